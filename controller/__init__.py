@@ -1,0 +1,83 @@
+"""Control laws of the ground-side offboard controller: pure maths, no sockets.
+
+- :mod:`controller.bsst`         the paper's finite-time backstepping super-twisting law
+- :mod:`controller.supertwisting` super-twisting (eq. 22) and first-order SMC reaching laws
+- :mod:`controller.power`        the regularised finite-time power sig_beta
+- :mod:`controller.jets`         exact time derivatives by the chain rule
+- :mod:`controller.pid`          cascaded PID baseline
+- :mod:`controller.actuation`    wrench clamp or rotor allocation (inverse of eq. 4)
+- :mod:`controller.gains`        gains from TOML, eq. (23) check
+- :mod:`controller.nominal`      the law's nominal vehicle model
+
+:class:`Controller` ties a law to an actuation: ``step(t, state, ref)`` returns a
+:class:`Command`. See ``controller/README.md`` for every deviation from the paper.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from controller.actuation import MotorActuation, WrenchActuation, make_actuation
+from controller.bsst import BacksteppingSuperTwisting
+from controller.gains import Gains, gains_from_table
+from controller.nominal import Nominal
+from controller.pid import CascadedPid
+from missions.references import Sample
+
+Quad = tuple[float, float, float, float]
+LAWS = ("bsst", "smc", "pid")
+
+
+@dataclass(frozen=True, slots=True)
+class Command:
+    """One control step's output: what the law demanded, what the actuation can realise,
+    and the normalised command for the wire (paper frame, see controller.actuation)."""
+
+    demanded: Quad
+    realisable: Quad
+    normalised: Quad
+
+
+def make_law(name: str, nominal: Nominal, gains: Gains, rate_hz: float):
+    """The law called ``name`` (bsst, smc or pid)."""
+    if name == "bsst":
+        return BacksteppingSuperTwisting(nominal, gains, rate_hz)
+    if name == "smc":
+        return BacksteppingSuperTwisting(nominal, gains, rate_hz, reaching="sign")
+    if name == "pid":
+        return CascadedPid(nominal, gains, rate_hz)
+    raise ValueError(f"unknown controller {name!r}; choose one of {', '.join(LAWS)}")
+
+
+class Controller:
+    """A law and its actuation, stepped at the control rate."""
+
+    def __init__(self, name: str, nominal: Nominal, gains: Gains | None = None, rate_hz: float = 250.0) -> None:
+        self.law = make_law(name, nominal, gains or Gains(), rate_hz)
+        self.actuation = make_actuation(nominal)
+        self.rate_hz = rate_hz
+
+    def step(self, t: float, state: tuple[float, ...], ref: Sample, hold: bool = False) -> Command:
+        """Compute the command for ``state`` at time t; ``hold`` freezes the integrators."""
+        u = self.law.update(t, state, ref, self.actuation.omega_d)
+        real, c, sat = self.actuation.allocate(u)
+        self.law.advance(sat, hold)
+        return Command(u, real, c)
+
+    def reset(self) -> None:
+        self.law.reset()
+
+
+__all__ = [
+    "LAWS",
+    "BacksteppingSuperTwisting",
+    "CascadedPid",
+    "Command",
+    "Controller",
+    "Gains",
+    "MotorActuation",
+    "Nominal",
+    "WrenchActuation",
+    "gains_from_table",
+    "make_law",
+]

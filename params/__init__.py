@@ -1,0 +1,162 @@
+"""Typed, validated parameters read from TOML files.
+
+Every parameter file of the project (vehicle profiles, missions, gains, sweeps) is read
+through :func:`load_toml` and checked field by field with :class:`Table`, so that a bad
+value always fails with one line naming the file, the key and what is allowed.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+
+class ConfigError(ValueError):
+    """A parameter file or value is wrong; the message names the file and the key."""
+
+
+def load_toml(path: str | Path) -> dict[str, Any]:
+    """Read a TOML file, turning every I/O or syntax problem into a :class:`ConfigError`."""
+    p = Path(path)
+    if not p.exists():
+        raise ConfigError(f"{p}: no such file")
+    if p.is_dir():
+        raise ConfigError(f"{p}: is a directory, expected a TOML file")
+    try:
+        raw = p.read_bytes()
+    except OSError as exc:
+        raise ConfigError(f"{p}: cannot read ({exc.strerror})") from None
+    try:
+        return tomllib.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError:
+        raise ConfigError(f"{p}: not a text file (expected TOML)") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{p}: not valid TOML ({exc})") from None
+
+
+class Table:
+    """One TOML table being validated: typed getters that name the file and the key.
+
+    Call :meth:`done` at the end so that any key nobody asked for is rejected as unknown.
+    """
+
+    def __init__(self, data: Mapping[str, Any], source: str, prefix: str = "") -> None:
+        if not isinstance(data, Mapping):
+            raise ConfigError(f"{source}: {prefix or 'top level'}: expected a table")
+        self._data = data
+        self._source = source
+        self._prefix = prefix
+        self._used: set[str] = set()
+
+    def key(self, name: str) -> str:
+        return f"{self._prefix}.{name}" if self._prefix else name
+
+    def error(self, name: str, why: str) -> ConfigError:
+        return ConfigError(f"{self._source}: {self.key(name)}: {why}")
+
+    def has(self, name: str) -> bool:
+        return name in self._data
+
+    def _get(self, name: str, default: Any) -> Any:
+        self._used.add(name)
+        if name in self._data:
+            return self._data[name]
+        if default is _REQUIRED:
+            raise self.error(name, "is required")
+        return default
+
+    def number(
+        self,
+        name: str,
+        default: Any = ...,
+        *,
+        lo: float | None = None,
+        hi: float | None = None,
+        lo_open: bool = False,
+        hi_open: bool = False,
+    ) -> float:
+        v = self._get(name, _REQUIRED if default is ... else default)
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise self.error(name, f"expected a number, got {_show(v)}")
+        v = float(v)
+        if not math.isfinite(v):
+            raise self.error(name, f"must be finite, got {v}")
+        if (lo is not None and (v < lo or (lo_open and v == lo))) or (
+            hi is not None and (v > hi or (hi_open and v == hi))
+        ):
+            raise self.error(name, f"must be in {_range(lo, hi, lo_open, hi_open)}, got {v:g}")
+        return v
+
+    def integer(self, name: str, default: Any = ..., *, lo: int | None = None, hi: int | None = None) -> int:
+        v = self._get(name, _REQUIRED if default is ... else default)
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise self.error(name, f"expected an integer, got {_show(v)}")
+        if (lo is not None and v < lo) or (hi is not None and v > hi):
+            raise self.error(name, f"must be in {_range(lo, hi, False, False)}, got {v}")
+        return v
+
+    def string(self, name: str, default: Any = ..., *, choices: Iterable[str] | None = None) -> str:
+        v = self._get(name, _REQUIRED if default is ... else default)
+        if not isinstance(v, str):
+            raise self.error(name, f"expected a string, got {_show(v)}")
+        if choices is not None:
+            allowed = tuple(choices)
+            if v not in allowed:
+                raise self.error(name, f"must be one of {', '.join(allowed)}; got {v!r}")
+        return v
+
+    def boolean(self, name: str, default: Any = ...) -> bool:
+        v = self._get(name, _REQUIRED if default is ... else default)
+        if not isinstance(v, bool):
+            raise self.error(name, f"expected true or false, got {_show(v)}")
+        return v
+
+    def vector(
+        self, name: str, length: int, default: Any = ..., *, lo: float | None = None, hi: float | None = None
+    ) -> tuple[float, ...]:
+        v = self._get(name, _REQUIRED if default is ... else default)
+        if not isinstance(v, (list, tuple)) or len(v) != length:
+            raise self.error(name, f"expected a list of {length} numbers, got {_show(v)}")
+        out = []
+        for i, x in enumerate(v):
+            if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+                raise self.error(name, f"element {i} must be a finite number, got {_show(x)}")
+            if (lo is not None and x < lo) or (hi is not None and x > hi):
+                raise self.error(name, f"element {i} must be in {_range(lo, hi, False, False)}, got {x:g}")
+            out.append(float(x))
+        return tuple(out)
+
+    def table(self, name: str, required: bool = False) -> Table:
+        v = self._get(name, _REQUIRED if required else {})
+        if not isinstance(v, Mapping):
+            raise self.error(name, f"expected a table, got {_show(v)}")
+        return Table(v, self._source, self.key(name))
+
+    def raw(self, name: str, default: Any = None) -> Any:
+        return self._get(name, default)
+
+    def done(self) -> None:
+        unknown = sorted(set(self._data) - self._used)
+        if unknown:
+            raise self.error(unknown[0], "unknown key")
+
+
+class _Required:
+    pass
+
+
+_REQUIRED = _Required()
+
+
+def _range(lo: float | None, hi: float | None, lo_open: bool, hi_open: bool) -> str:
+    left = "(" if lo_open or lo is None else "["
+    right = ")" if hi_open or hi is None else "]"
+    return f"{left}{'-inf' if lo is None else f'{lo:g}'}, {'inf' if hi is None else f'{hi:g}'}{right}"
+
+
+def _show(v: Any) -> str:
+    text = repr(v)
+    return text if len(text) <= 40 else text[:37] + "..."

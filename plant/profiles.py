@@ -1,0 +1,102 @@
+"""Vehicle profiles: the physical constants of one airframe, loaded from TOML and validated.
+
+A profile is a frozen :class:`Profile`. Built-in profiles live in ``plant/profiles/*.toml``
+(``paper``: Table 1 with ideal wrench actuation; ``x500``: PX4's x500 with real rotors).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from params import ConfigError, Table, load_toml
+
+PROFILE_DIR = Path(__file__).with_name("profiles")
+ACTUATIONS = ("wrench", "motors")
+
+
+@dataclass(frozen=True, slots=True)
+class Profile:
+    """Constants of one airframe (SI units, paper frame).
+
+    ``u_max`` are the wrench limits (u1 in N, u2..u4 in N: the paper's torques are l*u).
+    """
+
+    name: str
+    actuation: str
+    mass: float
+    arm: float
+    ixx: float
+    iyy: float
+    izz: float
+    rotor_inertia: float
+    thrust_coeff: float
+    drag_coeff: float
+    gravity: float
+    omega_max: float
+    drag: tuple[float, float, float, float, float, float]
+    motor_time_constant: float
+    u_max: tuple[float, float, float, float]
+
+    @property
+    def hover_omega(self) -> float:
+        """Rotor speed at hover, rad/s (eq. 4 with u1 = m g)."""
+        return math.sqrt(self.mass * self.gravity / (4.0 * self.thrust_coeff))
+
+    def with_actuation(self, actuation: str) -> Profile:
+        if actuation not in ACTUATIONS:
+            raise ConfigError(f"actuation must be one of {', '.join(ACTUATIONS)}; got {actuation!r}")
+        return replace(self, actuation=actuation)
+
+
+def profile_names() -> list[str]:
+    """Names of the built-in profiles."""
+    return sorted(f.stem for f in PROFILE_DIR.glob("*.toml"))
+
+
+def load_profile(name_or_path: str | Path) -> Profile:
+    """Load a built-in profile by name (``paper``, ``x500``) or a profile TOML by path."""
+    text = str(name_or_path)
+    if text.endswith(".toml") or "/" in text:
+        path = Path(text)
+    else:
+        path = PROFILE_DIR / f"{text}.toml"
+        if not path.exists():
+            raise ConfigError(f"unknown profile {text!r}; built-in profiles: {', '.join(profile_names())}")
+    return profile_from_table(load_toml(path), str(path))
+
+
+def profile_from_table(data: dict, source: str) -> Profile:
+    """Validate a profile table; errors name ``source`` and the key."""
+    t = Table(data, source)
+    name = t.string("name")
+    actuation = t.string("actuation", choices=ACTUATIONS)
+    mass = t.number("mass", lo=0.0, lo_open=True, hi=1000.0)
+    arm = t.number("arm", lo=0.0, lo_open=True, hi=10.0)
+    ixx = t.number("ixx", lo=0.0, lo_open=True, hi=1000.0)
+    iyy = t.number("iyy", lo=0.0, lo_open=True, hi=1000.0)
+    izz = t.number("izz", lo=0.0, lo_open=True, hi=1000.0)
+    jr = t.number("rotor_inertia", lo=0.0, hi=1000.0)
+    b = t.number("thrust_coeff", lo=0.0, lo_open=True)
+    d = t.number("drag_coeff", lo=0.0, lo_open=True)
+    g = t.number("gravity", 9.81, lo=0.0, lo_open=True, hi=100.0)
+    omega_max = t.number("omega_max", lo=0.0, lo_open=True)
+    drag = t.vector("drag", 6, (0.0,) * 6, lo=0.0)
+    tau = t.number("motor_time_constant", 0.02, lo=0.0, lo_open=True, hi=10.0)
+    hover = math.sqrt(mass * g / (4.0 * b))
+    if omega_max <= hover:
+        raise t.error("omega_max", f"must be above the hover speed {hover:.4g} rad/s, got {omega_max:g}")
+    envelope = (4 * b * omega_max**2, b * omega_max**2, b * omega_max**2, 2 * d * omega_max**2)
+    lim = t.table("limits")
+    u_max = (
+        lim.number("u1", envelope[0], lo=mass * g, lo_open=True),
+        lim.number("u2", envelope[1], lo=0.0, lo_open=True),
+        lim.number("u3", envelope[2], lo=0.0, lo_open=True),
+        lim.number("u4", envelope[3], lo=0.0, lo_open=True),
+    )
+    lim.done()
+    t.done()
+    if actuation == "motors" and u_max[0] > envelope[0] * (1 + 1e-9):
+        raise lim.error("u1", f"exceeds what the rotors give (4 b w_max^2 = {envelope[0]:.4g} N)")
+    return Profile(name, actuation, mass, arm, ixx, iyy, izz, jr, b, d, g, omega_max, drag, tau, u_max)

@@ -1,0 +1,123 @@
+"""The stateful plant: a profile, its effects, rotors and the RK4 integrator.
+
+One object with a small interface, in the RotorPy manner: :meth:`Quadrotor.command` sets
+the actuator command (held until the next call: zero-order hold) and :meth:`Quadrotor.step`
+advances one physics step. Commands are normalised and in the paper's frame:
+
+- ``wrench`` profiles: (u1/u1_max, u2/u2_max, u3/u3_max, u4/u4_max), u1 part in [0, 1],
+  the others in [-1, 1]; the plant applies them directly.
+- ``motors`` profiles: c_i = omega_i / omega_max in [0, 1]; the plant clips, passes the
+  speeds through the optional motor lag and realises eq. (4).
+"""
+
+from __future__ import annotations
+
+import math
+
+from plant.effects import Effects, disturbance_at
+from plant.integrate import rk4_step
+from plant.model import RigidBody, State, rigid_body, state_derivative
+from plant.profiles import Profile
+from plant.rotors import (
+    motor_lag_step,
+    motor_speeds_from_wrench,
+    signed_speed_sum,
+    wrench_from_motor_speeds,
+)
+
+AT_REST: State = (0.0,) * 12  # type: ignore[assignment]
+
+
+def _clip(v: float, lo: float, hi: float) -> float:
+    return lo if v < lo else hi if v > hi else v
+
+
+class Quadrotor:
+    """The simulated vehicle of eq. (6) with its actuation, at a fixed physics step."""
+
+    def __init__(
+        self,
+        profile: Profile,
+        effects: Effects | None = None,
+        *,
+        seed: int = 0,
+        physics_hz: float = 1000.0,
+        state: State = AT_REST,
+    ) -> None:
+        self.profile = profile
+        self.effects = effects or Effects()
+        e = self.effects
+        self.body: RigidBody = rigid_body(
+            mass=profile.mass * e.mass_scale,
+            ixx=profile.ixx * e.inertia_scale,
+            iyy=profile.iyy * e.inertia_scale,
+            izz=profile.izz * e.inertia_scale,
+            arm=profile.arm,
+            rotor_inertia=profile.rotor_inertia,
+            gravity=profile.gravity,
+            drag=profile.drag if e.drag else (0.0,) * 6,
+        )
+        self.dt = 1.0 / physics_hz
+        self.t = 0.0
+        self.state: State = tuple(float(v) for v in state)  # type: ignore[assignment]
+        self._phases = e.disturbance.phases(seed)
+        self._disturbed = e.disturbance.active
+        hover = profile.hover_omega
+        self.omega: tuple[float, float, float, float] = (hover,) * 4 if profile.actuation == "motors" else (0.0,) * 4
+        self._omega_target = self.omega
+        self.realised: tuple[float, float, float, float] = (0.0,) * 4
+        self._omega_d = 0.0
+        self.command((0.0, 0.0, 0.0, 0.0))
+
+    # -- actuation -----------------------------------------------------------------
+    def command(self, c: tuple[float, float, float, float]) -> None:
+        """Set the normalised actuator command (see module docstring); held until the next."""
+        p = self.profile
+        if p.actuation == "wrench":
+            u = (
+                _clip(c[0], 0.0, 1.0) * p.u_max[0],
+                _clip(c[1], -1.0, 1.0) * p.u_max[1],
+                _clip(c[2], -1.0, 1.0) * p.u_max[2],
+                _clip(c[3], -1.0, 1.0) * p.u_max[3],
+            )
+            self.realised = u
+            self.omega = motor_speeds_from_wrench(u, p.thrust_coeff, p.drag_coeff)
+            self._omega_d = signed_speed_sum(self.omega)
+        else:
+            w = p.omega_max
+            self._omega_target = tuple(_clip(ci, 0.0, 1.0) * w for ci in c)  # type: ignore[assignment]
+            if not self.effects.motor_lag:
+                self._set_omega(self._omega_target)
+
+    def _set_omega(self, omega: tuple[float, float, float, float]) -> None:
+        p = self.profile
+        self.omega = omega
+        self.realised = wrench_from_motor_speeds(omega, p.thrust_coeff, p.drag_coeff)
+        self._omega_d = signed_speed_sum(omega)
+
+    # -- dynamics ------------------------------------------------------------------
+    def derivative(self, t: float, X: State) -> State:
+        """dX/dt at time t with the command held (eq. 6 plus the switched-on effects)."""
+        u1, u2, u3, u4 = self.realised
+        ext = disturbance_at(self.effects.disturbance, self._phases, t) if self._disturbed else None
+        return state_derivative(X, u1, u2, u3, u4, self._omega_d, self.body, ext)
+
+    def step(self) -> None:
+        """Advance one physics step (RK4, command and rotor speeds held over the step)."""
+        if self.profile.actuation == "motors" and self.effects.motor_lag:
+            self._set_omega(
+                motor_lag_step(self.omega, self._omega_target, self.dt, self.profile.motor_time_constant)
+            )
+        self.state = rk4_step(self.derivative, self.t, self.state, self.dt)  # type: ignore[assignment]
+        self.t += self.dt
+
+    def diverged(self) -> str | None:
+        """Why the vehicle is lost (NaN, |position| > 100 m, tilt > 90 deg), or None."""
+        X = self.state
+        if not all(math.isfinite(v) for v in X):
+            return "state is not finite"
+        if X[0] * X[0] + X[2] * X[2] + X[4] * X[4] > 1e4:
+            return "position beyond 100 m"
+        if math.cos(X[6]) * math.cos(X[8]) < 0.0:
+            return "tilt beyond 90 degrees"
+        return None
