@@ -51,6 +51,26 @@ class Mission:
         """A copy with some fields replaced (None values are ignored), validated again."""
         return replace(self, **{k: v for k, v in kw.items() if v is not None})
 
+    def to_dict(self) -> dict[str, Any]:
+        """The mission as a TOML-ready table (what ``mission.toml`` of a run holds)."""
+        d: dict[str, Any] = {
+            "name": self.name,
+            "duration_s": self.duration_s,
+            "profile": self.profile,
+            "controller": self.controller,
+            "rate_hz": self.rate_hz,
+            "physics_hz": self.physics_hz,
+            "seed": self.seed,
+        }
+        if self.actuation:
+            d["actuation"] = self.actuation
+        d["start"] = {"position": list(self.start[:3]), "psi": self.start[3]}
+        d["trajectory"] = self.trajectory.to_dict()
+        for k in ("gains", "effects", "link", "failsafe"):
+            if getattr(self, k):
+                d[k] = dict(getattr(self, k))
+        return d
+
     @property
     def steps(self) -> int:
         """Number of control steps in the mission."""

@@ -26,6 +26,10 @@ class Reference(Protocol):
         """Times at which the reference jumps (set-point changes); (0.0,) for smooth ones."""
         ...
 
+    def to_dict(self) -> dict:
+        """The ``[trajectory]`` table that defines this reference."""
+        ...
+
 
 def _const(v: float) -> Derivs:
     return (v, 0.0, 0.0, 0.0, 0.0)
@@ -33,11 +37,17 @@ def _const(v: float) -> Derivs:
 
 @dataclass(frozen=True)
 class Setpoint:
+    """Position (m) and heading (rad) to hold from time t (s), paper frame."""
+
     t: float
     x: float
     y: float
     z: float
-    psi: float
+    psi: float = 0.0
+
+
+def _sp_dict(s: Setpoint) -> dict:
+    return {"t": s.t, "x": s.x, "y": s.y, "z": s.z, "psi": s.psi}
 
 
 @dataclass(frozen=True)
@@ -61,6 +71,9 @@ class Step:
 
     def change_times(self) -> tuple[float, ...]:
         return tuple(s.t for s in self.setpoints)
+
+    def to_dict(self) -> dict:
+        return {"kind": "step", "setpoints": [_sp_dict(s) for s in self.setpoints]}
 
 
 def _sinusoid(amp: float, w: float, phase: float, t: float) -> Derivs:
@@ -90,6 +103,10 @@ class Sine:
 
     def change_times(self) -> tuple[float, ...]:
         return (0.0,)
+
+    def to_dict(self) -> dict:
+        return {"kind": "sine", "amplitude": self.amplitude, "omega": self.omega, "climb": self.climb,
+                "z0": self.z0, "psi": self.psi}
 
 
 def _min_jerk(p0: float, p1: float, T: float, tau: float) -> Derivs:
@@ -146,3 +163,6 @@ class Waypoints:
 
     def change_times(self) -> tuple[float, ...]:
         return (0.0,)
+
+    def to_dict(self) -> dict:
+        return {"kind": "waypoints", "points": [_sp_dict(p) for p in self.points]}

@@ -1,5 +1,8 @@
 """The stateful plant: a profile, its effects, rotors and the RK4 integrator.
 
+The ground is the plane z = 0 (paper frame, z up; missions start there at rest); pass
+``ground=False`` for free flight.
+
 One object with a small interface, in the RotorPy manner: :meth:`Quadrotor.command` sets
 the actuator command (held until the next call: zero-order hold) and :meth:`Quadrotor.step`
 advances one physics step. Commands are normalised and in the paper's frame:
@@ -32,6 +35,12 @@ def _clip(v: float, lo: float, hi: float) -> float:
     return lo if v < lo else hi if v > hi else v
 
 
+def _on_ground(X: tuple[float, ...]) -> State:
+    """Contact with the ground plane z = 0 (the start height): the vehicle rests on its legs,
+    level, keeping its heading; any upward velocity is kept so it can take off again."""
+    return (X[0], 0.0, X[2], 0.0, 0.0, max(X[5], 0.0), 0.0, 0.0, 0.0, 0.0, X[10], 0.0)
+
+
 class Quadrotor:
     """The simulated vehicle of eq. (6) with its actuation, at a fixed physics step."""
 
@@ -43,6 +52,7 @@ class Quadrotor:
         seed: int = 0,
         physics_hz: float = 1000.0,
         state: State = AT_REST,
+        ground: bool = True,
     ) -> None:
         self.profile = profile
         self.effects = effects or Effects()
@@ -58,6 +68,7 @@ class Quadrotor:
             drag=profile.drag if e.drag else (0.0,) * 6,
         )
         self.dt = 1.0 / physics_hz
+        self.ground = ground
         self.t = 0.0
         self.state: State = tuple(float(v) for v in state)  # type: ignore[assignment]
         self._phases = e.disturbance.phases(seed)
@@ -108,8 +119,15 @@ class Quadrotor:
             self._set_omega(
                 motor_lag_step(self.omega, self._omega_target, self.dt, self.profile.motor_time_constant)
             )
-        self.state = rk4_step(self.derivative, self.t, self.state, self.dt)  # type: ignore[assignment]
+        X = rk4_step(self.derivative, self.t, self.state, self.dt)
+        if self.ground and X[4] < 0.0:
+            X = _on_ground(X)
+        self.state = X  # type: ignore[assignment]
         self.t += self.dt
+
+    @property
+    def on_ground(self) -> bool:
+        return self.ground and self.state[4] <= 0.0 and self.state[5] <= 0.0
 
     def diverged(self) -> str | None:
         """Why the vehicle is lost (NaN, |position| > 100 m, tilt > 90 deg), or None."""

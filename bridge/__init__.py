@@ -1,0 +1,17 @@
+"""Everything that connects a law to a plant; the only package that touches the network.
+
+- :mod:`bridge.loop`      the in-process closed loop (``bsst sim``), :func:`simulate`
+- :mod:`bridge.flight`    a mission validated into the parts that fly it
+- :mod:`bridge.simvehicle` plant + arming + timeout + failsafe, shared by every clock
+- :mod:`bridge.failsafe`  level-and-descend failsafe
+- :mod:`bridge.wire`      frame conversion NWU <-> NED and actuator normalisation
+- :mod:`bridge.runlog`    the run directory: trace, events, summary, tlogs
+- :mod:`bridge.metrics`   RMS, settling, finite-time bound, total variation
+- :mod:`bridge.plots`     the paper-style figures
+- :mod:`bridge.cli`       ``bsst``
+"""
+
+from bridge.loop import simulate
+from bridge.runlog import Run
+
+__all__ = ["Run", "simulate"]

@@ -1,0 +1,138 @@
+"""``bsst``: the command line (DESIGN.md section 7). ``python -m bridge`` is the same.
+
+Exit status: 0 the mission completed; 1 it ended in failsafe, divergence or abort; 2 bad
+input, with one line on stderr naming the file, key or flag, and no traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable, Sequence
+from typing import Any, NoReturn
+
+from params import ConfigError
+
+EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
+
+
+class UsageError(Exception):
+    """Bad command-line input (exit 2)."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> NoReturn:  # one line, no usage dump
+        raise UsageError(f"{self.prog}: {message}")
+
+
+def positive_float(name: str, lo: float = 0.0, hi: float = float("inf")) -> Callable[[str], float]:
+    def conv(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be a number, got {text!r}") from None
+        if not (lo < v <= hi) or v != v:
+            raise argparse.ArgumentTypeError(f"{name} must be in ({lo:g}, {hi:g}], got {text}")
+        return v
+
+    return conv
+
+
+def int_in(name: str, lo: int, hi: int) -> Callable[[str], int]:
+    def conv(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be an integer, got {text!r}") from None
+        if not lo <= v <= hi:
+            raise argparse.ArgumentTypeError(f"{name} must be in [{lo}, {hi}], got {v}")
+        return v
+
+    return conv
+
+
+def add_flight_options(p: argparse.ArgumentParser) -> None:
+    """Options every flying command shares: overrides of the mission's own values."""
+    p.add_argument("mission", help="mission TOML file (see missions/)")
+    p.add_argument("--out", metavar="DIR", help="run directory (default runs/<UTC time>-<mission>)")
+    p.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out")
+    p.add_argument("--rate", type=positive_float("--rate", 49.999, 1000.0), metavar="HZ",
+                   help="control rate, 50-1000 Hz (default: the mission's, 250)")
+    p.add_argument("--profile", metavar="NAME", help="vehicle profile: paper, x500 or a profile TOML path")
+    p.add_argument("--controller", choices=("bsst", "smc", "pid"), help="control law")
+    p.add_argument("--seed", type=int_in("--seed", 0, 2**31 - 1), metavar="N", help="seed of random effects")
+    p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="bsst", description="MAVLink SITL bridge for a BS-ST-controlled quadrotor")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub.required = True
+    p = sub.add_parser("sim", help="fly a mission offline, in one process")
+    add_flight_options(p)
+    p.set_defaults(func=cmd_sim)
+    return parser
+
+
+def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
+    """The one-screen summary printed after a run."""
+    out = stream or sys.stdout
+    w = out.write
+    w(f"mission {s['mission']}  controller {s['controller']}  profile {s['profile']}  "
+      f"clock {s['clock']}  rate {s['rate_hz']:g} Hz  duration {s['duration_s']:.2f} s\n")
+    w(f"outcome: {s['outcome']}\n")
+    rms = s.get("rms_3d")
+    w(f"3-D RMS error over t >= {s['rms_from_s']:g} s: {rms:.3e} m\n" if rms is not None else "3-D RMS: n/a\n")
+    w(f"{'axis':5} {'rms':>10} {'max':>10} {'settling_s':>11} {'bound_s':>9}\n")
+    for a, v in s["axes"].items():
+        def f(x: Any, spec: str) -> str:
+            return format(x, spec) if x is not None else "n/a"
+        w(f"{a:5} {f(v['rms'], '10.3e')} {f(v['max'], '10.3e')} "
+          f"{f(v['settling_s'], '11.3f')} {f(v['bound_s'], '9.3f')}\n")
+    w("input  " + "  ".join(f"{u}: [{v['min']:.3g}, {v['max']:.3g}] tv/s {v['tv_per_s']:.3g}"
+                            for u, v in s["inputs"].items() if v["min"] is not None) + "\n")
+    link = s.get("link", {})
+    if link.get("up", {}).get("sent"):
+        for d in ("up", "down"):
+            L = link[d]
+            w(f"link {d:4}: sent {L['sent']} delivered {L['delivered']} lost {L['lost']} "
+              f"delay p50 {L['delay_ms']['p50']:.2f} ms p99 {L['delay_ms']['p99']:.2f} ms\n")
+    for e in s.get("events", [])[:8]:
+        w(f"event t={e['t']:.3f} {e['kind']}: {e['text']}\n")
+    if path is not None:
+        w(f"run directory: {path}\n")
+
+
+def cmd_sim(args: argparse.Namespace) -> int:
+    from bridge.loop import simulate
+
+    run = simulate(
+        args.mission,
+        out=args.out,
+        write=True,
+        overwrite=args.overwrite,
+        plots=not args.no_plots,
+        profile=args.profile,
+        controller=args.controller,
+        rate_hz=args.rate,
+        seed=args.seed,
+    )
+    print_summary(run.summary, run.path)
+    return EXIT_OK if run.outcome == "completed" else EXIT_FAILED
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+        return args.func(args)
+    except (UsageError, ConfigError) as exc:
+        print(f"bsst: {exc}" if not str(exc).startswith("bsst") else str(exc), file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("bsst: interrupted", file=sys.stderr)
+        return EXIT_FAILED
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,76 @@
+"""From a mission to the parts that fly it: every table validated by the part that owns it.
+
+:func:`prepare` applies the command-line overrides and validates the mission's profile,
+``[effects]``, ``[gains]``, ``[failsafe]`` and ``[link]`` tables, so that a bad value fails
+before anything starts, with the file and key named.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from bridge.failsafe import FailsafeConfig, failsafe_from_table
+from bridge.simvehicle import SimVehicle
+from controller import Controller, Gains, Nominal, gains_from_table
+from missions import Mission, load_mission
+from params import ConfigError, Table
+from plant import Effects, Profile, Quadrotor, load_profile
+from plant.effects import effects_from_table
+
+
+@dataclass(frozen=True)
+class Flight:
+    """A validated mission and everything built from it."""
+
+    mission: Mission
+    profile: Profile
+    effects: Effects
+    gains: Gains
+    failsafe: FailsafeConfig
+
+    @property
+    def nominal(self) -> Nominal:
+        """The controller's model: the profile's nominal numbers, never the effects."""
+        return Nominal.from_profile(self.profile)
+
+    @property
+    def substeps(self) -> int:
+        return int(round(self.mission.physics_hz / self.mission.rate_hz))
+
+    def make_plant(self) -> Quadrotor:
+        m = self.mission
+        x, y, z, psi = m.start
+        state = (x, 0.0, y, 0.0, z, 0.0, 0.0, 0.0, 0.0, 0.0, psi, 0.0)
+        return Quadrotor(self.profile, self.effects, seed=m.seed, physics_hz=m.physics_hz, state=state)
+
+    def make_vehicle(self, armed: bool = False) -> SimVehicle:
+        return SimVehicle(self.make_plant(), self.substeps, self.failsafe, armed=armed)
+
+    def make_controller(self) -> Controller:
+        return Controller(self.mission.controller, self.nominal, self.gains, self.mission.rate_hz)
+
+
+def prepare(
+    mission: Mission | str | Path,
+    *,
+    profile: str | None = None,
+    controller: str | None = None,
+    rate_hz: float | None = None,
+    seed: int | None = None,
+    actuation: str | None = None,
+) -> Flight:
+    """Validate a mission (object or file) with overrides into a :class:`Flight`."""
+    m = mission if isinstance(mission, Mission) else load_mission(mission)
+    m = m.with_overrides(profile=profile, controller=controller, rate_hz=rate_hz, seed=seed, actuation=actuation)
+    src = m.source
+    try:
+        prof = load_profile(m.profile)
+    except ConfigError as exc:
+        raise ConfigError(f"{src}: profile: {exc}") from None
+    if m.actuation:
+        prof = prof.with_actuation(m.actuation)
+    effects = effects_from_table(Table(m.effects, src, "effects"))
+    gains = gains_from_table(m.gains, src) if m.gains else Gains()
+    failsafe = failsafe_from_table(m.failsafe, src)
+    return Flight(m, prof, effects, gains, failsafe)

@@ -1,0 +1,180 @@
+"""A run on disk (DESIGN.md section 6): directory, trace, events, summary, tlogs.
+
+Everything is written crash-safe: trace rows and events are appended as whole lines with
+one ``os.write`` each batch (a SIGKILL leaves the file whole up to its last complete
+row), and ``summary.json`` is written to a temporary name and renamed.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+from params import ConfigError
+
+STATE_COLUMNS = ("x", "y", "z", "vx", "vy", "vz", "phi", "theta", "psi", "dphi", "dtheta", "dpsi")
+REF_COLUMNS = ("x_ref", "y_ref", "z_ref", "psi_ref")
+TRACE_COLUMNS = (
+    ("t",)
+    + STATE_COLUMNS
+    + REF_COLUMNS
+    + ("u1", "u2", "u3", "u4", "c1", "c2", "c3", "c4", "u1_act", "u2_act", "u3_act", "u4_act")
+    + ("state_age_s", "phi_d", "theta_d")
+)
+
+
+def state_columns(X: Sequence[float]) -> tuple[float, ...]:
+    """Eq. (7) state -> the trace's state columns (x y z vx vy vz phi theta psi rates)."""
+    return (X[0], X[2], X[4], X[1], X[3], X[5], X[6], X[8], X[10], X[7], X[9], X[11])
+
+
+def run_dir(out: str | Path | None, mission_name: str, overwrite: bool = False, root: str | Path = "runs") -> Path:
+    """Create the run directory: ``out`` exactly, or ``runs/<UTC time>-<mission>``.
+
+    Refuses a non-empty directory unless ``overwrite``.
+    """
+    if out is None:
+        stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
+        path = Path(root) / f"{stamp}-{mission_name}"
+        n = 1
+        while path.exists():
+            n += 1
+            path = Path(root) / f"{stamp}-{mission_name}-{n}"
+    else:
+        path = Path(out)
+    if path.exists() and not path.is_dir():
+        raise ConfigError(f"--out {path}: exists and is not a directory")
+    if path.is_dir() and any(path.iterdir()) and not overwrite:
+        raise ConfigError(f"--out {path}: directory is not empty (use --overwrite to replace its run)")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        (path / "plots").mkdir(exist_ok=True)
+    except OSError as exc:
+        raise ConfigError(f"--out {path}: cannot create ({exc.strerror})") from None
+    return path
+
+
+class LineWriter:
+    """Append whole lines to a file, in batches of ``batch`` lines, one write each."""
+
+    def __init__(self, path: str | Path, header: str | None = None, batch: int = 50) -> None:
+        self.path = Path(path)
+        self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND, 0o644)
+        self._pending: list[str] = []
+        self._batch = batch
+        if header is not None:
+            os.write(self._fd, (header + "\n").encode())
+
+    def write(self, line: str) -> None:
+        self._pending.append(line)
+        if len(self._pending) >= self._batch:
+            self.flush()
+
+    def flush(self) -> None:
+        if self._pending and self._fd >= 0:
+            os.write(self._fd, ("\n".join(self._pending) + "\n").encode())
+            self._pending.clear()
+
+    def close(self) -> None:
+        if self._fd >= 0:
+            self.flush()
+            os.close(self._fd)
+            self._fd = -1
+
+
+class TraceWriter(LineWriter):
+    """``trace.csv``: one row per control step, columns :data:`TRACE_COLUMNS` (repr floats)."""
+
+    def __init__(self, path: str | Path, columns: Sequence[str] = TRACE_COLUMNS, batch: int = 50) -> None:
+        super().__init__(path, ",".join(columns), batch)
+
+    def row(self, values: Iterable[float]) -> None:
+        self.write(",".join(map(repr, values)))
+
+
+class EventLog(LineWriter):
+    """``events.log``: one line per event, ``t=<s> <kind>: <text>``, flushed at once."""
+
+    def __init__(self, path: str | Path) -> None:
+        super().__init__(path, None, batch=1)
+
+    def event(self, t: float, kind: str, text: str) -> None:
+        self.write(f"t={t:.3f} {kind}: {text}")
+
+
+def write_json_atomic(path: str | Path, obj: Any) -> None:
+    """Write JSON to ``path`` via a temporary file and rename: complete or absent."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    with open(tmp, "w") as f:
+        json.dump(obj, f, indent=2, allow_nan=False, default=_jsonable)
+        f.write("\n")
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+def _jsonable(v: Any) -> Any:
+    if hasattr(v, "item"):
+        return v.item()
+    raise TypeError(f"not JSON serialisable: {type(v).__name__}")
+
+
+def read_trace(path: str | Path) -> dict[str, Any]:
+    """Read a ``trace.csv`` back into numpy arrays by column, ignoring a torn last line."""
+    import numpy as np
+
+    with open(path) as f:
+        header = f.readline().strip().split(",")
+        rows = []
+        for line in f:
+            if not line.endswith("\n"):
+                break
+            parts = line.rstrip("\n").split(",")
+            if len(parts) != len(header):
+                break
+            rows.append([float(p) for p in parts])
+    arr = np.array(rows, dtype=float).reshape(-1, len(header))
+    return {name: arr[:, i] for i, name in enumerate(header)}
+
+
+class Run:
+    """The result of one flight, offline or networked: trace arrays, summary, directory."""
+
+    def __init__(self, trace: dict[str, Any], summary: dict[str, Any], path: Path | None) -> None:
+        self.trace = trace
+        self.summary = summary
+        self.path = path
+
+    @property
+    def outcome(self) -> str:
+        return self.summary["outcome"]
+
+    @property
+    def rms(self) -> float:
+        """3-D position RMS error over t >= summary['rms_from_s']."""
+        return self.summary["rms_3d"]
+
+    def __repr__(self) -> str:
+        return f"Run(outcome={self.outcome!r}, rms_3d={self.rms!r}, path={str(self.path) if self.path else None!r})"
+
+
+def trace_arrays(rows: list[Sequence[float]], columns: Sequence[str] = TRACE_COLUMNS) -> dict[str, Any]:
+    """Rows of the trace -> numpy arrays by column name."""
+    import numpy as np
+
+    arr = np.array(rows, dtype=float).reshape(-1, len(columns))
+    return {name: arr[:, i] for i, name in enumerate(columns)}
+
+
+def finish_run(path: Path, trace: dict[str, Any], summary: dict[str, Any], title: str, plots: bool = True) -> None:
+    """Write ``summary.json`` atomically, then the plots (a run without plots still has its numbers)."""
+    write_json_atomic(path / "summary.json", summary)
+    if plots and len(trace["t"]) > 1:
+        from bridge.plots import make_plots
+
+        make_plots(trace, path / "plots", title)
