@@ -13,6 +13,21 @@ from typing import Any
 from controller.supertwisting import super_twisting_bound
 from params import ConfigError, Table
 
+# Cascaded PID baseline (controller.pid): position, altitude, attitude and yaw loops.
+PID_DEFAULTS = {
+    "kp_pos": 4.0,
+    "kd_pos": 4.0,
+    "ki_pos": 0.5,
+    "kp_z": 4.0,
+    "kd_z": 4.0,
+    "ki_z": 1.0,
+    "kp_att": 100.0,
+    "kd_att": 20.0,
+    "kp_yaw": 16.0,
+    "kd_yaw": 8.0,
+    "i_max": 2.0,
+}
+
 
 @dataclass(frozen=True)
 class Twisting:
@@ -47,7 +62,7 @@ class Gains:
     tilt_rate_max: float = 6.0  # rad/s, on the desired roll/pitch rates
     feedforward_max: float = 200.0  # rad/s^2, on phi23-dot and phi33-dot
     smc_scale: float = 1.0  # SMC baseline: k = smc_scale * k1 in each loop
-    pid: Mapping[str, float] = field(default_factory=dict)
+    pid: Mapping[str, float] = field(default_factory=lambda: dict(PID_DEFAULTS))
 
     def __post_init__(self) -> None:
         for name in ("z_st", "attitude_st", "yaw_st"):
@@ -66,21 +81,6 @@ def check_twisting(st: Twisting, where: str = "gains") -> None:
             f"{where}.k1: eq. (23) needs k1 > sqrt(4L(k2+L)/(k2-L)) = {bound:.4g} "
             f"(k2 = {st.k2:g}, L = {st.L:g}), got {st.k1:g}"
         )
-
-
-PID_DEFAULTS = {
-    "kp_pos": 4.0,
-    "kd_pos": 4.0,
-    "ki_pos": 0.5,
-    "kp_z": 4.0,
-    "kd_z": 4.0,
-    "ki_z": 1.0,
-    "kp_att": 100.0,
-    "kd_att": 20.0,
-    "kp_yaw": 16.0,
-    "kd_yaw": 8.0,
-    "i_max": 2.0,
-}
 
 
 def gains_from_table(data: Mapping[str, Any], source: str) -> Gains:
