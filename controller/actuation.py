@@ -58,21 +58,6 @@ def _omega_d(w2: Quad) -> float:
     return sqrt(w2[1]) + sqrt(w2[3]) - sqrt(w2[0]) - sqrt(w2[2])
 
 
-def _fit(base: Quad, delta: Quad, top: float) -> float:
-    """Largest k in [0, 1] with 0 <= base_i + k delta_i <= top for every rotor."""
-    k = 1.0
-    for b0, dl in zip(base, delta, strict=True):
-        if dl > 0.0:
-            room = (top - b0) / dl
-        elif dl < 0.0:
-            room = b0 / -dl
-        else:
-            continue
-        if room < k:
-            k = room
-    return max(k, 0.0)
-
-
 class MotorActuation:
     """Allocation to four rotors inside [0, omega_max], thrust > roll/pitch > yaw."""
 
@@ -84,18 +69,46 @@ class MotorActuation:
         self.omega_d = 0.0
 
     def allocate(self, u: Quad) -> tuple[Quad, Quad, tuple[bool, bool, bool, bool]]:
+        """Squared speeds for (u1..u4) inside [0, omega_max^2], by priority (eq. 4 inverted).
+
+        With t = u1/(4b), a2 = u2/(2b), a3 = u3/(2b) and the yaw share Q (demanded
+        q = u4/(4d)), eq. (4) gives w^2 = (t - k a3 - Q, t - k a2 + Q, t + k a3 - Q,
+        t + k a2 + Q) for k = 1, Q = q. Thrust t is kept (clipped to the envelope); the
+        roll/pitch fraction k in [0, 1] is the largest for which some yaw share Q between 0
+        and q fits every rotor; then Q is the share closest to q that fits with that k. So a
+        wrench inside the envelope is realised exactly, roll/pitch keep their direction, and
+        yaw is given up first and never reversed. Each rotor gives two linear bounds on Q
+        in k; the largest k is the smallest crossing of a lower and an upper bound.
+        """
         b, d, top = self.b, self.d, self.w2_max
         u1 = _clip(u[0], 0.0, 4.0 * b * top)
         t = u1 / (4.0 * b)
-        base = (t, t, t, t)
-        rp = (-0.5 * u[2] / b, -0.5 * u[1] / b, 0.5 * u[2] / b, 0.5 * u[1] / b)
-        k_rp = _fit(base, rp, top)
-        base = tuple(x + k_rp * y for x, y in zip(base, rp, strict=True))  # type: ignore[assignment]
+        a2 = 0.5 * u[1] / b
+        a3 = 0.5 * u[2] / b
         q = 0.25 * u[3] / d
-        yaw = (-q, q, -q, q)
-        k_yaw = _fit(base, yaw, top)
-        w2 = tuple(_clip(x + k_yaw * y, 0.0, top) for x, y in zip(base, yaw, strict=True))
-        omega = tuple(sqrt(w) for w in w2)
+        r2 = abs(a2)
+        r3 = abs(a3)
+        q_lo, q_hi = (q, 0.0) if q < 0.0 else (0.0, q)
+        # lower bounds on Q: k r3 + t - top, k r2 - t, q_lo; upper: t - k r3, top - t - k r2, q_hi
+        k = 1.0
+        for ls, li in ((r3, t - top), (r2, -t), (0.0, q_lo)):
+            for us, ui in ((-r3, t), (-r2, top - t), (0.0, q_hi)):
+                slope = ls - us
+                if slope > 0.0 and (ui - li) < k * slope:
+                    k = (ui - li) / slope
+        k = max(k, 0.0)
+        lo = max(k * r3 + t - top, k * r2 - t, q_lo)
+        hi = min(t - k * r3, top - t - k * r2, q_hi)
+        Q = q if lo <= q <= hi else (lo if q < lo else hi)
+        ka2 = k * a2
+        ka3 = k * a3
+        w2 = (
+            _clip(t - ka3 - Q, 0.0, top),
+            _clip(t - ka2 + Q, 0.0, top),
+            _clip(t + ka3 - Q, 0.0, top),
+            _clip(t + ka2 + Q, 0.0, top),
+        )
+        omega = (sqrt(w2[0]), sqrt(w2[1]), sqrt(w2[2]), sqrt(w2[3]))
         self.omega_d = omega[1] + omega[3] - omega[0] - omega[2]
         real = (
             b * (w2[0] + w2[1] + w2[2] + w2[3]),
@@ -103,9 +116,9 @@ class MotorActuation:
             b * (w2[2] - w2[0]),
             d * (w2[1] + w2[3] - w2[0] - w2[2]),
         )
-        sat = (u1 != u[0], k_rp < 1.0, k_rp < 1.0, k_yaw < 1.0)
-        c = tuple(o / self.omega_max for o in omega)
-        return real, c, sat  # type: ignore[return-value]
+        sat = (u1 != u[0], k < 1.0, k < 1.0, Q != q)
+        w = self.omega_max
+        return real, (omega[0] / w, omega[1] / w, omega[2] / w, omega[3] / w), sat
 
 
 def make_actuation(nominal: Nominal) -> WrenchActuation | MotorActuation:
