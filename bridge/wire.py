@@ -11,7 +11,7 @@ and body rates are the exact kinematic transform of the Euler rates in the wire'
 
 from __future__ import annotations
 
-from math import asin, atan2, cos, pi, sin, tan
+from math import asin, atan2, cos, pi, sin, sqrt, tan
 
 Quad = tuple[float, float, float, float]
 TWO_PI = 2.0 * pi
@@ -111,3 +111,58 @@ def ned_to_paper(pos: tuple[float, float, float], vel: tuple[float, float, float
     droll, dpitch, dyaw = body_rates_to_euler_rates(roll, pitch, *rates)
     return (pos[0], vel[0], -pos[1], -vel[1], -pos[2], -vel[2],
             roll, droll, -pitch, -dpitch, wrap_pi(-yaw), -dyaw)
+
+
+# -- ODOMETRY (frame LOCAL_NED, child BODY_FRD) ---------------------------------------
+# MAVLink's ODOMETRY gives the pose in ``frame_id`` and the twist in ``child_frame_id``:
+# with child BODY_FRD the velocity (vx, vy, vz) is the body-frame velocity, so it is
+# rotated into FRD on the way out and back into NED on the way in.
+Vec3 = tuple[float, float, float]
+
+
+def rotate(q: Quad, v: Vec3) -> Vec3:
+    """Rotate body-frame vector v into the frame of unit quaternion q = (w, x, y, z): R(q) v."""
+    w, x, y, z = q
+    vx, vy, vz = v
+    # v + 2 w (u x v) + 2 u x (u x v), u = (x, y, z): no matrix built
+    cx = y * vz - z * vy
+    cy = z * vx - x * vz
+    cz = x * vy - y * vx
+    return (
+        vx + 2.0 * (w * cx + y * cz - z * cy),
+        vy + 2.0 * (w * cy + z * cx - x * cz),
+        vz + 2.0 * (w * cz + x * cy - y * cx),
+    )
+
+
+def rotate_inverse(q: Quad, v: Vec3) -> Vec3:
+    """Rotate a frame vector into the body: R(q)^T v (the conjugate rotation)."""
+    return rotate((q[0], -q[1], -q[2], -q[3]), v)
+
+
+def state_to_odometry(X: tuple[float, ...]) -> tuple[Vec3, Quad, Vec3, Vec3]:
+    """Paper state (eq. 7, NWU) -> ODOMETRY fields: NED position (m), attitude quaternion
+    (w, x, y, z; FRD body to NED), FRD body velocity (m/s), FRD body rates (rad/s)."""
+    x, vx, y, vy, z, vz, phi, dphi, th, dth, psi, dpsi = X
+    roll, pitch, yaw = phi, -th, wrap_pi(-psi)
+    q = euler_to_quaternion(roll, pitch, yaw)
+    return (x, -y, -z), q, rotate_inverse(q, (vx, -vy, -vz)), euler_rates_to_body_rates(roll, pitch, dphi, -dth, -dpsi)
+
+
+def odometry_to_state(pos: Vec3, q: Quad, vel_body: Vec3, rates: Vec3) -> tuple[float, ...]:
+    """Inverse of :func:`state_to_odometry` (psi comes back wrapped to (-pi, pi]). The
+    quaternion is normalised first: a float32 one is unit only to ~1e-7."""
+    n = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    q = (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
+    return ned_to_paper(pos, rotate(q, vel_body), q, rates)
+
+
+def step_usec(k: int, rate_hz: float) -> int:
+    """time_usec of control step k at ``rate_hz``: t_k = k / rate_hz, rounded to 1 us."""
+    return int(round(k * 1e6 / rate_hz))
+
+
+def step_of_usec(usec: int, rate_hz: float) -> int:
+    """The control step a time_usec stamps (inverse of :func:`step_usec` for rates up to
+    1 MHz), so that each side recomputes t_k = k / rate_hz exactly instead of from us."""
+    return int(round(usec * rate_hz / 1e6))
