@@ -154,7 +154,14 @@ _REQUIRED = _Required()
 def _range(lo: float | None, hi: float | None, lo_open: bool, hi_open: bool) -> str:
     left = "(" if lo_open or lo is None else "["
     right = ")" if hi_open or hi is None else "]"
-    return f"{left}{'-inf' if lo is None else f'{lo:g}'}, {'inf' if hi is None else f'{hi:g}'}{right}"
+    return f"{left}{_bound(lo, '-inf')}, {_bound(hi, 'inf')}{right}"
+
+
+def _bound(v: float | None, none: str) -> str:
+    """A range end as written: integers in full (2147483647, not 2.14748e+09)."""
+    if v is None:
+        return none
+    return str(v) if isinstance(v, int) else f"{v:g}"
 
 
 def _show(v: Any) -> str:
