@@ -1,0 +1,187 @@
+"""missions/mission.py: mission files load, validate and round-trip through params.dump_toml.
+
+Each bad value raises params.ConfigError naming the file and the key; the tables owned by
+other parts ([effects], [gains], [failsafe]) are validated when a run is built
+(bridge.flight.prepare), still naming the file and the key.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from bridge.flight import prepare
+from missions import MISSION_DIR, Mission, Setpoint, Sine, Step, Waypoints, load_mission, mission_from_table
+from params import ConfigError, dump_toml
+
+SHIPPED = sorted(MISSION_DIR.glob("*.toml"))
+STEP_TEXT = (MISSION_DIR / "step.toml").read_text()
+SINE_TEXT = (MISSION_DIR / "sine.toml").read_text()
+
+
+def test_shipped_missions_load_and_build() -> None:
+    assert {p.stem for p in SHIPPED} >= {"step", "sine", "robust", "waypoints"}
+    for path in SHIPPED:
+        m = load_mission(path)
+        assert m.name == path.stem and m.source == str(path)
+        flight = prepare(m)  # profile, effects, gains and failsafe validated too
+        assert flight.substeps == 4 and m.steps == int(round(m.duration_s * 250))
+
+
+def test_the_paper_scenarios() -> None:
+    step = load_mission(MISSION_DIR / "step.toml")
+    assert step.duration_s == 30.0 and step.start == (0.0, 0.0, 0.0, 0.0)
+    assert step.trajectory == Step((
+        Setpoint(0.0, 1.0, 1.0, 1.0, math.pi / 4),
+        Setpoint(10.0, -1.0, 2.0, 2.0, 0.0),
+        Setpoint(20.0, 0.0, 0.0, 1.5, -math.pi / 4),
+    ))
+    sine = load_mission(MISSION_DIR / "sine.toml")
+    assert sine.duration_s == 30.0 and sine.trajectory == Sine(1.0, 0.5, 0.1, 0.0, 0.0)
+    robust = prepare(MISSION_DIR / "robust.toml")
+    e = robust.effects
+    assert e.drag and e.mass_scale == 1.2 and e.inertia_scale == 1.2
+    assert e.disturbance.force_amp == (0.5,) * 3 and e.disturbance.torque_amp == (0.2,) * 3
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.stem)
+def test_round_trip_through_dump_toml(path: Path) -> None:
+    m = load_mission(path)
+    again = mission_from_table(tomllib.loads(dump_toml(m.to_dict())), "again.toml")
+    assert again.to_dict() == m.to_dict()
+    assert again.trajectory == m.trajectory
+
+
+def test_round_trip_of_a_scripted_mission() -> None:
+    m = Mission(
+        Waypoints((Setpoint(0.0, 0.0, 0.0, 0.0), Setpoint(4.0, 1.0, -2.0, 3.0, 1.0))),
+        duration_s=6.0,
+        name="scripted",
+        profile="x500",
+        actuation="wrench",
+        controller="smc",
+        rate_hz=500.0,
+        physics_hz=2000.0,
+        seed=7,
+        start=(0.5, -0.5, 0.0, 0.25),
+        gains={"z": {"c": 2.5}, "limits": {"tilt_max": 0.5}},
+        effects={"drag": True, "disturbance": {"force": [0.1, 0.0, -0.2], "random_phase": True}},
+        failsafe={"timeout_s": 0.2},
+    )
+    again = mission_from_table(tomllib.loads(dump_toml(m.to_dict())), "again.toml")
+    assert again.to_dict() == m.to_dict()
+    for field in ("trajectory", "duration_s", "profile", "actuation", "controller", "rate_hz", "seed", "start"):
+        assert getattr(again, field) == getattr(m, field)
+    prepare(again)
+
+
+def _write(tmp_path: Path, text: str, name: str = "bad.toml") -> Path:
+    f = tmp_path / name
+    f.write_text(text)
+    return f
+
+
+def _fails(path: Path, key: str, words: str = "") -> str:
+    with pytest.raises(ConfigError) as exc:
+        prepare(path)
+    msg = str(exc.value)
+    assert msg.startswith(f"{path}: {key}:"), msg
+    assert words in msg, msg
+    return msg
+
+
+@pytest.mark.parametrize(
+    "old, new, key, words",
+    [
+        ("duration_s = 30.0", "duration_s = -5.0", "duration_s", "(0, 86400]"),
+        ("duration_s = 30.0", "duration_s = 0", "duration_s", "(0, 86400]"),
+        ("duration_s = 30.0", 'duration_s = "long"', "duration_s", "expected a number"),
+        ("duration_s = 30.0", "", "duration_s", "is required"),
+        ("rate_hz = 250", "rate_hz = 5", "rate_hz", "[50, 1000]"),
+        ("rate_hz = 250", "rate_hz = 300", "rate_hz", "whole multiple"),
+        ("seed = 0", "seed = -1", "seed", "[0, 2147483647]"),
+        ("seed = 0", "seed = 1.5", "seed", "expected an integer"),
+        ('controller = "bsst"', 'controller = "lqr"', "controller", "bsst, smc, pid"),
+        ('profile = "paper"', 'profile = "f450"', "profile", "unknown profile"),
+        ('profile = "paper"', "profile = 3", "profile", "expected a string"),
+        ('name = "step"', 'name = "step"\nwind = 3', "wind", "unknown key"),
+        ('kind = "step"', 'kind = "spiral"', "trajectory.kind", "step, sine, waypoints"),
+        ("setpoints = [", "points = [", "trajectory.setpoints", "non-empty list"),
+        ("{ t = 10.0,", "{ t = 40.0,", "trajectory.setpoints[1].t", "[0, 30]"),
+        ("{ t = 20.0,", "{ t = 5.0,", "trajectory.setpoints[2].t", "later than"),
+        ("x = -1.0,", 'x = "left",', "trajectory.setpoints[1].x", "expected a number"),
+        ("y = 2.0,", "y = 2.0, w = 1,", "trajectory.setpoints[1].w", "unknown key"),
+        ("z = 1.5,", "", "trajectory.setpoints[2].z", "is required"),
+    ],
+)
+def test_bad_step_mission(tmp_path: Path, old: str, new: str, key: str, words: str) -> None:
+    assert old in STEP_TEXT
+    _fails(_write(tmp_path, STEP_TEXT.replace(old, new, 1)), key, words)
+
+
+@pytest.mark.parametrize(
+    "old, new, key, words",
+    [
+        ("amplitude = 1.0", "amplitude = -1.0", "trajectory.amplitude", "[0, 10000]"),
+        ("climb = 0.1", "climb = 0.1\nphase = 1.0", "trajectory.phase", "unknown key"),
+        ("", "[effects]\ndrag = 1\n", "effects.drag", "true or false"),
+        ("", "[effects]\nwind = true\n", "effects.wind", "unknown key"),
+        ("", "[effects.mismatch]\nmass_scale = 0.0\n", "effects.mismatch.mass_scale", "[0.1, 10]"),
+        ("", "[effects.disturbance]\nforce = [1.0, 2.0]\n", "effects.disturbance.force", "list of 3"),
+        ("", "[effects.disturbance]\nforce_amplitude = [-1.0, 0, 0]\n", "effects.disturbance.force_amplitude",
+         "element 0"),
+        ("", "[gains.z]\nk1 = 1.0\n", "gains.z.k1", "eq. (23)"),
+        ("", "[gains.attitude]\nalpha = 1.2\n", "gains.attitude.alpha", "(0.5, 1)"),
+        ("", "[failsafe]\ntimeout_s = 0\n", "failsafe.timeout_s", "[0.01, 60]"),
+        ("", "[start]\nposition = [0, 0]\n", "start.position", "list of 3"),
+        ("", "effects = 3\n", "effects", "expected a table"),
+    ],
+)
+def test_bad_sine_mission(tmp_path: Path, old: str, new: str, key: str, words: str) -> None:
+    assert old in SINE_TEXT
+    text = SINE_TEXT.replace(old, new, 1) if old else SINE_TEXT + new
+    if new.startswith("effects = "):  # a top-level key must come before the first table
+        text = new + SINE_TEXT
+    _fails(_write(tmp_path, text), key, words)
+
+
+def test_trajectory_shapes(tmp_path: Path) -> None:
+    body = 'name = "m"\nduration_s = 10.0\n'
+    _fails(_write(tmp_path, body), "trajectory", "is required")
+    _fails(_write(tmp_path, body + "trajectory = 3\n"), "trajectory", "expected a table")
+    _fails(_write(tmp_path, body + '[trajectory]\nkind = "step"\nsetpoints = []\n'), "trajectory.setpoints",
+           "non-empty list")
+    _fails(_write(tmp_path, body + '[trajectory]\nkind = "waypoints"\npoints = 5\n'), "trajectory.points",
+           "non-empty list")
+    _fails(_write(tmp_path, body + '[trajectory]\nkind = "step"\nsetpoints = [1, 2]\n'), "trajectory.setpoints[0]",
+           "expected a table")
+    _fails(_write(tmp_path, body + "[trajectory]\n"), "trajectory.kind", "is required")
+
+
+def test_missing_file_and_non_toml(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=r"nope\.toml: no such file$"):
+        load_mission(tmp_path / "nope.toml")
+    with pytest.raises(ConfigError, match=r"junk\.toml: not valid TOML"):
+        load_mission(_write(tmp_path, "this is not toml\n", "junk.toml"))
+    with pytest.raises(ConfigError, match=r"png\.toml: not a text file"):
+        p = tmp_path / "png.toml"
+        p.write_bytes(b"\x89PNG\r\n\x1a\n\xff\xff")
+        load_mission(p)
+    with pytest.raises(ConfigError, match="is a directory"):
+        load_mission(tmp_path)
+
+
+def test_scripted_missions_are_validated_too() -> None:
+    with pytest.raises(ConfigError, match=r"^<python>: duration_s:"):
+        Mission(Sine(), duration_s=-1.0)
+    with pytest.raises(ConfigError, match=r"^<python>: rate_hz:"):
+        Mission(Sine(), duration_s=10.0, rate_hz=5.0)
+    with pytest.raises(ConfigError, match=r"^<python>: controller:"):
+        Mission(Sine(), duration_s=10.0, controller="lqr")
+    m = Mission(Sine(), duration_s=10.0)
+    with pytest.raises(ConfigError, match=r"duration_s"):
+        m.with_overrides(duration_s=float("nan"))
+    assert m.with_overrides(rate_hz=500.0, seed=None).rate_hz == 500.0
