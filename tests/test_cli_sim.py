@@ -1,0 +1,169 @@
+"""`bsst sim` as a real subprocess (``python -m bridge sim ...``).
+
+A good run exits 0 and writes the run directory of DESIGN.md section 6; bad input exits 2
+with exactly one line on stderr and no traceback; a non-empty --out is refused without
+--overwrite.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from missions import MISSION_DIR
+from params import dump_toml
+
+ROOT = Path(__file__).resolve().parent.parent
+PYTHON = str(ROOT / ".venv" / "bin" / "python") if (ROOT / ".venv" / "bin" / "python").exists() else sys.executable
+
+# DESIGN.md section 6: fixed names (more may follow)
+TRACE_COLUMNS = [
+    "t", "x", "y", "z", "vx", "vy", "vz", "phi", "theta", "psi", "dphi", "dtheta", "dpsi",
+    "x_ref", "y_ref", "z_ref", "psi_ref", "u1", "u2", "u3", "u4", "c1", "c2", "c3", "c4",
+    "u1_act", "u2_act", "u3_act", "u4_act",
+]
+SUMMARY_KEYS = {"mission", "clock", "rate_hz", "duration_s", "axes", "inputs", "link", "events", "outcome"}
+AXIS_KEYS = {"rms", "max", "settling_s", "bound_s"}
+INPUT_KEYS = {"min", "max", "tv_per_s"}
+LINK_KEYS = {"sent", "delivered", "lost", "duplicated", "reordered", "delay_ms"}
+PLOTS = {"positions.png", "errors.png", "angles.png", "inputs.png", "path3d.png"}
+
+
+def bsst(*args: str | Path, cwd: Path = ROOT) -> subprocess.CompletedProcess[str]:
+    env = dict(os.environ, MPLBACKEND="Agg")
+    return subprocess.run([PYTHON, "-m", "bridge", "sim", *map(str, args)], cwd=cwd, env=env,
+                          capture_output=True, text=True, timeout=120)
+
+
+def short_sine(tmp_path: Path, seconds: float = 4.0) -> Path:
+    text = (MISSION_DIR / "sine.toml").read_text().replace("duration_s = 30.0", f"duration_s = {seconds}")
+    f = tmp_path / "short.toml"
+    f.write_text(text)
+    return f
+
+
+def test_good_run_writes_the_run_directory(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    res = bsst(short_sine(tmp_path), "--out", out, "--rate", "200", "--seed", "3")
+    assert res.returncode == 0, res.stderr
+    assert "outcome: completed" in res.stdout and str(out) in res.stdout
+    assert "Traceback" not in res.stderr
+
+    files = {p.name for p in out.iterdir()}
+    assert {"mission.toml", "trace.csv", "summary.json", "events.log", "plots"} <= files
+    assert {p.name for p in (out / "plots").glob("*.png")} >= PLOTS
+    for png in (out / "plots").glob("*.png"):
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+    # the mission as flown: overrides applied, loads again
+    flown = (out / "mission.toml").read_text()
+    assert "rate_hz = 200.0" in flown and "seed = 3" in flown
+    from missions import load_mission
+
+    assert load_mission(out / "mission.toml").rate_hz == 200.0
+
+    with open(out / "trace.csv") as f:
+        rows = list(csv.reader(f))
+    header, body = rows[0], rows[1:]
+    assert header[: len(TRACE_COLUMNS)] == TRACE_COLUMNS
+    assert len(body) == 4 * 200 and all(len(r) == len(header) for r in body)
+    assert float(body[1][0]) == pytest.approx(1 / 200)
+
+    s = json.loads((out / "summary.json").read_text())
+    assert SUMMARY_KEYS <= set(s)
+    assert s["clock"] == "offline" and s["outcome"] == "completed" and s["rate_hz"] == 200.0
+    assert s["mission"] == "sine" and s["duration_s"] == pytest.approx(4.0)
+    assert set(s["axes"]) == {"x", "y", "z", "psi"} and all(AXIS_KEYS <= set(v) for v in s["axes"].values())
+    assert set(s["inputs"]) == {"u1", "u2", "u3", "u4"} and all(INPUT_KEYS <= set(v) for v in s["inputs"].values())
+    assert {"up", "down", "rejected"} <= set(s["link"])
+    for d in ("up", "down"):
+        assert LINK_KEYS <= set(s["link"][d]) and {"p50", "p95", "p99", "max"} <= set(s["link"][d]["delay_ms"])
+    assert isinstance(s["events"], list)
+    assert not list(out.glob(".*tmp*"))  # the atomic write left no temporary behind
+
+
+def test_refuses_a_non_empty_out_without_overwrite(tmp_path: Path) -> None:
+    out = tmp_path / "busy"
+    out.mkdir()
+    (out / "keep.txt").write_text("mine")
+    mission = short_sine(tmp_path, 1.0)
+    res = bsst(mission, "--out", out, "--no-plots")
+    assert res.returncode == 2
+    assert len(res.stderr.splitlines()) == 1 and "--overwrite" in res.stderr and "Traceback" not in res.stderr
+    assert {p.name for p in out.iterdir()} == {"keep.txt"}
+    res = bsst(mission, "--out", out, "--no-plots", "--overwrite")
+    assert res.returncode == 0, res.stderr
+    assert (out / "trace.csv").exists() and (out / "keep.txt").read_text() == "mine"
+
+
+def _mission(tmp_path: Path, old: str, new: str) -> Path:
+    text = (MISSION_DIR / "step.toml").read_text()
+    assert old in text
+    f = tmp_path / "bad.toml"
+    f.write_text(text.replace(old, new, 1))
+    return f
+
+
+BAD = {
+    "negative duration": (lambda p: [_mission(p, "duration_s = 30.0", "duration_s = -1.0")], "duration_s"),
+    "unknown key": (lambda p: [_mission(p, 'name = "step"', 'name = "step"\nspeed = 3')], "speed: unknown key"),
+    "wrong type": (lambda p: [_mission(p, "rate_hz = 250", 'rate_hz = "fast"')], "rate_hz"),
+    "bad trajectory": (lambda p: [_mission(p, 'kind = "step"', 'kind = "loop"')], "trajectory.kind"),
+    "bad gains": (lambda p: [_mission(p, "seed = 0", "seed = 0\n[gains.z]\nk2 = 0.5")], "gains.z.k2"),
+    "missing file": (lambda p: [p / "nowhere.toml"], "no such file"),
+    "non-TOML": (lambda p: [_write(p / "junk.toml", "<xml>not toml</xml>")], "not valid TOML"),
+    "a directory": (lambda p: [p], "is a directory"),
+    "--rate 5": (lambda p: [MISSION_DIR / "step.toml", "--rate", "5"], "--rate"),
+    "--rate nan": (lambda p: [MISSION_DIR / "step.toml", "--rate", "nan"], "--rate"),
+    "--seed -1": (lambda p: [MISSION_DIR / "step.toml", "--seed", "-1"], "--seed"),
+    "--seed x": (lambda p: [MISSION_DIR / "step.toml", "--seed", "x"], "--seed"),
+    "unknown profile": (lambda p: [MISSION_DIR / "step.toml", "--profile", "f450"], "unknown profile"),
+    "unknown controller": (lambda p: [MISSION_DIR / "step.toml", "--controller", "lqr"], "--controller"),
+    "unknown flag": (lambda p: [MISSION_DIR / "step.toml", "--fast"], "--fast"),
+    "no mission": (lambda p: [], "mission"),
+}
+
+
+def _write(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("case", list(BAD))
+def test_bad_input_exits_2_with_one_line(tmp_path: Path, case: str) -> None:
+    make, words = BAD[case]
+    out = tmp_path / "out"
+    res = bsst(*make(tmp_path), "--out", out, "--no-plots")
+    assert res.returncode == 2, (res.returncode, res.stdout, res.stderr)
+    lines = res.stderr.splitlines()
+    assert len(lines) == 1, res.stderr
+    assert "Traceback" not in res.stderr and lines[0].startswith("bsst")
+    assert words in lines[0], lines[0]
+    assert not out.exists() or not any(out.iterdir())  # nothing flown, nothing written
+
+
+def test_divergence_exits_1_and_is_recorded(tmp_path: Path) -> None:
+    """A set-point 150 m away takes the vehicle past |position| = 100 m: the run stops there,
+    every file is written, the summary says why, and the exit status is 1."""
+    far = tmp_path / "far.toml"
+    far.write_text('name = "far"\nduration_s = 30.0\n[trajectory]\nkind = "step"\n'
+                   "setpoints = [{ t = 0.0, x = 150.0, y = 0.0, z = 2.0 }]\n")
+    out = tmp_path / "run"
+    res = bsst(far, "--out", out, "--no-plots")
+    assert res.returncode == 1, res.stderr
+    assert "Traceback" not in res.stderr
+    s = json.loads((out / "summary.json").read_text())
+    assert s["outcome"] == "diverged"
+    assert any(e["kind"] == "diverged" and "100 m" in e["text"] for e in s["events"])
+    assert "diverged" in (out / "events.log").read_text()
+    with open(out / "trace.csv") as f:
+        rows = list(csv.reader(f))[1:]
+    assert 0 < len(rows) < 30 * 250
+    last_x = float(rows[-1][1])
+    assert 90.0 < last_x <= 100.5
