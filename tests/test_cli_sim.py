@@ -16,8 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from missions import MISSION_DIR
-from params import dump_toml
+from missions import MISSION_DIR, load_mission
 
 ROOT = Path(__file__).resolve().parent.parent
 PYTHON = str(ROOT / ".venv" / "bin" / "python") if (ROOT / ".venv" / "bin" / "python").exists() else sys.executable
@@ -64,8 +63,6 @@ def test_good_run_writes_the_run_directory(tmp_path: Path) -> None:
     # the mission as flown: overrides applied, loads again
     flown = (out / "mission.toml").read_text()
     assert "rate_hz = 200.0" in flown and "seed = 3" in flown
-    from missions import load_mission
-
     assert load_mission(out / "mission.toml").rate_hz == 200.0
 
     with open(out / "trace.csv") as f:
