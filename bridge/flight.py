@@ -7,12 +7,16 @@ before anything starts, with the file and key named.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 from bridge.failsafe import FailsafeConfig, failsafe_from_table
+from bridge.link import LinkSettings, link_from_table, merge_link_tables
 from bridge.simvehicle import SimVehicle
 from controller import Controller, Gains, Nominal, gains_from_table
+from controller.link_guard import GuardConfig
 from missions import Mission, load_mission
 from params import ConfigError, Table
 from plant import Effects, Profile, Quadrotor, load_profile
@@ -28,6 +32,7 @@ class Flight:
     effects: Effects
     gains: Gains
     failsafe: FailsafeConfig
+    link: LinkSettings = field(default_factory=LinkSettings)
 
     @property
     def nominal(self) -> Nominal:
@@ -50,6 +55,11 @@ class Flight:
     def make_controller(self) -> Controller:
         return Controller(self.mission.controller, self.nominal, self.gains, self.mission.rate_hz)
 
+    @property
+    def guard(self) -> GuardConfig:
+        """The controller's link guard: ``[link]`` thresholds and compensation, ``[failsafe] resume``."""
+        return replace(self.link.guard, resume=self.failsafe.resume)
+
 
 def prepare(
     mission: Mission | str | Path,
@@ -59,10 +69,16 @@ def prepare(
     rate_hz: float | None = None,
     seed: int | None = None,
     actuation: str | None = None,
+    link: Mapping[str, Any] | None = None,
 ) -> Flight:
-    """Validate a mission (object or file) with overrides into a :class:`Flight`."""
+    """Validate a mission (object or file) with overrides into a :class:`Flight`.
+
+    ``link`` is laid over the mission's ``[link]`` table (see :func:`bridge.link.merge_link_tables`).
+    """
     m = mission if isinstance(mission, Mission) else load_mission(mission)
-    m = m.with_overrides(profile=profile, controller=controller, rate_hz=rate_hz, seed=seed, actuation=actuation)
+    merged = merge_link_tables(m.link, link) if link else None
+    m = m.with_overrides(profile=profile, controller=controller, rate_hz=rate_hz, seed=seed, actuation=actuation,
+                         link=merged)
     src = m.source
     try:
         prof = load_profile(m.profile)
@@ -73,4 +89,5 @@ def prepare(
     effects = effects_from_table(Table(m.effects, src, "effects"))
     gains = gains_from_table(m.gains, src) if m.gains else Gains()
     failsafe = failsafe_from_table(m.failsafe, src)
-    return Flight(m, prof, effects, gains, failsafe)
+    link_settings = link_from_table(m.link, src, seed=m.seed)
+    return Flight(m, prof, effects, gains, failsafe, link_settings)

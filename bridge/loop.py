@@ -3,14 +3,24 @@
 One control step at time t_k = k / rate_hz: the law reads the state, its command goes to
 the vehicle, which holds it over ``physics_hz / rate_hz`` RK4 steps. The vehicle is the same
 :class:`~bridge.simvehicle.SimVehicle` (timeout, failsafe) as the MAVLink vehicle uses.
+
+Both messages cross the mission's link model (:mod:`bridge.link`) in simulation time, as
+they would cross the sockets: the state at t_k goes down to the controller's
+:class:`~controller.link_guard.LinkGuard`, which controls on the newest state delivered
+(``state_age_s`` in the trace is its age); the command goes up and acts at the physics
+step the model delivers it in (:mod:`bridge.linkends`). A perfect link (the default)
+delivers both at once, which is exactly the loop without a link.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import math
+from collections.abc import Callable, Mapping
 from pathlib import Path
+from typing import Any
 
 from bridge.flight import Flight, prepare
+from bridge.linkends import ControllerEnd, VehicleEnd
 from bridge.metrics import summarise
 from bridge.runlog import (
     TRACE_COLUMNS,
@@ -22,8 +32,9 @@ from bridge.runlog import (
     state_columns,
     trace_arrays,
 )
-from bridge.simvehicle import FAILSAFE, LANDED
+from bridge.simvehicle import FAILSAFE, LANDED, OFFBOARD
 from bridge.wire import command_to_wire
+from controller.link_guard import LinkGuard
 from missions import Mission
 from params import dump_toml
 
@@ -42,13 +53,15 @@ def simulate(
     rate_hz: float | None = None,
     seed: int | None = None,
     progress: Progress | None = None,
+    link: Mapping[str, Any] | None = None,
 ) -> Run:
     """Fly a mission offline. Returns a :class:`Run` (trace as arrays, summary as a dict).
 
     The run directory is written only when ``out`` is given or ``write`` is true (then under
-    ``runs/``). Overrides replace the mission's own values, as the CLI flags do.
+    ``runs/``). Overrides replace the mission's own values, as the CLI flags do; ``link`` is
+    laid over the mission's ``[link]`` table (e.g. ``{"up": {"loss_pct": 20}}``).
     """
-    flight = prepare(mission, profile=profile, controller=controller, rate_hz=rate_hz, seed=seed)
+    flight = prepare(mission, profile=profile, controller=controller, rate_hz=rate_hz, seed=seed, link=link)
     path = run_dir(out, flight.mission.name, overwrite) if (out is not None or write) else None
     return fly(flight, path, plots=plots, progress=progress)
 
@@ -63,6 +76,11 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
     actuation = flight.profile.actuation
     sample = m.trajectory.sample
     rate = m.rate_hz
+    up, down = flight.link.make()
+    guard = LinkGuard(ctl, flight.guard)
+    vend = VehicleEnd(vehicle, up, actuation)
+    cend = ControllerEnd(guard, down)
+    blackouts = _blackout_notes(flight)
     rows: list[tuple[float, ...]] = []
     trace = events = None
     if path is not None:
@@ -70,21 +88,36 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
         trace = TraceWriter(path / "trace.csv")
         events = EventLog(path / "events.log")
     outcome = "completed"
+    failsafe_seen = False
     logged = 0
+    noted = 0
+    demanded = wire = (0.0, 0.0, 0.0, 0.0)
     try:
         for k in range(m.steps):
             t = k / rate
             X = plant.state
             ref = sample(t)
-            cmd = ctl.step(t, X, ref)
-            vehicle.command(cmd.normalised)
-            wire = command_to_wire(actuation, cmd.normalised)
-            row = (t, *state_columns(X), ref[0][0], ref[1][0], ref[2][0], ref[3][0], *cmd.demanded, *wire,
-                   *plant.realised, 0.0, *law.desired)
+            while blackouts and blackouts[0][0] <= t:
+                vehicle.event("blackout", blackouts.pop(0)[1])
+            cend.receive_state(t, X, vehicle.armed and vehicle.mode == OFFBOARD)
+            dec = cend.step(t, sample)
+            for e in guard.events[noted:]:
+                vehicle.event(e[1], e[2])
+            noted = len(guard.events)
+            if dec.arm:
+                vend.receive_arm(t)
+            cmd = dec.command
+            if cmd is not None:
+                vend.receive_command(t, cmd.normalised, dec.state_t)
+                demanded = cmd.demanded
+                wire = command_to_wire(actuation, cmd.normalised)
+            vend.deliver(t)
+            row = (t, *state_columns(X), ref[0][0], ref[1][0], ref[2][0], ref[3][0], *demanded, *wire,
+                   *plant.realised, dec.state_age_s if cmd is not None else math.nan, *law.desired)
             rows.append(row)
             if trace is not None:
                 trace.row(row)
-            vehicle.advance()
+            vend.advance()
             while logged < len(vehicle.events):
                 e = vehicle.events[logged]
                 logged += 1
@@ -96,7 +129,10 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
                 vehicle.event("diverged", why)
                 break
             if vehicle.mode in (FAILSAFE, LANDED):
+                failsafe_seen = True
                 outcome = "failsafe"
+            elif failsafe_seen and flight.failsafe.resume and vehicle.armed:
+                outcome = "completed"  # resumed after a failsafe (the events say so)
             if progress is not None and k % int(rate) == 0:
                 progress(t, m.duration_s, sum((X[i] - ref[j][0]) ** 2 for i, j in ((0, 0), (2, 1), (4, 2))) ** 0.5)
     except KeyboardInterrupt:
@@ -111,7 +147,18 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
             events.close()
     arrays = trace_arrays(rows, TRACE_COLUMNS)
     ev = [{"t": round(e.t, 6), "kind": e.kind, "text": e.text} for e in vehicle.events]
-    summary = summarise(arrays, m, flight.gains, clock="offline", outcome=outcome, events=ev)
+    link = {"up": up.stats.summary(), "down": down.stats.summary(), "rejected": dict(vend.rejected)}
+    summary = summarise(arrays, m, flight.gains, clock="offline", outcome=outcome, events=ev, link=link)
     if path is not None:
         finish_run(path, arrays, summary, f"{m.name} ({m.controller}, {flight.profile.name})", plots)
     return Run(arrays, summary, path)
+
+
+def _blackout_notes(flight: Flight) -> list[tuple[float, str]]:
+    """Events to log at the start of each scheduled blackout: (time s, text), in time order."""
+    windows: dict[tuple[float, float], list[str]] = {}
+    for d, cfg in (("up", flight.link.up), ("down", flight.link.down)):
+        for w in cfg.blackouts:
+            windows.setdefault(w, []).append(d)
+    return [(s, f"{'+'.join(ds)} link blackout from {s:.3f} s for {dur:.3f} s")
+            for (s, dur), ds in sorted(windows.items())]

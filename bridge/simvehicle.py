@@ -7,6 +7,7 @@ the command is held over the period (zero-order hold).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from bridge.failsafe import FailsafeConfig, LandingController
@@ -70,13 +71,22 @@ class SimVehicle:
         self.last_command_t = self.plant.t
         return True
 
-    def advance(self) -> None:
-        """One control period: failsafe check, then the physics substeps."""
+    def advance(self, deliver: Callable[[float], None] | None = None) -> None:
+        """One control period: failsafe check, then the physics substeps.
+
+        ``deliver(t)``, if given, is called with the plant time (s) before the check and
+        before each substep, so that messages an impaired link delivers in the middle of
+        the period (see :mod:`bridge.link`) act at the physics step they arrive in.
+        """
         p = self.plant
+        if deliver is not None:
+            deliver(p.t)
         if self.armed and self.mode == OFFBOARD and p.t - self.last_command_t > self.failsafe.timeout_s + 1e-9:
             self.mode = FAILSAFE
             self.event("failsafe", f"no actuator target for {p.t - self.last_command_t:.3f} s: level and descend")
-        for _ in range(self.substeps):
+        for i in range(self.substeps):
+            if deliver is not None and i:
+                deliver(p.t)
             if self.mode == FAILSAFE and self.armed:
                 if p.on_ground:
                     self.mode = LANDED

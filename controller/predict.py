@@ -1,0 +1,131 @@
+"""Latency compensation: carry a delayed state forward to "now" through the law's nominal model.
+
+The controller receives the vehicle's state some time after it was measured (its age).
+:class:`Predictor` integrates the nominal model of eq. (6) (corrected, LAW.md) from that
+state over its age, applying the wrenches the controller itself sent in the meantime, each
+from the time it was sent plus an assumed command latency ``lag_s``, and returns the
+predicted state, on which the law then computes its command.
+
+Why this is not ``plant/``'s integrator: the controller must not import the plant
+(DESIGN.md section 1). A real offboard computer has a model of the vehicle, not the
+simulator; this is that model: the law's :class:`~controller.nominal.Nominal` constants,
+no drag, no disturbance, no motor lag, no ground, and the realisable wrench taken as
+exactly applied. Everything else the plant does is prediction error that the next state
+corrects. It is a few lines of RK4 at the control period, which is all it needs (the
+horizon is a few periods).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from math import cos, sin
+
+from controller.nominal import Coefficients, Nominal
+
+State = tuple[float, ...]
+Quad = tuple[float, float, float, float]
+
+
+class NominalModel:
+    """Eq. (6), corrected, with the nominal constants: ``derivative`` and one RK4 step."""
+
+    def __init__(self, n: Nominal) -> None:
+        self.m = n.mass
+        self.g = n.gravity
+        self.c = Coefficients.of(n)
+
+    def derivative(self, X: State, u: Quad, omega_d: float) -> State:
+        """dX/dt for state X (eq. 7 order, SI) under wrench u = (u1 N, u2..u4 as in eq. 6)."""
+        _, vx, _, vy, _, vz, phi, dphi, th, dth, psi, dpsi = X
+        cphi, sphi, cth, sth, cpsi, spsi = cos(phi), sin(phi), cos(th), sin(th), cos(psi), sin(psi)
+        a = u[0] / self.m
+        c = self.c
+        return (
+            vx, (cphi * sth * cpsi + sphi * spsi) * a,
+            vy, (cphi * sth * spsi - sphi * cpsi) * a,
+            vz, cphi * cth * a - self.g,
+            dphi, c.i1 * dth * dpsi - c.jr_x * dth * omega_d + c.l_x * u[1],
+            dth, c.i2 * dphi * dpsi + c.jr_y * dphi * omega_d + c.l_y * u[2],
+            dpsi, c.i3 * dphi * dth + c.l_z * u[3],
+        )
+
+    def rk4(self, X: State, u: Quad, omega_d: float, h: float) -> State:
+        """One classical Runge–Kutta step of h seconds with the wrench held."""
+        f = self.derivative
+        k1 = f(X, u, omega_d)
+        k2 = f(tuple(x + 0.5 * h * k for x, k in zip(X, k1)), u, omega_d)
+        k3 = f(tuple(x + 0.5 * h * k for x, k in zip(X, k2)), u, omega_d)
+        k4 = f(tuple(x + h * k for x, k in zip(X, k3)), u, omega_d)
+        s = h / 6.0
+        return tuple(x + s * (a + 2.0 * b + 2.0 * c + d) for x, a, b, c, d in zip(X, k1, k2, k3, k4))
+
+
+class Predictor:
+    """The state "now" from the newest (delayed) state and the commands sent since.
+
+    ``sent(t, u, omega_d)`` records each command the controller sends (time in s, the
+    realisable wrench, the signed rotor-speed sum of eq. 5); ``predict(t_state, X, t)``
+    returns X carried from ``t_state`` to ``t``. Steps are at most ``dt_max`` seconds.
+    Predictions from the same state are continued incrementally, so holding a stale state
+    costs one step per call.
+    """
+
+    def __init__(self, nominal: Nominal, dt_max: float, lag_s: float = 0.0) -> None:
+        self.model = NominalModel(nominal)
+        self.dt_max = dt_max
+        self.lag_s = lag_s
+        self._cmds: deque[tuple[float, Quad, float]] = deque()
+        self._from: float | None = None  # time stamp of the state the cache starts from
+        self._t = 0.0
+        self._X: State = ()
+
+    def sent(self, t: float, u: Quad, omega_d: float) -> None:
+        self._cmds.append((t + self.lag_s, u, omega_d))
+
+    def reset(self) -> None:
+        self._cmds.clear()
+        self._from = None
+
+    def predict(self, t_state: float, X: State, t: float) -> State:
+        """X (measured at t_state) carried forward to t >= t_state through the nominal model.
+
+        Calls with the same state must come with non-decreasing t and commands recorded
+        in time order (the cached prediction is continued, not recomputed).
+        """
+        if t <= t_state:
+            return X
+        if self._from == t_state and self._t <= t:
+            start_t, start_X = self._t, self._X
+        else:
+            start_t, start_X = t_state, tuple(X)
+        cmds = self._cmds
+        while len(cmds) > 1 and cmds[1][0] <= t_state:  # keep the one in effect at t_state
+            cmds.popleft()
+        Xp = self._propagate(start_X, start_t, t)
+        self._from, self._t, self._X = t_state, t, Xp
+        return Xp
+
+    def _propagate(self, X: State, tau: float, t: float) -> State:
+        cmds = self._cmds
+        n = len(cmds)
+        i = -1  # index of the command in effect at tau (-1: none yet, zero wrench)
+        while i + 1 < n and cmds[i + 1][0] <= tau:
+            i += 1
+        rk4 = self.model.rk4
+        while tau < t:
+            nxt = cmds[i + 1][0] if i + 1 < n else t
+            end = nxt if nxt < t else t
+            if i >= 0:
+                _, u, od = cmds[i]
+            else:
+                u, od = (0.0, 0.0, 0.0, 0.0), 0.0
+            span = end - tau
+            if span > 0.0:
+                k = max(1, int(span / self.dt_max + 0.999999))
+                h = span / k
+                for _ in range(k):
+                    X = rk4(X, u, od, h)
+            tau = end
+            if end == nxt and i + 1 < n:
+                i += 1
+        return X
