@@ -64,12 +64,114 @@ def add_flight_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
 
 
+# -- link impairment flags (bridge.link): both directions, or one with --up-/--down- -----------
+LINK_FLAGS = (  # flag stem, [link] key, metavar, lo, hi, help
+    ("delay", "delay_ms", "MS", 0.0, 60_000.0, "one-way delay"),
+    ("jitter", "jitter_ms", "MS", 0.0, 60_000.0, "delay jitter (uniform half-width or normal sigma)"),
+    ("loss", "loss_pct", "PCT", 0.0, 100.0, "packet loss"),
+    ("burst", "burst_len", "LEN", 0.0, 1e6, "mean loss burst length in packets (Gilbert-Elliott; 0 Bernoulli)"),
+    ("dup", "dup_pct", "PCT", 0.0, 100.0, "duplicated packets"),
+    ("reorder", "reorder_pct", "PCT", 0.0, 100.0, "packets held back past their successor"),
+    ("bandwidth", "rate_bps", "BYTES_PER_S", 0.0, 1e10, "bandwidth cap in bytes/s (0: none)"),
+)
+
+
+def number_in(name: str, lo: float, hi: float) -> Callable[[str], float]:
+    """A number in [lo, hi] (closed), named in the error."""
+    def conv(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be a number, got {text!r}") from None
+        if not lo <= v <= hi:
+            raise argparse.ArgumentTypeError(f"{name} must be in [{lo:g}, {hi:g}], got {text}")
+        return v
+
+    return conv
+
+
+def blackout_window(name: str) -> Callable[[str], tuple[float, float]]:
+    """``START:DURATION`` in seconds of mission time."""
+    def conv(text: str) -> tuple[float, float]:
+        a, sep, b = text.partition(":")
+        try:
+            start, dur = float(a), float(b)
+        except ValueError:
+            start = dur = float("nan")
+        if not sep or not (0.0 <= start <= 1e6 and 0.0 < dur <= 1e6):
+            raise argparse.ArgumentTypeError(f"{name} must be START:DURATION in seconds (start >= 0, "
+                                             f"duration > 0), got {text!r}")
+        return start, dur
+
+    return conv
+
+
+def add_link_options(p: argparse.ArgumentParser, skip: Sequence[str] = ()) -> None:
+    """The link-impairment flags (``--delay MS`` … for both directions, ``--up-delay``,
+    ``--down-loss`` … for one) and the controller's compensation; ``skip`` omits flag
+    stems a command defines otherwise. :func:`link_table_from_args` reads them back."""
+    g = p.add_argument_group("link impairment", "override the mission's [link] tables; every flag for both "
+                             "directions also exists as --up-FLAG (controller -> vehicle) and --down-FLAG")
+    for stem, key, meta, lo, hi, text in LINK_FLAGS:
+        for pre in ("", "up-", "down-"):
+            if stem in skip and not pre:
+                continue
+            flag = f"--{pre}{stem}"
+            g.add_argument(flag, dest=f"link_{pre.replace('-', '_')}{key}", type=number_in(flag, lo, hi),
+                           metavar=meta, help=argparse.SUPPRESS if pre else text)
+    for pre in ("", "up-", "down-"):
+        flag = f"--{pre}blackout"
+        g.add_argument(flag, dest=f"link_{pre.replace('-', '_')}blackouts", action="append",
+                       type=blackout_window(flag), metavar="START:DURATION",
+                       help=argparse.SUPPRESS if pre else "no packets from START for DURATION s (repeatable)")
+    g.add_argument("--jitter-dist", dest="link_jitter", choices=("uniform", "normal"), help="jitter distribution")
+    g.add_argument("--link-seed", dest="link_seed", type=int_in("--link-seed", 0, 2**31 - 1), metavar="N",
+                   help="seed of the link's fates (default: the mission's seed)")
+    g.add_argument("--compensation", dest="link_compensation", choices=("none", "predict"),
+                   help="predict: control on the state carried forward over its age (nominal model)")
+    g.add_argument("--command-lag", dest="link_command_lag_ms", type=number_in("--command-lag", 0.0, 60_000.0),
+                   metavar="MS", help="with --compensation predict: assumed command delay it also covers")
+
+
+def link_table_from_args(args: argparse.Namespace) -> dict[str, Any]:
+    """The ``[link]`` overrides the flags of :func:`add_link_options` ask for ({} if none).
+
+    Flags for both directions write both ``up`` and ``down``; ``--up-*`` / ``--down-*`` win."""
+    out: dict[str, Any] = {}
+    keys = [key for _, key, *_ in LINK_FLAGS] + ["blackouts"]
+    for d in ("up", "down"):
+        side: dict[str, Any] = {}
+        for key in keys:
+            for dest in (f"link_{key}", f"link_{d}_{key}"):
+                v = getattr(args, dest, None)
+                if v is not None:
+                    side[key] = [list(w) for w in v] if key == "blackouts" else v
+        for key in ("jitter", "seed"):
+            v = getattr(args, f"link_{key}", None)
+            if v is not None:
+                side[key] = v
+        if side:
+            out[d] = side
+        if "burst_len" in side and "loss_pct" in side:
+            from bridge.link import burst_problem
+
+            why = burst_problem(side["loss_pct"], side["burst_len"])
+            if why:
+                raise UsageError(f"bsst: --burst / --{d}-burst: {why}")
+    for key in ("compensation", "command_lag_ms"):
+        v = getattr(args, f"link_{key}", None)
+        if v is not None:
+            out[key] = v
+    return out
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="bsst", description="MAVLink SITL bridge for a BS-ST-controlled quadrotor")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
     p = sub.add_parser("sim", help="fly a mission offline, in one process")
     add_flight_options(p)
+    add_link_options(p)
     p.set_defaults(func=cmd_sim)
     return parser
 
@@ -92,11 +194,13 @@ def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
     w("input  " + "  ".join(f"{u}: [{v['min']:.3g}, {v['max']:.3g}] tv/s {v['tv_per_s']:.3g}"
                             for u, v in s["inputs"].items() if v["min"] is not None) + "\n")
     link = s.get("link", {})
-    if link.get("up", {}).get("sent"):
+    if any(L.get("lost") or L.get("duplicated") or L.get("reordered") or (L.get("delay_ms") or {}).get("max")
+           for L in (link.get("up", {}), link.get("down", {}))):
         for d in ("up", "down"):
             L = link[d]
-            w(f"link {d:4}: sent {L['sent']} delivered {L['delivered']} lost {L['lost']} "
-              f"delay p50 {L['delay_ms']['p50']:.2f} ms p99 {L['delay_ms']['p99']:.2f} ms\n")
+            ms = {k: "n/a" if v is None else f"{v:.2f}" for k, v in L["delay_ms"].items()}
+            w(f"link {d:4}: sent {L['sent']} delivered {L['delivered']} lost {L['lost']} dup {L['duplicated']} "
+              f"reordered {L['reordered']} delay p50 {ms['p50']} ms p99 {ms['p99']} ms max {ms['max']} ms\n")
     for e in s.get("events", [])[:8]:
         w(f"event t={e['t']:.3f} {e['kind']}: {e['text']}\n")
     if path is not None:
@@ -116,6 +220,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
         controller=args.controller,
         rate_hz=args.rate,
         seed=args.seed,
+        link=link_table_from_args(args),
     )
     print_summary(run.summary, run.path)
     return EXIT_OK if run.outcome == "completed" else EXIT_FAILED
