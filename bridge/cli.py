@@ -173,6 +173,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_flight_options(p)
     add_link_options(p)
     p.set_defaults(func=cmd_sim)
+    add_sweep_commands(sub)
     return parser
 
 
@@ -224,6 +225,117 @@ def cmd_sim(args: argparse.Namespace) -> int:
     )
     print_summary(run.summary, run.path)
     return EXIT_OK if run.outcome == "completed" else EXIT_FAILED
+
+
+def value_list(name: str, lo: float, hi: float) -> Callable[[str], tuple[float, ...]]:
+    """``--delay 0,5,10``: comma-separated numbers in [lo, hi], no repeats."""
+    def conv(text: str) -> tuple[float, ...]:
+        parts = [x.strip() for x in text.split(",")]
+        try:
+            vals = tuple(float(x) for x in parts)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} takes numbers separated by commas, got {text!r}") from None
+        bad = [v for v in vals if not lo <= v <= hi]  # also catches nan
+        if bad or not vals:
+            raise argparse.ArgumentTypeError(f"{name} values must be in [{lo:g}, {hi:g}], got {text}")
+        if len(set(vals)) != len(vals):
+            raise argparse.ArgumentTypeError(f"{name}: repeated value in {text}")
+        return vals
+
+    return conv
+
+
+def name_list(name: str, choices: Sequence[str]) -> Callable[[str], tuple[str, ...]]:
+    def conv(text: str) -> tuple[str, ...]:
+        vals = tuple(x.strip() for x in text.split(","))
+        bad = [v for v in vals if v not in choices]
+        if bad or len(set(vals)) != len(vals):
+            raise argparse.ArgumentTypeError(f"{name} takes distinct names among {','.join(choices)}, got {text!r}")
+        return vals
+
+    return conv
+
+
+def add_sweep_commands(sub: Any) -> None:
+    """``bsst sweep`` (latency/dropout campaigns) and ``bsst report`` (rebuild a sweep's report)."""
+    from bridge.sweep import RANGES
+
+    p = sub.add_parser("sweep", help="fly a grid of link impairments, laws and rates; report stability maps")
+    p.add_argument("mission", help="mission TOML, or a sweep TOML (with mission = ... and [grid])")
+    for flag, axis, unit in (("--delay", "delay_ms", "MS"), ("--jitter", "jitter_ms", "MS"),
+                             ("--loss", "loss_pct", "PCT"), ("--burst", "burst_len", "LEN"),
+                             ("--rate", "rate_hz", "HZ")):
+        lo, hi = RANGES[axis]
+        p.add_argument(flag, dest=axis, type=value_list(flag, lo, hi), metavar=f"{unit},...",
+                       help=f"values of {axis} (link values apply to both directions)")
+    p.add_argument("--controller", type=name_list("--controller", ("bsst", "smc", "pid")), metavar="NAME,...",
+                   help="control laws to compare (bsst, smc, pid)")
+    p.add_argument("--seeds", type=int_in("--seeds", 1, 10000), metavar="N",
+                   help="seeds per grid point: the mission's seed, +1, ... (default 1)")
+    mode = p.add_mutually_exclusive_group()
+    mode.add_argument("--offline", dest="mode", action="store_const", const="offline",
+                      help="fly each cell in-process (default)")
+    mode.add_argument("--lockstep", dest="mode", action="store_const", const="lockstep",
+                      help="fly each cell as a lockstep SITL session (vehicle + controller processes)")
+    p.add_argument("--jobs", type=int_in("--jobs", 1, 1024), metavar="N", help="worker processes (default: all cores)")
+    p.add_argument("--dask", metavar="ADDRESS", help="run the cells on this Dask scheduler (e.g. tcp://host:8786)")
+    p.add_argument("--out", metavar="DIR", help="sweep directory (default sweeps/<UTC time>-<mission>)")
+    p.add_argument("--resume", action="store_true", help="fly only the cells missing from --out DIR")
+    p.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out")
+    p.add_argument("--no-plots", action="store_true", help="skip the heat maps")
+    p.set_defaults(func=cmd_sweep)
+    p = sub.add_parser("report", help="rebuild a sweep's report.md and heat maps from its cells.csv")
+    p.add_argument("dir", metavar="DIR", help="sweep directory")
+    p.add_argument("--no-plots", action="store_true", help="skip the heat maps")
+    p.set_defaults(func=cmd_report)
+
+
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from bridge.sweep import AXES, Grid, Sweep, is_sweep_file, load_sweep, run_sweep
+    from missions import load_mission
+
+    spec = load_sweep(args.mission) if is_sweep_file(args.mission) else Sweep(load_mission(args.mission), Grid())
+    axes = {a: getattr(args, a) for a in AXES if getattr(args, a) is not None}
+    if args.seeds is not None:
+        axes["seeds"] = args.seeds
+    spec = replace(spec, grid=replace(spec.grid, **axes), mode=args.mode or spec.mode)
+    if args.resume and args.out is None:
+        raise UsageError("bsst sweep: --resume needs --out DIR (the sweep to resume)")
+    client = connect_dask(args.dask) if args.dask else None
+    try:
+        res = run_sweep(spec, jobs=args.jobs, client=client, out=args.out, write=True, resume=args.resume,
+                        overwrite=args.overwrite, progress=True, plots=not args.no_plots)
+    finally:
+        if client is not None:
+            client.close()
+    print(f"sweep {spec.mission.name}: {len(res.rows)} cells, {res.ran} flown, {res.reused} kept from before, "
+          f"{res.failed} failed, {res.wall_s:.1f} s")
+    if res.interrupted:
+        print(f"bsst: interrupted; continue with --resume --out {res.path}", file=sys.stderr)
+        return EXIT_FAILED
+    print(f"sweep directory: {res.path} (cells.csv, report.md, map_*.png)")
+    return EXIT_FAILED if res.failed else EXIT_OK
+
+
+def connect_dask(address: str) -> Any:
+    """A ``distributed.Client`` for ``--dask ADDRESS`` (ConfigError if absent or unreachable)."""
+    try:
+        from distributed import Client
+    except ImportError:
+        raise ConfigError("--dask: needs Dask distributed (pip install 'bsst-sitl[cluster]')") from None
+    try:
+        return Client(address, timeout="10s")
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise ConfigError(f"--dask {address}: cannot connect ({' '.join(str(exc).split())[:200]})") from None
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from bridge.report import rebuild
+
+    print(f"report: {rebuild(args.dir, plots=not args.no_plots)}")
+    return EXIT_OK
 
 
 def main(argv: Sequence[str] | None = None) -> int:
