@@ -1,7 +1,9 @@
 """Fixed-step classical Runge-Kutta (RK4) on plain tuples.
 
 The plant's state is 12 floats: tuples and a hand-unrolled combination are several times
-faster than numpy arrays of that size.
+faster than numpy arrays of that size. This is the generic step (any f); the plant's own
+1 kHz step is :func:`plant.model.rk4_step_held`, the same arithmetic specialised for
+eq. (6) with held inputs (bit for bit equal, about twice as fast).
 """
 
 from __future__ import annotations

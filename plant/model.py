@@ -9,6 +9,9 @@ Corrections to the printed eq. (6):
 - the gyroscopic term uses the signed rotor-speed sum omega_d of eq. (5).
 Outside the paper's model, and off unless asked for: linear drag (Table 1's k1..k6 as
 -k*v on the translation and -k*rate on the rotation) and an external force/torque.
+
+:func:`state_derivative` is eq. (6) itself; :func:`rk4_step_held` is one RK4 step of it
+with the inputs held, specialised for speed (the plant's 1 kHz step).
 """
 
 from __future__ import annotations
@@ -115,3 +118,83 @@ def state_derivative(
         ddtheta += ext[4] / body.iyy
         ddpsi += ext[5] / body.izz
     return (vx, ax, vy, ay, vz, az, dphi, ddphi, dtheta, ddtheta, dpsi, ddpsi)
+
+
+Ext = tuple[float, float, float, float, float, float]
+
+
+def rk4_step_held(
+    X: State,
+    u1: float,
+    u2: float,
+    u3: float,
+    u4: float,
+    omega_d: float,
+    body: RigidBody,
+    h: float,
+    ext: tuple[Ext, Ext, Ext] | None = None,
+) -> State:
+    """One classical RK4 step of eq. (6) over h (s), inputs and omega_d held (zero-order hold).
+
+    Bit for bit the step ``plant.integrate.rk4_step(f, t, X, h)`` takes with f the
+    derivative of :func:`state_derivative` (same operations in the same order; tested), in
+    about half the time: positions and angles never enter the derivative, so each stage
+    carries only the 9 velocities, angles and rates in local floats; the input terms are
+    computed once; and no intermediate state tuple is built. ``ext`` is the external
+    (fx, fy, fz, tx, ty, tz) at t, t + h/2 and t + h (N, N m), or None.
+    """
+    m = body.mass
+    g = body.gravity
+    i1, i2, i3 = body.i1, body.i2, body.i3
+    kv0, kv1, kv2 = body.kv
+    kw0, kw1, kw2 = body.kw
+    a = u1 / m
+    jr_x, jr_y = body.jr_x, body.jr_y
+    tx = body.l_x * u2
+    ty = body.l_y * u3
+    tz = body.l_z * u4
+    x, vx, y, vy, z, vz, phi, dphi, th, dth, psi, dpsi = X
+    v1, v2, v3, f, df, t, dt, p, dp = vx, vy, vz, phi, dphi, th, dth, psi, dpsi  # the stage's values
+    h2 = 0.5 * h
+    k = []  # the four stage derivatives, 12 values each (eq. 7 order)
+    # (step from X to the next stage along this stage's derivative, index of its time in ext)
+    for c, i in ((h2, 0), (h2, 1), (h, 1), (0.0, 2)):
+        cf = cos(f)
+        sf = sin(f)
+        st = sin(t)
+        cp = cos(p)
+        sp = sin(p)
+        cf_st = cf * st
+        ax = (cf_st * cp + sf * sp) * a - kv0 * v1
+        ay = (cf_st * sp - sf * cp) * a - kv1 * v2
+        az = cf * cos(t) * a - g - kv2 * v3
+        ddf = i1 * dt * dp - jr_x * dt * omega_d + tx - kw0 * df
+        ddt = i2 * df * dp + jr_y * df * omega_d + ty - kw1 * dt
+        ddp = i3 * df * dt + tz - kw2 * dp
+        if ext is not None:
+            e = ext[i]
+            ax += e[0] / m
+            ay += e[1] / m
+            az += e[2] / m
+            ddf += e[3] / body.ixx
+            ddt += e[4] / body.iyy
+            ddp += e[5] / body.izz
+        k.append((v1, ax, v2, ay, v3, az, df, ddf, dt, ddt, dp, ddp))
+        v1, v2, v3 = vx + c * ax, vy + c * ay, vz + c * az
+        f, df, t, dt, p, dp = phi + c * df, dphi + c * ddf, th + c * dt, dth + c * ddt, psi + c * dp, dpsi + c * ddp
+    h6 = h / 6.0
+    k1, k2, k3, k4 = k
+    return (  # rk4_step's x + h/6 (k1 + 2 (k2 + k3) + k4), term by term: the same rounding
+        x + h6 * (k1[0] + 2.0 * (k2[0] + k3[0]) + k4[0]),
+        vx + h6 * (k1[1] + 2.0 * (k2[1] + k3[1]) + k4[1]),
+        y + h6 * (k1[2] + 2.0 * (k2[2] + k3[2]) + k4[2]),
+        vy + h6 * (k1[3] + 2.0 * (k2[3] + k3[3]) + k4[3]),
+        z + h6 * (k1[4] + 2.0 * (k2[4] + k3[4]) + k4[4]),
+        vz + h6 * (k1[5] + 2.0 * (k2[5] + k3[5]) + k4[5]),
+        phi + h6 * (k1[6] + 2.0 * (k2[6] + k3[6]) + k4[6]),
+        dphi + h6 * (k1[7] + 2.0 * (k2[7] + k3[7]) + k4[7]),
+        th + h6 * (k1[8] + 2.0 * (k2[8] + k3[8]) + k4[8]),
+        dth + h6 * (k1[9] + 2.0 * (k2[9] + k3[9]) + k4[9]),
+        psi + h6 * (k1[10] + 2.0 * (k2[10] + k3[10]) + k4[10]),
+        dpsi + h6 * (k1[11] + 2.0 * (k2[11] + k3[11]) + k4[11]),
+    )

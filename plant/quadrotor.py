@@ -18,8 +18,7 @@ from __future__ import annotations
 import math
 
 from plant.effects import Effects, disturbance_at
-from plant.integrate import rk4_step
-from plant.model import RigidBody, State, rigid_body, state_derivative
+from plant.model import RigidBody, State, rigid_body, rk4_step_held, state_derivative
 from plant.profiles import Profile
 from plant.rotors import (
     motor_lag_step,
@@ -114,12 +113,22 @@ class Quadrotor:
         return state_derivative(X, u1, u2, u3, u4, self._omega_d, self.body, ext)
 
     def step(self) -> None:
-        """Advance one physics step (RK4, command and rotor speeds held over the step)."""
+        """Advance one physics step (RK4 of eq. 6, command and rotor speeds held over the step).
+
+        The same step as ``plant.integrate.rk4_step(self.derivative, ...)``, specialised
+        (:func:`plant.model.rk4_step_held`)."""
         if self.profile.actuation == "motors" and self.effects.motor_lag:
             self._set_omega(
                 motor_lag_step(self.omega, self._omega_target, self.dt, self.profile.motor_time_constant)
             )
-        X = rk4_step(self.derivative, self.t, self.state, self.dt)
+        t, h = self.t, self.dt
+        ext = None
+        if self._disturbed:
+            d, ph = self.effects.disturbance, self._phases
+            mid = disturbance_at(d, ph, t + 0.5 * h)
+            ext = (disturbance_at(d, ph, t), mid, disturbance_at(d, ph, t + h))
+        u1, u2, u3, u4 = self.realised
+        X = rk4_step_held(self.state, u1, u2, u3, u4, self._omega_d, self.body, h, ext)  # type: ignore[arg-type]
         if self.ground and X[4] < 0.0:
             X = _on_ground(X)
         self.state = X  # type: ignore[assignment]

@@ -11,10 +11,13 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
 from plant import Disturbance, Effects, Quadrotor, load_profile
 from plant.integrate import rk4_step
+from plant.model import rigid_body, rk4_step_held, state_derivative
 
 
 def test_exact_for_cubic_quadrature() -> None:
@@ -40,6 +43,33 @@ def test_fourth_order_convergence() -> None:
 
     e1, e2 = error(20), error(40)
     assert 15.0 < e1 / e2 < 17.0
+
+
+small = st.floats(-3.0, 3.0, allow_nan=False)
+
+
+@given(st.tuples(*[small] * 12), st.tuples(st.floats(0.0, 40.0), small, small, small), small,
+       st.none() | st.tuples(*[small] * 6), st.sampled_from([1e-4, 1e-3, 4e-3]))
+def test_specialised_step_is_bit_for_bit_rk4(X: tuple, u: tuple, omega_d: float, ext: tuple | None, h: float) -> None:
+    """plant.model.rk4_step_held (the plant's fast step) == rk4_step over eq. (6), exactly."""
+    body = rigid_body(1.1, 1.22, 0.9, 2.2, 0.21, 0.2, drag=(0.1, 0.2, 0.3, 0.12, 0.13, 0.14))
+    generic = rk4_step(lambda _t, x: state_derivative(x, *u, omega_d, body, ext), 0.0, X, h)
+    held = rk4_step_held(X, *u, omega_d, body, h, None if ext is None else (ext, ext, ext))
+    assert held == generic
+
+
+def test_plant_step_is_rk4_of_its_derivative() -> None:
+    """Quadrotor.step (time-varying disturbance, motor commands) == rk4_step(Quadrotor.derivative)."""
+    p = load_profile("x500")
+    effects = Effects(drag=True, disturbance=Disturbance(force_amp=(0.3, 0.2, 0.1), torque_amp=(0.01, 0.02, 0.01),
+                                                         freq_hz=2.0, random_phase=True))
+    q = Quadrotor(p, effects, seed=1, ground=False, state=(0.0,) * 4 + (3.0,) + (0.0,) * 7)
+    q.command((0.76, 0.75, 0.77, 0.755))
+    X = q.state
+    for _ in range(300):
+        X = rk4_step(q.derivative, q.t, X, q.dt)
+        q.step()
+        assert q.state == X
 
 
 def commands(t: float, hover: float) -> tuple[float, float, float, float]:
