@@ -283,6 +283,7 @@ def add_sweep_commands(sub: Any) -> None:
     p.add_argument("--resume", action="store_true", help="fly only the cells missing from --out DIR")
     p.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out")
     p.add_argument("--no-plots", action="store_true", help="skip the heat maps")
+    add_link_options(p, skip=("delay", "jitter", "loss", "burst"))  # fixed for every cell: --up-delay, --dup ...
     p.set_defaults(func=cmd_sweep)
     p = sub.add_parser("report", help="rebuild a sweep's report.md and heat maps from its cells.csv")
     p.add_argument("dir", metavar="DIR", help="sweep directory")
@@ -301,6 +302,16 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if args.seeds is not None:
         axes["seeds"] = args.seeds
     spec = replace(spec, grid=replace(spec.grid, **axes), mode=args.mode or spec.mode)
+    fixed = link_table_from_args(args)
+    for d in ("up", "down"):
+        clash = [a for a in spec.grid.swept() if a in fixed.get(d, {})]
+        if clash:
+            raise UsageError(f"bsst sweep: --{d}-{clash[0].split('_')[0]} conflicts with the swept {clash[0]} "
+                             f"(a swept value applies to both directions)")
+    if fixed:
+        from bridge.link import merge_link_tables
+
+        spec = replace(spec, mission=spec.mission.with_overrides(link=merge_link_tables(spec.mission.link, fixed)))
     if args.resume and args.out is None:
         raise UsageError("bsst sweep: --resume needs --out DIR (the sweep to resume)")
     client = connect_dask(args.dask) if args.dask else None

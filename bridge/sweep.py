@@ -204,14 +204,10 @@ def cells(mission: Mission, grid: Grid) -> list[Cell]:
 
 def cell_mission(mission: Mission, cell: Cell) -> Mission:
     """The mission a cell flies: law, rate and seed replaced, link axes set in both directions."""
-    link = {k: (dict(v) if isinstance(v, Mapping) else v) for k, v in mission.link.items()}
-    if cell.link:
-        for direction in ("up", "down"):
-            table = link.get(direction)
-            table = dict(table) if isinstance(table, Mapping) else {}
-            for a in cell.link:
-                table[a] = getattr(cell, a)
-            link[direction] = table
+    from bridge.link import DIRECTIONS, merge_link_tables
+
+    over = {d: {a: getattr(cell, a) for a in cell.link} for d in DIRECTIONS} if cell.link else {}
+    link = merge_link_tables(mission.link, over)
     return mission.with_overrides(controller=cell.controller, rate_hz=cell.rate_hz, seed=cell.seed, link=link)
 
 
@@ -310,7 +306,7 @@ def _fly_lockstep(mission: Mission) -> Run:
     from bridge.session import sitl  # type: ignore[attr-defined]
 
     with _instance_slot() as instance:
-        return sitl(mission, realtime=False, instance=instance)
+        return sitl(mission, realtime=False, instance=instance, plots=False)
 
 
 class _instance_slot:

@@ -6,6 +6,7 @@ a minute on two cores.
 
 from __future__ import annotations
 
+import json
 import multiprocessing as mp
 import os
 import selectors
@@ -88,6 +89,29 @@ def test_cells_equal_single_simulate_runs(local: tuple[Path, list[dict]]) -> Non
         assert run.rms == r["rms"], r
         assert run.summary["link"]["up"]["lost"] == r["up_lost"]
         assert run.summary["link"]["down"]["lost"] == r["down_lost"]
+
+
+def test_a_row_is_one_bsst_sim_with_its_seed(local: tuple[Path, list[dict]], tmp_path: Path) -> None:
+    out, rows = local
+    r = next(r for r in rows if r["delay_ms"] == 10.0 and r["loss_pct"] == 20.0 and r["seed"] == 1)
+    assert main(["sim", str(out / "mission.toml"), "--delay", "10", "--loss", "20", "--seed", "1", "--no-plots",
+                 "--out", str(tmp_path / "one")]) == 0
+    summary = json.loads((tmp_path / "one" / "summary.json").read_text())
+    assert summary["rms_3d"] == r["rms"] and summary["link"]["up"]["lost"] == r["up_lost"] > 0
+    assert "bsst sim mission.toml --controller bsst --rate 250 --delay 0 --loss 0 --seed 0" in (
+        out / "report.md").read_text()
+
+
+def test_fixed_link_flags_apply_to_every_cell(mission_file: Path, tmp_path: Path, capsys) -> None:
+    assert main(["sweep", str(mission_file), "--loss", "0,20", "--up-delay", "5", "--out", str(tmp_path / "f"),
+                 "--no-plots"]) == 0
+    rows = read_cells(tmp_path / "f" / CELLS_CSV)
+    assert [r["delay_ms"] for r in rows] == [5.0, 5.0]  # the column shows the up direction's value
+    link = SHORT.with_overrides(link={"up": {"delay_ms": 5.0, "loss_pct": 20.0}, "down": {"loss_pct": 20.0}})
+    assert simulate(link).rms == rows[1]["rms"]
+    capsys.readouterr()
+    assert main(["sweep", str(mission_file), "--delay", "0,10", "--up-delay", "5"]) == 2
+    assert "--up-delay conflicts with the swept delay_ms" in capsys.readouterr().err
 
 
 def test_kill_then_resume_flies_only_missing_cells(mission_file: Path, tmp_path: Path, capsys) -> None:
@@ -238,6 +262,18 @@ def test_lockstep_flag(mission_file: Path, tmp_path: Path, capsys) -> None:
     assert main(["sweep", str(mission_file), "--delay", "0", "--lockstep", "--out", str(tmp_path / "l")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--lockstep" in err
+
+
+def test_lockstep_cells(tmp_path: Path) -> None:
+    from bridge.sweep import lockstep_available
+
+    if not lockstep_available():
+        pytest.skip("no SITL launcher (bridge.session.sitl) in this build: test_lockstep_flag covers --lockstep")
+    m = SHORT.with_overrides(duration_s=3.0)
+    rows = sweep(m, Grid(loss_pct=(0.0, 20.0)), jobs=2, mode="lockstep", out=tmp_path / "l")
+    assert [r["outcome"] for r in rows] == ["completed", "completed"], rows
+    offline = simulate(m).rms
+    assert abs(rows[0]["rms"] - offline) <= 1e-4  # DESIGN: lockstep and offline agree
 
 
 def test_run_cell_and_classes() -> None:
