@@ -492,8 +492,9 @@ class LinkImpairment:
         """Everything still scheduled, held packets included (end of a test stream)."""
         out = self.deliver(math.inf)
         if self._held:
-            for h in self._held:
-                self._push(h)
+            last = out[-1].due_t if out else -math.inf
+            for h in self._held:  # no successor came: released after the last packet
+                self._push(replace(h, due_t=max(h.due_t, last)))
             self._held.clear()
             out += self.deliver(math.inf)
         return out
