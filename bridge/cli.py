@@ -174,6 +174,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_link_options(p)
     p.set_defaults(func=cmd_sim)
     add_sweep_commands(sub)
+    add_sitl_commands(sub)
     return parser
 
 
@@ -347,6 +348,105 @@ def cmd_report(args: argparse.Namespace) -> int:
 
     print(f"report: {rebuild(args.dir, plots=not args.no_plots)}")
     return EXIT_OK
+
+
+def add_sitl_commands(sub: Any) -> None:
+    """``bsst vehicle``, ``bsst controller`` and ``bsst sitl``: the MAVLink SITL over UDP (bridge.session)."""
+    p = sub.add_parser("vehicle", help="the simulated vehicle alone: a MAVLink 2 endpoint over UDP")
+    p.add_argument("mission", nargs="?", help="mission TOML for the start, effects, failsafe and rates "
+                                              "(default: at rest at the origin, 250 Hz)")
+    p.add_argument("--profile", metavar="NAME", help="vehicle profile: paper, x500 or a profile TOML path")
+    p.add_argument("--rate", type=positive_float("--rate", 49.999, 1000.0), metavar="HZ",
+                   help="control rate, 50-1000 Hz: one lockstep step per period")
+    p.add_argument("--seed", type=int_in("--seed", 0, 2**31 - 1), metavar="N", help="seed of random effects")
+    _add_port_options(p, vehicle=True)
+    p.add_argument("--sysid", type=int_in("--sysid", 1, 254), metavar="N",
+                   help="MAVLink system id (default instance + 1)")
+    p.add_argument("--controller-id", type=_ids, metavar="SYSID:COMPID",
+                   help="the only sender of actuator targets (default 200:191)")
+    p.add_argument("--home", type=_home, metavar="LAT,LON,ALT", help="home: degrees, degrees, m AMSL")
+    p.add_argument("--out", metavar="DIR", help="write vehicle.tlog and vehicle.csv into DIR")
+    p.add_argument("--overwrite", action="store_true", help="allow replacing those files")
+    p.set_defaults(func=cmd_vehicle)
+
+    p = sub.add_parser("controller", help="the offboard controller alone: fly a mission against a MAVLink vehicle")
+    add_flight_options(p)
+    p.add_argument("--vehicle", metavar="HOST:PORT",
+                   help="the vehicle's controller link (default 127.0.0.1:14560 + instance)")
+    p.add_argument("--instance", type=int_in("--instance", 0, 9), default=0, metavar="N",
+                   help="vehicle instance N: port 14560 + N")
+    p.add_argument("--realtime", action="store_true", help="fixed-rate schedule on the wall clock (default lockstep)")
+    p.add_argument("--sysid", type=int_in("--sysid", 1, 254), default=200, metavar="N", help="own system id")
+    p.add_argument("--target-sysid", type=int_in("--target-sysid", 1, 254), metavar="N",
+                   help="fly only this vehicle (default: the first autopilot heard)")
+    p.add_argument("--timeout", type=positive_float("--timeout", 0.0, 3600.0), default=10.0, metavar="S",
+                   help="wait this long for the vehicle's heartbeat (default 10 s)")
+    p.set_defaults(func=cmd_controller)
+
+    p = sub.add_parser("sitl", help="fly a mission as SITL: vehicle and controller processes over MAVLink/UDP")
+    add_flight_options(p)
+    _add_port_options(p, vehicle=False)
+    p.set_defaults(func=cmd_sitl)
+
+
+def _add_port_options(p: argparse.ArgumentParser, vehicle: bool) -> None:
+    if vehicle:
+        p.add_argument("--listen", metavar="HOST:PORT",
+                       help="controller link, bound (default 127.0.0.1:14560 + instance)")
+    p.add_argument("--gcs", metavar="HOST:PORT", help="ground station link: telemetry goes there "
+                                                       "(default 127.0.0.1:14550 + instance; 'none': no GCS link)")
+    p.add_argument("--instance", type=int_in("--instance", 0, 9), default=0, metavar="N",
+                   help="PX4-style instance 0-9: ports 14560 + N and 14550 + N, sysid N + 1")
+    clock = p.add_mutually_exclusive_group()
+    if vehicle:
+        clock.add_argument("--lockstep", dest="realtime", action="store_false", help="lockstep clock (default)")
+    clock.add_argument("--realtime", action="store_true", help="run on the wall clock (default lockstep)")
+    p.add_argument("--speed", type=positive_float("--speed", 0.0, 1000.0), metavar="X",
+                   help="lockstep: at most X times real time; also the pace after the controller is lost (default 1)")
+
+
+def _ids(text: str) -> tuple[int, int]:
+    a, sep, b = text.partition(":")
+    try:
+        ids = (int(a), int(b))
+    except ValueError:
+        ids = (-1, -1)
+    if not sep or not (1 <= ids[0] <= 255 and 0 <= ids[1] <= 255):
+        raise argparse.ArgumentTypeError(f"--controller-id must be SYSID:COMPID (1-255:0-255), got {text!r}")
+    return ids
+
+
+def _home(text: str) -> tuple[float, float, float]:
+    try:
+        lat, lon, alt = (float(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--home must be LAT,LON,ALT in degrees and metres, got {text!r}") from None
+    if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0 and -1000.0 <= alt <= 10000.0):
+        raise argparse.ArgumentTypeError(f"--home out of range (lat [-90, 90], lon [-180, 180], alt [-1000, 10000]), "
+                                         f"got {text!r}")
+    return lat, lon, alt
+
+
+def cmd_vehicle(args: argparse.Namespace) -> int:
+    from bridge.session import vehicle_from_args
+
+    return vehicle_from_args(args)
+
+
+def cmd_controller(args: argparse.Namespace) -> int:
+    from bridge.session import controller_from_args
+
+    return controller_from_args(args)
+
+
+def cmd_sitl(args: argparse.Namespace) -> int:
+    from bridge.session import sitl
+
+    run = sitl(args.mission, out=args.out, write=True, overwrite=args.overwrite, plots=not args.no_plots,
+               profile=args.profile, controller=args.controller, rate_hz=args.rate, seed=args.seed,
+               realtime=args.realtime, instance=args.instance, gcs=args.gcs, speed=args.speed, live=True)
+    print_summary(run.summary, run.path)
+    return EXIT_OK if run.outcome == "completed" else EXIT_FAILED
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -44,8 +44,8 @@ class LandingController:
         self.descent_rate = descent_rate
         self.actuation = make_actuation(nominal)
 
-    def command(self, X: tuple[float, ...]) -> tuple[float, float, float, float]:
-        """Normalised paper-frame command for state X."""
+    def demand(self, X: tuple[float, ...]) -> tuple[float, float, float, float]:
+        """The wrench (u1..u4, N) this loop asks for in state X, before the actuation's limits."""
         n = self.n
         _, _, _, _, _, vz, phi, dphi, th, dth, _, dpsi = X
         tilt = max(cos(phi) * cos(th), 0.5)
@@ -53,4 +53,8 @@ class LandingController:
         u2 = n.ixx / n.arm * (-36.0 * phi - 12.0 * dphi)
         u3 = n.iyy / n.arm * (-36.0 * th - 12.0 * dth)
         u4 = n.izz / n.arm * (-4.0 * dpsi)
-        return self.actuation.allocate((u1, u2, u3, u4))[1]
+        return (u1, u2, u3, u4)
+
+    def command(self, X: tuple[float, ...]) -> tuple[float, float, float, float]:
+        """Normalised paper-frame command for state X."""
+        return self.actuation.allocate(self.demand(X))[1]

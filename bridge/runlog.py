@@ -178,3 +178,19 @@ def finish_run(path: Path, trace: dict[str, Any], summary: dict[str, Any], title
         from bridge.plots import make_plots
 
         make_plots(trace, path / "plots", title)
+
+
+def side_dir(out: str | Path, files: Sequence[str], overwrite: bool = False) -> Path:
+    """The directory one side of a networked run (vehicle or controller) writes ``files``
+    into: created if needed; refuses to replace those files unless ``overwrite``."""
+    path = Path(out)
+    if path.exists() and not path.is_dir():
+        raise ConfigError(f"--out {path}: exists and is not a directory")
+    taken = [f for f in files if (path / f).exists()]
+    if taken and not overwrite:
+        raise ConfigError(f"--out {path}: already holds {', '.join(taken)} (use --overwrite to replace)")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError(f"--out {path}: cannot create ({exc.strerror})") from None
+    return path

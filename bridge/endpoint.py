@@ -1,0 +1,374 @@
+"""MAVLink 2 over UDP: an endpoint that owns its socket, and the tlog it records.
+
+An :class:`Endpoint` is one UDP socket and one pymavlink ``MAVLink`` object (its own
+sequence numbers: one per link, as MAVLink wants). It encodes with pymavlink and decodes
+whole datagrams with ``parse_buffer``; it never uses ``recv_match``, whose per-message
+bookkeeping and polling ``select`` are the slow path. Every frame it sends or receives is
+appended to a :class:`Tlog`.
+
+Addresses follow pymavlink's connection strings (DESIGN.md section 4):
+
+- ``udpin:HOST:PORT``  bind HOST:PORT and answer whoever sent last (port 0: any free port);
+- ``udpout:HOST:PORT`` send to HOST:PORT from a free local port, answer on it;
+- ``HOST:PORT``        either, as the option that takes it says.
+
+The two messages of every control step (ODOMETRY down, the actuator target up) take a
+hot path (:class:`HotLayout`): framed and checked with ``struct`` and the CRC directly from
+pymavlink's own message metadata (field order, ``crc_extra``), without building a
+pymavlink message object; every other frame, and any hot one that is signed or shares its
+datagram, goes through ``parse_buffer``. Both paths give the same fields (tests/test_endpoint.py).
+
+Waiting is :func:`wait`: it first polls the hot socket for a short while (a reply that
+comes within tens of microseconds is taken without a sleep and wake-up, which costs more
+than the poll on loopback), then blocks in ``select`` on every socket until the deadline.
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import socket
+import struct
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from pymavlink.dialects.v20 import common as mavlink
+from pymavlink.generator.mavcrc import x25crc
+
+from params import ConfigError
+
+try:  # pymavlink uses fastcrc when it is installed; so does the hot path
+    from fastcrc.crc16 import mcrf4xx as _crc16
+except ImportError:  # pragma: no cover - pure Python fallback
+    def _crc16(data: bytes, initial: int = 0xFFFF) -> int:
+        return x25crc(data).crc
+
+MODES = ("udpin", "udpout")
+
+# Identities and ports of DESIGN.md section 4. Instance N (0-9) adds N to both ports and
+# makes the vehicle sysid N + 1, as PX4 does.
+GCS_PORT = 14550
+LINK_PORT = 14560
+VEHICLE_COMPID = 1  # MAV_COMP_ID_AUTOPILOT1
+CONTROLLER_SYSID = 200  # not 255 (MAVProxy) nor 245 (MAVSDK): a GCS can run beside the controller
+CONTROLLER_COMPID = 191  # MAV_COMP_ID_ONBOARD_COMPUTER
+FORCE_DISARM = 21196  # param2 of ARM_DISARM that disarms in the air (MAVLink's magic number)
+_STAMP = struct.Struct(">Q")
+_MAX_DATAGRAM = 65535
+_MAGIC2 = 0xFD
+_HEADER2 = struct.Struct("<BBBBBBBHB")  # magic len incompat compat seq sysid compid msgid(24 bit)
+
+
+@dataclass(frozen=True)
+class Address:
+    """A UDP address and what to do with it: ``udpin`` binds it, ``udpout`` sends to it."""
+
+    mode: str
+    host: str
+    port: int
+
+    def __str__(self) -> str:
+        return f"{self.mode}:{self.host}:{self.port}"
+
+    @property
+    def hostport(self) -> str:
+        return f"{self.host}:{self.port}"
+
+
+def parse_address(text: str, default_mode: str = "udpout", flag: str = "address") -> Address:
+    """``[udpin:|udpout:|udp:]HOST:PORT`` (also ``udpin://HOST:PORT``) -> :class:`Address`.
+
+    ``udp:`` is pymavlink's name for ``udpin``. Errors name ``flag`` (exit 2 material).
+    """
+    s = text.strip()
+    mode = default_mode
+    for prefix, m in (("udpin", "udpin"), ("udpout", "udpout"), ("udp", "udpin")):
+        for sep in ("://", ":"):
+            if s.startswith(prefix + sep):
+                mode, s = m, s[len(prefix) + len(sep):]
+                break
+        else:
+            continue
+        break
+    host, _, port_text = s.rpartition(":")
+    if not host or not port_text:
+        raise ConfigError(f"{flag} {text!r}: expected [udpin:|udpout:]HOST:PORT")
+    try:
+        port = int(port_text)
+    except ValueError:
+        raise ConfigError(f"{flag} {text!r}: port must be an integer") from None
+    lo = 0 if mode == "udpin" else 1
+    if not lo <= port <= 65535:
+        raise ConfigError(f"{flag} {text!r}: port must be in [{lo}, 65535]")
+    try:
+        socket.getaddrinfo(host, port, socket.AF_INET, socket.SOCK_DGRAM)
+    except (socket.gaierror, UnicodeError):
+        raise ConfigError(f"{flag} {text!r}: unknown host {host!r}") from None
+    return Address(mode, host, port)
+
+
+class HotLayout:
+    """Wire layout of one message type, from pymavlink's metadata: encode a flat tuple of
+    field values (pymavlink's ``ordered_fieldnames`` order, arrays flattened) into a
+    MAVLink 2 payload, and decode a payload into a :class:`HotMessage`."""
+
+    def __init__(self, cls: Any) -> None:
+        self.id = cls.id
+        self.name = cls.msgname
+        self.crc_extra = bytes([cls.crc_extra])
+        self.struct = cls.unpacker
+        self.size = cls.unpacker.size
+        self.spans: list[tuple[str, int, int]] = []
+        i = 0
+        for name, n in zip(cls.ordered_fieldnames, cls.array_lengths, strict=True):
+            self.spans.append((name, i, n))
+            i += max(n, 1)
+
+    def decode(self, payload: bytes) -> dict[str, Any]:
+        """Field values by name (arrays as tuples); a truncated MAVLink 2 payload is zero-padded."""
+        if len(payload) < self.size:
+            payload = payload + bytes(self.size - len(payload))
+        v = self.struct.unpack(payload)
+        return {name: v[i] if n == 0 else v[i:i + n] for name, i, n in self.spans}
+
+
+class HotMessage:
+    """A message decoded on the hot path: its fields as attributes, and the few methods of
+    a pymavlink message the handlers use."""
+
+    def __init__(self, layout: HotLayout, fields: dict[str, Any], src: int, comp: int, buf: bytes) -> None:
+        self.__dict__.update(fields)
+        self._type = layout.name
+        self._src = src
+        self._comp = comp
+        self._buf = buf
+
+    def get_type(self) -> str:
+        return self._type
+
+    def get_srcSystem(self) -> int:  # noqa: N802 - pymavlink's name
+        return self._src
+
+    def get_srcComponent(self) -> int:  # noqa: N802
+        return self._comp
+
+    def get_msgbuf(self) -> bytes:
+        return self._buf
+
+
+ODOMETRY = HotLayout(mavlink.MAVLink_odometry_message)
+HIL_ACTUATOR_CONTROLS = HotLayout(mavlink.MAVLink_hil_actuator_controls_message)
+SET_ACTUATOR_CONTROL_TARGET = HotLayout(mavlink.MAVLink_set_actuator_control_target_message)
+HOT = {lay.id: lay for lay in (ODOMETRY, HIL_ACTUATOR_CONTROLS, SET_ACTUATOR_CONTROL_TARGET)}
+
+
+class Tlog:
+    """A telemetry log: records of an 8-byte big-endian timestamp (microseconds since the
+    Unix epoch) followed by one raw MAVLink frame, in both directions, as pymavlink's
+    ``mavlogdump.py`` reads them.
+
+    Records are buffered and written whole, many per ``os.write``: a process killed
+    with SIGKILL leaves the file readable up to its last flush. Call :meth:`flush`
+    from the housekeeping of a loop (it is cheap when there is nothing to write).
+    """
+
+    def __init__(self, path: str | Path, batch_bytes: int = 1 << 16) -> None:
+        self.path = Path(path)
+        self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND, 0o644)
+        self._buf: list[bytes] = []
+        self._size = 0
+        self._batch = batch_bytes
+        self.records = 0
+
+    def record(self, frame: bytes) -> None:
+        self._buf.append(_STAMP.pack(time.time_ns() // 1000))
+        self._buf.append(frame)
+        self._size += 8 + len(frame)
+        self.records += 1
+        if self._size >= self._batch:
+            self.flush()
+
+    def flush(self) -> None:
+        if self._buf and self._fd >= 0:
+            os.write(self._fd, b"".join(self._buf))
+            self._buf.clear()
+            self._size = 0
+
+    def close(self) -> None:
+        if self._fd >= 0:
+            self.flush()
+            os.close(self._fd)
+            self._fd = -1
+
+
+class Endpoint:
+    """One MAVLink 2 UDP link: its socket, its ``MAVLink`` codec, its counters.
+
+    ``peer`` is where :meth:`send` goes: fixed for ``udpout``; for ``udpin`` the sender of
+    the last valid frame (pymavlink's behaviour), until someone sets it.
+    """
+
+    def __init__(self, address: Address, *, sysid: int, compid: int, tlog: Tlog | None = None,
+                 name: str = "link", rcvbuf: int = 1 << 20) -> None:
+        self.address = address
+        self.name = name
+        self.tlog = tlog
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
+            if address.mode == "udpin":
+                sock.bind((address.host, address.port))
+                self.peer: tuple[str, int] | None = None
+                self.follow = True
+            else:
+                # bind on the interface that reaches the peer: loopback stays loopback
+                local = "127.0.0.1" if address.host.startswith("127.") or address.host == "localhost" else ""
+                sock.bind((local, 0))
+                self.peer = (socket.gethostbyname(address.host), address.port)
+                self.follow = False
+        except OSError as exc:
+            sock.close()
+            raise ConfigError(f"{name} {address}: cannot bind ({exc.strerror})") from None
+        sock.setblocking(False)
+        self.sock = sock
+        self.fileno = sock.fileno()
+        self.local = sock.getsockname()
+        self.mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
+        self.mav.robust_parsing = True
+        self.sent = 0
+        self.received = 0
+        self.bad = 0
+        self.send_errors = 0
+
+    # -- sending ------------------------------------------------------------------------
+    def send(self, msg: Any, to: tuple[str, int] | None = None) -> bool:
+        """Encode ``msg`` (a pymavlink message) and send it to ``to`` or the peer.
+
+        Returns False when there is nowhere to send yet or the send failed (UDP: a lost
+        datagram, counted in ``send_errors``; nothing is raised).
+        """
+        mav = self.mav
+        buf = msg.pack(mav)
+        mav.seq = (mav.seq + 1) & 0xFF
+        return self.send_frame(buf, to)
+
+    def send_hot(self, layout: HotLayout, values: tuple[Any, ...], to: tuple[str, int] | None = None) -> bool:
+        """Encode a hot-path message from its flat field values (see :class:`HotLayout`) and
+        send it: the same bytes pymavlink would make, without a message object."""
+        mav = self.mav
+        if mav.signing.sign_outgoing:  # signing is pymavlink's business
+            fields = {name: values[i] if n == 0 else list(values[i:i + n]) for name, i, n in layout.spans}
+            return self.send(getattr(mavlink, f"MAVLink_{layout.name.lower()}_message")(**fields), to)
+        payload = layout.struct.pack(*values).rstrip(b"\0") or b"\0"  # MAVLink 2 drops trailing zeros
+        head = _HEADER2.pack(_MAGIC2, len(payload), 0, 0, mav.seq, mav.srcSystem, mav.srcComponent,
+                             layout.id & 0xFFFF, layout.id >> 16)
+        body = head + payload
+        buf = body + struct.pack("<H", _crc16(body[1:] + layout.crc_extra, 0xFFFF))
+        mav.seq = (mav.seq + 1) & 0xFF
+        return self.send_frame(buf, to)
+
+    def send_frame(self, buf: bytes, to: tuple[str, int] | None = None) -> bool:
+        """Send one already-encoded frame; recorded in the tlog when it has somewhere to go."""
+        dest = to or self.peer
+        if dest is None:
+            return False
+        if self.tlog is not None:
+            self.tlog.record(buf)
+        try:
+            self.sock.sendto(buf, dest)
+        except OSError:  # e.g. ECONNREFUSED from an earlier ICMP, ENOBUFS
+            self.send_errors += 1
+            return False
+        self.sent += 1
+        return True
+
+    # -- receiving ----------------------------------------------------------------------
+    def poll(self) -> list[tuple[Any, tuple[str, int]]]:
+        """Every valid message waiting on the socket, with its sender; never blocks."""
+        out: list[tuple[Any, tuple[str, int]]] = []
+        sock = self.sock
+        while True:
+            try:
+                data, addr = sock.recvfrom(_MAX_DATAGRAM)
+            except (BlockingIOError, InterruptedError):
+                return out
+            except OSError:  # ICMP port unreachable reported on a later recv
+                continue
+            hot = self._hot(data)
+            if hot is not None:
+                self.received += 1
+                if self.tlog is not None:
+                    self.tlog.record(data)
+                out.append((hot, addr))
+                if self.follow:
+                    self.peer = addr
+                continue
+            msgs = self.mav.parse_buffer(data)
+            if not msgs:
+                continue
+            valid = False
+            for m in msgs:
+                if m._type == "BAD_DATA":
+                    self.bad += 1
+                    continue
+                valid = True
+                self.received += 1
+                if self.tlog is not None:
+                    self.tlog.record(m.get_msgbuf())
+                out.append((m, addr))
+            if valid and self.follow:
+                self.peer = addr
+
+    @staticmethod
+    def _hot(data: bytes) -> HotMessage | None:
+        """A datagram that is exactly one unsigned hot-path frame with a good CRC, decoded;
+        None for anything else (it then goes to ``parse_buffer``)."""
+        if len(data) < 12 or data[0] != _MAGIC2 or data[2] != 0:
+            return None
+        n = data[1]
+        if len(data) != 12 + n:
+            return None
+        layout = HOT.get(data[7] | data[8] << 8 | data[9] << 16)
+        if layout is None:
+            return None
+        if _crc16(data[1:10 + n] + layout.crc_extra, 0xFFFF) != data[10 + n] | data[11 + n] << 8:
+            return None
+        return HotMessage(layout, layout.decode(data[10:10 + n]), data[5], data[6], data)
+
+    def close(self) -> None:
+        if self.fileno >= 0:
+            self.sock.close()
+            self.fileno = -1
+
+
+def wait(endpoints: Sequence[Endpoint], deadline: float, spin: Endpoint | None = None,
+         spin_s: float = 0.0) -> list[tuple[Endpoint, Any, tuple[str, int]]]:
+    """Messages from any endpoint, waiting at most until ``deadline`` (``time.monotonic``).
+
+    With ``spin``, that endpoint is polled without sleeping for up to ``spin_s`` first:
+    on loopback the answer to a message often arrives within that, and a sleeping
+    process pays a scheduler wake-up (tens of microseconds) to receive it.
+    """
+    mono = time.monotonic
+    if spin is not None and spin_s > 0.0:
+        end = min(mono() + spin_s, deadline)
+        while True:
+            got = spin.poll()
+            if got:
+                return [(spin, m, a) for m, a in got]
+            if mono() >= end:
+                break
+    while True:
+        out = [(ep, m, a) for ep in endpoints for m, a in ep.poll()]
+        if out:
+            return out
+        left = deadline - mono()
+        if left <= 0.0:
+            return out
+        try:
+            select.select([ep.sock for ep in endpoints], [], [], left)
+        except InterruptedError:
+            pass

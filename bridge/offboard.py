@@ -1,0 +1,448 @@
+"""The ground-side offboard controller as a MAVLink 2 endpoint: ``bsst controller``.
+
+It flies a mission against any vehicle that keeps DESIGN.md section 4's contract: it
+sends its own HEARTBEAT, waits for the vehicle's, arms it (COMMAND_LONG ARM_DISARM, until
+ACKed), answers each ODOMETRY with the law's actuator target stamped with the state's
+time_usec, and at the end of the mission disarms it (forced: it may be in the air) and
+returns DESIGN.md section 7's outcome.
+
+- **lockstep** (default): event-driven. The state of step k (t_k = k / rate_hz, k from
+  time_usec) is answered once, at once; a repeated state gets the same answer again
+  (the vehicle resends when a datagram is lost). Mission time is counted from the first
+  state after arming, in steps, so a fresh vehicle flies exactly the offline loop's times.
+- **realtime**: a drift-free fixed-rate schedule (tick j at T0 + j / rate_hz, never
+  re-based on a late tick), phase-locked just after the first state's arrival; each tick
+  controls on the newest state. Each row records the tick's lateness (the period error)
+  and the state-to-command round trip estimated with TIMESYNC.
+
+The law and its actuation are :class:`controller.Controller`'s (built by
+:func:`bridge.flight.prepare` from the mission). The command is sent first; its row of
+``controller.csv`` (:data:`CONTROLLER_COLUMNS`, one ``write`` each, so the file is whole
+up to its last row whatever kills the process) and the advance of the super-twisting
+integrators follow while the vehicle integrates. A controller killed between the send and
+the write leaves one command without its row: the session then leaves that step out of
+``trace.csv`` rather than guess what the law demanded.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from bridge.endpoint import (
+    CONTROLLER_COMPID,
+    CONTROLLER_SYSID,
+    FORCE_DISARM,
+    HIL_ACTUATOR_CONTROLS,
+    SET_ACTUATOR_CONTROL_TARGET,
+    Address,
+    Endpoint,
+    Tlog,
+    wait,
+)
+from bridge.flight import Flight
+from bridge.runlog import REF_COLUMNS, LineWriter
+from bridge.wire import command_to_wire, odometry_to_state, step_of_usec
+
+CONTROLLER_COLUMNS = (
+    ("k", "t") + REF_COLUMNS + ("u1", "u2", "u3", "u4", "c1", "c2", "c3", "c4", "phi_d", "theta_d")
+    + ("odo_recv_wall", "cmd_sent_wall", "state_to_cmd_s", "period_error_s")
+)
+OUTCOMES = ("completed", "failsafe", "diverged", "aborted")
+PHASE_S = 0.0003  # realtime: tick this long after the state's arrival (its one-way trip and decode)
+SPIN_BEFORE_TICK_S = 0.0003  # realtime: sleep until this long before a tick, then poll: select wakes late
+HOUSEKEEPING_S = 0.05
+_ZERO12 = (0.0,) * 12
+
+
+@dataclass(frozen=True)
+class OffboardConfig:
+    """Where the vehicle is and how to fly it (see the module docstring)."""
+
+    vehicle: Address
+    sysid: int = CONTROLLER_SYSID
+    compid: int = CONTROLLER_COMPID
+    clock: str = "lockstep"
+    target_sysid: int | None = None  # None: the first autopilot that sends a heartbeat
+    connect_timeout_s: float = 10.0  # s of wall time to wait for the vehicle's heartbeat
+    vehicle_timeout_s: float = 2.0  # s of wall time without any message: the vehicle is lost
+    spin_s: float = 0.0005
+    timesync_s: float = 0.5
+
+
+class Offboard:
+    """One offboard controller flying one mission; :meth:`run` returns the outcome."""
+
+    def __init__(self, flight: Flight, cfg: OffboardConfig, out: Path | None = None,
+                 status: Callable[[str], None] | None = None) -> None:
+        self.flight = flight
+        self.cfg = cfg
+        m = flight.mission
+        self.rate = m.rate_hz
+        self.steps = m.steps
+        self.ctl = flight.make_controller()
+        self._sample = m.trajectory.sample
+        self.actuation = flight.profile.actuation
+        self._status = status or (lambda line: None)
+        self.tlog = Tlog(out / "controller.tlog") if out is not None else None
+        self.ep = Endpoint(cfg.vehicle, sysid=cfg.sysid, compid=cfg.compid, tlog=self.tlog, name="--vehicle")
+        self.rows = (LineWriter(out / "controller.csv", ",".join(CONTROLLER_COLUMNS), batch=1)
+                     if out is not None else None)
+        self.stopping = False
+        self._heard = False  # a heartbeat of the vehicle arrived
+        self.vsys: int | None = cfg.target_sysid
+        self.vcomp = 1
+        self.armed_seen = False  # the vehicle's heartbeat showed it armed since we armed it
+        self.vehicle_armed = False
+        self.vehicle_state = mavlink.MAV_STATE_UNINIT
+        self._odo: Any = None  # newest ODOMETRY not yet used
+        self._odo_recv = 0.0
+        self._acks: dict[int, int] = {}
+        now = time.monotonic()
+        self._last_rx = now
+        self._next_hb = now
+        self._next_ts = now
+        self._next_house = now
+        self._ts_best: tuple[int, int] | None = None  # (rtt ns, offset ns) of the best recent TIMESYNC
+        self._ts_age = 0
+        self.offset_ns: int | None = None  # vehicle clock - our clock
+        self.rtt_ns: int | None = None
+        self.stale_ticks = 0
+        self.overruns = 0
+        self.commands = 0
+        self.states = 0
+        self.t_mission = 0.0
+        self.reason = ""
+
+    def stop(self) -> None:
+        """Ask :meth:`run` to return (safe from a signal handler): outcome ``aborted``."""
+        self.stopping = True
+
+    # -- the flight ---------------------------------------------------------------------------
+    def run(self) -> str:
+        """Connect, arm, fly, disarm; the outcome (one of :data:`OUTCOMES`)."""
+        self._status(f"ready vehicle={self.cfg.vehicle.hostport} local={self.ep.local[0]}:{self.ep.local[1]} "
+                     f"clock={self.cfg.clock}")
+        try:
+            if not self._connect() or not self._arm():
+                return "aborted"
+            outcome = self._fly_lockstep() if self.cfg.clock == "lockstep" else self._fly_realtime()
+            if outcome == "completed" and not self._disarm():
+                self.reason = "the vehicle did not acknowledge the disarm"
+            return outcome
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        if self.rows is not None:
+            self.rows.close()
+        if self.tlog is not None:
+            self.tlog.close()
+        self.ep.close()
+
+    def event(self, kind: str, text: str) -> None:
+        self._status(f"event t={self.t_mission:.3f} {kind}: {text}")
+
+    def _connect(self) -> bool:
+        deadline = time.monotonic() + self.cfg.connect_timeout_s
+        while self.vsys is None or not self._heard:
+            if self.stopping:
+                return False
+            now = time.monotonic()
+            if now >= deadline:
+                self.reason = (f"no heartbeat from a vehicle at {self.cfg.vehicle} "
+                               f"within {self.cfg.connect_timeout_s:g} s")
+                self.event("aborted", self.reason)
+                return False
+            self._serve(min(deadline, self._next_house))
+        self.event("connected", f"vehicle sysid {self.vsys} compid {self.vcomp}")
+        return True
+
+    def _arm(self) -> bool:
+        result = self._command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0, 0.0)
+        if result != mavlink.MAV_RESULT_ACCEPTED:
+            self.reason = "arming not acknowledged" if result is None else f"arming refused (MAV_RESULT {result})"
+            self.event("aborted", self.reason)
+            return False
+        self.event("armed", "vehicle armed, offboard control")
+        return True
+
+    def _disarm(self) -> bool:
+        result = self._command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0.0, float(FORCE_DISARM))
+        ok = result == mavlink.MAV_RESULT_ACCEPTED
+        self.event("disarmed" if ok else "disarm", "vehicle disarmed" if ok else "disarm not acknowledged")
+        return ok
+
+    def _command(self, cmd: int, p1: float, p2: float, tries: int = 6, every_s: float = 0.5) -> int | None:
+        """COMMAND_LONG to the vehicle, repeated (confirmation 0, 1, ...) until ACKed."""
+        self._acks.pop(cmd, None)
+        for n in range(tries):
+            self.ep.send(mavlink.MAVLink_command_long_message(self.vsys or 0, self.vcomp, cmd, n, p1, p2,
+                                                              0, 0, 0, 0, 0))
+            deadline = time.monotonic() + every_s
+            while time.monotonic() < deadline and not self.stopping:
+                self._serve(deadline)
+                if cmd in self._acks:
+                    return self._acks.pop(cmd)
+            if self.stopping:
+                return None
+        return None
+
+    def _fly_lockstep(self) -> str:
+        ep = self.ep
+        rate = self.rate
+        steps = self.steps
+        send = self._send_target
+        k0 = last_k = None
+        last_frame: tuple[int, tuple[float, ...]] | None = None
+        spin = self.cfg.spin_s
+        mono = time.monotonic
+        while not self.stopping:
+            deadline = min(self._next_house, self._last_rx + self.cfg.vehicle_timeout_s)
+            for _, m, _addr in wait((ep,), deadline, ep, spin):
+                self._on(m)
+            odo = self._odo
+            if odo is not None:
+                self._odo = None
+                recv = self._odo_recv
+                k = step_of_usec(odo.time_usec, rate)
+                if k0 is None:
+                    k0 = k
+                if last_k is not None and k <= last_k:
+                    if k == last_k and last_frame is not None:
+                        send(*last_frame)  # the vehicle resent: our answer was lost
+                    continue
+                if k - k0 >= steps:
+                    return "completed"
+                last_frame = (odo.time_usec, self._control(odo, k, k0, recv, math.nan))
+                last_k = k
+                if mono() < self._next_house:
+                    continue
+            outcome = self._check_vehicle()
+            if outcome:
+                return outcome
+            if mono() >= self._next_house:
+                self._housekeeping()
+        return "aborted"
+
+    def _fly_realtime(self) -> str:
+        rate = self.rate
+        period = 1.0 / rate
+        steps = self.steps
+        mono = time.monotonic
+        # phase-lock to the vehicle: the first tick just after a state arrives
+        while self._odo is None and not self.stopping:
+            outcome = self._check_vehicle()
+            if outcome:
+                return outcome
+            self._serve(min(self._next_house, self._last_rx + self.cfg.vehicle_timeout_s))
+        if self.stopping:
+            return "aborted"
+        t0 = self._odo_recv + PHASE_S
+        k0 = step_of_usec(self._odo.time_usec, rate)
+        last_k = k0 - 1
+        j = 0
+        while not self.stopping:
+            due = t0 + j * period
+            self._sleep_until(due)
+            now = mono()
+            late = now - due
+            if late > period:  # missed ticks: skip them, keep the schedule (no drift)
+                skipped = int(late / period)
+                self.overruns += skipped
+                j += skipped
+                due = t0 + j * period
+                late = now - due
+            for m, _addr in self.ep.poll():
+                self._on(m)
+            j += 1
+            outcome = self._check_vehicle()
+            if outcome:
+                return outcome
+            odo = self._odo
+            if odo is None or step_of_usec(odo.time_usec, rate) <= last_k:
+                self.stale_ticks += 1
+                continue
+            self._odo = None
+            k = step_of_usec(odo.time_usec, rate)
+            if k - k0 >= steps:
+                return "completed"
+            self._control(odo, k, k0, self._odo_recv, late)
+            last_k = k
+        return "aborted"
+
+    def _control(self, odo: Any, k: int, k0: int, recv: float, late: float) -> tuple[float, ...]:
+        """One control step on the state of vehicle step k: t = (k - k0) / rate_hz exactly,
+        the law on the float32 state, the target sent at once; its row and the integrators'
+        advance after the send, while the vehicle integrates. Returns the wire values."""
+        law, act = self.ctl.law, self.ctl.actuation
+        t = (k - k0) / self.rate
+        self.t_mission = t
+        X = odometry_to_state((odo.x, odo.y, odo.z), odo.q, (odo.vx, odo.vy, odo.vz),
+                              (odo.rollspeed, odo.pitchspeed, odo.yawspeed))
+        ref = self._sample(t)
+        u = law.update(t, X, ref, act.omega_d)
+        _, c, sat = act.allocate(u)
+        wire = command_to_wire(self.actuation, c)
+        sent = time.monotonic()
+        self._send_target(odo.time_usec, wire)
+        s2c = self._state_to_command(odo.time_usec, sent) if self.cfg.clock == "realtime" else math.nan
+        self._row(k, t, ref, u, wire, law.desired, recv, sent, s2c, late)
+        law.advance(sat)
+        return wire
+
+    def _sleep_until(self, due: float) -> None:
+        """Serve the link until ``due``: select until shortly before, then poll to the tick."""
+        mono = time.monotonic
+        while not self.stopping:
+            now = mono()
+            if now >= due:
+                return
+            if now >= self._next_house:
+                self._housekeeping()
+            if due - now > SPIN_BEFORE_TICK_S:
+                for _, m, _addr in wait((self.ep,), min(due - SPIN_BEFORE_TICK_S, self._next_house)):
+                    self._on(m)
+            else:
+                for m, _addr in self.ep.poll():
+                    self._on(m)
+
+    def _state_to_command(self, time_usec: int, sent: float) -> float:
+        """State-to-command round trip (s) by TIMESYNC: from the state's time, on the vehicle's
+        clock mapped onto ours, to our send, plus half a TIMESYNC round trip for the way up."""
+        if self.offset_ns is None or self.rtt_ns is None:
+            return math.nan
+        state_ns = time_usec * 1000 - self.offset_ns
+        return (sent * 1e9 - state_ns + 0.5 * self.rtt_ns) * 1e-9
+
+    # -- messages ----------------------------------------------------------------------------------
+    def _send_target(self, time_usec: int, wire: tuple[float, ...]) -> None:
+        """The actuator target answering the state stamped ``time_usec`` (hot path)."""
+        self.commands += 1
+        if self.actuation == "motors":
+            flags = 1 if self.cfg.clock == "lockstep" else 0  # bit 0: lockstep
+            self.ep.send_hot(HIL_ACTUATOR_CONTROLS, (time_usec, flags, *wire, *_ZERO12,
+                                                     mavlink.MAV_MODE_FLAG_SAFETY_ARMED))
+        else:  # control group 0
+            self.ep.send_hot(SET_ACTUATOR_CONTROL_TARGET, (time_usec, *wire, 0.0, 0.0, 0.0, 0.0, 0,
+                                                           self.vsys or 0, self.vcomp))
+
+    def _row(self, k: int, t: float, ref: Any, u: Any, wire: Any, desired: Any, recv: float, sent: float,
+             s2c: float, late: float) -> None:
+        if self.rows is not None:
+            self.rows.write(",".join(map(repr, (k, t, ref[0][0], ref[1][0], ref[2][0], ref[3][0], *u, *wire,
+                                                *desired, recv, sent, s2c, late))))
+
+    def _serve(self, deadline: float) -> None:
+        for _, m, _addr in wait((self.ep,), deadline):
+            self._on(m)
+        if time.monotonic() >= self._next_house:
+            self._housekeeping()
+
+    def _on(self, m: Any) -> None:
+        """Any message from the link (ODOMETRY is kept for the flight loop, newest only)."""
+        src = m.get_srcSystem()
+        kind = m._type
+        if kind == "ODOMETRY":
+            if src == self.vsys:
+                self.states += 1
+                self._odo = m
+                self._odo_recv = self._last_rx = time.monotonic()
+            return
+        if kind == "HEARTBEAT":
+            if m.autopilot == mavlink.MAV_AUTOPILOT_INVALID or m.type == mavlink.MAV_TYPE_GCS:
+                return
+            if self.vsys is None:
+                self.vsys, self.vcomp = src, m.get_srcComponent()
+            if src != self.vsys:
+                return
+            self._heard = True
+            self._last_rx = time.monotonic()
+            self.vehicle_armed = bool(m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+            self.vehicle_state = m.system_status
+            if self.vehicle_armed:
+                self.armed_seen = True
+            return
+        if src != self.vsys:
+            return
+        self._last_rx = time.monotonic()
+        if kind == "COMMAND_ACK":
+            if m.target_system in (0, self.cfg.sysid):
+                self._acks[m.command] = m.result
+        elif kind == "TIMESYNC":
+            self._timesync(m)
+        elif kind == "STATUSTEXT":
+            text = m.text.rstrip("\x00") if isinstance(m.text, str) else m.text.decode(errors="replace")
+            self._status(f"statustext severity={m.severity} {text}")
+
+    def _timesync(self, m: Any) -> None:
+        now = time.monotonic_ns()
+        if m.tc1 == 0:  # a request: answer with our clock
+            self.ep.send(mavlink.MAVLink_timesync_message(now, m.ts1))
+            return
+        rtt = now - m.ts1
+        if rtt < 0 or rtt > 1_000_000_000:
+            return
+        offset = m.tc1 - (m.ts1 + now) // 2
+        # keep the sample with the smallest round trip among the last few: its offset is the
+        # least disturbed by queueing on either side
+        self._ts_age += 1
+        if self._ts_best is None or rtt <= self._ts_best[0] or self._ts_age > 8:
+            self._ts_best = (rtt, offset)
+            self._ts_age = 0
+        self.rtt_ns, self.offset_ns = self._ts_best
+
+    def _check_vehicle(self) -> str | None:
+        """The outcome if the vehicle left our control (failsafe, disarmed, silent), else None."""
+        if time.monotonic() - self._last_rx > self.cfg.vehicle_timeout_s:
+            self.reason = f"vehicle silent for {self.cfg.vehicle_timeout_s:g} s"
+            self.event("aborted", self.reason)
+            return "aborted"
+        if self.vehicle_state == mavlink.MAV_STATE_CRITICAL:
+            self.reason = "the vehicle reports its failsafe (HEARTBEAT system_status CRITICAL)"
+            self.event("failsafe", self.reason)
+            return "failsafe"
+        if self.armed_seen and not self.vehicle_armed:
+            self.reason = "the vehicle was disarmed during the mission"
+            self.event("aborted", self.reason)
+            return "aborted"
+        return None
+
+    def _housekeeping(self) -> None:
+        now = time.monotonic()
+        if now >= self._next_hb:
+            self._next_hb = now + 1.0
+            self.ep.send(mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_ONBOARD_CONTROLLER,
+                                                           mavlink.MAV_AUTOPILOT_INVALID, 0, 0,
+                                                           mavlink.MAV_STATE_ACTIVE, 3))
+        if now >= self._next_ts and self.vsys is not None:
+            self._next_ts = now + self.cfg.timesync_s
+            self.ep.send(mavlink.MAVLink_timesync_message(0, time.monotonic_ns()))
+        if self.tlog is not None:
+            self.tlog.flush()
+        self._next_house = min(self._next_hb, self._next_ts, now + HOUSEKEEPING_S)
+
+
+def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None = None,
+                   overwrite: bool = False) -> int:
+    """``bsst controller``: fly, then exit 0 if the mission completed, else 1 (DESIGN.md section 7)."""
+    import json
+
+    from bridge.process import on_stop_signals, status_printer
+    from bridge.runlog import side_dir
+
+    path = side_dir(out, ("controller.tlog", "controller.csv"), overwrite) if out is not None else None
+    emit = status_printer()
+    node = Offboard(flight, cfg, path, emit)
+    on_stop_signals(node.stop)
+    outcome = node.run()
+    emit("stats " + json.dumps({"commands": node.commands, "states": node.states, "received": node.ep.received,
+                                "sent": node.ep.sent, "stale_ticks": node.stale_ticks, "overruns": node.overruns}))
+    emit(f"done outcome={outcome}" + (f" reason={node.reason}" if node.reason else ""))
+    return 0 if outcome == "completed" else 1
