@@ -72,6 +72,7 @@ class Quadrotor:
         self.state: State = tuple(float(v) for v in state)  # type: ignore[assignment]
         self._phases = e.disturbance.phases(seed)
         self._disturbed = e.disturbance.active
+        self._lagged = profile.actuation == "motors" and e.motor_lag
         hover = profile.hover_omega
         self.omega: tuple[float, float, float, float] = (hover,) * 4 if profile.actuation == "motors" else (0.0,) * 4
         self._omega_target = self.omega
@@ -117,11 +118,9 @@ class Quadrotor:
 
         The same step as ``plant.integrate.rk4_step(self.derivative, ...)``, specialised
         (:func:`plant.model.rk4_step_held`)."""
-        if self.profile.actuation == "motors" and self.effects.motor_lag:
-            self._set_omega(
-                motor_lag_step(self.omega, self._omega_target, self.dt, self.profile.motor_time_constant)
-            )
         t, h = self.t, self.dt
+        if self._lagged:
+            self._set_omega(motor_lag_step(self.omega, self._omega_target, h, self.profile.motor_time_constant))
         ext = None
         if self._disturbed:
             d, ph = self.effects.disturbance, self._phases
@@ -132,7 +131,7 @@ class Quadrotor:
         if self.ground and X[4] < 0.0:
             X = _on_ground(X)
         self.state = X  # type: ignore[assignment]
-        self.t += self.dt
+        self.t = t + h
 
     @property
     def on_ground(self) -> bool:
@@ -141,7 +140,7 @@ class Quadrotor:
     def diverged(self) -> str | None:
         """Why the vehicle is lost (NaN, |position| > 100 m, tilt > 90 deg), or None."""
         X = self.state
-        if not all(math.isfinite(v) for v in X):
+        if not math.isfinite(sum(X)) and not all(math.isfinite(v) for v in X):  # the sum: one cheap test
             return "state is not finite"
         if X[0] * X[0] + X[2] * X[2] + X[4] * X[4] > 1e4:
             return "position beyond 100 m"

@@ -193,3 +193,7 @@ def test_ground_and_divergence() -> None:
     assert q.diverged() == "tilt beyond 90 degrees"
     q.state = (math.nan,) + (0.0,) * 11  # type: ignore[assignment]
     assert q.diverged() == "state is not finite"
+    q.state = (0.0,) * 11 + (-math.inf,)  # type: ignore[assignment]
+    assert q.diverged() == "state is not finite"
+    q.state = (1e308, 0.0, 1e308) + (0.0,) * 9  # type: ignore[assignment]  # finite, but the sum overflows
+    assert q.diverged() == "position beyond 100 m"
