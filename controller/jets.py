@@ -83,8 +83,22 @@ def sqrt_(a: Jet) -> Jet:
 
 
 def atan2(y: Jet, x: Jet) -> Jet:
-    """atan2 with derivatives: theta' = (x y' - y x') / (x^2 + y^2). Exact to order 3."""
-    r = add(mul(x, x), mul(y, y))
-    n = sub(mul(x, shift(y)), mul(y, shift(x)))
-    q = div(n, r)
-    return (_atan2(y[0], x[0]), q[0], q[1], q[2])
+    """atan2 with derivatives: theta' = (x y' - y x') / (x^2 + y^2). Exact to order 3.
+
+    That is ``q = div(sub(mul(x, shift(y)), mul(y, shift(x))), add(mul(x, x), mul(y, y)))``
+    and theta = (atan2, q0, q1, q2), written out: the same operations in the same order
+    (the same result to the last bit, tested), keeping only the terms to order 2 that the
+    result needs. The law calls it twice per control step.
+    """
+    x0, x1, x2, x3 = x
+    y0, y1, y2, y3 = y
+    r0 = x0 * x0 + y0 * y0  # r = x^2 + y^2 (Leibniz)
+    r1 = (x1 * x0 + x0 * x1) + (y1 * y0 + y0 * y1)
+    r2 = (x2 * x0 + 2.0 * x1 * x1 + x0 * x2) + (y2 * y0 + 2.0 * y1 * y1 + y0 * y2)
+    n0 = x0 * y1 - y0 * x1  # n = x y' - y x'
+    n1 = (x1 * y1 + x0 * y2) - (y1 * x1 + y0 * x2)
+    n2 = (x2 * y1 + 2.0 * x1 * y2 + x0 * y3) - (y2 * x1 + 2.0 * y1 * x2 + y0 * x3)
+    q0 = n0 / r0  # q = n / r by recurrence (div)
+    q1 = (n1 - q0 * r1) / r0
+    q2 = (n2 - 2.0 * q1 * r1 - q0 * r2) / r0
+    return (_atan2(y0, x0), q0, q1, q2)

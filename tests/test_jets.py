@@ -117,3 +117,16 @@ def test_top_derivative_unknown_stays_downstream() -> None:
     truncated = J.mul((*sin_t(t)[:3], 0.0), (*cos_t(t)[:3], 0.0))
     assert close(exact[:3], truncated[:3])
     assert not math.isclose(exact[3], truncated[3])
+
+
+jet = st.tuples(*[st.floats(-10.0, 10.0, allow_nan=False)] * 4)
+
+
+@given(jet, jet)
+def test_atan2_is_its_definition_to_the_last_bit(y: J.Jet, x: J.Jet) -> None:
+    """The written-out atan2 is exactly div(x y' - y x', x^2 + y^2) on the primitive jets."""
+    if x[0] * x[0] + y[0] * y[0] < 1e-6:
+        return  # at the origin the angle has no derivative
+    r = J.add(J.mul(x, x), J.mul(y, y))
+    q = J.div(J.sub(J.mul(x, J.shift(y)), J.mul(y, J.shift(x))), r)
+    assert J.atan2(y, x) == (math.atan2(y[0], x[0]), q[0], q[1], q[2])
