@@ -175,7 +175,29 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_sim)
     add_sweep_commands(sub)
     add_sitl_commands(sub)
+    add_relay_command(sub)
     return parser
+
+
+def add_relay_command(sub: Any) -> None:
+    """``bsst relay``: the real-time UDP relay applying the link model on the wall clock (bridge.relay)."""
+    p = sub.add_parser("relay", help="relay UDP both ways between two endpoints through the link model")
+    p.add_argument("--listen", required=True, metavar="HOST:PORT", help="bind here; the controller sends here")
+    p.add_argument("--to", required=True, metavar="HOST:PORT", help="forward to here (the vehicle's link)")
+    p.add_argument("--listen-direction", choices=("up", "down"), default="up",
+                   help="direction of what arrives on --listen (default up: controller -> vehicle)")
+    p.add_argument("--mission", metavar="FILE", help="take the [link] tables (and seed) from this mission")
+    p.add_argument("--duration", type=positive_float("--duration", 0.0, 1e7), metavar="S",
+                   help="stop after S seconds (default: until SIGINT/SIGTERM)")
+    p.add_argument("--stats", metavar="FILE", help="write the statistics to FILE as JSON on exit")
+    add_link_options(p)
+    p.set_defaults(func=cmd_relay)
+
+
+def cmd_relay(args: argparse.Namespace) -> int:
+    from bridge.relay import relay_from_args
+
+    return relay_from_args(args)
 
 
 def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:

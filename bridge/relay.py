@@ -1,0 +1,286 @@
+"""A real-time UDP relay that applies the link model on the wall clock (``bsst relay``).
+
+Topology (DESIGN.md section 5)::
+
+    controller ──► LISTEN (front socket) ══ up ══► back socket ──► TARGET (the vehicle)
+    controller ◄── front socket ◄══ down ══ back socket ◄── vehicle
+
+Datagrams that arrive on the listen port travel ``up`` (``listen_direction="down"`` swaps
+the names) and leave from the back socket to the target; whatever the target sends back
+to the back socket travels the other way, to the last address the front heard from. Each
+direction has its own :class:`bridge.link.LinkImpairment`, driven with the seconds since
+the relay started (so blackouts are in relay time). Datagrams pass unchanged; the relay
+stamps each one on arrival and measures, when it hands it to the kernel to forward it,
+the delay it really added (scheduled delay + the relay's own latency, from the return of
+``recvfrom`` to the call of ``sendto``), next to the model's statistics.
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import socket
+import threading
+import time
+from array import array
+from collections.abc import Callable
+from typing import Any
+
+from bridge.link import LinkImpairment, LinkSettings
+
+Address = tuple[str, int]
+MAX_DATAGRAM = 65_535
+
+
+def parse_address(text: str, flag: str) -> Address:
+    """``HOST:PORT`` -> (host, port); ValueError naming ``flag`` otherwise."""
+    host, sep, port = text.rpartition(":")
+    try:
+        p = int(port)
+    except ValueError:
+        p = -1
+    if not sep or not host or not 0 <= p <= 65_535:
+        raise ValueError(f"{flag} must be HOST:PORT, got {text!r}")
+    return host, p
+
+
+def _percentiles_ms(values: array) -> dict[str, float | None]:
+    if not values:
+        return {"p50": None, "p95": None, "p99": None, "max": None}
+    import numpy as np
+
+    d = np.frombuffer(values, dtype=float) * 1000.0
+    p50, p95, p99 = np.percentile(d, (50.0, 95.0, 99.0))
+    return {"p50": float(p50), "p95": float(p95), "p99": float(p99), "max": float(d.max())}
+
+
+class Relay:
+    """Forward UDP both ways between a client and ``target``, through the link model.
+
+    Bind happens in the constructor (``address`` tells the port when 0 was asked for);
+    :meth:`serve` runs until :meth:`stop` (from any thread or a signal handler) or
+    ``duration_s``; :meth:`start` runs it in a daemon thread.
+    """
+
+    def __init__(self, listen: Address, target: Address, link: LinkSettings | None = None, *,
+                 listen_direction: str = "up", clock: Callable[[], float] = time.perf_counter) -> None:
+        link = link or LinkSettings()
+        up, down = link.make()
+        self.front_link, self.back_link = (up, down) if listen_direction == "up" else (down, up)
+        self.links = {"up": up, "down": down}
+        self.target = target
+        self.clock = clock
+        self.front = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.back = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            self.front.bind(listen)
+            self.back.bind((listen[0], 0))
+        except OSError:
+            self.close()
+            raise
+        for s in (self.front, self.back):
+            s.setblocking(False)
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+        self.client: Address | None = None
+        self.added = {"up": array("d"), "down": array("d")}  # s, measured arrival -> forward
+        self.dropped_no_client = 0
+        self.send_errors = 0
+        self._wake_r, self._wake_w = os.pipe()
+        os.set_blocking(self._wake_w, False)
+        self._stopping = False
+        self.t0 = clock()
+        self.cpu_user_s = 0.0  # CPU time of the serving process while serving (all its threads)
+        self.cpu_sys_s = 0.0
+        self.forwarded = 0
+        self._thread: threading.Thread | None = None
+
+    @property
+    def address(self) -> Address:
+        """Where the client should send (the bound listen address)."""
+        return self.front.getsockname()
+
+    @property
+    def back_address(self) -> Address:
+        """The address the target sees the relay's datagrams come from."""
+        return self.back.getsockname()
+
+    def stop(self) -> None:
+        """Ask :meth:`serve` to return (safe from signal handlers and other threads)."""
+        self._stopping = True
+        try:
+            os.write(self._wake_w, b"x")
+        except OSError:
+            pass
+
+    def start(self) -> threading.Thread:
+        """Serve in a daemon thread; :meth:`stop` then ``join`` it."""
+        self._thread = threading.Thread(target=self.serve, name="bsst-relay", daemon=True)
+        self._thread.start()
+        return self._thread
+
+    def _receive(self, sock: socket.socket, link: LinkImpairment, from_front: bool) -> None:
+        clock = self.clock
+        t0 = self.t0
+        while True:
+            try:
+                data, addr = sock.recvfrom(MAX_DATAGRAM)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError:  # e.g. ICMP port unreachable reported on the next recv
+                continue
+            now = clock()
+            if from_front:
+                self.client = addr
+            link.send(now - t0, len(data), (data, now))
+
+    def _forward(self, now: float) -> None:
+        t = now - self.t0
+        for link, sock, to_front in ((self.front_link, self.back, False), (self.back_link, self.front, True)):
+            due = link.deliver(t)
+            if not due:
+                continue
+            added = self.added[link.direction]
+            for d in due:
+                data, arrived = d.payload
+                dest = self.client if to_front else self.target
+                if dest is None:
+                    self.dropped_no_client += 1
+                    continue
+                added.append(self.clock() - arrived)  # handed to the kernel now
+                try:
+                    sock.sendto(data, dest)
+                except OSError:
+                    self.send_errors += 1
+                    added.pop()
+                    continue
+                self.forwarded += 1
+
+    def serve(self, duration_s: float | None = None) -> None:
+        """Relay until :meth:`stop` or for ``duration_s`` seconds."""
+        cpu0 = os.times()
+        clock = self.clock
+        end = None if duration_s is None else clock() + duration_s
+        rlist = [self.front, self.back, self._wake_r]
+        front, back = self.front, self.back
+        try:
+            while not self._stopping:
+                now = clock()
+                if end is not None and now >= end:
+                    break
+                nxt = [x for x in (self.front_link.next_due(), self.back_link.next_due()) if x is not None]
+                timeout = 1.0
+                if nxt:
+                    timeout = max(0.0, min(nxt) + self.t0 - now)
+                if end is not None:
+                    timeout = min(timeout, max(0.0, end - now))
+                ready, _, _ = select.select(rlist, [], [], timeout)
+                if ready:
+                    if front in ready:
+                        self._receive(front, self.front_link, True)
+                    if back in ready:
+                        self._receive(back, self.back_link, False)
+                    if self._wake_r in ready:
+                        os.read(self._wake_r, 64)
+                self._forward(clock())
+        finally:
+            cpu1 = os.times()
+            self.cpu_user_s += cpu1.user - cpu0.user
+            self.cpu_sys_s += cpu1.system - cpu0.system
+
+    def summary(self) -> dict[str, Any]:
+        """Per direction: the model's statistics (``delay_ms`` = scheduled one-way delay) and
+        ``measured_ms``, the delay the relay really added, arrival to forward; plus CPU time
+        (user and system, s; meaningful per packet when the relay has its own process)."""
+        out: dict[str, Any] = {}
+        for d, link in self.links.items():
+            s = link.stats.summary()
+            s["measured_ms"] = _percentiles_ms(self.added[d])
+            out[d] = s
+        out["forwarded"] = self.forwarded
+        out["dropped_no_client"] = self.dropped_no_client
+        out["send_errors"] = self.send_errors
+        cpu = self.cpu_user_s + self.cpu_sys_s
+        out["cpu_s"] = cpu
+        out["cpu_user_s"] = self.cpu_user_s
+        out["cpu_sys_s"] = self.cpu_sys_s
+        out["cpu_us_per_packet"] = 1e6 * cpu / self.forwarded if self.forwarded else None
+        return out
+
+    def close(self) -> None:
+        for s in (self.front, self.back):
+            s.close()
+        for fd in (getattr(self, "_wake_r", -1), getattr(self, "_wake_w", -1)):
+            if fd >= 0:
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+        self._wake_r = self._wake_w = -1
+
+    def __enter__(self) -> Relay:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+        self.close()
+
+
+def relay_from_args(args: Any) -> int:
+    """``bsst relay``: relay until SIGINT/SIGTERM or ``--duration``; print (and ``--stats``) the figures."""
+    import signal
+    import sys
+
+    from bridge.cli import UsageError, link_table_from_args
+    from bridge.link import link_from_table, merge_link_tables
+    from params import ConfigError
+
+    try:
+        listen = parse_address(args.listen, "--listen")
+        target = parse_address(args.to, "--to")
+    except ValueError as exc:
+        raise UsageError(f"bsst relay: {exc}") from None
+    base: dict[str, Any] = {}
+    seed = 0
+    source = "command line"
+    if args.mission:
+        from missions import load_mission
+
+        m = load_mission(args.mission)
+        base, seed, source = dict(m.link), m.seed, m.source
+    settings = link_from_table(merge_link_tables(base, link_table_from_args(args)), source, seed=seed)
+    try:
+        relay = Relay(listen, target, settings, listen_direction=args.listen_direction)
+    except OSError as exc:
+        raise ConfigError(f"--listen {args.listen}: cannot bind ({exc.strerror or exc})") from None
+    stop = relay.stop
+    old = {s: signal.signal(s, lambda *_: stop()) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        h, p = relay.address
+        print(f"relay: listening on {h}:{p} -> {target[0]}:{target[1]}; up: {settings.up.describe()}; "
+              f"down: {settings.down.describe()}", flush=True)
+        relay.serve(args.duration)
+    finally:
+        for s, handler in old.items():
+            signal.signal(s, handler)
+        relay.close()
+    summary = relay.summary()
+    for d in ("up", "down"):
+        s = summary[d]
+        m_ms = s["measured_ms"]
+        fmt = {k: "n/a" if v is None else f"{v:.3f}" for k, v in m_ms.items()}
+        print(f"{d:4}: sent {s['sent']} delivered {s['delivered']} lost {s['lost']} dup {s['duplicated']} "
+              f"reordered {s['reordered']}; added delay p50 {fmt['p50']} ms p99 {fmt['p99']} ms max {fmt['max']} ms")
+    cpu = summary["cpu_us_per_packet"]
+    print(f"cpu {summary['cpu_user_s']:.3f} s user + {summary['cpu_sys_s']:.3f} s system"
+          + (f", {cpu:.1f} us per packet" if cpu is not None else ""))
+    if args.stats:
+        from bridge.runlog import write_json_atomic
+
+        try:
+            write_json_atomic(args.stats, summary)
+        except OSError as exc:
+            print(f"bsst: --stats {args.stats}: cannot write ({exc.strerror or exc})", file=sys.stderr)
+            return 1
+    return 0
