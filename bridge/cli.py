@@ -349,7 +349,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if res.interrupted:
         print(f"bsst: interrupted; continue with --resume --out {res.path}", file=sys.stderr)
         return EXIT_FAILED
-    print(f"sweep directory: {res.path} (cells.csv, report.md, map_*.png)")
+    print(f"sweep directory: {res.path}")
     return EXIT_FAILED if res.failed else EXIT_OK
 
 
