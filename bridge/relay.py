@@ -18,6 +18,7 @@ the delay it really added (scheduled delay + the relay's own latency, from the r
 from __future__ import annotations
 
 import os
+import resource
 import select
 import socket
 import threading
@@ -157,7 +158,7 @@ class Relay:
 
     def serve(self, duration_s: float | None = None) -> None:
         """Relay until :meth:`stop` or for ``duration_s`` seconds."""
-        cpu0 = os.times()
+        cpu0 = resource.getrusage(resource.RUSAGE_SELF)
         clock = self.clock
         end = None if duration_s is None else clock() + duration_s
         rlist = [self.front, self.back, self._wake_r]
@@ -183,9 +184,9 @@ class Relay:
                         os.read(self._wake_r, 64)
                 self._forward(clock())
         finally:
-            cpu1 = os.times()
-            self.cpu_user_s += cpu1.user - cpu0.user
-            self.cpu_sys_s += cpu1.system - cpu0.system
+            cpu1 = resource.getrusage(resource.RUSAGE_SELF)
+            self.cpu_user_s += cpu1.ru_utime - cpu0.ru_utime
+            self.cpu_sys_s += cpu1.ru_stime - cpu0.ru_stime
 
     def summary(self) -> dict[str, Any]:
         """Per direction: the model's statistics (``delay_ms`` = scheduled one-way delay) and
