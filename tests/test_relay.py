@@ -154,3 +154,68 @@ def test_parse_address() -> None:
     assert parse_address("127.0.0.1:14560", "--to") == ("127.0.0.1", 14560)
     with pytest.raises(ValueError, match="--to"):
         parse_address("127.0.0.1:99999", "--to")
+
+
+# -- optional: the real kernel path with tc netem on a veth pair in a network namespace ----------
+ECHO = """
+import socket, sys
+s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+s.bind(("10.201.0.2", 0))
+print(s.getsockname()[1], flush=True)
+s.settimeout(20)
+while True:
+    data, src = s.recvfrom(2048)
+    s.sendto(data, src)
+"""
+
+
+def _ip(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(["ip", *args], capture_output=True, text=True, timeout=10)
+
+
+def test_netem_delay_on_a_veth_pair_matches_the_model() -> None:
+    """20 ms of netem delay on the host side of a veth pair: the echo's round trip is 20 ms more
+    than the model's zero, i.e. the same one-way figure the relay's 20 ms gives on loopback."""
+    import shutil
+
+    if os.geteuid() != 0 or shutil.which("ip") is None or shutil.which("tc") is None:
+        pytest.skip("needs root and iproute2 (ip, tc) to create a network namespace")
+    ns, veth = f"bsst{os.getpid()}", f"vb{os.getpid() % 100000}"
+    r = _ip("netns", "add", ns)
+    if r.returncode != 0:
+        pytest.skip(f"ip netns not permitted here: {r.stderr.strip()}")
+    echo = None
+    try:
+        steps = [("link", "add", veth + "a", "type", "veth", "peer", "name", veth + "b"),
+                 ("link", "set", veth + "b", "netns", ns),
+                 ("addr", "add", "10.201.0.1/30", "dev", veth + "a"),
+                 ("link", "set", veth + "a", "up"),
+                 ("netns", "exec", ns, "ip", "addr", "add", "10.201.0.2/30", "dev", veth + "b"),
+                 ("netns", "exec", ns, "ip", "link", "set", veth + "b", "up")]
+        for step in steps:
+            r = _ip(*step)
+            if r.returncode != 0:
+                pytest.skip(f"cannot build the veth pair ({' '.join(step)}): {r.stderr.strip()}")
+        r = subprocess.run(["tc", "qdisc", "add", "dev", veth + "a", "root", "netem", "delay", "20ms"],
+                           capture_output=True, text=True, timeout=10)
+        if r.returncode != 0:
+            pytest.skip(f"tc netem not available in this kernel: {r.stderr.strip()}")
+        echo = subprocess.Popen(["ip", "netns", "exec", ns, sys.executable, "-c", ECHO],
+                                stdout=subprocess.PIPE, text=True)
+        port = int(echo.stdout.readline())
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        s.bind(("10.201.0.1", 0))
+        s.settimeout(2.0)
+        rtt = []
+        for i in range(30):
+            s.sendto(stamped(i), ("10.201.0.2", port))
+            data = s.recv(2048)
+            rtt.append(time.perf_counter() - STAMP.unpack_from(data)[0])
+        s.close()
+        assert abs(np.median(rtt) * 1000.0 - 20.0) <= 2.0  # netem delays one direction only
+    finally:
+        if echo is not None:
+            echo.kill()
+            echo.wait()
+        _ip("netns", "del", ns)
+        _ip("link", "del", veth + "a")
