@@ -10,9 +10,10 @@ the names) and leave from the back socket to the target; whatever the target sen
 to the back socket travels the other way, to the last address the front heard from. Each
 direction has its own :class:`bridge.link.LinkImpairment`, driven with the seconds since
 the relay started (so blackouts are in relay time). Datagrams pass unchanged; the relay
-stamps each one on arrival and measures, when it hands it to the kernel to forward it,
-the delay it really added (scheduled delay + the relay's own latency, from the return of
-``recvfrom`` to the call of ``sendto``), next to the model's statistics.
+stamps each one on arrival — with the kernel's receive time stamp (``SO_TIMESTAMPNS``) on
+Linux, so that the relay's own wake-up latency counts — and measures, when it hands it to
+the kernel to forward it, the delay it really added (scheduled delay + the relay's own
+latency), next to the model's statistics.
 """
 
 from __future__ import annotations
@@ -21,6 +22,8 @@ import os
 import resource
 import select
 import socket
+import struct
+import sys
 import threading
 import time
 from array import array
@@ -31,6 +34,9 @@ from bridge.link import LinkImpairment, LinkSettings
 
 Address = tuple[str, int]
 MAX_DATAGRAM = 65_535
+_SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)  # Linux: kernel receive time, CLOCK_REALTIME
+_TIMESPEC = struct.Struct("qq")
+_ANC_SIZE = socket.CMSG_SPACE(_TIMESPEC.size)
 
 
 def parse_address(text: str, flag: str) -> Address:
@@ -79,9 +85,15 @@ class Relay:
         except OSError:
             self.close()
             raise
+        self.kernel_stamps = sys.platform.startswith("linux")
         for s in (self.front, self.back):
             s.setblocking(False)
             s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+            if self.kernel_stamps:
+                try:
+                    s.setsockopt(socket.SOL_SOCKET, _SO_TIMESTAMPNS, 1)
+                except OSError:
+                    self.kernel_stamps = False
         self.client: Address | None = None
         self.added = {"up": array("d"), "down": array("d")}  # s, measured arrival -> forward
         self.dropped_no_client = 0
@@ -122,14 +134,25 @@ class Relay:
     def _receive(self, sock: socket.socket, link: LinkImpairment, from_front: bool) -> None:
         clock = self.clock
         t0 = self.t0
+        stamps = self.kernel_stamps
         while True:
             try:
-                data, addr = sock.recvfrom(MAX_DATAGRAM)
+                if stamps:
+                    data, anc, _, addr = sock.recvmsg(MAX_DATAGRAM, _ANC_SIZE)
+                else:
+                    data, addr = sock.recvfrom(MAX_DATAGRAM)
+                    anc = ()
             except (BlockingIOError, InterruptedError):
                 return
             except OSError:  # e.g. ICMP port unreachable reported on the next recv
                 continue
             now = clock()
+            for level, kind, raw in anc:  # the kernel's arrival stamp: count our wake-up latency too
+                if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS and len(raw) >= 16:
+                    sec, nsec = _TIMESPEC.unpack_from(raw)
+                    lag = (time.time_ns() - sec * 1_000_000_000 - nsec) * 1e-9
+                    if 0.0 < lag < 1.0:
+                        now -= lag
             if from_front:
                 self.client = addr
             link.send(now - t0, len(data), (data, now))
