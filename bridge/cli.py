@@ -423,6 +423,7 @@ def _add_port_options(p: argparse.ArgumentParser, vehicle: bool) -> None:
     if vehicle:
         clock.add_argument("--lockstep", dest="realtime", action="store_false", help="lockstep clock (default)")
     clock.add_argument("--realtime", action="store_true", help="run on the wall clock (default lockstep)")
+    p.set_defaults(realtime=False)
     p.add_argument("--speed", type=positive_float("--speed", 0.0, 1000.0), metavar="X",
                    help="lockstep: at most X times real time; also the pace after the controller is lost (default 1)")
 

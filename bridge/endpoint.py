@@ -306,7 +306,15 @@ class Endpoint:
                 if self.follow:
                     self.peer = addr
                 continue
-            msgs = self.mav.parse_buffer(data)
+            mav = self.mav
+            msgs = mav.parse_buffer(data)
+            if mav.buf_len():
+                # a datagram never continues in the next one: a torn frame left in the parser
+                # would swallow the next good one, so it is dropped here
+                self.bad += 1
+                mav.buf = bytearray()
+                mav.buf_index = 0
+                mav.expected_length = mavlink.HEADER_LEN_V1 + 2
             if not msgs:
                 continue
             valid = False
@@ -361,6 +369,9 @@ def wait(endpoints: Sequence[Endpoint], deadline: float, spin: Endpoint | None =
                 return [(spin, m, a) for m, a in got]
             if mono() >= end:
                 break
+            # let any other runnable task on this core go first: on a busy machine the peer
+            # we are waiting for may be that task; on an idle one this returns at once
+            os.sched_yield()
     while True:
         out = [(ep, m, a) for ep in endpoints for m, a in ep.poll()]
         if out:

@@ -56,6 +56,7 @@ CONTROLLER_COLUMNS = (
 )
 OUTCOMES = ("completed", "failsafe", "diverged", "aborted")
 PHASE_S = 0.0003  # realtime: tick this long after the state's arrival (its one-way trip and decode)
+PHASE_STATES = 5  # realtime: states watched to find the phase of the vehicle's clock
 SPIN_BEFORE_TICK_S = 0.0003  # realtime: sleep until this long before a tick, then poll: select wakes late
 HOUSEKEEPING_S = 0.05
 _ZERO12 = (0.0,) * 12
@@ -236,16 +237,27 @@ class Offboard:
         period = 1.0 / rate
         steps = self.steps
         mono = time.monotonic
-        # phase-lock to the vehicle: the first tick just after a state arrives
-        while self._odo is None and not self.stopping:
+        # phase-lock to the vehicle: ticks just after its states arrive. The phase is the
+        # earliest arrival (recv - k / rate) over a few states, so one state that waited in
+        # the socket while we were busy does not shift the schedule.
+        self._odo = None
+        phase: float | None = None
+        seen = 0
+        while seen < PHASE_STATES and not self.stopping:
             outcome = self._check_vehicle()
             if outcome:
                 return outcome
             self._serve(min(self._next_house, self._last_rx + self.cfg.vehicle_timeout_s))
-        if self.stopping:
+            if self._odo is not None:
+                k = step_of_usec(self._odo.time_usec, rate)
+                p = self._odo_recv - k * period
+                phase = p if phase is None else min(phase, p)
+                seen += 1
+                self._odo = None
+        if self.stopping or phase is None:
             return "aborted"
-        t0 = self._odo_recv + PHASE_S
-        k0 = step_of_usec(self._odo.time_usec, rate)
+        k0 = k + 1  # the mission starts with the next state
+        t0 = phase + k0 * period + PHASE_S
         last_k = k0 - 1
         j = 0
         while not self.stopping:

@@ -247,6 +247,8 @@ class TraceJoiner:
         self.late_ms: list[float] = []
         self._up_seen: set[int] = set()
         self.missing = 0  # vehicle rows left out: their controller half was never written
+        self.first_sent: float | None = None  # wall time the first / last joined state was sent
+        self.last_sent = math.nan
 
     def update(self) -> int:
         """Join what both files hold now; returns the number of new trace rows."""
@@ -298,6 +300,9 @@ class TraceJoiner:
         own = self.ctl.get(k)
         if own is not None:
             self.down_ms.append(1e3 * (own[C_RECV] - v[V_SENT]))
+        if self.first_sent is None:
+            self.first_sent = v[V_SENT]
+        self.last_sent = v[V_SENT]
         row = (t, *v[V_STATE:V_STATE + 12], ref[0][0], ref[1][0], ref[2][0], ref[3][0], *u,
                *v[V_C:V_C + 4], *v[V_ACT:V_ACT + 4], v[V_AGE], *desired)
         self.rows.append(row)
@@ -343,6 +348,7 @@ class Session:
         self.diverged = False
         self.died: str | None = None
         self.aborted = False
+        self.interrupted = False  # set by Ctrl-C / SIGTERM (see _catch_stop_signals)
         self._event_log: EventLog | None = None
 
     # -- the whole session ---------------------------------------------------------------------
@@ -353,7 +359,7 @@ class Session:
         trace = TraceWriter(self.path / "trace.csv")
         self.joiner = TraceJoiner(self.path, self.flight, trace)
         self.t_wall0 = time.monotonic()
-        restore = _sigterm_as_interrupt()
+        restore = _catch_stop_signals(self)
         try:
             self._start()
             self._supervise()
@@ -443,6 +449,8 @@ class Session:
                 if child.eof or child.proc.poll() is not None:
                     child.proc.wait()
                     self._died(child, starting=True)
+                if self.interrupted:
+                    raise KeyboardInterrupt
                 left = deadline - time.monotonic()
                 if left <= 0:
                     raise ChildError(f"{child.name} (pid {child.pid}) not ready within {READY_TIMEOUT_S:g} s")
@@ -471,6 +479,8 @@ class Session:
         try:
             while True:
                 sel.select(0.1)
+                if self.interrupted:
+                    raise KeyboardInterrupt
                 for child in (veh, ctl):
                     for line in child.lines():
                         self._status(child, line)
@@ -585,7 +595,7 @@ class Session:
         up_sent = int(cs.get("commands", len(j.ctl)))
         up_delivered = int(vs.get("accepted", 0))
         down_sent = int(vs.get("odometry_sent", 0))
-        down_delivered = int(cs.get("states", 0))
+        down_delivered = int(cs.get("states", len(j.ctl)))  # a killed controller left no stats: its rows
         return {
             "up": {"sent": up_sent, "delivered": up_delivered,
                    "lost": max(0, up_sent - up_delivered - sum(rejected.values())), "duplicated": 0,
@@ -599,11 +609,16 @@ class Session:
         j = self.joiner
         sim = len(j.rows) / self.flight.mission.rate_hz
         cs = self.controller.stats if self.controller else {}
+        n = len(j.rows)
+        flight_s = j.last_sent - j.first_sent if j.first_sent is not None and n > 1 else math.nan
+        rate = (n - 1) / flight_s if flight_s > 0 else None
         return {
-            "wall_s": wall,
+            "wall_s": wall,  # the whole session: start, fly, stop
             "sim_s": sim,
-            "real_time_factor": sim / wall if wall > 0 else None,
-            "steps_per_s": len(j.rows) / wall if wall > 0 else None,
+            "flight_wall_s": flight_s if math.isfinite(flight_s) else None,
+            "step_rate_hz": rate,  # control steps per wall second while flying
+            "real_time_factor": rate / self.flight.mission.rate_hz if rate else None,
+            "missing_rows": j.missing,
             "state_to_command_ms": stats(j.rtt_ms),
             "state_to_command_timesync_ms": stats(j.s2c_ms),
             "period_error_ms": stats(j.late_ms),
@@ -612,16 +627,23 @@ class Session:
         }
 
 
-def _sigterm_as_interrupt() -> Callable[[], None]:
-    """While a session runs, SIGTERM interrupts it as Ctrl-C does (main thread only)."""
+def _catch_stop_signals(session: Session) -> Callable[[], None]:
+    """While a session runs, Ctrl-C (SIGINT) and SIGTERM only set ``session.interrupted``;
+    the session checks it between whole steps, so no file is left half-written by an
+    exception raised in the middle of a write. Main thread only (signals go there)."""
     if threading.current_thread() is not threading.main_thread():
         return lambda: None
 
     def handler(signum: int, frame: Any) -> None:
-        raise KeyboardInterrupt
+        session.interrupted = True
 
-    old = signal.signal(signal.SIGTERM, handler)
-    return lambda: signal.signal(signal.SIGTERM, old)
+    old = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
+
+    def restore() -> None:
+        for sig, h in old.items():
+            signal.signal(sig, h)
+
+    return restore
 
 
 @contextlib.contextmanager

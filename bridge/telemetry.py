@@ -86,7 +86,9 @@ def home_position(home: Home) -> Any:
 
 def sys_status(load_permille: int, healthy: bool) -> Any:
     """``SYS_STATUS``: simulated sensors present and healthy, a full 4S battery."""
-    health = _SENSORS if healthy else 0
+    # the geofence bit is set healthy although there is no fence: MAVProxy reads a clear
+    # health bit as "fence breach" even on a vehicle that has none
+    health = (_SENSORS | mavlink.MAV_SYS_STATUS_GEOFENCE) if healthy else 0
     return mavlink.MAVLink_sys_status_message(_SENSORS, _SENSORS, health, max(0, min(1000, load_permille)),
                                               16800, -1, 100, 0, 0, 0, 0, 0, 0)
 

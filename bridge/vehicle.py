@@ -332,7 +332,11 @@ class Vehicle:
         return True
 
     def _drain_events(self) -> None:
+        """Each new event as a status line and a STATUSTEXT; then a HEARTBEAT at once, so
+        that a ground station sees an arm, disarm or failsafe without waiting up to 1 s."""
         events = self.sim.events
+        if self._events_sent == len(events):
+            return
         while self._events_sent < len(events):
             e = events[self._events_sent]
             self._events_sent += 1
@@ -343,6 +347,9 @@ class Vehicle:
             msg = mavlink.MAVLink_statustext_message(sev, text)
             for ep in self.endpoints:
                 ep.send(msg)
+        hb = self._heartbeat()
+        for ep in self.endpoints:
+            ep.send(hb)
 
     # -- sending ---------------------------------------------------------------------------------
     def _send_odometry(self, now: float, fresh: bool = True) -> None:
@@ -353,8 +360,8 @@ class Vehicle:
         if not tm.finite(X):
             return
         pos, q, vel, rates = state_to_odometry(X)
-        self.link.send_hot(ODOMETRY, (step_usec(k, self.rate), *pos, *q, *vel, *rates, *ODOMETRY_TAIL))
-        self.odometry_sent += 1
+        if self.link.send_hot(ODOMETRY, (step_usec(k, self.rate), *pos, *q, *vel, *rates, *ODOMETRY_TAIL)):
+            self.odometry_sent += 1
         self._odo_sent[k] = now
         if len(self._odo_sent) > 256:
             for old in [s for s in self._odo_sent if s < k - 128]:
@@ -373,7 +380,8 @@ class Vehicle:
 
     def _heartbeat(self) -> Any:
         sim = self.sim
-        base = mavlink.MAV_MODE_FLAG_GUIDED_ENABLED | mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+        # offboard is guided flight; no custom mode (a GCS would read an ArduPilot or PX4 mode into it)
+        base = mavlink.MAV_MODE_FLAG_GUIDED_ENABLED
         if sim.armed:
             base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
         if self.halted or sim.mode in (FAILSAFE, LANDED):
@@ -383,7 +391,7 @@ class Vehicle:
         else:
             state = mavlink.MAV_STATE_STANDBY
         return mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_GENERIC, base,
-                                                 MODE_CODES.get(sim.mode, 0), state, 3)
+                                                 0, state, 3)
 
     def _message(self, mid: int) -> list[Any]:
         """The message(s) with id ``mid`` for a stream or a REQUEST_MESSAGE ([] if none)."""
@@ -517,6 +525,8 @@ class Vehicle:
             result = mavlink.MAV_RESULT_ACCEPTED if follow else mavlink.MAV_RESULT_UNSUPPORTED
         elif cmd == mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
             follow = [tm.autopilot_version(cfg.sysid)]
+        elif cmd == mavlink.MAV_CMD_GET_HOME_POSITION:
+            follow = [tm.home_position(cfg.home)]
         else:
             result = mavlink.MAV_RESULT_UNSUPPORTED
         ep.send(mavlink.MAVLink_command_ack_message(cmd, result, 0, 0, m.get_srcSystem(), m.get_srcComponent()), addr)
@@ -564,12 +574,14 @@ class Vehicle:
 
     def _clock_ns(self) -> int:
         """The vehicle's clock for TIMESYNC: simulation time (ns), as PX4 uses its own clock in
-        lockstep; on the wall clock it runs on between physics steps."""
+        lockstep; on the wall clock it runs on between physics steps. Never 0: a TIMESYNC with
+        tc1 = 0 is a request, not an answer."""
         if self.freerun:
             pace = self.cfg.speed or 1.0
             t = self._pace_n0 / self.physics_hz + (time.monotonic() - self._pace_w0) * pace
-            return int(t * 1e9)
-        return int(self.t * 1e9)
+        else:
+            t = self.t
+        return max(int(t * 1e9), 1)
 
 
 def run_vehicle(flight: Flight, cfg: VehicleConfig, out: str | Path | None = None, overwrite: bool = False) -> int:

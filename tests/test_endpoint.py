@@ -1,0 +1,200 @@
+"""bridge.endpoint: addresses, the hot-path codec against pymavlink, real UDP, tlogs."""
+
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import sys
+import time
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import common as mavlink
+
+from bridge.endpoint import (
+    HIL_ACTUATOR_CONTROLS,
+    ODOMETRY,
+    SET_ACTUATOR_CONTROL_TARGET,
+    Endpoint,
+    Tlog,
+    parse_address,
+    wait,
+)
+from params import ConfigError
+
+f32 = st.floats(width=32, allow_nan=False, allow_infinity=False)
+
+
+def _pair(tmp_path, tlog_a: bool = True):
+    """Two endpoints on 127.0.0.1: ``a`` bound to a free port, ``b`` sending to it."""
+    ta = Tlog(tmp_path / "a.tlog") if tlog_a else None
+    tb = Tlog(tmp_path / "b.tlog")
+    a = Endpoint(parse_address("udpin:127.0.0.1:0"), sysid=1, compid=1, tlog=ta)
+    b = Endpoint(parse_address(f"udpout:127.0.0.1:{a.local[1]}"), sysid=200, compid=191, tlog=tb)
+    return a, b, ta, tb
+
+
+def _recv(ep: Endpoint, n: int = 1, timeout: float = 5.0) -> list:
+    out: list = []
+    deadline = time.monotonic() + timeout
+    while len(out) < n and time.monotonic() < deadline:
+        out += [m for _, m, _a in wait((ep,), deadline)]
+    assert len(out) >= n, f"got {len(out)} of {n} messages"
+    return out
+
+
+@pytest.mark.parametrize("text, mode, host, port", [
+    ("udpin:127.0.0.1:14560", "udpin", "127.0.0.1", 14560),
+    ("udpout:127.0.0.1:14550", "udpout", "127.0.0.1", 14550),
+    ("udp:0.0.0.0:14550", "udpin", "0.0.0.0", 14550),
+    ("udpin://127.0.0.1:0", "udpin", "127.0.0.1", 0),
+    ("localhost:14551", "udpout", "localhost", 14551),
+])
+def test_parse_address(text, mode, host, port):
+    a = parse_address(text)
+    assert (a.mode, a.host, a.port) == (mode, host, port)
+
+
+@pytest.mark.parametrize("text", ["14550", "udpin:127.0.0.1", "127.0.0.1:port", "udpout:127.0.0.1:0",
+                                  "127.0.0.1:70000", "no.such.host.invalid:1"])
+def test_parse_address_rejects(text):
+    with pytest.raises(ConfigError, match="--gcs"):
+        parse_address(text, flag="--gcs")
+
+
+def test_bind_conflict_is_bad_input():
+    a = Endpoint(parse_address("udpin:127.0.0.1:0"), sysid=1, compid=1)
+    try:
+        with pytest.raises(ConfigError, match="cannot bind"):
+            Endpoint(parse_address(f"udpin:127.0.0.1:{a.local[1]}"), sysid=1, compid=1, name="--listen")
+    finally:
+        a.close()
+
+
+def _odo_values(t, pos, q, vel, rates):
+    cov = (math.nan,) + (0.0,) * 20
+    return (t, *pos, *q, *vel, *rates, *cov, *cov, 1, 12, 0, 1, 100)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**63), st.tuples(f32, f32, f32), st.tuples(f32, f32, f32, f32), st.tuples(f32, f32, f32),
+       st.tuples(f32, f32, f32))
+def test_hot_odometry_matches_pymavlink(t, pos, q, vel, rates):
+    """send_hot's frame is what pymavlink would make; pymavlink's frame decodes alike on the hot path."""
+    mav = mavlink.MAVLink(None, srcSystem=7, srcComponent=1)
+    msg = mavlink.MAVLink_odometry_message(t, 1, 12, *pos, list(q), *vel, *rates, [math.nan] + [0.0] * 20,
+                                           [math.nan] + [0.0] * 20, 0, 1, 100)
+    ref = msg.pack(mav)
+    hot = Endpoint._hot(ref)
+    assert hot is not None and hot._type == "ODOMETRY" and hot.get_srcSystem() == 7
+    assert (hot.time_usec, hot.x, hot.y, hot.z, hot.q, hot.vx, hot.rollspeed) == (
+        t, pos[0], pos[1], pos[2], q, vel[0], rates[0])
+    ours = _frame(ODOMETRY, _odo_values(t, pos, q, vel, rates), sysid=7, compid=1)
+    assert ours == ref
+
+
+def _frame(layout, values, sysid=200, compid=191):
+    """The bytes send_hot puts on the wire (captured through a real socket pair)."""
+    rx = Endpoint(parse_address("udpin:127.0.0.1:0"), sysid=1, compid=1)
+    tx = Endpoint(parse_address(f"udpout:127.0.0.1:{rx.local[1]}"), sysid=sysid, compid=compid)
+    try:
+        tx.send_hot(layout, values)
+        rx.sock.settimeout(5.0)  # a blocking receive with a deadline
+        data, _ = rx.sock.recvfrom(65535)
+        return data
+    finally:
+        rx.close()
+        tx.close()
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**63), st.lists(f32, min_size=16, max_size=16), st.integers(0, 255), st.integers(0, 2**63))
+def test_hot_actuator_messages_match_pymavlink(t, controls, mode, flags):
+    mav = mavlink.MAVLink(None, srcSystem=200, srcComponent=191)
+    ref = mavlink.MAVLink_hil_actuator_controls_message(t, controls, mode, flags).pack(mav)
+    assert _frame(HIL_ACTUATOR_CONTROLS, (t, flags, *controls, mode)) == ref
+    hot = Endpoint._hot(ref)
+    assert (hot.time_usec, list(hot.controls), hot.mode, hot.flags) == (t, controls, mode, flags)
+    ref = mavlink.MAVLink_set_actuator_control_target_message(t, 0, 7, 1, controls[:8]).pack(mav)
+    assert _frame(SET_ACTUATOR_CONTROL_TARGET, (t, *controls[:8], 0, 7, 1)) == ref
+    hot = Endpoint._hot(ref)
+    assert (hot.group_mlx, hot.target_system, list(hot.controls)) == (0, 7, controls[:8])
+
+
+def test_hot_path_refuses_what_it_cannot_check():
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    good = mavlink.MAVLink_hil_actuator_controls_message(5, [0.5] * 16, 0, 1).pack(mav)
+    assert Endpoint._hot(good) is not None
+    bad_crc = good[:-1] + bytes([good[-1] ^ 0xFF])
+    assert Endpoint._hot(bad_crc) is None
+    assert Endpoint._hot(good + good) is None  # two frames in one datagram: parse_buffer's job
+    hb = mavlink.MAVLink_heartbeat_message(2, 0, 0, 0, 3, 3).pack(mav)
+    assert Endpoint._hot(hb) is None
+
+
+def test_udp_exchange_peer_and_bad_data(tmp_path):
+    a, b, ta, tb = _pair(tmp_path)
+    try:
+        assert a.peer is None
+        b.send(mavlink.MAVLink_heartbeat_message(18, 8, 0, 0, 4, 3))
+        b.send_hot(HIL_ACTUATOR_CONTROLS, (42, 1, *([0.25] * 16), 128))
+        got = _recv(a, 2)
+        assert [m.get_type() for m in got] == ["HEARTBEAT", "HIL_ACTUATOR_CONTROLS"]
+        assert got[1].time_usec == 42 and got[1].controls[0] == 0.25
+        assert a.peer == b.local  # udpin answers whoever sent
+        a.send(mavlink.MAVLink_timesync_message(0, 7))
+        (ts,) = _recv(b)
+        assert ts.get_type() == "TIMESYNC" and ts.ts1 == 7 and ts.get_srcSystem() == 1
+        b.sock.sendto(b"\xfd\x09garbage that is not a frame", a.local)
+        b.send(mavlink.MAVLink_heartbeat_message(18, 8, 0, 0, 4, 3))
+        (hb,) = _recv(a)
+        assert hb.get_type() == "HEARTBEAT" and a.bad >= 1
+    finally:
+        for ep in (a, b):
+            ep.close()
+        ta.close()
+        tb.close()
+
+
+def test_wait_honours_its_deadline(tmp_path):
+    a, b, ta, tb = _pair(tmp_path, tlog_a=False)
+    try:
+        t0 = time.monotonic()
+        assert wait((a,), t0 + 0.05, a, 0.01) == []
+        assert 0.045 <= time.monotonic() - t0 < 1.0
+    finally:
+        a.close()
+        b.close()
+        tb.close()
+
+
+def test_tlog_holds_both_directions_and_mavlogdump_reads_it(tmp_path):
+    a, b, ta, tb = _pair(tmp_path)
+    try:
+        b.send(mavlink.MAVLink_heartbeat_message(18, 8, 0, 0, 4, 3))
+        _recv(a)
+        a.send_hot(ODOMETRY, _odo_values(4000, (1.0, 2.0, -3.0), (1.0, 0.0, 0.0, 0.0), (0.1, 0.2, 0.3),
+                                         (0.0, 0.0, 0.0)))
+        _recv(b)
+        b.send_hot(SET_ACTUATOR_CONTROL_TARGET, (4000, 0.1, 0.2, 0.3, 0.4, 0, 0, 0, 0, 0, 1, 1))
+        _recv(a)
+    finally:
+        for ep in (a, b):
+            ep.close()
+        ta.close()
+        tb.close()
+    os.environ["MAVLINK20"] = "1"
+    types = []
+    log = mavutil.mavlink_connection(str(tmp_path / "a.tlog"))
+    while (m := log.recv_match()) is not None:
+        types.append(m.get_type())
+        assert 0 < m._timestamp - time.time() + 60 < 120  # a wall-clock stamp of just now
+    assert types == ["HEARTBEAT", "ODOMETRY", "SET_ACTUATOR_CONTROL_TARGET"]  # received, sent, received
+    dump = subprocess.run([sys.executable, os.path.join(os.path.dirname(sys.executable), "mavlogdump.py"),
+                           str(tmp_path / "b.tlog")], capture_output=True, text=True, timeout=60,
+                          env={**os.environ, "MAVLINK20": "1"})
+    assert dump.returncode == 0, dump.stderr
+    assert "ODOMETRY" in dump.stdout and "SET_ACTUATOR_CONTROL_TARGET" in dump.stdout and "HEARTBEAT" in dump.stdout

@@ -1,0 +1,265 @@
+"""``bsst vehicle`` as a real process: ground stations (pymavlink, MAVProxy, MAVSDK) and the
+controller contract, over real UDP on 127.0.0.1.
+
+Each test holds an instance slot (bridge.session.instance_slot), so the ports 14550 + N and
+14560 + N are its own while it runs, whatever else runs beside it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+
+import pytest
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import common as mavlink
+
+from bridge.endpoint import GCS_PORT, LINK_PORT
+from bridge.session import instance_slot
+from tests.sitlkit import ENV, ROOT, Proc
+
+M = mavlink
+
+
+def _gcs(n: int, sysid: int = 255, compid: int = 190):
+    os.environ["MAVLINK20"] = "1"
+    return mavutil.mavlink_connection(f"udpin:127.0.0.1:{GCS_PORT + n}", source_system=sysid,
+                                      source_component=compid, dialect="common")
+
+
+def _ack(conn, command: int, timeout: float = 10.0):
+    m = conn.recv_match(type="COMMAND_ACK", blocking=True, timeout=timeout,
+                        condition=f"COMMAND_ACK.command=={command}")
+    assert m is not None, f"no COMMAND_ACK for {command}"
+    return m
+
+
+def _vehicle(n: int, tmp_path, *extra: str) -> Proc:
+    v = Proc.bsst("vehicle", "--instance", str(n), "--out", str(tmp_path), *extra)
+    v.wait_line(lambda s: s.startswith("ready"))
+    return v
+
+
+def _stats(v: Proc) -> dict:
+    line = v.wait_line(lambda s: s.startswith("stats "), timeout=10)
+    return json.loads(line[len("stats "):])
+
+
+def test_pymavlink_ground_station(tmp_path):
+    """Heartbeat, arm and disarm with ACKs, telemetry, requests answered, TIMESYNC."""
+    with instance_slot() as n:
+        gcs = _gcs(n)
+        v = _vehicle(n, tmp_path)
+        try:
+            hb = gcs.wait_heartbeat(timeout=20)
+            assert hb is not None
+            assert (hb.type, hb.autopilot, hb.system_status) == (M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_GENERIC,
+                                                                   M.MAV_STATE_STANDBY)
+            assert gcs.target_system == n + 1 and not hb.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED
+            tgt = (gcs.target_system, gcs.target_component)
+
+            gcs.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+            assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+            armed = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=5,
+                                   condition="HEARTBEAT.base_mode & 128")
+            assert armed is not None and armed.system_status == M.MAV_STATE_ACTIVE
+            gcs.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 0, 0, 0, 0, 0, 0)
+            assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+            text = gcs.recv_match(type="STATUSTEXT", blocking=True, timeout=5)
+            assert text is not None and "disarmed" in text.text  # events are said in STATUSTEXT
+
+            gcs.mav.command_long_send(*tgt, M.MAV_CMD_REQUEST_MESSAGE, 0, M.MAVLINK_MSG_ID_AUTOPILOT_VERSION,
+                                      0, 0, 0, 0, 0, 0)
+            assert _ack(gcs, M.MAV_CMD_REQUEST_MESSAGE).result == M.MAV_RESULT_ACCEPTED
+            ver = gcs.recv_match(type="AUTOPILOT_VERSION", blocking=True, timeout=5)
+            assert ver is not None and ver.capabilities & M.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+            gcs.mav.command_long_send(*tgt, M.MAV_CMD_SET_MESSAGE_INTERVAL, 0, M.MAVLINK_MSG_ID_ATTITUDE, 20000,
+                                      0, 0, 0, 0, 0)
+            assert _ack(gcs, M.MAV_CMD_SET_MESSAGE_INTERVAL).result == M.MAV_RESULT_ACCEPTED
+            gcs.mav.command_long_send(*tgt, M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 0, 5)
+            assert _ack(gcs, M.MAV_CMD_NAV_TAKEOFF).result == M.MAV_RESULT_UNSUPPORTED
+
+            gcs.mav.timesync_send(0, 123456789)
+            ts = gcs.recv_match(type="TIMESYNC", blocking=True, timeout=5, condition="TIMESYNC.tc1!=0")
+            assert ts is not None and ts.ts1 == 123456789
+            for kind in ("ATTITUDE", "LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "SYS_STATUS",
+                         "ACTUATOR_OUTPUT_STATUS"):
+                assert gcs.recv_match(type=kind, blocking=True, timeout=5) is not None, kind
+            pos = gcs.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=5)
+            assert abs(pos.lat - 473977420) < 10 and abs(pos.lon - 85455940) < 10  # the default home
+        finally:
+            assert v.stop() == 0
+            gcs.close()
+    assert (tmp_path / "vehicle.tlog").stat().st_size > 0
+
+
+def test_targets_only_from_the_configured_controller(tmp_path):
+    """Lockstep: the state of step k goes out; the vehicle steps only on the target for k
+    from sysid 200 / compid 191, armed; others are rejected and counted."""
+    with instance_slot() as n:
+        v = _vehicle(n, tmp_path)
+        os.environ["MAVLINK20"] = "1"
+        ctl = mavutil.mavlink_connection(f"udpout:127.0.0.1:{LINK_PORT + n}", source_system=200,
+                                         source_component=191, dialect="common")
+        impostor = mavutil.mavlink_connection(f"udpout:127.0.0.1:{LINK_PORT + n}", source_system=201,
+                                              source_component=191, dialect="common")
+        try:
+            ctl.mav.heartbeat_send(M.MAV_TYPE_ONBOARD_CONTROLLER, M.MAV_AUTOPILOT_INVALID, 0, 0, 4)
+            hb = ctl.recv_match(type="HEARTBEAT", blocking=True, timeout=20)
+            assert hb is not None
+            sysid = n + 1
+            hover = (1.1 * 9.81 / 43.164, 0.0, 0.0, 0.0)  # paper profile: (u1/u1_max, roll, pitch, yaw)
+            wire = (hover[1], hover[2], hover[3], hover[0])
+            # disarmed: a target is refused
+            ctl.mav.set_actuator_control_target_send(0, 0, sysid, 1, list(wire) + [0.0] * 4)
+            ctl.mav.command_long_send(sysid, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+            assert _ack(ctl, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+            odo = ctl.recv_match(type="ODOMETRY", blocking=True, timeout=5)
+            assert odo.time_usec == 0 and (odo.frame_id, odo.child_frame_id) == (M.MAV_FRAME_LOCAL_NED,
+                                                                                  M.MAV_FRAME_BODY_FRD)
+            impostor.mav.set_actuator_control_target_send(0, 0, sysid, 1, list(wire) + [0.0] * 4)
+            ctl.mav.hil_actuator_controls_send(0, [0.5] * 16, 0, 1)  # motors message to a wrench vehicle
+            ctl.mav.set_actuator_control_target_send(0, 1, sysid, 1, list(wire) + [0.0] * 4)  # group 1
+            ctl.mav.set_actuator_control_target_send(4000, 0, sysid, 1, list(wire) + [0.0] * 4)  # future step
+            ctl.mav.set_actuator_control_target_send(0, 0, sysid, 1, list(wire) + [0.0] * 4)  # the one
+            nxt = ctl.recv_match(type="ODOMETRY", blocking=True, timeout=5, condition="ODOMETRY.time_usec==4000")
+            assert nxt is not None  # stepped once: t = 1 / 250 s
+            ctl.mav.command_long_send(sysid, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 21196, 0, 0, 0, 0, 0)
+            assert _ack(ctl, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+        finally:
+            assert v.stop() == 0
+            ctl.close()
+            impostor.close()
+    s = _stats(v)
+    assert s["accepted"] == 1 and s["steps"] == 1
+    assert s["rejected"] == {"not_offboard": 1, "sender": 1, "message": 1, "group": 1, "future": 1}
+    lines = (tmp_path / "vehicle.csv").read_text().splitlines()
+    assert len(lines) == 2 and lines[1].startswith("0,0.0,")  # one row: step 0
+
+
+def test_mavproxy_arms_through_stdin(tmp_path):
+    """MAVProxy, unmodified, as the issue runs it: heartbeat and attitude seen, and
+    ``arm throttle`` typed into it is ACKed and arms the vehicle."""
+    mavproxy = os.path.join(os.path.dirname(sys.executable), "mavproxy.py")
+    with instance_slot() as n:
+        v = _vehicle(n, tmp_path / "v")
+        mp = Proc([sys.executable, mavproxy, f"--master=udpin:127.0.0.1:{GCS_PORT + n}", "--nowait"],
+                  cwd=tmp_path, stdin=subprocess.PIPE)
+        try:
+            mp.wait_line(lambda s: "Detected vehicle" in s or "online system" in s, timeout=30)
+
+            def say(cmd: str) -> None:
+                mp.p.stdin.write(cmd.encode() + b"\n")
+                mp.p.stdin.flush()
+
+            say("status")
+            mp.wait_line(lambda s: "ATTITUDE {" in s, timeout=15)
+            mp.wait_line(lambda s: "HEARTBEAT {" in s and "type : 2" in s, timeout=15)
+            say("arm throttle")
+            mp.wait_line(lambda s: "COMPONENT_ARM_DISARM: ACCEPTED" in s, timeout=15)
+            mp.wait_line(lambda s: s.strip().endswith("ARMED") and "DISARMED" not in s, timeout=15)
+            say("exit")
+        finally:
+            mp.stop()
+            assert v.stop() == 0
+    v.wait_line(lambda s: "armed: armed" in s)
+
+
+MAVSDK_SCRIPT = r"""
+import json, math, sys, threading
+from mavsdk import Mavsdk, Configuration, ComponentType
+from mavsdk.plugins.action import Action
+from mavsdk.plugins.telemetry import Telemetry
+
+sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+out = {"connect": str(sdk.add_any_connection(sys.argv[1]))}
+system = sdk.first_autopilot(30.0)
+out["found"] = system is not None
+tel, act = Telemetry(system), Action(system)
+att, pos, armed = threading.Event(), threading.Event(), threading.Event()
+seen = {}
+def on_att(a, ud=None):
+    if math.isfinite(a.roll_deg):
+        seen["att"] = (a.roll_deg, a.pitch_deg, a.yaw_deg); att.set()
+def on_pos(p, ud=None):
+    if math.isfinite(p.latitude_deg):
+        seen["pos"] = (p.latitude_deg, p.longitude_deg, p.relative_altitude_m); pos.set()
+def on_armed(a, ud=None):
+    if a:
+        armed.set()
+tel.subscribe_attitude_euler(on_att)
+tel.subscribe_position(on_pos)
+tel.subscribe_armed(on_armed)
+out["attitude"] = att.wait(30) and seen["att"]
+out["position"] = pos.wait(30) and seen["pos"]
+out["arm"] = act.arm().name
+out["armed_seen"] = armed.wait(10)
+out["disarm"] = act.disarm().name
+print("RESULT " + json.dumps(out), flush=True)
+sdk.destroy()
+"""
+
+
+def test_mavsdk_finds_reads_arms_disarms(tmp_path):
+    """MAVSDK 4's native binding, unmodified: finds the vehicle, reads attitude and position,
+    arms and disarms it. In its own process: the native library keeps threads of its own."""
+    with instance_slot() as n:
+        v = _vehicle(n, tmp_path)
+        try:
+            r = subprocess.run([sys.executable, "-c", MAVSDK_SCRIPT, f"udpin://127.0.0.1:{GCS_PORT + n}"],
+                               capture_output=True, text=True, timeout=120, env=ENV)
+        finally:
+            assert v.stop() == 0
+    lines = [ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")]
+    assert lines, f"MAVSDK script failed (exit {r.returncode}):\n{r.stdout[-2000:]}\n{r.stderr[-2000:]}"
+    out = json.loads(lines[0][len("RESULT "):])
+    assert out["found"]
+    assert out["attitude"] == [0.0, 0.0, 0.0]
+    lat, lon, alt = out["position"]
+    assert math.isclose(lat, 47.397742, abs_tol=1e-6) and math.isclose(lon, 8.545594, abs_tol=1e-6)
+    assert abs(alt) < 0.01
+    assert out["arm"] == "SUCCESS" and out["armed_seen"] and out["disarm"] == "SUCCESS"
+    # MAVSDK asks for messages and capabilities on connect: every command was answered
+    log = mavutil.mavlink_connection(str(tmp_path / "vehicle.tlog"), dialect="common")
+    asked, acked = set(), set()
+    while (m := log.recv_match(type=["COMMAND_LONG", "COMMAND_INT", "COMMAND_ACK"])) is not None:
+        (acked if m.get_type() == "COMMAND_ACK" else asked).add(m.command)
+    assert asked and asked <= acked, f"unanswered commands: {asked - acked}"
+
+
+@pytest.mark.parametrize("args, names", [
+    (["vehicle", "--listen", "nowhere"], "--listen"),
+    (["vehicle", "--gcs", "127.0.0.1:notaport"], "--gcs"),
+    (["vehicle", "--speed", "-1"], "--speed"),
+    (["vehicle", "--instance", "10"], "--instance"),
+    (["vehicle", "--home", "47,8"], "--home"),
+    (["vehicle", "--controller-id", "200"], "--controller-id"),
+    (["vehicle", "--listen", "udpout:127.0.0.1:14560"], "--listen"),
+    (["vehicle", "missions/nope.toml"], "nope.toml"),
+    (["controller", "missions/sine.toml", "--vehicle", "udpin:127.0.0.1:5"], "--vehicle"),
+    (["controller", "missions/sine.toml", "--timeout", "0"], "--timeout"),
+    (["sitl", "missions/sine.toml", "--instance", "12"], "--instance"),
+    (["sitl", "missions/sine.toml", "--gcs", "udpin:x"], "--gcs"),
+    (["sitl", "missions/sine.toml", "--realtime", "--speed", "nan"], "--speed"),
+])
+def test_bad_input_is_one_line_exit_2(args, names):
+    r = subprocess.run([sys.executable, "-m", "bridge", *args], capture_output=True, text=True, cwd=ROOT,
+                       timeout=60)
+    assert r.returncode == 2, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and names in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr
+
+
+def test_port_in_use_is_bad_input(tmp_path):
+    with instance_slot() as n:
+        v = _vehicle(n, tmp_path)
+        try:
+            r = subprocess.run([sys.executable, "-m", "bridge", "vehicle", "--instance", str(n)],
+                               capture_output=True, text=True, timeout=60)
+        finally:
+            v.stop()
+    assert r.returncode == 2 and "--listen" in r.stderr and "in use" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
