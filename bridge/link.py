@@ -414,6 +414,7 @@ class LinkImpairment:
         self._held: list[Delivery] = []
         self._copies: dict[int, int] = {}  # seq -> copies still to come, for duplicated packets
         self._highest = -1
+        self._last_due = -math.inf
         self._windows = tuple((s, s + d) for s, d in cfg.blackouts)
 
     def in_blackout(self, t: float) -> bool:
@@ -471,6 +472,7 @@ class LinkImpairment:
         while heap and heap[0][0] <= t:
             d = heapq.heappop(heap)[2]
             out.append(d)
+            self._last_due = d.due_t
             st.delays.append(d.due_t - d.sent_t)
             left = self._copies.get(d.seq)
             if left is not None:
@@ -492,9 +494,8 @@ class LinkImpairment:
         """Everything still scheduled, held packets included (end of a test stream)."""
         out = self.deliver(math.inf)
         if self._held:
-            last = out[-1].due_t if out else -math.inf
-            for h in self._held:  # no successor came: released after the last packet
-                self._push(replace(h, due_t=max(h.due_t, last)))
+            for h in self._held:  # no successor came: released after the last packet delivered
+                self._push(replace(h, due_t=max(h.due_t, self._last_due)))
             self._held.clear()
             out += self.deliver(math.inf)
         return out
