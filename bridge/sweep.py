@@ -431,7 +431,7 @@ def write_cells(path: Path, rows: Iterable[Mapping[str, Any]]) -> None:
 
 @dataclass(frozen=True)
 class Classes:
-    """Thresholds that class a cell (DESIGN of the report: see :func:`bridge.report.classify`).
+    """Thresholds that class a cell (the rules: :func:`bridge.report.classify`).
 
     ``clean_rms_m``: 3-D RMS error (m) up to which a cell is clean; ``diverged_rms_m``: RMS (m)
     above which it counts as diverged even if the plant's own check did not trip;
