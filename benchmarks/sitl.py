@@ -41,9 +41,12 @@ sys.path.insert(0, str(ROOT))
 from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
 from bridge.endpoint import HIL_ACTUATOR_CONTROLS, ODOMETRY, Endpoint, parse_address, wait  # noqa: E402
+from bridge.vehicle import VehicleConfig  # noqa: E402
 
 RATE_HZ = 250.0
-SPIN = float(os.environ.get("BSST_SPIN", "0.0005"))
+LEGS = ("down_us", "controller_us", "up_us", "vehicle_us", "step_us")
+WAITING = ("sched_yield", "select.select", "recvfrom", "poll", "wait")  # where a side waits for the other
+SPIN = VehicleConfig.spin_s  # the endpoint ping-pong polls as long as the SITL's vehicle does
 STOP = 2**64 - 1  # time_usec that tells the echo process to exit
 COV = [math.nan] + [0.0] * 20
 
@@ -136,17 +139,36 @@ def pingpong(mode: str, trips: int) -> float:
 
 # -- (b) lockstep SITL -----------------------------------------------------------------------------
 def lockstep_rate(mission: str) -> dict[str, float]:
-    """Flight step rate (steps/s) of one lockstep session, and its session wall time."""
+    """Flight step rate (steps/s) of one lockstep session, its session wall time, and the
+    median step split into its four legs, from both sides' wall-clock stamps (us)."""
+    import tempfile
+
+    from bridge.runlog import read_trace
     from bridge.session import sitl
 
-    t0 = time.perf_counter()
-    run = sitl(mission, instance=None, plots=False)
-    wall = time.perf_counter() - t0
-    if run.outcome != "completed":
-        raise RuntimeError(f"lockstep session ended {run.outcome}")
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        run = sitl(mission, out=Path(tmp) / "run", instance=None, plots=False)
+        wall = time.perf_counter() - t0
+        if run.outcome != "completed":
+            raise RuntimeError(f"lockstep session ended {run.outcome}")
+        v = read_trace(Path(tmp) / "run" / "vehicle.csv")
+        c = read_trace(Path(tmp) / "run" / "controller.csv")
+    n = min(len(v["k"]), len(c["k"]))
+    us = 1e6
+    legs = {
+        "down_us": (c["odo_recv_wall"][:n] - v["odo_sent_wall"][:n]) * us,  # ODOMETRY k on the wire + decode
+        "controller_us": (c["cmd_sent_wall"][:n] - c["odo_recv_wall"][:n]) * us,  # law + actuation + encode
+        "up_us": (v["cmd_recv_wall"][:n] - c["cmd_sent_wall"][:n]) * us,  # target k on the wire + decode
+        "vehicle_us": (v["odo_sent_wall"][1:n] - v["cmd_recv_wall"][:n - 1]) * us,  # physics + state encode
+        "step_us": (v["odo_sent_wall"][1:n] - v["odo_sent_wall"][:n - 1]) * us,
+    }
     timing = run.summary["timing"]
-    return {"step_rate_hz": timing["step_rate_hz"], "session_wall_s": wall,
-            "state_to_command_ms_p50": timing["state_to_command_ms"]["p50"]}
+    out = {"step_rate_hz": timing["step_rate_hz"], "session_wall_s": wall,
+           "state_to_command_ms_p50": timing["state_to_command_ms"]["p50"]}
+    out.update({k: float(statistics.median(x)) for k, x in legs.items()})
+    out["steps_over_1ms_share_of_time"] = float(sum(x for x in legs["step_us"] if x > 1000) / sum(legs["step_us"]))
+    return out
 
 
 # -- profile ----------------------------------------------------------------------------------------
@@ -175,9 +197,14 @@ def profile(mission: str, out: Path) -> dict[str, list[tuple[str, float]]]:
     tops = {}
     for side in ("vehicle", "controller"):
         st = pstats.Stats(str(out / f"{side}.prof"))
-        rows = sorted(st.stats.items(), key=lambda kv: kv[1][2], reverse=True)[:12]  # type: ignore[attr-defined]
-        total = sum(v[2] for v in st.stats.values())  # type: ignore[attr-defined]
-        tops[side] = [(f"{Path(fn).name}:{line}({name})", round(100 * v[2] / total, 1)) for (fn, line, name), v in rows]
+        stats = st.stats  # type: ignore[attr-defined]
+        total = sum(v[2] for v in stats.values())
+        waiting = sum(v[2] for (_, _, name), v in stats.items() if any(w in name for w in WAITING))
+        work = {k: v for k, v in stats.items() if not any(w in k[2] for w in WAITING)}
+        rows = sorted(work.items(), key=lambda kv: kv[1][2], reverse=True)[:10]
+        tops[side] = [("waiting (poll, yield, select) of all", round(100 * waiting / total, 1))] + [
+            (f"{Path(fn).name}:{line}({name}) of work", round(100 * v[2] / (total - waiting), 1))
+            for (fn, line, name), v in rows]
     return tops
 
 
@@ -212,6 +239,7 @@ def main() -> None:
         "c_lockstep_real_time_factor": b / RATE_HZ,
         "lockstep_session_wall_s": statistics.median(s["session_wall_s"] for s in steps),
         "state_to_command_ms_p50": statistics.median(s["state_to_command_ms_p50"] for s in steps),
+        **{k: statistics.median(s[k] for s in steps) for k in LEGS + ("steps_over_1ms_share_of_time",)},
         "repeats": args.repeats,
     }
     if args.profile:
@@ -226,6 +254,8 @@ def main() -> None:
     print(f"(c) (b)/(a) = {b / a:.2f} (naive), {b / a2:.2f} (endpoint);  lockstep real-time factor {b / RATE_HZ:.1f}x")
     print(f"    whole session (start, fly 30 s, stop, summary): {res['lockstep_session_wall_s']:.2f} s wall;"
           f" state-to-command p50 {res['state_to_command_ms_p50']:.3f} ms")
+    print("    median lockstep step, by leg (us): " + ", ".join(f"{k[:-3]} {res[k]:.0f}" for k in LEGS)
+          + f"; steps over 1 ms take {100 * res['steps_over_1ms_share_of_time']:.0f} % of the flight's wall time")
     for side, rows in res.get("profile_own_time_pct", {}).items():
         print(f"profile, {side} (own time %):")
         for name, pct in rows:

@@ -73,7 +73,7 @@ class OffboardConfig:
     target_sysid: int | None = None  # None: the first autopilot that sends a heartbeat
     connect_timeout_s: float = 10.0  # s of wall time to wait for the vehicle's heartbeat
     vehicle_timeout_s: float = 2.0  # s of wall time without any message: the vehicle is lost
-    spin_s: float = 0.0005
+    spin_s: float = 0.0002  # as the vehicle's (bridge.vehicle.VehicleConfig.spin_s)
     timesync_s: float = 0.5
 
 

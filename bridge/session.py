@@ -366,6 +366,8 @@ class Session:
         except KeyboardInterrupt:
             self.aborted = True
             self._note("aborted", "interrupted (Ctrl-C or SIGTERM): stopping both processes", "session")
+        except ChildError:
+            pass  # already said by name (_died); the outcome is "aborted", the files are kept
         finally:
             try:
                 self._stop_children()
@@ -453,7 +455,10 @@ class Session:
                     raise KeyboardInterrupt
                 left = deadline - time.monotonic()
                 if left <= 0:
-                    raise ChildError(f"{child.name} (pid {child.pid}) not ready within {READY_TIMEOUT_S:g} s")
+                    self.died = child.name
+                    self._note("died", f"{child.name} (pid {child.pid}) not ready within {READY_TIMEOUT_S:g} s",
+                               "session")
+                    raise ChildError(child.name)
                 sel.select(min(left, 0.5))
         finally:
             sel.close()
@@ -494,6 +499,9 @@ class Session:
                     for line in ctl.lines():
                         self._status(ctl, line)
                     self.joiner.controller_done = True
+                    if ctl.done and "reason=" in ctl.done:  # a controller that gave up says why
+                        reason = ctl.done.split("reason=", 1)[1]
+                        sys.stderr.write(("\n" if self.live else "") + f"bsst sitl: controller: {reason}\n")
                     if ctl.proc.returncode == 0 or not self.vehicle_armed:
                         if ctl.proc.returncode not in (0, 1):
                             self._died(ctl)
@@ -581,7 +589,8 @@ class Session:
         if self.progress is not None:
             self.progress(t, self.flight.mission.duration_s, err)
         if self.live:
-            wall = time.monotonic() - self.t_wall0
+            first = self.joiner.first_sent
+            wall = time.monotonic() - (first if first is not None else self.t_wall0)
             sys.stderr.write(f"\rsitl t {t:7.2f} / {self.flight.mission.duration_s:.2f} s   "
                              f"real-time factor {t / max(wall, 1e-9):6.1f}x   3-D error {err:.2e} m   ")
             sys.stderr.flush()
