@@ -27,6 +27,7 @@ the write leaves one command without its row: the session then leaves that step 
 from __future__ import annotations
 
 import math
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -438,7 +439,9 @@ class Offboard:
             self.ep.send(mavlink.MAVLink_timesync_message(0, time.monotonic_ns()))
         if self.tlog is not None:
             self.tlog.flush()
-        self._next_house = min(self._next_hb, self._next_ts, now + HOUSEKEEPING_S)
+        # no TIMESYNC before a vehicle is known: its due time must not hold the loop awake
+        self._next_house = min(self._next_hb, self._next_ts if self.vsys is not None else math.inf,
+                               now + HOUSEKEEPING_S)
 
 
 def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None = None,
@@ -457,4 +460,6 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
     emit("stats " + json.dumps({"commands": node.commands, "states": node.states, "received": node.ep.received,
                                 "sent": node.ep.sent, "stale_ticks": node.stale_ticks, "overruns": node.overruns}))
     emit(f"done outcome={outcome}" + (f" reason={node.reason}" if node.reason else ""))
+    if outcome != "completed":
+        sys.stderr.write(f"bsst controller: {outcome}" + (f": {node.reason}" if node.reason else "") + "\n")
     return 0 if outcome == "completed" else 1
