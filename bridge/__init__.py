@@ -8,6 +8,12 @@
 - :mod:`bridge.runlog`    the run directory: trace, events, summary, tlogs
 - :mod:`bridge.metrics`   RMS, settling, finite-time bound, total variation
 - :mod:`bridge.plots`     the paper-style figures
+- :mod:`bridge.endpoint`  MAVLink 2 over UDP: an endpoint owning its socket, hot-path codec, tlogs
+- :mod:`bridge.vehicle`   the simulated vehicle as a MAVLink endpoint (``bsst vehicle``)
+- :mod:`bridge.telemetry` what the vehicle tells a ground station, from the paper state
+- :mod:`bridge.offboard`  the offboard controller as a MAVLink endpoint (``bsst controller``)
+- :mod:`bridge.session`   the SITL session launcher (``bsst sitl``), :func:`~bridge.session.sitl`
+- :mod:`bridge.process`   status lines, stop signals and parent death for the child processes
 - :mod:`bridge.cli`       ``bsst``
 """
 
