@@ -12,6 +12,7 @@ import math
 import os
 import subprocess
 import sys
+import time
 
 import pytest
 from pymavlink import mavutil
@@ -155,9 +156,15 @@ def test_mavproxy_arms_through_stdin(tmp_path):
                 mp.p.stdin.write(cmd.encode() + b"\n")
                 mp.p.stdin.flush()
 
-            say("status")
-            mp.wait_line(lambda s: "ATTITUDE {" in s, timeout=15)
-            mp.wait_line(lambda s: "HEARTBEAT {" in s and "type : 2" in s, timeout=15)
+            deadline = time.monotonic() + 20
+            while True:  # "status" lists what MAVProxy has received so far: ask until attitude is in it
+                say("status")
+                try:
+                    mp.wait_line(lambda s: "ATTITUDE {" in s, timeout=1)
+                    break
+                except AssertionError:
+                    assert time.monotonic() < deadline, "MAVProxy never listed ATTITUDE"
+            mp.wait_line(lambda s: "HEARTBEAT {" in s and "type : 2" in s, timeout=5)
             say("arm throttle")
             mp.wait_line(lambda s: "COMPONENT_ARM_DISARM: ACCEPTED" in s, timeout=15)
             mp.wait_line(lambda s: s.strip().endswith("ARMED") and "DISARMED" not in s, timeout=15)
