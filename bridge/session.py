@@ -234,6 +234,7 @@ class TraceJoiner:
         self.c = PartReader(path / "controller.csv")
         self.trace = trace
         self.rate = flight.mission.rate_hz
+        self.steps = flight.mission.steps
         self.sample = flight.mission.trajectory.sample
         self.ctl: dict[int, list[float]] = {}
         self.pending: deque[list[float]] = deque()
@@ -284,6 +285,8 @@ class TraceJoiner:
         if key >= 0 and c is None:
             self.missing += 1  # a controller killed between its send and its row: no half to join
             return
+        if mode == 0 and k - self.k0 >= self.steps:
+            return  # realtime: the state that ended the mission, flown while the disarm was on its way
         t = (k - self.k0) / self.rate
         ref = self.sample(t)
         if c is not None:
