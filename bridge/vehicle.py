@@ -544,6 +544,8 @@ class Vehicle:
                 return mavlink.MAV_RESULT_DENIED
             was_offboard = sim.armed and sim.mode == OFFBOARD
             sim.arm()
+            if not was_offboard:
+                self.applied = None  # a new flight: no target of the last one is in force
             if not was_offboard and self.cfg.clock == "lockstep":
                 # back to lockstep: the state of step k goes out now and its target is awaited
                 self.freerun = False
