@@ -380,6 +380,7 @@ class Session:
                 self.joiner.update()
                 self.joiner.close()
                 trace.close()
+                self._event_log.close()
         wall = time.monotonic() - self.t_wall0
         outcome = self._outcome()
         rows = self.joiner.rows
@@ -393,8 +394,6 @@ class Session:
             "vehicle_exit": self.vehicle.exit_text() if self.vehicle else None,
             "controller_exit": self.controller.exit_text() if self.controller else None,
         }
-        if self._event_log is not None:
-            self._event_log.close()
         if keep:
             title = f"{m.name} ({m.controller}, {self.flight.profile.name}, SITL {summary['clock']})"
             finish_run(self.path, arrays, summary, title, plots and not self.aborted)
@@ -428,6 +427,7 @@ class Session:
         self.vehicle = Child("vehicle", argv, self.path / "vehicle.log")
         ready = self._wait_ready(self.vehicle)
         port = ready.get("listen", self.listen).rpartition(":")[2]
+        self.listen = f"127.0.0.1:{port}"  # the port bound, also when it was chosen free
         self._note("started", f"vehicle pid {self.vehicle.pid}: {ready.get('_line', '')}", "session")
         argv = ["controller", mission, "--vehicle", f"127.0.0.1:{port}", "--target-sysid", str(self.sysid),
                 "--out", str(self.path), "--overwrite"]
