@@ -408,6 +408,7 @@ def add_sitl_commands(sub: Any) -> None:
     p = sub.add_parser("sitl", help="fly a mission as SITL: vehicle and controller processes over MAVLink/UDP")
     add_flight_options(p)
     _add_port_options(p, vehicle=False)
+    add_link_options(p)
     p.set_defaults(func=cmd_sitl)
 
 
@@ -467,7 +468,8 @@ def cmd_sitl(args: argparse.Namespace) -> int:
 
     run = sitl(args.mission, out=args.out, write=True, overwrite=args.overwrite, plots=not args.no_plots,
                profile=args.profile, controller=args.controller, rate_hz=args.rate, seed=args.seed,
-               realtime=args.realtime, instance=args.instance, gcs=args.gcs, speed=args.speed, live=True)
+               realtime=args.realtime, instance=args.instance, gcs=args.gcs, speed=args.speed, live=True,
+               link=link_table_from_args(args))
     print_summary(run.summary, run.path)
     return EXIT_OK if run.outcome == "completed" else EXIT_FAILED
 

@@ -60,6 +60,15 @@ class Flight:
         """The controller's link guard: ``[link]`` thresholds and compensation, ``[failsafe] resume``."""
         return replace(self.link.guard, resume=self.failsafe.resume)
 
+    def blackout_notes(self) -> list[tuple[float, str]]:
+        """Events to log at the start of each scheduled link blackout: (mission time s, text), in time order."""
+        windows: dict[tuple[float, float], list[str]] = {}
+        for d, cfg in (("up", self.link.up), ("down", self.link.down)):
+            for w in cfg.blackouts:
+                windows.setdefault(w, []).append(d)
+        return [(s, f"{'+'.join(ds)} link blackout from {s:.3f} s for {dur:.3f} s")
+                for (s, dur), ds in sorted(windows.items())]
+
 
 def prepare(
     mission: Mission | str | Path,

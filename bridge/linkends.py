@@ -1,4 +1,4 @@
-"""The two ends of an impaired link in simulation time (offline loop, and lockstep later).
+"""The two ends of an impaired link in simulation time (the offline loop and the lockstep SITL).
 
 Each end owns the model of the direction it *receives* (DESIGN.md section 5: the model acts
 on messages after they cross the socket, so a lost packet never stalls a step):
@@ -60,13 +60,16 @@ def command_frame_bytes(actuation: str) -> int:
 class VehicleEnd:
     """The vehicle's side: commands through the ``up`` model into a :class:`SimVehicle`."""
 
-    def __init__(self, vehicle: SimVehicle, up: LinkImpairment, actuation: str) -> None:
+    def __init__(self, vehicle: SimVehicle, up: LinkImpairment, actuation: str,
+                 rejected: dict[str, int] | None = None) -> None:
         self.vehicle = vehicle
         self.up = up
         self.frame_bytes = command_frame_bytes(actuation)
         self.newest_sent_t = float("-inf")  # send time of the newest command applied
         self.applied_state_t = float("nan")  # state time stamp of the command in force
-        self.rejected: dict[str, int] = {}
+        # refusals by reason; the MAVLink vehicle passes its own dict, so that its socket-level
+        # reasons and these (duplicate, out_of_order, not_offboard) are counted in one place
+        self.rejected: dict[str, int] = rejected if rejected is not None else {}
         self._deliver = self.deliver  # bound once, handed to SimVehicle.advance
 
     def receive_command(self, t: float, c: Quad, state_t: float) -> None:

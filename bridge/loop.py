@@ -80,7 +80,7 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
     guard = LinkGuard(ctl, flight.guard)
     vend = VehicleEnd(vehicle, up, actuation)
     cend = ControllerEnd(guard, down)
-    blackouts = _blackout_notes(flight)
+    blackouts = flight.blackout_notes()
     rows: list[tuple[float, ...]] = []
     trace = events = None
     if path is not None:
@@ -152,13 +152,3 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
     if path is not None:
         finish_run(path, arrays, summary, f"{m.name} ({m.controller}, {flight.profile.name})", plots)
     return Run(arrays, summary, path)
-
-
-def _blackout_notes(flight: Flight) -> list[tuple[float, str]]:
-    """Events to log at the start of each scheduled blackout: (time s, text), in time order."""
-    windows: dict[tuple[float, float], list[str]] = {}
-    for d, cfg in (("up", flight.link.up), ("down", flight.link.down)):
-        for w in cfg.blackouts:
-            windows.setdefault(w, []).append(d)
-    return [(s, f"{'+'.join(ds)} link blackout from {s:.3f} s for {dur:.3f} s")
-            for (s, dur), ds in sorted(windows.items())]

@@ -10,16 +10,28 @@ returns DESIGN.md section 7's outcome.
   time_usec) is answered once, at once; a repeated state gets the same answer again
   (the vehicle resends when a datagram is lost). Mission time is counted from the first
   state after arming, in steps, so a fresh vehicle flies exactly the offline loop's times.
+  The mission's ``[link]`` model acts here on the states after they cross the socket, in
+  simulation time (:class:`bridge.linkends.ControllerEnd`, the offline loop's end): state k
+  enters the ``down`` model at t_k and the guard controls on the newest one delivered.
+  Every step is answered, also when the guard sends no command: then with the no-target
+  acknowledgement (HIL_ACTUATOR_CONTROLS, SAFETY_ARMED clear in ``mode``), so that the
+  vehicle's step clock, and its failsafe timeout, run on as offline.
 - **realtime**: a drift-free fixed-rate schedule (tick j at T0 + j / rate_hz, never
   re-based on a late tick), phase-locked just after the first state's arrival; each tick
-  controls on the newest state. Each row records the tick's lateness (the period error)
-  and the state-to-command round trip estimated with TIMESYNC.
+  controls on the newest state (the link model, if any, is on the wire: ``bsst relay``).
+  Each row records the tick's lateness (the period error) and the state-to-command round
+  trip estimated with TIMESYNC.
 
-The law and its actuation are :class:`controller.Controller`'s (built by
-:func:`bridge.flight.prepare` from the mission). The command is sent first; its row of
+The law runs under a :class:`controller.link_guard.LinkGuard` (the mission's ``[link]``
+``stale_ms``, ``stop_ms``, ``compensation`` and ``[failsafe] resume``): stale state freezes
+the super-twisting integrators, older state stops the commands, and when the vehicle has
+left offboard control (its HEARTBEAT: not armed, or system_status CRITICAL) it sends
+nothing but, with ``resume``, asks it to arm again (ARM_DISARM, through the link model in
+lockstep) once the state is fresh. A failsafe does not end the flight: the controller keeps
+answering steps to the mission's end, whose outcome is then ``failsafe`` unless the vehicle
+was back under offboard control. Each command is sent first, then its row of
 ``controller.csv`` (:data:`CONTROLLER_COLUMNS`, one ``write`` each, so the file is whole
-up to its last row whatever kills the process) and the advance of the super-twisting
-integrators follow while the vehicle integrates. A controller killed between the send and
+up to its last row whatever kills the process). A controller killed between the send and
 the write leaves one command without its row: the session then leaves that step out of
 ``trace.csv`` rather than guess what the law demanded.
 """
@@ -48,12 +60,15 @@ from bridge.endpoint import (
     wait,
 )
 from bridge.flight import Flight
+from bridge.link import LinkImpairment
+from bridge.linkends import ControllerEnd
 from bridge.runlog import REF_COLUMNS, LineWriter
 from bridge.wire import command_to_wire, odometry_to_state, step_of_usec
+from controller.link_guard import LinkGuard
 
 CONTROLLER_COLUMNS = (
     ("k", "t") + REF_COLUMNS + ("u1", "u2", "u3", "u4", "c1", "c2", "c3", "c4", "phi_d", "theta_d")
-    + ("odo_recv_wall", "cmd_sent_wall", "state_to_cmd_s", "period_error_s")
+    + ("odo_recv_wall", "cmd_sent_wall", "state_to_cmd_s", "period_error_s", "state_age_s")
 )
 OUTCOMES = ("completed", "failsafe", "diverged", "aborted")
 PHASE_S = 0.0003  # realtime: tick this long after the state's arrival (its one-way trip and decode)
@@ -61,6 +76,8 @@ PHASE_STATES = 5  # realtime: states watched to find the phase of the vehicle's 
 SPIN_BEFORE_TICK_S = 0.0003  # realtime: sleep until this long before a tick, then poll: select wakes late
 HOUSEKEEPING_S = 0.05
 _ZERO12 = (0.0,) * 12
+_ZERO16 = (0.0,) * 16
+_NAN4 = (math.nan,) * 4
 
 
 @dataclass(frozen=True)
@@ -89,6 +106,15 @@ class Offboard:
         self.rate = m.rate_hz
         self.steps = m.steps
         self.ctl = flight.make_controller()
+        self.guard = LinkGuard(self.ctl, flight.guard)
+        # lockstep: the mission's down-link model acts here, on what crossed the socket; real
+        # time: the relay applies it on the wire and this end passes the states straight on
+        down = flight.link.make()[1] if cfg.clock == "lockstep" else LinkImpairment(direction="down")
+        self.cend = ControllerEnd(self.guard, down)
+        self._blackouts = flight.blackout_notes()
+        self._noted = 0  # guard events already reported
+        self._u = self._wire = (0.0, 0.0, 0.0, 0.0)  # the last command sent: demanded, on the wire (as offline)
+        self.failsafe_seen = False  # the vehicle reported its failsafe (CRITICAL while armed)
         self._sample = m.trajectory.sample
         self.actuation = flight.profile.actuation
         self._status = status or (lambda line: None)
@@ -108,6 +134,7 @@ class Offboard:
         self._acks: dict[int, int] = {}
         now = time.monotonic()
         self._last_rx = now
+        self._last_state = now  # wall time of the newest state flown
         self._next_hb = now
         self._next_ts = now
         self._next_house = now
@@ -172,6 +199,9 @@ class Offboard:
             self.reason = "arming not acknowledged" if result is None else f"arming refused (MAV_RESULT {result})"
             self.event("aborted", self.reason)
             return False
+        # armed under offboard control from now on: its state of step k0 may come before the heartbeat saying so
+        self.vehicle_armed = self.armed_seen = True
+        self.vehicle_state = mavlink.MAV_STATE_ACTIVE
         self.event("armed", "vehicle armed, offboard control")
         return True
 
@@ -200,11 +230,12 @@ class Offboard:
         ep = self.ep
         rate = self.rate
         steps = self.steps
-        send = self._send_target
+        send = self._answer
         k0 = last_k = None
-        last_frame: tuple[int, tuple[float, ...]] | None = None
+        last_frame: tuple[int, tuple[float, ...] | None] | None = None
         spin = self.cfg.spin_s
         mono = time.monotonic
+        self._last_state = mono()
         while not self.stopping:
             deadline = min(self._next_house, self._last_rx + self.cfg.vehicle_timeout_s)
             for _, m, _addr in wait((ep,), deadline, ep, spin):
@@ -221,8 +252,10 @@ class Offboard:
                         send(*last_frame)  # the vehicle resent: our answer was lost
                     continue
                 if k - k0 >= steps:
-                    return "completed"
-                last_frame = (odo.time_usec, self._control(odo, k, k0, recv, math.nan))
+                    return self._end_of_mission()
+                t = (k - k0) / rate
+                self._observe(odo, t, recv)
+                last_frame = (odo.time_usec, self._decide(t, k, odo.time_usec, recv, math.nan))
                 last_k = k
                 if mono() < self._next_house:
                     continue
@@ -242,6 +275,7 @@ class Offboard:
         # earliest arrival (recv - k / rate) over a few states, so one state that waited in
         # the socket while we were busy does not shift the schedule.
         self._odo = None
+        self._last_state = mono()
         phase: float | None = None
         seen = 0
         while seen < PHASE_STATES and not self.stopping:
@@ -260,6 +294,7 @@ class Offboard:
         k0 = k + 1  # the mission starts with the next state
         t0 = phase + k0 * period + PHASE_S
         last_k = k0 - 1
+        usec, recv = 0, math.nan  # the newest state's stamp and arrival
         j = 0
         while not self.stopping:
             due = t0 + j * period
@@ -274,6 +309,7 @@ class Offboard:
                 late = now - due
             for m, _addr in self.ep.poll():
                 self._on(m)
+            t = j / rate  # mission time of this tick: state k0 + j is due just before it
             j += 1
             outcome = self._check_vehicle()
             if outcome:
@@ -281,34 +317,73 @@ class Offboard:
             odo = self._odo
             if odo is None or step_of_usec(odo.time_usec, rate) <= last_k:
                 self.stale_ticks += 1
-                continue
-            self._odo = None
-            k = step_of_usec(odo.time_usec, rate)
-            if k - k0 >= steps:
-                return "completed"
-            self._control(odo, k, k0, self._odo_recv, late)
-            last_k = k
+                if last_k < k0:
+                    continue  # no state of the mission yet
+            else:
+                self._odo = None
+                k = step_of_usec(odo.time_usec, rate)
+                if k - k0 >= steps:
+                    return self._end_of_mission()
+                usec, recv = odo.time_usec, self._odo_recv
+                self._observe(odo, (k - k0) / rate, recv)
+                last_k = k
+            self._decide(t, last_k, usec, recv, late)
         return "aborted"
 
-    def _control(self, odo: Any, k: int, k0: int, recv: float, late: float) -> tuple[float, ...]:
-        """One control step on the state of vehicle step k: t = (k - k0) / rate_hz exactly,
-        the law on the float32 state, the target sent at once; its row and the integrators'
-        advance after the send, while the vehicle integrates. Returns the wire values."""
-        law, act = self.ctl.law, self.ctl.actuation
-        t = (k - k0) / self.rate
-        self.t_mission = t
+    def _observe(self, odo: Any, t_state: float, recv: float) -> None:
+        """A new state of the vehicle, measured at mission time ``t_state`` (s), crossed the
+        socket: into the down-link model with the vehicle's offboard bit (its HEARTBEAT:
+        armed and not CRITICAL; sent before the state on every change, so it is this step's)."""
         X = odometry_to_state((odo.x, odo.y, odo.z), odo.q, (odo.vx, odo.vy, odo.vz),
                               (odo.rollspeed, odo.pitchspeed, odo.yawspeed))
-        ref = self._sample(t)
-        u = law.update(t, X, ref, act.omega_d)
-        _, c, sat = act.allocate(u)
-        wire = command_to_wire(self.actuation, c)
-        sent = time.monotonic()
-        self._send_target(odo.time_usec, wire)
-        s2c = self._state_to_command(odo.time_usec, sent) if self.cfg.clock == "realtime" else math.nan
-        self._row(k, t, ref, u, wire, law.desired, recv, sent, s2c, late)
-        law.advance(sat)
+        self.cend.receive_state(t_state, X, self.vehicle_armed and self.vehicle_state != mavlink.MAV_STATE_CRITICAL)
+        self._last_state = recv
+
+    def _decide(self, t: float, k: int, time_usec: int, recv: float, late: float) -> tuple[float, ...] | None:
+        """The control step at mission time t (s): the guard decides on the newest state the
+        model delivered; its command (or, in lockstep, the no-target acknowledgement) is sent
+        at once, stamped ``time_usec``, then the row (the trace's columns, as offline: the last
+        command's u and c, ``state_age_s`` of this step's command, nan without one). Returns
+        the wire values sent, None for none."""
+        self.t_mission = t
+        while self._blackouts and self._blackouts[0][0] <= t:
+            self.event("blackout", self._blackouts.pop(0)[1])
+        dec = self.cend.step(t, self._sample)
+        events = self.guard.events
+        while self._noted < len(events):
+            _, kind, text = events[self._noted]
+            self._noted += 1
+            self.event(kind, text)
+        if dec.arm:
+            self._send_arm()
+        cmd = dec.command
+        wire = None
+        if cmd is not None:
+            wire = command_to_wire(self.actuation, cmd.normalised)
+            sent = time.monotonic()
+            self._send_target(time_usec, wire)
+            self._u, self._wire = cmd.demanded, wire
+        else:
+            sent = time.monotonic()
+            if self.cfg.clock == "lockstep":
+                self._send_no_target(time_usec)
+        s2c = self._state_to_command(time_usec, sent) if cmd is not None and self.cfg.clock == "realtime" else math.nan
+        self._row(k, t, self._sample(t), self._u, self._wire, self.ctl.law.desired, recv, sent, s2c, late,
+                  dec.state_age_s if cmd is not None else math.nan)
         return wire
+
+    def _end_of_mission(self) -> str:
+        """The mission's steps are flown: ``failsafe`` if the vehicle's failsafe took over and
+        it is not back under offboard control, else ``completed``. A vehicle its failsafe
+        landed and disarmed is disarmed by command too, which ends its lockstep flight."""
+        back = self.vehicle_armed and self.vehicle_state != mavlink.MAV_STATE_CRITICAL
+        if not self.failsafe_seen or back:
+            return "completed"
+        self.reason = "the vehicle's failsafe took over (HEARTBEAT system_status CRITICAL)"
+        self.event("failsafe", self.reason)
+        if not self.vehicle_armed:
+            self._disarm()
+        return "failsafe"
 
     def _sleep_until(self, due: float) -> None:
         """Serve the link until ``due``: select until shortly before, then poll to the tick."""
@@ -335,6 +410,25 @@ class Offboard:
         return (sent * 1e9 - state_ns + 0.5 * self.rtt_ns) * 1e-9
 
     # -- messages ----------------------------------------------------------------------------------
+    def _answer(self, time_usec: int, wire: tuple[float, ...] | None) -> None:
+        """Send the answer to the state stamped ``time_usec`` again: its target, or no target."""
+        if wire is None:
+            self._send_no_target(time_usec)
+        else:
+            self._send_target(time_usec, wire)
+
+    def _send_no_target(self, time_usec: int) -> None:
+        """Lockstep: acknowledge the step of the state stamped ``time_usec`` without a valid
+        target (HIL_ACTUATOR_CONTROLS, flags bit 0 lockstep, ``mode`` without SAFETY_ARMED, as
+        PX4 clocks its simulator while its outputs are disarmed; for either actuation)."""
+        self.ep.send_hot(HIL_ACTUATOR_CONTROLS, (time_usec, 1, *_ZERO16, 0))
+
+    def _send_arm(self) -> None:
+        """Ask the vehicle to arm again (the guard's ``resume``); once per step while it asks."""
+        self.ep.send(mavlink.MAVLink_command_long_message(self.vsys or 0, self.vcomp,
+                                                          mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1.0, 0.0,
+                                                          0, 0, 0, 0, 0))
+
     def _send_target(self, time_usec: int, wire: tuple[float, ...]) -> None:
         """The actuator target answering the state stamped ``time_usec`` (hot path)."""
         self.commands += 1
@@ -347,10 +441,10 @@ class Offboard:
                                                            self.vsys or 0, self.vcomp))
 
     def _row(self, k: int, t: float, ref: Any, u: Any, wire: Any, desired: Any, recv: float, sent: float,
-             s2c: float, late: float) -> None:
+             s2c: float, late: float, age: float) -> None:
         if self.rows is not None:
             self.rows.write(",".join(map(repr, (k, t, ref[0][0], ref[1][0], ref[2][0], ref[3][0], *u, *wire,
-                                                *desired, recv, sent, s2c, late))))
+                                                *desired, recv, sent, s2c, late, age))))
 
     def _serve(self, deadline: float) -> None:
         for _, m, _addr in wait((self.ep,), deadline):
@@ -381,6 +475,8 @@ class Offboard:
             self.vehicle_state = m.system_status
             if self.vehicle_armed:
                 self.armed_seen = True
+                if m.system_status == mavlink.MAV_STATE_CRITICAL:
+                    self.failsafe_seen = True
             return
         if src != self.vsys:
             return
@@ -412,20 +508,21 @@ class Offboard:
         self.rtt_ns, self.offset_ns = self._ts_best
 
     def _check_vehicle(self) -> str | None:
-        """The outcome if the vehicle left our control (failsafe, disarmed, silent), else None."""
-        if time.monotonic() - self._last_rx > self.cfg.vehicle_timeout_s:
-            self.reason = f"vehicle silent for {self.cfg.vehicle_timeout_s:g} s"
-            self.event("aborted", self.reason)
-            return "aborted"
-        if self.vehicle_state == mavlink.MAV_STATE_CRITICAL:
-            self.reason = "the vehicle reports its failsafe (HEARTBEAT system_status CRITICAL)"
-            self.event("failsafe", self.reason)
-            return "failsafe"
-        if self.armed_seen and not self.vehicle_armed:
+        """The outcome if the vehicle is lost to the flight (silent, no more states, disarmed
+        other than by its failsafe), else None. Its failsafe alone does not end the flight."""
+        now = time.monotonic()
+        timeout = self.cfg.vehicle_timeout_s
+        if now - self._last_rx > timeout:
+            self.reason = f"vehicle silent for {timeout:g} s"
+        elif self.armed_seen and not self.vehicle_armed and not self.failsafe_seen:
             self.reason = "the vehicle was disarmed during the mission"
-            self.event("aborted", self.reason)
-            return "aborted"
-        return None
+        elif now - self._last_state > timeout:
+            self.reason = f"no new state from the vehicle for {timeout:g} s"
+        else:
+            return None
+        outcome = "failsafe" if self.failsafe_seen else "aborted"
+        self.event(outcome, self.reason)
+        return outcome
 
     def _housekeeping(self) -> None:
         now = time.monotonic()
@@ -458,7 +555,8 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
     on_stop_signals(node.stop)
     outcome = node.run()
     emit("stats " + json.dumps({"commands": node.commands, "states": node.states, "received": node.ep.received,
-                                "sent": node.ep.sent, "stale_ticks": node.stale_ticks, "overruns": node.overruns}))
+                                "sent": node.ep.sent, "stale_ticks": node.stale_ticks, "overruns": node.overruns,
+                                "down": node.cend.down.stats.summary() if cfg.clock == "lockstep" else None}))
     emit(f"done outcome={outcome}" + (f" reason={node.reason}" if node.reason else ""))
     if outcome != "completed":
         sys.stderr.write(f"bsst controller: {outcome}" + (f": {node.reason}" if node.reason else "") + "\n")

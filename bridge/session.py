@@ -13,6 +13,12 @@ and leaves the run directory of DESIGN.md section 6:
 - ``summary.json`` (with the ``link`` block and a ``timing`` block), ``events.log``,
   ``plots/``, and ``vehicle.log`` / ``controller.log`` (each child's stderr).
 
+The mission's ``[link]`` impairment (DESIGN.md section 5): in lockstep both children apply
+it in simulation time to what crossed the socket (the offline loop's ends,
+:mod:`bridge.linkends`), and ``summary.json["link"]`` gives the model's exact statistics; in
+real time, when the link is impaired, a third child, ``bsst relay`` (``relay.log``,
+``relay.json``), sits between controller and vehicle and applies it on the wall clock.
+
 Each half is written by the process that owns it, whole lines at a time, so any process
 killed with SIGKILL leaves every file readable up to its last complete row; the join
 only ever appends rows whose two halves are both on disk. A child that dies is reported
@@ -40,7 +46,7 @@ import tempfile
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -57,7 +63,7 @@ READY_TIMEOUT_S = 30.0  # s for a child to start (Python, imports, bind) on a lo
 STOP_GRACE_S = 1.5  # s between SIGTERM and SIGKILL: both children gone within 2 s
 # column positions in vehicle.csv / controller.csv (bridge.vehicle.VEHICLE_COLUMNS, bridge.offboard.CONTROLLER_COLUMNS)
 V_K, V_STATE, V_MODE, V_KEY, V_C, V_U, V_ACT, V_AGE, V_RTT, V_SENT, V_RECV = 0, 2, 14, 15, 16, 20, 24, 28, 29, 30, 31
-C_K, C_U, C_PHI_D, C_RECV, C_SENT, C_S2C, C_LATE = 0, 6, 14, 16, 17, 18, 19
+C_K, C_U, C_C, C_PHI_D, C_RECV, C_SENT, C_S2C, C_LATE, C_AGE = 0, 6, 10, 14, 16, 17, 18, 19, 20
 
 
 class ChildError(Exception):
@@ -81,6 +87,7 @@ def sitl(
     speed: float | None = None,
     progress: Progress | None = None,
     live: bool = False,
+    link: Mapping[str, Any] | None = None,
 ) -> Run:
     """Fly a mission as a SITL session (vehicle and controller processes over UDP).
 
@@ -90,9 +97,10 @@ def sitl(
     ``instance`` N (0-9) picks ports 14560 + N / 14550 + N and sysid N + 1; ``None`` picks
     a free port and no GCS link. ``gcs`` (``HOST:PORT`` or ``"none"``) overrides the GCS
     address. ``speed`` caps lockstep at that many times real time. ``live`` prints a
-    progress line on stderr (when it is a terminal).
+    progress line on stderr (when it is a terminal). ``link`` is laid over the mission's
+    ``[link]`` table, as for :func:`bridge.loop.simulate`.
     """
-    flight = prepare(mission, profile=profile, controller=controller, rate_hz=rate_hz, seed=seed)
+    flight = prepare(mission, profile=profile, controller=controller, rate_hz=rate_hz, seed=seed, link=link)
     if instance is not None and not (isinstance(instance, int) and 0 <= instance <= 9):
         raise ConfigError(f"--instance must be in [0, 9], got {instance!r}")
     if speed is not None and not (math.isfinite(speed) and speed > 0):
@@ -226,12 +234,16 @@ class TraceJoiner:
     once the controller is gone, a row whose half never came is left out (``missing``).
     Rows flown by the vehicle's own failsafe (no controller command) take the landing
     loop's demand, and its desired attitude (level). ``t`` counts from the first state the
-    controller answered.
+    controller answered. In ``lockstep`` a step the controller answered (``cmd_k`` = k) takes
+    ``c1..c4`` and ``state_age_s`` from the controller's row, as the offline loop writes them:
+    the last command sent, and the age of the state this step's command was computed from
+    (nan when the guard sent none).
     """
 
-    def __init__(self, path: Path, flight: Flight, trace: TraceWriter | None) -> None:
+    def __init__(self, path: Path, flight: Flight, trace: TraceWriter | None, lockstep: bool = False) -> None:
         self.v = PartReader(path / "vehicle.csv")
         self.c = PartReader(path / "controller.csv")
+        self.lockstep = lockstep
         self.trace = trace
         self.rate = flight.mission.rate_hz
         self.steps = flight.mission.steps
@@ -306,8 +318,11 @@ class TraceJoiner:
         if self.first_sent is None:
             self.first_sent = v[V_SENT]
         self.last_sent = v[V_SENT]
+        wire, age = v[V_C:V_C + 4], v[V_AGE]
+        if self.lockstep and c is not None and key == k:
+            wire, age = c[C_C:C_C + 4], c[C_AGE]
         row = (t, *v[V_STATE:V_STATE + 12], ref[0][0], ref[1][0], ref[2][0], ref[3][0], *u,
-               *v[V_C:V_C + 4], *v[V_ACT:V_ACT + 4], v[V_AGE], *desired)
+               *wire, *v[V_ACT:V_ACT + 4], age, *desired)
         self.rows.append(row)
         if self.trace is not None:
             self.trace.row(row)
@@ -346,6 +361,7 @@ class Session:
         self.events: list[dict[str, Any]] = []
         self.vehicle: Child | None = None
         self.controller: Child | None = None
+        self.relay: Child | None = None  # real time with an impaired link: bsst relay between the two
         self.vehicle_armed = False
         self.failsafe_seen = False
         self.diverged = False
@@ -360,7 +376,7 @@ class Session:
         (self.path / "mission.toml").write_text(dump_toml(m.to_dict()))
         self._event_log = EventLog(self.path / "events.log")
         trace = TraceWriter(self.path / "trace.csv")
-        self.joiner = TraceJoiner(self.path, self.flight, trace)
+        self.joiner = TraceJoiner(self.path, self.flight, trace, lockstep=not self.realtime)
         self.t_wall0 = time.monotonic()
         restore = _catch_stop_signals(self)
         try:
@@ -402,14 +418,15 @@ class Session:
         return Run(arrays, summary, self.path if keep else None)
 
     def _outcome(self) -> str:
+        ctl = self.controller
+        completed = ctl is not None and ctl.proc.returncode == 0 and not (self.aborted or self.died)
         if self.diverged:
             return "diverged"
-        if self.failsafe_seen:
+        if self.failsafe_seen and not completed:  # completed after a failsafe: resumed ([failsafe] resume)
             return "failsafe"
         if self.aborted or self.died:
             return "aborted"
-        ctl = self.controller
-        if ctl is not None and ctl.proc.returncode == 0:
+        if completed:
             return "completed"
         if ctl is not None and ctl.done and ctl.done.startswith("outcome="):
             word = ctl.done.split()[0].partition("=")[2]
@@ -429,6 +446,13 @@ class Session:
         port = ready.get("listen", self.listen).rpartition(":")[2]
         self.listen = f"127.0.0.1:{port}"  # the port bound, also when it was chosen free
         self._note("started", f"vehicle pid {self.vehicle.pid}: {ready.get('_line', '')}", "session")
+        if self.realtime and self.flight.link.impaired:  # the link model on the wall clock, between the two
+            self.relay = Child("relay", ["relay", "--listen", "127.0.0.1:0", "--to", f"127.0.0.1:{port}",
+                                         "--mission", mission, "--stats", str(self.path / "relay.json")],
+                               self.path / "relay.log")
+            line = self._wait_ready(self.relay, "relay:")["_line"]
+            port = line.split(" -> ")[0].rpartition(":")[2]  # "listening on HOST:PORT -> ..."
+            self._note("started", f"relay pid {self.relay.pid}: {line}", "session")
         argv = ["controller", mission, "--vehicle", f"127.0.0.1:{port}", "--target-sysid", str(self.sysid),
                 "--out", str(self.path), "--overwrite"]
         if self.realtime:
@@ -437,8 +461,9 @@ class Session:
         self._wait_ready(self.controller)
         self._note("started", f"controller pid {self.controller.pid}", "session")
 
-    def _wait_ready(self, child: Child) -> dict[str, str]:
-        """Block until ``child`` says ``ready`` (its fields), or raise :class:`ChildError`."""
+    def _wait_ready(self, child: Child, ready: str = "ready") -> dict[str, str]:
+        """Block until ``child`` says ``ready`` (the first word of a status line; its
+        ``key=value`` fields, and the rest of the line as ``_line``), or raise :class:`ChildError`."""
         deadline = time.monotonic() + READY_TIMEOUT_S
         sel = selectors.DefaultSelector()
         sel.register(child.fd, selectors.EVENT_READ)
@@ -447,7 +472,7 @@ class Session:
                 for line in child.lines():
                     word, rest = parse_status(line)
                     self._status(child, line)
-                    if word == "ready":
+                    if word == ready:
                         fields = dict(f.partition("=")[::2] for f in rest.split())
                         fields["_line"] = rest
                         return fields
@@ -498,6 +523,9 @@ class Session:
                     veh.lines()
                     self._died(veh)
                     return
+                if self.relay is not None and self.relay.proc.poll() is not None:
+                    self._died(self.relay)
+                    return
                 if ctl.proc.poll() is not None and landing_deadline is None:
                     for line in ctl.lines():
                         self._status(ctl, line)
@@ -529,8 +557,8 @@ class Session:
         return 5.0 + (1.0 + fs.timeout_s + max(z, 0.0) / fs.descent_rate) / pace
 
     def _stop_children(self) -> None:
-        """SIGTERM the controller then the vehicle; SIGKILL whatever is left after the grace."""
-        children = [c for c in (self.controller, self.vehicle) if c is not None]
+        """SIGTERM the controller, the relay, the vehicle; SIGKILL whatever is left after the grace."""
+        children = [c for c in (self.controller, self.relay, self.vehicle) if c is not None]
         for c in children:
             if c.proc.poll() is None:
                 try:
@@ -600,22 +628,58 @@ class Session:
 
     # -- summary blocks --------------------------------------------------------------------------------
     def _link_block(self) -> dict[str, Any]:
+        """``summary.json["link"]`` (DESIGN.md section 6), per direction:
+
+        - lockstep: the link model's exact statistics, from the end that applies it (the
+          vehicle: ``up``, the controller: ``down``), ``delay_ms`` in simulation time; plus
+          ``socket_ms``, the wall-clock one-way time of the per-step messages over the socket;
+        - real time through the relay: the relay's counts (every datagram), ``delay_ms``
+          measured end to end on the per-step messages (ODOMETRY down, the target up) from
+          both sides' stamps (one host: one monotonic clock, no offset to estimate), the
+          model's schedule (``model_delay_ms``) and the delay the relay added (``relay_added_ms``);
+        - otherwise (real time, perfect link; a side that left no statistics): counts from
+          both sides, ``delay_ms`` from their stamps.
+        """
         j = self.joiner
         vs = self.vehicle.stats if self.vehicle else {}
         cs = self.controller.stats if self.controller else {}
         rejected = dict(vs.get("rejected", {}))
+        measured = {"up": stats(j.up_ms), "down": stats(j.down_ms)}
+        relay = self._relay_stats()
+        model = {"up": vs.get("up"), "down": cs.get("down")}
         up_sent = int(cs.get("commands", len(j.ctl)))
         up_delivered = int(vs.get("accepted", 0))
         down_sent = int(vs.get("odometry_sent", 0))
         down_delivered = int(cs.get("states", len(j.ctl)))  # a killed controller left no stats: its rows
-        return {
+        sides = {
             "up": {"sent": up_sent, "delivered": up_delivered,
                    "lost": max(0, up_sent - up_delivered - sum(rejected.values())), "duplicated": 0,
-                   "reordered": int(rejected.get("reordered", 0)), "delay_ms": stats(j.up_ms)},
+                   "reordered": int(rejected.get("reordered", 0))},
             "down": {"sent": down_sent, "delivered": down_delivered, "lost": max(0, down_sent - down_delivered),
-                     "duplicated": 0, "reordered": 0, "delay_ms": stats(j.down_ms)},
-            "rejected": rejected,
+                     "duplicated": 0, "reordered": 0},
         }
+        out: dict[str, Any] = {}
+        for d in ("up", "down"):
+            if relay is not None:
+                r = relay[d]
+                out[d] = {**{k: r[k] for k in ("sent", "delivered", "lost", "duplicated", "reordered", "in_flight",
+                                               "lost_by")},
+                          "delay_ms": measured[d], "model_delay_ms": r["delay_ms"], "relay_added_ms": r["measured_ms"]}
+            elif model[d]:
+                out[d] = {**model[d], "socket_ms": measured[d]}
+            else:
+                out[d] = {**sides[d], "delay_ms": measured[d]}
+        out["rejected"] = rejected
+        return out
+
+    def _relay_stats(self) -> dict[str, Any] | None:
+        """What ``bsst relay --stats`` wrote on exit (None without a relay or a readable file)."""
+        if self.relay is None:
+            return None
+        try:
+            return json.loads((self.path / "relay.json").read_text())
+        except (OSError, ValueError):
+            return None
 
     def _timing_block(self, wall: float) -> dict[str, Any]:
         j = self.joiner

@@ -6,7 +6,8 @@ the same object the offline loop flies) with two UDP links:
 - the **controller link** (``--listen``, default ``udpin:127.0.0.1:14560``): ODOMETRY out
   at every control step, actuator targets in (HIL_ACTUATOR_CONTROLS for a ``motors``
   profile, SET_ACTUATOR_CONTROL_TARGET group 0 for a ``wrench`` profile), accepted only
-  from the configured controller (sysid/compid) and only while armed in offboard control;
+  from the configured controller (sysid/compid) and only while armed in offboard control
+  (in a lockstep flight the up-link model delivers them, and refuses them then);
 - the **GCS link** (``--gcs``, default ``udpout:127.0.0.1:14550``): HEARTBEAT, ATTITUDE,
   LOCAL_POSITION_NED, GLOBAL_POSITION_INT, SYS_STATUS, ACTUATOR_OUTPUT_STATUS, ... on the
   wall clock, and STATUSTEXT on events; commands are answered on the socket they came in on.
@@ -14,17 +15,25 @@ the same object the offline loop flies) with two UDP links:
 Clocks:
 
 - **lockstep** (default): the state of step k (time_usec = round(k / rate_hz * 1e6)) is sent
-  and the vehicle advances one control period only when it holds the target stamped with
-  that time_usec. ``speed`` caps the pace at that many times real time. Heartbeats and
-  telemetry keep flowing on the wall clock meanwhile. A controller silent for
-  ``lost_after_s`` of wall time is lost: the vehicle leaves lockstep, runs on at real-time
-  pace (``speed`` if given) and its timeout and failsafe take over; it returns to lockstep
-  when armed again.
+  and the vehicle advances one control period only when it holds the controller's answer
+  stamped with that time_usec: an actuator target, or the **no-target acknowledgement**
+  (HIL_ACTUATOR_CONTROLS with SAFETY_ARMED clear in ``mode``, for either actuation: the
+  controller has no valid target this step, the step clock ticks on and the vehicle's
+  timeout runs). The mission's ``[link]`` model acts here, in simulation time, on what
+  crossed the socket (:class:`bridge.linkends.VehicleEnd`, the offline loop's end): the
+  target of step k enters the ``up`` model at t_k and acts at the physics step it is
+  delivered in; so does an ARM_DISARM(arm) from the controller while its flight is on
+  (a re-arm after a failsafe). The step clock keeps ticking while the vehicle, landed by
+  its failsafe, is disarmed, for as long as the controller answers. ``speed`` caps the pace
+  at that many times real time. Heartbeats and telemetry keep flowing on the wall clock
+  meanwhile. A controller silent for ``lost_after_s`` of wall time is lost: the vehicle
+  leaves lockstep, runs on at real-time pace (``speed`` if given) and its timeout and
+  failsafe take over; it returns to lockstep when armed again.
 - **realtime**: physics steps against the wall clock at the physics rate; a target is
   applied at the physics step it arrives in and held; ODOMETRY goes out at the control rate.
 
 With ``out``, it writes ``vehicle.tlog`` (both directions) and ``vehicle.csv`` (its half of
-the trace: one row per control step flown armed, columns :data:`VEHICLE_COLUMNS`).
+the trace: one row per control step flown, columns :data:`VEHICLE_COLUMNS`).
 Status lines (``ready ...``, ``event t=... kind: text``) go to ``status``; the session
 launcher reads them.
 """
@@ -53,6 +62,7 @@ from bridge.endpoint import (
     wait,
 )
 from bridge.flight import Flight
+from bridge.linkends import VehicleEnd
 from bridge.process import on_stop_signals, status_printer
 from bridge.runlog import STATE_COLUMNS, LineWriter, state_columns
 from bridge.simvehicle import FAILSAFE, LANDED, OFFBOARD
@@ -134,7 +144,8 @@ class Vehicle:
         self.freerun = cfg.clock == "realtime"  # stepping on the wall clock (realtime, or lockstep lost)
         self.halted = False  # diverged: the plant is not stepped any more
         self.stopping = False
-        self.pending: tuple[tuple[float, ...], float] | None = None  # lockstep: (wire, recv wall) for step k
+        # lockstep: (wire, recv wall) answering step k; wire None: the no-target acknowledgement
+        self.pending: tuple[tuple[float, ...] | None, float] | None = None
         self.applied: tuple[int, tuple[float, ...], float] | None = None  # (key, wire, recv wall) in force
         self._odo_sent: dict[int, float] = {}  # step -> wall time its state was sent
         self.odometry_sent = 0
@@ -154,6 +165,9 @@ class Vehicle:
         self.rejected: dict[str, int] = {}
         self.accepted = 0
         self.overruns = 0
+        # lockstep: the controller's targets and re-arms cross the mission's up-link model here
+        self.vend = VehicleEnd(self.sim, flight.link.make()[0], self.actuation, rejected=self.rejected)
+        self.engaged = False  # lockstep: a flight is on, the step clock runs on the controller's answers
 
     # -- public --------------------------------------------------------------------------
     def stop(self) -> None:
@@ -171,7 +185,7 @@ class Vehicle:
                     self._idle()
                 elif self.freerun:
                     self._freerun_period()
-                elif self.sim.armed:
+                elif self.sim.armed or self.engaged:
                     self._lockstep_wait()
                 else:
                     self._idle()
@@ -205,7 +219,7 @@ class Vehicle:
             self._step_lockstep()
             return
         now = time.monotonic()
-        if not self.sim.armed or self.freerun:
+        if self.freerun or not (self.sim.armed or self.engaged):
             return
         if now >= self._lost_at:
             self.sim.event("lockstep", f"controller silent for {self.cfg.lost_after_s:g} s of wall time: "
@@ -215,22 +229,29 @@ class Vehicle:
             self._send_odometry(now, fresh=False)
 
     def _step_lockstep(self) -> None:
+        """Step k is answered: its target (if any) enters the up-link model at t_k, what the
+        model delivers by t_k acts, then one control period with mid-period deliveries."""
         wire, recv = self.pending  # type: ignore[misc]
         self.pending = None
         k = self.k
+        t = k / self.rate
         sent = self._odo_sent.get(k, recv)
-        self.sim.command(command_from_wire(self.actuation, wire))
+        vend = self.vend
+        if wire is not None:
+            vend.receive_command(t, command_from_wire(self.actuation, wire), t)
+            self.applied = (k, wire, recv)
+        vend.deliver(t)
         X = self.plant.state
         real = self.plant.realised
-        self.applied = (k, wire, recv)
-        self.sim.advance()
+        vend.advance()
         self.k = k + 1
         if self.cfg.speed is not None:
             self._pace(self.k * self.substeps)
         if self._after_step():
             self._send_odometry(time.monotonic())
         # off the critical path: the controller is computing step k+1 meanwhile
-        self._row(k, X, k, wire, NAN4, real, 0.0, recv - sent, sent, recv)
+        self._row(k, X, k, NAN4 if wire is None else wire, NAN4, real, t - vend.applied_state_t, recv - sent,
+                  sent, recv)
 
     def _pace(self, n: int) -> None:
         """Wait (serving the links) until the wall time of physics step n at the paced rate."""
@@ -247,6 +268,7 @@ class Vehicle:
 
     def _start_freerun(self, now: float) -> None:
         self.freerun = True
+        self.engaged = False
         self._pace_w0 = now
         self._pace_n0 = self.k * self.substeps
 
@@ -328,6 +350,7 @@ class Vehicle:
             self.sim.event("diverged", why)
             self.sim.disarm(f"diverged: {why}")
             self.halted = True
+            self.engaged = False
             self._drain_events()
             return False
         return True
@@ -476,6 +499,8 @@ class Vehicle:
                 or m.get_srcComponent() != cfg.controller_compid:
             return self._reject("sender")
         if kind == "HIL_ACTUATOR_CONTROLS":
+            if not m.mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED:
+                return self._no_target(m)
             if self.actuation != "motors":
                 return self._reject("message")
         else:
@@ -485,8 +510,9 @@ class Vehicle:
                 return self._reject("group")
             if m.target_system not in (0, cfg.sysid):
                 return self._reject("target")
-        if not self.sim.armed or self.sim.mode != OFFBOARD or self.halted:
-            return self._reject("not_offboard")
+        offboard = self.sim.armed and self.sim.mode == OFFBOARD
+        if self.halted or (not offboard and (self.freerun or not self.engaged)):
+            return self._reject("not_offboard")  # lockstep, flight on: VehicleEnd decides when the model delivers
         c = m.controls
         wire = (c[0], c[1], c[2], c[3])
         if not all(math.isfinite(v) for v in wire):
@@ -506,6 +532,25 @@ class Vehicle:
             self.applied = (key, wire, now)
         return None
 
+    def _no_target(self, m: Any) -> None:
+        """The controller's no-target acknowledgement of a step: HIL_ACTUATOR_CONTROLS with
+        SAFETY_ARMED clear in ``mode`` (as PX4's lockstep clocks its simulator while its
+        outputs are disarmed). In lockstep, with a flight on, it clocks step k without a
+        target (the last one stays in force and the timeout runs); otherwise it means nothing."""
+        if self.freerun or self.halted or not self.engaged:
+            return None
+        key = step_of_usec(m.time_usec, self.rate)
+        if key != self.k:
+            return self._reject("stale" if key < self.k else "future")
+        self.pending = (None, time.monotonic())
+        return None
+
+    def _through_link(self, ep: Endpoint, m: Any) -> bool:
+        """Whether a command crosses the up-link model: the controller's, on its link, in a lockstep flight."""
+        cfg = self.cfg
+        return (ep is self.link and self.engaged and not self.freerun and m.get_srcSystem() == cfg.controller_sysid
+                and m.get_srcComponent() == cfg.controller_compid)
+
     def _command(self, ep: Endpoint, m: Any, addr: tuple[str, int]) -> None:
         cfg = self.cfg
         if m.target_system not in (0, cfg.sysid) or m.target_component not in (0, cfg.compid):
@@ -513,7 +558,10 @@ class Vehicle:
         cmd = int(m.command)
         result = mavlink.MAV_RESULT_ACCEPTED
         follow: list[Any] = []
-        if cmd == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
+        if cmd == mavlink.MAV_CMD_COMPONENT_ARM_DISARM and m.param1 >= 0.5 and self._through_link(ep, m):
+            self.vend.receive_arm(self.t)  # acts when the model delivers it, as offline
+            result = mavlink.MAV_RESULT_IN_PROGRESS
+        elif cmd == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
             result = self._arm_disarm(m.param1, m.param2)
         elif cmd == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
             result = self._set_interval(int(m.param1), m.param2)
@@ -549,6 +597,7 @@ class Vehicle:
             if not was_offboard and self.cfg.clock == "lockstep":
                 # back to lockstep: the state of step k goes out now and its target is awaited
                 self.freerun = False
+                self.engaged = True
                 self.pending = None
                 self._pace_w0, self._pace_n0 = now, self.k * self.substeps
                 self._send_odometry(now)
@@ -557,6 +606,7 @@ class Vehicle:
             return mavlink.MAV_RESULT_DENIED  # in the air: only a forced disarm (PX4 does the same)
         sim.disarm("disarmed by command")
         self.pending = None
+        self.engaged = False  # the flight is over: time stands still until armed again
         return mavlink.MAV_RESULT_ACCEPTED
 
     def _set_interval(self, mid: int, interval_us: float) -> int:
@@ -599,5 +649,6 @@ def run_vehicle(flight: Flight, cfg: VehicleConfig, out: str | Path | None = Non
     on_stop_signals(v.stop)
     v.run()
     emit("stats " + json.dumps({"accepted": v.accepted, "rejected": v.rejected, "odometry_sent": v.odometry_sent,
-                                "received": v.link.received, "overruns": v.overruns, "steps": v.k}))
+                                "received": v.link.received, "overruns": v.overruns, "steps": v.k,
+                                "up": v.vend.up.stats.summary() if cfg.clock == "lockstep" else None}))
     return 0

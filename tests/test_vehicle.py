@@ -122,7 +122,9 @@ def test_targets_only_from_the_configured_controller(tmp_path):
             assert odo.time_usec == 0 and (odo.frame_id, odo.child_frame_id) == (M.MAV_FRAME_LOCAL_NED,
                                                                                   M.MAV_FRAME_BODY_FRD)
             impostor.mav.set_actuator_control_target_send(0, 0, sysid, 1, list(wire) + [0.0] * 4)
-            ctl.mav.hil_actuator_controls_send(0, [0.5] * 16, 0, 1)  # motors message to a wrench vehicle
+            # a motors target to a wrench vehicle (SAFETY_ARMED in mode: with it clear, the same
+            # message is the controller's no-target acknowledgement of a lockstep step)
+            ctl.mav.hil_actuator_controls_send(0, [0.5] * 16, M.MAV_MODE_FLAG_SAFETY_ARMED, 1)
             ctl.mav.set_actuator_control_target_send(0, 1, sysid, 1, list(wire) + [0.0] * 4)  # group 1
             ctl.mav.set_actuator_control_target_send(4000, 0, sysid, 1, list(wire) + [0.0] * 4)  # future step
             ctl.mav.set_actuator_control_target_send(0, 0, sysid, 1, list(wire) + [0.0] * 4)  # the one
