@@ -12,11 +12,18 @@ Addresses follow pymavlink's connection strings (DESIGN.md section 4):
 - ``udpout:HOST:PORT`` send to HOST:PORT from a free local port, answer on it;
 - ``HOST:PORT``        either, as the option that takes it says.
 
+Receiving is the project's one receive path (:mod:`bridge.guard`): :meth:`Endpoint.poll`
+reads a bounded batch, sheds excess from sources other than the peer, and
+:func:`parse_datagram` takes whole MAVLink 2 frames only, checked (CRC, length, known id,
+and with a key their signature: :mod:`bridge.signing`) before anything is decoded;
+everything refused is counted by reason in the endpoint's :class:`bridge.guard.Rejections`.
+
 The two messages of every control step (ODOMETRY down, the actuator target up) take a
 hot path (:class:`HotLayout`): framed and checked with ``struct`` and the CRC directly from
-pymavlink's own message metadata (field order, ``crc_extra``), without building a
-pymavlink message object; every other frame, and any hot one that is signed or shares its
-datagram, goes through ``parse_buffer``. Both paths give the same fields (tests/test_endpoint.py).
+pymavlink's own message metadata (field order, ``crc_extra``), signed and verified by
+:class:`bridge.signing.Signing`, without building a pymavlink message object; every other
+frame is decoded by pymavlink's ``decode`` once it has passed the same checks. Both paths
+give the same fields and bytes (tests/test_endpoint.py, tests/test_signing.py).
 
 Waiting is :func:`wait`: it first polls the hot socket for a short while (a reply that
 comes within tens of microseconds is taken without a sleep and wake-up, which costs more
@@ -36,15 +43,11 @@ from pathlib import Path
 from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
-from pymavlink.generator.mavcrc import x25crc
 
+from bridge.guard import BATCH, MAX_DATAGRAM, RateLimiter, Rejections
+from bridge.signing import IFLAG_SIGNED, SIGNATURE_BYTES, Signing
+from bridge.signing import crc16 as _crc16
 from params import ConfigError
-
-try:  # pymavlink uses fastcrc when it is installed; so does the hot path
-    from fastcrc.crc16 import mcrf4xx as _crc16
-except ImportError:  # pragma: no cover - pure Python fallback
-    def _crc16(data: bytes, initial: int = 0xFFFF) -> int:
-        return x25crc(data).crc
 
 MODES = ("udpin", "udpout")
 
@@ -165,6 +168,90 @@ SET_ACTUATOR_CONTROL_TARGET = HotLayout(mavlink.MAVLink_set_actuator_control_tar
 HOT = {lay.id: lay for lay in (ODOMETRY, HIL_ACTUATOR_CONTROLS, SET_ACTUATOR_CONTROL_TARGET)}
 
 
+def hot_frame(data: bytes) -> HotMessage | None:
+    """A datagram that is exactly one hot-path frame, unsigned or signed (the signature is
+    the caller's to verify), with a good CRC and a payload no longer than its message,
+    decoded; None for anything else (it then takes :func:`parse_datagram`)."""
+    if len(data) < 12 or data[0] != _MAGIC2:
+        return None
+    n = data[1]
+    flags = data[2]
+    if flags == 0:
+        size = 12 + n
+    elif flags == IFLAG_SIGNED:
+        size = 12 + n + SIGNATURE_BYTES
+    else:
+        return None
+    if len(data) != size:
+        return None
+    layout = HOT.get(data[7] | data[8] << 8 | data[9] << 16)
+    if layout is None or n > layout.size:
+        return None
+    if _crc16(data[1:10 + n] + layout.crc_extra, 0xFFFF) != data[10 + n] | data[11 + n] << 8:
+        return None
+    return HotMessage(layout, layout.decode(data[10:10 + n]), data[5], data[6], data)
+
+
+def parse_datagram(data: bytes, dec: Any, signing: Signing | None, rejected: Rejections,
+                   from_peer: bool = False) -> list[Any]:
+    """The frame stage of the receive path (:mod:`bridge.guard`): the messages of one
+    datagram, each a whole MAVLink 2 frame with a known id, a good CRC, a payload no longer
+    than its message and, with ``signing``, a good signature newer than its stream's last.
+    The first bad frame ends the datagram and is counted once in ``rejected`` by its reason;
+    frames before it are kept. Never raises. ``dec`` is a pymavlink ``MAVLink`` without a
+    key (it decodes what passed; the hot messages are decoded by the hot codec)."""
+    n = len(data)
+    why = "truncated" if n == 0 else "oversized" if n > MAX_DATAGRAM else None
+    out: list[Any] = []
+    pos = 0
+    while why is None and pos < n:
+        magic = data[pos]
+        if magic != _MAGIC2:
+            why = "mavlink1" if magic == mavlink.PROTOCOL_MARKER_V1 else "no_frame"
+            break
+        if n - pos < 12:
+            why = "truncated"
+            break
+        plen, flags = data[pos + 1], data[pos + 2]
+        if flags & ~IFLAG_SIGNED:
+            why = "bad_flags"
+            break
+        end = pos + 12 + plen + (SIGNATURE_BYTES if flags else 0)
+        if end > n:
+            why = "truncated"
+            break
+        mid = data[pos + 7] | data[pos + 8] << 8 | data[pos + 9] << 16
+        cls = mavlink.mavlink_map.get(mid)
+        if cls is None:
+            why = "unknown_id"
+            break
+        crc_at = pos + 10 + plen
+        if _crc16(data[pos + 1:crc_at] + bytes((cls.crc_extra,)), 0xFFFF) != data[crc_at] | data[crc_at + 1] << 8:
+            why = "bad_crc"
+            break
+        if plen > cls.unpacker.size:
+            why = "oversized"
+            break
+        frame = data[pos:end]
+        if signing is not None:
+            why = signing.verify(frame, frame[5], frame[6])
+            if why:
+                break
+        layout = HOT.get(mid)
+        if layout is not None:
+            out.append(HotMessage(layout, layout.decode(frame[10:10 + plen]), frame[5], frame[6], frame))
+        else:
+            try:
+                out.append(dec.decode(bytearray(frame)))
+            except Exception:  # whatever pymavlink raises on a frame it cannot decode, it is refused
+                why = "malformed"
+                break
+        pos = end
+    if why is not None:
+        rejected.add(why, from_peer)
+    return out
+
+
 class Tlog:
     """A telemetry log: records of an 8-byte big-endian timestamp (microseconds since the
     Unix epoch) followed by one raw MAVLink frame, in both directions, as pymavlink's
@@ -207,15 +294,25 @@ class Tlog:
 class Endpoint:
     """One MAVLink 2 UDP link: its socket, its ``MAVLink`` codec, its counters.
 
-    ``peer`` is where :meth:`send` goes: fixed for ``udpout``; for ``udpin`` the sender of
-    the last valid frame (pymavlink's behaviour), until someone sets it.
+    ``peer`` is where :meth:`send` goes: fixed for ``udpout`` (which then hears nobody
+    else); for ``udpin`` the sender of the last valid frame (pymavlink's behaviour) while
+    ``follow`` is true, else whoever its owner sets (the vehicle: its configured controller,
+    once it has spoken). With ``signing`` every frame sent is signed and every frame
+    received must be. ``rejected`` counts what the receive path refused (shared by the
+    endpoints of one process); ``batch`` and ``limiter`` bound what one :meth:`poll` reads
+    and what sources other than the peer may send (:mod:`bridge.guard`).
     """
 
     def __init__(self, address: Address, *, sysid: int, compid: int, tlog: Tlog | None = None,
-                 name: str = "link", rcvbuf: int = 1 << 20) -> None:
+                 name: str = "link", rcvbuf: int = 1 << 20, signing: Signing | None = None,
+                 rejected: Rejections | None = None, batch: int = BATCH, limiter: RateLimiter | None = None) -> None:
         self.address = address
         self.name = name
         self.tlog = tlog
+        self.signing = signing
+        self.rejected = rejected if rejected is not None else Rejections()
+        self.batch = batch
+        self.limiter = limiter or RateLimiter()
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
@@ -236,12 +333,16 @@ class Endpoint:
         self.sock = sock
         self.fileno = sock.fileno()
         self.local = sock.getsockname()
+        # encodes (unsigned: self.signing signs) and decodes what the frame stage passed; no key of its own
         self.mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
-        self.mav.robust_parsing = True
         self.sent = 0
         self.received = 0
-        self.bad = 0
         self.send_errors = 0
+
+    @property
+    def bad(self) -> int:
+        """Datagrams and messages refused so far (all reasons)."""
+        return self.rejected.total
 
     # -- sending ------------------------------------------------------------------------
     def send(self, msg: Any, to: tuple[str, int] | None = None) -> bool:
@@ -253,22 +354,28 @@ class Endpoint:
         mav = self.mav
         buf = msg.pack(mav)
         mav.seq = (mav.seq + 1) & 0xFF
+        if self.signing is not None:
+            buf = self.signing.resign(buf)
         return self.send_frame(buf, to)
 
     def send_hot(self, layout: HotLayout, values: tuple[Any, ...], to: tuple[str, int] | None = None) -> bool:
         """Encode a hot-path message from its flat field values (see :class:`HotLayout`) and
         send it: the same bytes pymavlink would make, without a message object."""
+        return self.send_frame(self.encode_hot(layout, values), to)
+
+    def encode_hot(self, layout: HotLayout, values: tuple[Any, ...]) -> bytes:
+        """The frame of a hot-path message (next sequence number; signed with a key)."""
         mav = self.mav
-        if mav.signing.sign_outgoing:  # signing is pymavlink's business
-            fields = {name: values[i] if n == 0 else list(values[i:i + n]) for name, i, n in layout.spans}
-            return self.send(getattr(mavlink, f"MAVLink_{layout.name.lower()}_message")(**fields), to)
+        signing = self.signing
         payload = layout.struct.pack(*values).rstrip(b"\0") or b"\0"  # MAVLink 2 drops trailing zeros
-        head = _HEADER2.pack(_MAGIC2, len(payload), 0, 0, mav.seq, mav.srcSystem, mav.srcComponent,
-                             layout.id & 0xFFFF, layout.id >> 16)
+        head = _HEADER2.pack(_MAGIC2, len(payload), 0 if signing is None else IFLAG_SIGNED, 0, mav.seq,
+                             mav.srcSystem, mav.srcComponent, layout.id & 0xFFFF, layout.id >> 16)
         body = head + payload
         buf = body + struct.pack("<H", _crc16(body[1:] + layout.crc_extra, 0xFFFF))
+        if signing is not None:
+            buf = signing.sign(buf)
         mav.seq = (mav.seq + 1) & 0xFF
-        return self.send_frame(buf, to)
+        return buf
 
     def send_frame(self, buf: bytes, to: tuple[str, int] | None = None) -> bool:
         """Send one already-encoded frame; recorded in the tlog when it has somewhere to go."""
@@ -287,64 +394,44 @@ class Endpoint:
 
     # -- receiving ----------------------------------------------------------------------
     def poll(self) -> list[tuple[Any, tuple[str, int]]]:
-        """Every valid message waiting on the socket, with its sender; never blocks."""
+        """The valid messages among the next :attr:`batch` datagrams waiting on the socket,
+        with their senders; never blocks, never raises (the receive path of :mod:`bridge.guard`:
+        read, shed, frame; what it refuses is counted in :attr:`rejected`)."""
         out: list[tuple[Any, tuple[str, int]]] = []
         sock = self.sock
-        while True:
+        signing = self.signing
+        rejected = self.rejected
+        sending = self.address.mode == "udpout"
+        for _ in range(self.batch):
             try:
                 data, addr = sock.recvfrom(_MAX_DATAGRAM)
             except (BlockingIOError, InterruptedError):
-                return out
+                break
             except OSError:  # ICMP port unreachable reported on a later recv
                 continue
-            hot = self._hot(data)
-            if hot is not None:
-                self.received += 1
-                if self.tlog is not None:
-                    self.tlog.record(data)
-                out.append((hot, addr))
-                if self.follow:
-                    self.peer = addr
-                continue
-            mav = self.mav
-            msgs = mav.parse_buffer(data)
-            if mav.buf_len():
-                # a datagram never continues in the next one: a torn frame left in the parser
-                # would swallow the next good one, so it is dropped here
-                self.bad += 1
-                mav.buf = bytearray()
-                mav.buf_index = 0
-                mav.expected_length = mavlink.HEADER_LEN_V1 + 2
-            if not msgs:
-                continue
-            valid = False
-            for m in msgs:
-                if m._type == "BAD_DATA":
-                    self.bad += 1
+            from_peer = addr == self.peer
+            if not from_peer:
+                if sending:  # a sending link hears its peer only
+                    rejected.add("sender")
                     continue
-                valid = True
-                self.received += 1
-                if self.tlog is not None:
+                if not self.limiter.allow(addr, time.monotonic()):
+                    rejected.add("rate_limited")
+                    continue
+            hot = hot_frame(data)
+            if hot is not None and (signing is None or signing.verify(data, data[5], data[6]) is None):
+                msgs: list[Any] = [hot]
+            else:  # everything else, and a hot frame whose signature failed (to name the reason)
+                msgs = parse_datagram(data, self.mav, signing, rejected, from_peer)
+                if not msgs:
+                    continue
+            self.received += len(msgs)
+            if self.tlog is not None:
+                for m in msgs:
                     self.tlog.record(m.get_msgbuf())
-                out.append((m, addr))
-            if valid and self.follow:
+            out.extend((m, addr) for m in msgs)
+            if self.follow:
                 self.peer = addr
-
-    @staticmethod
-    def _hot(data: bytes) -> HotMessage | None:
-        """A datagram that is exactly one unsigned hot-path frame with a good CRC, decoded;
-        None for anything else (it then goes to ``parse_buffer``)."""
-        if len(data) < 12 or data[0] != _MAGIC2 or data[2] != 0:
-            return None
-        n = data[1]
-        if len(data) != 12 + n:
-            return None
-        layout = HOT.get(data[7] | data[8] << 8 | data[9] << 16)
-        if layout is None:
-            return None
-        if _crc16(data[1:10 + n] + layout.crc_extra, 0xFFFF) != data[10 + n] | data[11 + n] << 8:
-            return None
-        return HotMessage(layout, layout.decode(data[10:10 + n]), data[5], data[6], data)
+        return out
 
     def close(self) -> None:
         if self.fileno >= 0:

@@ -20,6 +20,7 @@ from bridge.endpoint import (
     SET_ACTUATOR_CONTROL_TARGET,
     Endpoint,
     Tlog,
+    hot_frame,
     parse_address,
     wait,
 )
@@ -88,7 +89,7 @@ def test_hot_odometry_matches_pymavlink(t, pos, q, vel, rates):
     msg = mavlink.MAVLink_odometry_message(t, 1, 12, *pos, list(q), *vel, *rates, [math.nan] + [0.0] * 20,
                                            [math.nan] + [0.0] * 20, 0, 1, 100)
     ref = msg.pack(mav)
-    hot = Endpoint._hot(ref)
+    hot = hot_frame(ref)
     assert hot is not None and hot._type == "ODOMETRY" and hot.get_srcSystem() == 7
     assert (hot.time_usec, hot.x, hot.y, hot.z, hot.q, hot.vx, hot.rollspeed) == (
         t, pos[0], pos[1], pos[2], q, vel[0], rates[0])
@@ -116,23 +117,23 @@ def test_hot_actuator_messages_match_pymavlink(t, controls, mode, flags):
     mav = mavlink.MAVLink(None, srcSystem=200, srcComponent=191)
     ref = mavlink.MAVLink_hil_actuator_controls_message(t, controls, mode, flags).pack(mav)
     assert _frame(HIL_ACTUATOR_CONTROLS, (t, flags, *controls, mode)) == ref
-    hot = Endpoint._hot(ref)
+    hot = hot_frame(ref)
     assert (hot.time_usec, list(hot.controls), hot.mode, hot.flags) == (t, controls, mode, flags)
     ref = mavlink.MAVLink_set_actuator_control_target_message(t, 0, 7, 1, controls[:8]).pack(mav)
     assert _frame(SET_ACTUATOR_CONTROL_TARGET, (t, *controls[:8], 0, 7, 1)) == ref
-    hot = Endpoint._hot(ref)
+    hot = hot_frame(ref)
     assert (hot.group_mlx, hot.target_system, list(hot.controls)) == (0, 7, controls[:8])
 
 
 def test_hot_path_refuses_what_it_cannot_check():
     mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
     good = mavlink.MAVLink_hil_actuator_controls_message(5, [0.5] * 16, 0, 1).pack(mav)
-    assert Endpoint._hot(good) is not None
+    assert hot_frame(good) is not None
     bad_crc = good[:-1] + bytes([good[-1] ^ 0xFF])
-    assert Endpoint._hot(bad_crc) is None
-    assert Endpoint._hot(good + good) is None  # two frames in one datagram: parse_buffer's job
+    assert hot_frame(bad_crc) is None
+    assert hot_frame(good + good) is None  # two frames in one datagram: parse_buffer's job
     hb = mavlink.MAVLink_heartbeat_message(2, 0, 0, 0, 3, 3).pack(mav)
-    assert Endpoint._hot(hb) is None
+    assert hot_frame(hb) is None
 
 
 def test_udp_exchange_peer_and_bad_data(tmp_path):

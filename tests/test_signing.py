@@ -1,0 +1,187 @@
+"""bridge.signing: key files, and MAVLink 2 signatures byte for byte against pymavlink."""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from pymavlink.dialects.v20 import common as mavlink
+
+from bridge.endpoint import (
+    HIL_ACTUATOR_CONTROLS,
+    ODOMETRY,
+    SET_ACTUATOR_CONTROL_TARGET,
+    Endpoint,
+    hot_frame,
+    parse_address,
+    parse_datagram,
+)
+from bridge.guard import Rejections
+from bridge.signing import SIGNATURE_BYTES, Signing, clock_timestamp, key_from_file
+from params import ConfigError
+
+KEY = hashlib.sha256(b"bsst test key").digest()
+OTHER = hashlib.sha256(b"not our key").digest()
+f32 = st.floats(width=32, allow_nan=False, allow_infinity=False)
+
+
+def _key_file(tmp_path, data: bytes, mode: int = 0o600):
+    p = tmp_path / "key"
+    p.write_bytes(data)
+    p.chmod(mode)
+    return p
+
+
+def test_key_file_raw_and_passphrase(tmp_path):
+    assert key_from_file(_key_file(tmp_path, KEY)) == KEY
+    # a passphrase is hashed with SHA-256, as MAVProxy's "signing setup PASSPHRASE" does
+    assert key_from_file(_key_file(tmp_path, b"correct horse battery staple\n")) == hashlib.sha256(
+        b"correct horse battery staple").digest()
+
+
+@pytest.mark.parametrize("data, mode, words", [
+    (None, 0o600, "no such file"),
+    (b"", 0o600, "empty"),
+    (b"\n", 0o600, "empty"),
+    (KEY, 0o644, "readable or writable by others"),
+    (KEY, 0o602, "readable or writable by others"),
+    (b"\xff\xfe" * 20, 0o600, "neither"),
+])
+def test_bad_key_files_name_the_flag_never_the_content(tmp_path, data, mode, words):
+    p = tmp_path / "key" if data is None else _key_file(tmp_path, data, mode)
+    with pytest.raises(ConfigError) as err:
+        key_from_file(p)
+    text = str(err.value)
+    assert text.startswith(f"--key {p}") and words in text
+    if data:
+        assert data.hex() not in text and repr(data) not in text
+
+
+def test_a_directory_is_not_a_key(tmp_path):
+    with pytest.raises(ConfigError, match="not a regular file"):
+        key_from_file(tmp_path)
+
+
+def test_signing_never_shows_its_key():
+    s = Signing(KEY, 7)
+    assert KEY.hex() not in repr(s) and str(KEY) not in repr(s)
+
+
+def _pymavlink(key: bytes, link_id: int, timestamp: int, sysid: int, compid: int, seq: int) -> mavlink.MAVLink:
+    """pymavlink set up as mavutil's ``setup_signing`` does, at a chosen timestamp."""
+    mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
+    mav.signing.secret_key = key
+    mav.signing.sign_outgoing = True
+    mav.signing.link_id = link_id
+    mav.signing.timestamp = timestamp
+    mav.seq = seq
+    return mav
+
+
+def _signed_endpoint(link_id: int, sysid: int = 200, compid: int = 191) -> Endpoint:
+    return Endpoint(parse_address("udpin:127.0.0.1:0"), sysid=sysid, compid=compid, signing=Signing(KEY, link_id))
+
+
+def _stamp(frame: bytes) -> int:
+    return int.from_bytes(frame[-12:-6], "little")
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**63), st.lists(f32, min_size=16, max_size=16), st.integers(0, 255), st.integers(0, 255))
+def test_hot_codec_signs_as_pymavlink(t, controls, link_id, seq):
+    """Signed hot frames are pymavlink's bytes (setup_signing, same timestamp), and pymavlink
+    with the key accepts them; with another key it refuses them."""
+    ep = _signed_endpoint(link_id)
+    try:
+        ep.mav.seq = seq
+        ours = ep.encode_hot(HIL_ACTUATOR_CONTROLS, (t, 1, *controls, 128))
+        assert ours[2] == 1 and len(ours) == 12 + ours[1] + SIGNATURE_BYTES
+        ref = mavlink.MAVLink_hil_actuator_controls_message(t, controls, 128, 1).pack(
+            _pymavlink(KEY, link_id, _stamp(ours), 200, 191, seq))
+        assert ours == ref
+        ours = ep.encode_hot(SET_ACTUATOR_CONTROL_TARGET, (t, *controls[:8], 0, 7, 1))
+        ref = mavlink.MAVLink_set_actuator_control_target_message(t, 0, 7, 1, controls[:8]).pack(
+            _pymavlink(KEY, link_id, _stamp(ours), 200, 191, (seq + 1) & 0xFF))
+        assert ours == ref
+        cov = [math.nan] + [0.0] * 20
+        ours = ep.encode_hot(ODOMETRY, (t, *controls[:13], *cov, *cov, 1, 12, 0, 1, 100))
+        c = controls
+        ref = mavlink.MAVLink_odometry_message(t, 1, 12, c[0], c[1], c[2], c[3:7], c[7], c[8], c[9], c[10], c[11],
+                                               c[12], cov, cov, 0, 1, 100).pack(
+            _pymavlink(KEY, link_id, _stamp(ours), 200, 191, (seq + 2) & 0xFF))
+        assert ours == ref
+        checker = mavlink.MAVLink(None)
+        checker.signing.secret_key = KEY
+        assert checker.decode(bytearray(ours)).get_type() == "ODOMETRY"
+        checker.signing.secret_key = OTHER
+        checker.signing.stream_timestamps.clear()
+        with pytest.raises(mavlink.MAVError, match="signature"):
+            checker.decode(bytearray(ours))
+    finally:
+        ep.close()
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 255), st.integers(0, 255), st.floats(allow_nan=False, allow_infinity=False, width=32))
+def test_other_messages_are_signed_as_pymavlink(link_id, seq, p1):
+    """A message pymavlink packs unsigned, signed by :meth:`Signing.resign`: pymavlink's bytes."""
+    s = Signing(KEY, link_id)
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    mav.seq = seq
+    for msg in (mavlink.MAVLink_heartbeat_message(2, 8, 128, 0, 4, 3),
+                mavlink.MAVLink_command_long_message(1, 1, 400, 0, p1, 0, 0, 0, 0, 0, 0),
+                mavlink.MAVLink_statustext_message(4, b"rejected 3: bad_crc 3")):
+        mav.seq = seq
+        ours = s.resign(msg.pack(mav))
+        mav.seq = seq
+        assert ours == msg.pack(_pymavlink(KEY, link_id, _stamp(ours), 1, 1, seq))
+
+
+def test_verify_accepts_pymavlink_signed_and_refuses_unsigned_forged_replayed():
+    gcs = _pymavlink(KEY, 2, clock_timestamp(), 255, 190, 0)
+    forger = _pymavlink(OTHER, 2, clock_timestamp() + 1000, 255, 190, 0)
+    plain = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+    arm = mavlink.MAVLink_command_long_message(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0)
+    v = Signing(KEY, 0)
+    good = arm.pack(gcs)
+    assert v.verify(good, 255, 190) is None
+    assert v.verify(good, 255, 190) == "replayed"  # the same frame again
+    assert v.verify(arm.pack(plain), 255, 190) == "unsigned"
+    assert v.verify(arm.pack(forger), 255, 190) == "bad_signature"
+    # a forged frame with a later timestamp did not move the stream on: the owner still gets in
+    assert v.verify(arm.pack(gcs), 255, 190) is None
+    # an old recording of a stream never seen is refused (more than a minute behind our clock)
+    old = _pymavlink(KEY, 9, clock_timestamp() - 7_000_000, 255, 190, 0)
+    assert v.verify(arm.pack(old), 255, 190) == "replayed"
+
+
+def test_the_receive_path_counts_each_kind_and_decodes_the_rest():
+    gcs = _pymavlink(KEY, 1, clock_timestamp(), 255, 190, 0)
+    hb = mavlink.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3)
+    rej = Rejections()
+    v = Signing(KEY, 0)
+    dec = mavlink.MAVLink(None)
+    good = hb.pack(gcs)
+    assert [m.get_type() for m in parse_datagram(good, dec, v, rej)] == ["HEARTBEAT"]
+    assert parse_datagram(good, dec, v, rej) == []
+    assert parse_datagram(hb.pack(mavlink.MAVLink(None, 255, 190)), dec, v, rej) == []
+    assert parse_datagram(hb.pack(_pymavlink(OTHER, 1, clock_timestamp(), 255, 190, 0)), dec, v, rej) == []
+    assert rej == {"replayed": 1, "unsigned": 1, "bad_signature": 1}
+    # the hot path only frames a signed hot message; its signature is the caller's to check
+    ep = _signed_endpoint(0)
+    frame = ep.encode_hot(HIL_ACTUATOR_CONTROLS, (5, 1, *([0.5] * 16), 128))
+    ep.close()
+    assert hot_frame(frame) is not None and v.verify(frame, 200, 191) is None
+    assert hot_frame(frame[:-1]) is None
+
+
+def test_key_file_mode_is_checked_before_reading(tmp_path):
+    p = _key_file(tmp_path, KEY, 0o604)
+    with pytest.raises(ConfigError):
+        key_from_file(p)
+    os.chmod(p, 0o600)
+    assert key_from_file(p) == KEY
