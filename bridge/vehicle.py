@@ -62,9 +62,11 @@ from bridge.endpoint import (
     wait,
 )
 from bridge.flight import Flight
+from bridge.guard import Rejections, addressed_elsewhere, wire_problem
 from bridge.linkends import VehicleEnd
 from bridge.process import on_stop_signals, status_printer
 from bridge.runlog import STATE_COLUMNS, LineWriter, state_columns
+from bridge.signing import Signing
 from bridge.simvehicle import FAILSAFE, LANDED, OFFBOARD
 from bridge.wire import command_from_wire, command_to_wire, state_to_odometry, step_of_usec, step_usec
 
@@ -114,6 +116,7 @@ class VehicleConfig:
     spin_s: float = 0.0002  # s polled (yielding) before sleeping while a lockstep answer is due: ~4x the
     # peer's median work; longer only burns a core that a busy machine needs for that peer
     home: tm.Home = field(default_factory=tm.Home)
+    key: bytes | None = field(default=None, repr=False)  # MAVLink 2 signing key (never shown)
 
 
 class Vehicle:
@@ -135,8 +138,15 @@ class Vehicle:
         self.plant = self.sim.plant
         self._status = status or (lambda line: None)
         self.tlog = Tlog(out / "vehicle.tlog") if out is not None else None
-        self.link = Endpoint(cfg.listen, sysid=cfg.sysid, compid=cfg.compid, tlog=self.tlog, name="--listen")
-        self.gcs = (Endpoint(cfg.gcs, sysid=cfg.sysid, compid=cfg.compid, tlog=self.tlog, name="--gcs")
+        # refusals of the receive path (bridge.guard), both links, and of the up-link model's end
+        self.rejected = Rejections()
+        self._from_peer = False  # the message being handled came from the controller's address
+        sign = (lambda link_id: Signing(cfg.key, link_id)) if cfg.key is not None else (lambda link_id: None)
+        self.link = Endpoint(cfg.listen, sysid=cfg.sysid, compid=cfg.compid, tlog=self.tlog, name="--listen",
+                             signing=sign(0), rejected=self.rejected)
+        self.link.follow = False  # ODOMETRY goes to the configured controller only (see _handle)
+        self.gcs = (Endpoint(cfg.gcs, sysid=cfg.sysid, compid=cfg.compid, tlog=self.tlog, name="--gcs",
+                             signing=sign(1), rejected=self.rejected)
                     if cfg.gcs is not None else None)
         self.endpoints = [self.link] + ([self.gcs] if self.gcs is not None else [])
         self.rows = LineWriter(out / "vehicle.csv", ",".join(VEHICLE_COLUMNS), batch=100) if out is not None else None
@@ -162,7 +172,6 @@ class Vehicle:
         self._cpu0 = time.process_time()
         self._load_at = (now, self._cpu0)
         self.load = 0
-        self.rejected: dict[str, int] = {}
         self.accepted = 0
         self.overruns = 0
         # lockstep: the controller's targets and re-arms cross the mission's up-link model here
@@ -460,6 +469,11 @@ class Vehicle:
             w0, c0 = self._load_at
             self.load = int(1000 * (cpu - c0) / max(now - w0, 1e-6))
             self._load_at = (now, cpu)
+        refused = self.rejected.report(now)  # once per second while the receive path refuses anything
+        if refused is not None:
+            msg = mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_WARNING, refused.encode())
+            for ep in self.endpoints:
+                ep.send(msg)
         if self.gcs is not None:
             for mid, due in self._due.items():
                 if now >= due:
@@ -476,6 +490,19 @@ class Vehicle:
 
     # -- receiving ---------------------------------------------------------------------------------
     def _handle(self, ep: Endpoint, m: Any, addr: tuple[str, int]) -> None:
+        """A message that passed the frame stage: checked and acted on by :meth:`_dispatch`.
+        The controller link's peer (where ODOMETRY goes, never rate-limited) is the address
+        of the configured controller's newest message that nothing refused."""
+        link = self.link
+        self._from_peer = addr == link.peer
+        refused = self.rejected.total
+        self._dispatch(ep, m, addr)
+        cfg = self.cfg
+        if (ep is link and self.rejected.total == refused and m.get_srcSystem() == cfg.controller_sysid
+                and m.get_srcComponent() == cfg.controller_compid):
+            link.peer = addr
+
+    def _dispatch(self, ep: Endpoint, m: Any, addr: tuple[str, int]) -> None:
         kind = m._type
         if kind == "HIL_ACTUATOR_CONTROLS" or kind == "SET_ACTUATOR_CONTROL_TARGET":
             self._target(ep, m, kind)
@@ -490,7 +517,7 @@ class Vehicle:
                                                               m.mission_type), addr)
 
     def _reject(self, why: str) -> None:
-        self.rejected[why] = self.rejected.get(why, 0) + 1
+        self.rejected.add(why, self._from_peer)
 
     def _target(self, ep: Endpoint, m: Any, kind: str) -> None:
         """An actuator target: checked, then held for lockstep or applied at once (realtime)."""
@@ -508,15 +535,16 @@ class Vehicle:
                 return self._reject("message")
             if m.group_mlx != 0:
                 return self._reject("group")
-            if m.target_system not in (0, cfg.sysid):
+            if addressed_elsewhere(m, cfg.sysid, cfg.compid):
                 return self._reject("target")
         offboard = self.sim.armed and self.sim.mode == OFFBOARD
         if self.halted or (not offboard and (self.freerun or not self.engaged)):
             return self._reject("not_offboard")  # lockstep, flight on: VehicleEnd decides when the model delivers
         c = m.controls
         wire = (c[0], c[1], c[2], c[3])
-        if not all(math.isfinite(v) for v in wire):
-            return self._reject("not_finite")
+        why = wire_problem(self.actuation, wire)
+        if why:
+            return self._reject(why)
         key = step_of_usec(m.time_usec, self.rate)
         now = time.monotonic()
         if not self.freerun:
@@ -553,8 +581,8 @@ class Vehicle:
 
     def _command(self, ep: Endpoint, m: Any, addr: tuple[str, int]) -> None:
         cfg = self.cfg
-        if m.target_system not in (0, cfg.sysid) or m.target_component not in (0, cfg.compid):
-            return
+        if addressed_elsewhere(m, cfg.sysid, cfg.compid):
+            return self._reject("target")
         cmd = int(m.command)
         result = mavlink.MAV_RESULT_ACCEPTED
         follow: list[Any] = []
