@@ -42,7 +42,7 @@ import math
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -60,9 +60,11 @@ from bridge.endpoint import (
     wait,
 )
 from bridge.flight import Flight
+from bridge.guard import Rejections, odometry_problem
 from bridge.link import LinkImpairment
 from bridge.linkends import ControllerEnd
 from bridge.runlog import REF_COLUMNS, LineWriter
+from bridge.signing import Signing
 from bridge.wire import command_to_wire, odometry_to_state, step_of_usec
 from controller.link_guard import LinkGuard
 
@@ -93,6 +95,7 @@ class OffboardConfig:
     vehicle_timeout_s: float = 2.0  # s of wall time without any message: the vehicle is lost
     spin_s: float = 0.0002  # as the vehicle's (bridge.vehicle.VehicleConfig.spin_s)
     timesync_s: float = 0.5
+    key: bytes | None = field(default=None, repr=False)  # MAVLink 2 signing key (never shown)
 
 
 class Offboard:
@@ -119,7 +122,10 @@ class Offboard:
         self.actuation = flight.profile.actuation
         self._status = status or (lambda line: None)
         self.tlog = Tlog(out / "controller.tlog") if out is not None else None
-        self.ep = Endpoint(cfg.vehicle, sysid=cfg.sysid, compid=cfg.compid, tlog=self.tlog, name="--vehicle")
+        self.rejected = Rejections()  # what the receive path refused (bridge.guard)
+        self.ep = Endpoint(cfg.vehicle, sysid=cfg.sysid, compid=cfg.compid, tlog=self.tlog, name="--vehicle",
+                           signing=Signing(cfg.key) if cfg.key is not None else None, rejected=self.rejected)
+        self._odo_usec = -1  # time_usec of the newest state accepted: an older one is stale
         self.rows = (LineWriter(out / "controller.csv", ",".join(CONTROLLER_COLUMNS), batch=1)
                      if out is not None else None)
         self.stopping = False
@@ -456,11 +462,16 @@ class Offboard:
         """Any message from the link (ODOMETRY is kept for the flight loop, newest only)."""
         src = m.get_srcSystem()
         kind = m._type
-        if kind == "ODOMETRY":
-            if src == self.vsys:
-                self.states += 1
-                self._odo = m
-                self._odo_recv = self._last_rx = time.monotonic()
+        if kind == "ODOMETRY":  # checked before the law sees it (bridge.guard)
+            why = ("sender" if src != self.vsys else "stale" if m.time_usec < self._odo_usec
+                   else odometry_problem(m))
+            if why:
+                self.rejected.add(why, True)
+                return
+            self._odo_usec = m.time_usec
+            self.states += 1
+            self._odo = m
+            self._odo_recv = self._last_rx = time.monotonic()
             return
         if kind == "HEARTBEAT":
             if m.autopilot == mavlink.MAV_AUTOPILOT_INVALID or m.type == mavlink.MAV_TYPE_GCS:
@@ -534,6 +545,9 @@ class Offboard:
         if now >= self._next_ts and self.vsys is not None:
             self._next_ts = now + self.cfg.timesync_s
             self.ep.send(mavlink.MAVLink_timesync_message(0, time.monotonic_ns()))
+        refused = self.rejected.report(now)
+        if refused is not None:
+            self._status(f"warning {refused}")
         if self.tlog is not None:
             self.tlog.flush()
         # no TIMESYNC before a vehicle is known: its due time must not hold the loop awake
@@ -556,7 +570,8 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
     outcome = node.run()
     emit("stats " + json.dumps({"commands": node.commands, "states": node.states, "received": node.ep.received,
                                 "sent": node.ep.sent, "stale_ticks": node.stale_ticks, "overruns": node.overruns,
-                                "down": node.cend.down.stats.summary() if cfg.clock == "lockstep" else None}))
+                                "down": node.cend.down.stats.summary() if cfg.clock == "lockstep" else None,
+                                "rejected": node.rejected}))
     emit(f"done outcome={outcome}" + (f" reason={node.reason}" if node.reason else ""))
     if outcome != "completed":
         sys.stderr.write(f"bsst controller: {outcome}" + (f": {node.reason}" if node.reason else "") + "\n")
