@@ -1,0 +1,142 @@
+"""The link model in the MAVLink SITL: real processes over real UDP on 127.0.0.1, no mocks.
+
+Lockstep applies the mission's ``[link]`` model in simulation time to what crossed the
+socket (the offline loop's ends), so it must give the offline loop's trace and link
+statistics; real time puts ``bsst relay`` between the two processes. Waits are on events
+with deadlines (a session's end, a process's exit), never sleeps.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bridge.cli import main
+from bridge.loop import simulate
+from bridge.runlog import TRACE_COLUMNS, read_trace
+from bridge.session import instance_slot, sitl
+from missions import MISSION_DIR, Mission, Sine, load_mission
+from tests.sitlkit import ENV, ROOT
+
+SINE = MISSION_DIR / "sine.toml"
+# every kind of impairment at once, on both directions; the fates come from the mission's seed
+BAD = {"delay_ms": 4.0, "jitter_ms": 3.0, "loss_pct": 10.0, "burst_len": 2.0, "dup_pct": 5.0, "reorder_pct": 5.0}
+LINK_KEYS = ("sent", "delivered", "lost", "duplicated", "reordered", "delay_ms")
+
+
+def _worst(a: dict, b: dict) -> float:
+    """Largest position difference (m) between two traces of the same steps."""
+    assert np.array_equal(a["t"], b["t"])
+    return max(float(np.max(np.abs(a[c] - b[c]))) for c in ("x", "y", "z"))
+
+
+@pytest.fixture(scope="module")
+def bad_link(tmp_path_factory: pytest.TempPathFactory) -> tuple[object, object]:
+    """``missions/sine.toml`` through the bad link: lockstep SITL (run directory kept) and offline."""
+    out = tmp_path_factory.mktemp("sitl_link") / "a"
+    return sitl(SINE, out=out, plots=False, instance=None, link=BAD), simulate(SINE, plots=False, link=BAD)
+
+
+def test_lockstep_agrees_with_offline_under_impairment(bad_link) -> None:
+    run, off = bad_link
+    assert run.outcome == off.outcome == "completed" and run.summary["clock"] == "lockstep"
+    assert _worst(run.trace, off.trace) < 1e-4  # in fact ~1e-5 m: the float32 wire only
+    age, age_off = run.trace["state_age_s"], off.trace["state_age_s"]
+    assert np.array_equal(np.isnan(age), np.isnan(age_off)) and np.isnan(age).any()  # steps without a command
+    assert np.array_equal(age, age_off, equal_nan=True) and np.nanmax(age) > 0.004  # the same state ages
+    link, link_off = run.summary["link"], off.summary["link"]
+    for d in ("up", "down"):  # the model's statistics are exact, and the same packets met the same fates
+        assert {k: link[d][k] for k in LINK_KEYS} == {k: link_off[d][k] for k in LINK_KEYS}
+        assert link[d]["lost"] > 0 and link[d]["duplicated"] > 0 and link[d]["reordered"] > 0
+        assert set(link[d]["delay_ms"]) == {"p50", "p95", "p99", "max"} and link[d]["delay_ms"]["max"] > 4.0
+    assert link["rejected"] == link_off["rejected"] and link["rejected"]["out_of_order"] > 0
+    on_disk = json.loads((run.path / "summary.json").read_text())
+    assert on_disk["link"]["up"]["sent"] == link["up"]["sent"]
+    trace = read_trace(run.path / "trace.csv")
+    assert list(trace) == list(TRACE_COLUMNS) and "state_age_s" in trace
+
+
+def test_same_seed_same_trace_different_seed_different(bad_link, tmp_path: Path) -> None:
+    a = bad_link[0]
+    b = sitl(SINE, out=tmp_path / "b", plots=False, instance=None, link=BAD)
+    c = sitl(SINE, out=tmp_path / "c", plots=False, instance=None, link={**BAD, "seed": 1})
+    ta, tb, tc = ((r.path / "trace.csv").read_bytes() for r in (a, b, c))
+    assert ta == tb
+    assert ta != tc
+    assert c.summary["link"]["up"]["lost"] != a.summary["link"]["up"]["lost"]
+
+
+def test_short_blackout_rides_through_as_offline() -> None:
+    m = replace(load_mission(SINE), duration_s=17.0)
+    link = {"blackouts": [[15.0, 0.3]]}
+    run = sitl(m, plots=False, instance=None, link=link)
+    off = simulate(m, plots=False, link=link)
+    assert run.outcome == "completed"
+    assert _worst(run.trace, off.trace) < 1e-4
+    ev = {e["kind"]: e["t"] for e in run.summary["events"]}
+    assert "failsafe" not in ev
+    assert ev["blackout"] == 15.0 and ev["link_stale"] == 15.048 and ev["link_lost"] == 15.248
+    assert ev["link_restored"] == 15.3
+    assert np.nanmax(run.trace["state_age_s"]) < 0.25  # no command on a state older than stop_ms
+
+
+def test_long_blackout_failsafe_descends_disarms_exit_1(tmp_path: Path) -> None:
+    """``bsst sitl --blackout 3:2`` on an 8 s sine: the vehicle's failsafe 0.5 s (+ one step)
+    after the blackout starts, it descends and disarms on the ground, exit status 1, outcome
+    ``failsafe``, and every process ends by itself, none crashes."""
+    mission = tmp_path / "sine8.toml"
+    mission.write_text('name = "sine8"\nduration_s = 8.0\n[trajectory]\nkind = "sine"\n')
+    out = tmp_path / "run"
+    with instance_slot() as n:
+        p = subprocess.run([sys.executable, "-m", "bridge", "sitl", str(mission), "--instance", str(n), "--out",
+                            str(out), "--no-plots", "--blackout", "3:2"], cwd=ROOT, env=ENV, capture_output=True,
+                           text=True, timeout=120)
+    assert p.returncode == 1, p.stderr
+    assert "outcome: failsafe" in p.stdout
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["outcome"] == "failsafe"
+    assert summary["sitl"]["died"] is None
+    assert summary["sitl"]["vehicle_exit"] == "exited with status 0"
+    assert summary["sitl"]["controller_exit"] == "exited with status 1"  # its outcome, not a crash
+    for log in ("vehicle.log", "controller.log"):
+        assert "Traceback" not in (out / log).read_text()
+    vehicle = {e["kind"]: e["t"] for e in summary["events"] if e["source"] == "vehicle"}
+    assert 3.0 + 0.5 <= vehicle["failsafe"] <= 3.0 + 0.5 + 1 / 250 + 1e-9
+    assert vehicle["disarmed"] > vehicle["failsafe"]
+    assert summary["link"]["up"]["lost_by"]["blackout"] > 0 and summary["link"]["down"]["lost_by"]["blackout"] == 500
+    tr = read_trace(out / "trace.csv")
+    t, z = tr["t"], tr["z"]
+    assert len(t) == 2000  # the step clock ran on to the mission's end
+    falling = (t > vehicle["failsafe"] + 0.2) & (t < vehicle["disarmed"])
+    assert np.all(np.diff(z[falling]) <= 1e-9) and z[falling][0] - z[falling][-1] > 0.3  # from 0.34 m
+    assert z[t > vehicle["disarmed"] + 0.1].max() == 0.0  # at rest on the ground
+    log = (out / "events.log").read_text()
+    assert "blackout" in log and "failsafe: no actuator target" in log and "landed: disarmed" in log
+
+
+def test_realtime_through_the_relay_measures_20ms_each_way(tmp_path: Path) -> None:
+    run = sitl(Mission(Sine(), duration_s=3.0, name="sine3"), realtime=True, out=tmp_path / "rt", plots=False,
+               instance=None, link={"delay_ms": 20.0})
+    assert run.outcome == "completed" and run.summary["clock"] == "realtime"
+    assert (tmp_path / "rt" / "relay.json").stat().st_size > 0
+    assert any(e["kind"] == "started" and e["text"].startswith("relay pid") for e in run.summary["events"])
+    for d in ("up", "down"):
+        link = run.summary["link"][d]
+        assert abs(link["delay_ms"]["p50"] - 20.0) <= 2.0, (d, link["delay_ms"])  # end to end, both sides' stamps
+        assert link["model_delay_ms"]["p50"] == pytest.approx(20.0)
+        assert link["relay_added_ms"]["p50"] >= 20.0
+        assert link["sent"] > 700 and link["lost"] == 0
+
+
+@pytest.mark.parametrize(("flag", "value"), [("--delay", "-1"), ("--loss", "120"), ("--blackout", "3"),
+                                             ("--up-jitter", "x")])
+def test_bad_link_flag_is_one_line_exit_2(flag: str, value: str, capsys) -> None:
+    assert main(["sitl", str(SINE), flag, value]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and flag in err[0]
