@@ -160,11 +160,6 @@ def write_report(path: Path, rows: Sequence[Mapping[str, Any]], meta: Mapping[st
         lines.append(f"- `{a}`: {', '.join(_fmt(v) for v in vals)} {UNITS[a]}" + (" (swept)" if a in swept else ""))
     lines += ["", "Delay, jitter, loss and burst length apply to both link directions "
               "(up: controller -> vehicle, down: vehicle -> controller).", ""]
-    ignored = [r for r in rows if r["outcome"] != "error" and not r.get("up_sent") and not r.get("down_sent")
-               and any(r[a] for a in ("delay_ms", "jitter_ms", "loss_pct"))]
-    if ignored:
-        lines += [f"**Warning:** {len(ignored)} runs with a link impairment configured report no link traffic "
-                  "(`up_sent` = `down_sent` = 0): those flights did not apply the link model.", ""]
     lines += ["## Classes", ""] + thresholds_text(classes)
     lines += ["", "A table cell gathers every run with its two values (all seeds, and every value of the "
               "parameters not in the table): it shows the worst class (with how many runs have it, when not all) "

@@ -25,7 +25,6 @@ Scripting::
 from __future__ import annotations
 
 import csv
-import fcntl
 import io
 import json
 import math
@@ -33,7 +32,6 @@ import multiprocessing as mp
 import os
 import signal
 import sys
-import tempfile
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -63,7 +61,6 @@ LINK_DEFAULTS = {"delay_ms": 0.0, "jitter_ms": 0.0, "loss_pct": 0.0, "burst_len"
 RANGES = {"rate_hz": (50.0, 1000.0), "delay_ms": (0.0, 10000.0), "jitter_ms": (0.0, 10000.0),
           "loss_pct": (0.0, 100.0), "burst_len": (0.0, 1e6)}
 MODES = ("offline", "lockstep")
-MAX_INSTANCES = 10  # DESIGN.md section 4: instance N in 0..9
 
 COLUMNS = (
     "controller", "rate_hz", "delay_ms", "jitter_ms", "loss_pct", "burst_len", "seed",
@@ -302,42 +299,12 @@ def lockstep_available() -> bool:
 
 
 def _fly_lockstep(mission: Mission) -> Run:
-    """Fly with the full SITL processes in lockstep, on a free ``--instance`` port set."""
-    from bridge.session import sitl  # type: ignore[attr-defined]
+    """Fly with the full SITL processes in lockstep (the link model applied in simulation
+    time, as offline), on an ``--instance`` port set held exclusively while it flies."""
+    from bridge.session import instance_slot, sitl
 
-    with _instance_slot() as instance:
+    with instance_slot() as instance:
         return sitl(mission, realtime=False, instance=instance, plots=False)
-
-
-class _instance_slot:
-    """Hold an exclusive lock on one SITL instance number (0-9) of this machine.
-
-    An advisory ``flock`` on ``<tmp>/bsst-instance-N.lock``, so cells running side by side
-    (in one pool, several sweeps, or Dask workers) never share ports.
-    """
-
-    def __enter__(self) -> int:
-        deadline = time.monotonic() + 600.0
-        while True:
-            for n in range(MAX_INSTANCES):
-                fd = os.open(os.path.join(tempfile.gettempdir(), f"bsst-instance-{n}.lock"), os.O_RDWR | os.O_CREAT,
-                             0o644)
-                try:
-                    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                except BlockingIOError:
-                    os.close(fd)
-                    continue
-                self._fd = fd
-                return n
-            if time.monotonic() > deadline:
-                raise RuntimeError(f"no free SITL instance (0-{MAX_INSTANCES - 1}) within 600 s")
-            fd = os.open(os.path.join(tempfile.gettempdir(), "bsst-instance-0.lock"), os.O_RDWR | os.O_CREAT, 0o644)
-            fcntl.flock(fd, fcntl.LOCK_EX)  # block until instance 0 frees, then scan again
-            fcntl.flock(fd, fcntl.LOCK_UN)
-            os.close(fd)
-
-    def __exit__(self, *exc: object) -> None:
-        os.close(self._fd)  # closing releases the lock
 
 
 # ----------------------------------------------------------------------------- cells.csv

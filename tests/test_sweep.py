@@ -270,10 +270,16 @@ def test_lockstep_cells(tmp_path: Path) -> None:
     if not lockstep_available():
         pytest.skip("no SITL launcher (bridge.session.sitl) in this build: test_lockstep_flag covers --lockstep")
     m = SHORT.with_overrides(duration_s=3.0)
-    rows = sweep(m, Grid(loss_pct=(0.0, 20.0)), jobs=2, mode="lockstep", out=tmp_path / "l")
+    grid = Grid(loss_pct=(0.0, 20.0))
+    rows = sweep(m, grid, jobs=2, mode="lockstep", out=tmp_path / "l")
     assert [r["outcome"] for r in rows] == ["completed", "completed"], rows
-    offline = simulate(m).rms
-    assert abs(rows[0]["rms"] - offline) <= 1e-4  # DESIGN: lockstep and offline agree
+    offline = sweep(m, grid, jobs=1)
+    for lock, off in zip(rows, offline, strict=True):  # DESIGN: lockstep and offline agree, impaired too
+        assert abs(lock["rms"] - off["rms"]) <= 1e-4
+        assert [lock[k] for k in ("up_sent", "up_lost", "down_sent", "down_lost")] == \
+            [off[k] for k in ("up_sent", "up_lost", "down_sent", "down_lost")]
+    assert rows[1]["up_lost"] > 0 and rows[1]["down_lost"] > 0  # the 20 % cell really lost packets
+    assert "Warning" not in (tmp_path / "l" / "report.md").read_text()
 
 
 def test_run_cell_and_classes() -> None:
