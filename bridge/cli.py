@@ -403,6 +403,7 @@ def add_sitl_commands(sub: Any) -> None:
                    help="fly only this vehicle (default: the first autopilot heard)")
     p.add_argument("--timeout", type=positive_float("--timeout", 0.0, 3600.0), default=10.0, metavar="S",
                    help="wait this long for the vehicle's heartbeat (default 10 s)")
+    add_key_option(p)
     p.set_defaults(func=cmd_controller)
 
     p = sub.add_parser("sitl", help="fly a mission as SITL: vehicle and controller processes over MAVLink/UDP")
@@ -427,6 +428,15 @@ def _add_port_options(p: argparse.ArgumentParser, vehicle: bool) -> None:
     p.set_defaults(realtime=False)
     p.add_argument("--speed", type=positive_float("--speed", 0.0, 1000.0), metavar="X",
                    help="lockstep: at most X times real time; also the pace after the controller is lost (default 1)")
+    add_key_option(p)
+
+
+def add_key_option(p: argparse.ArgumentParser) -> None:
+    """``--key FILE``: MAVLink 2 signing (bridge.signing); the key is read from the file, never given on
+    the command line, so it never shows in ``ps``."""
+    p.add_argument("--key", metavar="FILE", help="sign every frame and accept only frames signed with this key: "
+                                                 "a 32-byte file or a passphrase (hashed with SHA-256, as "
+                                                 "MAVProxy does); not readable by others")
 
 
 def _ids(text: str) -> tuple[int, int]:
@@ -469,7 +479,7 @@ def cmd_sitl(args: argparse.Namespace) -> int:
     run = sitl(args.mission, out=args.out, write=True, overwrite=args.overwrite, plots=not args.no_plots,
                profile=args.profile, controller=args.controller, rate_hz=args.rate, seed=args.seed,
                realtime=args.realtime, instance=args.instance, gcs=args.gcs, speed=args.speed, live=True,
-               link=link_table_from_args(args))
+               link=link_table_from_args(args), key=args.key)
     print_summary(run.summary, run.path)
     return EXIT_OK if run.outcome == "completed" else EXIT_FAILED
 

@@ -50,6 +50,13 @@ def run_dir(out: str | Path | None, mission_name: str, overwrite: bool = False, 
         raise ConfigError(f"--out {path}: exists and is not a directory")
     if path.is_dir() and any(path.iterdir()) and not overwrite:
         raise ConfigError(f"--out {path}: directory is not empty (use --overwrite to replace its run)")
+    # an overwritten run's summary goes first: until the new one is written whole there is none,
+    # never one of another run beside this run's files
+    for old in (path.glob("summary.json") if path.is_dir() else ()):
+        try:
+            old.unlink()
+        except OSError as exc:
+            raise ConfigError(f"--out {path}: cannot replace {old.name} ({exc.strerror})") from None
     try:
         path.mkdir(parents=True, exist_ok=True)
         (path / "plots").mkdir(exist_ok=True)
@@ -108,11 +115,16 @@ class EventLog(LineWriter):
 
 def write_json_atomic(path: str | Path, obj: Any) -> None:
     """Write JSON to ``path`` via a temporary file and rename: complete or absent."""
+    write_text_atomic(path, json.dumps(obj, indent=2, allow_nan=False, default=_jsonable) + "\n")
+
+
+def write_text_atomic(path: str | Path, text: str) -> None:
+    """Write ``text`` to ``path`` via a temporary file (flushed to disk) and rename: whatever
+    kills the process, ``path`` is the old file, the new one complete, or absent."""
     path = Path(path)
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
     with open(tmp, "w") as f:
-        json.dump(obj, f, indent=2, allow_nan=False, default=_jsonable)
-        f.write("\n")
+        f.write(text)
         f.flush()
         os.fsync(f.fileno())
     os.replace(tmp, path)

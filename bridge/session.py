@@ -54,7 +54,17 @@ from bridge.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, GCS_PORT, LINK_
 from bridge.flight import Flight, prepare
 from bridge.metrics import summarise
 from bridge.process import die_with_parent, parse_status
-from bridge.runlog import TRACE_COLUMNS, EventLog, Run, TraceWriter, finish_run, run_dir, trace_arrays
+from bridge.runlog import (
+    TRACE_COLUMNS,
+    EventLog,
+    Run,
+    TraceWriter,
+    finish_run,
+    run_dir,
+    trace_arrays,
+    write_text_atomic,
+)
+from bridge.signing import key_from_file
 from missions import Mission, Setpoint, Step
 from params import ConfigError, dump_toml
 
@@ -88,6 +98,7 @@ def sitl(
     progress: Progress | None = None,
     live: bool = False,
     link: Mapping[str, Any] | None = None,
+    key: str | Path | None = None,
 ) -> Run:
     """Fly a mission as a SITL session (vehicle and controller processes over UDP).
 
@@ -98,8 +109,12 @@ def sitl(
     a free port and no GCS link. ``gcs`` (``HOST:PORT`` or ``"none"``) overrides the GCS
     address. ``speed`` caps lockstep at that many times real time. ``live`` prints a
     progress line on stderr (when it is a terminal). ``link`` is laid over the mission's
-    ``[link]`` table, as for :func:`bridge.loop.simulate`.
+    ``[link]`` table, as for :func:`bridge.loop.simulate`. ``key`` is a MAVLink 2 signing key
+    file (:func:`bridge.signing.key_from_file`): both sides sign everything they send and
+    accept only what is signed with it; only the file's path is passed on.
     """
+    if key is not None:
+        key_from_file(key)  # a missing, empty or world-readable key file is bad input, before anything starts
     flight = prepare(mission, profile=profile, controller=controller, rate_hz=rate_hz, seed=seed, link=link)
     if instance is not None and not (isinstance(instance, int) and 0 <= instance <= 9):
         raise ConfigError(f"--instance must be in [0, 9], got {instance!r}")
@@ -115,7 +130,7 @@ def sitl(
     path = run_dir(out, flight.mission.name, overwrite) if keep else Path(tempfile.mkdtemp(prefix="bsst-sitl-"))
     try:
         s = Session(flight, path, realtime=realtime, instance=instance, gcs=gcs_text, speed=speed,
-                    progress=progress, live=live)
+                    progress=progress, live=live, key=Path(key) if key is not None else None)
         return s.run(plots=plots and keep, keep=keep)
     finally:
         if not keep:
@@ -347,8 +362,9 @@ class Session:
     """One SITL session in a run directory; :meth:`run` flies it."""
 
     def __init__(self, flight: Flight, path: Path, *, realtime: bool, instance: int | None, gcs: str | None,
-                 speed: float | None, progress: Progress | None, live: bool) -> None:
+                 speed: float | None, progress: Progress | None, live: bool, key: Path | None = None) -> None:
         self.flight = flight
+        self.key = key  # the signing key file (its path only) both children get as --key
         self.path = path
         self.realtime = realtime
         self.instance = instance
@@ -373,7 +389,7 @@ class Session:
     # -- the whole session ---------------------------------------------------------------------
     def run(self, plots: bool, keep: bool) -> Run:
         m = self.flight.mission
-        (self.path / "mission.toml").write_text(dump_toml(m.to_dict()))
+        write_text_atomic(self.path / "mission.toml", dump_toml(m.to_dict()))
         self._event_log = EventLog(self.path / "events.log")
         trace = TraceWriter(self.path / "trace.csv")
         self.joiner = TraceJoiner(self.path, self.flight, trace, lockstep=not self.realtime)
@@ -406,7 +422,7 @@ class Session:
         summary["timing"] = self._timing_block(wall)
         summary["sitl"] = {
             "instance": self.instance, "listen": self.listen, "gcs": self.gcs, "sysid": self.sysid,
-            "speed": self.speed, "died": self.died,
+            "speed": self.speed, "died": self.died, "signed": self.key is not None,
             "vehicle_exit": self.vehicle.exit_text() if self.vehicle else None,
             "controller_exit": self.controller.exit_text() if self.controller else None,
         }
@@ -441,7 +457,8 @@ class Session:
                 "--out", str(self.path), "--overwrite"]
         if self.speed is not None:
             argv += ["--speed", repr(self.speed)]
-        self.vehicle = Child("vehicle", argv, self.path / "vehicle.log")
+        keyarg = ["--key", str(self.key)] if self.key is not None else []
+        self.vehicle = Child("vehicle", argv + keyarg, self.path / "vehicle.log")
         ready = self._wait_ready(self.vehicle)
         port = ready.get("listen", self.listen).rpartition(":")[2]
         self.listen = f"127.0.0.1:{port}"  # the port bound, also when it was chosen free
@@ -457,7 +474,7 @@ class Session:
                 "--out", str(self.path), "--overwrite"]
         if self.realtime:
             argv.append("--realtime")
-        self.controller = Child("controller", argv, self.path / "controller.log")
+        self.controller = Child("controller", argv + keyarg, self.path / "controller.log")
         self._wait_ready(self.controller)
         self._note("started", f"controller pid {self.controller.pid}", "session")
 
@@ -643,7 +660,11 @@ class Session:
         j = self.joiner
         vs = self.vehicle.stats if self.vehicle else {}
         cs = self.controller.stats if self.controller else {}
-        rejected = dict(vs.get("rejected", {}))
+        # what each side's receive path refused (bridge.guard), and all of it by reason
+        by = {"vehicle": dict(vs.get("rejected", {})), "controller": dict(cs.get("rejected", {}))}
+        rejected = {r: by["vehicle"].get(r, 0) + by["controller"].get(r, 0)
+                    for r in sorted(set(by["vehicle"]) | set(by["controller"]))}
+        own = int(vs.get("rejected_from_controller", sum(by["vehicle"].values())))  # of the controller's datagrams
         measured = {"up": stats(j.up_ms), "down": stats(j.down_ms)}
         relay = self._relay_stats()
         model = {"up": vs.get("up"), "down": cs.get("down")}
@@ -653,7 +674,7 @@ class Session:
         down_delivered = int(cs.get("states", len(j.ctl)))  # a killed controller left no stats: its rows
         sides = {
             "up": {"sent": up_sent, "delivered": up_delivered,
-                   "lost": max(0, up_sent - up_delivered - sum(rejected.values())), "duplicated": 0,
+                   "lost": max(0, up_sent - up_delivered - own), "duplicated": 0,
                    "reordered": int(rejected.get("reordered", 0))},
             "down": {"sent": down_sent, "delivered": down_delivered, "lost": max(0, down_sent - down_delivered),
                      "duplicated": 0, "reordered": 0},
@@ -670,6 +691,7 @@ class Session:
             else:
                 out[d] = {**sides[d], "delay_ms": measured[d]}
         out["rejected"] = rejected
+        out["rejected_by"] = by
         return out
 
     def _relay_stats(self) -> dict[str, Any] | None:
@@ -771,7 +793,7 @@ def vehicle_from_args(args: Any) -> int:
     sysid, compid = args.controller_id or (CONTROLLER_SYSID, CONTROLLER_COMPID)
     cfg = VehicleConfig(listen, gcs, sysid=args.sysid or n + 1, controller_sysid=sysid, controller_compid=compid,
                         clock="realtime" if args.realtime else "lockstep", speed=args.speed,
-                        home=Home(*args.home) if args.home else Home())
+                        home=Home(*args.home) if args.home else Home(), key=_key(args))
     return run_vehicle(flight, cfg, args.out, args.overwrite)
 
 
@@ -785,5 +807,10 @@ def controller_from_args(args: Any) -> int:
     if vehicle.mode != "udpout":
         raise ConfigError(f"--vehicle {args.vehicle!r}: the controller sends to the vehicle (udpout)")
     cfg = OffboardConfig(vehicle, sysid=args.sysid, clock="realtime" if args.realtime else "lockstep",
-                         target_sysid=args.target_sysid, connect_timeout_s=args.timeout)
+                         target_sysid=args.target_sysid, connect_timeout_s=args.timeout, key=_key(args))
     return run_controller(flight, cfg, args.out, args.overwrite)
+
+
+def _key(args: Any) -> bytes | None:
+    """The signing key of ``--key FILE``, if given (ConfigError: exit 2, naming the file)."""
+    return key_from_file(args.key) if getattr(args, "key", None) else None

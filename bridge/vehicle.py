@@ -678,5 +678,6 @@ def run_vehicle(flight: Flight, cfg: VehicleConfig, out: str | Path | None = Non
     v.run()
     emit("stats " + json.dumps({"accepted": v.accepted, "rejected": v.rejected, "odometry_sent": v.odometry_sent,
                                 "received": v.link.received, "overruns": v.overruns, "steps": v.k,
+                                "rejected_from_controller": v.rejected.from_peer,
                                 "up": v.vend.up.stats.summary() if cfg.clock == "lockstep" else None}))
     return 0
