@@ -692,6 +692,8 @@ class Session:
                 out[d] = {**sides[d], "delay_ms": measured[d]}
         out["rejected"] = rejected
         out["rejected_by"] = by
+        # of those, how many came from the other side itself (not from third parties on the link)
+        out["rejected_from_peer"] = {"vehicle": own, "controller": sum(by["controller"].values())}
         return out
 
     def _relay_stats(self) -> dict[str, Any] | None:
