@@ -190,6 +190,9 @@ def add_relay_command(sub: Any) -> None:
     p.add_argument("--duration", type=positive_float("--duration", 0.0, 1e7), metavar="S",
                    help="stop after S seconds (default: until SIGINT/SIGTERM)")
     p.add_argument("--stats", metavar="FILE", help="write the statistics to FILE as JSON on exit")
+    p.add_argument("--mission-clock", action="store_true",
+                   help="blackout times count from the flight's time 0 (the first actuator target up, less the "
+                        "down delay) instead of the relay's start")
     add_link_options(p)
     p.set_defaults(func=cmd_relay)
 

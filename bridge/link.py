@@ -420,6 +420,11 @@ class LinkImpairment:
     def in_blackout(self, t: float) -> bool:
         return any(a <= t < b for a, b in self._windows)
 
+    def shift_blackouts(self, offset_s: float) -> None:
+        """Put the scheduled blackout windows at ``offset_s`` + their start on this model's
+        clock (s): for a real-time driver whose clock started before the flight's time 0."""
+        self._windows = tuple((s + offset_s, s + d + offset_s) for s, d in self.cfg.blackouts)
+
     def send(self, t: float, size: int, payload: Any = None) -> int:
         """Put a packet of ``size`` bytes on the link at time t (s); returns its number."""
         st = self.stats

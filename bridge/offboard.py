@@ -117,7 +117,10 @@ class Offboard:
         self._blackouts = flight.blackout_notes()
         self._noted = 0  # guard events already reported
         self._u = self._wire = (0.0, 0.0, 0.0, 0.0)  # the last command sent: demanded, on the wire (as offline)
-        self.failsafe_seen = False  # the vehicle reported its failsafe (CRITICAL while armed)
+        self.failsafe_seen = False  # the vehicle reported its failsafe (CRITICAL since we armed it)
+        # a scheduled blackout of the real wire (the relay) silences the vehicle: wait that much longer
+        self._silence_s = cfg.vehicle_timeout_s + max(
+            (d for _, d in flight.link.up.blackouts + flight.link.down.blackouts), default=0.0)
         self._sample = m.trajectory.sample
         self.actuation = flight.profile.actuation
         self._status = status or (lambda line: None)
@@ -486,8 +489,10 @@ class Offboard:
             self.vehicle_state = m.system_status
             if self.vehicle_armed:
                 self.armed_seen = True
-                if m.system_status == mavlink.MAV_STATE_CRITICAL:
-                    self.failsafe_seen = True
+            if self.armed_seen and m.system_status == mavlink.MAV_STATE_CRITICAL:
+                # armed: flying its failsafe; disarmed: landed by it (on a real link the armed
+                # CRITICAL heartbeat may have been lost), or halted by divergence
+                self.failsafe_seen = True
             return
         if src != self.vsys:
             return
@@ -522,7 +527,7 @@ class Offboard:
         """The outcome if the vehicle is lost to the flight (silent, no more states, disarmed
         other than by its failsafe), else None. Its failsafe alone does not end the flight."""
         now = time.monotonic()
-        timeout = self.cfg.vehicle_timeout_s
+        timeout = self._silence_s
         if now - self._last_rx > timeout:
             self.reason = f"vehicle silent for {timeout:g} s"
         elif self.armed_seen and not self.vehicle_armed and not self.failsafe_seen:

@@ -9,7 +9,10 @@ Datagrams that arrive on the listen port travel ``up`` (``listen_direction="down
 the names) and leave from the back socket to the target; whatever the target sends back
 to the back socket travels the other way, to the last address the front heard from. Each
 direction has its own :class:`bridge.link.LinkImpairment`, driven with the seconds since
-the relay started (so blackouts are in relay time). Datagrams pass unchanged; the relay
+the relay started (so blackouts are in relay time; with ``mission_clock`` they are in the
+flight's time instead: t = 0 is put at the first actuator target that arrives on the
+listen side, less the down link's configured delay, i.e. when the vehicle sent the state
+that target answers, as ``bsst sitl --realtime`` counts mission time). Datagrams pass unchanged; the relay
 stamps each one on arrival — with the kernel's receive time stamp (``SO_TIMESTAMPNS``) on
 Linux, so that the relay's own wake-up latency counts — and measures, when it hands it to
 the kernel to forward it, the delay it really added (scheduled delay + the relay's own
@@ -18,6 +21,7 @@ latency), next to the model's statistics.
 
 from __future__ import annotations
 
+import math
 import os
 import resource
 import select
@@ -30,6 +34,8 @@ from array import array
 from collections.abc import Callable
 from typing import Any
 
+from pymavlink.dialects.v20 import common as mavlink
+
 from bridge.link import LinkImpairment, LinkSettings
 
 Address = tuple[str, int]
@@ -37,6 +43,9 @@ MAX_DATAGRAM = 65_535
 _SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)  # Linux: kernel receive time, CLOCK_REALTIME
 _TIMESPEC = struct.Struct("qq")
 _ANC_SIZE = socket.CMSG_SPACE(_TIMESPEC.size)
+# actuator targets (DESIGN.md section 4): the first one up marks the flight's time 0
+_TARGET_IDS = frozenset((mavlink.MAVLINK_MSG_ID_HIL_ACTUATOR_CONTROLS,
+                         mavlink.MAVLINK_MSG_ID_SET_ACTUATOR_CONTROL_TARGET))
 
 
 def parse_address(text: str, flag: str) -> Address:
@@ -70,11 +79,17 @@ class Relay:
     """
 
     def __init__(self, listen: Address, target: Address, link: LinkSettings | None = None, *,
-                 listen_direction: str = "up", clock: Callable[[], float] = time.perf_counter) -> None:
+                 listen_direction: str = "up", clock: Callable[[], float] = time.perf_counter,
+                 mission_clock: bool = False) -> None:
         link = link or LinkSettings()
+        self.mission_clock = mission_clock
+        self.origin_s: float | None = None  # relay time (s) of the flight's time 0 (mission_clock)
         up, down = link.make()
         self.front_link, self.back_link = (up, down) if listen_direction == "up" else (down, up)
         self.links = {"up": up, "down": down}
+        if mission_clock:  # no blackout before the flight's time 0 is known
+            for lk in self.links.values():
+                lk.shift_blackouts(math.inf)
         self.target = target
         self.clock = clock
         self.front = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -155,7 +170,16 @@ class Relay:
                         now -= lag
             if from_front:
                 self.client = addr
+                if self.mission_clock and self.origin_s is None and _is_target(data):
+                    self._set_origin(now - t0)
             link.send(now - t0, len(data), (data, now))
+
+    def _set_origin(self, t: float) -> None:
+        """The first actuator target arrived at relay time t (s): the flight's time 0 is when
+        the state it answers left the vehicle, t less the down link's configured delay."""
+        self.origin_s = t - self.links["down"].cfg.delay_ms / 1000.0
+        for link in self.links.values():
+            link.shift_blackouts(self.origin_s)
 
     def _forward(self, now: float) -> None:
         t = now - self.t0
@@ -220,6 +244,7 @@ class Relay:
             s = link.stats.summary()
             s["measured_ms"] = _percentiles_ms(self.added[d])
             out[d] = s
+        out["origin_s"] = self.origin_s
         out["forwarded"] = self.forwarded
         out["dropped_no_client"] = self.dropped_no_client
         out["send_errors"] = self.send_errors
@@ -251,6 +276,11 @@ class Relay:
         self.close()
 
 
+def _is_target(data: bytes) -> bool:
+    """Whether a datagram is (starts with) a MAVLink 2 actuator target frame."""
+    return len(data) >= 10 and data[0] == 0xFD and (data[7] | data[8] << 8 | data[9] << 16) in _TARGET_IDS
+
+
 def relay_from_args(args: Any) -> int:
     """``bsst relay``: relay until SIGINT/SIGTERM or ``--duration``; print (and ``--stats``) the figures."""
     import signal
@@ -275,7 +305,8 @@ def relay_from_args(args: Any) -> int:
         base, seed, source = dict(m.link), m.seed, m.source
     settings = link_from_table(merge_link_tables(base, link_table_from_args(args)), source, seed=seed)
     try:
-        relay = Relay(listen, target, settings, listen_direction=args.listen_direction)
+        relay = Relay(listen, target, settings, listen_direction=args.listen_direction,
+                      mission_clock=args.mission_clock)
     except OSError as exc:
         raise ConfigError(f"--listen {args.listen}: cannot bind ({exc.strerror or exc})") from None
     stop = relay.stop

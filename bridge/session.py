@@ -465,8 +465,8 @@ class Session:
         self._note("started", f"vehicle pid {self.vehicle.pid}: {ready.get('_line', '')}", "session")
         if self.realtime and self.flight.link.impaired:  # the link model on the wall clock, between the two
             self.relay = Child("relay", ["relay", "--listen", "127.0.0.1:0", "--to", f"127.0.0.1:{port}",
-                                         "--mission", mission, "--stats", str(self.path / "relay.json")],
-                               self.path / "relay.log")
+                                         "--mission", mission, "--mission-clock",
+                                         "--stats", str(self.path / "relay.json")], self.path / "relay.log")
             line = self._wait_ready(self.relay, "relay:")["_line"]
             port = line.split(" -> ")[0].rpartition(":")[2]  # "listening on HOST:PORT -> ..."
             self._note("started", f"relay pid {self.relay.pid}: {line}", "session")

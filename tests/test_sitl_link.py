@@ -140,3 +140,37 @@ def test_bad_link_flag_is_one_line_exit_2(flag: str, value: str, capsys) -> None
     assert main(["sitl", str(SINE), flag, value]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and flag in err[0]
+
+
+def test_relay_mission_clock_starts_blackouts_at_the_first_target() -> None:
+    """``Relay(mission_clock=True)``: no blackout before the flight's time 0, which is the first
+    actuator target's arrival (less the down delay); then the window counts from there."""
+    import socket
+
+    from pymavlink.dialects.v20 import common as mavlink
+
+    from bridge.link import LinkConfig, LinkSettings
+    from bridge.relay import Relay
+    from tests.sitlkit import wait_for
+
+    cut = LinkConfig(blackouts=((0.0, 30.0),))
+    target = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    target.bind(("127.0.0.1", 0))
+    target.settimeout(10.0)
+    client = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        with Relay(("127.0.0.1", 0), target.getsockname(), LinkSettings(cut, cut), mission_clock=True) as relay:
+            relay.start()
+            mav = mavlink.MAVLink(None, srcSystem=200, srcComponent=191)
+            client.sendto(mavlink.MAVLink_heartbeat_message(18, 8, 0, 0, 4, 3).pack(mav), relay.address)
+            assert target.recv(300)  # relay time ~0 is inside [0, 30) s, but the flight has not begun
+            assert relay.origin_s is None
+            hil = mavlink.MAVLink_hil_actuator_controls_message(0, [0.5] * 16, 128, 0).pack(mav)
+            client.sendto(hil, relay.address)
+            up = relay.links["up"].stats
+            wait_for(lambda: up.lost_by["blackout"] == 1, 10.0, "the first target lost in the blackout")
+            assert relay.origin_s is not None and relay.origin_s >= 0.0
+            assert up.sent == 2 and up.delivered == 1
+    finally:
+        target.close()
+        client.close()
