@@ -1,0 +1,223 @@
+"""Hostile input for the tests and benchmarks of issue 7: a seeded fuzzer of datagrams that
+a vehicle must refuse, the kernel's view of a UDP socket, and a paced sender.
+
+Every datagram :class:`Fuzzer` makes must be refused by the vehicle while it flies a
+lockstep mission (armed, at a step k >= :data:`MIN_STEP`), and each kind says which reason
+it must be counted under (None: any reason, e.g. random bytes):
+
+- ``random``: random bytes, 1-300 long;
+- ``truncated``: a valid frame cut short (0 to len - 1 bytes);
+- ``bitflip``: a valid frame with one bit flipped (CRC-16 catches every single-bit error);
+- ``sender``: a valid actuator target from another system or component than the controller;
+- ``target``: a valid ARM/DISARM addressed to another system;
+- ``unknown_id``: a MAVLink 2 frame of a message id not in the dialect;
+- ``not_finite`` / ``out_of_range``: targets with the controller's ids carrying NaN/inf, or
+  values outside their range;
+- ``stale`` / ``future``: valid targets with the controller's ids for step 0 or for a step
+  far past the mission's end;
+- ``mavlink1``: valid MAVLink 1 frames;
+- ``empty``: zero-length datagrams; ``huge``: 65507-byte (the largest UDP) datagrams.
+
+Nothing it makes is ever a valid target for the step being flown, so a fuzzed lockstep
+run must give the undisturbed run's ``trace.csv``.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+import socket
+import time
+from collections import Counter
+from collections.abc import Callable
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from bridge.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID
+
+MIN_STEP = 10  # the stale targets are for step 0: fuzz only once the vehicle is past this step
+KINDS: dict[str, str | None] = {
+    "random": None, "truncated": "truncated", "bitflip": None, "sender": "sender", "target": "target",
+    "unknown_id": "unknown_id", "not_finite": "not_finite", "out_of_range": "out_of_range", "stale": "stale",
+    "future": "future", "mavlink1": "mavlink1", "empty": "truncated", "huge": "oversized",
+}
+HUGE = 65507  # bytes: the largest UDP payload over IPv4
+FUTURE_USEC = 10**12  # a step no mission reaches (11.6 days)
+
+
+class Fuzzer:
+    """Seeded hostile datagrams for a vehicle of system ``sysid`` flying ``actuation``
+    (``wrench``: SET_ACTUATOR_CONTROL_TARGET, ``motors``: HIL_ACTUATOR_CONTROLS)."""
+
+    def __init__(self, seed: int, sysid: int, actuation: str = "wrench", huge_every: int = 2000) -> None:
+        self.rng = random.Random(seed)
+        self.sysid = sysid
+        self.actuation = actuation
+        self.huge_every = huge_every
+        self.ctl = mavlink.MAVLink(None, srcSystem=CONTROLLER_SYSID, srcComponent=CONTROLLER_COMPID)
+        self.sent: Counter[str] = Counter()
+        self._kinds = [k for k in KINDS if k != "huge"]
+
+    def _pack(self, msg: object, mav: mavlink.MAVLink | None = None, v1: bool = False) -> bytes:
+        mav = mav or self.ctl
+        buf = msg.pack(mav, force_mavlink1=v1)  # type: ignore[attr-defined]
+        mav.seq = (mav.seq + 1) & 0xFF
+        return bytes(buf)
+
+    def target(self, usec: int, values: tuple[float, float, float, float], src: tuple[int, int] | None = None
+               ) -> bytes:
+        """An actuator target of the vehicle's actuation, from ``src`` (default: the controller's ids)."""
+        mav = self.ctl if src is None else mavlink.MAVLink(None, srcSystem=src[0], srcComponent=src[1])
+        if self.actuation == "wrench":
+            msg: object = mavlink.MAVLink_set_actuator_control_target_message(usec, 0, self.sysid, 1,
+                                                                              list(values) + [0.0] * 4)
+        else:
+            msg = mavlink.MAVLink_hil_actuator_controls_message(usec, list(values) + [0.0] * 12,
+                                                                mavlink.MAV_MODE_FLAG_SAFETY_ARMED, 1)
+        return self._pack(msg, mav)
+
+    def _valid(self) -> bytes:
+        """A valid frame of some kind (only ever sent damaged)."""
+        r = self.rng
+        choice = r.randrange(4)
+        if choice == 0:
+            return self.target(r.randrange(10**9), (0.0, 0.0, 0.0, 0.3))
+        if choice == 1:
+            return self._pack(mavlink.MAVLink_command_long_message(self.sysid, 1, 400, 0, 0.0, 21196.0,
+                                                                   0, 0, 0, 0, 0))  # a forced DISARM
+        if choice == 2:
+            return self._pack(mavlink.MAVLink_heartbeat_message(18, 8, 0, 0, 4, 3))
+        return self._pack(mavlink.MAVLink_timesync_message(0, r.randrange(2**62)))
+
+    def make(self, kind: str) -> bytes:
+        r = self.rng
+        self.sent[kind] += 1
+        if kind == "random":
+            return r.randbytes(r.randint(1, 300))
+        if kind == "truncated":
+            f = self._valid()
+            return f[:r.randrange(len(f))]
+        if kind == "bitflip":
+            f = bytearray(self._valid())
+            f[r.randrange(len(f))] ^= 1 << r.randrange(8)
+            return bytes(f)
+        if kind == "sender":
+            other = (r.choice([s for s in range(1, 255) if s != CONTROLLER_SYSID]), CONTROLLER_COMPID) \
+                if r.random() < 0.5 else (CONTROLLER_SYSID, r.choice([c for c in range(256) if c != CONTROLLER_COMPID]))
+            return self.target(r.randrange(10**9), (0.0, 0.0, 0.0, 0.3), other)
+        if kind == "target":
+            return self._pack(mavlink.MAVLink_command_long_message(
+                r.choice([s for s in range(1, 255) if s != self.sysid]), 1, 400, 0, float(r.randrange(2)), 21196.0,
+                0, 0, 0, 0, 0))
+        if kind == "unknown_id":
+            n = r.randint(1, 40)
+            mid = r.choice([42000, 50001, 0xFFFFFF, 12345])
+            head = bytes((0xFD, n, 0, 0, r.randrange(256), 1, 1, mid & 0xFF, (mid >> 8) & 0xFF, mid >> 16))
+            return head + r.randbytes(n + 2)
+        if kind == "not_finite":
+            bad = r.choice([math.nan, math.inf, -math.inf])
+            v = [0.0, 0.0, 0.0, 0.3]
+            v[r.randrange(4)] = bad
+            return self.target(r.randrange(10**9), tuple(v))  # type: ignore[arg-type]
+        if kind == "out_of_range":
+            v = [0.0, 0.0, 0.0, 0.3]
+            i = r.randrange(4)
+            if self.actuation == "wrench" and i < 3:  # roll, pitch, yaw in [-1, 1]
+                v[i] = r.choice([-1.5, 1.5, 7.0])
+            else:  # thrust, motors in [0, 1]
+                v[i] = r.choice([-0.1, 1.2, 7.0])
+            return self.target(r.randrange(10**9), tuple(v))  # type: ignore[arg-type]
+        if kind == "stale":
+            return self.target(0, (0.0, 0.0, 0.0, 0.3))
+        if kind == "future":
+            return self.target(FUTURE_USEC + r.randrange(10**6), (0.0, 0.0, 0.0, 0.3))
+        if kind == "mavlink1":
+            mav = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+            return self._pack(mavlink.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3), mav, v1=True)
+        if kind == "empty":
+            return b""
+        if kind == "huge":
+            return r.randbytes(HUGE)
+        raise ValueError(kind)
+
+    def next(self, i: int) -> bytes:
+        """The i-th datagram of a burst: a 64 KiB one every ``huge_every``, else a random kind."""
+        if self.huge_every and i % self.huge_every == self.huge_every - 1:
+            return self.make("huge")
+        return self.make(self.rng.choice(self._kinds))
+
+    def expected(self) -> Counter[str]:
+        """The least count of each reason the refusals must show (kinds with a known reason)."""
+        out: Counter[str] = Counter()
+        for kind, n in self.sent.items():
+            reason = KINDS[kind]
+            if reason is not None:
+                out[reason] += n
+        return out
+
+
+def udp_queue(port: int) -> tuple[int, int] | None:
+    """The kernel's receive queue (bytes) and drop count of the UDP socket bound to
+    127.0.0.1:``port`` (``/proc/net/udp``), or None when there is none."""
+    want = f"0100007F:{port:04X}"
+    try:
+        with open("/proc/net/udp") as f:
+            next(f)
+            for line in f:
+                parts = line.split()
+                if parts[1] == want:
+                    return int(parts[4].split(":")[1], 16), int(parts[-1])
+    except OSError:
+        return None
+    return None
+
+
+def wait_until(pred: Callable[[], bool], timeout: float, what: str, poll_s: float = 0.001) -> None:
+    """Poll ``pred`` until it holds, or fail naming ``what`` (every ``poll_s``)."""
+    deadline = time.monotonic() + timeout
+    while not pred():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"{what}: not within {timeout} s")
+        time.sleep(poll_s)
+
+
+class Sender:
+    """Sends datagrams to 127.0.0.1:``port`` from ``sources`` sockets in turn (each its own
+    source address, so none exceeds the vehicle's per-source rate), pacing on the kernel's
+    receive queue of the target so that nothing is dropped before the vehicle reads it."""
+
+    def __init__(self, port: int, sources: int = 64, queue_bytes: int = 256 * 1024) -> None:
+        self.dest = ("127.0.0.1", port)
+        self.port = port
+        self.queue_bytes = queue_bytes
+        self.socks = []
+        for _ in range(sources):
+            s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 1 << 20)
+            s.bind(("127.0.0.1", 0))
+            self.socks.append(s)
+        self.sent = 0
+
+    def _room(self, need: int) -> bool:
+        q = udp_queue(self.port)
+        if q is None:
+            raise AssertionError(f"nothing bound on 127.0.0.1:{self.port} any more")
+        return q[0] + need <= self.queue_bytes or q[0] == 0
+
+    def send(self, datagrams: list[bytes], timeout: float = 30.0) -> None:
+        """Send them all (paced), then return; fails if the receiver stops reading."""
+        for d in datagrams:
+            if self.sent % 64 == 0 or len(d) > 4096:
+                wait_until(lambda d=d: self._room(2 * len(d) + 2048), timeout, "the vehicle reading its socket")
+            self.socks[self.sent % len(self.socks)].sendto(d, self.dest)
+            self.sent += 1
+
+    def drained(self, timeout: float = 30.0) -> int:
+        """Wait until the receiver has read everything; its kernel drop count."""
+        wait_until(lambda: (udp_queue(self.port) or (0, 0))[0] == 0, timeout, "the vehicle draining its socket")
+        q = udp_queue(self.port)
+        return q[1] if q else 0
+
+    def close(self) -> None:
+        for s in self.socks:
+            s.close()

@@ -1,0 +1,236 @@
+"""Hostile and broken input (issue 7): the receive path under fuzz, as properties and during
+a real lockstep mission (real processes, real UDP on 127.0.0.1, real pymavlink encoding)."""
+
+from __future__ import annotations
+
+import math
+import socket
+import threading
+from pathlib import Path
+from typing import Any
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from pymavlink.dialects.v20 import common as mavlink
+
+from bridge.endpoint import GCS_PORT, LINK_PORT, parse_address, parse_datagram
+from bridge.flight import prepare
+from bridge.guard import MAX_POSITION_M, Rejections, odometry_problem, wire_problem
+from bridge.session import instance_slot, sitl
+from bridge.signing import Signing
+from bridge.vehicle import Vehicle, VehicleConfig
+from missions import Mission, Sine
+from tests.hostile import MIN_STEP, Fuzzer, Sender, wait_until
+from tests.sitlkit import csv_rows
+
+FUZZ_DATAGRAMS = 30_000
+KEY = bytes(range(32))
+CTL = mavlink.MAVLink(None, srcSystem=200, srcComponent=191)
+
+
+def _frames() -> list[bytes]:
+    """Valid frames of every kind the vehicle handles, from the controller's ids."""
+    f = Fuzzer(0, 1)
+    return [
+        f.target(0, (0.0, 0.0, 0.0, 0.3)),
+        f.target(0, (math.nan, 0.0, 0.0, 0.3)),
+        f.target(0, (0.0, 0.0, 0.0, 1.5)),
+        f.target(4000, (0.1, 0.0, 0.0, 0.3)),
+        mavlink.MAVLink_heartbeat_message(18, 8, 0, 0, 4, 3).pack(CTL),
+        mavlink.MAVLink_command_long_message(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0).pack(CTL),
+        mavlink.MAVLink_command_long_message(1, 1, 511, 0, 33, 20000, 0, 0, 0, 0, 0).pack(CTL),
+        mavlink.MAVLink_timesync_message(0, 5).pack(CTL),
+        mavlink.MAVLink_hil_actuator_controls_message(0, [0.0] * 16, 0, 1).pack(CTL),
+    ]
+
+
+FRAMES = _frames()
+
+
+@st.composite
+def damaged(draw: Any) -> bytes:
+    """A valid frame, whole or damaged: cut, a bit flipped, bytes added before or after, doubled."""
+    frame = bytearray(draw(st.sampled_from(FRAMES)))
+    op = draw(st.sampled_from(["whole", "cut", "flip", "append", "prepend", "double", "byte"]))
+    if op == "cut":
+        frame = frame[:draw(st.integers(0, len(frame) - 1))]
+    elif op == "flip":
+        frame[draw(st.integers(0, len(frame) - 1))] ^= 1 << draw(st.integers(0, 7))
+    elif op == "append":
+        frame += draw(st.binary(min_size=1, max_size=40))
+    elif op == "prepend":
+        frame = bytearray(draw(st.binary(min_size=1, max_size=3))) + frame
+    elif op == "double":
+        frame = frame + frame
+    elif op == "byte":
+        frame[draw(st.integers(0, len(frame) - 1))] = draw(st.integers(0, 255))
+    return bytes(frame)
+
+
+ANY_BYTES = st.one_of(st.binary(max_size=600), damaged(), st.just(b"\xfd" * 12), st.just(b"\xfe" * 8))
+
+
+@settings(max_examples=400, deadline=None)
+@given(ANY_BYTES, st.booleans())
+def test_any_bytes_parse_without_exception_and_count_once(data, signed):
+    """parse_datagram never raises; a datagram gives its valid frames (each a whole slice of
+    it) and is counted at most once, exactly once when it gives none."""
+    rej = Rejections()
+    out = parse_datagram(data, mavlink.MAVLink(None), Signing(KEY) if signed else None, rej)
+    assert rej.total <= 1
+    assert out or rej.total == 1
+    for m in out:
+        assert bytes(m.get_msgbuf()) in data
+    if signed:  # nothing here was signed with our key
+        assert not out and set(rej) <= {"unsigned", "truncated", "oversized", "no_frame", "mavlink1", "bad_flags",
+                                        "unknown_id", "bad_crc", "bad_signature"}
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.tuples(*[st.floats(width=32)] * 4), st.sampled_from(["wrench", "motors"]))
+def test_actuator_values_are_checked(wire, actuation):
+    why = wire_problem(actuation, wire)
+    lo = (-1.0, -1.0, -1.0, 0.0) if actuation == "wrench" else (0.0,) * 4
+    ok = all(math.isfinite(v) and a <= v <= 1.0 for v, a in zip(wire, lo))
+    assert (why is None) == ok
+    if not ok:
+        assert why == ("out_of_range" if all(map(math.isfinite, wire)) else "not_finite")
+
+
+class _Odo:
+    def __init__(self, v: tuple[float, ...]) -> None:
+        self.x, self.y, self.z = v[:3]
+        self.q = v[3:7]
+        self.vx, self.vy, self.vz, self.rollspeed, self.pitchspeed, self.yawspeed = v[7:]
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.one_of(st.floats(-2e4, 2e4), st.sampled_from([math.nan, math.inf, -math.inf, 0.5, 1.0])),
+                min_size=13, max_size=13))
+def test_states_are_checked(v):
+    why = odometry_problem(_Odo(tuple(v)))
+    finite = all(map(math.isfinite, v))
+    unit = finite and abs(sum(x * x for x in v[3:7]) - 1.0) <= 1e-3
+    near = finite and math.hypot(*v[:3]) <= MAX_POSITION_M
+    assert (why is None) == (finite and unit and near)
+    assert why is None or why == ("out_of_range" if finite else "not_finite")
+
+
+@pytest.fixture(scope="module")
+def armed_vehicle():
+    """A real vehicle object (its sockets on 127.0.0.1), armed at step 0 of a lockstep flight,
+    and the controller's socket that talks to it."""
+    flight = prepare(Mission(Sine(), duration_s=5.0, name="prop"))
+    v = Vehicle(flight, VehicleConfig(parse_address("udpin:127.0.0.1:0"), None))
+    ctl = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    ctl.bind(("127.0.0.1", 0))
+    ctl.settimeout(5.0)
+    v.link.peer = ctl.getsockname()
+    v._arm_disarm(1.0, 0.0)
+    yield v, ctl
+    v.close()
+    ctl.close()
+
+
+def _snapshot(v: Vehicle) -> tuple:
+    s = v.sim
+    return (v.plant.state, s.armed, s.mode, v.k, v.pending, v.applied, v.engaged, v.freerun, v.halted,
+            tuple(sorted(v.streams.items())), v.link.peer, v.vend.newest_sent_t)
+
+
+@settings(max_examples=250, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(ANY_BYTES)
+def test_any_datagram_leaves_the_vehicle_as_it_was_unless_valid(armed_vehicle, data):
+    """Any bytes over real UDP into a real armed vehicle: nothing raises; a refused datagram
+    (counted once) changes no state; a changed state comes only from a frame nothing refused."""
+    v, ctl = armed_vehicle
+    before = _snapshot(v)
+    ctl.sendto(data, v.link.local)
+    got: list = []
+    count = {"frame": 0, "message": 0}
+
+    def consumed() -> bool:
+        r0 = v.rejected.total
+        msgs = v.link.poll()
+        r1 = v.rejected.total
+        for m, addr in msgs:
+            v._handle(v.link, m, addr)
+        count["frame"] += r1 - r0
+        count["message"] += v.rejected.total - r1
+        got.extend(msgs)
+        return bool(got) or count["frame"] > 0
+
+    wait_until(consumed, 5.0, "the vehicle receiving the datagram")
+    assert count["frame"] <= 1 and (got or count["frame"] == 1)
+    accepted = len(got) - count["message"]
+    if accepted == 0:
+        assert _snapshot(v) == before
+    v.pending = None  # stay at step 0, armed, for the next example
+    if not v.sim.armed:
+        v._arm_disarm(1.0, 0.0)
+
+
+def test_fuzz_during_a_lockstep_mission(tmp_path):
+    """30 000 hostile datagrams from 64 sources into the vehicle's controller link while it
+    flies a lockstep mission: the trace is the undisturbed run's byte for byte, both
+    processes stay up, and the refusals add up to what was sent (the benchmark sends 10^6)."""
+    mission = Mission(Sine(), duration_s=8.0, name="fuzz")
+    ref = sitl(mission, out=tmp_path / "ref", plots=False, instance=None)
+    assert ref.outcome == "completed" and ref.summary["link"]["rejected"] == {}
+    with instance_slot() as n:
+        gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        gcs.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+        gcs.bind(("127.0.0.1", GCS_PORT + n))
+        result: dict[str, Any] = {}
+
+        def fly() -> None:
+            try:
+                result["run"] = sitl(mission, out=tmp_path / "fuzz", plots=False, instance=n, speed=2.0)
+            except BaseException as exc:  # reported by the main thread
+                result["error"] = exc
+
+        th = threading.Thread(target=fly)
+        th.start()
+        vcsv = Path(tmp_path / "fuzz" / "vehicle.csv")
+        try:
+            wait_until(lambda: csv_rows(vcsv) > MIN_STEP or not th.is_alive(), 60, "the fuzzed flight starting",
+                       poll_s=0.01)
+            fuzz = Fuzzer(seed=7, sysid=n + 1)
+            sender = Sender(LINK_PORT + n, sources=64)
+            try:
+                sender.send(fuzz.next(i) for i in range(FUZZ_DATAGRAMS))
+                drops = sender.drained()
+            finally:
+                sender.close()
+            flown = csv_rows(vcsv)
+        finally:
+            th.join(timeout=120)
+        gcs.setblocking(False)
+        texts = []
+        mav = mavlink.MAVLink(None)
+        while True:
+            try:
+                data = gcs.recv(65535)
+            except BlockingIOError:
+                break
+            for m in mav.parse_buffer(data) or []:
+                if m.get_type() == "STATUSTEXT":
+                    texts.append(m.text)
+        gcs.close()
+    assert "error" not in result, result.get("error")
+    assert flown < mission.steps, "the mission ended before the fuzz did: fly longer"
+    run = result["run"]
+    s = run.summary
+    assert s["outcome"] == "completed" and s["sitl"]["died"] is None
+    assert s["sitl"]["vehicle_exit"] == s["sitl"]["controller_exit"] == "exited with status 0"
+    assert (tmp_path / "fuzz" / "trace.csv").read_bytes() == (tmp_path / "ref" / "trace.csv").read_bytes()
+    assert drops == 0, f"the kernel dropped {drops} datagrams: the count cannot add up"
+    link = s["link"]
+    by_vehicle = link["rejected_by"]["vehicle"]
+    assert sum(by_vehicle.values()) - link["rejected_from_peer"]["vehicle"] == sender.sent == FUZZ_DATAGRAMS
+    for reason, least in fuzz.expected().items():
+        assert by_vehicle.get(reason, 0) >= least, (reason, by_vehicle, fuzz.sent)
+    assert "rate_limited" not in by_vehicle
+    assert link["rejected_by"]["controller"] == {}
+    assert any(t.startswith("rejected ") for t in texts), texts[:5]
