@@ -24,16 +24,26 @@ run must give the undisturbed run's ``trace.csv``.
 
 from __future__ import annotations
 
+import json
 import math
+import os
 import random
+import re
+import signal
 import socket
+import subprocess
+import sys
 import time
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
+from pathlib import Path
+from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID
+from bridge.session import instance_slot
+from tests.sitlkit import Proc, csv_rows, wait_for
 
 MIN_STEP = 10  # the stale targets are for step 0: fuzz only once the vehicle is past this step
 KINDS: dict[str, str | None] = {
@@ -204,7 +214,7 @@ class Sender:
             raise AssertionError(f"nothing bound on 127.0.0.1:{self.port} any more")
         return q[0] + need <= self.queue_bytes or q[0] == 0
 
-    def send(self, datagrams: list[bytes], timeout: float = 30.0) -> None:
+    def send(self, datagrams: Iterable[bytes], timeout: float = 30.0) -> None:
         """Send them all (paced), then return; fails if the receiver stops reading."""
         for d in datagrams:
             if self.sent % 64 == 0 or len(d) > 4096:
@@ -221,3 +231,104 @@ class Sender:
     def close(self) -> None:
         for s in self.socks:
             s.close()
+
+
+# -- crash safety: what a run directory must look like whatever was killed, whenever ----------
+MAVLOGDUMP = Path(sys.executable).with_name("mavlogdump.py")
+PID = re.compile(r"started: (vehicle|controller|relay) pid (\d+)")
+
+
+def check_trace(path: Path) -> int:
+    """``path`` (a CSV with a header) is whole up to its last complete row: every line that
+    ends in a newline has the header's number of fields, all numbers; only a last line
+    without its newline (a write cut by SIGKILL) may be partial. Returns the complete rows."""
+    data = path.read_bytes()
+    lines = data.split(b"\n")
+    header, *rows, tail = lines if len(lines) > 1 else [*lines, b""]
+    width = len(header.split(b","))
+    assert width > 1, f"{path}: no header"
+    for i, line in enumerate(rows):
+        fields = line.split(b",")
+        assert len(fields) == width, f"{path}: row {i + 1} has {len(fields)} fields, not {width}"
+        for f in fields:
+            float(f)  # raises on a torn or garbled field
+    assert len(tail) < len(header) + 64 * width, f"{path}: an impossibly long unfinished last line"
+    return len(rows)
+
+
+def check_tlog(path: Path) -> int:
+    """``path`` opens with pymavlink's ``mavlogdump.py`` (exit 0); the messages it printed."""
+    r = subprocess.run([sys.executable, str(MAVLOGDUMP), str(path)], capture_output=True, text=True, timeout=120,
+                       env={**os.environ, "MAVLINK20": "1"})
+    assert r.returncode == 0, f"mavlogdump {path}: {r.stderr[-500:]}"
+    return r.stdout.count("\n")
+
+
+def check_summary(path: Path) -> str | None:
+    """``summary.json`` complete (valid JSON with its outcome) or absent: the outcome, or None."""
+    if not path.exists():
+        return None
+    s = json.loads(path.read_text())
+    assert s["outcome"] in ("completed", "failsafe", "diverged", "aborted") and "link" in s and "axes" in s
+    return s["outcome"]
+
+
+def check_run_dir(run: Path) -> dict[str, Any]:
+    """Every file a SIGKILL may have cut, checked: trace and part files, tlogs, summary; no
+    temporary file of an atomic write left beside a summary."""
+    out: dict[str, Any] = {"summary": check_summary(run / "summary.json")}
+    for name in ("trace.csv", "vehicle.csv", "controller.csv"):
+        if (run / name).exists():
+            out[name] = check_trace(run / name)
+    for name in ("vehicle.tlog", "controller.tlog"):
+        if (run / name).exists():
+            out[name] = check_tlog(run / name)
+    return out
+
+
+def session_pids(run: Path) -> dict[str, int]:
+    """The children's pids, as the launcher wrote them into ``events.log``."""
+    try:
+        return {k: int(v) for k, v in PID.findall((run / "events.log").read_text())}
+    except FileNotFoundError:
+        return {}
+
+
+CRASH_MISSION = 'name = "crash"\nduration_s = 6.0\n[trajectory]\nkind = "sine"\n'
+CRASH_STEPS = 1500
+SPEED = "3"  # lockstep at most 3x real time: the 1500 steps take 2 s, so the kill lands mid-flight
+
+
+def kill_session(tmp_path: Path, victim: str, at_step: int, key: str | None = None) -> tuple[int, dict[str, Any]]:
+    """Fly ``bsst sitl`` and SIGKILL ``victim`` (vehicle, controller, launcher or all) once the
+    vehicle has flown ``at_step`` steps; wait for every process to be gone; the launcher's
+    exit status and what :func:`tests.hostile.check_run_dir` found."""
+    mission = tmp_path / "crash.toml"
+    mission.write_text(CRASH_MISSION)
+    run = tmp_path / f"run-{victim}"
+    with instance_slot() as n:
+        p = Proc.bsst("sitl", str(mission), "--out", str(run), "--instance", str(n), "--speed", SPEED, "--no-plots",
+                      *(["--key", key] if key else []))
+        try:
+            wait_for(lambda: csv_rows(run / "vehicle.csv") >= at_step or p.p.poll() is not None, 60,
+                     f"{at_step} steps flown")
+            assert p.p.poll() is None, "the session ended before the kill"
+            pids = session_pids(run)
+            assert set(pids) == {"vehicle", "controller"}, pids
+            targets = {"launcher": [p.p.pid], "all": [p.p.pid, *pids.values()]}.get(victim) or [pids[victim]]
+            for pid in targets:
+                os.kill(pid, signal.SIGKILL)
+            p.p.wait(timeout=60)  # a surviving launcher reports and ends by itself
+            wait_for(lambda: all(gone(pid) for pid in pids.values()), 10, "both children gone")
+        finally:
+            p.stop()
+    return p.p.returncode, check_run_dir(run)
+
+
+def gone(pid: int) -> bool:
+    """Whether process ``pid`` has exited (a zombie nobody reaped counts as gone)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] in ("Z", "X")
+    except (FileNotFoundError, ProcessLookupError, IndexError):
+        return True
