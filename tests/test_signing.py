@@ -3,16 +3,22 @@
 from __future__ import annotations
 
 import hashlib
+import json
 import math
 import os
+from pathlib import Path
+from typing import Any
 
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.endpoint import (
+    GCS_PORT,
     HIL_ACTUATOR_CONTROLS,
+    LINK_PORT,
     ODOMETRY,
     SET_ACTUATOR_CONTROL_TARGET,
     Endpoint,
@@ -21,8 +27,11 @@ from bridge.endpoint import (
     parse_datagram,
 )
 from bridge.guard import Rejections
+from bridge.session import instance_slot, sitl
 from bridge.signing import SIGNATURE_BYTES, Signing, clock_timestamp, key_from_file
+from missions import Mission, Sine
 from params import ConfigError
+from tests.sitlkit import Proc
 
 KEY = hashlib.sha256(b"bsst test key").digest()
 OTHER = hashlib.sha256(b"not our key").digest()
@@ -185,3 +194,132 @@ def test_key_file_mode_is_checked_before_reading(tmp_path):
         key_from_file(p)
     os.chmod(p, 0o600)
     assert key_from_file(p) == KEY
+
+
+# -- with real processes: a signed vehicle, a signed ground station, a signed session ------------
+HOLD = 'name = "hold"\nduration_s = 600.0\n[trajectory]\nkind = "sine"\n[failsafe]\ntimeout_s = 30.0\n'
+
+
+def _heartbeat_now(gcs) -> Any:
+    """Ask the vehicle for a HEARTBEAT now (signed REQUEST_MESSAGE) and return it: the vehicle
+    handles its messages in order, so this shows the state after everything sent before."""
+    gcs.mav.command_long_send(gcs.target_system, 1, mavlink.MAV_CMD_REQUEST_MESSAGE, 0,
+                              mavlink.MAVLINK_MSG_ID_HEARTBEAT, 0, 0, 0, 0, 0, 0)
+    hb = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=10, condition="HEARTBEAT.get_srcSystem() != 255")
+    assert hb is not None
+    return hb
+
+
+def _armed(hb) -> bool:
+    return bool(hb.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+
+
+def _ack(conn, command: int) -> Any:
+    m = conn.recv_match(type="COMMAND_ACK", blocking=True, timeout=10, condition=f"COMMAND_ACK.command=={command}")
+    assert m is not None, f"no COMMAND_ACK for {command}"
+    return m
+
+
+def test_signed_vehicle_refuses_unsigned_forged_and_replayed_commands_and_targets(tmp_path):
+    """With --key: every unsigned, forged (other key) and replayed ARM, DISARM and actuator
+    target is refused and counted by kind; a pymavlink ground station with setup_signing arms
+    and disarms; nothing of the key is in the files or in the vehicle's command line."""
+    key = _key_file(tmp_path, KEY)
+    mission = tmp_path / "hold.toml"
+    mission.write_text(HOLD)
+    os.environ["MAVLINK20"] = "1"
+    sent = {"unsigned": 0, "bad_signature": 0, "replayed": 0}
+    with instance_slot() as n:
+        gcs = mavutil.mavlink_connection(f"udpin:127.0.0.1:{GCS_PORT + n}", source_system=255,
+                                         source_component=190, dialect="common")
+        gcs.setup_signing(KEY, sign_outgoing=True)
+        v = Proc.bsst("vehicle", str(mission), "--instance", str(n), "--out", str(tmp_path / "v"), "--key", str(key))
+        ctl = None
+        try:
+            v.wait_line(lambda s: s.startswith("ready"))
+            with open(f"/proc/{v.p.pid}/cmdline", "rb") as f:
+                cmdline = f.read()
+            assert KEY not in cmdline and KEY.hex().encode() not in cmdline and str(key).encode() in cmdline
+            assert gcs.wait_heartbeat(timeout=20) is not None  # signed, and pymavlink checked it with the key
+            sysid = gcs.target_system
+            plain = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+            forger = _pymavlink(OTHER, 0, clock_timestamp(), 255, 190, 0)
+
+            def arm(p1: float, p2: float = 0.0) -> Any:
+                return mavlink.MAVLink_command_long_message(sysid, 1, 400, 0, p1, p2, 0, 0, 0, 0, 0)
+
+            def bad(conn, msg) -> None:
+                for packer, kind in ((plain, "unsigned"), (forger, "bad_signature")):
+                    for _ in range(3):
+                        conn.write(msg.pack(packer))
+                        sent[kind] += 1
+
+            def replay(conn, frame: bytes) -> None:
+                for _ in range(3):
+                    conn.write(frame)
+                    sent["replayed"] += 1
+
+            bad(gcs, arm(1))
+            assert not _armed(_heartbeat_now(gcs))  # none of them armed it
+            good_arm = arm(1).pack(gcs.mav)
+            gcs.write(good_arm)
+            assert _ack(gcs, 400).result == mavlink.MAV_RESULT_ACCEPTED
+            assert _armed(_heartbeat_now(gcs))
+
+            # actuator targets on the controller link: the signed controller steps the vehicle
+            ctl = mavutil.mavlink_connection(f"udpout:127.0.0.1:{LINK_PORT + n}", source_system=200,
+                                             source_component=191, dialect="common")
+            ctl.setup_signing(KEY, sign_outgoing=True)
+            ctl.mav.heartbeat_send(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 4)
+            odo = ctl.recv_match(type="ODOMETRY", blocking=True, timeout=10)
+            assert odo is not None
+            k_usec = odo.time_usec
+            target = mavlink.MAVLink_set_actuator_control_target_message(k_usec, 0, sysid, 1,
+                                                                         [0.0, 0.0, 0.0, 0.245, 0, 0, 0, 0])
+            bad(ctl, target)
+            good_target = target.pack(ctl.mav)
+            ctl.write(good_target)
+            assert ctl.recv_match(type="ODOMETRY", blocking=True, timeout=10,
+                                  condition=f"ODOMETRY.time_usec > {k_usec}") is not None  # it stepped
+            replay(ctl, good_target)
+
+            bad(gcs, arm(0, 21196))
+            assert _armed(_heartbeat_now(gcs))  # none of them disarmed it
+            good_disarm = arm(0, 21196).pack(gcs.mav)
+            gcs.write(good_disarm)
+            assert _ack(gcs, 400).result == mavlink.MAV_RESULT_ACCEPTED
+            assert not _armed(_heartbeat_now(gcs))
+            replay(gcs, good_arm)
+            replay(gcs, good_disarm)
+            assert not _armed(_heartbeat_now(gcs))  # a replayed ARM did not arm it again
+        finally:
+            assert v.stop() == 0
+            gcs.close()
+            if ctl is not None:
+                ctl.close()
+    stats = json.loads(v.wait_line(lambda s: s.startswith("stats "))[len("stats "):])
+    assert stats["rejected"] == sent and all(n == 9 for n in sent.values()), (stats["rejected"], sent)
+    _assert_key_nowhere(tmp_path / "v")
+
+
+def _assert_key_nowhere(run: Path) -> None:
+    files = [f for f in run.rglob("*") if f.is_file()]
+    assert files
+    for f in files:
+        data = f.read_bytes()
+        for needle in (KEY, KEY.hex().encode(), KEY.hex().upper().encode()):
+            assert needle not in data, f"{f} holds the key"
+
+
+def test_signed_session_flies_and_never_writes_the_key(tmp_path):
+    """bsst sitl --key: both sides sign, the flight is the unsigned one, and the key is in no file."""
+    key = _key_file(tmp_path, KEY)
+    mission = Mission(Sine(), duration_s=2.0, name="signed")
+    sitl(mission, out=tmp_path / "plain", plots=False, instance=None)
+    run = sitl(mission, out=tmp_path / "signed", plots=True, instance=None, key=key)
+    assert run.outcome == "completed" and run.summary["sitl"]["signed"] is True
+    assert run.summary["link"]["rejected"] == {}
+    assert (tmp_path / "signed" / "trace.csv").read_bytes() == (tmp_path / "plain" / "trace.csv").read_bytes()
+    frames = (tmp_path / "signed" / "vehicle.tlog").read_bytes()
+    assert frames[8] == 0xFD and frames[8 + 2] & 1  # the first record (8-byte stamp, frame) is signed
+    _assert_key_nowhere(tmp_path / "signed")
