@@ -26,7 +26,7 @@ from math import cos, pi, sin
 
 from controller import jets as J
 from controller.gains import Backstep, Gains
-from controller.nominal import Nominal
+from controller.nominal import Coefficients, Nominal
 from controller.power import SignedPower
 from controller.supertwisting import SignReaching, SuperTwisting
 from missions.references import Sample
@@ -88,15 +88,11 @@ class BacksteppingSuperTwisting:
         n = nominal
         self._m = n.mass
         self._g = n.gravity
-        self._i1 = (n.iyy - n.izz) / n.ixx
-        self._i2 = (n.izz - n.ixx) / n.iyy
-        self._i3 = (n.ixx - n.iyy) / n.izz
-        self._jr_x = n.rotor_inertia / n.ixx
-        self._jr_y = n.rotor_inertia / n.iyy
-        self._kx = n.ixx / n.arm
-        self._ky = n.iyy / n.arm
-        self._kz = n.izz / n.arm
-        self._lz = n.arm / n.izz
+        c = Coefficients.of(n)
+        self._i1, self._i2, self._i3 = c.i1, c.i2, c.i3
+        self._jr_x, self._jr_y = c.jr_x, c.jr_y
+        self._kx, self._ky, self._kz = n.ixx / n.arm, n.iyy / n.arm, n.izz / n.arm  # I/l of eq. (36)-(40)
+        self._lz = c.l_z
         self._z = _Step(gains.z)
         self._p = _Step(gains.position)
         self._v = _Step(gains.velocity)
