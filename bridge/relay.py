@@ -295,6 +295,10 @@ def relay_from_args(args: Any) -> int:
         target = parse_address(args.to, "--to")
     except ValueError as exc:
         raise UsageError(f"bsst relay: {exc}") from None
+    if args.stats:
+        from bridge.runlog import check_writable
+
+        check_writable(args.stats, "--stats")  # bad input now, not a failure after relaying
     base: dict[str, Any] = {}
     seed = 0
     source = "command line"

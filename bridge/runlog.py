@@ -192,6 +192,21 @@ def finish_run(path: Path, trace: dict[str, Any], summary: dict[str, Any], title
         make_plots(trace, path / "plots", title)
 
 
+def check_writable(path: str | Path, flag: str) -> Path:
+    """``path`` as a file that can be written: not a directory, in an existing directory this
+    process may write into. Raises :class:`ConfigError` naming ``flag`` otherwise, so that a
+    bad output path is bad input (exit 2) before any work, not a failure after it."""
+    p = Path(path)
+    if p.is_dir():
+        raise ConfigError(f"{flag} {p}: is a directory")
+    parent = p.parent
+    if not parent.is_dir():
+        raise ConfigError(f"{flag} {p}: {parent} is not a directory")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ConfigError(f"{flag} {p}: cannot write into {parent}")
+    return p
+
+
 def side_dir(out: str | Path, files: Sequence[str], overwrite: bool = False) -> Path:
     """The directory one side of a networked run (vehicle or controller) writes ``files``
     into: created if needed; refuses to replace those files unless ``overwrite``."""
