@@ -48,16 +48,19 @@ _TARGET_IDS = frozenset((mavlink.MAVLINK_MSG_ID_HIL_ACTUATOR_CONTROLS,
                          mavlink.MAVLINK_MSG_ID_SET_ACTUATOR_CONTROL_TARGET))
 
 
-def parse_address(text: str, flag: str) -> Address:
-    """``HOST:PORT`` -> (host, port); ValueError naming ``flag`` otherwise."""
-    host, sep, port = text.rpartition(":")
+def parse_address(text: str, flag: str, bind: bool = False) -> Address:
+    """``HOST:PORT`` -> (host, port) with :func:`bridge.endpoint.parse_address`'s checks (a
+    known host, a port in range: 0, any free one, only to ``bind``); ValueError naming ``flag``."""
+    from bridge.endpoint import parse_address as endpoint_address
+
+    mode = "udpin" if bind else "udpout"
     try:
-        p = int(port)
-    except ValueError:
-        p = -1
-    if not sep or not host or not 0 <= p <= 65_535:
-        raise ValueError(f"{flag} must be HOST:PORT, got {text!r}")
-    return host, p
+        a = endpoint_address(text, mode, flag)
+    except ValueError as exc:  # ConfigError
+        raise ValueError(str(exc)) from None
+    if a.mode != mode:
+        raise ValueError(f"{flag} {text!r}: the relay {'binds' if bind else 'sends to'} it ({mode}), not {a.mode}")
+    return a.host, a.port
 
 
 def _percentiles_ms(values: array) -> dict[str, float | None]:
@@ -291,7 +294,7 @@ def relay_from_args(args: Any) -> int:
     from params import ConfigError
 
     try:
-        listen = parse_address(args.listen, "--listen")
+        listen = parse_address(args.listen, "--listen", bind=True)
         target = parse_address(args.to, "--to")
     except ValueError as exc:
         raise UsageError(f"bsst relay: {exc}") from None
@@ -303,9 +306,11 @@ def relay_from_args(args: Any) -> int:
     seed = 0
     source = "command line"
     if args.mission:
+        from bridge.flight import prepare
         from missions import load_mission
 
         m = load_mission(args.mission)
+        prepare(m)  # the whole mission is checked, not only the [link] the relay takes from it
         base, seed, source = dict(m.link), m.seed, m.source
     settings = link_from_table(merge_link_tables(base, link_table_from_args(args)), source, seed=seed)
     try:

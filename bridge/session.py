@@ -126,6 +126,8 @@ def sitl(
         gcs_text = None
     if gcs_text is not None:
         parse_address(gcs_text, "udpout", "--gcs")  # bad input fails here, before anything starts
+    if instance is not None:
+        _check_port_free(LINK_PORT + n, f"--instance {n}")
     keep = out is not None or write
     path = run_dir(out, flight.mission.name, overwrite) if keep else Path(tempfile.mkdtemp(prefix="bsst-sitl-"))
     try:
@@ -135,6 +137,20 @@ def sitl(
     finally:
         if not keep:
             shutil.rmtree(path, ignore_errors=True)
+
+
+def _check_port_free(port: int, flag: str) -> None:
+    """ConfigError naming ``flag`` if UDP 127.0.0.1:``port`` is taken: a vehicle already runs
+    there, so this session's could not start (said before any file is written)."""
+    import socket
+
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        s.bind(("127.0.0.1", port))
+    except OSError as exc:
+        raise ConfigError(f"{flag}: UDP 127.0.0.1:{port} is in use ({exc.strerror}); pick another instance") from None
+    finally:
+        s.close()
 
 
 class Child:

@@ -146,8 +146,10 @@ def test_bsst_relay_process_stops_on_sigterm_and_writes_stats(tmp_path: Path) ->
 
 
 @pytest.mark.parametrize(("args", "message"), [
-    (["--listen", "127.0.0.1:x", "--to", "127.0.0.1:1"], "--listen must be HOST:PORT"),
-    (["--listen", "127.0.0.1:0", "--to", "nowhere"], "--to must be HOST:PORT"),
+    (["--listen", "127.0.0.1:x", "--to", "127.0.0.1:1"], "--listen '127.0.0.1:x': port must be an integer"),
+    (["--listen", "127.0.0.1:0", "--to", "nowhere"], "--to 'nowhere': expected [udpin:|udpout:]HOST:PORT"),
+    (["--listen", "127.0.0.1:0", "--to", "127.0.0.1:0"], "--to '127.0.0.1:0': port must be in [1, 65535]"),
+    (["--listen", "127.0.0.1:0", "--to", "no.such.host.invalid:1"], "unknown host"),
     (["--listen", "127.0.0.1:0", "--to", "127.0.0.1:1", "--loss", "-3"], "--loss must be in [0, 100]"),
     (["--listen", "127.0.0.1:0", "--to", "127.0.0.1:1", "--mission", "nope.toml"], "nope.toml: no such file"),
 ])

@@ -1,0 +1,373 @@
+"""Bad input (issue 7): every flag of every ``bsst`` command, and every mission and sweep key,
+given a bad value (wrong type, out of range, missing file, unreadable file, port in use)
+exits 2 with one line on stderr naming it, and no traceback.
+
+The flags are walked from the parser itself (a flag added later is walked too, and a flag
+of a kind this file has no bad value for fails the walk); the keys from what the
+validators ask for while a mission with every table is prepared. Most cases call
+``bridge.cli.main`` in this process (an uncaught exception fails the test, the traceback
+case); a few run ``python -m bridge`` as a real process.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import os
+import signal
+import socket
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from bridge.cli import build_parser, main
+from bridge.endpoint import LINK_PORT
+from bridge.flight import prepare
+from bridge.session import instance_slot
+from missions import MISSION_DIR, mission_from_table
+from params import Table, dump_toml, load_toml
+from tests.sitlkit import ROOT
+
+TINY = 'name = "tiny"\nduration_s = 0.2\n[trajectory]\nkind = "sine"\n'
+GUARD_S = 20  # s: a case that is not refused would fly or serve; it fails instead of hanging
+
+
+@contextlib.contextmanager
+def _guard() -> Iterator[None]:
+    """Fail (instead of hanging) when a command meant to be refused starts serving; restore
+    the signal handlers a command may have set."""
+    def alarm(signum: int, frame: Any) -> None:
+        raise TimeoutError(f"not refused within {GUARD_S} s")
+
+    saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM, signal.SIGALRM)}
+    signal.signal(signal.SIGALRM, alarm)
+    signal.alarm(GUARD_S)
+    try:
+        yield
+    finally:
+        signal.alarm(0)
+        for s, h in saved.items():
+            signal.signal(s, h)
+
+
+def _refused(capsys: Any, argv: list[Any], *names: str) -> str:
+    """Run ``bsst argv`` in this process: exit 2, one line on stderr, naming one of ``names``."""
+    with _guard():
+        rc = main([str(a) for a in argv])
+    _, err = capsys.readouterr()
+    lines = err.strip().splitlines()
+    assert rc == 2, f"bsst {' '.join(map(str, argv))}: exit {rc}, stderr {err!r}"
+    assert len(lines) == 1 and lines[0].startswith("bsst"), err
+    assert any(n in lines[0] for n in names), f"{lines[0]!r} names none of {names}"
+    return lines[0]
+
+
+# -- the files a walk needs ------------------------------------------------------------------------
+class Files:
+    def __init__(self, root: Path) -> None:
+        self.root = root
+        self.mission = root / "tiny.toml"
+        self.mission.write_text(TINY)
+        self.missing = root / "nowhere.toml"
+        self.directory = root / "adir"
+        self.directory.mkdir()
+        self.binary = root / "binary.toml"
+        self.binary.write_bytes(b"\xff\xfe\x00garbage")
+        self.not_toml = root / "junk.toml"
+        self.not_toml.write_text("<xml>not toml</xml>")
+        self.regular = root / "afile"
+        self.regular.write_text("x")
+        self.socket_path = root / "a.sock"  # a path nobody can read, not even root: open() gives ENXIO
+        self._sock = socket.socket(socket.AF_UNIX)
+        self._sock.bind(str(self.socket_path))
+        self.key_empty = root / "key.empty"
+        self.key_empty.write_bytes(b"")
+        self.key_empty.chmod(0o600)
+        self.key_open = root / "key.open"
+        self.key_open.write_bytes(bytes(32))
+        self.key_open.chmod(0o644)
+        self.out = root / "out"
+
+    def close(self) -> None:
+        self._sock.close()
+
+
+@pytest.fixture
+def files(tmp_path: Path) -> Iterator[Files]:
+    f = Files(tmp_path)
+    yield f
+    f.close()
+
+
+BAD_FILES = ("missing", "directory", "binary", "not_toml", "socket_path")  # for a file to be read
+
+# what each command needs besides the one bad value (so that only that value can be wrong)
+BASE = {
+    "sim": lambda f: [f.mission, "--out", f.out, "--no-plots"],
+    "sitl": lambda f: [f.mission, "--out", f.out, "--no-plots", "--gcs", "none"],
+    "vehicle": lambda f: [f.mission, "--listen", "127.0.0.1:0", "--gcs", "none"],
+    "controller": lambda f: [f.mission, "--vehicle", "127.0.0.1:9", "--timeout", "0.2"],
+    "sweep": lambda f: [f.mission, "--out", f.out, "--jobs", "1", "--no-plots"],
+    "report": lambda f: [],
+    "relay": lambda f: ["--listen", "127.0.0.1:0", "--to", "127.0.0.1:9", "--duration", "0.1"],
+}
+# bad values by the converter a flag's argparse type comes from
+CONVERTER_BAD = {
+    "positive_float": ["x", "-1e300", "nan", "inf"],
+    "number_in": ["x", "-1e300", "nan"],
+    "int_in": ["x", "-99999999999", "99999999999", "1.5"],
+    "value_list": ["x", "-1e300", "1,1", ""],
+    "name_list": ["x", "bsst,bsst"],
+    "blackout_window": ["x", "-1:1", "1:0"],
+    "_ids": ["x", "999:1", "200"],
+    "_home": ["x", "91,0,0", "1,2"],
+}
+# bad values of the flags that take text (a callable of the files: values)
+TEXT_BAD = {
+    "--out": lambda f: [f.regular],
+    "--profile": lambda f: ["nosuch", f.missing.with_suffix(".profile.toml")],
+    "--listen": lambda f: ["nowhere", "udpout:127.0.0.1:9", "127.0.0.1:70000"],
+    "--gcs": lambda f: ["127.0.0.1:notaport", "udpin:x"],
+    "--vehicle": lambda f: ["udpin:127.0.0.1:5", "nowhere"],
+    "--to": lambda f: ["nowhere", "127.0.0.1:0"],
+    "--mission": lambda f: [getattr(f, b) for b in BAD_FILES],
+    "--stats": lambda f: [f.regular / "x.json", f.directory],
+    "--dask": lambda f: ["notanaddress"],
+    "--key": lambda f: [f.missing, f.key_empty, f.key_open, f.directory],
+}
+POSITIONAL_BAD = {  # command -> bad values of its positional argument
+    "report": lambda f: [f.missing, f.regular, f.directory],
+}
+
+
+def _commands() -> dict[str, argparse.ArgumentParser]:
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return dict(sub.choices)
+
+
+def _flag_cases() -> list[tuple[str, str]]:
+    out = []
+    for cmd, p in _commands().items():
+        for a in p._actions:
+            if isinstance(a, argparse._HelpAction) or a.nargs == 0:
+                continue
+            out.append((cmd, a.option_strings[0] if a.option_strings else a.dest))
+    return out
+
+
+def _bad_values(cmd: str, action: argparse.Action, f: Files) -> list[Any]:
+    if not action.option_strings:  # the positional: a mission file, or report's directory
+        return POSITIONAL_BAD.get(cmd, lambda f: [getattr(f, b) for b in BAD_FILES])(f)
+    flag = action.option_strings[0]
+    if action.choices is not None and action.type is None:
+        return ["bogus"]
+    if action.type is None:
+        assert flag in TEXT_BAD, f"bsst {cmd} {flag}: give tests/test_bad_input.py a bad value for it"
+        return TEXT_BAD[flag](f)
+    kind = action.type.__qualname__.split(".")[0]
+    assert kind in CONVERTER_BAD, f"bsst {cmd} {flag} ({kind}): give tests/test_bad_input.py bad values for it"
+    return CONVERTER_BAD[kind]
+
+
+@pytest.mark.parametrize("cmd, flag", _flag_cases())
+def test_every_flag_refuses_a_bad_value(files, capsys, cmd, flag):
+    p = _commands()[cmd]
+    action = next(a for a in p._actions if (a.option_strings[:1] or [a.dest]) == [flag])
+    base = BASE[cmd](files)
+    for bad in _bad_values(cmd, action, files):
+        if action.option_strings:
+            argv = [cmd, *base, flag, bad]
+            names = (flag, str(bad))
+        else:  # the positional comes first; report's directory, or a mission file
+            argv = [cmd, bad, *base[1:]]
+            names = (str(bad), Path(str(bad)).name)
+        _refused(capsys, argv, *names)
+        assert not files.out.exists() or not any(files.out.iterdir()), f"{argv}: wrote into --out"
+
+
+# -- mission and sweep keys ----------------------------------------------------------------------------
+def _full_mission(controller: str) -> dict[str, Any]:
+    """A mission with every table the validators read (the robust one, a link, a failsafe, gains)."""
+    d = load_toml(MISSION_DIR / "robust.toml")
+    d.update(controller=controller, duration_s=0.2, actuation="wrench", physics_hz=1000.0)
+    d["start"] = {"position": [0.0, 0.0, 0.0], "psi": 0.0}
+    d["link"] = {"delay_ms": 0.0, "stale_ms": 50.0, "up": {"loss_pct": 0.0}, "down": {"loss_pct": 0.0}}
+    d["failsafe"] = {"timeout_s": 0.5}
+    d["gains"] = {"smc_scale": 1.0}
+    return d
+
+
+def _keys_asked(data: dict[str, Any], source: str) -> dict[str, tuple[str, tuple, dict]]:
+    """Every key the validators ask of ``data`` while a run is prepared from it: dotted name ->
+    (getter, positional arguments, keyword arguments), recorded by wrapping Table's getters."""
+    asked: dict[str, tuple[str, tuple, dict]] = {}
+    saved = {}
+    for getter in ("number", "integer", "string", "boolean", "vector", "table"):
+        saved[getter] = original = getattr(Table, getter)
+
+        def spy(self: Table, name: str, *a: Any, _g: str = getter, _o: Any = original, **kw: Any) -> Any:
+            if self._source == source:
+                asked.setdefault(self.key(name), (_g, a, kw))
+            return _o(self, name, *a, **kw)
+
+        setattr(Table, getter, spy)
+    try:
+        prepare(mission_from_table(data, source))
+    finally:
+        for getter, original in saved.items():
+            setattr(Table, getter, original)
+    return asked
+
+
+def _bad_key_values(getter: str, args: tuple, kw: dict) -> list[Any]:
+    lo, hi = kw.get("lo"), kw.get("hi")
+    if getter == "number":
+        out: list[Any] = ["x", float("nan")]
+        if lo is not None:
+            out.append(lo if kw.get("lo_open") else lo - 1.0 - abs(lo))
+        if hi is not None:
+            out.append(hi if kw.get("hi_open") else hi + 1.0 + abs(hi))
+        return out
+    if getter == "integer":
+        return [1.5, "x"] + ([lo - 1] if lo is not None else []) + ([hi + 1] if hi is not None else [])
+    if getter == "string":
+        return [5] + (["bogus"] if kw.get("choices") else [])
+    if getter == "boolean":
+        return ["yes", 1]
+    if getter == "vector":
+        n = args[0]
+        return [[1.0] * (n + 1), ["x"] * n] + ([[lo - 1.0 - abs(lo)] * n] if lo is not None else [])
+    if getter == "table":
+        return [5]
+    raise AssertionError(getter)
+
+
+def _set(data: dict[str, Any], dotted: str, value: Any) -> dict[str, Any]:
+    """A deep copy of ``data`` with ``dotted`` (``a.b[0].c``) set to ``value``."""
+    import copy
+
+    out = copy.deepcopy(data)
+    node: Any = out
+    parts = dotted.split(".")
+    for part in parts[:-1]:
+        name, _, idx = part.partition("[")
+        node = node.setdefault(name, {})
+        if idx:
+            node = node[int(idx.rstrip("]"))]
+    node[parts[-1]] = value
+    return out
+
+
+def _key_cases() -> list[tuple[str, str, Any]]:
+    src = "<walk>"
+    cases = []
+    for ctl in ("bsst", "smc", "pid"):
+        for key, (getter, a, kw) in _keys_asked(_full_mission(ctl), src).items():
+            for bad in _bad_key_values(getter, a, kw):
+                if (ctl, key, repr(bad)) not in {(c[0], c[1], repr(c[2])) for c in cases}:
+                    cases.append((ctl, key, bad))
+    return cases
+
+
+KEY_CASES = _key_cases()
+
+
+def test_the_key_walk_covers_every_table():
+    keys = {k for _, k, _ in KEY_CASES}
+    for table in ("start", "trajectory", "gains", "effects", "link", "link.up", "failsafe"):
+        assert any(k.startswith(table + ".") for k in keys), table
+    assert len(keys) > 60
+
+
+@pytest.mark.parametrize("ctl, key, bad", KEY_CASES, ids=[f"{c}-{k}={b!r}" for c, k, b in KEY_CASES])
+def test_every_mission_key_refuses_a_bad_value(files, capsys, ctl, key, bad):
+    mission = files.root / "bad.toml"
+    mission.write_text(dump_toml(_set(_full_mission(ctl), key, bad)))
+    _refused(capsys, ["sim", mission, "--out", files.out, "--no-plots"], key)
+
+
+@pytest.mark.parametrize("cmd", ["sitl", "vehicle", "controller", "relay", "sweep"])
+@pytest.mark.parametrize("key, bad", [("duration_s", "long"), ("link.up.delay_ms", -5.0), ("speed", 3),
+                                      ("trajectory.omega", 1e9), ("failsafe.resume", "yes")])
+def test_every_command_reads_missions_alike(files, capsys, cmd, key, bad):
+    mission = files.root / "bad.toml"
+    mission.write_text(dump_toml(_set(_full_mission("bsst"), key, bad)))
+    argv = [cmd, *BASE[cmd](files)]
+    argv = argv + ["--mission", mission] if cmd == "relay" else [cmd, mission, *argv[2:]]
+    _refused(capsys, argv, key)
+
+
+SWEEP = 'mission = "{m}"\nmode = "offline"\nseeds = 1\n[grid]\ndelay_ms = [0.0]\n[classes]\nclean_rms_m = 0.001\n'
+
+
+@pytest.mark.parametrize("key, bad", [("mission", 5), ("mission", "nowhere.toml"), ("mode", "fast"), ("jobs", -1),
+                                      ("seeds", 0), ("seeds", "x"), ("grid.delay_ms", "x"), ("grid.delay_ms", [-1.0]),
+                                      ("grid.colour", [1]), ("classes.clean_rms_m", "x"), ("extra", 1)])
+def test_every_sweep_key_refuses_a_bad_value(files, capsys, key, bad):
+    data = load_toml_text(SWEEP.format(m=files.mission))
+    sweep = files.root / "sweep.toml"
+    sweep.write_text(dump_toml(_set(data, key, bad)))
+    _refused(capsys, ["sweep", sweep, "--out", files.out, "--jobs", "1", "--no-plots"], key.split(".")[-1])
+
+
+def load_toml_text(text: str) -> dict[str, Any]:
+    import tomllib
+
+    return tomllib.loads(text)
+
+
+# -- an existing run directory, ports in use, unreadable files, real processes -----------------------
+@pytest.mark.parametrize("cmd", ["sim", "sitl", "sweep"])
+def test_a_non_empty_run_directory_is_refused_without_overwrite(files, capsys, cmd):
+    files.out.mkdir()
+    (files.out / "keep.txt").write_text("mine")
+    _refused(capsys, [cmd, *BASE[cmd](files)], "--overwrite")
+    assert [p.name for p in files.out.iterdir()] == ["keep.txt"]
+
+
+def test_ports_in_use(files, capsys):
+    taken = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    taken.bind(("127.0.0.1", 0))
+    port = taken.getsockname()[1]
+    try:
+        _refused(capsys, ["relay", "--listen", f"127.0.0.1:{port}", "--to", "127.0.0.1:9", "--duration", "0.1"],
+                 "--listen")
+        _refused(capsys, ["vehicle", files.mission, "--listen", f"127.0.0.1:{port}", "--gcs", "none"], "--listen")
+    finally:
+        taken.close()
+    with instance_slot() as n:  # bsst sitl: its vehicle cannot bind 14560 + N
+        taken = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        taken.bind(("127.0.0.1", LINK_PORT + n))
+        try:
+            line = _refused(capsys, ["sitl", files.mission, "--instance", n, "--out", files.out, "--no-plots"],
+                            "--instance", str(LINK_PORT + n))
+        finally:
+            taken.close()
+    assert "in use" in line
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root reads a file of mode 000 (the socket-path cases cover it)")
+def test_a_file_without_read_permission(files, capsys):
+    files.regular.write_text(TINY)
+    files.regular.chmod(0)
+    _refused(capsys, ["sim", files.regular, "--out", files.out], str(files.regular))
+
+
+@pytest.mark.parametrize("argv, names", [
+    (["sim", "missions/sine.toml", "--rate", "fast"], "--rate"),
+    (["sitl", "missions/nowhere.toml"], "nowhere.toml"),
+    (["vehicle", "--key", "/nonexistent/key"], "--key"),
+    (["controller", "missions/sine.toml", "--key", "/nonexistent/key"], "--key"),
+    (["relay", "--listen", "127.0.0.1:0", "--to", "nowhere"], "--to"),
+    (["sweep", "missions/sine.toml", "--delay", "-5"], "--delay"),
+    (["report", "/nonexistent/sweep"], "/nonexistent/sweep"),
+])
+def test_as_a_real_process_one_line_and_no_traceback(argv, names):
+    r = subprocess.run([sys.executable, "-m", "bridge", *argv], capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert r.returncode == 2, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and names in r.stderr and "Traceback" not in r.stderr
