@@ -291,6 +291,16 @@ class Tlog:
             self._fd = -1
 
 
+def _check_free(address: Address) -> None:
+    """Raise OSError if ``address`` is bound already (probed without ``SO_REUSEPORT``, which
+    a socket holding the port with it refuses too)."""
+    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        probe.bind((address.host, address.port))
+    finally:
+        probe.close()
+
+
 class Endpoint:
     """One MAVLink 2 UDP link: its socket, its ``MAVLink`` codec, its counters.
 
@@ -301,11 +311,20 @@ class Endpoint:
     received must be. ``rejected`` counts what the receive path refused (shared by the
     endpoints of one process); ``batch`` and ``limiter`` bound what one :meth:`poll` reads
     and what sources other than the peer may send (:mod:`bridge.guard`).
+
+    With ``priority`` (a ``udpin`` link whose owner sets its peer), :meth:`prioritise` gives
+    the peer's datagrams a socket of their own: a second socket bound to the same port
+    (``SO_REUSEPORT``) and connected to the peer, which the kernel hands every datagram of
+    that address to. :func:`wait` then sleeps on that socket only: a flood from anyone else
+    queues on the main socket, never wakes the owner, and is read (bounded, shed) whenever
+    it wakes for its own duties; when the main queue overflows, the kernel drops the
+    others' datagrams, never the peer's.
     """
 
     def __init__(self, address: Address, *, sysid: int, compid: int, tlog: Tlog | None = None,
                  name: str = "link", rcvbuf: int = 1 << 20, signing: Signing | None = None,
-                 rejected: Rejections | None = None, batch: int = BATCH, limiter: RateLimiter | None = None) -> None:
+                 rejected: Rejections | None = None, batch: int = BATCH, limiter: RateLimiter | None = None,
+                 priority: bool = False) -> None:
         self.address = address
         self.name = name
         self.tlog = tlog
@@ -317,6 +336,9 @@ class Endpoint:
         try:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
             if address.mode == "udpin":
+                if priority:
+                    _check_free(address)  # SO_REUSEPORT must not let a second vehicle share the port
+                    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEPORT, 1)
                 sock.bind((address.host, address.port))
                 self.peer: tuple[str, int] | None = None
                 self.follow = True
@@ -338,6 +360,40 @@ class Endpoint:
         self.sent = 0
         self.received = 0
         self.send_errors = 0
+        self._priority = priority and address.mode == "udpin"
+        self._rcvbuf = rcvbuf
+        self.prio: socket.socket | None = None  # the peer's own socket (see the class docstring)
+        self.prio_peer: tuple[str, int] | None = None
+        self.backlog = False  # the last poll left datagrams on the main socket
+
+    def prioritise(self, addr: tuple[str, int]) -> None:
+        """Give the datagrams of ``addr`` (the peer) their own socket, if this endpoint was made
+        with ``priority``; another address replaces the last one. Without it (an error, or no
+        ``SO_REUSEPORT``), everything keeps coming on the main socket."""
+        if not self._priority or addr == self.prio_peer or self.fileno < 0:
+            return
+        self._close_prio()
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, self._rcvbuf)
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEPORT, 1)
+            s.bind(self.local)
+            s.connect(addr)
+        except OSError:
+            s.close()
+            return
+        s.setblocking(False)
+        self.prio, self.prio_peer = s, addr
+
+    def _close_prio(self) -> None:
+        if self.prio is not None:
+            self.prio.close()
+            self.prio = self.prio_peer = None
+
+    @property
+    def wake_socket(self) -> socket.socket:
+        """The socket :func:`wait` sleeps on: the peer's own one when there is one."""
+        return self.prio if self.prio is not None else self.sock
 
     @property
     def bad(self) -> int:
@@ -393,23 +449,37 @@ class Endpoint:
         return True
 
     # -- receiving ----------------------------------------------------------------------
-    def poll(self) -> list[tuple[Any, tuple[str, int]]]:
-        """The valid messages among the next :attr:`batch` datagrams waiting on the socket,
-        with their senders; never blocks, never raises (the receive path of :mod:`bridge.guard`:
-        read, shed, frame; what it refuses is counted in :attr:`rejected`)."""
+    def poll(self, until: float | None = None) -> list[tuple[Any, tuple[str, int]]]:
+        """The valid messages among the next :attr:`batch` datagrams waiting (the peer's own
+        socket first, if any: see :meth:`prioritise`), with their senders; never blocks,
+        never raises (the receive path of :mod:`bridge.guard`: read, shed, frame; what it
+        refuses is counted in :attr:`rejected`). With ``until`` (``time.monotonic``), it also
+        stops reading the main socket once that time has come (looked at every 8 datagrams),
+        so that a backlog never delays its caller's next duty past it; :attr:`backlog` then
+        says that datagrams may be left."""
         out: list[tuple[Any, tuple[str, int]]] = []
-        sock = self.sock
+        if self.prio is not None:
+            self._read(self.prio, out, None, True)
+        self.backlog = self._read(self.sock, out, until, False)
+        return out
+
+    def _read(self, sock: socket.socket, out: list[tuple[Any, tuple[str, int]]], until: float | None,
+              own: bool) -> bool:
+        """Read at most :attr:`batch` datagrams of ``sock`` into ``out`` (``own``: the peer's
+        socket); True when it stopped with datagrams possibly left."""
         signing = self.signing
         rejected = self.rejected
         sending = self.address.mode == "udpout"
-        for _ in range(self.batch):
+        for i in range(self.batch):
+            if until is not None and i & 7 == 7 and time.monotonic() >= until:
+                return True
             try:
                 data, addr = sock.recvfrom(_MAX_DATAGRAM)
             except (BlockingIOError, InterruptedError):
-                break
+                return False
             except OSError:  # ICMP port unreachable reported on a later recv
                 continue
-            from_peer = addr == self.peer
+            from_peer = own or addr == self.peer
             if not from_peer:
                 if sending:  # a sending link hears its peer only
                     rejected.add("sender")
@@ -431,10 +501,11 @@ class Endpoint:
             out.extend((m, addr) for m in msgs)
             if self.follow:
                 self.peer = addr
-        return out
+        return True
 
     def close(self) -> None:
         if self.fileno >= 0:
+            self._close_prio()
             self.sock.close()
             self.fileno = -1
 
@@ -460,13 +531,15 @@ def wait(endpoints: Sequence[Endpoint], deadline: float, spin: Endpoint | None =
             # we are waiting for may be that task; on an idle one this returns at once
             os.sched_yield()
     while True:
-        out = [(ep, m, a) for ep in endpoints for m, a in ep.poll()]
+        out = [(ep, m, a) for ep in endpoints for m, a in ep.poll(deadline)]
         if out:
             return out
         left = deadline - mono()
         if left <= 0.0:
             return out
-        try:
-            select.select([ep.sock for ep in endpoints], [], [], left)
+        if any(ep.backlog for ep in endpoints):
+            continue  # more waiting on a main socket: read on (each poll stops at the deadline)
+        try:  # an endpoint with a peer socket sleeps on it only (Endpoint.prioritise)
+            select.select([ep.wake_socket for ep in endpoints], [], [], left)
         except InterruptedError:
             pass

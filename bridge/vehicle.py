@@ -143,7 +143,7 @@ class Vehicle:
         self._from_peer = False  # the message being handled came from the controller's address
         sign = (lambda link_id: Signing(cfg.key, link_id)) if cfg.key is not None else (lambda link_id: None)
         self.link = Endpoint(cfg.listen, sysid=cfg.sysid, compid=cfg.compid, tlog=self.tlog, name="--listen",
-                             signing=sign(0), rejected=self.rejected)
+                             signing=sign(0), rejected=self.rejected, priority=True)
         self.link.follow = False  # ODOMETRY goes to the configured controller only (see _handle)
         self.gcs = (Endpoint(cfg.gcs, sysid=cfg.sysid, compid=cfg.compid, tlog=self.tlog, name="--gcs",
                              signing=sign(1), rejected=self.rejected)
@@ -491,8 +491,9 @@ class Vehicle:
     # -- receiving ---------------------------------------------------------------------------------
     def _handle(self, ep: Endpoint, m: Any, addr: tuple[str, int]) -> None:
         """A message that passed the frame stage: checked and acted on by :meth:`_dispatch`.
-        The controller link's peer (where ODOMETRY goes, never rate-limited) is the address
-        of the configured controller's newest message that nothing refused."""
+        The controller link's peer (where ODOMETRY goes, never rate-limited, with a socket of
+        its own: Endpoint.prioritise) is the address of the configured controller's newest
+        message that nothing refused."""
         link = self.link
         self._from_peer = addr == link.peer
         refused = self.rejected.total
@@ -501,6 +502,7 @@ class Vehicle:
         if (ep is link and self.rejected.total == refused and m.get_srcSystem() == cfg.controller_sysid
                 and m.get_srcComponent() == cfg.controller_compid):
             link.peer = addr
+            link.prioritise(addr)
 
     def _dispatch(self, ep: Endpoint, m: Any, addr: tuple[str, int]) -> None:
         kind = m._type

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import os
+import socket
 import subprocess
 import sys
 import time
@@ -25,6 +26,7 @@ from bridge.endpoint import (
     wait,
 )
 from params import ConfigError
+from tests.hostile import udp_queue, wait_until
 
 f32 = st.floats(width=32, allow_nan=False, allow_infinity=False)
 
@@ -199,3 +201,40 @@ def test_tlog_holds_both_directions_and_mavlogdump_reads_it(tmp_path):
                           env={**os.environ, "MAVLINK20": "1"})
     assert dump.returncode == 0, dump.stderr
     assert "ODOMETRY" in dump.stdout and "SET_ACTUATOR_CONTROL_TARGET" in dump.stdout and "HEARTBEAT" in dump.stdout
+
+
+def test_the_peer_gets_a_socket_of_its_own():
+    """With priority, the peer's datagrams come on a socket connected to it (SO_REUSEPORT):
+    read first, ahead of any backlog of others', and the only one wait() sleeps on; a second
+    endpoint still cannot take the port."""
+    a = Endpoint(parse_address("udpin:127.0.0.1:0"), sysid=1, compid=1, priority=True)
+    a.follow = False
+    ctl = Endpoint(parse_address(f"udpout:127.0.0.1:{a.local[1]}"), sysid=200, compid=191)
+    other = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    other.bind(("127.0.0.1", 0))
+    try:
+        with pytest.raises(ConfigError, match="cannot bind"):
+            Endpoint(parse_address(f"udpin:127.0.0.1:{a.local[1]}"), sysid=1, compid=1, priority=True)
+        a.peer = ctl.local
+        a.prioritise(ctl.local)
+        assert a.prio is not None and a.wake_socket is a.prio
+        for _ in range(200):
+            other.sendto(b"\x00junk", a.local)
+        ctl.send(mavlink.MAVLink_heartbeat_message(18, 8, 0, 0, 4, 3))
+        wait_until(lambda: (udp_queue(a.local[1]) or (0, 0))[0] > 0, 5.0, "datagrams queued")
+        got = a.poll()
+        assert got and got[0][0].get_type() == "HEARTBEAT" and got[0][1] == ctl.local  # ahead of the backlog
+        while a.backlog:
+            a.poll()
+        assert a.rejected == {"no_frame": 200}
+        # others' datagrams do not wake a wait: it sleeps on the peer's socket to its deadline
+        other.sendto(b"\x00junk", a.local)
+        t0 = time.monotonic()
+        assert wait((a,), t0 + 0.05) == [] and time.monotonic() - t0 >= 0.045
+        ctl.send(mavlink.MAVLink_heartbeat_message(18, 8, 0, 0, 4, 3))
+        got = [m for _, m, _a in wait((a,), time.monotonic() + 5.0)]
+        assert [m.get_type() for m in got] == ["HEARTBEAT"] and a.rejected == {"no_frame": 201}
+    finally:
+        a.close()
+        ctl.close()
+        other.close()
