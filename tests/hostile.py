@@ -33,6 +33,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from collections import Counter
 from collections.abc import Callable, Iterable
@@ -332,3 +333,94 @@ def gone(pid: int) -> bool:
             return f.read().rsplit(")", 1)[1].split()[0] in ("Z", "X")
     except (FileNotFoundError, ProcessLookupError, IndexError):
         return True
+
+
+# -- flood: another source at a multiple of the controller's rate, during a realtime flight ----
+class Flood:
+    """A thread sending ``rate_hz`` datagrams per second to 127.0.0.1:``port`` from one
+    source, from a pool of ``pool`` hostile datagrams (targets from an impostor, NaN targets
+    with the controller's ids, damaged frames, random bytes), on a drift-free schedule of
+    bursts every ``burst_s``, until :meth:`stop`."""
+
+    def __init__(self, port: int, rate_hz: float, sysid: int, seed: int = 3, pool: int = 2000,
+                 burst_s: float = 0.002) -> None:
+        fuzz = Fuzzer(seed, sysid, huge_every=0)
+        kinds = ("sender", "not_finite", "bitflip", "random")
+        self.pool = [fuzz.make(kinds[i % len(kinds)]) for i in range(pool)]
+        self.dest = ("127.0.0.1", port)
+        self.rate_hz = rate_hz
+        self.burst_s = burst_s
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sent = 0
+        self.elapsed_s = 0.0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def start(self) -> Flood:
+        self._thread.start()
+        return self
+
+    def _run(self) -> None:
+        t0 = time.monotonic()
+        n = len(self.pool)
+        while not self._stop.is_set():
+            due = int((time.monotonic() - t0) * self.rate_hz)  # datagrams due by now: no drift
+            while self.sent < due:
+                try:
+                    self.sock.sendto(self.pool[self.sent % n], self.dest)
+                except OSError:  # nobody there any more (ICMP), or the send buffer is full
+                    pass
+                self.sent += 1
+            self._stop.wait(self.burst_s)
+        self.elapsed_s = time.monotonic() - t0
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=10)
+        self.sock.close()
+
+
+def deadline_misses(state_age_s: Any, rate_hz: float) -> float:
+    """The share of control steps (after the first) whose command in force at the vehicle is
+    not the answer to the previous step's state, i.e. the target answering state k had not
+    arrived when step k + 1 began: ``state_age_s`` above 1.5 periods, or no command at all."""
+    import numpy as np
+
+    age = np.asarray(state_age_s, dtype=float)[1:]
+    if not len(age):
+        return 0.0
+    return float(np.mean(~(age <= 1.5 / rate_hz)))
+
+
+def fly_flooded(mission: Any, out: Path, multiple: float, **kw: Any) -> tuple[Any, Flood | None]:
+    """Fly ``mission`` as a real-time SITL session into ``out`` while another source floods the
+    vehicle's controller link at ``multiple`` times the controller's message rate (none if 0)
+    from the first step flown to the end; the :class:`~bridge.runlog.Run` and the flood."""
+    from bridge.endpoint import LINK_PORT
+    from bridge.session import sitl
+
+    with instance_slot() as n:
+        result: dict[str, Any] = {}
+
+        def fly() -> None:
+            try:
+                result["run"] = sitl(mission, out=out, plots=False, realtime=True, instance=n, **kw)
+            except BaseException as exc:  # re-raised below, in the caller's thread
+                result["error"] = exc
+
+        th = threading.Thread(target=fly)
+        th.start()
+        flood = None
+        try:
+            wait_until(lambda: csv_rows(out / "vehicle.csv") > 0 or not th.is_alive(), 60, "the flight starting",
+                       poll_s=0.005)
+            if multiple > 0 and th.is_alive():
+                flood = Flood(LINK_PORT + n, multiple * mission.rate_hz, n + 1).start()
+        finally:
+            th.join(timeout=600)
+            if flood is not None:
+                flood.stop()
+    if "error" in result:
+        raise result["error"]
+    return result["run"], flood
