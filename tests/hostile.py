@@ -24,6 +24,7 @@ run must give the undisturbed run's ``trace.csv``.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -36,7 +37,8 @@ import sys
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -197,7 +199,9 @@ class Sender:
     source address, so none exceeds the vehicle's per-source rate), pacing on the kernel's
     receive queue of the target so that nothing is dropped before the vehicle reads it."""
 
-    def __init__(self, port: int, sources: int = 64, queue_bytes: int = 256 * 1024) -> None:
+    def __init__(self, port: int, sources: int = 64, queue_bytes: int = 256 * 1024,
+                 rate_hz: float | None = None) -> None:
+        self.rate_hz = rate_hz  # datagrams/s at most, all sources together (None: as fast as read)
         self.dest = ("127.0.0.1", port)
         self.port = port
         self.queue_bytes = queue_bytes
@@ -217,7 +221,11 @@ class Sender:
 
     def send(self, datagrams: Iterable[bytes], timeout: float = 30.0) -> None:
         """Send them all (paced), then return; fails if the receiver stops reading."""
+        t0 = time.monotonic()
         for d in datagrams:
+            if self.rate_hz and self.sent % 64 == 0:
+                due = t0 + self.sent / self.rate_hz
+                wait_until(lambda due=due: time.monotonic() >= due, timeout, "the rate's schedule", poll_s=0.0005)
             if self.sent % 64 == 0 or len(d) > 4096:
                 wait_until(lambda d=d: self._room(2 * len(d) + 2048), timeout, "the vehicle reading its socket")
             self.socks[self.sent % len(self.socks)].sendto(d, self.dest)
@@ -393,11 +401,11 @@ def deadline_misses(state_age_s: Any, rate_hz: float) -> float:
     return float(np.mean(~(age <= 1.5 / rate_hz)))
 
 
-def fly_flooded(mission: Any, out: Path, multiple: float, **kw: Any) -> tuple[Any, Flood | None]:
-    """Fly ``mission`` as a real-time SITL session into ``out`` while another source floods the
-    vehicle's controller link at ``multiple`` times the controller's message rate (none if 0)
-    from the first step flown to the end; the :class:`~bridge.runlog.Run` and the flood."""
-    from bridge.endpoint import LINK_PORT
+@contextlib.contextmanager
+def session_thread(mission: Any, out: Path, **kw: Any) -> Iterator[tuple[int, threading.Thread, dict[str, Any]]]:
+    """Fly :func:`bridge.session.sitl` (``mission`` into ``out``, ``kw``) in a thread on an
+    instance of its own; yields (instance, thread, result); on leaving, waits for the flight
+    and re-raises what it raised. ``result["run"]`` is the :class:`~bridge.runlog.Run`."""
     from bridge.session import sitl
 
     with instance_slot() as n:
@@ -405,13 +413,28 @@ def fly_flooded(mission: Any, out: Path, multiple: float, **kw: Any) -> tuple[An
 
         def fly() -> None:
             try:
-                result["run"] = sitl(mission, out=out, plots=False, realtime=True, instance=n, **kw)
+                result["run"] = sitl(mission, out=out, plots=False, instance=n, **kw)
             except BaseException as exc:  # re-raised below, in the caller's thread
                 result["error"] = exc
 
         th = threading.Thread(target=fly)
         th.start()
-        flood = None
+        try:
+            yield n, th, result
+        finally:
+            th.join(timeout=600)
+    if "error" in result:
+        raise result["error"]
+
+
+def fly_flooded(mission: Any, out: Path, multiple: float, **kw: Any) -> tuple[Any, Flood | None]:
+    """Fly ``mission`` as a real-time SITL session into ``out`` while another source floods the
+    vehicle's controller link at ``multiple`` times the controller's message rate (none if 0)
+    from the first step flown to the end; the :class:`~bridge.runlog.Run` and the flood."""
+    from bridge.endpoint import LINK_PORT
+
+    flood = None
+    with session_thread(mission, out, realtime=True, **kw) as (n, th, result):
         try:
             wait_until(lambda: csv_rows(out / "vehicle.csv") > 0 or not th.is_alive(), 60, "the flight starting",
                        poll_s=0.005)
@@ -421,6 +444,68 @@ def fly_flooded(mission: Any, out: Path, multiple: float, **kw: Any) -> tuple[An
             th.join(timeout=600)
             if flood is not None:
                 flood.stop()
-    if "error" in result:
-        raise result["error"]
     return result["run"], flood
+
+
+@dataclass
+class Fuzzed:
+    """What :func:`fly_fuzzed` saw: the run, the fuzzer (what it sent, by kind), the kernel's
+    drops on the vehicle's socket, the steps flown when the last datagram had been read, the
+    STATUSTEXTs the GCS port got, the burst's wall time and the vehicle's CPU time meanwhile."""
+
+    run: Any
+    fuzz: Fuzzer
+    sent: int
+    drops: int
+    flown: int
+    texts: list[str]
+    elapsed_s: float
+    vehicle_cpu_s: float
+
+
+def fly_fuzzed(mission: Any, out: Path, datagrams: int, seed: int = 7, sources: int = 64,
+               speed: float = 2.0, rate_hz: float | None = None) -> Fuzzed:
+    """Fly ``mission`` lockstep (at most ``speed`` x real time) into ``out`` while
+    ``datagrams`` hostile ones from :class:`Fuzzer` go, paced by :class:`Sender` from
+    ``sources`` addresses (at most ``rate_hz`` per second), to the vehicle's controller link once it is past step
+    :data:`MIN_STEP`; a socket on the GCS port collects the vehicle's STATUSTEXTs."""
+    from bridge.endpoint import GCS_PORT, LINK_PORT
+
+    gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        with session_thread(mission, out, speed=speed) as (n, th, result):
+            gcs.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 21)
+            gcs.bind(("127.0.0.1", GCS_PORT + n))
+            vcsv = out / "vehicle.csv"
+            wait_until(lambda: csv_rows(vcsv) > MIN_STEP or not th.is_alive(), 60, "the fuzzed flight starting",
+                       poll_s=0.01)
+            pid = session_pids(out)["vehicle"]
+            fuzz = Fuzzer(seed=seed, sysid=n + 1)
+            sender = Sender(LINK_PORT + n, sources=sources, rate_hz=rate_hz)
+            cpu0, t0 = _cpu_s(pid), time.monotonic()
+            try:
+                sender.send(fuzz.next(i) for i in range(datagrams))
+                drops = sender.drained(timeout=120)
+            finally:
+                sender.close()
+            elapsed, cpu = time.monotonic() - t0, _cpu_s(pid) - cpu0
+            flown = csv_rows(vcsv)
+        gcs.setblocking(False)
+        texts = []
+        mav = mavlink.MAVLink(None)
+        while True:
+            try:
+                data = gcs.recv(65535)
+            except BlockingIOError:
+                break
+            texts += [m.text for m in mav.parse_buffer(data) or [] if m.get_type() == "STATUSTEXT"]
+    finally:
+        gcs.close()
+    return Fuzzed(result["run"], fuzz, sender.sent, drops, flown, texts, elapsed, cpu)
+
+
+def _cpu_s(pid: int) -> float:
+    """User + system CPU time of process ``pid`` so far (s)."""
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")

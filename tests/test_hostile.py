@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import math
 import socket
-import threading
-from pathlib import Path
 from typing import Any
 
 import pytest
@@ -14,15 +12,14 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import common as mavlink
 
-from bridge.endpoint import GCS_PORT, LINK_PORT, parse_address, parse_datagram
+from bridge.endpoint import parse_address, parse_datagram
 from bridge.flight import prepare
 from bridge.guard import MAX_POSITION_M, Rejections, odometry_problem, wire_problem
-from bridge.session import instance_slot, sitl
+from bridge.session import sitl
 from bridge.signing import Signing
 from bridge.vehicle import Vehicle, VehicleConfig
 from missions import Mission, Sine
-from tests.hostile import MIN_STEP, Fuzzer, Sender, deadline_misses, fly_flooded, wait_until
-from tests.sitlkit import csv_rows
+from tests.hostile import Fuzzer, deadline_misses, fly_flooded, fly_fuzzed, wait_until
 
 FUZZ_DATAGRAMS = 30_000
 KEY = bytes(range(32))
@@ -178,62 +175,21 @@ def test_fuzz_during_a_lockstep_mission(tmp_path):
     mission = Mission(Sine(), duration_s=8.0, name="fuzz")
     ref = sitl(mission, out=tmp_path / "ref", plots=False, instance=None)
     assert ref.outcome == "completed" and ref.summary["link"]["rejected"] == {}
-    with instance_slot() as n:
-        gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        gcs.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
-        gcs.bind(("127.0.0.1", GCS_PORT + n))
-        result: dict[str, Any] = {}
-
-        def fly() -> None:
-            try:
-                result["run"] = sitl(mission, out=tmp_path / "fuzz", plots=False, instance=n, speed=2.0)
-            except BaseException as exc:  # reported by the main thread
-                result["error"] = exc
-
-        th = threading.Thread(target=fly)
-        th.start()
-        vcsv = Path(tmp_path / "fuzz" / "vehicle.csv")
-        try:
-            wait_until(lambda: csv_rows(vcsv) > MIN_STEP or not th.is_alive(), 60, "the fuzzed flight starting",
-                       poll_s=0.01)
-            fuzz = Fuzzer(seed=7, sysid=n + 1)
-            sender = Sender(LINK_PORT + n, sources=64)
-            try:
-                sender.send(fuzz.next(i) for i in range(FUZZ_DATAGRAMS))
-                drops = sender.drained()
-            finally:
-                sender.close()
-            flown = csv_rows(vcsv)
-        finally:
-            th.join(timeout=120)
-        gcs.setblocking(False)
-        texts = []
-        mav = mavlink.MAVLink(None)
-        while True:
-            try:
-                data = gcs.recv(65535)
-            except BlockingIOError:
-                break
-            for m in mav.parse_buffer(data) or []:
-                if m.get_type() == "STATUSTEXT":
-                    texts.append(m.text)
-        gcs.close()
-    assert "error" not in result, result.get("error")
-    assert flown < mission.steps, "the mission ended before the fuzz did: fly longer"
-    run = result["run"]
-    s = run.summary
+    f = fly_fuzzed(mission, tmp_path / "fuzz", FUZZ_DATAGRAMS)
+    assert f.flown < mission.steps, "the mission ended before the fuzz did: fly longer"
+    s = f.run.summary
     assert s["outcome"] == "completed" and s["sitl"]["died"] is None
     assert s["sitl"]["vehicle_exit"] == s["sitl"]["controller_exit"] == "exited with status 0"
     assert (tmp_path / "fuzz" / "trace.csv").read_bytes() == (tmp_path / "ref" / "trace.csv").read_bytes()
-    assert drops == 0, f"the kernel dropped {drops} datagrams: the count cannot add up"
+    assert f.drops == 0, f"the kernel dropped {f.drops} datagrams: the count cannot add up"
     link = s["link"]
     by_vehicle = link["rejected_by"]["vehicle"]
-    assert sum(by_vehicle.values()) - link["rejected_from_peer"]["vehicle"] == sender.sent == FUZZ_DATAGRAMS
-    for reason, least in fuzz.expected().items():
-        assert by_vehicle.get(reason, 0) >= least, (reason, by_vehicle, fuzz.sent)
+    assert sum(by_vehicle.values()) - link["rejected_from_peer"]["vehicle"] == f.sent == FUZZ_DATAGRAMS
+    for reason, least in f.fuzz.expected().items():
+        assert by_vehicle.get(reason, 0) >= least, (reason, by_vehicle, f.fuzz.sent)
     assert "rate_limited" not in by_vehicle
     assert link["rejected_by"]["controller"] == {}
-    assert any(t.startswith("rejected ") for t in texts), texts[:5]
+    assert any(t.startswith("rejected ") for t in f.texts), f.texts[:5]
 
 
 def test_a_flood_from_another_source_leaves_the_control_deadlines_alone(tmp_path):
