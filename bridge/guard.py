@@ -76,17 +76,18 @@ class Rejections(dict[str, int]):
     def __init__(self) -> None:
         super().__init__()
         self.from_peer = 0
+        self.total = 0  # all refusals (kept as counts are set: read on every message, so O(1))
         self._reported: dict[str, int] = {}
         self._next_report = 0.0
+
+    def __setitem__(self, reason: str, count: int) -> None:
+        self.total += count - self.get(reason, 0)
+        super().__setitem__(reason, count)
 
     def add(self, reason: str, from_peer: bool = False) -> None:
         self[reason] = self.get(reason, 0) + 1
         if from_peer:
             self.from_peer += 1
-
-    @property
-    def total(self) -> int:
-        return sum(self.values())
 
     def report(self, now: float | None = None) -> str | None:
         """A line on the refusals since the last report (most frequent first, at most
@@ -162,8 +163,8 @@ def odometry_problem(m: Any) -> str | None:
     position within :data:`MAX_POSITION_M` of the origin, the quaternion of unit norm."""
     q = m.q
     vals = (m.x, m.y, m.z, q[0], q[1], q[2], q[3], m.vx, m.vy, m.vz, m.rollspeed, m.pitchspeed, m.yawspeed)
-    try:
-        if not all(map(math.isfinite, vals)):
+    try:  # the sum is finite when every value is (one call for all); if not, look value by value
+        if not math.isfinite(sum(vals)) and not all(map(math.isfinite, vals)):
             return "not_finite"
     except TypeError:  # not numbers at all
         return "malformed"

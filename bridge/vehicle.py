@@ -495,12 +495,13 @@ class Vehicle:
         its own: Endpoint.prioritise) is the address of the configured controller's newest
         message that nothing refused."""
         link = self.link
-        self._from_peer = addr == link.peer
+        known = self._from_peer = addr == link.peer
         refused = self.rejected.total
         self._dispatch(ep, m, addr)
+        if known or ep is not link or self.rejected.total != refused:
+            return
         cfg = self.cfg
-        if (ep is link and self.rejected.total == refused and m.get_srcSystem() == cfg.controller_sysid
-                and m.get_srcComponent() == cfg.controller_compid):
+        if m.get_srcSystem() == cfg.controller_sysid and m.get_srcComponent() == cfg.controller_compid:
             link.peer = addr
             link.prioritise(addr)
 

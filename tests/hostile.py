@@ -170,15 +170,16 @@ class Fuzzer:
 
 
 def udp_queue(port: int) -> tuple[int, int] | None:
-    """The kernel's receive queue (bytes) and drop count of the UDP socket bound to
-    127.0.0.1:``port`` (``/proc/net/udp``), or None when there is none."""
+    """The kernel's receive queue (bytes) and drop count of the (unconnected) UDP socket
+    bound to 127.0.0.1:``port`` (``/proc/net/udp``), or None when there is none. The vehicle's
+    controller gets a connected socket on the same port (Endpoint.prioritise): not that one."""
     want = f"0100007F:{port:04X}"
     try:
         with open("/proc/net/udp") as f:
             next(f)
             for line in f:
                 parts = line.split()
-                if parts[1] == want:
+                if parts[1] == want and parts[2] == "00000000:0000":
                     return int(parts[4].split(":")[1], 16), int(parts[-1])
     except OSError:
         return None
