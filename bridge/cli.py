@@ -25,19 +25,6 @@ class _Parser(argparse.ArgumentParser):
         raise UsageError(f"{self.prog}: {message}")
 
 
-def positive_float(name: str, lo: float = 0.0, hi: float = float("inf")) -> Callable[[str], float]:
-    def conv(text: str) -> float:
-        try:
-            v = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} must be a number, got {text!r}") from None
-        if not (lo < v <= hi) or v != v:
-            raise argparse.ArgumentTypeError(f"{name} must be in ({lo:g}, {hi:g}], got {text}")
-        return v
-
-    return conv
-
-
 def int_in(name: str, lo: int, hi: int) -> Callable[[str], int]:
     def conv(text: str) -> int:
         try:
@@ -56,7 +43,7 @@ def add_flight_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("mission", help="mission TOML file (see missions/)")
     p.add_argument("--out", metavar="DIR", help="run directory (default runs/<UTC time>-<mission>)")
     p.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out")
-    p.add_argument("--rate", type=positive_float("--rate", 49.999, 1000.0), metavar="HZ",
+    p.add_argument("--rate", type=number_in("--rate", 50.0, 1000.0), metavar="HZ",
                    help="control rate, 50-1000 Hz (default: the mission's, 250)")
     p.add_argument("--profile", metavar="NAME", help="vehicle profile: paper, x500 or a profile TOML path")
     p.add_argument("--controller", choices=("bsst", "smc", "pid"), help="control law")
@@ -76,15 +63,17 @@ LINK_FLAGS = (  # flag stem, [link] key, metavar, lo, hi, help
 )
 
 
-def number_in(name: str, lo: float, hi: float) -> Callable[[str], float]:
-    """A number in [lo, hi] (closed), named in the error."""
+def number_in(name: str, lo: float, hi: float, *, lo_open: bool = False) -> Callable[[str], float]:
+    """An argparse type: a finite number in [lo, hi] (or (lo, hi] with ``lo_open``), named in the error."""
+    left = "(" if lo_open else "["
+
     def conv(text: str) -> float:
         try:
             v = float(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{name} must be a number, got {text!r}") from None
-        if not lo <= v <= hi:
-            raise argparse.ArgumentTypeError(f"{name} must be in [{lo:g}, {hi:g}], got {text}")
+        if not (lo < v if lo_open else lo <= v) or not v <= hi:  # also refuses nan
+            raise argparse.ArgumentTypeError(f"{name} must be in {left}{lo:g}, {hi:g}], got {text}")
         return v
 
     return conv
@@ -187,7 +176,7 @@ def add_relay_command(sub: Any) -> None:
     p.add_argument("--listen-direction", choices=("up", "down"), default="up",
                    help="direction of what arrives on --listen (default up: controller -> vehicle)")
     p.add_argument("--mission", metavar="FILE", help="take the [link] tables (and seed) from this mission")
-    p.add_argument("--duration", type=positive_float("--duration", 0.0, 1e7), metavar="S",
+    p.add_argument("--duration", type=number_in("--duration", 0.0, 1e7, lo_open=True), metavar="S",
                    help="stop after S seconds (default: until SIGINT/SIGTERM)")
     p.add_argument("--stats", metavar="FILE", help="write the statistics to FILE as JSON on exit")
     p.add_argument("--mission-clock", action="store_true",
@@ -381,7 +370,7 @@ def add_sitl_commands(sub: Any) -> None:
     p.add_argument("mission", nargs="?", help="mission TOML for the start, effects, failsafe and rates "
                                               "(default: at rest at the origin, 250 Hz)")
     p.add_argument("--profile", metavar="NAME", help="vehicle profile: paper, x500 or a profile TOML path")
-    p.add_argument("--rate", type=positive_float("--rate", 49.999, 1000.0), metavar="HZ",
+    p.add_argument("--rate", type=number_in("--rate", 50.0, 1000.0), metavar="HZ",
                    help="control rate, 50-1000 Hz: one lockstep step per period")
     p.add_argument("--seed", type=int_in("--seed", 0, 2**31 - 1), metavar="N", help="seed of random effects")
     _add_port_options(p, vehicle=True)
@@ -404,7 +393,7 @@ def add_sitl_commands(sub: Any) -> None:
     p.add_argument("--sysid", type=int_in("--sysid", 1, 254), default=200, metavar="N", help="own system id")
     p.add_argument("--target-sysid", type=int_in("--target-sysid", 1, 254), metavar="N",
                    help="fly only this vehicle (default: the first autopilot heard)")
-    p.add_argument("--timeout", type=positive_float("--timeout", 0.0, 3600.0), default=10.0, metavar="S",
+    p.add_argument("--timeout", type=number_in("--timeout", 0.0, 3600.0, lo_open=True), default=10.0, metavar="S",
                    help="wait this long for the vehicle's heartbeat (default 10 s)")
     add_key_option(p)
     p.set_defaults(func=cmd_controller)
@@ -429,7 +418,7 @@ def _add_port_options(p: argparse.ArgumentParser, vehicle: bool) -> None:
         clock.add_argument("--lockstep", dest="realtime", action="store_false", help="lockstep clock (default)")
     clock.add_argument("--realtime", action="store_true", help="run on the wall clock (default lockstep)")
     p.set_defaults(realtime=False)
-    p.add_argument("--speed", type=positive_float("--speed", 0.0, 1000.0), metavar="X",
+    p.add_argument("--speed", type=number_in("--speed", 0.0, 1000.0, lo_open=True), metavar="X",
                    help="lockstep: at most X times real time; also the pace after the controller is lost (default 1)")
     add_key_option(p)
 
