@@ -49,8 +49,6 @@ from bridge.signing import IFLAG_SIGNED, SIGNATURE_BYTES, Signing
 from bridge.signing import crc16 as _crc16
 from params import ConfigError
 
-MODES = ("udpin", "udpout")
-
 # Identities and ports of DESIGN.md section 4. Instance N (0-9) adds N to both ports and
 # makes the vehicle sysid N + 1, as PX4 does.
 GCS_PORT = 14550

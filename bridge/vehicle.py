@@ -97,7 +97,6 @@ HEARTBEAT_S = 1.0
 HOUSEKEEPING_S = 0.02  # s of wall time between looks at the GCS socket, streams, file flushes
 RESEND_S = 0.05  # lockstep: resend the state nobody answered (a datagram can be dropped)
 IDLE_ODOMETRY_S = 0.1  # lockstep, disarmed: time stands still; the state is still shown
-MAV_RESULT = mavlink.MAV_RESULT_ACCEPTED, mavlink.MAV_RESULT_DENIED, mavlink.MAV_RESULT_UNSUPPORTED
 
 
 @dataclass(frozen=True)
