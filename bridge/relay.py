@@ -287,7 +287,6 @@ def _is_target(data: bytes) -> bool:
 def relay_from_args(args: Any) -> int:
     """``bsst relay``: relay until SIGINT/SIGTERM or ``--duration``; print (and ``--stats``) the figures."""
     import signal
-    import sys
 
     from bridge.cli import UsageError, link_table_from_args
     from bridge.link import link_from_table, merge_link_tables
