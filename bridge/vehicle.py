@@ -499,8 +499,7 @@ class Vehicle:
         self._dispatch(ep, m, addr)
         if known or ep is not link or self.rejected.total != refused:
             return
-        cfg = self.cfg
-        if m.get_srcSystem() == cfg.controller_sysid and m.get_srcComponent() == cfg.controller_compid:
+        if self._from_controller(m):
             link.peer = addr
             link.prioritise(addr)
 
@@ -521,11 +520,15 @@ class Vehicle:
     def _reject(self, why: str) -> None:
         self.rejected.add(why, self._from_peer)
 
+    def _from_controller(self, m: Any) -> bool:
+        """Whether ``m`` says it comes from the configured controller (its sysid and compid)."""
+        cfg = self.cfg
+        return m.get_srcSystem() == cfg.controller_sysid and m.get_srcComponent() == cfg.controller_compid
+
     def _target(self, ep: Endpoint, m: Any, kind: str) -> None:
         """An actuator target: checked, then held for lockstep or applied at once (realtime)."""
         cfg = self.cfg
-        if ep is not self.link or m.get_srcSystem() != cfg.controller_sysid \
-                or m.get_srcComponent() != cfg.controller_compid:
+        if ep is not self.link or not self._from_controller(m):
             return self._reject("sender")
         if kind == "HIL_ACTUATOR_CONTROLS":
             if not m.mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED:
@@ -577,9 +580,7 @@ class Vehicle:
 
     def _through_link(self, ep: Endpoint, m: Any) -> bool:
         """Whether a command crosses the up-link model: the controller's, on its link, in a lockstep flight."""
-        cfg = self.cfg
-        return (ep is self.link and self.engaged and not self.freerun and m.get_srcSystem() == cfg.controller_sysid
-                and m.get_srcComponent() == cfg.controller_compid)
+        return ep is self.link and self.engaged and not self.freerun and self._from_controller(m)
 
     def _command(self, ep: Endpoint, m: Any, addr: tuple[str, int]) -> None:
         cfg = self.cfg
