@@ -1,7 +1,8 @@
 """Plumbing shared by the session launcher and its two child processes.
 
 - Children report on stdout, one line each, flushed at once: ``ready ...``,
-  ``event t=<s> <kind>: <text>``, ``statustext ...``, ``stats {json}``, ``done outcome=...``.
+  ``event t=<s> <kind>: <text>``, ``statustext ...``, ``warning ...`` (the controller's
+  refusals, :meth:`bridge.guard.Rejections.report`), ``stats {json}``, ``done outcome=...``.
   The launcher reads them live (:func:`parse_status`) and waits on them with deadlines.
 - SIGTERM and SIGINT ask a node to stop at its next look; it then closes its files whole.
 - A child dies with its parent (``PR_SET_PDEATHSIG``), so a launcher killed with SIGKILL
