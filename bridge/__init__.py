@@ -5,7 +5,7 @@
 - :mod:`bridge.simvehicle` plant + arming + timeout + failsafe, shared by every clock
 - :mod:`bridge.failsafe`  level-and-descend failsafe
 - :mod:`bridge.wire`      frame conversion NWU <-> NED and actuator normalisation
-- :mod:`bridge.runlog`    the run directory: trace, events, summary, tlogs
+- :mod:`bridge.runlog`    the run directory: trace, events, summary
 - :mod:`bridge.metrics`   RMS, settling, finite-time bound, total variation
 - :mod:`bridge.plots`     the paper-style figures
 - :mod:`bridge.endpoint`  MAVLink 2 over UDP: an endpoint owning its socket, hot-path codec, tlogs

@@ -1,4 +1,5 @@
-"""A run on disk (DESIGN.md section 6): directory, trace, events, summary, tlogs.
+"""A run on disk (DESIGN.md section 6): directory, trace, events, summary (the tlogs are
+:mod:`bridge.endpoint`'s).
 
 Everything is written crash-safe: trace rows and events are appended as whole lines with
 one ``os.write`` each batch (a SIGKILL leaves the file whole up to its last complete
@@ -138,8 +139,6 @@ def _jsonable(v: Any) -> Any:
 
 def read_trace(path: str | Path) -> dict[str, Any]:
     """Read a ``trace.csv`` back into numpy arrays by column, ignoring a torn last line."""
-    import numpy as np
-
     with open(path) as f:
         header = f.readline().strip().split(",")
         rows = []
@@ -150,8 +149,7 @@ def read_trace(path: str | Path) -> dict[str, Any]:
             if len(parts) != len(header):
                 break
             rows.append([float(p) for p in parts])
-    arr = np.array(rows, dtype=float).reshape(-1, len(header))
-    return {name: arr[:, i] for i, name in enumerate(header)}
+    return trace_arrays(rows, header)
 
 
 class Run:
