@@ -70,7 +70,8 @@ def summarise(
     changes = [c for c in mission.trajectory.change_times() if n and c <= t[-1]]
     ends = changes[1:] + [float("inf")]
     outer = {"x": gains.position, "y": gains.position, "z": gains.z, "psi": gains.yaw}
-    late = t >= min(RMS_FROM_S, 0.5 * mission.duration_s) if n else np.zeros(0, bool)
+    rms_from = min(RMS_FROM_S, 0.5 * mission.duration_s)
+    late = t >= rms_from if n else np.zeros(0, bool)
     axes: dict[str, Any] = {}
     for a in AXES:
         e = err[a]
@@ -105,8 +106,8 @@ def summarise(
         "seed": mission.seed,
         "rate_hz": mission.rate_hz,
         "duration_s": _num(dur),
-        "rms_from_s": float(min(RMS_FROM_S, 0.5 * mission.duration_s)),
-        "rms_3d": _num(rms_3d(trace, min(RMS_FROM_S, 0.5 * mission.duration_s))) if n else None,
+        "rms_from_s": float(rms_from),
+        "rms_3d": _num(rms_3d(trace, rms_from)) if n else None,
         "axes": axes,
         "inputs": inputs,
         "link": link or empty_link(),
@@ -119,13 +120,6 @@ def empty_link() -> dict[str, Any]:
     side = {"sent": 0, "delivered": 0, "lost": 0, "duplicated": 0, "reordered": 0,
             "delay_ms": {"p50": 0.0, "p95": 0.0, "p99": 0.0, "max": 0.0}}
     return {"up": dict(side), "down": dict(side), "rejected": {}}
-
-
-def total_variation_per_s(v: np.ndarray, dt: float) -> float:
-    """Sum |v[k+1] - v[k]| per second of signal."""
-    if len(v) < 2:
-        return 0.0
-    return float(np.abs(np.diff(v)).sum() / (len(v) * dt))
 
 
 def _num(v: Any) -> float | None:
