@@ -8,6 +8,8 @@
 - :mod:`controller.actuation`    wrench clamp or rotor allocation (inverse of eq. 4)
 - :mod:`controller.gains`        gains from TOML, eq. (23) check
 - :mod:`controller.nominal`      the law's nominal vehicle model
+- :mod:`controller.link_guard`   what to do with a state of a given age (track, hold, stop, re-arm)
+- :mod:`controller.predict`      latency compensation through the nominal model
 
 :class:`Controller` ties a law to an actuation: ``step(t, state, ref)`` returns a
 :class:`Command`. See ``controller/README.md`` for every deviation from the paper.
