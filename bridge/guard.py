@@ -12,8 +12,8 @@ of it reaches the plant or the law:
 2. **Frame** (:func:`bridge.endpoint.parse_datagram`): MAVLink 2 frames only, whole, known
    message id, good CRC, payload no longer than the message, and, with a key
    (:mod:`bridge.signing`), correctly signed and newer than the last frame of its stream.
-   Only frames that pass are decoded (the two hot messages by the hot codec, the rest by
-   pymavlink) and written to the tlog. The first bad frame ends its datagram.
+   Only frames that pass are decoded (the per-step messages, ODOMETRY and the two actuator
+   targets, by the hot codec; the rest by pymavlink) and written to the tlog. The first bad frame ends its datagram.
 3. **Message** (the owner's handler, with the validators below): the right sender and
    target, finite values in range, the right state (armed, the step awaited).
 
