@@ -160,7 +160,6 @@ def _direction(t: Table, base: LinkConfig) -> LinkConfig:
 
 def _blackouts(t: Table, default: tuple[tuple[float, float], ...]) -> tuple[tuple[float, float], ...]:
     if not t.has("blackouts"):
-        t.raw("blackouts")
         return default
     v = t.raw("blackouts")
     if not isinstance(v, (list, tuple)):
@@ -196,7 +195,6 @@ class LinkSettings:
     def make(self) -> tuple[LinkImpairment, LinkImpairment]:
         """Fresh (up, down) models."""
         return LinkImpairment(self.up, "up"), LinkImpairment(self.down, "down")
-
 
 
 def link_from_table(data: Mapping[str, Any], source: str, seed: int = 0) -> LinkSettings:
