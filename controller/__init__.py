@@ -24,10 +24,11 @@ from controller.bsst import BacksteppingSuperTwisting
 from controller.gains import Gains, gains_from_table
 from controller.nominal import Nominal
 from controller.pid import CascadedPid
+from missions import CONTROLLERS
 from missions.references import Sample
 
 Quad = tuple[float, float, float, float]
-LAWS = ("bsst", "smc", "pid")
+LAWS = CONTROLLERS  # the names a mission may give, each made by make_law
 
 
 @dataclass(frozen=True, slots=True)
