@@ -204,6 +204,7 @@ class Vehicle:
 
     def close(self) -> None:
         """Flush and close every file and socket (idempotent)."""
+        self._drain_sockets()
         self._drain_events()
         if self.rows is not None:
             self.rows.close()
@@ -211,6 +212,20 @@ class Vehicle:
             self.tlog.close()
         for ep in self.endpoints:
             ep.close()
+
+    def _drain_sockets(self, batches: int = 64) -> None:
+        """Take in what is already queued on every socket before closing, so that the final
+        counts include every datagram that arrived before the stop (the others' socket is read
+        lazily while the controller's is busy: see Endpoint.poll); bounded, never blocks."""
+        for ep in self.endpoints:
+            if ep.fileno < 0:
+                continue
+            for _ in range(batches):
+                got = ep.poll()
+                for m, addr in got:
+                    self._handle(ep, m, addr)
+                if not got and not ep.backlog:
+                    break
 
     @property
     def t(self) -> float:
@@ -650,9 +665,10 @@ class Vehicle:
             self._due.pop(mid, None)
             return mavlink.MAV_RESULT_ACCEPTED
         iv = DEFAULT_STREAMS[mid] if interval_us == 0 else max(interval_us * 1e-6, 0.005)
-        if iv <= 0:
-            return mavlink.MAV_RESULT_ACCEPTED
         self.streams[mid] = iv
+        if iv <= 0:  # back to a default of "only on request"
+            self._due.pop(mid, None)
+            return mavlink.MAV_RESULT_ACCEPTED
         self._due[mid] = time.monotonic()
         return mavlink.MAV_RESULT_ACCEPTED
 
