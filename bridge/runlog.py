@@ -33,10 +33,13 @@ def state_columns(X: Sequence[float]) -> tuple[float, ...]:
     return (X[0], X[2], X[4], X[1], X[3], X[5], X[6], X[8], X[10], X[7], X[9], X[11])
 
 
-def run_dir(out: str | Path | None, mission_name: str, overwrite: bool = False, root: str | Path = "runs") -> Path:
+def run_dir(
+    out: str | Path | None, mission_name: str, overwrite: bool = False, root: str | Path = "runs", create: bool = True
+) -> Path:
     """Create the run directory: ``out`` exactly, or ``runs/<UTC time>-<mission>``.
 
-    Refuses a non-empty directory unless ``overwrite``.
+    Refuses a non-empty directory unless ``overwrite``. With ``create=False`` it only checks
+    (so a command can name every bad input before it starts anything).
     """
     if out is None:
         stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
@@ -51,6 +54,8 @@ def run_dir(out: str | Path | None, mission_name: str, overwrite: bool = False, 
         raise ConfigError(f"--out {path}: exists and is not a directory")
     if path.is_dir() and any(path.iterdir()) and not overwrite:
         raise ConfigError(f"--out {path}: directory is not empty (use --overwrite to replace its run)")
+    if not create:
+        return path
     # an overwritten run's summary goes first: until the new one is written whole there is none,
     # never one of another run beside this run's files
     for old in (path.glob("summary.json") if path.is_dir() else ()):

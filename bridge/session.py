@@ -126,9 +126,11 @@ def sitl(
         gcs_text = None
     if gcs_text is not None:
         parse_address(gcs_text, "udpout", "--gcs")  # bad input fails here, before anything starts
+    keep = out is not None or write
+    if keep:  # a refused run directory is named before a busy port (both before anything starts)
+        run_dir(out, flight.mission.name, overwrite, create=False)
     if instance is not None:
         _check_port_free(LINK_PORT + n, f"--instance {n}")
-    keep = out is not None or write
     path = run_dir(out, flight.mission.name, overwrite) if keep else Path(tempfile.mkdtemp(prefix="bsst-sitl-"))
     try:
         s = Session(flight, path, realtime=realtime, instance=instance, gcs=gcs_text, speed=speed,
