@@ -117,9 +117,13 @@ def summarise(
 
 
 def empty_link() -> dict[str, Any]:
-    side = {"sent": 0, "delivered": 0, "lost": 0, "duplicated": 0, "reordered": 0,
-            "delay_ms": {"p50": 0.0, "p95": 0.0, "p99": 0.0, "max": 0.0}}
-    return {"up": dict(side), "down": dict(side), "rejected": {}}
+    """The ``link`` block of a run that carried no packets (each direction its own dicts)."""
+
+    def side() -> dict[str, Any]:
+        return {"sent": 0, "delivered": 0, "lost": 0, "duplicated": 0, "reordered": 0,
+                "delay_ms": {"p50": 0.0, "p95": 0.0, "p99": 0.0, "max": 0.0}}
+
+    return {"up": side(), "down": side(), "rejected": {}}
 
 
 def _num(v: Any) -> float | None:
