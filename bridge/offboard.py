@@ -19,6 +19,9 @@ returns DESIGN.md section 7's outcome.
 - **realtime**: a drift-free fixed-rate schedule (tick j at T0 + j / rate_hz, never
   re-based on a late tick), phase-locked just after the first state's arrival; each tick
   controls on the newest state (the link model, if any, is on the wire: ``bsst relay``).
+  A tick whose state (k0 + j) is not in yet waits for it at most half a period, as a flight
+  stack's rate loop polls for its estimate with a timeout, then controls on what it has
+  (counted in ``stale_ticks``).
   Each row records the tick's lateness (the period error) and the state-to-command round
   trip estimated with TIMESYNC.
 
@@ -75,6 +78,11 @@ CONTROLLER_COLUMNS = (
 OUTCOMES = ("completed", "failsafe", "diverged", "aborted")
 PHASE_S = 0.0003  # realtime: tick this long after the state's arrival (its one-way trip and decode)
 PHASE_STATES = 5  # realtime: states watched to find the phase of the vehicle's clock
+# realtime: a tick whose state is not in yet waits for it at most this share of a period (a
+# late wake-up of the vehicle would otherwise cost the step: the law would answer the state
+# before, and its target would be two periods old when the next step begins); the rest of
+# the period is the target's way back
+STATE_WAIT_PERIODS = 0.5
 SPIN_BEFORE_TICK_S = 0.0003  # realtime: sleep until this long before a tick, then poll: select wakes late
 HOUSEKEEPING_S = 0.05
 _ZERO12 = (0.0,) * 12
@@ -318,6 +326,8 @@ class Offboard:
                 late = now - due
             for m, _addr in self.ep.poll():
                 self._on(m)
+            if self._odo is None or step_of_usec(self._odo.time_usec, rate) < k0 + j:
+                self._await_state(k0 + j, due + STATE_WAIT_PERIODS * period)
             t = j / rate  # mission time of this tick: state k0 + j is due just before it
             j += 1
             outcome = self._check_vehicle()
@@ -409,6 +419,15 @@ class Offboard:
             else:
                 for m, _addr in self.ep.poll():
                     self._on(m)
+
+    def _await_state(self, k: int, deadline: float) -> None:
+        """Serve the link until the state of step ``k`` (or a newer one) is in, or ``deadline``."""
+        rate = self.rate
+        while not self.stopping and (self._odo is None or step_of_usec(self._odo.time_usec, rate) < k):
+            if time.monotonic() >= deadline:
+                return
+            for _, m, _addr in wait((self.ep,), deadline):
+                self._on(m)
 
     def _state_to_command(self, time_usec: int, sent: float) -> float:
         """State-to-command round trip (s) by TIMESYNC: from the state's time, on the vehicle's
