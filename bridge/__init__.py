@@ -24,7 +24,19 @@
 - :mod:`bridge.cli`       ``bsst``
 """
 
-from bridge.loop import simulate
-from bridge.runlog import Run
+from typing import Any
 
 __all__ = ["Run", "simulate"]
+
+
+def __getattr__(name: str) -> Any:
+    # imported on first use, so that ``bsst --help`` or a refused flag does not load the law
+    if name == "simulate":
+        from bridge.loop import simulate
+
+        return simulate
+    if name == "Run":
+        from bridge.runlog import Run
+
+        return Run
+    raise AttributeError(f"module 'bridge' has no attribute {name!r}")

@@ -52,14 +52,14 @@ def add_flight_options(p: argparse.ArgumentParser) -> None:
 
 
 # -- link impairment flags (bridge.link): both directions, or one with --up-/--down- -----------
-LINK_FLAGS = (  # flag stem, [link] key, metavar, lo, hi, help
-    ("delay", "delay_ms", "MS", 0.0, 60_000.0, "one-way delay"),
-    ("jitter", "jitter_ms", "MS", 0.0, 60_000.0, "delay jitter (uniform half-width or normal sigma)"),
-    ("loss", "loss_pct", "PCT", 0.0, 100.0, "packet loss"),
-    ("burst", "burst_len", "LEN", 0.0, 1e6, "mean loss burst length in packets (Gilbert-Elliott; 0 Bernoulli)"),
-    ("dup", "dup_pct", "PCT", 0.0, 100.0, "duplicated packets"),
-    ("reorder", "reorder_pct", "PCT", 0.0, 100.0, "packets held back past their successor"),
-    ("bandwidth", "rate_bps", "BYTES_PER_S", 0.0, 1e10, "bandwidth cap in bytes/s (0: none)"),
+LINK_FLAGS = (  # flag stem, [link] key, metavar, help; the ranges are bridge.link.NUMBER_RANGES
+    ("delay", "delay_ms", "MS", "one-way delay"),
+    ("jitter", "jitter_ms", "MS", "delay jitter (uniform half-width or normal sigma)"),
+    ("loss", "loss_pct", "PCT", "packet loss"),
+    ("burst", "burst_len", "LEN", "mean loss burst length in packets (Gilbert-Elliott; 0 Bernoulli)"),
+    ("dup", "dup_pct", "PCT", "duplicated packets"),
+    ("reorder", "reorder_pct", "PCT", "packets held back past their successor"),
+    ("bandwidth", "rate_bps", "BYTES_PER_S", "bandwidth cap in bytes/s (0: none)"),
 )
 
 
@@ -75,6 +75,18 @@ def number_in(name: str, lo: float, hi: float, *, lo_open: bool = False) -> Call
         if not (lo < v if lo_open else lo <= v) or not v <= hi:  # also refuses nan
             raise argparse.ArgumentTypeError(f"{name} must be in {left}{lo:g}, {hi:g}], got {text}")
         return v
+
+    return conv
+
+
+def link_number(flag: str, key: str | None = None) -> Callable[[str], float]:
+    """An argparse type for a ``[link]`` number: in the range the mission file allows for
+    ``key`` (bridge.link, looked up when a flag is given, so that building the parser does
+    not load the link model; ``None``: the command lag)."""
+    def conv(text: str) -> float:
+        from bridge.link import COMMAND_LAG_RANGE_MS, NUMBER_RANGES
+
+        return number_in(flag, *(NUMBER_RANGES[key] if key else COMMAND_LAG_RANGE_MS))(text)
 
     return conv
 
@@ -101,12 +113,12 @@ def add_link_options(p: argparse.ArgumentParser, skip: Sequence[str] = ()) -> No
     stems a command defines otherwise. :func:`link_table_from_args` reads them back."""
     g = p.add_argument_group("link impairment", "override the mission's [link] tables; every flag for both "
                              "directions also exists as --up-FLAG (controller -> vehicle) and --down-FLAG")
-    for stem, key, meta, lo, hi, text in LINK_FLAGS:
+    for stem, key, meta, text in LINK_FLAGS:
         for pre in ("", "up-", "down-"):
             if stem in skip and not pre:
                 continue
             flag = f"--{pre}{stem}"
-            g.add_argument(flag, dest=f"link_{pre.replace('-', '_')}{key}", type=number_in(flag, lo, hi),
+            g.add_argument(flag, dest=f"link_{pre.replace('-', '_')}{key}", type=link_number(flag, key),
                            metavar=meta, help=argparse.SUPPRESS if pre else text)
     for pre in ("", "up-", "down-"):
         flag = f"--{pre}blackout"
@@ -118,7 +130,7 @@ def add_link_options(p: argparse.ArgumentParser, skip: Sequence[str] = ()) -> No
                    help="seed of the link's fates (default: the mission's seed)")
     g.add_argument("--compensation", dest="link_compensation", choices=("none", "predict"),
                    help="predict: control on the state carried forward over its age (nominal model)")
-    g.add_argument("--command-lag", dest="link_command_lag_ms", type=number_in("--command-lag", 0.0, 60_000.0),
+    g.add_argument("--command-lag", dest="link_command_lag_ms", type=link_number("--command-lag"),
                    metavar="MS", help="with --compensation predict: assumed command delay it also covers")
 
 

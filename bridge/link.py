@@ -131,7 +131,8 @@ def burst_problem(loss_pct: float, burst_len: float) -> str | None:
 
 
 # -- reading the mission's [link] table ------------------------------------------------
-_NUMBER_KEYS: dict[str, tuple[float, float]] = {
+# the allowed range [lo, hi] of each number of a direction's table (and of its CLI flag)
+NUMBER_RANGES: dict[str, tuple[float, float]] = {
     "delay_ms": (0.0, 60_000.0),
     "jitter_ms": (0.0, 60_000.0),
     "loss_pct": (0.0, 100.0),
@@ -139,17 +140,17 @@ _NUMBER_KEYS: dict[str, tuple[float, float]] = {
     "reorder_pct": (0.0, 100.0),
     "rate_bps": (0.0, 1e10),
     "queue_ms": (1.0, 600_000.0),
+    "burst_len": (0.0, 1e6),  # with loss_pct: checked together by burst_problem
 }
-DIRECTION_KEYS = (*_NUMBER_KEYS, "jitter", "burst_len", "blackouts", "seed")
+COMMAND_LAG_RANGE_MS = (0.0, 60_000.0)
 
 
 def _direction(t: Table, base: LinkConfig) -> LinkConfig:
     """Read the per-direction keys of one table, defaults from ``base``."""
     kw: dict[str, Any] = {}
-    for name, (lo, hi) in _NUMBER_KEYS.items():
+    for name, (lo, hi) in NUMBER_RANGES.items():
         kw[name] = t.number(name, getattr(base, name), lo=lo, hi=hi)
     kw["jitter"] = t.string("jitter", base.jitter, choices=JITTER_KINDS)
-    kw["burst_len"] = t.number("burst_len", base.burst_len, lo=0.0, hi=1e6)
     why = burst_problem(kw["loss_pct"], kw["burst_len"])
     if why:
         raise t.error("burst_len", why)
@@ -214,7 +215,7 @@ def link_from_table(data: Mapping[str, Any], source: str, seed: int = 0) -> Link
     stop_ms = t.number("stop_ms", g.stop_s * 1000.0, lo=0.0, lo_open=True, hi=60_000.0)
     if stop_ms < stale_ms:
         raise t.error("stop_ms", f"must be >= stale_ms = {stale_ms:g}, got {stop_ms:g}")
-    lag_ms = t.number("command_lag_ms", g.lag_s * 1000.0, lo=0.0, hi=60_000.0)
+    lag_ms = t.number("command_lag_ms", g.lag_s * 1000.0, lo=COMMAND_LAG_RANGE_MS[0], hi=COMMAND_LAG_RANGE_MS[1])
     if lag_ms and compensation != "predict":
         raise t.error("command_lag_ms", 'needs compensation = "predict"')
     dirs = {}

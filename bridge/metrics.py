@@ -19,6 +19,16 @@ BANDS = {"x": 0.01, "y": 0.01, "z": 0.01, "psi": 0.01}  # m, m, m, rad
 RMS_FROM_S = 10.0
 
 
+def percentiles(values: Any, scale: float = 1.0, empty: float | None = 0.0) -> dict[str, float | None]:
+    """p50 / p95 / p99 / max of a sample times ``scale`` (``empty`` for each when there is none)."""
+    a = np.asarray(values, dtype=float)
+    if not a.size:
+        return {"p50": empty, "p95": empty, "p99": empty, "max": empty}
+    a = a * scale
+    p50, p95, p99 = np.percentile(a, (50.0, 95.0, 99.0))
+    return {"p50": float(p50), "p95": float(p95), "p99": float(p99), "max": float(a.max())}
+
+
 def errors(trace: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """Tracking error per axis (psi wrapped to (-pi, pi])."""
     out = {a: trace[a] - trace[a + "_ref"] for a in ("x", "y", "z")}

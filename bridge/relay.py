@@ -63,16 +63,6 @@ def parse_address(text: str, flag: str, bind: bool = False) -> Address:
     return a.host, a.port
 
 
-def _percentiles_ms(values: array) -> dict[str, float | None]:
-    if not values:
-        return {"p50": None, "p95": None, "p99": None, "max": None}
-    import numpy as np
-
-    d = np.frombuffer(values, dtype=float) * 1000.0
-    p50, p95, p99 = np.percentile(d, (50.0, 95.0, 99.0))
-    return {"p50": float(p50), "p95": float(p95), "p99": float(p99), "max": float(d.max())}
-
-
 class Relay:
     """Forward UDP both ways between a client and ``target``, through the link model.
 
@@ -242,10 +232,12 @@ class Relay:
         """Per direction: the model's statistics (``delay_ms`` = scheduled one-way delay) and
         ``measured_ms``, the delay the relay really added, arrival to forward; plus CPU time
         (user and system, s; meaningful per packet when the relay has its own process)."""
+        from bridge.metrics import percentiles  # loads numpy: not needed while relaying
+
         out: dict[str, Any] = {}
         for d, link in self.links.items():
             s = link.stats.summary()
-            s["measured_ms"] = _percentiles_ms(self.added[d])
+            s["measured_ms"] = percentiles(self.added[d], 1000.0, empty=None)
             out[d] = s
         out["origin_s"] = self.origin_s
         out["forwarded"] = self.forwarded

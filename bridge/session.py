@@ -52,7 +52,7 @@ from typing import Any
 
 from bridge.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, GCS_PORT, LINK_PORT, parse_address
 from bridge.flight import Flight, prepare
-from bridge.metrics import summarise
+from bridge.metrics import percentiles, summarise
 from bridge.process import die_with_parent, parse_status
 from bridge.runlog import (
     TRACE_COLUMNS,
@@ -365,17 +365,6 @@ class TraceJoiner:
         self.c.close()
 
 
-def stats(values: list[float]) -> dict[str, float]:
-    """p50 / p95 / p99 / max of a sample (zeros when empty), in the sample's unit."""
-    import numpy as np
-
-    if not values:
-        return {"p50": 0.0, "p95": 0.0, "p99": 0.0, "max": 0.0}
-    a = np.asarray(values, dtype=float)
-    p50, p95, p99 = np.percentile(a, [50, 95, 99])
-    return {"p50": float(p50), "p95": float(p95), "p99": float(p99), "max": float(a.max())}
-
-
 class Session:
     """One SITL session in a run directory; :meth:`run` flies it."""
 
@@ -683,7 +672,7 @@ class Session:
         rejected = {r: by["vehicle"].get(r, 0) + by["controller"].get(r, 0)
                     for r in sorted(set(by["vehicle"]) | set(by["controller"]))}
         own = int(vs.get("rejected_from_controller", sum(by["vehicle"].values())))  # of the controller's datagrams
-        measured = {"up": stats(j.up_ms), "down": stats(j.down_ms)}
+        measured = {"up": percentiles(j.up_ms), "down": percentiles(j.down_ms)}
         relay = self._relay_stats()
         model = {"up": vs.get("up"), "down": cs.get("down")}
         up_sent = int(cs.get("commands", len(j.ctl)))
@@ -737,9 +726,9 @@ class Session:
             "step_rate_hz": rate,  # control steps per wall second while flying
             "real_time_factor": rate / self.flight.mission.rate_hz if rate else None,
             "missing_rows": j.missing,
-            "state_to_command_ms": stats(j.rtt_ms),
-            "state_to_command_timesync_ms": stats(j.s2c_ms),
-            "period_error_ms": stats(j.late_ms),
+            "state_to_command_ms": percentiles(j.rtt_ms),
+            "state_to_command_timesync_ms": percentiles(j.s2c_ms),
+            "period_error_ms": percentiles(j.late_ms),
             "stale_ticks": int(cs.get("stale_ticks", 0)),
             "overruns": int(cs.get("overruns", 0)),
         }

@@ -289,15 +289,6 @@ def run_cell(mission: Mission, cell: Cell, mode: str = "offline") -> dict[str, A
         return error_row(cell, f"{type(exc).__name__}: {exc}")
 
 
-def lockstep_available() -> bool:
-    """Whether the MAVLink SITL session launcher (``bridge.session.sitl``) exists."""
-    try:
-        from bridge import session
-    except ImportError:
-        return False
-    return hasattr(session, "sitl")
-
-
 def _fly_lockstep(mission: Mission) -> Run:
     """Fly with the full SITL processes in lockstep (the link model applied in simulation
     time, as offline), on an ``--instance`` port set held exclusively while it flies."""
@@ -470,9 +461,6 @@ class Sweep:
                 prepare(cell_mission(self.mission, c))
             except ConfigError as exc:
                 raise ConfigError(f"sweep cell ({c.label()}): {exc}") from None
-        if self.mode == "lockstep" and not lockstep_available():
-            raise ConfigError("--lockstep: the SITL session launcher (bridge.session.sitl) is not in this build; "
-                              "use --offline")
 
 
 def _axis_values(s: Sweep, axis: str) -> list[Any]:

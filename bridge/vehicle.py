@@ -277,13 +277,9 @@ class Vehicle:
                   sent, recv)
 
     def _pace(self, n: int) -> None:
-        """Wait (serving the links) until the wall time of physics step n at the paced rate."""
-        due = self._wall_of(n)
-        while not self.stopping and time.monotonic() < due:
-            for ep, m, addr in wait(self.endpoints, min(due, self._next_house)):
-                self._handle(ep, m, addr)
-            if time.monotonic() >= self._next_house:
-                self._housekeeping()
+        """Wait (serving the links) until the wall time of physics step n at the paced rate
+        (a pace fallen far behind is re-based, not caught up faster than ``--speed``)."""
+        self._wait_until(self._wall_of(n))
 
     def _wall_of(self, n: int) -> float:
         pace = self.cfg.speed or 1.0

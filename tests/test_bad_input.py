@@ -118,6 +118,7 @@ BASE = {
 # bad values by the converter a flag's argparse type comes from
 CONVERTER_BAD = {
     "number_in": ["x", "-1e300", "nan", "inf"],
+    "link_number": ["x", "-1e300", "nan", "1e300"],
     "int_in": ["x", "-99999999999", "99999999999", "1.5"],
     "value_list": ["x", "-1e300", "1,1", ""],
     "name_list": ["x", "bsst,bsst"],

@@ -254,21 +254,7 @@ def test_failed_cells_are_recorded_never_abort(tmp_path: Path, how: str, why: st
     assert "Cells that could not be flown" in (tmp_path / how / "report.md").read_text()
 
 
-def test_lockstep_flag(mission_file: Path, tmp_path: Path, capsys) -> None:
-    from bridge.sweep import lockstep_available
-
-    if lockstep_available():
-        pytest.skip("the SITL launcher exists: lockstep cells are covered by test_lockstep_cells")
-    assert main(["sweep", str(mission_file), "--delay", "0", "--lockstep", "--out", str(tmp_path / "l")]) == 2
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "--lockstep" in err
-
-
 def test_lockstep_cells(tmp_path: Path) -> None:
-    from bridge.sweep import lockstep_available
-
-    if not lockstep_available():
-        pytest.skip("no SITL launcher (bridge.session.sitl) in this build: test_lockstep_flag covers --lockstep")
     m = SHORT.with_overrides(duration_s=3.0)
     grid = Grid(loss_pct=(0.0, 20.0))
     rows = sweep(m, grid, jobs=2, mode="lockstep", out=tmp_path / "l")
