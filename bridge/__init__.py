@@ -7,6 +7,7 @@
 - :mod:`bridge.link`      link impairment: one seeded model of a bad link, used by every clock
 - :mod:`bridge.linkends`  the two ends of an impaired link in simulation time (offline and lockstep)
 - :mod:`bridge.wire`      frame conversion NWU <-> NED and actuator normalisation
+- :mod:`bridge.clock`     the real-time clocks: the vehicle's pace, the controller's fixed-rate schedule
 - :mod:`bridge.runlog`    the run directory: trace, events, summary
 - :mod:`bridge.metrics`   RMS, settling, finite-time bound, total variation
 - :mod:`bridge.plots`     the paper-style figures

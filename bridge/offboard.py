@@ -51,6 +51,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from bridge.clock import FixedRate
 from bridge.endpoint import (
     CONTROLLER_COMPID,
     CONTROLLER_SYSID,
@@ -160,11 +161,16 @@ class Offboard:
         self.offset_ns: int | None = None  # vehicle clock - our clock
         self.rtt_ns: int | None = None
         self.stale_ticks = 0
-        self.overruns = 0
+        self.schedule: FixedRate | None = None  # realtime: the tick schedule, once phase-locked
         self.commands = 0
         self.states = 0
         self.t_mission = 0.0
         self.reason = ""
+
+    @property
+    def overruns(self) -> int:
+        """Real-time ticks skipped because the process woke more than a period late."""
+        return self.schedule.skipped if self.schedule else 0
 
     def stop(self) -> None:
         """Ask :meth:`run` to return (safe from a signal handler): outcome ``aborted``."""
@@ -309,21 +315,16 @@ class Offboard:
         if self.stopping or phase is None:
             return "aborted"
         k0 = k + 1  # the mission starts with the next state
-        t0 = phase + k0 * period + PHASE_S
+        self.schedule = clock = FixedRate(phase + k0 * period + PHASE_S, rate)
         last_k = k0 - 1
         usec, recv = 0, math.nan  # the newest state's stamp and arrival
         j = 0
         while not self.stopping:
-            due = t0 + j * period
-            self._sleep_until(due)
+            self._sleep_until(clock.due(j))
             now = mono()
+            j = clock.catch_up(j, now)  # missed ticks are skipped, the schedule kept (no drift)
+            due = clock.due(j)
             late = now - due
-            if late > period:  # missed ticks: skip them, keep the schedule (no drift)
-                skipped = int(late / period)
-                self.overruns += skipped
-                j += skipped
-                due = t0 + j * period
-                late = now - due
             for m, _addr in self.ep.poll():
                 self._on(m)
             if self._odo is None or step_of_usec(self._odo.time_usec, rate) < k0 + j:

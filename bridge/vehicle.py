@@ -50,6 +50,7 @@ from typing import Any
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge import telemetry as tm
+from bridge.clock import Pace
 from bridge.endpoint import (
     CONTROLLER_COMPID,
     CONTROLLER_SYSID,
@@ -164,15 +165,13 @@ class Vehicle:
         self._next_heartbeat = now
         self._next_house = now
         self._resend_at = self._lost_at = self._idle_odo_at = now
-        self._pace_w0 = now  # wall clock origin of the paced clocks
-        self._pace_n0 = 0  # physics step at that origin
+        self.pace = Pace(self.physics_hz, cfg.speed or 1.0, now)  # the wall clock of physics steps
         self._n = 0  # physics steps taken (realtime: for the wall-clock schedule)
         self._events_sent = 0
         self._cpu0 = time.process_time()
         self._load_at = (now, self._cpu0)
         self.load = 0
         self.accepted = 0
-        self.overruns = 0
         # lockstep: the controller's targets and re-arms cross the mission's up-link model here
         self.vend = VehicleEnd(self.sim, flight.link.make()[0], self.actuation, rejected=self.rejected)
         self.engaged = False  # lockstep: a flight is on, the step clock runs on the controller's answers
@@ -269,34 +268,24 @@ class Vehicle:
         vend.advance()
         self.k = k + 1
         if self.cfg.speed is not None:
-            self._pace(self.k * self.substeps)
+            self._wait_until(self.pace.due(self.k * self.substeps))
         if self._after_step():
             self._send_odometry(time.monotonic())
         # off the critical path: the controller is computing step k+1 meanwhile
         self._row(k, X, k, NAN4 if wire is None else wire, NAN4, real, t - vend.applied_state_t, recv - sent,
                   sent, recv)
 
-    def _pace(self, n: int) -> None:
-        """Wait (serving the links) until the wall time of physics step n at the paced rate
-        (a pace fallen far behind is re-based, not caught up faster than ``--speed``)."""
-        self._wait_until(self._wall_of(n))
-
-    def _wall_of(self, n: int) -> float:
-        pace = self.cfg.speed or 1.0
-        return self._pace_w0 + (n - self._pace_n0) / (self.physics_hz * pace)
-
     def _start_freerun(self, now: float) -> None:
         self.freerun = True
         self.engaged = False
-        self._pace_w0 = now
-        self._pace_n0 = self.k * self.substeps
+        self.pace.restart(now, self.k * self.substeps)
 
     # -- free run: realtime clock, or lockstep lost --------------------------------------------
     def _freerun_period(self) -> None:
         """One control period on the wall clock: state out, row, physics steps on schedule."""
         k = self.k
         n0 = k * self.substeps
-        if not self._wait_until(self._wall_of(n0)):
+        if not self._wait_until(self.pace.due(n0)):
             return
         now = time.monotonic()
         if self.sim.armed or self.cfg.clock == "realtime":
@@ -309,7 +298,7 @@ class Vehicle:
         def deliver(_t: float) -> None:
             # called before each physics step: wait for its wall time, taking targets meanwhile
             if self._n > n0:
-                self._wait_until(self._wall_of(self._n))
+                self._wait_until(self.pace.due(self._n))
             self._n += 1
 
         self.sim.advance(deliver)
@@ -317,12 +306,10 @@ class Vehicle:
         self._after_step()
 
     def _wait_until(self, due: float) -> bool:
-        """Serve the links until wall time ``due``; False if stopping. A schedule more than
-        0.25 s behind is re-based (counted in ``overruns``) instead of caught up in a burst."""
+        """Serve the links until wall time ``due`` of the pace; False if stopping. A pace
+        stalled far behind is re-based (:meth:`Pace.rebase_if_stalled`), not caught up."""
         now = time.monotonic()
-        if now - due > 0.25:
-            self.overruns += 1
-            self._pace_w0 += now - due
+        if self.pace.rebase_if_stalled(now, due):
             return not self.stopping
         while not self.stopping:
             if now >= due:
@@ -641,7 +628,7 @@ class Vehicle:
                 self.freerun = False
                 self.engaged = True
                 self.pending = None
-                self._pace_w0, self._pace_n0 = now, self.k * self.substeps
+                self.pace.restart(now, self.k * self.substeps)
                 self._send_odometry(now)
             return mavlink.MAV_RESULT_ACCEPTED
         if sim.armed and not self.plant.on_ground and int(round(p2)) != FORCE_DISARM:
@@ -672,11 +659,7 @@ class Vehicle:
         """The vehicle's clock for TIMESYNC: simulation time (ns), as PX4 uses its own clock in
         lockstep; on the wall clock it runs on between physics steps. Never 0: a TIMESYNC with
         tc1 = 0 is a request, not an answer."""
-        if self.freerun:
-            pace = self.cfg.speed or 1.0
-            t = self._pace_n0 / self.physics_hz + (time.monotonic() - self._pace_w0) * pace
-        else:
-            t = self.t
+        t = self.pace.time_s(time.monotonic()) if self.freerun else self.t
         return max(int(t * 1e9), 1)
 
 
@@ -692,7 +675,7 @@ def run_vehicle(flight: Flight, cfg: VehicleConfig, out: str | Path | None = Non
     on_stop_signals(v.stop)
     v.run()
     emit("stats " + json.dumps({"accepted": v.accepted, "rejected": v.rejected, "odometry_sent": v.odometry_sent,
-                                "received": v.link.received, "overruns": v.overruns, "steps": v.k,
+                                "received": v.link.received, "overruns": v.pace.rebased, "steps": v.k,
                                 "rejected_from_controller": v.rejected.from_peer,
                                 "up": v.vend.up.stats.summary() if cfg.clock == "lockstep" else None}))
     return 0

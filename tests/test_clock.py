@@ -1,0 +1,34 @@
+"""bridge.clock: the arithmetic of the real-time clocks (pure: times are given, not read)."""
+
+from __future__ import annotations
+
+import pytest
+
+from bridge.clock import REBASE_S, FixedRate, Pace
+
+
+def test_pace_runs_speed_times_real_time_from_its_restart():
+    p = Pace(rate_hz=1000.0, speed=2.0)
+    p.restart(now=10.0, n=500)
+    assert p.due(500) == 10.0
+    assert p.due(1500) == pytest.approx(10.5)  # 1000 steps of 1 ms at twice real time
+    assert p.time_s(10.25) == pytest.approx(0.5 + 0.5)  # it runs on between steps
+
+
+def test_pace_rebases_a_stall_but_not_a_late_wake_up():
+    p = Pace(rate_hz=1000.0)
+    p.restart(now=0.0, n=0)
+    assert not p.rebase_if_stalled(now=0.1 + REBASE_S, due=0.1)  # at the limit: caught up
+    assert p.due(100) == pytest.approx(0.1) and p.rebased == 0
+    assert p.rebase_if_stalled(now=5.0, due=0.1)  # stalled: step 100 is due now, and so on
+    assert p.due(100) == pytest.approx(5.0) and p.due(200) == pytest.approx(5.1) and p.rebased == 1
+
+
+def test_fixed_rate_keeps_its_phase_and_skips_what_it_missed():
+    c = FixedRate(t0=2.0, rate_hz=250.0)
+    assert c.due(10) == pytest.approx(2.04)
+    assert c.catch_up(10, now=2.04 + 0.0039) == 10  # late by less than a period: run it
+    assert c.skipped == 0
+    j = c.catch_up(10, now=2.04 + 0.0101)  # 2.5 periods late: ticks 10 and 11 are lost
+    assert j == 12 and c.skipped == 2
+    assert c.due(j) == pytest.approx(2.048)  # the schedule is kept, not re-based on the late tick
