@@ -14,8 +14,15 @@ loss, 10 ms state delay with and without compensation, and the largest equal del
 directions with RMS < 10 cm, without and with compensation, found by bisection to
 ``--tol`` ms (each probe is one 30 s flight, about a second).
 
+``realtime``: the sine mission (20 s) as a real-time SITL session (``bsst relay`` between
+the processes) with ``--delay`` ms each way (default 20), without and with
+``compensation = "predict"``, beside the same in lockstep: how much of the offline gain of
+the predictor survives on the wall clock, where the controller learns the state's age from
+the arrival schedule and TIMESYNC instead of the link model.
+
     .venv/bin/python benchmarks/link.py [relay] [--seconds 10] [--delay MS]
     .venv/bin/python benchmarks/link.py control [--tol 0.25]
+    .venv/bin/python benchmarks/link.py realtime [--delay 20]
 """
 
 from __future__ import annotations
@@ -171,14 +178,39 @@ def bench_control(tol: float) -> int:
     return 0
 
 
+def bench_realtime(delay_ms: float) -> int:
+    from bridge.session import sitl
+    from missions import load_mission
+
+    sine = load_mission(ROOT / "missions" / "sine.toml").with_overrides(duration_s=20.0)
+    print(f"sine mission (20 s), 250 Hz, {delay_ms:g} ms each way, 3-D RMS over t >= 10 s; "
+          f"load {os.getloadavg()[0]:.2f}")
+    res = {}
+    for clock in ("lockstep", "realtime"):
+        for comp in ("none", "predict"):
+            r = sitl(sine, plots=False, instance=None, realtime=clock == "realtime",
+                     link={"delay_ms": delay_ms, "compensation": comp})
+            age = np.nanmedian(r.trace["state_age_s"]) * 1e3
+            res[clock, comp] = r.rms
+            print(f"  {clock:8} {comp:7}: {r.outcome}, RMS {r.rms:.3e} m, median state age at the vehicle "
+                  f"{age:.1f} ms")
+        print(f"  {clock:8} predict gain: {res[clock, 'none'] / res[clock, 'predict']:.1f}x")
+    return 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("what", nargs="?", choices=("relay", "control"), default="relay")
+    ap.add_argument("what", nargs="?", choices=("relay", "control", "realtime"), default="relay")
     ap.add_argument("--seconds", type=float, default=10.0, help="relay: traffic duration (s)")
-    ap.add_argument("--delay", type=float, default=0.0, help="relay: configured delay each way (ms)")
+    ap.add_argument("--delay", type=float, default=None,
+                    help="configured delay each way (ms; relay: default 0, realtime: default 20)")
     ap.add_argument("--tol", type=float, default=0.25, help="control: bisection tolerance (ms)")
     args = ap.parse_args()
-    return bench_relay(args.seconds, args.delay) if args.what == "relay" else bench_control(args.tol)
+    if args.what == "control":
+        return bench_control(args.tol)
+    if args.what == "realtime":
+        return bench_realtime(20.0 if args.delay is None else args.delay)
+    return bench_relay(args.seconds, args.delay or 0.0)
 
 
 if __name__ == "__main__":

@@ -21,7 +21,10 @@ returns DESIGN.md section 7's outcome.
   controls on the newest state (the link model, if any, is on the wire: ``bsst relay``).
   A tick whose state (k0 + j) is not in yet waits for it at most half a period, as a flight
   stack's rate loop polls for its estimate with a timeout, then controls on what it has
-  (counted in ``stale_ticks``).
+  (counted in ``stale_ticks``). The mission time of tick j is the vehicle's: j / rate_hz
+  plus the states' way down (their arrival phase less the vehicle's clock offset from
+  TIMESYNC), so the reference is sampled at the vehicle's now and each state's age includes
+  its trip, as in lockstep: the guard and ``compensation = "predict"`` see the whole delay.
   Each row records the tick's lateness (the period error) and the state-to-command round
   trip estimated with TIMESYNC.
 
@@ -318,6 +321,7 @@ class Offboard:
         self.schedule = clock = FixedRate(phase + k0 * period + PHASE_S, rate)
         last_k = k0 - 1
         usec, recv = 0, math.nan  # the newest state's stamp and arrival
+        way_down: float | None = None  # the states' one-way trip (s), once TIMESYNC tells it
         j = 0
         while not self.stopping:
             self._sleep_until(clock.due(j))
@@ -329,7 +333,11 @@ class Offboard:
                 self._on(m)
             if self._odo is None or step_of_usec(self._odo.time_usec, rate) < k0 + j:
                 self._await_state(k0 + j, due + STATE_WAIT_PERIODS * period)
-            t = j / rate  # mission time of this tick: state k0 + j is due just before it
+            if way_down is None:
+                way_down = self._way_down_s(phase)
+            # mission time of this tick on the vehicle's clock: state k0 + j is due just
+            # before it, measured the way down earlier (the schedule is phase-locked to arrivals)
+            t = j / rate + (way_down or 0.0)
             j += 1
             outcome = self._check_vehicle()
             if outcome:
@@ -349,6 +357,15 @@ class Offboard:
                 last_k = k
             self._decide(t, last_k, usec, recv, late)
         return "aborted"
+
+    def _way_down_s(self, phase: float) -> float | None:
+        """Real time: the one-way trip of the earliest-arriving states (s, >= 0), from the
+        phase of their arrivals and the vehicle's clock offset by TIMESYNC; None until a
+        TIMESYNC answer is in. The offset takes the two ways as equal, so an asymmetric link
+        (a delay on the way down only) is credited with half of the difference."""
+        if self.offset_ns is None:
+            return None
+        return max(phase + self.offset_ns * 1e-9, 0.0)
 
     def _observe(self, odo: Any, t_state: float, recv: float) -> None:
         """A new state of the vehicle, measured at mission time ``t_state`` (s), crossed the

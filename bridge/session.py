@@ -614,6 +614,8 @@ class Session:
         except ValueError:
             t = math.nan
         if child.name == "vehicle":
+            if self.realtime and math.isfinite(t):
+                t = self._flight_time(t)
             if kind == "armed":
                 self.vehicle_armed = True
             elif kind == "disarmed":
@@ -623,6 +625,17 @@ class Session:
             elif kind == "diverged":
                 self.diverged = True
         self._note(kind, text, child.name, t)
+
+    def _flight_time(self, t_vehicle: float) -> float:
+        """Real time: the vehicle's clock runs from its start; the flight's (the trace's and
+        the controller's) time 0 is the vehicle's step k0, the first state the controller
+        answered. Events before it is known (arming) are at 0."""
+        joiner = getattr(self, "joiner", None)
+        if joiner is not None:
+            joiner.update()  # k0 may be in a row not joined yet
+        if joiner is None or joiner.k0 is None:
+            return 0.0
+        return t_vehicle - joiner.k0 / self.flight.mission.rate_hz
 
     def _note(self, kind: str, text: str, source: str, t: float | None = None) -> None:
         if t is None:

@@ -5,6 +5,8 @@ controls to the microsecond, so that a state can be sent late or not at all.
 A tick whose state is late waits for it (at most half a period) instead of answering the
 state before: the target answering a late state still reaches the vehicle before its next
 step. A state that never comes costs its tick that wait, and the next state is answered on time.
+The vehicle's clock (TIMESYNC) tells the controller how long its states travel, which the
+arrival schedule alone cannot: that way down is part of every state's age.
 """
 
 from __future__ import annotations
@@ -13,7 +15,11 @@ import select
 import socket
 import time
 from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
 
+import numpy as np
+import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.wire import state_to_odometry, step_usec
@@ -26,6 +32,7 @@ PERIOD = 1.0 / RATE
 LATE_S = 0.003  # later than the controller's tick, well within half a period
 LATE = set(range(12, 72, 6))  # steps whose state is sent LATE_S after its time
 DROPPED = {33}  # steps whose state is never sent
+WAY_DOWN_S = 0.030  # every state is sent this long after the time it carries (its way down)
 MISSION = 'name = "late"\nduration_s = 1.4\nrate_hz = 50\n[trajectory]\nkind = "sine"\n'
 HOVER = (0.0,) * 12
 
@@ -45,6 +52,7 @@ class ScriptedVehicle:
         self.armed = False
         self.disarmed = False
         self.targets: Counter[int] = Counter()
+        self.v0 = time.monotonic() - 1.0  # the vehicle's clock reads monotonic - v0 (never 0)
 
     def send(self, msg: object) -> None:
         if self.peer is not None:
@@ -68,6 +76,8 @@ class ScriptedVehicle:
                 kind = m.get_type()
                 if kind == "SET_ACTUATOR_CONTROL_TARGET":
                     self.targets[m.time_usec] += 1
+                elif kind == "TIMESYNC" and m.tc1 == 0:  # a request: our clock, at once
+                    self.send(mavlink.MAVLink_timesync_message(int((time.monotonic() - self.v0) * 1e9), m.ts1))
                 elif kind == "COMMAND_LONG" and m.command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
                     self.armed, self.disarmed = m.param1 == 1.0, m.param1 == 0.0
                     self.send(mavlink.MAVLink_command_ack_message(m.command, mavlink.MAV_RESULT_ACCEPTED))
@@ -88,11 +98,23 @@ class ScriptedVehicle:
                                                    0, mavlink.MAV_ESTIMATOR_TYPE_NAIVE, 100))
 
 
-def test_a_late_state_is_waited_for_and_a_lost_one_costs_one_tick(tmp_path):
-    (tmp_path / "late.toml").write_text(MISSION)
+@dataclass
+class Flown:
+    targets: Counter[int]  # answers by the time_usec they carry
+    steps: range  # the steps whose states were due
+    run: Path  # the controller's run directory
+
+
+@pytest.fixture(scope="module")
+def flown(tmp_path_factory: pytest.TempPathFactory) -> Flown:
+    """One real-time flight of ``bsst controller`` against the scripted vehicle: state k
+    carries time k / RATE on the vehicle's clock and leaves WAY_DOWN_S after it (LATE_S
+    later still for the steps in LATE, never for those in DROPPED)."""
+    tmp = tmp_path_factory.mktemp("late")
+    (tmp / "late.toml").write_text(MISSION)
     v = ScriptedVehicle()
-    ctl = Proc.bsst("controller", str(tmp_path / "late.toml"), "--realtime", "--vehicle", f"127.0.0.1:{v.port}",
-                    "--out", str(tmp_path / "run"), "--no-plots", "--timeout", "20")
+    ctl = Proc.bsst("controller", str(tmp / "late.toml"), "--realtime", "--vehicle", f"127.0.0.1:{v.port}",
+                    "--out", str(tmp / "run"), "--no-plots", "--timeout", "20")
     try:
         deadline = time.monotonic() + 30
         next_hb = 0.0
@@ -102,13 +124,12 @@ def test_a_late_state_is_waited_for_and_a_lost_one_costs_one_tick(tmp_path):
                 next_hb = time.monotonic() + 0.1
                 v.heartbeat()
             v.until(time.monotonic() + 0.01)
-        t0 = time.monotonic() + 0.05
-        k = 0
+        k = k_first = int((time.monotonic() + 0.05 - v.v0) / PERIOD)
         while not v.disarmed:  # stream until the mission's end disarms us (1.4 s of steps)
-            assert k < 5 * RATE and ctl.p.poll() is None, f"no disarm after {k} steps"
-            due = t0 + k * PERIOD + (LATE_S if k in LATE else 0.0)
-            v.until(due)
-            if k not in DROPPED:
+            assert k - k_first < 5 * RATE and ctl.p.poll() is None, f"no disarm after {k - k_first} steps"
+            i = k - k_first
+            v.until(v.v0 + k * PERIOD + WAY_DOWN_S + (LATE_S if i in LATE else 0.0))
+            if i not in DROPPED:
                 v.odometry(k)
             if k % 5 == 0:
                 v.heartbeat()
@@ -117,7 +138,14 @@ def test_a_late_state_is_waited_for_and_a_lost_one_costs_one_tick(tmp_path):
     finally:
         ctl.stop()
         v.sock.close()
-    answered = {s for s in range(k) if v.targets[step_usec(s, RATE)]}
+    # steps renumbered from the first one streamed, as LATE and DROPPED count them
+    targets = Counter({(usec - step_usec(k_first, RATE)) // step_usec(1, RATE): n for usec, n in v.targets.items()})
+    return Flown(targets, range(k - k_first), tmp / "run")
+
+
+def test_a_late_state_is_waited_for_and_a_lost_one_costs_one_tick(flown: Flown) -> None:
+    k = len(flown.steps)
+    answered = {s for s in range(k) if flown.targets[s]}
     flown = [s for s in range(min(answered), max(answered) + 1)]
     late = LATE & set(flown)
     assert len(late) >= 7, (sorted(late), min(answered))
@@ -127,3 +155,15 @@ def test_a_late_state_is_waited_for_and_a_lost_one_costs_one_tick(tmp_path):
         assert s + 1 in answered, sorted(a for a in answered if abs(a - s) < 5)
     on_time = [s for s in flown if s not in LATE | DROPPED]
     assert sum(s in answered for s in on_time) >= len(on_time) - 2
+
+
+def test_the_state_age_counts_its_way_down(flown: Flown) -> None:
+    """The controller's age of each state it controlled on (controller.csv ``state_age_s``)
+    includes the WAY_DOWN_S the states spent on the way, learnt from TIMESYNC (answered at
+    once here: a symmetric link), plus the tick's 0.3 ms after the arrival."""
+    rows = (flown.run / "controller.csv").read_text().splitlines()
+    col = rows[0].split(",").index("state_age_s")
+    age = np.array([float(r.split(",")[col]) for r in rows[1:]])
+    age = age[np.isfinite(age)]
+    assert len(age) > 50
+    assert WAY_DOWN_S <= np.median(age) <= WAY_DOWN_S + 0.003, np.median(age)

@@ -132,6 +132,29 @@ def test_realtime_through_the_relay_measures_20ms_each_way(tmp_path: Path) -> No
         assert link["model_delay_ms"]["p50"] == pytest.approx(20.0)
         assert link["relay_added_ms"]["p50"] >= 20.0
         assert link["sent"] > 700 and link["lost"] == 0
+    # the controller's age of its states includes their 20 ms way down (TIMESYNC; a symmetric link)
+    ctl = (tmp_path / "rt" / "controller.csv").read_text().splitlines()
+    col = ctl[0].split(",").index("state_age_s")
+    age = np.array([float(r.split(",")[col]) for r in ctl[1:]])
+    assert 0.018 <= np.nanmedian(age) <= 0.025, np.nanmedian(age)
+
+
+def test_realtime_events_are_on_the_flights_clock(tmp_path: Path) -> None:
+    """Real time: the vehicle's clock runs from its start, the flight's from the first state
+    answered; events.log puts the vehicle's events on the flight's clock, as lockstep does:
+    a blackout of both ways from 1 s leaves the last target at ~1 s and the vehicle's
+    failsafe 0.5 s later, where the trace's rows switch to it."""
+    run = sitl(Mission(Sine(), duration_s=3.0, name="bo"), realtime=True, out=tmp_path / "rt", plots=False,
+               instance=None, link={"delay_ms": 5.0, "blackouts": [[1.0, 1.0]]})
+    assert run.outcome == "failsafe"
+    fs = [e for e in run.summary["events"] if e["kind"] == "failsafe" and e["source"] == "vehicle"]
+    assert len(fs) == 1 and 1.45 <= fs[0]["t"] <= 1.56, fs
+    # the vehicle's rows: step k is at flight time (k - k0) / rate, k0 the controller's first row
+    k0 = int(float((tmp_path / "rt" / "controller.csv").read_text().splitlines()[1].split(",")[0]))
+    rows = [r.split(",") for r in (tmp_path / "rt" / "vehicle.csv").read_text().splitlines()]
+    k, mode = (np.array([float(r[rows[0].index(c)]) for r in rows[1:]]) for c in ("k", "mode"))
+    switch = k[np.argmax((mode != mode[0]) & (k > k0))]
+    assert abs((switch - k0) / 250.0 - fs[0]["t"]) <= 0.012, (switch, k0, fs[0]["t"])
 
 
 @pytest.mark.parametrize(("flag", "value"), [("--delay", "-1"), ("--loss", "120"), ("--blackout", "3"),
