@@ -87,6 +87,10 @@ PHASE_STATES = 5  # realtime: states watched to find the phase of the vehicle's 
 # before, and its target would be two periods old when the next step begins); the rest of
 # the period is the target's way back
 STATE_WAIT_PERIODS = 0.5
+# real time: a way down (state stamp to arrival, by TIMESYNC) outside [-slack, max] means the
+# vehicle's stamps and its TIMESYNC clock differ; the ages then count from the arrivals
+WAY_DOWN_SLACK_S = 0.005
+WAY_DOWN_MAX_S = 2.0
 SPIN_BEFORE_TICK_S = 0.0003  # realtime: sleep until this long before a tick, then poll: select wakes late
 HOUSEKEEPING_S = 0.05
 _ZERO12 = (0.0,) * 12
@@ -365,7 +369,13 @@ class Offboard:
         (a delay on the way down only) is credited with half of the difference."""
         if self.offset_ns is None:
             return None
-        return max(phase + self.offset_ns * 1e-9, 0.0)
+        trip = phase + self.offset_ns * 1e-9
+        if not -WAY_DOWN_SLACK_S <= trip <= WAY_DOWN_MAX_S:
+            # the stamps and TIMESYNC are not on one clock: count ages from the arrivals
+            self.event("timesync", f"the states' way down comes out at {trip * 1e3:.1f} ms: "
+                                   "not counted in their age (stamps and TIMESYNC on different clocks?)")
+            return 0.0
+        return max(trip, 0.0)
 
     def _observe(self, odo: Any, t_state: float, recv: float) -> None:
         """A new state of the vehicle, measured at mission time ``t_state`` (s), crossed the

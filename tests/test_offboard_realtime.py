@@ -41,7 +41,8 @@ class ScriptedVehicle:
     """A vehicle that arms on command and streams ODOMETRY of a resting state at ``RATE`` on
     its own schedule; it records the time_usec of every actuator target it receives."""
 
-    def __init__(self) -> None:
+    def __init__(self, timesync_skew_s: float = 0.0) -> None:
+        self.skew_ns = int(timesync_skew_s * 1e9)  # TIMESYNC answers this far off the stamps' clock
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind(("127.0.0.1", 0))
         self.sock.setblocking(False)
@@ -77,7 +78,8 @@ class ScriptedVehicle:
                 if kind == "SET_ACTUATOR_CONTROL_TARGET":
                     self.targets[m.time_usec] += 1
                 elif kind == "TIMESYNC" and m.tc1 == 0:  # a request: our clock, at once
-                    self.send(mavlink.MAVLink_timesync_message(int((time.monotonic() - self.v0) * 1e9), m.ts1))
+                    now_ns = int((time.monotonic() - self.v0) * 1e9) + self.skew_ns
+                    self.send(mavlink.MAVLink_timesync_message(now_ns, m.ts1))
                 elif kind == "COMMAND_LONG" and m.command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
                     self.armed, self.disarmed = m.param1 == 1.0, m.param1 == 0.0
                     self.send(mavlink.MAVLink_command_ack_message(m.command, mavlink.MAV_RESULT_ACCEPTED))
@@ -100,19 +102,20 @@ class ScriptedVehicle:
 
 @dataclass
 class Flown:
+    """What one flight against the scripted vehicle left."""
+
     targets: Counter[int]  # answers by the time_usec they carry
     steps: range  # the steps whose states were due
     run: Path  # the controller's run directory
+    lines: list[str]  # the controller's status lines
 
 
-@pytest.fixture(scope="module")
-def flown(tmp_path_factory: pytest.TempPathFactory) -> Flown:
+def fly(tmp: Path, timesync_skew_s: float = 0.0) -> Flown:
     """One real-time flight of ``bsst controller`` against the scripted vehicle: state k
     carries time k / RATE on the vehicle's clock and leaves WAY_DOWN_S after it (LATE_S
     later still for the steps in LATE, never for those in DROPPED)."""
-    tmp = tmp_path_factory.mktemp("late")
     (tmp / "late.toml").write_text(MISSION)
-    v = ScriptedVehicle()
+    v = ScriptedVehicle(timesync_skew_s)
     ctl = Proc.bsst("controller", str(tmp / "late.toml"), "--realtime", "--vehicle", f"127.0.0.1:{v.port}",
                     "--out", str(tmp / "run"), "--no-plots", "--timeout", "20")
     try:
@@ -140,7 +143,20 @@ def flown(tmp_path_factory: pytest.TempPathFactory) -> Flown:
         v.sock.close()
     # steps renumbered from the first one streamed, as LATE and DROPPED count them
     targets = Counter({(usec - step_usec(k_first, RATE)) // step_usec(1, RATE): n for usec, n in v.targets.items()})
-    return Flown(targets, range(k - k_first), tmp / "run")
+    return Flown(targets, range(k - k_first), tmp / "run", ctl.lines)
+
+
+@pytest.fixture(scope="module")
+def flown(tmp_path_factory: pytest.TempPathFactory) -> Flown:
+    return fly(tmp_path_factory.mktemp("late"))
+
+
+def controller_ages(run: Path) -> np.ndarray:
+    """``state_age_s`` of every row of the controller's ``controller.csv`` that has one."""
+    rows = (run / "controller.csv").read_text().splitlines()
+    col = rows[0].split(",").index("state_age_s")
+    age = np.array([float(r.split(",")[col]) for r in rows[1:]])
+    return age[np.isfinite(age)]
 
 
 def test_a_late_state_is_waited_for_and_a_lost_one_costs_one_tick(flown: Flown) -> None:
@@ -161,9 +177,15 @@ def test_the_state_age_counts_its_way_down(flown: Flown) -> None:
     """The controller's age of each state it controlled on (controller.csv ``state_age_s``)
     includes the WAY_DOWN_S the states spent on the way, learnt from TIMESYNC (answered at
     once here: a symmetric link), plus the tick's 0.3 ms after the arrival."""
-    rows = (flown.run / "controller.csv").read_text().splitlines()
-    col = rows[0].split(",").index("state_age_s")
-    age = np.array([float(r.split(",")[col]) for r in rows[1:]])
-    age = age[np.isfinite(age)]
+    age = controller_ages(flown.run)
     assert len(age) > 50
     assert WAY_DOWN_S <= np.median(age) <= WAY_DOWN_S + 0.003, np.median(age)
+    assert not any("timesync" in line for line in flown.lines)
+
+
+def test_a_timesync_clock_off_the_stamps_is_not_believed(tmp_path: Path) -> None:
+    """A vehicle whose TIMESYNC answers run 10 s off its ODOMETRY stamps would make the way
+    down 10 s: the controller says so once and counts ages from the arrivals instead."""
+    f = fly(tmp_path, timesync_skew_s=10.0)
+    assert sum("timesync" in line and "not counted" in line for line in f.lines) == 1, f.lines[-20:]
+    assert np.median(controller_ages(f.run)) <= 0.003
