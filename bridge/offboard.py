@@ -339,10 +339,6 @@ class Offboard:
                 self._await_state(k0 + j, due + STATE_WAIT_PERIODS * period)
             if way_down is None:
                 way_down = self._way_down_s(phase)
-            # mission time of this tick on the vehicle's clock: state k0 + j is due just
-            # before it, measured the way down earlier (the schedule is phase-locked to arrivals)
-            t = j / rate + (way_down or 0.0)
-            j += 1
             outcome = self._check_vehicle()
             if outcome:
                 return outcome
@@ -350,15 +346,25 @@ class Offboard:
             if odo is None or step_of_usec(odo.time_usec, rate) <= last_k:
                 self.stale_ticks += 1
                 if last_k < k0:
+                    j += 1
                     continue  # no state of the mission yet
             else:
                 self._odo = None
                 k = step_of_usec(odo.time_usec, rate)
+                if last_k < k0 and j:
+                    # the first state of the mission came after the first tick (the earlier
+                    # ones were lost): the mission starts with it, as the trace does
+                    k0, j = k, 0
+                    self.schedule = clock = FixedRate(due, rate, clock.skipped)
                 if k - k0 >= steps:
                     return self._end_of_mission()
                 usec, recv = odo.time_usec, self._odo_recv
                 self._observe(odo, (k - k0) / rate, recv)
                 last_k = k
+            # mission time of this tick on the vehicle's clock: state k0 + j is due just
+            # before it, measured the way down earlier (the schedule is phase-locked to arrivals)
+            t = j / rate + (way_down or 0.0)
+            j += 1
             self._decide(t, last_k, usec, recv, late)
         return "aborted"
 
