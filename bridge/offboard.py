@@ -23,8 +23,9 @@ returns DESIGN.md section 7's outcome.
   stack's rate loop polls for its estimate with a timeout, then controls on what it has
   (counted in ``stale_ticks``). The mission time of tick j is the vehicle's: j / rate_hz
   plus the states' way down (their arrival phase less the vehicle's clock offset from
-  TIMESYNC), so the reference is sampled at the vehicle's now and each state's age includes
-  its trip, as in lockstep: the guard and ``compensation = "predict"`` see the whole delay.
+  TIMESYNC) plus the tick's PHASE_S after the arrival, so the reference is sampled at
+  the vehicle's now and each state's age includes its trip, as in lockstep: the guard and
+  ``compensation = "predict"`` see the whole delay.
   Each row records the tick's lateness (the period error) and the state-to-command round
   trip estimated with TIMESYNC.
 
@@ -361,9 +362,9 @@ class Offboard:
                 usec, recv = odo.time_usec, self._odo_recv
                 self._observe(odo, (k - k0) / rate, recv)
                 last_k = k
-            # mission time of this tick on the vehicle's clock: state k0 + j is due just
-            # before it, measured the way down earlier (the schedule is phase-locked to arrivals)
-            t = j / rate + (way_down or 0.0)
+            # mission time of this tick on the vehicle's clock: state k0 + j was measured at
+            # j / rate, arrived the way down later, and the tick is PHASE_S after its arrival
+            t = j / rate + (way_down + PHASE_S if way_down is not None else 0.0)
             j += 1
             self._decide(t, last_k, usec, recv, late)
         return "aborted"
