@@ -336,8 +336,7 @@ class Offboard:
             late = now - due
             for m, _addr in self.ep.poll():
                 self._on(m)
-            if self._odo is None or step_of_usec(self._odo.time_usec, rate) < k0 + j:
-                self._await_state(k0 + j, due + STATE_WAIT_PERIODS * period)
+            self._await_state(k0 + j, due + STATE_WAIT_PERIODS * period)  # at once if it is in
             if way_down is None:
                 way_down = self._way_down_s(phase)
             outcome = self._check_vehicle()
