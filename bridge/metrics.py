@@ -78,7 +78,7 @@ def summarise(
     dur = float(t[-1] - t[0] + 1.0 / mission.rate_hz) if n else 0.0
     err = errors(trace) if n else {a: np.zeros(0) for a in AXES}
     changes = [c for c in mission.trajectory.change_times() if n and c <= t[-1]]
-    ends = changes[1:] + [float("inf")]
+    ends = changes[1:] + [float("inf")] if changes else []  # each change's segment end
     outer = {"x": gains.position, "y": gains.position, "z": gains.z, "psi": gains.yaw}
     rms_from = min(RMS_FROM_S, 0.5 * mission.duration_s)
     late = t >= rms_from if n else np.zeros(0, bool)

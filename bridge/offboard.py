@@ -242,8 +242,10 @@ class Offboard:
         self.event("disarmed" if ok else "disarm", "vehicle disarmed" if ok else "disarm not acknowledged")
         return ok
 
-    def _command(self, cmd: int, p1: float, p2: float, tries: int = 6, every_s: float = 0.5) -> int | None:
-        """COMMAND_LONG to the vehicle, repeated (confirmation 0, 1, ...) until ACKed."""
+    def _command(self, cmd: int, p1: float, p2: float, tries: int = 30, every_s: float = 0.1) -> int | None:
+        """COMMAND_LONG to the vehicle, repeated (confirmation 0, 1, ...) until ACKed. Every
+        0.1 s: an ARM whose ACK was lost has armed the vehicle, whose failsafe takes over
+        0.5 s later without a target (ARM_DISARM is idempotent)."""
         self._acks.pop(cmd, None)
         for n in range(tries):
             self.ep.send(mavlink.MAVLink_command_long_message(self.vsys or 0, self.vcomp, cmd, n, p1, p2,

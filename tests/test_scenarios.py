@@ -170,3 +170,17 @@ def test_pid_completes_the_step_mission(tmp_path_factory: pytest.TempPathFactory
     for change in (0, 1, 2):
         late = run.segment(change, last_s=2.0)
         assert max(np.abs(run.err[a][late]).max() for a in ("x", "y", "z")) < 0.5
+
+
+def test_a_flight_with_no_rows_still_has_a_summary() -> None:
+    """A session whose vehicle fell to its failsafe before the first joined row (e.g. a lost
+    ARM acknowledgement) has an empty trace: the summary says so instead of raising."""
+    from bridge.metrics import summarise
+    from bridge.runlog import TRACE_COLUMNS
+    from controller.gains import Gains
+
+    empty = {c: np.zeros(0) for c in TRACE_COLUMNS}
+    for name in ("step", "sine"):  # a mission with set-point changes and one without
+        s = summarise(empty, load_mission(MISSION_DIR / f"{name}.toml"), Gains(), clock="realtime",
+                      outcome="failsafe")
+        assert s["outcome"] == "failsafe" and s["axes"]["x"]["rms"] is None
