@@ -36,7 +36,7 @@ def main() -> int:
     ap.add_argument("--speed", type=float, default=2.0, help="lockstep at most this many times real time")
     ap.add_argument("--sources", type=int, default=128)
     ap.add_argument("--rate", type=float, default=40000.0,
-                    help="datagrams/s at most: under the vehicle's limits for others (bridge.guard), so that "
+                    help="datagrams/s at most: under the vehicle's limits for others (bridge.mavlink.receive), so that "
                          "every datagram is parsed and its reason counted")
     ap.add_argument("--seed", type=int, default=7)
     ap.add_argument("--json", action="store_true")

@@ -31,7 +31,7 @@ from typing import Any
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from bridge.flight import prepare  # noqa: E402
+from bridge.core.flight import prepare  # noqa: E402
 from bridge.loop import simulate  # noqa: E402
 from missions import Mission, load_mission  # noqa: E402
 

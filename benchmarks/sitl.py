@@ -5,7 +5,7 @@ Measured in one run on this machine, each the median over ``--repeats``:
 (a) the bare floor: two processes over UDP loopback, ODOMETRY one way and
     HIL_ACTUATOR_CONTROLS back, in round trips per second:
     - ``naive``: pymavlink encode (``msg.pack``), blocking ``recvfrom``, ``parse_buffer``;
-    - ``endpoint``: this project's :class:`bridge.endpoint.Endpoint` (hot-path codec,
+    - ``endpoint``: this project's :class:`bridge.mavlink.endpoint.Endpoint` (hot-path codec,
       short poll before blocking), i.e. the floor the SITL itself stands on;
 (b) the lockstep SITL control-step rate of the sine mission at 250 Hz (``bsst sitl``'s
     processes, flight only: from the first to the last state the vehicle sent);
@@ -40,8 +40,8 @@ sys.path.insert(0, str(ROOT))
 
 from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
-from bridge.endpoint import HIL_ACTUATOR_CONTROLS, ODOMETRY, Endpoint, parse_address, wait  # noqa: E402
-from bridge.vehicle import VehicleConfig  # noqa: E402
+from bridge.mavlink.endpoint import HIL_ACTUATOR_CONTROLS, ODOMETRY, Endpoint, parse_address, wait  # noqa: E402
+from bridge.nodes.vehicle import VehicleConfig  # noqa: E402
 
 RATE_HZ = 250.0
 LEGS = ("down_us", "controller_us", "up_us", "vehicle_us", "step_us")
@@ -143,7 +143,7 @@ def lockstep_rate(mission: str) -> dict[str, float]:
     median step split into its four legs, from both sides' wall-clock stamps (us)."""
     import tempfile
 
-    from bridge.runlog import read_trace
+    from bridge.record.runlog import read_trace
     from bridge.session import sitl
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -249,7 +249,7 @@ def main() -> None:
         return
     print(f"machine: {res['machine']}, load {res['load_1min']:.2f}, medians of {args.repeats}")
     print(f"(a) ping-pong floor, naive pymavlink (blocking recvfrom): {a:8.0f} round trips/s")
-    print(f"    ping-pong floor, bridge.endpoint (hot codec + poll):  {a2:8.0f} round trips/s")
+    print(f"    ping-pong floor, bridge.mavlink.endpoint (hot codec + poll):  {a2:8.0f} round trips/s")
     print(f"(b) lockstep SITL, sine at 250 Hz:                        {b:8.0f} steps/s")
     print(f"(c) (b)/(a) = {b / a:.2f} (naive), {b / a2:.2f} (endpoint);  lockstep real-time factor {b / RATE_HZ:.1f}x")
     print(f"    whole session (start, fly 30 s, stop, summary): {res['lockstep_session_wall_s']:.2f} s wall;"

@@ -1,28 +1,65 @@
 """Everything that connects a law to a plant; the only package that touches the network.
 
-- :mod:`bridge.loop`      the in-process closed loop (``bsst sim``), :func:`simulate`
-- :mod:`bridge.flight`    a mission validated into the parts that fly it
-- :mod:`bridge.simvehicle` plant + arming + timeout + failsafe, shared by every clock
-- :mod:`bridge.failsafe`  level-and-descend failsafe
-- :mod:`bridge.link`      link impairment: one seeded model of a bad link, used by every clock
-- :mod:`bridge.linkends`  the two ends of an impaired link in simulation time (offline and lockstep)
-- :mod:`bridge.wire`      frame conversion NWU <-> NED and actuator normalisation
-- :mod:`bridge.clock`     the real-time clocks: the vehicle's pace, the controller's fixed-rate schedule
-- :mod:`bridge.runlog`    the run directory: trace, events, summary
-- :mod:`bridge.metrics`   RMS, settling, finite-time bound, total variation
-- :mod:`bridge.plots`     the paper-style figures
-- :mod:`bridge.sweep`     latency and dropout campaigns (``bsst sweep``)
-- :mod:`bridge.report`    a sweep's report: classes, tables, heat maps (``bsst report``)
-- :mod:`bridge.endpoint`  MAVLink 2 over UDP: an endpoint owning its socket, hot-path codec, tlogs
-- :mod:`bridge.guard`     the one receive path of both endpoints: what is refused, and how it is counted
-- :mod:`bridge.signing`   MAVLink 2 message signing
-- :mod:`bridge.vehicle`   the simulated vehicle as a MAVLink endpoint (``bsst vehicle``)
-- :mod:`bridge.telemetry` what the vehicle tells a ground station, from the paper state
-- :mod:`bridge.offboard`  the offboard controller as a MAVLink endpoint (``bsst controller``)
-- :mod:`bridge.relay`     a real-time UDP relay applying the link model on the wall clock (``bsst relay``)
-- :mod:`bridge.session`   the SITL session launcher (``bsst sitl``), :func:`~bridge.session.sitl`
-- :mod:`bridge.process`   status lines, stop signals and parent death for the child processes
-- :mod:`bridge.cli`       ``bsst``
+In:  a mission (a TOML file or a :class:`missions.Mission`) and its overrides (profile, law, rate Hz,
+     seed, a ``[link]`` table); for the nodes, UDP addresses and a signing key file
+Out: a :class:`~bridge.record.runlog.Run` (trace arrays in SI units, ``summary.json`` as a dict, the
+     run directory), MAVLink 2 over UDP between the nodes, sweep directories, ``bsst``'s exit status
+
+Public names: :func:`bridge.simulate` and :class:`bridge.Run` (imported on first use),
+:func:`bridge.session.sitl`, :class:`bridge.sweep.Grid`, :func:`bridge.sweep.sweep`.
+
+The layers (docs/design.md, "Parts and layers"), listed lowest first. An arrow means "may import",
+and a layer imports nothing above it (tests/test_layers.py checks it):
+``cli -> sweep -> {session, loop} -> nodes -> {mavlink, record} -> core``.
+
+- :mod:`bridge.core`: simulation time only, no sockets, no files
+
+  - :mod:`bridge.core.flight`      a mission validated into the parts that fly it (the one path)
+  - :mod:`bridge.core.simvehicle`  plant + arming + timeout + failsafe, shared by every clock
+  - :mod:`bridge.core.failsafe`    level-and-descend failsafe
+  - :mod:`bridge.core.link`        link impairment: one seeded model of a bad link, used by every clock
+  - :mod:`bridge.core.linkends`    the two ends of an impaired link in simulation time (offline, lockstep)
+  - :mod:`bridge.core.wire`        frames NWU <-> NED / FRD, actuator normalisation, step stamps
+  - :mod:`bridge.core.clock`       the real-time clocks: the vehicle's pace, the controller's fixed rate
+
+- :mod:`bridge.mavlink`: bytes and sockets, no plant, no law
+
+  - :mod:`bridge.mavlink.endpoint`   MAVLink 2 over UDP: an endpoint owning its socket, hot-path codec, tlogs
+  - :mod:`bridge.mavlink.receive`    the one receive path of both endpoints: what is refused, how it is counted
+  - :mod:`bridge.mavlink.signing`    MAVLink 2 message signing
+  - :mod:`bridge.mavlink.telemetry`  what the vehicle tells a ground station, from the paper state
+
+- :mod:`bridge.record`: the files of a run, no sockets
+
+  - :mod:`bridge.record.columns`  every CSV's columns (trace.csv, vehicle.csv, controller.csv)
+  - :mod:`bridge.record.runlog`   the run directory: trace, events, summary; :class:`~bridge.record.runlog.Run`
+  - :mod:`bridge.record.joiner`   vehicle.csv + controller.csv -> trace.csv rows (SITL)
+  - :mod:`bridge.record.metrics`  RMS, settling, finite-time bound, total variation, the summary
+  - :mod:`bridge.record.plots`    the paper-style figures
+
+- :mod:`bridge.nodes`: one process each
+
+  - :mod:`bridge.nodes.process`   status lines, stop signals and parent death for the child processes
+  - :mod:`bridge.nodes.vehicle`   the simulated vehicle as a MAVLink endpoint (``bsst vehicle``)
+  - :mod:`bridge.nodes.offboard`  the offboard controller as a MAVLink endpoint (``bsst controller``)
+  - :mod:`bridge.nodes.relay`     a real-time UDP relay applying the link model on the wall clock (``bsst relay``)
+
+- :mod:`bridge.loop`: the in-process closed loop (``bsst sim``), :func:`~bridge.loop.simulate`
+- :mod:`bridge.session`: the SITL session launcher (``bsst sitl``), :func:`~bridge.session.sitl`
+
+  - :mod:`bridge.session.children`  the child processes and the instance lock
+
+- :mod:`bridge.sweep`: latency and dropout campaigns (``bsst sweep``)
+
+  - :mod:`bridge.sweep.grid`       axes, their ranges, grid and cells
+  - :mod:`bridge.sweep.spec`       a campaign as one value, and the sweep TOML file
+  - :mod:`bridge.sweep.cells`      ``cells.csv``: columns, rows, the file
+  - :mod:`bridge.sweep.classes`    the class of a cell: thresholds and rules
+  - :mod:`bridge.sweep.executors`  process pool, Dask, progress bar
+  - :mod:`bridge.sweep.campaign`   a campaign from start to end
+  - :mod:`bridge.sweep.report`     a sweep's report: tables, heat maps (``bsst report``)
+
+- :mod:`bridge.cli`: ``bsst`` (:mod:`~bridge.cli.flags`, :mod:`~bridge.cli.commands`); nothing imports it
 """
 
 from typing import Any
@@ -33,11 +70,11 @@ __all__ = ["Run", "simulate"]
 def __getattr__(name: str) -> Any:
     # imported on first use, so that ``bsst --help`` or a refused flag does not load the law
     if name == "simulate":
-        from bridge.loop import simulate
+        from bridge.loop import simulate  # lazy: start-up time
 
         return simulate
     if name == "Run":
-        from bridge.runlog import Run
+        from bridge.record.runlog import Run  # lazy: start-up time
 
         return Run
     raise AttributeError(f"module 'bridge' has no attribute {name!r}")

@@ -1,14 +1,20 @@
 """The in-process closed loop (``bsst sim``): the truth every networked run is checked against.
 
+In:  a mission (a :class:`~missions.Mission` or a TOML path) and overrides (profile, controller,
+     ``rate_hz`` Hz, seed, a ``[link]`` table), or a prepared :class:`~bridge.core.flight.Flight`
+Out: a :class:`~bridge.record.runlog.Run`: trace arrays (:data:`~bridge.record.columns.TRACE_COLUMNS`,
+     SI units) and ``summary.json`` as a dict (``clock = "offline"``); with a directory also
+     ``mission.toml``, ``trace.csv``, ``events.log``, ``summary.json`` and ``plots/``
+
 One control step at time t_k = k / rate_hz: the law reads the state, its command goes to
 the vehicle, which holds it over ``physics_hz / rate_hz`` RK4 steps. The vehicle is the same
-:class:`~bridge.simvehicle.SimVehicle` (timeout, failsafe) as the MAVLink vehicle uses.
+:class:`~bridge.core.simvehicle.SimVehicle` (timeout, failsafe) as the MAVLink vehicle uses.
 
-Both messages cross the mission's link model (:mod:`bridge.link`) in simulation time, as
+Both messages cross the mission's link model (:mod:`bridge.core.link`) in simulation time, as
 they would cross the sockets: the state at t_k goes down to the controller's
 :class:`~controller.link_guard.LinkGuard`, which controls on the newest state delivered
 (``state_age_s`` in the trace is its age); the command goes up and acts at the physics
-step the model delivers it in (:mod:`bridge.linkends`). A perfect link (the default)
+step the model delivers it in (:mod:`bridge.core.linkends`). A perfect link (the default)
 delivers both at once, which is exactly the loop without a link.
 """
 
@@ -19,24 +25,15 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
-from bridge.flight import Flight, prepare
-from bridge.linkends import ControllerEnd, VehicleEnd
-from bridge.metrics import summarise
-from bridge.runlog import (
-    TRACE_COLUMNS,
-    EventLog,
-    Run,
-    TraceWriter,
-    finish_run,
-    run_dir,
-    state_columns,
-    trace_arrays,
-)
-from bridge.simvehicle import FAILSAFE, LANDED, OFFBOARD
-from bridge.wire import command_to_wire
+from bridge.core.flight import Flight, prepare
+from bridge.core.linkends import ControllerEnd, VehicleEnd
+from bridge.core.simvehicle import FAILSAFE, LANDED, OFFBOARD
+from bridge.core.wire import command_to_wire
+from bridge.record.columns import TRACE_COLUMNS, state_columns, trace_row
+from bridge.record.metrics import summarise
+from bridge.record.runlog import Run, RunRecord, run_dir, trace_arrays
 from controller.link_guard import LinkGuard
 from missions import Mission
-from params import dump_toml
 
 Progress = Callable[[float, float, float], None]  # (t, duration, current 3-D error)
 
@@ -82,11 +79,9 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
     cend = ControllerEnd(guard, down)
     blackouts = flight.blackout_notes()
     rows: list[tuple[float, ...]] = []
-    trace = events = None
-    if path is not None:
-        (path / "mission.toml").write_text(dump_toml(m.to_dict()))
-        trace = TraceWriter(path / "trace.csv")
-        events = EventLog(path / "events.log")
+    record = RunRecord(path, m) if path is not None else None
+    trace = record.trace if record is not None else None
+    events = record.events if record is not None else None
     outcome = "completed"
     failsafe_seen = False
     logged = 0
@@ -112,8 +107,8 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
                 demanded = cmd.demanded
                 wire = command_to_wire(actuation, cmd.normalised)
             vend.deliver(t)
-            row = (t, *state_columns(X), ref[0][0], ref[1][0], ref[2][0], ref[3][0], *demanded, *wire,
-                   *plant.realised, dec.state_age_s if cmd is not None else math.nan, *law.desired)
+            row = trace_row(t, state_columns(X), ref, demanded, wire, plant.realised,
+                            dec.state_age_s if cmd is not None else math.nan, law.desired)
             rows.append(row)
             if trace is not None:
                 trace.row(row)
@@ -139,16 +134,14 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
         outcome = "aborted"
         vehicle.event("aborted", "interrupted")
     finally:
-        if trace is not None:
-            trace.close()
-        if events is not None:
+        if record is not None:
             for e in vehicle.events[logged:]:
-                events.event(e.t, e.kind, e.text)
-            events.close()
+                record.events.event(e.t, e.kind, e.text)
+            record.close()
     arrays = trace_arrays(rows, TRACE_COLUMNS)
     ev = [{"t": round(e.t, 6), "kind": e.kind, "text": e.text} for e in vehicle.events]
     link = {"up": up.stats.summary(), "down": down.stats.summary(), "rejected": dict(vend.rejected)}
     summary = summarise(arrays, m, flight.gains, clock="offline", outcome=outcome, events=ev, link=link)
-    if path is not None:
-        finish_run(path, arrays, summary, f"{m.name} ({m.controller}, {flight.profile.name})", plots)
+    if record is not None:
+        record.finish(arrays, summary, f"{m.name} ({m.controller}, {flight.profile.name})", plots)
     return Run(arrays, summary, path)

@@ -12,7 +12,7 @@
 - :mod:`controller.predict`      latency compensation through the nominal model
 
 :class:`Controller` ties a law to an actuation: ``step(t, state, ref)`` returns a
-:class:`Command`. See ``controller/README.md`` for every deviation from the paper.
+:class:`Command`. See ``docs/law.md`` for the law as implemented and every deviation from the paper.
 """
 
 from __future__ import annotations
@@ -22,13 +22,13 @@ from dataclasses import dataclass
 from controller.actuation import MotorActuation, WrenchActuation, make_actuation
 from controller.bsst import BacksteppingSuperTwisting
 from controller.gains import Gains, gains_from_table
+from controller.law import BUILTIN, Law, LawFactory, make_law, resolve_law
 from controller.nominal import Nominal
 from controller.pid import CascadedPid
-from missions import CONTROLLERS
 from missions.references import Sample
 
 Quad = tuple[float, float, float, float]
-LAWS = CONTROLLERS  # the names a mission may give, each made by make_law
+LAWS = tuple(BUILTIN)  # the built-in laws; a user's own is a path or module and a class name
 
 
 @dataclass(frozen=True, slots=True)
@@ -41,22 +41,14 @@ class Command:
     normalised: Quad
 
 
-def make_law(name: str, nominal: Nominal, gains: Gains, rate_hz: float):
-    """The law called ``name`` (bsst, smc or pid)."""
-    if name == "bsst":
-        return BacksteppingSuperTwisting(nominal, gains, rate_hz)
-    if name == "smc":
-        return BacksteppingSuperTwisting(nominal, gains, rate_hz, reaching="sign")
-    if name == "pid":
-        return CascadedPid(nominal, gains, rate_hz)
-    raise ValueError(f"unknown controller {name!r}; choose one of {', '.join(LAWS)}")
-
-
 class Controller:
     """A law and its actuation, stepped at the control rate."""
 
-    def __init__(self, name: str, nominal: Nominal, gains: Gains | None = None, rate_hz: float = 250.0) -> None:
-        self.law = make_law(name, nominal, gains or Gains(), rate_hz)
+    def __init__(self, law: str | LawFactory, nominal: Nominal, gains: Gains | None = None,
+                 rate_hz: float = 250.0) -> None:
+        """``law``: a built-in name, ``file.py:Class`` / ``module:Class``, or a factory (controller.law)."""
+        self.law: Law = make_law(law, nominal, gains or Gains(), rate_hz)
+        self.nominal = nominal
         self.actuation = make_actuation(nominal)
         self.rate_hz = rate_hz
 
@@ -78,9 +70,11 @@ __all__ = [
     "Command",
     "Controller",
     "Gains",
+    "Law",
     "MotorActuation",
     "Nominal",
     "WrenchActuation",
     "gains_from_table",
     "make_law",
+    "resolve_law",
 ]

@@ -1,4 +1,4 @@
-"""From the law's wrench (u1..u4) to what goes on the wire (DESIGN.md section 3).
+"""From the law's wrench (u1..u4) to what goes on the wire (docs/law.md, "Actuation").
 
 - :class:`WrenchActuation`: clamp to the profile's limits and normalise,
   c = (u1/u1_max, u2/u2_max, u3/u3_max, u4/u4_max) in the paper's frame.

@@ -1,6 +1,6 @@
 """The paper's finite-time backstepping super-twisting law (eq. 24-40), corrected.
 
-Four subsystems (LAW.md):
+Four subsystems (docs/law.md, "The law, step by step"):
 - z in 2 steps (eq. 24-34): phi1 = zd' - c' sig(e_z); s1 = z' - phi1;
   u1 = m [g + phi1' + ST(s1)] / (cos phi cos theta).
 - x through theta and y through phi, 4 steps each (eq. 35-38): position and velocity

@@ -1,7 +1,7 @@
 """Controller gains: frozen dataclasses read from a mission's ``[gains]`` table.
 
-Defaults are LAW.md's starting set, known to fly both scenarios on the paper and x500
-profiles. The super-twisting gains are checked against eq. (23) on construction.
+Defaults are the set of docs/law.md, "Gains", known to fly both scenarios on the paper and
+x500 profiles. The super-twisting gains are checked against eq. (23) on construction.
 """
 
 from __future__ import annotations

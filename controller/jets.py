@@ -2,8 +2,8 @@
 
 A jet is a tuple (v, v', v'', v''') of plain floats. Arithmetic on jets is the chain rule
 done numerically (Leibniz for products, Faa di Bruno for compositions), which is how the
-BS-ST law gets the exact time derivatives of its virtual controls (LAW.md, "The
-derivatives") instead of differencing samples.
+BS-ST law gets the exact time derivatives of its virtual controls (docs/law.md, "Exact
+derivatives by jets") instead of differencing samples.
 
 Derivative k of a result depends only on derivatives <= k of its inputs, so a jet whose
 top derivative is unknown (set to 0) still gives exact lower derivatives downstream.

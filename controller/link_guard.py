@@ -77,7 +77,7 @@ class LinkGuard:
     def __init__(self, controller: Controller, cfg: GuardConfig | None = None) -> None:
         self.ctl = controller
         self.cfg = cfg = cfg or GuardConfig()
-        self.predictor = (Predictor(controller.law.nominal, 1.0 / controller.rate_hz, cfg.lag_s)
+        self.predictor = (Predictor(controller.nominal, 1.0 / controller.rate_hz, cfg.lag_s)
                           if cfg.compensation == "predict" else None)
         self.state_t = -math.inf
         self.state: tuple[float, ...] | None = None

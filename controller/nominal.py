@@ -31,7 +31,7 @@ class Nominal:
 
 @dataclass(frozen=True, slots=True)
 class Coefficients:
-    """The constant factors of eq. (6), corrected (LAW.md), from a :class:`Nominal`.
+    """The constant factors of eq. (6), corrected (errata 1-3 of docs/law.md), from a :class:`Nominal`.
 
     i1..i3 are the paper's shorthands (I_y - I_z)/I_x, (I_z - I_x)/I_y, (I_x - I_y)/I_z
     (dimensionless); jr_x, jr_y = J_r/I_x, J_r/I_y (dimensionless, the gyroscopic factors);

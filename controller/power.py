@@ -2,10 +2,10 @@
 
 The paper's term (1/e) c V^alpha with V = e^2/2 (eq. 17, 29, 36, 38, 40) equals
 c 2^-alpha sig_beta(e) with sig_beta(e) = |e|^beta sign(e) and beta = 2 alpha - 1
-(DESIGN.md section 8). Its derivatives are unbounded at e = 0, and the backstepping needs
+(docs/law.md, "The finite-time step"). Its derivatives are unbounded at e = 0, and the backstepping needs
 three of them, so the exact law diverges in simulation.
 
-Regularisation (deviation from the paper, documented in controller/README.md): inside
+Regularisation (deviation from the paper, docs/law.md, "Regularised power sig_β"): inside
 |e| < eps, sig_beta is replaced by the odd polynomial
     eps^beta * (a1 u + a3 u^3 + a5 u^5 + a7 u^7),   u = e / eps,
 whose value and first three derivatives match |e|^beta sign(e) at |e| = eps (C^3 join).

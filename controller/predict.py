@@ -1,13 +1,13 @@
 """Latency compensation: carry a delayed state forward to "now" through the law's nominal model.
 
 The controller receives the vehicle's state some time after it was measured (its age).
-:class:`Predictor` integrates the nominal model of eq. (6) (corrected, LAW.md) from that
+:class:`Predictor` integrates the nominal model of eq. (6) (corrected: docs/law.md, "Plant model") from that
 state over its age, applying the wrenches the controller itself sent in the meantime, each
 from the time it was sent plus an assumed command latency ``lag_s``, and returns the
 predicted state, on which the law then computes its command.
 
 Why this is not ``plant/``'s integrator: the controller must not import the plant
-(DESIGN.md section 1). A real offboard computer has a model of the vehicle, not the
+(docs/design.md, "Parts and layers"). A real offboard computer has a model of the vehicle, not the
 simulator; this is that model: the law's :class:`~controller.nominal.Nominal` constants,
 no drag, no disturbance, no motor lag, no ground, and the realisable wrench taken as
 exactly applied. Everything else the plant does is prediction error that the next state

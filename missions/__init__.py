@@ -6,15 +6,13 @@ Scripting::
     m = Mission(Sine(), duration_s=30.0, name="sine")
 """
 
-from pathlib import Path
-
-from missions.mission import CONTROLLERS, Mission, load_mission, mission_from_table
+from missions.mission import CONTROLLERS, MISSION_RANGES, Mission, load_mission, mission_from_table, mission_path
+from missions.mission import SHIPPED_DIR as MISSION_DIR
 from missions.references import Reference, Setpoint, Sine, Step, Waypoints
-
-MISSION_DIR = Path(__file__).parent
 
 __all__ = [
     "CONTROLLERS",
+    "MISSION_RANGES",
     "MISSION_DIR",
     "Mission",
     "Reference",
@@ -24,4 +22,5 @@ __all__ = [
     "Waypoints",
     "load_mission",
     "mission_from_table",
+    "mission_path",
 ]

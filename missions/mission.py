@@ -19,6 +19,14 @@ from missions.references import Reference, Setpoint, Sine, Step, Waypoints
 from params import ConfigError, Table, load_toml
 
 CONTROLLERS = ("bsst", "smc", "pid")
+# the allowed range [lo, hi] of each top-level number of a mission (duration_s: lo excluded), shared by
+# the loader, the command-line flags (--rate, --seed) and the sweep axes: one range per key
+MISSION_RANGES: dict[str, tuple[float, float]] = {
+    "duration_s": (0.0, 86400.0),
+    "rate_hz": (50.0, 1000.0),
+    "physics_hz": (100.0, 10000.0),
+    "seed": (0, 2**31 - 1),
+}
 TRAJECTORIES = ("step", "sine", "waypoints")
 
 
@@ -44,8 +52,9 @@ class Mission:
 
     def __post_init__(self) -> None:
         check_timing(self.duration_s, self.rate_hz, self.physics_hz, self.source)
-        if self.controller not in CONTROLLERS:
-            raise ConfigError(f"{self.source}: controller: must be one of {', '.join(CONTROLLERS)}")
+        why = law_spec_problem(self.controller)
+        if why:
+            raise ConfigError(f"{self.source}: controller: {why}")
 
     def with_overrides(self, **kw: Any) -> Mission:
         """A copy with some fields replaced (None values are ignored), validated again."""
@@ -77,14 +86,41 @@ class Mission:
         return int(round(self.duration_s * self.rate_hz))
 
 
+def law_spec_problem(spec: object) -> str | None:
+    """Why ``spec`` cannot name a law, or None: a built-in name, or ``path/to/file.py:ClassName``
+    or ``package.module:ClassName`` (whether that file, module and class exist, and fit the
+    law interface, is checked when the flight is built: controller.law.resolve_law)."""
+    if not isinstance(spec, str):
+        return f"must be a string, got {spec!r}"
+    if spec in CONTROLLERS:
+        return None
+    where, sep, cls = spec.rpartition(":")
+    if sep and where.strip() and cls.isidentifier() and "\n" not in spec:
+        return None
+    return (f"must be one of {', '.join(CONTROLLERS)}, or path/to/file.py:ClassName, or package.module:ClassName; "
+            f"got {spec!r}")
+
+
+def law_spec_from(spec: str, base: Path) -> str:
+    """``spec`` with a relative law file made absolute against ``base`` (a mission file's folder;
+    the working directory for a command-line flag), so that every process that reads the flown
+    ``mission.toml`` finds the same file."""
+    where, sep, cls = spec.rpartition(":")
+    if not sep or not (where.endswith(".py") or "/" in where or "\\" in where):
+        return spec
+    p = Path(where).expanduser()
+    return f"{p if p.is_absolute() else (base / p).absolute()}:{cls}"
+
+
 def check_timing(duration_s: float, rate_hz: float, physics_hz: float, source: str = "<python>") -> None:
     """Rates and duration must be positive and the physics rate a multiple of the control rate."""
-    if not (math.isfinite(duration_s) and 0.0 < duration_s <= 86400.0):
-        raise ConfigError(f"{source}: duration_s: must be in (0, 86400], got {duration_s:g}")
-    if not 50.0 <= rate_hz <= 1000.0:
-        raise ConfigError(f"{source}: rate_hz: must be in [50, 1000], got {rate_hz:g}")
-    if not 100.0 <= physics_hz <= 10000.0:
-        raise ConfigError(f"{source}: physics_hz: must be in [100, 10000], got {physics_hz:g}")
+    lo, hi = MISSION_RANGES["duration_s"]
+    if not (math.isfinite(duration_s) and lo < duration_s <= hi):
+        raise ConfigError(f"{source}: duration_s: must be in ({lo:g}, {hi:g}], got {duration_s:g}")
+    for key, v in (("rate_hz", rate_hz), ("physics_hz", physics_hz)):
+        lo, hi = MISSION_RANGES[key]
+        if not lo <= v <= hi:
+            raise ConfigError(f"{source}: {key}: must be in [{lo:g}, {hi:g}], got {v:g}")
     ratio = physics_hz / rate_hz
     if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
         raise ConfigError(
@@ -92,22 +128,43 @@ def check_timing(duration_s: float, rate_hz: float, physics_hz: float, source: s
         )
 
 
-def load_mission(path: str | Path) -> Mission:
-    """Read and validate a mission TOML file."""
+SHIPPED_DIR = Path(__file__).parent  # the missions that come with the package
+
+
+def mission_path(path: str | Path) -> Path:
+    """``path``, or the shipped mission it names when there is no such file here: a bare name
+    (``sine``) or ``missions/<name>.toml``, so that an installed ``bsst`` flies the paper's
+    missions from any directory. A file of that name in the working directory always wins."""
     p = Path(path)
+    if p.exists():
+        return p
+    named = (len(p.parts) == 1 and p.suffix == "") or (len(p.parts) == 2 and p.parts[0] == "missions")
+    shipped = SHIPPED_DIR / (p.name if p.suffix == ".toml" else f"{p.name}.toml")
+    return shipped if named and shipped.is_file() else p
+
+
+def load_mission(path: str | Path) -> Mission:
+    """Read and validate a mission TOML file (a shipped one by name: :func:`mission_path`)."""
+    p = mission_path(path)
     return mission_from_table(load_toml(p), str(p), default_name=p.stem)
 
 
 def mission_from_table(data: Mapping[str, Any], source: str, default_name: str = "mission") -> Mission:
     t = Table(data, source)
     name = t.string("name", default_name)
-    duration = t.number("duration_s", lo=0.0, lo_open=True, hi=86400.0)
+    duration = t.number("duration_s", lo=MISSION_RANGES["duration_s"][0], lo_open=True,
+                        hi=MISSION_RANGES["duration_s"][1])
     profile = t.string("profile", "paper")
     actuation = t.string("actuation", "", choices=("", "wrench", "motors")) or None
-    controller = t.string("controller", "bsst", choices=CONTROLLERS)
-    rate = t.number("rate_hz", 250.0, lo=50.0, hi=1000.0)
-    physics = t.number("physics_hz", 1000.0, lo=100.0, hi=10000.0)
-    seed = t.integer("seed", 0, lo=0, hi=2**31 - 1)
+    controller = t.string("controller", "bsst")
+    why = law_spec_problem(controller)
+    if why:
+        raise t.error("controller", why)
+    controller = law_spec_from(controller, Path(source).parent)
+    r = MISSION_RANGES
+    rate = t.number("rate_hz", 250.0, lo=r["rate_hz"][0], hi=r["rate_hz"][1])
+    physics = t.number("physics_hz", 1000.0, lo=r["physics_hz"][0], hi=r["physics_hz"][1])
+    seed = t.integer("seed", 0, lo=int(r["seed"][0]), hi=int(r["seed"][1]))
     st = t.table("start")
     start = st.vector("position", 3, (0.0, 0.0, 0.0), lo=-1e4, hi=1e4) + (st.number("psi", 0.0, lo=-10, hi=10),)
     st.done()

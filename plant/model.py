@@ -1,4 +1,4 @@
-"""The rigid-body model of the paper, eq. (6) with the errata of DESIGN.md section 8.
+"""The rigid-body model of the paper, eq. (6) with errata 1-4 of docs/law.md ("Errata").
 
 State X = (x, vx, y, vy, z, vz, phi, dphi, theta, dtheta, psi, dpsi), eq. (7): inertial
 frame x north, y west, z up (NWU); Z-Y-X Euler angles and their rates.

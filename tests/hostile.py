@@ -44,7 +44,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from bridge.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID
+from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID
 from bridge.session import instance_slot
 from tests.sitlkit import Proc, csv_rows, wait_for
 
@@ -406,7 +406,7 @@ def deadline_misses(state_age_s: Any, rate_hz: float) -> float:
 def session_thread(mission: Any, out: Path, **kw: Any) -> Iterator[tuple[int, threading.Thread, dict[str, Any]]]:
     """Fly :func:`bridge.session.sitl` (``mission`` into ``out``, ``kw``) in a thread on an
     instance of its own; yields (instance, thread, result); on leaving, waits for the flight
-    and re-raises what it raised. ``result["run"]`` is the :class:`~bridge.runlog.Run`."""
+    and re-raises what it raised. ``result["run"]`` is the :class:`~bridge.record.runlog.Run`."""
     from bridge.session import sitl
 
     with instance_slot() as n:
@@ -431,8 +431,8 @@ def session_thread(mission: Any, out: Path, **kw: Any) -> Iterator[tuple[int, th
 def fly_flooded(mission: Any, out: Path, multiple: float, **kw: Any) -> tuple[Any, Flood | None]:
     """Fly ``mission`` as a real-time SITL session into ``out`` while another source floods the
     vehicle's controller link at ``multiple`` times the controller's message rate (none if 0)
-    from the first step flown to the end; the :class:`~bridge.runlog.Run` and the flood."""
-    from bridge.endpoint import LINK_PORT
+    from the first step flown to the end; the :class:`~bridge.record.runlog.Run` and the flood."""
+    from bridge.mavlink.endpoint import LINK_PORT
 
     flood = None
     with session_thread(mission, out, realtime=True, **kw) as (n, th, result):
@@ -470,7 +470,7 @@ def fly_fuzzed(mission: Any, out: Path, datagrams: int, seed: int = 7, sources: 
     ``datagrams`` hostile ones from :class:`Fuzzer` go, paced by :class:`Sender` from
     ``sources`` addresses (at most ``rate_hz`` per second), to the vehicle's controller link once it is past step
     :data:`MIN_STEP`; a socket on the GCS port collects the vehicle's STATUSTEXTs."""
-    from bridge.endpoint import GCS_PORT, LINK_PORT
+    from bridge.mavlink.endpoint import GCS_PORT, LINK_PORT
 
     gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:

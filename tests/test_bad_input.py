@@ -25,8 +25,8 @@ from typing import Any
 import pytest
 
 from bridge.cli import build_parser, main
-from bridge.endpoint import LINK_PORT
-from bridge.flight import prepare
+from bridge.core.flight import prepare
+from bridge.mavlink.endpoint import LINK_PORT
 from bridge.session import instance_slot
 from missions import MISSION_DIR, mission_from_table
 from params import Table, dump_toml, load_toml
@@ -122,6 +122,12 @@ CONVERTER_BAD = {
     "int_in": ["x", "-99999999999", "99999999999", "1.5"],
     "value_list": ["x", "-1e300", "1,1", ""],
     "name_list": ["x", "bsst,bsst"],
+    "mission_number": ["x", "-1e300", "nan", "inf", "49"],
+    "mission_integer": ["x", "-1", "99999999999", "1.5"],
+    "link_seed": ["x", "-1", "99999999999", "1.5"],
+    "axis_values": ["x", "-1e300", "1,1", ""],
+    "law_spec": ["x", "nofile.py:Law", "no_such_module:Law", "json:JSONDecoder", "bsst:"],
+    "law_list": ["x", "bsst,bsst", "bsst,nofile.py:Law"],
     "blackout_window": ["x", "-1:1", "1:0"],
     "_ids": ["x", "999:1", "200"],
     "_home": ["x", "91,0,0", "1,2"],
@@ -183,6 +189,8 @@ def test_every_flag_refuses_a_bad_value(files, capsys, cmd, flag):
         if action.option_strings:
             argv = [cmd, *base, flag, bad]
             names = (flag, str(bad))
+            if getattr(action.type, "__qualname__", "").startswith("law_"):  # named by its file, module or class
+                names += tuple(p for p in str(bad).replace(",", ":").split(":") if len(p) > 2)
         else:  # the positional comes first; report's directory, or a mission file
             argv = [cmd, bad, *base[1:]]
             names = (str(bad), Path(str(bad)).name)

@@ -1,6 +1,6 @@
 """`bsst sim` as a real subprocess (``python -m bridge sim ...``).
 
-A good run exits 0 and writes the run directory of DESIGN.md section 6; bad input exits 2
+A good run exits 0 and writes the run directory of docs/design.md, "Files of a run"; bad input exits 2
 with exactly one line on stderr and no traceback; a non-empty --out is refused without
 --overwrite.
 """
@@ -21,7 +21,7 @@ from missions import MISSION_DIR, load_mission
 ROOT = Path(__file__).resolve().parent.parent
 PYTHON = str(ROOT / ".venv" / "bin" / "python") if (ROOT / ".venv" / "bin" / "python").exists() else sys.executable
 
-# DESIGN.md section 6: fixed names (more may follow)
+# docs/design.md, "Files of a run": fixed names (more may follow)
 TRACE_COLUMNS = [
     "t", "x", "y", "z", "vx", "vy", "vz", "phi", "theta", "psi", "dphi", "dtheta", "dpsi",
     "x_ref", "y_ref", "z_ref", "psi_ref", "u1", "u2", "u3", "u4", "c1", "c2", "c3", "c4",

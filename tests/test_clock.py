@@ -1,10 +1,10 @@
-"""bridge.clock: the arithmetic of the real-time clocks (pure: times are given, not read)."""
+"""bridge.core.clock: the arithmetic of the real-time clocks (pure: times are given, not read)."""
 
 from __future__ import annotations
 
 import pytest
 
-from bridge.clock import REBASE_S, FixedRate, Pace
+from bridge.core.clock import REBASE_S, FixedRate, Pace
 
 
 def test_pace_runs_speed_times_real_time_from_its_restart():

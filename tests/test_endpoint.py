@@ -1,4 +1,4 @@
-"""bridge.endpoint: addresses, the hot-path codec against pymavlink, real UDP, tlogs."""
+"""bridge.mavlink.endpoint: addresses, the hot-path codec against pymavlink, real UDP, tlogs."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
-from bridge.endpoint import (
+from bridge.mavlink.endpoint import (
     HIL_ACTUATOR_CONTROLS,
     ODOMETRY,
     SET_ACTUATOR_CONTROL_TARGET,

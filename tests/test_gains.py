@@ -18,7 +18,7 @@ from plant import load_profile
 
 
 def test_bound_values_of_law_md() -> None:
-    """LAW.md's examples: L = 1, k2 = 2 => k1 > 3.46; L = 2, k2 = 4 => k1 > 4.90."""
+    """docs/law.md, "Gains": L = 1, k2 = 2 => k1 > 3.46; L = 2, k2 = 4 => k1 > 4.90."""
     assert super_twisting_bound(2.0, 1.0) == pytest.approx(math.sqrt(12.0))
     assert super_twisting_bound(2.0, 1.0) == pytest.approx(3.46, abs=5e-3)
     assert super_twisting_bound(4.0, 2.0) == pytest.approx(4.90, abs=5e-3)
@@ -54,7 +54,7 @@ def test_construction_checks_every_loop() -> None:
         Gains(attitude_st=Twisting(4.0, 4.0, 2.0))
     with pytest.raises(ConfigError, match=r"^gains\.yaw\.k2:"):
         Gains(yaw_st=Twisting(9.0, 1.0, 1.0))
-    Gains(z_st=Twisting(3.5, 2.0, 1.0))  # LAW.md's set passes
+    Gains(z_st=Twisting(3.5, 2.0, 1.0))  # the default set passes (docs/law.md, "Gains")
 
 
 GOOD = """

@@ -12,12 +12,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import common as mavlink
 
-from bridge.endpoint import parse_address, parse_datagram
-from bridge.flight import prepare
-from bridge.guard import MAX_POSITION_M, Rejections, odometry_problem, wire_problem
+from bridge.core.flight import prepare
+from bridge.mavlink.endpoint import parse_address, parse_datagram
+from bridge.mavlink.receive import MAX_POSITION_M, Rejections, odometry_problem, wire_problem
+from bridge.mavlink.signing import Signing
+from bridge.nodes.vehicle import Vehicle, VehicleConfig
 from bridge.session import sitl
-from bridge.signing import Signing
-from bridge.vehicle import Vehicle, VehicleConfig
 from missions import MISSION_DIR, Mission, Sine, load_mission
 from tests.hostile import Fuzzer, fly_flooded, fly_fuzzed, wait_until
 

@@ -2,7 +2,7 @@
 
 Each bad value raises params.ConfigError naming the file and the key; the tables owned by
 other parts ([effects], [gains], [failsafe]) are validated when a run is built
-(bridge.flight.prepare), still naming the file and the key.
+(bridge.core.flight.prepare), still naming the file and the key.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from bridge.flight import prepare
+from bridge.core.flight import prepare
 from missions import MISSION_DIR, Mission, Setpoint, Sine, Step, Waypoints, load_mission, mission_from_table
 from params import ConfigError, dump_toml
 

@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from bridge.wire import state_to_odometry, step_usec
+from bridge.core.wire import state_to_odometry, step_usec
 from tests.sitlkit import Proc
 
 # 50 Hz, so that the scheduling jitter of a loaded 2-core machine (milliseconds) stays well

@@ -17,7 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
-from bridge.metrics import finite_time_bound
+from bridge.record.metrics import finite_time_bound
 from controller.power import SignedPower
 
 BETA = st.floats(0.001, 0.999)

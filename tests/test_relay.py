@@ -1,4 +1,4 @@
-"""The real-time relay (bridge.relay) with real UDP sockets on 127.0.0.1."""
+"""The real-time relay (bridge.nodes.relay) with real UDP sockets on 127.0.0.1."""
 
 from __future__ import annotations
 
@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bridge.link import LinkConfig, LinkSettings
-from bridge.relay import Relay, parse_address
+from bridge.core.link import LinkConfig, LinkSettings
+from bridge.nodes.relay import Relay, parse_address
 
 ROOT = Path(__file__).resolve().parent.parent
 STAMP = struct.Struct("<dI")

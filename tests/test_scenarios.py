@@ -24,8 +24,8 @@ import numpy as np
 import pytest
 
 from bridge.loop import simulate
-from bridge.metrics import errors
-from bridge.runlog import read_trace
+from bridge.record.metrics import errors
+from bridge.record.runlog import read_trace
 from missions import MISSION_DIR, load_mission
 
 STEP_CHANGES = (0.0, 10.0, 20.0, 30.0)
@@ -175,8 +175,8 @@ def test_pid_completes_the_step_mission(tmp_path_factory: pytest.TempPathFactory
 def test_a_flight_with_no_rows_still_has_a_summary() -> None:
     """A session whose vehicle fell to its failsafe before the first joined row (e.g. a lost
     ARM acknowledgement) has an empty trace: the summary says so instead of raising."""
-    from bridge.metrics import summarise
-    from bridge.runlog import TRACE_COLUMNS
+    from bridge.record.columns import TRACE_COLUMNS
+    from bridge.record.metrics import summarise
     from controller.gains import Gains
 
     empty = {c: np.zeros(0) for c in TRACE_COLUMNS}

@@ -1,4 +1,4 @@
-"""bridge.signing: key files, and MAVLink 2 signatures byte for byte against pymavlink."""
+"""bridge.mavlink.signing: key files, and MAVLink 2 signatures byte for byte against pymavlink."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
-from bridge.endpoint import (
+from bridge.mavlink.endpoint import (
     GCS_PORT,
     HIL_ACTUATOR_CONTROLS,
     LINK_PORT,
@@ -26,9 +26,9 @@ from bridge.endpoint import (
     parse_address,
     parse_datagram,
 )
-from bridge.guard import Rejections
+from bridge.mavlink.receive import Rejections
+from bridge.mavlink.signing import SIGNATURE_BYTES, Signing, clock_timestamp, key_from_file
 from bridge.session import instance_slot, sitl
-from bridge.signing import SIGNATURE_BYTES, Signing, clock_timestamp, key_from_file
 from missions import Mission, Sine
 from params import ConfigError
 from tests.sitlkit import Proc

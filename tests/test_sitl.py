@@ -16,7 +16,8 @@ import pytest
 from pymavlink import mavutil
 
 from bridge.loop import simulate
-from bridge.runlog import TRACE_COLUMNS, read_trace
+from bridge.record.columns import TRACE_COLUMNS
+from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
 from missions import MISSION_DIR, Mission, Sine
 from tests.sitlkit import ENV, ROOT, csv_rows, wait_for

@@ -19,7 +19,8 @@ import pytest
 
 from bridge.cli import main
 from bridge.loop import simulate
-from bridge.runlog import TRACE_COLUMNS, read_trace
+from bridge.record.columns import TRACE_COLUMNS
+from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
 from missions import MISSION_DIR, Mission, Sine, load_mission
 from tests.sitlkit import ENV, ROOT
@@ -172,8 +173,8 @@ def test_relay_mission_clock_starts_blackouts_at_the_first_target() -> None:
 
     from pymavlink.dialects.v20 import common as mavlink
 
-    from bridge.link import LinkConfig, LinkSettings
-    from bridge.relay import Relay
+    from bridge.core.link import LinkConfig, LinkSettings
+    from bridge.nodes.relay import Relay
     from tests.sitlkit import wait_for
 
     cut = LinkConfig(blackouts=((0.0, 30.0),))

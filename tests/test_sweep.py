@@ -21,19 +21,10 @@ import pytest
 
 from bridge import simulate
 from bridge.cli import main
-from bridge.report import CLASSES, classify
-from bridge.sweep import (
-    CELLS_CSV,
-    COLUMNS,
-    Cell,
-    Classes,
-    Grid,
-    load_sweep,
-    read_cells,
-    ripple_rms,
-    run_cell,
-    sweep,
-)
+from bridge.sweep import CELLS_CSV, COLUMNS, Cell, Classes, Grid, load_sweep, read_cells, sweep
+from bridge.sweep.cells import ripple_rms
+from bridge.sweep.classes import CLASSES, classify
+from bridge.sweep.executors import run_cell
 from missions import Mission, Sine
 from params import ConfigError, dump_toml
 

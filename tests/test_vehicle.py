@@ -18,7 +18,7 @@ import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
-from bridge.endpoint import GCS_PORT, LINK_PORT
+from bridge.mavlink.endpoint import GCS_PORT, LINK_PORT
 from bridge.session import instance_slot
 from tests.sitlkit import ENV, ROOT, Proc
 

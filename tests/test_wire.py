@@ -1,4 +1,4 @@
-"""The wire's frame conventions (bridge.wire): NWU <-> NED, ODOMETRY fields, actuators, time keys."""
+"""The wire's frame conventions (bridge.core.wire): NWU <-> NED, ODOMETRY fields, actuators, time keys."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bridge.wire import (
+from bridge.core.wire import (
     command_from_wire,
     command_to_wire,
     odometry_to_state,
@@ -59,7 +59,7 @@ def test_odometry_round_trip_through_float32(X):
 @settings(max_examples=200, deadline=None)
 @given(st.tuples(angle, tilt, angle), st.tuples(finite, finite, finite))
 def test_rotation_is_orthogonal(euler, v):
-    from bridge.wire import euler_to_quaternion
+    from bridge.core.wire import euler_to_quaternion
 
     q = euler_to_quaternion(*euler)
     assert _close(rotate_inverse(q, rotate(q, v)), v, 1e-12)
@@ -68,7 +68,7 @@ def test_rotation_is_orthogonal(euler, v):
 
 
 def test_ned_frd_signs():
-    """DESIGN.md section 2: north = x, east = -y, down = -z; pitch = -theta, yaw = -psi."""
+    """docs/design.md, "Frames and units": north = x, east = -y, down = -z; pitch = -theta, yaw = -psi."""
     X = (1.0, 0.5, 2.0, 0.0, 3.0, -0.25, 0.1, 0.0, 0.2, 0.0, 0.3, 0.0)
     n = paper_to_ned(X)
     assert n["pos"] == (1.0, -2.0, -3.0)

@@ -1,0 +1,41 @@
+"""``bsst``: the command line. ``python -m bridge`` is the same.
+
+In:  argv (``sys.argv[1:]`` by default), and the mission, sweep and key files it names
+Out: the command's work and its summary on stdout; an exit status; bad input as one line
+     ``bsst: ...`` on stderr
+
+- :mod:`bridge.cli.flags`     flag types with their ranges, shared options, ``[link]`` overrides
+- :mod:`bridge.cli.commands`  the parser and one function per command
+
+Exit status: 0 the mission completed; 1 it ended in failsafe, divergence or abort; 2 bad
+input, with one line on stderr naming the file, key or flag, and no traceback.
+Nothing imports this package: it is the top of the layers (tests/test_layers.py).
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Sequence
+
+from bridge.cli.commands import EXIT_BAD_INPUT, EXIT_FAILED, build_parser, print_summary
+from bridge.cli.flags import UsageError, link_table_from_args
+from params import ConfigError
+
+__all__ = ["build_parser", "link_table_from_args", "main", "print_summary"]
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+        return args.func(args)
+    except (UsageError, ConfigError) as exc:
+        print(f"bsst: {exc}" if not str(exc).startswith("bsst") else str(exc), file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("bsst: interrupted", file=sys.stderr)
+        return EXIT_FAILED
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,325 @@
+"""The command line's flags: their types (each checks its range and names the flag in its
+error), the options the commands share, and the ``[link]`` overrides read back from them.
+
+In:  command-line text (link values in ms, %, packets, bytes/s; ``--blackout START:DURATION`` s;
+     ``--rate`` Hz; ``--speed`` x real time; ``--home`` degrees, degrees, m AMSL)
+Out: parsed values, each checked against its range (a bad one is a ``UsageError`` naming the flag:
+     exit 2), and :func:`link_table_from_args`'s ``[link]`` override table, which goes to
+     :func:`bridge.core.flight.prepare` like every other override
+
+The ranges are the mission loader's (:data:`bridge.core.link.NUMBER_RANGES`), one per key.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable, Sequence
+from typing import Any, NoReturn
+
+
+class UsageError(Exception):
+    """Bad command-line input (exit 2)."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> NoReturn:  # one line, no usage dump
+        raise UsageError(f"{self.prog}: {message}")
+
+
+def int_in(name: str, lo: int, hi: int) -> Callable[[str], int]:
+    def conv(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be an integer, got {text!r}") from None
+        if not lo <= v <= hi:
+            raise argparse.ArgumentTypeError(f"{name} must be in [{lo}, {hi}], got {v}")
+        return v
+
+    return conv
+
+
+def number_in(name: str, lo: float, hi: float, *, lo_open: bool = False) -> Callable[[str], float]:
+    """An argparse type: a finite number in [lo, hi] (or (lo, hi] with ``lo_open``), named in the error."""
+    left = "(" if lo_open else "["
+
+    def conv(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be a number, got {text!r}") from None
+        if not (lo < v if lo_open else lo <= v) or not v <= hi:  # also refuses nan
+            raise argparse.ArgumentTypeError(f"{name} must be in {left}{lo:g}, {hi:g}], got {text}")
+        return v
+
+    return conv
+
+
+def value_list(name: str, lo: float, hi: float) -> Callable[[str], tuple[float, ...]]:
+    """``--delay 0,5,10``: comma-separated numbers in [lo, hi], no repeats."""
+    def conv(text: str) -> tuple[float, ...]:
+        parts = [x.strip() for x in text.split(",")]
+        try:
+            vals = tuple(float(x) for x in parts)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} takes numbers separated by commas, got {text!r}") from None
+        bad = [v for v in vals if not lo <= v <= hi]  # also catches nan
+        if bad or not vals:
+            raise argparse.ArgumentTypeError(f"{name} values must be in [{lo:g}, {hi:g}], got {text}")
+        if len(set(vals)) != len(vals):
+            raise argparse.ArgumentTypeError(f"{name}: repeated value in {text}")
+        return vals
+
+    return conv
+
+
+def name_list(name: str, choices: Sequence[str]) -> Callable[[str], tuple[str, ...]]:
+    def conv(text: str) -> tuple[str, ...]:
+        vals = tuple(x.strip() for x in text.split(","))
+        bad = [v for v in vals if v not in choices]
+        if bad or len(set(vals)) != len(vals):
+            raise argparse.ArgumentTypeError(f"{name} takes distinct names among {','.join(choices)}, got {text!r}")
+        return vals
+
+    return conv
+
+
+def link_seed(flag: str) -> Callable[[str], int]:
+    """An argparse type for the link's seed, in :data:`bridge.core.link.SEED_RANGE`."""
+    def conv(text: str) -> int:
+        from bridge.core.link import SEED_RANGE  # lazy: start-up time
+
+        return int_in(flag, *SEED_RANGE)(text)
+
+    return conv
+
+
+def blackout_window(name: str) -> Callable[[str], tuple[float, float]]:
+    """``START:DURATION`` in seconds of mission time."""
+    def conv(text: str) -> tuple[float, float]:
+        from bridge.core.link import BLACKOUT_DURATION_RANGE_S, BLACKOUT_START_RANGE_S  # lazy: start-up time
+
+        (s_lo, s_hi), (d_lo, d_hi) = BLACKOUT_START_RANGE_S, BLACKOUT_DURATION_RANGE_S
+        a, sep, b = text.partition(":")
+        try:
+            start, dur = float(a), float(b)
+        except ValueError:
+            start = dur = float("nan")
+        if not sep or not (s_lo <= start <= s_hi and d_lo < dur <= d_hi):
+            raise argparse.ArgumentTypeError(f"{name} must be START:DURATION in seconds (start >= 0, "
+                                             f"duration > 0), got {text!r}")
+        return start, dur
+
+    return conv
+
+
+def law_spec(flag: str) -> Callable[[str], str]:
+    """An argparse type for a law: a built-in name, ``file.py:Class`` or ``module:Class``
+    (checked for its form here; the file, module and class when the flight is built)."""
+    def conv(text: str) -> str:
+        from missions.mission import law_spec_problem  # lazy: building the parser loads no mission code
+
+        why = law_spec_problem(text)
+        if why:
+            raise argparse.ArgumentTypeError(f"{flag} {why}")
+        return text
+
+    return conv
+
+
+def law_list(flag: str) -> Callable[[str], tuple[str, ...]]:
+    """``--controller bsst,pid,examples/my_law.py:MyLaw``: distinct laws, comma-separated."""
+    def conv(text: str) -> tuple[str, ...]:
+        vals = tuple(x.strip() for x in text.split(","))
+        if len(set(vals)) != len(vals):
+            raise argparse.ArgumentTypeError(f"{flag}: repeated law in {text!r}")
+        return tuple(law_spec(flag)(v) for v in vals)
+
+    return conv
+
+
+def mission_number(flag: str, key: str) -> Callable[[str], float]:
+    """An argparse type for a mission's top-level number (``rate_hz``): in the range the mission
+    file allows (:data:`missions.MISSION_RANGES`, looked up when the flag is given)."""
+    def conv(text: str) -> float:
+        from missions import MISSION_RANGES  # lazy: building the parser loads no mission code
+
+        return number_in(flag, *MISSION_RANGES[key])(text)
+
+    return conv
+
+
+def mission_integer(flag: str, key: str) -> Callable[[str], int]:
+    """As :func:`mission_number`, for an integer (``seed``)."""
+    def conv(text: str) -> int:
+        from missions import MISSION_RANGES  # lazy: building the parser loads no mission code
+
+        lo, hi = MISSION_RANGES[key]
+        return int_in(flag, int(lo), int(hi))(text)
+
+    return conv
+
+
+def axis_values(flag: str, axis: str) -> Callable[[str], tuple[float, ...]]:
+    """An argparse type for a swept axis (``--delay 0,5,10``): each value in the axis's one
+    range (:data:`bridge.sweep.grid.RANGES`, the mission loader's), looked up when given."""
+    def conv(text: str) -> tuple[float, ...]:
+        from bridge.sweep.grid import RANGES  # lazy: only a sweep loads the sweep
+
+        return value_list(flag, *RANGES[axis])(text)
+
+    return conv
+
+
+def link_number(flag: str, key: str | None = None) -> Callable[[str], float]:
+    """An argparse type for a ``[link]`` number: in the range the mission file allows for
+    ``key`` (bridge.core.link, looked up when a flag is given, so that building the parser does
+    not load the link model; ``None``: the command lag)."""
+    def conv(text: str) -> float:
+        from bridge.core.link import GUARD_RANGES, LO_OPEN, NUMBER_RANGES  # lazy: start-up time
+
+        k = key or "command_lag_ms"
+        return number_in(flag, *{**NUMBER_RANGES, **GUARD_RANGES}[k], lo_open=k in LO_OPEN)(text)
+
+    return conv
+
+
+def add_flight_options(p: argparse.ArgumentParser) -> None:
+    """Options every flying command shares: overrides of the mission's own values."""
+    p.add_argument("mission", help="mission TOML file (see missions/)")
+    p.add_argument("--out", metavar="DIR", help="run directory (default runs/<UTC time>-<mission>)")
+    p.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out")
+    p.add_argument("--rate", type=mission_number("--rate", "rate_hz"), metavar="HZ",
+                   help="control rate, 50-1000 Hz (default: the mission's, 250)")
+    p.add_argument("--profile", metavar="NAME", help="vehicle profile: paper, x500 or a profile TOML path")
+    p.add_argument("--controller", type=law_spec("--controller"), metavar="LAW",
+                   help="control law: bsst, smc, pid, or your own (path/to/file.py:Class or package.module:Class)")
+    p.add_argument("--seed", type=mission_integer("--seed", "seed"), metavar="N", help="seed of random effects")
+    p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+
+
+# -- link impairment flags (bridge.core.link): both directions, or one with --up-/--down- -----------
+
+
+LINK_FLAGS = (  # flag stem, [link] key, metavar, help; the ranges are bridge.core.link.NUMBER_RANGES
+    ("delay", "delay_ms", "MS", "one-way delay"),
+    ("jitter", "jitter_ms", "MS", "delay jitter (uniform half-width or normal sigma)"),
+    ("loss", "loss_pct", "PCT", "packet loss"),
+    ("burst", "burst_len", "LEN", "mean loss burst length in packets (Gilbert-Elliott; 0 Bernoulli)"),
+    ("dup", "dup_pct", "PCT", "duplicated packets"),
+    ("reorder", "reorder_pct", "PCT", "packets held back past their successor"),
+    ("bandwidth", "rate_bps", "BYTES_PER_S", "bandwidth cap in bytes/s (0: none)"),
+    ("queue", "queue_ms", "MS", "with --bandwidth: longest wait in the queue before a packet is dropped"),
+)
+GUARD_FLAGS = (  # flag, [link] key, metavar, help: the controller's guard and prediction (not per direction)
+    ("--command-lag", "command_lag_ms", "MS", "with --compensation predict: assumed command delay it also covers"),
+    ("--stale-after", "stale_ms", "MS", "a state older than this is stale: the law holds its integrators"),
+    ("--stop-after", "stop_ms", "MS", "a state older than this stops the targets (the vehicle's timeout takes over)"),
+)
+
+
+def add_link_options(p: argparse.ArgumentParser, skip: Sequence[str] = ()) -> None:
+    """The link-impairment flags (``--delay MS`` … for both directions, ``--up-delay``,
+    ``--down-loss`` … for one) and the controller's compensation; ``skip`` omits flag
+    stems a command defines otherwise. :func:`link_table_from_args` reads them back."""
+    g = p.add_argument_group("link impairment", "override the mission's [link] tables; every flag for both "
+                             "directions also exists as --up-FLAG (controller -> vehicle) and --down-FLAG")
+    for stem, key, meta, text in LINK_FLAGS:
+        for pre in ("", "up-", "down-"):
+            if stem in skip and not pre:
+                continue
+            flag = f"--{pre}{stem}"
+            g.add_argument(flag, dest=f"link_{pre.replace('-', '_')}{key}", type=link_number(flag, key),
+                           metavar=meta, help=argparse.SUPPRESS if pre else text)
+    for pre in ("", "up-", "down-"):
+        flag = f"--{pre}blackout"
+        g.add_argument(flag, dest=f"link_{pre.replace('-', '_')}blackouts", action="append",
+                       type=blackout_window(flag), metavar="START:DURATION",
+                       help=argparse.SUPPRESS if pre else "no packets from START for DURATION s (repeatable)")
+    g.add_argument("--jitter-dist", dest="link_jitter", choices=("uniform", "normal"), help="jitter distribution")
+    g.add_argument("--link-seed", dest="link_seed", type=link_seed("--link-seed"), metavar="N",
+                   help="seed of the link's fates (default: the mission's seed)")
+    g.add_argument("--compensation", dest="link_compensation", choices=("none", "predict"),
+                   help="predict: control on the state carried forward over its age (nominal model)")
+    for flag, key, meta, text in GUARD_FLAGS:
+        g.add_argument(flag, dest=f"link_{key}", type=link_number(flag, key), metavar=meta, help=text)
+
+
+def link_table_from_args(args: argparse.Namespace) -> dict[str, Any]:
+    """The ``[link]`` overrides the flags of :func:`add_link_options` ask for ({} if none).
+
+    Flags for both directions write both ``up`` and ``down``; ``--up-*`` / ``--down-*`` win."""
+    out: dict[str, Any] = {}
+    keys = [key for _, key, *_ in LINK_FLAGS] + ["blackouts"]
+    for d in ("up", "down"):
+        side: dict[str, Any] = {}
+        for key in keys:
+            for dest in (f"link_{key}", f"link_{d}_{key}"):
+                v = getattr(args, dest, None)
+                if v is not None:
+                    side[key] = [list(w) for w in v] if key == "blackouts" else v
+        for key in ("jitter", "seed"):
+            v = getattr(args, f"link_{key}", None)
+            if v is not None:
+                side[key] = v
+        if side:
+            out[d] = side
+        if "burst_len" in side and "loss_pct" in side:
+            from bridge.core.link import burst_problem  # lazy: start-up time
+
+            why = burst_problem(side["loss_pct"], side["burst_len"])
+            if why:
+                raise UsageError(f"bsst: --burst / --{d}-burst: {why}")
+    for key in ("compensation", *(k for _, k, *_ in GUARD_FLAGS)):
+        v = getattr(args, f"link_{key}", None)
+        if v is not None:
+            out[key] = v
+    return out
+
+
+def add_key_option(p: argparse.ArgumentParser) -> None:
+    """``--key FILE``: MAVLink 2 signing (bridge.mavlink.signing); the key is read from the file, never given on
+    the command line, so it never shows in ``ps``."""
+    p.add_argument("--key", metavar="FILE", help="sign every frame and accept only frames signed with this key: "
+                                                 "a 32-byte file or a passphrase (hashed with SHA-256, as "
+                                                 "MAVProxy does); not readable by others")
+
+
+def _add_port_options(p: argparse.ArgumentParser, vehicle: bool) -> None:
+    if vehicle:
+        p.add_argument("--listen", metavar="HOST:PORT",
+                       help="controller link, bound (default 127.0.0.1:14560 + instance)")
+    p.add_argument("--gcs", metavar="HOST:PORT", help="ground station link: telemetry goes there "
+                                                       "(default 127.0.0.1:14550 + instance; 'none': no GCS link)")
+    p.add_argument("--instance", type=int_in("--instance", 0, 9), default=0, metavar="N",
+                   help="PX4-style instance 0-9: ports 14560 + N and 14550 + N, sysid N + 1")
+    clock = p.add_mutually_exclusive_group()
+    if vehicle:
+        clock.add_argument("--lockstep", dest="realtime", action="store_false", help="lockstep clock (default)")
+    clock.add_argument("--realtime", action="store_true", help="run on the wall clock (default lockstep)")
+    p.set_defaults(realtime=False)
+    p.add_argument("--speed", type=number_in("--speed", 0.0, 1000.0, lo_open=True), metavar="X",
+                   help="lockstep: at most X times real time; also the pace after the controller is lost (default 1)")
+    add_key_option(p)
+
+
+def _ids(text: str) -> tuple[int, int]:
+    a, sep, b = text.partition(":")
+    try:
+        ids = (int(a), int(b))
+    except ValueError:
+        ids = (-1, -1)
+    if not sep or not (1 <= ids[0] <= 255 and 0 <= ids[1] <= 255):
+        raise argparse.ArgumentTypeError(f"--controller-id must be SYSID:COMPID (1-255:0-255), got {text!r}")
+    return ids
+
+
+def _home(text: str) -> tuple[float, float, float]:
+    try:
+        lat, lon, alt = (float(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--home must be LAT,LON,ALT in degrees and metres, got {text!r}") from None
+    if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0 and -1000.0 <= alt <= 10000.0):
+        raise argparse.ArgumentTypeError(f"--home out of range (lat [-90, 90], lon [-180, 180], alt [-1000, 10000]), "
+                                         f"got {text!r}")
+    return lat, lon, alt

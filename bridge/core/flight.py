@@ -1,0 +1,126 @@
+"""From a mission to the parts that fly it: every table validated by the part that owns it.
+
+In:  a mission (a :class:`~missions.Mission` or a TOML path) and overrides: profile, controller,
+     ``rate_hz`` (Hz), seed, actuation, a ``[link]`` table laid over the mission's
+Out: a frozen :class:`Flight`, which builds the plant, the :class:`~bridge.core.simvehicle.SimVehicle`,
+     the law and the guard's configuration, and lists the blackouts (mission time s); a bad value
+     raises ``ConfigError`` naming file and key
+
+:func:`prepare` applies the command-line overrides and validates the mission's profile,
+``[effects]``, ``[gains]``, ``[failsafe]`` and ``[link]`` tables, so that a bad value fails
+before anything starts, with the file and key named.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from bridge.core.failsafe import FailsafeConfig, failsafe_from_table
+from bridge.core.link import LinkSettings, link_from_table, merge_link_tables
+from bridge.core.simvehicle import SimVehicle
+from controller import Controller, Gains, Nominal, gains_from_table
+from controller.law import LawFactory, resolve_law
+from controller.link_guard import GuardConfig
+from missions import Mission, Setpoint, Step, load_mission
+from missions.mission import law_spec_from
+from params import ConfigError, Table
+from plant import Effects, Profile, Quadrotor, load_profile
+from plant.effects import effects_from_table
+
+
+@dataclass(frozen=True)
+class Flight:
+    """A validated mission and everything built from it."""
+
+    mission: Mission
+    profile: Profile
+    effects: Effects
+    gains: Gains
+    failsafe: FailsafeConfig
+    link: LinkSettings = field(default_factory=LinkSettings)
+    law: LawFactory | None = None  # the mission's controller, resolved (None: resolved on use)
+
+    @property
+    def nominal(self) -> Nominal:
+        """The controller's model: the profile's nominal numbers, never the effects."""
+        return Nominal.from_profile(self.profile)
+
+    @property
+    def substeps(self) -> int:
+        return int(round(self.mission.physics_hz / self.mission.rate_hz))
+
+    def make_plant(self) -> Quadrotor:
+        m = self.mission
+        x, y, z, psi = m.start
+        state = (x, 0.0, y, 0.0, z, 0.0, 0.0, 0.0, 0.0, 0.0, psi, 0.0)
+        return Quadrotor(self.profile, self.effects, seed=m.seed, physics_hz=m.physics_hz, state=state)
+
+    def make_vehicle(self, armed: bool = False) -> SimVehicle:
+        return SimVehicle(self.make_plant(), self.substeps, self.failsafe, armed=armed)
+
+    def make_controller(self) -> Controller:
+        return Controller(self.law or self.mission.controller, self.nominal, self.gains, self.mission.rate_hz)
+
+    @property
+    def guard(self) -> GuardConfig:
+        """The controller's link guard: ``[link]`` thresholds and compensation, ``[failsafe] resume``."""
+        return replace(self.link.guard, resume=self.failsafe.resume)
+
+    def blackout_notes(self) -> list[tuple[float, str]]:
+        """Events to log at the start of each scheduled link blackout: (mission time s, text), in time order."""
+        windows: dict[tuple[float, float], list[str]] = {}
+        for d, cfg in (("up", self.link.up), ("down", self.link.down)):
+            for w in cfg.blackouts:
+                windows.setdefault(w, []).append(d)
+        return [(s, f"{'+'.join(ds)} link blackout from {s:.3f} s for {dur:.3f} s")
+                for (s, dur), ds in sorted(windows.items())]
+
+
+def prepare(
+    mission: Mission | str | Path,
+    *,
+    profile: str | None = None,
+    controller: str | None = None,
+    rate_hz: float | None = None,
+    seed: int | None = None,
+    actuation: str | None = None,
+    link: Mapping[str, Any] | None = None,
+) -> Flight:
+    """Validate a mission (object or file) with overrides into a :class:`Flight`.
+
+    ``link`` is laid over the mission's ``[link]`` table (see :func:`bridge.core.link.merge_link_tables`).
+    """
+    m = mission if isinstance(mission, Mission) else load_mission(mission)
+    merged = merge_link_tables(m.link, link) if link else None
+    if controller is not None:  # a law file given on the command line or from Python: from the working directory
+        controller = law_spec_from(controller, Path("."))
+    m = m.with_overrides(profile=profile, controller=controller, rate_hz=rate_hz, seed=seed, actuation=actuation,
+                         link=merged)
+    src = m.source
+    try:
+        prof = load_profile(m.profile)
+    except ConfigError as exc:
+        raise ConfigError(f"{src}: profile: {exc}") from None
+    if m.actuation:
+        prof = prof.with_actuation(m.actuation)
+    effects = effects_from_table(Table(m.effects, src, "effects"))
+    gains = gains_from_table(m.gains, src) if m.gains else Gains()
+    failsafe = failsafe_from_table(m.failsafe, src)
+    link_settings = link_from_table(m.link, src, seed=m.seed)
+    try:
+        law = resolve_law(m.controller)
+        flight = Flight(m, prof, effects, gains, failsafe, link_settings, law)
+        flight.make_controller()  # a user's law is built once here, so that one that does not fit is bad input
+    except ConfigError as exc:
+        raise ConfigError(f"{src}: {exc}") from None
+    return flight
+
+
+def at_rest() -> Mission:
+    """What a bare ``bsst vehicle`` (or ``bsst relay`` without ``--mission``) flies: the paper
+    profile at rest at the origin; its tables are the command line's."""
+    return Mission(Step((Setpoint(0.0, 0.0, 0.0, 0.0, 0.0),)), duration_s=86400.0, name="vehicle",
+                   source="command line")

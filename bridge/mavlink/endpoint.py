@@ -1,0 +1,557 @@
+"""MAVLink 2 over UDP: an endpoint that owns its socket, and the tlog it records.
+
+In:  UDP datagrams of MAVLink 2 frames; an address (``udpin:`` / ``udpout:`` HOST:PORT), the
+     endpoint's sysid and compid, an optional signing key
+Out: checked, decoded messages with their senders' addresses (pymavlink messages, or a
+     :class:`HotMessage` for ODOMETRY and the two actuator targets); encoded frames sent to the
+     peer; refusals counted by reason; a ``.tlog`` (per frame: 8-byte big-endian Unix time in
+     us, then the raw frame)
+
+An :class:`Endpoint` is one UDP socket and one pymavlink ``MAVLink`` object (its own
+sequence numbers: one per link, as MAVLink wants). It encodes with pymavlink and decodes
+whole datagrams with ``parse_buffer``; it never uses ``recv_match``, whose per-message
+bookkeeping and polling ``select`` are the slow path. Every frame it sends or receives is
+appended to a :class:`Tlog`.
+
+Addresses follow pymavlink's connection strings (docs/design.md, "The MAVLink contract"):
+
+- ``udpin:HOST:PORT``  bind HOST:PORT and answer whoever sent last (port 0: any free port);
+- ``udpout:HOST:PORT`` send to HOST:PORT from a free local port, answer on it;
+- ``HOST:PORT``        either, as the option that takes it says.
+
+Receiving is the project's one receive path (:mod:`bridge.mavlink.receive`): :meth:`Endpoint.poll`
+reads a bounded batch, sheds excess from sources other than the peer, and
+:func:`parse_datagram` takes whole MAVLink 2 frames only, checked (CRC, length, known id,
+and with a key their signature: :mod:`bridge.mavlink.signing`) before anything is decoded;
+everything refused is counted by reason in the endpoint's :class:`bridge.mavlink.receive.Rejections`.
+
+The two messages of every control step (ODOMETRY down, the actuator target up) take a
+hot path (:class:`HotLayout`): framed and checked with ``struct`` and the CRC directly from
+pymavlink's own message metadata (field order, ``crc_extra``), signed and verified by
+:class:`bridge.mavlink.signing.Signing`, without building a pymavlink message object; every other
+frame is decoded by pymavlink's ``decode`` once it has passed the same checks. Both paths
+give the same fields and bytes (tests/test_endpoint.py, tests/test_signing.py).
+
+Waiting is :func:`wait`: it first polls the hot socket for a short while (a reply that
+comes within tens of microseconds is taken without a sleep and wake-up, which costs more
+than the poll on loopback), then blocks in ``select`` on every socket until the deadline.
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import socket
+import struct
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from bridge.mavlink.receive import BATCH, MAX_DATAGRAM, RateLimiter, Rejections
+from bridge.mavlink.signing import IFLAG_SIGNED, SIGNATURE_BYTES, Signing
+from bridge.mavlink.signing import crc16 as _crc16
+from params import ConfigError
+
+# Identities and ports of docs/design.md, "The MAVLink contract". Instance N (0-9) adds N to both ports and
+# makes the vehicle sysid N + 1, as PX4 does.
+GCS_PORT = 14550
+LINK_PORT = 14560
+VEHICLE_COMPID = 1  # MAV_COMP_ID_AUTOPILOT1
+CONTROLLER_SYSID = 200  # not 255 (MAVProxy) nor 245 (MAVSDK): a GCS can run beside the controller
+CONTROLLER_COMPID = 191  # MAV_COMP_ID_ONBOARD_COMPUTER
+FORCE_DISARM = 21196  # param2 of ARM_DISARM that disarms in the air (MAVLink's magic number)
+_STAMP = struct.Struct(">Q")
+_MAX_DATAGRAM = 65535
+_MAGIC2 = 0xFD
+_HEADER2 = struct.Struct("<BBBBBBBHB")  # magic len incompat compat seq sysid compid msgid(24 bit)
+
+
+@dataclass(frozen=True)
+class Address:
+    """A UDP address and what to do with it: ``udpin`` binds it, ``udpout`` sends to it."""
+
+    mode: str
+    host: str
+    port: int
+
+    def __str__(self) -> str:
+        return f"{self.mode}:{self.host}:{self.port}"
+
+    @property
+    def hostport(self) -> str:
+        return f"{self.host}:{self.port}"
+
+
+def parse_address(text: str, default_mode: str = "udpout", flag: str = "address") -> Address:
+    """``[udpin:|udpout:|udp:]HOST:PORT`` (also ``udpin://HOST:PORT``) -> :class:`Address`.
+
+    ``udp:`` is pymavlink's name for ``udpin``. Errors name ``flag`` (exit 2 material).
+    """
+    s = text.strip()
+    mode = default_mode
+    for prefix, m in (("udpin", "udpin"), ("udpout", "udpout"), ("udp", "udpin")):
+        for sep in ("://", ":"):
+            if s.startswith(prefix + sep):
+                mode, s = m, s[len(prefix) + len(sep):]
+                break
+        else:
+            continue
+        break
+    host, _, port_text = s.rpartition(":")
+    if not host or not port_text:
+        raise ConfigError(f"{flag} {text!r}: expected [udpin:|udpout:]HOST:PORT")
+    try:
+        port = int(port_text)
+    except ValueError:
+        raise ConfigError(f"{flag} {text!r}: port must be an integer") from None
+    lo = 0 if mode == "udpin" else 1
+    if not lo <= port <= 65535:
+        raise ConfigError(f"{flag} {text!r}: port must be in [{lo}, 65535]")
+    try:
+        socket.getaddrinfo(host, port, socket.AF_INET, socket.SOCK_DGRAM)
+    except (socket.gaierror, UnicodeError):
+        raise ConfigError(f"{flag} {text!r}: unknown host {host!r}") from None
+    return Address(mode, host, port)
+
+
+class HotLayout:
+    """Wire layout of one message type, from pymavlink's metadata: encode a flat tuple of
+    field values (pymavlink's ``ordered_fieldnames`` order, arrays flattened) into a
+    MAVLink 2 payload, and decode a payload into a :class:`HotMessage`."""
+
+    def __init__(self, cls: Any) -> None:
+        self.id = cls.id
+        self.name = cls.msgname
+        self.crc_extra = bytes([cls.crc_extra])
+        self.struct = cls.unpacker
+        self.size = cls.unpacker.size
+        self.spans: list[tuple[str, int, int]] = []
+        i = 0
+        for name, n in zip(cls.ordered_fieldnames, cls.array_lengths, strict=True):
+            self.spans.append((name, i, n))
+            i += max(n, 1)
+
+    def decode(self, payload: bytes) -> dict[str, Any]:
+        """Field values by name (arrays as tuples); a truncated MAVLink 2 payload is zero-padded."""
+        if len(payload) < self.size:
+            payload = payload + bytes(self.size - len(payload))
+        v = self.struct.unpack(payload)
+        return {name: v[i] if n == 0 else v[i:i + n] for name, i, n in self.spans}
+
+
+class HotMessage:
+    """A message decoded on the hot path: its fields as attributes, and the few methods of
+    a pymavlink message the handlers use."""
+
+    def __init__(self, layout: HotLayout, fields: dict[str, Any], src: int, comp: int, buf: bytes) -> None:
+        self.__dict__.update(fields)
+        self._type = layout.name
+        self._src = src
+        self._comp = comp
+        self._buf = buf
+
+    def get_type(self) -> str:
+        return self._type
+
+    def get_srcSystem(self) -> int:  # noqa: N802 - pymavlink's name
+        return self._src
+
+    def get_srcComponent(self) -> int:  # noqa: N802
+        return self._comp
+
+    def get_msgbuf(self) -> bytes:
+        return self._buf
+
+
+ODOMETRY = HotLayout(mavlink.MAVLink_odometry_message)
+HIL_ACTUATOR_CONTROLS = HotLayout(mavlink.MAVLink_hil_actuator_controls_message)
+SET_ACTUATOR_CONTROL_TARGET = HotLayout(mavlink.MAVLink_set_actuator_control_target_message)
+HOT = {lay.id: lay for lay in (ODOMETRY, HIL_ACTUATOR_CONTROLS, SET_ACTUATOR_CONTROL_TARGET)}
+
+
+def hot_frame(data: bytes) -> HotMessage | None:
+    """A datagram that is exactly one hot-path frame, unsigned or signed (the signature is
+    the caller's to verify), with a good CRC and a payload no longer than its message,
+    decoded; None for anything else (it then takes :func:`parse_datagram`)."""
+    if len(data) < 12 or data[0] != _MAGIC2:
+        return None
+    n = data[1]
+    flags = data[2]
+    if flags == 0:
+        size = 12 + n
+    elif flags == IFLAG_SIGNED:
+        size = 12 + n + SIGNATURE_BYTES
+    else:
+        return None
+    if len(data) != size:
+        return None
+    layout = HOT.get(data[7] | data[8] << 8 | data[9] << 16)
+    if layout is None or n > layout.size:
+        return None
+    if _crc16(data[1:10 + n] + layout.crc_extra, 0xFFFF) != data[10 + n] | data[11 + n] << 8:
+        return None
+    return HotMessage(layout, layout.decode(data[10:10 + n]), data[5], data[6], data)
+
+
+def parse_datagram(data: bytes, dec: Any, signing: Signing | None, rejected: Rejections,
+                   from_peer: bool = False) -> list[Any]:
+    """The frame stage of the receive path (:mod:`bridge.mavlink.receive`): the messages of one
+    datagram, each a whole MAVLink 2 frame with a known id, a good CRC, a payload no longer
+    than its message and, with ``signing``, a good signature newer than its stream's last.
+    The first bad frame ends the datagram and is counted once in ``rejected`` by its reason;
+    frames before it are kept. Never raises. ``dec`` is a pymavlink ``MAVLink`` without a
+    key (it decodes what passed; the hot messages are decoded by the hot codec)."""
+    n = len(data)
+    why = "truncated" if n == 0 else "oversized" if n > MAX_DATAGRAM else None
+    out: list[Any] = []
+    pos = 0
+    while why is None and pos < n:
+        magic = data[pos]
+        if magic != _MAGIC2:
+            why = "mavlink1" if magic == mavlink.PROTOCOL_MARKER_V1 else "no_frame"
+            break
+        if n - pos < 12:
+            why = "truncated"
+            break
+        plen, flags = data[pos + 1], data[pos + 2]
+        if flags & ~IFLAG_SIGNED:
+            why = "bad_flags"
+            break
+        end = pos + 12 + plen + (SIGNATURE_BYTES if flags else 0)
+        if end > n:
+            why = "truncated"
+            break
+        mid = data[pos + 7] | data[pos + 8] << 8 | data[pos + 9] << 16
+        cls = mavlink.mavlink_map.get(mid)
+        if cls is None:
+            why = "unknown_id"
+            break
+        crc_at = pos + 10 + plen
+        if _crc16(data[pos + 1:crc_at] + bytes((cls.crc_extra,)), 0xFFFF) != data[crc_at] | data[crc_at + 1] << 8:
+            why = "bad_crc"
+            break
+        if plen > cls.unpacker.size:
+            why = "oversized"
+            break
+        frame = data[pos:end]
+        if signing is not None:
+            why = signing.verify(frame, frame[5], frame[6])
+            if why:
+                break
+        layout = HOT.get(mid)
+        if layout is not None:
+            out.append(HotMessage(layout, layout.decode(frame[10:10 + plen]), frame[5], frame[6], frame))
+        else:
+            try:
+                out.append(dec.decode(bytearray(frame)))
+            except Exception:  # whatever pymavlink raises on a frame it cannot decode, it is refused
+                why = "malformed"
+                break
+        pos = end
+    if why is not None:
+        rejected.add(why, from_peer)
+    return out
+
+
+class Tlog:
+    """A telemetry log: records of an 8-byte big-endian timestamp (microseconds since the
+    Unix epoch) followed by one raw MAVLink frame, in both directions, as pymavlink's
+    ``mavlogdump.py`` reads them.
+
+    Records are buffered and written whole, many per ``os.write``: a process killed
+    with SIGKILL leaves the file readable up to its last flush. Call :meth:`flush`
+    from the housekeeping of a loop (it is cheap when there is nothing to write).
+    """
+
+    def __init__(self, path: str | Path, batch_bytes: int = 1 << 16) -> None:
+        self.path = Path(path)
+        self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND, 0o644)
+        self._buf: list[bytes] = []
+        self._size = 0
+        self._batch = batch_bytes
+        self.records = 0
+
+    def record(self, frame: bytes) -> None:
+        self._buf.append(_STAMP.pack(time.time_ns() // 1000))
+        self._buf.append(frame)
+        self._size += 8 + len(frame)
+        self.records += 1
+        if self._size >= self._batch:
+            self.flush()
+
+    def flush(self) -> None:
+        if self._buf and self._fd >= 0:
+            os.write(self._fd, b"".join(self._buf))
+            self._buf.clear()
+            self._size = 0
+
+    def close(self) -> None:
+        if self._fd >= 0:
+            self.flush()
+            os.close(self._fd)
+            self._fd = -1
+
+
+def _check_free(address: Address) -> None:
+    """Raise OSError if ``address`` is bound already (probed without ``SO_REUSEPORT``, which
+    a socket holding the port with it refuses too)."""
+    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        probe.bind((address.host, address.port))
+    finally:
+        probe.close()
+
+
+class Endpoint:
+    """One MAVLink 2 UDP link: its socket, its ``MAVLink`` codec, its counters.
+
+    ``peer`` is where :meth:`send` goes: fixed for ``udpout`` (which then hears nobody
+    else); for ``udpin`` the sender of the last valid frame (pymavlink's behaviour) while
+    ``follow`` is true, else whoever its owner sets (the vehicle: its configured controller,
+    once it has spoken). With ``signing`` every frame sent is signed and every frame
+    received must be. ``rejected`` counts what the receive path refused (shared by the
+    endpoints of one process); ``batch`` and ``limiter`` bound what one :meth:`poll` reads
+    and what sources other than the peer may send (:mod:`bridge.mavlink.receive`).
+
+    With ``priority`` (a ``udpin`` link whose owner sets its peer), :meth:`prioritise` gives
+    the peer's datagrams a socket of their own: a second socket bound to the same port
+    (``SO_REUSEPORT``) and connected to the peer, which the kernel hands every datagram of
+    that address to. :func:`wait` then sleeps on that socket only: a flood from anyone else
+    queues on the main socket, never wakes the owner, and is read (bounded, shed) whenever
+    it wakes for its own duties; when the main queue overflows, the kernel drops the
+    others' datagrams, never the peer's.
+    """
+
+    def __init__(self, address: Address, *, sysid: int, compid: int, tlog: Tlog | None = None,
+                 name: str = "link", rcvbuf: int = 1 << 20, signing: Signing | None = None,
+                 rejected: Rejections | None = None, batch: int = BATCH, limiter: RateLimiter | None = None,
+                 priority: bool = False) -> None:
+        self.address = address
+        self.name = name
+        self.tlog = tlog
+        self.signing = signing
+        self.rejected = rejected if rejected is not None else Rejections()
+        self.batch = batch
+        self.limiter = limiter or RateLimiter()
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
+            if address.mode == "udpin":
+                if priority:
+                    _check_free(address)  # SO_REUSEPORT must not let a second vehicle share the port
+                    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEPORT, 1)
+                sock.bind((address.host, address.port))
+                self.peer: tuple[str, int] | None = None
+                self.follow = True
+            else:
+                # bind on the interface that reaches the peer: loopback stays loopback
+                local = "127.0.0.1" if address.host.startswith("127.") or address.host == "localhost" else ""
+                sock.bind((local, 0))
+                self.peer = (socket.gethostbyname(address.host), address.port)
+                self.follow = False
+        except OSError as exc:
+            sock.close()
+            raise ConfigError(f"{name} {address}: cannot bind ({exc.strerror})") from None
+        sock.setblocking(False)
+        self.sock = sock
+        self.fileno = sock.fileno()
+        self.local = sock.getsockname()
+        # encodes (unsigned: self.signing signs) and decodes what the frame stage passed; no key of its own
+        self.mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
+        self.sent = 0
+        self.received = 0
+        self.send_errors = 0
+        self._priority = priority and address.mode == "udpin"
+        self._rcvbuf = rcvbuf
+        self.prio: socket.socket | None = None  # the peer's own socket (see the class docstring)
+        self.prio_peer: tuple[str, int] | None = None
+        self.backlog = False  # the last poll left datagrams on the main socket
+        self._turn = 0  # polls since the main socket was read (with a peer socket)
+
+    def prioritise(self, addr: tuple[str, int]) -> None:
+        """Give the datagrams of ``addr`` (the peer) their own socket, if this endpoint was made
+        with ``priority``; another address replaces the last one. Without it (an error, or no
+        ``SO_REUSEPORT``), everything keeps coming on the main socket."""
+        if not self._priority or addr == self.prio_peer or self.fileno < 0:
+            return
+        self._close_prio()
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, self._rcvbuf)
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEPORT, 1)
+            s.bind(self.local)
+            s.connect(addr)
+        except OSError:
+            s.close()
+            return
+        s.setblocking(False)
+        self.prio, self.prio_peer = s, addr
+
+    def _close_prio(self) -> None:
+        if self.prio is not None:
+            self.prio.close()
+            self.prio = self.prio_peer = None
+
+    @property
+    def wake_socket(self) -> socket.socket:
+        """The socket :func:`wait` sleeps on: the peer's own one when there is one."""
+        return self.prio if self.prio is not None else self.sock
+
+    @property
+    def bad(self) -> int:
+        """Datagrams and messages refused so far (all reasons)."""
+        return self.rejected.total
+
+    # -- sending ------------------------------------------------------------------------
+    def send(self, msg: Any, to: tuple[str, int] | None = None) -> bool:
+        """Encode ``msg`` (a pymavlink message) and send it to ``to`` or the peer.
+
+        Returns False when there is nowhere to send yet or the send failed (UDP: a lost
+        datagram, counted in ``send_errors``; nothing is raised).
+        """
+        mav = self.mav
+        buf = msg.pack(mav)
+        mav.seq = (mav.seq + 1) & 0xFF
+        if self.signing is not None:
+            buf = self.signing.resign(buf)
+        return self.send_frame(buf, to)
+
+    def send_hot(self, layout: HotLayout, values: tuple[Any, ...], to: tuple[str, int] | None = None) -> bool:
+        """Encode a hot-path message from its flat field values (see :class:`HotLayout`) and
+        send it: the same bytes pymavlink would make, without a message object."""
+        return self.send_frame(self.encode_hot(layout, values), to)
+
+    def encode_hot(self, layout: HotLayout, values: tuple[Any, ...]) -> bytes:
+        """The frame of a hot-path message (next sequence number; signed with a key)."""
+        mav = self.mav
+        signing = self.signing
+        payload = layout.struct.pack(*values).rstrip(b"\0") or b"\0"  # MAVLink 2 drops trailing zeros
+        head = _HEADER2.pack(_MAGIC2, len(payload), 0 if signing is None else IFLAG_SIGNED, 0, mav.seq,
+                             mav.srcSystem, mav.srcComponent, layout.id & 0xFFFF, layout.id >> 16)
+        body = head + payload
+        buf = body + struct.pack("<H", _crc16(body[1:] + layout.crc_extra, 0xFFFF))
+        if signing is not None:
+            buf = signing.sign(buf)
+        mav.seq = (mav.seq + 1) & 0xFF
+        return buf
+
+    def send_frame(self, buf: bytes, to: tuple[str, int] | None = None) -> bool:
+        """Send one already-encoded frame; recorded in the tlog when it has somewhere to go."""
+        dest = to or self.peer
+        if dest is None:
+            return False
+        if self.tlog is not None:
+            self.tlog.record(buf)
+        try:
+            self.sock.sendto(buf, dest)
+        except OSError:  # e.g. ECONNREFUSED from an earlier ICMP, ENOBUFS
+            self.send_errors += 1
+            return False
+        self.sent += 1
+        return True
+
+    # -- receiving ----------------------------------------------------------------------
+    def poll(self, until: float | None = None) -> list[tuple[Any, tuple[str, int]]]:
+        """The valid messages among the next :attr:`batch` datagrams waiting (the peer's own
+        socket first, if any: see :meth:`prioritise`), with their senders; never blocks,
+        never raises (the receive path of :mod:`bridge.mavlink.receive`: read, shed, frame; what it
+        refuses is counted in :attr:`rejected`). With ``until`` (``time.monotonic``), it also
+        stops reading the main socket once that time has come (looked at every 8 datagrams),
+        so that a backlog never delays its caller's next duty past it; :attr:`backlog` then
+        says that datagrams may be left."""
+        out: list[tuple[Any, tuple[str, int]]] = []
+        if self.prio is not None:
+            self._read(self.prio, out, None, True)
+            self._turn = (self._turn + 1) & 3
+            if out or (self._turn and not self.backlog):
+                # the peer's first; the others' socket at a later poll (at one in four when it
+                # was empty: a caller spinning for its peer's answer pays one system call, not two)
+                self.backlog = self.backlog or bool(out)
+                return out
+        self.backlog = self._read(self.sock, out, until, False)
+        return out
+
+    def _read(self, sock: socket.socket, out: list[tuple[Any, tuple[str, int]]], until: float | None,
+              own: bool) -> bool:
+        """Read at most :attr:`batch` datagrams of ``sock`` into ``out`` (``own``: the peer's
+        socket); True when it stopped with datagrams possibly left."""
+        signing = self.signing
+        rejected = self.rejected
+        sending = self.address.mode == "udpout"
+        for i in range(self.batch):
+            if until is not None and i & 7 == 7 and time.monotonic() >= until:
+                return True
+            try:
+                data, addr = sock.recvfrom(_MAX_DATAGRAM)
+            except (BlockingIOError, InterruptedError):
+                return False
+            except OSError:  # ICMP port unreachable reported on a later recv
+                continue
+            from_peer = own or addr == self.peer
+            if not from_peer:
+                if sending:  # a sending link hears its peer only
+                    rejected.add("sender")
+                    continue
+                if not self.limiter.allow(addr, time.monotonic()):
+                    rejected.add("rate_limited")
+                    continue
+            hot = hot_frame(data)
+            if hot is not None and (signing is None or signing.verify(data, data[5], data[6]) is None):
+                msgs: list[Any] = [hot]
+            else:  # everything else, and a hot frame whose signature failed (to name the reason)
+                msgs = parse_datagram(data, self.mav, signing, rejected, from_peer)
+                if not msgs:
+                    continue
+            self.received += len(msgs)
+            if self.tlog is not None:
+                for m in msgs:
+                    self.tlog.record(m.get_msgbuf())
+            out.extend((m, addr) for m in msgs)
+            if self.follow:
+                self.peer = addr
+        return True
+
+    def close(self) -> None:
+        if self.fileno >= 0:
+            self._close_prio()
+            self.sock.close()
+            self.fileno = -1
+
+
+def wait(endpoints: Sequence[Endpoint], deadline: float, spin: Endpoint | None = None,
+         spin_s: float = 0.0) -> list[tuple[Endpoint, Any, tuple[str, int]]]:
+    """Messages from any endpoint, waiting at most until ``deadline`` (``time.monotonic``).
+
+    With ``spin``, that endpoint is polled without sleeping for up to ``spin_s`` first:
+    on loopback the answer to a message often arrives within that, and a sleeping
+    process pays a scheduler wake-up (tens of microseconds) to receive it.
+    """
+    mono = time.monotonic
+    if spin is not None and spin_s > 0.0:
+        end = min(mono() + spin_s, deadline)
+        while True:
+            got = spin.poll()
+            if got:
+                return [(spin, m, a) for m, a in got]
+            if mono() >= end:
+                break
+            # let any other runnable task on this core go first: on a busy machine the peer
+            # we are waiting for may be that task; on an idle one this returns at once
+            os.sched_yield()
+    while True:
+        out = [(ep, m, a) for ep in endpoints for m, a in ep.poll(deadline)]
+        if out:
+            return out
+        left = deadline - mono()
+        if left <= 0.0:
+            return out
+        if any(ep.backlog for ep in endpoints):
+            continue  # more waiting on a main socket: read on (each poll stops at the deadline)
+        try:  # an endpoint with a peer socket sleeps on it only (Endpoint.prioritise)
+            select.select([ep.wake_socket for ep in endpoints], [], [], left)
+        except InterruptedError:
+            pass

@@ -1,0 +1,7 @@
+"""One process each, speaking MAVLink 2 over UDP: the vehicle, the offboard controller, the relay.
+
+- :mod:`bridge.nodes.vehicle`   the simulated vehicle (``bsst vehicle``)
+- :mod:`bridge.nodes.offboard`  the offboard controller (``bsst controller``)
+- :mod:`bridge.nodes.relay`     the link model on the wall clock (``bsst relay``)
+- :mod:`bridge.nodes.process`   status lines, stop signals, parent death
+"""

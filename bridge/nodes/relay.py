@@ -1,0 +1,281 @@
+"""A real-time UDP relay that applies the link model on the wall clock (``bsst relay``).
+
+In:  UDP datagrams, whatever they hold: from the client on the listen port, from the target on the
+     back socket; the ``[link]`` settings (delays ms, loss %, ``rate_bps`` bytes/s, blackouts s)
+Out: the same datagrams, unchanged, forwarded when the link model (on the wall clock, s) says they
+     are due; :meth:`Relay.summary` (``relay.json``): per direction the model's statistics and
+     ``measured_ms``, the delay really added (ms), plus counts and CPU time (s, us per packet)
+
+Topology (docs/design.md, "Link model")::
+
+    controller ──► LISTEN (front socket) ══ up ══► back socket ──► TARGET (the vehicle)
+    controller ◄── front socket ◄══ down ══ back socket ◄── vehicle
+
+Datagrams that arrive on the listen port travel ``up`` (``listen_direction="down"`` swaps
+the names) and leave from the back socket to the target; whatever the target sends back
+to the back socket travels the other way, to the last address the front heard from. Each
+direction has its own :class:`bridge.core.link.LinkImpairment`, driven with the seconds since
+the relay started (so blackouts are in relay time; with ``mission_clock`` they are in the
+flight's time instead: t = 0 is put at the first actuator target that arrives on the
+listen side, less the down link's configured delay, i.e. when the vehicle sent the state
+that target answers, as ``bsst sitl --realtime`` counts mission time). Datagrams pass unchanged; the relay
+stamps each one on arrival — with the kernel's receive time stamp (``SO_TIMESTAMPNS``) on
+Linux, so that the relay's own wake-up latency counts — and measures, when it hands it to
+the kernel to forward it, the delay it really added (scheduled delay + the relay's own
+latency), next to the model's statistics.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import resource
+import select
+import socket
+import struct
+import sys
+import threading
+import time
+from array import array
+from collections.abc import Callable
+from typing import Any
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from bridge.core.link import LinkImpairment, LinkSettings
+from bridge.mavlink.endpoint import parse_address as endpoint_address
+
+Address = tuple[str, int]
+MAX_DATAGRAM = 65_535
+_SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)  # Linux: kernel receive time, CLOCK_REALTIME
+_TIMESPEC = struct.Struct("qq")
+_ANC_SIZE = socket.CMSG_SPACE(_TIMESPEC.size)
+# actuator targets (docs/design.md, "The MAVLink contract"): the first one up marks the flight's time 0
+_TARGET_IDS = frozenset((mavlink.MAVLINK_MSG_ID_HIL_ACTUATOR_CONTROLS,
+                         mavlink.MAVLINK_MSG_ID_SET_ACTUATOR_CONTROL_TARGET))
+
+
+def parse_address(text: str, flag: str, bind: bool = False) -> Address:
+    """``HOST:PORT`` -> (host, port) with :func:`bridge.mavlink.endpoint.parse_address`'s checks (a
+    known host, a port in range: 0, any free one, only to ``bind``); ValueError naming ``flag``."""
+    mode = "udpin" if bind else "udpout"
+    try:
+        a = endpoint_address(text, mode, flag)
+    except ValueError as exc:  # ConfigError
+        raise ValueError(str(exc)) from None
+    if a.mode != mode:
+        raise ValueError(f"{flag} {text!r}: the relay {'binds' if bind else 'sends to'} it ({mode}), not {a.mode}")
+    return a.host, a.port
+
+
+class Relay:
+    """Forward UDP both ways between a client and ``target``, through the link model.
+
+    Bind happens in the constructor (``address`` tells the port when 0 was asked for);
+    :meth:`serve` runs until :meth:`stop` (from any thread or a signal handler) or
+    ``duration_s``; :meth:`start` runs it in a daemon thread.
+    """
+
+    def __init__(self, listen: Address, target: Address, link: LinkSettings | None = None, *,
+                 listen_direction: str = "up", clock: Callable[[], float] = time.perf_counter,
+                 mission_clock: bool = False) -> None:
+        link = link or LinkSettings()
+        self.mission_clock = mission_clock
+        self.origin_s: float | None = None  # relay time (s) of the flight's time 0 (mission_clock)
+        up, down = link.make()
+        self.front_link, self.back_link = (up, down) if listen_direction == "up" else (down, up)
+        self.links = {"up": up, "down": down}
+        if mission_clock:  # no blackout before the flight's time 0 is known
+            for lk in self.links.values():
+                lk.shift_blackouts(math.inf)
+        self.target = target
+        self.clock = clock
+        self.front = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.back = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            self.front.bind(listen)
+            self.back.bind((listen[0], 0))
+        except OSError:
+            self.close()
+            raise
+        self.kernel_stamps = sys.platform.startswith("linux")
+        for s in (self.front, self.back):
+            s.setblocking(False)
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+            if self.kernel_stamps:
+                try:
+                    s.setsockopt(socket.SOL_SOCKET, _SO_TIMESTAMPNS, 1)
+                except OSError:
+                    self.kernel_stamps = False
+        self.client: Address | None = None
+        self.added = {"up": array("d"), "down": array("d")}  # s, measured arrival -> forward
+        self.dropped_no_client = 0
+        self.send_errors = 0
+        self._wake_r, self._wake_w = os.pipe()
+        os.set_blocking(self._wake_w, False)
+        self._stopping = False
+        self.t0 = clock()
+        self.cpu_user_s = 0.0  # CPU time of the serving process while serving (all its threads)
+        self.cpu_sys_s = 0.0
+        self.forwarded = 0
+        self._thread: threading.Thread | None = None
+
+    @property
+    def address(self) -> Address:
+        """Where the client should send (the bound listen address)."""
+        return self.front.getsockname()
+
+    @property
+    def back_address(self) -> Address:
+        """The address the target sees the relay's datagrams come from."""
+        return self.back.getsockname()
+
+    def stop(self) -> None:
+        """Ask :meth:`serve` to return (safe from signal handlers and other threads)."""
+        self._stopping = True
+        try:
+            os.write(self._wake_w, b"x")
+        except OSError:
+            pass
+
+    def start(self) -> threading.Thread:
+        """Serve in a daemon thread; :meth:`stop` then ``join`` it."""
+        self._thread = threading.Thread(target=self.serve, name="bsst-relay", daemon=True)
+        self._thread.start()
+        return self._thread
+
+    def _receive(self, sock: socket.socket, link: LinkImpairment, from_front: bool) -> None:
+        clock = self.clock
+        t0 = self.t0
+        stamps = self.kernel_stamps
+        while True:
+            try:
+                if stamps:
+                    data, anc, _, addr = sock.recvmsg(MAX_DATAGRAM, _ANC_SIZE)
+                else:
+                    data, addr = sock.recvfrom(MAX_DATAGRAM)
+                    anc = ()
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError:  # e.g. ICMP port unreachable reported on the next recv
+                continue
+            now = clock()
+            for level, kind, raw in anc:  # the kernel's arrival stamp: count our wake-up latency too
+                if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS and len(raw) >= 16:
+                    sec, nsec = _TIMESPEC.unpack_from(raw)
+                    lag = (time.time_ns() - sec * 1_000_000_000 - nsec) * 1e-9
+                    if 0.0 < lag < 1.0:
+                        now -= lag
+            if from_front:
+                self.client = addr
+                if self.mission_clock and self.origin_s is None and _is_target(data):
+                    self._set_origin(now - t0)
+            link.send(now - t0, len(data), (data, now))
+
+    def _set_origin(self, t: float) -> None:
+        """The first actuator target arrived at relay time t (s): the flight's time 0 is when
+        the state it answers left the vehicle, t less the down link's configured delay."""
+        self.origin_s = t - self.links["down"].cfg.delay_ms / 1000.0
+        for link in self.links.values():
+            link.shift_blackouts(self.origin_s)
+
+    def _forward(self, now: float) -> None:
+        t = now - self.t0
+        for link, sock, to_front in ((self.front_link, self.back, False), (self.back_link, self.front, True)):
+            due = link.deliver(t)
+            if not due:
+                continue
+            added = self.added[link.direction]
+            for d in due:
+                data, arrived = d.payload
+                dest = self.client if to_front else self.target
+                if dest is None:
+                    self.dropped_no_client += 1
+                    continue
+                added.append(self.clock() - arrived)  # handed to the kernel now
+                try:
+                    sock.sendto(data, dest)
+                except OSError:
+                    self.send_errors += 1
+                    added.pop()
+                    continue
+                self.forwarded += 1
+
+    def serve(self, duration_s: float | None = None) -> None:
+        """Relay until :meth:`stop` or for ``duration_s`` seconds."""
+        cpu0 = resource.getrusage(resource.RUSAGE_SELF)
+        clock = self.clock
+        end = None if duration_s is None else clock() + duration_s
+        rlist = [self.front, self.back, self._wake_r]
+        front, back = self.front, self.back
+        try:
+            while not self._stopping:
+                now = clock()
+                if end is not None and now >= end:
+                    break
+                nxt = [x for x in (self.front_link.next_due(), self.back_link.next_due()) if x is not None]
+                timeout = 1.0
+                if nxt:
+                    timeout = max(0.0, min(nxt) + self.t0 - now)
+                if end is not None:
+                    timeout = min(timeout, max(0.0, end - now))
+                ready, _, _ = select.select(rlist, [], [], timeout)
+                if ready:
+                    if front in ready:
+                        self._receive(front, self.front_link, True)
+                    if back in ready:
+                        self._receive(back, self.back_link, False)
+                    if self._wake_r in ready:
+                        os.read(self._wake_r, 64)
+                self._forward(clock())
+        finally:
+            cpu1 = resource.getrusage(resource.RUSAGE_SELF)
+            self.cpu_user_s += cpu1.ru_utime - cpu0.ru_utime
+            self.cpu_sys_s += cpu1.ru_stime - cpu0.ru_stime
+
+    def summary(self) -> dict[str, Any]:
+        """Per direction: the model's statistics (``delay_ms`` = scheduled one-way delay) and
+        ``measured_ms``, the delay the relay really added, arrival to forward; plus CPU time
+        (user and system, s; meaningful per packet when the relay has its own process)."""
+        from bridge.record.metrics import percentiles  # loads numpy: not needed while relaying
+
+        out: dict[str, Any] = {}
+        for d, link in self.links.items():
+            s = link.stats.summary()
+            s["measured_ms"] = percentiles(self.added[d], 1000.0, empty=None)
+            out[d] = s
+        out["origin_s"] = self.origin_s
+        out["forwarded"] = self.forwarded
+        out["dropped_no_client"] = self.dropped_no_client
+        out["send_errors"] = self.send_errors
+        cpu = self.cpu_user_s + self.cpu_sys_s
+        out["cpu_s"] = cpu
+        out["cpu_user_s"] = self.cpu_user_s
+        out["cpu_sys_s"] = self.cpu_sys_s
+        out["cpu_us_per_packet"] = 1e6 * cpu / self.forwarded if self.forwarded else None
+        return out
+
+    def close(self) -> None:
+        for s in (self.front, self.back):
+            s.close()
+        for fd in (getattr(self, "_wake_r", -1), getattr(self, "_wake_w", -1)):
+            if fd >= 0:
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+        self._wake_r = self._wake_w = -1
+
+    def __enter__(self) -> Relay:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+        self.close()
+
+
+def _is_target(data: bytes) -> bool:
+    """Whether a datagram is (starts with) a MAVLink 2 actuator target frame."""
+    return len(data) >= 10 and data[0] == 0xFD and (data[7] | data[8] << 8 | data[9] << 16) in _TARGET_IDS

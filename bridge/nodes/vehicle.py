@@ -1,0 +1,686 @@
+"""The simulated vehicle as a MAVLink 2 endpoint: ``bsst vehicle`` (docs/design.md, "The MAVLink contract").
+
+In:  actuator targets on the controller link, stamped with the ``time_usec`` of the state they answer:
+     HIL_ACTUATOR_CONTROLS (``motors``: c1..c4 = omega / omega_max, each in [0, 1]) or
+     SET_ACTUATOR_CONTROL_TARGET group 0 (``wrench``: roll, pitch, yaw in [-1, 1], thrust in [0, 1]),
+     or the no-target acknowledgement; COMMAND_LONG / COMMAND_INT, TIMESYNC, HEARTBEAT on either link
+Out: ODOMETRY (NED position m, FRD body velocity m/s, quaternion FRD to NED, FRD rates rad/s;
+     ``time_usec`` = simulation time, us), once per control step; HEARTBEAT at 1 Hz, STATUSTEXT on
+     each event, the GCS streams (25 Hz / 10 Hz, ``time_boot_ms`` = simulation time); ``vehicle.tlog``,
+     ``vehicle.csv`` rows; status lines on stdout
+
+Its clocks and its end of the link model: docs/design.md, "Clocks" and "Link model".
+
+It wraps :class:`bridge.core.simvehicle.SimVehicle` (plant, arming, command timeout, failsafe:
+the same object the offline loop flies) with two UDP links:
+
+- the **controller link** (``--listen``, default ``udpin:127.0.0.1:14560``): ODOMETRY out
+  at every control step, actuator targets in (HIL_ACTUATOR_CONTROLS for a ``motors``
+  profile, SET_ACTUATOR_CONTROL_TARGET group 0 for a ``wrench`` profile), accepted only
+  from the configured controller (sysid/compid) and only while armed in offboard control
+  (in a lockstep flight the up-link model delivers them, and refuses them then);
+- the **GCS link** (``--gcs``, default ``udpout:127.0.0.1:14550``): HEARTBEAT, ATTITUDE,
+  LOCAL_POSITION_NED, GLOBAL_POSITION_INT, SYS_STATUS, ACTUATOR_OUTPUT_STATUS, ... on the
+  wall clock, and STATUSTEXT on events; commands are answered on the socket they came in on.
+
+Clocks:
+
+- **lockstep** (default): the state of step k (time_usec = round(k / rate_hz * 1e6)) is sent
+  and the vehicle advances one control period only when it holds the controller's answer
+  stamped with that time_usec: an actuator target, or the **no-target acknowledgement**
+  (HIL_ACTUATOR_CONTROLS with SAFETY_ARMED clear in ``mode``, for either actuation: the
+  controller has no valid target this step, the step clock ticks on and the vehicle's
+  timeout runs). The mission's ``[link]`` model acts here, in simulation time, on what
+  crossed the socket (:class:`bridge.core.linkends.VehicleEnd`, the offline loop's end): the
+  target of step k enters the ``up`` model at t_k and acts at the physics step it is
+  delivered in; so does an ARM_DISARM(arm) from the controller while its flight is on
+  (a re-arm after a failsafe). The step clock keeps ticking while the vehicle, landed by
+  its failsafe, is disarmed, for as long as the controller answers. ``speed`` caps the pace
+  at that many times real time. Heartbeats and telemetry keep flowing on the wall clock
+  meanwhile. A controller silent for ``lost_after_s`` of wall time is lost: the vehicle
+  leaves lockstep, runs on at real-time pace (``speed`` if given) and its timeout and
+  failsafe take over; it returns to lockstep when armed again.
+- **realtime**: physics steps against the wall clock at the physics rate; a target is
+  applied at the physics step it arrives in and held; ODOMETRY goes out at the control rate.
+
+With ``out``, it writes ``vehicle.tlog`` (both directions) and ``vehicle.csv`` (its half of
+the trace: one row per control step flown, columns :data:`VEHICLE_COLUMNS`).
+Status lines (``ready ...``, ``event t=... kind: text``) go to ``status``; the session
+launcher reads them.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from bridge.core.clock import Pace
+from bridge.core.flight import Flight
+from bridge.core.linkends import VehicleEnd
+from bridge.core.simvehicle import FAILSAFE, LANDED, OFFBOARD
+from bridge.core.wire import command_from_wire, command_to_wire, state_to_odometry, step_of_usec, step_usec
+from bridge.mavlink import telemetry as tm
+from bridge.mavlink.endpoint import (
+    CONTROLLER_COMPID,
+    CONTROLLER_SYSID,
+    FORCE_DISARM,
+    ODOMETRY,
+    VEHICLE_COMPID,
+    Address,
+    Endpoint,
+    Tlog,
+    wait,
+)
+from bridge.mavlink.receive import Rejections, addressed_elsewhere, wire_problem
+from bridge.mavlink.signing import Signing
+from bridge.nodes.process import on_stop_signals, status_printer
+from bridge.record.columns import VEHICLE_COLUMNS, state_columns
+from bridge.record.runlog import LineWriter, side_dir
+
+CLOCKS = ("lockstep", "realtime")
+MODE_CODES = {OFFBOARD: 0, FAILSAFE: 1, LANDED: 2}
+NAN4 = (math.nan,) * 4
+# ODOMETRY after the body rates: covariances unknown (NaN first, MAVLink's convention),
+# frame LOCAL_NED, child BODY_FRD, reset counter, estimator type, quality (100: exact)
+_COV_UNKNOWN = (math.nan,) + (0.0,) * 20
+ODOMETRY_TAIL = (*_COV_UNKNOWN, *_COV_UNKNOWN, mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_BODY_FRD, 0,
+                 mavlink.MAV_ESTIMATOR_TYPE_NAIVE, 100)
+# default GCS streams (message id -> interval s): docs/design.md, "The MAVLink contract" gives 25 Hz and 10 Hz
+DEFAULT_STREAMS = {
+    mavlink.MAVLINK_MSG_ID_ATTITUDE: 0.04,
+    mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: 0.04,
+    mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 0.04,
+    mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 0.1,
+    mavlink.MAVLINK_MSG_ID_SYS_STATUS: 0.1,
+    mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 0.1,
+    mavlink.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS: 0.1,
+    mavlink.MAVLINK_MSG_ID_HOME_POSITION: 0.0,  # 0: only on request
+}
+HEARTBEAT_S = 1.0
+HOUSEKEEPING_S = 0.02  # s of wall time between looks at the GCS socket, streams, file flushes
+RESEND_S = 0.05  # lockstep: resend the state nobody answered (a datagram can be dropped)
+IDLE_ODOMETRY_S = 0.1  # lockstep, disarmed: time stands still; the state is still shown
+
+
+@dataclass(frozen=True)
+class VehicleConfig:
+    """How the vehicle is reached and clocked (see the module docstring)."""
+
+    listen: Address
+    gcs: Address | None
+    sysid: int = 1
+    compid: int = VEHICLE_COMPID
+    controller_sysid: int = CONTROLLER_SYSID
+    controller_compid: int = CONTROLLER_COMPID
+    clock: str = "lockstep"
+    speed: float | None = None  # x real time: lockstep cap, and pace after losing the controller
+    lost_after_s: float = 0.5  # s of wall time
+    spin_s: float = 0.0002  # s polled (yielding) before sleeping while a lockstep answer is due: ~4x the
+    # peer's median work; longer only burns a core that a busy machine needs for that peer
+    home: tm.Home = field(default_factory=tm.Home)
+    key: bytes | None = field(default=None, repr=False)  # MAVLink 2 signing key (never shown)
+
+
+class Vehicle:
+    """One simulated vehicle and its MAVLink links. :meth:`run` until :meth:`stop`."""
+
+    def __init__(self, flight: Flight, cfg: VehicleConfig, out: Path | None = None,
+                 status: Callable[[str], None] | None = None) -> None:
+        if cfg.clock not in CLOCKS:
+            raise ValueError(f"clock must be one of {', '.join(CLOCKS)}")
+        self.flight = flight
+        self.cfg = cfg
+        m = flight.mission
+        self.rate = m.rate_hz
+        self.physics_hz = m.physics_hz
+        self.substeps = flight.substeps
+        self.actuation = flight.profile.actuation
+        self.omega_max = flight.profile.omega_max
+        self.sim = flight.make_vehicle(armed=False)
+        self.plant = self.sim.plant
+        self._status = status or (lambda line: None)
+        self.tlog = Tlog(out / "vehicle.tlog") if out is not None else None
+        # refusals of the receive path (bridge.mavlink.receive), both links, and of the up-link model's end
+        self.rejected = Rejections()
+        self._from_peer = False  # the message being handled came from the controller's address
+        sign = (lambda link_id: Signing(cfg.key, link_id)) if cfg.key is not None else (lambda link_id: None)
+        self.link = Endpoint(cfg.listen, sysid=cfg.sysid, compid=cfg.compid, tlog=self.tlog, name="--listen",
+                             signing=sign(0), rejected=self.rejected, priority=True)
+        self.link.follow = False  # ODOMETRY goes to the configured controller only (see _handle)
+        self.gcs = (Endpoint(cfg.gcs, sysid=cfg.sysid, compid=cfg.compid, tlog=self.tlog, name="--gcs",
+                             signing=sign(1), rejected=self.rejected)
+                    if cfg.gcs is not None else None)
+        self.endpoints = [self.link] + ([self.gcs] if self.gcs is not None else [])
+        self.rows = LineWriter(out / "vehicle.csv", ",".join(VEHICLE_COLUMNS), batch=100) if out is not None else None
+        self.k = 0  # control step of the plant's state: t_k = k / rate_hz
+        self.freerun = cfg.clock == "realtime"  # stepping on the wall clock (realtime, or lockstep lost)
+        self.halted = False  # diverged: the plant is not stepped any more
+        self.stopping = False
+        # lockstep: (wire, recv wall) answering step k; wire None: the no-target acknowledgement
+        self.pending: tuple[tuple[float, ...] | None, float] | None = None
+        self.applied: tuple[int, tuple[float, ...], float] | None = None  # (key, wire, recv wall) in force
+        self._odo_sent: dict[int, float] = {}  # step -> wall time its state was sent
+        self.odometry_sent = 0
+        self.streams = dict(DEFAULT_STREAMS)
+        now = time.monotonic()
+        self._due = {mid: now for mid, iv in self.streams.items() if iv > 0}
+        self._next_heartbeat = now
+        self._next_house = now
+        self._resend_at = self._lost_at = self._idle_odo_at = now
+        self.pace = Pace(self.physics_hz, cfg.speed or 1.0, now)  # the wall clock of physics steps
+        self._n = 0  # physics steps taken (realtime: for the wall-clock schedule)
+        self._events_sent = 0
+        self._cpu0 = time.process_time()
+        self._load_at = (now, self._cpu0)
+        self.load = 0
+        self.accepted = 0
+        # lockstep: the controller's targets and re-arms cross the mission's up-link model here
+        self.vend = VehicleEnd(self.sim, flight.link.make()[0], self.actuation, rejected=self.rejected)
+        self.engaged = False  # lockstep: a flight is on, the step clock runs on the controller's answers
+
+    # -- public --------------------------------------------------------------------------
+    def stop(self) -> None:
+        """Ask :meth:`run` to return (safe from a signal handler)."""
+        self.stopping = True
+
+    def run(self) -> None:
+        """Serve until :meth:`stop`: step the clock, answer the links, stream telemetry."""
+        gcs = f" gcs={self.gcs.address.hostport}" if self.gcs is not None else ""
+        self._status(f"ready listen={self.link.local[0]}:{self.link.local[1]}{gcs} sysid={self.cfg.sysid} "
+                     f"clock={self.cfg.clock} profile={self.flight.profile.name}")
+        try:
+            while not self.stopping:
+                if self.halted:
+                    self._idle()
+                elif self.freerun:
+                    self._freerun_period()
+                elif self.sim.armed or self.engaged:
+                    self._lockstep_wait()
+                else:
+                    self._idle()
+                if time.monotonic() >= self._next_house:
+                    self._housekeeping()
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        """Flush and close every file and socket (idempotent)."""
+        self._drain_sockets()
+        self._drain_events()
+        if self.rows is not None:
+            self.rows.close()
+        if self.tlog is not None:
+            self.tlog.close()
+        for ep in self.endpoints:
+            ep.close()
+
+    def _drain_sockets(self, batches: int = 64) -> None:
+        """Take in what is already queued on every socket before closing, so that the final
+        counts include every datagram that arrived before the stop (the others' socket is read
+        lazily while the controller's is busy: see Endpoint.poll); bounded, never blocks."""
+        for ep in self.endpoints:
+            if ep.fileno < 0:
+                continue
+            for _ in range(batches):
+                got = ep.poll()
+                for m, addr in got:
+                    self._handle(ep, m, addr)
+                if not got and not ep.backlog:
+                    break
+
+    @property
+    def t(self) -> float:
+        """Simulation time of the current step (s)."""
+        return self.k / self.rate
+
+    # -- lockstep --------------------------------------------------------------------------
+    def _lockstep_wait(self) -> None:
+        """Wait for the target of step k; step when it is here, or give the controller up."""
+        deadline = min(self._next_house, self._resend_at, self._lost_at)
+        for ep, m, addr in wait(self.endpoints, deadline, self.link, self.cfg.spin_s):
+            self._handle(ep, m, addr)
+        if self.pending is not None:
+            self._step_lockstep()
+            return
+        now = time.monotonic()
+        if self.freerun or not (self.sim.armed or self.engaged):
+            return
+        if now >= self._lost_at:
+            self.sim.event("lockstep", f"controller silent for {self.cfg.lost_after_s:g} s of wall time: "
+                                       "leaving lockstep, running on the wall clock")
+            self._start_freerun(now)
+        elif now >= self._resend_at:
+            self._send_odometry(now, fresh=False)
+
+    def _step_lockstep(self) -> None:
+        """Step k is answered: its target (if any) enters the up-link model at t_k, what the
+        model delivers by t_k acts, then one control period with mid-period deliveries."""
+        wire, recv = self.pending  # type: ignore[misc]
+        self.pending = None
+        k = self.k
+        t = k / self.rate
+        sent = self._odo_sent.get(k, recv)
+        vend = self.vend
+        if wire is not None:
+            vend.receive_command(t, command_from_wire(self.actuation, wire), t)
+            self.applied = (k, wire, recv)
+        vend.deliver(t)
+        X = self.plant.state
+        real = self.plant.realised
+        vend.advance()
+        self.k = k + 1
+        if self.cfg.speed is not None:
+            self._wait_until(self.pace.due(self.k * self.substeps))
+        if self._after_step():
+            self._send_odometry(time.monotonic())
+        # off the critical path: the controller is computing step k+1 meanwhile
+        self._row(k, X, k, NAN4 if wire is None else wire, NAN4, real, t - vend.applied_state_t, recv - sent,
+                  sent, recv)
+
+    def _start_freerun(self, now: float) -> None:
+        self.freerun = True
+        self.engaged = False
+        self.pace.restart(now, self.k * self.substeps)
+
+    # -- free run: realtime clock, or lockstep lost --------------------------------------------
+    def _freerun_period(self) -> None:
+        """One control period on the wall clock: state out, row, physics steps on schedule."""
+        k = self.k
+        n0 = k * self.substeps
+        if not self._wait_until(self.pace.due(n0)):
+            return
+        now = time.monotonic()
+        if self.sim.armed or self.cfg.clock == "realtime":
+            self._send_odometry(now)
+        X = self.plant.state
+        if self.sim.armed:
+            self._row_freerun(k, X, now)
+        self._n = n0
+
+        def deliver(_t: float) -> None:
+            # called before each physics step: wait for its wall time, taking targets meanwhile
+            if self._n > n0:
+                self._wait_until(self.pace.due(self._n))
+            self._n += 1
+
+        self.sim.advance(deliver)
+        self.k = k + 1
+        self._after_step()
+
+    def _wait_until(self, due: float) -> bool:
+        """Serve the links until wall time ``due`` of the pace; False if stopping. A pace
+        stalled far behind is re-based (:meth:`Pace.rebase_if_stalled`), not caught up."""
+        now = time.monotonic()
+        if self.pace.rebase_if_stalled(now, due):
+            return not self.stopping
+        while not self.stopping:
+            if now >= due:
+                return True
+            for ep, m, addr in wait(self.endpoints, min(due, self._next_house)):
+                self._handle(ep, m, addr)
+            now = time.monotonic()
+            if now >= self._next_house:
+                self._housekeeping()
+        return False
+
+    def _row_freerun(self, k: int, X: tuple[float, ...], now: float) -> None:
+        sim = self.sim
+        if sim.mode == OFFBOARD and self.applied is not None:
+            key, wire, recv = self.applied
+            sent = self._odo_sent.get(key, math.nan)
+            self._row(k, X, key, wire, NAN4, self.plant.realised, self.t - key / self.rate, recv - sent, now, recv)
+        elif sim.mode == OFFBOARD:  # armed, no target yet
+            self._row(k, X, -1, NAN4, NAN4, self.plant.realised, math.nan, math.nan, now, math.nan)
+        else:  # failsafe: the vehicle's own landing loop is in command
+            dem = sim.landing.demand(X)
+            wire = command_to_wire(self.actuation, sim.landing.command(X))
+            self._row(k, X, -1, wire, dem, self.plant.realised, self.plant.t - sim.last_command_t,
+                      math.nan, now, math.nan)
+
+    # -- idle -----------------------------------------------------------------------------------
+    def _idle(self) -> None:
+        """Lockstep and disarmed (or halted): time stands still; serve the links."""
+        deadline = min(self._next_house, self._idle_odo_at)
+        for ep, m, addr in wait(self.endpoints, deadline):
+            self._handle(ep, m, addr)
+        now = time.monotonic()
+        if now >= self._idle_odo_at and not self.halted:
+            self._idle_odo_at = now + IDLE_ODOMETRY_S
+            self._send_odometry(now)
+
+    # -- after each control period -------------------------------------------------------------
+    def _after_step(self) -> bool:
+        """Events and divergence; False when the plant is lost (nothing more to send)."""
+        if len(self.sim.events) > self._events_sent:
+            self._drain_events()
+        why = self.plant.diverged()
+        if why:
+            self.sim.event("diverged", why)
+            self.sim.disarm(f"diverged: {why}")
+            self.halted = True
+            self.engaged = False
+            self._drain_events()
+            return False
+        return True
+
+    def _drain_events(self) -> None:
+        """Each new event as a status line and a STATUSTEXT; then a HEARTBEAT at once, so
+        that a ground station sees an arm, disarm or failsafe without waiting up to 1 s."""
+        events = self.sim.events
+        if self._events_sent == len(events):
+            return
+        while self._events_sent < len(events):
+            e = events[self._events_sent]
+            self._events_sent += 1
+            self._status(f"event t={e.t:.3f} {e.kind}: {e.text}")
+            sev = (mavlink.MAV_SEVERITY_CRITICAL if e.kind in ("failsafe", "diverged", "lockstep")
+                   else mavlink.MAV_SEVERITY_INFO)
+            text = f"{e.kind}: {e.text}"[:50].encode()
+            msg = mavlink.MAVLink_statustext_message(sev, text)
+            for ep in self.endpoints:
+                ep.send(msg)
+        hb = self._heartbeat()
+        for ep in self.endpoints:
+            ep.send(hb)
+
+    # -- sending ---------------------------------------------------------------------------------
+    def _send_odometry(self, now: float, fresh: bool = True) -> None:
+        """ODOMETRY of step k to the controller; a ``fresh`` one (not a resend) starts the
+        lockstep wait for its target."""
+        k = self.k
+        X = self.plant.state
+        if not tm.finite(X):
+            return
+        pos, q, vel, rates = state_to_odometry(X)
+        if self.link.send_hot(ODOMETRY, (step_usec(k, self.rate), *pos, *q, *vel, *rates, *ODOMETRY_TAIL)):
+            self.odometry_sent += 1
+        self._odo_sent[k] = now
+        if len(self._odo_sent) > 256:
+            for old in [s for s in self._odo_sent if s < k - 128]:
+                del self._odo_sent[old]
+        self._resend_at = now + RESEND_S
+        if fresh:
+            self._lost_at = now + self.cfg.lost_after_s
+
+    def _row(self, k: int, X: tuple[float, ...], key: int, wire: tuple[float, ...], dem: tuple[float, ...],
+             real: tuple[float, ...], age: float, rtt: float, sent: float, recv: float) -> None:
+        if self.rows is None:
+            return
+        mode = MODE_CODES.get(self.sim.mode, 0)
+        self.rows.write(",".join(map(repr, (k, k / self.rate, *state_columns(X), mode, key, *wire, *dem, *real,
+                                            age, rtt, sent, recv))))
+
+    def _heartbeat(self) -> Any:
+        sim = self.sim
+        # offboard is guided flight; no custom mode (a GCS would read an ArduPilot or PX4 mode into it)
+        base = mavlink.MAV_MODE_FLAG_GUIDED_ENABLED
+        if sim.armed:
+            base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+        if self.halted or sim.mode in (FAILSAFE, LANDED):
+            state = mavlink.MAV_STATE_CRITICAL
+        elif sim.armed:
+            state = mavlink.MAV_STATE_ACTIVE
+        else:
+            state = mavlink.MAV_STATE_STANDBY
+        return mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_GENERIC, base,
+                                                 0, state, 3)
+
+    def _message(self, mid: int) -> list[Any]:
+        """The message(s) with id ``mid`` for a stream or a REQUEST_MESSAGE ([] if none)."""
+        X = self.plant.state
+        ms = int(self.t * 1000.0)
+        if mid == mavlink.MAVLINK_MSG_ID_HEARTBEAT:
+            return [self._heartbeat()]
+        if mid == mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
+            return [tm.autopilot_version(self.cfg.sysid)]
+        if mid == mavlink.MAVLINK_MSG_ID_HOME_POSITION:
+            return [tm.home_position(self.cfg.home)]
+        if mid == mavlink.MAVLINK_MSG_ID_SYS_STATUS:
+            return [tm.sys_status(self.load, not self.halted)]
+        if mid == mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE:
+            return [tm.extended_sys_state(self.plant.on_ground, self.sim.mode == FAILSAFE)]
+        if mid == mavlink.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS:
+            return [tm.actuator_outputs(int(self.t * 1e6), self.plant.omega, self.omega_max)]
+        if not tm.finite(X):
+            return []
+        if mid == mavlink.MAVLINK_MSG_ID_ATTITUDE:
+            return tm.attitude(X, ms)[:1]
+        if mid == mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION:
+            return tm.attitude(X, ms)[1:]
+        if mid == mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED:
+            return [tm.local_position(X, ms)]
+        if mid == mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT:
+            return [tm.global_position(X, ms, self.cfg.home)]
+        return []
+
+    def _housekeeping(self) -> None:
+        """Wall-clock duties: GCS commands, heartbeat, streams, flushing files."""
+        now = time.monotonic()
+        if self.gcs is not None:
+            for m, addr in self.gcs.poll():
+                self._handle(self.gcs, m, addr)
+        if now >= self._next_heartbeat:
+            self._next_heartbeat = now + HEARTBEAT_S
+            hb = self._heartbeat()
+            for ep in self.endpoints:
+                ep.send(hb)
+            cpu = time.process_time()
+            w0, c0 = self._load_at
+            self.load = int(1000 * (cpu - c0) / max(now - w0, 1e-6))
+            self._load_at = (now, cpu)
+        refused = self.rejected.report(now)  # once per second while the receive path refuses anything
+        if refused is not None:
+            msg = mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_WARNING, refused.encode())
+            for ep in self.endpoints:
+                ep.send(msg)
+        if self.gcs is not None:
+            for mid, due in self._due.items():
+                if now >= due:
+                    iv = self.streams[mid]
+                    self._due[mid] = due + iv if now - due < iv else now + iv
+                    for msg in self._message(mid):
+                        self.gcs.send(msg)
+        if self.rows is not None:
+            self.rows.flush()
+        if self.tlog is not None:
+            self.tlog.flush()
+        nxt = min([self._next_heartbeat, now + HOUSEKEEPING_S] + list(self._due.values()))
+        self._next_house = max(nxt, now + 0.001)
+
+    # -- receiving ---------------------------------------------------------------------------------
+    def _handle(self, ep: Endpoint, m: Any, addr: tuple[str, int]) -> None:
+        """A message that passed the frame stage: checked and acted on by :meth:`_dispatch`.
+        The controller link's peer (where ODOMETRY goes, never rate-limited, with a socket of
+        its own: Endpoint.prioritise) is the address of the configured controller's newest
+        message that nothing refused."""
+        link = self.link
+        known = self._from_peer = addr == link.peer
+        refused = self.rejected.total
+        self._dispatch(ep, m, addr)
+        if known or ep is not link or self.rejected.total != refused:
+            return
+        if self._from_controller(m):
+            link.peer = addr
+            link.prioritise(addr)
+
+    def _dispatch(self, ep: Endpoint, m: Any, addr: tuple[str, int]) -> None:
+        kind = m._type
+        if kind == "HIL_ACTUATOR_CONTROLS" or kind == "SET_ACTUATOR_CONTROL_TARGET":
+            self._target(ep, m, kind)
+        elif kind == "COMMAND_LONG" or kind == "COMMAND_INT":
+            self._command(ep, m, addr)
+        elif kind == "TIMESYNC":
+            if m.tc1 == 0:
+                ep.send(mavlink.MAVLink_timesync_message(self._clock_ns(), m.ts1), addr)
+        elif kind == "MISSION_REQUEST_LIST":
+            if m.target_system in (0, self.cfg.sysid):
+                ep.send(mavlink.MAVLink_mission_count_message(m.get_srcSystem(), m.get_srcComponent(), 0,
+                                                              m.mission_type), addr)
+
+    def _reject(self, why: str) -> None:
+        self.rejected.add(why, self._from_peer)
+
+    def _from_controller(self, m: Any) -> bool:
+        """Whether ``m`` says it comes from the configured controller (its sysid and compid)."""
+        cfg = self.cfg
+        return m.get_srcSystem() == cfg.controller_sysid and m.get_srcComponent() == cfg.controller_compid
+
+    def _target(self, ep: Endpoint, m: Any, kind: str) -> None:
+        """An actuator target: checked, then held for lockstep or applied at once (realtime)."""
+        cfg = self.cfg
+        if ep is not self.link or not self._from_controller(m):
+            return self._reject("sender")
+        if kind == "HIL_ACTUATOR_CONTROLS":
+            if not m.mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED:
+                return self._no_target(m)
+            if self.actuation != "motors":
+                return self._reject("message")
+        else:
+            if self.actuation != "wrench":
+                return self._reject("message")
+            if m.group_mlx != 0:
+                return self._reject("group")
+            if addressed_elsewhere(m, cfg.sysid, cfg.compid):
+                return self._reject("target")
+        offboard = self.sim.armed and self.sim.mode == OFFBOARD
+        if self.halted or (not offboard and (self.freerun or not self.engaged)):
+            return self._reject("not_offboard")  # lockstep, flight on: VehicleEnd decides when the model delivers
+        c = m.controls
+        wire = (c[0], c[1], c[2], c[3])
+        why = wire_problem(self.actuation, wire)
+        if why:
+            return self._reject(why)
+        key = step_of_usec(m.time_usec, self.rate)
+        now = time.monotonic()
+        if not self.freerun:
+            if key != self.k:
+                return self._reject("stale" if key < self.k else "future")
+            self.accepted += 1
+            self.pending = (wire, now)
+            return None
+        if self.applied is not None and key < self.applied[0]:
+            return self._reject("reordered")
+        if self.sim.command(command_from_wire(self.actuation, wire)):
+            self.accepted += 1
+            self.applied = (key, wire, now)
+        return None
+
+    def _no_target(self, m: Any) -> None:
+        """The controller's no-target acknowledgement of a step: HIL_ACTUATOR_CONTROLS with
+        SAFETY_ARMED clear in ``mode`` (as PX4's lockstep clocks its simulator while its
+        outputs are disarmed). In lockstep, with a flight on, it clocks step k without a
+        target (the last one stays in force and the timeout runs); otherwise it means nothing."""
+        if self.freerun or self.halted or not self.engaged:
+            return None
+        key = step_of_usec(m.time_usec, self.rate)
+        if key != self.k:
+            return self._reject("stale" if key < self.k else "future")
+        self.pending = (None, time.monotonic())
+        return None
+
+    def _through_link(self, ep: Endpoint, m: Any) -> bool:
+        """Whether a command crosses the up-link model: the controller's, on its link, in a lockstep flight."""
+        return ep is self.link and self.engaged and not self.freerun and self._from_controller(m)
+
+    def _command(self, ep: Endpoint, m: Any, addr: tuple[str, int]) -> None:
+        cfg = self.cfg
+        if addressed_elsewhere(m, cfg.sysid, cfg.compid):
+            return self._reject("target")
+        cmd = int(m.command)
+        result = mavlink.MAV_RESULT_ACCEPTED
+        follow: list[Any] = []
+        if cmd == mavlink.MAV_CMD_COMPONENT_ARM_DISARM and m.param1 >= 0.5 and self._through_link(ep, m):
+            self.vend.receive_arm(self.t)  # acts when the model delivers it, as offline
+            result = mavlink.MAV_RESULT_IN_PROGRESS
+        elif cmd == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
+            result = self._arm_disarm(m.param1, m.param2)
+        elif cmd == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
+            result = self._set_interval(int(m.param1), m.param2)
+        elif cmd == mavlink.MAV_CMD_GET_MESSAGE_INTERVAL:
+            mid = int(m.param1)
+            iv = self.streams.get(mid, 0.0 if mid != mavlink.MAVLINK_MSG_ID_HEARTBEAT else HEARTBEAT_S)
+            follow = [mavlink.MAVLink_message_interval_message(mid, int(iv * 1e6) if iv > 0 else -1)]
+        elif cmd == mavlink.MAV_CMD_REQUEST_MESSAGE:
+            follow = self._message(int(m.param1))
+            result = mavlink.MAV_RESULT_ACCEPTED if follow else mavlink.MAV_RESULT_UNSUPPORTED
+        elif cmd == mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
+            follow = [tm.autopilot_version(cfg.sysid)]
+        elif cmd == mavlink.MAV_CMD_GET_HOME_POSITION:
+            follow = [tm.home_position(cfg.home)]
+        else:
+            result = mavlink.MAV_RESULT_UNSUPPORTED
+        ep.send(mavlink.MAVLink_command_ack_message(cmd, result, 0, 0, m.get_srcSystem(), m.get_srcComponent()), addr)
+        for msg in follow:
+            ep.send(msg, addr)
+        self._drain_events()
+        return None
+
+    def _arm_disarm(self, p1: float, p2: float) -> int:
+        sim = self.sim
+        now = time.monotonic()
+        if p1 >= 0.5:
+            if self.halted:
+                return mavlink.MAV_RESULT_DENIED
+            was_offboard = sim.armed and sim.mode == OFFBOARD
+            sim.arm()
+            if not was_offboard:
+                self.applied = None  # a new flight: no target of the last one is in force
+            if not was_offboard and self.cfg.clock == "lockstep":
+                # back to lockstep: the state of step k goes out now and its target is awaited
+                self.freerun = False
+                self.engaged = True
+                self.pending = None
+                self.pace.restart(now, self.k * self.substeps)
+                self._send_odometry(now)
+            return mavlink.MAV_RESULT_ACCEPTED
+        if sim.armed and not self.plant.on_ground and int(round(p2)) != FORCE_DISARM:
+            return mavlink.MAV_RESULT_DENIED  # in the air: only a forced disarm (PX4 does the same)
+        sim.disarm("disarmed by command")
+        self.pending = None
+        self.engaged = False  # the flight is over: time stands still until armed again
+        return mavlink.MAV_RESULT_ACCEPTED
+
+    def _set_interval(self, mid: int, interval_us: float) -> int:
+        if mid == mavlink.MAVLINK_MSG_ID_HEARTBEAT:
+            return mavlink.MAV_RESULT_ACCEPTED if interval_us in (0, HEARTBEAT_S * 1e6) else mavlink.MAV_RESULT_DENIED
+        if mid not in self.streams:
+            return mavlink.MAV_RESULT_UNSUPPORTED
+        if interval_us < 0:
+            self.streams[mid] = 0.0
+            self._due.pop(mid, None)
+            return mavlink.MAV_RESULT_ACCEPTED
+        iv = DEFAULT_STREAMS[mid] if interval_us == 0 else max(interval_us * 1e-6, 0.005)
+        self.streams[mid] = iv
+        if iv <= 0:  # back to a default of "only on request"
+            self._due.pop(mid, None)
+            return mavlink.MAV_RESULT_ACCEPTED
+        self._due[mid] = time.monotonic()
+        return mavlink.MAV_RESULT_ACCEPTED
+
+    def _clock_ns(self) -> int:
+        """The vehicle's clock for TIMESYNC: simulation time (ns), as PX4 uses its own clock in
+        lockstep; on the wall clock it runs on between physics steps. Never 0: a TIMESYNC with
+        tc1 = 0 is a request, not an answer."""
+        t = self.pace.time_s(time.monotonic()) if self.freerun else self.t
+        return max(int(t * 1e9), 1)
+
+
+def run_vehicle(flight: Flight, cfg: VehicleConfig, out: str | Path | None = None, overwrite: bool = False) -> int:
+    """``bsst vehicle``: serve until SIGTERM or SIGINT; status lines on stdout; exit status 0."""
+    path = side_dir(out, ("vehicle.tlog", "vehicle.csv"), overwrite) if out is not None else None
+    emit = status_printer()
+    v = Vehicle(flight, cfg, path, emit)
+    on_stop_signals(v.stop)
+    v.run()
+    emit("stats " + json.dumps({"accepted": v.accepted, "rejected": v.rejected, "odometry_sent": v.odometry_sent,
+                                "received": v.link.received, "overruns": v.pace.rebased, "steps": v.k,
+                                "rejected_from_controller": v.rejected.from_peer,
+                                "up": v.vend.up.stats.summary() if cfg.clock == "lockstep" else None}))
+    return 0

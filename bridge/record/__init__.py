@@ -1,0 +1,8 @@
+"""The files of a run: columns, writers, the SITL joiner, metrics and figures. No sockets.
+
+- :mod:`bridge.record.columns`  every CSV's columns (trace.csv, vehicle.csv, controller.csv)
+- :mod:`bridge.record.runlog`   run directory, line writers, atomic writes, :class:`~bridge.record.runlog.Run`
+- :mod:`bridge.record.joiner`   vehicle.csv + controller.csv -> trace.csv rows, by column name
+- :mod:`bridge.record.metrics`  RMS, settling, finite-time bound, total variation, the summary
+- :mod:`bridge.record.plots`    the paper-style figures
+"""

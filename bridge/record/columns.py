@@ -1,0 +1,65 @@
+"""The columns of every CSV of a run: one table, imported by the writers and the readers.
+
+In:  nothing but, for the helpers, an eq. (7) state (:func:`state_columns`) or a file's header
+     (:func:`column_index`)
+Out: column-name tuples; a state in the trace's column order; the positions of named columns
+
+- :data:`TRACE_COLUMNS`: ``trace.csv``, one row per control step (offline and SITL alike);
+- :data:`VEHICLE_COLUMNS`: ``vehicle.csv``, the vehicle's half of a SITL trace;
+- :data:`CONTROLLER_COLUMNS`: ``controller.csv``, the controller's half.
+
+Units: time s, position m, velocity m/s, angles rad, rates rad/s, ``u1..u4`` N (paper frame;
+the torques are l·u2..u4 in N m), ``c1..c4`` normalised actuator command, ``*_wall`` monotonic wall clock s.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+STATE_COLUMNS = ("x", "y", "z", "vx", "vy", "vz", "phi", "theta", "psi", "dphi", "dtheta", "dpsi")
+REF_COLUMNS = ("x_ref", "y_ref", "z_ref", "psi_ref")
+INPUT_COLUMNS = ("u1", "u2", "u3", "u4")
+WIRE_COLUMNS = ("c1", "c2", "c3", "c4")
+REALISED_COLUMNS = ("u1_act", "u2_act", "u3_act", "u4_act")
+DESIRED_COLUMNS = ("phi_d", "theta_d")
+TRACE_COLUMNS = (
+    ("t",) + STATE_COLUMNS + REF_COLUMNS + INPUT_COLUMNS + WIRE_COLUMNS + REALISED_COLUMNS
+    + ("state_age_s",) + DESIRED_COLUMNS
+)
+VEHICLE_COLUMNS = (
+    ("k", "t") + STATE_COLUMNS + ("mode", "cmd_k") + WIRE_COLUMNS + INPUT_COLUMNS + REALISED_COLUMNS
+    + ("state_age_s", "rtt_s", "odo_sent_wall", "cmd_recv_wall")
+)
+CONTROLLER_COLUMNS = (
+    ("k", "t") + REF_COLUMNS + INPUT_COLUMNS + WIRE_COLUMNS + DESIRED_COLUMNS
+    + ("odo_recv_wall", "cmd_sent_wall", "state_to_cmd_s", "period_error_s", "state_age_s")
+)
+
+
+def state_columns(X: Sequence[float]) -> tuple[float, ...]:
+    """Eq. (7) state -> the trace's state columns (x y z vx vy vz phi theta psi rates)."""
+    return (X[0], X[2], X[4], X[1], X[3], X[5], X[6], X[8], X[10], X[7], X[9], X[11])
+
+
+def trace_row(t: float, state: Sequence[float], ref: Sequence[Sequence[float]], demanded: Sequence[float],
+              wire: Sequence[float], realised: Sequence[float], state_age_s: float,
+              desired: Sequence[float]) -> tuple[float, ...]:
+    """One ``trace.csv`` row (:data:`TRACE_COLUMNS`), for the offline loop and the SITL joiner alike.
+
+    ``state``: the trace's 12 state columns (:func:`state_columns`); ``ref``: the reference
+    sample (x, y, z, psi; the values are taken); ``demanded``: u1..u4 N as the law asked;
+    ``wire``: c1..c4 as sent; ``realised``: u1..u4 N as the plant realised; ``state_age_s``:
+    age of the state the command came from (nan: none); ``desired``: (phi_d, theta_d) rad.
+    """
+    return (t, *state, ref[0][0], ref[1][0], ref[2][0], ref[3][0], *demanded, *wire, *realised, state_age_s,
+            *desired)
+
+
+def column_index(columns: Sequence[str], names: Sequence[str], where: str) -> dict[str, int]:
+    """Position of each of ``names`` in ``columns`` (a file's header); ValueError naming
+    ``where`` and the first missing column."""
+    pos = {c: i for i, c in enumerate(columns)}
+    missing = [n for n in names if n not in pos]
+    if missing:
+        raise ValueError(f"{where}: no column {missing[0]!r} in its header")
+    return {n: pos[n] for n in names}

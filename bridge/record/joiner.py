@@ -1,0 +1,197 @@
+"""The SITL trace joiner: the vehicle's and the controller's halves -> ``trace.csv`` rows.
+
+In:  ``vehicle.csv`` (:data:`~bridge.record.columns.VEHICLE_COLUMNS`) and ``controller.csv``
+     (:data:`~bridge.record.columns.CONTROLLER_COLUMNS`), appended by the two processes as they fly
+Out: rows of :data:`~bridge.record.columns.TRACE_COLUMNS` (units as there), also appended to
+     ``trace.csv``, and the per-packet times (ms: up, down, round trip, state to command, tick
+     lateness) the session's ``link`` and ``timing`` blocks are made of
+
+Columns are looked up by name in each file's own header, so a file without a column the join
+needs is an error that names it.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections import deque
+from pathlib import Path
+
+from bridge.core.flight import Flight
+from bridge.record.columns import (
+    CONTROLLER_COLUMNS,
+    DESIRED_COLUMNS,
+    INPUT_COLUMNS,
+    REALISED_COLUMNS,
+    STATE_COLUMNS,
+    VEHICLE_COLUMNS,
+    WIRE_COLUMNS,
+    column_index,
+    trace_row,
+)
+from bridge.record.runlog import TraceWriter
+
+# what the join reads of each half, by name
+_V_NEEDS = ("k", "mode", "cmd_k", "state_age_s", "rtt_s", "odo_sent_wall", "cmd_recv_wall") + STATE_COLUMNS \
+    + WIRE_COLUMNS + INPUT_COLUMNS + REALISED_COLUMNS
+_C_NEEDS = ("k", "odo_recv_wall", "cmd_sent_wall", "state_to_cmd_s", "period_error_s", "state_age_s") \
+    + INPUT_COLUMNS + WIRE_COLUMNS + DESIRED_COLUMNS
+
+
+class PartReader:
+    """Reads the complete new lines of a part file (``vehicle.csv``, ``controller.csv``)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self._fd = -1
+        self._buf = b""
+        self.columns: tuple[str, ...] | None = None  # the file's header, once read
+
+    def read(self) -> list[list[float]]:
+        if self._fd < 0:
+            try:
+                self._fd = os.open(self.path, os.O_RDONLY)
+            except FileNotFoundError:
+                return []
+        chunks = []
+        while True:
+            data = os.read(self._fd, 1 << 20)
+            if not data:
+                break
+            chunks.append(data)
+        if not chunks:
+            return []
+        *full, self._buf = (self._buf + b"".join(chunks)).split(b"\n")
+        if self.columns is None and full:
+            self.columns = tuple(full[0].decode(errors="replace").strip().split(","))
+            full = full[1:]
+        return [[float(x) for x in line.split(b",")] for line in full if line]
+
+    def close(self) -> None:
+        if self._fd >= 0:
+            os.close(self._fd)
+            self._fd = -1
+
+
+class TraceJoiner:
+    """Joins the vehicle's and the controller's halves into trace rows (live, append-only).
+
+    Vehicle row k holds the true state at t_k, the command in force (the target answering
+    state ``cmd_k``, as it arrived on the wire) and what the plant realised; the controller's
+    row for ``cmd_k`` holds what the law demanded (u1..u4, phi_d, theta_d). A vehicle row
+    waits for its other half (the controller writes it just after sending the command);
+    once the controller is gone, a row whose half never came is left out (``missing``).
+    Rows flown by the vehicle's own failsafe (no controller command) take the landing
+    loop's demand, and its desired attitude (level). ``t`` counts from the first state the
+    controller answered. In ``lockstep`` a step the controller answered (``cmd_k`` = k) takes
+    ``c1..c4`` and ``state_age_s`` from the controller's row, as the offline loop writes them:
+    the last command sent, and the age of the state this step's command was computed from
+    (nan when the guard sent none).
+    """
+
+    def __init__(self, path: Path, flight: Flight, trace: TraceWriter | None, lockstep: bool = False) -> None:
+        self.v = PartReader(path / "vehicle.csv")
+        self.c = PartReader(path / "controller.csv")
+        self.lockstep = lockstep
+        self.trace = trace
+        self.rate = flight.mission.rate_hz
+        self.steps = flight.mission.steps
+        self.sample = flight.mission.trajectory.sample
+        self.ctl: dict[int, list[float]] = {}
+        self.pending: deque[list[float]] = deque()
+        self.k0: int | None = None
+        self.rows: list[tuple[float, ...]] = []
+        self.controller_done = False
+        self.up_ms: list[float] = []
+        self.down_ms: list[float] = []
+        self.rtt_ms: list[float] = []
+        self.s2c_ms: list[float] = []
+        self.late_ms: list[float] = []
+        self._up_seen: set[int] = set()
+        self.missing = 0  # vehicle rows left out: their controller half was never written
+        self.first_sent: float | None = None  # wall time the first / last joined state was sent
+        self.last_sent = math.nan
+        self._vi: dict[str, int] | None = None  # column positions, from each file's header
+        self._ci: dict[str, int] | None = None
+
+    def _v_index(self) -> dict[str, int]:
+        if self._vi is None:
+            self._vi = column_index(self.v.columns or VEHICLE_COLUMNS, _V_NEEDS, str(self.v.path))
+        return self._vi
+
+    def _c_index(self) -> dict[str, int]:
+        if self._ci is None:
+            self._ci = column_index(self.c.columns or CONTROLLER_COLUMNS, _C_NEEDS, str(self.c.path))
+        return self._ci
+
+    def update(self) -> int:
+        """Join what both files hold now; returns the number of new trace rows."""
+        vrows = self.v.read()  # first: see the class docstring
+        for c in self.c.read():
+            ci = self._c_index()
+            k = int(c[ci['k']])
+            self.ctl[k] = c
+            if self.k0 is None:
+                self.k0 = k
+            if math.isfinite(c[ci['state_to_cmd_s']]):
+                self.s2c_ms.append(1e3 * c[ci['state_to_cmd_s']])
+            if math.isfinite(c[ci['period_error_s']]):
+                self.late_ms.append(1e3 * c[ci['period_error_s']])
+        self.pending.extend(vrows)
+        n0 = len(self.rows)
+        while self.pending:
+            v = self.pending[0]
+            key = int(v[self._v_index()['cmd_k']])
+            c = self.ctl.get(key) if key >= 0 else None
+            if key >= 0 and c is None and not self.controller_done:
+                break  # its row is on its way (written just after the send)
+            self.pending.popleft()
+            self._join(v, key, c)
+        if self.trace is not None and len(self.rows) > n0:
+            self.trace.flush()
+        return len(self.rows) - n0
+
+    def _join(self, v: list[float], key: int, c: list[float] | None) -> None:
+        vi = self._v_index()
+        k = int(v[vi['k']])
+        mode = int(v[vi['mode']])
+        if self.k0 is None or k < self.k0 or (key < 0 and mode == 0):
+            return  # not flying the mission yet (armed, no target)
+        if key >= 0 and c is None:
+            self.missing += 1  # a controller killed between its send and its row: no half to join
+            return
+        if mode == 0 and k - self.k0 >= self.steps:
+            return  # realtime: the state that ended the mission, flown while the disarm was on its way
+        t = (k - self.k0) / self.rate
+        ref = self.sample(t)
+        if c is not None:
+            ci = self._c_index()
+            u = tuple(c[ci[n]] for n in INPUT_COLUMNS)
+            desired = tuple(c[ci[n]] for n in DESIRED_COLUMNS)
+            if key not in self._up_seen and math.isfinite(v[vi['cmd_recv_wall']]):
+                self._up_seen.add(key)
+                self.up_ms.append(1e3 * (v[vi['cmd_recv_wall']] - c[ci['cmd_sent_wall']]))
+                if math.isfinite(v[vi['rtt_s']]):
+                    self.rtt_ms.append(1e3 * v[vi['rtt_s']])
+        else:
+            u = tuple(v[vi[n]] for n in INPUT_COLUMNS)
+            desired = (0.0, 0.0)  # the landing loop holds the vehicle level
+        own = self.ctl.get(k)
+        if own is not None:
+            self.down_ms.append(1e3 * (own[self._c_index()['odo_recv_wall']] - v[vi['odo_sent_wall']]))
+        if self.first_sent is None:
+            self.first_sent = v[vi['odo_sent_wall']]
+        self.last_sent = v[vi['odo_sent_wall']]
+        wire, age = [v[vi[n]] for n in WIRE_COLUMNS], v[vi['state_age_s']]
+        if self.lockstep and c is not None and key == k:
+            ci = self._c_index()
+            wire, age = [c[ci[n]] for n in WIRE_COLUMNS], c[ci['state_age_s']]
+        row = trace_row(t, [v[vi[n]] for n in STATE_COLUMNS], ref, u, wire, [v[vi[n]] for n in REALISED_COLUMNS], age,
+                        desired)
+        self.rows.append(row)
+        if self.trace is not None:
+            self.trace.row(row)
+
+    def close(self) -> None:
+        self.v.close()
+        self.c.close()

@@ -1,0 +1,242 @@
+"""A run on disk (docs/design.md, "Files of a run"): directory, trace, events, summary (the tlogs are
+:mod:`bridge.mavlink.endpoint`'s).
+
+In:  trace rows (floats, :data:`~bridge.record.columns.TRACE_COLUMNS`), events (t s, kind, text), a
+     summary dict, an ``--out`` path (or none: ``runs/<UTC time>-<mission>``)
+Out: the run directory with ``trace.csv`` (repr floats), ``events.log`` (``t=<s> <kind>: <text>``),
+     ``summary.json`` (written atomically) and ``plots/``; a trace read back as numpy arrays; a
+     :class:`Run`
+
+Everything is written crash-safe: trace rows and events are appended as whole lines with
+one ``os.write`` each batch (a SIGKILL leaves the file whole up to its last complete
+row), and ``summary.json`` is written to a temporary name and renamed.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+from bridge.record.columns import TRACE_COLUMNS
+from missions import Mission
+from params import ConfigError, dump_toml
+
+
+def run_dir(
+    out: str | Path | None, mission_name: str, overwrite: bool = False, root: str | Path = "runs", create: bool = True
+) -> Path:
+    """Create the run directory: ``out`` exactly, or ``runs/<UTC time>-<mission>``.
+
+    Refuses a non-empty directory unless ``overwrite``. With ``create=False`` it only checks
+    (so a command can name every bad input before it starts anything).
+    """
+    if out is None:
+        stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
+        path = Path(root) / f"{stamp}-{mission_name}"
+        n = 1
+        while path.exists():
+            n += 1
+            path = Path(root) / f"{stamp}-{mission_name}-{n}"
+    else:
+        path = Path(out)
+    if path.exists() and not path.is_dir():
+        raise ConfigError(f"--out {path}: exists and is not a directory")
+    if path.is_dir() and any(path.iterdir()) and not overwrite:
+        raise ConfigError(f"--out {path}: directory is not empty (use --overwrite to replace its run)")
+    if not create:
+        return path
+    # an overwritten run's summary goes first: until the new one is written whole there is none,
+    # never one of another run beside this run's files
+    for old in (path.glob("summary.json") if path.is_dir() else ()):
+        try:
+            old.unlink()
+        except OSError as exc:
+            raise ConfigError(f"--out {path}: cannot replace {old.name} ({exc.strerror})") from None
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        (path / "plots").mkdir(exist_ok=True)
+    except OSError as exc:
+        raise ConfigError(f"--out {path}: cannot create ({exc.strerror})") from None
+    return path
+
+
+class LineWriter:
+    """Append whole lines to a file, in batches of ``batch`` lines, one write each."""
+
+    def __init__(self, path: str | Path, header: str | None = None, batch: int = 50) -> None:
+        self.path = Path(path)
+        self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND, 0o644)
+        self._pending: list[str] = []
+        self._batch = batch
+        if header is not None:
+            os.write(self._fd, (header + "\n").encode())
+
+    def write(self, line: str) -> None:
+        self._pending.append(line)
+        if len(self._pending) >= self._batch:
+            self.flush()
+
+    def flush(self) -> None:
+        if self._pending and self._fd >= 0:
+            os.write(self._fd, ("\n".join(self._pending) + "\n").encode())
+            self._pending.clear()
+
+    def close(self) -> None:
+        if self._fd >= 0:
+            self.flush()
+            os.close(self._fd)
+            self._fd = -1
+
+
+class TraceWriter(LineWriter):
+    """``trace.csv``: one row per control step, columns :data:`TRACE_COLUMNS` (repr floats)."""
+
+    def __init__(self, path: str | Path, columns: Sequence[str] = TRACE_COLUMNS, batch: int = 50) -> None:
+        super().__init__(path, ",".join(columns), batch)
+
+    def row(self, values: Iterable[float]) -> None:
+        self.write(",".join(map(repr, values)))
+
+
+class EventLog(LineWriter):
+    """``events.log``: one line per event, ``t=<s> <kind>: <text>``, flushed at once."""
+
+    def __init__(self, path: str | Path) -> None:
+        super().__init__(path, None, batch=1)
+
+    def event(self, t: float, kind: str, text: str) -> None:
+        self.write(f"t={t:.3f} {kind}: {text}")
+
+
+class RunRecord:
+    """The one writer of a run's record, for the offline loop and the SITL session alike:
+    ``mission.toml`` as flown (atomically, before anything flies), ``trace.csv`` rows
+    (:func:`bridge.record.columns.trace_row`) and ``events.log`` as the flight goes, and at
+    the end ``summary.json`` (atomically) and the figures (:func:`finish_run`)."""
+
+    def __init__(self, path: Path, mission: Mission) -> None:
+        self.path = path
+        write_text_atomic(path / "mission.toml", dump_toml(mission.to_dict()))
+        self.trace = TraceWriter(path / "trace.csv")
+        self.events = EventLog(path / "events.log")
+
+    def close(self) -> None:
+        """Flush and close the trace and the event log (what was written stays whole)."""
+        try:
+            self.trace.close()
+        finally:
+            self.events.close()
+
+    def finish(self, trace: dict[str, Any], summary: dict[str, Any], title: str, plots: bool = True) -> None:
+        finish_run(self.path, trace, summary, title, plots)
+
+
+def write_json_atomic(path: str | Path, obj: Any) -> None:
+    """Write JSON to ``path`` via a temporary file and rename: complete or absent."""
+    write_text_atomic(path, json.dumps(obj, indent=2, allow_nan=False, default=_jsonable) + "\n")
+
+
+def write_text_atomic(path: str | Path, text: str) -> None:
+    """Write ``text`` to ``path`` via a temporary file (flushed to disk) and rename: whatever
+    kills the process, ``path`` is the old file, the new one complete, or absent."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    with open(tmp, "w") as f:
+        f.write(text)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+def _jsonable(v: Any) -> Any:
+    if hasattr(v, "item"):
+        return v.item()
+    raise TypeError(f"not JSON serialisable: {type(v).__name__}")
+
+
+def read_trace(path: str | Path) -> dict[str, Any]:
+    """Read a ``trace.csv`` back into numpy arrays by column, ignoring a torn last line."""
+    with open(path) as f:
+        header = f.readline().strip().split(",")
+        rows = []
+        for line in f:
+            if not line.endswith("\n"):
+                break
+            parts = line.rstrip("\n").split(",")
+            if len(parts) != len(header):
+                break
+            rows.append([float(p) for p in parts])
+    return trace_arrays(rows, header)
+
+
+class Run:
+    """The result of one flight, offline or networked: trace arrays, summary, directory."""
+
+    def __init__(self, trace: dict[str, Any], summary: dict[str, Any], path: Path | None) -> None:
+        self.trace = trace
+        self.summary = summary
+        self.path = path
+
+    @property
+    def outcome(self) -> str:
+        return self.summary["outcome"]
+
+    @property
+    def rms(self) -> float:
+        """3-D position RMS error over t >= summary['rms_from_s']."""
+        return self.summary["rms_3d"]
+
+    def __repr__(self) -> str:
+        return f"Run(outcome={self.outcome!r}, rms_3d={self.rms!r}, path={str(self.path) if self.path else None!r})"
+
+
+def trace_arrays(rows: list[Sequence[float]], columns: Sequence[str] = TRACE_COLUMNS) -> dict[str, Any]:
+    """Rows of the trace -> numpy arrays by column name."""
+    import numpy as np  # lazy: the nodes write lines and never need numpy
+
+    arr = np.array(rows, dtype=float).reshape(-1, len(columns))
+    return {name: arr[:, i] for i, name in enumerate(columns)}
+
+
+def finish_run(path: Path, trace: dict[str, Any], summary: dict[str, Any], title: str, plots: bool = True) -> None:
+    """Write ``summary.json`` atomically, then the plots (a run without plots still has its numbers)."""
+    write_json_atomic(path / "summary.json", summary)
+    if plots and len(trace["t"]) > 1:
+        from bridge.record.plots import make_plots  # lazy: loads matplotlib
+
+        make_plots(trace, path / "plots", title)
+
+
+def check_writable(path: str | Path, flag: str) -> Path:
+    """``path`` as a file that can be written: not a directory, in an existing directory this
+    process may write into. Raises :class:`ConfigError` naming ``flag`` otherwise, so that a
+    bad output path is bad input (exit 2) before any work, not a failure after it."""
+    p = Path(path)
+    if p.is_dir():
+        raise ConfigError(f"{flag} {p}: is a directory")
+    parent = p.parent
+    if not parent.is_dir():
+        raise ConfigError(f"{flag} {p}: {parent} is not a directory")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ConfigError(f"{flag} {p}: cannot write into {parent}")
+    return p
+
+
+def side_dir(out: str | Path, files: Sequence[str], overwrite: bool = False) -> Path:
+    """The directory one side of a networked run (vehicle or controller) writes ``files``
+    into: created if needed; refuses to replace those files unless ``overwrite``."""
+    path = Path(out)
+    if path.exists() and not path.is_dir():
+        raise ConfigError(f"--out {path}: exists and is not a directory")
+    taken = [f for f in files if (path / f).exists()]
+    if taken and not overwrite:
+        raise ConfigError(f"--out {path}: already holds {', '.join(taken)} (use --overwrite to replace)")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError(f"--out {path}: cannot create ({exc.strerror})") from None
+    return path

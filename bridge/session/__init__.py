@@ -1,0 +1,531 @@
+"""The SITL session: ``bsst sitl`` and :func:`sitl` (docs/design.md, "The MAVLink contract" to "Link model").
+
+In:  a mission (a :class:`~missions.Mission` or a TOML path) and options: overrides (profile, controller,
+     ``rate_hz`` Hz, seed, a ``[link]`` table), ``realtime``, ``instance`` (0-9, or None: a free port),
+     ``gcs``, ``speed`` (x real time), a signing key file
+Out: a :class:`~bridge.record.runlog.Run` (trace arrays, ``summary.json`` as a dict with its ``link``,
+     ``timing`` and ``sitl`` blocks) and its run directory (below); progress on stderr with ``live``
+
+Starts the vehicle (``python -m bridge vehicle``) and the offboard controller
+(``python -m bridge controller``) as two child processes talking MAVLink 2 over UDP on
+127.0.0.1, waits for each to say ``ready`` (deadlines, no fixed sleeps), supervises them,
+and leaves the run directory of docs/design.md, "Files of a run":
+
+- ``mission.toml`` (as flown, overrides applied: both children read this file),
+- ``vehicle.tlog``, ``controller.tlog`` (both directions of each side),
+- ``vehicle.csv``, ``controller.csv``: each side's half of the trace, appended as it flies,
+- ``trace.csv``: the two halves joined live, one row per control step, the same columns
+  and meaning as the offline loop's (:data:`bridge.record.columns.TRACE_COLUMNS`),
+- ``summary.json`` (with the ``link`` block and a ``timing`` block), ``events.log``,
+  ``plots/``, and ``vehicle.log`` / ``controller.log`` (each child's stderr).
+
+The mission's ``[link]`` impairment (docs/design.md, "Link model"): in lockstep both children apply
+it in simulation time to what crossed the socket (the offline loop's ends,
+:mod:`bridge.core.linkends`), and ``summary.json["link"]`` gives the model's exact statistics; in
+real time, when the link is impaired, a third child, ``bsst relay`` (``relay.log``,
+``relay.json``), sits between controller and vehicle and applies it on the wall clock.
+
+Each half is written by the process that owns it, whole lines at a time, so any process
+killed with SIGKILL leaves every file readable up to its last complete row; the join
+only ever appends rows whose two halves are both on disk. A child that dies is reported
+by name and the session ends in exit status 1; Ctrl-C or SIGTERM stops both children
+within 2 s (SIGTERM, then SIGKILL) and still writes the summary (outcome ``aborted``).
+
+Ports, as PX4 numbers its instances: the vehicle binds 14560 + N for the controller link
+and sends GCS telemetry to 14550 + N, with sysid N + 1. ``instance=None`` (for campaigns
+running many sessions at once) binds a free port instead and sends no GCS telemetry.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import selectors
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+from bridge.core.flight import Flight, prepare
+from bridge.mavlink.endpoint import GCS_PORT, LINK_PORT, parse_address
+from bridge.mavlink.signing import key_from_file
+from bridge.nodes.process import parse_status
+from bridge.record.columns import TRACE_COLUMNS
+from bridge.record.joiner import TraceJoiner
+from bridge.record.metrics import percentiles, summarise
+from bridge.record.runlog import EventLog, Run, RunRecord, run_dir, trace_arrays
+from bridge.session.children import READY_TIMEOUT_S, STOP_GRACE_S, Child, ChildError, check_port_free, instance_slot
+from missions import Mission
+from params import ConfigError
+
+__all__ = ["ChildError", "Session", "instance_slot", "sitl"]
+
+Progress = Callable[[float, float, float], None]  # (t, duration, current 3-D error), as bridge.loop
+
+
+def sitl(
+    mission: Mission | str | Path,
+    *,
+    out: str | Path | None = None,
+    write: bool = False,
+    overwrite: bool = False,
+    plots: bool = True,
+    profile: str | None = None,
+    controller: str | None = None,
+    rate_hz: float | None = None,
+    seed: int | None = None,
+    realtime: bool = False,
+    instance: int | None = 0,
+    gcs: str | None = None,
+    speed: float | None = None,
+    progress: Progress | None = None,
+    live: bool = False,
+    link: Mapping[str, Any] | None = None,
+    key: str | Path | None = None,
+) -> Run:
+    """Fly a mission as a SITL session (vehicle and controller processes over UDP).
+
+    Returns a :class:`~bridge.record.runlog.Run`, as :func:`bridge.loop.simulate` does. The run
+    directory is kept when ``out`` is given or ``write`` is true (then under ``runs/``);
+    otherwise the session works in a temporary directory and returns only the arrays.
+    ``instance`` N (0-9) picks ports 14560 + N / 14550 + N and sysid N + 1; ``None`` picks
+    a free port and no GCS link. ``gcs`` (``HOST:PORT`` or ``"none"``) overrides the GCS
+    address. ``speed`` caps lockstep at that many times real time. ``live`` prints a
+    progress line on stderr (when it is a terminal). ``link`` is laid over the mission's
+    ``[link]`` table, as for :func:`bridge.loop.simulate`. ``key`` is a MAVLink 2 signing key
+    file (:func:`bridge.mavlink.signing.key_from_file`): both sides sign everything they send and
+    accept only what is signed with it; only the file's path is passed on.
+    """
+    if key is not None:
+        key_from_file(key)  # a missing, empty or world-readable key file is bad input, before anything starts
+    flight = prepare(mission, profile=profile, controller=controller, rate_hz=rate_hz, seed=seed, link=link)
+    if instance is not None and not (isinstance(instance, int) and 0 <= instance <= 9):
+        raise ConfigError(f"--instance must be in [0, 9], got {instance!r}")
+    if speed is not None and not (math.isfinite(speed) and speed > 0):
+        raise ConfigError(f"--speed must be a positive number, got {speed!r}")
+    n = instance or 0
+    gcs_text = gcs if gcs is not None else (None if instance is None else f"127.0.0.1:{GCS_PORT + n}")
+    if gcs_text is not None and gcs_text.strip().lower() == "none":
+        gcs_text = None
+    if gcs_text is not None:
+        parse_address(gcs_text, "udpout", "--gcs")  # bad input fails here, before anything starts
+    keep = out is not None or write
+    if keep:  # a refused run directory is named before a busy port (both before anything starts)
+        run_dir(out, flight.mission.name, overwrite, create=False)
+    if instance is not None:
+        check_port_free(LINK_PORT + n, f"--instance {n}")
+    path = run_dir(out, flight.mission.name, overwrite) if keep else Path(tempfile.mkdtemp(prefix="bsst-sitl-"))
+    try:
+        s = Session(flight, path, realtime=realtime, instance=instance, gcs=gcs_text, speed=speed,
+                    progress=progress, live=live, key=Path(key) if key is not None else None)
+        return s.run(plots=plots and keep, keep=keep)
+    finally:
+        if not keep:
+            shutil.rmtree(path, ignore_errors=True)
+
+
+class Session:
+    """One SITL session in a run directory; :meth:`run` flies it."""
+
+    def __init__(self, flight: Flight, path: Path, *, realtime: bool, instance: int | None, gcs: str | None,
+                 speed: float | None, progress: Progress | None, live: bool, key: Path | None = None) -> None:
+        self.flight = flight
+        self.key = key  # the signing key file (its path only) both children get as --key
+        self.path = path
+        self.realtime = realtime
+        self.instance = instance
+        self.gcs = gcs
+        self.speed = speed
+        self.progress = progress
+        self.live = live and sys.stderr.isatty()
+        self.sysid = (instance or 0) + 1
+        self.listen = f"127.0.0.1:{LINK_PORT + instance}" if instance is not None else "127.0.0.1:0"
+        self.events: list[dict[str, Any]] = []
+        self.vehicle: Child | None = None
+        self.controller: Child | None = None
+        self.relay: Child | None = None  # real time with an impaired link: bsst relay between the two
+        self.vehicle_armed = False
+        self.failsafe_seen = False
+        self.diverged = False
+        self.died: str | None = None
+        self.aborted = False
+        self.interrupted = False  # set by Ctrl-C / SIGTERM (see _catch_stop_signals)
+        self._event_log: EventLog | None = None
+
+    # -- the whole session ---------------------------------------------------------------------
+    def run(self, plots: bool, keep: bool) -> Run:
+        m = self.flight.mission
+        record = RunRecord(self.path, m)
+        self._event_log = record.events
+        self.joiner = TraceJoiner(self.path, self.flight, record.trace, lockstep=not self.realtime)
+        self.t_wall0 = time.monotonic()
+        restore = _catch_stop_signals(self)
+        try:
+            self._start()
+            self._supervise()
+        except KeyboardInterrupt:
+            self.aborted = True
+            self._note("aborted", "interrupted (Ctrl-C or SIGTERM): stopping both processes", "session")
+        except ChildError:
+            pass  # already said by name (_died); the outcome is "aborted", the files are kept
+        finally:
+            try:
+                self._stop_children()
+            finally:
+                restore()
+                self.joiner.controller_done = True
+                self.joiner.update()
+                self.joiner.close()
+                record.close()
+        wall = time.monotonic() - self.t_wall0
+        outcome = self._outcome()
+        rows = self.joiner.rows
+        arrays = trace_arrays(rows, TRACE_COLUMNS)
+        summary = summarise(arrays, m, self.flight.gains, clock="realtime" if self.realtime else "lockstep",
+                            outcome=outcome, events=self.events, link=self._link_block())
+        summary["timing"] = self._timing_block(wall)
+        summary["sitl"] = {
+            "instance": self.instance, "listen": self.listen, "gcs": self.gcs, "sysid": self.sysid,
+            "speed": self.speed, "died": self.died, "signed": self.key is not None,
+            "vehicle_exit": self.vehicle.exit_text() if self.vehicle else None,
+            "controller_exit": self.controller.exit_text() if self.controller else None,
+        }
+        if keep:
+            title = f"{m.name} ({m.controller}, {self.flight.profile.name}, SITL {summary['clock']})"
+            record.finish(arrays, summary, title, plots and not self.aborted)
+        if self.live:
+            sys.stderr.write("\n")
+        return Run(arrays, summary, self.path if keep else None)
+
+    def _outcome(self) -> str:
+        ctl = self.controller
+        completed = ctl is not None and ctl.proc.returncode == 0 and not (self.aborted or self.died)
+        if self.diverged:
+            return "diverged"
+        if self.failsafe_seen and not completed:  # completed after a failsafe: resumed ([failsafe] resume)
+            return "failsafe"
+        if self.aborted or self.died:
+            return "aborted"
+        if completed:
+            return "completed"
+        if ctl is not None and ctl.done and ctl.done.startswith("outcome="):
+            word = ctl.done.split()[0].partition("=")[2]
+            return word if word in ("failsafe", "diverged", "aborted") else "aborted"
+        return "aborted"
+
+    # -- children ----------------------------------------------------------------------------------
+    def _start(self) -> None:
+        mission = str(self.path / "mission.toml")
+        argv = ["vehicle", mission, "--listen", self.listen, "--gcs", self.gcs or "none",
+                "--sysid", str(self.sysid), "--realtime" if self.realtime else "--lockstep",
+                "--out", str(self.path), "--overwrite"]
+        if self.speed is not None:
+            argv += ["--speed", repr(self.speed)]
+        keyarg = ["--key", str(self.key)] if self.key is not None else []
+        self.vehicle = Child("vehicle", argv + keyarg, self.path / "vehicle.log")
+        ready = self._wait_ready(self.vehicle)
+        port = ready.get("listen", self.listen).rpartition(":")[2]
+        self.listen = f"127.0.0.1:{port}"  # the port bound, also when it was chosen free
+        self._note("started", f"vehicle pid {self.vehicle.pid}: {ready.get('_line', '')}", "session")
+        if self.realtime and self.flight.link.impaired:  # the link model on the wall clock, between the two
+            self.relay = Child("relay", ["relay", "--listen", "127.0.0.1:0", "--to", f"127.0.0.1:{port}",
+                                         "--mission", mission, "--mission-clock",
+                                         "--stats", str(self.path / "relay.json")], self.path / "relay.log")
+            line = self._wait_ready(self.relay, "relay:")["_line"]
+            port = line.split(" -> ")[0].rpartition(":")[2]  # "listening on HOST:PORT -> ..."
+            self._note("started", f"relay pid {self.relay.pid}: {line}", "session")
+        argv = ["controller", mission, "--vehicle", f"127.0.0.1:{port}", "--target-sysid", str(self.sysid),
+                "--out", str(self.path), "--overwrite"]
+        if self.realtime:
+            argv.append("--realtime")
+        self.controller = Child("controller", argv + keyarg, self.path / "controller.log")
+        self._wait_ready(self.controller)
+        self._note("started", f"controller pid {self.controller.pid}", "session")
+
+    def _wait_ready(self, child: Child, ready: str = "ready") -> dict[str, str]:
+        """Block until ``child`` says ``ready`` (the first word of a status line; its
+        ``key=value`` fields, and the rest of the line as ``_line``), or raise :class:`ChildError`."""
+        deadline = time.monotonic() + READY_TIMEOUT_S
+        sel = selectors.DefaultSelector()
+        sel.register(child.fd, selectors.EVENT_READ)
+        try:
+            while True:
+                for line in child.lines():
+                    word, rest = parse_status(line)
+                    self._status(child, line)
+                    if word == ready:
+                        fields = dict(f.partition("=")[::2] for f in rest.split())
+                        fields["_line"] = rest
+                        return fields
+                if child.eof or child.proc.poll() is not None:
+                    child.proc.wait()
+                    self._died(child, starting=True)
+                if self.interrupted:
+                    raise KeyboardInterrupt
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    self.died = child.name
+                    self._note("died", f"{child.name} (pid {child.pid}) not ready within {READY_TIMEOUT_S:g} s",
+                               "session")
+                    raise ChildError(child.name)
+                sel.select(min(left, 0.5))
+        finally:
+            sel.close()
+
+    def _died(self, child: Child, starting: bool = False) -> None:
+        """A child is gone: say so by name; bad input (exit 2) is the user's, anything else ours."""
+        err = child.last_error()
+        if starting and child.proc.returncode == 2:
+            raise ConfigError(err.removeprefix("bsst: ") or f"{child.name}: bad input")
+        self.died = child.name
+        self._note("died", f"{child.name} (pid {child.pid}) {child.exit_text()}" + (f": {err}" if err else ""),
+                   "session")
+        if starting:
+            raise ChildError(f"{child.name} (pid {child.pid}) {child.exit_text()}" + (f": {err}" if err else ""))
+
+    def _supervise(self) -> None:
+        veh, ctl = self.vehicle, self.controller
+        assert veh is not None and ctl is not None
+        sel = selectors.DefaultSelector()
+        sel.register(veh.fd, selectors.EVENT_READ, veh)
+        sel.register(ctl.fd, selectors.EVENT_READ, ctl)
+        landing_deadline: float | None = None
+        try:
+            while True:
+                sel.select(0.1)
+                if self.interrupted:
+                    raise KeyboardInterrupt
+                for child in (veh, ctl):
+                    for line in child.lines():
+                        self._status(child, line)
+                self.joiner.update()
+                self._show_progress()
+                if veh.proc.poll() is not None:
+                    veh.lines()
+                    self._died(veh)
+                    return
+                if self.relay is not None and self.relay.proc.poll() is not None:
+                    self._died(self.relay)
+                    return
+                if ctl.proc.poll() is not None and landing_deadline is None:
+                    for line in ctl.lines():
+                        self._status(ctl, line)
+                    self.joiner.controller_done = True
+                    if ctl.done and "reason=" in ctl.done:  # a controller that gave up says why
+                        reason = ctl.done.split("reason=", 1)[1]
+                        sys.stderr.write(("\n" if self.live else "") + f"bsst sitl: controller: {reason}\n")
+                    if ctl.proc.returncode == 0 or not self.vehicle_armed:
+                        if ctl.proc.returncode not in (0, 1):
+                            self._died(ctl)
+                        return
+                    if ctl.done is None:  # killed or crashed: a death, not an outcome
+                        self._died(ctl)
+                    # the vehicle is on its own: let it finish its failsafe (land and disarm)
+                    landing_deadline = time.monotonic() + self._landing_time()
+                    self._note("waiting", f"vehicle on its own: waiting up to {self._landing_time():.0f} s "
+                                          "for it to land and disarm", "session")
+                if landing_deadline is not None and (not self.vehicle_armed or time.monotonic() > landing_deadline):
+                    return
+        finally:
+            sel.close()
+
+    def _landing_time(self) -> float:
+        """Wall time allowed to a vehicle flying its failsafe alone: lockstep loss, timeout,
+        descent from the highest point the trace reached, with a margin."""
+        z = max((r[3] for r in self.joiner.rows[-2000:]), default=0.0)
+        fs = self.flight.failsafe
+        pace = self.speed or 1.0
+        return 5.0 + (1.0 + fs.timeout_s + max(z, 0.0) / fs.descent_rate) / pace
+
+    def _stop_children(self) -> None:
+        """SIGTERM the controller, the relay, the vehicle; SIGKILL whatever is left after the grace."""
+        children = [c for c in (self.controller, self.relay, self.vehicle) if c is not None]
+        for c in children:
+            if c.proc.poll() is None:
+                try:
+                    c.proc.send_signal(signal.SIGTERM)
+                except ProcessLookupError:
+                    pass
+        deadline = time.monotonic() + STOP_GRACE_S
+        for c in children:
+            try:
+                c.proc.wait(timeout=max(deadline - time.monotonic(), 0.01))
+            except subprocess.TimeoutExpired:
+                c.proc.kill()
+                c.proc.wait()
+                self._note("killed", f"{c.name} (pid {c.pid}) did not stop within {STOP_GRACE_S:g} s: SIGKILL",
+                           "session")
+            for line in c.lines():
+                self._status(c, line)
+            c.proc.stdout.close()  # type: ignore[union-attr]
+
+    # -- status lines, events, progress -------------------------------------------------------------
+    def _status(self, child: Child, line: str) -> None:
+        word, rest = parse_status(line)
+        if word != "event":
+            return
+        t_text, _, what = rest.partition(" ")
+        kind, _, text = what.partition(": ")
+        try:
+            t = float(t_text.removeprefix("t="))
+        except ValueError:
+            t = math.nan
+        if child.name == "vehicle":
+            if self.realtime and math.isfinite(t):
+                t = self._flight_time(t)
+            if kind == "armed":
+                self.vehicle_armed = True
+            elif kind == "disarmed":
+                self.vehicle_armed = False
+            elif kind == "failsafe":
+                self.failsafe_seen = True
+            elif kind == "diverged":
+                self.diverged = True
+        self._note(kind, text, child.name, t)
+
+    def _flight_time(self, t_vehicle: float) -> float:
+        """Real time: the vehicle's clock runs from its start; the flight's (the trace's and
+        the controller's) time 0 is the vehicle's step k0, the first state the controller
+        answered. Events before it is known (arming) are at 0."""
+        joiner = getattr(self, "joiner", None)
+        if joiner is not None:
+            joiner.update()  # k0 may be in a row not joined yet
+        if joiner is None or joiner.k0 is None:
+            return 0.0
+        return t_vehicle - joiner.k0 / self.flight.mission.rate_hz
+
+    def _note(self, kind: str, text: str, source: str, t: float | None = None) -> None:
+        if t is None:
+            t = self.joiner.rows[-1][0] if getattr(self, "joiner", None) and self.joiner.rows else 0.0
+        self.events.append({"t": round(t, 6) if math.isfinite(t) else None, "kind": kind, "text": text,
+                            "source": source})
+        if self._event_log is not None:
+            self._event_log.event(t if math.isfinite(t) else 0.0, kind, f"{text} [{source}]")
+        if source == "session" and kind in ("died", "killed"):
+            sys.stderr.write(("\n" if self.live else "") + f"bsst sitl: {text}\n")
+
+    def _show_progress(self) -> None:
+        rows = self.joiner.rows
+        if not rows or not (self.live or self.progress):
+            return
+        r = rows[-1]
+        t = r[0]
+        err = math.sqrt((r[1] - r[13]) ** 2 + (r[2] - r[14]) ** 2 + (r[3] - r[15]) ** 2)
+        if self.progress is not None:
+            self.progress(t, self.flight.mission.duration_s, err)
+        if self.live:
+            first = self.joiner.first_sent
+            wall = time.monotonic() - (first if first is not None else self.t_wall0)
+            sys.stderr.write(f"\rsitl t {t:7.2f} / {self.flight.mission.duration_s:.2f} s   "
+                             f"real-time factor {t / max(wall, 1e-9):6.1f}x   3-D error {err:.2e} m   ")
+            sys.stderr.flush()
+
+    # -- summary blocks --------------------------------------------------------------------------------
+    def _link_block(self) -> dict[str, Any]:
+        """``summary.json["link"]`` (docs/design.md, "Files of a run"), per direction:
+
+        - lockstep: the link model's exact statistics, from the end that applies it (the
+          vehicle: ``up``, the controller: ``down``), ``delay_ms`` in simulation time; plus
+          ``socket_ms``, the wall-clock one-way time of the per-step messages over the socket;
+        - real time through the relay: the relay's counts (every datagram), ``delay_ms``
+          measured end to end on the per-step messages (ODOMETRY down, the target up) from
+          both sides' stamps (one host: one monotonic clock, no offset to estimate), the
+          model's schedule (``model_delay_ms``) and the delay the relay added (``relay_added_ms``);
+        - otherwise (real time, perfect link; a side that left no statistics): counts from
+          both sides, ``delay_ms`` from their stamps.
+        """
+        j = self.joiner
+        vs = self.vehicle.stats if self.vehicle else {}
+        cs = self.controller.stats if self.controller else {}
+        # what each side's receive path refused (bridge.mavlink.receive), and all of it by reason
+        by = {"vehicle": dict(vs.get("rejected", {})), "controller": dict(cs.get("rejected", {}))}
+        rejected = {r: by["vehicle"].get(r, 0) + by["controller"].get(r, 0)
+                    for r in sorted(set(by["vehicle"]) | set(by["controller"]))}
+        own = int(vs.get("rejected_from_controller", sum(by["vehicle"].values())))  # of the controller's datagrams
+        measured = {"up": percentiles(j.up_ms), "down": percentiles(j.down_ms)}
+        relay = self._relay_stats()
+        model = {"up": vs.get("up"), "down": cs.get("down")}
+        up_sent = int(cs.get("commands", len(j.ctl)))
+        up_delivered = int(vs.get("accepted", 0))
+        down_sent = int(vs.get("odometry_sent", 0))
+        down_delivered = int(cs.get("states", len(j.ctl)))  # a killed controller left no stats: its rows
+        sides = {
+            "up": {"sent": up_sent, "delivered": up_delivered,
+                   "lost": max(0, up_sent - up_delivered - own), "duplicated": 0,
+                   "reordered": int(rejected.get("reordered", 0))},
+            "down": {"sent": down_sent, "delivered": down_delivered, "lost": max(0, down_sent - down_delivered),
+                     "duplicated": 0, "reordered": 0},
+        }
+        out: dict[str, Any] = {}
+        for d in ("up", "down"):
+            if relay is not None:
+                r = relay[d]
+                out[d] = {**{k: r[k] for k in ("sent", "delivered", "lost", "duplicated", "reordered", "in_flight",
+                                               "lost_by")},
+                          "delay_ms": measured[d], "model_delay_ms": r["delay_ms"], "relay_added_ms": r["measured_ms"]}
+            elif model[d]:
+                out[d] = {**model[d], "socket_ms": measured[d]}
+            else:
+                out[d] = {**sides[d], "delay_ms": measured[d]}
+        out["rejected"] = rejected
+        out["rejected_by"] = by
+        # of those, how many came from the other side itself (not from third parties on the link)
+        out["rejected_from_peer"] = {"vehicle": own, "controller": sum(by["controller"].values())}
+        return out
+
+    def _relay_stats(self) -> dict[str, Any] | None:
+        """What ``bsst relay --stats`` wrote on exit (None without a relay or a readable file)."""
+        if self.relay is None:
+            return None
+        try:
+            return json.loads((self.path / "relay.json").read_text())
+        except (OSError, ValueError):
+            return None
+
+    def _timing_block(self, wall: float) -> dict[str, Any]:
+        j = self.joiner
+        sim = len(j.rows) / self.flight.mission.rate_hz
+        cs = self.controller.stats if self.controller else {}
+        n = len(j.rows)
+        flight_s = j.last_sent - j.first_sent if j.first_sent is not None and n > 1 else math.nan
+        rate = (n - 1) / flight_s if flight_s > 0 else None
+        return {
+            "wall_s": wall,  # the whole session: start, fly, stop
+            "sim_s": sim,
+            "flight_wall_s": flight_s if math.isfinite(flight_s) else None,
+            "step_rate_hz": rate,  # control steps per wall second while flying
+            "real_time_factor": rate / self.flight.mission.rate_hz if rate else None,
+            "missing_rows": j.missing,
+            "state_to_command_ms": percentiles(j.rtt_ms),
+            "state_to_command_timesync_ms": percentiles(j.s2c_ms),
+            "period_error_ms": percentiles(j.late_ms),
+            "stale_ticks": int(cs.get("stale_ticks", 0)),
+            "overruns": int(cs.get("overruns", 0)),
+        }
+
+
+def _catch_stop_signals(session: Session) -> Callable[[], None]:
+    """While a session runs, Ctrl-C (SIGINT) and SIGTERM only set ``session.interrupted``;
+    the session checks it between whole steps, so no file is left half-written by an
+    exception raised in the middle of a write. Main thread only (signals go there)."""
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+
+    def handler(signum: int, frame: Any) -> None:
+        session.interrupted = True
+
+    old = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
+
+    def restore() -> None:
+        for sig, h in old.items():
+            signal.signal(sig, h)
+
+    return restore
+
+

@@ -1,0 +1,142 @@
+"""The child processes of a SITL session, and the instance lock that keeps sessions apart.
+
+In:  a command line for ``python -m bridge`` and a log path; for :func:`instance_slot`, nothing
+Out: the child's status lines (stdout, read without blocking; :func:`bridge.nodes.process.parse_status`),
+     its exit, and the last line of its stderr; an instance number N (0-9) held exclusively
+
+:func:`instance_slot` holds one of the ten PX4-style instance numbers (ports 14550 + N /
+14560 + N) for as long as a block runs.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from bridge.nodes.process import die_with_parent, parse_status
+from params import ConfigError
+
+READY_TIMEOUT_S = 30.0  # s for a child to start (Python, imports, bind) on a loaded machine
+STOP_GRACE_S = 1.5  # s between SIGTERM and SIGKILL: both children gone within 2 s
+
+
+class ChildError(Exception):
+    """A child process failed to start or died; the message names it."""
+
+
+def check_port_free(port: int, flag: str) -> None:
+    """ConfigError naming ``flag`` if UDP 127.0.0.1:``port`` is taken: a vehicle already runs
+    there, so this session's could not start (said before any file is written)."""
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        s.bind(("127.0.0.1", port))
+    except OSError as exc:
+        raise ConfigError(f"{flag}: UDP 127.0.0.1:{port} is in use ({exc.strerror}); pick another instance") from None
+    finally:
+        s.close()
+
+
+class Child:
+    """One child process: its status lines (stdout, read without blocking) and its exit."""
+
+    def __init__(self, name: str, argv: list[str], log: Path) -> None:
+        self.name = name
+        with open(log, "wb") as err:
+            self.proc = subprocess.Popen(
+                [sys.executable, "-m", "bridge", *argv], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                stderr=err, start_new_session=True, preexec_fn=die_with_parent)
+        self.log = log
+        self.fd = self.proc.stdout.fileno()  # type: ignore[union-attr]
+        os.set_blocking(self.fd, False)
+        self._buf = b""
+        self.eof = False
+        self.stats: dict[str, Any] = {}
+        self.done: str | None = None  # the controller's "done outcome=..." line
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid
+
+    def lines(self) -> list[str]:
+        """Complete lines written since the last call."""
+        out = []
+        while True:
+            try:
+                data = os.read(self.fd, 65536)
+            except BlockingIOError:
+                break
+            if not data:
+                self.eof = True
+                break
+            self._buf += data
+        *full, self._buf = self._buf.split(b"\n")
+        for raw in full:
+            line = raw.decode(errors="replace")
+            word, rest = parse_status(line)
+            if word == "stats":
+                try:
+                    self.stats = json.loads(rest)
+                except ValueError:
+                    pass
+            elif word == "done":
+                self.done = rest
+            out.append(line)
+        return out
+
+    def exit_text(self) -> str:
+        rc = self.proc.returncode
+        if rc is None:
+            return "still running"
+        if rc < 0:
+            try:
+                return f"killed by {signal.Signals(-rc).name}"
+            except ValueError:
+                return f"killed by signal {-rc}"
+        return f"exited with status {rc}"
+
+    def last_error(self) -> str:
+        """The last line of the child's stderr (its one-line error, or a traceback's end)."""
+        try:
+            lines = [ln for ln in self.log.read_text(errors="replace").splitlines() if ln.strip()]
+        except OSError:
+            return ""
+        return lines[-1].strip() if lines else ""
+
+
+@contextlib.contextmanager
+def instance_slot(timeout_s: float = 600.0) -> Iterator[int]:
+    """Hold instance number N (0-9) of this machine exclusively while the block runs.
+
+    An advisory ``flock`` on ``<tmp>/bsst-instance-N.lock`` (the convention ``bsst sweep``
+    uses too), so sessions started by tests, sweeps or scripts side by side never share
+    ports 14550 + N / 14560 + N. Raises TimeoutError when all ten stay taken.
+    """
+    deadline = time.monotonic() + timeout_s
+    while True:
+        for n in range(10):
+            fd = os.open(os.path.join(tempfile.gettempdir(), f"bsst-instance-{n}.lock"), os.O_RDWR | os.O_CREAT,
+                         0o644)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                os.close(fd)
+                continue
+            try:
+                yield n
+            finally:
+                os.close(fd)  # closing releases the lock
+            return
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"no free SITL instance (0-9) within {timeout_s:g} s")
+        time.sleep(0.05)  # all ten held by other sessions: look again shortly

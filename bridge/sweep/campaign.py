@@ -1,0 +1,161 @@
+"""A campaign from start to end: open (or resume) the sweep directory, fly the missing cells,
+record each as it comes, rewrite ``cells.csv`` in grid order, write the report.
+
+In:  a :class:`~bridge.sweep.spec.Sweep` (for :func:`sweep`: a mission and a grid), ``jobs`` workers
+     or a Dask client, a sweep directory to write or to resume
+Out: an :class:`Outcome` (every row in grid order, counts, wall time s, the directory); in the
+     directory ``sweep.json``, ``mission.toml``, ``cells.csv``, ``report.md`` and the heat maps
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from bridge.record.runlog import run_dir, write_json_atomic
+from bridge.sweep.cells import CELLS_CSV, SWEEP_JSON, CellsFile, read_cells, read_sweep_json, row_key, write_cells
+from bridge.sweep.classes import Classes, classify
+from bridge.sweep.executors import Progress, run_dask, run_local
+from bridge.sweep.grid import Grid
+from bridge.sweep.report import write_report
+from bridge.sweep.spec import Sweep
+from missions import Mission, load_mission
+from params import ConfigError, dump_toml
+
+
+def sweep(
+    mission: Mission | str | Path,
+    grid: Grid | Mapping[str, Any],
+    *,
+    jobs: int | None = None,
+    client: Any = None,
+    mode: str = "offline",
+    out: str | Path | None = None,
+    resume: bool = False,
+    overwrite: bool = False,
+    classes: Classes | None = None,
+    progress: bool = False,
+    report: bool = True,
+    plots: bool = True,
+) -> list[dict[str, Any]]:
+    """Fly every cell of ``grid`` on ``mission``; return the rows in grid order.
+
+    ``jobs``: local worker processes (default: all cores); ``client``: a
+    ``distributed.Client`` to run the cells on a Dask cluster instead. With ``out`` the sweep
+    directory is written (``sweep.json``, ``mission.toml``, ``cells.csv`` cell by cell, then
+    ``report.md`` and the heat maps unless ``report`` is false); ``resume`` flies only the
+    cells missing from its ``cells.csv`` (and those recorded as ``error``).
+    """
+    m = mission if isinstance(mission, Mission) else load_mission(mission)
+    spec = Sweep(m, Grid.of(grid), mode, classes or Classes())
+    return run_sweep(spec, jobs=jobs, client=client, out=out, resume=resume, overwrite=overwrite,
+                     progress=progress, report=report, plots=plots).rows
+
+
+@dataclass
+class Outcome:
+    """What :func:`run_sweep` did: all rows (grid order), how many it flew, the directory."""
+
+    rows: list[dict[str, Any]]
+    ran: int
+    reused: int
+    failed: int
+    path: Path | None
+    wall_s: float
+    interrupted: bool = False
+
+
+def run_sweep(
+    spec: Sweep,
+    *,
+    jobs: int | None = None,
+    client: Any = None,
+    out: str | Path | None = None,
+    resume: bool = False,
+    overwrite: bool = False,
+    progress: bool = False,
+    report: bool = True,
+    plots: bool = True,
+    root: str | Path = "sweeps",
+    write: bool = False,
+) -> Outcome:
+    """Run a :class:`Sweep` (see :func:`sweep`); ``write`` makes ``sweeps/<UTC>-<mission>``."""
+    t0 = time.monotonic()
+    spec.validate()
+    all_cells = spec.cells()
+    order = {c.key(): i for i, c in enumerate(all_cells)}
+    jobs = jobs or spec.jobs or os.cpu_count() or 1
+    results: dict[tuple[Any, ...], dict[str, Any]] = {}
+    path: Path | None = None
+    if out is not None or write:
+        path, kept = _open_dir(spec, out, resume, overwrite, root)
+        results.update({row_key(r): r for r in kept if row_key(r) in order})
+    todo = [c for c in all_cells if c.key() not in results]
+    sink = CellsFile(path / CELLS_CSV, [results[k] for k in sorted(results, key=order.__getitem__)]) if path else None
+    bar = Progress(len(all_cells), len(results), enabled=progress)
+    reused = len(results)
+
+    def record(row: dict[str, Any]) -> None:
+        if row["outcome"] == "aborted":  # interrupted, not a result: resume flies it again
+            return
+        row["class"] = classify(row, spec.classes)
+        results[row_key(row)] = row
+        if sink is not None:
+            sink.append(row)
+        bar.update(row)
+
+    interrupted = False
+    try:
+        if todo:
+            if client is not None:
+                run_dask(client, spec.mission, todo, spec.mode, record)
+            else:
+                run_local(spec.mission, todo, spec.mode, jobs, record)
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        bar.close()
+        if sink is not None:
+            sink.close()
+    rows = [results[c.key()] for c in all_cells if c.key() in results]
+    if path is not None and not interrupted:
+        write_cells(path / CELLS_CSV, rows)
+        if report:
+            write_report(path, rows, spec.identity(), plots=plots)
+    failed = sum(1 for r in rows if r["outcome"] == "error")
+    return Outcome(rows, len(rows) - reused, reused, failed, path, time.monotonic() - t0, interrupted)
+
+
+def _open_dir(spec: Sweep, out: str | Path | None, resume: bool, overwrite: bool,
+              root: str | Path) -> tuple[Path, list[dict[str, Any]]]:
+    """The sweep directory, and the rows already in it that ``resume`` keeps."""
+    ident = spec.identity()
+    if resume:
+        if out is None:
+            raise ConfigError("--resume: needs --out DIR, the directory of the sweep to resume")
+        path = Path(out)
+        meta = path / SWEEP_JSON
+        if meta.exists():
+            old = read_sweep_json(meta)
+            if old != ident:
+                diff = sorted(k for k in ident if old.get(k) != ident[k])
+                raise ConfigError(f"--resume: {path} holds a different sweep ({', '.join(diff)} differ); "
+                                  f"use another --out")
+            kept = [r for r in read_cells(path / CELLS_CSV) if r["outcome"] != "error"] \
+                if (path / CELLS_CSV).exists() else []
+            return path, kept
+        if path.exists() and any(path.iterdir()):
+            raise ConfigError(f"--resume: {path} holds no {SWEEP_JSON}; not a sweep directory")
+    path = run_dir(out, spec.mission.name, overwrite, root=root)
+    plots_dir = path / "plots"  # run_dir makes it for a run; a sweep keeps its maps at the top
+    if plots_dir.is_dir() and not any(plots_dir.iterdir()):
+        plots_dir.rmdir()
+    for stale in path.glob("map_*.png"):
+        stale.unlink()
+    write_json_atomic(path / SWEEP_JSON, ident)
+    (path / "mission.toml").write_text(dump_toml(spec.mission.to_dict()))
+    return path, []

@@ -1,0 +1,84 @@
+"""The class of a cell: the thresholds (:class:`Classes`) and the rules (:func:`classify`).
+
+In:  a ``cells.csv`` row (``outcome``, ``rms`` m, ``ripple_u2`` N) and the thresholds (``[classes]``:
+     ``clean_rms_m`` m, ``diverged_rms_m`` m, ``ripple_u2`` N)
+Out: its class name, one of :data:`CLASSES`; the rules as Markdown table rows
+
+Classes, best to worst: ``clean``, ``degraded``, ``limit-cycling``, ``failsafe``,
+``diverged``, ``error`` (the rules are in :mod:`bridge.sweep.report`'s docstring and in
+:func:`classify`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
+from typing import Any
+
+from params import ConfigError, Table
+
+CLASSES = ("clean", "degraded", "limit-cycling", "failsafe", "diverged", "error")  # best to worst
+
+
+@dataclass(frozen=True)
+class Classes:
+    """Thresholds that class a cell (the rules: :func:`classify`).
+
+    ``clean_rms_m``: 3-D RMS error (m) up to which a cell is clean; ``diverged_rms_m``: RMS (m)
+    above which it counts as diverged even if the plant's own check did not trip;
+    ``ripple_u2``: high-frequency RMS of u2 (N, see :func:`ripple_rms`) above which the
+    attitude loop is limit-cycling.
+    """
+
+    clean_rms_m: float = 1e-3
+    diverged_rms_m: float = 1.0
+    ripple_u2: float = 20.0
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (0.0 < v < math.inf):
+                raise ConfigError(f"classes.{f.name}: must be a positive number, got {v!r}")
+        if self.diverged_rms_m <= self.clean_rms_m:
+            raise ConfigError("classes.diverged_rms_m: must be larger than classes.clean_rms_m")
+
+    @classmethod
+    def from_table(cls, t: Table) -> Classes:
+        d = cls()
+        c = cls(**{f.name: t.number(f.name, getattr(d, f.name), lo=0.0, lo_open=True, hi=1e9) for f in fields(cls)})
+        t.done()
+        return c
+
+
+def classify(row: Mapping[str, Any], classes: Classes) -> str:
+    """The class of one row (see the module docstring for the rules)."""
+    outcome = row["outcome"]
+    rms = row.get("rms")
+    if outcome not in ("completed", "failsafe", "diverged"):
+        return "error"
+    if outcome == "diverged" or (rms is not None and rms > classes.diverged_rms_m):
+        return "diverged"
+    if outcome == "failsafe":
+        return "failsafe"
+    ripple = row.get("ripple_u2")
+    if ripple is not None and ripple > classes.ripple_u2:
+        return "limit-cycling"
+    if rms is None or rms > classes.clean_rms_m:
+        return "degraded"
+    return "clean"
+
+
+def thresholds_text(c: Classes) -> list[str]:
+    """The class rules with their thresholds, as Markdown table rows."""
+    return [
+        "| class | rule |",
+        "|---|---|",
+        "| clean | none of the below |",
+        f"| degraded | 3-D RMS position error > {c.clean_rms_m:g} m |",
+        f"| limit-cycling | ripple of u2 > {c.ripple_u2:g} N (RMS of u2 about its 0.2 s moving average, "
+        "second half of the flight) |",
+        "| failsafe | the vehicle's failsafe took over (outcome `failsafe`) |",
+        f"| diverged | the plant's divergence check tripped, or 3-D RMS > {c.diverged_rms_m:g} m |",
+        "| error | the cell could not be flown (see the `error` column) |",
+    ]

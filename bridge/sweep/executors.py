@@ -1,0 +1,166 @@
+"""Where the cells fly: one cell in a worker, a local process pool, a Dask cluster, and the
+progress bar.
+
+In:  a mission, the cells to fly, a mode (``offline`` or ``lockstep``), ``jobs`` workers or a Dask client
+Out: each finished ``cells.csv`` row, handed to ``report`` in the main process as it comes; progress
+     on stderr
+
+A cell that raises, or whose worker dies, becomes an ``error`` row.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import signal
+import sys
+import time
+from collections import deque
+from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from typing import Any
+
+from bridge.loop import fly
+from bridge.record.runlog import Run
+from bridge.session import instance_slot, sitl
+from bridge.sweep.cells import error_row, row_from_run
+from bridge.sweep.grid import Cell, cell_flight
+from missions import Mission
+
+
+def run_cell(mission: Mission, cell: Cell, mode: str = "offline") -> dict[str, Any]:
+    """Fly one cell (in a worker process or on a Dask worker) and return its row.
+
+    Never raises for a failing flight: the exception becomes an ``error`` row.
+    """
+    try:
+        flight = cell_flight(mission, cell)
+        run = _fly_lockstep(flight.mission) if mode == "lockstep" else fly(flight, plots=False)
+        return row_from_run(cell, run)
+    except Exception as exc:  # a failed cell is a result, never the end of the sweep
+        return error_row(cell, f"{type(exc).__name__}: {exc}")
+
+
+def _fly_lockstep(mission: Mission) -> Run:
+    """Fly with the full SITL processes in lockstep (the link model applied in simulation
+    time, as offline), on an ``--instance`` port set held exclusively while it flies."""
+    with instance_slot() as instance:
+        return sitl(mission, realtime=False, instance=instance, plots=False)
+
+
+Report = Callable[[dict[str, Any]], None]  # called in the main process with each finished row
+
+
+def _worker_init() -> None:
+    # Ctrl-C goes to the whole process group: the main process stops the sweep; a worker
+    # finishes (or is ended with) its cell rather than recording it as aborted.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _pool(jobs: int) -> ProcessPoolExecutor:
+    ctx = mp.get_context("forkserver")
+    ctx.set_forkserver_preload(["bridge.sweep", "bridge.loop"])
+    return ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_worker_init)
+
+
+def run_local(mission: Mission, todo: Sequence[Cell], mode: str, jobs: int, report: Report) -> None:
+    """Fly cells in a local process pool, at most 2 x jobs in flight.
+
+    If a worker process dies (the pool breaks), the cells that were in flight are flown
+    again one at a time in a fresh one-worker pool: the one that breaks that one too is
+    recorded as an error, the others get their real result.
+    """
+    queue: deque[Cell] = deque(todo)
+    suspects: deque[Cell] = deque()
+    while queue or suspects:
+        if suspects:
+            cell = suspects.popleft()
+            with _pool(1) as p:
+                try:
+                    row = p.submit(run_cell, mission, cell, mode).result()
+                except BrokenProcessPool:
+                    row = error_row(cell, "worker process died")
+            report(row)
+            continue
+        pool = _pool(jobs)
+        inflight: dict[Any, Cell] = {}
+        try:
+            while queue or inflight:
+                while queue and len(inflight) < 2 * jobs:
+                    c = queue.popleft()
+                    inflight[pool.submit(run_cell, mission, c, mode)] = c
+                done, _ = wait(inflight, return_when=FIRST_COMPLETED)
+                broken = False
+                for f in done:
+                    c = inflight.pop(f)
+                    try:
+                        report(f.result())
+                    except BrokenProcessPool:
+                        suspects.append(c)
+                        broken = True
+                if broken:
+                    wait(inflight)
+                    suspects.extend(inflight.values())
+                    break
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
+
+
+def run_dask(client: Any, mission: Mission, todo: Sequence[Cell], mode: str, report: Report) -> None:
+    """Fly cells on a Dask distributed cluster; a task that fails there becomes an error row."""
+    from distributed import as_completed  # lazy: an optional dependency
+
+    mission_f = client.scatter(mission, broadcast=True)
+    futures = {client.submit(run_cell, mission_f, c, mode, pure=False): c for c in todo}
+    try:
+        for f in as_completed(futures):
+            c = futures[f]
+            try:
+                report(f.result())
+            except Exception as exc:  # e.g. KilledWorker: the worker died on this cell
+                report(error_row(c, f"{type(exc).__name__}: {exc}"))
+    finally:
+        client.cancel(list(futures))
+
+
+class Progress:
+    """Cells done / total, ETA and failures: a tqdm bar on a terminal, plain lines otherwise.
+
+    Plain lines (about 20 per sweep, and at most one a second besides) go to stderr as
+    ``sweep: 12/48 cells, 0 failed, ETA 3 s``; a test waits on them.
+    """
+
+    def __init__(self, total: int, done: int, stream: Any = None, enabled: bool = True) -> None:
+        self.total, self.done, self.failed, self.ran = total, done, 0, 0
+        self.stream = stream if stream is not None else sys.stderr
+        self.enabled = enabled
+        self._bar = None
+        self._t0 = time.monotonic()
+        self._last = 0.0
+        self._every = max(1, (total - done) // 20)
+        if enabled and getattr(self.stream, "isatty", lambda: False)():
+            from tqdm import tqdm  # lazy: only on a terminal
+
+            self._bar = tqdm(total=total, initial=done, unit="cell", desc="sweep", file=self.stream,
+                             dynamic_ncols=True, postfix={"failed": 0})
+
+    def update(self, row: Mapping[str, Any]) -> None:
+        self.done += 1
+        self.ran += 1
+        if row["outcome"] == "error":
+            self.failed += 1
+        if self._bar is not None:
+            self._bar.set_postfix(failed=self.failed, refresh=False)
+            self._bar.update(1)
+            return
+        now = time.monotonic()
+        if self.enabled and (self.ran % self._every == 0 or now - self._last >= 1.0 or self.done == self.total):
+            self._last = now
+            rate = (now - self._t0) / self.ran
+            self.stream.write(f"sweep: {self.done}/{self.total} cells, {self.failed} failed, "
+                              f"ETA {rate * (self.total - self.done):.0f} s\n")
+            self.stream.flush()
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.close()

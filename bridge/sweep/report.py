@@ -1,0 +1,249 @@
+"""A sweep's report: a class per cell, a table per pair of swept parameters, heat maps.
+
+In:  a sweep directory's ``cells.csv`` rows (``rms`` m, ``ripple_u2`` N, ``outcome``, the axes' values
+     in Hz, ms, %, packets) and its ``sweep.json`` (thresholds, axes)
+Out: ``report.md`` (thresholds, an overview per law, a table per pair of swept axes, the failed cells,
+     a command that reflies a row) and the heat maps ``map_<a>_<b>.png`` (log10 RMS, class per cell)
+
+``report.md`` and ``map_<param>_<param>.png`` are rebuilt from ``cells.csv`` (and the
+``sweep.json`` beside it, for the thresholds and the axes) by ``bsst report DIR``.
+
+Classes, worst first (a grid point flown with several seeds shows its worst class):
+
+- ``error``: the cell could not be flown (its ``error`` column says why);
+- ``diverged``: the plant's divergence check tripped, or the 3-D RMS error exceeds
+  ``diverged_rms_m``;
+- ``failsafe``: the vehicle's failsafe took over (no valid command for its timeout);
+- ``limit-cycling``: the ripple of u2 (its RMS about a 0.2 s moving average over the second
+  half of the flight, N) exceeds ``ripple_u2``: the attitude loop oscillates;
+- ``degraded``: the 3-D RMS error exceeds ``clean_rms_m``;
+- ``clean``: none of these.
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+from collections.abc import Mapping, Sequence
+from itertools import combinations
+from pathlib import Path
+from typing import Any
+
+from bridge.sweep.cells import CELLS_CSV, SWEEP_JSON, read_cells, read_sweep_json
+from bridge.sweep.classes import CLASSES, Classes, classify, thresholds_text
+from bridge.sweep.grid import AXES, LINK_AXES, SHORT
+from params import ConfigError
+
+NUMERIC_AXES = tuple(a for a in AXES if a != "controller")
+UNITS = {"rate_hz": "Hz", "delay_ms": "ms", "jitter_ms": "ms", "loss_pct": "%", "burst_len": "packets"}
+
+
+
+
+class Point:
+    """The runs sharing a pair of values: worst class (with how many runs share it), median RMS."""
+
+    def __init__(self, rows: Sequence[Mapping[str, Any]], classes: Classes) -> None:
+        cls = [classify(r, classes) for r in rows]
+        self.worst = max(cls, key=CLASSES.index)
+        self.count = cls.count(self.worst)
+        self.n = len(rows)
+        rms = [r["rms"] for r in rows if r.get("rms") is not None and math.isfinite(r["rms"])]
+        self.rms = statistics.median(rms) if rms else None
+
+    def text(self, sep: str = " ") -> str:
+        share = f" {self.count}/{self.n}" if self.count != self.n else ""
+        rms = f"{self.rms:.2g}" if self.rms is not None else "n/a"
+        return f"{self.worst}{share}{sep}{rms}"
+
+
+def _values(rows: Sequence[Mapping[str, Any]], axis: str) -> list[Any]:
+    return sorted({r[axis] for r in rows})
+
+
+def _fmt(v: Any) -> str:
+    return f"{v:g}" if isinstance(v, float) else str(v)
+
+
+def pairs(rows: Sequence[Mapping[str, Any]], swept: Sequence[str]) -> list[tuple[str, str]]:
+    """The parameter pairs to tabulate: every pair of swept numeric axes; with one swept axis,
+    that axis against a fixed one (a one-column map)."""
+    numeric = [a for a in NUMERIC_AXES if a in swept and len(_values(rows, a)) > 1]
+    if len(numeric) >= 2:
+        return list(combinations(numeric, 2))
+    if len(numeric) == 1:
+        other = next(a for a in ("loss_pct", "delay_ms", *NUMERIC_AXES) if a != numeric[0])
+        return [(numeric[0], other)]
+    return []
+
+
+def grid_points(rows: Sequence[Mapping[str, Any]], a: str, b: str, classes: Classes) -> dict[tuple[Any, Any], Point]:
+    groups: dict[tuple[Any, Any], list[Mapping[str, Any]]] = {}
+    for r in rows:
+        groups.setdefault((r[a], r[b]), []).append(r)
+    return {k: Point(v, classes) for k, v in groups.items()}
+
+
+def load_sweep_dir(path: str | Path) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """``cells.csv`` and ``sweep.json`` of a sweep directory (the latter inferred if absent)."""
+    p = Path(path)
+    if not p.is_dir():
+        raise ConfigError(f"{p}: not a directory")
+    rows = read_cells(p / CELLS_CSV)
+    meta_path = p / SWEEP_JSON
+    if meta_path.exists():
+        meta = read_sweep_json(meta_path)
+    else:
+        meta = {"mission": {"name": p.name}, "mode": "?", "swept": [a for a in AXES if len(_values(rows, a)) > 1],
+                "classes": {}}
+    return rows, meta
+
+
+def rebuild(path: str | Path, plots: bool = True) -> Path:
+    """``bsst report DIR``: write ``report.md`` and the heat maps again from ``cells.csv``."""
+    rows, meta = load_sweep_dir(path)
+    if not rows:
+        raise ConfigError(f"{Path(path) / CELLS_CSV}: no rows")
+    return write_report(Path(path), rows, meta, plots=plots)
+
+
+def write_report(path: Path, rows: Sequence[Mapping[str, Any]], meta: Mapping[str, Any], plots: bool = True) -> Path:
+    """Write ``report.md`` (and the ``map_*.png`` heat maps) into the sweep directory."""
+    try:
+        classes = Classes(**meta.get("classes", {}))
+    except (TypeError, ConfigError) as exc:
+        raise ConfigError(f"{path / SWEEP_JSON}: classes: {exc}") from None
+    swept = list(meta.get("swept") or [a for a in AXES if len(_values(rows, a)) > 1])
+    controllers = _values(rows, "controller")
+    prs = pairs(rows, swept)
+    mission = meta.get("mission", {}).get("name", "?")
+    seeds = _values(rows, "seed")
+    lines = [f"# Sweep report: {mission}", ""]
+    lines.append(f"Mode `{meta.get('mode', '?')}`, {len(rows)} runs: controllers {', '.join(controllers)}; "
+                 f"seeds {', '.join(map(str, seeds))}.")
+    for a in NUMERIC_AXES:
+        vals = _values(rows, a)
+        lines.append(f"- `{a}`: {', '.join(_fmt(v) for v in vals)} {UNITS[a]}" + (" (swept)" if a in swept else ""))
+    lines += ["", "Delay, jitter, loss and burst length apply to both link directions "
+              "(up: controller -> vehicle, down: vehicle -> controller).", ""]
+    lines += ["## Classes", ""] + thresholds_text(classes)
+    lines += ["", "A table cell gathers every run with its two values (all seeds, and every value of the "
+              "parameters not in the table): it shows the worst class (with how many runs have it, when not all) "
+              "and the median 3-D RMS position error (m, over the summary's RMS window).", ""]
+    lines += ["## Overview", "", "| controller | runs | " + " | ".join(CLASSES) + " | median RMS (m) |",
+              "|---|---:|" + "---:|" * len(CLASSES) + "---:|"]
+    for c in controllers:
+        mine = [r for r in rows if r["controller"] == c]
+        p = Point(mine, classes)
+        counts = [sum(1 for r in mine if classify(r, classes) == k) for k in CLASSES]
+        med = f"{p.rms:.3g}" if p.rms is not None else "n/a"
+        lines.append(f"| {c} | {len(mine)} | " + " | ".join(map(str, counts)) + f" | {med} |")
+    maps: list[Path] = []
+    for a, b in prs:
+        name = f"map_{SHORT[a]}_{SHORT[b]}"
+        lines += ["", f"## {a} x {b}", ""]
+        if len(controllers) > 1:
+            lines += [f"![{a} x {b}, all controllers]({name}.png)", ""]
+        for c in controllers:
+            mine = [r for r in rows if r["controller"] == c]
+            pts = grid_points(mine, a, b, classes)
+            av, bv = _values(mine, a), _values(mine, b)
+            lines += [f"### {c}", "", f"| {a} \\ {b} | " + " | ".join(_fmt(v) for v in bv) + " |",
+                      "|---|" + "---|" * len(bv)]
+            for x in av:
+                lines.append(f"| {_fmt(x)} | " + " | ".join(pts[(x, y)].text() if (x, y) in pts else "-" for y in bv)
+                             + " |")
+            fname = f"{name}_{c}.png" if len(controllers) > 1 else f"{name}.png"
+            lines += ["", f"![{c}: {a} x {b}]({fname})", ""]
+        if plots:
+            maps += heat_maps(path, rows, a, b, controllers, classes)
+    failed = [r for r in rows if r["outcome"] == "error"]
+    if failed:
+        lines += ["", "## Cells that could not be flown", "", "| controller | " + " | ".join(NUMERIC_AXES)
+                  + " | seed | error |", "|---" * (len(NUMERIC_AXES) + 3) + "|"]
+        for r in failed[:50]:
+            lines.append(f"| {r['controller']} | " + " | ".join(_fmt(r[a]) for a in NUMERIC_AXES)
+                         + f" | {r['seed']} | {r['error']} |")
+    lines += ["", "## Reproducing a row", "",
+              "Each row of `cells.csv` is one offline flight of `mission.toml` (in this directory); for example the "
+              "first one:", "", "```sh", reproduce(rows[0], swept), "```", ""]
+    out = path / "report.md"
+    tmp = path / ".report.md.tmp"
+    tmp.write_text("\n".join(lines))
+    tmp.replace(out)
+    return out
+
+
+def reproduce(row: Mapping[str, Any], swept: Sequence[str]) -> str:
+    """The ``bsst sim`` command that flies one row again."""
+    flags = [f"--controller {row['controller']}", f"--rate {row['rate_hz']:g}"]
+    flags += [f"--{SHORT[a]} {row[a]:g}" for a in LINK_AXES if a in swept]
+    return f"bsst sim mission.toml {' '.join(flags)} --seed {row['seed']}"
+
+
+def heat_maps(path: Path, rows: Sequence[Mapping[str, Any]], a: str, b: str, controllers: Sequence[str],
+              classes: Classes) -> list[Path]:
+    """``map_<a>_<b>.png`` (one panel per controller, shared colour scale) and, with several
+    controllers, ``map_<a>_<b>_<controller>.png`` for each: log10 RMS, class in each cell."""
+    import matplotlib  # lazy: matplotlib costs start-up time and is needed only for figures
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # lazy: as matplotlib
+    import numpy as np  # lazy: only the heat maps need arrays
+
+    per = {c: grid_points([r for r in rows if r["controller"] == c], a, b, classes) for c in controllers}
+    av, bv = _values(rows, a), _values(rows, b)
+    logs = [math.log10(p.rms) for pts in per.values() for p in pts.values() if p.rms is not None and p.rms > 0]
+    vmin, vmax = (min(logs), max(logs)) if logs else (-6.0, 0.0)
+    if vmax - vmin < 1e-9:
+        vmin, vmax = vmin - 0.5, vmax + 0.5
+    name = f"map_{SHORT[a]}_{SHORT[b]}"
+    written: list[Path] = []
+
+    def draw(ax: Any, c: str) -> Any:
+        pts = per[c]
+        z = np.full((len(av), len(bv)), np.nan)
+        for i, x in enumerate(av):
+            for j, y in enumerate(bv):
+                p = pts.get((x, y))
+                if p is not None and p.rms is not None and p.rms > 0:
+                    z[i, j] = math.log10(p.rms)
+        cmap = matplotlib.colormaps["viridis"]
+        cmap = cmap.with_extremes(bad="#bbbbbb")
+        im = ax.imshow(np.ma.masked_invalid(z), origin="lower", cmap=cmap, vmin=vmin, vmax=vmax, aspect="auto")
+        for i, x in enumerate(av):
+            for j, y in enumerate(bv):
+                p = pts.get((x, y))
+                if p is None:
+                    continue
+                bright = not math.isnan(z[i, j]) and (z[i, j] - vmin) / (vmax - vmin) > 0.6
+                ax.text(j, i, p.text("\n"), ha="center", va="center", fontsize=7,
+                        color="black" if bright or math.isnan(z[i, j]) else "white")
+        ax.set_xticks(range(len(bv)), [_fmt(v) for v in bv])
+        ax.set_yticks(range(len(av)), [_fmt(v) for v in av])
+        ax.set_xlabel(f"{b} [{UNITS[b]}]")
+        ax.set_ylabel(f"{a} [{UNITS[a]}]")
+        ax.set_title(c)
+        return im
+
+    def save(fig: Any, im: Any, axes: Any, fname: str) -> None:
+        fig.colorbar(im, ax=axes, label="log10 3-D RMS error [m]", shrink=0.9)
+        fig.suptitle(f"{SHORT[a]} x {SHORT[b]}: median RMS and worst class per cell", fontsize=10)
+        p = path / fname
+        fig.savefig(p, dpi=80)
+        plt.close(fig)
+        written.append(p)
+
+    w = 1.0 + 0.95 * len(bv)
+    h = 1.3 + 0.6 * len(av)
+    fig, axs = plt.subplots(1, len(controllers), figsize=(w * len(controllers) + 1.2, h + 0.4), squeeze=False,
+                            layout="constrained")
+    im = None
+    for ax, c in zip(axs[0], controllers, strict=True):
+        im = draw(ax, c)
+    save(fig, im, axs[0].tolist(), f"{name}.png")
+    if len(controllers) > 1:
+        for c in controllers:
+            fig, ax = plt.subplots(figsize=(w + 1.2, h + 0.4), layout="constrained")
+            save(fig, draw(ax, c), ax, f"{name}_{c}.png")
+    return written

@@ -1,0 +1,160 @@
+"""A whole campaign as one value (:class:`Sweep`), and the sweep TOML file that describes it.
+
+In:  a sweep file (``mission = ...``, ``[grid]``, ``[classes]``, ``mode``, ``jobs``) or a
+     mission and a grid
+Out: a validated :class:`Sweep`, and its identity (what ``sweep.json`` holds)
+
+Every law, rate and combination of link values is built once through
+:func:`bridge.core.flight.prepare` before any cell flies.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field
+from itertools import product
+from pathlib import Path
+from typing import Any
+
+from bridge.sweep.cells import COLUMNS
+from bridge.sweep.classes import Classes
+from bridge.sweep.grid import AXES, LINK_AXES, MODES, RANGES, Cell, Grid, cell_flight, cells, mission_value
+from missions import Mission, load_mission
+from missions.mission import law_spec_from, law_spec_problem, mission_path
+from params import ConfigError, Table, load_toml
+
+
+@dataclass(frozen=True)
+class Sweep:
+    """A whole campaign: the mission, its grid, how to fly the cells and how to class them."""
+
+    mission: Mission
+    grid: Grid
+    mode: str = "offline"
+    classes: Classes = field(default_factory=Classes)
+    jobs: int | None = None  # default worker count (a sweep file may set it)
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise ConfigError(f"mode: must be one of {', '.join(MODES)}; got {self.mode!r}")
+
+    def cells(self) -> list[Cell]:
+        return cells(self.mission, self.grid)
+
+    def identity(self) -> dict[str, Any]:
+        """What ``sweep.json`` records, and what ``--resume`` must find unchanged."""
+        return json.loads(json.dumps({
+            "mission": self.mission.to_dict(),
+            "mode": self.mode,
+            "grid": self.grid.to_dict(),
+            "seeds": list(self.grid.seed_list(self.mission)),
+            "axes": {a: _axis_values(self, a) for a in AXES},
+            "swept": list(self.grid.swept()),
+            "classes": asdict(self.classes),
+            "columns": list(COLUMNS),
+        }))
+
+    def validate(self) -> None:
+        """Build the flight of every law, every rate and every combination of link values once
+        (not every cell), so that a bad value fails before any cell runs."""
+        base = self.cells()[0]
+        probes = [_replace_cell(base, **{a: v}) for a in ("controller", "rate_hz") for v in getattr(self.grid, a)]
+        lists = [getattr(self.grid, a) or (getattr(base, a),) for a in LINK_AXES]
+        probes += [_replace_cell(base, **dict(zip(LINK_AXES, vs, strict=True))) for vs in product(*lists)]
+        for c in probes:
+            try:
+                cell_flight(self.mission, c)
+            except ConfigError as exc:
+                raise ConfigError(f"sweep cell ({c.label()}): {exc}") from None
+
+
+def _axis_values(s: Sweep, axis: str) -> list[Any]:
+    return list(getattr(s.grid, axis) or (mission_value(s.mission, axis),))
+
+
+def _replace_cell(c: Cell, **kw: Any) -> Cell:
+    d = asdict(c)
+    d.update(kw)
+    d["link"] = tuple(d["link"])
+    return Cell(**d)
+
+
+def load_sweep(path: str | Path) -> Sweep:
+    """Read a sweep file (TOML): ``mission`` (path relative to the file), ``mode``, ``seeds``,
+    ``jobs``, ``[grid]`` (axis = [values]) and ``[classes]`` (thresholds). Errors name file and key."""
+    p = Path(path)
+    src = str(p)
+    t = Table(load_toml(p), src)
+    mpath = Path(t.string("mission"))
+    if not mpath.is_absolute():
+        mpath = p.parent / mpath
+    if not mpath.exists():
+        raise t.error("mission", f"no such file {mpath}")
+    mission = load_mission(mpath)
+    mode = t.string("mode", "offline", choices=MODES)
+    jobs = t.integer("jobs", 0, lo=0, hi=1024) or None
+    seeds_raw = t.raw("seeds", 1)
+    if isinstance(seeds_raw, list):
+        seeds: int | tuple[int, ...] = tuple(_int_list(t, "seeds", 0, 2**31 - 1))
+    else:
+        seeds = t.integer("seeds", 1, lo=1, hi=10000)
+    g = t.table("grid")
+    axes: dict[str, Any] = {}
+    for a in AXES:
+        if g.has(a):
+            if a == "controller":
+                v = g.raw(a)
+                if isinstance(v, str):
+                    v = [v]
+                if not isinstance(v, list) or not v or not all(isinstance(x, str) for x in v):
+                    raise g.error(a, "expected a list of law names")
+                for x in v:
+                    why = law_spec_problem(x)
+                    if why:
+                        raise g.error(a, why)
+                axes[a] = tuple(law_spec_from(x, Path(path).parent) for x in v)
+            else:
+                lo, hi = RANGES[a]
+                axes[a] = tuple(_number_list(g, a, lo, hi))
+    g.done()
+    classes = Classes.from_table(t.table("classes"))
+    t.done()
+    try:
+        grid = Grid(seeds=seeds, **axes)
+    except ConfigError as exc:
+        raise ConfigError(f"{src}: {exc}") from None
+    return Sweep(mission, grid, mode, classes, jobs)
+
+
+def _number_list(t: Table, key: str, lo: float, hi: float) -> list[float]:
+    v = t.raw(key)
+    if isinstance(v, (int, float)) and not isinstance(v, bool):
+        v = [v]
+    if not isinstance(v, list) or not v:
+        raise t.error(key, f"expected a non-empty list of numbers, got {v!r}")
+    out = []
+    for i, x in enumerate(v):
+        if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+            raise t.error(key, f"element {i} must be a finite number, got {x!r}")
+        if not lo <= x <= hi:
+            raise t.error(key, f"element {i} must be in [{lo:g}, {hi:g}], got {x:g}")
+        out.append(float(x))
+    if len(set(out)) != len(out):
+        raise t.error(key, "repeated value")
+    return out
+
+
+def _int_list(t: Table, key: str, lo: int, hi: int) -> list[int]:
+    v = t.raw(key)
+    if not isinstance(v, list) or not v or not all(isinstance(x, int) and not isinstance(x, bool) for x in v):
+        raise t.error(key, f"expected a count or a non-empty list of integers, got {v!r}")
+    if not all(lo <= x <= hi for x in v) or len(set(v)) != len(v):
+        raise t.error(key, f"seeds must be distinct and in [{lo}, {hi}]")
+    return list(v)
+
+
+def is_sweep_file(path: str | Path) -> bool:
+    """Whether a TOML file declares a sweep (it has a ``[grid]`` table or a ``mission`` key)."""
+    data = load_toml(mission_path(path))
+    return "grid" in data or isinstance(data.get("mission"), str)

@@ -1,0 +1,164 @@
+"""The one interface every control law implements, the laws by name, and a user's own law.
+
+A law is a class built as ``Law(nominal, gains, rate_hz)`` and stepped once per control
+period by :class:`controller.Controller`:
+
+1. ``update(t, state, ref, omega_d)`` -> the inputs ``(u1, u2, u3, u4)``: collective thrust
+   u1 in N and the torque inputs u2, u3, u4 in N (the model has (l/I)·u, eq. 6, so the
+   torques are l·u in N m), in the paper frame. ``t`` is mission time (s); ``state`` the
+   12 states of eq. (7) in their order
+   (x, ẋ, y, ẏ, z, ż in m and m/s; φ, φ̇, θ, θ̇, ψ, ψ̇ in rad and rad/s); ``ref`` the
+   reference sample: for x, y, z (m) and ψ (rad) each a tuple of the value and its first
+   four time derivatives; ``omega_d`` the signed rotor speed sum of eq. (5) (rad/s) for the
+   gyroscopic term.
+2. ``advance(saturated, hold)``: step the law's integrators over one period; ``saturated``
+   says per input whether the actuation clipped it (anti-windup), ``hold`` freezes them
+   (a stale state: see :mod:`controller.link_guard`).
+3. ``reset()``: forget the integrators (a re-arm).
+
+and it exposes ``desired`` = (φ_d, θ_d) in rad, the attitude its outer loop asked for, which
+goes to the trace. ``bsst``, ``smc`` and ``pid`` are the built-in laws; any other class that
+fits is flown with ``--controller path/to/file.py:ClassName`` or
+``--controller package.module:ClassName`` (``examples/my_law.py`` is a template).
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import inspect
+import math
+import sys
+from collections.abc import Callable
+from functools import partial
+from pathlib import Path
+from typing import Protocol, runtime_checkable
+
+from controller.bsst import BacksteppingSuperTwisting
+from controller.gains import Gains
+from controller.nominal import Nominal
+from controller.pid import CascadedPid
+from missions import CONTROLLERS
+from missions.references import Sample
+from params import ConfigError
+
+Quad = tuple[float, float, float, float]
+
+
+@runtime_checkable
+class Law(Protocol):
+    """What a control law takes and gives (see the module docstring for units and frames)."""
+
+    desired: tuple[float, float]  # (phi_d, theta_d) rad: the attitude the outer loop asks for
+
+    def update(self, t: float, state: tuple[float, ...], ref: Sample, omega_d: float) -> Quad:
+        """The inputs (u1, u2, u3, u4), all in N, for ``state`` at mission time ``t`` (s)."""
+        ...
+
+    def advance(self, saturated: tuple[bool, bool, bool, bool], hold: bool = False) -> None:
+        """Step the integrators over one control period."""
+        ...
+
+    def reset(self) -> None:
+        """Forget the integrators."""
+        ...
+
+
+LawFactory = Callable[[Nominal, Gains, float], Law]  # (nominal, gains, rate_hz) -> a law
+
+BUILTIN: dict[str, LawFactory] = {
+    "bsst": BacksteppingSuperTwisting,
+    "smc": partial(BacksteppingSuperTwisting, reaching="sign"),
+    "pid": CascadedPid,
+}
+assert tuple(BUILTIN) == CONTROLLERS  # the names a mission may give are the laws built in here
+_METHODS = ("update", "advance", "reset")
+
+
+def law_problem(law: object) -> str | None:
+    """Why ``law`` (a built law) does not fit :class:`Law`, or None if it does."""
+    for name in _METHODS:
+        if not callable(getattr(law, name, None)):
+            return f"has no method {name}()"
+    desired = getattr(law, "desired", None)
+    if not (isinstance(desired, tuple) and len(desired) == 2
+            and all(isinstance(v, (int, float)) and math.isfinite(v) for v in desired)):
+        return f"its 'desired' must be a tuple (phi_d, theta_d) of two finite numbers, got {desired!r}"
+    return None
+
+
+def is_builtin(spec: str) -> bool:
+    return spec in BUILTIN
+
+
+def resolve_law(spec: str) -> LawFactory:
+    """The factory of the law named ``spec``: a built-in name, ``path/to/file.py:ClassName`` or
+    ``package.module:ClassName``. :class:`ConfigError` naming what is wrong (the file, the
+    module, the class) otherwise; the class's fit is checked by :func:`make_law`."""
+    if spec in BUILTIN:
+        return BUILTIN[spec]
+    where, sep, cls_name = spec.rpartition(":")
+    if not sep or not where or not cls_name.isidentifier():
+        raise ConfigError(f"controller {spec!r}: must be one of {', '.join(BUILTIN)}, "
+                          "or path/to/file.py:ClassName, or package.module:ClassName")
+    if where.endswith(".py") or "/" in where or "\\" in where:
+        module = _load_file(Path(where), spec)
+    else:
+        try:
+            module = importlib.import_module(where)
+        except ModuleNotFoundError as exc:
+            raise ConfigError(f"controller {spec!r}: no module named {exc.name!r}") from None
+        except Exception as exc:  # the user's module raised while importing: say so in one line
+            raise ConfigError(f"controller {spec!r}: importing {where} raised {type(exc).__name__}: {exc}") from None
+    cls = getattr(module, cls_name, None)
+    if cls is None:
+        raise ConfigError(f"controller {spec!r}: {where} has no class {cls_name!r}")
+    if not inspect.isclass(cls):
+        raise ConfigError(f"controller {spec!r}: {cls_name} is not a class")
+    missing = [m for m in _METHODS if not callable(getattr(cls, m, None))]
+    if missing:
+        raise ConfigError(f"controller {spec!r}: {cls_name} does not fit the Law interface "
+                          f"(controller/law.py): no method {missing[0]}()")
+    return cls
+
+
+def _load_file(path: Path, spec: str):  # -> module
+    if not path.is_file():
+        raise ConfigError(f"controller {spec!r}: no file {path}")
+    name = f"bsst_user_law_{abs(hash(str(path.resolve())))}"
+    if name in sys.modules:  # one module per file per process, as an import would
+        return sys.modules[name]
+    mod_spec = importlib.util.spec_from_file_location(name, path)
+    if mod_spec is None or mod_spec.loader is None:
+        raise ConfigError(f"controller {spec!r}: {path} is not a Python file")
+    module = importlib.util.module_from_spec(mod_spec)
+    sys.modules[name] = module
+    try:
+        mod_spec.loader.exec_module(module)
+    except Exception as exc:  # a syntax error or a raise in the user's file: one line, no traceback
+        del sys.modules[name]
+        raise ConfigError(f"controller {spec!r}: loading {path} raised {type(exc).__name__}: {exc}") from None
+    return module
+
+
+def make_law(spec: str | LawFactory, nominal: Nominal, gains: Gains, rate_hz: float) -> Law:
+    """Build the law ``spec`` (a name of :func:`resolve_law`, or a factory) and check that it fits."""
+    factory = resolve_law(spec) if isinstance(spec, str) else spec
+    label = spec if isinstance(spec, str) else _label(spec)
+    try:
+        law = factory(nominal, gains, rate_hz)
+    except Exception as exc:  # the user's constructor: one line naming it
+        raise ConfigError(f"controller {label!r}: building it as ({label.rpartition(':')[2]})(nominal, gains, "
+                          f"rate_hz) raised {type(exc).__name__}: {exc}") from None
+    why = law_problem(law)
+    if why:
+        raise ConfigError(f"controller {label!r}: does not fit the Law interface (controller/law.py): {why}")
+    return law
+
+
+def _label(factory: LawFactory) -> str:
+    """``file.py:Class`` of a law class (what a user would have written), else its repr."""
+    try:
+        return f"{inspect.getfile(factory)}:{factory.__qualname__}"  # type: ignore[arg-type, union-attr]
+    except (TypeError, AttributeError, OSError):
+        return repr(factory)

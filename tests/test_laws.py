@@ -1,0 +1,156 @@
+"""Every control law fits the one interface (controller/law.py), and a user's own law flies.
+
+As RotorPy's controller template and its test: the built-in laws and the template
+``examples/my_law.py`` are each built, stepped on a hover and checked against the
+``Law`` protocol; the template flies the sine mission offline and as a lockstep SITL
+session (real processes, real UDP), and the two traces agree. A law that cannot be
+found or does not fit is bad input: exit 2, one line naming it, no traceback.
+"""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bridge import simulate
+from bridge.record.runlog import read_trace
+from bridge.session import instance_slot
+from controller import Controller, Gains, Nominal
+from controller.law import BUILTIN, Law, law_problem, make_law, resolve_law
+from missions import Mission, Sine, load_mission
+from params import ConfigError
+from plant import load_profile
+
+ROOT = Path(__file__).resolve().parents[1]
+MY_LAW = f"{ROOT / 'examples' / 'my_law.py'}:MyLaw"
+HOVER = (0.0,) * 12
+REF = ((0.0,) * 5, (0.0,) * 5, (1.0, 0.0, 0.0, 0.0, 0.0), (0.0,) * 5)
+
+
+@pytest.fixture(scope="module")
+def nominal() -> Nominal:
+    return Nominal.from_profile(load_profile("paper"))
+
+
+@pytest.mark.parametrize("spec", [*BUILTIN, MY_LAW])
+def test_every_law_fits_the_interface(spec: str, nominal: Nominal) -> None:
+    law = make_law(spec, nominal, Gains(), 250.0)
+    assert isinstance(law, Law)
+    assert law_problem(law) is None
+    u = law.update(0.0, HOVER, REF, 0.0)
+    assert len(u) == 4 and all(math.isfinite(v) for v in u)
+    assert u[0] > 0.0, "below its reference the law asks for thrust"
+    law.advance((False,) * 4, hold=False)
+    law.advance((True,) * 4, hold=True)
+    law.reset()
+    assert len(law.desired) == 2 and all(math.isfinite(v) for v in law.desired)
+    ctl = Controller(spec, nominal, Gains(), 250.0)
+    cmd = ctl.step(0.0, HOVER, REF)
+    assert len(cmd.normalised) == 4 and all(math.isfinite(v) for v in cmd.normalised)
+
+
+class NoDesired:
+    def __init__(self, nominal: Nominal, gains: Gains, rate_hz: float) -> None:
+        pass
+
+    def update(self, t, state, ref, omega_d):
+        return (0.0, 0.0, 0.0, 0.0)
+
+    def advance(self, saturated, hold=False):
+        pass
+
+    def reset(self):
+        pass
+
+
+def test_a_law_without_desired_does_not_fit(nominal: Nominal) -> None:
+    with pytest.raises(ConfigError, match="does not fit the Law interface.*desired"):
+        make_law(NoDesired, nominal, Gains(), 250.0)
+
+
+def test_the_template_flies_the_sine_offline_and_in_lockstep_alike(tmp_path: Path) -> None:
+    offline = simulate(ROOT / "missions" / "sine.toml", controller="examples/my_law.py:MyLaw", plots=False)
+    assert offline.outcome == "completed"
+    assert offline.rms < 0.02
+    with instance_slot() as n:
+        r = subprocess.run([sys.executable, "-m", "bridge", "sitl", "missions/sine.toml", "--controller",
+                            "examples/my_law.py:MyLaw", "--instance", str(n), "--no-plots", "--out",
+                            str(tmp_path / "sitl")], cwd=ROOT, capture_output=True, text=True, timeout=240)
+    assert r.returncode == 0, r.stderr
+    lock = read_trace(tmp_path / "sitl" / "trace.csv")
+    assert len(lock["t"]) == len(offline.trace["t"])
+    for c in ("x", "y", "z"):
+        assert np.max(np.abs(lock[c] - offline.trace[c])) < 1e-4
+    flown = load_mission(tmp_path / "sitl" / "mission.toml")
+    assert flown.controller == MY_LAW  # the run records the law's file, absolute
+
+
+def test_a_mission_names_a_law_relative_to_its_own_folder(tmp_path: Path) -> None:
+    law = tmp_path / "laws" / "mine.py"
+    law.parent.mkdir()
+    law.write_text((ROOT / "examples" / "my_law.py").read_text())
+    mission = tmp_path / "m.toml"
+    mission.write_text('duration_s = 2.0\ncontroller = "laws/mine.py:MyLaw"\n[trajectory]\nkind = "sine"\n')
+    m = load_mission(mission)
+    assert m.controller == f"{law}:MyLaw"
+    run = simulate(m, plots=False)
+    assert run.outcome == "completed"
+
+
+def test_a_module_law_is_found_by_import(nominal: Nominal) -> None:
+    sys.path.insert(0, str(ROOT / "examples"))
+    try:
+        assert resolve_law("my_law:MyLaw").__name__ == "MyLaw"
+    finally:
+        sys.path.remove(str(ROOT / "examples"))
+
+
+BAD_LAWS = {  # file name -> source of a law file that does not fit, and what the one line must name
+    "no_update.py": ("class L:\n    desired = (0.0, 0.0)\n    def advance(self, s, h=False): pass\n"
+                     "    def reset(self): pass\n    def __init__(self, n, g, r): pass\n", "update"),
+    "bad_init.py": ("class L:\n    desired = (0.0, 0.0)\n    def __init__(self): pass\n"
+                    "    def update(self, *a): return (0, 0, 0, 0)\n    def advance(self, *a): pass\n"
+                    "    def reset(self): pass\n", "TypeError"),
+    "raises.py": ("raise RuntimeError('broken on import')\n", "broken on import"),
+    "syntax.py": ("class L(:\n", "SyntaxError"),
+}
+
+
+@pytest.mark.parametrize("command", ["sim", "sitl", "controller", "sweep"])
+@pytest.mark.parametrize("spec, names", [
+    ("examples/nowhere.py:MyLaw", "nowhere.py"),
+    ("examples/my_law.py:NoSuchLaw", "NoSuchLaw"),
+    ("no_such_package.laws:MyLaw", "no_such_package"),
+    ("json:JSONDecoder", "JSONDecoder"),
+])
+def test_a_law_that_cannot_be_flown_is_refused_in_one_line(command: str, spec: str, names: str) -> None:
+    r = subprocess.run([sys.executable, "-m", "bridge", command, "missions/sine.toml", "--controller", spec],
+                       cwd=ROOT, capture_output=True, text=True, timeout=60)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2, r.stderr
+    assert len(lines) == 1 and names in lines[0] and "Traceback" not in r.stderr, r.stderr
+
+
+@pytest.mark.parametrize("name", sorted(BAD_LAWS))
+def test_a_law_file_that_does_not_fit_is_named(tmp_path: Path, name: str) -> None:
+    source, names = BAD_LAWS[name]
+    (tmp_path / name).write_text(source)
+    r = subprocess.run([sys.executable, "-m", "bridge", "sim", "missions/sine.toml", "--controller",
+                        f"{tmp_path / name}:L"], cwd=ROOT, capture_output=True, text=True, timeout=60)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1, r.stderr
+    assert names in lines[0] and name in lines[0], lines[0]
+
+
+def test_a_sweep_compares_a_users_law_with_the_built_in_ones(tmp_path: Path) -> None:
+    from bridge.sweep import Grid, sweep
+
+    m = Mission(Sine(), duration_s=3.0, name="short")
+    rows = sweep(m, Grid(controller=("bsst", "examples/my_law.py:MyLaw")), jobs=1, report=False)
+    assert [r["outcome"] for r in rows] == ["completed", "completed"]
+    assert rows[1]["controller"] == "examples/my_law.py:MyLaw"

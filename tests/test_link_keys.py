@@ -1,0 +1,148 @@
+"""Every ``[link]`` key has its flag, one range, and a line in the README (a meta-test, as
+python-control's kwargs_test walks its functions' keywords).
+
+The keys are the link model's own tables (:data:`bridge.core.link.LINK_KEYS`); the test
+checks first that those tables are the whole of what ``link_from_table`` reads. For each
+key: a ``bsst`` flag sets it (``bsst sim``'s parser, read back by ``link_table_from_args``);
+for a number, the mission loader and the flag accept the same bounds and refuse the same
+values just outside them; and a line of README.md names the key and its flag.
+"""
+
+from __future__ import annotations
+
+import ast
+import math
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from bridge.cli import build_parser, link_table_from_args
+from bridge.cli.flags import GUARD_FLAGS, LINK_FLAGS, UsageError
+from bridge.core import link as link_model
+from bridge.core.link import (
+    BLACKOUT_DURATION_RANGE_S,
+    DIRECTION_KEYS,
+    GUARD_RANGES,
+    LINK_KEYS,
+    LO_OPEN,
+    NUMBER_RANGES,
+    SEED_RANGE,
+    link_from_table,
+)
+from params import ConfigError
+
+ROOT = Path(__file__).resolve().parents[1]
+# the flag of each key that no LINK_FLAGS / GUARD_FLAGS row names
+OTHER_FLAGS = {"jitter": "--jitter-dist", "seed": "--link-seed", "blackouts": "--blackout",
+               "compensation": "--compensation"}
+SAMPLE = {"jitter": "normal", "seed": "7", "blackouts": "3:1", "compensation": "predict", "stop_ms": "100"}
+
+
+def flag_of(key: str) -> str:
+    flags = {k: f"--{stem}" for stem, k, *_ in LINK_FLAGS} | {k: f for f, k, *_ in GUARD_FLAGS} | OTHER_FLAGS
+    assert key in flags, f"[link] key {key} has no command-line flag"
+    return flags[key]
+
+
+def parse(*argv: str) -> dict[str, Any]:
+    return link_table_from_args(build_parser().parse_args(["sim", "missions/sine.toml", *argv]))
+
+
+def accepted(table: dict[str, Any]) -> bool:
+    try:
+        link_from_table(table, "test.toml")
+    except ConfigError:
+        return False
+    return True
+
+
+def flag_accepts(flag: str, value: float) -> bool:
+    try:
+        parse(flag, repr(value))
+    except UsageError:
+        return False
+    return True
+
+
+def test_the_key_tables_are_all_that_the_loader_reads() -> None:
+    tree = ast.parse(Path(link_model.__file__).read_text())
+    read = set()
+    for node in ast.walk(tree):
+        if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                and node.func.attr in ("number", "string", "integer", "boolean", "has", "raw", "table", "error")
+                and node.args and isinstance(node.args[0], ast.Constant) and isinstance(node.args[0].value, str)):
+            read.add(node.args[0].value)
+    names_in_loops = set(NUMBER_RANGES) | {"up", "down"}  # read in loops: t.number(name, ...), t.table(d)
+    assert read | names_in_loops == set(LINK_KEYS) | {"up", "down"} | {"burst_len"}, read
+    assert not accepted({"no_such_key": 1})
+
+
+@pytest.mark.parametrize("key", LINK_KEYS)
+def test_every_key_has_its_flag(key: str) -> None:
+    flag = flag_of(key)
+    value = SAMPLE.get(key, "1")
+    if key == "burst_len":
+        table = parse(flag, "2", "--loss", "10")
+    elif key == "command_lag_ms":
+        table = parse(flag, value, "--compensation", "predict")
+    else:
+        table = parse(flag, value)
+    if key in DIRECTION_KEYS:
+        assert key in table["up"] and key in table["down"], table
+        up = parse(flag.replace("--", "--up-", 1), value, *(["--up-loss", "10"] if key == "burst_len" else [])) \
+            if key not in OTHER_FLAGS or key == "blackouts" else None
+        if up is not None:
+            assert key in up["up"] and key not in up.get("down", {}), up
+    else:
+        assert key in table, table
+    assert accepted(table), table
+
+
+@pytest.mark.parametrize("key", [*NUMBER_RANGES, *GUARD_RANGES])
+def test_every_number_has_one_range(key: str) -> None:
+    lo, hi = {**NUMBER_RANGES, **GUARD_RANGES}[key]
+    flag = flag_of(key)
+    extra: dict[str, Any] = {"compensation": "predict"} if key == "command_lag_ms" else {}
+    if key == "stale_ms":
+        extra["stop_ms"] = hi
+    pre = ["--compensation", "predict"] if key == "command_lag_ms" else []
+    if key == "stale_ms":
+        pre = ["--stop-after", repr(hi)]
+    outside = (hi * 1.001 + 1.0, lo - 1.0)
+    for v in outside:
+        assert not accepted({key: v, **extra}), (key, v)
+        assert not flag_accepts(flag, v), (flag, v)
+    for v, ok in ((hi, True), (lo, key not in LO_OPEN), (math.nan, False), (math.inf, False)):
+        if key == "burst_len" and v == hi:
+            extra_b = {"loss_pct": 50.0}
+            assert accepted({key: v, **extra_b})
+            continue
+        assert accepted({key: v, **extra}) == ok, (key, v)
+        try:
+            parse(*pre, flag, repr(v))
+            took = True
+        except UsageError:
+            took = False
+        assert took == ok, (flag, v)
+
+
+def test_the_seed_and_the_blackouts_have_one_range() -> None:
+    lo, hi = SEED_RANGE
+    assert accepted({"seed": hi}) and not accepted({"seed": hi + 1}) and not accepted({"seed": lo - 1})
+    assert parse("--link-seed", str(hi))["up"]["seed"] == hi
+    for bad in (str(hi + 1), str(lo - 1)):
+        with pytest.raises(UsageError):
+            parse("--link-seed", bad)
+    d_lo, d_hi = BLACKOUT_DURATION_RANGE_S
+    assert accepted({"blackouts": [[0.0, d_hi]]}) and not accepted({"blackouts": [[0.0, d_lo]]})
+    assert parse("--blackout", f"0:{d_hi:g}")
+    with pytest.raises(UsageError):
+        parse("--blackout", f"0:{d_lo:g}")
+
+
+@pytest.mark.parametrize("key", LINK_KEYS)
+def test_every_key_has_a_readme_line(key: str) -> None:
+    flag = flag_of(key)
+    lines = [ln for ln in (ROOT / "README.md").read_text().splitlines() if f"`{key}`" in ln and flag in ln]
+    assert lines, f"README.md has no line naming [link] key `{key}` with its flag {flag}"
