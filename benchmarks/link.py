@@ -20,9 +20,15 @@ the processes) with ``--delay`` ms each way (default 20), without and with
 the predictor survives on the wall clock, where the controller learns the state's age from
 the arrival schedule and TIMESYNC instead of the link model.
 
+``profiles``: the sine mission (30 s, 250 Hz) offline through each named link profile
+(``bridge/core/linkprofiles``, ``--link-profile NAME``) and a perfect link, with BS-ST without and
+with ``compensation = "predict"``: outcome, 3-D RMS over t >= 10 s and the sweep's class
+(``bridge.sweep.classes``, default thresholds), as a Markdown table (docs/links.md shows it).
+
     .venv/bin/python benchmarks/link.py [relay] [--seconds 10] [--delay MS]
     .venv/bin/python benchmarks/link.py control [--tol 0.25]
     .venv/bin/python benchmarks/link.py realtime [--delay 20]
+    .venv/bin/python benchmarks/link.py profiles
 """
 
 from __future__ import annotations
@@ -198,9 +204,38 @@ def bench_realtime(delay_ms: float) -> int:
     return 0
 
 
+def bench_profiles() -> int:
+    from bridge import simulate
+    from bridge.core.linkprofile import load_link_profile, profile_names
+    from bridge.sweep.cells import ripple_rms
+    from bridge.sweep.classes import Classes, classify
+
+    sine = ROOT / "missions" / "sine.toml"
+    print(f"sine mission (30 s), 250 Hz, offline, BS-ST; 3-D RMS over t >= 10 s; class: bridge.sweep.classes "
+          f"{Classes()}; Python {sys.version.split()[0]}")
+    print("| profile | link (each way) | compensation | outcome | RMS (m) | class | state delay p50 (ms) | "
+          "commands lost (%) |")
+    print("|---|---|---|---|---|---|---|---|")
+    for name in ("perfect", *profile_names()):
+        what = "none" if name == "perfect" else load_link_profile(name).description
+        for comp in ("none", "predict"):
+            link = {"compensation": comp} | ({} if name == "perfect" else {"profile": name})
+            r = simulate(sine, plots=False, link=link)
+            tr, s = r.trace, r.summary
+            ripple = ripple_rms(tr["t"], tr["u2"], s["rate_hz"])
+            cls = classify({"outcome": r.outcome, "rms": r.rms, "ripple_u2": ripple}, Classes())
+            up, down = s["link"]["up"], s["link"]["down"]
+            p50 = down["delay_ms"]["p50"]
+            lost = 100.0 * up["lost"] / up["sent"] if up["sent"] else float("nan")
+            rms = f"{r.rms:.3e}" if r.rms is not None else "n/a"
+            print(f"| {name} | {what} | {comp} | {r.outcome} | {rms} | {cls} | "
+                  f"{'n/a' if p50 is None else f'{p50:.1f}'} | {lost:.2f} |", flush=True)
+    return 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("what", nargs="?", choices=("relay", "control", "realtime"), default="relay")
+    ap.add_argument("what", nargs="?", choices=("relay", "control", "realtime", "profiles"), default="relay")
     ap.add_argument("--seconds", type=float, default=10.0, help="relay: traffic duration (s)")
     ap.add_argument("--delay", type=float, default=None,
                     help="configured delay each way (ms; relay: default 0, realtime: default 20)")
@@ -208,6 +243,8 @@ def main() -> int:
     args = ap.parse_args()
     if args.what == "control":
         return bench_control(args.tol)
+    if args.what == "profiles":
+        return bench_profiles()
     if args.what == "realtime":
         return bench_realtime(20.0 if args.delay is None else args.delay)
     return bench_relay(args.seconds, args.delay or 0.0)

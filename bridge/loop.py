@@ -6,7 +6,9 @@ Out: a :class:`~bridge.record.runlog.Run`: trace arrays (:data:`~bridge.record.c
      SI units) and ``summary.json`` as a dict (``clock = "offline"``); with a directory also
      ``mission.toml``, ``trace.csv``, ``events.log``, ``summary.json`` and ``plots/``
 
-One control step at time t_k = k / rate_hz: the law reads the state, its command goes to
+One control step at time t_k = k / rate_hz: the law reads the state the vehicle publishes (its
+on-board estimate: :meth:`~bridge.core.simvehicle.SimVehicle.published`; the true state under the
+``truth`` estimator), its command goes to
 the vehicle, which holds it over ``physics_hz / rate_hz`` RK4 steps. The vehicle is the same
 :class:`~bridge.core.simvehicle.SimVehicle` (timeout, failsafe) as the MAVLink vehicle uses.
 
@@ -21,6 +23,7 @@ delivers both at once, which is exactly the loop without a link.
 from __future__ import annotations
 
 import math
+from array import array
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -31,7 +34,8 @@ from bridge.core.simvehicle import FAILSAFE, LANDED, OFFBOARD
 from bridge.core.wire import command_to_wire
 from bridge.record.columns import TRACE_COLUMNS, state_columns, trace_row
 from bridge.record.metrics import summarise
-from bridge.record.runlog import Run, RunRecord, run_dir, trace_arrays
+from bridge.record.policies import ended_by_outcome, judge, rules_for, violation_text
+from bridge.record.runlog import Run, RunRecord, check_trace_steps, run_dir, trace_arrays
 from controller.link_guard import LinkGuard
 from missions import Mission
 
@@ -51,14 +55,23 @@ def simulate(
     seed: int | None = None,
     progress: Progress | None = None,
     link: Mapping[str, Any] | None = None,
+    failsafe: Mapping[str, Any] | None = None,
+    sensors: Mapping[str, Any] | None = None,
+    estimator: str | None = None,
+    noise: float | None = None,
 ) -> Run:
     """Fly a mission offline. Returns a :class:`Run` (trace as arrays, summary as a dict).
 
     The run directory is written only when ``out`` is given or ``write`` is true (then under
     ``runs/``). Overrides replace the mission's own values, as the CLI flags do; ``link`` is
-    laid over the mission's ``[link]`` table (e.g. ``{"up": {"loss_pct": 20}}``).
+    laid over the mission's ``[link]`` table (e.g. ``{"up": {"loss_pct": 20}}``), ``failsafe`` over
+    its ``[failsafe]`` table (e.g. ``{"action": "hold"}``), ``sensors`` over its ``[sensors]`` table
+    (``{"set": "mocap"}``); ``estimator`` (truth, raw, ekf) and ``noise`` (every σ times it) replace
+    ``[estimator] kind`` and ``[sensors] noise_scale``.
     """
-    flight = prepare(mission, profile=profile, controller=controller, rate_hz=rate_hz, seed=seed, link=link)
+    flight = prepare(mission, profile=profile, controller=controller, rate_hz=rate_hz, seed=seed, link=link,
+                     failsafe=failsafe, sensors=sensors, estimator=estimator, noise=noise)
+    check_trace_steps(flight.mission)  # before the run directory is made: a refused mission writes nothing
     path = run_dir(out, flight.mission.name, overwrite) if (out is not None or write) else None
     return fly(flight, path, plots=plots, progress=progress)
 
@@ -66,6 +79,7 @@ def simulate(
 def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progress: Progress | None = None) -> Run:
     """Fly a prepared :class:`Flight`; write its run directory into ``path`` if given."""
     m = flight.mission
+    check_trace_steps(m)
     vehicle = flight.make_vehicle(armed=True)
     ctl = flight.make_controller()
     law = ctl.law
@@ -78,7 +92,7 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
     vend = VehicleEnd(vehicle, up, actuation)
     cend = ControllerEnd(guard, down)
     blackouts = flight.blackout_notes()
-    rows: list[tuple[float, ...]] = []
+    rows = array("d")  # the trace, row after row, 8 bytes a value: 0.6 KB a step (a tuple of floats took 1.6 KB)
     record = RunRecord(path, m) if path is not None else None
     trace = record.trace if record is not None else None
     events = record.events if record is not None else None
@@ -91,10 +105,11 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
         for k in range(m.steps):
             t = k / rate
             X = plant.state
+            E = vehicle.published()  # what the vehicle knows, and sends down the link
             ref = sample(t)
             while blackouts and blackouts[0][0] <= t:
                 vehicle.event("blackout", blackouts.pop(0)[1])
-            cend.receive_state(t, X, vehicle.armed and vehicle.mode == OFFBOARD)
+            cend.receive_state(t, E, vehicle.armed and vehicle.mode == OFFBOARD)
             dec = cend.step(t, sample)
             for e in guard.events[noted:]:
                 vehicle.event(e[1], e[2])
@@ -108,8 +123,9 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
                 wire = command_to_wire(actuation, cmd.normalised)
             vend.deliver(t)
             row = trace_row(t, state_columns(X), ref, demanded, wire, plant.realised,
-                            dec.state_age_s if cmd is not None else math.nan, law.desired)
-            rows.append(row)
+                            dec.state_age_s if cmd is not None else math.nan, law.desired,
+                            state_columns(E), vehicle.nees(E))
+            rows.extend(row)
             if trace is not None:
                 trace.row(row)
             vend.advance()
@@ -133,15 +149,29 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
     except KeyboardInterrupt:
         outcome = "aborted"
         vehicle.event("aborted", "interrupted")
+    except BaseException:
+        _close_record(record, vehicle.events[logged:])
+        raise
+    try:  # the record stays open for the verdicts' lines, and is closed whatever happens
+        arrays = trace_arrays(rows, TRACE_COLUMNS)
+        ev = [{"t": round(e.t, 6), "kind": e.kind, "text": e.text} for e in vehicle.events]
+        link = {"up": up.stats.summary(), "down": down.stats.summary(), "rejected": dict(vend.rejected)}
+        summary = summarise(arrays, m, flight.gains, clock="offline", outcome=outcome, events=ev, link=link,
+                            estimator=flight.estimator, sensors=flight.sensors.name)
+        summary["ended_by"] = ended_by_outcome(outcome, ev)
+        for v in judge(summary, arrays, ev, rules_for(flight, "offline", link)):
+            vehicle.event("policy", violation_text(v))
+            ev.append({"t": round(vehicle.t, 6), "kind": "policy", "text": violation_text(v)})
     finally:
-        if record is not None:
-            for e in vehicle.events[logged:]:
-                record.events.event(e.t, e.kind, e.text)
-            record.close()
-    arrays = trace_arrays(rows, TRACE_COLUMNS)
-    ev = [{"t": round(e.t, 6), "kind": e.kind, "text": e.text} for e in vehicle.events]
-    link = {"up": up.stats.summary(), "down": down.stats.summary(), "rejected": dict(vend.rejected)}
-    summary = summarise(arrays, m, flight.gains, clock="offline", outcome=outcome, events=ev, link=link)
+        _close_record(record, vehicle.events[logged:])
     if record is not None:
         record.finish(arrays, summary, f"{m.name} ({m.controller}, {flight.profile.name})", plots)
     return Run(arrays, summary, path)
+
+
+def _close_record(record: RunRecord | None, unlogged: list[Any]) -> None:
+    """Write the events not in ``events.log`` yet, then close the run's files."""
+    if record is not None:
+        for e in unlogged:
+            record.events.event(e.t, e.kind, e.text)
+        record.close()

@@ -1,9 +1,9 @@
 """Mission files: load, validate, and the :class:`Mission` they describe.
 
 A mission names its trajectory, duration, vehicle profile, controller and gains, rates,
-effects, link impairment and seed. The tables ``[gains]``, ``[effects]``, ``[link]`` and
-``[failsafe]`` belong to other parts (controller, plant, bridge): they are kept here as raw
-tables with their source and validated by the part that owns them when a run is built, so
+effects, link impairment and seed. The tables ``[gains]``, ``[effects]``, ``[link]``,
+``[failsafe]``, ``[sensors]`` and ``[estimator]`` belong to other parts (controller, plant, bridge):
+they are kept here as raw tables with their source and validated by the part that owns them when a run is built, so
 errors still name the file and the key.
 """
 
@@ -28,6 +28,11 @@ MISSION_RANGES: dict[str, tuple[float, float]] = {
     "seed": (0, 2**31 - 1),
 }
 TRAJECTORIES = ("step", "sine", "waypoints")
+# The plant's envelope: plant/quadrotor.py Quadrotor.diverged() calls a vehicle farther than this from the
+# origin lost, so no start or reference may leave it (envelope_problem; the loader's wider ranges catch typos).
+# Missions do not import the plant: tests/test_mission.py checks that the two agree.
+ENVELOPE_RADIUS_M = 100.0
+NAME_MAX_BYTES = 100  # a run directory is runs/<UTC time>-<name>[-N]: well under a file system's 255 bytes
 
 
 @dataclass(frozen=True)
@@ -48,13 +53,21 @@ class Mission:
     effects: Mapping[str, Any] = field(default_factory=dict)
     link: Mapping[str, Any] = field(default_factory=dict)
     failsafe: Mapping[str, Any] = field(default_factory=dict)
+    sensors: Mapping[str, Any] = field(default_factory=dict)  # raw: plant.profiles.sensors_from_table
+    estimator: Mapping[str, Any] = field(default_factory=dict)  # raw: bridge.core.flight validates kind
     source: str = "<python>"
 
     def __post_init__(self) -> None:
+        why = name_problem(self.name)
+        if why:
+            raise ConfigError(f"{self.source}: name: {why}")
         check_timing(self.duration_s, self.rate_hz, self.physics_hz, self.source)
         why = law_spec_problem(self.controller)
         if why:
             raise ConfigError(f"{self.source}: controller: {why}")
+        outside = envelope_problem(self.trajectory, self.start, self.duration_s)
+        if outside:
+            raise ConfigError(f"{self.source}: {outside[0]}: {outside[1]}")
 
     def with_overrides(self, **kw: Any) -> Mission:
         """A copy with some fields replaced (None values are ignored), validated again."""
@@ -75,7 +88,7 @@ class Mission:
             d["actuation"] = self.actuation
         d["start"] = {"position": list(self.start[:3]), "psi": self.start[3]}
         d["trajectory"] = self.trajectory.to_dict()
-        for k in ("gains", "effects", "link", "failsafe"):
+        for k in ("gains", "effects", "link", "failsafe", "sensors", "estimator"):
             if getattr(self, k):
                 d[k] = dict(getattr(self, k))
         return d
@@ -84,6 +97,62 @@ class Mission:
     def steps(self) -> int:
         """Number of control steps in the mission."""
         return int(round(self.duration_s * self.rate_hz))
+
+
+def name_problem(name: object) -> str | None:
+    """Why ``name`` cannot name a mission, or None. It names the run directory,
+    ``runs/<UTC time>-<name>``, so it must be one safe path component: not blank, no ``/`` or ``\\``,
+    printable (no newline, tab or other control character), at most :data:`NAME_MAX_BYTES` bytes of
+    UTF-8. Refused, never rewritten: the name in ``summary.json`` is the directory's."""
+    if not isinstance(name, str):
+        return f"expected a string, got {name!r}"[:200]
+    if not name.strip():
+        return "must not be blank (it names the run directory runs/<UTC time>-<name>)"
+    if "/" in name or "\\" in name:
+        return f"must not contain / or \\ (it names the run directory runs/<UTC time>-<name>); got {name!r}"[:200]
+    if not name.isprintable():
+        return f"must be printable, without newlines, tabs or other control characters; got {name!r}"[:200]
+    if len(name.encode()) > NAME_MAX_BYTES:
+        return f"must be at most {NAME_MAX_BYTES} bytes of UTF-8 (it names the run directory), got {len(name.encode())}"
+    return None
+
+
+def envelope_problem(trajectory: Reference, start: tuple[float, ...], duration_s: float) -> tuple[str, str] | None:
+    """The key and the reason when the start or the reference leaves the plant's envelope
+    (:data:`ENVELOPE_RADIUS_M` from the origin) at some time of the mission, or None.
+
+    Step set-points and waypoints are checked point by point: a minimum-jerk segment runs on the
+    straight line between its two points (a convex blend), and the envelope is a ball. A sine's
+    horizontal radius is its amplitude and its height is linear in t, so its farthest points are
+    at t = 0 and t = ``duration_s``. Other references (written in Python) are not checked here:
+    the plant's own divergence check still stops them."""
+    def beyond(what: str, r: float) -> str:
+        return (f"{what} is {r:.4g} m from the origin, outside the plant's envelope of {ENVELOPE_RADIUS_M:g} m "
+                f"(plant/quadrotor.py: a vehicle farther out has diverged)")
+
+    r = math.sqrt(sum(v * v for v in start[:3]))
+    if r > ENVELOPE_RADIUS_M:
+        return "start.position", beyond("the start", r)
+    if isinstance(trajectory, (Step, Waypoints)):
+        key, points = (("trajectory.setpoints", trajectory.setpoints) if isinstance(trajectory, Step)
+                       else ("trajectory.points", trajectory.points))
+        for i, s in enumerate(points):
+            r = math.sqrt(s.x * s.x + s.y * s.y + s.z * s.z)
+            if r > ENVELOPE_RADIUS_M:
+                return f"{key}[{i}]", beyond(f"({s.x:g}, {s.y:g}, {s.z:g})", r)
+    elif isinstance(trajectory, Sine):
+        a, z0 = abs(trajectory.amplitude), trajectory.z0
+        z_end = z0 + trajectory.climb * duration_s
+        if a > ENVELOPE_RADIUS_M:
+            return "trajectory.amplitude", beyond(f"amplitude {a:g} m: the circle", a)
+        if math.hypot(a, z0) > ENVELOPE_RADIUS_M:
+            return "trajectory.z0", beyond(f"at t = 0 (amplitude {a:g} m, z0 {z0:g} m) the reference",
+                                           math.hypot(a, z0))
+        if math.hypot(a, z_end) > ENVELOPE_RADIUS_M:
+            return "trajectory.climb", beyond(
+                f"climbing {trajectory.climb:g} m/s from z0 {z0:g} m, at t = {duration_s:g} s (z = {z_end:g} m) "
+                f"the reference", math.hypot(a, z_end))
+    return None
 
 
 def law_spec_problem(spec: object) -> str | None:
@@ -169,7 +238,7 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
     start = st.vector("position", 3, (0.0, 0.0, 0.0), lo=-1e4, hi=1e4) + (st.number("psi", 0.0, lo=-10, hi=10),)
     st.done()
     trajectory = _trajectory(t.table("trajectory", required=True), duration)
-    raw = {k: _table(t, k) for k in ("gains", "effects", "link", "failsafe")}
+    raw = {k: _table(t, k) for k in ("gains", "effects", "link", "failsafe", "sensors", "estimator")}
     t.done()
     return Mission(
         trajectory=trajectory,

@@ -8,6 +8,8 @@ value always fails with one line naming the file, the key and what is allowed.
 from __future__ import annotations
 
 import math
+import os
+import stat
 import tomllib
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -18,23 +20,91 @@ class ConfigError(ValueError):
     """A parameter file or value is wrong; the message names the file and the key."""
 
 
-def load_toml(path: str | Path) -> dict[str, Any]:
-    """Read a TOML file, turning every I/O or syntax problem into a :class:`ConfigError`."""
+MAX_TOML_BYTES = 4 << 20  # a mission, profile or sweep file is a few kB; anything this big is not one
+MAX_DEPTH = 32  # tables and lists nested deeper are refused: ours nest 6 deep, and every walk stays far from
+# Python's recursion limit (tomllib itself gives up at about 450 levels of arrays or inline tables)
+
+
+def read_regular_file(path: str | Path, expected: str = "file", max_bytes: int | None = None) -> bytes:
+    """The bytes of ``path``, which must be a regular file (never blocks: a FIFO, socket or device is
+    refused before it is read, and opened without blocking should one be swapped in after the check).
+    Every problem is a :class:`ConfigError` naming the path and saying that ``expected`` was wanted."""
     p = Path(path)
-    if not p.exists():
-        raise ConfigError(f"{p}: no such file")
-    if p.is_dir():
-        raise ConfigError(f"{p}: is a directory, expected a TOML file")
     try:
-        raw = p.read_bytes()
+        kind = _file_kind(os.stat(p).st_mode)
+    except FileNotFoundError:
+        raise ConfigError(f"{p}: no such file") from None
+    except OSError as exc:
+        raise ConfigError(f"{p}: cannot read ({exc.strerror})") from None
+    if kind:
+        raise ConfigError(f"{p}: is {kind}, expected {expected}")
+    try:
+        fd = os.open(p, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
     except OSError as exc:
         raise ConfigError(f"{p}: cannot read ({exc.strerror})") from None
     try:
-        return tomllib.loads(raw.decode("utf-8"))
+        st = os.fstat(fd)
+        kind = _file_kind(st.st_mode)
+        if kind:
+            raise ConfigError(f"{p}: is {kind}, expected {expected}")
+        if max_bytes is not None and st.st_size > max_bytes:
+            raise ConfigError(f"{p}: {st.st_size} bytes, larger than {max_bytes} bytes: not {expected}")
+        chunks = []
+        while chunk := os.read(fd, 1 << 20):
+            chunks.append(chunk)
+        return b"".join(chunks)
+    except OSError as exc:
+        raise ConfigError(f"{p}: cannot read ({exc.strerror})") from None
+    finally:
+        os.close(fd)
+
+
+def _file_kind(mode: int) -> str | None:
+    """What a file that is not regular is, in words (None for a regular file)."""
+    if stat.S_ISREG(mode):
+        return None
+    for test, words in ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
+                        (stat.S_ISSOCK, "a socket"), (stat.S_ISCHR, "a character device"),
+                        (stat.S_ISBLK, "a block device")):
+        if test(mode):
+            return words
+    return "not a regular file"
+
+
+def load_toml(path: str | Path) -> dict[str, Any]:
+    """Read a TOML file, turning every I/O or syntax problem into a :class:`ConfigError`:
+    not a regular file, over :data:`MAX_TOML_BYTES`, not UTF-8, not TOML, nested over :data:`MAX_DEPTH`."""
+    p = Path(path)
+    raw = read_regular_file(p, "a TOML file", MAX_TOML_BYTES)
+    try:
+        data = tomllib.loads(raw.decode("utf-8"))
     except UnicodeDecodeError:
         raise ConfigError(f"{p}: not a text file (expected TOML)") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{p}: not valid TOML ({exc})") from None
+    except RecursionError:
+        raise ConfigError(f"{p}: nested too deeply (more than {MAX_DEPTH} levels of tables and lists)") from None
+    check_depth(data, str(p))
+    return data
+
+
+def check_depth(data: Any, source: str, limit: int = MAX_DEPTH) -> None:
+    """Refuse tables and lists nested deeper than ``limit``, naming the top-level key that does, so
+    that no recursive walk of ours (validation, ``repr``, ``dump_toml``, JSON) can exceed the stack.
+    Iterative: it never recurses itself."""
+    stack: list[tuple[Any, int, str]] = [(data, 0, "")]
+    while stack:
+        node, depth, top = stack.pop()
+        if isinstance(node, Mapping):
+            children: Iterable[tuple[str, Any]] = ((top or str(k), v) for k, v in node.items())
+        elif isinstance(node, (list, tuple)):
+            children = ((top, v) for v in node)
+        else:
+            continue
+        if depth >= limit:
+            where = f"{top[:40]}: " if top else ""
+            raise ConfigError(f"{source}: {where}nested more than {limit} levels deep")
+        stack.extend((v, depth + 1, name) for name, v in children)
 
 
 class Table:

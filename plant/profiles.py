@@ -2,15 +2,20 @@
 
 A profile is a frozen :class:`Profile`. Built-in profiles live in ``plant/profiles/*.toml``
 (``paper``: Table 1 with ideal wrench actuation; ``x500``: PX4's x500 with real rotors).
+A profile's ``[sensors]`` table holds named sensor sets (:mod:`plant.sensors`); a mission picks
+one and overrides its keys with :func:`sensors_from_table`.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 from params import ConfigError, Table, load_toml
+from plant.sensors import CLASS_KEYS, IDEAL, SensorConfig, sensor_config_from_table, sensor_sets_from_table
 
 PROFILE_DIR = Path(__file__).with_name("profiles")
 ACTUATIONS = ("wrench", "motors")
@@ -38,6 +43,15 @@ class Profile:
     drag: tuple[float, float, float, float, float, float]
     motor_time_constant: float
     u_max: tuple[float, float, float, float]
+    sensors: tuple[tuple[str, SensorConfig], ...] = (("ideal", IDEAL),)  # (name, set), as in the file
+
+    def sensor_set(self, name: str) -> SensorConfig:
+        """The named sensor set; ConfigError naming the sets there are if there is none."""
+        for n, cfg in self.sensors:
+            if n == name:
+                return cfg
+        raise ConfigError(f"profile {self.name!r} has no sensor set {name!r}; it has: "
+                          f"{', '.join(n for n, _ in self.sensors)}")
 
     @property
     def hover_omega(self) -> float:
@@ -96,7 +110,33 @@ def profile_from_table(data: dict, source: str) -> Profile:
         lim.number("u4", envelope[3], lo=0.0, lo_open=True),
     )
     lim.done()
+    sensors = sensor_sets_from_table(t.raw("sensors", {}), source) if t.has("sensors") else (("ideal", IDEAL),)
     t.done()
     if actuation == "motors" and u_max[0] > envelope[0] * (1 + 1e-9):
         raise lim.error("u1", f"exceeds what the rotors give (4 b w_max^2 = {envelope[0]:.4g} N)")
-    return Profile(name, actuation, mass, arm, ixx, iyy, izz, jr, b, d, g, omega_max, drag, tau, u_max)
+    return Profile(name, actuation, mass, arm, ixx, iyy, izz, jr, b, d, g, omega_max, drag, tau, u_max, sensors)
+
+
+NOISE_SCALE_RANGE = (0.0, 100.0)  # the mission's [sensors] noise_scale: multiplies every sigma of the set
+
+
+def sensors_from_table(profile: Profile, table: Mapping[str, Any], source: str) -> SensorConfig:
+    """A mission's ``[sensors]`` table over its profile's sets: ``set`` picks one (default
+    ``ideal``), any key of a set overrides it, ``noise_scale`` multiplies every σ.
+
+    A ``position_class`` override drops the keys of the set's own class, so the other class's keys
+    must then be given. Errors name ``source``, the ``sensors.`` key and its range.
+    """
+    t = Table(table, source, "sensors")
+    names = [n for n, _ in profile.sensors]
+    name = t.string("set", "ideal", choices=names)
+    scale = t.number("noise_scale", 1.0, lo=NOISE_SCALE_RANGE[0], hi=NOISE_SCALE_RANGE[1])
+    base = profile.sensor_set(name).as_table()
+    overrides = {k: v for k, v in table.items() if k not in ("set", "noise_scale")}
+    cls = overrides.get("position_class", base["position_class"])
+    if cls != base["position_class"]:
+        for k in CLASS_KEYS.get(str(base["position_class"]), ()):
+            base.pop(k, None)
+    merged = {**base, **overrides}
+    cfg = sensor_config_from_table(Table(merged, source, "sensors"), name)
+    return cfg.scaled(scale) if scale != 1.0 else cfg

@@ -1,5 +1,7 @@
-"""Hostile input for the tests and benchmarks of issue 7: a seeded fuzzer of datagrams that
-a vehicle must refuse, the kernel's view of a UDP socket, and a paced sender.
+"""Hostile input for the tests and benchmarks of issues 7 and 11: a seeded fuzzer of datagrams
+that a vehicle must refuse, the kernel's view of a UDP socket, a paced sender, a flood (of
+fuzz, or of packed requests: :func:`packed_requests`) that counts what comes back, and a
+scripted MAVLink speaker (:class:`Station`: a ground station, a controller, a stranger).
 
 Every datagram :class:`Fuzzer` makes must be refused by the vehicle while it flies a
 lockstep mission (armed, at a step k >= :data:`MIN_STEP`), and each kind says which reason
@@ -15,6 +17,9 @@ it must be counted under (None: any reason, e.g. random bytes):
   values outside their range;
 - ``stale`` / ``future``: valid targets with the controller's ids for step 0 or for a step
   far past the mission's end;
+
+  (these four claim the controller's ids from other addresses during its flight: each is
+  refused as a ``stranger``'s before its numbers are looked at; docs/design.md, "Authority")
 - ``mavlink1``: valid MAVLink 1 frames;
 - ``empty``: zero-length datagrams; ``huge``: 65507-byte (the largest UDP) datagrams.
 
@@ -30,6 +35,7 @@ import math
 import os
 import random
 import re
+import selectors
 import signal
 import socket
 import subprocess
@@ -51,8 +57,8 @@ from tests.sitlkit import Proc, csv_rows, wait_for
 MIN_STEP = 10  # the stale targets are for step 0: fuzz only once the vehicle is past this step
 KINDS: dict[str, str | None] = {
     "random": None, "truncated": "truncated", "bitflip": None, "sender": "sender", "target": "target",
-    "unknown_id": "unknown_id", "not_finite": "not_finite", "out_of_range": "out_of_range", "stale": "stale",
-    "future": "future", "mavlink1": "mavlink1", "empty": "truncated", "huge": "oversized",
+    "unknown_id": "unknown_id", "not_finite": "stranger", "out_of_range": "stranger", "stale": "stranger",
+    "future": "stranger", "mavlink1": "mavlink1", "empty": "truncated", "huge": "oversized",
 }
 HUGE = 65507  # bytes: the largest UDP payload over IPv4
 FUTURE_USEC = 10**12  # a step no mission reaches (11.6 days)
@@ -348,20 +354,29 @@ def gone(pid: int) -> bool:
 class Flood:
     """A thread sending ``rate_hz`` datagrams per second to 127.0.0.1:``port`` from one
     source, from a pool of ``pool`` hostile datagrams (targets from an impostor, NaN targets
-    with the controller's ids, damaged frames, random bytes), on a drift-free schedule of
-    bursts every ``burst_s``, until :meth:`stop`."""
+    with the controller's ids, damaged frames, random bytes) or the ``datagrams`` given, on a
+    drift-free schedule of bursts every ``burst_s``, until :meth:`stop`; it counts what it
+    sent and what came back to it (``replies``, ``reply_bytes``)."""
 
     def __init__(self, port: int, rate_hz: float, sysid: int, seed: int = 3, pool: int = 2000,
-                 burst_s: float = 0.002) -> None:
-        fuzz = Fuzzer(seed, sysid, huge_every=0)
-        kinds = ("sender", "not_finite", "bitflip", "random")
-        self.pool = [fuzz.make(kinds[i % len(kinds)]) for i in range(pool)]
+                 burst_s: float = 0.002, datagrams: list[bytes] | None = None) -> None:
+        if datagrams is None:
+            fuzz = Fuzzer(seed, sysid, huge_every=0)
+            kinds = ("sender", "not_finite", "bitflip", "random")
+            datagrams = [fuzz.make(kinds[i % len(kinds)]) for i in range(pool)]
+        self.pool = datagrams
         self.dest = ("127.0.0.1", port)
         self.rate_hz = rate_hz
         self.burst_s = burst_s
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 1 << 20)
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
         self.sock.bind(("127.0.0.1", 0))
+        self.sock.setblocking(False)
         self.sent = 0
+        self.bytes_sent = 0
+        self.replies = 0
+        self.reply_bytes = 0
         self.elapsed_s = 0.0
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
@@ -376,18 +391,46 @@ class Flood:
         while not self._stop.is_set():
             due = int((time.monotonic() - t0) * self.rate_hz)  # datagrams due by now: no drift
             while self.sent < due:
+                d = self.pool[self.sent % n]
                 try:
-                    self.sock.sendto(self.pool[self.sent % n], self.dest)
-                except OSError:  # nobody there any more (ICMP), or the send buffer is full
+                    self.sock.sendto(d, self.dest)
+                    self.bytes_sent += len(d)
+                except OSError:  # nobody there (yet or any more: ICMP), or the send buffer is full
                     pass
                 self.sent += 1
+            self._take_replies()
             self._stop.wait(self.burst_s)
         self.elapsed_s = time.monotonic() - t0
+        self._take_replies()
+
+    def _take_replies(self) -> None:
+        while True:
+            try:
+                data = self.sock.recv(65535)
+            except BlockingIOError:
+                return
+            except OSError:  # an ICMP error reported on this socket
+                continue
+            self.replies += 1
+            self.reply_bytes += len(data)
 
     def stop(self) -> None:
         self._stop.set()
         self._thread.join(timeout=10)
         self.sock.close()
+
+
+def packed_requests(sysid: int, frames: int = 40, src: tuple[int, int] = (255, 190),
+                    message_id: int = mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION) -> bytes:
+    """One datagram of ``frames`` valid REQUEST_MESSAGE frames (``message_id``, the longest
+    answer the vehicle has) to system ``sysid`` from ``src``: a packed flood's datagram."""
+    mav = mavlink.MAVLink(None, srcSystem=src[0], srcComponent=src[1])
+    out = []
+    for i in range(frames):
+        mav.seq = i & 0xFF
+        out.append(bytes(mavlink.MAVLink_command_long_message(sysid, 1, mavlink.MAV_CMD_REQUEST_MESSAGE, 0,
+                                                               message_id, 0, 0, 0, 0, 0, 0).pack(mav)))
+    return b"".join(out)
 
 
 def deadline_misses(state_age_s: Any, rate_hz: float) -> float:
@@ -510,3 +553,95 @@ def _cpu_s(pid: int) -> float:
     with open(f"/proc/{pid}/stat") as f:
         fields = f.read().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+# -- a scripted MAVLink speaker: a ground station, a controller, a stranger ---------------------
+class Station:
+    """A MAVLink 2 speaker on a UDP socket of its own on 127.0.0.1 (``port`` 0: any free one):
+    it sends pymavlink-packed messages with its ``ids`` (signed with ``key`` when given, link
+    id ``link_id``) to ``dest`` (or, for a ground station bound on the GCS port, to wherever
+    the vehicle's datagrams came from), and reads what comes back, with deadlines. Every
+    message received is kept in :attr:`got` (type -> count) and :attr:`seen`."""
+
+    def __init__(self, ids: tuple[int, int] = (255, 190), dest: tuple[str, int] | None = None, port: int = 0,
+                 key: bytes | None = None, link_id: int = 0) -> None:
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 21)
+        self.sock.bind(("127.0.0.1", port))
+        self.sock.setblocking(False)
+        self.addr = self.sock.getsockname()
+        self.dest = dest
+        self.mav = mavlink.MAVLink(None, srcSystem=ids[0], srcComponent=ids[1])
+        if key is not None:  # as pymavlink's setup_signing does
+            self.mav.signing.secret_key = key
+            self.mav.signing.sign_outgoing = True
+            self.mav.signing.link_id = link_id
+            self.mav.signing.timestamp = int((time.time() - 1420070400) * 100_000)
+        self._dec = mavlink.MAVLink(None)  # decodes (a signed frame is taken without checking it)
+        self.got: Counter[str] = Counter()
+        self.seen: list[Any] = []  # every message received, in order
+        self.datagrams = 0
+
+    def frame(self, msg: Any) -> bytes:
+        """``msg`` packed with this station's ids (and signature): the bytes :meth:`send` sends."""
+        buf = bytes(msg.pack(self.mav))
+        self.mav.seq = (self.mav.seq + 1) & 0xFF
+        return buf
+
+    def send(self, msg: Any) -> bytes:
+        return self.send_raw(self.frame(msg))
+
+    def send_raw(self, data: bytes) -> bytes:
+        assert self.dest is not None, "nowhere to send yet: no datagram from the vehicle"
+        self.sock.sendto(data, self.dest)
+        return data
+
+    def command(self, cmd: int, p1: float = 0.0, p2: float = 0.0, target: tuple[int, int] = (0, 0),
+                as_int: bool = False) -> bytes:
+        """COMMAND_LONG (or COMMAND_INT) ``cmd`` with param1, param2 (the rest 0)."""
+        if as_int:
+            return self.send(mavlink.MAVLink_command_int_message(*target, 0, cmd, 0, 0, p1, p2, 0, 0, 0, 0, 0))
+        return self.send(mavlink.MAVLink_command_long_message(*target, cmd, 0, p1, p2, 0, 0, 0, 0, 0))
+
+    def poll(self) -> list[Any]:
+        """The messages waiting now (never blocks); a bound ground station learns its ``dest``."""
+        out = []
+        while True:
+            try:
+                data, addr = self.sock.recvfrom(65535)
+            except BlockingIOError:
+                return out
+            except OSError:  # an ICMP error reported on this socket
+                continue
+            self.datagrams += 1
+            if self.dest is None:
+                self.dest = addr
+            for m in self._dec.parse_buffer(data) or []:
+                self.got[m.get_type()] += 1
+                self.seen.append(m)
+                out.append(m)
+
+    def wait(self, pred: Callable[[Any], bool], timeout: float = 10.0, what: str = "a message") -> Any:
+        """The first message from now on that satisfies ``pred``; fails naming ``what``."""
+        deadline = time.monotonic() + timeout
+        sel = selectors.DefaultSelector()
+        sel.register(self.sock, selectors.EVENT_READ)
+        try:
+            while True:
+                for m in self.poll():
+                    if pred(m):
+                        return m
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise AssertionError(f"{what}: not within {timeout} s (got {dict(self.got)})")
+                sel.select(left)
+        finally:
+            sel.close()
+
+    def ack(self, cmd: int, timeout: float = 10.0) -> int:
+        """The result of the next COMMAND_ACK of ``cmd``."""
+        m = self.wait(lambda m: m.get_type() == "COMMAND_ACK" and m.command == cmd, timeout, f"COMMAND_ACK {cmd}")
+        return m.result
+
+    def close(self) -> None:
+        self.sock.close()

@@ -114,6 +114,7 @@ BASE = {
     "sweep": lambda f: [f.mission, "--out", f.out, "--jobs", "1", "--no-plots"],
     "report": lambda f: [],
     "relay": lambda f: ["--listen", "127.0.0.1:0", "--to", "127.0.0.1:9", "--duration", "0.1"],
+    "link": lambda f: [],
 }
 # bad values by the converter a flag's argparse type comes from
 CONVERTER_BAD = {
@@ -131,6 +132,11 @@ CONVERTER_BAD = {
     "blackout_window": ["x", "-1:1", "1:0"],
     "_ids": ["x", "999:1", "200"],
     "_home": ["x", "91,0,0", "1,2"],
+    "trace_file": ["no_such_trace.csv", "/"],
+    "yes_no": ["maybe", "2"],
+    "link_profile": ["no_such_profile", "no_such_profile.toml", "/"],
+    "sensor_set_name": ["", "mo.cap", "bogus"],
+    "noise_scale": ["x", "-1", "nan", "1e300"],
 }
 # bad values of the flags that take text (a callable of the files: values)
 TEXT_BAD = {
@@ -140,6 +146,7 @@ TEXT_BAD = {
     "--gcs": lambda f: ["127.0.0.1:notaport", "udpin:x"],
     "--vehicle": lambda f: ["udpin:127.0.0.1:5", "nowhere"],
     "--to": lambda f: ["nowhere", "127.0.0.1:0"],
+    "--client": lambda f: ["nowhere", "127.0.0.1:0", "udpin:127.0.0.1:5"],
     "--mission": lambda f: [getattr(f, b) for b in BAD_FILES],
     "--stats": lambda f: [f.regular / "x.json", f.directory],
     "--dask": lambda f: ["notanaddress"],
@@ -147,6 +154,7 @@ TEXT_BAD = {
 }
 POSITIONAL_BAD = {  # command -> bad values of its positional argument
     "report": lambda f: [f.missing, f.regular, f.directory],
+    "link": lambda f: ["bogus"],  # its actions (extract, fit, show): tests/test_link_trace.py
 }
 
 
@@ -379,3 +387,71 @@ def test_as_a_real_process_one_line_and_no_traceback(argv, names):
     r = subprocess.run([sys.executable, "-m", "bridge", *argv], capture_output=True, text=True, cwd=ROOT, timeout=60)
     assert r.returncode == 2, r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and names in r.stderr and "Traceback" not in r.stderr
+
+
+# -- issue 11: files that cannot be read as they claim, missions that cannot be flown -------------------
+def _bad_files_of_issue_11(root: Path) -> dict[str, Path]:
+    def mission(name: str, text: str) -> Path:
+        p = root / f"{name}.toml"
+        p.write_text(text)
+        return p
+
+    fifo = root / "fifo.toml"
+    os.mkfifo(fifo)  # nobody writes it: opening it to read would wait for ever
+    return {
+        "escape": mission("escape", 'name = "../../escape"\n' + TINY.split("\n", 1)[1]),
+        "newline": mission("newline", 'name = "two\\nlines"\n' + TINY.split("\n", 1)[1]),
+        "fifo": fifo,
+        "deep_array": mission("deep_array", TINY + "x = " + "[" * 5000 + "]" * 5000 + "\n"),
+        "deep_keys": mission("deep_keys", "wind." + ".".join(["a"] * 3000) + " = 1\n" + TINY),
+        "far": mission("far", 'name = "far"\nduration_s = 30.0\n[trajectory]\nkind = "step"\n'
+                              "setpoints = [{ t = 0.0, x = 150.0, y = 0.0, z = 2.0 }]\n"),
+        "day": mission("day", 'name = "day"\nduration_s = 86400.0\n[trajectory]\nkind = "sine"\nclimb = 0.0\n'),
+    }
+
+
+ISSUE_11_CASES = [
+    (["sim", "{escape}", "--no-plots"], ["name: must not contain /", "escape.toml"]),
+    (["sitl", "{escape}", "--no-plots", "--gcs", "none"], ["name: must not contain /"]),
+    (["sweep", "{escape}", "--jobs", "1", "--no-plots"], ["name: must not contain /"]),
+    (["sim", "{newline}", "--no-plots"], ["name: must be printable"]),
+    (["sim", "{fifo}"], ["fifo.toml: is a FIFO (named pipe), expected a TOML file"]),
+    (["sweep", "{fifo}", "--jobs", "1"], ["fifo.toml: is a FIFO"]),
+    (["relay", "--listen", "127.0.0.1:0", "--to", "127.0.0.1:9", "--mission", "{fifo}"], ["fifo.toml: is a FIFO"]),
+    (["sim", "{deep_array}"], ["deep_array.toml: nested too deeply"]),
+    (["sim", "{deep_keys}"], ["deep_keys.toml: wind: nested more than 32 levels deep"]),
+    (["sim", "{far}", "--no-plots"], ["trajectory.setpoints[0]", "envelope of 100 m"]),
+    (["sim", "{day}", "--no-plots"], ["day.toml: duration_s", "21600000 control steps", "over the 500000"]),
+    (["sitl", "{day}", "--no-plots", "--gcs", "none"], ["duration_s", "over the 500000"]),
+    (["sim", str(ROOT / "missions" / "sine.toml"), "--blackout", "40:1"],
+     ["--blackout/--up-blackout (link.up.blackouts): the window [40, 41) s starts after the mission's end "
+      "(duration_s = 30 s)"]),
+]
+
+
+@pytest.mark.parametrize("argv, words", ISSUE_11_CASES, ids=[" ".join(a[:2]) + f" {i}"
+                                                            for i, (a, _) in enumerate(ISSUE_11_CASES)])
+def test_issue_11_files_and_missions_exit_2_with_one_line(tmp_path: Path, argv: list[str], words: list[str]) -> None:
+    """As a real process, in a fresh working directory: exit 2 within the deadline (a FIFO is never
+    opened to wait on), one line naming the file and key, no traceback, and no directory made."""
+    work = tmp_path / "work"
+    work.mkdir()
+    files = _bad_files_of_issue_11(tmp_path)
+    cmd = [a.format(**files) for a in argv]
+    r = subprocess.run([sys.executable, "-m", "bridge", *cmd], capture_output=True, text=True, cwd=work, timeout=60)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2, (cmd, r.returncode, r.stderr)
+    assert len(lines) == 1 and lines[0].startswith("bsst: ") and "Traceback" not in r.stderr, r.stderr
+    assert all(w in lines[0] for w in words), lines[0]
+    assert not any(work.iterdir()), sorted(work.rglob("*"))  # no runs/ or sweeps/ directory, nothing inside
+    assert not list(tmp_path.parent.glob("*escape*")) and not list(tmp_path.glob("*escape*/"))
+
+
+def test_the_vehicle_at_rest_is_not_capped() -> None:
+    """The 24 h at-rest mission of a bare ``bsst vehicle`` (rows streamed to disk) prepares as before:
+    the trace cap is only where a run keeps its trace (bsst sim, sitl, sweep)."""
+    from bridge.core.flight import at_rest  # local: only this test builds the at-rest mission
+    from bridge.record.runlog import MAX_TRACE_STEPS  # local: as above
+
+    flight = prepare(at_rest())
+    assert flight.mission.steps == 86400 * 250 > MAX_TRACE_STEPS

@@ -146,11 +146,13 @@ def test_bad_input_exits_2_with_one_line(tmp_path: Path, case: str) -> None:
 
 
 def test_divergence_exits_1_and_is_recorded(tmp_path: Path) -> None:
-    """A set-point 150 m away takes the vehicle past |position| = 100 m: the run stops there,
+    """A constant 20 N push the law cannot hold against takes the vehicle past |position| = 100 m
+    (a set-point out there is refused up front: tests/test_mission.py): the run stops there,
     every file is written, the summary says why, and the exit status is 1."""
     far = tmp_path / "far.toml"
     far.write_text('name = "far"\nduration_s = 30.0\n[trajectory]\nkind = "step"\n'
-                   "setpoints = [{ t = 0.0, x = 150.0, y = 0.0, z = 2.0 }]\n")
+                   "setpoints = [{ t = 0.0, x = 50.0, y = 0.0, z = 2.0 }]\n"
+                   "[effects.disturbance]\nforce = [20.0, 0.0, 0.0]\n")
     out = tmp_path / "run"
     res = bsst(far, "--out", out, "--no-plots")
     assert res.returncode == 1, res.stderr

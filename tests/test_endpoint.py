@@ -25,8 +25,9 @@ from bridge.mavlink.endpoint import (
     parse_address,
     wait,
 )
+from bridge.mavlink.receive import RateLimiter, ReplyBudget
 from params import ConfigError
-from tests.hostile import udp_queue, wait_until
+from tests.hostile import packed_requests, udp_queue, wait_until
 
 f32 = st.floats(width=32, allow_nan=False, allow_infinity=False)
 
@@ -241,3 +242,75 @@ def test_the_peer_gets_a_socket_of_its_own():
         a.close()
         ctl.close()
         other.close()
+
+
+def _take(ep: Endpoint, n_refused: int) -> list:
+    """What ``ep`` makes of the datagrams sent to it, once ``n_refused`` refusals are counted
+    or a message is in."""
+    got: list = []
+
+    def done() -> bool:
+        got.extend(m for m, _a in ep.poll())
+        return bool(got) or ep.rejected.total >= n_refused
+
+    wait_until(done, 5.0, "the endpoint reading its datagram")
+    return got
+
+
+def test_budgets_count_frames_and_bytes_not_only_datagrams():
+    """A source other than the peer pays for every frame and every byte (issue 11): of a
+    datagram packing 40 frames, only its frame budget is decoded and the rest is refused
+    (``rate_limited``, once); the next such datagram is over its byte budget and dropped
+    unparsed; the peer pays nothing."""
+    a = Endpoint(parse_address("udpin:127.0.0.1:0"), sysid=1, compid=1,
+                 limiter=RateLimiter(source_hz=10, others_hz=1000, source_bytes_s=2000, others_bytes_s=1e6))
+    a.follow = False
+    other, peer = socket.socket(socket.AF_INET, socket.SOCK_DGRAM), socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    packed = packed_requests(1, 40)
+    assert 1600 < len(packed) <= 2000  # one fits the byte budget, two do not
+    try:
+        for s in (other, peer):
+            s.bind(("127.0.0.1", 0))
+        a.peer = peer.getsockname()
+        other.sendto(packed, a.local)
+        assert len(_take(a, 1)) == 10 and a.rejected == {"rate_limited": 1}
+        other.sendto(packed, a.local)
+        assert _take(a, 2) == [] and a.rejected == {"rate_limited": 2}
+        peer.sendto(packed, a.local)
+        assert len(_take(a, 3)) == 40 and a.rejected == {"rate_limited": 2}
+    finally:
+        a.close()
+        other.close()
+        peer.close()
+
+
+def test_replies_are_one_datagram_within_the_sources_budget(tmp_path):
+    """:meth:`Endpoint.reply`: a COMMAND_ACK and what was asked for go in one datagram (each
+    frame its own tlog record), at most the reply budget's worth to a source; the exempt peer
+    is not charged."""
+    tlog = Tlog(tmp_path / "a.tlog")
+    a = Endpoint(parse_address("udpin:127.0.0.1:0"), sysid=1, compid=1, tlog=tlog, replies=ReplyBudget(5, 1e5))
+    a.follow = False
+    other, peer = socket.socket(socket.AF_INET, socket.SOCK_DGRAM), socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        for s in (other, peer):
+            s.bind(("127.0.0.1", 0))
+            s.settimeout(5.0)
+        a.peer = peer.getsockname()
+        answer = (mavlink.MAVLink_command_ack_message(512, 0, 0, 0, 255, 190),
+                  mavlink.MAVLink_heartbeat_message(2, 0, 0, 0, 3, 3))
+        sent = [a.reply(answer, other.getsockname()) for _ in range(20)]
+        assert sent[:5] == [True] * 5 and sent.count(True) <= 6  # 5 a second (a refill while it ran at most)
+        msgs = mavlink.MAVLink(None).parse_buffer(other.recv(65535))
+        assert [m.get_type() for m in msgs] == ["COMMAND_ACK", "HEARTBEAT"]
+        assert all(a.reply(answer, peer.getsockname()) for _ in range(20))
+    finally:
+        a.close()
+        other.close()
+        peer.close()
+        tlog.close()
+    log = mavutil.mavlink_connection(str(tmp_path / "a.tlog"))
+    types = []
+    while (m := log.recv_match()) is not None:
+        types.append(m.get_type())
+    assert types == ["COMMAND_ACK", "HEARTBEAT"] * (sent.count(True) + 20)

@@ -34,7 +34,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("bridge.core",),
     ("bridge.mavlink", "bridge.record"),
     ("bridge.nodes",),
-    ("bridge.loop", "bridge.session"),
+    ("bridge.loop", "bridge.batch", "bridge.session"),
     ("bridge.sweep",),
     ("bridge.cli",),
     ("bridge.__main__",),  # python -m bridge: the CLI

@@ -212,3 +212,36 @@ def test_long_blackout_with_resume_rearms_and_completes() -> None:
     err = np.sqrt((tr["x"] - tr["x_ref"]) ** 2 + (tr["y"] - tr["y_ref"]) ** 2 + (tr["z"] - tr["z_ref"]) ** 2)
     assert err[late].max() < 1e-3  # back on the reference
     assert not math.isnan(tr["state_age_s"][-1])
+
+
+def test_failsafe_action_flag_is_flown_offline_and_written_as_flown(tmp_path: Path, capsys) -> None:
+    """``bsst sim --failsafe-action disarm``: the motors stop in the failsafe's own step; exit 1,
+    and the mission as flown carries the action (docs/design.md, "Failsafe")."""
+    out = tmp_path / "run"
+    code = main(["sim", str(SINE), "--out", str(out), "--no-plots", "--blackout", "15:2",
+                 "--failsafe-action", "disarm"])
+    assert code == 1
+    assert "outcome: failsafe" in capsys.readouterr().out
+    assert 'action = "disarm"' in (out / "mission.toml").read_text()
+    log = (out / "events.log").read_text()
+    assert "t=15.500 failsafe: no actuator target for 0.504 s: stop the motors" in log
+    assert "t=15.500 disarmed: failsafe: motors stopped" in log
+
+
+def test_long_blackout_with_hold_and_resume_holds_then_resumes() -> None:
+    """``hold`` with ``resume``: the vehicle holds where its targets stopped until the link is back,
+    the controller re-arms it and the mission completes, back on the reference."""
+    m = replace(load_mission(SINE), failsafe={"resume": True, "action": "hold"})
+    run = simulate(m, plots=False, link={"blackouts": [[15.0, 2.0]]})
+    ev = {e["kind"]: e["t"] for e in run.summary["events"]}
+    assert ev["failsafe"] < ev["rearm"] <= ev["armed"] < ev["resumed"] < 17.1
+    assert "landing" not in ev and "disarmed" not in ev  # re-armed within its 5 s hold
+    assert run.outcome == "completed"
+    tr = run.trace
+    t = tr["t"]
+    i = int(np.searchsorted(t, ev["failsafe"] - 1e-9))
+    held = (t >= ev["failsafe"]) & (t < ev["armed"])
+    away = np.sqrt((tr["x"] - tr["x"][i]) ** 2 + (tr["y"] - tr["y"][i]) ** 2 + (tr["z"] - tr["z"][i]) ** 2)
+    assert away[held].max() < 0.5
+    err = np.sqrt((tr["x"] - tr["x_ref"]) ** 2 + (tr["y"] - tr["y_ref"]) ** 2 + (tr["z"] - tr["z_ref"]) ** 2)
+    assert err[t > 22.0].max() < 1e-3

@@ -13,9 +13,13 @@ from pathlib import Path
 
 import pytest
 
+from bridge import simulate
 from bridge.core.flight import prepare
+from bridge.record.runlog import run_dir
 from missions import MISSION_DIR, Mission, Setpoint, Sine, Step, Waypoints, load_mission, mission_from_table
+from missions.mission import ENVELOPE_RADIUS_M
 from params import ConfigError, dump_toml
+from plant import Quadrotor, load_profile
 
 SHIPPED = sorted(MISSION_DIR.glob("*.toml"))
 STEP_TEXT = (MISSION_DIR / "step.toml").read_text()
@@ -185,3 +189,80 @@ def test_scripted_missions_are_validated_too() -> None:
     with pytest.raises(ConfigError, match=r"duration_s"):
         m.with_overrides(duration_s=float("nan"))
     assert m.with_overrides(rate_hz=500.0, seed=None).rate_hz == 500.0
+
+
+# -- issue 11: what is accepted can be flown; a name names one directory ---------------------------------
+def test_the_envelope_is_the_plants() -> None:
+    """The loader's envelope is where the plant's own divergence check trips, in every direction."""
+    q = Quadrotor(load_profile("paper"))
+    for direction in ((1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, 1.0), (0.6, 0.0, -0.8)):
+        for scale, lost in ((0.999, False), (1.001, True)):
+            x, y, z = (scale * ENVELOPE_RADIUS_M * c for c in direction)
+            q.state = (x, 0.0, y, 0.0, z, 0.0) + (0.0,) * 6  # type: ignore[assignment]
+            assert (q.diverged() == "position beyond 100 m") is lost, (direction, scale)
+
+
+def test_a_set_point_at_the_envelope_flies() -> None:
+    """99 m out is accepted and flown to the end (the law does not overshoot it into divergence)."""
+    run = simulate(Mission(Step((Setpoint(0.0, 99.0, 0.0, 2.0),)), duration_s=30.0, name="edge"))
+    assert run.outcome == "completed" and abs(run.trace["x"][-1] - 99.0) < 0.01
+
+
+SINE_BODY = 'name = "m"\nduration_s = 300.0\n[trajectory]\nkind = "sine"\n'
+
+
+@pytest.mark.parametrize("text, key, words", [
+    ('name = "m"\nduration_s = 30.0\n[trajectory]\nkind = "step"\nsetpoints = [{ t = 0.0, x = 150.0, y = 0.0, '
+     'z = 2.0 }]\n', "trajectory.setpoints[0]", "150 m from the origin"),
+    ('name = "m"\nduration_s = 30.0\n[trajectory]\nkind = "step"\nsetpoints = [{ t = 0.0, x = 1.0, y = 0.0, z = 1.0 },'
+     ' { t = 5.0, x = 80.0, y = 80.0, z = 2.0 }]\n', "trajectory.setpoints[1]", "113.2 m"),
+    ('name = "m"\nduration_s = 30.0\n[trajectory]\nkind = "waypoints"\npoints = [{ t = 0.0, x = 0.0, y = 0.0, '
+     'z = 0.0 }, { t = 9.0, x = 0.0, y = 0.0, z = 101.0 }]\n', "trajectory.points[1]", "101 m"),
+    (SINE_BODY + "amplitude = 120.0\nclimb = 0.0\n", "trajectory.amplitude", "120 m"),
+    (SINE_BODY + "z0 = 99.9\namplitude = 5.0\nclimb = 0.0\n", "trajectory.z0", "100 m from the origin"),
+    (SINE_BODY + "climb = 0.5\n", "trajectory.climb", "at t = 300 s (z = 150 m)"),
+    (SINE_BODY + "climb = -0.5\nz0 = 10.0\n", "trajectory.climb", "(z = -140 m)"),
+    ('name = "m"\nduration_s = 30.0\n[start]\nposition = [0.0, 0.0, 101.0]\n[trajectory]\nkind = "sine"\n',
+     "start.position", "101 m"),
+])
+def test_a_reference_outside_the_envelope_is_refused(tmp_path: Path, text: str, key: str, words: str) -> None:
+    msg = _fails(_write(tmp_path, text), key, words)
+    assert "envelope of 100 m" in msg and "diverged" in msg
+
+
+def test_a_python_mission_outside_the_envelope_is_refused() -> None:
+    with pytest.raises(ConfigError, match=r"^<python>: trajectory\.setpoints\[0\]: .*envelope of 100 m"):
+        Mission(Step((Setpoint(0.0, 0.0, 0.0, 150.0),)), duration_s=10.0)
+    with pytest.raises(ConfigError, match=r"^<python>: start\.position: "):
+        Mission(Sine(), duration_s=10.0, start=(0.0, 0.0, 200.0, 0.0))
+    Mission(Sine(amplitude=3.0, climb=-1.0, z0=90.0), duration_s=100.0)  # z from 90 m to -10 m: inside
+
+
+@pytest.mark.parametrize("name, words", [
+    ("../../escape", "must not contain /"), ("a/b", "must not contain /"), ("a\\\\b", "must not contain /"),
+    ("a\\nb", "must be printable"), ("tab\\there", "must be printable"), ("   ", "must not be blank"),
+    ("x" * 101, "at most 100 bytes"), ("é" * 51, "at most 100 bytes"),
+])
+def test_a_name_that_is_not_one_safe_directory_name_is_refused(tmp_path: Path, name: str, words: str) -> None:
+    _fails(_write(tmp_path, f'name = "{name}"\nduration_s = 1.0\n[trajectory]\nkind = "sine"\n'), "name", words)
+
+
+def test_a_name_with_spaces_dots_and_accents_is_one_directory(tmp_path: Path) -> None:
+    m = prepare(_write(tmp_path, 'name = "..été 2 ..."\nduration_s = 1.0\n[trajectory]\nkind = "sine"\n')).mission
+    assert m.name == "..été 2 ..."
+    path = run_dir(None, m.name, root=tmp_path / "runs", create=False)
+    assert path.parent == tmp_path / "runs" and path.name.endswith("-..été 2 ...")
+    with pytest.raises(ConfigError, match="mission name: must not contain /"):
+        run_dir(None, "../x", root=tmp_path / "runs", create=False)  # the one place a name becomes a path
+
+
+def test_a_blackout_after_the_end_is_refused(tmp_path: Path) -> None:
+    body = 'name = "m"\nduration_s = 5.0\n[trajectory]\nkind = "sine"\n'
+    msg = _fails(_write(tmp_path, body + "[link]\nblackouts = [[1.0, 0.5], [5.0, 1.0]]\n"), "link.blackouts",
+                 "the window [5, 6) s starts after the mission's end (duration_s = 5 s)")
+    _fails(_write(tmp_path, body + "[link.down]\nblackouts = [[7.5, 1.0]]\n"), "link.down.blackouts", "[7.5, 8.5)")
+    with pytest.raises(ConfigError, match=r"--blackout/--up-blackout \(link\.up\.blackouts\): the window \[40, 41\) s"):
+        prepare(MISSION_DIR / "sine.toml", link={"up": {"blackouts": [[40.0, 1.0]]}})  # as --up-blackout 40:1
+    assert "never happen" in msg
+    ends_late = prepare(_write(tmp_path, body + "[link]\nblackouts = [[4.0, 100.0]]\n"))  # running past the end: fine
+    assert ends_late.link.up.blackouts == ((4.0, 100.0),)

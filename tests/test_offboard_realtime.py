@@ -11,6 +11,7 @@ arrival schedule alone cannot: that way down is part of every state's age.
 
 from __future__ import annotations
 
+import json
 import select
 import socket
 import time
@@ -100,10 +101,12 @@ class ScriptedVehicle:
                 select.select([self.sock], [], [], left - 0.0005)
             self.serve()
 
-    def odometry(self, k: int) -> None:
+    def odometry(self, k: int, usec: int | None = None) -> None:
+        """The state of step k, stamped with its time (or ``usec``, a stamp of the test's choosing)."""
         pos, q, vel, rates = state_to_odometry(HOVER)
         cov = [float("nan")] + [0.0] * 20  # unknown
-        self.send(mavlink.MAVLink_odometry_message(step_usec(k, RATE), mavlink.MAV_FRAME_LOCAL_NED,
+        stamp = step_usec(k, RATE) if usec is None else usec
+        self.send(mavlink.MAVLink_odometry_message(stamp, mavlink.MAV_FRAME_LOCAL_NED,
                                                    mavlink.MAV_FRAME_BODY_FRD, *pos, list(q), *vel, *rates, cov, cov,
                                                    0, mavlink.MAV_ESTIMATOR_TYPE_NAIVE, 100))
 
@@ -119,10 +122,11 @@ class Flown:
     arm_to_target_s: float  # from the first ARM (armed, answers lost) to the first target
 
 
-def fly(tmp: Path, timesync_skew_s: float = 0.0) -> Flown:
+def fly(tmp: Path, timesync_skew_s: float = 0.0, spoofs: dict[int, int] | None = None) -> Flown:
     """One real-time flight of ``bsst controller`` against the scripted vehicle: state k
     carries time k / RATE on the vehicle's clock and leaves WAY_DOWN_S after it (LATE_S
-    later still for the steps in LATE, never for those in DROPPED)."""
+    later still for the steps in LATE, never for those in DROPPED). ``spoofs``: after the
+    state of step i, another one stamped ``spoofs[i]`` us, from the vehicle's own socket."""
     (tmp / "late.toml").write_text(MISSION)
     v = ScriptedVehicle(timesync_skew_s)
     ctl = Proc.bsst("controller", str(tmp / "late.toml"), "--realtime", "--vehicle", f"127.0.0.1:{v.port}",
@@ -143,6 +147,8 @@ def fly(tmp: Path, timesync_skew_s: float = 0.0) -> Flown:
             v.until(v.v0 + k * PERIOD + WAY_DOWN_S + (LATE_S if i in LATE else 0.0))
             if i not in DROPPED:
                 v.odometry(k)
+            if spoofs and i in spoofs:
+                v.odometry(k, spoofs[i])
             if k % 5 == 0:
                 v.heartbeat()
             k += 1
@@ -216,3 +222,18 @@ def test_an_arm_whose_answers_are_lost_is_repeated_before_the_failsafe(flown: Fl
     asks again soon enough that its first target comes inside the vehicle's 0.5 s
     failsafe timeout (it asked every 0.5 s, and a lost ACK under 10 % loss cost the flight)."""
     assert flown.arm_to_target_s <= 0.45, flown.arm_to_target_s  # 50 Hz: 5 states to phase-lock take 0.1 s
+
+
+def test_a_state_stamped_far_ahead_or_back_is_refused_and_the_mission_flies_on(tmp_path: Path) -> None:
+    """Issue 11: one ODOMETRY stamped 11.6 days ahead, from the vehicle's own address and
+    sysid, used to end the mission at once (the controller took it for the last step and
+    disarmed the vehicle in the air). Now it, and one stamped near 0 (a jump back), are
+    refused as ``stamp_jump`` and counted; the mission is flown to its end and no target
+    answers either stamp."""
+    steps = round(1.4 * RATE)  # MISSION's duration
+    f = fly(tmp_path, spoofs={30: 10**12, 40: 1})
+    stats = json.loads(next(line for line in f.lines if line.startswith("stats ")).partition(" ")[2])
+    assert stats["rejected"].get("stamp_jump") == 2, stats["rejected"]
+    assert len(f.steps) >= steps, f"disarmed after {len(f.steps)} of the mission's {steps} steps"
+    assert all(0 <= s < len(f.steps) for s in f.targets), sorted(f.targets)[-3:]
+    assert any(line.startswith("done outcome=completed") for line in f.lines), f.lines[-5:]

@@ -152,6 +152,12 @@ def test_bsst_relay_process_stops_on_sigterm_and_writes_stats(tmp_path: Path) ->
     (["--listen", "127.0.0.1:0", "--to", "no.such.host.invalid:1"], "unknown host"),
     (["--listen", "127.0.0.1:0", "--to", "127.0.0.1:1", "--loss", "-3"], "--loss must be in [0, 100]"),
     (["--listen", "127.0.0.1:0", "--to", "127.0.0.1:1", "--mission", "nope.toml"], "nope.toml: no such file"),
+    (["--listen", "127.0.0.1:0", "--to", "127.0.0.1:1", "--client", "127.0.0.1:0"],
+     "--client '127.0.0.1:0': port must be in [1, 65535]"),
+    (["--listen", "127.0.0.1:0", "--to", "127.0.0.1:1", "--client", "nowhere"],
+     "--client 'nowhere': expected [udpin:|udpout:]HOST:PORT"),
+    (["--listen", "127.0.0.1:0", "--to", "127.0.0.1:1", "--client", "udpin:127.0.0.1:5"],
+     "--client 'udpin:127.0.0.1:5': the relay sends to it"),
 ])
 def test_bad_relay_input_exits_2_with_one_line(args: list[str], message: str, capsys) -> None:
     from bridge.cli import main

@@ -23,8 +23,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bridge.core.flight import prepare
 from bridge.loop import simulate
 from bridge.record.metrics import errors
+from bridge.record.policies import POLICIES, check, rules_for
 from bridge.record.runlog import read_trace
 from missions import MISSION_DIR, load_mission
 
@@ -80,6 +82,12 @@ def fly(tmp_path_factory: pytest.TempPathFactory, mission, **kw) -> Flown:
     # what went to disk is what the call returned
     for col in ("t", "x", "u2", "c1", "u1_act"):
         assert np.array_equal(flown.trace[col], run.trace[col])
+    # and it was flown safely: every policy holds, checked over the trace as written
+    assert [p["name"] for p in flown.summary["policies"]] == list(POLICIES)
+    assert all(p["ok"] for p in flown.summary["policies"]), flown.summary["policies"]
+    assert flown.summary["policies"] == [v.as_dict() for v in check(flown.trace, flown.summary["events"],
+                                                                     rules_for(prepare(out / "mission.toml"),
+                                                                               "offline", flown.summary["link"]))]
     return flown
 
 
@@ -184,3 +192,30 @@ def test_a_flight_with_no_rows_still_has_a_summary() -> None:
         s = summarise(empty, load_mission(MISSION_DIR / f"{name}.toml"), Gains(), clock="realtime",
                       outcome="failsafe")
         assert s["outcome"] == "failsafe" and s["axes"]["x"]["rms"] is None
+
+
+# the failsafe scenarios: each ends as its outcome says, names who ended it, and breaks no policy
+FAILSAFES = {
+    "blackout": ({"blackouts": [[15.0, 2.0]]}, {}, "failsafe"),
+    "blackout-land": ({"blackouts": [[15.0, 2.0]]}, {"action": "land"}, "failsafe"),
+    "blackout-hold": ({"blackouts": [[15.0, 2.0]]}, {"action": "hold", "hold_s": 1.0}, "failsafe"),
+    "blackout-disarm": ({"blackouts": [[15.0, 2.0]]}, {"action": "disarm"}, "failsafe"),  # it falls, motors off
+    "blackout-resume": ({"blackouts": [[15.0, 2.0]]}, {"resume": True}, "completed"),
+    "delayed-blackout": ({"delay_ms": 10.0, "jitter_ms": 5.0, "compensation": "predict", "blackouts": [[15.0, 2.0]]},
+                         {}, "failsafe"),
+    "no-commands": ({"up": {"loss_pct": 100.0}}, {}, "failsafe"),
+    "lossy": ({"loss_pct": 40.0, "burst_len": 5.0}, {}, "completed"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(FAILSAFES))
+def test_failsafe_scenarios_keep_every_policy(tmp_path_factory: pytest.TempPathFactory, name: str) -> None:
+    link, failsafe, outcome = FAILSAFES[name]
+    run = fly(tmp_path_factory, MISSION_DIR / "sine.toml", link=link, failsafe=failsafe)  # asserts the policies
+    assert run.summary["outcome"] == outcome
+    who = run.summary["ended_by"]
+    if outcome == "failsafe":
+        fs = next(e for e in run.summary["events"] if e["kind"] == "failsafe")
+        assert who == {"who": "vehicle", "how": f"failsafe at t={fs['t']:.3f} s: {fs['text']}"}
+    else:
+        assert who == {"who": "mission", "how": "completed"}

@@ -31,6 +31,7 @@ from bridge.mavlink.signing import SIGNATURE_BYTES, Signing, clock_timestamp, ke
 from bridge.session import instance_slot, sitl
 from missions import Mission, Sine
 from params import ConfigError
+from tests.hostile import Station
 from tests.sitlkit import Proc
 
 KEY = hashlib.sha256(b"bsst test key").digest()
@@ -166,6 +167,19 @@ def test_verify_accepts_pymavlink_signed_and_refuses_unsigned_forged_replayed():
     # an old recording of a stream never seen is refused (more than a minute behind our clock)
     old = _pymavlink(KEY, 9, clock_timestamp() - 7_000_000, 255, 190, 0)
     assert v.verify(arm.pack(old), 255, 190) == "replayed"
+
+
+def test_links_sharing_a_replay_table_refuse_a_frame_replayed_across_them():
+    """One table per system (sysid, compid, link id -> newest timestamp), as the MAVLink 2
+    signing specification keeps it: a frame accepted on one link is a replay on the other.
+    Two tables (one per link) would take it twice."""
+    arm = mavlink.MAVLink_command_long_message(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0).pack(
+        _pymavlink(KEY, 4, clock_timestamp(), 200, 191, 0))
+    table: dict = {}
+    link, gcs = Signing(KEY, 0, table), Signing(KEY, 1, table)
+    assert link.verify(arm, 200, 191) is None and gcs.verify(arm, 200, 191) == "replayed"
+    apart = Signing(KEY, 0), Signing(KEY, 1)
+    assert [s.verify(arm, 200, 191) for s in apart] == [None, None]  # what one table per link let through
 
 
 def test_the_receive_path_counts_each_kind_and_decodes_the_rest():
@@ -323,3 +337,40 @@ def test_signed_session_flies_and_never_writes_the_key(tmp_path):
     frames = (tmp_path / "signed" / "vehicle.tlog").read_bytes()
     assert frames[8] == 0xFD and frames[8 + 2] & 1  # the first record (8-byte stamp, frame) is signed
     _assert_key_nowhere(tmp_path / "signed")
+
+
+def test_a_signed_frame_replayed_from_one_link_onto_the_other_is_refused(tmp_path):
+    """Issue 11, finding 4, against a real ``bsst vehicle --key``: the controller's signed ARM,
+    replayed onto the GCS link (which obeys any ground station) once a ground station has
+    disarmed the vehicle, does not arm it again; a ground station's signed request replayed
+    onto the controller link is refused too. Both count as ``replayed``: the vehicle keeps
+    one replay table for its two links."""
+    key = _key_file(tmp_path, KEY)
+    with instance_slot() as n:
+        v = Proc.bsst("vehicle", "--instance", str(n), "--out", str(tmp_path / "v"), "--key", str(key))
+        gcs = ctl = None
+        try:
+            v.wait_line(lambda s: s.startswith("ready"))
+            gcs = Station((255, 190), port=GCS_PORT + n, key=KEY, link_id=3)
+            gcs.wait(lambda m: m.get_type() == "HEARTBEAT", 20, "the vehicle's heartbeat")
+            ctl = Station((200, 191), ("127.0.0.1", LINK_PORT + n), key=KEY, link_id=4)
+            arm = ctl.command(400, 1.0, target=(n + 1, 1))
+            assert ctl.ack(400) == mavlink.MAV_RESULT_ACCEPTED
+            gcs.command(400, 0.0, 21196.0, target=(n + 1, 1))
+            assert gcs.ack(400) == mavlink.MAV_RESULT_ACCEPTED
+            gcs.send_raw(arm)  # the controller's ARM, from the ground station's address
+            asked = gcs.command(mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAVLINK_MSG_ID_HEARTBEAT, target=(n + 1, 1))
+            assert gcs.ack(mavlink.MAV_CMD_REQUEST_MESSAGE) == mavlink.MAV_RESULT_ACCEPTED  # after the replay
+            hb = [m for m in gcs.seen if m.get_type() == "HEARTBEAT"][-1]  # the one asked for (it came with the ACK)
+            assert not _armed(hb)
+            ctl.send_raw(asked)  # the ground station's request, from the controller's address
+            ctl.command(mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAVLINK_MSG_ID_HEARTBEAT, target=(n + 1, 1))
+            assert ctl.ack(mavlink.MAV_CMD_REQUEST_MESSAGE) == mavlink.MAV_RESULT_ACCEPTED
+        finally:
+            rc = v.stop()
+            for st_ in (gcs, ctl):
+                if st_ is not None:
+                    st_.close()
+    assert rc == 0
+    stats = json.loads(v.wait_line(lambda s: s.startswith("stats "))[len("stats "):])
+    assert stats["rejected"] == {"replayed": 2}, stats["rejected"]

@@ -14,9 +14,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 from pymavlink import mavutil
+from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.loop import simulate
+from bridge.mavlink.endpoint import GCS_PORT
 from bridge.record.columns import TRACE_COLUMNS
+from bridge.record.policies import POLICIES
 from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
 from missions import MISSION_DIR, Mission, Sine
@@ -156,6 +159,12 @@ def test_controller_sigkill_means_failsafe_landing_exit_1(tmp_path):
     trace = read_trace(run / "trace.csv")
     assert trace["t"][-1] > t_fs and abs(trace["z"][-1]) < 0.02  # flown down to the ground
     assert np.all(np.diff(trace["t"]) > 0)
+    # the record: who ended it, the lockstep the vehicle left once its controller fell silent; flown safely
+    assert summary["ended_by"] == {"who": "controller", "how": "died (killed by SIGKILL); the vehicle's failsafe "
+                                                               "took over"}
+    left = events["lockstep"]
+    assert summary["lockstep"]["held"] is False and summary["lockstep"]["left_at_s"] == left["t"] < t_fs
+    _policies_hold(summary)
 
 
 def test_ctrl_c_stops_everything_within_2_s(tmp_path):
@@ -167,6 +176,7 @@ def test_ctrl_c_stops_everything_within_2_s(tmp_path):
             os.kill(pid, 0)  # reaped: gone, not even a zombie
     summary = json.loads((run / "summary.json").read_text())
     assert summary["outcome"] == "aborted"
+    assert summary["ended_by"] == {"who": "user", "how": "interrupted (Ctrl-C or SIGTERM)"}
     trace = read_trace(run / "trace.csv")
     assert len(trace["t"]) > 250 and list(trace) == list(TRACE_COLUMNS)
     assert _tlog_types(run / "vehicle.tlog")["ODOMETRY"] > 250
@@ -188,3 +198,123 @@ def test_two_instances_fly_side_by_side(tmp_path):
     assert sa["link"]["up"]["delivered"] == sb["link"]["up"]["delivered"] == 1500
     # nothing crossed: the same mission flown twice, side by side, gives the same trace
     assert (tmp_path / "a" / "run" / "trace.csv").read_bytes() == (tmp_path / "b" / "run" / "trace.csv").read_bytes()
+
+
+# -- honest records: lockstep left, a flight ended by someone, the policies --------------------------------
+def _policies_hold(summary: dict) -> None:
+    assert [p["name"] for p in summary["policies"]] == list(POLICIES)
+    assert all(p["ok"] for p in summary["policies"]), summary["policies"]
+
+
+def test_a_clean_session_passes_every_policy(tmp_path):
+    """Both clocks: every policy holds, lockstep held, the mission ended the flight, and the
+    controller's refused frames and everyone else's are counted apart (none of either here)."""
+    lock = sitl(SHORT, out=tmp_path / "l", plots=False, instance=None)
+    real = sitl(SHORT, realtime=True, out=tmp_path / "r", plots=False, instance=None)
+    for run in (lock, real):
+        s = run.summary
+        assert s["outcome"] == "completed" and s["ended_by"] == {"who": "mission", "how": "completed"}
+        _policies_hold(s)
+        assert s["link"]["rejected_from_peer"] == s["link"]["rejected_from_others"] == {"vehicle": 0, "controller": 0}
+        assert "ended: completed: by mission: completed [session]" in (run.path / "events.log").read_text()
+    assert lock.summary["lockstep"] == {"held": True} and "lockstep" not in real.summary
+
+
+def _bsst_sitl(n: int, mission: Path, out: Path, *extra: str) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "bridge", "sitl", str(mission), "--instance", str(n),
+                             "--out", str(out), "--no-plots", *extra], cwd=ROOT, env=ENV,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def test_a_lockstep_run_that_leaves_lockstep_says_so_and_exits_1(tmp_path):
+    """The controller stalls (SIGSTOP) mid-flight until the vehicle gives it up and leaves
+    lockstep, then goes on (SIGCONT): the rest is flown on the wall clock. The run says when and
+    why (summary.json, events.log, the printed summary), and it is no lockstep completion: exit 1,
+    whatever the outcome (the controller back in time completes the mission; too late, the
+    vehicle's failsafe took over)."""
+    mission = tmp_path / "sine6.toml"
+    mission.write_text(SINE_6S)
+    run = tmp_path / "run"
+    with instance_slot() as n:
+        p = _bsst_sitl(n, mission, run)
+        try:
+            wait_for(lambda: csv_rows(run / "controller.csv") > 250 or p.poll() is not None, 60, "a second of flight")
+            pid = _pids(run)["controller"]
+            os.kill(pid, signal.SIGSTOP)
+            try:
+                wait_for(lambda: "lockstep: controller silent" in (run / "events.log").read_text(), 20,
+                         "the vehicle leaving lockstep")
+            finally:
+                os.kill(pid, signal.SIGCONT)
+            out, err = p.communicate(timeout=120)
+        finally:
+            if p.poll() is None:
+                p.kill()
+    assert p.returncode == 1, (out, err)
+    s = json.loads((run / "summary.json").read_text())
+    left = next(e for e in s["events"] if e["kind"] == "lockstep" and e["source"] == "vehicle")
+    assert s["clock"] == "lockstep" and s["outcome"] in ("completed", "failsafe")
+    assert s["lockstep"] == {"held": False, "left_at_s": left["t"], "why": left["text"], "times": 1}
+    assert 1.0 <= left["t"] < 6.0 and "controller silent for 0.5 s" in left["text"]
+    assert f"left lockstep at t={left['t']:.3f} s: controller silent" in out
+    assert f"bsst sitl: not a lockstep run: the vehicle left lockstep at t={left['t']:.3f} s" in err
+    assert "not a lockstep run: the vehicle left lockstep" in (run / "events.log").read_text()
+    _policies_hold(s)  # recorded, and flown safely
+    if s["outcome"] == "completed":  # exit 1 all the same (it was exit 0 and "completed" before)
+        assert s["ended_by"] == {"who": "mission", "how": "completed"}
+        assert s["sitl"]["controller_exit"] == "exited with status 1"  # it heard the vehicle say so
+
+
+def test_a_ground_station_that_disarms_the_vehicle_in_flight_is_named(tmp_path):
+    """A ground station (pymavlink, on the GCS link, as MAVProxy would) sends a few corrupted
+    frames, then a forced disarm in the air: the mission is ended by someone, so outcome
+    ``aborted``, exit 1, and ``ended_by`` names the sender; the station's bad frames are not
+    the controller's; the arm and the disarm had authority."""
+    mission = tmp_path / "sine6.toml"
+    mission.write_text(SINE_6S)
+    run = tmp_path / "run"
+    os.environ["MAVLINK20"] = "1"
+    with instance_slot() as n:
+        gcs = mavutil.mavlink_connection(f"udpin:127.0.0.1:{GCS_PORT + n}", source_system=255, source_component=190,
+                                         dialect="common")
+        p = _bsst_sitl(n, mission, run, "--speed", "1")
+        try:
+            assert gcs.wait_heartbeat(timeout=30) is not None
+
+            def flown_2s() -> bool:  # reading the telemetry meanwhile, as a ground station does: a full
+                while gcs.recv_msg() is not None:  # socket buffer would drop the COMMAND_ACK to come
+                    pass
+                return csv_rows(run / "vehicle.csv") > 500 or p.poll() is not None
+
+            wait_for(flown_2s, 60, "2 s of flight")
+            bad = bytearray(gcs.mav.heartbeat_encode(6, 8, 0, 0, 4, 3).pack(gcs.mav))
+            bad[-1] ^= 0xFF  # a wrong checksum
+            for _ in range(3):
+                gcs.write(bytes(bad))  # to the vehicle's GCS link, which it heard from
+            gcs.mav.command_long_send(n + 1, 1, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 21196, 0, 0, 0, 0, 0)
+            ack = gcs.recv_match(type="COMMAND_ACK", blocking=True, timeout=10)
+            assert ack is not None and ack.result == mavlink.MAV_RESULT_ACCEPTED
+            out, err = p.communicate(timeout=120)
+        finally:
+            if p.poll() is None:
+                p.kill()
+            gcs.close()
+    assert p.returncode == 1, (out, err)
+    s = json.loads((run / "summary.json").read_text())
+    assert s["outcome"] == "aborted"
+    disarm = next(e for e in s["events"] if e["kind"] == "disarmed" and e["source"] == "vehicle")
+    assert 2.0 <= disarm["t"] < 6.0
+    assert s["ended_by"]["how"] == f"disarmed in flight by command at t={disarm['t']:.3f} s"
+    if "[by " in disarm["text"]:  # the vehicle names the sender of every arm and disarm
+        assert s["ended_by"]["who"] == f"255:190 127.0.0.1:{GCS_PORT + n} gcs"
+    else:
+        assert s["ended_by"]["who"].startswith("someone")
+    assert f"ended by {s['ended_by']['who']}: disarmed in flight" in out
+    assert f"ended: aborted: by {s['ended_by']['who']}" in (run / "events.log").read_text()
+    _policies_hold(s)
+    link = s["link"]
+    assert link["rejected"].get("bad_crc") == 3
+    # the station's three are others'; the controller's own are its targets still in flight after the disarm
+    assert link["rejected_from_others"]["vehicle"] == 3
+    own = sum(link["rejected_by"]["vehicle"].values()) - 3
+    assert link["rejected_from_peer"]["vehicle"] == own == link["rejected"].get("not_offboard", 0)

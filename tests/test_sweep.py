@@ -10,7 +10,9 @@ import json
 import multiprocessing as mp
 import os
 import selectors
+import shutil
 import signal
+import stat
 import subprocess
 import sys
 import time
@@ -282,3 +284,169 @@ def test_ripple_detects_oscillation_not_slow_motion() -> None:
     assert ripple_rms(t, slow, 250.0) < 0.02  # 30 N at 0.08 Hz: the moving average follows it
     fast = slow + 4.0 * np.sin(2 * np.pi * 20.0 * t)
     assert ripple_rms(t, fast, 250.0) == pytest.approx(4.0 / np.sqrt(2.0), rel=0.05)
+
+
+# -- issue 11: a grid too big to mean, malformed sweep files -------------------------------------------
+def test_a_grid_over_the_cell_cap_is_refused_unless_raised(mission_file: Path, tmp_path: Path, capsys) -> None:
+    big = [sys.executable, "-m", "bridge", "sweep", str(mission_file), "--delay", ",".join(map(str, range(100))),
+           "--loss", ",".join(map(str, range(100))), "--seeds", "100", "--out", str(tmp_path / "big")]
+    r = subprocess.run(big, cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "Traceback" not in r.stderr, r.stderr
+    assert "grid: 1000000 cells (100 delay_ms x 100 loss_pct x 100 seeds), over the cap of 10000" in r.stderr
+    assert "--max-cells 1000000" in r.stderr and not (tmp_path / "big").exists()
+    small = ["sweep", str(mission_file), "--delay", "0,10", "--seeds", "2", "--jobs", "2", "--no-plots"]
+    assert main([*small, "--max-cells", "3", "--out", str(tmp_path / "s3")]) == 2
+    assert "grid: 4 cells (2 delay_ms x 2 seeds), over the cap of 3" in capsys.readouterr().err
+    assert main([*small, "--max-cells", "4", "--out", str(tmp_path / "s4")]) == 0
+    assert len(read_cells(tmp_path / "s4" / CELLS_CSV)) == 4
+    f = tmp_path / "capped.toml"
+    f.write_text(f'mission = "{mission_file}"\nmax_cells = 1\n[grid]\nloss_pct = [0, 30]\n')
+    assert main(["sweep", str(f), "--out", str(tmp_path / "f")]) == 2
+    assert "grid: 2 cells (2 loss_pct x 1 seeds), over the cap of 1" in capsys.readouterr().err
+    with pytest.raises(ConfigError, match="over the cap of 2"):
+        sweep(SHORT, Grid(delay_ms=(0.0, 5.0, 10.0)), jobs=1, max_cells=2)
+
+
+def test_a_mission_too_long_to_hold_is_refused_before_any_cell(mission_file: Path, tmp_path: Path, capsys) -> None:
+    """Each rate of the grid is checked against the trace cap: 2000 s is 500000 steps at 250 Hz, not at 500."""
+    long = tmp_path / "long.toml"
+    long.write_text(dump_toml(Mission(Sine(climb=0.0), duration_s=2000.0, name="long").to_dict()))
+    assert main(["sweep", str(long), "--rate", "250,500", "--out", str(tmp_path / "l")]) == 2
+    err = capsys.readouterr().err
+    assert "rate_hz=500" in err and "1000000 control steps, over the 500000" in err and err.count("\n") == 1
+    assert not (tmp_path / "l").exists()
+
+
+@pytest.fixture(scope="module")
+def small_sweep(mission_file: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[str]]:
+    """A finished 2-cell sweep directory, and the arguments that made it (what --resume is given)."""
+    out = tmp_path_factory.mktemp("small") / "sweep"
+    args = ["sweep", str(mission_file), "--delay", "0,10", "--jobs", "1", "--no-plots"]
+    assert main([*args, "--out", str(out)]) == 0
+    return out, args
+
+
+def _damage(d: Path, name: str) -> str:
+    """Damage sweep directory ``d`` as ``name`` says; the words the refusal must contain."""
+    cells, meta = d / CELLS_CSV, d / "sweep.json"
+    lines = cells.read_text().splitlines(keepends=True)
+    row = lines[1]
+    if name == "non-utf8":
+        cells.write_bytes(cells.read_bytes() + b"bsst,250.0,\xff\xfe,0\n")
+        return "cells.csv: line 4: not UTF-8 text"
+    if name == "cells-dir":
+        cells.unlink()
+        cells.mkdir()
+        return "cells.csv: is a directory"
+    if name == "cells-fifo":
+        cells.unlink()
+        os.mkfifo(cells)
+        return "cells.csv: is a FIFO"
+    if name == "truncated-row":
+        cells.write_text(lines[0] + row[: len(row) // 2] + "\n" + lines[2])
+        return "cells.csv: line 2:"
+    if name == "extra-column":
+        cells.write_text(lines[0] + row.rstrip("\n") + ",surplus\n" + lines[2])
+        return "cells.csv: line 2: 21 fields, expected 20"
+    if name == "text-in-number":
+        cells.write_text(lines[0] + row.replace(",completed,", ",completed,").replace("bsst,250.0,", "bsst,fast,", 1)
+                         + lines[2])
+        return "cells.csv: line 2: rate_hz: expected a number, got 'fast'"
+    if name == "text-in-integer":
+        parts = row.split(",")
+        parts[6] = "seven"
+        cells.write_text(lines[0] + ",".join(parts) + lines[2])
+        return "cells.csv: line 2: seed: expected an integer, got 'seven'"
+    if name == "infinite":
+        parts = row.split(",")
+        parts[7] = "inf"
+        cells.write_text(lines[0] + ",".join(parts) + lines[2])
+        return "cells.csv: line 2: rms: expected a finite number, got 'inf'"
+    if name == "empty-axis":
+        parts = row.split(",")
+        parts[2] = ""
+        cells.write_text(lines[0] + ",".join(parts) + lines[2])
+        return "cells.csv: line 2: delay_ms: is empty"
+    if name == "bad-quote":
+        cells.write_text(lines[0] + row.replace("bsst,", '"bs"st,', 1) + lines[2])
+        return "cells.csv: line 2:"
+    if name == "other-header":
+        cells.write_text("a,b,c\n" + "".join(lines[1:]))
+        return "cells.csv: line 1: not a sweep's cells.csv header"
+    if name == "nul":
+        cells.write_text(lines[0] + "\0\0\n" + "".join(lines[1:]))
+        return "cells.csv: line 2:"
+    json_damage = {"json-null": ("null", "expected a JSON object, got null"),
+                   "json-list": ("[1, 2]", "expected a JSON object, got list"),
+                   "json-truncated": (meta.read_text()[:50], "not valid JSON"),
+                   "json-non-utf8": (None, "not UTF-8 text"),
+                   "json-deep": ("[" * 100000 + "]" * 100000, "nested too deeply"),
+                   "json-swept-number": ('{"swept": 5}', "swept: expected a list of names"),
+                   "json-swept-unknown": ('{"swept": ["colour"]}', "swept: 'colour' is not an axis"),
+                   "json-mission-string": ('{"mission": "x"}', "mission: expected an object"),
+                   "json-classes-list": ('{"classes": [1]}', "classes: expected an object")}
+    text, words = json_damage[name]
+    if text is None:
+        meta.write_bytes(b'{"mode": "\xff"}')
+    else:
+        meta.write_text(text)
+    return f"sweep.json: {words}"
+
+
+DAMAGES = ["non-utf8", "cells-dir", "cells-fifo", "truncated-row", "extra-column", "text-in-number",
+           "text-in-integer", "infinite", "empty-axis", "bad-quote", "other-header", "nul", "json-null", "json-list",
+           "json-truncated", "json-non-utf8", "json-deep", "json-swept-number", "json-swept-unknown",
+           "json-mission-string", "json-classes-list"]
+
+
+@pytest.mark.parametrize("damage", DAMAGES)
+def test_malformed_sweep_files_exit_2_with_one_line(small_sweep: tuple[Path, list[str]], tmp_path: Path,
+                                                    damage: str) -> None:
+    """``bsst report DIR`` and ``bsst sweep --resume --out DIR``, as real processes, on a damaged sweep
+    directory: exit 2, one line naming the file (and line, column or field), no traceback, no hang,
+    and the damaged file left as it was."""
+    d = tmp_path / "d"
+    shutil.copytree(small_sweep[0], d)
+    words = _damage(d, damage)
+    kept = {p.name: p.read_bytes() for p in d.iterdir() if p.is_file() and not stat.S_ISFIFO(p.stat().st_mode)}
+    is_json = damage.startswith("json-")
+    commands = [["report", str(d), "--no-plots"]]
+    if is_json and damage in ("json-swept-number", "json-swept-unknown", "json-mission-string", "json-classes-list"):
+        pass  # a resume refuses these as another sweep's (its identity differs), tested below
+    else:
+        commands.append([*small_sweep[1], "--out", str(d), "--resume"])
+    procs = [subprocess.Popen([sys.executable, "-m", "bridge", *argv], cwd=ROOT, stdout=subprocess.DEVNULL,
+                              stderr=subprocess.PIPE, text=True) for argv in commands]  # side by side: half the wait
+    try:
+        for argv, p in zip(commands, procs, strict=True):
+            err = p.communicate(timeout=60)[1]
+            assert p.returncode == 2, (argv, p.returncode, err)
+            assert err.count("\n") == 1 and "Traceback" not in err, err
+            assert words in err and str(d) in err, (words, err)
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+    assert {p.name: p.read_bytes() for p in d.iterdir() if p.name in kept} == kept  # nothing recorded is lost
+
+
+def test_a_resume_of_a_partial_sweep_json_is_another_sweep(small_sweep: tuple[Path, list[str]], tmp_path: Path,
+                                                           capsys) -> None:
+    d = tmp_path / "d"
+    shutil.copytree(small_sweep[0], d)
+    (d / "sweep.json").write_text('{"classes": {}}')
+    assert main([*small_sweep[1], "--out", str(d), "--resume"]) == 2
+    assert "holds a different sweep" in capsys.readouterr().err
+
+
+def test_a_torn_last_row_is_left_out_not_refused(small_sweep: tuple[Path, list[str]], tmp_path: Path) -> None:
+    """Where a killed sweep stopped writing (no newline yet) is the one damage that is expected: the
+    row is left out, and resume flies that cell again."""
+    d = tmp_path / "d"
+    shutil.copytree(small_sweep[0], d)
+    text = (d / CELLS_CSV).read_text()
+    (d / CELLS_CSV).write_text(text[: len(text) - 40])
+    assert len(read_cells(d / CELLS_CSV)) == 1
+    assert main([*small_sweep[1], "--out", str(d), "--resume"]) == 0
+    assert (d / CELLS_CSV).read_text() == text

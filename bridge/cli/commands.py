@@ -25,16 +25,20 @@ from bridge.cli.flags import (
     _home,
     _ids,
     _Parser,
+    add_failsafe_options,
     add_flight_options,
     add_key_option,
     add_link_options,
+    add_sensor_options,
     axis_values,
+    failsafe_table_from_args,
     int_in,
     law_list,
     link_table_from_args,
     mission_integer,
     mission_number,
     number_in,
+    sensor_overrides_from_args,
 )
 from params import ConfigError
 
@@ -46,19 +50,141 @@ def build_parser() -> argparse.ArgumentParser:
     sub.required = True
     p = sub.add_parser("sim", help="fly a mission offline, in one process")
     add_flight_options(p)
+    add_sensor_options(p)
     add_link_options(p)
     p.set_defaults(func=cmd_sim)
     add_sweep_commands(sub)
     add_sitl_commands(sub)
     add_relay_command(sub)
+    add_link_commands(sub)
     return parser
+
+
+# -- bsst link: measured links (bridge.record.linkextract, bridge.core.linkfit, bridge.record.linkplots) ---------
+def add_link_commands(sub: Any) -> None:
+    """``bsst link extract | fit | show``: a trace from a run or two tlogs, the model that fits it, its figure."""
+    p = sub.add_parser("link", help="measured links: extract a trace, fit the link model to it, plot it")
+    acts = p.add_subparsers(dest="link_command", metavar="ACTION", parser_class=_Parser)
+    acts.required = True
+    e = acts.add_parser("extract", help="per-packet delays and losses of both directions, as a trace file")
+    e.add_argument("source", nargs="+", metavar="RUN_DIR | VEHICLE.tlog CONTROLLER.tlog",
+                   help="a real-time run directory, or the tlogs of the vehicle's end and the controller's end")
+    e.add_argument("--out", metavar="FILE", help="the trace (default RUN_DIR/link-trace.csv, or ./link-trace.csv)")
+    e.add_argument("--clock", choices=("same", "timesync"), default="same",
+                   help="same: both tlogs stamped on one clock (one host, or hosts kept in sync); timesync: the "
+                        "offset from the TIMESYNC exchanges (equal one-way delays assumed)")
+    e.add_argument("--overwrite", action="store_true", help="replace an existing --out")
+    e.set_defaults(func=cmd_link_extract)
+    f = acts.add_parser("fit", help="the [link] table that fits a trace best, as a link profile (TOML)")
+    f.add_argument("trace", metavar="TRACE", help="trace CSV (t_s, delay_ms, optional direction)")
+    f.add_argument("--out", metavar="FILE", help="write the profile here (default: print it)")
+    f.add_argument("--blackout-after", type=number_in("--blackout-after", 0.0, 1e6, lo_open=True), default=1.0,
+                   metavar="S", help="a loss run this long or longer is a blackout, listed apart (default 1 s)")
+    f.add_argument("--overwrite", action="store_true", help="replace an existing --out")
+    f.set_defaults(func=cmd_link_fit)
+    s = acts.add_parser("show", help="plot a trace: delay over time, loss bursts, delay histogram (PNG)")
+    s.add_argument("trace", metavar="TRACE", help="trace CSV (t_s, delay_ms, optional direction)")
+    s.add_argument("--out", metavar="FILE.png", help="the figure (default: TRACE with .png)")
+    s.add_argument("--overwrite", action="store_true", help="replace an existing --out")
+    s.set_defaults(func=cmd_link_show)
+
+
+def _new_output(path: Any, flag: str, overwrite: bool) -> Any:
+    """``path`` as a file this command may write: writable, and new unless ``--overwrite`` (exit 2 otherwise)."""
+    from bridge.record.runlog import check_writable  # lazy: start-up time
+
+    p = check_writable(path, flag)
+    if p.exists() and not overwrite:
+        raise ConfigError(f"{flag} {p}: exists; --overwrite to replace it")
+    return p
+
+
+def cmd_link_extract(args: argparse.Namespace) -> int:
+    """``bsst link extract``: write the trace, print each direction's figures."""
+    from pathlib import Path  # lazy: with the command
+
+    from bridge.record.linkextract import extract_run_dir, extract_tlogs, extraction_text, read_tlog  # lazy
+    from bridge.record.runlog import write_text_atomic  # lazy: start-up time
+
+    src = args.source
+    if len(src) not in (1, 2):
+        raise UsageError("bsst link extract: give a run directory, or a vehicle tlog and a controller tlog")
+    if len(src) == 2 and Path(src[0]).resolve() == Path(src[1]).resolve():
+        raise UsageError(f"bsst link extract: {src[0]} given as both ends: the same file twice")
+    out = _new_output(args.out or (Path(src[0]) / "link-trace.csv" if len(src) == 1 else "link-trace.csv"),
+                      "--out", args.overwrite)
+    if len(src) == 1:
+        ex = extract_run_dir(src[0], args.clock)
+    else:
+        ex = extract_tlogs(read_tlog(src[0]), read_tlog(src[1]), args.clock, inputs=tuple(src))
+    write_text_atomic(out, extraction_text(ex))
+    for d in ("up", "down"):
+        s = getattr(ex, d).figures()
+        ms = {k: "n/a" if v is None else f"{v:.2f}" for k, v in s["delay_ms"].items()}
+        loss = "n/a" if s["loss_pct"] is None else f"{s['loss_pct']:.2f} %"
+        print(f"{d:4}: sent {s['sent']} delivered {s['delivered']} lost {s['lost']} ({loss}); delay p50 {ms['p50']} "
+              f"ms p95 {ms['p95']} ms p99 {ms['p99']} ms max {ms['max']} ms; duplicates {s['duplicates']}")
+    if ex.timesync is not None:
+        print(f"timesync: vehicle clock {ex.timesync[0] * 1e3:+.3f} ms from the controller's (round trip "
+              f"{ex.timesync[1] * 1e3:.2f} ms); clock used: {ex.clock}")
+    for n in ex.notes:
+        print(f"note: {n}")
+    print(f"trace: {out} (t_s = 0 at {ex.origin})")
+    return EXIT_OK
+
+
+def cmd_link_fit(args: argparse.Namespace) -> int:
+    """``bsst link fit``: the fitted table as a link profile, on stdout or in ``--out``."""
+    from pathlib import Path  # lazy: with the command
+
+    from bridge.core.linkfit import fit_toml, fit_trace  # lazy: numpy
+    from bridge.core.linktrace import read_trace  # lazy: start-up time
+    from bridge.record.runlog import write_text_atomic  # lazy: start-up time
+
+    out = _new_output(args.out, "--out", args.overwrite) if args.out else None
+    tf = read_trace(args.trace)
+    fits = fit_trace(tf, args.blackout_after)
+    text = fit_toml(fits, str(Path(args.trace).absolute()))
+    if out is None:
+        sys.stdout.write(text)
+        return EXIT_OK
+    write_text_atomic(out, text)
+    for d, f in fits.items():
+        dl, ls = f.delay, f.loss
+        jitter = "" if dl is None or dl.jitter == "none" else \
+            f" jitter {dl.jitter_ms:.2f} ms {dl.jitter} (KS D {dl.ks[dl.jitter]:.4f})"
+        delay = "nothing delivered" if dl is None else f"delay {dl.delay_ms:.2f} ms{jitter}"
+        loss = f"loss {ls.loss_pct:.3g} % {ls.model}" + (f" bursts of {ls.burst_len:.3g}" if ls.burst_len else "")
+        print(f"{d:4}: {delay}; {loss}; {len(f.blackouts)} blackouts of {f.blackout_after_s:g} s or more")
+    print(f"profile: {out} (fly it: bsst sim MISSION --link-profile {out})")
+    return EXIT_OK
+
+
+def cmd_link_show(args: argparse.Namespace) -> int:
+    """``bsst link show``: the trace's figure as PNG."""
+    from pathlib import Path  # lazy: with the command
+
+    from bridge.core.linktrace import read_trace  # lazy: start-up time
+    from bridge.record.linkplots import trace_figure  # lazy: matplotlib
+
+    out = Path(args.out) if args.out else Path(args.trace).with_suffix(".png")
+    if out.suffix.lower() != ".png":
+        raise UsageError(f"bsst link show: --out {out}: the figure is a PNG (name it *.png)")
+    _new_output(out, "--out", args.overwrite)
+    tf = read_trace(args.trace)
+    print(f"figure: {trace_figure(tf, out)}")
+    return EXIT_OK
 
 
 def add_relay_command(sub: Any) -> None:
     """``bsst relay``: the real-time UDP relay applying the link model on the wall clock (bridge.nodes.relay)."""
     p = sub.add_parser("relay", help="relay UDP both ways between two endpoints through the link model")
     p.add_argument("--listen", required=True, metavar="HOST:PORT", help="bind here; the controller sends here")
-    p.add_argument("--to", required=True, metavar="HOST:PORT", help="forward to here (the vehicle's link)")
+    p.add_argument("--to", required=True, metavar="HOST:PORT",
+                   help="forward to here (the vehicle's link); only datagrams from exactly here go back")
+    p.add_argument("--client", metavar="HOST:PORT",
+                   help="the controller side's address: only its datagrams go on (default: the first sender "
+                        "to --listen, learned once)")
     p.add_argument("--listen-direction", choices=("up", "down"), default="up",
                    help="direction of what arrives on --listen (default up: controller -> vehicle)")
     p.add_argument("--mission", metavar="FILE", help="take the [link] tables (and seed) from this mission")
@@ -82,6 +208,7 @@ def cmd_relay(args: argparse.Namespace) -> int:
     try:
         listen = parse_address(args.listen, "--listen", bind=True)
         target = parse_address(args.to, "--to")
+        client = parse_address(args.client, "--client") if args.client else None
     except ValueError as exc:
         raise UsageError(f"bsst relay: {exc}") from None
     if args.stats:
@@ -89,17 +216,24 @@ def cmd_relay(args: argparse.Namespace) -> int:
     # the one path from a mission and its overrides to the parts: the whole mission is checked,
     # and the relay flies the link it gives
     settings = prepare(load_mission(args.mission) if args.mission else at_rest(), link=link_table_from_args(args)).link
+
+    def learned(addr: Any) -> None:  # a status line (bridge.nodes.process): the session logs the event
+        print(f"event t=0.000 client: {addr[0]}:{addr[1]} is the controller side (the first sender to "
+              f"--listen); any other sender is refused", flush=True)
+
     try:
         relay = Relay(listen, target, settings, listen_direction=args.listen_direction,
-                      mission_clock=args.mission_clock)
+                      mission_clock=args.mission_clock, client=client, on_client=learned)
     except OSError as exc:
         raise ConfigError(f"--listen {args.listen}: cannot bind ({exc.strerror or exc})") from None
     stop = relay.stop
     old = {s: signal.signal(s, lambda *_: stop()) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         h, p = relay.address
-        print(f"relay: listening on {h}:{p} -> {target[0]}:{target[1]}; up: {settings.up.describe()}; "
-              f"down: {settings.down.describe()}", flush=True)
+        bh, bp = relay.back_address
+        ends = f"client {client[0]}:{client[1]}" if client else "client: the first sender"
+        print(f"relay: listening on {h}:{p} -> {target[0]}:{target[1]} from {bh}:{bp} ({ends}); "
+              f"up: {settings.up.describe()}; down: {settings.down.describe()}", flush=True)
         relay.serve(args.duration)
     finally:
         for s, handler in old.items():
@@ -112,6 +246,9 @@ def cmd_relay(args: argparse.Namespace) -> int:
         fmt = {k: "n/a" if v is None else f"{v:.3f}" for k, v in m_ms.items()}
         print(f"{d:4}: sent {s['sent']} delivered {s['delivered']} lost {s['lost']} dup {s['duplicated']} "
               f"reordered {s['reordered']}; added delay p50 {fmt['p50']} ms p99 {fmt['p99']} ms max {fmt['max']} ms")
+    refused = summary["refused"]
+    print(f"refused {sum(refused.values())}: " + ", ".join(f"{r} {n}" for r, n in refused.items())
+          + f" (client {summary['client'] or 'none'}, target {summary['target']})")
     cpu = summary["cpu_us_per_packet"]
     print(f"cpu {summary['cpu_user_s']:.3f} s user + {summary['cpu_sys_s']:.3f} s system"
           + (f", {cpu:.1f} us per packet" if cpu is not None else ""))
@@ -131,6 +268,13 @@ def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
     w(f"mission {s['mission']}  controller {s['controller']}  profile {s['profile']}  "
       f"clock {s['clock']}  rate {s['rate_hz']:g} Hz  duration {s['duration_s']:.2f} s\n")
     w(f"outcome: {s['outcome']}\n")
+    end = s.get("ended_by")
+    if end and (end.get("who"), end.get("how")) != ("mission", "completed"):
+        w(f"ended by {end['who']}: {end['how']}\n")
+    lock = s.get("lockstep")
+    if lock and not lock.get("held", True):
+        w(f"left lockstep at t={lock['left_at_s']:.3f} s: {lock['why']} (flown on from there on the wall clock: "
+          "not a lockstep run)\n")
     rms = s.get("rms_3d")
     w(f"3-D RMS error over t >= {s['rms_from_s']:g} s: {rms:.3e} m\n" if rms is not None else "3-D RMS: n/a\n")
     w(f"{'axis':5} {'rms':>10} {'max':>10} {'settling_s':>11} {'bound_s':>9}\n")
@@ -151,6 +295,13 @@ def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
               f"reordered {L['reordered']} delay p50 {ms['p50']} ms p99 {ms['p99']} ms max {ms['max']} ms\n")
     for e in s.get("events", [])[:8]:
         w(f"event t={e['t']:.3f} {e['kind']}: {e['text']}\n")
+    policies = s.get("policies") or []
+    broken = [v for v in policies if not v.get("ok")]
+    if policies:
+        from bridge.record.policies import violation_text  # lazy: numpy
+
+        w(f"policies: all {len(policies)} hold\n" if not broken else
+          "".join(f"policy {violation_text(v)}\n" for v in broken))
     if path is not None:
         w(f"run directory: {path}\n")
 
@@ -169,9 +320,25 @@ def cmd_sim(args: argparse.Namespace) -> int:
         rate_hz=args.rate,
         seed=args.seed,
         link=link_table_from_args(args),
+        failsafe=failsafe_table_from_args(args),
+        **sensor_overrides_from_args(args),
     )
+    return report_run(run, "sim")
+
+
+def report_run(run: Any, command: str) -> int:
+    """Print a run's summary, name each violated policy on stderr; its exit status (0: a clean completion)."""
+    from bridge.record.policies import run_ok, violation_text  # lazy: numpy
+
     print_summary(run.summary, run.path)
-    return EXIT_OK if run.outcome == "completed" else EXIT_FAILED
+    lock = run.summary.get("lockstep") or {"held": True}
+    if not lock.get("held", True):
+        print(f"bsst {command}: not a lockstep run: the vehicle left lockstep at t={lock['left_at_s']:.3f} s "
+              f"({lock['why']})", file=sys.stderr)
+    for v in run.summary.get("policies") or []:
+        if not v.get("ok"):
+            print(f"bsst {command}: policy {violation_text(v)}", file=sys.stderr)
+    return EXIT_OK if run_ok(run.summary) else EXIT_FAILED
 
 
 def add_sweep_commands(sub: Any) -> None:
@@ -193,6 +360,8 @@ def add_sweep_commands(sub: Any) -> None:
     mode.add_argument("--lockstep", dest="mode", action="store_const", const="lockstep",
                       help="fly each cell as a lockstep SITL session (vehicle + controller processes)")
     p.add_argument("--jobs", type=int_in("--jobs", 1, 1024), metavar="N", help="worker processes (default: all cores)")
+    p.add_argument("--max-cells", type=int_in("--max-cells", 1, 10**9), metavar="N",
+                   help="fly a grid of up to N cells (default 10000: a bigger one is refused as a likely mistake)")
     p.add_argument("--dask", metavar="ADDRESS", help="run the cells on this Dask scheduler (e.g. tcp://host:8786)")
     p.add_argument("--out", metavar="DIR", help="sweep directory (default sweeps/<UTC time>-<mission>)")
     p.add_argument("--resume", action="store_true", help="fly only the cells missing from --out DIR")
@@ -215,7 +384,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     axes = {a: getattr(args, a) for a in AXES if getattr(args, a) is not None}
     if args.seeds is not None:
         axes["seeds"] = args.seeds
-    spec = replace(spec, grid=replace(spec.grid, **axes), mode=args.mode or spec.mode)
+    spec = replace(spec, grid=replace(spec.grid, **axes), mode=args.mode or spec.mode,
+                   max_cells=args.max_cells or spec.max_cells)
     fixed = link_table_from_args(args)
     for d in ("up", "down"):
         clash = [a for a in spec.grid.swept() if a in fixed.get(d, {})]
@@ -276,12 +446,14 @@ def add_sitl_commands(sub: Any) -> None:
     p.add_argument("--controller-id", type=_ids, metavar="SYSID:COMPID",
                    help="the only sender of actuator targets (default 200:191)")
     p.add_argument("--home", type=_home, metavar="LAT,LON,ALT", help="home: degrees, degrees, m AMSL")
+    add_failsafe_options(p)
+    add_sensor_options(p)
     p.add_argument("--out", metavar="DIR", help="write vehicle.tlog and vehicle.csv into DIR")
     p.add_argument("--overwrite", action="store_true", help="allow replacing those files")
     p.set_defaults(func=cmd_vehicle)
 
     p = sub.add_parser("controller", help="the offboard controller alone: fly a mission against a MAVLink vehicle")
-    add_flight_options(p)
+    add_flight_options(p, failsafe=False)  # the vehicle flies its failsafe: the controller has no say in it
     p.add_argument("--vehicle", metavar="HOST:PORT",
                    help="the vehicle's controller link (default 127.0.0.1:14560 + instance)")
     p.add_argument("--instance", type=int_in("--instance", 0, 9), default=0, metavar="N",
@@ -297,6 +469,7 @@ def add_sitl_commands(sub: Any) -> None:
 
     p = sub.add_parser("sitl", help="fly a mission as SITL: vehicle and controller processes over MAVLink/UDP")
     add_flight_options(p)
+    add_sensor_options(p)
     _add_port_options(p, vehicle=False)
     add_link_options(p)
     p.set_defaults(func=cmd_sitl)
@@ -308,9 +481,9 @@ def cmd_sitl(args: argparse.Namespace) -> int:
     run = sitl(args.mission, out=args.out, write=True, overwrite=args.overwrite, plots=not args.no_plots,
                profile=args.profile, controller=args.controller, rate_hz=args.rate, seed=args.seed,
                realtime=args.realtime, instance=args.instance, gcs=args.gcs, speed=args.speed, live=True,
-               link=link_table_from_args(args), key=args.key)
-    print_summary(run.summary, run.path)
-    return EXIT_OK if run.outcome == "completed" else EXIT_FAILED
+               link=link_table_from_args(args), key=args.key, failsafe=failsafe_table_from_args(args),
+               **sensor_overrides_from_args(args))
+    return report_run(run, "sitl")
 
 
 # -- the two sides alone (bsst vehicle, bsst controller) ---------------------------------------------
@@ -321,7 +494,8 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
     from bridge.mavlink.telemetry import Home  # lazy: start-up time
     from bridge.nodes.vehicle import VehicleConfig, run_vehicle  # lazy: start-up time
 
-    flight = prepare(args.mission or at_rest(), profile=args.profile, rate_hz=args.rate, seed=args.seed)
+    flight = prepare(args.mission or at_rest(), profile=args.profile, rate_hz=args.rate, seed=args.seed,
+                     failsafe=failsafe_table_from_args(args), **sensor_overrides_from_args(args))
     n = args.instance
     listen = parse_address(args.listen or f"127.0.0.1:{LINK_PORT + n}", "udpin", "--listen")
     if listen.mode != "udpin":

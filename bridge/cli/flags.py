@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any, NoReturn
 
 
@@ -184,8 +185,70 @@ def link_number(flag: str, key: str | None = None) -> Callable[[str], float]:
     return conv
 
 
-def add_flight_options(p: argparse.ArgumentParser) -> None:
-    """Options every flying command shares: overrides of the mission's own values."""
+def add_failsafe_options(p: argparse.ArgumentParser) -> None:
+    """``--failsafe-action A``: over the mission's ``[failsafe] action``; :func:`failsafe_table_from_args`
+    reads it back."""
+    # the choices are bridge.core.failsafe.FAILSAFE_ACTIONS (tests/test_failsafe_actions.py keeps them equal),
+    # written out so that building the parser loads no flight code
+    p.add_argument("--failsafe-action", choices=("descend", "land", "hold", "disarm"),
+                   help="what the vehicle does when its targets stop: descend (default: level, sink, disarm on the "
+                        "ground), land (here), hold (here for [failsafe] hold_s, 5 s, then land) or disarm "
+                        "(motors off at once)")
+
+
+def failsafe_table_from_args(args: argparse.Namespace) -> dict[str, Any]:
+    """The ``[failsafe]`` overrides the flags of :func:`add_failsafe_options` ask for ({} if none)."""
+    action = getattr(args, "failsafe_action", None)
+    return {"action": action} if action is not None else {}
+
+
+def sensor_set_name(flag: str) -> Callable[[str], str]:
+    """An argparse type for a sensor set's name (``--sensors mocap``): checked for its form here (a
+    TOML bare key: letters, digits, ``_``, ``-``); whether the profile has it, when the flight is built."""
+    def conv(text: str) -> str:
+        if not text or not all(c.isascii() and (c.isalnum() or c in "_-") for c in text):
+            raise argparse.ArgumentTypeError(f"{flag} takes the name of a sensor set of the profile "
+                                             f"(ideal, mocap, gnss), got {text!r}")
+        return text
+
+    return conv
+
+
+def noise_scale(flag: str) -> Callable[[str], float]:
+    """An argparse type for the noise scale: in the mission's ``[sensors] noise_scale`` range
+    (:data:`plant.profiles.NOISE_SCALE_RANGE`, looked up when the flag is given)."""
+    def conv(text: str) -> float:
+        from plant.profiles import NOISE_SCALE_RANGE  # lazy: building the parser loads no plant code
+
+        return number_in(flag, *NOISE_SCALE_RANGE)(text)
+
+    return conv
+
+
+def add_sensor_options(p: argparse.ArgumentParser) -> None:
+    """``--sensors NAME``, ``--estimator KIND``, ``--noise X``: over the mission's ``[sensors] set``,
+    ``[estimator] kind`` and ``[sensors] noise_scale``; :func:`sensor_overrides_from_args` reads them back."""
+    p.add_argument("--sensors", type=sensor_set_name("--sensors"), metavar="NAME",
+                   help="the vehicle's sensor set from its profile's [sensors]: ideal, mocap or gnss")
+    # the choices are bridge.core.estimator.ESTIMATOR_KINDS (tests/test_estimation_flight.py keeps them equal),
+    # written out so that building the parser loads no flight code
+    p.add_argument("--estimator", choices=("truth", "raw", "ekf"),
+                   help="what the vehicle sends the controller: truth (default: the true state), raw (the "
+                        "measurements as they come) or ekf (its Kalman filter's estimate)")
+    p.add_argument("--noise", type=noise_scale("--noise"), metavar="X",
+                   help="multiply every noise sigma of the sensor set by X")
+
+
+def sensor_overrides_from_args(args: argparse.Namespace) -> dict[str, Any]:
+    """``prepare``'s ``sensors``, ``estimator`` and ``noise`` keywords from :func:`add_sensor_options`' flags."""
+    name = getattr(args, "sensors", None)
+    return {"sensors": {"set": name} if name is not None else None,
+            "estimator": getattr(args, "estimator", None), "noise": getattr(args, "noise", None)}
+
+
+def add_flight_options(p: argparse.ArgumentParser, failsafe: bool = True) -> None:
+    """Options every flying command shares: overrides of the mission's own values (``failsafe``:
+    with the vehicle's failsafe action, for the commands that fly the vehicle)."""
     p.add_argument("mission", help="mission TOML file (see missions/)")
     p.add_argument("--out", metavar="DIR", help="run directory (default runs/<UTC time>-<mission>)")
     p.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out")
@@ -196,6 +259,8 @@ def add_flight_options(p: argparse.ArgumentParser) -> None:
                    help="control law: bsst, smc, pid, or your own (path/to/file.py:Class or package.module:Class)")
     p.add_argument("--seed", type=mission_integer("--seed", "seed"), metavar="N", help="seed of random effects")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+    if failsafe:
+        add_failsafe_options(p)
 
 
 # -- link impairment flags (bridge.core.link): both directions, or one with --up-/--down- -----------
@@ -236,6 +301,7 @@ def add_link_options(p: argparse.ArgumentParser, skip: Sequence[str] = ()) -> No
         g.add_argument(flag, dest=f"link_{pre.replace('-', '_')}blackouts", action="append",
                        type=blackout_window(flag), metavar="START:DURATION",
                        help=argparse.SUPPRESS if pre else "no packets from START for DURATION s (repeatable)")
+    add_trace_options(g)
     g.add_argument("--jitter-dist", dest="link_jitter", choices=("uniform", "normal"), help="jitter distribution")
     g.add_argument("--link-seed", dest="link_seed", type=link_seed("--link-seed"), metavar="N",
                    help="seed of the link's fates (default: the mission's seed)")
@@ -245,12 +311,80 @@ def add_link_options(p: argparse.ArgumentParser, skip: Sequence[str] = ()) -> No
         g.add_argument(flag, dest=f"link_{key}", type=link_number(flag, key), metavar=meta, help=text)
 
 
+TRACE_KEYS = ("trace", "trace_loop")  # per direction, read back like the numbers
+
+
+def existing_file(flag: str, text: str) -> str:
+    """``text`` as an absolute path to a regular file (relative: to the working directory)."""
+    p = Path(text).expanduser()
+    if not p.is_file():
+        raise argparse.ArgumentTypeError(f"{flag} {text}: {'is not a regular file' if p.exists() else 'no such file'}")
+    return str(p.absolute())
+
+
+def trace_file(flag: str) -> Callable[[str], str]:
+    """An argparse type for a link trace: an existing file, made absolute (relative to the working
+    directory, so that every process of a session finds it); ``none`` for no trace. The file's
+    content is checked when the flight is built (bridge.core.linktrace), naming its bad lines."""
+    def conv(text: str) -> str:
+        if text.strip().lower() == "none":
+            return ""
+        return existing_file(flag, text)
+
+    return conv
+
+
+def yes_no(flag: str) -> Callable[[str], bool]:
+    """``true|false`` (also yes/no, on/off, 1/0) for a flag that may be given bare (meaning true)."""
+    words = {"true": True, "yes": True, "on": True, "1": True, "false": False, "no": False, "off": False, "0": False}
+
+    def conv(text: str) -> bool:
+        v = words.get(text.strip().lower())
+        if v is None:
+            raise argparse.ArgumentTypeError(f"{flag} takes true or false, got {text!r}")
+        return v
+
+    return conv
+
+
+def link_profile(flag: str) -> Callable[[str], str]:
+    """An argparse type for a link profile: a shipped name or a profile TOML (made absolute)."""
+    def conv(text: str) -> str:
+        from bridge.core.linkprofile import profile_names  # lazy: building the parser loads no link code
+        from bridge.core.linktrace import is_profile_path  # lazy: as above
+
+        if not is_profile_path(text):
+            if text not in profile_names():
+                raise argparse.ArgumentTypeError(f"{flag}: unknown link profile {text!r}; shipped profiles: "
+                                                 f"{', '.join(profile_names())} (or a profile TOML path)")
+            return text
+        return existing_file(flag, text)
+
+    return conv
+
+
+def add_trace_options(g: Any) -> None:
+    """``--link-trace FILE`` (``--up-link-trace``, ``--down-link-trace``), ``--link-trace-loop [true|false]``
+    and ``--link-profile NAME``: a measured trace, looped or not, and a named link profile."""
+    for pre in ("", "up-", "down-"):
+        dest = f"link_{pre.replace('-', '_')}"
+        g.add_argument(f"--{pre}link-trace", dest=f"{dest}trace", type=trace_file(f"--{pre}link-trace"),
+                       metavar="FILE", help=argparse.SUPPRESS if pre else
+                       "replay this measured link trace (CSV: t_s, delay_ms, optional direction; 'none': no trace)")
+        g.add_argument(f"--{pre}link-trace-loop", dest=f"{dest}trace_loop", nargs="?", const=True,
+                       type=yes_no(f"--{pre}link-trace-loop"), metavar="true|false",
+                       help=argparse.SUPPRESS if pre else "loop a trace shorter than the mission (bare: true)")
+    g.add_argument("--link-profile", dest="link_profile", type=link_profile("--link-profile"), metavar="NAME",
+                   help="a named link profile the mission's [link] is laid over: wifi, lte, sik-57600, "
+                        "satellite-geo, satellite-leo, or a profile TOML (bsst link fit writes one)")
+
+
 def link_table_from_args(args: argparse.Namespace) -> dict[str, Any]:
     """The ``[link]`` overrides the flags of :func:`add_link_options` ask for ({} if none).
 
     Flags for both directions write both ``up`` and ``down``; ``--up-*`` / ``--down-*`` win."""
     out: dict[str, Any] = {}
-    keys = [key for _, key, *_ in LINK_FLAGS] + ["blackouts"]
+    keys = [key for _, key, *_ in LINK_FLAGS] + ["blackouts", *TRACE_KEYS]
     for d in ("up", "down"):
         side: dict[str, Any] = {}
         for key in keys:
@@ -270,7 +404,15 @@ def link_table_from_args(args: argparse.Namespace) -> dict[str, Any]:
             why = burst_problem(side["loss_pct"], side["burst_len"])
             if why:
                 raise UsageError(f"bsst: --burst / --{d}-burst: {why}")
-    for key in ("compensation", *(k for _, k, *_ in GUARD_FLAGS)):
+        if side.get("trace"):
+            from bridge.core.link import trace_clash  # lazy: start-up time
+
+            clash = trace_clash(side)
+            if clash:
+                raise UsageError(f"bsst: --link-trace / --{d}-link-trace cannot be combined with {clash} (--delay, "
+                                 f"--jitter, --loss, --burst) in the {d} direction: the trace gives the delays and "
+                                 f"the losses")
+    for key in ("compensation", "profile", *(k for _, k, *_ in GUARD_FLAGS)):
         v = getattr(args, f"link_{key}", None)
         if v is not None:
             out[key] = v

@@ -1,33 +1,103 @@
-"""The vehicle's own failsafe: level, descend, disarm on the ground (docs/design.md, "Failsafe").
+"""The vehicle's own failsafe and the small position controller that flies it (docs/design.md, "Failsafe").
 
-In:  the ``[failsafe]`` table (``timeout_s`` s, ``descent_rate`` m/s, ``resume``), the controller's
-     nominal model (the profile's numbers), the paper state (eq. 7, NWU: m, m/s, rad, rad/s)
-Out: a :class:`FailsafeConfig`; the landing loop's wrench demand (u1..u4, N) and the normalised
-     paper-frame command the profile's actuation makes of it
+In:  the ``[failsafe]`` table (``timeout_s`` s, ``descent_rate`` m/s, ``resume``, ``action``, ``hold_s`` s),
+     the vehicle's nominal model (the profile's numbers, never the effects), the paper state (eq. 7, NWU:
+     m, m/s, rad, rad/s)
+Out: a :class:`FailsafeConfig`; the on-board controller's wrench demand (u1..u4, N) and the normalised
+     paper-frame command the profile's actuation makes of it, for a target (:class:`Level`,
+     :class:`PositionHold`, :class:`Land`, :class:`Takeoff`)
 
 No valid actuator target for longer than ``timeout_s`` of vehicle time and the vehicle
-leaves offboard control. A small PD loop of its own then holds it level at its heading and
-sinks it at ``descent_rate`` m/s until it rests on the ground, where it disarms. It
-returns to offboard control only when armed again.
+leaves offboard control; what it does then is ``action`` (PX4's offboard-loss action,
+``COM_OBL_RC_ACT``, for the three that PX4 has):
+
+- ``descend`` (default; the only action before there were four): level at its heading and sink
+  at ``descent_rate``, no horizontal control (it drifts with the speed it had), disarm on the ground.
+- ``land``: hold the horizontal position where the failsafe began while sinking at ``descent_rate``,
+  disarm on the ground (PX4 4, Land mode: "land at the position where the mode was engaged").
+- ``hold``: hold the position and height where the failsafe began for ``hold_s``, then ``land``
+  there (PX4 5, Hold). PX4 waits ``COM_FAIL_ACT_T`` in Hold before it takes a failsafe action
+  (default 5 s, 0-25 s: "Before entering failsafe (RTL, Land, Hold), wait COM_FAIL_ACT_T seconds
+  in Hold mode for the user to realize", PX4-Autopilot's commander parameters), and Land is what
+  its offboard-loss action maps to (src/modules/commander/failsafe/failsafe.cpp,
+  ``fromOffboardLossActParam``: 4 Land mode, 5 Hold mode, 7 Disarm); ``hold_s`` is that wait, with
+  its default and range, and the landing after it is that action.
+- ``disarm``: stop the motors at once (PX4 7, Disarm); the vehicle falls.
+
+A failsafe that begins on the ground disarms at once, whatever the action. The vehicle returns
+to offboard control only when armed again.
+
+**The on-board controller** (:class:`OnboardController`) is the vehicle's own, not the paper's
+law: a cascade on the vehicle's nominal model, run at every physics step (1 kHz by default):
+
+1. position P to a velocity set-point (each target makes its own, :meth:`Target.setpoint`):
+   v_sp,xy = clip_|.|(k_pos,xy (p_xy,d - p_xy), v_xy,max), v_sp,z = clip(k_pos,z (z_d - z), -v_down, v_up)
+   (``Land``/``Level``: v_sp,z = -descent_rate; ``Level``: no horizontal set-point at all);
+2. velocity PI to an acceleration: a = k_vel (v_sp - v) + k_i ∫(v_sp - v) dt, the integral clamped
+   to |k_i ∫| <= a_i,max (anti-windup; it takes up a mass mismatch or a steady push: PX4's velocity
+   loop has one too, MPC_XY_VEL_I_ACC, MPC_Z_VEL_I_ACC), a_xy clipped to g tan(tilt_max);
+3. thrust along (a_x, a_y, g + a_z) (``controller.pid.tilt_from_acceleration``), roll and pitch
+   clipped to tilt_max: u1 = m (g + a_z) / max(cos phi cos theta, 0.5);
+4. attitude PD: u2 = (Ix/l)(100 (phi_d - phi) - 20 phi'), u3 = (Iy/l)(100 (theta_d - theta) - 20 theta')
+   (10 rad/s, critically damped: a vehicle tilted when its failsafe begins turns its thrust where
+   it wants it quickly, so that a small difference in that start, the float32 wire's, stays small);
+   yaw: u4 = -(Iz/l) 4 psi' (stop turning; the heading stays where that leaves it), or, for a
+   target with a heading psi_d, u4 = (Iz/l)(4 wrap(psi_d - psi) - 4 psi') (2 rad/s, critically
+   damped). The failsafe's targets have none: the translation does not need one (the closed loop
+   is the same about any heading), and turning back to the heading it began with would carry
+   that heading's small difference between clocks into the path.
+
+Gains (:class:`OnboardGains`): k_pos,xy = k_pos,z = 1.5 /s, k_vel = 3 /s (in the linear range a PD
+on position with kp = 4.5 /s², kd = 3 /s: 2.1 rad/s, damping 0.71, a fifth of the attitude loop's
+10 rad/s), k_i,xy = 0.5 /s², k_i,z = 2 /s² (PX4's MPC_Z_VEL_I_ACC default), a_i,max = 3 m/s²
+(a plant 30 % heavier than its model), v_xy,max = 2 m/s, v_up = 1.5 m/s (PX4's MPC_TKO_SPEED),
+v_down = 1 m/s, tilt_max = 0.35 rad (20 deg). ``Level`` (``descend``) is the earlier landing loop
+exactly: level attitude at 6 rad/s (36, 12), velocity P only with k_vel,level = 2 /s and no
+integral, u1 = m (g + 2 (-descent_rate - z')) / max(cos phi cos theta, 0.5). A later HOLD,
+NAV_LAND or NAV_TAKEOFF mode flies the same controller with :class:`PositionHold`, :class:`Land`
+or :class:`Takeoff` (``SimVehicle.fly_onboard``).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from math import cos
+from math import cos, hypot, tan
 from typing import Any
 
 from controller.actuation import make_actuation
+from controller.bsst import wrap_angle
 from controller.nominal import Nominal
+from controller.pid import tilt_from_acceleration
 from params import Table
+
+FAILSAFE_ACTIONS = ("descend", "land", "hold", "disarm")
+# PX4's COM_OBL_RC_ACT value of the actions it has (commander_params.c: 4 Land, 5 Hold, 7 Disarm);
+# ``descend`` (level, no position) has none.
+PX4_OFFBOARD_LOSS_ACTION = {"land": 4, "hold": 5, "disarm": 7}
+HOLD_RANGE_S = (0.0, 25.0)  # PX4's COM_FAIL_ACT_T range
+ACTION_TEXT = {  # the failsafe event says what the vehicle does
+    "descend": "level and descend",
+    "land": "land here",
+    "hold": "hold here, then land",
+    "disarm": "stop the motors",
+}
 
 
 @dataclass(frozen=True)
 class FailsafeConfig:
     timeout_s: float = 0.5
-    descent_rate: float = 0.7  # m/s
+    descent_rate: float = 0.7  # m/s (PX4's MPC_LAND_SPEED default)
     resume: bool = False  # the controller re-arms and resumes when the link returns
+    action: str = "descend"  # one of FAILSAFE_ACTIONS
+    hold_s: float = 5.0  # hold: how long before it lands (PX4's COM_FAIL_ACT_T default)
+
+    def time_to_land_s(self, height_m: float) -> float:
+        """Vehicle time from the failsafe to a disarm on the ground from ``height_m`` (the
+        descent at ``descent_rate``; ``hold`` adds its hold; ``disarm``: at once)."""
+        if self.action == "disarm":
+            return 0.0
+        return (self.hold_s if self.action == "hold" else 0.0) + max(height_m, 0.0) / self.descent_rate
 
 
 def failsafe_from_table(data: Mapping[str, Any], source: str) -> FailsafeConfig:
@@ -36,30 +106,226 @@ def failsafe_from_table(data: Mapping[str, Any], source: str) -> FailsafeConfig:
         timeout_s=t.number("timeout_s", 0.5, lo=0.01, hi=60.0),
         descent_rate=t.number("descent_rate", 0.7, lo=0.05, hi=10.0),
         resume=t.boolean("resume", False),
+        action=t.string("action", "descend", choices=FAILSAFE_ACTIONS),
+        hold_s=t.number("hold_s", 5.0, lo=HOLD_RANGE_S[0], hi=HOLD_RANGE_S[1]),
     )
     t.done()
     return cfg
 
 
-class LandingController:
-    """Level-and-descend: the vehicle's own PD loop, used only in failsafe."""
+# -- the on-board controller ----------------------------------------------------------------------
 
-    def __init__(self, nominal: Nominal, descent_rate: float) -> None:
+
+@dataclass(frozen=True)
+class OnboardGains:
+    """The on-board controller's gains (module docstring): SI, per second."""
+
+    k_pos_xy: float = 1.5  # 1/s: position error -> velocity set-point
+    k_pos_z: float = 1.5
+    k_vel: float = 3.0  # 1/s: velocity error -> acceleration
+    k_vel_level: float = 2.0  # 1/s: the same for Level (``descend``: the earlier landing loop's gain)
+    k_i_xy: float = 0.5  # 1/s^2: integral of the velocity error
+    k_i_z: float = 2.0
+    a_i_max: float = 3.0  # m/s^2: the most the integral may add (anti-windup)
+    v_xy_max: float = 2.0  # m/s
+    v_up: float = 1.5  # m/s
+    v_down: float = 1.0  # m/s
+    tilt_max: float = 0.35  # rad
+    k_att: float = 100.0  # 1/s^2: attitude PD (10 rad/s, critically damped)
+    d_att: float = 20.0  # 1/s
+    k_att_level: float = 36.0  # 1/s^2: the same for Level (the earlier loop's: 6 rad/s, critically damped)
+    d_att_level: float = 12.0  # 1/s
+    k_yaw: float = 4.0  # 1/s^2 (2 rad/s, critically damped)
+    d_yaw: float = 4.0  # 1/s
+
+
+DEFAULT_GAINS = OnboardGains()
+
+
+@dataclass(frozen=True)
+class Setpoint:
+    """What a target asks of the velocity loop: horizontal velocity (None: level attitude, no
+    horizontal control), vertical velocity (m/s, z up), heading (rad; None: only damp the yaw rate).
+    ``level``: the earlier level-and-descend loop (vertical P with ``k_vel_level``, no integral)."""
+
+    v_xy: tuple[float, float] | None
+    v_z: float
+    psi: float | None
+    level: bool = False
+
+
+def _xy_velocity(x: float, y: float, X: tuple[float, ...], g: OnboardGains) -> tuple[float, float]:
+    vx, vy = g.k_pos_xy * (x - X[0]), g.k_pos_xy * (y - X[2])
+    n = hypot(vx, vy)
+    return (vx, vy) if n <= g.v_xy_max else (vx * g.v_xy_max / n, vy * g.v_xy_max / n)
+
+
+def _z_velocity(z: float, X: tuple[float, ...], g: OnboardGains, up: float) -> float:
+    v = g.k_pos_z * (z - X[4])
+    return up if v > up else -g.v_down if v < -g.v_down else v
+
+
+class Target:
+    """Where the on-board controller flies: a set-point for the state X. ``lands``: the vehicle
+    disarms once it rests on the ground under this target."""
+
+    lands = False
+
+    def setpoint(self, X: tuple[float, ...], g: OnboardGains) -> Setpoint:
+        raise NotImplementedError
+
+
+@dataclass(frozen=True)
+class Level(Target):
+    """``descend``: level, sink at ``rate`` m/s, no horizontal control (the earlier landing loop)."""
+
+    rate: float
+    lands = True
+
+    def setpoint(self, X: tuple[float, ...], g: OnboardGains) -> Setpoint:
+        return Setpoint(None, -self.rate, None, level=True)
+
+
+@dataclass(frozen=True)
+class PositionHold(Target):
+    """Hold (x, y, z) in m (HOLD; ``hold`` failsafe) and the heading ``psi`` rad, or with ``psi``
+    None only stop turning (the yaw rate is damped; the heading stays where that leaves it)."""
+
+    x: float
+    y: float
+    z: float
+    psi: float | None = None
+
+    @classmethod
+    def here(cls, X: tuple[float, ...]) -> PositionHold:
+        return cls(X[0], X[2], X[4])
+
+    def setpoint(self, X: tuple[float, ...], g: OnboardGains) -> Setpoint:
+        return Setpoint(_xy_velocity(self.x, self.y, X, g), _z_velocity(self.z, X, g, g.v_up), self.psi)
+
+
+@dataclass(frozen=True)
+class Land(Target):
+    """Hold (x, y) in m while sinking at ``rate`` m/s (NAV_LAND; ``land`` failsafe); heading as
+    :class:`PositionHold`."""
+
+    x: float
+    y: float
+    rate: float
+    psi: float | None = None
+    lands = True
+
+    @classmethod
+    def here(cls, X: tuple[float, ...], rate: float) -> Land:
+        return cls(X[0], X[2], rate)
+
+    def setpoint(self, X: tuple[float, ...], g: OnboardGains) -> Setpoint:
+        return Setpoint(_xy_velocity(self.x, self.y, X, g), -self.rate, self.psi)
+
+
+@dataclass(frozen=True)
+class Takeoff(Target):
+    """Climb at most ``rate`` m/s to height z (m) over (x, y), then hold there (NAV_TAKEOFF);
+    heading as :class:`PositionHold`."""
+
+    x: float
+    y: float
+    z: float
+    rate: float = DEFAULT_GAINS.v_up
+    psi: float | None = None
+
+    @classmethod
+    def here(cls, X: tuple[float, ...], z: float, rate: float = DEFAULT_GAINS.v_up) -> Takeoff:
+        return cls(X[0], X[2], z, rate)
+
+    def setpoint(self, X: tuple[float, ...], g: OnboardGains) -> Setpoint:
+        return Setpoint(_xy_velocity(self.x, self.y, X, g), _z_velocity(self.z, X, g, self.rate), self.psi)
+
+
+def failsafe_target(cfg: FailsafeConfig, X: tuple[float, ...]) -> Target:
+    """What the failsafe flies first from state X (``disarm`` flies nothing: see SimVehicle)."""
+    if cfg.action == "land":
+        return Land.here(X, cfg.descent_rate)
+    if cfg.action == "hold":
+        return PositionHold.here(X)
+    return Level(cfg.descent_rate)
+
+
+def _clip(v: float, m: float) -> float:
+    return m if v > m else -m if v < -m else v
+
+
+class OnboardController:
+    """The vehicle's own position controller (module docstring): one target at a time.
+
+    :meth:`demand` and :meth:`command` read the current integrals without changing them (a row
+    may ask what the loop demands); :meth:`step` commands and advances them by one physics step.
+    """
+
+    def __init__(self, nominal: Nominal, gains: OnboardGains = DEFAULT_GAINS) -> None:
         self.n = nominal
-        self.descent_rate = descent_rate
+        self.g = gains
         self.actuation = make_actuation(nominal)
+        self.target: Target | None = None
+        self.integral = (0.0, 0.0, 0.0)  # of the velocity error, m/s * s = m
+
+    def engage(self, target: Target) -> None:
+        """Fly ``target`` from now on; the integrals start from zero for a new flight (from
+        nothing), and carry over from one target to the next (hold, then land: no thrust step)."""
+        if self.target is None:
+            self.integral = (0.0, 0.0, 0.0)
+        self.target = target
+
+    def disengage(self) -> None:
+        self.target = None
+        self.integral = (0.0, 0.0, 0.0)
+
+    def _law(self, X: tuple[float, ...]) -> tuple[tuple[float, float, float, float], tuple[float, float, float]]:
+        """The wrench demand in state X and the velocity error (m/s) the integrals take in."""
+        n, g = self.n, self.g
+        if self.target is None:
+            return (0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+        sp = self.target.setpoint(X, g)
+        _, vx, _, vy, _, vz, phi, dphi, th, dth, psi, dpsi = X
+        ix, iy, iz = self.integral
+        ez = sp.v_z - vz
+        az = g.k_vel_level * ez if sp.level else g.k_vel * ez + _clip(g.k_i_z * iz, g.a_i_max)
+        if sp.v_xy is None:
+            phi_d = th_d = 0.0
+            err = (0.0, 0.0, ez)
+        else:
+            ex, ey = sp.v_xy[0] - vx, sp.v_xy[1] - vy
+            ax = g.k_vel * ex + _clip(g.k_i_xy * ix, g.a_i_max)
+            ay = g.k_vel * ey + _clip(g.k_i_xy * iy, g.a_i_max)
+            a_max = n.gravity * tan(g.tilt_max)
+            a = hypot(ax, ay)
+            if a > a_max:
+                ax, ay = ax * a_max / a, ay * a_max / a
+            phi_d, th_d = tilt_from_acceleration(ax, ay, max(n.gravity + az, 0.2 * n.gravity), psi)
+            phi_d, th_d = _clip(phi_d, g.tilt_max), _clip(th_d, g.tilt_max)
+            err = (ex, ey, ez)
+        tilt = max(cos(phi) * cos(th), 0.5)
+        u1 = n.mass * (n.gravity + az) / tilt
+        ka, da = (g.k_att_level, g.d_att_level) if sp.level else (g.k_att, g.d_att)
+        u2 = n.ixx / n.arm * (ka * (phi_d - phi) - da * dphi)
+        u3 = n.iyy / n.arm * (ka * (th_d - th) - da * dth)
+        yaw = g.k_yaw * wrap_angle(sp.psi - psi) - g.d_yaw * dpsi if sp.psi is not None else -g.d_yaw * dpsi
+        u4 = n.izz / n.arm * yaw
+        return (u1, u2, u3, u4), ((0.0, 0.0, 0.0) if sp.level else err)
 
     def demand(self, X: tuple[float, ...]) -> tuple[float, float, float, float]:
         """The wrench (u1..u4, N) this loop asks for in state X, before the actuation's limits."""
-        n = self.n
-        _, _, _, _, _, vz, phi, dphi, th, dth, _, dpsi = X
-        tilt = max(cos(phi) * cos(th), 0.5)
-        u1 = n.mass * (n.gravity + 2.0 * (-self.descent_rate - vz)) / tilt
-        u2 = n.ixx / n.arm * (-36.0 * phi - 12.0 * dphi)
-        u3 = n.iyy / n.arm * (-36.0 * th - 12.0 * dth)
-        u4 = n.izz / n.arm * (-4.0 * dpsi)
-        return (u1, u2, u3, u4)
+        return self._law(X)[0]
 
     def command(self, X: tuple[float, ...]) -> tuple[float, float, float, float]:
         """Normalised paper-frame command for state X."""
         return self.actuation.allocate(self.demand(X))[1]
+
+    def step(self, X: tuple[float, ...], dt: float) -> tuple[float, float, float, float]:
+        """The command for state X, then the integrals advanced by ``dt`` s (each clamped so that
+        it adds at most ``a_i_max``)."""
+        u, err = self._law(X)
+        g = self.g
+        lim = (g.a_i_max / g.k_i_xy, g.a_i_max / g.k_i_xy, g.a_i_max / g.k_i_z)
+        self.integral = tuple(_clip(i + e * dt, m) for i, e, m in zip(self.integral, err, lim, strict=True))  # type: ignore[assignment]
+        return self.actuation.allocate(u)[1]

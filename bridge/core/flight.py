@@ -1,14 +1,15 @@
 """From a mission to the parts that fly it: every table validated by the part that owns it.
 
 In:  a mission (a :class:`~missions.Mission` or a TOML path) and overrides: profile, controller,
-     ``rate_hz`` (Hz), seed, actuation, a ``[link]`` table laid over the mission's
+     ``rate_hz`` (Hz), seed, actuation, a ``[link]`` table and a ``[failsafe]`` table laid over the mission's,
+     a ``[sensors]`` table (``{"set": NAME}``), an estimator kind and a noise scale
 Out: a frozen :class:`Flight`, which builds the plant, the :class:`~bridge.core.simvehicle.SimVehicle`,
      the law and the guard's configuration, and lists the blackouts (mission time s); a bad value
      raises ``ConfigError`` naming file and key
 
 :func:`prepare` applies the command-line overrides and validates the mission's profile,
-``[effects]``, ``[gains]``, ``[failsafe]`` and ``[link]`` tables, so that a bad value fails
-before anything starts, with the file and key named.
+``[effects]``, ``[gains]``, ``[failsafe]``, ``[link]``, ``[sensors]`` and ``[estimator]`` tables, so
+that a bad value fails before anything starts, with the file and key named.
 """
 
 from __future__ import annotations
@@ -18,8 +19,9 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from bridge.core.estimator import ESTIMATOR_KINDS, make_estimator
 from bridge.core.failsafe import FailsafeConfig, failsafe_from_table
-from bridge.core.link import LinkSettings, link_from_table, merge_link_tables
+from bridge.core.link import LinkSettings, absolute_link_paths, link_from_table, merge_link_tables
 from bridge.core.simvehicle import SimVehicle
 from controller import Controller, Gains, Nominal, gains_from_table
 from controller.law import LawFactory, resolve_law
@@ -29,6 +31,8 @@ from missions.mission import law_spec_from
 from params import ConfigError, Table
 from plant import Effects, Profile, Quadrotor, load_profile
 from plant.effects import effects_from_table
+from plant.profiles import sensors_from_table
+from plant.sensors import IDEAL, SensorConfig, SensorSuite
 
 
 @dataclass(frozen=True)
@@ -42,6 +46,8 @@ class Flight:
     failsafe: FailsafeConfig
     link: LinkSettings = field(default_factory=LinkSettings)
     law: LawFactory | None = None  # the mission's controller, resolved (None: resolved on use)
+    sensors: SensorConfig = IDEAL  # the vehicle's sensor set (profile's set, mission's overrides, noise scale)
+    estimator: str = "truth"  # the vehicle's estimator kind (bridge.core.estimator.ESTIMATOR_KINDS)
 
     @property
     def nominal(self) -> Nominal:
@@ -59,7 +65,13 @@ class Flight:
         return Quadrotor(self.profile, self.effects, seed=m.seed, physics_hz=m.physics_hz, state=state)
 
     def make_vehicle(self, armed: bool = False) -> SimVehicle:
-        return SimVehicle(self.make_plant(), self.substeps, self.failsafe, armed=armed)
+        plant = self.make_plant()
+        if self.estimator == "truth":  # no sensors to sample: the plant's state is published as it is
+            return SimVehicle(plant, self.substeps, self.failsafe, armed=armed)
+        m = self.mission
+        suite = SensorSuite(self.sensors, m.seed, m.physics_hz, self.profile.gravity)
+        est = make_estimator(self.estimator, self.sensors, plant.state, self.profile.gravity, lambda: plant.state)
+        return SimVehicle(plant, self.substeps, self.failsafe, armed=armed, sensors=suite, estimator=est)
 
     def make_controller(self) -> Controller:
         return Controller(self.law or self.mission.controller, self.nominal, self.gains, self.mission.rate_hz)
@@ -88,17 +100,29 @@ def prepare(
     seed: int | None = None,
     actuation: str | None = None,
     link: Mapping[str, Any] | None = None,
+    failsafe: Mapping[str, Any] | None = None,
+    sensors: Mapping[str, Any] | None = None,
+    estimator: str | None = None,
+    noise: float | None = None,
 ) -> Flight:
     """Validate a mission (object or file) with overrides into a :class:`Flight`.
 
-    ``link`` is laid over the mission's ``[link]`` table (see :func:`bridge.core.link.merge_link_tables`).
+    ``link`` is laid over the mission's ``[link]`` table (see :func:`bridge.core.link.merge_link_tables`);
+    ``failsafe`` over its ``[failsafe]`` table, key by key (``{"action": "hold"}``); ``sensors`` over
+    its ``[sensors]`` table, key by key (``{"set": "mocap"}``); ``estimator`` replaces ``[estimator] kind``;
+    ``noise`` replaces ``[sensors] noise_scale`` (every σ of the set times it).
     """
     m = mission if isinstance(mission, Mission) else load_mission(mission)
-    merged = merge_link_tables(m.link, link) if link else None
+    # trace and profile files: a mission's from its folder, an override's from the working directory (as law files)
+    own_link = absolute_link_paths(m.link, Path(m.source).parent)
+    merged = merge_link_tables(own_link, absolute_link_paths(link, Path("."))) if link else own_link
+    merged_failsafe = {**m.failsafe, **failsafe} if failsafe else None
+    merged_sensors = merged_tables(m.sensors, sensors, {} if noise is None else {"noise_scale": noise})
+    merged_estimator = merged_tables(m.estimator, {} if estimator is None else {"kind": estimator})
     if controller is not None:  # a law file given on the command line or from Python: from the working directory
         controller = law_spec_from(controller, Path("."))
     m = m.with_overrides(profile=profile, controller=controller, rate_hz=rate_hz, seed=seed, actuation=actuation,
-                         link=merged)
+                         link=merged, failsafe=merged_failsafe, sensors=merged_sensors, estimator=merged_estimator)
     src = m.source
     try:
         prof = load_profile(m.profile)
@@ -109,14 +133,42 @@ def prepare(
     effects = effects_from_table(Table(m.effects, src, "effects"))
     gains = gains_from_table(m.gains, src) if m.gains else Gains()
     failsafe = failsafe_from_table(m.failsafe, src)
-    link_settings = link_from_table(m.link, src, seed=m.seed)
+    link_settings = link_from_table(m.link, src, seed=m.seed, duration_s=m.duration_s)
+    given_set = (sensors or {}).get("set")
+    if given_set is not None and given_set not in [n for n, _ in prof.sensors]:  # an override: named as the flag
+        raise ConfigError(f"{src}: --sensors {given_set!r} (sensors.set): profile {prof.name!r} has no such sensor "
+                          f"set; it has: {', '.join(n for n, _ in prof.sensors)}")
+    sensor_config = sensors_from_table(prof, m.sensors, src)
+    est_table = Table(m.estimator, src, "estimator")
+    estimator_kind = est_table.string("kind", "truth", choices=ESTIMATOR_KINDS)
+    est_table.done()
+    for d in ("up", "down"):  # a blackout that would never happen is a mistake in the file, not a plan
+        for start, dur in getattr(link_settings, d).blackouts:
+            if start >= m.duration_s:  # named where it came from: the direction's own table, or both's
+                own, given = m.link.get(d), (link or {}).get(d)
+                key = f"link.{d}.blackouts" if isinstance(own, Mapping) and "blackouts" in own else "link.blackouts"
+                if isinstance(given, Mapping) and "blackouts" in given:  # an override: the flags' table
+                    key = f"--blackout/--{d}-blackout ({key})"
+                raise ConfigError(f"{src}: {key}: the window [{start:g}, {start + dur:g}) s starts after the "
+                                  f"mission's end (duration_s = {m.duration_s:g} s), so it would never happen")
     try:
         law = resolve_law(m.controller)
-        flight = Flight(m, prof, effects, gains, failsafe, link_settings, law)
+        flight = Flight(m, prof, effects, gains, failsafe, link_settings, law, sensor_config, estimator_kind)
         flight.make_controller()  # a user's law is built once here, so that one that does not fit is bad input
     except ConfigError as exc:
         raise ConfigError(f"{src}: {exc}") from None
     return flight
+
+
+def merged_tables(own: Mapping[str, Any], *over: Mapping[str, Any] | None) -> Mapping[str, Any] | None:
+    """``own`` with each of ``over`` laid over it key by key; None (keep the mission's) when nothing is laid."""
+    given = [o for o in over if o]
+    if not given:
+        return None
+    out = dict(own)
+    for o in given:
+        out.update(o)
+    return out
 
 
 def at_rest() -> Mission:

@@ -29,6 +29,14 @@ packets are due by a later time. What can happen to a packet, in this order:
 6. **duplication** (``dup_pct``): a second copy follows with its own jitter draw
    (duplication happens after the bottleneck: the copy costs no bandwidth).
 
+**A measured trace** (``trace = FILE``, :mod:`bridge.core.linktrace`) takes the place of steps 2
+and 4: a packet sent at time t (s of mission time; :meth:`LinkImpairment.shift_blackouts` puts the
+relay's mission time 0) is lost or delayed as the trace's record with the largest ``t_s`` <= t
+says. Blackouts, the bandwidth cap, reordering and duplication still apply on top; ``delay_ms``,
+``jitter_ms``, ``loss_pct`` and ``burst_len`` in the same direction are refused. A named profile
+(``profile = NAME``, :mod:`bridge.core.linkprofile`) is a ``[link]`` table the mission's keys are
+laid over.
+
 Reproducibility: the random part of each packet's fate (loss, jitter, hold-back,
 duplicate) is drawn from a counter-based generator keyed by ``(seed, direction, packet
 number, draw)``, so the n-th packet's fate is a pure function of the seed and n, never of
@@ -51,8 +59,21 @@ from dataclasses import dataclass, field, replace
 from statistics import NormalDist
 from typing import Any
 
+from bridge.core.linkprofile import load_link_profile
+from bridge.core.linktrace import (
+    LENGTH_SLACK_S,
+    DirectionTrace,
+    Replay,
+    TraceFile,
+    absolute_link_paths,
+    own_figures,
+    read_trace,
+    records_problem,
+)
 from controller.link_guard import COMPENSATIONS, GuardConfig
 from params import ConfigError, Table
+
+__all__ = ["absolute_link_paths"]  # re-exported: the one place a [link] table's files are made absolute
 
 # MAVLink 2 frame sizes in bytes (header 10 + payload with trailing zeros truncated + CRC 2,
 # unsigned), measured once with pymavlink's encoder; tests/test_link.py re-measures them.
@@ -85,6 +106,7 @@ class LinkConfig:
     rate_bps: float = 0.0  # bytes per second; 0 = unlimited
     queue_ms: float = 1000.0  # longest wait in the bandwidth queue before tail drop
     seed: int = 0
+    trace: DirectionTrace | None = None  # a measured trace gives the delays and losses instead
 
     def __post_init__(self) -> None:
         if self.jitter not in JITTER_KINDS:
@@ -92,16 +114,19 @@ class LinkConfig:
         why = burst_problem(self.loss_pct, self.burst_len)
         if why:
             raise ConfigError(f"link burst_len: {why}")
+        clash = trace_clash(self)
+        if self.trace is not None and clash:
+            raise ConfigError(f"link trace: cannot be combined with {clash} in the same direction")
 
     @property
     def impaired(self) -> bool:
         """True when the link does anything at all to the packets."""
         return bool(self.delay_ms or self.jitter_ms or self.loss_pct or self.blackouts or self.dup_pct
-                    or self.reorder_pct or self.rate_bps)
+                    or self.reorder_pct or self.rate_bps or self.trace is not None)
 
     def describe(self) -> str:
         """One line for logs: only what is switched on."""
-        parts = []
+        parts = [self.trace.describe()] if self.trace is not None else []
         if self.delay_ms or self.jitter_ms:
             parts.append(f"delay {self.delay_ms:g} ms" + (f" ± {self.jitter_ms:g} ms {self.jitter}"
                                                          if self.jitter_ms else ""))
@@ -116,6 +141,16 @@ class LinkConfig:
         if self.rate_bps:
             parts.append(f"{self.rate_bps:g} B/s")
         return ", ".join(parts) or "perfect"
+
+
+TRACE_EXCLUSIVE = ("delay_ms", "jitter_ms", "loss_pct", "burst_len")  # what a trace gives instead
+
+
+def trace_clash(values: Any) -> str:
+    """The keys of :data:`TRACE_EXCLUSIVE` set (non-zero) in ``values`` (a mapping or a config), as
+    ``key = value`` text; empty when none is."""
+    get = values.get if isinstance(values, Mapping) else lambda k: getattr(values, k)
+    return ", ".join(f"{k} = {get(k):g}" for k in TRACE_EXCLUSIVE if get(k))
 
 
 def burst_problem(loss_pct: float, burst_len: float) -> str | None:
@@ -157,24 +192,65 @@ LO_OPEN = frozenset({"stale_ms", "stop_ms"})
 COMMAND_LAG_RANGE_MS = GUARD_RANGES["command_lag_ms"]
 SEED_RANGE = (0, 2**31 - 1)
 # every key a direction's table takes, and every key [link] itself takes (besides [link.up] and [link.down])
-DIRECTION_KEYS = (*NUMBER_RANGES, "jitter", "seed", "blackouts")
-LINK_KEYS = (*DIRECTION_KEYS, "compensation", *GUARD_RANGES)
+DIRECTION_KEYS = (*NUMBER_RANGES, "jitter", "seed", "blackouts", "trace", "trace_loop")
+LINK_KEYS = (*DIRECTION_KEYS, "profile", "compensation", *GUARD_RANGES)
 BLACKOUT_START_RANGE_S = (0.0, 1e6)  # a window's start, s of mission time
 BLACKOUT_DURATION_RANGE_S = (0.0, 1e6)  # its duration, s (0 excluded)
 
 
-def _direction(t: Table, base: LinkConfig) -> LinkConfig:
-    """Read the per-direction keys of one table, defaults from ``base``."""
+def _defaults(seed: int) -> dict[str, Any]:
+    """Every per-direction key at its default (the trace as its file name, "" for none)."""
+    d = LinkConfig(seed=seed)
+    return {name: getattr(d, name) for name in (*NUMBER_RANGES, "jitter", "seed", "blackouts")} | {
+        "trace": "", "trace_loop": False}
+
+
+def _direction(t: Table, base: Mapping[str, Any]) -> dict[str, Any]:
+    """Read the per-direction keys of one table, defaults from ``base`` (the same keys)."""
     kw: dict[str, Any] = {}
     for name, (lo, hi) in NUMBER_RANGES.items():
-        kw[name] = t.number(name, getattr(base, name), lo=lo, hi=hi)
-    kw["jitter"] = t.string("jitter", base.jitter, choices=JITTER_KINDS)
+        kw[name] = t.number(name, base[name], lo=lo, hi=hi)
+    kw["jitter"] = t.string("jitter", base["jitter"], choices=JITTER_KINDS)
     why = burst_problem(kw["loss_pct"], kw["burst_len"])
     if why:
         raise t.error("burst_len", why)
-    kw["seed"] = t.integer("seed", base.seed, lo=SEED_RANGE[0], hi=SEED_RANGE[1])
-    kw["blackouts"] = _blackouts(t, base.blackouts)
-    return LinkConfig(**kw)
+    kw["seed"] = t.integer("seed", base["seed"], lo=SEED_RANGE[0], hi=SEED_RANGE[1])
+    kw["blackouts"] = _blackouts(t, base["blackouts"])
+    kw["trace"] = t.string("trace", base["trace"])
+    kw["trace_loop"] = t.boolean("trace_loop", base["trace_loop"])
+    return kw
+
+
+def _config(kw: Mapping[str, Any], direction: str, source: str, duration_s: float | None,
+            files: dict[str, TraceFile]) -> LinkConfig:
+    """One direction's :class:`LinkConfig` from its keys: the trace file read (once per file) and checked
+    against the other keys, its rows for this direction and, unless it loops, the mission's length."""
+    kw = dict(kw)
+    path, loop = kw.pop("trace"), kw.pop("trace_loop")
+    if not path:
+        return LinkConfig(**kw)
+    where = f"{source}: link.{direction}"
+    clash = trace_clash(kw)
+    if clash:
+        raise ConfigError(f"{where}: trace {path} cannot be combined with {clash} in the same direction: the "
+                          f"trace gives the delays and the losses (set those to 0 or remove them; [link] sets "
+                          f"both directions)")
+    if path not in files:
+        try:
+            files[path] = read_trace(path)
+        except ConfigError as exc:
+            raise ConfigError(f"{where}.trace: {exc}") from None
+    tf = files[path]
+    why = records_problem(tf, direction)
+    if why:
+        raise ConfigError(f"{where}.trace: {path} {why}")
+    rec = tf.records(direction)
+    assert rec is not None
+    if duration_s is not None and not loop and rec.length_s < duration_s - LENGTH_SLACK_S:
+        raise ConfigError(f"{where}.trace: {path} lasts {rec.length_s:g} s ({rec.n} {direction} records), "
+                          f"shorter than the mission ({duration_s:g} s); loop it with trace_loop = true "
+                          f"(--link-trace-loop) or give a longer trace")
+    return LinkConfig(**kw, trace=DirectionTrace(path, rec, loop))
 
 
 def _blackouts(t: Table, default: tuple[tuple[float, float], ...]) -> tuple[tuple[float, float], ...]:
@@ -217,17 +293,23 @@ class LinkSettings:
         return LinkImpairment(self.up, "up"), LinkImpairment(self.down, "down")
 
 
-def link_from_table(data: Mapping[str, Any], source: str, seed: int = 0) -> LinkSettings:
+def link_from_table(data: Mapping[str, Any], source: str, seed: int = 0,
+                    duration_s: float | None = None) -> LinkSettings:
     """Validate a mission's ``[link]`` table.
 
     Keys of ``[link]`` itself: every per-direction key (a default for both directions), and
     the controller's: ``compensation = "none" | "predict"``, ``command_lag_ms`` (assumed
     up-link delay the prediction also covers), ``stale_ms``, ``stop_ms`` (thresholds on the
-    age of the newest state). ``[link.up]`` and ``[link.down]`` override per direction. ``seed``
-    defaults to the mission's seed; the two directions always draw different streams.
+    age of the newest state), and ``profile`` (a named link profile the table is laid over).
+    ``[link.up]`` and ``[link.down]`` override per direction. ``seed`` defaults to the mission's
+    seed; the two directions always draw different streams. A ``trace`` file is read here; with
+    ``duration_s`` (the mission's, s) one shorter than it is refused unless it loops.
     """
     t = Table(data, source, "link")
-    both = _direction(t, LinkConfig(seed=seed))
+    profile = t.string("profile", "")
+    if profile:
+        return _with_profile(profile, data, source, seed, duration_s)
+    both = _direction(t, _defaults(seed))
     g = GuardConfig()
     compensation = t.string("compensation", g.compensation, choices=COMPENSATIONS)
     r = GUARD_RANGES
@@ -239,14 +321,29 @@ def link_from_table(data: Mapping[str, Any], source: str, seed: int = 0) -> Link
     if lag_ms and compensation != "predict":
         raise t.error("command_lag_ms", 'needs compensation = "predict"')
     dirs = {}
+    files: dict[str, TraceFile] = {}
     for d in DIRECTIONS:
         sub = t.table(d)
-        dirs[d] = _direction(sub, both)
+        kw = _direction(sub, both)
         sub.done()
+        dirs[d] = _config(kw, d, source, duration_s, files)
     t.done()
     guard = GuardConfig(stale_s=stale_ms / 1000.0, stop_s=stop_ms / 1000.0, compensation=compensation,
                         lag_s=lag_ms / 1000.0)
     return LinkSettings(dirs["up"], dirs["down"], guard)
+
+
+def _with_profile(name: str, data: Mapping[str, Any], source: str, seed: int,
+                  duration_s: float | None) -> LinkSettings:
+    """``data`` laid over the ``[link]`` table of profile ``name``, validated (the profile alone first,
+    so that a bad profile names its own file)."""
+    try:
+        prof = load_link_profile(name)
+    except ConfigError as exc:
+        raise ConfigError(f"{source}: link.profile: {exc}") from None
+    link_from_table(prof.link, str(prof.path), seed)
+    over = {k: v for k, v in data.items() if k != "profile"}
+    return link_from_table(merge_link_tables(prof.link, over), source, seed, duration_s)
 
 
 def merge_link_tables(base: Mapping[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
@@ -365,9 +462,10 @@ class LinkStats:
         self.delivered = 0
         self.duplicated = 0
         self.reordered = 0
-        self.lost_by = {"random": 0, "blackout": 0, "queue": 0}
+        self.lost_by = {"random": 0, "blackout": 0, "queue": 0, "trace": 0}
         self.delays = array("d")  # seconds, every delivered copy
         self.in_flight = 0
+        self.trace: DirectionTrace | None = None  # the trace replayed, whose own figures the summary adds
 
     @property
     def lost(self) -> int:
@@ -383,8 +481,9 @@ class LinkStats:
         return {"p50": float(p50), "p95": float(p95), "p99": float(p99), "max": float(d.max())}
 
     def summary(self) -> dict[str, Any]:
-        """The ``summary.json`` keys of docs/design.md, "Files of a run", plus ``in_flight`` and ``lost_by``."""
-        return {
+        """The ``summary.json`` keys of docs/design.md, "Files of a run", plus ``in_flight`` and ``lost_by``,
+        and with a trace ``trace``: its file and its own records, loss and delays, beside what the flight met."""
+        out = {
             "sent": self.sent,
             "delivered": self.delivered,
             "lost": self.lost,
@@ -394,6 +493,9 @@ class LinkStats:
             "in_flight": self.in_flight,
             "lost_by": dict(self.lost_by),
         }
+        if self.trace is not None:
+            out["trace"] = own_figures(self.trace)
+        return out
 
 
 # -- the model ------------------------------------------------------------------------------
@@ -435,14 +537,19 @@ class LinkImpairment:
         self._highest = -1
         self._last_due = -math.inf
         self._windows = tuple((s, s + d) for s, d in cfg.blackouts)
+        self._replay = Replay(cfg.trace) if cfg.trace is not None else None
+        self._origin = 0.0  # this model's clock (s) at mission time 0: where the trace starts
+        self.stats.trace = cfg.trace
 
     def in_blackout(self, t: float) -> bool:
         return any(a <= t < b for a, b in self._windows)
 
     def shift_blackouts(self, offset_s: float) -> None:
-        """Put the scheduled blackout windows at ``offset_s`` + their start on this model's
-        clock (s): for a real-time driver whose clock started before the flight's time 0."""
+        """Put mission time 0 at ``offset_s`` on this model's clock (s): the scheduled blackout
+        windows and the trace's start, for a real-time driver whose clock started before the
+        flight's time 0 (``math.inf``: not yet known, no blackout and the trace's first record)."""
         self._windows = tuple((s + offset_s, s + d + offset_s) for s, d in self.cfg.blackouts)
+        self._origin = offset_s
 
     def send(self, t: float, size: int, payload: Any = None) -> int:
         """Put a packet of ``size`` bytes on the link at time t (s); returns its number."""
@@ -456,6 +563,12 @@ class LinkImpairment:
         if fate.lost:
             st.lost_by["random"] += 1
             return seq
+        delay = self._delay
+        if self._replay is not None:
+            delay = self._replay.delay_at(t - self._origin)
+            if delay != delay:  # the trace lost it
+                st.lost_by["trace"] += 1
+                return seq
         tx = t
         if self._rate > 0.0:
             start = self._free_at if self._free_at > t else t
@@ -463,12 +576,12 @@ class LinkImpairment:
                 st.lost_by["queue"] += 1
                 return seq
             tx = self._free_at = start + size / self._rate
-        due = tx + self._delay + fate.jitter_s
+        due = tx + delay + fate.jitter_s
         st.in_flight += 1
         d = Delivery(seq, t, due, payload)
         if fate.dup_jitter_s is not None:
             self._copies[seq] = 2
-            self._push(Delivery(seq, t, tx + self._delay + fate.dup_jitter_s, payload, True))
+            self._push(Delivery(seq, t, tx + delay + fate.dup_jitter_s, payload, True))
         if fate.held:
             self._held.append(d)
         else:

@@ -2,12 +2,25 @@
 
 In:  normalised paper-frame commands (``wrench``: u / u_max; ``motors``: omega / omega_max), arm and
      disarm, and a delivery callback called with the plant time (s) before each physics step
-Out: the plant's state (eq. 7, NWU: m, m/s, rad, rad/s) after each control period, the mode
-     (offboard, failsafe, landed) and the events (t s, kind, text)
+Out: what the vehicle publishes after each control period (:meth:`SimVehicle.published`: its
+     on-board estimate of the state, eq. 7, NWU: m, m/s, rad, rad/s; the true state under the
+     ``truth`` estimator), the mode (offboard, failsafe, landed) and the events (t s, kind, text)
 
 Shared by the in-process loop and the MAVLink vehicle so that both fly, time out and land
 the same way. Time advances in control periods of ``physics_hz / rate_hz`` physics steps;
 the command is held over the period (zero-order hold).
+
+Out of offboard control and armed, the vehicle's own :class:`~bridge.core.failsafe.OnboardController`
+flies its target at every physics step (:meth:`SimVehicle.fly_onboard`): the failsafe's action
+(``[failsafe] action``), and whatever a later mode hands it. Under a target that lands, the
+vehicle disarms once it rests on the ground (mode ``landed``). Mode changes happen at the start
+of a control period, the same step in every clock.
+
+The vehicle owns its sensors (:class:`plant.sensors.SensorSuite`) and its estimator
+(:mod:`bridge.core.estimator`): the suite samples the true state once at t = 0 and after every
+physics step, the estimator takes what arrived, and both the controller (through what is published)
+and the on-board controller fly on the estimate. Under ``truth`` there is no suite: the estimate is
+the plant's state itself, read directly, so truth flights are the same to the bit and as fast.
 """
 
 from __future__ import annotations
@@ -15,9 +28,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from bridge.core.failsafe import FailsafeConfig, LandingController
+from bridge.core.estimator import Estimator, TruthEstimator, nees
+from bridge.core.failsafe import ACTION_TEXT, FailsafeConfig, Land, OnboardController, Target, failsafe_target
 from controller.nominal import Nominal
 from plant import Quadrotor
+from plant.sensors import SensorSuite
 
 OFFBOARD = "offboard"
 FAILSAFE = "failsafe"
@@ -39,15 +54,38 @@ class SimVehicle:
     armed: bool = False
     mode: str = OFFBOARD
     events: list[Event] = field(default_factory=list)
+    sensors: SensorSuite | None = None  # None: the estimator is truth (nothing to sample)
+    estimator: Estimator | None = None  # None: truth, reading the plant
 
     def __post_init__(self) -> None:
-        self.landing = LandingController(Nominal.from_profile(self.plant.profile), self.failsafe.descent_rate)
+        if self.estimator is None:
+            self.estimator = TruthEstimator(lambda: self.plant.state)
+        if self.sensors is not None:
+            self.estimator.step(self.plant.t, self.sensors.sample(self.plant.t, self.plant.state))
+        self.onboard = OnboardController(Nominal.from_profile(self.plant.profile))
+        self.landing = self.onboard  # the name bridge/nodes/vehicle.py reads its failsafe rows' demand from
         self.last_command_t = 0.0
+        self.land_at: float | None = None  # hold: the plant time its hold ends and it lands
         self._zero = (0.0, 0.0, 0.0, 0.0)
 
     @property
     def t(self) -> float:
         return self.plant.t
+
+    def published(self) -> tuple[float, ...]:
+        """The state the vehicle knows now: its estimate at the plant time (the true state under truth)."""
+        if self.sensors is None:
+            return self.plant.state
+        assert self.estimator is not None
+        return self.estimator.estimate(self.plant.t)
+
+    def nees(self, estimate: tuple[float, ...]) -> float:
+        """NEES of ``estimate`` (the one published now) against the estimator's covariance; 0 under truth
+        (the estimate is the state: no error to weigh)."""
+        if self.sensors is None:
+            return 0.0
+        assert self.estimator is not None
+        return nees(self.plant.state, estimate, self.estimator.covariance())
 
     def event(self, kind: str, text: str) -> Event:
         e = Event(self.plant.t, kind, text)
@@ -60,13 +98,45 @@ class SimVehicle:
             self.armed = True
             self.mode = OFFBOARD
             self.last_command_t = self.plant.t
+            self._onboard_off()
             self.event("armed", "armed, offboard control")
 
     def disarm(self, why: str = "disarmed") -> None:
         if self.armed:
             self.armed = False
             self.plant.command(self._zero)
+            self._onboard_off()
             self.event("disarmed", why)
+
+    def _onboard_off(self) -> None:
+        self.onboard.disengage()
+        self.land_at = None
+
+    def fly_onboard(self, target: Target, mode: str) -> None:
+        """Hand the motors to the on-board controller flying ``target`` under ``mode`` (not
+        offboard): from the next physics step on, until armed (offboard) again or disarmed."""
+        self.mode = mode
+        self.onboard.engage(target)
+
+    def _enter_failsafe(self, silent_s: float) -> None:
+        """No target for ``silent_s``: the failsafe's action, from the state it began in."""
+        p, fs = self.plant, self.failsafe
+        self.mode = FAILSAFE
+        self.event("failsafe", f"no actuator target for {silent_s:.3f} s: {ACTION_TEXT[fs.action]}")
+        if p.on_ground or fs.action == "disarm":  # nothing to fly: motors off now, in this control step
+            self.mode = LANDED
+            self.disarm("landed: disarmed" if p.on_ground else "failsafe: motors stopped")
+            return
+        self.fly_onboard(failsafe_target(fs, self.published()), FAILSAFE)
+        if fs.action == "hold":
+            self.land_at = p.t + fs.hold_s
+
+    def _end_hold(self) -> None:
+        """``hold``: its time is up; land where it held."""
+        self.land_at = None
+        X = self.published()
+        self.fly_onboard(Land.here(X, self.failsafe.descent_rate), self.mode)
+        self.event("landing", f"held {self.failsafe.hold_s:.3f} s: landing at x={X[0]:.3f} y={X[2]:.3f} m")
 
     def command(self, c: tuple[float, float, float, float]) -> bool:
         """A valid actuator target (normalised, paper frame). Ignored unless armed offboard."""
@@ -87,15 +157,20 @@ class SimVehicle:
         if deliver is not None:
             deliver(p.t)
         if self.armed and self.mode == OFFBOARD and p.t - self.last_command_t > self.failsafe.timeout_s + 1e-9:
-            self.mode = FAILSAFE
-            self.event("failsafe", f"no actuator target for {p.t - self.last_command_t:.3f} s: level and descend")
+            self._enter_failsafe(p.t - self.last_command_t)
+        if self.land_at is not None and p.t >= self.land_at - 1e-9:
+            self._end_hold()
+        onboard = self.onboard
+        sensors, estimator = self.sensors, self.estimator
         for i in range(self.substeps):
             if deliver is not None and i:
                 deliver(p.t)
-            if self.mode == FAILSAFE and self.armed:
-                if p.on_ground:
+            if self.armed and self.mode != OFFBOARD and onboard.target is not None:
+                if onboard.target.lands and p.on_ground:
                     self.mode = LANDED
                     self.disarm("landed: disarmed")
                 else:
-                    p.command(self.landing.command(p.state))
+                    p.command(onboard.step(p.state if sensors is None else estimator.estimate(p.t), p.dt))
             p.step()
+            if sensors is not None:
+                estimator.step(p.t, sensors.sample(p.t, p.state))

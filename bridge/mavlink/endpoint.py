@@ -44,14 +44,21 @@ import select
 import socket
 import struct
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from bridge.mavlink.receive import BATCH, MAX_DATAGRAM, RateLimiter, Rejections
+from bridge.mavlink.receive import (
+    BATCH,
+    FORCE_DISARM,  # noqa: F401 - re-exported: the controller imports it from here
+    MAX_DATAGRAM,
+    RateLimiter,
+    Rejections,
+    ReplyBudget,
+)
 from bridge.mavlink.signing import IFLAG_SIGNED, SIGNATURE_BYTES, Signing
 from bridge.mavlink.signing import crc16 as _crc16
 from params import ConfigError
@@ -63,7 +70,6 @@ LINK_PORT = 14560
 VEHICLE_COMPID = 1  # MAV_COMP_ID_AUTOPILOT1
 CONTROLLER_SYSID = 200  # not 255 (MAVProxy) nor 245 (MAVSDK): a GCS can run beside the controller
 CONTROLLER_COMPID = 191  # MAV_COMP_ID_ONBOARD_COMPUTER
-FORCE_DISARM = 21196  # param2 of ARM_DISARM that disarms in the air (MAVLink's magic number)
 _STAMP = struct.Struct(">Q")
 _MAX_DATAGRAM = 65535
 _MAGIC2 = 0xFD
@@ -198,13 +204,15 @@ def hot_frame(data: bytes) -> HotMessage | None:
 
 
 def parse_datagram(data: bytes, dec: Any, signing: Signing | None, rejected: Rejections,
-                   from_peer: bool = False) -> list[Any]:
+                   from_peer: bool = False, frame_budget: Callable[[], bool] | None = None) -> list[Any]:
     """The frame stage of the receive path (:mod:`bridge.mavlink.receive`): the messages of one
     datagram, each a whole MAVLink 2 frame with a known id, a good CRC, a payload no longer
     than its message and, with ``signing``, a good signature newer than its stream's last.
-    The first bad frame ends the datagram and is counted once in ``rejected`` by its reason;
-    frames before it are kept. Never raises. ``dec`` is a pymavlink ``MAVLink`` without a
-    key (it decodes what passed; the hot messages are decoded by the hot codec)."""
+    With ``frame_budget`` (:meth:`RateLimiter.frame`), each frame is charged before it is
+    checked: once it says no, the rest is ``rate_limited``. The first bad frame ends the
+    datagram and is counted once in ``rejected`` by its reason; frames before it are kept.
+    Never raises. ``dec`` is a pymavlink ``MAVLink`` without a key (it decodes what passed;
+    the hot messages are decoded by the hot codec)."""
     n = len(data)
     why = "truncated" if n == 0 else "oversized" if n > MAX_DATAGRAM else None
     out: list[Any] = []
@@ -216,6 +224,9 @@ def parse_datagram(data: bytes, dec: Any, signing: Signing | None, rejected: Rej
             break
         if n - pos < 12:
             why = "truncated"
+            break
+        if frame_budget is not None and not frame_budget():
+            why = "rate_limited"
             break
         plen, flags = data[pos + 1], data[pos + 2]
         if flags & ~IFLAG_SIGNED:
@@ -315,7 +326,11 @@ class Endpoint:
     once it has spoken). With ``signing`` every frame sent is signed and every frame
     received must be. ``rejected`` counts what the receive path refused (shared by the
     endpoints of one process); ``batch`` and ``limiter`` bound what one :meth:`poll` reads
-    and what sources other than the peer may send (:mod:`bridge.mavlink.receive`).
+    and what sources other than the peer may send in datagrams, frames and bytes
+    (:mod:`bridge.mavlink.receive`). With ``exempt_peer`` false (the vehicle's GCS link:
+    a ground station is not the flight's controller) the peer is charged like anyone and
+    its refusals are not counted as the peer's. :meth:`reply` answers a source within its
+    :class:`ReplyBudget` (:attr:`replies`), one datagram per request.
 
     With ``priority`` (a ``udpin`` link whose owner sets its peer), :meth:`prioritise` gives
     the peer's datagrams a socket of their own: a second socket bound to the same port
@@ -329,7 +344,7 @@ class Endpoint:
     def __init__(self, address: Address, *, sysid: int, compid: int, tlog: Tlog | None = None,
                  name: str = "link", rcvbuf: int = 1 << 20, signing: Signing | None = None,
                  rejected: Rejections | None = None, batch: int = BATCH, limiter: RateLimiter | None = None,
-                 priority: bool = False) -> None:
+                 priority: bool = False, exempt_peer: bool = True, replies: ReplyBudget | None = None) -> None:
         self.address = address
         self.name = name
         self.tlog = tlog
@@ -337,6 +352,8 @@ class Endpoint:
         self.rejected = rejected if rejected is not None else Rejections()
         self.batch = batch
         self.limiter = limiter or RateLimiter()
+        self.exempt_peer = exempt_peer
+        self.replies = replies or ReplyBudget()
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
@@ -391,6 +408,11 @@ class Endpoint:
         s.setblocking(False)
         self.prio, self.prio_peer = s, addr
 
+    def forget_peer(self) -> None:
+        """No peer any more (its own socket closed): the owner learns the next one."""
+        self.peer = None
+        self._close_prio()
+
     def _close_prio(self) -> None:
         if self.prio is not None:
             self.prio.close()
@@ -413,12 +435,34 @@ class Endpoint:
         Returns False when there is nowhere to send yet or the send failed (UDP: a lost
         datagram, counted in ``send_errors``; nothing is raised).
         """
+        return self.send_frame(self.pack(msg), to)
+
+    def pack(self, msg: Any) -> bytes:
+        """The frame of a pymavlink message (next sequence number; signed with a key)."""
         mav = self.mav
         buf = msg.pack(mav)
         mav.seq = (mav.seq + 1) & 0xFF
-        if self.signing is not None:
-            buf = self.signing.resign(buf)
-        return self.send_frame(buf, to)
+        return self.signing.resign(buf) if self.signing is not None else bytes(buf)
+
+    def send_many(self, msgs: Sequence[Any], to: tuple[str, int] | None = None) -> bool:
+        """Send ``msgs`` as the frames of one datagram (a ground station parses every frame of
+        a datagram) to ``to`` or the peer; False as :meth:`send_frame`."""
+        return self.send_frames([self.pack(m) for m in msgs], to)
+
+    def reply_allowed(self, to: tuple[str, int]) -> bool:
+        """Whether a reply to ``to`` is within its budget now (the exempt peer: always)."""
+        return (self.exempt_peer and to == self.peer) or self.replies.allows(to, time.monotonic())
+
+    def reply(self, msgs: Sequence[Any], to: tuple[str, int]) -> bool:
+        """Answer one request from ``to``: ``msgs`` in one datagram, charged to its reply
+        budget (the exempt peer is not charged); False when nothing was sent."""
+        if not msgs:
+            return False
+        frames = [self.pack(m) for m in msgs]
+        if not (self.exempt_peer and to == self.peer) and not self.replies.charge(
+                to, time.monotonic(), sum(map(len, frames))):
+            return False
+        return self.send_frames(frames, to)
 
     def send_hot(self, layout: HotLayout, values: tuple[Any, ...], to: tuple[str, int] | None = None) -> bool:
         """Encode a hot-path message from its flat field values (see :class:`HotLayout`) and
@@ -439,13 +483,28 @@ class Endpoint:
         mav.seq = (mav.seq + 1) & 0xFF
         return buf
 
+    def send_frames(self, frames: Sequence[bytes], to: tuple[str, int] | None = None) -> bool:
+        """Send already-encoded frames in one datagram; each recorded in the tlog (a record is
+        one frame). False as :meth:`send_frame`."""
+        if len(frames) <= 1:
+            return bool(frames) and self.send_frame(frames[0], to)
+        if self.tlog is not None and (to or self.peer) is not None:
+            for f in frames[:-1]:
+                self.tlog.record(f)
+        return self._send_datagram(b"".join(frames), to, frames[-1])
+
     def send_frame(self, buf: bytes, to: tuple[str, int] | None = None) -> bool:
-        """Send one already-encoded frame; recorded in the tlog when it has somewhere to go."""
+        """Send one already-encoded frame; recorded in the tlog when it has somewhere to go.
+        Returns False when there is nowhere to send yet or the send failed (UDP: a lost
+        datagram, counted in ``send_errors``; nothing is raised)."""
+        return self._send_datagram(buf, to, buf)
+
+    def _send_datagram(self, buf: bytes, to: tuple[str, int] | None, last: bytes) -> bool:
         dest = to or self.peer
         if dest is None:
             return False
         if self.tlog is not None:
-            self.tlog.record(buf)
+            self.tlog.record(last)
         try:
             self.sock.sendto(buf, dest)
         except OSError:  # e.g. ECONNREFUSED from an earlier ICMP, ENOBUFS
@@ -482,6 +541,8 @@ class Endpoint:
         signing = self.signing
         rejected = self.rejected
         sending = self.address.mode == "udpout"
+        limiter = self.limiter
+        exempt_peer = self.exempt_peer
         for i in range(self.batch):
             if until is not None and i & 7 == 7 and time.monotonic() >= until:
                 return True
@@ -491,19 +552,25 @@ class Endpoint:
                 return False
             except OSError:  # ICMP port unreachable reported on a later recv
                 continue
-            from_peer = own or addr == self.peer
-            if not from_peer:
-                if sending:  # a sending link hears its peer only
-                    rejected.add("sender")
-                    continue
-                if not self.limiter.allow(addr, time.monotonic()):
+            heard = own or addr == self.peer
+            if not heard and sending:  # a sending link hears its peer only
+                rejected.add("sender")
+                continue
+            from_peer = heard and exempt_peer  # never charged; its refusals counted as the peer's
+            if not from_peer and not limiter.admit(addr, time.monotonic(), len(data)):
+                rejected.add("rate_limited")
+                continue
+            budget = None if from_peer else limiter.frame  # others pay for every frame
+            hot = hot_frame(data)
+            if hot is not None and budget is not None:
+                if not budget():
                     rejected.add("rate_limited")
                     continue
-            hot = hot_frame(data)
+                budget = None  # its one frame is paid for
             if hot is not None and (signing is None or signing.verify(data, data[5], data[6]) is None):
                 msgs: list[Any] = [hot]
             else:  # everything else, and a hot frame whose signature failed (to name the reason)
-                msgs = parse_datagram(data, self.mav, signing, rejected, from_peer)
+                msgs = parse_datagram(data, self.mav, signing, rejected, from_peer, budget)
                 if not msgs:
                     continue
             self.received += len(msgs)

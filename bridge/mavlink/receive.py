@@ -1,27 +1,33 @@
 """The one receive path of both MAVLink endpoints: what is refused, and how it is counted.
 
-In:  each datagram's sender and arrival time (s, for the rate limits in datagrams/s), and the fields
-     of decoded messages: actuator targets (normalised, [-1, 1] / [0, 1]), ODOMETRY (position m,
-     quaternion), target ids
+In:  each datagram's sender, size (bytes) and arrival time (s, for the budgets in datagrams/s, frames/s
+     and bytes/s), and the fields of decoded messages: actuator targets (normalised, [-1, 1] / [0, 1]),
+     ODOMETRY (position m, quaternion), command parameters (message ids, intervals in us), target ids
 Out: accept, or a refusal reason of :data:`REASONS` counted in :class:`Rejections` (``summary.json``
-     ``link.rejected``), and a STATUSTEXT line on them (at most 50 characters) at most once a second
+     ``link.rejected``), and a STATUSTEXT line on them (at most 50 characters) at most once a second;
+     whether a reply to a source is within its budget (:class:`ReplyBudget`)
 
 Every datagram the vehicle or the controller receives takes the same path before anything
 of it reaches the plant or the law:
 
 1. **Read** (:meth:`bridge.mavlink.endpoint.Endpoint.poll`): at most ``batch`` datagrams per call,
    so a flood never holds a loop past its deadline. A datagram from the link's own peer
-   (the configured controller, once it has spoken; the vehicle, for the controller) is
-   always taken; one from anyone else is first charged to its source's token bucket and to
-   the bucket of all others together (:class:`RateLimiter`), and dropped unparsed when
-   either is empty: excess from others is shed first, the peer never.
+   (the vehicle's flight's controller, once it has spoken; the vehicle, for the controller)
+   is always taken; one from anyone else is first charged (one datagram, its bytes) to its
+   source's budget and to the budget of all others together (:class:`RateLimiter`), and
+   dropped unparsed when either is spent: excess from others is shed first, the peer never.
 2. **Frame** (:func:`bridge.mavlink.endpoint.parse_datagram`): MAVLink 2 frames only, whole, known
    message id, good CRC, payload no longer than the message, and, with a key
    (:mod:`bridge.mavlink.signing`), correctly signed and newer than the last frame of its stream.
+   Each frame of a datagram from anyone but the peer is charged to the same budgets in
+   frames, so that packing many frames into a datagram buys nothing.
    Only frames that pass are decoded (the per-step messages, ODOMETRY and the two actuator
    targets, by the hot codec; the rest by pymavlink) and written to the tlog. The first bad frame ends its datagram.
-3. **Message** (the owner's handler, with the validators below): the right sender and
-   target, finite values in range, the right state (armed, the step awaited).
+3. **Message** (the owner's handler, with the validators below): the right sender (its
+   authority on that link: docs/design.md, "Authority") and target, every number it uses
+   finite, whole where a whole number is due, and in range, the right state (armed, the
+   step awaited). What is sent back to a source is at most one datagram per frame it sent
+   and within its reply budget (:class:`ReplyBudget`): a flood cannot be amplified.
 
 A refused datagram or message raises nothing, blocks nothing, changes no state: it is
 counted in a :class:`Rejections` by its reason (:data:`REASONS`), which ends up in
@@ -37,15 +43,24 @@ from typing import Any
 
 MAX_DATAGRAM = 2048  # bytes: a MAVLink 2 frame is at most 280; a few may share a datagram
 BATCH = 64  # datagrams read per poll at most
-SOURCE_RATE_HZ = 1000.0  # datagrams/s one source other than the peer may send (and burst)
-OTHERS_RATE_HZ = 50000.0  # datagrams/s all sources other than the peer together may send (and burst)
+SOURCE_RATE_HZ = 1000.0  # datagrams/s one source other than the peer may send (and burst); frames/s alike
+OTHERS_RATE_HZ = 50000.0  # datagrams/s all sources other than the peer together may send (and burst); frames/s alike
+MAX_FRAME = 280  # bytes: the longest MAVLink 2 frame (255-byte payload, signed)
+SOURCE_BYTES_S = SOURCE_RATE_HZ * MAX_FRAME  # bytes/s of one source: its frame budget of the longest frames
+OTHERS_BYTES_S = OTHERS_RATE_HZ * MAX_FRAME  # bytes/s of all others together
+REPLY_RATE_HZ = 100.0  # reply datagrams/s to one source (and burst): COMMAND_ACK, TIMESYNC, requested messages
+REPLY_BYTES_S = 16_384.0  # reply bytes/s to one source (and burst)
+MESSAGE_ID_MAX = 2**24 - 1  # MAVLink 2 message ids have 24 bits
+MAX_INTERVAL_US = 3.6e9  # SET_MESSAGE_INTERVAL: at most one an hour
+FORCE_DISARM = 21196  # param2 of ARM_DISARM that disarms in the air (MAVLink's magic number)
 MAX_POSITION_M = 10_000.0
 QUATERNION_TOL = 1e-3  # | |q|^2 - 1 | allowed: a float32 unit quaternion is within ~1e-7
 REPORT_S = 1.0  # s of wall time between two STATUSTEXT reports of refusals
 STATUSTEXT_CHARS = 50
 REASONS: dict[str, str] = {
     # read
-    "rate_limited": "from a source other than the peer, over its own or all others' rate: dropped unparsed",
+    "rate_limited": "from a source other than the peer, over its own or all others' budget of datagrams, "
+                    "frames or bytes per second: the datagram (or the rest of it) dropped unparsed",
     "sender": "from an address other than the peer of a sending link, or a target or state from another "
               "system or component than the configured one",
     # frame
@@ -62,6 +77,11 @@ REASONS: dict[str, str] = {
     "replayed": "with a key: timestamp not newer than the last of its stream",
     # message
     "target": "addressed to another system or component",
+    "not_authorised": "a command, request or other message on a link where its sender has no authority (the "
+                      "controller link obeys only the configured controller's sysid and compid)",
+    "stranger": "the configured controller's ids from an address other than the one its flight is on",
+    "bad_number": "a command parameter NaN, infinite, not a whole number where one is due, or out of range",
+    "reply_limited": "a request from a source whose reply budget is spent: not acted on, not answered",
     "message": "actuator message of the other actuation mode",
     "group": "SET_ACTUATOR_CONTROL_TARGET of a control group other than 0",
     "not_finite": "NaN or infinite value",
@@ -110,44 +130,117 @@ class Rejections(dict[str, int]):
         return text if len(text) <= STATUSTEXT_CHARS else text[:STATUSTEXT_CHARS - 3] + "..."
 
 
+def _refill(b: list[float], rates: tuple[float, float, float], now: float) -> None:
+    """Refill a bucket ``[datagrams, frames, bytes, time]`` to ``now`` at ``rates`` (per s,
+    each also the bucket's size: one second's worth)."""
+    dt = now - b[3]
+    if dt > 0.0:  # (conditionals, not min(): this runs for every datagram from others)
+        d, f, n = rates
+        v = b[0] + dt * d
+        b[0] = v if v < d else d
+        v = b[1] + dt * f
+        b[1] = v if v < f else f
+        v = b[2] + dt * n
+        b[2] = v if v < n else n
+        b[3] = now
+
+
 class RateLimiter:
-    """Token buckets (datagrams/s, full bucket = one second's worth): one per source address
-    and one for all sources together. The peer of a link is never charged (see the module
-    docstring). At most ``max_sources`` buckets are kept; beyond that the full ones (idle
-    sources) are forgotten, and if none is, all are."""
+    """Token buckets of datagrams, frames and bytes per second (full bucket = one second's
+    worth): one per source address and one for all sources together. :meth:`admit` charges a
+    datagram and its bytes before it is parsed, :meth:`frame` each of its frames before it is
+    decoded. The peer of a link is never charged (see the module docstring). At most
+    ``max_sources`` buckets are kept; beyond that the full ones (idle sources) are forgotten,
+    and if none is, all are."""
 
     def __init__(self, source_hz: float = SOURCE_RATE_HZ, others_hz: float = OTHERS_RATE_HZ,
-                 max_sources: int = 4096) -> None:
-        self.source_hz = source_hz
-        self.others_hz = others_hz
+                 max_sources: int = 4096, source_bytes_s: float = SOURCE_BYTES_S,
+                 others_bytes_s: float = OTHERS_BYTES_S) -> None:
+        self.source = (source_hz, source_hz, source_bytes_s)
+        self.others = (others_hz, others_hz, others_bytes_s)
         self.max_sources = max_sources
-        self._src: dict[Any, list[float]] = {}  # address -> [tokens, time of last refill]
-        self._all = [others_hz, time.monotonic()]
+        self._src: dict[Any, list[float]] = {}  # address -> [datagrams, frames, bytes, time of last refill]
+        self._all = [*self.others, time.monotonic()]
+        self._last: list[float] = self._all  # the bucket of the datagram admitted last (for frame())
 
-    def allow(self, addr: Any, now: float) -> bool:
-        """Charge one datagram from ``addr`` at wall time ``now`` (s); False: drop it."""
+    def admit(self, addr: Any, now: float, nbytes: int) -> bool:
+        """Charge one datagram of ``nbytes`` from ``addr`` at wall time ``now`` (s); False: drop it."""
         b = self._src.get(addr)
         if b is None:
             if len(self._src) >= self.max_sources:
                 self._forget(now)
-            b = self._src[addr] = [self.source_hz, now]
-        else:
-            b[0] = min(self.source_hz, b[0] + (now - b[1]) * self.source_hz)
-            b[1] = now
+            b = self._src[addr] = [*self.source, now]
+        elif now > b[3]:
+            _refill(b, self.source, now)
         a = self._all
-        a[0] = min(self.others_hz, a[0] + (now - a[1]) * self.others_hz)
-        a[1] = now
-        if b[0] < 1.0 or a[0] < 1.0:
+        if now > a[3]:
+            _refill(a, self.others, now)
+        if b[0] < 1.0 or a[0] < 1.0 or b[2] < nbytes or a[2] < nbytes:
             return False
         b[0] -= 1.0
         a[0] -= 1.0
+        b[2] -= nbytes
+        a[2] -= nbytes
+        self._last = b
+        return True
+
+    def frame(self) -> bool:
+        """Charge one frame of the datagram admitted last (to its source and to all others);
+        False: the budget is spent, the rest of the datagram is dropped."""
+        b, a = self._last, self._all
+        if b[1] < 1.0 or a[1] < 1.0:
+            return False
+        b[1] -= 1.0
+        a[1] -= 1.0
         return True
 
     def _forget(self, now: float) -> None:
-        hz = self.source_hz
-        idle = [k for k, (tokens, t) in self._src.items() if tokens + (now - t) * hz >= hz]
+        full = self.source
+        for b in self._src.values():
+            _refill(b, full, now)
+        idle = [k for k, b in self._src.items() if (b[0], b[1], b[2]) == full]
         for k in idle or list(self._src):
             del self._src[k]
+
+
+class ReplyBudget:
+    """What one endpoint may send back to each source: token buckets of reply datagrams and
+    bytes per second (full bucket = one second's worth), per destination address. With at
+    most one reply datagram per frame received, no source gets more back than it sent, and
+    none more than :data:`REPLY_RATE_HZ` datagrams or :data:`REPLY_BYTES_S` bytes a second
+    however much it sends. Kept for at most ``max_sources`` addresses, as :class:`RateLimiter`."""
+
+    def __init__(self, rate_hz: float = REPLY_RATE_HZ, bytes_s: float = REPLY_BYTES_S,
+                 max_sources: int = 4096) -> None:
+        self.rates = (rate_hz, rate_hz, bytes_s)  # (the frames entry of the bucket is not used)
+        self.max_sources = max_sources
+        self._to: dict[Any, list[float]] = {}  # address -> [datagrams, -, bytes, time of last refill]
+
+    def _bucket(self, addr: Any, now: float) -> list[float]:
+        b = self._to.get(addr)
+        if b is None:
+            if len(self._to) >= self.max_sources:
+                self._to.clear()
+            b = self._to[addr] = [*self.rates, now]
+        else:
+            _refill(b, self.rates, now)
+        return b
+
+    def allows(self, addr: Any, now: float) -> bool:
+        """Whether a reply to ``addr`` may go now: a datagram and the bytes of the longest reply
+        (a COMMAND_ACK and one message, two frames) left."""
+        b = self._bucket(addr, now)
+        return b[0] >= 1.0 and b[2] >= 2 * MAX_FRAME
+
+    def charge(self, addr: Any, now: float, nbytes: int) -> bool:
+        """Take one reply datagram of ``nbytes`` to ``addr``; False (and nothing taken) when it
+        does not fit."""
+        b = self._bucket(addr, now)
+        if b[0] < 1.0 or b[2] < nbytes:
+            return False
+        b[0] -= 1.0
+        b[2] -= nbytes
+        return True
 
 
 # -- message stage: stateless checks of what a message carries ---------------------------------
@@ -178,6 +271,37 @@ def odometry_problem(m: Any) -> str | None:
         return "out_of_range"
     if abs(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3] - 1.0) > QUATERNION_TOL:
         return "out_of_range"
+    return None
+
+
+def whole(value: float, lo: int, hi: int) -> int | None:
+    """``value`` (a float parameter) as an int if it is a whole number in [lo, hi], else None
+    (NaN, +-inf, a fraction or out of range: never a ValueError or OverflowError)."""
+    if not (lo <= value <= hi) or value != int(value):  # NaN fails the first test, inf is out of range
+        return None
+    return int(value)
+
+
+def arm_disarm_args(p1: float, p2: float) -> tuple[bool, bool] | None:
+    """MAV_CMD_COMPONENT_ARM_DISARM's (arm, forced), or None when refused (``bad_number``):
+    param1 exactly 0 (disarm) or 1 (arm); param2 exactly 21196 forces, anything else does
+    not, NaN included (MAVLink's "unused" value: MAVSDK arms with param2 NaN)."""
+    if p1 != 0.0 and p1 != 1.0:  # NaN is neither
+        return None
+    return p1 == 1.0, p2 == FORCE_DISARM
+
+
+def message_id_arg(p1: float) -> int | None:
+    """A message id given as a command's param1 (REQUEST_MESSAGE, GET/SET_MESSAGE_INTERVAL):
+    a whole number in [0, 2^24 - 1], else None (``bad_number``)."""
+    return whole(p1, 0, MESSAGE_ID_MAX)
+
+
+def interval_arg(p2: float) -> float | None:
+    """SET_MESSAGE_INTERVAL's param2 (us): -1 (off), 0 (the default), or in (0, 3.6e9]
+    (at most one an hour); None for anything else (``bad_number``)."""
+    if p2 == -1.0 or p2 == 0.0 or 0.0 < p2 <= MAX_INTERVAL_US:
+        return p2
     return None
 
 

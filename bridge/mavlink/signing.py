@@ -11,7 +11,10 @@ ends with a 13-byte block ``link_id (1) + timestamp (6, little-endian, units of 
 2015-01-01 00:00 UTC) + signature (6)``, where the signature is the first 48 bits of
 ``sha256(secret_key + header + payload + CRC + link_id + timestamp)`` (the header with the
 signed flag set, so the CRC covers it). A receiver keeps, per stream (sender sysid,
-compid and link id), the newest timestamp it accepted and refuses anything not newer.
+compid and link id), the newest timestamp it accepted and refuses anything not newer. The
+specification keeps one such table per receiving system, whatever link a frame came in on:
+the :class:`Signing` objects of one system's links share theirs (``streams``), so a frame
+replayed from one link onto another is refused.
 
 One implementation serves every frame of this project, hot path or not: :meth:`Signing.sign`
 completes a frame whose header already has the flag (the hot codec builds it so),
@@ -101,12 +104,14 @@ class Signing:
 
     ``link_id`` tells this sender's links apart (the vehicle signs its controller link and
     its GCS link with different ids). Outgoing timestamps follow the clock and grow by at
-    least 1 per frame, so they stay unique and monotonic at any send rate.
+    least 1 per frame, so they stay unique and monotonic at any send rate. ``streams`` is the
+    replay table, (sysid, compid, link id) -> newest timestamp accepted: pass one dict to the
+    Signing of every link of a system (one table per system, as the specification says).
     """
 
     __slots__ = ("_key", "link_id", "timestamp", "streams")
 
-    def __init__(self, key: bytes, link_id: int = 0) -> None:
+    def __init__(self, key: bytes, link_id: int = 0, streams: dict[tuple[int, int, int], int] | None = None) -> None:
         if len(key) != KEY_BYTES:
             raise ValueError(f"a signing key has {KEY_BYTES} bytes")
         if not 0 <= link_id <= 255:
@@ -114,7 +119,8 @@ class Signing:
         self._key = bytes(key)
         self.link_id = link_id
         self.timestamp = 0  # the last one sent (10 us units)
-        self.streams: dict[tuple[int, int, int], int] = {}  # (sysid, compid, link id) -> newest accepted
+        # (sysid, compid, link id) -> newest accepted; shared by the links of one system
+        self.streams: dict[tuple[int, int, int], int] = streams if streams is not None else {}
 
     def __repr__(self) -> str:  # never the key
         return f"Signing(link_id={self.link_id})"

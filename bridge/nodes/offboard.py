@@ -37,6 +37,12 @@ returns its outcome: ``completed``, ``failsafe``, ``diverged`` or ``aborted``.
   Each row records the tick's lateness (the period error) and the state-to-command round
   trip estimated with TIMESYNC.
 
+A state is taken only from the vehicle's sysid, finite and in range, and with a stamp that
+follows the newest one accepted (:func:`stamp_problem`): not older, and ahead by no more than
+the wall time since (at up to twice real time) plus a slack. Anything else is refused and
+counted (``stale``; ``stamp_jump`` for a jump of the mission's time either way), so no single
+datagram, e.g. one stamped days ahead, can end the mission or make its time jump.
+
 The law runs under a :class:`controller.link_guard.LinkGuard` (the mission's ``[link]``
 ``stale_ms``, ``stop_ms``, ``compensation`` and ``[failsafe] resume``): stale state freezes
 the super-twisting integrators, older state stops the commands, and when the vehicle has
@@ -100,10 +106,42 @@ STATE_WAIT_PERIODS = 0.5
 WAY_DOWN_SLACK_S = 0.005
 WAY_DOWN_MAX_S = 2.0
 SPIN_BEFORE_TICK_S = 0.0003  # realtime: sleep until this long before a tick, then poll: select wakes late
+# a state's stamp may run ahead of the newest accepted state's by one step, plus the wall time
+# between their arrivals at up to STAMP_PACE x real time (a vehicle's stamps follow its steps:
+# lockstep answers or the wall clock; the factor lets a stream that fell behind catch up),
+# plus STAMP_SLACK_S (losses while the controller read late) and, in real time, twice the
+# down link's jitter and its bandwidth queue (one state delayed more than the next). Further
+# ahead, or further back than the slack, is a jump of the mission's time: stamp_jump
+STAMP_PACE = 2.0
+STAMP_SLACK_S = 0.5
 HOUSEKEEPING_S = 0.05
 _ZERO12 = (0.0,) * 12
 _ZERO16 = (0.0,) * 16
 _NAN4 = (math.nan,) * 4
+
+
+def stamp_problem(usec: int, newest_usec: int, since_s: float, period_s: float, slack_s: float) -> str | None:
+    """Why a state stamped ``usec`` (us) cannot follow the newest state accepted, stamped
+    ``newest_usec`` (-1: none yet, nothing to compare with) and received ``since_s`` wall
+    seconds ago, or None. Older is ``stale`` (reordered on the way) within ``slack_s`` and a
+    jump back beyond; ahead by more than one period ``period_s`` plus :data:`STAMP_PACE` x
+    ``since_s`` plus ``slack_s`` is a jump forward. Both are ``stamp_jump``: the state would
+    move the mission's time (and a far-future one would end the mission at once)."""
+    if newest_usec < 0:
+        return None
+    ahead_s = (usec - newest_usec) * 1e-6
+    if ahead_s < 0.0:
+        return "stamp_jump" if -ahead_s > slack_s else "stale"
+    return "stamp_jump" if ahead_s > period_s + STAMP_PACE * max(since_s, 0.0) + slack_s else None
+
+
+def stamp_slack_s(flight: Flight, clock: str) -> float:
+    """:data:`STAMP_SLACK_S`, plus in real time what the down link (the relay's, on the wire)
+    may take from one state's delay and not the next's: twice its jitter, its bandwidth queue."""
+    if clock == "lockstep":  # the down model acts here, after the socket: states cross it in order
+        return STAMP_SLACK_S
+    d = flight.link.down
+    return STAMP_SLACK_S + 2e-3 * d.jitter_ms + (1e-3 * d.queue_ms if d.rate_bps else 0.0)
 
 
 @dataclass(frozen=True)
@@ -153,6 +191,7 @@ class Offboard:
         self.ep = Endpoint(cfg.vehicle, sysid=cfg.sysid, compid=cfg.compid, tlog=self.tlog, name="--vehicle",
                            signing=Signing(cfg.key) if cfg.key is not None else None, rejected=self.rejected)
         self._odo_usec = -1  # time_usec of the newest state accepted: an older one is stale
+        self._stamp_slack_s = stamp_slack_s(flight, cfg.clock)  # how far a stamp may jump (stamp_problem)
         self.rows = (LineWriter(out / "controller.csv", ",".join(CONTROLLER_COLUMNS), batch=1)
                      if out is not None else None)
         self.stopping = False
@@ -181,6 +220,7 @@ class Offboard:
         self.states = 0
         self.t_mission = 0.0
         self.reason = ""
+        self.left_lockstep = ""  # the vehicle's STATUSTEXT saying it left lockstep, if it did
 
     @property
     def overruns(self) -> int:
@@ -528,15 +568,17 @@ class Offboard:
         src = m.get_srcSystem()
         kind = m._type
         if kind == "ODOMETRY":  # checked before the law sees it (bridge.mavlink.receive)
-            why = ("sender" if src != self.vsys else "stale" if m.time_usec < self._odo_usec
-                   else odometry_problem(m))
+            now = time.monotonic()
+            why = ("sender" if src != self.vsys
+                   else stamp_problem(m.time_usec, self._odo_usec, now - self._odo_recv, 1.0 / self.rate,
+                                      self._stamp_slack_s) or odometry_problem(m))
             if why:
                 self.rejected.add(why, True)
                 return
             self._odo_usec = m.time_usec
             self.states += 1
             self._odo = m
-            self._odo_recv = self._last_rx = time.monotonic()
+            self._odo_recv = self._last_rx = now
             return
         if kind == "HEARTBEAT":
             if m.autopilot == mavlink.MAV_AUTOPILOT_INVALID or m.type == mavlink.MAV_TYPE_GCS:
@@ -567,6 +609,8 @@ class Offboard:
         elif kind == "STATUSTEXT":
             text = m.text.rstrip("\x00") if isinstance(m.text, str) else m.text.decode(errors="replace")
             self._status(f"statustext severity={m.severity} {text}")
+            if text.startswith("lockstep:") and not self.left_lockstep:  # not a lockstep flight any more
+                self.left_lockstep = text
 
     def _timesync(self, m: Any) -> None:
         now = time.monotonic_ns()
@@ -624,7 +668,8 @@ class Offboard:
 
 def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None = None,
                    overwrite: bool = False) -> int:
-    """``bsst controller``: fly, then exit 0 if the mission completed, else 1 (failsafe, diverged, aborted)."""
+    """``bsst controller``: fly, then exit 0 if the mission completed (in lockstep: without the vehicle
+    leaving it), else 1 (failsafe, diverged, aborted, or lockstep left)."""
     path = side_dir(out, ("controller.tlog", "controller.csv"), overwrite) if out is not None else None
     emit = status_printer()
     node = Offboard(flight, cfg, path, emit)
@@ -633,8 +678,11 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
     emit("stats " + json.dumps({"commands": node.commands, "states": node.states, "received": node.ep.received,
                                 "sent": node.ep.sent, "stale_ticks": node.stale_ticks, "overruns": node.overruns,
                                 "down": node.cend.down.stats.summary() if cfg.clock == "lockstep" else None,
-                                "rejected": node.rejected}))
-    emit(f"done outcome={outcome}" + (f" reason={node.reason}" if node.reason else ""))
+                                "rejected": node.rejected, "rejected_from_vehicle": node.rejected.from_peer}))
+    left = " lockstep=left" if node.left_lockstep else ""  # before reason=, which runs to the end of the line
+    emit(f"done outcome={outcome}{left}" + (f" reason={node.reason}" if node.reason else ""))
     if outcome != "completed":
         sys.stderr.write(f"bsst controller: {outcome}" + (f": {node.reason}" if node.reason else "") + "\n")
-    return 0 if outcome == "completed" else 1
+    elif left:
+        sys.stderr.write(f"bsst controller: completed, but not in lockstep: the vehicle said {node.left_lockstep!r}\n")
+    return 0 if outcome == "completed" and not left else 1

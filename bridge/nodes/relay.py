@@ -1,10 +1,12 @@
 """A real-time UDP relay that applies the link model on the wall clock (``bsst relay``).
 
 In:  UDP datagrams, whatever they hold: from the client on the listen port, from the target on the
-     back socket; the ``[link]`` settings (delays ms, loss %, ``rate_bps`` bytes/s, blackouts s)
+     back socket; the ``[link]`` settings (delays ms, loss %, ``rate_bps`` bytes/s, blackouts s);
+     optionally the client's address
 Out: the same datagrams, unchanged, forwarded when the link model (on the wall clock, s) says they
      are due; :meth:`Relay.summary` (``relay.json``): per direction the model's statistics and
-     ``measured_ms``, the delay really added (ms), plus counts and CPU time (s, us per packet)
+     ``measured_ms``, the delay really added (ms), plus counts, the client, what was refused by
+     reason, and CPU time (s, us per packet)
 
 Topology (docs/design.md, "Link model")::
 
@@ -13,7 +15,7 @@ Topology (docs/design.md, "Link model")::
 
 Datagrams that arrive on the listen port travel ``up`` (``listen_direction="down"`` swaps
 the names) and leave from the back socket to the target; whatever the target sends back
-to the back socket travels the other way, to the last address the front heard from. Each
+to the back socket travels the other way, to the client. Each
 direction has its own :class:`bridge.core.link.LinkImpairment`, driven with the seconds since
 the relay started (so blackouts are in relay time; with ``mission_clock`` they are in the
 flight's time instead: t = 0 is put at the first actuator target that arrives on the
@@ -23,6 +25,14 @@ stamps each one on arrival — with the kernel's receive time stamp (``SO_TIMEST
 Linux, so that the relay's own wake-up latency counts — and measures, when it hands it to
 the kernel to forward it, the delay it really added (scheduled delay + the relay's own
 latency), next to the model's statistics.
+
+**Two ends only** (docs/hostile-input.md). The relay forwards between its two configured
+ends and nobody else: the vehicle side is exactly the ``target`` address (only datagrams
+from it go back), the controller side is the ``client`` given, or else the first address
+that sends to the listen port, learned once and never re-learned. Anything else is refused
+before the link model sees it (so it draws no fate and the seeded run stays the same) and
+counted by reason: ``stranger_front`` (to the listen port, not from the client),
+``stranger_back`` (to the back socket, not from the target).
 """
 
 from __future__ import annotations
@@ -50,6 +60,8 @@ MAX_DATAGRAM = 65_535
 _SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)  # Linux: kernel receive time, CLOCK_REALTIME
 _TIMESPEC = struct.Struct("qq")
 _ANC_SIZE = socket.CMSG_SPACE(_TIMESPEC.size)
+MAX_READS = 256  # datagrams read from one socket per wake-up: a flood cannot hold up what is due
+REFUSAL_REASONS = ("stranger_front", "stranger_back")  # see the module docstring, "Two ends only"
 # actuator targets (docs/design.md, "The MAVLink contract"): the first one up marks the flight's time 0
 _TARGET_IDS = frozenset((mavlink.MAVLINK_MSG_ID_HIL_ACTUATOR_CONTROLS,
                          mavlink.MAVLINK_MSG_ID_SET_ACTUATOR_CONTROL_TARGET))
@@ -68,17 +80,31 @@ def parse_address(text: str, flag: str, bind: bool = False) -> Address:
     return a.host, a.port
 
 
+def numeric(addr: Address) -> Address:
+    """(host, port) with the host as its IPv4 dotted quad, the form ``recvfrom`` reports a
+    sender in (so that ``localhost:14560`` is the address datagrams from 127.0.0.1:14560 come from)."""
+    return socket.getaddrinfo(addr[0], addr[1], socket.AF_INET, socket.SOCK_DGRAM)[0][4][:2]
+
+
+def hostport(addr: Address | None) -> str | None:
+    """``HOST:PORT``, or None."""
+    return None if addr is None else f"{addr[0]}:{addr[1]}"
+
+
 class Relay:
     """Forward UDP both ways between a client and ``target``, through the link model.
 
     Bind happens in the constructor (``address`` tells the port when 0 was asked for);
     :meth:`serve` runs until :meth:`stop` (from any thread or a signal handler) or
-    ``duration_s``; :meth:`start` runs it in a daemon thread.
+    ``duration_s``; :meth:`start` runs it in a daemon thread. ``client`` fixes the controller
+    side's address; without it the first sender to the listen port is the client, for good
+    (``on_client`` is then called with its address, once, from the serving thread).
     """
 
     def __init__(self, listen: Address, target: Address, link: LinkSettings | None = None, *,
                  listen_direction: str = "up", clock: Callable[[], float] = time.perf_counter,
-                 mission_clock: bool = False) -> None:
+                 mission_clock: bool = False, client: Address | None = None,
+                 on_client: Callable[[Address], None] | None = None) -> None:
         link = link or LinkSettings()
         self.mission_clock = mission_clock
         self.origin_s: float | None = None  # relay time (s) of the flight's time 0 (mission_clock)
@@ -88,7 +114,8 @@ class Relay:
         if mission_clock:  # no blackout before the flight's time 0 is known
             for lk in self.links.values():
                 lk.shift_blackouts(math.inf)
-        self.target = target
+        self.target = numeric(target)
+        given = numeric(client) if client is not None else None
         self.clock = clock
         self.front = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.back = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -107,7 +134,10 @@ class Relay:
                     s.setsockopt(socket.SOL_SOCKET, _SO_TIMESTAMPNS, 1)
                 except OSError:
                     self.kernel_stamps = False
-        self.client: Address | None = None
+        self.client: Address | None = given
+        self.client_given = given is not None
+        self.on_client = on_client
+        self.refused = dict.fromkeys(REFUSAL_REASONS, 0)  # datagrams from neither end, by reason
         self.added = {"up": array("d"), "down": array("d")}  # s, measured arrival -> forward
         self.dropped_no_client = 0
         self.send_errors = 0
@@ -148,7 +178,7 @@ class Relay:
         clock = self.clock
         t0 = self.t0
         stamps = self.kernel_stamps
-        while True:
+        for _ in range(MAX_READS):
             try:
                 if stamps:
                     data, anc, _, addr = sock.recvmsg(MAX_DATAGRAM, _ANC_SIZE)
@@ -159,6 +189,15 @@ class Relay:
                 return
             except OSError:  # e.g. ICMP port unreachable reported on the next recv
                 continue
+            if from_front:
+                if self.client is None:
+                    self._learn_client(addr)
+                elif addr != self.client:
+                    self.refused["stranger_front"] += 1
+                    continue
+            elif addr != self.target:
+                self.refused["stranger_back"] += 1
+                continue
             now = clock()
             for level, kind, raw in anc:  # the kernel's arrival stamp: count our wake-up latency too
                 if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS and len(raw) >= 16:
@@ -166,11 +205,15 @@ class Relay:
                     lag = (time.time_ns() - sec * 1_000_000_000 - nsec) * 1e-9
                     if 0.0 < lag < 1.0:
                         now -= lag
-            if from_front:
-                self.client = addr
-                if self.mission_clock and self.origin_s is None and _is_target(data):
-                    self._set_origin(now - t0)
+            if from_front and self.mission_clock and self.origin_s is None and _is_target(data):
+                self._set_origin(now - t0)
             link.send(now - t0, len(data), (data, now))
+
+    def _learn_client(self, addr: Address) -> None:
+        """The first sender to the listen port is the controller side, for good."""
+        self.client = addr
+        if self.on_client is not None:
+            self.on_client(addr)
 
     def _set_origin(self, t: float) -> None:
         """The first actuator target arrived at relay time t (s): the flight's time 0 is when
@@ -245,6 +288,10 @@ class Relay:
             s["measured_ms"] = percentiles(self.added[d], 1000.0, empty=None)
             out[d] = s
         out["origin_s"] = self.origin_s
+        out["client"] = hostport(self.client)
+        out["client_from"] = "given" if self.client_given else "first sender"
+        out["target"] = hostport(self.target)
+        out["refused"] = dict(self.refused)
         out["forwarded"] = self.forwarded
         out["dropped_no_client"] = self.dropped_no_client
         out["send_errors"] = self.send_errors

@@ -9,7 +9,10 @@ Out: ODOMETRY (NED position m, FRD body velocity m/s, quaternion FRD to NED, FRD
      each event, the GCS streams (25 Hz / 10 Hz, ``time_boot_ms`` = simulation time); ``vehicle.tlog``,
      ``vehicle.csv`` rows; status lines on stdout
 
-Its clocks and its end of the link model: docs/design.md, "Clocks" and "Link model".
+Its clocks and its end of the link model: docs/design.md, "Clocks" and "Link model". Who may
+do what on which link: docs/design.md, "Authority" (:meth:`Vehicle._authority`); every
+command's numbers are checked before use (:mod:`bridge.mavlink.receive`), and every command
+that changes the flight is an event naming its sender (:class:`Sender`).
 
 It wraps :class:`bridge.core.simvehicle.SimVehicle` (plant, arming, command timeout, failsafe:
 the same object the offline loop flies) with two UDP links:
@@ -59,18 +62,26 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.core.clock import Pace
+from bridge.core.estimator import Covariance, upper_triangle
 from bridge.core.flight import Flight
 from bridge.core.linkends import VehicleEnd
 from bridge.core.simvehicle import FAILSAFE, LANDED, OFFBOARD
-from bridge.core.wire import command_from_wire, command_to_wire, state_to_odometry, step_of_usec, step_usec
+from bridge.core.wire import (
+    command_from_wire,
+    command_to_wire,
+    rotate_inverse,
+    state_to_odometry,
+    step_of_usec,
+    step_usec,
+)
 from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import (
     CONTROLLER_COMPID,
     CONTROLLER_SYSID,
-    FORCE_DISARM,
     ODOMETRY,
     VEHICLE_COMPID,
     Address,
@@ -78,7 +89,15 @@ from bridge.mavlink.endpoint import (
     Tlog,
     wait,
 )
-from bridge.mavlink.receive import Rejections, addressed_elsewhere, wire_problem
+from bridge.mavlink.receive import (
+    FORCE_DISARM,
+    Rejections,
+    addressed_elsewhere,
+    arm_disarm_args,
+    interval_arg,
+    message_id_arg,
+    wire_problem,
+)
 from bridge.mavlink.signing import Signing
 from bridge.nodes.process import on_stop_signals, status_printer
 from bridge.record.columns import VEHICLE_COLUMNS, state_columns
@@ -92,6 +111,25 @@ NAN4 = (math.nan,) * 4
 _COV_UNKNOWN = (math.nan,) + (0.0,) * 20
 ODOMETRY_TAIL = (*_COV_UNKNOWN, *_COV_UNKNOWN, mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_BODY_FRD, 0,
                  mavlink.MAV_ESTIMATOR_TYPE_NAIVE, 100)
+# an estimate's (raw, ekf): its covariances follow; the autopilot's own estimator (ekf) or the sensors as read (raw)
+ESTIMATOR_TYPES = {"raw": mavlink.MAV_ESTIMATOR_TYPE_NAIVE, "ekf": mavlink.MAV_ESTIMATOR_TYPE_AUTOPILOT}
+_POSE_SIGNS = np.array([1.0, -1.0, -1.0, 1.0, -1.0, -1.0])  # (x, y, z, roll, pitch, yaw): NWU/FLU -> NED/FRD
+
+
+def odometry_covariance(q: tuple[float, float, float, float], cov: Covariance) -> tuple[tuple[float, ...], ...]:
+    """ODOMETRY's ``pose_covariance`` and ``velocity_covariance`` (21 each, the upper triangles) of an
+    estimate's covariance, in the message's frames: pose over NED (x, y, z) and the Euler angles of
+    :func:`~bridge.core.wire.state_to_odometry` (roll, pitch, yaw = φ, −θ, −ψ); twist over the FRD body
+    velocity and FRD body rates (``q``: the estimate's attitude, FRD to NED). NaN stays NaN."""
+    pose = np.array(cov.pose()).reshape(6, 6) * np.outer(_POSE_SIGNS, _POSE_SIGNS)
+    T = np.zeros((6, 6))  # twist (NWU velocity, FLU rates) -> (FRD body velocity, FRD rates)
+    for j, e in enumerate(((1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, -1.0))):  # NWU axis j in NED
+        T[0:3, j] = rotate_inverse(q, e)
+    T[3:6, 3:6] = np.diag((1.0, -1.0, -1.0))
+    twist = T @ np.array(cov.twist()).reshape(6, 6) @ T.T
+    return upper_triangle(pose.ravel().tolist()), upper_triangle(twist.ravel().tolist())
+
+
 # default GCS streams (message id -> interval s): docs/design.md, "The MAVLink contract" gives 25 Hz and 10 Hz
 DEFAULT_STREAMS = {
     mavlink.MAVLINK_MSG_ID_ATTITUDE: 0.04,
@@ -103,10 +141,58 @@ DEFAULT_STREAMS = {
     mavlink.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS: 0.1,
     mavlink.MAVLINK_MSG_ID_HOME_POSITION: 0.0,  # 0: only on request
 }
+MIN_INTERVAL_S = 0.005  # the shortest stream interval (200 Hz)
 HEARTBEAT_S = 1.0
 HOUSEKEEPING_S = 0.02  # s of wall time between looks at the GCS socket, streams, file flushes
 RESEND_S = 0.05  # lockstep: resend the state nobody answered (a datagram can be dropped)
 IDLE_ODOMETRY_S = 0.1  # lockstep, disarmed: time stands still; the state is still shown
+BY_VEHICLE = " [by vehicle]"  # the suffix of an arm or disarm the vehicle made itself (failsafe landing, divergence)
+ATTRIBUTED = ("armed", "disarmed", "mode", "interval")  # the events that say who caused them
+_TARGETS = frozenset({"HIL_ACTUATOR_CONTROLS", "SET_ACTUATOR_CONTROL_TARGET"})
+_ADDRESSED = frozenset({"COMMAND_LONG", "COMMAND_INT", "MISSION_REQUEST_LIST"})  # target fields checked first
+_COMMANDS = frozenset({"COMMAND_LONG", "COMMAND_INT"})
+
+
+@dataclass(frozen=True)
+class Sender:
+    """Who sent a command: its sysid and compid, its address, and the link it came in on
+    (``controller`` or ``gcs``)."""
+
+    sysid: int
+    compid: int
+    addr: tuple[str, int]
+    link: str
+
+    @property
+    def tag(self) -> str:
+        """The suffix of the events it caused, `` [by SYSID:COMPID HOST:PORT LINK]`` (docs/design.md,
+        "Authority": a policy checker parses it from events.log)."""
+        return f" [by {self.sysid}:{self.compid} {self.addr[0]}:{self.addr[1]} {self.link}]"
+
+
+class StreamTable(dict[int, float]):
+    """One link's streams: message id -> interval (s; 0: only on request), and when each
+    stream is due next (``due``, wall time). ``defaults`` are what an interval of 0 asks for."""
+
+    def __init__(self, defaults: dict[int, float], now: float) -> None:
+        super().__init__(defaults)
+        self.defaults = defaults
+        self.due = {mid: now for mid, iv in defaults.items() if iv > 0}
+
+    def set(self, mid: int, interval_us: float, now: float) -> float | None:
+        """Apply a checked SET_MESSAGE_INTERVAL (:func:`bridge.mavlink.receive.interval_arg`: -1 off,
+        0 the default, else us, at least :data:`MIN_INTERVAL_S`) to a stream of this table;
+        the new interval (s, 0: off), or None when it is what it was."""
+        iv = 0.0 if interval_us < 0 else self.defaults[mid] if interval_us == 0 else max(interval_us * 1e-6,
+                                                                                          MIN_INTERVAL_S)
+        if iv == self[mid]:
+            return None
+        self[mid] = iv
+        if iv > 0:
+            self.due[mid] = now
+        else:
+            self.due.pop(mid, None)
+        return iv
 
 
 @dataclass(frozen=True)
@@ -150,12 +236,16 @@ class Vehicle:
         # refusals of the receive path (bridge.mavlink.receive), both links, and of the up-link model's end
         self.rejected = Rejections()
         self._from_peer = False  # the message being handled came from the controller's address
-        sign = (lambda link_id: Signing(cfg.key, link_id)) if cfg.key is not None else (lambda link_id: None)
+        # one replay table for both links: a signed frame replayed from one link onto the other is refused
+        replay: dict[tuple[int, int, int], int] = {}
+        sign = ((lambda link_id: Signing(cfg.key, link_id, replay)) if cfg.key is not None
+                else (lambda link_id: None))
         self.link = Endpoint(cfg.listen, sysid=cfg.sysid, compid=cfg.compid, tlog=self.tlog, name="--listen",
                              signing=sign(0), rejected=self.rejected, priority=True)
-        self.link.follow = False  # ODOMETRY goes to the configured controller only (see _handle)
+        self.link.follow = False  # ODOMETRY goes to the flight's controller only (see _handle)
+        # a ground station is charged like any source, and its refusals are not the controller's
         self.gcs = (Endpoint(cfg.gcs, sysid=cfg.sysid, compid=cfg.compid, tlog=self.tlog, name="--gcs",
-                             signing=sign(1), rejected=self.rejected)
+                             signing=sign(1), rejected=self.rejected, exempt_peer=False)
                     if cfg.gcs is not None else None)
         self.endpoints = [self.link] + ([self.gcs] if self.gcs is not None else [])
         self.rows = LineWriter(out / "vehicle.csv", ",".join(VEHICLE_COLUMNS), batch=100) if out is not None else None
@@ -168,9 +258,9 @@ class Vehicle:
         self.applied: tuple[int, tuple[float, ...], float] | None = None  # (key, wire, recv wall) in force
         self._odo_sent: dict[int, float] = {}  # step -> wall time its state was sent
         self.odometry_sent = 0
-        self.streams = dict(DEFAULT_STREAMS)
         now = time.monotonic()
-        self._due = {mid: now for mid, iv in self.streams.items() if iv > 0}
+        self.streams = StreamTable(DEFAULT_STREAMS, now)  # the GCS link's
+        self.ctl_streams = StreamTable(dict.fromkeys(DEFAULT_STREAMS, 0.0), now)  # the controller link's: none
         self._next_heartbeat = now
         self._next_house = now
         self._resend_at = self._lost_at = self._idle_odo_at = now
@@ -273,6 +363,7 @@ class Vehicle:
             self.applied = (k, wire, recv)
         vend.deliver(t)
         X = self.plant.state
+        est = self._estimate()
         real = self.plant.realised
         vend.advance()
         self.k = k + 1
@@ -282,7 +373,7 @@ class Vehicle:
             self._send_odometry(time.monotonic())
         # off the critical path: the controller is computing step k+1 meanwhile
         self._row(k, X, k, NAN4 if wire is None else wire, NAN4, real, t - vend.applied_state_t, recv - sent,
-                  sent, recv)
+                  sent, recv, est)
 
     def _start_freerun(self, now: float) -> None:
         self.freerun = True
@@ -376,30 +467,33 @@ class Vehicle:
         events = self.sim.events
         if self._events_sent == len(events):
             return
+        msgs = []
         while self._events_sent < len(events):
             e = events[self._events_sent]
             self._events_sent += 1
+            if e.kind in ATTRIBUTED and " [by " not in e.text:
+                # not caused by a command handled here: an arm the up-link model delivered (the
+                # flight's controller sent it), or the vehicle's own disarm (landed, diverged)
+                e.text += self._controller().tag if e.kind == "armed" and self.link.peer is not None else BY_VEHICLE
             self._status(f"event t={e.t:.3f} {e.kind}: {e.text}")
             sev = (mavlink.MAV_SEVERITY_CRITICAL if e.kind in ("failsafe", "diverged", "lockstep")
                    else mavlink.MAV_SEVERITY_INFO)
-            text = f"{e.kind}: {e.text}"[:50].encode()
-            msg = mavlink.MAVLink_statustext_message(sev, text)
-            for ep in self.endpoints:
-                ep.send(msg)
-        hb = self._heartbeat()
+            msgs.append(mavlink.MAVLink_statustext_message(sev, f"{e.kind}: {e.text}"[:50].encode()))
+        msgs.append(self._heartbeat())
         for ep in self.endpoints:
-            ep.send(hb)
+            ep.send_many(msgs[-8:])  # one datagram per link (the newest texts if many came at once)
 
     # -- sending ---------------------------------------------------------------------------------
     def _send_odometry(self, now: float, fresh: bool = True) -> None:
         """ODOMETRY of step k to the controller; a ``fresh`` one (not a resend) starts the
         lockstep wait for its target."""
         k = self.k
-        X = self.plant.state
+        X = self.sim.published()  # the vehicle's estimate (the true state under the truth estimator)
         if not tm.finite(X):
             return
         pos, q, vel, rates = state_to_odometry(X)
-        if self.link.send_hot(ODOMETRY, (step_usec(k, self.rate), *pos, *q, *vel, *rates, *ODOMETRY_TAIL)):
+        tail = ODOMETRY_TAIL if self.sim.sensors is None else self._estimate_tail(q)
+        if self.link.send_hot(ODOMETRY, (step_usec(k, self.rate), *pos, *q, *vel, *rates, *tail)):
             self.odometry_sent += 1
         self._odo_sent[k] = now
         if len(self._odo_sent) > 256:
@@ -410,12 +504,28 @@ class Vehicle:
             self._lost_at = now + self.cfg.lost_after_s
 
     def _row(self, k: int, X: tuple[float, ...], key: int, wire: tuple[float, ...], dem: tuple[float, ...],
-             real: tuple[float, ...], age: float, rtt: float, sent: float, recv: float) -> None:
+             real: tuple[float, ...], age: float, rtt: float, sent: float, recv: float,
+             est: tuple[tuple[float, ...], float] | None = None) -> None:
+        """One ``vehicle.csv`` row; ``est``: (estimate, NEES) taken with ``X`` (None: now, with ``X`` current)."""
         if self.rows is None:
             return
+        E, nees = est if est is not None else self._estimate()
         mode = MODE_CODES.get(self.sim.mode, 0)
         self.rows.write(",".join(map(repr, (k, k / self.rate, *state_columns(X), mode, key, *wire, *dem, *real,
-                                            age, rtt, sent, recv))))
+                                            age, rtt, sent, recv, *state_columns(E), nees))))
+
+    def _estimate(self) -> tuple[tuple[float, ...], float]:
+        """The published estimate now and its NEES against the true state (nan under truth)."""
+        E = self.sim.published()
+        return E, self.sim.nees(E)
+
+    def _estimate_tail(self, q: tuple[float, float, float, float]) -> tuple[Any, ...]:
+        """ODOMETRY after the body rates for an estimate: its covariances, frames, estimator type, quality 0
+        (unknown: MAVLink has no scale for it)."""
+        assert self.sim.estimator is not None
+        pose, twist = odometry_covariance(q, self.sim.estimator.covariance())
+        return (*pose, *twist, mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_BODY_FRD, 0,
+                ESTIMATOR_TYPES[self.flight.estimator], 0)
 
     def _heartbeat(self) -> Any:
         sim = self.sim
@@ -480,35 +590,84 @@ class Vehicle:
             msg = mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_WARNING, refused.encode())
             for ep in self.endpoints:
                 ep.send(msg)
-        if self.gcs is not None:
-            for mid, due in self._due.items():
+        for ep, table in ((self.gcs, self.streams), (self.link, self.ctl_streams)):
+            if ep is None or ep.peer is None:
+                continue
+            for mid, due in table.due.items():
                 if now >= due:
-                    iv = self.streams[mid]
-                    self._due[mid] = due + iv if now - due < iv else now + iv
-                    for msg in self._message(mid):
-                        self.gcs.send(msg)
+                    iv = table[mid]
+                    table.due[mid] = due + iv if now - due < iv else now + iv
+                    ep.send_many(self._message(mid))
         if self.rows is not None:
             self.rows.flush()
         if self.tlog is not None:
             self.tlog.flush()
-        nxt = min([self._next_heartbeat, now + HOUSEKEEPING_S] + list(self._due.values()))
+        nxt = min([self._next_heartbeat, now + HOUSEKEEPING_S, *self.streams.due.values(),
+                   *self.ctl_streams.due.values()])
         self._next_house = max(nxt, now + 0.001)
 
     # -- receiving ---------------------------------------------------------------------------------
     def _handle(self, ep: Endpoint, m: Any, addr: tuple[str, int]) -> None:
-        """A message that passed the frame stage: checked and acted on by :meth:`_dispatch`.
+        """A message that passed the frame stage: its sender's authority checked
+        (:meth:`_authority`), then checked and acted on by :meth:`_dispatch`.
+
         The controller link's peer (where ODOMETRY goes, never rate-limited, with a socket of
-        its own: Endpoint.prioritise) is the address of the configured controller's newest
-        message that nothing refused."""
+        its own: Endpoint.prioritise) is the flight's controller: the address of the
+        configured controller's message that nothing refused, learned while no flight is on
+        (the newest such) or when the flight has none yet (the first), and then held until
+        the flight ends: while it is on, the controller's ids from any other address are a
+        ``stranger``'s."""
         link = self.link
-        known = self._from_peer = addr == link.peer
-        refused = self.rejected.total
-        self._dispatch(ep, m, addr)
-        if known or ep is not link or self.rejected.total != refused:
+        if ep is not link:
+            self._from_peer = False
+            self._dispatch(ep, m, addr)
             return
-        if self._from_controller(m):
-            link.peer = addr
+        known = self._from_peer = addr == link.peer
+        why = self._authority(m, known)
+        if why is not None:
+            self._reject(why)
+            if m._type in _COMMANDS:
+                self._ack(ep, m, addr, mavlink.MAV_RESULT_DENIED)
+            return
+        if known:
+            self._dispatch(ep, m, addr)
+            return
+        # the controller's ids from a new address, no flight on (or none with a controller yet):
+        # it is the peer while its message is handled (an arm's first state goes to it), and
+        # stays so unless the message is refused
+        before, refused = link.peer, self.rejected.total
+        link.peer = addr
+        self._dispatch(ep, m, addr)
+        if self.rejected.total != refused:
+            link.peer = before
+        else:
             link.prioritise(addr)
+
+    def _authority(self, m: Any, known: bool) -> str | None:
+        """Why a message on the controller link is refused for its sender, or None: only the
+        configured controller (its sysid and compid) is heard there, and during a flight only
+        from the flight's address (docs/design.md, "Authority"). A command for another
+        system is ``target`` whoever sent it."""
+        cfg = self.cfg
+        kind = m._type
+        if kind in _ADDRESSED and addressed_elsewhere(m, cfg.sysid, cfg.compid):
+            return "target"
+        if not self._from_controller(m):
+            return "sender" if kind in _TARGETS else "not_authorised"
+        if not known and self.link.peer is not None and (self.sim.armed or self.engaged):
+            return "stranger"
+        return None
+
+    def _controller(self) -> Sender:
+        """The flight's controller (configured ids, learned address) as a :class:`Sender`."""
+        cfg = self.cfg
+        return Sender(cfg.controller_sysid, cfg.controller_compid, self.link.peer or ("?", 0), "controller")
+
+    def _ack(self, ep: Endpoint, m: Any, addr: tuple[str, int], result: int, follow: tuple[Any, ...] = ()) -> None:
+        """COMMAND_ACK of ``m`` (and the messages it asked for) to its sender: one datagram,
+        within that sender's reply budget."""
+        ack = mavlink.MAVLink_command_ack_message(m.command, result, 0, 0, m.get_srcSystem(), m.get_srcComponent())
+        ep.reply((ack, *follow), addr)
 
     def _dispatch(self, ep: Endpoint, m: Any, addr: tuple[str, int]) -> None:
         kind = m._type
@@ -517,12 +676,21 @@ class Vehicle:
         elif kind == "COMMAND_LONG" or kind == "COMMAND_INT":
             self._command(ep, m, addr)
         elif kind == "TIMESYNC":
-            if m.tc1 == 0:
-                ep.send(mavlink.MAVLink_timesync_message(self._clock_ns(), m.ts1), addr)
+            if m.tc1 == 0:  # a request (an answer, tc1 != 0, is for someone else's clock: nothing to do)
+                self._request(ep, addr, mavlink.MAVLink_timesync_message(self._clock_ns(), m.ts1))
         elif kind == "MISSION_REQUEST_LIST":
-            if m.target_system in (0, self.cfg.sysid):
-                ep.send(mavlink.MAVLink_mission_count_message(m.get_srcSystem(), m.get_srcComponent(), 0,
-                                                              m.mission_type), addr)
+            if addressed_elsewhere(m, self.cfg.sysid, self.cfg.compid):
+                return self._reject("target")
+            self._request(ep, addr, mavlink.MAVLink_mission_count_message(m.get_srcSystem(), m.get_srcComponent(),
+                                                                          0, m.mission_type))
+        return None
+
+    def _request(self, ep: Endpoint, addr: tuple[str, int], answer: Any) -> None:
+        """Answer a request that changes nothing, within its sender's reply budget."""
+        if not ep.reply_allowed(addr):
+            return self._reject("reply_limited")
+        ep.reply((answer,), addr)
+        return None
 
     def _reject(self, why: str) -> None:
         self.rejected.add(why, self._from_peer)
@@ -590,46 +758,76 @@ class Vehicle:
         return ep is self.link and self.engaged and not self.freerun and self._from_controller(m)
 
     def _command(self, ep: Endpoint, m: Any, addr: tuple[str, int]) -> None:
+        """COMMAND_LONG / COMMAND_INT from a sender with authority on ``ep``: its numbers
+        checked, acted on, answered (COMMAND_ACK and what it asked for, in one datagram) and,
+        if it changed the flight, an event naming the sender."""
         cfg = self.cfg
         if addressed_elsewhere(m, cfg.sysid, cfg.compid):
             return self._reject("target")
-        cmd = int(m.command)
-        result = mavlink.MAV_RESULT_ACCEPTED
-        follow: list[Any] = []
-        if cmd == mavlink.MAV_CMD_COMPONENT_ARM_DISARM and m.param1 >= 0.5 and self._through_link(ep, m):
-            self.vend.receive_arm(self.t)  # acts when the model delivers it, as offline
-            result = mavlink.MAV_RESULT_IN_PROGRESS
-        elif cmd == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
-            result = self._arm_disarm(m.param1, m.param2)
-        elif cmd == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
-            result = self._set_interval(int(m.param1), m.param2)
-        elif cmd == mavlink.MAV_CMD_GET_MESSAGE_INTERVAL:
-            mid = int(m.param1)
-            iv = self.streams.get(mid, 0.0 if mid != mavlink.MAVLINK_MSG_ID_HEARTBEAT else HEARTBEAT_S)
-            follow = [mavlink.MAVLink_message_interval_message(mid, int(iv * 1e6) if iv > 0 else -1)]
-        elif cmd == mavlink.MAV_CMD_REQUEST_MESSAGE:
-            follow = self._message(int(m.param1))
-            result = mavlink.MAV_RESULT_ACCEPTED if follow else mavlink.MAV_RESULT_UNSUPPORTED
-        elif cmd == mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
-            follow = [tm.autopilot_version(cfg.sysid)]
-        elif cmd == mavlink.MAV_CMD_GET_HOME_POSITION:
-            follow = [tm.home_position(cfg.home)]
-        else:
-            result = mavlink.MAV_RESULT_UNSUPPORTED
-        ep.send(mavlink.MAVLink_command_ack_message(cmd, result, 0, 0, m.get_srcSystem(), m.get_srcComponent()), addr)
-        for msg in follow:
-            ep.send(msg, addr)
+        if not ep.reply_allowed(addr):
+            return self._reject("reply_limited")  # not acted on: its answer could not go
+        by = Sender(m.get_srcSystem(), m.get_srcComponent(), addr, "controller" if ep is self.link else "gcs")
+        n0 = len(self.sim.events)
+        result, follow = self._run_command(ep, m, by)
+        for e in self.sim.events[n0:]:
+            if e.kind in ATTRIBUTED:
+                e.text += by.tag
+        self._ack(ep, m, addr, result, follow)
         self._drain_events()
         return None
 
-    def _arm_disarm(self, p1: float, p2: float) -> int:
+    def _run_command(self, ep: Endpoint, m: Any, by: Sender) -> tuple[int, tuple[Any, ...]]:
+        """Act on a command whose sender has authority: (MAV_RESULT, the messages it asked for).
+        Every parameter used is checked first (:mod:`bridge.mavlink.receive`); a bad one is
+        DENIED and counted (``bad_number``), nothing done."""
+        cmd = m.command
+        denied = (mavlink.MAV_RESULT_DENIED, ())
+        if cmd == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
+            args = arm_disarm_args(m.param1, m.param2)
+            if args is None:
+                self._reject("bad_number")
+                return denied
+            if args[0] and self._through_link(ep, m):
+                self.vend.receive_arm(self.t)  # acts when the model delivers it, as offline
+                return mavlink.MAV_RESULT_IN_PROGRESS, ()
+            return self._arm_disarm(m.param1, m.param2, by), ()
+        if cmd in (mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAV_CMD_GET_MESSAGE_INTERVAL,
+                   mavlink.MAV_CMD_REQUEST_MESSAGE):
+            mid = message_id_arg(m.param1)
+            interval = interval_arg(m.param2) if cmd == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL else 0.0
+            if mid is None or interval is None:
+                self._reject("bad_number")
+                return denied
+            table = self.ctl_streams if ep is self.link else self.streams  # a link's requests change its streams
+            if cmd == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
+                return self._set_interval(table, mid, interval, by), ()
+            if cmd == mavlink.MAV_CMD_GET_MESSAGE_INTERVAL:
+                if mid > 0xFFFF:  # MESSAGE_INTERVAL's message_id has 16 bits
+                    return mavlink.MAV_RESULT_UNSUPPORTED, ()
+                iv = table.get(mid, HEARTBEAT_S if mid == mavlink.MAVLINK_MSG_ID_HEARTBEAT else 0.0)
+                return mavlink.MAV_RESULT_ACCEPTED, (
+                    mavlink.MAVLink_message_interval_message(mid, int(iv * 1e6) if iv > 0 else -1),)
+            follow = tuple(self._message(mid))
+            return (mavlink.MAV_RESULT_ACCEPTED if follow else mavlink.MAV_RESULT_UNSUPPORTED), follow
+        if cmd == mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
+            return mavlink.MAV_RESULT_ACCEPTED, (tm.autopilot_version(self.cfg.sysid),)
+        if cmd == mavlink.MAV_CMD_GET_HOME_POSITION:
+            return mavlink.MAV_RESULT_ACCEPTED, (tm.home_position(self.cfg.home),)
+        return mavlink.MAV_RESULT_UNSUPPORTED, ()
+
+    def _arm_disarm(self, p1: float, p2: float, by: Sender | None = None) -> int:
+        """Arm (``p1`` 1) or disarm (0; in the air only with ``p2`` = 21196, forced), checked
+        values (:func:`bridge.mavlink.receive.arm_disarm_args`). A new flight armed from a
+        ground station learns its controller's address afresh (see :meth:`_handle`)."""
         sim = self.sim
         now = time.monotonic()
-        if p1 >= 0.5:
+        if p1 == 1.0:
             if self.halted:
                 return mavlink.MAV_RESULT_DENIED
             was_offboard = sim.armed and sim.mode == OFFBOARD
             sim.arm()
+            if not was_offboard and by is not None and by.link == "gcs":
+                self.link.forget_peer()  # no controller yet: the flight's is the first to speak
             if not was_offboard:
                 self.applied = None  # a new flight: no target of the last one is in force
             if not was_offboard and self.cfg.clock == "lockstep":
@@ -640,28 +838,25 @@ class Vehicle:
                 self.pace.restart(now, self.k * self.substeps)
                 self._send_odometry(now)
             return mavlink.MAV_RESULT_ACCEPTED
-        if sim.armed and not self.plant.on_ground and int(round(p2)) != FORCE_DISARM:
+        forced = p2 == FORCE_DISARM
+        if sim.armed and not self.plant.on_ground and not forced:
             return mavlink.MAV_RESULT_DENIED  # in the air: only a forced disarm (PX4 does the same)
-        sim.disarm("disarmed by command")
+        sim.disarm("disarmed by command (forced)" if forced else "disarmed by command")
         self.pending = None
         self.engaged = False  # the flight is over: time stands still until armed again
         return mavlink.MAV_RESULT_ACCEPTED
 
-    def _set_interval(self, mid: int, interval_us: float) -> int:
+    def _set_interval(self, table: StreamTable, mid: int, interval_us: float, by: Sender) -> int:
+        """A checked SET_MESSAGE_INTERVAL on one link's streams; a change is an event."""
         if mid == mavlink.MAVLINK_MSG_ID_HEARTBEAT:
             return mavlink.MAV_RESULT_ACCEPTED if interval_us in (0, HEARTBEAT_S * 1e6) else mavlink.MAV_RESULT_DENIED
-        if mid not in self.streams:
+        if mid not in table:
             return mavlink.MAV_RESULT_UNSUPPORTED
-        if interval_us < 0:
-            self.streams[mid] = 0.0
-            self._due.pop(mid, None)
-            return mavlink.MAV_RESULT_ACCEPTED
-        iv = DEFAULT_STREAMS[mid] if interval_us == 0 else max(interval_us * 1e-6, 0.005)
-        self.streams[mid] = iv
-        if iv <= 0:  # back to a default of "only on request"
-            self._due.pop(mid, None)
-            return mavlink.MAV_RESULT_ACCEPTED
-        self._due[mid] = time.monotonic()
+        iv = table.set(mid, interval_us, time.monotonic())
+        if iv is not None:
+            name = mavlink.mavlink_map[mid].msgname
+            self.sim.event("interval", f"{name} every {iv:g} s on the {by.link} link" if iv > 0
+                           else f"{name} off on the {by.link} link")
         return mavlink.MAV_RESULT_ACCEPTED
 
     def _clock_ns(self) -> int:

@@ -5,4 +5,6 @@
 - :mod:`bridge.record.joiner`   vehicle.csv + controller.csv -> trace.csv rows, by column name
 - :mod:`bridge.record.metrics`  RMS, settling, finite-time bound, total variation, the summary
 - :mod:`bridge.record.plots`    the paper-style figures
+- :mod:`bridge.record.linkextract`  a link's trace from a run directory or two tlogs
+- :mod:`bridge.record.linkplots`    a link trace's figure
 """

@@ -10,6 +10,9 @@ Out: column-name tuples; a state in the trace's column order; the positions of n
 
 Units: time s, position m, velocity m/s, angles rad, rates rad/s, ``u1..u4`` N (paper frame;
 the torques are l·u2..u4 in N m), ``c1..c4`` normalised actuator command, ``*_wall`` monotonic wall clock s.
+The state columns are the true state; the ``*_est`` columns (last, so the older columns keep their
+places) the vehicle's on-board estimate of it, what the controller was sent (equal to the truth
+under the ``truth`` estimator), and ``nees`` its NEES against its own covariance (0 under truth: no error).
 """
 
 from __future__ import annotations
@@ -22,13 +25,14 @@ INPUT_COLUMNS = ("u1", "u2", "u3", "u4")
 WIRE_COLUMNS = ("c1", "c2", "c3", "c4")
 REALISED_COLUMNS = ("u1_act", "u2_act", "u3_act", "u4_act")
 DESIRED_COLUMNS = ("phi_d", "theta_d")
+ESTIMATE_COLUMNS = tuple(f"{c}_est" for c in STATE_COLUMNS)
 TRACE_COLUMNS = (
     ("t",) + STATE_COLUMNS + REF_COLUMNS + INPUT_COLUMNS + WIRE_COLUMNS + REALISED_COLUMNS
-    + ("state_age_s",) + DESIRED_COLUMNS
+    + ("state_age_s",) + DESIRED_COLUMNS + ESTIMATE_COLUMNS + ("nees",)
 )
 VEHICLE_COLUMNS = (
     ("k", "t") + STATE_COLUMNS + ("mode", "cmd_k") + WIRE_COLUMNS + INPUT_COLUMNS + REALISED_COLUMNS
-    + ("state_age_s", "rtt_s", "odo_sent_wall", "cmd_recv_wall")
+    + ("state_age_s", "rtt_s", "odo_sent_wall", "cmd_recv_wall") + ESTIMATE_COLUMNS + ("nees",)
 )
 CONTROLLER_COLUMNS = (
     ("k", "t") + REF_COLUMNS + INPUT_COLUMNS + WIRE_COLUMNS + DESIRED_COLUMNS
@@ -43,16 +47,18 @@ def state_columns(X: Sequence[float]) -> tuple[float, ...]:
 
 def trace_row(t: float, state: Sequence[float], ref: Sequence[Sequence[float]], demanded: Sequence[float],
               wire: Sequence[float], realised: Sequence[float], state_age_s: float,
-              desired: Sequence[float]) -> tuple[float, ...]:
+              desired: Sequence[float], estimate: Sequence[float], nees: float) -> tuple[float, ...]:
     """One ``trace.csv`` row (:data:`TRACE_COLUMNS`), for the offline loop and the SITL joiner alike.
 
     ``state``: the trace's 12 state columns (:func:`state_columns`); ``ref``: the reference
     sample (x, y, z, psi; the values are taken); ``demanded``: u1..u4 N as the law asked;
     ``wire``: c1..c4 as sent; ``realised``: u1..u4 N as the plant realised; ``state_age_s``:
-    age of the state the command came from (nan: none); ``desired``: (phi_d, theta_d) rad.
+    age of the state the command came from (nan: none); ``desired``: (phi_d, theta_d) rad;
+    ``estimate``: the vehicle's estimate in the state columns' order (:func:`state_columns`);
+    ``nees``: its normalised estimation error squared (0 under ``truth``: no error).
     """
     return (t, *state, ref[0][0], ref[1][0], ref[2][0], ref[3][0], *demanded, *wire, *realised, state_age_s,
-            *desired)
+            *desired, *estimate, nees)
 
 
 def column_index(columns: Sequence[str], names: Sequence[str], where: str) -> dict[str, int]:

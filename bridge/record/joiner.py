@@ -21,6 +21,7 @@ from bridge.core.flight import Flight
 from bridge.record.columns import (
     CONTROLLER_COLUMNS,
     DESIRED_COLUMNS,
+    ESTIMATE_COLUMNS,
     INPUT_COLUMNS,
     REALISED_COLUMNS,
     STATE_COLUMNS,
@@ -33,7 +34,7 @@ from bridge.record.runlog import TraceWriter
 
 # what the join reads of each half, by name
 _V_NEEDS = ("k", "mode", "cmd_k", "state_age_s", "rtt_s", "odo_sent_wall", "cmd_recv_wall") + STATE_COLUMNS \
-    + WIRE_COLUMNS + INPUT_COLUMNS + REALISED_COLUMNS
+    + WIRE_COLUMNS + INPUT_COLUMNS + REALISED_COLUMNS + ESTIMATE_COLUMNS + ("nees",)
 _C_NEEDS = ("k", "odo_recv_wall", "cmd_sent_wall", "state_to_cmd_s", "period_error_s", "state_age_s") \
     + INPUT_COLUMNS + WIRE_COLUMNS + DESIRED_COLUMNS
 
@@ -187,7 +188,7 @@ class TraceJoiner:
             ci = self._c_index()
             wire, age = [c[ci[n]] for n in WIRE_COLUMNS], c[ci['state_age_s']]
         row = trace_row(t, [v[vi[n]] for n in STATE_COLUMNS], ref, u, wire, [v[vi[n]] for n in REALISED_COLUMNS], age,
-                        desired)
+                        desired, [v[vi[n]] for n in ESTIMATE_COLUMNS], v[vi["nees"]])
         self.rows.append(row)
         if self.trace is not None:
             self.trace.row(row)

@@ -5,6 +5,12 @@ In:  trace arrays by column (:data:`~bridge.record.columns.TRACE_COLUMNS`: s, m,
 Out: ``summary.json`` as a dict (errors m or rad, times s, inputs N and N/s); p50 / p95 / p99 / max
      of a sample
 
+Each of u2..u4 has its ``ripple`` (N, :func:`ripple_rms`); a run whose vehicle flew on an
+estimate (not ``truth``) has an ``estimation`` block: the RMS over the whole flight of the
+estimate's errors (truth − ``*_est`` columns) in position (3-D, m), velocity (3-D, m/s) and
+attitude (φ, θ, ψ together, rad, ψ wrapped) and, from the ``nees`` column, the mean NEES over
+position, velocity and attitude (9 degrees of freedom: about 9 when the reported covariance is right).
+
 All computed from the trace arrays (the same ones ``trace.csv`` holds), so the summary can
 always be rebuilt from the trace.
 """
@@ -22,6 +28,26 @@ from missions import Mission
 AXES = ("x", "y", "z", "psi")
 BANDS = {"x": 0.01, "y": 0.01, "z": 0.01, "psi": 0.01}  # m, m, m, rad
 RMS_FROM_S = 10.0
+RIPPLE_WINDOW_S = 0.2  # moving-average window of the u2 ripple: content above ~5 Hz counts
+
+
+def ripple_rms(t: np.ndarray, u: np.ndarray, rate_hz: float, window_s: float = RIPPLE_WINDOW_S) -> float:
+    """High-frequency RMS of a signal over the second half of its time span (same unit as u).
+
+    The signal minus its centred moving average over ``window_s`` (so content above about
+    1/window_s Hz), over t >= half the span, half a window away from both ends. This is the
+    limit-cycle detector: a chattering or oscillating attitude input has a large ripple.
+    """
+    n = 2 * int(round(0.5 * window_s * rate_hz)) + 1  # odd: the average is centred exactly
+    if len(u) < 3 * n:
+        return 0.0
+    mean = np.convolve(u, np.ones(n) / n, mode="same")
+    sel = t >= t[0] + 0.5 * (t[-1] - t[0])
+    sel[: n // 2 + 1] = False
+    sel[len(sel) - n // 2 - 1:] = False
+    if not sel.any():
+        return 0.0
+    return float(np.sqrt(np.mean((u - mean)[sel] ** 2)))
 
 
 def percentiles(values: Any, scale: float = 1.0, empty: float | None = 0.0) -> dict[str, float | None]:
@@ -76,8 +102,12 @@ def summarise(
     outcome: str,
     events: list[dict[str, Any]] | None = None,
     link: dict[str, Any] | None = None,
+    estimator: str = "truth",
+    sensors: str = "ideal",
 ) -> dict[str, Any]:
-    """The ``summary.json`` of docs/design.md, "Files of a run" (fixed keys, plus a few extras)."""
+    """The ``summary.json`` of docs/design.md, "Files of a run" (fixed keys, plus a few extras). Its
+    callers add how the run ended and its safety verdicts (``ended_by``, ``policies``:
+    :mod:`bridge.record.policies`); a session also ``timing``, ``sitl`` and, in lockstep, ``lockstep``."""
     t = trace["t"]
     n = len(t)
     dur = float(t[-1] - t[0] + 1.0 / mission.rate_hz) if n else 0.0
@@ -113,7 +143,9 @@ def summarise(
             "max": _num(v.max()) if n else None,
             "tv_per_s": _num(np.abs(np.diff(v)).sum() / dur) if n > 1 else 0.0,
         }
-    return {
+        if u != "u1":
+            inputs[u]["ripple"] = _num(ripple_rms(t, v, mission.rate_hz)) if n else None
+    out = {
         "mission": mission.name,
         "clock": clock,
         "controller": mission.controller,
@@ -128,6 +160,40 @@ def summarise(
         "link": link or empty_link(),
         "events": events or [],
         "outcome": outcome,
+    }
+    if estimator != "truth":
+        out["estimation"] = estimation(trace, estimator, sensors)
+    return out
+
+
+NEES_DOF = 9  # position, velocity, attitude: bridge.core.estimator.nees
+
+
+def estimation(trace: dict[str, np.ndarray], estimator: str, sensors: str) -> dict[str, Any]:
+    """The ``estimation`` block (see the module docstring) over every row of the trace."""
+    n = len(trace["t"])
+
+    def rms(cols: tuple[str, ...], wrap: tuple[str, ...] = ()) -> float | None:
+        if not n:
+            return None
+        sq = np.zeros(n)
+        for c in cols:
+            d = trace[c] - trace[c + "_est"]
+            if c in wrap:
+                d = (d + np.pi) % (2 * np.pi) - np.pi
+            sq += d**2
+        return _num(np.sqrt(np.mean(sq)))
+
+    ne = trace["nees"][np.isfinite(trace["nees"])] if n else np.zeros(0)
+    return {
+        "estimator": estimator,
+        "sensors": sensors,
+        "position_rms_m": rms(("x", "y", "z")),
+        "velocity_rms_mps": rms(("vx", "vy", "vz")),
+        "attitude_rms_rad": rms(("phi", "theta", "psi"), wrap=("psi",)),
+        "nees_mean": _num(ne.mean()) if ne.size else None,
+        "nees_dof": NEES_DOF,
+        "nees_samples": int(ne.size),
     }
 
 

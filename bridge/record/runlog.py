@@ -23,7 +23,27 @@ from typing import Any
 
 from bridge.record.columns import TRACE_COLUMNS
 from missions import Mission
+from missions.mission import name_problem
 from params import ConfigError, dump_toml
+
+MAX_TRACE_STEPS = 500_000  # control steps a run that keeps its trace for its summary may fly (see check_trace_steps)
+
+
+def check_trace_steps(mission: Mission) -> None:
+    """Refuse a mission too long to keep its trace in memory, before anything starts.
+
+    ``bsst sim``, ``bsst sitl`` and every sweep cell keep one row per control step (37 floats)
+    to compute the summary, the sweep's columns and the plots at the end: about 0.6 KB a step
+    offline and 1.6 KB in a session (measured), so :data:`MAX_TRACE_STEPS` steps (2000 s at
+    250 Hz) stay under 1 GB. A longer flight is flown by ``bsst vehicle`` and ``bsst controller``,
+    which write their rows to disk and hold none (the vehicle at rest flies 24 h).
+    """
+    n, cap = mission.steps, MAX_TRACE_STEPS
+    if n > cap:
+        raise ConfigError(
+            f"{mission.source}: duration_s: {mission.duration_s:g} s at {mission.rate_hz:g} Hz is {n} control steps, "
+            f"over the {cap} a run keeps in memory for its summary ({cap / mission.rate_hz:g} s at this rate); "
+            f"fly longer with bsst vehicle and bsst controller, which stream their rows to disk")
 
 
 def run_dir(
@@ -32,9 +52,14 @@ def run_dir(
     """Create the run directory: ``out`` exactly, or ``runs/<UTC time>-<mission>``.
 
     Refuses a non-empty directory unless ``overwrite``. With ``create=False`` it only checks
-    (so a command can name every bad input before it starts anything).
+    (so a command can name every bad input before it starts anything). ``out`` is the user's own
+    choice and taken as given; a mission name must be one safe path component
+    (:func:`missions.mission.name_problem`), so the directory it names stays inside ``root``.
     """
     if out is None:
+        why = name_problem(mission_name)
+        if why:  # a Mission refuses such a name already; this is the one place it becomes a path
+            raise ConfigError(f"mission name: {why}")
         stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
         path = Path(root) / f"{stamp}-{mission_name}"
         n = 1
@@ -194,8 +219,9 @@ class Run:
         return f"Run(outcome={self.outcome!r}, rms_3d={self.rms!r}, path={str(self.path) if self.path else None!r})"
 
 
-def trace_arrays(rows: list[Sequence[float]], columns: Sequence[str] = TRACE_COLUMNS) -> dict[str, Any]:
-    """Rows of the trace -> numpy arrays by column name."""
+def trace_arrays(rows: Sequence[Any], columns: Sequence[str] = TRACE_COLUMNS) -> dict[str, Any]:
+    """Rows of the trace (a list of rows, or one flat ``array('d')`` of them end to end) -> numpy
+    arrays by column name."""
     import numpy as np  # lazy: the nodes write lines and never need numpy
 
     arr = np.array(rows, dtype=float).reshape(-1, len(columns))

@@ -31,6 +31,13 @@ only ever appends rows whose two halves are both on disk. A child that dies is r
 by name and the session ends in exit status 1; Ctrl-C or SIGTERM stops both children
 within 2 s (SIGTERM, then SIGKILL) and still writes the summary (outcome ``aborted``).
 
+Every session says honestly how it flew (docs/sitl.md, "Outcomes, exit statuses and safety
+policies"): ``summary.json["ended_by"]`` names who ended the flight (the mission, the sender the
+vehicle names for a disarm by command, the vehicle's failsafe, a child that died, the user), a
+lockstep session has ``summary.json["lockstep"]`` (held, or when and why the vehicle left it),
+and the safety policies of :mod:`bridge.record.policies` are checked over its trace and events
+(``summary.json["policies"]``); ``events.log`` ends with the same.
+
 Ports, as PX4 numbers its instances: the vehicle binds 14560 + N for the controller link
 and sends GCS telemetry to 14550 + N, with sysid N + 1. ``instance=None`` (for campaigns
 running many sessions at once) binds a free port instead and sends no GCS telemetry.
@@ -52,14 +59,25 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from bridge.core.flight import Flight, prepare
-from bridge.mavlink.endpoint import GCS_PORT, LINK_PORT, parse_address
+from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, GCS_PORT, LINK_PORT, parse_address
 from bridge.mavlink.signing import key_from_file
 from bridge.nodes.process import parse_status
 from bridge.record.columns import TRACE_COLUMNS
 from bridge.record.joiner import TraceJoiner
 from bridge.record.metrics import percentiles, summarise
-from bridge.record.runlog import EventLog, Run, RunRecord, run_dir, trace_arrays
+from bridge.record.policies import (
+    ended_by_command,
+    ended_by_outcome,
+    judge,
+    lockstep_record,
+    rules_for,
+    violation_text,
+    without_sender,
+)
+from bridge.record.runlog import EventLog, Run, RunRecord, check_trace_steps, run_dir, trace_arrays
 from bridge.session.children import READY_TIMEOUT_S, STOP_GRACE_S, Child, ChildError, check_port_free, instance_slot
 from missions import Mission
 from params import ConfigError
@@ -88,6 +106,10 @@ def sitl(
     live: bool = False,
     link: Mapping[str, Any] | None = None,
     key: str | Path | None = None,
+    failsafe: Mapping[str, Any] | None = None,
+    sensors: Mapping[str, Any] | None = None,
+    estimator: str | None = None,
+    noise: float | None = None,
 ) -> Run:
     """Fly a mission as a SITL session (vehicle and controller processes over UDP).
 
@@ -98,13 +120,16 @@ def sitl(
     a free port and no GCS link. ``gcs`` (``HOST:PORT`` or ``"none"``) overrides the GCS
     address. ``speed`` caps lockstep at that many times real time. ``live`` prints a
     progress line on stderr (when it is a terminal). ``link`` is laid over the mission's
-    ``[link]`` table, as for :func:`bridge.loop.simulate`. ``key`` is a MAVLink 2 signing key
-    file (:func:`bridge.mavlink.signing.key_from_file`): both sides sign everything they send and
-    accept only what is signed with it; only the file's path is passed on.
+    ``[link]`` table and ``failsafe`` over its ``[failsafe]`` table, as for :func:`bridge.loop.simulate`.
+    ``key`` is a MAVLink 2 signing key file (:func:`bridge.mavlink.signing.key_from_file`): both
+    sides sign everything they send and accept only what is signed with it; only the file's path
+    is passed on.
     """
     if key is not None:
         key_from_file(key)  # a missing, empty or world-readable key file is bad input, before anything starts
-    flight = prepare(mission, profile=profile, controller=controller, rate_hz=rate_hz, seed=seed, link=link)
+    flight = prepare(mission, profile=profile, controller=controller, rate_hz=rate_hz, seed=seed, link=link,
+                     failsafe=failsafe, sensors=sensors, estimator=estimator, noise=noise)
+    check_trace_steps(flight.mission)  # the session keeps every trace row for its summary: a cap, said up front
     if instance is not None and not (isinstance(instance, int) and 0 <= instance <= 9):
         raise ConfigError(f"--instance must be in [0, 9], got {instance!r}")
     if speed is not None and not (math.isfinite(speed) and speed > 0):
@@ -167,35 +192,25 @@ class Session:
         self.t_wall0 = time.monotonic()
         restore = _catch_stop_signals(self)
         try:
-            self._start()
-            self._supervise()
-        except KeyboardInterrupt:
-            self.aborted = True
-            self._note("aborted", "interrupted (Ctrl-C or SIGTERM): stopping both processes", "session")
-        except ChildError:
-            pass  # already said by name (_died); the outcome is "aborted", the files are kept
-        finally:
             try:
-                self._stop_children()
+                self._start()
+                self._supervise()
+            except KeyboardInterrupt:
+                self.aborted = True
+                self._note("aborted", "interrupted (Ctrl-C or SIGTERM): stopping both processes", "session")
+            except ChildError:
+                pass  # already said by name (_died); the outcome is "aborted", the files are kept
             finally:
-                restore()
-                self.joiner.controller_done = True
-                self.joiner.update()
-                self.joiner.close()
-                record.close()
-        wall = time.monotonic() - self.t_wall0
-        outcome = self._outcome()
-        rows = self.joiner.rows
-        arrays = trace_arrays(rows, TRACE_COLUMNS)
-        summary = summarise(arrays, m, self.flight.gains, clock="realtime" if self.realtime else "lockstep",
-                            outcome=outcome, events=self.events, link=self._link_block())
-        summary["timing"] = self._timing_block(wall)
-        summary["sitl"] = {
-            "instance": self.instance, "listen": self.listen, "gcs": self.gcs, "sysid": self.sysid,
-            "speed": self.speed, "died": self.died, "signed": self.key is not None,
-            "vehicle_exit": self.vehicle.exit_text() if self.vehicle else None,
-            "controller_exit": self.controller.exit_text() if self.controller else None,
-        }
+                try:
+                    self._stop_children()
+                finally:
+                    restore()
+                    self.joiner.controller_done = True
+                    self.joiner.update()
+                    self.joiner.close()
+            arrays, summary = self._summary(time.monotonic() - self.t_wall0)
+        finally:
+            record.close()  # after the summary: events.log ends with how the run ended and its verdicts
         if keep:
             title = f"{m.name} ({m.controller}, {self.flight.profile.name}, SITL {summary['clock']})"
             record.finish(arrays, summary, title, plots and not self.aborted)
@@ -203,9 +218,110 @@ class Session:
             sys.stderr.write("\n")
         return Run(arrays, summary, self.path if keep else None)
 
+    def _summary(self, wall: float) -> tuple[dict[str, Any], dict[str, Any]]:
+        """The trace arrays and ``summary.json``: the figures, the ``timing`` and ``sitl`` blocks, the
+        lockstep record (lockstep), who ended the flight (``ended_by``, which may turn a completion
+        into ``aborted``) and the policies' verdicts; the last three also go to ``events.log``."""
+        m = self.flight.mission
+        clock = "realtime" if self.realtime else "lockstep"
+        arrays = trace_arrays(self.joiner.rows, TRACE_COLUMNS)
+        link = self._link_block()
+        summary = summarise(arrays, m, self.flight.gains, clock=clock, outcome=self._outcome(), events=self.events,
+                            link=link, estimator=self.flight.estimator, sensors=self.flight.sensors.name)
+        summary["timing"] = self._timing_block(wall)
+        summary["sitl"] = {
+            "instance": self.instance, "listen": self.listen, "gcs": self.gcs, "sysid": self.sysid,
+            "speed": self.speed, "died": self.died, "signed": self.key is not None,
+            "vehicle_exit": self.vehicle.exit_text() if self.vehicle else None,
+            "controller_exit": self.controller.exit_text() if self.controller else None,
+        }
+        judged, lockstep, off_clock = arrays, None, None
+        if not self.realtime:
+            # lockstep events keep the vehicle's clock (step k at k / rate_hz); the trace counts from the
+            # controller's first answered step k0: the policies see both on the vehicle's clock
+            k0 = self.joiner.k0 or 0
+            judged = {**arrays, "t": arrays["t"] + k0 / m.rate_hz}
+            off_clock = self._off_clock_t()
+            summary["lockstep"] = lockstep = lockstep_record(self.events, off_clock)
+        summary["outcome"], summary["ended_by"] = self._ended_by(summary["outcome"], arrays)
+        rules = rules_for(self.flight, clock, link, (CONTROLLER_SYSID, CONTROLLER_COMPID))
+        violated = judge(summary, judged, self.events, rules, lockstep, off_clock)
+        end = summary["ended_by"]
+        self._note("ended", f"{summary['outcome']}: by {end['who']}: {end['how']}", "session")
+        if lockstep is not None and not lockstep["held"]:
+            self._note("lockstep", f"not a lockstep run: the vehicle left lockstep at t={lockstep['left_at_s']:.3f} s "
+                                   f"({lockstep['why']}) and flew on the wall clock", "session")
+        for v in violated:
+            self._note("policy", violation_text(v), "session")
+        return arrays, summary
+
+    def _ended_by(self, outcome: str, trace: Mapping[str, Any]) -> tuple[str, dict[str, Any]]:
+        """The outcome and ``summary.json["ended_by"]``: who ended the flight, and how. A disarm or
+        mode change by command from anyone but the configured controller, before the mission's
+        end, ended it (named by the vehicle's event, `` [by ...]``), as does a controller that
+        reports a completed mission whose trace stops short of the mission's end: both are
+        ``aborted``, never ``completed``."""
+        m = self.flight.mission
+        ctl = self.controller
+        if self.aborted:
+            return "aborted", {"who": "user", "how": "interrupted (Ctrl-C or SIGTERM)"}
+        if self.died:
+            child = next((c for c in (self.vehicle, self.controller, self.relay) if c and c.name == self.died), None)
+            how = f"died ({child.exit_text() if child else 'gone'})"
+            if outcome == "failsafe":
+                how += "; the vehicle's failsafe took over"
+            return outcome, {"who": self.died, "how": how}
+        if outcome == "diverged":
+            return outcome, ended_by_outcome(outcome, self.events)
+        ctl_completed = self._controller_completed()
+        hit = ended_by_command(self.events, (CONTROLLER_SYSID, CONTROLLER_COMPID), before_s=m.duration_s)
+        if hit is not None and not (ctl_completed and hit[1] is None):  # unattributed: the controller's own
+            e, who = hit
+            if e["kind"] == "mode":
+                how = f"mode changed at t={e['t']:.3f} s: {without_sender(e['text'])}"
+            else:
+                where = "in flight" if _airborne(trace, e["t"] - (self.joiner.k0 or 0) / m.rate_hz
+                                                 if not self.realtime else e["t"]) else "on the ground"
+                how = f"disarmed {where} by command at t={e['t']:.3f} s"
+            named = str(who) if who is not None else "someone (the vehicle's event names no sender)"
+            return ("aborted" if outcome == "completed" else outcome), {"who": named, "how": how}
+        t = trace["t"]
+        if outcome == "completed" and (not len(t) or t[-1] < m.duration_s - 1.5 / m.rate_hz):
+            flown = float(t[-1]) + 1.0 / m.rate_hz if len(t) else 0.0
+            return "aborted", {"who": "controller", "how": f"ended the mission after {flown:.3f} s of its "
+                                                           f"{m.duration_s:g} s"}
+        if outcome == "aborted" and ctl is not None and ctl.done and "reason=" in ctl.done:
+            return outcome, {"who": "controller", "how": ctl.done.split("reason=", 1)[1]}
+        return outcome, ended_by_outcome(outcome, self.events)
+
+    def _off_clock_t(self) -> float | None:
+        """Lockstep: the vehicle's time (s) of its first row of ``vehicle.csv`` not flown on the step
+        clock (the command in force answers another step, or none), or None; read as a stream."""
+        try:
+            with open(self.path / "vehicle.csv") as f:
+                header = f.readline().strip().split(",")
+                ik, ic = header.index("k"), header.index("cmd_k")
+                for line in f:
+                    parts = line.split(",")
+                    if not line.endswith("\n") or len(parts) != len(header):
+                        break  # a torn last line
+                    if parts[ik] != parts[ic] and float(parts[ik]) != float(parts[ic]):
+                        return float(parts[ik]) / self.flight.mission.rate_hz
+        except (OSError, ValueError):
+            return None
+        return None
+
+    def _controller_completed(self) -> bool:
+        """Whether the controller flew its mission to the end: exit 0, or exit 1 with outcome completed
+        (in lockstep, a vehicle that left lockstep: ``done outcome=completed lockstep=left``)."""
+        ctl = self.controller
+        if ctl is None or ctl.proc.returncode not in (0, 1):
+            return False
+        return ctl.proc.returncode == 0 or (ctl.done or "").startswith("outcome=completed ")
+
     def _outcome(self) -> str:
         ctl = self.controller
-        completed = ctl is not None and ctl.proc.returncode == 0 and not (self.aborted or self.died)
+        completed = self._controller_completed() and not (self.aborted or self.died)
         if self.diverged:
             return "diverged"
         if self.failsafe_seen and not completed:  # completed after a failsafe: resumed ([failsafe] resume)
@@ -320,7 +436,7 @@ class Session:
                     if ctl.done and "reason=" in ctl.done:  # a controller that gave up says why
                         reason = ctl.done.split("reason=", 1)[1]
                         sys.stderr.write(("\n" if self.live else "") + f"bsst sitl: controller: {reason}\n")
-                    if ctl.proc.returncode == 0 or not self.vehicle_armed:
+                    if self._controller_completed() or not self.vehicle_armed:
                         if ctl.proc.returncode not in (0, 1):
                             self._died(ctl)
                         return
@@ -341,7 +457,7 @@ class Session:
         z = max((r[3] for r in self.joiner.rows[-2000:]), default=0.0)
         fs = self.flight.failsafe
         pace = self.speed or 1.0
-        return 5.0 + (1.0 + fs.timeout_s + max(z, 0.0) / fs.descent_rate) / pace
+        return 5.0 + (1.0 + fs.timeout_s + fs.time_to_land_s(z)) / pace
 
     def _stop_children(self) -> None:
         """SIGTERM the controller, the relay, the vehicle; SIGKILL whatever is left after the grace."""
@@ -475,8 +591,14 @@ class Session:
                 out[d] = {**sides[d], "delay_ms": measured[d]}
         out["rejected"] = rejected
         out["rejected_by"] = by
-        # of those, how many came from the other side itself (not from third parties on the link)
-        out["rejected_from_peer"] = {"vehicle": own, "controller": sum(by["controller"].values())}
+        # of those, how many came from the other side itself, and how many from anyone else on the link (a
+        # ground station's, a stranger's): the vehicle counts its controller's apart from the GCS link's
+        ctl_own = int(cs.get("rejected_from_vehicle", sum(by["controller"].values())))
+        out["rejected_from_peer"] = {"vehicle": own, "controller": ctl_own}
+        out["rejected_from_others"] = {"vehicle": max(0, sum(by["vehicle"].values()) - own),
+                                       "controller": max(0, sum(by["controller"].values()) - ctl_own)}
+        if relay is not None:  # datagrams the relay refused, from neither of its two ends, by reason
+            out["relay_refused"] = relay.get("refused", {})
         return out
 
     def _relay_stats(self) -> dict[str, Any] | None:
@@ -508,6 +630,13 @@ class Session:
             "stale_ticks": int(cs.get("stale_ticks", 0)),
             "overruns": int(cs.get("overruns", 0)),
         }
+
+
+def _airborne(trace: Mapping[str, Any], t: float) -> bool:
+    """Whether the trace's last row at or before ``t`` (s) is off the ground (z above it, or moving)."""
+    ts = trace["t"]
+    i = int(np.searchsorted(ts, t + 1e-9, side="right")) - 1
+    return i >= 0 and (trace["z"][i] > 1e-6 or abs(trace["vz"][i]) > 1e-6)
 
 
 def _catch_stop_signals(session: Session) -> Callable[[], None]:

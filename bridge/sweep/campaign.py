@@ -41,6 +41,7 @@ def sweep(
     progress: bool = False,
     report: bool = True,
     plots: bool = True,
+    max_cells: int | None = None,
 ) -> list[dict[str, Any]]:
     """Fly every cell of ``grid`` on ``mission``; return the rows in grid order.
 
@@ -48,10 +49,11 @@ def sweep(
     ``distributed.Client`` to run the cells on a Dask cluster instead. With ``out`` the sweep
     directory is written (``sweep.json``, ``mission.toml``, ``cells.csv`` cell by cell, then
     ``report.md`` and the heat maps unless ``report`` is false); ``resume`` flies only the
-    cells missing from its ``cells.csv`` (and those recorded as ``error``).
+    cells missing from its ``cells.csv`` (and those recorded as ``error``). A grid of more than
+    ``max_cells`` cells (default :data:`bridge.sweep.spec.MAX_CELLS`) is refused before anything flies.
     """
     m = mission if isinstance(mission, Mission) else load_mission(mission)
-    spec = Sweep(m, Grid.of(grid), mode, classes or Classes())
+    spec = Sweep(m, Grid.of(grid), mode, classes or Classes(), max_cells=max_cells)
     return run_sweep(spec, jobs=jobs, client=client, out=out, resume=resume, overwrite=overwrite,
                      progress=progress, report=report, plots=plots).rows
 

@@ -20,10 +20,10 @@ from typing import Any
 
 import numpy as np
 
-from bridge.record.metrics import errors
+from bridge.record.metrics import errors, ripple_rms  # ripple_rms lives with the other metrics
 from bridge.record.runlog import LineWriter, Run
 from bridge.sweep.grid import AXES, Cell
-from params import ConfigError
+from params import ConfigError, check_depth, read_regular_file
 
 COLUMNS = (
     "controller", "rate_hz", "delay_ms", "jitter_ms", "loss_pct", "burst_len", "seed",
@@ -38,32 +38,13 @@ INT_COLUMNS = ("seed", "up_sent", "up_lost", "down_sent", "down_lost")
 STR_COLUMNS = ("controller", "outcome", "class", "error")
 
 
+KEY_COLUMNS = (*AXES, "seed")  # what names a row's cell: never empty
+
+
 CELLS_CSV = "cells.csv"
 
 
 SWEEP_JSON = "sweep.json"
-
-
-RIPPLE_WINDOW_S = 0.2  # moving-average window of the u2 ripple: content above ~5 Hz counts
-
-
-def ripple_rms(t: np.ndarray, u: np.ndarray, rate_hz: float, window_s: float = RIPPLE_WINDOW_S) -> float:
-    """High-frequency RMS of a signal over the second half of its time span (same unit as u).
-
-    The signal minus its centred moving average over ``window_s`` (so content above about
-    1/window_s Hz), over t >= half the span, half a window away from both ends. This is the
-    limit-cycle detector: a chattering or oscillating attitude input has a large ripple.
-    """
-    n = 2 * int(round(0.5 * window_s * rate_hz)) + 1  # odd: the average is centred exactly
-    if len(u) < 3 * n:
-        return 0.0
-    mean = np.convolve(u, np.ones(n) / n, mode="same")
-    sel = t >= t[0] + 0.5 * (t[-1] - t[0])
-    sel[: n // 2 + 1] = False
-    sel[len(sel) - n // 2 - 1:] = False
-    if not sel.any():
-        return 0.0
-    return float(np.sqrt(np.mean((u - mean)[sel] ** 2)))
 
 
 def row_from_run(cell: Cell, run: Run) -> dict[str, Any]:
@@ -123,44 +104,71 @@ def _cell_text(v: Any) -> str:
 
 
 def parse_row(values: Sequence[str]) -> dict[str, Any]:
-    """A ``cells.csv`` record (strings, in :data:`COLUMNS` order) back to typed values."""
+    """A ``cells.csv`` record (strings, in :data:`COLUMNS` order) back to typed values; a
+    ``ValueError`` names the column and what it holds when a value is not of its column's kind
+    (numbers finite, the axes and the seed never empty: what a sweep writes)."""
+    if len(values) != len(COLUMNS):
+        n = len(values)
+        raise ValueError(f"{n} field{'s' if n != 1 else ''}, expected {len(COLUMNS)} ({','.join(COLUMNS[:3])},...)")
     row: dict[str, Any] = {}
     for c, v in zip(COLUMNS, values, strict=True):
         if c in STR_COLUMNS:
             row[c] = v
         elif v == "":
+            if c in KEY_COLUMNS:
+                raise ValueError(f"{c}: is empty (every row names its cell)")
             row[c] = None
         elif c in INT_COLUMNS:
-            row[c] = int(v)
+            try:
+                row[c] = int(v)
+            except ValueError:
+                raise ValueError(f"{c}: expected an integer, got {v[:40]!r}") from None
         else:
-            row[c] = float(v)
+            try:
+                x = float(v)
+            except ValueError:
+                raise ValueError(f"{c}: expected a number, got {v[:40]!r}") from None
+            if not math.isfinite(x):
+                raise ValueError(f"{c}: expected a finite number, got {v[:40]!r}")
+            row[c] = x
     return row
 
 
 def read_cells(path: str | Path) -> list[dict[str, Any]]:
-    """Read ``cells.csv``: whole, well-formed records only (a torn last line is ignored)."""
+    """Read ``cells.csv``: every whole line a well-formed row, or a :class:`ConfigError` naming the
+    file, the line and what is wrong there. Only an unfinished last line (no newline yet: where a
+    killed sweep stopped writing) is left out; a blank line is skipped."""
     p = Path(path)
-    if not p.exists():
-        raise ConfigError(f"{p}: no such file")
-    text = p.read_text()
-    lines = text.split("\n")
-    if lines and lines[-1] != "":
-        lines = lines[:-1]  # torn last line: no newline yet
-    rows = []
-    reader = csv.reader(lines)
-    header = next(reader, None)
-    if header is None:
+    data = read_regular_file(p, f"a sweep's {CELLS_CSV}")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        raise ConfigError(f"{p}: line {line}: not UTF-8 text (byte {exc.start}); not a sweep's {CELLS_CSV}") from None
+    lines = text.split("\n")[:-1]  # the part after the last newline is a torn row, or nothing
+    rows: list[dict[str, Any]] = []
+    if not lines:
         return rows
-    if tuple(header[: len(COLUMNS)]) != COLUMNS:
-        raise ConfigError(f"{p}: not a sweep's cells.csv (header {','.join(header[:4])}...)")
-    for rec in reader:
-        if len(rec) != len(COLUMNS):
+    header = _record(p, 1, lines[0])
+    if tuple(header) != COLUMNS:
+        raise ConfigError(f"{p}: line 1: not a sweep's {CELLS_CSV} header (expected {','.join(COLUMNS[:4])},..., "
+                          f"got {','.join(header[:4])[:60]!r}...)")
+    for n, line in enumerate(lines[1:], start=2):
+        if not line.strip():
             continue
         try:
-            rows.append(parse_row(rec))
-        except ValueError:
-            continue
+            rows.append(parse_row(_record(p, n, line)))
+        except ValueError as exc:
+            raise ConfigError(f"{p}: line {n}: {exc} (a damaged row: mend or delete that line)") from None
     return rows
+
+
+def _record(p: Path, n: int, line: str) -> list[str]:
+    """One line of ``cells.csv`` split into its fields (ConfigError naming the line if it cannot be)."""
+    try:
+        return next(csv.reader([line], strict=True), [])  # as csv.writer writes: a stray quote is damage
+    except csv.Error as exc:
+        raise ConfigError(f"{p}: line {n}: not a CSV row ({exc})") from None
 
 
 def row_key(row: Mapping[str, Any]) -> tuple[Any, ...]:
@@ -191,8 +199,47 @@ def write_cells(path: Path, rows: Iterable[Mapping[str, Any]]) -> None:
 
 
 def read_sweep_json(path: Path) -> dict[str, Any]:
-    """A sweep's ``sweep.json`` (ConfigError naming the file if unreadable)."""
+    """A sweep's ``sweep.json``: a JSON object whose fields the readers use have their kinds
+    (``mission``, ``grid``, ``classes`` objects; ``mode`` a string; ``swept`` and ``columns``
+    lists of names; ``seeds`` a list of integers). Anything else is a :class:`ConfigError`
+    naming the file and the field."""
+    data = read_regular_file(path, f"a sweep's {SWEEP_JSON}", MAX_SWEEP_JSON_BYTES)
     try:
-        return json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        raise ConfigError(f"{path}: unreadable ({exc})") from None
+        meta = json.loads(data.decode("utf-8"))
+    except UnicodeDecodeError:
+        raise ConfigError(f"{path}: not UTF-8 text; not a sweep's {SWEEP_JSON}") from None
+    except ValueError as exc:
+        raise ConfigError(f"{path}: not valid JSON ({exc})") from None
+    except RecursionError:
+        raise ConfigError(f"{path}: nested too deeply; not a sweep's {SWEEP_JSON}") from None
+    if not isinstance(meta, dict):
+        raise ConfigError(f"{path}: expected a JSON object, got {type(meta).__name__ if meta is not None else 'null'}")
+    check_depth(meta, str(path))
+    for key, kind in SWEEP_JSON_FIELDS.items():
+        if key in meta and not _is_kind(meta[key], kind):
+            raise ConfigError(f"{path}: {key}: expected {kind}, got {str(meta[key])[:40]!r}")
+    name = meta.get("mission", {}).get("name", "")
+    if not isinstance(name, str):
+        raise ConfigError(f"{path}: mission.name: expected a string, got {str(name)[:40]!r}")
+    unknown = [a for a in meta.get("swept", ()) if a not in AXES]
+    if unknown:
+        raise ConfigError(f"{path}: swept: {unknown[0][:40]!r} is not an axis ({', '.join(AXES)})")
+    return meta
+
+
+MAX_SWEEP_JSON_BYTES = 16 << 20  # a sweep.json is a few kB (its mission and grid)
+
+
+SWEEP_JSON_FIELDS = {"mission": "an object", "grid": "an object", "classes": "an object", "mode": "a string",
+                     "swept": "a list of names", "columns": "a list of names", "seeds": "a list of integers",
+                     "axes": "an object"}
+
+
+def _is_kind(v: Any, kind: str) -> bool:
+    if kind == "an object":
+        return isinstance(v, dict)
+    if kind == "a string":
+        return isinstance(v, str)
+    if kind == "a list of names":
+        return isinstance(v, list) and all(isinstance(x, str) for x in v)
+    return isinstance(v, list) and all(isinstance(x, int) and not isinstance(x, bool) for x in v)

@@ -11,8 +11,11 @@ A cell that raises, or whose worker dies, becomes an ``error`` row.
 from __future__ import annotations
 
 import multiprocessing as mp
+import os
+import select
 import signal
 import sys
+import threading
 import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
@@ -21,6 +24,7 @@ from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
 from bridge.loop import fly
+from bridge.nodes.process import die_with_parent
 from bridge.record.runlog import Run
 from bridge.session import instance_slot, sitl
 from bridge.sweep.cells import error_row, row_from_run
@@ -33,12 +37,19 @@ def run_cell(mission: Mission, cell: Cell, mode: str = "offline") -> dict[str, A
 
     Never raises for a failing flight: the exception becomes an ``error`` row.
     """
+    _idle.clear()
     try:
         flight = cell_flight(mission, cell)
         run = _fly_lockstep(flight.mission) if mode == "lockstep" else fly(flight, plots=False)
         return row_from_run(cell, run)
     except Exception as exc:  # a failed cell is a result, never the end of the sweep
         return error_row(cell, f"{type(exc).__name__}: {exc}")
+    finally:
+        _idle.set()
+
+
+_idle = threading.Event()  # set while this process flies no cell (a worker that lost its sweep then ends)
+_idle.set()
 
 
 def _fly_lockstep(mission: Mission) -> Run:
@@ -51,16 +62,62 @@ def _fly_lockstep(mission: Mission) -> Run:
 Report = Callable[[dict[str, Any]], None]  # called in the main process with each finished row
 
 
-def _worker_init() -> None:
+WORKER_STOP_GRACE_S = 10.0  # after its sweep died: time for a lockstep cell to stop its children and clean up
+
+
+def _worker_init(sweep_pid: int) -> None:
     # Ctrl-C goes to the whole process group: the main process stops the sweep; a worker
     # finishes (or is ended with) its cell rather than recording it as aborted.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # A worker must not outlive its sweep: a SIGKILL of `bsst sweep` left its workers flying, then
+    # blocked for ever on a queue whose both ends they hold, and the forkserver (their parent) waiting on
+    # them. So a thread watches the sweep's own process, and PR_SET_PDEATHSIG covers the forkserver's end.
+    die_with_parent()
+    threading.Thread(target=_end_with, args=(sweep_pid,), name="end-with-sweep", daemon=True).start()
+
+
+def _end_with(sweep_pid: int) -> None:
+    """Wait for the sweep's process to end, then end this worker: SIGTERM (the default action ends an
+    idle worker or an offline cell at once; a lockstep cell's session takes it as a stop: its vehicle
+    and controller stopped, its temporary directory removed), then ``os._exit`` once the cell is
+    over, or after :data:`WORKER_STOP_GRACE_S` at most. (A session's children die with the worker
+    too: ``PR_SET_PDEATHSIG``, bridge.session.children.)"""
+    _wait_for_exit(sweep_pid)
+    os.kill(os.getpid(), signal.SIGTERM)
+    _idle.wait(WORKER_STOP_GRACE_S)  # this thread only: the main thread is stopping its cell
+    os._exit(1)
+
+
+def _wait_for_exit(pid: int) -> None:
+    """Return once process ``pid`` has ended (a pidfd where Linux has one, else a poll every 0.2 s)."""
+    try:
+        fd = os.pidfd_open(pid)
+    except ProcessLookupError:
+        return  # already gone
+    except (AttributeError, OSError):  # no pidfd here: poll
+        while _alive(pid):
+            time.sleep(0.2)
+        return
+    try:
+        select.select([fd], [], [])  # readable once the process has ended
+    finally:
+        os.close(fd)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
 
 
 def _pool(jobs: int) -> ProcessPoolExecutor:
     ctx = mp.get_context("forkserver")
     ctx.set_forkserver_preload(["bridge.sweep", "bridge.loop"])
-    return ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_worker_init)
+    return ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_worker_init, initargs=(os.getpid(),))
 
 
 def run_local(mission: Mission, todo: Sequence[Cell], mode: str, jobs: int, report: Report) -> None:

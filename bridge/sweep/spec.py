@@ -17,12 +17,16 @@ from itertools import product
 from pathlib import Path
 from typing import Any
 
+from bridge.record.runlog import check_trace_steps
 from bridge.sweep.cells import COLUMNS
 from bridge.sweep.classes import Classes
 from bridge.sweep.grid import AXES, LINK_AXES, MODES, RANGES, Cell, Grid, cell_flight, cells, mission_value
 from missions import Mission, load_mission
 from missions.mission import law_spec_from, law_spec_problem, mission_path
 from params import ConfigError, Table, load_toml
+
+MAX_CELLS = 10_000  # cells a sweep flies unless told more (max_cells): 48 cells of the 30 s sine take 15 s on 2
+# cores, so 10^4 take about an hour; 10^6 would take days, which is a typo far more often than a plan
 
 
 @dataclass(frozen=True)
@@ -34,10 +38,31 @@ class Sweep:
     mode: str = "offline"
     classes: Classes = field(default_factory=Classes)
     jobs: int | None = None  # default worker count (a sweep file may set it)
+    max_cells: int | None = None  # the most cells it may fly (None: MAX_CELLS); not part of its identity
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
             raise ConfigError(f"mode: must be one of {', '.join(MODES)}; got {self.mode!r}")
+        if self.max_cells is not None and (isinstance(self.max_cells, bool) or not isinstance(self.max_cells, int)
+                                           or self.max_cells < 1):
+            raise ConfigError(f"max_cells: must be a positive integer, got {self.max_cells!r}")
+
+    def cell_count(self) -> int:
+        """How many cells the grid makes (without making them): the product of the axes' lengths and the seeds."""
+        n = len(self.grid.seed_list(self.mission))
+        for a in AXES:
+            n *= len(getattr(self.grid, a)) or 1
+        return n
+
+    def check_size(self) -> None:
+        """Refuse a grid of more than ``max_cells`` (default :data:`MAX_CELLS`) cells, saying how many and why."""
+        n, cap = self.cell_count(), self.max_cells or MAX_CELLS
+        if n > cap:
+            sizes = [f"{len(getattr(self.grid, a))} {a}" for a in AXES if len(getattr(self.grid, a)) > 1]
+            sizes.append(f"{len(self.grid.seed_list(self.mission))} seeds")
+            raise ConfigError(f"grid: {n} cells ({' x '.join(sizes)}), over the cap of {cap} a sweep flies "
+                              f"(about {n * self.mission.duration_s / 3600:.3g} h of flight time); "
+                              f"raise it with --max-cells {n} (max_cells in a sweep file) if that is meant")
 
     def cells(self) -> list[Cell]:
         return cells(self.mission, self.grid)
@@ -57,14 +82,15 @@ class Sweep:
 
     def validate(self) -> None:
         """Build the flight of every law, every rate and every combination of link values once
-        (not every cell), so that a bad value fails before any cell runs."""
+        (not every cell), so that a bad value fails before any cell runs; first the grid's size."""
+        self.check_size()
         base = self.cells()[0]
         probes = [_replace_cell(base, **{a: v}) for a in ("controller", "rate_hz") for v in getattr(self.grid, a)]
         lists = [getattr(self.grid, a) or (getattr(base, a),) for a in LINK_AXES]
         probes += [_replace_cell(base, **dict(zip(LINK_AXES, vs, strict=True))) for vs in product(*lists)]
         for c in probes:
             try:
-                cell_flight(self.mission, c)
+                check_trace_steps(cell_flight(self.mission, c).mission)  # each rate: its steps within the cap
             except ConfigError as exc:
                 raise ConfigError(f"sweep cell ({c.label()}): {exc}") from None
 
@@ -94,6 +120,7 @@ def load_sweep(path: str | Path) -> Sweep:
     mission = load_mission(mpath)
     mode = t.string("mode", "offline", choices=MODES)
     jobs = t.integer("jobs", 0, lo=0, hi=1024) or None
+    max_cells = t.integer("max_cells", MAX_CELLS, lo=1, hi=10**9)
     seeds_raw = t.raw("seeds", 1)
     if isinstance(seeds_raw, list):
         seeds: int | tuple[int, ...] = tuple(_int_list(t, "seeds", 0, 2**31 - 1))
@@ -124,7 +151,7 @@ def load_sweep(path: str | Path) -> Sweep:
         grid = Grid(seeds=seeds, **axes)
     except ConfigError as exc:
         raise ConfigError(f"{src}: {exc}") from None
-    return Sweep(mission, grid, mode, classes, jobs)
+    return Sweep(mission, grid, mode, classes, jobs, max_cells)
 
 
 def _number_list(t: Table, key: str, lo: float, hi: float) -> list[float]:

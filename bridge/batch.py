@@ -1,0 +1,502 @@
+"""The batched offline engine: many cells of one mission flown at once, numpy over the cell axis.
+
+In:  a mission (a :class:`~missions.Mission` or a TOML path) and, per cell, the overrides
+     :func:`bridge.core.flight.prepare` takes (``controller``, ``rate_hz`` Hz, ``seed``, a ``link`` table:
+     what :func:`bridge.sweep.grid.cell_overrides` gives), or prepared :class:`~bridge.core.flight.Flight` s
+Out: per cell the measured columns of a ``cells.csv`` row (:data:`MEASURES`: ``rms``/``max`` m,
+     ``settling_s``/``flown_s`` s, ``tv_u2`` N/s, ``ripple_u2`` N, ``outcome``, packet counts, ``error``),
+     the same numbers :func:`bridge.sweep.cells.row_from_run` takes from the scalar loop's run;
+     :func:`batch_problem` says in one line why a set of cells cannot be flown here
+
+The scalar loop (:func:`bridge.loop.fly`) stays the reference; this engine flies the same parts over a
+cell axis: the link model, the guard and the vehicle's timeout first, as a plan of the whole flight
+(:func:`bridge.core.batchlink.plan_links`: with no bandwidth queue and no re-arming nothing of it depends
+on the flight), then the plant (:class:`plant.batch.BatchPlant`), the laws and the actuation
+(:class:`controller.batch.BatchController`), the prediction and the failsafe landing, step by step. The
+metrics are accumulated as the flight goes (running sums and maxima, the last step outside the settling
+band), with one column kept whole, u2, for the ripple of each cell's own second half; no trace is held.
+
+Cells may differ in law (``bsst``, ``smc``, ``pid``), seed, control rate (flown as separate batches) and
+every link setting but the bandwidth queue; they must share everything else (profile, effects, gains,
+trajectory, duration). Not flown here (:func:`batch_problem`): a user's own law, the bandwidth
+queue (``rate_bps``), a measured link ``trace``, ``[failsafe] resume`` and any failsafe ``action`` but
+``descend``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bridge.core.batchlink import HOLD, NONE, BatchPredictor, Clocks, plan_links
+from bridge.core.flight import Flight, prepare
+from bridge.core.link import link_from_table, merge_link_tables
+from bridge.record.metrics import BANDS, RMS_FROM_S
+from controller.batch import BATCH_LAWS, BatchActuation, BatchController
+from missions import Mission, load_mission
+from plant.batch import BatchPlant
+
+# the columns of a cells.csv row this engine measures (the cell's own axes and seed come from the cell)
+MEASURES = ("rms", "max", "settling_s", "tv_u2", "ripple_u2", "outcome", "up_sent", "up_lost", "down_sent",
+            "down_lost", "flown_s", "error")
+CELL_STEPS = 8_000_000  # cells x control steps flown in one batch: bounds the memory (~0.3 GiB)
+RIPPLE_WINDOW_S = 0.2  # bridge.sweep.cells.RIPPLE_WINDOW_S (that layer is above this one)
+Progress = Callable[[int, int], None]  # (cells done, cells in all), now and then
+
+
+def batch_problem(mission: Mission | str | Path, cells: Sequence[Mapping[str, Any]]) -> str | None:
+    """Why these cells cannot fly in the batch engine, in one line; None if they can.
+
+    ``cells``: per cell the overrides of :func:`bridge.core.flight.prepare` (a cell whose overrides are
+    bad input is no reason: it becomes an ``error`` row, as in the process engine)."""
+    m = mission if isinstance(mission, Mission) else load_mission(mission)
+    return flights_problem([f for f in _prepare_all(m, cells) if isinstance(f, Flight)])
+
+
+def flights_problem(flights: Sequence[Flight]) -> str | None:
+    """:func:`batch_problem` for prepared flights."""
+    first: Flight | None = None
+    for f in flights:
+        m = f.mission
+        if m.controller not in BATCH_LAWS:
+            return (f"controller {m.controller!r}: the batch engine flies only the built-in laws "
+                    f"({', '.join(BATCH_LAWS)}); a law of your own needs the process engine")
+        for d, cfg in (("up", f.link.up), ("down", f.link.down)):
+            if cfg.rate_bps:
+                return f"link {d}.rate_bps = {cfg.rate_bps:g}: the bandwidth queue is not in the batch engine"
+            if cfg.trace is not None:
+                return f"link {d}.trace: replaying a measured trace is not in the batch engine"
+            if getattr(cfg, "trace", None) is not None:
+                return f"link {d}.trace: replaying a measured link trace is not in the batch engine"
+        if f.failsafe.resume:
+            return "[failsafe] resume = true: re-arming after a failsafe is not in the batch engine"
+        action = getattr(f.failsafe, "action", "descend")
+        if action != "descend":
+            return f"[failsafe] action = {action!r}: the batch engine flies only the default, 'descend'"
+        if m.steps > CELL_STEPS:
+            return f"the mission has {m.steps} control steps: more than the batch engine holds ({CELL_STEPS})"
+        if first is None:
+            first = f
+            continue
+        why = _differs(first, f)
+        if why:
+            return f"the cells differ in {why}: a batch flies one mission with per-cell law, seed, rate and link"
+    return None
+
+
+def _differs(a: Flight, b: Flight) -> str | None:
+    ma, mb = a.mission, b.mission
+    for what, x, y in (("trajectory", ma.trajectory, mb.trajectory), ("duration_s", ma.duration_s, mb.duration_s),
+                       ("physics_hz", ma.physics_hz, mb.physics_hz), ("start", ma.start, mb.start),
+                       ("profile", a.profile, b.profile), ("effects", a.effects, b.effects),
+                       ("gains", a.gains, b.gains), ("failsafe", a.failsafe, b.failsafe)):
+        if x != y:
+            return what
+    return None
+
+
+_PER_CELL = frozenset({"seed", "link"})  # what a cell may change without its own prepare()
+
+
+def _prepare_all(mission: Mission, cells: Sequence[Mapping[str, Any]]) -> list[Flight | str]:
+    """Each cell's Flight, as :func:`prepare` builds it; a cell that cannot be built gives its error's text.
+
+    prepare() parses the profile and builds the law (milliseconds each), so it runs once per distinct
+    law and rate; each cell then gets what prepare() does with a seed and a ``link`` table: the mission
+    with that seed and the table laid over ``[link]``, and that ``[link]`` validated (tests/test_batch.py
+    checks the result equals prepare()'s, cell by cell)."""
+    bases: dict[tuple[Any, ...], Flight | str] = {}
+    out: list[Flight | str] = []
+    for over in cells:
+        over = dict(over)
+        try:
+            if not set(over) <= _PER_CELL | {"controller", "rate_hz"}:
+                out.append(prepare(mission, **over))
+                continue
+            key = (over.get("controller"), over.get("rate_hz"))
+            if key not in bases:
+                try:
+                    bases[key] = prepare(mission, controller=key[0], rate_hz=key[1])
+                except Exception as exc:  # the cell's law or rate is bad input: every such cell says so
+                    bases[key] = f"{type(exc).__name__}: {exc}"
+            base = bases[key]
+            if isinstance(base, str):
+                out.append(base)
+                continue
+            out.append(_with_seed_and_link(base, mission, over.get("seed"), over.get("link")))
+        except Exception as exc:  # a cell that cannot be built is an error row, never the end of the batch
+            out.append(f"{type(exc).__name__}: {exc}")
+    return out
+
+
+def _with_seed_and_link(base: Flight, mission: Mission, seed: int | None, link: Mapping[str, Any] | None) -> Flight:
+    """``prepare(mission, controller=…, rate_hz=…, seed=seed, link=link)`` from that prepare() without them."""
+    if seed is None and not link:
+        return base
+    merged = merge_link_tables(mission.link, link) if link else None
+    m = base.mission.with_overrides(seed=seed, link=merged)
+    return replace(base, mission=m, link=link_from_table(m.link, m.source, seed=m.seed))
+
+
+def fly_batch(mission: Mission | str | Path, cells: Sequence[Mapping[str, Any]], *,
+              progress: Progress | None = None) -> list[dict[str, Any]]:
+    """Fly every cell (the overrides of :func:`bridge.core.flight.prepare`) and return, in order, the
+    measured columns (:data:`MEASURES`) of each one's ``cells.csv`` row; a cell that cannot be built gets
+    outcome ``error`` and its message. ValueError (:func:`batch_problem`'s line) if the batch cannot fly them."""
+    m = mission if isinstance(mission, Mission) else load_mission(mission)
+    built = _prepare_all(m, cells)
+    flights = [f for f in built if isinstance(f, Flight)]
+    results = iter(fly_flights(flights, progress=progress, total=len(built)))
+    return [next(results) if isinstance(f, Flight) else error_measures(f) for f in built]
+
+
+def error_measures(why: str) -> dict[str, Any]:
+    """The measured columns of a cell that could not be flown (outcome ``error``)."""
+    out: dict[str, Any] = {c: None for c in MEASURES}
+    out.update(outcome="error", error=" ".join(why.split())[:300])
+    return out
+
+
+def fly_flights(flights: Sequence[Flight], *, progress: Progress | None = None,
+                total: int | None = None) -> list[dict[str, Any]]:
+    """Fly prepared flights (of one mission, see :func:`flights_problem`); the measured columns of each."""
+    why = flights_problem(flights)
+    if why:
+        raise ValueError(why)
+    out: list[dict[str, Any] | None] = [None] * len(flights)
+    by_rate: dict[float, list[int]] = {}
+    for i, f in enumerate(flights):
+        by_rate.setdefault(f.mission.rate_hz, []).append(i)
+    total = len(flights) if total is None else total
+    done = total - len(flights)
+    for idx in by_rate.values():
+        size = max(1, min(len(idx), CELL_STEPS // max(1, flights[idx[0]].mission.steps), 1024))
+        for a in range(0, len(idx), size):
+            part = idx[a:a + size]
+
+            def report(k: int, of: int, base: int = done, n: int = len(part)) -> None:
+                if progress is not None:
+                    progress(base + n * k // max(of, 1), total)
+
+            rows = _Batch([flights[i] for i in part]).fly(report)
+            for i, r in zip(part, rows, strict=True):
+                out[i] = r
+            done += len(part)
+            if progress is not None:
+                progress(done, total)
+    return [r for r in out if r is not None]
+
+
+@dataclass
+class _Metrics:
+    """Running figures of every cell, updated once per control step (the trace row of that step)."""
+
+    sq_sum: np.ndarray  # sum over t >= rms_from of |3-D error|^2
+    sq_max: np.ndarray
+    last_out: np.ndarray  # [segments, 3, n]: last step outside the settling band, per change and axis (-1)
+    tv: np.ndarray  # sum of |u2_k - u2_{k-1}|
+    u2: np.ndarray  # [steps, n]: u2 as recorded, for the ripple
+
+
+class _Batch:
+    """One batch: flights of one mission and one control rate, ordered backstepping laws first."""
+
+    def __init__(self, flights: Sequence[Flight]) -> None:
+        laws = [f.mission.controller for f in flights]
+        self.order = BatchController.order(laws)
+        self.flights = [flights[i] for i in self.order]
+        f0 = self.flights[0]
+        m = f0.mission
+        self.mission = m
+        self.n = len(self.flights)
+        self.clocks = Clocks(m.rate_hz, m.physics_hz, f0.substeps, m.steps)
+
+    def fly(self, report: Callable[[int, int], None]) -> list[dict[str, Any]]:
+        fl = self.flights
+        f0 = fl[0]
+        m = self.mission
+        n = self.n
+        clocks = self.clocks
+        steps, S, rate = clocks.steps, clocks.substeps, clocks.rate_hz
+        guards = [f.guard for f in fl]
+        plan = plan_links([f.link for f in fl], guards, f0.failsafe.timeout_s, clocks)
+        x0, y0, z0, psi0 = m.start
+        start = (x0, 0.0, y0, 0.0, z0, 0.0, 0.0, 0.0, 0.0, 0.0, psi0, 0.0)
+        plant = BatchPlant(f0.profile, f0.effects, [f.mission.seed for f in fl], physics_hz=m.physics_hz,
+                           state=start)
+        nominal = f0.nominal
+        ctl = BatchController([f.mission.controller for f in fl], nominal, f0.gains, rate)
+        t_all = clocks.step_t
+        cols = np.arange(n)
+
+        # the states the guard may still use, and the commands on their way up (rings by step)
+        age_max = plan.state_age_max
+        ring_n = age_max + 1
+        ring_X = np.zeros((ring_n, 12, n))
+        held_n = plan.cmd_age_max + 1
+        ring_held = np.zeros((held_n, 5 if not plant.lagged else 4, n))
+        ptr = np.zeros(n, np.int64)
+        next_check = plan.apply_check[:, 0].copy()
+
+        # prediction: its cells, their command lags, and the references at t + lag
+        predict = np.array([g.compensation == "predict" for g in guards])
+        pidx = np.nonzero(predict)[0]
+        lags = np.array([g.lag_s for g in guards])
+        ref_now = _references(m, t_all)
+        lagged_refs = {}
+        for lag in sorted({float(v) for v in lags[pidx]} - {0.0}):
+            lagged_refs[lag] = (np.nonzero(predict & (lags == lag))[0], _references(m, t_all + lag))
+        predictor = None
+        if len(pidx):
+            depth = age_max + int(math.ceil(float(lags.max()) * rate)) + 4
+            predictor = BatchPredictor(nominal, 1.0 / rate, lags[pidx], depth)
+
+        # the failsafe: which step's period starts it, the landing loop's actuation
+        fs_step = plan.failsafe_step
+        in_failsafe = np.zeros(n, bool)
+        armed = np.ones(n, bool)
+        landing = BatchActuation(nominal, n)
+        descent = f0.failsafe.descent_rate
+
+        # the figures, as the flight goes
+        rms_from = min(RMS_FROM_S, 0.5 * m.duration_s)
+        changes = list(m.trajectory.change_times())
+        seg_of = np.searchsorted(np.array(changes), t_all, side="right") - 1  # the change each step follows
+        met = _Metrics(np.zeros(n), np.zeros(n), np.full((max(1, len(changes)), 3, n), -1, np.int64),
+                       np.zeros(n), np.zeros((steps, n)))
+        band = np.array([BANDS["x"], BANDS["y"], BANDS["z"]])[:, None]
+        u2_now = np.zeros(n)
+        alive = np.ones(n, bool)
+        flown = np.full(n, steps, np.int64)
+        diverged = np.zeros(n, bool)
+        any_dead = False
+        ref_cells = None
+        every = max(1, steps // 20)
+
+        with np.errstate(all="ignore"):
+            for k in range(steps):
+                t = k / rate
+                X = plant.X
+                ring_X[k % ring_n] = X
+                mode = plan.mode[k]
+                active = mode != NONE
+                if active.any():
+                    st = plan.state_step[k]
+                    fresh = (st == k) | ~active
+                    if fresh.all():
+                        Xg = X.copy()
+                    else:
+                        Xg = ring_X[np.where(active, st, k) % ring_n, :, cols].T
+                    ref = ref_now[k]
+                    if lagged_refs:
+                        if ref_cells is None:
+                            ref_cells = np.empty((4, 5, n))
+                        ref_cells[...] = ref[:, :, None]
+                        for which, table in lagged_refs.values():
+                            ref_cells[:, :, which] = table[k][:, :, None]
+                        ref = ref_cells
+                    if predictor is not None:
+                        pos = np.nonzero(active[pidx])[0]
+                        if len(pos):
+                            g_idx = pidx[pos]
+                            aim = t + lags[g_idx]
+                            Xg[:, g_idx] = predictor.predict(t_all[st[g_idx]], Xg[:, g_idx], aim, pos)
+                    u, real, c = ctl.step(Xg, ref, mode == HOLD, active)
+                    if predictor is not None and len(pos):
+                        predictor.sent(t, real[:, g_idx], ctl.actuation.omega_d[g_idx], pos)
+                    np.copyto(u2_now, u[1], where=active)
+                    ring_held[k % held_n] = plant.held(c)
+                self._measure(k, X, ref_now[k], u2_now, met, band, seg_of[k], t >= rms_from,
+                              alive if any_dead else None)
+
+                # the vehicle's period: commands take effect at the physics step they arrive in
+                for i in range(S):
+                    check = k * S + i
+                    hit = next_check == check
+                    if hit.any():
+                        cells = np.nonzero(hit)[0]
+                        cmd = plan.apply_cmd[cells, ptr[cells]]
+                        plant.hold(ring_held[cmd % held_n, :, cells].T, cells)
+                        ptr[cells] += 1
+                        next_check[cells] = plan.apply_check[cells, ptr[cells]]
+                    if i == 0:
+                        starting = fs_step == k
+                        if starting.any():
+                            in_failsafe |= starting
+                    if in_failsafe.any():
+                        self._land(plant, landing, nominal, descent, in_failsafe & armed, armed)
+                    plant.step()
+                plant.resync()
+
+                bad = plant.diverged() & alive
+                if bad.any():
+                    diverged |= bad
+                    alive &= ~bad
+                    flown[bad] = k + 1
+                    plant.X[:, bad] = np.asarray(start)[:, None]  # a resting state: no nan downstream
+                    any_dead = True
+                    if not alive.any():
+                        break
+                if k % every == 0:
+                    report(k, steps)
+        outcome = np.where(diverged, "diverged", np.where(fs_step < flown, "failsafe", "completed"))
+        rows = self._rows(met, flown, outcome, plan.counts(flown), changes, rms_from)
+        back = [None] * n
+        for pos_, i in enumerate(self.order):
+            back[i] = rows[pos_]
+        return back  # type: ignore[return-value]
+
+    @staticmethod
+    def _measure(k: int, X: np.ndarray, ref: np.ndarray, u2: np.ndarray, met: _Metrics, band: np.ndarray,
+                 seg: int, late: bool, alive: np.ndarray | None) -> None:
+        """The figures of the trace row of step k: state X [12, n], reference sample ref [4, 5], u2 [n]."""
+        e = X[0:6:2] - ref[0:3, 0:1]
+        sq = e * e
+        s = sq[0] + sq[1] + sq[2]
+        out = np.abs(e) > band
+        du = np.abs(u2 - met.u2[k - 1]) if k else None
+        if alive is not None:
+            s = np.where(alive, s, 0.0)
+            out &= alive
+            if du is not None:
+                du = np.where(alive, du, 0.0)
+        if late:
+            met.sq_sum += s
+            np.maximum(met.sq_max, s, out=met.sq_max)
+        if seg >= 0:
+            np.copyto(met.last_out[seg], k, where=out)
+        if du is not None:
+            met.tv += du
+        met.u2[k] = u2
+
+    @staticmethod
+    def _land(plant: BatchPlant, act: BatchActuation, nominal: Any, descent: float, flying: np.ndarray,
+              armed: np.ndarray) -> None:
+        """One physics step of the vehicle's failsafe (SimVehicle.advance): on the ground it disarms
+        (command zero), else the landing loop (bridge.core.failsafe.LandingController) commands."""
+        if not flying.any():
+            return
+        down = flying & plant.on_ground
+        if down.any():
+            cells = np.nonzero(down)[0]
+            armed[cells] = False
+            plant.hold(plant.held(np.zeros((4, len(cells)))), cells)
+            flying = flying & ~down
+            if not flying.any():
+                return
+        cells = np.nonzero(flying)[0]
+        X = plant.X[:, cells]
+        n = nominal
+        vz, phi, dphi, th, dth, dpsi = X[5], X[6], X[7], X[8], X[9], X[11]
+        tilt = np.maximum(np.cos(phi) * np.cos(th), 0.5)
+        u = np.stack((n.mass * (n.gravity + 2.0 * (-descent - vz)) / tilt,
+                      n.ixx / n.arm * (-36.0 * phi - 12.0 * dphi),
+                      n.iyy / n.arm * (-36.0 * th - 12.0 * dth),
+                      n.izz / n.arm * (-4.0 * dpsi)))
+        c = act.allocate(u)[1]
+        plant.hold(plant.held(c), cells)
+
+    def _rows(self, met: _Metrics, flown: np.ndarray, outcome: np.ndarray, counts: dict[str, np.ndarray],
+              changes: list[float], rms_from: float) -> list[dict[str, Any]]:
+        m = self.mission
+        rate = self.clocks.rate_hz
+        t_all = self.clocks.step_t
+        first_late = int(np.searchsorted(t_all, rms_from, side="left"))
+        ripple = _ripples(met.u2, flown, t_all, rate)
+        rows = []
+        for i in range(self.n):
+            L = int(flown[i])
+            n_late = max(0, L - first_late)
+            dur = float(t_all[L - 1] - t_all[0] + 1.0 / rate)
+            rms = _num(math.sqrt(met.sq_sum[i] / n_late)) if n_late else None
+            mx = _num(math.sqrt(met.sq_max[i])) if n_late else None
+            settle = [s for s in (_settling(met.last_out[:, a, i], changes, t_all, L) for a in range(3))
+                      if s is not None]
+            rows.append({
+                "rms": rms, "max": mx,
+                "settling_s": max(settle) if settle else None,
+                "tv_u2": _num(met.tv[i] / dur) if L > 1 else 0.0,
+                "ripple_u2": ripple[i],
+                "outcome": str(outcome[i]),
+                "up_sent": int(counts["up_sent"][i]), "up_lost": int(counts["up_lost"][i]),
+                "down_sent": int(counts["down_sent"][i]), "down_lost": int(counts["down_lost"][i]),
+                "flown_s": _num(dur), "error": "",
+            })
+        del m
+        return rows
+
+
+def _references(m: Mission, times: np.ndarray) -> np.ndarray:
+    """[len(times), 4, 5]: the reference sample (x, y, z, psi; value and 4 derivatives) at each time."""
+    sample = m.trajectory.sample
+    return np.array([sample(float(t)) for t in times])
+
+
+def _settling(last_out: np.ndarray, changes: list[float], t: np.ndarray, L: int) -> float | None:
+    """metrics.settling_time's worst over the set-point changes flown, from the last step outside the band."""
+    if L == 0:
+        return None
+    flown_changes = [c for c in changes if c <= t[L - 1]]
+    if not flown_changes:
+        return None
+    ends = flown_changes[1:] + [math.inf]
+    worst = None
+    for s, (c, end) in enumerate(zip(flown_changes, ends, strict=True)):
+        lo = int(np.searchsorted(t[:L], c, side="left"))
+        hi = int(np.searchsorted(t[:L], end, side="left"))
+        i = int(last_out[s])
+        if hi <= lo or i < lo:
+            v = 0.0
+        elif i + 1 < hi:
+            v = float(t[i + 1] - c)
+        else:
+            v = float(t[i] + (t[lo + 1] - t[lo] if hi - lo > 1 else 0.0) - c)
+        worst = v if worst is None else max(worst, v)
+    return _num(worst) if worst is not None else None
+
+
+def _ripples(u2: np.ndarray, flown: np.ndarray, t: np.ndarray, rate_hz: float) -> list[float | None]:
+    """bridge.sweep.cells.ripple_rms of each cell's u2 over its own flight ([steps, n] history)."""
+    n_win = 2 * int(round(0.5 * RIPPLE_WINDOW_S * rate_hz)) + 1
+    h = n_win // 2
+    out: list[float | None] = []
+    groups: dict[int, list[int]] = {}
+    for i, L in enumerate(flown):
+        groups.setdefault(int(L), []).append(i)
+    res = np.zeros(len(flown))
+    for L, cells in groups.items():
+        if L < 3 * n_win:
+            res[cells] = 0.0
+            continue
+        u = u2[:L, cells] - u2[0, cells]  # shifted: the ripple is the same, the running sum stays small
+        csum = np.zeros((L + 1, len(cells)))
+        np.cumsum(u, axis=0, out=csum[1:])
+        tt = t[:L]
+        sel = tt >= tt[0] + 0.5 * (tt[-1] - tt[0])
+        sel[: h + 1] = False
+        sel[L - h - 1:] = False
+        idx = np.nonzero(sel)[0]
+        if not len(idx):
+            res[cells] = 0.0
+            continue
+        mean = (csum[idx + h + 1] - csum[idx - h]) / n_win
+        dev = u[idx] - mean
+        res[cells] = np.sqrt(np.mean(dev * dev, axis=0))
+    for v in res:
+        out.append(_num(v))
+    return out
+
+
+def _num(v: Any) -> float | None:
+    f = float(v)
+    return f if math.isfinite(f) else None
+
+
+__all__ = ["CELL_STEPS", "MEASURES", "batch_problem", "error_measures", "flights_problem", "fly_batch",
+           "fly_flights"]
+

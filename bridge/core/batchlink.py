@@ -1,0 +1,562 @@
+"""The link model, the link guard and the prediction for N cells at once (the batch engine).
+
+In:  per cell a :class:`~bridge.core.link.LinkSettings` (delays ms, loss %, burst length packets, blackouts s,
+     dup and reorder %) and its guard (``stale_s``, ``stop_s`` s, compensation, ``lag_s`` s), the vehicle's
+     ``timeout_s`` (s), the clocks (``rate_hz``, ``substeps`` physics steps per control step, ``physics_hz``)
+     and the number of control steps
+Out: a :class:`LinkPlan`: per control step and cell the guard's decision (track, hold, nothing) and the
+     index of the state it controls on; per cell the physics steps at which a newer command takes effect on
+     the vehicle (and which), the step whose period starts the vehicle's failsafe, and what was sent and
+     lost; and :class:`BatchPredictor`, :class:`controller.predict.Predictor` over the cell axis
+
+Why a plan: with no bandwidth queue and no ``resume``, nothing the link, the guard or the vehicle's
+timeout decides depends on the flight itself. A packet's fate is a pure function of its seed, direction
+and number (the counter-based SplitMix64 draws of :mod:`bridge.core.link`, reproduced here bit for bit
+over whole arrays); when a packet is sent is decided by the guard, which looks only at the ages of the
+states it received; and the vehicle's failsafe looks only at when commands arrived. So the whole flight's
+packet traffic is worked out first, with array operations along the step axis, exactly as
+:class:`~bridge.core.link.LinkImpairment`, :class:`~bridge.core.linkends.VehicleEnd`,
+:class:`~bridge.core.linkends.ControllerEnd` and :class:`~controller.link_guard.LinkGuard` would do it
+step by step, and the engine then flies the plant and the laws along it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from statistics import NormalDist
+
+import numpy as np
+
+from bridge.core.link import (  # the draw numbers and bound are link.py's: one definition of a fate
+    _D_DUP,
+    _D_DUP_JITTER,
+    _D_GE_START,
+    _D_HOLD,
+    _D_JITTER,
+    _D_LOSS,
+    _NORMAL_BOUND_SIGMAS,
+    LinkConfig,
+    LinkSettings,
+    stream_key,
+)
+from bridge.core.linkends import EPS_T
+from controller.link_guard import GuardConfig
+from controller.nominal import Coefficients, Nominal
+
+NONE, TRACK, HOLD = 0, 1, 2  # the guard's decision per step: no command (stop or idle), command, command on hold
+NEVER = np.iinfo(np.int64).max // 4  # a check or step index that never comes
+PLAN_CHUNK = 128  # cells planned together: bounds the planner's temporary arrays to ~100 MB at 7500 steps
+
+_C1, _C2, _C3 = np.uint64(0x9E3779B97F4A7C15), np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB)
+_U30, _U27, _U31, _U11, _U8 = (np.uint64(v) for v in (30, 27, 31, 11, 8))
+
+
+# -- the draws -------------------------------------------------------------------------------------
+def _mix(z: np.ndarray) -> np.ndarray:
+    """SplitMix64's finaliser (:func:`bridge.core.link._mix`) in place on a uint64 array (wrapping)."""
+    z += _C1
+    z ^= z >> _U30
+    z *= _C2
+    z ^= z >> _U27
+    z *= _C3
+    z ^= z >> _U31
+    return z
+
+
+def uniforms(keys: np.ndarray, count: int, draw: int) -> np.ndarray:
+    """``link.uniform(key, n, draw)`` for every key (rows) and n = 0..count-1 (columns): [len(keys), count]."""
+    n = np.arange(count, dtype=np.uint64)
+    inner = _mix(((n & np.uint64(0xFFFFFFFFFFFF)) << _U8) | np.uint64(draw))
+    z = keys[:, None] ^ inner[None, :]
+    _mix(z)
+    out = (z >> _U11).astype(np.float64)
+    out += 0.5
+    out *= 1.0 / 9007199254740992.0
+    return out
+
+
+_A = (2.5090809287301226727e+3, 3.3430575583588128105e+4, 6.7265770927008700853e+4, 4.5921953931549871457e+4,
+      1.3731693765509461125e+4, 1.9715909503065514427e+3, 1.3314166789178437745e+2, 3.3871328727963666080e+0)
+_B = (5.2264952788528545610e+3, 2.8729085735721942674e+4, 3.9307895800092710610e+4, 2.1213794301586595867e+4,
+      5.3941960214247511077e+3, 6.8718700749205790830e+2, 4.2313330701600911252e+1, 1.0)
+_C = (7.7454501427834140764e-4, 2.2723844989269184583e-2, 2.4178072517745061177e-1, 1.2704582524523683826e+0,
+      3.6478483247632046050e+0, 5.7694972214606914055e+0, 4.6303378461565452959e+0, 1.4234371107496835773e+0)
+_D = (1.05075007164441684324e-9, 5.4759380849953449460e-4, 1.5198666563616457197e-2, 1.4810397642748007459e-1,
+      6.8976733498510000455e-1, 1.6763848301838038494e+0, 2.0531916266377588219e+0, 1.0)
+_E = (2.01033439929228813265e-7, 2.71155556874348757815e-5, 1.24266094738807843860e-3, 2.65321895265761230930e-2,
+      2.96560571828504891230e-1, 1.78482653991729133580e+0, 5.46378491116411436990e+0, 6.65790464350110377720e+0)
+_F = (2.04426310338993978564e-15, 1.42151175831644588870e-7, 1.84631831751005468180e-5, 7.86869131145613259100e-4,
+      1.48753612908506148525e-2, 1.36929880922735805310e-1, 5.99832206555887937690e-1, 1.0)
+
+
+def _poly(c: tuple[float, ...], r: np.ndarray) -> np.ndarray:
+    """Horner's rule in the order of statistics' AS241: (((c0 r + c1) r + c2) ... ) + c7."""
+    v = c[0] * r + c[1]
+    for k in c[2:]:
+        v = v * r + k
+    return v
+
+
+def normal_inv_cdf(p: np.ndarray, sigma: float) -> np.ndarray:
+    """``NormalDist(0, sigma).inv_cdf(p)`` elementwise, the same operations (Wichura's AS241) in the
+    same order; the tail's log is :func:`math.log` (numpy's differs in the last bit now and then)."""
+    q = p - 0.5
+    x = np.empty_like(p)
+    mid = np.abs(q) <= 0.425
+    qm = q[mid]
+    r = 0.180625 - qm * qm
+    x[mid] = (_poly(_A, r) * qm) / _poly(_B, r)
+    tail = ~mid
+    if tail.any():
+        qt = q[tail]
+        pt = p[tail]
+        r = np.where(qt <= 0.0, pt, 1.0 - pt)
+        r = np.sqrt(-np.array([math.log(v) for v in r.tolist()]))
+        xt = np.empty_like(r)
+        near = r <= 5.0
+        rn = r[near] - 1.6
+        xt[near] = _poly(_C, rn) / _poly(_D, rn)
+        rf = r[~near] - 5.0
+        xt[~near] = _poly(_E, rf) / _poly(_F, rf)
+        xt = np.where(qt < 0.0, -xt, xt)
+        x[tail] = xt
+    return 0.0 + x * sigma
+
+
+@dataclass
+class Fates:
+    """The random part of the fates of packets 0..count-1 of one direction of each cell ([cells, count])."""
+
+    lost: np.ndarray  # bool: Bernoulli or Gilbert–Elliott loss
+    jitter: np.ndarray  # s
+    held: np.ndarray  # bool: held back past its successor
+    dup: np.ndarray  # bool: a duplicate follows
+    dup_jitter: np.ndarray  # s, the duplicate's
+
+
+def _jitter_params(cfg: LinkConfig) -> tuple[float, float, float]:
+    """(bound s, lo, hi) of :class:`~bridge.core.link.FateStream`'s jitter (bound 0: none; lo = hi = 0: uniform)."""
+    delay = cfg.delay_ms / 1000.0
+    j = cfg.jitter_ms / 1000.0
+    if not (j > 0.0 and delay > 0.0):
+        return 0.0, 0.0, 0.0
+    if cfg.jitter == "uniform":
+        return min(j, delay), 0.0, 0.0
+    b = min(delay, _NORMAL_BOUND_SIGMAS * j)
+    nd = NormalDist(0.0, j)
+    return b, nd.cdf(-b), nd.cdf(b)
+
+
+def _jitters(cfg: LinkConfig, u: np.ndarray, bound: float, lo: float, hi: float) -> np.ndarray:
+    if cfg.jitter == "uniform":
+        return (2.0 * u - 1.0) * bound
+    x = normal_inv_cdf(lo + u * (hi - lo), cfg.jitter_ms / 1000.0)
+    return np.clip(x, -bound, bound)
+
+
+def draw_fates(cfgs: Sequence[LinkConfig], direction: str, count: int) -> Fates:
+    """The fates :class:`~bridge.core.link.FateStream` gives packets 0..count-1 of ``direction``, per cell."""
+    n = len(cfgs)
+    lost = np.zeros((n, count), bool)
+    jitter = np.zeros((n, count))
+    held = np.zeros((n, count), bool)
+    dup = np.zeros((n, count), bool)
+    dup_jitter = np.zeros((n, count))
+    if count == 0:
+        return Fates(lost, jitter, held, dup, dup_jitter)
+    keys = np.array([stream_key(c.seed, direction) for c in cfgs], dtype=np.uint64)
+    ge = [i for i, c in enumerate(cfgs) if c.burst_len >= 1.0 and 0.0 < c.loss_pct / 100.0 < 1.0]
+    bern = [i for i, c in enumerate(cfgs) if c.loss_pct > 0.0 and i not in set(ge)]
+    if bern:
+        loss = np.array([cfgs[i].loss_pct / 100.0 for i in bern])
+        lost[bern] = uniforms(keys[bern], count, _D_LOSS) < loss[:, None]
+    if ge:
+        L = np.array([cfgs[i].loss_pct / 100.0 for i in ge])
+        r = np.array([1.0 / cfgs[i].burst_len for i in ge])
+        p = np.array([min(1.0, (cfgs[i].loss_pct / 100.0) * (1.0 / cfgs[i].burst_len)
+                          / (1.0 - cfgs[i].loss_pct / 100.0)) for i in ge])
+        u = uniforms(keys[ge], count, _D_LOSS)
+        bad = uniforms(keys[ge], 1, _D_GE_START)[:, 0] < L  # the chain starts in its stationary distribution
+        out = np.empty((len(ge), count), bool)
+        for k in range(count):  # a Markov chain: sequential in the packet number, vectorised over cells
+            uk = u[:, k]
+            bad = np.where(bad, uk >= r, uk < p)
+            out[:, k] = bad
+        lost[ge] = out
+    hold = [i for i, c in enumerate(cfgs) if c.reorder_pct > 0.0]
+    if hold:
+        h = np.array([cfgs[i].reorder_pct / 100.0 for i in hold])
+        held[hold] = uniforms(keys[hold], count, _D_HOLD) < h[:, None]
+    dups = [i for i, c in enumerate(cfgs) if c.dup_pct > 0.0]
+    if dups:
+        d = np.array([cfgs[i].dup_pct / 100.0 for i in dups])
+        dup[dups] = uniforms(keys[dups], count, _D_DUP) < d[:, None]
+    for i, c in enumerate(cfgs):
+        bound, lo, hi = _jitter_params(c)
+        if bound == 0.0:
+            continue
+        jitter[i] = _jitters(c, uniforms(keys[i:i + 1], count, _D_JITTER)[0], bound, lo, hi)
+        if dup[i].any():
+            dup_jitter[i] = _jitters(c, uniforms(keys[i:i + 1], count, _D_DUP_JITTER)[0], bound, lo, hi)
+    return Fates(lost, jitter, held, dup, dup_jitter)
+
+
+# -- the plan ------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Clocks:
+    """The clocks every cell of a batch shares: control steps, physics steps and their check thresholds (s)."""
+
+    rate_hz: float
+    physics_hz: float
+    substeps: int
+    steps: int
+
+    @property
+    def step_t(self) -> np.ndarray:
+        """t_k = k / rate_hz of every control step (s), as the loop computes it."""
+        return np.arange(self.steps, dtype=np.float64) / self.rate_hz
+
+    @property
+    def plant_t(self) -> np.ndarray:
+        """The plant's clock before each physics step and after the last (s): a running sum of 1/physics_hz,
+        as :class:`plant.Quadrotor` keeps it."""
+        n = self.steps * self.substeps
+        h = 1.0 / self.physics_hz
+        out = np.empty(n + 1)
+        t = 0.0
+        for i in range(n + 1):  # sequential on purpose: the plant's own rounding
+            out[i] = t
+            t = t + h
+        return out
+
+
+def _first_at_or_after(thresholds: np.ndarray, due: np.ndarray, per_s: float) -> np.ndarray:
+    """For each due time (s), the first index i with thresholds[i] >= due (len(thresholds): none), for
+    thresholds within 1e-9 s of i / per_s; ``np.searchsorted`` without its cost on millions of times."""
+    n = len(thresholds)
+    c = np.floor(due * per_s).astype(np.int64) - 1
+    np.clip(c, 0, n, out=c)
+    padded = np.append(thresholds, np.inf)
+    # thresholds[i] lies within 1e-9 s of i / per_s (a running sum's rounding plus EPS_T), so the answer
+    # is the guess plus 1 or 2: two passes that move it up where it is still short are exact
+    c += padded[c] < due
+    c += padded[c] < due
+    return c
+
+
+def _blackout_mask(cfgs: Sequence[LinkConfig], t: np.ndarray) -> np.ndarray:
+    """[cells, len(t)]: sent inside one of the cell's blackout windows [start, start + duration)."""
+    out = np.zeros((len(cfgs), len(t)), bool)
+    memo: dict[tuple[tuple[float, float], ...], np.ndarray] = {}
+    for i, c in enumerate(cfgs):
+        if not c.blackouts:
+            continue
+        if c.blackouts not in memo:
+            m = np.zeros(len(t), bool)
+            for s, d in c.blackouts:
+                m |= (t >= s) & (t < s + d)
+            memo[c.blackouts] = m
+        out[i] = memo[c.blackouts]
+    return out
+
+
+def _next_index(flag: np.ndarray) -> np.ndarray:
+    """[cells, n]: for each column the first later column where ``flag`` is set (n: none)."""
+    n = flag.shape[1]
+    idx = np.where(flag, np.arange(n), n)
+    nxt = np.minimum.accumulate(idx[:, ::-1], axis=1)[:, ::-1]
+    out = np.full_like(nxt, n)
+    out[:, :-1] = nxt[:, 1:]
+    return out
+
+
+def _arrivals(sent: np.ndarray, send_t: np.ndarray, lost: np.ndarray, fates: Fates, seq: np.ndarray,
+              delay: np.ndarray, thresholds: np.ndarray, per_s: float, first_check: np.ndarray) -> np.ndarray:
+    """[cells, steps]: the check at which each packet sent (one per step at most) is first delivered
+    (:data:`NEVER`: lost, or held with no successor). ``seq`` numbers the packets (the fates' column),
+    ``first_check`` is the first check after each step's send (a packet cannot arrive before it is sent)."""
+    n_cells, steps = sent.shape
+    rows = np.arange(n_cells)[:, None]
+    s = np.clip(seq, 0, max(fates.lost.shape[1] - 1, 0))
+    jit = fates.jitter[rows, s] if fates.jitter.size else np.zeros(sent.shape)
+    held = (fates.held[rows, s] if fates.held.size else np.zeros(sent.shape, bool)) & sent & ~lost
+    dup = (fates.dup[rows, s] if fates.dup.size else np.zeros(sent.shape, bool)) & sent & ~lost
+    base = send_t[None, :] + delay[:, None]  # tx + delay: LinkImpairment.send's order of operations
+    due = base + jit
+    ok = sent & ~lost
+    releaser = ok & ~held
+    nxt = _next_index(releaser)  # the successor that releases a held packet
+    has = nxt < steps
+    nxt_c = np.minimum(nxt, steps - 1)
+    due_rel = np.where(held, np.maximum(due, due[rows, nxt_c]), due)
+    pushed = np.where(held, first_check[nxt_c], first_check[None, :])
+    c = np.maximum(_first_at_or_after(thresholds, due_rel, per_s), pushed)
+    c = np.where(ok & (~held | has), c, NEVER)
+    if dup.any():
+        dj = fates.dup_jitter[rows, s]
+        cd = np.maximum(_first_at_or_after(thresholds, base + dj, per_s), first_check[None, :])
+        c = np.where(dup, np.minimum(c, cd), c)
+    return c
+
+
+def _newest(arrive: np.ndarray, n_checks: int) -> np.ndarray:
+    """[cells, n_checks]: the highest packet index delivered by each check (-1: none yet).
+
+    A packet is the newest from its arrival on unless a later-numbered one arrives no later; those
+    records arrive in increasing order, so a scatter and a running maximum give the answer."""
+    n_cells, n = arrive.shape
+    later_min = np.minimum.accumulate(arrive[:, ::-1], axis=1)[:, ::-1]
+    following = np.full_like(later_min, NEVER)
+    following[:, :-1] = later_min[:, 1:]
+    record = (arrive < following) & (arrive < n_checks)
+    out = np.full((n_cells, n_checks), -1, np.int64)
+    r, j = np.nonzero(record)
+    out[r, arrive[r, j]] = j
+    np.maximum.accumulate(out, axis=1, out=out)
+    return out
+
+
+@dataclass
+class LinkPlan:
+    """What the link, the guard and the vehicle's timeout decide for a batch of cells (see the module doc).
+
+    Arrays are [steps, cells] (step-major, the engine reads one step at a time) unless said otherwise."""
+
+    mode: np.ndarray  # int8: NONE, TRACK or HOLD
+    state_step: np.ndarray  # int32: the step whose state the guard controls on (-1: none)
+    failsafe_step: np.ndarray  # [cells] int64: the step whose period starts in failsafe (NEVER: none)
+    apply_check: np.ndarray  # [cells, slots] int64: physics checks where a newer command takes effect (sorted)
+    apply_cmd: np.ndarray  # [cells, slots] int32: the step whose command that is
+    up_lost: np.ndarray  # bool: the command sent at this step was lost
+    down_lost: np.ndarray  # bool: the state sent at this step was lost
+    cmd_age_max: int  # most control steps between a command's send and its taking effect
+    state_age_max: int  # most control steps between a state's send and the guard's last use of it
+
+    def counts(self, flown: np.ndarray) -> dict[str, np.ndarray]:
+        """up_sent, up_lost, down_sent, down_lost per cell over its first ``flown`` steps."""
+        steps = self.mode.shape[0]
+        alive = np.arange(steps)[:, None] < flown[None, :]
+        sent = (self.mode != NONE) & alive
+        return {"up_sent": sent.sum(0), "up_lost": (self.up_lost & alive).sum(0),
+                "down_sent": flown.astype(np.int64), "down_lost": (self.down_lost & alive).sum(0)}
+
+
+def plan_links(links: Sequence[LinkSettings], guards: Sequence[GuardConfig], timeout_s: float,
+               clocks: Clocks) -> LinkPlan:
+    """The :class:`LinkPlan` of a batch (one entry of ``links`` and ``guards`` per cell)."""
+    n = len(links)
+    steps = clocks.steps
+    mode = np.zeros((steps, n), np.int8)
+    state_step = np.full((steps, n), -1, np.int32)
+    up_lost = np.zeros((steps, n), bool)
+    down_lost = np.zeros((steps, n), bool)
+    failsafe = np.full(n, NEVER, np.int64)
+    chunks = []
+    age_max = 0
+    state_age = 0
+    for a in range(0, n, PLAN_CHUNK):
+        b = min(n, a + PLAN_CHUNK)
+        part = _plan_chunk(links[a:b], guards[a:b], timeout_s, clocks)
+        mode[:, a:b] = part["mode"].T
+        state_step[:, a:b] = part["state"].T
+        up_lost[:, a:b] = part["up_lost"].T
+        down_lost[:, a:b] = part["down_lost"].T
+        failsafe[a:b] = part["failsafe"]
+        chunks.append((part["apply_check"], part["apply_cmd"]))
+        age_max = max(age_max, part["age_max"])
+        state_age = max(state_age, part["state_age"])
+    width = max([c.shape[1] for c, _ in chunks] + [1]) + 1
+    apply_check = np.full((n, width), NEVER, np.int64)
+    apply_cmd = np.zeros((n, width), np.int32)
+    row = 0
+    for c, k in chunks:
+        apply_check[row:row + len(c), :c.shape[1]] = c
+        apply_cmd[row:row + len(c), :k.shape[1]] = k
+        row += len(c)
+    return LinkPlan(mode, state_step, failsafe, apply_check, apply_cmd, up_lost, down_lost, age_max, state_age)
+
+
+def _plan_chunk(links: Sequence[LinkSettings], guards: Sequence[GuardConfig], timeout_s: float,
+                clocks: Clocks) -> dict[str, np.ndarray | int]:
+    n = len(links)
+    steps, S = clocks.steps, clocks.substeps
+    t = clocks.step_t
+    pt = clocks.plant_t
+    rows = np.arange(n)[:, None]
+    ks = np.arange(steps)
+
+    # down: a state every step; the guard controls on the newest delivered (ControllerEnd, LinkGuard.observe)
+    down = [ln.down for ln in links]
+    fd = draw_fates(down, "down", steps)
+    d_lost = _blackout_mask(down, t) | fd.lost
+    d_delay = np.array([c.delay_ms / 1000.0 for c in down])
+    everyone = np.ones((n, steps), bool)
+    down_thresholds = t + EPS_T
+    arrive = _arrivals(everyone, t, d_lost, fd, np.broadcast_to(ks, (n, steps)), d_delay, down_thresholds,
+                       clocks.rate_hz, ks)
+    newest = _newest(arrive, steps)  # [n, steps]
+    has = newest >= 0
+    age = t[None, :] - t[np.maximum(newest, 0)]
+    stale = np.array([g.stale_s for g in guards])[:, None]
+    stop = np.array([g.stop_s for g in guards])[:, None]
+    acting = has & (age <= stop)
+    mode0 = np.where(acting, np.where(age <= stale, TRACK, HOLD), NONE).astype(np.int8)
+
+    # up: a command on every step the guard acts; each numbered by the cell's count (its packet number)
+    sent0 = mode0 != NONE
+    seq = np.cumsum(sent0, axis=1) - 1
+    up = [ln.up for ln in links]
+    fu = draw_fates(up, "up", int(seq[:, -1].max()) + 1 if steps else 0)
+    s = np.clip(seq, 0, None)
+    u_lost = sent0 & (_blackout_mask(up, t) | (fu.lost[rows, s] if fu.lost.size else False))
+    u_delay = np.array([c.delay_ms / 1000.0 for c in up])
+    up_thresholds = pt[:-1] + EPS_T
+    up_thresholds[::S] = np.maximum(t, pt[:-1:S]) + EPS_T  # the loop's deliver(t) and the period's deliver(p.t)
+    first_check = ks * S
+    e = _arrivals(sent0, t, u_lost, fu, seq, u_delay, up_thresholds, clocks.physics_hz, first_check)
+    # the command in force is the newest delivered: records (a later command arriving no later wins)
+    later_min = np.minimum.accumulate(e[:, ::-1], axis=1)[:, ::-1]
+    following = np.full_like(later_min, NEVER)
+    following[:, :-1] = later_min[:, 1:]
+    record = (e < following) & (e < steps * S)
+
+    # the vehicle's timeout: at each period's start, time since the last command took effect
+    r, kk = np.nonzero(record)
+    ec = e[r, kk]
+    g = (ec + S - 1) // S  # the first period start at or after the arrival
+    last_of_group = np.ones(len(r), bool)
+    last_of_group[:-1] = (r[1:] != r[:-1]) | (g[1:] != g[:-1])
+    lastapp = np.full((n, steps + 1), -1, np.int64)
+    lastapp[r[last_of_group], g[last_of_group]] = ec[last_of_group]
+    np.maximum.accumulate(lastapp, axis=1, out=lastapp)
+    lastapp = lastapp[:, :steps]
+    last_t = np.where(lastapp >= 0, pt[np.maximum(lastapp, 0)], 0.0)
+    late = (pt[first_check][None, :] - last_t) > timeout_s + 1e-9
+    fs = np.where(late.any(axis=1), np.argmax(late, axis=1), NEVER).astype(np.int64)
+
+    # after the failsafe the vehicle reports it: states newer than its step carry "not offboard" (idle)
+    offboard = newest <= fs[:, None]
+    mode = np.where(offboard, mode0, NONE).astype(np.int8)
+    sent = mode != NONE
+    limit = np.where(fs == NEVER, NEVER, np.minimum(fs, steps) * S)  # (NEVER * S would wrap round)
+    keep = ec < limit[r]  # commands arriving in failsafe are refused (not_offboard)
+    r, kk, ec = r[keep], kk[keep], ec[keep]
+    per_cell = np.bincount(r, minlength=n)
+    width = int(per_cell.max()) if len(r) else 0
+    apply_check = np.full((n, width), NEVER, np.int64)
+    apply_cmd = np.zeros((n, width), np.int64)
+    if len(r):
+        start = np.concatenate(([0], np.cumsum(per_cell)[:-1]))
+        col = np.arange(len(r)) - start[r]
+        apply_check[r, col] = ec
+        apply_cmd[r, col] = kk
+    age_max = int((ec // S - kk).max()) + 1 if len(r) else 1
+    state_age = int((ks[None, :] - newest)[sent].max()) if sent.any() else 0
+    return {"mode": mode, "state": np.where(sent, newest, -1).astype(np.int32), "up_lost": u_lost & sent,
+            "down_lost": d_lost, "failsafe": fs, "apply_check": apply_check, "apply_cmd": apply_cmd,
+            "age_max": age_max, "state_age": state_age}
+
+
+# -- the prediction -----------------------------------------------------------------------------------
+class BatchPredictor:
+    """:class:`controller.predict.Predictor` for n cells: the newest state carried from its stamp to the
+    aim time (s) through the nominal model with the commands sent since, in the same RK4 steps.
+
+    Commands are kept in a ring by their number (``depth`` of them: enough to cover the longest a state
+    may be used, plus the command lag). Each call advances every cell through its segments between command
+    times (a cell with fewer segments takes steps of length 0, which leave its state exactly as it is),
+    continuing from the last prediction while the state is the same one, as the scalar predictor does.
+    """
+
+    def __init__(self, nominal: Nominal, dt_max: float, lag_s: np.ndarray, depth: int) -> None:
+        n = len(lag_s)
+        self.n = n
+        self.m = nominal.mass
+        self.g = nominal.gravity
+        c = Coefficients.of(nominal)
+        self.c = c
+        self.dt_max = dt_max
+        self.lag = lag_s
+        self.depth = depth
+        self.cmd_t = np.full((depth, n), np.inf)  # when each command counts from (send time + lag)
+        self.cmd_u = np.zeros((depth, 5, n))  # u1..u4 realisable, omega_d
+        self.total = np.zeros(n, np.int64)  # commands recorded so far
+        self.from_t = np.full(n, np.nan)  # the state stamp the cache starts from
+        self.cache_t = np.zeros(n)
+        self.cache_X = np.zeros((12, n))
+        self._cols = np.arange(n)
+
+    def sent(self, t: float, u: np.ndarray, omega_d: np.ndarray, which: np.ndarray) -> None:
+        """Record the command sent at t (s) by the cells ``which`` (index array): u [4, len(which)] N, omega_d."""
+        if not len(which):
+            return
+        slot = self.total[which] % self.depth
+        self.cmd_t[slot, which] = t + self.lag[which]
+        self.cmd_u[slot, :4, which] = u.T
+        self.cmd_u[slot, 4, which] = omega_d
+        self.total[which] += 1
+
+    def predict(self, t_state: np.ndarray, X: np.ndarray, aim: np.ndarray, which: np.ndarray) -> np.ndarray:
+        """X [12, len(which)] (measured at ``t_state``) carried to ``aim`` (s) for the cells ``which``."""
+        if not len(which):
+            return X
+        cont = (self.from_t[which] == t_state) & (self.cache_t[which] <= aim)
+        tau = np.where(cont, self.cache_t[which], t_state)
+        Xp = np.where(cont[None, :], self.cache_X[:, which], X)
+        total = self.total[which]
+        depth = self.depth
+        times = self.cmd_t[:, which]  # [depth, k]
+        unused = np.arange(depth)[:, None] >= np.minimum(total, depth)[None, :]
+        times = np.where(unused, np.inf, times)
+        # the command in effect at tau: the newest numbered with its time <= tau (-1: none, zero wrench)
+        after = ((times > tau[None, :]) & ~unused).sum(axis=0)
+        cur = total - 1 - after
+        go = tau < aim
+        cols = self._cols[:len(which)]
+        while go.any():
+            has_next = cur + 1 < total
+            nxt_t = np.where(has_next, times[(cur + 1) % depth, cols], aim)
+            end = np.minimum(nxt_t, aim)
+            u = self.cmd_u[np.maximum(cur, 0) % depth, :, which].T  # [5, k]
+            u = np.where((cur >= 0)[None, :], u, 0.0)
+            span = np.where(go, end - tau, 0.0)
+            kk = np.maximum(1, (span / self.dt_max + 0.999999).astype(np.int64))
+            h = span / kk
+            for i in range(int(kk[go].max()) if go.any() else 0):
+                hi = np.where(i < kk, h, 0.0)
+                Xp = self.rk4(Xp, u, hi)
+            tau = np.where(go, end, tau)
+            cur = np.where(go & (end == nxt_t) & has_next, cur + 1, cur)
+            go = tau < aim
+        self.from_t[which] = t_state
+        self.cache_t[which] = aim
+        self.cache_X[:, which] = Xp
+        return Xp
+
+    def derivative(self, X: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """:meth:`controller.predict.NominalModel.derivative` over the cell axis."""
+        c = self.c
+        phi, dphi, th, dth, psi, dpsi = X[6], X[7], X[8], X[9], X[10], X[11]
+        cphi, sphi, cth, sth, cpsi, spsi = np.cos(phi), np.sin(phi), np.cos(th), np.sin(th), np.cos(psi), np.sin(psi)
+        a = u[0] / self.m
+        od = u[4]
+        return np.stack((
+            X[1], (cphi * sth * cpsi + sphi * spsi) * a,
+            X[3], (cphi * sth * spsi - sphi * cpsi) * a,
+            X[5], cphi * cth * a - self.g,
+            dphi, c.i1 * dth * dpsi - c.jr_x * dth * od + c.l_x * u[1],
+            dth, c.i2 * dphi * dpsi + c.jr_y * dphi * od + c.l_y * u[2],
+            dpsi, c.i3 * dphi * dth + c.l_z * u[3],
+        ))
+
+    def rk4(self, X: np.ndarray, u: np.ndarray, h: np.ndarray) -> np.ndarray:
+        """One RK4 step of h (s, per cell) with the wrench held, in NominalModel.rk4's order of operations."""
+        f = self.derivative
+        k1 = f(X, u)
+        k2 = f(X + 0.5 * h * k1, u)
+        k3 = f(X + 0.5 * h * k2, u)
+        k4 = f(X + h * k3, u)
+        s = h / 6.0
+        return X + s * (k1 + 2.0 * k2 + 2.0 * k3 + k4)

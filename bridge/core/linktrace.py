@@ -1,0 +1,267 @@
+"""Measured link traces: per-packet one-way delays and losses, replayed by the link model
+(docs/links.md, "Link traces").
+
+In:  a trace file (CSV, UTF-8: a header naming ``t_s`` (s from the trace's start), ``delay_ms``
+     (one-way, ms; empty: lost) and optionally ``direction`` (``up`` | ``down``); ``#`` lines are
+     comments), a packet's send time (s of mission time)
+Out: :class:`TraceFile` (each direction's :class:`Records`, validated: a bad row is a ``ConfigError``
+     naming the file and the line), the delay (s) or the loss of a packet sent at time t
+     (:class:`Replay`), a trace's own figures (:func:`own_figures`: records, loss %, delay
+     percentiles ms), and trace text to write (:func:`trace_text`)
+
+A packet sent at time t takes the record with the largest ``t_s`` <= t of its direction (the
+first record before the trace's first ``t_s``); with a ``direction`` column each direction has its
+own rows, without one the rows serve both. A trace lasts its last ``t_s`` plus its median record
+spacing (:attr:`Records.length_s`); past its end it is refused for a longer mission
+(bridge.core.link), or looped: t is taken modulo that length.
+
+Pure: the file's bytes come from :func:`params.read_regular_file`, which refuses what is not a
+regular file; this module only reads text.
+"""
+
+from __future__ import annotations
+
+import bisect
+import csv
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from statistics import median
+from typing import Any
+
+from params import ConfigError, read_regular_file
+
+COLUMNS = ("t_s", "delay_ms", "direction")
+REQUIRED = ("t_s", "delay_ms")
+DIRECTIONS = ("up", "down")
+DELAY_RANGE_MS = (0.0, 60_000.0)  # the one-way delay a record may give, as the [link] delay_ms key
+T_RANGE_S = (0.0, 1e7)  # a record's time from the trace's start
+MAX_TRACE_BYTES = 512 << 20  # about 2.5e7 records: anything bigger is not a link trace of a flight
+LENGTH_SLACK_S = 1e-6  # a trace "as long as" the mission may fall short of it by rounding
+
+
+@dataclass(frozen=True)
+class Records:
+    """One direction's records: send times (s, strictly increasing) and one-way delays (s, nan: lost)."""
+
+    t_s: tuple[float, ...]
+    delay_s: tuple[float, ...]
+    length_s: float  # last t_s + the median spacing: how long the trace lasts (its loop period)
+
+    @property
+    def n(self) -> int:
+        return len(self.t_s)
+
+    @property
+    def lost(self) -> int:
+        return sum(1 for d in self.delay_s if d != d)
+
+
+def make_records(t_s: Iterable[float], delay_s: Iterable[float]) -> Records:
+    """:class:`Records` from times (s, strictly increasing) and delays (s, nan lost); length computed."""
+    t = tuple(t_s)
+    d = tuple(delay_s)
+    spacing = median(b - a for a, b in zip(t, t[1:], strict=False)) if len(t) > 1 else 0.0
+    return Records(t, d, (t[-1] + spacing) if t else 0.0)
+
+
+@dataclass(frozen=True)
+class TraceFile:
+    """A validated trace: its path and its records, for both directions or each apart."""
+
+    path: str
+    both: Records | None = None  # no direction column: these rows serve both directions
+    up: Records | None = None
+    down: Records | None = None
+
+    def records(self, direction: str) -> Records | None:
+        """The records ``direction`` replays (None: the file has no rows for it)."""
+        return self.both if self.both is not None else (self.up if direction == "up" else self.down)
+
+
+@dataclass(frozen=True)
+class DirectionTrace:
+    """What one direction of the link model replays: the file, its records, whether it loops."""
+
+    path: str
+    records: Records
+    loop: bool = False
+
+    def describe(self) -> str:
+        r = self.records
+        return f"trace {Path(self.path).name} ({r.n} records, {r.length_s:g} s{', looped' if self.loop else ''})"
+
+
+class Replay:
+    """The delay (s) or loss (nan) of a packet sent at time t (s from the trace's start)."""
+
+    def __init__(self, trace: DirectionTrace) -> None:
+        self.t = trace.records.t_s
+        self.d = trace.records.delay_s
+        self.length = trace.records.length_s
+        self.loop = trace.loop and self.length > 0.0
+
+    def delay_at(self, t: float) -> float:
+        """Delay in s (nan: lost) of the record with the largest ``t_s`` <= t (the first before it)."""
+        if not t > 0.0:  # before the trace's start (or -inf: a mission clock not started yet)
+            return self.d[0]
+        if self.loop and t >= self.length:
+            t = math.fmod(t, self.length)
+        i = bisect.bisect_right(self.t, t) - 1
+        return self.d[i if i > 0 else 0]
+
+
+# -- reading -----------------------------------------------------------------------------------
+def read_trace(path: str | Path) -> TraceFile:
+    """Read and validate a trace file (every problem a ``ConfigError`` naming the file, and the line)."""
+    data = read_regular_file(path, "a link trace (CSV)", MAX_TRACE_BYTES)
+    return parse_trace(data, str(path))
+
+
+def parse_trace(data: bytes, name: str) -> TraceFile:
+    """Validate a trace's bytes; ``name`` is what the errors call the file."""
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        raise ConfigError(f"{name} line {line}: not UTF-8 text (expected a CSV link trace)") from None
+    lines = [(i, ln) for i, ln in enumerate(text.removeprefix("\ufeff").splitlines(), 1)
+             if ln.strip() and not ln.lstrip().startswith("#")]
+    if not lines:
+        raise ConfigError(f"{name}: empty; expected a CSV header {','.join(REQUIRED)}[,direction] and records")
+    head_line, head = lines[0]
+    cols = _header(next(csv.reader([head])), name, head_line)
+    rows: dict[str, tuple[list[float], list[float]]] = {}
+    bad: list[str] = []
+    last: dict[str, float] = {}
+    reader = csv.reader(ln for _, ln in lines[1:])
+    for (number, _), fields in zip(lines[1:], reader, strict=True):
+        why, direction, t, d = _row(fields, cols, last)
+        if direction and t == t:  # a good time on a bad row still orders the rows after it
+            last[direction] = t
+        if why:
+            bad.append(f"{name} line {number}: {why}")
+            continue
+        ts, ds = rows.setdefault(direction, ([], []))
+        ts.append(t)
+        ds.append(d)
+    if bad:
+        more = f" (and {len(bad) - 1} more bad row{'s' if len(bad) > 2 else ''})" if len(bad) > 1 else ""
+        raise ConfigError(bad[0] + more)
+    if not rows:
+        raise ConfigError(f"{name}: no records after the header (rows of {','.join(cols)})")
+    recs = {k: make_records(*v) for k, v in rows.items()}
+    if "direction" in cols:
+        return TraceFile(name, up=recs.get("up"), down=recs.get("down"))
+    return TraceFile(name, both=recs["both"])
+
+
+def _header(names: list[str], name: str, line: int) -> tuple[str, ...]:
+    cols = tuple(n.strip() for n in names)
+    unknown = [c for c in cols if c not in COLUMNS]
+    if unknown:
+        raise ConfigError(f"{name} line {line}: unknown column {unknown[0]!r}; a trace has the columns "
+                          f"{', '.join(COLUMNS)} (direction optional)")
+    if len(set(cols)) != len(cols):
+        raise ConfigError(f"{name} line {line}: a column is named twice ({', '.join(cols)})")
+    missing = [c for c in REQUIRED if c not in cols]
+    if missing:
+        raise ConfigError(f"{name} line {line}: no {missing[0]} column; the header must name "
+                          f"{', '.join(REQUIRED)} (and optionally direction)")
+    return cols
+
+
+def _row(fields: list[str], cols: tuple[str, ...], last: Mapping[str, float]) -> tuple[str | None, str, float, float]:
+    """(why it is bad or None, direction ("" if unknown), t_s (nan if bad), delay s (nan: lost)) of one record."""
+    nan = math.nan
+    if len(fields) != len(cols):
+        return f"{len(fields)} fields, the header has {len(cols)} ({','.join(cols)})", "", nan, nan
+    v = dict(zip(cols, (f.strip() for f in fields), strict=True))
+    direction = v.get("direction", "both")
+    if direction not in ("both", *DIRECTIONS) or "direction" in v and direction == "both":
+        return f"direction must be up or down, got {direction!r}", "", nan, nan
+    t, why = _number(v["t_s"], "t_s", T_RANGE_S)
+    if why:
+        return why, direction, nan, nan
+    if direction in last and not t > last[direction]:
+        where = f" of the {direction} rows" if direction != "both" else ""
+        return f"t_s must increase: {t!r} after {last[direction]!r}{where}", direction, nan, nan
+    if v["delay_ms"] == "":
+        return None, direction, t, nan
+    d, why = _number(v["delay_ms"], "delay_ms", DELAY_RANGE_MS)
+    return why, direction, t, d / 1000.0
+
+
+def _number(text: str, key: str, bounds: tuple[float, float]) -> tuple[float, str | None]:
+    try:
+        x = float(text)
+    except ValueError:
+        return 0.0, f"{key} is not a number: {text[:40]!r}"
+    if math.isnan(x):
+        return 0.0, f"{key} is NaN (an empty delay_ms means lost)" if key == "delay_ms" else f"{key} is NaN"
+    lo, hi = bounds
+    if not lo <= x <= hi:
+        return 0.0, f"{key} must be in [{lo:g}, {hi:g}], got {text[:40]}"
+    return x, None
+
+
+def records_problem(tf: TraceFile, direction: str) -> str | None:
+    """Why ``direction`` cannot replay ``tf`` (no rows of its own), or None."""
+    if tf.records(direction) is None:
+        return f"has no {direction} rows (its direction column names only {'down' if direction == 'up' else 'up'})"
+    return None
+
+
+# -- a trace's own figures, and writing one ---------------------------------------------------------
+def own_figures(trace: DirectionTrace) -> dict[str, Any]:
+    """The trace's own records, loss (%) and delay percentiles (ms), for ``summary.json``."""
+    import numpy as np  # lazy: the relay loads no numpy while it relays
+
+    r = trace.records
+    d = np.asarray(r.delay_s, dtype=float)
+    ok = d[~np.isnan(d)] * 1000.0
+    pct = ({"p50": None, "p95": None, "p99": None, "max": None} if not len(ok) else
+           dict(zip(("p50", "p95", "p99"), map(float, np.percentile(ok, (50.0, 95.0, 99.0))), strict=True))
+           | {"max": float(ok.max())})
+    return {"file": trace.path, "records": r.n, "length_s": r.length_s, "loop": trace.loop,
+            "loss_pct": 100.0 * (r.n - len(ok)) / r.n if r.n else None, "delay_ms": pct}
+
+
+def trace_text(rows: Iterable[tuple[float, float | None, str | None]], comments: Iterable[str] = ()) -> str:
+    """A trace file's text: ``comments`` as ``#`` lines, then rows (t_s, delay_ms or None for lost,
+    direction or None); a direction column when the first row has one. Floats as ``repr``."""
+    out = [f"# {c}" for c in comments]
+    rows = list(rows)
+    with_dir = bool(rows) and rows[0][2] is not None
+    out.append("t_s,delay_ms,direction" if with_dir else "t_s,delay_ms")
+    for t, d, direction in rows:
+        cell = "" if d is None or d != d else repr(d)
+        out.append(f"{t!r},{cell},{direction}" if with_dir else f"{t!r},{cell}")
+    return "\n".join(out) + "\n"
+
+
+# -- the paths a [link] table names --------------------------------------------------------------------
+def is_profile_path(name: str) -> bool:
+    """Whether a ``profile`` value names a file (``*.toml`` or with a folder) rather than a shipped profile."""
+    return name.endswith(".toml") or "/" in name or "\\" in name
+
+
+def absolute_link_paths(table: Mapping[str, Any] | None, base: Path) -> dict[str, Any]:
+    """A ``[link]`` table with its relative ``trace`` files (in it and in ``up`` / ``down``) and a
+    ``profile`` file made absolute against ``base`` (a mission's folder, or the working directory for
+    a flag), so that every process that reads the flown ``mission.toml`` finds the same files."""
+    out: dict[str, Any] = {k: (dict(v) if isinstance(v, Mapping) else v) for k, v in (table or {}).items()}
+
+    def fix(t: dict[str, Any], key: str) -> None:
+        v = t.get(key)
+        if isinstance(v, str) and v and (key == "trace" or is_profile_path(v)):
+            p = Path(v).expanduser()
+            t[key] = str(p if p.is_absolute() else (base / p).absolute())
+
+    fix(out, "trace")
+    fix(out, "profile")
+    for d in DIRECTIONS:
+        if isinstance(out.get(d), dict):
+            fix(out[d], "trace")
+    return out

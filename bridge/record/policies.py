@@ -1,0 +1,425 @@
+"""Safety policies as executable properties (in the manner of PGFuzz), checked over every run.
+
+In:  a run's trace arrays by column (:data:`~bridge.record.columns.TRACE_COLUMNS`: ``t`` s, ``u*_act`` N,
+     ``state_age_s`` s), its events (dicts: ``t`` s, ``kind``, ``text``, and in a session ``source``), the
+     :class:`Rules` it flew under (control rate Hz, ``[failsafe] timeout_s`` s, clock, link delays s, the
+     controller's ids), and in a lockstep session its ``lockstep`` record and the first step its vehicle
+     flew off the step clock
+Out: one :class:`Verdict` per policy of :data:`POLICIES` (``ok``; when violated, the mission time of the
+     first violation and a one-line why), for ``summary.json["policies"]``; and the honest records that
+     go with them: who sent an arm or disarm (:func:`sender_of`), the lockstep record
+     (:func:`lockstep_record`), who ended a flight by command (:func:`ended_by_command`)
+
+The offline loop (:mod:`bridge.loop`) and the SITL session (:mod:`bridge.session`) both call
+:func:`check` on what they recorded, so every run is judged by the same properties; a violated
+policy is named on stderr and in ``summary.json`` and makes ``bsst sim`` / ``bsst sitl`` exit 1.
+
+What each policy reads, and why it cannot be fooled by a run's own claims:
+
+- ``no_actuation_disarmed``: the disarmed intervals from the vehicle's ``armed`` / ``disarmed``
+  events; every trace row strictly inside one must realise zero wrench (``u1_act..u4_act``).
+  With a motor lag (``Rules.spin_down``) the rotors spin down instead: the realised values may
+  only shrink.
+- ``failsafe_in_time``: armed under offboard control (from an ``armed`` event, or the start
+  offline), the vehicle must leave offboard control (its ``failsafe`` event, a disarm or a
+  divergence) within ``timeout_s`` plus one control period of the last valid target. The
+  targets are read from the trace: a row that answers its step (offline, lockstep) with a
+  command (finite ``state_age_s``) sent one at ``t``, which acts at most the up link's largest
+  delay later (``Rules.command_slack_s``); a row that shows the command in force (real time,
+  or lockstep after the vehicle left it) has it from the state stamped ``t - state_age_s``: a
+  new stamp arrived by ``t``, and the controller repeats a stamp for at most its link guard's
+  ``stop_ms`` plus the link's delays (``Rules.hold_slack_s``). These bounds are upper ones: a
+  lost command counts as sent, so a lossy link never makes a violation, and a vehicle that
+  flies on without targets always does.
+- ``arm_authority``: every arm or disarm the vehicle reports names its sender as the suffix
+  `` [by SYSID:COMPID HOST:PORT LINK]`` (or `` [by vehicle]``): on the controller link only the
+  configured controller's ids have authority; on the GCS link any ground station (with a key
+  only signed frames get that far: the receive path refuses the rest). An event without the
+  suffix names nobody and is not judged.
+- ``lockstep_recorded``: in a lockstep session, a vehicle that left lockstep (its ``lockstep``
+  event, or a vehicle row flown off the step clock) has a record saying so (``held`` false, the
+  time of the first event); a row off the step clock with no ``lockstep`` event before it is a
+  vehicle that left silently.
+- ``time_steady``: the trace's ``t`` increases by exactly one control period from row to row
+  (a missing row, a repeated step or a jump of the mission's clock breaks it), except over
+  steps the vehicle flew disarmed: on the wall clock it writes no rows then (real time,
+  landed by its failsafe until ``[failsafe] resume`` re-arms it).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+POLICIES: dict[str, str] = {
+    "no_actuation_disarmed": "the realised thrust and torques are zero whenever the vehicle is disarmed",
+    "failsafe_in_time": "armed under offboard control, the vehicle fails safe within the timeout plus one step "
+                        "of its last valid target",
+    "arm_authority": "no arm or disarm from a sender without authority (controller link: the configured "
+                     "controller only; GCS link: any ground station)",
+    "lockstep_recorded": "lockstep is never left without a record",
+    "time_steady": "the mission's time never jumps: trace t increases by one control period each row",
+}
+EPS_S = 1e-5  # s: event times are rounded to 1 us; a physics step is at least 100 us
+ZERO_N = 1e-9  # N: a realised wrench this small is zero
+CONTROLLER_ID = (200, 191)  # the configured controller's sysid, compid (bridge.mavlink.endpoint's default)
+_BY = re.compile(r"\[by (?:(vehicle)|(\d+):(\d+) (\S+) (\w+))\]")
+_ENDS_OFFBOARD = ("failsafe", "disarmed", "diverged")
+
+
+@dataclass(frozen=True)
+class Rules:
+    """What a run is judged against. ``clock``: ``offline``, ``lockstep`` or ``realtime``;
+    ``armed_at_start``: the offline loop's vehicle is armed from t = 0, a session's is not;
+    ``command_slack_s``: how long after its row a command sent may act (the up link's largest
+    delay); ``hold_slack_s``: how long after its state's stamp a command in force may still be
+    repeated (the guard's ``stop_ms`` plus both links' largest delays plus a period);
+    ``spin_down``: a motor lag spins the rotors down after a disarm instead of stopping them."""
+
+    rate_hz: float
+    timeout_s: float
+    clock: str = "offline"
+    armed_at_start: bool = False
+    command_slack_s: float = 0.0
+    hold_slack_s: float = 0.0
+    controller_id: tuple[int, int] = CONTROLLER_ID
+    spin_down: bool = False
+
+    @property
+    def period_s(self) -> float:
+        return 1.0 / self.rate_hz
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """One policy over one run: ``ok``, or the mission time ``t`` (s) of its first violation and why."""
+
+    name: str
+    ok: bool
+    t: float | None = None
+    why: str | None = None
+
+    def as_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"name": self.name, "ok": self.ok}
+        if not self.ok:
+            out["t"] = None if self.t is None or not math.isfinite(self.t) else round(self.t, 6)
+            out["why"] = self.why
+        return out
+
+
+@dataclass(frozen=True)
+class Sender:
+    """Who sent a command, as the vehicle's event names it (``link``: ``controller``, ``gcs``, or
+    ``vehicle`` for the vehicle's own decision, without ids or address)."""
+
+    link: str
+    sysid: int | None = None
+    compid: int | None = None
+    address: str | None = None
+
+    def __str__(self) -> str:
+        if self.link == "vehicle":
+            return "vehicle"
+        return f"{self.sysid}:{self.compid} {self.address} {self.link}"
+
+
+def sender_of(text: str) -> Sender | None:
+    """The sender an event's text names in its last `` [by ...]`` suffix, or None when it names none."""
+    found = list(_BY.finditer(text or ""))
+    if not found:
+        return None
+    m = found[-1]
+    if m.group(1):
+        return Sender("vehicle")
+    return Sender(m.group(5), int(m.group(2)), int(m.group(3)), m.group(4))
+
+
+def without_sender(text: str) -> str:
+    """An event's text without its `` [by ...]`` suffix."""
+    return _BY.sub("", text or "").rstrip()
+
+
+def vehicle_events(events: Sequence[Mapping[str, Any]]) -> list[Mapping[str, Any]]:
+    """The events the vehicle reported (offline: all of them; a session's carry ``source``), with a time."""
+    return [e for e in events if e.get("source", "vehicle") == "vehicle" and e.get("t") is not None]
+
+
+# -- the honest records ------------------------------------------------------------------------------
+def lockstep_record(events: Sequence[Mapping[str, Any]], off_clock_t: float | None = None) -> dict[str, Any]:
+    """``summary.json["lockstep"]`` of a lockstep session: ``{"held": true}``, or ``held`` false with
+    the time and text of the vehicle's first ``lockstep`` event (``left_at_s``, ``why``) and how many
+    times it left (``times``); a vehicle row flown off the step clock (from ``off_clock_t`` s) with
+    no such event is recorded too, as having left without saying so."""
+    left = [e for e in vehicle_events(events) if e["kind"] == "lockstep"]
+    if left:
+        first = left[0]
+        return {"held": False, "left_at_s": first["t"], "why": first["text"], "times": len(left)}
+    if off_clock_t is not None:
+        return {"held": False, "left_at_s": round(off_clock_t, 6),
+                "why": "the vehicle flew off the step clock without saying so", "times": 1}
+    return {"held": True}
+
+
+def ended_by_command(events: Sequence[Mapping[str, Any]], controller_id: tuple[int, int] = CONTROLLER_ID,
+                     before_s: float = math.inf) -> tuple[Mapping[str, Any], Sender | None] | None:
+    """The vehicle's first disarm by command before ``before_s`` (or a mode change) that the
+    configured controller on its own link did not send: the event and its sender (None when the
+    event names none), or None."""
+    for e in vehicle_events(events):
+        if e["t"] >= before_s - EPS_S:
+            break
+        text = e.get("text", "")
+        commanded = (e["kind"] == "disarmed" and "by command" in text) or e["kind"] == "mode"
+        if not commanded:
+            continue
+        who = sender_of(text)
+        if who is not None and who.link == "controller" and (who.sysid, who.compid) == controller_id:
+            continue
+        return e, who
+    return None
+
+
+# -- the policies ----------------------------------------------------------------------------------------
+def check(trace: Mapping[str, Any], events: Sequence[Mapping[str, Any]], rules: Rules,
+          lockstep: Mapping[str, Any] | None = None, off_clock_t: float | None = None) -> list[Verdict]:
+    """Every policy of :data:`POLICIES` over one run, in that order (see the module docstring)."""
+    ev = vehicle_events(events)
+    t = np.asarray(trace["t"], dtype=float)
+    return [
+        no_actuation_disarmed(t, [np.asarray(trace[f"u{i}_act"], dtype=float) for i in range(1, 5)], ev, rules),
+        failsafe_in_time(t, np.asarray(trace["state_age_s"], dtype=float), ev, rules),
+        arm_authority(ev, rules),
+        lockstep_recorded(ev, rules, lockstep, off_clock_t),
+        time_steady(t, rules, ev),
+    ]
+
+
+def all_hold(verdicts: Sequence[Mapping[str, Any]] | None) -> bool:
+    """Whether every policy of ``summary.json["policies"]`` holds (none checked: vacuously)."""
+    return all(v.get("ok") for v in verdicts or ())
+
+
+def disarmed_intervals(events: Sequence[Mapping[str, Any]], armed_at_start: bool) -> list[tuple[float, float]]:
+    """(disarm t, next arm t or inf) of each disarmed stretch the vehicle's events tell, in order."""
+    out: list[tuple[float, float]] = []
+    since: float | None = None if armed_at_start else -math.inf
+    for e in events:
+        if e["kind"] == "disarmed" and since is None:
+            since = e["t"]
+        elif e["kind"] == "armed" and since is not None:
+            out.append((since, e["t"]))
+            since = None
+    if since is not None:
+        out.append((since, math.inf))
+    return out
+
+
+def no_actuation_disarmed(t: np.ndarray, realised: Sequence[np.ndarray], events: Sequence[Mapping[str, Any]],
+                          rules: Rules) -> Verdict:
+    """Rows strictly inside a disarmed stretch realise no wrench (``spin_down``: never more than the row before)."""
+    name = "no_actuation_disarmed"
+    u = np.abs(np.column_stack(realised)) if len(t) else np.zeros((0, 4))
+    for start, end in disarmed_intervals(events, rules.armed_at_start):
+        inside = np.nonzero((t > start + EPS_S) & (t < end - EPS_S))[0]
+        if not len(inside):
+            continue
+        if rules.spin_down:
+            grew = np.nonzero(np.any(u[inside[1:]] > u[inside[:-1]] + ZERO_N, axis=1))[0]
+            if len(grew):
+                i = inside[grew[0] + 1]
+                return Verdict(name, False, float(t[i]), f"disarmed since t={start:.3f} s, the realised wrench "
+                                                         f"grows at t={t[i]:.3f} s ({_wrench(u[i])})")
+            continue
+        bad = np.nonzero(np.any(u[inside] > ZERO_N, axis=1))[0]
+        if len(bad):
+            i = inside[bad[0]]
+            return Verdict(name, False, float(t[i]), f"disarmed since t={start:.3f} s, yet at t={t[i]:.3f} s "
+                                                     f"the plant realises {_wrench(u[i])}")
+    return Verdict(name, True)
+
+
+def _wrench(u: np.ndarray) -> str:
+    return f"|u1..u4| = {u[0]:.3g} N, {u[1]:.3g}, {u[2]:.3g}, {u[3]:.3g}"
+
+
+def offboard_intervals(events: Sequence[Mapping[str, Any]], armed_at_start: bool
+                       ) -> list[tuple[float, float, str | None]]:
+    """(arm t, t it left offboard control or inf, the kind of event that ended it or None) of
+    each stretch armed under offboard control."""
+    out: list[tuple[float, float, str | None]] = []
+    since: float | None = -math.inf if armed_at_start else None
+    for e in events:
+        if e["kind"] == "armed":
+            if since is not None:  # armed again without leaving: the timeout restarts
+                out.append((since, e["t"], "armed"))
+            since = e["t"]
+        elif e["kind"] in _ENDS_OFFBOARD and since is not None:
+            out.append((since, e["t"], e["kind"]))
+            since = None
+    if since is not None:
+        out.append((since, math.inf, None))
+    return out
+
+
+def failsafe_in_time(t: np.ndarray, age: np.ndarray, events: Sequence[Mapping[str, Any]], rules: Rules) -> Verdict:
+    """Armed offboard, no stretch longer than ``timeout_s`` + one period since the last valid target
+    without a failsafe (see the module docstring for how the targets are read from the trace)."""
+    name = "failsafe_in_time"
+    period, timeout = rules.period_s, rules.timeout_s
+    left = next((e["t"] for e in events if e["kind"] == "lockstep"), math.inf)
+    answers_until = left if rules.clock in ("offline", "lockstep") else -math.inf  # rows answering their step
+    for start, end, kind in offboard_intervals(events, rules.armed_at_start):
+        last = start if math.isfinite(start) else (float(t[0]) if len(t) else 0.0)  # arming restarts the timeout
+        stamp = math.nan
+        inside = np.nonzero((t >= start - EPS_S) & (t < end - EPS_S))[0]
+        for i in inside:
+            ti, ai = float(t[i]), float(age[i])
+            if math.isfinite(ai):
+                if ti < answers_until - EPS_S:
+                    last = max(last, ti + rules.command_slack_s)
+                else:  # the command in force: from the state stamped ti - ai
+                    s = ti - ai
+                    if abs(s - stamp) > EPS_S or math.isnan(stamp):
+                        last = max(last, ti + period)  # a new one, in by ti (repeats of it within a period)
+                        stamp = s
+                    last = max(last, s + rules.hold_slack_s)
+            if ti > last + timeout + period + EPS_S:
+                return Verdict(name, False, ti, f"armed offboard with no actuator target since t={last:.3f} s, "
+                                                f"still no failsafe at t={ti:.3f} s (timeout {timeout:g} s "
+                                                f"+ one step {period:g} s)")
+        if kind == "failsafe" and end > last + timeout + period + EPS_S:
+            return Verdict(name, False, end, f"failsafe at t={end:.3f} s, {end - last:.3f} s after the last valid "
+                                             f"target at t={last:.3f} s (timeout {timeout:g} s + one step "
+                                             f"{period:g} s)")
+    return Verdict(name, True)
+
+
+def arm_authority(events: Sequence[Mapping[str, Any]], rules: Rules) -> Verdict:
+    """Every arm and disarm (and mode change) that names its sender names one with authority."""
+    name = "arm_authority"
+    for e in events:
+        if e["kind"] not in ("armed", "disarmed", "mode"):
+            continue
+        who = sender_of(e.get("text", ""))
+        if who is None or who.link in ("vehicle", "gcs"):
+            continue
+        if who.link != "controller":
+            return Verdict(name, False, e["t"], f"{e['kind']} by {who}: not a link the vehicle has")
+        if (who.sysid, who.compid) != rules.controller_id:
+            ids = f"{rules.controller_id[0]}:{rules.controller_id[1]}"
+            return Verdict(name, False, e["t"], f"{e['kind']} by {who}: on the controller link only {ids} has "
+                                                f"authority")
+    return Verdict(name, True)
+
+
+def lockstep_recorded(events: Sequence[Mapping[str, Any]], rules: Rules, record: Mapping[str, Any] | None,
+                      off_clock_t: float | None) -> Verdict:
+    """A lockstep session that left lockstep says so: the vehicle's event, and a record that agrees."""
+    name = "lockstep_recorded"
+    if rules.clock != "lockstep":
+        return Verdict(name, True)
+    left = next((e for e in events if e["kind"] == "lockstep"), None)
+    if off_clock_t is not None and (left is None or left["t"] > off_clock_t + rules.period_s + EPS_S):
+        return Verdict(name, False, off_clock_t, f"the vehicle flew off the step clock from t={off_clock_t:.3f} s "
+                                                 "without a lockstep event")
+    if left is None:
+        if record is not None and not record.get("held", False):
+            return Verdict(name, False, record.get("left_at_s"), "the record says lockstep was left, the vehicle "
+                                                                  "never said so")
+        return Verdict(name, True)
+    if record is None or record.get("held", True):
+        return Verdict(name, False, left["t"], f"the vehicle left lockstep at t={left['t']:.3f} s "
+                                               f"({left['text']}), the record says it held")
+    at = record.get("left_at_s")
+    if at is None or abs(at - left["t"]) > EPS_S:
+        return Verdict(name, False, left["t"], f"the vehicle left lockstep at t={left['t']:.3f} s, the record "
+                                               f"says at {at}")
+    return Verdict(name, True)
+
+
+def time_steady(t: np.ndarray, rules: Rules, events: Sequence[Mapping[str, Any]] = ()) -> Verdict:
+    """``t`` finite and increasing by exactly one control period from row to row. The one gap
+    allowed is over steps the vehicle's events say it flew disarmed (a vehicle on the wall
+    clock writes no rows while disarmed: real time, landed by its failsafe until a re-arm)."""
+    name = "time_steady"
+    period = rules.period_s
+    if len(t) and not np.all(np.isfinite(t)):
+        i = int(np.nonzero(~np.isfinite(t))[0][0])
+        return Verdict(name, False, float(t[i - 1]) if i else None, f"row {i} has t = {t[i]}")
+    d = np.diff(t)
+    bad = np.nonzero(np.abs(d - period) > 1e-6 * period)[0]
+    off = disarmed_intervals(events, rules.armed_at_start)
+    for i in map(int, bad):
+        a, b = float(t[i]), float(t[i + 1])
+        if b > a and any(s <= a + period + EPS_S and b - period - EPS_S <= e for s, e in off):
+            continue  # every step in between flown disarmed, unrecorded
+        return Verdict(name, False, a, f"t goes from {a:.6f} s to {b:.6f} s (one period is {period:g} s)")
+    return Verdict(name, True)
+
+
+def rules_for(flight: Any, clock: str, link: Mapping[str, Any] | None,
+              controller_id: tuple[int, int] = CONTROLLER_ID) -> Rules:
+    """The :class:`Rules` of a :class:`~bridge.core.flight.Flight` flown on ``clock``, with the
+    largest delays of its ``summary.json["link"]`` block (ms; none: 0) and the configured
+    controller's ids."""
+    m = flight.mission
+
+    def max_s(d: str) -> float:
+        v = ((link or {}).get(d) or {}).get("delay_ms") or {}
+        x = v.get("max")
+        return 1e-3 * float(x) if x is not None and math.isfinite(float(x)) else 0.0
+
+    up, down = max_s("up"), max_s("down")
+    physics = 1.0 / m.physics_hz
+    lag = flight.profile.actuation == "motors" and bool(getattr(flight.effects, "motor_lag", False))
+    return Rules(rate_hz=m.rate_hz, timeout_s=flight.failsafe.timeout_s, clock=clock,
+                 armed_at_start=clock == "offline", command_slack_s=up + physics,
+                 hold_slack_s=flight.guard.stop_s + up + down + 1.0 / m.rate_hz, controller_id=controller_id,
+                 spin_down=lag)
+
+
+def ended_by_outcome(outcome: str, events: Sequence[Mapping[str, Any]]) -> dict[str, str]:
+    """``summary.json["ended_by"]`` as the outcome and the vehicle's events tell it: the mission
+    (completed), the vehicle (its failsafe, with its event), the plant (diverged), or whoever
+    interrupted it. A session knows more (a child that died, a command from someone) and says so."""
+    ev = vehicle_events(events)
+
+    def first(kind: str) -> Mapping[str, Any] | None:
+        return next((e for e in ev if e["kind"] == kind), None)
+
+    if outcome == "completed":
+        return {"who": "mission", "how": "completed"}
+    if outcome == "diverged":
+        e = first("diverged")
+        return {"who": "plant", "how": f"diverged at t={e['t']:.3f} s: {e['text']}" if e else "diverged"}
+    if outcome == "failsafe":
+        e = first("failsafe")
+        return {"who": "vehicle", "how": f"failsafe at t={e['t']:.3f} s: {e['text']}" if e else "failsafe"}
+    return {"who": "user", "how": "interrupted (Ctrl-C or SIGTERM)"}
+
+
+def judge(summary: dict[str, Any], trace: Mapping[str, Any], events: Sequence[Mapping[str, Any]], rules: Rules,
+          lockstep: Mapping[str, Any] | None = None, off_clock_t: float | None = None) -> list[Verdict]:
+    """:func:`check` a run and put the verdicts into its ``summary["policies"]``; the violated ones."""
+    verdicts = check(trace, events, rules, lockstep, off_clock_t)
+    summary["policies"] = [v.as_dict() for v in verdicts]
+    return [v for v in verdicts if not v.ok]
+
+
+def violation_text(v: Verdict | Mapping[str, Any]) -> str:
+    """One line naming a violated policy: ``NAME violated at t=... s: why``."""
+    d = v.as_dict() if isinstance(v, Verdict) else v
+    at = f" at t={d['t']:.3f} s" if d.get("t") is not None else ""
+    return f"{d['name']} violated{at}: {d.get('why')}"
+
+
+def run_ok(summary: Mapping[str, Any]) -> bool:
+    """Whether a run is a clean completion (exit status 0): outcome ``completed``, every policy
+    holds, and a lockstep session held lockstep throughout."""
+    return (summary.get("outcome") == "completed" and all_hold(summary.get("policies"))
+            and (summary.get("lockstep") or {"held": True}).get("held", False))

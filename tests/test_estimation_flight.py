@@ -1,0 +1,179 @@
+"""Sensors and the on-board estimator in the flights: offline (``bsst sim``) and lockstep (``bsst sitl``),
+with ``truth`` (the default) unchanged, real processes over real UDP, the tlog read with pymavlink."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import common as mavlink
+
+from bridge.cli import main
+from bridge.cli.commands import build_parser
+from bridge.core.estimator import ESTIMATOR_KINDS
+from bridge.loop import simulate
+from bridge.record.columns import ESTIMATE_COLUMNS, TRACE_COLUMNS
+from bridge.record.runlog import read_trace
+from bridge.session import instance_slot, sitl
+from missions import MISSION_DIR
+from tests.sitlkit import ENV, ROOT
+
+SINE = MISSION_DIR / "sine.toml"
+EKF_MOCAP = {"sensors": {"set": "mocap"}, "estimator": "ekf"}
+SINE_6S = 'name = "sine6"\nduration_s = 6.0\nseed = {seed}\n[trajectory]\nkind = "sine"\n' \
+          '[sensors]\nset = "mocap"\n[estimator]\nkind = "ekf"\n'
+
+
+def _bsst(*argv: object, timeout: float = 300.0) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "bridge", *map(str, argv)], cwd=ROOT, env=ENV, capture_output=True,
+                          text=True, timeout=timeout)
+
+
+def test_truth_and_ideal_sensors_leave_the_sine_unchanged():
+    """The paper's figure stays: no sensors sampled, the controller on the true state, bit for bit."""
+    base = simulate(SINE, plots=False)
+    assert 2.2e-6 < base.summary["rms_3d"] < 2.4e-6 and "estimation" not in base.summary
+    for kw in ({"sensors": {"set": "ideal"}}, {"estimator": "truth"}, {"sensors": {"set": "mocap"}, "noise": 2.0}):
+        run = simulate(SINE, plots=False, **kw)  # truth: the sensor set is not even sampled
+        assert run.summary["rms_3d"] == base.summary["rms_3d"], kw
+        assert all(np.array_equal(run.trace[c], base.trace[c], equal_nan=True) for c in TRACE_COLUMNS), kw
+    for c, e in zip(("x", "vx", "psi", "dpsi"), ("x_est", "vx_est", "psi_est", "dpsi_est"), strict=True):
+        assert np.array_equal(base.trace[c], base.trace[e])  # truth's estimate is the truth
+    assert np.all(base.trace["nees"] == 0.0)
+
+
+def test_sim_with_mocap_and_ekf_flies_and_reports_its_estimation(tmp_path):
+    out = tmp_path / "run"
+    r = _bsst("sim", SINE, "--sensors", "mocap", "--estimator", "ekf", "--out", out, "--no-plots")
+    assert r.returncode == 0, r.stderr
+    s = json.loads((out / "summary.json").read_text())
+    assert s["outcome"] == "completed" and s["rms_3d"] < 5e-3
+    est = s["estimation"]
+    assert est["estimator"] == "ekf" and est["sensors"] == "mocap"
+    assert 0 < est["position_rms_m"] < 2e-3 and 0 < est["velocity_rms_mps"] < 0.02
+    assert 0 < est["attitude_rms_rad"] < 0.01
+    assert 3.0 < est["nees_mean"] < 30.0 and est["nees_samples"] > 7000  # about 9 (dof) when consistent
+    assert all(s["inputs"][u]["ripple"] > 0 for u in ("u2", "u3", "u4"))
+    trace = read_trace(out / "trace.csv")
+    assert list(trace) == list(TRACE_COLUMNS) and list(TRACE_COLUMNS[-13:-1]) == list(ESTIMATE_COLUMNS)
+    err = np.abs(trace["x"] - trace["x_est"])
+    assert 0 < err.max() < 0.01  # an estimate, not the truth
+    mission = (out / "mission.toml").read_text()
+    assert "[sensors]" in mission and "[estimator]" in mission  # as flown: a rerun of it flies the same
+
+
+def test_raw_passes_noise_on_and_the_ekf_removes_it():
+    raw = simulate(SINE, plots=False, sensors={"set": "mocap"}, estimator="raw")
+    ekf = simulate(SINE, plots=False, **EKF_MOCAP)
+    ripple = {k: r.summary["inputs"]["u2"]["ripple"] for k, r in (("raw", raw), ("ekf", ekf))}
+    assert ripple["ekf"] * 5 < ripple["raw"], ripple
+    assert ekf.summary["rms_3d"] < raw.summary["rms_3d"]
+
+
+def test_a_seed_gives_the_same_lockstep_trace_twice_and_another_seed_another(tmp_path):
+    runs = {}
+    for name, seed in (("a", 1), ("b", 1), ("c", 2)):
+        m = tmp_path / f"{name}.toml"
+        m.write_text(SINE_6S.format(seed=seed))
+        run = sitl(m, out=tmp_path / name, plots=False, instance=None)
+        assert run.outcome == "completed" and "estimation" in run.summary
+        runs[name] = (tmp_path / name / "trace.csv").read_bytes()
+    assert runs["a"] == runs["b"]
+    assert runs["a"] != runs["c"]
+
+
+def test_lockstep_matches_offline_and_odometry_carries_the_covariance(tmp_path):
+    """A real ``bsst sitl`` process against the offline loop; ODOMETRY in the vehicle's tlog."""
+    off = simulate(SINE, plots=False, **EKF_MOCAP)
+    out = tmp_path / "run"
+    with instance_slot() as n:
+        r = _bsst("sitl", SINE, "--sensors", "mocap", "--estimator", "ekf", "--instance", n, "--out", out,
+                  "--no-plots")
+    assert r.returncode == 0, r.stderr
+    trace = read_trace(out / "trace.csv")
+    assert np.array_equal(trace["t"], off.trace["t"])
+    for c in ("x", "y", "z", "x_est", "y_est", "z_est"):
+        worst = float(np.max(np.abs(trace[c] - off.trace[c])))
+        assert worst < 1e-4, f"{c}: lockstep and offline differ by {worst:.3e} m"
+    s = json.loads((out / "summary.json").read_text())
+    assert s["clock"] == "lockstep" and s["estimation"]["position_rms_m"] == pytest.approx(
+        off.summary["estimation"]["position_rms_m"], rel=1e-3)
+    log = mavutil.mavlink_connection(str(out / "vehicle.tlog"), dialect="common")
+    odometry = []
+    while (m := log.recv_match(type="ODOMETRY")) is not None:
+        odometry.append(m)
+    assert len(odometry) > 7500
+    for m in odometry[1:]:
+        assert all(math.isfinite(v) for v in (*m.pose_covariance, *m.velocity_covariance))
+        assert m.estimator_type == mavlink.MAV_ESTIMATOR_TYPE_AUTOPILOT
+    late = odometry[-1]
+    sigma_x = math.sqrt(late.pose_covariance[0])  # x of the upper triangle: element (0, 0)
+    assert 1e-5 < sigma_x < 5e-3  # millimetre-class from motion capture
+
+
+def test_truth_odometry_keeps_its_unknown_covariance(tmp_path):
+    """Under truth the wire is as it was: covariance unknown (NaN first), estimator type naive."""
+    run = sitl(_mission(tmp_path, "truth"), out=tmp_path / "t", plots=False, instance=None)
+    assert run.outcome == "completed"
+    log = mavutil.mavlink_connection(str(tmp_path / "t" / "vehicle.tlog"), dialect="common")
+    m = log.recv_match(type="ODOMETRY")
+    assert m is not None and math.isnan(m.pose_covariance[0]) and m.estimator_type == mavlink.MAV_ESTIMATOR_TYPE_NAIVE
+
+
+def _mission(tmp_path: Path, kind: str) -> Path:
+    p = tmp_path / f"{kind}.toml"
+    p.write_text(SINE_6S.replace('kind = "ekf"', f'kind = "{kind}"').format(seed=0))
+    return p
+
+
+BAD = [
+    (["--sensors", "bogus"], "--sensors"),
+    (["--sensors", "mo.cap"], "--sensors"),
+    (["--estimator", "kf"], "--estimator"),
+    (["--noise", "-1"], "--noise"),
+    (["--noise", "nan"], "--noise"),
+]
+BAD_TABLES = [
+    ('[sensors]\nset = "mocap"\nposition_noise_m = -1\n', "sensors.position_noise_m"),
+    ('[sensors]\nset = "nosuch"\n', "sensors.set"),
+    ('[sensors]\nnoise_scale = "big"\n', "sensors.noise_scale"),
+    ('[sensors]\nwhatever_hz = 3\n', "whatever_hz"),
+    ('[sensors]\nset = "mocap"\nvelocity_noise_mps = 0.1\n', "velocity_noise_mps"),
+    ('[estimator]\nkind = "kf"\n', "estimator.kind"),
+    ('[estimator]\nkind = "ekf"\ngain = 2\n', "estimator.gain"),
+]
+
+
+def _refused(capsys, argv: list[str], names: tuple[str, ...], out: Path) -> None:
+    """``bsst argv`` in this process: exit 2, one line on stderr naming every one of ``names``, nothing written."""
+    rc = main(argv)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and all(n in err[0] for n in names), (argv, rc, err)
+    assert "unrecognized" not in err[0]  # refused by the flag's own check, not unknown
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("cmd", ["sim", "sitl", "vehicle"])
+@pytest.mark.parametrize("flags, name", BAD)
+def test_bad_sensor_flags_exit_2_with_one_line(capsys, tmp_path, cmd, flags, name):
+    _refused(capsys, [cmd, str(SINE), *flags, "--out", str(tmp_path / "out")], (name, flags[1]), tmp_path / "out")
+
+
+@pytest.mark.parametrize("table, name", BAD_TABLES)
+def test_bad_sensors_and_estimator_tables_exit_2_with_one_line(capsys, tmp_path, table, name):
+    m = tmp_path / "bad.toml"
+    m.write_text(SINE.read_text() + "\n" + table)
+    _refused(capsys, ["sim", str(m), "--out", str(tmp_path / "out")], (str(m), name), tmp_path / "out")
+
+
+def test_estimator_flag_choices_are_the_estimator_kinds():
+    sub = next(a for a in build_parser()._actions if a.dest == "command")
+    for cmd in ("sim", "sitl", "vehicle"):
+        action = next(a for a in sub.choices[cmd]._actions if "--estimator" in a.option_strings)
+        assert sorted(action.choices) == sorted(ESTIMATOR_KINDS)

@@ -1,0 +1,325 @@
+"""The vehicle's failsafe actions (issue 14): ``[failsafe] action = descend | land | hold | disarm``.
+
+``bsst sitl missions/sine.toml --blackout 15:2 --failsafe-action A`` is flown for each action as
+a real ``bsst sitl`` process (lockstep, its vehicle and controller real processes over UDP on
+127.0.0.1), each on an instance of its own; the same flights offline with
+``simulate``. Both clocks fly the same vehicle core, so they must agree on every event and, up
+to touchdown, on every row (the float32 wire aside). Then the on-board controller alone: the
+earlier landing loop is ``Level`` exactly, and ``Takeoff`` / ``PositionHold`` fly as a later
+NAV_TAKEOFF / HOLD mode needs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import os
+import signal
+import subprocess
+import sys
+from collections.abc import Iterator
+from math import cos
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bridge.cli import build_parser, main
+from bridge.core.failsafe import FAILSAFE_ACTIONS, Level, PositionHold, Takeoff
+from bridge.core.flight import prepare
+from bridge.core.simvehicle import FAILSAFE, LANDED
+from bridge.loop import simulate
+from bridge.mavlink.endpoint import LINK_PORT
+from bridge.record.runlog import read_trace
+from bridge.session import instance_slot, sitl
+from bridge.session.children import check_port_free
+from missions import MISSION_DIR, Mission, Setpoint, Sine, Step
+from params import ConfigError, load_toml
+from tests.sitlkit import ENV, ROOT
+
+SINE = MISSION_DIR / "sine.toml"
+BLACKOUT = {"blackouts": [[15.0, 2.0]]}
+STEP_S = 1 / 250  # one control step of the sine mission
+FLIGHT_TIMEOUT_S = 180  # a lockstep sine flies in seconds; this only stops a hang
+
+
+@contextlib.contextmanager
+def _free_instance() -> Iterator[int]:
+    """An instance held by :func:`instance_slot` whose port is free too: a slot whose port some
+    process outside the lock convention has bound (a vehicle left running) is kept held, so
+    that the next one is taken."""
+    with contextlib.ExitStack() as held:
+        for _ in range(10):
+            n = held.enter_context(instance_slot())
+            try:
+                check_port_free(LINK_PORT + n, f"--instance {n}")
+            except ConfigError:
+                continue
+            yield n
+            return
+    raise AssertionError("no SITL instance with a free port")
+
+
+def _bsst_sitl(out: Path, action: str) -> subprocess.CompletedProcess:
+    """``bsst sitl missions/sine.toml --blackout 15:2 --failsafe-action ACTION`` as a real process on
+    an instance of its own; on a hang its whole process group (vehicle, controller) is killed."""
+    with _free_instance() as n:
+        p = subprocess.Popen([sys.executable, "-m", "bridge", "sitl", str(SINE), "--blackout", "15:2",
+                              "--failsafe-action", action, "--instance", str(n), "--out", str(out), "--no-plots"],
+                             cwd=ROOT, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             start_new_session=True)
+        try:
+            stdout, stderr = p.communicate(timeout=FLIGHT_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.communicate()
+            raise
+    assert (out / "summary.json").exists(), f"bsst sitl --failsafe-action {action}: exit {p.returncode}: {stderr}"
+    return subprocess.CompletedProcess(p.args, p.returncode, stdout, stderr)
+
+
+@pytest.fixture(scope="module")
+def flown(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict]:
+    """Each action through ``bsst sitl`` (one after the other: each flight keeps two processes
+    busy) and offline."""
+    root = tmp_path_factory.mktemp("failsafe_actions")
+    runs: dict[str, dict] = {}
+    for a in FAILSAFE_ACTIONS:
+        out = root / a
+        p = _bsst_sitl(out, a)
+        summary = json.loads((out / "summary.json").read_text())
+        runs[a] = {"rc": p.returncode, "stdout": p.stdout, "stderr": p.stderr, "out": out, "summary": summary,
+                   "trace": read_trace(out / "trace.csv"),
+                   "vehicle": {e["kind"]: e["t"] for e in summary["events"] if e["source"] == "vehicle"},
+                   "offline": simulate(SINE, plots=False, link=BLACKOUT, failsafe={"action": a})}
+    return runs
+
+
+def _at(trace: dict, t: float) -> int:
+    """The row of control step time t."""
+    return int(np.searchsorted(trace["t"], t - 1e-9))
+
+
+def _start(run: dict) -> tuple[float, np.ndarray]:
+    """The failsafe's time and the position (x, y, z) of its row: where it began."""
+    t0 = run["vehicle"]["failsafe"]
+    tr = run["trace"]
+    i = _at(tr, t0)
+    return t0, np.array([tr["x"][i], tr["y"][i], tr["z"][i]])
+
+
+def _touchdown(trace: dict, after: float) -> float:
+    """The time of the first row on the ground after ``after``."""
+    t, z = trace["t"], trace["z"]
+    return float(t[(t > after) & (z <= 0.0)][0])
+
+
+# -- the four actions in lockstep, as the issue's acceptance says ------------------------------------
+@pytest.mark.parametrize("action", FAILSAFE_ACTIONS)
+def test_each_action_ends_in_failsafe_exit_1_and_flies_as_written(flown, action: str) -> None:
+    run = flown[action]
+    assert run["rc"] == 1, run["stderr"]
+    assert "outcome: failsafe" in run["stdout"]
+    assert run["summary"]["outcome"] == "failsafe" and run["summary"]["clock"] == "lockstep"
+    assert run["summary"]["sitl"]["died"] is None
+    assert load_toml(run["out"] / "mission.toml")["failsafe"]["action"] == action  # what both children read
+    t0 = run["vehicle"]["failsafe"]
+    assert 15.5 <= t0 <= 15.5 + STEP_S + 1e-9
+    for log in ("vehicle.log", "controller.log"):
+        assert "Traceback" not in (run["out"] / log).read_text()
+    tr = run["trace"]
+    assert len(tr["t"]) == 7500  # the step clock ran on to the mission's end
+    assert tr["z"][tr["t"] > run["vehicle"]["disarmed"] + 1.0].max() == 0.0  # at rest on the ground
+
+
+def test_descend_is_the_default_and_todays_figure(flown) -> None:
+    v = flown["descend"]["vehicle"]
+    assert v["failsafe"] == pytest.approx(15.5) and v["disarmed"] == pytest.approx(18.274, abs=0.005)
+    log = (flown["descend"]["out"] / "events.log").read_text()
+    assert "failsafe: no actuator target for 0.504 s: level and descend" in log and "landed: disarmed" in log
+    plain = simulate(SINE, plots=False, link=BLACKOUT)  # no action given: descend, row for row
+    for c in ("x", "y", "z", "u1_act", "u2_act"):
+        assert np.array_equal(plain.trace[c], flown["descend"]["offline"].trace[c])
+
+
+def test_hold_keeps_within_half_a_metre_for_3s_then_lands(flown) -> None:
+    run = flown["hold"]
+    t0, p0 = _start(run)
+    tr = run["trace"]
+    t = tr["t"]
+    held = (t >= t0) & (t <= t0 + 3.0)
+    away = np.sqrt((tr["x"] - p0[0]) ** 2 + (tr["y"] - p0[1]) ** 2 + (tr["z"] - p0[2]) ** 2)
+    assert away[held].max() <= 0.5, away[held].max()
+    assert abs(tr["z"][_at(tr, t0 + 4.9)] - p0[2]) < 0.05  # and its height, to the end of the hold
+    v = run["vehicle"]
+    assert v["landing"] == pytest.approx(t0 + 5.0)  # [failsafe] hold_s, PX4's COM_FAIL_ACT_T default
+    assert v["disarmed"] > v["landing"] + 1.5  # from 1.55 m at 0.7 m/s
+    assert "landing: held 5.000 s" in (run["out"] / "events.log").read_text()
+
+
+def test_land_drifts_at_most_half_a_metre_lands_and_disarms(flown) -> None:
+    run = flown["land"]
+    t0, p0 = _start(run)
+    tr = run["trace"]
+    t = tr["t"]
+    v = run["vehicle"]
+    flying = (t >= t0) & (t <= v["disarmed"])
+    drift = np.hypot(tr["x"] - p0[0], tr["y"] - p0[1])
+    assert drift[flying].max() <= 0.5, drift[flying].max()
+    assert np.all(drift[t > v["disarmed"]] <= 0.5)  # where it rests
+    assert "landed: disarmed" in (run["out"] / "events.log").read_text()
+    assert v["disarmed"] < flown["descend"]["vehicle"]["disarmed"] + 0.5  # it sank, it did not hover
+    # descend, for contrast, drifts on with the 0.5 m/s it had
+    d0 = _start(flown["descend"])[1]
+    dtr = flown["descend"]["trace"]
+    assert np.hypot(dtr["x"] - d0[0], dtr["y"] - d0[1]).max() > 1.0
+
+
+def test_disarm_stops_the_motors_within_one_control_step(flown) -> None:
+    run = flown["disarm"]
+    v = run["vehicle"]
+    assert 0.0 <= v["disarmed"] - v["failsafe"] <= STEP_S
+    assert "disarmed: failsafe: motors stopped" in (run["out"] / "events.log").read_text()
+    tr = run["trace"]
+    after = tr["t"] >= v["failsafe"] + STEP_S
+    for c in ("u1_act", "u2_act", "u3_act", "u4_act"):
+        assert np.all(tr[c][after] == 0.0), c
+    t_ground = _touchdown(tr, v["failsafe"])
+    assert t_ground - v["failsafe"] < 0.7  # it fell: from 1.55 m, 0.56 s
+
+
+@pytest.mark.parametrize("action", FAILSAFE_ACTIONS)
+def test_offline_and_lockstep_fly_the_same_failsafe(flown, action: str) -> None:
+    run = flown[action]
+    off = run["offline"]
+    assert off.outcome == "failsafe"
+    ev = [(e["kind"], round(e["t"], 3)) for e in off.summary["events"] if e["kind"] in ("failsafe", "landing")]
+    assert ev == [(k, round(run["vehicle"][k], 3)) for k, _ in ev]
+    off_disarm = next(e["t"] for e in off.summary["events"] if e["kind"] == "disarmed")
+    assert abs(off_disarm - run["vehicle"]["disarmed"]) <= STEP_S + 1e-9
+    tr = run["trace"]
+    assert np.array_equal(tr["t"], off.trace["t"])
+    until = tr["t"] < _touchdown(off.trace, run["vehicle"]["failsafe"])
+    worst = max(float(np.max(np.abs(tr[c][until] - off.trace[c][until]))) for c in ("x", "y", "z"))
+    # descend has no horizontal control: the float32 wire's difference in the speed it begins
+    # with (8e-5 m/s) carries on across the ground, 1e-3 m by touchdown, as before the actions
+    assert worst < (2e-3 if action == "descend" else 1e-4), worst
+
+
+# -- real time: the same vehicle core on the wall clock -------------------------------------------
+def test_hold_on_the_wall_clock_brakes_and_returns_to_where_it_began(tmp_path: Path) -> None:
+    """Real time, the same vehicle core: a blackout from 1 s leaves the vehicle on the held target
+    for 0.5 s (it leaves it moving at up to 0.8 m/s, tilted, 0.15 m up, depending on the wall
+    clock's timing), then ``hold`` brakes it and brings it back (``descend`` would drift 1.6 m in
+    those 2 s, and sink)."""
+    run = sitl(Mission(Sine(), duration_s=4.0, name="rt-hold"), realtime=True, out=tmp_path / "rt", plots=False,
+               instance=None, link={"delay_ms": 5.0, "blackouts": [[1.0, 1.5]]}, failsafe={"action": "hold"})
+    assert run.outcome == "failsafe"
+    fs = [e for e in run.summary["events"] if e["kind"] == "failsafe" and e["source"] == "vehicle"]
+    assert len(fs) == 1 and "hold here" in fs[0]["text"]
+    rows = (tmp_path / "rt" / "vehicle.csv").read_text().splitlines()
+    head = rows[0].split(",")
+    vals = np.array([[float(v) for v in r.split(",")] for r in rows[1:]])
+    col = {c: vals[:, head.index(c)] for c in ("mode", "x", "y", "z", "vx", "vy", "vz")}
+    holding = np.flatnonzero(col["mode"] == 1)[:500]  # the vehicle's own rows, its first 2 s of holding
+    assert len(holding) == 500 and np.all(np.diff(holding) == 1)
+    p0 = np.array([col[c][holding[0]] for c in ("x", "y", "z")])
+    away = np.sqrt(sum((col[c][holding] - p0[j]) ** 2 for j, c in enumerate(("x", "y", "z"))))
+    speed = np.sqrt(sum(col[c][holding] ** 2 for c in ("vx", "vy", "vz")))
+    assert away.max() < 0.8, away.max()  # it braked
+    assert away[-1] < 0.3 and speed[-1] < 0.3, (away[-1], speed[-1])  # and came back
+    assert col["z"][holding].min() > 0.05  # in the air all along
+    assert any(e["kind"] == "landing" and e["source"] == "vehicle" for e in run.summary["events"])  # then it landed
+
+
+# -- the [failsafe] table and the flag ---------------------------------------------------------------
+def test_the_flags_choices_are_the_actions() -> None:
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    for cmd in ("sim", "sitl", "vehicle"):
+        flag = next(a for a in sub.choices[cmd]._actions if "--failsafe-action" in a.option_strings)
+        assert tuple(flag.choices) == FAILSAFE_ACTIONS
+    ctl = sub.choices["controller"]._actions  # the vehicle flies its failsafe: not the controller's flag
+    assert not any("--failsafe-action" in a.option_strings for a in ctl)
+
+
+def test_the_override_is_laid_over_the_mission_table() -> None:
+    m = Mission(Sine(), duration_s=1.0, name="s", failsafe={"timeout_s": 0.2, "action": "land"})
+    f = prepare(m, failsafe={"action": "hold"})
+    assert (f.failsafe.action, f.failsafe.timeout_s, f.failsafe.hold_s) == ("hold", 0.2, 5.0)
+    assert f.mission.failsafe == {"timeout_s": 0.2, "action": "hold"}  # what mission.toml carries
+    assert prepare(m).failsafe.action == "land"
+
+
+@pytest.mark.parametrize("table, key", [({"action": "fly"}, "failsafe.action"), ({"action": 4}, "failsafe.action"),
+                                        ({"hold_s": 30.0}, "failsafe.hold_s"), ({"hold_s": -1.0}, "failsafe.hold_s")])
+def test_a_bad_failsafe_value_is_named(table: dict, key: str) -> None:
+    with pytest.raises(ConfigError, match=key):
+        prepare(Mission(Sine(), duration_s=1.0, name="s", failsafe=table))
+
+
+def test_a_bad_flag_is_one_line_exit_2(capsys) -> None:
+    assert main(["sim", str(SINE), "--failsafe-action", "fly", "--no-plots"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--failsafe-action" in err[0] and "'fly'" in err[0]
+
+
+# -- the on-board controller alone -------------------------------------------------------------------
+HOVER = (0.3, 0.2, -0.1, -0.1, 1.0, 0.3, 0.05, 0.4, -0.04, -0.2, 0.5, 0.3)
+
+
+def test_level_is_the_earlier_landing_loop_exactly() -> None:
+    """``descend`` flies the loop the failsafe had before it had actions, to the last bit."""
+    sim = prepare(Mission(Sine(), duration_s=1.0, name="s")).make_vehicle(armed=True)
+    n = sim.onboard.n
+    sim.fly_onboard(Level(0.7), FAILSAFE)
+    _, _, _, _, _, vz, phi, dphi, th, dth, _, dpsi = HOVER
+    earlier = (n.mass * (n.gravity + 2.0 * (-0.7 - vz)) / max(cos(phi) * cos(th), 0.5),
+               n.ixx / n.arm * (-36.0 * phi - 12.0 * dphi), n.iyy / n.arm * (-36.0 * th - 12.0 * dth),
+               n.izz / n.arm * (-4.0 * dpsi))
+    assert sim.onboard.demand(HOVER) == earlier
+    sim.onboard.step(HOVER, 0.001)
+    assert sim.onboard.integral == (0.0, 0.0, 0.0) and sim.onboard.demand(HOVER) == earlier
+
+
+def _ground_mission(**effects) -> Mission:
+    return Mission(Step((Setpoint(0.0, 0.0, 0.0, 0.0, 0.0),)), duration_s=60.0, name="g", effects=effects)
+
+
+def _fly(sim, seconds: float) -> list[tuple[float, ...]]:
+    states = []
+    for _ in range(int(seconds * 250)):
+        sim.advance()
+        states.append(sim.plant.state)
+    return states
+
+
+def test_takeoff_climbs_to_its_height_and_holds_there() -> None:
+    """What a later NAV_TAKEOFF needs: from rest on the ground, up at most 1.5 m/s to 2 m, then held."""
+    sim = prepare(_ground_mission()).make_vehicle(armed=True)
+    sim.fly_onboard(Takeoff.here(sim.plant.state, 2.0), "takeoff")
+    states = _fly(sim, 6.0)
+    assert 1.4 < max(s[5] for s in states) <= 1.5 * 1.1  # its climb rate (the integral overshoots it < 10 %)
+    assert max(s[4] for s in states) < 2.1
+    end = states[-1]
+    assert abs(end[4] - 2.0) < 0.02 and abs(end[0]) < 1e-6 and abs(end[2]) < 1e-6 and sim.armed
+
+
+def test_position_hold_takes_up_a_heavier_plant_with_its_integral() -> None:
+    """20 % more mass than the model: the height sags while the integral fills, then returns."""
+    sim = prepare(_ground_mission(mismatch={"mass_scale": 1.2})).make_vehicle(armed=True)
+    sim.plant.state = (0.0, 0.0, 0.0, 0.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    sim.fly_onboard(PositionHold(0.0, 0.0, 2.0), "hold")
+    states = _fly(sim, 8.0)
+    assert min(s[4] for s in states) < 1.95  # it did sag: the model is light
+    assert abs(states[-1][4] - 2.0) < 0.01  # and the integral brought it back
+
+
+def test_a_failsafe_on_the_ground_disarms_at_once_whatever_the_action() -> None:
+    for action in FAILSAFE_ACTIONS:
+        sim = prepare(_ground_mission(), failsafe={"action": action}).make_vehicle(armed=True)
+        _fly(sim, 0.6)  # no target for over timeout_s
+        assert not sim.armed and sim.mode == LANDED
+        fs = [e for e in sim.events if e.kind == "failsafe"]
+        disarmed = [e for e in sim.events if e.kind == "disarmed"]
+        assert len(fs) == 1 and len(disarmed) == 1 and disarmed[0].t == fs[0].t, action
