@@ -274,6 +274,9 @@ def _fly(mission: Path, out: Path, seen: dict[str, Any] | None) -> dict[str, Any
 
 
 def _attack(n: int, out: Path, gcs: Station, p: Proc, seen: dict[str, Any]) -> None:
+    """Once instance ``n``'s flight is past step 10: another system's ARM, forced DISARM and
+    streams off; a second of spoofed controller heartbeats and a spoofed forced DISARM; the
+    ground station's bad numbers (each DENIED). What the attackers saw goes into ``seen``."""
     wait_for(lambda: csv_rows(out / "vehicle.csv") > 10 or p.p.poll() is not None, 60, "the flight starting")
     assert p.p.poll() is None, "the session ended before the attack"
     to = (n + 1, 1)

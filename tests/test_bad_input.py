@@ -115,6 +115,7 @@ BASE = {
     "report": lambda f: [],
     "relay": lambda f: ["--listen", "127.0.0.1:0", "--to", "127.0.0.1:9", "--duration", "0.1"],
     "link": lambda f: [],
+    "margin": lambda f: [f.mission, "--over", "delay_ms", "--until", "rms=0.1", "--out", f.out],
 }
 # bad values by the converter a flag's argparse type comes from
 CONVERTER_BAD = {
@@ -140,6 +141,7 @@ CONVERTER_BAD = {
 }
 # bad values of the flags that take text (a callable of the files: values)
 TEXT_BAD = {
+    "--until": lambda f: ["rms=x", "rms=-1", "class=nope", "speed=3", "rms"],
     "--out": lambda f: [f.regular],
     "--profile": lambda f: ["nosuch", f.missing.with_suffix(".profile.toml")],
     "--listen": lambda f: ["nowhere", "udpout:127.0.0.1:9", "127.0.0.1:70000"],

@@ -209,3 +209,26 @@ def test_a_flood_from_another_source_is_shed_and_the_flight_holds(tmp_path):
     by = run.summary["link"]["rejected_by"]
     assert by["vehicle"].get("rate_limited", 0) > 0 and by["vehicle"].get("sender", 0) > 0
     assert by["controller"] == {}  # the flood never reached it
+
+
+def test_valid_frames_of_every_message_id_from_strangers_and_a_gcs_change_nothing(tmp_path):
+    """The command surface (issue 11; benchmarks/fuzz.py --commands sends 10^5): 3000 valid
+    pymavlink frames, message ids of the whole common dialect in turn and commands the vehicle
+    acts on, every field random or extreme, from strangers to the controller link and from the
+    ground station to the GCS link (never a valid ARM_DISARM), during a lockstep mission: the
+    trace is the undisturbed run's byte for byte, every stranger's frame is refused and every
+    GCS frame the vehicle handles is refused or answered, and no safety policy is violated."""
+    from benchmarks.fuzz import command_checks, fly_commands  # the benchmark's fuzzer: one copy of it
+
+    mission = Mission(Sine(), duration_s=8.0, name="cmdfuzz")
+    ref = sitl(mission, out=tmp_path / "ref", plots=False, instance=None)
+    assert ref.outcome == "completed"
+    f = fly_commands(mission, tmp_path / "cmd", 3000, speed=2.0)
+    res = command_checks(f, tmp_path / "ref" / "trace.csv", mission.steps)
+    assert res["done_before_mission_end"], "the mission ended before the fuzz did: fly longer"
+    assert {c.msgname for c in mavlink.mavlink_map.values()} <= set(f.fuzz.sent), "not every message id was sent"
+    assert res["outcome"] == "completed" and res["trace_identical"], res
+    assert res["kernel_drops"] == 0 and res["adds_up"], res
+    assert res["answered"] > 0 and res["bad_number"] > 0 and res["refused_by_reason"].get("not_authorised"), res
+    assert res["policies_checked"] > 0 and res["policies_violated"] == [], f.run.summary["policies"]
+    assert res["controller_refused"] == {}

@@ -54,6 +54,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_link_options(p)
     p.set_defaults(func=cmd_sim)
     add_sweep_commands(sub)
+    add_margin_command(sub)
     add_sitl_commands(sub)
     add_relay_command(sub)
     add_link_commands(sub)
@@ -359,6 +360,9 @@ def add_sweep_commands(sub: Any) -> None:
                       help="fly each cell in-process (default)")
     mode.add_argument("--lockstep", dest="mode", action="store_const", const="lockstep",
                       help="fly each cell as a lockstep SITL session (vehicle + controller processes)")
+    p.add_argument("--engine", choices=("auto", "batch", "process"), default="auto",
+                   help="batch: fly the cells together in one numpy loop; process: one by one in worker processes; "
+                        "auto (default): batch where the grid allows it")
     p.add_argument("--jobs", type=int_in("--jobs", 1, 1024), metavar="N", help="worker processes (default: all cores)")
     p.add_argument("--max-cells", type=int_in("--max-cells", 1, 10**9), metavar="N",
                    help="fly a grid of up to N cells (default 10000: a bigger one is refused as a likely mistake)")
@@ -368,6 +372,7 @@ def add_sweep_commands(sub: Any) -> None:
     p.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out")
     p.add_argument("--no-plots", action="store_true", help="skip the heat maps")
     add_link_options(p, skip=("delay", "jitter", "loss", "burst"))  # fixed for every cell: --up-delay, --dup ...
+    add_sensor_options(p)  # fixed for every cell too
     p.set_defaults(func=cmd_sweep)
     p = sub.add_parser("report", help="rebuild a sweep's report.md and heat maps from its cells.csv")
     p.add_argument("dir", metavar="DIR", help="sweep directory")
@@ -392,19 +397,20 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         if clash:
             raise UsageError(f"bsst sweep: --{d}-{clash[0].split('_')[0]} conflicts with the swept {clash[0]} "
                              f"(a swept value applies to both directions)")
-    if fixed:  # the flags fixed for every cell, laid over the mission by the one path to its parts
-        spec = replace(spec, mission=prepare(spec.mission, link=fixed).mission)
+    sensing = {k: v for k, v in sensor_overrides_from_args(args).items() if v is not None}
+    if fixed or sensing:  # the flags fixed for every cell, laid over the mission by the one path to its parts
+        spec = replace(spec, mission=prepare(spec.mission, link=fixed or None, **sensing).mission)
     if args.resume and args.out is None:
         raise UsageError("bsst sweep: --resume needs --out DIR (the sweep to resume)")
     client = connect_dask(args.dask) if args.dask else None
     try:
         res = run_sweep(spec, jobs=args.jobs, client=client, out=args.out, write=True, resume=args.resume,
-                        overwrite=args.overwrite, progress=True, plots=not args.no_plots)
+                        overwrite=args.overwrite, progress=True, plots=not args.no_plots, engine=args.engine)
     finally:
         if client is not None:
             client.close()
     print(f"sweep {spec.mission.name}: {len(res.rows)} cells, {res.ran} flown, {res.reused} kept from before, "
-          f"{res.failed} failed, {res.wall_s:.1f} s")
+          f"{res.failed} failed, {res.wall_s:.1f} s; engine {res.engine} ({res.engine_why})")
     if res.interrupted:
         print(f"bsst: interrupted; continue with --resume --out {res.path}", file=sys.stderr)
         return EXIT_FAILED
@@ -422,6 +428,70 @@ def connect_dask(address: str) -> Any:
         return Client(address, timeout="10s")
     except (OSError, TimeoutError, ValueError) as exc:
         raise ConfigError(f"--dask {address}: cannot connect ({' '.join(str(exc).split())[:200]})") from None
+
+
+def add_margin_command(sub: Any) -> None:
+    """``bsst margin``: the boundary of one link impairment by bisection (bridge.sweep.margin)."""
+    p = sub.add_parser("margin", help="find how much delay, loss, jitter or burst a law takes (bisection)")
+    p.add_argument("mission", help="mission TOML file")
+    p.add_argument("--over", required=True, choices=("delay_ms", "loss_pct", "jitter_ms", "burst_len"),
+                   help="the impairment searched (both directions, as a sweep's axes)")
+    p.add_argument("--until", required=True, metavar="rms=M|class=NAME",
+                   help="failure: the 3-D RMS passes M metres, or the class is NAME or worse")
+    p.add_argument("--controller", type=law_list("--controller"), metavar="LAW,...", help="laws to search")
+    p.add_argument("--seeds", type=int_in("--seeds", 1, 1000), default=1, metavar="N",
+                   help="seeds per value: a value fails when any seed fails (default 1)")
+    p.add_argument("--resolution", type=number_in("--resolution", 0.0, 1e6, lo_open=True), default=0.25,
+                   metavar="X", help="stop when the bracket is this narrow, in the axis's unit (default 0.25)")
+    p.add_argument("--require", type=number_in("--require", 0.0, 1e9), metavar="X",
+                   help="exit 1 when a law's margin is below X (for a user's CI)")
+    p.add_argument("--engine", choices=("auto", "batch", "process"), default="auto",
+                   help="batch: each round's cells together in one numpy loop (default where it can)")
+    p.add_argument("--jobs", type=int_in("--jobs", 1, 1024), default=2, metavar="N",
+                   help="worker processes for the process engine (default 2)")
+    p.add_argument("--out", metavar="DIR", help="write margin.json into DIR (default runs/<UTC>-<mission>-margin)")
+    p.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out")
+    add_link_options(p)
+    p.set_defaults(func=cmd_margin)
+
+
+def cmd_margin(args: argparse.Namespace) -> int:
+    from bridge.core.flight import prepare  # lazy: start-up time
+    from bridge.sweep.margin import margin, parse_until, write_margin  # lazy: start-up time
+    from missions import load_mission  # lazy: start-up time
+
+    until = parse_until(args.until)
+    fixed = link_table_from_args(args)
+    for d in ("up", "down"):
+        if args.over in fixed.get(d, {}):
+            raise UsageError(f"bsst margin: a {args.over} flag conflicts with --over {args.over}")
+    mission = prepare(load_mission(args.mission), link=fixed or None).mission
+    live = sys.stderr.isatty()
+
+    def show(text: str) -> None:
+        if live:
+            sys.stderr.write(f"\rmargin over {args.over}: {text}   ")
+            sys.stderr.flush()
+
+    res = margin(mission, args.over, until, controllers=args.controller, seeds=args.seeds,
+                 resolution=args.resolution, jobs=args.jobs, engine=args.engine, progress=show)
+    if live:
+        sys.stderr.write("\n")
+    path = write_margin(res, args.out, mission.name, args.overwrite)
+    entries = res.get("controllers") or [res]
+    low = []
+    for e in entries:
+        lo, hi = e["bracket"]
+        tail = f"fails at {hi:g}" if hi is not None else "held over the whole range"
+        print(f"margin {e['controller']}: {args.over} {e['margin']:g} (bracket [{lo:g}, "
+              f"{'-' if hi is None else f'{hi:g}'}], {tail}; until {res['until']})")
+        if args.require is not None and e["margin"] < args.require:
+            low.append(e["controller"])
+    print(f"{res['cells_flown']} cells flown; margin.json: {path / 'margin.json'}")
+    if low:
+        print(f"bsst margin: below --require {args.require:g}: {', '.join(low)}", file=sys.stderr)
+        return EXIT_FAILED
+    return EXIT_OK
 
 
 def cmd_report(args: argparse.Namespace) -> int:

@@ -12,7 +12,8 @@ Units: time s, position m, velocity m/s, angles rad, rates rad/s, ``u1..u4`` N (
 the torques are l·u2..u4 in N m), ``c1..c4`` normalised actuator command, ``*_wall`` monotonic wall clock s.
 The state columns are the true state; the ``*_est`` columns (last, so the older columns keep their
 places) the vehicle's on-board estimate of it, what the controller was sent (equal to the truth
-under the ``truth`` estimator), and ``nees`` its NEES against its own covariance (0 under truth: no error).
+under the ``truth`` estimator), and ``nees`` its NEES against its own covariance (every 10th step,
+nan between; 0 under truth: no error).
 """
 
 from __future__ import annotations

@@ -585,6 +585,8 @@ class Session:
                 out[d] = {**{k: r[k] for k in ("sent", "delivered", "lost", "duplicated", "reordered", "in_flight",
                                                "lost_by")},
                           "delay_ms": measured[d], "model_delay_ms": r["delay_ms"], "relay_added_ms": r["measured_ms"]}
+                if "trace" in r:  # a replayed link trace: its own delays and losses, as offline
+                    out[d]["trace"] = r["trace"]
             elif model[d]:
                 out[d] = {**model[d], "socket_ms": measured[d]}
             else:

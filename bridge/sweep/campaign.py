@@ -19,7 +19,7 @@ from typing import Any
 from bridge.record.runlog import run_dir, write_json_atomic
 from bridge.sweep.cells import CELLS_CSV, SWEEP_JSON, CellsFile, read_cells, read_sweep_json, row_key, write_cells
 from bridge.sweep.classes import Classes, classify
-from bridge.sweep.executors import Progress, run_dask, run_local
+from bridge.sweep.executors import Progress, engine_for, run_batch, run_batch_dask, run_dask, run_local
 from bridge.sweep.grid import Grid
 from bridge.sweep.report import write_report
 from bridge.sweep.spec import Sweep
@@ -42,6 +42,7 @@ def sweep(
     report: bool = True,
     plots: bool = True,
     max_cells: int | None = None,
+    engine: str = "auto",
 ) -> list[dict[str, Any]]:
     """Fly every cell of ``grid`` on ``mission``; return the rows in grid order.
 
@@ -49,12 +50,15 @@ def sweep(
     ``distributed.Client`` to run the cells on a Dask cluster instead. With ``out`` the sweep
     directory is written (``sweep.json``, ``mission.toml``, ``cells.csv`` cell by cell, then
     ``report.md`` and the heat maps unless ``report`` is false); ``resume`` flies only the
-    cells missing from its ``cells.csv`` (and those recorded as ``error``). A grid of more than
+    cells missing from its ``cells.csv`` (and those recorded as ``error``). ``engine``: ``batch``
+    flies the cells together in one numpy loop (:mod:`bridge.batch`), ``process`` one by one;
+    ``auto`` takes the batch where the grid allows it (:func:`bridge.sweep.executors.engine_for`).
+    A grid of more than
     ``max_cells`` cells (default :data:`bridge.sweep.spec.MAX_CELLS`) is refused before anything flies.
     """
     m = mission if isinstance(mission, Mission) else load_mission(mission)
     spec = Sweep(m, Grid.of(grid), mode, classes or Classes(), max_cells=max_cells)
-    return run_sweep(spec, jobs=jobs, client=client, out=out, resume=resume, overwrite=overwrite,
+    return run_sweep(spec, jobs=jobs, client=client, out=out, resume=resume, overwrite=overwrite, engine=engine,
                      progress=progress, report=report, plots=plots).rows
 
 
@@ -69,6 +73,8 @@ class Outcome:
     path: Path | None
     wall_s: float
     interrupted: bool = False
+    engine: str = "process"  # what flew the cells: batch or process (the grid decides for "auto")
+    engine_why: str = ""
 
 
 def run_sweep(
@@ -84,6 +90,7 @@ def run_sweep(
     plots: bool = True,
     root: str | Path = "sweeps",
     write: bool = False,
+    engine: str = "auto",
 ) -> Outcome:
     """Run a :class:`Sweep` (see :func:`sweep`); ``write`` makes ``sweeps/<UTC>-<mission>``."""
     t0 = time.monotonic()
@@ -93,10 +100,12 @@ def run_sweep(
     jobs = jobs or spec.jobs or os.cpu_count() or 1
     results: dict[tuple[Any, ...], dict[str, Any]] = {}
     path: Path | None = None
+    engine_for(spec.mission, all_cells, spec.mode, engine)  # an --engine that cannot be honoured: before any file
     if out is not None or write:
         path, kept = _open_dir(spec, out, resume, overwrite, root)
         results.update({row_key(r): r for r in kept if row_key(r) in order})
     todo = [c for c in all_cells if c.key() not in results]
+    used, used_why = engine_for(spec.mission, todo, spec.mode, engine)
     sink = CellsFile(path / CELLS_CSV, [results[k] for k in sorted(results, key=order.__getitem__)]) if path else None
     bar = Progress(len(all_cells), len(results), enabled=progress)
     reused = len(results)
@@ -112,7 +121,12 @@ def run_sweep(
 
     interrupted = False
     try:
-        if todo:
+        if todo and used == "batch":
+            if client is not None:
+                run_batch_dask(client, spec.mission, todo, record)
+            else:
+                run_batch(spec.mission, todo, record)
+        elif todo:
             if client is not None:
                 run_dask(client, spec.mission, todo, spec.mode, record)
             else:
@@ -129,7 +143,8 @@ def run_sweep(
         if report:
             write_report(path, rows, spec.identity(), plots=plots)
     failed = sum(1 for r in rows if r["outcome"] == "error")
-    return Outcome(rows, len(rows) - reused, reused, failed, path, time.monotonic() - t0, interrupted)
+    return Outcome(rows, len(rows) - reused, reused, failed, path, time.monotonic() - t0, interrupted, used,
+                   used_why)
 
 
 def _open_dir(spec: Sweep, out: str | Path | None, resume: bool, overwrite: bool,

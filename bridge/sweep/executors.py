@@ -23,13 +23,15 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
+from bridge.batch import batch_problem, fly_batch
 from bridge.loop import fly
 from bridge.nodes.process import die_with_parent
 from bridge.record.runlog import Run
 from bridge.session import instance_slot, sitl
 from bridge.sweep.cells import error_row, row_from_run
-from bridge.sweep.grid import Cell, cell_flight
+from bridge.sweep.grid import AXES, Cell, cell_flight, cell_overrides
 from missions import Mission
+from params import ConfigError
 
 
 def run_cell(mission: Mission, cell: Cell, mode: str = "offline") -> dict[str, Any]:
@@ -221,3 +223,68 @@ class Progress:
     def close(self) -> None:
         if self._bar is not None:
             self._bar.close()
+
+
+# -- the batch engine: many cells of one mission in one numpy loop (bridge.batch) ---------------------
+ENGINES = ("auto", "batch", "process")
+BATCH_CHUNK = 250  # cells flown together: each chunk's rows are recorded (and cells.csv appended) as it ends
+# auto takes the batch from this many cells on: a batch step costs about the same for 1 cell as for 100
+# (numpy's per-call overhead), so a few cells fly faster one by one in worker processes
+BATCH_MIN_CELLS = 32
+
+
+def engine_for(mission: Mission, todo: Sequence[Cell], mode: str, engine: str) -> tuple[str, str]:
+    """The engine that flies ``todo``, and why: ``batch`` where the batch can fly the grid
+    (offline cells, :func:`bridge.batch.batch_problem` has nothing against them; for ``auto``
+    also at least :data:`BATCH_MIN_CELLS` of them), ``process`` otherwise. ``engine`` ``"batch"``
+    that cannot be honoured is bad input (ConfigError), not a silent fallback; ``"auto"`` falls
+    back and says why."""
+    if engine not in ENGINES:
+        raise ConfigError(f"--engine: must be one of {', '.join(ENGINES)}, got {engine!r}")
+    if engine == "process":
+        return "process", "asked for"
+    if engine == "auto" and len(todo) < BATCH_MIN_CELLS:
+        return "process", f"fewer than {BATCH_MIN_CELLS} cells to fly"
+    why = "lockstep cells fly as SITL sessions" if mode == "lockstep" else (
+        batch_problem(mission, [cell_overrides(c) for c in todo]) if todo else None)
+    if why is None:
+        return "batch", "the grid allows it" if engine == "auto" else "asked for"
+    if engine == "batch":
+        raise ConfigError(f"--engine batch: {why}; fly it with --engine process")
+    return "process", f"the batch engine cannot fly this grid: {why}"
+
+
+def batch_row(cell: Cell, measures: Mapping[str, Any]) -> dict[str, Any]:
+    """A ``cells.csv`` row from a batch cell's measured columns (the same keys as :func:`row_from_run`)."""
+    return {**{a: getattr(cell, a) for a in AXES}, "seed": cell.seed, **measures}
+
+
+def run_batch(mission: Mission, todo: Sequence[Cell], report: Report, chunk: int = BATCH_CHUNK) -> None:
+    """Fly cells with the batch engine in this process, ``chunk`` at a time (rows reported per chunk)."""
+    for i in range(0, len(todo), chunk):
+        part = todo[i:i + chunk]
+        for cell, m in zip(part, fly_batch(mission, [cell_overrides(c) for c in part]), strict=True):
+            report(batch_row(cell, m))
+
+
+def run_batch_dask(client: Any, mission: Mission, todo: Sequence[Cell], report: Report,
+                   chunk: int = BATCH_CHUNK) -> None:
+    """Fly cells with the batch engine on a Dask cluster: a chunk of cells is one task."""
+    from distributed import as_completed  # lazy: an optional dependency
+
+    mission_f = client.scatter(mission, broadcast=True)
+    parts = [todo[i:i + chunk] for i in range(0, len(todo), chunk)]
+    futures = {client.submit(fly_batch, mission_f, [cell_overrides(c) for c in p], pure=False): p for p in parts}
+    try:
+        for f in as_completed(futures):
+            part = futures[f]
+            try:
+                measures = f.result()
+            except Exception as exc:  # e.g. KilledWorker: the chunk's cells are error rows, the sweep goes on
+                for c in part:
+                    report(error_row(c, f"{type(exc).__name__}: {exc}"))
+                continue
+            for cell, m in zip(part, measures, strict=True):
+                report(batch_row(cell, m))
+    finally:
+        client.cancel(list(futures))

@@ -1,0 +1,161 @@
+"""``bsst margin``: how much of one link impairment a law takes before it fails, found by
+bisection instead of a grid.
+
+In: a mission, the swept axis (``delay_ms`` | ``loss_pct`` | ``jitter_ms`` | ``burst_len``,
+applied to both directions as a sweep's axes are), the failure criterion (``rms=X``: the 3-D
+RMS error passes X m; ``class=NAME``: the cell's class is NAME or worse, see
+:mod:`bridge.sweep.classes`), the laws and the seeds. Out: per law the margin (the largest
+value flown that did not fail, in the axis's unit), its bracket ``[margin, first failing
+value]``, and every cell flown; ``margin.json`` when a directory is given.
+
+A value fails when any of its seeds fails. The search first doubles from ``start`` until it
+finds a failing value (or reaches the axis's range), then halves the bracket until it is no
+wider than ``resolution``. All laws' probes of one round fly together, with their seeds, as
+one batch (:mod:`bridge.batch`) where it can fly them, one by one otherwise. This assumes
+that failure is monotonic in the axis over the bracket (more delay is never better); the
+cells in ``margin.json`` show what was flown if it is not.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from bridge.record.runlog import run_dir, write_json_atomic
+from bridge.sweep.classes import CLASSES, Classes, classify
+from bridge.sweep.executors import engine_for, run_batch, run_local
+from bridge.sweep.grid import LINK_AXES, RANGES, Cell, mission_value
+from missions import Mission
+from params import ConfigError
+
+OVER = LINK_AXES  # the axes a margin is searched over
+START = {"delay_ms": 16.0, "loss_pct": 10.0, "jitter_ms": 16.0, "burst_len": 4.0}  # first value tried
+MARGIN_JSON = "margin.json"
+
+
+@dataclass(frozen=True)
+class Until:
+    """The failure criterion: ``rms`` (m) passed, or a class at least as bad as ``cls``."""
+
+    rms: float | None = None
+    cls: str | None = None
+
+    def failed(self, row: dict[str, Any], classes: Classes) -> bool:
+        if row["outcome"] == "error":
+            raise ConfigError(f"margin: a cell could not be flown: {row.get('error')}")
+        if self.rms is not None:
+            rms = row["rms"]
+            return rms is None or not math.isfinite(rms) or rms > self.rms or row["outcome"] != "completed"
+        return CLASSES.index(classify(row, classes)) >= CLASSES.index(self.cls or "error")
+
+    def text(self) -> str:
+        return f"rms={self.rms:g}" if self.rms is not None else f"class={self.cls}"
+
+
+def parse_until(text: str) -> Until:
+    """``rms=0.1`` or ``class=limit-cycling`` (ConfigError naming ``--until`` otherwise)."""
+    key, sep, value = text.partition("=")
+    if sep and key.strip() == "rms":
+        try:
+            v = float(value)
+        except ValueError:
+            v = math.nan
+        if not (math.isfinite(v) and v > 0):
+            raise ConfigError(f"--until rms=X: X must be a positive number of metres, got {value!r}")
+        return Until(rms=v)
+    if sep and key.strip() == "class":
+        name = value.strip()
+        if name not in CLASSES or name == "clean":
+            raise ConfigError(f"--until class=NAME: NAME must be one of {', '.join(CLASSES[1:])}, got {name!r}")
+        return Until(cls=name)
+    raise ConfigError(f"--until must be rms=METRES or class=NAME, got {text!r}")
+
+
+@dataclass
+class Search:
+    """One law's bracket: ``lo`` flown and held, ``hi`` flown and failed (None: not found yet)."""
+
+    controller: str
+    lo: float
+    hi: float | None = None
+    cells: list[dict[str, Any]] = field(default_factory=list)
+
+    def next_value(self, resolution: float, top: float) -> float | None:
+        if self.hi is None:
+            nxt = min(max(2.0 * self.lo, self.lo + resolution), top)
+            return None if nxt <= self.lo else nxt
+        if self.hi - self.lo <= resolution:
+            return None
+        return 0.5 * (self.lo + self.hi)
+
+
+def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[str] | None = None,
+           seeds: int = 1, resolution: float = 0.25, classes: Classes | None = None, jobs: int = 1,
+           engine: str = "auto", progress: Callable[[str], None] | None = None) -> dict[str, Any]:
+    """Search the margin of each law (see the module docstring); the ``margin.json`` content."""
+    if over not in OVER:
+        raise ConfigError(f"--over must be one of {', '.join(OVER)}, got {over!r}")
+    if not (math.isfinite(resolution) and resolution > 0):
+        raise ConfigError(f"--resolution must be a positive number, got {resolution!r}")
+    classes = classes or Classes()
+    lo_range, top = RANGES[over]
+    laws = list(controllers or (mission.controller,))
+    base = {a: float(mission_value(mission, a) or 0.0) for a in LINK_AXES}
+    if base[over]:
+        raise ConfigError(f"margin over {over}: the mission's [link] already sets {over} = {base[over]:g}; "
+                          "search from a mission without it")
+    seed_list = [mission.seed + i for i in range(seeds)]
+    searches = [Search(c, lo_range) for c in laws]
+    pending = {s.controller: START[over] for s in searches}
+    cells_flown = 0
+    while pending:
+        probes = [Cell(c, float(mission.rate_hz), **{**base, over: v}, seed=s, link=(over,))
+                  for c, v in pending.items() for s in seed_list]
+        rows: list[dict[str, Any]] = []
+        used, _ = engine_for(mission, probes, "offline", engine)
+        if used == "batch":
+            run_batch(mission, probes, rows.append)
+        else:
+            run_local(mission, probes, "offline", jobs, rows.append)
+        cells_flown += len(rows)
+        for s in searches:
+            if s.controller not in pending:
+                continue
+            v = pending[s.controller]
+            mine = [r for r in rows if r["controller"] == s.controller and r[over] == v]
+            failed = any(until.failed(r, classes) for r in mine)
+            s.cells += [{over: v, "seed": r["seed"], "rms": r["rms"], "outcome": r["outcome"],
+                         "class": classify(r, classes), "failed": until.failed(r, classes)} for r in mine]
+            if failed:
+                s.hi = v
+            else:
+                s.lo = v
+            nxt = s.next_value(resolution, top)
+            if s.hi is None and nxt is None:  # held up to the top of the axis's range
+                del pending[s.controller]
+            elif nxt is None:
+                del pending[s.controller]
+            else:
+                pending[s.controller] = nxt
+        if progress is not None:
+            progress(", ".join(f"{s.controller} [{s.lo:g}, {'-' if s.hi is None else f'{s.hi:g}'}]"
+                               for s in searches))
+    entries = [{"controller": s.controller, "margin": s.lo, "bracket": [s.lo, s.hi], "cells": s.cells,
+                "held_to_range": s.hi is None} for s in searches]
+    out: dict[str, Any] = {"over": over, "until": until.text(), "resolution": resolution, "seeds": seed_list,
+                           "mission": mission.name, "cells_flown": cells_flown}
+    if len(entries) == 1:
+        out.update({k: v for k, v in entries[0].items()})
+    else:
+        out["controllers"] = entries
+    return out
+
+
+def write_margin(result: dict[str, Any], out: str | Path | None, mission_name: str, overwrite: bool) -> Path:
+    """``margin.json`` in ``out`` (or ``runs/<UTC time>-<mission>-margin``)."""
+    path = run_dir(out, f"{mission_name}-margin", overwrite)
+    write_json_atomic(path / MARGIN_JSON, result)
+    return path
