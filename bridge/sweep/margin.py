@@ -26,7 +26,7 @@ from typing import Any
 
 from bridge.record.runlog import run_dir, write_json_atomic
 from bridge.sweep.classes import CLASSES, Classes, classify
-from bridge.sweep.executors import engine_for, run_batch, run_local
+from bridge.sweep.executors import engine_for, run_batch, run_cell, run_local
 from bridge.sweep.grid import LINK_AXES, RANGES, Cell, mission_value
 from missions import Mission
 from params import ConfigError
@@ -34,6 +34,7 @@ from params import ConfigError
 OVER = LINK_AXES  # the axes a margin is searched over
 START = {"delay_ms": 16.0, "loss_pct": 10.0, "jitter_ms": 16.0, "burst_len": 4.0}  # first value tried
 MARGIN_JSON = "margin.json"
+IN_PROCESS_CELLS = 2  # a round of at most this many process-engine cells flies in this process
 
 
 @dataclass(frozen=True)
@@ -118,6 +119,8 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
         used, _ = engine_for(mission, probes, "offline", engine)
         if used == "batch":
             run_batch(mission, probes, rows.append)
+        elif len(probes) <= IN_PROCESS_CELLS:  # a pool's start costs more than a cell or two
+            rows += [run_cell(mission, c) for c in probes]
         else:
             run_local(mission, probes, "offline", jobs, rows.append)
         cells_flown += len(rows)
