@@ -166,3 +166,17 @@ def test_divergence_exits_1_and_is_recorded(tmp_path: Path) -> None:
     assert 0 < len(rows) < 30 * 250
     last_x = float(rows[-1][1])
     assert 90.0 < last_x <= 100.5
+
+
+def test_a_reader_that_stops_early_costs_no_traceback_nor_the_exit_status(tmp_path):
+    """``bsst sim ... | head -1``: the summary's print meets a closed pipe; the run is on disk and
+    the exit status is the run's (0), with nothing on stderr."""
+    import subprocess
+    import sys
+
+    p = subprocess.Popen([sys.executable, "-m", "bridge", "sim", "missions/sine.toml", "--no-plots", "--out",
+                          str(tmp_path / "r")], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    p.stdout.close()  # as head does once it has its lines: every write of the summary meets a closed pipe
+    err = p.stderr.read().decode()
+    assert p.wait(timeout=60) == 0 and "Traceback" not in err and "Exception" not in err, err
+    assert (tmp_path / "r" / "summary.json").is_file()

@@ -14,6 +14,7 @@ flag stay fast.
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
 from dataclasses import replace
@@ -331,7 +332,11 @@ def report_run(run: Any, command: str) -> int:
     """Print a run's summary, name each violated policy on stderr; its exit status (0: a clean completion)."""
     from bridge.record.policies import run_ok, violation_text  # lazy: numpy
 
-    print_summary(run.summary, run.path)
+    try:
+        print_summary(run.summary, run.path)
+        sys.stdout.flush()
+    except BrokenPipeError:  # stdout closed early (bsst sim ... | head): the run is on disk, its status stands
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
     lock = run.summary.get("lockstep") or {"held": True}
     if not lock.get("held", True):
         print(f"bsst {command}: not a lockstep run: the vehicle left lockstep at t={lock['left_at_s']:.3f} s "
