@@ -24,11 +24,11 @@ from __future__ import annotations
 
 import math
 from array import array
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from bridge.core.flight import Flight, prepare
+from bridge.core.flight import Flight, Progress, prepare
 from bridge.core.linkends import ControllerEnd, VehicleEnd
 from bridge.core.simvehicle import FAILSAFE, LANDED, OFFBOARD
 from bridge.core.wire import command_to_wire
@@ -38,8 +38,6 @@ from bridge.record.policies import ended_by_outcome, judge, rules_for, violation
 from bridge.record.runlog import Run, RunRecord, check_trace_steps, run_dir, trace_arrays
 from controller.link_guard import LinkGuard
 from missions import Mission
-
-Progress = Callable[[float, float, float], None]  # (t, duration, current 3-D error)
 
 
 def simulate(
@@ -122,9 +120,10 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
                 demanded = cmd.demanded
                 wire = command_to_wire(actuation, cmd.normalised)
             vend.deliver(t)
-            row = trace_row(t, state_columns(X), ref, demanded, wire, plant.realised,
+            truth = state_columns(X)
+            row = trace_row(t, truth, ref, demanded, wire, plant.realised,
                             dec.state_age_s if cmd is not None else math.nan, law.desired,
-                            state_columns(E), vehicle.nees(E))
+                            truth if E is X else state_columns(E), vehicle.nees(E))  # truth: E is X
             rows.extend(row)
             if trace is not None:
                 trace.row(row)

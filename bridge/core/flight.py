@@ -14,7 +14,7 @@ that a bad value fails before anything starts, with the file and key named.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -33,6 +33,8 @@ from plant import Effects, Profile, Quadrotor, load_profile
 from plant.effects import effects_from_table
 from plant.profiles import sensors_from_table
 from plant.sensors import IDEAL, SensorConfig, SensorSuite
+
+Progress = Callable[[float, float, float], None]  # a flight's progress: (t s, duration s, current 3-D error m)
 
 
 @dataclass(frozen=True)

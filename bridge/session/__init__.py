@@ -61,7 +61,7 @@ from typing import Any
 
 import numpy as np
 
-from bridge.core.flight import Flight, prepare
+from bridge.core.flight import Flight, Progress, prepare
 from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, GCS_PORT, LINK_PORT, parse_address
 from bridge.mavlink.signing import key_from_file
 from bridge.nodes.process import parse_status
@@ -84,7 +84,6 @@ from params import ConfigError
 
 __all__ = ["ChildError", "Session", "instance_slot", "sitl"]
 
-Progress = Callable[[float, float, float], None]  # (t, duration, current 3-D error), as bridge.loop
 
 
 def sitl(
