@@ -39,6 +39,7 @@ import numpy as np  # noqa: E402
 from bridge.batch import fly_batch  # noqa: E402
 from bridge.core.batchlink import Clocks, plan_links  # noqa: E402
 from bridge.core.flight import prepare  # noqa: E402
+from bridge.loop import fly  # noqa: E402
 from bridge.sweep import Grid, sweep  # noqa: E402
 from bridge.sweep.grid import cell_overrides, cells  # noqa: E402
 from controller.batch import BatchController  # noqa: E402
@@ -48,6 +49,7 @@ from plant.batch import BatchPlant  # noqa: E402
 DELAYS = tuple(float(d) for d in range(0, 20, 2))  # ms, 10 values
 LOSSES = tuple(float(v) for v in range(0, 50, 5))  # %, 10 values
 SUBSET = Grid(delay_ms=(0.0, 6.0, 12.0, 18.0), loss_pct=(0.0, 15.0, 30.0, 45.0), seeds=2)  # 32 cells
+SCALAR_PROBE = 2  # cells of the subset flown by the scalar loop in this process, for its CPU time
 TARGET_RATIO = 20.0
 LIMIT_GIB = 1.0
 
@@ -60,14 +62,14 @@ def peak_rss_mib() -> float:
 def batch_sweep(mission: Any, n_cells: int) -> dict[str, Any]:
     grid = Grid(delay_ms=DELAYS, loss_pct=LOSSES, seeds=10)
     todo = cells(mission, grid)[:n_cells]
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     rows = fly_batch(mission, [cell_overrides(c) for c in todo])
-    wall = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     outcomes: dict[str, int] = {}
     for r in rows:
         outcomes[r["outcome"]] = outcomes.get(r["outcome"], 0) + 1
     return {"cells": len(rows), "wall_s": wall, "cells_per_s": len(rows) / wall, "peak_rss_mib": peak_rss_mib(),
-            "outcomes": outcomes}
+            "outcomes": outcomes, "cpu_s": cpu, "cells_per_cpu_s": len(rows) / cpu}
 
 
 def _fly_part(overrides: list[dict[str, Any]]) -> tuple[int, float]:
@@ -89,9 +91,16 @@ def batch_two_workers(mission: Any, n_cells: int) -> dict[str, Any]:
 
 def process_sweep(mission: Any) -> dict[str, Any]:
     t0 = time.perf_counter()
-    rows = sweep(mission, SUBSET, jobs=2, report=False, plots=False)
+    rows = sweep(mission, SUBSET, jobs=2, report=False, plots=False, engine="process")  # auto would take the batch
     wall = time.perf_counter() - t0
-    return {"cells": len(rows), "wall_s": wall, "cells_per_s": len(rows) / wall}
+    # the scalar loop a worker runs per cell, timed in this process's CPU (the workers' is not visible here:
+    # they are the forkserver's children): what the process engine could do on two idle cores at best
+    c0 = time.process_time()
+    probe = cells(mission, SUBSET)[:SCALAR_PROBE]
+    for c in probe:
+        fly(prepare(mission, **cell_overrides(c)), plots=False)
+    per_cell = (time.process_time() - c0) / len(probe)
+    return {"cells": len(rows), "wall_s": wall, "cells_per_s": len(rows) / wall, "scalar_cpu_s_per_cell": per_cell}
 
 
 def step_parts_ms(mission: Any, n: int, repeats: int) -> dict[str, float]:
@@ -129,42 +138,62 @@ def step_parts_ms(mission: Any, n: int, repeats: int) -> dict[str, float]:
             "plan_ms": statistics.median(plan_ms)}
 
 
+def acceptance(mission: Any, n_cells: int = 1000, repeats: int = 3, two_workers: bool = True) -> dict[str, Any]:
+    """Issue 13's acceptance figures, measured in this process now (see the module doc)."""
+    load_before = os.getloadavg()
+    batch = batch_sweep(mission, n_cells)  # first: the peak memory is this process's before anything else
+    batch2 = batch_two_workers(mission, n_cells) if two_workers else None
+    process = process_sweep(mission)
+    parts = step_parts_ms(mission, 1000, repeats) if repeats else None
+    load_after = os.getloadavg()
+    ratio = batch["cells_per_s"] / process["cells_per_s"]
+    ratio2 = batch2["cells_per_s"] / process["cells_per_s"] if batch2 else None
+    # the same comparison in CPU time, which other load on the machine does not move: the batch's cells per
+    # CPU second against two cores' worth of the scalar loop (pool overhead left out: in the process's favour)
+    ratio_cpu = batch["cells_per_cpu_s"] * process["scalar_cpu_s_per_cell"] / 2.0
+    ok = ratio >= TARGET_RATIO and batch["peak_rss_mib"] <= LIMIT_GIB * 1024
+    return {"batch": batch, "batch_2_workers": batch2, "process": process, "ratio": ratio,
+            "ratio_2_workers": ratio2, "ratio_cpu": ratio_cpu, "step_parts_n1000": parts, "load_before": load_before,
+            "load_after": load_after, "cpus": os.cpu_count(), "ok": ok}
+
+
+def print_acceptance(out: dict[str, Any]) -> None:
+    """The figures of :func:`acceptance`, one line each, then PASS or FAIL."""
+    lb, la = out["load_before"], out["load_after"]
+    batch, batch2, process, parts = out["batch"], out["batch_2_workers"], out["process"], out["step_parts_n1000"]
+    print(f"load average before {lb[0]:.2f} {lb[1]:.2f} {lb[2]:.2f}, "
+          f"after {la[0]:.2f} {la[1]:.2f} {la[2]:.2f} ({out['cpus']} cpus)")
+    print(f"batch:   {batch['cells']} cells of the 30 s sine in {batch['wall_s']:.1f} s = "
+          f"{batch['cells_per_s']:.1f} cells/s, peak memory {batch['peak_rss_mib']:.0f} MiB "
+          f"(limit {LIMIT_GIB * 1024:.0f}), outcomes {batch['outcomes']}")
+    if batch2:
+        print(f"batch on 2 workers: {batch2['cells']} cells in {batch2['wall_s']:.1f} s = "
+              f"{batch2['cells_per_s']:.1f} cells/s, workers' peak memory {batch2['peak_rss_mib']:.0f} MiB")
+    print(f"process: {process['cells']} cells with --engine process --jobs 2 in {process['wall_s']:.1f} s = "
+          f"{process['cells_per_s']:.2f} cells/s")
+    two = f", {out['ratio_2_workers']:.1f}x on 2 workers" if batch2 else ""
+    print(f"ratio:   {out['ratio']:.1f}x in one process (target >= {TARGET_RATIO:g}x){two}")
+    print(f"in CPU time: batch {batch['cells_per_cpu_s']:.1f} cells per CPU-s ({batch['cpu_s']:.1f} s), scalar loop "
+          f"{process['scalar_cpu_s_per_cell']:.2f} CPU-s per cell: {out['ratio_cpu']:.1f}x two idle cores of it "
+          f"(not moved by other load)")
+    if parts:
+        print(f"one control step at N=1000 (median): plant {parts['plant_ms']:.2f} ms, "
+              f"law + actuation {parts['law_ms']:.2f} ms, link plan {parts['plan_ms']:.3f} ms")
+    print("PASS" if out["ok"] else "FAIL")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--repeats", type=int, default=3, help="repeats of the per-step figures (median)")
     ap.add_argument("--cells", type=int, default=1000, help="cells of the batch sweep (default 1000)")
     ap.add_argument("--json", action="store_true", help="print the figures as JSON")
     args = ap.parse_args(argv)
-    mission = load_mission(ROOT / "missions" / "sine.toml")
-    load_before = os.getloadavg()
-    batch = batch_sweep(mission, args.cells)  # first: the peak memory is this process's before anything else
-    batch2 = batch_two_workers(mission, args.cells)
-    process = process_sweep(mission)
-    parts = step_parts_ms(mission, 1000, args.repeats)
-    load_after = os.getloadavg()
-    ratio = batch["cells_per_s"] / process["cells_per_s"]
-    ratio2 = batch2["cells_per_s"] / process["cells_per_s"]
-    out = {"batch": batch, "batch_2_workers": batch2, "process": process, "ratio": ratio,
-           "ratio_2_workers": ratio2, "step_parts_n1000": parts,
-           "load_before": load_before, "load_after": load_after, "cpus": os.cpu_count()}
+    out = acceptance(load_mission(ROOT / "missions" / "sine.toml"), args.cells, args.repeats)
     if args.json:
         print(json.dumps(out, indent=2))
-        return 0
-    print(f"load average before {load_before[0]:.2f} {load_before[1]:.2f} {load_before[2]:.2f}, "
-          f"after {load_after[0]:.2f} {load_after[1]:.2f} {load_after[2]:.2f} ({os.cpu_count()} cpus)")
-    print(f"batch:   {batch['cells']} cells of the 30 s sine in {batch['wall_s']:.1f} s = "
-          f"{batch['cells_per_s']:.1f} cells/s, peak memory {batch['peak_rss_mib']:.0f} MiB "
-          f"(limit {LIMIT_GIB * 1024:.0f}), outcomes {batch['outcomes']}")
-    print(f"batch on 2 workers: {batch2['cells']} cells in {batch2['wall_s']:.1f} s = "
-          f"{batch2['cells_per_s']:.1f} cells/s, workers' peak memory {batch2['peak_rss_mib']:.0f} MiB")
-    print(f"process: {process['cells']} cells with jobs=2 in {process['wall_s']:.1f} s = "
-          f"{process['cells_per_s']:.2f} cells/s")
-    print(f"ratio:   {ratio:.1f}x in one process (target >= {TARGET_RATIO:g}x), {ratio2:.1f}x on 2 workers")
-    print(f"one control step at N=1000 (median of {args.repeats}): plant {parts['plant_ms']:.2f} ms, "
-          f"law + actuation {parts['law_ms']:.2f} ms, link plan {parts['plan_ms']:.3f} ms")
-    ok = ratio >= TARGET_RATIO and batch["peak_rss_mib"] <= LIMIT_GIB * 1024
-    print("PASS" if ok else "FAIL")
-    return 0 if ok else 1
+    else:
+        print_acceptance(out)
+    return 0 if out["ok"] else 1
 
 
 if __name__ == "__main__":

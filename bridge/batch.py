@@ -1,4 +1,4 @@
-"""The batched offline engine: many cells of one mission flown at once, numpy over the cell axis.
+"""The batched offline engine: many cells of one mission flown at once, over a cell axis (numpy and numba).
 
 In:  a mission (a :class:`~missions.Mission` or a TOML path) and, per cell, the overrides
      :func:`bridge.core.flight.prepare` takes (``controller``, ``rate_hz`` Hz, ``seed``, a ``link`` table:
@@ -19,8 +19,8 @@ band), with one column kept whole, u2, for the ripple of each cell's own second 
 Cells may differ in law (``bsst``, ``smc``, ``pid``), seed, control rate (flown as separate batches) and
 every link setting but the bandwidth queue; they must share everything else (profile, effects, gains,
 trajectory, duration). Not flown here (:func:`batch_problem`): a user's own law, the bandwidth
-queue (``rate_bps``), a measured link ``trace``, ``[failsafe] resume`` and any failsafe ``action`` but
-``descend``.
+queue (``rate_bps``), a measured link ``trace``, ``[failsafe] resume``, any failsafe ``action`` but
+``descend``, and parameters changed in flight (``--param-at``).
 """
 
 from __future__ import annotations
@@ -32,8 +32,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numba import njit
 
-from bridge.core.batchlink import HOLD, NONE, BatchPredictor, Clocks, plan_links
+from bridge.core.batchlink import HOLD, NONE, BatchPredictor, Clocks, commands_over_wire, plan_links, states_over_wire
 from bridge.core.flight import Flight, prepare
 from bridge.core.link import link_from_table, merge_link_tables
 from bridge.record.metrics import BANDS, RMS_FROM_S
@@ -74,6 +75,9 @@ def flights_problem(flights: Sequence[Flight]) -> str | None:
         if f.estimator != "truth":  # the batch plant has no sensors: it would fly the truth and say otherwise
             return (f"[estimator] kind = {f.estimator!r}: sensors and the on-board estimator are not in the batch "
                     f"engine; it flies only 'truth'")
+        if f.param_changes:
+            return ("--param-at: parameters changed during the flight are not in the batch engine; "
+                    "fly it with the process engine")
         if f.failsafe.resume:
             return "[failsafe] resume = true: re-arming after a failsafe is not in the batch engine"
         if f.failsafe.action != "descend":
@@ -140,7 +144,7 @@ def _with_seed_and_link(base: Flight, mission: Mission, seed: int | None, link: 
         return base
     merged = merge_link_tables(mission.link, link) if link else None
     m = base.mission.with_overrides(seed=seed, link=merged)
-    return replace(base, mission=m, link=link_from_table(m.link, m.source, seed=m.seed))
+    return replace(base, mission=m, link=link_from_table(m.link, m.source, seed=m.seed, duration_s=m.duration_s))
 
 
 def fly_batch(mission: Mission | str | Path, cells: Sequence[Mapping[str, Any]], *,
@@ -232,7 +236,6 @@ class _Batch:
         nominal = f0.nominal
         ctl = BatchController([f.mission.controller for f in fl], nominal, f0.gains, rate)
         t_all = clocks.step_t
-        cols = np.arange(n)
 
         # the states the guard may still use, and the commands on their way up (rings by step)
         age_max = plan.state_age_max
@@ -269,29 +272,27 @@ class _Batch:
         seg_of = np.searchsorted(np.array(changes), t_all, side="right") - 1  # the change each step follows
         met = _Metrics(np.zeros(n), np.zeros(n), np.full((max(1, len(changes)), 3, n), -1, np.int64),
                        np.zeros(n), np.zeros((steps, n)))
-        band = np.array([BANDS["x"], BANDS["y"], BANDS["z"]])[:, None]
+        band = np.array([BANDS["x"], BANDS["y"], BANDS["z"]])
         u2_now = np.zeros(n)
         alive = np.ones(n, bool)
         flown = np.full(n, steps, np.int64)
         diverged = np.zeros(n, bool)
-        any_dead = False
         ref_cells = None
         every = max(1, steps // 20)
 
+        fs_steps = {int(v) for v in fs_step[fs_step < steps]}  # the steps whose period starts a failsafe
+        any_failsafe = False
+        Xg = np.empty((12, n))
+        last_u2 = np.zeros(n)
         with np.errstate(all="ignore"):
             for k in range(steps):
                 t = k / rate
                 X = plant.X
-                ring_X[k % ring_n] = X
+                states_over_wire(X, ring_X[k % ring_n])  # what the laws read: ODOMETRY's float32, as the scalar loop
                 mode = plan.mode[k]
                 active = mode != NONE
                 if active.any():
-                    st = plan.state_step[k]
-                    fresh = (st == k) | ~active
-                    if fresh.all():
-                        Xg = X.copy()
-                    else:
-                        Xg = ring_X[np.where(active, st, k) % ring_n, :, cols].T
+                    _states_used(ring_X, plan.state_step[k], active, k, Xg)
                     ref = ref_now[k]
                     if lagged_refs:
                         if ref_cells is None:
@@ -301,6 +302,7 @@ class _Batch:
                             ref_cells[:, :, which] = table[k][:, :, None]
                         ref = ref_cells
                     if predictor is not None:
+                        st = plan.state_step[k]
                         pos = np.nonzero(active[pidx])[0]
                         if len(pos):
                             g_idx = pidx[pos]
@@ -310,25 +312,19 @@ class _Batch:
                     if predictor is not None and len(pos):
                         predictor.sent(t, real[:, g_idx], ctl.actuation.omega_d[g_idx], pos)
                     np.copyto(u2_now, u[1], where=active)
-                    ring_held[k % held_n] = plant.held(c)
-                self._measure(k, X, ref_now[k], u2_now, met, band, seg_of[k], t >= rms_from,
-                              alive if any_dead else None)
+                    plant.held(commands_over_wire(c), out=ring_held[k % held_n])  # the float32 target, as SITL
+                _measure(k, X, ref_now[k], u2_now, last_u2, met.sq_sum, met.sq_max, met.last_out, met.tv, band,
+                         int(seg_of[k]), t >= rms_from, alive)
+                met.u2[k] = u2_now
+                last_u2[...] = u2_now
 
                 # the vehicle's period: commands take effect at the physics step they arrive in
+                if k in fs_steps:
+                    in_failsafe |= fs_step == k
+                    any_failsafe = True
                 for i in range(S):
-                    check = k * S + i
-                    hit = next_check == check
-                    if hit.any():
-                        cells = np.nonzero(hit)[0]
-                        cmd = plan.apply_cmd[cells, ptr[cells]]
-                        plant.hold(ring_held[cmd % held_n, :, cells].T, cells)
-                        ptr[cells] += 1
-                        next_check[cells] = plan.apply_check[cells, ptr[cells]]
-                    if i == 0:
-                        starting = fs_step == k
-                        if starting.any():
-                            in_failsafe |= starting
-                    if in_failsafe.any():
+                    _apply_due(k * S + i, next_check, ptr, plan.apply_check, plan.apply_cmd, ring_held, plant.holding)
+                    if any_failsafe:
                         self._land(plant, landing, nominal, descent, in_failsafe & armed, armed)
                     plant.step()
                 plant.resync()
@@ -339,7 +335,6 @@ class _Batch:
                     alive &= ~bad
                     flown[bad] = k + 1
                     plant.X[:, bad] = np.asarray(start)[:, None]  # a resting state: no nan downstream
-                    any_dead = True
                     if not alive.any():
                         break
                 if k % every == 0:
@@ -350,29 +345,6 @@ class _Batch:
         for pos_, i in enumerate(self.order):
             back[i] = rows[pos_]
         return back  # type: ignore[return-value]
-
-    @staticmethod
-    def _measure(k: int, X: np.ndarray, ref: np.ndarray, u2: np.ndarray, met: _Metrics, band: np.ndarray,
-                 seg: int, late: bool, alive: np.ndarray | None) -> None:
-        """The figures of the trace row of step k: state X [12, n], reference sample ref [4, 5], u2 [n]."""
-        e = X[0:6:2] - ref[0:3, 0:1]
-        sq = e * e
-        s = sq[0] + sq[1] + sq[2]
-        out = np.abs(e) > band
-        du = np.abs(u2 - met.u2[k - 1]) if k else None
-        if alive is not None:
-            s = np.where(alive, s, 0.0)
-            out &= alive
-            if du is not None:
-                du = np.where(alive, du, 0.0)
-        if late:
-            met.sq_sum += s
-            np.maximum(met.sq_max, s, out=met.sq_max)
-        if seg >= 0:
-            np.copyto(met.last_out[seg], k, where=out)
-        if du is not None:
-            met.tv += du
-        met.u2[k] = u2
 
     @staticmethod
     def _land(plant: BatchPlant, act: BatchActuation, nominal: Any, descent: float, flying: np.ndarray,
@@ -473,7 +445,8 @@ def _ripples(u2: np.ndarray, flown: np.ndarray, t: np.ndarray, rate_hz: float) -
         if L < 3 * n_win:
             res[cells] = 0.0
             continue
-        u = u2[:L, cells] - u2[0, cells]  # shifted: the ripple is the same, the running sum stays small
+        whole = len(cells) == u2.shape[1]  # every cell flew this long: columns in order, no gather
+        u = u2[:L] - u2[0] if whole else u2[:L, cells] - u2[0, cells]  # shifted: the running sum stays small
         csum = np.zeros((L + 1, len(cells)))
         np.cumsum(u, axis=0, out=csum[1:])
         tt = t[:L]
@@ -490,6 +463,62 @@ def _ripples(u2: np.ndarray, flown: np.ndarray, t: np.ndarray, rate_hz: float) -
     for v in res:
         out.append(_num(v))
     return out
+
+
+@njit(cache=True)
+def _states_used(ring_X: np.ndarray, state_step: np.ndarray, active: np.ndarray, k: int,
+                 out: np.ndarray) -> None:  # pragma: no cover
+    """The state each cell's guard controls on at step k (the ring's row of step state_step, or of k where the
+    cell does not act) into out [12, n]."""
+    ring_n = ring_X.shape[0]
+    for j in range(out.shape[1]):
+        slot = (state_step[j] if active[j] else k) % ring_n
+        for i in range(12):
+            out[i, j] = ring_X[slot, i, j]
+
+
+@njit(cache=True)
+def _apply_due(check: int, next_check: np.ndarray, ptr: np.ndarray, apply_check: np.ndarray, apply_cmd: np.ndarray,
+               ring_held: np.ndarray, holding: np.ndarray) -> None:  # pragma: no cover
+    """The commands that take effect at physics check ``check``: each such cell's next planned one, from the
+    ring of what the commands hold, into the plant's ``holding`` [rows, n]; its pointer moves on."""
+    held_n = ring_held.shape[0]
+    for j in range(next_check.shape[0]):
+        if next_check[j] != check:
+            continue
+        slot = apply_cmd[j, ptr[j]] % held_n
+        for i in range(holding.shape[0]):
+            holding[i, j] = ring_held[slot, i, j]
+        ptr[j] += 1
+        next_check[j] = apply_check[j, ptr[j]]
+
+
+@njit(cache=True)
+def _measure(k: int, X: np.ndarray, ref: np.ndarray, u2: np.ndarray, last_u2: np.ndarray, sq_sum: np.ndarray,
+             sq_max: np.ndarray, last_out: np.ndarray, tv: np.ndarray, band: np.ndarray, seg: int, late: bool,
+             alive: np.ndarray) -> None:  # pragma: no cover
+    """The figures of the trace row of step k: state X [12, n], reference sample ref [4, 5], u2 [n] (and the
+    last step's, last_u2); a cell no longer alive adds nothing."""
+    for j in range(X.shape[1]):
+        if not alive[j]:
+            continue
+        ex = X[0, j] - ref[0, 0]
+        ey = X[2, j] - ref[1, 0]
+        ez = X[4, j] - ref[2, 0]
+        s = ex * ex + ey * ey + ez * ez
+        if late:
+            sq_sum[j] += s
+            if s > sq_max[j] or s != s:  # np.maximum's: a nan stays
+                sq_max[j] = s
+        if seg >= 0:
+            if abs(ex) > band[0]:
+                last_out[seg, 0, j] = k
+            if abs(ey) > band[1]:
+                last_out[seg, 1, j] = k
+            if abs(ez) > band[2]:
+                last_out[seg, 2, j] = k
+        if k:
+            tv[j] += abs(u2[j] - last_u2[j])
 
 
 def _num(v: Any) -> float | None:

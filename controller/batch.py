@@ -8,18 +8,21 @@ Out: the wrench demanded and realisable [4, N] (N), the normalised command [4, N
      the signed rotor-speed sum omega_d [N] (rad/s) the actuation allocated
 
 The same arithmetic as :class:`controller.bsst.BacksteppingSuperTwisting`, :class:`controller.pid.CascadedPid`
-and :mod:`controller.actuation`, written on arrays (a jet is a [4, ...] array of a value and its three
-derivatives); the x and y loops, and the sig_beta of loops that run side by side, share one array so
-that a step costs the same few hundred array operations whatever N is. ``smc`` cells fly the BS-ST
-arithmetic with the sign reaching law in the last step, as ``make_law("smc")`` does.
+and :mod:`controller.actuation`. The backstepping law, its integrators and the ``wrench`` actuation are
+compiled loops over the cells (numba: ``_backstepping``, ``_advance``, ``_wrench``; a cell's jets — a value
+and its three derivatives — in registers), the PID law and the rotor allocation numpy over the cell axis.
+``smc`` cells fly the BS-ST arithmetic with the sign reaching law in the last step, as ``make_law("smc")``
+does.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from math import pi
 
 import numpy as np
+from numba import njit
 
 from controller.gains import Gains
 from controller.nominal import Coefficients, Nominal
@@ -36,96 +39,6 @@ def wrap_angle(a: np.ndarray) -> np.ndarray:
     return np.where(a == -pi, pi, a)
 
 
-class SignedPowers:
-    """Several :class:`~controller.power.SignedPower` side by side, one per row of a [rows, N] array."""
-
-    def __init__(self, powers: Sequence[SignedPower]) -> None:
-        col = lambda v: np.array(v, float)[:, None]  # noqa: E731
-        self.beta = col([p.beta for p in powers])
-        self.eps = col([p.eps for p in powers])
-        a = np.array([p._a for p in powers])  # the C^3 join's coefficients, solved once by SignedPower
-        self.a1, self.a3, self.a5, self.a7 = (col(a[:, i]) for i in range(4))
-        s = np.array([p._scale for p in powers])
-        self.s0, self.s1, self.s2, self.s3 = (col(s[:, i]) for i in range(4))
-        self.c3a3, self.c5a5, self.c7a7 = 3.0 * self.a3, 5.0 * self.a5, 7.0 * self.a7
-        self.c6a3, self.c20a5, self.c42a7 = 6.0 * self.a3, 20.0 * self.a5, 42.0 * self.a7
-        self.c60a5, self.c210a7 = 60.0 * self.a5, 210.0 * self.a7
-
-    def derivs(self, e: np.ndarray, order: int = 3) -> list[np.ndarray]:
-        """sig_beta of each row of e [rows, N] and its derivatives up to ``order`` (SignedPower.derivs)."""
-        u = e / self.eps
-        u2 = u * u
-        f = [self.s0 * u * (self.a1 + u2 * (self.a3 + u2 * (self.a5 + u2 * self.a7))),
-             self.s1 * (self.a1 + u2 * (self.c3a3 + u2 * (self.c5a5 + u2 * self.c7a7)))]
-        if order >= 2:
-            f.append(self.s2 * u * (self.c6a3 + u2 * (self.c20a5 + u2 * self.c42a7)))
-        if order >= 3:
-            f.append(self.s3 * (self.c6a3 + u2 * (self.c60a5 + u2 * self.c210a7)))
-        m = np.abs(e)
-        out = m >= self.eps
-        if not out.any():  # every error inside its band: the polynomial alone (the usual case in flight)
-            return f
-        b = self.beta
-        with np.errstate(divide="ignore", invalid="ignore"):
-            p = m**b
-            g = [np.copysign(p, e), b * p / m]
-            if order >= 2:
-                g2 = (b - 1.0) * g[1] / m  # odd function: f0 and f2 take e's sign, f1 and f3 do not
-                g.append(g2 * np.sign(e))
-            if order >= 3:
-                g.append((b - 2.0) * g2 / m)
-        for fi, gi in zip(f, g, strict=True):
-            np.copyto(fi, gi, where=out)
-        return f
-
-
-def _step_jet(fs: list[np.ndarray], c: np.ndarray, e: np.ndarray, lead: np.ndarray) -> np.ndarray:
-    """``bsst._Step.jet``: lead - c' sig_beta(e) as a jet, from sig_beta's derivatives fs at e[0]."""
-    f0, f1, f2, f3 = fs
-    e1, e2, e3 = e[1], e[2], e[3]
-    e11 = e1 * e1
-    return np.stack((
-        lead[0] - f0 * c,
-        lead[1] - f1 * e1 * c,
-        lead[2] - (f2 * e11 + f1 * e2) * c,
-        lead[3] - (f3 * e11 * e1 + 3.0 * f2 * e1 * e2 + f1 * e3) * c,
-    ))
-
-
-def _mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """:func:`controller.jets.mul` (Leibniz) on [4, ...] jets."""
-    a0, a1, a2, a3 = a
-    b0, b1, b2, b3 = b
-    return np.stack((a0 * b0, a1 * b0 + a0 * b1, a2 * b0 + 2.0 * a1 * b1 + a0 * b2,
-                     a3 * b0 + 3.0 * (a2 * b1 + a1 * b2) + a0 * b3))
-
-
-def _atan2(y: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """:func:`controller.jets.atan2` on [4, ...] jets (exact to order 2; the 3rd is not needed)."""
-    x0, x1, x2, x3 = x[0], x[1], x[2], x[3]
-    y0, y1, y2, y3 = y[0], y[1], y[2], y[3]
-    r0 = x0 * x0 + y0 * y0
-    r1 = 2.0 * (x1 * x0 + y1 * y0)
-    r2 = (2.0 * x2 * x0 + 2.0 * x1 * x1) + (2.0 * y2 * y0 + 2.0 * y1 * y1)
-    n0 = x0 * y1 - y0 * x1
-    n1 = x0 * y2 - y0 * x2
-    n2 = (x1 * y2 + x0 * y3) - (y1 * x2 + y0 * x3)
-    q0 = n0 / r0
-    q1 = (n1 - q0 * r1) / r0
-    q2 = (n2 - 2.0 * q1 * r1 - q0 * r2) / r0
-    return np.stack((np.arctan2(y0, x0), q0, q1, q2))
-
-
-def _sqrt(a: np.ndarray) -> np.ndarray:
-    """:func:`controller.jets.sqrt_` on a [4, ...] jet (chain rule)."""
-    a0, a1, a2, a3 = a
-    r = np.sqrt(a0)
-    f1 = 0.5 / r
-    f2 = -0.25 / (r * a0)
-    f3 = 0.375 / (r * a0 * a0)
-    return np.stack((r, f1 * a1, f2 * a1 * a1 + f1 * a2, f3 * a1 * a1 * a1 + 3.0 * f2 * a1 * a2 + f1 * a3))
-
-
 class BatchBacksteppingLaw:
     """:class:`~controller.bsst.BacksteppingSuperTwisting` for n cells; per cell super-twisting (``bsst``)
     or sign (``smc``) reaching in the last step."""
@@ -135,216 +48,39 @@ class BatchBacksteppingLaw:
         self.n = n
         self.dt = 1.0 / rate_hz
         self.gains = gains
-        self.m = nominal.mass
-        self.g = nominal.gravity
         co = Coefficients.of(nominal)
-        self.co = co
-        self.kx, self.ky, self.kz = nominal.ixx / nominal.arm, nominal.iyy / nominal.arm, nominal.izz / nominal.arm
-        self.u1_max = nominal.u_max[0]
         g = gains
-        steps = {name: SignedPower(2.0 * b.alpha - 1.0, b.eps) for name, b in
-                 (("yaw", g.yaw), ("z", g.z), ("p", g.position), ("v", g.velocity), ("a", g.attitude))}
-        cc = {name: b.c * 2.0 ** (-b.alpha) for name, b in
-              (("yaw", g.yaw), ("z", g.z), ("p", g.position), ("v", g.velocity), ("a", g.attitude))}
-        # the loops whose sig_beta runs side by side: (yaw, z, x, y); (x, y) velocity; (theta, phi) attitude
-        self.sig1 = SignedPowers([steps["yaw"], steps["z"], steps["p"], steps["p"]])
-        self.c1 = np.array([cc["yaw"], cc["z"], cc["p"], cc["p"]])[:, None]
-        self.sig2 = SignedPowers([steps["v"], steps["v"]])
-        self.cv = cc["v"]
-        self.sigz = cc["z"]
-        self.sig3 = SignedPowers([steps["a"], steps["a"]])
-        self.ca = cc["a"]
-        st = (g.z_st, g.attitude_st, g.attitude_st, g.yaw_st)
-        self.k1 = np.array([s.k1 for s in st])[:, None]
+        loops = {"yaw": g.yaw, "z": g.z, "p": g.position, "v": g.velocity, "a": g.attitude}
+        self._sp = np.array([_sp_row(SignedPower(2.0 * loops[r].alpha - 1.0, loops[r].eps)) for r in _SP_ROWS])
+        c = {r: loops[r].c * 2.0 ** (-loops[r].alpha) for r in _SP_ROWS}
+        st = (g.z_st, g.attitude_st, g.attitude_st, g.yaw_st)  # the channels: z, phi (u2), theta (u3), yaw
+        k = {"c_yaw": c["yaw"], "c_z": c["z"], "c_p": c["p"], "c_v": c["v"], "c_a": c["a"],
+             "k1_z": st[0].k1, "k1_phi": st[1].k1, "k1_th": st[2].k1, "k1_yaw": st[3].k1,
+             "ks_z": g.smc_scale * st[0].k1, "ks_phi": g.smc_scale * st[1].k1, "ks_th": g.smc_scale * st[2].k1,
+             "ks_yaw": g.smc_scale * st[3].k1,
+             "kx": nominal.ixx / nominal.arm, "ky": nominal.iyy / nominal.arm, "kz": nominal.izz / nominal.arm,
+             "u1_max": nominal.u_max[0], "m": nominal.mass, "g": nominal.gravity, "i1": co.i1, "i2": co.i2,
+             "i3": co.i3, "jr_x": co.jr_x, "jr_y": co.jr_y, "l_z": co.l_z, "tilt_max": g.tilt_max,
+             "rate_max": g.tilt_rate_max, "ff_max": g.feedforward_max}
+        self._k = np.array([k[name] for name in _K], float)
         self.k2dt = np.array([s.k2 * self.dt for s in st])[:, None]
         self.xi_max = np.array([s.xi_max for s in st])[:, None]
-        self.k_sign = np.array([g.smc_scale * s.k1 for s in st])[:, None]
         self.sign = np.asarray(sign, bool)
-        self._any_sign = bool(self.sign.any())
-        self._flip = np.array([1.0, -1.0])[:, None]
         self.xi = np.zeros((4, n))
         self.s = np.zeros((4, n))
         self.desired = np.zeros((2, n))
 
-    def _reach(self, s: np.ndarray, k1: np.ndarray, xi: np.ndarray, k_sign: np.ndarray) -> np.ndarray:
-        """ST(s) of some channels (rows): -k1 sqrt|s| sign s + xi, or -k sign s for the ``smc`` cells."""
-        st = np.copysign(np.sqrt(np.abs(s)), s)
-        st *= -k1
-        st += xi
-        if self._any_sign:
-            np.copyto(st, -k_sign * np.sign(s), where=self.sign[None, :])
-        return st
-
     def advance(self, saturated: np.ndarray, hold: np.ndarray) -> None:
         """Step the integrators (eq. 22) of the cells not holding, per channel not saturated and s != 0."""
-        s = self.s
-        xi = np.minimum(np.maximum(self.xi - np.sign(s) * self.k2dt, -self.xi_max), self.xi_max)
-        frozen = saturated | hold[None, :] | (s == 0.0) | self.sign[None, :]
-        np.copyto(self.xi, xi, where=~frozen)
+        _advance(self.xi, self.s, self.k2dt[:, 0], self.xi_max[:, 0], np.ascontiguousarray(saturated),
+                 np.ascontiguousarray(hold), self.sign)
 
     def update(self, X: np.ndarray, ref: np.ndarray, omega_d: np.ndarray) -> np.ndarray:
         """The wrench (u1..u4) [4, n] for the states X [12, n]; ref [4, 5, 1] or [4, 5, n] (x, y, z, psi)."""
-        x, vx, y, vy, z, vz, phi, dphi, th, dth, psi, dpsi = X
-        co = self.co
-        g, m = self.g, self.m
-        rz, rpsi = ref[2], ref[3]
-        rxy = ref[0:2]  # [2, 5, n|1]: x and y side by side
-        Sn = np.sin(X[6::2])
-        Cs = np.cos(X[6::2])
-        sphi, sth, spsi = Sn
-        cphi, cth, cpsi = Cs
-
-        # sig_beta of psi, z, x and y side by side
-        e = np.empty((4, X.shape[1]))
-        e[0] = wrap_angle(psi - rpsi[0])
-        np.subtract(z, rz[0], out=e[1])
-        np.subtract(X[0:4:2], rxy[:, 0], out=e[2:4])
-        f0, f1, f2, f3 = self.sig1.derivs(e)
-        c1 = self.c1
-        phi4 = rpsi[1] - c1[0] * f0[0]
-        dphi4 = rpsi[2] - c1[0] * f1[0] * (dpsi - rpsi[1])
-        phi1 = rz[1] - c1[1] * f0[1]
-        dphi1 = rz[2] - c1[1] * f1[1] * (vz - rz[1])
-        s14 = np.empty((2, X.shape[1]))
-        np.subtract(vz, phi1, out=s14[0])
-        np.subtract(dpsi, phi4, out=s14[1])
-        st14 = self._reach(s14, self.k1[0::3], self.xi[0::3], self.k_sign[0::3])
-        u4 = self.kz * ((dphi4 + st14[1]) if co.i3 == 0.0 else (-co.i3 * dphi * dth + dphi4 + st14[1]))
-        tilt = cphi * cth
-        u1 = m * (g + dphi1 + st14[0]) / np.maximum(tilt, 0.2)
-        a = np.minimum(np.maximum(u1, 0.0), self.u1_max) / m
-
-        # the state's 2nd and 3rd derivatives along the nominal model, inputs held ([2, n]: x and y)
-        cs = cphi * sth
-        ss = sphi * sth
-        AB = np.empty((2, X.shape[1]))
-        np.add(cs * cpsi, sphi * spsi, out=AB[0])
-        np.subtract(cs * spsi, sphi * cpsi, out=AB[1])
-        dAB = np.empty_like(AB)
-        tdth = tilt * dth
-        np.add((cphi * spsi - ss * cpsi) * dphi + tdth * cpsi, -AB[1] * dpsi, out=dAB[0])
-        np.add(-(ss * spsi + cphi * cpsi) * dphi + tdth * spsi, AB[0] * dpsi, out=dAB[1])
-        dC = -(sphi * cth * dphi + cs * dth)
-        ddpsi = co.l_z * u4 if co.i3 == 0.0 else co.i3 * dphi * dth + co.l_z * u4
-
-        # x and y: position then velocity step, as jets of [2, n] rows
-        p1 = X[1:4:2]
-        p2 = AB * a
-        p3 = dAB * a
-        e1 = p1 - rxy[:, 1]
-        e2 = p2 - rxy[:, 2]
-        e3 = p3 - rxy[:, 3]
-        cp = c1[2:4]
-        fp0, fp1, fp2, fp3 = f0[2:4], f1[2:4], f2[2:4], f3[2:4]
-        e11 = e1 * e1
-        q0 = rxy[:, 1] - fp0 * cp
-        q1 = rxy[:, 2] - fp1 * e1 * cp
-        q2 = rxy[:, 3] - (fp2 * e11 + fp1 * e2) * cp
-        q3 = rxy[:, 4] - (fp3 * e11 * e1 + 3.0 * fp2 * e1 * e2 + fp1 * e3) * cp
-        z0 = p1 - q0
-        z1 = p2 - q1
-        z2 = p3 - q2
-        z3 = -q3
-        fv0, fv1, fv2, fv3 = self.sig2.derivs(z0)
-        cv = self.cv
-        z11 = z1 * z1
-        a0 = q1 - fv0 * cv
-        a1 = q2 - fv1 * z1 * cv
-        a2 = q3 - (fv2 * z11 + fv1 * z2) * cv
-        a3 = -((fv3 * z11 * z1 + 3.0 * fv2 * z1 * z2 + fv1 * z3) * cv)
-        # a_z = phi1' as a jet (the z step again, from the state's derivatives): G = g + a_z, floored
-        ez1 = vz - rz[1]
-        ez2 = tilt * a - g - rz[2]
-        ez3 = dC * a - rz[3]
-        cz = self.sigz
-        fz1, fz2, fz3 = f1[1], f2[1], f3[1]
-        G0 = rz[2] - fz1 * ez1 * cz + g
-        G1 = rz[3] - (fz2 * ez1 * ez1 + fz1 * ez2) * cz
-        G2 = rz[4] - (fz3 * ez1 * ez1 * ez1 + 3.0 * fz2 * ez1 * ez2 + fz1 * ez3) * cz
-        low = G0 < 0.2 * g
-        if low.any():
-            G0 = np.where(low, 0.2 * g, G0)
-            G1 = np.where(low, 0.0, G1)
-            G2 = np.where(low, 0.0, G2)
-        # [hx, hy] = a_x [cos psi, sin psi] + a_y [sin psi, -cos psi], as jets (Leibniz)
-        d1, d2 = dpsi, ddpsi
-        d11 = d1 * d1
-        sd12 = 3.0 * d1 * d2
-        c0 = np.empty((2, X.shape[1]))  # the jet of (cos psi, sin psi)
-        c0[0], c0[1] = cpsi, spsi
-        cA = np.empty_like(c0)
-        cA[0], cA[1] = -spsi * d1, cpsi * d1
-        cB = np.empty_like(c0)
-        cB[0], cB[1] = -cpsi * d11 - spsi * d2, -spsi * d11 + cpsi * d2
-        cC = np.empty_like(c0)
-        cC[0], cC[1] = spsi * d11 * d1 - cpsi * sd12, -cpsi * d11 * d1 - spsi * sd12
-        # (sin psi, -cos psi) is the same jet turned: rows swapped, the second negated
-        n0 = c0[::-1] * self._flip
-        nA = cA[::-1] * self._flip
-        nB = cB[::-1] * self._flip
-        nC = cC[::-1] * self._flip
-        ax0, ax1, ax2, ax3 = a0[0], a1[0], a2[0], a3[0]
-        ay0, ay1, ay2, ay3 = a0[1], a1[1], a2[1], a3[1]
-        h0 = ax0 * c0 + ay0 * n0
-        h1 = ax1 * c0 + ax0 * cA + ay1 * n0 + ay0 * nA
-        h2 = ax2 * c0 + 2.0 * ax1 * cA + ax0 * cB + ay2 * n0 + 2.0 * ay1 * nA + ay0 * nB
-        h3 = (ax3 * c0 + 3.0 * (ax2 * cA + ax1 * cB) + ax0 * cC
-              + ay3 * n0 + 3.0 * (ay2 * nA + ay1 * nB) + ay0 * nC)
-        hx0, hx1, hx2, hx3 = h0[0], h1[0], h2[0], h3[0]
-        # theta_d = atan2(hx, G), phi_d = atan2(hy, sqrt(hx^2 + G^2)): one atan2 of [2, n] jets
-        r0 = hx0 * hx0 + G0 * G0
-        r1 = 2.0 * (hx0 * hx1 + G0 * G1)
-        r2 = 2.0 * (hx0 * hx2 + hx1 * hx1 + G0 * G2 + G1 * G1)
-        r3 = 2.0 * (hx0 * hx3 + G0 * 0.0) + 6.0 * (hx1 * hx2 + G1 * G2)
-        q = np.sqrt(r0)
-        k1_ = 0.5 / q
-        k2_ = -0.25 / (q * r0)
-        k3_ = 0.375 / (q * r0 * r0)
-        den = np.empty((4, 2, X.shape[1]))
-        den[0, 0], den[1, 0], den[2, 0], den[3, 0] = G0, G1, G2, 0.0
-        den[0, 1] = q
-        den[1, 1] = k1_ * r1
-        den[2, 1] = k2_ * r1 * r1 + k1_ * r2
-        den[3, 1] = k3_ * r1 * r1 * r1 + 3.0 * k2_ * r1 * r2 + k1_ * r3
-        att = _atan2((h0, h1, h2, h3), den)  # [4, 2, n]: theta_d, phi_d
-        att = self._limit_tilt(att)
-        self.desired = att[0, ::-1]
-
-        # attitude steps: theta for x (u3), phi for y (u2), side by side
-        ea = X[8:5:-2] - att[0]
-        fa0, fa1 = self.sig3.derivs(ea, order=1)
-        ca = self.ca
-        rate = X[9:6:-2]
-        ffm = self.gains.feedforward_max
-        dphi3 = np.minimum(np.maximum(att[2] - ca * fa1 * (rate - att[1]), -ffm), ffm)
-        s32 = rate - (att[1] - ca * fa0)
-        st32 = self._reach(s32, self.k1[2:0:-1], self.xi[2:0:-1], self.k_sign[2:0:-1])
         u = np.empty((4, X.shape[1]))
-        u[0] = u1
-        u[1] = self.kx * (-co.i1 * dth * dpsi + co.jr_x * dth * omega_d + dphi3[1] + st32[1])
-        u[2] = self.ky * (-co.i2 * dphi * dpsi - co.jr_y * dphi * omega_d + dphi3[0] + st32[0])
-        u[3] = u4
-        s_ = self.s
-        s_[0] = s14[0]
-        s_[1] = s32[1]
-        s_[2] = s32[0]
-        s_[3] = s14[1]
+        _backstepping(np.ascontiguousarray(X), np.ascontiguousarray(ref), np.ascontiguousarray(omega_d), self._sp,
+                      self._k, self.sign, self.xi, self.s, self.desired, u)
         return u
-
-    def _limit_tilt(self, a: np.ndarray) -> np.ndarray:
-        """``bsst._limit_tilt`` on [4, 2, n] jets: the tilt limit (derivatives zeroed), else the rate limit."""
-        tm = self.gains.tilt_max
-        rm = self.gains.tilt_rate_max
-        over = np.abs(a[0]) > tm
-        fast = ~over & ((a[1] > rm) | (a[1] < -rm))
-        if not (over.any() or fast.any()):
-            return a
-        out = a.copy()
-        out[0] = np.where(over, np.clip(a[0], -tm, tm), a[0])
-        out[1] = np.where(over, 0.0, np.where(fast, np.clip(a[1], -rm, rm), a[1]))
-        out[2] = np.where(over | fast, 0.0, a[2])
-        out[3] = np.where(over | fast, 0.0, a[3])
-        return out
 
 
 class BatchPid:
@@ -410,13 +146,10 @@ class BatchActuation:
         return self._motors(u) if self.motors else self._wrench(u)
 
     def _wrench(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        r = np.minimum(np.maximum(u, self.lo), self.u_max)
-        sat = r != u
-        b, d = self.b, self.d
-        s24 = 0.5 * (r[0] / b + r[3] / d)
-        s13 = 0.5 * (r[0] / b - r[3] / d)
-        w = np.sqrt(np.maximum(0.5 * np.stack((s13 - r[2] / b, s24 - r[1] / b, s13 + r[2] / b, s24 + r[1] / b)), 0.0))
-        return r, r / self.u_max, sat, w[1] + w[3] - w[0] - w[2]
+        k = u.shape[1]
+        r, c, sat, od = np.empty((4, k)), np.empty((4, k)), np.empty((4, k), bool), np.empty(k)
+        _wrench(np.ascontiguousarray(u), self.lo[:, 0], self.u_max[:, 0], self.b, self.d, r, c, sat, od)
+        return r, c, sat, od
 
     def _motors(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         b, d, top = self.b, self.d, self.w2_max
@@ -502,3 +235,261 @@ class BatchController:
         if self.pid_law is not None:
             self.pid_law.advance(sat[:, self.pid], idle[self.pid])
         return u, real, c
+
+
+# -- the compiled backstepping law -------------------------------------------------------------------------
+# rows of the sig_beta table (BatchBacksteppingLaw._sp) and its columns: beta, eps, the C^3 join's a1..a7,
+# the scales s0..s3, and the products of the a's the derivatives take (SignedPowers' c3a3 ... c210a7)
+_SP_YAW, _SP_Z, _SP_P, _SP_V, _SP_A = range(5)
+_SP_ROWS = ("yaw", "z", "p", "v", "a")
+# the kernel's scalars (BatchBacksteppingLaw._k), in this order
+_K = ("c_yaw", "c_z", "c_p", "c_v", "c_a", "k1_z", "k1_phi", "k1_th", "k1_yaw", "ks_z", "ks_phi", "ks_th", "ks_yaw",
+      "kx", "ky", "kz", "u1_max", "m", "g", "i1", "i2", "i3", "jr_x", "jr_y", "l_z", "tilt_max", "rate_max", "ff_max")
+(_C_YAW, _C_Z, _C_P, _C_V, _C_A, _K1_Z, _K1_PHI, _K1_TH, _K1_YAW, _KS_Z, _KS_PHI, _KS_TH, _KS_YAW, _KX, _KY, _KZ,
+ _U1_MAX, _M, _G, _I1, _I2, _I3, _JR_X, _JR_Y, _L_Z, _TILT_MAX, _RATE_MAX, _FF_MAX) = range(len(_K))
+
+
+def _sp_row(p: SignedPower) -> list[float]:
+    a1, a3, a5, a7 = p._a
+    return [p.beta, p.eps, a1, a3, a5, a7, *p._scale, 3.0 * a3, 5.0 * a5, 7.0 * a7, 6.0 * a3, 20.0 * a5, 42.0 * a7,
+            60.0 * a5, 210.0 * a7]
+
+
+@njit(cache=True, inline="always")
+def _sgn(v: float) -> float:
+    """np.sign of a float (nan stays nan)."""
+    return 1.0 if v > 0.0 else -1.0 if v < 0.0 else v
+
+
+@njit(cache=True, inline="always")
+def _sig(e: float, P: np.ndarray) -> tuple[float, float, float, float]:
+    """SignedPowers.derivs of one error e with the row P of the sig_beta table."""
+    u = e / P[1]
+    u2 = u * u
+    f0 = P[6] * u * (P[2] + u2 * (P[3] + u2 * (P[4] + u2 * P[5])))
+    f1 = P[7] * (P[2] + u2 * (P[10] + u2 * (P[11] + u2 * P[12])))
+    f2 = P[8] * u * (P[13] + u2 * (P[14] + u2 * P[15]))
+    f3 = P[9] * (P[13] + u2 * (P[16] + u2 * P[17]))
+    m = abs(e)
+    if m >= P[1]:
+        b = P[0]
+        p = m**b
+        f0 = math.copysign(p, e)
+        f1 = b * p / m
+        g2 = (b - 1.0) * f1 / m
+        f2 = g2 * _sgn(e)
+        f3 = (b - 2.0) * g2 / m
+    return f0, f1, f2, f3
+
+
+@njit(cache=True, inline="always")
+def _reach1(s: float, k1: float, xi: float, k_sign: float, sign: bool) -> float:
+    """BatchBacksteppingLaw._reach of one channel of one cell."""
+    if sign:
+        return -k_sign * _sgn(s)
+    return math.copysign(math.sqrt(abs(s)), s) * -k1 + xi
+
+
+@njit(cache=True, inline="always")
+def _wrap1(a: float) -> float:
+    a = (a + pi) % TWO_PI - pi
+    return pi if a == -pi else a
+
+
+@njit(cache=True, inline="always")
+def _atan2_1(y0: float, y1: float, y2: float, y3: float, x0: float, x1: float, x2: float,
+             x3: float) -> tuple[float, float, float, float]:
+    """:func:`_atan2` of one pair of jets."""
+    r0 = x0 * x0 + y0 * y0
+    r1 = 2.0 * (x1 * x0 + y1 * y0)
+    r2 = (2.0 * x2 * x0 + 2.0 * x1 * x1) + (2.0 * y2 * y0 + 2.0 * y1 * y1)
+    n0 = x0 * y1 - y0 * x1
+    n1 = x0 * y2 - y0 * x2
+    n2 = (x1 * y2 + x0 * y3) - (y1 * x2 + y0 * x3)
+    q0 = n0 / r0
+    q1 = (n1 - q0 * r1) / r0
+    q2 = (n2 - 2.0 * q1 * r1 - q0 * r2) / r0
+    return math.atan2(y0, x0), q0, q1, q2
+
+
+@njit(cache=True, inline="always")
+def _limit1(a0: float, a1: float, a2: float, a3: float, tm: float, rm: float) -> tuple[float, float, float, float]:
+    """BatchBacksteppingLaw._limit_tilt of one jet."""
+    if abs(a0) > tm:
+        return min(max(a0, -tm), tm), 0.0, 0.0, 0.0
+    if a1 > rm or a1 < -rm:
+        return a0, min(max(a1, -rm), rm), 0.0, 0.0
+    return a0, a1, a2, a3
+
+
+@njit(cache=True)
+def _backstepping(X: np.ndarray, ref: np.ndarray, omega_d: np.ndarray, sp: np.ndarray, k: np.ndarray,
+                  sign: np.ndarray, xi: np.ndarray, s_out: np.ndarray, desired: np.ndarray,
+                  u_out: np.ndarray) -> None:  # pragma: no cover
+    """BatchBacksteppingLaw.update's arithmetic, cell by cell: the wrench into u_out [4, n], the sliding
+    variables into s_out [4, n], (phi_d, theta_d) into desired [2, n]; ref [4, 5, 1] or [4, 5, n]."""
+    shared = ref.shape[2] == 1
+    g, m = k[_G], k[_M]
+    i1, i2, i3, l_z = k[_I1], k[_I2], k[_I3], k[_L_Z]
+    tm, rm, ffm = k[_TILT_MAX], k[_RATE_MAX], k[_FF_MAX]
+    cp, cv, cz, ca = k[_C_P], k[_C_V], k[_C_Z], k[_C_A]
+    P_yaw, P_z, P_p, P_v, P_a = sp[_SP_YAW], sp[_SP_Z], sp[_SP_P], sp[_SP_V], sp[_SP_A]
+    aj = np.empty((2, 4))  # the jets of a_x and a_y
+    for j in range(X.shape[1]):
+        r = 0 if shared else j
+        x, vx, y, vy, z, vz = X[0, j], X[1, j], X[2, j], X[3, j], X[4, j], X[5, j]
+        phi, dphi, th, dth, psi, dpsi = X[6, j], X[7, j], X[8, j], X[9, j], X[10, j], X[11, j]
+        sgn = sign[j]
+        sphi, sth, spsi = math.sin(phi), math.sin(th), math.sin(psi)
+        cphi, cth, cpsi = math.cos(phi), math.cos(th), math.cos(psi)
+
+        # yaw and z: position steps, then the velocity steps' sliding variables
+        f0y, f1y, _, _ = _sig(_wrap1(psi - ref[3, 0, r]), P_yaw)
+        f0z, f1z, f2z, f3z = _sig(z - ref[2, 0, r], P_z)
+        phi4 = ref[3, 1, r] - k[_C_YAW] * f0y
+        dphi4 = ref[3, 2, r] - k[_C_YAW] * f1y * (dpsi - ref[3, 1, r])
+        phi1 = ref[2, 1, r] - cz * f0z
+        dphi1 = ref[2, 2, r] - cz * f1z * (vz - ref[2, 1, r])
+        s_z = vz - phi1
+        s_yaw = dpsi - phi4
+        st_z = _reach1(s_z, k[_K1_Z], xi[0, j], k[_KS_Z], sgn)
+        st_yaw = _reach1(s_yaw, k[_K1_YAW], xi[3, j], k[_KS_YAW], sgn)
+        u4 = k[_KZ] * ((dphi4 + st_yaw) if i3 == 0.0 else (-i3 * dphi * dth + dphi4 + st_yaw))
+        tilt = cphi * cth
+        u1 = m * (g + dphi1 + st_z) / max(tilt, 0.2)
+        a = min(max(u1, 0.0), k[_U1_MAX]) / m
+
+        # the state's 2nd and 3rd derivatives along the nominal model, inputs held (x and y)
+        cs = cphi * sth
+        ss = sphi * sth
+        A = cs * cpsi + sphi * spsi
+        B = cs * spsi - sphi * cpsi
+        tdth = tilt * dth
+        dA = (cphi * spsi - ss * cpsi) * dphi + tdth * cpsi + -B * dpsi
+        dB = -(ss * spsi + cphi * cpsi) * dphi + tdth * spsi + A * dpsi
+        dC = -(sphi * cth * dphi + cs * dth)
+        ddpsi = l_z * u4 if i3 == 0.0 else i3 * dphi * dth + l_z * u4
+
+        # x (q = 0) and y (q = 1): position then velocity step, as jets; the a_x, a_y jets
+        for q in range(2):
+            rq = 0 if q == 0 else 1
+            p1 = vx if q == 0 else vy
+            p2 = (A if q == 0 else B) * a
+            p3 = (dA if q == 0 else dB) * a
+            fp0, fp1, fp2, fp3 = _sig(x - ref[0, 0, r] if q == 0 else y - ref[1, 0, r], P_p)
+            e1 = p1 - ref[rq, 1, r]
+            e2 = p2 - ref[rq, 2, r]
+            e3 = p3 - ref[rq, 3, r]
+            e11 = e1 * e1
+            q0 = ref[rq, 1, r] - fp0 * cp
+            q1 = ref[rq, 2, r] - fp1 * e1 * cp
+            q2 = ref[rq, 3, r] - (fp2 * e11 + fp1 * e2) * cp
+            q3 = ref[rq, 4, r] - (fp3 * e11 * e1 + 3.0 * fp2 * e1 * e2 + fp1 * e3) * cp
+            z0 = p1 - q0
+            z1 = p2 - q1
+            z2 = p3 - q2
+            z3 = -q3
+            fv0, fv1, fv2, fv3 = _sig(z0, P_v)
+            z11 = z1 * z1
+            aj[q, 0] = q1 - fv0 * cv
+            aj[q, 1] = q2 - fv1 * z1 * cv
+            aj[q, 2] = q3 - (fv2 * z11 + fv1 * z2) * cv
+            aj[q, 3] = -((fv3 * z11 * z1 + 3.0 * fv2 * z1 * z2 + fv1 * z3) * cv)
+        # a_z = phi1' as a jet: G = g + a_z, floored
+        ez1 = vz - ref[2, 1, r]
+        ez2 = tilt * a - g - ref[2, 2, r]
+        ez3 = dC * a - ref[2, 3, r]
+        G0 = ref[2, 2, r] - f1z * ez1 * cz + g
+        G1 = ref[2, 3, r] - (f2z * ez1 * ez1 + f1z * ez2) * cz
+        G2 = ref[2, 4, r] - (f3z * ez1 * ez1 * ez1 + 3.0 * f2z * ez1 * ez2 + f1z * ez3) * cz
+        if G0 < 0.2 * g:
+            G0, G1, G2 = 0.2 * g, 0.0, 0.0
+        # [hx, hy] = a_x [cos psi, sin psi] + a_y [sin psi, -cos psi], as jets (Leibniz)
+        d1, d2 = dpsi, ddpsi
+        d11 = d1 * d1
+        sd12 = 3.0 * d1 * d2
+        c0x, c0y = cpsi, spsi
+        cAx, cAy = -spsi * d1, cpsi * d1
+        cBx, cBy = -cpsi * d11 - spsi * d2, -spsi * d11 + cpsi * d2
+        cCx, cCy = spsi * d11 * d1 - cpsi * sd12, -cpsi * d11 * d1 - spsi * sd12
+        n0x, n0y, nAx, nAy, nBx, nBy, nCx, nCy = c0y, -c0x, cAy, -cAx, cBy, -cBx, cCy, -cCx
+        ax0, ax1, ax2, ax3 = aj[0, 0], aj[0, 1], aj[0, 2], aj[0, 3]
+        ay0, ay1, ay2, ay3 = aj[1, 0], aj[1, 1], aj[1, 2], aj[1, 3]
+        hx0 = ax0 * c0x + ay0 * n0x
+        hy0 = ax0 * c0y + ay0 * n0y
+        hx1 = ax1 * c0x + ax0 * cAx + ay1 * n0x + ay0 * nAx
+        hy1 = ax1 * c0y + ax0 * cAy + ay1 * n0y + ay0 * nAy
+        hx2 = ax2 * c0x + 2.0 * ax1 * cAx + ax0 * cBx + ay2 * n0x + 2.0 * ay1 * nAx + ay0 * nBx
+        hy2 = ax2 * c0y + 2.0 * ax1 * cAy + ax0 * cBy + ay2 * n0y + 2.0 * ay1 * nAy + ay0 * nBy
+        hx3 = (ax3 * c0x + 3.0 * (ax2 * cAx + ax1 * cBx) + ax0 * cCx
+               + ay3 * n0x + 3.0 * (ay2 * nAx + ay1 * nBx) + ay0 * nCx)
+        hy3 = (ax3 * c0y + 3.0 * (ax2 * cAy + ax1 * cBy) + ax0 * cCy
+               + ay3 * n0y + 3.0 * (ay2 * nAy + ay1 * nBy) + ay0 * nCy)
+        # theta_d = atan2(hx, G), phi_d = atan2(hy, sqrt(hx^2 + G^2))
+        r0 = hx0 * hx0 + G0 * G0
+        r1 = 2.0 * (hx0 * hx1 + G0 * G1)
+        r2 = 2.0 * (hx0 * hx2 + hx1 * hx1 + G0 * G2 + G1 * G1)
+        r3 = 2.0 * (hx0 * hx3 + G0 * 0.0) + 6.0 * (hx1 * hx2 + G1 * G2)
+        sq = math.sqrt(r0)
+        k1_ = 0.5 / sq
+        k2_ = -0.25 / (sq * r0)
+        k3_ = 0.375 / (sq * r0 * r0)
+        t0, t1, t2, t3 = _atan2_1(hx0, hx1, hx2, hx3, G0, G1, G2, 0.0)
+        p0, p1_, p2_, p3_ = _atan2_1(hy0, hy1, hy2, hy3, sq, k1_ * r1, k2_ * r1 * r1 + k1_ * r2,
+                                     k3_ * r1 * r1 * r1 + 3.0 * k2_ * r1 * r2 + k1_ * r3)
+        t0, t1, t2, t3 = _limit1(t0, t1, t2, t3, tm, rm)
+        p0, p1_, p2_, p3_ = _limit1(p0, p1_, p2_, p3_, tm, rm)
+        desired[0, j] = p0
+        desired[1, j] = t0
+
+        # attitude steps: theta for x (u3), phi for y (u2)
+        fa0t, fa1t, _, _ = _sig(th - t0, P_a)
+        fa0p, fa1p, _, _ = _sig(phi - p0, P_a)
+        ff_t = min(max(t2 - ca * fa1t * (dth - t1), -ffm), ffm)
+        ff_p = min(max(p2_ - ca * fa1p * (dphi - p1_), -ffm), ffm)
+        s_th = dth - (t1 - ca * fa0t)
+        s_phi = dphi - (p1_ - ca * fa0p)
+        st_th = _reach1(s_th, k[_K1_TH], xi[2, j], k[_KS_TH], sgn)
+        st_phi = _reach1(s_phi, k[_K1_PHI], xi[1, j], k[_KS_PHI], sgn)
+        u_out[0, j] = u1
+        u_out[1, j] = k[_KX] * (-i1 * dth * dpsi + k[_JR_X] * dth * omega_d[j] + ff_p + st_phi)
+        u_out[2, j] = k[_KY] * (-i2 * dphi * dpsi - k[_JR_Y] * dphi * omega_d[j] + ff_t + st_th)
+        u_out[3, j] = u4
+        s_out[0, j] = s_z
+        s_out[1, j] = s_phi
+        s_out[2, j] = s_th
+        s_out[3, j] = s_yaw
+
+
+@njit(cache=True)
+def _advance(xi: np.ndarray, s: np.ndarray, k2dt: np.ndarray, xi_max: np.ndarray, saturated: np.ndarray,
+             hold: np.ndarray, sign: np.ndarray) -> None:  # pragma: no cover
+    """BatchBacksteppingLaw.advance in place on xi [4, n]."""
+    for j in range(xi.shape[1]):
+        if hold[j] or sign[j]:
+            continue
+        for r in range(4):
+            if saturated[r, j] or s[r, j] == 0.0:
+                continue
+            xi[r, j] = min(max(xi[r, j] - _sgn(s[r, j]) * k2dt[r], -xi_max[r]), xi_max[r])
+
+
+@njit(cache=True)
+def _wrench(u: np.ndarray, lo: np.ndarray, u_max: np.ndarray, b: float, d: float, real: np.ndarray, c: np.ndarray,
+            sat: np.ndarray, omega_d: np.ndarray) -> None:  # pragma: no cover
+    """BatchActuation._wrench per cell: the clamped wrench, the normalised command, the saturation flags and
+    the omega_d of the rotor speeds the clamped wrench gives."""
+    for j in range(u.shape[1]):
+        for i in range(4):
+            r = min(max(u[i, j], lo[i]), u_max[i])
+            real[i, j] = r
+            c[i, j] = r / u_max[i]
+            sat[i, j] = r != u[i, j]
+        r0, r1, r2, r3 = real[0, j], real[1, j], real[2, j], real[3, j]
+        s24 = 0.5 * (r0 / b + r3 / d)
+        s13 = 0.5 * (r0 / b - r3 / d)
+        w0 = math.sqrt(max(0.5 * (s13 - r2 / b), 0.0))
+        w1 = math.sqrt(max(0.5 * (s24 - r1 / b), 0.0))
+        w2 = math.sqrt(max(0.5 * (s13 + r2 / b), 0.0))
+        w3 = math.sqrt(max(0.5 * (s24 + r1 / b), 0.0))
+        omega_d[j] = w1 + w3 - w0 - w2

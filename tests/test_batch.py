@@ -24,6 +24,7 @@ from bridge.core.batchlink import Clocks, _first_at_or_after, draw_fates
 from bridge.core.flight import prepare
 from bridge.core.link import FateStream, LinkConfig
 from bridge.core.linkends import EPS_T
+from bridge.core.params import ParamChange
 from bridge.loop import fly
 from bridge.sweep.cells import row_from_run
 from bridge.sweep.grid import AXES, Cell, Grid, cell_overrides, cells
@@ -156,6 +157,9 @@ def test_batch_problem_names_what_the_batch_cannot_fly(tmp_path: Path) -> None:
     hold = replace(m, failsafe={"action": "hold"})
     why = batch_problem(hold, [{"controller": "bsst"}])
     assert why is not None and "action" in why
+    at = [ParamChange(2.0, "MPC_LAND_SPEED", 0.5)]  # a parameter changed in flight: the batch does not model it
+    why = batch_problem(m, [{"controller": "bsst", "param_at": at}])
+    assert why is not None and "--param-at" in why and "\n" not in why
     law = f"{ROOT / 'examples' / 'my_law.py'}:MyLaw"
     why = batch_problem(m, [{"controller": law}])
     assert why is not None and "process engine" in why

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from statistics import NormalDist
 
 import numpy as np
+from numba import njit
 
 from bridge.core.link import (  # the draw numbers and bound are link.py's: one definition of a fate
     _D_DUP,
@@ -134,6 +135,9 @@ class Fates:
     held: np.ndarray  # bool: held back past its successor
     dup: np.ndarray  # bool: a duplicate follows
     dup_jitter: np.ndarray  # s, the duplicate's
+    jittered: bool = True  # some cell's packets have jitter (else ``jitter`` is all zero)
+    reordered: bool = True  # some cell holds packets back (else ``held`` is all false)
+    duplicated: bool = True  # some cell duplicates (else ``dup`` is all false)
 
 
 def _jitter_params(cfg: LinkConfig) -> tuple[float, float, float]:
@@ -165,7 +169,7 @@ def draw_fates(cfgs: Sequence[LinkConfig], direction: str, count: int) -> Fates:
     dup = np.zeros((n, count), bool)
     dup_jitter = np.zeros((n, count))
     if count == 0:
-        return Fates(lost, jitter, held, dup, dup_jitter)
+        return Fates(lost, jitter, held, dup, dup_jitter, False, False, False)
     keys = np.array([stream_key(c.seed, direction) for c in cfgs], dtype=np.uint64)
     ge = [i for i, c in enumerate(cfgs) if c.burst_len >= 1.0 and 0.0 < c.loss_pct / 100.0 < 1.0]
     bern = [i for i, c in enumerate(cfgs) if c.loss_pct > 0.0 and i not in set(ge)]
@@ -193,14 +197,16 @@ def draw_fates(cfgs: Sequence[LinkConfig], direction: str, count: int) -> Fates:
     if dups:
         d = np.array([cfgs[i].dup_pct / 100.0 for i in dups])
         dup[dups] = uniforms(keys[dups], count, _D_DUP) < d[:, None]
+    jittered = False
     for i, c in enumerate(cfgs):
         bound, lo, hi = _jitter_params(c)
         if bound == 0.0:
             continue
+        jittered = True
         jitter[i] = _jitters(c, uniforms(keys[i:i + 1], count, _D_JITTER)[0], bound, lo, hi)
         if dup[i].any():
             dup_jitter[i] = _jitters(c, uniforms(keys[i:i + 1], count, _D_DUP_JITTER)[0], bound, lo, hi)
-    return Fates(lost, jitter, held, dup, dup_jitter)
+    return Fates(lost, jitter, held, dup, dup_jitter, jittered, bool(hold), bool(dups))
 
 
 # -- the plan ------------------------------------------------------------------------------------------
@@ -279,43 +285,56 @@ def _arrivals(sent: np.ndarray, send_t: np.ndarray, lost: np.ndarray, fates: Fat
     ``first_check`` is the first check after each step's send (a packet cannot arrive before it is sent)."""
     n_cells, steps = sent.shape
     rows = np.arange(n_cells)[:, None]
-    s = np.clip(seq, 0, max(fates.lost.shape[1] - 1, 0))
-    jit = fates.jitter[rows, s] if fates.jitter.size else np.zeros(sent.shape)
-    held = (fates.held[rows, s] if fates.held.size else np.zeros(sent.shape, bool)) & sent & ~lost
-    dup = (fates.dup[rows, s] if fates.dup.size else np.zeros(sent.shape, bool)) & sent & ~lost
-    base = send_t[None, :] + delay[:, None]  # tx + delay: LinkImpairment.send's order of operations
-    due = base + jit
+    some = fates.lost.shape[1] > 0
+    s = np.clip(seq, 0, max(fates.lost.shape[1] - 1, 0)) if some and (
+        fates.jittered or fates.reordered or fates.duplicated) else None
     ok = sent & ~lost
-    releaser = ok & ~held
-    nxt = _next_index(releaser)  # the successor that releases a held packet
-    has = nxt < steps
-    nxt_c = np.minimum(nxt, steps - 1)
-    due_rel = np.where(held, np.maximum(due, due[rows, nxt_c]), due)
-    pushed = np.where(held, first_check[nxt_c], first_check[None, :])
-    c = np.maximum(_first_at_or_after(thresholds, due_rel, per_s), pushed)
-    c = np.where(ok & (~held | has), c, NEVER)
-    if dup.any():
-        dj = fates.dup_jitter[rows, s]
-        cd = np.maximum(_first_at_or_after(thresholds, base + dj, per_s), first_check[None, :])
-        c = np.where(dup, np.minimum(c, cd), c)
+    base = send_t[None, :] + delay[:, None]  # tx + delay: LinkImpairment.send's order of operations
+    due = base + fates.jitter[rows, s] if s is not None and fates.jittered else base
+    if s is None or not fates.reordered:  # no packet held back: each is due at its own time
+        c = np.maximum(_first_at_or_after(thresholds, due, per_s), first_check[None, :])
+        c = np.where(ok, c, NEVER)
+    else:
+        held = fates.held[rows, s] & ok
+        releaser = ok & ~held
+        nxt = _next_index(releaser)  # the successor that releases a held packet
+        has = nxt < steps
+        nxt_c = np.minimum(nxt, steps - 1)
+        due_rel = np.where(held, np.maximum(due, due[rows, nxt_c]), due)
+        pushed = np.where(held, first_check[nxt_c], first_check[None, :])
+        c = np.maximum(_first_at_or_after(thresholds, due_rel, per_s), pushed)
+        c = np.where(ok & (~held | has), c, NEVER)
+    if s is not None and fates.duplicated:
+        dup = fates.dup[rows, s] & ok
+        if dup.any():
+            dj = fates.dup_jitter[rows, s]
+            cd = np.maximum(_first_at_or_after(thresholds, base + dj, per_s), first_check[None, :])
+            c = np.where(dup, np.minimum(c, cd), c)
     return c
 
 
 def _newest(arrive: np.ndarray, n_checks: int) -> np.ndarray:
-    """[cells, n_checks]: the highest packet index delivered by each check (-1: none yet).
-
-    A packet is the newest from its arrival on unless a later-numbered one arrives no later; those
-    records arrive in increasing order, so a scatter and a running maximum give the answer."""
-    n_cells, n = arrive.shape
-    later_min = np.minimum.accumulate(arrive[:, ::-1], axis=1)[:, ::-1]
-    following = np.full_like(later_min, NEVER)
-    following[:, :-1] = later_min[:, 1:]
-    record = (arrive < following) & (arrive < n_checks)
-    out = np.full((n_cells, n_checks), -1, np.int64)
-    r, j = np.nonzero(record)
-    out[r, arrive[r, j]] = j
-    np.maximum.accumulate(out, axis=1, out=out)
+    """[cells, n_checks]: the highest packet index delivered by each check (-1: none yet)."""
+    out = np.empty((arrive.shape[0], n_checks), np.int64)
+    _newest_into(np.ascontiguousarray(arrive), out)
     return out
+
+
+@njit(cache=True)
+def _newest_into(arrive: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover
+    """:func:`_newest`: each packet's index where it arrives (the highest of those arriving together), then
+    a running maximum along the checks."""
+    n_checks = out.shape[1]
+    for c in range(arrive.shape[0]):
+        row = out[c]
+        row[:] = -1
+        for j in range(arrive.shape[1]):
+            a = arrive[c, j]
+            if a < n_checks and j > row[a]:
+                row[a] = j
+        for i in range(1, n_checks):
+            if row[i] < row[i - 1]:
+                row[i] = row[i - 1]
 
 
 @dataclass
@@ -416,47 +435,78 @@ def _plan_chunk(links: Sequence[LinkSettings], guards: Sequence[GuardConfig], ti
     up_thresholds[::S] = np.maximum(t, pt[:-1:S]) + EPS_T  # the loop's deliver(t) and the period's deliver(p.t)
     first_check = ks * S
     e = _arrivals(sent0, t, u_lost, fu, seq, u_delay, up_thresholds, clocks.physics_hz, first_check)
-    # the command in force is the newest delivered: records (a later command arriving no later wins)
-    later_min = np.minimum.accumulate(e[:, ::-1], axis=1)[:, ::-1]
-    following = np.full_like(later_min, NEVER)
-    following[:, :-1] = later_min[:, 1:]
-    record = (e < following) & (e < steps * S)
-
-    # the vehicle's timeout: at each period's start, time since the last command took effect
-    r, kk = np.nonzero(record)
-    ec = e[r, kk]
-    g = (ec + S - 1) // S  # the first period start at or after the arrival
-    last_of_group = np.ones(len(r), bool)
-    last_of_group[:-1] = (r[1:] != r[:-1]) | (g[1:] != g[:-1])
-    lastapp = np.full((n, steps + 1), -1, np.int64)
-    lastapp[r[last_of_group], g[last_of_group]] = ec[last_of_group]
-    np.maximum.accumulate(lastapp, axis=1, out=lastapp)
-    lastapp = lastapp[:, :steps]
-    last_t = np.where(lastapp >= 0, pt[np.maximum(lastapp, 0)], 0.0)
-    late = (pt[first_check][None, :] - last_t) > timeout_s + 1e-9
-    fs = np.where(late.any(axis=1), np.argmax(late, axis=1), NEVER).astype(np.int64)
+    # the commands in force (each the newest delivered), the vehicle's timeout, and what takes effect before it
+    rec_check = np.empty((n, steps), np.int64)
+    rec_cmd = np.empty((n, steps), np.int64)
+    fs = np.empty(n, np.int64)
+    count = np.empty(n, np.int64)
+    cmd_age = np.empty(n, np.int64)
+    _commands_in_force(np.ascontiguousarray(e), S, pt, timeout_s, rec_check, rec_cmd, fs, count, cmd_age)
 
     # after the failsafe the vehicle reports it: states newer than its step carry "not offboard" (idle)
     offboard = newest <= fs[:, None]
     mode = np.where(offboard, mode0, NONE).astype(np.int8)
     sent = mode != NONE
-    limit = np.where(fs == NEVER, NEVER, np.minimum(fs, steps) * S)  # (NEVER * S would wrap round)
-    keep = ec < limit[r]  # commands arriving in failsafe are refused (not_offboard)
-    r, kk, ec = r[keep], kk[keep], ec[keep]
-    per_cell = np.bincount(r, minlength=n)
-    width = int(per_cell.max()) if len(r) else 0
-    apply_check = np.full((n, width), NEVER, np.int64)
-    apply_cmd = np.zeros((n, width), np.int64)
-    if len(r):
-        start = np.concatenate(([0], np.cumsum(per_cell)[:-1]))
-        col = np.arange(len(r)) - start[r]
-        apply_check[r, col] = ec
-        apply_cmd[r, col] = kk
-    age_max = int((ec // S - kk).max()) + 1 if len(r) else 1
+    width = int(count.max()) if n else 0
+    apply_check = rec_check[:, :width].copy()
+    apply_cmd = rec_cmd[:, :width].copy()
+    age_max = int(cmd_age.max()) + 1 if width else 1
     state_age = int((ks[None, :] - newest)[sent].max()) if sent.any() else 0
     return {"mode": mode, "state": np.where(sent, newest, -1).astype(np.int32), "up_lost": u_lost & sent,
             "down_lost": d_lost, "failsafe": fs, "apply_check": apply_check, "apply_cmd": apply_cmd,
             "age_max": age_max, "state_age": state_age}
+
+
+@njit(cache=True)
+def _commands_in_force(e: np.ndarray, S: int, pt: np.ndarray, timeout_s: float, rec_check: np.ndarray,
+                       rec_cmd: np.ndarray, fs: np.ndarray, count: np.ndarray,
+                       age: np.ndarray) -> None:  # pragma: no cover
+    """From the physics check each command arrives at (e [cells, steps]; NEVER: never), per cell: the commands
+    that take effect — the records, a command arriving before every later one (a later command arriving no
+    later wins), in increasing order of both — into rec_check / rec_cmd (the check, the command's step;
+    NEVER / 0 after the last); the step whose period starts the vehicle's failsafe (fs; NEVER: none): the
+    first period start more than ``timeout_s`` after the last command took effect (at the period start at
+    or after its arrival) or after the start; how many take effect before it (count: commands arriving in
+    failsafe are refused), and the most periods one of those took from its send (age)."""
+    n, steps = e.shape
+    checks = steps * S
+    for c in range(n):
+        # the records, found from the end: a command is one if it arrives before the earliest later arrival
+        m = 0
+        following = NEVER
+        for k in range(steps - 1, -1, -1):
+            v = e[c, k]
+            if v < following and v < checks:
+                rec_check[c, m] = v
+                rec_cmd[c, m] = k
+                m += 1
+            if v < following:
+                following = v
+        rec_check[c, :m] = rec_check[c, :m][::-1].copy()
+        rec_cmd[c, :m] = rec_cmd[c, :m][::-1].copy()
+        # the timeout: at each period start p, the time since the last command took effect by then
+        f = NEVER
+        i = 0
+        last = -1
+        for p in range(steps):
+            while i < m and (rec_check[c, i] + S - 1) // S <= p:
+                last = rec_check[c, i]
+                i += 1
+            last_t = pt[last] if last >= 0 else 0.0
+            if (pt[p * S] - last_t) > timeout_s + 1e-9:
+                f = p
+                break
+        fs[c] = f
+        limit = NEVER if f == NEVER else min(f, steps) * S
+        kept = 0
+        worst = 0
+        while kept < m and rec_check[c, kept] < limit:  # the records arrive in increasing order: a prefix
+            worst = max(worst, rec_check[c, kept] // S - rec_cmd[c, kept])
+            kept += 1
+        count[c] = kept
+        age[c] = worst
+        rec_check[c, kept:] = NEVER
+        rec_cmd[c, kept:] = 0
 
 
 # -- the prediction -----------------------------------------------------------------------------------
@@ -560,3 +610,80 @@ class BatchPredictor:
         k4 = f(X + h * k3, u)
         s = h / 6.0
         return X + s * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+
+
+# -- what the wire carries ------------------------------------------------------------------------------
+@njit(cache=True)
+def _wrap_pi(a: float) -> float:
+    """:func:`bridge.core.wire.wrap_pi`."""
+    a = (a + math.pi) % (2.0 * math.pi) - math.pi
+    return math.pi if a == -math.pi else a
+
+
+@njit(cache=True)
+def _rotate(w: float, x: float, y: float, z: float, vx: float, vy: float, vz: float) -> tuple[float, float, float]:
+    """:func:`bridge.core.wire.rotate` by the quaternion (w, x, y, z)."""
+    cx = y * vz - z * vy
+    cy = z * vx - x * vz
+    cz = x * vy - y * vx
+    return (vx + 2.0 * (w * cx + y * cz - z * cy), vy + 2.0 * (w * cy + z * cx - x * cz),
+            vz + 2.0 * (w * cz + x * cy - y * cx))
+
+
+@njit(cache=True)
+def _f32(v: float) -> float:
+    """v rounded to float32, as MAVLink carries it."""
+    return np.float64(np.float32(v))
+
+
+@njit(cache=True)
+def states_over_wire(X: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover
+    """:func:`bridge.core.wire.state_over_wire` of every cell (X [12, n] -> out [12, n]; out may be X): the
+    state as the law reads it from ODOMETRY, each field rounded to float32, in wire.py's operations."""
+    for j in range(X.shape[1]):
+        x, vx, y, vy, z, vz = X[0, j], X[1, j], X[2, j], X[3, j], X[4, j], X[5, j]
+        phi, dphi, th, dth, psi, dpsi = X[6, j], X[7, j], X[8, j], X[9, j], X[10, j], X[11, j]
+        # state_to_odometry
+        roll, pitch, yaw = phi, -th, _wrap_pi(-psi)
+        cr, sr = math.cos(0.5 * roll), math.sin(0.5 * roll)
+        cp, sp = math.cos(0.5 * pitch), math.sin(0.5 * pitch)
+        cy, sy = math.cos(0.5 * yaw), math.sin(0.5 * yaw)
+        qw = cr * cp * cy + sr * sp * sy
+        qx = sr * cp * cy - cr * sp * sy
+        qy = cr * sp * cy + sr * cp * sy
+        qz = cr * cp * sy - sr * sp * cy
+        bx, by, bz = _rotate(qw, -qx, -qy, -qz, vx, -vy, -vz)
+        sr1, cr1 = math.sin(roll), math.cos(roll)
+        sp1, cp1 = math.sin(pitch), math.cos(pitch)
+        droll, dpitch, dyaw = dphi, -dth, -dpsi
+        p = droll - sp1 * dyaw
+        q = cr1 * dpitch + sr1 * cp1 * dyaw
+        r = -sr1 * dpitch + cr1 * cp1 * dyaw
+        # float32 on the wire
+        n_, e_, d_ = _f32(x), _f32(-y), _f32(-z)
+        qw, qx, qy, qz = _f32(qw), _f32(qx), _f32(qy), _f32(qz)
+        bx, by, bz = _f32(bx), _f32(by), _f32(bz)
+        p, q, r = _f32(p), _f32(q), _f32(r)
+        # odometry_to_state
+        nq = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+        qw, qx, qy, qz = qw / nq, qx / nq, qy / nq, qz / nq
+        v0, v1, v2 = _rotate(qw, qx, qy, qz, bx, by, bz)
+        nn = qw * qw + qx * qx + qy * qy + qz * qz
+        s = 2.0 * (qw * qy - qz * qx) / nn
+        s = 1.0 if s > 1.0 else -1.0 if s < -1.0 else s
+        roll = math.atan2(2.0 * (qw * qx + qy * qz), nn - 2.0 * (qx * qx + qy * qy))
+        pitch = math.asin(s)
+        yaw = math.atan2(2.0 * (qw * qz + qx * qy), nn - 2.0 * (qy * qy + qz * qz))
+        sr2, cr2 = math.sin(roll), math.cos(roll)
+        cp2 = math.cos(pitch)
+        a = q * sr2 + r * cr2
+        droll, dpitch, dyaw = p + a * math.tan(pitch), q * cr2 - r * sr2, a / cp2
+        out[0, j], out[1, j], out[2, j], out[3, j], out[4, j], out[5, j] = n_, v0, -e_, -v1, -d_, -v2
+        out[6, j], out[7, j], out[8, j], out[9, j] = roll, droll, -pitch, -dpitch
+        out[10, j], out[11, j] = _wrap_pi(-yaw), -dyaw
+
+
+def commands_over_wire(c: np.ndarray) -> np.ndarray:
+    """:func:`bridge.core.wire.command_over_wire`'s command as the vehicle reads it, for normalised commands
+    [4, n]: reordered and re-signed (exactly) on the way out and back, so only the float32 rounding stays."""
+    return c.astype(np.float32).astype(np.float64)
