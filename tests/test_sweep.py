@@ -27,6 +27,7 @@ from bridge.sweep import CELLS_CSV, COLUMNS, Cell, Classes, Grid, load_sweep, re
 from bridge.sweep.cells import ripple_rms
 from bridge.sweep.classes import CLASSES, classify
 from bridge.sweep.executors import run_cell
+from bridge.sweep.grid import cells as grid_cells
 from missions import Mission, Sine
 from params import ConfigError, dump_toml
 
@@ -209,6 +210,14 @@ def test_sweep_file(tmp_path: Path, mission_file: Path) -> None:
     (["--loss", "80", "--burst", "1"], "burst_len"),
     (["--offline", "--lockstep"], "not allowed"),
     (["--resume"], "--resume"),
+    (["--noise", "-1"], "--noise"),
+    (["--noise", "x"], "--noise"),
+    (["--noise", "0,101"], "--noise"),
+    (["--estimator", "kalman"], "--estimator"),
+    (["--estimator", "raw,raw"], "--estimator"),
+    (["--sensors", "nosuch", "--estimator", "raw"], "--sensors"),
+    (["--noise", "0,1"], "estimator is 'truth'"),  # noise alone changes nothing: the law flies the true state
+    (["--noise", "0,1", "--estimator", "raw"], "sensor set 'ideal' has no noise"),  # the mission's set is exact
 ])
 def test_bad_flags_one_line_exit_2(mission_file: Path, tmp_path: Path, capsys, argv: list[str], needle: str) -> None:
     capsys.readouterr()
@@ -347,24 +356,24 @@ def _damage(d: Path, name: str) -> str:
         return "cells.csv: line 2:"
     if name == "extra-column":
         cells.write_text(lines[0] + row.rstrip("\n") + ",surplus\n" + lines[2])
-        return "cells.csv: line 2: 21 fields, expected 20"
+        return f"cells.csv: line 2: {len(COLUMNS) + 1} fields, expected {len(COLUMNS)}"
     if name == "text-in-number":
         cells.write_text(lines[0] + row.replace(",completed,", ",completed,").replace("bsst,250.0,", "bsst,fast,", 1)
                          + lines[2])
         return "cells.csv: line 2: rate_hz: expected a number, got 'fast'"
     if name == "text-in-integer":
         parts = row.split(",")
-        parts[6] = "seven"
+        parts[COLUMNS.index("seed")] = "seven"
         cells.write_text(lines[0] + ",".join(parts) + lines[2])
         return "cells.csv: line 2: seed: expected an integer, got 'seven'"
     if name == "infinite":
         parts = row.split(",")
-        parts[7] = "inf"
+        parts[COLUMNS.index("rms")] = "inf"
         cells.write_text(lines[0] + ",".join(parts) + lines[2])
         return "cells.csv: line 2: rms: expected a finite number, got 'inf'"
     if name == "empty-axis":
         parts = row.split(",")
-        parts[2] = ""
+        parts[COLUMNS.index("delay_ms")] = ""
         cells.write_text(lines[0] + ",".join(parts) + lines[2])
         return "cells.csv: line 2: delay_ms: is empty"
     if name == "bad-quote":
@@ -450,3 +459,72 @@ def test_a_torn_last_row_is_left_out_not_refused(small_sweep: tuple[Path, list[s
     assert len(read_cells(d / CELLS_CSV)) == 1
     assert main([*small_sweep[1], "--out", str(d), "--resume"]) == 0
     assert (d / CELLS_CSV).read_text() == text
+
+
+# -- issue 12: the vehicle's axes, the estimator kind and the noise scale of its sensor set ------------------
+def test_a_noise_by_estimator_grid(mission_file: Path, tmp_path: Path, capsys) -> None:
+    """Real flights on the motion-capture set: with ``raw`` the error grows with the noise, the filter
+    keeps it small; each row is one ``bsst sim`` with its flags, the report maps estimator x noise,
+    and the process engine flies the cells, saying why."""
+    out = tmp_path / "n"
+    capsys.readouterr()
+    assert main(["sweep", str(mission_file), "--sensors", "mocap", "--noise", "0,1,2", "--estimator", "raw,ekf",
+                 "--jobs", "2", "--out", str(out), "--no-plots"]) == 0  # the maps' drawing: the tests above
+    said = capsys.readouterr().out
+    assert "engine process (the batch engine cannot fly this grid: [estimator] kind = 'raw'" in said
+    rows = read_cells(out / CELLS_CSV)
+    assert [(r["estimator"], r["noise"]) for r in rows] == [(e, n) for e in ("raw", "ekf") for n in (0.0, 1.0, 2.0)]
+    assert all(r["outcome"] == "completed" for r in rows), rows
+    raw = [r["rms"] for r in rows if r["estimator"] == "raw"]
+    ekf = [r["rms"] for r in rows if r["estimator"] == "ekf"]
+    assert raw[0] < raw[1] < raw[2] and raw[2] > 5 * raw[0], raw  # 6.7 mm, 2.9 cm, 8.1 cm
+    assert all(e < r for e, r in zip(ekf[1:], raw[1:], strict=True)), (ekf, raw)
+    report = (out / "report.md").read_text()
+    assert "## estimator x noise" in report and "- sensor set: `mocap`" in report
+    maps = [line for line in report.splitlines() if line.startswith("## ") and " x " in line]
+    assert maps == ["## estimator x noise"] and "(map_estimator_noise.png)" in report  # one-valued axes: no map
+    r = rows[2]
+    assert "bsst sim mission.toml --controller bsst --rate 250 --estimator raw --noise 0 --seed 0" in report
+    assert main(["sim", str(out / "mission.toml"), "--estimator", "raw", "--noise", "2", "--no-plots",
+                 "--out", str(tmp_path / "one")]) == 0
+    assert json.loads((tmp_path / "one" / "summary.json").read_text())["rms_3d"] == r["rms"]
+    ident = json.loads((out / "sweep.json").read_text())
+    assert ident["swept"] == ["estimator", "noise"] and ident["mission"]["sensors"] == {"set": "mocap"}
+
+
+def test_a_sweep_of_an_older_bsst_is_reported_not_resumed(small_sweep: tuple[Path, list[str]], tmp_path: Path,
+                                                          capsys) -> None:
+    """A cells.csv without the estimator and noise columns (an older bsst's): ``bsst report`` reads it with
+    the values its mission flew; ``--resume`` is refused in one line naming the file, and nothing is lost."""
+    d = tmp_path / "old"
+    shutil.copytree(small_sweep[0], d)
+    keep = [i for i, c in enumerate(COLUMNS) if c not in ("estimator", "noise")]
+    lines = (d / CELLS_CSV).read_text().splitlines()
+    (d / CELLS_CSV).write_text("".join(",".join(line.split(",")[i] for i in keep) + "\n" for line in lines))
+    meta = json.loads((d / "sweep.json").read_text())
+    meta["columns"] = [COLUMNS[i] for i in keep]
+    (d / "sweep.json").write_text(json.dumps(meta))
+    before = {p.name: p.read_bytes() for p in d.iterdir() if p.suffix in (".csv", ".json")}
+    capsys.readouterr()
+    assert main([*small_sweep[1], "--out", str(d), "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{d / 'sweep.json'}: a sweep of an older bsst" in err, err
+    assert {p.name: p.read_bytes() for p in d.iterdir() if p.name in before} == before
+    assert main(["report", str(d), "--no-plots"]) == 0
+    assert "- `estimator`: truth" in (d / "report.md").read_text()
+    rows = read_cells(d / CELLS_CSV, legacy={"estimator": "truth", "noise": 1.0})
+    assert [r["delay_ms"] for r in rows] == [0.0, 10.0] and {r["estimator"] for r in rows} == {"truth"}
+    with pytest.raises(ConfigError, match="cells.csv: line 1: a cells.csv of an older bsst"):
+        read_cells(d / CELLS_CSV)  # where a sweep would add to it
+
+
+def test_a_sweep_file_declares_the_vehicle_axes(tmp_path: Path, mission_file: Path) -> None:
+    f = tmp_path / "noise.toml"
+    f.write_text(f'mission = "{mission_file}"\n[grid]\nestimator = ["raw", "ekf"]\nnoise = [0, 2]\n')
+    spec = load_sweep(f)
+    assert spec.grid.estimator == ("raw", "ekf") and spec.grid.noise == (0.0, 2.0)
+    assert [(c.estimator, c.noise, c.sensing) for c in spec.cells()] == [
+        ("raw", 0.0, ("estimator", "noise")), ("raw", 2.0, ("estimator", "noise")),
+        ("ekf", 0.0, ("estimator", "noise")), ("ekf", 2.0, ("estimator", "noise"))]
+    kept = Grid(estimator=("truth", "raw"), noise=(1.0,))  # the mission's own values: no override, the same flight
+    assert [c.sensing for c in grid_cells(SHORT, kept)] == [(), ("estimator",)]

@@ -73,6 +73,8 @@ def test_auto_takes_the_batch_for_a_large_offline_grid_and_says_why_not_otherwis
     (["--lockstep"], "lockstep"),
     (["--controller", "examples/my_law.py:MyLaw"], "--engine batch"),
     (["--bandwidth", "5000"], "--engine batch"),
+    (["--sensors", "mocap", "--estimator", "ekf"], "--engine batch: [estimator] kind = 'ekf'"),
+    (["--sensors", "mocap", "--estimator", "truth,raw"], "--engine batch: [estimator] kind = 'raw'"),
 ])
 def test_an_engine_that_cannot_be_honoured_is_refused_in_one_line(tmp_path: Path, extra: list[str],
                                                                    names: str) -> None:
@@ -90,3 +92,17 @@ def test_the_command_line_says_which_engine_flew(tmp_path: Path) -> None:
                        timeout=120)
     assert r.returncode == 0, r.stderr
     assert f"engine process (fewer than {BATCH_MIN_CELLS} cells to fly)" in r.stdout
+
+
+def test_cells_with_sensors_fly_on_the_process_engine_and_say_so() -> None:
+    """The batch has no sensors or estimator: under ``auto`` a grid with them goes to the process engine,
+    whatever its size, and the reason names the estimator; ``truth`` cells (the mission's own kind, no
+    override) still go to the batch."""
+    mocap = SHORT.with_overrides(sensors={"set": "mocap"})
+    delays = tuple(float(d) for d in range(BATCH_MIN_CELLS))
+    for grid in (Grid(estimator=("truth", "ekf")), Grid(estimator=("truth", "raw"), delay_ms=delays)):
+        used, why = engine_for(mocap, cells(mocap, grid), "offline", "auto")
+        assert used == "process" and why.startswith("the batch engine cannot fly this grid: [estimator] kind"), why
+    truth = cells(mocap, Grid(estimator=("truth",), delay_ms=delays))
+    assert all(c.estimator == "truth" and not c.sensing for c in truth)
+    assert engine_for(mocap, truth, "offline", "auto") == ("batch", "the grid allows it")

@@ -1,7 +1,8 @@
 """Latency and dropout campaigns (``bsst sweep``): a grid of link impairments, flown in parallel.
 
 In:  a mission (or a sweep TOML file) and a :class:`Grid`: laws, control rates (Hz), one-way delays
-     (ms), jitters (ms), losses (%), mean loss-burst lengths (packets), seeds per point
+     (ms), jitters (ms), losses (%), mean loss-burst lengths (packets), the vehicle's estimator kinds,
+     noise scales of its sensor set (x every sigma), seeds per point
 Out: one ``cells.csv`` row per cell, in grid order (3-D RMS and max error m, settling s, ``tv_u2``
      N/s, ``ripple_u2`` N, class, packet counts); with ``out``, the sweep directory (``cells.csv``,
      ``sweep.json``, ``mission.toml``, ``report.md``, heat maps)
@@ -13,10 +14,12 @@ Out: one ``cells.csv`` row per cell, in grid order (3-D RMS and max error m, set
 - :mod:`bridge.sweep.executors`  process pool, Dask, progress bar
 - :mod:`bridge.sweep.campaign`   :func:`sweep` and :func:`run_sweep`
 - :mod:`bridge.sweep.report`     ``report.md`` and the heat maps (``bsst report``)
+- :mod:`bridge.sweep.margin`     ``bsst margin``: one axis's boundary by bisection
 
 A sweep flies one mission over the product of a few lists (the *grid*): control law, control
-rate, link delay, jitter, loss and mean loss-burst length, each grid point with several
-seeds. One grid point flown with one seed is a *cell*: one run, one row of ``cells.csv``.
+rate, link delay, jitter, loss and mean loss-burst length, the vehicle's estimator kind and
+the noise scale of its sensor set, each grid point with several seeds. One grid point flown
+with one seed is a *cell*: one run, one row of ``cells.csv``.
 
 Delay, jitter, loss and burst length apply to **both** link directions (``[link.up]``,
 controller -> vehicle, and ``[link.down]``, vehicle -> controller) with the same values; the
@@ -39,9 +42,9 @@ Scripting::
 from bridge.sweep.campaign import Outcome, run_sweep, sweep
 from bridge.sweep.cells import CELLS_CSV, COLUMNS, SWEEP_JSON, read_cells, row_from_run
 from bridge.sweep.classes import CLASSES, Classes, classify
-from bridge.sweep.grid import AXES, LINK_AXES, RANGES, Cell, Grid, cells
+from bridge.sweep.grid import AXES, LINK_AXES, RANGES, SENSING_AXES, Cell, Grid, cells
 from bridge.sweep.spec import Sweep, is_sweep_file, load_sweep
 
-__all__ = ["AXES", "CELLS_CSV", "CLASSES", "COLUMNS", "LINK_AXES", "RANGES", "SWEEP_JSON", "Cell", "Classes", "Grid",
-           "Outcome", "Sweep", "cells", "classify", "is_sweep_file", "load_sweep", "read_cells", "row_from_run",
-           "run_sweep", "sweep"]
+__all__ = ["AXES", "CELLS_CSV", "CLASSES", "COLUMNS", "LINK_AXES", "RANGES", "SENSING_AXES", "SWEEP_JSON", "Cell",
+           "Classes", "Grid", "Outcome", "Sweep", "cells", "classify", "is_sweep_file", "load_sweep", "read_cells",
+           "row_from_run", "run_sweep", "sweep"]

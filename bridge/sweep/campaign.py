@@ -158,6 +158,9 @@ def _open_dir(spec: Sweep, out: str | Path | None, resume: bool, overwrite: bool
         meta = path / SWEEP_JSON
         if meta.exists():
             old = read_sweep_json(meta)
+            if "columns" in old and "noise" not in old["columns"]:  # before the vehicle's axes: other cells.csv
+                raise ConfigError(f"--resume: {meta}: a sweep of an older bsst (its {CELLS_CSV} has no estimator, "
+                                  f"noise columns); bsst report still reads it; fly the sweep into another --out")
             if old != ident:
                 diff = sorted(k for k in ident if old.get(k) != ident[k])
                 raise ConfigError(f"--resume: {path} holds a different sweep ({', '.join(diff)} differ); "

@@ -26,16 +26,21 @@ from bridge.sweep.grid import AXES, Cell
 from params import ConfigError, check_depth, read_regular_file
 
 COLUMNS = (
-    "controller", "rate_hz", "delay_ms", "jitter_ms", "loss_pct", "burst_len", "seed",
+    "controller", "rate_hz", "delay_ms", "jitter_ms", "loss_pct", "burst_len", "estimator", "noise", "seed",
     "rms", "max", "settling_s", "tv_u2", "ripple_u2", "outcome", "class",
     "up_sent", "up_lost", "down_sent", "down_lost", "flown_s", "error",
 )
 
 
+# cells.csv before the vehicle's axes (issue 12): read (bsst report) with the values its sweep.json's mission
+# flew, never resumed (bridge.sweep.campaign refuses it, naming the file)
+LEGACY_COLUMNS = tuple(c for c in COLUMNS if c not in ("estimator", "noise"))
+
+
 INT_COLUMNS = ("seed", "up_sent", "up_lost", "down_sent", "down_lost")
 
 
-STR_COLUMNS = ("controller", "outcome", "class", "error")
+STR_COLUMNS = ("controller", "estimator", "outcome", "class", "error")
 
 
 KEY_COLUMNS = (*AXES, "seed")  # what names a row's cell: never empty
@@ -103,15 +108,15 @@ def _cell_text(v: Any) -> str:
     return str(v)
 
 
-def parse_row(values: Sequence[str]) -> dict[str, Any]:
-    """A ``cells.csv`` record (strings, in :data:`COLUMNS` order) back to typed values; a
+def parse_row(values: Sequence[str], columns: Sequence[str] = COLUMNS) -> dict[str, Any]:
+    """A ``cells.csv`` record (strings, in ``columns`` order) back to typed values; a
     ``ValueError`` names the column and what it holds when a value is not of its column's kind
     (numbers finite, the axes and the seed never empty: what a sweep writes)."""
-    if len(values) != len(COLUMNS):
+    if len(values) != len(columns):
         n = len(values)
-        raise ValueError(f"{n} field{'s' if n != 1 else ''}, expected {len(COLUMNS)} ({','.join(COLUMNS[:3])},...)")
+        raise ValueError(f"{n} field{'s' if n != 1 else ''}, expected {len(columns)} ({','.join(columns[:3])},...)")
     row: dict[str, Any] = {}
-    for c, v in zip(COLUMNS, values, strict=True):
+    for c, v in zip(columns, values, strict=True):
         if c in STR_COLUMNS:
             row[c] = v
         elif v == "":
@@ -134,10 +139,13 @@ def parse_row(values: Sequence[str]) -> dict[str, Any]:
     return row
 
 
-def read_cells(path: str | Path) -> list[dict[str, Any]]:
+def read_cells(path: str | Path, legacy: Mapping[str, Any] | None = None) -> list[dict[str, Any]]:
     """Read ``cells.csv``: every whole line a well-formed row, or a :class:`ConfigError` naming the
     file, the line and what is wrong there. Only an unfinished last line (no newline yet: where a
-    killed sweep stopped writing) is left out; a blank line is skipped."""
+    killed sweep stopped writing) is left out; a blank line is skipped.
+
+    A file of an older sweep (:data:`LEGACY_COLUMNS`: no ``estimator``, ``noise``) is read when
+    ``legacy`` gives the values its cells flew (``{"estimator": ..., "noise": ...}``), refused otherwise."""
     p = Path(path)
     data = read_regular_file(p, f"a sweep's {CELLS_CSV}")
     try:
@@ -150,14 +158,21 @@ def read_cells(path: str | Path) -> list[dict[str, Any]]:
     if not lines:
         return rows
     header = _record(p, 1, lines[0])
-    if tuple(header) != COLUMNS:
+    columns = COLUMNS
+    if tuple(header) == LEGACY_COLUMNS:
+        if legacy is None:
+            raise ConfigError(f"{p}: line 1: a {CELLS_CSV} of an older bsst (no estimator, noise columns): "
+                              "bsst report reads it, a sweep cannot add to it; fly the sweep into another --out")
+        columns = LEGACY_COLUMNS
+    elif tuple(header) != COLUMNS:
         raise ConfigError(f"{p}: line 1: not a sweep's {CELLS_CSV} header (expected {','.join(COLUMNS[:4])},..., "
                           f"got {','.join(header[:4])[:60]!r}...)")
     for n, line in enumerate(lines[1:], start=2):
         if not line.strip():
             continue
         try:
-            rows.append(parse_row(_record(p, n, line)))
+            row = parse_row(_record(p, n, line), columns)
+            rows.append({c: row[c] if c in row else legacy[c] for c in COLUMNS} if legacy is not None else row)
         except ValueError as exc:
             raise ConfigError(f"{p}: line {n}: {exc} (a damaged row: mend or delete that line)") from None
     return rows

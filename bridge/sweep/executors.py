@@ -238,20 +238,21 @@ def engine_for(mission: Mission, todo: Sequence[Cell], mode: str, engine: str) -
     (offline cells, :func:`bridge.batch.batch_problem` has nothing against them; for ``auto``
     also at least :data:`BATCH_MIN_CELLS` of them), ``process`` otherwise. ``engine`` ``"batch"``
     that cannot be honoured is bad input (ConfigError), not a silent fallback; ``"auto"`` falls
-    back and says why."""
+    back and says why: what the batch cannot fly (sensors and an estimator, a law of one's own, ...)
+    before the grid's size, so that the reason given is the one that decides."""
     if engine not in ENGINES:
         raise ConfigError(f"--engine: must be one of {', '.join(ENGINES)}, got {engine!r}")
     if engine == "process":
         return "process", "asked for"
-    if engine == "auto" and len(todo) < BATCH_MIN_CELLS:
-        return "process", f"fewer than {BATCH_MIN_CELLS} cells to fly"
     why = "lockstep cells fly as SITL sessions" if mode == "lockstep" else (
         batch_problem(mission, [cell_overrides(c) for c in todo]) if todo else None)
-    if why is None:
-        return "batch", "the grid allows it" if engine == "auto" else "asked for"
-    if engine == "batch":
-        raise ConfigError(f"--engine batch: {why}; fly it with --engine process")
-    return "process", f"the batch engine cannot fly this grid: {why}"
+    if why is not None:
+        if engine == "batch":
+            raise ConfigError(f"--engine batch: {why}; fly it with --engine process")
+        return "process", f"the batch engine cannot fly this grid: {why}"
+    if engine == "auto" and len(todo) < BATCH_MIN_CELLS:
+        return "process", f"fewer than {BATCH_MIN_CELLS} cells to fly"
+    return "batch", "the grid allows it" if engine == "auto" else "asked for"
 
 
 def batch_row(cell: Cell, measures: Mapping[str, Any]) -> dict[str, Any]:

@@ -1,37 +1,45 @@
 """The grid of a campaign: its axes, their one range table, and the cells it makes.
 
 In:  a mission and a :class:`Grid` (lists of values per axis: law, control rate Hz, one-way
-     delay ms, jitter ms, loss %, mean loss-burst length in packets; seeds)
+     delay ms, jitter ms, loss %, mean loss-burst length in packets, the vehicle's estimator kind,
+     the noise scale of its sensor set (x every sigma); seeds)
 Out: the :class:`Cell` list in grid order, and for each cell the overrides that
      :func:`bridge.core.flight.prepare` (the one path from a mission to its parts) applies
 
 Ranges: the link axes take :data:`bridge.core.link.NUMBER_RANGES`, the rate the mission
-loader's, so a value a mission accepts is accepted here and the other way round.
+loader's, the noise scale the ``[sensors] noise_scale`` one (:data:`plant.profiles.NOISE_SCALE_RANGE`),
+so a value a mission accepts is accepted here and the other way round.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields
 from itertools import product
 from typing import Any
 
+from bridge.core.estimator import ESTIMATOR_KINDS
 from bridge.core.flight import Flight, prepare
 from bridge.core.link import DIRECTIONS, NUMBER_RANGES
 from missions import MISSION_RANGES, Mission
 from missions.mission import law_spec_problem
 from params import ConfigError
+from plant.profiles import NOISE_SCALE_RANGE
+from plant.sensors import SIGMA_KEYS, SensorConfig
 
-# Grid axes, in the order of the product (the last varies fastest; seeds vary faster still).
-AXES = ("controller", "rate_hz", "delay_ms", "jitter_ms", "loss_pct", "burst_len")
+# Grid axes, in the order of the product (the last varies fastest; seeds vary faster still). The vehicle's
+# axes come last, so that a grid without them keeps the order (and cells.csv its first columns) it had.
+AXES = ("controller", "rate_hz", "delay_ms", "jitter_ms", "loss_pct", "burst_len", "estimator", "noise")
 
 
 LINK_AXES = ("delay_ms", "jitter_ms", "loss_pct", "burst_len")
+SENSING_AXES = ("estimator", "noise")  # the vehicle's: prepare()'s estimator and noise overrides
+NAME_AXES = ("controller", "estimator")  # axes of names; the others are numbers
 # Short names: command-line flags (--delay ...) and heat-map file names (map_delay_loss.png).
 
 
 SHORT = {"controller": "controller", "rate_hz": "rate", "delay_ms": "delay", "jitter_ms": "jitter",
-         "loss_pct": "loss", "burst_len": "burst"}
+         "loss_pct": "loss", "burst_len": "burst", "estimator": "estimator", "noise": "noise"}
 # Value of a link axis when neither the sweep nor the mission's [link.up] sets it.
 
 
@@ -39,7 +47,7 @@ LINK_DEFAULTS = {"delay_ms": 0.0, "jitter_ms": 0.0, "loss_pct": 0.0, "burst_len"
 # (lo, hi) of every numeric axis, units in the names: ms, %, packets, Hz.
 
 
-RANGES = {"rate_hz": MISSION_RANGES["rate_hz"], **{a: NUMBER_RANGES[a] for a in LINK_AXES}}
+RANGES = {"rate_hz": MISSION_RANGES["rate_hz"], **{a: NUMBER_RANGES[a] for a in LINK_AXES}, "noise": NOISE_SCALE_RANGE}
 
 
 MODES = ("offline", "lockstep")
@@ -52,6 +60,8 @@ class Grid:
     ``controller``: law names; ``rate_hz``: control rates (Hz); ``delay_ms``: fixed one-way
     delay (ms); ``jitter_ms``: jitter amplitude (ms); ``loss_pct``: packet loss (%);
     ``burst_len``: mean loss-burst length (packets, Gilbert-Elliott; 0 = independent losses).
+    ``estimator``: the vehicle's estimator kinds (``truth``, ``ekf``, ``raw``); ``noise``: noise scales
+    of the mission's sensor set (every sigma times it; 0 = exact sensors, still sampled and late).
     ``seeds``: how many seeds per grid point (mission seed, +1, ...) or the seeds themselves.
     """
 
@@ -61,6 +71,8 @@ class Grid:
     jitter_ms: tuple[float, ...] = ()
     loss_pct: tuple[float, ...] = ()
     burst_len: tuple[float, ...] = ()
+    estimator: tuple[str, ...] = ()
+    noise: tuple[float, ...] = ()
     seeds: int | tuple[int, ...] = 1
 
     def __post_init__(self) -> None:
@@ -68,7 +80,7 @@ class Grid:
             values = getattr(self, name)
             if isinstance(values, (str, int, float)):
                 values = (values,)
-            values = tuple(values) if name == "controller" else tuple(float(v) for v in values)
+            values = tuple(values) if name in NAME_AXES else tuple(float(v) for v in values)
             object.__setattr__(self, name, values)
             if len(set(values)) != len(values):
                 raise ConfigError(f"grid.{name}: repeated value in {list(values)}")
@@ -77,6 +89,9 @@ class Grid:
                     why = law_spec_problem(v)
                     if why:
                         raise ConfigError(f"grid.controller: {why}")
+                elif name == "estimator":
+                    if v not in ESTIMATOR_KINDS:
+                        raise ConfigError(f"grid.estimator: must be among {', '.join(ESTIMATOR_KINDS)}, got {v!r}")
                 else:
                     lo, hi = RANGES[name]
                     if not (lo <= v <= hi):  # also rejects nan
@@ -123,7 +138,9 @@ class Grid:
 class Cell:
     """One grid point flown with one seed: the effective values of every axis.
 
-    ``link`` names the link axes that override the mission's ``[link.up]``/``[link.down]``.
+    ``link`` names the link axes that override the mission's ``[link.up]``/``[link.down]``;
+    ``sensing`` the vehicle's axes (estimator kind, noise scale) that override its ``[estimator] kind``
+    and ``[sensors] noise_scale`` (those where the cell's value is not the mission's own).
     """
 
     controller: str
@@ -134,23 +151,32 @@ class Cell:
     burst_len: float
     seed: int
     link: tuple[str, ...] = ()
+    estimator: str = "truth"
+    noise: float = 1.0
+    sensing: tuple[str, ...] = ()
 
     def key(self) -> tuple[Any, ...]:
         """What identifies the cell's row in ``cells.csv``."""
-        return (self.controller, self.rate_hz, self.delay_ms, self.jitter_ms, self.loss_pct, self.burst_len,
-                self.seed)
+        return tuple(getattr(self, a) for a in (*AXES, "seed"))
 
     def label(self) -> str:
-        return " ".join(f"{a}={getattr(self, a):g}" if a != "controller" else f"{a}={self.controller}"
+        return " ".join(f"{a}={getattr(self, a)}" if a in NAME_AXES else f"{a}={getattr(self, a):g}"
                         for a in (*AXES, "seed"))
 
 
 def mission_value(mission: Mission, axis: str) -> Any:
-    """The mission's own value of an axis (link axes: ``[link.up]``, else ``[link]``, else none)."""
+    """The mission's own value of an axis (link axes: ``[link.up]``, else ``[link]``, else none; the
+    vehicle's: ``[estimator] kind`` and ``[sensors] noise_scale``, else their defaults)."""
     if axis == "controller":
         return mission.controller
     if axis == "rate_hz":
         return float(mission.rate_hz)
+    if axis == "estimator":
+        kind = mission.estimator.get("kind", "truth")
+        return kind if isinstance(kind, str) else "truth"  # a bad kind: prepare() names it when the cell is built
+    if axis == "noise":
+        scale = mission.sensors.get("noise_scale", 1.0)
+        return float(scale) if isinstance(scale, (int, float)) and not isinstance(scale, bool) else 1.0
     up = mission.link.get("up")
     for table in (up if isinstance(up, Mapping) else {}, mission.link):
         v = table.get(axis)
@@ -162,19 +188,47 @@ def mission_value(mission: Mission, axis: str) -> Any:
 def cells(mission: Mission, grid: Grid) -> list[Cell]:
     """Every cell of the sweep, in grid order (axes in :data:`AXES` order, seed fastest)."""
     given = set(grid.swept())
-    lists = [getattr(grid, a) or (mission_value(mission, a),) for a in AXES]
+    own = {a: mission_value(mission, a) for a in AXES}
+    lists = [getattr(grid, a) or (own[a],) for a in AXES]
     link = tuple(a for a in LINK_AXES if a in given)
     seeds = grid.seed_list(mission)
-    return [Cell(*values, seed=s, link=link) for values in product(*lists) for s in seeds]
+    out = []
+    for values in product(*lists):
+        v = dict(zip(AXES, values, strict=True))
+        # a vehicle axis overrides only where it differs from the mission's own value: the same flight, and
+        # a grid of 'truth' cells stays one the batch engine builds from one prepare() per law and rate
+        sensing = tuple(a for a in SENSING_AXES if a in given and v[a] != own[a])
+        out += [Cell(**v, seed=s, link=link, sensing=sensing) for s in seeds]
+    return out
 
 
 def cell_overrides(cell: Cell) -> dict[str, Any]:
     """What a cell changes in its mission, as :func:`bridge.core.flight.prepare`'s overrides:
-    law, rate and seed, and the swept link axes in both directions."""
+    law, rate and seed, the swept link axes in both directions, and the vehicle's swept axes."""
     link = {d: {a: getattr(cell, a) for a in cell.link} for d in DIRECTIONS} if cell.link else None
-    return {"controller": cell.controller, "rate_hz": cell.rate_hz, "seed": cell.seed, "link": link}
+    over: dict[str, Any] = {"controller": cell.controller, "rate_hz": cell.rate_hz, "seed": cell.seed, "link": link}
+    over.update({a: getattr(cell, a) for a in cell.sensing})  # prepare()'s estimator= and noise= keywords
+    return over
+
+
+def noiseless(sensors: SensorConfig) -> bool:
+    """Whether a sensor set has no noise at all (every sigma 0 or unused): scaling it changes nothing."""
+    return not any(getattr(sensors, k) for k in SIGMA_KEYS)
 
 
 def cell_flight(mission: Mission, cell: Cell) -> Flight:
     """The parts a cell flies, by the one path from a mission and its overrides."""
     return prepare(mission, **cell_overrides(cell))
+
+
+def noise_problem(estimators: Sequence[str], sensors: SensorConfig) -> str | None:
+    """Why a noise scale would change nothing in flights with these estimator kinds and this sensor set
+    (None if it does): every one is ``truth`` (the true state: the sensors are not read), or the set
+    has no noise to scale."""
+    if set(estimators) <= {"truth"}:
+        return ("the estimator is 'truth' (the true state: the sensors are not read), so noise changes nothing; "
+                "give --estimator raw or ekf (or [estimator] kind)")
+    if noiseless(sensors):
+        return (f"the sensor set {sensors.name!r} has no noise (every sigma is 0), so its scale changes nothing; "
+                "choose one with --sensors mocap or gnss (or [sensors] set)")
+    return None

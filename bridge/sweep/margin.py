@@ -1,8 +1,9 @@
-"""``bsst margin``: how much of one link impairment a law takes before it fails, found by
-bisection instead of a grid.
+"""``bsst margin``: how much of one link impairment, or of sensor noise, a law takes before it
+fails, found by bisection instead of a grid.
 
 In: a mission, the swept axis (``delay_ms`` | ``loss_pct`` | ``jitter_ms`` | ``burst_len``,
-applied to both directions as a sweep's axes are), the failure criterion (``rms=X``: the 3-D
+applied to both directions as a sweep's axes are, or ``noise``: the scale of every sigma of the
+mission's sensor set, flown with its estimator), the failure criterion (``rms=X``: the 3-D
 RMS error passes X m; ``class=NAME``: the cell's class is NAME or worse, see
 :mod:`bridge.sweep.classes`), the laws and the seeds. Out: per law the margin (the largest
 value flown that did not fail, in the axis's unit), its bracket ``[margin, first failing
@@ -14,6 +15,11 @@ wider than ``resolution``. All laws' probes of one round fly together, with thei
 one batch (:mod:`bridge.batch`) where it can fly them, one by one otherwise. This assumes
 that failure is monotonic in the axis over the bracket (more delay is never better); the
 cells in ``margin.json`` show what was flown if it is not.
+
+Over ``noise`` the batch engine cannot fly the cells (it has no sensors): every probe is a
+scalar flight on the process engine, one at a time for one law and seed (a pool costs more
+than a few cells), so keep ``seeds`` and the laws few. Noise needs an estimator that reads
+the sensors (``raw`` or ``ekf``; ``truth`` ignores them) and a set with noise to scale.
 """
 
 from __future__ import annotations
@@ -24,15 +30,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from bridge.core.flight import prepare
 from bridge.record.runlog import run_dir, write_json_atomic
 from bridge.sweep.classes import CLASSES, Classes, classify
 from bridge.sweep.executors import engine_for, run_batch, run_cell, run_local
-from bridge.sweep.grid import LINK_AXES, RANGES, Cell, mission_value
+from bridge.sweep.grid import LINK_AXES, RANGES, Cell, mission_value, noise_problem
 from missions import Mission
 from params import ConfigError
 
-OVER = LINK_AXES  # the axes a margin is searched over
-START = {"delay_ms": 16.0, "loss_pct": 10.0, "jitter_ms": 16.0, "burst_len": 4.0}  # first value tried
+OVER = (*LINK_AXES, "noise")  # the axes a margin is searched over
+# first value tried; noise: the set's own sigmas (1), so a set that holds them takes 1, 2, 4, ... up to the
+# range's top (plant.profiles.NOISE_SCALE_RANGE, 100): at most 8 doublings and 8 halvings at 0.25 per law and seed
+START = {"delay_ms": 16.0, "loss_pct": 10.0, "jitter_ms": 16.0, "burst_len": 4.0, "noise": 1.0}
 MARGIN_JSON = "margin.json"
 IN_PROCESS_CELLS = 2  # a round of at most this many process-engine cells flies in this process
 
@@ -77,19 +86,22 @@ def parse_until(text: str) -> Until:
 
 @dataclass
 class Search:
-    """One law's bracket: ``lo`` flown and held, ``hi`` flown and failed (None: not found yet)."""
+    """One law's bracket: ``lo`` flown and held (``held``; until then the range's low end, not flown),
+    ``hi`` flown and failed (None: not found yet)."""
 
     controller: str
     lo: float
     hi: float | None = None
     cells: list[dict[str, Any]] = field(default_factory=list)
+    held: bool = False
 
     def next_value(self, resolution: float, top: float) -> float | None:
         if self.hi is None:
             nxt = min(max(2.0 * self.lo, self.lo + resolution), top)
             return None if nxt <= self.lo else nxt
         if self.hi - self.lo <= resolution:
-            return None
+            # every value flown failed: fly the range's low end itself (once) rather than claim that it holds
+            return self.lo if not self.held and self.hi > self.lo else None
         return 0.5 * (self.lo + self.hi)
 
 
@@ -105,16 +117,21 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
     lo_range, top = RANGES[over]
     laws = list(controllers or (mission.controller,))
     base = {a: float(mission_value(mission, a) or 0.0) for a in LINK_AXES}
-    if base[over]:
+    if over in LINK_AXES and base[over]:
         raise ConfigError(f"margin over {over}: the mission's [link] already sets {over} = {base[over]:g}; "
                           "search from a mission without it")
+    flight = prepare(mission)
+    if over == "noise":
+        why = noise_problem((flight.estimator,), prepare(mission, noise=1.0).sensors)  # the set's own sigmas
+        if why:
+            raise ConfigError(f"margin over noise: {why}")
+    vehicle = {"estimator": flight.estimator, "noise": mission_value(mission, "noise")}
     seed_list = [mission.seed + i for i in range(seeds)]
     searches = [Search(c, lo_range) for c in laws]
     pending = {s.controller: START[over] for s in searches}
     cells_flown = 0
     while pending:
-        probes = [Cell(c, float(mission.rate_hz), **{**base, over: v}, seed=s, link=(over,))
-                  for c, v in pending.items() for s in seed_list]
+        probes = [probe(mission, c, over, v, s, base, vehicle) for c, v in pending.items() for s in seed_list]
         rows: list[dict[str, Any]] = []
         used, _ = engine_for(mission, probes, "offline", engine)
         if used == "batch":
@@ -135,7 +152,7 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
             if failed:
                 s.hi = v
             else:
-                s.lo = v
+                s.lo, s.held = v, True
             nxt = s.next_value(resolution, top)
             if s.hi is None and nxt is None:  # held up to the top of the axis's range
                 del pending[s.controller]
@@ -146,15 +163,27 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
         if progress is not None:
             progress(", ".join(f"{s.controller} [{s.lo:g}, {'-' if s.hi is None else f'{s.hi:g}'}]"
                                for s in searches))
-    entries = [{"controller": s.controller, "margin": s.lo, "bracket": [s.lo, s.hi], "cells": s.cells,
-                "held_to_range": s.hi is None} for s in searches]
+    entries = [{"controller": s.controller, "margin": s.lo if s.held else None,  # None: it failed at every value
+                "bracket": [s.lo if s.held else None, s.hi], "cells": s.cells, "held_to_range": s.hi is None}
+               for s in searches]
     out: dict[str, Any] = {"over": over, "until": until.text(), "resolution": resolution, "seeds": seed_list,
-                           "mission": mission.name, "cells_flown": cells_flown}
+                           "mission": mission.name, "cells_flown": cells_flown, "estimator": flight.estimator,
+                           "sensors": flight.sensors.name}
     if len(entries) == 1:
         out.update({k: v for k, v in entries[0].items()})
     else:
         out["controllers"] = entries
     return out
+
+
+def probe(mission: Mission, law: str, over: str, value: float, seed: int, link: dict[str, float],
+          vehicle: dict[str, Any]) -> Cell:
+    """The cell that flies ``value`` of ``over`` for one law and seed: a link axis in both directions, or
+    the noise scale; the other axes at the mission's own values (``link``, ``vehicle``)."""
+    if over == "noise":
+        return Cell(law, float(mission.rate_hz), **link, seed=seed, estimator=vehicle["estimator"], noise=value,
+                    sensing=("noise",))
+    return Cell(law, float(mission.rate_hz), **{**link, over: value}, seed=seed, link=(over,), **vehicle)
 
 
 def write_margin(result: dict[str, Any], out: str | Path | None, mission_name: str, overwrite: bool) -> Path:

@@ -1,7 +1,7 @@
 """A sweep's report: a class per cell, a table per pair of swept parameters, heat maps.
 
 In:  a sweep directory's ``cells.csv`` rows (``rms`` m, ``ripple_u2`` N, ``outcome``, the axes' values
-     in Hz, ms, %, packets) and its ``sweep.json`` (thresholds, axes)
+     in Hz, ms, %, packets, estimator kinds, noise scales) and its ``sweep.json`` (thresholds, axes)
 Out: ``report.md`` (thresholds, an overview per law, a table per pair of swept axes, the failed cells,
      a command that reflies a row) and the heat maps ``map_<a>_<b>.png`` (log10 RMS, class per cell)
 
@@ -29,14 +29,18 @@ from itertools import combinations
 from pathlib import Path
 from typing import Any
 
+from bridge.core.estimator import ESTIMATOR_KINDS
 from bridge.sweep.cells import CELLS_CSV, SWEEP_JSON, read_cells, read_sweep_json
 from bridge.sweep.classes import CLASSES, Classes, classify, thresholds_text
-from bridge.sweep.grid import AXES, LINK_AXES, SHORT
+from bridge.sweep.grid import AXES, LINK_AXES, NAME_AXES, SHORT
 from params import ConfigError
 
-NUMERIC_AXES = tuple(a for a in AXES if a != "controller")
-UNITS = {"rate_hz": "Hz", "delay_ms": "ms", "jitter_ms": "ms", "loss_pct": "%", "burst_len": "packets"}
-
+NUMERIC_AXES = tuple(a for a in AXES if a not in NAME_AXES)
+# the axes a table (and a heat map) may have: the numbers, and the estimator kind (a few names, like a law;
+# the laws get a table each instead)
+MAP_AXES = tuple(a for a in AXES if a != "controller")
+UNITS = {"rate_hz": "Hz", "delay_ms": "ms", "jitter_ms": "ms", "loss_pct": "%", "burst_len": "packets",
+         "noise": "x sigma"}
 
 
 
@@ -58,6 +62,9 @@ class Point:
 
 
 def _values(rows: Sequence[Mapping[str, Any]], axis: str) -> list[Any]:
+    if axis == "estimator":  # in the order of ESTIMATOR_KINDS (truth, ekf, raw): the baseline first
+        return sorted({r[axis] for r in rows}, key=lambda k: (ESTIMATOR_KINDS.index(k) if k in ESTIMATOR_KINDS
+                                                               else len(ESTIMATOR_KINDS), k))
     return sorted({r[axis] for r in rows})
 
 
@@ -66,15 +73,31 @@ def _fmt(v: Any) -> str:
 
 
 def pairs(rows: Sequence[Mapping[str, Any]], swept: Sequence[str]) -> list[tuple[str, str]]:
-    """The parameter pairs to tabulate: every pair of swept numeric axes; with one swept axis,
-    that axis against a fixed one (a one-column map)."""
-    numeric = [a for a in NUMERIC_AXES if a in swept and len(_values(rows, a)) > 1]
-    if len(numeric) >= 2:
-        return list(combinations(numeric, 2))
-    if len(numeric) == 1:
-        other = next(a for a in ("loss_pct", "delay_ms", *NUMERIC_AXES) if a != numeric[0])
-        return [(numeric[0], other)]
+    """The parameter pairs to tabulate: every pair of swept axes with more than one value (numbers, and
+    the estimator kind); with one such axis, that axis against a fixed one (a one-column map)."""
+    varied = [a for a in MAP_AXES if a in swept and len(_values(rows, a)) > 1]
+    if len(varied) >= 2:
+        return list(combinations(varied, 2))
+    if len(varied) == 1:
+        other = next(a for a in ("loss_pct", "delay_ms", *NUMERIC_AXES) if a != varied[0])
+        return [(varied[0], other)]
     return []
+
+
+def _label(axis: str) -> str:
+    """An axis with its unit, for a heat map's axis."""
+    return f"{axis} [{UNITS[axis]}]" if axis in UNITS else axis
+
+
+def legacy_values(meta: Mapping[str, Any]) -> dict[str, Any]:
+    """What an older sweep's cells flew on the vehicle's axes (its ``cells.csv`` has no such columns): its
+    mission's ``[estimator] kind`` and ``[sensors] noise_scale``, else their defaults."""
+    mission = meta.get("mission") if isinstance(meta.get("mission"), Mapping) else {}
+    est, sensors = mission.get("estimator"), mission.get("sensors")
+    kind = est.get("kind", "truth") if isinstance(est, Mapping) else "truth"
+    scale = sensors.get("noise_scale", 1.0) if isinstance(sensors, Mapping) else 1.0
+    return {"estimator": kind if isinstance(kind, str) else "truth",
+            "noise": float(scale) if isinstance(scale, (int, float)) and not isinstance(scale, bool) else 1.0}
 
 
 def grid_points(rows: Sequence[Mapping[str, Any]], a: str, b: str, classes: Classes) -> dict[tuple[Any, Any], Point]:
@@ -89,11 +112,10 @@ def load_sweep_dir(path: str | Path) -> tuple[list[dict[str, Any]], dict[str, An
     p = Path(path)
     if not p.is_dir():
         raise ConfigError(f"{p}: not a directory")
-    rows = read_cells(p / CELLS_CSV)
     meta_path = p / SWEEP_JSON
-    if meta_path.exists():
-        meta = read_sweep_json(meta_path)
-    else:
+    meta = read_sweep_json(meta_path) if meta_path.exists() else {}
+    rows = read_cells(p / CELLS_CSV, legacy=legacy_values(meta))  # an older sweep's cells.csv is read too
+    if not meta:
         meta = {"mission": {"name": p.name}, "mode": "?", "swept": [a for a in AXES if len(_values(rows, a)) > 1],
                 "classes": {}}
     return rows, meta
@@ -121,9 +143,13 @@ def write_report(path: Path, rows: Sequence[Mapping[str, Any]], meta: Mapping[st
     lines = [f"# Sweep report: {mission}", ""]
     lines.append(f"Mode `{meta.get('mode', '?')}`, {len(rows)} runs: controllers {', '.join(controllers)}; "
                  f"seeds {', '.join(map(str, seeds))}.")
-    for a in NUMERIC_AXES:
+    for a in MAP_AXES:
         vals = _values(rows, a)
-        lines.append(f"- `{a}`: {', '.join(_fmt(v) for v in vals)} {UNITS[a]}" + (" (swept)" if a in swept else ""))
+        unit = f" {UNITS[a]}" if a in UNITS else ""
+        lines.append(f"- `{a}`: {', '.join(_fmt(v) for v in vals)}{unit}" + (" (swept)" if a in swept else ""))
+    if any(r["estimator"] != "truth" for r in rows):
+        lines += [f"- sensor set: `{sensor_set(meta)}` (the noise scale multiplies each of its sigmas; the "
+                  "estimator `truth` flies the true state and ignores them)"]
     lines += ["", "Delay, jitter, loss and burst length apply to both link directions "
               "(up: controller -> vehicle, down: vehicle -> controller).", ""]
     lines += ["## Classes", ""] + thresholds_text(classes)
@@ -159,10 +185,10 @@ def write_report(path: Path, rows: Sequence[Mapping[str, Any]], meta: Mapping[st
             maps += heat_maps(path, rows, a, b, controllers, classes)
     failed = [r for r in rows if r["outcome"] == "error"]
     if failed:
-        lines += ["", "## Cells that could not be flown", "", "| controller | " + " | ".join(NUMERIC_AXES)
-                  + " | seed | error |", "|---" * (len(NUMERIC_AXES) + 3) + "|"]
+        lines += ["", "## Cells that could not be flown", "", "| controller | " + " | ".join(MAP_AXES)
+                  + " | seed | error |", "|---" * (len(MAP_AXES) + 3) + "|"]
         for r in failed[:50]:
-            lines.append(f"| {r['controller']} | " + " | ".join(_fmt(r[a]) for a in NUMERIC_AXES)
+            lines.append(f"| {r['controller']} | " + " | ".join(_fmt(r[a]) for a in MAP_AXES)
                          + f" | {r['seed']} | {r['error']} |")
     lines += ["", "## Reproducing a row", "",
               "Each row of `cells.csv` is one offline flight of `mission.toml` (in this directory); for example the "
@@ -178,7 +204,17 @@ def reproduce(row: Mapping[str, Any], swept: Sequence[str]) -> str:
     """The ``bsst sim`` command that flies one row again."""
     flags = [f"--controller {row['controller']}", f"--rate {row['rate_hz']:g}"]
     flags += [f"--{SHORT[a]} {row[a]:g}" for a in LINK_AXES if a in swept]
+    flags += [f"--estimator {row['estimator']}"] if "estimator" in swept else []
+    flags += [f"--noise {row['noise']:g}"] if "noise" in swept else []
     return f"bsst sim mission.toml {' '.join(flags)} --seed {row['seed']}"
+
+
+def sensor_set(meta: Mapping[str, Any]) -> str:
+    """The sensor set a sweep's cells flew (its mission's ``[sensors] set``; ``ideal`` without one)."""
+    mission = meta.get("mission") if isinstance(meta.get("mission"), Mapping) else {}
+    sensors = mission.get("sensors")
+    name = sensors.get("set", "ideal") if isinstance(sensors, Mapping) else "ideal"
+    return name if isinstance(name, str) else "ideal"
 
 
 def heat_maps(path: Path, rows: Sequence[Mapping[str, Any]], a: str, b: str, controllers: Sequence[str],
@@ -221,8 +257,8 @@ def heat_maps(path: Path, rows: Sequence[Mapping[str, Any]], a: str, b: str, con
                         color="black" if bright or math.isnan(z[i, j]) else "white")
         ax.set_xticks(range(len(bv)), [_fmt(v) for v in bv])
         ax.set_yticks(range(len(av)), [_fmt(v) for v in av])
-        ax.set_xlabel(f"{b} [{UNITS[b]}]")
-        ax.set_ylabel(f"{a} [{UNITS[a]}]")
+        ax.set_xlabel(_label(b))
+        ax.set_ylabel(_label(a))
         ax.set_title(c)
         return im
 

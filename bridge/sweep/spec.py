@@ -17,10 +17,23 @@ from itertools import product
 from pathlib import Path
 from typing import Any
 
+from bridge.core.estimator import ESTIMATOR_KINDS
 from bridge.record.runlog import check_trace_steps
 from bridge.sweep.cells import COLUMNS
 from bridge.sweep.classes import Classes
-from bridge.sweep.grid import AXES, LINK_AXES, MODES, RANGES, Cell, Grid, cell_flight, cells, mission_value
+from bridge.sweep.grid import (
+    AXES,
+    LINK_AXES,
+    MODES,
+    RANGES,
+    SENSING_AXES,
+    Cell,
+    Grid,
+    cell_flight,
+    cells,
+    mission_value,
+    noise_problem,
+)
 from missions import Mission, load_mission
 from missions.mission import law_spec_from, law_spec_problem, mission_path
 from params import ConfigError, Table, load_toml
@@ -81,11 +94,14 @@ class Sweep:
         }))
 
     def validate(self) -> None:
-        """Build the flight of every law, every rate and every combination of link values once
-        (not every cell), so that a bad value fails before any cell runs; first the grid's size."""
+        """Build the flight of every law, every rate, every estimator kind, every noise scale and every
+        combination of link values once (not every cell), so that a bad value fails before any cell runs;
+        first the grid's size; then that a swept noise scale changes something."""
         self.check_size()
         base = self.cells()[0]
         probes = [_replace_cell(base, **{a: v}) for a in ("controller", "rate_hz") for v in getattr(self.grid, a)]
+        probes += [_replace_cell(base, **{a: v, "sensing": tuple({*base.sensing, a})}) for a in SENSING_AXES
+                   for v in getattr(self.grid, a)]
         lists = [getattr(self.grid, a) or (getattr(base, a),) for a in LINK_AXES]
         probes += [_replace_cell(base, **dict(zip(LINK_AXES, vs, strict=True))) for vs in product(*lists)]
         for c in probes:
@@ -93,6 +109,18 @@ class Sweep:
                 check_trace_steps(cell_flight(self.mission, c).mission)  # each rate: its steps within the cap
             except ConfigError as exc:
                 raise ConfigError(f"sweep cell ({c.label()}): {exc}") from None
+        why = self.noise_problem()
+        if why:
+            raise ConfigError(f"grid.noise (--noise): {why}")
+
+    def noise_problem(self) -> str | None:
+        """Why a swept noise scale (more than one value) would change nothing, or None."""
+        if len(self.grid.noise) < 2:
+            return None
+        kinds = self.grid.estimator or (mission_value(self.mission, "estimator"),)
+        first = self.cells()[0]
+        unscaled = _replace_cell(first, noise=1.0, sensing=tuple({*first.sensing, "noise"}))  # the set's own sigmas
+        return noise_problem(kinds, cell_flight(self.mission, unscaled).sensors)
 
 
 def _axis_values(s: Sweep, axis: str) -> list[Any]:
@@ -103,6 +131,7 @@ def _replace_cell(c: Cell, **kw: Any) -> Cell:
     d = asdict(c)
     d.update(kw)
     d["link"] = tuple(d["link"])
+    d["sensing"] = tuple(d["sensing"])
     return Cell(**d)
 
 
@@ -130,7 +159,9 @@ def load_sweep(path: str | Path) -> Sweep:
     axes: dict[str, Any] = {}
     for a in AXES:
         if g.has(a):
-            if a == "controller":
+            if a == "estimator":
+                axes[a] = tuple(_name_list(g, a, ESTIMATOR_KINDS))
+            elif a == "controller":
                 v = g.raw(a)
                 if isinstance(v, str):
                     v = [v]
@@ -170,6 +201,20 @@ def _number_list(t: Table, key: str, lo: float, hi: float) -> list[float]:
     if len(set(out)) != len(out):
         raise t.error(key, "repeated value")
     return out
+
+
+def _name_list(t: Table, key: str, choices: tuple[str, ...]) -> list[str]:
+    v = t.raw(key)
+    if isinstance(v, str):
+        v = [v]
+    if not isinstance(v, list) or not v or not all(isinstance(x, str) for x in v):
+        raise t.error(key, f"expected a non-empty list of names among {', '.join(choices)}, got {v!r}")
+    for i, x in enumerate(v):
+        if x not in choices:
+            raise t.error(key, f"element {i} must be one of {', '.join(choices)}, got {x!r}")
+    if len(set(v)) != len(v):
+        raise t.error(key, "repeated value")
+    return list(v)
 
 
 def _int_list(t: Table, key: str, lo: int, hi: int) -> list[int]:
