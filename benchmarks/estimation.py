@@ -1,4 +1,8 @@
-"""Sensors and the on-board estimator: the cost of one estimator step, and what the EKF buys.
+"""Sensors and the on-board estimator: the cost of one estimator step, and what noise and the EKF do.
+
+Every flight is the product's own loop: ``bridge.simulate`` (``bsst sim``) with the overrides
+``sensors={"set": ...}``, ``estimator=...``, ``controller=...`` and ``link=...``, exactly what
+``bsst sim MISSION --sensors S --estimator E --controller L --delay MS`` flies.
 
 ``step``: the median wall time of one estimator step (``Ekf.step`` and ``RawEstimator.step``,
 microseconds), replaying the measurements of a sine flight (paper profile, 250 Hz control, 1 kHz
@@ -7,21 +11,28 @@ most calls carry nothing (the IMU runs at 250 Hz), so the median of all calls sa
 figures are the median of the calls that carry a measurement, the median of each mix of
 measurements, and the mean cost per physics step and per control step.
 
-``table``: the sine mission (missions/sine.toml, paper profile, 250 Hz) flown OFFLINE with the
-``mocap`` sensor set and the estimators ``raw`` and ``ekf`` (``truth`` beside them), for the laws
-bsst, smc and pid: the 3-D RMS tracking error over t >= 10 s (``bridge.record.metrics.rms_3d``)
-and the ripple of u2 (the demanded roll input's RMS about its centred 0.1 s moving average over
-the second half, ``bridge.sweep.cells.ripple_rms``), and the real-time factor of the whole flight
-(simulated s per wall s, and per CPU s of this process). The loop is
-``bridge.core.estimator.fly_closed_loop`` (plant, sensors, estimator, ``controller.Controller`` fed
-the estimate), not yet the product's loop, which has no estimator yet.
+``speed``: the offline sine (paper profile, ``mocap``, BS-ST) with ``ekf`` and with ``truth``,
+``--repeats`` times each, interleaved: simulated s per wall s of the whole ``bridge.simulate``
+call (prepare, plant, sensors, estimator, law, link, summary; no files), median and best, and per
+CPU s of this process.
 
-Every figure is the median over ``--repeats`` repeats (the flights are the same every repeat: one
-seed; only the times vary). Targets (issue 12): with ``ekf`` BS-ST's u2 ripple at least 5x lower
-than with ``raw`` and its RMS no worse; one estimator step <= 50 us median; the offline sine with
-``ekf`` >= 30x real time.
+``table``: the sine mission (missions/sine.toml, paper profile, 250 Hz), ``mocap`` sensors, for
+the laws bsst, smc, pid x the estimators raw, ekf (truth beside them) x the links ``perfect``
+and ``delay 10 ms`` (``--delay 10``: 10 ms each way, ``[link] delay_ms = 10``): the 3-D RMS
+tracking error over t >= 10 s (``summary.json`` ``rms_3d``) and the ripple of u2 (the demanded
+roll input's RMS about its centred 0.1 s moving average over the second half, the issue's
+definition: ``bridge.record.metrics.ripple_rms`` with a 0.1 s window; ``summary.json`` reports it
+with 0.2 s). One flight per cell: the figures are the same every time (one seed).
 
-    .venv/bin/python benchmarks/estimation.py [--repeats 3] [--seed 0] [--json]
+``x500``: ``--profile x500 --sensors gnss --estimator ekf`` (and ``truth`` beside) on the sine and
+step missions with BS-ST: outcome, RMS, the estimate's position RMS, the largest rotor command
+(omega / omega_max) and the share of control steps with a rotor at its limit (0 or omega_max).
+
+Targets (issue 12): with ``ekf`` BS-ST's u2 ripple at least 5x lower than with ``raw`` and its RMS
+no worse (perfect link); one estimator step <= 50 us median; the offline sine with ``ekf`` >= 30x
+real time.
+
+    .venv/bin/python benchmarks/estimation.py [--repeats 5] [--seed 0] [--json]
 """
 
 from __future__ import annotations
@@ -37,49 +48,51 @@ from collections import defaultdict
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from bridge.core.estimator import Ekf, RawEstimator, fly_closed_loop, make_estimator  # noqa: E402
+from bridge.core.estimator import Ekf, RawEstimator  # noqa: E402
 from bridge.core.flight import prepare  # noqa: E402
-from bridge.record.metrics import rms_3d  # noqa: E402
-from bridge.sweep.cells import ripple_rms  # noqa: E402
+from bridge.loop import simulate  # noqa: E402
+from bridge.record.metrics import ripple_rms  # noqa: E402
 from plant.sensors import SensorSuite  # noqa: E402
 
-MISSION = str(ROOT / "missions" / "sine.toml")
+MISSIONS = {"sine": str(ROOT / "missions" / "sine.toml"), "step": str(ROOT / "missions" / "step.toml")}
 SENSORS = "mocap"
 LAWS = ("bsst", "smc", "pid")
 KINDS = ("raw", "ekf", "truth")
-RIPPLE_WINDOW_S = 0.1
+LINKS: dict[str, dict[str, Any] | None] = {"perfect": None, "delay 10 ms": {"delay_ms": 10.0}}
+RIPPLE_WINDOW_S = 0.1  # the issue's ripple: RMS about the centred 0.1 s moving average
 TARGET_STEP_US = 50.0
 TARGET_RTF = 30.0
 TARGET_RIPPLE_RATIO = 5.0
 
 
-def flight(law: str, kind: str, seed: int) -> dict[str, Any]:
-    """One offline sine flight with sensors and an estimator; its figures and times."""
+def flight(mission: str, *, law: str = "bsst", kind: str = "ekf", sensors: str = SENSORS,
+           link: dict[str, Any] | None = None, profile: str | None = None, seed: int = 0) -> dict[str, Any]:
+    """One flight of the product's offline loop (``bsst sim`` without files); its figures and times."""
     w0, c0 = time.perf_counter(), time.process_time()
-    f = prepare(MISSION, controller=law, seed=seed)
-    m = f.mission
-    plant = f.make_plant()
-    cfg = f.profile.sensor_set(SENSORS)
-    suite = SensorSuite(cfg, m.seed, m.physics_hz, f.profile.gravity)
-    est = make_estimator(kind, cfg, plant.state, f.profile.gravity, lambda: plant.state)
-    rec = fly_closed_loop(plant, f.make_controller(), m.trajectory.sample, suite, est, steps=m.steps,
-                          rate_hz=m.rate_hz)
+    run = simulate(mission, plots=False, controller=law, seed=seed, profile=profile, sensors={"set": sensors},
+                   estimator=kind, link=link)
     wall, cpu = time.perf_counter() - w0, time.process_time() - c0
-    trace = {"t": rec.t, "x": rec.truth[:, 0], "y": rec.truth[:, 2], "z": rec.truth[:, 4],
-             "psi": rec.truth[:, 10], "x_ref": rec.reference[:, 0], "y_ref": rec.reference[:, 1],
-             "z_ref": rec.reference[:, 2], "psi_ref": rec.reference[:, 3]}
-    flown = float(rec.t[-1]) + 1.0 / m.rate_hz if len(rec.t) else 0.0
-    return {"outcome": rec.outcome, "rms_3d_m": rms_3d(trace, 10.0),
-            "ripple_u2_n": ripple_rms(rec.t, rec.demanded[:, 1], m.rate_hz, RIPPLE_WINDOW_S),
+    s, tr = run.summary, run.trace
+    rate = float(s["rate_hz"])
+    flown = len(tr["t"]) / rate
+    rotors = np.stack([tr[f"c{i}"] for i in range(1, 5)])
+    at_limit = np.any((rotors >= 1.0 - 1e-9) | (rotors <= 1e-9), axis=0)
+    est = s.get("estimation") or {}
+    return {"outcome": s["outcome"], "rms_3d_m": s["rms_3d"],
+            "ripple_u2_n": ripple_rms(tr["t"], tr["u2"], rate, RIPPLE_WINDOW_S),
+            "position_est_rms_m": est.get("position_rms_m"), "nees_mean": est.get("nees_mean"),
+            "rotor_max": float(rotors.max()), "rotor_at_limit_pct": 100.0 * float(at_limit.mean()),
             "rtf": flown / wall, "rtf_cpu": flown / cpu}
 
 
 def recorded_stream(seed: int) -> tuple[list[tuple[float, list]], Any, Any]:
     """(t, measurements) of every physics step of a BS-ST sine flight on the true state."""
-    f = prepare(MISSION, seed=seed)
+    f = prepare(MISSIONS["sine"], seed=seed)
     m = f.mission
     plant = f.make_plant()
     ctl = f.make_controller()
@@ -117,32 +130,26 @@ def step_times(make: Any, stream: list[tuple[float, list]]) -> dict[str, Any]:
             "by_mix_count": {k: len(v) for k, v in by_mix.items()}}
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--json", action="store_true", help="print the figures as JSON")
-    args = ap.parse_args(argv)
+def measure(repeats: int, seed: int) -> dict[str, Any]:
+    """Every figure of the benchmark (see the module docstring)."""
     med = statistics.median
-
-    stream, cfg, f = recorded_stream(args.seed)
+    stream, cfg, f = recorded_stream(seed)
     start = f.make_plant().state
     makers = {"ekf": lambda: Ekf(cfg, start, f.profile.gravity), "raw": lambda: RawEstimator(cfg, start)}
     steps: dict[str, list[dict[str, Any]]] = {k: [] for k in makers}
-    flights: dict[tuple[str, str], list[dict[str, Any]]] = defaultdict(list)
-    flight("bsst", "ekf", args.seed)  # warm up imports and caches
-    for _ in range(args.repeats):
+    speed: dict[str, list[dict[str, Any]]] = {"ekf": [], "truth": []}
+    flight(MISSIONS["sine"], kind="ekf", seed=seed)  # warm up imports and caches
+    for _ in range(repeats):  # interleaved, so that drifts in machine load hit every estimator alike
         for kind, make in makers.items():
             steps[kind].append(step_times(make, stream))
-        for law in LAWS:  # interleaved, so that drifts in machine load hit every estimator alike
-            for kind in KINDS:
-                flights[(law, kind)].append(flight(law, kind, args.seed))
+        for kind in speed:
+            speed[kind].append(flight(MISSIONS["sine"], kind=kind, seed=seed))
 
     res: dict[str, Any] = {
         "mission": "sine", "profile": f.profile.name, "sensors": SENSORS, "rate_hz": f.mission.rate_hz,
-        "physics_hz": f.mission.physics_hz, "seed": args.seed, "repeats": args.repeats,
-        "python": platform.python_version(), "machine": platform.machine(),
-        "load_average_1min": os.getloadavg()[0], "step": {}, "table": {},
+        "physics_hz": f.mission.physics_hz, "seed": seed, "repeats": repeats,
+        "python": platform.python_version(), "machine": platform.machine(), "cpus": os.cpu_count(),
+        "load_average_1min": os.getloadavg()[0], "step": {}, "speed": {}, "table": {}, "x500": {},
     }
     control_steps = f.mission.steps
     for kind, runs in steps.items():
@@ -153,30 +160,37 @@ def main(argv: list[str] | None = None) -> int:
             "by_mix_us": {k: med(r["by_mix_us"][k] for r in runs) for k in runs[0]["by_mix_us"]},
             "by_mix_count": runs[0]["by_mix_count"],
         }
-    for (law, kind), runs in flights.items():
-        last = runs[-1]
-        res["table"].setdefault(law, {})[kind] = {
-            "outcome": last["outcome"], "rms_3d_m": last["rms_3d_m"], "ripple_u2_n": last["ripple_u2_n"],
-            "rtf": med(r["rtf"] for r in runs), "rtf_range": [min(r["rtf"] for r in runs), max(r["rtf"] for r in runs)],
-            "rtf_cpu": med(r["rtf_cpu"] for r in runs),
-        }
-    for row in res["table"].values():
-        row["ripple_ratio_raw_over_ekf"] = row["raw"]["ripple_u2_n"] / row["ekf"]["ripple_u2_n"]
-        row["rms_ratio_ekf_over_raw"] = row["ekf"]["rms_3d_m"] / row["raw"]["rms_3d_m"]
-    bsst = res["table"]["bsst"]
+    for kind, runs in speed.items():
+        res["speed"][kind] = {"rtf": med(r["rtf"] for r in runs), "rtf_best": max(r["rtf"] for r in runs),
+                              "rtf_worst": min(r["rtf"] for r in runs), "rtf_cpu": med(r["rtf_cpu"] for r in runs)}
+    for link_name, link in LINKS.items():
+        for law in LAWS:
+            row = res["table"].setdefault(link_name, {}).setdefault(law, {})
+            for kind in KINDS:
+                row[kind] = flight(MISSIONS["sine"], law=law, kind=kind, link=link, seed=seed)
+            row["ripple_ratio_raw_over_ekf"] = row["raw"]["ripple_u2_n"] / row["ekf"]["ripple_u2_n"]
+            row["rms_ratio_ekf_over_raw"] = row["ekf"]["rms_3d_m"] / row["raw"]["rms_3d_m"]
+    for name in ("sine", "step"):
+        for kind in ("ekf", "truth"):
+            res["x500"].setdefault(name, {})[kind] = flight(MISSIONS[name], kind=kind, sensors="gnss",
+                                                            profile="x500", seed=seed)
+    bsst = res["table"]["perfect"]["bsst"]
     res["targets"] = {
         "bsst_ripple_ratio_at_least_5": bsst["ripple_ratio_raw_over_ekf"] >= TARGET_RIPPLE_RATIO,
         "bsst_rms_ekf_no_worse": bsst["ekf"]["rms_3d_m"] <= bsst["raw"]["rms_3d_m"],
         "ekf_step_median_at_most_50us": res["step"]["ekf"]["median_loaded_us"] <= TARGET_STEP_US,
-        "ekf_sine_at_least_30x": bsst["ekf"]["rtf"] >= TARGET_RTF,
+        "ekf_sine_at_least_30x": res["speed"]["ekf"]["rtf"] >= TARGET_RTF,
+        "x500_gnss_ekf_completes": all(r["ekf"]["outcome"] == "completed" for r in res["x500"].values()),
     }
-    if args.json:
-        print(json.dumps(res, indent=2))
-        return 0
+    return res
 
-    print(f"estimation benchmark: sine, paper profile, {res['rate_hz']:g} Hz control, "
-          f"{res['physics_hz']:g} Hz physics, sensors {SENSORS}, seed {args.seed}, median of {args.repeats} repeats "
-          f"(Python {res['python']}, {res['machine']}, load average {res['load_average_1min']:.2f})")
+
+def report(res: dict[str, Any]) -> None:
+    """The figures as tables on stdout."""
+    print(f"estimation benchmark: the product's offline loop (bridge.simulate), sine, paper profile, "
+          f"{res['rate_hz']:g} Hz control, {res['physics_hz']:g} Hz physics, sensors {res['sensors']}, seed "
+          f"{res['seed']}, {res['repeats']} repeats (Python {res['python']}, {res['machine']}, {res['cpus']} CPUs, "
+          f"load average {res['load_average_1min']:.2f})")
     print()
     print("one estimator step (wall us; called every physics step, most calls carry nothing):")
     for kind, s in res["step"].items():
@@ -187,26 +201,57 @@ def main(argv: list[str] | None = None) -> int:
               f"per control step {s['mean_per_control_step_us']:5.1f} us")
         print(f"       by mix: {mixes}")
     print()
-    print(f"{'law':5} {'estimator':9} {'outcome':10} {'rms 3-D m':>10} {'u2 ripple N':>12} {'offline x':>10} "
-          f"{'range':>11} {'cpu x':>6}")
-    for law in LAWS:
-        row = res["table"][law]
-        for kind in KINDS:
-            r = row[kind]
-            lo, hi = r["rtf_range"]
-            print(f"{law:5} {kind:9} {r['outcome'][:10]:10} {r['rms_3d_m']:10.3e} {r['ripple_u2_n']:12.3f} "
-                  f"{r['rtf']:10.1f} {f'[{lo:.0f}, {hi:.0f}]':>11} {r['rtf_cpu']:6.1f}")
-        print(f"{'':5} raw/ekf u2 ripple {row['ripple_ratio_raw_over_ekf']:.1f}x, ekf/raw rms "
-              f"{row['rms_ratio_ekf_over_raw']:.3f}")
-    print("rms 3-D: over t >= 10 s; u2 ripple: RMS about the centred 0.1 s moving average, second half;")
-    print("offline x: simulated s per wall s of the whole flight (prepare, plant, sensors, estimator, law); "
-          "cpu x: per CPU s")
+    print("speed: offline sine, BS-ST, mocap (simulated s per wall s of bridge.simulate; median, best, worst; cpu)")
+    for kind, s in res["speed"].items():
+        print(f"  {kind:5} {s['rtf']:6.1f}x  best {s['rtf_best']:5.1f}x  worst {s['rtf_worst']:5.1f}x  "
+              f"cpu {s['rtf_cpu']:5.1f}x")
+    print()
+    print(f"{'link':12} {'law':5} {'estimator':9} {'outcome':10} {'rms 3-D m':>10} {'u2 ripple N':>12}")
+    for link_name, rows in res["table"].items():
+        for law in LAWS:
+            row = rows[law]
+            for kind in KINDS:
+                r = row[kind]
+                print(f"{link_name:12} {law:5} {kind:9} {r['outcome'][:10]:10} {r['rms_3d_m']:10.3e} "
+                      f"{r['ripple_u2_n']:12.3f}")
+            print(f"{'':12} {'':5} raw/ekf u2 ripple {row['ripple_ratio_raw_over_ekf']:.1f}x, ekf/raw rms "
+                  f"{row['rms_ratio_ekf_over_raw']:.3f}")
+    print("rms 3-D: over t >= 10 s; u2 ripple: RMS about the centred 0.1 s moving average, second half")
+    print()
+    print("x500, gnss sensors, BS-ST:")
+    print(f"{'mission':8} {'estimator':9} {'outcome':10} {'rms 3-D m':>10} {'est pos rms m':>14} {'NEES':>6} "
+          f"{'rotor max':>10} {'at limit %':>11}")
+    for name, rows in res["x500"].items():
+        for kind, r in rows.items():
+            pos = r["position_est_rms_m"]
+            nees = r["nees_mean"]
+            print(f"{name:8} {kind:9} {r['outcome'][:10]:10} {r['rms_3d_m']:10.3f} "
+                  f"{'-' if pos is None else f'{pos:.3f}':>14} {'-' if nees is None else f'{nees:.1f}':>6} "
+                  f"{r['rotor_max']:10.3f} {r['rotor_at_limit_pct']:11.2f}")
+    print()
     t = res["targets"]
     ok = {True: "met", False: "NOT met"}
     print(f"targets: BS-ST ripple raw/ekf >= {TARGET_RIPPLE_RATIO:g}x: {ok[t['bsst_ripple_ratio_at_least_5']]}; "
           f"BS-ST rms ekf <= raw: {ok[t['bsst_rms_ekf_no_worse']]}; "
           f"ekf step median <= {TARGET_STEP_US:g} us: {ok[t['ekf_step_median_at_most_50us']]}; "
-          f"offline sine with ekf >= {TARGET_RTF:g}x real time: {ok[t['ekf_sine_at_least_30x']]}")
+          f"offline sine with ekf >= {TARGET_RTF:g}x real time: {ok[t['ekf_sine_at_least_30x']]}; "
+          f"x500 gnss ekf completes sine and step: {ok[t['x500_gnss_ekf_completes']]}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--repeats", type=int, default=5, help="repeats of the step and speed figures (default 5)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--json", action="store_true", help="print the figures as JSON")
+    args = ap.parse_args(argv)
+    if args.repeats < 1:
+        print(f"estimation.py: --repeats must be at least 1, got {args.repeats}", file=sys.stderr)
+        return 2
+    res = measure(args.repeats, args.seed)
+    if args.json:
+        print(json.dumps(res, indent=2))
+    else:
+        report(res)
     return 0
 
 

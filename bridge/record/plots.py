@@ -4,7 +4,10 @@ errors, angles (with the desired roll and pitch), inputs, and the 3-D path.
 In:  trace arrays by column (t s, positions m, angles rad, inputs demanded and realised N), a
      directory, a title
 Out: ``positions.png``, ``errors.png``, ``angles.png``, ``inputs.png``, ``path3d.png`` in it, and
-     their paths
+     their paths; when the vehicle flew on an estimate (an estimator other than ``truth``: the
+     ``*_est`` columns differ from the truth) also ``estimate.png``: x, y, z, φ, θ, ψ true and
+     estimated, the estimate's error (true − estimated, ψ wrapped), and its NEES against the χ²(9)
+     band (the covariance itself is not in the trace, only this consistency figure)
 """
 
 from __future__ import annotations
@@ -14,6 +17,32 @@ from pathlib import Path
 import numpy as np
 
 from bridge.record.metrics import errors
+
+ESTIMATED = (("x", "m"), ("y", "m"), ("z", "m"), ("phi", "rad"), ("theta", "rad"), ("psi", "rad"))
+NEES_DOF = 9  # position, velocity, attitude: bridge.core.estimator.nees
+NEES_BAND = (2.70, 19.02)  # the chi-square(9) 2.5 % and 97.5 % quantiles: 95 % of a consistent filter's NEES
+
+
+def has_estimate(trace: dict[str, np.ndarray]) -> bool:
+    """Whether the vehicle flew on an estimate: its ``*_est`` columns are there and differ from the
+    truth somewhere (under ``truth`` they are the truth itself, bit for bit)."""
+    for a, _ in ESTIMATED:
+        est = trace.get(a + "_est")
+        if est is None:
+            return False
+        d = np.asarray(trace[a]) - np.asarray(est)
+        if np.any(d[np.isfinite(d)] != 0.0):
+            return True
+    return False
+
+
+def estimation_errors(trace: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """True minus estimated of each of x, y, z (m) and phi, theta, psi (rad; psi wrapped to [-pi, pi))."""
+    out = {}
+    for a, _ in ESTIMATED:
+        d = np.asarray(trace[a]) - np.asarray(trace[a + "_est"])
+        out[a] = (d + np.pi) % (2.0 * np.pi) - np.pi if a == "psi" else d
+    return out
 
 
 def make_plots(trace: dict[str, np.ndarray], out: str | Path, title: str = "") -> list[Path]:
@@ -85,4 +114,45 @@ def make_plots(trace: dict[str, np.ndarray], out: str | Path, title: str = "") -
     ax.set_zlabel("z [m]")
     ax.legend()
     save(fig, "path3d")
+
+    if has_estimate(trace):
+        save(_estimate_figure(plt, trace), "estimate")
     return written
+
+
+def _estimate_figure(plt, trace: dict[str, np.ndarray]):
+    """The estimate against the truth: one row per quantity (left: both; right: the error), NEES below."""
+    t = trace["t"]
+    e = estimation_errors(trace)
+    fig = plt.figure(figsize=(11, 13))
+    grid = fig.add_gridspec(len(ESTIMATED) + 1, 2)
+    first = None
+    for i, (a, unit) in enumerate(ESTIMATED):
+        ax = fig.add_subplot(grid[i, 0], sharex=first)
+        first = first or ax
+        ax.plot(t, trace[a], label=f"{a} true")
+        ax.plot(t, trace[a + "_est"], "--", label=f"{a} estimated")
+        ax.set_ylabel(f"{a} [{unit}]")
+        ax.legend(loc="upper right", fontsize=8)
+        ax.grid(alpha=0.3)
+        ax = fig.add_subplot(grid[i, 1], sharex=first)
+        rms = float(np.sqrt(np.nanmean(e[a] ** 2))) if np.any(np.isfinite(e[a])) else float("nan")
+        ax.plot(t, e[a], color="C3", lw=0.8, label=f"true - estimated (RMS {rms:.3g} {unit})")
+        ax.set_ylabel(f"error {a} [{unit}]")
+        ax.legend(loc="upper right", fontsize=8)
+        ax.grid(alpha=0.3)
+    ax = fig.add_subplot(grid[len(ESTIMATED), :], sharex=first)
+    nees = np.asarray(trace.get("nees", np.full(len(t), np.nan)))
+    sampled = np.isfinite(nees)
+    ax.set_yscale("log")
+    if sampled.any():
+        mean = float(nees[sampled].mean())
+        ax.plot(t[sampled], np.maximum(nees[sampled], 1e-3), ".", ms=2, label=f"NEES (mean {mean:.3g})")
+    for q in NEES_BAND:
+        ax.axhline(q, color="k", ls="--", lw=0.8)
+    ax.axhline(NEES_DOF, color="k", lw=0.8, label=f"chi-square({NEES_DOF}): mean {NEES_DOF}, 95 % band dashed")
+    ax.set_ylabel("NEES")
+    ax.set_xlabel("t [s]")
+    ax.legend(loc="upper right", fontsize=8)
+    ax.grid(alpha=0.3)
+    return fig
