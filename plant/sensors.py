@@ -347,6 +347,7 @@ class SensorSuite:
         self._last: tuple[float, State] | None = None  # (t, true state) at the last IMU sample
         self._pending: deque[Measurement] = deque()  # latent position fixes, in order of arrival
         self._next_event = -math.inf  # nothing to do before this time (s)
+        self._latest: dict[str, Measurement] = {}  # kind -> the newest released (what a ground station is shown)
         if self._gnss:
             h, z, vh, vz = c.position_noise_m, c.position_noise_z_m, c.velocity_noise_mps, c.velocity_noise_z_mps
             self._pos_sigma = (h, h, z, vh, vh, vz)
@@ -359,9 +360,16 @@ class SensorSuite:
         if t + self._eps < self._next_event:
             return []
         out = self._sample(t, state)
+        for m in out:
+            self._latest[m.kind] = m
         nxt = min(self._imu.next_due, self._pos.next_due, self._baro.next_due, self._heading.next_due)
         self._next_event = min(nxt, self._pending[0].t_arrival) if self._pending else nxt
         return out
+
+    def latest(self, kind: str) -> Measurement | None:
+        """The newest measurement of ``kind`` (``imu``, ``pose``, ``gnss``, ``baro``, ``heading``) that has
+        arrived (released after its latency), None before the first; reading it changes nothing."""
+        return self._latest.get(kind)
 
     def _sample(self, t: float, state: State) -> list[Measurement]:
         out: list[Measurement] = []
