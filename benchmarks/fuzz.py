@@ -43,7 +43,16 @@ sys.path.insert(0, str(ROOT))
 
 from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
+from bridge.core.params import BY_NAME, ParamRefused, VehicleParams, change_param  # noqa: E402
 from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, GCS_PORT, LINK_PORT  # noqa: E402
+from bridge.mavlink.modes import (  # noqa: E402
+    PARAM_TYPES,
+    ftp_nak,
+    param_from_wire,
+    requested_custom_mode,
+    requested_mode,
+)
+from bridge.mavlink.receive import addressed_elsewhere  # noqa: E402
 from bridge.session import sitl  # noqa: E402
 from missions import MISSION_DIR, Mission, Sine, load_mission  # noqa: E402
 from tests.hostile import MIN_STEP, Sender, Station, fly_fuzzed, session_thread, udp_queue, wait_until  # noqa: E402
@@ -67,8 +76,12 @@ PARAM1 = (0.0, 1.0, float(M.MAVLINK_MSG_ID_ATTITUDE), float(M.MAVLINK_MSG_ID_HOM
 PARAM2 = (-1.0, 0.0, 1e4, 1e6, 21196.0, 1e12, -5.0, *FLOAT_EXTREMES[:3])
 # what the vehicle handles from a ground station: each such frame is refused (counted) or answered
 GCS_HANDLED = ("COMMAND_LONG", "COMMAND_INT", "MISSION_REQUEST_LIST", "HIL_ACTUATOR_CONTROLS",
-               "SET_ACTUATOR_CONTROL_TARGET")
-ANSWERS = ("COMMAND_ACK", "TIMESYNC", "MISSION_COUNT")  # a datagram holding one is the answer to one frame
+               "SET_ACTUATOR_CONTROL_TARGET", "SET_MODE", "PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET")
+# a datagram holding one is the answer to one frame
+ANSWERS = ("COMMAND_ACK", "TIMESYNC", "MISSION_COUNT", "PARAM_VALUE", "FILE_TRANSFER_PROTOCOL")
+# refusals that are answered too (a DENIED COMMAND_ACK, the unchanged PARAM_VALUE): counted once in the sum
+ANSWERED_REFUSALS = ("bad_number", "param_refused")
+MODE_COMMANDS = (M.MAV_CMD_DO_SET_MODE, M.MAV_CMD_NAV_TAKEOFF, M.MAV_CMD_NAV_LAND)
 GCS_IDS = (255, 190)
 
 
@@ -78,6 +91,32 @@ def flight_changing(m: Any, sysid: int) -> bool:
     GCS stream never sends one, so that the trace must stay the undisturbed run's."""
     return (m.get_type() in ("COMMAND_LONG", "COMMAND_INT") and m.command == ARM and m.param1 in (0.0, 1.0)
             and m.target_system in (0, sysid) and m.target_component in (0, 1))
+
+
+def mode_or_param_changing(m: Any, sysid: int) -> bool:
+    """Whether ``m``, from a ground station, for this vehicle, would change its mode (DO_SET_MODE of a
+    mode it flies, NAV_TAKEOFF, NAV_LAND, SET_MODE) or a parameter (a valid PARAM_SET): withheld too,
+    by addressing it to another system (refused as ``target``), so that the trace stays the same."""
+    kind = m.get_type()
+    if getattr(m, "target_system", -1) not in (0, sysid) or getattr(m, "target_component", 0) not in (0, 1):
+        return False
+    if kind in ("COMMAND_LONG", "COMMAND_INT"):
+        if m.command == M.MAV_CMD_DO_SET_MODE:
+            return requested_mode(m.param1, m.param2, m.param3)[0] is not None
+        return m.command in MODE_COMMANDS
+    if kind == "SET_MODE":
+        return requested_custom_mode(m.base_mode, m.custom_mode)[0] is not None
+    if kind == "PARAM_SET":
+        name = m.param_id.rstrip("\x00") if isinstance(m.param_id, str) else m.param_id.decode(errors="replace")
+        spec = BY_NAME.get(name)
+        if spec is None or m.param_type != PARAM_TYPES[spec.kind]:
+            return False
+        try:
+            change_param(VehicleParams(), name, param_from_wire(m.param_value, m.param_type))
+        except ParamRefused:
+            return False
+        return True
+    return False
 
 
 class CommandFuzzer:
@@ -137,8 +176,13 @@ class CommandFuzzer:
         if gcs and flight_changing(m, self.sysid):
             m.param1 = math.nan
             self.withheld += 1
+        elif gcs and mode_or_param_changing(m, self.sysid):
+            m.target_system = self.sysid % 250 + 1  # another vehicle's: refused as target
+            self.withheld += 1
         kind = m.get_type()
-        if gcs and (kind in GCS_HANDLED or (kind == "TIMESYNC" and m.tc1 == 0)):
+        if gcs and (kind in GCS_HANDLED or (kind == "TIMESYNC" and m.tc1 == 0) or (
+                kind == "FILE_TRANSFER_PROTOCOL" and (addressed_elsewhere(m, self.sysid, 1)
+                                                      or ftp_nak(bytes(m.payload)) is not None))):
             self.handled += 1
         self.sent[kind] += 1
         mav = self.mav
@@ -189,8 +233,9 @@ def _to_gcs_link(gcs: Station, frames: list[bytes], rate_hz: float, timeout: flo
 
 
 def answers(gcs: Station) -> int:
-    """The answers ``gcs`` got: one datagram (holding one of :data:`ANSWERS`) per frame answered."""
-    return sum(gcs.got[kind] for kind in ANSWERS)
+    """The answers ``gcs`` got: one datagram (led by one of :data:`ANSWERS`) per frame answered (a
+    parameter list is one datagram of PARAM_VALUEs)."""
+    return sum(gcs.first[kind] for kind in ANSWERS)
 
 
 def fly_commands(mission: Mission, out: Path, frames: int, seed: int = 11, sources: int = 64, speed: float = 1.0,
@@ -265,7 +310,7 @@ def command_checks(f: CommandFuzzed, ref_trace: Path, steps: int) -> dict[str, A
         "refused": refused, "refused_by_reason": dict(sorted(by.items(), key=lambda kv: -kv[1])),
         "answered": f.answers, "bad_number": by.get("bad_number", 0), "due": due,
         "ignored": f.to_gcs_link - f.fuzz.handled,
-        "adds_up": refused + f.answers - by.get("bad_number", 0) == due and f.drops == 0,
+        "adds_up": refused + f.answers - sum(by.get(r, 0) for r in ANSWERED_REFUSALS) == due and f.drops == 0,
         "policies_checked": len(policies), "policies_violated": [p["name"] for p in policies if not p.get("ok")],
         "withheld_arm_disarm": f.fuzz.withheld, "outcome": s["outcome"], "kernel_drops": f.drops,
         "done_before_mission_end": f.flown < steps, "controller_refused": link["rejected_by"]["controller"],

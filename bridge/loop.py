@@ -24,14 +24,15 @@ from __future__ import annotations
 
 import math
 from array import array
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from bridge.core.flight import Flight, Progress, prepare
 from bridge.core.linkends import ControllerEnd, VehicleEnd
+from bridge.core.params import ParamChange
 from bridge.core.simvehicle import FAILSAFE, LANDED, OFFBOARD
-from bridge.core.wire import command_to_wire
+from bridge.core.wire import command_over_wire, state_over_wire
 from bridge.record.columns import TRACE_COLUMNS, state_columns, trace_row
 from bridge.record.metrics import summarise
 from bridge.record.policies import ended_by_outcome, judge, rules_for, violation_text
@@ -57,6 +58,8 @@ def simulate(
     sensors: Mapping[str, Any] | None = None,
     estimator: str | None = None,
     noise: float | None = None,
+    params: Mapping[str, float] | None = None,
+    param_at: Sequence[ParamChange] = (),
 ) -> Run:
     """Fly a mission offline. Returns a :class:`Run` (trace as arrays, summary as a dict).
 
@@ -65,10 +68,13 @@ def simulate(
     laid over the mission's ``[link]`` table (e.g. ``{"up": {"loss_pct": 20}}``), ``failsafe`` over
     its ``[failsafe]`` table (e.g. ``{"action": "hold"}``), ``sensors`` over its ``[sensors]`` table
     (``{"set": "mocap"}``); ``estimator`` (truth, raw, ekf) and ``noise`` (every σ times it) replace
-    ``[estimator] kind`` and ``[sensors] noise_scale``.
+    ``[estimator] kind`` and ``[sensors] noise_scale``. ``params`` over its ``[params]`` table (PX4 names,
+    ``{"COM_OF_LOSS_T": 1.0}``); ``param_at``: parameter changes at mission times
+    (``[ParamChange(10.0, "COM_OBL_ACT", 1)]``), made at the start of their control step.
     """
     flight = prepare(mission, profile=profile, controller=controller, rate_hz=rate_hz, seed=seed, link=link,
-                     failsafe=failsafe, sensors=sensors, estimator=estimator, noise=noise)
+                     failsafe=failsafe, sensors=sensors, estimator=estimator, noise=noise, params=params,
+                     param_at=param_at)
     check_trace_steps(flight.mission)  # before the run directory is made: a refused mission writes nothing
     path = run_dir(out, flight.mission.name, overwrite) if (out is not None or write) else None
     return fly(flight, path, plots=plots, progress=progress)
@@ -99,15 +105,20 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
     logged = 0
     noted = 0
     demanded = wire = (0.0, 0.0, 0.0, 0.0)
+    changes = list(flight.param_changes)  # scheduled parameter changes: at the start of their step, as in SITL
     try:
         for k in range(m.steps):
             t = k / rate
+            while changes and changes[0].step(rate) <= k:
+                c = changes.pop(0)
+                vehicle.change_param(c.name, c.value)
             X = plant.state
             E = vehicle.published()  # what the vehicle knows, and sends down the link
             ref = sample(t)
             while blackouts and blackouts[0][0] <= t:
                 vehicle.event("blackout", blackouts.pop(0)[1])
-            cend.receive_state(t, E, vehicle.armed and vehicle.mode == OFFBOARD)
+            # the law reads the state as ODOMETRY carries it (float32), as in SITL
+            cend.receive_state(t, state_over_wire(E), vehicle.armed and vehicle.mode == OFFBOARD)
             dec = cend.step(t, sample)
             for e in guard.events[noted:]:
                 vehicle.event(e[1], e[2])
@@ -116,9 +127,9 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
                 vend.receive_arm(t)
             cmd = dec.command
             if cmd is not None:
-                vend.receive_command(t, cmd.normalised, dec.state_t)
+                received, wire = command_over_wire(actuation, cmd.normalised)  # the float32 target, as in SITL
+                vend.receive_command(t, received, dec.state_t)
                 demanded = cmd.demanded
-                wire = command_to_wire(actuation, cmd.normalised)
             vend.deliver(t)
             truth = state_columns(X)
             row = trace_row(t, truth, ref, demanded, wire, plant.realised,

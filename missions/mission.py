@@ -2,7 +2,7 @@
 
 A mission names its trajectory, duration, vehicle profile, controller and gains, rates,
 effects, link impairment and seed. The tables ``[gains]``, ``[effects]``, ``[link]``,
-``[failsafe]``, ``[sensors]`` and ``[estimator]`` belong to other parts (controller, plant, bridge):
+``[failsafe]``, ``[sensors]``, ``[estimator]`` and ``[params]`` belong to other parts (controller, plant, bridge):
 they are kept here as raw tables with their source and validated by the part that owns them when a run is built, so
 errors still name the file and the key.
 """
@@ -55,6 +55,7 @@ class Mission:
     failsafe: Mapping[str, Any] = field(default_factory=dict)
     sensors: Mapping[str, Any] = field(default_factory=dict)  # raw: plant.profiles.sensors_from_table
     estimator: Mapping[str, Any] = field(default_factory=dict)  # raw: bridge.core.flight validates kind
+    params: Mapping[str, Any] = field(default_factory=dict)  # raw: bridge.core.params.params_from_table
     source: str = "<python>"
 
     def __post_init__(self) -> None:
@@ -88,7 +89,7 @@ class Mission:
             d["actuation"] = self.actuation
         d["start"] = {"position": list(self.start[:3]), "psi": self.start[3]}
         d["trajectory"] = self.trajectory.to_dict()
-        for k in ("gains", "effects", "link", "failsafe", "sensors", "estimator"):
+        for k in ("gains", "effects", "link", "failsafe", "sensors", "estimator", "params"):
             if getattr(self, k):
                 d[k] = dict(getattr(self, k))
         return d
@@ -238,7 +239,7 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
     start = st.vector("position", 3, (0.0, 0.0, 0.0), lo=-1e4, hi=1e4) + (st.number("psi", 0.0, lo=-10, hi=10),)
     st.done()
     trajectory = _trajectory(t.table("trajectory", required=True), duration)
-    raw = {k: _table(t, k) for k in ("gains", "effects", "link", "failsafe", "sensors", "estimator")}
+    raw = {k: _table(t, k) for k in ("gains", "effects", "link", "failsafe", "sensors", "estimator", "params")}
     t.done()
     return Mission(
         trajectory=trajectory,

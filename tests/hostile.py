@@ -579,6 +579,7 @@ class Station:
             self.mav.signing.timestamp = int((time.time() - 1420070400) * 100_000)
         self._dec = mavlink.MAVLink(None)  # decodes (a signed frame is taken without checking it)
         self.got: Counter[str] = Counter()
+        self.first: Counter[str] = Counter()  # datagrams by the type of their first message (one answer each)
         self.seen: list[Any] = []  # every message received, in order
         self.datagrams = 0
 
@@ -616,7 +617,10 @@ class Station:
             self.datagrams += 1
             if self.dest is None:
                 self.dest = addr
-            for m in self._dec.parse_buffer(data) or []:
+            msgs = self._dec.parse_buffer(data) or []
+            if msgs:
+                self.first[msgs[0].get_type()] += 1
+            for m in msgs:
                 self.got[m.get_type()] += 1
                 self.seen.append(m)
                 out.append(m)

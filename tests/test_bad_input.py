@@ -138,6 +138,9 @@ CONVERTER_BAD = {
     "link_profile": ["no_such_profile", "no_such_profile.toml", "/"],
     "sensor_set_name": ["", "mo.cap", "bogus"],
     "noise_scale": ["x", "-1", "nan", "1e300"],
+    "param_assignment": ["x", "NOPE=1", "COM_OF_LOSS_T=99", "COM_OBL_ACT=2", "COM_OF_LOSS_T=nan",
+                         "5:COM_OF_LOSS_T=99", "x:COM_OBL_ACT=1"],
+    "system_id": ["x", "0", "255", "1.5"],
 }
 # bad values of the flags that take text (a callable of the files: values)
 TEXT_BAD = {
@@ -325,7 +328,10 @@ SWEEP = 'mission = "{m}"\nmode = "offline"\nseeds = 1\n[grid]\ndelay_ms = [0.0]\
 
 @pytest.mark.parametrize("key, bad", [("mission", 5), ("mission", "nowhere.toml"), ("mode", "fast"), ("jobs", -1),
                                       ("seeds", 0), ("seeds", "x"), ("grid.delay_ms", "x"), ("grid.delay_ms", [-1.0]),
-                                      ("grid.colour", [1]), ("classes.clean_rms_m", "x"), ("extra", 1)])
+                                      ("grid.colour", [1]), ("classes.clean_rms_m", "x"), ("extra", 1),
+                                      ("grid.noise", [-1.0]), ("grid.noise", "x"), ("grid.noise", [0.0, 1e300]),
+                                      ("grid.estimator", ["kalman"]), ("grid.estimator", 5),
+                                      ("grid.estimator", ["raw", "raw"])])
 def test_every_sweep_key_refuses_a_bad_value(files, capsys, key, bad):
     data = load_toml_text(SWEEP.format(m=files.mission))
     sweep = files.root / "sweep.toml"

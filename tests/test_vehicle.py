@@ -57,8 +57,9 @@ def test_pymavlink_ground_station(tmp_path):
         try:
             hb = gcs.wait_heartbeat(timeout=20)
             assert hb is not None
-            assert (hb.type, hb.autopilot, hb.system_status) == (M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_GENERIC,
+            assert (hb.type, hb.autopilot, hb.system_status) == (M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_PX4,
                                                                    M.MAV_STATE_STANDBY)
+            assert hb.custom_mode == 6 << 16 and mavutil.mode_string_v10(hb) == "OFFBOARD"  # PX4's main mode 6
             assert gcs.target_system == n + 1 and not hb.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED
             tgt = (gcs.target_system, gcs.target_component)
 
@@ -80,8 +81,17 @@ def test_pymavlink_ground_station(tmp_path):
             gcs.mav.command_long_send(*tgt, M.MAV_CMD_SET_MESSAGE_INTERVAL, 0, M.MAVLINK_MSG_ID_ATTITUDE, 20000,
                                       0, 0, 0, 0, 0)
             assert _ack(gcs, M.MAV_CMD_SET_MESSAGE_INTERVAL).result == M.MAV_RESULT_ACCEPTED
+            # NAV_TAKEOFF's param7 is m AMSL (as PX4 reads it): 5 m is below the 488 m home, refused, saying why
             gcs.mav.command_long_send(*tgt, M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 0, 5)
-            assert _ack(gcs, M.MAV_CMD_NAV_TAKEOFF).result == M.MAV_RESULT_UNSUPPORTED
+            seen: dict[str, object] = {}  # the ACK and the STATUSTEXT, in either order
+            deadline = time.monotonic() + 10
+            while len(seen) < 2 and time.monotonic() < deadline:
+                m = gcs.recv_match(type=["COMMAND_ACK", "STATUSTEXT"], blocking=True, timeout=1)
+                if m is not None and m.get_type() == "COMMAND_ACK" and m.command == M.MAV_CMD_NAV_TAKEOFF:
+                    seen["ack"] = m.result
+                elif m is not None and m.get_type() == "STATUSTEXT" and m.text.startswith("NAV_TAKEOFF"):
+                    seen["why"] = m.text
+            assert seen.get("ack") == M.MAV_RESULT_DENIED and "5 m AMSL" in str(seen.get("why")), seen
 
             gcs.mav.timesync_send(0, 123456789)
             ts = gcs.recv_match(type="TIMESYNC", blocking=True, timeout=5, condition="TIMESYNC.tc1!=0")

@@ -30,6 +30,8 @@ from bridge.cli.flags import (
     add_flight_options,
     add_key_option,
     add_link_options,
+    add_param_options,
+    add_sensor_axes,
     add_sensor_options,
     axis_values,
     failsafe_table_from_args,
@@ -39,7 +41,9 @@ from bridge.cli.flags import (
     mission_integer,
     mission_number,
     number_in,
+    param_overrides_from_args,
     sensor_overrides_from_args,
+    system_id,
 )
 from params import ConfigError
 
@@ -324,6 +328,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
         link=link_table_from_args(args),
         failsafe=failsafe_table_from_args(args),
         **sensor_overrides_from_args(args),
+        **param_overrides_from_args(args),
     )
     return report_run(run, "sim")
 
@@ -377,7 +382,7 @@ def add_sweep_commands(sub: Any) -> None:
     p.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out")
     p.add_argument("--no-plots", action="store_true", help="skip the heat maps")
     add_link_options(p, skip=("delay", "jitter", "loss", "burst"))  # fixed for every cell: --up-delay, --dup ...
-    add_sensor_options(p)  # fixed for every cell too
+    add_sensor_axes(p)  # --sensors fixed for every cell; --estimator and --noise are axes
     p.set_defaults(func=cmd_sweep)
     p = sub.add_parser("report", help="rebuild a sweep's report.md and heat maps from its cells.csv")
     p.add_argument("dir", metavar="DIR", help="sweep directory")
@@ -402,7 +407,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         if clash:
             raise UsageError(f"bsst sweep: --{d}-{clash[0].split('_')[0]} conflicts with the swept {clash[0]} "
                              f"(a swept value applies to both directions)")
-    sensing = {k: v for k, v in sensor_overrides_from_args(args).items() if v is not None}
+    sensing = {"sensors": {"set": args.sensors}} if args.sensors is not None else {}
     if fixed or sensing:  # the flags fixed for every cell, laid over the mission by the one path to its parts
         spec = replace(spec, mission=prepare(spec.mission, link=fixed or None, **sensing).mission)
     if args.resume and args.out is None:
@@ -437,10 +442,12 @@ def connect_dask(address: str) -> Any:
 
 def add_margin_command(sub: Any) -> None:
     """``bsst margin``: the boundary of one link impairment by bisection (bridge.sweep.margin)."""
-    p = sub.add_parser("margin", help="find how much delay, loss, jitter or burst a law takes (bisection)")
+    p = sub.add_parser("margin", help="find how much delay, loss, jitter, burst or sensor noise a law takes "
+                                      "(bisection)")
     p.add_argument("mission", help="mission TOML file")
-    p.add_argument("--over", required=True, choices=("delay_ms", "loss_pct", "jitter_ms", "burst_len"),
-                   help="the impairment searched (both directions, as a sweep's axes)")
+    p.add_argument("--over", required=True, choices=("delay_ms", "loss_pct", "jitter_ms", "burst_len", "noise"),
+                   help="the impairment searched (link values: both directions, as a sweep's axes; noise: the scale "
+                        "of every sigma of the sensor set, with --sensors and --estimator raw|ekf)")
     p.add_argument("--until", required=True, metavar="rms=M|class=NAME",
                    help="failure: the 3-D RMS passes M metres, or the class is NAME or worse")
     p.add_argument("--controller", type=law_list("--controller"), metavar="LAW,...", help="laws to search")
@@ -457,6 +464,7 @@ def add_margin_command(sub: Any) -> None:
     p.add_argument("--out", metavar="DIR", help="write margin.json into DIR (default runs/<UTC>-<mission>-margin)")
     p.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out")
     add_link_options(p)
+    add_sensor_options(p)  # fixed for every probe; --noise conflicts with --over noise
     p.set_defaults(func=cmd_margin)
 
 
@@ -470,7 +478,10 @@ def cmd_margin(args: argparse.Namespace) -> int:
     for d in ("up", "down"):
         if args.over in fixed.get(d, {}):
             raise UsageError(f"bsst margin: a {args.over} flag conflicts with --over {args.over}")
-    mission = prepare(load_mission(args.mission), link=fixed or None).mission
+    sensing = sensor_overrides_from_args(args)
+    if args.over == "noise" and sensing["noise"] is not None:
+        raise UsageError("bsst margin: --noise conflicts with --over noise (the noise scale is what is searched)")
+    mission = prepare(load_mission(args.mission), link=fixed or None, **sensing).mission
     live = sys.stderr.isatty()
 
     def show(text: str) -> None:
@@ -487,10 +498,15 @@ def cmd_margin(args: argparse.Namespace) -> int:
     low = []
     for e in entries:
         lo, hi = e["bracket"]
-        tail = f"fails at {hi:g}" if hi is not None else "held over the whole range"
-        print(f"margin {e['controller']}: {args.over} {e['margin']:g} (bracket [{lo:g}, "
-              f"{'-' if hi is None else f'{hi:g}'}], {tail}; until {res['until']})")
-        if args.require is not None and e["margin"] < args.require:
+        what = f" x the sigmas of {res['sensors']}, estimator {res['estimator']}" if args.over == "noise" else ""
+        if e["margin"] is None:  # no value held, the range's low end included
+            print(f"margin {e['controller']}: {args.over}: none{what} (fails at every value flown, down to {hi:g}, "
+                  f"the low end of its range; until {res['until']})")
+        else:
+            tail = f"fails at {hi:g}" if hi is not None else "held over the whole range"
+            print(f"margin {e['controller']}: {args.over} {e['margin']:g}{what} (bracket [{lo:g}, "
+                  f"{'-' if hi is None else f'{hi:g}'}], {tail}; until {res['until']})")
+        if args.require is not None and (e["margin"] is None or e["margin"] < args.require):
             low.append(e["controller"])
     print(f"{res['cells_flown']} cells flown; margin.json: {path / 'margin.json'}")
     if low:
@@ -516,12 +532,13 @@ def add_sitl_commands(sub: Any) -> None:
                    help="control rate, 50-1000 Hz: one lockstep step per period")
     p.add_argument("--seed", type=mission_integer("--seed", "seed"), metavar="N", help="seed of random effects")
     _add_port_options(p, vehicle=True)
-    p.add_argument("--sysid", type=int_in("--sysid", 1, 254), metavar="N",
-                   help="MAVLink system id (default instance + 1)")
+    p.add_argument("--sysid", type=system_id("--sysid"), metavar="N",
+                   help="MAVLink system id (default: MAV_SYS_ID if set, else instance + 1)")
     p.add_argument("--controller-id", type=_ids, metavar="SYSID:COMPID",
                    help="the only sender of actuator targets (default 200:191)")
     p.add_argument("--home", type=_home, metavar="LAT,LON,ALT", help="home: degrees, degrees, m AMSL")
     add_failsafe_options(p)
+    add_param_options(p, schedule=False)  # a change at a mission time is the controller's to send (--param-at)
     add_sensor_options(p)
     p.add_argument("--out", metavar="DIR", help="write vehicle.tlog and vehicle.csv into DIR")
     p.add_argument("--overwrite", action="store_true", help="allow replacing those files")
@@ -557,7 +574,7 @@ def cmd_sitl(args: argparse.Namespace) -> int:
                profile=args.profile, controller=args.controller, rate_hz=args.rate, seed=args.seed,
                realtime=args.realtime, instance=args.instance, gcs=args.gcs, speed=args.speed, live=True,
                link=link_table_from_args(args), key=args.key, failsafe=failsafe_table_from_args(args),
-               **sensor_overrides_from_args(args))
+               **sensor_overrides_from_args(args), **param_overrides_from_args(args))
     return report_run(run, "sitl")
 
 
@@ -570,15 +587,19 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
     from bridge.nodes.vehicle import VehicleConfig, run_vehicle  # lazy: start-up time
 
     flight = prepare(args.mission or at_rest(), profile=args.profile, rate_hz=args.rate, seed=args.seed,
-                     failsafe=failsafe_table_from_args(args), **sensor_overrides_from_args(args))
+                     failsafe=failsafe_table_from_args(args), **sensor_overrides_from_args(args),
+                     **param_overrides_from_args(args))
     n = args.instance
+    own = flight.params.sysid if "MAV_SYS_ID" in flight.mission.params else None  # [params] or --param
+    if args.sysid is not None and own is not None and args.sysid != own:
+        raise ConfigError(f"--sysid {args.sysid} and MAV_SYS_ID {own} set the vehicle's system id twice: give one")
     listen = parse_address(args.listen or f"127.0.0.1:{LINK_PORT + n}", "udpin", "--listen")
     if listen.mode != "udpin":
         raise ConfigError(f"--listen {args.listen!r}: the controller link is bound (udpin), not udpout")
     gcs_text = args.gcs or f"127.0.0.1:{GCS_PORT + n}"
     gcs = None if gcs_text.strip().lower() == "none" else parse_address(gcs_text, "udpout", "--gcs")
     sysid, compid = args.controller_id or (CONTROLLER_SYSID, CONTROLLER_COMPID)
-    cfg = VehicleConfig(listen, gcs, sysid=args.sysid or n + 1, controller_sysid=sysid, controller_compid=compid,
+    cfg = VehicleConfig(listen, gcs, sysid=args.sysid or own or n + 1, controller_sysid=sysid, controller_compid=compid,
                         clock="realtime" if args.realtime else "lockstep", speed=args.speed,
                         home=Home(*args.home) if args.home else Home(), key=_key(args))
     return run_vehicle(flight, cfg, args.out, args.overwrite)
@@ -591,7 +612,7 @@ def cmd_controller(args: argparse.Namespace) -> int:
     from bridge.nodes.offboard import OffboardConfig, run_controller  # lazy: start-up time
 
     flight = prepare(args.mission, profile=args.profile, controller=args.controller, rate_hz=args.rate,
-                     seed=args.seed)
+                     seed=args.seed, **param_overrides_from_args(args))
     vehicle = parse_address(args.vehicle or f"127.0.0.1:{LINK_PORT + args.instance}", "udpout", "--vehicle")
     if vehicle.mode != "udpout":
         raise ConfigError(f"--vehicle {args.vehicle!r}: the controller sends to the vehicle (udpout)")

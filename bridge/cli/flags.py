@@ -196,6 +196,62 @@ def add_failsafe_options(p: argparse.ArgumentParser) -> None:
                         "(motors off at once)")
 
 
+def param_assignment(flag: str, timed: bool = False) -> Callable[[str], Any]:
+    """An argparse type for ``NAME=VALUE`` (``--param``) or ``T:NAME=VALUE`` (``--param-at``): a
+    parameter the vehicle has, a value in its one range (bridge.core.params, looked up when given)."""
+    def conv(text: str) -> Any:
+        from bridge.core.params import BY_NAME, parse_assignment, parse_change, value_problem  # lazy: start-up
+        from params import ConfigError  # lazy: start-up time
+
+        try:
+            got = parse_change(text) if timed else parse_assignment(text)
+        except ConfigError as exc:
+            raise argparse.ArgumentTypeError(f"{flag} {text!r}: {exc}") from None
+        name, value = (got.name, got.value) if timed else got
+        why = value_problem(BY_NAME[name], value)
+        if why:
+            raise argparse.ArgumentTypeError(f"{flag} {text!r}: {why}")
+        return got
+
+    return conv
+
+
+def system_id(flag: str) -> Callable[[str], int]:
+    """An argparse type for the vehicle's system id: MAV_SYS_ID's range (bridge.core.params.SYSID_RANGE)."""
+    def conv(text: str) -> int:
+        from bridge.core.params import SYSID_RANGE  # lazy: start-up time
+
+        return int_in(flag, *SYSID_RANGE)(text)
+
+    return conv
+
+
+def add_param_options(p: argparse.ArgumentParser, start: bool = True, schedule: bool = True) -> None:
+    """``--param NAME=VALUE`` (``start``: the vehicle's parameters at start, over the mission's ``[params]``)
+    and ``--param-at T:NAME=VALUE`` (``schedule``: a change at mission time T s), each repeatable;
+    :func:`param_overrides_from_args` reads them back."""
+    if start:
+        p.add_argument("--param", type=param_assignment("--param"), action="append", metavar="NAME=VALUE",
+                       help="a vehicle parameter at start, PX4's name (e.g. COM_OF_LOSS_T=1.0); repeatable")
+    if schedule:
+        p.add_argument("--param-at", type=param_assignment("--param-at", timed=True), action="append",
+                       metavar="T:NAME=VALUE", help="set a vehicle parameter at mission time T s (e.g. "
+                                                    "10:COM_OBL_ACT=1), the same step in every clock; repeatable")
+
+
+def param_overrides_from_args(args: argparse.Namespace) -> dict[str, Any]:
+    """The keyword arguments of :func:`bridge.core.flight.prepare` the flags of :func:`add_param_options`
+    ask for (``params``, ``param_at``; {} if none)."""
+    out: dict[str, Any] = {}
+    given = getattr(args, "param", None)
+    if given:
+        out["params"] = dict(given)
+    changes = getattr(args, "param_at", None)
+    if changes:
+        out["param_at"] = tuple(changes)
+    return out
+
+
 def failsafe_table_from_args(args: argparse.Namespace) -> dict[str, Any]:
     """The ``[failsafe]`` overrides the flags of :func:`add_failsafe_options` ask for ({} if none)."""
     action = getattr(args, "failsafe_action", None)
@@ -239,6 +295,19 @@ def add_sensor_options(p: argparse.ArgumentParser) -> None:
                    help="multiply every noise sigma of the sensor set by X")
 
 
+def add_sensor_axes(p: argparse.ArgumentParser) -> None:
+    """``bsst sweep``'s ``--sensors NAME`` (fixed for every cell) and its two vehicle axes, ``--estimator
+    truth,ekf,raw`` and ``--noise 0,0.5,1,2`` (lists; one value flies every cell with it, as ``bsst sim``'s flag)."""
+    p.add_argument("--sensors", type=sensor_set_name("--sensors"), metavar="NAME",
+                   help="the vehicle's sensor set from its profile's [sensors], for every cell: ideal, mocap or gnss")
+    # the kinds are bridge.core.estimator.ESTIMATOR_KINDS, written out as in add_sensor_options
+    p.add_argument("--estimator", type=name_list("--estimator", ("truth", "ekf", "raw")), metavar="KIND,...",
+                   help="estimator kinds to compare: truth (the true state), ekf (the vehicle's Kalman filter), "
+                        "raw (the measurements as they come)")
+    p.add_argument("--noise", type=axis_values("--noise", "noise"), metavar="X,...",
+                   help="noise scales: every sigma of the sensor set times X (0-100)")
+
+
 def sensor_overrides_from_args(args: argparse.Namespace) -> dict[str, Any]:
     """``prepare``'s ``sensors``, ``estimator`` and ``noise`` keywords from :func:`add_sensor_options`' flags."""
     name = getattr(args, "sensors", None)
@@ -261,6 +330,7 @@ def add_flight_options(p: argparse.ArgumentParser, failsafe: bool = True) -> Non
     p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
     if failsafe:
         add_failsafe_options(p)
+    add_param_options(p, start=failsafe)  # the controller sets no start values: it schedules changes only
 
 
 # -- link impairment flags (bridge.core.link): both directions, or one with --up-/--down- -----------

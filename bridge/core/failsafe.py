@@ -76,6 +76,9 @@ FAILSAFE_ACTIONS = ("descend", "land", "hold", "disarm")
 # ``descend`` (level, no position) has none.
 PX4_OFFBOARD_LOSS_ACTION = {"land": 4, "hold": 5, "disarm": 7}
 HOLD_RANGE_S = (0.0, 25.0)  # PX4's COM_FAIL_ACT_T range
+# the one range of each number of ``[failsafe]``, shared by the table, the flags and the parameters
+# (bridge.core.params: COM_OF_LOSS_T, MPC_LAND_SPEED, COM_FAIL_ACT_T)
+FAILSAFE_RANGES = {"timeout_s": (0.01, 60.0), "descent_rate": (0.05, 10.0), "hold_s": HOLD_RANGE_S}
 ACTION_TEXT = {  # the failsafe event says what the vehicle does
     "descend": "level and descend",
     "land": "land here",
@@ -102,12 +105,13 @@ class FailsafeConfig:
 
 def failsafe_from_table(data: Mapping[str, Any], source: str) -> FailsafeConfig:
     t = Table(data, source, "failsafe")
+    r = FAILSAFE_RANGES
     cfg = FailsafeConfig(
-        timeout_s=t.number("timeout_s", 0.5, lo=0.01, hi=60.0),
-        descent_rate=t.number("descent_rate", 0.7, lo=0.05, hi=10.0),
+        timeout_s=t.number("timeout_s", 0.5, lo=r["timeout_s"][0], hi=r["timeout_s"][1]),
+        descent_rate=t.number("descent_rate", 0.7, lo=r["descent_rate"][0], hi=r["descent_rate"][1]),
         resume=t.boolean("resume", False),
         action=t.string("action", "descend", choices=FAILSAFE_ACTIONS),
-        hold_s=t.number("hold_s", 5.0, lo=HOLD_RANGE_S[0], hi=HOLD_RANGE_S[1]),
+        hold_s=t.number("hold_s", 5.0, lo=r["hold_s"][0], hi=r["hold_s"][1]),
     )
     t.done()
     return cfg

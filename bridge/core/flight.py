@@ -2,19 +2,20 @@
 
 In:  a mission (a :class:`~missions.Mission` or a TOML path) and overrides: profile, controller,
      ``rate_hz`` (Hz), seed, actuation, a ``[link]`` table and a ``[failsafe]`` table laid over the mission's,
-     a ``[sensors]`` table (``{"set": NAME}``), an estimator kind and a noise scale
+     a ``[sensors]`` table (``{"set": NAME}``), an estimator kind, a noise scale, ``[params]`` entries
+     (PX4 names) and parameter changes at mission times (s)
 Out: a frozen :class:`Flight`, which builds the plant, the :class:`~bridge.core.simvehicle.SimVehicle`,
      the law and the guard's configuration, and lists the blackouts (mission time s); a bad value
      raises ``ConfigError`` naming file and key
 
 :func:`prepare` applies the command-line overrides and validates the mission's profile,
-``[effects]``, ``[gains]``, ``[failsafe]``, ``[link]``, ``[sensors]`` and ``[estimator]`` tables, so
+``[effects]``, ``[gains]``, ``[failsafe]``, ``[link]``, ``[sensors]``, ``[estimator]`` and ``[params]`` tables, so
 that a bad value fails before anything starts, with the file and key named.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -22,6 +23,7 @@ from typing import Any
 from bridge.core.estimator import ESTIMATOR_KINDS, make_estimator
 from bridge.core.failsafe import FailsafeConfig, failsafe_from_table
 from bridge.core.link import LinkSettings, absolute_link_paths, link_from_table, merge_link_tables
+from bridge.core.params import ParamChange, VehicleParams, check_param_changes, params_as_failsafe, params_from_table
 from bridge.core.simvehicle import SimVehicle
 from controller import Controller, Gains, Nominal, gains_from_table
 from controller.law import LawFactory, resolve_law
@@ -50,6 +52,8 @@ class Flight:
     law: LawFactory | None = None  # the mission's controller, resolved (None: resolved on use)
     sensors: SensorConfig = IDEAL  # the vehicle's sensor set (profile's set, mission's overrides, noise scale)
     estimator: str = "truth"  # the vehicle's estimator kind (bridge.core.estimator.ESTIMATOR_KINDS)
+    params: VehicleParams = VehicleParams()  # the vehicle's parameters at start (failsafe: the same as .failsafe)
+    param_changes: tuple[ParamChange, ...] = ()  # scheduled PARAM_SETs (--param-at), by mission time
 
     @property
     def nominal(self) -> Nominal:
@@ -69,11 +73,13 @@ class Flight:
     def make_vehicle(self, armed: bool = False) -> SimVehicle:
         plant = self.make_plant()
         if self.estimator == "truth":  # no sensors to sample: the plant's state is published as it is
-            return SimVehicle(plant, self.substeps, self.failsafe, armed=armed)
+            return SimVehicle(plant, self.substeps, self.failsafe, armed=armed,
+                              takeoff_alt_m=self.params.takeoff_alt_m)
         m = self.mission
         suite = SensorSuite(self.sensors, m.seed, m.physics_hz, self.profile.gravity)
         est = make_estimator(self.estimator, self.sensors, plant.state, self.profile.gravity, lambda: plant.state)
-        return SimVehicle(plant, self.substeps, self.failsafe, armed=armed, sensors=suite, estimator=est)
+        return SimVehicle(plant, self.substeps, self.failsafe, armed=armed, sensors=suite, estimator=est,
+                          takeoff_alt_m=self.params.takeoff_alt_m)
 
     def make_controller(self) -> Controller:
         return Controller(self.law or self.mission.controller, self.nominal, self.gains, self.mission.rate_hz)
@@ -106,25 +112,31 @@ def prepare(
     sensors: Mapping[str, Any] | None = None,
     estimator: str | None = None,
     noise: float | None = None,
+    params: Mapping[str, float] | None = None,
+    param_at: Sequence[ParamChange] = (),
 ) -> Flight:
     """Validate a mission (object or file) with overrides into a :class:`Flight`.
 
     ``link`` is laid over the mission's ``[link]`` table (see :func:`bridge.core.link.merge_link_tables`);
     ``failsafe`` over its ``[failsafe]`` table, key by key (``{"action": "hold"}``); ``sensors`` over
     its ``[sensors]`` table, key by key (``{"set": "mocap"}``); ``estimator`` replaces ``[estimator] kind``;
-    ``noise`` replaces ``[sensors] noise_scale`` (every σ of the set times it).
+    ``noise`` replaces ``[sensors] noise_scale`` (every σ of the set times it); ``params`` over its
+    ``[params]`` table (``{"COM_OF_LOSS_T": 1.0}``; a parameter standing for a ``[failsafe]`` key wins
+    over it, and a ``failsafe`` override over a ``[params]`` entry of the file). ``param_at``: parameter
+    changes at mission times (:class:`bridge.core.params.ParamChange`), checked here.
     """
     m = mission if isinstance(mission, Mission) else load_mission(mission)
     # trace and profile files: a mission's from its folder, an override's from the working directory (as law files)
     own_link = absolute_link_paths(m.link, Path(m.source).parent)
     merged = merge_link_tables(own_link, absolute_link_paths(link, Path("."))) if link else own_link
-    merged_failsafe = {**m.failsafe, **failsafe} if failsafe else None
+    merged_failsafe, merged_params = merged_failsafe_params(m, failsafe, params)
     merged_sensors = merged_tables(m.sensors, sensors, {} if noise is None else {"noise_scale": noise})
     merged_estimator = merged_tables(m.estimator, {} if estimator is None else {"kind": estimator})
     if controller is not None:  # a law file given on the command line or from Python: from the working directory
         controller = law_spec_from(controller, Path("."))
     m = m.with_overrides(profile=profile, controller=controller, rate_hz=rate_hz, seed=seed, actuation=actuation,
-                         link=merged, failsafe=merged_failsafe, sensors=merged_sensors, estimator=merged_estimator)
+                         link=merged, failsafe=merged_failsafe, sensors=merged_sensors, estimator=merged_estimator,
+                         params=merged_params)
     src = m.source
     try:
         prof = load_profile(m.profile)
@@ -134,7 +146,12 @@ def prepare(
         prof = prof.with_actuation(m.actuation)
     effects = effects_from_table(Table(m.effects, src, "effects"))
     gains = gains_from_table(m.gains, src) if m.gains else Gains()
-    failsafe = failsafe_from_table(m.failsafe, src)
+    for key, name in params_as_failsafe(m.params).items():  # two keys of one file for one setting
+        if key in m.failsafe:
+            raise ConfigError(f"{src}: params.{name} and failsafe.{key} set the same thing: give one of them")
+    vehicle_params = params_from_table(m.params, src, VehicleParams(failsafe_from_table(m.failsafe, src)))
+    failsafe = vehicle_params.failsafe
+    changes = check_param_changes(param_at, m.duration_s)
     link_settings = link_from_table(m.link, src, seed=m.seed, duration_s=m.duration_s)
     given_set = (sensors or {}).get("set")
     if given_set is not None and given_set not in [n for n, _ in prof.sensors]:  # an override: named as the flag
@@ -155,11 +172,35 @@ def prepare(
                                   f"mission's end (duration_s = {m.duration_s:g} s), so it would never happen")
     try:
         law = resolve_law(m.controller)
-        flight = Flight(m, prof, effects, gains, failsafe, link_settings, law, sensor_config, estimator_kind)
+        flight = Flight(m, prof, effects, gains, failsafe, link_settings, law, sensor_config, estimator_kind,
+                        vehicle_params, changes)
         flight.make_controller()  # a user's law is built once here, so that one that does not fit is bad input
     except ConfigError as exc:
         raise ConfigError(f"{src}: {exc}") from None
     return flight
+
+
+def merged_failsafe_params(m: Mission, failsafe: Mapping[str, Any] | None,
+                           params: Mapping[str, float] | None) -> tuple[Mapping[str, Any] | None,
+                                                                        Mapping[str, Any] | None]:
+    """The mission's ``[failsafe]`` and ``[params]`` tables with the overrides laid over them, so that
+    an override wins over whichever of the file's two tables holds the same setting (and the result
+    holds each setting in one of them only): None for a table nothing was laid over."""
+    if not failsafe and not params:
+        return None, None
+    over_fs = dict(failsafe or {})
+    over_params = dict(params or {})
+    by_params = params_as_failsafe(over_params)  # failsafe key -> the parameter override setting it
+    fs = {k: v for k, v in m.failsafe.items() if k not in by_params}
+    fs.update({k: v for k, v in over_fs.items() if k not in by_params})
+    for key, name in by_params.items():
+        if key in over_fs:
+            raise ConfigError(f"--param {name} and the failsafe override of {key} (--failsafe-action) set the same "
+                              "thing: give one")
+    taken = set(over_fs)
+    ps = {n: v for n, v in m.params.items() if params_as_failsafe({n: v}).keys().isdisjoint(taken)}
+    ps.update(over_params)
+    return fs, ps
 
 
 def merged_tables(own: Mapping[str, Any], *over: Mapping[str, Any] | None) -> Mapping[str, Any] | None:

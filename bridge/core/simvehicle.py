@@ -30,7 +30,17 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from bridge.core.estimator import Estimator, TruthEstimator, nees
-from bridge.core.failsafe import ACTION_TEXT, FailsafeConfig, Land, OnboardController, Target, failsafe_target
+from bridge.core.failsafe import (
+    ACTION_TEXT,
+    FailsafeConfig,
+    Land,
+    OnboardController,
+    PositionHold,
+    Takeoff,
+    Target,
+    failsafe_target,
+)
+from bridge.core.params import VehicleParams, change_param, read_param
 from controller.nominal import Nominal
 from plant import Quadrotor
 from plant.sensors import SensorSuite
@@ -38,7 +48,12 @@ from plant.sensors import SensorSuite
 NEES_EVERY = 10  # control steps between NEES samples (its solve costs a fifth of an EKF flight if every step)
 OFFBOARD = "offboard"
 FAILSAFE = "failsafe"
-LANDED = "landed"
+LANDED = "landed"  # the failsafe landed it (or stopped its motors): disarmed
+HOLD = "hold"  # the modes a ground station selects (bridge/nodes/vehicle.py, PX4's names: HOLD, LAND, TAKEOFF)
+LAND = "land"
+TAKEOFF = "takeoff"
+GROUND_MODES = (HOLD, LAND, TAKEOFF)  # flown by the on-board controller, set by a ground station
+TAKEOFF_DONE_M = 0.1  # m from its height: a takeoff is done and the vehicle holds there (PX4: HOLD after TAKEOFF)
 
 
 @dataclass
@@ -58,6 +73,7 @@ class SimVehicle:
     events: list[Event] = field(default_factory=list)
     sensors: SensorSuite | None = None  # None: the estimator is truth (nothing to sample)
     estimator: Estimator | None = None  # None: truth, reading the plant
+    takeoff_alt_m: float = 2.5  # m above the start: NAV_TAKEOFF's altitude when it gives none (MIS_TAKEOFF_ALT)
 
     def __post_init__(self) -> None:
         if self.estimator is None:
@@ -68,6 +84,8 @@ class SimVehicle:
         self.landing = self.onboard  # the name bridge/nodes/vehicle.py reads its failsafe rows' demand from
         self.last_command_t = 0.0
         self.land_at: float | None = None  # hold: the plant time its hold ends and it lands
+        self._start_z = self.plant.state[4]  # m: TAKEOFF's altitude is above the start
+        self._takeoff_alt = self.takeoff_alt_m  # m: the altitude the selected TAKEOFF climbs to
         self._zero = (0.0, 0.0, 0.0, 0.0)
 
     @property
@@ -98,13 +116,66 @@ class SimVehicle:
         return e
 
     def arm(self) -> None:
-        """Arm and take offboard commands (from failsafe or landed too)."""
+        """Arm and take offboard commands (from failsafe or landed too). Not while armed in a mode a
+        ground station chose (HOLD, LAND, TAKEOFF): the vehicle is the ground station's until it
+        selects OFFBOARD again (:meth:`set_mode`)."""
+        if self.armed and self.mode in GROUND_MODES:
+            return
         if not self.armed or self.mode != OFFBOARD:
             self.armed = True
             self.mode = OFFBOARD
             self.last_command_t = self.plant.t
             self._onboard_off()
             self.event("armed", "armed, offboard control")
+
+    def arm_in_mode(self) -> None:
+        """A ground station's arm: in the mode it selected (HOLD, LAND, TAKEOFF: flown by the on-board
+        controller from now), else as :meth:`arm` (offboard control)."""
+        if self.armed or self.mode not in GROUND_MODES:
+            self.arm()
+            return
+        self.armed = True
+        self.event("armed", f"armed, {self.mode.upper()}")
+        self._engage(self.mode, self._takeoff_alt)
+
+    def set_mode(self, mode: str, takeoff_alt_m: float | None = None) -> None:
+        """A ground station's mode (OFFBOARD, HOLD, LAND, TAKEOFF to ``takeoff_alt_m`` above the start,
+        :attr:`takeoff_alt_m` if None), at the start of a control period. Armed, the vehicle flies it
+        from this step: HOLD holds where it is, LAND lands where it is, TAKEOFF climbs over where it
+        is, OFFBOARD takes the controller's targets again (its timeout counts from now). Disarmed, it
+        is the mode the next arm from a ground station arms in."""
+        alt = self.takeoff_alt_m if takeoff_alt_m is None else takeoff_alt_m
+        if mode == OFFBOARD:
+            if self.armed and self.mode != OFFBOARD:
+                self._onboard_off()
+                self.last_command_t = self.plant.t
+            self.mode = OFFBOARD
+            self.event("mode", "OFFBOARD" if self.armed else "OFFBOARD (disarmed: armed in it next)")
+            return
+        self._takeoff_alt = alt
+        if not self.armed:
+            self.mode = mode
+            self.event("mode", f"{mode.upper()} (disarmed: armed in it next)")
+            return
+        if mode == TAKEOFF and not self.plant.on_ground and self.published()[4] >= self._start_z + alt:
+            mode = HOLD  # already above it: PX4 refuses nothing here, it holds
+        self.land_at = None
+        self.mode = mode
+        self._engage(mode, alt)
+
+    def _engage(self, mode: str, alt: float) -> None:
+        X = self.published()
+        if mode == HOLD:
+            target: Target = PositionHold.here(X)
+            text = f"HOLD at x={X[0]:.3f} y={X[2]:.3f} z={X[4]:.3f} m"
+        elif mode == LAND:
+            target = Land.here(X, self.failsafe.descent_rate)
+            text = f"LAND at x={X[0]:.3f} y={X[2]:.3f} m, {self.failsafe.descent_rate:g} m/s"
+        else:
+            target = Takeoff.here(X, self._start_z + alt)
+            text = f"TAKEOFF to {alt:g} m over x={X[0]:.3f} y={X[2]:.3f} m"
+        self.fly_onboard(target, mode)
+        self.event("mode", text)
 
     def disarm(self, why: str = "disarmed") -> None:
         if self.armed:
@@ -116,6 +187,17 @@ class SimVehicle:
     def _onboard_off(self) -> None:
         self.onboard.disengage()
         self.land_at = None
+
+    def change_param(self, name: str, value: float, sysid: int = 1) -> str:
+        """Set parameter ``name`` (PX4's name, :mod:`bridge.core.params`) to ``value``, checked
+        (:class:`~bridge.core.params.ParamRefused` if it cannot be): it acts from the next control
+        period on (a failsafe already flying keeps the action it began with). An event says it."""
+        before = VehicleParams(self.failsafe, self.takeoff_alt_m, sysid)
+        after = change_param(before, name, value)
+        self.failsafe, self.takeoff_alt_m = after.failsafe, after.takeoff_alt_m
+        text = f"{name} = {read_param(after, name):g} (was {read_param(before, name):g})"
+        self.event("param", text)
+        return text
 
     def fly_onboard(self, target: Target, mode: str) -> None:
         """Hand the motors to the on-board controller flying ``target`` under ``mode`` (not
@@ -165,6 +247,11 @@ class SimVehicle:
             self._enter_failsafe(p.t - self.last_command_t)
         if self.land_at is not None and p.t >= self.land_at - 1e-9:
             self._end_hold()
+        if self.mode == TAKEOFF and self.armed:
+            target = self.onboard.target
+            if isinstance(target, Takeoff) and abs(self.published()[4] - target.z) < TAKEOFF_DONE_M:
+                self.fly_onboard(PositionHold(target.x, target.y, target.z), HOLD)
+                self.event("mode", f"HOLD: takeoff done at z={target.z:.3f} m")
         onboard = self.onboard
         sensors, estimator = self.sensors, self.estimator
         for i in range(self.substeps):
@@ -172,7 +259,8 @@ class SimVehicle:
                 deliver(p.t)
             if self.armed and self.mode != OFFBOARD and onboard.target is not None:
                 if onboard.target.lands and p.on_ground:
-                    self.mode = LANDED
+                    if self.mode == FAILSAFE:
+                        self.mode = LANDED
                     self.disarm("landed: disarmed")
                 else:
                     p.command(onboard.step(p.state if sensors is None else estimator.estimate(p.t), p.dt))

@@ -17,6 +17,7 @@ and body rates are the exact kinematic transform of the Euler rates in the wire'
 
 from __future__ import annotations
 
+import struct
 from math import asin, atan2, cos, pi, sin, sqrt, tan
 
 Quad = tuple[float, float, float, float]
@@ -161,6 +162,26 @@ def odometry_to_state(pos: Vec3, q: Quad, vel_body: Vec3, rates: Vec3) -> tuple[
     n = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
     q = (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
     return ned_to_paper(pos, rotate(q, vel_body), q, rates)
+
+
+_FLOAT32_13 = struct.Struct("<13f")
+_FLOAT32_4 = struct.Struct("<4f")
+
+
+def state_over_wire(X: tuple[float, ...]) -> tuple[float, ...]:
+    """The state as the controller reads it from ODOMETRY: through :func:`state_to_odometry`, each
+    field rounded to float32 as MAVLink carries it, back through :func:`odometry_to_state` (psi
+    wrapped). The offline loop hands its law this, so that it flies what a lockstep flight flies."""
+    pos, q, vel, rates = state_to_odometry(X)
+    f = _FLOAT32_13.unpack(_FLOAT32_13.pack(*pos, *q, *vel, *rates))
+    return odometry_to_state(f[0:3], f[3:7], f[7:10], f[10:13])
+
+
+def command_over_wire(actuation: str, c: Quad) -> tuple[Quad, Quad]:
+    """(the normalised command the vehicle reads, the wire values) of the normalised command ``c``
+    sent as MAVLink's float32 actuator target (HIL_ACTUATOR_CONTROLS or SET_ACTUATOR_CONTROL_TARGET)."""
+    w = _FLOAT32_4.unpack(_FLOAT32_4.pack(*command_to_wire(actuation, c)))
+    return command_from_wire(actuation, w), w  # type: ignore[arg-type]
 
 
 def step_usec(k: int, rate_hz: float) -> int:

@@ -91,6 +91,9 @@ REASONS: dict[str, str] = {
     "stale": "time_usec older than the step awaited (lockstep), or than the newest state (controller)",
     "future": "lockstep: target for a step not reached yet",
     "reordered": "realtime: target older than the one in force",
+    "param_refused": "PARAM_SET of a value out of its range, of the wrong type, or of a parameter that acts "
+                     "at start only: answered with the unchanged value and a STATUSTEXT",
+    "param_unknown": "PARAM_REQUEST_READ or PARAM_SET of a parameter the vehicle does not have",
 }
 
 

@@ -12,6 +12,11 @@ frames (NED / FRD, via :mod:`bridge.core.wire`): ``ATTITUDE``, ``ATTITUDE_QUATER
 ``HOME_POSITION``, ``SYS_STATUS``, ``EXTENDED_SYS_STATE``, ``ACTUATOR_OUTPUT_STATUS``,
 ``AUTOPILOT_VERSION``. ``time_boot_ms`` is the vehicle's simulation time, as PX4 stamps it
 in lockstep.
+
+From the vehicle's sensors (:class:`plant.sensors.SensorSuite`, paper frame, SI), not the true state:
+``HIGHRES_IMU`` (FRD specific force m/s^2 and rates rad/s, barometric pressure hPa and pressure
+altitude m) and, with a GNSS position sensor, ``GPS_RAW_INT`` (degE7, mm AMSL, cm/s, cdeg); the
+streams they go out on and their intervals: :func:`sensor_streams`.
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ from typing import Any
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.core.wire import paper_to_ned
+from plant.sensors import BARO, GNSS, IMU, Measurement, SensorConfig, SensorSuite
 
 EARTH_RADIUS_M = 6_378_137.0  # WGS-84 equatorial radius: flat-earth offsets around home
 # the sensors a ground station expects to see healthy before it shows a vehicle as ready
@@ -31,7 +37,7 @@ _SENSORS = (mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSO
             | mavlink.MAV_SYS_STATUS_SENSOR_GPS | mavlink.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
             | mavlink.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION)
 CAPABILITIES = (mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-                | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT)
+                | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE)
 VERSION = (0 << 24) | (1 << 16) | (0 << 8) | 255  # 0.1.0, FIRMWARE_VERSION_TYPE_OFFICIAL
 
 
@@ -114,6 +120,24 @@ def actuator_outputs(usec: int, omega: tuple[float, ...], omega_max: float) -> A
         usec, 0b1111, [w / omega_max for w in omega] + [0.0] * 28)
 
 
+STATUSTEXT_CHUNK = 50  # characters of one STATUSTEXT's text
+STATUSTEXT_MAX = 200  # characters of one text at most (four chunks): a reply stays one small datagram
+
+
+def statustext(severity: int, text: str, text_id: int) -> list[Any]:
+    """STATUSTEXT(s) saying ``text`` (at most :data:`STATUSTEXT_MAX` characters): one message if it
+    fits in 50, else MAVLink 2's chunks (the same ``id`` = ``text_id``, 1..65535, and ``chunk_seq``
+    0, 1, ...; a last chunk shorter than 50, empty if need be, ends it), which MAVSDK and
+    QGroundControl join again; a ground station that does not shows each chunk as a line."""
+    data = text[:STATUSTEXT_MAX].encode("utf-8", errors="replace")[:STATUSTEXT_MAX]
+    if len(data) <= STATUSTEXT_CHUNK:
+        return [mavlink.MAVLink_statustext_message(severity, data)]
+    chunks = [data[i:i + STATUSTEXT_CHUNK] for i in range(0, len(data), STATUSTEXT_CHUNK)]
+    if len(chunks[-1]) == STATUSTEXT_CHUNK:
+        chunks.append(b"")
+    return [mavlink.MAVLink_statustext_message(severity, c, text_id, i) for i, c in enumerate(chunks)]
+
+
 def autopilot_version(sysid: int) -> Any:
     """``AUTOPILOT_VERSION``: capabilities (MAVLink 2, COMMAND_INT) and a uid from the sysid."""
     return mavlink.MAVLink_autopilot_version_message(
@@ -122,3 +146,125 @@ def autopilot_version(sysid: int) -> Any:
 
 def _cm(v: float) -> int:
     return max(-32768, min(32767, int(round(v * 100.0))))
+
+
+# -- from the sensors ---------------------------------------------------------------------------
+# PX4 streams HIGHRES_IMU at 50 Hz on its onboard and config links (mavlink_main.cpp); the GCS streams
+# go out on the wall clock, so a faster default would only resend the newest sample more often (in
+# lockstep simulation time may run faster or slower than the wall) and load the ground station: a GCS
+# that wants more asks with SET_MESSAGE_INTERVAL (up to the vehicle's 200 Hz floor).
+SENSOR_STREAM_MAX_HZ = 50.0
+SATELLITES_VISIBLE = 10  # a plausible open-sky count: the GNSS model has no constellation
+UINT16_UNKNOWN = 65535  # MAVLink's "unknown" for GPS_RAW_INT's eph, epv, vel, cog
+_IMU_FIELDS = (mavlink.HIGHRES_IMU_UPDATED_XACC | mavlink.HIGHRES_IMU_UPDATED_YACC | mavlink.HIGHRES_IMU_UPDATED_ZACC
+               | mavlink.HIGHRES_IMU_UPDATED_XGYRO | mavlink.HIGHRES_IMU_UPDATED_YGYRO
+               | mavlink.HIGHRES_IMU_UPDATED_ZGYRO)
+_BARO_FIELDS = mavlink.HIGHRES_IMU_UPDATED_ABS_PRESSURE | mavlink.HIGHRES_IMU_UPDATED_PRESSURE_ALT
+SENSOR_MESSAGES = (mavlink.MAVLINK_MSG_ID_HIGHRES_IMU, mavlink.MAVLINK_MSG_ID_GPS_RAW_INT)
+
+
+def sensor_streams(config: SensorConfig | None) -> dict[int, float]:
+    """The sensor streams of a vehicle (message id -> default interval, s): none under truth (``None``,
+    no sensors); ``HIGHRES_IMU`` at the IMU's rate and, for a ``gnss`` position sensor, ``GPS_RAW_INT``
+    at its fix rate, each at most :data:`SENSOR_STREAM_MAX_HZ`."""
+    if config is None:
+        return {}
+    streams = {mavlink.MAVLINK_MSG_ID_HIGHRES_IMU: 1.0 / min(config.imu_rate_hz, SENSOR_STREAM_MAX_HZ)}
+    if config.position_class == "gnss":
+        streams[mavlink.MAVLINK_MSG_ID_GPS_RAW_INT] = 1.0 / min(config.position_rate_hz, SENSOR_STREAM_MAX_HZ)
+    return streams
+
+
+def sensor_message(mid: int, sensors: SensorSuite | None, home: Home, usec: int) -> list[Any]:
+    """``HIGHRES_IMU`` or ``GPS_RAW_INT`` (``mid``) from the newest samples of ``sensors`` ([] under truth,
+    for a GPS_RAW_INT without a GNSS sensor, or once a sample is not finite: a diverged plant).
+    ``usec``: simulation time now (us), the stamp of a message no sample dates yet."""
+    if sensors is None:
+        return []
+    if mid == mavlink.MAVLINK_MSG_ID_HIGHRES_IMU:
+        imu, baro = sensors.latest(IMU), sensors.latest(BARO)
+        if not all(m is None or finite(m.values) for m in (imu, baro)):
+            return []
+        return [highres_imu(imu, baro, home, usec)]
+    if mid == mavlink.MAVLINK_MSG_ID_GPS_RAW_INT and sensors.config.position_class == "gnss":
+        fix = sensors.latest(GNSS)
+        if fix is None:
+            return [gps_no_fix(usec)]
+        return [gps_raw_int(fix, home)] if finite(fix.values) else []
+    return []
+
+
+def isa_pressure_hpa(alt_m: float) -> float:
+    """Static pressure (hPa) at ``alt_m`` m above mean sea level in the ISA troposphere:
+    1013.25 (1 - 2.25577e-5 h)^5.25588 (15 degC and 1013.25 hPa at sea level, 6.5 K/km lapse)."""
+    return 1013.25 * (1.0 - 2.25577e-5 * alt_m) ** 5.25588
+
+
+def highres_imu(imu: Measurement | None, baro: Measurement | None, home: Home, usec: int) -> Any:
+    """``HIGHRES_IMU`` of the newest IMU and barometer samples: xacc..zacc the mean specific force (m/s^2,
+    FRD: at rest about (0, 0, -9.81)), xgyro..zgyro the body rate (rad/s, FRD), ``abs_pressure`` (hPa) the
+    ISA pressure at the barometer's altitude, ``pressure_alt`` (m AMSL) that altitude (home.alt + z).
+    ``fields_updated`` has the bits of what is present (accelerometer and gyro once the IMU has sampled,
+    pressure once the barometer has); no magnetometer (the heading sensor gives no field vector),
+    differential pressure or temperature. ``time_usec``: the IMU sample's simulation time (us; the end
+    of its interval), else the barometer's, else ``usec``."""
+    fields = 0
+    acc = gyro = (0.0, 0.0, 0.0)
+    pressure = alt = 0.0
+    stamp = usec
+    if baro is not None:
+        fields |= _BARO_FIELDS
+        alt = home.alt + baro.values[0]
+        pressure = isa_pressure_hpa(alt)
+        stamp = _usec(baro.t_valid)
+    if imu is not None:
+        fields |= _IMU_FIELDS
+        fx, fy, fz, p, q, r = imu.values
+        acc, gyro = _frd((fx, fy, fz)), _frd((p, q, r))
+        stamp = _usec(imu.t_valid)
+    return mavlink.MAVLink_highres_imu_message(stamp, *acc, *gyro, 0.0, 0.0, 0.0, pressure, 0.0, alt, 0.0, fields)
+
+
+def gps_raw_int(fix: Measurement, home: Home) -> Any:
+    """``GPS_RAW_INT`` of a GNSS fix (x, y, z m and their rates m/s, paper frame): a 3-D fix at
+    lat/lon (degE7) and alt (mm AMSL) from ``home`` (:meth:`Home.to_global`), ground speed ``vel``
+    (cm/s) and course over ground ``cog`` (cdeg, 0..35999) of the measured velocity. ``eph``/``epv``:
+    the sensor's horizontal / vertical σ in cm (as PX4's SITL GPS plugin fills them; MAVLink calls
+    them HDOP / VDOP x 100), and the same σ in ``h_acc``/``v_acc`` (mm), the horizontal velocity σ in
+    ``vel_acc`` (mm/s). ``time_usec``: the fix's simulation time (us; when it was valid, before
+    its latency)."""
+    x, y, z, vx, vy, vz = fix.values
+    n = paper_to_ned((x, vx, y, vy, z, vz, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+    north, east, down = n["pos"]
+    vn, ve, _vd = n["vel"]
+    lat, lon, alt = home.to_global(north, east, down)
+    sh, sz, svh = fix.sigma[0], fix.sigma[2], fix.sigma[3]
+    cog = int(round(math.degrees(math.atan2(ve, vn)) * 100.0)) % 36000
+    return mavlink.MAVLink_gps_raw_int_message(
+        _usec(fix.t_valid), mavlink.GPS_FIX_TYPE_3D_FIX, int(round(lat * 1e7)), int(round(lon * 1e7)),
+        int(round(alt * 1000.0)), _u16(sh * 100.0), _u16(sz * 100.0), _u16(math.hypot(vn, ve) * 100.0), cog,
+        SATELLITES_VISIBLE, 0, _u32(sh * 1000.0), _u32(sz * 1000.0), _u32(svh * 1000.0))
+
+
+def gps_no_fix(usec: int) -> Any:
+    """``GPS_RAW_INT`` before the first fix has arrived: a receiver with no fix, every figure unknown."""
+    return mavlink.MAVLink_gps_raw_int_message(usec, mavlink.GPS_FIX_TYPE_NO_FIX, 0, 0, 0, UINT16_UNKNOWN,
+                                               UINT16_UNKNOWN, UINT16_UNKNOWN, UINT16_UNKNOWN, 0)
+
+
+def _frd(v: tuple[float, float, float]) -> tuple[float, float, float]:
+    # body FLU -> FRD: the half turn about x that bridge.core.wire applies to every body vector
+    # (its roll = phi, pitch = -theta, yaw = -psi; rates q, r negated)
+    return (v[0], -v[1], -v[2])
+
+
+def _usec(t: float) -> int:
+    return int(round(t * 1e6))
+
+
+def _u16(v: float) -> int:
+    return max(0, min(UINT16_UNKNOWN - 1, int(round(v))))
+
+
+def _u32(v: float) -> int:
+    return max(0, min(0xFFFFFFFF, int(round(v))))

@@ -50,7 +50,12 @@ left offboard control (its HEARTBEAT: not armed, or system_status CRITICAL) it s
 nothing but, with ``resume``, asks it to arm again (ARM_DISARM, through the link model in
 lockstep) once the state is fresh. A failsafe does not end the flight: the controller keeps
 answering steps to the mission's end, whose outcome is then ``failsafe`` unless the vehicle
-was back under offboard control. Each command is sent first, then its row of
+was back under offboard control. A vehicle that a ground station switches out of OFFBOARD while
+armed (its PX4 HEARTBEAT's ``custom_mode``: HOLD, LAND, TAKEOFF, not in its failsafe) is the ground
+station's: no more targets are sent, the flight ends ``aborted`` with that reason, and the session
+names the ground station from the vehicle's event. Parameter changes scheduled at mission times
+(``--param-at``, :class:`bridge.core.params.ParamChange`) go out as PARAM_SET just before the
+answer of their step. Each command is sent first, then its row of
 ``controller.csv`` (:data:`CONTROLLER_COLUMNS`, one ``write`` each, so the file is whole
 up to its last row whatever kills the process). A controller killed between the send and
 the write leaves one command without its row: the session then leaves that step out of
@@ -74,6 +79,7 @@ from bridge.core.clock import FixedRate
 from bridge.core.flight import Flight
 from bridge.core.link import LinkImpairment
 from bridge.core.linkends import ControllerEnd
+from bridge.core.params import BY_NAME
 from bridge.core.wire import command_to_wire, odometry_to_state, step_of_usec
 from bridge.mavlink.endpoint import (
     CONTROLLER_COMPID,
@@ -86,6 +92,7 @@ from bridge.mavlink.endpoint import (
     Tlog,
     wait,
 )
+from bridge.mavlink.modes import MAIN_OFFBOARD, PARAM_TYPES, main_mode, param_to_wire, shown_name
 from bridge.mavlink.receive import Rejections, odometry_problem
 from bridge.mavlink.signing import Signing
 from bridge.nodes.process import on_stop_signals, status_printer
@@ -221,6 +228,8 @@ class Offboard:
         self.t_mission = 0.0
         self.reason = ""
         self.left_lockstep = ""  # the vehicle's STATUSTEXT saying it left lockstep, if it did
+        self.taken_over = ""  # the mode a ground station switched the armed vehicle to (PX4 custom_mode), if any
+        self._changes = list(flight.param_changes)  # scheduled PARAM_SETs not sent yet, by mission time
 
     @property
     def overruns(self) -> int:
@@ -333,6 +342,8 @@ class Offboard:
                     continue
                 if k - k0 >= steps:
                     return self._end_of_mission()
+                if self.taken_over:  # its HEARTBEAT came before this state: no answer to it
+                    return self._check_vehicle() or "aborted"
                 t = (k - k0) / rate
                 self._observe(odo, t, recv)
                 last_frame = (odo.time_usec, self._decide(t, k, odo.time_usec, recv, math.nan))
@@ -450,6 +461,8 @@ class Offboard:
         self.t_mission = t
         while self._blackouts and self._blackouts[0][0] <= t:
             self.event("blackout", self._blackouts.pop(0)[1])
+        while self._changes and self._changes[0].step(self.rate) <= round(t * self.rate):
+            self._send_param(self._changes.pop(0))
         dec = self.cend.step(t, self._sample)
         events = self.guard.events
         while self._noted < len(events):
@@ -540,6 +553,14 @@ class Offboard:
                                                           mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1.0, 0.0,
                                                           0, 0, 0, 0, 0))
 
+    def _send_param(self, change: Any) -> None:
+        """A scheduled parameter change (``--param-at``): PARAM_SET before this step's answer, so
+        that in lockstep the vehicle makes it before it flies the step (the same step as offline)."""
+        kind = PARAM_TYPES[BY_NAME[change.name].kind]
+        self.ep.send(mavlink.MAVLink_param_set_message(self.vsys or 0, self.vcomp, change.name.encode(),
+                                                       param_to_wire(change.value, kind), kind))
+        self.event("param", f"set {change.name} = {change.value:g}")
+
     def _send_target(self, time_usec: int, wire: tuple[float, ...]) -> None:
         """The actuator target answering the state stamped ``time_usec`` (hot path)."""
         self.commands += 1
@@ -597,6 +618,10 @@ class Offboard:
                 # armed: flying its failsafe; disarmed: landed by it (on a real link the armed
                 # CRITICAL heartbeat may have been lost), or halted by divergence
                 self.failsafe_seen = True
+            elif (self.vehicle_armed and m.autopilot == mavlink.MAV_AUTOPILOT_PX4 and not self.taken_over
+                  and main_mode(m.custom_mode) != MAIN_OFFBOARD):
+                # armed, not in its failsafe, out of OFFBOARD: a ground station took it (HOLD, LAND, ...)
+                self.taken_over = shown_name(m.custom_mode)
             return
         if src != self.vsys:
             return
@@ -631,10 +656,13 @@ class Offboard:
 
     def _check_vehicle(self) -> str | None:
         """The outcome if the vehicle is lost to the flight (silent, no more states, disarmed
-        other than by its failsafe), else None. Its failsafe alone does not end the flight."""
+        other than by its failsafe, taken out of OFFBOARD by a ground station), else None. Its
+        failsafe alone does not end the flight."""
         now = time.monotonic()
         timeout = self._silence_s
-        if now - self._last_rx > timeout:
+        if self.taken_over:
+            self.reason = f"the vehicle was switched to {self.taken_over}: no more targets sent"
+        elif now - self._last_rx > timeout:
             self.reason = f"vehicle silent for {timeout:g} s"
         elif self.armed_seen and not self.vehicle_armed and not self.failsafe_seen:
             self.reason = "the vehicle was disarmed during the mission"

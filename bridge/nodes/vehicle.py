@@ -3,13 +3,18 @@
 In:  actuator targets on the controller link, stamped with the ``time_usec`` of the state they answer:
      HIL_ACTUATOR_CONTROLS (``motors``: c1..c4 = omega / omega_max, each in [0, 1]) or
      SET_ACTUATOR_CONTROL_TARGET group 0 (``wrench``: roll, pitch, yaw in [-1, 1], thrust in [0, 1]),
-     or the no-target acknowledgement; COMMAND_LONG / COMMAND_INT, TIMESYNC, HEARTBEAT on either link
+     or the no-target acknowledgement; COMMAND_LONG / COMMAND_INT (among them DO_SET_MODE, NAV_TAKEOFF
+     m AMSL, NAV_LAND), SET_MODE, PARAM_REQUEST_LIST / PARAM_REQUEST_READ / PARAM_SET, TIMESYNC,
+     HEARTBEAT on either link
 Out: ODOMETRY (NED position m, FRD body velocity m/s, quaternion FRD to NED, FRD rates rad/s;
-     ``time_usec`` = simulation time, us), once per control step; HEARTBEAT at 1 Hz, STATUSTEXT on
-     each event, the GCS streams (25 Hz / 10 Hz, ``time_boot_ms`` = simulation time); ``vehicle.tlog``,
+     ``time_usec`` = simulation time, us), once per control step; HEARTBEAT at 1 Hz (PX4's
+     ``custom_mode``), STATUSTEXT on each event, the GCS streams (25 Hz / 10 Hz, ``time_boot_ms`` =
+     simulation time; with sensors HIGHRES_IMU and GPS_RAW_INT), PARAM_VALUE; ``vehicle.tlog``,
      ``vehicle.csv`` rows; status lines on stdout
 
-Its clocks and its end of the link model: docs/design.md, "Clocks" and "Link model". Who may
+Its clocks and its end of the link model: docs/design.md, "Clocks" and "Link model". Its
+parameters, flight modes (OFFBOARD, HOLD, LAND, TAKEOFF, in PX4's encoding: :mod:`bridge.mavlink.modes`)
+and what a ground station can do with them: docs/ground-station.md. Who may
 do what on which link: docs/design.md, "Authority" (:meth:`Vehicle._authority`); every
 command's numbers are checked before use (:mod:`bridge.mavlink.receive`), and every command
 that changes the flight is an event naming its sender (:class:`Sender`).
@@ -69,7 +74,8 @@ from bridge.core.clock import Pace
 from bridge.core.estimator import Covariance, upper_triangle
 from bridge.core.flight import Flight
 from bridge.core.linkends import VehicleEnd
-from bridge.core.simvehicle import FAILSAFE, LANDED, OFFBOARD
+from bridge.core.params import BY_NAME, PARAMS, ParamRefused, VehicleParams, read_param
+from bridge.core.simvehicle import FAILSAFE, GROUND_MODES, HOLD, LAND, LANDED, OFFBOARD, TAKEOFF
 from bridge.core.wire import (
     command_from_wire,
     command_to_wire,
@@ -89,6 +95,16 @@ from bridge.mavlink.endpoint import (
     Tlog,
     wait,
 )
+from bridge.mavlink.modes import (
+    PARAM_TYPES,
+    ftp_nak,
+    heartbeat_mode,
+    mode_name,
+    param_from_wire,
+    param_to_wire,
+    requested_custom_mode,
+    requested_mode,
+)
 from bridge.mavlink.receive import (
     FORCE_DISARM,
     Rejections,
@@ -104,7 +120,7 @@ from bridge.record.columns import VEHICLE_COLUMNS, state_columns
 from bridge.record.runlog import LineWriter, side_dir
 
 CLOCKS = ("lockstep", "realtime")
-MODE_CODES = {OFFBOARD: 0, FAILSAFE: 1, LANDED: 2}
+MODE_CODES = {OFFBOARD: 0, FAILSAFE: 1, LANDED: 2, HOLD: 3, LAND: 4, TAKEOFF: 5}  # vehicle.csv's ``mode``
 NAN4 = (math.nan,) * 4
 # ODOMETRY after the body rates: covariances unknown (NaN first, MAVLink's convention),
 # frame LOCAL_NED, child BODY_FRD, reset counter, estimator type, quality (100: exact)
@@ -144,13 +160,17 @@ DEFAULT_STREAMS = {
 MIN_INTERVAL_S = 0.005  # the shortest stream interval (200 Hz)
 HEARTBEAT_S = 1.0
 HOUSEKEEPING_S = 0.02  # s of wall time between looks at the GCS socket, streams, file flushes
+MAX_TEXT_MESSAGES = 12  # STATUSTEXTs in one datagram of events (the newest texts, whole)
+OFFBOARD_STREAM_S = 1.0  # s of wall time: a ground station's OFFBOARD needs a target from the controller this recent
 RESEND_S = 0.05  # lockstep: resend the state nobody answered (a datagram can be dropped)
 IDLE_ODOMETRY_S = 0.1  # lockstep, disarmed: time stands still; the state is still shown
 BY_VEHICLE = " [by vehicle]"  # the suffix of an arm or disarm the vehicle made itself (failsafe landing, divergence)
-ATTRIBUTED = ("armed", "disarmed", "mode", "interval")  # the events that say who caused them
+ATTRIBUTED = ("armed", "disarmed", "mode", "interval", "param")  # the events that say who caused them
 _TARGETS = frozenset({"HIL_ACTUATOR_CONTROLS", "SET_ACTUATOR_CONTROL_TARGET"})
-_ADDRESSED = frozenset({"COMMAND_LONG", "COMMAND_INT", "MISSION_REQUEST_LIST"})  # target fields checked first
+_ADDRESSED = frozenset({"COMMAND_LONG", "COMMAND_INT", "MISSION_REQUEST_LIST", "PARAM_REQUEST_LIST",
+                        "PARAM_REQUEST_READ", "PARAM_SET", "SET_MODE"})  # target fields checked first
 _COMMANDS = frozenset({"COMMAND_LONG", "COMMAND_INT"})
+_PARAM_MESSAGES = frozenset({"PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET"})
 
 
 @dataclass(frozen=True)
@@ -259,8 +279,10 @@ class Vehicle:
         self._odo_sent: dict[int, float] = {}  # step -> wall time its state was sent
         self.odometry_sent = 0
         now = time.monotonic()
-        self.streams = StreamTable(DEFAULT_STREAMS, now)  # the GCS link's
-        self.ctl_streams = StreamTable(dict.fromkeys(DEFAULT_STREAMS, 0.0), now)  # the controller link's: none
+        # the GCS link's: the defaults, and with sensors (not truth) HIGHRES_IMU and, for GNSS, GPS_RAW_INT
+        sensors = self.sim.sensors.config if self.sim.sensors is not None else None
+        self.streams = StreamTable({**DEFAULT_STREAMS, **tm.sensor_streams(sensors)}, now)
+        self.ctl_streams = StreamTable(dict.fromkeys(self.streams, 0.0), now)  # the controller link's: none
         self._next_heartbeat = now
         self._next_house = now
         self._resend_at = self._lost_at = self._idle_odo_at = now
@@ -274,6 +296,9 @@ class Vehicle:
         # lockstep: the controller's targets and re-arms cross the mission's up-link model here
         self.vend = VehicleEnd(self.sim, flight.link.make()[0], self.actuation, rejected=self.rejected)
         self.engaged = False  # lockstep: a flight is on, the step clock runs on the controller's answers
+        self._texts: list[Any] = []  # STATUSTEXTs saying why a command was refused: sent after its COMMAND_ACK
+        self._text_id = 0  # the id of the last chunked STATUSTEXT
+        self._target_wall = -math.inf  # wall time of the newest actuator target from the controller (checked)
 
     # -- public --------------------------------------------------------------------------
     def stop(self) -> None:
@@ -467,7 +492,7 @@ class Vehicle:
         events = self.sim.events
         if self._events_sent == len(events):
             return
-        msgs = []
+        texts: list[list[Any]] = []
         while self._events_sent < len(events):
             e = events[self._events_sent]
             self._events_sent += 1
@@ -478,10 +503,20 @@ class Vehicle:
             self._status(f"event t={e.t:.3f} {e.kind}: {e.text}")
             sev = (mavlink.MAV_SEVERITY_CRITICAL if e.kind in ("failsafe", "diverged", "lockstep")
                    else mavlink.MAV_SEVERITY_INFO)
-            msgs.append(mavlink.MAVLink_statustext_message(sev, f"{e.kind}: {e.text}"[:50].encode()))
+            texts.append(self._statustext(sev, f"{e.kind}: {e.text}"))
+        msgs: list[Any] = []
+        for chunks in reversed(texts):  # the newest texts, whole, if many came at once
+            if len(msgs) + len(chunks) > MAX_TEXT_MESSAGES:
+                break
+            msgs[:0] = chunks
         msgs.append(self._heartbeat())
         for ep in self.endpoints:
-            ep.send_many(msgs[-8:])  # one datagram per link (the newest texts if many came at once)
+            ep.send_many(msgs)  # one datagram per link
+
+    def _statustext(self, severity: int, text: str) -> list[Any]:
+        """STATUSTEXT(s) of ``text``: chunked when longer than 50 characters, each text its own id."""
+        self._text_id = self._text_id % 65535 + 1
+        return tm.statustext(severity, text, self._text_id)
 
     # -- sending ---------------------------------------------------------------------------------
     def _send_odometry(self, now: float, fresh: bool = True) -> None:
@@ -529,18 +564,16 @@ class Vehicle:
 
     def _heartbeat(self) -> Any:
         sim = self.sim
-        # offboard is guided flight; no custom mode (a GCS would read an ArduPilot or PX4 mode into it)
-        base = mavlink.MAV_MODE_FLAG_GUIDED_ENABLED
-        if sim.armed:
-            base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+        # PX4's encoding of the mode (bridge.mavlink.modes): ground stations name it
+        base, custom = heartbeat_mode(sim.mode, sim.onboard.target, sim.armed)
         if self.halted or sim.mode in (FAILSAFE, LANDED):
             state = mavlink.MAV_STATE_CRITICAL
         elif sim.armed:
             state = mavlink.MAV_STATE_ACTIVE
         else:
             state = mavlink.MAV_STATE_STANDBY
-        return mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_GENERIC, base,
-                                                 0, state, 3)
+        return mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4, base,
+                                                 custom, state, 3)
 
     def _message(self, mid: int) -> list[Any]:
         """The message(s) with id ``mid`` for a stream or a REQUEST_MESSAGE ([] if none)."""
@@ -558,6 +591,8 @@ class Vehicle:
             return [tm.extended_sys_state(self.plant.on_ground, self.sim.mode == FAILSAFE)]
         if mid == mavlink.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS:
             return [tm.actuator_outputs(int(self.t * 1e6), self.plant.omega, self.omega_max)]
+        if mid in tm.SENSOR_MESSAGES:  # the sensors' newest samples, never the true state: [] under truth
+            return tm.sensor_message(mid, self.sim.sensors, self.cfg.home, int(self.t * 1e6))
         if not tm.finite(X):
             return []
         if mid == mavlink.MAVLINK_MSG_ID_ATTITUDE:
@@ -678,11 +713,32 @@ class Vehicle:
         elif kind == "TIMESYNC":
             if m.tc1 == 0:  # a request (an answer, tc1 != 0, is for someone else's clock: nothing to do)
                 self._request(ep, addr, mavlink.MAVLink_timesync_message(self._clock_ns(), m.ts1))
+        elif kind in _PARAM_MESSAGES:
+            self._param_message(ep, m, addr, kind)
+        elif kind == "SET_MODE":  # deprecated by DO_SET_MODE, still sent by some ground stations
+            if addressed_elsewhere(m, self.cfg.sysid, self.cfg.compid):
+                return self._reject("target")
+            if not ep.reply_allowed(addr):
+                return self._reject("reply_limited")
+            by = self._sender(ep, m, addr)
+            result = self._set_mode_or_refuse(ep, addr, *requested_custom_mode(m.base_mode, m.custom_mode), by=by)
+            ack = mavlink.MAVLink_command_ack_message(mavlink.MAV_CMD_DO_SET_MODE, result, 0, 0, m.get_srcSystem(),
+                                                      m.get_srcComponent())
+            ep.reply((ack, *self._texts), addr)
+            self._texts.clear()
+            self._drain_events()
         elif kind == "MISSION_REQUEST_LIST":
             if addressed_elsewhere(m, self.cfg.sysid, self.cfg.compid):
                 return self._reject("target")
             self._request(ep, addr, mavlink.MAVLink_mission_count_message(m.get_srcSystem(), m.get_srcComponent(),
                                                                           0, m.mission_type))
+        elif kind == "FILE_TRANSFER_PROTOCOL":  # no files: a NAK at once (MAVProxy then fetches parameters)
+            if addressed_elsewhere(m, self.cfg.sysid, self.cfg.compid):
+                return self._reject("target")
+            nak = ftp_nak(bytes(m.payload))
+            if nak is not None:
+                self._request(ep, addr, mavlink.MAVLink_file_transfer_protocol_message(
+                    0, m.get_srcSystem(), m.get_srcComponent(), list(nak)))
         return None
 
     def _request(self, ep: Endpoint, addr: tuple[str, int], answer: Any) -> None:
@@ -705,6 +761,7 @@ class Vehicle:
         cfg = self.cfg
         if ep is not self.link or not self._from_controller(m):
             return self._reject("sender")
+        self._target_wall = time.monotonic()  # the controller streams (whether or not this one is taken)
         if kind == "HIL_ACTUATOR_CONTROLS":
             if not m.mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED:
                 return self._no_target(m)
@@ -766,15 +823,23 @@ class Vehicle:
             return self._reject("target")
         if not ep.reply_allowed(addr):
             return self._reject("reply_limited")  # not acted on: its answer could not go
-        by = Sender(m.get_srcSystem(), m.get_srcComponent(), addr, "controller" if ep is self.link else "gcs")
+        by = self._sender(ep, m, addr)
         n0 = len(self.sim.events)
         result, follow = self._run_command(ep, m, by)
-        for e in self.sim.events[n0:]:
-            if e.kind in ATTRIBUTED:
-                e.text += by.tag
-        self._ack(ep, m, addr, result, follow)
+        self._attribute(n0, by)
+        self._ack(ep, m, addr, result, (*follow, *self._texts))
+        self._texts.clear()
         self._drain_events()
         return None
+
+    def _sender(self, ep: Endpoint, m: Any, addr: tuple[str, int]) -> Sender:
+        return Sender(m.get_srcSystem(), m.get_srcComponent(), addr, "controller" if ep is self.link else "gcs")
+
+    def _attribute(self, n0: int, by: Sender) -> None:
+        """Name ``by`` in the events from the ``n0`` th on that say who caused them."""
+        for e in self.sim.events[n0:]:
+            if e.kind in ATTRIBUTED and " [by " not in e.text:
+                e.text += by.tag
 
     def _run_command(self, ep: Endpoint, m: Any, by: Sender) -> tuple[int, tuple[Any, ...]]:
         """Act on a command whose sender has authority: (MAV_RESULT, the messages it asked for).
@@ -809,11 +874,143 @@ class Vehicle:
                     mavlink.MAVLink_message_interval_message(mid, int(iv * 1e6) if iv > 0 else -1),)
             follow = tuple(self._message(mid))
             return (mavlink.MAV_RESULT_ACCEPTED if follow else mavlink.MAV_RESULT_UNSUPPORTED), follow
+        if cmd == mavlink.MAV_CMD_DO_SET_MODE:
+            return self._set_mode_or_refuse(ep, by.addr, *requested_mode(m.param1, m.param2, m.param3), by=by), ()
+        if cmd == mavlink.MAV_CMD_NAV_TAKEOFF:
+            alt = self._takeoff_altitude(m.param7 if m._type == "COMMAND_LONG" else m.z)  # COMMAND_INT: z, m AMSL
+            if isinstance(alt, str):
+                return self._refuse(ep, by.addr, alt), ()
+            return self._set_mode_or_refuse(ep, by.addr, TAKEOFF, "", by=by, takeoff_alt_m=alt), ()
+        if cmd == mavlink.MAV_CMD_NAV_LAND:  # lands where it is (PX4 with NaN lat/lon); a position is not flown to
+            return self._set_mode_or_refuse(ep, by.addr, LAND, "", by=by), ()
         if cmd == mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
             return mavlink.MAV_RESULT_ACCEPTED, (tm.autopilot_version(self.cfg.sysid),)
         if cmd == mavlink.MAV_CMD_GET_HOME_POSITION:
             return mavlink.MAV_RESULT_ACCEPTED, (tm.home_position(self.cfg.home),)
         return mavlink.MAV_RESULT_UNSUPPORTED, ()
+
+    # -- flight modes (docs/ground-station.md) -------------------------------------------------------
+    def _takeoff_altitude(self, param7: float) -> float | str:
+        """NAV_TAKEOFF's altitude above home (m) from its param7 (m AMSL, as PX4 reads it; NaN:
+        MIS_TAKEOFF_ALT), or why it cannot be flown."""
+        if math.isnan(param7):
+            return self.sim.takeoff_alt_m
+        lo, hi = BY_NAME["MIS_TAKEOFF_ALT"].lo, BY_NAME["MIS_TAKEOFF_ALT"].hi
+        rel = param7 - self.cfg.home.alt
+        if not (math.isfinite(param7) and lo <= rel <= hi):
+            return (f"NAV_TAKEOFF: altitude {param7:g} m AMSL is {rel:g} m above home; "
+                    f"must be {lo:g}..{hi:g} m above (home {self.cfg.home.alt:g} m)")
+        return rel
+
+    def _refuse(self, ep: Endpoint, addr: tuple[str, int], why: str) -> int:
+        """DENIED; a STATUSTEXT saying why follows the COMMAND_ACK to the sender (:attr:`_texts`)."""
+        self._texts += self._statustext(mavlink.MAV_SEVERITY_WARNING, why)
+        self._status(f"refused {why}")
+        return mavlink.MAV_RESULT_DENIED
+
+    def _set_mode_or_refuse(self, ep: Endpoint, addr: tuple[str, int], mode: str | None, why: str, *,
+                            by: Sender, takeoff_alt_m: float | None = None) -> int:
+        """A ground station's (or the controller's) mode change: made at the start of the next
+        control period, or DENIED with a STATUSTEXT saying why."""
+        if mode is None:
+            return self._refuse(ep, addr, why)
+        if self.halted:
+            return self._refuse(ep, addr, f"mode {mode_name(mode)}: the plant diverged")
+        if (mode == OFFBOARD and self.sim.armed and self.sim.mode != OFFBOARD
+                and time.monotonic() - self._target_wall > OFFBOARD_STREAM_S):
+            # PX4 too: OFFBOARD only while a controller streams targets (its failsafe would act at once)
+            return self._refuse(ep, addr, "OFFBOARD: no controller is sending targets")
+        n0 = len(self.sim.events)
+        was = self.sim.mode
+        self.sim.set_mode(mode, takeoff_alt_m)
+        self._attribute(n0, by)
+        self._clock_after_mode(was)
+        return mavlink.MAV_RESULT_ACCEPTED
+
+    def _clock_after_mode(self, was: str) -> None:
+        """The step clock after a mode change: a vehicle flown by its own controller (HOLD, LAND,
+        TAKEOFF) needs no controller's answers and runs on the wall clock (``speed`` if given);
+        OFFBOARD again, armed, returns to lockstep (the state of step k goes out, its answer awaited)."""
+        sim, now = self.sim, time.monotonic()
+        if self.cfg.clock != "lockstep" or not sim.armed:
+            return
+        if sim.mode in GROUND_MODES and not self.freerun:
+            self._ground_takes_over(now)
+        elif sim.mode == OFFBOARD and was != OFFBOARD:
+            self._engage_lockstep(now)
+
+    def _ground_takes_over(self, now: float) -> None:
+        """Lockstep, a ground station's mode flown by the vehicle's own controller: on the wall clock
+        from now; a lockstep flight that was on says so (its record: it left lockstep here)."""
+        if self.engaged:
+            self.sim.event("lockstep", f"{mode_name(self.sim.mode)} set by a ground station: flown by the "
+                                       "vehicle on the wall clock")
+        self.pending = None
+        self._start_freerun(now)
+
+    def _engage_lockstep(self, now: float) -> None:
+        """Lockstep from now: the state of step k goes out and its target is awaited."""
+        self.freerun = False
+        self.engaged = True
+        self.pending = None
+        self.pace.restart(now, self.k * self.substeps)
+        self._send_odometry(now)
+
+    # -- parameters (docs/ground-station.md) ----------------------------------------------------------
+    def _params(self) -> VehicleParams:
+        return VehicleParams(self.sim.failsafe, self.sim.takeoff_alt_m, self.cfg.sysid)
+
+    def _param_value(self, index: int, params: VehicleParams | None = None) -> Any:
+        spec = PARAMS[index]
+        kind = PARAM_TYPES[spec.kind]
+        value = read_param(params or self._params(), spec.name)
+        return mavlink.MAVLink_param_value_message(spec.name.encode(), param_to_wire(value, kind), kind,
+                                                   len(PARAMS), index)
+
+    def _param_message(self, ep: Endpoint, m: Any, addr: tuple[str, int], kind: str) -> None:
+        """PARAM_REQUEST_LIST (every PARAM_VALUE, in one datagram), PARAM_REQUEST_READ (by index, or
+        by name with index -1), PARAM_SET (checked: made and answered with the new value, or refused,
+        answered with the unchanged value and a STATUSTEXT saying why). Within the sender's reply budget."""
+        if addressed_elsewhere(m, self.cfg.sysid, self.cfg.compid):
+            return self._reject("target")
+        if not ep.reply_allowed(addr):
+            return self._reject("reply_limited")  # not acted on: its answer could not go
+        if kind == "PARAM_REQUEST_LIST":
+            params = self._params()
+            ep.reply(tuple(self._param_value(i, params) for i in range(len(PARAMS))), addr)
+            return None
+        name = m.param_id.rstrip("\x00") if isinstance(m.param_id, str) else m.param_id.decode(errors="replace")
+        if kind == "PARAM_REQUEST_READ":
+            index = m.param_index if m.param_index >= 0 else next(
+                (i for i, p in enumerate(PARAMS) if p.name == name), -1)
+            if not 0 <= index < len(PARAMS):
+                return self._param_unknown(ep, addr, name if m.param_index < 0 else f"index {m.param_index}")
+            ep.reply((self._param_value(index),), addr)
+            return None
+        spec = BY_NAME.get(name)
+        if spec is None:
+            return self._param_unknown(ep, addr, name)
+        index = PARAMS.index(spec)
+        want = PARAM_TYPES[spec.kind]
+        try:
+            if m.param_type != want:
+                raise ParamRefused(f"{name}: is {spec.kind}, the set says type {m.param_type}")
+            n0 = len(self.sim.events)
+            self.sim.change_param(name, param_from_wire(m.param_value, want), self.cfg.sysid)
+            self._attribute(n0, self._sender(ep, m, addr))
+        except ParamRefused as exc:
+            self._reject("param_refused")
+            self._status(f"refused {exc}")
+            ep.reply((self._param_value(index), *self._statustext(mavlink.MAV_SEVERITY_WARNING, str(exc))), addr)
+            return None
+        ep.reply((self._param_value(index),), addr)
+        self._drain_events()
+        return None
+
+    def _param_unknown(self, ep: Endpoint, addr: tuple[str, int], what: str) -> None:
+        """No such parameter: no PARAM_VALUE (the protocol's answer), a STATUSTEXT saying so."""
+        self._reject("param_unknown")
+        ep.reply(tuple(self._statustext(mavlink.MAV_SEVERITY_WARNING, f"param {what}: no such parameter")), addr)
 
     def _arm_disarm(self, p1: float, p2: float, by: Sender | None = None) -> int:
         """Arm (``p1`` 1) or disarm (0; in the air only with ``p2`` = 21196, forced), checked
@@ -825,18 +1022,21 @@ class Vehicle:
             if self.halted:
                 return mavlink.MAV_RESULT_DENIED
             was_offboard = sim.armed and sim.mode == OFFBOARD
-            sim.arm()
-            if not was_offboard and by is not None and by.link == "gcs":
+            from_gcs = by is not None and by.link == "gcs"
+            if from_gcs:
+                sim.arm_in_mode()  # in the mode it selected (HOLD, LAND, TAKEOFF), else offboard
+            else:
+                sim.arm()
+            if sim.mode in GROUND_MODES:  # the vehicle's own controller flies: no controller's answers
+                if self.cfg.clock == "lockstep" and not self.freerun:
+                    self._ground_takes_over(now)
+                return mavlink.MAV_RESULT_ACCEPTED
+            if not was_offboard and from_gcs:
                 self.link.forget_peer()  # no controller yet: the flight's is the first to speak
             if not was_offboard:
                 self.applied = None  # a new flight: no target of the last one is in force
             if not was_offboard and self.cfg.clock == "lockstep":
-                # back to lockstep: the state of step k goes out now and its target is awaited
-                self.freerun = False
-                self.engaged = True
-                self.pending = None
-                self.pace.restart(now, self.k * self.substeps)
-                self._send_odometry(now)
+                self._engage_lockstep(now)  # back to lockstep
             return mavlink.MAV_RESULT_ACCEPTED
         forced = p2 == FORCE_DISARM
         if sim.armed and not self.plant.on_ground and not forced:

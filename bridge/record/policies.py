@@ -258,7 +258,12 @@ def offboard_intervals(events: Sequence[Mapping[str, Any]], armed_at_start: bool
             if since is not None:  # armed again without leaving: the timeout restarts
                 out.append((since, e["t"], "armed"))
             since = e["t"]
-        elif e["kind"] in _ENDS_OFFBOARD and since is not None:
+        elif e["kind"] == "mode" and without_sender(e.get("text", "")) == "OFFBOARD":
+            if since is not None:  # OFFBOARD again, armed: the timeout counts from the switch
+                out.append((since, e["t"], "mode"))
+            since = e["t"]
+        elif (e["kind"] in _ENDS_OFFBOARD or (e["kind"] == "mode" and "(disarmed" not in e.get("text", ""))) \
+                and since is not None:  # a failsafe, a disarm, or a ground station's HOLD, LAND, TAKEOFF
             out.append((since, e["t"], e["kind"]))
             since = None
     if since is not None:
@@ -270,7 +275,8 @@ def failsafe_in_time(t: np.ndarray, age: np.ndarray, events: Sequence[Mapping[st
     """Armed offboard, no stretch longer than ``timeout_s`` + one period since the last valid target
     without a failsafe (see the module docstring for how the targets are read from the trace)."""
     name = "failsafe_in_time"
-    period, timeout = rules.period_s, rules.timeout_s
+    period = rules.period_s
+    changes = timeout_changes(events)
     left = next((e["t"] for e in events if e["kind"] == "lockstep"), math.inf)
     answers_until = left if rules.clock in ("offline", "lockstep") else -math.inf  # rows answering their step
     for start, end, kind in offboard_intervals(events, rules.armed_at_start):
@@ -288,15 +294,41 @@ def failsafe_in_time(t: np.ndarray, age: np.ndarray, events: Sequence[Mapping[st
                         last = max(last, ti + period)  # a new one, in by ti (repeats of it within a period)
                         stamp = s
                     last = max(last, s + rules.hold_slack_s)
+            timeout = timeout_between(rules.timeout_s, changes, last, ti)
             if ti > last + timeout + period + EPS_S:
                 return Verdict(name, False, ti, f"armed offboard with no actuator target since t={last:.3f} s, "
                                                 f"still no failsafe at t={ti:.3f} s (timeout {timeout:g} s "
                                                 f"+ one step {period:g} s)")
+        timeout = timeout_between(rules.timeout_s, changes, last, end)
         if kind == "failsafe" and end > last + timeout + period + EPS_S:
             return Verdict(name, False, end, f"failsafe at t={end:.3f} s, {end - last:.3f} s after the last valid "
                                              f"target at t={last:.3f} s (timeout {timeout:g} s + one step "
                                              f"{period:g} s)")
     return Verdict(name, True)
+
+
+def timeout_changes(events: Sequence[Mapping[str, Any]]) -> list[tuple[float, float]]:
+    """(t s, new timeout s) of each change of the offboard-loss timeout (COM_OF_LOSS_T) the events tell."""
+    out = []
+    for e in events:
+        text = e.get("text", "")
+        if e["kind"] == "param" and text.startswith("COM_OF_LOSS_T = "):
+            out.append((e["t"], float(text.split()[2])))
+    return out
+
+
+def timeout_between(start: float, changes: Sequence[tuple[float, float]], a: float, b: float) -> float:
+    """The longest timeout in force at any time in [a, b] (s): ``start`` changed by ``changes``; a
+    failsafe is late only if it is late under each (a change of COM_OF_LOSS_T acts from its step on)."""
+    now = start
+    longest = -math.inf
+    for t, v in changes:
+        if t > b + EPS_S:
+            break
+        if t > a + EPS_S:
+            longest = max(longest, now)
+        now = v
+    return max(longest, now)
 
 
 def arm_authority(events: Sequence[Mapping[str, Any]], rules: Rules) -> Verdict:

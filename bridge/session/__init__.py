@@ -55,13 +55,14 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from bridge.core.flight import Flight, Progress, prepare
+from bridge.core.params import ParamChange
 from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, GCS_PORT, LINK_PORT, parse_address
 from bridge.mavlink.signing import key_from_file
 from bridge.nodes.process import parse_status
@@ -109,6 +110,8 @@ def sitl(
     sensors: Mapping[str, Any] | None = None,
     estimator: str | None = None,
     noise: float | None = None,
+    params: Mapping[str, float] | None = None,
+    param_at: Sequence[ParamChange] = (),
 ) -> Run:
     """Fly a mission as a SITL session (vehicle and controller processes over UDP).
 
@@ -119,7 +122,9 @@ def sitl(
     a free port and no GCS link. ``gcs`` (``HOST:PORT`` or ``"none"``) overrides the GCS
     address. ``speed`` caps lockstep at that many times real time. ``live`` prints a
     progress line on stderr (when it is a terminal). ``link`` is laid over the mission's
-    ``[link]`` table and ``failsafe`` over its ``[failsafe]`` table, as for :func:`bridge.loop.simulate`.
+    ``[link]`` table and ``failsafe`` over its ``[failsafe]`` table, ``params`` over its ``[params]``, and
+    ``param_at`` changes parameters at mission times, as for :func:`bridge.loop.simulate` (the controller
+    sends each as PARAM_SET before the answer of its step: in lockstep the same step as offline).
     ``key`` is a MAVLink 2 signing key file (:func:`bridge.mavlink.signing.key_from_file`): both
     sides sign everything they send and accept only what is signed with it; only the file's path
     is passed on.
@@ -127,7 +132,8 @@ def sitl(
     if key is not None:
         key_from_file(key)  # a missing, empty or world-readable key file is bad input, before anything starts
     flight = prepare(mission, profile=profile, controller=controller, rate_hz=rate_hz, seed=seed, link=link,
-                     failsafe=failsafe, sensors=sensors, estimator=estimator, noise=noise)
+                     failsafe=failsafe, sensors=sensors, estimator=estimator, noise=noise, params=params,
+                     param_at=param_at)
     check_trace_steps(flight.mission)  # the session keeps every trace row for its summary: a cap, said up front
     if instance is not None and not (isinstance(instance, int) and 0 <= instance <= 9):
         raise ConfigError(f"--instance must be in [0, 9], got {instance!r}")
@@ -168,7 +174,8 @@ class Session:
         self.speed = speed
         self.progress = progress
         self.live = live and sys.stderr.isatty()
-        self.sysid = (instance or 0) + 1
+        # a mission's MAV_SYS_ID is the vehicle's system id; else the instance's, as PX4 SITL's
+        self.sysid = flight.params.sysid if "MAV_SYS_ID" in flight.mission.params else (instance or 0) + 1
         self.listen = f"127.0.0.1:{LINK_PORT + instance}" if instance is not None else "127.0.0.1:0"
         self.events: list[dict[str, Any]] = []
         self.vehicle: Child | None = None
@@ -359,6 +366,8 @@ class Session:
                 "--out", str(self.path), "--overwrite"]
         if self.realtime:
             argv.append("--realtime")
+        for c in self.flight.param_changes:
+            argv += ["--param-at", f"{c.t_s!r}:{c.name}={c.value!r}"]
         self.controller = Child("controller", argv + keyarg, self.path / "controller.log")
         self._wait_ready(self.controller)
         self._note("started", f"controller pid {self.controller.pid}", "session")

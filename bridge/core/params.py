@@ -1,0 +1,218 @@
+"""The vehicle's parameters, by PX4's names (docs/ground-station.md, "Parameters").
+
+In:  a parameter's name and value (a float: MAVLink's PARAM_VALUE carries every value as one; an
+     INT32's as the integer), the settings they act on (:class:`VehicleParams`: the ``[failsafe]``
+     table's numbers, s and m/s, the takeoff altitude m, the MAVLink system id), a mission's
+     ``[params]`` table (NAME = value) and ``--param NAME=VALUE`` flags
+Out: the parameter list (:data:`PARAMS`: name, type, unit, range, meaning), a value read
+     (:func:`read_param`), a change checked and made (:func:`change_param`, or :class:`ParamRefused`
+     saying why), the ``[failsafe]`` keys a ``[params]`` table stands for (:func:`params_as_failsafe`)
+
+Each parameter is one of the vehicle's settings under PX4's name where PX4 has that setting, with
+the one range the setting has everywhere (``[failsafe]``'s :data:`~bridge.core.failsafe.FAILSAFE_RANGES`
+for the failsafe's numbers), so a mission file, a flag and a ground station's PARAM_SET are checked
+alike. The two offboard-loss action parameters are one setting, ``[failsafe] action``, under PX4's
+old name (``COM_OBL_ACT``, PX4 1.13 and earlier: 0 Land, 1 Hold, 3 Terminate) and its current one
+(``COM_OBL_RC_ACT``, PX4 1.14 on: 4 Land, 5 Hold, 7 Disarm); ``descend``, which PX4 does not have,
+is -1 in both. PX4's values that the vehicle cannot fly (Return, Position, ...) are refused.
+``MAV_SYS_ID`` takes effect when the vehicle starts (``--param``, ``[params]``); a ground station's
+PARAM_SET of it is refused, as it could not act until a restart that SITL does not do.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+from typing import Any
+
+from bridge.core.failsafe import FAILSAFE_RANGES, FailsafeConfig
+from params import ConfigError, Table
+
+REAL32 = "REAL32"
+INT32 = "INT32"
+TAKEOFF_ALT_RANGE_M = (0.5, 50.0)  # MIS_TAKEOFF_ALT: inside the plant's 100 m envelope; PX4: 0..80 m
+SYSID_RANGE = (1, 254)  # MAV_SYS_ID and --sysid (0 is broadcast, 255 a ground station's by custom)
+
+
+@dataclass(frozen=True)
+class VehicleParams:
+    """The settings the parameters read and change."""
+
+    failsafe: FailsafeConfig = FailsafeConfig()
+    takeoff_alt_m: float = 2.5  # m above home: NAV_TAKEOFF's altitude when it gives none (PX4's default)
+    sysid: int = 1
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One parameter: its name (at most 16 characters: PARAM_VALUE's ``param_id``), MAVLink type,
+    unit, range [lo, hi] (an INT32's ``choices``: the values allowed and what each means), what it
+    is, and the ``[failsafe]`` key it stands for (None: another setting)."""
+
+    name: str
+    kind: str
+    unit: str
+    lo: float
+    hi: float
+    meaning: str
+    failsafe_key: str | None = None
+    choices: Mapping[int, str] | None = None
+    at_start_only: bool = False
+
+
+# PX4's offboard-loss action values, old and new, of the actions the vehicle flies
+_OBL_ACT = {-1: "descend", 0: "land", 1: "hold", 3: "disarm"}
+_OBL_RC_ACT = {-1: "descend", 4: "land", 5: "hold", 7: "disarm"}
+_fr = FAILSAFE_RANGES
+PARAMS: tuple[ParamSpec, ...] = (
+    ParamSpec("COM_OF_LOSS_T", REAL32, "s", *_fr["timeout_s"],
+              "offboard loss timeout: no actuator target for this long and the failsafe acts "
+              "([failsafe] timeout_s)", failsafe_key="timeout_s"),
+    ParamSpec("COM_OBL_ACT", INT32, "", -1, 3,
+              "offboard loss action, PX4 1.13 values: -1 descend, 0 land, 1 hold, 3 terminate (disarm) "
+              "([failsafe] action)", failsafe_key="action", choices=_OBL_ACT),
+    ParamSpec("COM_OBL_RC_ACT", INT32, "", -1, 7,
+              "offboard loss action, PX4 1.14 values: -1 descend, 4 land, 5 hold, 7 disarm "
+              "([failsafe] action)", failsafe_key="action", choices=_OBL_RC_ACT),
+    ParamSpec("COM_FAIL_ACT_T", REAL32, "s", *_fr["hold_s"],
+              "hold failsafe: how long it holds before it lands ([failsafe] hold_s)", failsafe_key="hold_s"),
+    ParamSpec("MPC_LAND_SPEED", REAL32, "m/s", *_fr["descent_rate"],
+              "descent speed of the failsafe's landing and of LAND ([failsafe] descent_rate)",
+              failsafe_key="descent_rate"),
+    ParamSpec("MIS_TAKEOFF_ALT", REAL32, "m", *TAKEOFF_ALT_RANGE_M,
+              "takeoff altitude above home when NAV_TAKEOFF gives none"),
+    ParamSpec("MAV_SYS_ID", INT32, "", *SYSID_RANGE, "the vehicle's MAVLink system id (at start only)",
+              at_start_only=True),
+)
+BY_NAME = {p.name: p for p in PARAMS}
+
+
+class ParamRefused(ValueError):
+    """A parameter change that is not made; the message says why (it goes out in a STATUSTEXT)."""
+
+
+def read_param(p: VehicleParams, name: str) -> float:
+    """The value of parameter ``name`` (a float; an INT32's integer value)."""
+    spec = BY_NAME[name]
+    if spec.failsafe_key == "action":
+        return float(next(v for v, a in (spec.choices or {}).items() if a == p.failsafe.action))
+    if spec.failsafe_key is not None:
+        return float(getattr(p.failsafe, spec.failsafe_key))
+    return float(p.takeoff_alt_m if name == "MIS_TAKEOFF_ALT" else p.sysid)
+
+
+def value_problem(spec: ParamSpec, value: float) -> str | None:
+    """Why ``value`` cannot be ``spec``'s, or None (type, range, choices)."""
+    if not math.isfinite(value):
+        return f"{spec.name}: must be finite, got {value}"
+    if spec.kind == INT32 and value != int(value):
+        return f"{spec.name}: an INT32, got {value:g}"
+    if spec.choices is not None and int(value) not in spec.choices:
+        allowed = ", ".join(f"{v} {a}" for v, a in spec.choices.items())
+        return f"{spec.name}: {value:g} is not one the vehicle flies; allowed: {allowed}"
+    if not spec.lo <= value <= spec.hi:
+        unit = f" {spec.unit}" if spec.unit else ""
+        return f"{spec.name}: must be in [{spec.lo:g}, {spec.hi:g}]{unit}, got {value:g}"
+    return None
+
+
+def change_param(p: VehicleParams, name: str, value: float, running: bool = True) -> VehicleParams:
+    """``p`` with parameter ``name`` set to ``value``; :class:`ParamRefused` if it cannot be (an
+    unknown name, a value out of range or of the wrong type, or, ``running``, one that acts only at start)."""
+    spec = BY_NAME.get(name)
+    if spec is None:
+        raise ParamRefused(f"{name}: no such parameter")
+    why = value_problem(spec, value)
+    if why:
+        raise ParamRefused(why)
+    if running and spec.at_start_only:
+        raise ParamRefused(f"{name}: takes effect at start only (--param {name}=N)")
+    if spec.failsafe_key == "action":
+        return replace(p, failsafe=replace(p.failsafe, action=(spec.choices or {})[int(value)]))
+    if spec.failsafe_key is not None:
+        return replace(p, failsafe=replace(p.failsafe, **{spec.failsafe_key: float(value)}))
+    if name == "MIS_TAKEOFF_ALT":
+        return replace(p, takeoff_alt_m=float(value))
+    return replace(p, sysid=int(value))
+
+
+def params_from_table(data: Mapping[str, Any], source: str, start: VehicleParams) -> VehicleParams:
+    """A ``[params]`` table (NAME = value) applied over ``start``, each value checked with its
+    parameter's one range; names the file and the key (``params.NAME``) of a bad one."""
+    t = Table(data, source, "params")
+    p = start
+    for name in data:
+        spec = BY_NAME.get(name)
+        if spec is None:
+            raise t.error(name, f"no such parameter; the vehicle has {', '.join(BY_NAME)}")
+        v = t.number(name) if spec.kind == REAL32 else float(t.integer(name))
+        try:
+            p = change_param(p, name, v, running=False)
+        except ParamRefused as exc:
+            raise t.error(name, str(exc).split(": ", 1)[1]) from None
+    t.done()
+    return p
+
+
+def params_as_failsafe(data: Mapping[str, Any]) -> dict[str, str]:
+    """The ``[failsafe]`` keys the parameters of a ``[params]`` table stand for: key -> parameter name."""
+    return {BY_NAME[n].failsafe_key: n for n in data if n in BY_NAME and BY_NAME[n].failsafe_key}  # type: ignore[misc]
+
+
+def parse_assignment(text: str) -> tuple[str, float]:
+    """``NAME=VALUE`` (``--param``) as (name, value); ConfigError saying what is wrong."""
+    name, sep, value = text.partition("=")
+    name = name.strip()
+    if not sep or not name:
+        raise ConfigError(f"expected NAME=VALUE, got {text!r}")
+    if name not in BY_NAME:
+        raise ConfigError(f"{name}: no such parameter; the vehicle has {', '.join(BY_NAME)}")
+    try:
+        v = float(value)
+    except ValueError:
+        raise ConfigError(f"{name}: expected a number, got {value.strip()!r}") from None
+    return name, v
+
+
+@dataclass(frozen=True, order=True)
+class ParamChange:
+    """A parameter set at a mission time (``--param-at T:NAME=VALUE``): it takes effect at the start of
+    the control step that begins at or after ``t_s`` (s), in every clock the same step."""
+
+    t_s: float
+    name: str
+    value: float
+
+    def step(self, rate_hz: float) -> int:
+        """The control step it takes effect at."""
+        return math.ceil(self.t_s * rate_hz - 1e-9)
+
+
+def check_param_changes(changes: Any, duration_s: float) -> tuple[ParamChange, ...]:
+    """Scheduled changes, checked (a known parameter that may change while running, its value in
+    range, a time inside the mission) and sorted by time; ConfigError naming the bad one."""
+    out = []
+    for c in changes:
+        where = f"--param-at {c.t_s:g}:{c.name}={c.value:g}"
+        if not (math.isfinite(c.t_s) and 0.0 <= c.t_s < duration_s):
+            raise ConfigError(f"{where}: the time must be in [0, {duration_s:g}) s (the mission's duration)")
+        try:
+            change_param(VehicleParams(), c.name, c.value)
+        except ParamRefused as exc:
+            raise ConfigError(f"{where}: {exc}") from None
+        out.append(c)
+    return tuple(sorted(out))
+
+
+def parse_change(text: str) -> ParamChange:
+    """``T:NAME=VALUE`` (``--param-at``) as a :class:`ParamChange`; ConfigError saying what is wrong."""
+    t, sep, rest = text.partition(":")
+    if not sep:
+        raise ConfigError(f"expected T:NAME=VALUE (T in s of mission time), got {text!r}")
+    try:
+        t_s = float(t)
+    except ValueError:
+        raise ConfigError(f"expected T:NAME=VALUE, T a number of seconds, got {t.strip()!r}") from None
+    name, value = parse_assignment(rest)
+    return ParamChange(t_s, name, value)

@@ -1,0 +1,150 @@
+"""Flight modes and parameter values in PX4's encoding (docs/ground-station.md): bytes, no sockets.
+
+In:  the vehicle's mode (:mod:`bridge.core.simvehicle`: offboard, hold, land, takeoff, failsafe, landed) and
+     the target its on-board controller flies; DO_SET_MODE's parameters and SET_MODE's ``custom_mode``;
+     a parameter's value and MAVLink type; a MAVLink FTP request (FILE_TRANSFER_PROTOCOL's payload)
+Out: HEARTBEAT's ``base_mode`` and ``custom_mode`` (PX4's: main mode in bits 16-23, sub mode in
+     bits 24-31, px4_custom_mode.h), the mode a ground station asked for (or why not), PARAM_VALUE's
+     ``param_value`` float for a value and the value a PARAM_SET's float carries; the FTP request's NAK
+     (no file is served: :func:`ftp_nak`)
+
+With ``MAV_AUTOPILOT_PX4`` in the heartbeat, MAVProxy, MAVSDK and QGroundControl read
+``custom_mode`` as PX4's and name the modes (OFFBOARD, HOLD — pymavlink calls it LOITER —, LAND,
+TAKEOFF), and they encode INT32 parameters as PX4 does, byte for byte in the float
+(``MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE``).
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from bridge.core.failsafe import Land, Level, PositionHold, Takeoff, Target
+from bridge.core.simvehicle import FAILSAFE, HOLD, LAND, LANDED, OFFBOARD, TAKEOFF
+
+MAIN_AUTO = 4  # PX4_CUSTOM_MAIN_MODE_AUTO
+MAIN_OFFBOARD = 6  # PX4_CUSTOM_MAIN_MODE_OFFBOARD
+SUB_TAKEOFF, SUB_LOITER, SUB_LAND = 2, 3, 6  # PX4_CUSTOM_SUB_MODE_AUTO_*
+PX4_MODES = {  # the modes the vehicle flies: its name -> (main, sub) and the name a ground station shows
+    OFFBOARD: (MAIN_OFFBOARD, 0),
+    HOLD: (MAIN_AUTO, SUB_LOITER),
+    LAND: (MAIN_AUTO, SUB_LAND),
+    TAKEOFF: (MAIN_AUTO, SUB_TAKEOFF),
+}
+_BY_CODE = {code: mode for mode, code in PX4_MODES.items()}
+# PX4's other modes by (main, sub), to name the one refused: px4_custom_mode.h
+_PX4_NAMES = {(1, 0): "MANUAL", (2, 0): "ALTCTL", (3, 0): "POSCTL", (4, 1): "AUTO READY", (4, 4): "MISSION",
+              (4, 5): "RTL", (4, 7): "RTGS", (4, 8): "FOLLOW_TARGET", (4, 9): "PRECLAND", (5, 0): "ACRO",
+              (7, 0): "STABILIZED", (8, 0): "RATTITUDE"}
+# base_mode as PX4 sends it in these modes: custom mode, auto, guided, stabilized (29), and armed
+BASE_MODE = (mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mavlink.MAV_MODE_FLAG_AUTO_ENABLED
+             | mavlink.MAV_MODE_FLAG_GUIDED_ENABLED | mavlink.MAV_MODE_FLAG_STABILIZE_ENABLED)
+
+
+PARAM_TYPES = {"REAL32": mavlink.MAV_PARAM_TYPE_REAL32, "INT32": mavlink.MAV_PARAM_TYPE_INT32}  # ParamSpec.kind
+
+
+def custom_mode(main: int, sub: int = 0) -> int:
+    """PX4's ``custom_mode`` of a main and sub mode."""
+    return (main << 16) | (sub << 24)
+
+
+def shown_mode(mode: str, target: Target | None) -> str:
+    """The mode a ground station is shown for the vehicle's ``mode`` and on-board ``target``: the
+    failsafe flies as HOLD (a hold) or LAND (land, descend), a landed vehicle shows LAND."""
+    if mode in PX4_MODES:
+        return mode
+    if mode == FAILSAFE and isinstance(target, PositionHold):
+        return HOLD
+    if mode == FAILSAFE and isinstance(target, Takeoff):
+        return TAKEOFF
+    assert mode in (FAILSAFE, LANDED) and (target is None or isinstance(target, (Land, Level)))
+    return LAND
+
+
+def heartbeat_mode(mode: str, target: Target | None, armed: bool) -> tuple[int, int]:
+    """HEARTBEAT's (``base_mode``, ``custom_mode``)."""
+    base = BASE_MODE | (mavlink.MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
+    return base, custom_mode(*PX4_MODES[shown_mode(mode, target)])
+
+
+def mode_name(mode: str) -> str:
+    """A vehicle mode's name as a ground station shows it."""
+    return mode.upper()
+
+
+def requested_mode(base: float, main: float, sub: float) -> tuple[str | None, str]:
+    """The mode DO_SET_MODE asks for (param1 base mode with MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+    param2 PX4 main mode, param3 sub mode; whole numbers): (mode, "") or (None, why not)."""
+    nums = (base, main, sub)
+    if not all(math.isfinite(v) and v == int(v) and 0 <= v <= 255 for v in nums):
+        return None, "DO_SET_MODE: base, main and sub mode must be whole numbers in [0, 255]"
+    if not int(base) & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+        return None, "DO_SET_MODE: only PX4 custom modes (base mode with CUSTOM_MODE_ENABLED)"
+    code = (int(main), int(sub) if int(main) == MAIN_AUTO else 0)
+    mode = _BY_CODE.get(code)
+    if mode is None:
+        name = _PX4_NAMES.get(code, f"main {code[0]} sub {code[1]}")
+        return None, f"mode {name}: not flown here; OFFBOARD, HOLD, LAND, TAKEOFF are"
+    return mode, ""
+
+
+def requested_custom_mode(base: int, custom: int) -> tuple[str | None, str]:
+    """The mode SET_MODE asks for (``base_mode``, ``custom_mode`` in PX4's encoding)."""
+    return requested_mode(float(base), float((custom >> 16) & 0xFF), float((custom >> 24) & 0xFF))
+
+
+def main_mode(custom: int) -> int:
+    """PX4's main mode in a ``custom_mode``."""
+    return (custom >> 16) & 0xFF
+
+
+def shown_name(custom: int) -> str:
+    """The name a ground station shows for a PX4 ``custom_mode``."""
+    code = (main_mode(custom), (custom >> 24) & 0xFF if main_mode(custom) == MAIN_AUTO else 0)
+    mode = _BY_CODE.get(code)
+    return mode_name(mode) if mode else _PX4_NAMES.get(code, f"main {code[0]} sub {code[1]}")
+
+
+def param_to_wire(value: float, kind: int) -> float:
+    """PARAM_VALUE's float for ``value`` of MAVLink type ``kind``: an INT32's bytes as they are
+    (PX4's bytewise encoding), a REAL32 itself."""
+    if kind == mavlink.MAV_PARAM_TYPE_INT32:
+        return struct.unpack("<f", struct.pack("<i", int(value)))[0]
+    return value
+
+
+def param_from_wire(value: float, kind: int) -> float:
+    """The value a PARAM_SET's float carries for MAVLink type ``kind``: an INT32 bytewise (PX4), or,
+    when the float is a whole number itself (not a denormal or NaN pattern), cast (ArduPilot's way;
+    the two never collide for the vehicle's INT32 ranges, -1..255)."""
+    if kind != mavlink.MAV_PARAM_TYPE_INT32:
+        return value
+    if math.isfinite(value) and value == int(value) and (value == 0 or abs(value) >= 1):
+        return float(value)
+    return float(struct.unpack("<i", struct.pack("<f", value))[0])
+
+
+# MAVLink FTP (FILE_TRANSFER_PROTOCOL's payload: seq u16, session, opcode, size, req_opcode, burst_complete,
+# padding, offset u32, then data): the vehicle has no file system to serve, and says so at once
+FTP_HEADER = struct.Struct("<HBBBBBBI")
+FTP_PAYLOAD_LEN = 251
+FTP_NAK = 129  # OpcodeId Nack (Ack is 128: opcodes from 128 on are replies, never answered)
+FTP_ERR_UNKNOWN_COMMAND = 7  # ERR_UnknownCommand: no FTP operation is supported here
+
+
+def ftp_nak(request: bytes) -> bytes | None:
+    """FILE_TRANSFER_PROTOCOL's payload answering an FTP ``request`` payload: a NAK with
+    ERR_UnknownCommand (seq + 1, the request's session and opcode), so that a ground station that
+    tries FTP first (MAVProxy fetches parameters as ``@PARAM/param.pck``) falls back to the parameter
+    protocol at once instead of after its retries time out; None for a reply (opcode >= 128) or a
+    payload too short to hold a header."""
+    if len(request) < FTP_HEADER.size:
+        return None
+    seq, session, opcode, *_ = FTP_HEADER.unpack_from(request)
+    if opcode >= 128:
+        return None
+    head = FTP_HEADER.pack((seq + 1) & 0xFFFF, session, FTP_NAK, 1, opcode, 0, 0, 0)
+    return (head + bytes((FTP_ERR_UNKNOWN_COMMAND,))).ljust(FTP_PAYLOAD_LEN, b"\x00")

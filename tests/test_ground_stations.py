@@ -1,0 +1,313 @@
+"""The ground-station surface of ``bsst vehicle`` with the real tools (issue 14): MAVSDK 4's native
+binding (parameters; HOLD, arm, TAKEOFF, HOLD, LAND, disarmed; its flight mode) and MAVProxy typed
+into through stdin (``param show`` / ``param set``, a refused set, HOLD and LAND, its prompt naming
+the mode), against real vehicle processes over UDP on 127.0.0.1.
+
+Each test holds an instance slot (bridge.session.instance_slot). The vehicle flies its own modes
+on the wall clock: 4x real time (``--speed 4``) for MAVSDK, so that a takeoff and a landing take about
+a second; real time for MAVProxy, whose prompt is asked for while TAKEOFF lasts. Every wait is on an
+event (a line, a callback) with a deadline.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+import subprocess
+import sys
+import time
+from collections import Counter
+from collections.abc import Callable
+from pathlib import Path
+
+from pymavlink import mavutil
+
+from bridge.core.params import PARAMS, VehicleParams, read_param
+from bridge.mavlink.endpoint import GCS_PORT
+from bridge.mavlink.modes import FTP_ERR_UNKNOWN_COMMAND, FTP_HEADER, FTP_NAK, FTP_PAYLOAD_LEN, ftp_nak
+from bridge.session import instance_slot
+from tests.sitlkit import ENV, Proc
+from tests.test_vehicle import _vehicle
+
+FAST = ("--speed", "4", "--param", "MPC_LAND_SPEED=2")  # a takeoff to 3 m and its landing in ~1 s of wall time
+
+
+def _answers(tlog: Path, sysid: int) -> tuple[set[int], int, int]:
+    """From a vehicle's tlog: the commands others sent that got no COMMAND_ACK, and the FTP requests
+    others sent and the FTP replies the vehicle sent."""
+    log = mavutil.mavlink_connection(str(tlog), dialect="common")
+    asked, acked, ftp = set(), set(), Counter()
+    kinds = ["COMMAND_LONG", "COMMAND_INT", "COMMAND_ACK", "FILE_TRANSFER_PROTOCOL"]
+    while (m := log.recv_match(type=kinds)) is not None:
+        mine = m.get_srcSystem() == sysid
+        if m.get_type() == "FILE_TRANSFER_PROTOCOL":
+            ftp["replies" if mine else "requests"] += 1
+        elif mine and m.get_type() == "COMMAND_ACK":
+            acked.add(m.command)
+        elif not mine and m.get_type() != "COMMAND_ACK":
+            asked.add(m.command)
+    return asked - acked, ftp["requests"], ftp["replies"]
+
+
+# -- MAVSDK ---------------------------------------------------------------------------------------
+
+MAVSDK_SCRIPT = r"""
+import json, sys, threading
+from mavsdk import Mavsdk, Configuration, ComponentType
+from mavsdk.plugins.action import Action
+from mavsdk.plugins.param import Param, ParamError
+from mavsdk.plugins.telemetry import Telemetry
+
+sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+sdk.add_any_connection(sys.argv[1])
+system = sdk.first_autopilot(30.0)
+out = {"found": system is not None}
+
+def refused(call, *args):
+    try:
+        return "SUCCESS: " + str(call(*args))
+    except ParamError as e:
+        return e.result.name
+
+if sys.argv[2] == "params":
+    par = Param(system)
+    every = par.get_all_params()
+    out["ints"] = {p.name: p.value for p in every.int_params}
+    out["floats"] = {p.name: p.value for p in every.float_params}
+    out["get"] = par.get_param_float("COM_OF_LOSS_T")
+    out["set"] = par.set_param_float("COM_OF_LOSS_T", 1.5).name
+    out["get_after_set"] = par.get_param_float("COM_OF_LOSS_T")
+    out["set_out_of_range"] = refused(par.set_param_float, "COM_OF_LOSS_T", 100.0)
+    out["get_after_refusal"] = par.get_param_float("COM_OF_LOSS_T")
+    out["obl_act"] = par.get_param_int("COM_OBL_ACT")
+    out["set_obl_act"] = par.set_param_int("COM_OBL_ACT", 1).name
+    out["obl_rc_act"] = par.get_param_int("COM_OBL_RC_ACT")  # the same setting under PX4 1.14's name
+    out["set_sys_id"] = refused(par.set_param_int, "MAV_SYS_ID", 9)
+else:
+    tel, act = Telemetry(system), Action(system)
+    cond = threading.Condition()
+    modes, seen = [], {"armed": None, "rel": None, "top": -1.0}
+    def on_mode(m, ud=None):
+        with cond:
+            if not modes or modes[-1] != m.name:
+                modes.append(m.name)
+            cond.notify_all()
+    def on_armed(a, ud=None):
+        with cond:
+            seen["armed"] = a
+            cond.notify_all()
+    def on_position(p, ud=None):
+        with cond:
+            seen["rel"] = p.relative_altitude_m
+            seen["top"] = max(seen["top"], p.relative_altitude_m)
+            cond.notify_all()
+    tel.subscribe_flight_mode(on_mode)
+    tel.subscribe_armed(on_armed)
+    tel.subscribe_position(on_position)
+    def until(what, pred, timeout):
+        with cond:
+            out[what] = cond.wait_for(pred, timeout)
+    out["hold"] = act.hold().name
+    until("hold_seen", lambda: modes and modes[-1] == "HOLD", 10)
+    out["arm"] = act.arm().name
+    until("armed_seen", lambda: seen["armed"] is True, 10)
+    out["set_takeoff_altitude"] = act.set_takeoff_altitude(3.0).name
+    out["takeoff_altitude"] = act.get_takeoff_altitude()
+    out["takeoff"] = act.takeoff().name
+    until("at_height", lambda: modes[-2:] == ["TAKEOFF", "HOLD"] and seen["rel"] > 2.9, 15)
+    out["rel_at_height"] = seen["rel"]
+    out["land"] = act.land().name
+    until("disarmed_seen", lambda: seen["armed"] is False, 15)
+    until("on_ground", lambda: abs(seen["rel"]) < 0.02, 5)  # positions come at 10 Hz: the next ones
+    with cond:
+        out.update(modes=modes, rel_landed=seen["rel"], top=seen["top"])
+print("RESULT " + json.dumps(out), flush=True)
+sdk.destroy()
+"""
+
+
+def _mavsdk(n: int, part: str) -> dict:
+    """Run the MAVSDK script's ``part`` (in its own process: the native library keeps threads of its
+    own) against the vehicle of instance ``n``; its RESULT."""
+    r = subprocess.run([sys.executable, "-c", MAVSDK_SCRIPT, f"udpin://127.0.0.1:{GCS_PORT + n}", part],
+                       capture_output=True, text=True, timeout=120, env=ENV)
+    lines = [ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")]
+    assert lines, f"MAVSDK script failed (exit {r.returncode}):\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
+    return json.loads(lines[0][len("RESULT "):])
+
+
+def test_mavsdk_parameters(tmp_path):
+    """``Param``: every parameter listed with its value (``--param`` included), read, set and read
+    back, an out-of-range set refused with the value unchanged, an INT32 set under PX4's old name
+    read under its new one, and the start-only MAV_SYS_ID refused."""
+    with instance_slot() as n:
+        v = _vehicle(n, tmp_path, "--param", "COM_FAIL_ACT_T=7")
+        try:
+            out = _mavsdk(n, "params")
+        finally:
+            assert v.stop() == 0
+    assert out["found"]
+    defaults = VehicleParams()
+    want = {p.name: read_param(defaults, p.name) for p in PARAMS} | {"COM_FAIL_ACT_T": 7.0, "MAV_SYS_ID": n + 1}
+    got = out["ints"] | out["floats"]
+    assert set(got) == set(want) and len(got) == len(PARAMS)
+    assert set(out["ints"]) == {p.name for p in PARAMS if p.kind == "INT32"}  # bytewise INT32s decoded as ints
+    for name, value in want.items():
+        assert math.isclose(got[name], value, rel_tol=1e-6), (name, got[name], value)
+    assert out["get"] == 0.5 and out["set"] == "SUCCESS" and out["get_after_set"] == 1.5
+    # parameter protocol v1 has no refusal: MAVSDK sees the unchanged value come back, retries, then gives up
+    assert not out["set_out_of_range"].startswith("SUCCESS") and out["get_after_refusal"] == 1.5
+    assert out["obl_act"] == -1 and out["set_obl_act"] == "SUCCESS" and out["obl_rc_act"] == 5  # hold
+    assert not out["set_sys_id"].startswith("SUCCESS")
+    v.wait_line(lambda s: "param: COM_OF_LOSS_T = 1.5 (was 0.5) [by " in s and " gcs]" in s)
+    v.wait_line(lambda s: s.startswith("refused COM_OF_LOSS_T: must be in [0.01, 60] s, got 100"))
+    v.wait_line(lambda s: s.startswith("refused MAV_SYS_ID: takes effect at start only"))
+    assert not any("COM_OF_LOSS_T = 100" in s for s in v.lines)
+
+
+def test_mavsdk_hold_takeoff_land(tmp_path):
+    """``Action.hold``, ``arm``, ``set_takeoff_altitude`` / ``takeoff`` (TAKEOFF, then HOLD at the
+    height), ``land`` (LAND, then disarmed on the ground), with ``Telemetry.flight_mode`` naming
+    each mode; every command MAVSDK sent was answered."""
+    with instance_slot() as n:
+        v = _vehicle(n, tmp_path, *FAST)
+        try:
+            out = _mavsdk(n, "flight")
+        finally:
+            assert v.stop() == 0
+    assert out["found"]
+    assert [out[k] for k in ("hold", "arm", "set_takeoff_altitude", "takeoff", "land")] == ["SUCCESS"] * 5
+    assert all(out[k] for k in ("hold_seen", "armed_seen", "at_height", "disarmed_seen", "on_ground")), out
+    assert out["takeoff_altitude"] == 3.0  # MIS_TAKEOFF_ALT, set and read back through the parameters
+    # the first callback is the mode at subscription (OFFBOARD, the boot mode) or, if it came first, HOLD's
+    assert out["modes"][:-4] in ([], ["OFFBOARD"]) and out["modes"][-4:] == ["HOLD", "TAKEOFF", "HOLD", "LAND"], \
+        out["modes"]
+    assert abs(out["rel_at_height"] - 3.0) < 0.1 and out["top"] < 3.1
+    assert abs(out["rel_landed"]) < 0.02
+    v.wait_line(lambda s: "mode: TAKEOFF to 3 m" in s)
+    v.wait_line(lambda s: "mode: HOLD: takeoff done" in s)
+    v.wait_line(lambda s: "mode: LAND at" in s and "2 m/s" in s)
+    v.wait_line(lambda s: "disarmed: landed" in s)
+    unanswered, _, _ = _answers(tmp_path / "vehicle.tlog", n + 1)
+    assert not unanswered, f"commands MAVSDK sent that got no COMMAND_ACK: {unanswered}"
+
+
+# -- MAVProxy --------------------------------------------------------------------------------------
+
+def _from(mark: int, pred: Callable[[str], bool]) -> Callable[[str], bool]:
+    """``pred`` for the lines from the ``mark`` th on (a Proc.wait_line predicate sees each line once, in order)."""
+    index = -1
+
+    def at_or_after(line: str) -> bool:
+        nonlocal index
+        index += 1
+        return index >= mark and pred(line)
+    return at_or_after
+
+
+def test_mavproxy_params_and_modes(tmp_path):
+    """MAVProxy, unmodified, through stdin: the parameters load at once (the vehicle NAKs MAVProxy's
+    FTP try, ``@PARAM/param.pck``: without that, MAVProxy waits ~11 s for its FTP retries), ``param
+    show``, ``param set`` and ``param show`` again; an out-of-range set refused (the vehicle's
+    STATUSTEXT shown, the value unchanged); HOLD (MAVProxy's LOITER), arm, TAKEOFF, LAND, with
+    MAVProxy naming each mode in its prompt."""
+    mavproxy = os.path.join(os.path.dirname(sys.executable), "mavproxy.py")
+    with instance_slot() as n:
+        v = _vehicle(n, tmp_path / "v", "--param", "MPC_LAND_SPEED=2")  # real time: TAKEOFF lasts ~2 s
+        mp = Proc([sys.executable, mavproxy, f"--master=udpin:127.0.0.1:{GCS_PORT + n}", "--nowait"],
+                  cwd=tmp_path, stdin=subprocess.PIPE)
+
+        def say(cmd: str) -> int:
+            """Type ``cmd``; the index of the first line that can answer it."""
+            mark = len(mp.lines)
+            mp.p.stdin.write(cmd.encode() + b"\n")  # type: ignore[union-attr]
+            mp.p.stdin.flush()  # type: ignore[union-attr]
+            return mark
+
+        def prompt_names(name: str) -> None:
+            """Wait until MAVProxy's prompt names mode ``name`` (its "Mode X" line comes at most every
+            2 s; the prompt follows each heartbeat): it prefixes the next line printed, so ask for one
+            until it does."""
+            deadline = time.monotonic() + 10
+            while True:
+                try:
+                    mp.wait_line(_from(say("param show MAV_SYS_ID"),
+                                       lambda s: s.startswith(f"{name}> ") and "MAV_SYS_ID" in s), timeout=0.25)
+                    return
+                except AssertionError:
+                    assert time.monotonic() < deadline, f"MAVProxy's prompt never named {name}"
+
+        def set_mode(name: str) -> None:
+            """``mode NAME``, then its prompt. MAVProxy 1.8.75's ``mode`` fails for every PX4 autopilot
+            (it hands pymavlink's PX4 (base, main, sub) tuple to set_mode as one number: "required
+            argument is not a float"); then what a user types instead, DO_SET_MODE with those numbers."""
+            mark = say(f"mode {name}")
+            failed = f"ERROR in command ['{name}']"
+            done = mp.wait_line(_from(mark, lambda s: "DO_SET_MODE: ACCEPTED" in s or failed in s))
+            if "ERROR" in done:
+                base, main, sub = mavutil.px4_map[name]
+                mp.wait_line(_from(say(f"long DO_SET_MODE {base} {main} {sub}"),
+                                   lambda s: "DO_SET_MODE: ACCEPTED" in s), timeout=10)
+            prompt_names(name)
+
+        try:
+            mp.wait_line(lambda s: "online system" in s, timeout=30)
+            online = len(mp.lines)
+            # FTP NAKed, MAVProxy fetches the list at its next 1 s check: well inside 8 s (without: >= 11 s)
+            mp.wait_line(_from(online, lambda s: f"Received {len(PARAMS)} parameters" in s and "ftp" not in s),
+                         timeout=8)
+            show = re.compile(r"COM_OF_LOSS_T\s+([0-9.]+)$")
+            line = mp.wait_line(_from(say("param show COM_OF_LOSS_T"), show.search), timeout=10)
+            assert show.search(line).group(1) == "0.5"  # type: ignore[union-attr]
+            # the vehicle's STATUSTEXT saying so follows its PARAM_VALUE answer: MAVProxy has the value then
+            mp.wait_line(_from(say("param set COM_OF_LOSS_T 1.5"),
+                               lambda s: "AP: param: COM_OF_LOSS_T = 1.5 (was 0.5)" in s), timeout=10)
+            line = mp.wait_line(_from(say("param show COM_OF_LOSS_T"), show.search), timeout=10)
+            assert show.search(line).group(1) == "1.5"  # type: ignore[union-attr]
+
+            mark = say("param set COM_OF_LOSS_T 100")
+            mp.wait_line(_from(mark, lambda s: "COM_OF_LOSS_T: must be in [0.01, 60] s" in s), timeout=10)
+            mp.wait_line(_from(mark, lambda s: "Failed to set COM_OF_LOSS_T to 100" in s), timeout=15)
+            fetched = mp.wait_line(_from(say("param fetch COM_OF_LOSS_T"), lambda s: "COM_OF_LOSS_T = " in s),
+                                   timeout=10)  # read from the vehicle afresh
+            assert fetched.split("COM_OF_LOSS_T = ")[1].strip() == "1.5000000"
+            line = mp.wait_line(_from(say("param show COM_OF_LOSS_T"), show.search), timeout=10)
+            assert show.search(line).group(1) == "1.5"  # type: ignore[union-attr]
+
+            set_mode("LOITER")
+            mp.wait_line(_from(say("arm throttle"), lambda s: "COMPONENT_ARM_DISARM: ACCEPTED" in s), timeout=10)
+            mark = say("long NAV_TAKEOFF 0 0 0 nan nan nan nan")  # NaN altitude: MIS_TAKEOFF_ALT (2.5 m)
+            mp.wait_line(_from(mark, lambda s: "NAV_TAKEOFF: ACCEPTED" in s), timeout=10)
+            prompt_names("TAKEOFF")  # ~2 s of climb in real time
+            v.wait_line(lambda s: "mode: HOLD: takeoff done at z=2.500 m" in s, timeout=15)
+            prompt_names("LOITER")  # at the height: HOLD
+            mark = len(mp.lines)
+            set_mode("LAND")
+            v.wait_line(lambda s: "disarmed: landed" in s, timeout=15)
+            mp.wait_line(_from(mark, lambda s: s.strip().endswith("DISARMED")), timeout=10)
+            say("exit")
+        finally:
+            mp.stop()
+            assert v.stop() == 0
+    assert any(s.startswith("refused COM_OF_LOSS_T: must be in") for s in v.lines)
+    assert not any("COM_OF_LOSS_T = 100" in s for s in v.lines)
+    unanswered, ftp_requests, ftp_replies = _answers(tmp_path / "v" / "vehicle.tlog", n + 1)
+    assert not unanswered, f"commands MAVProxy sent that got no COMMAND_ACK: {unanswered}"
+    assert ftp_requests >= 1 and ftp_replies == ftp_requests  # every FTP request answered (a NAK)
+
+
+def test_ftp_nak_bytes():
+    """The NAK of an FTP request: seq + 1 (wrapping), the request's session and opcode, ERR_UnknownCommand;
+    a reply (ACK, NAK) or a payload shorter than a header is not answered."""
+    open_ro = FTP_HEADER.pack(7, 3, 4, 5, 0, 0, 0, 0) + b"@PARA"  # OpenFileRO, 5 bytes of its path
+    nak = ftp_nak(open_ro.ljust(FTP_PAYLOAD_LEN, b"\x00"))
+    assert nak is not None and len(nak) == FTP_PAYLOAD_LEN
+    assert FTP_HEADER.unpack_from(nak) == (8, 3, FTP_NAK, 1, 4, 0, 0, 0)
+    assert nak[FTP_HEADER.size] == FTP_ERR_UNKNOWN_COMMAND and not any(nak[FTP_HEADER.size + 1:])
+    wrap = ftp_nak(FTP_HEADER.pack(0xFFFF, 0, 1, 0, 0, 0, 0, 0))  # TerminateSession at the last seq
+    assert wrap is not None and FTP_HEADER.unpack_from(wrap)[0] == 0
+    assert ftp_nak(FTP_HEADER.pack(1, 0, 128, 0, 4, 0, 0, 0)) is None  # an ACK
+    assert ftp_nak(FTP_HEADER.pack(1, 0, FTP_NAK, 1, 4, 0, 0, 0) + b"\x07") is None
+    assert ftp_nak(b"\x00" * (FTP_HEADER.size - 1)) is None

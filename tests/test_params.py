@@ -1,0 +1,338 @@
+"""The vehicle's parameters and flight modes (issue 14), without a ground-station program.
+
+The pure parts (bridge.core.params, bridge.mavlink.modes) on their own; then ``bsst vehicle`` as a
+real process spoken to by a pymavlink ground station over UDP on 127.0.0.1 (the parameter
+protocol, DO_SET_MODE / SET_MODE, NAV_TAKEOFF and NAV_LAND); then whole flights: a parameter set
+at a mission time (``--param-at``) gives the same trace twice in lockstep and matches offline,
+and a ground station's HOLD during a lockstep flight ends it, named. MAVSDK and MAVProxy against
+the same vehicle: tests/test_ground_stations.py.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import struct
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import common as M
+
+from bridge.core.failsafe import FAILSAFE_RANGES
+from bridge.core.flight import prepare
+from bridge.core.params import (
+    BY_NAME,
+    PARAMS,
+    ParamChange,
+    ParamRefused,
+    VehicleParams,
+    change_param,
+    parse_change,
+    read_param,
+)
+from bridge.loop import simulate
+from bridge.mavlink.endpoint import GCS_PORT
+from bridge.mavlink.modes import (
+    param_from_wire,
+    param_to_wire,
+    requested_custom_mode,
+    requested_mode,
+    shown_name,
+)
+from bridge.record.runlog import read_trace
+from bridge.session import instance_slot, sitl
+from params import ConfigError
+from tests.sitlkit import ENV, ROOT, Proc
+
+BLACKOUT = {"blackouts": [[15.0, 2.0]]}
+
+
+# -- the pure parts -------------------------------------------------------------------------------
+def test_every_parameter_reads_back_what_was_set_and_refuses_outside_its_range():
+    p = VehicleParams()
+    for spec in PARAMS:
+        if spec.at_start_only:
+            with pytest.raises(ParamRefused, match="at start only"):
+                change_param(p, spec.name, spec.lo)
+            continue
+        values = list(spec.choices) if spec.choices else [spec.lo, spec.hi, (spec.lo + spec.hi) / 2]
+        for v in values:
+            assert read_param(change_param(p, spec.name, v), spec.name) == pytest.approx(v)
+        with pytest.raises(ParamRefused, match=spec.name):
+            change_param(p, spec.name, spec.hi + 1)
+        with pytest.raises(ParamRefused, match="finite"):
+            change_param(p, spec.name, math.nan)
+    with pytest.raises(ParamRefused, match="no such parameter"):
+        change_param(p, "FS_GCS_ENABLE", 1)
+    with pytest.raises(ParamRefused, match="not one the vehicle flies"):
+        change_param(p, "COM_OBL_RC_ACT", 3)  # PX4's Return: not flown here
+    with pytest.raises(ParamRefused, match="INT32"):
+        change_param(p, "COM_OBL_ACT", 0.5)
+
+
+def test_the_failsafe_parameters_share_the_failsafe_tables_ranges():
+    for spec in PARAMS:
+        if spec.failsafe_key in FAILSAFE_RANGES:
+            assert (spec.lo, spec.hi) == FAILSAFE_RANGES[spec.failsafe_key], spec.name
+
+
+def test_both_offboard_loss_parameters_are_the_failsafe_action():
+    p = change_param(VehicleParams(), "COM_OBL_ACT", 1)
+    assert p.failsafe.action == "hold" and read_param(p, "COM_OBL_RC_ACT") == 5
+    p = change_param(p, "COM_OBL_RC_ACT", 7)
+    assert p.failsafe.action == "disarm" and read_param(p, "COM_OBL_ACT") == 3
+    assert read_param(VehicleParams(), "COM_OBL_ACT") == -1  # descend, the default
+
+
+def test_int32_values_cross_the_wire_bytewise_and_cast_values_are_read_too():
+    for v in (-1, 0, 1, 3, 7, 254):
+        wire = param_to_wire(v, M.MAV_PARAM_TYPE_INT32)
+        assert struct.pack("<f", wire) == struct.pack("<i", v)
+        assert param_from_wire(wire, M.MAV_PARAM_TYPE_INT32) == v
+        assert param_from_wire(float(v), M.MAV_PARAM_TYPE_INT32) == v  # a C cast (ArduPilot's way)
+    assert param_to_wire(0.25, M.MAV_PARAM_TYPE_REAL32) == 0.25
+
+
+def test_px4_modes_decode_and_others_are_named_when_refused():
+    assert requested_mode(29, 4, 3) == ("hold", "")
+    assert requested_mode(1, 6, 0) == ("offboard", "")
+    assert requested_custom_mode(1, (4 << 16) | (6 << 24)) == ("land", "")
+    mode, why = requested_mode(29, 4, 5)
+    assert mode is None and "RTL" in why
+    assert requested_mode(0, 4, 3)[0] is None  # no CUSTOM_MODE_ENABLED
+    assert requested_mode(29, math.nan, 3)[0] is None
+    assert shown_name((4 << 16) | (2 << 24)) == "TAKEOFF"
+
+
+def test_a_missions_params_table_and_the_flags_are_checked_and_ordered(tmp_path):
+    f = prepare("missions/sine.toml", params={"COM_OF_LOSS_T": 1.0, "COM_OBL_RC_ACT": 4})
+    assert (f.failsafe.timeout_s, f.failsafe.action) == (1.0, "land")
+    # a flag wins over the file, whichever of the file's tables holds the setting
+    src = (ROOT / "missions" / "sine.toml").read_text()
+    path = tmp_path / "m.toml"
+    path.write_text(src + "\n[params]\nCOM_OBL_ACT = 1\n")
+    assert prepare(path).failsafe.action == "hold"
+    assert prepare(path, failsafe={"action": "land"}).failsafe.action == "land"
+    path.write_text(src + "\n[params]\nCOM_OBL_ACT = 1\n\n[failsafe]\naction = \"land\"\n")
+    with pytest.raises(ConfigError, match="params.COM_OBL_ACT and failsafe.action"):
+        prepare(path)
+    path.write_text(src + "\n[params]\nCOM_OF_LOSS_T = 99.0\n")
+    with pytest.raises(ConfigError, match=r"m.toml: params.COM_OF_LOSS_T: must be in \[0.01, 60\]"):
+        prepare(path)
+    with pytest.raises(ConfigError, match="--failsafe-action"):
+        prepare("missions/sine.toml", params={"COM_OBL_ACT": 1}, failsafe={"action": "land"})
+    with pytest.raises(ConfigError, match="mission's duration"):
+        prepare("missions/sine.toml", param_at=[parse_change("31:COM_OF_LOSS_T=1")])
+
+
+@pytest.mark.parametrize("args, says", [
+    (["--param", "COM_OF_LOSS_T=99"], "COM_OF_LOSS_T: must be in [0.01, 60] s"),
+    (["--param", "NOPE=1"], "NOPE: no such parameter"),
+    (["--param", "COM_OBL_ACT=2"], "not one the vehicle flies"),
+    (["--param-at", "x:COM_OBL_ACT=1"], "--param-at"),
+    (["--param-at", "5:MAV_SYS_ID=3"], "at start only"),
+])
+def test_bad_parameter_flags_are_one_line_exit_2(args, says):
+    r = subprocess.run([sys.executable, "-m", "bridge", "sim", "missions/sine.toml", *args], capture_output=True,
+                       text=True, cwd=ROOT, timeout=60)
+    assert r.returncode == 2 and says in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+
+
+def test_the_offboard_loss_parameter_flies_the_failsafe_action_it_names():
+    """``--param COM_OBL_ACT=1`` is ``--failsafe-action hold``, row for row (offline)."""
+    a = simulate("missions/sine.toml", link=BLACKOUT, params={"COM_OBL_ACT": 1}, plots=False)
+    b = simulate("missions/sine.toml", link=BLACKOUT, failsafe={"action": "hold"}, plots=False)
+    assert np.array_equal(a.trace["x"], b.trace["x"]) and a.summary["outcome"] == "failsafe"
+
+
+# -- a pymavlink ground station against bsst vehicle --------------------------------------------------
+def _gcs(n: int):
+    os.environ["MAVLINK20"] = "1"
+    return mavutil.mavlink_connection(f"udpin:127.0.0.1:{GCS_PORT + n}", source_system=255, source_component=190,
+                                      dialect="common")
+
+
+def _recv(conn, kind: str, cond: str | None = None, timeout: float = 10.0):
+    m = conn.recv_match(type=kind, blocking=True, timeout=timeout, condition=cond)
+    assert m is not None, f"no {kind} ({cond})"
+    return m
+
+
+def test_parameter_protocol_over_udp(tmp_path):
+    with instance_slot() as n:
+        gcs = _gcs(n)
+        v = Proc.bsst("vehicle", "--instance", str(n), "--out", str(tmp_path), "--param", "COM_OF_LOSS_T=0.8")
+        try:
+            v.wait_line(lambda s: s.startswith("ready"))
+            hb = gcs.wait_heartbeat(timeout=20)
+            assert hb.autopilot == M.MAV_AUTOPILOT_PX4 and mavutil.mode_string_v10(hb) == "OFFBOARD"
+            tgt = (gcs.target_system, gcs.target_component)
+            gcs.mav.param_request_list_send(*tgt)
+            got = {}
+            while len(got) < len(PARAMS):
+                m = _recv(gcs, "PARAM_VALUE")
+                assert m.param_count == len(PARAMS)
+                got[m.param_id] = (m.param_index, param_from_wire(m.param_value, m.param_type))
+            assert got["COM_OF_LOSS_T"][1] == pytest.approx(0.8)  # --param, at start
+            assert got["MAV_SYS_ID"][1] == n + 1 and got["COM_OBL_ACT"][1] == -1
+            assert sorted(i for i, _ in got.values()) == list(range(len(PARAMS)))
+            gcs.mav.param_request_read_send(*tgt, b"MPC_LAND_SPEED", -1)
+            assert _recv(gcs, "PARAM_VALUE").param_value == pytest.approx(0.7)
+            gcs.mav.param_request_read_send(*tgt, b"", BY_NAME and list(BY_NAME).index("MIS_TAKEOFF_ALT"))
+            assert _recv(gcs, "PARAM_VALUE").param_id == "MIS_TAKEOFF_ALT"
+            # a set: made, answered with the new value; out of range, wrong type, start-only: refused
+            gcs.mav.param_set_send(*tgt, b"COM_OF_LOSS_T", 1.5, M.MAV_PARAM_TYPE_REAL32)
+            assert _recv(gcs, "PARAM_VALUE").param_value == 1.5
+            for name, value, kind, why in (("COM_OF_LOSS_T", 100.0, M.MAV_PARAM_TYPE_REAL32, "must be in"),
+                                           ("COM_OF_LOSS_T", 1.0, M.MAV_PARAM_TYPE_INT32, "REAL32"),
+                                           ("MAV_SYS_ID", param_to_wire(9, 6), 6, "at start only")):
+                gcs.mav.param_set_send(*tgt, name.encode(), value, kind)
+                m = _recv(gcs, "PARAM_VALUE")
+                text = _recv(gcs, "STATUSTEXT", f"'{why}' in STATUSTEXT.text")
+                assert m.param_id == name and text.severity == M.MAV_SEVERITY_WARNING
+                assert param_from_wire(m.param_value, m.param_type) == (1.5 if name == "COM_OF_LOSS_T" else n + 1)
+            gcs.mav.param_set_send(*tgt, b"COM_OBL_RC_ACT", param_to_wire(5, 6), M.MAV_PARAM_TYPE_INT32)
+            assert param_from_wire(_recv(gcs, "PARAM_VALUE").param_value, 6) == 5
+        finally:
+            assert v.stop() == 0
+            gcs.close()
+    v.wait_line(lambda s: "param: COM_OF_LOSS_T = 1.5 (was 0.8) [by 255:190" in s)
+    v.wait_line(lambda s: "param: COM_OBL_RC_ACT = 5 (was -1)" in s)
+    stats = json.loads(v.wait_line(lambda s: s.startswith("stats "))[6:])
+    assert stats["rejected"]["param_refused"] == 3
+
+
+def test_modes_takeoff_hold_land_over_udp(tmp_path):
+    """HOLD selected on the ground, armed in it; NAV_TAKEOFF (NaN: MIS_TAKEOFF_ALT) climbs and then
+    holds; SET_MODE LAND lands and disarms; modes a ground station cannot have are refused, named."""
+    with instance_slot() as n:
+        gcs = _gcs(n)
+        v = Proc.bsst("vehicle", "--instance", str(n), "--out", str(tmp_path), "--speed", "4",
+                      "--param", "MIS_TAKEOFF_ALT=1.5", "--param", "MPC_LAND_SPEED=1.5")
+        try:
+            v.wait_line(lambda s: s.startswith("ready"))
+            gcs.wait_heartbeat(timeout=20)
+            tgt = (gcs.target_system, gcs.target_component)
+
+            def command(cmd: int, *p: float) -> int:
+                gcs.mav.command_long_send(*tgt, cmd, 0, *p)
+                return _recv(gcs, "COMMAND_ACK", f"COMMAND_ACK.command=={cmd}").result
+
+            assert command(M.MAV_CMD_DO_SET_MODE, 29, 4, 5, 0, 0, 0, 0) == M.MAV_RESULT_DENIED  # RTL
+            assert "RTL" in _recv(gcs, "STATUSTEXT").text
+            assert command(M.MAV_CMD_DO_SET_MODE, 29, 4, 3, 0, 0, 0, 0) == M.MAV_RESULT_ACCEPTED
+            _recv(gcs, "HEARTBEAT", f"HEARTBEAT.custom_mode=={(4 << 16) | (3 << 24)}")
+            assert command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1, 0, 0, 0, 0, 0, 0) == M.MAV_RESULT_ACCEPTED
+            assert command(M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, math.nan, math.nan, 5.0) == M.MAV_RESULT_DENIED
+            nan = math.nan
+            assert command(M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, nan, nan, nan, nan) == M.MAV_RESULT_ACCEPTED
+            _recv(gcs, "STATUSTEXT", "'takeoff done' in STATUSTEXT.text", timeout=20)
+            pos = _recv(gcs, "LOCAL_POSITION_NED")
+            assert abs(-pos.z - 1.5) < 0.15 and math.hypot(pos.x, pos.y) < 0.1
+            hb = _recv(gcs, "HEARTBEAT")
+            assert mavutil.mode_string_v10(hb) == "LOITER" and hb.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED
+            # armed, OFFBOARD needs a controller sending targets (PX4's rule too)
+            assert command(M.MAV_CMD_DO_SET_MODE, 29, 6, 0, 0, 0, 0, 0) == M.MAV_RESULT_DENIED
+            assert "no controller" in _recv(gcs, "STATUSTEXT").text
+            gcs.mav.set_mode_send(tgt[0], 1, (4 << 16) | (6 << 24))  # SET_MODE LAND
+            assert _recv(gcs, "COMMAND_ACK", "COMMAND_ACK.command==176").result == M.MAV_RESULT_ACCEPTED
+            _recv(gcs, "STATUSTEXT", "'landed: disarmed' in STATUSTEXT.text", timeout=20)
+            hb = _recv(gcs, "HEARTBEAT")
+            assert mavutil.mode_string_v10(hb) == "LAND" and not hb.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED
+            assert hb.system_status == M.MAV_STATE_STANDBY  # a landing asked for, not a failsafe
+        finally:
+            assert v.stop() == 0
+            gcs.close()
+    for text in ("mode: HOLD (disarmed: armed in it next) [by 255:190", "armed: armed, HOLD [by 255:190",
+                 "mode: TAKEOFF to 1.5 m", "mode: HOLD: takeoff done", "mode: LAND at", "landed: disarmed"):
+        v.wait_line(lambda s, text=text: text in s)
+
+
+# -- whole flights --------------------------------------------------------------------------------
+CHANGES = [ParamChange(5.0, "COM_OF_LOSS_T", 0.3), ParamChange(10.0, "COM_OBL_ACT", 1)]
+
+
+def test_a_parameter_set_at_a_mission_time_is_reproducible_in_lockstep_and_matches_offline(tmp_path):
+    """``--param-at``: the controller sends PARAM_SET before the answer of its step, the vehicle makes
+    it before it flies that step, the offline loop at the start of it: twice the same trace.csv in
+    lockstep, and offline within 1e-4 m."""
+    runs = []
+    for i in range(2):
+        sitl("missions/sine.toml", out=tmp_path / f"r{i}", instance=None, link=BLACKOUT, param_at=CHANGES,
+             plots=False)
+        runs.append((tmp_path / f"r{i}" / "trace.csv").read_bytes())
+    assert runs[0] == runs[1]
+    s = json.loads((tmp_path / "r0" / "summary.json").read_text())
+    assert s["outcome"] == "failsafe" and "hold here" in s["ended_by"]["how"]
+    assert "0.304 s" in s["ended_by"]["how"]  # COM_OF_LOSS_T 0.3 from t = 5 s: the failsafe at 15.3 s
+    off = simulate("missions/sine.toml", link=BLACKOUT, param_at=CHANGES, plots=False)
+    lock = read_trace(tmp_path / "r0" / "trace.csv")
+    n = min(len(off.trace["t"]), len(lock["t"]))
+    err = max(float(np.max(np.abs(np.asarray(off.trace[c][:n]) - np.asarray(lock[c][:n])))) for c in "xyz")
+    assert err < 1e-4
+    assert all(p["ok"] for p in s["policies"])
+
+
+def test_a_ground_stations_hold_ends_a_lockstep_flight_named(tmp_path):
+    """During ``bsst sitl``, a ground station's DO_SET_MODE HOLD at t >= 3 s: the vehicle holds on its
+    own (a lockstep event says it leaves lockstep), the controller stops sending targets, the run is
+    ``aborted``, ended by that ground station, exit 1, and every policy holds."""
+    with instance_slot() as n:
+        gcs = _gcs(n)
+        out = tmp_path / "run"
+        s = subprocess.Popen([sys.executable, "-m", "bridge", "sitl", "missions/step.toml", "--instance", str(n),
+                              "--out", str(out), "--no-plots", "--speed", "2"], cwd=ROOT, env=ENV,
+                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        try:
+            gcs.wait_heartbeat(timeout=30)
+            _recv(gcs, "LOCAL_POSITION_NED", "LOCAL_POSITION_NED.time_boot_ms >= 3000", timeout=30)
+            gcs.mav.command_long_send(gcs.target_system, gcs.target_component, M.MAV_CMD_DO_SET_MODE, 0,
+                                      29, 4, 3, 0, 0, 0, 0)
+            assert _recv(gcs, "COMMAND_ACK", "COMMAND_ACK.command==176").result == M.MAV_RESULT_ACCEPTED
+            _, err = s.communicate(timeout=90)
+        finally:
+            if s.poll() is None:
+                s.kill()
+            gcs.close()
+    assert s.returncode == 1, err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["outcome"] == "aborted"
+    assert summary["ended_by"]["who"].startswith("255:190 127.0.0.1:") and "HOLD" in summary["ended_by"]["how"]
+    assert summary["lockstep"]["held"] is False and "HOLD set by a ground station" in summary["lockstep"]["why"]
+    assert all(p["ok"] for p in summary["policies"]), summary["policies"]
+    log = (out / "events.log").read_text()
+    assert "the vehicle was switched to HOLD: no more targets sent [controller]" in log
+
+
+@pytest.mark.parametrize("spec", PARAMS, ids=lambda s: s.name)
+def test_every_parameter_has_its_range_in_the_readme_and_the_ground_station_page(spec):
+    """A meta-test, as tests/test_link_keys.py for ``[link]``: the README's row names the parameter
+    and its range (or its choices), and so does docs/ground-station.md."""
+    def shown(v: float) -> str:
+        return f"{v:g}".replace("-", "−")
+
+    want = ([f"{shown(v)} {a}" for v, a in spec.choices.items()] if spec.choices
+            else [f"{shown(spec.lo)}–{shown(spec.hi)}"])
+    for page in ("README.md", "docs/ground-station.md"):
+        rows = [ln for ln in (ROOT / page).read_text().splitlines() if ln.startswith(f"| `{spec.name}` |")]
+        assert rows, f"{page} has no row for {spec.name}"
+        for w in want:
+            assert w.split()[0] in rows[0], f"{page}: {spec.name}'s row does not give {w!r}: {rows[0]}"
+
+
+def test_a_long_refusal_goes_out_whole_in_statustext_chunks():
+    """MAVLink 2's chunked STATUSTEXT: one id, chunk_seq 0.., a short last chunk (an empty one after an
+    exact multiple of 50), the text whole up to 200 characters; a short text is one plain message."""
+    from bridge.mavlink.telemetry import statustext
+
+    assert [(m.id, m.chunk_seq) for m in statustext(4, "short", 7)] == [(0, 0)]
+    why = "NAV_TAKEOFF: altitude 5 m AMSL is -483 m above home; must be 0.5..50 m above (home 488 m)"
+    msgs = statustext(4, why, 7)
+    assert [(m.id, m.chunk_seq) for m in msgs] == [(7, 0), (7, 1)]
+    assert b"".join(m.text if isinstance(m.text, bytes) else m.text.encode() for m in msgs) == why.encode()
+    assert [len(m.text) for m in statustext(4, "x" * 100, 3)] == [50, 50, 0]
+    assert len(statustext(4, "y" * 1000, 3)) == 5  # 200 characters at most, then the empty end
