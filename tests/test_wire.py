@@ -100,3 +100,16 @@ def test_actuator_round_trip(act, c):
 def test_step_time_key(k, rate):
     """time_usec carries the step exactly: both sides recompute t_k = k / rate."""
     assert step_of_usec(step_usec(k, rate), rate) == k
+
+
+def test_the_fast_state_over_wire_is_the_definition_to_the_bit():
+    """bridge.core.wire.state_over_wire (written out for speed) against its definition: state_to_odometry,
+    each field rounded to float32, odometry_to_state; bit for bit, over attitudes up to +-3 rad and yaw wraps."""
+    import random
+
+    from bridge.core.wire import state_over_wire, state_over_wire_reference
+
+    rng = random.Random(5)
+    for _ in range(20000):
+        X = tuple(rng.uniform(-3.0, 3.0) * (30.0 if j in (0, 2, 4) else 1.0) for j in range(12))
+        assert state_over_wire(X) == state_over_wire_reference(X), X

@@ -171,7 +171,59 @@ _FLOAT32_4 = struct.Struct("<4f")
 def state_over_wire(X: tuple[float, ...]) -> tuple[float, ...]:
     """The state as the controller reads it from ODOMETRY: through :func:`state_to_odometry`, each
     field rounded to float32 as MAVLink carries it, back through :func:`odometry_to_state` (psi
-    wrapped). The offline loop hands its law this, so that it flies what a lockstep flight flies."""
+    wrapped). The offline loop hands its law this, so that it flies what a lockstep flight flies.
+
+    The two functions written out in one (the same operations in the same order, so the same
+    floats to the bit, ``tests/test_wire.py``): it runs once per control step of every offline flight."""
+    x, vx, y, vy, z, vz, phi, dphi, th, dth, psi, dpsi = X
+    roll, pitch, yaw = phi, -th, wrap_pi(-psi)
+    cr, sr = cos(0.5 * roll), sin(0.5 * roll)
+    cp, sp = cos(0.5 * pitch), sin(0.5 * pitch)
+    cy, sy = cos(0.5 * yaw), sin(0.5 * yaw)
+    qw = cr * cp * cy + sr * sp * sy
+    qx = sr * cp * cy - cr * sp * sy
+    qy = cr * sp * cy + sr * cp * sy
+    qz = cr * cp * sy - sr * sp * cy
+    a, b, c = -qx, -qy, -qz  # rotate_inverse: the conjugate's rotation of the NED velocity
+    ux, uy, uz = vx, -vy, -vz
+    kx = b * uz - c * uy
+    ky = c * ux - a * uz
+    kz = a * uy - b * ux
+    sR, cR = sin(roll), cos(roll)
+    sP, cP = sin(pitch), cos(pitch)
+    dp, dy = -dth, -dpsi
+    f = _FLOAT32_13.unpack(_FLOAT32_13.pack(
+        x, -y, -z, qw, qx, qy, qz,
+        ux + 2.0 * (qw * kx + b * kz - c * ky), uy + 2.0 * (qw * ky + c * kx - a * kz),
+        uz + 2.0 * (qw * kz + a * ky - b * kx),
+        dphi - sP * dy, cR * dp + sR * cP * dy, -sR * dp + cR * cP * dy))
+    # odometry_to_state: normalise, rotate back, quaternion to Euler, body rates to Euler rates
+    w, qx, qy, qz = f[3], f[4], f[5], f[6]
+    n = sqrt(w * w + qx * qx + qy * qy + qz * qz)
+    w, qx, qy, qz = w / n, qx / n, qy / n, qz / n
+    ux, uy, uz = f[7], f[8], f[9]
+    kx = qy * uz - qz * uy
+    ky = qz * ux - qx * uz
+    kz = qx * uy - qy * ux
+    v0 = ux + 2.0 * (w * kx + qy * kz - qz * ky)
+    v1 = uy + 2.0 * (w * ky + qz * kx - qx * kz)
+    v2 = uz + 2.0 * (w * kz + qx * ky - qy * kx)
+    nn = w * w + qx * qx + qy * qy + qz * qz
+    s = 2.0 * (w * qy - qz * qx) / nn
+    s = 1.0 if s > 1.0 else -1.0 if s < -1.0 else s
+    roll = atan2(2.0 * (w * qx + qy * qz), nn - 2.0 * (qx * qx + qy * qy))
+    pitch = asin(s)
+    yaw = atan2(2.0 * (w * qz + qx * qy), nn - 2.0 * (qy * qy + qz * qz))
+    sR, cR = sin(roll), cos(roll)
+    p, q, r = f[10], f[11], f[12]
+    k = q * sR + r * cR
+    return (f[0], v0, -f[1], -v1, -f[2], -v2,
+            roll, p + k * tan(pitch), -pitch, -(q * cR - r * sR), wrap_pi(-yaw), -(k / cos(pitch)))
+
+
+def state_over_wire_reference(X: tuple[float, ...]) -> tuple[float, ...]:
+    """:func:`state_over_wire` by its definition (the two functions and a float32 pack between): the
+    reference ``tests/test_wire.py`` holds the fast one to."""
     pos, q, vel, rates = state_to_odometry(X)
     f = _FLOAT32_13.unpack(_FLOAT32_13.pack(*pos, *q, *vel, *rates))
     return odometry_to_state(f[0:3], f[3:7], f[7:10], f[10:13])
