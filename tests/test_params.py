@@ -45,6 +45,7 @@ from bridge.mavlink.modes import (
 )
 from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
+from missions import Mission, Sine
 from params import ConfigError
 from tests.sitlkit import ENV, ROOT, Proc
 
@@ -253,23 +254,25 @@ def test_modes_takeoff_hold_land_over_udp(tmp_path):
 
 
 # -- whole flights --------------------------------------------------------------------------------
-CHANGES = [ParamChange(5.0, "COM_OF_LOSS_T", 0.3), ParamChange(10.0, "COM_OBL_ACT", 1)]
+CHANGES = [ParamChange(2.0, "COM_OF_LOSS_T", 0.3), ParamChange(4.0, "COM_OBL_ACT", 1),
+           ParamChange(4.0, "COM_FAIL_ACT_T", 1.0), ParamChange(4.0, "MPC_LAND_SPEED", 2.0)]
+SHORT = Mission(Sine(), duration_s=9.0, name="short")
+EARLY_BLACKOUT = {"blackouts": [[6.0, 2.0]]}
 
 
 def test_a_parameter_set_at_a_mission_time_is_reproducible_in_lockstep_and_matches_offline(tmp_path):
     """``--param-at``: the controller sends PARAM_SET before the answer of its step, the vehicle makes
     it before it flies that step, the offline loop at the start of it: twice the same trace.csv in
-    lockstep, and offline within 1e-4 m."""
+    lockstep, and offline within 1e-4 m (the same, bit for bit: the offline loop flies the float32 wire)."""
     runs = []
     for i in range(2):
-        sitl("missions/sine.toml", out=tmp_path / f"r{i}", instance=None, link=BLACKOUT, param_at=CHANGES,
-             plots=False)
+        sitl(SHORT, out=tmp_path / f"r{i}", instance=None, link=EARLY_BLACKOUT, param_at=CHANGES, plots=False)
         runs.append((tmp_path / f"r{i}" / "trace.csv").read_bytes())
     assert runs[0] == runs[1]
     s = json.loads((tmp_path / "r0" / "summary.json").read_text())
     assert s["outcome"] == "failsafe" and "hold here" in s["ended_by"]["how"]
-    assert "0.304 s" in s["ended_by"]["how"]  # COM_OF_LOSS_T 0.3 from t = 5 s: the failsafe at 15.3 s
-    off = simulate("missions/sine.toml", link=BLACKOUT, param_at=CHANGES, plots=False)
+    assert "0.304 s" in s["ended_by"]["how"]  # COM_OF_LOSS_T 0.3 from t = 2 s: the failsafe at 6.3 s
+    off = simulate(SHORT, link=EARLY_BLACKOUT, param_at=CHANGES, plots=False)
     lock = read_trace(tmp_path / "r0" / "trace.csv")
     n = min(len(off.trace["t"]), len(lock["t"]))
     err = max(float(np.max(np.abs(np.asarray(off.trace[c][:n]) - np.asarray(lock[c][:n])))) for c in "xyz")

@@ -444,7 +444,9 @@ class Session:
                     if ctl.done and "reason=" in ctl.done:  # a controller that gave up says why
                         reason = ctl.done.split("reason=", 1)[1]
                         sys.stderr.write(("\n" if self.live else "") + f"bsst sitl: controller: {reason}\n")
-                    if self._controller_completed() or not self.vehicle_armed:
+                    taken = ctl.done is not None and "reason=the vehicle was switched to " in ctl.done
+                    if self._controller_completed() or not self.vehicle_armed or taken:
+                        # taken: a ground station flies it now (HOLD, LAND, ...): nothing of the mission to wait for
                         if ctl.proc.returncode not in (0, 1):
                             self._died(ctl)
                         return
