@@ -27,6 +27,7 @@ from numba import njit
 from controller.gains import Gains
 from controller.nominal import Coefficients, Nominal
 from controller.power import SignedPower
+from plant.batch import net_rotor_speed
 
 BACKSTEPPING = ("bsst", "smc")  # the laws of controller.bsst (super-twisting or sign reaching)
 BATCH_LAWS = (*BACKSTEPPING, "pid")
@@ -486,10 +487,4 @@ def _wrench(u: np.ndarray, lo: np.ndarray, u_max: np.ndarray, b: float, d: float
             c[i, j] = r / u_max[i]
             sat[i, j] = r != u[i, j]
         r0, r1, r2, r3 = real[0, j], real[1, j], real[2, j], real[3, j]
-        s24 = 0.5 * (r0 / b + r3 / d)
-        s13 = 0.5 * (r0 / b - r3 / d)
-        w0 = math.sqrt(max(0.5 * (s13 - r2 / b), 0.0))
-        w1 = math.sqrt(max(0.5 * (s24 - r1 / b), 0.0))
-        w2 = math.sqrt(max(0.5 * (s13 + r2 / b), 0.0))
-        w3 = math.sqrt(max(0.5 * (s24 + r1 / b), 0.0))
-        omega_d[j] = w1 + w3 - w0 - w2
+        omega_d[j] = net_rotor_speed(r0, r1, r2, r3, b, d)

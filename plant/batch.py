@@ -164,6 +164,19 @@ _MASS, _G, _LX, _LY, _LZ, _JRX, _JRY, _I1, _I2, _I3, _KV, _KW, _DT, _IXX, _IYY, 
     0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 13, 16, 17, 18, 19)
 
 
+@njit(cache=True)
+def net_rotor_speed(u0: float, u1: float, u2: float, u3: float, b: float, d: float) -> float:
+    """The rotors' net speed w2 + w4 - w1 - w3 (rad/s, the gyroscopic term of eq. 6) of the wrench
+    (u1..u4, N and N m) through the inverse of eq. 5 (thrust factor b, drag factor d), squares clipped at 0."""
+    s24 = 0.5 * (u0 / b + u3 / d)
+    s13 = 0.5 * (u0 / b - u3 / d)
+    w0 = math.sqrt(max(0.5 * (s13 - u2 / b), 0.0))
+    w1 = math.sqrt(max(0.5 * (s24 - u1 / b), 0.0))
+    w2 = math.sqrt(max(0.5 * (s13 + u2 / b), 0.0))
+    w3 = math.sqrt(max(0.5 * (s24 + u1 / b), 0.0))
+    return w1 + w3 - w0 - w2
+
+
 @njit(cache=True, inline="always")
 def _turned(c0: float, s0: float, angle0: float, d: float) -> tuple[float, float]:
     """(cos, sin) of angle0 + d from those of angle0 (c0, s0): angle addition with the Taylor series of d
@@ -272,11 +285,5 @@ def _held_wrench(c: np.ndarray, c_lo: np.ndarray, u_max: np.ndarray, b: float, d
         u1 = min(max(c[1, j], c_lo[1]), 1.0) * u_max[1]
         u2 = min(max(c[2, j], c_lo[2]), 1.0) * u_max[2]
         u3 = min(max(c[3, j], c_lo[3]), 1.0) * u_max[3]
-        s24 = 0.5 * (u0 / b + u3 / d)
-        s13 = 0.5 * (u0 / b - u3 / d)
-        w0 = math.sqrt(max(0.5 * (s13 - u2 / b), 0.0))
-        w1 = math.sqrt(max(0.5 * (s24 - u1 / b), 0.0))
-        w2 = math.sqrt(max(0.5 * (s13 + u2 / b), 0.0))
-        w3 = math.sqrt(max(0.5 * (s24 + u1 / b), 0.0))
         out[0, j], out[1, j], out[2, j], out[3, j] = u0, u1, u2, u3
-        out[4, j] = w1 + w3 - w0 - w2
+        out[4, j] = net_rotor_speed(u0, u1, u2, u3, b, d)
