@@ -257,14 +257,20 @@ def imu_mean(X0: State, X1: State, dt: float, gravity: float) -> tuple[float, ..
     """(fx, fy, fz, p, q, r): the true mean specific force and body rate over an interval dt
     between the states X0 and X1, by the midpoint rule (second order in dt): the attitude and the
     Euler rates half-way are the means of the ends' angles and their differences over dt."""
+    # body_rates and rotation written out, sharing their sines (the same operations in the same order, so
+    # the same floats to the bit): it runs at every IMU sample
     phi, theta, psi = 0.5 * (X0[6] + X1[6]), 0.5 * (X0[8] + X1[8]), 0.5 * (X0[10] + X1[10])
-    p, q, r = body_rates(phi, theta, (X1[6] - X0[6]) / dt, (X1[8] - X0[8]) / dt, (X1[10] - X0[10]) / dt)
-    M = rotation(phi, theta, psi)
+    dphi, dtheta, dpsi = (X1[6] - X0[6]) / dt, (X1[8] - X0[8]) / dt, (X1[10] - X0[10]) / dt
+    cf, sf, ct, st = math.cos(phi), math.sin(phi), math.cos(theta), math.sin(theta)
+    cp, sp = math.cos(psi), math.sin(psi)
     ax = (X1[1] - X0[1]) / dt
     ay = (X1[3] - X0[3]) / dt
     az = (X1[5] - X0[5]) / dt + gravity
-    return (M[0] * ax + M[3] * ay + M[6] * az, M[1] * ax + M[4] * ay + M[7] * az,
-            M[2] * ax + M[5] * ay + M[8] * az, p, q, r)
+    # R's columns: (cp ct, sp ct, -st), (cp st sf - sp cf, sp st sf + cp cf, ct sf), (cp st cf + sp sf, ...)
+    return ((cp * ct) * ax + (sp * ct) * ay + (-st) * az,
+            (cp * st * sf - sp * cf) * ax + (sp * st * sf + cp * cf) * ay + (ct * sf) * az,
+            (cp * st * cf + sp * sf) * ax + (sp * st * cf - cp * sf) * ay + (ct * cf) * az,
+            dphi - dpsi * st, dtheta * cf + dpsi * sf * ct, -dtheta * sf + dpsi * cf * ct)
 
 
 # -- noise and schedules ---------------------------------------------------------------------
@@ -321,14 +327,16 @@ class SensorSuite:
     """All sensors of one set, sampled once per physics step (see the module docstring).
 
     ``sample(t, state)`` returns what arrives at t: the IMU's sample first (no latency), then
-    the others in order of arrival. The first call only starts the IMU's first interval.
+    the others in order of arrival. The first call only starts the IMU's first interval. While
+    ``t + eps < next_event`` nothing is due and ``sample`` returns [] at once (a caller at every
+    physics step may test it first and skip the call: most steps bring nothing).
     """
 
     def __init__(self, config: SensorConfig, seed: int, physics_hz: float, gravity: float = 9.81) -> None:
         self.config = config
         c = config
         self.gravity = gravity
-        self._eps = 0.25 / physics_hz
+        self.eps = 0.25 / physics_hz  # s: a quarter physics step, the rounding a caller's t accumulates
         self._imu = _Schedule(c.imu_rate_hz, physics_hz)
         self._pos = _Schedule(c.position_rate_hz, physics_hz)
         self._baro = _Schedule(c.baro_rate_hz, physics_hz)
@@ -346,7 +354,7 @@ class SensorSuite:
         self.gyro_bias = [0.0, 0.0, 0.0]
         self._last: tuple[float, State] | None = None  # (t, true state) at the last IMU sample
         self._pending: deque[Measurement] = deque()  # latent position fixes, in order of arrival
-        self._next_event = -math.inf  # nothing to do before this time (s)
+        self.next_event = -math.inf  # nothing to do before this time (s), give or take eps
         self._latest: dict[str, Measurement] = {}  # kind -> the newest released (what a ground station is shown)
         if self._gnss:
             h, z, vh, vz = c.position_noise_m, c.position_noise_z_m, c.velocity_noise_mps, c.velocity_noise_z_mps
@@ -357,13 +365,13 @@ class SensorSuite:
 
     def sample(self, t: float, state: State) -> list[Measurement]:
         """The measurements that arrive at time t (s), given the true state at t."""
-        if t + self._eps < self._next_event:
+        if t + self.eps < self.next_event:
             return []
         out = self._sample(t, state)
         for m in out:
             self._latest[m.kind] = m
         nxt = min(self._imu.next_due, self._pos.next_due, self._baro.next_due, self._heading.next_due)
-        self._next_event = min(nxt, self._pending[0].t_arrival) if self._pending else nxt
+        self.next_event = min(nxt, self._pending[0].t_arrival) if self._pending else nxt
         return out
 
     def latest(self, kind: str) -> Measurement | None:
@@ -373,21 +381,22 @@ class SensorSuite:
 
     def _sample(self, t: float, state: State) -> list[Measurement]:
         out: list[Measurement] = []
-        if self._imu.due(t):
+        te = t + self.eps  # each schedule's own test first (its eps is this one): no call while it is not due
+        if te >= self._imu.next_due and self._imu.due(t):
             m = self._sample_imu(t, state)
             if m is not None:
                 out.append(m)
-        if self._pos.due(t):
+        if te >= self._pos.next_due and self._pos.due(t):
             self._pending.append(self._sample_position(t, state))
         pending = self._pending
-        while pending and pending[0].t_arrival <= t + self._eps:
+        while pending and pending[0].t_arrival <= te:
             out.append(pending.popleft())
         c = self.config
-        if self._baro.due(t):
+        if te >= self._baro.next_due and self._baro.due(t):
             s = c.baro_noise_m
             z = state[4] + (s * self._n_baro.next()[0] if s else 0.0)
             out.append(Measurement(BARO, t, t, (z,), (s,)))
-        if self._heading.due(t):
+        if te >= self._heading.next_due and self._heading.due(t):
             s = c.heading_noise_rad
             psi = wrap_angle(state[10] + (s * self._n_heading.next()[0] if s else 0.0))
             out.append(Measurement(HEADING, t, t, (psi,), (s,)))

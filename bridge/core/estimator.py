@@ -175,8 +175,20 @@ def estimation_error(truth: State, est: State) -> tuple[float, ...]:
 def nees(truth: State, est: State, cov: Covariance) -> float:
     """Normalised estimation error squared over position, velocity and attitude (9 degrees of
     freedom: χ²(9) if the covariance is right); NaN if the covariance is unknown or singular."""
+    return _nees_of(truth, est, np.array(cov.state).reshape(9, 9))
+
+
+def estimator_nees(estimator: Estimator, truth: State, est: State) -> float:
+    """:func:`nees` of ``est`` against ``estimator``'s covariance now (the EKF's 9×9 straight from its P,
+    without the :class:`Covariance` tuples between: the same floats, a control step's worth less work)."""
+    if isinstance(estimator, Ekf):
+        return _nees_of(truth, est, estimator.state_covariance())
+    return nees(truth, est, estimator.covariance())
+
+
+def _nees_of(truth: State, est: State, C: np.ndarray) -> float:
+    """:func:`nees` with the state covariance as a 9×9 array."""
     e = np.array(estimation_error(truth, est))
-    C = np.array(cov.state).reshape(9, 9)
     if not np.isfinite(C).all():
         return NAN
     try:
@@ -378,10 +390,16 @@ class Ekf:
     def _euler_now(self) -> tuple[float, float, float]:
         """(φ, θ, ψ) of R̂, ψ continuous; kept until R̂ changes (read at every IMU sample and control step)."""
         e = self._euler
-        if e is None:
-            phi, theta, psi = euler(self._R)
-            self._psi = _unwrap(psi, self._psi)
-            e = self._euler = (phi, theta, self._psi)
+        if e is None:  # plant.sensors.euler and _unwrap written out (the same operations): once per IMU sample
+            R = self._R
+            s = -R[6]
+            theta = math.asin(1.0 if s > 1.0 else -1.0 if s < -1.0 else s)
+            previous = self._psi
+            w = math.fmod(math.atan2(R[3], R[0]) - previous + math.pi, 2.0 * math.pi)
+            if w <= 0.0:
+                w += 2.0 * math.pi
+            self._psi = previous + (w - math.pi)
+            e = self._euler = (math.atan2(R[7], R[8]), theta, self._psi)
         return e
 
     def _remember(self) -> None:
@@ -418,7 +436,10 @@ class Ekf:
 
     def estimate(self, t: float) -> State:
         phi, theta, psi = self._euler_now()
-        dphi, dtheta, dpsi = euler_rates(phi, theta, *self._omega)
+        wp, wq, wr = self._omega  # plant.sensors.euler_rates written out (the same operations): every control step
+        cf, sf = math.cos(phi), math.sin(phi)
+        w = wq * sf + wr * cf
+        dphi, dtheta, dpsi = wp + w * math.tan(theta), wq * cf - wr * sf, w / math.cos(theta)
         dt = t - self._t
         p, v = self._p, self._v
         if dt > 0.0:
@@ -427,13 +448,20 @@ class Ekf:
                     v[2] + a[2] * dt, phi + dphi * dt, dphi, theta + dtheta * dt, dtheta, psi + dpsi * dt, dpsi)
         return (p[0], v[0], p[1], v[1], p[2], v[2], phi, dphi, theta, dtheta, psi, dpsi)
 
-    def covariance(self) -> Covariance:
-        P = self._current_P()
+    def state_covariance(self, P: np.ndarray | None = None) -> np.ndarray:
+        """:attr:`Covariance.state` as a 9×9 array (of ``P``, the covariance carried to now if None)."""
+        if P is None:
+            P = self._current_P()
         # J P Jᵀ with J = diag(I₆, E⁻¹) on (δp, δv, δθ): only the attitude's rows and columns change
         Ja = _euler_jacobian(*self._euler_now())
         state = P[:9, :9].copy()
         state[6:9] = np.dot(Ja, state[6:9])
         state[:, 6:9] = np.dot(state[:, 6:9], Ja.T)
+        return state
+
+    def covariance(self) -> Covariance:
+        P = self._current_P()
+        state = self.state_covariance(P)
         g = self._gyro_var
         (b00, b01, b02), (b10, b11, b12), (b20, b21, b22) = P[9:12, 9:12].tolist()
         rates = (b00 + g, b01, b02, b10, b11 + g, b12, b20, b21, b22 + g)
@@ -460,7 +488,17 @@ class Ekf:
         bg, ba = self._bg, self._ba
         wx, wy, wz = fm[3] - bg[0], fm[4] - bg[1], fm[5] - bg[2]
         fx, fy, fz = fm[0] - ba[0], fm[1] - ba[1], fm[2] - ba[2]
-        h0, h1, h2, h3, h4, h5, h6, h7, h8 = rotation_of(0.5 * wx * T, 0.5 * wy * T, 0.5 * wz * T)
+        # Exp(ωT/2): plant.sensors.rotation_of written out (the same operations), once per IMU sample
+        v0, v1, v2 = 0.5 * wx * T, 0.5 * wy * T, 0.5 * wz * T
+        a2 = v0 * v0 + v1 * v1 + v2 * v2
+        if a2 < 1e-12:
+            s, c = 1.0 - a2 / 6.0, 0.5 - a2 / 24.0  # sin(a)/a, (1 - cos a)/a^2
+        else:
+            a = math.sqrt(a2)
+            s, c = math.sin(a) / a, (1.0 - math.cos(a)) / a2
+        h0, h1, h2 = 1.0 - c * (v1 * v1 + v2 * v2), c * v0 * v1 - s * v2, c * v0 * v2 + s * v1
+        h3, h4, h5 = c * v0 * v1 + s * v2, 1.0 - c * (v0 * v0 + v2 * v2), c * v1 * v2 - s * v0
+        h6, h7, h8 = c * v0 * v2 - s * v1, c * v1 * v2 + s * v0, 1.0 - c * (v0 * v0 + v1 * v1)
         r0, r1, r2, r3, r4, r5, r6, r7, r8 = self._R
         # M = R·Exp(ωT/2) and R ← M·Exp(ωT/2), written out (plant.sensors.matmul, without its call and indexing)
         m0, m1, m2 = r0 * h0 + r1 * h3 + r2 * h6, r0 * h1 + r1 * h4 + r2 * h7, r0 * h2 + r1 * h5 + r2 * h8
@@ -520,8 +558,9 @@ class Ekf:
         ax, ay, az = af
         Sk = (0.0, -az, ay, az, 0.0, -ax, -ay, ax, 0.0)
         Phi = self._Phi
+        # the entries in _PHI_INDEX's order, gathered in Python (a numpy take less)
         # np.dot, not @: a third less call overhead on arrays this small
-        Phi.put(_PHI_INDEX, np.array(Sk + M + matmul(Sk, M) + (1.0,)).take(_PHI_SOURCE) * self._phi_coef)
+        Phi.put(_PHI_INDEX, np.array(Sk + M + M + Sk + M + matmul(Sk, M) + _ONES3) * self._phi_coef)
         P = np.dot(np.dot(Phi, self.P), Phi.T)
         P += self._Q
         return P
@@ -722,13 +761,12 @@ def _block(r0: int, c0: int) -> list[int]:
     return [15 * (r0 + i) + c0 + j for i in range(3) for j in range(3)]
 
 
-# Φ's entries other than its unit diagonal (flat indices) and where each comes from in (Sk, M, Sk·M, 1),
+# Φ's entries other than its unit diagonal (flat indices), each from one of (Sk, M, Sk·M, 1),
 # Sk = [M f]x: -T Sk at (v, θ), -T M at (v, b_a) and (θ, b_g), -T²/2 Sk at (p, θ), -T²/2 M at (p, b_a),
 # T²/2 Sk M at (v, b_g), T at (p, v) (its diagonal)
 _PHI_INDEX = np.array(_block(3, 6) + _block(3, 12) + _block(6, 9) + _block(0, 6) + _block(0, 12) + _block(3, 9)
                       + [15 * i + 3 + i for i in range(3)])
-_PHI_SOURCE = np.array(list(range(0, 9)) + list(range(9, 18)) * 2 + list(range(0, 9)) + list(range(9, 18))
-                       + list(range(18, 27)) + [27] * 3)
+_ONES3 = (1.0, 1.0, 1.0)  # T at (p, v): _carried gathers (Sk, M, M, Sk, M, Sk·M, 1, 1, 1), _PHI_INDEX's order
 
 
 def make_estimator(kind: str, config: SensorConfig, start: State, gravity: float,
