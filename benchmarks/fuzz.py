@@ -49,6 +49,7 @@ from bridge.mavlink.modes import (  # noqa: E402
     PARAM_TYPES,
     ftp_nak,
     param_from_wire,
+    param_name,
     requested_custom_mode,
     requested_mode,
 )
@@ -107,7 +108,7 @@ def mode_or_param_changing(m: Any, sysid: int) -> bool:
     if kind == "SET_MODE":
         return requested_custom_mode(m.base_mode, m.custom_mode)[0] is not None
     if kind == "PARAM_SET":
-        name = m.param_id.rstrip("\x00") if isinstance(m.param_id, str) else m.param_id.decode(errors="replace")
+        name = param_name(m)
         spec = BY_NAME.get(name)
         if spec is None or m.param_type != PARAM_TYPES[spec.kind]:
             return False

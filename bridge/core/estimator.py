@@ -390,16 +390,10 @@ class Ekf:
     def _euler_now(self) -> tuple[float, float, float]:
         """(φ, θ, ψ) of R̂, ψ continuous; kept until R̂ changes (read at every IMU sample and control step)."""
         e = self._euler
-        if e is None:  # plant.sensors.euler and _unwrap written out (the same operations): once per IMU sample
-            R = self._R
-            s = -R[6]
-            theta = math.asin(1.0 if s > 1.0 else -1.0 if s < -1.0 else s)
-            previous = self._psi
-            w = math.fmod(math.atan2(R[3], R[0]) - previous + math.pi, 2.0 * math.pi)
-            if w <= 0.0:
-                w += 2.0 * math.pi
-            self._psi = previous + (w - math.pi)
-            e = self._euler = (math.atan2(R[7], R[8]), theta, self._psi)
+        if e is None:
+            phi, theta, psi = euler(self._R)
+            self._psi = _unwrap(psi, self._psi)
+            e = self._euler = (phi, theta, self._psi)
         return e
 
     def _remember(self) -> None:
@@ -436,10 +430,7 @@ class Ekf:
 
     def estimate(self, t: float) -> State:
         phi, theta, psi = self._euler_now()
-        wp, wq, wr = self._omega  # plant.sensors.euler_rates written out (the same operations): every control step
-        cf, sf = math.cos(phi), math.sin(phi)
-        w = wq * sf + wr * cf
-        dphi, dtheta, dpsi = wp + w * math.tan(theta), wq * cf - wr * sf, w / math.cos(theta)
+        dphi, dtheta, dpsi = euler_rates(phi, theta, *self._omega)
         dt = t - self._t
         p, v = self._p, self._v
         if dt > 0.0:
@@ -488,23 +479,9 @@ class Ekf:
         bg, ba = self._bg, self._ba
         wx, wy, wz = fm[3] - bg[0], fm[4] - bg[1], fm[5] - bg[2]
         fx, fy, fz = fm[0] - ba[0], fm[1] - ba[1], fm[2] - ba[2]
-        # Exp(ωT/2): plant.sensors.rotation_of written out (the same operations), once per IMU sample
-        v0, v1, v2 = 0.5 * wx * T, 0.5 * wy * T, 0.5 * wz * T
-        a2 = v0 * v0 + v1 * v1 + v2 * v2
-        if a2 < 1e-12:
-            s, c = 1.0 - a2 / 6.0, 0.5 - a2 / 24.0  # sin(a)/a, (1 - cos a)/a^2
-        else:
-            a = math.sqrt(a2)
-            s, c = math.sin(a) / a, (1.0 - math.cos(a)) / a2
-        h0, h1, h2 = 1.0 - c * (v1 * v1 + v2 * v2), c * v0 * v1 - s * v2, c * v0 * v2 + s * v1
-        h3, h4, h5 = c * v0 * v1 + s * v2, 1.0 - c * (v0 * v0 + v2 * v2), c * v1 * v2 - s * v0
-        h6, h7, h8 = c * v0 * v2 - s * v1, c * v1 * v2 + s * v0, 1.0 - c * (v0 * v0 + v1 * v1)
-        r0, r1, r2, r3, r4, r5, r6, r7, r8 = self._R
-        # M = R·Exp(ωT/2) and R ← M·Exp(ωT/2), written out (plant.sensors.matmul, without its call and indexing)
-        m0, m1, m2 = r0 * h0 + r1 * h3 + r2 * h6, r0 * h1 + r1 * h4 + r2 * h7, r0 * h2 + r1 * h5 + r2 * h8
-        m3, m4, m5 = r3 * h0 + r4 * h3 + r5 * h6, r3 * h1 + r4 * h4 + r5 * h7, r3 * h2 + r4 * h5 + r5 * h8
-        m6, m7, m8 = r6 * h0 + r7 * h3 + r8 * h6, r6 * h1 + r7 * h4 + r8 * h7, r6 * h2 + r7 * h5 + r8 * h8
-        M = (m0, m1, m2, m3, m4, m5, m6, m7, m8)
+        H = rotation_of(0.5 * wx * T, 0.5 * wy * T, 0.5 * wz * T)  # Exp(ωT/2)
+        M = matmul(self._R, H)  # the attitude at mid-interval
+        m0, m1, m2, m3, m4, m5, m6, m7, m8 = M
         afx = m0 * fx + m1 * fy + m2 * fz
         afy = m3 * fx + m4 * fy + m5 * fz
         afz = m6 * fx + m7 * fy + m8 * fz
@@ -517,9 +494,7 @@ class Ekf:
         v[0] += ax * T
         v[1] += ay * T
         v[2] += az * T
-        self._R = (m0 * h0 + m1 * h3 + m2 * h6, m0 * h1 + m1 * h4 + m2 * h7, m0 * h2 + m1 * h5 + m2 * h8,
-                   m3 * h0 + m4 * h3 + m5 * h6, m3 * h1 + m4 * h4 + m5 * h7, m3 * h2 + m4 * h5 + m5 * h8,
-                   m6 * h0 + m7 * h3 + m8 * h6, m6 * h1 + m7 * h4 + m8 * h7, m6 * h2 + m7 * h5 + m8 * h8)
+        self._R = matmul(M, H)
         self._euler = None
         self._t = m.t_valid
         self._omega = (wx, wy, wz)

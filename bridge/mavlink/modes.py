@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 import struct
+from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
@@ -106,6 +107,11 @@ def shown_name(custom: int) -> str:
     code = (main_mode(custom), (custom >> 24) & 0xFF if main_mode(custom) == MAIN_AUTO else 0)
     mode = _BY_CODE.get(code)
     return mode_name(mode) if mode else _PX4_NAMES.get(code, f"main {code[0]} sub {code[1]}")
+
+
+def param_name(m: Any) -> str:
+    """The parameter a PARAM_REQUEST_READ or PARAM_SET names (its ``param_id``, NULs stripped)."""
+    return m.param_id.rstrip("\x00") if isinstance(m.param_id, str) else m.param_id.decode(errors="replace")
 
 
 def param_to_wire(value: float, kind: int) -> float:

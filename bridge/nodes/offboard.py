@@ -79,7 +79,7 @@ from bridge.core.clock import FixedRate
 from bridge.core.flight import Flight
 from bridge.core.link import LinkImpairment
 from bridge.core.linkends import ControllerEnd
-from bridge.core.params import BY_NAME
+from bridge.core.params import BY_NAME, ParamChange
 from bridge.core.wire import command_to_wire, odometry_to_state, step_of_usec
 from bridge.mavlink.endpoint import (
     CONTROLLER_COMPID,
@@ -553,7 +553,7 @@ class Offboard:
                                                           mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1.0, 0.0,
                                                           0, 0, 0, 0, 0))
 
-    def _send_param(self, change: Any) -> None:
+    def _send_param(self, change: ParamChange) -> None:
         """A scheduled parameter change (``--param-at``): PARAM_SET before this step's answer, so
         that in lockstep the vehicle makes it before it flies the step (the same step as offline)."""
         kind = PARAM_TYPES[BY_NAME[change.name].kind]

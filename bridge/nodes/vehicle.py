@@ -101,6 +101,7 @@ from bridge.mavlink.modes import (
     heartbeat_mode,
     mode_name,
     param_from_wire,
+    param_name,
     param_to_wire,
     requested_custom_mode,
     requested_mode,
@@ -761,7 +762,7 @@ class Vehicle:
         cfg = self.cfg
         if ep is not self.link or not self._from_controller(m):
             return self._reject("sender")
-        self._target_wall = time.monotonic()  # the controller streams (whether or not this one is taken)
+        now = self._target_wall = time.monotonic()  # the controller streams (whether or not this one is taken)
         if kind == "HIL_ACTUATOR_CONTROLS":
             if not m.mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED:
                 return self._no_target(m)
@@ -783,7 +784,6 @@ class Vehicle:
         if why:
             return self._reject(why)
         key = step_of_usec(m.time_usec, self.rate)
-        now = time.monotonic()
         if not self.freerun:
             if key != self.k:
                 return self._reject("stale" if key < self.k else "future")
@@ -979,7 +979,7 @@ class Vehicle:
             params = self._params()
             ep.reply(tuple(self._param_value(i, params) for i in range(len(PARAMS))), addr)
             return None
-        name = m.param_id.rstrip("\x00") if isinstance(m.param_id, str) else m.param_id.decode(errors="replace")
+        name = param_name(m)
         if kind == "PARAM_REQUEST_READ":
             index = m.param_index if m.param_index >= 0 else next(
                 (i for i, p in enumerate(PARAMS) if p.name == name), -1)
