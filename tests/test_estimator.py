@@ -33,7 +33,7 @@ from bridge.core.estimator import (
 )
 from bridge.core.flight import prepare
 from bridge.sweep.cells import ripple_rms
-from plant.sensors import IDEAL, Measurement, SensorConfig, SensorSuite
+from plant.sensors import IDEAL, Measurement, SensorConfig, SensorSuite, rotation
 
 SINE = "missions/sine.toml"
 
@@ -253,3 +253,85 @@ def test_covariance_blocks_and_nees() -> None:
     assert estimation_error(truth, (0.0,) * 12)[0] == 0.01
     unknown = Covariance((math.nan,) * 81, (math.nan,) * 9)
     assert math.isnan(nees(truth, truth, unknown))
+
+
+# -- the compiled arithmetic (bridge/core/ekfkernels.py) against numpy written from the docstrings ---------
+
+def test_weighted_square_is_the_quadratic_form_and_nan_unless_positive_definite() -> None:
+    from bridge.core import ekfkernels
+    from bridge.core.cholesky import weighted_square
+
+    rng = np.random.default_rng(3)
+    for n in (1, 3, 9):
+        A = rng.standard_normal((n, n))
+        C = A @ A.T + 0.1 * np.eye(n)
+        e = rng.standard_normal(n)
+        want = float(e @ np.linalg.solve(C, e))
+        assert weighted_square(tuple(C.ravel()), tuple(e)) == pytest.approx(want, rel=1e-12)
+        assert ekfkernels._weighted_square(C.ravel(), e) == pytest.approx(want, rel=1e-12)
+    e3 = (1.0, 2.0, 3.0)
+    for bad in (np.diag([1.0, -1.0, 1.0]), np.zeros((3, 3)), np.diag([1.0, math.nan, 1.0]),
+                np.diag([1.0, math.inf, 1.0])):
+        assert math.isnan(weighted_square(tuple(bad.ravel()), e3))
+        assert math.isnan(ekfkernels._weighted_square(bad.ravel(), np.array(e3)))
+
+
+def test_the_compiled_covariance_step_is_phi_p_phi_transpose_plus_q() -> None:
+    """carry() builds Φ = I + A from its blocks sparsely; here Φ and Q are written densely from the
+    module docstring and multiplied by numpy."""
+    from bridge.core import ekfkernels as k
+
+    rng = np.random.default_rng(5)
+    x = np.zeros(k.X_SIZE)
+    M = rotation(0.2, -0.1, 0.7)
+    x[k.X_M:k.X_M + 9] = M
+    af = (0.3, -0.2, 9.6)
+    x[k.X_AF:k.X_AF + 3] = af
+    c = np.zeros(k.C_SIZE)
+    c[k.C_NA2], c[k.C_NG2], c[k.C_WA2], c[k.C_WG2] = 4e-4, 1e-6, 1e-8, 1e-10
+    A0 = rng.standard_normal((15, 15))
+    P = A0 @ A0.T
+    T = 0.004
+    out = np.empty((15, 15))
+    k.carry(x, c, P, T, out)
+    Mm = np.array(M).reshape(3, 3)
+    Sk = np.array([[0.0, -af[2], af[1]], [af[2], 0.0, -af[0]], [-af[1], af[0], 0.0]])
+    Phi = np.eye(15)
+    Phi[0:3, 3:6] = T * np.eye(3)
+    Phi[0:3, 6:9] = -0.5 * T * T * Sk
+    Phi[0:3, 12:15] = -0.5 * T * T * Mm
+    Phi[3:6, 6:9] = -T * Sk
+    Phi[3:6, 9:12] = 0.5 * T * T * Sk @ Mm
+    Phi[3:6, 12:15] = -T * Mm
+    Phi[6:9, 9:12] = -T * Mm
+    na2, ng2, wa2, wg2 = 4e-4, 1e-6, 1e-8, 1e-10
+    Q = np.zeros((15, 15))
+    I3 = np.eye(3)
+    Q[0:3, 0:3], Q[0:3, 3:6], Q[3:6, 0:3] = na2 * T**3 / 3 * I3, na2 * T**2 / 2 * I3, na2 * T**2 / 2 * I3
+    Q[3:6, 3:6], Q[6:9, 6:9], Q[9:12, 9:12], Q[12:15, 12:15] = na2 * T * I3, ng2 * T * I3, wg2 * T * I3, wa2 * T * I3
+    assert np.allclose(out, Phi @ P @ Phi.T + Q, rtol=1e-12, atol=1e-15)
+
+
+def test_the_kernel_nees_equals_the_nees_of_the_reported_covariance() -> None:
+    """The vehicle's NEES (straight from P, compiled) and nees() of the Covariance that ODOMETRY carries
+    (the tuples, in Python) are the same number, mid-flight, between covariance steps."""
+    f = prepare(SINE)
+    cfg = f.profile.sensor_set("mocap")
+    plant = f.make_plant()
+    ctl = f.make_controller()
+    suite = SensorSuite(cfg, 0, f.mission.physics_hz, f.profile.gravity)
+    ekf = Ekf(cfg, plant.state, f.profile.gravity)
+    ekf.step(plant.t, suite.sample(plant.t, plant.state))
+    checked = 0
+    for step in range(500):
+        t = step / f.mission.rate_hz
+        e = ekf.estimate(t)
+        plant.command(ctl.step(t, e, f.mission.trajectory.sample(t)).normalised)
+        if step % 37 == 0:
+            a, b = ekf.nees(plant.state, e), nees(plant.state, e, ekf.covariance())
+            assert a == pytest.approx(b, rel=1e-9) and a > 0
+            checked += 1
+        for _ in range(f.substeps):
+            plant.step()
+            ekf.step(plant.t, suite.sample(plant.t, plant.state))
+    assert checked == 14 and ekf.fused > 100 and ekf.rejected == {}

@@ -75,21 +75,23 @@ accelerometer bias 0.05 m/s².
 for the estimator's own tests (the product's loops carry the estimator in
 :class:`~bridge.core.simvehicle.SimVehicle`; ``benchmarks/estimation.py`` flies those).
 
-**Speed.** The filter runs once per physics step in every clock, so its arithmetic is written for
-CPython: 3-vectors and 3×3 matrices as plain floats, numpy only for the 15×15 covariance, through
-``np.dot`` (a third less call overhead than ``@`` at this size), one product where two would do.
+**Speed.** The filter runs at every measurement in every clock, so its arithmetic is compiled:
+:class:`Ekf` owns the state as arrays and each measurement is one call of a numba kernel of
+:mod:`bridge.core.ekfkernels` (about 2 µs for an IMU sample, 4 µs for a pose reading). numba is imported,
+and the kernels loaded from their on-disk cache (~0.8 s), only when an EKF is built; the first EKF on
+a machine compiles them first (~13 s on the 2-core VM).
 """
 
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
 
+from bridge.core.cholesky import weighted_square
 from plant.sensors import (
     BARO,
     GNSS,
@@ -174,27 +176,16 @@ def estimation_error(truth: State, est: State) -> tuple[float, ...]:
 
 def nees(truth: State, est: State, cov: Covariance) -> float:
     """Normalised estimation error squared over position, velocity and attitude (9 degrees of
-    freedom: χ²(9) if the covariance is right); NaN if the covariance is unknown or singular."""
-    return _nees_of(truth, est, np.array(cov.state).reshape(9, 9))
+    freedom: χ²(9) if the covariance is right); NaN if the covariance is unknown or not positive definite."""
+    return weighted_square(cov.state, estimation_error(truth, est))
 
 
 def estimator_nees(estimator: Estimator, truth: State, est: State) -> float:
-    """:func:`nees` of ``est`` against ``estimator``'s covariance now (the EKF's 9×9 straight from its P,
+    """:func:`nees` of ``est`` against ``estimator``'s covariance now (the EKF's straight from its P,
     without the :class:`Covariance` tuples between: the same floats, a control step's worth less work)."""
     if isinstance(estimator, Ekf):
-        return _nees_of(truth, est, estimator.state_covariance())
+        return estimator.nees(truth, est)
     return nees(truth, est, estimator.covariance())
-
-
-def _nees_of(truth: State, est: State, C: np.ndarray) -> float:
-    """:func:`nees` with the state covariance as a 9×9 array."""
-    e = np.array(estimation_error(truth, est))
-    if not np.isfinite(C).all():
-        return NAN
-    try:
-        return float(np.dot(e, np.linalg.solve(C, e)))
-    except np.linalg.LinAlgError:
-        return NAN
 
 
 def chi2_quantile(dof: int, tail: float) -> float:
@@ -319,357 +310,121 @@ class RawEstimator:
         return Covariance(tuple(state), tuple(rates))
 
 
-def _euler_jacobian(phi: float, theta: float, psi: float) -> np.ndarray:
-    """E⁻¹: a small rotation in the paper frame → the Euler-angle errors (dφ, dθ, dψ)."""
-    cp, sp, ct, tt = math.cos(psi), math.sin(psi), math.cos(theta), math.tan(theta)
-    return np.array(((cp / ct, sp / ct, 0.0), (-sp, cp, 0.0), (cp * tt, sp * tt, 1.0)))
-
-
 class Ekf:
-    """The error-state EKF of the module docstring (15 error states)."""
+    """The error-state EKF of the module docstring (15 error states); its arithmetic is
+    :mod:`bridge.core.ekfkernels`, on the arrays this object owns."""
 
     kind = "ekf"
 
     def __init__(self, config: SensorConfig, start: State, gravity: float = 9.81) -> None:
+        from bridge.core import ekfkernels as kernels  # numba's import costs ~0.3 s: only an EKF flight pays it
+
+        kernels.ready()
+        k = self._k = kernels
         c = config
         self.config = c
         self.gravity = gravity
         f = SIGMA_FLOOR
-        self._na2 = max(c.accel_noise_density, f["accel"]) ** 2
-        self._ng2 = max(c.gyro_noise_density, f["gyro"]) ** 2
-        self._wa2 = max(c.accel_bias_walk, f["accel_walk"]) ** 2
-        self._wg2 = max(c.gyro_bias_walk, f["gyro_walk"]) ** 2
+        consts = np.zeros(k.C_SIZE)
+        consts[k.C_G] = gravity
+        consts[k.C_NA2] = max(c.accel_noise_density, f["accel"]) ** 2
+        consts[k.C_NG2] = ng2 = max(c.gyro_noise_density, f["gyro"]) ** 2
+        consts[k.C_WA2] = max(c.accel_bias_walk, f["accel_walk"]) ** 2
+        consts[k.C_WG2] = max(c.gyro_bias_walk, f["gyro_walk"]) ** 2
+        consts[k.C_STEPMAX] = COVARIANCE_STEP_MAX_S
+        consts[k.C_GATE1] = chi2_quantile(1, GATE_PROBABILITY)
+        consts[k.C_GATE3] = chi2_quantile(3, GATE_PROBABILITY)
+        consts[k.C_RESET] = RESET_AFTER
+        self._c = consts
         X = start
-        self._p = [X[0], X[2], X[4]]
-        self._v = [X[1], X[3], X[5]]
-        self._R = rotation(X[6], X[8], X[10])
-        self._bg = [0.0, 0.0, 0.0]
-        self._ba = [0.0, 0.0, 0.0]
-        self._psi = X[10]  # the output's continuous heading
-        self._t = 0.0  # time of the nominal state (the last IMU sample)
-        self._omega = (0.0, 0.0, 0.0)  # bias-corrected body rate of the last IMU sample
-        self._accel = (0.0, 0.0, 0.0)  # inertial acceleration of the last IMU sample
-        self._af = (0.0, 0.0, gravity)  # specific force in the paper frame (M f) of the last sample
-        self._M = self._R
-        self._euler: tuple[float, float, float] | None = None  # Euler angles of R (psi unwrapped), None: not yet
-        self._gyro_var = self._ng2 * min(c.imu_rate_hz, 1e4)  # white variance of one gyro sample (set per sample)
+        x = self._x = np.zeros(k.X_SIZE)
+        x[k.X_P:k.X_P + 3] = X[0], X[2], X[4]
+        x[k.X_V:k.X_V + 3] = X[1], X[3], X[5]
+        x[k.X_R:k.X_R + 9] = rotation(X[6], X[8], X[10])
+        x[k.X_M:k.X_M + 9] = x[k.X_R:k.X_R + 9]
+        x[k.X_PSI] = X[10]  # the output's continuous heading
+        x[k.X_AF + 2] = gravity  # specific force in the paper frame (M f) at rest
+        x[k.X_GVAR] = ng2 * min(c.imu_rate_hz, 1e4)  # white variance of one gyro sample (set per sample)
         s_pos = max(c.position_noise_m, 0.01)
         s_z = max(c.position_noise_z_m, 0.01)
         self.P = np.diag([s_pos**2, s_pos**2, s_z**2] + [1e-4] * 3 + [1e-4] * 3 + [1e-6] * 3 + [0.05**2] * 3)
-        self._Phi = np.eye(15)
-        self._T = -1.0  # the period T (s) the coefficients and Q below are set for
-        self._phi_coef = np.zeros(len(_PHI_INDEX))
-        self._Q = np.zeros((15, 15))
-        self._predictions = 0
-        self._pending_T = 0.0  # IMU time P has not been carried over yet (s)
-        self._periods: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-        self._h_heading = np.zeros(15)  # the heading's row of H: (cψ tθ, sψ tθ, 1) on δθ
-        self._h_heading[8] = 1.0
-        self._corr = [0.0] * 9  # corrections applied so far to (p, v, phi, theta, psi), summed
         latency = c.position_latency_ms / 1000.0
         depth = int(math.ceil((latency + 0.05) * min(c.imu_rate_hz, 1e4))) + 4  # IMU samples over the latency
-        self._history: deque[tuple[float, ...]] = deque(maxlen=depth)
-        self._remember()
-        self.rejected: dict[str, int] = {}
-        self._refused_in_row: dict[str, int] = {}
-        self._gates = {m: chi2_quantile(m, GATE_PROBABILITY) for m in (1, 3, 6)}
+        self._hist = np.zeros((depth, k.HIST_COLS))  # the nominal state at each IMU sample, newest last
+        self._hs = np.zeros(2, np.int64)  # the buffer's (start, count)
+        self._counts = np.zeros((4, 2), np.int64)  # per kind: refused in all, refused in a row
+        k.remember(x, self._hist, self._hs)
         self._kept_variances: dict[str, tuple[tuple[float, ...], tuple[float, ...]]] = {}
-        self.fused = 0
+        self._C9 = np.empty((9, 9))
+        self._P15 = np.empty((15, 15))
 
     # -- reading the state ---------------------------------------------------------------
     @property
     def biases(self) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
         """The estimated (gyro bias rad/s, accelerometer bias m/s²), body axes."""
-        return (self._bg[0], self._bg[1], self._bg[2]), (self._ba[0], self._ba[1], self._ba[2])
+        k, x = self._k, self._x
+        bg, ba = x[k.X_BG:k.X_BG + 3].tolist(), x[k.X_BA:k.X_BA + 3].tolist()
+        return (bg[0], bg[1], bg[2]), (ba[0], ba[1], ba[2])
 
     def bias_sigma(self) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
         """σ of the estimated biases, as :attr:`biases`."""
-        d = np.sqrt(np.diag(self._current_P())[9:15]).tolist()
+        self._k.current_P(self._x, self._c, self.P, self._P15)
+        d = np.sqrt(np.diag(self._P15)[9:15]).tolist()
         return (d[0], d[1], d[2]), (d[3], d[4], d[5])
 
-    def _euler_now(self) -> tuple[float, float, float]:
-        """(φ, θ, ψ) of R̂, ψ continuous; kept until R̂ changes (read at every IMU sample and control step)."""
-        e = self._euler
-        if e is None:
-            phi, theta, psi = euler(self._R)
-            self._psi = _unwrap(psi, self._psi)
-            e = self._euler = (phi, theta, self._psi)
-        return e
+    @property
+    def rejected(self) -> dict[str, int]:
+        """Readings refused so far, by kind (a gate's refusal, or a singular innovation covariance)."""
+        return {kind: int(n) for kind, n in zip((POSE, GNSS, BARO, HEADING), self._counts[:, 0]) if n}
 
-    def _remember(self) -> None:
-        phi, theta, psi = self._euler_now()
-        p0, p1, p2 = self._p
-        v0, v1, v2 = self._v
-        c0, c1, c2, c3, c4, c5, c6, c7, c8 = self._corr
-        self._history.append((self._t, p0, p1, p2, v0, v1, v2, phi, theta, psi, c0, c1, c2, c3, c4, c5, c6, c7, c8))
-
-    def _state_at(self, t: float) -> list[float]:
-        """(x, y, z, vx, vy, vz, phi, theta, psi) at time t, as known now (buffer + corrections since)."""
-        h = self._history
-        c0, c1, c2, c3, c4, c5, c6, c7, c8 = self._corr
-        newest = h[-1]
-        if t >= newest[0]:
-            tb, x, y, z, vx, vy, vz, phi, theta, psi, k0, k1, k2, k3, k4, k5, k6, k7, k8 = newest
-            dt = t - tb
-            return [x + vx * dt + c0 - k0, y + vy * dt + c1 - k1, z + vz * dt + c2 - k2, vx + c3 - k3, vy + c4 - k4,
-                    vz + c5 - k5, phi + c6 - k6, theta + c7 - k7, psi + c8 - k8]
-        for i in range(len(h) - 1, 0, -1):
-            a = h[i - 1]
-            if a[0] <= t:
-                ta, a0, a1, a2, a3, a4, a5, a6, a7, a8, m0, m1, m2, m3, m4, m5, m6, m7, m8 = a
-                tb, b0, b1, b2, b3, b4, b5, b6, b7, b8, n0, n1, n2, n3, n4, n5, n6, n7, n8 = h[i]
-                w = (t - ta) / (tb - ta)  # the state, and the corrections it had then, both interpolated
-                return [a0 + w * (b0 - a0) + c0 - (m0 + w * (n0 - m0)), a1 + w * (b1 - a1) + c1 - (m1 + w * (n1 - m1)),
-                        a2 + w * (b2 - a2) + c2 - (m2 + w * (n2 - m2)), a3 + w * (b3 - a3) + c3 - (m3 + w * (n3 - m3)),
-                        a4 + w * (b4 - a4) + c4 - (m4 + w * (n4 - m4)), a5 + w * (b5 - a5) + c5 - (m5 + w * (n5 - m5)),
-                        a6 + w * (b6 - a6) + c6 - (m6 + w * (n6 - m6)), a7 + w * (b7 - a7) + c7 - (m7 + w * (n7 - m7)),
-                        a8 + w * (b8 - a8) + c8 - (m8 + w * (n8 - m8))]
-        older = h[0]
-        c = (c0, c1, c2, c3, c4, c5, c6, c7, c8)
-        return [older[1 + k] + c[k] - older[10 + k] for k in range(9)]
+    @property
+    def fused(self) -> int:
+        """Readings fused so far."""
+        return int(self._x[self._k.X_FUSED])
 
     def estimate(self, t: float) -> State:
-        phi, theta, psi = self._euler_now()
-        dphi, dtheta, dpsi = euler_rates(phi, theta, *self._omega)
-        dt = t - self._t
-        p, v = self._p, self._v
-        if dt > 0.0:
-            a = self._accel
-            return (p[0] + v[0] * dt, v[0] + a[0] * dt, p[1] + v[1] * dt, v[1] + a[1] * dt, p[2] + v[2] * dt,
-                    v[2] + a[2] * dt, phi + dphi * dt, dphi, theta + dtheta * dt, dtheta, psi + dpsi * dt, dpsi)
-        return (p[0], v[0], p[1], v[1], p[2], v[2], phi, dphi, theta, dtheta, psi, dpsi)
+        return self._k.estimate(self._x, t)
 
-    def state_covariance(self, P: np.ndarray | None = None) -> np.ndarray:
-        """:attr:`Covariance.state` as a 9×9 array (of ``P``, the covariance carried to now if None)."""
-        if P is None:
-            P = self._current_P()
-        # J P Jᵀ with J = diag(I₆, E⁻¹) on (δp, δv, δθ): only the attitude's rows and columns change
-        Ja = _euler_jacobian(*self._euler_now())
-        state = P[:9, :9].copy()
-        state[6:9] = np.dot(Ja, state[6:9])
-        state[:, 6:9] = np.dot(state[:, 6:9], Ja.T)
-        return state
+    def state_covariance(self) -> np.ndarray:
+        """:attr:`Covariance.state` as a 9×9 array, of the covariance carried to now."""
+        out = np.empty((9, 9))
+        self._k.state_covariance(self._x, self._c, self.P, out)
+        return out
 
     def covariance(self) -> Covariance:
-        P = self._current_P()
-        state = self.state_covariance(P)
-        g = self._gyro_var
-        (b00, b01, b02), (b10, b11, b12), (b20, b21, b22) = P[9:12, 9:12].tolist()
+        k = self._k
+        k.current_P(self._x, self._c, self.P, self._P15)
+        k.state_covariance(self._x, self._c, self.P, self._C9)
+        g = float(self._x[k.X_GVAR])
+        (b00, b01, b02), (b10, b11, b12), (b20, b21, b22) = self._P15[9:12, 9:12].tolist()
         rates = (b00 + g, b01, b02, b10, b11 + g, b12, b20, b21, b22 + g)
-        return Covariance(tuple(state.ravel().tolist()), rates)
+        return Covariance(tuple(self._C9.ravel().tolist()), rates)
+
+    def nees(self, truth: State, est: State) -> float:
+        """:func:`nees` of ``est`` against the covariance now (computed from P directly)."""
+        return self._k.nees(self._x, self._c, self.P, estimation_error(truth, est))
 
     # -- the filter ----------------------------------------------------------------------
     def step(self, t: float, measurements: Sequence[Measurement]) -> None:
+        k, x, c, P, hist, hs = self._k, self._x, self._c, self.P, self._hist, self._hs
         for m in measurements:
-            k = m.kind
-            if k == IMU:
-                self._propagate(m)
-            elif k == POSE:
-                self._fuse_pose(t, m)
-            elif k == GNSS:
-                self._fuse_gnss(t, m)
-            elif k == BARO:
-                self._fuse_baro(t, m)
-            elif k == HEADING:
-                self._fuse_heading(t, m)
-
-    def _propagate(self, m: Measurement) -> None:
-        T = m.interval_s
-        fm = m.values
-        bg, ba = self._bg, self._ba
-        wx, wy, wz = fm[3] - bg[0], fm[4] - bg[1], fm[5] - bg[2]
-        fx, fy, fz = fm[0] - ba[0], fm[1] - ba[1], fm[2] - ba[2]
-        H = rotation_of(0.5 * wx * T, 0.5 * wy * T, 0.5 * wz * T)  # Exp(ωT/2)
-        M = matmul(self._R, H)  # the attitude at mid-interval
-        m0, m1, m2, m3, m4, m5, m6, m7, m8 = M
-        afx = m0 * fx + m1 * fy + m2 * fz
-        afy = m3 * fx + m4 * fy + m5 * fz
-        afz = m6 * fx + m7 * fy + m8 * fz
-        ax, ay, az = afx, afy, afz - self.gravity
-        p, v = self._p, self._v
-        hT2 = 0.5 * T * T
-        p[0] += v[0] * T + ax * hT2
-        p[1] += v[1] * T + ay * hT2
-        p[2] += v[2] * T + az * hT2
-        v[0] += ax * T
-        v[1] += ay * T
-        v[2] += az * T
-        self._R = matmul(M, H)
-        self._euler = None
-        self._t = m.t_valid
-        self._omega = (wx, wy, wz)
-        self._gyro_var = self._ng2 / T  # white variance of this sample's mean rate
-        self._accel = (ax, ay, az)
-        self._af = (afx, afy, afz)
-        self._M = M
-        self._pending_T += T
-        if self._pending_T >= COVARIANCE_STEP_MAX_S:
-            self._flush_covariance()
-        self._remember()
-
-    def _flush_covariance(self) -> None:
-        """Carry P over the IMU samples since the last time it was carried (one step, Φ at the
-        newest sample's attitude and specific force): before each update and at least every
-        COVARIANCE_STEP_MAX_S. Reading the covariance never does (so that reading it, or not,
-        changes nothing of the flight)."""
-        T = self._pending_T
-        if T > 0.0:
-            self._pending_T = 0.0
-            P = self._carried(T, self._af, self._M)
-            self._predictions += 1
-            if self._predictions % 64 == 0:  # rounding makes P drift from symmetric, slowly
-                P = 0.5 * (P + P.T)
-            self.P = P
-
-    def _current_P(self) -> np.ndarray:
-        """P carried to now, without storing it."""
-        T = self._pending_T
-        return self._carried(T, self._af, self._M) if T > 0.0 else self.P
-
-    def _carried(self, T: float, af: tuple[float, float, float], M: tuple[float, ...]) -> np.ndarray:
-        """Φ P Φᵀ + Q over T: Φ's varying blocks written in place with one scatter, Q cached per T."""
-        if T != self._T:
-            self._set_period(T)
-        ax, ay, az = af
-        Sk = (0.0, -az, ay, az, 0.0, -ax, -ay, ax, 0.0)
-        Phi = self._Phi
-        # the entries in _PHI_INDEX's order, gathered in Python (a numpy take less)
-        # np.dot, not @: a third less call overhead on arrays this small
-        Phi.put(_PHI_INDEX, np.array(Sk + M + M + Sk + M + matmul(Sk, M) + _ONES3) * self._phi_coef)
-        P = np.dot(np.dot(Phi, self.P), Phi.T)
-        P += self._Q
-        return P
-
-    def _set_period(self, T: float) -> None:
-        """The coefficients of Φ's varying entries and Q of a step T (s), cached per T."""
-        self._T = T
-        key = round(T * 1e9)
-        cached = self._periods.get(key)
-        if cached is None:
-            coef = np.array([-T] * 27 + [-0.5 * T * T] * 18 + [0.5 * T * T] * 9 + [T] * 3)
-            na2, T2 = self._na2, T * T
-            Q = np.zeros((15, 15))
-            for i in range(3):
-                Q[i, i] = na2 * T2 * T / 3.0
-                Q[i, 3 + i] = Q[3 + i, i] = 0.5 * na2 * T2
-                Q[3 + i, 3 + i] = na2 * T
-                Q[6 + i, 6 + i] = self._ng2 * T
-                Q[9 + i, 9 + i] = self._wg2 * T
-                Q[12 + i, 12 + i] = self._wa2 * T
-            cached = self._periods[key] = (coef, Q)
-        self._phi_coef, self._Q = cached
-
-    def _gate(self, kind: str, nis: float, dof: int) -> bool:
-        """Whether to fuse a reading of this normalised innovation squared (counts refusals)."""
-        if nis <= self._gates[dof]:
-            self._refused_in_row[kind] = 0
-            return True
-        n = self._refused_in_row.get(kind, 0) + 1
-        self._refused_in_row[kind] = n
-        self.rejected[kind] = self.rejected.get(kind, 0) + 1
-        if n > RESET_AFTER:
-            self._refused_in_row[kind] = 0
-            return True
-        return False
-
-    def _update_block(self, kind: str, i0: int, r: Sequence[float], Rm: Sequence[float],
-                      dx: list[float] | None) -> list[float] | None:
-        """One 3-value reading of the error states i0..i0+2 (H selects them) with noise covariance
-        ``Rm`` (3×3 row-major), after the correction ``dx`` of an earlier block of the same reading
-        (sequential blocks: exact, their noises being independent); returns the correction so far,
-        or None if refused."""
-        P = self.P
-        PHt = P[:, i0:i0 + 3]
-        (s00, s01, s02), (s10, s11, s12), (s20, s21, s22) = P[i0:i0 + 3, i0:i0 + 3].tolist()
-        s00 += Rm[0]
-        s01 += Rm[1]
-        s02 += Rm[2]
-        s10 += Rm[3]
-        s11 += Rm[4]
-        s12 += Rm[5]
-        s20 += Rm[6]
-        s21 += Rm[7]
-        s22 += Rm[8]
-        c00 = s11 * s22 - s12 * s21
-        c01 = s02 * s21 - s01 * s22
-        c02 = s01 * s12 - s02 * s11
-        det = s00 * c00 + s10 * c01 + s20 * c02
-        if not det > 0.0:
-            self.rejected[kind] = self.rejected.get(kind, 0) + 1
-            return None
-        k = 1.0 / det
-        i00, i01, i02 = c00 * k, c01 * k, c02 * k
-        i10, i11, i12 = (s12 * s20 - s10 * s22) * k, (s00 * s22 - s02 * s20) * k, (s02 * s10 - s00 * s12) * k
-        i20, i21, i22 = (s10 * s21 - s11 * s20) * k, (s01 * s20 - s00 * s21) * k, (s00 * s11 - s01 * s10) * k
-        r0, r1, r2 = r
-        if dx is not None:
-            r0, r1, r2 = r0 - dx[i0], r1 - dx[i0 + 1], r2 - dx[i0 + 2]
-        y0 = i00 * r0 + i01 * r1 + i02 * r2
-        y1 = i10 * r0 + i11 * r1 + i12 * r2
-        y2 = i20 * r0 + i21 * r1 + i22 * r2
-        if not self._gate(kind, r0 * y0 + r1 * y1 + r2 * y2, 3):
-            return None
-        # one product gives the gain K = P Hᵀ S⁻¹ (first 3 columns) and the correction P Hᵀ S⁻¹ r (the 4th);
-        # np.dot, not @: a third less call overhead on arrays this small
-        Ky = np.dot(PHt, np.array(((i00, i01, i02, y0), (i10, i11, i12, y1), (i20, i21, i22, y2))))
-        step = Ky[:, 3].tolist()
-        P -= np.dot(Ky[:, :3], PHt.T)  # in place: the product is evaluated before P changes
-        if dx is None:
-            return step
-        return [a + b for a, b in zip(dx, step, strict=True)]
-
-    def _update_scalar(self, kind: str, h: np.ndarray | int, r: float, var: float) -> None:
-        """One scalar reading: h a 15-row of the error, or the index of the one error state it reads."""
-        P = self.P
-        if isinstance(h, int):
-            PHt = P[:, h].copy()
-            s = PHt.item(h) + var
-        else:
-            PHt = np.dot(P, h)
-            s = float(np.dot(h, PHt)) + var
-        if not s > 0.0 or not self._gate(kind, r * r / s, 1):
-            return
-        K = PHt / s
-        P -= np.dot(K.reshape(15, 1), PHt.reshape(1, 15))  # np.outer costs three times as much
-        self._inject((K * r).tolist())
-        self.fused += 1
-
-    def _inject(self, dx: list[float]) -> None:
-        """Add a correction to the nominal state, and to the corrections applied so far (the
-        attitude's as Euler-angle changes, E⁻¹ δθ)."""
-        d0, d1, d2, d3, d4, d5, w0, w1, w2, g0, g1, g2, a0, a1, a2 = dx
-        p, v, bg, ba, c = self._p, self._v, self._bg, self._ba, self._corr
-        p[0] += d0
-        p[1] += d1
-        p[2] += d2
-        v[0] += d3
-        v[1] += d4
-        v[2] += d5
-        bg[0] += g0
-        bg[1] += g1
-        bg[2] += g2
-        ba[0] += a0
-        ba[1] += a1
-        ba[2] += a2
-        c[0] += d0
-        c[1] += d1
-        c[2] += d2
-        c[3] += d3
-        c[4] += d4
-        c[5] += d5
-        R = self._R
-        cp, sp = math.cos(self._psi), math.sin(self._psi)
-        ct = math.sqrt(max(1e-12, 1.0 - R[6] * R[6]))  # cos theta
-        a = (cp * w0 + sp * w1) / ct
-        c[6] += a
-        c[7] += cp * w1 - sp * w0
-        c[8] += w2 - R[6] * a  # + tan(theta) cos(theta) a, sin(theta) = -R[6]
-        e0, e1, e2, e3, e4, e5, e6, e7, e8 = rotation_of(w0, w1, w2)
-        r0, r1, r2, r3, r4, r5, r6, r7, r8 = R
-        self._R = (e0 * r0 + e1 * r3 + e2 * r6, e0 * r1 + e1 * r4 + e2 * r7, e0 * r2 + e1 * r5 + e2 * r8,
-                   e3 * r0 + e4 * r3 + e5 * r6, e3 * r1 + e4 * r4 + e5 * r7, e3 * r2 + e4 * r5 + e5 * r8,
-                   e6 * r0 + e7 * r3 + e8 * r6, e6 * r1 + e7 * r4 + e8 * r7, e6 * r2 + e7 * r5 + e8 * r8)  # Exp(δθ)·R
-        self._euler = None
+            kind = m.kind
+            z = m.values
+            if kind == IMU:
+                k.propagate(x, c, P, hist, hs, z[0], z[1], z[2], z[3], z[4], z[5], m.interval_s, m.t_valid)
+            elif kind == POSE:
+                v = self._variances(POSE, m.sigma)
+                k.fuse_pose(x, c, P, hist, hs, self._counts, m.t_valid, z[0], z[1], z[2], z[3], z[4], z[5],
+                            v[0], v[1], v[2], v[3], v[4], v[5])
+            elif kind == GNSS:
+                v = self._variances(GNSS, m.sigma)
+                k.fuse_gnss(x, c, P, hist, hs, self._counts, m.t_valid, z[0], z[1], z[2], z[3], z[4], z[5],
+                            v[0], v[1], v[2], v[3], v[4], v[5])
+            elif kind == BARO:
+                k.fuse_baro(x, c, P, hist, hs, self._counts, m.t_valid, z[0], self._variances(BARO, m.sigma)[0])
+            elif kind == HEADING:
+                k.fuse_heading(x, c, P, hist, hs, self._counts, m.t_valid, z[0],
+                               self._variances(HEADING, m.sigma)[0])
 
     def _variances(self, kind: str, sigma: tuple[float, ...]) -> tuple[float, ...]:
         """The filter's noise variances of a reading's σ (floored, :data:`SIGMA_FLOOR`), kept per kind
@@ -681,67 +436,15 @@ class Ekf:
         self._kept_variances[kind] = (sigma, v)
         return v
 
-    def _fuse_pose(self, t: float, m: Measurement) -> None:
-        self._flush_covariance()
-        s = self._state_at(m.t_valid)
-        z = m.values
-        vp0, vp1, vp2, v0, v1, v2 = self._variances(POSE, m.sigma)
-        dx = self._update_block(POSE, 0, (z[0] - s[0], z[1] - s[1], z[2] - s[2]),
-                                (vp0, 0.0, 0.0, 0.0, vp1, 0.0, 0.0, 0.0, vp2), None)
-        # the Euler-angle residual as a small rotation, r = E·(dφ, dθ, dψ), its noise E·diag(σ²)·Eᵀ
-        e0, e1, e2 = wrap_angle(z[3] - s[6]), wrap_angle(z[4] - s[7]), wrap_angle(z[5] - s[8])
-        cp, sp, ct, st = math.cos(s[8]), math.sin(s[8]), math.cos(s[7]), math.sin(s[7])
-        a, b = cp * ct, sp * ct  # E = [[a, -sp, 0], [b, cp, 0], [-st, 0, 1]]
-        r = (a * e0 - sp * e1, b * e0 + cp * e1, e2 - st * e0)
-        r01 = a * b * v0 - sp * cp * v1
-        r02 = -a * st * v0
-        r12 = -b * st * v0
-        Rm = (a * a * v0 + sp * sp * v1, r01, r02, r01, b * b * v0 + cp * cp * v1, r12, r02, r12, st * st * v0 + v2)
-        dx2 = self._update_block(POSE, 6, r, Rm, dx)
-        dx = dx2 if dx2 is not None else dx
-        if dx is not None:
-            self._inject(dx)
-            self.fused += 1
 
-    def _fuse_gnss(self, t: float, m: Measurement) -> None:
-        self._flush_covariance()
-        s = self._state_at(m.t_valid)
-        z = m.values
-        vp0, vp1, vp2, vv0, vv1, vv2 = self._variances(GNSS, m.sigma)
-        dx = self._update_block(GNSS, 0, (z[0] - s[0], z[1] - s[1], z[2] - s[2]),
-                                (vp0, 0.0, 0.0, 0.0, vp1, 0.0, 0.0, 0.0, vp2), None)
-        dx2 = self._update_block(GNSS, 3, (z[3] - s[3], z[4] - s[4], z[5] - s[5]),
-                                 (vv0, 0.0, 0.0, 0.0, vv1, 0.0, 0.0, 0.0, vv2), dx)
-        dx = dx2 if dx2 is not None else dx
-        if dx is not None:
-            self._inject(dx)
-            self.fused += 1
+def compile_estimator(kind: str) -> None:
+    """Compile, or load from the on-disk cache, what an estimator of ``kind`` runs on (the EKF's kernels;
+    nothing for the others), in this process: a launcher calls it before it starts a vehicle, so that a
+    first EKF on a machine compiles once, here, not in the vehicle's start-up time."""
+    if kind == "ekf":
+        from bridge.core import ekfkernels  # numba's import costs ~0.3 s: only an EKF flight pays it
 
-    def _fuse_baro(self, t: float, m: Measurement) -> None:
-        self._flush_covariance()
-        s = self._state_at(m.t_valid)
-        self._update_scalar(BARO, 2, m.values[0] - s[2], self._variances(BARO, m.sigma)[0])
-
-    def _fuse_heading(self, t: float, m: Measurement) -> None:
-        self._flush_covariance()
-        s = self._state_at(m.t_valid)
-        h = self._h_heading
-        cp, sp, tt = math.cos(s[8]), math.sin(s[8]), math.tan(s[7])
-        h[6] = cp * tt
-        h[7] = sp * tt
-        self._update_scalar(HEADING, h, wrap_angle(m.values[0] - s[8]), self._variances(HEADING, m.sigma)[0])
-
-
-def _block(r0: int, c0: int) -> list[int]:
-    return [15 * (r0 + i) + c0 + j for i in range(3) for j in range(3)]
-
-
-# Φ's entries other than its unit diagonal (flat indices), each from one of (Sk, M, Sk·M, 1),
-# Sk = [M f]x: -T Sk at (v, θ), -T M at (v, b_a) and (θ, b_g), -T²/2 Sk at (p, θ), -T²/2 M at (p, b_a),
-# T²/2 Sk M at (v, b_g), T at (p, v) (its diagonal)
-_PHI_INDEX = np.array(_block(3, 6) + _block(3, 12) + _block(6, 9) + _block(0, 6) + _block(0, 12) + _block(3, 9)
-                      + [15 * i + 3 + i for i in range(3)])
-_ONES3 = (1.0, 1.0, 1.0)  # T at (p, v): _carried gathers (Sk, M, M, Sk, M, Sk·M, 1, 1, 1), _PHI_INDEX's order
+        ekfkernels.ready()
 
 
 def make_estimator(kind: str, config: SensorConfig, start: State, gravity: float,

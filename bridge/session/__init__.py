@@ -61,6 +61,7 @@ from typing import Any
 
 import numpy as np
 
+from bridge.core.estimator import compile_estimator
 from bridge.core.flight import Flight, Progress, prepare
 from bridge.core.params import ParamChange
 from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, GCS_PORT, LINK_PORT, parse_address
@@ -150,6 +151,7 @@ def sitl(
         run_dir(out, flight.mission.name, overwrite, create=False)
     if instance is not None:
         check_port_free(LINK_PORT + n, f"--instance {n}")
+    compile_estimator(flight.estimator)  # a first EKF on this machine compiles here, not in the vehicle's start-up
     path = run_dir(out, flight.mission.name, overwrite) if keep else Path(tempfile.mkdtemp(prefix="bsst-sitl-"))
     try:
         s = Session(flight, path, realtime=realtime, instance=instance, gcs=gcs_text, speed=speed,

@@ -1,0 +1,512 @@
+"""The error-state EKF's arithmetic, compiled: propagation, updates, the estimate and its covariances.
+
+In:  the filter's arrays, owned by :class:`bridge.core.estimator.Ekf`: ``x`` the nominal state and its
+     bookkeeping (float64, layout ``X_*`` below: m, m/s, rad, rad/s, m/s², s), ``c`` its constants
+     (``C_*``: gravity m/s², noise variances, gates), ``P`` the 15×15 error covariance, ``hist``/``hs``
+     the ring buffer of past nominal states and its (start, count), ``counts`` the refusals per kind;
+     per call one measurement's values (paper frame NWU, SI units) and its noise variances
+Out: the same arrays, changed in place; ``estimate`` the 12-state of eq. (7); the covariances and the
+     NEES on request, into arrays the caller gives
+
+The filter is described in :mod:`bridge.core.estimator`; this module is its arithmetic, nothing else,
+compiled with numba so that a flight with the EKF pays about a microsecond of call per measurement
+rather than the tens that the same work costs in small numpy calls. The 3-vector and 3×3 helpers are
+:mod:`plant.sensors`' own functions compiled (one source for both), and the NEES is
+:func:`bridge.core.cholesky.weighted_square` compiled. Each kernel is cached on disk (``cache=True``):
+the first flight with the EKF on a machine compiles them (a few seconds), later ones load them.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+from numba.extending import overload
+
+from bridge.core.cholesky import weighted_square
+from plant import sensors as _s
+
+# the nominal state x: position, velocity, attitude R (row-major, body FLU -> NWU), biases, the output's
+# continuous heading, the time of the last IMU sample, and what that sample left (bias-corrected rate,
+# inertial acceleration, specific force M f, mid-interval attitude M); then the corrections injected so
+# far to (p, v, phi, theta, psi), the white variance of one gyro sample, the IMU time P was not carried
+# over yet, the Euler angles of R (valid if X_EOK is 1), and counts of covariance steps and fusions
+X_P, X_V, X_R, X_BG, X_BA, X_PSI, X_T, X_OM, X_ACC, X_AF, X_M = 0, 3, 6, 15, 18, 21, 22, 23, 26, 29, 32
+X_CORR, X_GVAR, X_PEND, X_EUL, X_EOK, X_PRED, X_FUSED, X_SIZE = 41, 50, 51, 52, 55, 56, 57, 58
+# the constants c: gravity, the noise variances (densities squared), COVARIANCE_STEP_MAX_S, the chi2
+# gates of 1 and 3 degrees of freedom, RESET_AFTER
+C_G, C_NA2, C_NG2, C_WA2, C_WG2, C_STEPMAX, C_GATE1, C_GATE3, C_RESET, C_SIZE = range(10)
+# the kinds of reading (rows of counts) and the columns of counts: refused in all, refused in a row
+K_POSE, K_GNSS, K_BARO, K_HEADING = 0, 1, 2, 3
+N_REJ, N_ROW = 0, 1
+HIST_COLS = 19  # t, p, v, (phi, theta, psi), the nine corrections at that time
+
+
+
+@overload(math.fmod)
+def _fmod(a, b):  # noqa: ANN001, ANN202 - numba has no math.fmod, which wrap_angle uses
+    def impl(a, b):  # noqa: ANN001, ANN202
+        return np.fmod(a, b)  # exact in IEEE arithmetic, as math.fmod: the same floats
+
+    return impl
+
+
+_rotation_of = njit(cache=True)(_s.rotation_of)
+_matmul = njit(cache=True)(_s.matmul)
+_euler = njit(cache=True)(_s.euler)
+_euler_rates = njit(cache=True)(_s.euler_rates)
+_wrap_angle = njit(cache=True)(_s.wrap_angle)
+_weighted_square = njit(cache=True)(weighted_square)
+
+
+@njit(cache=True)
+def _attitude(x: np.ndarray) -> tuple:
+    return (x[X_R], x[X_R + 1], x[X_R + 2], x[X_R + 3], x[X_R + 4], x[X_R + 5], x[X_R + 6], x[X_R + 7],
+            x[X_R + 8])
+
+
+@njit(cache=True)
+def _mid_attitude(x: np.ndarray) -> tuple:
+    return (x[X_M], x[X_M + 1], x[X_M + 2], x[X_M + 3], x[X_M + 4], x[X_M + 5], x[X_M + 6], x[X_M + 7],
+            x[X_M + 8])
+
+
+@njit(cache=True)
+def euler_now(x: np.ndarray) -> tuple:
+    """(φ, θ, ψ) of R̂ (rad), ψ continuous; kept in x until R̂ changes."""
+    if x[X_EOK] == 0.0:
+        phi, theta, psi = _euler(_attitude(x))
+        x[X_PSI] = x[X_PSI] + _wrap_angle(psi - x[X_PSI])  # the angle equal to psi nearest the last one
+        x[X_EUL] = phi
+        x[X_EUL + 1] = theta
+        x[X_EUL + 2] = x[X_PSI]
+        x[X_EOK] = 1.0
+    return x[X_EUL], x[X_EUL + 1], x[X_EUL + 2]
+
+
+@njit(cache=True)
+def remember(x: np.ndarray, hist: np.ndarray, hs: np.ndarray) -> None:
+    """Append the nominal state now (and the corrections so far) to the buffer, dropping the oldest."""
+    phi, theta, psi = euler_now(x)
+    depth = hist.shape[0]
+    start, n = hs[0], hs[1]
+    if n < depth:
+        slot = (start + n) % depth
+        hs[1] = n + 1
+    else:
+        slot = start
+        hs[0] = (start + 1) % depth
+    row = hist[slot]
+    row[0] = x[X_T]
+    for k in range(3):
+        row[1 + k] = x[X_P + k]
+        row[4 + k] = x[X_V + k]
+    row[7] = phi
+    row[8] = theta
+    row[9] = psi
+    for k in range(9):
+        row[10 + k] = x[X_CORR + k]
+
+
+@njit(cache=True)
+def _state_at(x: np.ndarray, hist: np.ndarray, hs: np.ndarray, t: float, s: np.ndarray) -> None:
+    """s = (x, y, z, vx, vy, vz, φ, θ, ψ) at time t as known now: the buffer, interpolated, plus the
+    corrections injected since (after the newest sample: carried at its velocity)."""
+    depth = hist.shape[0]
+    start, n = hs[0], hs[1]
+    newest = hist[(start + n - 1) % depth]
+    if t >= newest[0]:
+        dt = t - newest[0]
+        for k in range(3):
+            s[k] = newest[1 + k] + newest[4 + k] * dt + x[X_CORR + k] - newest[10 + k]
+        for k in range(3, 9):
+            s[k] = newest[1 + k] + x[X_CORR + k] - newest[10 + k]
+        return
+    for i in range(n - 1, 0, -1):
+        a = hist[(start + i - 1) % depth]
+        if a[0] <= t:
+            b = hist[(start + i) % depth]
+            w = (t - a[0]) / (b[0] - a[0])  # the state, and the corrections it had then, both interpolated
+            for k in range(9):
+                s[k] = (a[1 + k] + w * (b[1 + k] - a[1 + k]) + x[X_CORR + k]
+                        - (a[10 + k] + w * (b[10 + k] - a[10 + k])))
+            return
+    older = hist[start]
+    for k in range(9):
+        s[k] = older[1 + k] + x[X_CORR + k] - older[10 + k]
+
+
+@njit(cache=True)
+def carry(x: np.ndarray, c: np.ndarray, P: np.ndarray, T: float, out: np.ndarray) -> None:
+    """out = Φ P Φᵀ + Q over T (s), Φ = I + A at the newest IMU sample's specific force and attitude
+    (``out`` may be ``P``). A's blocks: T I at (p, v), −T²/2 [Mf]× at (p, θ), −T²/2 M at (p, b_a),
+    −T [Mf]× at (v, θ), T²/2 [Mf]× M at (v, b_g), −T M at (v, b_a), −T M at (θ, b_g)."""
+    ax, ay, az = x[X_AF], x[X_AF + 1], x[X_AF + 2]
+    Sk = (0.0, -az, ay, az, 0.0, -ax, -ay, ax, 0.0)
+    M = _mid_attitude(x)
+    SkM = _matmul(Sk, M)
+    A = np.zeros((9, 15))  # A's rows of p, v and theta (the rest of A is zero)
+    hn = -0.5 * T * T
+    hp = 0.5 * T * T
+    for i in range(3):
+        A[i, 3 + i] = T
+        for j in range(3):
+            A[i, 6 + j] = Sk[3 * i + j] * hn
+            A[i, 12 + j] = M[3 * i + j] * hn
+            A[3 + i, 6 + j] = Sk[3 * i + j] * -T
+            A[3 + i, 9 + j] = SkM[3 * i + j] * hp
+            A[3 + i, 12 + j] = M[3 * i + j] * -T
+            A[6 + i, 9 + j] = M[3 * i + j] * -T
+    B = np.empty((15, 15))  # Φ P: only the rows of p, v and theta change
+    for i in range(15):
+        for j in range(15):
+            s = P[i, j]
+            if i < 9:
+                for k in range(3, 15):
+                    s += A[i, k] * P[k, j]
+            B[i, j] = s
+    for i in range(15):  # (Φ P) Φᵀ: only the columns of p, v and theta change
+        for j in range(15):
+            if j < 9:
+                s = B[i, j]
+                for k in range(3, 15):
+                    s += B[i, k] * A[j, k]
+                out[i, j] = s
+            else:
+                out[i, j] = B[i, j]
+    na2, T2 = c[C_NA2], T * T
+    for i in range(3):
+        out[i, i] += na2 * T2 * T / 3.0
+        out[i, 3 + i] += 0.5 * na2 * T2
+        out[3 + i, i] += 0.5 * na2 * T2
+        out[3 + i, 3 + i] += na2 * T
+        out[6 + i, 6 + i] += c[C_NG2] * T
+        out[9 + i, 9 + i] += c[C_WG2] * T
+        out[12 + i, 12 + i] += c[C_WA2] * T
+
+
+@njit(cache=True)
+def flush(x: np.ndarray, c: np.ndarray, P: np.ndarray) -> None:
+    """Carry P over the IMU time not carried yet (before each update, and at least every C_STEPMAX)."""
+    T = x[X_PEND]
+    if T > 0.0:
+        x[X_PEND] = 0.0
+        carry(x, c, P, T, P)
+        x[X_PRED] += 1.0
+        if int(x[X_PRED]) % 64 == 0:  # rounding makes P drift from symmetric, slowly
+            for i in range(15):
+                for j in range(i + 1, 15):
+                    m = 0.5 * (P[i, j] + P[j, i])
+                    P[i, j] = m
+                    P[j, i] = m
+
+
+@njit(cache=True)
+def current_P(x: np.ndarray, c: np.ndarray, P: np.ndarray, out: np.ndarray) -> None:
+    """out = P carried to now, without storing it (reading the covariance changes nothing)."""
+    T = x[X_PEND]
+    if T > 0.0:
+        carry(x, c, P, T, out)
+    else:
+        for i in range(15):
+            for j in range(15):
+                out[i, j] = P[i, j]
+
+
+@njit(cache=True)
+def propagate(x: np.ndarray, c: np.ndarray, P: np.ndarray, hist: np.ndarray, hs: np.ndarray, f0: float,
+              f1: float, f2: float, w0: float, w1: float, w2: float, T: float, t_valid: float) -> None:
+    """One IMU sample: mean specific force (f0, f1, f2) m/s² and body rate (w0, w1, w2) rad/s over T s."""
+    wx, wy, wz = w0 - x[X_BG], w1 - x[X_BG + 1], w2 - x[X_BG + 2]
+    fx, fy, fz = f0 - x[X_BA], f1 - x[X_BA + 1], f2 - x[X_BA + 2]
+    H = _rotation_of(0.5 * wx * T, 0.5 * wy * T, 0.5 * wz * T)  # Exp(ωT/2)
+    M = _matmul(_attitude(x), H)  # the attitude at mid-interval
+    afx = M[0] * fx + M[1] * fy + M[2] * fz
+    afy = M[3] * fx + M[4] * fy + M[5] * fz
+    afz = M[6] * fx + M[7] * fy + M[8] * fz
+    ax, ay, az = afx, afy, afz - c[C_G]
+    hT2 = 0.5 * T * T
+    x[X_P] += x[X_V] * T + ax * hT2
+    x[X_P + 1] += x[X_V + 1] * T + ay * hT2
+    x[X_P + 2] += x[X_V + 2] * T + az * hT2
+    x[X_V] += ax * T
+    x[X_V + 1] += ay * T
+    x[X_V + 2] += az * T
+    R = _matmul(M, H)
+    for k in range(9):
+        x[X_R + k] = R[k]
+        x[X_M + k] = M[k]
+    x[X_EOK] = 0.0
+    x[X_T] = t_valid
+    x[X_OM], x[X_OM + 1], x[X_OM + 2] = wx, wy, wz
+    x[X_GVAR] = c[C_NG2] / T  # white variance of this sample's mean rate
+    x[X_ACC], x[X_ACC + 1], x[X_ACC + 2] = ax, ay, az
+    x[X_AF], x[X_AF + 1], x[X_AF + 2] = afx, afy, afz
+    x[X_PEND] += T
+    if x[X_PEND] >= c[C_STEPMAX]:
+        flush(x, c, P)
+    remember(x, hist, hs)
+
+
+@njit(cache=True)
+def _gate(c: np.ndarray, counts: np.ndarray, kind: int, nis: float, gate: float) -> bool:
+    """Whether to fuse a reading of this normalised innovation squared (counts refusals)."""
+    if nis <= gate:
+        counts[kind, N_ROW] = 0
+        return True
+    n = counts[kind, N_ROW] + 1
+    counts[kind, N_ROW] = n
+    counts[kind, N_REJ] += 1
+    if n > c[C_RESET]:
+        counts[kind, N_ROW] = 0
+        return True
+    return False
+
+
+@njit(cache=True)
+def _update_block(c: np.ndarray, P: np.ndarray, counts: np.ndarray, kind: int, i0: int, r0: float, r1: float,
+                  r2: float, Rm: tuple, dx: np.ndarray, have_dx: bool) -> bool:
+    """One 3-value reading of the error states i0..i0+2 (H selects them), noise covariance ``Rm`` (3×3
+    row-major), after the correction ``dx`` of an earlier block of the same reading if ``have_dx``
+    (sequential blocks: exact, their noises being independent). Adds its correction to ``dx`` (or sets
+    it) and returns True; False, changing nothing but the counts, if refused."""
+    s00 = P[i0, i0] + Rm[0]
+    s01 = P[i0, i0 + 1] + Rm[1]
+    s02 = P[i0, i0 + 2] + Rm[2]
+    s10 = P[i0 + 1, i0] + Rm[3]
+    s11 = P[i0 + 1, i0 + 1] + Rm[4]
+    s12 = P[i0 + 1, i0 + 2] + Rm[5]
+    s20 = P[i0 + 2, i0] + Rm[6]
+    s21 = P[i0 + 2, i0 + 1] + Rm[7]
+    s22 = P[i0 + 2, i0 + 2] + Rm[8]
+    c00 = s11 * s22 - s12 * s21
+    c01 = s02 * s21 - s01 * s22
+    c02 = s01 * s12 - s02 * s11
+    det = s00 * c00 + s10 * c01 + s20 * c02
+    if not det > 0.0:
+        counts[kind, N_REJ] += 1
+        return False
+    k = 1.0 / det
+    i00, i01, i02 = c00 * k, c01 * k, c02 * k
+    i10, i11, i12 = (s12 * s20 - s10 * s22) * k, (s00 * s22 - s02 * s20) * k, (s02 * s10 - s00 * s12) * k
+    i20, i21, i22 = (s10 * s21 - s11 * s20) * k, (s01 * s20 - s00 * s21) * k, (s00 * s11 - s01 * s10) * k
+    if have_dx:
+        r0, r1, r2 = r0 - dx[i0], r1 - dx[i0 + 1], r2 - dx[i0 + 2]
+    y0 = i00 * r0 + i01 * r1 + i02 * r2
+    y1 = i10 * r0 + i11 * r1 + i12 * r2
+    y2 = i20 * r0 + i21 * r1 + i22 * r2
+    if not _gate(c, counts, kind, r0 * y0 + r1 * y1 + r2 * y2, c[C_GATE3]):
+        return False
+    PHt = np.empty((15, 3))
+    K = np.empty((15, 3))  # K = P Hᵀ S⁻¹
+    for i in range(15):
+        a0, a1, a2 = P[i, i0], P[i, i0 + 1], P[i, i0 + 2]
+        PHt[i, 0], PHt[i, 1], PHt[i, 2] = a0, a1, a2
+        K[i, 0] = a0 * i00 + a1 * i10 + a2 * i20
+        K[i, 1] = a0 * i01 + a1 * i11 + a2 * i21
+        K[i, 2] = a0 * i02 + a1 * i12 + a2 * i22
+        step = a0 * y0 + a1 * y1 + a2 * y2  # P Hᵀ S⁻¹ r
+        dx[i] = dx[i] + step if have_dx else step
+    for i in range(15):  # P -= K (P Hᵀ)ᵀ
+        k0, k1, k2 = K[i, 0], K[i, 1], K[i, 2]
+        for j in range(15):
+            P[i, j] -= k0 * PHt[j, 0] + k1 * PHt[j, 1] + k2 * PHt[j, 2]
+    return True
+
+
+@njit(cache=True)
+def _update_scalar(x: np.ndarray, c: np.ndarray, P: np.ndarray, counts: np.ndarray, kind: int, h: np.ndarray,
+                   r: float, var: float) -> None:
+    """One scalar reading with H = h (a 15-row of the error states): fused and injected, or refused."""
+    PHt = np.empty(15)
+    for i in range(15):
+        s = 0.0
+        for j in range(15):
+            if h[j] != 0.0:
+                s += P[i, j] * h[j]
+        PHt[i] = s
+    s = var
+    for j in range(15):
+        s += h[j] * PHt[j]
+    if not s > 0.0 or not _gate(c, counts, kind, r * r / s, c[C_GATE1]):
+        return
+    dx = np.empty(15)
+    for i in range(15):
+        ki = PHt[i] / s
+        dx[i] = ki * r
+        for j in range(15):
+            P[i, j] -= ki * PHt[j]
+    _inject(x, dx)
+    x[X_FUSED] += 1.0
+
+
+@njit(cache=True)
+def _inject(x: np.ndarray, dx: np.ndarray) -> None:
+    """Add a correction to the nominal state, and to the corrections applied so far (the attitude's as
+    Euler-angle changes, E⁻¹ δθ); R̂ ← Exp(δθ)·R̂."""
+    for k in range(3):
+        x[X_P + k] += dx[k]
+        x[X_V + k] += dx[3 + k]
+        x[X_BG + k] += dx[9 + k]
+        x[X_BA + k] += dx[12 + k]
+    for k in range(6):
+        x[X_CORR + k] += dx[k]
+    w0, w1, w2 = dx[6], dx[7], dx[8]
+    R = _attitude(x)
+    cp, sp = math.cos(x[X_PSI]), math.sin(x[X_PSI])
+    ct = math.sqrt(max(1e-12, 1.0 - R[6] * R[6]))  # cos theta
+    a = (cp * w0 + sp * w1) / ct
+    x[X_CORR + 6] += a
+    x[X_CORR + 7] += cp * w1 - sp * w0
+    x[X_CORR + 8] += w2 - R[6] * a  # + tan(theta) cos(theta) a, sin(theta) = -R[6]
+    R = _matmul(_rotation_of(w0, w1, w2), R)
+    for k in range(9):
+        x[X_R + k] = R[k]
+    x[X_EOK] = 0.0
+
+
+@njit(cache=True)
+def fuse_pose(x: np.ndarray, c: np.ndarray, P: np.ndarray, hist: np.ndarray, hs: np.ndarray, counts: np.ndarray,
+              t_valid: float, z0: float, z1: float, z2: float, z3: float, z4: float, z5: float, vp0: float,
+              vp1: float, vp2: float, v0: float, v1: float, v2: float) -> None:
+    """A motion-capture pose: position (z0, z1, z2) m with variances vp, Euler angles (z3, z4, z5) rad with
+    variances v, valid at t_valid s; fused as two 3-value blocks, the attitude's as the small rotation
+    E·r of its residual r with noise E·diag(v)·Eᵀ."""
+    flush(x, c, P)
+    s = np.empty(9)
+    _state_at(x, hist, hs, t_valid, s)
+    dx = np.zeros(15)
+    have = _update_block(c, P, counts, K_POSE, 0, z0 - s[0], z1 - s[1], z2 - s[2],
+                         (vp0, 0.0, 0.0, 0.0, vp1, 0.0, 0.0, 0.0, vp2), dx, False)
+    e0, e1, e2 = _wrap_angle(z3 - s[6]), _wrap_angle(z4 - s[7]), _wrap_angle(z5 - s[8])
+    cp, sp, ct, st = math.cos(s[8]), math.sin(s[8]), math.cos(s[7]), math.sin(s[7])
+    a, b = cp * ct, sp * ct  # E = [[a, -sp, 0], [b, cp, 0], [-st, 0, 1]]
+    r01 = a * b * v0 - sp * cp * v1
+    r02 = -a * st * v0
+    r12 = -b * st * v0
+    Rm = (a * a * v0 + sp * sp * v1, r01, r02, r01, b * b * v0 + cp * cp * v1, r12, r02, r12, st * st * v0 + v2)
+    if _update_block(c, P, counts, K_POSE, 6, a * e0 - sp * e1, b * e0 + cp * e1, e2 - st * e0, Rm, dx, have):
+        have = True
+    if have:
+        _inject(x, dx)
+        x[X_FUSED] += 1.0
+
+
+@njit(cache=True)
+def fuse_gnss(x: np.ndarray, c: np.ndarray, P: np.ndarray, hist: np.ndarray, hs: np.ndarray, counts: np.ndarray,
+              t_valid: float, z0: float, z1: float, z2: float, z3: float, z4: float, z5: float, vp0: float,
+              vp1: float, vp2: float, vv0: float, vv1: float, vv2: float) -> None:
+    """A GNSS fix: position (z0, z1, z2) m and velocity (z3, z4, z5) m/s with their variances, valid at t_valid."""
+    flush(x, c, P)
+    s = np.empty(9)
+    _state_at(x, hist, hs, t_valid, s)
+    dx = np.zeros(15)
+    have = _update_block(c, P, counts, K_GNSS, 0, z0 - s[0], z1 - s[1], z2 - s[2],
+                         (vp0, 0.0, 0.0, 0.0, vp1, 0.0, 0.0, 0.0, vp2), dx, False)
+    if _update_block(c, P, counts, K_GNSS, 3, z3 - s[3], z4 - s[4], z5 - s[5],
+                     (vv0, 0.0, 0.0, 0.0, vv1, 0.0, 0.0, 0.0, vv2), dx, have):
+        have = True
+    if have:
+        _inject(x, dx)
+        x[X_FUSED] += 1.0
+
+
+@njit(cache=True)
+def fuse_baro(x: np.ndarray, c: np.ndarray, P: np.ndarray, hist: np.ndarray, hs: np.ndarray, counts: np.ndarray,
+              t_valid: float, z: float, var: float) -> None:
+    """A barometric altitude z (m above the start's datum, variance var m²), valid at t_valid: H = e_z on δp."""
+    flush(x, c, P)
+    s = np.empty(9)
+    _state_at(x, hist, hs, t_valid, s)
+    h = np.zeros(15)
+    h[2] = 1.0
+    _update_scalar(x, c, P, counts, K_BARO, h, z - s[2], var)
+
+
+@njit(cache=True)
+def fuse_heading(x: np.ndarray, c: np.ndarray, P: np.ndarray, hist: np.ndarray, hs: np.ndarray,
+                 counts: np.ndarray, t_valid: float, z: float, var: float) -> None:
+    """A heading z (rad, variance var rad²), valid at t_valid: H = (cψ tθ, sψ tθ, 1) on δθ."""
+    flush(x, c, P)
+    s = np.empty(9)
+    _state_at(x, hist, hs, t_valid, s)
+    h = np.zeros(15)
+    tt = math.tan(s[7])
+    h[6] = math.cos(s[8]) * tt
+    h[7] = math.sin(s[8]) * tt
+    h[8] = 1.0
+    _update_scalar(x, c, P, counts, K_HEADING, h, _wrap_angle(z - s[8]), var)
+
+
+@njit(cache=True)
+def estimate(x: np.ndarray, t: float) -> tuple:
+    """The 12-state of eq. (7) at t (s): the nominal state, carried from the last IMU sample at constant
+    velocity and rates; the Euler rates of the bias-corrected gyro."""
+    phi, theta, psi = euler_now(x)
+    dphi, dtheta, dpsi = _euler_rates(phi, theta, x[X_OM], x[X_OM + 1], x[X_OM + 2])
+    dt = t - x[X_T]
+    if dt > 0.0:
+        return (x[X_P] + x[X_V] * dt, x[X_V] + x[X_ACC] * dt, x[X_P + 1] + x[X_V + 1] * dt,
+                x[X_V + 1] + x[X_ACC + 1] * dt, x[X_P + 2] + x[X_V + 2] * dt, x[X_V + 2] + x[X_ACC + 2] * dt,
+                phi + dphi * dt, dphi, theta + dtheta * dt, dtheta, psi + dpsi * dt, dpsi)
+    return (x[X_P], x[X_V], x[X_P + 1], x[X_V + 1], x[X_P + 2], x[X_V + 2], phi, dphi, theta, dtheta, psi, dpsi)
+
+
+@njit(cache=True)
+def state_covariance(x: np.ndarray, c: np.ndarray, P: np.ndarray, out: np.ndarray) -> None:
+    """out (9×9) = J P Jᵀ over (x, y, z, ẋ, ẏ, ż, φ, θ, ψ), P carried to now, J = diag(I₆, E⁻¹) on
+    (δp, δv, δθ): the attitude's rows and columns as Euler-angle errors."""
+    Pn = np.empty((15, 15))
+    current_P(x, c, P, Pn)
+    _, theta, psi = euler_now(x)
+    cp, sp, ct, tt = math.cos(psi), math.sin(psi), math.cos(theta), math.tan(theta)
+    J = ((cp / ct, sp / ct, 0.0), (-sp, cp, 0.0), (cp * tt, sp * tt, 1.0))
+    for i in range(9):
+        for j in range(9):
+            out[i, j] = Pn[i, j]
+    for j in range(9):  # rows 6..8 ← J · rows 6..8
+        a0, a1, a2 = out[6, j], out[7, j], out[8, j]
+        for i in range(3):
+            out[6 + i, j] = J[i][0] * a0 + J[i][1] * a1 + J[i][2] * a2
+    for i in range(9):  # columns 6..8 ← columns 6..8 · Jᵀ
+        a0, a1, a2 = out[i, 6], out[i, 7], out[i, 8]
+        for j in range(3):
+            out[i, 6 + j] = a0 * J[j][0] + a1 * J[j][1] + a2 * J[j][2]
+
+
+@njit(cache=True)
+def nees(x: np.ndarray, c: np.ndarray, P: np.ndarray, e: tuple) -> float:
+    """eᵀ C⁻¹ e of an estimation error e (the order of :func:`state_covariance`) against the state
+    covariance C now; NaN if C is not positive definite."""
+    C = np.empty(81)
+    state_covariance(x, c, P, C.reshape((9, 9)))
+    return _weighted_square(C, e)
+
+
+_ready = False
+
+
+def ready() -> None:
+    """Compile (or load from the cache) every kernel now, once per process: an EKF built in the middle
+    of a real-time session must not stop to compile at its first measurement."""
+    global _ready
+    if _ready:
+        return
+    x = np.zeros(X_SIZE)
+    x[X_R] = x[X_R + 4] = x[X_R + 8] = x[X_M] = x[X_M + 4] = x[X_M + 8] = 1.0
+    c = np.ones(C_SIZE)
+    P = np.eye(15)
+    hist = np.zeros((4, HIST_COLS))
+    hs = np.zeros(2, np.int64)
+    counts = np.zeros((4, 2), np.int64)
+    remember(x, hist, hs)
+    propagate(x, c, P, hist, hs, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.01, 0.01)
+    fuse_pose(x, c, P, hist, hs, counts, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
+    fuse_gnss(x, c, P, hist, hs, counts, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
+    fuse_baro(x, c, P, hist, hs, counts, 0.0, 0.0, 1.0)
+    fuse_heading(x, c, P, hist, hs, counts, 0.0, 0.0, 1.0)
+    estimate(x, 0.0)
+    current_P(x, c, P, np.empty((15, 15)))
+    nees(x, c, P, (0.0,) * 9)
+    _ready = True
