@@ -100,3 +100,15 @@ def test_a_law_that_fails_everywhere_has_no_margin(tmp_path: Path) -> None:
     assert res["margin"] is None and res["bracket"] == [None, 0.0] and all(c["failed"] for c in res["cells"])
     assert [c["noise"] for c in res["cells"]] == [1.0, 0.5, 0.25, 0.0]
     assert "margin bsst: noise: none" in r.stdout
+
+
+def test_a_refused_out_directory_is_named_before_any_flight(tmp_path: Path) -> None:
+    """A non-empty --out is refused up front: with 1000 seeds a probe, a search that flew first would
+    run for many minutes before it refused to write (the deadline below would end the test)."""
+    (tmp_path / "kept.txt").write_text("a user's file\n")
+    r = subprocess.run([sys.executable, "-m", "bridge", "margin", "missions/sine.toml", "--over", "delay_ms",
+                        "--until", "rms=0.1", "--seeds", "1000", "--out", str(tmp_path)],
+                       cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "--out" in r.stderr and "not empty" in r.stderr, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
+    assert (tmp_path / "kept.txt").read_text() == "a user's file\n" and not (tmp_path / "margin.json").exists()

@@ -470,6 +470,7 @@ def add_margin_command(sub: Any) -> None:
 
 def cmd_margin(args: argparse.Namespace) -> int:
     from bridge.core.flight import prepare  # lazy: start-up time
+    from bridge.record.runlog import run_dir  # lazy: start-up time
     from bridge.sweep.margin import margin, parse_until, write_margin  # lazy: start-up time
     from missions import load_mission  # lazy: start-up time
 
@@ -482,6 +483,7 @@ def cmd_margin(args: argparse.Namespace) -> int:
     if args.over == "noise" and sensing["noise"] is not None:
         raise UsageError("bsst margin: --noise conflicts with --over noise (the noise scale is what is searched)")
     mission = prepare(load_mission(args.mission), link=fixed or None, **sensing).mission
+    run_dir(args.out, f"{mission.name}-margin", args.overwrite, create=False)  # a refused --out before any flight
     live = sys.stderr.isatty()
 
     def show(text: str) -> None:
