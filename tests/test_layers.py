@@ -19,6 +19,7 @@ that it fails on an upward import, a sibling import and a circle.
 from __future__ import annotations
 
 import ast
+import functools
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -71,11 +72,9 @@ def project_sources(root: Path = ROOT) -> dict[str, str]:
     return out
 
 
-def imports_of(name: str, source: str, modules: set[str]) -> list[tuple[str, int, bool, str]]:
-    """(imported module, line, function-local?, source line) for each import of ``source``.
-
-    ``from a.b import c`` imports the module ``a.b.c`` when there is one, else ``a.b``.
-    """
+@functools.lru_cache(maxsize=4096)  # every test re-checks the whole project with one module changed
+def _import_nodes(source: str) -> tuple[tuple[int, str, int, tuple[str, ...], int, bool, str], ...]:
+    """(is-from, module, level, names, line, function-local?, source line) of each import statement."""
     tree = ast.parse(source)
     lines = source.splitlines()
     local: set[int] = set()
@@ -85,19 +84,33 @@ def imports_of(name: str, source: str, modules: set[str]) -> list[tuple[str, int
                 if isinstance(sub, (ast.Import, ast.ImportFrom)):
                     local.add(id(sub))
     out = []
-    package = name if name in modules and _is_package(name, modules) else name.rpartition(".")[0]
     for node in ast.walk(tree):
-        targets: list[str] = []
         if isinstance(node, ast.Import):
-            targets = [a.name for a in node.names]
+            out.append((0, "", 0, tuple(a.name for a in node.names), node.lineno, id(node) in local,
+                        lines[node.lineno - 1]))
         elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:
-                up = package.split(".")[: len(package.split(".")) - node.level + 1]
+            out.append((1, node.module or "", node.level, tuple(a.name for a in node.names), node.lineno,
+                        id(node) in local, lines[node.lineno - 1]))
+    return tuple(out)
+
+
+def imports_of(name: str, source: str, modules: set[str] | frozenset[str]) -> list[tuple[str, int, bool, str]]:
+    """(imported module, line, function-local?, source line) for each import of ``source``.
+
+    ``from a.b import c`` imports the module ``a.b.c`` when there is one, else ``a.b``.
+    """
+    out = []
+    package = name if name in modules and _is_package(name, modules) else name.rpartition(".")[0]
+    for is_from, base, level, names, lineno, local, text in _import_nodes(source):
+        if not is_from:
+            targets = list(names)
+        else:
+            if level:
+                up = package.split(".")[: len(package.split(".")) - level + 1]
                 base = ".".join(up + ([base] if base else []))
-            targets = [f"{base}.{a.name}" if f"{base}.{a.name}" in modules else base for a in node.names]
+            targets = [f"{base}.{a}" if f"{base}.{a}" in modules else base for a in names]
         for t in dict.fromkeys(targets):
-            out.append((t, node.lineno, id(node) in local, lines[node.lineno - 1]))
+            out.append((t, lineno, local, text))
     return out
 
 
@@ -107,7 +120,7 @@ def _is_package(name: str, modules: set[str]) -> bool:
 
 def layer_problems(sources: Mapping[str, str]) -> list[str]:
     """Every broken rule of the module docstring, one line each (empty: the layout holds)."""
-    modules = set(sources)
+    modules = frozenset(sources)
     problems = []
     graph: dict[str, set[str]] = {m: set() for m in modules}
     for name, src in sources.items():
