@@ -58,8 +58,9 @@ names the ground station from the vehicle's event. Parameter changes scheduled a
 answer of their step. Each command is sent first, then its row of
 ``controller.csv`` (:data:`CONTROLLER_COLUMNS`, one ``write`` each, so the file is whole
 up to its last row whatever kills the process). A controller killed between the send and
-the write leaves one command without its row: the session then leaves that step out of
-``trace.csv`` rather than guess what the law demanded.
+the write leaves one command without its row: the session keeps the steps flown on that
+command in ``trace.csv`` with the law's demand unknown (NaN; ``missing_rows``) rather than
+guess it.
 """
 
 from __future__ import annotations

@@ -81,7 +81,9 @@ class TraceJoiner:
     state ``cmd_k``, as it arrived on the wire) and what the plant realised; the controller's
     row for ``cmd_k`` holds what the law demanded (u1..u4, phi_d, theta_d). A vehicle row
     waits for its other half (the controller writes it just after sending the command);
-    once the controller is gone, a row whose half never came is left out (``missing``).
+    once the controller is gone, a row whose half never came (the command it sent last, and
+    every step the vehicle held it before its failsafe) is kept, with the law's demand and
+    desired attitude unknown (NaN), and counted (``missing``): the trace never skips a step.
     Rows flown by the vehicle's own failsafe (no controller command) take the landing
     loop's demand, and its desired attitude (level). ``t`` counts from the first state the
     controller answered. In ``lockstep`` a step the controller answered (``cmd_k`` = k) takes
@@ -109,7 +111,7 @@ class TraceJoiner:
         self.s2c_ms: list[float] = []
         self.late_ms: list[float] = []
         self._up_seen: set[int] = set()
-        self.missing = 0  # vehicle rows left out: their controller half was never written
+        self.missing = 0  # rows without their controller half (never written): demand NaN
         self.first_sent: float | None = None  # wall time the first / last joined state was sent
         self.last_sent = math.nan
         self._vi: dict[str, int] | None = None  # column positions, from each file's header
@@ -158,9 +160,6 @@ class TraceJoiner:
         mode = int(v[vi['mode']])
         if self.k0 is None or k < self.k0 or (key < 0 and mode == 0):
             return  # not flying the mission yet (armed, no target)
-        if key >= 0 and c is None:
-            self.missing += 1  # a controller killed between its send and its row: no half to join
-            return
         if mode == 0 and k - self.k0 >= self.steps:
             return  # realtime: the state that ended the mission, flown while the disarm was on its way
         t = (k - self.k0) / self.rate
@@ -174,6 +173,9 @@ class TraceJoiner:
                 self.up_ms.append(1e3 * (v[vi['cmd_recv_wall']] - c[ci['cmd_sent_wall']]))
                 if math.isfinite(v[vi['rtt_s']]):
                     self.rtt_ms.append(1e3 * v[vi['rtt_s']])
+        elif key >= 0:  # a controller killed between sending this command and writing its row
+            self.missing += 1
+            u, desired = (math.nan,) * 4, (math.nan, math.nan)  # what the law demanded was never recorded
         else:
             u = tuple(v[vi[n]] for n in INPUT_COLUMNS)
             desired = (0.0, 0.0)  # the landing loop holds the vehicle level

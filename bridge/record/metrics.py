@@ -45,9 +45,11 @@ def ripple_rms(t: np.ndarray, u: np.ndarray, rate_hz: float, window_s: float = R
     sel = t >= t[0] + 0.5 * (t[-1] - t[0])
     sel[: n // 2 + 1] = False
     sel[len(sel) - n // 2 - 1:] = False
+    dev = u - mean
+    sel &= np.isfinite(dev)  # a window over an unknown demand (NaN) says nothing
     if not sel.any():
         return 0.0
-    return float(np.sqrt(np.mean((u - mean)[sel] ** 2)))
+    return float(np.sqrt(np.mean(dev[sel] ** 2)))
 
 
 def percentiles(values: Any, scale: float = 1.0, empty: float | None = 0.0) -> dict[str, float | None]:
@@ -138,10 +140,12 @@ def summarise(
     inputs = {}
     for u in ("u1", "u2", "u3", "u4"):
         v = trace[u]
+        known = np.isfinite(v)  # NaN: a demand never recorded (a controller killed before its row)
+        m = int(known.sum())
         inputs[u] = {
-            "min": _num(v.min()) if n else None,
-            "max": _num(v.max()) if n else None,
-            "tv_per_s": _num(np.abs(np.diff(v)).sum() / dur) if n > 1 else 0.0,
+            "min": _num(v[known].min()) if m else None,
+            "max": _num(v[known].max()) if m else None,
+            "tv_per_s": _num(np.nansum(np.abs(np.diff(v))) / dur) if n > 1 else 0.0,
         }
         if u != "u1":
             inputs[u]["ripple"] = _num(ripple_rms(t, v, mission.rate_hz)) if n else None

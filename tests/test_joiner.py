@@ -1,0 +1,68 @@
+"""bridge/record/joiner.py: vehicle.csv + controller.csv -> trace.csv rows, on real part files.
+
+The files are written here as the vehicle and the controller write them (their headers, one line
+a row), for the case a SITL flight cannot produce on demand: a controller killed between sending a
+command and writing its row.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from bridge.core.flight import prepare
+from bridge.nodes.vehicle import MODE_CODES
+from bridge.record.columns import CONTROLLER_COLUMNS, TRACE_COLUMNS, VEHICLE_COLUMNS
+from bridge.record.joiner import TraceJoiner
+from bridge.record.metrics import ripple_rms
+from missions import MISSION_DIR
+
+RATE = 250.0
+
+
+def _write(path: Path, columns: tuple[str, ...], rows: list[dict[str, float]]) -> None:
+    lines = [",".join(columns)] + [",".join(repr(float(r.get(c, 0.0))) for c in columns) for r in rows]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def test_steps_flown_on_a_command_whose_row_was_never_written_are_kept_with_the_demand_unknown(tmp_path: Path) -> None:
+    """Steps 0..5 answered; the controller dies after sending 5 and before writing its row; the vehicle
+    holds command 5 for steps 6..8, then its failsafe flies 9..11. Every step is a trace row, in order;
+    the rows on command 5 have u and the desired attitude NaN, and are counted missing."""
+    flight = prepare(MISSION_DIR / "sine.toml")
+    vehicle, controller = [], []
+    for k in range(12):
+        key = k if k <= 5 else 5 if k <= 8 else -1
+        mode = MODE_CODES["offboard"] if key >= 0 else MODE_CODES["failsafe"]
+        vehicle.append({"k": k, "t": k / RATE, "x": 0.001 * k, "mode": mode, "cmd_k": key, "c1": 0.5, "u1": 3.0,
+                        "u1_act": 3.0, "odo_sent_wall": 100.0 + k / RATE, "cmd_recv_wall": 100.0 + k / RATE,
+                        "rtt_s": 1e-4, "state_age_s": 0.0, "nees": 0.0})
+        if k <= 4:
+            controller.append({"k": k, "t": k / RATE, "u1": 4.0 + k, "u2": 0.1, "phi_d": 0.01, "theta_d": 0.02,
+                               "odo_recv_wall": 100.0 + k / RATE, "cmd_sent_wall": 100.0 + k / RATE})
+    _write(tmp_path / "vehicle.csv", VEHICLE_COLUMNS, vehicle)
+    _write(tmp_path / "controller.csv", CONTROLLER_COLUMNS, controller)
+    j = TraceJoiner(tmp_path, flight, None, lockstep=True)
+    assert j.update() == 5  # rows 0..4 joined; row 5 waits for a controller row that may still come
+    j.controller_done = True
+    assert j.update() == 7
+    j.close()
+    col = {c: np.array([r[i] for r in j.rows]) for i, c in enumerate(TRACE_COLUMNS)}
+    assert np.allclose(col["t"], np.arange(12) / RATE) and np.allclose(col["x"], 0.001 * np.arange(12))
+    assert np.all(np.diff(col["t"]) > 0)
+    assert list(col["u1"][:5]) == [4.0, 5.0, 6.0, 7.0, 8.0]
+    assert all(math.isnan(v) for v in (*col["u1"][5:9], *col["u2"][5:9], *col["phi_d"][5:9], *col["theta_d"][5:9]))
+    assert list(col["u1"][9:]) == [3.0, 3.0, 3.0] and list(col["phi_d"][9:]) == [0.0, 0.0, 0.0]  # the landing loop
+    assert j.missing == 4
+
+
+def test_ripple_ignores_an_unknown_stretch_of_demand() -> None:
+    t = np.arange(2000) / RATE
+    u = np.sin(2 * np.pi * 20 * t)
+    clean = ripple_rms(t, u, RATE)
+    holed = u.copy()
+    holed[1500:1600] = np.nan
+    got = ripple_rms(t, holed, RATE)
+    assert math.isfinite(got) and abs(got - clean) < 0.05 * clean
