@@ -221,6 +221,41 @@ def test_the_controller_link_obeys_only_the_flights_controller(tmp_path):
     ]
 
 
+def test_a_pinned_controller_address_leaves_a_stranger_nothing_even_before_the_flight(tmp_path):
+    """The gap an address learned from the first message leaves (docs/design.md, "Not enforced"),
+    closed by ``--controller-from`` (what ``bsst sitl`` passes): before any flight, a process
+    claiming 200:191 from another address is a ``stranger`` (its ARM DENIED, no state sent to
+    it); the controller from the pinned address arms and flies, and is named in the events."""
+    ctl = Station((200, 191))  # bound first: its port is the one the vehicle is told
+    with instance_slot() as n, _vehicle(n, tmp_path / "v", "--controller-from", f"127.0.0.1:{ctl.addr[1]}") as v:
+        ctl.dest = ("127.0.0.1", LINK_PORT + n)
+        gcs = Station((255, 190), port=GCS_PORT + n, link_id=3)
+        thief = Station((200, 191), ("127.0.0.1", LINK_PORT + n))
+        try:
+            gcs.wait(lambda m: m.get_type() == "HEARTBEAT", 20, "the vehicle's heartbeat")
+            thief.send(M.MAVLink_heartbeat_message(M.MAV_TYPE_ONBOARD_CONTROLLER, M.MAV_AUTOPILOT_INVALID, 0, 0, 4, 3))
+            thief.command(ARM, 1.0)
+            assert thief.ack(ARM) == M.MAV_RESULT_DENIED  # no flight on, the ids right: refused all the same
+            assert not _armed(gcs)
+            ctl.command(ARM, 1.0)
+            assert ctl.ack(ARM) == M.MAV_RESULT_ACCEPTED
+            usec = ctl.wait(lambda m: m.get_type() == "ODOMETRY", 10, "ODOMETRY at the controller").time_usec
+            for _ in range(3):
+                usec = _step(ctl, 0.2, n + 1, usec)
+            assert _armed(gcs)
+            thief.command(ARM, 0.0, 21196.0)
+            assert thief.ack(ARM) == M.MAV_RESULT_DENIED
+            assert _armed(gcs)
+            thief.poll()
+        finally:
+            for st_ in (gcs, ctl, thief):
+                st_.close()
+    assert v.p.returncode == 0
+    assert thief.got["ODOMETRY"] == 0
+    assert _stats(v)["rejected"] == {"stranger": 3}
+    assert _events(v)[0] == f"armed: armed, offboard control [by 200:191 127.0.0.1:{ctl.addr[1]} controller]"
+
+
 STRANGE_MISSION = 'name = "strangers"\nduration_s = 10.0\n[trajectory]\nkind = "sine"\n'
 DEFAULT_STREAM_IDS = (M.MAVLINK_MSG_ID_ATTITUDE, M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION,
                       M.MAVLINK_MSG_ID_LOCAL_POSITION_NED, M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT,

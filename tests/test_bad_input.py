@@ -152,6 +152,7 @@ TEXT_BAD = {
     "--vehicle": lambda f: ["udpin:127.0.0.1:5", "nowhere"],
     "--to": lambda f: ["nowhere", "127.0.0.1:0"],
     "--client": lambda f: ["nowhere", "127.0.0.1:0", "udpin:127.0.0.1:5"],
+    "--controller-from": lambda f: ["nowhere", "127.0.0.1:0", "udpin:127.0.0.1:5", "127.0.0.1:x"],
     "--mission": lambda f: [getattr(f, b) for b in BAD_FILES],
     "--stats": lambda f: [f.regular / "x.json", f.directory],
     "--dask": lambda f: ["notanaddress"],

@@ -191,6 +191,9 @@ def add_relay_command(sub: Any) -> None:
     p.add_argument("--client", metavar="HOST:PORT",
                    help="the controller side's address: only its datagrams go on (default: the first sender "
                         "to --listen, learned once)")
+    p.add_argument("--back-port", type=int_in("--back-port", 1, 65535), metavar="PORT",
+                   help="send to --to from this local port (a vehicle run with --controller-from hears only it; "
+                        "default: any free one)")
     p.add_argument("--listen-direction", choices=("up", "down"), default="up",
                    help="direction of what arrives on --listen (default up: controller -> vehicle)")
     p.add_argument("--mission", metavar="FILE", help="take the [link] tables (and seed) from this mission")
@@ -229,9 +232,11 @@ def cmd_relay(args: argparse.Namespace) -> int:
 
     try:
         relay = Relay(listen, target, settings, listen_direction=args.listen_direction,
-                      mission_clock=args.mission_clock, client=client, on_client=learned)
+                      mission_clock=args.mission_clock, client=client, on_client=learned,
+                      back_port=args.back_port or 0)
     except OSError as exc:
-        raise ConfigError(f"--listen {args.listen}: cannot bind ({exc.strerror or exc})") from None
+        where = f"--listen {args.listen}" + (f" or --back-port {args.back_port}" if args.back_port else "")
+        raise ConfigError(f"{where}: cannot bind ({exc.strerror or exc})") from None
     stop = relay.stop
     old = {s: signal.signal(s, lambda *_: stop()) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
@@ -538,6 +543,9 @@ def add_sitl_commands(sub: Any) -> None:
                    help="MAVLink system id (default: MAV_SYS_ID if set, else instance + 1)")
     p.add_argument("--controller-id", type=_ids, metavar="SYSID:COMPID",
                    help="the only sender of actuator targets (default 200:191)")
+    p.add_argument("--controller-from", metavar="HOST:PORT",
+                   help="the only address the controller's ids are heard from (bsst sitl pins it; default: "
+                        "learned from the controller's first message)")
     p.add_argument("--home", type=_home, metavar="LAT,LON,ALT", help="home: degrees, degrees, m AMSL")
     add_failsafe_options(p)
     add_param_options(p, schedule=False)  # a change at a mission time is the controller's to send (--param-at)
@@ -553,6 +561,9 @@ def add_sitl_commands(sub: Any) -> None:
     p.add_argument("--instance", type=int_in("--instance", 0, 9), default=0, metavar="N",
                    help="vehicle instance N: port 14560 + N")
     p.add_argument("--realtime", action="store_true", help="fixed-rate schedule on the wall clock (default lockstep)")
+    p.add_argument("--source-port", type=int_in("--source-port", 1, 65535), metavar="PORT",
+                   help="send from this local UDP port (a vehicle run with --controller-from hears only it; "
+                        "default: any free one)")
     p.add_argument("--sysid", type=int_in("--sysid", 1, 254), default=200, metavar="N", help="own system id")
     p.add_argument("--target-sysid", type=int_in("--target-sysid", 1, 254), metavar="N",
                    help="fly only this vehicle (default: the first autopilot heard)")
@@ -601,9 +612,15 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
     gcs_text = args.gcs or f"127.0.0.1:{GCS_PORT + n}"
     gcs = None if gcs_text.strip().lower() == "none" else parse_address(gcs_text, "udpout", "--gcs")
     sysid, compid = args.controller_id or (CONTROLLER_SYSID, CONTROLLER_COMPID)
+    pin = None
+    if args.controller_from is not None:
+        a = parse_address(args.controller_from, "udpout", "--controller-from")
+        if a.mode != "udpout" or a.port == 0:
+            raise ConfigError(f"--controller-from {args.controller_from!r}: give the controller's HOST:PORT")
+        pin = (a.host, a.port)
     cfg = VehicleConfig(listen, gcs, sysid=args.sysid or own or n + 1, controller_sysid=sysid, controller_compid=compid,
                         clock="realtime" if args.realtime else "lockstep", speed=args.speed,
-                        home=Home(*args.home) if args.home else Home(), key=_key(args))
+                        home=Home(*args.home) if args.home else Home(), key=_key(args), controller_from=pin)
     return run_vehicle(flight, cfg, args.out, args.overwrite)
 
 
@@ -619,7 +636,8 @@ def cmd_controller(args: argparse.Namespace) -> int:
     if vehicle.mode != "udpout":
         raise ConfigError(f"--vehicle {args.vehicle!r}: the controller sends to the vehicle (udpout)")
     cfg = OffboardConfig(vehicle, sysid=args.sysid, clock="realtime" if args.realtime else "lockstep",
-                         target_sysid=args.target_sysid, connect_timeout_s=args.timeout, key=_key(args))
+                         target_sysid=args.target_sysid, connect_timeout_s=args.timeout, key=_key(args),
+                         source_port=args.source_port or 0)
     return run_controller(flight, cfg, args.out, args.overwrite)
 
 

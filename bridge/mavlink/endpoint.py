@@ -344,7 +344,8 @@ class Endpoint:
     def __init__(self, address: Address, *, sysid: int, compid: int, tlog: Tlog | None = None,
                  name: str = "link", rcvbuf: int = 1 << 20, signing: Signing | None = None,
                  rejected: Rejections | None = None, batch: int = BATCH, limiter: RateLimiter | None = None,
-                 priority: bool = False, exempt_peer: bool = True, replies: ReplyBudget | None = None) -> None:
+                 priority: bool = False, exempt_peer: bool = True, replies: ReplyBudget | None = None,
+                 source_port: int = 0) -> None:
         self.address = address
         self.name = name
         self.tlog = tlog
@@ -367,12 +368,13 @@ class Endpoint:
             else:
                 # bind on the interface that reaches the peer: loopback stays loopback
                 local = "127.0.0.1" if address.host.startswith("127.") or address.host == "localhost" else ""
-                sock.bind((local, 0))
+                sock.bind((local, source_port))  # udpout: the port it sends from (0: any free one)
                 self.peer = (socket.gethostbyname(address.host), address.port)
                 self.follow = False
         except OSError as exc:
             sock.close()
-            raise ConfigError(f"{name} {address}: cannot bind ({exc.strerror})") from None
+            what = f"--source-port {source_port}" if source_port and address.mode == "udpout" else f"{name} {address}"
+            raise ConfigError(f"{what}: cannot bind ({exc.strerror})") from None
         sock.setblocking(False)
         self.sock = sock
         self.fileno = sock.fileno()

@@ -166,6 +166,7 @@ class OffboardConfig:
     spin_s: float = 0.0002  # as the vehicle's (bridge.nodes.vehicle.VehicleConfig.spin_s)
     timesync_s: float = 0.5
     key: bytes | None = field(default=None, repr=False)  # MAVLink 2 signing key (never shown)
+    source_port: int = 0  # local UDP port it sends from (0: any free one; bsst sitl pins it for the vehicle)
 
 
 class Offboard:
@@ -197,7 +198,8 @@ class Offboard:
         self.tlog = Tlog(out / "controller.tlog") if out is not None else None
         self.rejected = Rejections()  # what the receive path refused (bridge.mavlink.receive)
         self.ep = Endpoint(cfg.vehicle, sysid=cfg.sysid, compid=cfg.compid, tlog=self.tlog, name="--vehicle",
-                           signing=Signing(cfg.key) if cfg.key is not None else None, rejected=self.rejected)
+                           signing=Signing(cfg.key) if cfg.key is not None else None, rejected=self.rejected,
+                           source_port=cfg.source_port)
         self._odo_usec = -1  # time_usec of the newest state accepted: an older one is stale
         self._stamp_slack_s = stamp_slack_s(flight, cfg.clock)  # how far a stamp may jump (stamp_problem)
         self.rows = (LineWriter(out / "controller.csv", ",".join(CONTROLLER_COLUMNS), batch=1)

@@ -99,12 +99,13 @@ class Relay:
     ``duration_s``; :meth:`start` runs it in a daemon thread. ``client`` fixes the controller
     side's address; without it the first sender to the listen port is the client, for good
     (``on_client`` is then called with its address, once, from the serving thread).
+    ``back_port`` is the local port the back socket sends to ``target`` from (0: any free one).
     """
 
     def __init__(self, listen: Address, target: Address, link: LinkSettings | None = None, *,
                  listen_direction: str = "up", clock: Callable[[], float] = time.perf_counter,
                  mission_clock: bool = False, client: Address | None = None,
-                 on_client: Callable[[Address], None] | None = None) -> None:
+                 on_client: Callable[[Address], None] | None = None, back_port: int = 0) -> None:
         link = link or LinkSettings()
         self.mission_clock = mission_clock
         self.origin_s: float | None = None  # relay time (s) of the flight's time 0 (mission_clock)
@@ -121,7 +122,7 @@ class Relay:
         self.back = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             self.front.bind(listen)
-            self.back.bind((listen[0], 0))
+            self.back.bind((listen[0], back_port))  # 0: any free port
         except OSError:
             self.close()
             raise

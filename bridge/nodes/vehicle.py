@@ -61,6 +61,7 @@ from __future__ import annotations
 
 import json
 import math
+import socket
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -233,6 +234,9 @@ class VehicleConfig:
     # peer's median work; longer only burns a core that a busy machine needs for that peer
     home: tm.Home = field(default_factory=tm.Home)
     key: bytes | None = field(default=None, repr=False)  # MAVLink 2 signing key (never shown)
+    # the only address the controller's ids are heard from on the controller link (bsst sitl pins the
+    # controller's source port); None: learned from its first message, as docs/design.md says
+    controller_from: tuple[str, int] | None = None
 
 
 class Vehicle:
@@ -257,6 +261,8 @@ class Vehicle:
         # refusals of the receive path (bridge.mavlink.receive), both links, and of the up-link model's end
         self.rejected = Rejections()
         self._from_peer = False  # the message being handled came from the controller's address
+        pin = cfg.controller_from  # numeric, as recvfrom gives addresses (a name would never match)
+        self._pinned = (socket.gethostbyname(pin[0]), pin[1]) if pin is not None else None
         # one replay table for both links: a signed frame replayed from one link onto the other is refused
         replay: dict[tuple[int, int, int], int] = {}
         sign = ((lambda link_id: Signing(cfg.key, link_id, replay)) if cfg.key is not None
@@ -659,7 +665,7 @@ class Vehicle:
             self._dispatch(ep, m, addr)
             return
         known = self._from_peer = addr == link.peer
-        why = self._authority(m, known)
+        why = self._authority(m, known, addr)
         if why is not None:
             self._reject(why)
             if m._type in _COMMANDS:
@@ -679,17 +685,19 @@ class Vehicle:
         else:
             link.prioritise(addr)
 
-    def _authority(self, m: Any, known: bool) -> str | None:
+    def _authority(self, m: Any, known: bool, addr: tuple[str, int]) -> str | None:
         """Why a message on the controller link is refused for its sender, or None: only the
-        configured controller (its sysid and compid) is heard there, and during a flight only
-        from the flight's address (docs/design.md, "Authority"). A command for another
-        system is ``target`` whoever sent it."""
+        configured controller (its sysid and compid) is heard there; with ``controller_from``
+        only from that address, else during a flight only from the flight's address
+        (docs/design.md, "Authority"). A command for another system is ``target`` whoever sent it."""
         cfg = self.cfg
         kind = m._type
         if kind in _ADDRESSED and addressed_elsewhere(m, cfg.sysid, cfg.compid):
             return "target"
         if not self._from_controller(m):
             return "sender" if kind in _TARGETS else "not_authorised"
+        if self._pinned is not None and addr != self._pinned:
+            return "stranger"
         if not known and self.link.peer is not None and (self.sim.armed or self.engaged):
             return "stranger"
         return None

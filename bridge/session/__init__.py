@@ -80,7 +80,15 @@ from bridge.record.policies import (
     without_sender,
 )
 from bridge.record.runlog import EventLog, Run, RunRecord, check_trace_steps, run_dir, trace_arrays
-from bridge.session.children import READY_TIMEOUT_S, STOP_GRACE_S, Child, ChildError, check_port_free, instance_slot
+from bridge.session.children import (
+    READY_TIMEOUT_S,
+    STOP_GRACE_S,
+    Child,
+    ChildError,
+    check_port_free,
+    free_udp_port,
+    instance_slot,
+)
 from missions import Mission
 from params import ConfigError
 
@@ -346,9 +354,15 @@ class Session:
     # -- children ----------------------------------------------------------------------------------
     def _start(self) -> None:
         mission = str(self.path / "mission.toml")
+        # the controller's source port, named to the vehicle before either starts: the vehicle hears the
+        # controller's ids from that address only (through a relay, from the relay's back port), so no
+        # other process can claim them, not even before the controller's first message
+        source = free_udp_port()
+        relayed = self.realtime and self.flight.link.impaired
+        back = free_udp_port() if relayed else source
         argv = ["vehicle", mission, "--listen", self.listen, "--gcs", self.gcs or "none",
                 "--sysid", str(self.sysid), "--realtime" if self.realtime else "--lockstep",
-                "--out", str(self.path), "--overwrite"]
+                "--controller-from", f"127.0.0.1:{back}", "--out", str(self.path), "--overwrite"]
         if self.speed is not None:
             argv += ["--speed", repr(self.speed)]
         keyarg = ["--key", str(self.key)] if self.key is not None else []
@@ -357,15 +371,16 @@ class Session:
         port = ready.get("listen", self.listen).rpartition(":")[2]
         self.listen = f"127.0.0.1:{port}"  # the port bound, also when it was chosen free
         self._note("started", f"vehicle pid {self.vehicle.pid}: {ready.get('_line', '')}", "session")
-        if self.realtime and self.flight.link.impaired:  # the link model on the wall clock, between the two
+        if relayed:  # the link model on the wall clock, between the two
             self.relay = Child("relay", ["relay", "--listen", "127.0.0.1:0", "--to", f"127.0.0.1:{port}",
+                                         "--back-port", str(back), "--client", f"127.0.0.1:{source}",
                                          "--mission", mission, "--mission-clock",
                                          "--stats", str(self.path / "relay.json")], self.path / "relay.log")
             line = self._wait_ready(self.relay, "relay:")["_line"]
             port = line.split(" -> ")[0].rpartition(":")[2]  # "listening on HOST:PORT -> ..."
             self._note("started", f"relay pid {self.relay.pid}: {line}", "session")
         argv = ["controller", mission, "--vehicle", f"127.0.0.1:{port}", "--target-sysid", str(self.sysid),
-                "--out", str(self.path), "--overwrite"]
+                "--source-port", str(source), "--out", str(self.path), "--overwrite"]
         if self.realtime:
             argv.append("--realtime")
         for c in self.flight.param_changes:

@@ -47,6 +47,17 @@ def check_port_free(port: int, flag: str) -> None:
         s.close()
 
 
+def free_udp_port() -> int:
+    """A UDP port of 127.0.0.1 free now (the kernel's choice), for a child to bind next: the session
+    names its controller's source port to the vehicle before either child starts."""
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+    finally:
+        s.close()
+
+
 class Child:
     """One child process: its status lines (stdout, read without blocking) and its exit."""
 
