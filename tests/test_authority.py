@@ -256,6 +256,28 @@ def test_a_pinned_controller_address_leaves_a_stranger_nothing_even_before_the_f
     assert _events(v)[0] == f"armed: armed, offboard control [by 200:191 127.0.0.1:{ctl.addr[1]} controller]"
 
 
+def test_a_ping_is_answered_to_its_sender_and_an_answer_is_not(tmp_path):
+    """PING with no target (MAVSDK sends one at connect to measure the link) is answered with
+    the same sequence and time, addressed to the sender, on either link; a PING addressed to
+    someone (an answer) gets nothing back."""
+    with instance_slot() as n, _vehicle(n, tmp_path / "v") as v:
+        gcs, ctl = _stations(n)
+        try:
+            for st_, ids in ((gcs, (255, 190)), (ctl, (200, 191))):
+                st_.send(M.MAVLink_ping_message(123456789, 42, 0, 0))
+                pong = st_.wait(lambda m: m.get_type() == "PING", 5, "the PING answer")
+                assert (pong.time_usec, pong.seq, pong.target_system, pong.target_component) == (123456789, 42, *ids)
+                assert pong.get_srcSystem() == n + 1
+                st_.send(M.MAVLink_ping_message(5, 6, 7, 8))  # an answer to someone: no reply
+                st_.command(REQ, M.MAVLINK_MSG_ID_HEARTBEAT)  # handled in order: its ACK comes after any reply
+                assert st_.ack(REQ) == M.MAV_RESULT_ACCEPTED
+                assert [m.seq for m in st_.seen if m.get_type() == "PING"] == [42]
+        finally:
+            gcs.close()
+            ctl.close()
+    assert v.p.returncode == 0
+
+
 STRANGE_MISSION = 'name = "strangers"\nduration_s = 10.0\n[trajectory]\nkind = "sine"\n'
 DEFAULT_STREAM_IDS = (M.MAVLINK_MSG_ID_ATTITUDE, M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION,
                       M.MAVLINK_MSG_ID_LOCAL_POSITION_NED, M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT,
@@ -398,7 +420,7 @@ def _fly_packed(mission: Path, out: Path, flood: bool) -> tuple[dict[str, Any], 
 SYSID = 1
 CTL_IDS = (CONTROLLER_SYSID, CONTROLLER_COMPID)
 HANDLED = [M.MAVLink_heartbeat_message, M.MAVLink_command_long_message, M.MAVLink_command_int_message,
-           M.MAVLink_timesync_message, M.MAVLink_mission_request_list_message,
+           M.MAVLink_timesync_message, M.MAVLink_ping_message, M.MAVLink_mission_request_list_message,
            M.MAVLink_hil_actuator_controls_message, M.MAVLink_set_actuator_control_target_message]
 COMMANDS = [ARM, SET_IV, GET_IV, REQ, M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, M.MAV_CMD_GET_HOME_POSITION,
             M.MAV_CMD_DO_SET_MODE, M.MAV_CMD_NAV_TAKEOFF]

@@ -163,6 +163,12 @@ def test_a_strangers_far_future_state_does_not_end_a_relayed_flight(tmp_path: Pa
     assert relay["refused"] == {"stranger_front": sent, "stranger_back": sent}
     assert s["link"]["relay_refused"] == relay["refused"]
     assert not s["link"]["rejected_by"]["controller"], s["link"]["rejected_by"]  # none reached it
-    clients = [e for e in s["events"] if e["source"] == "relay" and e["kind"] == "client"]
-    assert len(clients) == 1, s["events"]
+    # the session named the relay its client (the controller's source port) and the vehicle the relay's back
+    # port: nothing was left to learn from a first sender
+    started = [e["text"] for e in s["events"] if e["kind"] == "started" and e["text"].startswith("relay pid")]
+    assert len(started) == 1 and "(client 127.0.0.1:" in started[0], s["events"]
+    back = started[0].split(" from ")[1].split(" ")[0]
+    vehicle_start = next(e["text"] for e in s["events"] if e["kind"] == "started" and e["text"].startswith("vehicle"))
+    assert f"controller_from={back}" in vehicle_start, vehicle_start
+    assert not [e for e in s["events"] if e["source"] == "relay" and e["kind"] == "client"], s["events"]
 

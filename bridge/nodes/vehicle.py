@@ -4,7 +4,7 @@ In:  actuator targets on the controller link, stamped with the ``time_usec`` of 
      HIL_ACTUATOR_CONTROLS (``motors``: c1..c4 = omega / omega_max, each in [0, 1]) or
      SET_ACTUATOR_CONTROL_TARGET group 0 (``wrench``: roll, pitch, yaw in [-1, 1], thrust in [0, 1]),
      or the no-target acknowledgement; COMMAND_LONG / COMMAND_INT (among them DO_SET_MODE, NAV_TAKEOFF
-     m AMSL, NAV_LAND), SET_MODE, PARAM_REQUEST_LIST / PARAM_REQUEST_READ / PARAM_SET, TIMESYNC,
+     m AMSL, NAV_LAND), SET_MODE, PARAM_REQUEST_LIST / PARAM_REQUEST_READ / PARAM_SET, TIMESYNC, PING,
      HEARTBEAT on either link
 Out: ODOMETRY (NED position m, FRD body velocity m/s, quaternion FRD to NED, FRD rates rad/s;
      ``time_usec`` = simulation time, us), once per control step; HEARTBEAT at 1 Hz (PX4's
@@ -315,8 +315,9 @@ class Vehicle:
     def run(self) -> None:
         """Serve until :meth:`stop`: step the clock, answer the links, stream telemetry."""
         gcs = f" gcs={self.gcs.address.hostport}" if self.gcs is not None else ""
+        pin = f" controller_from={self._pinned[0]}:{self._pinned[1]}" if self._pinned is not None else ""
         self._status(f"ready listen={self.link.local[0]}:{self.link.local[1]}{gcs} sysid={self.cfg.sysid} "
-                     f"clock={self.cfg.clock} profile={self.flight.profile.name}")
+                     f"clock={self.cfg.clock} profile={self.flight.profile.name}{pin}")
         try:
             while not self.stopping:
                 if self.halted:
@@ -722,6 +723,10 @@ class Vehicle:
         elif kind == "TIMESYNC":
             if m.tc1 == 0:  # a request (an answer, tc1 != 0, is for someone else's clock: nothing to do)
                 self._request(ep, addr, mavlink.MAVLink_timesync_message(self._clock_ns(), m.ts1))
+        elif kind == "PING":  # a request has no target (0, 0); answered as PX4 does, addressed to its sender
+            if m.target_system == 0 and m.target_component == 0:
+                self._request(ep, addr, mavlink.MAVLink_ping_message(m.time_usec, m.seq, m.get_srcSystem(),
+                                                                     m.get_srcComponent()))
         elif kind in _PARAM_MESSAGES:
             self._param_message(ep, m, addr, kind)
         elif kind == "SET_MODE":  # deprecated by DO_SET_MODE, still sent by some ground stations
