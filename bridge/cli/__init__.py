@@ -14,6 +14,8 @@ Nothing imports this package: it is the top of the layers (tests/test_layers.py)
 
 from __future__ import annotations
 
+import argparse
+import functools
 import sys
 from collections.abc import Sequence
 
@@ -24,8 +26,15 @@ from params import ConfigError
 __all__ = ["build_parser", "link_table_from_args", "main", "print_summary"]
 
 
+@functools.cache
+def _parser() -> argparse.ArgumentParser:
+    """The parser, built once per process (parsing changes nothing in it; in-process callers such as
+    the test suite call :func:`main` thousands of times)."""
+    return build_parser()
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
+    parser = _parser()
     try:
         args = parser.parse_args(argv)
         return args.func(args)
