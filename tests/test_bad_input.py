@@ -376,6 +376,15 @@ def test_ports_in_use(files, capsys):
     assert "in use" in line
 
 
+def test_a_real_time_flight_is_not_sped_up(files, capsys):
+    """``--speed`` paces lockstep; in real time the plant would outrun the controller's wall-clock
+    schedule (it diverged at 2x): refused up front, nothing written."""
+    line = _refused(capsys, ["sitl", files.mission, "--realtime", "--speed", "2", "--out", files.out, "--no-plots",
+                             "--gcs", "none"], "--speed")
+    assert "--realtime" in line and not files.out.exists()
+    _refused(capsys, ["sitl", files.mission, "--realtime", "--speed", "0.5", "--out", files.out], "--speed")
+
+
 @pytest.mark.skipif(os.geteuid() == 0, reason="root reads a file of mode 000 (the socket-path cases cover it)")
 def test_a_file_without_read_permission(files, capsys):
     files.regular.write_text(TINY)

@@ -148,6 +148,9 @@ def sitl(
         raise ConfigError(f"--instance must be in [0, 9], got {instance!r}")
     if speed is not None and not (math.isfinite(speed) and speed > 0):
         raise ConfigError(f"--speed must be a positive number, got {speed!r}")
+    if realtime and speed is not None and speed != 1.0:  # the controller's schedule is the wall clock's
+        raise ConfigError(f"--speed {speed:g} with --realtime: a real-time flight runs at the wall clock's pace "
+                          "(the controller keeps its rate on it, the plant would outrun it); --speed paces lockstep")
     n = instance or 0
     gcs_text = gcs if gcs is not None else (None if instance is None else f"127.0.0.1:{GCS_PORT + n}")
     if gcs_text is not None and gcs_text.strip().lower() == "none":
