@@ -50,14 +50,43 @@ class NominalModel:
         )
 
     def rk4(self, X: State, u: Quad, omega_d: float, h: float) -> State:
-        """One classical Runge–Kutta step of h seconds with the wrench held."""
-        f = self.derivative
-        k1 = f(X, u, omega_d)
-        k2 = f(tuple(x + 0.5 * h * k for x, k in zip(X, k1)), u, omega_d)
-        k3 = f(tuple(x + 0.5 * h * k for x, k in zip(X, k2)), u, omega_d)
-        k4 = f(tuple(x + h * k for x, k in zip(X, k3)), u, omega_d)
+        """One classical Runge–Kutta step of h seconds with the wrench held.
+
+        Bit for bit RK4 of :meth:`derivative` (stages X + h/2 k1, X + h/2 k2, X + h k3; X + h/6 (k1 +
+        2 k2 + 2 k3 + k4); tested), written out: positions never enter the derivative, so each stage
+        carries the 9 velocities, angles and rates in local floats (a horizon of 57 ms is 15 steps a
+        control period: this is most of a predicting controller's time).
+        """
+        a = u[0] / self.m
+        g = self.g
+        c = self.c
+        i1, i2, i3, jr_x, jr_y = c.i1, c.i2, c.i3, c.jr_x, c.jr_y
+        tx, ty, tz = c.l_x * u[1], c.l_y * u[2], c.l_z * u[3]
+        x, vx, y, vy, z, vz, phi, dphi, th, dth, psi, dpsi = X
+        v1, v2, v3, f, df, t, dt, p, dp = vx, vy, vz, phi, dphi, th, dth, psi, dpsi  # the stage's values
+        hh = 0.5 * h
+        k = []
+        for step in (hh, hh, h, 0.0):
+            cf, sf, ct, st, cp, sp = cos(f), sin(f), cos(t), sin(t), cos(p), sin(p)
+            ax = (cf * st * cp + sf * sp) * a
+            ay = (cf * st * sp - sf * cp) * a
+            az = cf * ct * a - g
+            ddf = i1 * dt * dp - jr_x * dt * omega_d + tx
+            ddt = i2 * df * dp + jr_y * df * omega_d + ty
+            ddp = i3 * df * dt + tz
+            k.append((v1, ax, v2, ay, v3, az, df, ddf, dt, ddt, dp, ddp))
+            v1, v2, v3 = vx + step * ax, vy + step * ay, vz + step * az
+            f, df, t, dt, p, dp = phi + step * df, dphi + step * ddf, th + step * dt, dth + step * ddt, \
+                psi + step * dp, dpsi + step * ddp
         s = h / 6.0
-        return tuple(x + s * (a + 2.0 * b + 2.0 * c + d) for x, a, b, c, d in zip(X, k1, k2, k3, k4))
+        (a0, a1, a2, a3, a4, a5, a6, a7, a8, a9, a10, a11), (b0, b1, b2, b3, b4, b5, b6, b7, b8, b9, b10, b11), \
+            (c0, c1, c2, c3, c4, c5, c6, c7, c8, c9, c10, c11), (d0, d1, d2, d3, d4, d5, d6, d7, d8, d9, d10, d11) = k
+        return (x + s * (a0 + 2.0 * b0 + 2.0 * c0 + d0), vx + s * (a1 + 2.0 * b1 + 2.0 * c1 + d1),
+                y + s * (a2 + 2.0 * b2 + 2.0 * c2 + d2), vy + s * (a3 + 2.0 * b3 + 2.0 * c3 + d3),
+                z + s * (a4 + 2.0 * b4 + 2.0 * c4 + d4), vz + s * (a5 + 2.0 * b5 + 2.0 * c5 + d5),
+                phi + s * (a6 + 2.0 * b6 + 2.0 * c6 + d6), dphi + s * (a7 + 2.0 * b7 + 2.0 * c7 + d7),
+                th + s * (a8 + 2.0 * b8 + 2.0 * c8 + d8), dth + s * (a9 + 2.0 * b9 + 2.0 * c9 + d9),
+                psi + s * (a10 + 2.0 * b10 + 2.0 * c10 + d10), dpsi + s * (a11 + 2.0 * b11 + 2.0 * c11 + d11))
 
 
 class Predictor:
