@@ -685,6 +685,8 @@ class Vehicle:
             link.peer = before
         else:
             link.prioritise(addr)
+            if addr != before:  # a new controller hears who it talks to now, not at the next 1 Hz heartbeat
+                link.send(self._heartbeat())
 
     def _authority(self, m: Any, known: bool, addr: tuple[str, int]) -> str | None:
         """Why a message on the controller link is refused for its sender, or None: only the
