@@ -208,8 +208,9 @@ def test_parameter_protocol_over_udp(tmp_path):
 
 
 def test_modes_takeoff_hold_land_over_udp(tmp_path):
-    """HOLD selected on the ground, armed in it; NAV_TAKEOFF (NaN: MIS_TAKEOFF_ALT) climbs and then
-    holds; SET_MODE LAND lands and disarms; modes a ground station cannot have are refused, named."""
+    """HOLD selected on the ground, armed in it; NAV_TAKEOFF above the envelope is refused, below
+    MIS_TAKEOFF_ALT (below home) raised to it, which it climbs to and then holds; SET_MODE LAND lands
+    and disarms; modes a ground station cannot have are refused, named."""
     with instance_slot() as n:
         gcs = _gcs(n)
         v = Proc.bsst("vehicle", "--instance", str(n), "--out", str(tmp_path), "--speed", "4",
@@ -228,9 +229,12 @@ def test_modes_takeoff_hold_land_over_udp(tmp_path):
             assert command(M.MAV_CMD_DO_SET_MODE, 29, 4, 3, 0, 0, 0, 0) == M.MAV_RESULT_ACCEPTED
             _recv(gcs, "HEARTBEAT", f"HEARTBEAT.custom_mode=={(4 << 16) | (3 << 24)}")
             assert command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1, 0, 0, 0, 0, 0, 0) == M.MAV_RESULT_ACCEPTED
-            assert command(M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, math.nan, math.nan, 5.0) == M.MAV_RESULT_DENIED
             nan = math.nan
-            assert command(M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, nan, nan, nan, nan) == M.MAV_RESULT_ACCEPTED
+            assert command(M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, nan, nan, nan, 600.0) == M.MAV_RESULT_DENIED  # 112 m up
+            assert "600 m AMSL is 112 m" in _recv(gcs, "STATUSTEXT").text  # the first 50-character chunk
+            # 5 m AMSL is below home (488 m): raised to MIS_TAKEOFF_ALT, the least it climbs to, as PX4 does
+            assert command(M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, nan, nan, nan, 5.0) == M.MAV_RESULT_ACCEPTED
+            assert _recv(gcs, "STATUSTEXT").text == "Using minimum takeoff altitude: 489.50 m"
             _recv(gcs, "STATUSTEXT", "'takeoff done' in STATUSTEXT.text", timeout=20)
             pos = _recv(gcs, "LOCAL_POSITION_NED")
             assert abs(-pos.z - 1.5) < 0.15 and math.hypot(pos.x, pos.y) < 0.1

@@ -81,7 +81,7 @@ PARAMS: tuple[ParamSpec, ...] = (
               "descent speed of the failsafe's landing and of LAND ([failsafe] descent_rate)",
               failsafe_key="descent_rate"),
     ParamSpec("MIS_TAKEOFF_ALT", REAL32, "m", *TAKEOFF_ALT_RANGE_M,
-              "takeoff altitude above home when NAV_TAKEOFF gives none"),
+              "takeoff altitude above home when NAV_TAKEOFF gives none, and the least it climbs to"),
     ParamSpec("MAV_SYS_ID", INT32, "", *SYSID_RANGE, "the vehicle's MAVLink system id (at start only)",
               at_start_only=True),
 )

@@ -907,14 +907,22 @@ class Vehicle:
     # -- flight modes (docs/ground-station.md) -------------------------------------------------------
     def _takeoff_altitude(self, param7: float) -> float | str:
         """NAV_TAKEOFF's altitude above home (m) from its param7 (m AMSL, as PX4 reads it; NaN:
-        MIS_TAKEOFF_ALT), or why it cannot be flown."""
+        MIS_TAKEOFF_ALT), or why it cannot be flown. MIS_TAKEOFF_ALT is also the least it climbs to: a
+        lower altitude (below home too) is raised to it with a STATUSTEXT, as PX4 does; one above the
+        plant's envelope (MIS_TAKEOFF_ALT's upper bound) is refused."""
+        least = self.sim.takeoff_alt_m
         if math.isnan(param7):
-            return self.sim.takeoff_alt_m
-        lo, hi = BY_NAME["MIS_TAKEOFF_ALT"].lo, BY_NAME["MIS_TAKEOFF_ALT"].hi
+            return least
+        hi = BY_NAME["MIS_TAKEOFF_ALT"].hi
         rel = param7 - self.cfg.home.alt
-        if not (math.isfinite(param7) and lo <= rel <= hi):
+        if not (math.isfinite(param7) and rel <= hi):
             return (f"NAV_TAKEOFF: altitude {param7:g} m AMSL is {rel:g} m above home; "
-                    f"must be {lo:g}..{hi:g} m above (home {self.cfg.home.alt:g} m)")
+                    f"must be at most {hi:g} m above (home {self.cfg.home.alt:g} m)")
+        if rel < least:
+            if rel < least - 0.1:  # PX4 says nothing for less than 10 cm
+                self._texts += self._statustext(mavlink.MAV_SEVERITY_WARNING, "Using minimum takeoff altitude: "
+                                                f"{self.cfg.home.alt + least:.2f} m")
+            return least
         return rel
 
     def _refuse(self, ep: Endpoint, addr: tuple[str, int], why: str) -> int:
