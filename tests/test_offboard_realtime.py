@@ -195,7 +195,9 @@ def test_the_state_age_counts_its_way_down(flown: Flown) -> None:
     once here: a symmetric link), plus the tick's 0.3 ms after the arrival."""
     age = controller_ages(flown.run)
     assert len(age) > 50
-    assert WAY_DOWN_S <= np.median(age) <= WAY_DOWN_S + 0.003, np.median(age)
+    # the way down counted once: at least it, and well short of twice it (10 ms of slack: the median tick
+    # comes 0.3 ms after its state on an idle machine, but a busy one delays the tick, not the stamps)
+    assert WAY_DOWN_S <= np.median(age) <= WAY_DOWN_S + 0.010, np.median(age)
     assert not any("timesync" in line for line in flown.lines)
 
 
