@@ -278,8 +278,10 @@ def test_mavproxy_params_and_modes(tmp_path):
 
             set_mode("LOITER")
             mp.wait_line(_from(say("arm throttle"), lambda s: "COMPONENT_ARM_DISARM: ACCEPTED" in s), timeout=10)
-            mark = say("long NAV_TAKEOFF 0 0 0 nan nan nan nan")  # NaN altitude: MIS_TAKEOFF_ALT (2.5 m)
+            # MAVProxy's own takeoff: 3 m AMSL, below home, raised to MIS_TAKEOFF_ALT (2.5 m above) as PX4 does
+            mark = say("takeoff 3")
             mp.wait_line(_from(mark, lambda s: "NAV_TAKEOFF: ACCEPTED" in s), timeout=10)
+            mp.wait_line(_from(mark, lambda s: "Using minimum takeoff altitude: 490.50 m" in s), timeout=10)
             prompt_names("TAKEOFF")  # ~2 s of climb in real time
             v.wait_line(lambda s: "mode: HOLD: takeoff done at z=2.500 m" in s, timeout=15)
             prompt_names("LOITER")  # at the height: HOLD

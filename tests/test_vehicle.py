@@ -81,8 +81,9 @@ def test_pymavlink_ground_station(tmp_path):
             gcs.mav.command_long_send(*tgt, M.MAV_CMD_SET_MESSAGE_INTERVAL, 0, M.MAVLINK_MSG_ID_ATTITUDE, 20000,
                                       0, 0, 0, 0, 0)
             assert _ack(gcs, M.MAV_CMD_SET_MESSAGE_INTERVAL).result == M.MAV_RESULT_ACCEPTED
-            # NAV_TAKEOFF's param7 is m AMSL (as PX4 reads it): 5 m is below the 488 m home, refused, saying why
-            gcs.mav.command_long_send(*tgt, M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 0, 5)
+            # NAV_TAKEOFF's param7 is m AMSL (as PX4 reads it): 600 m is 112 m above the 488 m home, beyond the
+            # plant's envelope: refused, saying why
+            gcs.mav.command_long_send(*tgt, M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 0, 600)
             seen: dict[str, object] = {}  # the ACK and the STATUSTEXT, in either order
             deadline = time.monotonic() + 10
             while len(seen) < 2 and time.monotonic() < deadline:
@@ -91,7 +92,7 @@ def test_pymavlink_ground_station(tmp_path):
                     seen["ack"] = m.result
                 elif m is not None and m.get_type() == "STATUSTEXT" and m.text.startswith("NAV_TAKEOFF"):
                     seen["why"] = m.text
-            assert seen.get("ack") == M.MAV_RESULT_DENIED and "5 m AMSL" in str(seen.get("why")), seen
+            assert seen.get("ack") == M.MAV_RESULT_DENIED and "600 m AMSL" in str(seen.get("why")), seen
 
             gcs.mav.timesync_send(0, 123456789)
             ts = gcs.recv_match(type="TIMESYNC", blocking=True, timeout=5, condition="TIMESYNC.tc1!=0")
