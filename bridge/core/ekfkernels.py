@@ -13,7 +13,7 @@ compiled with numba so that a flight with the EKF pays about a microsecond of ca
 rather than the tens that the same work costs in small numpy calls. The 3-vector and 3×3 helpers are
 :mod:`plant.sensors`' own functions compiled (one source for both), and the NEES is
 :func:`bridge.core.cholesky.weighted_square` compiled. Each kernel is cached on disk (``cache=True``):
-the first flight with the EKF on a machine compiles them (a few seconds), later ones load them.
+the first flight with the EKF on a machine compiles them (~13 s on a 2-core VM), later ones load them.
 """
 
 from __future__ import annotations
@@ -337,6 +337,12 @@ def _update_scalar(x: np.ndarray, c: np.ndarray, P: np.ndarray, counts: np.ndarr
         dx[i] = ki * r
         for j in range(15):
             P[i, j] -= ki * PHt[j]
+    _fused(x, dx)
+
+
+@njit(cache=True)
+def _fused(x: np.ndarray, dx: np.ndarray) -> None:
+    """A reading's correction, fused: injected and counted."""
     _inject(x, dx)
     x[X_FUSED] += 1.0
 
@@ -386,11 +392,9 @@ def fuse_pose(x: np.ndarray, c: np.ndarray, P: np.ndarray, hist: np.ndarray, hs:
     r02 = -a * st * v0
     r12 = -b * st * v0
     Rm = (a * a * v0 + sp * sp * v1, r01, r02, r01, b * b * v0 + cp * cp * v1, r12, r02, r12, st * st * v0 + v2)
-    if _update_block(c, P, counts, K_POSE, 6, a * e0 - sp * e1, b * e0 + cp * e1, e2 - st * e0, Rm, dx, have):
-        have = True
+    have |= _update_block(c, P, counts, K_POSE, 6, a * e0 - sp * e1, b * e0 + cp * e1, e2 - st * e0, Rm, dx, have)
     if have:
-        _inject(x, dx)
-        x[X_FUSED] += 1.0
+        _fused(x, dx)
 
 
 @njit(cache=True)
@@ -404,12 +408,10 @@ def fuse_gnss(x: np.ndarray, c: np.ndarray, P: np.ndarray, hist: np.ndarray, hs:
     dx = np.zeros(15)
     have = _update_block(c, P, counts, K_GNSS, 0, z0 - s[0], z1 - s[1], z2 - s[2],
                          (vp0, 0.0, 0.0, 0.0, vp1, 0.0, 0.0, 0.0, vp2), dx, False)
-    if _update_block(c, P, counts, K_GNSS, 3, z3 - s[3], z4 - s[4], z5 - s[5],
-                     (vv0, 0.0, 0.0, 0.0, vv1, 0.0, 0.0, 0.0, vv2), dx, have):
-        have = True
+    have |= _update_block(c, P, counts, K_GNSS, 3, z3 - s[3], z4 - s[4], z5 - s[5],
+                          (vv0, 0.0, 0.0, 0.0, vv1, 0.0, 0.0, 0.0, vv2), dx, have)
     if have:
-        _inject(x, dx)
-        x[X_FUSED] += 1.0
+        _fused(x, dx)
 
 
 @njit(cache=True)
@@ -454,10 +456,9 @@ def estimate(x: np.ndarray, t: float) -> tuple:
 
 
 @njit(cache=True)
-def state_covariance(x: np.ndarray, c: np.ndarray, P: np.ndarray, out: np.ndarray) -> None:
-    """out (9×9) = J P Jᵀ over (x, y, z, ẋ, ẏ, ż, φ, θ, ψ), P carried to now, J = diag(I₆, E⁻¹) on
-    (δp, δv, δθ): the attitude's rows and columns as Euler-angle errors."""
-    Pn = np.empty((15, 15))
+def state_covariance(x: np.ndarray, c: np.ndarray, P: np.ndarray, out: np.ndarray, Pn: np.ndarray) -> None:
+    """out (9×9) = J Pn Jᵀ over (x, y, z, ẋ, ẏ, ż, φ, θ, ψ), Pn (15×15, written here) P carried to now,
+    J = diag(I₆, E⁻¹) on (δp, δv, δθ): the attitude's rows and columns as Euler-angle errors."""
     current_P(x, c, P, Pn)
     _, theta, psi = euler_now(x)
     cp, sp, ct, tt = math.cos(psi), math.sin(psi), math.cos(theta), math.tan(theta)
@@ -480,7 +481,7 @@ def nees(x: np.ndarray, c: np.ndarray, P: np.ndarray, e: tuple) -> float:
     """eᵀ C⁻¹ e of an estimation error e (the order of :func:`state_covariance`) against the state
     covariance C now; NaN if C is not positive definite."""
     C = np.empty(81)
-    state_covariance(x, c, P, C.reshape((9, 9)))
+    state_covariance(x, c, P, C.reshape((9, 9)), np.empty((15, 15)))
     return _weighted_square(C, e)
 
 
@@ -508,5 +509,6 @@ def ready() -> None:
     fuse_heading(x, c, P, hist, hs, counts, 0.0, 0.0, 1.0)
     estimate(x, 0.0)
     current_P(x, c, P, np.empty((15, 15)))
+    state_covariance(x, c, P, np.empty((9, 9)), np.empty((15, 15)))
     nees(x, c, P, (0.0,) * 9)
     _ready = True

@@ -385,16 +385,9 @@ class Ekf:
     def estimate(self, t: float) -> State:
         return self._k.estimate(self._x, t)
 
-    def state_covariance(self) -> np.ndarray:
-        """:attr:`Covariance.state` as a 9×9 array, of the covariance carried to now."""
-        out = np.empty((9, 9))
-        self._k.state_covariance(self._x, self._c, self.P, out)
-        return out
-
     def covariance(self) -> Covariance:
         k = self._k
-        k.current_P(self._x, self._c, self.P, self._P15)
-        k.state_covariance(self._x, self._c, self.P, self._C9)
+        k.state_covariance(self._x, self._c, self.P, self._C9, self._P15)  # P carried to now once, for both
         g = float(self._x[k.X_GVAR])
         (b00, b01, b02), (b10, b11, b12), (b20, b21, b22) = self._P15[9:12, 9:12].tolist()
         rates = (b00 + g, b01, b02, b10, b11 + g, b12, b20, b21, b22 + g)
