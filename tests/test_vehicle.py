@@ -154,6 +154,40 @@ def test_targets_only_from_the_configured_controller(tmp_path):
     assert len(lines) == 2 and lines[1].startswith("0,0.0,")  # one row: step 0
 
 
+def test_a_slow_answer_to_a_resent_state_is_taken_once_and_refuses_nothing(tmp_path):
+    """Lockstep resends a state unanswered for 50 ms of wall time, and the controller answers
+    every copy: an answer that was slow (not lost) comes twice. The vehicle steps once on the
+    first and counts the second in ``answered_again``, not as a ``stale`` refusal (that made a
+    loaded machine's lockstep summary differ from the offline one)."""
+    with instance_slot() as n:
+        v = _vehicle(n, tmp_path)
+        os.environ["MAVLINK20"] = "1"
+        ctl = mavutil.mavlink_connection(f"udpout:127.0.0.1:{LINK_PORT + n}", source_system=200,
+                                         source_component=191, dialect="common")
+        try:
+            ctl.mav.heartbeat_send(M.MAV_TYPE_ONBOARD_CONTROLLER, M.MAV_AUTOPILOT_INVALID, 0, 0, 4)
+            assert ctl.recv_match(type="HEARTBEAT", blocking=True, timeout=20) is not None
+            sysid = n + 1
+            ctl.mav.command_long_send(sysid, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+            assert _ack(ctl, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+            first = ctl.recv_match(type="ODOMETRY", blocking=True, timeout=5, condition="ODOMETRY.time_usec==0")
+            again = ctl.recv_match(type="ODOMETRY", blocking=True, timeout=5, condition="ODOMETRY.time_usec==0")
+            assert first is not None and again is not None  # step 0's state, then its copy (not answered)
+            wire = [0.0, 0.0, 0.0, 1.1 * 9.81 / 43.164] + [0.0] * 4  # hover, paper profile
+            for _ in (first, again):  # one answer to each copy, as the controller does
+                ctl.mav.set_actuator_control_target_send(0, 0, sysid, 1, wire)
+            nxt = ctl.recv_match(type="ODOMETRY", blocking=True, timeout=5, condition="ODOMETRY.time_usec==4000")
+            assert nxt is not None
+            ctl.mav.command_long_send(sysid, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 21196, 0, 0, 0, 0, 0)
+            assert _ack(ctl, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+        finally:
+            assert v.stop() == 0
+            ctl.close()
+    s = _stats(v)
+    assert s["steps"] == 1 and s["accepted"] == 1 and s["resends"] >= 1
+    assert s["answered_again"] == 1 and s["rejected"] == {}
+
+
 def test_mavproxy_arms_through_stdin(tmp_path):
     """MAVProxy, unmodified, as the issue runs it: heartbeat and attitude seen, and
     ``arm throttle`` typed into it is ACKed and arms the vehicle."""

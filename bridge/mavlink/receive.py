@@ -90,6 +90,8 @@ REASONS: dict[str, str] = {
     "not_offboard": "actuator target while disarmed or not under offboard control",
     "stale": "time_usec older than the step awaited (lockstep), or than the newest state (controller)",
     "future": "lockstep: target for a step not reached yet",
+    "repeated": "lockstep: a second answer to the step awaited, whose state was sent once (an answer to a "
+                "resent state's copy is expected: counted in timing.answered_again, not here)",
     "reordered": "realtime: target older than the one in force",
     "param_refused": "PARAM_SET of a value out of its range, of the wrong type, or of a parameter that acts "
                      "at start only: answered with the unchanged value and a STATUSTEXT",

@@ -285,6 +285,12 @@ class Vehicle:
         self.applied: tuple[int, tuple[float, ...], float] | None = None  # (key, wire, recv wall) in force
         self._odo_sent: dict[int, float] = {}  # step -> wall time its state was sent
         self.odometry_sent = 0
+        # lockstep: the steps whose state was resent (RESEND_S unanswered), and the answers that came for
+        # one of them after its first answer had been taken: the controller answers every copy, so a slow
+        # answer (not a lost one) comes twice; the second is expected, not a refusal of anyone's datagram
+        self._resent_steps: set[int] = set()
+        self.resends = 0
+        self.answered_again = 0
         now = time.monotonic()
         # the GCS link's: the defaults, and with sensors (not truth) HIGHRES_IMU and, for GNSS, GPS_RAW_INT
         sensors = self.sim.sensors.config if self.sim.sensors is not None else None
@@ -542,6 +548,11 @@ class Vehicle:
         if len(self._odo_sent) > 256:
             for old in [s for s in self._odo_sent if s < k - 128]:
                 del self._odo_sent[old]
+        if not fresh:
+            self.resends += 1
+            self._resent_steps.add(k)
+            if len(self._resent_steps) > 256:
+                self._resent_steps = {s for s in self._resent_steps if s >= k - 128}
         self._resend_at = now + RESEND_S
         if fresh:
             self._lost_at = now + self.cfg.lost_after_s
@@ -800,8 +811,8 @@ class Vehicle:
             return self._reject(why)
         key = step_of_usec(m.time_usec, self.rate)
         if not self.freerun:
-            if key != self.k:
-                return self._reject("stale" if key < self.k else "future")
+            if key != self.k or self.pending is not None:
+                return self._behind(key)
             self.accepted += 1
             self.pending = (wire, now)
             return None
@@ -820,10 +831,22 @@ class Vehicle:
         if self.freerun or self.halted or not self.engaged:
             return None
         key = step_of_usec(m.time_usec, self.rate)
-        if key != self.k:
-            return self._reject("stale" if key < self.k else "future")
+        if key != self.k or self.pending is not None:
+            return self._behind(key)
         self.pending = (None, time.monotonic())
         return None
+
+    def _behind(self, key: int) -> None:
+        """Lockstep: the controller's answer for a step other than k. For a step whose state was
+        resent it is the answer to a copy, its first answer already taken (``answered_again``);
+        otherwise a second answer to step k (its state sent once) is ``repeated``, an older one ``stale``, a newer
+        one ``future``."""
+        if key in self._resent_steps:  # (k itself: both answers to its copies came before it was stepped)
+            self.answered_again += 1
+            return None
+        if key == self.k:
+            return self._reject("repeated")
+        return self._reject("stale" if key < self.k else "future")
 
     def _through_link(self, ep: Endpoint, m: Any) -> bool:
         """Whether a command crosses the up-link model: the controller's, on its link, in a lockstep flight."""
@@ -1100,5 +1123,6 @@ def run_vehicle(flight: Flight, cfg: VehicleConfig, out: str | Path | None = Non
     emit("stats " + json.dumps({"accepted": v.accepted, "rejected": v.rejected, "odometry_sent": v.odometry_sent,
                                 "received": v.link.received, "overruns": v.pace.rebased, "steps": v.k,
                                 "rejected_from_controller": v.rejected.from_peer,
+                                "resends": v.resends, "answered_again": v.answered_again,
                                 "up": v.vend.up.stats.summary() if cfg.clock == "lockstep" else None}))
     return 0

@@ -653,6 +653,7 @@ class Session:
         j = self.joiner
         sim = len(j.rows) / self.flight.mission.rate_hz
         cs = self.controller.stats if self.controller else {}
+        vs = self.vehicle.stats if self.vehicle else {}
         n = len(j.rows)
         flight_s = j.last_sent - j.first_sent if j.first_sent is not None and n > 1 else math.nan
         rate = (n - 1) / flight_s if flight_s > 0 else None
@@ -668,6 +669,9 @@ class Session:
             "period_error_ms": percentiles(j.late_ms),
             "stale_ticks": int(cs.get("stale_ticks", 0)),
             "overruns": int(cs.get("overruns", 0)),
+            # lockstep: states resent after RESEND_S of wall time unanswered, and the second answers to them
+            "lockstep_resends": int(vs.get("resends", 0)),
+            "answered_again": int(vs.get("answered_again", 0)),
         }
 
 
