@@ -39,7 +39,7 @@ from bridge.core.flight import Flight, prepare
 from bridge.core.link import link_from_table, merge_link_tables
 from bridge.record.metrics import BANDS, RMS_FROM_S
 from controller.batch import BATCH_LAWS, BatchActuation, BatchController
-from missions import Mission, load_mission
+from missions import MISSION_DIR, Mission, Sine, load_mission
 from plant.batch import BatchPlant
 
 # the columns of a cells.csv row this engine measures (the cell's own axes and seed come from the cell)
@@ -157,6 +157,17 @@ def fly_batch(mission: Mission | str | Path, cells: Sequence[Mapping[str, Any]],
     flights = [f for f in built if isinstance(f, Flight)]
     results = iter(fly_flights(flights, progress=progress, total=len(built)))
     return [next(results) if isinstance(f, Flight) else error_measures(f) for f in built]
+
+
+def compile_batch() -> None:
+    """Compile, or load from numba's on-disk cache, this engine's kernels in this process, by flying a
+    few steps of every kind of cell: each law, wrench (paper) and motors (x500), plant effects, a lossy
+    delayed link with prediction. A first batch on a machine compiles them (~12 s here); after it, ~1 s."""
+    cells = [{"controller": law} for law in ("bsst", "smc", "pid")]
+    cells.append({"link": {"delay_ms": 8.0, "loss_pct": 10.0, "compensation": "predict"}})
+    x500 = load_mission(MISSION_DIR / "robust-x500.toml")
+    for m in (Mission(Sine(), duration_s=0.1), replace(x500, duration_s=0.1)):
+        fly_batch(m, cells)
 
 
 def error_measures(why: str) -> dict[str, Any]:
