@@ -11,7 +11,9 @@
   processes, today's engine): wall time and cells/s;
 - the ratios to the process engine (target: >= 20 for the batch in one process), the load average
   before and after, and the median time of one batch control step (plant, law, link plan) at N = 1000
-  over ``--repeats`` repeats.
+  over ``--repeats`` repeats;
+- with prediction (``compensation = "predict"``, 0-57 ms each way, where the predictor integrates up to
+  15 segments a step): a batch of 1 cell and of 100, against the scalar loop's CPU time per cell.
 
     .venv/bin/python benchmarks/batch_engine.py [--repeats 3] [--cells 1000] [--json]
 """
@@ -138,6 +140,22 @@ def step_parts_ms(mission: Any, n: int, repeats: int) -> dict[str, float]:
             "plan_ms": statistics.median(plan_ms)}
 
 
+def predict_cells(mission: Any) -> dict[str, Any]:
+    """The batch with prediction: 1 cell at 57 ms, then 100 cells at 0-57 ms; the scalar loop's CPU per cell."""
+    one = [{"link": {"delay_ms": 57.0, "compensation": "predict"}}]
+    many = [{"link": {"delay_ms": 57.0 * i / 99, "compensation": "predict"}} for i in range(100)]
+    out: dict[str, Any] = {}
+    for name, over in (("one", one), ("hundred", many)):
+        t0 = time.process_time()
+        fly_batch(mission, over)
+        out[f"{name}_cpu_s"] = time.process_time() - t0
+    c0 = time.process_time()
+    fly(prepare(mission, **one[0]), plots=False)
+    out["scalar_cpu_s_per_cell"] = time.process_time() - c0
+    out["ratio_hundred"] = out["scalar_cpu_s_per_cell"] * 100 / out["hundred_cpu_s"]
+    return out
+
+
 def acceptance(mission: Any, n_cells: int = 1000, repeats: int = 3, two_workers: bool = True) -> dict[str, Any]:
     """Issue 13's acceptance figures, measured in this process now (see the module doc)."""
     load_before = os.getloadavg()
@@ -145,6 +163,7 @@ def acceptance(mission: Any, n_cells: int = 1000, repeats: int = 3, two_workers:
     batch2 = batch_two_workers(mission, n_cells) if two_workers else None
     process = process_sweep(mission)
     parts = step_parts_ms(mission, 1000, repeats) if repeats else None
+    predict = predict_cells(mission)
     load_after = os.getloadavg()
     ratio = batch["cells_per_s"] / process["cells_per_s"]
     ratio2 = batch2["cells_per_s"] / process["cells_per_s"] if batch2 else None
@@ -153,7 +172,7 @@ def acceptance(mission: Any, n_cells: int = 1000, repeats: int = 3, two_workers:
     ratio_cpu = batch["cells_per_cpu_s"] * process["scalar_cpu_s_per_cell"] / 2.0
     ok = ratio >= TARGET_RATIO and batch["peak_rss_mib"] <= LIMIT_GIB * 1024
     return {"batch": batch, "batch_2_workers": batch2, "process": process, "ratio": ratio,
-            "ratio_2_workers": ratio2, "ratio_cpu": ratio_cpu, "step_parts_n1000": parts, "load_before": load_before,
+            "ratio_2_workers": ratio2, "ratio_cpu": ratio_cpu, "step_parts_n1000": parts, "predict": predict, "load_before": load_before,
             "load_after": load_after, "cpus": os.cpu_count(), "ok": ok}
 
 
@@ -179,6 +198,10 @@ def print_acceptance(out: dict[str, Any]) -> None:
     if parts:
         print(f"one control step at N=1000 (median): plant {parts['plant_ms']:.2f} ms, "
               f"law + actuation {parts['law_ms']:.2f} ms, link plan {parts['plan_ms']:.3f} ms")
+    pr = out["predict"]
+    print(f"with prediction (CPU time): 1 cell at 57 ms {pr['one_cpu_s']:.2f} s, 100 cells at 0-57 ms "
+          f"{pr['hundred_cpu_s']:.1f} s; the scalar loop {pr['scalar_cpu_s_per_cell']:.2f} s a cell: "
+          f"{pr['ratio_hundred']:.1f}x")
     print("PASS" if out["ok"] else "FAIL")
 
 

@@ -552,64 +552,101 @@ class BatchPredictor:
         """X [12, len(which)] (measured at ``t_state``) carried to ``aim`` (s) for the cells ``which``."""
         if not len(which):
             return X
-        cont = (self.from_t[which] == t_state) & (self.cache_t[which] <= aim)
-        tau = np.where(cont, self.cache_t[which], t_state)
-        Xp = np.where(cont[None, :], self.cache_X[:, which], X)
-        total = self.total[which]
-        depth = self.depth
-        times = self.cmd_t[:, which]  # [depth, k]
-        unused = np.arange(depth)[:, None] >= np.minimum(total, depth)[None, :]
-        times = np.where(unused, np.inf, times)
-        # the command in effect at tau: the newest numbered with its time <= tau (-1: none, zero wrench)
-        after = ((times > tau[None, :]) & ~unused).sum(axis=0)
-        cur = total - 1 - after
-        go = tau < aim
-        cols = self._cols[:len(which)]
-        while go.any():
-            has_next = cur + 1 < total
-            nxt_t = np.where(has_next, times[(cur + 1) % depth, cols], aim)
-            end = np.minimum(nxt_t, aim)
-            u = self.cmd_u[np.maximum(cur, 0) % depth, :, which].T  # [5, k]
-            u = np.where((cur >= 0)[None, :], u, 0.0)
-            span = np.where(go, end - tau, 0.0)
-            kk = np.maximum(1, (span / self.dt_max + 0.999999).astype(np.int64))
-            h = span / kk
-            for i in range(int(kk[go].max()) if go.any() else 0):
-                hi = np.where(i < kk, h, 0.0)
-                Xp = self.rk4(Xp, u, hi)
-            tau = np.where(go, end, tau)
-            cur = np.where(go & (end == nxt_t) & has_next, cur + 1, cur)
-            go = tau < aim
-        self.from_t[which] = t_state
-        self.cache_t[which] = aim
-        self.cache_X[:, which] = Xp
-        return Xp
-
-    def derivative(self, X: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """:meth:`controller.predict.NominalModel.derivative` over the cell axis."""
         c = self.c
-        phi, dphi, th, dth, psi, dpsi = X[6], X[7], X[8], X[9], X[10], X[11]
-        cphi, sphi, cth, sth, cpsi, spsi = np.cos(phi), np.sin(phi), np.cos(th), np.sin(th), np.cos(psi), np.sin(psi)
-        a = u[0] / self.m
-        od = u[4]
-        return np.stack((
-            X[1], (cphi * sth * cpsi + sphi * spsi) * a,
-            X[3], (cphi * sth * spsi - sphi * cpsi) * a,
-            X[5], cphi * cth * a - self.g,
-            dphi, c.i1 * dth * dpsi - c.jr_x * dth * od + c.l_x * u[1],
-            dth, c.i2 * dphi * dpsi + c.jr_y * dphi * od + c.l_y * u[2],
-            dpsi, c.i3 * dphi * dth + c.l_z * u[3],
-        ))
+        out = np.empty_like(X)
+        _predict_cells(t_state, X, aim, which, self.from_t, self.cache_t, self.cache_X, self.cmd_t, self.cmd_u,
+                       self.total, self.dt_max, self.m, self.g,
+                       np.array((c.i1, c.i2, c.i3, c.jr_x, c.jr_y, c.l_x, c.l_y, c.l_z)), out)
+        return out
 
-    def rk4(self, X: np.ndarray, u: np.ndarray, h: np.ndarray) -> np.ndarray:
-        """One RK4 step of h (s, per cell) with the wrench held, in NominalModel.rk4's order of operations."""
-        f = self.derivative
-        k1 = f(X, u)
-        k2 = f(X + 0.5 * h * k1, u)
-        k3 = f(X + 0.5 * h * k2, u)
-        k4 = f(X + h * k3, u)
-        s = h / 6.0
-        return X + s * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+
+@njit(cache=True)
+def _predict_cells(t_state: np.ndarray, X: np.ndarray, aim: np.ndarray, which: np.ndarray, from_t: np.ndarray,
+                   cache_t: np.ndarray, cache_X: np.ndarray, cmd_t: np.ndarray, cmd_u: np.ndarray,
+                   total: np.ndarray, dt_max: float, m: float, g: float, c: np.ndarray,
+                   out: np.ndarray) -> None:  # pragma: no cover
+    """:meth:`controller.predict.Predictor.predict` of each cell ``which[i]``: X[:, i] (measured at
+    t_state[i] s) carried to aim[i] s in steps of at most dt_max s, through the segments between the
+    times its commands count from (cmd_t, a ring of ``depth`` by number; cmd_u: u1..u4 and omega_d),
+    continuing the cached prediction (from_t, cache_t, cache_X, updated here) while the state is the
+    same one. Into out [12, len(which)]."""
+    depth = cmd_t.shape[0]
+    i1, i2, i3, jr_x, jr_y, l_x, l_y, l_z = c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]
+    for i in range(len(which)):
+        j = which[i]
+        ts, to = t_state[i], aim[i]
+        if from_t[j] == ts and cache_t[j] <= to:
+            tau = cache_t[j]
+            x, vx, y, vy, z, vz = cache_X[0, j], cache_X[1, j], cache_X[2, j], cache_X[3, j], cache_X[4, j], \
+                cache_X[5, j]
+            phi, dphi, th, dth, psi, dpsi = cache_X[6, j], cache_X[7, j], cache_X[8, j], cache_X[9, j], \
+                cache_X[10, j], cache_X[11, j]
+        else:
+            tau = ts
+            x, vx, y, vy, z, vz = X[0, i], X[1, i], X[2, i], X[3, i], X[4, i], X[5, i]
+            phi, dphi, th, dth, psi, dpsi = X[6, i], X[7, i], X[8, i], X[9, i], X[10, i], X[11, i]
+        n = total[j]
+        used = min(n, depth)
+        after = 0  # the command in effect at tau: the newest numbered with its time <= tau (-1: none)
+        for k in range(used):
+            if cmd_t[k, j] > tau:
+                after += 1
+        cur = n - 1 - after
+        while tau < to:
+            has_next = cur + 1 < n
+            nxt = cmd_t[(cur + 1) % depth, j] if has_next else to
+            end = nxt if nxt < to else to
+            if cur >= 0:
+                slot = cur % depth
+                u0, u1, u2, u3, od = cmd_u[slot, 0, j], cmd_u[slot, 1, j], cmd_u[slot, 2, j], cmd_u[slot, 3, j], \
+                    cmd_u[slot, 4, j]
+            else:
+                u0 = u1 = u2 = u3 = od = 0.0
+            span = end - tau
+            kk = max(1, int(span / dt_max + 0.999999))
+            h = span / kk
+            a = u0 / m
+            tx, ty, tz = l_x * u1, l_y * u2, l_z * u3
+            for _ in range(kk):  # NominalModel.rk4, in its order of operations
+                hh = 0.5 * h
+                s6 = h / 6.0
+                v1, v2, v3, f, df, t, dt, p, dp = vx, vy, vz, phi, dphi, th, dth, psi, dpsi
+                sx = sy = sz = svx = svy = svz = sf = sdf = st_ = sdt = sp_ = sdp = 0.0
+                for stage in range(4):
+                    step = hh if stage < 2 else (h if stage == 2 else 0.0)
+                    w = 1.0 if stage == 0 or stage == 3 else 2.0
+                    cf, snf, ct, snt, cp, snp = math.cos(f), math.sin(f), math.cos(t), math.sin(t), math.cos(p), \
+                        math.sin(p)
+                    ax = (cf * snt * cp + snf * snp) * a
+                    ay = (cf * snt * snp - snf * cp) * a
+                    az = cf * ct * a - g
+                    ddf = i1 * dt * dp - jr_x * dt * od + tx
+                    ddt = i2 * df * dp + jr_y * df * od + ty
+                    ddp = i3 * df * dt + tz
+                    if stage == 0:
+                        sx, svx, sy, svy, sz, svz = v1, ax, v2, ay, v3, az
+                        sf, sdf, st_, sdt, sp_, sdp = df, ddf, dt, ddt, dp, ddp
+                    else:
+                        sx, svx, sy, svy, sz, svz = sx + w * v1, svx + w * ax, sy + w * v2, svy + w * ay, \
+                            sz + w * v3, svz + w * az
+                        sf, sdf, st_, sdt, sp_, sdp = sf + w * df, sdf + w * ddf, st_ + w * dt, sdt + w * ddt, \
+                            sp_ + w * dp, sdp + w * ddp
+                    v1, v2, v3 = vx + step * ax, vy + step * ay, vz + step * az
+                    f, df, t, dt, p, dp = phi + step * df, dphi + step * ddf, th + step * dt, dth + step * ddt, \
+                        psi + step * dp, dpsi + step * ddp
+                x, vx, y, vy, z, vz = x + s6 * sx, vx + s6 * svx, y + s6 * sy, vy + s6 * svy, z + s6 * sz, \
+                    vz + s6 * svz
+                phi, dphi, th, dth, psi, dpsi = phi + s6 * sf, dphi + s6 * sdf, th + s6 * st_, dth + s6 * sdt, \
+                    psi + s6 * sp_, dpsi + s6 * sdp
+            tau = end
+            if end == nxt and has_next:
+                cur += 1
+        from_t[j] = ts
+        cache_t[j] = to
+        r = (x, vx, y, vy, z, vz, phi, dphi, th, dth, psi, dpsi)
+        for q in range(12):
+            out[q, i] = r[q]
+            cache_X[q, j] = r[q]
 
 
 # -- what the wire carries ------------------------------------------------------------------------------

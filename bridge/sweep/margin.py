@@ -12,7 +12,7 @@ value]``, and every cell flown; ``margin.json`` when a directory is given.
 A value fails when any of its seeds fails. The search first doubles from ``start`` until it
 finds a failing value (or reaches the axis's range), then halves the bracket until it is no
 wider than ``resolution``. All laws' probes of one round fly together, with their seeds, as
-one batch (:mod:`bridge.batch`) where it can fly them, one by one otherwise. This assumes
+one batch (:mod:`bridge.batch`) where it can fly them (a round of one cell too), one by one otherwise. This assumes
 that failure is monotonic in the axis over the bracket (more delay is never better); the
 cells in ``margin.json`` show what was flown if it is not.
 
@@ -133,7 +133,8 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
     while pending:
         probes = [probe(mission, c, over, v, s, base, vehicle) for c, v in pending.items() for s in seed_list]
         rows: list[dict[str, Any]] = []
-        used, _ = engine_for(mission, probes, "offline", engine)
+        # a round of even one cell flies as a batch where it can: this process loads the kernels once
+        used, _ = engine_for(mission, probes, "offline", engine, min_cells=1)
         if used == "batch":
             run_batch(mission, probes, rows.append)
         elif len(probes) <= IN_PROCESS_CELLS:  # a pool's start costs more than a cell or two
