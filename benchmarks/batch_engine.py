@@ -172,8 +172,8 @@ def acceptance(mission: Any, n_cells: int = 1000, repeats: int = 3, two_workers:
     ratio_cpu = batch["cells_per_cpu_s"] * process["scalar_cpu_s_per_cell"] / 2.0
     ok = ratio >= TARGET_RATIO and batch["peak_rss_mib"] <= LIMIT_GIB * 1024
     return {"batch": batch, "batch_2_workers": batch2, "process": process, "ratio": ratio,
-            "ratio_2_workers": ratio2, "ratio_cpu": ratio_cpu, "step_parts_n1000": parts, "predict": predict, "load_before": load_before,
-            "load_after": load_after, "cpus": os.cpu_count(), "ok": ok}
+            "ratio_2_workers": ratio2, "ratio_cpu": ratio_cpu, "step_parts_n1000": parts, "predict": predict,
+            "load_before": load_before, "load_after": load_after, "cpus": os.cpu_count(), "ok": ok}
 
 
 def print_acceptance(out: dict[str, Any]) -> None:

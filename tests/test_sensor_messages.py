@@ -238,3 +238,34 @@ def test_truth_vehicle_has_no_sensor_messages(tmp_path):
             gcs.close()
     counts = _tlog_counts(tmp_path / "vehicle.tlog")
     assert "HIGHRES_IMU" not in counts and "GPS_RAW_INT" not in counts and counts.get("ATTITUDE", 0) > 0
+
+
+def test_odometry_covariance_is_the_dense_frame_change():
+    """ODOMETRY's covariances (bridge.nodes.vehicle.odometry_covariance, plain floats) against the frame
+    change written densely in numpy: pose S P S with S = diag(1, -1, -1, 1, -1, -1) over (x, y, z, φ, θ, ψ);
+    twist T C Tᵀ, T = blockdiag(R, diag(1, -1, -1)), R's column j the NWU axis j in the FRD body; both
+    as their 21-entry upper triangles. And NaN stays where it was."""
+    import numpy as np
+
+    from bridge.core.estimator import Covariance, upper_triangle
+    from bridge.core.wire import euler_to_quaternion
+    from bridge.nodes.vehicle import odometry_covariance
+
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        A, B = rng.normal(size=(9, 9)), rng.normal(size=(3, 3))
+        cov = Covariance(tuple((A @ A.T).ravel()), tuple((B @ B.T).ravel()))
+        q = euler_to_quaternion(*rng.uniform(-1.0, 1.0, 3))
+        pose, twist = odometry_covariance(q, cov)
+        P = np.array(cov.pose()).reshape(6, 6)
+        S = np.diag([1.0, -1.0, -1.0, 1.0, -1.0, -1.0])
+        T = np.zeros((6, 6))
+        for j, e in enumerate(((1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, -1.0))):
+            T[0:3, j] = rotate_inverse(q, e)
+        T[3:6, 3:6] = np.diag([1.0, -1.0, -1.0])
+        C = T @ np.array(cov.twist()).reshape(6, 6) @ T.T
+        assert np.allclose(pose, upper_triangle((S @ P @ S).ravel().tolist()), rtol=1e-12, atol=1e-12)
+        assert np.allclose(twist, upper_triangle(C.ravel().tolist()), rtol=1e-12, atol=1e-12)
+    unknown = Covariance((math.nan,) + (0.0,) * 80, (math.nan,) + (0.0,) * 8)
+    pose, twist = odometry_covariance((1.0, 0.0, 0.0, 0.0), unknown)
+    assert math.isnan(pose[0]) and math.isnan(twist[15]) and not any(math.isnan(v) for v in pose[1:])

@@ -68,11 +68,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.core.clock import Pace
-from bridge.core.estimator import Covariance, upper_triangle
+from bridge.core.estimator import Covariance
 from bridge.core.flight import Flight
 from bridge.core.linkends import VehicleEnd
 from bridge.core.params import BY_NAME, PARAMS, ParamRefused, VehicleParams, read_param
@@ -131,21 +130,32 @@ ODOMETRY_TAIL = (*_COV_UNKNOWN, *_COV_UNKNOWN, mavlink.MAV_FRAME_LOCAL_NED, mavl
                  mavlink.MAV_ESTIMATOR_TYPE_NAIVE, 100)
 # an estimate's (raw, ekf): its covariances follow; the autopilot's own estimator (ekf) or the sensors as read (raw)
 ESTIMATOR_TYPES = {"raw": mavlink.MAV_ESTIMATOR_TYPE_NAIVE, "ekf": mavlink.MAV_ESTIMATOR_TYPE_AUTOPILOT}
-_POSE_SIGNS = np.array([1.0, -1.0, -1.0, 1.0, -1.0, -1.0])  # (x, y, z, roll, pitch, yaw): NWU/FLU -> NED/FRD
+# the pose block's 21 upper-triangle entries: (index in Covariance.state's 9x9, sign) over (x, y, z, roll, pitch,
+# yaw); NWU/FLU -> NED/FRD flips y, z, pitch (-theta) and yaw (-psi)
+_POSE_AXES = (0, 1, 2, 6, 7, 8)
+_POSE_SIGNS = (1.0, -1.0, -1.0, 1.0, -1.0, -1.0)
+_POSE_UPPER = tuple((9 * _POSE_AXES[i] + _POSE_AXES[j], _POSE_SIGNS[i] * _POSE_SIGNS[j])
+                    for i in range(6) for j in range(i, 6))
+_NWU_AXES_NED = ((1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, -1.0))
 
 
 def odometry_covariance(q: tuple[float, float, float, float], cov: Covariance) -> tuple[tuple[float, ...], ...]:
     """ODOMETRY's ``pose_covariance`` and ``velocity_covariance`` (21 each, the upper triangles) of an
     estimate's covariance, in the message's frames: pose over NED (x, y, z) and the Euler angles of
     :func:`~bridge.core.wire.state_to_odometry` (roll, pitch, yaw = φ, −θ, −ψ); twist over the FRD body
-    velocity and FRD body rates (``q``: the estimate's attitude, FRD to NED). NaN stays NaN."""
-    pose = np.array(cov.pose()).reshape(6, 6) * np.outer(_POSE_SIGNS, _POSE_SIGNS)
-    T = np.zeros((6, 6))  # twist (NWU velocity, FLU rates) -> (FRD body velocity, FRD rates)
-    for j, e in enumerate(((1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, -1.0))):  # NWU axis j in NED
-        T[0:3, j] = rotate_inverse(q, e)
-    T[3:6, 3:6] = np.diag((1.0, -1.0, -1.0))
-    twist = T @ np.array(cov.twist()).reshape(6, 6) @ T.T
-    return upper_triangle(pose.ravel().tolist()), upper_triangle(twist.ravel().tolist())
+    velocity and FRD body rates (``q``: the estimate's attitude, FRD to NED): R V Rᵀ, R's column j the NWU
+    axis j in the body, and the rates' covariance with q and r flipped; no cross terms (the twist has
+    none). NaN stays NaN. Plain floats: it runs at every lockstep step (numpy's calls cost ~100 µs)."""
+    s = cov.state
+    pose = tuple(s[k] * sign for k, sign in _POSE_UPPER)
+    c0, c1, c2 = (rotate_inverse(q, e) for e in _NWU_AXES_NED)  # R's columns
+    V = (s[30:33], s[39:42], s[48:51])  # the velocity block, rows and columns 3..5 of the 9x9
+    RV = [[c0[a] * V[0][j] + c1[a] * V[1][j] + c2[a] * V[2][j] for j in range(3)] for a in range(3)]
+    M = [[RV[a][0] * c0[b] + RV[a][1] * c1[b] + RV[a][2] * c2[b] for b in range(3)] for a in range(3)]
+    w = cov.rates
+    twist = (M[0][0], M[0][1], M[0][2], 0.0, 0.0, 0.0, M[1][1], M[1][2], 0.0, 0.0, 0.0, M[2][2], 0.0, 0.0, 0.0,
+             w[0], -w[1], -w[2], w[4], w[5], w[8])
+    return pose, twist
 
 
 # default GCS streams (message id -> interval s): docs/design.md, "The MAVLink contract" gives 25 Hz and 10 Hz

@@ -23,7 +23,6 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
-from bridge.batch import batch_problem, fly_batch
 from bridge.loop import fly
 from bridge.nodes.process import die_with_parent
 from bridge.record.runlog import Run
@@ -248,6 +247,8 @@ def engine_for(mission: Mission, todo: Sequence[Cell], mode: str, engine: str,
         raise ConfigError(f"--engine: must be one of {', '.join(ENGINES)}, got {engine!r}")
     if engine == "process":
         return "process", "asked for"
+    from bridge.batch import batch_problem  # numba's import (~0.3 s): only where cells are to be flown
+
     why = "lockstep cells fly as SITL sessions" if mode == "lockstep" else (
         batch_problem(mission, [cell_overrides(c) for c in todo]) if todo else None)
     if why is not None:
@@ -266,6 +267,8 @@ def batch_row(cell: Cell, measures: Mapping[str, Any]) -> dict[str, Any]:
 
 def run_batch(mission: Mission, todo: Sequence[Cell], report: Report, chunk: int = BATCH_CHUNK) -> None:
     """Fly cells with the batch engine in this process, ``chunk`` at a time (rows reported per chunk)."""
+    from bridge.batch import fly_batch
+
     for i in range(0, len(todo), chunk):
         part = todo[i:i + chunk]
         for cell, m in zip(part, fly_batch(mission, [cell_overrides(c) for c in part]), strict=True):
@@ -276,6 +279,8 @@ def run_batch_dask(client: Any, mission: Mission, todo: Sequence[Cell], report: 
                    chunk: int = BATCH_CHUNK) -> None:
     """Fly cells with the batch engine on a Dask cluster: a chunk of cells is one task."""
     from distributed import as_completed  # lazy: an optional dependency
+
+    from bridge.batch import fly_batch
 
     mission_f = client.scatter(mission, broadcast=True)
     parts = [todo[i:i + chunk] for i in range(0, len(todo), chunk)]
