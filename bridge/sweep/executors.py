@@ -267,7 +267,7 @@ def batch_row(cell: Cell, measures: Mapping[str, Any]) -> dict[str, Any]:
 
 def run_batch(mission: Mission, todo: Sequence[Cell], report: Report, chunk: int = BATCH_CHUNK) -> None:
     """Fly cells with the batch engine in this process, ``chunk`` at a time (rows reported per chunk)."""
-    from bridge.batch import fly_batch
+    from bridge.batch import fly_batch  # lazy: numba loads only where the batch flies (engine_for)
 
     for i in range(0, len(todo), chunk):
         part = todo[i:i + chunk]
@@ -280,7 +280,7 @@ def run_batch_dask(client: Any, mission: Mission, todo: Sequence[Cell], report: 
     """Fly cells with the batch engine on a Dask cluster: a chunk of cells is one task."""
     from distributed import as_completed  # lazy: an optional dependency
 
-    from bridge.batch import fly_batch
+    from bridge.batch import fly_batch  # lazy: numba loads only where the batch flies (engine_for)
 
     mission_f = client.scatter(mission, broadcast=True)
     parts = [todo[i:i + chunk] for i in range(0, len(todo), chunk)]
