@@ -59,9 +59,10 @@ def make_plots(trace: dict[str, np.ndarray], out: str | Path, title: str = "") -
 
     def save(fig, name: str) -> None:
         fig.suptitle(f"{title} — {name}" if title else name)
-        fig.tight_layout()
+        if name != "path3d":  # fixed margins: tight_layout's measuring pass cost a third of the figures' time
+            fig.subplots_adjust(left=0.11, right=0.97, bottom=0.07, top=0.93, hspace=0.22, wspace=0.28)
         p = out / f"{name}.png"
-        fig.savefig(p, dpi=90)
+        fig.savefig(p, dpi=90, pil_kwargs={"compress_level": 1})
         plt.close(fig)
         written.append(p)
 
