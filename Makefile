@@ -18,8 +18,11 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/bsst sim missions/sine.toml --out runs/demo-sine --overwrite
 
+# the suite starts some hundreds of Python processes (vehicles, controllers, bsst commands): with bytecode
+# caching off (PYTHONDONTWRITEBYTECODE, set on some machines) each compiles the project's sources again
+# (~0.12 s a process) and pytest rewrites every test module again in each worker
 test: $(STAMP)
-	$(BIN)/python -m pytest
+	env -u PYTHONDONTWRITEBYTECODE $(BIN)/python -m pytest
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
