@@ -7,6 +7,7 @@ Each test holds an instance slot (bridge.session.instance_slot), so the ports 14
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 import os
@@ -186,6 +187,9 @@ def test_a_slow_answer_to_a_resent_state_is_taken_once_and_refuses_nothing(tmp_p
     s = _stats(v)
     assert s["steps"] == 1 and s["accepted"] == 1 and s["resends"] >= 1
     assert s["answered_again"] == 1 and s["rejected"] == {}
+    with open(tmp_path / "vehicle.csv", newline="") as f:
+        row = next(csv.DictReader(f))
+    assert float(row["rtt_s"]) >= 0.05  # its round trip from the state's first sending, not from the copy
 
 
 def test_mavproxy_arms_through_stdin(tmp_path):

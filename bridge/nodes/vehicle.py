@@ -554,7 +554,8 @@ class Vehicle:
         tail = ODOMETRY_TAIL if self.sim.sensors is None else self._estimate_tail(q)
         if self.link.send_hot(ODOMETRY, (step_usec(k, self.rate), *pos, *q, *vel, *rates, *tail)):
             self.odometry_sent += 1
-        self._odo_sent[k] = now
+        if fresh or k not in self._odo_sent:  # a resent state's round trip counts from its first sending
+            self._odo_sent[k] = now
         if len(self._odo_sent) > 256:
             for old in [s for s in self._odo_sent if s < k - 128]:
                 del self._odo_sent[old]
