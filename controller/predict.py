@@ -50,43 +50,51 @@ class NominalModel:
         )
 
     def rk4(self, X: State, u: Quad, omega_d: float, h: float) -> State:
-        """One classical Runge–Kutta step of h seconds with the wrench held.
-
-        Bit for bit RK4 of :meth:`derivative` (stages X + h/2 k1, X + h/2 k2, X + h k3; X + h/6 (k1 +
-        2 k2 + 2 k3 + k4); tested), written out: positions never enter the derivative, so each stage
-        carries the 9 velocities, angles and rates in local floats (a horizon of 57 ms is 15 steps a
-        control period: this is most of a predicting controller's time).
-        """
-        a = u[0] / self.m
-        g = self.g
+        """One classical Runge–Kutta step of h seconds with the wrench held (:func:`nominal_rk4`)."""
         c = self.c
-        i1, i2, i3, jr_x, jr_y = c.i1, c.i2, c.i3, c.jr_x, c.jr_y
-        tx, ty, tz = c.l_x * u[1], c.l_y * u[2], c.l_z * u[3]
-        x, vx, y, vy, z, vz, phi, dphi, th, dth, psi, dpsi = X
-        v1, v2, v3, f, df, t, dt, p, dp = vx, vy, vz, phi, dphi, th, dth, psi, dpsi  # the stage's values
-        hh = 0.5 * h
-        k = []
-        for step in (hh, hh, h, 0.0):
-            cf, sf, ct, st, cp, sp = cos(f), sin(f), cos(t), sin(t), cos(p), sin(p)
-            ax = (cf * st * cp + sf * sp) * a
-            ay = (cf * st * sp - sf * cp) * a
-            az = cf * ct * a - g
-            ddf = i1 * dt * dp - jr_x * dt * omega_d + tx
-            ddt = i2 * df * dp + jr_y * df * omega_d + ty
-            ddp = i3 * df * dt + tz
-            k.append((v1, ax, v2, ay, v3, az, df, ddf, dt, ddt, dp, ddp))
-            v1, v2, v3 = vx + step * ax, vy + step * ay, vz + step * az
-            f, df, t, dt, p, dp = phi + step * df, dphi + step * ddf, th + step * dt, dth + step * ddt, \
-                psi + step * dp, dpsi + step * ddp
-        s = h / 6.0
-        (a0, a1, a2, a3, a4, a5, a6, a7, a8, a9, a10, a11), (b0, b1, b2, b3, b4, b5, b6, b7, b8, b9, b10, b11), \
-            (c0, c1, c2, c3, c4, c5, c6, c7, c8, c9, c10, c11), (d0, d1, d2, d3, d4, d5, d6, d7, d8, d9, d10, d11) = k
-        return (x + s * (a0 + 2.0 * b0 + 2.0 * c0 + d0), vx + s * (a1 + 2.0 * b1 + 2.0 * c1 + d1),
-                y + s * (a2 + 2.0 * b2 + 2.0 * c2 + d2), vy + s * (a3 + 2.0 * b3 + 2.0 * c3 + d3),
-                z + s * (a4 + 2.0 * b4 + 2.0 * c4 + d4), vz + s * (a5 + 2.0 * b5 + 2.0 * c5 + d5),
-                phi + s * (a6 + 2.0 * b6 + 2.0 * c6 + d6), dphi + s * (a7 + 2.0 * b7 + 2.0 * c7 + d7),
-                th + s * (a8 + 2.0 * b8 + 2.0 * c8 + d8), dth + s * (a9 + 2.0 * b9 + 2.0 * c9 + d9),
-                psi + s * (a10 + 2.0 * b10 + 2.0 * c10 + d10), dpsi + s * (a11 + 2.0 * b11 + 2.0 * c11 + d11))
+        return nominal_rk4(X, u[0] / self.m, self.g, c.i1, c.i2, c.i3, c.jr_x, c.jr_y, c.l_x * u[1], c.l_y * u[2],
+                           c.l_z * u[3], omega_d, h)
+
+
+def nominal_rk4(X: State, a: float, g: float, i1: float, i2: float, i3: float, jr_x: float, jr_y: float,
+                tx: float, ty: float, tz: float, omega_d: float, h: float) -> State:
+    """One RK4 step of h s of eq. (6), corrected, with the wrench held: ``a`` = u1/m (m/s²), ``g`` (m/s²),
+    the :class:`~controller.nominal.Coefficients` i1..i3, jr_x, jr_y, the torque terms tx, ty, tz =
+    l_x u2, l_y u3, l_z u4 (rad/s²) and omega_d (rad/s, eq. 5).
+
+    Bit for bit RK4 of :meth:`NominalModel.derivative` (stages X + h/2 k1, X + h/2 k2, X + h k3;
+    X + h/6 (k1 + 2 k2 + 2 k3 + k4), the sum in that order; tested), written out: positions never enter
+    the derivative, so each stage carries the 9 velocities, angles and rates in local floats (a horizon of
+    57 ms is 15 steps a control period: this is most of a predicting controller's time). Plain floats and
+    a tuple: the batch engine compiles this same function (numba) for its cells.
+    """
+    x, vx, y, vy, z, vz, phi, dphi, th, dth, psi, dpsi = X
+    hh = 0.5 * h
+    v1, v2, v3, f, df, t, dt, p, dp = vx, vy, vz, phi, dphi, th, dth, psi, dpsi  # the stage's values
+    sx = sy = sz = svx = svy = svz = sf = sdf = st = sdt = sp = sdp = 0.0  # k1 + 2 k2 + 2 k3 + k4, so far
+    for stage in range(4):
+        step = hh if stage < 2 else (h if stage == 2 else 0.0)  # where the next stage is taken
+        w = 1.0 if stage == 0 or stage == 3 else 2.0
+        cf, snf, ct, snt, cp, snp = cos(f), sin(f), cos(t), sin(t), cos(p), sin(p)
+        ax = (cf * snt * cp + snf * snp) * a
+        ay = (cf * snt * snp - snf * cp) * a
+        az = cf * ct * a - g
+        ddf = i1 * dt * dp - jr_x * dt * omega_d + tx
+        ddt = i2 * df * dp + jr_y * df * omega_d + ty
+        ddp = i3 * df * dt + tz
+        if stage == 0:
+            sx, svx, sy, svy, sz, svz, sf, sdf, st, sdt, sp, sdp = v1, ax, v2, ay, v3, az, df, ddf, dt, ddt, dp, ddp
+        else:
+            sx, svx, sy, svy, sz, svz = sx + w * v1, svx + w * ax, sy + w * v2, svy + w * ay, sz + w * v3, \
+                svz + w * az
+            sf, sdf, st, sdt, sp, sdp = sf + w * df, sdf + w * ddf, st + w * dt, sdt + w * ddt, sp + w * dp, \
+                sdp + w * ddp
+        v1, v2, v3 = vx + step * ax, vy + step * ay, vz + step * az
+        f, df, t, dt, p, dp = phi + step * df, dphi + step * ddf, th + step * dt, dth + step * ddt, \
+            psi + step * dp, dpsi + step * ddp
+    s = h / 6.0
+    return (x + s * sx, vx + s * svx, y + s * sy, vy + s * svy, z + s * sz, vz + s * svz,
+            phi + s * sf, dphi + s * sdf, th + s * st, dth + s * sdt, psi + s * sp, dpsi + s * sdp)
 
 
 class Predictor:

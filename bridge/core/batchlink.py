@@ -45,6 +45,7 @@ from bridge.core.link import (  # the draw numbers and bound are link.py's: one 
 from bridge.core.linkends import EPS_T
 from controller.link_guard import GuardConfig
 from controller.nominal import Coefficients, Nominal
+from controller.predict import nominal_rk4
 
 NONE, TRACK, HOLD = 0, 1, 2  # the guard's decision per step: no command (stop or idle), command, command on hold
 NEVER = np.iinfo(np.int64).max // 4  # a check or step index that never comes
@@ -560,6 +561,9 @@ class BatchPredictor:
         return out
 
 
+_nominal_rk4 = njit(cache=True)(nominal_rk4)  # the scalar predictor's own step, compiled
+
+
 @njit(cache=True)
 def _predict_cells(t_state: np.ndarray, X: np.ndarray, aim: np.ndarray, which: np.ndarray, from_t: np.ndarray,
                    cache_t: np.ndarray, cache_X: np.ndarray, cmd_t: np.ndarray, cmd_u: np.ndarray,
@@ -575,16 +579,11 @@ def _predict_cells(t_state: np.ndarray, X: np.ndarray, aim: np.ndarray, which: n
     for i in range(len(which)):
         j = which[i]
         ts, to = t_state[i], aim[i]
-        if from_t[j] == ts and cache_t[j] <= to:
-            tau = cache_t[j]
-            x, vx, y, vy, z, vz = cache_X[0, j], cache_X[1, j], cache_X[2, j], cache_X[3, j], cache_X[4, j], \
-                cache_X[5, j]
-            phi, dphi, th, dth, psi, dpsi = cache_X[6, j], cache_X[7, j], cache_X[8, j], cache_X[9, j], \
-                cache_X[10, j], cache_X[11, j]
-        else:
-            tau = ts
-            x, vx, y, vy, z, vz = X[0, i], X[1, i], X[2, i], X[3, i], X[4, i], X[5, i]
-            phi, dphi, th, dth, psi, dpsi = X[6, i], X[7, i], X[8, i], X[9, i], X[10, i], X[11, i]
+        cont = from_t[j] == ts and cache_t[j] <= to
+        src, col = (cache_X, j) if cont else (X, i)
+        tau = cache_t[j] if cont else ts
+        Xp = (src[0, col], src[1, col], src[2, col], src[3, col], src[4, col], src[5, col], src[6, col],
+              src[7, col], src[8, col], src[9, col], src[10, col], src[11, col])
         n = total[j]
         used = min(n, depth)
         after = 0  # the command in effect at tau: the newest numbered with its time <= tau (-1: none)
@@ -605,48 +604,16 @@ def _predict_cells(t_state: np.ndarray, X: np.ndarray, aim: np.ndarray, which: n
             span = end - tau
             kk = max(1, int(span / dt_max + 0.999999))
             h = span / kk
-            a = u0 / m
-            tx, ty, tz = l_x * u1, l_y * u2, l_z * u3
-            for _ in range(kk):  # NominalModel.rk4, in its order of operations
-                hh = 0.5 * h
-                s6 = h / 6.0
-                v1, v2, v3, f, df, t, dt, p, dp = vx, vy, vz, phi, dphi, th, dth, psi, dpsi
-                sx = sy = sz = svx = svy = svz = sf = sdf = st_ = sdt = sp_ = sdp = 0.0
-                for stage in range(4):
-                    step = hh if stage < 2 else (h if stage == 2 else 0.0)
-                    w = 1.0 if stage == 0 or stage == 3 else 2.0
-                    cf, snf, ct, snt, cp, snp = math.cos(f), math.sin(f), math.cos(t), math.sin(t), math.cos(p), \
-                        math.sin(p)
-                    ax = (cf * snt * cp + snf * snp) * a
-                    ay = (cf * snt * snp - snf * cp) * a
-                    az = cf * ct * a - g
-                    ddf = i1 * dt * dp - jr_x * dt * od + tx
-                    ddt = i2 * df * dp + jr_y * df * od + ty
-                    ddp = i3 * df * dt + tz
-                    if stage == 0:
-                        sx, svx, sy, svy, sz, svz = v1, ax, v2, ay, v3, az
-                        sf, sdf, st_, sdt, sp_, sdp = df, ddf, dt, ddt, dp, ddp
-                    else:
-                        sx, svx, sy, svy, sz, svz = sx + w * v1, svx + w * ax, sy + w * v2, svy + w * ay, \
-                            sz + w * v3, svz + w * az
-                        sf, sdf, st_, sdt, sp_, sdp = sf + w * df, sdf + w * ddf, st_ + w * dt, sdt + w * ddt, \
-                            sp_ + w * dp, sdp + w * ddp
-                    v1, v2, v3 = vx + step * ax, vy + step * ay, vz + step * az
-                    f, df, t, dt, p, dp = phi + step * df, dphi + step * ddf, th + step * dt, dth + step * ddt, \
-                        psi + step * dp, dpsi + step * ddp
-                x, vx, y, vy, z, vz = x + s6 * sx, vx + s6 * svx, y + s6 * sy, vy + s6 * svy, z + s6 * sz, \
-                    vz + s6 * svz
-                phi, dphi, th, dth, psi, dpsi = phi + s6 * sf, dphi + s6 * sdf, th + s6 * st_, dth + s6 * sdt, \
-                    psi + s6 * sp_, dpsi + s6 * sdp
+            for _ in range(kk):
+                Xp = _nominal_rk4(Xp, u0 / m, g, i1, i2, i3, jr_x, jr_y, l_x * u1, l_y * u2, l_z * u3, od, h)
             tau = end
             if end == nxt and has_next:
                 cur += 1
         from_t[j] = ts
         cache_t[j] = to
-        r = (x, vx, y, vy, z, vz, phi, dphi, th, dth, psi, dpsi)
         for q in range(12):
-            out[q, i] = r[q]
-            cache_X[q, j] = r[q]
+            out[q, i] = Xp[q]
+            cache_X[q, j] = Xp[q]
 
 
 # -- what the wire carries ------------------------------------------------------------------------------
