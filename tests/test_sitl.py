@@ -316,3 +316,28 @@ def test_a_ground_station_that_disarms_the_vehicle_in_flight_is_named(tmp_path):
     assert link["rejected_from_others"]["vehicle"] == 3
     own = sum(link["rejected_by"]["vehicle"].values()) - 3
     assert link["rejected_from_peer"]["vehicle"] == own == link["rejected"].get("not_offboard", 0)
+
+
+def test_the_lines_a_child_writes_after_ready_in_the_same_read_are_kept(tmp_path):
+    """The children start at once, so the controller may arm the vehicle before the session reads the
+    vehicle's ``ready``: its ``event ... armed`` line then comes in the same read, and must count (it was
+    dropped once, and the session's policy saw a flight that was never armed: exit 1 on a clean run).
+    A real process writes both lines in one write to a real pipe."""
+    from bridge.core.flight import prepare
+    from bridge.session import Session
+    from bridge.session.children import Child
+
+    session = Session(prepare(Mission(Sine(), duration_s=1.0, name="ready")), tmp_path, realtime=False,
+                      instance=None, gcs=None, speed=None, progress=None, live=False)
+    child = Child.__new__(Child)  # a Child whose process is not bsst: one that writes the two lines at once
+    child.name, child.log, child._buf, child.eof, child.stats, child.done = "vehicle", tmp_path / "v.log", b"", \
+        False, {}, None
+    child.proc = subprocess.Popen([sys.executable, "-c", "import os; os.write(1, b'ready listen=x\\n"
+                                   "event t=0.000 armed: armed, offboard control\\n')"], stdout=subprocess.PIPE)
+    child.fd = child.proc.stdout.fileno()
+    child.proc.wait(timeout=30)  # both lines are in the pipe before the session reads
+    os.set_blocking(child.fd, False)
+    fields = session._wait_ready(child)
+    child.proc.stdout.close()
+    assert fields["listen"] == "x"
+    assert session.vehicle_armed and [e["kind"] for e in session.events] == ["armed"]

@@ -406,14 +406,19 @@ class Session:
         sel = selectors.DefaultSelector()
         sel.register(child.fd, selectors.EVENT_READ)
         try:
+            fields: dict[str, str] | None = None
             while True:
+                # every line read is handled, the ones after "ready" too: the children start at once, so the
+                # controller may arm the vehicle before its "ready" is read, and its "event ... armed" line
+                # then comes in the same read (dropped, the session saw a flight never armed)
                 for line in child.lines():
                     word, rest = parse_status(line)
                     self._status(child, line)
-                    if word == ready:
+                    if word == ready and fields is None:
                         fields = dict(f.partition("=")[::2] for f in rest.split())
                         fields["_line"] = rest
-                        return fields
+                if fields is not None:
+                    return fields
                 if child.eof or child.proc.poll() is not None:
                     child.proc.wait()
                     self._died(child, starting=True)
