@@ -463,7 +463,8 @@ class Session:
                 self.joiner.update()
                 self._show_progress()
                 if veh.proc.poll() is not None:
-                    veh.lines()
+                    for line in veh.lines():  # its last words: events it said before it went
+                        self._status(veh, line)
                     self._died(veh)
                     return
                 if self.relay is not None and self.relay.proc.poll() is not None:
