@@ -13,13 +13,16 @@ import math
 import os
 import time
 
+import numpy as np
 import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
-from bridge.core.wire import paper_to_ned, rotate_inverse
+from bridge.core.estimator import Covariance, upper_triangle
+from bridge.core.wire import euler_to_quaternion, paper_to_ned, rotate_inverse
 from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import GCS_PORT
+from bridge.nodes.vehicle import odometry_covariance
 from bridge.session import instance_slot
 from plant import load_profile
 from plant.sensors import BARO, GNSS, IMU, Measurement, SensorSuite, body_rates, rotation
@@ -245,12 +248,6 @@ def test_odometry_covariance_is_the_dense_frame_change():
     change written densely in numpy: pose S P S with S = diag(1, -1, -1, 1, -1, -1) over (x, y, z, φ, θ, ψ);
     twist T C Tᵀ, T = blockdiag(R, diag(1, -1, -1)), R's column j the NWU axis j in the FRD body; both
     as their 21-entry upper triangles. And NaN stays where it was."""
-    import numpy as np
-
-    from bridge.core.estimator import Covariance, upper_triangle
-    from bridge.core.wire import euler_to_quaternion
-    from bridge.nodes.vehicle import odometry_covariance
-
     rng = np.random.default_rng(3)
     for _ in range(50):
         A, B = rng.normal(size=(9, 9)), rng.normal(size=(3, 3))

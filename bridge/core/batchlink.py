@@ -527,7 +527,6 @@ class BatchPredictor:
         self.m = nominal.mass
         self.g = nominal.gravity
         c = Coefficients.of(nominal)
-        self.c = c
         self.dt_max = dt_max
         self.lag = lag_s
         self.depth = depth
@@ -537,7 +536,7 @@ class BatchPredictor:
         self.from_t = np.full(n, np.nan)  # the state stamp the cache starts from
         self.cache_t = np.zeros(n)
         self.cache_X = np.zeros((12, n))
-        self._cols = np.arange(n)
+        self._coefficients = np.array((c.i1, c.i2, c.i3, c.jr_x, c.jr_y, c.l_x, c.l_y, c.l_z))  # for the kernel
 
     def sent(self, t: float, u: np.ndarray, omega_d: np.ndarray, which: np.ndarray) -> None:
         """Record the command sent at t (s) by the cells ``which`` (index array): u [4, len(which)] N, omega_d."""
@@ -553,11 +552,9 @@ class BatchPredictor:
         """X [12, len(which)] (measured at ``t_state``) carried to ``aim`` (s) for the cells ``which``."""
         if not len(which):
             return X
-        c = self.c
         out = np.empty_like(X)
         _predict_cells(t_state, X, aim, which, self.from_t, self.cache_t, self.cache_X, self.cmd_t, self.cmd_u,
-                       self.total, self.dt_max, self.m, self.g,
-                       np.array((c.i1, c.i2, c.i3, c.jr_x, c.jr_y, c.l_x, c.l_y, c.l_z)), out)
+                       self.total, self.dt_max, self.m, self.g, self._coefficients, out)
         return out
 
 

@@ -373,18 +373,28 @@ def _inject(x: np.ndarray, dx: np.ndarray) -> None:
 
 
 @njit(cache=True)
+def _position_first(x: np.ndarray, c: np.ndarray, P: np.ndarray, hist: np.ndarray, hs: np.ndarray,
+                    counts: np.ndarray, kind: int, t_valid: float, z0: float, z1: float, z2: float, vp0: float,
+                    vp1: float, vp2: float) -> tuple[np.ndarray, np.ndarray, bool]:
+    """The start of a pose or GNSS fix (``kind``): P carried to now, the state at t_valid (s), and the
+    position (z0, z1, z2) m with variances vp (m²) fused into a new error dx; (that state, dx, fused?)."""
+    flush(x, c, P)
+    s = np.empty(9)
+    _state_at(x, hist, hs, t_valid, s)
+    dx = np.zeros(15)
+    have = _update_block(c, P, counts, kind, 0, z0 - s[0], z1 - s[1], z2 - s[2],
+                         (vp0, 0.0, 0.0, 0.0, vp1, 0.0, 0.0, 0.0, vp2), dx, False)
+    return s, dx, have
+
+
+@njit(cache=True)
 def fuse_pose(x: np.ndarray, c: np.ndarray, P: np.ndarray, hist: np.ndarray, hs: np.ndarray, counts: np.ndarray,
               t_valid: float, z0: float, z1: float, z2: float, z3: float, z4: float, z5: float, vp0: float,
               vp1: float, vp2: float, v0: float, v1: float, v2: float) -> None:
     """A motion-capture pose: position (z0, z1, z2) m with variances vp, Euler angles (z3, z4, z5) rad with
     variances v, valid at t_valid s; fused as two 3-value blocks, the attitude's as the small rotation
     E·r of its residual r with noise E·diag(v)·Eᵀ."""
-    flush(x, c, P)
-    s = np.empty(9)
-    _state_at(x, hist, hs, t_valid, s)
-    dx = np.zeros(15)
-    have = _update_block(c, P, counts, K_POSE, 0, z0 - s[0], z1 - s[1], z2 - s[2],
-                         (vp0, 0.0, 0.0, 0.0, vp1, 0.0, 0.0, 0.0, vp2), dx, False)
+    s, dx, have = _position_first(x, c, P, hist, hs, counts, K_POSE, t_valid, z0, z1, z2, vp0, vp1, vp2)
     e0, e1, e2 = _wrap_angle(z3 - s[6]), _wrap_angle(z4 - s[7]), _wrap_angle(z5 - s[8])
     cp, sp, ct, st = math.cos(s[8]), math.sin(s[8]), math.cos(s[7]), math.sin(s[7])
     a, b = cp * ct, sp * ct  # E = [[a, -sp, 0], [b, cp, 0], [-st, 0, 1]]
@@ -402,12 +412,7 @@ def fuse_gnss(x: np.ndarray, c: np.ndarray, P: np.ndarray, hist: np.ndarray, hs:
               t_valid: float, z0: float, z1: float, z2: float, z3: float, z4: float, z5: float, vp0: float,
               vp1: float, vp2: float, vv0: float, vv1: float, vv2: float) -> None:
     """A GNSS fix: position (z0, z1, z2) m and velocity (z3, z4, z5) m/s with their variances, valid at t_valid."""
-    flush(x, c, P)
-    s = np.empty(9)
-    _state_at(x, hist, hs, t_valid, s)
-    dx = np.zeros(15)
-    have = _update_block(c, P, counts, K_GNSS, 0, z0 - s[0], z1 - s[1], z2 - s[2],
-                         (vp0, 0.0, 0.0, 0.0, vp1, 0.0, 0.0, 0.0, vp2), dx, False)
+    s, dx, have = _position_first(x, c, P, hist, hs, counts, K_GNSS, t_valid, z0, z1, z2, vp0, vp1, vp2)
     have |= _update_block(c, P, counts, K_GNSS, 3, z3 - s[3], z4 - s[4], z5 - s[5],
                           (vv0, 0.0, 0.0, 0.0, vv1, 0.0, 0.0, 0.0, vv2), dx, have)
     if have:
