@@ -39,8 +39,8 @@ sys.path.insert(0, str(ROOT))
 import numpy as np  # noqa: E402
 
 from bridge.batch import fly_batch  # noqa: E402
-from bridge.core.batchlink import Clocks, plan_links  # noqa: E402
 from bridge.core.flight import prepare  # noqa: E402
+from bridge.link.plan import Clocks, plan_links  # noqa: E402
 from bridge.loop import fly  # noqa: E402
 from bridge.sweep import Grid, sweep  # noqa: E402
 from bridge.sweep.grid import cell_overrides, cells  # noqa: E402

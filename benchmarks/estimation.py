@@ -53,7 +53,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from bridge.core.estimator import Ekf, RawEstimator  # noqa: E402
+from bridge.autopilot.estimator import Ekf, RawEstimator  # noqa: E402
 from bridge.core.flight import prepare  # noqa: E402
 from bridge.loop import simulate  # noqa: E402
 from bridge.record.metrics import ripple_rms  # noqa: E402

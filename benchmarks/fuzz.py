@@ -43,7 +43,7 @@ sys.path.insert(0, str(ROOT))
 
 from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
-from bridge.core.params import BY_NAME, ParamRefused, VehicleParams, change_param  # noqa: E402
+from bridge.autopilot.params import BY_NAME, ParamRefused, VehicleParams, change_param  # noqa: E402
 from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, GCS_PORT, LINK_PORT  # noqa: E402
 from bridge.mavlink.modes import (  # noqa: E402
     PARAM_TYPES,

@@ -21,7 +21,7 @@ the predictor survives on the wall clock, where the controller learns the state'
 the arrival schedule and TIMESYNC instead of the link model.
 
 ``profiles``: the sine mission (30 s, 250 Hz) offline through each named link profile
-(``bridge/core/linkprofiles``, ``--link-profile NAME``) and a perfect link, with BS-ST without and
+(``bridge/link/profiles``, ``--link-profile NAME``) and a perfect link, with BS-ST without and
 with ``compensation = "predict"``: outcome, 3-D RMS over t >= 10 s and the sweep's class
 (``bridge.sweep.classes``, default thresholds), as a Markdown table (docs/links.md shows it).
 
@@ -206,7 +206,7 @@ def bench_realtime(delay_ms: float) -> int:
 
 def bench_profiles() -> int:
     from bridge import simulate
-    from bridge.core.linkprofile import load_link_profile, profile_names
+    from bridge.link.profile import load_link_profile, profile_names
     from bridge.sweep.cells import ripple_rms
     from bridge.sweep.classes import Classes, classify
 

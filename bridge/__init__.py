@@ -15,10 +15,10 @@ and a layer imports nothing above it (tests/test_layers.py checks it):
 - :mod:`bridge.core`: simulation time only, no sockets, no files
 
   - :mod:`bridge.core.flight`      a mission validated into the parts that fly it (the one path)
-  - :mod:`bridge.core.simvehicle`  plant + arming + timeout + failsafe, shared by every clock
-  - :mod:`bridge.core.failsafe`    level-and-descend failsafe
-  - :mod:`bridge.core.link`        link impairment: one seeded model of a bad link, used by every clock
-  - :mod:`bridge.core.linkends`    the two ends of an impaired link in simulation time (offline, lockstep)
+  - :mod:`bridge.autopilot.simvehicle`  plant + arming + timeout + failsafe, shared by every clock
+  - :mod:`bridge.autopilot.failsafe`    level-and-descend failsafe
+  - :mod:`bridge.link.model`        link impairment: one seeded model of a bad link, used by every clock
+  - :mod:`bridge.link.ends`    the two ends of an impaired link in simulation time (offline, lockstep)
   - :mod:`bridge.core.wire`        frames NWU <-> NED / FRD, actuator normalisation, step stamps
   - :mod:`bridge.core.clock`       the real-time clocks: the vehicle's pace, the controller's fixed rate
 

@@ -10,7 +10,7 @@ Out: per cell the measured columns of a ``cells.csv`` row (:data:`MEASURES`: ``r
 
 The scalar loop (:func:`bridge.loop.fly`) stays the reference; this engine flies the same parts over a
 cell axis: the link model, the guard and the vehicle's timeout first, as a plan of the whole flight
-(:func:`bridge.core.batchlink.plan_links`: with no bandwidth queue and no re-arming nothing of it depends
+(:func:`bridge.link.plan.plan_links`: with no bandwidth queue and no re-arming nothing of it depends
 on the flight), then the plant (:class:`plant.batch.BatchPlant`), the laws and the actuation
 (:class:`controller.batch.BatchController`), the prediction and the failsafe landing, step by step. The
 metrics are accumulated as the flight goes (running sums and maxima, the last step outside the settling
@@ -34,9 +34,9 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from bridge.core.batchlink import HOLD, NONE, BatchPredictor, Clocks, commands_over_wire, plan_links, states_over_wire
 from bridge.core.flight import Flight, prepare
-from bridge.core.link import link_from_table, merge_link_tables
+from bridge.link.model import link_from_table, merge_link_tables
+from bridge.link.plan import HOLD, NONE, BatchPredictor, Clocks, commands_over_wire, plan_links, states_over_wire
 from bridge.record.metrics import BANDS, RMS_FROM_S
 from controller.batch import BATCH_LAWS, BatchActuation, BatchController
 from missions import MISSION_DIR, Mission, Sine, load_mission
@@ -361,7 +361,7 @@ class _Batch:
     def _land(plant: BatchPlant, act: BatchActuation, nominal: Any, descent: float, flying: np.ndarray,
               armed: np.ndarray) -> None:
         """One physics step of the vehicle's failsafe (SimVehicle.advance): on the ground it disarms
-        (command zero), else the landing loop (bridge.core.failsafe.LandingController) commands."""
+        (command zero), else the landing loop (bridge.autopilot.failsafe.LandingController) commands."""
         if not flying.any():
             return
         down = flying & plant.on_ground

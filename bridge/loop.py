@@ -7,16 +7,16 @@ Out: a :class:`~bridge.record.runlog.Run`: trace arrays (:data:`~bridge.record.c
      ``mission.toml``, ``trace.csv``, ``events.log``, ``summary.json`` and ``plots/``
 
 One control step at time t_k = k / rate_hz: the law reads the state the vehicle publishes (its
-on-board estimate: :meth:`~bridge.core.simvehicle.SimVehicle.published`; the true state under the
+on-board estimate: :meth:`~bridge.autopilot.simvehicle.SimVehicle.published`; the true state under the
 ``truth`` estimator), its command goes to
 the vehicle, which holds it over ``physics_hz / rate_hz`` RK4 steps. The vehicle is the same
-:class:`~bridge.core.simvehicle.SimVehicle` (timeout, failsafe) as the MAVLink vehicle uses.
+:class:`~bridge.autopilot.simvehicle.SimVehicle` (timeout, failsafe) as the MAVLink vehicle uses.
 
-Both messages cross the mission's link model (:mod:`bridge.core.link`) in simulation time, as
+Both messages cross the mission's link model (:mod:`bridge.link.model`) in simulation time, as
 they would cross the sockets: the state at t_k goes down to the controller's
 :class:`~controller.link_guard.LinkGuard`, which controls on the newest state delivered
 (``state_age_s`` in the trace is its age); the command goes up and acts at the physics
-step the model delivers it in (:mod:`bridge.core.linkends`). A perfect link (the default)
+step the model delivers it in (:mod:`bridge.link.ends`). A perfect link (the default)
 delivers both at once, which is exactly the loop without a link.
 """
 
@@ -28,11 +28,11 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from bridge.autopilot.params import ParamChange
+from bridge.autopilot.simvehicle import FAILSAFE, LANDED, OFFBOARD
 from bridge.core.flight import Flight, Progress, prepare
-from bridge.core.linkends import ControllerEnd, VehicleEnd
-from bridge.core.params import ParamChange
-from bridge.core.simvehicle import FAILSAFE, LANDED, OFFBOARD
 from bridge.core.wire import command_over_wire, state_over_wire
+from bridge.link.ends import ControllerEnd, VehicleEnd
 from bridge.record.columns import TRACE_COLUMNS, state_columns, trace_row
 from bridge.record.metrics import summarise
 from bridge.record.policies import ended_by_outcome, judge, rules_for, violation_text

@@ -55,7 +55,7 @@ class Mission:
     failsafe: Mapping[str, Any] = field(default_factory=dict)
     sensors: Mapping[str, Any] = field(default_factory=dict)  # raw: plant.profiles.sensors_from_table
     estimator: Mapping[str, Any] = field(default_factory=dict)  # raw: bridge.core.flight validates kind
-    params: Mapping[str, Any] = field(default_factory=dict)  # raw: bridge.core.params.params_from_table
+    params: Mapping[str, Any] = field(default_factory=dict)  # raw: bridge.autopilot.params.params_from_table
     source: str = "<python>"
 
     def __post_init__(self) -> None:

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
+from bridge.autopilot.estimator import compile_estimator
 from bridge.batch import compile_batch
-from bridge.core.estimator import compile_estimator
 
 ROOT = Path(__file__).resolve().parent.parent
 MISSIONS = ROOT / "missions"

@@ -27,8 +27,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import common as mavlink
 
+from bridge.autopilot.simvehicle import OFFBOARD
 from bridge.core.flight import prepare
-from bridge.core.simvehicle import OFFBOARD
 from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, GCS_PORT, LINK_PORT, Endpoint, parse_address
 from bridge.mavlink.receive import REPLY_RATE_HZ, RateLimiter, ReplyBudget
 from bridge.nodes.vehicle import Vehicle, VehicleConfig

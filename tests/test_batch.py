@@ -6,7 +6,7 @@ command lag, per-direction settings, seeds — is flown by both engines and comp
 same outcome and packet counts everywhere; for ``bsst`` and ``pid`` the 3-D RMS within 1e-6 relative
 (and the other figures likewise), for ``smc`` (a switching law) within 1 %, or, where the scalar loop
 itself is that sensitive, within its own spread under a 1e-15 m change of start. The packet fates are also
-checked draw by draw against :class:`bridge.core.link.FateStream`, and the refusals of
+checked draw by draw against :class:`bridge.link.model.FateStream`, and the refusals of
 :func:`bridge.batch.batch_problem` one by one.
 """
 
@@ -19,12 +19,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bridge.autopilot.params import ParamChange
 from bridge.batch import MEASURES, _prepare_all, batch_problem, fly_batch
-from bridge.core.batchlink import BatchPredictor, Clocks, _first_at_or_after, draw_fates
 from bridge.core.flight import prepare
-from bridge.core.link import FateStream, LinkConfig
-from bridge.core.linkends import EPS_T
-from bridge.core.params import ParamChange
+from bridge.link.ends import EPS_T
+from bridge.link.model import FateStream, LinkConfig
+from bridge.link.plan import BatchPredictor, Clocks, _first_at_or_after, draw_fates
 from bridge.loop import fly
 from bridge.sweep.cells import row_from_run
 from bridge.sweep.grid import AXES, Cell, Grid, cell_overrides, cells

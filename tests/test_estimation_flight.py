@@ -15,10 +15,10 @@ import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
+from bridge.autopilot.estimator import ESTIMATOR_KINDS
 from bridge.batch import batch_problem
 from bridge.cli import main
 from bridge.cli.commands import build_parser
-from bridge.core.estimator import ESTIMATOR_KINDS
 from bridge.loop import simulate
 from bridge.record.columns import ESTIMATE_COLUMNS, TRACE_COLUMNS
 from bridge.record.runlog import read_trace

@@ -1,4 +1,4 @@
-"""bridge/core/estimator.py: the on-board EKF, the raw and truth estimators.
+"""bridge/autopilot/estimator.py: the on-board EKF, the raw and truth estimators.
 
 Truth comes from the real plant (plant.Quadrotor) flown along the paper's sine with the real
 controller.Controller; the sensors are plant.sensors.SensorSuite with the profiles' sets. The
@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from bridge.core.estimator import (
+from bridge.autopilot.estimator import (
     ESTIMATOR_KINDS,
     ZERO_COVARIANCE,
     ClosedLoopRecord,
@@ -255,11 +255,11 @@ def test_covariance_blocks_and_nees() -> None:
     assert math.isnan(nees(truth, truth, unknown))
 
 
-# -- the compiled arithmetic (bridge/core/ekfkernels.py) against numpy written from the docstrings ---------
+# -- the compiled arithmetic (bridge/autopilot/ekfkernels.py) against numpy written from the docstrings ---------
 
 def test_weighted_square_is_the_quadratic_form_and_nan_unless_positive_definite() -> None:
-    from bridge.core import ekfkernels
-    from bridge.core.cholesky import weighted_square
+    from bridge.autopilot import ekfkernels
+    from bridge.autopilot.cholesky import weighted_square
 
     rng = np.random.default_rng(3)
     for n in (1, 3, 9):
@@ -279,7 +279,7 @@ def test_weighted_square_is_the_quadratic_form_and_nan_unless_positive_definite(
 def test_the_compiled_covariance_step_is_phi_p_phi_transpose_plus_q() -> None:
     """carry() builds Φ = I + A from its blocks sparsely; here Φ and Q are written densely from the
     module docstring and multiplied by numpy."""
-    from bridge.core import ekfkernels as k
+    from bridge.autopilot import ekfkernels as k
 
     rng = np.random.default_rng(5)
     x = np.zeros(k.X_SIZE)

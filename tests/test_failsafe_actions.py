@@ -25,10 +25,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bridge.autopilot.failsafe import FAILSAFE_ACTIONS, Level, PositionHold, Takeoff
+from bridge.autopilot.simvehicle import FAILSAFE, LANDED
 from bridge.cli import build_parser, main
-from bridge.core.failsafe import FAILSAFE_ACTIONS, Level, PositionHold, Takeoff
 from bridge.core.flight import prepare
-from bridge.core.simvehicle import FAILSAFE, LANDED
 from bridge.loop import simulate
 from bridge.mavlink.endpoint import LINK_PORT
 from bridge.record.runlog import read_trace

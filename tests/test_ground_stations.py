@@ -24,7 +24,7 @@ from pathlib import Path
 
 from pymavlink import mavutil
 
-from bridge.core.params import PARAMS, VehicleParams, read_param
+from bridge.autopilot.params import PARAMS, VehicleParams, read_param
 from bridge.mavlink.endpoint import GCS_PORT
 from bridge.mavlink.modes import FTP_ERR_UNKNOWN_COMMAND, FTP_HEADER, FTP_NAK, FTP_PAYLOAD_LEN, ftp_nak
 from bridge.session import instance_slot

@@ -32,7 +32,9 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("params",),
     ("plant", "missions"),
     ("controller",),
-    ("bridge.core",),
+    ("bridge.autopilot",),  # the simulated vehicle's on-board parts: estimator, failsafe, PX4 parameters
+    ("bridge.link",),  # the link model; its ends carry a simulated vehicle
+    ("bridge.core",),  # the one path from a mission to a flight (link + autopilot), the wire, the clocks
     ("bridge.mavlink", "bridge.record"),
     ("bridge.nodes",),
     ("bridge.loop", "bridge.batch", "bridge.session"),
@@ -239,10 +241,10 @@ def test_pure_packages_touch_no_files() -> None:
     ("bridge.record.bad", "import bridge.mavlink.endpoint\n", "sibling import bridge.record -> bridge.mavlink"),
     ("bridge.nodes.bad", "def f():\n    from bridge.cli import main  # lazy\n", "imports the CLI"),
     ("bridge.loop", "from bridge.sweep import Grid\n", "upward import bridge.loop -> bridge.sweep"),
-    ("controller.bad", "from bridge.core.link import LinkConfig\n", "upward import controller -> bridge.core"),
+    ("controller.bad", "from bridge.link.model import LinkConfig\n", "upward import controller -> bridge.link"),
     ("bridge.core.bad", "import socket\n", "may not touch the network"),
     ("plant.bad", "import subprocess\n", "pure package imports subprocess"),
-    ("bridge.core.bad", "def f():\n    from bridge.core import link\n", "without a comment"),
+    ("bridge.core.bad", "def f():\n    from bridge.link import model\n", "without a comment"),
 ])
 def test_the_checker_fails_on_a_broken_rule(name: str, source: str, expected: str) -> None:
     sources = project_sources()

@@ -1,4 +1,4 @@
-"""The link-impairment model (bridge.core.link): statistics, reproducibility, invariants, configuration."""
+"""The link-impairment model (bridge.link.model): statistics, reproducibility, invariants, configuration."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from bridge.cli import main
-from bridge.core.link import (
+from bridge.link.model import (
     FRAME_BYTES,
     LinkConfig,
     LinkImpairment,

@@ -1,7 +1,7 @@
 """Every ``[link]`` key has its flag, one range, and a line in the README (a meta-test, as
 python-control's kwargs_test walks its functions' keywords).
 
-The keys are the link model's own tables (:data:`bridge.core.link.LINK_KEYS`); the test
+The keys are the link model's own tables (:data:`bridge.link.model.LINK_KEYS`); the test
 checks first that those tables are the whole of what ``link_from_table`` reads. For each
 key: a ``bsst`` flag sets it (``bsst sim``'s parser, read back by ``link_table_from_args``);
 for a number, the mission loader and the flag accept the same bounds and refuse the same
@@ -19,8 +19,8 @@ import pytest
 
 from bridge.cli import build_parser, link_table_from_args
 from bridge.cli.flags import GUARD_FLAGS, LINK_FLAGS, UsageError
-from bridge.core import link as link_model
-from bridge.core.link import (
+from bridge.link import model as link_model
+from bridge.link.model import (
     BLACKOUT_DURATION_RANGE_S,
     DIRECTION_KEYS,
     GUARD_RANGES,

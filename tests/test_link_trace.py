@@ -28,10 +28,10 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.cli import build_parser, link_table_from_args, main
 from bridge.core.flight import prepare
-from bridge.core.link import LinkConfig, LinkImpairment, link_from_table
-from bridge.core.linkfit import model_records
-from bridge.core.linkprofile import PROFILE_DIR, load_link_profile, profile_names
-from bridge.core.linktrace import DirectionTrace, Records, Replay, make_records, parse_trace, read_trace, trace_text
+from bridge.link.fit import model_records
+from bridge.link.model import LinkConfig, LinkImpairment, link_from_table
+from bridge.link.profile import PROFILE_DIR, load_link_profile, profile_names
+from bridge.link.trace import DirectionTrace, Records, Replay, make_records, parse_trace, read_trace, trace_text
 from bridge.loop import simulate
 from bridge.nodes.relay import Relay
 from bridge.record.linkextract import extract_tlogs, parse_tlog

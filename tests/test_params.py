@@ -1,6 +1,6 @@
 """The vehicle's parameters and flight modes (issue 14), without a ground-station program.
 
-The pure parts (bridge.core.params, bridge.mavlink.modes) on their own; then ``bsst vehicle`` as a
+The pure parts (bridge.autopilot.params, bridge.mavlink.modes) on their own; then ``bsst vehicle`` as a
 real process spoken to by a pymavlink ground station over UDP on 127.0.0.1 (the parameter
 protocol, DO_SET_MODE / SET_MODE, NAV_TAKEOFF and NAV_LAND); then whole flights: a parameter set
 at a mission time (``--param-at``) gives the same trace twice in lockstep and matches offline,
@@ -22,9 +22,8 @@ import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as M
 
-from bridge.core.failsafe import FAILSAFE_RANGES
-from bridge.core.flight import prepare
-from bridge.core.params import (
+from bridge.autopilot.failsafe import FAILSAFE_RANGES
+from bridge.autopilot.params import (
     BY_NAME,
     PARAMS,
     ParamChange,
@@ -34,6 +33,7 @@ from bridge.core.params import (
     parse_change,
     read_param,
 )
+from bridge.core.flight import prepare
 from bridge.loop import simulate
 from bridge.mavlink.endpoint import GCS_PORT
 from bridge.mavlink.modes import (

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bridge.core.link import LinkConfig, LinkSettings
+from bridge.link.model import LinkConfig, LinkSettings
 from bridge.nodes.relay import Relay, parse_address
 
 ROOT = Path(__file__).resolve().parent.parent

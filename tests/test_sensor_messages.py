@@ -18,7 +18,7 @@ import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
-from bridge.core.estimator import Covariance, upper_triangle
+from bridge.autopilot.estimator import Covariance, upper_triangle
 from bridge.core.wire import euler_to_quaternion, paper_to_ned, rotate_inverse
 from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import GCS_PORT

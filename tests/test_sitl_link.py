@@ -173,7 +173,7 @@ def test_relay_mission_clock_starts_blackouts_at_the_first_target() -> None:
 
     from pymavlink.dialects.v20 import common as mavlink
 
-    from bridge.core.link import LinkConfig, LinkSettings
+    from bridge.link.model import LinkConfig, LinkSettings
     from bridge.nodes.relay import Relay
     from tests.sitlkit import wait_for
 

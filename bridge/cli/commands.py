@@ -66,7 +66,7 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-# -- bsst link: measured links (bridge.record.linkextract, bridge.core.linkfit, bridge.record.linkplots) ---------
+# -- bsst link: measured links (bridge.record.linkextract, bridge.link.fit, bridge.record.linkplots) ---------
 def add_link_commands(sub: Any) -> None:
     """``bsst link extract | fit | show``: a trace from a run or two tlogs, the model that fits it, its figure."""
     p = sub.add_parser("link", help="measured links: extract a trace, fit the link model to it, plot it")
@@ -143,8 +143,8 @@ def cmd_link_fit(args: argparse.Namespace) -> int:
     """``bsst link fit``: the fitted table as a link profile, on stdout or in ``--out``."""
     from pathlib import Path  # lazy: with the command
 
-    from bridge.core.linkfit import fit_toml, fit_trace  # lazy: numpy
-    from bridge.core.linktrace import read_trace  # lazy: start-up time
+    from bridge.link.fit import fit_toml, fit_trace  # lazy: numpy
+    from bridge.link.trace import read_trace  # lazy: start-up time
     from bridge.record.runlog import write_text_atomic  # lazy: start-up time
 
     out = _new_output(args.out, "--out", args.overwrite) if args.out else None
@@ -170,7 +170,7 @@ def cmd_link_show(args: argparse.Namespace) -> int:
     """``bsst link show``: the trace's figure as PNG."""
     from pathlib import Path  # lazy: with the command
 
-    from bridge.core.linktrace import read_trace  # lazy: start-up time
+    from bridge.link.trace import read_trace  # lazy: start-up time
     from bridge.record.linkplots import trace_figure  # lazy: matplotlib
 
     out = Path(args.out) if args.out else Path(args.trace).with_suffix(".png")

@@ -7,7 +7,7 @@ Out: parsed values, each checked against its range (a bad one is a ``UsageError`
      exit 2), and :func:`link_table_from_args`'s ``[link]`` override table, which goes to
      :func:`bridge.core.flight.prepare` like every other override
 
-The ranges are the mission loader's (:data:`bridge.core.link.NUMBER_RANGES`), one per key.
+The ranges are the mission loader's (:data:`bridge.link.model.NUMBER_RANGES`), one per key.
 """
 
 from __future__ import annotations
@@ -86,9 +86,9 @@ def name_list(name: str, choices: Sequence[str]) -> Callable[[str], tuple[str, .
 
 
 def link_seed(flag: str) -> Callable[[str], int]:
-    """An argparse type for the link's seed, in :data:`bridge.core.link.SEED_RANGE`."""
+    """An argparse type for the link's seed, in :data:`bridge.link.model.SEED_RANGE`."""
     def conv(text: str) -> int:
-        from bridge.core.link import SEED_RANGE  # lazy: start-up time
+        from bridge.link.model import SEED_RANGE  # lazy: start-up time
 
         return int_in(flag, *SEED_RANGE)(text)
 
@@ -98,7 +98,7 @@ def link_seed(flag: str) -> Callable[[str], int]:
 def blackout_window(name: str) -> Callable[[str], tuple[float, float]]:
     """``START:DURATION`` in seconds of mission time."""
     def conv(text: str) -> tuple[float, float]:
-        from bridge.core.link import BLACKOUT_DURATION_RANGE_S, BLACKOUT_START_RANGE_S  # lazy: start-up time
+        from bridge.link.model import BLACKOUT_DURATION_RANGE_S, BLACKOUT_START_RANGE_S  # lazy: start-up time
 
         (s_lo, s_hi), (d_lo, d_hi) = BLACKOUT_START_RANGE_S, BLACKOUT_DURATION_RANGE_S
         a, sep, b = text.partition(":")
@@ -174,10 +174,10 @@ def axis_values(flag: str, axis: str) -> Callable[[str], tuple[float, ...]]:
 
 def link_number(flag: str, key: str | None = None) -> Callable[[str], float]:
     """An argparse type for a ``[link]`` number: in the range the mission file allows for
-    ``key`` (bridge.core.link, looked up when a flag is given, so that building the parser does
+    ``key`` (bridge.link.model, looked up when a flag is given, so that building the parser does
     not load the link model; ``None``: the command lag)."""
     def conv(text: str) -> float:
-        from bridge.core.link import GUARD_RANGES, LO_OPEN, NUMBER_RANGES  # lazy: start-up time
+        from bridge.link.model import GUARD_RANGES, LO_OPEN, NUMBER_RANGES  # lazy: start-up time
 
         k = key or "command_lag_ms"
         return number_in(flag, *{**NUMBER_RANGES, **GUARD_RANGES}[k], lo_open=k in LO_OPEN)(text)
@@ -188,7 +188,7 @@ def link_number(flag: str, key: str | None = None) -> Callable[[str], float]:
 def add_failsafe_options(p: argparse.ArgumentParser) -> None:
     """``--failsafe-action A``: over the mission's ``[failsafe] action``; :func:`failsafe_table_from_args`
     reads it back."""
-    # the choices are bridge.core.failsafe.FAILSAFE_ACTIONS (tests/test_failsafe_actions.py keeps them equal),
+    # the choices are bridge.autopilot.failsafe.FAILSAFE_ACTIONS (tests/test_failsafe_actions.py keeps them equal),
     # written out so that building the parser loads no flight code
     p.add_argument("--failsafe-action", choices=("descend", "land", "hold", "disarm"),
                    help="what the vehicle does when its targets stop: descend (default: level, sink, disarm on the "
@@ -198,9 +198,9 @@ def add_failsafe_options(p: argparse.ArgumentParser) -> None:
 
 def param_assignment(flag: str, timed: bool = False) -> Callable[[str], Any]:
     """An argparse type for ``NAME=VALUE`` (``--param``) or ``T:NAME=VALUE`` (``--param-at``): a
-    parameter the vehicle has, a value in its one range (bridge.core.params, looked up when given)."""
+    parameter the vehicle has, a value in its one range (bridge.autopilot.params, looked up when given)."""
     def conv(text: str) -> Any:
-        from bridge.core.params import BY_NAME, parse_assignment, parse_change, value_problem  # lazy: start-up
+        from bridge.autopilot.params import BY_NAME, parse_assignment, parse_change, value_problem  # lazy: start-up
         from params import ConfigError  # lazy: start-up time
 
         try:
@@ -217,9 +217,9 @@ def param_assignment(flag: str, timed: bool = False) -> Callable[[str], Any]:
 
 
 def system_id(flag: str) -> Callable[[str], int]:
-    """An argparse type for the vehicle's system id: MAV_SYS_ID's range (bridge.core.params.SYSID_RANGE)."""
+    """An argparse type for the vehicle's system id: MAV_SYS_ID's range (bridge.autopilot.params.SYSID_RANGE)."""
     def conv(text: str) -> int:
-        from bridge.core.params import SYSID_RANGE  # lazy: start-up time
+        from bridge.autopilot.params import SYSID_RANGE  # lazy: start-up time
 
         return int_in(flag, *SYSID_RANGE)(text)
 
@@ -286,7 +286,7 @@ def add_sensor_options(p: argparse.ArgumentParser) -> None:
     ``[estimator] kind`` and ``[sensors] noise_scale``; :func:`sensor_overrides_from_args` reads them back."""
     p.add_argument("--sensors", type=sensor_set_name("--sensors"), metavar="NAME",
                    help="the vehicle's sensor set from its profile's [sensors]: ideal, mocap or gnss")
-    # the choices are bridge.core.estimator.ESTIMATOR_KINDS (tests/test_estimation_flight.py keeps them equal),
+    # the choices are bridge.autopilot.estimator.ESTIMATOR_KINDS (tests/test_estimation_flight.py keeps them equal),
     # written out so that building the parser loads no flight code
     p.add_argument("--estimator", choices=("truth", "raw", "ekf"),
                    help="what the vehicle sends the controller: truth (default: the true state), raw (the "
@@ -300,7 +300,7 @@ def add_sensor_axes(p: argparse.ArgumentParser) -> None:
     truth,ekf,raw`` and ``--noise 0,0.5,1,2`` (lists; one value flies every cell with it, as ``bsst sim``'s flag)."""
     p.add_argument("--sensors", type=sensor_set_name("--sensors"), metavar="NAME",
                    help="the vehicle's sensor set from its profile's [sensors], for every cell: ideal, mocap or gnss")
-    # the kinds are bridge.core.estimator.ESTIMATOR_KINDS, written out as in add_sensor_options
+    # the kinds are bridge.autopilot.estimator.ESTIMATOR_KINDS, written out as in add_sensor_options
     p.add_argument("--estimator", type=name_list("--estimator", ("truth", "ekf", "raw")), metavar="KIND,...",
                    help="estimator kinds to compare: truth (the true state), ekf (the vehicle's Kalman filter), "
                         "raw (the measurements as they come)")
@@ -333,10 +333,10 @@ def add_flight_options(p: argparse.ArgumentParser, failsafe: bool = True) -> Non
     add_param_options(p, start=failsafe)  # the controller sets no start values: it schedules changes only
 
 
-# -- link impairment flags (bridge.core.link): both directions, or one with --up-/--down- -----------
+# -- link impairment flags (bridge.link.model): both directions, or one with --up-/--down- -----------
 
 
-LINK_FLAGS = (  # flag stem, [link] key, metavar, help; the ranges are bridge.core.link.NUMBER_RANGES
+LINK_FLAGS = (  # flag stem, [link] key, metavar, help; the ranges are bridge.link.model.NUMBER_RANGES
     ("delay", "delay_ms", "MS", "one-way delay"),
     ("jitter", "jitter_ms", "MS", "delay jitter (uniform half-width or normal sigma)"),
     ("loss", "loss_pct", "PCT", "packet loss"),
@@ -395,7 +395,7 @@ def existing_file(flag: str, text: str) -> str:
 def trace_file(flag: str) -> Callable[[str], str]:
     """An argparse type for a link trace: an existing file, made absolute (relative to the working
     directory, so that every process of a session finds it); ``none`` for no trace. The file's
-    content is checked when the flight is built (bridge.core.linktrace), naming its bad lines."""
+    content is checked when the flight is built (bridge.link.trace), naming its bad lines."""
     def conv(text: str) -> str:
         if text.strip().lower() == "none":
             return ""
@@ -420,8 +420,8 @@ def yes_no(flag: str) -> Callable[[str], bool]:
 def link_profile(flag: str) -> Callable[[str], str]:
     """An argparse type for a link profile: a shipped name or a profile TOML (made absolute)."""
     def conv(text: str) -> str:
-        from bridge.core.linkprofile import profile_names  # lazy: building the parser loads no link code
-        from bridge.core.linktrace import is_profile_path  # lazy: as above
+        from bridge.link.profile import profile_names  # lazy: building the parser loads no link code
+        from bridge.link.trace import is_profile_path  # lazy: as above
 
         if not is_profile_path(text):
             if text not in profile_names():
@@ -469,13 +469,13 @@ def link_table_from_args(args: argparse.Namespace) -> dict[str, Any]:
         if side:
             out[d] = side
         if "burst_len" in side and "loss_pct" in side:
-            from bridge.core.link import burst_problem  # lazy: start-up time
+            from bridge.link.model import burst_problem  # lazy: start-up time
 
             why = burst_problem(side["loss_pct"], side["burst_len"])
             if why:
                 raise UsageError(f"bsst: --burst / --{d}-burst: {why}")
         if side.get("trace"):
-            from bridge.core.link import trace_clash  # lazy: start-up time
+            from bridge.link.model import trace_clash  # lazy: start-up time
 
             clash = trace_clash(side)
             if clash:

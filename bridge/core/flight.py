@@ -4,7 +4,7 @@ In:  a mission (a :class:`~missions.Mission` or a TOML path) and overrides: prof
      ``rate_hz`` (Hz), seed, actuation, a ``[link]`` table and a ``[failsafe]`` table laid over the mission's,
      a ``[sensors]`` table (``{"set": NAME}``), an estimator kind, a noise scale, ``[params]`` entries
      (PX4 names) and parameter changes at mission times (s)
-Out: a frozen :class:`Flight`, which builds the plant, the :class:`~bridge.core.simvehicle.SimVehicle`,
+Out: a frozen :class:`Flight`, which builds the plant, the :class:`~bridge.autopilot.simvehicle.SimVehicle`,
      the law and the guard's configuration, and lists the blackouts (mission time s); a bad value
      raises ``ConfigError`` naming file and key
 
@@ -20,11 +20,17 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from bridge.core.estimator import ESTIMATOR_KINDS, make_estimator
-from bridge.core.failsafe import FailsafeConfig, failsafe_from_table
-from bridge.core.link import LinkSettings, absolute_link_paths, link_from_table, merge_link_tables
-from bridge.core.params import ParamChange, VehicleParams, check_param_changes, params_as_failsafe, params_from_table
-from bridge.core.simvehicle import SimVehicle
+from bridge.autopilot.estimator import ESTIMATOR_KINDS, make_estimator
+from bridge.autopilot.failsafe import FailsafeConfig, failsafe_from_table
+from bridge.autopilot.params import (
+    ParamChange,
+    VehicleParams,
+    check_param_changes,
+    params_as_failsafe,
+    params_from_table,
+)
+from bridge.autopilot.simvehicle import SimVehicle
+from bridge.link.model import LinkSettings, absolute_link_paths, link_from_table, merge_link_tables
 from controller import Controller, Gains, Nominal, gains_from_table
 from controller.law import LawFactory, resolve_law
 from controller.link_guard import GuardConfig
@@ -51,7 +57,7 @@ class Flight:
     link: LinkSettings = field(default_factory=LinkSettings)
     law: LawFactory | None = None  # the mission's controller, resolved (None: resolved on use)
     sensors: SensorConfig = IDEAL  # the vehicle's sensor set (profile's set, mission's overrides, noise scale)
-    estimator: str = "truth"  # the vehicle's estimator kind (bridge.core.estimator.ESTIMATOR_KINDS)
+    estimator: str = "truth"  # the vehicle's estimator kind (bridge.autopilot.estimator.ESTIMATOR_KINDS)
     params: VehicleParams = VehicleParams()  # the vehicle's parameters at start (failsafe: the same as .failsafe)
     param_changes: tuple[ParamChange, ...] = ()  # scheduled PARAM_SETs (--param-at), by mission time
 
@@ -117,13 +123,13 @@ def prepare(
 ) -> Flight:
     """Validate a mission (object or file) with overrides into a :class:`Flight`.
 
-    ``link`` is laid over the mission's ``[link]`` table (see :func:`bridge.core.link.merge_link_tables`);
+    ``link`` is laid over the mission's ``[link]`` table (see :func:`bridge.link.model.merge_link_tables`);
     ``failsafe`` over its ``[failsafe]`` table, key by key (``{"action": "hold"}``); ``sensors`` over
     its ``[sensors]`` table, key by key (``{"set": "mocap"}``); ``estimator`` replaces ``[estimator] kind``;
     ``noise`` replaces ``[sensors] noise_scale`` (every σ of the set times it); ``params`` over its
     ``[params]`` table (``{"COM_OF_LOSS_T": 1.0}``; a parameter standing for a ``[failsafe]`` key wins
     over it, and a ``failsafe`` override over a ``[params]`` entry of the file). ``param_at``: parameter
-    changes at mission times (:class:`bridge.core.params.ParamChange`), checked here.
+    changes at mission times (:class:`bridge.autopilot.params.ParamChange`), checked here.
     """
     m = mission if isinstance(mission, Mission) else load_mission(mission)
     # trace and profile files: a mission's from its folder, an override's from the working directory (as law files)

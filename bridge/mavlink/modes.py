@@ -1,6 +1,6 @@
 """Flight modes and parameter values in PX4's encoding (docs/ground-station.md): bytes, no sockets.
 
-In:  the vehicle's mode (:mod:`bridge.core.simvehicle`: offboard, hold, land, takeoff, failsafe, landed) and
+In:  the vehicle's mode (:mod:`bridge.autopilot.simvehicle`: offboard, hold, land, takeoff, failsafe, landed) and
      the target its on-board controller flies; DO_SET_MODE's parameters and SET_MODE's ``custom_mode``;
      a parameter's value and MAVLink type; a MAVLink FTP request (FILE_TRANSFER_PROTOCOL's payload)
 Out: HEARTBEAT's ``base_mode`` and ``custom_mode`` (PX4's: main mode in bits 16-23, sub mode in
@@ -22,8 +22,8 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from bridge.core.failsafe import Land, Level, PositionHold, Takeoff, Target
-from bridge.core.simvehicle import FAILSAFE, HOLD, LAND, LANDED, OFFBOARD, TAKEOFF
+from bridge.autopilot.failsafe import Land, Level, PositionHold, Takeoff, Target
+from bridge.autopilot.simvehicle import FAILSAFE, HOLD, LAND, LANDED, OFFBOARD, TAKEOFF
 
 MAIN_AUTO = 4  # PX4_CUSTOM_MAIN_MODE_AUTO
 MAIN_OFFBOARD = 6  # PX4_CUSTOM_MAIN_MODE_OFFBOARD

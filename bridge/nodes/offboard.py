@@ -19,7 +19,7 @@ returns its outcome: ``completed``, ``failsafe``, ``diverged`` or ``aborted``.
   (the vehicle resends when a datagram is lost). Mission time is counted from the first
   state after arming, in steps, so a fresh vehicle flies exactly the offline loop's times.
   The mission's ``[link]`` model acts here on the states after they cross the socket, in
-  simulation time (:class:`bridge.core.linkends.ControllerEnd`, the offline loop's end): state k
+  simulation time (:class:`bridge.link.ends.ControllerEnd`, the offline loop's end): state k
   enters the ``down`` model at t_k and the guard controls on the newest one delivered.
   Every step is answered, also when the guard sends no command: then with the no-target
   acknowledgement (HIL_ACTUATOR_CONTROLS, SAFETY_ARMED clear in ``mode``), so that the
@@ -54,7 +54,7 @@ was back under offboard control. A vehicle that a ground station switches out of
 armed (its PX4 HEARTBEAT's ``custom_mode``: HOLD, LAND, TAKEOFF, not in its failsafe) is the ground
 station's: no more targets are sent, the flight ends ``aborted`` with that reason, and the session
 names the ground station from the vehicle's event. Parameter changes scheduled at mission times
-(``--param-at``, :class:`bridge.core.params.ParamChange`) go out as PARAM_SET just before the
+(``--param-at``, :class:`bridge.autopilot.params.ParamChange`) go out as PARAM_SET just before the
 answer of their step. Each command is sent first, then its row of
 ``controller.csv`` (:data:`CONTROLLER_COLUMNS`, one ``write`` each, so the file is whole
 up to its last row whatever kills the process). A controller killed between the send and
@@ -76,12 +76,12 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from bridge.autopilot.params import BY_NAME, ParamChange
 from bridge.core.clock import FixedRate
 from bridge.core.flight import Flight
-from bridge.core.link import LinkImpairment
-from bridge.core.linkends import ControllerEnd
-from bridge.core.params import BY_NAME, ParamChange
 from bridge.core.wire import command_to_wire, odometry_to_state, step_of_usec
+from bridge.link.ends import ControllerEnd
+from bridge.link.model import LinkImpairment
 from bridge.mavlink.endpoint import (
     CONTROLLER_COMPID,
     CONTROLLER_SYSID,

@@ -16,7 +16,7 @@ Topology (docs/design.md, "Link model")::
 Datagrams that arrive on the listen port travel ``up`` (``listen_direction="down"`` swaps
 the names) and leave from the back socket to the target; whatever the target sends back
 to the back socket travels the other way, to the client. Each
-direction has its own :class:`bridge.core.link.LinkImpairment`, driven with the seconds since
+direction has its own :class:`bridge.link.model.LinkImpairment`, driven with the seconds since
 the relay started (so blackouts are in relay time; with ``mission_clock`` they are in the
 flight's time instead: t = 0 is put at the first actuator target that arrives on the
 listen side, less the down link's configured delay, i.e. when the vehicle sent the state
@@ -52,7 +52,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from bridge.core.link import LinkImpairment, LinkSettings
+from bridge.link.model import LinkImpairment, LinkSettings
 from bridge.mavlink.endpoint import parse_address as endpoint_address
 
 Address = tuple[str, int]

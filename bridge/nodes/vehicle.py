@@ -19,7 +19,7 @@ do what on which link: docs/design.md, "Authority" (:meth:`Vehicle._authority`);
 command's numbers are checked before use (:mod:`bridge.mavlink.receive`), and every command
 that changes the flight is an event naming its sender (:class:`Sender`).
 
-It wraps :class:`bridge.core.simvehicle.SimVehicle` (plant, arming, command timeout, failsafe:
+It wraps :class:`bridge.autopilot.simvehicle.SimVehicle` (plant, arming, command timeout, failsafe:
 the same object the offline loop flies) with two UDP links:
 
 - the **controller link** (``--listen``, default ``udpin:127.0.0.1:14560``): ODOMETRY out
@@ -39,7 +39,7 @@ Clocks:
   (HIL_ACTUATOR_CONTROLS with SAFETY_ARMED clear in ``mode``, for either actuation: the
   controller has no valid target this step, the step clock ticks on and the vehicle's
   timeout runs). The mission's ``[link]`` model acts here, in simulation time, on what
-  crossed the socket (:class:`bridge.core.linkends.VehicleEnd`, the offline loop's end): the
+  crossed the socket (:class:`bridge.link.ends.VehicleEnd`, the offline loop's end): the
   target of step k enters the ``up`` model at t_k and acts at the physics step it is
   delivered in; so does an ARM_DISARM(arm) from the controller while its flight is on
   (a re-arm after a failsafe). The step clock keeps ticking while the vehicle, landed by
@@ -70,12 +70,11 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from bridge.autopilot.estimator import Covariance
+from bridge.autopilot.params import BY_NAME, PARAMS, ParamRefused, VehicleParams, read_param
+from bridge.autopilot.simvehicle import FAILSAFE, GROUND_MODES, HOLD, LAND, LANDED, OFFBOARD, TAKEOFF
 from bridge.core.clock import Pace
-from bridge.core.estimator import Covariance
 from bridge.core.flight import Flight
-from bridge.core.linkends import VehicleEnd
-from bridge.core.params import BY_NAME, PARAMS, ParamRefused, VehicleParams, read_param
-from bridge.core.simvehicle import FAILSAFE, GROUND_MODES, HOLD, LAND, LANDED, OFFBOARD, TAKEOFF
 from bridge.core.wire import (
     command_from_wire,
     command_to_wire,
@@ -84,6 +83,7 @@ from bridge.core.wire import (
     step_of_usec,
     step_usec,
 )
+from bridge.link.ends import VehicleEnd
 from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import (
     CONTROLLER_COMPID,

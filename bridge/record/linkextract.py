@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from bridge.core.linktrace import trace_text
+from bridge.link.trace import trace_text
 from params import ConfigError, read_regular_file
 
 MAX_TLOG_BYTES = 4 << 30

@@ -1,6 +1,6 @@
 """The figure of a link trace (``bsst link show``): delay over time, loss bursts, the delay histogram.
 
-In:  a validated trace (:class:`bridge.core.linktrace.TraceFile`: per direction send times s, one-way
+In:  a validated trace (:class:`bridge.link.trace.TraceFile`: per direction send times s, one-way
      delays s, nan lost), a PNG path, a title
 Out: the PNG: (1) each record's delay (ms) against its send time (s), lost records as ticks along the
      top; (2) each loss run as a bar at its start, as tall as its length (packets); (3) the histogram
@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bridge.core.linktrace import Records, TraceFile
+from bridge.link.trace import Records, TraceFile
 
 COLOURS = {"both": "C0", "up": "C0", "down": "C1"}
 

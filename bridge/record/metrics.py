@@ -170,7 +170,7 @@ def summarise(
     return out
 
 
-NEES_DOF = 9  # position, velocity, attitude: bridge.core.estimator.nees
+NEES_DOF = 9  # position, velocity, attitude: bridge.autopilot.estimator.nees
 
 
 def estimation(trace: dict[str, np.ndarray], estimator: str, sensors: str) -> dict[str, Any]:

@@ -19,7 +19,7 @@ import numpy as np
 from bridge.record.metrics import errors
 
 ESTIMATED = (("x", "m"), ("y", "m"), ("z", "m"), ("phi", "rad"), ("theta", "rad"), ("psi", "rad"))
-NEES_DOF = 9  # position, velocity, attitude: bridge.core.estimator.nees
+NEES_DOF = 9  # position, velocity, attitude: bridge.autopilot.estimator.nees
 NEES_BAND = (2.70, 19.02)  # the chi-square(9) 2.5 % and 97.5 % quantiles: 95 % of a consistent filter's NEES
 
 

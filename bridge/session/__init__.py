@@ -21,7 +21,7 @@ and leaves the run directory of docs/design.md, "Files of a run":
 
 The mission's ``[link]`` impairment (docs/design.md, "Link model"): in lockstep both children apply
 it in simulation time to what crossed the socket (the offline loop's ends,
-:mod:`bridge.core.linkends`), and ``summary.json["link"]`` gives the model's exact statistics; in
+:mod:`bridge.link.ends`), and ``summary.json["link"]`` gives the model's exact statistics; in
 real time, when the link is impaired, a third child, ``bsst relay`` (``relay.log``,
 ``relay.json``), sits between controller and vehicle and applies it on the wall clock.
 
@@ -61,9 +61,9 @@ from typing import Any
 
 import numpy as np
 
-from bridge.core.estimator import compile_estimator
+from bridge.autopilot.estimator import compile_estimator
+from bridge.autopilot.params import ParamChange
 from bridge.core.flight import Flight, Progress, prepare
-from bridge.core.params import ParamChange
 from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, GCS_PORT, LINK_PORT, parse_address
 from bridge.mavlink.signing import key_from_file
 from bridge.nodes.process import parse_status

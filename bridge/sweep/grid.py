@@ -6,7 +6,7 @@ In:  a mission and a :class:`Grid` (lists of values per axis: law, control rate 
 Out: the :class:`Cell` list in grid order, and for each cell the overrides that
      :func:`bridge.core.flight.prepare` (the one path from a mission to its parts) applies
 
-Ranges: the link axes take :data:`bridge.core.link.NUMBER_RANGES`, the rate the mission
+Ranges: the link axes take :data:`bridge.link.model.NUMBER_RANGES`, the rate the mission
 loader's, the noise scale the ``[sensors] noise_scale`` one (:data:`plant.profiles.NOISE_SCALE_RANGE`),
 so a value a mission accepts is accepted here and the other way round.
 """
@@ -18,9 +18,9 @@ from dataclasses import dataclass, fields
 from itertools import product
 from typing import Any
 
-from bridge.core.estimator import ESTIMATOR_KINDS
+from bridge.autopilot.estimator import ESTIMATOR_KINDS
 from bridge.core.flight import Flight, prepare
-from bridge.core.link import DIRECTIONS, NUMBER_RANGES
+from bridge.link.model import DIRECTIONS, NUMBER_RANGES
 from missions import MISSION_RANGES, Mission
 from missions.mission import law_spec_problem
 from params import ConfigError

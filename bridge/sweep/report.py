@@ -29,7 +29,7 @@ from itertools import combinations
 from pathlib import Path
 from typing import Any
 
-from bridge.core.estimator import ESTIMATOR_KINDS
+from bridge.autopilot.estimator import ESTIMATOR_KINDS
 from bridge.sweep.cells import CELLS_CSV, SWEEP_JSON, read_cells, read_sweep_json
 from bridge.sweep.classes import CLASSES, Classes, classify, thresholds_text
 from bridge.sweep.grid import AXES, LINK_AXES, NAME_AXES, SHORT

@@ -17,7 +17,7 @@ from itertools import product
 from pathlib import Path
 from typing import Any
 
-from bridge.core.estimator import ESTIMATOR_KINDS
+from bridge.autopilot.estimator import ESTIMATOR_KINDS
 from bridge.record.runlog import check_trace_steps
 from bridge.sweep.cells import COLUMNS
 from bridge.sweep.classes import Classes

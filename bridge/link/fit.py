@@ -1,9 +1,9 @@
 """The link model's table that best fits a trace, with a goodness-of-fit figure for each part, and
 traces the model makes from a table (docs/links.md, "Fitting a trace").
 
-In:  a trace's records per direction (:class:`bridge.core.linktrace.Records`: send times s, delays s,
+In:  a trace's records per direction (:class:`bridge.link.trace.Records`: send times s, delays s,
      nan lost); the length (s) above which a loss run is a blackout; or a ``[link]`` direction
-     (:class:`bridge.core.link.LinkConfig`) and a packet rate (Hz) to make a trace from
+     (:class:`bridge.link.model.LinkConfig`) and a packet rate (Hz) to make a trace from
 Out: :class:`DirectionFit` per direction: the delay (mean ms) and jitter (ms) with its distribution
      (uniform or normal: the one with the smaller Kolmogorov–Smirnov statistic D against the model's
      own truncated distribution), the loss (%) as Bernoulli or Gilbert–Elliott (mean burst, packets:
@@ -27,11 +27,11 @@ from typing import Any
 
 import numpy as np
 
-from bridge.core.link import LinkConfig, LinkImpairment
-from bridge.core.linktrace import Records, TraceFile, make_records
+from bridge.link.model import LinkConfig, LinkImpairment
+from bridge.link.trace import Records, TraceFile, make_records
 
 BLACKOUT_AFTER_S = 1.0  # a loss run at least this long is an outage, listed as a blackout, not a burst
-_NORMAL_BOUND_SIGMAS = 5.0  # the model's truncation of normal jitter (bridge.core.link)
+_NORMAL_BOUND_SIGMAS = 5.0  # the model's truncation of normal jitter (bridge.link.model)
 
 
 @dataclass(frozen=True)

@@ -3,7 +3,7 @@
 In:  the controller's actuator targets (normalised paper-frame command, with the time stamp of the
      state they answer, s) and arm requests, and the vehicle's states (eq. 7: m, m/s, rad, rad/s,
      with its offboard bit), each at the step time (s) it crossed the socket
-Out: the newest target applied to the :class:`~bridge.core.simvehicle.SimVehicle` at the physics step
+Out: the newest target applied to the :class:`~bridge.autopilot.simvehicle.SimVehicle` at the physics step
      it is delivered in (older ones refused and counted by reason); each control step's
      :class:`~controller.link_guard.Decision` of the guard, made on the newest state delivered
 
@@ -15,7 +15,7 @@ on messages after they cross the socket, so a lost packet never stalls a step):
   control period the model releases what is due, at the physics step it is due in; the
   newest command is applied, one older than the newest applied (reordered, duplicated) is
   rejected and counted. A lost command leaves the last one in force; the vehicle's own
-  timeout and failsafe (:class:`bridge.core.simvehicle.SimVehicle`) do the rest.
+  timeout and failsafe (:class:`bridge.autopilot.simvehicle.SimVehicle`) do the rest.
 - :class:`ControllerEnd` (controller side, direction ``down``): every state the vehicle
   publishes enters the model; at each control step the states due are handed to the
   :class:`controller.link_guard.LinkGuard`, which controls on the newest one.
@@ -27,8 +27,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from bridge.core.link import FRAME_BYTES, LinkImpairment
-from bridge.core.simvehicle import SimVehicle
+from bridge.autopilot.simvehicle import SimVehicle
+from bridge.link.model import FRAME_BYTES, LinkImpairment
 from controller.link_guard import Decision, LinkGuard
 from missions.references import Sample
 

@@ -1,6 +1,6 @@
 """The error-state EKF's arithmetic, compiled: propagation, updates, the estimate and its covariances.
 
-In:  the filter's arrays, owned by :class:`bridge.core.estimator.Ekf`: ``x`` the nominal state and its
+In:  the filter's arrays, owned by :class:`bridge.autopilot.estimator.Ekf`: ``x`` the nominal state and its
      bookkeeping (float64, layout ``X_*`` below: m, m/s, rad, rad/s, m/s², s), ``c`` its constants
      (``C_*``: gravity m/s², noise variances, gates), ``P`` the 15×15 error covariance, ``hist``/``hs``
      the ring buffer of past nominal states and its (start, count), ``counts`` the refusals per kind;
@@ -8,11 +8,11 @@ In:  the filter's arrays, owned by :class:`bridge.core.estimator.Ekf`: ``x`` the
 Out: the same arrays, changed in place; ``estimate`` the 12-state of eq. (7); the covariances and the
      NEES on request, into arrays the caller gives
 
-The filter is described in :mod:`bridge.core.estimator`; this module is its arithmetic, nothing else,
+The filter is described in :mod:`bridge.autopilot.estimator`; this module is its arithmetic, nothing else,
 compiled with numba so that a flight with the EKF pays about a microsecond of call per measurement
 rather than the tens that the same work costs in small numpy calls. The 3-vector and 3×3 helpers are
 :mod:`plant.sensors`' own functions compiled (one source for both), and the NEES is
-:func:`bridge.core.cholesky.weighted_square` compiled. Each kernel is cached on disk (``cache=True``):
+:func:`bridge.autopilot.cholesky.weighted_square` compiled. Each kernel is cached on disk (``cache=True``):
 the first flight with the EKF on a machine compiles them (~13 s on a 2-core VM), later ones load them.
 """
 
@@ -24,7 +24,7 @@ import numpy as np
 from numba import njit
 from numba.extending import overload
 
-from bridge.core.cholesky import weighted_square
+from bridge.autopilot.cholesky import weighted_square
 from plant import sensors as _s
 
 # the nominal state x: position, velocity, attitude R (row-major, body FLU -> NWU), biases, the output's

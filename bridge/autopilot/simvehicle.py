@@ -10,14 +10,14 @@ Shared by the in-process loop and the MAVLink vehicle so that both fly, time out
 the same way. Time advances in control periods of ``physics_hz / rate_hz`` physics steps;
 the command is held over the period (zero-order hold).
 
-Out of offboard control and armed, the vehicle's own :class:`~bridge.core.failsafe.OnboardController`
+Out of offboard control and armed, the vehicle's own :class:`~bridge.autopilot.failsafe.OnboardController`
 flies its target at every physics step (:meth:`SimVehicle.fly_onboard`): the failsafe's action
 (``[failsafe] action``), and whatever a later mode hands it. Under a target that lands, the
 vehicle disarms once it rests on the ground (mode ``landed``). Mode changes happen at the start
 of a control period, the same step in every clock.
 
 The vehicle owns its sensors (:class:`plant.sensors.SensorSuite`) and its estimator
-(:mod:`bridge.core.estimator`): the suite samples the true state once at t = 0 and after every
+(:mod:`bridge.autopilot.estimator`): the suite samples the true state once at t = 0 and after every
 physics step, the estimator takes what arrived, and both the controller (through what is published)
 and the on-board controller fly on the estimate. Under ``truth`` there is no suite: the estimate is
 the plant's state itself, read directly, so truth flights are the same to the bit and as fast.
@@ -29,8 +29,8 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from bridge.core.estimator import Estimator, TruthEstimator, estimator_nees
-from bridge.core.failsafe import (
+from bridge.autopilot.estimator import Estimator, TruthEstimator, estimator_nees
+from bridge.autopilot.failsafe import (
     ACTION_TEXT,
     FailsafeConfig,
     Land,
@@ -40,7 +40,7 @@ from bridge.core.failsafe import (
     Target,
     failsafe_target,
 )
-from bridge.core.params import VehicleParams, change_param, read_param
+from bridge.autopilot.params import VehicleParams, change_param, read_param
 from controller.nominal import Nominal
 from plant import Quadrotor
 from plant.sensors import SensorSuite
@@ -189,8 +189,8 @@ class SimVehicle:
         self.land_at = None
 
     def change_param(self, name: str, value: float, sysid: int = 1) -> str:
-        """Set parameter ``name`` (PX4's name, :mod:`bridge.core.params`) to ``value``, checked
-        (:class:`~bridge.core.params.ParamRefused` if it cannot be): it acts from the next control
+        """Set parameter ``name`` (PX4's name, :mod:`bridge.autopilot.params`) to ``value``, checked
+        (:class:`~bridge.autopilot.params.ParamRefused` if it cannot be): it acts from the next control
         period on (a failsafe already flying keeps the action it began with). An event says it."""
         before = VehicleParams(self.failsafe, self.takeoff_alt_m, sysid)
         after = change_param(before, name, value)
@@ -238,7 +238,7 @@ class SimVehicle:
 
         ``deliver(t)``, if given, is called with the plant time (s) before the check and
         before each substep, so that messages an impaired link delivers in the middle of
-        the period (see :mod:`bridge.core.link`) act at the physics step they arrive in.
+        the period (see :mod:`bridge.link.model`) act at the physics step they arrive in.
         """
         p = self.plant
         if deliver is not None:

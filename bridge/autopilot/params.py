@@ -9,7 +9,7 @@ Out: the parameter list (:data:`PARAMS`: name, type, unit, range, meaning), a va
      saying why), the ``[failsafe]`` keys a ``[params]`` table stands for (:func:`params_as_failsafe`)
 
 Each parameter is one of the vehicle's settings under PX4's name where PX4 has that setting, with
-the one range the setting has everywhere (``[failsafe]``'s :data:`~bridge.core.failsafe.FAILSAFE_RANGES`
+the one range the setting has everywhere (``[failsafe]``'s :data:`~bridge.autopilot.failsafe.FAILSAFE_RANGES`
 for the failsafe's numbers), so a mission file, a flag and a ground station's PARAM_SET are checked
 alike. The two offboard-loss action parameters are one setting, ``[failsafe] action``, under PX4's
 old name (``COM_OBL_ACT``, PX4 1.13 and earlier: 0 Land, 1 Hold, 3 Terminate) and its current one
@@ -26,7 +26,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
-from bridge.core.failsafe import FAILSAFE_RANGES, FailsafeConfig
+from bridge.autopilot.failsafe import FAILSAFE_RANGES, FailsafeConfig
 from params import ConfigError, Table
 
 REAL32 = "REAL32"

@@ -13,7 +13,7 @@ A packet sent at time t takes the record with the largest ``t_s`` <= t of its di
 first record before the trace's first ``t_s``); with a ``direction`` column each direction has its
 own rows, without one the rows serve both. A trace lasts its last ``t_s`` plus its median record
 spacing (:attr:`Records.length_s`); past its end it is refused for a longer mission
-(bridge.core.link), or looped: t is taken modulo that length.
+(bridge.link.model), or looped: t is taken modulo that length.
 
 Pure: the file's bytes come from :func:`params.read_regular_file`, which refuses what is not a
 regular file; this module only reads text.

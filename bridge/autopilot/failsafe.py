@@ -77,7 +77,7 @@ FAILSAFE_ACTIONS = ("descend", "land", "hold", "disarm")
 PX4_OFFBOARD_LOSS_ACTION = {"land": 4, "hold": 5, "disarm": 7}
 HOLD_RANGE_S = (0.0, 25.0)  # PX4's COM_FAIL_ACT_T range
 # the one range of each number of ``[failsafe]``, shared by the table, the flags and the parameters
-# (bridge.core.params: COM_OF_LOSS_T, MPC_LAND_SPEED, COM_FAIL_ACT_T)
+# (bridge.autopilot.params: COM_OF_LOSS_T, MPC_LAND_SPEED, COM_FAIL_ACT_T)
 FAILSAFE_RANGES = {"timeout_s": (0.01, 60.0), "descent_rate": (0.05, 10.0), "hold_s": HOLD_RANGE_S}
 ACTION_TEXT = {  # the failsafe event says what the vehicle does
     "descend": "level and descend",

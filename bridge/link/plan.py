@@ -1,6 +1,6 @@
 """The link model, the link guard and the prediction for N cells at once (the batch engine).
 
-In:  per cell a :class:`~bridge.core.link.LinkSettings` (delays ms, loss %, burst length packets, blackouts s,
+In:  per cell a :class:`~bridge.link.model.LinkSettings` (delays ms, loss %, burst length packets, blackouts s,
      dup and reorder %) and its guard (``stale_s``, ``stop_s`` s, compensation, ``lag_s`` s), the vehicle's
      ``timeout_s`` (s), the clocks (``rate_hz``, ``substeps`` physics steps per control step, ``physics_hz``)
      and the number of control steps
@@ -11,12 +11,12 @@ Out: a :class:`LinkPlan`: per control step and cell the guard's decision (track,
 
 Why a plan: with no bandwidth queue and no ``resume``, nothing the link, the guard or the vehicle's
 timeout decides depends on the flight itself. A packet's fate is a pure function of its seed, direction
-and number (the counter-based SplitMix64 draws of :mod:`bridge.core.link`, reproduced here bit for bit
+and number (the counter-based SplitMix64 draws of :mod:`bridge.link.model`, reproduced here bit for bit
 over whole arrays); when a packet is sent is decided by the guard, which looks only at the ages of the
 states it received; and the vehicle's failsafe looks only at when commands arrived. So the whole flight's
 packet traffic is worked out first, with array operations along the step axis, exactly as
-:class:`~bridge.core.link.LinkImpairment`, :class:`~bridge.core.linkends.VehicleEnd`,
-:class:`~bridge.core.linkends.ControllerEnd` and :class:`~controller.link_guard.LinkGuard` would do it
+:class:`~bridge.link.model.LinkImpairment`, :class:`~bridge.link.ends.VehicleEnd`,
+:class:`~bridge.link.ends.ControllerEnd` and :class:`~controller.link_guard.LinkGuard` would do it
 step by step, and the engine then flies the plant and the laws along it.
 """
 
@@ -30,7 +30,8 @@ from statistics import NormalDist
 import numpy as np
 from numba import njit
 
-from bridge.core.link import (  # the draw numbers and bound are link.py's: one definition of a fate
+from bridge.link.ends import EPS_T
+from bridge.link.model import (  # the draw numbers and bound are link.py's: one definition of a fate
     _D_DUP,
     _D_DUP_JITTER,
     _D_GE_START,
@@ -42,7 +43,6 @@ from bridge.core.link import (  # the draw numbers and bound are link.py's: one 
     LinkSettings,
     stream_key,
 )
-from bridge.core.linkends import EPS_T
 from controller.link_guard import GuardConfig
 from controller.nominal import Coefficients, Nominal
 from controller.predict import nominal_rk4
@@ -57,7 +57,7 @@ _U30, _U27, _U31, _U11, _U8 = (np.uint64(v) for v in (30, 27, 31, 11, 8))
 
 # -- the draws -------------------------------------------------------------------------------------
 def _mix(z: np.ndarray) -> np.ndarray:
-    """SplitMix64's finaliser (:func:`bridge.core.link._mix`) in place on a uint64 array (wrapping)."""
+    """SplitMix64's finaliser (:func:`bridge.link.model._mix`) in place on a uint64 array (wrapping)."""
     z += _C1
     z ^= z >> _U30
     z *= _C2
@@ -142,7 +142,7 @@ class Fates:
 
 
 def _jitter_params(cfg: LinkConfig) -> tuple[float, float, float]:
-    """(bound s, lo, hi) of :class:`~bridge.core.link.FateStream`'s jitter (bound 0: none; lo = hi = 0: uniform)."""
+    """(bound s, lo, hi) of :class:`~bridge.link.model.FateStream`'s jitter (bound 0: none; lo = hi = 0: uniform)."""
     delay = cfg.delay_ms / 1000.0
     j = cfg.jitter_ms / 1000.0
     if not (j > 0.0 and delay > 0.0):
@@ -162,7 +162,7 @@ def _jitters(cfg: LinkConfig, u: np.ndarray, bound: float, lo: float, hi: float)
 
 
 def draw_fates(cfgs: Sequence[LinkConfig], direction: str, count: int) -> Fates:
-    """The fates :class:`~bridge.core.link.FateStream` gives packets 0..count-1 of ``direction``, per cell."""
+    """The fates :class:`~bridge.link.model.FateStream` gives packets 0..count-1 of ``direction``, per cell."""
     n = len(cfgs)
     lost = np.zeros((n, count), bool)
     jitter = np.zeros((n, count))

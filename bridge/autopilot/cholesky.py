@@ -3,8 +3,8 @@
 In:  a symmetric n×n matrix C (row-major, n² values; NaN where unknown) and an n-vector e
 Out: eᵀ C⁻¹ e, or NaN if C is not positive definite
 
-Plain Python on sequences, so that :mod:`bridge.core.estimator` runs it on a covariance's tuples
-and :mod:`bridge.core.ekfkernels` compiles the same source with numba for the EKF.
+Plain Python on sequences, so that :mod:`bridge.autopilot.estimator` runs it on a covariance's tuples
+and :mod:`bridge.autopilot.ekfkernels` compiles the same source with numba for the EKF.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from collections.abc import Sequence
 def weighted_square(C: Sequence[float], e: Sequence[float]) -> float:
     """eᵀ C⁻¹ e for a symmetric n×n C (row-major, n = len(e)), by its Cholesky factor L (C = L Lᵀ,
     eᵀ C⁻¹ e = |L⁻¹ e|²); NaN unless C is positive definite (NaN entries: unknown). Plain Python that
-    :mod:`bridge.core.ekfkernels` compiles as it is (the EKF's NEES, every tenth control step)."""
+    :mod:`bridge.autopilot.ekfkernels` compiles as it is (the EKF's NEES, every tenth control step)."""
     n = len(e)
     L = [0.0] * (n * n)
     total = 0.0

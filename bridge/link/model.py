@@ -29,12 +29,12 @@ packets are due by a later time. What can happen to a packet, in this order:
 6. **duplication** (``dup_pct``): a second copy follows with its own jitter draw
    (duplication happens after the bottleneck: the copy costs no bandwidth).
 
-**A measured trace** (``trace = FILE``, :mod:`bridge.core.linktrace`) takes the place of steps 2
+**A measured trace** (``trace = FILE``, :mod:`bridge.link.trace`) takes the place of steps 2
 and 4: a packet sent at time t (s of mission time; :meth:`LinkImpairment.shift_blackouts` puts the
 relay's mission time 0) is lost or delayed as the trace's record with the largest ``t_s`` <= t
 says. Blackouts, the bandwidth cap, reordering and duplication still apply on top; ``delay_ms``,
 ``jitter_ms``, ``loss_pct`` and ``burst_len`` in the same direction are refused. A named profile
-(``profile = NAME``, :mod:`bridge.core.linkprofile`) is a ``[link]`` table the mission's keys are
+(``profile = NAME``, :mod:`bridge.link.profile`) is a ``[link]`` table the mission's keys are
 laid over.
 
 Reproducibility: the random part of each packet's fate (loss, jitter, hold-back,
@@ -59,8 +59,8 @@ from dataclasses import dataclass, field, replace
 from statistics import NormalDist
 from typing import Any
 
-from bridge.core.linkprofile import load_link_profile
-from bridge.core.linktrace import (
+from bridge.link.profile import load_link_profile
+from bridge.link.trace import (
     LENGTH_SLACK_S,
     DirectionTrace,
     Replay,

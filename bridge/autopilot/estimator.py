@@ -73,11 +73,11 @@ accelerometer bias 0.05 m/s².
 **Offline harness.** :func:`fly_closed_loop` flies plant, sensors, estimator and a
 :class:`~controller.Controller` fed the estimate (or the truth) with the vehicle loop's order,
 for the estimator's own tests (the product's loops carry the estimator in
-:class:`~bridge.core.simvehicle.SimVehicle`; ``benchmarks/estimation.py`` flies those).
+:class:`~bridge.autopilot.simvehicle.SimVehicle`; ``benchmarks/estimation.py`` flies those).
 
 **Speed.** The filter runs at every measurement in every clock, so its arithmetic is compiled:
 :class:`Ekf` owns the state as arrays and each measurement is one call of a numba kernel of
-:mod:`bridge.core.ekfkernels` (about 2 µs for an IMU sample, 4 µs for a pose reading). numba is imported,
+:mod:`bridge.autopilot.ekfkernels` (about 2 µs for an IMU sample, 4 µs for a pose reading). numba is imported,
 and the kernels loaded from their on-disk cache (~0.8 s), only when an EKF is built; the first EKF on
 a machine compiles them first (~13 s on the 2-core VM).
 """
@@ -91,7 +91,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from bridge.core.cholesky import weighted_square
+from bridge.autopilot.cholesky import weighted_square
 from plant.sensors import (
     BARO,
     GNSS,
@@ -312,12 +312,12 @@ class RawEstimator:
 
 class Ekf:
     """The error-state EKF of the module docstring (15 error states); its arithmetic is
-    :mod:`bridge.core.ekfkernels`, on the arrays this object owns."""
+    :mod:`bridge.autopilot.ekfkernels`, on the arrays this object owns."""
 
     kind = "ekf"
 
     def __init__(self, config: SensorConfig, start: State, gravity: float = 9.81) -> None:
-        from bridge.core import ekfkernels as kernels  # numba's import costs ~0.3 s: only an EKF flight pays it
+        from bridge.autopilot import ekfkernels as kernels  # numba's import costs ~0.3 s: only an EKF flight pays it
 
         kernels.ready()
         k = self._k = kernels
@@ -435,7 +435,7 @@ def compile_estimator(kind: str) -> None:
     nothing for the others), in this process: a launcher calls it before it starts a vehicle, so that a
     first EKF on a machine compiles once, here, not in the vehicle's start-up time."""
     if kind == "ekf":
-        from bridge.core import ekfkernels  # numba's import costs ~0.3 s: only an EKF flight pays it
+        from bridge.autopilot import ekfkernels  # numba's import costs ~0.3 s: only an EKF flight pays it
 
         ekfkernels.ready()
 

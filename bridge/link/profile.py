@@ -1,5 +1,5 @@
 """Named link profiles: a ``[link]`` table for a kind of link people fly over (Wi-Fi, LTE, a telemetry
-radio, satellites), shipped in ``bridge/core/linkprofiles/*.toml``, or any such file by path (what
+radio, satellites), shipped in ``bridge/link/profiles/*.toml``, or any such file by path (what
 ``bsst link fit`` writes).
 
 In:  a profile name (``lte``) or a profile TOML path; the file: ``name``, ``description``, ``sources``
@@ -9,7 +9,7 @@ In:  a profile name (``lte``) or a profile TOML path; the file: ``name``, ``desc
 Out: :class:`LinkProfile`: its ``[link]`` table, trace paths made absolute against the profile's folder;
      a bad file or name is a ``ConfigError`` naming it
 
-The table is validated by the link model (bridge.core.link, ``[link] profile = NAME`` or
+The table is validated by the link model (bridge.link.model, ``[link] profile = NAME`` or
 ``--link-profile NAME``), where the mission's own ``[link]`` keys are laid over it.
 """
 
@@ -19,10 +19,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from bridge.core.linktrace import absolute_link_paths, is_profile_path
+from bridge.link.trace import absolute_link_paths, is_profile_path
 from params import ConfigError, Table, load_toml
 
-PROFILE_DIR = Path(__file__).parent / "linkprofiles"
+PROFILE_DIR = Path(__file__).parent / "profiles"
 
 
 @dataclass(frozen=True)

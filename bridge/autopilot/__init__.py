@@ -1,0 +1,12 @@
+"""The on-board autopilot of the simulated vehicle, for every clock: no sockets, no files.
+
+In:  actuator targets (paper frame), arm/mode requests, sensor readings, PX4 parameter sets;
+Out: the flown state, the estimate the vehicle reports, failsafe decisions and events
+
+- :mod:`bridge.autopilot.simvehicle`  plant + arming + offboard timeout + failsafe, for every clock
+- :mod:`bridge.autopilot.failsafe`    level-and-descend landing loop and the on-board targets
+- :mod:`bridge.autopilot.params`      PX4 parameters: names, one range table, changes
+- :mod:`bridge.autopilot.estimator`   truth or EKF estimate of the state
+- :mod:`bridge.autopilot.ekfkernels`  the EKF's compiled kernels
+- :mod:`bridge.autopilot.cholesky`    a small weighted-square helper of the EKF
+"""
