@@ -39,7 +39,8 @@ and a layer imports nothing above it (tests/test_layers.py checks it):
 
 - :mod:`bridge.nodes`: one process each
 
-  - :mod:`bridge.nodes.process`   status lines, stop signals and parent death for the child processes
+  - :mod:`bridge.nodes.process`   report lines, stop signals and parent death for the child processes
+  - :mod:`bridge.nodes.report`    the children's reports to the session: one JSON object a line, read in one place
   - :mod:`bridge.nodes.vehicle`   the simulated vehicle as a MAVLink endpoint (``bsst vehicle``)
   - :mod:`bridge.nodes.offboard`  the offboard controller as a MAVLink endpoint (``bsst controller``)
   - :mod:`bridge.nodes.relay`     a real-time UDP relay applying the link model on the wall clock (``bsst relay``)

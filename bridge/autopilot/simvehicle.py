@@ -4,7 +4,8 @@ In:  normalised paper-frame commands (``wrench``: u / u_max; ``motors``: omega /
      disarm, and a delivery callback called with the plant time (s) before each physics step
 Out: what the vehicle publishes after each control period (:meth:`SimVehicle.published`: its
      on-board estimate of the state, eq. 7, NWU: m, m/s, rad, rad/s; the true state under the
-     ``truth`` estimator), the mode (offboard, failsafe, landed) and the events (t s, kind, text)
+     ``truth`` estimator), the mode (offboard, failsafe, landed) and the events (:class:`Event`: t s, kind,
+     text, and who caused it, :class:`Sender`)
 
 Shared by the in-process loop and the MAVLink vehicle so that both fly, time out and land
 the same way. Time advances in control periods of ``physics_hz / rate_hz`` physics steps;
@@ -26,8 +27,9 @@ the plant's state itself, read directly, so truth flights are the same to the bi
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 from bridge.autopilot.estimator import Estimator, TruthEstimator, estimator_nees
 from bridge.autopilot.failsafe import (
@@ -56,11 +58,65 @@ GROUND_MODES = (HOLD, LAND, TAKEOFF)  # flown by the on-board controller, set by
 TAKEOFF_DONE_M = 0.1  # m from its height: a takeoff is done and the vehicle holds there (PX4: HOLD after TAKEOFF)
 
 
+@dataclass(frozen=True)
+class Sender:
+    """Who caused an event: the sysid and compid of a command's sender, the address (``host``,
+    ``port``) it came from and the link it came in on (``controller`` or ``gcs``); or the vehicle
+    itself (:data:`ITSELF`: its own disarm after a failsafe landing, a divergence), with no ids."""
+
+    sysid: int | None
+    compid: int | None
+    host: str | None
+    port: int | None
+    link: str
+
+    @property
+    def is_vehicle(self) -> bool:
+        """Whether the vehicle decided it itself (no command, no sender on any link)."""
+        return self.link == VEHICLE_LINK
+
+    def __str__(self) -> str:
+        """``SYSID:COMPID HOST:PORT LINK``, or ``vehicle``: as events.log and summary.json name it."""
+        if self.is_vehicle:
+            return VEHICLE_LINK
+        return f"{self.sysid}:{self.compid} {self.host}:{self.port} {self.link}"
+
+    @property
+    def suffix(self) -> str:
+        """`` [by ...]``: how a written event (events.log, summary.json) names its sender; never parsed back."""
+        return f" [by {self}]"
+
+    def as_dict(self) -> dict[str, int | str | None]:
+        return {"sysid": self.sysid, "compid": self.compid, "host": self.host, "port": self.port, "link": self.link}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Sender:
+        """The inverse of :meth:`as_dict`; ValueError (or KeyError, TypeError) for anything else."""
+        link = str(d["link"])
+        if link == VEHICLE_LINK:
+            return ITSELF
+        return cls(int(d["sysid"]), int(d["compid"]), str(d["host"]), int(d["port"]), link)
+
+
+VEHICLE_LINK = "vehicle"
+ITSELF = Sender(None, None, None, None, VEHICLE_LINK)  # the vehicle's own decision
+
+
 @dataclass
 class Event:
+    """Something the vehicle did (or was told to do) at plant time ``t`` (s): its ``kind``
+    (``armed``, ``disarmed``, ``mode``, ``failsafe``, ...), a human ``text``, and who caused it
+    (``by``; None: not said, e.g. offline, where only the flight's own controller commands)."""
+
     t: float
     kind: str
     text: str
+    by: Sender | None = None
+
+    @property
+    def shown(self) -> str:
+        """The text as written to events.log and summary.json: with its sender's `` [by ...]``."""
+        return self.text + (self.by.suffix if self.by is not None else "")
 
 
 @dataclass

@@ -6,7 +6,7 @@ Out: one actuator target per state answered, stamped with its ``time_usec``: HIL
      (``motors``: c1..c4 = omega / omega_max, each in [0, 1]) or SET_ACTUATOR_CONTROL_TARGET group 0
      (``wrench``: roll, pitch, yaw in [-1, 1], thrust in [0, 1]), or the no-target acknowledgement;
      ARM_DISARM, HEARTBEAT at 1 Hz (10 Hz until the vehicle's is heard), TIMESYNC every 0.5 s;
-     ``controller.tlog``, ``controller.csv`` rows; status lines on stdout; the outcome
+     ``controller.tlog``, ``controller.csv`` rows; reports on stdout (:mod:`bridge.nodes.report`); the outcome
 
 It flies a mission against any vehicle that keeps the contract of docs/design.md, "The MAVLink contract": it
 sends its own HEARTBEAT, waits for the vehicle's, arms it (COMMAND_LONG ARM_DISARM, until
@@ -65,7 +65,6 @@ guess it.
 
 from __future__ import annotations
 
-import json
 import math
 import sys
 import time
@@ -96,7 +95,8 @@ from bridge.mavlink.endpoint import (
 from bridge.mavlink.modes import MAIN_OFFBOARD, PARAM_TYPES, main_mode, param_to_wire, shown_name
 from bridge.mavlink.receive import Rejections, odometry_problem
 from bridge.mavlink.signing import Signing
-from bridge.nodes.process import on_stop_signals, status_printer
+from bridge.nodes.process import on_stop_signals, report_printer
+from bridge.nodes.report import Done, Event, Ready, Report, Stats, StatusText, Warning
 from bridge.record.columns import CONTROLLER_COLUMNS
 from bridge.record.runlog import LineWriter, side_dir
 from controller.link_guard import LinkGuard
@@ -173,7 +173,7 @@ class Offboard:
     """One offboard controller flying one mission; :meth:`run` returns the outcome."""
 
     def __init__(self, flight: Flight, cfg: OffboardConfig, out: Path | None = None,
-                 status: Callable[[str], None] | None = None) -> None:
+                 status: Callable[[Report], None] | None = None) -> None:
         self.flight = flight
         self.cfg = cfg
         m = flight.mission
@@ -194,7 +194,7 @@ class Offboard:
             (d for _, d in flight.link.up.blackouts + flight.link.down.blackouts), default=0.0)
         self._sample = m.trajectory.sample
         self.actuation = flight.profile.actuation
-        self._status = status or (lambda line: None)
+        self._status = status or (lambda report: None)
         self.tlog = Tlog(out / "controller.tlog") if out is not None else None
         self.rejected = Rejections()  # what the receive path refused (bridge.mavlink.receive)
         self.ep = Endpoint(cfg.vehicle, sysid=cfg.sysid, compid=cfg.compid, tlog=self.tlog, name="--vehicle",
@@ -232,6 +232,7 @@ class Offboard:
         self.reason = ""
         self.left_lockstep = ""  # the vehicle's STATUSTEXT saying it left lockstep, if it did
         self.taken_over = ""  # the mode a ground station switched the armed vehicle to (PX4 custom_mode), if any
+        self.ended_taken_over = False  # the flight ended for it (no more targets sent)
         self._changes = list(flight.param_changes)  # scheduled PARAM_SETs not sent yet, by mission time
 
     @property
@@ -246,8 +247,8 @@ class Offboard:
     # -- the flight ---------------------------------------------------------------------------
     def run(self) -> str:
         """Connect, arm, fly, disarm; the outcome (one of :data:`OUTCOMES`)."""
-        self._status(f"ready vehicle={self.cfg.vehicle.hostport} local={self.ep.local[0]}:{self.ep.local[1]} "
-                     f"clock={self.cfg.clock}")
+        self._status(Ready("controller", vehicle=self.cfg.vehicle.hostport,
+                           local=f"{self.ep.local[0]}:{self.ep.local[1]}", clock=self.cfg.clock))
         try:
             if not self._connect() or not self._arm():
                 return "aborted"
@@ -266,7 +267,7 @@ class Offboard:
         self.ep.close()
 
     def event(self, kind: str, text: str) -> None:
-        self._status(f"event t={self.t_mission:.3f} {kind}: {text}")
+        self._status(Event.at(self.t_mission, kind, text))
 
     def _connect(self) -> bool:
         deadline = time.monotonic() + self.cfg.connect_timeout_s
@@ -636,7 +637,7 @@ class Offboard:
             self._timesync(m)
         elif kind == "STATUSTEXT":
             text = m.text.rstrip("\x00") if isinstance(m.text, str) else m.text.decode(errors="replace")
-            self._status(f"statustext severity={m.severity} {text}")
+            self._status(StatusText(m.severity, text))
             if text.startswith("lockstep:") and not self.left_lockstep:  # not a lockstep flight any more
                 self.left_lockstep = text
 
@@ -665,6 +666,7 @@ class Offboard:
         timeout = self._silence_s
         if self.taken_over:
             self.reason = f"the vehicle was switched to {self.taken_over}: no more targets sent"
+            self.ended_taken_over = True
         elif now - self._last_rx > timeout:
             self.reason = f"vehicle silent for {timeout:g} s"
         elif self.armed_seen and not self.vehicle_armed and not self.failsafe_seen:
@@ -690,7 +692,7 @@ class Offboard:
             self.ep.send(mavlink.MAVLink_timesync_message(0, time.monotonic_ns()))
         refused = self.rejected.report(now)
         if refused is not None:
-            self._status(f"warning {refused}")
+            self._status(Warning(refused))
         if self.tlog is not None:
             self.tlog.flush()
         # no TIMESYNC before a vehicle is known: its due time must not hold the loop awake
@@ -703,16 +705,16 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
     """``bsst controller``: fly, then exit 0 if the mission completed (in lockstep: without the vehicle
     leaving it), else 1 (failsafe, diverged, aborted, or lockstep left)."""
     path = side_dir(out, ("controller.tlog", "controller.csv"), overwrite) if out is not None else None
-    emit = status_printer()
+    emit = report_printer()
     node = Offboard(flight, cfg, path, emit)
     on_stop_signals(node.stop)
     outcome = node.run()
-    emit("stats " + json.dumps({"commands": node.commands, "states": node.states, "received": node.ep.received,
-                                "sent": node.ep.sent, "stale_ticks": node.stale_ticks, "overruns": node.overruns,
-                                "down": node.cend.down.stats.summary() if cfg.clock == "lockstep" else None,
-                                "rejected": node.rejected, "rejected_from_vehicle": node.rejected.from_peer}))
-    left = " lockstep=left" if node.left_lockstep else ""  # before reason=, which runs to the end of the line
-    emit(f"done outcome={outcome}{left}" + (f" reason={node.reason}" if node.reason else ""))
+    emit(Stats({"commands": node.commands, "states": node.states, "received": node.ep.received,
+                "sent": node.ep.sent, "stale_ticks": node.stale_ticks, "overruns": node.overruns,
+                "down": node.cend.down.stats.summary() if cfg.clock == "lockstep" else None,
+                "rejected": dict(node.rejected), "rejected_from_vehicle": node.rejected.from_peer}))
+    left = bool(node.left_lockstep)
+    emit(Done(outcome, left, node.reason or None, node.taken_over if node.ended_taken_over else None))
     if outcome != "completed":
         sys.stderr.write(f"bsst controller: {outcome}" + (f": {node.reason}" if node.reason else "") + "\n")
     elif left:

@@ -66,7 +66,7 @@ from bridge.autopilot.params import ParamChange
 from bridge.core.flight import Flight, Progress, prepare
 from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, GCS_PORT, LINK_PORT, parse_address
 from bridge.mavlink.signing import key_from_file
-from bridge.nodes.process import parse_status
+from bridge.nodes.report import Event, Ready, Report
 from bridge.record.columns import TRACE_COLUMNS
 from bridge.record.joiner import TraceJoiner
 from bridge.record.metrics import percentiles, summarise
@@ -309,8 +309,8 @@ class Session:
             flown = float(t[-1]) + 1.0 / m.rate_hz if len(t) else 0.0
             return "aborted", {"who": "controller", "how": f"ended the mission after {flown:.3f} s of its "
                                                            f"{m.duration_s:g} s"}
-        if outcome == "aborted" and ctl is not None and ctl.done and "reason=" in ctl.done:
-            return outcome, {"who": "controller", "how": ctl.done.split("reason=", 1)[1]}
+        if outcome == "aborted" and ctl is not None and ctl.done is not None and ctl.done.reason:
+            return outcome, {"who": "controller", "how": ctl.done.reason}
         return outcome, ended_by_outcome(outcome, self.events)
 
     def _off_clock_t(self) -> float | None:
@@ -336,7 +336,7 @@ class Session:
         ctl = self.controller
         if ctl is None or ctl.proc.returncode not in (0, 1):
             return False
-        return ctl.proc.returncode == 0 or (ctl.done or "").startswith("outcome=completed ")
+        return ctl.proc.returncode == 0 or (ctl.done is not None and ctl.done.outcome == "completed")
 
     def _outcome(self) -> str:
         ctl = self.controller
@@ -349,8 +349,8 @@ class Session:
             return "aborted"
         if completed:
             return "completed"
-        if ctl is not None and ctl.done and ctl.done.startswith("outcome="):
-            word = ctl.done.split()[0].partition("=")[2]
+        if ctl is not None and ctl.done is not None:
+            word = ctl.done.outcome
             return word if word in ("failsafe", "diverged", "aborted") else "aborted"
         return "aborted"
 
@@ -392,33 +392,31 @@ class Session:
             argv += ["--param-at", f"{c.t_s!r}:{c.name}={c.value!r}"]
         self.controller = Child("controller", argv + keyarg, self.path / "controller.log")
         ready = self._wait_ready(self.vehicle)
-        self._note("started", f"vehicle pid {self.vehicle.pid}: {ready.get('_line', '')}", "session")
+        self._note("started", f"vehicle pid {self.vehicle.pid}: {ready.describe()}", "session")
         if self.relay is not None:
-            line = self._wait_ready(self.relay, "relay:")["_line"]
+            line = self._wait_ready(self.relay).describe()
             self._note("started", f"relay pid {self.relay.pid}: {line}", "session")
         self._wait_ready(self.controller)
         self._note("started", f"controller pid {self.controller.pid}", "session")
 
-    def _wait_ready(self, child: Child, ready: str = "ready") -> dict[str, str]:
-        """Block until ``child`` says ``ready`` (the first word of a status line; its
-        ``key=value`` fields, and the rest of the line as ``_line``), or raise :class:`ChildError`."""
+    def _wait_ready(self, child: Child) -> Ready:
+        """Block until ``child`` reports :class:`~bridge.nodes.report.Ready` (returned), or raise
+        :class:`ChildError`."""
         deadline = time.monotonic() + READY_TIMEOUT_S
         sel = selectors.DefaultSelector()
         sel.register(child.fd, selectors.EVENT_READ)
         try:
-            fields: dict[str, str] | None = None
+            ready: Ready | None = None
             while True:
                 # every line read is handled, the ones after "ready" too: the children start at once, so the
                 # controller may arm the vehicle before its "ready" is read, and its "event ... armed" line
                 # then comes in the same read (dropped, the session saw a flight never armed)
-                for line in child.lines():
-                    word, rest = parse_status(line)
-                    self._status(child, line)
-                    if word == ready and fields is None:
-                        fields = dict(f.partition("=")[::2] for f in rest.split())
-                        fields["_line"] = rest
-                if fields is not None:
-                    return fields
+                for report in child.reports():
+                    self._status(child, report)
+                    if isinstance(report, Ready) and ready is None:
+                        ready = report
+                if ready is not None:
+                    return ready
                 if child.eof or child.proc.poll() is not None:
                     child.proc.wait()
                     self._died(child, starting=True)
@@ -458,26 +456,25 @@ class Session:
                 if self.interrupted:
                     raise KeyboardInterrupt
                 for child in (veh, ctl):
-                    for line in child.lines():
-                        self._status(child, line)
+                    for report in child.reports():
+                        self._status(child, report)
                 self.joiner.update()
                 self._show_progress()
                 if veh.proc.poll() is not None:
-                    for line in veh.lines():  # its last words: events it said before it went
-                        self._status(veh, line)
+                    for report in veh.reports():  # its last words: events it said before it went
+                        self._status(veh, report)
                     self._died(veh)
                     return
                 if self.relay is not None and self.relay.proc.poll() is not None:
                     self._died(self.relay)
                     return
                 if ctl.proc.poll() is not None and landing_deadline is None:
-                    for line in ctl.lines():
-                        self._status(ctl, line)
+                    for report in ctl.reports():
+                        self._status(ctl, report)
                     self.joiner.controller_done = True
-                    if ctl.done and "reason=" in ctl.done:  # a controller that gave up says why
-                        reason = ctl.done.split("reason=", 1)[1]
-                        sys.stderr.write(("\n" if self.live else "") + f"bsst sitl: controller: {reason}\n")
-                    taken = ctl.done is not None and "reason=the vehicle was switched to " in ctl.done
+                    if ctl.done is not None and ctl.done.reason:  # a controller that gave up says why
+                        sys.stderr.write(("\n" if self.live else "") + f"bsst sitl: controller: {ctl.done.reason}\n")
+                    taken = ctl.done is not None and ctl.done.taken_over is not None
                     if self._controller_completed() or not self.vehicle_armed or taken:
                         # taken: a ground station flies it now (HOLD, LAND, ...): nothing of the mission to wait for
                         if ctl.proc.returncode not in (0, 1):
@@ -520,21 +517,17 @@ class Session:
                 c.proc.wait()
                 self._note("killed", f"{c.name} (pid {c.pid}) did not stop within {STOP_GRACE_S:g} s: SIGKILL",
                            "session")
-            for line in c.lines():
-                self._status(c, line)
+            for report in c.reports():
+                self._status(c, report)
             c.proc.stdout.close()  # type: ignore[union-attr]
 
     # -- status lines, events, progress -------------------------------------------------------------
-    def _status(self, child: Child, line: str) -> None:
-        word, rest = parse_status(line)
-        if word != "event":
+    def _status(self, child: Child, report: Report) -> None:
+        if not isinstance(report, Event):
             return
-        t_text, _, what = rest.partition(" ")
-        kind, _, text = what.partition(": ")
-        try:
-            t = float(t_text.removeprefix("t="))
-        except ValueError:
-            t = math.nan
+        t, kind, text = report.t, report.kind, report.text
+        if report.by is not None:  # until the events carry their sender on (the next change)
+            text += report.by.suffix
         if child.name == "vehicle":
             if self.realtime and math.isfinite(t):
                 t = self._flight_time(t)
