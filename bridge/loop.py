@@ -34,6 +34,7 @@ from bridge.core.flight import Flight, Progress, prepare
 from bridge.core.wire import command_over_wire, state_over_wire
 from bridge.link.ends import ControllerEnd, VehicleEnd
 from bridge.record.columns import TRACE_COLUMNS, state_columns, trace_row
+from bridge.record.events import RunEvent
 from bridge.record.metrics import summarise
 from bridge.record.policies import ended_by_outcome, judge, rules_for, violation_text
 from bridge.record.runlog import Run, RunRecord, check_trace_steps, run_dir, trace_arrays
@@ -164,14 +165,15 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
         raise
     try:  # the record stays open for the verdicts' lines, and is closed whatever happens
         arrays = trace_arrays(rows, TRACE_COLUMNS)
-        ev = [{"t": round(e.t, 6), "kind": e.kind, "text": e.text} for e in vehicle.events]
+        ev = [RunEvent(round(e.t, 6), e.kind, e.text, by=e.by) for e in vehicle.events]
+        shown = [e.as_dict() for e in ev]
         link = {"up": up.stats.summary(), "down": down.stats.summary(), "rejected": dict(vend.rejected)}
-        summary = summarise(arrays, m, flight.gains, clock="offline", outcome=outcome, events=ev, link=link,
+        summary = summarise(arrays, m, flight.gains, clock="offline", outcome=outcome, events=shown, link=link,
                             estimator=flight.estimator, sensors=flight.sensors.name)
         summary["ended_by"] = ended_by_outcome(outcome, ev)
         for v in judge(summary, arrays, ev, rules_for(flight, "offline", link)):
             vehicle.event("policy", violation_text(v))
-            ev.append({"t": round(vehicle.t, 6), "kind": "policy", "text": violation_text(v)})
+            shown.append({"t": round(vehicle.t, 6), "kind": "policy", "text": violation_text(v)})
     finally:
         _close_record(record, vehicle.events[logged:])
     if record is not None:

@@ -342,4 +342,4 @@ def test_the_lines_a_child_writes_after_ready_in_the_same_read_are_kept(tmp_path
     ready = session._wait_ready(child)
     child.proc.stdout.close()
     assert ready.listen == "x"
-    assert session.vehicle_armed and [e["kind"] for e in session.events] == ["armed"]
+    assert session.vehicle_armed and [e.kind for e in session.events] == ["armed"]

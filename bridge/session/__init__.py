@@ -63,11 +63,13 @@ import numpy as np
 
 from bridge.autopilot.estimator import compile_estimator
 from bridge.autopilot.params import ParamChange
+from bridge.autopilot.simvehicle import Sender
 from bridge.core.flight import Flight, Progress, prepare
 from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, GCS_PORT, LINK_PORT, parse_address
 from bridge.mavlink.signing import key_from_file
 from bridge.nodes.report import Event, Ready, Report
 from bridge.record.columns import TRACE_COLUMNS
+from bridge.record.events import RunEvent
 from bridge.record.joiner import TraceJoiner
 from bridge.record.metrics import percentiles, summarise
 from bridge.record.policies import (
@@ -77,7 +79,6 @@ from bridge.record.policies import (
     lockstep_record,
     rules_for,
     violation_text,
-    without_sender,
 )
 from bridge.record.runlog import EventLog, Run, RunRecord, check_trace_steps, run_dir, trace_arrays
 from bridge.session.children import (
@@ -190,7 +191,7 @@ class Session:
         # a mission's MAV_SYS_ID is the vehicle's system id; else the instance's, as PX4 SITL's
         self.sysid = flight.params.sysid if "MAV_SYS_ID" in flight.mission.params else (instance or 0) + 1
         self.listen = f"127.0.0.1:{LINK_PORT + instance}" if instance is not None else "127.0.0.1:0"
-        self.events: list[dict[str, Any]] = []
+        self.events: list[RunEvent] = []
         self.vehicle: Child | None = None
         self.controller: Child | None = None
         self.relay: Child | None = None  # real time with an impaired link: bsst relay between the two
@@ -245,7 +246,7 @@ class Session:
         clock = "realtime" if self.realtime else "lockstep"
         arrays = trace_arrays(self.joiner.rows, TRACE_COLUMNS)
         link = self._link_block()
-        summary = summarise(arrays, m, self.flight.gains, clock=clock, outcome=self._outcome(), events=self.events,
+        summary = summarise(arrays, m, self.flight.gains, clock=clock, outcome=self._outcome(), events=[],
                             link=link, estimator=self.flight.estimator, sensors=self.flight.sensors.name)
         summary["timing"] = self._timing_block(wall)
         summary["sitl"] = {
@@ -272,6 +273,7 @@ class Session:
                                    f"({lockstep['why']}) and flew on the wall clock", "session")
         for v in violated:
             self._note("policy", violation_text(v), "session")
+        summary["events"] = [e.as_dict() for e in self.events]  # with the verdicts' notes just made
         return arrays, summary
 
     def _ended_by(self, outcome: str, trace: Mapping[str, Any]) -> tuple[str, dict[str, Any]]:
@@ -296,12 +298,12 @@ class Session:
         hit = ended_by_command(self.events, (CONTROLLER_SYSID, CONTROLLER_COMPID), before_s=m.duration_s)
         if hit is not None and not (ctl_completed and hit[1] is None):  # unattributed: the controller's own
             e, who = hit
-            if e["kind"] == "mode":
-                how = f"mode changed at t={e['t']:.3f} s: {without_sender(e['text'])}"
+            if e.kind == "mode":
+                how = f"mode changed at t={e.t:.3f} s: {e.text}"
             else:
-                where = "in flight" if _airborne(trace, e["t"] - (self.joiner.k0 or 0) / m.rate_hz
-                                                 if not self.realtime else e["t"]) else "on the ground"
-                how = f"disarmed {where} by command at t={e['t']:.3f} s"
+                where = "in flight" if _airborne(trace, e.t - (self.joiner.k0 or 0) / m.rate_hz
+                                                 if not self.realtime else e.t) else "on the ground"
+                how = f"disarmed {where} by command at t={e.t:.3f} s"
             named = str(who) if who is not None else "someone (the vehicle's event names no sender)"
             return ("aborted" if outcome == "completed" else outcome), {"who": named, "how": how}
         t = trace["t"]
@@ -525,9 +527,7 @@ class Session:
     def _status(self, child: Child, report: Report) -> None:
         if not isinstance(report, Event):
             return
-        t, kind, text = report.t, report.kind, report.text
-        if report.by is not None:  # until the events carry their sender on (the next change)
-            text += report.by.suffix
+        t, kind = report.t, report.kind
         if child.name == "vehicle":
             if self.realtime and math.isfinite(t):
                 t = self._flight_time(t)
@@ -539,7 +539,7 @@ class Session:
                 self.failsafe_seen = True
             elif kind == "diverged":
                 self.diverged = True
-        self._note(kind, text, child.name, t)
+        self._note(kind, report.text, child.name, t, report.by)
 
     def _flight_time(self, t_vehicle: float) -> float:
         """Real time: the vehicle's clock runs from its start; the flight's (the trace's and
@@ -552,13 +552,12 @@ class Session:
             return 0.0
         return t_vehicle - joiner.k0 / self.flight.mission.rate_hz
 
-    def _note(self, kind: str, text: str, source: str, t: float | None = None) -> None:
+    def _note(self, kind: str, text: str, source: str, t: float | None = None, by: Sender | None = None) -> None:
         if t is None:
             t = self.joiner.rows[-1][0] if getattr(self, "joiner", None) and self.joiner.rows else 0.0
-        self.events.append({"t": round(t, 6) if math.isfinite(t) else None, "kind": kind, "text": text,
-                            "source": source})
+        self.events.append(RunEvent.at(t, kind, text, source, by))
         if self._event_log is not None:
-            self._event_log.event(t if math.isfinite(t) else 0.0, kind, f"{text} [{source}]")
+            self._event_log.event(t if math.isfinite(t) else 0.0, kind, text, by, source)
         if source == "session" and kind in ("died", "killed"):
             sys.stderr.write(("\n" if self.live else "") + f"bsst sitl: {text}\n")
 
