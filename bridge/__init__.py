@@ -35,6 +35,8 @@ and a layer imports nothing above it (tests/test_layers.py checks it):
   - :mod:`bridge.record.runlog`   the run directory: trace, events, summary; :class:`~bridge.record.runlog.Run`
   - :mod:`bridge.record.joiner`   vehicle.csv + controller.csv -> trace.csv rows (SITL)
   - :mod:`bridge.record.metrics`  RMS, settling, finite-time bound, total variation, the summary
+  - :mod:`bridge.record.events`   a run's events, typed, with their sender as a field
+  - :mod:`bridge.record.summary`  a SITL session's summary.json, pure functions of what the session saw
   - :mod:`bridge.record.plots`    the paper-style figures
 
 - :mod:`bridge.nodes`: one process each
@@ -48,6 +50,7 @@ and a layer imports nothing above it (tests/test_layers.py checks it):
 - :mod:`bridge.loop`: the in-process closed loop (``bsst sim``), :func:`~bridge.loop.simulate`
 - :mod:`bridge.session`: the SITL session launcher (``bsst sitl``), :func:`~bridge.session.sitl`
 
+  - :mod:`bridge.session.session`   the session: start, supervise and stop the children, summarise
   - :mod:`bridge.session.children`  the child processes and the instance lock
 
 - :mod:`bridge.sweep`: latency and dropout campaigns (``bsst sweep``)

@@ -2,7 +2,8 @@
 
 In:  nothing but, for the helpers, an eq. (7) state (:func:`state_columns`) or a file's header
      (:func:`column_index`)
-Out: column-name tuples; a state in the trace's column order; the positions of named columns
+Out: column-name tuples; :class:`TraceRow`, one ``trace.csv`` row with its columns as named fields; a state
+     in the trace's column order; the positions of named columns
 
 - :data:`TRACE_COLUMNS`: ``trace.csv``, one row per control step (offline and SITL alike);
 - :data:`VEHICLE_COLUMNS`: ``vehicle.csv``, the vehicle's half of a SITL trace;
@@ -19,6 +20,7 @@ nan between; 0 under truth: no error).
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import NamedTuple
 
 STATE_COLUMNS = ("x", "y", "z", "vx", "vy", "vz", "phi", "theta", "psi", "dphi", "dtheta", "dpsi")
 REF_COLUMNS = ("x_ref", "y_ref", "z_ref", "psi_ref")
@@ -41,6 +43,58 @@ CONTROLLER_COLUMNS = (
 )
 
 
+
+class TraceRow(NamedTuple):
+    """One ``trace.csv`` row (:data:`TRACE_COLUMNS`, in order; units in the module docstring). A tuple of
+    floats, so it is written, stacked into arrays and extended into ``array('d')`` as one; read by name."""
+
+    t: float
+    x: float
+    y: float
+    z: float
+    vx: float
+    vy: float
+    vz: float
+    phi: float
+    theta: float
+    psi: float
+    dphi: float
+    dtheta: float
+    dpsi: float
+    x_ref: float
+    y_ref: float
+    z_ref: float
+    psi_ref: float
+    u1: float
+    u2: float
+    u3: float
+    u4: float
+    c1: float
+    c2: float
+    c3: float
+    c4: float
+    u1_act: float
+    u2_act: float
+    u3_act: float
+    u4_act: float
+    state_age_s: float
+    phi_d: float
+    theta_d: float
+    x_est: float
+    y_est: float
+    z_est: float
+    vx_est: float
+    vy_est: float
+    vz_est: float
+    phi_est: float
+    theta_est: float
+    psi_est: float
+    dphi_est: float
+    dtheta_est: float
+    dpsi_est: float
+    nees: float
+
+
 def state_columns(X: Sequence[float]) -> tuple[float, ...]:
     """Eq. (7) state -> the trace's state columns (x y z vx vy vz phi theta psi rates)."""
     return (X[0], X[2], X[4], X[1], X[3], X[5], X[6], X[8], X[10], X[7], X[9], X[11])
@@ -48,7 +102,7 @@ def state_columns(X: Sequence[float]) -> tuple[float, ...]:
 
 def trace_row(t: float, state: Sequence[float], ref: Sequence[Sequence[float]], demanded: Sequence[float],
               wire: Sequence[float], realised: Sequence[float], state_age_s: float,
-              desired: Sequence[float], estimate: Sequence[float], nees: float) -> tuple[float, ...]:
+              desired: Sequence[float], estimate: Sequence[float], nees: float) -> TraceRow:
     """One ``trace.csv`` row (:data:`TRACE_COLUMNS`), for the offline loop and the SITL joiner alike.
 
     ``state``: the trace's 12 state columns (:func:`state_columns`); ``ref``: the reference
@@ -58,8 +112,8 @@ def trace_row(t: float, state: Sequence[float], ref: Sequence[Sequence[float]], 
     ``estimate``: the vehicle's estimate in the state columns' order (:func:`state_columns`);
     ``nees``: its normalised estimation error squared (0 under ``truth``: no error).
     """
-    return (t, *state, ref[0][0], ref[1][0], ref[2][0], ref[3][0], *demanded, *wire, *realised, state_age_s,
-            *desired, *estimate, nees)
+    return TraceRow(t, *state, ref[0][0], ref[1][0], ref[2][0], ref[3][0], *demanded, *wire, *realised,
+                    state_age_s, *desired, *estimate, nees)
 
 
 def column_index(columns: Sequence[str], names: Sequence[str], where: str) -> dict[str, int]:

@@ -2,9 +2,10 @@
 
 In:  ``vehicle.csv`` (:data:`~bridge.record.columns.VEHICLE_COLUMNS`) and ``controller.csv``
      (:data:`~bridge.record.columns.CONTROLLER_COLUMNS`), appended by the two processes as they fly
-Out: rows of :data:`~bridge.record.columns.TRACE_COLUMNS` (units as there), also appended to
-     ``trace.csv``, and the per-packet times (ms: up, down, round trip, state to command, tick
-     lateness) the session's ``link`` and ``timing`` blocks are made of
+Out: rows (:class:`~bridge.record.columns.TraceRow`, units as there), also appended to ``trace.csv``, and
+     the per-packet times (ms: up, down, round trip, state to command, tick lateness) the session's
+     ``link`` and ``timing`` blocks are made of, together as :class:`Joined`; the first step (s) a lockstep
+     vehicle flew off the step clock (:func:`off_clock_time`)
 
 Columns are looked up by name in each file's own header, so a file without a column the join
 needs is an error that names it.
@@ -15,6 +16,8 @@ from __future__ import annotations
 import math
 import os
 from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 from bridge.core.flight import Flight
@@ -27,6 +30,7 @@ from bridge.record.columns import (
     STATE_COLUMNS,
     VEHICLE_COLUMNS,
     WIRE_COLUMNS,
+    TraceRow,
     column_index,
     trace_row,
 )
@@ -37,6 +41,27 @@ _V_NEEDS = ("k", "mode", "cmd_k", "state_age_s", "rtt_s", "odo_sent_wall", "cmd_
     + WIRE_COLUMNS + INPUT_COLUMNS + REALISED_COLUMNS + ESTIMATE_COLUMNS + ("nees",)
 _C_NEEDS = ("k", "odo_recv_wall", "cmd_sent_wall", "state_to_cmd_s", "period_error_s", "state_age_s") \
     + INPUT_COLUMNS + WIRE_COLUMNS + DESIRED_COLUMNS
+
+
+@dataclass(frozen=True)
+class Joined:
+    """The trace as the session joined it, and what the join measured (:class:`bridge.record.joiner.TraceJoiner`):
+    per-packet ``up_ms``, ``down_ms`` (one-way, ms), ``rtt_ms`` (vehicle's round trip), ``s2c_ms`` (state to
+    command by TIMESYNC), ``late_ms`` (tick lateness); ``commands``: controller rows read; ``k0``: the
+    vehicle's step of the trace's t = 0; ``first_sent``/``last_sent``: wall s of the first and last joined
+    state's send; ``missing``: rows without their controller half."""
+
+    rows: Sequence[TraceRow] = ()
+    k0: int | None = None
+    missing: int = 0
+    first_sent: float | None = None
+    last_sent: float = math.nan
+    commands: int = 0
+    up_ms: Sequence[float] = ()
+    down_ms: Sequence[float] = ()
+    rtt_ms: Sequence[float] = ()
+    s2c_ms: Sequence[float] = ()
+    late_ms: Sequence[float] = ()
 
 
 class PartReader:
@@ -103,7 +128,7 @@ class TraceJoiner:
         self.ctl: dict[int, list[float]] = {}
         self.pending: deque[list[float]] = deque()
         self.k0: int | None = None
-        self.rows: list[tuple[float, ...]] = []
+        self.rows: list[TraceRow] = []
         self.controller_done = False
         self.up_ms: list[float] = []
         self.down_ms: list[float] = []
@@ -195,6 +220,29 @@ class TraceJoiner:
         if self.trace is not None:
             self.trace.row(row)
 
+    def joined(self) -> Joined:
+        """The rows joined so far and what the join measured."""
+        return Joined(self.rows, self.k0, self.missing, self.first_sent, self.last_sent, len(self.ctl), self.up_ms,
+                      self.down_ms, self.rtt_ms, self.s2c_ms, self.late_ms)
+
     def close(self) -> None:
         self.v.close()
         self.c.close()
+
+
+def off_clock_time(path: Path, rate_hz: float) -> float | None:
+    """Lockstep: the vehicle's time (s) of its first row of ``vehicle.csv`` (at ``path``) not flown on the
+    step clock (the command in force answers another step, or none), or None; read as a stream."""
+    try:
+        with open(path) as f:
+            header = f.readline().strip().split(",")
+            ik, ic = header.index("k"), header.index("cmd_k")
+            for line in f:
+                parts = line.split(",")
+                if not line.endswith("\n") or len(parts) != len(header):
+                    break  # a torn last line
+                if parts[ik] != parts[ic] and float(parts[ik]) != float(parts[ic]):
+                    return float(parts[ik]) / rate_hz
+    except (OSError, ValueError):
+        return None
+    return None
