@@ -95,6 +95,9 @@ class TraceRow(NamedTuple):
     nees: float
 
 
+_new_row = tuple.__new__  # TraceRow from one tuple at once: a third of the time of its 45-argument constructor
+
+
 def state_columns(X: Sequence[float]) -> tuple[float, ...]:
     """Eq. (7) state -> the trace's state columns (x y z vx vy vz phi theta psi rates)."""
     return (X[0], X[2], X[4], X[1], X[3], X[5], X[6], X[8], X[10], X[7], X[9], X[11])
@@ -112,8 +115,8 @@ def trace_row(t: float, state: Sequence[float], ref: Sequence[Sequence[float]], 
     ``estimate``: the vehicle's estimate in the state columns' order (:func:`state_columns`);
     ``nees``: its normalised estimation error squared (0 under ``truth``: no error).
     """
-    return TraceRow(t, *state, ref[0][0], ref[1][0], ref[2][0], ref[3][0], *demanded, *wire, *realised,
-                    state_age_s, *desired, *estimate, nees)
+    return _new_row(TraceRow, (t, *state, ref[0][0], ref[1][0], ref[2][0], ref[3][0], *demanded, *wire, *realised,
+                               state_age_s, *desired, *estimate, nees))
 
 
 def column_index(columns: Sequence[str], names: Sequence[str], where: str) -> dict[str, int]:
