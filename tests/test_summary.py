@@ -13,7 +13,15 @@ import pytest
 
 from bridge.autopilot.simvehicle import ITSELF, Sender
 from bridge.core.flight import prepare
-from bridge.record.columns import TRACE_COLUMNS, TraceRow, trace_row
+from bridge.record.columns import (
+    CONTROLLER_COLUMNS,
+    TRACE_COLUMNS,
+    VEHICLE_COLUMNS,
+    ControllerRow,
+    TraceRow,
+    VehicleRow,
+    trace_row,
+)
 from bridge.record.events import RunEvent
 from bridge.record.joiner import Joined
 from bridge.record.policies import POLICIES
@@ -198,3 +206,7 @@ def test_trace_rows_have_the_trace_columns_as_names() -> None:
     r = rows(2)[1]
     assert r.t == 1 / RATE and r.z == r.z_ref and math.isnan(r.state_age_s) is False and r.nees == 0.0
     assert ITSELF.is_vehicle
+
+
+def test_the_part_files_rows_have_their_columns_as_names() -> None:
+    assert VehicleRow._fields == VEHICLE_COLUMNS and ControllerRow._fields == CONTROLLER_COLUMNS

@@ -2,8 +2,8 @@
 
 In:  nothing but, for the helpers, an eq. (7) state (:func:`state_columns`) or a file's header
      (:func:`column_index`)
-Out: column-name tuples; :class:`TraceRow`, one ``trace.csv`` row with its columns as named fields; a state
-     in the trace's column order; the positions of named columns
+Out: column-name tuples; :class:`TraceRow`, :class:`VehicleRow`, :class:`ControllerRow`: one row of each file
+     with its columns as named fields; a state in the trace's column order; the positions of named columns
 
 - :data:`TRACE_COLUMNS`: ``trace.csv``, one row per control step (offline and SITL alike);
 - :data:`VEHICLE_COLUMNS`: ``vehicle.csv``, the vehicle's half of a SITL trace;
@@ -93,6 +93,83 @@ class TraceRow(NamedTuple):
     dtheta_est: float
     dpsi_est: float
     nees: float
+
+
+class VehicleRow(NamedTuple):
+    """One ``vehicle.csv`` row (:data:`VEHICLE_COLUMNS`), read by name (filled by header:
+    :class:`bridge.record.joiner.PartReader`)."""
+
+    k: float
+    t: float
+    x: float
+    y: float
+    z: float
+    vx: float
+    vy: float
+    vz: float
+    phi: float
+    theta: float
+    psi: float
+    dphi: float
+    dtheta: float
+    dpsi: float
+    mode: float
+    cmd_k: float
+    c1: float
+    c2: float
+    c3: float
+    c4: float
+    u1: float
+    u2: float
+    u3: float
+    u4: float
+    u1_act: float
+    u2_act: float
+    u3_act: float
+    u4_act: float
+    state_age_s: float
+    rtt_s: float
+    odo_sent_wall: float
+    cmd_recv_wall: float
+    x_est: float
+    y_est: float
+    z_est: float
+    vx_est: float
+    vy_est: float
+    vz_est: float
+    phi_est: float
+    theta_est: float
+    psi_est: float
+    dphi_est: float
+    dtheta_est: float
+    dpsi_est: float
+    nees: float
+
+
+class ControllerRow(NamedTuple):
+    """One ``controller.csv`` row (:data:`CONTROLLER_COLUMNS`), read by name."""
+
+    k: float
+    t: float
+    x_ref: float
+    y_ref: float
+    z_ref: float
+    psi_ref: float
+    u1: float
+    u2: float
+    u3: float
+    u4: float
+    c1: float
+    c2: float
+    c3: float
+    c4: float
+    phi_d: float
+    theta_d: float
+    odo_recv_wall: float
+    cmd_sent_wall: float
+    state_to_cmd_s: float
+    period_error_s: float
+    state_age_s: float
 
 
 _new_row = tuple.__new__  # TraceRow from one tuple at once: a third of the time of its 45-argument constructor

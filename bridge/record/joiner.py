@@ -7,8 +7,9 @@ Out: rows (:class:`~bridge.record.columns.TraceRow`, units as there), also appen
      ``link`` and ``timing`` blocks are made of, together as :class:`Joined`; the first step (s) a lockstep
      vehicle flew off the step clock (:func:`off_clock_time`)
 
-Columns are looked up by name in each file's own header, so a file without a column the join
-needs is an error that names it.
+Each file's rows are read into named rows (:class:`~bridge.record.columns.VehicleRow`,
+:class:`~bridge.record.columns.ControllerRow`) by the file's own header, so a file without a column is an
+error that names it, and the join reads every value by name.
 """
 
 from __future__ import annotations
@@ -18,29 +19,33 @@ import os
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
+from operator import attrgetter
 from pathlib import Path
+from typing import Any
 
 from bridge.core.flight import Flight
 from bridge.record.columns import (
-    CONTROLLER_COLUMNS,
     DESIRED_COLUMNS,
     ESTIMATE_COLUMNS,
     INPUT_COLUMNS,
     REALISED_COLUMNS,
     STATE_COLUMNS,
-    VEHICLE_COLUMNS,
     WIRE_COLUMNS,
+    ControllerRow,
     TraceRow,
+    VehicleRow,
     column_index,
     trace_row,
 )
 from bridge.record.runlog import TraceWriter
 
-# what the join reads of each half, by name
-_V_NEEDS = ("k", "mode", "cmd_k", "state_age_s", "rtt_s", "odo_sent_wall", "cmd_recv_wall") + STATE_COLUMNS \
-    + WIRE_COLUMNS + INPUT_COLUMNS + REALISED_COLUMNS + ESTIMATE_COLUMNS + ("nees",)
-_C_NEEDS = ("k", "odo_recv_wall", "cmd_sent_wall", "state_to_cmd_s", "period_error_s", "state_age_s") \
-    + INPUT_COLUMNS + WIRE_COLUMNS + DESIRED_COLUMNS
+# groups of columns of a half, by name
+_STATE = attrgetter(*STATE_COLUMNS)
+_ESTIMATE = attrgetter(*ESTIMATE_COLUMNS)
+_INPUT = attrgetter(*INPUT_COLUMNS)
+_WIRE = attrgetter(*WIRE_COLUMNS)
+_REALISED = attrgetter(*REALISED_COLUMNS)
+_DESIRED = attrgetter(*DESIRED_COLUMNS)
 
 
 @dataclass(frozen=True)
@@ -65,15 +70,18 @@ class Joined:
 
 
 class PartReader:
-    """Reads the complete new lines of a part file (``vehicle.csv``, ``controller.csv``)."""
+    """Reads the complete new lines of a part file (``vehicle.csv``, ``controller.csv``) as named rows of
+    ``row_type``, each value taken from its column of the file's own header (ValueError naming a missing one)."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, row_type: Any) -> None:
         self.path = path
+        self.row_type = row_type
         self._fd = -1
         self._buf = b""
         self.columns: tuple[str, ...] | None = None  # the file's header, once read
+        self._pick: list[int] | None = None  # the header's positions of row_type's fields (None: the same order)
 
-    def read(self) -> list[list[float]]:
+    def read(self) -> list[Any]:
         if self._fd < 0:
             try:
                 self._fd = os.open(self.path, os.O_RDONLY)
@@ -90,8 +98,20 @@ class PartReader:
         *full, self._buf = (self._buf + b"".join(chunks)).split(b"\n")
         if self.columns is None and full:
             self.columns = tuple(full[0].decode(errors="replace").strip().split(","))
+            fields = self.row_type._fields
+            if self.columns != fields:
+                where = column_index(self.columns, fields, str(self.path))
+                self._pick = [where[n] for n in fields]
             full = full[1:]
-        return [[float(x) for x in line.split(b",")] for line in full if line]
+        make, pick = self.row_type._make, self._pick
+        if pick is None:
+            return [make([float(x) for x in line.split(b",")]) for line in full if line]
+        rows = []
+        for line in full:
+            if line:
+                values = [float(x) for x in line.split(b",")]
+                rows.append(make([values[i] for i in pick]))
+        return rows
 
     def close(self) -> None:
         if self._fd >= 0:
@@ -118,15 +138,15 @@ class TraceJoiner:
     """
 
     def __init__(self, path: Path, flight: Flight, trace: TraceWriter | None, lockstep: bool = False) -> None:
-        self.v = PartReader(path / "vehicle.csv")
-        self.c = PartReader(path / "controller.csv")
+        self.v = PartReader(path / "vehicle.csv", VehicleRow)
+        self.c = PartReader(path / "controller.csv", ControllerRow)
         self.lockstep = lockstep
         self.trace = trace
         self.rate = flight.mission.rate_hz
         self.steps = flight.mission.steps
         self.sample = flight.mission.trajectory.sample
-        self.ctl: dict[int, list[float]] = {}
-        self.pending: deque[list[float]] = deque()
+        self.ctl: dict[int, ControllerRow] = {}
+        self.pending: deque[VehicleRow] = deque()
         self.k0: int | None = None
         self.rows: list[TraceRow] = []
         self.controller_done = False
@@ -139,37 +159,24 @@ class TraceJoiner:
         self.missing = 0  # rows without their controller half (never written): demand NaN
         self.first_sent: float | None = None  # wall time the first / last joined state was sent
         self.last_sent = math.nan
-        self._vi: dict[str, int] | None = None  # column positions, from each file's header
-        self._ci: dict[str, int] | None = None
-
-    def _v_index(self) -> dict[str, int]:
-        if self._vi is None:
-            self._vi = column_index(self.v.columns or VEHICLE_COLUMNS, _V_NEEDS, str(self.v.path))
-        return self._vi
-
-    def _c_index(self) -> dict[str, int]:
-        if self._ci is None:
-            self._ci = column_index(self.c.columns or CONTROLLER_COLUMNS, _C_NEEDS, str(self.c.path))
-        return self._ci
 
     def update(self) -> int:
         """Join what both files hold now; returns the number of new trace rows."""
         vrows = self.v.read()  # first: see the class docstring
         for c in self.c.read():
-            ci = self._c_index()
-            k = int(c[ci['k']])
+            k = int(c.k)
             self.ctl[k] = c
             if self.k0 is None:
                 self.k0 = k
-            if math.isfinite(c[ci['state_to_cmd_s']]):
-                self.s2c_ms.append(1e3 * c[ci['state_to_cmd_s']])
-            if math.isfinite(c[ci['period_error_s']]):
-                self.late_ms.append(1e3 * c[ci['period_error_s']])
+            if math.isfinite(c.state_to_cmd_s):
+                self.s2c_ms.append(1e3 * c.state_to_cmd_s)
+            if math.isfinite(c.period_error_s):
+                self.late_ms.append(1e3 * c.period_error_s)
         self.pending.extend(vrows)
         n0 = len(self.rows)
         while self.pending:
             v = self.pending[0]
-            key = int(v[self._v_index()['cmd_k']])
+            key = int(v.cmd_k)
             c = self.ctl.get(key) if key >= 0 else None
             if key >= 0 and c is None and not self.controller_done:
                 break  # its row is on its way (written just after the send)
@@ -179,10 +186,9 @@ class TraceJoiner:
             self.trace.flush()
         return len(self.rows) - n0
 
-    def _join(self, v: list[float], key: int, c: list[float] | None) -> None:
-        vi = self._v_index()
-        k = int(v[vi['k']])
-        mode = int(v[vi['mode']])
+    def _join(self, v: VehicleRow, key: int, c: ControllerRow | None) -> None:
+        k = int(v.k)
+        mode = int(v.mode)
         if self.k0 is None or k < self.k0 or (key < 0 and mode == 0):
             return  # not flying the mission yet (armed, no target)
         if mode == 0 and k - self.k0 >= self.steps:
@@ -190,32 +196,29 @@ class TraceJoiner:
         t = (k - self.k0) / self.rate
         ref = self.sample(t)
         if c is not None:
-            ci = self._c_index()
-            u = tuple(c[ci[n]] for n in INPUT_COLUMNS)
-            desired = tuple(c[ci[n]] for n in DESIRED_COLUMNS)
-            if key not in self._up_seen and math.isfinite(v[vi['cmd_recv_wall']]):
+            u = _INPUT(c)
+            desired = _DESIRED(c)
+            if key not in self._up_seen and math.isfinite(v.cmd_recv_wall):
                 self._up_seen.add(key)
-                self.up_ms.append(1e3 * (v[vi['cmd_recv_wall']] - c[ci['cmd_sent_wall']]))
-                if math.isfinite(v[vi['rtt_s']]):
-                    self.rtt_ms.append(1e3 * v[vi['rtt_s']])
+                self.up_ms.append(1e3 * (v.cmd_recv_wall - c.cmd_sent_wall))
+                if math.isfinite(v.rtt_s):
+                    self.rtt_ms.append(1e3 * v.rtt_s)
         elif key >= 0:  # a controller killed between sending this command and writing its row
             self.missing += 1
             u, desired = (math.nan,) * 4, (math.nan, math.nan)  # what the law demanded was never recorded
         else:
-            u = tuple(v[vi[n]] for n in INPUT_COLUMNS)
+            u = _INPUT(v)
             desired = (0.0, 0.0)  # the landing loop holds the vehicle level
         own = self.ctl.get(k)
         if own is not None:
-            self.down_ms.append(1e3 * (own[self._c_index()['odo_recv_wall']] - v[vi['odo_sent_wall']]))
+            self.down_ms.append(1e3 * (own.odo_recv_wall - v.odo_sent_wall))
         if self.first_sent is None:
-            self.first_sent = v[vi['odo_sent_wall']]
-        self.last_sent = v[vi['odo_sent_wall']]
-        wire, age = [v[vi[n]] for n in WIRE_COLUMNS], v[vi['state_age_s']]
+            self.first_sent = v.odo_sent_wall
+        self.last_sent = v.odo_sent_wall
+        wire, age = _WIRE(v), v.state_age_s
         if self.lockstep and c is not None and key == k:
-            ci = self._c_index()
-            wire, age = [c[ci[n]] for n in WIRE_COLUMNS], c[ci['state_age_s']]
-        row = trace_row(t, [v[vi[n]] for n in STATE_COLUMNS], ref, u, wire, [v[vi[n]] for n in REALISED_COLUMNS], age,
-                        desired, [v[vi[n]] for n in ESTIMATE_COLUMNS], v[vi["nees"]])
+            wire, age = _WIRE(c), c.state_age_s
+        row = trace_row(t, _STATE(v), ref, u, wire, _REALISED(v), age, desired, _ESTIMATE(v), v.nees)
         self.rows.append(row)
         if self.trace is not None:
             self.trace.row(row)
