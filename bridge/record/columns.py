@@ -19,8 +19,8 @@ nan between; 0 under truth: no error).
 
 from __future__ import annotations
 
+from collections import namedtuple
 from collections.abc import Sequence
-from typing import NamedTuple
 
 STATE_COLUMNS = ("x", "y", "z", "vx", "vy", "vz", "phi", "theta", "psi", "dphi", "dtheta", "dpsi")
 REF_COLUMNS = ("x_ref", "y_ref", "z_ref", "psi_ref")
@@ -42,135 +42,15 @@ CONTROLLER_COLUMNS = (
     + ("odo_recv_wall", "cmd_sent_wall", "state_to_cmd_s", "period_error_s", "state_age_s")
 )
 
-
-
-class TraceRow(NamedTuple):
-    """One ``trace.csv`` row (:data:`TRACE_COLUMNS`, in order; units in the module docstring). A tuple of
-    floats, so it is written, stacked into arrays and extended into ``array('d')`` as one; read by name."""
-
-    t: float
-    x: float
-    y: float
-    z: float
-    vx: float
-    vy: float
-    vz: float
-    phi: float
-    theta: float
-    psi: float
-    dphi: float
-    dtheta: float
-    dpsi: float
-    x_ref: float
-    y_ref: float
-    z_ref: float
-    psi_ref: float
-    u1: float
-    u2: float
-    u3: float
-    u4: float
-    c1: float
-    c2: float
-    c3: float
-    c4: float
-    u1_act: float
-    u2_act: float
-    u3_act: float
-    u4_act: float
-    state_age_s: float
-    phi_d: float
-    theta_d: float
-    x_est: float
-    y_est: float
-    z_est: float
-    vx_est: float
-    vy_est: float
-    vz_est: float
-    phi_est: float
-    theta_est: float
-    psi_est: float
-    dphi_est: float
-    dtheta_est: float
-    dpsi_est: float
-    nees: float
-
-
-class VehicleRow(NamedTuple):
-    """One ``vehicle.csv`` row (:data:`VEHICLE_COLUMNS`), read by name (filled by header:
-    :class:`bridge.record.joiner.PartReader`)."""
-
-    k: float
-    t: float
-    x: float
-    y: float
-    z: float
-    vx: float
-    vy: float
-    vz: float
-    phi: float
-    theta: float
-    psi: float
-    dphi: float
-    dtheta: float
-    dpsi: float
-    mode: float
-    cmd_k: float
-    c1: float
-    c2: float
-    c3: float
-    c4: float
-    u1: float
-    u2: float
-    u3: float
-    u4: float
-    u1_act: float
-    u2_act: float
-    u3_act: float
-    u4_act: float
-    state_age_s: float
-    rtt_s: float
-    odo_sent_wall: float
-    cmd_recv_wall: float
-    x_est: float
-    y_est: float
-    z_est: float
-    vx_est: float
-    vy_est: float
-    vz_est: float
-    phi_est: float
-    theta_est: float
-    psi_est: float
-    dphi_est: float
-    dtheta_est: float
-    dpsi_est: float
-    nees: float
-
-
-class ControllerRow(NamedTuple):
-    """One ``controller.csv`` row (:data:`CONTROLLER_COLUMNS`), read by name."""
-
-    k: float
-    t: float
-    x_ref: float
-    y_ref: float
-    z_ref: float
-    psi_ref: float
-    u1: float
-    u2: float
-    u3: float
-    u4: float
-    c1: float
-    c2: float
-    c3: float
-    c4: float
-    phi_d: float
-    theta_d: float
-    odo_recv_wall: float
-    cmd_sent_wall: float
-    state_to_cmd_s: float
-    period_error_s: float
-    state_age_s: float
-
+# one row of each file with its columns as named fields (a tuple of floats: written, stacked into arrays and
+# extended into array('d') as one), made from the column tuples above so that the two never differ
+TraceRow = namedtuple("TraceRow", TRACE_COLUMNS)
+TraceRow.__doc__ = "One ``trace.csv`` row (:data:`TRACE_COLUMNS`, in order; units in the module docstring)."
+VehicleRow = namedtuple("VehicleRow", VEHICLE_COLUMNS)
+VehicleRow.__doc__ = ("One ``vehicle.csv`` row (:data:`VEHICLE_COLUMNS`), filled by the file's header "
+                      "(:class:`bridge.record.joiner.PartReader`).")
+ControllerRow = namedtuple("ControllerRow", CONTROLLER_COLUMNS)
+ControllerRow.__doc__ = "One ``controller.csv`` row (:data:`CONTROLLER_COLUMNS`), filled by the file's header."
 
 _new_row = tuple.__new__  # TraceRow from one tuple at once: a third of the time of its 45-argument constructor
 
