@@ -17,16 +17,15 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
+from bridge.autopilot.closedloop import ClosedLoopRecord, fly_closed_loop
 from bridge.autopilot.estimator import (
     ESTIMATOR_KINDS,
     ZERO_COVARIANCE,
-    ClosedLoopRecord,
     Covariance,
     Ekf,
     RawEstimator,
     TruthEstimator,
     estimation_error,
-    fly_closed_loop,
     make_estimator,
     nees,
     upper_triangle,
