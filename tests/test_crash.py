@@ -12,7 +12,8 @@ import signal
 import pytest
 
 from tests.hostile import CRASH_STEPS, kill_session
-from tests.sitlkit import Proc, wait_for
+from tests.sitlkit import Proc
+from tests.waiting import wait_for
 
 
 @pytest.mark.parametrize("victim", ["vehicle", "controller", "launcher"])

@@ -19,7 +19,8 @@ from bridge.mavlink.signing import Signing
 from bridge.nodes.vehicle import Vehicle, VehicleConfig
 from bridge.session import sitl
 from missions import MISSION_DIR, Mission, Sine, load_mission
-from tests.hostile import Fuzzer, fly_flooded, fly_fuzzed, wait_until
+from tests.hostile import Fuzzer, fly_flooded, fly_fuzzed
+from tests.waiting import wait_for
 
 FUZZ_DATAGRAMS = 30_000
 KEY = bytes(range(32))
@@ -158,7 +159,7 @@ def test_any_datagram_leaves_the_vehicle_as_it_was_unless_valid(armed_vehicle, d
         got.extend(msgs)
         return bool(got) or count["frame"] > 0
 
-    wait_until(consumed, 5.0, "the vehicle receiving the datagram")
+    wait_for(consumed, 5.0, "the vehicle receiving the datagram", poll_s=0.001)
     assert count["frame"] <= 1 and (got or count["frame"] == 1)
     accepted = len(got) - count["message"]
     if accepted == 0:

@@ -40,6 +40,7 @@ from bridge.session.children import check_port_free
 from missions import Mission, Sine
 from params import ConfigError
 from tests.sitlkit import ENV, ROOT
+from tests.waiting import wait_for
 
 SHORT = Mission(Sine(), duration_s=5.0, name="sine5")
 RATE = 250.0
@@ -298,10 +299,8 @@ def test_the_relay_replays_a_trace_on_the_wall_clock(tmp_path: Path) -> None:
             data, back = target.recvfrom(2048)
             delays.append(time.perf_counter() - struct.unpack_from("<d", data)[0])
             target.sendto(b"state", back)
-        deadline = time.monotonic() + 5.0
-        while relay.summary()["down"]["sent"] < 20:
-            assert time.monotonic() < deadline, relay.summary()["down"]
-            time.sleep(0.005)
+        wait_for(lambda: relay.summary()["down"]["sent"] >= 20, 5.0, "the relay sending the 20 states down",
+                 poll_s=0.005)
         s = relay.summary()
     assert abs(float(np.median(delays)) * 1000.0 - 25.0) <= 2.0 and min(delays) >= 0.025
     assert s["up"]["delivered"] == 20 and s["up"]["trace"]["delay_ms"]["p50"] == 25.0

@@ -23,7 +23,8 @@ from bridge.record.policies import POLICIES
 from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
 from missions import MISSION_DIR, Mission, Sine
-from tests.sitlkit import ENV, ROOT, csv_rows, wait_for
+from tests.sitlkit import ENV, ROOT, csv_rows
+from tests.waiting import wait_for
 
 SINE = MISSION_DIR / "sine.toml"
 SHORT = Mission(Sine(), duration_s=6.0, name="sine6")

@@ -175,7 +175,7 @@ def test_relay_mission_clock_starts_blackouts_at_the_first_target() -> None:
 
     from bridge.link.model import LinkConfig, LinkSettings
     from bridge.nodes.relay import Relay
-    from tests.sitlkit import wait_for
+    from tests.waiting import wait_for
 
     cut = LinkConfig(blackouts=((0.0, 30.0),))
     target = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
