@@ -1,4 +1,6 @@
-"""Who may command the vehicle, with what numbers, at what cost (issue 11; docs/design.md,
+"""Covers bridge.nodes.vehicle and bridge.mavlink.receive.
+
+Who may command the vehicle, with what numbers, at what cost (issue 11; docs/design.md,
 "Authority"): real ``bsst vehicle`` and ``bsst sitl`` processes over real UDP on 127.0.0.1,
 real pymavlink frames; and a hypothesis property over every message the vehicle handles,
 into a real vehicle object on real loopback sockets.
@@ -37,6 +39,8 @@ from missions import Mission, Sine
 from tests.hostile import Flood, Station, packed_requests
 from tests.sitlkit import Proc, csv_rows
 from tests.waiting import wait_for
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 M = mavlink
 KEY = bytes(range(100, 132))

@@ -1,4 +1,6 @@
-"""Bad input (issue 7): every flag of every ``bsst`` command, and every mission and sweep key,
+"""Covers bridge.cli, missions.mission and bridge.sweep.spec.
+
+Bad input (issue 7): every flag of every ``bsst`` command, and every mission and sweep key,
 given a bad value (wrong type, out of range, missing file, unreadable file, port in use)
 exits 2 with one line on stderr naming it, and no traceback.
 
@@ -31,6 +33,8 @@ from bridge.session import instance_slot
 from missions import MISSION_DIR, mission_from_table
 from params import Table, dump_toml, load_toml
 from tests.sitlkit import ROOT
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 TINY = 'name = "tiny"\nduration_s = 0.2\n[trajectory]\nkind = "sine"\n'
 GUARD_S = 20  # s: a case that is not refused would fly or serve; it fails instead of hanging

@@ -1,4 +1,6 @@
-"""The batch engine against the scalar loop it is checked by (bridge/batch.py, docs: issue 13).
+"""Covers bridge.batch and bridge.link.plan.
+
+The batch engine against the scalar loop it is checked by (bridge/batch.py, docs: issue 13).
 
 A mixed grid — the three laws, delays, Bernoulli and Gilbert–Elliott loss, uniform and normal jitter,
 duplicates and reordering, a blackout that ends in the failsafe, the prediction with and without a

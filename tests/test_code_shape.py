@@ -1,4 +1,4 @@
-"""Covers the shape of bridge/, controller/, plant/ and missions/: sizes, docstrings, ports, type hints.
+"""Covers bridge, controller, plant and missions: their shape (sizes, docstrings, ports, type hints).
 
 Walks every module of those packages with ``ast`` (as python-control's ``kwargs_test.py`` and
 ``docstrings_test.py`` walk theirs) and checks the rules of the house:

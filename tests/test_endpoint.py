@@ -1,4 +1,6 @@
-"""bridge.mavlink.endpoint: addresses, the hot-path codec against pymavlink, real UDP, tlogs."""
+"""Covers bridge.mavlink.endpoint, bridge.mavlink.frames and bridge.mavlink.tlog.
+
+bridge.mavlink.endpoint: addresses, the hot-path codec against pymavlink, real UDP, tlogs."""
 
 from __future__ import annotations
 
@@ -29,6 +31,8 @@ from bridge.mavlink.receive import RateLimiter, ReplyBudget
 from params import ConfigError
 from tests.hostile import packed_requests, udp_queue
 from tests.waiting import wait_for
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 f32 = st.floats(width=32, allow_nan=False, allow_infinity=False)
 

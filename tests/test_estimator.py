@@ -1,4 +1,6 @@
-"""bridge/autopilot/estimator.py: the on-board EKF, the raw and truth estimators.
+"""Covers bridge.autopilot.estimator, bridge.autopilot.ekfkernels and bridge.autopilot.closedloop.
+
+bridge/autopilot/estimator.py: the on-board EKF, the raw and truth estimators.
 
 Truth comes from the real plant (plant.Quadrotor) flown along the paper's sine with the real
 controller.Controller; the sensors are plant.sensors.SensorSuite with the profiles' sets. The

@@ -1,4 +1,6 @@
-"""Hostile and broken input (issue 7): the receive path under fuzz, as properties and during
+"""Covers bridge.mavlink.receive, bridge.mavlink.frames and bridge.nodes.vehicle.
+
+Hostile and broken input (issue 7): the receive path under fuzz, as properties and during
 a real lockstep mission (real processes, real UDP on 127.0.0.1, real pymavlink encoding)."""
 
 from __future__ import annotations
@@ -21,6 +23,8 @@ from bridge.session import sitl
 from missions import MISSION_DIR, Mission, Sine, load_mission
 from tests.hostile import Fuzzer, fly_flooded, fly_fuzzed
 from tests.waiting import wait_for
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 FUZZ_DATAGRAMS = 30_000
 KEY = bytes(range(32))

@@ -1,4 +1,6 @@
-"""The loop under a bad link: the guard, the prediction, control quality, failsafe and recovery.
+"""Covers controller.link_guard and controller.predict.
+
+The loop under a bad link: the guard, the prediction, control quality, failsafe and recovery.
 
 The control-quality cases fly the paper's 30 s sine mission offline at 250 Hz (about a
 second each) and measure the 3-D RMS error over t >= 10 s.

@@ -1,4 +1,6 @@
-"""Real links, replayed: measured traces in every clock, extracted from run directories and tlogs,
+"""Covers bridge.link.trace, bridge.link.fit, bridge.link.profile and bridge.record.linkextract.
+
+Real links, replayed: measured traces in every clock, extracted from run directories and tlogs,
 fitted to the model, and the named profiles (issue 15; docs/links.md).
 
 Real parts throughout: trace files on disk read by the mission loader, the link model, the offline
@@ -41,6 +43,8 @@ from missions import Mission, Sine
 from params import ConfigError
 from tests.sitlkit import ENV, ROOT
 from tests.waiting import wait_for
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 SHORT = Mission(Sine(), duration_s=5.0, name="sine5")
 RATE = 250.0

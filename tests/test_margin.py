@@ -1,4 +1,6 @@
-"""``bsst margin``: the boundary of one impairment by bisection, within a few dozen cells.
+"""Covers bridge.sweep.margin.
+
+``bsst margin``: the boundary of one impairment by bisection, within a few dozen cells.
 
 The figures are the README's (docs/figures.md, "A bad link"): the sine mission's BS-ST loop
 holds a 3-D RMS under 10 cm up to 36 ms of equal delay both ways, and up to 57 ms with
@@ -18,6 +20,8 @@ import pytest
 from bridge import simulate
 from missions import Mission, Sine
 from params import dump_toml
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 ROOT = Path(__file__).resolve().parents[1]
 SHORT = Mission(Sine(), duration_s=6.0, name="short")  # the raw estimator's RMS: 2.9 cm at noise 1, 8.1 cm at 2

@@ -1,4 +1,6 @@
-"""The vehicle's parameters and flight modes (issue 14), without a ground-station program.
+"""Covers bridge.autopilot.params, bridge.mavlink.modes and bridge.nodes.vehicle.
+
+The vehicle's parameters and flight modes (issue 14), without a ground-station program.
 
 The pure parts (bridge.autopilot.params, bridge.mavlink.modes) on their own; then ``bsst vehicle`` as a
 real process spoken to by a pymavlink ground station over UDP on 127.0.0.1 (the parameter
@@ -48,6 +50,8 @@ from bridge.session import instance_slot, sitl
 from missions import Mission, Sine
 from params import ConfigError
 from tests.sitlkit import ENV, ROOT, Proc
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 BLACKOUT = {"blackouts": [[15.0, 2.0]]}
 

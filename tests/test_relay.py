@@ -1,4 +1,6 @@
-"""The real-time relay (bridge.nodes.relay) with real UDP sockets on 127.0.0.1."""
+"""Covers bridge.nodes.relay.
+
+The real-time relay (bridge.nodes.relay) with real UDP sockets on 127.0.0.1."""
 
 from __future__ import annotations
 
@@ -19,6 +21,8 @@ import pytest
 from bridge.link.model import LinkConfig, LinkSettings
 from bridge.nodes.relay import Relay, parse_address
 from tests.waiting import wait_for
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 ROOT = Path(__file__).resolve().parent.parent
 STAMP = struct.Struct("<dI")

@@ -1,4 +1,6 @@
-"""The relay forwards only between its two ends (issue 11, finding 3): real ``bsst relay``
+"""Covers bridge.nodes.relay.
+
+The relay forwards only between its two ends (issue 11, finding 3): real ``bsst relay``
 processes and a real ``bsst sitl --realtime --delay 20`` flight, real UDP on 127.0.0.1, real
 pymavlink frames from a stranger.
 
@@ -15,6 +17,7 @@ import socket
 from pathlib import Path
 
 import numpy as np
+import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.core.wire import state_to_odometry
@@ -23,6 +26,8 @@ from tests.hostile import session_thread
 from tests.sitlkit import Proc, csv_rows
 from tests.test_relay import udp
 from tests.waiting import wait_for
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 FAR_FUTURE_USEC = 10**12  # 11.6 days: the controller would call its mission flown at once
 READY = re.compile(r"listening on ([\d.]+):(\d+) -> [\d.]+:\d+ from ([\d.]+):(\d+)")

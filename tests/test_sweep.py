@@ -1,4 +1,6 @@
-"""``bsst sweep`` / ``bsst report``: real process pools, a real SIGKILL, a real Dask cluster.
+"""Covers bridge.sweep.
+
+``bsst sweep`` / ``bsst report``: real process pools, a real SIGKILL, a real Dask cluster.
 
 Most tests fly a 6 s sine mission (RMS window t >= 3 s) so the whole file stays well under
 a minute on two cores.
@@ -30,6 +32,8 @@ from bridge.sweep.executors import run_cell
 from bridge.sweep.grid import cells as grid_cells
 from missions import Mission, Sine
 from params import ConfigError, dump_toml
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 ROOT = Path(__file__).resolve().parent.parent
 SHORT = Mission(Sine(), duration_s=6.0, name="short")
