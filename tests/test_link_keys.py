@@ -1,4 +1,4 @@
-"""Every ``[link]`` key has its flag, one range, and a line in docs/usage.md (a meta-test, as
+"""Every ``[link]`` key has its flag, one range, and a line in the README (a meta-test, as
 python-control's kwargs_test walks its functions' keywords).
 
 The keys are the link model's own tables (:data:`bridge.link.model.LINK_KEYS`); the test
