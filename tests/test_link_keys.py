@@ -7,7 +7,7 @@ The keys are the link model's own tables (:data:`bridge.link.model.LINK_KEYS`); 
 checks first that those tables are the whole of what ``link_from_table`` reads. For each
 key: a ``bsst`` flag sets it (``bsst sim``'s parser, read back by ``link_table_from_args``);
 for a number, the mission loader and the flag accept the same bounds and refuse the same
-values just outside them; and a line of README.md names the key and its flag.
+values just outside them; and a line of docs/usage.md (the front page's reference) names the key and its flag.
 """
 
 from __future__ import annotations
@@ -146,7 +146,7 @@ def test_the_seed_and_the_blackouts_have_one_range() -> None:
 
 
 @pytest.mark.parametrize("key", LINK_KEYS)
-def test_every_key_has_a_readme_line(key: str) -> None:
+def test_every_key_has_a_line_in_the_usage_page(key: str) -> None:
     flag = flag_of(key)
-    lines = [ln for ln in (ROOT / "README.md").read_text().splitlines() if f"`{key}`" in ln and flag in ln]
-    assert lines, f"README.md has no line naming [link] key `{key}` with its flag {flag}"
+    lines = [ln for ln in (ROOT / "docs/usage.md").read_text().splitlines() if f"`{key}`" in ln and flag in ln]
+    assert lines, f"docs/usage.md has no line naming [link] key `{key}` with its flag {flag}"

@@ -320,15 +320,15 @@ def test_a_ground_stations_hold_ends_a_lockstep_flight_named(tmp_path):
 
 
 @pytest.mark.parametrize("spec", PARAMS, ids=lambda s: s.name)
-def test_every_parameter_has_its_range_in_the_readme_and_the_ground_station_page(spec):
-    """A meta-test, as tests/test_link_keys.py for ``[link]``: the README's row names the parameter
+def test_every_parameter_has_its_range_in_the_usage_and_the_ground_station_pages(spec):
+    """A meta-test, as tests/test_link_keys.py for ``[link]``: docs/usage.md's row names the parameter
     and its range (or its choices), and so does docs/ground-station.md."""
     def shown(v: float) -> str:
         return f"{v:g}".replace("-", "−")
 
     want = ([f"{shown(v)} {a}" for v, a in spec.choices.items()] if spec.choices
             else [f"{shown(spec.lo)}–{shown(spec.hi)}"])
-    for page in ("README.md", "docs/ground-station.md"):
+    for page in ("docs/usage.md", "docs/ground-station.md"):
         rows = [ln for ln in (ROOT / page).read_text().splitlines() if ln.startswith(f"| `{spec.name}` |")]
         assert rows, f"{page} has no row for {spec.name}"
         for w in want:
