@@ -32,8 +32,6 @@ NO_DOCSTRING = {"bridge/__main__.py"}  # ``python -m bridge``: three lines that 
 # being split in issue 21; must be empty. Paths of modules over MAX_MODULE_LINES, and file::function of
 # functions over MAX_FUNCTION_LINES.
 KNOWN_OVER = {
-    "bridge/batch.py",
-    "bridge/batch.py::fly",
     "bridge/cli/commands.py",
     "bridge/cli/flags.py",
     "bridge/link/model.py",
@@ -41,29 +39,9 @@ KNOWN_OVER = {
     "bridge/nodes/offboard.py",
     "bridge/nodes/vehicle.py",
     "bridge/session/__init__.py",
-    "controller/batch.py::_backstepping",
 }
 # being written in issue 21; must be empty. Modules whose docstring has no ports block yet.
-KNOWN_WITHOUT_PORTS = {
-    "controller/__init__.py",
-    "controller/actuation.py",
-    "controller/bsst.py",
-    "controller/gains.py",
-    "controller/jets.py",
-    "controller/law.py",
-    "controller/link_guard.py",
-    "controller/nominal.py",
-    "controller/pid.py",
-    "controller/power.py",
-    "controller/predict.py",
-    "controller/supertwisting.py",
-    "plant/effects.py",
-    "plant/integrate.py",
-    "plant/model.py",
-    "plant/profiles.py",
-    "plant/quadrotor.py",
-    "plant/rotors.py",
-}
+KNOWN_WITHOUT_PORTS: set[str] = set()
 
 
 def modules(root: Path = ROOT) -> Iterator[tuple[str, str, ast.Module]]:

@@ -15,6 +15,7 @@ compiled caller names it); the pure packages themselves never import numba.
 
 from __future__ import annotations
 
+import numpy as np
 from numba import njit
 from numba.extending import register_jitable
 
@@ -56,21 +57,21 @@ level_wrench = njit(cache=True)(failsafe.level_wrench)
 
 
 @njit(cache=True, inline="always")
-def column(X, j):  # pragma: no cover
+def column(X: np.ndarray, j: int) -> tuple[float, ...]:  # pragma: no cover
     """The 12 states of cell j of X [12, n] as a tuple (eq. 7 order)."""
     return (X[0, j], X[1, j], X[2, j], X[3, j], X[4, j], X[5, j], X[6, j], X[7, j], X[8, j], X[9, j], X[10, j],
             X[11, j])
 
 
 @njit(cache=True, inline="always")
-def put_column(X, j, v):  # pragma: no cover
+def put_column(X: np.ndarray, j: int, v: tuple[float, ...]) -> None:  # pragma: no cover
     """Write the 12-tuple v into column j of X [12, n]."""
     for i in range(12):
         X[i, j] = v[i]
 
 
 @njit(cache=True, inline="always")
-def sample(ref, r):  # pragma: no cover
+def sample(ref: np.ndarray, r: int) -> tuple[tuple[float, ...], ...]:  # pragma: no cover
     """The reference sample of column r of ref [4, 5, n]: four tuples (x, y, z, psi) of value and 4 derivatives."""
     return ((ref[0, 0, r], ref[0, 1, r], ref[0, 2, r], ref[0, 3, r], ref[0, 4, r]),
             (ref[1, 0, r], ref[1, 1, r], ref[1, 2, r], ref[1, 3, r], ref[1, 4, r]),
