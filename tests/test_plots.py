@@ -68,6 +68,15 @@ def _open(figs: dict) -> Iterator[tuple[str, object]]:
             plt.close(fig)
 
 
+def _only(trace: dict, name: str) -> object:
+    """One of a trace's figures (the others closed at once)."""
+    figs = figures(trace)
+    keep = figs.pop(name)
+    for fig in figs.values():
+        plt.close(fig)
+    return keep
+
+
 def _data_axes(fig) -> list:
     return [ax for ax in fig.axes if ax.lines or ax.images or ax.collections]
 
@@ -113,7 +122,7 @@ def _check_legends(name: str, fig) -> int:
 
 
 def test_every_axis_label_carries_its_unit(clean: dict, estimated: dict) -> None:
-    for name, fig in _open(figures(clean, "short") | {"estimate": figures(estimated)["estimate"]}):
+    for name, fig in _open(figures(clean, "short") | {"estimate": _only(estimated, "estimate")}):  # 7 at once
         for ax in _data_axes(fig):
             assert any(u in ax.get_ylabel() for u in UNIT), (name, ax.get_ylabel())
             if ax.name != "3d" and any(t.get_visible() and t.get_text() for t in ax.get_xticklabels()):
@@ -133,9 +142,10 @@ def test_every_axis_label_carries_its_unit(clean: dict, estimated: dict) -> None
 def test_legends_are_inside_the_figure_and_off_the_data(clean: dict, cut: tuple, estimated: dict) -> None:
     trace, spans = cut
     n = 0
-    for name, fig in _open(figures(clean) | {f"{k} (cut)": f for k, f in figures(trace, "cut", spans).items()}
-                           | {"estimate": figures(estimated)["estimate"]}):
-        n += _check_legends(name, fig)
+    for build in (lambda: figures(clean), lambda: {f"{k} (cut)": f for k, f in figures(trace, "cut", spans).items()},
+                  lambda: {"estimate": _only(estimated, "estimate")}):
+        for name, fig in _open(build()):
+            n += _check_legends(name, fig)
     assert n >= 20  # positions, errors (cut), angles x3, inputs, path3d, estimate x7, ...
 
 
@@ -158,7 +168,7 @@ def test_inputs_show_each_step_of_the_last_tenth_of_a_second(clean: dict) -> Non
     control step, and the realised input held (a step line) in another style."""
     t = clean["t"]
     last = t >= t[-1] - ZOOM_S
-    for _, fig in _open({"inputs": figures(clean)["inputs"]}):
+    for _, fig in _open({"inputs": _only(clean, "inputs")}):
         zooms = fig.axes[1::2]
         assert len(zooms) == 4
         for ax, u in zip(zooms, ("u1", "u2", "u3", "u4"), strict=True):
@@ -174,7 +184,7 @@ def test_inputs_show_each_step_of_the_last_tenth_of_a_second(clean: dict) -> Non
 
 
 def test_path3d_tick_labels_do_not_overlap(clean: dict) -> None:
-    for _, fig in _open({"path3d": figures(clean)["path3d"]}):
+    for _, fig in _open({"path3d": _only(clean, "path3d")}):
         r = fig.canvas.get_renderer()
         ax = fig.axes[0]
         for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
@@ -211,7 +221,7 @@ def test_run_spans_end_a_failsafe_where_the_vehicle_leaves_it() -> None:
 
 
 def test_estimate_error_panels_have_time_and_nees_skips_t0(estimated: dict) -> None:
-    for _, fig in _open({"estimate": figures(estimated)["estimate"]}):
+    for _, fig in _open({"estimate": _only(estimated, "estimate")}):
         errors = [ax for ax in fig.axes if ax.get_ylabel().startswith("error ")]
         assert len(errors) == 6 and errors[-1].get_xlabel() == "t [s]"
         assert all(ax.get_shared_x_axes().joined(ax, errors[-1]) for ax in errors)
