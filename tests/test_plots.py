@@ -1,15 +1,17 @@
-"""The figures, read as matplotlib objects (not pixels): every axis label has its unit, legends sit inside the
-figure and off the data (checked in display coordinates after a draw), the dpi and size are the stated ones,
+"""Covers bridge.record.plots, bridge.record.linkplots and bridge.sweep.report: the figures.
+
+Read as matplotlib objects (not pixels): every axis label has its unit, legends sit inside the figure and
+off the data (checked in display coordinates after a draw), the dpi and size are the stated ones,
 blackouts and failsafes are marked, the inputs' close-up shows each control step, the 3-D path's tick labels
 do not overlap, the estimate's NEES axis is not stretched by its t = 0 sample, a lossless link trace says so,
-heat maps have readable text and a colour scale per law, and a sweep with a plug-in law writes its maps.
+heat maps have readable text and a colour scale per law (a sweep with a plug-in law writing its maps, as
+real processes, is in test_sweep.py).
 """
 
 from __future__ import annotations
 
 import os
 import struct
-import subprocess
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -24,7 +26,6 @@ from bridge.link.trace import read_trace
 from bridge.record.linkplots import link_trace_figure
 from bridge.record.plots import DPI, ZOOM_S, Span, figures, make_plots, run_spans
 from bridge.record.runlog import blackout_windows
-from bridge.sweep import read_cells
 from bridge.sweep.report import HEAT_DPI, HEAT_TEXT_PT, controller_files, heat_map_figure, pair_title
 from missions import Mission, Sine
 
@@ -289,30 +290,3 @@ def test_file_names_of_laws_are_safe_and_unique() -> None:
     assert len(set(names.values())) == len(names)
     for v in names.values():
         assert v and "/" not in v and not v.startswith(".") and v == os.path.basename(v)
-
-
-def test_a_sweep_with_a_plug_in_law_writes_its_maps(tmp_path: Path) -> None:
-    """``bsst sweep ... --controller bsst,examples/my_law.py:MyLaw`` and ``bsst report`` on it, as real processes."""
-    mission = tmp_path / "short.toml"
-    mission.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 3.0"))
-    out = tmp_path / "sweep"
-    env = dict(os.environ, MPLBACKEND="Agg")
-
-    def bsst(*args: str) -> subprocess.CompletedProcess[str]:
-        return subprocess.run([PYTHON, "-m", "bridge", *args], cwd=ROOT, env=env, capture_output=True, text=True,
-                              timeout=300)
-
-    r = bsst("sweep", str(mission), "--controller", "bsst,examples/my_law.py:MyLaw", "--delay", "0,10",
-             "--jobs", "2", "--out", str(out))
-    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
-    maps = {"map_delay_loss.png", "map_delay_loss_bsst.png", "map_delay_loss_examples-my_law-py-MyLaw.png"}
-    assert maps <= {p.name for p in out.iterdir()}
-    report = (out / "report.md").read_text()
-    assert all(f"({m})" in report for m in maps) and "## delay_ms (at loss_pct = 0 %)" in report
-    assert " x " not in "".join(line for line in report.splitlines() if line.startswith("## "))
-    for m in maps:
-        (out / m).unlink()
-    r = bsst("report", str(out))
-    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
-    assert maps <= {p.name for p in out.iterdir()} and (out / "report.md").read_text() == report
-    assert {r["controller"] for r in read_cells(out / "cells.csv")} == {"bsst", "examples/my_law.py:MyLaw"}

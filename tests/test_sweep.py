@@ -532,3 +532,30 @@ def test_a_sweep_file_declares_the_vehicle_axes(tmp_path: Path, mission_file: Pa
         ("ekf", 0.0, ("estimator", "noise")), ("ekf", 2.0, ("estimator", "noise"))]
     kept = Grid(estimator=("truth", "raw"), noise=(1.0,))  # the mission's own values: no override, the same flight
     assert [c.sensing for c in grid_cells(SHORT, kept)] == [(), ("estimator",)]
+
+
+def test_a_sweep_with_a_plug_in_law_writes_its_maps(tmp_path: Path) -> None:
+    """``bsst sweep ... --controller bsst,examples/my_law.py:MyLaw`` and ``bsst report`` on it, as real processes."""
+    mission = tmp_path / "short.toml"
+    mission.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 3.0"))
+    out = tmp_path / "sweep"
+    env = dict(os.environ, MPLBACKEND="Agg")
+
+    def bsst(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, "-m", "bridge", *args], cwd=ROOT, env=env, capture_output=True,
+                              text=True, timeout=300)
+
+    r = bsst("sweep", str(mission), "--controller", "bsst,examples/my_law.py:MyLaw", "--delay", "0,10",
+             "--jobs", "2", "--out", str(out))
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
+    maps = {"map_delay_loss.png", "map_delay_loss_bsst.png", "map_delay_loss_examples-my_law-py-MyLaw.png"}
+    assert maps <= {p.name for p in out.iterdir()}
+    report = (out / "report.md").read_text()
+    assert all(f"({m})" in report for m in maps) and "## delay_ms (at loss_pct = 0 %)" in report
+    assert " x " not in "".join(line for line in report.splitlines() if line.startswith("## "))
+    for m in maps:
+        (out / m).unlink()
+    r = bsst("report", str(out))
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
+    assert maps <= {p.name for p in out.iterdir()} and (out / "report.md").read_text() == report
+    assert {r["controller"] for r in read_cells(out / "cells.csv")} == {"bsst", "examples/my_law.py:MyLaw"}
