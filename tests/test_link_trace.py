@@ -512,3 +512,46 @@ def test_sweep_takes_the_trace_flags_and_refuses_a_swept_loss_over_a_trace(tmp_p
     assert p.returncode == 0, p.stderr
     flown = tomllib.loads((tmp_path / "s2" / "mission.toml").read_text())
     assert flown["link"]["down"]["trace"] == str(f)
+
+
+# -- issue 22, defect 7: bsst link fit writes only what the link model loads ------------------------------------------
+def test_fit_of_outages_past_the_blackout_ranges_writes_a_profile_bsst_loads(tmp_path: Path) -> None:
+    """A trace (rows every 100 s) with an outage from 500 s lasting 1.2e6 s and one starting at 2e6 s: the
+    blackouts the model takes start by 1e6 s and last at most 1e6 s; the fit warns, and its profile loads."""
+    t = np.arange(0.0, 2.5e6, 100.0)
+    lost = ((t >= 500.0) & (t < 1.2e6 + 500.0)) | ((t >= 2e6) & (t < 2.1e6))
+    rows = [(float(x), None if gone else 20.0, None) for x, gone in zip(t, lost, strict=True)]
+    f = tmp_path / "long.csv"
+    f.write_text(trace_text(rows))
+    p = bsst("link", "fit", str(f), "--out", str(tmp_path / "long.toml"))
+    assert p.returncode == 0, p.stderr
+    assert "cut to 1e+06 s" in p.stderr and "at 2e+06 s left out" in p.stderr, p.stderr
+    prof = load_link_profile(str(tmp_path / "long.toml"))
+    s = link_from_table(prof.link, str(prof.path))
+    assert s.up.blackouts == ((500.0, 1e6),) and s.up.delay_ms == 20.0
+    assert "# clamped to the model's ranges: " in (tmp_path / "long.toml").read_text()
+
+
+def test_fit_of_bursts_longer_than_the_model_takes_is_clamped_and_loads() -> None:
+    """Loss runs of 2.5e6 packets (burst_len over the model's 1e6) and a loss fraction that rounds to 100 %:
+    the table keeps burst_len and loss_pct within what the loader takes, and the loader takes it."""
+    from bridge.link.fit import fit_records, loadable  # local: only these tests fit records directly
+
+    n = 6_000_000
+    lost = np.zeros(n, dtype=bool)
+    lost[1000:2_501_000] = True
+    lost[3_000_000:5_500_000] = True
+    t = np.arange(n) * 1e-3
+    rec = make_records(t, np.where(lost, np.nan, 0.02))
+    fit = fit_records(rec, blackout_after_s=1e6)  # no run is an outage: every loss is a burst
+    assert fit.loss.burst_len > 1e6 and fit.loss.model == "gilbert-elliott"
+    table = fit.table()
+    assert table["burst_len"] == 1e6 and any("burst_len" in n for n in fit.clamped())
+    link_from_table(loadable({"both": fit}, "t"), "t")  # what bsst link fit checks before it writes
+    nearly_all = np.ones(3_000_000, dtype=bool)
+    nearly_all[[5, 6, 2_000_000]] = False  # 99.9999 % lost, in two runs: rounds to 100.0 at 4 decimals
+    rec = make_records(np.arange(len(nearly_all)) * 1e-3, np.where(nearly_all, np.nan, 0.02))
+    fit = fit_records(rec, blackout_after_s=1e6)
+    table = fit.table()
+    assert table["loss_pct"] < 100.0 and table.get("burst_len", 0.0) <= 1e6
+    link_from_table(table, "t")
