@@ -36,13 +36,6 @@ from bridge.link.config import (
     trace_clash,
 )
 from bridge.link.impairment import (
-    _D_DUP,
-    _D_DUP_JITTER,
-    _D_GE_START,
-    _D_HOLD,
-    _D_JITTER,
-    _D_LOSS,
-    _NORMAL_BOUND_SIGMAS,
     FRAME_BYTES,
     Delivery,
     Fate,
@@ -68,8 +61,7 @@ from params import ConfigError, Table
 __all__ = [  # re-exported: the link model's one import (absolute_link_paths: where a table's files are made absolute)
     "BLACKOUT_DURATION_RANGE_S", "BLACKOUT_START_RANGE_S", "COMMAND_LAG_RANGE_MS", "DIRECTION_KEYS", "DIRECTIONS",
     "FRAME_BYTES", "GUARD_RANGES", "JITTER_KINDS", "LINK_KEYS", "LO_OPEN", "NUMBER_RANGES", "SEED_RANGE",
-    "TRACE_EXCLUSIVE", "_D_DUP", "_D_DUP_JITTER", "_D_GE_START", "_D_HOLD", "_D_JITTER", "_D_LOSS",
-    "_NORMAL_BOUND_SIGMAS", "Delivery", "Fate", "FateStream", "LinkConfig", "LinkImpairment", "LinkSettings",
+    "TRACE_EXCLUSIVE", "Delivery", "Fate", "FateStream", "LinkConfig", "LinkImpairment", "LinkSettings",
     "LinkStats", "absolute_link_paths", "burst_problem", "fates", "link_from_table", "merge_link_tables",
     "stream_key", "trace_clash", "uniform",
 ]
