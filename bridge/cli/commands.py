@@ -151,6 +151,8 @@ def cmd_link_fit(args: argparse.Namespace) -> int:
     tf = read_trace(args.trace)
     fits = fit_trace(tf, args.blackout_after)
     text = fit_toml(fits, str(Path(args.trace).absolute()))
+    for d, note in ((d, n) for d, f in fits.items() for n in f.clamped()):  # what the model's ranges cut
+        print(f"bsst link fit: warning: {d}: {note}", file=sys.stderr)
     if out is None:
         sys.stdout.write(text)
         return EXIT_OK
