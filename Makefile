@@ -1,12 +1,13 @@
 # Two entry points, both creating or reusing .venv with nothing but Python 3.11+:
 #   make demo   fly the default mission (the paper's sine scenario) end to end
 #   make test   run the test suite
+#   make test-fast  the pure tests only (no processes, no sockets): under a minute
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint bench clean
+.PHONY: demo test test-fast lint bench clean
 
 $(STAMP): pyproject.toml
 	@$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "Python 3.11+ needed, found " + sys.version.split()[0]'
@@ -23,6 +24,10 @@ demo: $(STAMP)
 # (~0.12 s a process) and pytest rewrites every test module again in each worker
 test: $(STAMP)
 	env -u PYTHONDONTWRITEBYTECODE $(BIN)/python -m pytest
+
+# the test modules marked `pytestmark = pytest.mark.process` start processes or open sockets; the rest is pure
+test-fast: $(STAMP)
+	env -u PYTHONDONTWRITEBYTECODE $(BIN)/python -m pytest -m "not process"
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

@@ -39,14 +39,14 @@ sys.path.insert(0, str(ROOT))
 import numpy as np  # noqa: E402
 
 from bridge.batch import fly_batch  # noqa: E402
+from bridge.batch.control import BatchController  # noqa: E402
+from bridge.batch.plant import BatchPlant  # noqa: E402
 from bridge.core.flight import prepare  # noqa: E402
 from bridge.link.plan import Clocks, plan_links  # noqa: E402
 from bridge.loop import fly  # noqa: E402
 from bridge.sweep import Grid, sweep  # noqa: E402
 from bridge.sweep.grid import cell_overrides, cells  # noqa: E402
-from controller.batch import BatchController  # noqa: E402
 from missions import load_mission  # noqa: E402
-from plant.batch import BatchPlant  # noqa: E402
 
 DELAYS = tuple(float(d) for d in range(0, 20, 2))  # ms, 10 values
 LOSSES = tuple(float(v) for v in range(0, 50, 5))  # %, 10 values
@@ -100,7 +100,7 @@ def process_sweep(mission: Any) -> dict[str, Any]:
     c0 = time.process_time()
     probe = cells(mission, SUBSET)[:SCALAR_PROBE]
     for c in probe:
-        fly(prepare(mission, **cell_overrides(c)), plots=False)
+        fly(prepare(mission, cell_overrides(c)), plots=False)
     per_cell = (time.process_time() - c0) / len(probe)
     return {"cells": len(rows), "wall_s": wall, "cells_per_s": len(rows) / wall, "scalar_cpu_s_per_cell": per_cell}
 
@@ -121,7 +121,6 @@ def step_parts_ms(mission: Any, n: int, repeats: int) -> dict[str, float]:
         for _ in range(50):
             for _ in range(f.substeps):
                 plant.step()
-            plant.resync()
         plant_ms.append((time.perf_counter() - t0) / 50 * 1e3)
         t0 = time.perf_counter()
         for _ in range(50):

@@ -56,8 +56,9 @@ from bridge.mavlink.modes import (  # noqa: E402
 from bridge.mavlink.receive import addressed_elsewhere  # noqa: E402
 from bridge.session import sitl  # noqa: E402
 from missions import MISSION_DIR, Mission, Sine, load_mission  # noqa: E402
-from tests.hostile import MIN_STEP, Sender, Station, fly_fuzzed, session_thread, udp_queue, wait_until  # noqa: E402
+from tests.hostile import MIN_STEP, Sender, Station, fly_fuzzed, session_thread, udp_queue  # noqa: E402
 from tests.sitlkit import csv_rows  # noqa: E402
+from tests.waiting import wait_for  # noqa: E402
 
 # -- the command surface (issue 11): valid frames of every message id, from strangers and a GCS ------
 F32_MAX = 3.4028234663852886e38
@@ -228,7 +229,7 @@ def _to_gcs_link(gcs: Station, frames: list[bytes], rate_hz: float, timeout: flo
         due = t0 + i / rate_hz
         if time.monotonic() < due:
             gcs.poll()
-            wait_until(lambda due=due: time.monotonic() >= due, timeout, "the GCS schedule", poll_s=0.0005)
+            wait_for(lambda due=due: time.monotonic() >= due, timeout, "the GCS schedule", poll_s=0.0005)
         gcs.send_raw(frame)
     gcs.poll()
 
@@ -255,7 +256,7 @@ def fly_commands(mission: Mission, out: Path, frames: int, seed: int = 11, sourc
             grounded = [fuzz.make(i, GCS_IDS, gcs=True) for i in range(ground)]
             strange = [fuzz.make(i, fuzz.stranger_ids()) for i in range(frames - ground)]
             vcsv = out / "vehicle.csv"
-            wait_until(lambda: csv_rows(vcsv) > MIN_STEP or not th.is_alive(), 60, "the flight starting", poll_s=0.01)
+            wait_for(lambda: csv_rows(vcsv) > MIN_STEP or not th.is_alive(), 60, "the flight starting")
             gcs.wait(lambda m: True, 10, "a datagram on the GCS link")
             failed: list[BaseException] = []
 
@@ -275,7 +276,8 @@ def fly_commands(mission: Mission, out: Path, frames: int, seed: int = 11, sourc
             gcs_port = gcs.dest[1]
             if udp_queue(gcs_port) is None:
                 raise AssertionError(f"the vehicle's GCS socket 127.0.0.1:{gcs_port} is not in /proc/net/udp")
-            wait_until(lambda: (udp_queue(gcs_port) or (0, 0))[0] == 0, 30, "the vehicle draining its GCS socket")
+            wait_for(lambda: (udp_queue(gcs_port) or (0, 0))[0] == 0, 30, "the vehicle draining its GCS socket",
+                     poll_s=0.001)
             drops = to_link.drained(timeout=120) + (udp_queue(gcs_port) or (0, 0))[1]
             elapsed = time.monotonic() - t0
             flown = csv_rows(vcsv)
@@ -286,7 +288,7 @@ def fly_commands(mission: Mission, out: Path, frames: int, seed: int = 11, sourc
                 gcs.poll()
                 return time.monotonic() > quiet
 
-            wait_until(settled, 10, "the last answers")
+            wait_for(settled, 10, "the last answers", poll_s=0.001)
             got = answers(gcs)
         finally:
             to_link.close()

@@ -13,6 +13,10 @@
 
 :class:`Controller` ties a law to an actuation: ``step(t, state, ref)`` returns a
 :class:`Command`. See ``docs/law.md`` for the law as implemented and every deviation from the paper.
+
+In:  a law name or factory, the nominal model, the gains, the control rate (Hz); each step the time (s), the
+     state (eq. 7: m, m/s, rad, rad/s), the reference sample (m, rad and derivatives)
+Out: a :class:`Command`: the demanded and realisable wrench (N) and the normalised command
 """
 
 from __future__ import annotations

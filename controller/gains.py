@@ -2,6 +2,9 @@
 
 Defaults are the set of docs/law.md, "Gains", known to fly both scenarios on the paper and
 x500 profiles. The super-twisting gains are checked against eq. (23) on construction.
+
+In:  a mission's ``[gains]`` table (c 1/s-ish, alpha, eps in each loop's units, k1, k2, L, PID gains)
+Out: a frozen :class:`Gains`, eq. (23) checked
 """
 
 from __future__ import annotations

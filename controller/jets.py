@@ -7,6 +7,9 @@ derivatives by jets") instead of differencing samples.
 
 Derivative k of a result depends only on derivatives <= k of its inputs, so a jet whose
 top derivative is unknown (set to 0) still gives exact lower derivatives downstream.
+
+In:  jets (v, v', v'', v''') of any quantity, in its own units and per second
+Out: the jets of sums, products, quotients, compositions (sin, cos, sqrt, atan2)
 """
 
 from __future__ import annotations

@@ -20,6 +20,10 @@ and it exposes ``desired`` = (φ_d, θ_d) in rad, the attitude its outer loop as
 goes to the trace. ``bsst``, ``smc`` and ``pid`` are the built-in laws; any other class that
 fits is flown with ``--controller path/to/file.py:ClassName`` or
 ``--controller package.module:ClassName`` (``examples/my_law.py`` is a template).
+
+In:  a law spec (built-in name, ``file.py:Class``, ``module:Class``) or factory; the nominal model, gains,
+     control rate (Hz)
+Out: a built law that fits :class:`Law` (units in the list above), or a one-line ConfigError
 """
 
 from __future__ import annotations

@@ -25,6 +25,9 @@ With an assumed command latency ``lag_s`` > 0 as well, each command is taken to 
 controls the state predicted at t + lag_s towards the reference at t + lag_s (a Smith
 predictor over the whole loop; the offboard process can set ``lag_s`` from its TIMESYNC
 estimate of the up-link delay).
+
+In:  the age (s) of the newest state the controller holds, the guard's thresholds ``stale_s``, ``stop_s`` (s)
+Out: what to do with it: track, hold the integrators, stop commanding, re-arm
 """
 
 from __future__ import annotations

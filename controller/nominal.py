@@ -1,4 +1,8 @@
-"""The controller's own nominal model of the vehicle (it never reads the plant's code)."""
+"""The controller's own nominal model of the vehicle (it never reads the plant's code).
+
+In:  a plant profile (or anything with its fields: kg, m/s^2, kg m^2, m, N s^2, N m s^2, rad/s, N)
+Out: the law's :class:`Nominal` model and eq. (6)'s constant factors (:class:`Coefficients`)
+"""
 
 from __future__ import annotations
 

@@ -13,6 +13,10 @@ no drag, no disturbance, no motor lag, no ground, and the realisable wrench take
 exactly applied. Everything else the plant does is prediction error that the next state
 corrects. It is a few lines of RK4 at the control period, which is all it needs (the
 horizon is a few periods).
+
+In:  the nominal model, the newest state (eq. 7: m, m/s, rad, rad/s) and its stamp (s), the commands sent
+     (time s, realisable wrench N, omega_d rad/s), the time to predict to (s)
+Out: the state carried to that time through the nominal model (RK4 steps of at most ``dt_max`` s)
 """
 
 from __future__ import annotations

@@ -1,5 +1,12 @@
 """Missions: the paper's scenarios as TOML files and the trajectory references they define.
 
+In:  a mission TOML file (``missions/*.toml`` or a path), or a mission's fields in Python;
+Out: a validated :class:`Mission` and its :class:`Reference` (x, y, z m and psi rad against t s,
+     with four derivatives). Pure: no sockets, no processes; the file is read by :mod:`params`
+
+- :mod:`missions.mission`     the mission file: load, validate, the :class:`Mission`
+- :mod:`missions.references`  the trajectories: set-points, steps, sine, waypoints
+
 Scripting::
 
     from missions import Mission, Sine, Step, Setpoint

@@ -1,5 +1,13 @@
 """Mission files: load, validate, and the :class:`Mission` they describe.
 
+In:  a mission TOML file's path (read by :func:`params.load_toml`) or its parsed table, or the
+     fields given in Python: a trajectory, ``duration_s`` (s), ``rate_hz`` and ``physics_hz`` (Hz),
+     ``start`` (x, y, z in m, psi in rad; paper frame NWU, z up), the profile, law and seed names,
+     and the raw tables of the other parts
+Out: a frozen, validated :class:`Mission` (its trajectory a :class:`~missions.references.Reference`);
+     a bad value as a :class:`params.ConfigError` naming the file and the key; ``to_dict`` the
+     TOML-ready table a run's ``mission.toml`` holds
+
 A mission names its trajectory, duration, vehicle profile, controller and gains, rates,
 effects, link impairment and seed. The tables ``[gains]``, ``[effects]``, ``[link]``,
 ``[failsafe]``, ``[sensors]``, ``[estimator]`` and ``[params]`` belong to other parts (controller, plant, bridge):

@@ -1,5 +1,10 @@
 """Trajectory references with analytic derivatives up to the 4th.
 
+In:  a reference's parameters (set-points and waypoints: x, y, z in m, psi in rad, each with its time
+     in s; the sine's amplitude m, omega rad/s, climb m/s, z0 m, psi rad), then a time t (s)
+Out: ``sample(t)``: for x, y, z (m) and psi (rad) each (value, 1st, 2nd, 3rd, 4th derivative)
+     (m/s .. m/s⁴, rad/s .. rad/s⁴); ``change_times()`` (s); ``to_dict()`` the ``[trajectory]`` table
+
 Every reference maps time t (s) to four axes (x, y, z, psi), each a tuple
 (value, 1st, 2nd, 3rd, 4th derivative) in the paper's frame (z up, psi counter-clockwise).
 The BS-ST law needs them all: the x/y virtual controls use the reference's snap.

@@ -6,6 +6,9 @@
 - :mod:`plant.effects`    drag, external disturbance, parameter mismatch
 - :mod:`plant.profiles`   vehicle profiles (``profiles/*.toml``), validated on load
 - :mod:`plant.quadrotor`  :class:`Quadrotor`, the stateful plant that ties them together
+
+In:  a profile, effects, a seed, the physics rate (Hz)
+Out: the simulated vehicle's state (eq. 7: m, m/s, rad, rad/s), see :mod:`plant.quadrotor`
 """
 
 from plant.effects import Disturbance, Effects

@@ -1,6 +1,10 @@
 """Effects outside the paper's model, each off by default: drag, motor lag, an external
 disturbance and parameter mismatch. The controller never sees them: they are what its
 super-twisting terms must reject.
+
+In:  a mission's ``[effects]`` table (drag on/off, motor lag on/off, disturbance N and N m, Hz; mass and
+     inertia scales), a seed
+Out: :class:`Effects`, the disturbance force (N) and torque (N m) at a time (s)
 """
 
 from __future__ import annotations

@@ -4,6 +4,9 @@ The plant's state is 12 floats: tuples and a hand-unrolled combination are sever
 faster than numpy arrays of that size. This is the generic step (any f); the plant's own
 1 kHz step is :func:`plant.model.rk4_step_held`, the same arithmetic specialised for
 eq. (6) with held inputs (bit for bit equal, about twice as fast).
+
+In:  dx/dt = f(t, x), the state x, the time t and step h (s)
+Out: the state after one RK4 step
 """
 
 from __future__ import annotations

@@ -11,7 +11,13 @@ Outside the paper's model, and off unless asked for: linear drag (Table 1's k1..
 -k*v on the translation and -k*rate on the rotation) and an external force/torque.
 
 :func:`state_derivative` is eq. (6) itself; :func:`rk4_step_held` is one RK4 step of it
-with the inputs held, specialised for speed (the plant's 1 kHz step).
+with the inputs held, specialised for speed (the plant's 1 kHz step): :func:`rk4_held`, a plain-float
+function the batch engine compiles for its cells (numba, bridge.batch.kernels).
+
+In:  the state X (eq. 7: m, m/s, rad, rad/s), the inputs u1 (N), u2..u4 (N; the torques are l u), omega_d
+     (rad/s, eq. 5), the airframe's constants (:class:`RigidBody`: kg, m/s^2, kg m^2, m), the step h (s),
+     optionally an external force (N) and torque (N m)
+Out: dX/dt, or the state after one RK4 step
 """
 
 from __future__ import annotations
@@ -45,6 +51,14 @@ class RigidBody:
     l_z: float  # l / I_z
     kv: tuple[float, float, float]  # k1..k3 / m   (translational drag, 1/s)
     kw: tuple[float, float, float]  # k4..k6 / I   (rotational drag, 1/s)
+    constants: tuple[float, ...]  # what rk4_held reads (:func:`rk4_constants`)
+
+
+def rk4_constants(mass: float, gravity: float, i1: float, i2: float, i3: float, jr_x: float, jr_y: float,
+                  l_x: float, l_y: float, l_z: float, kv: tuple[float, float, float], kw: tuple[float, float, float],
+                  ixx: float, iyy: float, izz: float) -> tuple[float, ...]:
+    """The flat tuple :func:`rk4_held` reads: m, g, i1..i3, jr_x, jr_y, l_x..l_z, kv0..kv2, kw0..kw2, Ixx..Izz."""
+    return (mass, gravity, i1, i2, i3, jr_x, jr_y, l_x, l_y, l_z, *kv, *kw, ixx, iyy, izz)
 
 
 def rigid_body(
@@ -58,23 +72,15 @@ def rigid_body(
     drag: tuple[float, ...] = (0.0,) * 6,
 ) -> RigidBody:
     """Precompute the constants of eq. (6) for one airframe (drag k1..k6 in N s/m, N m s)."""
-    return RigidBody(
-        mass=mass,
-        gravity=gravity,
-        ixx=ixx,
-        iyy=iyy,
-        izz=izz,
-        i1=(iyy - izz) / ixx,
-        i2=(izz - ixx) / iyy,
-        i3=(ixx - iyy) / izz,
-        jr_x=rotor_inertia / ixx,
-        jr_y=rotor_inertia / iyy,
-        l_x=arm / ixx,
-        l_y=arm / iyy,
-        l_z=arm / izz,
-        kv=(drag[0] / mass, drag[1] / mass, drag[2] / mass),
-        kw=(drag[3] / ixx, drag[4] / iyy, drag[5] / izz),
-    )
+    i1, i2, i3 = (iyy - izz) / ixx, (izz - ixx) / iyy, (ixx - iyy) / izz
+    jr_x, jr_y = rotor_inertia / ixx, rotor_inertia / iyy
+    l_x, l_y, l_z = arm / ixx, arm / iyy, arm / izz
+    kv = (drag[0] / mass, drag[1] / mass, drag[2] / mass)
+    kw = (drag[3] / ixx, drag[4] / iyy, drag[5] / izz)
+    return RigidBody(mass=mass, gravity=gravity, ixx=ixx, iyy=iyy, izz=izz, i1=i1, i2=i2, i3=i3, jr_x=jr_x,
+                     jr_y=jr_y, l_x=l_x, l_y=l_y, l_z=l_z, kv=kv, kw=kw,
+                     constants=rk4_constants(mass, gravity, i1, i2, i3, jr_x, jr_y, l_x, l_y, l_z, kv, kw, ixx,
+                                             iyy, izz))
 
 
 def state_derivative(
@@ -134,29 +140,34 @@ def rk4_step_held(
     h: float,
     ext: tuple[Ext, Ext, Ext] | None = None,
 ) -> State:
-    """One classical RK4 step of eq. (6) over h (s), inputs and omega_d held (zero-order hold).
+    """One classical RK4 step of eq. (6) over h (s), inputs and omega_d held (zero-order hold):
+    :func:`rk4_held` with the body's constants."""
+    return rk4_held(X, u1, u2, u3, u4, omega_d, body.constants, h, ext)  # type: ignore[return-value]
+
+
+def rk4_held(X: tuple[float, ...], u1: float, u2: float, u3: float, u4: float, omega_d: float,
+             K: tuple[float, ...], h: float, ext: tuple[Ext, Ext, Ext] | None) -> tuple[float, ...]:
+    """One classical RK4 step of eq. (6) over h (s), inputs (u1 N, u2..u4 N) and omega_d (rad/s) held;
+    K = :func:`rk4_constants`; ``ext`` the external (fx, fy, fz, tx, ty, tz) at t, t + h/2 and t + h
+    (N, N m), or None.
 
     Bit for bit the step ``plant.integrate.rk4_step(f, t, X, h)`` takes with f the
     derivative of :func:`state_derivative` (same operations in the same order; tested), in
     about half the time: positions and angles never enter the derivative, so each stage
     carries only the 9 velocities, angles and rates in local floats; the input terms are
-    computed once; and no intermediate state tuple is built. ``ext`` is the external
-    (fx, fy, fz, tx, ty, tz) at t, t + h/2 and t + h (N, N m), or None.
+    computed once; and no intermediate state tuple is built. Plain floats and tuples: the batch
+    engine compiles this same function.
     """
-    m = body.mass
-    g = body.gravity
-    i1, i2, i3 = body.i1, body.i2, body.i3
-    kv0, kv1, kv2 = body.kv
-    kw0, kw1, kw2 = body.kw
+    m, g, i1, i2, i3, jr_x, jr_y, l_x, l_y, l_z, kv0, kv1, kv2, kw0, kw1, kw2, ixx, iyy, izz = K
     a = u1 / m
-    jr_x, jr_y = body.jr_x, body.jr_y
-    tx = body.l_x * u2
-    ty = body.l_y * u3
-    tz = body.l_z * u4
+    tx = l_x * u2
+    ty = l_y * u3
+    tz = l_z * u4
     x, vx, y, vy, z, vz, phi, dphi, th, dth, psi, dpsi = X
     v1, v2, v3, f, df, t, dt, p, dp = vx, vy, vz, phi, dphi, th, dth, psi, dpsi  # the stage's values
     h2 = 0.5 * h
-    k = []  # the four stage derivatives, 12 values each (eq. 7 order)
+    k1 = k2 = k3 = k4 = X  # the four stage derivatives, 12 values each (eq. 7 order)
+    stage = 0
     # (step from X to the next stage along this stage's derivative, index of its time in ext)
     for c, i in ((h2, 0), (h2, 1), (h, 1), (0.0, 2)):
         cf = cos(f)
@@ -176,14 +187,22 @@ def rk4_step_held(
             ax += e[0] / m
             ay += e[1] / m
             az += e[2] / m
-            ddf += e[3] / body.ixx
-            ddt += e[4] / body.iyy
-            ddp += e[5] / body.izz
-        k.append((v1, ax, v2, ay, v3, az, df, ddf, dt, ddt, dp, ddp))
+            ddf += e[3] / ixx
+            ddt += e[4] / iyy
+            ddp += e[5] / izz
+        k = (v1, ax, v2, ay, v3, az, df, ddf, dt, ddt, dp, ddp)
+        if stage == 0:
+            k1 = k
+        elif stage == 1:
+            k2 = k
+        elif stage == 2:
+            k3 = k
+        else:
+            k4 = k
+        stage += 1
         v1, v2, v3 = vx + c * ax, vy + c * ay, vz + c * az
         f, df, t, dt, p, dp = phi + c * df, dphi + c * ddf, th + c * dt, dth + c * ddt, psi + c * dp, dpsi + c * ddp
     h6 = h / 6.0
-    k1, k2, k3, k4 = k
     return (  # rk4_step's x + h/6 (k1 + 2 (k2 + k3) + k4), term by term: the same rounding
         x + h6 * (k1[0] + 2.0 * (k2[0] + k3[0]) + k4[0]),
         vx + h6 * (k1[1] + 2.0 * (k2[1] + k3[1]) + k4[1]),

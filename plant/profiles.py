@@ -4,6 +4,10 @@ A profile is a frozen :class:`Profile`. Built-in profiles live in ``plant/profil
 (``paper``: Table 1 with ideal wrench actuation; ``x500``: PX4's x500 with real rotors).
 A profile's ``[sensors]`` table holds named sensor sets (:mod:`plant.sensors`); a mission picks
 one and overrides its keys with :func:`sensors_from_table`.
+
+In:  a profile name or TOML (mass kg, inertias kg m^2, arm m, rotor inertia kg m^2, b N s^2, d N m s^2,
+     omega_max rad/s, actuation, limits N)
+Out: a frozen :class:`Profile`, its hover speed (rad/s) and limits u_max (N)
 """
 
 from __future__ import annotations

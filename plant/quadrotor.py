@@ -3,6 +3,10 @@
 The ground is the plane z = 0 (paper frame, z up; missions start there at rest); pass
 ``ground=False`` for free flight.
 
+In:  a profile and its effects, the physics rate (Hz), a start state (eq. 7: m, m/s, rad, rad/s); then a
+     normalised command (held) per control period
+Out: the state after each physics step, the realised wrench (N), the rotor speeds (rad/s), ground contact
+
 One object with a small interface, in the RotorPy manner: :meth:`Quadrotor.command` sets
 the actuator command (held until the next call: zero-order hold) and :meth:`Quadrotor.step`
 advances one physics step. Commands are normalised and in the paper's frame:
@@ -21,20 +25,18 @@ from plant.effects import Effects, disturbance_at
 from plant.model import RigidBody, State, rigid_body, rk4_step_held, state_derivative
 from plant.profiles import Profile
 from plant.rotors import (
+    clip,
     motor_lag_step,
     motor_speeds_from_wrench,
     signed_speed_sum,
+    wrench_command,
     wrench_from_motor_speeds,
 )
 
 AT_REST: State = (0.0,) * 12  # type: ignore[assignment]
 
 
-def _clip(v: float, lo: float, hi: float) -> float:
-    return lo if v < lo else hi if v > hi else v
-
-
-def _on_ground(X: tuple[float, ...]) -> State:
+def ground_contact(X: tuple[float, ...]) -> State:
     """Contact with the ground plane z = 0 (the start height): the vehicle rests on its legs,
     level, keeping its heading; any upward velocity is kept so it can take off again."""
     return (X[0], 0.0, X[2], 0.0, 0.0, max(X[5], 0.0), 0.0, 0.0, 0.0, 0.0, X[10], 0.0)
@@ -85,18 +87,13 @@ class Quadrotor:
         """Set the normalised actuator command (see module docstring); held until the next."""
         p = self.profile
         if p.actuation == "wrench":
-            u = (
-                _clip(c[0], 0.0, 1.0) * p.u_max[0],
-                _clip(c[1], -1.0, 1.0) * p.u_max[1],
-                _clip(c[2], -1.0, 1.0) * p.u_max[2],
-                _clip(c[3], -1.0, 1.0) * p.u_max[3],
-            )
+            u = wrench_command(c, p.u_max)
             self.realised = u
             self.omega = motor_speeds_from_wrench(u, p.thrust_coeff, p.drag_coeff)
             self._omega_d = signed_speed_sum(self.omega)
         else:
             w = p.omega_max
-            self._omega_target = tuple(_clip(ci, 0.0, 1.0) * w for ci in c)  # type: ignore[assignment]
+            self._omega_target = tuple(clip(ci, 0.0, 1.0) * w for ci in c)  # type: ignore[assignment]
             if not self.effects.motor_lag:
                 self._set_omega(self._omega_target)
 
@@ -129,7 +126,7 @@ class Quadrotor:
         u1, u2, u3, u4 = self.realised
         X = rk4_step_held(self.state, u1, u2, u3, u4, self._omega_d, self.body, h, ext)  # type: ignore[arg-type]
         if self.ground and X[4] < 0.0:
-            X = _on_ground(X)
+            X = ground_contact(X)
         self.state = X  # type: ignore[assignment]
         self.t = t + h
 

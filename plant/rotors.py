@@ -2,6 +2,11 @@
 
 Rotor numbering of eq. (4) in the '+' geometry: rotor 1 front (+x), 2 right (-y), 3 back
 (-x), 4 left (+y); rotors 2 and 4 react +z yaw torque.
+
+In:  rotor speeds (rad/s) or a wrench (u1 N; u2, u3, u4 N) or a normalised wrench command, the thrust and
+     drag factors b (N s^2), d (N m s^2), the motor time constant (s)
+Out: the wrench, the rotor speeds, omega_d (rad/s, eq. 5), the lagged speeds after a step. Plain floats:
+     the batch engine compiles these same functions (numba, bridge.batch.kernels).
 """
 
 from __future__ import annotations
@@ -9,6 +14,21 @@ from __future__ import annotations
 from math import exp, sqrt
 
 Quad = tuple[float, float, float, float]
+
+
+def clip(v: float, lo: float, hi: float) -> float:
+    return lo if v < lo else hi if v > hi else v
+
+
+def wrench_command(c: Quad, u_max: Quad) -> Quad:
+    """What a ``wrench`` profile applies for the normalised command c: u1 part in [0, 1], the others in
+    [-1, 1], times the profile's limits u_max (N)."""
+    return (
+        clip(c[0], 0.0, 1.0) * u_max[0],
+        clip(c[1], -1.0, 1.0) * u_max[1],
+        clip(c[2], -1.0, 1.0) * u_max[2],
+        clip(c[3], -1.0, 1.0) * u_max[3],
+    )
 
 
 def wrench_from_motor_speeds(omega: Quad, b: float, d: float) -> Quad:

@@ -52,7 +52,8 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID
 from bridge.session import instance_slot
-from tests.sitlkit import Proc, csv_rows, wait_for
+from tests.sitlkit import Proc, csv_rows
+from tests.waiting import wait_for
 
 MIN_STEP = 10  # the stale targets are for step 0: fuzz only once the vehicle is past this step
 KINDS: dict[str, str | None] = {
@@ -192,15 +193,6 @@ def udp_queue(port: int) -> tuple[int, int] | None:
     return None
 
 
-def wait_until(pred: Callable[[], bool], timeout: float, what: str, poll_s: float = 0.001) -> None:
-    """Poll ``pred`` until it holds, or fail naming ``what`` (every ``poll_s``)."""
-    deadline = time.monotonic() + timeout
-    while not pred():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"{what}: not within {timeout} s")
-        time.sleep(poll_s)
-
-
 class Sender:
     """Sends datagrams to 127.0.0.1:``port`` from ``sources`` sockets in turn (each its own
     source address, so none exceeds the vehicle's per-source rate), pacing on the kernel's
@@ -232,15 +224,17 @@ class Sender:
         for d in datagrams:
             if self.rate_hz and self.sent % 64 == 0:
                 due = t0 + self.sent / self.rate_hz
-                wait_until(lambda due=due: time.monotonic() >= due, timeout, "the rate's schedule", poll_s=0.0005)
+                wait_for(lambda due=due: time.monotonic() >= due, timeout, "the rate's schedule", poll_s=0.0005)
             if self.sent % 64 == 0 or len(d) > 4096:
-                wait_until(lambda d=d: self._room(2 * len(d) + 2048), timeout, "the vehicle reading its socket")
+                wait_for(lambda d=d: self._room(2 * len(d) + 2048), timeout, "the vehicle reading its socket",
+                         poll_s=0.001)
             self.socks[self.sent % len(self.socks)].sendto(d, self.dest)
             self.sent += 1
 
     def drained(self, timeout: float = 30.0) -> int:
         """Wait until the receiver has read everything; its kernel drop count."""
-        wait_until(lambda: (udp_queue(self.port) or (0, 0))[0] == 0, timeout, "the vehicle draining its socket")
+        wait_for(lambda: (udp_queue(self.port) or (0, 0))[0] == 0, timeout, "the vehicle draining its socket",
+                 poll_s=0.001)
         q = udp_queue(self.port)
         return q[1] if q else 0
 
@@ -480,7 +474,7 @@ def fly_flooded(mission: Any, out: Path, multiple: float, **kw: Any) -> tuple[An
     flood = None
     with session_thread(mission, out, realtime=True, **kw) as (n, th, result):
         try:
-            wait_until(lambda: csv_rows(out / "vehicle.csv") > 0 or not th.is_alive(), 60, "the flight starting",
+            wait_for(lambda: csv_rows(out / "vehicle.csv") > 0 or not th.is_alive(), 60, "the flight starting",
                        poll_s=0.005)
             if multiple > 0 and th.is_alive():
                 flood = Flood(LINK_PORT + n, multiple * mission.rate_hz, n + 1).start()
@@ -521,7 +515,7 @@ def fly_fuzzed(mission: Any, out: Path, datagrams: int, seed: int = 7, sources: 
             gcs.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 21)
             gcs.bind(("127.0.0.1", GCS_PORT + n))
             vcsv = out / "vehicle.csv"
-            wait_until(lambda: csv_rows(vcsv) > MIN_STEP or not th.is_alive(), 60, "the fuzzed flight starting",
+            wait_for(lambda: csv_rows(vcsv) > MIN_STEP or not th.is_alive(), 60, "the fuzzed flight starting",
                        poll_s=0.01)
             pid = session_pids(out)["vehicle"]
             fuzz = Fuzzer(seed=seed, sysid=n + 1)

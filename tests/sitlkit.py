@@ -80,15 +80,6 @@ class Proc:
         return self.p.returncode
 
 
-def wait_for(pred: Callable[[], bool], timeout: float, what: str) -> None:
-    """Poll ``pred`` every 10 ms until it holds, or fail naming ``what``."""
-    deadline = time.monotonic() + timeout
-    while not pred():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"{what}: not within {timeout} s")
-        time.sleep(0.01)
-
-
 def csv_rows(path: Path) -> int:
     """Complete data rows of a part file so far (0 if it does not exist yet)."""
     try:

@@ -1,4 +1,6 @@
-"""Who may command the vehicle, with what numbers, at what cost (issue 11; docs/design.md,
+"""Covers bridge.nodes.vehicle and bridge.mavlink.receive.
+
+Who may command the vehicle, with what numbers, at what cost (issue 11; docs/design.md,
 "Authority"): real ``bsst vehicle`` and ``bsst sitl`` processes over real UDP on 127.0.0.1,
 real pymavlink frames; and a hypothesis property over every message the vehicle handles,
 into a real vehicle object on real loopback sockets.
@@ -34,8 +36,11 @@ from bridge.mavlink.receive import REPLY_RATE_HZ, RateLimiter, ReplyBudget
 from bridge.nodes.vehicle import Vehicle, VehicleConfig
 from bridge.session import instance_slot
 from missions import Mission, Sine
-from tests.hostile import Flood, Station, packed_requests, wait_until
-from tests.sitlkit import Proc, csv_rows, wait_for
+from tests.hostile import Flood, Station, packed_requests
+from tests.sitlkit import Proc, csv_rows
+from tests.waiting import wait_for
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 M = mavlink
 KEY = bytes(range(100, 132))
@@ -354,7 +359,7 @@ def _attack(n: int, out: Path, gcs: Station, p: Proc, seen: dict[str, Any]) -> N
         for cmd, p1, p2 in GCS_BAD:
             gcs.command(cmd, p1, p2, target=to)
             assert gcs.ack(cmd) == M.MAV_RESULT_DENIED
-        wait_until(lambda: flood.sent >= 200, 10, "a second of spoofed heartbeats", poll_s=0.01)
+        wait_for(lambda: flood.sent >= 200, 10, "a second of spoofed heartbeats")
     finally:
         flood.stop()
     seen["spoofed"] = flood.sent
@@ -598,7 +603,7 @@ class _Bench:
             got.extend(msgs)
             return bool(got) or v.rejected.total > r0
 
-        wait_until(consumed, 5.0, "the vehicle receiving the datagram")
+        wait_for(consumed, 5.0, "the vehicle receiving the datagram", poll_s=0.001)
         return len(got), v.rejected.total - r0
 
     def replies(self, source: str) -> list[bytes]:
@@ -674,7 +679,7 @@ def test_any_message_from_anyone_changes_nothing_unless_valid_and_authorised(ben
     if authorised and decoded and m.get_type() in ("COMMAND_LONG", "COMMAND_INT") and _bad_numbers(m) \
             and m.target_system in (0, SYSID) and m.target_component in (0, 1):
         if not back:  # the answer may still be on its way on loopback: wait for it
-            wait_until(lambda: bool(back.extend(bench.replies(source)) or back), 5.0, "the COMMAND_ACK")
+            wait_for(lambda: bool(back.extend(bench.replies(source)) or back), 5.0, "the COMMAND_ACK", poll_s=0.001)
         assert _acks(back) == [M.MAV_RESULT_DENIED], (m, source, ids)
         assert after == before
     assert decoded <= 1

@@ -1,4 +1,6 @@
-"""The batch engine against the scalar loop it is checked by (bridge/batch.py, docs: issue 13).
+"""Covers bridge.batch and bridge.link.plan.
+
+The batch engine against the scalar loop it is checked by (bridge/batch.py, docs: issue 13).
 
 A mixed grid — the three laws, delays, Bernoulli and Gilbert–Elliott loss, uniform and normal jitter,
 duplicates and reordering, a blackout that ends in the failsafe, the prediction with and without a
@@ -21,10 +23,11 @@ import pytest
 
 from bridge.autopilot.params import ParamChange
 from bridge.batch import MEASURES, _prepare_all, batch_problem, fly_batch
+from bridge.batch.predict import BatchPredictor
 from bridge.core.flight import prepare
 from bridge.link.ends import EPS_T
 from bridge.link.model import FateStream, LinkConfig
-from bridge.link.plan import BatchPredictor, Clocks, _first_at_or_after, draw_fates
+from bridge.link.plan import Clocks, _first_at_or_after, draw_fates
 from bridge.loop import fly
 from bridge.sweep.cells import row_from_run
 from bridge.sweep.grid import AXES, Cell, Grid, cell_overrides, cells
@@ -115,7 +118,7 @@ def test_cells_of_a_sweep_grid_are_prepared_as_prepare_does() -> None:
     grid = Grid(controller=("bsst", "pid"), delay_ms=(0.0, 10.0), loss_pct=(0.0, 20.0), burst_len=(0.0, 3.0), seeds=2)
     over = [cell_overrides(c) for c in cells(m, grid)] + _overrides()
     fast = _prepare_all(m, over)
-    assert fast == [prepare(m, **o) for o in over]
+    assert fast == [prepare(m, o) for o in over]  # an Overrides (a cell's) or a mapping of its fields
     bad = _prepare_all(m, [{"controller": "bsst", "link": {"loss_pct": 150.0}}])
     assert len(bad) == 1 and isinstance(bad[0], str) and "loss_pct" in bad[0]
 
@@ -249,3 +252,45 @@ def test_the_batch_predictor_is_the_scalar_one_cell_by_cell() -> None:
             assert tuple(got[:, i]) == want, (k, j)
             compared += 1
     assert compared > 400
+
+
+def test_each_compiled_kernel_is_its_plain_function_to_the_bit() -> None:
+    """bridge.batch.kernels compiles the scalar engine's own functions (one source each); on random inputs the
+    compiled twin returns the very floats the plain function does (same operations, same libm)."""
+    from bridge.autopilot.failsafe import level_wrench
+    from bridge.batch import kernels as K
+    from bridge.core.wire import odometry_fields, state_from_odometry_fields
+    from controller.actuation import allocate_motors, allocate_wrench
+    from controller.bsst import backstepping, law_constants, law_tables
+    from controller.gains import Gains
+    from controller.pid import pid, pid_constants
+    from plant.model import rigid_body, rk4_held
+
+    rng = np.random.default_rng(21)
+    for name in ("paper", "x500"):
+        pr = load_profile(name)
+        nominal = Nominal.from_profile(pr)
+        gains = Gains()
+        lc, lt, pc = law_constants(nominal, gains), law_tables(gains), pid_constants(nominal, gains)
+        body = rigid_body(pr.mass, pr.ixx, pr.iyy, pr.izz, pr.arm, pr.rotor_inertia, pr.gravity, (0.1,) * 6)
+        for _ in range(300):
+            X = tuple(float(v) for v in rng.normal(0.0, 0.4, 12))
+            ref = tuple(tuple(float(v) for v in rng.normal(0.0, 0.5, 5)) for _ in range(4))
+            xi = tuple(float(v) for v in rng.normal(0.0, 1.0, 4))
+            od = float(rng.normal(0.0, 50.0))
+            u = (float(rng.uniform(0.0, 1.5 * pr.u_max[0])), *(float(v) for v in rng.normal(0.0, 0.5, 3)))
+            ext = tuple(tuple(float(v) for v in rng.normal(0.0, 0.3, 6)) for _ in range(3))
+            for sign in (False, True):
+                assert K.backstepping(X, ref, od, xi, sign, lc, lt) == backstepping(X, ref, od, xi, sign, lc, lt)
+            assert K.pid_law(X, ref, xi[:3], pc) == pid(X, ref, xi[:3], pc)
+            assert K.allocate_wrench(u, pr.u_max, pr.thrust_coeff, pr.drag_coeff) == \
+                allocate_wrench(u, pr.u_max, pr.thrust_coeff, pr.drag_coeff)
+            w = (pr.thrust_coeff, pr.drag_coeff, pr.omega_max, pr.omega_max**2)
+            assert K.allocate_motors(u, *w) == allocate_motors(u, *w)
+            for e in (None, ext):
+                assert K.rk4_held(X, *u, od, body.constants, 1e-3, e) == rk4_held(X, *u, od, body.constants, 1e-3, e)
+            f = odometry_fields(X)
+            assert K.odometry_fields(X) == f
+            assert K.state_from_odometry_fields(f) == state_from_odometry_fields(f)
+            lw = (-1.0, pr.mass, pr.gravity, 1.0, 2.0, 3.0, 2.0, 36.0, 12.0, 4.0)
+            assert K.level_wrench(X, *lw) == level_wrench(X, *lw)

@@ -1,4 +1,6 @@
-"""`bsst sim` as a real subprocess (``python -m bridge sim ...``).
+"""Covers bridge.cli and bridge.loop.
+
+`bsst sim` as a real subprocess (``python -m bridge sim ...``).
 
 A good run exits 0 and writes the run directory of docs/design.md, "Files of a run"; bad input exits 2
 with exactly one line on stderr and no traceback; a non-empty --out is refused without
@@ -17,6 +19,8 @@ from pathlib import Path
 import pytest
 
 from missions import MISSION_DIR, load_mission
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 ROOT = Path(__file__).resolve().parent.parent
 PYTHON = str(ROOT / ".venv" / "bin" / "python") if (ROOT / ".venv" / "bin" / "python").exists() else sys.executable

@@ -1,4 +1,4 @@
-"""bridge.core.clock: the arithmetic of the real-time clocks (pure: times are given, not read)."""
+"""Covers bridge.core.clock: the arithmetic of the real-time clocks (pure: times are given, not read)."""
 
 from __future__ import annotations
 

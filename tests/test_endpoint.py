@@ -1,4 +1,6 @@
-"""bridge.mavlink.endpoint: addresses, the hot-path codec against pymavlink, real UDP, tlogs."""
+"""Covers bridge.mavlink.endpoint, bridge.mavlink.frames and bridge.mavlink.tlog.
+
+bridge.mavlink.endpoint: addresses, the hot-path codec against pymavlink, real UDP, tlogs."""
 
 from __future__ import annotations
 
@@ -27,7 +29,10 @@ from bridge.mavlink.endpoint import (
 )
 from bridge.mavlink.receive import RateLimiter, ReplyBudget
 from params import ConfigError
-from tests.hostile import packed_requests, udp_queue, wait_until
+from tests.hostile import packed_requests, udp_queue
+from tests.waiting import wait_for
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 f32 = st.floats(width=32, allow_nan=False, allow_infinity=False)
 
@@ -222,7 +227,7 @@ def test_the_peer_gets_a_socket_of_its_own():
         for _ in range(200):
             other.sendto(b"\x00junk", a.local)
         ctl.send(mavlink.MAVLink_heartbeat_message(18, 8, 0, 0, 4, 3))
-        wait_until(lambda: (udp_queue(a.local[1]) or (0, 0))[0] > 0, 5.0, "datagrams queued")
+        wait_for(lambda: (udp_queue(a.local[1]) or (0, 0))[0] > 0, 5.0, "datagrams queued", poll_s=0.001)
         got = a.poll()
         assert got and got[0][0].get_type() == "HEARTBEAT" and got[0][1] == ctl.local  # ahead of the backlog
         while a.backlog:
@@ -253,7 +258,7 @@ def _take(ep: Endpoint, n_refused: int) -> list:
         got.extend(m for m, _a in ep.poll())
         return bool(got) or ep.rejected.total >= n_refused
 
-    wait_until(done, 5.0, "the endpoint reading its datagram")
+    wait_for(done, 5.0, "the endpoint reading its datagram", poll_s=0.001)
     return got
 
 

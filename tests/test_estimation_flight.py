@@ -1,4 +1,6 @@
-"""Sensors and the on-board estimator in the flights: offline (``bsst sim``) and lockstep (``bsst sitl``),
+"""Covers bridge.autopilot.estimator, bridge.loop and bridge.session.
+
+Sensors and the on-board estimator in the flights: offline (``bsst sim``) and lockstep (``bsst sitl``),
 with ``truth`` (the default) unchanged, real processes over real UDP, the tlog read with pymavlink."""
 
 from __future__ import annotations
@@ -25,6 +27,8 @@ from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
 from missions import MISSION_DIR
 from tests.sitlkit import ENV, ROOT
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 SINE = MISSION_DIR / "sine.toml"
 EKF_MOCAP = {"sensors": {"set": "mocap"}, "estimator": "ekf"}

@@ -1,4 +1,6 @@
-"""bridge/autopilot/estimator.py: the on-board EKF, the raw and truth estimators.
+"""Covers bridge.autopilot.estimator, bridge.autopilot.ekfkernels and bridge.autopilot.closedloop.
+
+bridge/autopilot/estimator.py: the on-board EKF, the raw and truth estimators.
 
 Truth comes from the real plant (plant.Quadrotor) flown along the paper's sine with the real
 controller.Controller; the sensors are plant.sensors.SensorSuite with the profiles' sets. The
@@ -17,16 +19,15 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
+from bridge.autopilot.closedloop import ClosedLoopRecord, fly_closed_loop
 from bridge.autopilot.estimator import (
     ESTIMATOR_KINDS,
     ZERO_COVARIANCE,
-    ClosedLoopRecord,
     Covariance,
     Ekf,
     RawEstimator,
     TruthEstimator,
     estimation_error,
-    fly_closed_loop,
     make_estimator,
     nees,
     upper_triangle,

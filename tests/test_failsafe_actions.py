@@ -1,4 +1,6 @@
-"""The vehicle's failsafe actions (issue 14): ``[failsafe] action = descend | land | hold | disarm``.
+"""Covers bridge.autopilot.failsafe and bridge.autopilot.simvehicle.
+
+The vehicle's failsafe actions (issue 14): ``[failsafe] action = descend | land | hold | disarm``.
 
 ``bsst sitl missions/sine.toml --blackout 15:2 --failsafe-action A`` is flown for each action as
 a real ``bsst sitl`` process (lockstep, its vehicle and controller real processes over UDP on
@@ -37,6 +39,8 @@ from bridge.session.children import check_port_free
 from missions import MISSION_DIR, Mission, Setpoint, Sine, Step
 from params import ConfigError, load_toml
 from tests.sitlkit import ENV, ROOT
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 SINE = MISSION_DIR / "sine.toml"
 BLACKOUT = {"blackouts": [[15.0, 2.0]]}

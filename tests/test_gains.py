@@ -1,4 +1,4 @@
-"""controller/gains.py: the eq. (23) check and gains read from a mission's [gains] table.
+"""Covers controller.gains: the eq. (23) check and gains read from a mission's [gains] table.
 
 Eq. (23): k2 > L and k1 > sqrt(4 L (k2 + L) / (k2 - L)), L bounding |d'| (erratum 7).
 """

@@ -1,4 +1,6 @@
-"""The ground-station surface of ``bsst vehicle`` with the real tools (issue 14): MAVSDK 4's native
+"""Covers bridge.nodes.vehicle, bridge.mavlink.modes and bridge.autopilot.params.
+
+The ground-station surface of ``bsst vehicle`` with the real tools (issue 14): MAVSDK 4's native
 binding (parameters; HOLD, arm, TAKEOFF, HOLD, LAND, disarmed; its flight mode) and MAVProxy typed
 into through stdin (``param show`` / ``param set``, a refused set, HOLD and LAND, its prompt naming
 the mode), against real vehicle processes over UDP on 127.0.0.1.
@@ -22,6 +24,7 @@ from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
 
+import pytest
 from pymavlink import mavutil
 
 from bridge.autopilot.params import PARAMS, VehicleParams, read_param
@@ -30,6 +33,8 @@ from bridge.mavlink.modes import FTP_ERR_UNKNOWN_COMMAND, FTP_HEADER, FTP_NAK, F
 from bridge.session import instance_slot
 from tests.sitlkit import ENV, Proc
 from tests.test_vehicle import _vehicle
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 FAST = ("--speed", "4", "--param", "MPC_LAND_SPEED=2")  # a takeoff to 3 m and its landing in ~1 s of wall time
 

@@ -1,4 +1,6 @@
-"""Hostile and broken input (issue 7): the receive path under fuzz, as properties and during
+"""Covers bridge.mavlink.receive, bridge.mavlink.frames and bridge.nodes.vehicle.
+
+Hostile and broken input (issue 7): the receive path under fuzz, as properties and during
 a real lockstep mission (real processes, real UDP on 127.0.0.1, real pymavlink encoding)."""
 
 from __future__ import annotations
@@ -19,7 +21,10 @@ from bridge.mavlink.signing import Signing
 from bridge.nodes.vehicle import Vehicle, VehicleConfig
 from bridge.session import sitl
 from missions import MISSION_DIR, Mission, Sine, load_mission
-from tests.hostile import Fuzzer, fly_flooded, fly_fuzzed, wait_until
+from tests.hostile import Fuzzer, fly_flooded, fly_fuzzed
+from tests.waiting import wait_for
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 FUZZ_DATAGRAMS = 30_000
 KEY = bytes(range(32))
@@ -158,7 +163,7 @@ def test_any_datagram_leaves_the_vehicle_as_it_was_unless_valid(armed_vehicle, d
         got.extend(msgs)
         return bool(got) or count["frame"] > 0
 
-    wait_until(consumed, 5.0, "the vehicle receiving the datagram")
+    wait_for(consumed, 5.0, "the vehicle receiving the datagram", poll_s=0.001)
     assert count["frame"] <= 1 and (got or count["frame"] == 1)
     accepted = len(got) - count["message"]
     if accepted == 0:

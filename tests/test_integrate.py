@@ -1,4 +1,4 @@
-"""plant/integrate.py: the fixed-step RK4, alone and as the plant flies it.
+"""Covers plant.integrate: the fixed-step RK4, alone and as the plant flies it.
 
 The plant's 1 kHz RK4 with commands held between control steps (zero-order hold) is
 checked against scipy's solve_ivp at rtol = atol = 1e-12 over a 10 s flight with varying

@@ -1,4 +1,4 @@
-"""controller/jets.py: the chain rule on (value, 1st, 2nd, 3rd derivative) jets.
+"""Covers controller.jets: the chain rule on (value, 1st, 2nd, 3rd derivative) jets.
 
 Each operation is checked against the closed-form derivatives of a known function of t
 (derived by hand, not by the rules under test), at many t (hypothesis).

@@ -1,4 +1,4 @@
-"""bridge/record/joiner.py: vehicle.csv + controller.csv -> trace.csv rows, on real part files.
+"""Covers bridge.record.joiner: vehicle.csv + controller.csv -> trace.csv rows, on real part files.
 
 The files are written here as the vehicle and the controller write them (their headers, one line
 a row), for the case a SITL flight cannot produce on demand: a controller killed between sending a

@@ -1,4 +1,6 @@
-"""Every control law fits the one interface (controller/law.py), and a user's own law flies.
+"""Covers controller.law.
+
+Every control law fits the one interface (controller/law.py), and a user's own law flies.
 
 As RotorPy's controller template and its test: the built-in laws and the template
 ``examples/my_law.py`` are each built, stepped on a hover and checked against the
@@ -25,6 +27,8 @@ from controller.law import BUILTIN, Law, law_problem, make_law, resolve_law
 from missions import Mission, Sine, load_mission
 from params import ConfigError
 from plant import load_profile
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 ROOT = Path(__file__).resolve().parents[1]
 MY_LAW = f"{ROOT / 'examples' / 'my_law.py'}:MyLaw"

@@ -1,4 +1,6 @@
-"""The layout is the architecture: every import points down the layers, and none goes round.
+"""Covers bridge, controller, plant, missions and params.
+
+The layout is the architecture: every import points down the layers, and none goes round.
 
 Reads every module of the project with ``ast`` (function-local imports included) and checks:
 

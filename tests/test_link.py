@@ -1,4 +1,6 @@
-"""The link-impairment model (bridge.link.model): statistics, reproducibility, invariants, configuration."""
+"""Covers bridge.link.model.
+
+The link-impairment model (bridge.link.model): statistics, reproducibility, invariants, configuration."""
 
 from __future__ import annotations
 

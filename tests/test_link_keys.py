@@ -1,11 +1,13 @@
-"""Every ``[link]`` key has its flag, one range, and a line in the README (a meta-test, as
+"""Covers bridge.link.model and bridge.cli.flags.
+
+Every ``[link]`` key has its flag, one range, and a line in the README (a meta-test, as
 python-control's kwargs_test walks its functions' keywords).
 
 The keys are the link model's own tables (:data:`bridge.link.model.LINK_KEYS`); the test
 checks first that those tables are the whole of what ``link_from_table`` reads. For each
 key: a ``bsst`` flag sets it (``bsst sim``'s parser, read back by ``link_table_from_args``);
 for a number, the mission loader and the flag accept the same bounds and refuse the same
-values just outside them; and a line of README.md names the key and its flag.
+values just outside them; and a line of docs/usage.md (the front page's reference) names the key and its flag.
 """
 
 from __future__ import annotations
@@ -144,7 +146,7 @@ def test_the_seed_and_the_blackouts_have_one_range() -> None:
 
 
 @pytest.mark.parametrize("key", LINK_KEYS)
-def test_every_key_has_a_readme_line(key: str) -> None:
+def test_every_key_has_a_line_in_the_usage_page(key: str) -> None:
     flag = flag_of(key)
-    lines = [ln for ln in (ROOT / "README.md").read_text().splitlines() if f"`{key}`" in ln and flag in ln]
-    assert lines, f"README.md has no line naming [link] key `{key}` with its flag {flag}"
+    lines = [ln for ln in (ROOT / "docs/usage.md").read_text().splitlines() if f"`{key}`" in ln and flag in ln]
+    assert lines, f"docs/usage.md has no line naming [link] key `{key}` with its flag {flag}"

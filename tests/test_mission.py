@@ -1,4 +1,4 @@
-"""missions/mission.py: mission files load, validate and round-trip through params.dump_toml.
+"""Covers missions.mission: mission files load, validate and round-trip through params.dump_toml.
 
 Each bad value raises params.ConfigError naming the file and the key; the tables owned by
 other parts ([effects], [gains], [failsafe]) are validated when a run is built

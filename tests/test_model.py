@@ -1,4 +1,4 @@
-"""plant/model.py and plant/quadrotor.py: eq. (6) with errata 1-4 of docs/law.md ("Errata").
+"""Covers plant.model and plant.quadrotor: eq. (6) with errata 1-4 of docs/law.md ("Errata").
 
 - phi'' uses l/I_x u2 (printed l/I_y); theta'' coupling is (I_z - I_x)/I_y (printed
   I_x - I_z); the gyroscopic term uses the signed omega_d of eq. (5).

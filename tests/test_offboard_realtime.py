@@ -1,4 +1,6 @@
-"""The real-time controller (``bsst controller --realtime``) against a scripted vehicle: a real
+"""Covers bridge.nodes.offboard.
+
+The real-time controller (``bsst controller --realtime``) against a scripted vehicle: a real
 UDP socket in this process speaking MAVLink 2 with pymavlink, whose ODOMETRY schedule the test
 controls to the microsecond, so that a state can be sent late or not at all.
 
@@ -25,6 +27,8 @@ from pymavlink.dialects.v20 import common as mavlink
 from bridge.core.wire import state_to_odometry, step_usec
 from bridge.nodes.report import Done, Stats, parse_line
 from tests.sitlkit import Proc
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 # 50 Hz, so that the scheduling jitter of a loaded 2-core machine (milliseconds) stays well
 # inside the margins: the tick comes 0.3 ms after the state, the wait lasts up to 10 ms

@@ -1,4 +1,6 @@
-"""The safety policies of :mod:`bridge.record.policies`, each on a synthetic trace and events that
+"""Covers bridge.record.policies.
+
+The safety policies of :mod:`bridge.record.policies`, each on a synthetic trace and events that
 break it and on ones that keep it; the honest records (sender, lockstep, who ended a flight);
 and the exit status a violation gives ``bsst sim`` / ``bsst sitl``. Events are
 :class:`~bridge.record.events.RunEvent` with their sender as a field (``by``).

@@ -1,4 +1,4 @@
-"""controller/power.py: the regularised sig_beta and the finite-time bound of eq. (11)/(19).
+"""Covers controller.power: the regularised sig_beta and the finite-time bound of eq. (11)/(19).
 
 sig_beta(e) = |e|^beta sign(e), replaced inside |e| < eps by an odd polynomial with a C^3
 join. Checked: the join, oddness, strict monotonicity for every beta in (0, 1), exactness

@@ -1,4 +1,4 @@
-"""plant/profiles.py: vehicle profiles load into frozen dataclasses and are validated.
+"""Covers plant.profiles: vehicle profiles load into frozen dataclasses and are validated.
 
 Every bad value raises params.ConfigError naming the file and the key (and the range).
 """

@@ -1,4 +1,4 @@
-"""missions/references.py: Step, Sine and Waypoints give their derivatives up to the 4th.
+"""Covers missions.references: Step, Sine and Waypoints give their derivatives up to the 4th.
 
 Each derivative k (1..4) must equal the central finite difference of derivative k - 1;
 waypoint segments join with continuous value, velocity and acceleration (C^2) and rest at

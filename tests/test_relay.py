@@ -1,4 +1,6 @@
-"""The real-time relay (bridge.nodes.relay) with real UDP sockets on 127.0.0.1."""
+"""Covers bridge.nodes.relay.
+
+The real-time relay (bridge.nodes.relay) with real UDP sockets on 127.0.0.1."""
 
 from __future__ import annotations
 
@@ -18,6 +20,9 @@ import pytest
 from bridge.link.model import LinkConfig, LinkSettings
 from bridge.nodes.relay import Relay, parse_address
 from bridge.nodes.report import Ready, parse_line
+from tests.waiting import wait_for
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 ROOT = Path(__file__).resolve().parent.parent
 STAMP = struct.Struct("<dI")
@@ -34,14 +39,6 @@ def udp(timeout: float = 2.0) -> socket.socket:
 def stamped(i: int, size: int = FRAME) -> bytes:
     head = STAMP.pack(time.perf_counter(), i)
     return head + bytes(size - len(head))
-
-
-def wait_until(cond, timeout: float) -> None:
-    """Poll ``cond`` until it holds; fail after ``timeout`` seconds."""
-    deadline = time.monotonic() + timeout
-    while not cond():
-        assert time.monotonic() < deadline, "condition not met before the deadline"
-        time.sleep(0.0005)
 
 
 def drain(sock: socket.socket) -> list[int]:
@@ -103,9 +100,11 @@ def test_no_impairment_forwards_at_once_and_loss_drops_what_the_model_says() -> 
             client.sendto(stamped(i), relay.address)
             # pace on the relay's own counter (a burst of 200 can overflow the socket buffer
             # of a relay that a loaded machine has not scheduled yet)
-            wait_until(lambda i=i: relay.summary()["up"]["sent"] > i, 5.0)
+            wait_for(lambda i=i: relay.summary()["up"]["sent"] > i, 5.0, f"the relay sending datagram {i}",
+                     poll_s=0.0005)
             got += drain(target)
-        wait_until(lambda: relay.forwarded >= relay.summary()["up"]["delivered"], 5.0)
+        wait_for(lambda: relay.forwarded >= relay.summary()["up"]["delivered"], 5.0,
+                 "every delivered datagram forwarded", poll_s=0.0005)
         got += drain(target)
     st = relay.summary()["up"]
     assert st["sent"] == 200 and len(got) == st["delivered"] and st["lost"] == 200 - len(got)

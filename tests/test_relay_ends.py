@@ -1,4 +1,6 @@
-"""The relay forwards only between its two ends (issue 11, finding 3): real ``bsst relay``
+"""Covers bridge.nodes.relay.
+
+The relay forwards only between its two ends (issue 11, finding 3): real ``bsst relay``
 processes and a real ``bsst sitl --realtime --delay 20`` flight, real UDP on 127.0.0.1, real
 pymavlink frames from a stranger.
 
@@ -15,14 +17,18 @@ import socket
 from pathlib import Path
 
 import numpy as np
+import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.core.wire import state_to_odometry
 from bridge.nodes.report import Event, Ready, parse_line
 from missions import Mission, Sine
-from tests.hostile import session_thread, wait_until
+from tests.hostile import session_thread
 from tests.sitlkit import Proc, csv_rows
 from tests.test_relay import udp
+from tests.waiting import wait_for
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 FAR_FUTURE_USEC = 10**12  # 11.6 days: the controller would call its mission flown at once
 
@@ -146,7 +152,7 @@ def test_a_strangers_far_future_state_does_not_end_a_relayed_flight(tmp_path: Pa
     run_dir = tmp_path / "run"
     sent = 5
     with session_thread(mission, run_dir, realtime=True, link={"delay_ms": 20.0}) as (n, th, result):
-        wait_until(lambda: csv_rows(run_dir / "controller.csv") > 25 or not th.is_alive(), 60,
+        wait_for(lambda: csv_rows(run_dir / "controller.csv") > 25 or not th.is_alive(), 60,
                    "the relayed flight under way", poll_s=0.005)
         assert th.is_alive(), "the flight ended before the spoofing"
         front, back = relay_ports(run_dir)

@@ -1,4 +1,4 @@
-"""bridge/nodes/report.py: the children's reports to the session, one JSON object a line, read in one place.
+"""Covers bridge.nodes.report: the children's reports to the session, one JSON object a line, read in one place.
 
 Pure: no processes, no sockets (the processes writing them are tested in test_sitl.py, test_relay*.py,
 test_offboard_realtime.py).

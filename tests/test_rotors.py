@@ -1,4 +1,6 @@
-"""Eq. (4)-(5): rotor speeds <-> wrench, and the controller's rotor allocation.
+"""Covers plant.rotors and controller.actuation.
+
+Eq. (4)-(5): rotor speeds <-> wrench, and the controller's rotor allocation.
 
 - plant/rotors.py: eq. (4) forward and inverse are a round trip; eq. (5) is signed.
 - controller/actuation.py, MotorActuation: inside the rotor envelope the allocation

@@ -1,4 +1,6 @@
-"""Issue 3's acceptance list, checked from each run's trace.csv (not only from the summary).
+"""Covers bridge.loop, bridge.record.metrics and bridge.record.policies.
+
+Issue 3's acceptance list, checked from each run's trace.csv (not only from the summary).
 
 - step mission (paper, and x500 with its rotor envelope): after each of the 3 set-point
   changes every position axis is within 1 cm and psi within 0.01 rad in <= 5 s and stays;

@@ -1,4 +1,6 @@
-"""HIGHRES_IMU and GPS_RAW_INT: the vehicle's sensors on the GCS link (issue 12, "On the wire").
+"""Covers bridge.mavlink.telemetry and bridge.nodes.vehicle.
+
+HIGHRES_IMU and GPS_RAW_INT: the vehicle's sensors on the GCS link (issue 12, "On the wire").
 
 The pure builders of bridge/mavlink/telemetry.py (units, NWU/FLU -> NED/FRD against bridge/core/wire.py,
 packing with pymavlink), the suite's ``latest`` accessor, and a real ``bsst vehicle`` process with a
@@ -27,6 +29,8 @@ from bridge.session import instance_slot
 from plant import load_profile
 from plant.sensors import BARO, GNSS, IMU, Measurement, SensorSuite, body_rates, rotation
 from tests.sitlkit import Proc
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 M = mavlink
 G = 9.81

@@ -1,4 +1,6 @@
-"""plant/sensors.py and the profiles' [sensors] sets: noise statistics, rates, latency, seeding,
+"""Covers plant.sensors.
+
+plant/sensors.py and the profiles' [sensors] sets: noise statistics, rates, latency, seeding,
 what the IMU measures, and the validation of every key (file, key and range named)."""
 
 from __future__ import annotations

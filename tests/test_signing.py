@@ -1,4 +1,4 @@
-"""bridge.mavlink.signing: key files, and MAVLink 2 signatures byte for byte against pymavlink."""
+"""Covers bridge.mavlink.signing: key files, and MAVLink 2 signatures byte for byte against pymavlink."""
 
 from __future__ import annotations
 
@@ -33,6 +33,8 @@ from missions import Mission, Sine
 from params import ConfigError
 from tests.hostile import Station
 from tests.sitlkit import Proc
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 KEY = hashlib.sha256(b"bsst test key").digest()
 OTHER = hashlib.sha256(b"not our key").digest()

@@ -1,4 +1,6 @@
-"""``bsst sitl`` / :func:`bridge.session.sitl`: real processes over real UDP on 127.0.0.1,
+"""Covers bridge.session.
+
+``bsst sitl`` / :func:`bridge.session.sitl`: real processes over real UDP on 127.0.0.1,
 checked against the offline loop (the truth), and under SIGKILL and Ctrl-C."""
 
 from __future__ import annotations
@@ -23,7 +25,10 @@ from bridge.record.policies import POLICIES
 from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
 from missions import MISSION_DIR, Mission, Sine
-from tests.sitlkit import ENV, ROOT, csv_rows, wait_for
+from tests.sitlkit import ENV, ROOT, csv_rows
+from tests.waiting import wait_for
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 SINE = MISSION_DIR / "sine.toml"
 SHORT = Mission(Sine(), duration_s=6.0, name="sine6")

@@ -1,4 +1,6 @@
-"""The link model in the MAVLink SITL: real processes over real UDP on 127.0.0.1, no mocks.
+"""Covers bridge.session and bridge.link.ends.
+
+The link model in the MAVLink SITL: real processes over real UDP on 127.0.0.1, no mocks.
 
 Lockstep applies the mission's ``[link]`` model in simulation time to what crossed the
 socket (the offline loop's ends), so it must give the offline loop's trace and link
@@ -24,6 +26,8 @@ from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
 from missions import MISSION_DIR, Mission, Sine, load_mission
 from tests.sitlkit import ENV, ROOT
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 SINE = MISSION_DIR / "sine.toml"
 # every kind of impairment at once, on both directions; the fates come from the mission's seed
@@ -175,7 +179,7 @@ def test_relay_mission_clock_starts_blackouts_at_the_first_target() -> None:
 
     from bridge.link.model import LinkConfig, LinkSettings
     from bridge.nodes.relay import Relay
-    from tests.sitlkit import wait_for
+    from tests.waiting import wait_for
 
     cut = LinkConfig(blackouts=((0.0, 30.0),))
     target = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)

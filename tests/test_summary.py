@@ -1,4 +1,5 @@
-"""bridge/record/summary.py: a session's summary.json built from hand-made inputs, without processes.
+"""Covers bridge.record.summary, bridge.record.events and bridge.record.columns: a session's summary.json built
+from hand-made inputs, without processes.
 
 Each case is what a session could see (the joined trace, each child's end, the events); the summary's
 outcome, ``ended_by``, ``link``, ``timing``, ``lockstep`` and policy blocks are checked against it.

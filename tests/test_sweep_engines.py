@@ -1,4 +1,6 @@
-"""``bsst sweep --engine batch | process | auto``: the same cells.csv rows from either engine,
+"""Covers bridge.sweep.executors and bridge.batch.
+
+``bsst sweep --engine batch | process | auto``: the same cells.csv rows from either engine,
 ``--resume`` with the batch, and an engine that cannot be honoured refused in one line.
 
 The cell-by-cell agreement of the batch with the scalar loop over every link feature is
@@ -20,6 +22,8 @@ from bridge.sweep.executors import BATCH_MIN_CELLS, engine_for
 from bridge.sweep.grid import cells
 from missions import Mission, Sine
 from params import ConfigError
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 ROOT = Path(__file__).resolve().parents[1]
 SHORT = Mission(Sine(), duration_s=4.0, name="short")

@@ -1,4 +1,6 @@
-"""``bsst vehicle`` as a real process: ground stations (pymavlink, MAVProxy, MAVSDK) and the
+"""Covers bridge.nodes.vehicle.
+
+``bsst vehicle`` as a real process: ground stations (pymavlink, MAVProxy, MAVSDK) and the
 controller contract, over real UDP on 127.0.0.1.
 
 Each test holds an instance slot (bridge.session.instance_slot), so the ports 14550 + N and
@@ -22,6 +24,8 @@ from pymavlink.dialects.v20 import common as mavlink
 from bridge.mavlink.endpoint import GCS_PORT, LINK_PORT
 from bridge.session import instance_slot
 from tests.sitlkit import ENV, ROOT, Proc
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 M = mavlink
 

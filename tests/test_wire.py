@@ -1,4 +1,6 @@
-"""The wire's frame conventions (bridge.core.wire): NWU <-> NED, ODOMETRY fields, actuators, time keys."""
+"""Covers bridge.core.wire.
+
+The wire's frame conventions (bridge.core.wire): NWU <-> NED, ODOMETRY fields, actuators, time keys."""
 
 from __future__ import annotations
 

@@ -7,6 +7,8 @@ Out: the flown state, the estimate the vehicle reports, failsafe decisions and e
 - :mod:`bridge.autopilot.failsafe`    level-and-descend landing loop and the on-board targets
 - :mod:`bridge.autopilot.params`      PX4 parameters: names, one range table, changes
 - :mod:`bridge.autopilot.estimator`   truth or EKF estimate of the state
-- :mod:`bridge.autopilot.ekfkernels`  the EKF's compiled kernels
+- :mod:`bridge.autopilot.ekfkernels`  the EKF's compiled kernels: propagation, updates, the estimate
+- :mod:`bridge.autopilot.ekfstate`    the EKF's state layout, its buffer of past states, P carried in time
+- :mod:`bridge.autopilot.closedloop`  the estimator's offline harness (plant, sensors, estimator, law)
 - :mod:`bridge.autopilot.cholesky`    a small weighted-square helper of the EKF
 """

@@ -259,6 +259,21 @@ def _clip(v: float, m: float) -> float:
     return m if v > m else -m if v < -m else v
 
 
+def level_wrench(X: tuple[float, ...], v_z: float, m: float, g: float, kx: float, ky: float, kz: float,
+                 k_vel: float, k_att: float, d_att: float, d_yaw: float) -> tuple[float, float, float, float]:
+    """The ``descend`` landing law (:class:`Level`, module docstring): level at the heading it has, sink at
+    v_z (m/s, z up, negative), no horizontal control. The wrench (u1 N; u2..u4 N) for state X (eq. 7) on
+    the nominal model (m kg, g m/s^2, kx..kz = I/l kg m) with the gains k_vel (1/s), k_att (1/s^2), d_att,
+    d_yaw (1/s): u1 = m (g + k_vel (v_z - z')) / max(cos phi cos theta, 0.5), u2 = (Ix/l)(k_att (0 - phi)
+    - d_att phi'), likewise u3, u4 = -(Iz/l) d_yaw psi'. Plain floats: the batch engine compiles this same
+    function."""
+    vz, phi, dphi, th, dth, dpsi = X[5], X[6], X[7], X[8], X[9], X[11]
+    az = k_vel * (v_z - vz)
+    tilt = max(cos(phi) * cos(th), 0.5)
+    return (m * (g + az) / tilt, kx * (k_att * (0.0 - phi) - d_att * dphi), ky * (k_att * (0.0 - th) - d_att * dth),
+            kz * (-d_yaw * dpsi))
+
+
 class OnboardController:
     """The vehicle's own position controller (module docstring): one target at a time.
 
@@ -290,10 +305,13 @@ class OnboardController:
         if self.target is None:
             return (0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
         sp = self.target.setpoint(X, g)
+        if sp.level:
+            return level_wrench(X, sp.v_z, n.mass, n.gravity, n.ixx / n.arm, n.iyy / n.arm, n.izz / n.arm,
+                                g.k_vel_level, g.k_att_level, g.d_att_level, g.d_yaw), (0.0, 0.0, 0.0)
         _, vx, _, vy, _, vz, phi, dphi, th, dth, psi, dpsi = X
         ix, iy, iz = self.integral
         ez = sp.v_z - vz
-        az = g.k_vel_level * ez if sp.level else g.k_vel * ez + _clip(g.k_i_z * iz, g.a_i_max)
+        az = g.k_vel * ez + _clip(g.k_i_z * iz, g.a_i_max)
         if sp.v_xy is None:
             phi_d = th_d = 0.0
             err = (0.0, 0.0, ez)
@@ -310,12 +328,11 @@ class OnboardController:
             err = (ex, ey, ez)
         tilt = max(cos(phi) * cos(th), 0.5)
         u1 = n.mass * (n.gravity + az) / tilt
-        ka, da = (g.k_att_level, g.d_att_level) if sp.level else (g.k_att, g.d_att)
-        u2 = n.ixx / n.arm * (ka * (phi_d - phi) - da * dphi)
-        u3 = n.iyy / n.arm * (ka * (th_d - th) - da * dth)
+        u2 = n.ixx / n.arm * (g.k_att * (phi_d - phi) - g.d_att * dphi)
+        u3 = n.iyy / n.arm * (g.k_att * (th_d - th) - g.d_att * dth)
         yaw = g.k_yaw * wrap_angle(sp.psi - psi) - g.d_yaw * dpsi if sp.psi is not None else -g.d_yaw * dpsi
         u4 = n.izz / n.arm * yaw
-        return (u1, u2, u3, u4), ((0.0, 0.0, 0.0) if sp.level else err)
+        return (u1, u2, u3, u4), err
 
     def demand(self, X: tuple[float, ...]) -> tuple[float, float, float, float]:
         """The wrench (u1..u4, N) this loop asks for in state X, before the actuation's limits."""

@@ -6,6 +6,10 @@ Out: NED position (m), NED or FRD body velocity (m/s), quaternion (w, x, y, z; F
      angles (rad, yaw wrapped to (-pi, pi]), FRD body rates (rad/s); actuator controls[0..3] in the
      wire's order and signs; ``time_usec`` stamps (us) and the steps they stamp; the paper state back
 
+The state and the command over the wire (:func:`odometry_fields`, :func:`state_from_odometry_fields`,
+:func:`wrench_to_wire`, :func:`wrench_from_wire`) are plain-float functions: the batch engine compiles
+these same ones for its cells (numba, bridge.batch.wire).
+
 The plant and the law work in the paper's frame: inertial x north, y west, z up (NWU),
 body FLU, Z-Y-X Euler angles (phi, theta, psi). MAVLink speaks NED / FRD. At the wire
 (docs/design.md, "Frames and units"):
@@ -168,13 +172,10 @@ _FLOAT32_13 = struct.Struct("<13f")
 _FLOAT32_4 = struct.Struct("<4f")
 
 
-def state_over_wire(X: tuple[float, ...]) -> tuple[float, ...]:
-    """The state as the controller reads it from ODOMETRY: through :func:`state_to_odometry`, each
-    field rounded to float32 as MAVLink carries it, back through :func:`odometry_to_state` (psi
-    wrapped). The offline loop hands its law this, so that it flies what a lockstep flight flies.
-
-    The two functions written out in one (the same operations in the same order, so the same
-    floats to the bit, ``tests/test_wire.py``): it runs once per control step of every offline flight."""
+def odometry_fields(X: tuple[float, ...]) -> tuple[float, ...]:
+    """:func:`state_to_odometry` written out, flat: the 13 fields (NED position m, quaternion w x y z, FRD body
+    velocity m/s, FRD body rates rad/s) in float64, before MAVLink rounds them to float32. The same operations
+    in the same order (tested). Plain floats: the batch engine compiles this same function."""
     x, vx, y, vy, z, vz, phi, dphi, th, dth, psi, dpsi = X
     roll, pitch, yaw = phi, -th, wrap_pi(-psi)
     cr, sr = cos(0.5 * roll), sin(0.5 * roll)
@@ -192,12 +193,16 @@ def state_over_wire(X: tuple[float, ...]) -> tuple[float, ...]:
     sR, cR = sin(roll), cos(roll)
     sP, cP = sin(pitch), cos(pitch)
     dp, dy = -dth, -dpsi
-    f = _FLOAT32_13.unpack(_FLOAT32_13.pack(
-        x, -y, -z, qw, qx, qy, qz,
-        ux + 2.0 * (qw * kx + b * kz - c * ky), uy + 2.0 * (qw * ky + c * kx - a * kz),
-        uz + 2.0 * (qw * kz + a * ky - b * kx),
-        dphi - sP * dy, cR * dp + sR * cP * dy, -sR * dp + cR * cP * dy))
-    # odometry_to_state: normalise, rotate back, quaternion to Euler, body rates to Euler rates
+    return (x, -y, -z, qw, qx, qy, qz,
+            ux + 2.0 * (qw * kx + b * kz - c * ky), uy + 2.0 * (qw * ky + c * kx - a * kz),
+            uz + 2.0 * (qw * kz + a * ky - b * kx),
+            dphi - sP * dy, cR * dp + sR * cP * dy, -sR * dp + cR * cP * dy)
+
+
+def state_from_odometry_fields(f: tuple[float, ...]) -> tuple[float, ...]:
+    """:func:`odometry_to_state` of the 13 fields of :func:`odometry_fields` (as read from the wire) written
+    out: normalise, rotate back, quaternion to Euler, body rates to Euler rates; the paper state (psi wrapped).
+    The same operations in the same order (tested). Plain floats: the batch engine compiles this same one."""
     w, qx, qy, qz = f[3], f[4], f[5], f[6]
     n = sqrt(w * w + qx * qx + qy * qy + qz * qz)
     w, qx, qy, qz = w / n, qx / n, qy / n, qz / n
@@ -219,6 +224,17 @@ def state_over_wire(X: tuple[float, ...]) -> tuple[float, ...]:
     k = q * sR + r * cR
     return (f[0], v0, -f[1], -v1, -f[2], -v2,
             roll, p + k * tan(pitch), -pitch, -(q * cR - r * sR), wrap_pi(-yaw), -(k / cos(pitch)))
+
+
+def state_over_wire(X: tuple[float, ...]) -> tuple[float, ...]:
+    """The state as the controller reads it from ODOMETRY: through :func:`state_to_odometry`, each
+    field rounded to float32 as MAVLink carries it, back through :func:`odometry_to_state` (psi
+    wrapped). The offline loop hands its law this, so that it flies what a lockstep flight flies.
+
+    :func:`odometry_fields` and :func:`state_from_odometry_fields` (the two functions written out: the same
+    floats to the bit, ``tests/test_wire.py``) around one float32 pack: it runs once per control step of
+    every offline flight, and the batch engine compiles the same two halves."""
+    return state_from_odometry_fields(_FLOAT32_13.unpack(_FLOAT32_13.pack(*odometry_fields(X))))
 
 
 def state_over_wire_reference(X: tuple[float, ...]) -> tuple[float, ...]:

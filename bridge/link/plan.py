@@ -7,7 +7,7 @@ In:  per cell a :class:`~bridge.link.model.LinkSettings` (delays ms, loss %, bur
 Out: a :class:`LinkPlan`: per control step and cell the guard's decision (track, hold, nothing) and the
      index of the state it controls on; per cell the physics steps at which a newer command takes effect on
      the vehicle (and which), the step whose period starts the vehicle's failsafe, and what was sent and
-     lost; and :class:`BatchPredictor`, :class:`controller.predict.Predictor` over the cell axis
+     lost (the engine that flies along it, its predictor and its wire: :mod:`bridge.batch`)
 
 Why a plan: with no bandwidth queue and no ``resume``, nothing the link, the guard or the vehicle's
 timeout decides depends on the flight itself. A packet's fate is a pure function of its seed, direction
@@ -31,7 +31,7 @@ import numpy as np
 from numba import njit
 
 from bridge.link.ends import EPS_T
-from bridge.link.model import (  # the draw numbers and bound are link.py's: one definition of a fate
+from bridge.link.impairment import (  # the draw numbers and bound are the model's: one definition of a fate
     _D_DUP,
     _D_DUP_JITTER,
     _D_GE_START,
@@ -39,13 +39,10 @@ from bridge.link.model import (  # the draw numbers and bound are link.py's: one
     _D_JITTER,
     _D_LOSS,
     _NORMAL_BOUND_SIGMAS,
-    LinkConfig,
-    LinkSettings,
     stream_key,
 )
+from bridge.link.model import LinkConfig, LinkSettings
 from controller.link_guard import GuardConfig
-from controller.nominal import Coefficients, Nominal
-from controller.predict import nominal_rk4
 
 NONE, TRACK, HOLD = 0, 1, 2  # the guard's decision per step: no command (stop or idle), command, command on hold
 NEVER = np.iinfo(np.int64).max // 4  # a check or step index that never comes
@@ -57,7 +54,7 @@ _U30, _U27, _U31, _U11, _U8 = (np.uint64(v) for v in (30, 27, 31, 11, 8))
 
 # -- the draws -------------------------------------------------------------------------------------
 def _mix(z: np.ndarray) -> np.ndarray:
-    """SplitMix64's finaliser (:func:`bridge.link.model._mix`) in place on a uint64 array (wrapping)."""
+    """SplitMix64's finaliser (:func:`bridge.link.impairment._mix`) in place on a uint64 array (wrapping)."""
     z += _C1
     z ^= z >> _U30
     z *= _C2
@@ -508,183 +505,3 @@ def _commands_in_force(e: np.ndarray, S: int, pt: np.ndarray, timeout_s: float, 
         age[c] = worst
         rec_check[c, kept:] = NEVER
         rec_cmd[c, kept:] = 0
-
-
-# -- the prediction -----------------------------------------------------------------------------------
-class BatchPredictor:
-    """:class:`controller.predict.Predictor` for n cells: the newest state carried from its stamp to the
-    aim time (s) through the nominal model with the commands sent since, in the same RK4 steps.
-
-    Commands are kept in a ring by their number (``depth`` of them: enough to cover the longest a state
-    may be used, plus the command lag). Each call advances every cell through its segments between command
-    times (a cell with fewer segments takes steps of length 0, which leave its state exactly as it is),
-    continuing from the last prediction while the state is the same one, as the scalar predictor does.
-    """
-
-    def __init__(self, nominal: Nominal, dt_max: float, lag_s: np.ndarray, depth: int) -> None:
-        n = len(lag_s)
-        self.n = n
-        self.m = nominal.mass
-        self.g = nominal.gravity
-        c = Coefficients.of(nominal)
-        self.dt_max = dt_max
-        self.lag = lag_s
-        self.depth = depth
-        self.cmd_t = np.full((depth, n), np.inf)  # when each command counts from (send time + lag)
-        self.cmd_u = np.zeros((depth, 5, n))  # u1..u4 realisable, omega_d
-        self.total = np.zeros(n, np.int64)  # commands recorded so far
-        self.from_t = np.full(n, np.nan)  # the state stamp the cache starts from
-        self.cache_t = np.zeros(n)
-        self.cache_X = np.zeros((12, n))
-        self._coefficients = np.array((c.i1, c.i2, c.i3, c.jr_x, c.jr_y, c.l_x, c.l_y, c.l_z))  # for the kernel
-
-    def sent(self, t: float, u: np.ndarray, omega_d: np.ndarray, which: np.ndarray) -> None:
-        """Record the command sent at t (s) by the cells ``which`` (index array): u [4, len(which)] N, omega_d."""
-        if not len(which):
-            return
-        slot = self.total[which] % self.depth
-        self.cmd_t[slot, which] = t + self.lag[which]
-        self.cmd_u[slot, :4, which] = u.T
-        self.cmd_u[slot, 4, which] = omega_d
-        self.total[which] += 1
-
-    def predict(self, t_state: np.ndarray, X: np.ndarray, aim: np.ndarray, which: np.ndarray) -> np.ndarray:
-        """X [12, len(which)] (measured at ``t_state``) carried to ``aim`` (s) for the cells ``which``."""
-        if not len(which):
-            return X
-        out = np.empty_like(X)
-        _predict_cells(t_state, X, aim, which, self.from_t, self.cache_t, self.cache_X, self.cmd_t, self.cmd_u,
-                       self.total, self.dt_max, self.m, self.g, self._coefficients, out)
-        return out
-
-
-_nominal_rk4 = njit(cache=True)(nominal_rk4)  # the scalar predictor's own step, compiled
-
-
-@njit(cache=True)
-def _predict_cells(t_state: np.ndarray, X: np.ndarray, aim: np.ndarray, which: np.ndarray, from_t: np.ndarray,
-                   cache_t: np.ndarray, cache_X: np.ndarray, cmd_t: np.ndarray, cmd_u: np.ndarray,
-                   total: np.ndarray, dt_max: float, m: float, g: float, c: np.ndarray,
-                   out: np.ndarray) -> None:  # pragma: no cover
-    """:meth:`controller.predict.Predictor.predict` of each cell ``which[i]``: X[:, i] (measured at
-    t_state[i] s) carried to aim[i] s in steps of at most dt_max s, through the segments between the
-    times its commands count from (cmd_t, a ring of ``depth`` by number; cmd_u: u1..u4 and omega_d),
-    continuing the cached prediction (from_t, cache_t, cache_X, updated here) while the state is the
-    same one. Into out [12, len(which)]."""
-    depth = cmd_t.shape[0]
-    i1, i2, i3, jr_x, jr_y, l_x, l_y, l_z = c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]
-    for i in range(len(which)):
-        j = which[i]
-        ts, to = t_state[i], aim[i]
-        cont = from_t[j] == ts and cache_t[j] <= to
-        src, col = (cache_X, j) if cont else (X, i)
-        tau = cache_t[j] if cont else ts
-        Xp = (src[0, col], src[1, col], src[2, col], src[3, col], src[4, col], src[5, col], src[6, col],
-              src[7, col], src[8, col], src[9, col], src[10, col], src[11, col])
-        n = total[j]
-        used = min(n, depth)
-        after = 0  # the command in effect at tau: the newest numbered with its time <= tau (-1: none)
-        for k in range(used):
-            if cmd_t[k, j] > tau:
-                after += 1
-        cur = n - 1 - after
-        while tau < to:
-            has_next = cur + 1 < n
-            nxt = cmd_t[(cur + 1) % depth, j] if has_next else to
-            end = nxt if nxt < to else to
-            if cur >= 0:
-                slot = cur % depth
-                u0, u1, u2, u3, od = cmd_u[slot, 0, j], cmd_u[slot, 1, j], cmd_u[slot, 2, j], cmd_u[slot, 3, j], \
-                    cmd_u[slot, 4, j]
-            else:
-                u0 = u1 = u2 = u3 = od = 0.0
-            span = end - tau
-            kk = max(1, int(span / dt_max + 0.999999))
-            h = span / kk
-            for _ in range(kk):
-                Xp = _nominal_rk4(Xp, u0 / m, g, i1, i2, i3, jr_x, jr_y, l_x * u1, l_y * u2, l_z * u3, od, h)
-            tau = end
-            if end == nxt and has_next:
-                cur += 1
-        from_t[j] = ts
-        cache_t[j] = to
-        for q in range(12):
-            out[q, i] = Xp[q]
-            cache_X[q, j] = Xp[q]
-
-
-# -- what the wire carries ------------------------------------------------------------------------------
-@njit(cache=True)
-def _wrap_pi(a: float) -> float:
-    """:func:`bridge.core.wire.wrap_pi`."""
-    a = (a + math.pi) % (2.0 * math.pi) - math.pi
-    return math.pi if a == -math.pi else a
-
-
-@njit(cache=True)
-def _rotate(w: float, x: float, y: float, z: float, vx: float, vy: float, vz: float) -> tuple[float, float, float]:
-    """:func:`bridge.core.wire.rotate` by the quaternion (w, x, y, z)."""
-    cx = y * vz - z * vy
-    cy = z * vx - x * vz
-    cz = x * vy - y * vx
-    return (vx + 2.0 * (w * cx + y * cz - z * cy), vy + 2.0 * (w * cy + z * cx - x * cz),
-            vz + 2.0 * (w * cz + x * cy - y * cx))
-
-
-@njit(cache=True)
-def _f32(v: float) -> float:
-    """v rounded to float32, as MAVLink carries it."""
-    return np.float64(np.float32(v))
-
-
-@njit(cache=True)
-def states_over_wire(X: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover
-    """:func:`bridge.core.wire.state_over_wire` of every cell (X [12, n] -> out [12, n]; out may be X): the
-    state as the law reads it from ODOMETRY, each field rounded to float32, in wire.py's operations."""
-    for j in range(X.shape[1]):
-        x, vx, y, vy, z, vz = X[0, j], X[1, j], X[2, j], X[3, j], X[4, j], X[5, j]
-        phi, dphi, th, dth, psi, dpsi = X[6, j], X[7, j], X[8, j], X[9, j], X[10, j], X[11, j]
-        # state_to_odometry
-        roll, pitch, yaw = phi, -th, _wrap_pi(-psi)
-        cr, sr = math.cos(0.5 * roll), math.sin(0.5 * roll)
-        cp, sp = math.cos(0.5 * pitch), math.sin(0.5 * pitch)
-        cy, sy = math.cos(0.5 * yaw), math.sin(0.5 * yaw)
-        qw = cr * cp * cy + sr * sp * sy
-        qx = sr * cp * cy - cr * sp * sy
-        qy = cr * sp * cy + sr * cp * sy
-        qz = cr * cp * sy - sr * sp * cy
-        bx, by, bz = _rotate(qw, -qx, -qy, -qz, vx, -vy, -vz)
-        sr1, cr1 = math.sin(roll), math.cos(roll)
-        sp1, cp1 = math.sin(pitch), math.cos(pitch)
-        droll, dpitch, dyaw = dphi, -dth, -dpsi
-        p = droll - sp1 * dyaw
-        q = cr1 * dpitch + sr1 * cp1 * dyaw
-        r = -sr1 * dpitch + cr1 * cp1 * dyaw
-        # float32 on the wire
-        n_, e_, d_ = _f32(x), _f32(-y), _f32(-z)
-        qw, qx, qy, qz = _f32(qw), _f32(qx), _f32(qy), _f32(qz)
-        bx, by, bz = _f32(bx), _f32(by), _f32(bz)
-        p, q, r = _f32(p), _f32(q), _f32(r)
-        # odometry_to_state
-        nq = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
-        qw, qx, qy, qz = qw / nq, qx / nq, qy / nq, qz / nq
-        v0, v1, v2 = _rotate(qw, qx, qy, qz, bx, by, bz)
-        nn = qw * qw + qx * qx + qy * qy + qz * qz
-        s = 2.0 * (qw * qy - qz * qx) / nn
-        s = 1.0 if s > 1.0 else -1.0 if s < -1.0 else s
-        roll = math.atan2(2.0 * (qw * qx + qy * qz), nn - 2.0 * (qx * qx + qy * qy))
-        pitch = math.asin(s)
-        yaw = math.atan2(2.0 * (qw * qz + qx * qy), nn - 2.0 * (qy * qy + qz * qz))
-        sr2, cr2 = math.sin(roll), math.cos(roll)
-        cp2 = math.cos(pitch)
-        a = q * sr2 + r * cr2
-        droll, dpitch, dyaw = p + a * math.tan(pitch), q * cr2 - r * sr2, a / cp2
-        out[0, j], out[1, j], out[2, j], out[3, j], out[4, j], out[5, j] = n_, v0, -e_, -v1, -d_, -v2
-        out[6, j], out[7, j], out[8, j], out[9, j] = roll, droll, -pitch, -dpitch
-        out[10, j], out[11, j] = _wrap_pi(-yaw), -dyaw
-
-
-def commands_over_wire(c: np.ndarray) -> np.ndarray:
-    """:func:`bridge.core.wire.command_over_wire`'s command as the vehicle reads it, for normalised commands
-    [4, n]: reordered and re-signed (exactly) on the way out and back, so only the float32 rounding stays."""
-    return c.astype(np.float32).astype(np.float64)

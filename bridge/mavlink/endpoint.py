@@ -1,17 +1,17 @@
-"""MAVLink 2 over UDP: an endpoint that owns its socket, and the tlog it records.
+"""MAVLink 2 over UDP: an endpoint that owns its socket, and how it waits.
 
 In:  UDP datagrams of MAVLink 2 frames; an address (``udpin:`` / ``udpout:`` HOST:PORT), the
      endpoint's sysid and compid, an optional signing key
 Out: checked, decoded messages with their senders' addresses (pymavlink messages, or a
-     :class:`HotMessage` for ODOMETRY and the two actuator targets); encoded frames sent to the
-     peer; refusals counted by reason; a ``.tlog`` (per frame: 8-byte big-endian Unix time in
-     us, then the raw frame)
+     :class:`~bridge.mavlink.frames.HotMessage` for ODOMETRY and the two actuator targets); encoded
+     frames sent to the peer; refusals counted by reason; every frame recorded in a
+     :class:`~bridge.mavlink.tlog.Tlog`
 
 An :class:`Endpoint` is one UDP socket and one pymavlink ``MAVLink`` object (its own
 sequence numbers: one per link, as MAVLink wants). It encodes with pymavlink and decodes
 whole datagrams with ``parse_buffer``; it never uses ``recv_match``, whose per-message
 bookkeeping and polling ``select`` are the slow path. Every frame it sends or receives is
-appended to a :class:`Tlog`.
+appended to a :class:`~bridge.mavlink.tlog.Tlog`.
 
 Addresses follow pymavlink's connection strings (docs/design.md, "The MAVLink contract"):
 
@@ -21,12 +21,12 @@ Addresses follow pymavlink's connection strings (docs/design.md, "The MAVLink co
 
 Receiving is the project's one receive path (:mod:`bridge.mavlink.receive`): :meth:`Endpoint.poll`
 reads a bounded batch, sheds excess from sources other than the peer, and
-:func:`parse_datagram` takes whole MAVLink 2 frames only, checked (CRC, length, known id,
+:func:`~bridge.mavlink.frames.parse_datagram` takes whole MAVLink 2 frames only, checked (CRC, length, known id,
 and with a key their signature: :mod:`bridge.mavlink.signing`) before anything is decoded;
 everything refused is counted by reason in the endpoint's :class:`bridge.mavlink.receive.Rejections`.
 
 The two messages of every control step (ODOMETRY down, the actuator target up) take a
-hot path (:class:`HotLayout`): framed and checked with ``struct`` and the CRC directly from
+hot path (:class:`~bridge.mavlink.frames.HotLayout`): framed and checked with ``struct`` and the CRC directly from
 pymavlink's own message metadata (field order, ``crc_extra``), signed and verified by
 :class:`bridge.mavlink.signing.Signing`, without building a pymavlink message object; every other
 frame is decoded by pymavlink's ``decode`` once it has passed the same checks. Both paths
@@ -44,23 +44,36 @@ import select
 import socket
 import struct
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
+# the codec and the tlog live in their own modules; their names are re-exported here, where the nodes,
+# the tests and the benchmarks import them with the endpoint
+from bridge.mavlink.frames import (  # noqa: F401 - re-exported
+    HEADER2,
+    HIL_ACTUATOR_CONTROLS,
+    HOT,
+    MAGIC2,
+    ODOMETRY,
+    SET_ACTUATOR_CONTROL_TARGET,
+    HotLayout,
+    HotMessage,
+    hot_frame,
+    parse_datagram,
+)
 from bridge.mavlink.receive import (
     BATCH,
     FORCE_DISARM,  # noqa: F401 - re-exported: the controller imports it from here
-    MAX_DATAGRAM,
     RateLimiter,
     Rejections,
     ReplyBudget,
 )
-from bridge.mavlink.signing import IFLAG_SIGNED, SIGNATURE_BYTES, Signing
+from bridge.mavlink.signing import IFLAG_SIGNED, Signing
 from bridge.mavlink.signing import crc16 as _crc16
+from bridge.mavlink.tlog import Tlog
 from params import ConfigError
 
 # Identities and ports of docs/design.md, "The MAVLink contract". Instance N (0-9) adds N to both ports and
@@ -70,10 +83,7 @@ LINK_PORT = 14560
 VEHICLE_COMPID = 1  # MAV_COMP_ID_AUTOPILOT1
 CONTROLLER_SYSID = 200  # not 255 (MAVProxy) nor 245 (MAVSDK): a GCS can run beside the controller
 CONTROLLER_COMPID = 191  # MAV_COMP_ID_ONBOARD_COMPUTER
-_STAMP = struct.Struct(">Q")
 _MAX_DATAGRAM = 65535
-_MAGIC2 = 0xFD
-_HEADER2 = struct.Struct("<BBBBBBBHB")  # magic len incompat compat seq sysid compid msgid(24 bit)
 
 
 @dataclass(frozen=True)
@@ -122,189 +132,6 @@ def parse_address(text: str, default_mode: str = "udpout", flag: str = "address"
     except (socket.gaierror, UnicodeError):
         raise ConfigError(f"{flag} {text!r}: unknown host {host!r}") from None
     return Address(mode, host, port)
-
-
-class HotLayout:
-    """Wire layout of one message type, from pymavlink's metadata: encode a flat tuple of
-    field values (pymavlink's ``ordered_fieldnames`` order, arrays flattened) into a
-    MAVLink 2 payload, and decode a payload into a :class:`HotMessage`."""
-
-    def __init__(self, cls: Any) -> None:
-        self.id = cls.id
-        self.name = cls.msgname
-        self.crc_extra = bytes([cls.crc_extra])
-        self.struct = cls.unpacker
-        self.size = cls.unpacker.size
-        self.spans: list[tuple[str, int, int]] = []
-        i = 0
-        for name, n in zip(cls.ordered_fieldnames, cls.array_lengths, strict=True):
-            self.spans.append((name, i, n))
-            i += max(n, 1)
-
-    def decode(self, payload: bytes) -> dict[str, Any]:
-        """Field values by name (arrays as tuples); a truncated MAVLink 2 payload is zero-padded."""
-        if len(payload) < self.size:
-            payload = payload + bytes(self.size - len(payload))
-        v = self.struct.unpack(payload)
-        return {name: v[i] if n == 0 else v[i:i + n] for name, i, n in self.spans}
-
-
-class HotMessage:
-    """A message decoded on the hot path: its fields as attributes, and the few methods of
-    a pymavlink message the handlers use."""
-
-    def __init__(self, layout: HotLayout, fields: dict[str, Any], src: int, comp: int, buf: bytes) -> None:
-        self.__dict__.update(fields)
-        self._type = layout.name
-        self._src = src
-        self._comp = comp
-        self._buf = buf
-
-    def get_type(self) -> str:
-        return self._type
-
-    def get_srcSystem(self) -> int:  # noqa: N802 - pymavlink's name
-        return self._src
-
-    def get_srcComponent(self) -> int:  # noqa: N802
-        return self._comp
-
-    def get_msgbuf(self) -> bytes:
-        return self._buf
-
-
-ODOMETRY = HotLayout(mavlink.MAVLink_odometry_message)
-HIL_ACTUATOR_CONTROLS = HotLayout(mavlink.MAVLink_hil_actuator_controls_message)
-SET_ACTUATOR_CONTROL_TARGET = HotLayout(mavlink.MAVLink_set_actuator_control_target_message)
-HOT = {lay.id: lay for lay in (ODOMETRY, HIL_ACTUATOR_CONTROLS, SET_ACTUATOR_CONTROL_TARGET)}
-
-
-def hot_frame(data: bytes) -> HotMessage | None:
-    """A datagram that is exactly one hot-path frame, unsigned or signed (the signature is
-    the caller's to verify), with a good CRC and a payload no longer than its message,
-    decoded; None for anything else (it then takes :func:`parse_datagram`)."""
-    if len(data) < 12 or data[0] != _MAGIC2:
-        return None
-    n = data[1]
-    flags = data[2]
-    if flags == 0:
-        size = 12 + n
-    elif flags == IFLAG_SIGNED:
-        size = 12 + n + SIGNATURE_BYTES
-    else:
-        return None
-    if len(data) != size:
-        return None
-    layout = HOT.get(data[7] | data[8] << 8 | data[9] << 16)
-    if layout is None or n > layout.size:
-        return None
-    if _crc16(data[1:10 + n] + layout.crc_extra, 0xFFFF) != data[10 + n] | data[11 + n] << 8:
-        return None
-    return HotMessage(layout, layout.decode(data[10:10 + n]), data[5], data[6], data)
-
-
-def parse_datagram(data: bytes, dec: Any, signing: Signing | None, rejected: Rejections,
-                   from_peer: bool = False, frame_budget: Callable[[], bool] | None = None) -> list[Any]:
-    """The frame stage of the receive path (:mod:`bridge.mavlink.receive`): the messages of one
-    datagram, each a whole MAVLink 2 frame with a known id, a good CRC, a payload no longer
-    than its message and, with ``signing``, a good signature newer than its stream's last.
-    With ``frame_budget`` (:meth:`RateLimiter.frame`), each frame is charged before it is
-    checked: once it says no, the rest is ``rate_limited``. The first bad frame ends the
-    datagram and is counted once in ``rejected`` by its reason; frames before it are kept.
-    Never raises. ``dec`` is a pymavlink ``MAVLink`` without a key (it decodes what passed;
-    the hot messages are decoded by the hot codec)."""
-    n = len(data)
-    why = "truncated" if n == 0 else "oversized" if n > MAX_DATAGRAM else None
-    out: list[Any] = []
-    pos = 0
-    while why is None and pos < n:
-        magic = data[pos]
-        if magic != _MAGIC2:
-            why = "mavlink1" if magic == mavlink.PROTOCOL_MARKER_V1 else "no_frame"
-            break
-        if n - pos < 12:
-            why = "truncated"
-            break
-        if frame_budget is not None and not frame_budget():
-            why = "rate_limited"
-            break
-        plen, flags = data[pos + 1], data[pos + 2]
-        if flags & ~IFLAG_SIGNED:
-            why = "bad_flags"
-            break
-        end = pos + 12 + plen + (SIGNATURE_BYTES if flags else 0)
-        if end > n:
-            why = "truncated"
-            break
-        mid = data[pos + 7] | data[pos + 8] << 8 | data[pos + 9] << 16
-        cls = mavlink.mavlink_map.get(mid)
-        if cls is None:
-            why = "unknown_id"
-            break
-        crc_at = pos + 10 + plen
-        if _crc16(data[pos + 1:crc_at] + bytes((cls.crc_extra,)), 0xFFFF) != data[crc_at] | data[crc_at + 1] << 8:
-            why = "bad_crc"
-            break
-        if plen > cls.unpacker.size:
-            why = "oversized"
-            break
-        frame = data[pos:end]
-        if signing is not None:
-            why = signing.verify(frame, frame[5], frame[6])
-            if why:
-                break
-        layout = HOT.get(mid)
-        if layout is not None:
-            out.append(HotMessage(layout, layout.decode(frame[10:10 + plen]), frame[5], frame[6], frame))
-        else:
-            try:
-                out.append(dec.decode(bytearray(frame)))
-            except Exception:  # whatever pymavlink raises on a frame it cannot decode, it is refused
-                why = "malformed"
-                break
-        pos = end
-    if why is not None:
-        rejected.add(why, from_peer)
-    return out
-
-
-class Tlog:
-    """A telemetry log: records of an 8-byte big-endian timestamp (microseconds since the
-    Unix epoch) followed by one raw MAVLink frame, in both directions, as pymavlink's
-    ``mavlogdump.py`` reads them.
-
-    Records are buffered and written whole, many per ``os.write``: a process killed
-    with SIGKILL leaves the file readable up to its last flush. Call :meth:`flush`
-    from the housekeeping of a loop (it is cheap when there is nothing to write).
-    """
-
-    def __init__(self, path: str | Path, batch_bytes: int = 1 << 16) -> None:
-        self.path = Path(path)
-        self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND, 0o644)
-        self._buf: list[bytes] = []
-        self._size = 0
-        self._batch = batch_bytes
-        self.records = 0
-
-    def record(self, frame: bytes) -> None:
-        self._buf.append(_STAMP.pack(time.time_ns() // 1000))
-        self._buf.append(frame)
-        self._size += 8 + len(frame)
-        self.records += 1
-        if self._size >= self._batch:
-            self.flush()
-
-    def flush(self) -> None:
-        if self._buf and self._fd >= 0:
-            os.write(self._fd, b"".join(self._buf))
-            self._buf.clear()
-            self._size = 0
-
-    def close(self) -> None:
-        if self._fd >= 0:
-            self.flush()
-            os.close(self._fd)
-            self._fd = -1
 
 
 def _check_free(address: Address) -> None:
@@ -476,7 +303,7 @@ class Endpoint:
         mav = self.mav
         signing = self.signing
         payload = layout.struct.pack(*values).rstrip(b"\0") or b"\0"  # MAVLink 2 drops trailing zeros
-        head = _HEADER2.pack(_MAGIC2, len(payload), 0 if signing is None else IFLAG_SIGNED, 0, mav.seq,
+        head = HEADER2.pack(MAGIC2, len(payload), 0 if signing is None else IFLAG_SIGNED, 0, mav.seq,
                              mav.srcSystem, mav.srcComponent, layout.id & 0xFFFF, layout.id >> 16)
         body = head + payload
         buf = body + struct.pack("<H", _crc16(body[1:] + layout.crc_extra, 0xFFFF))

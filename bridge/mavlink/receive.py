@@ -16,7 +16,7 @@ of it reaches the plant or the law:
    is always taken; one from anyone else is first charged (one datagram, its bytes) to its
    source's budget and to the budget of all others together (:class:`RateLimiter`), and
    dropped unparsed when either is spent: excess from others is shed first, the peer never.
-2. **Frame** (:func:`bridge.mavlink.endpoint.parse_datagram`): MAVLink 2 frames only, whole, known
+2. **Frame** (:func:`bridge.mavlink.frames.parse_datagram`): MAVLink 2 frames only, whole, known
    message id, good CRC, payload no longer than the message, and, with a key
    (:mod:`bridge.mavlink.signing`), correctly signed and newer than the last frame of its stream.
    Each frame of a datagram from anyone but the peer is charged to the same budgets in

@@ -1,8 +1,9 @@
-"""The batched offline engine: many cells of one mission flown at once, over a cell axis (numpy and numba).
+"""The batch engine's flight: many cells of one mission flown at once, over a cell axis (numpy and numba).
 
-In:  a mission (a :class:`~missions.Mission` or a TOML path) and, per cell, the overrides
-     :func:`bridge.core.flight.prepare` takes (``controller``, ``rate_hz`` Hz, ``seed``, a ``link`` table:
-     what :func:`bridge.sweep.grid.cell_overrides` gives), or prepared :class:`~bridge.core.flight.Flight` s
+In:  a mission (a :class:`~missions.Mission` or a TOML path) and, per cell, its
+     :class:`~bridge.core.flight.Overrides` (``controller``, ``rate_hz`` Hz, ``seed``, a ``link`` table:
+     what :func:`bridge.sweep.grid.cell_overrides` gives; or those fields as a mapping), or prepared
+     :class:`~bridge.core.flight.Flight` s
 Out: per cell the measured columns of a ``cells.csv`` row (:data:`MEASURES`: ``rms``/``max`` m,
      ``settling_s``/``flown_s`` s, ``tv_u2`` N/s, ``ripple_u2`` N, ``outcome``, packet counts, ``error``),
      the same numbers :func:`bridge.sweep.cells.row_from_run` takes from the scalar loop's run;
@@ -11,8 +12,8 @@ Out: per cell the measured columns of a ``cells.csv`` row (:data:`MEASURES`: ``r
 The scalar loop (:func:`bridge.loop.fly`) stays the reference; this engine flies the same parts over a
 cell axis: the link model, the guard and the vehicle's timeout first, as a plan of the whole flight
 (:func:`bridge.link.plan.plan_links`: with no bandwidth queue and no re-arming nothing of it depends
-on the flight), then the plant (:class:`plant.batch.BatchPlant`), the laws and the actuation
-(:class:`controller.batch.BatchController`), the prediction and the failsafe landing, step by step. The
+on the flight), then the plant (:class:`bridge.batch.plant.BatchPlant`), the laws and the actuation
+(:class:`bridge.batch.control.BatchController`), the prediction and the failsafe landing, step by step. The
 metrics are accumulated as the flight goes (running sums and maxima, the last step outside the settling
 band), with one column kept whole, u2, for the ripple of each cell's own second half; no trace is held.
 
@@ -27,30 +28,35 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numba import njit
 
-from bridge.core.flight import Flight, prepare
+from bridge.autopilot.failsafe import DEFAULT_GAINS, OnboardGains
+from bridge.batch import kernels as K
+from bridge.batch.control import BATCH_LAWS, BatchActuation, BatchController
+from bridge.batch.metrics import Metrics, measure_step, measured_rows
+from bridge.batch.plant import BatchPlant
+from bridge.batch.predict import BatchPredictor
+from bridge.batch.wire import commands_over_wire, states_over_wire
+from bridge.core.flight import Flight, Overrides, prepare
 from bridge.link.model import link_from_table, merge_link_tables
-from bridge.link.plan import HOLD, NONE, BatchPredictor, Clocks, commands_over_wire, plan_links, states_over_wire
+from bridge.link.plan import HOLD, NONE, Clocks, LinkPlan, plan_links
 from bridge.record.metrics import BANDS, RMS_FROM_S
-from controller.batch import BATCH_LAWS, BatchActuation, BatchController
+from controller.nominal import Nominal
 from missions import MISSION_DIR, Mission, Sine, load_mission
-from plant.batch import BatchPlant
 
 # the columns of a cells.csv row this engine measures (the cell's own axes and seed come from the cell)
 MEASURES = ("rms", "max", "settling_s", "tv_u2", "ripple_u2", "outcome", "up_sent", "up_lost", "down_sent",
             "down_lost", "flown_s", "error")
 CELL_STEPS = 8_000_000  # cells x control steps in one batch: bounds its memory (1000 x 7500: 457 MiB peak RSS)
-RIPPLE_WINDOW_S = 0.2  # bridge.sweep.cells.RIPPLE_WINDOW_S (that layer is above this one)
 Progress = Callable[[int, int], None]  # (cells done, cells in all), now and then
 
 
-def batch_problem(mission: Mission | str | Path, cells: Sequence[Mapping[str, Any]]) -> str | None:
+def batch_problem(mission: Mission | str | Path, cells: Sequence[Overrides | Mapping[str, Any]]) -> str | None:
     """Why these cells cannot fly in the batch engine, in one line; None if they can.
 
     ``cells``: per cell the overrides of :func:`bridge.core.flight.prepare` (a cell whose overrides are
@@ -107,7 +113,7 @@ def _differs(a: Flight, b: Flight) -> str | None:
 _PER_CELL = frozenset({"seed", "link"})  # what a cell may change without its own prepare()
 
 
-def _prepare_all(mission: Mission, cells: Sequence[Mapping[str, Any]]) -> list[Flight | str]:
+def _prepare_all(mission: Mission, cells: Sequence[Overrides | Mapping[str, Any]]) -> list[Flight | str]:
     """Each cell's Flight, as :func:`prepare` builds it; a cell that cannot be built gives its error's text.
 
     prepare() parses the profile and builds the law (milliseconds each), so it runs once per distinct
@@ -116,23 +122,23 @@ def _prepare_all(mission: Mission, cells: Sequence[Mapping[str, Any]]) -> list[F
     checks the result equals prepare()'s, cell by cell)."""
     bases: dict[tuple[Any, ...], Flight | str] = {}
     out: list[Flight | str] = []
-    for over in cells:
-        over = dict(over)
+    for given in cells:
         try:
-            if not set(over) <= _PER_CELL | {"controller", "rate_hz"}:
-                out.append(prepare(mission, **over))
+            over = Overrides.of(given)
+            if not set(over.given()) <= _PER_CELL | {"controller", "rate_hz"}:
+                out.append(prepare(mission, over))
                 continue
-            key = (over.get("controller"), over.get("rate_hz"))
+            key = (over.controller, over.rate_hz)
             if key not in bases:
                 try:
-                    bases[key] = prepare(mission, controller=key[0], rate_hz=key[1])
+                    bases[key] = prepare(mission, Overrides(controller=key[0], rate_hz=key[1]))
                 except Exception as exc:  # the cell's law or rate is bad input: every such cell says so
                     bases[key] = f"{type(exc).__name__}: {exc}"
             base = bases[key]
             if isinstance(base, str):
                 out.append(base)
                 continue
-            out.append(_with_seed_and_link(base, mission, over.get("seed"), over.get("link")))
+            out.append(_with_seed_and_link(base, mission, over.seed, over.link))
         except Exception as exc:  # a cell that cannot be built is an error row, never the end of the batch
             out.append(f"{type(exc).__name__}: {exc}")
     return out
@@ -147,7 +153,7 @@ def _with_seed_and_link(base: Flight, mission: Mission, seed: int | None, link: 
     return replace(base, mission=m, link=link_from_table(m.link, m.source, seed=m.seed, duration_s=m.duration_s))
 
 
-def fly_batch(mission: Mission | str | Path, cells: Sequence[Mapping[str, Any]], *,
+def fly_batch(mission: Mission | str | Path, cells: Sequence[Overrides | Mapping[str, Any]], *,
               progress: Progress | None = None) -> list[dict[str, Any]]:
     """Fly every cell (the overrides of :func:`bridge.core.flight.prepare`) and return, in order, the
     measured columns (:data:`MEASURES`) of each one's ``cells.csv`` row; a cell that cannot be built gets
@@ -207,17 +213,6 @@ def fly_flights(flights: Sequence[Flight], *, progress: Progress | None = None,
     return [r for r in out if r is not None]
 
 
-@dataclass
-class _Metrics:
-    """Running figures of every cell, updated once per control step (the trace row of that step)."""
-
-    sq_sum: np.ndarray  # sum over t >= rms_from of |3-D error|^2
-    sq_max: np.ndarray
-    last_out: np.ndarray  # [segments, 3, n]: last step outside the settling band, per change and axis (-1)
-    tv: np.ndarray  # sum of |u2_k - u2_{k-1}|
-    u2: np.ndarray  # [steps, n]: u2 as recorded, for the ripple
-
-
 class _Batch:
     """One batch: flights of one mission and one control rate, ordered backstepping laws first."""
 
@@ -238,107 +233,65 @@ class _Batch:
         n = self.n
         clocks = self.clocks
         steps, S, rate = clocks.steps, clocks.substeps, clocks.rate_hz
-        guards = [f.guard for f in fl]
-        plan = plan_links([f.link for f in fl], guards, f0.failsafe.timeout_s, clocks)
+        plan = plan_links([f.link for f in fl], [f.guard for f in fl], f0.failsafe.timeout_s, clocks)
         x0, y0, z0, psi0 = m.start
         start = (x0, 0.0, y0, 0.0, z0, 0.0, 0.0, 0.0, 0.0, 0.0, psi0, 0.0)
         plant = BatchPlant(f0.profile, f0.effects, [f.mission.seed for f in fl], physics_hz=m.physics_hz,
                            state=start)
-        nominal = f0.nominal
-        ctl = BatchController([f.mission.controller for f in fl], nominal, f0.gains, rate)
+        ctl = BatchController([f.mission.controller for f in fl], f0.nominal, f0.gains, rate)
         t_all = clocks.step_t
 
         # the states the guard may still use, and the commands on their way up (rings by step)
-        age_max = plan.state_age_max
-        ring_n = age_max + 1
-        ring_X = np.zeros((ring_n, 12, n))
-        held_n = plan.cmd_age_max + 1
-        ring_held = np.zeros((held_n, 5 if not plant.lagged else 4, n))
+        ring_X = np.zeros((plan.state_age_max + 1, 12, n))
+        ring_held = np.zeros((plan.cmd_age_max + 1, 5 if not plant.lagged else 4, n))
         ptr = np.zeros(n, np.int64)
         next_check = plan.apply_check[:, 0].copy()
-
-        # prediction: its cells, their command lags, and the references at t + lag
-        predict = np.array([g.compensation == "predict" for g in guards])
-        pidx = np.nonzero(predict)[0]
-        lags = np.array([g.lag_s for g in guards])
-        ref_now = _references(m, t_all)
-        lagged_refs = {}
-        for lag in sorted({float(v) for v in lags[pidx]} - {0.0}):
-            lagged_refs[lag] = (np.nonzero(predict & (lags == lag))[0], _references(m, t_all + lag))
-        predictor = None
-        if len(pidx):
-            depth = age_max + int(math.ceil(float(lags.max()) * rate)) + 4
-            predictor = BatchPredictor(nominal, 1.0 / rate, lags[pidx], depth)
-
-        # the failsafe: which step's period starts it, the landing loop's actuation
+        pred = _Prediction(self, plan)
+        land = _Landing(f0.nominal, f0.failsafe.descent_rate, n)
         fs_step = plan.failsafe_step
-        in_failsafe = np.zeros(n, bool)
-        armed = np.ones(n, bool)
-        landing = BatchActuation(nominal, n)
-        descent = f0.failsafe.descent_rate
+        fs_steps = {int(v) for v in fs_step[fs_step < steps]}  # the steps whose period starts a failsafe
 
         # the figures, as the flight goes
         rms_from = min(RMS_FROM_S, 0.5 * m.duration_s)
         changes = list(m.trajectory.change_times())
         seg_of = np.searchsorted(np.array(changes), t_all, side="right") - 1  # the change each step follows
-        met = _Metrics(np.zeros(n), np.zeros(n), np.full((max(1, len(changes)), 3, n), -1, np.int64),
-                       np.zeros(n), np.zeros((steps, n)))
+        met = Metrics(np.zeros(n), np.zeros(n), np.full((max(1, len(changes)), 3, n), -1, np.int64),
+                      np.zeros(n), np.zeros((steps, n)))
         band = np.array([BANDS["x"], BANDS["y"], BANDS["z"]])
         u2_now = np.zeros(n)
         alive = np.ones(n, bool)
         flown = np.full(n, steps, np.int64)
         diverged = np.zeros(n, bool)
-        ref_cells = None
         every = max(1, steps // 20)
-
-        fs_steps = {int(v) for v in fs_step[fs_step < steps]}  # the steps whose period starts a failsafe
-        any_failsafe = False
         Xg = np.empty((12, n))
         last_u2 = np.zeros(n)
+        actuation = f0.nominal.actuation
         with np.errstate(all="ignore"):
             for k in range(steps):
                 t = k / rate
                 X = plant.X
-                states_over_wire(X, ring_X[k % ring_n])  # what the laws read: ODOMETRY's float32, as the scalar loop
+                states_over_wire(X, ring_X[k % len(ring_X)])  # what the laws read: ODOMETRY float32, as offline
                 mode = plan.mode[k]
                 active = mode != NONE
                 if active.any():
                     _states_used(ring_X, plan.state_step[k], active, k, Xg)
-                    ref = ref_now[k]
-                    if lagged_refs:
-                        if ref_cells is None:
-                            ref_cells = np.empty((4, 5, n))
-                        ref_cells[...] = ref[:, :, None]
-                        for which, table in lagged_refs.values():
-                            ref_cells[:, :, which] = table[k][:, :, None]
-                        ref = ref_cells
-                    if predictor is not None:
-                        st = plan.state_step[k]
-                        pos = np.nonzero(active[pidx])[0]
-                        if len(pos):
-                            g_idx = pidx[pos]
-                            aim = t + lags[g_idx]
-                            Xg[:, g_idx] = predictor.predict(t_all[st[g_idx]], Xg[:, g_idx], aim, pos)
+                    ref = pred.prepare(k, t, active, Xg)
                     u, real, c = ctl.step(Xg, ref, mode == HOLD, active)
-                    if predictor is not None and len(pos):
-                        predictor.sent(t, real[:, g_idx], ctl.actuation.omega_d[g_idx], pos)
+                    pred.sent(t, real, ctl.actuation.omega_d)
                     np.copyto(u2_now, u[1], where=active)
-                    plant.held(commands_over_wire(c), out=ring_held[k % held_n])  # the float32 target, as SITL
-                _measure(k, X, ref_now[k], u2_now, last_u2, met.sq_sum, met.sq_max, met.last_out, met.tv, band,
-                         int(seg_of[k]), t >= rms_from, alive)
+                    plant.held(commands_over_wire(c, actuation), out=ring_held[k % len(ring_held)])  # float32, as SITL
+                measure_step(k, X, pred.ref_now[k], u2_now, last_u2, met.sq_sum, met.sq_max, met.last_out, met.tv,
+                             band, int(seg_of[k]), t >= rms_from, alive)
                 met.u2[k] = u2_now
                 last_u2[...] = u2_now
 
                 # the vehicle's period: commands take effect at the physics step they arrive in
                 if k in fs_steps:
-                    in_failsafe |= fs_step == k
-                    any_failsafe = True
+                    land.begin(fs_step == k)
                 for i in range(S):
                     _apply_due(k * S + i, next_check, ptr, plan.apply_check, plan.apply_cmd, ring_held, plant.holding)
-                    if any_failsafe:
-                        self._land(plant, landing, nominal, descent, in_failsafe & armed, armed)
+                    land.step(plant)
                     plant.step()
-                plant.resync()
 
                 bad = plant.diverged() & alive
                 if bad.any():
@@ -351,129 +304,114 @@ class _Batch:
                 if k % every == 0:
                     report(k, steps)
         outcome = np.where(diverged, "diverged", np.where(fs_step < flown, "failsafe", "completed"))
-        rows = self._rows(met, flown, outcome, plan.counts(flown), changes, rms_from)
+        rows = measured_rows(met, flown, outcome, plan.counts(flown), changes, rms_from, t_all, rate)
         back = [None] * n
         for pos_, i in enumerate(self.order):
             back[i] = rows[pos_]
         return back  # type: ignore[return-value]
 
-    @staticmethod
-    def _land(plant: BatchPlant, act: BatchActuation, nominal: Any, descent: float, flying: np.ndarray,
-              armed: np.ndarray) -> None:
-        """One physics step of the vehicle's failsafe (SimVehicle.advance): on the ground it disarms
-        (command zero), else the landing loop (bridge.autopilot.failsafe.LandingController) commands."""
+
+class _Prediction:
+    """The references each cell controls on (at t + its command lag where it predicts) and the batch
+    predictor of the cells that predict (compensation ``predict``)."""
+
+    def __init__(self, batch: _Batch, plan: LinkPlan) -> None:
+        guards = [f.guard for f in batch.flights]
+        m, n, rate = batch.mission, batch.n, batch.clocks.rate_hz
+        self.t_all = batch.clocks.step_t
+        self.plan = plan
+        predict = np.array([g.compensation == "predict" for g in guards])
+        self.pidx = np.nonzero(predict)[0]
+        self.lags = np.array([g.lag_s for g in guards])
+        self.ref_now = _references(m, self.t_all)
+        self.lagged_refs = {}
+        for lag in sorted({float(v) for v in self.lags[self.pidx]} - {0.0}):
+            self.lagged_refs[lag] = (np.nonzero(predict & (self.lags == lag))[0], _references(m, self.t_all + lag))
+        self.ref_cells = np.empty((4, 5, n)) if self.lagged_refs else None
+        self.predictor = None
+        if len(self.pidx):
+            depth = plan.state_age_max + int(math.ceil(float(self.lags.max()) * rate)) + 4
+            self.predictor = BatchPredictor(batch.flights[0].nominal, 1.0 / rate, self.lags[self.pidx], depth)
+        self.pos = self.g_idx = np.zeros(0, np.int64)
+
+    def prepare(self, k: int, t: float, active: np.ndarray, Xg: np.ndarray) -> np.ndarray:
+        """The reference sample of step k for the cells ([4, 5] or [4, 5, n]); the states Xg [12, n] of the
+        predicting active cells carried to t + lag, in place."""
+        ref = self.ref_now[k]
+        if self.ref_cells is not None:
+            self.ref_cells[...] = ref[:, :, None]
+            for which, table in self.lagged_refs.values():
+                self.ref_cells[:, :, which] = table[k][:, :, None]
+            ref = self.ref_cells
+        self.pos = self.g_idx = np.zeros(0, np.int64)
+        if self.predictor is not None:
+            st = self.plan.state_step[k]
+            self.pos = np.nonzero(active[self.pidx])[0]
+            if len(self.pos):
+                self.g_idx = g = self.pidx[self.pos]
+                Xg[:, g] = self.predictor.predict(self.t_all[st[g]], Xg[:, g], t + self.lags[g], self.pos)
+        return ref
+
+    def sent(self, t: float, real: np.ndarray, omega_d: np.ndarray) -> None:
+        """Record the commands the predicting cells of this step sent (realisable wrench [4, n], omega_d [n])."""
+        if self.predictor is not None and len(self.pos):
+            self.predictor.sent(t, real[:, self.g_idx], omega_d[self.g_idx], self.pos)
+
+
+class _Landing:
+    """The vehicle's failsafe (SimVehicle.advance) of every cell in it: on the ground it disarms (command
+    zero), else the ``descend`` landing law (:func:`bridge.autopilot.failsafe.level_wrench`, compiled, with
+    the on-board controller's gains) commands through the profile's actuation."""
+
+    def __init__(self, nominal: Nominal, descent: float, n: int, gains: OnboardGains = DEFAULT_GAINS) -> None:
+        no = nominal
+        self.act = BatchActuation(nominal, n)
+        self.constants = (-descent, no.mass, no.gravity, no.ixx / no.arm, no.iyy / no.arm, no.izz / no.arm,
+                          gains.k_vel_level, gains.k_att_level, gains.d_att_level, gains.d_yaw)
+        self.in_failsafe = np.zeros(n, bool)
+        self.armed = np.ones(n, bool)
+        self.any = False
+
+    def begin(self, cells: np.ndarray) -> None:
+        """The cells (bool [n]) whose failsafe begins this period."""
+        self.in_failsafe |= cells
+        self.any = True
+
+    def step(self, plant: BatchPlant) -> None:
+        """One physics step of the failsafe: what the cells in it hold until the next."""
+        if not self.any:
+            return
+        flying = self.in_failsafe & self.armed
         if not flying.any():
             return
         down = flying & plant.on_ground
         if down.any():
             cells = np.nonzero(down)[0]
-            armed[cells] = False
+            self.armed[cells] = False
             plant.hold(plant.held(np.zeros((4, len(cells)))), cells)
             flying = flying & ~down
             if not flying.any():
                 return
         cells = np.nonzero(flying)[0]
-        X = plant.X[:, cells]
-        n = nominal
-        vz, phi, dphi, th, dth, dpsi = X[5], X[6], X[7], X[8], X[9], X[11]
-        tilt = np.maximum(np.cos(phi) * np.cos(th), 0.5)
-        u = np.stack((n.mass * (n.gravity + 2.0 * (-descent - vz)) / tilt,
-                      n.ixx / n.arm * (-36.0 * phi - 12.0 * dphi),
-                      n.iyy / n.arm * (-36.0 * th - 12.0 * dth),
-                      n.izz / n.arm * (-4.0 * dpsi)))
-        c = act.allocate(u)[1]
-        plant.hold(plant.held(c), cells)
+        u = np.empty((4, len(cells)))
+        _level(plant.X, cells, self.constants, u)
+        plant.hold(plant.held(self.act.allocate(u)[1]), cells)
 
-    def _rows(self, met: _Metrics, flown: np.ndarray, outcome: np.ndarray, counts: dict[str, np.ndarray],
-              changes: list[float], rms_from: float) -> list[dict[str, Any]]:
-        m = self.mission
-        rate = self.clocks.rate_hz
-        t_all = self.clocks.step_t
-        first_late = int(np.searchsorted(t_all, rms_from, side="left"))
-        ripple = _ripples(met.u2, flown, t_all, rate)
-        rows = []
-        for i in range(self.n):
-            L = int(flown[i])
-            n_late = max(0, L - first_late)
-            dur = float(t_all[L - 1] - t_all[0] + 1.0 / rate)
-            rms = _num(math.sqrt(met.sq_sum[i] / n_late)) if n_late else None
-            mx = _num(math.sqrt(met.sq_max[i])) if n_late else None
-            settle = [s for s in (_settling(met.last_out[:, a, i], changes, t_all, L) for a in range(3))
-                      if s is not None]
-            rows.append({
-                "rms": rms, "max": mx,
-                "settling_s": max(settle) if settle else None,
-                "tv_u2": _num(met.tv[i] / dur) if L > 1 else 0.0,
-                "ripple_u2": ripple[i],
-                "outcome": str(outcome[i]),
-                "up_sent": int(counts["up_sent"][i]), "up_lost": int(counts["up_lost"][i]),
-                "down_sent": int(counts["down_sent"][i]), "down_lost": int(counts["down_lost"][i]),
-                "flown_s": _num(dur), "error": "",
-            })
-        del m
-        return rows
+
+@njit(cache=True)
+def _level(X: np.ndarray, cells: np.ndarray, constants: tuple, out: np.ndarray) -> None:  # pragma: no cover
+    """:func:`bridge.autopilot.failsafe.level_wrench` of the cells ``cells`` of X [12, n] into out [4, len(cells)]."""
+    v_z, m, g, kx, ky, kz, k_vel, k_att, d_att, d_yaw = constants
+    for i in range(len(cells)):
+        u = K.level_wrench(K.column(X, cells[i]), v_z, m, g, kx, ky, kz, k_vel, k_att, d_att, d_yaw)
+        for r in range(4):
+            out[r, i] = u[r]
 
 
 def _references(m: Mission, times: np.ndarray) -> np.ndarray:
     """[len(times), 4, 5]: the reference sample (x, y, z, psi; value and 4 derivatives) at each time."""
     sample = m.trajectory.sample
     return np.array([sample(float(t)) for t in times])
-
-
-def _settling(last_out: np.ndarray, changes: list[float], t: np.ndarray, L: int) -> float | None:
-    """metrics.settling_time's worst over the set-point changes flown, from the last step outside the band."""
-    if L == 0:
-        return None
-    flown_changes = [c for c in changes if c <= t[L - 1]]
-    if not flown_changes:
-        return None
-    ends = flown_changes[1:] + [math.inf]
-    worst = None
-    for s, (c, end) in enumerate(zip(flown_changes, ends, strict=True)):
-        lo = int(np.searchsorted(t[:L], c, side="left"))
-        hi = int(np.searchsorted(t[:L], end, side="left"))
-        i = int(last_out[s])
-        if hi <= lo or i < lo:
-            v = 0.0
-        elif i + 1 < hi:
-            v = float(t[i + 1] - c)
-        else:
-            v = float(t[i] + (t[lo + 1] - t[lo] if hi - lo > 1 else 0.0) - c)
-        worst = v if worst is None else max(worst, v)
-    return _num(worst) if worst is not None else None
-
-
-def _ripples(u2: np.ndarray, flown: np.ndarray, t: np.ndarray, rate_hz: float) -> list[float | None]:
-    """bridge.sweep.cells.ripple_rms of each cell's u2 over its own flight ([steps, n] history)."""
-    n_win = 2 * int(round(0.5 * RIPPLE_WINDOW_S * rate_hz)) + 1
-    h = n_win // 2
-    out: list[float | None] = []
-    groups: dict[int, list[int]] = {}
-    for i, L in enumerate(flown):
-        groups.setdefault(int(L), []).append(i)
-    res = np.zeros(len(flown))
-    for L, cells in groups.items():
-        if L < 3 * n_win:
-            res[cells] = 0.0
-            continue
-        whole = len(cells) == u2.shape[1]  # every cell flew this long: columns in order, no gather
-        u = u2[:L] - u2[0] if whole else u2[:L, cells] - u2[0, cells]  # shifted: the running sum stays small
-        csum = np.zeros((L + 1, len(cells)))
-        np.cumsum(u, axis=0, out=csum[1:])
-        tt = t[:L]
-        sel = tt >= tt[0] + 0.5 * (tt[-1] - tt[0])
-        sel[: h + 1] = False
-        sel[L - h - 1:] = False
-        idx = np.nonzero(sel)[0]
-        if not len(idx):
-            res[cells] = 0.0
-            continue
-        mean = (csum[idx + h + 1] - csum[idx - h]) / n_win
-        dev = u[idx] - mean
-        res[cells] = np.sqrt(np.mean(dev * dev, axis=0))
-    for v in res:
-        out.append(_num(v))
-    return out
 
 
 @njit(cache=True)
@@ -502,39 +440,6 @@ def _apply_due(check: int, next_check: np.ndarray, ptr: np.ndarray, apply_check:
             holding[i, j] = ring_held[slot, i, j]
         ptr[j] += 1
         next_check[j] = apply_check[j, ptr[j]]
-
-
-@njit(cache=True)
-def _measure(k: int, X: np.ndarray, ref: np.ndarray, u2: np.ndarray, last_u2: np.ndarray, sq_sum: np.ndarray,
-             sq_max: np.ndarray, last_out: np.ndarray, tv: np.ndarray, band: np.ndarray, seg: int, late: bool,
-             alive: np.ndarray) -> None:  # pragma: no cover
-    """The figures of the trace row of step k: state X [12, n], reference sample ref [4, 5], u2 [n] (and the
-    last step's, last_u2); a cell no longer alive adds nothing."""
-    for j in range(X.shape[1]):
-        if not alive[j]:
-            continue
-        ex = X[0, j] - ref[0, 0]
-        ey = X[2, j] - ref[1, 0]
-        ez = X[4, j] - ref[2, 0]
-        s = ex * ex + ey * ey + ez * ez
-        if late:
-            sq_sum[j] += s
-            if s > sq_max[j] or s != s:  # np.maximum's: a nan stays
-                sq_max[j] = s
-        if seg >= 0:
-            if abs(ex) > band[0]:
-                last_out[seg, 0, j] = k
-            if abs(ey) > band[1]:
-                last_out[seg, 1, j] = k
-            if abs(ez) > band[2]:
-                last_out[seg, 2, j] = k
-        if k:
-            tv[j] += abs(u2[j] - last_u2[j])
-
-
-def _num(v: Any) -> float | None:
-    f = float(v)
-    return f if math.isfinite(f) else None
 
 
 __all__ = ["CELL_STEPS", "MEASURES", "batch_problem", "error_measures", "flights_problem", "fly_batch",

@@ -1,0 +1,37 @@
+"""The batched offline engine: many cells of one mission flown at once, over a cell axis (numpy and numba).
+
+In:  a mission (a :class:`~missions.Mission` or a TOML path) and, per cell, the overrides
+     :func:`bridge.core.flight.prepare` takes (``controller``, ``rate_hz`` Hz, ``seed``, a ``link`` table:
+     what :func:`bridge.sweep.grid.cell_overrides` gives), or prepared :class:`~bridge.core.flight.Flight` s
+Out: per cell the measured columns of a ``cells.csv`` row (:data:`MEASURES`: ``rms``/``max`` m,
+     ``settling_s``/``flown_s`` s, ``tv_u2`` N/s, ``ripple_u2`` N, ``outcome``, packet counts, ``error``),
+     the same numbers :func:`bridge.sweep.cells.row_from_run` takes from the scalar loop's run;
+     :func:`batch_problem` says in one line why a set of cells cannot be flown here
+
+The parts:
+
+- :mod:`bridge.batch.engine`   the batches and the flight loop (what may be flown, the link plan, the steps)
+- :mod:`bridge.batch.kernels`  the scalar engine's own plain-float functions, compiled (one source each)
+- :mod:`bridge.batch.control`  the laws and the actuation over the cell axis
+- :mod:`bridge.batch.plant`    the plant over the cell axis
+- :mod:`bridge.batch.predict`  the predictor over the cell axis
+- :mod:`bridge.batch.wire`     the state and the command over the float32 wire
+- :mod:`bridge.batch.metrics`  the running figures and the cells.csv row
+"""
+
+from __future__ import annotations
+
+from bridge.batch.engine import (
+    CELL_STEPS,
+    MEASURES,
+    _prepare_all,
+    batch_problem,
+    compile_batch,
+    error_measures,
+    flights_problem,
+    fly_batch,
+    fly_flights,
+)
+
+__all__ = ["CELL_STEPS", "MEASURES", "_prepare_all", "batch_problem", "compile_batch", "error_measures",
+           "flights_problem", "fly_batch", "fly_flights"]

@@ -1,0 +1,186 @@
+"""The plant of :class:`plant.quadrotor.Quadrotor` for N cells at once: a compiled loop over the cell axis.
+
+In:  one profile and one set of effects for every cell, a seed per cell (the disturbance's phases), the
+     physics rate (Hz) and the start state (eq. 7: m, m/s, rad, rad/s); then per step what each cell's
+     command holds (see :meth:`BatchPlant.held`)
+Out: the states [12, N] (eq. 7 order, NWU), the realised wrench [4, N] (N), ground contact and divergence
+     per cell
+
+The same model as the scalar plant: eq. (6) corrected, RK4 with the inputs held over a physics step,
+drag, motor lag, the external disturbance, mass and inertia mismatch, and the ground plane. The step of
+each cell is the scalar plant's own :func:`plant.model.rk4_held` and
+:func:`plant.quadrotor.ground_contact`, and a ``wrench`` command is held through
+:func:`plant.rotors.wrench_command` and eq. (4)/(5) as the scalar plant holds it, compiled
+(bridge.batch.kernels).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+from numba import njit
+
+from bridge.batch import kernels as K
+from plant.effects import Effects
+from plant.model import rigid_body
+from plant.profiles import Profile
+
+
+class BatchPlant:
+    """N quadrotors of one profile and effects, each with its own command and disturbance phases."""
+
+    def __init__(self, profile: Profile, effects: Effects | None, seeds: Sequence[int], *, physics_hz: float,
+                 state: Sequence[float], ground: bool = True) -> None:
+        e = effects or Effects()
+        self.profile = profile
+        self.effects = e
+        n = len(seeds)
+        self.n = n
+        self.body = rigid_body(
+            mass=profile.mass * e.mass_scale, ixx=profile.ixx * e.inertia_scale, iyy=profile.iyy * e.inertia_scale,
+            izz=profile.izz * e.inertia_scale, arm=profile.arm, rotor_inertia=profile.rotor_inertia,
+            gravity=profile.gravity, drag=profile.drag if e.drag else (0.0,) * 6)
+        self.dt = 1.0 / physics_hz
+        self.ground = ground
+        self.t = 0.0
+        self.X = np.repeat(np.asarray(state, float)[:, None], n, axis=1)
+        self.motors = profile.actuation == "motors"
+        self.lagged = self.motors and e.motor_lag
+        self._lag_k = 1.0 - math.exp(-self.dt / profile.motor_time_constant)
+        d = e.disturbance
+        self.disturbed = d.active
+        if self.disturbed:
+            self._phases = np.array([d.phases(s) for s in seeds]).T  # [6, N]
+            self._const = np.array(d.force_const + d.torque_const)[:, None]
+            self._amp = np.array(d.force_amp + d.torque_amp)[:, None]
+            self._ext_t = math.nan  # the time of the disturbance in _ext[2]
+        # the disturbance at a step's start, middle and end ([3, 6, N]; a stand-in [3, 6, 1] when there is none)
+        self._ext = np.zeros((3, 6, n if self.disturbed else 1))
+        hover = profile.hover_omega
+        self.omega = np.full((4, n), hover if self.motors else 0.0)
+        self.target = self.omega.copy()
+        self._u = np.zeros((5, n))  # what the step integrates with: the realised u1..u4 (N) and omega_d (rad/s)
+        self.realised = self._u[:4]
+        self.omega_d = self._u[4]
+        # what a command holds (see held): the target speeds with motor lag, else the rows of _u
+        self.holding = self.target if self.lagged else self._u
+        self._u_max = tuple(float(v) for v in profile.u_max)
+        self.hold(self.held(np.zeros((4, n))))
+
+    # -- actuation -------------------------------------------------------------------------------------
+    def held(self, c: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """What :meth:`Quadrotor.command` holds for normalised commands c [4, k]: ``wrench`` and ``motors``
+        without lag the realised u1..u4 (N) and omega_d (rad/s), [5, k]; ``motors`` with lag the four
+        target speeds (rad/s), [4, k]. Into ``out`` if given (and returned)."""
+        p = self.profile
+        if not self.motors:
+            if out is None:
+                out = np.empty((5, c.shape[1]))
+            _held_wrench(np.ascontiguousarray(c), self._u_max, p.thrust_coeff, p.drag_coeff, out)
+            return out
+        target = np.minimum(np.maximum(c, 0.0), 1.0) * p.omega_max
+        v = target if self.lagged else np.vstack(self._from_speeds(target))
+        if out is None:
+            return v
+        out[...] = v
+        return out
+
+    def _from_speeds(self, omega: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Eq. (4) and (5): rotor speeds [4, k] -> (realised u [4, k], omega_d [1, k])."""
+        p = self.profile
+        b, d = p.thrust_coeff, p.drag_coeff
+        w = omega * omega
+        u = np.stack((b * (w[0] + w[1] + w[2] + w[3]), b * (w[3] - w[1]), b * (w[2] - w[0]),
+                      d * (w[1] + w[3] - w[0] - w[2])))
+        return u, (omega[1] + omega[3] - omega[0] - omega[2])[None, :]
+
+    def hold(self, values: np.ndarray, cols: np.ndarray | slice | None = None) -> None:
+        """Hold what :meth:`held` gave for the cells ``cols`` (all by default) until their next command."""
+        self.holding[:, slice(None) if cols is None else cols] = values
+
+    # -- dynamics ----------------------------------------------------------------------------------------
+    def _disturbance(self, t: float, out: np.ndarray) -> None:
+        """The external force (N) and torque (N m) at t into out [6, N] (plant.effects.disturbance_at)."""
+        d = self.effects.disturbance
+        w = 2.0 * math.pi * d.freq_hz * t
+        np.sin(w + self._phases, out=out)
+        out *= self._amp
+        out += self._const
+
+    def step(self) -> None:
+        """Advance every cell one physics step (RK4 of eq. 6, commands and rotor speeds held)."""
+        t, h = self.t, self.dt
+        if self.lagged:
+            self.omega += (self.target - self.omega) * self._lag_k
+            u, od = self._from_speeds(self.omega)
+            self.realised[...] = u
+            self.omega_d[...] = od[0]
+        ext = self._ext
+        if self.disturbed:
+            if self._ext_t == t:  # the last step's end is this one's start
+                ext[0] = ext[2]
+            else:
+                self._disturbance(t, ext[0])
+            self._disturbance(t + 0.5 * h, ext[1])
+            self._disturbance(t + h, ext[2])
+            self._ext_t = t + h
+        _rk4_step(self.X, self.realised, self.omega_d, ext, self.disturbed, self.body.constants, h, self.ground)
+        self.t = t + h
+
+    @property
+    def on_ground(self) -> np.ndarray:
+        """[N] bool: resting on the ground plane (z <= 0 and not rising)."""
+        X = self.X
+        return (X[4] <= 0.0) & (X[5] <= 0.0) & self.ground
+
+    def diverged(self) -> np.ndarray:
+        """[N] bool: :meth:`Quadrotor.diverged` — not finite, |position| > 100 m, or tilt beyond 90 degrees."""
+        bad = np.empty(self.n, bool)
+        _diverged(self.X, bad)
+        return bad
+
+
+# -- the compiled loops (each cell: the scalar plant's own functions, compiled) ----------------------------
+@njit(cache=True)
+def _rk4_step(X, realised, omega_d, ext, disturbed, constants, h, ground):  # pragma: no cover
+    """:func:`plant.model.rk4_held` of every cell in place (then :func:`plant.quadrotor.ground_contact` where
+    ``ground``). ext [3, 6, N]: the force (N) and torque (N m) at the step's start, middle and end (read only
+    when ``disturbed``)."""
+    for j in range(X.shape[1]):
+        Xj = K.column(X, j)
+        u0, u1, u2, u3, od = realised[0, j], realised[1, j], realised[2, j], realised[3, j], omega_d[j]
+        if disturbed:
+            e = ((ext[0, 0, j], ext[0, 1, j], ext[0, 2, j], ext[0, 3, j], ext[0, 4, j], ext[0, 5, j]),
+                 (ext[1, 0, j], ext[1, 1, j], ext[1, 2, j], ext[1, 3, j], ext[1, 4, j], ext[1, 5, j]),
+                 (ext[2, 0, j], ext[2, 1, j], ext[2, 2, j], ext[2, 3, j], ext[2, 4, j], ext[2, 5, j]))
+            Y = K.rk4_held(Xj, u0, u1, u2, u3, od, constants, h, e)
+        else:
+            Y = K.rk4_held(Xj, u0, u1, u2, u3, od, constants, h, None)
+        if ground and Y[4] < 0.0:
+            Y = K.ground_contact(Y)
+        K.put_column(X, j, Y)
+
+
+@njit(cache=True)
+def _diverged(X: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover
+    """:meth:`Quadrotor.diverged` of every cell into out [N] bool."""
+    for j in range(X.shape[1]):
+        bad = False
+        for i in range(12):
+            if not math.isfinite(X[i, j]):
+                bad = True
+        out[j] = (bad or X[0, j] * X[0, j] + X[2, j] * X[2, j] + X[4, j] * X[4, j] > 1e4
+                  or math.cos(X[6, j]) * math.cos(X[8, j]) < 0.0)
+
+
+@njit(cache=True)
+def _held_wrench(c, u_max, b, d, out):  # pragma: no cover
+    """The ``wrench`` profile's :meth:`BatchPlant.held` per cell (c [4, k] -> out [5, k]): what
+    :meth:`plant.quadrotor.Quadrotor.command` holds, :func:`plant.rotors.wrench_command` and the omega_d of
+    the rotor speeds it gives."""
+    for j in range(c.shape[1]):
+        u = K.wrench_command((c[0, j], c[1, j], c[2, j], c[3, j]), u_max)
+        out[0, j], out[1, j], out[2, j], out[3, j] = u
+        out[4, j] = K.signed_speed_sum(K.motor_speeds_from_wrench(u, b, d))

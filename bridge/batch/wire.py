@@ -1,0 +1,55 @@
+"""The wire for N cells at once: the state as the laws read it from ODOMETRY, the command as the vehicle
+reads it from the actuator target.
+
+In:  the states [12, n] (eq. 7, NWU: m, m/s, rad, rad/s); the normalised paper-frame commands [4, n]
+Out: the same after MAVLink's float32 (ODOMETRY's 13 fields; the actuator target's 4), back in the paper frame
+
+Each cell runs the scalar engine's own functions (bridge.core.wire: :func:`~bridge.core.wire.odometry_fields`
+and :func:`~bridge.core.wire.state_from_odometry_fields` around the float32 rounding, as
+:func:`~bridge.core.wire.state_over_wire`; :func:`~bridge.core.wire.wrench_to_wire` and back, as
+:func:`~bridge.core.wire.command_over_wire`), compiled (bridge.batch.kernels).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from bridge.batch import kernels as K
+
+
+@njit(cache=True, inline="always")
+def _f32(v: float) -> float:
+    """v rounded to float32, as MAVLink carries it (struct's "<f" in the scalar engine)."""
+    return np.float64(np.float32(v))
+
+
+@njit(cache=True)
+def states_over_wire(X: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover
+    """:func:`bridge.core.wire.state_over_wire` of every cell (X [12, n] -> out [12, n]; out may be X)."""
+    for j in range(X.shape[1]):
+        f = K.odometry_fields(K.column(X, j))
+        r = (_f32(f[0]), _f32(f[1]), _f32(f[2]), _f32(f[3]), _f32(f[4]), _f32(f[5]), _f32(f[6]), _f32(f[7]),
+             _f32(f[8]), _f32(f[9]), _f32(f[10]), _f32(f[11]), _f32(f[12]))
+        K.put_column(out, j, K.state_from_odometry_fields(r))
+
+
+@njit(cache=True)
+def _commands_over_wire(c: np.ndarray, wrench: bool, out: np.ndarray) -> None:  # pragma: no cover
+    for j in range(c.shape[1]):
+        v = (c[0, j], c[1, j], c[2, j], c[3, j])
+        if wrench:
+            w = K.wrench_to_wire(v)
+            v = K.wrench_from_wire((_f32(w[0]), _f32(w[1]), _f32(w[2]), _f32(w[3])))
+        else:
+            v = (_f32(v[0]), _f32(v[1]), _f32(v[2]), _f32(v[3]))
+        for i in range(4):
+            out[i, j] = v[i]
+
+
+def commands_over_wire(c: np.ndarray, actuation: str) -> np.ndarray:
+    """:func:`bridge.core.wire.command_over_wire`'s command as the vehicle reads it, for normalised commands
+    c [4, n] of a ``wrench`` or ``motors`` actuation."""
+    out = np.empty_like(c)
+    _commands_over_wire(np.ascontiguousarray(c), actuation == "wrench", out)
+    return out

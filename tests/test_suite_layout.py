@@ -1,0 +1,163 @@
+"""Covers tests and tests.waiting: the suite's own layout, so that a newcomer can find their way in it.
+
+- every ``tests/test_*.py`` opens with a docstring whose first line names what it covers:
+  ``Covers bridge.link.model: ...`` (modules or packages of the project, each of which exists);
+- a test module that starts processes or opens sockets says so with ``pytestmark = pytest.mark.process``
+  (``make test-fast`` runs the others: ``pytest -m "not process"``); one without the marker neither
+  imports what does (:data:`PROCESS_IMPORTS`, the kits ``tests/sitlkit.py`` and ``tests/hostile.py``,
+  a marked test module) nor runs a ``bsst`` command that starts processes (:data:`PROCESS_COMMANDS`);
+- :func:`tests.waiting.wait_for` waits, and fails naming what it waited for.
+
+Checked with ``ast`` on each file's source, and shown failing on broken samples.
+"""
+
+from __future__ import annotations
+
+import ast
+import re
+import time
+from pathlib import Path
+
+import pytest
+
+from tests.waiting import wait_for
+
+ROOT = Path(__file__).resolve().parents[1]
+TESTS = sorted((ROOT / "tests").glob("test_*.py"))
+COVERS = re.compile(r"Covers (?P<names>[\w.]+(?:(?:, | and )[\w.]+)*)(?::|\.(?:\s|$))")
+# what a module imports when it starts processes or opens sockets (a prefix of the imported module's name)
+PROCESS_IMPORTS = ("socket", "subprocess", "select", "selectors", "multiprocessing", "concurrent.futures", "dask",
+                   "mavsdk", "pymavlink.mavutil", "tests.sitlkit", "tests.hostile", "bridge.session",
+                   "bridge.mavlink.endpoint", "bridge.nodes.relay", "bridge.sweep.executors")
+# bsst commands that start processes (children, pools), whether run as a subprocess or through bridge.cli.main
+PROCESS_COMMANDS = {"sitl", "vehicle", "controller", "relay", "sweep", "margin"}
+
+
+def module_exists(name: str) -> bool:
+    path = ROOT / name.replace(".", "/")
+    return path.with_suffix(".py").is_file() or (path / "__init__.py").is_file()
+
+
+def covers_problem(path: str, source: str) -> str | None:
+    """What is wrong with a test module's first docstring line (None: it names what it covers)."""
+    doc = ast.get_docstring(ast.parse(source))
+    if not doc:
+        return f"{path}:1: no module docstring"
+    first = doc.splitlines()[0]
+    m = COVERS.match(first)
+    if not m:
+        return f"{path}:1: the docstring's first line does not start 'Covers <module>[, <module> and <module>]: '"
+    missing = [n for n in re.split(r", | and ", m["names"]) if not module_exists(n)]
+    if missing:
+        return f"{path}:1: covers {', '.join(missing)}, which is no module of the project"
+    return None
+
+
+def is_marked_process(tree: ast.Module) -> bool:
+    """Whether the module sets ``pytestmark`` to ``pytest.mark.process`` (alone or in a list)."""
+    for node in tree.body:
+        if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "pytestmark" for t in node.targets):
+            return any(isinstance(n, ast.Attribute) and n.attr == "process" for n in ast.walk(node.value))
+    return False
+
+
+def process_uses(path: str, tree: ast.Module, marked_modules: set[str]) -> list[str]:
+    """Each import or command of a test module that starts processes or opens sockets, as file:line."""
+    out = []
+    for node in ast.walk(tree):
+        names: list[str] = []
+        if isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            names = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
+        for name in names:
+            if any(name == p or name.startswith(p + ".") for p in PROCESS_IMPORTS) or name in marked_modules:
+                out.append(f"{path}:{node.lineno}: imports {name}")
+                break
+        if isinstance(node, (ast.List, ast.Tuple)) and node.elts:
+            head = node.elts[0]
+            if isinstance(head, ast.Constant) and head.value in PROCESS_COMMANDS and len(node.elts) > 1:
+                out.append(f"{path}:{node.lineno}: runs `bsst {head.value}`")
+        if isinstance(node, ast.Call) and any(isinstance(a, ast.Constant) and a.value in PROCESS_COMMANDS
+                                              for a in node.args[:1]) and _called(node) in ("bsst", "run_bsst"):
+            out.append(f"{path}:{node.lineno}: runs `bsst {node.args[0].value}`")  # type: ignore[attr-defined]
+    return out
+
+
+def _called(call: ast.Call) -> str:
+    f = call.func
+    return f.id if isinstance(f, ast.Name) else f.attr if isinstance(f, ast.Attribute) else ""
+
+
+def marker_problems() -> list[str]:
+    trees = {f"tests/{f.name}": ast.parse(f.read_text()) for f in TESTS}
+    marked = {f"tests.{Path(p).stem}" for p, t in trees.items() if is_marked_process(t)}
+    out = []
+    for path, tree in trees.items():
+        if not is_marked_process(tree):
+            uses = process_uses(path, tree, marked)
+            if uses:
+                out.append(f"{path}: starts processes or opens sockets without pytestmark = pytest.mark.process: "
+                           + "; ".join(uses))
+    return out
+
+
+def test_every_test_module_names_what_it_covers() -> None:
+    problems = [p for f in TESTS for p in [covers_problem(f"tests/{f.name}", f.read_text())] if p]
+    assert not problems, "\n".join(problems)
+
+
+def test_a_test_module_without_the_process_marker_starts_no_process_and_opens_no_socket() -> None:
+    problems = marker_problems()
+    assert not problems, "\n".join(problems)
+
+
+def test_the_process_marker_is_registered() -> None:
+    text = (ROOT / "pyproject.toml").read_text()
+    assert re.search(r'^markers = \[[^\]]*"process:', text, re.M), "pyproject.toml registers no 'process' marker"
+
+
+@pytest.mark.parametrize("source, expected", [
+    ('"""The relay."""\n', "does not start 'Covers"),
+    ('"""Covers bridge.nodes.nowhere: x."""\n', "covers bridge.nodes.nowhere, which is no module"),
+    ('"""Covers plant.model and plant.elsewhere."""\n', "covers plant.elsewhere"),
+    ("x = 1\n", "no module docstring"),
+])
+def test_the_covers_check_fails_on_a_broken_docstring(source: str, expected: str) -> None:
+    problem = covers_problem("tests/test_x.py", source)
+    assert problem is not None and expected in problem and problem.startswith("tests/test_x.py:1:"), problem
+
+
+@pytest.mark.parametrize("source", [
+    '"""Covers bridge.core.clock: the clocks."""\n',
+    '"""Covers plant.model, plant.rotors and controller: eq. (6).\n\nMore."""\n',
+    '"""Covers bridge.sweep.\n\nMore."""\n',
+])
+def test_the_covers_check_passes_a_good_docstring(source: str) -> None:
+    assert covers_problem("tests/test_x.py", source) is None
+
+
+@pytest.mark.parametrize("source, expected", [
+    ("import socket\n", "imports socket"),
+    ("def f():\n    import subprocess  # late\n", "imports subprocess"),
+    ("from tests.sitlkit import Proc\n", "imports tests.sitlkit"),
+    ("from bridge.session import sitl\n", "imports bridge.session"),
+    ("from tests.test_relay import udp\n", "imports tests.test_relay"),
+    ("from bridge.cli import main\nmain(['sitl', 'm.toml'])\n", "runs `bsst sitl`"),
+    ("Proc.bsst('vehicle', '--instance', '3')\n", "runs `bsst vehicle`"),
+])
+def test_the_marker_check_finds_a_process_or_a_socket(source: str, expected: str) -> None:
+    uses = process_uses("tests/test_x.py", ast.parse(source), {"tests.test_relay"})
+    assert any(expected in u and u.startswith("tests/test_x.py:") for u in uses), uses
+    assert not process_uses("tests/test_x.py", ast.parse("from bridge.cli import main\nmain(['sim', 'm.toml'])\n"),
+                            set())
+    marked = ast.parse(source + "import pytest\npytestmark = pytest.mark.process\n")
+    assert is_marked_process(marked) and not is_marked_process(ast.parse(source))
+
+
+def test_wait_for_returns_once_the_predicate_holds_and_names_what_never_came() -> None:
+    due = time.monotonic() + 0.05
+    wait_for(lambda: time.monotonic() >= due, 5.0, "a time 50 ms away", poll_s=0.001)
+    assert time.monotonic() >= due
+    with pytest.raises(AssertionError, match=r"^the impossible: not within 0.05 s$"):
+        wait_for(lambda: False, 0.05, "the impossible")

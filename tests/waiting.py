@@ -1,0 +1,26 @@
+"""The tests' one way to wait for something: poll a predicate until a deadline.
+
+In:  a predicate (no arguments, true once what is awaited has happened), a timeout (s), what is
+     awaited (words, for the failure), how often to look (s)
+Out: nothing once the predicate holds; an ``AssertionError`` naming what was awaited and the
+     timeout when it does not hold in time
+
+No sleep-and-hope: a test waits on the event it needs, polled, and fails saying which event
+never came. Waits on a child's output lines are :meth:`tests.sitlkit.Proc.wait_line`
+(``select`` on the pipe); waits for a MAVLink message are ``recv_match`` with a timeout.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+
+def wait_for(predicate: Callable[[], object], timeout_s: float, what: str, poll_s: float = 0.01) -> None:
+    """Poll ``predicate`` every ``poll_s`` s until it is true, or raise AssertionError naming ``what``
+    after ``timeout_s`` s."""
+    deadline = time.monotonic() + timeout_s
+    while not predicate():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"{what}: not within {timeout_s} s")
+        time.sleep(poll_s)
