@@ -26,6 +26,7 @@ from bridge.cli.flags import (
     _home,
     _ids,
     _Parser,
+    add_discretization_option,
     add_failsafe_options,
     add_flight_options,
     add_key_option,
@@ -38,6 +39,7 @@ from bridge.cli.flags import (
     int_in,
     law_list,
     link_table_from_args,
+    mission_from_args,
     mission_integer,
     mission_number,
     number_in,
@@ -295,6 +297,7 @@ def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
         w(f"{a:5} {f(v['rms'], '10.3e')} {f(v['max'], '10.3e')} "
           f"{f(v['settling_s'], '11.3f')} {f(v['bound_s'], '9.3f')}\n")
     w("input  " + "  ".join(f"{u}: [{v['min']:.3g}, {v['max']:.3g}] tv/s {v['tv_per_s']:.3g}"
+                            + (f" p2 {v['period2']:.3g}" if v.get("period2") is not None else "")
                             for u, v in s["inputs"].items() if v["min"] is not None) + "\n")
     link = s.get("link", {})
     if any(L.get("lost") or L.get("duplicated") or L.get("reordered") or (L.get("delay_ms") or {}).get("max")
@@ -321,7 +324,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
     from bridge.loop import simulate  # lazy: start-up time
 
     run = simulate(
-        args.mission,
+        mission_from_args(args),
         out=args.out,
         write=True,
         overwrite=args.overwrite,
@@ -368,6 +371,7 @@ def add_sweep_commands(sub: Any) -> None:
                        help=f"values of {axis} (link values apply to both directions)")
     p.add_argument("--controller", type=law_list("--controller"), metavar="LAW,...",
                    help="control laws to compare (bsst, smc, pid, or your own file.py:ClassName)")
+    add_discretization_option(p)
     p.add_argument("--seeds", type=int_in("--seeds", 1, 10000), metavar="N",
                    help="seeds per grid point: the mission's seed, +1, ... (default 1)")
     mode = p.add_mutually_exclusive_group()
@@ -401,6 +405,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     from missions import load_mission  # lazy: start-up time
 
     spec = load_sweep(args.mission) if is_sweep_file(args.mission) else Sweep(load_mission(args.mission), Grid())
+    if args.discretization is not None:
+        spec = replace(spec, mission=spec.mission.with_overrides(discretization=args.discretization))
     axes = {a: getattr(args, a) for a in AXES if getattr(args, a) is not None}
     if args.seeds is not None:
         axes["seeds"] = args.seeds
@@ -456,6 +462,7 @@ def add_margin_command(sub: Any) -> None:
     p.add_argument("--until", required=True, metavar="rms=M|class=NAME",
                    help="failure: the 3-D RMS passes M metres, or the class is NAME or worse")
     p.add_argument("--controller", type=law_list("--controller"), metavar="LAW,...", help="laws to search")
+    add_discretization_option(p)
     p.add_argument("--seeds", type=int_in("--seeds", 1, 1000), default=1, metavar="N",
                    help="seeds per value: a value fails when any seed fails (default 1)")
     p.add_argument("--resolution", type=number_in("--resolution", 0.0, 1e6, lo_open=True), default=0.25,
@@ -487,7 +494,8 @@ def cmd_margin(args: argparse.Namespace) -> int:
     sensing = sensor_overrides_from_args(args)
     if args.over == "noise" and sensing["noise"] is not None:
         raise UsageError("bsst margin: --noise conflicts with --over noise (the noise scale is what is searched)")
-    mission = prepare(load_mission(args.mission), link=fixed or None, **sensing).mission
+    mission = prepare(load_mission(args.mission).with_overrides(discretization=args.discretization),
+                      link=fixed or None, **sensing).mission
     run_dir(args.out, f"{mission.name}-margin", args.overwrite, create=False)  # a refused --out before any flight
     live = sys.stderr.isatty()
 
@@ -583,7 +591,7 @@ def add_sitl_commands(sub: Any) -> None:
 def cmd_sitl(args: argparse.Namespace) -> int:
     from bridge.session import sitl  # lazy: start-up time
 
-    run = sitl(args.mission, out=args.out, write=True, overwrite=args.overwrite, plots=not args.no_plots,
+    run = sitl(mission_from_args(args), out=args.out, write=True, overwrite=args.overwrite, plots=not args.no_plots,
                profile=args.profile, controller=args.controller, rate_hz=args.rate, seed=args.seed,
                realtime=args.realtime, instance=args.instance, gcs=args.gcs, speed=args.speed, live=True,
                link=link_table_from_args(args), key=args.key, failsafe=failsafe_table_from_args(args),
@@ -630,7 +638,7 @@ def cmd_controller(args: argparse.Namespace) -> int:
     from bridge.mavlink.endpoint import LINK_PORT, parse_address  # lazy: start-up time
     from bridge.nodes.offboard import OffboardConfig, run_controller  # lazy: start-up time
 
-    flight = prepare(args.mission, profile=args.profile, controller=args.controller, rate_hz=args.rate,
+    flight = prepare(mission_from_args(args), profile=args.profile, controller=args.controller, rate_hz=args.rate,
                      seed=args.seed, **param_overrides_from_args(args))
     vehicle = parse_address(args.vehicle or f"127.0.0.1:{LINK_PORT + args.instance}", "udpout", "--vehicle")
     if vehicle.mode != "udpout":

@@ -327,10 +327,28 @@ def add_flight_options(p: argparse.ArgumentParser, failsafe: bool = True) -> Non
     p.add_argument("--controller", type=law_spec("--controller"), metavar="LAW",
                    help="control law: bsst, smc, pid, or your own (path/to/file.py:Class or package.module:Class)")
     p.add_argument("--seed", type=mission_integer("--seed", "seed"), metavar="N", help="seed of random effects")
+    add_discretization_option(p)
     p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
     if failsafe:
         add_failsafe_options(p)
     add_param_options(p, start=failsafe)  # the controller sets no start values: it schedules changes only
+
+
+def add_discretization_option(p: argparse.ArgumentParser) -> None:
+    from missions import DISCRETIZATIONS  # lazy: start-up time
+
+    p.add_argument("--discretization", choices=DISCRETIZATIONS,
+                   help="how bsst steps its super-twisting step: explicit (the paper as printed) or implicit "
+                        "(backward Euler, chattering-free; docs/law.md) (default: the mission's)")
+
+
+def mission_from_args(args: argparse.Namespace) -> Any:
+    """``args.mission`` (a path) as given, or the mission loaded with ``--discretization`` laid over it."""
+    if getattr(args, "discretization", None) is None or not args.mission:
+        return args.mission
+    from missions import load_mission  # lazy: start-up time
+
+    return load_mission(args.mission).with_overrides(discretization=args.discretization)
 
 
 # -- link impairment flags (bridge.link.model): both directions, or one with --up-/--down- -----------

@@ -88,7 +88,8 @@ class Flight:
                           takeoff_alt_m=self.params.takeoff_alt_m)
 
     def make_controller(self) -> Controller:
-        return Controller(self.law or self.mission.controller, self.nominal, self.gains, self.mission.rate_hz)
+        m = self.mission
+        return Controller(self.law or m.controller, self.nominal, self.gains, m.rate_hz, m.discretization)
 
     @property
     def guard(self) -> GuardConfig:
