@@ -8,9 +8,9 @@ Two discretizations of eq. (22) over the control period h (docs/law.md, "Discret
 - ``explicit`` (the paper as printed, forward Euler): the term uses s_k and xi_k, and
   xi_{k+1} = xi_k - h k2 sign(s_k). Once |s| is small, xi jumps by +-k2 h every step and the
   sqrt term overshoots: a period-2 cycle in the command (issue 24).
-- ``implicit`` (backward Euler, Brogliato, Polyakov and Efimov, IEEE TAC 65(5), 2020, "The implicit
+- ``implicit`` (backward Euler, Brogliato, Polyakov and Efimov, IEEE Trans. Automatic Control, 2020: "The implicit
   discretization of the super-twisting sliding-mode control algorithm"; the set-valued sign treated as in
-  Acary and Brogliato, Syst. Control Lett. 59, 2010): the command is the one that brings the nominal
+  Acary and Brogliato, Systems & Control Letters 59, 2010): the command is the one that brings the nominal
   sliding dynamics s' = u to s~_{k+1} in one step, with the sign and the root taken at s~_{k+1}, not s_k
   (:func:`implicit_twisting`).
 
@@ -50,7 +50,7 @@ def advance_xi(xi: float, s: float, k2: float, dt: float, xi_max: float, hold: b
 
 
 def implicit_twisting(s: float, xi: float, k1: float, k2: float, h: float) -> tuple[float, float]:
-    """One backward-Euler step of the super-twisting law (Brogliato, Polyakov, Efimov 2020, Sec. III):
+    """One backward-Euler step of the super-twisting law (Brogliato, Polyakov, Efimov 2020):
     (the reaching term u_k, xi_{k+1}) for s_k = ``s``, xi_k = ``xi`` and the period h (s).
 
     The implicit step of s' = -k1 |s|^1/2 sign(s) + xi, xi' = -k2 Sign(s) over h is

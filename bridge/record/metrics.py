@@ -169,6 +169,7 @@ def summarise(
         "mission": mission.name,
         "clock": clock,
         "controller": mission.controller,
+        "discretization": mission.discretization,
         "profile": mission.profile,
         "seed": mission.seed,
         "rate_hz": mission.rate_hz,
