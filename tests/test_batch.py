@@ -118,7 +118,7 @@ def test_cells_of_a_sweep_grid_are_prepared_as_prepare_does() -> None:
     grid = Grid(controller=("bsst", "pid"), delay_ms=(0.0, 10.0), loss_pct=(0.0, 20.0), burst_len=(0.0, 3.0), seeds=2)
     over = [cell_overrides(c) for c in cells(m, grid)] + _overrides()
     fast = _prepare_all(m, over)
-    assert fast == [prepare(m, **o) for o in over]
+    assert fast == [prepare(m, o) for o in over]  # an Overrides (a cell's) or a mapping of its fields
     bad = _prepare_all(m, [{"controller": "bsst", "link": {"loss_pct": 150.0}}])
     assert len(bad) == 1 and isinstance(bad[0], str) and "loss_pct" in bad[0]
 
