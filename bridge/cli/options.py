@@ -122,11 +122,21 @@ def add_flight_options(p: argparse.ArgumentParser, failsafe: bool = True) -> Non
     p.add_argument("--controller", type=law_spec("--controller"), metavar="LAW",
                    help="control law: bsst, smc, pid, or your own (path/to/file.py:Class or package.module:Class)")
     p.add_argument("--seed", type=mission_integer("--seed", "seed"), metavar="N", help="seed of random effects")
+    add_discretization_option(p)
     p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
     if failsafe:
         add_failsafe_options(p)
     add_param_options(p, start=failsafe)  # the controller sets no start values: it schedules changes only
 
+
+
+def add_discretization_option(p: argparse.ArgumentParser) -> None:
+    """``--discretization explicit|implicit``: the Overrides field of the same name (docs/law.md)."""
+    from missions import DISCRETIZATIONS  # lazy: start-up time
+
+    p.add_argument("--discretization", choices=DISCRETIZATIONS,
+                   help="how bsst steps its super-twisting step: explicit (the paper as printed) or implicit "
+                        "(backward Euler, chattering-free; docs/law.md) (default: the mission's)")
 
 
 def overrides_from_args(args: argparse.Namespace) -> Overrides:
@@ -135,9 +145,10 @@ def overrides_from_args(args: argparse.Namespace) -> Overrides:
     from bridge.core.flight import Overrides  # lazy: building the parser loads no flight code
 
     return Overrides(profile=getattr(args, "profile", None), controller=getattr(args, "controller", None),
-                     rate_hz=getattr(args, "rate", None), seed=getattr(args, "seed", None),
-                     link=link_table_from_args(args) or None, failsafe=failsafe_table_from_args(args) or None,
-                     **sensor_overrides_from_args(args), **param_overrides_from_args(args))
+                     discretization=getattr(args, "discretization", None), rate_hz=getattr(args, "rate", None),
+                     seed=getattr(args, "seed", None), link=link_table_from_args(args) or None,
+                     failsafe=failsafe_table_from_args(args) or None, **sensor_overrides_from_args(args),
+                     **param_overrides_from_args(args))
 
 
 def add_key_option(p: argparse.ArgumentParser) -> None:

@@ -93,7 +93,8 @@ class Flight:
                           takeoff_alt_m=self.params.takeoff_alt_m)
 
     def make_controller(self) -> Controller:
-        return Controller(self.law or self.mission.controller, self.nominal, self.gains, self.mission.rate_hz)
+        m = self.mission
+        return Controller(self.law or m.controller, self.nominal, self.gains, m.rate_hz, m.discretization)
 
     @property
     def guard(self) -> GuardConfig:
@@ -119,6 +120,7 @@ class Overrides:
 
     profile: str | None = None  # vehicle profile: paper, x500, or a profile TOML path
     controller: str | None = None  # law: bsst, smc, pid, file.py:Class or module:Class (from the working dir)
+    discretization: str | None = None  # how bsst steps its super-twisting step: explicit or implicit (docs/law.md)
     rate_hz: float | None = None  # control rate, Hz
     seed: int | None = None  # seed of the random effects (and of the link's fates, unless [link] seed)
     actuation: str | None = None  # the profile's actuation: wrench or motors
@@ -131,7 +133,7 @@ class Overrides:
     param_at: tuple[ParamChange, ...] = ()  # parameter changes at mission times (s), at the start of their step
 
     def __post_init__(self) -> None:
-        for f in ("profile", "controller", "actuation", "estimator"):
+        for f in ("profile", "controller", "discretization", "actuation", "estimator"):
             _check_type(f, getattr(self, f), str, "a string")
         for f in ("rate_hz", "noise"):
             _check_type(f, getattr(self, f), Real, "a number")
@@ -180,7 +182,8 @@ class Overrides:
         estimator = merged_tables(m.estimator, {} if self.estimator is None else {"kind": self.estimator})
         # a law file given on the command line or from Python: from the working directory
         law = law_spec_from(self.controller, Path(".")) if self.controller is not None else None
-        return m.with_overrides(profile=self.profile, controller=law, rate_hz=self.rate_hz, seed=self.seed,
+        return m.with_overrides(profile=self.profile, controller=law, discretization=self.discretization,
+                                rate_hz=self.rate_hz, seed=self.seed,
                                 actuation=self.actuation, link=link, failsafe=failsafe, sensors=sensors,
                                 estimator=estimator, params=params)
 
