@@ -127,6 +127,8 @@ class Vehicle:
                 else (lambda link_id: None))
         self.link = Endpoint(cfg.listen, sysid=cfg.sysid, compid=cfg.compid, tlog=self.tlog, name="--listen",
                              signing=sign(0), rejected=self.rejected, priority=True)
+        self.link.follow = False  # ODOMETRY goes to the flight's controller only (see Receiver.handle)
+        # a ground station is charged like any source, and its refusals are not the controller's
         self.gcs = (Endpoint(cfg.gcs, sysid=cfg.sysid, compid=cfg.compid, tlog=self.tlog, name="--gcs",
                              signing=sign(1), rejected=self.rejected, exempt_peer=False)
                     if cfg.gcs is not None else None)
