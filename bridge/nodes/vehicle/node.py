@@ -25,10 +25,10 @@ from typing import Any
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.core.flight import Flight
-from bridge.core.wire import command_from_wire, state_to_odometry, step_usec
+from bridge.core.wire import command_from_wire
 from bridge.link.ends import VehicleEnd
 from bridge.mavlink import telemetry as tm
-from bridge.mavlink.endpoint import ODOMETRY, Endpoint, Tlog, wait
+from bridge.mavlink.endpoint import Endpoint, Tlog, wait
 from bridge.mavlink.receive import Rejections
 from bridge.mavlink.signing import Signing
 from bridge.nodes.process import on_stop_signals, status_printer
@@ -42,11 +42,10 @@ from bridge.nodes.vehicle.rows import Rows
 from bridge.nodes.vehicle.streams import (
     DEFAULT_STREAMS,
     HEARTBEAT_S,
-    ODOMETRY_TAIL,
+    OdometryOut,
     StatusTexts,
     StreamTable,
     VehicleView,
-    estimate_tail,
     heartbeat,
     message,
 )
@@ -85,9 +84,6 @@ class Vehicle:
         self.rows = Rows(out / "vehicle.csv", self.rate) if out is not None else None
         self.k = 0  # control step of the plant's state: t_k = k / rate_hz
         self.stopping = False
-        self._odo_sent: dict[int, float] = {}  # step -> wall time its state was sent
-        self.odometry_sent = 0
-        self.resends = 0
         now = time.monotonic()
         # the GCS link's: the defaults, and with sensors (not truth) HIGHRES_IMU and, for GNSS, GPS_RAW_INT
         sensors = self.sim.sensors.config if self.sim.sensors is not None else None
@@ -104,6 +100,7 @@ class Vehicle:
         self.load = 0
         # lockstep: the controller's targets and re-arms cross the mission's up-link model here
         self.vend = VehicleEnd(self.sim, flight.link.make()[0], self.actuation, rejected=self.rejected)
+        self.odometry = OdometryOut(self.link, self.sim, self.rate, flight.estimator)
         self.targets = Targets(self.sim, self.clock, self.authority, self.rate, self.actuation, self._reject)
         self._statustext = StatusTexts()
         self.params = ParamService(self.sim, self.authority, self._statustext, self._reject, self._report)
@@ -174,9 +171,9 @@ class Vehicle:
     def report_stats(self) -> None:
         """The ``stats {json}`` line: what was accepted, refused, sent and received, and the up-link model's."""
         self._report("stats " + json.dumps({
-            "accepted": self.targets.accepted, "rejected": self.rejected, "odometry_sent": self.odometry_sent,
+            "accepted": self.targets.accepted, "rejected": self.rejected, "odometry_sent": self.odometry.count,
             "received": self.link.received, "overruns": self.pace.rebased, "steps": self.k,
-            "rejected_from_controller": self.rejected.from_peer, "resends": self.resends,
+            "rejected_from_controller": self.rejected.from_peer, "resends": self.odometry.resends,
             "answered_again": self.targets.answered_again,
             "up": self.vend.up.stats.summary() if self.cfg.clock == "lockstep" else None}))
 
@@ -263,7 +260,7 @@ class Vehicle:
         wire, recv = answer.wire, answer.recv
         k = self.k
         t = k / self.rate
-        sent = self._odo_sent.get(k, recv)
+        sent = self.odometry.sent_at.get(k, recv)
         vend = self.vend
         if wire is not None:
             vend.receive_command(t, command_from_wire(self.actuation, wire), t)
@@ -295,7 +292,7 @@ class Vehicle:
             self._send_odometry(now)
         X = self.plant.state
         if self.sim.armed and self.rows is not None:
-            self.rows.free_running(k, X, self.sim, self.actuation, self.targets.applied, self._odo_sent, now,
+            self.rows.free_running(k, X, self.sim, self.actuation, self.targets.applied, self.odometry.sent_at, now,
                                    self._estimate)
         self._n = n0
 
@@ -377,27 +374,10 @@ class Vehicle:
     def _send_odometry(self, now: float, fresh: bool = True) -> None:
         """ODOMETRY of step k to the controller; a ``fresh`` one (not a resend) starts the
         lockstep wait for its target."""
-        k = self.k
-        sim = self.sim
-        X = sim.published()  # the vehicle's estimate (the true state under the truth estimator)
-        if not tm.finite(X):
+        if not self.odometry.send(self.k, now, fresh):
             return
-        pos, q, vel, rates = state_to_odometry(X)
-        if sim.sensors is None:
-            tail = ODOMETRY_TAIL
-        else:
-            assert sim.estimator is not None
-            tail = estimate_tail(q, sim.estimator.covariance(), self.flight.estimator)
-        if self.link.send_hot(ODOMETRY, (step_usec(k, self.rate), *pos, *q, *vel, *rates, *tail)):
-            self.odometry_sent += 1
-        if fresh or k not in self._odo_sent:  # a resent state's round trip counts from its first sending
-            self._odo_sent[k] = now
-        if len(self._odo_sent) > 256:
-            for old in [s for s in self._odo_sent if s < k - 128]:
-                del self._odo_sent[old]
         if not fresh:
-            self.resends += 1
-            self.targets.resent(k)
+            self.targets.resent(self.k)
         self._resend_at = now + RESEND_S
         if fresh:
             self._lost_at = now + self.cfg.lost_after_s

@@ -5,7 +5,8 @@ In:  a :class:`VehicleView` (the vehicle as its messages read it: paper-frame st
      rad/s; simulation time s; rotor speeds rad/s; load per mille), a message id, SET_MESSAGE_INTERVAL's
      checked interval (us), wall times (s)
 Out: MAVLink messages (pymavlink): the GCS streams (``time_boot_ms`` = simulation time), HEARTBEAT
-     (PX4's ``custom_mode``), STATUSTEXT, ODOMETRY's tail (covariances in NED/FRD, frames, estimator type)
+     (PX4's ``custom_mode``), STATUSTEXT; ODOMETRY to the controller (NED position m, FRD body velocity m/s,
+     quaternion FRD to NED, FRD rates rad/s, ``time_usec`` = k / rate_hz; covariances in NED/FRD)
 
 Each stream is one entry of :data:`STREAMS`, as PX4 has one class per stream: a builder and the
 default interval on the GCS link (docs/design.md, "The MAVLink contract": 25 Hz and 10 Hz; 0: only on
@@ -22,9 +23,10 @@ from typing import Any
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.autopilot.estimator import Covariance
-from bridge.autopilot.simvehicle import FAILSAFE, LANDED
-from bridge.core.wire import rotate_inverse
+from bridge.autopilot.simvehicle import FAILSAFE, LANDED, SimVehicle
+from bridge.core.wire import rotate_inverse, state_to_odometry, step_usec
 from bridge.mavlink import telemetry as tm
+from bridge.mavlink.endpoint import ODOMETRY, Endpoint
 from bridge.mavlink.modes import heartbeat_mode
 from plant.sensors import SensorSuite
 
@@ -201,3 +203,42 @@ def estimate_tail(q: tuple[float, float, float, float], cov: Covariance, estimat
     pose, twist = odometry_covariance(q, cov)
     return (*pose, *twist, mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_BODY_FRD, 0,
             ESTIMATOR_TYPES[estimator], 0)
+
+
+class OdometryOut:
+    """ODOMETRY of step k to the controller link: the vehicle's published state (its estimate; the true
+    state under truth), and the wall time each step's state was first sent (its round trip counts from it)."""
+
+    def __init__(self, link: Endpoint, sim: SimVehicle, rate_hz: float, estimator: str) -> None:
+        self.link = link
+        self.sim = sim
+        self.rate = rate_hz
+        self.estimator = estimator  # truth, raw or ekf
+        self.sent_at: dict[int, float] = {}  # step -> wall time its state was first sent
+        self.count = 0  # ODOMETRY messages sent
+        self.resends = 0  # states sent again (nobody answered them)
+
+    def send(self, k: int, now: float, fresh: bool) -> bool:
+        """Send the state of step k at wall time ``now`` (s); ``fresh``: not a resend. False when the
+        state is not finite (a diverged plant: nothing to send)."""
+        sim = self.sim
+        X = sim.published()
+        if not tm.finite(X):
+            return False
+        pos, q, vel, rates = state_to_odometry(X)
+        if sim.sensors is None:
+            tail = ODOMETRY_TAIL
+        else:
+            assert sim.estimator is not None
+            tail = estimate_tail(q, sim.estimator.covariance(), self.estimator)
+        if self.link.send_hot(ODOMETRY, (step_usec(k, self.rate), *pos, *q, *vel, *rates, *tail)):
+            self.count += 1
+        sent_at = self.sent_at
+        if fresh or k not in sent_at:  # a resent state's round trip counts from its first sending
+            sent_at[k] = now
+        if len(sent_at) > 256:
+            for old in [s for s in sent_at if s < k - 128]:
+                del sent_at[old]
+        if not fresh:
+            self.resends += 1
+        return True
