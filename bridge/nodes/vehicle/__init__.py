@@ -63,7 +63,9 @@ Its parts, as PX4 splits an autopilot:
 - :mod:`.authority`     who may command what on which link; who caused an event (`` [by ...]``)
 - :mod:`.commander`     arming, flight modes, commands, the triggers that end a flight
 - :mod:`.paramservice`  PX4's parameters over MAVLink
-- :mod:`.streams`       the telemetry streams (message id -> builder and rate), HEARTBEAT, ODOMETRY's tail
+- :mod:`.targets`       the controller's answers: actuator targets, the no-target acknowledgement
+- :mod:`.receiver`      the receive path: each message, its sender's authority checked, to its part
+- :mod:`.streams`       the telemetry streams (message id -> builder and rate), HEARTBEAT, ODOMETRY
 - :mod:`.rows`          ``vehicle.csv``
 - :mod:`.config`        :class:`VehicleConfig`
 - :mod:`.node`          :class:`Vehicle`, which wires the parts to the links, and :func:`run_vehicle`
