@@ -19,6 +19,10 @@ they would cross the sockets: the state at t_k goes down to the controller's
 (``state_age_s`` in the trace is its age); the command goes up and acts at the physics
 step the model delivers it in (:mod:`bridge.link.ends`). A perfect link (the default)
 delivers both at once, which is exactly the loop without a link.
+
+The plant flies through the mission's wind and its timeline of faults (docs/weather.md): the vehicle acts on
+each event at the start of its control step. A touchdown too fast or too tilted while armed ends the flight
+``crashed`` (the plant's impact speed in the event); ``summary.json`` carries the ``wind`` and ``battery`` blocks.
 """
 
 from __future__ import annotations
@@ -33,7 +37,7 @@ from bridge.core.flight import Flight, Overrides, Progress, prepare
 from bridge.core.wire import command_over_wire, state_over_wire
 from bridge.link.ends import ControllerEnd, VehicleEnd
 from bridge.record.columns import TRACE_COLUMNS, state_columns, trace_row
-from bridge.record.metrics import summarise
+from bridge.record.metrics import impact_text, plant_summary, summarise
 from bridge.record.policies import ended_by_outcome, judge, rules_for, violation_text
 from bridge.record.runlog import Run, RunRecord, check_trace_steps, run_dir, trace_arrays
 from controller.link_guard import LinkGuard
@@ -91,6 +95,7 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
     events = record.events if record is not None else None
     outcome = "completed"
     failsafe_seen = False
+    impact_noted = False
     logged = 0
     noted = 0
     demanded = wire = (0.0, 0.0, 0.0, 0.0)
@@ -138,6 +143,13 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
                 outcome = "diverged"
                 vehicle.event("diverged", why)
                 break
+            if plant.impact is not None and not impact_noted:  # a hard touchdown: crashed, unless disarmed
+                impact_noted = True
+                if vehicle.armed:
+                    outcome = "crashed"
+                    vehicle.event("crashed", impact_text(plant.impact))
+                    break
+                vehicle.event("impact", f"{impact_text(plant.impact)} (disarmed, motors off)")
             if vehicle.mode in (FAILSAFE, LANDED):
                 failsafe_seen = True
                 outcome = "failsafe"
@@ -157,7 +169,11 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
         link = {"up": up.stats.summary(), "down": down.stats.summary(), "rejected": dict(vend.rejected)}
         summary = summarise(arrays, m, flight.gains, clock="offline", outcome=outcome, events=ev, link=link,
                             estimator=flight.estimator, sensors=flight.sensors.name)
+        summary.update(plant_summary(plant))
         summary["ended_by"] = ended_by_outcome(outcome, ev)
+        faults = [f"t={e['t']:.3f} s: {e['text']}" for e in ev if e["kind"] == "fault"]
+        if outcome != "completed" and faults:  # why it ended: what failed before
+            summary["ended_by"]["after_faults"] = faults
         for v in judge(summary, arrays, ev, rules_for(flight, "offline", link)):
             vehicle.event("policy", violation_text(v))
             ev.append({"t": round(vehicle.t, 6), "kind": "policy", "text": violation_text(v)})

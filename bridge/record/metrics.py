@@ -31,6 +31,29 @@ RMS_FROM_S = 10.0
 RIPPLE_WINDOW_S = 0.2  # moving-average window of the u2 ripple: content above ~5 Hz counts
 
 
+def impact_text(impact: tuple[float, float, float]) -> str:
+    """A hard touchdown (t s, speed m/s, tilt rad) as the ``crashed`` event's text."""
+    return f"hit the ground at {impact[1]:.2f} m/s, tilted {math.degrees(impact[2]):.1f} deg"
+
+
+def plant_summary(plant: Any) -> dict[str, Any]:
+    """``summary.json``'s blocks from the plant itself (:class:`plant.Quadrotor`): ``wind`` (the configuration,
+    the mean wind and the turbulence's std per axis over the flight, with MIL-HDBK-1797's σ: plant/wind.py),
+    ``battery`` (volts, amperes, mAh) and ``impact`` (a hard touchdown: t s, speed m/s, tilt deg); only those
+    the flight had."""
+    out: dict[str, Any] = {}
+    if plant.wind is not None:
+        out["wind"] = plant.wind.summary()
+    if plant.battery is not None:
+        out["battery"] = plant.battery.summary()
+    if plant.impact is not None:
+        t, speed, tilt = plant.impact
+        out["impact"] = {"t": round(t, 6), "speed_mps": speed, "tilt_deg": math.degrees(tilt)}
+    if plant.effectiveness != (1.0, 1.0, 1.0, 1.0):
+        out["rotor_effectiveness"] = list(plant.effectiveness)
+    return out
+
+
 def ripple_rms(t: np.ndarray, u: np.ndarray, rate_hz: float, window_s: float = RIPPLE_WINDOW_S) -> float:
     """High-frequency RMS of a signal over the second half of its time span (same unit as u).
 
