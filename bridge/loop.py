@@ -37,7 +37,7 @@ from bridge.core.flight import Flight, Overrides, Progress, prepare
 from bridge.core.wire import command_over_wire, state_over_wire
 from bridge.link.ends import ControllerEnd, VehicleEnd
 from bridge.record.columns import TRACE_COLUMNS, state_columns, trace_row
-from bridge.record.metrics import impact_text, plant_summary, summarise
+from bridge.record.metrics import gps_outages, impact_text, plant_summary, summarise
 from bridge.record.policies import ended_by_outcome, judge, rules_for, violation_text
 from bridge.record.runlog import Run, RunRecord, check_trace_steps, run_dir, trace_arrays
 from controller.link_guard import LinkGuard
@@ -170,6 +170,9 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
         summary = summarise(arrays, m, flight.gains, clock="offline", outcome=outcome, events=ev, link=link,
                             estimator=flight.estimator, sensors=flight.sensors.name)
         summary.update(plant_summary(plant))
+        outages = gps_outages(arrays, ev)
+        if outages:
+            summary["gps_outages"] = outages
         summary["ended_by"] = ended_by_outcome(outcome, ev)
         faults = [f"t={e['t']:.3f} s: {e['text']}" for e in ev if e["kind"] == "fault"]
         if outcome != "completed" and faults:  # why it ended: what failed before

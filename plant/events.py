@@ -169,6 +169,7 @@ def event_table_from_flag(text: str) -> dict[str, Any]:
         out.update(duration_s=v[0], amplitude_mps=v[1], from_deg=v[2] if len(v) > 2 else 0.0)
     else:
         forms = {"gps": "gps:off|on|jump=DX,DY,DZ", "baro": "baro:drift=M_PER_S", "mag": "mag:off|on",
-                 "gyro": "gyro:bias=X,Y,Z", "wind": "wind:SPEED[:FROM_DEG]", "gust": "gust:DURATION,AMPLITUDE[,FROM_DEG]"}
+                 "gyro": "gyro:bias=X,Y,Z", "wind": "wind:SPEED[:FROM_DEG]",
+                 "gust": "gust:DURATION,AMPLITUDE[,FROM_DEG]"}
         raise ValueError(f"expected {forms[kind]}, got {text!r}")
     return out

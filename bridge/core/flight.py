@@ -44,8 +44,8 @@ from missions.mission import law_spec_from
 from params import ConfigError, Table
 from plant import Effects, Profile, Quadrotor, load_profile
 from plant.effects import effects_from_table
-from plant.profiles import sensors_from_table
 from plant.events import SENSOR_EVENT_KINDS, TimedEvent, event_table_from_flag, timeline_from_tables
+from plant.profiles import sensors_from_table
 from plant.sensors import IDEAL, SensorConfig, SensorSuite
 from plant.wind import WindConfig, wind_from_table
 
@@ -293,7 +293,7 @@ def weather_of(m: Mission, prof: Profile, sensors: SensorConfig, estimator: str)
     heading sensor; a wind or gust event with no ``[wind]`` flies the plant in (still) air."""
     src = m.source
     timeline = timeline_from_tables(m.events, src, m.duration_s)
-    for i, e in enumerate(timeline):
+    for e in timeline:
         where = f"{src}: events (t_s = {e.t_s:g}, kind = {e.kind})"
         if e.kind == "motor" and prof.actuation != "motors":
             raise ConfigError(f"{where}: profile {prof.name!r} flies ideal wrench actuation: it has no rotors to "
