@@ -32,12 +32,12 @@ from array import array
 from pathlib import Path
 from typing import Any
 
-from bridge.autopilot.simvehicle import FAILSAFE, LANDED, OFFBOARD
+from bridge.autopilot.simvehicle import FAILSAFE, LANDED, OFFBOARD, SimVehicle
 from bridge.core.flight import Flight, Overrides, Progress, prepare
 from bridge.core.wire import command_over_wire, state_over_wire
 from bridge.link.ends import ControllerEnd, VehicleEnd
 from bridge.record.columns import TRACE_COLUMNS, state_columns, trace_row
-from bridge.record.metrics import gps_outages, impact_text, plant_summary, summarise
+from bridge.record.metrics import after_faults, impact_text, plant_summary, summarise
 from bridge.record.policies import ended_by_outcome, judge, rules_for, violation_text
 from bridge.record.runlog import Run, RunRecord, check_trace_steps, run_dir, trace_arrays
 from controller.link_guard import LinkGuard
@@ -138,18 +138,10 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
                 logged += 1
                 if events is not None:
                     events.event(e.t, e.kind, e.text)
-            why = plant.diverged()
-            if why:
-                outcome = "diverged"
-                vehicle.event("diverged", why)
+            verdict, impact_noted = plant_verdict(vehicle, impact_noted)
+            if verdict:
+                outcome = verdict
                 break
-            if plant.impact is not None and not impact_noted:  # a hard touchdown: crashed, unless disarmed
-                impact_noted = True
-                if vehicle.armed:
-                    outcome = "crashed"
-                    vehicle.event("crashed", impact_text(plant.impact))
-                    break
-                vehicle.event("impact", f"{impact_text(plant.impact)} (disarmed, motors off)")
             if vehicle.mode in (FAILSAFE, LANDED):
                 failsafe_seen = True
                 outcome = "failsafe"
@@ -169,14 +161,8 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
         link = {"up": up.stats.summary(), "down": down.stats.summary(), "rejected": dict(vend.rejected)}
         summary = summarise(arrays, m, flight.gains, clock="offline", outcome=outcome, events=ev, link=link,
                             estimator=flight.estimator, sensors=flight.sensors.name)
-        summary.update(plant_summary(plant))
-        outages = gps_outages(arrays, ev)
-        if outages:
-            summary["gps_outages"] = outages
-        summary["ended_by"] = ended_by_outcome(outcome, ev)
-        faults = [f"t={e['t']:.3f} s: {e['text']}" for e in ev if e["kind"] == "fault"]
-        if outcome != "completed" and faults:  # why it ended: what failed before
-            summary["ended_by"]["after_faults"] = faults
+        summary.update(plant_summary(plant, arrays, ev))
+        summary["ended_by"] = {**ended_by_outcome(outcome, ev), **after_faults(outcome, ev)}
         for v in judge(summary, arrays, ev, rules_for(flight, "offline", link)):
             vehicle.event("policy", violation_text(v))
             ev.append({"t": round(vehicle.t, 6), "kind": "policy", "text": violation_text(v)})
@@ -185,6 +171,20 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
     if record is not None:
         record.finish(arrays, summary, f"{m.name} ({m.controller}, {flight.profile.name})", plots)
     return Run(arrays, summary, path)
+
+
+def plant_verdict(vehicle: SimVehicle, impact_noted: bool) -> tuple[str | None, bool]:
+    """``diverged`` or ``crashed`` when the plant ends the flight now (its event logged), else None; and whether
+    its hard touchdown is noted (a disarmed vehicle's is logged once as an ``impact``, and the flight goes on)."""
+    plant = vehicle.plant
+    why = plant.diverged()
+    if why:
+        vehicle.event("diverged", why)
+        return "diverged", impact_noted
+    if plant.impact is None or impact_noted:
+        return None, impact_noted
+    vehicle.event("crashed" if vehicle.armed else "impact", impact_text(plant.impact, vehicle.armed))
+    return ("crashed" if vehicle.armed else None), True
 
 
 def _close_record(record: RunRecord | None, unlogged: list[Any]) -> None:

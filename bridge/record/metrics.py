@@ -31,17 +31,27 @@ RMS_FROM_S = 10.0
 RIPPLE_WINDOW_S = 0.2  # moving-average window of the u2 ripple: content above ~5 Hz counts
 
 
-def impact_text(impact: tuple[float, float, float]) -> str:
-    """A hard touchdown (t s, speed m/s, tilt rad) as the ``crashed`` event's text."""
-    return f"hit the ground at {impact[1]:.2f} m/s, tilted {math.degrees(impact[2]):.1f} deg"
+def impact_text(impact: tuple[float, float, float], armed: bool = True) -> str:
+    """A hard touchdown (t s, speed m/s, tilt rad) as the ``crashed`` (or, disarmed, ``impact``) event's text."""
+    text = f"hit the ground at {impact[1]:.2f} m/s, tilted {math.degrees(impact[2]):.1f} deg"
+    return text if armed else f"{text} (disarmed, motors off)"
 
 
-def plant_summary(plant: Any) -> dict[str, Any]:
+def after_faults(outcome: str, events: list[dict[str, Any]]) -> dict[str, Any]:
+    """``ended_by``'s ``after_faults``: the timeline's faults before a flight that did not complete (why it ended)."""
+    faults = [f"t={e['t']:.3f} s: {e['text']}" for e in events if e["kind"] == "fault"]
+    return {"after_faults": faults} if outcome != "completed" and faults else {}
+
+
+def plant_summary(plant: Any, trace: dict[str, np.ndarray], events: list[dict[str, Any]]) -> dict[str, Any]:
     """``summary.json``'s blocks from the plant itself (:class:`plant.Quadrotor`): ``wind`` (the configuration,
     the mean wind and the turbulence's std per axis over the flight, with MIL-HDBK-1797's σ: plant/wind.py),
-    ``battery`` (volts, amperes, mAh) and ``impact`` (a hard touchdown: t s, speed m/s, tilt deg); only those
-    the flight had."""
+    ``battery`` (volts, amperes, mAh), ``impact`` (a hard touchdown: t s, speed m/s, tilt deg) and
+    ``gps_outages`` (:func:`gps_outages`); only those the flight had."""
     out: dict[str, Any] = {}
+    outages = gps_outages(trace, events)
+    if outages:
+        out["gps_outages"] = outages
     if plant.wind is not None:
         out["wind"] = plant.wind.summary()
     if plant.battery is not None:
