@@ -395,6 +395,9 @@ def ended_by_outcome(outcome: str, events: Sequence[RunEvent]) -> dict[str, str]
     if outcome == "diverged":
         e = first("diverged")
         return {"who": "plant", "how": f"diverged at t={e.t:.3f} s: {e.text}" if e else "diverged"}
+    if outcome == "crashed":
+        e = first("crashed")
+        return {"who": "plant", "how": f"crashed at t={e.t:.3f} s: {e.text}" if e else "crashed"}
     if outcome == "failsafe":
         e = first("failsafe")
         return {"who": "vehicle", "how": f"failsafe at t={e.t:.3f} s: {e.text}" if e else "failsafe"}
