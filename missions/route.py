@@ -43,8 +43,9 @@ from params import ConfigError
 
 SAME_POINT_M = 0.01  # m: closer than this, two points are one (no leg between them)
 MAX_SPEED_M_S = 12.0  # PX4's MPC_XY_VEL_MAX default: a faster cruise or DO_CHANGE_SPEED is refused
+SAMPLING_MARGIN = 1.002  # the peaks fall between samples: 48 a leg see them to about 1e-5; this keeps them under
 SAMPLES_PER_LEG = 48  # samples of each leg's speed, acceleration and yaw rate against the limits
-GUIDE_SHARE = 0.1  # guide points this share of a horizontal leg from its ends (with_guides)
+GUIDE_SHARE = 0.2  # guide points this share of a horizontal leg from its ends (with_guides)
 
 
 @dataclass(frozen=True)
@@ -308,7 +309,7 @@ def route_of(plan: PlanFile, limits: Limits, envelope_m: float) -> Route:
     first = 0  # each piece between two stops is its own problem: scaled alone, its peak meets the limits
     for i in range(len(legs)):
         if pts[i + 1].stop:
-            factor = max(ratios[first:i + 1])
+            factor = max(ratios[first:i + 1]) * SAMPLING_MARGIN
             for j in range(first, i + 1):
                 legs[j] = math.ceil(legs[j] * factor * 1000.0) / 1000.0  # whole ms, up: never over the limits
             first = i + 1
