@@ -164,22 +164,32 @@ class Demand:
     tilt_t: float
 
 
-def demands(ref: Smooth, mass: float, gravity: float, factor: float = 1.0, per_segment: int = 64) -> Demand:
-    """The thrust (N) and tilt from vertical (rad) the trajectory needs at most, its times stretched by
-    ``factor`` (accelerations / factor²), sampled ``per_segment`` times a segment and at every knot."""
-    thrust = tilt = t_thrust = t_tilt = 0.0
+def accelerations(ref: Smooth, per_segment: int = 64) -> list[tuple[float, float, float, float]]:
+    """(t s, ax, ay, az m/s²) sampled ``per_segment`` times a segment and at every knot."""
+    out = []
     times = [k.t for k in ref.knots]
     for j in range(len(times) - 1):
         for i in range(per_segment + 1):
             t = times[j] + (times[j + 1] - times[j]) * i / per_segment
             x, y, z, _ = ref.sample(t)  # a knot's end: the next piece (continuous, or at rest on both sides)
-            ax, ay, az = x[2] / factor**2, y[2] / factor**2, z[2] / factor**2 + gravity
-            f = mass * math.sqrt(ax * ax + ay * ay + az * az)
-            a = math.atan2(math.hypot(ax, ay), az)
-            if f > thrust:
-                thrust, t_thrust = f, times[0] + (t - times[0]) * factor
-            if a > tilt:
-                tilt, t_tilt = a, times[0] + (t - times[0]) * factor
+            out.append((t, x[2], y[2], z[2]))
+    return out
+
+
+def demands(ref: Smooth, mass: float, gravity: float, factor: float = 1.0,
+            samples: list[tuple[float, float, float, float]] | None = None) -> Demand:
+    """The thrust (N) and tilt from vertical (rad) the trajectory needs at most, its times stretched by
+    ``factor`` (accelerations / factor²), over :func:`accelerations` (``samples``, if already taken)."""
+    thrust = tilt = t_thrust = t_tilt = 0.0
+    t0 = ref.knots[0].t
+    for t, ax, ay, az in samples if samples is not None else accelerations(ref):
+        ax, ay, az = ax / factor**2, ay / factor**2, az / factor**2 + gravity
+        f = mass * math.sqrt(ax * ax + ay * ay + az * az)
+        a = math.atan2(math.hypot(ax, ay), az)
+        if f > thrust:
+            thrust, t_thrust = f, t0 + (t - t0) * factor
+        if a > tilt:
+            tilt, t_tilt = a, t0 + (t - t0) * factor
     return Demand(thrust, t_thrust, tilt, t_tilt)
 
 

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from missions.minsnap import Knot, Smooth, demands, stretched
+from missions.minsnap import Knot, Smooth, accelerations, demands, stretched
 from missions.planfiles import read_plan_text
 from missions.references import Reference, Setpoint, Sine, Step, Waypoints
 from missions.route import LIMIT_RANGES, Limits, smooth_from_plan
@@ -286,14 +286,15 @@ def fitted_to_airframe(m: Mission, mass: float, gravity: float, u1_max: float, t
     if not isinstance(ref, Smooth):
         return m
     f_max, a_max = THRUST_SHARE * u1_max, TILT_SHARE * tilt_max
+    samples = accelerations(ref)  # taken once: stretching only divides them by k²
 
     def fits(k: float) -> bool:
-        d = demands(ref, mass, gravity, k)
+        d = demands(ref, mass, gravity, k, samples)
         return d.thrust_n <= f_max and d.tilt_rad <= a_max
 
     if fits(1.0):
         return m
-    d = demands(ref, mass, gravity)
+    d = demands(ref, mass, gravity, 1.0, samples)
     if mass * gravity > f_max or not fits(MAX_STRETCH):
         raise ConfigError(
             f"{m.source}: trajectory: refused: it needs {d.thrust_n:.3g} N of thrust (t = {d.thrust_t:.2f} s) and "

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 
+from bridge import simulate
 from bridge.core.flight import prepare
 from missions import load_mission
 from missions.minsnap import Smooth, demands
@@ -182,3 +183,17 @@ def test_bsst_sim_flies_a_plan_and_refuses_a_bad_one(tmp_path: Path) -> None:
     p = subprocess.run([sys.executable, "-m", "bridge", "sim", str(bad), "--no-plots"], cwd=ROOT, env=env,
                        capture_output=True, text=True, timeout=120)
     assert p.returncode == 2 and p.stderr.strip().count("\n") == 0 and "DO_JUMP (177)" in p.stderr
+
+
+def test_lockstep_sitl_flies_the_plan_as_offline(tmp_path: Path) -> None:
+    from bridge.session import sitl  # here: the other tests of this module start no SITL session
+
+    offline = simulate(BOX_PLAN, plots=False)
+    lock = sitl(BOX_PLAN, out=tmp_path / "sitl", plots=False, instance=None)
+    assert lock.summary["outcome"] == "completed" and lock.summary["clock"] == "lockstep"
+    n = len(offline.trace["t"])
+    assert len(lock.trace["t"]) == n
+    worst = max(math.dist((offline.trace["x"][i], offline.trace["y"][i], offline.trace["z"][i]),
+                          (lock.trace["x"][i], lock.trace["y"][i], lock.trace["z"][i])) for i in range(n))
+    assert worst <= 1e-4
+    assert lock.summary["events"][-1]["kind"] in ("disarmed", "ended") and abs(lock.trace["z"][-1]) <= 0.05
