@@ -71,6 +71,16 @@ def _file_kind(mode: int) -> str | None:
     return "not a regular file"
 
 
+def read_text_file(path: str | Path, expected: str, max_bytes: int = MAX_TOML_BYTES) -> str:
+    """The UTF-8 text of a regular file of at most ``max_bytes`` (:func:`read_regular_file`); every
+    problem a :class:`ConfigError` naming the path and ``expected`` (a mission plan, a waypoint file)."""
+    raw = read_regular_file(path, expected, max_bytes)
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError:
+        raise ConfigError(f"{Path(path)}: not a text file (expected {expected})") from None
+
+
 def load_toml(path: str | Path) -> dict[str, Any]:
     """Read a TOML file, turning every I/O or syntax problem into a :class:`ConfigError`:
     not a regular file, over :data:`MAX_TOML_BYTES`, not UTF-8, not TOML, nested over :data:`MAX_DEPTH`."""
