@@ -9,8 +9,9 @@ Out: a frozen, validated :class:`Mission` (its trajectory a :class:`~missions.re
      TOML-ready table a run's ``mission.toml`` holds
 
 A mission names its trajectory, duration, vehicle profile, controller and gains, rates,
-effects, link impairment and seed. The tables ``[gains]``, ``[effects]``, ``[link]``,
-``[failsafe]``, ``[sensors]``, ``[estimator]`` and ``[params]`` belong to other parts (controller, plant, bridge):
+effects, link impairment, wind, timeline of events and seed. The tables ``[gains]``, ``[effects]``, ``[link]``,
+``[failsafe]``, ``[sensors]``, ``[estimator]``, ``[params]``, ``[wind]`` and ``[[events]]`` belong to other parts
+(controller, plant, bridge):
 they are kept here as raw tables with their source and validated by the part that owns them when a run is built, so
 errors still name the file and the key.
 """
@@ -27,6 +28,10 @@ from missions.references import Reference, Setpoint, Sine, Step, Waypoints
 from params import ConfigError, Table, load_toml
 
 CONTROLLERS = ("bsst", "smc", "pid")
+# how the super-twisting step of ``bsst`` is stepped over the control period (controller.supertwisting):
+# forward Euler as the paper prints it, or backward Euler solved in closed form (docs/law.md, "Discretization")
+DISCRETIZATIONS = ("explicit", "implicit")
+DEFAULT_DISCRETIZATION = "explicit"
 # the allowed range [lo, hi] of each top-level number of a mission (duration_s: lo excluded), shared by
 # the loader, the command-line flags (--rate, --seed) and the sweep axes: one range per key
 MISSION_RANGES: dict[str, tuple[float, float]] = {
@@ -53,6 +58,7 @@ class Mission:
     profile: str = "paper"
     actuation: str | None = None  # None: the profile's own
     controller: str = "bsst"
+    discretization: str = DEFAULT_DISCRETIZATION  # DISCRETIZATIONS; only ``bsst`` has a step it changes
     rate_hz: float = 250.0
     physics_hz: float = 1000.0
     seed: int = 0
@@ -65,6 +71,8 @@ class Mission:
     estimator: Mapping[str, Any] = field(default_factory=dict)  # raw: bridge.core.flight validates kind
     params: Mapping[str, Any] = field(default_factory=dict)  # raw: bridge.autopilot.params.params_from_table
     source: str = "<python>"
+    wind: Mapping[str, Any] = field(default_factory=dict)  # raw: plant.wind.wind_from_table
+    events: tuple[Mapping[str, Any], ...] = ()  # raw [[events]]: plant.events.timeline_from_tables
 
     def __post_init__(self) -> None:
         why = name_problem(self.name)
@@ -74,6 +82,9 @@ class Mission:
         why = law_spec_problem(self.controller)
         if why:
             raise ConfigError(f"{self.source}: controller: {why}")
+        if self.discretization not in DISCRETIZATIONS:
+            raise ConfigError(f"{self.source}: discretization: must be one of {', '.join(DISCRETIZATIONS)}; "
+                              f"got {self.discretization!r}"[:300])
         outside = envelope_problem(self.trajectory, self.start, self.duration_s)
         if outside:
             raise ConfigError(f"{self.source}: {outside[0]}: {outside[1]}")
@@ -89,6 +100,7 @@ class Mission:
             "duration_s": self.duration_s,
             "profile": self.profile,
             "controller": self.controller,
+            "discretization": self.discretization,
             "rate_hz": self.rate_hz,
             "physics_hz": self.physics_hz,
             "seed": self.seed,
@@ -97,9 +109,11 @@ class Mission:
             d["actuation"] = self.actuation
         d["start"] = {"position": list(self.start[:3]), "psi": self.start[3]}
         d["trajectory"] = self.trajectory.to_dict()
-        for k in ("gains", "effects", "link", "failsafe", "sensors", "estimator", "params"):
+        for k in ("gains", "effects", "link", "failsafe", "sensors", "estimator", "params", "wind"):
             if getattr(self, k):
                 d[k] = dict(getattr(self, k))
+        if self.events:
+            d["events"] = [dict(e) for e in self.events]
         return d
 
     @property
@@ -239,6 +253,7 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
     if why:
         raise t.error("controller", why)
     controller = law_spec_from(controller, Path(source).parent)
+    discretization = t.string("discretization", DEFAULT_DISCRETIZATION, choices=DISCRETIZATIONS)
     r = MISSION_RANGES
     rate = t.number("rate_hz", 250.0, lo=r["rate_hz"][0], hi=r["rate_hz"][1])
     physics = t.number("physics_hz", 1000.0, lo=r["physics_hz"][0], hi=r["physics_hz"][1])
@@ -247,7 +262,10 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
     start = st.vector("position", 3, (0.0, 0.0, 0.0), lo=-1e4, hi=1e4) + (st.number("psi", 0.0, lo=-10, hi=10),)
     st.done()
     trajectory = _trajectory(t.table("trajectory", required=True), duration)
-    raw = {k: _table(t, k) for k in ("gains", "effects", "link", "failsafe", "sensors", "estimator", "params")}
+    raw = {k: _table(t, k) for k in ("gains", "effects", "link", "failsafe", "sensors", "estimator", "params", "wind")}
+    events = t.raw("events", [])
+    if not isinstance(events, list) or not all(isinstance(e, Mapping) for e in events):
+        raise t.error("events", "expected an array of tables [[events]] (t_s, kind and its settings)")
     t.done()
     return Mission(
         trajectory=trajectory,
@@ -256,11 +274,13 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
         profile=profile,
         actuation=actuation,
         controller=controller,
+        discretization=discretization,
         rate_hz=rate,
         physics_hz=physics,
         seed=seed,
         start=start,  # type: ignore[arg-type]
         source=source,
+        events=tuple(events),
         **raw,
     )
 

@@ -238,7 +238,8 @@ class _Batch:
         start = (x0, 0.0, y0, 0.0, z0, 0.0, 0.0, 0.0, 0.0, 0.0, psi0, 0.0)
         plant = BatchPlant(f0.profile, f0.effects, [f.mission.seed for f in fl], physics_hz=m.physics_hz,
                            state=start)
-        ctl = BatchController([f.mission.controller for f in fl], f0.nominal, f0.gains, rate)
+        ctl = BatchController([f.mission.controller for f in fl], f0.nominal, f0.gains, rate,
+                              [f.mission.discretization for f in fl])
         t_all = clocks.step_t
 
         # the states the guard may still use, and the commands on their way up (rings by step)

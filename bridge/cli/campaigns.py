@@ -26,7 +26,12 @@ from bridge.cli.flags import (
     link_table_from_args,
     number_in,
 )
-from bridge.cli.options import add_sensor_axes, add_sensor_options, sensor_overrides_from_args
+from bridge.cli.options import (
+    add_discretization_option,
+    add_sensor_axes,
+    add_sensor_options,
+    sensor_overrides_from_args,
+)
 from params import ConfigError
 
 
@@ -41,6 +46,7 @@ def add_sweep_commands(sub: Any) -> None:
                        help=f"values of {axis} (link values apply to both directions)")
     p.add_argument("--controller", type=law_list("--controller"), metavar="LAW,...",
                    help="control laws to compare (bsst, smc, pid, or your own file.py:ClassName)")
+    add_discretization_option(p)
     p.add_argument("--seeds", type=int_in("--seeds", 1, 10000), metavar="N",
                    help="seeds per grid point: the mission's seed, +1, ... (default 1)")
     mode = p.add_mutually_exclusive_group()
@@ -87,8 +93,10 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             raise UsageError(f"bsst sweep: --{d}-{clash[0].split('_')[0]} conflicts with the swept {clash[0]} "
                              f"(a swept value applies to both directions)")
     sensors = {"set": args.sensors} if args.sensors is not None else None
-    if fixed or sensors:  # the flags fixed for every cell, laid over the mission by the one path to its parts
-        spec = replace(spec, mission=prepare(spec.mission, Overrides(link=fixed or None, sensors=sensors)).mission)
+    if fixed or sensors or args.discretization:  # the flags fixed for every cell, laid over the mission by the one
+        # path to its parts
+        spec = replace(spec, mission=prepare(spec.mission, Overrides(link=fixed or None, sensors=sensors,
+                                                                     discretization=args.discretization)).mission)
     if args.resume and args.out is None:
         raise UsageError("bsst sweep: --resume needs --out DIR (the sweep to resume)")
     client = connect_dask(args.dask) if args.dask else None
@@ -138,6 +146,7 @@ def add_margin_command(sub: Any) -> None:
     p.add_argument("--until", required=True, metavar="rms=M|class=NAME",
                    help="failure: the 3-D RMS passes M metres, or the class is NAME or worse")
     p.add_argument("--controller", type=law_list("--controller"), metavar="LAW,...", help="laws to search")
+    add_discretization_option(p)
     p.add_argument("--seeds", type=int_in("--seeds", 1, 1000), default=1, metavar="N",
                    help="seeds per value: a value fails when any seed fails (default 1)")
     p.add_argument("--resolution", type=number_in("--resolution", 0.0, 1e6, lo_open=True), default=0.25,
@@ -170,7 +179,8 @@ def cmd_margin(args: argparse.Namespace) -> int:
     sensing = sensor_overrides_from_args(args)
     if args.over == "noise" and sensing["noise"] is not None:
         raise UsageError("bsst margin: --noise conflicts with --over noise (the noise scale is what is searched)")
-    mission = prepare(load_mission(args.mission), Overrides(link=fixed or None, **sensing)).mission
+    mission = prepare(load_mission(args.mission), Overrides(link=fixed or None, discretization=args.discretization,
+                                                            **sensing)).mission
     run_dir(args.out, f"{mission.name}-margin", args.overwrite, create=False)  # a refused --out before any flight
     live = sys.stderr.isatty()
 

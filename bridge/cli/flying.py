@@ -100,6 +100,7 @@ def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
         w(f"{a:5} {f(v['rms'], '10.3e')} {f(v['max'], '10.3e')} "
           f"{f(v['settling_s'], '11.3f')} {f(v['bound_s'], '9.3f')}\n")
     w("input  " + "  ".join(f"{u}: [{v['min']:.3g}, {v['max']:.3g}] tv/s {v['tv_per_s']:.3g}"
+                            + (f" p2 {v['period2']:.3g}" if v.get("period2") is not None else "")
                             for u, v in s["inputs"].items() if v["min"] is not None) + "\n")
     link = s.get("link", {})
     if any(L.get("lost") or L.get("duplicated") or L.get("reordered") or (L.get("delay_ms") or {}).get("max")

@@ -112,7 +112,7 @@ def sensor_overrides_from_args(args: argparse.Namespace) -> dict[str, Any]:
 
 def add_flight_options(p: argparse.ArgumentParser, vehicle: bool = True) -> None:
     """Options every flying command shares: overrides of the mission's own values (``vehicle``: with the
-    vehicle's failsafe action, its start parameters, and a run directory with plots, for the commands that
+    vehicle's failsafe action, its weather, its start parameters, and a run directory with plots, for the commands that
     fly the vehicle and record the whole run, ``sim`` and ``sitl``; ``bsst controller`` writes its own two
     files only when given ``--out``, and plots nothing)."""
     p.add_argument("mission", help="mission TOML file (see missions/)")
@@ -129,11 +129,47 @@ def add_flight_options(p: argparse.ArgumentParser, vehicle: bool = True) -> None
     p.add_argument("--controller", type=law_spec("--controller"), metavar="LAW",
                    help="control law: bsst, smc, pid, or your own (path/to/file.py:Class or package.module:Class)")
     p.add_argument("--seed", type=mission_integer("--seed", "seed"), metavar="N", help="seed of random effects")
+    add_discretization_option(p)
     if vehicle:
         p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
         add_failsafe_options(p)
+        add_weather_options(p)
     add_param_options(p, start=vehicle)  # the controller sets no start values: it schedules changes only
 
+
+def wind_flag(text: str) -> tuple[float, float]:
+    """``--wind SPEED[:FROM_DEG]``: (m/s, compass degrees it blows from); ranges checked by plant/wind.py."""
+    speed, _, frm = text.partition(":")
+    try:
+        values = (float(speed), float(frm) if frm else 0.0)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected SPEED[:FROM_DEG] (m/s, compass degrees), got {text!r}") from None
+    if not (0.0 <= values[0] <= 50.0 and -360.0 <= values[1] <= 360.0):
+        raise argparse.ArgumentTypeError(f"SPEED must be in [0, 50] m/s and FROM_DEG in [-360, 360], got {text!r}")
+    return values
+
+
+def add_weather_options(p: argparse.ArgumentParser) -> None:
+    """``--wind``, ``--turbulence`` (over the mission's ``[wind]``) and ``--at T:KIND[:ARGS]`` (after its
+    ``[[events]]``; checked when the flight is built: plant/events.py). docs/weather.md."""
+    p.add_argument("--wind", type=wind_flag, metavar="SPEED[:FROM_DEG]",
+                   help="steady wind, m/s, blowing from compass FROM_DEG (default 0: from the north)")
+    # the levels are plant.wind.TURBULENCE, written out so that building the parser loads no flight code
+    p.add_argument("--turbulence", choices=("none", "light", "moderate", "severe"),
+                   help="Dryden turbulence of MIL-HDBK-1797 at low altitude")
+    p.add_argument("--at", action="append", metavar="T:KIND[:ARGS]",
+                   help="an event at mission time T s: motor:N=EFF, gps:off|on|jump=DX,DY,DZ, baro:drift=M_PER_S, "
+                        "mag:off|on, gyro:bias=X,Y,Z, wind:SPEED[:FROM], gust:DURATION,AMPLITUDE[,FROM]; repeatable")
+
+
+
+def add_discretization_option(p: argparse.ArgumentParser) -> None:
+    """``--discretization explicit|implicit``: the Overrides field of the same name (docs/law.md)."""
+    from missions import DISCRETIZATIONS  # lazy: start-up time
+
+    p.add_argument("--discretization", choices=DISCRETIZATIONS,
+                   help="how bsst steps its super-twisting step: explicit (the paper as printed) or implicit "
+                        "(backward Euler, chattering-free; docs/law.md) (default: the mission's)")
 
 
 def overrides_from_args(args: argparse.Namespace) -> Overrides:
@@ -142,9 +178,12 @@ def overrides_from_args(args: argparse.Namespace) -> Overrides:
     from bridge.core.flight import Overrides  # lazy: building the parser loads no flight code
 
     return Overrides(profile=getattr(args, "profile", None), controller=getattr(args, "controller", None),
-                     rate_hz=getattr(args, "rate", None), seed=getattr(args, "seed", None),
-                     link=link_table_from_args(args) or None, failsafe=failsafe_table_from_args(args) or None,
-                     **sensor_overrides_from_args(args), **param_overrides_from_args(args))
+                     discretization=getattr(args, "discretization", None), rate_hz=getattr(args, "rate", None),
+                     seed=getattr(args, "seed", None), link=link_table_from_args(args) or None,
+                     failsafe=failsafe_table_from_args(args) or None, **sensor_overrides_from_args(args),
+                     **param_overrides_from_args(args),
+                     wind=getattr(args, "wind", None), turbulence=getattr(args, "turbulence", None),
+                     at=tuple(getattr(args, "at", None) or ()))
 
 
 def add_key_option(p: argparse.ArgumentParser) -> None:
