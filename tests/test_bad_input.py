@@ -135,6 +135,7 @@ CONVERTER_BAD = {
     "law_spec": ["x", "nofile.py:Law", "no_such_module:Law", "json:JSONDecoder", "bsst:"],
     "law_list": ["x", "bsst,bsst", "bsst,nofile.py:Law"],
     "blackout_window": ["x", "-1:1", "1:0"],
+    "wind_flag": ["x", "-5", "5:x"],
     "_ids": ["x", "999:1", "200"],
     "_home": ["x", "91,0,0", "1,2"],
     "trace_file": ["no_such_trace.csv", "/"],
@@ -161,6 +162,7 @@ TEXT_BAD = {
     "--stats": lambda f: [f.regular / "x.json", f.directory],
     "--dask": lambda f: ["notanaddress"],
     "--key": lambda f: [f.missing, f.key_empty, f.key_open, f.directory],
+    "--at": lambda f: ["x", "5:bogus", "5:gps:sideways"],
 }
 POSITIONAL_BAD = {  # command -> bad values of its positional argument
     "report": lambda f: [f.missing, f.regular, f.directory],
