@@ -41,6 +41,7 @@ from bridge.record.events import RunEvent
 from bridge.record.metrics import after_faults, impact_text, plant_summary, summarise
 from bridge.record.policies import ended_by_outcome, judge, rules_for, violation_text
 from bridge.record.runlog import Run, RunRecord, check_trace_steps, run_dir, trace_arrays
+from controller.law import LawFailed
 from controller.link_guard import LinkGuard
 from missions import Mission
 
@@ -153,6 +154,9 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
     except KeyboardInterrupt:
         outcome = "aborted"
         vehicle.event("aborted", "interrupted")
+    except LawFailed as exc:  # a user's law failed in flight: the flight ends here, honestly recorded
+        outcome = "law_failed"
+        vehicle.event("law_failed", f"{exc} at step {k} (t={k / rate:.3f} s)")
     except BaseException:
         _close_record(record, vehicle.events[logged:])
         raise

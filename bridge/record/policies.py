@@ -401,6 +401,9 @@ def ended_by_outcome(outcome: str, events: Sequence[RunEvent]) -> dict[str, str]
     if outcome == "failsafe":
         e = first("failsafe")
         return {"who": "vehicle", "how": f"failsafe at t={e.t:.3f} s: {e.text}" if e else "failsafe"}
+    if outcome == "law_failed":  # a user's law raised, exited or gave no four finite inputs (controller.law)
+        e = first("law_failed")
+        return {"who": "controller", "how": f"its law failed at t={e.t:.3f} s: {e.text}" if e else "its law failed"}
     return {"who": "user", "how": "interrupted (Ctrl-C or SIGTERM)"}
 
 

@@ -39,7 +39,7 @@ from bridge.record.policies import (
 )
 from bridge.record.runlog import trace_arrays
 
-FAILED_OUTCOMES = ("failsafe", "diverged", "aborted")  # what a controller may say besides completed
+FAILED_OUTCOMES = ("failsafe", "diverged", "aborted", "law_failed")  # what a controller may say besides completed
 
 
 @dataclass(frozen=True)
@@ -94,6 +94,8 @@ def outcome_of(facts: SessionFacts, controller: ChildEnd | None) -> str:
     completed = controller_completed(controller) and not (facts.aborted or facts.died)
     if facts.diverged:
         return "diverged"
+    if controller is not None and controller.outcome == "law_failed" and not facts.died:
+        return "law_failed"  # the failsafe that followed is the vehicle's answer to it, not the cause
     if facts.failsafe_seen and not completed:  # completed after a failsafe: resumed ([failsafe] resume)
         return "failsafe"
     if facts.aborted or facts.died:
@@ -132,6 +134,8 @@ def ended_by(outcome: str, trace: Mapping[str, Any], flight: Flight, facts: Sess
         return outcome, {"who": facts.died, "how": how}
     if outcome == "diverged":
         return outcome, ended_by_outcome(outcome, events)
+    if outcome == "law_failed" and ctl is not None:
+        return outcome, {"who": "controller", "how": f"its law failed: {ctl.reason}"}
     hit = ended_by_command(events, controller_id, before_s=m.duration_s)
     if hit is not None and not (controller_completed(ctl) and hit[1] is None):  # unattributed: the controller's own
         e, who = hit

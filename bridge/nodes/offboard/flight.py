@@ -37,9 +37,10 @@ from bridge.nodes.process import on_stop_signals, report_printer
 from bridge.nodes.report import Done, Ready, Report, Stats
 from bridge.record.columns import CONTROLLER_COLUMNS
 from bridge.record.runlog import LineWriter, side_dir
+from controller.law import LawFailed
 from controller.link_guard import LinkGuard
 
-OUTCOMES = ("completed", "failsafe", "diverged", "aborted")
+OUTCOMES = ("completed", "failsafe", "diverged", "aborted", "law_failed")
 
 
 class Offboard(OffboardLink):
@@ -89,7 +90,12 @@ class Offboard(OffboardLink):
         try:
             if not self._connect() or not self._arm():
                 return "aborted"
-            outcome = self._fly_lockstep() if self.cfg.clock == "lockstep" else self._fly_realtime()
+            try:
+                outcome = self._fly_lockstep() if self.cfg.clock == "lockstep" else self._fly_realtime()
+            except LawFailed as exc:  # a user's law failed (an exit too): no more targets, said why
+                self.reason = f"{exc} at step {round(self.t_mission * self.rate)} (t={self.t_mission:.3f} s)"
+                self.event("law_failed", self.reason)
+                return "law_failed"
             if outcome == "completed" and not self._disarm():
                 self.reason = "the vehicle did not acknowledge the disarm"
             return outcome
