@@ -162,7 +162,7 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
         raise
     try:  # the record stays open for the verdicts' lines, and is closed whatever happens
         arrays = trace_arrays(rows, TRACE_COLUMNS)
-        ev = [RunEvent(round(e.t, 6), e.kind, e.text, by=e.by) for e in vehicle.events]
+        ev = [RunEvent(round(e.t, 6), e.kind, e.text, by=e.by, param=e.param) for e in vehicle.events]
         shown = [e.as_dict() for e in ev]
         link = {"up": up.stats.summary(), "down": down.stats.summary(), "rejected": dict(vend.rejected)}
         summary = summarise(arrays, m, flight.gains, clock="offline", outcome=outcome, events=shown, link=link,
