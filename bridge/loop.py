@@ -102,6 +102,7 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
     noted = 0
     demanded = wire = (0.0, 0.0, 0.0, 0.0)
     changes = list(flight.param_changes)  # scheduled parameter changes: at the start of their step, as in SITL
+    k = 0
     try:
         for k in range(m.steps):
             t = k / rate
@@ -151,12 +152,8 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
                 outcome = "completed"  # resumed after a failsafe (the events say so)
             if progress is not None and k % int(rate) == 0:
                 progress(t, m.duration_s, sum((X[i] - ref[j][0]) ** 2 for i, j in ((0, 0), (2, 1), (4, 2))) ** 0.5)
-    except KeyboardInterrupt:
-        outcome = "aborted"
-        vehicle.event("aborted", "interrupted")
-    except LawFailed as exc:  # a user's law failed in flight: the flight ends here, honestly recorded
-        outcome = "law_failed"
-        vehicle.event("law_failed", f"{exc} at step {k} (t={k / rate:.3f} s)")
+    except (KeyboardInterrupt, LawFailed) as exc:  # interrupted, or a user's law failed: the flight ends, recorded
+        outcome = stopped(vehicle, exc, k, rate)
     except BaseException:
         _close_record(record, vehicle.events[logged:])
         raise
@@ -177,6 +174,16 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
     if record is not None:
         record.finish(arrays, summary, f"{m.name} ({m.controller}, {flight.profile.name})", plots)
     return Run(arrays, summary, path)
+
+
+def stopped(vehicle: SimVehicle, exc: BaseException, k: int, rate: float) -> str:
+    """The outcome of a flight stopped at step ``k`` by ``exc``, its event logged: ``aborted`` (Ctrl-C), or
+    ``law_failed`` (:class:`~controller.law.LawFailed`: a user's law raised, exited or gave no four finite inputs)."""
+    if isinstance(exc, LawFailed):
+        vehicle.event("law_failed", f"{exc} at step {k} (t={k / rate:.3f} s)")
+        return "law_failed"
+    vehicle.event("aborted", "interrupted")
+    return "aborted"
 
 
 def plant_verdict(vehicle: SimVehicle, impact_noted: bool) -> tuple[str | None, bool]:
