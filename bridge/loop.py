@@ -41,6 +41,7 @@ from bridge.record.events import RunEvent
 from bridge.record.metrics import after_faults, impact_text, plant_summary, summarise
 from bridge.record.policies import ended_by_outcome, judge, rules_for, violation_text
 from bridge.record.runlog import Run, RunRecord, check_trace_steps, run_dir, trace_arrays
+from controller.law import LawFailed
 from controller.link_guard import LinkGuard
 from missions import Mission
 from missions.minsnap import Smooth
@@ -104,6 +105,7 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
     noted = 0
     demanded = wire = (0.0, 0.0, 0.0, 0.0)
     changes = list(flight.param_changes)  # scheduled parameter changes: at the start of their step, as in SITL
+    k = 0
     try:
         for k in range(m.steps):
             t = k / rate
@@ -151,15 +153,14 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
                 progress(t, m.duration_s, sum((X[i] - ref[j][0]) ** 2 for i, j in ((0, 0), (2, 1), (4, 2))) ** 0.5)
         if outcome == "completed" and isinstance(m.trajectory, Smooth) and m.trajectory.lands:
             _disarm_landed(vehicle)
-    except KeyboardInterrupt:
-        outcome = "aborted"
-        vehicle.event("aborted", "interrupted")
+    except (KeyboardInterrupt, LawFailed) as exc:  # interrupted, or a user's law failed: the flight ends, recorded
+        outcome = stopped(vehicle, exc, k, rate)
     except BaseException:
         _close_record(record, vehicle.events[logged:])
         raise
     try:  # the record stays open for the verdicts' lines, and is closed whatever happens
         arrays = trace_arrays(rows, TRACE_COLUMNS)
-        ev = [RunEvent(round(e.t, 6), e.kind, e.text, by=e.by) for e in vehicle.events]
+        ev = [RunEvent(round(e.t, 6), e.kind, e.text, by=e.by, param=e.param) for e in vehicle.events]
         shown = [e.as_dict() for e in ev]
         link = {"up": up.stats.summary(), "down": down.stats.summary(), "rejected": dict(vend.rejected)}
         summary = summarise(arrays, m, flight.gains, clock="offline", outcome=outcome, events=shown, link=link,
@@ -174,6 +175,16 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
     if record is not None:
         record.finish(arrays, summary, f"{m.name} ({m.controller}, {flight.profile.name})", plots)
     return Run(arrays, summary, path)
+
+
+def stopped(vehicle: SimVehicle, exc: BaseException, k: int, rate: float) -> str:
+    """The outcome of a flight stopped at step ``k`` by ``exc``, its event logged: ``aborted`` (Ctrl-C), or
+    ``law_failed`` (:class:`~controller.law.LawFailed`: a user's law raised, exited or gave no four finite inputs)."""
+    if isinstance(exc, LawFailed):
+        vehicle.event("law_failed", f"{exc} at step {k} (t={k / rate:.3f} s)")
+        return "law_failed"
+    vehicle.event("aborted", "interrupted")
+    return "aborted"
 
 
 def plant_verdict(vehicle: SimVehicle, impact_noted: bool) -> tuple[str | None, bool]:
