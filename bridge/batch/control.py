@@ -210,14 +210,20 @@ def _pid_advance(integral, err, dt, i_max, saturated, hold):  # pragma: no cover
 
 
 @njit(cache=True)
+def allocate_cell(u: tuple, motors: bool, u_max: tuple, b: float, d: float, omega_max: float,
+                  w2_max: float) -> tuple:  # pragma: no cover
+    """:func:`controller.actuation.allocate_motors` (``motors``) or ``allocate_wrench`` of one cell's wrench u:
+    (realisable, normalised, saturated, omega_d)."""
+    if motors:
+        return K.allocate_motors(u, b, d, omega_max, w2_max)
+    return K.allocate_wrench(u, u_max, b, d)
+
+
+@njit(cache=True)
 def _allocate(u, motors, u_max, b, d, omega_max, w2_max, real, c, sat, omega_d):  # pragma: no cover
-    """:func:`controller.actuation.allocate_motors` (``motors``) or ``allocate_wrench`` of every cell."""
+    """:func:`allocate_cell` of every cell."""
     for j in range(u.shape[1]):
-        uj = (u[0, j], u[1, j], u[2, j], u[3, j])
-        if motors:
-            rr, cc, ss, od = K.allocate_motors(uj, b, d, omega_max, w2_max)
-        else:
-            rr, cc, ss, od = K.allocate_wrench(uj, u_max, b, d)
+        rr, cc, ss, od = allocate_cell((u[0, j], u[1, j], u[2, j], u[3, j]), motors, u_max, b, d, omega_max, w2_max)
         for i in range(4):
             real[i, j] = rr[i]
             c[i, j] = cc[i]

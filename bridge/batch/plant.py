@@ -142,45 +142,94 @@ class BatchPlant:
         return bad
 
 
+# -- one cell (what the loops below and the whole flight's kernel, bridge.batch.flight, run per cell) ------
+@njit(cache=True)
+def rk4_cell(x: tuple, u: tuple, ext: tuple, disturbed: bool, constants: tuple, h: float,
+             ground: bool) -> tuple:  # pragma: no cover
+    """:func:`plant.model.rk4_held` of one cell's state x (eq. 7) with u = (u1..u4 N, omega_d rad/s) held and the
+    external force and torque ext at the step's start, middle and end (read only when ``disturbed``), then
+    :func:`plant.quadrotor.ground_contact` where ``ground`` and below it."""
+    if disturbed:
+        y = K.rk4_held(x, u[0], u[1], u[2], u[3], u[4], constants, h, ext)
+    else:
+        y = K.rk4_held(x, u[0], u[1], u[2], u[3], u[4], constants, h, None)
+    if ground and y[4] < 0.0:
+        y = K.ground_contact(y)
+    return y
+
+
+@njit(cache=True)
+def disturbance_cell(freq_hz: float, const: tuple, amp: tuple, phases: tuple, t: float) -> tuple:  # pragma: no cover
+    """:func:`plant.effects.disturbance_at` (fx, fy, fz N, tx, ty, tz N m) at t (s) for one cell's phases."""
+    w = 2.0 * math.pi * freq_hz * t
+    return (const[0] + amp[0] * math.sin(w + phases[0]), const[1] + amp[1] * math.sin(w + phases[1]),
+            const[2] + amp[2] * math.sin(w + phases[2]), const[3] + amp[3] * math.sin(w + phases[3]),
+            const[4] + amp[4] * math.sin(w + phases[4]), const[5] + amp[5] * math.sin(w + phases[5]))
+
+
+@njit(cache=True)
+def from_speeds(o: tuple, b: float, d: float) -> tuple:  # pragma: no cover
+    """Eq. (4) and (5) of one cell: rotor speeds (rad/s) -> (u1..u4 N, omega_d rad/s), as
+    :meth:`BatchPlant._from_speeds` computes them."""
+    w0, w1, w2, w3 = o[0] * o[0], o[1] * o[1], o[2] * o[2], o[3] * o[3]
+    return (b * (w0 + w1 + w2 + w3), b * (w3 - w1), b * (w2 - w0), d * (w1 + w3 - w0 - w2), o[1] + o[3] - o[0] - o[2])
+
+
+@njit(cache=True)
+def held_cell(c: tuple, motors: bool, lagged: bool, u_max: tuple, b: float, d: float,
+              omega_max: float) -> tuple:  # pragma: no cover
+    """:meth:`BatchPlant.held` of one cell's normalised command c: (u1..u4, omega_d), or with motor lag the
+    four target speeds (rad/s) and a 0."""
+    if not motors:
+        u = K.wrench_command(c, u_max)
+        return (u[0], u[1], u[2], u[3], K.signed_speed_sum(K.motor_speeds_from_wrench(u, b, d)))
+    o = (_unit(c[0]) * omega_max, _unit(c[1]) * omega_max, _unit(c[2]) * omega_max, _unit(c[3]) * omega_max)
+    if lagged:
+        return (o[0], o[1], o[2], o[3], 0.0)
+    return from_speeds(o, b, d)
+
+
+@njit(cache=True, inline="always")
+def _unit(v: float) -> float:  # pragma: no cover
+    """np.minimum(np.maximum(v, 0), 1): a nan stays a nan."""
+    v = 0.0 if v < 0.0 else v
+    return 1.0 if v > 1.0 else v
+
+
+@njit(cache=True)
+def diverged_cell(x: tuple) -> bool:  # pragma: no cover
+    """:meth:`Quadrotor.diverged` of one cell's state: not finite, |position| > 100 m, or tilt beyond 90 degrees."""
+    for i in range(12):
+        if not math.isfinite(x[i]):
+            return True
+    return x[0] * x[0] + x[2] * x[2] + x[4] * x[4] > 1e4 or math.cos(x[6]) * math.cos(x[8]) < 0.0
+
+
 # -- the compiled loops (each cell: the scalar plant's own functions, compiled) ----------------------------
 @njit(cache=True)
 def _rk4_step(X, realised, omega_d, ext, disturbed, constants, h, ground):  # pragma: no cover
-    """:func:`plant.model.rk4_held` of every cell in place (then :func:`plant.quadrotor.ground_contact` where
-    ``ground``). ext [3, 6, N]: the force (N) and torque (N m) at the step's start, middle and end (read only
-    when ``disturbed``)."""
+    """:func:`rk4_cell` of every cell in place. ext [3, 6, N]: the force (N) and torque (N m) at the step's
+    start, middle and end (read only when ``disturbed``)."""
     for j in range(X.shape[1]):
-        Xj = K.column(X, j)
-        u0, u1, u2, u3, od = realised[0, j], realised[1, j], realised[2, j], realised[3, j], omega_d[j]
-        if disturbed:
-            e = ((ext[0, 0, j], ext[0, 1, j], ext[0, 2, j], ext[0, 3, j], ext[0, 4, j], ext[0, 5, j]),
-                 (ext[1, 0, j], ext[1, 1, j], ext[1, 2, j], ext[1, 3, j], ext[1, 4, j], ext[1, 5, j]),
-                 (ext[2, 0, j], ext[2, 1, j], ext[2, 2, j], ext[2, 3, j], ext[2, 4, j], ext[2, 5, j]))
-            Y = K.rk4_held(Xj, u0, u1, u2, u3, od, constants, h, e)
-        else:
-            Y = K.rk4_held(Xj, u0, u1, u2, u3, od, constants, h, None)
-        if ground and Y[4] < 0.0:
-            Y = K.ground_contact(Y)
-        K.put_column(X, j, Y)
+        u = (realised[0, j], realised[1, j], realised[2, j], realised[3, j], omega_d[j])
+        jj = j if disturbed else 0
+        e = ((ext[0, 0, jj], ext[0, 1, jj], ext[0, 2, jj], ext[0, 3, jj], ext[0, 4, jj], ext[0, 5, jj]),
+             (ext[1, 0, jj], ext[1, 1, jj], ext[1, 2, jj], ext[1, 3, jj], ext[1, 4, jj], ext[1, 5, jj]),
+             (ext[2, 0, jj], ext[2, 1, jj], ext[2, 2, jj], ext[2, 3, jj], ext[2, 4, jj], ext[2, 5, jj]))
+        K.put_column(X, j, rk4_cell(K.column(X, j), u, e, disturbed, constants, h, ground))
 
 
 @njit(cache=True)
 def _diverged(X: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover
-    """:meth:`Quadrotor.diverged` of every cell into out [N] bool."""
+    """:func:`diverged_cell` of every cell into out [N] bool."""
     for j in range(X.shape[1]):
-        bad = False
-        for i in range(12):
-            if not math.isfinite(X[i, j]):
-                bad = True
-        out[j] = (bad or X[0, j] * X[0, j] + X[2, j] * X[2, j] + X[4, j] * X[4, j] > 1e4
-                  or math.cos(X[6, j]) * math.cos(X[8, j]) < 0.0)
+        out[j] = diverged_cell(K.column(X, j))
 
 
 @njit(cache=True)
 def _held_wrench(c, u_max, b, d, out):  # pragma: no cover
-    """The ``wrench`` profile's :meth:`BatchPlant.held` per cell (c [4, k] -> out [5, k]): what
-    :meth:`plant.quadrotor.Quadrotor.command` holds, :func:`plant.rotors.wrench_command` and the omega_d of
-    the rotor speeds it gives."""
+    """The ``wrench`` profile's :meth:`BatchPlant.held` per cell (c [4, k] -> out [5, k]): :func:`held_cell`."""
     for j in range(c.shape[1]):
-        u = K.wrench_command((c[0, j], c[1, j], c[2, j], c[3, j]), u_max)
-        out[0, j], out[1, j], out[2, j], out[3, j] = u
-        out[4, j] = K.signed_speed_sum(K.motor_speeds_from_wrench(u, b, d))
+        v = held_cell((c[0, j], c[1, j], c[2, j], c[3, j]), False, False, u_max, b, d, 0.0)
+        for i in range(5):
+            out[i, j] = v[i]

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from statistics import NormalDist
 
@@ -362,8 +363,10 @@ class LinkPlan:
 
 
 def plan_links(links: Sequence[LinkSettings], guards: Sequence[GuardConfig], timeout_s: float,
-               clocks: Clocks) -> LinkPlan:
-    """The :class:`LinkPlan` of a batch (one entry of ``links`` and ``guards`` per cell)."""
+               clocks: Clocks, jobs: int = 1) -> LinkPlan:
+    """The :class:`LinkPlan` of a batch (one entry of ``links`` and ``guards`` per cell), its chunks of
+    :data:`PLAN_CHUNK` cells planned on ``jobs`` threads (numpy's array operations run without the GIL;
+    each chunk is planned alone, so the plan does not depend on ``jobs``)."""
     n = len(links)
     steps = clocks.steps
     mode = np.zeros((steps, n), np.int8)
@@ -374,9 +377,17 @@ def plan_links(links: Sequence[LinkSettings], guards: Sequence[GuardConfig], tim
     chunks = []
     age_max = 0
     state_age = 0
-    for a in range(0, n, PLAN_CHUNK):
-        b = min(n, a + PLAN_CHUNK)
-        part = _plan_chunk(links[a:b], guards[a:b], timeout_s, clocks)
+    spans = [(a, min(n, a + PLAN_CHUNK)) for a in range(0, n, PLAN_CHUNK)]
+
+    def plan(span: tuple[int, int]) -> dict[str, np.ndarray | int]:
+        return _plan_chunk(links[span[0]:span[1]], guards[span[0]:span[1]], timeout_s, clocks)
+
+    if jobs > 1 and len(spans) > 1:
+        with ThreadPoolExecutor(min(jobs, len(spans))) as pool:
+            parts = list(pool.map(plan, spans))
+    else:
+        parts = [plan(span) for span in spans]
+    for (a, b), part in zip(spans, parts, strict=True):
         mode[:, a:b] = part["mode"].T
         state_step[:, a:b] = part["state"].T
         up_lost[:, a:b] = part["up_lost"].T
