@@ -100,7 +100,7 @@ def process_sweep(mission: Any) -> dict[str, Any]:
     c0 = time.process_time()
     probe = cells(mission, SUBSET)[:SCALAR_PROBE]
     for c in probe:
-        fly(prepare(mission, **cell_overrides(c)), plots=False)
+        fly(prepare(mission, cell_overrides(c)), plots=False)
     per_cell = (time.process_time() - c0) / len(probe)
     return {"cells": len(rows), "wall_s": wall, "cells_per_s": len(rows) / wall, "scalar_cpu_s_per_cell": per_cell}
 

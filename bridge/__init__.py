@@ -1,11 +1,12 @@
 """Everything that connects a law to a plant; the only package that touches the network.
 
-In:  a mission (a TOML file or a :class:`missions.Mission`) and its overrides (profile, law, rate Hz,
-     seed, a ``[link]`` table); for the nodes, UDP addresses and a signing key file
+In:  a mission (a TOML file or a :class:`missions.Mission`) and its overrides (a frozen
+     :class:`bridge.Overrides`, or its fields as keywords: profile, law, rate Hz, seed, a ``[link]``
+     table, ...); for the nodes, UDP addresses and a signing key file
 Out: a :class:`~bridge.record.runlog.Run` (trace arrays in SI units, ``summary.json`` as a dict, the
      run directory), MAVLink 2 over UDP between the nodes, sweep directories, ``bsst``'s exit status
 
-Public names: :func:`bridge.simulate` and :class:`bridge.Run` (imported on first use),
+Public names: :func:`bridge.simulate`, :class:`bridge.Overrides` and :class:`bridge.Run` (imported on first use),
 :func:`bridge.session.sitl`, :class:`bridge.sweep.Grid`, :func:`bridge.sweep.sweep`.
 
 The layers (docs/design.md, "Parts and layers"), listed lowest first. An arrow means "may import",
@@ -59,12 +60,12 @@ and a layer imports nothing above it (tests/test_layers.py checks it):
   - :mod:`bridge.sweep.campaign`   a campaign from start to end
   - :mod:`bridge.sweep.report`     a sweep's report: tables, heat maps (``bsst report``)
 
-- :mod:`bridge.cli`: ``bsst`` (:mod:`~bridge.cli.flags`, :mod:`~bridge.cli.commands`); nothing imports it
+- :mod:`bridge.cli`: ``bsst`` (the parser, the flags, one module per command family); nothing imports it
 """
 
 from typing import Any
 
-__all__ = ["Run", "simulate"]
+__all__ = ["Overrides", "Run", "simulate"]
 
 
 def __getattr__(name: str) -> Any:
@@ -73,6 +74,10 @@ def __getattr__(name: str) -> Any:
         from bridge.loop import simulate  # lazy: start-up time
 
         return simulate
+    if name == "Overrides":
+        from bridge.core.flight import Overrides  # lazy: start-up time
+
+        return Overrides
     if name == "Run":
         from bridge.record.runlog import Run  # lazy: start-up time
 

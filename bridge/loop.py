@@ -1,7 +1,8 @@
 """The in-process closed loop (``bsst sim``): the truth every networked run is checked against.
 
-In:  a mission (a :class:`~missions.Mission` or a TOML path) and overrides (profile, controller,
-     ``rate_hz`` Hz, seed, a ``[link]`` table), or a prepared :class:`~bridge.core.flight.Flight`
+In:  a mission (a :class:`~missions.Mission` or a TOML path) and its overrides (an
+     :class:`~bridge.core.flight.Overrides`, or its fields as keywords: profile, controller, ``rate_hz``
+     Hz, seed, a ``[link]`` table, ...), or a prepared :class:`~bridge.core.flight.Flight`
 Out: a :class:`~bridge.record.runlog.Run`: trace arrays (:data:`~bridge.record.columns.TRACE_COLUMNS`,
      SI units) and ``summary.json`` as a dict (``clock = "offline"``); with a directory also
      ``mission.toml``, ``trace.csv``, ``events.log``, ``summary.json`` and ``plots/``
@@ -24,13 +25,11 @@ from __future__ import annotations
 
 import math
 from array import array
-from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from bridge.autopilot.params import ParamChange
 from bridge.autopilot.simvehicle import FAILSAFE, LANDED, OFFBOARD
-from bridge.core.flight import Flight, Progress, prepare
+from bridge.core.flight import Flight, Overrides, Progress, prepare
 from bridge.core.wire import command_over_wire, state_over_wire
 from bridge.link.ends import ControllerEnd, VehicleEnd
 from bridge.record.columns import TRACE_COLUMNS, state_columns, trace_row
@@ -48,33 +47,23 @@ def simulate(
     write: bool = False,
     overwrite: bool = False,
     plots: bool = True,
-    profile: str | None = None,
-    controller: str | None = None,
-    rate_hz: float | None = None,
-    seed: int | None = None,
     progress: Progress | None = None,
-    link: Mapping[str, Any] | None = None,
-    failsafe: Mapping[str, Any] | None = None,
-    sensors: Mapping[str, Any] | None = None,
-    estimator: str | None = None,
-    noise: float | None = None,
-    params: Mapping[str, float] | None = None,
-    param_at: Sequence[ParamChange] = (),
+    overrides: Overrides | None = None,
+    **keywords: Any,
 ) -> Run:
     """Fly a mission offline. Returns a :class:`Run` (trace as arrays, summary as a dict).
 
     The run directory is written only when ``out`` is given or ``write`` is true (then under
-    ``runs/``). Overrides replace the mission's own values, as the CLI flags do; ``link`` is
-    laid over the mission's ``[link]`` table (e.g. ``{"up": {"loss_pct": 20}}``), ``failsafe`` over
-    its ``[failsafe]`` table (e.g. ``{"action": "hold"}``), ``sensors`` over its ``[sensors]`` table
-    (``{"set": "mocap"}``); ``estimator`` (truth, raw, ekf) and ``noise`` (every σ times it) replace
-    ``[estimator] kind`` and ``[sensors] noise_scale``. ``params`` over its ``[params]`` table (PX4 names,
-    ``{"COM_OF_LOSS_T": 1.0}``); ``param_at``: parameter changes at mission times
+    ``runs/``). ``overrides`` (an :class:`~bridge.core.flight.Overrides`), or its fields as keywords,
+    replace the mission's own values, as the CLI flags do: ``profile``, ``controller``, ``rate_hz``,
+    ``seed``; ``link`` is laid over the mission's ``[link]`` table (e.g. ``{"up": {"loss_pct": 20}}``),
+    ``failsafe`` over its ``[failsafe]`` table (e.g. ``{"action": "hold"}``), ``sensors`` over its
+    ``[sensors]`` table (``{"set": "mocap"}``); ``estimator`` (truth, raw, ekf) and ``noise`` (every σ
+    times it) replace ``[estimator] kind`` and ``[sensors] noise_scale``. ``params`` over its ``[params]``
+    table (PX4 names, ``{"COM_OF_LOSS_T": 1.0}``); ``param_at``: parameter changes at mission times
     (``[ParamChange(10.0, "COM_OBL_ACT", 1)]``), made at the start of their control step.
     """
-    flight = prepare(mission, profile=profile, controller=controller, rate_hz=rate_hz, seed=seed, link=link,
-                     failsafe=failsafe, sensors=sensors, estimator=estimator, noise=noise, params=params,
-                     param_at=param_at)
+    flight = prepare(mission, overrides, **keywords)
     check_trace_steps(flight.mission)  # before the run directory is made: a refused mission writes nothing
     path = run_dir(out, flight.mission.name, overwrite) if (out is not None or write) else None
     return fly(flight, path, plots=plots, progress=progress)

@@ -49,9 +49,10 @@ class Controller:
     """A law and its actuation, stepped at the control rate."""
 
     def __init__(self, law: str | LawFactory, nominal: Nominal, gains: Gains | None = None,
-                 rate_hz: float = 250.0) -> None:
-        """``law``: a built-in name, ``file.py:Class`` / ``module:Class``, or a factory (controller.law)."""
-        self.law: Law = make_law(law, nominal, gains or Gains(), rate_hz)
+                 rate_hz: float = 250.0, discretization: str = "explicit") -> None:
+        """``law``: a built-in name, ``file.py:Class`` / ``module:Class``, or a factory (controller.law);
+        ``discretization``: how ``bsst`` steps its super-twisting step (controller.bsst.DISCRETIZATIONS)."""
+        self.law: Law = make_law(law, nominal, gains or Gains(), rate_hz, discretization)
         self.nominal = nominal
         self.actuation = make_actuation(nominal)
         self.rate_hz = rate_hz

@@ -11,8 +11,11 @@ Four subsystems (docs/law.md, "The law, step by step"):
 - psi in 2 steps (eq. 39-40).
 
 Here ST(s) = -k1 |s|^1/2 sign(s) + xi, xi' = -k2 sign(s) (eq. 22), or -k sign(s) for the
-first-order SMC baseline (``reaching="sign"``). c' = c 2^-alpha and sig = sig_beta with
-beta = 2 alpha - 1 (regularised, :mod:`controller.power`).
+first-order SMC baseline (``reaching="sign"``). ST is stepped over the control period either explicitly
+(the paper as printed) or implicitly (backward Euler in closed form,
+:func:`controller.supertwisting.implicit_twisting`): ``discretization`` of :class:`BacksteppingSuperTwisting`,
+``LawConstants.h``. c' = c 2^-alpha and sig = sig_beta with beta = 2 alpha - 1 (regularised,
+:mod:`controller.power`).
 
 The derivatives phi33' needs (theta_d'' and so the reference's snap and the state's jerk)
 are computed exactly with :mod:`controller.jets`: the reference gives its derivatives
@@ -38,7 +41,8 @@ from controller import jets as J
 from controller.gains import Backstep, Gains
 from controller.nominal import Coefficients, Nominal
 from controller.power import SigTable, sig_derivs, sig_table
-from controller.supertwisting import advance_xi, reaching
+from controller.supertwisting import advance_xi, advance_xi_implicit, implicit_twisting, reaching
+from missions.mission import DISCRETIZATIONS
 from missions.references import Sample
 
 Quad = tuple[float, float, float, float]
@@ -87,7 +91,11 @@ class LawConstants(NamedTuple):
     ks_phi: float
     ks_th: float
     ks_yaw: float
-
+    k2_z: float  # super-twisting k2 per channel, as k1 (the implicit step needs it in the command)
+    k2_phi: float
+    k2_th: float
+    k2_yaw: float
+    h: float  # the implicit step's control period (s); 0: the explicit step (the paper as printed)
 
 LawTables = tuple[SigTable, SigTable, SigTable, SigTable, SigTable]  # sig_beta of yaw, z, position, velocity, attitude
 
@@ -96,8 +104,9 @@ def _c(g: Backstep) -> float:
     return g.c * 2.0 ** (-g.alpha)
 
 
-def law_constants(nominal: Nominal, gains: Gains) -> LawConstants:
-    """:class:`LawConstants` of a nominal model and a gain set."""
+def law_constants(nominal: Nominal, gains: Gains, h: float = 0.0) -> LawConstants:
+    """:class:`LawConstants` of a nominal model and a gain set; ``h`` the control period (s) for the implicit
+    super-twisting step, 0 for the explicit one."""
     n, g = nominal, gains
     co = Coefficients.of(n)
     st = (g.z_st, g.attitude_st, g.attitude_st, g.yaw_st)
@@ -105,7 +114,7 @@ def law_constants(nominal: Nominal, gains: Gains) -> LawConstants:
     return LawConstants(n.mass, n.gravity, co.i1, co.i2, co.i3, co.jr_x, co.jr_y, n.ixx / n.arm, n.iyy / n.arm,
                         n.izz / n.arm, co.l_z, n.u_max[0], g.tilt_max, g.tilt_rate_max, g.feedforward_max,
                         _c(g.yaw), _c(g.z), _c(g.position), _c(g.velocity), _c(g.attitude),
-                        *(s.k1 for s in st), *(k * s.k1 for s in st))
+                        *(s.k1 for s in st), *(k * s.k1 for s in st), *(s.k2 for s in st), h)
 
 
 def law_tables(gains: Gains) -> LawTables:
@@ -169,6 +178,14 @@ def _attitude_step(angle: float, rate: float, d: J.Jet, c: float, P: SigTable, f
     return _clip(d[2] - c * f1 * (rate - d[1]), ffm), rate - phi
 
 
+def _reach(s: float, k1: float, k2: float, xi: float, k_sign: float, sign: bool, h: float) -> float:
+    """The last step's reaching term: sign reaching (``sign``), else super-twisting stepped explicitly (h = 0,
+    :func:`controller.supertwisting.reaching`) or implicitly over h (:func:`implicit_twisting`)."""
+    if sign or h == 0.0:
+        return reaching(s, k1, xi, k_sign, sign)
+    return implicit_twisting(s, xi, k1, k2, h)[0]
+
+
 def backstepping(X: tuple[float, ...], ref: Sample, omega_d: float, xi: Quad, sign: bool, K: LawConstants,
                  P: LawTables) -> tuple[float, float, float, float, float, float, float, float, float, float]:
     """One step of the BS-ST law (module docstring; ``sign``: the SMC baseline's reaching) for state X and
@@ -177,7 +194,7 @@ def backstepping(X: tuple[float, ...], ref: Sample, omega_d: float, xi: Quad, si
     x, vx, y, vy, z, vz, phi, dphi, th, dth, psi, dpsi = X
     rx, ry, rz, rpsi = ref
     (m, g, i1, i2, i3, jr_x, jr_y, kx, ky, kz, l_z, u1m, tm, rm, ffm, c_yaw, c_z, c_p, c_v, c_a,
-     k1_z, k1_phi, k1_th, k1_yaw, ks_z, ks_phi, ks_th, ks_yaw) = K
+     k1_z, k1_phi, k1_th, k1_yaw, ks_z, ks_phi, ks_th, ks_yaw, k2_z, k2_phi, k2_th, k2_yaw, h) = K
     P_yaw, P_z, P_p, P_v, P_a = P
 
     # psi, 2 steps (eq. 39-40)
@@ -185,7 +202,7 @@ def backstepping(X: tuple[float, ...], ref: Sample, omega_d: float, xi: Quad, si
     phi4 = rpsi[1] - c_yaw * f0
     dphi4 = rpsi[2] - c_yaw * f1 * (dpsi - rpsi[1])
     s4 = dpsi - phi4
-    u4 = kz * (-i3 * dphi * dth + dphi4 + reaching(s4, k1_yaw, xi[3], ks_yaw, sign))
+    u4 = kz * (-i3 * dphi * dth + dphi4 + _reach(s4, k1_yaw, k2_yaw, xi[3], ks_yaw, sign, h))
 
     # z, 2 steps (eq. 24-34); its jets also give a_z = phi1' for the x/y inversion
     cphi = cos(phi)
@@ -199,7 +216,7 @@ def backstepping(X: tuple[float, ...], ref: Sample, omega_d: float, xi: Quad, si
     dphi1 = rz[2] - c_z * fz[1] * (vz - rz[1])
     s1 = vz - phi1
     tilt = cphi * cth
-    u1 = m * (g + dphi1 + reaching(s1, k1_z, xi[0], ks_z, sign)) / (tilt if tilt > 0.2 else 0.2)
+    u1 = m * (g + dphi1 + _reach(s1, k1_z, k2_z, xi[0], ks_z, sign, h)) / (tilt if tilt > 0.2 else 0.2)
     u1n = 0.0 if u1 < 0.0 else u1m if u1 > u1m else u1
 
     # the state's 2nd and 3rd derivatives along the nominal model, inputs held
@@ -227,9 +244,9 @@ def backstepping(X: tuple[float, ...], ref: Sample, omega_d: float, xi: Quad, si
 
     # attitude steps: theta for x (u3), phi for y (u2)
     dphi33, s3 = _attitude_step(th, dth, th_d, c_a, P_a, ffm)
-    u3 = ky * (-i2 * dphi * dpsi - jr_y * dphi * omega_d + dphi33 + reaching(s3, k1_th, xi[2], ks_th, sign))
+    u3 = ky * (-i2 * dphi * dpsi - jr_y * dphi * omega_d + dphi33 + _reach(s3, k1_th, k2_th, xi[2], ks_th, sign, h))
     dphi23, s2 = _attitude_step(phi, dphi, ph_d, c_a, P_a, ffm)
-    u2 = kx * (-i1 * dth * dpsi + jr_x * dth * omega_d + dphi23 + reaching(s2, k1_phi, xi[1], ks_phi, sign))
+    u2 = kx * (-i1 * dth * dpsi + jr_x * dth * omega_d + dphi23 + _reach(s2, k1_phi, k2_phi, xi[1], ks_phi, sign, h))
     return (u1, u2, u3, u4, s1, s2, s3, s4, ph_d[0], th_d[0])
 
 
@@ -238,21 +255,27 @@ class BacksteppingSuperTwisting:
     integrators (:func:`controller.supertwisting.advance_xi`).
 
     ``reaching="sign"`` gives the first-order sliding-mode baseline (same backstepping,
-    sign function in the last step).
+    sign function in the last step). ``discretization``: the super-twisting step stepped ``explicit`` (the
+    paper as printed) or ``implicit`` (backward Euler, :func:`controller.supertwisting.implicit_twisting`);
+    the sign baseline is always flown as printed.
     """
 
     name = "bsst"
 
-    def __init__(self, nominal: Nominal, gains: Gains, rate_hz: float, reaching: str = "st") -> None:
+    def __init__(self, nominal: Nominal, gains: Gains, rate_hz: float, reaching: str = "st",
+                 discretization: str = "explicit") -> None:
         if reaching not in ("st", "sign"):
             raise ValueError(f"reaching must be 'st' or 'sign', got {reaching!r}")
+        if discretization not in DISCRETIZATIONS:
+            raise ValueError(f"discretization must be one of {', '.join(DISCRETIZATIONS)}, got {discretization!r}")
         self.nominal = nominal
         self.gains = gains
         self.dt = 1.0 / rate_hz
         self.sign = reaching == "sign"
         if self.sign:
             self.name = "smc"
-        self.constants = law_constants(nominal, gains)
+        self.implicit = discretization == "implicit" and not self.sign
+        self.constants = law_constants(nominal, gains, self.dt if self.implicit else 0.0)
         self.tables = law_tables(gains)
         st = (gains.z_st, gains.attitude_st, gains.attitude_st, gains.yaw_st)  # z, phi (u2), theta (u3), yaw
         self._k2 = tuple(s.k2 for s in st)
@@ -269,6 +292,14 @@ class BacksteppingSuperTwisting:
         if self.sign:
             return
         dt, xi, s, k2, xm = self.dt, self.xi, self.s, self._k2, self._xi_max
+        if self.implicit:
+            K = self.constants
+            k1 = (K.k1_z, K.k1_phi, K.k1_th, K.k1_yaw)
+            self.xi = (advance_xi_implicit(xi[0], s[0], k1[0], k2[0], dt, xm[0], hold or saturated[0]),
+                       advance_xi_implicit(xi[1], s[1], k1[1], k2[1], dt, xm[1], hold or saturated[1]),
+                       advance_xi_implicit(xi[2], s[2], k1[2], k2[2], dt, xm[2], hold or saturated[2]),
+                       advance_xi_implicit(xi[3], s[3], k1[3], k2[3], dt, xm[3], hold or saturated[3]))
+            return
         self.xi = (advance_xi(xi[0], s[0], k2[0], dt, xm[0], hold or saturated[0]),
                    advance_xi(xi[1], s[1], k2[1], dt, xm[1], hold or saturated[1]),
                    advance_xi(xi[2], s[2], k2[2], dt, xm[2], hold or saturated[2]),

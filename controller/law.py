@@ -145,12 +145,18 @@ def _load_file(path: Path, spec: str):  # -> module
     return module
 
 
-def make_law(spec: str | LawFactory, nominal: Nominal, gains: Gains, rate_hz: float) -> Law:
-    """Build the law ``spec`` (a name of :func:`resolve_law`, or a factory) and check that it fits."""
+def make_law(spec: str | LawFactory, nominal: Nominal, gains: Gains, rate_hz: float,
+             discretization: str = "explicit") -> Law:
+    """Build the law ``spec`` (a name of :func:`resolve_law`, or a factory) and check that it fits.
+    ``discretization`` (controller.bsst.DISCRETIZATIONS) reaches the super-twisting law ``bsst``; the
+    others (``smc``'s sign, ``pid``, a user's law) have no super-twisting step to discretize."""
     factory = resolve_law(spec) if isinstance(spec, str) else spec
     label = spec if isinstance(spec, str) else _label(spec)
     try:
-        law = factory(nominal, gains, rate_hz)
+        if factory is BacksteppingSuperTwisting:
+            law = BacksteppingSuperTwisting(nominal, gains, rate_hz, discretization=discretization)
+        else:
+            law = factory(nominal, gains, rate_hz)
     except Exception as exc:  # the user's constructor: one line naming it
         raise ConfigError(f"controller {label!r}: building it as ({label.rpartition(':')[2]})(nominal, gains, "
                           f"rate_hz) raised {type(exc).__name__}: {exc}") from None

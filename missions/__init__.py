@@ -13,12 +13,21 @@ Scripting::
     m = Mission(Sine(), duration_s=30.0, name="sine")
 """
 
-from missions.mission import CONTROLLERS, MISSION_RANGES, Mission, load_mission, mission_from_table, mission_path
+from missions.mission import (
+    CONTROLLERS,
+    DISCRETIZATIONS,
+    MISSION_RANGES,
+    Mission,
+    load_mission,
+    mission_from_table,
+    mission_path,
+)
 from missions.mission import SHIPPED_DIR as MISSION_DIR
 from missions.references import Reference, Setpoint, Sine, Step, Waypoints
 
 __all__ = [
     "CONTROLLERS",
+    "DISCRETIZATIONS",
     "MISSION_RANGES",
     "MISSION_DIR",
     "Mission",

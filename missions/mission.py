@@ -27,6 +27,10 @@ from missions.references import Reference, Setpoint, Sine, Step, Waypoints
 from params import ConfigError, Table, load_toml
 
 CONTROLLERS = ("bsst", "smc", "pid")
+# how the super-twisting step of ``bsst`` is stepped over the control period (controller.supertwisting):
+# forward Euler as the paper prints it, or backward Euler solved in closed form (docs/law.md, "Discretization")
+DISCRETIZATIONS = ("explicit", "implicit")
+DEFAULT_DISCRETIZATION = "explicit"
 # the allowed range [lo, hi] of each top-level number of a mission (duration_s: lo excluded), shared by
 # the loader, the command-line flags (--rate, --seed) and the sweep axes: one range per key
 MISSION_RANGES: dict[str, tuple[float, float]] = {
@@ -53,6 +57,7 @@ class Mission:
     profile: str = "paper"
     actuation: str | None = None  # None: the profile's own
     controller: str = "bsst"
+    discretization: str = DEFAULT_DISCRETIZATION  # DISCRETIZATIONS; only ``bsst`` has a step it changes
     rate_hz: float = 250.0
     physics_hz: float = 1000.0
     seed: int = 0
@@ -74,6 +79,9 @@ class Mission:
         why = law_spec_problem(self.controller)
         if why:
             raise ConfigError(f"{self.source}: controller: {why}")
+        if self.discretization not in DISCRETIZATIONS:
+            raise ConfigError(f"{self.source}: discretization: must be one of {', '.join(DISCRETIZATIONS)}; "
+                              f"got {self.discretization!r}"[:300])
         outside = envelope_problem(self.trajectory, self.start, self.duration_s)
         if outside:
             raise ConfigError(f"{self.source}: {outside[0]}: {outside[1]}")
@@ -89,6 +97,7 @@ class Mission:
             "duration_s": self.duration_s,
             "profile": self.profile,
             "controller": self.controller,
+            "discretization": self.discretization,
             "rate_hz": self.rate_hz,
             "physics_hz": self.physics_hz,
             "seed": self.seed,
@@ -239,6 +248,7 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
     if why:
         raise t.error("controller", why)
     controller = law_spec_from(controller, Path(source).parent)
+    discretization = t.string("discretization", DEFAULT_DISCRETIZATION, choices=DISCRETIZATIONS)
     r = MISSION_RANGES
     rate = t.number("rate_hz", 250.0, lo=r["rate_hz"][0], hi=r["rate_hz"][1])
     physics = t.number("physics_hz", 1000.0, lo=r["physics_hz"][0], hi=r["physics_hz"][1])
@@ -256,6 +266,7 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
         profile=profile,
         actuation=actuation,
         controller=controller,
+        discretization=discretization,
         rate_hz=rate,
         physics_hz=physics,
         seed=seed,

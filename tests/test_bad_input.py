@@ -477,3 +477,43 @@ def test_the_vehicle_at_rest_is_not_capped() -> None:
 
     flight = prepare(at_rest())
     assert flight.mission.steps == 86400 * 250 > MAX_TRACE_STEPS
+
+
+# -- issue 22, defect 7: a trace file the csv module cannot read, through every path that reads a trace ----------
+BAD_TRACES = {  # name: (the file's text, its line named, what the line says)
+    "unclosed quote": ('t_s,delay_ms\n0,5\n0.1,"10\n0.2,5\n', "line 3", "unclosed quote"),
+    "quoted newline": ('t_s,delay_ms\n0,5\n0.1,"10\n12",3\n0.3,5\n', "line 3", "unclosed quote"),
+    "over the field limit": ("t_s,delay_ms\n0,5\n0.1," + "1" * 200_000 + "\n", "line 3", "characters long"),
+    "quoted over the field limit": ('t_s,delay_ms\n0,5\n0.1,"' + "1" * 200_000 + '"\n', "line 3", "characters long"),
+}
+
+
+@pytest.mark.parametrize("kind", BAD_TRACES)
+def test_issue_22_a_bad_trace_is_one_line_through_every_path(tmp_path: Path, kind: str) -> None:
+    """``--link-trace``, ``[link] trace`` in a mission, a link profile's trace, ``bsst relay --link-trace``,
+    ``bsst link fit`` and ``bsst link show``: each a real process, exit 2, one line naming the file and its line."""
+    text, line, why = BAD_TRACES[kind]
+    bad = tmp_path / "bad.csv"
+    bad.write_text(text)
+    mission = tmp_path / "m.toml"
+    mission.write_text(TINY + '[link]\ntrace = "bad.csv"\ntrace_loop = true\n')
+    profile = tmp_path / "p.toml"
+    profile.write_text('name = "p"\n[link]\ntrace = "bad.csv"\ntrace_loop = true\n')
+    paths = {
+        "--link-trace": ["sim", str(MISSION_DIR / "sine.toml"), "--link-trace", str(bad), "--link-trace-loop"],
+        "[link] trace": ["sim", str(mission)],
+        "a profile's trace": ["sim", str(MISSION_DIR / "sine.toml"), "--link-profile", str(profile)],
+        "relay --link-trace": ["relay", "--listen", "127.0.0.1:0", "--to", "127.0.0.1:9", "--link-trace", str(bad),
+                               "--link-trace-loop", "--duration", "1"],
+        "link fit": ["link", "fit", str(bad)],
+        "link show": ["link", "show", str(bad), "--out", str(tmp_path / "bad.png")],
+    }
+    for name, argv in paths.items():
+        r = subprocess.run([sys.executable, "-m", "bridge", *argv], capture_output=True, text=True, cwd=tmp_path,
+                           timeout=60)
+        lines = r.stderr.strip().splitlines()
+        assert r.returncode == 2, (name, r.returncode, r.stderr[-2000:])
+        assert len(lines) == 1 and "Traceback" not in r.stderr, (name, r.stderr[-2000:])
+        assert f"{bad} {line}: " in lines[0] and why in lines[0], (name, lines[0])
+        assert len(lines[0]) < 600, (name, len(lines[0]))  # the line says what is wrong, not the field
+    assert not (tmp_path / "runs").exists() and not (tmp_path / "bad.png").exists()

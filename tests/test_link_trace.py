@@ -405,8 +405,8 @@ def test_extract_two_tlogs_of_any_link_by_sequence_numbers_and_timesync(tmp_path
     got = [x for _, x in down.records if x is not None]
     assert np.allclose(got, delay_down + (delay_up - delay_down) / 2, atol=1e-5)  # symmetric-TIMESYNC bias
     assert ex.up.lost == sum(1 for k in range(0, 700, 2) if k % 20 == 0) - 1  # the first one is before any delivery
-    same = extract_tlogs(v, c, "same")
-    assert any("--clock timesync" in n for n in same.notes)
+    with pytest.raises(ConfigError, match=r"306 frames arrived before they were sent .*--clock timesync"):
+        extract_tlogs(v, c, "same")  # the controller's clock 2.5 s ahead: its commands arrive before they leave
     p = bsst("link", "extract", str(tmp_path / "v.tlog"), str(tmp_path / "c.tlog"), "--clock", "timesync",
              cwd=tmp_path)
     assert p.returncode == 0, p.stderr
@@ -515,3 +515,142 @@ def test_sweep_takes_the_trace_flags_and_refuses_a_swept_loss_over_a_trace(tmp_p
     assert p.returncode == 0, p.stderr
     flown = tomllib.loads((tmp_path / "s2" / "mission.toml").read_text())
     assert flown["link"]["down"]["trace"] == str(f)
+
+
+# -- issue 22, defect 7: bsst link fit writes only what the link model loads ------------------------------------------
+def test_fit_of_outages_past_the_blackout_ranges_writes_a_profile_bsst_loads(tmp_path: Path) -> None:
+    """A trace (rows every 100 s) with an outage from 500 s lasting 1.2e6 s and one starting at 2e6 s: the
+    blackouts the model takes start by 1e6 s and last at most 1e6 s; the fit warns, and its profile loads."""
+    t = np.arange(0.0, 2.5e6, 100.0)
+    lost = ((t >= 500.0) & (t < 1.2e6 + 500.0)) | ((t >= 2e6) & (t < 2.1e6))
+    rows = [(float(x), None if gone else 20.0, None) for x, gone in zip(t, lost, strict=True)]
+    f = tmp_path / "long.csv"
+    f.write_text(trace_text(rows))
+    p = bsst("link", "fit", str(f), "--out", str(tmp_path / "long.toml"))
+    assert p.returncode == 0, p.stderr
+    assert "cut to 1e+06 s" in p.stderr and "at 2e+06 s left out" in p.stderr, p.stderr
+    prof = load_link_profile(str(tmp_path / "long.toml"))
+    s = link_from_table(prof.link, str(prof.path))
+    assert s.up.blackouts == ((500.0, 1e6),) and s.up.delay_ms == 20.0
+    assert "# clamped to the model's ranges: " in (tmp_path / "long.toml").read_text()
+
+
+def test_fit_of_bursts_longer_than_the_model_takes_is_clamped_and_loads() -> None:
+    """Loss runs of 2.5e6 packets (burst_len over the model's 1e6) and a loss fraction that rounds to 100 %:
+    the table keeps burst_len and loss_pct within what the loader takes, and the loader takes it."""
+    from bridge.link.fit import fit_records, loadable  # local: only these tests fit records directly
+
+    n = 6_000_000
+    lost = np.zeros(n, dtype=bool)
+    lost[1000:2_501_000] = True
+    lost[3_000_000:5_500_000] = True
+    t = np.arange(n) * 1e-3
+    rec = make_records(t, np.where(lost, np.nan, 0.02))
+    fit = fit_records(rec, blackout_after_s=1e6)  # no run is an outage: every loss is a burst
+    assert fit.loss.burst_len > 1e6 and fit.loss.model == "gilbert-elliott"
+    table = fit.table()
+    assert table["burst_len"] == 1e6 and any("burst_len" in n for n in fit.clamped())
+    link_from_table(loadable({"both": fit}, "t"), "t")  # what bsst link fit checks before it writes
+    nearly_all = np.ones(3_000_000, dtype=bool)
+    nearly_all[[5, 6, 2_000_000]] = False  # 99.9999 % lost, in two runs: rounds to 100.0 at 4 decimals
+    rec = make_records(np.arange(len(nearly_all)) * 1e-3, np.where(nearly_all, np.nan, 0.02))
+    fit = fit_records(rec, blackout_after_s=1e6)
+    table = fit.table()
+    assert table["loss_pct"] < 100.0 and table.get("burst_len", 0.0) <= 1e6
+    link_from_table(table, "t")
+
+
+# -- issue 22, defect 7: bsst link extract refuses two tlogs that are not the ends of one link; linear in repeats --
+def _link_logs(start: float, frames: int, odometry_from: int = 0) -> tuple[bytes, bytes]:
+    """A vehicle's and a controller's tlog of one link from ``start`` (Unix s): ODOMETRY down (its time field
+    from ``odometry_from``), HEARTBEAT up, every 7th frame each way lost, 10 ms down and 20 ms up."""
+    veh, ctl = (mavlink.MAVLink(None, srcSystem=1, srcComponent=1),
+                mavlink.MAVLink(None, srcSystem=255, srcComponent=190))
+    vlog: list[tuple[float, bytes]] = []
+    clog: list[tuple[float, bytes]] = []
+    for k in range(frames):
+        t = start + k * 0.004
+        f = _frame(veh, veh.odometry_encode(odometry_from + k * 4000, 1, 1, 0, 0, 0, [1, 0, 0, 0], 0, 0, 0, 0, 0, 0,
+                                            [math.nan] * 21, [math.nan] * 21))
+        vlog.append((t, f))
+        c = _frame(ctl, ctl.heartbeat_encode(6, 8, 0, 0, 4))
+        clog.append((t + 0.001, c))
+        if k % 7 != 3:
+            clog.append((t + 0.010, f))
+            vlog.append((t + 0.021, c))
+    return _tlog(vlog), _tlog(clog)
+
+
+def test_extract_refuses_two_tlogs_that_are_not_the_ends_of_one_link(tmp_path: Path) -> None:
+    """One tlog as both ends (a copy), two flights 100 s apart, and the vehicle of one link with the controller
+    of another flown at the same time: each exit 2 with one line saying why, and no trace written."""
+    v, c = _link_logs(1000.0, 2000)
+    (tmp_path / "v.tlog").write_bytes(v)
+    (tmp_path / "c.tlog").write_bytes(c)
+    good = bsst("link", "extract", str(tmp_path / "v.tlog"), str(tmp_path / "c.tlog"), "--out",
+                str(tmp_path / "ok.csv"))
+    assert good.returncode == 0, good.stderr
+    tf = read_trace(tmp_path / "ok.csv")
+    assert tf.down.n == 2000 and tf.down.lost == sum(1 for k in range(2000) if k % 7 == 3)
+    (tmp_path / "copy.tlog").write_bytes(c)
+    later_v, later_c = _link_logs(1100.0, 2000)
+    (tmp_path / "later_c.tlog").write_bytes(later_c)
+    other_v, other_c = _link_logs(1000.0, 2000, odometry_from=10**9)  # another vehicle, the same ids, same time
+    (tmp_path / "other_c.tlog").write_bytes(other_c)
+    cases = {"copy.tlog": "one tlog given as both ends", "later_c.tlog": "they never overlap",
+             "other_c.tlog": "not in the other end's tlog"}
+    for name, why in cases.items():
+        ends = (str(tmp_path / "c.tlog"), str(tmp_path / name)) if name == "copy.tlog" else \
+            (str(tmp_path / "v.tlog"), str(tmp_path / name))
+        err = one_line_error(bsst("link", "extract", *ends, "--out", str(tmp_path / f"{name}.csv")))
+        assert why in err and "not the two ends of one link" in err or "both ends" in err, (name, err)
+        assert not (tmp_path / f"{name}.csv").exists()
+    assert "ahead" not in one_line_error(bsst("link", "extract", str(tmp_path / "v.tlog"), str(tmp_path / "v.tlog"),
+                                              "--out", str(tmp_path / "same.csv")))
+
+
+def test_extract_matches_frames_repeated_many_times_each_to_its_own_copy() -> None:
+    """200 000 heartbeats up whose bytes repeat every 256 frames (only the sequence number changes): every
+    delivered one matched to the copy sent just before it (20 ms), every lost one counted lost, none twice."""
+    ctl = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+    veh = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    n = 200_000
+    vlog: list[tuple[float, bytes]] = []
+    clog: list[tuple[float, bytes]] = []
+    lost = {k for k in range(n) if k % 11 == 4}
+    for k in range(n):
+        t = 50.0 + k * 0.004
+        c = _frame(ctl, ctl.heartbeat_encode(6, 8, 0, 0, 4))
+        clog.append((t, c))
+        if k not in lost:
+            vlog.append((t + 0.020, c))
+        if k % 50 == 0:
+            h = _frame(veh, veh.heartbeat_encode(2, 12, 0, 0, 4))
+            vlog.append((t + 0.0005, h))
+            clog.append((t + 0.0105, h))
+    v, c = parse_tlog(_tlog(vlog), "v"), parse_tlog(_tlog(clog), "c")
+    ex = extract_tlogs(v, c, "same")
+    assert ex.up.sent == n and ex.up.lost == len(lost) and ex.up.duplicates == 0 and ex.up.unmatched == 0
+    got = np.array([x for _, x in ex.up.records if x is not None])
+    assert len(got) == n - len(lost) and np.allclose(got, 0.020, atol=2e-6)
+    assert [t for t, x in ex.up.records if x is None] == pytest.approx([k * 0.004 for k in sorted(lost)], abs=2e-6)
+
+
+def test_a_trace_takes_memory_in_proportion_to_its_records() -> None:
+    """Reading a trace holds its records as doubles, not a Python object per row: the peak of what the parse
+    allocates stays under 64 bytes a record (two doubles are 16; one float object and a list slot alone are 32;
+    it was 278 with tuples of floats and a list of lines). benchmarks/linkfiles.py measures 10^6 rows."""
+    import tracemalloc  # local: only this test traces allocations
+
+    n = 20_000
+    data = ("t_s,delay_ms,direction\n" + "".join(f"{k * 0.004:.6f},{'' if k % 20 == 7 else '21.5'},"
+                                                  f"{'up' if k % 2 else 'down'}\n" for k in range(n))).encode()
+    parse_trace(b"t_s,delay_ms\n0,1\n0.1,2\n", "warm")  # the first parse's one-off allocations, outside the count
+    tracemalloc.start()
+    try:
+        tf = parse_trace(data, "big.csv")
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert tf.up.n + tf.down.n == n and tf.up.lost + tf.down.lost == n // 20
+    assert peak / n < 64.0, peak / n

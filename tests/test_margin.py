@@ -116,3 +116,40 @@ def test_a_refused_out_directory_is_named_before_any_flight(tmp_path: Path) -> N
     assert r.returncode == 2 and "--out" in r.stderr and "not empty" in r.stderr, r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
     assert (tmp_path / "kept.txt").read_text() == "a user's file\n" and not (tmp_path / "margin.json").exists()
+
+
+# -- issue 22, defect 8: every --resolution the search takes ends ------------------------------------------------------
+@pytest.mark.parametrize("over", ["delay_ms", "loss_pct", "jitter_ms", "burst_len", "noise"])
+def test_a_resolution_too_fine_to_end_is_refused_naming_the_flag_and_its_range(over: str) -> None:
+    r = subprocess.run([sys.executable, "-m", "bridge", "margin", "missions/sine.toml", "--over", over, "--until",
+                        "rms=0.1", "--resolution", "1e-300"], cwd=ROOT, capture_output=True, text=True, timeout=60)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
+    assert "--resolution must be in [" in lines[0] and f"for --over {over}" in lines[0] and "1e-300" in lines[0]
+
+
+@pytest.mark.parametrize("over", ["delay_ms", "loss_pct", "jitter_ms", "burst_len", "noise"])
+def test_the_finest_resolution_taken_ends_within_its_rounds(over: str) -> None:
+    """The search's own steps (no flight: a value fails above a threshold) from the finest resolution the
+    search takes to the coarsest, for a boundary near the range's bottom, inside it, at its top and nowhere
+    (every value fails): the rounds stay within the doublings to the top plus MAX_HALVINGS + 1."""
+    import math
+
+    from bridge.sweep.grid import RANGES
+    from bridge.sweep.margin import MAX_HALVINGS, START, Search, resolution_range
+
+    lo, top = RANGES[over]
+    least, most = resolution_range(over)
+    bound = math.ceil(math.log2(top / START[over])) + 2 + MAX_HALVINGS + 1
+    for resolution in (least, least * 1.5, (top - lo) / 1000.0, most):
+        for boundary in (lo - 1.0, lo + least / 3.0, lo + (top - lo) * 0.3141, top, math.inf):
+            s = Search("bs_st", lo)
+            value: float | None = START[over]
+            rounds = 0
+            while value is not None:
+                rounds += 1
+                assert rounds <= bound, (resolution, boundary, s)
+                s.record(value, value > boundary)
+                value = s.next_value(resolution, top)
+            if s.hi is not None and s.held:
+                assert s.hi - s.lo <= resolution or math.nextafter(s.lo, math.inf) >= s.hi, (resolution, s)

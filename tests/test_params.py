@@ -347,3 +347,141 @@ def test_a_long_refusal_goes_out_whole_in_statustext_chunks():
     assert b"".join(m.text if isinstance(m.text, bytes) else m.text.encode() for m in msgs) == why.encode()
     assert [len(m.text) for m in statustext(4, "x" * 100, 3)] == [50, 50, 0]
     assert len(statustext(4, "y" * 1000, 3)) == 5  # 200 characters at most, then the empty end
+
+
+# -- issue 22: parameters as typed flags, float32 bounds, two entries for one setting ------------------
+def _f32(x: float) -> float:
+    return struct.unpack("<f", struct.pack("<f", x))[0]
+
+
+def _bsst(*args: str, cwd=ROOT) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "bridge", *args], capture_output=True, text=True, cwd=cwd,
+                          env=ENV, timeout=120)
+
+
+@pytest.mark.parametrize("name, value", [("COM_OBL_ACT", "1"), ("COM_OBL_RC_ACT", "5"), ("MAV_SYS_ID", "7")])
+def test_an_integer_parameter_flag_is_parsed_as_an_integer(tmp_path, name, value):
+    """Issue 22, defect 4: ``--param COM_OBL_ACT=1`` flies (it was refused as 'expected an integer, got
+    1.0', blamed on the mission file); the run's mission.toml holds the integer."""
+    r = _bsst("sim", "missions/sine.toml", "--param", f"{name}={value}", "--out", str(tmp_path / "r"),
+              "--no-plots")
+    assert r.returncode == 0, r.stderr
+    assert f"{name} = {value}\n" in (tmp_path / "r" / "mission.toml").read_text()
+
+
+@pytest.mark.parametrize("cmd", ["sim", "sitl", "vehicle"])
+@pytest.mark.parametrize("args, says", [
+    (["--param", "COM_OBL_ACT=1.5"], "--param 'COM_OBL_ACT=1.5': COM_OBL_ACT: an INT32, expected an integer"),
+    (["--param", "MAV_SYS_ID=x"], "--param 'MAV_SYS_ID=x': MAV_SYS_ID: an INT32, expected an integer"),
+    (["--param", "COM_OBL_ACT=1", "--param", "COM_OBL_RC_ACT=7"],
+     "--param COM_OBL_RC_ACT=7 and --param COM_OBL_ACT=1 set one setting, [failsafe] action, two ways"),
+], ids=["fraction", "word", "clash"])
+def test_a_bad_parameter_flag_is_named_as_the_flag_not_the_mission(cmd, args, says):
+    mission = [] if cmd == "vehicle" else ["missions/sine.toml"]
+    r = _bsst(cmd, *mission, *args)  # refused before a port is bound
+    assert r.returncode == 2 and says in r.stderr, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and "sine.toml" not in r.stderr, r.stderr
+
+
+def test_two_offboard_loss_entries_of_one_file_must_agree(tmp_path):
+    """Issue 22, defect 10: ``[params]`` COM_OBL_ACT and COM_OBL_RC_ACT are one setting; two different
+    actions are refused naming the file and both keys, the same action twice is taken."""
+    src = (ROOT / "missions" / "sine.toml").read_text()
+    path = tmp_path / "m.toml"
+    path.write_text(src + "\n[params]\nCOM_OBL_ACT = 1\nCOM_OBL_RC_ACT = 7\n")
+    with pytest.raises(ConfigError, match=r"m.toml: params.COM_OBL_RC_ACT and params.COM_OBL_ACT set one setting"):
+        prepare(path)
+    r = _bsst("sim", str(path))
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert all(w in r.stderr for w in ("m.toml", "params.COM_OBL_ACT", "params.COM_OBL_RC_ACT")), r.stderr
+    path.write_text(src + "\n[params]\nCOM_OBL_ACT = 1\nCOM_OBL_RC_ACT = 5\n")  # hold, twice
+    assert prepare(path).failsafe.action == "hold"
+    # a flag for the setting wins over both of the file's entries
+    path.write_text(src + "\n[params]\nCOM_OBL_RC_ACT = 7\n")
+    assert prepare(path, params={"COM_OBL_ACT": 1}).failsafe.action == "hold"
+
+
+def test_two_scheduled_changes_of_one_parameter_at_one_time_the_last_given_wins(tmp_path):
+    """Issue 22, defect 10: ``--param-at 15:COM_OBL_ACT=3 --param-at 15:COM_OBL_ACT=1``: hold (the last
+    given), not disarm (the larger value, as it was)."""
+    out = tmp_path / "r"
+    r = _bsst("sim", "missions/sine.toml", "--param-at", "10:COM_OBL_ACT=3", "--param-at", "10:COM_OBL_ACT=1",
+              "--blackout", "15:2", "--out", str(out), "--no-plots")
+    assert r.returncode == 1, r.stderr  # the failsafe
+    log = (out / "events.log").read_text()
+    assert "COM_OBL_ACT = 1 (was 3)" in log and "hold here" in json.loads((out / "summary.json").read_text())[
+        "ended_by"]["how"], log
+    assert [c.value for c in prepare("missions/sine.toml", param_at=[
+        ParamChange(10.0, "COM_OBL_ACT", 3), ParamChange(10.0, "COM_OBL_ACT", 1), ParamChange(5.0, "COM_OBL_ACT", 0),
+    ]).param_changes] == [0, 3, 1]
+
+
+def test_a_value_that_rounds_to_a_bound_in_float32_is_the_bound():
+    """Issue 22, defect 5: every bound of every REAL32 parameter survives the float32 wire (0.01 arrives as
+    0.0099999998, and is set as 0.01 itself: the setting stays in its range); the next float32 beyond a
+    bound is still refused."""
+    assert _f32(0.01) < 0.01
+    for far in (0.0099999, 1e300, -1e300):  # beyond float32 rounding, or beyond float32
+        with pytest.raises(ParamRefused, match="must be in"):
+            change_param(VehicleParams(), "COM_OF_LOSS_T", far)
+    for spec in PARAMS:
+        if spec.kind != "REAL32":
+            continue
+        for bound in (spec.lo, spec.hi):
+            got = read_param(change_param(VehicleParams(), spec.name, _f32(bound)), spec.name)
+            assert spec.lo <= got <= spec.hi and got == pytest.approx(bound, rel=1e-7), spec.name
+        # the next float32 beyond each bound: a value that crossed the wire and is not the bound
+        for outside in (np.nextafter(np.float32(spec.lo), np.float32(-np.inf)),
+                        np.nextafter(np.float32(spec.hi), np.float32(np.inf))):
+            with pytest.raises(ParamRefused, match="must be in"):
+                change_param(VehicleParams(), spec.name, float(outside))
+    assert change_param(VehicleParams(), "COM_OF_LOSS_T", _f32(0.01)).failsafe.timeout_s == 0.01
+
+
+def test_the_documented_minimum_loss_timeout_is_set_over_mavlink(tmp_path):
+    """Issue 22, defects 4 and 5 against a real ``bsst vehicle``: started with integer ``--param`` flags
+    (MAV_SYS_ID=7: its heartbeat's system id; COM_OBL_ACT=1 read back), then a pymavlink ground station's
+    PARAM_SET COM_OF_LOSS_T 0.01 (float32 0.0099999998) is made, and one truly below is refused."""
+    with instance_slot() as n:
+        gcs = _gcs(n)
+        v = Proc.bsst("vehicle", "--instance", str(n), "--out", str(tmp_path), "--param", "MAV_SYS_ID=7",
+                      "--param", "COM_OBL_ACT=1")
+        try:
+            v.wait_line(lambda s: s.startswith("ready"))
+            hb = gcs.wait_heartbeat(timeout=20)
+            assert hb.get_srcSystem() == 7
+            tgt = (7, gcs.target_component)
+            gcs.mav.param_request_read_send(*tgt, b"COM_OBL_ACT", -1)
+            assert param_from_wire(_recv(gcs, "PARAM_VALUE").param_value, M.MAV_PARAM_TYPE_INT32) == 1
+            gcs.mav.param_set_send(*tgt, b"COM_OF_LOSS_T", 0.01, M.MAV_PARAM_TYPE_REAL32)
+            m = _recv(gcs, "PARAM_VALUE", "PARAM_VALUE.param_id == 'COM_OF_LOSS_T'")
+            assert m.param_value == _f32(0.01)
+            gcs.mav.param_set_send(*tgt, b"COM_OF_LOSS_T", 0.0099, M.MAV_PARAM_TYPE_REAL32)
+            assert _recv(gcs, "PARAM_VALUE", "PARAM_VALUE.param_id == 'COM_OF_LOSS_T'").param_value == _f32(0.01)
+            _recv(gcs, "STATUSTEXT", "'must be in [0.01, 60]' in STATUSTEXT.text")
+        finally:
+            assert v.stop() == 0
+            gcs.close()
+    v.wait_line(lambda s: "param: COM_OF_LOSS_T = 0.01 (was 0.5) [by 255:190" in s)
+    stats = json.loads(v.wait_line(lambda s: s.startswith("stats "))[6:])
+    assert stats["rejected"]["param_refused"] == 1
+
+
+def test_integer_flags_and_the_minimum_timeout_fly_in_lockstep_as_offline(tmp_path):
+    """``bsst sitl`` with ``--param COM_OBL_ACT=1`` (hold) and ``--param-at 2:COM_OF_LOSS_T=0.01``: the
+    controller's PARAM_SET (float32) is made by the vehicle process, and the lockstep trace is the offline
+    one: the failsafe holds 0.01 s into the blackout in both."""
+    mission = tmp_path / "short.toml"
+    mission.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 9.0"))
+    flags = ["--param", "COM_OBL_ACT=1", "--param-at", "2:COM_OF_LOSS_T=0.01", "--blackout", "6:2", "--no-plots"]
+    with instance_slot() as n:
+        r = _bsst("sitl", str(mission), *flags, "--instance", str(n), "--out", str(tmp_path / "lock"))
+    assert r.returncode == 1, r.stderr  # the failsafe
+    s = json.loads((tmp_path / "lock" / "summary.json").read_text())
+    assert "hold here" in s["ended_by"]["how"] and "0.012 s" in s["ended_by"]["how"], s["ended_by"]
+    assert "COM_OF_LOSS_T = 0.01 (was 0.5)" in (tmp_path / "lock" / "events.log").read_text()
+    off = _bsst("sim", str(mission), *flags, "--out", str(tmp_path / "off"))
+    assert off.returncode == 1, off.stderr
+    lock, offline = read_trace(tmp_path / "lock" / "trace.csv"), read_trace(tmp_path / "off" / "trace.csv")
+    n = min(len(offline["t"]), len(lock["t"]))
+    assert max(float(np.max(np.abs(np.asarray(offline[c][:n]) - np.asarray(lock[c][:n])))) for c in "xyz") < 1e-4

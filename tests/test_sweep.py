@@ -8,6 +8,7 @@ a minute on two cores.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import multiprocessing as mp
 import os
@@ -532,3 +533,89 @@ def test_a_sweep_file_declares_the_vehicle_axes(tmp_path: Path, mission_file: Pa
         ("ekf", 0.0, ("estimator", "noise")), ("ekf", 2.0, ("estimator", "noise"))]
     kept = Grid(estimator=("truth", "raw"), noise=(1.0,))  # the mission's own values: no override, the same flight
     assert [c.sensing for c in grid_cells(SHORT, kept)] == [(), ("estimator",)]
+
+
+def test_a_sweep_with_a_plug_in_law_writes_its_maps(tmp_path: Path) -> None:
+    """``bsst sweep ... --controller bsst,examples/my_law.py:MyLaw`` and ``bsst report`` on it, as real processes."""
+    mission = tmp_path / "short.toml"
+    mission.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 3.0"))
+    out = tmp_path / "sweep"
+    env = dict(os.environ, MPLBACKEND="Agg")
+
+    def bsst(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, "-m", "bridge", *args], cwd=ROOT, env=env, capture_output=True,
+                              text=True, timeout=300)
+
+    r = bsst("sweep", str(mission), "--controller", "bsst,examples/my_law.py:MyLaw", "--delay", "0,10",
+             "--jobs", "2", "--out", str(out))
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
+    maps = {"map_delay_loss.png", "map_delay_loss_bsst.png", "map_delay_loss_examples-my_law-py-MyLaw.png"}
+    assert maps <= {p.name for p in out.iterdir()}
+    report = (out / "report.md").read_text()
+    assert all(f"({m})" in report for m in maps) and "## delay_ms (at loss_pct = 0 %)" in report
+    assert " x " not in "".join(line for line in report.splitlines() if line.startswith("## "))
+    for m in maps:
+        (out / m).unlink()
+    r = bsst("report", str(out))
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
+    assert maps <= {p.name for p in out.iterdir()} and (out / "report.md").read_text() == report
+    assert {r["controller"] for r in read_cells(out / "cells.csv")} == {"bsst", "examples/my_law.py:MyLaw"}
+
+
+# -- issue 22, defect 10: --resume re-checks what it keeps ------------------------------------------------------------
+def test_resume_refuses_a_row_whose_class_contradicts_its_rms(small_sweep: tuple[Path, list[str]], tmp_path: Path,
+                                                              capsys) -> None:
+    """A row relabelled with another class, and one whose RMS was raised to 5 m under its old class: each is
+    refused on resume in one line naming the file, the line and the class its numbers give; nothing rewritten."""
+    for case in ("relabelled", "rms"):
+        d = tmp_path / case
+        shutil.copytree(small_sweep[0], d)
+        lines = (d / CELLS_CSV).read_text().splitlines(keepends=True)
+        parts = lines[2].rstrip("\n").split(",")
+        was = parts[COLUMNS.index("class")]
+        if case == "relabelled":
+            label, want = ("clean" if was != "clean" else "diverged"), was
+            parts[COLUMNS.index("class")] = label
+        else:
+            label, want = was, "diverged"  # 5 m is past the diverged threshold (1 m)
+            parts[COLUMNS.index("rms")] = "5.0"
+        (d / CELLS_CSV).write_text(lines[0] + lines[1] + ",".join(parts) + "\n")
+        before = (d / CELLS_CSV).read_bytes()
+        capsys.readouterr()
+        assert main([*small_sweep[1], "--out", str(d), "--resume"]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and f"{d / CELLS_CSV}: line 3: class '{label}' contradicts the row" in err, err
+        assert f"'{want}' by the sweep's classes" in err, err
+        assert (d / CELLS_CSV).read_bytes() == before
+
+
+def test_resume_refuses_a_mission_toml_edited_after_the_sweep(small_sweep: tuple[Path, list[str]], tmp_path: Path,
+                                                              capsys) -> None:
+    """sweep.json records the hash of the mission.toml it wrote; an edit (even a comment), a missing file,
+    and (for a sweep.json of before the hash) a file that is not the recorded mission's are refused in one line;
+    the untouched directory resumes."""
+    ok = tmp_path / "ok"
+    shutil.copytree(small_sweep[0], ok)
+    meta = json.loads((ok / "sweep.json").read_text())
+    assert meta["mission_toml_sha256"] == hashlib.sha256((ok / "mission.toml").read_bytes()).hexdigest()
+    assert main([*small_sweep[1], "--out", str(ok), "--resume"]) == 0
+    for case in ("comment", "duration", "missing", "old-sweep-json"):
+        d = tmp_path / case
+        shutil.copytree(small_sweep[0], d)
+        toml = d / "mission.toml"
+        if case == "comment":
+            toml.write_text("# tuned later\n" + toml.read_text())
+        elif case == "duration":
+            toml.write_text(toml.read_text().replace("duration_s = ", "duration_s = 1", 1))
+        elif case == "missing":
+            toml.unlink()
+        else:
+            old = json.loads((d / "sweep.json").read_text())
+            del old["mission_toml_sha256"]
+            (d / "sweep.json").write_text(json.dumps(old))
+            toml.write_text(toml.read_text().replace("duration_s = ", "duration_s = 1", 1))
+        capsys.readouterr()
+        assert main([*small_sweep[1], "--out", str(d), "--resume"]) == 2, case
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and str(toml) in err, (case, err)
+        assert ("no such file" if case == "missing" else "edited after the sweep") in err, (case, err)

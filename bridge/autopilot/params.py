@@ -14,15 +14,21 @@ for the failsafe's numbers), so a mission file, a flag and a ground station's PA
 alike. The two offboard-loss action parameters are one setting, ``[failsafe] action``, under PX4's
 old name (``COM_OBL_ACT``, PX4 1.13 and earlier: 0 Land, 1 Hold, 3 Terminate) and its current one
 (``COM_OBL_RC_ACT``, PX4 1.14 on: 4 Land, 5 Hold, 7 Disarm); ``descend``, which PX4 does not have,
-is -1 in both. PX4's values that the vehicle cannot fly (Return, Position, ...) are refused.
+is -1 in both. PX4's values that the vehicle cannot fly (Return, Position, ...) are refused; two entries naming that
+one setting with different actions, in one ``[params]`` table or in the flags, are refused too.
 ``MAV_SYS_ID`` takes effect when the vehicle starts (``--param``, ``[params]``); a ground station's
 PARAM_SET of it is refused, as it could not act until a restart that SITL does not do.
+
+A value that came over MAVLink is a float32: the documented minimum COM_OF_LOSS_T, 0.01 s, arrives as
+0.0099999998. The range check (:func:`in_range`) therefore takes a value that rounds to a bound in
+float32 as that bound, and the change sets the bound itself.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+import struct
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -102,8 +108,37 @@ def read_param(p: VehicleParams, name: str) -> float:
     return float(p.takeoff_alt_m if name == "MIS_TAKEOFF_ALT" else p.sysid)
 
 
+def _float32(x: float) -> float | None:
+    """``x`` rounded to float32 (what a MAVLink float carries), or None if it is beyond float32's range."""
+    try:
+        return struct.unpack("<f", struct.pack("<f", x))[0]
+    except OverflowError:
+        return None
+
+
+def in_range(value: float, lo: float, hi: float) -> bool:
+    """Whether ``value`` is in [lo, hi], counting one that rounds to a bound in float32 as that bound (a
+    value that crossed MAVLink: 0.01 arrives as 0.0099999998)."""
+    if lo <= value <= hi:
+        return True
+    f = _float32(value)
+    return f is not None and f in (_float32(lo), _float32(hi))
+
+
+def typed_value(spec: ParamSpec, value: Any) -> float:
+    """``value`` as ``spec``'s type: an INT32's an ``int`` (a whole float is taken as one: PARAM_VALUE and
+    Python callers carry integers as floats), a REAL32's a number; :class:`ParamRefused` if it is not one."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ParamRefused(f"{spec.name}: expected a number, got {value!r}"[:200])
+    if spec.kind == INT32:
+        if not (math.isfinite(value) and value == int(value)):
+            raise ParamRefused(f"{spec.name}: an INT32, got {value:g}")
+        return int(value)
+    return value
+
+
 def value_problem(spec: ParamSpec, value: float) -> str | None:
-    """Why ``value`` cannot be ``spec``'s, or None (type, range, choices)."""
+    """Why ``value`` cannot be ``spec``'s, or None (type, range, choices; :func:`in_range`)."""
     if not math.isfinite(value):
         return f"{spec.name}: must be finite, got {value}"
     if spec.kind == INT32 and value != int(value):
@@ -111,7 +146,7 @@ def value_problem(spec: ParamSpec, value: float) -> str | None:
     if spec.choices is not None and int(value) not in spec.choices:
         allowed = ", ".join(f"{v} {a}" for v, a in spec.choices.items())
         return f"{spec.name}: {value:g} is not one the vehicle flies; allowed: {allowed}"
-    if not spec.lo <= value <= spec.hi:
+    if not in_range(value, spec.lo, spec.hi):
         unit = f" {spec.unit}" if spec.unit else ""
         return f"{spec.name}: must be in [{spec.lo:g}, {spec.hi:g}]{unit}, got {value:g}"
     return None
@@ -128,6 +163,7 @@ def change_param(p: VehicleParams, name: str, value: float, running: bool = True
         raise ParamRefused(why)
     if running and spec.at_start_only:
         raise ParamRefused(f"{name}: takes effect at start only (--param {name}=N)")
+    value = min(max(value, spec.lo), spec.hi)  # one that rounds to a bound in float32 is that bound (in_range)
     if spec.failsafe_key == "action":
         return replace(p, failsafe=replace(p.failsafe, action=(spec.choices or {})[int(value)]))
     if spec.failsafe_key is not None:
@@ -139,19 +175,44 @@ def change_param(p: VehicleParams, name: str, value: float, running: bool = True
 
 def params_from_table(data: Mapping[str, Any], source: str, start: VehicleParams) -> VehicleParams:
     """A ``[params]`` table (NAME = value) applied over ``start``, each value checked with its
-    parameter's one range; names the file and the key (``params.NAME``) of a bad one."""
+    parameter's one range; names the file and the key (``params.NAME``) of a bad one, and both keys of
+    two that set one setting to different values."""
     t = Table(data, source, "params")
-    p = start
+    entries = []
     for name in data:
         spec = BY_NAME.get(name)
         if spec is None:
             raise t.error(name, f"no such parameter; the vehicle has {', '.join(BY_NAME)}")
-        v = t.number(name) if spec.kind == REAL32 else float(t.integer(name))
-        try:
-            p = change_param(p, name, v, running=False)
-        except ParamRefused as exc:
-            raise t.error(name, str(exc).split(": ", 1)[1]) from None
+        entries.append((name, t.number(name) if spec.kind == REAL32 else t.integer(name)))
     t.done()
+    return apply_params(start, entries, f"{source}: ", lambda name, value: f"params.{name}")
+
+
+def apply_params(start: VehicleParams, entries: Iterable[tuple[str, Any]], prefix: str,
+                 where: Callable[[str, Any], str]) -> VehicleParams:
+    """Parameters at start (``[params]``, ``--param``), in order, over ``start``: each a known name with a
+    value of its type in its range, and no two naming one setting (COM_OBL_ACT, COM_OBL_RC_ACT) with
+    different values. ConfigError ``prefix`` + ``where(name, value)`` (the entry: a file's key, a flag)
+    + why; a clash names both entries."""
+    p = start
+    by_setting: dict[str, tuple[str, Any]] = {}  # [failsafe] key -> the entry that set it
+    for name, value in entries:
+        spec = BY_NAME.get(name)
+        try:
+            if spec is None:
+                raise ParamRefused(f"{name}: no such parameter; the vehicle has {', '.join(BY_NAME)}")
+            after = change_param(p, name, typed_value(spec, value), running=False)
+        except ParamRefused as exc:
+            raise ConfigError(f"{prefix}{where(name, value)}: {str(exc).split(': ', 1)[1]}") from None
+        key = spec.failsafe_key
+        if key is not None:
+            other = by_setting.get(key)
+            was, now = getattr(p.failsafe, key), getattr(after.failsafe, key)
+            if other is not None and other[0] != name and was != now:
+                raise ConfigError(f"{prefix}{where(name, value)} and {where(*other)} set one setting, [failsafe] "
+                                  f"{key}, two ways ({now}, {was}): give one of them")
+            by_setting[key] = (name, value)
+        p = after
     return p
 
 
@@ -161,18 +222,20 @@ def params_as_failsafe(data: Mapping[str, Any]) -> dict[str, str]:
 
 
 def parse_assignment(text: str) -> tuple[str, float]:
-    """``NAME=VALUE`` (``--param``) as (name, value); ConfigError saying what is wrong."""
+    """``NAME=VALUE`` (``--param``) as (name, value), the value parsed as the parameter's type (an INT32's
+    as an integer, a REAL32's as a number); ConfigError saying what is wrong."""
     name, sep, value = text.partition("=")
     name = name.strip()
     if not sep or not name:
         raise ConfigError(f"expected NAME=VALUE, got {text!r}")
-    if name not in BY_NAME:
+    spec = BY_NAME.get(name)
+    if spec is None:
         raise ConfigError(f"{name}: no such parameter; the vehicle has {', '.join(BY_NAME)}")
     try:
-        v = float(value)
+        return name, (int(value) if spec.kind == INT32 else float(value))
     except ValueError:
-        raise ConfigError(f"{name}: expected a number, got {value.strip()!r}") from None
-    return name, v
+        what = "an integer" if spec.kind == INT32 else "a number"
+        raise ConfigError(f"{name}: an {spec.kind}, expected {what}, got {value.strip()!r}") from None
 
 
 @dataclass(frozen=True, order=True)
@@ -190,19 +253,22 @@ class ParamChange:
 
 
 def check_param_changes(changes: Any, duration_s: float) -> tuple[ParamChange, ...]:
-    """Scheduled changes, checked (a known parameter that may change while running, its value in
-    range, a time inside the mission) and sorted by time; ConfigError naming the bad one."""
+    """Scheduled changes, checked (a known parameter that may change while running, its value of its type
+    and in range, a time inside the mission), each value as its parameter's type (:func:`typed_value`),
+    in time order: two at one time in the order given (the last given wins); ConfigError naming the bad one."""
     out = []
     for c in changes:
-        where = f"--param-at {c.t_s:g}:{c.name}={c.value:g}"
+        where = f"--param-at {c.t_s:g}:{c.name}={c.value!r}"
         if not (math.isfinite(c.t_s) and 0.0 <= c.t_s < duration_s):
             raise ConfigError(f"{where}: the time must be in [0, {duration_s:g}) s (the mission's duration)")
         try:
-            change_param(VehicleParams(), c.name, c.value)
+            spec = BY_NAME.get(c.name)
+            value = c.value if spec is None else typed_value(spec, c.value)
+            change_param(VehicleParams(), c.name, value)
         except ParamRefused as exc:
             raise ConfigError(f"{where}: {exc}") from None
-        out.append(c)
-    return tuple(sorted(out))
+        out.append(replace(c, value=value))
+    return tuple(sorted(out, key=lambda c: c.t_s))  # stable: one time's changes keep the order given
 
 
 def parse_change(text: str) -> ParamChange:

@@ -1,6 +1,7 @@
 """The BS-ST, SMC and PID laws and the actuation for N cells at once: compiled loops over the cell axis.
 
-In:  per cell a built-in law name (``bsst``, ``smc``, ``pid``), the nominal model, the gains and the control
+In:  per cell a built-in law name (``bsst``, ``smc``, ``pid``) and discretization (``explicit``, ``implicit``:
+     how ``bsst`` steps its super-twisting step), the nominal model, the gains and the control
      rate (Hz) they all share; each step the states [12, N] (eq. 7: m, m/s, rad, rad/s), the reference
      sample (x, y, z, psi, each value and 4 derivatives: [5] shared or [5, N]), which cells command and
      which hold their integrators
@@ -8,7 +9,8 @@ Out: the wrench demanded and realisable [4, N] (N), the normalised command [4, N
      the signed rotor-speed sum omega_d [N] (rad/s) the actuation allocated
 
 Each cell runs the scalar engine's own functions, compiled (bridge.batch.kernels):
-:func:`controller.bsst.backstepping` and :func:`controller.supertwisting.advance_xi`,
+:func:`controller.bsst.backstepping` and :func:`controller.supertwisting.advance_xi` (explicit) or
+:func:`controller.supertwisting.advance_xi_implicit` (implicit),
 :func:`controller.pid.pid` and :func:`controller.pid.pid_integrals`,
 :func:`controller.actuation.allocate_wrench` or :func:`controller.actuation.allocate_motors`. ``smc`` cells
 fly the BS-ST arithmetic with the sign reaching law in the last step, as ``make_law("smc")`` does.
@@ -33,32 +35,38 @@ BATCH_LAWS = (*BACKSTEPPING, "pid")
 
 class BatchBacksteppingLaw:
     """:class:`~controller.bsst.BacksteppingSuperTwisting` for n cells; per cell super-twisting (``bsst``)
-    or sign (``smc``) reaching in the last step."""
+    or sign (``smc``) reaching in the last step, the super-twisting stepped explicitly or (``implicit``)
+    implicitly: the cell's law constants carry the implicit step's period, or 0."""
 
-    def __init__(self, nominal: Nominal, gains: Gains, rate_hz: float, sign: np.ndarray) -> None:
+    def __init__(self, nominal: Nominal, gains: Gains, rate_hz: float, sign: np.ndarray,
+                 implicit: np.ndarray | None = None) -> None:
         n = len(sign)
         self.n = n
         self.dt = 1.0 / rate_hz
         self.constants = law_constants(nominal, gains)
+        self.constants_implicit = law_constants(nominal, gains, self.dt)
         self.tables = law_tables(gains)
         st = (gains.z_st, gains.attitude_st, gains.attitude_st, gains.yaw_st)  # z, phi (u2), theta (u3), yaw
         self.k2 = np.array([s.k2 for s in st])
+        self.k1 = np.array([s.k1 for s in st])
         self.xi_max = np.array([s.xi_max for s in st])
         self.sign = np.asarray(sign, bool)
+        self.implicit = np.zeros(n, bool) if implicit is None else np.asarray(implicit, bool) & ~self.sign
         self.xi = np.zeros((4, n))
         self.s = np.zeros((4, n))
         self.desired = np.zeros((2, n))
 
     def advance(self, saturated: np.ndarray, hold: np.ndarray) -> None:
         """Step the integrators (eq. 22) of the cells not holding, per channel not saturated and s != 0."""
-        _advance(self.xi, self.s, self.k2, self.dt, self.xi_max, np.ascontiguousarray(saturated),
-                 np.ascontiguousarray(hold), self.sign)
+        _advance(self.xi, self.s, self.k1, self.k2, self.dt, self.xi_max, np.ascontiguousarray(saturated),
+                 np.ascontiguousarray(hold), self.sign, self.implicit)
 
     def update(self, X: np.ndarray, ref: np.ndarray, omega_d: np.ndarray) -> np.ndarray:
         """The wrench (u1..u4) [4, n] for the states X [12, n]; ref [4, 5, 1] or [4, 5, n] (x, y, z, psi)."""
         u = np.empty((4, X.shape[1]))
         _backstepping(np.ascontiguousarray(X), np.ascontiguousarray(ref), np.ascontiguousarray(omega_d), self.xi,
-                      self.sign, self.constants, self.tables, self.s, self.desired, u)
+                      self.sign, self.implicit, self.constants, self.constants_implicit, self.tables, self.s,
+                      self.desired, u)
         return u
 
 
@@ -111,7 +119,10 @@ class BatchController:
     over the cell axis). ``laws`` must list the backstepping cells (``bsst``, ``smc``) before the ``pid``
     ones: each group is a contiguous block, so every array is a view, never a copy."""
 
-    def __init__(self, laws: Sequence[str], nominal: Nominal, gains: Gains, rate_hz: float) -> None:
+    def __init__(self, laws: Sequence[str], nominal: Nominal, gains: Gains, rate_hz: float,
+                 discretizations: Sequence[str] | None = None) -> None:
+        """``discretizations``: per cell (in the order of ``laws``) ``explicit`` or ``implicit``; None: all
+        explicit."""
         unknown = sorted(set(laws) - set(BATCH_LAWS))
         if unknown:
             raise ValueError(f"the batch flies only {', '.join(BATCH_LAWS)}; got {unknown[0]!r}")
@@ -122,7 +133,8 @@ class BatchController:
         self.bs = slice(0, n_bs)
         self.pid = slice(n_bs, self.n)
         sign = np.array([name == "smc" for name in laws[:n_bs]], bool)
-        self.backstepping = BatchBacksteppingLaw(nominal, gains, rate_hz, sign) if n_bs else None
+        implicit = np.array([d == "implicit" for d in (discretizations or ["explicit"] * self.n)[:n_bs]], bool)
+        self.backstepping = BatchBacksteppingLaw(nominal, gains, rate_hz, sign, implicit) if n_bs else None
         self.pid_law = BatchPid(nominal, gains, rate_hz, self.n - n_bs) if self.n > n_bs else None
         self.actuation = BatchActuation(nominal, self.n)
 
@@ -159,13 +171,16 @@ class BatchController:
 
 # -- the loops over the cells (each cell: the scalar engine's function, compiled) ---------------------------
 @njit(cache=True)
-def _backstepping(X, ref, omega_d, xi, sign, constants, tables, s_out, desired, u_out):  # pragma: no cover
-    """:func:`controller.bsst.backstepping` of every cell: the wrench into u_out [4, n], the sliding variables
-    into s_out [4, n], (phi_d, theta_d) into desired [2, n]; ref [4, 5, 1] or [4, 5, n]."""
+def _backstepping(X, ref, omega_d, xi, sign, implicit, constants, constants_implicit, tables, s_out, desired,
+                  u_out):  # pragma: no cover
+    """:func:`controller.bsst.backstepping` of every cell (with ``constants_implicit`` where ``implicit``): the
+    wrench into u_out [4, n], the sliding variables into s_out [4, n], (phi_d, theta_d) into desired [2, n];
+    ref [4, 5, 1] or [4, 5, n]."""
     shared = ref.shape[2] == 1
     for j in range(X.shape[1]):
         r = K.backstepping(K.column(X, j), K.sample(ref, 0 if shared else j), omega_d[j],
-                           (xi[0, j], xi[1, j], xi[2, j], xi[3, j]), sign[j], constants, tables)
+                           (xi[0, j], xi[1, j], xi[2, j], xi[3, j]), sign[j],
+                           constants_implicit if implicit[j] else constants, tables)
         for i in range(4):
             u_out[i, j] = r[i]
             s_out[i, j] = r[4 + i]
@@ -174,13 +189,18 @@ def _backstepping(X, ref, omega_d, xi, sign, constants, tables, s_out, desired, 
 
 
 @njit(cache=True)
-def _advance(xi, s, k2, dt, xi_max, saturated, hold, sign):  # pragma: no cover
-    """:func:`controller.supertwisting.advance_xi` of every channel of every super-twisting cell, in place."""
+def _advance(xi, s, k1, k2, dt, xi_max, saturated, hold, sign, implicit):  # pragma: no cover
+    """:func:`controller.supertwisting.advance_xi` (or ``advance_xi_implicit`` where ``implicit``) of every
+    channel of every super-twisting cell, in place."""
     for j in range(xi.shape[1]):
         if sign[j]:
             continue
         for r in range(4):
-            xi[r, j] = K.advance_xi(xi[r, j], s[r, j], k2[r], dt, xi_max[r], hold[j] or saturated[r, j])
+            held = hold[j] or saturated[r, j]
+            if implicit[j]:
+                xi[r, j] = K.advance_xi_implicit(xi[r, j], s[r, j], k1[r], k2[r], dt, xi_max[r], held)
+            else:
+                xi[r, j] = K.advance_xi(xi[r, j], s[r, j], k2[r], dt, xi_max[r], held)
 
 
 @njit(cache=True)

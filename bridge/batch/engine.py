@@ -1,8 +1,9 @@
 """The batch engine's flight: many cells of one mission flown at once, over a cell axis (numpy and numba).
 
-In:  a mission (a :class:`~missions.Mission` or a TOML path) and, per cell, the overrides
-     :func:`bridge.core.flight.prepare` takes (``controller``, ``rate_hz`` Hz, ``seed``, a ``link`` table:
-     what :func:`bridge.sweep.grid.cell_overrides` gives), or prepared :class:`~bridge.core.flight.Flight` s
+In:  a mission (a :class:`~missions.Mission` or a TOML path) and, per cell, its
+     :class:`~bridge.core.flight.Overrides` (``controller``, ``rate_hz`` Hz, ``seed``, a ``link`` table:
+     what :func:`bridge.sweep.grid.cell_overrides` gives; or those fields as a mapping), or prepared
+     :class:`~bridge.core.flight.Flight` s
 Out: per cell the measured columns of a ``cells.csv`` row (:data:`MEASURES`: ``rms``/``max`` m,
      ``settling_s``/``flown_s`` s, ``tv_u2`` N/s, ``ripple_u2`` N, ``outcome``, packet counts, ``error``),
      the same numbers :func:`bridge.sweep.cells.row_from_run` takes from the scalar loop's run;
@@ -37,7 +38,7 @@ import numpy as np
 from bridge.batch.control import BATCH_LAWS
 from bridge.batch.flight import Cells, Constants, batch_arrays, fly_cells
 from bridge.batch.metrics import Metrics, measured_rows
-from bridge.core.flight import Flight, prepare
+from bridge.core.flight import Flight, Overrides, prepare
 from bridge.link.model import link_from_table, merge_link_tables
 from bridge.link.plan import Clocks, plan_links
 from bridge.record.metrics import RMS_FROM_S
@@ -51,7 +52,7 @@ BLOCK_CELLS = 8  # cells a thread flies in one compiled call (~0.1 s of the 30 s
 Progress = Callable[[int, int], None]  # (cells done, cells in all), now and then
 
 
-def batch_problem(mission: Mission | str | Path, cells: Sequence[Mapping[str, Any]]) -> str | None:
+def batch_problem(mission: Mission | str | Path, cells: Sequence[Overrides | Mapping[str, Any]]) -> str | None:
     """Why these cells cannot fly in the batch engine, in one line; None if they can.
 
     ``cells``: per cell the overrides of :func:`bridge.core.flight.prepare` (a cell whose overrides are
@@ -108,7 +109,7 @@ def _differs(a: Flight, b: Flight) -> str | None:
 _PER_CELL = frozenset({"seed", "link"})  # what a cell may change without its own prepare()
 
 
-def _prepare_all(mission: Mission, cells: Sequence[Mapping[str, Any]]) -> list[Flight | str]:
+def _prepare_all(mission: Mission, cells: Sequence[Overrides | Mapping[str, Any]]) -> list[Flight | str]:
     """Each cell's Flight, as :func:`prepare` builds it; a cell that cannot be built gives its error's text.
 
     prepare() parses the profile and builds the law (milliseconds each), so it runs once per distinct
@@ -117,23 +118,23 @@ def _prepare_all(mission: Mission, cells: Sequence[Mapping[str, Any]]) -> list[F
     checks the result equals prepare()'s, cell by cell)."""
     bases: dict[tuple[Any, ...], Flight | str] = {}
     out: list[Flight | str] = []
-    for over in cells:
-        over = dict(over)
+    for given in cells:
         try:
-            if not set(over) <= _PER_CELL | {"controller", "rate_hz"}:
-                out.append(prepare(mission, **over))
+            over = Overrides.of(given)
+            if not set(over.given()) <= _PER_CELL | {"controller", "rate_hz"}:
+                out.append(prepare(mission, over))
                 continue
-            key = (over.get("controller"), over.get("rate_hz"))
+            key = (over.controller, over.rate_hz)
             if key not in bases:
                 try:
-                    bases[key] = prepare(mission, controller=key[0], rate_hz=key[1])
+                    bases[key] = prepare(mission, Overrides(controller=key[0], rate_hz=key[1]))
                 except Exception as exc:  # the cell's law or rate is bad input: every such cell says so
                     bases[key] = f"{type(exc).__name__}: {exc}"
             base = bases[key]
             if isinstance(base, str):
                 out.append(base)
                 continue
-            out.append(_with_seed_and_link(base, mission, over.get("seed"), over.get("link")))
+            out.append(_with_seed_and_link(base, mission, over.seed, over.link))
         except Exception as exc:  # a cell that cannot be built is an error row, never the end of the batch
             out.append(f"{type(exc).__name__}: {exc}")
     return out
@@ -148,7 +149,7 @@ def _with_seed_and_link(base: Flight, mission: Mission, seed: int | None, link: 
     return replace(base, mission=m, link=link_from_table(m.link, m.source, seed=m.seed, duration_s=m.duration_s))
 
 
-def fly_batch(mission: Mission | str | Path, cells: Sequence[Mapping[str, Any]], *,
+def fly_batch(mission: Mission | str | Path, cells: Sequence[Overrides | Mapping[str, Any]], *,
               progress: Progress | None = None, jobs: int | None = None) -> list[dict[str, Any]]:
     """Fly every cell (the overrides of :func:`bridge.core.flight.prepare`) and return, in order, the
     measured columns (:data:`MEASURES`) of each one's ``cells.csv`` row; a cell that cannot be built gets

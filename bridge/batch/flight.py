@@ -42,8 +42,14 @@ from bridge.record.metrics import BANDS, RMS_FROM_S
 from controller.bsst import law_constants, law_tables
 from controller.pid import pid_constants
 
-LAW_CODES = {"bsst": 0, "smc": 1, "pid": 2}
-_BSST, _SMC, _PID = 0, 1, 2
+_BSST, _SMC, _PID, _BSST_IMPLICIT = 0, 1, 2, 3  # the cells' laws (bsst: its super-twisting step explicit or implicit)
+
+
+def law_code(controller: str, discretization: str) -> int:
+    """The kernel's code of a cell's law and discretization (only ``bsst`` has a step it changes)."""
+    if controller == "bsst":
+        return _BSST_IMPLICIT if discretization == "implicit" else _BSST
+    return {"smc": _SMC, "pid": _PID}[controller]
 
 
 class Constants(NamedTuple):
@@ -67,9 +73,11 @@ class Constants(NamedTuple):
     freq_hz: float  # the disturbance
     dist_const: tuple
     dist_amp: tuple
-    law: Any  # controller.bsst.LawConstants
+    law: Any  # controller.bsst.LawConstants (explicit super-twisting step)
+    law_implicit: Any  # the same with the implicit step's period
     tables: tuple  # controller.bsst.law_tables
-    k2: tuple  # the super-twisting integrators' gains and bounds per channel (z, phi, theta, yaw)
+    k1: tuple  # the super-twisting integrators' gains and bounds per channel (z, phi, theta, yaw)
+    k2: tuple
     xi_max: tuple
     pid: Any  # controller.pid.PidConstants
     i_max: float
@@ -98,7 +106,7 @@ class Cells(NamedTuple):
     holding: np.ndarray  # [n, 5] what the vehicle holds now (u1..u4 N and omega_d; with motor lag target speeds)
     omega: np.ndarray  # [n, 4] the rotor speeds under motor lag (rad/s)
     phases: np.ndarray  # [n, 6] the disturbance's
-    law: np.ndarray  # [n] int8: LAW_CODES
+    law: np.ndarray  # [n] int8: law_code
     xi: np.ndarray  # [n, 4] the super-twisting integrators
     integral: np.ndarray  # [n, 3] the PID's
     omega_d: np.ndarray  # [n] the law's last allocated omega_d (rad/s)
@@ -251,7 +259,8 @@ def _law_step(xg: tuple, sample: tuple, law: int, xi: tuple, integ: tuple, od: f
         u = (r[0], r[1], r[2], r[3])
         s = (r[4], r[5], r[6], 0.0)  # the position errors
     else:
-        q = K.backstepping(xg, sample, od, xi, law == _SMC, c.law, c.tables)
+        q = K.backstepping(xg, sample, od, xi, law == _SMC, c.law_implicit if law == _BSST_IMPLICIT else c.law,
+                           c.tables)
         u = (q[0], q[1], q[2], q[3])
         s = (q[4], q[5], q[6], q[7])  # the sliding variables
     real, cmd, sat, od = allocate_cell(u, c.nom_motors, c.nom_u_max, c.nom_b, c.nom_d, c.nom_omega_max,
@@ -261,6 +270,11 @@ def _law_step(xg: tuple, sample: tuple, law: int, xi: tuple, integ: tuple, od: f
               K.advance_xi(xi[1], s[1], c.k2[1], c.dt, c.xi_max[1], idle or sat[1]),
               K.advance_xi(xi[2], s[2], c.k2[2], c.dt, c.xi_max[2], idle or sat[2]),
               K.advance_xi(xi[3], s[3], c.k2[3], c.dt, c.xi_max[3], idle or sat[3]))
+    elif law == _BSST_IMPLICIT:
+        xi = (K.advance_xi_implicit(xi[0], s[0], c.k1[0], c.k2[0], c.dt, c.xi_max[0], idle or sat[0]),
+              K.advance_xi_implicit(xi[1], s[1], c.k1[1], c.k2[1], c.dt, c.xi_max[1], idle or sat[1]),
+              K.advance_xi_implicit(xi[2], s[2], c.k1[2], c.k2[2], c.dt, c.xi_max[2], idle or sat[2]),
+              K.advance_xi_implicit(xi[3], s[3], c.k1[3], c.k2[3], c.dt, c.xi_max[3], idle or sat[3]))
     elif law == _PID and not (idle or sat[0]):
         integ = K.pid_integrals(integ, (s[0], s[1], s[2]), c.dt, c.i_max)
     return u, real, cmd, od, xi, integ
@@ -328,7 +342,8 @@ def batch_arrays(flights: Sequence[Flight], plan: LinkPlan, clocks: Clocks, refs
         clocks.substeps, float(rate), 1.0 / rate, plant.dt, plant.ground, plant.motors, plant.lagged,
         plant.disturbed, plant._lag_k, nominal.actuation == "wrench", plant.body.constants, plant._u_max,
         p.thrust_coeff, p.drag_coeff, p.omega_max, float(dist.freq_hz), tuple(dist.force_const + dist.torque_const),
-        tuple(dist.force_amp + dist.torque_amp), law_constants(nominal, gains), law_tables(gains),
+        tuple(dist.force_amp + dist.torque_amp), law_constants(nominal, gains),
+        law_constants(nominal, gains, 1.0 / rate), law_tables(gains), tuple(float(s.k1) for s in st),
         tuple(float(s.k2) for s in st), tuple(float(s.xi_max) for s in st), pid_constants(nominal, gains),
         float(gains.pid["i_max"]), act.motors, act.u_max, act.b, act.d, act.omega_max, act.w2_max,
         (-f0.failsafe.descent_rate, nominal.mass, nominal.gravity, nominal.ixx / nominal.arm,
@@ -344,7 +359,8 @@ def batch_arrays(flights: Sequence[Flight], plan: LinkPlan, clocks: Clocks, refs
         np.ascontiguousarray(plant.X.T), np.zeros((n, plan.state_age_max + 1, 12)),
         np.zeros((n, plan.cmd_age_max + 1, 5)), holding, np.ascontiguousarray(plant.omega.T),
         np.ascontiguousarray(plant._phases.T) if plant.disturbed else np.zeros((n, 6)),
-        np.array([LAW_CODES[f.mission.controller] for f in flights], np.int8), np.zeros((n, 4)), np.zeros((n, 3)),
+        np.array([law_code(f.mission.controller, f.mission.discretization) for f in flights], np.int8),
+        np.zeros((n, 4)), np.zeros((n, 3)),
         np.zeros(n), predicts, lag, ref_idx, np.ascontiguousarray(np.stack(tables)), pred.from_t, pred.cache_t,
         pred.cache_X, pred.cmd_t, pred.cmd_u, pred.total, plan.mode, plan.state_step, plan.apply_check,
         plan.apply_cmd, plan.failsafe_step, np.zeros(n, np.int64), np.zeros(n, bool), np.ones(n, bool),

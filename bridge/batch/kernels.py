@@ -3,7 +3,7 @@
 In:  nothing at import but the pure functions of controller/, plant/, bridge/core/wire.py and
      bridge/autopilot/failsafe.py
 Out: their compiled twins, called per cell by the batch engine's loops (bridge.batch.control, .plant,
-     .predict, .wire): the BS-ST law (eq. 24-40), PID, the super-twisting integrator (eq. 22), the
+     .predict, .wire): the BS-ST law (eq. 24-40), PID, the super-twisting integrator (eq. 22, both steps), the
      actuation and allocation (eq. 4 inverted), the RK4 plant step (eq. 6), the predictor's nominal RK4,
      the state and command over the wire, the on-board landing law
 
@@ -26,8 +26,8 @@ from plant import model, quadrotor, rotors
 
 for _helper in (
     jets.add, jets.sub, jets.mul, jets.chain, jets.sqrt_, jets.atan2,
-    power.sig_derivs, supertwisting.reaching, supertwisting.advance_xi,
-    bsst.wrap_angle, bsst._clip, bsst.virtual_jet, bsst._accel, bsst._limit_tilt, bsst.desired_attitude,
+    power.sig_derivs, supertwisting.reaching, supertwisting.advance_xi, supertwisting.implicit_twisting,
+    bsst.wrap_angle, bsst._reach, bsst._clip, bsst.virtual_jet, bsst._accel, bsst._limit_tilt, bsst.desired_attitude,
     bsst._attitude_step,
     pid._clip, pid.tilt_from_acceleration, pid.pid_integrals,
     actuation._clip, actuation.rotor_squares, actuation._omega_d,
@@ -39,6 +39,7 @@ for _helper in (
 
 backstepping = njit(cache=True)(bsst.backstepping)
 advance_xi = njit(cache=True)(supertwisting.advance_xi)
+advance_xi_implicit = njit(cache=True)(supertwisting.advance_xi_implicit)
 pid_law = njit(cache=True)(pid.pid)
 pid_integrals = njit(cache=True)(pid.pid_integrals)
 allocate_wrench = njit(cache=True)(actuation.allocate_wrench)

@@ -4,8 +4,13 @@ In:  argv (``sys.argv[1:]`` by default), and the mission, sweep and key files it
 Out: the command's work and its summary on stdout; an exit status; bad input as one line
      ``bsst: ...`` on stderr
 
-- :mod:`bridge.cli.flags`     flag types with their ranges, shared options, ``[link]`` overrides
-- :mod:`bridge.cli.commands`  the parser and one function per command
+- :mod:`bridge.cli.flags`      flag types with their ranges, the link flags and their ``[link]`` overrides
+- :mod:`bridge.cli.options`    the options the flying commands share, and the :class:`~bridge.core.flight.Overrides`
+  their flags make
+- :mod:`bridge.cli.commands`   the parser: one sub-command each, from the modules of their families
+- :mod:`bridge.cli.flying`     ``sim``, ``sitl``, ``vehicle``, ``controller``, and the summary printed after a run
+- :mod:`bridge.cli.campaigns`  ``sweep``, ``report``, ``margin``
+- :mod:`bridge.cli.linktools`  ``link extract | fit | show``, ``relay``
 
 Exit status: 0 the mission completed; 1 it ended in failsafe, divergence or abort; 2 bad
 input, with one line on stderr naming the file, key or flag, and no traceback.

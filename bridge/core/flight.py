@@ -1,33 +1,38 @@
 """From a mission to the parts that fly it: every table validated by the part that owns it.
 
-In:  a mission (a :class:`~missions.Mission` or a TOML path) and overrides: profile, controller,
-     ``rate_hz`` (Hz), seed, actuation, a ``[link]`` table and a ``[failsafe]`` table laid over the mission's,
-     a ``[sensors]`` table (``{"set": NAME}``), an estimator kind, a noise scale, ``[params]`` entries
-     (PX4 names) and parameter changes at mission times (s)
+In:  a mission (a :class:`~missions.Mission` or a TOML path) and its :class:`Overrides` (one frozen value:
+     profile, controller, ``rate_hz`` Hz, seed, actuation, tables laid over ``[link]``, ``[failsafe]``,
+     ``[sensors]``, an estimator kind, a noise scale, ``[params]`` entries by PX4 name, parameter changes
+     at mission times s), or the same as keywords
 Out: a frozen :class:`Flight`, which builds the plant, the :class:`~bridge.autopilot.simvehicle.SimVehicle`,
      the law and the guard's configuration, and lists the blackouts (mission time s); a bad value
-     raises ``ConfigError`` naming file and key
+     raises ``ConfigError`` naming file and key (or the flag, for an override)
 
-:func:`prepare` applies the command-line overrides and validates the mission's profile,
-``[effects]``, ``[gains]``, ``[failsafe]``, ``[link]``, ``[sensors]``, ``[estimator]`` and ``[params]`` tables, so
-that a bad value fails before anything starts, with the file and key named.
+:func:`prepare` lays the overrides over the mission and validates its profile, ``[effects]``,
+``[gains]``, ``[failsafe]``, ``[link]``, ``[sensors]``, ``[estimator]`` and ``[params]`` tables, so that a
+bad value fails before anything starts, with the file and key named. :meth:`Overrides.of` is the one way
+from keywords (``simulate(mission, rate_hz=500)``) to an :class:`Overrides`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, fields, replace
+from numbers import Integral, Real
 from pathlib import Path
 from typing import Any
 
 from bridge.autopilot.estimator import ESTIMATOR_KINDS, make_estimator
 from bridge.autopilot.failsafe import FailsafeConfig, failsafe_from_table
 from bridge.autopilot.params import (
+    BY_NAME,
     ParamChange,
     VehicleParams,
+    apply_params,
     check_param_changes,
     params_as_failsafe,
     params_from_table,
+    typed_value,
 )
 from bridge.autopilot.simvehicle import SimVehicle
 from bridge.link.model import LinkSettings, absolute_link_paths, link_from_table, merge_link_tables
@@ -88,7 +93,8 @@ class Flight:
                           takeoff_alt_m=self.params.takeoff_alt_m)
 
     def make_controller(self) -> Controller:
-        return Controller(self.law or self.mission.controller, self.nominal, self.gains, self.mission.rate_hz)
+        m = self.mission
+        return Controller(self.law or m.controller, self.nominal, self.gains, m.rate_hz, m.discretization)
 
     @property
     def guard(self) -> GuardConfig:
@@ -105,24 +111,96 @@ class Flight:
                 for (s, dur), ds in sorted(windows.items())]
 
 
-def prepare(
-    mission: Mission | str | Path,
-    *,
-    profile: str | None = None,
-    controller: str | None = None,
-    rate_hz: float | None = None,
-    seed: int | None = None,
-    actuation: str | None = None,
-    link: Mapping[str, Any] | None = None,
-    failsafe: Mapping[str, Any] | None = None,
-    sensors: Mapping[str, Any] | None = None,
-    estimator: str | None = None,
-    noise: float | None = None,
-    params: Mapping[str, float] | None = None,
-    param_at: Sequence[ParamChange] = (),
-) -> Flight:
-    """Validate a mission (object or file) with overrides into a :class:`Flight`.
+@dataclass(frozen=True)
+class Overrides:
+    """What a caller lays over a mission: ``bsst``'s flags, or Python's keywords. None (and an empty
+    table) keeps the mission's own. Each field is checked for its type here, ``params`` for its
+    parameters' types, ranges and clashes (ConfigError naming ``--param``); every other value by the
+    part that owns it when :func:`prepare` builds the flight (the mission's ranges, the link model's)."""
 
+    profile: str | None = None  # vehicle profile: paper, x500, or a profile TOML path
+    controller: str | None = None  # law: bsst, smc, pid, file.py:Class or module:Class (from the working dir)
+    discretization: str | None = None  # how bsst steps its super-twisting step: explicit or implicit (docs/law.md)
+    rate_hz: float | None = None  # control rate, Hz
+    seed: int | None = None  # seed of the random effects (and of the link's fates, unless [link] seed)
+    actuation: str | None = None  # the profile's actuation: wrench or motors
+    link: Mapping[str, Any] | None = None  # over [link] (merge_link_tables): delay_ms ms, loss_pct %, blackouts s, ...
+    failsafe: Mapping[str, Any] | None = None  # over [failsafe], key by key: timeout_s s, descent_rate m/s, action
+    sensors: Mapping[str, Any] | None = None  # over [sensors], key by key: {"set": "mocap"}
+    estimator: str | None = None  # [estimator] kind: truth, raw or ekf
+    noise: float | None = None  # [sensors] noise_scale: every sigma of the set times it (no unit)
+    params: Mapping[str, float] | None = None  # over [params], PX4 names: COM_OF_LOSS_T s, COM_OBL_ACT (an integer)
+    param_at: tuple[ParamChange, ...] = ()  # parameter changes at mission times (s), at the start of their step
+
+    def __post_init__(self) -> None:
+        for f in ("profile", "controller", "discretization", "actuation", "estimator"):
+            _check_type(f, getattr(self, f), str, "a string")
+        for f in ("rate_hz", "noise"):
+            _check_type(f, getattr(self, f), Real, "a number")
+        _check_type("seed", self.seed, Integral, "an integer")
+        for f in ("link", "failsafe", "sensors", "params"):
+            v = getattr(self, f)
+            _check_type(f, v, Mapping, "a table (a mapping)")
+            if v is not None:  # a copy: a caller's later change to its dict changes nothing here
+                object.__setattr__(self, f, dict(v))
+        if self.params:  # each as its parameter's type (an INT32 an int), checked, named as the flag
+            apply_params(VehicleParams(), self.params.items(), "", lambda name, value: f"--param {name}={value}")
+            object.__setattr__(self, "params", {n: typed_value(BY_NAME[n], v) for n, v in self.params.items()})
+        changes = tuple(self.param_at)
+        for c in changes:
+            if not isinstance(c, ParamChange):
+                raise ConfigError(f"param_at: expected ParamChange(t_s, name, value) entries, got {c!r}"[:200])
+        object.__setattr__(self, "param_at", changes)
+
+    @classmethod
+    def of(cls, given: Overrides | Mapping[str, Any] | None = None, /, **keywords: Any) -> Overrides:
+        """``given`` (an :class:`Overrides`, a mapping of its fields, or None) with ``keywords`` (its
+        fields by name) laid over it: how :func:`prepare`, :func:`bridge.loop.simulate` and
+        :func:`bridge.session.sitl` take ``overrides=`` and keywords alike. A name that is no field is
+        a TypeError, as an unknown keyword argument is."""
+        base = given.given() if isinstance(given, Overrides) else dict(given or {})
+        unknown = sorted(set(base) - OVERRIDE_FIELDS) + sorted(set(keywords) - OVERRIDE_FIELDS)
+        if unknown:
+            raise TypeError(f"unknown override {', '.join(map(repr, unknown))}; the overrides are "
+                            f"{', '.join(f.name for f in fields(cls))}")
+        if isinstance(given, Overrides) and not keywords:
+            return given
+        return cls(**{**base, **keywords})
+
+    def given(self) -> dict[str, Any]:
+        """The fields that lay something over the mission (not None, not empty), by name."""
+        return {f.name: v for f in fields(self)
+                if (v := getattr(self, f.name)) is not None and not (isinstance(v, (dict, tuple)) and not v)}
+
+    def laid_over(self, m: Mission) -> Mission:
+        """The mission with these overrides laid over it (validated again by the mission)."""
+        # trace and profile files: a mission's from its folder, an override's from the working directory
+        own_link = absolute_link_paths(m.link, Path(m.source).parent)
+        link = merge_link_tables(own_link, absolute_link_paths(self.link, Path("."))) if self.link else own_link
+        failsafe, params = merged_failsafe_params(m, self.failsafe, self.params)
+        sensors = merged_tables(m.sensors, self.sensors, {} if self.noise is None else {"noise_scale": self.noise})
+        estimator = merged_tables(m.estimator, {} if self.estimator is None else {"kind": self.estimator})
+        # a law file given on the command line or from Python: from the working directory
+        law = law_spec_from(self.controller, Path(".")) if self.controller is not None else None
+        return m.with_overrides(profile=self.profile, controller=law, discretization=self.discretization,
+                                rate_hz=self.rate_hz, seed=self.seed,
+                                actuation=self.actuation, link=link, failsafe=failsafe, sensors=sensors,
+                                estimator=estimator, params=params)
+
+
+OVERRIDE_FIELDS = frozenset(f.name for f in fields(Overrides))
+
+
+def _check_type(name: str, value: Any, kind: type | tuple[type, ...], what: str) -> None:
+    """ConfigError unless ``value`` is None or a ``kind`` (never a bool)."""
+    if value is not None and (isinstance(value, bool) or not isinstance(value, kind)):
+        raise ConfigError(f"overrides: {name}: expected {what}, got {value!r}"[:200])
+
+
+def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, **keywords: Any) -> Flight:
+    """Validate a mission (object or file) with its :class:`Overrides` into a :class:`Flight`.
+
+    The overrides are ``overrides``, or the same fields as keywords (:meth:`Overrides.of`: ``rate_hz=500``).
     ``link`` is laid over the mission's ``[link]`` table (see :func:`bridge.link.model.merge_link_tables`);
     ``failsafe`` over its ``[failsafe]`` table, key by key (``{"action": "hold"}``); ``sensors`` over
     its ``[sensors]`` table, key by key (``{"set": "mocap"}``); ``estimator`` replaces ``[estimator] kind``;
@@ -131,18 +209,9 @@ def prepare(
     over it, and a ``failsafe`` override over a ``[params]`` entry of the file). ``param_at``: parameter
     changes at mission times (:class:`bridge.autopilot.params.ParamChange`), checked here.
     """
+    over = Overrides.of(overrides, **keywords)
     m = mission if isinstance(mission, Mission) else load_mission(mission)
-    # trace and profile files: a mission's from its folder, an override's from the working directory (as law files)
-    own_link = absolute_link_paths(m.link, Path(m.source).parent)
-    merged = merge_link_tables(own_link, absolute_link_paths(link, Path("."))) if link else own_link
-    merged_failsafe, merged_params = merged_failsafe_params(m, failsafe, params)
-    merged_sensors = merged_tables(m.sensors, sensors, {} if noise is None else {"noise_scale": noise})
-    merged_estimator = merged_tables(m.estimator, {} if estimator is None else {"kind": estimator})
-    if controller is not None:  # a law file given on the command line or from Python: from the working directory
-        controller = law_spec_from(controller, Path("."))
-    m = m.with_overrides(profile=profile, controller=controller, rate_hz=rate_hz, seed=seed, actuation=actuation,
-                         link=merged, failsafe=merged_failsafe, sensors=merged_sensors, estimator=merged_estimator,
-                         params=merged_params)
+    m = over.laid_over(m)
     src = m.source
     try:
         prof = load_profile(m.profile)
@@ -157,9 +226,9 @@ def prepare(
             raise ConfigError(f"{src}: params.{name} and failsafe.{key} set the same thing: give one of them")
     vehicle_params = params_from_table(m.params, src, VehicleParams(failsafe_from_table(m.failsafe, src)))
     failsafe = vehicle_params.failsafe
-    changes = check_param_changes(param_at, m.duration_s)
+    changes = check_param_changes(over.param_at, m.duration_s)
     link_settings = link_from_table(m.link, src, seed=m.seed, duration_s=m.duration_s)
-    given_set = (sensors or {}).get("set")
+    given_set = (over.sensors or {}).get("set")
     if given_set is not None and given_set not in [n for n, _ in prof.sensors]:  # an override: named as the flag
         raise ConfigError(f"{src}: --sensors {given_set!r} (sensors.set): profile {prof.name!r} has no such sensor "
                           f"set; it has: {', '.join(n for n, _ in prof.sensors)}")
@@ -170,7 +239,7 @@ def prepare(
     for d in ("up", "down"):  # a blackout that would never happen is a mistake in the file, not a plan
         for start, dur in getattr(link_settings, d).blackouts:
             if start >= m.duration_s:  # named where it came from: the direction's own table, or both's
-                own, given = m.link.get(d), (link or {}).get(d)
+                own, given = m.link.get(d), (over.link or {}).get(d)
                 key = f"link.{d}.blackouts" if isinstance(own, Mapping) and "blackouts" in own else "link.blackouts"
                 if isinstance(given, Mapping) and "blackouts" in given:  # an override: the flags' table
                     key = f"--blackout/--{d}-blackout ({key})"
@@ -197,13 +266,13 @@ def merged_failsafe_params(m: Mission, failsafe: Mapping[str, Any] | None,
     over_fs = dict(failsafe or {})
     over_params = dict(params or {})
     by_params = params_as_failsafe(over_params)  # failsafe key -> the parameter override setting it
-    fs = {k: v for k, v in m.failsafe.items() if k not in by_params}
-    fs.update({k: v for k, v in over_fs.items() if k not in by_params})
     for key, name in by_params.items():
         if key in over_fs:
             raise ConfigError(f"--param {name} and the failsafe override of {key} (--failsafe-action) set the same "
                               "thing: give one")
-    taken = set(over_fs)
+    fs = {k: v for k, v in m.failsafe.items() if k not in by_params}
+    fs.update(over_fs)
+    taken = set(over_fs) | set(by_params)  # the settings an override sets: the file's entries for them go
     ps = {n: v for n, v in m.params.items() if params_as_failsafe({n: v}).keys().isdisjoint(taken)}
     ps.update(over_params)
     return fs, ps

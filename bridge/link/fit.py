@@ -27,8 +27,16 @@ from typing import Any
 
 import numpy as np
 
-from bridge.link.model import LinkConfig, LinkImpairment
+from bridge.link.model import (
+    BLACKOUT_DURATION_RANGE_S,
+    BLACKOUT_START_RANGE_S,
+    NUMBER_RANGES,
+    LinkConfig,
+    LinkImpairment,
+    link_from_table,
+)
 from bridge.link.trace import Records, TraceFile, make_records
+from params import ConfigError
 
 BLACKOUT_AFTER_S = 1.0  # a loss run at least this long is an outage, listed as a blackout, not a burst
 _NORMAL_BOUND_SIGMAS = 5.0  # the model's truncation of normal jitter (bridge.link.model)
@@ -69,19 +77,65 @@ class DirectionFit:
     blackout_after_s: float
 
     def table(self) -> dict[str, Any]:
-        """This direction's ``[link]`` keys."""
+        """This direction's ``[link]`` keys, each within what the link model takes (:meth:`clamped` says
+        what had to be changed to get there)."""
+        return self._table()[0]
+
+    def clamped(self) -> list[str]:
+        """What the fit found that the model's ranges do not take, and what :meth:`table` gives instead."""
+        return self._table()[1]
+
+    def _table(self) -> tuple[dict[str, Any], list[str]]:
         out: dict[str, Any] = {}
+        notes: list[str] = []
         if self.delay is not None:
-            out["delay_ms"] = round(self.delay.delay_ms, 3)
+            out["delay_ms"] = _within("delay_ms", round(self.delay.delay_ms, 3), notes)
             if self.delay.jitter != "none":
-                out["jitter_ms"] = round(self.delay.jitter_ms, 3)
+                out["jitter_ms"] = _within("jitter_ms", round(self.delay.jitter_ms, 3), notes)
                 out["jitter"] = self.delay.jitter
-        out["loss_pct"] = round(self.loss.loss_pct, 4)
+        loss = round(self.loss.loss_pct, 4)
+        if self.loss.burst_len and loss >= 100.0:  # bursts need loss_pct < 100: the nearest the table can say
+            loss = 99.9999
+        out["loss_pct"] = loss
         if self.loss.burst_len:
-            out["burst_len"] = round(self.loss.burst_len, 3)
-        if self.blackouts:
-            out["blackouts"] = [[round(s, 3), round(d, 3)] for s, d in self.blackouts]
-        return out
+            need = loss / (100.0 - loss)  # the chain's shortest mean burst at this loss (burst_problem)
+            burst = math.ceil(max(self.loss.burst_len, need * (1.0 + 1e-9)) * 1000.0) / 1000.0
+            out["burst_len"] = _within("burst_len", burst, notes)
+        windows = []
+        (s_lo, s_hi), (_, d_hi) = BLACKOUT_START_RANGE_S, BLACKOUT_DURATION_RANGE_S
+        for start, dur in self.blackouts:
+            if not s_lo <= round(start, 3) <= s_hi:
+                notes.append(f"an outage at {start:g} s left out: a blackout starts by {s_hi:g} s")
+                continue
+            d = math.ceil(dur * 1000.0) / 1000.0  # never rounded to 0: a blackout lasts
+            if d > d_hi:
+                notes.append(f"the outage at {start:g} s lasts {dur:g} s: its blackout is cut to {d_hi:g} s")
+                d = d_hi
+            windows.append([round(start, 3), d])
+        if windows:
+            out["blackouts"] = windows
+        return out, notes
+
+
+def _within(key: str, value: float, notes: list[str]) -> float:
+    """``value`` of ``key`` clamped into the model's range (:data:`NUMBER_RANGES`), noted when it was not in it."""
+    lo, hi = NUMBER_RANGES[key]
+    if lo <= value <= hi:
+        return value
+    clamped = min(max(value, lo), hi)
+    notes.append(f"{key} {value:g} is outside the model's [{lo:g}, {hi:g}]: {clamped:g}")
+    return clamped
+
+
+def loadable(fits: dict[str, DirectionFit], name: str) -> dict[str, Any]:
+    """The fitted ``[link]`` table, checked by the link model's own loader (a ``ConfigError`` if it refused
+    it: what the fit writes is always a profile bsst flies)."""
+    table = fit_link_table(fits)
+    try:
+        link_from_table(table, name)
+    except ConfigError as exc:
+        raise ConfigError(f"bsst link fit: the fitted table is not one the link model takes: {exc}") from None
+    return table
 
 
 # -- delay ------------------------------------------------------------------------------------------
@@ -284,6 +338,7 @@ def fit_toml(fits: dict[str, DirectionFit], trace_path: str) -> str:
     """The fitted table as a link profile (TOML): use it with ``--link-profile FILE`` or
     ``[link] profile = "FILE"``, or paste its ``[link]`` tables into a mission."""
     name = Path(trace_path).stem
+    loadable(fits, f"bsst link fit {trace_path}")
     lines = [f"# bsst link fit {trace_path}",
              "# The link model's table that fits this trace best, with a goodness-of-fit figure for each part.",
              "# Fly it: bsst sim MISSION --link-profile THIS_FILE (or [link] profile = \"THIS_FILE\"), or paste",
@@ -299,6 +354,7 @@ def fit_toml(fits: dict[str, DirectionFit], trace_path: str) -> str:
             lines.append(f"{k} = {text}" + (f"  # {note}" if note else ""))
         if f.delay is None:
             lines.append("# no record delivered: no delay to fit")
+        lines += [f"# clamped to the model's ranges: {n}" for n in f.clamped()]
         lines.append("")
     for d, f in fits.items():
         lines.append("[fit]" if d == "both" else f"[fit.{d}]")

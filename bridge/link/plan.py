@@ -32,7 +32,7 @@ import numpy as np
 from numba import njit
 
 from bridge.link.ends import EPS_T
-from bridge.link.model import (  # the draw numbers and bound are link.py's: one definition of a fate
+from bridge.link.impairment import (  # the draw numbers and bound are the model's: one definition of a fate
     _D_DUP,
     _D_DUP_JITTER,
     _D_GE_START,
@@ -40,10 +40,9 @@ from bridge.link.model import (  # the draw numbers and bound are link.py's: one
     _D_JITTER,
     _D_LOSS,
     _NORMAL_BOUND_SIGMAS,
-    LinkConfig,
-    LinkSettings,
     stream_key,
 )
+from bridge.link.model import LinkConfig, LinkSettings
 from controller.link_guard import GuardConfig
 
 NONE, TRACK, HOLD = 0, 1, 2  # the guard's decision per step: no command (stop or idle), command, command on hold
@@ -56,7 +55,7 @@ _U30, _U27, _U31, _U11, _U8 = (np.uint64(v) for v in (30, 27, 31, 11, 8))
 
 # -- the draws -------------------------------------------------------------------------------------
 def _mix(z: np.ndarray) -> np.ndarray:
-    """SplitMix64's finaliser (:func:`bridge.link.model._mix`) in place on a uint64 array (wrapping)."""
+    """SplitMix64's finaliser (:func:`bridge.link.impairment._mix`) in place on a uint64 array (wrapping)."""
     z += _C1
     z ^= z >> _U30
     z *= _C2

@@ -23,12 +23,15 @@ from __future__ import annotations
 
 import bisect
 import csv
+import io
 import math
-from collections.abc import Iterable, Mapping
+from array import array
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from statistics import median
 from typing import Any
+
+import numpy as np
 
 from params import ConfigError, read_regular_file
 
@@ -39,14 +42,16 @@ DELAY_RANGE_MS = (0.0, 60_000.0)  # the one-way delay a record may give, as the 
 T_RANGE_S = (0.0, 1e7)  # a record's time from the trace's start
 MAX_TRACE_BYTES = 512 << 20  # about 2.5e7 records: anything bigger is not a link trace of a flight
 LENGTH_SLACK_S = 1e-6  # a trace "as long as" the mission may fall short of it by rounding
+MAX_ROW_CHARS = 1000  # a record is two numbers and a direction: a longer line is not one
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Records:
-    """One direction's records: send times (s, strictly increasing) and one-way delays (s, nan: lost)."""
+    """One direction's records: send times (s, strictly increasing) and one-way delays (s, nan: lost), as
+    arrays of doubles (8 bytes a number: a trace of 10^7 records is 160 MB, not a Python object per row)."""
 
-    t_s: tuple[float, ...]
-    delay_s: tuple[float, ...]
+    t_s: array[float]
+    delay_s: array[float]
     length_s: float  # last t_s + the median spacing: how long the trace lasts (its loop period)
 
     @property
@@ -55,14 +60,15 @@ class Records:
 
     @property
     def lost(self) -> int:
-        return sum(1 for d in self.delay_s if d != d)
+        return int(np.count_nonzero(np.isnan(np.frombuffer(self.delay_s, dtype=float)))) if self.n else 0
 
 
 def make_records(t_s: Iterable[float], delay_s: Iterable[float]) -> Records:
     """:class:`Records` from times (s, strictly increasing) and delays (s, nan lost); length computed."""
-    t = tuple(t_s)
-    d = tuple(delay_s)
-    spacing = median(b - a for a, b in zip(t, t[1:], strict=False)) if len(t) > 1 else 0.0
+    t = t_s if isinstance(t_s, array) and t_s.typecode == "d" else array("d", t_s)
+    d = delay_s if isinstance(delay_s, array) and delay_s.typecode == "d" else array("d", delay_s)
+    # the median of the spacings, as statistics.median gives it (the middle one, or the mean of the two)
+    spacing = float(np.median(np.diff(np.frombuffer(t, dtype=float)))) if len(t) > 1 else 0.0
     return Records(t, d, (t[-1] + spacing) if t else 0.0)
 
 
@@ -119,36 +125,69 @@ def read_trace(path: str | Path) -> TraceFile:
     return parse_trace(data, str(path))
 
 
-def parse_trace(data: bytes, name: str) -> TraceFile:
-    """Validate a trace's bytes; ``name`` is what the errors call the file."""
+def _lines(data: bytes, name: str) -> Iterator[tuple[int, str]]:
+    """(line number, text) of every line that is neither blank nor a ``#`` comment, one at a time (a
+    trace may hold 10^7 rows: no list of them), numbered as ``str.splitlines`` numbers them."""
+    number = 0
+    for raw in io.BytesIO(data):  # shares the bytes; splits after each b"\n"
+        try:
+            text = raw.decode("utf-8")
+        except UnicodeDecodeError:
+            raise ConfigError(f"{name} line {number + 1}: not UTF-8 text (expected a CSV link trace)") from None
+        if number == 0:
+            text = text.removeprefix("\ufeff")
+        for ln in text.splitlines():
+            number += 1
+            if ln.strip() and not ln.lstrip().startswith("#"):
+                yield number, ln
+
+
+def _fields(line: str) -> tuple[list[str], str | None]:
+    """The fields of one line, or why it is not one CSV record of a trace (a trace's fields are numbers
+    and ``up``/``down``: a quote may wrap one, never a newline or a comma)."""
+    if len(line) > MAX_ROW_CHARS:
+        return [], f"{len(line)} characters long; a trace row is at most {MAX_ROW_CHARS} ({','.join(COLUMNS)})"
+    if '"' not in line:
+        return line.split(","), None
     try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        line = data[: exc.start].count(b"\n") + 1
-        raise ConfigError(f"{name} line {line}: not UTF-8 text (expected a CSV link trace)") from None
-    lines = [(i, ln) for i, ln in enumerate(text.removeprefix("\ufeff").splitlines(), 1)
-             if ln.strip() and not ln.lstrip().startswith("#")]
-    if not lines:
+        return next(csv.reader([line], strict=True)), None
+    except csv.Error as exc:
+        why = "an unclosed quote (a field cannot hold a newline)" if "end of data" in str(exc) else str(exc)
+        return [], f"not a CSV record: {why}"
+
+
+def parse_trace(data: bytes, name: str) -> TraceFile:
+    """Validate a trace's bytes; ``name`` is what the errors call the file. Memory: the bytes, and 16 bytes
+    per record (:class:`Records` holds arrays of doubles)."""
+    lines = _lines(data, name)
+    first = next(lines, None)
+    if first is None:
         raise ConfigError(f"{name}: empty; expected a CSV header {','.join(REQUIRED)}[,direction] and records")
-    head_line, head = lines[0]
-    cols = _header(next(csv.reader([head])), name, head_line)
-    rows: dict[str, tuple[list[float], list[float]]] = {}
-    bad: list[str] = []
+    head_line, head = first
+    names, why = _fields(head)
+    if why:
+        raise ConfigError(f"{name} line {head_line}: {why}")
+    cols = _header(names, name, head_line)
+    rows: dict[str, tuple[array[float], array[float]]] = {}
+    first_bad, bad = "", 0
     last: dict[str, float] = {}
-    reader = csv.reader(ln for _, ln in lines[1:])
-    for (number, _), fields in zip(lines[1:], reader, strict=True):
-        why, direction, t, d = _row(fields, cols, last)
+    for number, ln in lines:
+        fields, why = _fields(ln)
+        direction, t, d = "", math.nan, math.nan
+        if not why:
+            why, direction, t, d = _row(fields, cols, last)
         if direction and t == t:  # a good time on a bad row still orders the rows after it
             last[direction] = t
         if why:
-            bad.append(f"{name} line {number}: {why}")
+            bad += 1
+            first_bad = first_bad or f"{name} line {number}: {why}"
             continue
-        ts, ds = rows.setdefault(direction, ([], []))
+        ts, ds = rows.setdefault(direction, (array("d"), array("d")))
         ts.append(t)
         ds.append(d)
     if bad:
-        more = f" (and {len(bad) - 1} more bad row{'s' if len(bad) > 2 else ''})" if len(bad) > 1 else ""
-        raise ConfigError(bad[0] + more)
+        more = f" (and {bad - 1} more bad row{'s' if bad > 2 else ''})" if bad > 1 else ""
+        raise ConfigError(first_bad + more)
     if not rows:
         raise ConfigError(f"{name}: no records after the header (rows of {','.join(cols)})")
     recs = {k: make_records(*v) for k, v in rows.items()}
@@ -216,8 +255,6 @@ def records_problem(tf: TraceFile, direction: str) -> str | None:
 # -- a trace's own figures, and writing one ---------------------------------------------------------
 def own_figures(trace: DirectionTrace) -> dict[str, Any]:
     """The trace's own records, loss (%) and delay percentiles (ms), for ``summary.json``."""
-    import numpy as np  # lazy: the relay loads no numpy while it relays
-
     r = trace.records
     d = np.asarray(r.delay_s, dtype=float)
     ok = d[~np.isnan(d)] * 1000.0

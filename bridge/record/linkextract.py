@@ -25,7 +25,9 @@ target answers left the vehicle), a pair of tlogs' at the first frame.
 
 from __future__ import annotations
 
+import bisect
 import csv
+import itertools
 import json
 import math
 import struct
@@ -159,6 +161,44 @@ def _ends(a: Sequence[Frame], b: Sequence[Frame]) -> dict[Source, str]:
     return out
 
 
+class _Copies:
+    """The frames a sender logged with one set of bytes (their indices, in order), and which a receiver has
+    matched yet. :meth:`take`: the last one not yet matched sent by a time, else the first one not yet matched,
+    in amortised constant time (path-compressed pointers), so n repeats of a frame cost O(n), not O(n^2)."""
+
+    __slots__ = ("first", "free_before", "idx", "latest", "taken")
+
+    def __init__(self, idx: list[int], sent_t: Sequence[float]) -> None:
+        self.idx = idx
+        self.latest = list(itertools.accumulate((sent_t[i] for i in idx), max))  # bisectable if stamps step back
+        self.free_before = list(range(len(idx)))  # itself while free; once taken, a copy before it (-1: none)
+        self.taken = [False] * len(idx)
+        self.first = 0
+
+    def _free_at_or_before(self, p: int) -> int:
+        root = p
+        while root >= 0 and self.taken[root]:
+            root = self.free_before[root]
+        while p > root and self.taken[p]:  # compress the path walked
+            nxt = self.free_before[p]
+            self.free_before[p] = root
+            p = nxt
+        return root
+
+    def take(self, by_t: float) -> int | None:
+        """The sent index of the copy a frame received at ``by_t`` (s, the sender's clock, slack included) is."""
+        q = self._free_at_or_before(bisect.bisect_right(self.latest, by_t) - 1)
+        if q < 0:
+            while self.first < len(self.idx) and self.taken[self.first]:
+                self.first += 1
+            if self.first == len(self.idx):
+                return None
+            q = self.first
+        self.taken[q] = True
+        self.free_before[q] = q - 1
+        return self.idx[q]
+
+
 def _direction(sent: Sequence[Frame], recv: Sequence[Frame], shift_recv_s: float) -> DirectionRecords:
     """One source's frames as sent and as received (stamps + ``shift_recv_s`` on the sender's clock)."""
     out = DirectionRecords()
@@ -166,19 +206,22 @@ def _direction(sent: Sequence[Frame], recv: Sequence[Frame], shift_recv_s: float
     for i, f in enumerate(sent):
         by_bytes[f.raw].append(i)
     sent_t = [f.t for f in sent]
+    copies: dict[bytes, _Copies] = {}
     arrival: dict[int, float] = {}
     for r in recv:
         cands = by_bytes.get(r.raw)
         if not cands:
             out.unmatched += 1
             continue
+        pool = copies.get(r.raw)
+        if pool is None:
+            pool = copies[r.raw] = _Copies(cands, sent_t)
         t = r.t + shift_recv_s
-        free = [i for i in cands if i not in arrival]
-        if not free:
+        i = pool.take(t + _STAMP_SLACK_S)
+        if i is None:
             out.duplicates += 1
             continue
-        before = [i for i in free if sent_t[i] <= t + _STAMP_SLACK_S]
-        arrival[before[-1] if before else free[0]] = t
+        arrival[i] = t
     if not arrival:
         return out
     matched = sorted(arrival)
@@ -261,48 +304,89 @@ def _flight_origin(vehicle: Sequence[Frame], controller: Sequence[Frame], ends: 
 def extract_tlogs(vehicle: Sequence[Frame], controller: Sequence[Frame], clock: str = "same",
                   run_dir: bool = False, inputs: tuple[str, ...] = ()) -> Extraction:
     """Both directions of the link between the two ends whose tlogs these are (module docstring).
-    ``run_dir``: the trace starts at the flight's time 0, else at the first frame."""
+    ``run_dir``: the trace starts at the flight's time 0, else at the first frame. Two tlogs that are not
+    the two ends of one link (one tlog twice, clocks that never overlap, no frame of one in the other, frames
+    received before they were sent) are a ``ConfigError``: their figures would be nonsense."""
     if clock not in CLOCKS:
         raise ConfigError(f"--clock must be one of {', '.join(CLOCKS)}, got {clock!r}")
+    names = " and ".join(inputs) or "the tlogs"
+    if len(vehicle) == len(controller) and all(a.t == b.t and a.raw == b.raw for a, b in zip(vehicle, controller)):
+        raise ConfigError(f"{names}: the same frames at the same times: one tlog given as both ends (give the "
+                          f"vehicle's tlog and the controller's)")
     ends = _ends(vehicle, controller)
     if not ends:
-        raise ConfigError(f"{' and '.join(inputs) or 'the tlogs'}: no MAVLink source appears in both, so no frame "
-                          f"crossed between them: not the two ends of one link")
+        raise ConfigError(f"{names}: no MAVLink source appears in both, so no frame crossed between them: not the "
+                          f"two ends of one link")
     ts = timesync_offset(vehicle, controller, ends)
     notes = []
     if clock == "timesync":
         if ts is None:
-            raise ConfigError(f"--clock timesync: {' and '.join(inputs) or 'the tlogs'} hold no complete TIMESYNC "
-                              f"exchange (a request and its answer, each seen at both ends)")
+            raise ConfigError(f"--clock timesync: {names} hold no complete TIMESYNC exchange (a request and its "
+                              f"answer, each seen at both ends)")
         shift_c = ts[0]  # controller stamps + shift = vehicle clock
     else:
         shift_c = 0.0
         if ts is not None and abs(ts[0]) > max(0.005, ts[1]):
             notes.append(f"TIMESYNC puts the vehicle's clock {ts[0] * 1e3:+.1f} ms from the controller's (round trip "
                          f"{ts[1] * 1e3:.1f} ms): if the two ends' clocks differ, use --clock timesync")
+    _check_overlap(vehicle, controller, shift_c, names)
+    v_by, c_by = _by_source(vehicle), _by_source(controller)
     per: dict[str, list[DirectionRecords]] = {"up": [], "down": []}
     for src, end in sorted(ends.items()):
         if end == "a":  # the vehicle's: down
-            per["down"].append(_direction([f for f in vehicle if f.src == src],
-                                          [f for f in controller if f.src == src], shift_c))
+            per["down"].append(_direction(v_by[src], c_by[src], shift_c))
         else:  # the controller's, on its clock shifted to the vehicle's: up
-            sent = [Frame(f.t + shift_c, f.src, f.msgid, f.seq, f.raw, f.payload) for f in controller if f.src == src]
-            per["up"].append(_direction(sent, [f for f in vehicle if f.src == src], 0.0))
+            sent = [Frame(f.t + shift_c, f.src, f.msgid, f.seq, f.raw, f.payload) for f in c_by[src]]
+            per["up"].append(_direction(sent, v_by[src], 0.0))
     up, down = _merge(per["up"]), _merge(per["down"])
+    _check_matched(up, down, names)
+    negative = [x for d in (up, down) for _, x in d.records if x is not None and x < -_STAMP_SLACK_S]
+    if negative and clock == "same":
+        raise ConfigError(f"{names}: {len(negative)} frames arrived before they were sent by the stamps (by up to "
+                          f"{-min(negative):.6g} s): the two ends' clocks differ (use --clock timesync) or these are "
+                          f"not the two ends of one link")
+    if negative:
+        notes.append(f"{len(negative)} frames arrived before they were sent by the stamps (by up to "
+                     f"{-min(negative) * 1e3:.1f} ms): the TIMESYNC offset is off by at least that much")
     origin = _flight_origin(vehicle, controller, ends, shift_c) if run_dir else None
     what = "the flight's time 0 (the state the first actuator target answers left the vehicle)"
     if origin is None:
-        starts = [r[0][0] for r in (up.records, down.records) if r]
-        if not starts:
-            raise ConfigError(f"{' and '.join(inputs) or 'the tlogs'}: no frame was delivered either way")
-        origin, what = min(starts), "the first frame sent either way"
+        origin, what = min(r[0][0] for r in (up.records, down.records) if r), "the first frame sent either way"
     for d in (up, down):
         d.records = [(t - origin, x) for t, x in d.records if t >= origin]
-    negative = sum(1 for d in (up, down) for _, x in d.records if x is not None and x < -_STAMP_SLACK_S)
-    if negative:
-        notes.append(f"{negative} frames arrived before they were sent by the stamps: the two clocks differ "
-                     f"(try --clock timesync)")
     return Extraction(up, down, what, clock, shift_c, ts, inputs, notes)
+
+
+def _by_source(frames: Sequence[Frame]) -> dict[Source, list[Frame]]:
+    out: dict[Source, list[Frame]] = defaultdict(list)
+    for f in frames:
+        out[f.src].append(f)
+    return out
+
+
+def _check_overlap(vehicle: Sequence[Frame], controller: Sequence[Frame], shift_c: float, names: str) -> None:
+    """Refuse two tlogs whose stamps (the controller's shifted by ``shift_c`` s) never overlap in time."""
+    v0, v1 = min(f.t for f in vehicle), max(f.t for f in vehicle)
+    c0, c1 = min(f.t for f in controller) + shift_c, max(f.t for f in controller) + shift_c
+    if v1 < c0 or c1 < v0:
+        raise ConfigError(f"{names}: the vehicle's tlog spans {v0:.3f}..{v1:.3f} s, the controller's {c0:.3f}.."
+                          f"{c1:.3f} s (Unix time{', TIMESYNC offset applied' if shift_c else ''}): they never "
+                          f"overlap, so these are not the two ends of one link (or their clocks differ: "
+                          f"--clock timesync)")
+
+
+def _check_matched(up: DirectionRecords, down: DirectionRecords, names: str) -> None:
+    """Refuse two tlogs where no frame, or in either direction fewer than half the frames received, match a
+    frame the other end sent."""
+    if not any(d.sent - d.lost for d in (up, down)):
+        raise ConfigError(f"{names}: no frame was delivered either way (no frame one end received is one the "
+                          f"other sent): not the two ends of one link")
+    for name, d in (("up", up), ("down", down)):
+        delivered = d.sent - d.lost
+        if d.unmatched > delivered:
+            raise ConfigError(f"{names}: {name}: {d.unmatched} of the {d.unmatched + delivered} frames received "
+                              f"from the other end's sources are not in the other end's tlog: not the two ends of "
+                              f"one link")
 
 
 # -- a run directory -----------------------------------------------------------------------------------

@@ -3,17 +3,20 @@
 In:  a validated trace (:class:`bridge.link.trace.TraceFile`: per direction send times s, one-way
      delays s, nan lost), a PNG path, a title
 Out: the PNG: (1) each record's delay (ms) against its send time (s), lost records as ticks along the
-     top; (2) each loss run as a bar at its start, as tall as its length (packets); (3) the histogram
-     of the delivered delays (ms), with each direction's median
+     top; (2) each loss run as a bar at its start, as tall as its length (packets), or a line saying there
+     were none; (3) the histogram of the delivered delays (ms), with each direction's median; legends above
+     their panels, off the data
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from bridge.link.trace import Records, TraceFile
+from bridge.record.plots import DPI, legend_above
 
 COLOURS = {"both": "C0", "up": "C0", "down": "C1"}
 
@@ -28,6 +31,17 @@ def _loss_runs(rec: Records) -> tuple[np.ndarray, np.ndarray]:
 
 def trace_figure(trace: TraceFile, out: str | Path, title: str = "") -> Path:
     """Write the three-panel figure of ``trace`` to ``out`` (PNG); returns its path."""
+    import matplotlib.pyplot as plt  # lazy: matplotlib costs start-up time and is needed only for figures
+
+    fig = link_trace_figure(trace, title)
+    out = Path(out)
+    fig.savefig(out, dpi="figure")
+    plt.close(fig)
+    return out
+
+
+def link_trace_figure(trace: TraceFile, title: str = "") -> Any:
+    """The three-panel figure of ``trace`` (matplotlib, Agg, :data:`~bridge.record.plots.DPI`); the caller closes it."""
     import matplotlib  # lazy: matplotlib costs start-up time and is needed only for figures
 
     matplotlib.use("Agg")
@@ -35,7 +49,8 @@ def trace_figure(trace: TraceFile, out: str | Path, title: str = "") -> Path:
 
     parts = [("both", trace.both)] if trace.both is not None else [(d, r) for d, r in (("up", trace.up),
                                                                                       ("down", trace.down)) if r]
-    fig, (ax_d, ax_l, ax_h) = plt.subplots(3, 1, figsize=(9, 9))
+    fig, (ax_d, ax_l, ax_h) = plt.subplots(3, 1, figsize=(9, 9), dpi=DPI)
+    ax_l.sharex(ax_d)  # one time axis: a loss run lines up with the delays around it
     top = 0.0
     for _, rec in parts:  # one height for the lost ticks of every direction: above the highest delay
         assert rec is not None
@@ -60,16 +75,18 @@ def trace_figure(trace: TraceFile, out: str | Path, title: str = "") -> Path:
             med = float(np.median(d[ok]))
             ax_h.hist(d[ok], bins=100, histtype="step", color=c, label=f"{name}: median {med:.2f} ms")
             ax_h.axvline(med, color=c, ls="--", lw=0.8)
-    ax_d.set(xlabel="send time t_s (s)", ylabel="one-way delay (ms)", title="delay over time (ticks at the top: lost)")
-    ax_l.set(xlabel="send time t_s (s)", ylabel="loss run (packets)", title="loss bursts")
-    ax_h.set(xlabel="one-way delay (ms)", ylabel="records", title="delay histogram (delivered)")
-    for ax in (ax_d, ax_l, ax_h):
-        if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=8, loc="upper right")
+    if not ax_l.collections:  # nothing lost: say so, rather than leave empty axes
+        ax_l.text(0.5, 0.5, "no loss runs: every record was delivered", transform=ax_l.transAxes, ha="center",
+                  va="center", fontsize=11, color="0.3")
+        ax_l.set_yticks([])
+    ax_d.set(xlabel="send time t_s (s)", ylabel="one-way delay (ms)")
+    ax_l.set(xlabel="send time t_s (s)", ylabel="loss run (packets)")
+    ax_h.set(xlabel="one-way delay (ms)", ylabel="records (count)")
+    for ax, name in ((ax_d, "delay over time (ticks at the top: lost)"), (ax_l, "loss bursts"),
+                     (ax_h, "delay histogram (delivered)")):
+        ax.set_title(name, loc="left", fontsize=10)
+        legend_above(ax, markerscale=4)  # the delay dots are 1.5 points: too small to see in the legend
         ax.grid(alpha=0.3)
     fig.suptitle(title or Path(trace.path).name)
     fig.tight_layout()
-    out = Path(out)
-    fig.savefig(out, dpi=90)
-    plt.close(fig)
-    return out
+    return fig

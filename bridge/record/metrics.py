@@ -5,7 +5,10 @@ In:  trace arrays by column (:data:`~bridge.record.columns.TRACE_COLUMNS`: s, m,
 Out: ``summary.json`` as a dict (errors m or rad, times s, inputs N and N/s); p50 / p95 / p99 / max
      of a sample
 
-Each of u2..u4 has its ``ripple`` (N, :func:`ripple_rms`); a run whose vehicle flew on an
+Each of u1..u4 has its total variation per second ``tv_per_s`` (N/s, the whole flight) and its
+``period2`` component (N, :func:`period2`, over t >= ``rms_from_s``: the alternation at half the
+control rate an explicitly stepped sliding mode leaves, issue 24); each of u2..u4 its ``ripple``
+(N, :func:`ripple_rms`); a run whose vehicle flew on an
 estimate (not ``truth``) has an ``estimation`` block: the RMS over the whole flight of the
 estimate's errors (truth − ``*_est`` columns) in position (3-D, m), velocity (3-D, m/s) and
 attitude (φ, θ, ψ together, rad, ψ wrapped) and, from the ``nees`` column, the mean NEES over
@@ -50,6 +53,18 @@ def ripple_rms(t: np.ndarray, u: np.ndarray, rate_hz: float, window_s: float = R
     if not sel.any():
         return 0.0
     return float(np.sqrt(np.mean(dev[sel] ** 2)))
+
+
+def period2(u: np.ndarray) -> float:
+    """The period-2 component of a sampled signal (same unit as u): the mean of |u[k] - 2 u[k+1] + u[k+2]| / 4.
+
+    For u alternating +-a around a slow mean it is a; for a signal smooth at the sample rate it is about
+    |u''| T^2 / 4, so almost 0. Samples next to an unknown demand (NaN) are left out; 0 for fewer than 3."""
+    if len(u) < 3:
+        return 0.0
+    d = np.abs(u[:-2] - 2.0 * u[1:-1] + u[2:]) / 4.0
+    d = d[np.isfinite(d)]
+    return float(d.mean()) if d.size else 0.0
 
 
 def percentiles(values: Any, scale: float = 1.0, empty: float | None = 0.0) -> dict[str, float | None]:
@@ -146,6 +161,7 @@ def summarise(
             "min": _num(v[known].min()) if m else None,
             "max": _num(v[known].max()) if m else None,
             "tv_per_s": _num(np.nansum(np.abs(np.diff(v))) / dur) if n > 1 else 0.0,
+            "period2": _num(period2(v[late])) if n else None,
         }
         if u != "u1":
             inputs[u]["ripple"] = _num(ripple_rms(t, v, mission.rate_hz)) if n else None
@@ -153,6 +169,7 @@ def summarise(
         "mission": mission.name,
         "clock": clock,
         "controller": mission.controller,
+        "discretization": mission.discretization,
         "profile": mission.profile,
         "seed": mission.seed,
         "rate_hz": mission.rate_hz,

@@ -21,6 +21,7 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
+from bridge.link.model import link_from_table
 from bridge.record.columns import TRACE_COLUMNS
 from missions import Mission
 from missions.mission import name_problem
@@ -145,6 +146,7 @@ class RunRecord:
 
     def __init__(self, path: Path, mission: Mission) -> None:
         self.path = path
+        self.mission = mission
         write_text_atomic(path / "mission.toml", dump_toml(mission.to_dict()))
         self.trace = TraceWriter(path / "trace.csv")
         self.events = EventLog(path / "events.log")
@@ -157,7 +159,7 @@ class RunRecord:
             self.events.close()
 
     def finish(self, trace: dict[str, Any], summary: dict[str, Any], title: str, plots: bool = True) -> None:
-        finish_run(self.path, trace, summary, title, plots)
+        finish_run(self.path, trace, summary, title, plots, blackout_windows(self.mission) if plots else ())
 
 
 def write_json_atomic(path: str | Path, obj: Any) -> None:
@@ -228,13 +230,27 @@ def trace_arrays(rows: Sequence[Any], columns: Sequence[str] = TRACE_COLUMNS) ->
     return {name: arr[:, i] for i, name in enumerate(columns)}
 
 
-def finish_run(path: Path, trace: dict[str, Any], summary: dict[str, Any], title: str, plots: bool = True) -> None:
-    """Write ``summary.json`` atomically, then the plots (a run without plots still has its numbers)."""
+def finish_run(path: Path, trace: dict[str, Any], summary: dict[str, Any], title: str, plots: bool = True,
+               blackouts: Sequence[tuple[float, float]] = ()) -> None:
+    """Write ``summary.json`` atomically, then the plots (a run without plots still has its numbers), with the
+    link ``blackouts`` ((start s, duration s) windows) and the summary's failsafes marked."""
     write_json_atomic(path / "summary.json", summary)
     if plots and len(trace["t"]) > 1:
-        from bridge.record.plots import make_plots  # lazy: loads matplotlib
+        from bridge.record.plots import make_plots, run_spans  # lazy: loads matplotlib
 
-        make_plots(trace, path / "plots", title)
+        spans = run_spans(summary.get("events", ()), blackouts, float(trace["t"][-1]))
+        make_plots(trace, path / "plots", title, spans)
+
+
+def blackout_windows(mission: Mission) -> list[tuple[float, float]]:
+    """The link blackouts ``mission`` (as flown: its ``[link]`` with the overrides) scheduled, both directions:
+    (start s, duration s) windows of mission time. Its ``[link]`` was validated before the flight; a trace or
+    profile file it names that has changed since cannot be read again: then no windows (the figures go without)."""
+    try:
+        link = link_from_table(mission.link, mission.source, seed=mission.seed, duration_s=mission.duration_s)
+    except (ConfigError, OSError):
+        return []
+    return [*link.up.blackouts, *link.down.blackouts]
 
 
 def check_writable(path: str | Path, flag: str) -> Path:

@@ -55,15 +55,14 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from bridge.autopilot.estimator import compile_estimator
-from bridge.autopilot.params import ParamChange
-from bridge.core.flight import Flight, Progress, prepare
+from bridge.core.flight import Flight, Overrides, Progress, prepare
 from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, GCS_PORT, LINK_PORT, parse_address
 from bridge.mavlink.signing import key_from_file
 from bridge.nodes.process import parse_status
@@ -103,24 +102,15 @@ def sitl(
     write: bool = False,
     overwrite: bool = False,
     plots: bool = True,
-    profile: str | None = None,
-    controller: str | None = None,
-    rate_hz: float | None = None,
-    seed: int | None = None,
     realtime: bool = False,
     instance: int | None = 0,
     gcs: str | None = None,
     speed: float | None = None,
     progress: Progress | None = None,
     live: bool = False,
-    link: Mapping[str, Any] | None = None,
     key: str | Path | None = None,
-    failsafe: Mapping[str, Any] | None = None,
-    sensors: Mapping[str, Any] | None = None,
-    estimator: str | None = None,
-    noise: float | None = None,
-    params: Mapping[str, float] | None = None,
-    param_at: Sequence[ParamChange] = (),
+    overrides: Overrides | None = None,
+    **keywords: Any,
 ) -> Run:
     """Fly a mission as a SITL session (vehicle and controller processes over UDP).
 
@@ -130,19 +120,17 @@ def sitl(
     ``instance`` N (0-9) picks ports 14560 + N / 14550 + N and sysid N + 1; ``None`` picks
     a free port and no GCS link. ``gcs`` (``HOST:PORT`` or ``"none"``) overrides the GCS
     address. ``speed`` caps lockstep at that many times real time. ``live`` prints a
-    progress line on stderr (when it is a terminal). ``link`` is laid over the mission's
-    ``[link]`` table and ``failsafe`` over its ``[failsafe]`` table, ``params`` over its ``[params]``, and
-    ``param_at`` changes parameters at mission times, as for :func:`bridge.loop.simulate` (the controller
-    sends each as PARAM_SET before the answer of its step: in lockstep the same step as offline).
+    progress line on stderr (when it is a terminal). ``overrides`` (an
+    :class:`~bridge.core.flight.Overrides`), or its fields as keywords, are laid over the mission as for
+    :func:`bridge.loop.simulate` (``param_at``: the controller sends each change as PARAM_SET before the
+    answer of its step: in lockstep the same step as offline).
     ``key`` is a MAVLink 2 signing key file (:func:`bridge.mavlink.signing.key_from_file`): both
     sides sign everything they send and accept only what is signed with it; only the file's path
     is passed on.
     """
     if key is not None:
         key_from_file(key)  # a missing, empty or world-readable key file is bad input, before anything starts
-    flight = prepare(mission, profile=profile, controller=controller, rate_hz=rate_hz, seed=seed, link=link,
-                     failsafe=failsafe, sensors=sensors, estimator=estimator, noise=noise, params=params,
-                     param_at=param_at)
+    flight = prepare(mission, overrides, **keywords)
     check_trace_steps(flight.mission)  # the session keeps every trace row for its summary: a cap, said up front
     if instance is not None and not (isinstance(instance, int) and 0 <= instance <= 9):
         raise ConfigError(f"--instance must be in [0, 9], got {instance!r}")

@@ -9,6 +9,7 @@ Out: an :class:`Outcome` (every row in grid order, counts, wall time s, the dire
 
 from __future__ import annotations
 
+import hashlib
 import os
 import time
 from collections.abc import Mapping
@@ -17,14 +18,25 @@ from pathlib import Path
 from typing import Any
 
 from bridge.record.runlog import run_dir, write_json_atomic
-from bridge.sweep.cells import CELLS_CSV, SWEEP_JSON, CellsFile, read_cells, read_sweep_json, row_key, write_cells
+from bridge.sweep.cells import (
+    CELLS_CSV,
+    MISSION_HASH,
+    SWEEP_JSON,
+    CellsFile,
+    read_cells,
+    read_sweep_json,
+    row_key,
+    write_cells,
+)
 from bridge.sweep.classes import Classes, classify
 from bridge.sweep.executors import Progress, engine_for, run_batch, run_batch_dask, run_dask, run_local
 from bridge.sweep.grid import Grid
 from bridge.sweep.report import write_report
 from bridge.sweep.spec import Sweep
 from missions import Mission, load_mission
-from params import ConfigError, dump_toml
+from params import ConfigError, dump_toml, read_regular_file
+
+MISSION_TOML = "mission.toml"
 
 
 def sweep(
@@ -161,11 +173,13 @@ def _open_dir(spec: Sweep, out: str | Path | None, resume: bool, overwrite: bool
             if "columns" in old and "noise" not in old["columns"]:  # before the vehicle's axes: other cells.csv
                 raise ConfigError(f"--resume: {meta}: a sweep of an older bsst (its {CELLS_CSV} has no estimator, "
                                   f"noise columns); bsst report still reads it; fly the sweep into another --out")
+            recorded = old.pop(MISSION_HASH, None)
             if old != ident:
                 diff = sorted(k for k in ident if old.get(k) != ident[k])
                 raise ConfigError(f"--resume: {path} holds a different sweep ({', '.join(diff)} differ); "
                                   f"use another --out")
-            kept = [r for r in read_cells(path / CELLS_CSV) if r["outcome"] != "error"] \
+            _check_mission_toml(path, recorded, spec)
+            kept = [r for r in read_cells(path / CELLS_CSV, classes=spec.classes) if r["outcome"] != "error"] \
                 if (path / CELLS_CSV).exists() else []
             return path, kept
         if path.exists() and any(path.iterdir()):
@@ -176,6 +190,28 @@ def _open_dir(spec: Sweep, out: str | Path | None, resume: bool, overwrite: bool
         plots_dir.rmdir()
     for stale in path.glob("map_*.png"):
         stale.unlink()
-    write_json_atomic(path / SWEEP_JSON, ident)
-    (path / "mission.toml").write_text(dump_toml(spec.mission.to_dict()))
+    text = dump_toml(spec.mission.to_dict())
+    (path / MISSION_TOML).write_text(text)
+    write_json_atomic(path / SWEEP_JSON, ident | {MISSION_HASH: _sha256(text.encode())})
     return path, []
+
+
+def _sha256(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def _check_mission_toml(path: Path, recorded: str | None, spec: Sweep) -> None:
+    """Refuse to resume into a directory whose ``mission.toml`` is not the one the sweep wrote (its hash in
+    ``sweep.json``; a sweep.json of before the hash: the text the sweep's mission gives): every row, kept and
+    new, must be one flight of the ``mission.toml`` beside it (report.md says so)."""
+    f = path / MISSION_TOML
+    try:
+        data = read_regular_file(f, "the sweep's mission.toml")
+    except ConfigError as exc:
+        raise ConfigError(f"--resume: {exc} (the mission every cell flies; restore it, or fly the sweep into another "
+                          f"--out)") from None
+    same = _sha256(data) == recorded if recorded is not None else data == dump_toml(spec.mission.to_dict()).encode()
+    if not same:
+        raise ConfigError(f"--resume: {f}: edited after the sweep ({SWEEP_JSON} records another mission.toml): its "
+                          f"rows fly the mission the sweep recorded; restore the file, or fly the sweep into another "
+                          f"--out")

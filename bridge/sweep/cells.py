@@ -22,6 +22,7 @@ import numpy as np
 
 from bridge.record.metrics import errors, ripple_rms  # ripple_rms lives with the other metrics
 from bridge.record.runlog import LineWriter, Run
+from bridge.sweep.classes import Classes, classify
 from bridge.sweep.grid import AXES, Cell
 from params import ConfigError, check_depth, read_regular_file
 
@@ -50,6 +51,9 @@ CELLS_CSV = "cells.csv"
 
 
 SWEEP_JSON = "sweep.json"
+
+
+MISSION_HASH = "mission_toml_sha256"  # sweep.json: the hash of the mission.toml the sweep wrote beside it
 
 
 def row_from_run(cell: Cell, run: Run) -> dict[str, Any]:
@@ -139,10 +143,12 @@ def parse_row(values: Sequence[str], columns: Sequence[str] = COLUMNS) -> dict[s
     return row
 
 
-def read_cells(path: str | Path, legacy: Mapping[str, Any] | None = None) -> list[dict[str, Any]]:
+def read_cells(path: str | Path, legacy: Mapping[str, Any] | None = None,
+               classes: Classes | None = None) -> list[dict[str, Any]]:
     """Read ``cells.csv``: every whole line a well-formed row, or a :class:`ConfigError` naming the
     file, the line and what is wrong there. Only an unfinished last line (no newline yet: where a
-    killed sweep stopped writing) is left out; a blank line is skipped.
+    killed sweep stopped writing) is left out; a blank line is skipped. With ``classes`` (what a resume
+    keeps) each row's ``class`` must be the one its outcome, RMS and ripple give by them.
 
     A file of an older sweep (:data:`LEGACY_COLUMNS`: no ``estimator``, ``noise``) is read when
     ``legacy`` gives the values its cells flew (``{"estimator": ..., "noise": ...}``), refused otherwise."""
@@ -172,6 +178,10 @@ def read_cells(path: str | Path, legacy: Mapping[str, Any] | None = None) -> lis
             continue
         try:
             row = parse_row(_record(p, n, line), columns)
+            if classes is not None and row["class"] != classify(row, classes):
+                raise ValueError(f"class {row['class']!r} contradicts the row (outcome {row['outcome']}, rms "
+                                 f"{row['rms']} m, ripple_u2 {row['ripple_u2']} N: {classify(row, classes)!r} by "
+                                 f"the sweep's classes)")
             rows.append({c: row[c] if c in row else legacy[c] for c in COLUMNS} if legacy is not None else row)
         except ValueError as exc:
             raise ConfigError(f"{p}: line {n}: {exc} (a damaged row: mend or delete that line)") from None
@@ -247,7 +257,7 @@ MAX_SWEEP_JSON_BYTES = 16 << 20  # a sweep.json is a few kB (its mission and gri
 
 SWEEP_JSON_FIELDS = {"mission": "an object", "grid": "an object", "classes": "an object", "mode": "a string",
                      "swept": "a list of names", "columns": "a list of names", "seeds": "a list of integers",
-                     "axes": "an object"}
+                     "axes": "an object", MISSION_HASH: "a string"}
 
 
 def _is_kind(v: Any, kind: str) -> bool:

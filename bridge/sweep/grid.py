@@ -19,7 +19,7 @@ from itertools import product
 from typing import Any
 
 from bridge.autopilot.estimator import ESTIMATOR_KINDS
-from bridge.core.flight import Flight, prepare
+from bridge.core.flight import Flight, Overrides, prepare
 from bridge.link.model import DIRECTIONS, NUMBER_RANGES
 from missions import MISSION_RANGES, Mission
 from missions.mission import law_spec_problem
@@ -202,13 +202,12 @@ def cells(mission: Mission, grid: Grid) -> list[Cell]:
     return out
 
 
-def cell_overrides(cell: Cell) -> dict[str, Any]:
+def cell_overrides(cell: Cell) -> Overrides:
     """What a cell changes in its mission, as :func:`bridge.core.flight.prepare`'s overrides:
     law, rate and seed, the swept link axes in both directions, and the vehicle's swept axes."""
     link = {d: {a: getattr(cell, a) for a in cell.link} for d in DIRECTIONS} if cell.link else None
-    over: dict[str, Any] = {"controller": cell.controller, "rate_hz": cell.rate_hz, "seed": cell.seed, "link": link}
-    over.update({a: getattr(cell, a) for a in cell.sensing})  # prepare()'s estimator= and noise= keywords
-    return over
+    return Overrides(controller=cell.controller, rate_hz=cell.rate_hz, seed=cell.seed, link=link,
+                     **{a: getattr(cell, a) for a in cell.sensing})  # the estimator and noise fields
 
 
 def noiseless(sensors: SensorConfig) -> bool:
@@ -218,7 +217,7 @@ def noiseless(sensors: SensorConfig) -> bool:
 
 def cell_flight(mission: Mission, cell: Cell) -> Flight:
     """The parts a cell flies, by the one path from a mission and its overrides."""
-    return prepare(mission, **cell_overrides(cell))
+    return prepare(mission, cell_overrides(cell))
 
 
 def noise_problem(estimators: Sequence[str], sensors: SensorConfig) -> str | None:

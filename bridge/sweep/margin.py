@@ -44,6 +44,8 @@ OVER = (*LINK_AXES, "noise")  # the axes a margin is searched over
 START = {"delay_ms": 16.0, "loss_pct": 10.0, "jitter_ms": 16.0, "burst_len": 4.0, "noise": 1.0}
 MARGIN_JSON = "margin.json"
 IN_PROCESS_CELLS = 2  # a round of at most this many process-engine cells flies in this process
+MAX_HALVINGS = 24  # the finest --resolution is an axis's range / 2^24 (delay: 3.6 us, loss: 6e-6 %)
+RESOLUTION_TOP = 1e6  # the coarsest (the flag's own top)
 
 
 @dataclass(frozen=True)
@@ -99,10 +101,25 @@ class Search:
         if self.hi is None:
             nxt = min(max(2.0 * self.lo, self.lo + resolution), top)
             return None if nxt <= self.lo else nxt
-        if self.hi - self.lo <= resolution:
+        mid = 0.5 * (self.lo + self.hi)
+        if self.hi - self.lo <= resolution or not self.lo < mid < self.hi:  # no float left between: done too
             # every value flown failed: fly the range's low end itself (once) rather than claim that it holds
             return self.lo if not self.held and self.hi > self.lo else None
-        return 0.5 * (self.lo + self.hi)
+        return mid
+
+    def record(self, value: float, failed: bool) -> None:
+        """``value`` was flown: it failed (the bracket's new top) or held (its new bottom)."""
+        if failed:
+            self.hi = value
+        else:
+            self.lo, self.held = value, True
+
+
+def resolution_range(over: str) -> tuple[float, float]:
+    """The ``--resolution`` a search over ``over`` takes: at least its range / 2^MAX_HALVINGS, so that the
+    bisection ends within MAX_HALVINGS rounds (and the doubling within log2(top / start) before it)."""
+    lo, top = RANGES[over]
+    return (top - lo) * 2.0 ** -MAX_HALVINGS, RESOLUTION_TOP
 
 
 def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[str] | None = None,
@@ -111,8 +128,11 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
     """Search the margin of each law (see the module docstring); the ``margin.json`` content."""
     if over not in OVER:
         raise ConfigError(f"--over must be one of {', '.join(OVER)}, got {over!r}")
-    if not (math.isfinite(resolution) and resolution > 0):
-        raise ConfigError(f"--resolution must be a positive number, got {resolution!r}")
+    least, most = resolution_range(over)
+    if not least <= resolution <= most:  # also refuses nan
+        raise ConfigError(f"--resolution must be in [{least:.3g}, {most:g}] for --over {over} (its range "
+                          f"[{RANGES[over][0]:g}, {RANGES[over][1]:g}] in at most {MAX_HALVINGS} halvings), "
+                          f"got {resolution:g}")
     classes = classes or Classes()
     lo_range, top = RANGES[over]
     laws = list(controllers or (mission.controller,))
@@ -147,13 +167,9 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
                 continue
             v = pending[s.controller]
             mine = [r for r in rows if r["controller"] == s.controller and r[over] == v]
-            failed = any(until.failed(r, classes) for r in mine)
             s.cells += [{over: v, "seed": r["seed"], "rms": r["rms"], "outcome": r["outcome"],
                          "class": classify(r, classes), "failed": until.failed(r, classes)} for r in mine]
-            if failed:
-                s.hi = v
-            else:
-                s.lo, s.held = v, True
+            s.record(v, any(until.failed(r, classes) for r in mine))
             nxt = s.next_value(resolution, top)
             if s.hi is None and nxt is None:  # held up to the top of the axis's range
                 del pending[s.controller]

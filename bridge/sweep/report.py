@@ -3,7 +3,8 @@
 In:  a sweep directory's ``cells.csv`` rows (``rms`` m, ``ripple_u2`` N, ``outcome``, the axes' values
      in Hz, ms, %, packets, estimator kinds, noise scales) and its ``sweep.json`` (thresholds, axes)
 Out: ``report.md`` (thresholds, an overview per law, a table per pair of swept axes, the failed cells,
-     a command that reflies a row) and the heat maps ``map_<a>_<b>.png`` (log10 RMS, class per cell)
+     a command that reflies a row) and the heat maps ``map_<a>_<b>.png`` (median RMS m on each law's own log
+     colour scale, class per cell)
 
 ``report.md`` and ``map_<param>_<param>.png`` are rebuilt from ``cells.csv`` (and the
 ``sweep.json`` beside it, for the thresholds and the axes) by ``bsst report DIR``.
@@ -22,6 +23,7 @@ Classes, worst first (a grid point flown with several seeds shows its worst clas
 
 from __future__ import annotations
 
+import hashlib
 import math
 import statistics
 from collections.abc import Mapping, Sequence
@@ -165,11 +167,13 @@ def write_report(path: Path, rows: Sequence[Mapping[str, Any]], meta: Mapping[st
         med = f"{p.rms:.3g}" if p.rms is not None else "n/a"
         lines.append(f"| {c} | {len(mine)} | " + " | ".join(map(str, counts)) + f" | {med} |")
     maps: list[Path] = []
+    files = controller_files(controllers)
     for a, b in prs:
         name = f"map_{SHORT[a]}_{SHORT[b]}"
-        lines += ["", f"## {a} x {b}", ""]
+        title = pair_title(rows, a, b)
+        lines += ["", f"## {title}", ""]
         if len(controllers) > 1:
-            lines += [f"![{a} x {b}, all controllers]({name}.png)", ""]
+            lines += [f"![{title}, all controllers]({name}.png)", ""]
         for c in controllers:
             mine = [r for r in rows if r["controller"] == c]
             pts = grid_points(mine, a, b, classes)
@@ -179,8 +183,8 @@ def write_report(path: Path, rows: Sequence[Mapping[str, Any]], meta: Mapping[st
             for x in av:
                 lines.append(f"| {_fmt(x)} | " + " | ".join(pts[(x, y)].text() if (x, y) in pts else "-" for y in bv)
                              + " |")
-            fname = f"{name}_{c}.png" if len(controllers) > 1 else f"{name}.png"
-            lines += ["", f"![{c}: {a} x {b}]({fname})", ""]
+            fname = f"{name}_{files[c]}.png" if len(controllers) > 1 else f"{name}.png"
+            lines += ["", f"![{c}: {title}]({fname})", ""]
         if plots:
             maps += heat_maps(path, rows, a, b, controllers, classes)
     failed = [r for r in rows if r["outcome"] == "error"]
@@ -217,69 +221,98 @@ def sensor_set(meta: Mapping[str, Any]) -> str:
     return name if isinstance(name, str) else "ideal"
 
 
+def controller_files(controllers: Sequence[str]) -> dict[str, str]:
+    """Each law's part of a file name: its spec with every character but ASCII letters, digits, ``_`` and ``-``
+    made ``-`` (a plug-in law ``examples/my_law.py:MyLaw`` is ``examples-my_law-py-MyLaw``, the built-ins keep
+    their names); two specs that would share one get each a short hash of the spec, so every law has its own."""
+    def part(spec: str) -> str:
+        return "".join(ch if (ch.isascii() and ch.isalnum()) or ch in "_-" else "-" for ch in spec).strip("-") or "law"
+
+    parts = {c: part(c) for c in controllers}
+    taken = [parts[c] for c in controllers]
+    return {c: p if taken.count(p) == 1 else f"{p}-{hashlib.sha1(c.encode()).hexdigest()[:8]}"
+            for c, p in parts.items()}
+
+
+def pair_title(rows: Sequence[Mapping[str, Any]], a: str, b: str) -> str:
+    """What a table and its heat map show: ``a x b``, or with ``b`` not swept (one value), ``a`` at that value."""
+    bv = _values(rows, b)
+    if len(bv) > 1:
+        return f"{a} x {b}"
+    unit = f" {UNITS[b]}" if b in UNITS else ""
+    return f"{a} (at {b} = {_fmt(bv[0])}{unit})"
+
+
+HEAT_DPI = 110
+HEAT_TEXT_PT = 9  # the class and RMS written in each cell
+
+
 def heat_maps(path: Path, rows: Sequence[Mapping[str, Any]], a: str, b: str, controllers: Sequence[str],
               classes: Classes) -> list[Path]:
-    """``map_<a>_<b>.png`` (one panel per controller, shared colour scale) and, with several
-    controllers, ``map_<a>_<b>_<controller>.png`` for each: log10 RMS, class in each cell."""
+    """``map_<a>_<b>.png`` (one panel per controller) and, with several controllers,
+    ``map_<a>_<b>_<controller>.png`` for each (:func:`controller_files`): median 3-D RMS on a log colour
+    scale of each panel's own (a law's 0.021..0.027 m is not one colour beside another's 1 m), class in each cell."""
+    import matplotlib.pyplot as plt  # lazy: matplotlib costs start-up time and is needed only for figures
+
+    name = f"map_{SHORT[a]}_{SHORT[b]}"
+    files = controller_files(controllers)
+    written: list[Path] = []
+
+    def save(fig: Any, fname: str) -> None:
+        p = path / fname
+        fig.savefig(p, dpi="figure")
+        plt.close(fig)
+        written.append(p)
+
+    save(heat_map_figure(rows, a, b, controllers, classes), f"{name}.png")
+    if len(controllers) > 1:
+        for c in controllers:
+            save(heat_map_figure(rows, a, b, [c], classes), f"{name}_{files[c]}.png")
+    return written
+
+
+def heat_map_figure(rows: Sequence[Mapping[str, Any]], a: str, b: str, controllers: Sequence[str],
+                    classes: Classes) -> Any:
+    """The heat map of ``a`` x ``b``, a panel (and colour bar, m) per controller; the caller closes it."""
     import matplotlib  # lazy: matplotlib costs start-up time and is needed only for figures
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt  # lazy: as matplotlib
     import numpy as np  # lazy: only the heat maps need arrays
+    from matplotlib.colors import LogNorm  # lazy: as matplotlib
 
-    per = {c: grid_points([r for r in rows if r["controller"] == c], a, b, classes) for c in controllers}
     av, bv = _values(rows, a), _values(rows, b)
-    logs = [math.log10(p.rms) for pts in per.values() for p in pts.values() if p.rms is not None and p.rms > 0]
-    vmin, vmax = (min(logs), max(logs)) if logs else (-6.0, 0.0)
-    if vmax - vmin < 1e-9:
-        vmin, vmax = vmin - 0.5, vmax + 0.5
-    name = f"map_{SHORT[a]}_{SHORT[b]}"
-    written: list[Path] = []
-
-    def draw(ax: Any, c: str) -> Any:
-        pts = per[c]
-        z = np.full((len(av), len(bv)), np.nan)
-        for i, x in enumerate(av):
-            for j, y in enumerate(bv):
-                p = pts.get((x, y))
-                if p is not None and p.rms is not None and p.rms > 0:
-                    z[i, j] = math.log10(p.rms)
-        cmap = matplotlib.colormaps["viridis"]
-        cmap = cmap.with_extremes(bad="#bbbbbb")
-        im = ax.imshow(np.ma.masked_invalid(z), origin="lower", cmap=cmap, vmin=vmin, vmax=vmax, aspect="auto")
-        for i, x in enumerate(av):
-            for j, y in enumerate(bv):
-                p = pts.get((x, y))
-                if p is None:
-                    continue
-                bright = not math.isnan(z[i, j]) and (z[i, j] - vmin) / (vmax - vmin) > 0.6
-                ax.text(j, i, p.text("\n"), ha="center", va="center", fontsize=7,
-                        color="black" if bright or math.isnan(z[i, j]) else "white")
-        ax.set_xticks(range(len(bv)), [_fmt(v) for v in bv])
-        ax.set_yticks(range(len(av)), [_fmt(v) for v in av])
-        ax.set_xlabel(_label(b))
-        ax.set_ylabel(_label(a))
-        ax.set_title(c)
-        return im
-
-    def save(fig: Any, im: Any, axes: Any, fname: str) -> None:
-        fig.colorbar(im, ax=axes, label="log10 3-D RMS error [m]", shrink=0.9)
-        fig.suptitle(f"{SHORT[a]} x {SHORT[b]}: median RMS and worst class per cell", fontsize=10)
-        p = path / fname
-        fig.savefig(p, dpi=80)
-        plt.close(fig)
-        written.append(p)
-
-    w = 1.0 + 0.95 * len(bv)
-    h = 1.3 + 0.6 * len(av)
-    fig, axs = plt.subplots(1, len(controllers), figsize=(w * len(controllers) + 1.2, h + 0.4), squeeze=False,
-                            layout="constrained")
-    im = None
+    cmap = matplotlib.colormaps["viridis"].with_extremes(bad="#bbbbbb")
+    w, h = 2.4 + 1.5 * len(bv), 1.9 + 0.8 * len(av)
+    fig, axs = plt.subplots(1, len(controllers), figsize=(w * len(controllers), h), squeeze=False,
+                            layout="constrained", dpi=HEAT_DPI)
     for ax, c in zip(axs[0], controllers, strict=True):
-        im = draw(ax, c)
-    save(fig, im, axs[0].tolist(), f"{name}.png")
-    if len(controllers) > 1:
-        for c in controllers:
-            fig, ax = plt.subplots(figsize=(w + 1.2, h + 0.4), layout="constrained")
-            save(fig, draw(ax, c), ax, f"{name}_{c}.png")
-    return written
+        pts = grid_points([r for r in rows if r["controller"] == c], a, b, classes)
+        z = np.full((len(av), len(bv)), np.nan)
+        for (x, y), p in pts.items():
+            if p.rms is not None and p.rms > 0:
+                z[av.index(x), bv.index(y)] = p.rms
+        have = z[np.isfinite(z)]
+        vmin, vmax = (float(have.min()), float(have.max())) if have.size else (1e-6, 1.0)
+        if vmax < vmin * 1.001:  # one value: a scale around it
+            vmin, vmax = vmin / 1.2, vmax * 1.2
+        norm = LogNorm(vmin, vmax)
+        im = ax.imshow(np.ma.masked_invalid(z), origin="lower", cmap=cmap, norm=norm, aspect="auto")
+        for (x, y), p in pts.items():
+            i, j = av.index(x), bv.index(y)
+            r, g, bl, _ = cmap(norm(z[i, j])) if np.isfinite(z[i, j]) else (0.73, 0.73, 0.73, 1.0)
+            dark = 0.299 * r + 0.587 * g + 0.114 * bl < 0.5  # the cell's luminance: white text on dark cells
+            ax.text(j, i, p.text("\n"), ha="center", va="center", fontsize=HEAT_TEXT_PT,
+                    color="white" if dark else "black")
+        ax.set_xticks(range(len(bv)), [_fmt(v) for v in bv], fontsize=10)
+        ax.set_yticks(range(len(av)), [_fmt(v) for v in av], fontsize=10)
+        ax.set_xlabel(_label(b), fontsize=10)
+        ax.set_ylabel(_label(a), fontsize=10)
+        ax.set_title(c, fontsize=11)
+        bar = fig.colorbar(im, ax=ax, shrink=0.95)
+        ticks = np.geomspace(vmin, vmax, 5)
+        bar.set_ticks(ticks, labels=[f"{v:.3g}" for v in ticks])
+        bar.minorticks_off()
+        bar.set_label("median 3-D RMS error [m] (log scale)", fontsize=9)
+    fig.suptitle(f"{pair_title(rows, a, b)}: median 3-D RMS and worst class per cell", fontsize=11)
+    return fig

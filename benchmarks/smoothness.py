@@ -1,0 +1,194 @@
+"""Issue 24's table: the explicit and the implicit super-twisting step side by side.
+
+Every flight is the product's offline loop (``bridge.simulate``, what ``bsst sim MISSION --discretization D``
+flies), paper profile, seed 0, one flight per cell (the figures are the same every time):
+
+- ``sine`` (missions/sine.toml) at 250 Hz, 100 Hz and 1 kHz: the period-2 component of u2, u3, u4
+  (``summary.json`` ``inputs.uN.period2``: mean of |u[k] - 2u[k+1] + u[k+2]| / 4 over t >= 10 s, N), their
+  total variation per second (``tv_per_s``, whole flight, N/s) and the 3-D RMS over t >= 10 s (m);
+- ``step``: per axis the settling time (the largest over the 3 changes, ``settling_s``) and the steady error
+  (the largest |e| over the last 2 s of each segment, m or rad): the acceptance of tests/test_scenarios.py;
+- ``robust`` and ``robust-x500``: the 3-D RMS;
+- smoothness against SMC (``--controller smc``, whose sign reaching has no super-twisting step: the same in
+  both columns): on the step mission the total variation per second of u2 and u3 over the last 5 s of each
+  segment (tests/test_scenarios.py's measure, docs/figures.md's "smoothness against SMC"), SMC's over
+  BS-ST's, the smallest of the 6 ratios;
+- sensors (docs/sensors.md's table, benchmarks/estimation.py's flight): the sine with ``mocap`` sensors and
+  the ``raw`` and ``ekf`` estimators: the 3-D RMS and the u2 ripple (0.1 s window);
+- ``bsst margin missions/sine.toml --over delay_ms --until rms=0.1`` with and without
+  ``--compensation predict`` (a real ``bsst`` process each, margin.json read back), ms.
+
+Acceptance (issue 24): implicit sine 250 Hz period-2 <= 0.01 N (u2, u3, u4), TV <= 35 /s (u2, u3), RMS <= 1e-5
+m, 100 Hz period-2 <= 0.02 N; step settling <= 5 s and steady error <= 1 mm; robust <= 6 cm; smoothness
+against SMC >= 20x; the delay margin at least the explicit law's.
+
+``--figure PATH`` draws docs/u2-explicit-vs-implicit.png instead: u2 of the sine at 250 Hz over
+t in [20, 20.1) s, both schemes.
+
+    .venv/bin/python benchmarks/smoothness.py [--no-margin] [--json]
+    .venv/bin/python benchmarks/smoothness.py --figure docs/u2-explicit-vs-implicit.png
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from estimation import flight  # noqa: E402  (the sensors table's own flight)
+
+from bridge.loop import simulate  # noqa: E402
+from bridge.record.metrics import errors  # noqa: E402
+from missions import DISCRETIZATIONS, Mission, load_mission  # noqa: E402
+
+STEP_CHANGES = (0.0, 10.0, 20.0, 30.0)  # missions/step.toml's set-point times (s), as tests/test_scenarios.py
+SMC_LAST_S = 5.0
+STEADY_LAST_S = 2.0
+
+
+def mission(name: str, d: str) -> Mission:
+    return load_mission(ROOT / "missions" / f"{name}.toml").with_overrides(discretization=d)
+
+
+def segment(t: np.ndarray, i: int, last_s: float) -> np.ndarray:
+    return (t >= STEP_CHANGES[i + 1] - last_s) & (t < STEP_CHANGES[i + 1])
+
+
+def sine(d: str, rate: float) -> dict[str, Any]:
+    s = simulate(mission("sine", d), rate_hz=rate, plots=False).summary
+    out: dict[str, Any] = {"rms_3d": s["rms_3d"], "outcome": s["outcome"]}
+    for u in ("u2", "u3", "u4"):
+        out[f"p2_{u}"] = s["inputs"][u]["period2"]
+        out[f"tv_{u}"] = s["inputs"][u]["tv_per_s"]
+    return out
+
+
+def step(d: str, law: str = "bsst") -> tuple[dict[str, Any], dict[str, Any]]:
+    run = simulate(mission("step", d), controller=law, plots=False)
+    t, e = run.trace["t"], errors(run.trace)
+    axes = {a: {"settling_s": v["settling_s"],
+                "steady": max(float(np.max(np.abs(e[a][segment(t, i, STEADY_LAST_S)]))) for i in range(3))}
+            for a, v in run.summary["axes"].items()}
+    tv = {(u, i): float(np.abs(np.diff(run.trace[u][segment(t, i, SMC_LAST_S)])).sum() / SMC_LAST_S)
+          for u in ("u2", "u3") for i in range(3)}
+    return axes, tv
+
+
+def margin(d: str, predict: bool) -> float | None:
+    with tempfile.TemporaryDirectory() as tmp:
+        cmd = [sys.executable, "-m", "bridge", "margin", "missions/sine.toml", "--over", "delay_ms", "--until",
+               "rms=0.1", "--discretization", d, "--out", tmp, "--overwrite"]
+        if predict:
+            cmd += ["--compensation", "predict"]
+        subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=3600, check=False)
+        f = Path(tmp) / "margin.json"
+        return json.loads(f.read_text()).get("margin") if f.exists() else None
+
+
+def measure(d: str, with_margin: bool) -> dict[str, Any]:
+    r: dict[str, Any] = {f"sine_{int(rate)}": sine(d, rate) for rate in (250.0, 100.0, 1000.0)}
+    r["step"], tv_bsst = step(d)
+    _, tv_smc = step(d, "smc")
+    r["smc_ratio"] = min(tv_smc[k] / tv_bsst[k] for k in tv_bsst)
+    r["tv_last5_bsst_max"] = max(tv_bsst.values())
+    r["tv_last5_smc_min"] = min(tv_smc.values())
+    for name in ("robust", "robust-x500"):
+        r[name] = simulate(mission(name, d), plots=False).summary["rms_3d"]
+    for kind in ("raw", "ekf"):
+        f = flight(mission("sine", d), kind=kind)  # type: ignore[arg-type]
+        r[f"mocap_{kind}"] = {"rms_3d": f["rms_3d_m"], "ripple_u2": f["ripple_u2_n"]}
+    if with_margin:
+        r["margin_ms"] = {"none": margin(d, False), "predict": margin(d, True)}
+    return r
+
+
+def table(res: dict[str, dict[str, Any]]) -> str:
+    ds = list(res)
+    lines = [f"| | {' | '.join(ds)} |", "|---|" + "---|" * len(ds)]
+
+    def row(label: str, get: Any, fmt: str = ".3g") -> None:
+        vals = []
+        for d in ds:
+            try:
+                v = get(res[d])
+            except KeyError:
+                v = None
+            vals.append("n/a" if v is None else format(v, fmt))
+        lines.append(f"| {label} | {' | '.join(vals)} |")
+
+    for rate in ("250", "100", "1000"):
+        k = f"sine_{rate}"
+        row(f"sine {rate} Hz: 3-D RMS (m)", lambda r, k=k: r[k]["rms_3d"])
+        for u in ("u2", "u3", "u4"):
+            row(f"sine {rate} Hz: period-2 {u} (N)", lambda r, k=k, u=u: r[k][f"p2_{u}"])
+        for u in ("u2", "u3", "u4"):
+            row(f"sine {rate} Hz: TV {u} (/s)", lambda r, k=k, u=u: r[k][f"tv_{u}"])
+    for a in ("x", "y", "z", "psi"):
+        row(f"step: settling {a} (s)", lambda r, a=a: r["step"][a]["settling_s"], ".3f")
+        row(f"step: steady error {a} (m, rad)", lambda r, a=a: r["step"][a]["steady"], ".2e")
+    row("robust: 3-D RMS (m)", lambda r: r["robust"])
+    row("robust-x500: 3-D RMS (m)", lambda r: r["robust-x500"])
+    row("step: TV u2/u3 last 5 s, BS-ST worst (/s)", lambda r: r["tv_last5_bsst_max"])
+    row("step: TV u2/u3 last 5 s, SMC least (/s)", lambda r: r["tv_last5_smc_min"])
+    row("smoothness against SMC (x, least of 6)", lambda r: r["smc_ratio"], ".1f")
+    for kind in ("raw", "ekf"):
+        row(f"mocap {kind}: 3-D RMS (m)", lambda r, kind=kind: r[f"mocap_{kind}"]["rms_3d"])
+        row(f"mocap {kind}: u2 ripple (N)", lambda r, kind=kind: r[f"mocap_{kind}"]["ripple_u2"])
+    row("margin delay_ms, rms=0.1 (ms)", lambda r: r["margin_ms"]["none"], "g")
+    row("margin delay_ms, rms=0.1, predict (ms)", lambda r: r["margin_ms"]["predict"], "g")
+    return "\n".join(lines)
+
+
+def figure(path: Path, t0: float = 20.0, span: float = 0.1) -> None:
+    import matplotlib  # lazy: only the figure needs it
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # lazy: after the backend
+
+    fig, ax = plt.subplots(figsize=(7.0, 3.2), dpi=120)
+    for d, style in zip(DISCRETIZATIONS, ("o-", "s-"), strict=True):
+        tr = simulate(mission("sine", d), plots=False).trace
+        w = (tr["t"] >= t0) & (tr["t"] < t0 + span)
+        ax.plot(tr["t"][w], tr["u2"][w], style, ms=3, lw=1, label=d)
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel("u2 (N)")
+    ax.set_title("sine mission, 250 Hz: u2 stepped explicitly and implicitly")
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--no-margin", action="store_true", help="skip the four bsst margin searches (minutes)")
+    ap.add_argument("--json", action="store_true", help="print the figures as JSON too")
+    ap.add_argument("--figure", type=Path, metavar="PATH", help="draw u2 of both schemes over 0.1 s into PATH")
+    args = ap.parse_args(argv)
+    if args.figure:
+        figure(args.figure)
+        return 0
+    t0 = time.perf_counter()
+    res = {d: measure(d, not args.no_margin) for d in DISCRETIZATIONS}
+    print(table(res))
+    print(f"\nload average {' '.join(f'{v:.2f}' for v in os.getloadavg())}; {os.cpu_count()} cores; "
+          f"{time.perf_counter() - t0:.0f} s")
+    if args.json:
+        print(json.dumps(res, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,218 @@
+"""``bsst sweep``, ``bsst report`` and ``bsst margin``: campaigns over link impairments, laws, rates and
+sensor noise (bridge.sweep).
+
+In:  the parsed flags (``argparse.Namespace``): a mission or sweep TOML, swept values (``--delay`` ms,
+     ``--loss`` %, ``--rate`` Hz, ...), flags fixed for every cell, ``--until rms=M|class=NAME``
+Out: the call of :func:`bridge.sweep.run_sweep`, :func:`bridge.sweep.report.rebuild` or
+     :func:`bridge.sweep.margin.margin`; their figures on stdout (margins in the axis's unit); the exit
+     status: 0 done, 1 a failed or interrupted sweep or a margin below ``--require``, 2 bad input
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import replace
+from typing import Any
+
+from bridge.cli.flags import (
+    EXIT_FAILED,
+    EXIT_OK,
+    UsageError,
+    add_link_options,
+    axis_values,
+    int_in,
+    law_list,
+    link_table_from_args,
+    number_in,
+)
+from bridge.cli.options import (
+    add_discretization_option,
+    add_sensor_axes,
+    add_sensor_options,
+    sensor_overrides_from_args,
+)
+from params import ConfigError
+
+
+def add_sweep_commands(sub: Any) -> None:
+    """``bsst sweep`` (latency/dropout campaigns) and ``bsst report`` (rebuild a sweep's report)."""
+    p = sub.add_parser("sweep", help="fly a grid of link impairments, laws and rates; report stability maps")
+    p.add_argument("mission", help="mission TOML, or a sweep TOML (with mission = ... and [grid])")
+    for flag, axis, unit in (("--delay", "delay_ms", "MS"), ("--jitter", "jitter_ms", "MS"),
+                             ("--loss", "loss_pct", "PCT"), ("--burst", "burst_len", "LEN"),
+                             ("--rate", "rate_hz", "HZ")):
+        p.add_argument(flag, dest=axis, type=axis_values(flag, axis), metavar=f"{unit},...",
+                       help=f"values of {axis} (link values apply to both directions)")
+    p.add_argument("--controller", type=law_list("--controller"), metavar="LAW,...",
+                   help="control laws to compare (bsst, smc, pid, or your own file.py:ClassName)")
+    add_discretization_option(p)
+    p.add_argument("--seeds", type=int_in("--seeds", 1, 10000), metavar="N",
+                   help="seeds per grid point: the mission's seed, +1, ... (default 1)")
+    mode = p.add_mutually_exclusive_group()
+    mode.add_argument("--offline", dest="mode", action="store_const", const="offline",
+                      help="fly each cell in-process (default)")
+    mode.add_argument("--lockstep", dest="mode", action="store_const", const="lockstep",
+                      help="fly each cell as a lockstep SITL session (vehicle + controller processes)")
+    p.add_argument("--engine", choices=("auto", "batch", "process"), default="auto",
+                   help="batch: fly the cells together in one numpy loop; process: one by one in worker processes; "
+                        "auto (default): batch where the grid allows it")
+    p.add_argument("--jobs", type=int_in("--jobs", 1, 1024), metavar="N", help="worker processes (default: all cores)")
+    p.add_argument("--max-cells", type=int_in("--max-cells", 1, 10**9), metavar="N",
+                   help="fly a grid of up to N cells (default 10000: a bigger one is refused as a likely mistake)")
+    p.add_argument("--dask", metavar="ADDRESS", help="run the cells on this Dask scheduler (e.g. tcp://host:8786)")
+    p.add_argument("--out", metavar="DIR", help="sweep directory (default sweeps/<UTC time>-<mission>)")
+    p.add_argument("--resume", action="store_true", help="fly only the cells missing from --out DIR")
+    p.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out")
+    p.add_argument("--no-plots", action="store_true", help="skip the heat maps")
+    add_link_options(p, skip=("delay", "jitter", "loss", "burst"))  # fixed for every cell: --up-delay, --dup ...
+    add_sensor_axes(p)  # --sensors fixed for every cell; --estimator and --noise are axes
+    p.set_defaults(func=cmd_sweep)
+    p = sub.add_parser("report", help="rebuild a sweep's report.md and heat maps from its cells.csv")
+    p.add_argument("dir", metavar="DIR", help="sweep directory")
+    p.add_argument("--no-plots", action="store_true", help="skip the heat maps")
+    p.set_defaults(func=cmd_report)
+
+
+
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from bridge.core.flight import Overrides, prepare  # lazy: start-up time
+    from bridge.sweep import AXES, Grid, Sweep, is_sweep_file, load_sweep, run_sweep  # lazy: start-up time
+    from missions import load_mission  # lazy: start-up time
+
+    spec = load_sweep(args.mission) if is_sweep_file(args.mission) else Sweep(load_mission(args.mission), Grid())
+    axes = {a: getattr(args, a) for a in AXES if getattr(args, a) is not None}
+    if args.seeds is not None:
+        axes["seeds"] = args.seeds
+    spec = replace(spec, grid=replace(spec.grid, **axes), mode=args.mode or spec.mode,
+                   max_cells=args.max_cells or spec.max_cells)
+    fixed = link_table_from_args(args)
+    for d in ("up", "down"):
+        clash = [a for a in spec.grid.swept() if a in fixed.get(d, {})]
+        if clash:
+            raise UsageError(f"bsst sweep: --{d}-{clash[0].split('_')[0]} conflicts with the swept {clash[0]} "
+                             f"(a swept value applies to both directions)")
+    sensors = {"set": args.sensors} if args.sensors is not None else None
+    if fixed or sensors or args.discretization:  # the flags fixed for every cell, laid over the mission by the one
+        # path to its parts
+        spec = replace(spec, mission=prepare(spec.mission, Overrides(link=fixed or None, sensors=sensors,
+                                                                     discretization=args.discretization)).mission)
+    if args.resume and args.out is None:
+        raise UsageError("bsst sweep: --resume needs --out DIR (the sweep to resume)")
+    client = connect_dask(args.dask) if args.dask else None
+    try:
+        res = run_sweep(spec, jobs=args.jobs, client=client, out=args.out, write=True, resume=args.resume,
+                        overwrite=args.overwrite, progress=True, plots=not args.no_plots, engine=args.engine)
+    finally:
+        if client is not None:
+            client.close()
+    print(f"sweep {spec.mission.name}: {len(res.rows)} cells, {res.ran} flown, {res.reused} kept from before, "
+          f"{res.failed} failed, {res.wall_s:.1f} s; engine {res.engine} ({res.engine_why})")
+    if res.interrupted:
+        print(f"bsst: interrupted; continue with --resume --out {res.path}", file=sys.stderr)
+        return EXIT_FAILED
+    print(f"sweep directory: {res.path}")
+    return EXIT_FAILED if res.failed else EXIT_OK
+
+
+
+def connect_dask(address: str) -> Any:
+    """A ``distributed.Client`` for ``--dask ADDRESS`` (ConfigError if absent or unreachable)."""
+    try:
+        from distributed import Client  # lazy: an optional dependency
+    except ImportError:
+        raise ConfigError("--dask: needs Dask distributed (pip install 'bsst-sitl[cluster]')") from None
+    try:
+        return Client(address, timeout="10s")
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise ConfigError(f"--dask {address}: cannot connect ({' '.join(str(exc).split())[:200]})") from None
+
+
+
+def add_margin_command(sub: Any) -> None:
+    """``bsst margin``: the boundary of one link impairment by bisection (bridge.sweep.margin)."""
+    p = sub.add_parser("margin", help="find how much delay, loss, jitter, burst or sensor noise a law takes "
+                                      "(bisection)")
+    p.add_argument("mission", help="mission TOML file")
+    p.add_argument("--over", required=True, choices=("delay_ms", "loss_pct", "jitter_ms", "burst_len", "noise"),
+                   help="the impairment searched (link values: both directions, as a sweep's axes; noise: the scale "
+                        "of every sigma of the sensor set, with --sensors and --estimator raw|ekf)")
+    p.add_argument("--until", required=True, metavar="rms=M|class=NAME",
+                   help="failure: the 3-D RMS passes M metres, or the class is NAME or worse")
+    p.add_argument("--controller", type=law_list("--controller"), metavar="LAW,...", help="laws to search")
+    add_discretization_option(p)
+    p.add_argument("--seeds", type=int_in("--seeds", 1, 1000), default=1, metavar="N",
+                   help="seeds per value: a value fails when any seed fails (default 1)")
+    p.add_argument("--resolution", type=number_in("--resolution", 0.0, 1e6, lo_open=True), default=0.25,
+                   metavar="X", help="stop when the bracket is this narrow, in the axis's unit (default 0.25)")
+    p.add_argument("--require", type=number_in("--require", 0.0, 1e9), metavar="X",
+                   help="exit 1 when a law's margin is below X (for a user's CI)")
+    p.add_argument("--engine", choices=("auto", "batch", "process"), default="auto",
+                   help="batch: each round's cells together in one numpy loop (default where it can)")
+    p.add_argument("--jobs", type=int_in("--jobs", 1, 1024), default=2, metavar="N",
+                   help="worker processes for the process engine (default 2)")
+    p.add_argument("--out", metavar="DIR", help="write margin.json into DIR (default runs/<UTC>-<mission>-margin)")
+    p.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out")
+    add_link_options(p)
+    add_sensor_options(p)  # fixed for every probe; --noise conflicts with --over noise
+    p.set_defaults(func=cmd_margin)
+
+
+
+def cmd_margin(args: argparse.Namespace) -> int:
+    from bridge.core.flight import Overrides, prepare  # lazy: start-up time
+    from bridge.record.runlog import run_dir  # lazy: start-up time
+    from bridge.sweep.margin import margin, parse_until, write_margin  # lazy: start-up time
+    from missions import load_mission  # lazy: start-up time
+
+    until = parse_until(args.until)
+    fixed = link_table_from_args(args)
+    for d in ("up", "down"):
+        if args.over in fixed.get(d, {}):
+            raise UsageError(f"bsst margin: a {args.over} flag conflicts with --over {args.over}")
+    sensing = sensor_overrides_from_args(args)
+    if args.over == "noise" and sensing["noise"] is not None:
+        raise UsageError("bsst margin: --noise conflicts with --over noise (the noise scale is what is searched)")
+    mission = prepare(load_mission(args.mission), Overrides(link=fixed or None, discretization=args.discretization,
+                                                            **sensing)).mission
+    run_dir(args.out, f"{mission.name}-margin", args.overwrite, create=False)  # a refused --out before any flight
+    live = sys.stderr.isatty()
+
+    def show(text: str) -> None:
+        if live:
+            sys.stderr.write(f"\rmargin over {args.over}: {text}   ")
+            sys.stderr.flush()
+
+    res = margin(mission, args.over, until, controllers=args.controller, seeds=args.seeds,
+                 resolution=args.resolution, jobs=args.jobs, engine=args.engine, progress=show)
+    if live:
+        sys.stderr.write("\n")
+    path = write_margin(res, args.out, mission.name, args.overwrite)
+    entries = res.get("controllers") or [res]
+    low = []
+    for e in entries:
+        lo, hi = e["bracket"]
+        what = f" x the sigmas of {res['sensors']}, estimator {res['estimator']}" if args.over == "noise" else ""
+        if e["margin"] is None:  # no value held, the range's low end included
+            print(f"margin {e['controller']}: {args.over}: none{what} (fails at every value flown, down to {hi:g}, "
+                  f"the low end of its range; until {res['until']})")
+        else:
+            tail = f"fails at {hi:g}" if hi is not None else "held over the whole range"
+            print(f"margin {e['controller']}: {args.over} {e['margin']:g}{what} (bracket [{lo:g}, "
+                  f"{'-' if hi is None else f'{hi:g}'}], {tail}; until {res['until']})")
+        if args.require is not None and (e["margin"] is None or e["margin"] < args.require):
+            low.append(e["controller"])
+    print(f"{res['cells_flown']} cells flown; margin.json: {path / 'margin.json'}")
+    if low:
+        print(f"bsst margin: below --require {args.require:g}: {', '.join(low)}", file=sys.stderr)
+        return EXIT_FAILED
+    return EXIT_OK
+
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from bridge.sweep.report import rebuild  # lazy: start-up time
+
+    print(f"report: {rebuild(args.dir, plots=not args.no_plots)}")
+    return EXIT_OK
+

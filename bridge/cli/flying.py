@@ -1,0 +1,241 @@
+"""``bsst sim``, ``bsst sitl``, ``bsst vehicle`` and ``bsst controller``: the commands that fly, and the
+summary printed after a run.
+
+In:  the parsed flags (``argparse.Namespace``) of those commands; their overrides go to the layer that
+     flies as one :class:`~bridge.core.flight.Overrides` (:func:`bridge.cli.options.overrides_from_args`)
+Out: the call of :func:`bridge.loop.simulate`, :func:`bridge.session.sitl`,
+     :func:`bridge.nodes.vehicle.run_vehicle` or :func:`bridge.nodes.offboard.run_controller`; the run's
+     summary on stdout (m, s, N, ms), violated policies on stderr; the exit status: 0 completed,
+     1 failsafe/diverged/aborted, 2 bad input
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from typing import Any
+
+from bridge.cli.flags import (
+    EXIT_FAILED,
+    EXIT_OK,
+    _home,
+    _ids,
+    add_link_options,
+    int_in,
+    mission_integer,
+    mission_number,
+    number_in,
+    system_id,
+)
+from bridge.cli.options import (
+    add_failsafe_options,
+    add_flight_options,
+    add_key_option,
+    add_param_options,
+    add_port_options,
+    add_sensor_options,
+    overrides_from_args,
+)
+from params import ConfigError
+
+
+def add_sim_command(sub: Any) -> None:
+    """``bsst sim``: a mission flown offline, in one process (bridge.loop)."""
+    p = sub.add_parser("sim", help="fly a mission offline, in one process")
+    add_flight_options(p)
+    add_sensor_options(p)
+    add_link_options(p)
+    p.set_defaults(func=cmd_sim)
+
+
+def cmd_sim(args: argparse.Namespace) -> int:
+    from bridge.loop import simulate  # lazy: start-up time
+
+    run = simulate(args.mission, out=args.out, write=True, overwrite=args.overwrite, plots=not args.no_plots,
+                   overrides=overrides_from_args(args))
+    return report_run(run, "sim")
+
+
+def report_run(run: Any, command: str) -> int:
+    """Print a run's summary, name each violated policy on stderr; its exit status (0: a clean completion)."""
+    from bridge.record.policies import run_ok, violation_text  # lazy: numpy
+
+    try:
+        print_summary(run.summary, run.path)
+        sys.stdout.flush()
+    except BrokenPipeError:  # stdout closed early (bsst sim ... | head): the run is on disk, its status stands
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    lock = run.summary.get("lockstep") or {"held": True}
+    if not lock.get("held", True):
+        print(f"bsst {command}: not a lockstep run: the vehicle left lockstep at t={lock['left_at_s']:.3f} s "
+              f"({lock['why']})", file=sys.stderr)
+    for v in run.summary.get("policies") or []:
+        if not v.get("ok"):
+            print(f"bsst {command}: policy {violation_text(v)}", file=sys.stderr)
+    return EXIT_OK if run_ok(run.summary) else EXIT_FAILED
+
+
+
+def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
+    """The one-screen summary printed after a run."""
+    out = stream or sys.stdout
+    w = out.write
+    w(f"mission {s['mission']}  controller {s['controller']}  profile {s['profile']}  "
+      f"clock {s['clock']}  rate {s['rate_hz']:g} Hz  duration {s['duration_s']:.2f} s\n")
+    w(f"outcome: {s['outcome']}\n")
+    end = s.get("ended_by")
+    if end and (end.get("who"), end.get("how")) != ("mission", "completed"):
+        w(f"ended by {end['who']}: {end['how']}\n")
+    lock = s.get("lockstep")
+    if lock and not lock.get("held", True):
+        w(f"left lockstep at t={lock['left_at_s']:.3f} s: {lock['why']} (flown on from there on the wall clock: "
+          "not a lockstep run)\n")
+    rms = s.get("rms_3d")
+    w(f"3-D RMS error over t >= {s['rms_from_s']:g} s: {rms:.3e} m\n" if rms is not None else "3-D RMS: n/a\n")
+    w(f"{'axis':5} {'rms':>10} {'max':>10} {'settling_s':>11} {'bound_s':>9}\n")
+    for a, v in s["axes"].items():
+        def f(x: Any, spec: str) -> str:
+            return format(x, spec) if x is not None else "n/a"
+        w(f"{a:5} {f(v['rms'], '10.3e')} {f(v['max'], '10.3e')} "
+          f"{f(v['settling_s'], '11.3f')} {f(v['bound_s'], '9.3f')}\n")
+    w("input  " + "  ".join(f"{u}: [{v['min']:.3g}, {v['max']:.3g}] tv/s {v['tv_per_s']:.3g}"
+                            + (f" p2 {v['period2']:.3g}" if v.get("period2") is not None else "")
+                            for u, v in s["inputs"].items() if v["min"] is not None) + "\n")
+    link = s.get("link", {})
+    if any(L.get("lost") or L.get("duplicated") or L.get("reordered") or (L.get("delay_ms") or {}).get("max")
+           for L in (link.get("up", {}), link.get("down", {}))):
+        for d in ("up", "down"):
+            L = link[d]
+            ms = {k: "n/a" if v is None else f"{v:.2f}" for k, v in L["delay_ms"].items()}
+            w(f"link {d:4}: sent {L['sent']} delivered {L['delivered']} lost {L['lost']} dup {L['duplicated']} "
+              f"reordered {L['reordered']} delay p50 {ms['p50']} ms p99 {ms['p99']} ms max {ms['max']} ms\n")
+    for e in s.get("events", [])[:8]:
+        w(f"event t={e['t']:.3f} {e['kind']}: {e['text']}\n")
+    policies = s.get("policies") or []
+    broken = [v for v in policies if not v.get("ok")]
+    if policies:
+        from bridge.record.policies import violation_text  # lazy: numpy
+
+        w(f"policies: all {len(policies)} hold\n" if not broken else
+          "".join(f"policy {violation_text(v)}\n" for v in broken))
+    if path is not None:
+        w(f"run directory: {path}\n")
+
+
+
+def add_sitl_commands(sub: Any) -> None:
+    """``bsst vehicle``, ``bsst controller`` and ``bsst sitl``: the MAVLink SITL over UDP (bridge.session)."""
+    p = sub.add_parser("vehicle", help="the simulated vehicle alone: a MAVLink 2 endpoint over UDP")
+    p.add_argument("mission", nargs="?", help="mission TOML for the start, effects, failsafe and rates "
+                                              "(default: at rest at the origin, 250 Hz)")
+    p.add_argument("--profile", metavar="NAME", help="vehicle profile: paper, x500 or a profile TOML path")
+    p.add_argument("--rate", type=mission_number("--rate", "rate_hz"), metavar="HZ",
+                   help="control rate, 50-1000 Hz: one lockstep step per period")
+    p.add_argument("--seed", type=mission_integer("--seed", "seed"), metavar="N", help="seed of random effects")
+    add_port_options(p, vehicle=True)
+    p.add_argument("--sysid", type=system_id("--sysid"), metavar="N",
+                   help="MAVLink system id (default: MAV_SYS_ID if set, else instance + 1)")
+    p.add_argument("--controller-id", type=_ids, metavar="SYSID:COMPID",
+                   help="the only sender of actuator targets (default 200:191)")
+    p.add_argument("--controller-from", metavar="HOST:PORT",
+                   help="the only address the controller's ids are heard from (bsst sitl pins it; default: "
+                        "learned from the controller's first message)")
+    p.add_argument("--home", type=_home, metavar="LAT,LON,ALT", help="home: degrees, degrees, m AMSL")
+    add_failsafe_options(p)
+    add_param_options(p, schedule=False)  # a change at a mission time is the controller's to send (--param-at)
+    add_sensor_options(p)
+    p.add_argument("--out", metavar="DIR", help="write vehicle.tlog and vehicle.csv into DIR")
+    p.add_argument("--overwrite", action="store_true", help="allow replacing those files")
+    p.set_defaults(func=cmd_vehicle)
+
+    p = sub.add_parser("controller", help="the offboard controller alone: fly a mission against a MAVLink vehicle")
+    add_flight_options(p, failsafe=False)  # the vehicle flies its failsafe: the controller has no say in it
+    p.add_argument("--vehicle", metavar="HOST:PORT",
+                   help="the vehicle's controller link (default 127.0.0.1:14560 + instance)")
+    p.add_argument("--instance", type=int_in("--instance", 0, 9), default=0, metavar="N",
+                   help="vehicle instance N: port 14560 + N")
+    p.add_argument("--realtime", action="store_true", help="fixed-rate schedule on the wall clock (default lockstep)")
+    p.add_argument("--source-port", type=int_in("--source-port", 1, 65535), metavar="PORT",
+                   help="send from this local UDP port (a vehicle run with --controller-from hears only it; "
+                        "default: any free one)")
+    p.add_argument("--sysid", type=int_in("--sysid", 1, 254), default=200, metavar="N", help="own system id")
+    p.add_argument("--target-sysid", type=int_in("--target-sysid", 1, 254), metavar="N",
+                   help="fly only this vehicle (default: the first autopilot heard)")
+    p.add_argument("--timeout", type=number_in("--timeout", 0.0, 3600.0, lo_open=True), default=10.0, metavar="S",
+                   help="wait this long for the vehicle's heartbeat (default 10 s)")
+    add_key_option(p)
+    p.set_defaults(func=cmd_controller)
+
+    p = sub.add_parser("sitl", help="fly a mission as SITL: vehicle and controller processes over MAVLink/UDP")
+    add_flight_options(p)
+    add_sensor_options(p)
+    add_port_options(p, vehicle=False)
+    add_link_options(p)
+    p.set_defaults(func=cmd_sitl)
+
+
+
+def cmd_sitl(args: argparse.Namespace) -> int:
+    from bridge.session import sitl  # lazy: start-up time
+
+    run = sitl(args.mission, out=args.out, write=True, overwrite=args.overwrite, plots=not args.no_plots,
+               realtime=args.realtime, instance=args.instance, gcs=args.gcs, speed=args.speed, live=True,
+               key=args.key, overrides=overrides_from_args(args))
+    return report_run(run, "sitl")
+
+
+# -- the two sides alone (bsst vehicle, bsst controller) ---------------------------------------------
+def cmd_vehicle(args: argparse.Namespace) -> int:
+    """``bsst vehicle``: the simulated vehicle alone."""
+    from bridge.core.flight import at_rest, prepare  # lazy: start-up time
+    from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, GCS_PORT, LINK_PORT, parse_address  # lazy
+    from bridge.mavlink.telemetry import Home  # lazy: start-up time
+    from bridge.nodes.vehicle import VehicleConfig, run_vehicle  # lazy: start-up time
+
+    flight = prepare(args.mission or at_rest(), overrides_from_args(args))
+    n = args.instance
+    own = flight.params.sysid if "MAV_SYS_ID" in flight.mission.params else None  # [params] or --param
+    if args.sysid is not None and own is not None and args.sysid != own:
+        raise ConfigError(f"--sysid {args.sysid} and MAV_SYS_ID {own} set the vehicle's system id twice: give one")
+    listen = parse_address(args.listen or f"127.0.0.1:{LINK_PORT + n}", "udpin", "--listen")
+    if listen.mode != "udpin":
+        raise ConfigError(f"--listen {args.listen!r}: the controller link is bound (udpin), not udpout")
+    gcs_text = args.gcs or f"127.0.0.1:{GCS_PORT + n}"
+    gcs = None if gcs_text.strip().lower() == "none" else parse_address(gcs_text, "udpout", "--gcs")
+    sysid, compid = args.controller_id or (CONTROLLER_SYSID, CONTROLLER_COMPID)
+    pin = None
+    if args.controller_from is not None:
+        a = parse_address(args.controller_from, "udpout", "--controller-from")
+        if a.mode != "udpout" or a.port == 0:
+            raise ConfigError(f"--controller-from {args.controller_from!r}: give the controller's HOST:PORT")
+        pin = (a.host, a.port)
+    cfg = VehicleConfig(listen, gcs, sysid=args.sysid or own or n + 1, controller_sysid=sysid, controller_compid=compid,
+                        clock="realtime" if args.realtime else "lockstep", speed=args.speed,
+                        home=Home(*args.home) if args.home else Home(), key=_key(args), controller_from=pin)
+    return run_vehicle(flight, cfg, args.out, args.overwrite)
+
+
+def cmd_controller(args: argparse.Namespace) -> int:
+    """``bsst controller``: the offboard controller alone."""
+    from bridge.core.flight import prepare  # lazy: start-up time
+    from bridge.mavlink.endpoint import LINK_PORT, parse_address  # lazy: start-up time
+    from bridge.nodes.offboard import OffboardConfig, run_controller  # lazy: start-up time
+
+    flight = prepare(args.mission, overrides_from_args(args))
+    vehicle = parse_address(args.vehicle or f"127.0.0.1:{LINK_PORT + args.instance}", "udpout", "--vehicle")
+    if vehicle.mode != "udpout":
+        raise ConfigError(f"--vehicle {args.vehicle!r}: the controller sends to the vehicle (udpout)")
+    cfg = OffboardConfig(vehicle, sysid=args.sysid, clock="realtime" if args.realtime else "lockstep",
+                         target_sysid=args.target_sysid, connect_timeout_s=args.timeout, key=_key(args),
+                         source_port=args.source_port or 0)
+    return run_controller(flight, cfg, args.out, args.overwrite)
+
+
+
+def _key(args: argparse.Namespace) -> bytes | None:
+    """The signing key of ``--key FILE``, if given (ConfigError: exit 2, naming the file)."""
+    from bridge.mavlink.signing import key_from_file  # lazy: start-up time
+
+    return key_from_file(args.key) if getattr(args, "key", None) else None
+

@@ -1,0 +1,180 @@
+"""The options the flying commands share (the flight's overrides, the failsafe, parameters, sensors,
+ports, signing key) and the one way from their flags to an :class:`~bridge.core.flight.Overrides`.
+
+In:  an ``argparse`` parser to add options to; the parsed ``argparse.Namespace`` (``--rate`` Hz,
+     ``--seed``, ``--param NAME=VALUE`` in the parameter's unit, ``--param-at T:NAME=VALUE`` T in s,
+     ``--noise`` a scale, the link flags of :mod:`bridge.cli.flags`)
+Out: the options on the parser; :func:`overrides_from_args`, the frozen
+     :class:`~bridge.core.flight.Overrides` those flags ask for (a flag a command does not have: the
+     mission's own), which :func:`bridge.core.flight.prepare` lays over the mission
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import TYPE_CHECKING, Any
+
+from bridge.cli.flags import (
+    axis_values,
+    int_in,
+    law_spec,
+    link_table_from_args,
+    mission_integer,
+    mission_number,
+    name_list,
+    noise_scale,
+    number_in,
+    param_assignment,
+    sensor_set_name,
+)
+
+if TYPE_CHECKING:  # annotations only: building the parser loads no flight code
+    from bridge.core.flight import Overrides
+
+
+def add_failsafe_options(p: argparse.ArgumentParser) -> None:
+    """``--failsafe-action A``: over the mission's ``[failsafe] action``; :func:`failsafe_table_from_args`
+    reads it back."""
+    # the choices are bridge.autopilot.failsafe.FAILSAFE_ACTIONS (tests/test_failsafe_actions.py keeps them equal),
+    # written out so that building the parser loads no flight code
+    p.add_argument("--failsafe-action", choices=("descend", "land", "hold", "disarm"),
+                   help="what the vehicle does when its targets stop: descend (default: level, sink, disarm on the "
+                        "ground), land (here), hold (here for [failsafe] hold_s, 5 s, then land) or disarm "
+                        "(motors off at once)")
+
+
+def add_param_options(p: argparse.ArgumentParser, start: bool = True, schedule: bool = True) -> None:
+    """``--param NAME=VALUE`` (``start``: the vehicle's parameters at start, over the mission's ``[params]``)
+    and ``--param-at T:NAME=VALUE`` (``schedule``: a change at mission time T s), each repeatable;
+    :func:`param_overrides_from_args` reads them back."""
+    if start:
+        p.add_argument("--param", type=param_assignment("--param"), action="append", metavar="NAME=VALUE",
+                       help="a vehicle parameter at start, PX4's name (e.g. COM_OF_LOSS_T=1.0); repeatable")
+    if schedule:
+        p.add_argument("--param-at", type=param_assignment("--param-at", timed=True), action="append",
+                       metavar="T:NAME=VALUE", help="set a vehicle parameter at mission time T s (e.g. "
+                                                    "10:COM_OBL_ACT=1), the same step in every clock; repeatable")
+
+
+def param_overrides_from_args(args: argparse.Namespace) -> dict[str, Any]:
+    """The :class:`~bridge.core.flight.Overrides` fields the flags of :func:`add_param_options` ask for
+    (``params``, ``param_at``; {} if none)."""
+    out: dict[str, Any] = {}
+    given = getattr(args, "param", None)
+    if given:
+        out["params"] = dict(given)
+    changes = getattr(args, "param_at", None)
+    if changes:
+        out["param_at"] = tuple(changes)
+    return out
+
+
+def failsafe_table_from_args(args: argparse.Namespace) -> dict[str, Any]:
+    """The ``[failsafe]`` overrides the flags of :func:`add_failsafe_options` ask for ({} if none)."""
+    action = getattr(args, "failsafe_action", None)
+    return {"action": action} if action is not None else {}
+
+
+def add_sensor_options(p: argparse.ArgumentParser) -> None:
+    """``--sensors NAME``, ``--estimator KIND``, ``--noise X``: over the mission's ``[sensors] set``,
+    ``[estimator] kind`` and ``[sensors] noise_scale``; :func:`sensor_overrides_from_args` reads them back."""
+    p.add_argument("--sensors", type=sensor_set_name("--sensors"), metavar="NAME",
+                   help="the vehicle's sensor set from its profile's [sensors]: ideal, mocap or gnss")
+    # the choices are bridge.autopilot.estimator.ESTIMATOR_KINDS (tests/test_estimation_flight.py keeps them equal),
+    # written out so that building the parser loads no flight code
+    p.add_argument("--estimator", choices=("truth", "raw", "ekf"),
+                   help="what the vehicle sends the controller: truth (default: the true state), raw (the "
+                        "measurements as they come) or ekf (its Kalman filter's estimate)")
+    p.add_argument("--noise", type=noise_scale("--noise"), metavar="X",
+                   help="multiply every noise sigma of the sensor set by X")
+
+
+def add_sensor_axes(p: argparse.ArgumentParser) -> None:
+    """``bsst sweep``'s ``--sensors NAME`` (fixed for every cell) and its two vehicle axes, ``--estimator
+    truth,ekf,raw`` and ``--noise 0,0.5,1,2`` (lists; one value flies every cell with it, as ``bsst sim``'s flag)."""
+    p.add_argument("--sensors", type=sensor_set_name("--sensors"), metavar="NAME",
+                   help="the vehicle's sensor set from its profile's [sensors], for every cell: ideal, mocap or gnss")
+    # the kinds are bridge.autopilot.estimator.ESTIMATOR_KINDS, written out as in add_sensor_options
+    p.add_argument("--estimator", type=name_list("--estimator", ("truth", "ekf", "raw")), metavar="KIND,...",
+                   help="estimator kinds to compare: truth (the true state), ekf (the vehicle's Kalman filter), "
+                        "raw (the measurements as they come)")
+    p.add_argument("--noise", type=axis_values("--noise", "noise"), metavar="X,...",
+                   help="noise scales: every sigma of the sensor set times X (0-100)")
+
+
+def sensor_overrides_from_args(args: argparse.Namespace) -> dict[str, Any]:
+    """The :class:`~bridge.core.flight.Overrides` fields ``sensors``, ``estimator`` and ``noise`` from
+    :func:`add_sensor_options`' flags."""
+    name = getattr(args, "sensors", None)
+    return {"sensors": {"set": name} if name is not None else None,
+            "estimator": getattr(args, "estimator", None), "noise": getattr(args, "noise", None)}
+
+
+def add_flight_options(p: argparse.ArgumentParser, failsafe: bool = True) -> None:
+    """Options every flying command shares: overrides of the mission's own values (``failsafe``:
+    with the vehicle's failsafe action, for the commands that fly the vehicle)."""
+    p.add_argument("mission", help="mission TOML file (see missions/)")
+    p.add_argument("--out", metavar="DIR", help="run directory (default runs/<UTC time>-<mission>)")
+    p.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out")
+    p.add_argument("--rate", type=mission_number("--rate", "rate_hz"), metavar="HZ",
+                   help="control rate, 50-1000 Hz (default: the mission's, 250)")
+    p.add_argument("--profile", metavar="NAME", help="vehicle profile: paper, x500 or a profile TOML path")
+    p.add_argument("--controller", type=law_spec("--controller"), metavar="LAW",
+                   help="control law: bsst, smc, pid, or your own (path/to/file.py:Class or package.module:Class)")
+    p.add_argument("--seed", type=mission_integer("--seed", "seed"), metavar="N", help="seed of random effects")
+    add_discretization_option(p)
+    p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+    if failsafe:
+        add_failsafe_options(p)
+    add_param_options(p, start=failsafe)  # the controller sets no start values: it schedules changes only
+
+
+
+def add_discretization_option(p: argparse.ArgumentParser) -> None:
+    """``--discretization explicit|implicit``: the Overrides field of the same name (docs/law.md)."""
+    from missions import DISCRETIZATIONS  # lazy: start-up time
+
+    p.add_argument("--discretization", choices=DISCRETIZATIONS,
+                   help="how bsst steps its super-twisting step: explicit (the paper as printed) or implicit "
+                        "(backward Euler, chattering-free; docs/law.md) (default: the mission's)")
+
+
+def overrides_from_args(args: argparse.Namespace) -> Overrides:
+    """The :class:`~bridge.core.flight.Overrides` a flying command's flags ask for (a flag the command does
+    not have keeps the mission's own): the one way from ``bsst``'s flags to :func:`~bridge.core.flight.prepare`."""
+    from bridge.core.flight import Overrides  # lazy: building the parser loads no flight code
+
+    return Overrides(profile=getattr(args, "profile", None), controller=getattr(args, "controller", None),
+                     discretization=getattr(args, "discretization", None), rate_hz=getattr(args, "rate", None),
+                     seed=getattr(args, "seed", None), link=link_table_from_args(args) or None,
+                     failsafe=failsafe_table_from_args(args) or None, **sensor_overrides_from_args(args),
+                     **param_overrides_from_args(args))
+
+
+def add_key_option(p: argparse.ArgumentParser) -> None:
+    """``--key FILE``: MAVLink 2 signing (bridge.mavlink.signing); the key is read from the file, never given on
+    the command line, so it never shows in ``ps``."""
+    p.add_argument("--key", metavar="FILE", help="sign every frame and accept only frames signed with this key: "
+                                                 "a 32-byte file or a passphrase (hashed with SHA-256, as "
+                                                 "MAVProxy does); not readable by others")
+
+
+
+def add_port_options(p: argparse.ArgumentParser, vehicle: bool) -> None:
+    """The ports, the clock, the pace and the signing key of ``bsst vehicle`` (``vehicle``) and ``bsst sitl``."""
+    if vehicle:
+        p.add_argument("--listen", metavar="HOST:PORT",
+                       help="controller link, bound (default 127.0.0.1:14560 + instance)")
+    p.add_argument("--gcs", metavar="HOST:PORT", help="ground station link: telemetry goes there "
+                                                       "(default 127.0.0.1:14550 + instance; 'none': no GCS link)")
+    p.add_argument("--instance", type=int_in("--instance", 0, 9), default=0, metavar="N",
+                   help="PX4-style instance 0-9: ports 14560 + N and 14550 + N, sysid N + 1")
+    clock = p.add_mutually_exclusive_group()
+    if vehicle:
+        clock.add_argument("--lockstep", dest="realtime", action="store_false", help="lockstep clock (default)")
+    clock.add_argument("--realtime", action="store_true", help="run on the wall clock (default lockstep)")
+    p.set_defaults(realtime=False)
+    p.add_argument("--speed", type=number_in("--speed", 0.0, 1000.0, lo_open=True), metavar="X",
+                   help="lockstep: at most X times real time; also the pace after the controller is lost (default 1)")
+    add_key_option(p)
+
