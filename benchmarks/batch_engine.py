@@ -33,6 +33,7 @@ import os
 import resource
 import statistics
 import sys
+import threading
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -64,14 +65,14 @@ TARGET_CEILING = 0.5  # of the 2-core ceiling
 TARGET_SPEEDUP = 1.7  # jobs 2 against jobs 1
 
 # The engine's work per cell and control step (the 30 s sine at 250 Hz, 4 physics steps a control step),
-# counted from the code: flops (multiplies, adds, divides, square roots) and libm calls (sin, cos, atan2,
-# pow, exp, log; a sin and cos of one angle fused into one sincos counts as two).
+# counted from the code: flops (multiplies, adds, divides, square roots), libm calls (sin, cos, tan, atan2,
+# pow, exp, log) and sin-cos pairs of one angle (the compiler makes each one sincos call).
 WORK = {
-    # plant.model.rk4_held: 4 stages of ~100 flops and 6 calls (sin/cos of phi, theta, psi) + ~80 to combine
-    "plant (4 RK4 steps)": (4 * 500, 4 * 24),
-    "law (controller.bsst.backstepping and the actuation)": (600, 12),
-    "wire (state and command through float32: quaternion, body rates)": (150, 20),
-    "figures and rings": (30, 0),
+    # plant.model.rk4_held: 4 stages of ~100 flops and the sin and cos of phi, theta, psi, + ~80 to combine
+    "plant (4 RK4 steps)": (4 * 500, 0, 4 * 12),
+    "law (controller.bsst.backstepping and the actuation)": (600, 12, 0),
+    "wire (state and command through float32: quaternion, body rates)": (150, 20, 0),
+    "figures and rings": (30, 0, 0),
 }
 
 
@@ -105,30 +106,72 @@ def _libm_calls(n: int, step: float) -> float:  # pragma: no cover
     return s
 
 
+@njit(cache=True)
+def _sincos_pairs(n: int, step: float) -> float:  # pragma: no cover
+    """n sin-cos pairs of one angle each (one sincos call), as plant.model.rk4_held takes them."""
+    s = 0.0
+    v = 0.1
+    for _ in range(n):
+        s += math.sin(v) * math.cos(v)
+        v += step
+        if v > 3.0:
+            v -= 3.0
+    return s
+
+
+@njit(cache=True, nogil=True)
+def _spin(n: int) -> float:  # pragma: no cover
+    x = 1.0
+    for _ in range(n):
+        x = x * 0.9999999 + 1e-9
+    return x
+
+
 def machine_rates(repeats: int = 5) -> dict[str, float]:
-    """The best of ``repeats`` (other load only ever slows a loop down): multiply-add GFLOP/s on one core,
-    ns per libm sin or cos call."""
+    """Multiply-add GFLOP/s on one core and ns per libm sin or cos call, in this thread's CPU time (other
+    load on the machine takes the core away between time slices, not within them), the best of ``repeats``."""
     _multiply_adds(10, 0.999999)
     _libm_calls(10, 1e-3)
+    _sincos_pairs(10, 1e-3)
     n = 20_000_000
-    flops, calls = [], []
+    flops, calls, pairs = [], [], []
     for _ in range(repeats):
-        t0 = time.perf_counter()
+        t0 = time.thread_time()
+        _sincos_pairs(n // 4, 1e-3)
+        pairs.append((time.thread_time() - t0) / (n // 4) * 1e9)
+        t0 = time.thread_time()
         _multiply_adds(n, 0.999999)
-        flops.append(16 * n / (time.perf_counter() - t0) / 1e9)
-        t0 = time.perf_counter()
+        flops.append(16 * n / (time.thread_time() - t0) / 1e9)
+        t0 = time.thread_time()
         _libm_calls(n // 4, 1e-3)
-        calls.append((time.perf_counter() - t0) / (2 * (n // 4)) * 1e9)
-    return {"gflops": max(flops), "ns_per_call": min(calls)}
+        calls.append((time.thread_time() - t0) / (2 * (n // 4)) * 1e9)
+    return {"gflops": max(flops), "ns_per_call": min(calls), "ns_per_pair": min(pairs)}
 
 
-def ceiling(rates: dict[str, float], steps: int) -> dict[str, float]:
-    """The cells/s one core could fly at best: :data:`WORK` per cell-step at the measured rates."""
-    flops = sum(f for f, _ in WORK.values())
-    calls = sum(c for _, c in WORK.values())
-    per_step_s = flops / (rates["gflops"] * 1e9) + calls * rates["ns_per_call"] * 1e-9
-    return {"flops_per_step": flops, "calls_per_step": calls, "us_per_cell_step": per_step_s * 1e6,
-            "cells_per_s_core": 1.0 / (per_step_s * steps)}
+def cores_available(threads: int = 2, n: int = 100_000_000) -> float:
+    """How many cores this process gets now: CPU seconds over wall seconds of ``threads`` compiled loops
+    running without the GIL (2.0 on an idle 2-core machine; less while other work shares it)."""
+    _spin(10)
+    workers = [threading.Thread(target=_spin, args=(n,)) for _ in range(threads)]
+    t0, c0 = time.perf_counter(), time.process_time()
+    for w in workers:
+        w.start()
+    for w in workers:
+        w.join()
+    return (time.process_time() - c0) / (time.perf_counter() - t0)
+
+
+ISSUE_WORK = (2800, 35, 0)  # issue 25's count per cell-step (2.1e7 flops, 2.6e5 calls a 30 s cell): no plant trig
+
+
+def ceiling(rates: dict[str, float], steps: int, work: tuple[int, int, int] | None = None) -> dict[str, float]:
+    """The cells/s one core could fly at best: :data:`WORK` (or ``work``: flops, calls, sin-cos pairs) per
+    cell-step at the measured rates."""
+    flops, calls, pairs = (sum(w[i] for w in WORK.values()) for i in range(3)) if work is None else work
+    per_step_s = (flops / (rates["gflops"] * 1e9) + calls * rates["ns_per_call"] * 1e-9
+                  + pairs * rates["ns_per_pair"] * 1e-9)
+    return {"flops_per_step": flops, "calls_per_step": calls, "pairs_per_step": pairs,
+            "us_per_cell_step": per_step_s * 1e6, "cells_per_s_core": 1.0 / (per_step_s * steps)}
 
 
 def jobs_figures(mission: Any, n_cells: int, jobs: tuple[int, ...] = (1, 2)) -> dict[str, Any]:
@@ -152,12 +195,15 @@ def jobs_figures(mission: Any, n_cells: int, jobs: tuple[int, ...] = (1, 2)) -> 
 def ceiling_figures(mission: Any, n_cells: int) -> dict[str, Any]:
     """Issue 25's figures: the ceiling, jobs 1 and 2, the fractions and the speed-up (see the module doc)."""
     load_before = os.getloadavg()
+    cores = cores_available()
     rates = machine_rates()
     top = ceiling(rates, mission.steps)
     jf = jobs_figures(mission, n_cells)
     rates_after = machine_rates()
+    cores_after = cores_available()
     one, two = jf[1], jf[2]
     out = {"rates": rates, "rates_after": rates_after, "ceiling": top, "jobs": jf, "cpus": os.cpu_count(),
+           "issue_ceiling": ceiling(rates, mission.steps, ISSUE_WORK), "cores": (cores, cores_after),
            "load_before": load_before, "load_after": os.getloadavg(),
            "fraction_2_cores": two["cells_per_s"] / (2 * top["cells_per_s_core"]),
            "fraction_cpu": two["cells_per_cpu_s"] / top["cells_per_s_core"],
@@ -173,11 +219,16 @@ def print_ceiling(out: dict[str, Any]) -> None:
                               out["ceiling"], out["jobs"])
     print(f"load average before {lb[0]:.2f} {lb[1]:.2f} {lb[2]:.2f}, after {la[0]:.2f} {la[1]:.2f} {la[2]:.2f} "
           f"({out['cpus']} cpus)")
-    print(f"machine: multiply-add {r['gflops']:.2f} GFLOP/s a core (after the sweeps {ra['gflops']:.2f}), "
-          f"libm sin/cos {r['ns_per_call']:.2f} ns a call ({ra['ns_per_call']:.2f})")
-    print(f"work per cell-step: {top['flops_per_step']} flops + {top['calls_per_step']} libm calls = "
+    print(f"cores this process gets (2 threads' CPU-s per wall-s): {out['cores'][0]:.2f} before, "
+          f"{out['cores'][1]:.2f} after: --jobs 2 can be at most that much faster than --jobs 1 now")
+    print(f"machine (thread CPU time): multiply-add {r['gflops']:.2f} GFLOP/s a core (after the sweeps "
+          f"{ra['gflops']:.2f}), libm sin/cos {r['ns_per_call']:.2f} ns a call ({ra['ns_per_call']:.2f}), "
+          f"a sin-cos pair {r['ns_per_pair']:.2f} ns ({ra['ns_per_pair']:.2f})")
+    print(f"work per cell-step: {top['flops_per_step']} flops + {top['calls_per_step']} libm calls + "
+          f"{top['pairs_per_step']} sin-cos pairs = "
           f"{top['us_per_cell_step']:.3f} us at best: ceiling {top['cells_per_s_core']:.0f} cells/s a core, "
-          f"{2 * top['cells_per_s_core']:.0f} on 2")
+          f"{2 * top['cells_per_s_core']:.0f} on 2 (with issue 25's count, {ISSUE_WORK[0]} flops + {ISSUE_WORK[1]} "
+          f"calls, no plant trig: {out['issue_ceiling']['cells_per_s_core']:.0f} a core)")
     for j in (1, 2):
         f = jf[j]
         print(f"--jobs {j}: {f['wall_s']:.1f} s wall, {f['cpu_s']:.1f} s CPU: {f['cells_per_s']:.1f} cells/s, "
@@ -185,7 +236,8 @@ def print_ceiling(out: dict[str, Any]) -> None:
     print(f"--jobs 2 against --jobs 1: {out['speedup']:.2f}x (target >= {TARGET_SPEEDUP}); rows identical: "
           f"{jf['same_rows']}; peak memory {jf['peak_rss_mib']:.0f} MiB (limit {LIMIT_GIB * 1024:.0f})")
     print(f"fraction of the 2-core ceiling: {100 * out['fraction_2_cores']:.0f} % in wall time (target >= "
-          f"{100 * TARGET_CEILING:.0f} %); of one core's, per CPU-second: {100 * out['fraction_cpu']:.0f} %")
+          f"{100 * TARGET_CEILING:.0f} %); per CPU-second, of one core's: {100 * out['fraction_cpu']:.0f} % "
+          f"(issue 25's count: {100 * jf[2]['cells_per_cpu_s'] / out['issue_ceiling']['cells_per_s_core']:.0f} %)")
     print("PASS" if out["ok"] else "FAIL")
 
 

@@ -233,7 +233,7 @@ class _Batch:
         _fly_blocks(c, a, steps, jobs, report)
         flown = a.flown
         outcome = np.where(a.diverged, "diverged", np.where(plan.failsafe_step < flown, "failsafe", "completed"))
-        met = Metrics(a.sq_sum, a.sq_max, a.last_out, a.tv, a.u2)
+        met = Metrics(a.sq_sum, a.sq_max, a.last_out, a.tv, a.u2.T)  # u2 as the ripple reads it, [steps, n]
         rms_from = min(RMS_FROM_S, 0.5 * m.duration_s)
         return measured_rows(met, flown, outcome, plan.counts(flown), list(m.trajectory.change_times()), rms_from,
                              t_all, clocks.rate_hz)

@@ -98,7 +98,7 @@ class Constants(NamedTuple):
 
 class Cells(NamedTuple):
     """Every cell's arrays: [n, ...] cell first where the engine made them, the plan's and the
-    predictor's in their own layout ([steps, n], [depth, n])."""
+    predictor's in their own layout ([n, steps], [depth, n])."""
 
     X: np.ndarray  # [n, 12] the plant's state
     ring_X: np.ndarray  # [n, R, 12] the states over the wire, by step
@@ -120,8 +120,8 @@ class Cells(NamedTuple):
     cmd_t: np.ndarray
     cmd_u: np.ndarray
     total: np.ndarray
-    mode: np.ndarray  # the plan's [steps, n] int8
-    state_step: np.ndarray  # [steps, n] int32
+    mode: np.ndarray  # the plan's [n, steps] int8
+    state_step: np.ndarray  # [n, steps] int32
     apply_check: np.ndarray  # [n, slots] int64
     apply_cmd: np.ndarray  # [n, slots] int32
     failsafe_step: np.ndarray  # [n] int64
@@ -132,7 +132,7 @@ class Cells(NamedTuple):
     sq_max: np.ndarray
     last_out: np.ndarray
     tv: np.ndarray
-    u2: np.ndarray  # [steps, n]
+    u2: np.ndarray  # [n, steps]
     u2_now: np.ndarray  # [n]
     seg_of: np.ndarray  # [steps] the set-point change each step follows (-1: none)
     late: np.ndarray  # [steps] bool: the step counts in the RMS
@@ -178,12 +178,12 @@ def _fly_cell(j, k0, k1, c, X, ring_X, ring_held, holding, omega, phases, law, x
         slot = k % n_ring
         for i in range(12):
             ring_X[j, slot, i] = w[i]
-        m = mode[k, j]
+        m = mode[j, k]
         if m != NONE:
-            r = ring_X[j, state_step[k, j] % n_ring]
+            r = ring_X[j, state_step[j, k] % n_ring]
             xg = (r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], r[9], r[10], r[11])
             if predicts:
-                xg = carry(j, a.t_step[state_step[k, j]], xg, t + lag, a.from_t, a.cache_t, a.cache_X,
+                xg = carry(j, a.t_step[state_step[j, k]], xg, t + lag, a.from_t, a.cache_t, a.cache_X,
                            a.cmd_t, a.cmd_u, a.total, c.dt_max, c.pm, c.pg, c.coef)
             u, real, cmd, od, xi, integ = _law_step(xg, _sample(refs, ref_idx[j], k), lc, xi, integ, od,
                                                     m == HOLD, c)
@@ -195,7 +195,7 @@ def _fly_cell(j, k0, k1, c, X, ring_X, ring_held, holding, omega, phases, law, x
             hslot = k % n_held
             for i in range(5):
                 ring_held[j, hslot, i] = held[i]
-        # the figures of the trace row of step k (bridge.batch.metrics.measure_step, one cell)
+        # the figures of the trace row of step k (bridge.batch.metrics.Metrics)
         ex, ey, ez = x[0] - refs[0, k, 0, 0], x[2] - refs[0, k, 1, 0], x[4] - refs[0, k, 2, 0]
         e2 = ex * ex + ey * ey + ez * ez
         if late[k]:
@@ -211,8 +211,8 @@ def _fly_cell(j, k0, k1, c, X, ring_X, ring_held, holding, omega, phases, law, x
             if abs(ez) > c.band[2]:
                 last_out[seg, 2, j] = k
         if k:
-            tv[j] += abs(u2 - u2_a[k - 1, j])
-        u2_a[k, j] = u2
+            tv[j] += abs(u2 - u2_a[j, k - 1])
+        u2_a[j, k] = u2
         if failsafe_step[j] == k:
             fs = True
         for i in range(S):
@@ -365,7 +365,7 @@ def batch_arrays(flights: Sequence[Flight], plan: LinkPlan, clocks: Clocks, refs
         pred.cache_X, pred.cmd_t, pred.cmd_u, pred.total, plan.mode, plan.state_step, plan.apply_check,
         plan.apply_cmd, plan.failsafe_step, np.zeros(n, np.int64), np.zeros(n, bool), np.ones(n, bool),
         np.zeros(n), np.zeros(n), np.full((max(1, len(changes)), 3, n), -1, np.int64), np.zeros(n),
-        np.zeros((steps, n)), np.zeros(n),
+        np.zeros((n, steps)), np.zeros(n),
         (np.searchsorted(np.array(changes), t_step, side="right") - 1).astype(np.int64),
         t_step >= min(RMS_FROM_S, 0.5 * m.duration_s), t_step, clocks.plant_t, np.ones(n, bool),
         np.full(n, steps, np.int64), np.zeros(n, bool))
