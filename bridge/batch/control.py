@@ -229,7 +229,7 @@ def _pid_advance(integral, err, dt, i_max, saturated, hold):  # pragma: no cover
         integral[0, j], integral[1, j], integral[2, j] = v
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def allocate_cell(u: tuple, motors: bool, u_max: tuple, b: float, d: float, omega_max: float,
                   w2_max: float) -> tuple:  # pragma: no cover
     """:func:`controller.actuation.allocate_motors` (``motors``) or ``allocate_wrench`` of one cell's wrench u:

@@ -143,7 +143,7 @@ class BatchPlant:
 
 
 # -- one cell (what the loops below and the whole flight's kernel, bridge.batch.flight, run per cell) ------
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def rk4_cell(x: tuple, u: tuple, ext: tuple, disturbed: bool, constants: tuple, h: float,
              ground: bool) -> tuple:  # pragma: no cover
     """:func:`plant.model.rk4_held` of one cell's state x (eq. 7) with u = (u1..u4 N, omega_d rad/s) held and the
@@ -158,7 +158,7 @@ def rk4_cell(x: tuple, u: tuple, ext: tuple, disturbed: bool, constants: tuple, 
     return y
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def disturbance_cell(freq_hz: float, const: tuple, amp: tuple, phases: tuple, t: float) -> tuple:  # pragma: no cover
     """:func:`plant.effects.disturbance_at` (fx, fy, fz N, tx, ty, tz N m) at t (s) for one cell's phases."""
     w = 2.0 * math.pi * freq_hz * t
@@ -167,7 +167,7 @@ def disturbance_cell(freq_hz: float, const: tuple, amp: tuple, phases: tuple, t:
             const[4] + amp[4] * math.sin(w + phases[4]), const[5] + amp[5] * math.sin(w + phases[5]))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def from_speeds(o: tuple, b: float, d: float) -> tuple:  # pragma: no cover
     """Eq. (4) and (5) of one cell: rotor speeds (rad/s) -> (u1..u4 N, omega_d rad/s), as
     :meth:`BatchPlant._from_speeds` computes them."""
@@ -175,7 +175,7 @@ def from_speeds(o: tuple, b: float, d: float) -> tuple:  # pragma: no cover
     return (b * (w0 + w1 + w2 + w3), b * (w3 - w1), b * (w2 - w0), d * (w1 + w3 - w0 - w2), o[1] + o[3] - o[0] - o[2])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def held_cell(c: tuple, motors: bool, lagged: bool, u_max: tuple, b: float, d: float,
               omega_max: float) -> tuple:  # pragma: no cover
     """:meth:`BatchPlant.held` of one cell's normalised command c: (u1..u4, omega_d), or with motor lag the
@@ -196,7 +196,7 @@ def _unit(v: float) -> float:  # pragma: no cover
     return 1.0 if v > 1.0 else v
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def diverged_cell(x: tuple) -> bool:  # pragma: no cover
     """:meth:`Quadrotor.diverged` of one cell's state: not finite, |position| > 100 m, or tilt beyond 90 degrees."""
     for i in range(12):

@@ -24,7 +24,7 @@ def _f32(v: float) -> float:
     return np.float64(np.float32(v))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def state_over_wire(x: tuple[float, ...]) -> tuple[float, ...]:  # pragma: no cover
     """:func:`bridge.core.wire.state_over_wire` of one cell's 12 states (a tuple, eq. 7 order)."""
     f = K.odometry_fields(x)
@@ -33,7 +33,7 @@ def state_over_wire(x: tuple[float, ...]) -> tuple[float, ...]:  # pragma: no co
     return K.state_from_odometry_fields(r)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def command_over_wire(v: tuple[float, float, float, float],
                       wrench: bool) -> tuple[float, float, float, float]:  # pragma: no cover
     """:func:`bridge.core.wire.command_over_wire`'s command as the vehicle reads it, for one cell's normalised
