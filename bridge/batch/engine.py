@@ -9,13 +9,14 @@ Out: per cell the measured columns of a ``cells.csv`` row (:data:`MEASURES`: ``r
      the same numbers :func:`bridge.sweep.cells.row_from_run` takes from the scalar loop's run;
      :func:`batch_problem` says in one line why a set of cells cannot be flown here
 
-The scalar loop (:func:`bridge.loop.fly`) stays the reference; this engine flies the same parts over a
-cell axis: the link model, the guard and the vehicle's timeout first, as a plan of the whole flight
+The scalar loop (:func:`bridge.loop.fly`) stays the reference; this engine flies the same parts cell by
+cell: the link model, the guard and the vehicle's timeout first, as a plan of the whole flight
 (:func:`bridge.link.plan.plan_links`: with no bandwidth queue and no re-arming nothing of it depends
-on the flight), then the plant (:class:`bridge.batch.plant.BatchPlant`), the laws and the actuation
-(:class:`bridge.batch.control.BatchController`), the prediction and the failsafe landing, step by step. The
-metrics are accumulated as the flight goes (running sums and maxima, the last step outside the settling
-band), with one column kept whole, u2, for the ripple of each cell's own second half; no trace is held.
+on the flight), then each cell's whole flight along it in one compiled call (:mod:`bridge.batch.flight`:
+the wire, the prediction, the law and actuation, the physics steps, the failsafe landing, the running
+figures), blocks of cells on ``jobs`` threads. The metrics are accumulated as the flight goes (running
+sums and maxima, the last step outside the settling band), with one column kept whole, u2, for the
+ripple of each cell's own second half; no trace is held.
 
 Cells may differ in law (``bsst``, ``smc``, ``pid``), seed, control rate (flown as separate batches) and
 every link setting but the bandwidth queue; they must share everything else (profile, effects, gains,

@@ -1,10 +1,10 @@
-"""The plant of :class:`plant.quadrotor.Quadrotor` for N cells at once: a compiled loop over the cell axis.
+"""The plant of :class:`plant.quadrotor.Quadrotor` for the batch: N cells' start, and one cell's step, compiled.
 
 In:  one profile and one set of effects for every cell, a seed per cell (the disturbance's phases), the
-     physics rate (Hz) and the start state (eq. 7: m, m/s, rad, rad/s); then per step what each cell's
-     command holds (see :meth:`BatchPlant.held`)
-Out: the states [12, N] (eq. 7 order, NWU), the realised wrench [4, N] (N), ground contact and divergence
-     per cell
+     physics rate (Hz) and the start state (eq. 7: m, m/s, rad, rad/s); per cell and physics step its
+     state, what its command holds (u1..u4 N and omega_d rad/s, or target rotor speeds rad/s) and the time (s)
+Out: :class:`BatchPlant`: the start (states [12, N], rotor speeds, what a command at rest holds, the
+     constants); per cell the state after a physics step, its disturbance, divergence
 
 The same model as the scalar plant: eq. (6) corrected, RK4 with the inputs held over a physics step,
 drag, motor lag, the external disturbance, mass and inertia mismatch, and the ground plane. The step of
@@ -100,49 +100,8 @@ class BatchPlant:
         """Hold what :meth:`held` gave for the cells ``cols`` (all by default) until their next command."""
         self.holding[:, slice(None) if cols is None else cols] = values
 
-    # -- dynamics ----------------------------------------------------------------------------------------
-    def _disturbance(self, t: float, out: np.ndarray) -> None:
-        """The external force (N) and torque (N m) at t into out [6, N] (plant.effects.disturbance_at)."""
-        d = self.effects.disturbance
-        w = 2.0 * math.pi * d.freq_hz * t
-        np.sin(w + self._phases, out=out)
-        out *= self._amp
-        out += self._const
 
-    def step(self) -> None:
-        """Advance every cell one physics step (RK4 of eq. 6, commands and rotor speeds held)."""
-        t, h = self.t, self.dt
-        if self.lagged:
-            self.omega += (self.target - self.omega) * self._lag_k
-            u, od = self._from_speeds(self.omega)
-            self.realised[...] = u
-            self.omega_d[...] = od[0]
-        ext = self._ext
-        if self.disturbed:
-            if self._ext_t == t:  # the last step's end is this one's start
-                ext[0] = ext[2]
-            else:
-                self._disturbance(t, ext[0])
-            self._disturbance(t + 0.5 * h, ext[1])
-            self._disturbance(t + h, ext[2])
-            self._ext_t = t + h
-        _rk4_step(self.X, self.realised, self.omega_d, ext, self.disturbed, self.body.constants, h, self.ground)
-        self.t = t + h
-
-    @property
-    def on_ground(self) -> np.ndarray:
-        """[N] bool: resting on the ground plane (z <= 0 and not rising)."""
-        X = self.X
-        return (X[4] <= 0.0) & (X[5] <= 0.0) & self.ground
-
-    def diverged(self) -> np.ndarray:
-        """[N] bool: :meth:`Quadrotor.diverged` — not finite, |position| > 100 m, or tilt beyond 90 degrees."""
-        bad = np.empty(self.n, bool)
-        _diverged(self.X, bad)
-        return bad
-
-
-# -- one cell (what the loops below and the whole flight's kernel, bridge.batch.flight, run per cell) ------
+# -- one cell (what the whole flight's kernel, bridge.batch.flight, runs per cell) ------
 @njit(cache=True, inline="always")
 def rk4_cell(x: tuple, u: tuple, ext: tuple, disturbed: bool, constants: tuple, h: float,
              ground: bool) -> tuple:  # pragma: no cover
@@ -206,26 +165,6 @@ def diverged_cell(x: tuple) -> bool:  # pragma: no cover
 
 
 # -- the compiled loops (each cell: the scalar plant's own functions, compiled) ----------------------------
-@njit(cache=True)
-def _rk4_step(X, realised, omega_d, ext, disturbed, constants, h, ground):  # pragma: no cover
-    """:func:`rk4_cell` of every cell in place. ext [3, 6, N]: the force (N) and torque (N m) at the step's
-    start, middle and end (read only when ``disturbed``)."""
-    for j in range(X.shape[1]):
-        u = (realised[0, j], realised[1, j], realised[2, j], realised[3, j], omega_d[j])
-        jj = j if disturbed else 0
-        e = ((ext[0, 0, jj], ext[0, 1, jj], ext[0, 2, jj], ext[0, 3, jj], ext[0, 4, jj], ext[0, 5, jj]),
-             (ext[1, 0, jj], ext[1, 1, jj], ext[1, 2, jj], ext[1, 3, jj], ext[1, 4, jj], ext[1, 5, jj]),
-             (ext[2, 0, jj], ext[2, 1, jj], ext[2, 2, jj], ext[2, 3, jj], ext[2, 4, jj], ext[2, 5, jj]))
-        K.put_column(X, j, rk4_cell(K.column(X, j), u, e, disturbed, constants, h, ground))
-
-
-@njit(cache=True)
-def _diverged(X: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover
-    """:func:`diverged_cell` of every cell into out [N] bool."""
-    for j in range(X.shape[1]):
-        out[j] = diverged_cell(K.column(X, j))
-
-
 @njit(cache=True)
 def _held_wrench(c, u_max, b, d, out):  # pragma: no cover
     """The ``wrench`` profile's :meth:`BatchPlant.held` per cell (c [4, k] -> out [5, k]): :func:`held_cell`."""
