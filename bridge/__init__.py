@@ -36,11 +36,14 @@ and a layer imports nothing above it (tests/test_layers.py checks it):
   - :mod:`bridge.record.runlog`   the run directory: trace, events, summary; :class:`~bridge.record.runlog.Run`
   - :mod:`bridge.record.joiner`   vehicle.csv + controller.csv -> trace.csv rows (SITL)
   - :mod:`bridge.record.metrics`  RMS, settling, finite-time bound, total variation, the summary
+  - :mod:`bridge.record.events`   a run's events, typed, with their sender as a field
+  - :mod:`bridge.record.summary`  a SITL session's summary.json, pure functions of what the session saw
   - :mod:`bridge.record.plots`    the paper-style figures
 
 - :mod:`bridge.nodes`: one process each
 
-  - :mod:`bridge.nodes.process`   status lines, stop signals and parent death for the child processes
+  - :mod:`bridge.nodes.process`   report lines, stop signals and parent death for the child processes
+  - :mod:`bridge.nodes.report`    the children's reports to the session: one JSON object a line, read in one place
   - :mod:`bridge.nodes.vehicle`   the simulated vehicle as a MAVLink endpoint (``bsst vehicle``)
   - :mod:`bridge.nodes.offboard`  the offboard controller as a MAVLink endpoint (``bsst controller``)
   - :mod:`bridge.nodes.relay`     a real-time UDP relay applying the link model on the wall clock (``bsst relay``)
@@ -48,6 +51,7 @@ and a layer imports nothing above it (tests/test_layers.py checks it):
 - :mod:`bridge.loop`: the in-process closed loop (``bsst sim``), :func:`~bridge.loop.simulate`
 - :mod:`bridge.session`: the SITL session launcher (``bsst sitl``), :func:`~bridge.session.sitl`
 
+  - :mod:`bridge.session.session`   the session: start, supervise and stop the children, summarise
   - :mod:`bridge.session.children`  the child processes and the instance lock
 
 - :mod:`bridge.sweep`: latency and dropout campaigns (``bsst sweep``)

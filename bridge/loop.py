@@ -19,6 +19,10 @@ they would cross the sockets: the state at t_k goes down to the controller's
 (``state_age_s`` in the trace is its age); the command goes up and acts at the physics
 step the model delivers it in (:mod:`bridge.link.ends`). A perfect link (the default)
 delivers both at once, which is exactly the loop without a link.
+
+The plant flies through the mission's wind and its timeline of faults (docs/weather.md): the vehicle acts on
+each event at the start of its control step. A touchdown too fast or too tilted while armed ends the flight
+``crashed`` (the plant's impact speed in the event); ``summary.json`` carries the ``wind`` and ``battery`` blocks.
 """
 
 from __future__ import annotations
@@ -28,12 +32,13 @@ from array import array
 from pathlib import Path
 from typing import Any
 
-from bridge.autopilot.simvehicle import FAILSAFE, LANDED, OFFBOARD
+from bridge.autopilot.simvehicle import FAILSAFE, LANDED, OFFBOARD, SimVehicle
 from bridge.core.flight import Flight, Overrides, Progress, prepare
 from bridge.core.wire import command_over_wire, state_over_wire
 from bridge.link.ends import ControllerEnd, VehicleEnd
 from bridge.record.columns import TRACE_COLUMNS, state_columns, trace_row
-from bridge.record.metrics import summarise
+from bridge.record.events import RunEvent
+from bridge.record.metrics import after_faults, impact_text, plant_summary, summarise
 from bridge.record.policies import ended_by_outcome, judge, rules_for, violation_text
 from bridge.record.runlog import Run, RunRecord, check_trace_steps, run_dir, trace_arrays
 from controller.link_guard import LinkGuard
@@ -91,6 +96,7 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
     events = record.events if record is not None else None
     outcome = "completed"
     failsafe_seen = False
+    impact_noted = False
     logged = 0
     noted = 0
     demanded = wire = (0.0, 0.0, 0.0, 0.0)
@@ -133,10 +139,9 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
                 logged += 1
                 if events is not None:
                     events.event(e.t, e.kind, e.text)
-            why = plant.diverged()
-            if why:
-                outcome = "diverged"
-                vehicle.event("diverged", why)
+            verdict, impact_noted = plant_verdict(vehicle, impact_noted)
+            if verdict:
+                outcome = verdict
                 break
             if vehicle.mode in (FAILSAFE, LANDED):
                 failsafe_seen = True
@@ -153,19 +158,35 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
         raise
     try:  # the record stays open for the verdicts' lines, and is closed whatever happens
         arrays = trace_arrays(rows, TRACE_COLUMNS)
-        ev = [{"t": round(e.t, 6), "kind": e.kind, "text": e.text} for e in vehicle.events]
+        ev = [RunEvent(round(e.t, 6), e.kind, e.text, by=e.by) for e in vehicle.events]
+        shown = [e.as_dict() for e in ev]
         link = {"up": up.stats.summary(), "down": down.stats.summary(), "rejected": dict(vend.rejected)}
-        summary = summarise(arrays, m, flight.gains, clock="offline", outcome=outcome, events=ev, link=link,
+        summary = summarise(arrays, m, flight.gains, clock="offline", outcome=outcome, events=shown, link=link,
                             estimator=flight.estimator, sensors=flight.sensors.name)
-        summary["ended_by"] = ended_by_outcome(outcome, ev)
+        summary.update(plant_summary(plant, arrays, shown))
+        summary["ended_by"] = {**ended_by_outcome(outcome, ev), **after_faults(outcome, shown)}
         for v in judge(summary, arrays, ev, rules_for(flight, "offline", link)):
             vehicle.event("policy", violation_text(v))
-            ev.append({"t": round(vehicle.t, 6), "kind": "policy", "text": violation_text(v)})
+            shown.append({"t": round(vehicle.t, 6), "kind": "policy", "text": violation_text(v)})
     finally:
         _close_record(record, vehicle.events[logged:])
     if record is not None:
         record.finish(arrays, summary, f"{m.name} ({m.controller}, {flight.profile.name})", plots)
     return Run(arrays, summary, path)
+
+
+def plant_verdict(vehicle: SimVehicle, impact_noted: bool) -> tuple[str | None, bool]:
+    """``diverged`` or ``crashed`` when the plant ends the flight now (its event logged), else None; and whether
+    its hard touchdown is noted (a disarmed vehicle's is logged once as an ``impact``, and the flight goes on)."""
+    plant = vehicle.plant
+    why = plant.diverged()
+    if why:
+        vehicle.event("diverged", why)
+        return "diverged", impact_noted
+    if plant.impact is None or impact_noted:
+        return None, impact_noted
+    vehicle.event("crashed" if vehicle.armed else "impact", impact_text(plant.impact, vehicle.armed))
+    return ("crashed" if vehicle.armed else None), True
 
 
 def _close_record(record: RunRecord | None, unlogged: list[Any]) -> None:

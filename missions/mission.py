@@ -9,8 +9,9 @@ Out: a frozen, validated :class:`Mission` (its trajectory a :class:`~missions.re
      TOML-ready table a run's ``mission.toml`` holds
 
 A mission names its trajectory, duration, vehicle profile, controller and gains, rates,
-effects, link impairment and seed. The tables ``[gains]``, ``[effects]``, ``[link]``,
-``[failsafe]``, ``[sensors]``, ``[estimator]`` and ``[params]`` belong to other parts (controller, plant, bridge):
+effects, link impairment, wind, timeline of events and seed. The tables ``[gains]``, ``[effects]``, ``[link]``,
+``[failsafe]``, ``[sensors]``, ``[estimator]``, ``[params]``, ``[wind]`` and ``[[events]]`` belong to other parts
+(controller, plant, bridge):
 they are kept here as raw tables with their source and validated by the part that owns them when a run is built, so
 errors still name the file and the key.
 """
@@ -70,6 +71,8 @@ class Mission:
     estimator: Mapping[str, Any] = field(default_factory=dict)  # raw: bridge.core.flight validates kind
     params: Mapping[str, Any] = field(default_factory=dict)  # raw: bridge.autopilot.params.params_from_table
     source: str = "<python>"
+    wind: Mapping[str, Any] = field(default_factory=dict)  # raw: plant.wind.wind_from_table
+    events: tuple[Mapping[str, Any], ...] = ()  # raw [[events]]: plant.events.timeline_from_tables
 
     def __post_init__(self) -> None:
         why = name_problem(self.name)
@@ -106,9 +109,11 @@ class Mission:
             d["actuation"] = self.actuation
         d["start"] = {"position": list(self.start[:3]), "psi": self.start[3]}
         d["trajectory"] = self.trajectory.to_dict()
-        for k in ("gains", "effects", "link", "failsafe", "sensors", "estimator", "params"):
+        for k in ("gains", "effects", "link", "failsafe", "sensors", "estimator", "params", "wind"):
             if getattr(self, k):
                 d[k] = dict(getattr(self, k))
+        if self.events:
+            d["events"] = [dict(e) for e in self.events]
         return d
 
     @property
@@ -257,7 +262,10 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
     start = st.vector("position", 3, (0.0, 0.0, 0.0), lo=-1e4, hi=1e4) + (st.number("psi", 0.0, lo=-10, hi=10),)
     st.done()
     trajectory = _trajectory(t.table("trajectory", required=True), duration)
-    raw = {k: _table(t, k) for k in ("gains", "effects", "link", "failsafe", "sensors", "estimator", "params")}
+    raw = {k: _table(t, k) for k in ("gains", "effects", "link", "failsafe", "sensors", "estimator", "params", "wind")}
+    events = t.raw("events", [])
+    if not isinstance(events, list) or not all(isinstance(e, Mapping) for e in events):
+        raise t.error("events", "expected an array of tables [[events]] (t_s, kind and its settings)")
     t.done()
     return Mission(
         trajectory=trajectory,
@@ -272,6 +280,7 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
         seed=seed,
         start=start,  # type: ignore[arg-type]
         source=source,
+        events=tuple(events),
         **raw,
     )
 

@@ -2,8 +2,8 @@
 disturbance and parameter mismatch. The controller never sees them: they are what its
 super-twisting terms must reject.
 
-In:  a mission's ``[effects]`` table (drag on/off, motor lag on/off, disturbance N and N m, Hz; mass and
-     inertia scales), a seed
+In:  a mission's ``[effects]`` table (drag on/off, motor lag on/off, battery on/off, disturbance N and N m, Hz;
+     mass and inertia scales), a seed
 Out: :class:`Effects`, the disturbance force (N) and torque (N m) at a time (s)
 """
 
@@ -62,12 +62,15 @@ class Effects:
     disturbance: Disturbance = field(default_factory=Disturbance)
     mass_scale: float = 1.0
     inertia_scale: float = 1.0
+    battery: bool = False  # the profile's [battery]: its voltage sags under load and caps the rotors' speed
+
 
 
 def effects_from_table(t: Table) -> Effects:
     """Validate a mission's ``[effects]`` table (errors name the file and key)."""
     drag = t.boolean("drag", False)
     motor_lag = t.boolean("motor_lag", False)
+    battery = t.boolean("battery", False)
     d = t.table("disturbance")
     dist = Disturbance(
         force_const=d.vector("force", 3, _ZERO3, lo=-1e4, hi=1e4),
@@ -83,4 +86,4 @@ def effects_from_table(t: Table) -> Effects:
     inertia_scale = m.number("inertia_scale", 1.0, lo=0.1, hi=10.0)
     m.done()
     t.done()
-    return Effects(drag, motor_lag, dist, mass_scale, inertia_scale)
+    return Effects(drag, motor_lag, dist, mass_scale, inertia_scale, battery)

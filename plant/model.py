@@ -8,7 +8,8 @@ Corrections to the printed eq. (6):
 - theta'' coupling is (I_z - I_x)/I_y (printed (I_x - I_z)/I_y): Euler's equations.
 - the gyroscopic term uses the signed rotor-speed sum omega_d of eq. (5).
 Outside the paper's model, and off unless asked for: linear drag (Table 1's k1..k6 as
--k*v on the translation and -k*rate on the rotation) and an external force/torque.
+-k*v on the translation and -k*rate on the rotation), an external force/torque, and the air
+(wind: the drag on the airspeed and the rotors' induced drag, :func:`rk4_held`'s ``air``).
 
 :func:`state_derivative` is eq. (6) itself; :func:`rk4_step_held` is one RK4 step of it
 with the inputs held, specialised for speed (the plant's 1 kHz step): :func:`rk4_held`, a plain-float
@@ -16,7 +17,7 @@ function the batch engine compiles for its cells (numba, bridge.batch.kernels).
 
 In:  the state X (eq. 7: m, m/s, rad, rad/s), the inputs u1 (N), u2..u4 (N; the torques are l u), omega_d
      (rad/s, eq. 5), the airframe's constants (:class:`RigidBody`: kg, m/s^2, kg m^2, m), the step h (s),
-     optionally an external force (N) and torque (N m)
+     optionally an external force (N) and torque (N m), the wind (m/s) and the rotor-drag coefficient (s/m)
 Out: dX/dt, or the state after one RK4 step
 """
 
@@ -139,17 +140,27 @@ def rk4_step_held(
     body: RigidBody,
     h: float,
     ext: tuple[Ext, Ext, Ext] | None = None,
+    air: tuple[float, float, float, float] | None = None,
 ) -> State:
     """One classical RK4 step of eq. (6) over h (s), inputs and omega_d held (zero-order hold):
-    :func:`rk4_held` with the body's constants."""
-    return rk4_held(X, u1, u2, u3, u4, omega_d, body.constants, h, ext)  # type: ignore[return-value]
+    :func:`rk4_held` with the body's constants (``air``: the held wind and rotor drag, or None)."""
+    if air is None:
+        return rk4_held(X, u1, u2, u3, u4, omega_d, body.constants, h, ext)  # type: ignore[return-value]
+    return rk4_held(X, u1, u2, u3, u4, omega_d, body.constants, h, ext, air)  # type: ignore[return-value]
 
 
 def rk4_held(X: tuple[float, ...], u1: float, u2: float, u3: float, u4: float, omega_d: float,
-             K: tuple[float, ...], h: float, ext: tuple[Ext, Ext, Ext] | None) -> tuple[float, ...]:
+             K: tuple[float, ...], h: float, ext: tuple[Ext, Ext, Ext] | None,
+             air: tuple[float, float, float, float] | None = None) -> tuple[float, ...]:
     """One classical RK4 step of eq. (6) over h (s), inputs (u1 N, u2..u4 N) and omega_d (rad/s) held;
     K = :func:`rk4_constants`; ``ext`` the external (fx, fy, fz, tx, ty, tz) at t, t + h/2 and t + h
     (N, N m), or None.
+
+    ``air`` = (wx, wy, wz, c_r): the wind (m/s, NWU) held over the step and the rotor-drag coefficient
+    (s/m), or None (still air: drag on the ground velocity, no rotor drag, the paper's eq. 6 exactly).
+    With it the translational drag acts on the airspeed v_a = v − w, and the rotors add the induced drag
+    −c_r u1 (v_a − (v_a·n) n), n the thrust axis: proportional to the thrust and to the airspeed in the
+    rotor plane (docs/weather.md).
 
     Bit for bit the step ``plant.integrate.rk4_step(f, t, X, h)`` takes with f the
     derivative of :func:`state_derivative` (same operations in the same order; tested), in
@@ -176,9 +187,18 @@ def rk4_held(X: tuple[float, ...], u1: float, u2: float, u3: float, u4: float, o
         cp = cos(p)
         sp = sin(p)
         cf_st = cf * st
-        ax = (cf_st * cp + sf * sp) * a - kv0 * v1
-        ay = (cf_st * sp - sf * cp) * a - kv1 * v2
-        az = cf * cos(t) * a - g - kv2 * v3
+        if air is None:
+            ax = (cf_st * cp + sf * sp) * a - kv0 * v1
+            ay = (cf_st * sp - sf * cp) * a - kv1 * v2
+            az = cf * cos(t) * a - g - kv2 * v3
+        else:  # through the air: drag on the airspeed, rotor drag in the rotor plane
+            nx, ny, nz = cf_st * cp + sf * sp, cf_st * sp - sf * cp, cf * cos(t)
+            rx, ry, rz = v1 - air[0], v2 - air[1], v3 - air[2]
+            dot = rx * nx + ry * ny + rz * nz
+            kr = air[3] * a
+            ax = nx * a - kv0 * rx - kr * (rx - dot * nx)
+            ay = ny * a - kv1 * ry - kr * (ry - dot * ny)
+            az = nz * a - g - kv2 * rz - kr * (rz - dot * nz)
         ddf = i1 * dt * dp - jr_x * dt * omega_d + tx - kw0 * df
         ddt = i2 * df * dp + jr_y * df * omega_d + ty - kw1 * dt
         ddp = i3 * df * dt + tz - kw2 * dp

@@ -6,7 +6,7 @@ A profile's ``[sensors]`` table holds named sensor sets (:mod:`plant.sensors`); 
 one and overrides its keys with :func:`sensors_from_table`.
 
 In:  a profile name or TOML (mass kg, inertias kg m^2, arm m, rotor inertia kg m^2, b N s^2, d N m s^2,
-     omega_max rad/s, actuation, limits N)
+     omega_max rad/s, actuation, limits N, rotor drag s/m, an optional [battery])
 Out: a frozen :class:`Profile`, its hover speed (rad/s) and limits u_max (N)
 """
 
@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from params import ConfigError, Table, load_toml
+from plant.battery import BatteryConfig, battery_from_table
 from plant.sensors import CLASS_KEYS, IDEAL, SensorConfig, sensor_config_from_table, sensor_sets_from_table
 
 PROFILE_DIR = Path(__file__).with_name("profiles")
@@ -48,6 +49,8 @@ class Profile:
     motor_time_constant: float
     u_max: tuple[float, float, float, float]
     sensors: tuple[tuple[str, SensorConfig], ...] = (("ideal", IDEAL),)  # (name, set), as in the file
+    rotor_drag: float = 0.0  # s/m: the rotors' induced drag per N of thrust and m/s of in-plane airspeed (in wind)
+    battery: BatteryConfig | None = None  # the flight battery ([battery]; flown with [effects] battery = true)
 
     def sensor_set(self, name: str) -> SensorConfig:
         """The named sensor set; ConfigError naming the sets there are if there is none."""
@@ -102,6 +105,8 @@ def profile_from_table(data: dict, source: str) -> Profile:
     omega_max = t.number("omega_max", lo=0.0, lo_open=True)
     drag = t.vector("drag", 6, (0.0,) * 6, lo=0.0)
     tau = t.number("motor_time_constant", 0.02, lo=0.0, lo_open=True, hi=10.0)
+    rotor_drag = t.number("rotor_drag", 0.0, lo=0.0, hi=1.0)
+    battery = battery_from_table(t.table("battery")) if t.has("battery") else None
     hover = math.sqrt(mass * g / (4.0 * b))
     if omega_max <= hover:
         raise t.error("omega_max", f"must be above the hover speed {hover:.4g} rad/s, got {omega_max:g}")
@@ -118,7 +123,8 @@ def profile_from_table(data: dict, source: str) -> Profile:
     t.done()
     if actuation == "motors" and u_max[0] > envelope[0] * (1 + 1e-9):
         raise lim.error("u1", f"exceeds what the rotors give (4 b w_max^2 = {envelope[0]:.4g} N)")
-    return Profile(name, actuation, mass, arm, ixx, iyy, izz, jr, b, d, g, omega_max, drag, tau, u_max, sensors)
+    return Profile(name, actuation, mass, arm, ixx, iyy, izz, jr, b, d, g, omega_max, drag, tau, u_max, sensors,
+                   rotor_drag, battery)
 
 
 NOISE_SCALE_RANGE = (0.0, 100.0)  # the mission's [sensors] noise_scale: multiplies every sigma of the set

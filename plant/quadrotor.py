@@ -3,9 +3,11 @@
 The ground is the plane z = 0 (paper frame, z up; missions start there at rest); pass
 ``ground=False`` for free flight.
 
-In:  a profile and its effects, the physics rate (Hz), a start state (eq. 7: m, m/s, rad, rad/s); then a
-     normalised command (held) per control period
-Out: the state after each physics step, the realised wrench (N), the rotor speeds (rad/s), ground contact
+In:  a profile and its effects, the physics rate (Hz), a start state (eq. 7: m, m/s, rad, rad/s), the wind
+     (:class:`plant.wind.WindConfig`, or None: still air); then a normalised command (held) per control
+     period, and faults (a rotor's effectiveness 0..1)
+Out: the state after each physics step, the realised wrench (N), the rotor speeds (rad/s), ground contact and
+     a hard touchdown (impact speed m/s, tilt rad), the wind (m/s) and battery (V, A, mAh) statistics
 
 One object with a small interface, in the RotorPy manner: :meth:`Quadrotor.command` sets
 the actuator command (held until the next call: zero-order hold) and :meth:`Quadrotor.step`
@@ -21,6 +23,7 @@ from __future__ import annotations
 
 import math
 
+from plant.battery import Battery
 from plant.effects import Effects, disturbance_at
 from plant.model import RigidBody, State, rigid_body, rk4_step_held, state_derivative
 from plant.profiles import Profile
@@ -30,10 +33,16 @@ from plant.rotors import (
     motor_speeds_from_wrench,
     signed_speed_sum,
     wrench_command,
+    wrench_from_degraded_rotors,
     wrench_from_motor_speeds,
 )
+from plant.wind import Wind, WindConfig
 
 AT_REST: State = (0.0,) * 12  # type: ignore[assignment]
+
+
+CRASH_SPEED_MPS = 2.0  # m/s: a touchdown faster than this breaks the vehicle (docs/weather.md "Outcomes")
+CRASH_TILT_RAD = math.radians(30.0)  # rad: a touchdown tilted more than this lands on a rotor, not the legs
 
 
 def ground_contact(X: tuple[float, ...]) -> State:
@@ -54,10 +63,13 @@ class Quadrotor:
         physics_hz: float = 1000.0,
         state: State = AT_REST,
         ground: bool = True,
+        wind: WindConfig | None = None,
     ) -> None:
         self.profile = profile
         self.effects = effects or Effects()
         e = self.effects
+        # in wind the air acts through the drag: a wind turns the profile's drag on, on the airspeed
+        self.wind = Wind(wind, seed, 1.0 / physics_hz) if wind is not None else None
         self.body: RigidBody = rigid_body(
             mass=profile.mass * e.mass_scale,
             ixx=profile.ixx * e.inertia_scale,
@@ -66,7 +78,7 @@ class Quadrotor:
             arm=profile.arm,
             rotor_inertia=profile.rotor_inertia,
             gravity=profile.gravity,
-            drag=profile.drag if e.drag else (0.0,) * 6,
+            drag=profile.drag if e.drag or wind is not None else (0.0,) * 6,
         )
         self.dt = 1.0 / physics_hz
         self.ground = ground
@@ -80,6 +92,10 @@ class Quadrotor:
         self._omega_target = self.omega
         self.realised: tuple[float, float, float, float] = (0.0,) * 4
         self._omega_d = 0.0
+        self.effectiveness: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)  # each rotor's, 0..1
+        self.battery = Battery(profile.battery) if e.battery and profile.battery is not None else None
+        self._speed_cap = 1.0  # the rotors' top speed now, a fraction of omega_max (the battery's sag)
+        self.impact: tuple[float, float, float] | None = None  # the first hard touchdown: (t s, speed m/s, tilt rad)
         self.command((0.0, 0.0, 0.0, 0.0))
 
     # -- actuation -----------------------------------------------------------------
@@ -93,15 +109,27 @@ class Quadrotor:
             self._omega_d = signed_speed_sum(self.omega)
         else:
             w = p.omega_max
-            self._omega_target = tuple(clip(ci, 0.0, 1.0) * w for ci in c)  # type: ignore[assignment]
+            cap = self._speed_cap
+            self._omega_target = tuple(clip(ci, 0.0, cap) * w for ci in c)  # type: ignore[assignment]
             if not self.effects.motor_lag:
                 self._set_omega(self._omega_target)
 
     def _set_omega(self, omega: tuple[float, float, float, float]) -> None:
         p = self.profile
         self.omega = omega
-        self.realised = wrench_from_motor_speeds(omega, p.thrust_coeff, p.drag_coeff)
+        if self.effectiveness == (1.0, 1.0, 1.0, 1.0):
+            self.realised = wrench_from_motor_speeds(omega, p.thrust_coeff, p.drag_coeff)
+        else:
+            self.realised = wrench_from_degraded_rotors(omega, self.effectiveness, p.thrust_coeff, p.drag_coeff)
         self._omega_d = signed_speed_sum(omega)
+
+    def set_effectiveness(self, rotor: int, value: float) -> None:
+        """Rotor ``rotor`` (1-4, eq. 4's numbering) gives ``value`` (0..1) of its thrust from now on (a fault)."""
+        e = list(self.effectiveness)
+        e[rotor - 1] = value
+        self.effectiveness = tuple(e)  # type: ignore[assignment]
+        if self.profile.actuation == "motors":
+            self._set_omega(self.omega)
 
     # -- dynamics ------------------------------------------------------------------
     def derivative(self, t: float, X: State) -> State:
@@ -116,6 +144,8 @@ class Quadrotor:
         The same step as ``plant.integrate.rk4_step(self.derivative, ...)``, specialised
         (:func:`plant.model.rk4_step_held`)."""
         t, h = self.t, self.dt
+        if self.battery is not None:
+            self._draw_battery(h)
         if self._lagged:
             self._set_omega(motor_lag_step(self.omega, self._omega_target, h, self.profile.motor_time_constant))
         ext = None
@@ -124,11 +154,37 @@ class Quadrotor:
             mid = disturbance_at(d, ph, t + 0.5 * h)
             ext = (disturbance_at(d, ph, t), mid, disturbance_at(d, ph, t + h))
         u1, u2, u3, u4 = self.realised
-        X = rk4_step_held(self.state, u1, u2, u3, u4, self._omega_d, self.body, h, ext)  # type: ignore[arg-type]
+        if self.wind is None:
+            X = rk4_step_held(self.state, u1, u2, u3, u4, self._omega_d, self.body, h, ext)  # type: ignore[arg-type]
+        else:  # the wind at the step's start, held over it; the turbulence then advances to the next step
+            wx, wy, wz = self.wind.now(t)
+            X = rk4_step_held(self.state, u1, u2, u3, u4, self._omega_d, self.body, h, ext,  # type: ignore[arg-type]
+                              (wx, wy, wz, self.profile.rotor_drag))
+            self.wind.advance()
         if self.ground and X[4] < 0.0:
+            if self.impact is None:
+                self._touchdown(t + h, X)
             X = ground_contact(X)
         self.state = X  # type: ignore[assignment]
         self.t = t + h
+
+    def _touchdown(self, t: float, X: tuple[float, ...]) -> None:
+        """Record a touchdown too fast (over CRASH_SPEED_MPS) or too tilted (over CRASH_TILT_RAD) as the impact."""
+        speed = math.sqrt(X[1] * X[1] + X[3] * X[3] + X[5] * X[5])
+        tilt = math.acos(max(-1.0, min(1.0, math.cos(X[6]) * math.cos(X[8]))))
+        if speed > CRASH_SPEED_MPS or tilt > CRASH_TILT_RAD:
+            self.impact = (t, speed, tilt)
+
+    def _draw_battery(self, h: float) -> None:
+        """The battery over this step: its sag caps the rotors' top speed (the command's clip and the speeds now)."""
+        p = self.profile
+        assert self.battery is not None
+        self._speed_cap = min(self.battery.step(self.omega, p.drag_coeff * p.arm, h), 1.0)
+        top = self._speed_cap * p.omega_max
+        if any(o > top for o in self._omega_target):
+            self._omega_target = tuple(min(o, top) for o in self._omega_target)  # type: ignore[assignment]
+            if not self._lagged:
+                self._set_omega(self._omega_target)
 
     @property
     def on_ground(self) -> bool:

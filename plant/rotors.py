@@ -37,6 +37,13 @@ def wrench_from_motor_speeds(omega: Quad, b: float, d: float) -> Quad:
     return (b * (w1 + w2 + w3 + w4), b * (w4 - w2), b * (w3 - w1), d * (w2 + w4 - w1 - w3))
 
 
+def wrench_from_degraded_rotors(omega: Quad, effectiveness: Quad, b: float, d: float) -> Quad:
+    """Eq. (4) with rotor i giving ``effectiveness[i]`` (0..1) of its thrust and drag torque (a damaged or
+    failed rotor: 0 is off)."""
+    w1, w2, w3, w4 = (o * o * e for o, e in zip(omega, effectiveness, strict=True))
+    return (b * (w1 + w2 + w3 + w4), b * (w4 - w2), b * (w3 - w1), d * (w2 + w4 - w1 - w3))
+
+
 def motor_speeds_from_wrench(u: Quad, b: float, d: float) -> Quad:
     """Eq. (4) inverted, with no envelope: (u1..u4) -> rotor speeds (rad/s).
 

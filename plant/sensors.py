@@ -46,6 +46,7 @@ from typing import Any
 import numpy as np
 
 from params import Table
+from plant.sensorfaults import SensorFaults
 
 State = tuple[float, ...]
 Vec3 = tuple[float, float, float]
@@ -356,6 +357,7 @@ class SensorSuite:
         self._pending: deque[Measurement] = deque()  # latent position fixes, in order of arrival
         self.next_event = -math.inf  # nothing to do before this time (s), give or take eps
         self._latest: dict[str, Measurement] = {}  # kind -> the newest released (what a ground station is shown)
+        self.faults = SensorFaults()  # what a timeline's sensor events changed (plant/events.py)
         if self._gnss:
             h, z, vh, vz = c.position_noise_m, c.position_noise_z_m, c.velocity_noise_mps, c.velocity_noise_z_mps
             self._pos_sigma = (h, h, z, vh, vh, vz)
@@ -387,7 +389,9 @@ class SensorSuite:
             if m is not None:
                 out.append(m)
         if te >= self._pos.next_due and self._pos.due(t):
-            self._pending.append(self._sample_position(t, state))
+            fix = self._sample_position(t, state)
+            if self.faults.gps_on:  # off: drawn and dropped (plant/sensorfaults.py)
+                self._pending.append(fix)
         pending = self._pending
         while pending and pending[0].t_arrival <= te:
             out.append(pending.popleft())
@@ -395,11 +399,14 @@ class SensorSuite:
         if te >= self._baro.next_due and self._baro.due(t):
             s = c.baro_noise_m
             z = state[4] + (s * self._n_baro.next()[0] if s else 0.0)
+            if self.faults.baro_drift_mps or self.faults.baro_offset_m:
+                z += self.faults.baro_error(t)
             out.append(Measurement(BARO, t, t, (z,), (s,)))
         if te >= self._heading.next_due and self._heading.due(t):
             s = c.heading_noise_rad
             psi = wrap_angle(state[10] + (s * self._n_heading.next()[0] if s else 0.0))
-            out.append(Measurement(HEADING, t, t, (psi,), (s,)))
+            if self.faults.mag_on:
+                out.append(Measurement(HEADING, t, t, (psi,), (s,)))
         return out
 
     def _sample_imu(self, t: float, X: State) -> Measurement | None:
@@ -435,6 +442,9 @@ class SensorSuite:
     def _sample_position(self, t: float, X: State) -> Measurement:
         s = self._pos_sigma
         n = self._n_pos.next() if any(s) else (0.0,) * 6
+        if self.faults.position_offset != (0.0, 0.0, 0.0):  # a GPS jump: the fixes from then on shifted
+            dx, dy, dz = self.faults.position_offset
+            X = (X[0] + dx, X[1], X[2] + dy, X[3], X[4] + dz, *X[5:])
         if self._gnss:
             values = (X[0] + s[0] * n[0], X[2] + s[1] * n[1], X[4] + s[2] * n[2],
                       X[1] + s[3] * n[3], X[3] + s[4] * n[4], X[5] + s[5] * n[5])

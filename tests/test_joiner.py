@@ -11,11 +11,12 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from bridge.core.flight import prepare
 from bridge.nodes.vehicle import MODE_CODES
-from bridge.record.columns import CONTROLLER_COLUMNS, TRACE_COLUMNS, VEHICLE_COLUMNS
-from bridge.record.joiner import TraceJoiner
+from bridge.record.columns import CONTROLLER_COLUMNS, TRACE_COLUMNS, VEHICLE_COLUMNS, ControllerRow, VehicleRow
+from bridge.record.joiner import PartReader, TraceJoiner
 from bridge.record.metrics import ripple_rms
 from missions import MISSION_DIR
 
@@ -49,7 +50,7 @@ def test_steps_flown_on_a_command_whose_row_was_never_written_are_kept_with_the_
     j.controller_done = True
     assert j.update() == 7
     j.close()
-    col = {c: np.array([r[i] for r in j.rows]) for i, c in enumerate(TRACE_COLUMNS)}
+    col = {c: np.array([getattr(r, c) for r in j.rows]) for c in TRACE_COLUMNS}
     assert np.allclose(col["t"], np.arange(12) / RATE) and np.allclose(col["x"], 0.001 * np.arange(12))
     assert np.all(np.diff(col["t"]) > 0)
     assert list(col["u1"][:5]) == [4.0, 5.0, 6.0, 7.0, 8.0]
@@ -66,3 +67,14 @@ def test_ripple_ignores_an_unknown_stretch_of_demand() -> None:
     holed[1500:1600] = np.nan
     got = ripple_rms(t, holed, RATE)
     assert math.isfinite(got) and abs(got - clean) < 0.05 * clean
+
+
+def test_a_part_file_is_read_by_its_own_header(tmp_path: Path) -> None:
+    """Columns in another order are read by name; a missing column is an error that names it."""
+    shuffled = tuple(reversed(CONTROLLER_COLUMNS))
+    _write(tmp_path / "controller.csv", shuffled, [{"k": 3.0, "u1": 4.5, "cmd_sent_wall": 7.0}])
+    rows = PartReader(tmp_path / "controller.csv", ControllerRow).read()
+    assert [(r.k, r.u1, r.cmd_sent_wall, r.u2) for r in rows] == [(3.0, 4.5, 7.0, 0.0)]
+    _write(tmp_path / "vehicle.csv", tuple(c for c in VEHICLE_COLUMNS if c != "cmd_k"), [{"k": 0.0}])
+    with pytest.raises(ValueError, match="vehicle.csv: no column 'cmd_k'"):
+        PartReader(tmp_path / "vehicle.csv", VehicleRow).read()

@@ -111,7 +111,7 @@ def _fails(path: Path, key: str, words: str = "") -> str:
         ('controller = "bsst"', 'controller = "lqr"', "controller", "bsst, smc, pid"),
         ('profile = "paper"', 'profile = "f450"', "profile", "unknown profile"),
         ('profile = "paper"', "profile = 3", "profile", "expected a string"),
-        ('name = "step"', 'name = "step"\nwind = 3', "wind", "unknown key"),
+        ('name = "step"', 'name = "step"\nweather = 3', "weather", "unknown key"),
         ('kind = "step"', 'kind = "spiral"', "trajectory.kind", "step, sine, waypoints"),
         ("setpoints = [", "points = [", "trajectory.setpoints", "non-empty list"),
         ("{ t = 10.0,", "{ t = 40.0,", "trajectory.setpoints[1].t", "[0, 30]"),

@@ -13,7 +13,6 @@ arrival schedule alone cannot: that way down is part of every state's age.
 
 from __future__ import annotations
 
-import json
 import select
 import socket
 import time
@@ -26,6 +25,7 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.core.wire import state_to_odometry, step_usec
+from bridge.nodes.report import Done, Stats, parse_line
 from tests.sitlkit import Proc
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -238,8 +238,9 @@ def test_a_state_stamped_far_ahead_or_back_is_refused_and_the_mission_flies_on(t
     answers either stamp."""
     steps = round(1.4 * RATE)  # MISSION's duration
     f = fly(tmp_path, spoofs={30: 10**12, 40: 1})
-    stats = json.loads(next(line for line in f.lines if line.startswith("stats ")).partition(" ")[2])
+    reports = [parse_line(line) for line in f.lines]
+    stats = next(r for r in reports if isinstance(r, Stats)).values
     assert stats["rejected"].get("stamp_jump") == 2, stats["rejected"]
     assert len(f.steps) >= steps, f"disarmed after {len(f.steps)} of the mission's {steps} steps"
     assert all(0 <= s < len(f.steps) for s in f.targets), sorted(f.targets)[-3:]
-    assert any(line.startswith("done outcome=completed") for line in f.lines), f.lines[-5:]
+    assert any(isinstance(r, Done) and r.outcome == "completed" for r in reports), f.lines[-5:]

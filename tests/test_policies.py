@@ -2,7 +2,8 @@
 
 The safety policies of :mod:`bridge.record.policies`, each on a synthetic trace and events that
 break it and on ones that keep it; the honest records (sender, lockstep, who ended a flight);
-and the exit status a violation gives ``bsst sim`` / ``bsst sitl``.
+and the exit status a violation gives ``bsst sim`` / ``bsst sitl``. Events are
+:class:`~bridge.record.events.RunEvent` with their sender as a field (``by``).
 
 Every shipped mission, offline and in SITL, is checked against the same policies where it is
 flown (tests/test_scenarios.py, tests/test_sitl.py).
@@ -15,11 +16,12 @@ import math
 import numpy as np
 import pytest
 
+from bridge.autopilot.simvehicle import ITSELF, Sender
 from bridge.cli.commands import report_run
+from bridge.record.events import RunEvent
 from bridge.record.policies import (
     POLICIES,
     Rules,
-    Sender,
     arm_authority,
     check,
     ended_by_command,
@@ -28,10 +30,8 @@ from bridge.record.policies import (
     lockstep_recorded,
     no_actuation_disarmed,
     run_ok,
-    sender_of,
     time_steady,
     violation_text,
-    without_sender,
 )
 from bridge.record.runlog import Run
 
@@ -52,8 +52,12 @@ def trace(seconds: float, thrust: float = 10.0, age: float = 0.0, t0: float = 0.
     return out
 
 
-def ev(t: float, kind: str, text: str = "", source: str = "vehicle") -> dict:
-    return {"t": t, "kind": kind, "text": text, "source": source}
+CONTROLLER = Sender(200, 191, "127.0.0.1", 40000, "controller")
+GCS = Sender(255, 190, "127.0.0.1", 14550, "gcs")
+
+
+def ev(t: float, kind: str, text: str = "", source: str = "vehicle", by: Sender | None = None) -> RunEvent:
+    return RunEvent(t, kind, text, source, by)
 
 
 def verdict(name: str, tr: dict, events: list, rules: Rules, **kw):
@@ -65,7 +69,7 @@ def verdict(name: str, tr: dict, events: list, rules: Rules, **kw):
 # -- no actuation while disarmed -------------------------------------------------------------------
 def test_no_actuation_while_disarmed() -> None:
     tr = trace(3.0)
-    events = [ev(1.0, "disarmed", "landed: disarmed [by vehicle]"), ev(2.0, "armed", "armed, offboard control")]
+    events = [ev(1.0, "disarmed", "landed: disarmed", by=ITSELF), ev(2.0, "armed", "armed, offboard control")]
     off = (tr["t"] > 1.0) & (tr["t"] < 2.0)
     for c in ("u1_act", "u2_act", "u3_act", "u4_act"):
         tr[c][off] = 0.0
@@ -85,7 +89,7 @@ def test_rotors_spinning_down_after_a_disarm_may_only_slow() -> None:
     decay = np.exp(-(tr["t"][after] - 1.0) / 0.02)
     for c in ("u1_act", "u2_act", "u3_act"):
         tr[c][after] = tr[c][after] * decay
-    events = [ev(1.0, "disarmed", "failsafe: motors stopped [by vehicle]")]
+    events = [ev(1.0, "disarmed", "failsafe: motors stopped", by=ITSELF)]
     lag = Rules(rate_hz=RATE, timeout_s=0.5, armed_at_start=True, spin_down=True)
     assert not verdict("no_actuation_disarmed", tr, events, OFFLINE).ok  # without a lag: not zero, refused
     assert verdict("no_actuation_disarmed", tr, events, lag).ok
@@ -138,32 +142,37 @@ def test_real_time_reads_the_command_in_force() -> None:
 
 # -- authority ---------------------------------------------------------------------------------------
 def test_arms_and_disarms_need_authority() -> None:
-    def events(by: str) -> list:
-        return [ev(0.0, "armed", f"armed, offboard control{by}")]
+    def events(by: Sender | None) -> list:
+        return [ev(0.0, "armed", "armed, offboard control", by=by)]
 
-    assert arm_authority(events(" [by 200:191 127.0.0.1:40000 controller]"), LOCKSTEP).ok
-    assert arm_authority(events(" [by 255:190 127.0.0.1:14550 gcs]"), LOCKSTEP).ok  # any ground station
-    assert arm_authority(events(" [by 7:1 127.0.0.1:9 gcs]"), LOCKSTEP).ok
-    assert arm_authority(events(" [by vehicle]"), LOCKSTEP).ok
-    assert arm_authority(events(""), LOCKSTEP).ok  # names no one: not judged
-    v = arm_authority(events(" [by 1:1 127.0.0.1:40001 controller]"), LOCKSTEP)
-    assert not v.ok and v.t == 0.0 and "only 200:191" in v.why
-    v = arm_authority([ev(2.5, "disarmed", "disarmed by command [by 200:190 127.0.0.1:5 controller]")], LOCKSTEP)
+    assert arm_authority(events(CONTROLLER), LOCKSTEP).ok
+    assert arm_authority(events(GCS), LOCKSTEP).ok  # any ground station
+    assert arm_authority(events(Sender(7, 1, "127.0.0.1", 9, "gcs")), LOCKSTEP).ok
+    assert arm_authority(events(ITSELF), LOCKSTEP).ok
+    assert arm_authority(events(None), LOCKSTEP).ok  # names no one: not judged
+    v = arm_authority(events(Sender(1, 1, "127.0.0.1", 40001, "controller")), LOCKSTEP)
+    assert not v.ok and v.t == 0.0 and "only 200:191" in v.why and "by 1:1 127.0.0.1:40001 controller" in v.why
+    v = arm_authority([ev(2.5, "disarmed", "disarmed by command", by=Sender(200, 190, "127.0.0.1", 5, "controller"))],
+                      LOCKSTEP)
     assert not v.ok and v.t == 2.5
-    assert arm_authority(events(" [by 200:191 127.0.0.1:40000 controller]"),
-                         Rules(rate_hz=RATE, timeout_s=0.5, controller_id=(42, 1))).ok is False
+    v = arm_authority(events(Sender(200, 191, "127.0.0.1", 5, "radio")), LOCKSTEP)
+    assert not v.ok and "not a link the vehicle has" in v.why
+    assert arm_authority(events(CONTROLLER), Rules(rate_hz=RATE, timeout_s=0.5, controller_id=(42, 1))).ok is False
     # the controller's own events (source controller) are not the vehicle's
-    assert verdict("arm_authority", trace(1.0), [ev(0.0, "armed", "[by 1:1 h:1 controller]", "controller")],
+    assert verdict("arm_authority", trace(1.0), [ev(0.0, "armed", "x", "controller", Sender(1, 1, "h", 1,
+                                                                                          "controller"))],
                    LOCKSTEP).ok
+    # the sender is the field: a text that looks like one names nobody
+    assert arm_authority([ev(0.0, "armed", "armed [by 1:1 127.0.0.1:9 controller]")], LOCKSTEP).ok
 
 
-def test_the_sender_suffix_is_parsed() -> None:
-    assert sender_of("disarmed by command [by 255:190 127.0.0.1:14550 gcs]") == Sender("gcs", 255, 190,
-                                                                                      "127.0.0.1:14550")
-    assert str(sender_of("x [by 255:190 127.0.0.1:14550 gcs]")) == "255:190 127.0.0.1:14550 gcs"
-    assert sender_of("landed: disarmed [by vehicle]") == Sender("vehicle")
-    assert sender_of("disarmed by command") is None
-    assert without_sender("disarmed by command [by 255:190 127.0.0.1:14550 gcs]") == "disarmed by command"
+def test_an_events_sender_is_shown_not_parsed() -> None:
+    e = ev(2.0, "disarmed", "disarmed by command", by=GCS)
+    assert e.shown == "disarmed by command [by 255:190 127.0.0.1:14550 gcs]"
+    assert e.as_dict() == {"t": 2.0, "kind": "disarmed", "text": e.shown, "source": "vehicle"}
+    assert RunEvent(1.0, "armed", "armed").as_dict() == {"t": 1.0, "kind": "armed", "text": "armed"}  # offline
+    assert ev(3.0, "disarmed", "landed: disarmed", by=ITSELF).shown == "landed: disarmed [by vehicle]"
+    assert RunEvent.at(float("nan"), "k", "x").t is None and RunEvent.at(1.23456789, "k", "x").t == 1.234568
 
 
 # -- lockstep --------------------------------------------------------------------------------------------
@@ -207,7 +216,7 @@ def test_the_missions_time_never_jumps() -> None:
     # real time writes no rows while the vehicle is disarmed (landed by its failsafe, re-armed by resume):
     # a gap over disarmed steps only is no jump; one that starts before the disarm is
     landed = np.concatenate([tr["t"][:300], tr["t"][300:] + 1.0])  # no rows for 1 s after 1.196 s
-    events = [ev(0.0, "armed"), ev(1.198, "disarmed", "landed: disarmed [by vehicle]"), ev(2.199, "armed")]
+    events = [ev(0.0, "armed"), ev(1.198, "disarmed", "landed: disarmed", by=ITSELF), ev(2.199, "armed")]
     assert time_steady(landed, REALTIME, events).ok
     assert not time_steady(landed, REALTIME, events[:1]).ok
     assert not time_steady(landed, REALTIME, [ev(0.0, "armed"), ev(1.5, "disarmed"), ev(2.199, "armed")]).ok
@@ -224,14 +233,13 @@ def test_failsafe_policy_reads_failsafe_events_only_from_the_vehicle() -> None:
 
 # -- the records of who ended a flight, and the exit status ---------------------------------------------
 def test_who_ended_a_flight_by_command() -> None:
-    ctl = " [by 200:191 127.0.0.1:40000 controller]"
-    gcs = " [by 255:190 127.0.0.1:14550 gcs]"
-    events = [ev(0.0, "armed", "armed, offboard control" + ctl), ev(2.0, "disarmed", "disarmed by command" + gcs),
-              ev(6.0, "disarmed", "disarmed by command" + ctl)]
+    events = [ev(0.0, "armed", "armed, offboard control", by=CONTROLLER),
+              ev(2.0, "disarmed", "disarmed by command", by=GCS),
+              ev(6.0, "disarmed", "disarmed by command", by=CONTROLLER)]
     e, who = ended_by_command(events, before_s=6.0)
-    assert e["t"] == 2.0 and str(who) == "255:190 127.0.0.1:14550 gcs"
+    assert e.t == 2.0 and who == GCS and str(who) == "255:190 127.0.0.1:14550 gcs"
     assert ended_by_command(events[:1] + events[2:], before_s=6.0) is None  # the controller's own, at the end
-    assert ended_by_command([ev(3.0, "disarmed", "landed: disarmed [by vehicle]")]) is None  # not a command
+    assert ended_by_command([ev(3.0, "disarmed", "landed: disarmed", by=ITSELF)]) is None  # not a command
     e, who = ended_by_command([ev(3.0, "disarmed", "disarmed by command")])
     assert who is None  # it names no sender
 

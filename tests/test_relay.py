@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import os
-import re
 import signal
 import socket
 import struct
@@ -20,6 +19,7 @@ import pytest
 
 from bridge.link.model import LinkConfig, LinkSettings
 from bridge.nodes.relay import Relay, parse_address
+from bridge.nodes.report import Ready, parse_line
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -123,10 +123,11 @@ def test_bsst_relay_process_stops_on_sigterm_and_writes_stats(tmp_path: Path) ->
                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env={**os.environ, "PYTHONUNBUFFERED": "1"})
     try:
-        line = proc.stdout.readline()  # the ready line, printed once bound
-        m = re.search(r"listening on ([\d.]+):(\d+)", line)
-        assert m, line + proc.stderr.read()
-        up, down = ping_pong(client, target, (m.group(1), int(m.group(2))), 20)
+        line = proc.stdout.readline()  # the ready report, printed once bound
+        ready = parse_line(line)
+        assert isinstance(ready, Ready) and ready.node == "relay" and ready.listen, line + proc.stderr.read()
+        host, _, port = ready.listen.rpartition(":")
+        up, down = ping_pong(client, target, (host, int(port)), 20)
         assert min(down) >= 0.005 and np.median(up) < 0.005
         proc.send_signal(signal.SIGTERM)
         out, err = proc.communicate(timeout=10)

@@ -329,6 +329,7 @@ def test_the_lines_a_child_writes_after_ready_in_the_same_read_are_kept(tmp_path
     dropped once, and the session's policy saw a flight that was never armed: exit 1 on a clean run).
     A real process writes both lines in one write to a real pipe."""
     from bridge.core.flight import prepare
+    from bridge.nodes.report import Event, Ready, to_line
     from bridge.session import Session
     from bridge.session.children import Child
 
@@ -337,12 +338,13 @@ def test_the_lines_a_child_writes_after_ready_in_the_same_read_are_kept(tmp_path
     child = Child.__new__(Child)  # a Child whose process is not bsst: one that writes the two lines at once
     child.name, child.log, child._buf, child.eof, child.stats, child.done = "vehicle", tmp_path / "v.log", b"", \
         False, {}, None
-    child.proc = subprocess.Popen([sys.executable, "-c", "import os; os.write(1, b'ready listen=x\\n"
-                                   "event t=0.000 armed: armed, offboard control\\n')"], stdout=subprocess.PIPE)
+    lines = to_line(Ready("vehicle", listen="x")) + "\n" + to_line(Event(0.0, "armed", "armed, offboard control"))
+    child.proc = subprocess.Popen([sys.executable, "-c", f"import os; os.write(1, {(lines + chr(10)).encode()!r})"],
+                                  stdout=subprocess.PIPE)
     child.fd = child.proc.stdout.fileno()
     child.proc.wait(timeout=30)  # both lines are in the pipe before the session reads
     os.set_blocking(child.fd, False)
-    fields = session._wait_ready(child)
+    ready = session._wait_ready(child)
     child.proc.stdout.close()
-    assert fields["listen"] == "x"
-    assert session.vehicle_armed and [e["kind"] for e in session.events] == ["armed"]
+    assert ready.listen == "x"
+    assert session.vehicle_armed and [e.kind for e in session.events] == ["armed"]

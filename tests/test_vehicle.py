@@ -1,7 +1,7 @@
 """Covers bridge.nodes.vehicle.
 
-``bsst vehicle`` as a real process: ground stations (pymavlink, MAVProxy, MAVSDK) and the
-controller contract, over real UDP on 127.0.0.1.
+``bsst vehicle`` (the package bridge/nodes/vehicle/) as a real process: ground stations (pymavlink,
+MAVProxy, MAVSDK) and the controller contract, over real UDP on 127.0.0.1.
 
 Each test holds an instance slot (bridge.session.instance_slot), so the ports 14550 + N and
 14560 + N are its own while it runs, whatever else runs beside it.

@@ -1,10 +1,12 @@
 """The simulated vehicle without its radio: plant, arming, command timeout and failsafe.
 
 In:  normalised paper-frame commands (``wrench``: u / u_max; ``motors``: omega / omega_max), arm and
-     disarm, and a delivery callback called with the plant time (s) before each physics step
+     disarm, a delivery callback called with the plant time (s) before each physics step, and a timeline of
+     faults and weather changes (:mod:`plant.events`, mission times s) acted on at the start of their period
 Out: what the vehicle publishes after each control period (:meth:`SimVehicle.published`: its
      on-board estimate of the state, eq. 7, NWU: m, m/s, rad, rad/s; the true state under the
-     ``truth`` estimator), the mode (offboard, failsafe, landed) and the events (t s, kind, text)
+     ``truth`` estimator), the mode (offboard, failsafe, landed) and the events (:class:`Event`: t s, kind,
+     text, and who caused it, :class:`Sender`)
 
 Shared by the in-process loop and the MAVLink vehicle so that both fly, time out and land
 the same way. Time advances in control periods of ``physics_hz / rate_hz`` physics steps;
@@ -26,8 +28,9 @@ the plant's state itself, read directly, so truth flights are the same to the bi
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 from bridge.autopilot.estimator import Estimator, TruthEstimator, estimator_nees
 from bridge.autopilot.failsafe import (
@@ -43,7 +46,9 @@ from bridge.autopilot.failsafe import (
 from bridge.autopilot.params import VehicleParams, change_param, read_param
 from controller.nominal import Nominal
 from plant import Quadrotor
+from plant.events import TimedEvent
 from plant.sensors import SensorSuite
+from plant.wind import Gust
 
 NEES_EVERY = 10  # control steps between NEES samples (its solve costs a fifth of an EKF flight if every step)
 OFFBOARD = "offboard"
@@ -56,11 +61,65 @@ GROUND_MODES = (HOLD, LAND, TAKEOFF)  # flown by the on-board controller, set by
 TAKEOFF_DONE_M = 0.1  # m from its height: a takeoff is done and the vehicle holds there (PX4: HOLD after TAKEOFF)
 
 
+@dataclass(frozen=True)
+class Sender:
+    """Who caused an event: the sysid and compid of a command's sender, the address (``host``,
+    ``port``) it came from and the link it came in on (``controller`` or ``gcs``); or the vehicle
+    itself (:data:`ITSELF`: its own disarm after a failsafe landing, a divergence), with no ids."""
+
+    sysid: int | None
+    compid: int | None
+    host: str | None
+    port: int | None
+    link: str
+
+    @property
+    def is_vehicle(self) -> bool:
+        """Whether the vehicle decided it itself (no command, no sender on any link)."""
+        return self.link == VEHICLE_LINK
+
+    def __str__(self) -> str:
+        """``SYSID:COMPID HOST:PORT LINK``, or ``vehicle``: as events.log and summary.json name it."""
+        if self.is_vehicle:
+            return VEHICLE_LINK
+        return f"{self.sysid}:{self.compid} {self.host}:{self.port} {self.link}"
+
+    @property
+    def suffix(self) -> str:
+        """`` [by ...]``: how a written event (events.log, summary.json) names its sender; never parsed back."""
+        return f" [by {self}]"
+
+    def as_dict(self) -> dict[str, int | str | None]:
+        return {"sysid": self.sysid, "compid": self.compid, "host": self.host, "port": self.port, "link": self.link}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Sender:
+        """The inverse of :meth:`as_dict`; ValueError (or KeyError, TypeError) for anything else."""
+        link = str(d["link"])
+        if link == VEHICLE_LINK:
+            return ITSELF
+        return cls(int(d["sysid"]), int(d["compid"]), str(d["host"]), int(d["port"]), link)
+
+
+VEHICLE_LINK = "vehicle"
+ITSELF = Sender(None, None, None, None, VEHICLE_LINK)  # the vehicle's own decision
+
+
 @dataclass
 class Event:
+    """Something the vehicle did (or was told to do) at plant time ``t`` (s): its ``kind``
+    (``armed``, ``disarmed``, ``mode``, ``failsafe``, ...), a human ``text``, and who caused it
+    (``by``; None: not said, e.g. offline, where only the flight's own controller commands)."""
+
     t: float
     kind: str
     text: str
+    by: Sender | None = None
+
+    @property
+    def shown(self) -> str:
+        """The text as written to events.log and summary.json: with its sender's `` [by ...]``."""
+        return self.text + (self.by.suffix if self.by is not None else "")
 
 
 @dataclass
@@ -74,6 +133,7 @@ class SimVehicle:
     sensors: SensorSuite | None = None  # None: the estimator is truth (nothing to sample)
     estimator: Estimator | None = None  # None: truth, reading the plant
     takeoff_alt_m: float = 2.5  # m above the start: NAV_TAKEOFF's altitude when it gives none (MIS_TAKEOFF_ALT)
+    timeline: tuple[TimedEvent, ...] = ()  # faults and weather changes (plant/events.py), in time order
 
     def __post_init__(self) -> None:
         if self.estimator is None:
@@ -87,6 +147,8 @@ class SimVehicle:
         self._start_z = self.plant.state[4]  # m: TAKEOFF's altitude is above the start
         self._takeoff_alt = self.takeoff_alt_m  # m: the altitude the selected TAKEOFF climbs to
         self._zero = (0.0, 0.0, 0.0, 0.0)
+        self._pending_events = list(self.timeline)
+        self._period_s = self.plant.dt * self.substeps
 
     @property
     def t(self) -> float:
@@ -225,6 +287,38 @@ class SimVehicle:
         self.fly_onboard(Land.here(X, self.failsafe.descent_rate), self.mode)
         self.event("landing", f"held {self.failsafe.hold_s:.3f} s: landing at x={X[0]:.3f} y={X[2]:.3f} m")
 
+    def inject(self, e: TimedEvent) -> None:
+        """Act on one event of the timeline now (checked against the flight when it was built:
+        :func:`bridge.core.flight.prepare`); an event says it (``fault``, or ``wind`` for the weather's)."""
+        p, k = self.plant, e.kind
+        if k == "motor":
+            p.set_effectiveness(e.get("motor"), e.get("effectiveness"))
+        elif k in ("wind", "gust"):
+            if p.wind is None:
+                raise ValueError("a wind or gust event needs the plant built with a wind (prepare gives one)")
+            if k == "wind":
+                p.wind.set_steady(e.get("speed_mps"), e.get("from_deg"))
+            else:
+                p.wind.add_gust(Gust(p.t, e.get("duration_s"), e.get("amplitude_mps"), e.get("from_deg")))
+        else:
+            if self.sensors is None:
+                raise ValueError(f"a {k} event needs the vehicle's sensors (an estimator other than truth)")
+            f = self.sensors.faults
+            if k == "gps":
+                if e.get("jump") is not None:
+                    f.jump(e.get("jump"))
+                else:
+                    f.gps_on = e.get("state") == "on"
+            elif k == "mag":
+                f.mag_on = e.get("state") == "on"
+            elif k == "baro":
+                f.set_drift(e.get("drift_mps"), p.t)
+            else:
+                bias = self.sensors.gyro_bias
+                for i, b in enumerate(e.get("bias")):
+                    bias[i] += b
+        self.event("wind" if k in ("wind", "gust") else "fault", e.text())
+
     def command(self, c: tuple[float, float, float, float]) -> bool:
         """A valid actuator target (normalised, paper frame). Ignored unless armed offboard."""
         if not self.armed or self.mode != OFFBOARD:
@@ -241,6 +335,9 @@ class SimVehicle:
         the period (see :mod:`bridge.link.model`) act at the physics step they arrive in.
         """
         p = self.plant
+        pending = self._pending_events
+        while pending and math.ceil(pending[0].t_s / self._period_s - 1e-9) * self._period_s <= p.t + 0.25 * p.dt:
+            self.inject(pending.pop(0))
         if deliver is not None:
             deliver(p.t)
         if self.armed and self.mode == OFFBOARD and p.t - self.last_command_t > self.failsafe.timeout_s + 1e-9:

@@ -178,7 +178,8 @@ def add_relay_command(sub: Any) -> None:
 def cmd_relay(args: argparse.Namespace) -> int:
     """``bsst relay``: relay until SIGINT/SIGTERM or ``--duration``; print (and ``--stats``) the figures."""
     from bridge.core.flight import at_rest, prepare  # lazy: start-up time
-    from bridge.nodes.relay import Relay, parse_address  # lazy: start-up time
+    from bridge.nodes.relay import Relay, client_event, parse_address  # lazy: start-up time
+    from bridge.nodes.report import to_line  # lazy: start-up time
     from bridge.record.runlog import check_writable, write_json_atomic  # lazy: start-up time
     from missions import load_mission  # lazy: start-up time
 
@@ -194,9 +195,8 @@ def cmd_relay(args: argparse.Namespace) -> int:
     # and the relay flies the link it gives
     settings = prepare(load_mission(args.mission) if args.mission else at_rest(), overrides_from_args(args)).link
 
-    def learned(addr: Any) -> None:  # a status line (bridge.nodes.process): the session logs the event
-        print(f"event t=0.000 client: {addr[0]}:{addr[1]} is the controller side (the first sender to "
-              f"--listen); any other sender is refused", flush=True)
+    def learned(addr: Any) -> None:  # a report (bridge.nodes.report): the session logs the event
+        print(to_line(client_event(addr)), flush=True)
 
     try:
         relay = Relay(listen, target, settings, listen_direction=args.listen_direction,
@@ -208,11 +208,7 @@ def cmd_relay(args: argparse.Namespace) -> int:
     stop = relay.stop
     old = {s: signal.signal(s, lambda *_: stop()) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
-        h, p = relay.address
-        bh, bp = relay.back_address
-        ends = f"client {client[0]}:{client[1]}" if client else "client: the first sender"
-        print(f"relay: listening on {h}:{p} -> {target[0]}:{target[1]} from {bh}:{bp} ({ends}); "
-              f"up: {settings.up.describe()}; down: {settings.down.describe()}", flush=True)
+        print(to_line(relay.ready(settings)), flush=True)
         relay.serve(args.duration)
     finally:
         for s, handler in old.items():

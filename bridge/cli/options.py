@@ -126,7 +126,33 @@ def add_flight_options(p: argparse.ArgumentParser, failsafe: bool = True) -> Non
     p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
     if failsafe:
         add_failsafe_options(p)
+        add_weather_options(p)
     add_param_options(p, start=failsafe)  # the controller sets no start values: it schedules changes only
+
+
+def wind_flag(text: str) -> tuple[float, float]:
+    """``--wind SPEED[:FROM_DEG]``: (m/s, compass degrees it blows from); ranges checked by plant/wind.py."""
+    speed, _, frm = text.partition(":")
+    try:
+        values = (float(speed), float(frm) if frm else 0.0)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected SPEED[:FROM_DEG] (m/s, compass degrees), got {text!r}") from None
+    if not (0.0 <= values[0] <= 50.0 and -360.0 <= values[1] <= 360.0):
+        raise argparse.ArgumentTypeError(f"SPEED must be in [0, 50] m/s and FROM_DEG in [-360, 360], got {text!r}")
+    return values
+
+
+def add_weather_options(p: argparse.ArgumentParser) -> None:
+    """``--wind``, ``--turbulence`` (over the mission's ``[wind]``) and ``--at T:KIND[:ARGS]`` (after its
+    ``[[events]]``; checked when the flight is built: plant/events.py). docs/weather.md."""
+    p.add_argument("--wind", type=wind_flag, metavar="SPEED[:FROM_DEG]",
+                   help="steady wind, m/s, blowing from compass FROM_DEG (default 0: from the north)")
+    # the levels are plant.wind.TURBULENCE, written out so that building the parser loads no flight code
+    p.add_argument("--turbulence", choices=("none", "light", "moderate", "severe"),
+                   help="Dryden turbulence of MIL-HDBK-1797 at low altitude")
+    p.add_argument("--at", action="append", metavar="T:KIND[:ARGS]",
+                   help="an event at mission time T s: motor:N=EFF, gps:off|on|jump=DX,DY,DZ, baro:drift=M_PER_S, "
+                        "mag:off|on, gyro:bias=X,Y,Z, wind:SPEED[:FROM], gust:DURATION,AMPLITUDE[,FROM]; repeatable")
 
 
 
@@ -148,7 +174,9 @@ def overrides_from_args(args: argparse.Namespace) -> Overrides:
                      discretization=getattr(args, "discretization", None), rate_hz=getattr(args, "rate", None),
                      seed=getattr(args, "seed", None), link=link_table_from_args(args) or None,
                      failsafe=failsafe_table_from_args(args) or None, **sensor_overrides_from_args(args),
-                     **param_overrides_from_args(args))
+                     **param_overrides_from_args(args),
+                     wind=getattr(args, "wind", None), turbulence=getattr(args, "turbulence", None),
+                     at=tuple(getattr(args, "at", None) or ()))
 
 
 def add_key_option(p: argparse.ArgumentParser) -> None:

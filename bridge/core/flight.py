@@ -44,8 +44,10 @@ from missions.mission import law_spec_from
 from params import ConfigError, Table
 from plant import Effects, Profile, Quadrotor, load_profile
 from plant.effects import effects_from_table
+from plant.events import SENSOR_EVENT_KINDS, TimedEvent, event_table_from_flag, timeline_from_tables
 from plant.profiles import sensors_from_table
 from plant.sensors import IDEAL, SensorConfig, SensorSuite
+from plant.wind import WindConfig, wind_from_table
 
 Progress = Callable[[float, float, float], None]  # a flight's progress: (t s, duration s, current 3-D error m)
 
@@ -65,6 +67,8 @@ class Flight:
     estimator: str = "truth"  # the vehicle's estimator kind (bridge.autopilot.estimator.ESTIMATOR_KINDS)
     params: VehicleParams = VehicleParams()  # the vehicle's parameters at start (failsafe: the same as .failsafe)
     param_changes: tuple[ParamChange, ...] = ()  # scheduled PARAM_SETs (--param-at), by mission time
+    wind: WindConfig | None = None  # the air it flies through ([wind]); None: still air, the paper's model
+    timeline: tuple[TimedEvent, ...] = ()  # faults and weather changes ([[events]], --at), by mission time
 
     @property
     def nominal(self) -> Nominal:
@@ -79,18 +83,19 @@ class Flight:
         m = self.mission
         x, y, z, psi = m.start
         state = (x, 0.0, y, 0.0, z, 0.0, 0.0, 0.0, 0.0, 0.0, psi, 0.0)
-        return Quadrotor(self.profile, self.effects, seed=m.seed, physics_hz=m.physics_hz, state=state)
+        return Quadrotor(self.profile, self.effects, seed=m.seed, physics_hz=m.physics_hz, state=state,
+                         wind=self.wind)
 
     def make_vehicle(self, armed: bool = False) -> SimVehicle:
         plant = self.make_plant()
         if self.estimator == "truth":  # no sensors to sample: the plant's state is published as it is
             return SimVehicle(plant, self.substeps, self.failsafe, armed=armed,
-                              takeoff_alt_m=self.params.takeoff_alt_m)
+                              takeoff_alt_m=self.params.takeoff_alt_m, timeline=self.timeline)
         m = self.mission
         suite = SensorSuite(self.sensors, m.seed, m.physics_hz, self.profile.gravity)
         est = make_estimator(self.estimator, self.sensors, plant.state, self.profile.gravity, lambda: plant.state)
         return SimVehicle(plant, self.substeps, self.failsafe, armed=armed, sensors=suite, estimator=est,
-                          takeoff_alt_m=self.params.takeoff_alt_m)
+                          takeoff_alt_m=self.params.takeoff_alt_m, timeline=self.timeline)
 
     def make_controller(self) -> Controller:
         m = self.mission
@@ -131,8 +136,33 @@ class Overrides:
     noise: float | None = None  # [sensors] noise_scale: every sigma of the set times it (no unit)
     params: Mapping[str, float] | None = None  # over [params], PX4 names: COM_OF_LOSS_T s, COM_OBL_ACT (an integer)
     param_at: tuple[ParamChange, ...] = ()  # parameter changes at mission times (s), at the start of their step
+    wind: Mapping[str, Any] | float | tuple[float, float] | None = None  # over [wind]: a table, SPEED m/s, or
+    #   (SPEED m/s, FROM_DEG compass direction it blows from)
+    turbulence: str | None = None  # [wind] turbulence: none, light, moderate or severe
+    at: tuple[Mapping[str, Any] | str, ...] = ()  # events after the mission's [[events]]: tables or "T:KIND[:ARGS]"
 
     def __post_init__(self) -> None:
+        _check_type("turbulence", self.turbulence, str, "a string")
+        w = self.wind
+        if isinstance(w, (int, float)) and not isinstance(w, bool):
+            object.__setattr__(self, "wind", {"speed_mps": float(w)})
+        elif isinstance(w, tuple) and len(w) == 2 and all(isinstance(v, (int, float)) for v in w):
+            object.__setattr__(self, "wind", {"speed_mps": float(w[0]), "from_deg": float(w[1])})
+        else:
+            _check_type("wind", w, Mapping, "a table, a speed (m/s) or (speed m/s, from deg)")
+            if w is not None:
+                object.__setattr__(self, "wind", dict(w))
+        events = []
+        for e in tuple(self.at):
+            if isinstance(e, str):
+                try:
+                    e = event_table_from_flag(e)
+                except ValueError as exc:
+                    raise ConfigError(f"--at {e}: {exc}"[:300]) from None
+            if not isinstance(e, Mapping):
+                raise ConfigError(f"at: expected event tables or 'T:KIND[:ARGS]' strings, got {e!r}"[:200])
+            events.append(dict(e))
+        object.__setattr__(self, "at", tuple(events))
         for f in ("profile", "controller", "discretization", "actuation", "estimator"):
             _check_type(f, getattr(self, f), str, "a string")
         for f in ("rate_hz", "noise"):
@@ -182,10 +212,12 @@ class Overrides:
         estimator = merged_tables(m.estimator, {} if self.estimator is None else {"kind": self.estimator})
         # a law file given on the command line or from Python: from the working directory
         law = law_spec_from(self.controller, Path(".")) if self.controller is not None else None
+        wind = merged_tables(m.wind, self.wind, {} if self.turbulence is None else {"turbulence": self.turbulence})
+        events = (*m.events, *self.at) if self.at else None
         return m.with_overrides(profile=self.profile, controller=law, discretization=self.discretization,
                                 rate_hz=self.rate_hz, seed=self.seed,
                                 actuation=self.actuation, link=link, failsafe=failsafe, sensors=sensors,
-                                estimator=estimator, params=params)
+                                estimator=estimator, params=params, wind=wind, events=events)
 
 
 OVERRIDE_FIELDS = frozenset(f.name for f in fields(Overrides))
@@ -245,14 +277,46 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
                     key = f"--blackout/--{d}-blackout ({key})"
                 raise ConfigError(f"{src}: {key}: the window [{start:g}, {start + dur:g}) s starts after the "
                                   f"mission's end (duration_s = {m.duration_s:g} s), so it would never happen")
+    wind, timeline = weather_of(m, prof, sensor_config, estimator_kind)
     try:
         law = resolve_law(m.controller)
         flight = Flight(m, prof, effects, gains, failsafe, link_settings, law, sensor_config, estimator_kind,
-                        vehicle_params, changes)
+                        vehicle_params, changes, wind, timeline)
         flight.make_controller()  # a user's law is built once here, so that one that does not fit is bad input
     except ConfigError as exc:
         raise ConfigError(f"{src}: {exc}") from None
     return flight
+
+
+def weather_of(m: Mission, prof: Profile, sensors: SensorConfig, estimator: str) -> tuple[WindConfig | None,
+                                                                                          tuple[TimedEvent, ...]]:
+    """The mission's ``[wind]`` (its turbulence at the reference's mean height unless ``altitude_m``; None: still
+    air) and ``[[events]]``, validated and checked against the flight: a motor event needs rotors, a sensor
+    event the vehicle's sensors (an estimator other than truth), a GPS event a gnss set, a compass event a
+    heading sensor; a wind or gust event with no ``[wind]`` flies the plant in (still) air."""
+    src = m.source
+    timeline = timeline_from_tables(m.events, src, m.duration_s)
+    for e in timeline:
+        where = f"{src}: events (t_s = {e.t_s:g}, kind = {e.kind})"
+        if e.kind == "motor" and prof.actuation != "motors":
+            raise ConfigError(f"{where}: profile {prof.name!r} flies ideal wrench actuation: it has no rotors to "
+                              "fail (fly --profile x500, or --actuation motors)")
+        if e.kind in SENSOR_EVENT_KINDS and estimator == "truth":
+            raise ConfigError(f"{where}: the truth estimator reads the true state, no sensor to fail: fly "
+                              "--estimator ekf (or raw), with --sensors gnss or mocap")
+        if e.kind == "gps" and sensors.position_class != "gnss":
+            raise ConfigError(f"{where}: sensor set {sensors.name!r} has no GPS (its position is "
+                              f"{sensors.position_class}): fly --sensors gnss")
+        if e.kind == "mag" and sensors.heading_rate_hz <= 0.0:
+            raise ConfigError(f"{where}: sensor set {sensors.name!r} has no magnetometer (heading_rate_hz = 0)")
+    if not m.wind and not any(e.kind in ("wind", "gust") for e in timeline):
+        return None, timeline
+    wind = wind_from_table(Table(m.wind, src, "wind"), m.duration_s)
+    if wind.altitude_m is None:  # the flight's altitude: the reference's mean height over the mission
+        n = 100
+        heights = [m.trajectory.sample(m.duration_s * k / n)[2][0] for k in range(n + 1)]
+        wind = wind.at_altitude(max(sum(heights) / len(heights), 0.0))
+    return wind, timeline
 
 
 def merged_failsafe_params(m: Mission, failsafe: Mapping[str, Any] | None,

@@ -1,13 +1,12 @@
 """Plumbing shared by the session launcher and its two child processes.
 
-In:  status lines to report, SIGTERM / SIGINT, the death of the parent; a status line read back
-Out: one line on stdout per status, flushed at once; ``stop()`` called on a stop signal; SIGTERM to a
-     child whose parent died; a status line split into its first word and the rest
+In:  reports (:mod:`bridge.nodes.report`) or status lines to write, SIGTERM / SIGINT, the death of the parent
+Out: one line on stdout per report, flushed at once; ``stop()`` called on a stop signal; SIGTERM to a
+     child whose parent died
 
-- Children report on stdout, one line each, flushed at once: ``ready ...``,
-  ``event t=<s> <kind>: <text>``, ``statustext ...``, ``warning ...`` (the controller's
-  refusals, :meth:`bridge.mavlink.receive.Rejections.report`), ``stats {json}``, ``done outcome=...``.
-  The launcher reads them live (:func:`parse_status`) and waits on them with deadlines.
+- Children report on stdout, one JSON line each, flushed at once (:func:`report_printer`; the
+  kinds and their fields are :mod:`bridge.nodes.report`'s). The launcher reads them live
+  (:func:`bridge.nodes.report.parse_line`) and waits on them with deadlines.
 - SIGTERM and SIGINT ask a node to stop at its next look; it then closes its files whole.
 - A child dies with its parent (``PR_SET_PDEATHSIG``), so a launcher killed with SIGKILL
   leaves no vehicle running on its port.
@@ -21,6 +20,8 @@ import signal
 from collections.abc import Callable
 from typing import Any
 
+from bridge.nodes.report import Report, to_line
+
 _PR_SET_PDEATHSIG = 1
 
 
@@ -33,6 +34,12 @@ def status_printer(prefix: str = "") -> Callable[[str], None]:
             pass
 
     return emit
+
+
+def report_printer() -> Callable[[Report], None]:
+    """A report sink: each report as one JSON line on stdout, written at once."""
+    emit = status_printer()
+    return lambda report: emit(to_line(report))
 
 
 def on_stop_signals(stop: Callable[[], None]) -> None:
@@ -52,8 +59,3 @@ def die_with_parent() -> None:
     except (OSError, AttributeError):
         pass
 
-
-def parse_status(line: str) -> tuple[str, str]:
-    """``"event t=1.000 armed: ..."`` -> ``("event", "t=1.000 armed: ...")``."""
-    word, _, rest = line.strip().partition(" ")
-    return word, rest

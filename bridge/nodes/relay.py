@@ -54,6 +54,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.link.model import LinkImpairment, LinkSettings
 from bridge.mavlink.endpoint import parse_address as endpoint_address
+from bridge.nodes.report import Event, Ready
 
 Address = tuple[str, int]
 MAX_DATAGRAM = 65_535
@@ -160,6 +161,13 @@ class Relay:
     def back_address(self) -> Address:
         """The address the target sees the relay's datagrams come from."""
         return self.back.getsockname()
+
+    def ready(self, settings: LinkSettings) -> Ready:
+        """The ready report (:mod:`bridge.nodes.report`) of a relay bound and about to serve ``settings``."""
+        (h, p), (bh, bp) = self.address, self.back_address
+        client = f"{self.client[0]}:{self.client[1]}" if self.client_given and self.client else None
+        return Ready("relay", listen=f"{h}:{p}", to=f"{self.target[0]}:{self.target[1]}", back=f"{bh}:{bp}",
+                     client=client, up=settings.up.describe(), down=settings.down.describe())
 
     def stop(self) -> None:
         """Ask :meth:`serve` to return (safe from signal handlers and other threads)."""
@@ -325,6 +333,12 @@ class Relay:
         if self._thread is not None:
             self._thread.join(timeout=5.0)
         self.close()
+
+
+def client_event(addr: Address) -> Event:
+    """The event report of a client learned: the first sender to the listen port is the controller side."""
+    return Event(0.0, "client", f"{addr[0]}:{addr[1]} is the controller side (the first sender to --listen); "
+                                "any other sender is refused")
 
 
 def _is_target(data: bytes) -> bool:

@@ -4,6 +4,9 @@
 - :mod:`bridge.record.runlog`   run directory, line writers, atomic writes, :class:`~bridge.record.runlog.Run`
 - :mod:`bridge.record.joiner`   vehicle.csv + controller.csv -> trace.csv rows, by column name
 - :mod:`bridge.record.metrics`  RMS, settling, finite-time bound, total variation, the summary
+- :mod:`bridge.record.events`   a run's events, typed, with their sender as a field
+- :mod:`bridge.record.summary`  a SITL session's summary.json as pure functions of what the session saw
+- :mod:`bridge.record.policies` the safety policies checked over every run
 - :mod:`bridge.record.plots`    the paper-style figures
 - :mod:`bridge.record.linkextract`  a link's trace from a run directory or two tlogs
 - :mod:`bridge.record.linkplots`    a link trace's figure

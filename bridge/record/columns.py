@@ -2,7 +2,8 @@
 
 In:  nothing but, for the helpers, an eq. (7) state (:func:`state_columns`) or a file's header
      (:func:`column_index`)
-Out: column-name tuples; a state in the trace's column order; the positions of named columns
+Out: column-name tuples; :class:`TraceRow`, :class:`VehicleRow`, :class:`ControllerRow`: one row of each file
+     with its columns as named fields; a state in the trace's column order; the positions of named columns
 
 - :data:`TRACE_COLUMNS`: ``trace.csv``, one row per control step (offline and SITL alike);
 - :data:`VEHICLE_COLUMNS`: ``vehicle.csv``, the vehicle's half of a SITL trace;
@@ -18,6 +19,7 @@ nan between; 0 under truth: no error).
 
 from __future__ import annotations
 
+from collections import namedtuple
 from collections.abc import Sequence
 
 STATE_COLUMNS = ("x", "y", "z", "vx", "vy", "vz", "phi", "theta", "psi", "dphi", "dtheta", "dpsi")
@@ -40,6 +42,18 @@ CONTROLLER_COLUMNS = (
     + ("odo_recv_wall", "cmd_sent_wall", "state_to_cmd_s", "period_error_s", "state_age_s")
 )
 
+# one row of each file with its columns as named fields (a tuple of floats: written, stacked into arrays and
+# extended into array('d') as one), made from the column tuples above so that the two never differ
+TraceRow = namedtuple("TraceRow", TRACE_COLUMNS)
+TraceRow.__doc__ = "One ``trace.csv`` row (:data:`TRACE_COLUMNS`, in order; units in the module docstring)."
+VehicleRow = namedtuple("VehicleRow", VEHICLE_COLUMNS)
+VehicleRow.__doc__ = ("One ``vehicle.csv`` row (:data:`VEHICLE_COLUMNS`), filled by the file's header "
+                      "(:class:`bridge.record.joiner.PartReader`).")
+ControllerRow = namedtuple("ControllerRow", CONTROLLER_COLUMNS)
+ControllerRow.__doc__ = "One ``controller.csv`` row (:data:`CONTROLLER_COLUMNS`), filled by the file's header."
+
+_new_row = tuple.__new__  # TraceRow from one tuple at once: a third of the time of its 45-argument constructor
+
 
 def state_columns(X: Sequence[float]) -> tuple[float, ...]:
     """Eq. (7) state -> the trace's state columns (x y z vx vy vz phi theta psi rates)."""
@@ -48,7 +62,7 @@ def state_columns(X: Sequence[float]) -> tuple[float, ...]:
 
 def trace_row(t: float, state: Sequence[float], ref: Sequence[Sequence[float]], demanded: Sequence[float],
               wire: Sequence[float], realised: Sequence[float], state_age_s: float,
-              desired: Sequence[float], estimate: Sequence[float], nees: float) -> tuple[float, ...]:
+              desired: Sequence[float], estimate: Sequence[float], nees: float) -> TraceRow:
     """One ``trace.csv`` row (:data:`TRACE_COLUMNS`), for the offline loop and the SITL joiner alike.
 
     ``state``: the trace's 12 state columns (:func:`state_columns`); ``ref``: the reference
@@ -58,8 +72,8 @@ def trace_row(t: float, state: Sequence[float], ref: Sequence[Sequence[float]], 
     ``estimate``: the vehicle's estimate in the state columns' order (:func:`state_columns`);
     ``nees``: its normalised estimation error squared (0 under ``truth``: no error).
     """
-    return (t, *state, ref[0][0], ref[1][0], ref[2][0], ref[3][0], *demanded, *wire, *realised, state_age_s,
-            *desired, *estimate, nees)
+    return _new_row(TraceRow, (t, *state, ref[0][0], ref[1][0], ref[2][0], ref[3][0], *demanded, *wire, *realised,
+                               state_age_s, *desired, *estimate, nees))
 
 
 def column_index(columns: Sequence[str], names: Sequence[str], where: str) -> dict[str, int]:

@@ -2,12 +2,14 @@
 
 In:  ``vehicle.csv`` (:data:`~bridge.record.columns.VEHICLE_COLUMNS`) and ``controller.csv``
      (:data:`~bridge.record.columns.CONTROLLER_COLUMNS`), appended by the two processes as they fly
-Out: rows of :data:`~bridge.record.columns.TRACE_COLUMNS` (units as there), also appended to
-     ``trace.csv``, and the per-packet times (ms: up, down, round trip, state to command, tick
-     lateness) the session's ``link`` and ``timing`` blocks are made of
+Out: rows (:class:`~bridge.record.columns.TraceRow`, units as there), also appended to ``trace.csv``, and
+     the per-packet times (ms: up, down, round trip, state to command, tick lateness) the session's
+     ``link`` and ``timing`` blocks are made of, together as :class:`Joined`; the first step (s) a lockstep
+     vehicle flew off the step clock (:func:`off_clock_time`)
 
-Columns are looked up by name in each file's own header, so a file without a column the join
-needs is an error that names it.
+Each file's rows are read into named rows (:class:`~bridge.record.columns.VehicleRow`,
+:class:`~bridge.record.columns.ControllerRow`) by the file's own header, so a file without a column is an
+error that names it, and the join reads every value by name.
 """
 
 from __future__ import annotations
@@ -15,40 +17,71 @@ from __future__ import annotations
 import math
 import os
 from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass
+from operator import attrgetter
 from pathlib import Path
+from typing import Any
 
 from bridge.core.flight import Flight
 from bridge.record.columns import (
-    CONTROLLER_COLUMNS,
     DESIRED_COLUMNS,
     ESTIMATE_COLUMNS,
     INPUT_COLUMNS,
     REALISED_COLUMNS,
     STATE_COLUMNS,
-    VEHICLE_COLUMNS,
     WIRE_COLUMNS,
+    ControllerRow,
+    TraceRow,
+    VehicleRow,
     column_index,
     trace_row,
 )
 from bridge.record.runlog import TraceWriter
 
-# what the join reads of each half, by name
-_V_NEEDS = ("k", "mode", "cmd_k", "state_age_s", "rtt_s", "odo_sent_wall", "cmd_recv_wall") + STATE_COLUMNS \
-    + WIRE_COLUMNS + INPUT_COLUMNS + REALISED_COLUMNS + ESTIMATE_COLUMNS + ("nees",)
-_C_NEEDS = ("k", "odo_recv_wall", "cmd_sent_wall", "state_to_cmd_s", "period_error_s", "state_age_s") \
-    + INPUT_COLUMNS + WIRE_COLUMNS + DESIRED_COLUMNS
+# groups of columns of a half, by name
+_STATE = attrgetter(*STATE_COLUMNS)
+_ESTIMATE = attrgetter(*ESTIMATE_COLUMNS)
+_INPUT = attrgetter(*INPUT_COLUMNS)
+_WIRE = attrgetter(*WIRE_COLUMNS)
+_REALISED = attrgetter(*REALISED_COLUMNS)
+_DESIRED = attrgetter(*DESIRED_COLUMNS)
+
+
+@dataclass(frozen=True)
+class Joined:
+    """The trace as the session joined it, and what the join measured (:class:`bridge.record.joiner.TraceJoiner`):
+    per-packet ``up_ms``, ``down_ms`` (one-way, ms), ``rtt_ms`` (vehicle's round trip), ``s2c_ms`` (state to
+    command by TIMESYNC), ``late_ms`` (tick lateness); ``commands``: controller rows read; ``k0``: the
+    vehicle's step of the trace's t = 0; ``first_sent``/``last_sent``: wall s of the first and last joined
+    state's send; ``missing``: rows without their controller half."""
+
+    rows: Sequence[TraceRow] = ()
+    k0: int | None = None
+    missing: int = 0
+    first_sent: float | None = None
+    last_sent: float = math.nan
+    commands: int = 0
+    up_ms: Sequence[float] = ()
+    down_ms: Sequence[float] = ()
+    rtt_ms: Sequence[float] = ()
+    s2c_ms: Sequence[float] = ()
+    late_ms: Sequence[float] = ()
 
 
 class PartReader:
-    """Reads the complete new lines of a part file (``vehicle.csv``, ``controller.csv``)."""
+    """Reads the complete new lines of a part file (``vehicle.csv``, ``controller.csv``) as named rows of
+    ``row_type``, each value taken from its column of the file's own header (ValueError naming a missing one)."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, row_type: Any) -> None:
         self.path = path
+        self.row_type = row_type
         self._fd = -1
         self._buf = b""
         self.columns: tuple[str, ...] | None = None  # the file's header, once read
+        self._pick: list[int] | None = None  # the header's positions of row_type's fields (None: the same order)
 
-    def read(self) -> list[list[float]]:
+    def read(self) -> list[Any]:
         if self._fd < 0:
             try:
                 self._fd = os.open(self.path, os.O_RDONLY)
@@ -65,8 +98,20 @@ class PartReader:
         *full, self._buf = (self._buf + b"".join(chunks)).split(b"\n")
         if self.columns is None and full:
             self.columns = tuple(full[0].decode(errors="replace").strip().split(","))
+            fields = self.row_type._fields
+            if self.columns != fields:
+                where = column_index(self.columns, fields, str(self.path))
+                self._pick = [where[n] for n in fields]
             full = full[1:]
-        return [[float(x) for x in line.split(b",")] for line in full if line]
+        make, pick = self.row_type._make, self._pick
+        if pick is None:
+            return [make([float(x) for x in line.split(b",")]) for line in full if line]
+        rows = []
+        for line in full:
+            if line:
+                values = [float(x) for x in line.split(b",")]
+                rows.append(make([values[i] for i in pick]))
+        return rows
 
     def close(self) -> None:
         if self._fd >= 0:
@@ -93,17 +138,17 @@ class TraceJoiner:
     """
 
     def __init__(self, path: Path, flight: Flight, trace: TraceWriter | None, lockstep: bool = False) -> None:
-        self.v = PartReader(path / "vehicle.csv")
-        self.c = PartReader(path / "controller.csv")
+        self.v = PartReader(path / "vehicle.csv", VehicleRow)
+        self.c = PartReader(path / "controller.csv", ControllerRow)
         self.lockstep = lockstep
         self.trace = trace
         self.rate = flight.mission.rate_hz
         self.steps = flight.mission.steps
         self.sample = flight.mission.trajectory.sample
-        self.ctl: dict[int, list[float]] = {}
-        self.pending: deque[list[float]] = deque()
+        self.ctl: dict[int, ControllerRow] = {}
+        self.pending: deque[VehicleRow] = deque()
         self.k0: int | None = None
-        self.rows: list[tuple[float, ...]] = []
+        self.rows: list[TraceRow] = []
         self.controller_done = False
         self.up_ms: list[float] = []
         self.down_ms: list[float] = []
@@ -114,37 +159,24 @@ class TraceJoiner:
         self.missing = 0  # rows without their controller half (never written): demand NaN
         self.first_sent: float | None = None  # wall time the first / last joined state was sent
         self.last_sent = math.nan
-        self._vi: dict[str, int] | None = None  # column positions, from each file's header
-        self._ci: dict[str, int] | None = None
-
-    def _v_index(self) -> dict[str, int]:
-        if self._vi is None:
-            self._vi = column_index(self.v.columns or VEHICLE_COLUMNS, _V_NEEDS, str(self.v.path))
-        return self._vi
-
-    def _c_index(self) -> dict[str, int]:
-        if self._ci is None:
-            self._ci = column_index(self.c.columns or CONTROLLER_COLUMNS, _C_NEEDS, str(self.c.path))
-        return self._ci
 
     def update(self) -> int:
         """Join what both files hold now; returns the number of new trace rows."""
         vrows = self.v.read()  # first: see the class docstring
         for c in self.c.read():
-            ci = self._c_index()
-            k = int(c[ci['k']])
+            k = int(c.k)
             self.ctl[k] = c
             if self.k0 is None:
                 self.k0 = k
-            if math.isfinite(c[ci['state_to_cmd_s']]):
-                self.s2c_ms.append(1e3 * c[ci['state_to_cmd_s']])
-            if math.isfinite(c[ci['period_error_s']]):
-                self.late_ms.append(1e3 * c[ci['period_error_s']])
+            if math.isfinite(c.state_to_cmd_s):
+                self.s2c_ms.append(1e3 * c.state_to_cmd_s)
+            if math.isfinite(c.period_error_s):
+                self.late_ms.append(1e3 * c.period_error_s)
         self.pending.extend(vrows)
         n0 = len(self.rows)
         while self.pending:
             v = self.pending[0]
-            key = int(v[self._v_index()['cmd_k']])
+            key = int(v.cmd_k)
             c = self.ctl.get(key) if key >= 0 else None
             if key >= 0 and c is None and not self.controller_done:
                 break  # its row is on its way (written just after the send)
@@ -154,10 +186,9 @@ class TraceJoiner:
             self.trace.flush()
         return len(self.rows) - n0
 
-    def _join(self, v: list[float], key: int, c: list[float] | None) -> None:
-        vi = self._v_index()
-        k = int(v[vi['k']])
-        mode = int(v[vi['mode']])
+    def _join(self, v: VehicleRow, key: int, c: ControllerRow | None) -> None:
+        k = int(v.k)
+        mode = int(v.mode)
         if self.k0 is None or k < self.k0 or (key < 0 and mode == 0):
             return  # not flying the mission yet (armed, no target)
         if mode == 0 and k - self.k0 >= self.steps:
@@ -165,36 +196,56 @@ class TraceJoiner:
         t = (k - self.k0) / self.rate
         ref = self.sample(t)
         if c is not None:
-            ci = self._c_index()
-            u = tuple(c[ci[n]] for n in INPUT_COLUMNS)
-            desired = tuple(c[ci[n]] for n in DESIRED_COLUMNS)
-            if key not in self._up_seen and math.isfinite(v[vi['cmd_recv_wall']]):
+            u = _INPUT(c)
+            desired = _DESIRED(c)
+            if key not in self._up_seen and math.isfinite(v.cmd_recv_wall):
                 self._up_seen.add(key)
-                self.up_ms.append(1e3 * (v[vi['cmd_recv_wall']] - c[ci['cmd_sent_wall']]))
-                if math.isfinite(v[vi['rtt_s']]):
-                    self.rtt_ms.append(1e3 * v[vi['rtt_s']])
+                self.up_ms.append(1e3 * (v.cmd_recv_wall - c.cmd_sent_wall))
+                if math.isfinite(v.rtt_s):
+                    self.rtt_ms.append(1e3 * v.rtt_s)
         elif key >= 0:  # a controller killed between sending this command and writing its row
             self.missing += 1
             u, desired = (math.nan,) * 4, (math.nan, math.nan)  # what the law demanded was never recorded
         else:
-            u = tuple(v[vi[n]] for n in INPUT_COLUMNS)
+            u = _INPUT(v)
             desired = (0.0, 0.0)  # the landing loop holds the vehicle level
         own = self.ctl.get(k)
         if own is not None:
-            self.down_ms.append(1e3 * (own[self._c_index()['odo_recv_wall']] - v[vi['odo_sent_wall']]))
+            self.down_ms.append(1e3 * (own.odo_recv_wall - v.odo_sent_wall))
         if self.first_sent is None:
-            self.first_sent = v[vi['odo_sent_wall']]
-        self.last_sent = v[vi['odo_sent_wall']]
-        wire, age = [v[vi[n]] for n in WIRE_COLUMNS], v[vi['state_age_s']]
+            self.first_sent = v.odo_sent_wall
+        self.last_sent = v.odo_sent_wall
+        wire, age = _WIRE(v), v.state_age_s
         if self.lockstep and c is not None and key == k:
-            ci = self._c_index()
-            wire, age = [c[ci[n]] for n in WIRE_COLUMNS], c[ci['state_age_s']]
-        row = trace_row(t, [v[vi[n]] for n in STATE_COLUMNS], ref, u, wire, [v[vi[n]] for n in REALISED_COLUMNS], age,
-                        desired, [v[vi[n]] for n in ESTIMATE_COLUMNS], v[vi["nees"]])
+            wire, age = _WIRE(c), c.state_age_s
+        row = trace_row(t, _STATE(v), ref, u, wire, _REALISED(v), age, desired, _ESTIMATE(v), v.nees)
         self.rows.append(row)
         if self.trace is not None:
             self.trace.row(row)
 
+    def joined(self) -> Joined:
+        """The rows joined so far and what the join measured."""
+        return Joined(self.rows, self.k0, self.missing, self.first_sent, self.last_sent, len(self.ctl), self.up_ms,
+                      self.down_ms, self.rtt_ms, self.s2c_ms, self.late_ms)
+
     def close(self) -> None:
         self.v.close()
         self.c.close()
+
+
+def off_clock_time(path: Path, rate_hz: float) -> float | None:
+    """Lockstep: the vehicle's time (s) of its first row of ``vehicle.csv`` (at ``path``) not flown on the
+    step clock (the command in force answers another step, or none), or None; read as a stream."""
+    try:
+        with open(path) as f:
+            header = f.readline().strip().split(",")
+            ik, ic = header.index("k"), header.index("cmd_k")
+            for line in f:
+                parts = line.split(",")
+                if not line.endswith("\n") or len(parts) != len(header):
+                    break  # a torn last line
+                if parts[ik] != parts[ic] and float(parts[ik]) != float(parts[ic]):
+                    return float(parts[ik]) / rate_hz
+    except (OSError, ValueError):
+        return None
+    return None

@@ -34,6 +34,66 @@ RMS_FROM_S = 10.0
 RIPPLE_WINDOW_S = 0.2  # moving-average window of the u2 ripple: content above ~5 Hz counts
 
 
+def impact_text(impact: tuple[float, float, float], armed: bool = True) -> str:
+    """A hard touchdown (t s, speed m/s, tilt rad) as the ``crashed`` (or, disarmed, ``impact``) event's text."""
+    text = f"hit the ground at {impact[1]:.2f} m/s, tilted {math.degrees(impact[2]):.1f} deg"
+    return text if armed else f"{text} (disarmed, motors off)"
+
+
+def after_faults(outcome: str, events: list[dict[str, Any]]) -> dict[str, Any]:
+    """``ended_by``'s ``after_faults``: the timeline's faults before a flight that did not complete (why it ended)."""
+    faults = [f"t={e['t']:.3f} s: {e['text']}" for e in events if e["kind"] == "fault"]
+    return {"after_faults": faults} if outcome != "completed" and faults else {}
+
+
+def plant_summary(plant: Any, trace: dict[str, np.ndarray], events: list[dict[str, Any]]) -> dict[str, Any]:
+    """``summary.json``'s blocks from the plant itself (:class:`plant.Quadrotor`): ``wind`` (the configuration,
+    the mean wind and the turbulence's std per axis over the flight, with MIL-HDBK-1797's σ: plant/wind.py),
+    ``battery`` (volts, amperes, mAh), ``impact`` (a hard touchdown: t s, speed m/s, tilt deg) and
+    ``gps_outages`` (:func:`gps_outages`); only those the flight had."""
+    out: dict[str, Any] = {}
+    outages = gps_outages(trace, events)
+    if outages:
+        out["gps_outages"] = outages
+    if plant.wind is not None:
+        out["wind"] = plant.wind.summary()
+    if plant.battery is not None:
+        out["battery"] = plant.battery.summary()
+    if plant.impact is not None:
+        t, speed, tilt = plant.impact
+        out["impact"] = {"t": round(t, 6), "speed_mps": speed, "tilt_deg": math.degrees(tilt)}
+    if plant.effectiveness != (1.0, 1.0, 1.0, 1.0):
+        out["rotor_effectiveness"] = list(plant.effectiveness)
+    return out
+
+
+def gps_outages(trace: dict[str, np.ndarray], events: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Each GPS outage of the timeline (``fault`` events ``gps off`` .. ``gps on``, or to the end): the
+    estimate's 3-D position drift (m, truth − estimate) during it, at its max and at its end, and the mean NEES
+    after it (to the next outage or the end; 9 degrees of freedom), from the trace arrays."""
+    if "x_est" not in trace:
+        return []
+    t = trace["t"]
+    err = np.sqrt(sum((trace[a] - trace[a + "_est"]) ** 2 for a in ("x", "y", "z")))
+    marks = [(e["t"], e["text"]) for e in events if e["kind"] == "fault" and e["text"] in ("gps off", "gps on")]
+    out = []
+    for i, (t_off, text) in enumerate(marks):
+        if text != "gps off":
+            continue
+        t_on = next((tm for tm, tx in marks[i + 1:] if tx == "gps on"), None)
+        during = (t >= t_off) & (t <= (t[-1] if t_on is None else t_on))
+        row: dict[str, Any] = {"off_s": t_off, "on_s": t_on,
+                               "drift_max_m": float(err[during].max()) if during.any() else None,
+                               "drift_at_end_m": float(err[during][-1]) if during.any() else None}
+        if t_on is not None:
+            t_next = next((tm for tm, tx in marks[i + 1:] if tx == "gps off" and tm > t_on), t[-1] + 1.0)
+            after = (t >= t_on) & (t < t_next) & np.isfinite(trace["nees"])
+            row["nees_mean_after"] = float(trace["nees"][after].mean()) if after.any() else None
+            row["drift_rms_after_m"] = float(np.sqrt(np.mean(err[(t >= t_on) & (t < t_next)] ** 2)))
+        out.append(row)
+    return out
+
+
 def ripple_rms(t: np.ndarray, u: np.ndarray, rate_hz: float, window_s: float = RIPPLE_WINDOW_S) -> float:
     """High-frequency RMS of a signal over the second half of its time span (same unit as u).
 

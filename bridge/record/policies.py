@@ -1,13 +1,14 @@
 """Safety policies as executable properties (in the manner of PGFuzz), checked over every run.
 
 In:  a run's trace arrays by column (:data:`~bridge.record.columns.TRACE_COLUMNS`: ``t`` s, ``u*_act`` N,
-     ``state_age_s`` s), its events (dicts: ``t`` s, ``kind``, ``text``, and in a session ``source``), the
+     ``state_age_s`` s), its events (:class:`~bridge.record.events.RunEvent`: ``t`` s, ``kind``, ``text``,
+     in a session ``source``, and who caused it, ``by``), the
      :class:`Rules` it flew under (control rate Hz, ``[failsafe] timeout_s`` s, clock, link delays s, the
      controller's ids), and in a lockstep session its ``lockstep`` record and the first step its vehicle
      flew off the step clock
 Out: one :class:`Verdict` per policy of :data:`POLICIES` (``ok``; when violated, the mission time of the
      first violation and a one-line why), for ``summary.json["policies"]``; and the honest records that
-     go with them: who sent an arm or disarm (:func:`sender_of`), the lockstep record
+     go with them: the lockstep record
      (:func:`lockstep_record`), who ended a flight by command (:func:`ended_by_command`)
 
 The offline loop (:mod:`bridge.loop`) and the SITL session (:mod:`bridge.session`) both call
@@ -31,11 +32,11 @@ What each policy reads, and why it cannot be fooled by a run's own claims:
   ``stop_ms`` plus the link's delays (``Rules.hold_slack_s``). These bounds are upper ones: a
   lost command counts as sent, so a lossy link never makes a violation, and a vehicle that
   flies on without targets always does.
-- ``arm_authority``: every arm or disarm the vehicle reports names its sender as the suffix
-  `` [by SYSID:COMPID HOST:PORT LINK]`` (or `` [by vehicle]``): on the controller link only the
+- ``arm_authority``: every arm or disarm the vehicle reports names its sender (the event's ``by``:
+  sysid, compid, address and link, or the vehicle itself): on the controller link only the
   configured controller's ids have authority; on the GCS link any ground station (with a key
-  only signed frames get that far: the receive path refuses the rest). An event without the
-  suffix names nobody and is not judged.
+  only signed frames get that far: the receive path refuses the rest). An event that names
+  nobody is not judged.
 - ``lockstep_recorded``: in a lockstep session, a vehicle that left lockstep (its ``lockstep``
   event, or a vehicle row flown off the step clock) has a record saying so (``held`` false, the
   time of the first event); a row off the step clock with no ``lockstep`` event before it is a
@@ -49,12 +50,14 @@ What each policy reads, and why it cannot be fooled by a run's own claims:
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+
+from bridge.autopilot.simvehicle import Sender
+from bridge.record.events import RunEvent
 
 POLICIES: dict[str, str] = {
     "no_actuation_disarmed": "the realised thrust and torques are zero whenever the vehicle is disarmed",
@@ -68,7 +71,6 @@ POLICIES: dict[str, str] = {
 EPS_S = 1e-5  # s: event times are rounded to 1 us; a physics step is at least 100 us
 ZERO_N = 1e-9  # N: a realised wrench this small is zero
 CONTROLLER_ID = (200, 191)  # the configured controller's sysid, compid (bridge.mavlink.endpoint's default)
-_BY = re.compile(r"\[by (?:(vehicle)|(\d+):(\d+) (\S+) (\w+))\]")
 _ENDS_OFFBOARD = ("failsafe", "disarmed", "diverged")
 
 
@@ -112,72 +114,39 @@ class Verdict:
         return out
 
 
-@dataclass(frozen=True)
-class Sender:
-    """Who sent a command, as the vehicle's event names it (``link``: ``controller``, ``gcs``, or
-    ``vehicle`` for the vehicle's own decision, without ids or address)."""
-
-    link: str
-    sysid: int | None = None
-    compid: int | None = None
-    address: str | None = None
-
-    def __str__(self) -> str:
-        if self.link == "vehicle":
-            return "vehicle"
-        return f"{self.sysid}:{self.compid} {self.address} {self.link}"
-
-
-def sender_of(text: str) -> Sender | None:
-    """The sender an event's text names in its last `` [by ...]`` suffix, or None when it names none."""
-    found = list(_BY.finditer(text or ""))
-    if not found:
-        return None
-    m = found[-1]
-    if m.group(1):
-        return Sender("vehicle")
-    return Sender(m.group(5), int(m.group(2)), int(m.group(3)), m.group(4))
-
-
-def without_sender(text: str) -> str:
-    """An event's text without its `` [by ...]`` suffix."""
-    return _BY.sub("", text or "").rstrip()
-
-
-def vehicle_events(events: Sequence[Mapping[str, Any]]) -> list[Mapping[str, Any]]:
+def vehicle_events(events: Sequence[RunEvent]) -> list[RunEvent]:
     """The events the vehicle reported (offline: all of them; a session's carry ``source``), with a time."""
-    return [e for e in events if e.get("source", "vehicle") == "vehicle" and e.get("t") is not None]
+    return [e for e in events if (e.source or "vehicle") == "vehicle" and e.t is not None]
 
 
 # -- the honest records ------------------------------------------------------------------------------
-def lockstep_record(events: Sequence[Mapping[str, Any]], off_clock_t: float | None = None) -> dict[str, Any]:
+def lockstep_record(events: Sequence[RunEvent], off_clock_t: float | None = None) -> dict[str, Any]:
     """``summary.json["lockstep"]`` of a lockstep session: ``{"held": true}``, or ``held`` false with
     the time and text of the vehicle's first ``lockstep`` event (``left_at_s``, ``why``) and how many
     times it left (``times``); a vehicle row flown off the step clock (from ``off_clock_t`` s) with
     no such event is recorded too, as having left without saying so."""
-    left = [e for e in vehicle_events(events) if e["kind"] == "lockstep"]
+    left = [e for e in vehicle_events(events) if e.kind == "lockstep"]
     if left:
         first = left[0]
-        return {"held": False, "left_at_s": first["t"], "why": first["text"], "times": len(left)}
+        return {"held": False, "left_at_s": first.t, "why": first.text, "times": len(left)}
     if off_clock_t is not None:
         return {"held": False, "left_at_s": round(off_clock_t, 6),
                 "why": "the vehicle flew off the step clock without saying so", "times": 1}
     return {"held": True}
 
 
-def ended_by_command(events: Sequence[Mapping[str, Any]], controller_id: tuple[int, int] = CONTROLLER_ID,
-                     before_s: float = math.inf) -> tuple[Mapping[str, Any], Sender | None] | None:
+def ended_by_command(events: Sequence[RunEvent], controller_id: tuple[int, int] = CONTROLLER_ID,
+                     before_s: float = math.inf) -> tuple[RunEvent, Sender | None] | None:
     """The vehicle's first disarm by command before ``before_s`` (or a mode change) that the
     configured controller on its own link did not send: the event and its sender (None when the
     event names none), or None."""
     for e in vehicle_events(events):
-        if e["t"] >= before_s - EPS_S:
+        if e.t >= before_s - EPS_S:
             break
-        text = e.get("text", "")
-        commanded = (e["kind"] == "disarmed" and "by command" in text) or e["kind"] == "mode"
+        commanded = (e.kind == "disarmed" and "by command" in e.text) or e.kind == "mode"
         if not commanded:
             continue
-        who = sender_of(text)
+        who = e.by
         if who is not None and who.link == "controller" and (who.sysid, who.compid) == controller_id:
             continue
         return e, who
@@ -185,7 +154,7 @@ def ended_by_command(events: Sequence[Mapping[str, Any]], controller_id: tuple[i
 
 
 # -- the policies ----------------------------------------------------------------------------------------
-def check(trace: Mapping[str, Any], events: Sequence[Mapping[str, Any]], rules: Rules,
+def check(trace: Mapping[str, Any], events: Sequence[RunEvent], rules: Rules,
           lockstep: Mapping[str, Any] | None = None, off_clock_t: float | None = None) -> list[Verdict]:
     """Every policy of :data:`POLICIES` over one run, in that order (see the module docstring)."""
     ev = vehicle_events(events)
@@ -204,22 +173,22 @@ def all_hold(verdicts: Sequence[Mapping[str, Any]] | None) -> bool:
     return all(v.get("ok") for v in verdicts or ())
 
 
-def disarmed_intervals(events: Sequence[Mapping[str, Any]], armed_at_start: bool) -> list[tuple[float, float]]:
+def disarmed_intervals(events: Sequence[RunEvent], armed_at_start: bool) -> list[tuple[float, float]]:
     """(disarm t, next arm t or inf) of each disarmed stretch the vehicle's events tell, in order."""
     out: list[tuple[float, float]] = []
     since: float | None = None if armed_at_start else -math.inf
     for e in events:
-        if e["kind"] == "disarmed" and since is None:
-            since = e["t"]
-        elif e["kind"] == "armed" and since is not None:
-            out.append((since, e["t"]))
+        if e.kind == "disarmed" and since is None:
+            since = e.t
+        elif e.kind == "armed" and since is not None:
+            out.append((since, e.t))
             since = None
     if since is not None:
         out.append((since, math.inf))
     return out
 
 
-def no_actuation_disarmed(t: np.ndarray, realised: Sequence[np.ndarray], events: Sequence[Mapping[str, Any]],
+def no_actuation_disarmed(t: np.ndarray, realised: Sequence[np.ndarray], events: Sequence[RunEvent],
                           rules: Rules) -> Verdict:
     """Rows strictly inside a disarmed stretch realise no wrench (``spin_down``: never more than the row before)."""
     name = "no_actuation_disarmed"
@@ -247,37 +216,37 @@ def _wrench(u: np.ndarray) -> str:
     return f"|u1..u4| = {u[0]:.3g} N, {u[1]:.3g}, {u[2]:.3g}, {u[3]:.3g}"
 
 
-def offboard_intervals(events: Sequence[Mapping[str, Any]], armed_at_start: bool
+def offboard_intervals(events: Sequence[RunEvent], armed_at_start: bool
                        ) -> list[tuple[float, float, str | None]]:
     """(arm t, t it left offboard control or inf, the kind of event that ended it or None) of
     each stretch armed under offboard control."""
     out: list[tuple[float, float, str | None]] = []
     since: float | None = -math.inf if armed_at_start else None
     for e in events:
-        if e["kind"] == "armed":
+        if e.kind == "armed":
             if since is not None:  # armed again without leaving: the timeout restarts
-                out.append((since, e["t"], "armed"))
-            since = e["t"]
-        elif e["kind"] == "mode" and without_sender(e.get("text", "")) == "OFFBOARD":
+                out.append((since, e.t, "armed"))
+            since = e.t
+        elif e.kind == "mode" and e.text == "OFFBOARD":
             if since is not None:  # OFFBOARD again, armed: the timeout counts from the switch
-                out.append((since, e["t"], "mode"))
-            since = e["t"]
-        elif (e["kind"] in _ENDS_OFFBOARD or (e["kind"] == "mode" and "(disarmed" not in e.get("text", ""))) \
+                out.append((since, e.t, "mode"))
+            since = e.t
+        elif (e.kind in _ENDS_OFFBOARD or (e.kind == "mode" and "(disarmed" not in e.text)) \
                 and since is not None:  # a failsafe, a disarm, or a ground station's HOLD, LAND, TAKEOFF
-            out.append((since, e["t"], e["kind"]))
+            out.append((since, e.t, e.kind))
             since = None
     if since is not None:
         out.append((since, math.inf, None))
     return out
 
 
-def failsafe_in_time(t: np.ndarray, age: np.ndarray, events: Sequence[Mapping[str, Any]], rules: Rules) -> Verdict:
+def failsafe_in_time(t: np.ndarray, age: np.ndarray, events: Sequence[RunEvent], rules: Rules) -> Verdict:
     """Armed offboard, no stretch longer than ``timeout_s`` + one period since the last valid target
     without a failsafe (see the module docstring for how the targets are read from the trace)."""
     name = "failsafe_in_time"
     period = rules.period_s
     changes = timeout_changes(events)
-    left = next((e["t"] for e in events if e["kind"] == "lockstep"), math.inf)
+    left = next((e.t for e in events if e.kind == "lockstep"), math.inf)
     answers_until = left if rules.clock in ("offline", "lockstep") else -math.inf  # rows answering their step
     for start, end, kind in offboard_intervals(events, rules.armed_at_start):
         last = start if math.isfinite(start) else (float(t[0]) if len(t) else 0.0)  # arming restarts the timeout
@@ -307,13 +276,12 @@ def failsafe_in_time(t: np.ndarray, age: np.ndarray, events: Sequence[Mapping[st
     return Verdict(name, True)
 
 
-def timeout_changes(events: Sequence[Mapping[str, Any]]) -> list[tuple[float, float]]:
+def timeout_changes(events: Sequence[RunEvent]) -> list[tuple[float, float]]:
     """(t s, new timeout s) of each change of the offboard-loss timeout (COM_OF_LOSS_T) the events tell."""
     out = []
     for e in events:
-        text = e.get("text", "")
-        if e["kind"] == "param" and text.startswith("COM_OF_LOSS_T = "):
-            out.append((e["t"], float(text.split()[2])))
+        if e.kind == "param" and e.text.startswith("COM_OF_LOSS_T = "):
+            out.append((e.t, float(e.text.split()[2])))
     return out
 
 
@@ -331,32 +299,31 @@ def timeout_between(start: float, changes: Sequence[tuple[float, float]], a: flo
     return max(longest, now)
 
 
-def arm_authority(events: Sequence[Mapping[str, Any]], rules: Rules) -> Verdict:
+def arm_authority(events: Sequence[RunEvent], rules: Rules) -> Verdict:
     """Every arm and disarm (and mode change) that names its sender names one with authority."""
     name = "arm_authority"
     for e in events:
-        if e["kind"] not in ("armed", "disarmed", "mode"):
+        if e.kind not in ("armed", "disarmed", "mode"):
             continue
-        who = sender_of(e.get("text", ""))
-        if who is None or who.link in ("vehicle", "gcs"):
+        who = e.by
+        if who is None or who.is_vehicle or who.link == "gcs":
             continue
         if who.link != "controller":
-            return Verdict(name, False, e["t"], f"{e['kind']} by {who}: not a link the vehicle has")
+            return Verdict(name, False, e.t, f"{e.kind} by {who}: not a link the vehicle has")
         if (who.sysid, who.compid) != rules.controller_id:
             ids = f"{rules.controller_id[0]}:{rules.controller_id[1]}"
-            return Verdict(name, False, e["t"], f"{e['kind']} by {who}: on the controller link only {ids} has "
-                                                f"authority")
+            return Verdict(name, False, e.t, f"{e.kind} by {who}: on the controller link only {ids} has authority")
     return Verdict(name, True)
 
 
-def lockstep_recorded(events: Sequence[Mapping[str, Any]], rules: Rules, record: Mapping[str, Any] | None,
+def lockstep_recorded(events: Sequence[RunEvent], rules: Rules, record: Mapping[str, Any] | None,
                       off_clock_t: float | None) -> Verdict:
     """A lockstep session that left lockstep says so: the vehicle's event, and a record that agrees."""
     name = "lockstep_recorded"
     if rules.clock != "lockstep":
         return Verdict(name, True)
-    left = next((e for e in events if e["kind"] == "lockstep"), None)
-    if off_clock_t is not None and (left is None or left["t"] > off_clock_t + rules.period_s + EPS_S):
+    left = next((e for e in events if e.kind == "lockstep"), None)
+    if off_clock_t is not None and (left is None or left.t > off_clock_t + rules.period_s + EPS_S):
         return Verdict(name, False, off_clock_t, f"the vehicle flew off the step clock from t={off_clock_t:.3f} s "
                                                  "without a lockstep event")
     if left is None:
@@ -365,16 +332,15 @@ def lockstep_recorded(events: Sequence[Mapping[str, Any]], rules: Rules, record:
                                                                   "never said so")
         return Verdict(name, True)
     if record is None or record.get("held", True):
-        return Verdict(name, False, left["t"], f"the vehicle left lockstep at t={left['t']:.3f} s "
-                                               f"({left['text']}), the record says it held")
+        return Verdict(name, False, left.t, f"the vehicle left lockstep at t={left.t:.3f} s ({left.text}), "
+                                            "the record says it held")
     at = record.get("left_at_s")
-    if at is None or abs(at - left["t"]) > EPS_S:
-        return Verdict(name, False, left["t"], f"the vehicle left lockstep at t={left['t']:.3f} s, the record "
-                                               f"says at {at}")
+    if at is None or abs(at - left.t) > EPS_S:
+        return Verdict(name, False, left.t, f"the vehicle left lockstep at t={left.t:.3f} s, the record says at {at}")
     return Verdict(name, True)
 
 
-def time_steady(t: np.ndarray, rules: Rules, events: Sequence[Mapping[str, Any]] = ()) -> Verdict:
+def time_steady(t: np.ndarray, rules: Rules, events: Sequence[RunEvent] = ()) -> Verdict:
     """``t`` finite and increasing by exactly one control period from row to row. The one gap
     allowed is over steps the vehicle's events say it flew disarmed (a vehicle on the wall
     clock writes no rows while disarmed: real time, landed by its failsafe until a re-arm)."""
@@ -415,27 +381,30 @@ def rules_for(flight: Any, clock: str, link: Mapping[str, Any] | None,
                  spin_down=lag)
 
 
-def ended_by_outcome(outcome: str, events: Sequence[Mapping[str, Any]]) -> dict[str, str]:
+def ended_by_outcome(outcome: str, events: Sequence[RunEvent]) -> dict[str, str]:
     """``summary.json["ended_by"]`` as the outcome and the vehicle's events tell it: the mission
     (completed), the vehicle (its failsafe, with its event), the plant (diverged), or whoever
     interrupted it. A session knows more (a child that died, a command from someone) and says so."""
     ev = vehicle_events(events)
 
-    def first(kind: str) -> Mapping[str, Any] | None:
-        return next((e for e in ev if e["kind"] == kind), None)
+    def first(kind: str) -> RunEvent | None:
+        return next((e for e in ev if e.kind == kind), None)
 
     if outcome == "completed":
         return {"who": "mission", "how": "completed"}
     if outcome == "diverged":
         e = first("diverged")
-        return {"who": "plant", "how": f"diverged at t={e['t']:.3f} s: {e['text']}" if e else "diverged"}
+        return {"who": "plant", "how": f"diverged at t={e.t:.3f} s: {e.text}" if e else "diverged"}
+    if outcome == "crashed":
+        e = first("crashed")
+        return {"who": "plant", "how": f"crashed at t={e.t:.3f} s: {e.text}" if e else "crashed"}
     if outcome == "failsafe":
         e = first("failsafe")
-        return {"who": "vehicle", "how": f"failsafe at t={e['t']:.3f} s: {e['text']}" if e else "failsafe"}
+        return {"who": "vehicle", "how": f"failsafe at t={e.t:.3f} s: {e.text}" if e else "failsafe"}
     return {"who": "user", "how": "interrupted (Ctrl-C or SIGTERM)"}
 
 
-def judge(summary: dict[str, Any], trace: Mapping[str, Any], events: Sequence[Mapping[str, Any]], rules: Rules,
+def judge(summary: dict[str, Any], trace: Mapping[str, Any], events: Sequence[RunEvent], rules: Rules,
           lockstep: Mapping[str, Any] | None = None, off_clock_t: float | None = None) -> list[Verdict]:
     """:func:`check` a run and put the verdicts into its ``summary["policies"]``; the violated ones."""
     verdicts = check(trace, events, rules, lockstep, off_clock_t)

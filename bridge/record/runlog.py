@@ -3,7 +3,8 @@
 
 In:  trace rows (floats, :data:`~bridge.record.columns.TRACE_COLUMNS`), events (t s, kind, text), a
      summary dict, an ``--out`` path (or none: ``runs/<UTC time>-<mission>``)
-Out: the run directory with ``trace.csv`` (repr floats), ``events.log`` (``t=<s> <kind>: <text>``),
+Out: the run directory with ``trace.csv`` (repr floats), ``events.log`` (``t=<s> <kind>: <text>`` and, when
+     the event names them, `` [by SENDER]`` and `` [SOURCE]``),
      ``summary.json`` (written atomically) and ``plots/``; a trace read back as numpy arrays; a
      :class:`Run`
 
@@ -21,6 +22,7 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
+from bridge.autopilot.simvehicle import Sender
 from bridge.link.model import link_from_table
 from bridge.record.columns import TRACE_COLUMNS
 from missions import Mission
@@ -129,13 +131,15 @@ class TraceWriter(LineWriter):
 
 
 class EventLog(LineWriter):
-    """``events.log``: one line per event, ``t=<s> <kind>: <text>``, flushed at once."""
+    """``events.log``: one line per event, ``t=<s> <kind>: <text>[ [by SENDER]][ [SOURCE]]``, flushed at
+    once: for people (the sender is the event's field, :attr:`bridge.record.events.RunEvent.by`)."""
 
     def __init__(self, path: str | Path) -> None:
         super().__init__(path, None, batch=1)
 
-    def event(self, t: float, kind: str, text: str) -> None:
-        self.write(f"t={t:.3f} {kind}: {text}")
+    def event(self, t: float, kind: str, text: str, by: Sender | None = None, source: str | None = None) -> None:
+        shown = text + (by.suffix if by is not None else "") + (f" [{source}]" if source is not None else "")
+        self.write(f"t={t:.3f} {kind}: {shown}")
 
 
 class RunRecord:

@@ -1,8 +1,9 @@
 """The child processes of a SITL session, and the instance lock that keeps sessions apart.
 
 In:  a command line for ``python -m bridge`` and a log path; for :func:`instance_slot`, nothing
-Out: the child's status lines (stdout, read without blocking; :func:`bridge.nodes.process.parse_status`),
-     its exit, and the last line of its stderr; an instance number N (0-9) held exclusively
+Out: the child's reports (its stdout, read without blocking, each line parsed by
+     :func:`bridge.nodes.report.parse_line`), its exit, and the last line of its stderr; an instance
+     number N (0-9) held exclusively
 
 :func:`instance_slot` holds one of the ten PX4-style instance numbers (ports 14550 + N /
 14560 + N) for as long as a block runs.
@@ -12,7 +13,6 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
-import json
 import os
 import signal
 import socket
@@ -24,7 +24,8 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from bridge.nodes.process import die_with_parent, parse_status
+from bridge.nodes.process import die_with_parent
+from bridge.nodes.report import Done, Report, Stats, parse_line
 from params import ConfigError
 
 READY_TIMEOUT_S = 30.0  # s for a child to start (Python, imports, bind) on a loaded machine
@@ -59,7 +60,7 @@ def free_udp_port() -> int:
 
 
 class Child:
-    """One child process: its status lines (stdout, read without blocking) and its exit."""
+    """One child process: its reports (stdout, read without blocking) and its exit."""
 
     def __init__(self, name: str, argv: list[str], log: Path) -> None:
         self.name = name
@@ -72,16 +73,16 @@ class Child:
         os.set_blocking(self.fd, False)
         self._buf = b""
         self.eof = False
-        self.stats: dict[str, Any] = {}
-        self.done: str | None = None  # the controller's "done outcome=..." line
+        self.stats: dict[str, Any] = {}  # its last stats report's
+        self.done: Done | None = None  # the controller's outcome
 
     @property
     def pid(self) -> int:
         return self.proc.pid
 
-    def lines(self) -> list[str]:
-        """Complete lines written since the last call."""
-        out = []
+    def reports(self) -> list[Report]:
+        """The reports in the complete lines written since the last call (other lines are skipped)."""
+        out: list[Report] = []
         while True:
             try:
                 data = os.read(self.fd, 65536)
@@ -93,16 +94,14 @@ class Child:
             self._buf += data
         *full, self._buf = self._buf.split(b"\n")
         for raw in full:
-            line = raw.decode(errors="replace")
-            word, rest = parse_status(line)
-            if word == "stats":
-                try:
-                    self.stats = json.loads(rest)
-                except ValueError:
-                    pass
-            elif word == "done":
-                self.done = rest
-            out.append(line)
+            report = parse_line(raw.decode(errors="replace"))
+            if report is None:
+                continue
+            if isinstance(report, Stats):
+                self.stats = report.values
+            elif isinstance(report, Done):
+                self.done = report
+            out.append(report)
         return out
 
     def exit_text(self) -> str:

@@ -1,0 +1,101 @@
+"""Weather and faults (issue 27, docs/weather.md): the acceptance figures, printed as tables.
+
+Every flight is the product's own loop, ``bridge.simulate`` (``bsst sim``), with the overrides ``wind``,
+``turbulence``, ``at``, ``controller``, ``link``, ``profile``, ``sensors``, ``estimator``: exactly what
+``bsst sim MISSION --wind S:FROM --turbulence L --at T:KIND:ARGS ...`` flies.
+
+``wind``: ``missions/sine.toml --wind 5:270 --turbulence moderate`` for seeds 0..N-1: outcome, RMS, the mean
+wind along its direction and the turbulence's std per axis over the flight against MIL-HDBK-1797's σ, and the
+same pooled over the seeds (a 30 s flight is a few correlation times of u and v: one flight's sample is spread).
+``table``: BS-ST, SMC, PID on the sine, 3-D RMS (m, t >= 10 s) and u2 ripple (N, summary.json's), in still
+air, 5 m/s moderate and 10 m/s severe, on a perfect link and with 20 ms each way (``--delay 20``).
+``faults``: the x500 with ``--at 10:motor:1=E`` for each law; ``--sensors gnss --estimator ekf --at 10:gps:off
+--at 20:gps:on``: the drift during the outage and the NEES after.
+
+    python benchmarks/weather.py [wind|table|faults|all] [--seeds N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+from bridge import simulate
+
+MISSION = "missions/sine.toml"
+WEATHERS = (("still", {}), ("5 m/s moderate", {"wind": (5.0, 270.0), "turbulence": "moderate"}),
+            ("10 m/s severe", {"wind": (10.0, 270.0), "turbulence": "severe"}))
+LINKS = (("perfect", None), ("20 ms each way", {"delay_ms": 20.0}))
+LAWS = ("bsst", "smc", "pid")
+
+
+def wind_table(seeds: int) -> None:
+    print("## --wind 5:270 --turbulence moderate, sine, per seed\n")
+    print("| seed | outcome | RMS m | mean along m/s | std u / σ_u | std v / σ_v | std w / σ_w |")
+    print("|---|---|---|---|---|---|---|")
+    pooled = [0.0, 0.0, 0.0]
+    means = []
+    sig = None
+    for seed in range(seeds):
+        s = simulate(MISSION, wind=(5.0, 270.0), turbulence="moderate", seed=seed).summary
+        w = s["wind"]
+        sig = w["dryden"]["sigma_mps"]
+        std = w["turbulence_std_mps"]
+        means.append(w["mean_mps"]["along"])
+        for i, k in enumerate("uvw"):
+            pooled[i] += std[k] ** 2
+        print(f"| {seed} | {s['outcome']} | {s['rms_3d']:.4f} | {w['mean_mps']['along']:.2f} | "
+              + " | ".join(f"{std[k] / sig[k]:.2f}" for k in "uvw") + " |")
+    assert sig is not None
+    print(f"| pooled | | | {sum(means) / len(means):.2f} | "
+          + " | ".join(f"{math.sqrt(pooled[i] / seeds) / sig[k]:.2f}" for i, k in enumerate("uvw")) + " |")
+    print(f"\nσ (MIL-HDBK-1797, moderate, h = {w['dryden']['model_altitude_m']:.3f} m): "
+          + ", ".join(f"{k} {sig[k]:.3f} m/s" for k in "uvw") + "\n")
+
+
+def law_table() -> None:
+    print("## sine: 3-D RMS (m) / u2 ripple (N)\n")
+    print("| law | link | " + " | ".join(n for n, _ in WEATHERS) + " |")
+    print("|---|---|" + "---|" * len(WEATHERS))
+    for law in LAWS:
+        for lname, link in LINKS:
+            cells = []
+            for _, over in WEATHERS:
+                s = simulate(MISSION, controller=law, link=link, **over).summary
+                cell = f"{s['rms_3d']:.3g} / {s['inputs']['u2']['ripple']:.3g}"
+                cells.append(cell if s["outcome"] == "completed" else f"{s['outcome']} ({cell})")
+            print(f"| {law} | {lname} | " + " | ".join(cells) + " |")
+    print()
+
+
+def fault_table() -> None:
+    print("## x500, sine, --at 10:motor:1=E\n")
+    print("| law | E | outcome | RMS m | ended by |")
+    print("|---|---|---|---|---|")
+    for law in LAWS:
+        for eff in (0.9, 0.75, 0.0):
+            s = simulate(MISSION, profile="x500", controller=law, at=(f"10:motor:1={eff:g}",)).summary
+            print(f"| {law} | {eff:g} | {s['outcome']} | {s['rms_3d']:.4g} | {s['ended_by']['how']} |")
+    print("\n## GPS loss: sine, --sensors gnss --estimator ekf --at 10:gps:off --at 20:gps:on\n")
+    s = simulate(MISSION, sensors={"set": "gnss"}, estimator="ekf", at=("10:gps:off", "20:gps:on")).summary
+    (o,) = s["gps_outages"]
+    print(f"outcome {s['outcome']}, RMS {s['rms_3d']:.3f} m; drift during the outage max {o['drift_max_m']:.3f} m, "
+          f"{o['drift_at_end_m']:.3f} m at its end; after it: NEES mean {o['nees_mean_after']:.2f} (9 dof), "
+          f"position error RMS {o['drift_rms_after_m']:.3f} m\n")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("what", nargs="?", default="all", choices=("wind", "table", "faults", "all"))
+    ap.add_argument("--seeds", type=int, default=8)
+    a = ap.parse_args()
+    if a.what in ("wind", "all"):
+        wind_table(a.seeds)
+    if a.what in ("table", "all"):
+        law_table()
+    if a.what in ("faults", "all"):
+        fault_table()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,371 @@
+"""The offboard controller's flight: connect, arm, fly each step, disarm; its outcome (:mod:`bridge.nodes.offboard`).
+
+In:  the vehicle's states and state of mind through :class:`~bridge.nodes.offboard.link.OffboardLink`; the
+     :class:`~bridge.core.flight.Flight` (mission, law, link guard, ``[link]`` down model, parameter changes)
+Out: one answer per state (lockstep) or per tick (real time, s on the wall clock); ``controller.csv`` rows
+     (:data:`~bridge.record.columns.CONTROLLER_COLUMNS`); the outcome (:data:`OUTCOMES`) and why;
+     :func:`run_controller`: the ``stats`` and ``done`` reports and the exit status of ``bsst controller``
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from bridge.core.clock import FixedRate
+from bridge.core.flight import Flight
+from bridge.core.wire import command_to_wire, odometry_to_state, step_of_usec
+from bridge.link.ends import ControllerEnd
+from bridge.link.model import LinkImpairment
+from bridge.mavlink.endpoint import FORCE_DISARM, wait
+from bridge.nodes.offboard.config import (
+    PHASE_S,
+    PHASE_STATES,
+    STATE_WAIT_PERIODS,
+    WAY_DOWN_MAX_S,
+    WAY_DOWN_SLACK_S,
+    OffboardConfig,
+)
+from bridge.nodes.offboard.link import OffboardLink
+from bridge.nodes.process import on_stop_signals, report_printer
+from bridge.nodes.report import Done, Ready, Report, Stats
+from bridge.record.columns import CONTROLLER_COLUMNS
+from bridge.record.runlog import LineWriter, side_dir
+from controller.link_guard import LinkGuard
+
+OUTCOMES = ("completed", "failsafe", "diverged", "aborted")
+
+
+class Offboard(OffboardLink):
+    """One offboard controller flying one mission; :meth:`run` returns the outcome."""
+
+    def __init__(self, flight: Flight, cfg: OffboardConfig, out: Path | None = None,
+                 status: Callable[[Report], None] | None = None) -> None:
+        self.flight = flight
+        m = flight.mission
+        self.steps = m.steps
+        self.ctl = flight.make_controller()
+        self.guard = LinkGuard(self.ctl, flight.guard)
+        # lockstep: the mission's down-link model acts here, on what crossed the socket; real
+        # time: the relay applies it on the wire and this end passes the states straight on
+        down = flight.link.make()[1] if cfg.clock == "lockstep" else LinkImpairment(direction="down")
+        self.cend = ControllerEnd(self.guard, down)
+        self._blackouts = flight.blackout_notes()
+        self._noted = 0  # guard events already reported
+        self._u = self._wire = (0.0, 0.0, 0.0, 0.0)  # the last command sent: demanded, on the wire (as offline)
+        # a scheduled blackout of the real wire (the relay) silences the vehicle: wait that much longer
+        self._silence_s = cfg.vehicle_timeout_s + max(
+            (d for _, d in flight.link.up.blackouts + flight.link.down.blackouts), default=0.0)
+        self._sample = m.trajectory.sample
+        super().__init__(flight, cfg, out, status)
+        self.rows = (LineWriter(out / "controller.csv", ",".join(CONTROLLER_COLUMNS), batch=1)
+                     if out is not None else None)
+        self._last_state = time.monotonic()  # wall time of the newest state flown
+        self.stale_ticks = 0
+        self.schedule: FixedRate | None = None  # realtime: the tick schedule, once phase-locked
+        self.reason = ""
+        self.ended_taken_over = False  # the flight ended for a ground station's mode (no more targets sent)
+        self._changes = list(flight.param_changes)  # scheduled PARAM_SETs not sent yet, by mission time
+
+    @property
+    def overruns(self) -> int:
+        """Real-time ticks skipped because the process woke more than a period late."""
+        return self.schedule.skipped if self.schedule else 0
+
+    def stop(self) -> None:
+        """Ask :meth:`run` to return (safe from a signal handler): outcome ``aborted``."""
+        self.stopping = True
+
+    def run(self) -> str:
+        """Connect, arm, fly, disarm; the outcome (one of :data:`OUTCOMES`)."""
+        self._status(Ready("controller", vehicle=self.cfg.vehicle.hostport,
+                           local=f"{self.ep.local[0]}:{self.ep.local[1]}", clock=self.cfg.clock))
+        try:
+            if not self._connect() or not self._arm():
+                return "aborted"
+            outcome = self._fly_lockstep() if self.cfg.clock == "lockstep" else self._fly_realtime()
+            if outcome == "completed" and not self._disarm():
+                self.reason = "the vehicle did not acknowledge the disarm"
+            return outcome
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        if self.rows is not None:
+            self.rows.close()
+        if self.tlog is not None:
+            self.tlog.close()
+        self.ep.close()
+
+    def _connect(self) -> bool:
+        deadline = time.monotonic() + self.cfg.connect_timeout_s
+        while self.vsys is None or not self._heard:
+            if self.stopping:
+                return False
+            now = time.monotonic()
+            if now >= deadline:
+                self.reason = (f"no heartbeat from a vehicle at {self.cfg.vehicle} "
+                               f"within {self.cfg.connect_timeout_s:g} s")
+                self.event("aborted", self.reason)
+                return False
+            self._serve(min(deadline, self._next_house))
+        self.event("connected", f"vehicle sysid {self.vsys} compid {self.vcomp}")
+        return True
+
+    def _arm(self) -> bool:
+        result = self._command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0, 0.0)
+        if result != mavlink.MAV_RESULT_ACCEPTED:
+            self.reason = "arming not acknowledged" if result is None else f"arming refused (MAV_RESULT {result})"
+            self.event("aborted", self.reason)
+            return False
+        # armed under offboard control from now on: its state of step k0 may come before the heartbeat saying so
+        self.vehicle_armed = self.armed_seen = True
+        self.vehicle_state = mavlink.MAV_STATE_ACTIVE
+        self.event("armed", "vehicle armed, offboard control")
+        return True
+
+    def _disarm(self) -> bool:
+        result = self._command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0.0, float(FORCE_DISARM))
+        ok = result == mavlink.MAV_RESULT_ACCEPTED
+        self.event("disarmed" if ok else "disarm", "vehicle disarmed" if ok else "disarm not acknowledged")
+        return ok
+
+    def _fly_lockstep(self) -> str:
+        ep = self.ep
+        rate = self.rate
+        steps = self.steps
+        send = self._answer
+        k0 = last_k = None
+        last_frame: tuple[int, tuple[float, ...] | None] | None = None
+        spin = self.cfg.spin_s
+        mono = time.monotonic
+        self._last_state = mono()
+        while not self.stopping:
+            deadline = min(self._next_house, self._last_rx + self.cfg.vehicle_timeout_s)
+            for _, m, _addr in wait((ep,), deadline, ep, spin):
+                self._on(m)
+            odo = self._odo
+            if odo is not None:
+                self._odo = None
+                recv = self._odo_recv
+                k = step_of_usec(odo.time_usec, rate)
+                if k0 is None:
+                    k0 = k
+                if last_k is not None and k <= last_k:
+                    if k == last_k and last_frame is not None:
+                        send(*last_frame)  # the vehicle resent: our answer was lost
+                    continue
+                if k - k0 >= steps:
+                    return self._end_of_mission()
+                if self.taken_over:  # its HEARTBEAT came before this state: no answer to it
+                    return self._check_vehicle() or "aborted"
+                t = (k - k0) / rate
+                self._observe(odo, t, recv)
+                last_frame = (odo.time_usec, self._decide(t, k, odo.time_usec, recv, math.nan))
+                last_k = k
+                if mono() < self._next_house:
+                    continue
+            outcome = self._check_vehicle()
+            if outcome:
+                return outcome
+            if mono() >= self._next_house:
+                self._housekeeping()
+        return "aborted"
+
+    def _fly_realtime(self) -> str:
+        rate = self.rate
+        period = 1.0 / rate
+        steps = self.steps
+        mono = time.monotonic
+        # phase-lock to the vehicle: ticks just after its states arrive. The phase is the
+        # earliest arrival (recv - k / rate) over a few states, so one state that waited in
+        # the socket while we were busy does not shift the schedule.
+        self._odo = None
+        self._last_state = mono()
+        phase: float | None = None
+        seen = 0
+        while seen < PHASE_STATES and not self.stopping:
+            outcome = self._check_vehicle()
+            if outcome:
+                return outcome
+            self._serve(min(self._next_house, self._last_rx + self.cfg.vehicle_timeout_s))
+            if self._odo is not None:
+                k = step_of_usec(self._odo.time_usec, rate)
+                p = self._odo_recv - k * period
+                phase = p if phase is None else min(phase, p)
+                seen += 1
+                self._odo = None
+        if self.stopping or phase is None:
+            return "aborted"
+        k0 = k + 1  # the mission starts with the next state
+        self.schedule = clock = FixedRate(phase + k0 * period + PHASE_S, rate)
+        last_k = k0 - 1
+        usec, recv = 0, math.nan  # the newest state's stamp and arrival
+        way_down: float | None = None  # the states' one-way trip (s), once TIMESYNC tells it
+        j = 0
+        while not self.stopping:
+            self._sleep_until(clock.due(j))
+            now = mono()
+            j = clock.catch_up(j, now)  # missed ticks are skipped, the schedule kept (no drift)
+            due = clock.due(j)
+            late = now - due
+            for m, _addr in self.ep.poll():
+                self._on(m)
+            self._await_state(k0 + j, due + STATE_WAIT_PERIODS * period)  # at once if it is in
+            if way_down is None:
+                way_down = self._way_down_s(phase)
+            outcome = self._check_vehicle()
+            if outcome:
+                return outcome
+            odo = self._odo
+            if odo is None or step_of_usec(odo.time_usec, rate) <= last_k:
+                self.stale_ticks += 1
+                if last_k < k0:
+                    j += 1
+                    continue  # no state of the mission yet
+            else:
+                self._odo = None
+                k = step_of_usec(odo.time_usec, rate)
+                if last_k < k0 and j:
+                    # the first state of the mission came after the first tick (the earlier
+                    # ones were lost): the mission starts with it, as the trace does
+                    k0, j = k, 0
+                    self.schedule = clock = FixedRate(due, rate, clock.skipped)
+                if k - k0 >= steps:
+                    return self._end_of_mission()
+                usec, recv = odo.time_usec, self._odo_recv
+                self._observe(odo, (k - k0) / rate, recv)
+                last_k = k
+            # mission time of this tick on the vehicle's clock: state k0 + j was measured at
+            # j / rate, arrived the way down later, and the tick is PHASE_S after its arrival
+            t = j / rate + (way_down + PHASE_S if way_down is not None else 0.0)
+            j += 1
+            self._decide(t, last_k, usec, recv, late)
+        return "aborted"
+
+    def _way_down_s(self, phase: float) -> float | None:
+        """Real time: the one-way trip of the earliest-arriving states (s, >= 0), from the
+        phase of their arrivals and the vehicle's clock offset by TIMESYNC; None until a
+        TIMESYNC answer is in. The offset takes the two ways as equal, so an asymmetric link
+        (a delay on the way down only) is credited with half of the difference."""
+        if self.offset_ns is None:
+            return None
+        trip = phase + self.offset_ns * 1e-9
+        if not -WAY_DOWN_SLACK_S <= trip <= WAY_DOWN_MAX_S:
+            # the stamps and TIMESYNC are not on one clock: count ages from the arrivals
+            self.event("timesync", f"the states' way down comes out at {trip * 1e3:.1f} ms: "
+                                   "not counted in their age (stamps and TIMESYNC on different clocks?)")
+            return 0.0
+        return max(trip, 0.0)
+
+    def _observe(self, odo: Any, t_state: float, recv: float) -> None:
+        """A new state of the vehicle, measured at mission time ``t_state`` (s), crossed the
+        socket: into the down-link model with the vehicle's offboard bit (its HEARTBEAT:
+        armed and not CRITICAL; sent before the state on every change, so it is this step's)."""
+        X = odometry_to_state((odo.x, odo.y, odo.z), odo.q, (odo.vx, odo.vy, odo.vz),
+                              (odo.rollspeed, odo.pitchspeed, odo.yawspeed))
+        self.cend.receive_state(t_state, X, self.vehicle_armed and self.vehicle_state != mavlink.MAV_STATE_CRITICAL)
+        self._last_state = recv
+
+    def _decide(self, t: float, k: int, time_usec: int, recv: float, late: float) -> tuple[float, ...] | None:
+        """The control step at mission time t (s): the guard decides on the newest state the
+        model delivered; its command (or, in lockstep, the no-target acknowledgement) is sent
+        at once, stamped ``time_usec``, then the row (the trace's columns, as offline: the last
+        command's u and c, ``state_age_s`` of this step's command, nan without one). Returns
+        the wire values sent, None for none."""
+        self.t_mission = t
+        while self._blackouts and self._blackouts[0][0] <= t:
+            self.event("blackout", self._blackouts.pop(0)[1])
+        while self._changes and self._changes[0].step(self.rate) <= round(t * self.rate):
+            self._send_param(self._changes.pop(0))
+        dec = self.cend.step(t, self._sample)
+        events = self.guard.events
+        while self._noted < len(events):
+            _, kind, text = events[self._noted]
+            self._noted += 1
+            self.event(kind, text)
+        if dec.arm:
+            self._send_arm()
+        cmd = dec.command
+        wire = None
+        if cmd is not None:
+            wire = command_to_wire(self.actuation, cmd.normalised)
+            sent = time.monotonic()
+            self._send_target(time_usec, wire)
+            self._u, self._wire = cmd.demanded, wire
+        else:
+            sent = time.monotonic()
+            if self.cfg.clock == "lockstep":
+                self._send_no_target(time_usec)
+        s2c = self._state_to_command(time_usec, sent) if cmd is not None and self.cfg.clock == "realtime" else math.nan
+        self._row(k, t, self._sample(t), self._u, self._wire, self.ctl.law.desired, recv, sent, s2c, late,
+                  dec.state_age_s if cmd is not None else math.nan)
+        return wire
+
+    def _end_of_mission(self) -> str:
+        """The mission's steps are flown: ``failsafe`` if the vehicle's failsafe took over and
+        it is not back under offboard control, else ``completed``. A vehicle its failsafe
+        landed and disarmed is disarmed by command too, which ends its lockstep flight."""
+        back = self.vehicle_armed and self.vehicle_state != mavlink.MAV_STATE_CRITICAL
+        if not self.failsafe_seen or back:
+            return "completed"
+        self.reason = "the vehicle's failsafe took over (HEARTBEAT system_status CRITICAL)"
+        self.event("failsafe", self.reason)
+        if not self.vehicle_armed:
+            self._disarm()
+        return "failsafe"
+
+    def _row(self, k: int, t: float, ref: Any, u: Any, wire: Any, desired: Any, recv: float, sent: float,
+             s2c: float, late: float, age: float) -> None:
+        if self.rows is not None:
+            self.rows.write(",".join(map(repr, (k, t, ref[0][0], ref[1][0], ref[2][0], ref[3][0], *u, *wire,
+                                                *desired, recv, sent, s2c, late, age))))
+
+    def _check_vehicle(self) -> str | None:
+        """The outcome if the vehicle is lost to the flight (silent, no more states, disarmed
+        other than by its failsafe, taken out of OFFBOARD by a ground station), else None. Its
+        failsafe alone does not end the flight."""
+        now = time.monotonic()
+        timeout = self._silence_s
+        if self.taken_over:
+            self.reason = f"the vehicle was switched to {self.taken_over}: no more targets sent"
+            self.ended_taken_over = True
+        elif now - self._last_rx > timeout:
+            self.reason = f"vehicle silent for {timeout:g} s"
+        elif self.armed_seen and not self.vehicle_armed and not self.failsafe_seen:
+            self.reason = "the vehicle was disarmed during the mission"
+        elif now - self._last_state > timeout:
+            self.reason = f"no new state from the vehicle for {timeout:g} s"
+        else:
+            return None
+        outcome = "failsafe" if self.failsafe_seen else "aborted"
+        self.event(outcome, self.reason)
+        return outcome
+
+
+def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None = None,
+                   overwrite: bool = False) -> int:
+    """``bsst controller``: fly, then exit 0 if the mission completed (in lockstep: without the vehicle
+    leaving it), else 1 (failsafe, diverged, aborted, or lockstep left)."""
+    path = side_dir(out, ("controller.tlog", "controller.csv"), overwrite) if out is not None else None
+    emit = report_printer()
+    node = Offboard(flight, cfg, path, emit)
+    on_stop_signals(node.stop)
+    outcome = node.run()
+    emit(Stats({"commands": node.commands, "states": node.states, "received": node.ep.received,
+                "sent": node.ep.sent, "stale_ticks": node.stale_ticks, "overruns": node.overruns,
+                "down": node.cend.down.stats.summary() if cfg.clock == "lockstep" else None,
+                "rejected": dict(node.rejected), "rejected_from_vehicle": node.rejected.from_peer}))
+    left = bool(node.left_lockstep)
+    emit(Done(outcome, left, node.reason or None, node.taken_over if node.ended_taken_over else None))
+    if outcome != "completed":
+        sys.stderr.write(f"bsst controller: {outcome}" + (f": {node.reason}" if node.reason else "") + "\n")
+    elif left:
+        sys.stderr.write(f"bsst controller: completed, but not in lockstep: the vehicle said {node.left_lockstep!r}\n")
+    return 0 if outcome == "completed" and not left else 1

@@ -1,0 +1,270 @@
+"""The offboard controller's side of its link to the vehicle: the endpoint, what it knows of the vehicle, what
+it sends (:mod:`bridge.nodes.offboard`).
+
+In:  the vehicle's messages: ODOMETRY (checked: sender, stamp, range; kept newest only), HEARTBEAT (armed, system
+     status CRITICAL = its failsafe, PX4 ``custom_mode``: a ground station's mode), COMMAND_ACK, TIMESYNC (clock
+     offset and round trip, ns), STATUSTEXT
+Out: actuator targets stamped with their state's ``time_usec`` (or the lockstep no-target acknowledgement),
+     ARM_DISARM and other COMMAND_LONGs until ACKed, PARAM_SET, HEARTBEAT, TIMESYNC; ``controller.tlog``;
+     reports (:mod:`bridge.nodes.report`): events at the mission's time, received STATUSTEXTs, refusals
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from bridge.autopilot.params import BY_NAME, ParamChange
+from bridge.core.flight import Flight
+from bridge.core.wire import step_of_usec
+from bridge.mavlink.endpoint import HIL_ACTUATOR_CONTROLS, SET_ACTUATOR_CONTROL_TARGET, Endpoint, Tlog, wait
+from bridge.mavlink.modes import MAIN_OFFBOARD, PARAM_TYPES, main_mode, param_to_wire, shown_name
+from bridge.mavlink.receive import Rejections, odometry_problem
+from bridge.mavlink.signing import Signing
+from bridge.nodes.offboard.config import (
+    HOUSEKEEPING_S,
+    SPIN_BEFORE_TICK_S,
+    OffboardConfig,
+    stamp_problem,
+    stamp_slack_s,
+)
+from bridge.nodes.report import Event, Report, StatusText, Warning
+
+_ZERO12 = (0.0,) * 12
+_ZERO16 = (0.0,) * 16
+
+
+class OffboardLink:
+    """The link side of :class:`~bridge.nodes.offboard.flight.Offboard`: one endpoint to the vehicle, the
+    vehicle as its messages tell it, and the messages sent to it."""
+
+    def __init__(self, flight: Flight, cfg: OffboardConfig, out: Path | None,
+                 status: Callable[[Report], None] | None) -> None:
+        self.cfg = cfg
+        self.rate = flight.mission.rate_hz
+        self.actuation = flight.profile.actuation
+        self._status = status or (lambda report: None)
+        self.tlog = Tlog(out / "controller.tlog") if out is not None else None
+        self.rejected = Rejections()  # what the receive path refused (bridge.mavlink.receive)
+        self.ep = Endpoint(cfg.vehicle, sysid=cfg.sysid, compid=cfg.compid, tlog=self.tlog, name="--vehicle",
+                           signing=Signing(cfg.key) if cfg.key is not None else None, rejected=self.rejected,
+                           source_port=cfg.source_port)
+        self._odo_usec = -1  # time_usec of the newest state accepted: an older one is stale
+        self._stamp_slack_s = stamp_slack_s(flight, cfg.clock)  # how far a stamp may jump (stamp_problem)
+        self.stopping = False
+        self._heard = False  # a heartbeat of the vehicle arrived
+        self.vsys: int | None = cfg.target_sysid
+        self.vcomp = 1
+        self.armed_seen = False  # the vehicle's heartbeat showed it armed since we armed it
+        self.vehicle_armed = False
+        self.vehicle_state = mavlink.MAV_STATE_UNINIT
+        self.failsafe_seen = False  # the vehicle reported its failsafe (CRITICAL since we armed it)
+        self.left_lockstep = ""  # the vehicle's STATUSTEXT saying it left lockstep, if it did
+        self.taken_over = ""  # the mode a ground station switched the armed vehicle to (PX4 custom_mode), if any
+        self._odo: Any = None  # newest ODOMETRY not yet used
+        self._odo_recv = 0.0
+        self._acks: dict[int, int] = {}
+        now = time.monotonic()
+        self._last_rx = now
+        self._next_hb = now
+        self._next_ts = now
+        self._next_house = now
+        self._ts_best: tuple[int, int] | None = None  # (rtt ns, offset ns) of the best recent TIMESYNC
+        self._ts_age = 0
+        self.offset_ns: int | None = None  # vehicle clock - our clock
+        self.rtt_ns: int | None = None
+        self.commands = 0
+        self.states = 0
+        self.t_mission = 0.0  # the mission time the events are reported at (s)
+
+    def event(self, kind: str, text: str) -> None:
+        self._status(Event.at(self.t_mission, kind, text))
+
+    def _command(self, cmd: int, p1: float, p2: float, tries: int = 30, every_s: float = 0.1) -> int | None:
+        """COMMAND_LONG to the vehicle, repeated (confirmation 0, 1, ...) until ACKed. Every
+        0.1 s: an ARM whose ACK was lost has armed the vehicle, whose failsafe takes over
+        0.5 s later without a target (ARM_DISARM is idempotent)."""
+        self._acks.pop(cmd, None)
+        for n in range(tries):
+            self.ep.send(mavlink.MAVLink_command_long_message(self.vsys or 0, self.vcomp, cmd, n, p1, p2,
+                                                              0, 0, 0, 0, 0))
+            deadline = time.monotonic() + every_s
+            while time.monotonic() < deadline and not self.stopping:
+                self._serve(deadline)
+                if cmd in self._acks:
+                    return self._acks.pop(cmd)
+            if self.stopping:
+                return None
+        return None
+
+    def _sleep_until(self, due: float) -> None:
+        """Serve the link until ``due``: select until shortly before, then poll to the tick."""
+        mono = time.monotonic
+        while not self.stopping:
+            now = mono()
+            if now >= due:
+                return
+            if now >= self._next_house:
+                self._housekeeping()
+            if due - now > SPIN_BEFORE_TICK_S:
+                for _, m, _addr in wait((self.ep,), min(due - SPIN_BEFORE_TICK_S, self._next_house)):
+                    self._on(m)
+            else:
+                for m, _addr in self.ep.poll():
+                    self._on(m)
+
+    def _await_state(self, k: int, deadline: float) -> None:
+        """Serve the link until the state of step ``k`` (or a newer one) is in, or ``deadline``."""
+        rate = self.rate
+        while not self.stopping and (self._odo is None or step_of_usec(self._odo.time_usec, rate) < k):
+            if time.monotonic() >= deadline:
+                return
+            for _, m, _addr in wait((self.ep,), deadline):
+                self._on(m)
+
+    def _state_to_command(self, time_usec: int, sent: float) -> float:
+        """State-to-command round trip (s) by TIMESYNC: from the state's time, on the vehicle's
+        clock mapped onto ours, to our send, plus half a TIMESYNC round trip for the way up."""
+        if self.offset_ns is None or self.rtt_ns is None:
+            return math.nan
+        state_ns = time_usec * 1000 - self.offset_ns
+        return (sent * 1e9 - state_ns + 0.5 * self.rtt_ns) * 1e-9
+
+    def _answer(self, time_usec: int, wire: tuple[float, ...] | None) -> None:
+        """Send the answer to the state stamped ``time_usec`` again: its target, or no target."""
+        if wire is None:
+            self._send_no_target(time_usec)
+        else:
+            self._send_target(time_usec, wire)
+
+    def _send_no_target(self, time_usec: int) -> None:
+        """Lockstep: acknowledge the step of the state stamped ``time_usec`` without a valid
+        target (HIL_ACTUATOR_CONTROLS, flags bit 0 lockstep, ``mode`` without SAFETY_ARMED, as
+        PX4 clocks its simulator while its outputs are disarmed; for either actuation)."""
+        self.ep.send_hot(HIL_ACTUATOR_CONTROLS, (time_usec, 1, *_ZERO16, 0))
+
+    def _send_arm(self) -> None:
+        """Ask the vehicle to arm again (the guard's ``resume``); once per step while it asks."""
+        self.ep.send(mavlink.MAVLink_command_long_message(self.vsys or 0, self.vcomp,
+                                                          mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1.0, 0.0,
+                                                          0, 0, 0, 0, 0))
+
+    def _send_param(self, change: ParamChange) -> None:
+        """A scheduled parameter change (``--param-at``): PARAM_SET before this step's answer, so
+        that in lockstep the vehicle makes it before it flies the step (the same step as offline)."""
+        kind = PARAM_TYPES[BY_NAME[change.name].kind]
+        self.ep.send(mavlink.MAVLink_param_set_message(self.vsys or 0, self.vcomp, change.name.encode(),
+                                                       param_to_wire(change.value, kind), kind))
+        self.event("param", f"set {change.name} = {change.value:g}")
+
+    def _send_target(self, time_usec: int, wire: tuple[float, ...]) -> None:
+        """The actuator target answering the state stamped ``time_usec`` (hot path)."""
+        self.commands += 1
+        if self.actuation == "motors":
+            flags = 1 if self.cfg.clock == "lockstep" else 0  # bit 0: lockstep
+            self.ep.send_hot(HIL_ACTUATOR_CONTROLS, (time_usec, flags, *wire, *_ZERO12,
+                                                     mavlink.MAV_MODE_FLAG_SAFETY_ARMED))
+        else:  # control group 0
+            self.ep.send_hot(SET_ACTUATOR_CONTROL_TARGET, (time_usec, *wire, 0.0, 0.0, 0.0, 0.0, 0,
+                                                           self.vsys or 0, self.vcomp))
+
+    def _serve(self, deadline: float) -> None:
+        for _, m, _addr in wait((self.ep,), deadline):
+            self._on(m)
+        if time.monotonic() >= self._next_house:
+            self._housekeeping()
+
+    def _on(self, m: Any) -> None:
+        """Any message from the link (ODOMETRY is kept for the flight loop, newest only)."""
+        src = m.get_srcSystem()
+        kind = m._type
+        if kind == "ODOMETRY":  # checked before the law sees it (bridge.mavlink.receive)
+            now = time.monotonic()
+            why = ("sender" if src != self.vsys
+                   else stamp_problem(m.time_usec, self._odo_usec, now - self._odo_recv, 1.0 / self.rate,
+                                      self._stamp_slack_s) or odometry_problem(m))
+            if why:
+                self.rejected.add(why, True)
+                return
+            self._odo_usec = m.time_usec
+            self.states += 1
+            self._odo = m
+            self._odo_recv = self._last_rx = now
+            return
+        if kind == "HEARTBEAT":
+            if m.autopilot == mavlink.MAV_AUTOPILOT_INVALID or m.type == mavlink.MAV_TYPE_GCS:
+                return
+            if self.vsys is None:
+                self.vsys, self.vcomp = src, m.get_srcComponent()
+            if src != self.vsys:
+                return
+            self._heard = True
+            self._last_rx = time.monotonic()
+            self.vehicle_armed = bool(m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+            self.vehicle_state = m.system_status
+            if self.vehicle_armed:
+                self.armed_seen = True
+            if self.armed_seen and m.system_status == mavlink.MAV_STATE_CRITICAL:
+                # armed: flying its failsafe; disarmed: landed by it (on a real link the armed
+                # CRITICAL heartbeat may have been lost), or halted by divergence
+                self.failsafe_seen = True
+            elif (self.vehicle_armed and m.autopilot == mavlink.MAV_AUTOPILOT_PX4 and not self.taken_over
+                  and main_mode(m.custom_mode) != MAIN_OFFBOARD):
+                # armed, not in its failsafe, out of OFFBOARD: a ground station took it (HOLD, LAND, ...)
+                self.taken_over = shown_name(m.custom_mode)
+            return
+        if src != self.vsys:
+            return
+        self._last_rx = time.monotonic()
+        if kind == "COMMAND_ACK":
+            if m.target_system in (0, self.cfg.sysid):
+                self._acks[m.command] = m.result
+        elif kind == "TIMESYNC":
+            self._timesync(m)
+        elif kind == "STATUSTEXT":
+            text = m.text.rstrip("\x00") if isinstance(m.text, str) else m.text.decode(errors="replace")
+            self._status(StatusText(m.severity, text))
+            if text.startswith("lockstep:") and not self.left_lockstep:  # not a lockstep flight any more
+                self.left_lockstep = text
+
+    def _timesync(self, m: Any) -> None:
+        now = time.monotonic_ns()
+        if m.tc1 == 0:  # a request: answer with our clock
+            self.ep.send(mavlink.MAVLink_timesync_message(now, m.ts1))
+            return
+        rtt = now - m.ts1
+        if rtt < 0 or rtt > 1_000_000_000:
+            return
+        offset = m.tc1 - (m.ts1 + now) // 2
+        # keep the sample with the smallest round trip among the last few: its offset is the
+        # least disturbed by queueing on either side
+        self._ts_age += 1
+        if self._ts_best is None or rtt <= self._ts_best[0] or self._ts_age > 8:
+            self._ts_best = (rtt, offset)
+            self._ts_age = 0
+        self.rtt_ns, self.offset_ns = self._ts_best
+
+    def _housekeeping(self) -> None:
+        now = time.monotonic()
+        if now >= self._next_hb:
+            # 1 Hz; 10 Hz until the vehicle is heard: one lost to a vehicle still starting costs 0.1 s, not 1 s
+            self._next_hb = now + (1.0 if self._heard else 0.1)
+            self.ep.send(mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_ONBOARD_CONTROLLER,
+                                                           mavlink.MAV_AUTOPILOT_INVALID, 0, 0,
+                                                           mavlink.MAV_STATE_ACTIVE, 3))
+        if now >= self._next_ts and self.vsys is not None:
+            self._next_ts = now + self.cfg.timesync_s
+            self.ep.send(mavlink.MAVLink_timesync_message(0, time.monotonic_ns()))
+        refused = self.rejected.report(now)
+        if refused is not None:
+            self._status(Warning(refused))
+        if self.tlog is not None:
+            self.tlog.flush()
+        # no TIMESYNC before a vehicle is known: its due time must not hold the loop awake
+        self._next_house = min(self._next_hb, self._next_ts if self.vsys is not None else math.inf,
+                               now + HOUSEKEEPING_S)

@@ -1,0 +1,227 @@
+"""What a child process (vehicle, controller, relay) reports to the session: one JSON object a line.
+
+In:  a report (one frozen dataclass per :class:`Kind`) to write; a line read back from a child's stdout
+Out: :func:`to_line`: ``{"report": KIND, ...fields}`` on one line (no newline); :func:`parse_line`: the
+     report again, or None for a line that is not one (not JSON, an unknown kind, a missing field)
+
+The kinds, and their fields (times in s of the flight's clock, to the millisecond):
+
+- ``ready``: the child is up, bound, its clock chosen (:class:`Ready`: which node, its addresses);
+- ``event``: something happened (:class:`Event`: ``t`` s, ``kind``, ``text``, ``by`` the
+  :class:`~bridge.autopilot.simvehicle.Sender` that caused it, as an object, or null);
+- ``statustext``: a STATUSTEXT the controller received (:class:`StatusText`: MAV_SEVERITY, text);
+- ``warning``: what the receive path refused lately (:class:`Warning`,
+  :meth:`bridge.mavlink.receive.Rejections.report`);
+- ``refused``: a command or parameter the vehicle refused, and why (:class:`Refused`);
+- ``stats``: the child's counts on exit (:class:`Stats`, a JSON object; the keys per child are
+  :func:`bridge.nodes.offboard.run_controller`'s and the vehicle's);
+- ``done``: the controller's outcome (:class:`Done`: ``completed``, ``failsafe``, ``diverged`` or
+  ``aborted``; whether the vehicle left lockstep; why it gave up; the mode a ground station took it into).
+
+This module is the one place that reads them: the session never looks inside a report's text.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from dataclasses import dataclass, field, fields
+from enum import StrEnum
+from typing import Any
+
+from bridge.autopilot.simvehicle import ITSELF, VEHICLE_LINK, Sender
+
+
+class Kind(StrEnum):
+    READY = "ready"
+    EVENT = "event"
+    STATUSTEXT = "statustext"
+    WARNING = "warning"
+    REFUSED = "refused"
+    STATS = "stats"
+    DONE = "done"
+
+
+@dataclass(frozen=True)
+class Ready:
+    """A child is up. ``node``: ``vehicle``, ``controller`` or ``relay``; the rest as the node has them:
+
+    - vehicle: ``listen`` (HOST:PORT of its controller link), ``gcs`` (where its GCS telemetry goes, or
+      None), ``sysid``, ``clock`` (``lockstep``/``realtime``), ``profile``, ``controller_from`` (the one
+      address it hears its controller from, or None);
+    - controller: ``vehicle`` (HOST:PORT it sends to), ``local`` (its own), ``clock``;
+    - relay: ``listen`` (its front), ``to`` (where it forwards), ``back`` (the port it forwards from),
+      ``client`` (the controller side, or None: the first sender), ``up`` and ``down`` (each direction's
+      link model, described).
+    """
+
+    node: str
+    listen: str | None = None
+    gcs: str | None = None
+    sysid: int | None = None
+    clock: str | None = None
+    profile: str | None = None
+    controller_from: str | None = None
+    vehicle: str | None = None
+    local: str | None = None
+    to: str | None = None
+    back: str | None = None
+    client: str | None = None
+    up: str | None = None
+    down: str | None = None
+
+    def describe(self) -> str:
+        """One line for a person (the session's ``started`` event): the relay's as it says it,
+        the others' as ``key=value`` pairs of what they have."""
+        if self.node == "relay":
+            ends = f"client {self.client}" if self.client else "client: the first sender"
+            return (f"listening on {self.listen} -> {self.to} from {self.back} ({ends}); "
+                    f"up: {self.up}; down: {self.down}")
+        return " ".join(f"{f.name}={v}" for f in fields(self)[1:] if (v := getattr(self, f.name)) is not None)
+
+
+@dataclass(frozen=True)
+class Event:
+    """An event at ``t`` (s, to the millisecond: :meth:`at`) of ``kind``, its ``text`` and who caused it."""
+
+    t: float
+    kind: str
+    text: str
+    by: Sender | None = None
+
+    @classmethod
+    def at(cls, t: float, kind: str, text: str, by: Sender | None = None) -> Event:
+        """The event at ``t`` rounded to the millisecond: the resolution every child reports at."""
+        return cls(float(f"{t:.3f}"), kind, text, by)
+
+
+@dataclass(frozen=True)
+class StatusText:
+    """A STATUSTEXT received from the vehicle: its MAV_SEVERITY and text."""
+
+    severity: int
+    text: str
+
+
+@dataclass(frozen=True)
+class Warning:  # noqa: A001 - the report's name; the builtin is not used here
+    """What the receive path refused since the last warning (one line, counts by reason)."""
+
+    text: str
+
+
+@dataclass(frozen=True)
+class Refused:
+    """A command or parameter refused, and why."""
+
+    text: str
+
+
+@dataclass(frozen=True)
+class Stats:
+    """A child's counts on exit (a JSON object; the keys are the child's)."""
+
+    values: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Done:
+    """The controller's outcome; ``left_lockstep``: the vehicle left lockstep during the flight;
+    ``reason``: why it ended other than completed (None: it completed, or said nothing); ``taken_over``:
+    the mode a ground station switched the armed vehicle to, when that ended the flight (else None)."""
+
+    outcome: str
+    left_lockstep: bool = False
+    reason: str | None = None
+    taken_over: str | None = None
+
+
+Report = Ready | Event | StatusText | Warning | Refused | Stats | Done
+KIND_OF: dict[type, Kind] = {Ready: Kind.READY, Event: Kind.EVENT, StatusText: Kind.STATUSTEXT,
+                             Warning: Kind.WARNING, Refused: Kind.REFUSED, Stats: Kind.STATS, Done: Kind.DONE}
+_CLASS_OF = {k: c for c, k in KIND_OF.items()}
+
+
+def to_line(report: Report) -> str:
+    """The report as one JSON object on one line (no newline): ``{"report": KIND, ...fields}``."""
+    body: dict[str, Any] = {"report": KIND_OF[type(report)].value}
+    for f in fields(report):
+        v = getattr(report, f.name)
+        body[f.name] = v.as_dict() if isinstance(v, Sender) else v
+    return json.dumps(body, separators=(",", ":"))
+
+
+def parse_line(line: str) -> Report | None:
+    """The report a line holds, or None when it holds none (not JSON, an unknown kind, a missing or
+    mistyped field). Also reads the vehicle's text lines until it writes JSON (:func:`_legacy`)."""
+    text = line.strip()
+    if not text.startswith("{"):
+        return _legacy(text)
+    try:
+        body = json.loads(text)
+        cls = _CLASS_OF[Kind(body.pop("report"))]
+        if cls is Event and body.get("by") is not None:
+            body["by"] = Sender.from_dict(body["by"])
+        report = cls(**body)
+    except (ValueError, KeyError, TypeError, AttributeError):
+        return None
+    return report if _well_typed(report) else None
+
+
+def _well_typed(report: Report) -> bool:
+    """Whether the fields a reader relies on have their types (a JSON line is anyone's to write)."""
+    if isinstance(report, Event):
+        return (isinstance(report.t, (int, float)) and not isinstance(report.t, bool)
+                and isinstance(report.kind, str) and isinstance(report.text, str))
+    if isinstance(report, Stats):
+        return isinstance(report.values, dict)
+    if isinstance(report, Done):
+        return isinstance(report.outcome, str) and (report.reason is None or isinstance(report.reason, str))
+    if isinstance(report, StatusText):
+        return isinstance(report.severity, int) and isinstance(report.text, str)
+    if isinstance(report, Ready):
+        return isinstance(report.node, str)
+    return isinstance(report.text, str)
+
+
+# -- LEGACY: the vehicle's text lines (bridge/nodes/vehicle.py), until it writes JSON lines ------------------
+# Delete from here to the end of the module once the vehicle emits to_line(...) for its ready, event,
+# refused and stats reports.
+_BY = re.compile(r" \[by (?:(vehicle)|(\d+):(\d+) (\S+):(\d+) (\w+))\]$")
+
+
+def _legacy(line: str) -> Report | None:
+    """The vehicle's status line as a report: ``ready k=v ...``, ``event t=<s> <kind>: <text>[ [by ...]]``,
+    ``refused <why>``, ``stats {json}``; None for anything else."""
+    word, _, rest = line.partition(" ")
+    if word == "ready":
+        pairs = dict(f.partition("=")[::2] for f in rest.split())
+        known = {f.name for f in fields(Ready)}
+        try:
+            return Ready("vehicle", **{k: int(v) if k == "sysid" else v for k, v in pairs.items() if k in known})
+        except ValueError:
+            return None
+    if word == "event":
+        t_text, _, what = rest.partition(" ")
+        kind, _, text = what.partition(": ")
+        try:
+            t = float(t_text.removeprefix("t="))
+        except ValueError:
+            t = math.nan
+        by = None
+        m = _BY.search(text)
+        if m is not None:
+            text = text[:m.start()]
+            by = ITSELF if m.group(1) == VEHICLE_LINK else Sender(int(m.group(2)), int(m.group(3)), m.group(4),
+                                                                    int(m.group(5)), m.group(6))
+        return Event(t, kind, text, by)
+    if word == "refused":
+        return Refused(rest)
+    if word == "stats":
+        try:
+            values = json.loads(rest)
+        except ValueError:
+            return None
+        return Stats(values) if isinstance(values, dict) else None
+    return None

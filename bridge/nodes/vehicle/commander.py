@@ -1,0 +1,297 @@
+"""The vehicle's commander: arming, flight modes, commands, and the triggers that end a flight.
+
+In:  COMMAND_LONG / COMMAND_INT (COMPONENT_ARM_DISARM, DO_SET_MODE, NAV_TAKEOFF m AMSL, NAV_LAND,
+     SET/GET_MESSAGE_INTERVAL us, REQUEST_MESSAGE, REQUEST_AUTOPILOT_CAPABILITIES, GET_HOME_POSITION) and
+     SET_MODE from a sender with authority (:class:`~bridge.nodes.vehicle.authority.Sender`); the plant's
+     divergence and the controller's silence (wall time, s)
+Out: COMMAND_ACK (with what a command asked for, and a STATUSTEXT saying why it was refused) in one
+     datagram; the flight's changes (arm, disarm, mode) on the :class:`SimVehicle` as events naming their
+     sender; the step clock's transitions (:class:`~bridge.nodes.vehicle.clock.Clock`); ``refused ...``
+     status lines
+
+Flight modes (OFFBOARD, HOLD, LAND, TAKEOFF, in PX4's encoding: :mod:`bridge.mavlink.modes`) and what a
+ground station can do with them: docs/ground-station.md. Every command's numbers are checked before use
+(:mod:`bridge.mavlink.receive`): a bad one is DENIED and counted (``bad_number``), nothing done.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from bridge.autopilot.params import BY_NAME
+from bridge.autopilot.simvehicle import GROUND_MODES, LAND, OFFBOARD, TAKEOFF, SimVehicle
+from bridge.mavlink import telemetry as tm
+from bridge.mavlink.endpoint import Endpoint
+from bridge.mavlink.modes import mode_name, requested_custom_mode, requested_mode
+from bridge.mavlink.receive import FORCE_DISARM, arm_disarm_args, interval_arg, message_id_arg
+from bridge.nodes.vehicle.authority import Authority, Sender, attribute
+from bridge.nodes.vehicle.clock import Clock, Trigger
+from bridge.nodes.vehicle.streams import HEARTBEAT_S, StatusTexts, StreamTable
+
+OFFBOARD_STREAM_S = 1.0  # s of wall time: a ground station's OFFBOARD needs a target from the controller this recent
+_STREAM_COMMANDS = (mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAV_CMD_GET_MESSAGE_INTERVAL,
+                    mavlink.MAV_CMD_REQUEST_MESSAGE)
+Result = tuple[int, tuple[Any, ...]]  # (MAV_RESULT, the messages a command asked for)
+
+
+@dataclass(frozen=True)
+class CommanderPorts:
+    """What the commander asks of the vehicle that wires it."""
+
+    step: Callable[[], int]  # the current control step k
+    state_out: Callable[[float], None]  # send step k's state at wall time now (s): lockstep awaits its answer
+    new_flight: Callable[[bool], None]  # a new flight is armed (True: by a ground station)
+    arm_through_link: Callable[[], None]  # the controller's arm enters the up-link model now (lockstep)
+    target_wall: Callable[[], float]  # wall time (s) of the newest actuator target from the controller
+    message: Callable[[int], list[Any]]  # the message(s) of an id, as a stream sends them
+    reject: Callable[[str], None]  # count a refusal (bridge.mavlink.receive.Rejections)
+    report: Callable[[str], None]  # a status line
+
+
+class Commander:
+    """Arms, disarms, sets modes and runs commands for one vehicle."""
+
+    def __init__(self, sim: SimVehicle, clock: Clock, authority: Authority, texts: StatusTexts,
+                 streams: dict[str, StreamTable], substeps: int, ports: CommanderPorts) -> None:
+        self.sim = sim
+        self.clock = clock
+        self.authority = authority
+        self.cfg = authority.cfg
+        self.lockstep = self.cfg.clock == "lockstep"
+        self._statustext = texts
+        self.streams = streams  # link (controller, gcs) -> its stream table: a link's requests change its own
+        self.substeps = substeps
+        self.ports = ports
+        self.texts: list[Any] = []  # STATUSTEXTs saying why a command was refused: sent after its COMMAND_ACK
+
+    # -- the messages ---------------------------------------------------------------------------------
+    def command(self, ep: Endpoint, m: Any, addr: tuple[str, int], link: str) -> bool:
+        """COMMAND_LONG / COMMAND_INT from a sender with authority on ``ep``: its numbers checked, acted
+        on, answered (COMMAND_ACK and what it asked for, in one datagram) and, if it changed the flight,
+        an event naming the sender. False when refused unanswered (``target``, ``reply_limited``)."""
+        if self.authority.for_others(m):
+            self.ports.reject("target")
+            return False
+        if not ep.reply_allowed(addr):
+            self.ports.reject("reply_limited")  # not acted on: its answer could not go
+            return False
+        by = self.authority.sender(m, addr, link)
+        n0 = len(self.sim.events)
+        result, follow = self._run_command(m, by)
+        attribute(self.sim.events, n0, by)
+        ack = mavlink.MAVLink_command_ack_message(m.command, result, 0, 0, m.get_srcSystem(), m.get_srcComponent())
+        ep.reply((ack, *follow, *self.texts), addr)
+        self.texts.clear()
+        return True
+
+    def set_mode_message(self, ep: Endpoint, m: Any, addr: tuple[str, int], link: str) -> bool:
+        """SET_MODE (deprecated by DO_SET_MODE, still sent by some ground stations), answered as a
+        DO_SET_MODE. False when refused unanswered."""
+        if self.authority.for_others(m):
+            self.ports.reject("target")
+            return False
+        if not ep.reply_allowed(addr):
+            self.ports.reject("reply_limited")
+            return False
+        by = self.authority.sender(m, addr, link)
+        result = self._set_mode_or_refuse(*requested_custom_mode(m.base_mode, m.custom_mode), by=by)
+        ack = mavlink.MAVLink_command_ack_message(mavlink.MAV_CMD_DO_SET_MODE, result, 0, 0, m.get_srcSystem(),
+                                                  m.get_srcComponent())
+        ep.reply((ack, *self.texts), addr)
+        self.texts.clear()
+        return True
+
+    def _run_command(self, m: Any, by: Sender) -> Result:
+        """Act on a command whose sender has authority: (MAV_RESULT, the messages it asked for)."""
+        cmd = m.command
+        if cmd == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
+            args = arm_disarm_args(m.param1, m.param2)
+            if args is None:
+                self.ports.reject("bad_number")
+                return mavlink.MAV_RESULT_DENIED, ()
+            if args[0] and self._through_link(m, by):
+                self.ports.arm_through_link()  # acts when the model delivers it, as offline
+                return mavlink.MAV_RESULT_IN_PROGRESS, ()
+            return self.arm_disarm(m.param1, m.param2, by), ()
+        if cmd in _STREAM_COMMANDS:
+            return self._stream_command(m, by)
+        if cmd == mavlink.MAV_CMD_DO_SET_MODE:
+            return self._set_mode_or_refuse(*requested_mode(m.param1, m.param2, m.param3), by=by), ()
+        if cmd == mavlink.MAV_CMD_NAV_TAKEOFF:
+            alt = self._takeoff_altitude(m.param7 if m._type == "COMMAND_LONG" else m.z)  # COMMAND_INT: z, m AMSL
+            if isinstance(alt, str):
+                return self._refuse(alt), ()
+            return self._set_mode_or_refuse(TAKEOFF, "", by=by, takeoff_alt_m=alt), ()
+        if cmd == mavlink.MAV_CMD_NAV_LAND:  # lands where it is (PX4 with NaN lat/lon); a position is not flown to
+            return self._set_mode_or_refuse(LAND, "", by=by), ()
+        if cmd == mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
+            return mavlink.MAV_RESULT_ACCEPTED, (tm.autopilot_version(self.cfg.sysid),)
+        if cmd == mavlink.MAV_CMD_GET_HOME_POSITION:
+            return mavlink.MAV_RESULT_ACCEPTED, (tm.home_position(self.cfg.home),)
+        return mavlink.MAV_RESULT_UNSUPPORTED, ()
+
+    def _through_link(self, m: Any, by: Sender) -> bool:
+        """Whether a command crosses the up-link model: the controller's, on its link, in a lockstep flight."""
+        return by.link == "controller" and self.clock.engaged and self.authority.from_controller(m)
+
+    def _stream_command(self, m: Any, by: Sender) -> Result:
+        """SET_MESSAGE_INTERVAL, GET_MESSAGE_INTERVAL, REQUEST_MESSAGE on the sender's link's streams."""
+        cmd = m.command
+        mid = message_id_arg(m.param1)
+        interval = interval_arg(m.param2) if cmd == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL else 0.0
+        if mid is None or interval is None:
+            self.ports.reject("bad_number")
+            return mavlink.MAV_RESULT_DENIED, ()
+        table = self.streams[by.link]
+        if cmd == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
+            return self._set_interval(table, mid, interval, by), ()
+        if cmd == mavlink.MAV_CMD_GET_MESSAGE_INTERVAL:
+            if mid > 0xFFFF:  # MESSAGE_INTERVAL's message_id has 16 bits
+                return mavlink.MAV_RESULT_UNSUPPORTED, ()
+            iv = table.get(mid, HEARTBEAT_S if mid == mavlink.MAVLINK_MSG_ID_HEARTBEAT else 0.0)
+            return mavlink.MAV_RESULT_ACCEPTED, (
+                mavlink.MAVLink_message_interval_message(mid, int(iv * 1e6) if iv > 0 else -1),)
+        follow = tuple(self.ports.message(mid))
+        return (mavlink.MAV_RESULT_ACCEPTED if follow else mavlink.MAV_RESULT_UNSUPPORTED), follow
+
+    def _set_interval(self, table: StreamTable, mid: int, interval_us: float, by: Sender) -> int:
+        """A checked SET_MESSAGE_INTERVAL on one link's streams; a change is an event."""
+        if mid == mavlink.MAVLINK_MSG_ID_HEARTBEAT:
+            return mavlink.MAV_RESULT_ACCEPTED if interval_us in (0, HEARTBEAT_S * 1e6) else mavlink.MAV_RESULT_DENIED
+        if mid not in table:
+            return mavlink.MAV_RESULT_UNSUPPORTED
+        iv = table.set(mid, interval_us, time.monotonic())
+        if iv is not None:
+            name = mavlink.mavlink_map[mid].msgname
+            self.sim.event("interval", f"{name} every {iv:g} s on the {by.link} link" if iv > 0
+                           else f"{name} off on the {by.link} link")
+        return mavlink.MAV_RESULT_ACCEPTED
+
+    # -- flight modes (docs/ground-station.md) -------------------------------------------------------
+    def _takeoff_altitude(self, param7: float) -> float | str:
+        """NAV_TAKEOFF's altitude above home (m) from its param7 (m AMSL, as PX4 reads it; NaN:
+        MIS_TAKEOFF_ALT), or why it cannot be flown. MIS_TAKEOFF_ALT is also the least it climbs to: a
+        lower altitude (below home too) is raised to it with a STATUSTEXT, as PX4 does; one above the
+        plant's envelope (MIS_TAKEOFF_ALT's upper bound) is refused."""
+        least = self.sim.takeoff_alt_m
+        if math.isnan(param7):
+            return least
+        hi = BY_NAME["MIS_TAKEOFF_ALT"].hi
+        home = self.cfg.home.alt
+        rel = param7 - home
+        if not (math.isfinite(param7) and rel <= hi):
+            return (f"NAV_TAKEOFF: altitude {param7:g} m AMSL is {rel:g} m above home; "
+                    f"must be at most {hi:g} m above (home {home:g} m)")
+        if rel < least:
+            if rel < least - 0.1:  # PX4 says nothing for less than 10 cm
+                self.texts += self._statustext(mavlink.MAV_SEVERITY_WARNING, "Using minimum takeoff altitude: "
+                                               f"{home + least:.2f} m")
+            return least
+        return rel
+
+    def _refuse(self, why: str) -> int:
+        """DENIED; a STATUSTEXT saying why follows the COMMAND_ACK to the sender (:attr:`texts`)."""
+        self.texts += self._statustext(mavlink.MAV_SEVERITY_WARNING, why)
+        self.ports.report(f"refused {why}")
+        return mavlink.MAV_RESULT_DENIED
+
+    def _set_mode_or_refuse(self, mode: str | None, why: str, *, by: Sender,
+                            takeoff_alt_m: float | None = None) -> int:
+        """A ground station's (or the controller's) mode change: made at the start of the next
+        control period, or DENIED with a STATUSTEXT saying why."""
+        if mode is None:
+            return self._refuse(why)
+        if self.clock.halted:
+            return self._refuse(f"mode {mode_name(mode)}: the plant diverged")
+        sim = self.sim
+        if (mode == OFFBOARD and sim.armed and sim.mode != OFFBOARD
+                and time.monotonic() - self.ports.target_wall() > OFFBOARD_STREAM_S):
+            # PX4 too: OFFBOARD only while a controller streams targets (its failsafe would act at once)
+            return self._refuse("OFFBOARD: no controller is sending targets")
+        n0 = len(sim.events)
+        was = sim.mode
+        sim.set_mode(mode, takeoff_alt_m)
+        attribute(sim.events, n0, by)
+        self._clock_after_mode(was)
+        return mavlink.MAV_RESULT_ACCEPTED
+
+    def _clock_after_mode(self, was: str) -> None:
+        """The step clock after a mode change: a vehicle flown by its own controller (HOLD, LAND,
+        TAKEOFF) needs no controller's answers and runs on the wall clock (``speed`` if given);
+        OFFBOARD again, armed, returns to lockstep (the state of step k goes out, its answer awaited)."""
+        sim, now = self.sim, time.monotonic()
+        if not self.lockstep or not sim.armed:
+            return
+        if sim.mode in GROUND_MODES and not self.clock.free_running:
+            self._ground_takes_over(now)
+        elif sim.mode == OFFBOARD and was != OFFBOARD:
+            self._engage_lockstep(now)
+
+    def _ground_takes_over(self, now: float) -> None:
+        """Lockstep, a ground station's mode flown by the vehicle's own controller: on the wall clock
+        from now; a lockstep flight that was on says so (its record: it left lockstep here)."""
+        if self.clock.engaged:
+            self.sim.event("lockstep", f"{mode_name(self.sim.mode)} set by a ground station: flown by the "
+                                       "vehicle on the wall clock")
+        self.clock.run_free(Trigger.GROUND, now, self.ports.step() * self.substeps)
+
+    def _engage_lockstep(self, now: float) -> None:
+        """Lockstep from now: the state of step k goes out and its target is awaited."""
+        self.clock.engage(now, self.ports.step() * self.substeps)
+        self.ports.state_out(now)
+
+    # -- arming ----------------------------------------------------------------------------------------
+    def arm_disarm(self, p1: float, p2: float, by: Sender | None = None) -> int:
+        """Arm (``p1`` 1) or disarm (0; in the air only with ``p2`` = 21196, forced), checked
+        values (:func:`bridge.mavlink.receive.arm_disarm_args`). A new flight armed from a
+        ground station learns its controller's address afresh (``new_flight``)."""
+        sim = self.sim
+        now = time.monotonic()
+        if p1 == 1.0:
+            if self.clock.halted:
+                return mavlink.MAV_RESULT_DENIED
+            was_offboard = sim.armed and sim.mode == OFFBOARD
+            from_gcs = by is not None and by.link == "gcs"
+            if from_gcs:
+                sim.arm_in_mode()  # in the mode it selected (HOLD, LAND, TAKEOFF), else offboard
+            else:
+                sim.arm()
+            if sim.mode in GROUND_MODES:  # the vehicle's own controller flies: no controller's answers
+                if self.lockstep and not self.clock.free_running:
+                    self._ground_takes_over(now)
+                return mavlink.MAV_RESULT_ACCEPTED
+            if not was_offboard:
+                self.ports.new_flight(from_gcs)  # no target of the last flight is in force
+                if self.lockstep:
+                    self._engage_lockstep(now)  # back to lockstep
+            return mavlink.MAV_RESULT_ACCEPTED
+        forced = p2 == FORCE_DISARM
+        if sim.armed and not sim.plant.on_ground and not forced:
+            return mavlink.MAV_RESULT_DENIED  # in the air: only a forced disarm (PX4 does the same)
+        sim.disarm("disarmed by command (forced)" if forced else "disarmed by command")
+        self.clock.fire(Trigger.DISARM)  # a lockstep flight is over: time stands still until armed again
+        return mavlink.MAV_RESULT_ACCEPTED
+
+    # -- what ends a flight --------------------------------------------------------------------------
+    def controller_lost(self, now: float) -> None:
+        """Lockstep, the controller silent for ``lost_after_s``: on the wall clock from ``now``, where the
+        vehicle's timeout and failsafe take over."""
+        self.sim.event("lockstep", f"controller silent for {self.cfg.lost_after_s:g} s of wall time: "
+                                   "leaving lockstep, running on the wall clock")
+        self.clock.run_free(Trigger.LOSE, now, self.ports.step() * self.substeps)
+
+    def diverged(self) -> bool:
+        """After a control period: whether the plant diverged (then disarmed, and the clock halted for good)."""
+        why = self.sim.plant.diverged()
+        if not why:
+            return False
+        self.sim.event("diverged", why)
+        self.sim.disarm(f"diverged: {why}")
+        self.clock.fire(Trigger.DIVERGE)
+        return True

@@ -1,0 +1,36 @@
+"""How the vehicle is reached and clocked: :class:`VehicleConfig`, shared by all its parts.
+
+In:  the ``bsst vehicle`` options (addresses, MAVLink ids, clock, speed, timeouts, home, signing key)
+Out: one frozen :class:`VehicleConfig` (wall times in s, ``speed`` in x real time)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from bridge.mavlink import telemetry as tm
+from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, VEHICLE_COMPID, Address
+
+CLOCKS = ("lockstep", "realtime")
+
+
+@dataclass(frozen=True)
+class VehicleConfig:
+    """How the vehicle is reached and clocked (see :mod:`bridge.nodes.vehicle`)."""
+
+    listen: Address
+    gcs: Address | None
+    sysid: int = 1
+    compid: int = VEHICLE_COMPID
+    controller_sysid: int = CONTROLLER_SYSID
+    controller_compid: int = CONTROLLER_COMPID
+    clock: str = "lockstep"
+    speed: float | None = None  # x real time: lockstep cap, and pace after losing the controller
+    lost_after_s: float = 0.5  # s of wall time
+    spin_s: float = 0.0002  # s polled (yielding) before sleeping while a lockstep answer is due: ~4x the
+    # peer's median work; longer only burns a core that a busy machine needs for that peer
+    home: tm.Home = field(default_factory=tm.Home)
+    key: bytes | None = field(default=None, repr=False)  # MAVLink 2 signing key (never shown)
+    # the only address the controller's ids are heard from on the controller link (bsst sitl pins the
+    # controller's source port); None: learned from its first message, as docs/design.md says
+    controller_from: tuple[str, int] | None = None

@@ -1,0 +1,461 @@
+"""The simulated vehicle's node: :class:`Vehicle` wires its parts to two UDP links; ``bsst vehicle``.
+
+In:  datagrams on the controller link (``--listen``) and the GCS link (``--gcs``): actuator targets
+     stamped with the ``time_usec`` (us) of the state they answer, the no-target acknowledgement,
+     commands, parameters, TIMESYNC, PING, ...; wall time (s, ``time.monotonic``)
+Out: ODOMETRY of step k (``time_usec`` = k / rate_hz, us) to the controller; HEARTBEAT (1 Hz), the
+     streams, STATUSTEXT on events, answers; ``vehicle.tlog`` and ``vehicle.csv`` (its half of the trace);
+     status lines (``ready ...``, ``event t=... kind: text``, ``refused ...``, ``stats {json}``), all
+     through :meth:`Vehicle._report`
+
+The parts (this package): the step clock (:mod:`.clock`), who is heard (:mod:`.authority`), arming,
+modes and commands (:mod:`.commander`), parameters (:mod:`.paramservice`), telemetry (:mod:`.streams`),
+the trace rows (:mod:`.rows`). Here: the loops of the clock's states (lockstep, free-running, idle),
+the receive path and its dispatch, and the wall-clock housekeeping.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from bridge.core.flight import Flight
+from bridge.core.wire import command_from_wire
+from bridge.link.ends import VehicleEnd
+from bridge.mavlink import telemetry as tm
+from bridge.mavlink.endpoint import Endpoint, Tlog, wait
+from bridge.mavlink.receive import Rejections
+from bridge.mavlink.signing import Signing
+from bridge.nodes.process import on_stop_signals, status_printer
+from bridge.nodes.vehicle.authority import Authority, claim
+from bridge.nodes.vehicle.clock import Answer, Clock, ClockState, Trigger
+from bridge.nodes.vehicle.commander import Commander, CommanderPorts
+from bridge.nodes.vehicle.config import CLOCKS, VehicleConfig
+from bridge.nodes.vehicle.paramservice import ParamService
+from bridge.nodes.vehicle.receiver import Receiver, ReceiverPorts, Refusals
+from bridge.nodes.vehicle.rows import Rows
+from bridge.nodes.vehicle.streams import (
+    DEFAULT_STREAMS,
+    HEARTBEAT_S,
+    OdometryOut,
+    StatusTexts,
+    StreamTable,
+    VehicleView,
+    heartbeat,
+    message,
+)
+from bridge.nodes.vehicle.targets import Targets
+from bridge.record.runlog import side_dir
+
+HOUSEKEEPING_S = 0.02  # s of wall time between looks at the GCS socket, streams, file flushes
+MAX_TEXT_MESSAGES = 12  # STATUSTEXTs in one datagram of events (the newest texts, whole)
+RESEND_S = 0.05  # lockstep: resend the state nobody answered (a datagram can be dropped)
+IDLE_ODOMETRY_S = 0.1  # lockstep, disarmed: time stands still; the state is still shown
+_ENGAGED = (ClockState.LOCKSTEP, ClockState.ANSWERED)
+
+
+class Vehicle:
+    """One simulated vehicle and its MAVLink links. :meth:`run` until :meth:`stop`."""
+
+    def __init__(self, flight: Flight, cfg: VehicleConfig, out: Path | None = None,
+                 status: Callable[[str], None] | None = None) -> None:
+        if cfg.clock not in CLOCKS:
+            raise ValueError(f"clock must be one of {', '.join(CLOCKS)}")
+        self.flight = flight
+        self.cfg = cfg
+        m = flight.mission
+        self.rate = m.rate_hz
+        self.substeps = flight.substeps
+        self.actuation = flight.profile.actuation
+        self.sim = flight.make_vehicle(armed=False)
+        self.plant = self.sim.plant
+        self._status = status or (lambda line: None)
+        self.tlog = Tlog(out / "vehicle.tlog") if out is not None else None
+        # refusals of the receive path (bridge.mavlink.receive), both links, and of the up-link model's end
+        self.rejected = Rejections()
+        self._reject = Refusals(self.rejected)
+        self.authority = Authority(cfg)
+        self._open_links(cfg)
+        self.rows = Rows(out / "vehicle.csv", self.rate) if out is not None else None
+        self.k = 0  # control step of the plant's state: t_k = k / rate_hz
+        self.stopping = False
+        now = time.monotonic()
+        # the GCS link's: the defaults, and with sensors (not truth) HIGHRES_IMU and, for GNSS, GPS_RAW_INT
+        sensors = self.sim.sensors.config if self.sim.sensors is not None else None
+        self.streams = StreamTable({**DEFAULT_STREAMS, **tm.sensor_streams(sensors)}, now)
+        self.ctl_streams = StreamTable(dict.fromkeys(self.streams, 0.0), now)  # the controller link's: none
+        self._next_heartbeat = now
+        self._next_house = now
+        self._resend_at = self._lost_at = self._idle_odo_at = now
+        self.clock = Clock(cfg.clock == "realtime", m.physics_hz, cfg.speed or 1.0, now)
+        self.pace = self.clock.pace  # the wall clock of physics steps
+        self._n = 0  # physics steps taken (realtime: for the wall-clock schedule)
+        self._events_sent = 0
+        self._load_at = (now, time.process_time())
+        self.load = 0
+        # lockstep: the controller's targets and re-arms cross the mission's up-link model here
+        self.vend = VehicleEnd(self.sim, flight.link.make()[0], self.actuation, rejected=self.rejected)
+        self.odometry = OdometryOut(self.link, self.sim, self.rate, flight.estimator)
+        self.targets = Targets(self.sim, self.clock, self.authority, self.rate, self.actuation, self._reject)
+        self._statustext = StatusTexts()
+        self.params = ParamService(self.sim, self.authority, self._statustext, self._reject, self._report)
+        ports = CommanderPorts(step=lambda: self.k, state_out=self._send_odometry, new_flight=self._new_flight,
+                               arm_through_link=lambda: self.vend.receive_arm(self.t),
+                               target_wall=lambda: self.targets.wall, message=self._message,
+                               reject=self._reject, report=self._report)
+        self.commander = Commander(self.sim, self.clock, self.authority, self._statustext,
+                                   {"controller": self.ctl_streams, "gcs": self.streams}, self.substeps, ports)
+        self.receiver = Receiver(self.link, self.authority, self._reject, self.targets, self.commander, self.params,
+                                 ReceiverPorts(step=lambda: self.k, flight_on=self._flight_on,
+                                               announce=self._drain_events, heartbeat=self._heartbeat,
+                                               clock_ns=self._clock_ns))
+        self._handle = self.receiver.handle  # (an attribute: one call less on the lockstep's hot path)
+
+    def _open_links(self, cfg: VehicleConfig) -> None:
+        """The controller link (``--listen``) and the GCS link (``--gcs``, if any), signed with ``cfg.key``."""
+        # one replay table for both links: a signed frame replayed from one link onto the other is refused
+        replay: dict[tuple[int, int, int], int] = {}
+        sign = ((lambda link_id: Signing(cfg.key, link_id, replay)) if cfg.key is not None
+                else (lambda link_id: None))
+        self.link = Endpoint(cfg.listen, sysid=cfg.sysid, compid=cfg.compid, tlog=self.tlog, name="--listen",
+                             signing=sign(0), rejected=self.rejected, priority=True)
+        self.link.follow = False  # ODOMETRY goes to the flight's controller only (see Receiver.handle)
+        # a ground station is charged like any source, and its refusals are not the controller's
+        self.gcs = (Endpoint(cfg.gcs, sysid=cfg.sysid, compid=cfg.compid, tlog=self.tlog, name="--gcs",
+                             signing=sign(1), rejected=self.rejected, exempt_peer=False)
+                    if cfg.gcs is not None else None)
+        self.endpoints = [self.link] + ([self.gcs] if self.gcs is not None else [])
+
+    # -- public --------------------------------------------------------------------------
+    def stop(self) -> None:
+        """Ask :meth:`run` to return (safe from a signal handler)."""
+        self.stopping = True
+
+    def run(self) -> None:
+        """Serve until :meth:`stop`: step the clock, answer the links, stream telemetry."""
+        gcs = f" gcs={self.gcs.address.hostport}" if self.gcs is not None else ""
+        pinned = self.authority.pinned
+        pin = f" controller_from={pinned[0]}:{pinned[1]}" if pinned is not None else ""
+        self._report(f"ready listen={self.link.local[0]}:{self.link.local[1]}{gcs} sysid={self.cfg.sysid} "
+                     f"clock={self.cfg.clock} profile={self.flight.profile.name}{pin}")
+        try:
+            while not self.stopping:
+                state = self.clock.state
+                if state is ClockState.FREE_RUNNING:
+                    self._freerun_period()
+                elif state in _ENGAGED:
+                    self._lockstep_wait()
+                else:  # idle, halted
+                    self._idle()
+                if time.monotonic() >= self._next_house:
+                    self._housekeeping()
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        """Flush and close every file and socket (idempotent)."""
+        self._drain_sockets()
+        self._drain_events()
+        if self.rows is not None:
+            self.rows.close()
+        if self.tlog is not None:
+            self.tlog.close()
+        for ep in self.endpoints:
+            ep.close()
+
+    def report_stats(self) -> None:
+        """The ``stats {json}`` line: what was accepted, refused, sent and received, and the up-link model's."""
+        self._report("stats " + json.dumps({
+            "accepted": self.targets.accepted, "rejected": self.rejected, "odometry_sent": self.odometry.count,
+            "received": self.link.received, "overruns": self.pace.rebased, "steps": self.k,
+            "rejected_from_controller": self.rejected.from_peer, "resends": self.odometry.resends,
+            "answered_again": self.targets.answered_again,
+            "up": self.vend.up.stats.summary() if self.cfg.clock == "lockstep" else None}))
+
+    def _report(self, line: str) -> None:
+        """Every status line of the vehicle goes out here."""
+        self._status(line)
+
+    def _drain_sockets(self, batches: int = 64) -> None:
+        """Take in what is already queued on every socket before closing, so that the final
+        counts include every datagram that arrived before the stop (the others' socket is read
+        lazily while the controller's is busy: see Endpoint.poll); bounded, never blocks."""
+        for ep in self.endpoints:
+            if ep.fileno < 0:
+                continue
+            for _ in range(batches):
+                got = ep.poll()
+                for m, addr in got:
+                    self._handle(ep, m, addr)
+                if not got and not ep.backlog:
+                    break
+
+    @property
+    def t(self) -> float:
+        """Simulation time of the current step (s)."""
+        return self.k / self.rate
+
+    # -- the clock's flags as they were (tests look at them) ---------------------------------------
+    @property
+    def freerun(self) -> bool:
+        """Time runs on the wall clock (realtime, or lockstep lost; halted from there too)."""
+        return self.clock.on_wall_clock
+
+    @property
+    def engaged(self) -> bool:
+        return self.clock.engaged
+
+    @property
+    def halted(self) -> bool:
+        return self.clock.halted
+
+    @property
+    def applied(self) -> tuple[int, tuple[float, ...], float] | None:
+        """The target in force: (the step it answered, wire, wall time received)."""
+        return self.targets.applied
+
+    @property
+    def pending(self) -> Answer | None:
+        """The answer of step k held for its step (None: none)."""
+        return self.clock.answer
+
+    @pending.setter
+    def pending(self, value: None) -> None:
+        """Drop the held answer (only None may be set)."""
+        if value is not None:
+            raise ValueError("only None may be set: the answer comes from the controller")
+        if self.clock.state is ClockState.ANSWERED:
+            self.clock.fire(Trigger.DROP)
+
+    def _arm_disarm(self, p1: float, p2: float) -> int:
+        """Arm or disarm as the controller would (:meth:`Commander.arm_disarm`)."""
+        return self.commander.arm_disarm(p1, p2)
+
+    # -- lockstep --------------------------------------------------------------------------
+    def _lockstep_wait(self) -> None:
+        """Wait for the target of step k; step when it is here, or give the controller up."""
+        deadline = min(self._next_house, self._resend_at, self._lost_at)
+        for ep, m, addr in wait(self.endpoints, deadline, self.link, self.cfg.spin_s):
+            self._handle(ep, m, addr)
+        if self.clock.state is ClockState.ANSWERED:
+            self._step_lockstep()
+            return
+        if self.clock.state is not ClockState.LOCKSTEP:
+            return
+        now = time.monotonic()
+        if now >= self._lost_at:
+            self.commander.controller_lost(now)
+        elif now >= self._resend_at:
+            self._send_odometry(now, fresh=False)
+
+    def _step_lockstep(self) -> None:
+        """Step k is answered: its target (if any) enters the up-link model at t_k, what the
+        model delivers by t_k acts, then one control period with mid-period deliveries."""
+        answer = self.clock.take()
+        wire, recv = answer.wire, answer.recv
+        k = self.k
+        t = k / self.rate
+        sent = self.odometry.sent_at.get(k, recv)
+        vend = self.vend
+        if wire is not None:
+            vend.receive_command(t, command_from_wire(self.actuation, wire), t)
+            self.targets.applied = (k, wire, recv)
+        vend.deliver(t)
+        X = self.plant.state
+        est = self._estimate()
+        real = self.plant.realised
+        vend.advance()
+        self.k = k + 1
+        if self.cfg.speed is not None:
+            self._wait_until(self.pace.due(self.k * self.substeps))
+        if self._after_step():
+            self._send_odometry(time.monotonic())
+        # off the critical path: the controller is computing step k+1 meanwhile
+        if self.rows is not None:
+            self.rows.lockstep(k, X, self.sim.mode, wire, real, t - vend.applied_state_t, recv - sent, sent, recv,
+                               est)
+
+    # -- free run: realtime clock, or lockstep lost --------------------------------------------
+    def _freerun_period(self) -> None:
+        """One control period on the wall clock: state out, row, physics steps on schedule."""
+        k = self.k
+        n0 = k * self.substeps
+        if not self._wait_until(self.pace.due(n0)):
+            return
+        now = time.monotonic()
+        if self.sim.armed or self.cfg.clock == "realtime":
+            self._send_odometry(now)
+        X = self.plant.state
+        if self.sim.armed and self.rows is not None:
+            self.rows.free_running(k, X, self.sim, self.actuation, self.targets.applied, self.odometry.sent_at, now,
+                                   self._estimate)
+        self._n = n0
+
+        def deliver(_t: float) -> None:
+            # called before each physics step: wait for its wall time, taking targets meanwhile
+            if self._n > n0:
+                self._wait_until(self.pace.due(self._n))
+            self._n += 1
+
+        self.sim.advance(deliver)
+        self.k = k + 1
+        self._after_step()
+
+    def _wait_until(self, due: float) -> bool:
+        """Serve the links until wall time ``due`` of the pace; False if stopping. A pace
+        stalled far behind is re-based (:meth:`Pace.rebase_if_stalled`), not caught up."""
+        now = time.monotonic()
+        if self.pace.rebase_if_stalled(now, due):
+            return not self.stopping
+        while not self.stopping:
+            if now >= due:
+                return True
+            for ep, m, addr in wait(self.endpoints, min(due, self._next_house)):
+                self._handle(ep, m, addr)
+            now = time.monotonic()
+            if now >= self._next_house:
+                self._housekeeping()
+        return False
+
+    # -- idle -----------------------------------------------------------------------------------
+    def _idle(self) -> None:
+        """Lockstep and disarmed (or halted): time stands still; serve the links."""
+        deadline = min(self._next_house, self._idle_odo_at)
+        for ep, m, addr in wait(self.endpoints, deadline):
+            self._handle(ep, m, addr)
+        now = time.monotonic()
+        if now >= self._idle_odo_at and not self.clock.halted:
+            self._idle_odo_at = now + IDLE_ODOMETRY_S
+            self._send_odometry(now)
+
+    # -- after each control period -------------------------------------------------------------
+    def _after_step(self) -> bool:
+        """Events and divergence; False when the plant is lost (nothing more to send)."""
+        if len(self.sim.events) > self._events_sent:
+            self._drain_events()
+        if self.commander.diverged():
+            self._drain_events()
+            return False
+        return True
+
+    def _drain_events(self) -> None:
+        """Each new event as a status line and a STATUSTEXT; then a HEARTBEAT at once, so
+        that a ground station sees an arm, disarm or failsafe without waiting up to 1 s."""
+        events = self.sim.events
+        if self._events_sent == len(events):
+            return
+        texts: list[list[Any]] = []
+        while self._events_sent < len(events):
+            e = events[self._events_sent]
+            self._events_sent += 1
+            # not caused by a command handled here: an arm the up-link model delivered (the
+            # flight's controller sent it), or the vehicle's own disarm (landed, diverged)
+            peer = self.link.peer
+            claim(e, self.authority.controller(peer) if e.kind == "armed" and peer is not None else None)
+            self._report(f"event t={e.t:.3f} {e.kind}: {e.text}")
+            sev = (mavlink.MAV_SEVERITY_CRITICAL if e.kind in ("failsafe", "diverged", "lockstep")
+                   else mavlink.MAV_SEVERITY_INFO)
+            texts.append(self._statustext(sev, f"{e.kind}: {e.text}"))
+        msgs: list[Any] = []
+        for chunks in reversed(texts):  # the newest texts, whole, if many came at once
+            if len(msgs) + len(chunks) > MAX_TEXT_MESSAGES:
+                break
+            msgs[:0] = chunks
+        msgs.append(self._heartbeat())
+        for ep in self.endpoints:
+            ep.send_many(msgs)  # one datagram per link
+
+    # -- sending ---------------------------------------------------------------------------------
+    def _send_odometry(self, now: float, fresh: bool = True) -> None:
+        """ODOMETRY of step k to the controller; a ``fresh`` one (not a resend) starts the
+        lockstep wait for its target."""
+        if not self.odometry.send(self.k, now, fresh):
+            return
+        if not fresh:
+            self.targets.resent(self.k)
+        self._resend_at = now + RESEND_S
+        if fresh:
+            self._lost_at = now + self.cfg.lost_after_s
+
+    def _estimate(self) -> tuple[tuple[float, ...], float]:
+        """The published estimate now and its NEES against the true state (nan under truth)."""
+        E = self.sim.published()
+        return E, self.sim.nees(E)
+
+    def _view(self) -> VehicleView:
+        """The vehicle now, as its telemetry reads it."""
+        sim, plant, cfg = self.sim, self.plant, self.cfg
+        return VehicleView(plant.state, self.t, sim.mode, sim.onboard.target, sim.armed, self.clock.halted,
+                           plant.on_ground, plant.omega, self.flight.profile.omega_max, self.load, sim.sensors,
+                           cfg.home, cfg.sysid)
+
+    def _heartbeat(self) -> Any:
+        return heartbeat(self._view())
+
+    def _message(self, mid: int) -> list[Any]:
+        """The message(s) with id ``mid`` for a stream or a REQUEST_MESSAGE ([] if none)."""
+        return message(mid, self._view())
+
+    def _housekeeping(self) -> None:
+        """Wall-clock duties: GCS commands, heartbeat, streams, flushing files."""
+        now = time.monotonic()
+        if self.gcs is not None:
+            for m, addr in self.gcs.poll():
+                self._handle(self.gcs, m, addr)
+        if now >= self._next_heartbeat:
+            self._next_heartbeat = now + HEARTBEAT_S
+            hb = self._heartbeat()
+            for ep in self.endpoints:
+                ep.send(hb)
+            cpu = time.process_time()
+            w0, c0 = self._load_at
+            self.load = int(1000 * (cpu - c0) / max(now - w0, 1e-6))
+            self._load_at = (now, cpu)
+        refused = self.rejected.report(now)  # once per second while the receive path refuses anything
+        if refused is not None:
+            msg = mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_WARNING, refused.encode())
+            for ep in self.endpoints:
+                ep.send(msg)
+        for ep, table in ((self.gcs, self.streams), (self.link, self.ctl_streams)):
+            if ep is None or ep.peer is None:
+                continue
+            table.send_due(now, lambda mid, ep=ep: ep.send_many(self._message(mid)))
+        if self.rows is not None:
+            self.rows.flush()
+        if self.tlog is not None:
+            self.tlog.flush()
+        nxt = min([self._next_heartbeat, now + HOUSEKEEPING_S, *self.streams.due.values(),
+                   *self.ctl_streams.due.values()])
+        self._next_house = max(nxt, now + 0.001)
+
+    def _flight_on(self) -> bool:
+        """Armed, or a lockstep flight on: the controller's address is held."""
+        return self.sim.armed or self.clock.engaged
+
+    def _new_flight(self, from_gcs: bool) -> None:
+        """A new flight is armed: no target of the last one is in force; armed by a ground station,
+        it has no controller yet (the flight's is the first to speak, :meth:`_handle`)."""
+        if from_gcs:
+            self.link.forget_peer()
+        self.targets.applied = None
+
+    def _clock_ns(self) -> int:
+        """The vehicle's clock for TIMESYNC: simulation time (ns), as PX4 uses its own clock in
+        lockstep; on the wall clock it runs on between physics steps. Never 0: a TIMESYNC with
+        tc1 = 0 is a request, not an answer."""
+        return max(int(self.clock.time_s(time.monotonic(), self.t) * 1e9), 1)
+
+
+def run_vehicle(flight: Flight, cfg: VehicleConfig, out: str | Path | None = None, overwrite: bool = False) -> int:
+    """``bsst vehicle``: serve until SIGTERM or SIGINT; status lines on stdout; exit status 0."""
+    path = side_dir(out, ("vehicle.tlog", "vehicle.csv"), overwrite) if out is not None else None
+    v = Vehicle(flight, cfg, path, status_printer())
+    on_stop_signals(v.stop)
+    v.run()
+    v.report_stats()
+    return 0

@@ -1,0 +1,104 @@
+"""The vehicle's parameter service: PX4's parameters over MAVLink (docs/ground-station.md).
+
+In:  PARAM_REQUEST_LIST, PARAM_REQUEST_READ (by index, or by name with index -1), PARAM_SET (name, value,
+     MAV_PARAM_TYPE) from a sender with authority, with the link they came in on
+Out: PARAM_VALUE (all, in one datagram, for a list; the new or unchanged value for a set), STATUSTEXT
+     saying why a set was refused or a name is unknown; a ``param`` event naming the sender of a set;
+     refusals counted (``target``, ``reply_limited``, ``param_refused``, ``param_unknown``)
+
+The parameters and their checks are :mod:`bridge.autopilot.params`; a set acts from the next control
+period (:meth:`bridge.autopilot.simvehicle.SimVehicle.change_param`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from bridge.autopilot.params import BY_NAME, PARAMS, ParamRefused, VehicleParams, read_param
+from bridge.autopilot.simvehicle import SimVehicle
+from bridge.mavlink.endpoint import Endpoint
+from bridge.mavlink.modes import PARAM_TYPES, param_from_wire, param_name, param_to_wire
+from bridge.nodes.vehicle.authority import Authority, attribute
+from bridge.nodes.vehicle.streams import StatusTexts
+
+MESSAGES = frozenset({"PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET"})
+
+
+class ParamService:
+    """Answers the parameter protocol for one vehicle (its :class:`SimVehicle` holds the values)."""
+
+    def __init__(self, sim: SimVehicle, authority: Authority, texts: StatusTexts,
+                 reject: Callable[[str], None], report: Callable[[str], None]) -> None:
+        self.sim = sim
+        self.authority = authority
+        self.sysid = authority.cfg.sysid
+        self._texts = texts
+        self._reject = reject
+        self._report = report
+
+    def params(self) -> VehicleParams:
+        return VehicleParams(self.sim.failsafe, self.sim.takeoff_alt_m, self.sysid)
+
+    def value(self, index: int, params: VehicleParams | None = None) -> Any:
+        """PARAM_VALUE of the ``index`` th parameter."""
+        spec = PARAMS[index]
+        kind = PARAM_TYPES[spec.kind]
+        value = read_param(params or self.params(), spec.name)
+        return mavlink.MAVLink_param_value_message(spec.name.encode(), param_to_wire(value, kind), kind,
+                                                   len(PARAMS), index)
+
+    def handle(self, ep: Endpoint, m: Any, addr: tuple[str, int], link: str) -> bool:
+        """PARAM_REQUEST_LIST (every PARAM_VALUE, in one datagram), PARAM_REQUEST_READ (by index, or
+        by name with index -1), PARAM_SET (checked: made and answered with the new value, or refused,
+        answered with the unchanged value and a STATUSTEXT saying why). Within the sender's reply
+        budget. True when a parameter changed (its event is to be announced)."""
+        if self.authority.for_others(m):
+            self._reject("target")
+            return False
+        if not ep.reply_allowed(addr):
+            self._reject("reply_limited")  # not acted on: its answer could not go
+            return False
+        kind = m._type
+        if kind == "PARAM_REQUEST_LIST":
+            params = self.params()
+            ep.reply(tuple(self.value(i, params) for i in range(len(PARAMS))), addr)
+            return False
+        name = param_name(m)
+        if kind == "PARAM_REQUEST_READ":
+            index = m.param_index if m.param_index >= 0 else next(
+                (i for i, p in enumerate(PARAMS) if p.name == name), -1)
+            if not 0 <= index < len(PARAMS):
+                self._unknown(ep, addr, name if m.param_index < 0 else f"index {m.param_index}")
+                return False
+            ep.reply((self.value(index),), addr)
+            return False
+        return self._set(ep, m, addr, link, name)
+
+    def _set(self, ep: Endpoint, m: Any, addr: tuple[str, int], link: str, name: str) -> bool:
+        spec = BY_NAME.get(name)
+        if spec is None:
+            self._unknown(ep, addr, name)
+            return False
+        index = PARAMS.index(spec)
+        want = PARAM_TYPES[spec.kind]
+        try:
+            if m.param_type != want:
+                raise ParamRefused(f"{name}: is {spec.kind}, the set says type {m.param_type}")
+            n0 = len(self.sim.events)
+            self.sim.change_param(name, param_from_wire(m.param_value, want), self.sysid)
+            attribute(self.sim.events, n0, self.authority.sender(m, addr, link))
+        except ParamRefused as exc:
+            self._reject("param_refused")
+            self._report(f"refused {exc}")
+            ep.reply((self.value(index), *self._texts(mavlink.MAV_SEVERITY_WARNING, str(exc))), addr)
+            return False
+        ep.reply((self.value(index),), addr)
+        return True
+
+    def _unknown(self, ep: Endpoint, addr: tuple[str, int], what: str) -> None:
+        """No such parameter: no PARAM_VALUE (the protocol's answer), a STATUSTEXT saying so."""
+        self._reject("param_unknown")
+        ep.reply(tuple(self._texts(mavlink.MAV_SEVERITY_WARNING, f"param {what}: no such parameter")), addr)

@@ -1,0 +1,147 @@
+"""The vehicle's receive path: each message that passed the frame stage, its sender's authority checked,
+handed to the part that acts on it.
+
+In:  a message (pymavlink), the :class:`Endpoint` it came in on and its source address (host, port)
+Out: calls into the parts (:class:`Targets`, :class:`Commander`, :class:`ParamService`); answers to the
+     requests that change nothing (TIMESYNC with the vehicle's clock in ns, PING, MISSION_COUNT 0, an FTP
+     NAK); the controller link's peer learned; refusals counted, with whether the flight's controller
+     sent them (:class:`Refusals`)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from bridge.mavlink.endpoint import Endpoint
+from bridge.mavlink.modes import ftp_nak
+from bridge.mavlink.receive import Rejections
+from bridge.nodes.vehicle.authority import COMMANDS, TARGETS, Authority
+from bridge.nodes.vehicle.commander import Commander
+from bridge.nodes.vehicle.paramservice import MESSAGES as PARAM_MESSAGES
+from bridge.nodes.vehicle.paramservice import ParamService
+from bridge.nodes.vehicle.targets import Targets
+
+
+class Refusals:
+    """Counts a refusal in ``rejected``, marked as the flight's controller's while :attr:`from_peer`."""
+
+    def __init__(self, rejected: Rejections) -> None:
+        self.rejected = rejected
+        self.from_peer = False  # the message being handled came from the controller's address
+
+    def __call__(self, why: str) -> None:
+        self.rejected.add(why, self.from_peer)
+
+
+@dataclass(frozen=True)
+class ReceiverPorts:
+    """What the receive path asks of the vehicle that wires it."""
+
+    step: Callable[[], int]  # the current control step k
+    flight_on: Callable[[], bool]  # armed, or a lockstep flight on
+    announce: Callable[[], None]  # the new events out now (status lines, STATUSTEXT, HEARTBEAT)
+    heartbeat: Callable[[], Any]  # the HEARTBEAT now
+    clock_ns: Callable[[], int]  # the vehicle's clock for TIMESYNC (ns, never 0)
+
+
+class Receiver:
+    """Routes the messages of the controller link (``link``) and the GCS link to the vehicle's parts."""
+
+    def __init__(self, link: Endpoint, authority: Authority, refuse: Refusals, targets: Targets,
+                 commander: Commander, params: ParamService, ports: ReceiverPorts) -> None:
+        self.link = link
+        self.authority = authority
+        self.refuse = refuse
+        self.targets = targets
+        self.commander = commander
+        self.params = params
+        self.ports = ports
+
+    def handle(self, ep: Endpoint, m: Any, addr: tuple[str, int]) -> None:
+        """A message that passed the frame stage: its sender's authority checked
+        (:meth:`Authority.controller_refusal`), then checked and acted on by :meth:`dispatch`.
+
+        The controller link's peer (where ODOMETRY goes, never rate-limited, with a socket of
+        its own: Endpoint.prioritise) is the flight's controller: the address of the
+        configured controller's message that nothing refused, learned while no flight is on
+        (the newest such) or when the flight has none yet (the first), and then held until
+        the flight ends: while it is on, the controller's ids from any other address are a
+        ``stranger``'s."""
+        link = self.link
+        if ep is not link:
+            self.refuse.from_peer = False
+            self.dispatch(ep, m, addr)
+            return
+        known = self.refuse.from_peer = addr == link.peer
+        why = self.authority.controller_refusal(m, known, addr, link.peer, self.ports.flight_on())
+        if why is not None:
+            self.refuse(why)
+            if m._type in COMMANDS:
+                ep.reply((mavlink.MAVLink_command_ack_message(m.command, mavlink.MAV_RESULT_DENIED, 0, 0,
+                                                              m.get_srcSystem(), m.get_srcComponent()),), addr)
+            return
+        if known:
+            self.dispatch(ep, m, addr)
+            return
+        # the controller's ids from a new address, no flight on (or none with a controller yet):
+        # it is the peer while its message is handled (an arm's first state goes to it), and
+        # stays so unless the message is refused
+        rejected = self.refuse.rejected
+        before, refused = link.peer, rejected.total
+        link.peer = addr
+        self.dispatch(ep, m, addr)
+        if rejected.total != refused:
+            link.peer = before
+        else:
+            link.prioritise(addr)
+            if addr != before:  # a new controller hears who it talks to now, not at the next 1 Hz heartbeat
+                link.send(self.ports.heartbeat())
+
+    def dispatch(self, ep: Endpoint, m: Any, addr: tuple[str, int]) -> None:
+        """A message whose sender may send it, to the part that acts on it."""
+        kind = m._type
+        if kind in TARGETS:
+            self.targets.receive(m, kind, self.ports.step(), ep is self.link)
+        elif kind in COMMANDS:
+            if self.commander.command(ep, m, addr, self._link_name(ep)):
+                self.ports.announce()
+        elif kind == "TIMESYNC":
+            if m.tc1 == 0:  # a request (an answer, tc1 != 0, is for someone else's clock: nothing to do)
+                self._request(ep, addr, mavlink.MAVLink_timesync_message(self.ports.clock_ns(), m.ts1))
+        elif kind == "PING":  # a request has no target (0, 0); answered as PX4 does, addressed to its sender
+            if m.target_system == 0 and m.target_component == 0:
+                self._request(ep, addr, mavlink.MAVLink_ping_message(m.time_usec, m.seq, m.get_srcSystem(),
+                                                                     m.get_srcComponent()))
+        elif kind in PARAM_MESSAGES:
+            if self.params.handle(ep, m, addr, self._link_name(ep)):
+                self.ports.announce()
+        elif kind == "SET_MODE":
+            if self.commander.set_mode_message(ep, m, addr, self._link_name(ep)):
+                self.ports.announce()
+        elif kind == "MISSION_REQUEST_LIST":
+            if self.authority.for_others(m):
+                return self.refuse("target")
+            self._request(ep, addr, mavlink.MAVLink_mission_count_message(m.get_srcSystem(), m.get_srcComponent(),
+                                                                          0, m.mission_type))
+        elif kind == "FILE_TRANSFER_PROTOCOL":  # no files: a NAK at once (MAVProxy then fetches parameters)
+            if self.authority.for_others(m):
+                return self.refuse("target")
+            nak = ftp_nak(bytes(m.payload))
+            if nak is not None:
+                self._request(ep, addr, mavlink.MAVLink_file_transfer_protocol_message(
+                    0, m.get_srcSystem(), m.get_srcComponent(), list(nak)))
+        return None
+
+    def _link_name(self, ep: Endpoint) -> str:
+        return "controller" if ep is self.link else "gcs"
+
+    def _request(self, ep: Endpoint, addr: tuple[str, int], answer: Any) -> None:
+        """Answer a request that changes nothing, within its sender's reply budget."""
+        if not ep.reply_allowed(addr):
+            return self.refuse("reply_limited")
+        ep.reply((answer,), addr)
+        return None

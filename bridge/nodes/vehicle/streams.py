@@ -1,0 +1,244 @@
+"""The vehicle's telemetry: a registry of streams (message id -> builder and default rate), one link's
+stream table, HEARTBEAT, STATUSTEXT ids, and ODOMETRY's covariances.
+
+In:  a :class:`VehicleView` (the vehicle as its messages read it: paper-frame state eq. 7, m, m/s, rad,
+     rad/s; simulation time s; rotor speeds rad/s; load per mille), a message id, SET_MESSAGE_INTERVAL's
+     checked interval (us), wall times (s)
+Out: MAVLink messages (pymavlink): the GCS streams (``time_boot_ms`` = simulation time), HEARTBEAT
+     (PX4's ``custom_mode``), STATUSTEXT; ODOMETRY to the controller (NED position m, FRD body velocity m/s,
+     quaternion FRD to NED, FRD rates rad/s, ``time_usec`` = k / rate_hz; covariances in NED/FRD)
+
+Each stream is one entry of :data:`STREAMS`, as PX4 has one class per stream: a builder and the
+default interval on the GCS link (docs/design.md, "The MAVLink contract": 25 Hz and 10 Hz; 0: only on
+request; None: never streamed, sent on request, or, for the sensor messages, at the sensors' own rates).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from bridge.autopilot.estimator import Covariance
+from bridge.autopilot.simvehicle import FAILSAFE, LANDED, SimVehicle
+from bridge.core.wire import rotate_inverse, state_to_odometry, step_usec
+from bridge.mavlink import telemetry as tm
+from bridge.mavlink.endpoint import ODOMETRY, Endpoint
+from bridge.mavlink.modes import heartbeat_mode
+from plant.sensors import SensorSuite
+
+MIN_INTERVAL_S = 0.005  # the shortest stream interval (200 Hz)
+HEARTBEAT_S = 1.0
+
+
+@dataclass(frozen=True)
+class VehicleView:
+    """The vehicle as its telemetry reads it, at one moment."""
+
+    X: tuple[float, ...]  # the plant's true state (paper frame, eq. 7)
+    t: float  # simulation time of the current step (s)
+    mode: str  # the flight mode (bridge.autopilot.simvehicle)
+    target: Any  # the on-board controller's target (None: not flying one)
+    armed: bool
+    halted: bool  # diverged
+    on_ground: bool
+    omega: tuple[float, ...]  # rotor speeds (rad/s)
+    omega_max: float  # rad/s
+    load: int  # CPU load, per mille
+    sensors: SensorSuite | None  # None: truth
+    home: tm.Home
+    sysid: int
+
+
+def heartbeat(v: VehicleView) -> Any:
+    """HEARTBEAT: PX4's encoding of the mode (bridge.mavlink.modes), so that ground stations name it."""
+    base, custom = heartbeat_mode(v.mode, v.target, v.armed)
+    if v.halted or v.mode in (FAILSAFE, LANDED):
+        state = mavlink.MAV_STATE_CRITICAL
+    elif v.armed:
+        state = mavlink.MAV_STATE_ACTIVE
+    else:
+        state = mavlink.MAV_STATE_STANDBY
+    return mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4, base,
+                                             custom, state, 3)
+
+
+def _ms(v: VehicleView) -> int:
+    return int(v.t * 1000.0)
+
+
+def _if_finite(build: Callable[[VehicleView], list[Any]]) -> Callable[[VehicleView], list[Any]]:
+    """A builder of the state's messages: nothing while the state is not finite (a diverged plant)."""
+    return lambda v: build(v) if tm.finite(v.X) else []
+
+
+@dataclass(frozen=True)
+class Stream:
+    """One message: how it is built, and its default interval on the GCS link (s; 0: only on request;
+    None: not a default stream)."""
+
+    build: Callable[[VehicleView], list[Any]]
+    interval_s: float | None
+
+
+def _sensor(mid: int) -> Stream:
+    # the sensors' newest samples, never the true state: [] under truth; their rates: tm.sensor_streams
+    return Stream(lambda v: tm.sensor_message(mid, v.sensors, v.home, int(v.t * 1e6)), None)
+
+
+# message id -> stream; the order of the default streams is the order they are sent in when due together
+STREAMS: dict[int, Stream] = {
+    mavlink.MAVLINK_MSG_ID_ATTITUDE: Stream(_if_finite(lambda v: tm.attitude(v.X, _ms(v))[:1]), 0.04),
+    mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: Stream(_if_finite(lambda v: tm.attitude(v.X, _ms(v))[1:]), 0.04),
+    mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: Stream(_if_finite(lambda v: [tm.local_position(v.X, _ms(v))]), 0.04),
+    mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: Stream(
+        _if_finite(lambda v: [tm.global_position(v.X, _ms(v), v.home)]), 0.1),
+    mavlink.MAVLINK_MSG_ID_SYS_STATUS: Stream(lambda v: [tm.sys_status(v.load, not v.halted)], 0.1),
+    mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: Stream(
+        lambda v: [tm.extended_sys_state(v.on_ground, v.mode == FAILSAFE)], 0.1),
+    mavlink.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS: Stream(
+        lambda v: [tm.actuator_outputs(int(v.t * 1e6), v.omega, v.omega_max)], 0.1),
+    mavlink.MAVLINK_MSG_ID_HOME_POSITION: Stream(lambda v: [tm.home_position(v.home)], 0.0),
+    mavlink.MAVLINK_MSG_ID_HEARTBEAT: Stream(lambda v: [heartbeat(v)], None),  # its own 1 Hz clock
+    mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION: Stream(lambda v: [tm.autopilot_version(v.sysid)], None),
+    **{mid: _sensor(mid) for mid in tm.SENSOR_MESSAGES},
+}
+# default GCS streams (message id -> interval s)
+DEFAULT_STREAMS = {mid: s.interval_s for mid, s in STREAMS.items() if s.interval_s is not None}
+
+
+def message(mid: int, view: VehicleView) -> list[Any]:
+    """The message(s) with id ``mid`` for a stream or a REQUEST_MESSAGE ([] if none)."""
+    stream = STREAMS.get(mid)
+    return stream.build(view) if stream is not None else []
+
+
+class StreamTable(dict[int, float]):
+    """One link's streams: message id -> interval (s; 0: only on request), and when each
+    stream is due next (``due``, wall time). ``defaults`` are what an interval of 0 asks for."""
+
+    def __init__(self, defaults: dict[int, float], now: float) -> None:
+        super().__init__(defaults)
+        self.defaults = defaults
+        self.due = {mid: now for mid, iv in defaults.items() if iv > 0}
+
+    def set(self, mid: int, interval_us: float, now: float) -> float | None:
+        """Apply a checked SET_MESSAGE_INTERVAL (:func:`bridge.mavlink.receive.interval_arg`: -1 off,
+        0 the default, else us, at least :data:`MIN_INTERVAL_S`) to a stream of this table;
+        the new interval (s, 0: off), or None when it is what it was."""
+        iv = 0.0 if interval_us < 0 else self.defaults[mid] if interval_us == 0 else max(interval_us * 1e-6,
+                                                                                          MIN_INTERVAL_S)
+        if iv == self[mid]:
+            return None
+        self[mid] = iv
+        if iv > 0:
+            self.due[mid] = now
+        else:
+            self.due.pop(mid, None)
+        return iv
+
+    def send_due(self, now: float, send: Callable[[int], None]) -> None:
+        """``send`` each stream that is due at wall time ``now`` (s), and schedule its next."""
+        for mid, due in self.due.items():
+            if now >= due:
+                iv = self[mid]
+                self.due[mid] = due + iv if now - due < iv else now + iv
+                send(mid)
+
+
+class StatusTexts:
+    """STATUSTEXT(s) of a text, each text its own id (one counter for every part of the vehicle)."""
+
+    def __init__(self) -> None:
+        self.text_id = 0  # the id of the last chunked STATUSTEXT
+
+    def __call__(self, severity: int, text: str) -> list[Any]:
+        """Chunked when longer than 50 characters."""
+        self.text_id = self.text_id % 65535 + 1
+        return tm.statustext(severity, text, self.text_id)
+
+
+# -- ODOMETRY, the controller link's stream ---------------------------------------------------------------
+# after the body rates: covariances unknown (NaN first, MAVLink's convention),
+# frame LOCAL_NED, child BODY_FRD, reset counter, estimator type, quality (100: exact)
+_COV_UNKNOWN = (math.nan,) + (0.0,) * 20
+ODOMETRY_TAIL = (*_COV_UNKNOWN, *_COV_UNKNOWN, mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_BODY_FRD, 0,
+                 mavlink.MAV_ESTIMATOR_TYPE_NAIVE, 100)
+# an estimate's (raw, ekf): its covariances follow; the autopilot's own estimator (ekf) or the sensors as read (raw)
+ESTIMATOR_TYPES = {"raw": mavlink.MAV_ESTIMATOR_TYPE_NAIVE, "ekf": mavlink.MAV_ESTIMATOR_TYPE_AUTOPILOT}
+# the pose block's 21 upper-triangle entries: (index in Covariance.state's 9x9, sign) over (x, y, z, roll, pitch,
+# yaw); NWU/FLU -> NED/FRD flips y, z, pitch (-theta) and yaw (-psi)
+_POSE_AXES = (0, 1, 2, 6, 7, 8)
+_POSE_SIGNS = (1.0, -1.0, -1.0, 1.0, -1.0, -1.0)
+_POSE_UPPER = tuple((9 * _POSE_AXES[i] + _POSE_AXES[j], _POSE_SIGNS[i] * _POSE_SIGNS[j])
+                    for i in range(6) for j in range(i, 6))
+_NWU_AXES_NED = ((1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, -1.0))
+
+
+def odometry_covariance(q: tuple[float, float, float, float], cov: Covariance) -> tuple[tuple[float, ...], ...]:
+    """ODOMETRY's ``pose_covariance`` and ``velocity_covariance`` (21 each, the upper triangles) of an
+    estimate's covariance, in the message's frames: pose over NED (x, y, z) and the Euler angles of
+    :func:`~bridge.core.wire.state_to_odometry` (roll, pitch, yaw = φ, −θ, −ψ); twist over the FRD body
+    velocity and FRD body rates (``q``: the estimate's attitude, FRD to NED): R V Rᵀ, R's column j the NWU
+    axis j in the body, and the rates' covariance with q and r flipped; no cross terms (the twist has
+    none). NaN stays NaN. Plain floats: it runs at every lockstep step (numpy's calls cost ~100 µs)."""
+    s = cov.state
+    pose = tuple(s[k] * sign for k, sign in _POSE_UPPER)
+    c0, c1, c2 = (rotate_inverse(q, e) for e in _NWU_AXES_NED)  # R's columns
+    V = (s[30:33], s[39:42], s[48:51])  # the velocity block, rows and columns 3..5 of the 9x9
+    RV = [[c0[a] * V[0][j] + c1[a] * V[1][j] + c2[a] * V[2][j] for j in range(3)] for a in range(3)]
+    M = [[RV[a][0] * c0[b] + RV[a][1] * c1[b] + RV[a][2] * c2[b] for b in range(3)] for a in range(3)]
+    w = cov.rates
+    twist = (M[0][0], M[0][1], M[0][2], 0.0, 0.0, 0.0, M[1][1], M[1][2], 0.0, 0.0, 0.0, M[2][2], 0.0, 0.0, 0.0,
+             w[0], -w[1], -w[2], w[4], w[5], w[8])
+    return pose, twist
+
+
+def estimate_tail(q: tuple[float, float, float, float], cov: Covariance, estimator: str) -> tuple[Any, ...]:
+    """ODOMETRY after the body rates for an estimate (``estimator``: raw or ekf): its covariances, frames,
+    estimator type, quality 0 (unknown: MAVLink has no scale for it)."""
+    pose, twist = odometry_covariance(q, cov)
+    return (*pose, *twist, mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_BODY_FRD, 0,
+            ESTIMATOR_TYPES[estimator], 0)
+
+
+class OdometryOut:
+    """ODOMETRY of step k to the controller link: the vehicle's published state (its estimate; the true
+    state under truth), and the wall time each step's state was first sent (its round trip counts from it)."""
+
+    def __init__(self, link: Endpoint, sim: SimVehicle, rate_hz: float, estimator: str) -> None:
+        self.link = link
+        self.sim = sim
+        self.rate = rate_hz
+        self.estimator = estimator  # truth, raw or ekf
+        self.sent_at: dict[int, float] = {}  # step -> wall time its state was first sent
+        self.count = 0  # ODOMETRY messages sent
+        self.resends = 0  # states sent again (nobody answered them)
+
+    def send(self, k: int, now: float, fresh: bool) -> bool:
+        """Send the state of step k at wall time ``now`` (s); ``fresh``: not a resend. False when the
+        state is not finite (a diverged plant: nothing to send)."""
+        sim = self.sim
+        X = sim.published()
+        if not tm.finite(X):
+            return False
+        pos, q, vel, rates = state_to_odometry(X)
+        if sim.sensors is None:
+            tail = ODOMETRY_TAIL
+        else:
+            assert sim.estimator is not None
+            tail = estimate_tail(q, sim.estimator.covariance(), self.estimator)
+        if self.link.send_hot(ODOMETRY, (step_usec(k, self.rate), *pos, *q, *vel, *rates, *tail)):
+            self.count += 1
+        sent_at = self.sent_at
+        if fresh or k not in sent_at:  # a resent state's round trip counts from its first sending
+            sent_at[k] = now
+        if len(sent_at) > 256:
+            for old in [s for s in sent_at if s < k - 128]:
+                del sent_at[old]
+        if not fresh:
+            self.resends += 1
+        return True

@@ -1,0 +1,56 @@
+"""A run's events as the record keeps them: typed, with their sender as a field.
+
+In:  an event's time (s, the flight's clock), kind, text, who reported it (``source``: in a session the
+     vehicle, the controller, the relay or the session; offline none) and who caused it (``by``, a
+     :class:`~bridge.autopilot.simvehicle.Sender`, or None)
+Out: :class:`RunEvent`; its dict for ``summary.json["events"]`` (:meth:`RunEvent.as_dict`: ``t`` s rounded
+     to 1 us or null, ``kind``, ``text`` with the sender shown as `` [by ...]``, ``source`` when there is one)
+
+The written `` [by ...]`` is for people (events.log, summary.json); everything that judges a run reads
+``by`` (:mod:`bridge.record.policies`), never the text.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from bridge.autopilot.simvehicle import Sender
+
+
+@dataclass(frozen=True)
+class RunEvent:
+    """One event of a run: ``t`` (s, rounded to 1 us; None when it has no time on the flight's clock)."""
+
+    t: float | None
+    kind: str
+    text: str
+    source: str | None = None
+    by: Sender | None = None
+
+    @classmethod
+    def at(cls, t: float, kind: str, text: str, source: str | None = None, by: Sender | None = None) -> RunEvent:
+        """The event at ``t`` (s): rounded to 1 us, None if not finite."""
+        return cls(round(t, 6) if math.isfinite(t) else None, kind, text, source, by)
+
+    @property
+    def shown(self) -> str:
+        """The text as written: with its sender's `` [by ...]`` when it names one."""
+        return self.text + (self.by.suffix if self.by is not None else "")
+
+    def as_dict(self) -> dict[str, Any]:
+        """``summary.json["events"]``'s entry: ``t``, ``kind``, ``text`` (as shown) and ``source`` if any."""
+        d: dict[str, Any] = {"t": self.t, "kind": self.kind, "text": self.shown}
+        if self.source is not None:
+            d["source"] = self.source
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> RunEvent:
+        """An event as :meth:`as_dict` gave it (``by`` read only when given as an object: a written
+        `` [by ...]`` stays text)."""
+        by = d.get("by")
+        return cls(d.get("t"), d["kind"], d.get("text", ""), d.get("source"),
+                   Sender.from_dict(by) if isinstance(by, Mapping) else None)

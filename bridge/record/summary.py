@@ -1,0 +1,279 @@
+"""A SITL session's ``summary.json``, as pure functions of what the session saw (no processes, no files).
+
+In:  the :class:`~bridge.core.flight.Flight`; the joined trace and the per-packet times measured while
+     joining (:class:`Joined`: rows of :class:`~bridge.record.columns.TraceRow`, times ms); each child's end
+     (:class:`ChildEnd`: exit, its ``stats`` report's values, the controller's outcome and reason); what the
+     session itself saw (:class:`SessionFacts`: clock, wall time s, interrupted, who died, the vehicle's
+     failsafe and divergence, the first step flown off the step clock s, the ``sitl`` block); the relay's
+     statistics (``relay.json``'s dict, or None); the events (:class:`~bridge.record.events.RunEvent`)
+Out: :class:`SessionSummary`: the trace arrays, ``summary.json`` (the figures of
+     :func:`bridge.record.metrics.summarise`, the ``link``, ``timing`` and ``sitl`` blocks, the lockstep
+     record, ``ended_by``, the policies' verdicts, the events) and the session's closing notes (its
+     ``ended``, ``lockstep`` and ``policy`` events, also in ``summary["events"]``, for events.log)
+
+See docs/design.md, "Files of a run", and docs/sitl.md, "Outcomes, exit statuses and safety policies".
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from bridge.core.flight import Flight
+from bridge.record.columns import TRACE_COLUMNS
+from bridge.record.events import RunEvent
+from bridge.record.joiner import Joined
+from bridge.record.metrics import percentiles, summarise
+from bridge.record.policies import (
+    CONTROLLER_ID,
+    ended_by_command,
+    ended_by_outcome,
+    judge,
+    lockstep_record,
+    rules_for,
+    violation_text,
+)
+from bridge.record.runlog import trace_arrays
+
+FAILED_OUTCOMES = ("failsafe", "diverged", "aborted")  # what a controller may say besides completed
+
+
+@dataclass(frozen=True)
+class ChildEnd:
+    """How a child ended: ``name``, its exit status (``returncode``; None: still running) and as said in
+    ``summary.json`` (``exit_text``), its ``stats`` report's values, and for the controller its ``done``
+    report's ``outcome`` and ``reason`` (None: it said none)."""
+
+    name: str
+    returncode: int | None
+    exit_text: str
+    stats: Mapping[str, Any] = field(default_factory=dict)
+    outcome: str | None = None
+    reason: str | None = None
+
+
+@dataclass(frozen=True)
+class SessionFacts:
+    """What the session itself saw. ``clock``: ``lockstep`` or ``realtime``; ``wall_s``: the whole session
+    (s); ``aborted``: interrupted by the user; ``died``: the name of a child that died (or None);
+    ``failsafe_seen``/``diverged``: the vehicle's events said so; ``off_clock_t``: lockstep, the vehicle's
+    time (s) of its first row flown off the step clock (or None); ``sitl``: ``summary.json["sitl"]``
+    but for the children's exits (added here)."""
+
+    clock: str
+    wall_s: float
+    aborted: bool = False
+    died: str | None = None
+    failsafe_seen: bool = False
+    diverged: bool = False
+    off_clock_t: float | None = None
+    sitl: Mapping[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class SessionSummary:
+    arrays: dict[str, Any]
+    summary: dict[str, Any]
+    notes: list[RunEvent]  # the session's closing events, in order (also at the end of summary["events"])
+
+
+def controller_completed(controller: ChildEnd | None) -> bool:
+    """Whether the controller flew its mission to the end: exit 0, or exit 1 with outcome completed
+    (in lockstep, a vehicle that left lockstep)."""
+    if controller is None or controller.returncode not in (0, 1):
+        return False
+    return controller.returncode == 0 or controller.outcome == "completed"
+
+
+def outcome_of(facts: SessionFacts, controller: ChildEnd | None) -> str:
+    """The flight's outcome before who ended it is weighed (:func:`ended_by`)."""
+    completed = controller_completed(controller) and not (facts.aborted or facts.died)
+    if facts.diverged:
+        return "diverged"
+    if facts.failsafe_seen and not completed:  # completed after a failsafe: resumed ([failsafe] resume)
+        return "failsafe"
+    if facts.aborted or facts.died:
+        return "aborted"
+    if completed:
+        return "completed"
+    if controller is not None and controller.outcome is not None:
+        return controller.outcome if controller.outcome in FAILED_OUTCOMES else "aborted"
+    return "aborted"
+
+
+def airborne(trace: Mapping[str, Any], t: float) -> bool:
+    """Whether the trace's last row at or before ``t`` (s) is off the ground (z above it, or moving)."""
+    ts = trace["t"]
+    i = int(np.searchsorted(ts, t + 1e-9, side="right")) - 1
+    return i >= 0 and (trace["z"][i] > 1e-6 or abs(trace["vz"][i]) > 1e-6)
+
+
+def ended_by(outcome: str, trace: Mapping[str, Any], flight: Flight, facts: SessionFacts, k0: int | None,
+             events: Sequence[RunEvent], children: Sequence[ChildEnd],
+             controller_id: tuple[int, int] = CONTROLLER_ID) -> tuple[str, dict[str, Any]]:
+    """The outcome and ``summary.json["ended_by"]``: who ended the flight, and how. A disarm or
+    mode change by command from anyone but the configured controller, before the mission's
+    end, ended it (named by the vehicle's event's sender), as does a controller that
+    reports a completed mission whose trace stops short of the mission's end: both are
+    ``aborted``, never ``completed``."""
+    m = flight.mission
+    ctl = next((c for c in children if c.name == "controller"), None)
+    if facts.aborted:
+        return "aborted", {"who": "user", "how": "interrupted (Ctrl-C or SIGTERM)"}
+    if facts.died:
+        child = next((c for c in children if c.name == facts.died), None)
+        how = f"died ({child.exit_text if child else 'gone'})"
+        if outcome == "failsafe":
+            how += "; the vehicle's failsafe took over"
+        return outcome, {"who": facts.died, "how": how}
+    if outcome == "diverged":
+        return outcome, ended_by_outcome(outcome, events)
+    hit = ended_by_command(events, controller_id, before_s=m.duration_s)
+    if hit is not None and not (controller_completed(ctl) and hit[1] is None):  # unattributed: the controller's own
+        e, who = hit
+        assert e.t is not None  # the policies' events have a time
+        if e.kind == "mode":
+            how = f"mode changed at t={e.t:.3f} s: {e.text}"
+        else:
+            at = e.t - (k0 or 0) / m.rate_hz if facts.clock == "lockstep" else e.t
+            how = f"disarmed {'in flight' if airborne(trace, at) else 'on the ground'} by command at t={e.t:.3f} s"
+        named = str(who) if who is not None else "someone (the vehicle's event names no sender)"
+        return ("aborted" if outcome == "completed" else outcome), {"who": named, "how": how}
+    t = trace["t"]
+    if outcome == "completed" and (not len(t) or t[-1] < m.duration_s - 1.5 / m.rate_hz):
+        flown = float(t[-1]) + 1.0 / m.rate_hz if len(t) else 0.0
+        return "aborted", {"who": "controller", "how": f"ended the mission after {flown:.3f} s of its "
+                                                       f"{m.duration_s:g} s"}
+    if outcome == "aborted" and ctl is not None and ctl.reason:
+        return outcome, {"who": "controller", "how": ctl.reason}
+    return outcome, ended_by_outcome(outcome, events)
+
+
+def link_block(joined: Joined, vehicle: Mapping[str, Any], controller: Mapping[str, Any],
+               relay: Mapping[str, Any] | None) -> dict[str, Any]:
+    """``summary.json["link"]`` (docs/design.md, "Files of a run") from each side's ``stats`` (``vehicle``,
+    ``controller``; empty when a side left none), the join's measures, and the relay's statistics, per direction:
+
+    - lockstep: the link model's exact statistics, from the end that applies it (the
+      vehicle: ``up``, the controller: ``down``), ``delay_ms`` in simulation time; plus
+      ``socket_ms``, the wall-clock one-way time of the per-step messages over the socket;
+    - real time through the relay: the relay's counts (every datagram), ``delay_ms``
+      measured end to end on the per-step messages (ODOMETRY down, the target up) from
+      both sides' stamps (one host: one monotonic clock, no offset to estimate), the
+      model's schedule (``model_delay_ms``) and the delay the relay added (``relay_added_ms``);
+    - otherwise (real time, perfect link; a side that left no statistics): counts from
+      both sides, ``delay_ms`` from their stamps.
+    """
+    vs, cs = vehicle, controller
+    # what each side's receive path refused (bridge.mavlink.receive), and all of it by reason
+    by = {"vehicle": dict(vs.get("rejected", {})), "controller": dict(cs.get("rejected", {}))}
+    rejected = {r: by["vehicle"].get(r, 0) + by["controller"].get(r, 0)
+                for r in sorted(set(by["vehicle"]) | set(by["controller"]))}
+    own = int(vs.get("rejected_from_controller", sum(by["vehicle"].values())))  # of the controller's datagrams
+    measured = {"up": percentiles(joined.up_ms), "down": percentiles(joined.down_ms)}
+    model = {"up": vs.get("up"), "down": cs.get("down")}
+    up_sent = int(cs.get("commands", joined.commands))
+    up_delivered = int(vs.get("accepted", 0))
+    down_sent = int(vs.get("odometry_sent", 0))
+    down_delivered = int(cs.get("states", joined.commands))  # a killed controller left no stats: its rows
+    sides = {
+        "up": {"sent": up_sent, "delivered": up_delivered,
+               "lost": max(0, up_sent - up_delivered - own), "duplicated": 0,
+               "reordered": int(rejected.get("reordered", 0))},
+        "down": {"sent": down_sent, "delivered": down_delivered, "lost": max(0, down_sent - down_delivered),
+                 "duplicated": 0, "reordered": 0},
+    }
+    out: dict[str, Any] = {}
+    for d in ("up", "down"):
+        if relay is not None:
+            r = relay[d]
+            out[d] = {**{k: r[k] for k in ("sent", "delivered", "lost", "duplicated", "reordered", "in_flight",
+                                           "lost_by")},
+                      "delay_ms": measured[d], "model_delay_ms": r["delay_ms"], "relay_added_ms": r["measured_ms"]}
+            if "trace" in r:  # a replayed link trace: its own delays and losses, as offline
+                out[d]["trace"] = r["trace"]
+        elif model[d]:
+            out[d] = {**model[d], "socket_ms": measured[d]}
+        else:
+            out[d] = {**sides[d], "delay_ms": measured[d]}
+    out["rejected"] = rejected
+    out["rejected_by"] = by
+    # of those, how many came from the other side itself, and how many from anyone else on the link (a
+    # ground station's, a stranger's): the vehicle counts its controller's apart from the GCS link's
+    ctl_own = int(cs.get("rejected_from_vehicle", sum(by["controller"].values())))
+    out["rejected_from_peer"] = {"vehicle": own, "controller": ctl_own}
+    out["rejected_from_others"] = {"vehicle": max(0, sum(by["vehicle"].values()) - own),
+                                   "controller": max(0, sum(by["controller"].values()) - ctl_own)}
+    if relay is not None:  # datagrams the relay refused, from neither of its two ends, by reason
+        out["relay_refused"] = relay.get("refused", {})
+    return out
+
+
+def timing_block(joined: Joined, rate_hz: float, wall_s: float, vehicle: Mapping[str, Any],
+                 controller: Mapping[str, Any]) -> dict[str, Any]:
+    """``summary.json["timing"]``: the session's wall time, the flight's pace and the per-step times (ms)."""
+    n = len(joined.rows)
+    first = joined.first_sent
+    flight_s = joined.last_sent - first if first is not None and n > 1 else math.nan
+    rate = (n - 1) / flight_s if flight_s > 0 else None
+    return {
+        "wall_s": wall_s,  # the whole session: start, fly, stop
+        "sim_s": n / rate_hz,
+        "flight_wall_s": flight_s if math.isfinite(flight_s) else None,
+        "step_rate_hz": rate,  # control steps per wall second while flying
+        "real_time_factor": rate / rate_hz if rate else None,
+        "missing_rows": joined.missing,
+        "state_to_command_ms": percentiles(joined.rtt_ms),
+        "state_to_command_timesync_ms": percentiles(joined.s2c_ms),
+        "period_error_ms": percentiles(joined.late_ms),
+        "stale_ticks": int(controller.get("stale_ticks", 0)),
+        "overruns": int(controller.get("overruns", 0)),
+        # lockstep: states resent after RESEND_S of wall time unanswered, and the second answers to them
+        "lockstep_resends": int(vehicle.get("resends", 0)),
+        "answered_again": int(vehicle.get("answered_again", 0)),
+    }
+
+
+def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events: Sequence[RunEvent],
+                    vehicle: ChildEnd | None, controller: ChildEnd | None, relay: ChildEnd | None = None,
+                    relay_stats: Mapping[str, Any] | None = None,
+                    controller_id: tuple[int, int] = CONTROLLER_ID) -> SessionSummary:
+    """The trace arrays and ``summary.json`` of a session: the figures, the ``link``, ``timing`` and ``sitl``
+    blocks, the lockstep record (lockstep), who ended the flight (``ended_by``, which may turn a completion
+    into ``aborted``), the policies' verdicts, and the events with the session's closing notes."""
+    m = flight.mission
+    vs = vehicle.stats if vehicle is not None else {}
+    cs = controller.stats if controller is not None else {}
+    arrays = trace_arrays(joined.rows, TRACE_COLUMNS)
+    link = link_block(joined, vs, cs, relay_stats if relay is not None else None)
+    summary = summarise(arrays, m, flight.gains, clock=facts.clock, outcome=outcome_of(facts, controller),
+                        events=[], link=link, estimator=flight.estimator, sensors=flight.sensors.name)
+    summary["timing"] = timing_block(joined, m.rate_hz, facts.wall_s, vs, cs)
+    summary["sitl"] = {**facts.sitl, "vehicle_exit": vehicle.exit_text if vehicle else None,
+                       "controller_exit": controller.exit_text if controller else None}
+    judged, lockstep, off_clock = arrays, None, None
+    if facts.clock == "lockstep":
+        # lockstep events keep the vehicle's clock (step k at k / rate_hz); the trace counts from the
+        # controller's first answered step k0: the policies see both on the vehicle's clock
+        judged = {**arrays, "t": arrays["t"] + (joined.k0 or 0) / m.rate_hz}
+        off_clock = facts.off_clock_t
+        summary["lockstep"] = lockstep = lockstep_record(events, off_clock)
+    children = [c for c in (vehicle, controller, relay) if c is not None]
+    summary["outcome"], summary["ended_by"] = ended_by(summary["outcome"], arrays, flight, facts, joined.k0,
+                                                       events, children, controller_id)
+    rules = rules_for(flight, facts.clock, link, controller_id)
+    violated = judge(summary, judged, events, rules, lockstep, off_clock)
+    end = summary["ended_by"]
+    texts = [("ended", f"{summary['outcome']}: by {end['who']}: {end['how']}")]
+    if lockstep is not None and not lockstep["held"]:
+        texts.append(("lockstep", f"not a lockstep run: the vehicle left lockstep at t={lockstep['left_at_s']:.3f} s "
+                                  f"({lockstep['why']}) and flew on the wall clock"))
+    texts += [("policy", violation_text(v)) for v in violated]
+    t = joined.rows[-1].t if joined.rows else 0.0  # the notes' time: the trace's last row
+    notes = [RunEvent.at(t, kind, text, "session") for kind, text in texts]
+    summary["events"] = [e.as_dict() for e in (*events, *notes)]
+    return SessionSummary(arrays, summary, notes)

@@ -1,0 +1,387 @@
+"""One SITL session in a run directory: start the children, supervise them, stop them, summarise.
+
+In:  a prepared :class:`~bridge.core.flight.Flight`, a run directory, the session's options (clock,
+     instance, GCS address, speed x real time, progress, signing key file)
+Out: :meth:`Session.run`: a :class:`~bridge.record.runlog.Run`; the run directory's files (see
+     :mod:`bridge.session`); the children's reports (:mod:`bridge.nodes.report`) as events; progress on
+     stderr with ``live``
+
+The children's command lines are :mod:`bridge.session.launch`'s; ``summary.json`` is
+:func:`bridge.record.summary.session_summary`'s, from what the session saw.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import selectors
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from bridge.autopilot.simvehicle import Sender
+from bridge.core.flight import Flight, Progress
+from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, LINK_PORT
+from bridge.nodes.report import Event, Ready, Report
+from bridge.record.events import RunEvent
+from bridge.record.joiner import TraceJoiner, off_clock_time
+from bridge.record.runlog import EventLog, Run, RunRecord
+from bridge.record.summary import ChildEnd, SessionFacts, SessionSummary, controller_completed, session_summary
+from bridge.session.children import READY_TIMEOUT_S, STOP_GRACE_S, Child, ChildError, free_udp_port
+from params import ConfigError
+
+
+class Session:
+    """One SITL session in a run directory; :meth:`run` flies it."""
+
+    def __init__(self, flight: Flight, path: Path, *, realtime: bool, instance: int | None, gcs: str | None,
+                 speed: float | None, progress: Progress | None, live: bool, key: Path | None = None) -> None:
+        self.flight = flight
+        self.key = key  # the signing key file (its path only) both children get as --key
+        self.path = path
+        self.realtime = realtime
+        self.instance = instance
+        self.gcs = gcs
+        self.speed = speed
+        self.progress = progress
+        self.live = live and sys.stderr.isatty()
+        # a mission's MAV_SYS_ID is the vehicle's system id; else the instance's, as PX4 SITL's
+        self.sysid = flight.params.sysid if "MAV_SYS_ID" in flight.mission.params else (instance or 0) + 1
+        self.listen = f"127.0.0.1:{LINK_PORT + instance}" if instance is not None else "127.0.0.1:0"
+        self.events: list[RunEvent] = []
+        self.vehicle: Child | None = None
+        self.controller: Child | None = None
+        self.relay: Child | None = None  # real time with an impaired link: bsst relay between the two
+        self.vehicle_armed = False
+        self.failsafe_seen = False
+        self.diverged = False
+        self.died: str | None = None
+        self.aborted = False
+        self.interrupted = False  # set by Ctrl-C / SIGTERM (see _catch_stop_signals)
+        self._event_log: EventLog | None = None
+
+    # -- the whole session ---------------------------------------------------------------------
+    def run(self, plots: bool, keep: bool) -> Run:
+        m = self.flight.mission
+        record = RunRecord(self.path, m)
+        self._event_log = record.events
+        self.joiner = TraceJoiner(self.path, self.flight, record.trace, lockstep=not self.realtime)
+        self.t_wall0 = time.monotonic()
+        restore = _catch_stop_signals(self)
+        try:
+            try:
+                self._start()
+                self._supervise()
+            except KeyboardInterrupt:
+                self.aborted = True
+                self._note("aborted", "interrupted (Ctrl-C or SIGTERM): stopping both processes", "session")
+            except ChildError:
+                pass  # already said by name (_died); the outcome is "aborted", the files are kept
+            finally:
+                try:
+                    self._stop_children()
+                finally:
+                    restore()
+                    self.joiner.controller_done = True
+                    self.joiner.update()
+                    self.joiner.close()
+            done = self._summary(time.monotonic() - self.t_wall0)
+            arrays, summary = done.arrays, done.summary
+        finally:
+            record.close()  # after the summary: events.log ends with how the run ended and its verdicts
+        if keep:
+            title = f"{m.name} ({m.controller}, {self.flight.profile.name}, SITL {summary['clock']})"
+            record.finish(arrays, summary, title, plots and not self.aborted)
+        if self.live:
+            sys.stderr.write("\n")
+        return Run(arrays, summary, self.path if keep else None)
+
+    def _summary(self, wall: float) -> SessionSummary:
+        """The trace arrays and ``summary.json`` (:func:`bridge.record.summary.session_summary`, from what
+        the session saw); its closing notes also go to ``events.log``."""
+        facts = SessionFacts(
+            clock="realtime" if self.realtime else "lockstep", wall_s=wall, aborted=self.aborted, died=self.died,
+            failsafe_seen=self.failsafe_seen, diverged=self.diverged,
+            off_clock_t=None if self.realtime else off_clock_time(self.path / "vehicle.csv",
+                                                                   self.flight.mission.rate_hz),
+            sitl={"instance": self.instance, "listen": self.listen, "gcs": self.gcs, "sysid": self.sysid,
+                  "speed": self.speed, "died": self.died, "signed": self.key is not None})
+        joined = self.joiner.joined()
+        out = session_summary(self.flight, facts, joined, self.events, _end(self.vehicle), _end(self.controller),
+                              _end(self.relay), self._relay_stats(), (CONTROLLER_SYSID, CONTROLLER_COMPID))
+        t = joined.rows[-1].t if joined.rows else 0.0
+        for e in out.notes:
+            self.events.append(e)
+            if self._event_log is not None:
+                self._event_log.event(t, e.kind, e.text, e.by, e.source)
+        return out
+
+    def _controller_completed(self) -> bool:
+        """Whether the controller flew its mission to the end (:func:`bridge.record.summary.controller_completed`)."""
+        return controller_completed(_end(self.controller))
+
+    # -- children ----------------------------------------------------------------------------------
+    def _start(self) -> None:
+        """Start the children at once (each one's start-up, ~0.5 s of Python and imports, overlaps the
+        others'), every port they need chosen first, then wait until each is ready."""
+        mission = str(self.path / "mission.toml")
+        # the controller's source port, named to the vehicle before either starts: the vehicle hears the
+        # controller's ids from that address only (through a relay, from the relay's back port), so no
+        # other process can claim them, not even before the controller's first message
+        source = free_udp_port()
+        relayed = self.realtime and self.flight.link.impaired
+        back = free_udp_port() if relayed else source
+        if self.listen.endswith(":0"):
+            self.listen = f"127.0.0.1:{free_udp_port()}"
+        port = self.listen.rpartition(":")[2]
+        argv = ["vehicle", mission, "--listen", self.listen, "--gcs", self.gcs or "none",
+                "--sysid", str(self.sysid), "--realtime" if self.realtime else "--lockstep",
+                "--controller-from", f"127.0.0.1:{back}", "--out", str(self.path), "--overwrite"]
+        if self.speed is not None:
+            argv += ["--speed", repr(self.speed)]
+        keyarg = ["--key", str(self.key)] if self.key is not None else []
+        self.vehicle = Child("vehicle", argv + keyarg, self.path / "vehicle.log")
+        to = port
+        if relayed:  # the link model on the wall clock, between the two
+            to = str(free_udp_port())
+            self.relay = Child("relay", ["relay", "--listen", f"127.0.0.1:{to}", "--to", f"127.0.0.1:{port}",
+                                         "--back-port", str(back), "--client", f"127.0.0.1:{source}",
+                                         "--mission", mission, "--mission-clock",
+                                         "--stats", str(self.path / "relay.json")], self.path / "relay.log")
+        # its wait for the vehicle's heartbeat now includes the vehicle's start-up: the session's budget for it
+        argv = ["controller", mission, "--vehicle", f"127.0.0.1:{to}", "--target-sysid", str(self.sysid),
+                "--source-port", str(source), "--timeout", f"{READY_TIMEOUT_S:g}", "--out", str(self.path),
+                "--overwrite"]
+        if self.realtime:
+            argv.append("--realtime")
+        for c in self.flight.param_changes:
+            argv += ["--param-at", f"{c.t_s!r}:{c.name}={c.value!r}"]
+        self.controller = Child("controller", argv + keyarg, self.path / "controller.log")
+        ready = self._wait_ready(self.vehicle)
+        self._note("started", f"vehicle pid {self.vehicle.pid}: {ready.describe()}", "session")
+        if self.relay is not None:
+            line = self._wait_ready(self.relay).describe()
+            self._note("started", f"relay pid {self.relay.pid}: {line}", "session")
+        self._wait_ready(self.controller)
+        self._note("started", f"controller pid {self.controller.pid}", "session")
+
+    def _wait_ready(self, child: Child) -> Ready:
+        """Block until ``child`` reports :class:`~bridge.nodes.report.Ready` (returned), or raise
+        :class:`ChildError`."""
+        deadline = time.monotonic() + READY_TIMEOUT_S
+        sel = selectors.DefaultSelector()
+        sel.register(child.fd, selectors.EVENT_READ)
+        try:
+            ready: Ready | None = None
+            while True:
+                # every line read is handled, the ones after "ready" too: the children start at once, so the
+                # controller may arm the vehicle before its "ready" is read, and its "event ... armed" line
+                # then comes in the same read (dropped, the session saw a flight never armed)
+                for report in child.reports():
+                    self._status(child, report)
+                    if isinstance(report, Ready) and ready is None:
+                        ready = report
+                if ready is not None:
+                    return ready
+                if child.eof or child.proc.poll() is not None:
+                    child.proc.wait()
+                    self._died(child, starting=True)
+                if self.interrupted:
+                    raise KeyboardInterrupt
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    self.died = child.name
+                    self._note("died", f"{child.name} (pid {child.pid}) not ready within {READY_TIMEOUT_S:g} s",
+                               "session")
+                    raise ChildError(child.name)
+                sel.select(min(left, 0.5))
+        finally:
+            sel.close()
+
+    def _died(self, child: Child, starting: bool = False) -> None:
+        """A child is gone: say so by name; bad input (exit 2) is the user's, anything else ours."""
+        err = child.last_error()
+        if starting and child.proc.returncode == 2:
+            raise ConfigError(err.removeprefix("bsst: ") or f"{child.name}: bad input")
+        self.died = child.name
+        self._note("died", f"{child.name} (pid {child.pid}) {child.exit_text()}" + (f": {err}" if err else ""),
+                   "session")
+        if starting:
+            raise ChildError(f"{child.name} (pid {child.pid}) {child.exit_text()}" + (f": {err}" if err else ""))
+
+    def _supervise(self) -> None:
+        veh, ctl = self.vehicle, self.controller
+        assert veh is not None and ctl is not None
+        sel = selectors.DefaultSelector()
+        sel.register(veh.fd, selectors.EVENT_READ, veh)
+        sel.register(ctl.fd, selectors.EVENT_READ, ctl)
+        landing_deadline: float | None = None
+        try:
+            while True:
+                sel.select(0.1)
+                if self.interrupted:
+                    raise KeyboardInterrupt
+                for child in (veh, ctl):
+                    for report in child.reports():
+                        self._status(child, report)
+                self.joiner.update()
+                self._show_progress()
+                if veh.proc.poll() is not None:
+                    for report in veh.reports():  # its last words: events it said before it went
+                        self._status(veh, report)
+                    self._died(veh)
+                    return
+                if self.relay is not None and self.relay.proc.poll() is not None:
+                    self._died(self.relay)
+                    return
+                if ctl.proc.poll() is not None and landing_deadline is None:
+                    for report in ctl.reports():
+                        self._status(ctl, report)
+                    self.joiner.controller_done = True
+                    if ctl.done is not None and ctl.done.reason:  # a controller that gave up says why
+                        sys.stderr.write(("\n" if self.live else "") + f"bsst sitl: controller: {ctl.done.reason}\n")
+                    taken = ctl.done is not None and ctl.done.taken_over is not None
+                    if self._controller_completed() or not self.vehicle_armed or taken:
+                        # taken: a ground station flies it now (HOLD, LAND, ...): nothing of the mission to wait for
+                        if ctl.proc.returncode not in (0, 1):
+                            self._died(ctl)
+                        return
+                    if ctl.done is None:  # killed or crashed: a death, not an outcome
+                        self._died(ctl)
+                    # the vehicle is on its own: let it finish its failsafe (land and disarm)
+                    landing_deadline = time.monotonic() + self._landing_time()
+                    self._note("waiting", f"vehicle on its own: waiting up to {self._landing_time():.0f} s "
+                                          "for it to land and disarm", "session")
+                if landing_deadline is not None and (not self.vehicle_armed or time.monotonic() > landing_deadline):
+                    return
+        finally:
+            sel.close()
+
+    def _landing_time(self) -> float:
+        """Wall time allowed to a vehicle flying its failsafe alone: lockstep loss, timeout,
+        descent from the highest point the trace reached, with a margin."""
+        z = max((r.z for r in self.joiner.rows[-2000:]), default=0.0)
+        fs = self.flight.failsafe
+        pace = self.speed or 1.0
+        return 5.0 + (1.0 + fs.timeout_s + fs.time_to_land_s(z)) / pace
+
+    def _stop_children(self) -> None:
+        """SIGTERM the controller, the relay, the vehicle; SIGKILL whatever is left after the grace."""
+        children = [c for c in (self.controller, self.relay, self.vehicle) if c is not None]
+        for c in children:
+            if c.proc.poll() is None:
+                try:
+                    c.proc.send_signal(signal.SIGTERM)
+                except ProcessLookupError:
+                    pass
+        deadline = time.monotonic() + STOP_GRACE_S
+        for c in children:
+            try:
+                c.proc.wait(timeout=max(deadline - time.monotonic(), 0.01))
+            except subprocess.TimeoutExpired:
+                c.proc.kill()
+                c.proc.wait()
+                self._note("killed", f"{c.name} (pid {c.pid}) did not stop within {STOP_GRACE_S:g} s: SIGKILL",
+                           "session")
+            for report in c.reports():
+                self._status(c, report)
+            c.proc.stdout.close()  # type: ignore[union-attr]
+
+    # -- status lines, events, progress -------------------------------------------------------------
+    def _status(self, child: Child, report: Report) -> None:
+        if not isinstance(report, Event):
+            return
+        t, kind = report.t, report.kind
+        if child.name == "vehicle":
+            if self.realtime and math.isfinite(t):
+                t = self._flight_time(t)
+            if kind == "armed":
+                self.vehicle_armed = True
+            elif kind == "disarmed":
+                self.vehicle_armed = False
+            elif kind == "failsafe":
+                self.failsafe_seen = True
+            elif kind == "diverged":
+                self.diverged = True
+        self._note(kind, report.text, child.name, t, report.by)
+
+    def _flight_time(self, t_vehicle: float) -> float:
+        """Real time: the vehicle's clock runs from its start; the flight's (the trace's and
+        the controller's) time 0 is the vehicle's step k0, the first state the controller
+        answered. Events before it is known (arming) are at 0."""
+        joiner = getattr(self, "joiner", None)
+        if joiner is not None:
+            joiner.update()  # k0 may be in a row not joined yet
+        if joiner is None or joiner.k0 is None:
+            return 0.0
+        return t_vehicle - joiner.k0 / self.flight.mission.rate_hz
+
+    def _note(self, kind: str, text: str, source: str, t: float | None = None, by: Sender | None = None) -> None:
+        if t is None:
+            t = self.joiner.rows[-1].t if getattr(self, "joiner", None) and self.joiner.rows else 0.0
+        self.events.append(RunEvent.at(t, kind, text, source, by))
+        if self._event_log is not None:
+            self._event_log.event(t if math.isfinite(t) else 0.0, kind, text, by, source)
+        if source == "session" and kind in ("died", "killed"):
+            sys.stderr.write(("\n" if self.live else "") + f"bsst sitl: {text}\n")
+
+    def _show_progress(self) -> None:
+        rows = self.joiner.rows
+        if not rows or not (self.live or self.progress):
+            return
+        r = rows[-1]
+        t = r.t
+        err = math.sqrt((r.x - r.x_ref) ** 2 + (r.y - r.y_ref) ** 2 + (r.z - r.z_ref) ** 2)
+        if self.progress is not None:
+            self.progress(t, self.flight.mission.duration_s, err)
+        if self.live:
+            first = self.joiner.first_sent
+            wall = time.monotonic() - (first if first is not None else self.t_wall0)
+            sys.stderr.write(f"\rsitl t {t:7.2f} / {self.flight.mission.duration_s:.2f} s   "
+                             f"real-time factor {t / max(wall, 1e-9):6.1f}x   3-D error {err:.2e} m   ")
+            sys.stderr.flush()
+
+    def _relay_stats(self) -> dict[str, Any] | None:
+        """What ``bsst relay --stats`` wrote on exit (None without a relay or a readable file)."""
+        if self.relay is None:
+            return None
+        try:
+            return json.loads((self.path / "relay.json").read_text())
+        except (OSError, ValueError):
+            return None
+
+
+def _end(child: Child | None) -> ChildEnd | None:
+    """How ``child`` ended, as the summary reads it (its exit, its stats report, the controller's outcome)."""
+    if child is None:
+        return None
+    done = child.done
+    return ChildEnd(child.name, child.proc.returncode, child.exit_text(), child.stats,
+                    done.outcome if done is not None else None, done.reason if done is not None else None)
+
+
+def _catch_stop_signals(session: Session) -> Callable[[], None]:
+    """While a session runs, Ctrl-C (SIGINT) and SIGTERM only set ``session.interrupted``;
+    the session checks it between whole steps, so no file is left half-written by an
+    exception raised in the middle of a write. Main thread only (signals go there)."""
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+
+    def handler(signum: int, frame: Any) -> None:
+        session.interrupted = True
+
+    old = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
+
+    def restore() -> None:
+        for sig, h in old.items():
+            signal.signal(sig, h)
+
+    return restore
+
+
+

@@ -1,0 +1,85 @@
+"""The flight battery of a ``motors`` profile: its voltage sags under load and caps the rotors' top speed.
+
+In:  a profile's ``[battery]`` table (cells, capacity mAh, cell volts full and empty, internal resistance
+     ohm per cell, motor and ESC efficiency), then per physics step the rotor speeds (rad/s), the rotors'
+     drag-torque factor (N m s^2) and the step (s)
+Out: the terminal voltage (V), the current (A), the charge used (mAh) and the rotors' speed cap (rad/s)
+
+The model (docs/weather.md "Battery"): the open-circuit voltage falls linearly with the charge used,
+E = n (v_full − (v_full − v_empty) · used / capacity); the shaft power the rotors draw is
+P = Σ Q_i ω_i = κ Σ ω_i³ (Q = κ ω², the rotor's drag torque), the pack delivers P / η, and its terminal
+voltage V = E − I R with I = P / (η V) is the larger root of V² − E V + P R / η = 0 (exact, no iteration).
+A DC motor's no-load speed is proportional to its voltage (K_v · V), so the rotors' top speed is
+ω_max · V / (n v_full): the profile's ω_max on a full pack at rest.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from params import Table
+
+
+@dataclass(frozen=True, slots=True)
+class BatteryConfig:
+    cells: int
+    capacity_mah: float
+    cell_full_v: float
+    cell_empty_v: float
+    cell_resistance_ohm: float
+    efficiency: float
+
+    @property
+    def full_v(self) -> float:
+        return self.cells * self.cell_full_v
+
+
+def battery_from_table(t: Table) -> BatteryConfig:
+    """Validate a profile's ``[battery]`` table (errors name the file and key)."""
+    cfg = BatteryConfig(
+        cells=t.integer("cells", lo=1, hi=24),
+        capacity_mah=t.number("capacity_mah", lo=1.0, hi=1e6),
+        cell_full_v=t.number("cell_full_v", 4.2, lo=1.0, hi=5.0),
+        cell_empty_v=t.number("cell_empty_v", 3.3, lo=1.0, hi=5.0),
+        cell_resistance_ohm=t.number("cell_resistance_ohm", lo=0.0, hi=1.0),
+        efficiency=t.number("efficiency", lo=0.05, hi=1.0),
+    )
+    if cfg.cell_empty_v >= cfg.cell_full_v:
+        raise t.error("cell_empty_v", f"must be below cell_full_v ({cfg.cell_full_v:g} V)")
+    t.done()
+    return cfg
+
+
+class Battery:
+    """The pack's state: charge used (mAh), terminal voltage (V), current (A); their extremes over the flight."""
+
+    def __init__(self, config: BatteryConfig) -> None:
+        self.config = config
+        self.used_mah = 0.0
+        self.voltage = config.full_v
+        self.current = 0.0
+        self.min_voltage = self.voltage
+        self.max_current = 0.0
+        self._charge_as = 0.0  # A s drawn
+
+    def step(self, omega: tuple[float, ...], torque_factor: float, h: float) -> float:
+        """Draw the rotors' power over h (s); returns the rotors' speed cap (rad/s) as a fraction of ω_max."""
+        c = self.config
+        power = torque_factor * sum(o * o * o for o in omega) / c.efficiency  # W from the pack
+        e = c.cells * (c.cell_full_v - (c.cell_full_v - c.cell_empty_v) * min(self.used_mah / c.capacity_mah, 1.0))
+        r = c.cells * c.cell_resistance_ohm
+        disc = e * e - 4.0 * power * r
+        v = 0.5 * (e + math.sqrt(disc)) if disc > 0.0 else 0.5 * e  # beyond the pack's peak power: it gives half
+        i = power / v if v > 0.0 else 0.0
+        self.voltage, self.current = v, i
+        self._charge_as += i * h
+        self.used_mah = self._charge_as / 3.6
+        self.min_voltage = min(self.min_voltage, v)
+        self.max_current = max(self.max_current, i)
+        return v / c.full_v
+
+    def summary(self) -> dict:
+        return {"voltage_v": self.voltage, "min_voltage_v": self.min_voltage, "current_a": self.current,
+                "max_current_a": self.max_current, "used_mah": self.used_mah,
+                "capacity_mah": self.config.capacity_mah, "cells": self.config.cells}

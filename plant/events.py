@@ -1,0 +1,175 @@
+"""A flight's timeline of events: faults and weather changes at mission times (pure; validated here).
+
+In:  a mission's ``[[events]]`` tables (``t_s`` s, ``kind`` and its settings) or ``--at T:KIND[:ARGS]`` flags
+Out: frozen :class:`TimedEvent` s in time order, each with its TOML table (what ``mission.toml`` holds) and
+     the one-line text its ``events.log`` line carries
+
+The kinds, as a table and as a flag (units: s, m, m/s, rad/s; rotors numbered as eq. 4):
+
+=========  ==============================================  =========================================
+kind       table keys                                      flag ARGS
+=========  ==============================================  =========================================
+motor      ``motor`` 1-4, ``effectiveness`` 0..1 (0: off)  ``N=EFFECTIVENESS``
+gps        ``state`` off|on, or ``jump`` [dx, dy, dz] m    ``off``, ``on``, ``jump=DX,DY,DZ``
+baro       ``drift_mps`` (m/s of altitude error)           ``drift=M_PER_S``
+mag        ``state`` off|on                                ``off``, ``on``
+gyro       ``bias`` [x, y, z] rad/s (added)                ``bias=X,Y,Z``
+wind       ``speed_mps``, ``from_deg``                     ``SPEED[:FROM_DEG]``
+gust       ``duration_s``, ``amplitude_mps``, ``from_deg``  ``DURATION,AMPLITUDE[,FROM_DEG]``
+link       (refused: the link model is fixed for a flight)  ``PROFILE_OR_KEYS``
+=========  ==============================================  =========================================
+
+An event acts at the start of the control step that begins at or after ``t_s``: the same step in every clock.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from params import ConfigError, Table
+
+EVENT_KINDS = ("motor", "gps", "baro", "mag", "gyro", "wind", "gust", "link")
+SENSOR_EVENT_KINDS = ("gps", "baro", "mag", "gyro")
+LINK_REFUSED = ("link events are not supported: the link model is built once for a flight (its fates are drawn "
+                "ahead from the seed); schedule outages with [link] blackouts or --blackout")
+
+
+@dataclass(frozen=True, slots=True)
+class TimedEvent:
+    """One event of the timeline: at ``t_s`` (s), ``kind`` with its ``settings`` (key, value) pairs."""
+
+    t_s: float
+    kind: str
+    settings: tuple[tuple[str, Any], ...]
+
+    def get(self, key: str, default: Any = None) -> Any:
+        return dict(self.settings).get(key, default)
+
+    def step(self, rate_hz: float) -> int:
+        """The control step it acts at (the first that begins at or after t_s)."""
+        return math.ceil(self.t_s * rate_hz - 1e-9)
+
+    def table(self) -> dict[str, Any]:
+        """As a ``[[events]]`` table."""
+        return {"t_s": self.t_s, "kind": self.kind, **{k: list(v) if isinstance(v, tuple) else v
+                                                       for k, v in self.settings}}
+
+    def text(self) -> str:
+        """What it does, for ``events.log``."""
+        s = dict(self.settings)
+        k = self.kind
+        if k == "motor":
+            e = s["effectiveness"]
+            return f"motor {s['motor']}: {'off' if e == 0.0 else f'{e:g} of its thrust'}"
+        if k in ("gps", "mag") and "state" in s:
+            return f"{k} {s['state']}"
+        if k == "gps":
+            return "gps jump by ({:g}, {:g}, {:g}) m".format(*s["jump"])
+        if k == "baro":
+            return f"baro drifts {s['drift_mps']:g} m/s"
+        if k == "gyro":
+            return "gyro bias +({:g}, {:g}, {:g}) rad/s".format(*s["bias"])
+        if k == "wind":
+            return f"steady wind {s['speed_mps']:g} m/s from {s['from_deg']:g} deg"
+        return f"gust {s['amplitude_mps']:g} m/s from {s['from_deg']:g} deg over {s['duration_s']:g} s"
+
+
+def _vector(t: Table, key: str, lo: float, hi: float) -> tuple[float, float, float]:
+    return t.vector(key, 3, lo=lo, hi=hi)  # type: ignore[return-value]
+
+
+def event_from_table(t: Table, duration_s: float) -> TimedEvent:
+    """Validate one ``[[events]]`` table; errors name the file and key."""
+    t_s = t.number("t_s", lo=0.0, hi=duration_s)
+    if t_s >= duration_s:
+        raise t.error("t_s", f"must be before the mission's end ({duration_s:g} s)")
+    kind = t.string("kind", choices=EVENT_KINDS)
+    s: dict[str, Any] = {}
+    if kind == "link":
+        raise t.error("kind", LINK_REFUSED)
+    if kind == "motor":
+        s["motor"] = t.integer("motor", lo=1, hi=4)
+        s["effectiveness"] = t.number("effectiveness", lo=0.0, hi=1.0)
+    elif kind in ("gps", "mag"):
+        if kind == "gps" and t.has("jump"):
+            s["jump"] = _vector(t, "jump", -1e4, 1e4)
+        else:
+            s["state"] = t.string("state", choices=("off", "on"))
+    elif kind == "baro":
+        s["drift_mps"] = t.number("drift_mps", lo=-100.0, hi=100.0)
+    elif kind == "gyro":
+        s["bias"] = _vector(t, "bias", -10.0, 10.0)
+    elif kind == "wind":
+        s["speed_mps"] = t.number("speed_mps", lo=0.0, hi=50.0)
+        s["from_deg"] = t.number("from_deg", 0.0, lo=-360.0, hi=360.0)
+    else:
+        s["duration_s"] = t.number("duration_s", lo=0.0, lo_open=True, hi=600.0)
+        s["amplitude_mps"] = t.number("amplitude_mps", lo=0.0, hi=50.0)
+        s["from_deg"] = t.number("from_deg", 0.0, lo=-360.0, hi=360.0)
+    t.done()
+    return TimedEvent(t_s, kind, tuple(s.items()))
+
+
+def timeline_from_tables(tables: Sequence[Mapping[str, Any]], source: str, duration_s: float) -> tuple[TimedEvent, ...]:
+    """Every ``[[events]]`` table validated, in time order (two at one time in the order given)."""
+    out = []
+    for i, raw in enumerate(tables):
+        if not isinstance(raw, Mapping):
+            raise ConfigError(f"{source}: events[{i}]: expected a table {{t_s, kind, ...}}, got {raw!r}"[:200])
+        out.append(event_from_table(Table(raw, source, f"events[{i}]"), duration_s))
+    return tuple(sorted(out, key=lambda e: e.t_s))
+
+
+def _numbers(text: str, n: tuple[int, ...], what: str) -> list[float]:
+    parts = text.split(",")
+    try:
+        values = [float(p) for p in parts]
+    except ValueError:
+        values = []
+    if len(values) not in n or not all(math.isfinite(v) for v in values):
+        raise ValueError(f"expected {what}, got {text!r}")
+    return values
+
+
+def event_table_from_flag(text: str) -> dict[str, Any]:
+    """``T:KIND[:ARGS]`` (``--at``) as an ``[[events]]`` table; ValueError saying what is wrong (ranges are
+    checked by :func:`event_from_table`)."""
+    t_text, _, rest = text.partition(":")
+    kind, _, args = rest.partition(":")
+    try:
+        t_s = float(t_text)
+    except ValueError:
+        raise ValueError(f"expected T:KIND[:ARGS] with T in seconds, got {text!r}") from None
+    if kind not in EVENT_KINDS:
+        raise ValueError(f"unknown event kind {kind!r} in {text!r}; the kinds are {', '.join(EVENT_KINDS)}")
+    out: dict[str, Any] = {"t_s": t_s, "kind": kind}
+    key, eq, value = args.partition("=")
+    if kind == "link":
+        raise ValueError(LINK_REFUSED)
+    if kind == "motor":
+        if not eq or not key.strip().isdigit():
+            raise ValueError(f"expected motor:N=EFFECTIVENESS (N 1-4, 0..1), got {text!r}")
+        out.update(motor=int(key), effectiveness=_numbers(value, (1,), "an effectiveness 0..1")[0])
+    elif kind in ("gps", "mag") and args in ("off", "on"):
+        out["state"] = args
+    elif kind == "gps" and key == "jump" and eq:
+        out["jump"] = _numbers(value, (3,), "jump=DX,DY,DZ in m")
+    elif kind == "baro" and key == "drift" and eq:
+        out["drift_mps"] = _numbers(value, (1,), "drift=M_PER_S")[0]
+    elif kind == "gyro" and key == "bias" and eq:
+        out["bias"] = _numbers(value, (3,), "bias=X,Y,Z in rad/s")
+    elif kind == "wind" and args:
+        v = _numbers(args.replace(":", ","), (1, 2), "wind:SPEED[:FROM_DEG]")
+        out.update(speed_mps=v[0], from_deg=v[1] if len(v) > 1 else 0.0)
+    elif kind == "gust" and args:
+        v = _numbers(args, (2, 3), "gust:DURATION,AMPLITUDE[,FROM_DEG]")
+        out.update(duration_s=v[0], amplitude_mps=v[1], from_deg=v[2] if len(v) > 2 else 0.0)
+    else:
+        forms = {"gps": "gps:off|on|jump=DX,DY,DZ", "baro": "baro:drift=M_PER_S", "mag": "mag:off|on",
+                 "gyro": "gyro:bias=X,Y,Z", "wind": "wind:SPEED[:FROM_DEG]",
+                 "gust": "gust:DURATION,AMPLITUDE[,FROM_DEG]"}
+        raise ValueError(f"expected {forms[kind]}, got {text!r}")
+    return out

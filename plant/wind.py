@@ -1,0 +1,306 @@
+"""The air the vehicle flies through: steady wind, Dryden turbulence and discrete 1 − cos gusts (pure, seeded).
+
+In:  a mission's ``[wind]`` table (``speed_mps`` m/s, ``from_deg`` the compass direction it blows FROM,
+     ``turbulence`` none|light|moderate|severe, ``altitude_m`` m, ``gusts`` [[t_s, duration_s, amplitude_mps,
+     from_deg]]), a seed, the physics step (s)
+Out: the wind velocity (m/s, paper frame NWU: x north, y west, z up) held over each physics step, and its
+     statistics over the flight (the ``wind`` block of ``summary.json``)
+
+Every formula and number, with its source: docs/weather.md.
+
+- **Steady wind** from compass bearing β (clockwise from north) blows toward β + 180°: in NWU it is
+  ``speed · (−cos β, sin β, 0)``.
+- **Dryden turbulence** (MIL-F-8785C §3.7.2, MIL-HDBK-1797 low altitude, h in ft, 10 ≤ h ≤ 1000):
+  σ_w = 0.1 W20, σ_u = σ_v = σ_w / (0.177 + 0.000823 h)^0.4, L_w = h, L_u = L_v = h / (0.177 + 0.000823 h)^1.2,
+  W20 (the wind at 20 ft) 15, 30, 45 kt for light, moderate, severe. The velocity spectra, one-sided in ω
+  (rad/s) for a frozen field passed at the speed V, are
+  Φ_u(ω) = σ_u² (2 L_u / π V) / (1 + (L_u ω / V)²) and
+  Φ_v(ω) = σ_v² (L_v / π V) (1 + 3 (L_v ω / V)²) / (1 + (L_v ω / V)²)² (w as v with L_w, σ_w).
+  u runs along the mean wind, v across it (horizontal), w up. V is the mean wind speed (the vehicle
+  roughly holds station: the air passes it at the mean wind), at least :data:`MIN_PASS_SPEED_MPS`.
+- The shaping filters are discretized **exactly**: u is the Ornstein-Uhlenbeck process
+  u_{k+1} = e^{−ah} u_k + σ √(1 − e^{−2ah}) n_k (a = V/L); v and w are the second-order filter
+  H(s) = σ √(L/V) (1 + √3 (L/V) s) / (1 + (L/V) s)² in state space, stepped with its matrix exponential
+  and the exact covariance of the noise it integrates over h (Q_d = ∫₀ʰ e^{Aτ} B Bᵀ e^{Aᵀτ} dτ, in closed
+  form). Each filter starts in its stationary distribution, so the turbulence is stationary from t = 0.
+- **Gusts** (MIL-F-8785C §3.7.4, the 1 − cos shape of CS-25.341): from t_s for duration_s,
+  ``amplitude/2 · (1 − cos(2π (t − t_s) / duration))`` along the gust's direction, then nothing.
+
+**Seeding.** The turbulence draws from its own numpy ``Generator`` seeded with (seed, :data:`_DOMAIN`):
+apart from the sensors' and the link's streams, so adding wind changes neither.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from params import ConfigError, Table
+
+FT = 0.3048  # m per foot
+KT = 1852.0 / 3600.0  # m/s per knot
+TURBULENCE = ("none", "light", "moderate", "severe")
+W20_KT = {"light": 15.0, "moderate": 30.0, "severe": 45.0}  # MIL-F-8785C fig. 11 / MIL-HDBK-1797: W20 by level
+LOW_ALTITUDE_FT = (10.0, 1000.0)  # the low-altitude model's range of h
+MIN_PASS_SPEED_MPS = 1.0  # the frozen field passes the vehicle at least this fast (no mean wind: still defined)
+_DOMAIN = 0x3D1D  # keeps the turbulence's stream apart from any other use of the seed
+WIND_RANGES = {"speed_mps": (0.0, 50.0), "from_deg": (-360.0, 360.0), "altitude_m": (0.0, 1000.0)}
+
+Vec3 = tuple[float, float, float]
+
+
+@dataclass(frozen=True, slots=True)
+class Gust:
+    """A discrete 1 − cos gust: starts at ``t_s`` (s), lasts ``duration_s`` (s), peaks at ``amplitude_mps``
+    (m/s) half-way, blowing from compass ``from_deg``."""
+
+    t_s: float
+    duration_s: float
+    amplitude_mps: float
+    from_deg: float = 0.0
+
+    def velocity(self, t: float) -> Vec3:
+        """The gust's wind (m/s, NWU) at time t (s)."""
+        s = t - self.t_s
+        if s <= 0.0 or s >= self.duration_s:
+            return (0.0, 0.0, 0.0)
+        m = 0.5 * self.amplitude_mps * (1.0 - math.cos(2.0 * math.pi * s / self.duration_s))
+        return blowing(m, self.from_deg)
+
+
+@dataclass(frozen=True, slots=True)
+class WindConfig:
+    """One ``[wind]`` table, validated (:func:`wind_from_table`). ``altitude_m`` None: the flight's own
+    (:func:`bridge.core.flight.prepare` sets the mean height of the reference)."""
+
+    speed_mps: float = 0.0
+    from_deg: float = 0.0
+    turbulence: str = "none"
+    altitude_m: float | None = None
+    gusts: tuple[Gust, ...] = ()
+
+    def at_altitude(self, altitude_m: float) -> WindConfig:
+        return replace(self, altitude_m=altitude_m)
+
+    def as_table(self) -> dict:
+        d: dict = {"speed_mps": self.speed_mps, "from_deg": self.from_deg, "turbulence": self.turbulence}
+        if self.altitude_m is not None:
+            d["altitude_m"] = self.altitude_m
+        if self.gusts:
+            d["gusts"] = [[g.t_s, g.duration_s, g.amplitude_mps, g.from_deg] for g in self.gusts]
+        return d
+
+
+def blowing(speed: float, from_deg: float) -> Vec3:
+    """The NWU velocity (m/s) of a wind of ``speed`` blowing FROM compass bearing ``from_deg``."""
+    b = math.radians(from_deg)
+    return (-speed * math.cos(b), speed * math.sin(b), 0.0)
+
+
+def wind_from_table(t: Table, duration_s: float) -> WindConfig:
+    """Validate a mission's ``[wind]`` table (errors name the file and key)."""
+    r = WIND_RANGES
+    speed = t.number("speed_mps", 0.0, lo=r["speed_mps"][0], hi=r["speed_mps"][1])
+    from_deg = t.number("from_deg", 0.0, lo=r["from_deg"][0], hi=r["from_deg"][1])
+    level = t.string("turbulence", "none", choices=TURBULENCE)
+    altitude = t.number("altitude_m", lo=r["altitude_m"][0], hi=r["altitude_m"][1]) if t.has("altitude_m") else None
+    raw = t.raw("gusts", [])
+    if not isinstance(raw, list):
+        raise t.error("gusts", "expected a list of [t_s, duration_s, amplitude_mps, from_deg]")
+    gusts = tuple(gust_from_list(g, f"{t.key('gusts')}[{i}]", t, duration_s) for i, g in enumerate(raw))
+    t.done()
+    return WindConfig(speed, from_deg, level, altitude, gusts)
+
+
+def gust_from_list(g: object, where: str, t: Table, duration_s: float) -> Gust:
+    """One gust ``[t_s, duration_s, amplitude_mps]`` or with ``from_deg``; ConfigError naming ``where``."""
+    if (not isinstance(g, (list, tuple)) or len(g) not in (3, 4)
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in g)):
+        raise ConfigError(f"{t._source}: {where}: expected [t_s, duration_s, amplitude_mps, from_deg], got {g!r}"[:200])
+    ts, dur, amp = float(g[0]), float(g[1]), float(g[2])
+    frm = float(g[3]) if len(g) == 4 else 0.0
+    problems = [(not 0.0 <= ts < duration_s, f"t_s must be in [0, {duration_s:g}) s (the mission), got {ts:g}"),
+                (not 0.0 < dur <= 600.0, f"duration_s must be in (0, 600] s, got {dur:g}"),
+                (not 0.0 <= amp <= 50.0, f"amplitude_mps must be in [0, 50] m/s, got {amp:g}"),
+                (not -360.0 <= frm <= 360.0, f"from_deg must be in [-360, 360], got {frm:g}")]
+    for bad, why in problems:
+        if bad:
+            raise ConfigError(f"{t._source}: {where}: {why}")
+    return Gust(ts, dur, amp, frm)
+
+
+def dryden_low_altitude(level: str, altitude_m: float) -> tuple[float, float, float, float, float, float]:
+    """(σ_u, σ_v, σ_w m/s, L_u, L_v, L_w m) of MIL-F-8785C / MIL-HDBK-1797 low-altitude turbulence at
+    ``altitude_m`` (clamped to 10-1000 ft, the model's range); all 0 for ``none``."""
+    if level == "none":
+        return (0.0,) * 6  # type: ignore[return-value]
+    h = min(max(altitude_m / FT, LOW_ALTITUDE_FT[0]), LOW_ALTITUDE_FT[1])  # ft
+    s = 0.177 + 0.000823 * h
+    sigma_w = 0.1 * W20_KT[level] * KT
+    sigma_uv = sigma_w / s**0.4
+    l_uv = h / s**1.2 * FT
+    return (sigma_uv, sigma_uv, sigma_w, l_uv, l_uv, h * FT)
+
+
+def _tail(x: float, n: int) -> float:
+    """1 − e^{−x} Σ_{k=0..n} x^k/k! (the regularised lower incomplete gamma P(n+1, x)), accurate for small x."""
+    if x < 1.0:  # the series e^{−x} Σ_{k>n} x^k/k!: no cancellation
+        term = x ** (n + 1) / math.factorial(n + 1)
+        total, k = 0.0, n + 1
+        while term > 1e-18 * total or total == 0.0:
+            total += term
+            k += 1
+            term *= x / k
+            if term == 0.0:
+                break
+        return math.exp(-x) * total
+    return 1.0 - math.exp(-x) * sum(x**k / math.factorial(k) for k in range(n + 1))
+
+
+def dryden_second_order(a: float, h: float) -> tuple[tuple[float, ...], tuple[float, float, float]]:
+    """The exact step over h of x' = A x + B η, A = [[0, 1], [−a², −2a]], B = (0, 1), η white of unit
+    two-sided density: (e^{Ah} row-major, the lower Cholesky factor (l11, l21, l22) of Q_d)."""
+    e = math.exp(-a * h)
+    phi = (e * (1.0 + a * h), e * h, -e * a * a * h, e * (1.0 - a * h))
+    c = 2.0 * a
+    x = c * h
+    i0, i1, i2 = _tail(x, 0) / c, _tail(x, 1) / c**2, 2.0 * _tail(x, 2) / c**3  # ∫₀ʰ τⁿ e^{−cτ} dτ
+    q11, q12, q22 = i2, i1 - a * i2, i0 - 2.0 * a * i1 + a * a * i2  # e^{Aτ}B = e^{−aτ} (τ, 1 − aτ)
+    l11 = math.sqrt(q11)
+    l21 = q12 / l11
+    return phi, (l11, l21, math.sqrt(max(q22 - l21 * l21, 0.0)))
+
+
+class Turbulence:
+    """Dryden turbulence (u along the mean wind, v across, w up), stepped exactly every ``h`` s."""
+
+    def __init__(self, level: str, altitude_m: float, pass_speed_mps: float, seed: int, h: float) -> None:
+        self.sigma_u, self.sigma_v, self.sigma_w, self.l_u, self.l_v, self.l_w = dryden_low_altitude(level, altitude_m)
+        self.speed = max(pass_speed_mps, MIN_PASS_SPEED_MPS)
+        self.h = h
+        self._gen = np.random.default_rng([seed, _DOMAIN])
+        self._rows: list[list[float]] = []
+        self._i = 0
+        a_u = self.speed / self.l_u
+        self._phi_u = math.exp(-a_u * h)
+        self._k_u = self.sigma_u * math.sqrt(-math.expm1(-2.0 * a_u * h))
+        self._vw = []
+        n0 = self._normals()
+        for sigma, length, (m1, m2) in ((self.sigma_v, self.l_v, (n0[1], n0[2])), (self.sigma_w, self.l_w,
+                                                                                    (n0[3], n0[4]))):
+            a = self.speed / length
+            phi, chol = dryden_second_order(a, h)
+            k = sigma / math.sqrt(a)  # σ √(L/V)
+            out = (k * a * a, k * math.sqrt(3.0) * a)  # y = K (a² x1 + √3 a x2)
+            state = [m1 / (2.0 * a * math.sqrt(a)), m2 / (2.0 * math.sqrt(a))]  # stationary: P = diag(1/4a³, 1/4a)
+            self._vw.append((phi, chol, out, state))
+        self.u = self.sigma_u * n0[0]
+        self.v = self._output(0)
+        self.w = self._output(1)
+
+    def _normals(self) -> list[float]:
+        if self._i >= len(self._rows):
+            self._rows = self._gen.standard_normal((512, 5)).tolist()
+            self._i = 0
+        row = self._rows[self._i]
+        self._i += 1
+        return row
+
+    def _output(self, j: int) -> float:
+        _, _, out, x = self._vw[j]
+        return out[0] * x[0] + out[1] * x[1]
+
+    def advance(self) -> None:
+        """Step the three filters over h."""
+        n = self._normals()
+        self.u = self._phi_u * self.u + self._k_u * n[0]
+        for j, (m1, m2) in enumerate(((n[1], n[2]), (n[3], n[4]))):
+            phi, (l11, l21, l22), _, x = self._vw[j]
+            x0, x1 = x
+            x[0] = phi[0] * x0 + phi[1] * x1 + l11 * m1
+            x[1] = phi[2] * x0 + phi[3] * x1 + l21 * m1 + l22 * m2
+        self.v = self._output(0)
+        self.w = self._output(1)
+
+
+class Wind:
+    """The wind the plant flies through: :meth:`now` at a physics step's start (held over it), then
+    :meth:`advance`. Its statistics (along, across the initial mean wind, up) accumulate at every step."""
+
+    def __init__(self, config: WindConfig, seed: int, h: float) -> None:
+        self.config = config
+        self.steady = blowing(config.speed_mps, config.from_deg)
+        self.gusts = list(config.gusts)
+        b = math.radians(config.from_deg) if config.speed_mps > 0.0 else math.pi  # no wind: u points north
+        self.along = (-math.cos(b), math.sin(b))  # unit vector the mean wind blows toward (x, y)
+        self.across = (-self.along[1], self.along[0])  # 90° to the left of it (z up)
+        self.turbulence = (Turbulence(config.turbulence, config.altitude_m or 0.0, config.speed_mps, seed, h)
+                           if config.turbulence != "none" else None)
+        self._n = 0
+        self._sum = [0.0] * 6  # Σ along, across, up, Σ of their squares
+        self._sum_t = [0.0] * 6  # the same of the turbulence alone
+        self.peak_mps = 0.0
+
+    def set_steady(self, speed_mps: float, from_deg: float) -> None:
+        """A change of the steady wind (an event): from the next physics step."""
+        self.steady = blowing(speed_mps, from_deg)
+
+    def add_gust(self, gust: Gust) -> None:
+        self.gusts.append(gust)
+
+    def now(self, t: float) -> Vec3:
+        """The wind at t (m/s, NWU): steady + turbulence + gusts; counted in the statistics."""
+        wx, wy, wz = self.steady
+        tu = self.turbulence
+        tx = ty = tz = 0.0
+        if tu is not None:
+            (ax, ay), (cx, cy) = self.along, self.across
+            tx, ty, tz = tu.u * ax + tu.v * cx, tu.u * ay + tu.v * cy, tu.w
+            wx, wy, wz = wx + tx, wy + ty, wz + tz
+        for g in self.gusts:
+            gx, gy, gz = g.velocity(t)
+            wx, wy, wz = wx + gx, wy + gy, wz + gz
+        self._count(wx, wy, wz, self._sum)
+        self._count(tx, ty, tz, self._sum_t)
+        self._n += 1
+        speed = math.sqrt(wx * wx + wy * wy + wz * wz)
+        if speed > self.peak_mps:
+            self.peak_mps = speed
+        return (wx, wy, wz)
+
+    def _count(self, wx: float, wy: float, wz: float, s: list[float]) -> None:
+        (ax, ay), (cx, cy) = self.along, self.across
+        a, c = wx * ax + wy * ay, wx * cx + wy * cy
+        s[0] += a
+        s[1] += c
+        s[2] += wz
+        s[3] += a * a
+        s[4] += c * c
+        s[5] += wz * wz
+
+    def advance(self) -> None:
+        if self.turbulence is not None:
+            self.turbulence.advance()
+
+    def summary(self) -> dict:
+        """The ``wind`` block: the configuration, the mean wind and the turbulence's std per axis over the
+        flight (m/s, along / across the mean wind, up) with MIL-HDBK-1797's σ at the turbulence's altitude."""
+        n = max(self._n, 1)
+        mean = [s / n for s in self._sum[:3]]
+        # the turbulence's mean is 0 by construction: its std is its RMS about 0 (unbiased for σ², where the
+        # deviation about a sample mean loses the slow part of a process whose correlation time is seconds)
+        std_t = [math.sqrt(self._sum_t[3 + i] / n) for i in range(3)]
+        c = self.config
+        out: dict = {**c.as_table(), "samples": self._n, "mean_mps": {"along": mean[0], "across": mean[1],
+                                                                      "up": mean[2]},
+                     "mean_speed_mps": math.hypot(mean[0], mean[1]), "peak_mps": self.peak_mps}
+        tu = self.turbulence
+        if tu is not None:
+            out["turbulence_std_mps"] = {"u": std_t[0], "v": std_t[1], "w": std_t[2]}
+            out["dryden"] = {"sigma_mps": {"u": tu.sigma_u, "v": tu.sigma_v, "w": tu.sigma_w},
+                             "scale_m": {"u": tu.l_u, "v": tu.l_v, "w": tu.l_w}, "pass_speed_mps": tu.speed,
+                             "model_altitude_m": tu.l_w,  # L_w = h: the altitude in the model's range
+                             "source": "MIL-F-8785C / MIL-HDBK-1797 low altitude"}
+        return out

@@ -1,0 +1,92 @@
+"""Covers plant.events and bridge.autopilot.simvehicle: the timeline of events.
+
+Motor faults, sensor faults, weather changes; honest outcomes (crashed, diverged after a fault) and the CLI's
+``--at`` (docs/weather.md)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from bridge import simulate
+from params import ConfigError
+from plant import Quadrotor, load_profile
+from plant.events import event_table_from_flag
+
+pytestmark = pytest.mark.process  # runs bsst as a real process: not in make test-fast
+
+
+def test_flags_parse_into_event_tables() -> None:
+    assert event_table_from_flag("10:motor:1=0.75") == {"t_s": 10.0, "kind": "motor", "motor": 1,
+                                                         "effectiveness": 0.75}
+    assert event_table_from_flag("3:gps:jump=1,2,0")["jump"] == [1.0, 2.0, 0.0]
+    assert event_table_from_flag("3:wind:8:90") == {"t_s": 3.0, "kind": "wind", "speed_mps": 8.0, "from_deg": 90.0}
+    assert event_table_from_flag("3:gust:2,4")["duration_s"] == 2.0
+    for bad in ("x:motor:1=0", "3:quake", "3:motor:one=0", "3:gps:maybe", "3:gyro:bias=1,2", "3:link:lte"):
+        with pytest.raises(ValueError):
+            event_table_from_flag(bad)
+
+
+def test_events_that_cannot_act_on_this_flight_are_refused() -> None:
+    with pytest.raises(ConfigError, match="no rotors to fail"):
+        simulate("missions/sine.toml", at=("10:motor:1=0",))  # the paper profile: ideal wrench actuation
+    with pytest.raises(ConfigError, match="truth estimator"):
+        simulate("missions/sine.toml", at=("10:gps:off",))
+    with pytest.raises(ConfigError, match="no GPS"):
+        simulate("missions/sine.toml", sensors={"set": "mocap"}, estimator="ekf", at=("10:gps:off",))
+    with pytest.raises(ConfigError, match="effectiveness"):
+        simulate("missions/sine.toml", profile="x500", at=("10:motor:1=1.5",))
+    with pytest.raises(ConfigError, match="t_s"):
+        simulate("missions/sine.toml", profile="x500", at=("40:motor:1=0.5",))
+
+
+def test_a_full_rotor_changes_nothing_and_a_weak_one_is_logged_and_reproducible() -> None:
+    still = simulate("missions/sine.toml", profile="x500")
+    same = simulate("missions/sine.toml", profile="x500", at=("10:motor:2=1",))
+    assert same.rms == still.rms
+    weak = simulate("missions/sine.toml", profile="x500", at=("10:motor:1=0.9",))
+    again = simulate("missions/sine.toml", profile="x500", at=("10:motor:1=0.9",))
+    assert weak.rms == again.rms and weak.rms != still.rms
+    assert {"t": 10.0, "kind": "fault", "text": "motor 1: 0.9 of its thrust"} in weak.summary["events"]
+
+
+def test_one_motor_off_on_the_x500_ends_not_completed_and_says_why(tmp_path) -> None:
+    out = tmp_path / "run"
+    proc = subprocess.run([sys.executable, "-m", "bridge", "sim", "missions/sine.toml", "--profile", "x500",
+                           "--at", "10:motor:1=0", "--out", str(out), "--no-plots"], capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 1, proc.stderr
+    s = json.loads((out / "summary.json").read_text())
+    assert s["outcome"] in ("diverged", "crashed")
+    assert s["ended_by"]["after_faults"] == ["t=10.000 s: motor 1: off"]
+    assert "fault" in (out / "events.log").read_text()
+
+
+def test_a_hard_touchdown_is_an_impact() -> None:
+    """Dropped from 2 m with the rotors stopped: the plant records the impact speed (about sqrt(2 g h))."""
+    plant = Quadrotor(load_profile("x500"), state=(0.0, 0.0, 0.0, 0.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+    plant.command((0.0, 0.0, 0.0, 0.0))
+    for _ in range(1000):
+        plant.step()
+    assert plant.impact is not None and plant.impact[1] == pytest.approx((2 * 9.81 * 2.0) ** 0.5, rel=0.02)
+    soft = Quadrotor(load_profile("x500"), state=(0.0, 0.0, 0.0, 0.0, 0.01, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+    for _ in range(200):
+        soft.step()
+    assert soft.impact is None
+
+
+def test_gps_outage_drifts_and_is_reported() -> None:
+    run = simulate("missions/step.toml", sensors={"set": "gnss"}, estimator="ekf", at=("5:gps:off", "8:gps:on"))
+    (o,) = run.summary["gps_outages"]
+    assert o["off_s"] == 5.0 and o["on_s"] == 8.0 and o["drift_max_m"] > 0.0 and o["nees_mean_after"] > 0.0
+    kinds = [(e["t"], e["text"]) for e in run.summary["events"] if e["kind"] == "fault"]
+    assert kinds == [(5.0, "gps off"), (8.0, "gps on")]
+
+
+def test_wind_and_gust_events_change_the_air() -> None:
+    run = simulate("missions/sine.toml", at=("5:wind:4:0", "10:gust:2,6,90"))
+    assert run.summary["wind"]["peak_mps"] > 4.0 and run.summary["outcome"] == "completed"
+    assert [e["kind"] for e in run.summary["events"] if e["t"] in (5.0, 10.0)] == ["wind", "wind"]

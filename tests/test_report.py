@@ -1,0 +1,112 @@
+"""Covers bridge.nodes.report: the children's reports to the session, one JSON object a line, read in one place.
+
+Pure: no processes, no sockets (the processes writing them are tested in test_sitl.py, test_relay*.py,
+test_offboard_realtime.py).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+from bridge.autopilot.simvehicle import ITSELF, Sender
+from bridge.nodes.report import (
+    Done,
+    Event,
+    Kind,
+    Ready,
+    Refused,
+    Stats,
+    StatusText,
+    Warning,
+    parse_line,
+    to_line,
+)
+
+GCS = Sender(255, 190, "127.0.0.1", 14550, "gcs")
+
+EVERY_KIND = [
+    Ready("vehicle", listen="127.0.0.1:14560", gcs="127.0.0.1:14550", sysid=1, clock="lockstep", profile="paper",
+          controller_from="127.0.0.1:40000"),
+    Ready("controller", vehicle="127.0.0.1:14560", local="127.0.0.1:40000", clock="realtime"),
+    Ready("relay", listen="127.0.0.1:5", to="127.0.0.1:6", back="127.0.0.1:7", up="delay 10 ms", down="perfect"),
+    Event(1.25, "armed", "armed, offboard control", Sender(200, 191, "127.0.0.1", 40000, "controller")),
+    Event(3.0, "disarmed", "landed: disarmed", ITSELF),
+    Event(0.5, "connected", "vehicle sysid 1 compid 1"),
+    StatusText(2, "lockstep: left (no answer)"),
+    Warning("rejected 3: sender 2, crc 1"),
+    Refused("PARAM_SET MPC_XY_VEL_MAX: out of range"),
+    Stats({"commands": 10, "rejected": {"stale": 1}, "down": None}),
+    Done("completed"),
+    Done("aborted", True, "vehicle silent for 2 s"),
+    Done("aborted", False, "the vehicle was switched to HOLD: no more targets sent", "HOLD"),
+]
+
+
+@pytest.mark.parametrize("report", EVERY_KIND, ids=lambda r: type(r).__name__)
+def test_every_report_is_one_json_line_and_reads_back_equal(report):
+    line = to_line(report)
+    assert "\n" not in line
+    body = json.loads(line)
+    assert Kind(body["report"]).value == body["report"]
+    assert parse_line(line) == report
+    assert parse_line(line + "\n") == report  # as read from a pipe
+
+
+def test_an_events_sender_travels_as_an_object():
+    body = json.loads(to_line(Event(1.0, "disarmed", "disarmed by command", GCS)))
+    assert body["by"] == {"sysid": 255, "compid": 190, "host": "127.0.0.1", "port": 14550, "link": "gcs"}
+    assert json.loads(to_line(Event(1.0, "x", "y")))["by"] is None
+
+
+def test_event_times_are_reported_to_the_millisecond():
+    assert Event.at(1.23456, "k", "t").t == 1.235
+    assert Event.at(2.0004999, "k", "t").t == float("2.000")
+
+
+@pytest.mark.parametrize("line", [
+    "", "hello", "{", "[1, 2]", '{"report": "nonsense"}', '{"no": "kind"}',
+    '{"report": "done"}',  # a missing field
+    '{"report": "done", "outcome": "completed", "extra": 1}',  # a field no reader knows
+    '{"report": "event", "t": "soon", "kind": "armed", "text": "x", "by": null}',
+    '{"report": "event", "t": 1.0, "kind": "armed", "text": "x", "by": {"link": "gcs"}}',
+    '{"report": "stats", "values": [1, 2]}',
+    '{"report": "warning", "text": 5}',
+    "relay: listening on 127.0.0.1:5",  # a person's line, not a report
+])
+def test_a_line_that_is_not_a_report_is_none_not_a_traceback(line):
+    assert parse_line(line) is None
+
+
+# -- the vehicle's text lines, read until it writes JSON lines (report._legacy) -------------------------------
+def test_legacy_vehicle_ready_line():
+    r = parse_line("ready listen=127.0.0.1:14560 gcs=127.0.0.1:14550 sysid=1 clock=lockstep profile=paper "
+                   "controller_from=127.0.0.1:40000")
+    assert r == EVERY_KIND[0]
+    assert r.describe() == ("listen=127.0.0.1:14560 gcs=127.0.0.1:14550 sysid=1 clock=lockstep profile=paper "
+                            "controller_from=127.0.0.1:40000")
+
+
+def test_legacy_vehicle_event_lines_carry_their_sender_as_a_field():
+    assert parse_line("event t=1.250 armed: armed, offboard control [by 200:191 127.0.0.1:40000 controller]") == \
+        EVERY_KIND[3]
+    assert parse_line("event t=3.000 disarmed: landed: disarmed [by vehicle]") == Event(3.0, "disarmed",
+                                                                                       "landed: disarmed", ITSELF)
+    e = parse_line("event t=2.000 failsafe: no actuator target for 0.500 s: land")
+    assert e == Event(2.0, "failsafe", "no actuator target for 0.500 s: land")
+    assert math.isnan(parse_line("event t=x mode: HOLD").t)
+
+
+def test_legacy_vehicle_refused_and_stats_lines():
+    assert parse_line("refused takeoff: too high") == Refused("takeoff: too high")
+    assert parse_line('stats {"accepted": 3, "rejected": {}}') == Stats({"accepted": 3, "rejected": {}})
+    assert parse_line("stats {torn") is None
+    assert parse_line("stats [1]") is None
+
+
+def test_a_sender_is_shown_as_the_written_suffix():
+    assert str(GCS) == "255:190 127.0.0.1:14550 gcs" and GCS.suffix == " [by 255:190 127.0.0.1:14550 gcs]"
+    assert str(ITSELF) == "vehicle" and ITSELF.is_vehicle and not GCS.is_vehicle
+    assert Sender.from_dict(GCS.as_dict()) == GCS and Sender.from_dict(ITSELF.as_dict()) is ITSELF

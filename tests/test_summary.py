@@ -1,0 +1,213 @@
+"""Covers bridge.record.summary, bridge.record.events and bridge.record.columns: a session's summary.json built
+from hand-made inputs, without processes.
+
+Each case is what a session could see (the joined trace, each child's end, the events); the summary's
+outcome, ``ended_by``, ``link``, ``timing``, ``lockstep`` and policy blocks are checked against it.
+Real sessions, whose summaries these functions build, are in test_sitl.py and test_failsafe_actions.py.
+"""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from bridge.autopilot.simvehicle import ITSELF, Sender
+from bridge.core.flight import prepare
+from bridge.record.columns import (
+    CONTROLLER_COLUMNS,
+    TRACE_COLUMNS,
+    VEHICLE_COLUMNS,
+    ControllerRow,
+    TraceRow,
+    VehicleRow,
+    trace_row,
+)
+from bridge.record.events import RunEvent
+from bridge.record.joiner import Joined
+from bridge.record.policies import POLICIES
+from bridge.record.summary import (
+    ChildEnd,
+    SessionFacts,
+    controller_completed,
+    link_block,
+    outcome_of,
+    session_summary,
+    timing_block,
+)
+from missions import Mission, Sine
+
+FLIGHT = prepare(Mission(Sine(z0=1.0), duration_s=1.0, name="hand-made"))
+RATE = FLIGHT.mission.rate_hz
+STEPS = FLIGHT.mission.steps
+CONTROLLER = Sender(200, 191, "127.0.0.1", 40000, "controller")
+GCS = Sender(255, 190, "127.0.0.1", 14550, "gcs")
+ARMED = RunEvent(0.0, "armed", "armed, offboard control", "vehicle", CONTROLLER)
+VEHICLE_STATS = {"accepted": STEPS, "odometry_sent": STEPS, "rejected": {"sender": 2}, "rejected_from_controller": 0,
+                 "resends": 3, "answered_again": 1,
+                 "up": {"sent": STEPS, "delivered": STEPS, "lost": 0, "delay_ms": {"max": 0.0}}}
+CONTROLLER_STATS = {"commands": STEPS, "states": STEPS, "stale_ticks": 0, "overruns": 0, "rejected": {},
+                    "rejected_from_vehicle": 0,
+                    "down": {"sent": STEPS, "delivered": STEPS, "lost": 0, "delay_ms": {"max": 0.0}}}
+
+
+def rows(n: int = STEPS) -> list[TraceRow]:
+    """``n`` rows on the reference (zero error), hovering thrust, each step answered by a fresh command."""
+    out = []
+    for k in range(n):
+        t = k / RATE
+        ref = FLIGHT.mission.trajectory.sample(t)
+        state = (ref[0][0], ref[1][0], ref[2][0]) + (0.0,) * 9
+        out.append(trace_row(t, state, ref, (9.81, 0.0, 0.0, 0.0), (0.5,) * 4, (9.81, 0.0, 0.0, 0.0), 0.0,
+                             (0.0, 0.0), state, 0.0))
+    return out
+
+
+def joined(n: int = STEPS, pace: float = 2.0) -> Joined:
+    """The join of ``n`` rows flown at ``pace`` x real time, with up/down times of 0.1 / 0.2 ms."""
+    return Joined(rows(n), k0=5, first_sent=100.0, last_sent=100.0 + (n - 1) / RATE / pace, commands=n,
+                  up_ms=[0.1] * n, down_ms=[0.2] * n, rtt_ms=[0.3] * n)
+
+
+def ends(rc: int | None = 0, outcome: str | None = "completed", reason: str | None = None,
+         exit_text: str = "exited with status 0") -> tuple[ChildEnd, ChildEnd]:
+    return (ChildEnd("vehicle", 0, "exited with status 0", VEHICLE_STATS),
+            ChildEnd("controller", rc, exit_text, CONTROLLER_STATS, outcome, reason))
+
+
+def facts(**kw) -> SessionFacts:
+    return SessionFacts(**{"clock": "lockstep", "wall_s": 3.0, "sitl": {"instance": 7}, **kw})
+
+
+def test_a_clean_lockstep_completion() -> None:
+    vehicle, controller = ends()
+    out = session_summary(FLIGHT, facts(), joined(), [ARMED], vehicle, controller)
+    s = out.summary
+    assert s["outcome"] == "completed" and s["ended_by"] == {"who": "mission", "how": "completed"}
+    assert s["lockstep"] == {"held": True}
+    assert [p["name"] for p in s["policies"]] == list(POLICIES) and all(p["ok"] for p in s["policies"])
+    assert s["rms_3d"] == 0.0 and s["clock"] == "lockstep"
+    assert s["sitl"] == {"instance": 7, "vehicle_exit": "exited with status 0",
+                         "controller_exit": "exited with status 0"}
+    # the events as written: the sender shown, the session's closing note last, at the trace's last row
+    assert s["events"][0] == {"t": 0.0, "kind": "armed", "source": "vehicle",
+                              "text": "armed, offboard control [by 200:191 127.0.0.1:40000 controller]"}
+    assert [(e.kind, e.text, e.t) for e in out.notes] == [("ended", "completed: by mission: completed",
+                                                          round((STEPS - 1) / RATE, 6))]
+    assert s["events"][-1] == out.notes[0].as_dict()
+    assert list(out.arrays) == list(TRACE_COLUMNS) and len(out.arrays["t"]) == STEPS
+
+
+def test_the_link_block_in_lockstep_is_the_models_with_the_socket_times() -> None:
+    link = link_block(joined(), VEHICLE_STATS, CONTROLLER_STATS, None)
+    assert link["up"] == {**VEHICLE_STATS["up"], "socket_ms": {"p50": 0.1, "p95": 0.1, "p99": 0.1, "max": 0.1}}
+    assert link["down"]["socket_ms"]["max"] == 0.2
+    assert link["rejected"] == {"sender": 2} and link["rejected_by"] == {"vehicle": {"sender": 2}, "controller": {}}
+    assert link["rejected_from_peer"] == {"vehicle": 0, "controller": 0}
+    assert link["rejected_from_others"] == {"vehicle": 2, "controller": 0}
+
+
+def test_the_link_block_through_a_relay_and_without_statistics() -> None:
+    side = {"sent": 10, "delivered": 9, "lost": 1, "duplicated": 0, "reordered": 0, "in_flight": 0,
+            "lost_by": {"random": 1}, "delay_ms": {"max": 20.0}, "measured_ms": {"max": 20.3}}
+    relay = {"up": side, "down": side, "refused": {"stranger_front": 1}}
+    link = link_block(joined(), {}, {}, relay)
+    assert link["up"]["delivered"] == 9 and link["up"]["model_delay_ms"] == {"max": 20.0}
+    assert link["up"]["relay_added_ms"] == {"max": 20.3} and link["up"]["delay_ms"]["max"] == 0.1
+    assert link["relay_refused"] == {"stranger_front": 1}
+    # a controller killed before its stats: its rows joined stand for what it sent and received
+    bare = link_block(joined(40), {"accepted": 38, "odometry_sent": 45}, {}, None)
+    assert bare["up"] == {"sent": 40, "delivered": 38, "lost": 2, "duplicated": 0, "reordered": 0,
+                          "delay_ms": {"p50": 0.1, "p95": 0.1, "p99": 0.1, "max": 0.1}}
+    assert bare["down"]["sent"] == 45 and bare["down"]["lost"] == 5
+
+
+def test_the_timing_block() -> None:
+    t = timing_block(joined(pace=2.0), RATE, 3.0, VEHICLE_STATS, CONTROLLER_STATS)
+    assert t["sim_s"] == STEPS / RATE and t["wall_s"] == 3.0
+    assert t["step_rate_hz"] == pytest.approx(2 * RATE) and t["real_time_factor"] == pytest.approx(2.0)
+    assert t["lockstep_resends"] == 3 and t["answered_again"] == 1 and t["missing_rows"] == 0
+    assert t["state_to_command_ms"]["max"] == 0.3
+    empty = timing_block(Joined(), RATE, 1.0, {}, {})
+    assert empty["flight_wall_s"] is None and empty["step_rate_hz"] is None and empty["sim_s"] == 0.0
+
+
+def test_a_ground_stations_disarm_in_flight_ends_it_aborted_and_named() -> None:
+    vehicle, controller = ends(rc=1, outcome="aborted", reason="the vehicle was disarmed during the mission")
+    events = [ARMED, RunEvent(0.5, "disarmed", "disarmed by command", "vehicle", GCS)]
+    s = session_summary(FLIGHT, facts(), joined(int(0.5 * RATE)), events, vehicle, controller).summary
+    assert s["outcome"] == "aborted"
+    assert s["ended_by"] == {"who": "255:190 127.0.0.1:14550 gcs",
+                             "how": "disarmed in flight by command at t=0.500 s"}
+
+
+def test_the_controllers_own_reason_and_a_short_completion() -> None:
+    vehicle, controller = ends(rc=1, outcome="aborted", reason="vehicle silent for 2 s",
+                               exit_text="exited with status 1")
+    s = session_summary(FLIGHT, facts(), joined(100), [ARMED], vehicle, controller).summary
+    assert s["outcome"] == "aborted" and s["ended_by"] == {"who": "controller", "how": "vehicle silent for 2 s"}
+    # a controller saying completed whose trace stops short of the mission's end did not complete it
+    vehicle, controller = ends()
+    s = session_summary(FLIGHT, facts(), joined(100), [ARMED], vehicle, controller).summary
+    assert s["outcome"] == "aborted"
+    assert s["ended_by"] == {"who": "controller", "how": f"ended the mission after {100 / RATE:.3f} s of its 1 s"}
+
+
+def test_a_controller_that_died_leaves_the_vehicles_failsafe() -> None:
+    vehicle, controller = ends(rc=-9, outcome=None, exit_text="killed by SIGKILL")
+    events = [ARMED, RunEvent(0.8, "failsafe", "no actuator target for 0.504 s: land", "vehicle")]
+    s = session_summary(FLIGHT, facts(died="controller", failsafe_seen=True), joined(), events, vehicle,
+                        controller).summary
+    assert s["outcome"] == "failsafe"
+    assert s["ended_by"] == {"who": "controller", "how": "died (killed by SIGKILL); the vehicle's failsafe took over"}
+
+
+def test_a_vehicle_that_left_lockstep_is_recorded_and_noted() -> None:
+    vehicle, controller = ends(rc=1)
+    left = RunEvent(0.6, "lockstep", "controller silent for 0.5 s of wall time", "vehicle")
+    out = session_summary(FLIGHT, facts(off_clock_t=0.6), joined(), [ARMED, left], vehicle, controller)
+    s = out.summary
+    assert s["lockstep"] == {"held": False, "left_at_s": 0.6, "why": left.text, "times": 1}
+    assert s["outcome"] == "completed"  # the controller flew it to the end; run_ok says it is no lockstep run
+    assert [n.kind for n in out.notes] == ["ended", "lockstep"] and "left lockstep at t=0.600 s" in out.notes[1].text
+
+
+def test_a_violation_is_in_the_policies_and_noted() -> None:
+    vehicle, controller = ends()
+    never_armed = session_summary(FLIGHT, facts(), joined(), [], vehicle, controller)  # thrust while disarmed
+    bad = [p for p in never_armed.summary["policies"] if not p["ok"]]
+    assert [p["name"] for p in bad] == ["no_actuation_disarmed"]
+    assert never_armed.notes[-1].kind == "policy" and never_armed.notes[-1].text.startswith("no_actuation_disarmed")
+    # an arm by a controller without authority
+    rogue = RunEvent(0.0, "armed", "armed, offboard control", "vehicle", Sender(1, 1, "127.0.0.1", 9, "controller"))
+    s = session_summary(FLIGHT, facts(), joined(), [rogue], vehicle, controller).summary
+    assert [p["name"] for p in s["policies"] if not p["ok"]] == ["arm_authority"]
+
+
+@pytest.mark.parametrize(("rc", "said", "seen", "expect"), [
+    (0, "completed", {}, "completed"),
+    (1, "completed", {}, "completed"),  # lockstep left: completed, exit 1
+    (1, "failsafe", {}, "failsafe"),
+    (1, "diverged", {"diverged": True}, "diverged"),
+    (1, "nonsense", {}, "aborted"),
+    (None, None, {}, "aborted"),
+    (0, "completed", {"aborted": True}, "aborted"),
+    (0, "completed", {"failsafe_seen": True}, "completed"),  # resumed after its failsafe
+    (1, "aborted", {"failsafe_seen": True}, "failsafe"),
+    (-9, None, {"died": "controller"}, "aborted"),
+])
+def test_the_outcome_from_what_the_session_saw(rc, said, seen, expect) -> None:
+    controller = ChildEnd("controller", rc, "", {}, said)
+    assert outcome_of(facts(**seen), controller) == expect
+    assert controller_completed(controller) == (rc in (0, 1) and (rc == 0 or said == "completed"))
+
+
+def test_trace_rows_have_the_trace_columns_as_names() -> None:
+    assert TraceRow._fields == TRACE_COLUMNS
+    r = rows(2)[1]
+    assert r.t == 1 / RATE and r.z == r.z_ref and math.isnan(r.state_age_s) is False and r.nees == 0.0
+    assert ITSELF.is_vehicle
+
+
+def test_the_part_files_rows_have_their_columns_as_names() -> None:
+    assert VehicleRow._fields == VEHICLE_COLUMNS and ControllerRow._fields == CONTROLLER_COLUMNS

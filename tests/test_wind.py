@@ -1,0 +1,129 @@
+"""Covers plant.wind: Dryden turbulence's spectrum and intensities, its exact discretization, gusts,
+the plant flying through the air, and ``--wind`` / ``--turbulence`` / ``[wind]`` end to end (docs/weather.md)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from bridge import simulate
+from params import ConfigError
+from plant.wind import (
+    FT,
+    KT,
+    Gust,
+    Turbulence,
+    blowing,
+    dryden_low_altitude,
+    dryden_second_order,
+)
+
+STILL_SINE_RMS = 2.4093284288839256e-06  # COMMON.md's fingerprint: still air stays bit-identical
+
+
+def welch(x: np.ndarray, fs: float, nseg: int) -> tuple[np.ndarray, np.ndarray]:
+    """One-sided PSD (unit²/Hz) by Welch's method: Hann windows of ``nseg`` samples, half overlapping."""
+    w = np.hanning(nseg)
+    step = nseg // 2
+    segs = np.lib.stride_tricks.sliding_window_view(x, nseg)[::step]
+    spec = np.abs(np.fft.rfft((segs - segs.mean(axis=1, keepdims=True)) * w, axis=1)) ** 2
+    psd = spec.mean(axis=0) / (fs * (w * w).sum())
+    psd[1:-1] *= 2.0
+    return np.fft.rfftfreq(nseg, 1.0 / fs), psd
+
+
+def test_dryden_low_altitude_numbers_are_mil_hdbk_1797s() -> None:
+    su, sv, sw, lu, lv, lw = dryden_low_altitude("moderate", 50 * FT)
+    assert sw == pytest.approx(0.1 * 30 * KT)  # sigma_w = 0.1 W20, W20 = 30 kt
+    assert su == sv == pytest.approx(sw / (0.177 + 0.000823 * 50) ** 0.4)
+    assert lu == lv == pytest.approx(50 / (0.177 + 0.000823 * 50) ** 1.2 * FT) and lw == pytest.approx(50 * FT)
+    assert dryden_low_altitude("severe", 1.0)[5] == pytest.approx(10 * FT)  # below 10 ft: the model's floor
+    assert dryden_low_altitude("none", 5.0) == (0.0,) * 6
+
+
+def test_the_second_order_step_is_exact() -> None:
+    """Q_d in closed form equals P∞ − Φ P∞ Φᵀ (the stationary covariance carried over one step)."""
+    for a, h in ((0.7, 0.3), (2.0, 0.001), (0.05, 5.0)):
+        phi, (l11, l21, l22) = dryden_second_order(a, h)
+        F = np.array(phi).reshape(2, 2)
+        P = np.diag([1 / (4 * a**3), 1 / (4 * a)])
+        L = np.array([[l11, 0.0], [l21, l22]])
+        A = np.array([[0.0, 1.0], [-a * a, -2 * a]])
+        expm = sum(np.linalg.matrix_power(A * h, k) / math.factorial(k) for k in range(60))
+        assert np.allclose(F, expm, rtol=1e-9, atol=1e-12)
+        assert np.allclose(L @ L.T, P - F @ P @ F.T, rtol=1e-6, atol=1e-15)
+
+
+def test_turbulence_spectrum_is_drydens_at_three_frequencies() -> None:
+    """A long run (8000 s at 50 Hz): Welch's PSD of u, v, w against the Dryden forms at 0.1, 0.3 and 1 Hz."""
+    V, h = 5.0, 0.02
+    tu = Turbulence("moderate", 5.0, V, seed=3, h=h)
+    n = 400_000
+    out = np.empty((n, 3))
+    for i in range(n):
+        out[i] = (tu.u, tu.v, tu.w)
+        tu.advance()
+    f, psd = welch(out[:, 0], 1 / h, 4096)
+    _, psd_v = welch(out[:, 1], 1 / h, 4096)
+    _, psd_w = welch(out[:, 2], 1 / h, 4096)
+
+    def dryden_u(fr: float) -> float:  # one-sided per Hz: 2 pi Phi(omega)
+        om = 2 * math.pi * fr
+        return 2 * math.pi * tu.sigma_u**2 * 2 * tu.l_u / (math.pi * V) / (1 + (tu.l_u * om / V) ** 2)
+
+    def dryden_vw(fr: float, s: float, L: float) -> float:
+        x = (L * 2 * math.pi * fr / V) ** 2
+        return 2 * math.pi * s**2 * L / (math.pi * V) * (1 + 3 * x) / (1 + x) ** 2
+
+    for fr in (0.1, 0.3, 1.0):  # the PSD over +-20 % of each against the form over the same bins
+        band = (f > fr * 0.8) & (f < fr * 1.2)
+        fb = f[band]
+        assert psd[band].mean() == pytest.approx(np.mean([dryden_u(x) for x in fb]), rel=0.15), fr
+        assert psd_v[band].mean() == pytest.approx(np.mean([dryden_vw(x, tu.sigma_v, tu.l_v) for x in fb]),
+                                                   rel=0.15), fr
+        assert psd_w[band].mean() == pytest.approx(np.mean([dryden_vw(x, tu.sigma_w, tu.l_w) for x in fb]),
+                                                   rel=0.15), fr
+    assert out.std(axis=0) == pytest.approx([tu.sigma_u, tu.sigma_v, tu.sigma_w], rel=0.1)
+
+
+def test_a_gust_is_one_minus_cosine_and_blows_from_its_bearing() -> None:
+    g = Gust(2.0, 4.0, 6.0, 270.0)  # from the west: toward the east, -y in NWU
+    assert g.velocity(1.9) == (0.0, 0.0, 0.0) and g.velocity(6.1) == (0.0, 0.0, 0.0)
+    peak = g.velocity(4.0)
+    assert peak[0] == pytest.approx(0.0, abs=1e-12) and peak[1] == pytest.approx(-6.0)
+    assert g.velocity(3.0)[1] == pytest.approx(-3.0)
+    assert blowing(5.0, 0.0) == pytest.approx((-5.0, 0.0, 0.0))  # a north wind blows south
+
+
+def test_still_air_is_unchanged_and_a_zero_wind_is_the_air_model() -> None:
+    assert simulate("missions/sine.toml").rms == STILL_SINE_RMS
+    calm = simulate("missions/sine.toml", wind=0.0)
+    assert calm.summary["wind"]["mean_speed_mps"] == 0.0 and calm.summary["outcome"] == "completed"
+
+
+def test_steady_wind_pushes_the_paper_vehicle_through_its_drag() -> None:
+    """The paper profile keeps Table 1's linear drag (k1 = 0.1 N s/m) and no rotor drag: in a steady 5 m/s wind
+    the force is 0.5 N; the law rejects it, the error grows from micrometres but stays small."""
+    run = simulate("missions/sine.toml", wind=(5.0, 270.0))
+    w = run.summary["wind"]
+    assert w["mean_mps"]["along"] == pytest.approx(5.0) and w["mean_mps"]["across"] == pytest.approx(0.0, abs=1e-12)
+    assert STILL_SINE_RMS < run.rms < 0.05
+    assert run.summary["outcome"] == "completed"
+
+
+def test_turbulence_is_seeded_and_reproducible() -> None:
+    a = simulate("missions/sine.toml", wind=5.0, turbulence="light", seed=4)
+    b = simulate("missions/sine.toml", wind=5.0, turbulence="light", seed=4)
+    c = simulate("missions/sine.toml", wind=5.0, turbulence="light", seed=5)
+    assert a.rms == b.rms and a.summary["wind"] == b.summary["wind"] and a.rms != c.rms
+
+
+def test_bad_wind_is_refused_with_the_key_named() -> None:
+    with pytest.raises(ConfigError, match="wind.turbulence"):
+        simulate("missions/sine.toml", wind={"turbulence": "gale"})
+    with pytest.raises(ConfigError, match="wind.speed_mps"):
+        simulate("missions/sine.toml", wind=80.0)
+    with pytest.raises(ConfigError, match=r"wind.gusts\[0\]"):
+        simulate("missions/sine.toml", wind={"gusts": [[50.0, 1.0, 2.0]]})
