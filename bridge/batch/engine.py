@@ -22,7 +22,7 @@ Cells may differ in law (``bsst``, ``smc``, ``pid``), seed, control rate (flown 
 every link setting but the bandwidth queue; they must share everything else (profile, effects, gains,
 trajectory, duration). Not flown here (:func:`batch_problem`): a user's own law, the bandwidth
 queue (``rate_bps``), a measured link ``trace``, ``[failsafe] resume``, any failsafe ``action`` but
-``descend``, and parameters changed in flight (``--param-at``).
+``descend``, parameters changed in flight (``--param-at``), the wind, timed events and the battery.
 """
 
 from __future__ import annotations
@@ -81,6 +81,10 @@ def flights_problem(flights: Sequence[Flight]) -> str | None:
         if f.param_changes:
             return ("--param-at: parameters changed during the flight are not in the batch engine; "
                     "fly it with the process engine")
+        if f.wind is not None or f.timeline or f.effects.battery:
+            what = "[wind]" if f.wind is not None else "[[events]] or --at" if f.timeline else "[effects] battery"
+            return f"{what}: the weather, timed events and the battery are not in the batch engine; fly it with the " \
+                   "process engine"
         if f.failsafe.resume:
             return "[failsafe] resume = true: re-arming after a failsafe is not in the batch engine"
         if f.failsafe.action != "descend":
@@ -234,7 +238,8 @@ class _Batch:
         c, a = batch_arrays(fl, plan, clocks, _references(m, t_all), lambda lag: _references(m, t_all + lag))
         _fly_blocks(c, a, steps, jobs, report)
         flown = a.flown
-        outcome = np.where(a.diverged, "diverged", np.where(plan.failsafe_step < flown, "failsafe", "completed"))
+        outcome = np.where(a.diverged, "diverged", np.where(a.crashed, "crashed", np.where(
+            plan.failsafe_step < flown, "failsafe", "completed")))
         met = Metrics(a.sq_sum, a.sq_max, a.last_out, a.tv, a.u2.T)  # u2 as the ripple reads it, [steps, n]
         rms_from = min(RMS_FROM_S, 0.5 * m.duration_s)
         return measured_rows(met, flown, outcome, plan.counts(flown), list(m.trajectory.change_times()), rms_from,

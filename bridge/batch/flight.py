@@ -6,7 +6,7 @@ In:  a batch's prepared flights (one mission, one control rate; :func:`bridge.ba
      psi: m, rad, value and 4 derivatives) per control step
 Out: per cell the running figures (:class:`bridge.batch.metrics.Metrics`: squared 3-D error m^2, the last
      step outside each settling band, the total variation and the history of u2 N), the steps flown and
-     whether it diverged
+     whether it diverged or crashed (touched the ground hard while armed)
 
 :func:`fly_cells` flies control steps k0..k1 of a block of cells, each cell its own steps in order, without
 the GIL: one compiled call per block of cells instead of a few dozen Python calls per control step, the
@@ -143,6 +143,8 @@ class Cells(NamedTuple):
     alive: np.ndarray  # [n] bool
     flown: np.ndarray  # [n] steps flown
     diverged: np.ndarray  # [n] bool
+    impact: np.ndarray  # [n] int8: 0 no hard touchdown, 1 one this step, 2 noted (bridge.loop.plant_verdict)
+    crashed: np.ndarray  # [n] bool: touched down hard while armed
 
 
 @njit(cache=True, nogil=True)
@@ -172,6 +174,7 @@ def _fly_cell(j, k0, k1, c, X, ring_X, ring_held, holding, omega, phases, law, x
     xi = (xi_a[j, 0], xi_a[j, 1], xi_a[j, 2], xi_a[j, 3])
     integ = (integral_a[j, 0], integral_a[j, 1], integral_a[j, 2])
     od, ptr, fs, armed, u2, lc = omega_d_a[j], ptr_a[j], in_failsafe[j], armed_a[j], u2_now[j], law[j]
+    impact = a.impact[j]
     predicts, lag = a.predicts[j], a.lag[j]
     n_ring, n_held, S = ring_X.shape[1], ring_held.shape[1], c.substeps
     for k in range(k0, k1):
@@ -223,13 +226,22 @@ def _fly_cell(j, k0, k1, c, X, ring_X, ring_held, holding, omega, phases, law, x
                 q = ring_held[j, apply_cmd[j, ptr] % n_held]
                 hold = (q[0], q[1], q[2], q[3], q[4])
                 ptr += 1
-            x, hold, om, armed = _physics_step(x, hold, om, fs and armed, armed, ph, t_plant[check], c)
-        if diverged_cell(x):
+            x, hold, om, armed, hard = _physics_step(x, hold, om, fs and armed, armed, ph, t_plant[check], c)
+            if hard and impact == 0:  # the first hard touchdown (Quadrotor.impact)
+                impact = 1
+        if diverged_cell(x):  # bridge.loop.plant_verdict: diverged, else a hard touchdown armed ends the flight
             diverged[j] = True
             alive[j] = False
             flown[j] = k + 1
             x = c.start  # a resting state: no nan downstream
             break
+        if impact == 1:
+            impact = 2  # noted: disarmed, the flight goes on
+            if armed:
+                a.crashed[j] = True
+                alive[j] = False
+                flown[j] = k + 1
+                break
     for i in range(12):
         X[j, i] = x[i]
     for i in range(5):
@@ -240,6 +252,7 @@ def _fly_cell(j, k0, k1, c, X, ring_X, ring_held, holding, omega, phases, law, x
     for i in range(3):
         integral_a[j, i] = integ[i]
     omega_d_a[j], ptr_a[j], in_failsafe[j], armed_a[j], u2_now[j] = od, ptr, fs, armed, u2
+    a.impact[j] = impact
 
 
 @njit(cache=True, inline="always")
@@ -288,7 +301,7 @@ def _physics_step(x: tuple, hold: tuple, om: tuple, landing: bool, armed: bool, 
     """One physics step of one cell from state x at t (s), holding ``hold`` (u1..u4 N and omega_d, or target
     speeds under motor lag), rotor speeds om under lag: the ``descend`` landing where ``landing`` (in
     failsafe and armed; on the ground it disarms and commands zero), the motor lag, the disturbance
-    (phases ph), RK4 and the ground. (x, hold, om, armed) after it."""
+    (phases ph), RK4 and the ground. (x, hold, om, armed, whether it touched the ground hard) after it."""
     if landing:
         if x[4] <= 0.0 and x[5] <= 0.0 and c.ground:
             armed = False
@@ -311,7 +324,8 @@ def _physics_step(x: tuple, hold: tuple, om: tuple, landing: bool, armed: bool, 
     else:
         z = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         ext = (z, z, z)
-    return rk4_cell(x, u, ext, c.disturbed, c.body, c.h, c.ground), hold, om, armed
+    y, hard = rk4_cell(x, u, ext, c.disturbed, c.body, c.h, c.ground)
+    return y, hold, om, armed, hard
 
 
 def batch_arrays(flights: Sequence[Flight], plan: LinkPlan, clocks: Clocks, refs: np.ndarray,
@@ -370,5 +384,5 @@ def batch_arrays(flights: Sequence[Flight], plan: LinkPlan, clocks: Clocks, refs
         np.zeros((n, steps)), np.zeros(n),
         (np.searchsorted(np.array(changes), t_step, side="right") - 1).astype(np.int64),
         t_step >= min(RMS_FROM_S, 0.5 * m.duration_s), t_step, clocks.plant_t, np.ones(n, bool),
-        np.full(n, steps, np.int64), np.zeros(n, bool))
+        np.full(n, steps, np.int64), np.zeros(n, bool), np.zeros(n, np.int8), np.zeros(n, bool))
     return c, a

@@ -26,6 +26,7 @@ from bridge.batch import kernels as K
 from plant.effects import Effects
 from plant.model import rigid_body
 from plant.profiles import Profile
+from plant.quadrotor import CRASH_SPEED_MPS, CRASH_TILT_RAD
 
 
 class BatchPlant:
@@ -107,14 +108,20 @@ def rk4_cell(x: tuple, u: tuple, ext: tuple, disturbed: bool, constants: tuple, 
              ground: bool) -> tuple:  # pragma: no cover
     """:func:`plant.model.rk4_held` of one cell's state x (eq. 7) with u = (u1..u4 N, omega_d rad/s) held and the
     external force and torque ext at the step's start, middle and end (read only when ``disturbed``), then
-    :func:`plant.quadrotor.ground_contact` where ``ground`` and below it."""
+    :func:`plant.quadrotor.ground_contact` where ``ground`` and below it. (The state, and whether this step
+    touched the ground hard: faster than CRASH_SPEED_MPS or tilted more than CRASH_TILT_RAD, as
+    :meth:`plant.quadrotor.Quadrotor._touchdown` judges it on the state below the ground.)"""
     if disturbed:
         y = K.rk4_held(x, u[0], u[1], u[2], u[3], u[4], constants, h, ext)
     else:
         y = K.rk4_held(x, u[0], u[1], u[2], u[3], u[4], constants, h, None)
+    hard = False
     if ground and y[4] < 0.0:
+        speed = math.sqrt(y[1] * y[1] + y[3] * y[3] + y[5] * y[5])
+        tilt = math.acos(max(-1.0, min(1.0, math.cos(y[6]) * math.cos(y[8]))))
+        hard = speed > CRASH_SPEED_MPS or tilt > CRASH_TILT_RAD
         y = K.ground_contact(y)
-    return y
+    return y, hard
 
 
 @njit(cache=True, inline="always")
