@@ -114,6 +114,12 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         print(f"bsst: interrupted; continue with --resume --out {res.path}", file=sys.stderr)
         return EXIT_FAILED
     print(f"sweep directory: {res.path}")
+    if res.status == "all failed":
+        print(f"bsst sweep: every cell failed ({res.failed} of {len(res.rows)}): nothing was measured; the first "
+              f"error: {res.first_error()}", file=sys.stderr)
+    elif res.failed:
+        print(f"bsst sweep: {res.failed} of {len(res.rows)} cells failed (cells.csv's error column); the first: "
+              f"{res.first_error()}", file=sys.stderr)
     return EXIT_FAILED if res.failed else EXIT_OK
 
 

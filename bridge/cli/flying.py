@@ -150,7 +150,7 @@ def add_sitl_commands(sub: Any) -> None:
     p.set_defaults(func=cmd_vehicle)
 
     p = sub.add_parser("controller", help="the offboard controller alone: fly a mission against a MAVLink vehicle")
-    add_flight_options(p, failsafe=False)  # the vehicle flies its failsafe: the controller has no say in it
+    add_flight_options(p, vehicle=False)  # no failsafe of its own (the vehicle flies it), no run directory, no plots
     p.add_argument("--vehicle", metavar="HOST:PORT",
                    help="the vehicle's controller link (default 127.0.0.1:14560 + instance)")
     p.add_argument("--instance", type=int_in("--instance", 0, 9), default=0, metavar="N",
