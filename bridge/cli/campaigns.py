@@ -57,7 +57,9 @@ def add_sweep_commands(sub: Any) -> None:
     p.add_argument("--engine", choices=("auto", "batch", "process"), default="auto",
                    help="batch: fly the cells together in one numpy loop; process: one by one in worker processes; "
                         "auto (default): batch where the grid allows it")
-    p.add_argument("--jobs", type=int_in("--jobs", 1, 1024), metavar="N", help="worker processes (default: all cores)")
+    p.add_argument("--jobs", type=int_in("--jobs", 1, 1024), metavar="N",
+                   help="cores: threads of the batch engine, worker processes of the process engine "
+                        "(default: all cores)")
     p.add_argument("--max-cells", type=int_in("--max-cells", 1, 10**9), metavar="N",
                    help="fly a grid of up to N cells (default 10000: a bigger one is refused as a likely mistake)")
     p.add_argument("--dask", metavar="ADDRESS", help="run the cells on this Dask scheduler (e.g. tcp://host:8786)")
@@ -155,8 +157,9 @@ def add_margin_command(sub: Any) -> None:
                    help="exit 1 when a law's margin is below X (for a user's CI)")
     p.add_argument("--engine", choices=("auto", "batch", "process"), default="auto",
                    help="batch: each round's cells together in one numpy loop (default where it can)")
-    p.add_argument("--jobs", type=int_in("--jobs", 1, 1024), default=2, metavar="N",
-                   help="worker processes for the process engine (default 2)")
+    p.add_argument("--jobs", type=int_in("--jobs", 1, 1024), metavar="N",
+                   help="cores: threads of the batch engine, worker processes of the process engine "
+                        "(default: all cores)")
     p.add_argument("--out", metavar="DIR", help="write margin.json into DIR (default runs/<UTC>-<mission>-margin)")
     p.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out")
     add_link_options(p)

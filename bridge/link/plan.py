@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from statistics import NormalDist
 
@@ -339,7 +340,7 @@ def _newest_into(arrive: np.ndarray, out: np.ndarray) -> None:  # pragma: no cov
 class LinkPlan:
     """What the link, the guard and the vehicle's timeout decide for a batch of cells (see the module doc).
 
-    Arrays are [steps, cells] (step-major, the engine reads one step at a time) unless said otherwise."""
+    Arrays are [cells, steps] (cell-major: the engine flies each cell's steps in order) unless said otherwise."""
 
     mode: np.ndarray  # int8: NONE, TRACK or HOLD
     state_step: np.ndarray  # int32: the step whose state the guard controls on (-1: none)
@@ -353,33 +354,43 @@ class LinkPlan:
 
     def counts(self, flown: np.ndarray) -> dict[str, np.ndarray]:
         """up_sent, up_lost, down_sent, down_lost per cell over its first ``flown`` steps."""
-        steps = self.mode.shape[0]
-        alive = np.arange(steps)[:, None] < flown[None, :]
+        steps = self.mode.shape[1]
+        alive = np.arange(steps)[None, :] < flown[:, None]
         sent = (self.mode != NONE) & alive
-        return {"up_sent": sent.sum(0), "up_lost": (self.up_lost & alive).sum(0),
-                "down_sent": flown.astype(np.int64), "down_lost": (self.down_lost & alive).sum(0)}
+        return {"up_sent": sent.sum(1), "up_lost": (self.up_lost & alive).sum(1),
+                "down_sent": flown.astype(np.int64), "down_lost": (self.down_lost & alive).sum(1)}
 
 
 def plan_links(links: Sequence[LinkSettings], guards: Sequence[GuardConfig], timeout_s: float,
-               clocks: Clocks) -> LinkPlan:
-    """The :class:`LinkPlan` of a batch (one entry of ``links`` and ``guards`` per cell)."""
+               clocks: Clocks, jobs: int = 1) -> LinkPlan:
+    """The :class:`LinkPlan` of a batch (one entry of ``links`` and ``guards`` per cell), its chunks of
+    :data:`PLAN_CHUNK` cells planned on ``jobs`` threads (numpy's array operations run without the GIL;
+    each chunk is planned alone, so the plan does not depend on ``jobs``)."""
     n = len(links)
     steps = clocks.steps
-    mode = np.zeros((steps, n), np.int8)
-    state_step = np.full((steps, n), -1, np.int32)
-    up_lost = np.zeros((steps, n), bool)
-    down_lost = np.zeros((steps, n), bool)
+    mode = np.zeros((n, steps), np.int8)
+    state_step = np.full((n, steps), -1, np.int32)
+    up_lost = np.zeros((n, steps), bool)
+    down_lost = np.zeros((n, steps), bool)
     failsafe = np.full(n, NEVER, np.int64)
     chunks = []
     age_max = 0
     state_age = 0
-    for a in range(0, n, PLAN_CHUNK):
-        b = min(n, a + PLAN_CHUNK)
-        part = _plan_chunk(links[a:b], guards[a:b], timeout_s, clocks)
-        mode[:, a:b] = part["mode"].T
-        state_step[:, a:b] = part["state"].T
-        up_lost[:, a:b] = part["up_lost"].T
-        down_lost[:, a:b] = part["down_lost"].T
+    spans = [(a, min(n, a + PLAN_CHUNK)) for a in range(0, n, PLAN_CHUNK)]
+
+    def plan(span: tuple[int, int]) -> dict[str, np.ndarray | int]:
+        return _plan_chunk(links[span[0]:span[1]], guards[span[0]:span[1]], timeout_s, clocks)
+
+    if jobs > 1 and len(spans) > 1:
+        with ThreadPoolExecutor(min(jobs, len(spans))) as pool:
+            parts = list(pool.map(plan, spans))
+    else:
+        parts = [plan(span) for span in spans]
+    for (a, b), part in zip(spans, parts, strict=True):
+        mode[a:b] = part["mode"]
+        state_step[a:b] = part["state"]
+        up_lost[a:b] = part["up_lost"]
+        down_lost[a:b] = part["down_lost"]
         failsafe[a:b] = part["failsafe"]
         chunks.append((part["apply_check"], part["apply_cmd"]))
         age_max = max(age_max, part["age_max"])

@@ -184,7 +184,7 @@ def run_sweep(
             if client is not None:
                 run_batch_dask(client, spec.mission, todo, record)
             else:
-                run_batch(spec.mission, todo, record)
+                run_batch(spec.mission, todo, record, jobs=jobs)
         elif todo:
             if client is not None:
                 run_dask(client, spec.mission, todo, spec.mode, record)

@@ -323,14 +323,16 @@ def batch_row(cell: Cell, measures: Mapping[str, Any]) -> dict[str, Any]:
     return {**{a: getattr(cell, a) for a in AXES}, "seed": cell.seed, **measures}
 
 
-def run_batch(mission: Mission, todo: Sequence[Cell], report: Report, chunk: int = BATCH_CHUNK) -> None:
-    """Fly cells with the batch engine in this process, ``chunk`` at a time (rows reported per chunk)."""
+def run_batch(mission: Mission, todo: Sequence[Cell], report: Report, chunk: int = BATCH_CHUNK,
+              jobs: int | None = None) -> None:
+    """Fly cells with the batch engine in this process, ``chunk`` at a time (rows reported per chunk), on
+    ``jobs`` threads (default: every core; the rows do not depend on it)."""
     from bridge.batch import fly_batch  # lazy: numba loads only where the batch flies (engine_for)
 
     announce_compiling("bridge.batch")  # a cold cache: say so before ~12 s of silence
     for i in range(0, len(todo), chunk):
         part = todo[i:i + chunk]
-        for cell, m in zip(part, fly_batch(mission, [cell_overrides(c) for c in part]), strict=True):
+        for cell, m in zip(part, fly_batch(mission, [cell_overrides(c) for c in part], jobs=jobs), strict=True):
             report(batch_row(cell, m))
 
 
