@@ -26,8 +26,9 @@ from bridge.batch import MEASURES, _prepare_all, batch_problem, fly_batch
 from bridge.batch.predict import BatchPredictor
 from bridge.core.flight import prepare
 from bridge.link.ends import EPS_T
+from bridge.link.fates import draw_fates
 from bridge.link.model import FateStream, LinkConfig
-from bridge.link.plan import Clocks, _first_at_or_after, draw_fates
+from bridge.link.plan import Clocks, _first_at_or_after
 from bridge.loop import fly
 from bridge.sweep.cells import row_from_run
 from bridge.sweep.grid import AXES, Cell, Grid, cell_overrides, cells
