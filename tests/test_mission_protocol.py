@@ -12,9 +12,11 @@ callback with a deadline.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
+import socket
 import subprocess
 import sys
 import time
@@ -25,12 +27,16 @@ import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
-from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, GCS_PORT, LINK_PORT
+from bridge.core.flight import prepare
+from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, GCS_PORT, LINK_PORT, parse_address
 from bridge.mavlink.missionitems import ItemRefused, parse_item
-from bridge.nodes.vehicle.mission import PROTOCOL_TIMEOUT_S, RETRY_S
+from bridge.nodes.vehicle import Vehicle, VehicleConfig
+from bridge.nodes.vehicle.mission import PROTOCOL_TIMEOUT_S, REACHED_REPEATS, REACHED_S, RETRY_S
 from bridge.session import instance_slot
+from missions import Mission, Sine
 from tests.sitlkit import ENV, Proc
 from tests.test_vehicle import _vehicle
+from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -621,3 +627,63 @@ def test_mavsdk_100_items_through_a_lossy_slow_link(tmp_path):
         if m.get_srcSystem() == n + 1:
             totals.add(m.total)
     assert totals == {100}, totals
+
+
+# -- the flight's side, in process -----------------------------------------------------------------------
+
+def test_reached_and_current_from_the_flight():
+    """The flight's API on a vehicle in this process: ``reached(seq)`` sends MISSION_ITEM_REACHED on the GCS
+    link at once and again at each of the next ten 1 Hz ticks (PX4's repeats), then no more; ``set_current``
+    moves MISSION_CURRENT; a seq outside the mission is a ValueError, not a message."""
+    gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    gcs.bind(("127.0.0.1", 0))
+    gcs.setblocking(False)
+    flight = prepare(Mission(Sine(), duration_s=5.0, name="reached"))
+    v = Vehicle(flight, VehicleConfig(parse_address("udpin:127.0.0.1:0"),
+                                      parse_address(f"udpout:127.0.0.1:{gcs.getsockname()[1]}")))
+    mav = M.MAVLink(None, srcSystem=255, srcComponent=190)
+    seen: list[Any] = []
+
+    def exchange(msg: Any | None, want: str) -> Any:
+        """Send ``msg`` (if any) to the GCS link, let the vehicle take it in; the first ``want`` back."""
+        if msg is not None:
+            gcs.sendto(msg.pack(mav), v.gcs.local)
+
+        def answered() -> bool:
+            for m, addr in v.gcs.poll():
+                v._handle(v.gcs, m, addr)
+            with contextlib.suppress(BlockingIOError):
+                while True:
+                    seen.extend(mav.parse_buffer(gcs.recv(65535)) or [])
+            return any(m.get_type() == want for m in seen)
+
+        wait_for(answered, 5.0, f"the vehicle's {want}", poll_s=0.001)
+        got = next(m for m in seen if m.get_type() == want)
+        seen.clear()
+        return got
+
+    try:
+        with pytest.raises(ValueError, match="the mission has 0 items"):
+            v.missions.reached(0)
+        items = _items(3)
+        exchange(M.MAVLink_mission_count_message(1, 1, 3, 0), "MISSION_REQUEST_INT")
+        for it in items[:2]:
+            exchange(it, "MISSION_REQUEST_INT")
+        assert exchange(items[2], "MISSION_ACK").type == M.MAV_MISSION_ACCEPTED
+        assert v._message(M.MAVLINK_MSG_ID_MISSION_CURRENT)[0].total == 3
+        v.missions.set_current(2)
+        assert v._message(M.MAVLINK_MSG_ID_MISSION_CURRENT)[0].seq == 2
+        with pytest.raises(ValueError):
+            v.missions.set_current(3)
+        v.missions.reached(1)
+        assert exchange(None, "MISSION_ITEM_REACHED").seq == 1
+        t = time.monotonic()
+        for k in range(1, REACHED_REPEATS + 3):
+            v.missions.tick(t + k * (REACHED_S + 0.01))
+        with contextlib.suppress(BlockingIOError):
+            while True:
+                seen.extend(mav.parse_buffer(gcs.recv(65535)) or [])
+        assert [m.seq for m in seen if m.get_type() == "MISSION_ITEM_REACHED"] == [1] * REACHED_REPEATS
+    finally:
+        v.close()
+        gcs.close()
