@@ -165,11 +165,12 @@ class MissionManager:
         now = time.monotonic()
         who = Partner(self.authority.sender(m, addr, link), ep)
         kind = m._type
+        if kind in ("MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_REQUEST_INT", "MISSION_REQUEST") and (
+                self.state is State.IDLE or self._is_partner(who)):  # the form the partner speaks (not another's)
+            self.int_mode = kind.endswith("_INT")
         if kind in ("MISSION_ITEM_INT", "MISSION_ITEM"):
-            self.int_mode = kind == "MISSION_ITEM_INT"
             return self._item(who, m, now)
         if kind in ("MISSION_REQUEST_INT", "MISSION_REQUEST"):
-            self.int_mode = kind == "MISSION_REQUEST_INT"
             self._request(who, m, now)
             return False
         if kind == "MISSION_ACK":
