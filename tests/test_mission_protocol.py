@@ -20,6 +20,7 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -148,11 +149,18 @@ def _texts(conn: Any, text: str, timeout: float = 5.0) -> Any:
     return _recv(conn, "STATUSTEXT", timeout, cond=f"'{text}' in STATUSTEXT.text")
 
 
-def _started(n: int, tmp_path: Path, *extra: str) -> tuple[Proc, Any]:
+@contextlib.contextmanager
+def _started(n: int, tmp_path: Path, *extra: str) -> Iterator[tuple[Proc, Any]]:
+    """A vehicle of instance ``n`` and a pymavlink ground station that heard it; both closed after (the
+    next test of this slot binds the same port)."""
     v = _vehicle(n, tmp_path, *extra)
     gcs = _gcs(n)
-    assert gcs.wait_heartbeat(timeout=20) is not None
-    return v, gcs
+    try:
+        assert gcs.wait_heartbeat(timeout=20) is not None
+        yield v, gcs
+    finally:
+        gcs.close()
+        assert v.stop() == 0
 
 
 # -- pymavlink ----------------------------------------------------------------------------------------
@@ -164,8 +172,7 @@ def test_upload_download_round_trip_set_current_clear(tmp_path):
     MISSION_CLEAR_ALL; each change a ``mission`` event naming the ground station."""
     items = _items(6)
     with instance_slot() as n:
-        v, gcs = _started(n, tmp_path)
-        try:
+        with _started(n, tmp_path) as (v, gcs):
             ack, requests = _upload(gcs, items)
             assert ack.type == M.MAV_MISSION_ACCEPTED and ack.mission_type == M.MAV_MISSION_TYPE_MISSION
             assert [s for s, _ in requests] == list(range(6))
@@ -192,8 +199,6 @@ def test_upload_download_round_trip_set_current_clear(tmp_path):
             v.wait_line(lambda s: "mission: uploaded 6 items" in s and "[by 255:190 " in s and s.endswith(" gcs]"))
             v.wait_line(lambda s: "mission: current item 4 [by 255:190 " in s)
             v.wait_line(lambda s: "mission: cleared [by 255:190 " in s)
-        finally:
-            assert v.stop() == 0
     assert not any("current item 6" in s for s in v.lines)
 
 
@@ -203,8 +208,7 @@ def test_a_dropped_request_is_asked_again(tmp_path):
     request was lost is answered with that request again."""
     items = _items(4)
     with instance_slot() as n:
-        v, gcs = _started(n, tmp_path)
-        try:
+        with _started(n, tmp_path) as (v, gcs):
             ack, requests = _upload(gcs, items, skip={2})
             assert ack.type == M.MAV_MISSION_ACCEPTED
             seqs = [s for s, _ in requests]
@@ -227,8 +231,6 @@ def test_a_dropped_request_is_asked_again(tmp_path):
             assert _ack(gcs).type == M.MAV_MISSION_ACCEPTED
             _send(gcs, short[1])  # the last item again (our ACK lost, for the GCS): ACCEPTED again
             assert _ack(gcs).type == M.MAV_MISSION_ACCEPTED
-        finally:
-            assert v.stop() == 0
 
 
 def test_an_abandoned_or_cancelled_upload_leaves_the_mission(tmp_path):
@@ -237,8 +239,7 @@ def test_an_abandoned_or_cancelled_upload_leaves_the_mission(tmp_path):
     (MISSION_CURRENT's total never changes)."""
     before = _items(3)
     with instance_slot() as n:
-        v, gcs = _started(n, tmp_path)
-        try:
+        with _started(n, tmp_path) as (v, gcs):
             assert _upload(gcs, before)[0].type == M.MAV_MISSION_ACCEPTED
             longer = _items(8)
             gcs.mav.mission_count_send(*_tgt(gcs), 8, 0)
@@ -264,8 +265,6 @@ def test_an_abandoned_or_cancelled_upload_leaves_the_mission(tmp_path):
             assert _recv(gcs, "MISSION_REQUEST_INT", cond="MISSION_REQUEST_INT.seq==1").seq == 1
             gcs.mav.mission_ack_send(*_tgt(gcs), M.MAV_MISSION_OPERATION_CANCELLED, 0)
             assert [_fields(m) for m in _download(gcs)] == [_fields(m) for m in before]
-        finally:
-            assert v.stop() == 0
     assert sum("mission: uploaded" in s for s in v.lines) == 1
 
 
@@ -315,8 +314,7 @@ def test_bad_items_get_px4s_results_and_leave_the_mission(tmp_path):
     (MAVLink's "default") are accepted."""
     good = _items(3)
     with instance_slot() as n:
-        v, gcs = _started(n, tmp_path)
-        try:
+        with _started(n, tmp_path) as (v, gcs):
             assert _upload(gcs, good)[0].type == M.MAV_MISSION_ACCEPTED
             for name, (bad, result) in BAD_ITEMS.items():
                 ack, _ = _upload(gcs, [_items(2)[0], bad])
@@ -329,8 +327,6 @@ def test_bad_items_get_px4s_results_and_leave_the_mission(tmp_path):
             nan_params = M.MAVLink_mission_item_int_message(1, 1, 0, M.MAV_FRAME_GLOBAL_INT, M.MAV_CMD_NAV_WAYPOINT,
                                                             0, 1, *([math.nan] * 4), *HOME, 500.0, 0)
             assert _upload(gcs, [nan_params])[0].type == M.MAV_MISSION_ACCEPTED
-        finally:
-            assert v.stop() == 0
     assert sum("mission: uploaded" in s for s in v.lines) == 2
     assert any(s.startswith("refused mission item 1 (command 82") for s in v.lines)
 
@@ -343,11 +339,11 @@ def test_one_transfer_at_a_time(tmp_path):
     items = _items(4)
     with instance_slot() as n:
         v = _vehicle(n, tmp_path, "--gcs", f"udpin:127.0.0.1:{GCS_PORT + n}")
+        at = ("127.0.0.1", GCS_PORT + n)
+        gcs = _to(at, 255, 190, n + 1)
+        other = _to(at, 254, 190, n + 1)
+        twin = _to(at, 255, 190, n + 1)  # the first one's ids, another address
         try:
-            at = ("127.0.0.1", GCS_PORT + n)
-            gcs = _to(at, 255, 190, n + 1)
-            other = _to(at, 254, 190, n + 1)
-            twin = _to(at, 255, 190, n + 1)  # the first one's ids, another address
             gcs.mav.mission_count_send(*_tgt(gcs), 4, 0)
             assert _recv(gcs, "MISSION_REQUEST_INT").seq == 0
             _send(gcs, items[0])
@@ -372,6 +368,8 @@ def test_one_transfer_at_a_time(tmp_path):
             assert ack.type == M.MAV_MISSION_ACCEPTED
             assert [_fields(m) for m in _download(other)] == [_fields(m) for m in items]
         finally:
+            for conn in (gcs, other, twin):
+                conn.close()
             assert v.stop() == 0
     assert sum("busy (getlist)" in s for s in v.lines) == 12
     assert sum("mission: uploaded 4 items" in s and "[by 255:190 " in s for s in v.lines) == 1
@@ -381,8 +379,7 @@ def test_fence_and_rally_are_unsupported(tmp_path):
     """Geofence and rally points: MAV_MISSION_UNSUPPORTED for an upload, a download and a clear, with the
     mission type asked for; MAV_MISSION_TYPE_ALL clears the mission."""
     with instance_slot() as n:
-        v, gcs = _started(n, tmp_path)
-        try:
+        with _started(n, tmp_path) as (v, gcs):
             for kind in (M.MAV_MISSION_TYPE_FENCE, M.MAV_MISSION_TYPE_RALLY):
                 for ask in (lambda k: gcs.mav.mission_count_send(*_tgt(gcs), 3, k),
                             lambda k: gcs.mav.mission_request_list_send(*_tgt(gcs), k),
@@ -395,8 +392,6 @@ def test_fence_and_rally_are_unsupported(tmp_path):
             ack = _ack(gcs)
             assert (ack.type, ack.mission_type) == (M.MAV_MISSION_ACCEPTED, M.MAV_MISSION_TYPE_ALL)
             assert _download(gcs) == []
-        finally:
-            assert v.stop() == 0
 
 
 def test_the_controller_link_hears_no_stranger_and_only_reads(tmp_path):
@@ -404,8 +399,7 @@ def test_the_controller_link_hears_no_stranger_and_only_reads(tmp_path):
     the configured controller may download the mission but not change it (``not_authorised``)."""
     items = _items(3)
     with instance_slot() as n:
-        v, gcs = _started(n, tmp_path)
-        try:
+        with _started(n, tmp_path) as (v, gcs):
             assert _upload(gcs, items)[0].type == M.MAV_MISSION_ACCEPTED
             link = ("127.0.0.1", LINK_PORT + n)
             stranger = _to(link, 255, 190, n + 1)
@@ -420,8 +414,6 @@ def test_the_controller_link_hears_no_stranger_and_only_reads(tmp_path):
             assert [_fields(m) for m in got] == [_fields(m) for m in items]
             assert stranger.recv_match(type=MISSION_KINDS, blocking=False) is None
             assert ctl.recv_match(type=["MISSION_ACK", "MISSION_REQUEST_INT"], blocking=False) is None
-        finally:
-            assert v.stop() == 0
     stats = json.loads(next(s for s in v.lines if s.startswith("stats "))[len("stats "):])
     assert stats["rejected"]["not_authorised"] >= 6, stats["rejected"]
     assert sum(s.startswith("event ") and " mission: " in s for s in v.lines) == 1
