@@ -38,7 +38,7 @@ from bridge.core.wire import command_over_wire, state_over_wire
 from bridge.link.ends import ControllerEnd, VehicleEnd
 from bridge.record.columns import TRACE_COLUMNS, state_columns, trace_row
 from bridge.record.events import RunEvent
-from bridge.record.metrics import after_faults, impact_text, plant_summary, summarise
+from bridge.record.metrics import after_faults, plant_blocks, plant_summary, summarise
 from bridge.record.policies import ended_by_outcome, judge, rules_for, violation_text
 from bridge.record.runlog import Run, RunRecord, check_trace_steps, run_dir, trace_arrays
 from controller.law import LawFailed
@@ -100,7 +100,6 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
     events = record.events if record is not None else None
     outcome = "completed"
     failsafe_seen = False
-    impact_noted = False
     logged = 0
     noted = 0
     demanded = wire = (0.0, 0.0, 0.0, 0.0)
@@ -140,7 +139,7 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
                 trace.row(row)
             vend.advance()
             logged = _log_new_events(vehicle, events, logged)
-            verdict, impact_noted = plant_verdict(vehicle, impact_noted)
+            verdict = vehicle.plant_verdict()
             if verdict:
                 outcome = verdict
                 break
@@ -165,7 +164,7 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
         link = {"up": up.stats.summary(), "down": down.stats.summary(), "rejected": dict(vend.rejected)}
         summary = summarise(arrays, m, flight.gains, clock="offline", outcome=outcome, events=shown, link=link,
                             estimator=flight.estimator, sensors=flight.sensors.name)
-        summary.update(plant_summary(plant, arrays, shown))
+        summary.update(plant_summary(plant_blocks(plant), arrays, shown))
         summary["ended_by"] = {**ended_by_outcome(outcome, ev), **after_faults(outcome, shown)}
         for v in judge(summary, arrays, ev, rules_for(flight, "offline", link)):
             vehicle.event("policy", violation_text(v))
@@ -185,20 +184,6 @@ def stopped(vehicle: SimVehicle, exc: BaseException, k: int, rate: float) -> str
         return "law_failed"
     vehicle.event("aborted", "interrupted")
     return "aborted"
-
-
-def plant_verdict(vehicle: SimVehicle, impact_noted: bool) -> tuple[str | None, bool]:
-    """``diverged`` or ``crashed`` when the plant ends the flight now (its event logged), else None; and whether
-    its hard touchdown is noted (a disarmed vehicle's is logged once as an ``impact``, and the flight goes on)."""
-    plant = vehicle.plant
-    why = plant.diverged()
-    if why:
-        vehicle.event("diverged", why)
-        return "diverged", impact_noted
-    if plant.impact is None or impact_noted:
-        return None, impact_noted
-    vehicle.event("crashed" if vehicle.armed else "impact", impact_text(plant.impact, vehicle.armed))
-    return ("crashed" if vehicle.armed else None), True
 
 
 def _log_new_events(vehicle: SimVehicle, events: Any, logged: int) -> int:

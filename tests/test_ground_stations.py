@@ -133,10 +133,10 @@ sdk.destroy()
 """
 
 
-def _mavsdk(n: int, part: str) -> dict:
-    """Run the MAVSDK script's ``part`` (in its own process: the native library keeps threads of its
+def _mavsdk(n: int, part: str, script: str = MAVSDK_SCRIPT) -> dict:
+    """Run the MAVSDK ``script``'s ``part`` (in its own process: the native library keeps threads of its
     own) against the vehicle of instance ``n``; its RESULT."""
-    r = subprocess.run([sys.executable, "-c", MAVSDK_SCRIPT, f"udpin://127.0.0.1:{GCS_PORT + n}", part],
+    r = subprocess.run([sys.executable, "-c", script, f"udpin://127.0.0.1:{GCS_PORT + n}", part],
                        capture_output=True, text=True, timeout=120, env=ENV)
     lines = [ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")]
     assert lines, f"MAVSDK script failed (exit {r.returncode}):\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"

@@ -48,6 +48,7 @@ class VehicleParams:
     failsafe: FailsafeConfig = FailsafeConfig()
     takeoff_alt_m: float = 2.5  # m above home: NAV_TAKEOFF's altitude when it gives none (PX4's default)
     sysid: int = 1
+    failure_injection: int = 0  # SYS_FAILURE_EN: 1 acts on MAV_CMD_INJECT_FAILURE, 0 denies it (PX4's default)
 
 
 @dataclass(frozen=True)
@@ -90,6 +91,9 @@ PARAMS: tuple[ParamSpec, ...] = (
               "takeoff altitude above home when NAV_TAKEOFF gives none, and the least it climbs to"),
     ParamSpec("MAV_SYS_ID", INT32, "", *SYSID_RANGE, "the vehicle's MAVLink system id (at start only)",
               at_start_only=True),
+    ParamSpec("SYS_FAILURE_EN", INT32, "", 0, 1,
+              "failure injection: 1 acts on a ground station's MAV_CMD_INJECT_FAILURE, 0 denies it (docs/weather.md)",
+              choices={0: "disabled", 1: "enabled"}),
 )
 BY_NAME = {p.name: p for p in PARAMS}
 
@@ -105,6 +109,8 @@ def read_param(p: VehicleParams, name: str) -> float:
         return float(next(v for v, a in (spec.choices or {}).items() if a == p.failsafe.action))
     if spec.failsafe_key is not None:
         return float(getattr(p.failsafe, spec.failsafe_key))
+    if name == "SYS_FAILURE_EN":
+        return float(p.failure_injection)
     return float(p.takeoff_alt_m if name == "MIS_TAKEOFF_ALT" else p.sysid)
 
 
@@ -170,6 +176,8 @@ def change_param(p: VehicleParams, name: str, value: float, running: bool = True
         return replace(p, failsafe=replace(p.failsafe, **{spec.failsafe_key: float(value)}))
     if name == "MIS_TAKEOFF_ALT":
         return replace(p, takeoff_alt_m=float(value))
+    if name == "SYS_FAILURE_EN":
+        return replace(p, failure_injection=int(value))
     return replace(p, sysid=int(value))
 
 

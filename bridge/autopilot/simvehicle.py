@@ -154,6 +154,7 @@ class SimVehicle:
     estimator: Estimator | None = None  # None: truth, reading the plant
     takeoff_alt_m: float = 2.5  # m above the start: NAV_TAKEOFF's altitude when it gives none (MIS_TAKEOFF_ALT)
     timeline: tuple[TimedEvent, ...] = ()  # faults and weather changes (plant/events.py), in time order
+    failure_injection: int = 0  # SYS_FAILURE_EN: a ground station's MAV_CMD_INJECT_FAILURE is acted on (1) or not
 
     def __post_init__(self) -> None:
         if self.estimator is None:
@@ -168,6 +169,8 @@ class SimVehicle:
         self._takeoff_alt = self.takeoff_alt_m  # m: the altitude the selected TAKEOFF climbs to
         self._zero = (0.0, 0.0, 0.0, 0.0)
         self._pending_events = list(self.timeline)
+        self._injected: list[tuple[TimedEvent, Sender]] = []  # a ground station's, acted on next period (schedule)
+        self._impact_noted = False  # a disarmed vehicle's hard touchdown is logged once (plant_verdict)
         self._period_s = self.plant.dt * self.substeps
 
     @property
@@ -275,11 +278,12 @@ class SimVehicle:
         (:class:`~bridge.autopilot.params.ParamRefused` if it cannot be): it acts from the next control
         period on (a failsafe already flying keeps the action it began with). A ``param`` event says it
         (returned); a set that leaves every setting as it was is no change: no event, None."""
-        before = VehicleParams(self.failsafe, self.takeoff_alt_m, sysid)
+        before = VehicleParams(self.failsafe, self.takeoff_alt_m, sysid, self.failure_injection)
         after = change_param(before, name, value)
         if after == before:
             return None
         self.failsafe, self.takeoff_alt_m = after.failsafe, after.takeoff_alt_m
+        self.failure_injection = after.failure_injection
         old, new = read_param(before, name), read_param(after, name)
         e = self.event("param", f"{name} = {new:g} (was {old:g})")
         e.param = ParamChanged(name, float(old), float(new))
@@ -311,9 +315,16 @@ class SimVehicle:
         self.fly_onboard(Land.here(X, self.failsafe.descent_rate), self.mode)
         self.event("landing", f"held {self.failsafe.hold_s:.3f} s: landing at x={X[0]:.3f} y={X[2]:.3f} m")
 
-    def inject(self, e: TimedEvent) -> None:
+    def schedule(self, e: TimedEvent, by: Sender) -> None:
+        """A ground station's injected fault (MAV_CMD_INJECT_FAILURE, checked by its handler): acted on by
+        :meth:`inject` at the start of the next control period (lockstep: the step after it arrived), its
+        event naming ``by``. When it acts depends on when it arrived, as a ground station's parameter does."""
+        self._injected.append((e, by))
+
+    def inject(self, e: TimedEvent, by: Sender | None = None) -> None:
         """Act on one event of the timeline now (checked against the flight when it was built:
-        :func:`bridge.core.flight.prepare`); an event says it (``fault``, or ``wind`` for the weather's)."""
+        :func:`bridge.core.flight.prepare`); an event says it (``fault``, or ``wind`` for the weather's),
+        naming ``by`` (a ground station's injection; None: the mission's timeline)."""
         p, k = self.plant, e.kind
         if k == "motor":
             p.set_effectiveness(e.get("motor"), e.get("effectiveness"))
@@ -341,7 +352,22 @@ class SimVehicle:
                 bias = self.sensors.gyro_bias
                 for i, b in enumerate(e.get("bias")):
                     bias[i] += b
-        self.event("wind" if k in ("wind", "gust") else "fault", e.text())
+        self.event("wind" if k in ("wind", "gust") else "fault", e.text()).by = by
+
+    def plant_verdict(self) -> str | None:
+        """After a control period: ``diverged`` or ``crashed`` when the plant ends the flight now (its event
+        logged), else None. A disarmed vehicle's hard touchdown is logged once as an ``impact``, and the flight
+        goes on. The same check in every clock (bridge/loop.py offline, the vehicle node's commander)."""
+        plant = self.plant
+        why = plant.diverged()
+        if why:
+            self.event("diverged", why)
+            return "diverged"
+        if plant.impact is None or self._impact_noted:
+            return None
+        self._impact_noted = True
+        self.event("crashed" if self.armed else "impact", impact_text(plant.impact, self.armed))
+        return "crashed" if self.armed else None
 
     def command(self, c: tuple[float, float, float, float]) -> bool:
         """A valid actuator target (normalised, paper frame). Ignored unless armed offboard."""
@@ -362,6 +388,10 @@ class SimVehicle:
         pending = self._pending_events
         while pending and math.ceil(pending[0].t_s / self._period_s - 1e-9) * self._period_s <= p.t + 0.25 * p.dt:
             self.inject(pending.pop(0))
+        if self._injected:
+            for e, by in self._injected:
+                self.inject(e, by)
+            self._injected.clear()
         if deliver is not None:
             deliver(p.t)
         if self.armed and self.mode == OFFBOARD and p.t - self.last_command_t > self.failsafe.timeout_s + 1e-9:
@@ -391,3 +421,9 @@ class SimVehicle:
                 arrived = sensors.sample(p.t, p.state)
                 if arrived:
                     estimator.step(p.t, arrived)
+
+
+def impact_text(impact: tuple[float, float, float], armed: bool = True) -> str:
+    """A hard touchdown (t s, speed m/s, tilt rad) as the ``crashed`` (or, disarmed, ``impact``) event's text."""
+    text = f"hit the ground at {impact[1]:.2f} m/s, tilted {math.degrees(impact[2]):.1f} deg"
+    return text if armed else f"{text} (disarmed, motors off)"

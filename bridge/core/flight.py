@@ -90,12 +90,14 @@ class Flight:
         plant = self.make_plant()
         if self.estimator == "truth":  # no sensors to sample: the plant's state is published as it is
             return SimVehicle(plant, self.substeps, self.failsafe, armed=armed,
-                              takeoff_alt_m=self.params.takeoff_alt_m, timeline=self.timeline)
+                              takeoff_alt_m=self.params.takeoff_alt_m, timeline=self.timeline,
+                              failure_injection=self.params.failure_injection)
         m = self.mission
         suite = SensorSuite(self.sensors, m.seed, m.physics_hz, self.profile.gravity)
         est = make_estimator(self.estimator, self.sensors, plant.state, self.profile.gravity, lambda: plant.state)
         return SimVehicle(plant, self.substeps, self.failsafe, armed=armed, sensors=suite, estimator=est,
-                          takeoff_alt_m=self.params.takeoff_alt_m, timeline=self.timeline)
+                          takeoff_alt_m=self.params.takeoff_alt_m, timeline=self.timeline,
+                          failure_injection=self.params.failure_injection)
 
     def make_controller(self) -> Controller:
         m = self.mission
@@ -289,6 +291,23 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
     return flight
 
 
+def event_problem(kind: str, prof: Profile, sensors: SensorConfig | None) -> str | None:
+    """Why an event of ``kind`` cannot act on this vehicle (``sensors`` None: the truth estimator, no sensor
+    to fail), or None: a motor event needs rotors, a sensor event the vehicle's sensors, a GPS event a gnss
+    set, a compass event a heading sensor. The timeline's check, and a ground station's injection's."""
+    if kind == "motor" and prof.actuation != "motors":
+        return (f"profile {prof.name!r} flies ideal wrench actuation: it has no rotors to fail (fly --profile x500, "
+                "or --actuation motors)")
+    if kind in SENSOR_EVENT_KINDS and sensors is None:
+        return ("the truth estimator reads the true state, no sensor to fail: fly --estimator ekf (or raw), with "
+                "--sensors gnss or mocap")
+    if kind == "gps" and sensors is not None and sensors.position_class != "gnss":
+        return f"sensor set {sensors.name!r} has no GPS (its position is {sensors.position_class}): fly --sensors gnss"
+    if kind == "mag" and sensors is not None and sensors.heading_rate_hz <= 0.0:
+        return f"sensor set {sensors.name!r} has no magnetometer (heading_rate_hz = 0)"
+    return None
+
+
 def weather_of(m: Mission, prof: Profile, sensors: SensorConfig, estimator: str) -> tuple[WindConfig | None,
                                                                                           tuple[TimedEvent, ...]]:
     """The mission's ``[wind]`` (its turbulence at the reference's mean height unless ``altitude_m``; None: still
@@ -298,18 +317,9 @@ def weather_of(m: Mission, prof: Profile, sensors: SensorConfig, estimator: str)
     src = m.source
     timeline = timeline_from_tables(m.events, src, m.duration_s)
     for e in timeline:
-        where = f"{src}: events (t_s = {e.t_s:g}, kind = {e.kind})"
-        if e.kind == "motor" and prof.actuation != "motors":
-            raise ConfigError(f"{where}: profile {prof.name!r} flies ideal wrench actuation: it has no rotors to "
-                              "fail (fly --profile x500, or --actuation motors)")
-        if e.kind in SENSOR_EVENT_KINDS and estimator == "truth":
-            raise ConfigError(f"{where}: the truth estimator reads the true state, no sensor to fail: fly "
-                              "--estimator ekf (or raw), with --sensors gnss or mocap")
-        if e.kind == "gps" and sensors.position_class != "gnss":
-            raise ConfigError(f"{where}: sensor set {sensors.name!r} has no GPS (its position is "
-                              f"{sensors.position_class}): fly --sensors gnss")
-        if e.kind == "mag" and sensors.heading_rate_hz <= 0.0:
-            raise ConfigError(f"{where}: sensor set {sensors.name!r} has no magnetometer (heading_rate_hz = 0)")
+        why = event_problem(e.kind, prof, None if estimator == "truth" else sensors)
+        if why is not None:
+            raise ConfigError(f"{src}: events (t_s = {e.t_s:g}, kind = {e.kind}): {why}")
     if not m.wind and not any(e.kind in ("wind", "gust") for e in timeline):
         return None, timeline
     wind = wind_from_table(Table(m.wind, src, "wind"), m.duration_s)

@@ -109,13 +109,14 @@ def mission_current(seq: int, total: int) -> list[Any]:
     return [mavlink.MAVLink_mission_current_message(seq, total, mavlink.MISSION_STATE_NOT_STARTED, 0)]
 
 
-def sys_status(load_permille: int, healthy: bool) -> Any:
-    """``SYS_STATUS``: simulated sensors present and healthy, a full 4S battery."""
+def sys_status(load_permille: int, healthy: bool, battery: tuple[int, int, int] = (16800, -1, 100)) -> Any:
+    """``SYS_STATUS``: simulated sensors present and healthy; ``battery``: voltage mV, current cA (-1: not
+    measured) and remaining % (a full 4S battery unless the plant flies one)."""
     # the geofence bit is set healthy although there is no fence: MAVProxy reads a clear
     # health bit as "fence breach" even on a vehicle that has none
     health = (_SENSORS | mavlink.MAV_SYS_STATUS_GEOFENCE) if healthy else 0
     return mavlink.MAVLink_sys_status_message(_SENSORS, _SENSORS, health, max(0, min(1000, load_permille)),
-                                              16800, -1, 100, 0, 0, 0, 0, 0, 0)
+                                              *battery, 0, 0, 0, 0, 0, 0)
 
 
 def extended_sys_state(on_ground: bool, descending: bool) -> Any:

@@ -21,6 +21,7 @@ always be rebuilt from the trace.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -34,27 +35,27 @@ RMS_FROM_S = 10.0
 RIPPLE_WINDOW_S = 0.2  # moving-average window of the u2 ripple: content above ~5 Hz counts
 
 
-def impact_text(impact: tuple[float, float, float], armed: bool = True) -> str:
-    """A hard touchdown (t s, speed m/s, tilt rad) as the ``crashed`` (or, disarmed, ``impact``) event's text."""
-    text = f"hit the ground at {impact[1]:.2f} m/s, tilted {math.degrees(impact[2]):.1f} deg"
-    return text if armed else f"{text} (disarmed, motors off)"
-
-
 def after_faults(outcome: str, events: list[dict[str, Any]]) -> dict[str, Any]:
     """``ended_by``'s ``after_faults``: the timeline's faults before a flight that did not complete (why it ended)."""
     faults = [f"t={e['t']:.3f} s: {e['text']}" for e in events if e["kind"] == "fault"]
     return {"after_faults": faults} if outcome != "completed" and faults else {}
 
 
-def plant_summary(plant: Any, trace: dict[str, np.ndarray], events: list[dict[str, Any]]) -> dict[str, Any]:
-    """``summary.json``'s blocks from the plant itself (:class:`plant.Quadrotor`): ``wind`` (the configuration,
-    the mean wind and the turbulence's std per axis over the flight, with MIL-HDBK-1797's σ: plant/wind.py),
-    ``battery`` (volts, amperes, mAh), ``impact`` (a hard touchdown: t s, speed m/s, tilt deg) and
-    ``gps_outages`` (:func:`gps_outages`); only those the flight had."""
-    out: dict[str, Any] = {}
+def plant_summary(blocks: Mapping[str, Any], trace: Mapping[str, np.ndarray],
+                  events: list[dict[str, Any]]) -> dict[str, Any]:
+    """``summary.json``'s plant blocks: ``gps_outages`` (:func:`gps_outages`, from the trace and the events on
+    one clock), then the plant's own ``blocks`` (:func:`plant_blocks`; a SITL vehicle reports them in its
+    stats); only those the flight had."""
     outages = gps_outages(trace, events)
-    if outages:
-        out["gps_outages"] = outages
+    return {**({"gps_outages": outages} if outages else {}), **blocks}
+
+
+def plant_blocks(plant: Any) -> dict[str, Any]:
+    """The blocks the plant itself (:class:`plant.Quadrotor`) holds: ``wind`` (the configuration, the mean wind
+    and the turbulence's std per axis over the flight, with MIL-HDBK-1797's σ: plant/wind.py), ``battery``
+    (volts, amperes, mAh), ``impact`` (a hard touchdown: t s, speed m/s, tilt deg), ``rotor_effectiveness``;
+    JSON as they are."""
+    out: dict[str, Any] = {}
     if plant.wind is not None:
         out["wind"] = plant.wind.summary()
     if plant.battery is not None:
@@ -67,7 +68,7 @@ def plant_summary(plant: Any, trace: dict[str, np.ndarray], events: list[dict[st
     return out
 
 
-def gps_outages(trace: dict[str, np.ndarray], events: list[dict[str, Any]]) -> list[dict[str, Any]]:
+def gps_outages(trace: Mapping[str, np.ndarray], events: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Each GPS outage of the timeline (``fault`` events ``gps off`` .. ``gps on``, or to the end): the
     estimate's 3-D position drift (m, truth − estimate) during it, at its max and at its end, and the mean NEES
     after it (to the next outage or the end; 9 degrees of freedom), from the trace arrays."""

@@ -28,7 +28,7 @@ from bridge.core.flight import Flight
 from bridge.record.columns import TRACE_COLUMNS
 from bridge.record.events import RunEvent
 from bridge.record.joiner import Joined
-from bridge.record.metrics import percentiles, summarise
+from bridge.record.metrics import after_faults, percentiles, plant_summary, summarise
 from bridge.record.policies import (
     CONTROLLER_ID,
     ended_by_command,
@@ -42,8 +42,9 @@ from bridge.record.policies import (
 from bridge.record.runlog import trace_arrays
 
 FAILED_OUTCOMES = ("failsafe", "diverged", "aborted", "law_failed")
+PLANT_OUTCOMES = ("diverged", "crashed")  # the plant ended the flight (SimVehicle.plant_verdict), as offline
 # the vehicle's events that a sender other than the flight's controller may cause and that change the flight
-INTERVENING = ("param", "mode", "armed", "disarmed")  # what a controller may say besides completed
+INTERVENING = ("param", "mode", "armed", "disarmed", "fault")  # fault: a ground station's injected failure
 
 
 @dataclass(frozen=True)
@@ -180,6 +181,15 @@ def ended_by_change(end: dict[str, Any], outcome: str, events: Sequence[RunEvent
                                    f"ground station at t={c['t']:.3f} s (step {c['step']})"}
 
 
+def plant_outcome(outcome: str, facts: SessionFacts, events: Sequence[RunEvent]) -> str:
+    """``crashed`` when the vehicle's events say it hit the ground armed (its ``crashed`` event: the flight's
+    end, as offline) and nothing came before it (the plant diverged, the user interrupted, a child died); else
+    ``outcome``."""
+    if outcome == "diverged" or facts.aborted or facts.died:
+        return outcome
+    return "crashed" if any(e.kind == "crashed" for e in vehicle_events(events)) else outcome
+
+
 def airborne(trace: Mapping[str, Any], t: float) -> bool:
     """Whether the trace's last row at or before ``t`` (s) is off the ground (z above it, or moving)."""
     ts = trace["t"]
@@ -205,7 +215,7 @@ def ended_by(outcome: str, trace: Mapping[str, Any], flight: Flight, facts: Sess
         if outcome == "failsafe":
             how += "; the vehicle's failsafe took over"
         return outcome, {"who": facts.died, "how": how}
-    if outcome == "diverged":
+    if outcome in PLANT_OUTCOMES:
         return outcome, ended_by_outcome(outcome, events)
     if outcome == "law_failed" and ctl is not None:
         return outcome, {"who": "controller", "how": f"its law failed: {ctl.reason}"}
@@ -327,16 +337,21 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
     cs = controller.stats if controller is not None else {}
     arrays = trace_arrays(joined.rows, TRACE_COLUMNS)
     link = link_block(joined, vs, cs, relay_stats if relay is not None else None)
-    summary = summarise(arrays, m, flight.gains, clock=facts.clock, outcome=outcome_of(facts, controller),
+    outcome = plant_outcome(outcome_of(facts, controller), facts, events)
+    summary = summarise(arrays, m, flight.gains, clock=facts.clock, outcome=outcome,
                         events=[], link=link, estimator=flight.estimator, sensors=flight.sensors.name)
+    # lockstep events keep the vehicle's clock (step k at k / rate_hz); the trace counts from the
+    # controller's first answered step k0: the policies (and the GPS outages) see both on the vehicle's clock
+    judged = {**arrays, "t": arrays["t"] + (joined.k0 or 0) / m.rate_hz} if facts.clock == "lockstep" else arrays
+    ev = vehicle_events(events)
+    # the plant's own blocks as the vehicle reported them in its stats; the GPS outages from the trace and the
+    # events' own texts (an injected fault's shown text names its sender)
+    summary.update(plant_summary(vs.get("plant") or {}, judged, [{**e.as_dict(), "text": e.text} for e in ev]))
     summary["timing"] = timing_block(joined, m.rate_hz, facts.wall_s, vs, cs)
     summary["sitl"] = {**facts.sitl, "vehicle_exit": vehicle.exit_text if vehicle else None,
                        "controller_exit": controller.exit_text if controller else None}
-    judged, lockstep, off_clock = arrays, None, None
+    lockstep, off_clock = None, None
     if facts.clock == "lockstep":
-        # lockstep events keep the vehicle's clock (step k at k / rate_hz); the trace counts from the
-        # controller's first answered step k0: the policies see both on the vehicle's clock
-        judged = {**arrays, "t": arrays["t"] + (joined.k0 or 0) / m.rate_hz}
         off_clock = facts.off_clock_t
         summary["lockstep"] = lockstep = lockstep_record(events, off_clock)
     children = [c for c in (vehicle, controller, relay) if c is not None]
@@ -346,6 +361,7 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
     if cs.get("param_at"):  # the scheduled changes (--param-at) as sent, each confirmed by the vehicle's echo or not
         summary["param_at"] = list(cs["param_at"])
     summary["ended_by"] = ended_by_change(summary["ended_by"], summary["outcome"], events, changes)
+    summary["ended_by"].update(after_faults(summary["outcome"], [e.as_dict() for e in ev]))
     if lockstep is not None:
         summary["lockstep"] = reproducibility(lockstep, changes)
     rules = rules_for(flight, facts.clock, link, controller_id)

@@ -26,12 +26,15 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.autopilot.params import BY_NAME
 from bridge.autopilot.simvehicle import GROUND_MODES, LAND, OFFBOARD, TAKEOFF, SimVehicle
+from bridge.autopilot.simvehicle import Sender as EventSender
+from bridge.core.flight import event_problem
 from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import Endpoint
 from bridge.mavlink.modes import mode_name, requested_custom_mode, requested_mode
 from bridge.mavlink.receive import FORCE_DISARM, arm_disarm_args, interval_arg, message_id_arg
 from bridge.nodes.vehicle.authority import Authority, Sender, attribute
 from bridge.nodes.vehicle.clock import Clock, Trigger
+from bridge.nodes.vehicle.injection import injection
 from bridge.nodes.vehicle.streams import HEARTBEAT_S, StatusTexts, StreamTable
 
 OFFBOARD_STREAM_S = 1.0  # s of wall time: a ground station's OFFBOARD needs a target from the controller this recent
@@ -134,7 +137,30 @@ class Commander:
             return mavlink.MAV_RESULT_ACCEPTED, (tm.autopilot_version(self.cfg.sysid),)
         if cmd == mavlink.MAV_CMD_GET_HOME_POSITION:
             return mavlink.MAV_RESULT_ACCEPTED, (tm.home_position(self.cfg.home),)
+        if cmd == mavlink.MAV_CMD_INJECT_FAILURE:
+            return self._inject_failure(m, by), ()
         return mavlink.MAV_RESULT_UNSUPPORTED, ()
+
+    def _inject_failure(self, m: Any, by: Sender) -> int:
+        """MAV_CMD_INJECT_FAILURE (:mod:`.injection`): DENIED unless SYS_FAILURE_EN = 1 (PX4's receiver does
+        the same); else its events are scheduled (:meth:`SimVehicle.schedule`: acted on at the start of the next
+        control period, naming ``by``), or it is refused with a STATUSTEXT saying why."""
+        sim = self.sim
+        if not sim.failure_injection:
+            return self._refuse("INJECT_FAILURE: disabled, SYS_FAILURE_EN is 0")
+        sensors = sim.sensors.config if sim.sensors is not None else None
+        got = injection(m.param1, m.param2, m.param3, sim.t,
+                        lambda kind: event_problem(kind, sim.plant.profile, sensors))
+        if got.why is not None:
+            if got.result == mavlink.MAV_RESULT_DENIED:
+                self.ports.reject("bad_number")
+                return self._refuse(got.why)
+            self.texts += self._statustext(mavlink.MAV_SEVERITY_WARNING, got.why)
+            self.ports.report(f"refused {got.why}")
+            return got.result
+        for e in got.events:
+            sim.schedule(e, _sim_sender(by))
+        return mavlink.MAV_RESULT_ACCEPTED
 
     def _through_link(self, m: Any, by: Sender) -> bool:
         """Whether a command crosses the up-link model: the controller's, on its link, in a lockstep flight."""
@@ -287,11 +313,16 @@ class Commander:
         self.clock.run_free(Trigger.LOSE, now, self.ports.step() * self.substeps)
 
     def diverged(self) -> bool:
-        """After a control period: whether the plant diverged (then disarmed, and the clock halted for good)."""
-        why = self.sim.plant.diverged()
-        if not why:
+        """After a control period: whether the plant ended the flight (diverged, or crashed while armed:
+        :meth:`SimVehicle.plant_verdict`, as offline); then disarmed, and the clock halted for good."""
+        verdict = self.sim.plant_verdict()
+        if verdict is None:
             return False
-        self.sim.event("diverged", why)
-        self.sim.disarm(f"diverged: {why}")
+        self.sim.disarm(f"{verdict}: {self.sim.events[-1].text}")
         self.clock.fire(Trigger.DIVERGE)
         return True
+
+
+def _sim_sender(by: Sender) -> EventSender:
+    """The command's sender as an event names it (the ``by`` field of :class:`SimVehicle`'s events)."""
+    return EventSender(by.sysid, by.compid, by.addr[0], by.addr[1], by.link)

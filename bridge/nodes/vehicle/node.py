@@ -50,10 +50,12 @@ from bridge.nodes.vehicle.streams import (
     StatusTexts,
     StreamTable,
     VehicleView,
+    battery_streams,
     heartbeat,
     message,
 )
 from bridge.nodes.vehicle.targets import Targets
+from bridge.record.metrics import plant_blocks
 from bridge.record.runlog import side_dir
 
 HOUSEKEEPING_S = 0.02  # s of wall time between looks at the GCS socket, streams, file flushes
@@ -91,7 +93,8 @@ class Vehicle:
         now = time.monotonic()
         # the GCS link's: the defaults, and with sensors (not truth) HIGHRES_IMU and, for GNSS, GPS_RAW_INT
         sensors = self.sim.sensors.config if self.sim.sensors is not None else None
-        self.streams = StreamTable({**DEFAULT_STREAMS, **tm.sensor_streams(sensors)}, now)
+        self.streams = StreamTable({**DEFAULT_STREAMS, **tm.sensor_streams(sensors),
+                                    **battery_streams(self.plant.battery)}, now)
         self.ctl_streams = StreamTable(dict.fromkeys(self.streams, 0.0), now)  # the controller link's: none
         self._next_heartbeat = now
         self._next_house = now
@@ -181,7 +184,8 @@ class Vehicle:
             "received": self.link.received, "overruns": self.pace.rebased, "steps": self.k,
             "rejected_from_controller": self.rejected.from_peer, "resends": self.odometry.resends,
             "answered_again": self.targets.answered_again,
-            "up": self.vend.up.stats.summary() if self.cfg.clock == "lockstep" else None}))
+            "up": self.vend.up.stats.summary() if self.cfg.clock == "lockstep" else None,
+            "plant": plant_blocks(self.plant)}))  # summary.json's wind, battery, impact blocks, as offline
 
     def _report(self, line: str) -> None:
         """Every status line of the vehicle goes out here."""
@@ -402,7 +406,7 @@ class Vehicle:
         mission = self.missions.mission
         return VehicleView(plant.state, self.t, sim.mode, sim.onboard.target, sim.armed, self.clock.halted,
                            plant.on_ground, plant.omega, self.flight.profile.omega_max, self.load, sim.sensors,
-                           cfg.home, cfg.sysid, (mission.current, len(mission.items)))
+                           cfg.home, cfg.sysid, (mission.current, len(mission.items)), plant.battery)
 
     def _heartbeat(self) -> Any:
         return heartbeat(self._view())

@@ -42,7 +42,7 @@ class ParamService:
         self._report = report
 
     def params(self) -> VehicleParams:
-        return VehicleParams(self.sim.failsafe, self.sim.takeoff_alt_m, self.sysid)
+        return VehicleParams(self.sim.failsafe, self.sim.takeoff_alt_m, self.sysid, self.sim.failure_injection)
 
     def value(self, index: int, params: VehicleParams | None = None) -> Any:
         """PARAM_VALUE of the ``index`` th parameter."""

@@ -2,8 +2,8 @@
 stream table, HEARTBEAT, STATUSTEXT ids, and ODOMETRY's covariances.
 
 In:  a :class:`VehicleView` (the vehicle as its messages read it: paper-frame state eq. 7, m, m/s, rad,
-     rad/s; simulation time s; rotor speeds rad/s; load per mille), a message id, SET_MESSAGE_INTERVAL's
-     checked interval (us), wall times (s)
+     rad/s; simulation time s; rotor speeds rad/s; load per mille; the plant's battery V, A, mAh), a message
+     id, SET_MESSAGE_INTERVAL's checked interval (us), wall times (s)
 Out: MAVLink messages (pymavlink): the GCS streams (``time_boot_ms`` = simulation time), HEARTBEAT
      (PX4's ``custom_mode``), STATUSTEXT; ODOMETRY to the controller (NED position m, FRD body velocity m/s,
      quaternion FRD to NED, FRD rates rad/s, ``time_usec`` = k / rate_hz; covariances in NED/FRD)
@@ -28,10 +28,12 @@ from bridge.core.wire import rotate_inverse, state_to_odometry, step_usec
 from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import ODOMETRY, Endpoint
 from bridge.mavlink.modes import heartbeat_mode
+from plant.battery import Battery
 from plant.sensors import SensorSuite
 
 MIN_INTERVAL_S = 0.005  # the shortest stream interval (200 Hz)
 HEARTBEAT_S = 1.0
+BATTERY_STATUS_S = 2.0  # PX4's default rate of BATTERY_STATUS on a normal link (mavlink_main.cpp: 0.5 Hz)
 
 
 @dataclass(frozen=True)
@@ -52,6 +54,38 @@ class VehicleView:
     home: tm.Home
     sysid: int
     mission: tuple[int, int] = (0, 0)  # the mission's current item and its number of items
+    battery: Battery | None = None  # the plant's flight battery ([effects] battery), None: it flies none
+
+
+def battery_fields(b: Battery) -> tuple[int, int, int]:
+    """SYS_STATUS's battery fields of the plant's battery: terminal voltage mV, current cA, remaining %."""
+    remaining = 100.0 * (1.0 - b.used_mah / b.config.capacity_mah)
+    return int(round(b.voltage * 1000.0)), int(round(b.current * 100.0)), int(round(min(max(remaining, 0.0), 100.0)))
+
+
+def battery_status(v: VehicleView) -> list[Any]:
+    """BATTERY_STATUS of the plant's battery ([] without one): the pack voltage in cell 0 (the cells are not
+    modelled one by one: MAVLink's convention), current, charge drawn, remaining, and the charge state by PX4's
+    default thresholds (BAT_LOW_THR, BAT_CRIT_THR, BAT_EMERGEN_THR: 15 %, 7 %, 5 %)."""
+    b = v.battery
+    if b is None:
+        return []
+    mv, ca, remaining = battery_fields(b)
+    state = next((s for limit, s in _CHARGE_STATES if remaining <= limit), mavlink.MAV_BATTERY_CHARGE_STATE_OK)
+    return [mavlink.MAVLink_battery_status_message(
+        0, mavlink.MAV_BATTERY_FUNCTION_ALL, mavlink.MAV_BATTERY_TYPE_LIPO, _INT16_MAX, [mv] + [_UINT16_MAX] * 9, ca,
+        int(round(b.used_mah)), -1, remaining, 0, state)]
+
+
+def _sys_status(v: VehicleView) -> list[Any]:
+    if v.battery is None:
+        return [tm.sys_status(v.load, not v.halted)]
+    return [tm.sys_status(v.load, not v.halted, battery_fields(v.battery))]
+
+
+_INT16_MAX, _UINT16_MAX = 2**15 - 1, 2**16 - 1  # MAVLink's "unknown" temperature and cell voltage
+_CHARGE_STATES = ((5, mavlink.MAV_BATTERY_CHARGE_STATE_EMERGENCY), (7, mavlink.MAV_BATTERY_CHARGE_STATE_CRITICAL),
+                  (15, mavlink.MAV_BATTERY_CHARGE_STATE_LOW))
 
 
 def heartbeat(v: VehicleView) -> Any:
@@ -97,7 +131,8 @@ STREAMS: dict[int, Stream] = {
     mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: Stream(_if_finite(lambda v: [tm.local_position(v.X, _ms(v))]), 0.04),
     mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: Stream(
         _if_finite(lambda v: [tm.global_position(v.X, _ms(v), v.home)]), 0.1),
-    mavlink.MAVLINK_MSG_ID_SYS_STATUS: Stream(lambda v: [tm.sys_status(v.load, not v.halted)], 0.1),
+    mavlink.MAVLINK_MSG_ID_SYS_STATUS: Stream(_sys_status, 0.1),
+    mavlink.MAVLINK_MSG_ID_BATTERY_STATUS: Stream(battery_status, None),  # a battery's: battery_streams
     mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: Stream(
         lambda v: [tm.extended_sys_state(v.on_ground, v.mode == FAILSAFE)], 0.1),
     mavlink.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS: Stream(
@@ -111,6 +146,12 @@ STREAMS: dict[int, Stream] = {
 }
 # default GCS streams (message id -> interval s)
 DEFAULT_STREAMS = {mid: s.interval_s for mid, s in STREAMS.items() if s.interval_s is not None}
+
+
+def battery_streams(battery: Battery | None) -> dict[int, float]:
+    """The GCS streams of the plant's battery (message id -> interval s): BATTERY_STATUS at PX4's 0.5 Hz; none
+    without a battery (SYS_STATUS then says a full 4S pack, as before)."""
+    return {mavlink.MAVLINK_MSG_ID_BATTERY_STATUS: BATTERY_STATUS_S} if battery is not None else {}
 
 
 def message(mid: int, view: VehicleView) -> list[Any]:

@@ -1,0 +1,277 @@
+"""Covers bridge.nodes.vehicle.injection, the commander's MAV_CMD_INJECT_FAILURE and SYS_FAILURE_EN.
+
+A ground station injects failures as PX4's do (MAVSDK's Failure plugin, pymavlink's COMMAND_LONG), against
+real ``bsst vehicle`` and ``bsst sitl`` processes over UDP on 127.0.0.1: refused (DENIED) while
+SYS_FAILURE_EN = 0, acted on with 1 through the timeline's path (SimVehicle.inject), each event naming its
+sender; each unit and type answered as PX4's handlers answer it (docs/weather.md, "Injection").
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+
+import pytest
+from pymavlink.dialects.v20 import common as mavlink
+
+from bridge.nodes.report import Event, Refused, parse_line
+from bridge.nodes.vehicle.injection import injection
+from bridge.session import instance_slot
+from tests.sitlkit import ENV, Proc
+from tests.test_ground_stations import _mavsdk
+from tests.test_vehicle import _ack, _gcs, _vehicle
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
+
+M = mavlink
+MOTOR, GPS, MAG, BARO, GYRO = (M.FAILURE_UNIT_SYSTEM_MOTOR, M.FAILURE_UNIT_SENSOR_GPS, M.FAILURE_UNIT_SENSOR_MAG,
+                               M.FAILURE_UNIT_SENSOR_BARO, M.FAILURE_UNIT_SENSOR_GYRO)
+OK, OFF, STUCK = M.FAILURE_TYPE_OK, M.FAILURE_TYPE_OFF, M.FAILURE_TYPE_STUCK
+
+
+def _events(v: Proc) -> list[Event]:
+    """The vehicle's event reports so far (its status lines, read as the session reads them)."""
+    return [r for r in map(parse_line, v.lines) if isinstance(r, Event)]
+
+
+def _inject(gcs, unit: int, ftype: int, instance: float = 0, command_int: bool = False) -> int:
+    tgt = (gcs.target_system, gcs.target_component)
+    if command_int:
+        gcs.mav.command_int_send(*tgt, 0, M.MAV_CMD_INJECT_FAILURE, 0, 0, unit, ftype, instance, 0, 0, 0, 0)
+    else:
+        gcs.mav.command_long_send(*tgt, M.MAV_CMD_INJECT_FAILURE, 0, unit, ftype, instance, 0, 0, 0, 0)
+    return _ack(gcs, M.MAV_CMD_INJECT_FAILURE).result
+
+
+def test_mapping_pure():
+    """The units and types that map, and the answers for those that do not (no processes)."""
+    can = lambda kind: None  # noqa: E731 - a vehicle every event can act on
+    got = injection(MOTOR, OFF, 2, 1.5, can)
+    assert got.result == M.MAV_RESULT_ACCEPTED and [e.text() for e in got.events] == ["motor 2: off"]
+    assert [e.text() for e in injection(MOTOR, OK, 0, 0.0, can).events] == [f"motor {n}: 1 of its thrust"
+                                                                             for n in range(1, 5)]
+    assert [e.text() for e in injection(GPS, OFF, 0, 0.0, can).events] == ["gps off"]
+    assert [e.text() for e in injection(MAG, OK, 1, 0.0, can).events] == ["mag on"]
+    for args, result in (((MOTOR, STUCK, 1), M.MAV_RESULT_UNSUPPORTED), ((MOTOR, OFF, 5), M.MAV_RESULT_DENIED),
+                         ((GPS, OFF, 2), M.MAV_RESULT_DENIED), ((BARO, OFF, 0), M.MAV_RESULT_UNSUPPORTED),
+                         ((GYRO, OFF, 0), M.MAV_RESULT_UNSUPPORTED), ((M.FAILURE_UNIT_SYSTEM_BATTERY, OFF, 0),
+                                                                     M.MAV_RESULT_UNSUPPORTED),
+                         ((MOTOR, OFF, 1.5), M.MAV_RESULT_DENIED), ((math.nan, OFF, 0), M.MAV_RESULT_DENIED)):
+        got = injection(*args, 0.0, can)
+        assert got.result == result and not got.events and got.why, (args, got)
+    no_rotors = injection(MOTOR, OFF, 1, 0.0, lambda kind: "no rotors to fail")
+    assert no_rotors.result == M.MAV_RESULT_UNSUPPORTED and "no rotors to fail" in no_rotors.why
+
+
+def test_pymavlink_acks_per_unit(tmp_path):
+    """SYS_FAILURE_EN = 0: every injection DENIED, nothing done. = 1 (a PARAM_SET): the x500 with a GNSS set
+    and the EKF acts on motor, GPS and compass OFF/OK (ACCEPTED; COMMAND_INT too), and answers every other
+    type and unit as PX4 does: UNSUPPORTED (a STATUSTEXT saying why), DENIED for a motor it does not have.
+    Each accepted one is a ``fault`` event naming the ground station, acted on when the vehicle next steps."""
+    with instance_slot() as n:
+        gcs = _gcs(n)
+        v = _vehicle(n, tmp_path, "--profile", "x500", "--sensors", "gnss", "--estimator", "ekf", "--realtime")
+        try:
+            assert gcs.wait_heartbeat(timeout=20) is not None
+            assert _inject(gcs, MOTOR, OFF, 1) == M.MAV_RESULT_DENIED
+            text = gcs.recv_match(type="STATUSTEXT", blocking=True, timeout=5)
+            assert text is not None and "SYS_FAILURE_EN is 0" in text.text
+            gcs.mav.param_set_send(gcs.target_system, gcs.target_component, b"SYS_FAILURE_EN", 1,
+                                   M.MAV_PARAM_TYPE_INT32)
+            v.wait_line(lambda s: "SYS_FAILURE_EN = 1 (was 0)" in s)
+            answers = {(MOTOR, OFF, 1): M.MAV_RESULT_ACCEPTED, (MOTOR, OK, 1): M.MAV_RESULT_ACCEPTED,
+                       (GPS, OFF, 0): M.MAV_RESULT_ACCEPTED, (GPS, OK, 0): M.MAV_RESULT_ACCEPTED,
+                       (MAG, OFF, 0): M.MAV_RESULT_ACCEPTED, (MAG, OK, 0): M.MAV_RESULT_ACCEPTED,
+                       (MOTOR, STUCK, 1): M.MAV_RESULT_UNSUPPORTED, (MOTOR, OFF, 5): M.MAV_RESULT_DENIED,
+                       (GPS, M.FAILURE_TYPE_GARBAGE, 0): M.MAV_RESULT_UNSUPPORTED,
+                       (BARO, OFF, 0): M.MAV_RESULT_UNSUPPORTED, (GYRO, OFF, 0): M.MAV_RESULT_UNSUPPORTED,
+                       (M.FAILURE_UNIT_SENSOR_ACCEL, OFF, 0): M.MAV_RESULT_UNSUPPORTED,
+                       (M.FAILURE_UNIT_SYSTEM_BATTERY, OFF, 0): M.MAV_RESULT_UNSUPPORTED}
+            got = {args: _inject(gcs, *args) for args in answers}
+            assert got == answers
+            assert _inject(gcs, MOTOR, OFF, 3, command_int=True) == M.MAV_RESULT_ACCEPTED
+            # acted on at the vehicle's next control period (realtime: the clock runs), each naming the sender
+            v.wait_line(lambda s: '"kind":"fault"' in s and "motor 3: off" in s)
+        finally:
+            assert v.stop() == 0
+    faults = [e for e in _events(v) if e.kind == "fault"]
+    assert [e.text for e in faults] == ["motor 1: off", "motor 1: 1 of its thrust", "gps off", "gps on", "mag off",
+                                        "mag on", "motor 3: off"]
+    assert all(e.by is not None and e.by.link == "gcs" and (e.by.sysid, e.by.compid) == (255, 190) for e in faults)
+
+
+def test_paper_profile_has_no_rotors(tmp_path):
+    """The paper profile (ideal wrench) has no rotor to fail, and the truth estimator no sensor: UNSUPPORTED."""
+    with instance_slot() as n:
+        gcs = _gcs(n)
+        v = _vehicle(n, tmp_path, "--param", "SYS_FAILURE_EN=1")
+        try:
+            assert gcs.wait_heartbeat(timeout=20) is not None
+            assert _inject(gcs, MOTOR, OFF, 1) == M.MAV_RESULT_UNSUPPORTED
+            v.wait_line(lambda s: isinstance(r := parse_line(s), Refused) and "no rotors to fail" in r.text)
+            assert _inject(gcs, GPS, OFF, 0) == M.MAV_RESULT_UNSUPPORTED
+            v.wait_line(lambda s: isinstance(r := parse_line(s), Refused) and "no sensor to fail" in r.text)
+        finally:
+            assert v.stop() == 0
+
+
+MAVSDK_FAILURE = r"""
+import json, sys, threading
+from mavsdk import Mavsdk, Configuration, ComponentType
+from mavsdk.plugins.failure import Failure, FailureError, FailureType, FailureUnit
+from mavsdk.plugins.param import Param
+from mavsdk.plugins.telemetry import Telemetry
+
+sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+sdk.add_any_connection(sys.argv[1])
+system = sdk.first_autopilot(30.0)
+out = {"found": system is not None}
+def inject():
+    try:
+        Failure(system).inject(FailureUnit.SYSTEM_MOTOR, FailureType.OFF, 1)
+        return "SUCCESS"
+    except FailureError as e:
+        return e.result.name
+
+if sys.argv[2] == "flight":  # once the flight's controller has armed it: refused, enabled, acted on
+    armed, tel = threading.Event(), Telemetry(system)  # (the plugin held: its subscriptions live while it does)
+    tel.subscribe_armed(lambda a, ud=None: a and armed.set())
+    out["armed"] = armed.wait(60)
+    out["disabled"] = inject()
+    out["set"] = Param(system).set_param_int("SYS_FAILURE_EN", 1).name
+    out["enabled"] = inject()
+print("RESULT " + json.dumps(out), flush=True)
+sdk.destroy()
+"""
+
+
+def test_mavsdk_failure_plugin_motor_off(tmp_path):
+    """MAVSDK's Failure plugin against a lockstep ``bsst sitl --profile x500`` flight: motor 1 OFF is DENIED
+    while SYS_FAILURE_EN = 0, then (the parameter set to 1 through MAVSDK's Param) acted on: the quadrotor
+    cannot fly on three rotors, and the flight ends honestly, not completed, exit 1, the fault in its events
+    naming the ground station that injected it."""
+    out = tmp_path / "run"
+    with instance_slot() as n:
+        p = Proc.bsst("sitl", "missions/sine.toml", "--profile", "x500", "--out", str(out), "--instance", str(n),
+                      "--speed", "1", "--no-plots")
+        try:
+            got = _mavsdk(n, "flight", MAVSDK_FAILURE)
+            code = p.p.wait(timeout=120)
+        finally:
+            p.stop()
+    assert got == {"found": True, "armed": True, "disabled": "DENIED", "set": "SUCCESS", "enabled": "SUCCESS"}, got
+    summary = json.loads((out / "summary.json").read_text())
+    assert code == 1 and summary["outcome"] != "completed", summary["outcome"]
+    faults = [e for e in summary["events"] if e["kind"] == "fault"]
+    # summary.json's events carry their sender in the text (RunEvent.shown): MAVSDK's ids, on the GCS link
+    assert len(faults) == 1 and faults[0]["text"].startswith("motor 1: off [by 245:190 "), faults
+    assert faults[0]["text"].endswith(" gcs]")
+    # a ground station's change: the run is reproducible only up to the step it acted at (it depends on arrival)
+    (change,) = [i for i in summary["interventions"] if i["kind"] == "fault"]
+    assert change["what"] == "motor 1: off" and change["by"].endswith(" gcs")
+    assert summary["lockstep"]["reproducible"] is False
+    assert summary["lockstep"]["reproducible_until_step"] == change["step"] == round(faults[0]["t"] * 250)
+    assert summary["ended_by"]["after_faults"] == [f"t={faults[0]['t']:.3f} s: {faults[0]['text']}"]
+
+
+WINDY_X500 = """
+name = "windy-x500"
+duration_s = 14.0
+profile = "x500"
+controller = "bsst"
+rate_hz = 250
+seed = 0
+
+[trajectory]
+kind = "sine"
+amplitude = 1.0
+omega = 0.5
+climb = 0.1
+psi = 0.0
+
+[effects]
+battery = true
+
+[wind]
+speed_mps = 5.0
+from_deg = 270.0
+turbulence = "moderate"
+gusts = [[11.0, 2.0, 3.0, 90.0]]
+"""
+ALL_OFF = tuple(a for i in (1, 2, 3, 4) for a in ("--at", f"5:motor:{i}=0"))  # it falls from 0.5 m: crashed
+
+
+@pytest.mark.parametrize("case", ["wind-battery", "crash"])
+def test_sitl_plant_blocks_equal_offline(tmp_path, case):
+    """``bsst sitl`` (lockstep) reports the plant's blocks as ``bsst sim`` does, to the bit: ``wind`` and
+    ``battery`` (a windy x500 with its battery), and a hard touchdown's ``crashed`` outcome (every rotor off:
+    it falls from 0.5 m), its ``impact``, ``rotor_effectiveness`` and ``ended_by`` (with ``after_faults``),
+    exit 1."""
+    mission = tmp_path / "windy.toml"
+    mission.write_text(WINDY_X500)
+    args = (str(mission),) if case == "wind-battery" else ("missions/sine.toml", "--profile", "x500", *ALL_OFF)
+    codes, summaries = [], []
+    for command in ("sim", "sitl"):
+        out = tmp_path / command
+        with instance_slot() as n:
+            extra = ("--instance", str(n)) if command == "sitl" else ()
+            r = subprocess.run([sys.executable, "-m", "bridge", command, *args, "--out", str(out), "--no-plots",
+                                *extra], capture_output=True, text=True, timeout=300, env=ENV)
+        codes.append(r.returncode)
+        summaries.append(json.loads((out / "summary.json").read_text()))
+    offline, sitl = summaries
+    keys = ("outcome", "ended_by", "wind", "battery", "impact", "rotor_effectiveness", "rms_3d")
+    assert {k: sitl.get(k) for k in keys} == {k: offline.get(k) for k in keys}
+    if case == "crash":
+        assert codes == [1, 1] and sitl["outcome"] == "crashed" and sitl["impact"]["speed_mps"] > 2.0
+        assert sitl["ended_by"]["after_faults"] == [f"t=5.000 s: motor {i}: off" for i in (1, 2, 3, 4)]
+    else:
+        assert codes == [0, 0] and sitl["wind"]["samples"] > 0 and sitl["battery"]["used_mah"] > 0.0
+
+
+def test_battery_on_the_ground_station_link(tmp_path):
+    """An x500 flying its battery ([effects] battery): SYS_STATUS carries its voltage, current and remaining
+    charge, BATTERY_STATUS streams at PX4's 0.5 Hz; at rest the pack is full and idle, in a takeoff (the
+    ground station's NAV_TAKEOFF and arm) it draws current and its voltage sags. Without a battery, no
+    BATTERY_STATUS stream (SET_MESSAGE_INTERVAL of it UNSUPPORTED)."""
+    mission = tmp_path / "battery.toml"
+    mission.write_text(WINDY_X500.replace("[wind]", "[unused]").split("[unused]")[0])
+    with instance_slot() as n:
+        gcs = _gcs(n)
+        v = _vehicle(n, tmp_path, str(mission), "--speed", "2")
+        try:
+            assert gcs.wait_heartbeat(timeout=20) is not None
+            rest = gcs.recv_match(type="BATTERY_STATUS", blocking=True, timeout=10)
+            after = gcs.recv_match(type="BATTERY_STATUS", blocking=True, timeout=10)
+            assert rest is not None and after is not None
+            assert 1.5 < (after._timestamp - rest._timestamp) < 2.5  # 0.5 Hz (wall clock)
+            assert (rest.voltages[0], rest.current_battery, rest.current_consumed, rest.battery_remaining) == (
+                16800, 0, 0, 100)
+            status = gcs.recv_match(type="SYS_STATUS", blocking=True, timeout=5)
+            assert (status.voltage_battery, status.current_battery, status.battery_remaining) == (16800, 0, 100)
+            tgt = (gcs.target_system, gcs.target_component)
+            gcs.mav.command_long_send(*tgt, M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 0, math.nan)
+            assert _ack(gcs, M.MAV_CMD_NAV_TAKEOFF).result == M.MAV_RESULT_ACCEPTED
+            gcs.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+            assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+            loaded = gcs.recv_match(type="SYS_STATUS", blocking=True, timeout=10,
+                                    condition="SYS_STATUS.current_battery > 500")  # over 5 A: the rotors spin
+            assert loaded is not None and 14000 < loaded.voltage_battery < 16800
+            flying = gcs.recv_match(type="BATTERY_STATUS", blocking=True, timeout=10,
+                                    condition="BATTERY_STATUS.current_battery > 500")
+            assert flying is not None and flying.voltages[0] < 16800 and flying.voltages[1] == 65535
+        finally:
+            assert v.stop() == 0
+    with instance_slot() as n:
+        gcs = _gcs(n)
+        v = _vehicle(n, tmp_path / "no-battery", "--profile", "x500")
+        try:
+            assert gcs.wait_heartbeat(timeout=20) is not None
+            gcs.mav.command_long_send(gcs.target_system, gcs.target_component, M.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+                                      M.MAVLINK_MSG_ID_BATTERY_STATUS, 1e6, 0, 0, 0, 0, 0)
+            assert _ack(gcs, M.MAV_CMD_SET_MESSAGE_INTERVAL).result == M.MAV_RESULT_UNSUPPORTED
+            assert gcs.recv_match(type="BATTERY_STATUS", blocking=True, timeout=3) is None
+        finally:
+            assert v.stop() == 0
