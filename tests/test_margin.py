@@ -119,7 +119,7 @@ def test_a_refused_out_directory_is_named_before_any_flight(tmp_path: Path) -> N
 
 
 # -- issue 22, defect 8: every --resolution the search takes ends ------------------------------------------------------
-@pytest.mark.parametrize("over", ["delay_ms", "loss_pct", "jitter_ms", "burst_len", "noise"])
+@pytest.mark.parametrize("over", ["delay_ms", "loss_pct", "jitter_ms", "burst_len", "noise", "wind_mps"])
 def test_a_resolution_too_fine_to_end_is_refused_naming_the_flag_and_its_range(over: str) -> None:
     r = subprocess.run([sys.executable, "-m", "bridge", "margin", "missions/sine.toml", "--over", over, "--until",
                         "rms=0.1", "--resolution", "1e-300"], cwd=ROOT, capture_output=True, text=True, timeout=60)
@@ -128,7 +128,7 @@ def test_a_resolution_too_fine_to_end_is_refused_naming_the_flag_and_its_range(o
     assert "--resolution must be in [" in lines[0] and f"for --over {over}" in lines[0] and "1e-300" in lines[0]
 
 
-@pytest.mark.parametrize("over", ["delay_ms", "loss_pct", "jitter_ms", "burst_len", "noise"])
+@pytest.mark.parametrize("over", ["delay_ms", "loss_pct", "jitter_ms", "burst_len", "noise", "wind_mps"])
 def test_the_finest_resolution_taken_ends_within_its_rounds(over: str) -> None:
     """The search's own steps (no flight: a value fails above a threshold) from the finest resolution the
     search takes to the coarsest, for a boundary near the range's bottom, inside it, at its top and nowhere
@@ -153,3 +153,24 @@ def test_the_finest_resolution_taken_ends_within_its_rounds(over: str) -> None:
                 value = s.next_value(resolution, top)
             if s.hi is not None and s.held:
                 assert s.hi - s.lo <= resolution or math.nextafter(s.lo, math.inf) >= s.hi, (resolution, s)
+
+
+def test_the_wind_margin_is_found_inside_its_bracket(tmp_path: Path) -> None:
+    """``--over wind_mps`` (issue 27): the steady wind the BS-ST law takes on the sine before its RMS passes
+    10 cm, on the process engine (the batch flies still air only), in at most 80 cells; each end of the
+    bracket flown again on its own lands on its side of the bound."""
+    r = bsst("margin", "missions/sine.toml", "--over", "wind_mps", "--until", "rms=0.1", "--controller", "bsst",
+             "--out", str(tmp_path))
+    assert r.returncode == 0, r.stderr
+    res = json.loads((tmp_path / "margin.json").read_text())
+    lo, hi = res["bracket"]
+    assert res["over"] == "wind_mps" and res["margin"] == lo and 0.0 < lo < hi and hi - lo <= 0.25, res
+    assert res["cells_flown"] == len(res["cells"]) <= 80
+    assert all(c["failed"] for c in res["cells"] if c["wind_mps"] >= hi)
+    assert not any(c["failed"] for c in res["cells"] if c["wind_mps"] <= lo)
+    assert simulate("missions/sine.toml", wind=lo).rms <= 0.1 < simulate("missions/sine.toml", wind=hi).rms
+    assert f"wind_mps {lo:g}" in r.stdout
+    windy = tmp_path / "windy.toml"
+    windy.write_text(dump_toml({**SHORT.to_dict(), "wind": {"speed_mps": 3.0}}))
+    refused = bsst("margin", str(windy), "--over", "wind_mps", "--until", "rms=0.1")
+    assert refused.returncode == 2 and "already sets speed_mps = 3" in refused.stderr, refused.stderr

@@ -621,3 +621,35 @@ def test_resume_refuses_a_mission_toml_edited_after_the_sweep(small_sweep: tuple
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and str(toml) in err, (case, err)
         assert ("no such file" if case == "missing" else "edited after the sweep") in err, (case, err)
+
+
+def test_a_wind_by_turbulence_grid(mission_file: Path, tmp_path: Path, capsys) -> None:
+    """``--wind 0,5 --turbulence none,moderate``: two axes of ``cells.csv``; each row is the one ``bsst sim``
+    with those flags (a still-air cell of a still-air mission is that mission, untouched); ``auto`` flies them
+    on the process engine (the batch flies still air only) and ``--engine batch`` refuses the wind in one line."""
+    out = tmp_path / "wind"
+    assert main(["sweep", str(mission_file), "--wind", "0,5", "--turbulence", "none,moderate", "--out", str(out),
+                 "--no-plots", "--jobs", "2"]) == 0
+    printed = capsys.readouterr().out
+    assert "engine process (the batch engine cannot fly this grid: [wind]" in printed, printed
+    rows = read_cells(out / CELLS_CSV)
+    assert [(r["wind_mps"], r["turbulence"]) for r in rows] == [(0.0, "none"), (0.0, "moderate"), (5.0, "none"),
+                                                                (5.0, "moderate")]
+    for r in rows:
+        flags = {**({"wind": r["wind_mps"]} if r["wind_mps"] else {}),
+                 **({"turbulence": r["turbulence"]} if r["turbulence"] != "none" else {})}
+        run = simulate(SHORT, **flags)
+        assert (run.rms, run.summary["outcome"]) == (r["rms"], r["outcome"]), (r, flags)
+        assert ripple_rms(run.trace["t"], run.trace["u2"], 250.0) == r["ripple_u2"]
+    assert rows[0]["rms"] < rows[1]["rms"] and rows[0]["rms"] < rows[2]["rms"]  # the air moves the vehicle
+    one = tmp_path / "one"
+    assert main(["sim", str(mission_file), "--wind", "5", "--turbulence", "moderate", "--no-plots",
+                 "--out", str(one)]) == 0
+    assert json.loads((one / "summary.json").read_text())["rms_3d"] == rows[3]["rms"]
+    capsys.readouterr()
+    assert main(["sweep", str(mission_file), "--wind", "0,5", "--engine", "batch", "--out", str(tmp_path / "b"),
+                 "--no-plots"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--engine batch: [wind]" in err, err
+    assert main(["sweep", str(mission_file), "--turbulence", "gale", "--out", str(tmp_path / "c")]) == 2
+    assert "--turbulence" in capsys.readouterr().err

@@ -24,6 +24,7 @@ from bridge.cli.flags import (
     int_in,
     law_list,
     link_table_from_args,
+    name_list,
     number_in,
 )
 from bridge.cli.options import (
@@ -69,6 +70,11 @@ def add_sweep_commands(sub: Any) -> None:
     p.add_argument("--no-plots", action="store_true", help="skip the heat maps")
     add_link_options(p, skip=("delay", "jitter", "loss", "burst"))  # fixed for every cell: --up-delay, --dup ...
     add_sensor_axes(p)  # --sensors fixed for every cell; --estimator and --noise are axes
+    p.add_argument("--wind", dest="wind_mps", type=axis_values("--wind", "wind_mps"), metavar="MPS,...",
+                   help="steady wind speeds, m/s (0-50), from the mission's [wind] from_deg (north without one)")
+    # the levels are plant.wind.TURBULENCE, written out so that building the parser loads no plant code
+    p.add_argument("--turbulence", type=name_list("--turbulence", ("none", "light", "moderate", "severe")),
+                   metavar="LEVEL,...", help="Dryden turbulence levels: none, light, moderate, severe")
     p.set_defaults(func=cmd_sweep)
     p = sub.add_parser("report", help="rebuild a sweep's report.md and heat maps from its cells.csv")
     p.add_argument("dir", metavar="DIR", help="sweep directory")
@@ -139,12 +145,14 @@ def connect_dask(address: str) -> Any:
 
 def add_margin_command(sub: Any) -> None:
     """``bsst margin``: the boundary of one link impairment by bisection (bridge.sweep.margin)."""
-    p = sub.add_parser("margin", help="find how much delay, loss, jitter, burst or sensor noise a law takes "
-                                      "(bisection)")
+    p = sub.add_parser("margin", help="find how much delay, loss, jitter, burst, sensor noise or wind a law "
+                                      "takes (bisection)")
     p.add_argument("mission", help="mission TOML file")
-    p.add_argument("--over", required=True, choices=("delay_ms", "loss_pct", "jitter_ms", "burst_len", "noise"),
+    p.add_argument("--over", required=True,
+                   choices=("delay_ms", "loss_pct", "jitter_ms", "burst_len", "noise", "wind_mps"),
                    help="the impairment searched (link values: both directions, as a sweep's axes; noise: the scale "
-                        "of every sigma of the sensor set, with --sensors and --estimator raw|ekf)")
+                        "of every sigma of the sensor set, with --sensors and --estimator raw|ekf; wind_mps: the "
+                        "steady wind, m/s, from the mission's [wind] from_deg)")
     p.add_argument("--until", required=True, metavar="rms=M|class=NAME",
                    help="failure: the 3-D RMS passes M metres, or the class is NAME or worse")
     p.add_argument("--controller", type=law_list("--controller"), metavar="LAW,...", help="laws to search")
@@ -164,6 +172,8 @@ def add_margin_command(sub: Any) -> None:
     p.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out")
     add_link_options(p)
     add_sensor_options(p)  # fixed for every probe; --noise conflicts with --over noise
+    p.add_argument("--turbulence", choices=("none", "light", "moderate", "severe"),
+                   help="Dryden turbulence flown with every probe (over [wind] turbulence)")
     p.set_defaults(func=cmd_margin)
 
 
@@ -183,7 +193,7 @@ def cmd_margin(args: argparse.Namespace) -> int:
     if args.over == "noise" and sensing["noise"] is not None:
         raise UsageError("bsst margin: --noise conflicts with --over noise (the noise scale is what is searched)")
     mission = prepare(load_mission(args.mission), Overrides(link=fixed or None, discretization=args.discretization,
-                                                            **sensing)).mission
+                                                            turbulence=args.turbulence, **sensing)).mission
     run_dir(args.out, f"{mission.name}-margin", args.overwrite, create=False)  # a refused --out before any flight
     live = sys.stderr.isatty()
 

@@ -20,6 +20,7 @@ from typing import Any
 from bridge.record.runlog import run_dir, write_json_atomic
 from bridge.sweep.cells import (
     CELLS_CSV,
+    COLUMNS,
     MISSION_HASH,
     SWEEP_JSON,
     CellsFile,
@@ -217,9 +218,11 @@ def _open_dir(spec: Sweep, out: str | Path | None, resume: bool, overwrite: bool
         meta = path / SWEEP_JSON
         if meta.exists():
             old = read_sweep_json(meta)
-            if "columns" in old and "noise" not in old["columns"]:  # before the vehicle's axes: other cells.csv
-                raise ConfigError(f"--resume: {meta}: a sweep of an older bsst (its {CELLS_CSV} has no estimator, "
-                                  f"noise columns); bsst report still reads it; fly the sweep into another --out")
+            lacks = [c for c in COLUMNS if c not in old.get("columns", COLUMNS)]
+            if lacks:  # before the vehicle's or the air's axes: another cells.csv
+                raise ConfigError(f"--resume: {meta}: a sweep of an older bsst (its {CELLS_CSV} has no "
+                                  f"{', '.join(lacks)} columns); bsst report still reads it; fly the sweep into "
+                                  "another --out")
             recorded = old.pop(MISSION_HASH, None)
             if old != ident:
                 diff = sorted(k for k in ident if old.get(k) != ident[k])

@@ -27,21 +27,24 @@ from bridge.sweep.grid import AXES, Cell
 from params import ConfigError, check_depth, read_regular_file
 
 COLUMNS = (
-    "controller", "rate_hz", "delay_ms", "jitter_ms", "loss_pct", "burst_len", "estimator", "noise", "seed",
+    "controller", "rate_hz", "delay_ms", "jitter_ms", "loss_pct", "burst_len", "estimator", "noise", "wind_mps",
+    "turbulence", "seed",
     "rms", "max", "settling_s", "tv_u2", "ripple_u2", "outcome", "class",
     "up_sent", "up_lost", "down_sent", "down_lost", "flown_s", "error",
 )
 
 
-# cells.csv before the vehicle's axes (issue 12): read (bsst report) with the values its sweep.json's mission
-# flew, never resumed (bridge.sweep.campaign refuses it, naming the file)
-LEGACY_COLUMNS = tuple(c for c in COLUMNS if c not in ("estimator", "noise"))
+# cells.csv before the vehicle's axes (issue 12) and before the air's (issue 27): read (bsst report) with the
+# values its sweep.json's mission flew, never resumed (bridge.sweep.campaign refuses it, naming the file)
+LEGACY_COLUMNS = tuple(c for c in COLUMNS if c not in ("estimator", "noise", "wind_mps", "turbulence"))
+WEATHERLESS_COLUMNS = tuple(c for c in COLUMNS if c not in ("wind_mps", "turbulence"))
+LEGACY_LAYOUTS = (LEGACY_COLUMNS, WEATHERLESS_COLUMNS, tuple(c for c in COLUMNS if c not in ("estimator", "noise")))
 
 
 INT_COLUMNS = ("seed", "up_sent", "up_lost", "down_sent", "down_lost")
 
 
-STR_COLUMNS = ("controller", "estimator", "outcome", "class", "error")
+STR_COLUMNS = ("controller", "estimator", "turbulence", "outcome", "class", "error")
 
 
 KEY_COLUMNS = (*AXES, "seed")  # what names a row's cell: never empty
@@ -150,8 +153,9 @@ def read_cells(path: str | Path, legacy: Mapping[str, Any] | None = None,
     killed sweep stopped writing) is left out; a blank line is skipped. With ``classes`` (what a resume
     keeps) each row's ``class`` must be the one its outcome, RMS and ripple give by them.
 
-    A file of an older sweep (:data:`LEGACY_COLUMNS`: no ``estimator``, ``noise``) is read when
-    ``legacy`` gives the values its cells flew (``{"estimator": ..., "noise": ...}``), refused otherwise."""
+    A file of an older sweep (:data:`LEGACY_LAYOUTS`: no ``estimator``, ``noise``, or no ``wind_mps``,
+    ``turbulence``) is read when ``legacy`` gives the values its cells flew (``{"estimator": ..., "noise": ...,
+    "wind_mps": ..., "turbulence": ...}``), refused otherwise."""
     p = Path(path)
     data = read_regular_file(p, f"a sweep's {CELLS_CSV}")
     try:
@@ -165,11 +169,12 @@ def read_cells(path: str | Path, legacy: Mapping[str, Any] | None = None,
         return rows
     header = _record(p, 1, lines[0])
     columns = COLUMNS
-    if tuple(header) == LEGACY_COLUMNS:
+    if tuple(header) in LEGACY_LAYOUTS:
+        columns = tuple(header)
         if legacy is None:
-            raise ConfigError(f"{p}: line 1: a {CELLS_CSV} of an older bsst (no estimator, noise columns): "
+            lacks = ", ".join(c for c in COLUMNS if c not in columns)
+            raise ConfigError(f"{p}: line 1: a {CELLS_CSV} of an older bsst (no {lacks} columns): "
                               "bsst report reads it, a sweep cannot add to it; fly the sweep into another --out")
-        columns = LEGACY_COLUMNS
     elif tuple(header) != COLUMNS:
         raise ConfigError(f"{p}: line 1: not a sweep's {CELLS_CSV} header (expected {','.join(COLUMNS[:4])},..., "
                           f"got {','.join(header[:4])[:60]!r}...)")

@@ -2,13 +2,15 @@
 
 In:  a mission and a :class:`Grid` (lists of values per axis: law, control rate Hz, one-way
      delay ms, jitter ms, loss %, mean loss-burst length in packets, the vehicle's estimator kind,
-     the noise scale of its sensor set (x every sigma); seeds)
+     the noise scale of its sensor set (x every sigma), the steady wind m/s, the turbulence level; seeds)
 Out: the :class:`Cell` list in grid order, and for each cell the overrides that
      :func:`bridge.core.flight.prepare` (the one path from a mission to its parts) applies
 
 Ranges: the link axes take :data:`bridge.link.model.NUMBER_RANGES`, the rate the mission
-loader's, the noise scale the ``[sensors] noise_scale`` one (:data:`plant.profiles.NOISE_SCALE_RANGE`),
-so a value a mission accepts is accepted here and the other way round.
+loader's, the noise scale the ``[sensors] noise_scale`` one (:data:`plant.profiles.NOISE_SCALE_RANGE`), the wind
+``[wind] speed_mps``'s (:data:`plant.wind.WIND_RANGES`) and the turbulence its levels (:data:`plant.wind.TURBULENCE`),
+so a value a mission accepts is accepted here and the other way round. The wind blows from the mission's
+``[wind] from_deg`` (0, from the north, without one).
 """
 
 from __future__ import annotations
@@ -26,20 +28,24 @@ from missions.mission import law_spec_problem
 from params import ConfigError
 from plant.profiles import NOISE_SCALE_RANGE
 from plant.sensors import SIGMA_KEYS, SensorConfig
+from plant.wind import TURBULENCE, WIND_RANGES
 
 # Grid axes, in the order of the product (the last varies fastest; seeds vary faster still). The vehicle's
 # axes come last, so that a grid without them keeps the order (and cells.csv its first columns) it had.
-AXES = ("controller", "rate_hz", "delay_ms", "jitter_ms", "loss_pct", "burst_len", "estimator", "noise")
+AXES = ("controller", "rate_hz", "delay_ms", "jitter_ms", "loss_pct", "burst_len", "estimator", "noise", "wind_mps",
+        "turbulence")
 
 
 LINK_AXES = ("delay_ms", "jitter_ms", "loss_pct", "burst_len")
 SENSING_AXES = ("estimator", "noise")  # the vehicle's: prepare()'s estimator and noise overrides
-NAME_AXES = ("controller", "estimator")  # axes of names; the others are numbers
+WEATHER_AXES = ("wind_mps", "turbulence")  # the air's: prepare()'s wind (its speed) and turbulence overrides
+NAME_AXES = ("controller", "estimator", "turbulence")  # axes of names; the others are numbers
 # Short names: command-line flags (--delay ...) and heat-map file names (map_delay_loss.png).
 
 
 SHORT = {"controller": "controller", "rate_hz": "rate", "delay_ms": "delay", "jitter_ms": "jitter",
-         "loss_pct": "loss", "burst_len": "burst", "estimator": "estimator", "noise": "noise"}
+         "loss_pct": "loss", "burst_len": "burst", "estimator": "estimator", "noise": "noise", "wind_mps": "wind",
+         "turbulence": "turbulence"}
 # Value of a link axis when neither the sweep nor the mission's [link.up] sets it.
 
 
@@ -47,7 +53,8 @@ LINK_DEFAULTS = {"delay_ms": 0.0, "jitter_ms": 0.0, "loss_pct": 0.0, "burst_len"
 # (lo, hi) of every numeric axis, units in the names: ms, %, packets, Hz.
 
 
-RANGES = {"rate_hz": MISSION_RANGES["rate_hz"], **{a: NUMBER_RANGES[a] for a in LINK_AXES}, "noise": NOISE_SCALE_RANGE}
+RANGES = {"rate_hz": MISSION_RANGES["rate_hz"], **{a: NUMBER_RANGES[a] for a in LINK_AXES}, "noise": NOISE_SCALE_RANGE,
+          "wind_mps": WIND_RANGES["speed_mps"]}
 
 
 MODES = ("offline", "lockstep")
@@ -62,6 +69,8 @@ class Grid:
     ``burst_len``: mean loss-burst length (packets, Gilbert-Elliott; 0 = independent losses).
     ``estimator``: the vehicle's estimator kinds (``truth``, ``ekf``, ``raw``); ``noise``: noise scales
     of the mission's sensor set (every sigma times it; 0 = exact sensors, still sampled and late).
+    ``wind_mps``: steady wind speeds (m/s, from the mission's ``[wind] from_deg``); ``turbulence``: Dryden
+    levels (``none``, ``light``, ``moderate``, ``severe``).
     ``seeds``: how many seeds per grid point (mission seed, +1, ...) or the seeds themselves.
     """
 
@@ -73,6 +82,8 @@ class Grid:
     burst_len: tuple[float, ...] = ()
     estimator: tuple[str, ...] = ()
     noise: tuple[float, ...] = ()
+    wind_mps: tuple[float, ...] = ()
+    turbulence: tuple[str, ...] = ()
     seeds: int | tuple[int, ...] = 1
 
     def __post_init__(self) -> None:
@@ -89,9 +100,10 @@ class Grid:
                     why = law_spec_problem(v)
                     if why:
                         raise ConfigError(f"grid.controller: {why}")
-                elif name == "estimator":
-                    if v not in ESTIMATOR_KINDS:
-                        raise ConfigError(f"grid.estimator: must be among {', '.join(ESTIMATOR_KINDS)}, got {v!r}")
+                elif name in ("estimator", "turbulence"):
+                    kinds = ESTIMATOR_KINDS if name == "estimator" else TURBULENCE
+                    if v not in kinds:
+                        raise ConfigError(f"grid.{name}: must be among {', '.join(kinds)}, got {v!r}")
                 else:
                     lo, hi = RANGES[name]
                     if not (lo <= v <= hi):  # also rejects nan
@@ -140,7 +152,8 @@ class Cell:
 
     ``link`` names the link axes that override the mission's ``[link.up]``/``[link.down]``;
     ``sensing`` the vehicle's axes (estimator kind, noise scale) that override its ``[estimator] kind``
-    and ``[sensors] noise_scale`` (those where the cell's value is not the mission's own).
+    and ``[sensors] noise_scale``, ``weather`` the air's (wind speed, turbulence) that override its ``[wind]``
+    (those where the cell's value is not the mission's own: a still-air cell of a still-air mission flies it).
     """
 
     controller: str
@@ -154,6 +167,9 @@ class Cell:
     estimator: str = "truth"
     noise: float = 1.0
     sensing: tuple[str, ...] = ()
+    wind_mps: float = 0.0
+    turbulence: str = "none"
+    weather: tuple[str, ...] = ()
 
     def key(self) -> tuple[Any, ...]:
         """What identifies the cell's row in ``cells.csv``."""
@@ -177,6 +193,12 @@ def mission_value(mission: Mission, axis: str) -> Any:
     if axis == "noise":
         scale = mission.sensors.get("noise_scale", 1.0)
         return float(scale) if isinstance(scale, (int, float)) and not isinstance(scale, bool) else 1.0
+    if axis == "wind_mps":
+        speed = mission.wind.get("speed_mps", 0.0)
+        return float(speed) if isinstance(speed, (int, float)) and not isinstance(speed, bool) else 0.0
+    if axis == "turbulence":
+        level = mission.wind.get("turbulence", "none")
+        return level if isinstance(level, str) else "none"  # a bad level: prepare() names it
     up = mission.link.get("up")
     for table in (up if isinstance(up, Mapping) else {}, mission.link):
         v = table.get(axis)
@@ -198,16 +220,22 @@ def cells(mission: Mission, grid: Grid) -> list[Cell]:
         # a vehicle axis overrides only where it differs from the mission's own value: the same flight, and
         # a grid of 'truth' cells stays one the batch engine builds from one prepare() per law and rate
         sensing = tuple(a for a in SENSING_AXES if a in given and v[a] != own[a])
-        out += [Cell(**v, seed=s, link=link, sensing=sensing) for s in seeds]
+        weather = tuple(a for a in WEATHER_AXES if a in given and v[a] != own[a])
+        out += [Cell(**v, seed=s, link=link, sensing=sensing, weather=weather) for s in seeds]
     return out
 
 
 def cell_overrides(cell: Cell) -> Overrides:
     """What a cell changes in its mission, as :func:`bridge.core.flight.prepare`'s overrides:
-    law, rate and seed, the swept link axes in both directions, and the vehicle's swept axes."""
+    law, rate and seed, the swept link axes in both directions, the vehicle's swept axes and the air's."""
     link = {d: {a: getattr(cell, a) for a in cell.link} for d in DIRECTIONS} if cell.link else None
+    weather: dict[str, Any] = {}
+    if "wind_mps" in cell.weather:
+        weather["wind"] = {"speed_mps": cell.wind_mps}  # over [wind]: its direction (from_deg) stays
+    if "turbulence" in cell.weather:
+        weather["turbulence"] = cell.turbulence
     return Overrides(controller=cell.controller, rate_hz=cell.rate_hz, seed=cell.seed, link=link,
-                     **{a: getattr(cell, a) for a in cell.sensing})  # the estimator and noise fields
+                     **{a: getattr(cell, a) for a in cell.sensing}, **weather)  # estimator, noise; wind, turbulence
 
 
 def noiseless(sensors: SensorConfig) -> bool:

@@ -1,9 +1,10 @@
-"""``bsst margin``: how much of one link impairment, or of sensor noise, a law takes before it
-fails, found by bisection instead of a grid.
+"""``bsst margin``: how much of one link impairment, of sensor noise, or of steady wind a law takes
+before it fails, found by bisection instead of a grid.
 
 In: a mission, the swept axis (``delay_ms`` | ``loss_pct`` | ``jitter_ms`` | ``burst_len``,
 applied to both directions as a sweep's axes are, or ``noise``: the scale of every sigma of the
-mission's sensor set, flown with its estimator), the failure criterion (``rms=X``: the 3-D
+mission's sensor set, flown with its estimator, or ``wind_mps``: the steady wind's speed, from the
+mission's ``[wind] from_deg``, with its turbulence), the failure criterion (``rms=X``: the 3-D
 RMS error passes X m; ``class=NAME``: the cell's class is NAME or worse, see
 :mod:`bridge.sweep.classes`), the laws and the seeds. Out: per law the margin (the largest
 value flown that did not fail, in the axis's unit), its bracket ``[margin, first failing
@@ -19,7 +20,8 @@ cells in ``margin.json`` show what was flown if it is not.
 Over ``noise`` the batch engine cannot fly the cells (it has no sensors): every probe is a
 scalar flight on the process engine, one at a time for one law and seed (a pool costs more
 than a few cells), so keep ``seeds`` and the laws few. Noise needs an estimator that reads
-the sensors (``raw`` or ``ekf``; ``truth`` ignores them) and a set with noise to scale.
+the sensors (``raw`` or ``ekf``; ``truth`` ignores them) and a set with noise to scale. Over
+``wind_mps`` too (the batch engine flies still air only): every probe on the process engine.
 """
 
 from __future__ import annotations
@@ -39,10 +41,11 @@ from bridge.sweep.grid import LINK_AXES, RANGES, Cell, mission_value, noise_prob
 from missions import Mission
 from params import ConfigError
 
-OVER = (*LINK_AXES, "noise")  # the axes a margin is searched over
+OVER = (*LINK_AXES, "noise", "wind_mps")  # the axes a margin is searched over
 # first value tried; noise: the set's own sigmas (1), so a set that holds them takes 1, 2, 4, ... up to the
 # range's top (plant.profiles.NOISE_SCALE_RANGE, 100): at most 8 doublings and 8 halvings at 0.25 per law and seed
-START = {"delay_ms": 16.0, "loss_pct": 10.0, "jitter_ms": 16.0, "burst_len": 4.0, "noise": 1.0}
+# wind: 4, 8, 16, 32, 50 m/s (the range's top), then halvings: about 12 probes per law and seed at 0.25 m/s
+START = {"delay_ms": 16.0, "loss_pct": 10.0, "jitter_ms": 16.0, "burst_len": 4.0, "noise": 1.0, "wind_mps": 4.0}
 MARGIN_JSON = "margin.json"
 IN_PROCESS_CELLS = 2  # a round of at most this many process-engine cells flies in this process
 MAX_HALVINGS = 24  # the finest --resolution is an axis's range / 2^24 (delay: 3.6 us, loss: 6e-6 %)
@@ -141,12 +144,16 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
     if over in LINK_AXES and base[over]:
         raise ConfigError(f"margin over {over}: the mission's [link] already sets {over} = {base[over]:g}; "
                           "search from a mission without it")
+    if over == "wind_mps" and mission_value(mission, over):
+        raise ConfigError(f"margin over wind_mps: the mission's [wind] already sets speed_mps = "
+                          f"{mission_value(mission, over):g}; search from a mission without it")
     flight = prepare(mission)
     if over == "noise":
         why = noise_problem((flight.estimator,), prepare(mission, noise=1.0).sensors)  # the set's own sigmas
         if why:
             raise ConfigError(f"margin over noise: {why}")
-    vehicle = {"estimator": flight.estimator, "noise": mission_value(mission, "noise")}
+    vehicle = {"estimator": flight.estimator, "noise": mission_value(mission, "noise"),
+               "turbulence": mission_value(mission, "turbulence")}
     seed_list = [mission.seed + i for i in range(seeds)]
     searches = [Search(c, lo_range) for c in laws]
     pending = {s.controller: START[over] for s in searches}
@@ -196,11 +203,13 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
 
 def probe(mission: Mission, law: str, over: str, value: float, seed: int, link: dict[str, float],
           vehicle: dict[str, Any]) -> Cell:
-    """The cell that flies ``value`` of ``over`` for one law and seed: a link axis in both directions, or
-    the noise scale; the other axes at the mission's own values (``link``, ``vehicle``)."""
+    """The cell that flies ``value`` of ``over`` for one law and seed: a link axis in both directions, the
+    noise scale or the wind; the other axes at the mission's own values (``link``, ``vehicle``)."""
     if over == "noise":
         return Cell(law, float(mission.rate_hz), **link, seed=seed, estimator=vehicle["estimator"], noise=value,
-                    sensing=("noise",))
+                    sensing=("noise",), turbulence=vehicle["turbulence"])
+    if over == "wind_mps":
+        return Cell(law, float(mission.rate_hz), **link, seed=seed, **vehicle, wind_mps=value, weather=("wind_mps",))
     return Cell(law, float(mission.rate_hz), **{**link, over: value}, seed=seed, link=(over,), **vehicle)
 
 

@@ -36,13 +36,14 @@ from bridge.sweep.cells import CELLS_CSV, SWEEP_JSON, read_cells, read_sweep_jso
 from bridge.sweep.classes import CLASSES, Classes, classify, thresholds_text
 from bridge.sweep.grid import AXES, LINK_AXES, NAME_AXES, SHORT
 from params import ConfigError
+from plant.wind import TURBULENCE
 
 NUMERIC_AXES = tuple(a for a in AXES if a not in NAME_AXES)
-# the axes a table (and a heat map) may have: the numbers, and the estimator kind (a few names, like a law;
+# the axes a table (and a heat map) may have: the numbers, the estimator kind, the turbulence (a few names, like a law;
 # the laws get a table each instead)
 MAP_AXES = tuple(a for a in AXES if a != "controller")
 UNITS = {"rate_hz": "Hz", "delay_ms": "ms", "jitter_ms": "ms", "loss_pct": "%", "burst_len": "packets",
-         "noise": "x sigma"}
+         "noise": "x sigma", "wind_mps": "m/s"}
 
 
 
@@ -64,9 +65,10 @@ class Point:
 
 
 def _values(rows: Sequence[Mapping[str, Any]], axis: str) -> list[Any]:
-    if axis == "estimator":  # in the order of ESTIMATOR_KINDS (truth, ekf, raw): the baseline first
-        return sorted({r[axis] for r in rows}, key=lambda k: (ESTIMATOR_KINDS.index(k) if k in ESTIMATOR_KINDS
-                                                               else len(ESTIMATOR_KINDS), k))
+    # names in their kind's order, the baseline first: estimator truth, ekf, raw; turbulence none to severe
+    order = {"estimator": ESTIMATOR_KINDS, "turbulence": TURBULENCE}.get(axis)
+    if order is not None:
+        return sorted({r[axis] for r in rows}, key=lambda k: (order.index(k) if k in order else len(order), k))
     return sorted({r[axis] for r in rows})
 
 
@@ -92,14 +94,20 @@ def _label(axis: str) -> str:
 
 
 def legacy_values(meta: Mapping[str, Any]) -> dict[str, Any]:
-    """What an older sweep's cells flew on the vehicle's axes (its ``cells.csv`` has no such columns): its
-    mission's ``[estimator] kind`` and ``[sensors] noise_scale``, else their defaults."""
+    """What an older sweep's cells flew on the vehicle's and the air's axes (its ``cells.csv`` has no such
+    columns): its mission's ``[estimator] kind``, ``[sensors] noise_scale``, ``[wind] speed_mps`` and
+    ``turbulence``, else their defaults."""
     mission = meta.get("mission") if isinstance(meta.get("mission"), Mapping) else {}
-    est, sensors = mission.get("estimator"), mission.get("sensors")
-    kind = est.get("kind", "truth") if isinstance(est, Mapping) else "truth"
-    scale = sensors.get("noise_scale", 1.0) if isinstance(sensors, Mapping) else 1.0
-    return {"estimator": kind if isinstance(kind, str) else "truth",
-            "noise": float(scale) if isinstance(scale, (int, float)) and not isinstance(scale, bool) else 1.0}
+    est, sensors, wind = (t if isinstance(t := mission.get(k), Mapping) else {}
+                          for k in ("estimator", "sensors", "wind"))
+    kind, scale = est.get("kind", "truth"), sensors.get("noise_scale", 1.0)
+    speed, level = wind.get("speed_mps", 0.0), wind.get("turbulence", "none")
+    return {"estimator": kind if isinstance(kind, str) else "truth", "noise": _number(scale, 1.0),
+            "wind_mps": _number(speed, 0.0), "turbulence": level if isinstance(level, str) else "none"}
+
+
+def _number(v: Any, default: float) -> float:
+    return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else default
 
 
 def grid_points(rows: Sequence[Mapping[str, Any]], a: str, b: str, classes: Classes) -> dict[tuple[Any, Any], Point]:

@@ -27,6 +27,7 @@ from bridge.sweep.grid import (
     MODES,
     RANGES,
     SENSING_AXES,
+    WEATHER_AXES,
     Cell,
     Grid,
     cell_flight,
@@ -37,6 +38,7 @@ from bridge.sweep.grid import (
 from missions import Mission, load_mission
 from missions.mission import is_plan_file, law_spec_from, law_spec_problem, mission_path
 from params import ConfigError, Table, load_toml
+from plant.wind import TURBULENCE
 
 MAX_CELLS = 10_000  # cells a sweep flies unless told more (max_cells): 48 cells of the 30 s sine take 15 s on 2
 # cores, so 10^4 take about an hour; 10^6 would take days, which is a typo far more often than a plan
@@ -94,13 +96,15 @@ class Sweep:
         }))
 
     def validate(self) -> None:
-        """Build the flight of every law, every rate, every estimator kind, every noise scale and every
-        combination of link values once (not every cell), so that a bad value fails before any cell runs;
-        first the grid's size; then that a swept noise scale changes something."""
+        """Build the flight of every law, every rate, every estimator kind, every noise scale, every wind and
+        turbulence and every combination of link values once (not every cell), so that a bad value fails before
+        any cell runs; first the grid's size; then that a swept noise scale changes something."""
         self.check_size()
         base = self.cells()[0]
         probes = [_replace_cell(base, **{a: v}) for a in ("controller", "rate_hz") for v in getattr(self.grid, a)]
         probes += [_replace_cell(base, **{a: v, "sensing": tuple({*base.sensing, a})}) for a in SENSING_AXES
+                   for v in getattr(self.grid, a)]
+        probes += [_replace_cell(base, **{a: v, "weather": tuple({*base.weather, a})}) for a in WEATHER_AXES
                    for v in getattr(self.grid, a)]
         lists = [getattr(self.grid, a) or (getattr(base, a),) for a in LINK_AXES]
         probes += [_replace_cell(base, **dict(zip(LINK_AXES, vs, strict=True))) for vs in product(*lists)]
@@ -132,6 +136,7 @@ def _replace_cell(c: Cell, **kw: Any) -> Cell:
     d.update(kw)
     d["link"] = tuple(d["link"])
     d["sensing"] = tuple(d["sensing"])
+    d["weather"] = tuple(d["weather"])
     return Cell(**d)
 
 
@@ -159,8 +164,8 @@ def load_sweep(path: str | Path) -> Sweep:
     axes: dict[str, Any] = {}
     for a in AXES:
         if g.has(a):
-            if a == "estimator":
-                axes[a] = tuple(_name_list(g, a, ESTIMATOR_KINDS))
+            if a in ("estimator", "turbulence"):
+                axes[a] = tuple(_name_list(g, a, ESTIMATOR_KINDS if a == "estimator" else TURBULENCE))
             elif a == "controller":
                 v = g.raw(a)
                 if isinstance(v, str):
