@@ -33,6 +33,7 @@ from bridge.autopilot.simvehicle import OFFBOARD
 from bridge.core.flight import prepare
 from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, GCS_PORT, LINK_PORT, Endpoint, parse_address
 from bridge.mavlink.receive import REPLY_RATE_HZ, RateLimiter, ReplyBudget
+from bridge.nodes.report import Ready, Stats
 from bridge.nodes.vehicle import Vehicle, VehicleConfig
 from bridge.session import instance_slot
 from missions import Mission, Sine
@@ -63,19 +64,19 @@ def _vehicle(n: int, out: Path, *extra: str) -> Iterator[Proc]:
     """``bsst vehicle`` on instance ``n``, ready; stopped (SIGTERM) whatever happens."""
     v = Proc.bsst("vehicle", "--instance", str(n), "--out", str(out), *extra)
     try:
-        v.wait_line(lambda s: s.startswith("ready"))
+        v.wait_report(Ready)
         yield v
     finally:
         v.stop()
 
 
 def _stats(v: Proc) -> dict[str, Any]:
-    return json.loads(v.wait_line(lambda s: s.startswith("stats "))[len("stats "):])
+    return v.wait_report(Stats).values
 
 
 def _events(v: Proc) -> list[str]:
-    """The vehicle's event texts (``kind: text``), in order."""
-    return [ln.split(" ", 2)[2] for ln in v.lines if ln.startswith("event ")]
+    """The vehicle's events as a person reads them (``kind: text [by ...]``), in order."""
+    return v.events()
 
 
 def _stations(n: int, key: bytes | None = None) -> tuple[Station, Station]:
@@ -683,3 +684,4 @@ def test_any_message_from_anyone_changes_nothing_unless_valid_and_authorised(ben
         assert _acks(back) == [M.MAV_RESULT_DENIED], (m, source, ids)
         assert after == before
     assert decoded <= 1
+

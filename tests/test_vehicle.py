@@ -22,6 +22,7 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.mavlink.endpoint import GCS_PORT, LINK_PORT
+from bridge.nodes.report import Ready, Stats
 from bridge.session import instance_slot
 from tests.sitlkit import ENV, ROOT, Proc
 
@@ -45,13 +46,12 @@ def _ack(conn, command: int, timeout: float = 10.0):
 
 def _vehicle(n: int, tmp_path, *extra: str) -> Proc:
     v = Proc.bsst("vehicle", "--instance", str(n), "--out", str(tmp_path), *extra)
-    v.wait_line(lambda s: s.startswith("ready"))
+    v.wait_report(Ready)
     return v
 
 
 def _stats(v: Proc) -> dict:
-    line = v.wait_line(lambda s: s.startswith("stats "), timeout=10)
-    return json.loads(line[len("stats "):])
+    return v.wait_report(Stats, timeout=10).values
 
 
 def test_pymavlink_ground_station(tmp_path):
@@ -227,7 +227,7 @@ def test_mavproxy_arms_through_stdin(tmp_path):
         finally:
             mp.stop()
             assert v.stop() == 0
-    v.wait_line(lambda s: "armed: armed" in s)
+    v.wait_event(lambda s: s.startswith("armed: armed"))
 
 
 MAVSDK_SCRIPT = r"""

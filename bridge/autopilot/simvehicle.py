@@ -103,18 +103,32 @@ class Sender:
 
 VEHICLE_LINK = "vehicle"
 ITSELF = Sender(None, None, None, None, VEHICLE_LINK)  # the vehicle's own decision
+TYPED_FIELDS = ("mode", "armed", "param", "value")  # an event's typed fields (:class:`Event`), as it travels
+
+
+def typed_fields(event: Any) -> dict[str, Any]:
+    """The typed fields of an event (this :class:`Event`, a report's, a run's: each carries them), by name."""
+    return {k: getattr(event, k) for k in TYPED_FIELDS}
 
 
 @dataclass
 class Event:
     """Something the vehicle did (or was told to do) at plant time ``t`` (s): its ``kind``
     (``armed``, ``disarmed``, ``mode``, ``failsafe``, ...), a human ``text``, and who caused it
-    (``by``; None: not said, e.g. offline, where only the flight's own controller commands)."""
+    (``by``; None: not said, e.g. offline, where only the flight's own controller commands).
+
+    What a reader judges by is in fields, never in the text: a ``mode`` event's ``mode`` (the mode
+    it is in after, or will arm in) and ``armed`` (it acted on an armed vehicle now; False: a
+    selection for the next arm); a ``param`` event's ``param`` (PX4's name) and ``value`` (the new value)."""
 
     t: float
     kind: str
     text: str
     by: Sender | None = None
+    mode: str | None = None
+    armed: bool | None = None
+    param: str | None = None
+    value: float | None = None
 
     @property
     def shown(self) -> str:
@@ -172,8 +186,9 @@ class SimVehicle:
         assert self.estimator is not None
         return estimator_nees(self.estimator, self.plant.state, estimate)
 
-    def event(self, kind: str, text: str) -> Event:
-        e = Event(self.plant.t, kind, text)
+    def event(self, kind: str, text: str, **fields: Any) -> Event:
+        """Record an event now; ``fields``: its typed fields (:class:`Event`)."""
+        e = Event(self.plant.t, kind, text, **fields)
         self.events.append(e)
         return e
 
@@ -212,12 +227,13 @@ class SimVehicle:
                 self._onboard_off()
                 self.last_command_t = self.plant.t
             self.mode = OFFBOARD
-            self.event("mode", "OFFBOARD" if self.armed else "OFFBOARD (disarmed: armed in it next)")
+            self.event("mode", "OFFBOARD" if self.armed else "OFFBOARD (disarmed: armed in it next)", mode=OFFBOARD,
+                       armed=self.armed)
             return
         self._takeoff_alt = alt
         if not self.armed:
             self.mode = mode
-            self.event("mode", f"{mode.upper()} (disarmed: armed in it next)")
+            self.event("mode", f"{mode.upper()} (disarmed: armed in it next)", mode=mode, armed=False)
             return
         if mode == TAKEOFF and not self.plant.on_ground and self.published()[4] >= self._start_z + alt:
             mode = HOLD  # already above it: PX4 refuses nothing here, it holds
@@ -237,7 +253,7 @@ class SimVehicle:
             target = Takeoff.here(X, self._start_z + alt)
             text = f"TAKEOFF to {alt:g} m over x={X[0]:.3f} y={X[2]:.3f} m"
         self.fly_onboard(target, mode)
-        self.event("mode", text)
+        self.event("mode", text, mode=mode, armed=True)
 
     def disarm(self, why: str = "disarmed") -> None:
         if self.armed:
@@ -257,8 +273,9 @@ class SimVehicle:
         before = VehicleParams(self.failsafe, self.takeoff_alt_m, sysid)
         after = change_param(before, name, value)
         self.failsafe, self.takeoff_alt_m = after.failsafe, after.takeoff_alt_m
-        text = f"{name} = {read_param(after, name):g} (was {read_param(before, name):g})"
-        self.event("param", text)
+        value = read_param(after, name)
+        text = f"{name} = {value:g} (was {read_param(before, name):g})"
+        self.event("param", text, param=name, value=value)
         return text
 
     def fly_onboard(self, target: Target, mode: str) -> None:
@@ -348,7 +365,7 @@ class SimVehicle:
             target = self.onboard.target
             if isinstance(target, Takeoff) and abs(self.published()[4] - target.z) < TAKEOFF_DONE_M:
                 self.fly_onboard(PositionHold(target.x, target.y, target.z), HOLD)
-                self.event("mode", f"HOLD: takeoff done at z={target.z:.3f} m")
+                self.event("mode", f"HOLD: takeoff done at z={target.z:.3f} m", mode=HOLD, armed=True)
         onboard = self.onboard
         sensors, estimator = self.sensors, self.estimator
         for i in range(self.substeps):

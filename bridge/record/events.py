@@ -4,7 +4,8 @@ In:  an event's time (s, the flight's clock), kind, text, who reported it (``sou
      vehicle, the controller, the relay or the session; offline none) and who caused it (``by``, a
      :class:`~bridge.autopilot.simvehicle.Sender`, or None)
 Out: :class:`RunEvent`; its dict for ``summary.json["events"]`` (:meth:`RunEvent.as_dict`: ``t`` s rounded
-     to 1 us or null, ``kind``, ``text`` with the sender shown as `` [by ...]``, ``source`` when there is one)
+     to 1 us or null, ``kind``, ``text`` with the sender shown as `` [by ...]``, ``source`` when there is one,
+     and the typed fields a vehicle's event has: ``mode`` and ``armed``, ``param`` and ``value``)
 
 The written `` [by ...]`` is for people (events.log, summary.json); everything that judges a run reads
 ``by`` (:mod:`bridge.record.policies`), never the text.
@@ -17,7 +18,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from bridge.autopilot.simvehicle import Sender
+from bridge.autopilot.simvehicle import TYPED_FIELDS, Sender, typed_fields
 
 
 @dataclass(frozen=True)
@@ -29,11 +30,16 @@ class RunEvent:
     text: str
     source: str | None = None
     by: Sender | None = None
+    mode: str | None = None  # the typed fields of the vehicle's events (bridge.autopilot.simvehicle.Event)
+    armed: bool | None = None
+    param: str | None = None
+    value: float | None = None
 
     @classmethod
-    def at(cls, t: float, kind: str, text: str, source: str | None = None, by: Sender | None = None) -> RunEvent:
-        """The event at ``t`` (s): rounded to 1 us, None if not finite."""
-        return cls(round(t, 6) if math.isfinite(t) else None, kind, text, source, by)
+    def at(cls, t: float, kind: str, text: str, source: str | None = None, by: Sender | None = None,
+           **fields: Any) -> RunEvent:
+        """The event at ``t`` (s): rounded to 1 us, None if not finite; ``fields``: its typed fields."""
+        return cls(round(t, 6) if math.isfinite(t) else None, kind, text, source, by, **fields)
 
     @property
     def shown(self) -> str:
@@ -45,6 +51,7 @@ class RunEvent:
         d: dict[str, Any] = {"t": self.t, "kind": self.kind, "text": self.shown}
         if self.source is not None:
             d["source"] = self.source
+        d.update((k, v) for k, v in typed_fields(self).items() if v is not None)
         return d
 
     @classmethod
@@ -53,4 +60,4 @@ class RunEvent:
         `` [by ...]`` stays text)."""
         by = d.get("by")
         return cls(d.get("t"), d["kind"], d.get("text", ""), d.get("source"),
-                   Sender.from_dict(by) if isinstance(by, Mapping) else None)
+                   Sender.from_dict(by) if isinstance(by, Mapping) else None, **{k: d.get(k) for k in TYPED_FIELDS})

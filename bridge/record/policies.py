@@ -56,7 +56,7 @@ from typing import Any
 
 import numpy as np
 
-from bridge.autopilot.simvehicle import Sender
+from bridge.autopilot.simvehicle import OFFBOARD, Sender
 from bridge.record.events import RunEvent
 
 POLICIES: dict[str, str] = {
@@ -143,7 +143,8 @@ def ended_by_command(events: Sequence[RunEvent], controller_id: tuple[int, int] 
     for e in vehicle_events(events):
         if e.t >= before_s - EPS_S:
             break
-        commanded = (e.kind == "disarmed" and "by command" in e.text) or e.kind == "mode"
+        # a disarm not of the vehicle's own (landed, stopped by its failsafe, diverged: ``by`` ITSELF)
+        commanded = (e.kind == "disarmed" and not (e.by is not None and e.by.is_vehicle)) or e.kind == "mode"
         if not commanded:
             continue
         who = e.by
@@ -227,11 +228,11 @@ def offboard_intervals(events: Sequence[RunEvent], armed_at_start: bool
             if since is not None:  # armed again without leaving: the timeout restarts
                 out.append((since, e.t, "armed"))
             since = e.t
-        elif e.kind == "mode" and e.text == "OFFBOARD":
+        elif e.kind == "mode" and e.armed and e.mode == OFFBOARD:
             if since is not None:  # OFFBOARD again, armed: the timeout counts from the switch
                 out.append((since, e.t, "mode"))
             since = e.t
-        elif (e.kind in _ENDS_OFFBOARD or (e.kind == "mode" and "(disarmed" not in e.text)) \
+        elif (e.kind in _ENDS_OFFBOARD or (e.kind == "mode" and e.armed)) \
                 and since is not None:  # a failsafe, a disarm, or a ground station's HOLD, LAND, TAKEOFF
             out.append((since, e.t, e.kind))
             since = None
@@ -277,12 +278,10 @@ def failsafe_in_time(t: np.ndarray, age: np.ndarray, events: Sequence[RunEvent],
 
 
 def timeout_changes(events: Sequence[RunEvent]) -> list[tuple[float, float]]:
-    """(t s, new timeout s) of each change of the offboard-loss timeout (COM_OF_LOSS_T) the events tell."""
-    out = []
-    for e in events:
-        if e.kind == "param" and e.text.startswith("COM_OF_LOSS_T = "):
-            out.append((e.t, float(e.text.split()[2])))
-    return out
+    """(t s, new timeout s) of each change of the offboard-loss timeout (COM_OF_LOSS_T) the events tell
+    (a ``param`` event's typed ``param`` and ``value``)."""
+    return [(e.t, float(e.value)) for e in events
+            if e.kind == "param" and e.param == "COM_OF_LOSS_T" and e.value is not None]
 
 
 def timeout_between(start: float, changes: Sequence[tuple[float, float]], a: float, b: float) -> float:

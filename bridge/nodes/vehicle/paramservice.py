@@ -31,13 +31,13 @@ class ParamService:
     """Answers the parameter protocol for one vehicle (its :class:`SimVehicle` holds the values)."""
 
     def __init__(self, sim: SimVehicle, authority: Authority, texts: StatusTexts,
-                 reject: Callable[[str], None], report: Callable[[str], None]) -> None:
+                 reject: Callable[[str], None], refused: Callable[[str], None]) -> None:
         self.sim = sim
         self.authority = authority
         self.sysid = authority.cfg.sysid
         self._texts = texts
         self._reject = reject
-        self._report = report
+        self._refused = refused  # a set refused, and why (its report to the session)
 
     def params(self) -> VehicleParams:
         return VehicleParams(self.sim.failsafe, self.sim.takeoff_alt_m, self.sysid)
@@ -92,7 +92,7 @@ class ParamService:
             attribute(self.sim.events, n0, self.authority.sender(m, addr, link))
         except ParamRefused as exc:
             self._reject("param_refused")
-            self._report(f"refused {exc}")
+            self._refused(str(exc))
             ep.reply((self.value(index), *self._texts(mavlink.MAV_SEVERITY_WARNING, str(exc))), addr)
             return False
         ep.reply((self.value(index),), addr)
