@@ -220,8 +220,11 @@ class SimVehicle:
         :attr:`takeoff_alt_m` if None), at the start of a control period. Armed, the vehicle flies it
         from this step: HOLD holds where it is, LAND lands where it is, TAKEOFF climbs over where it
         is, OFFBOARD takes the controller's targets again (its timeout counts from now). Disarmed, it
-        is the mode the next arm from a ground station arms in."""
+        is the mode the next arm from a ground station arms in. A request that changes nothing (OFFBOARD in
+        OFFBOARD; disarmed, the mode already selected) is no event: the flight is the same."""
         alt = self.takeoff_alt_m if takeoff_alt_m is None else takeoff_alt_m
+        if self.mode == mode and (mode == OFFBOARD or (not self.armed and alt == self._takeoff_alt)):
+            return
         if mode == OFFBOARD:
             if self.armed and self.mode != OFFBOARD:
                 self._onboard_off()

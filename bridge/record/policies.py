@@ -137,14 +137,17 @@ def lockstep_record(events: Sequence[RunEvent], off_clock_t: float | None = None
 
 def ended_by_command(events: Sequence[RunEvent], controller_id: tuple[int, int] = CONTROLLER_ID,
                      before_s: float = math.inf) -> tuple[RunEvent, Sender | None] | None:
-    """The vehicle's first disarm by command before ``before_s`` (or a mode change) that the
-    configured controller on its own link did not send: the event and its sender (None when the
-    event names none), or None."""
+    """The vehicle's first disarm by command before ``before_s`` (or a takeover: a mode change of the
+    armed vehicle out of OFFBOARD, not the vehicle's own) that the configured controller on its own link
+    did not send: the event and its sender (None when the event names none), or None. A mode selected
+    while disarmed, for the next arm, ends nothing: the controller's arm flies OFFBOARD."""
     for e in vehicle_events(events):
         if e.t >= before_s - EPS_S:
             break
         # a disarm not of the vehicle's own (landed, stopped by its failsafe, diverged: ``by`` ITSELF)
-        commanded = (e.kind == "disarmed" and not (e.by is not None and e.by.is_vehicle)) or e.kind == "mode"
+        own = e.by is not None and e.by.is_vehicle
+        commanded = ((e.kind == "disarmed" and not own)
+                     or (e.kind == "mode" and bool(e.armed) and e.mode != OFFBOARD and not own))
         if not commanded:
             continue
         who = e.by
