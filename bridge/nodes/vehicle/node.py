@@ -371,8 +371,11 @@ class Vehicle:
                 break
             msgs[:0] = chunks
         msgs.append(self._heartbeat())
-        for ep in self.endpoints:
-            ep.send_many(msgs)  # one datagram per link
+        for ep in self.endpoints:  # one datagram per link
+            if ep.trial is not None and ep.peer is not None and not self._flight_on():
+                ep.reply(msgs, ep.peer)  # a would-be controller's doing: within its trial's credit (Receiver)
+            else:
+                ep.send_many(msgs)
 
     # -- sending ---------------------------------------------------------------------------------
     def _send_odometry(self, now: float, fresh: bool = True) -> None:
