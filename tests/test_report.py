@@ -10,7 +10,7 @@ import json
 
 import pytest
 
-from bridge.autopilot.simvehicle import ITSELF, Sender
+from bridge.autopilot.simvehicle import ITSELF, ParamChanged, Sender
 from bridge.autopilot.simvehicle import Event as VehicleEvent
 from bridge.nodes.report import (
     Done,
@@ -85,16 +85,16 @@ def test_a_vehicle_event_travels_with_its_sender_and_typed_fields():
     mode = VehicleEvent(1.23456, "mode", "HOLD (disarmed: armed in it next)", GCS, mode="hold", armed=False)
     r = parse_line(to_line(Event.of(mode)))
     assert r == Event(1.235, "mode", "HOLD (disarmed: armed in it next)", GCS, mode="hold", armed=False)
-    param = VehicleEvent(2.0, "param", "COM_OF_LOSS_T = 0.01 (was 0.5)", GCS, param="COM_OF_LOSS_T", value=0.01)
-    assert parse_line(to_line(Event.of(param))) == Event(2.0, "param", param.text, GCS, param="COM_OF_LOSS_T",
-                                                         value=0.01)
+    change = ParamChanged("COM_OF_LOSS_T", 0.5, 0.01)
+    param = VehicleEvent(2.0, "param", "COM_OF_LOSS_T = 0.01 (was 0.5)", GCS, param=change)
+    assert parse_line(to_line(Event.of(param))) == Event(2.0, "param", param.text, GCS, param=change)
     assert param.shown == "COM_OF_LOSS_T = 0.01 (was 0.5) [by 255:190 127.0.0.1:14550 gcs]"  # for people only
     landed = parse_line(to_line(Event.of(VehicleEvent(3.0, "disarmed", "landed: disarmed", ITSELF))))
     assert landed == Event(3.0, "disarmed", "landed: disarmed", ITSELF) and landed.by is ITSELF
 
 
-@pytest.mark.parametrize("field, bad", [("mode", 1), ("armed", "yes"), ("armed", 1), ("param", 5), ("value", "1"),
-                                        ("value", True)])
+@pytest.mark.parametrize("field, bad", [("mode", 1), ("armed", "yes"), ("armed", 1), ("param", 5),
+                                        ("param", {"name": "X"})])
 def test_a_mistyped_event_field_is_no_report(field, bad):
     body = json.loads(to_line(Event(1.0, "mode", "x")))
     assert parse_line(json.dumps({**body, field: bad})) is None

@@ -85,6 +85,11 @@ class Sender:
         return f"{self.sysid}:{self.compid} {self.host}:{self.port} {self.link}"
 
     @property
+    def addr(self) -> tuple[str, int]:
+        """(host, port) it sent from: where its answers go."""
+        return (str(self.host), int(self.port or 0))
+
+    @property
     def suffix(self) -> str:
         """`` [by ...]``: how a written event (events.log, summary.json) names its sender; never parsed back."""
         return f" [by {self}]"
@@ -103,12 +108,30 @@ class Sender:
 
 VEHICLE_LINK = "vehicle"
 ITSELF = Sender(None, None, None, None, VEHICLE_LINK)  # the vehicle's own decision
-TYPED_FIELDS = ("mode", "armed", "param", "value")  # an event's typed fields (:class:`Event`), as it travels
+TYPED_FIELDS = ("param", "mode", "armed")  # an event's typed fields (:class:`Event`), as it travels
 
 
 def typed_fields(event: Any) -> dict[str, Any]:
     """The typed fields of an event (this :class:`Event`, a report's, a run's: each carries them), by name."""
     return {k: getattr(event, k) for k in TYPED_FIELDS}
+
+
+@dataclass(frozen=True)
+class ParamChanged:
+    """A parameter the vehicle changed: its PX4 ``name``, the value it had (``old``) and has (``new``), as
+    PARAM_VALUE reads them (an INT32's as a float)."""
+
+    name: str
+    old: float
+    new: float
+
+    def as_dict(self) -> dict[str, str | float]:
+        return {"name": self.name, "old": self.old, "new": self.new}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> ParamChanged:
+        """The inverse of :meth:`as_dict`; ValueError (or KeyError, TypeError) for anything else."""
+        return cls(str(d["name"]), float(d["old"]), float(d["new"]))
 
 
 @dataclass
@@ -117,18 +140,17 @@ class Event:
     (``armed``, ``disarmed``, ``mode``, ``failsafe``, ...), a human ``text``, and who caused it
     (``by``; None: not said, e.g. offline, where only the flight's own controller commands).
 
-    What a reader judges by is in fields, never in the text: a ``mode`` event's ``mode`` (the mode
-    it is in after, or will arm in) and ``armed`` (it acted on an armed vehicle now; False: a
-    selection for the next arm); a ``param`` event's ``param`` (PX4's name) and ``value`` (the new value)."""
+    What a reader judges by is in fields, never in the text: a ``param`` event's change (``param``:
+    name, old and new value); a ``mode`` event's ``mode`` (the mode it is in after, or will arm in)
+    and ``armed`` (it acted on an armed vehicle now; False: a selection for the next arm)."""
 
     t: float
     kind: str
     text: str
     by: Sender | None = None
+    param: ParamChanged | None = None
     mode: str | None = None
     armed: bool | None = None
-    param: str | None = None
-    value: float | None = None
 
     @property
     def shown(self) -> str:
@@ -269,17 +291,18 @@ class SimVehicle:
         self.onboard.disengage()
         self.land_at = None
 
-    def change_param(self, name: str, value: float, sysid: int = 1) -> str:
+    def change_param(self, name: str, value: float, sysid: int = 1) -> Event | None:
         """Set parameter ``name`` (PX4's name, :mod:`bridge.autopilot.params`) to ``value``, checked
         (:class:`~bridge.autopilot.params.ParamRefused` if it cannot be): it acts from the next control
-        period on (a failsafe already flying keeps the action it began with). An event says it."""
+        period on (a failsafe already flying keeps the action it began with). A ``param`` event says it
+        (returned); a set that leaves every setting as it was is no change: no event, None."""
         before = VehicleParams(self.failsafe, self.takeoff_alt_m, sysid)
         after = change_param(before, name, value)
+        if after == before:
+            return None
         self.failsafe, self.takeoff_alt_m = after.failsafe, after.takeoff_alt_m
-        value = read_param(after, name)
-        text = f"{name} = {value:g} (was {read_param(before, name):g})"
-        self.event("param", text, param=name, value=value)
-        return text
+        old, new = read_param(before, name), read_param(after, name)
+        return self.event("param", f"{name} = {new:g} (was {old:g})", param=ParamChanged(name, float(old), float(new)))
 
     def fly_onboard(self, target: Target, mode: str) -> None:
         """Hand the motors to the on-board controller flying ``target`` under ``mode`` (not

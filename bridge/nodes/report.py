@@ -9,7 +9,8 @@ The kinds, and their fields (times in s of the flight's clock, to the millisecon
 - ``ready``: the child is up, bound, its clock chosen (:class:`Ready`: which node, its addresses);
 - ``event``: something happened (:class:`Event`: ``t`` s, ``kind``, ``text``, ``by`` the
   :class:`~bridge.autopilot.simvehicle.Sender` that caused it, as an object, or null; a vehicle's
-  ``mode`` event its ``mode`` and ``armed``, a ``param`` event its ``param`` and ``value``, else null);
+  ``param`` event its change, ``param`` (``{name, old, new}``), a ``mode`` event its ``mode`` and ``armed``,
+  else null);
 - ``statustext``: a STATUSTEXT the controller received (:class:`StatusText`: MAV_SEVERITY, text);
 - ``warning``: what the receive path refused lately (:class:`Warning`,
   :meth:`bridge.mavlink.receive.Rejections.report`);
@@ -30,7 +31,7 @@ from enum import StrEnum
 from typing import Any
 
 from bridge.autopilot.simvehicle import Event as VehicleEvent
-from bridge.autopilot.simvehicle import Sender, typed_fields
+from bridge.autopilot.simvehicle import ParamChanged, Sender, typed_fields
 
 
 class Kind(StrEnum):
@@ -84,16 +85,16 @@ class Ready:
 @dataclass(frozen=True)
 class Event:
     """An event at ``t`` (s, to the millisecond: :meth:`at`) of ``kind``, its ``text``, who caused it, and
-    the typed fields of the vehicle's events (:class:`bridge.autopilot.simvehicle.Event`)."""
+    the typed fields of the vehicle's events (:class:`bridge.autopilot.simvehicle.Event`: a parameter
+    event's change, ``param``; a mode event's ``mode`` and ``armed``)."""
 
     t: float
     kind: str
     text: str
     by: Sender | None = None
+    param: ParamChanged | None = None
     mode: str | None = None
     armed: bool | None = None
-    param: str | None = None
-    value: float | None = None
 
     @classmethod
     def at(cls, t: float, kind: str, text: str, by: Sender | None = None, **fields: Any) -> Event:
@@ -158,7 +159,7 @@ def to_line(report: Report) -> str:
     body: dict[str, Any] = {"report": KIND_OF[type(report)].value}
     for f in fields(report):
         v = getattr(report, f.name)
-        body[f.name] = v.as_dict() if isinstance(v, Sender) else v
+        body[f.name] = v.as_dict() if isinstance(v, (Sender, ParamChanged)) else v
     return json.dumps(body, separators=(",", ":"))
 
 
@@ -173,6 +174,8 @@ def parse_line(line: str) -> Report | None:
         cls = _CLASS_OF[Kind(body.pop("report"))]
         if cls is Event and body.get("by") is not None:
             body["by"] = Sender.from_dict(body["by"])
+        if cls is Event and body.get("param") is not None:
+            body["param"] = ParamChanged.from_dict(body["param"])
         report = cls(**body)
     except (ValueError, KeyError, TypeError, AttributeError):
         return None
@@ -183,9 +186,8 @@ def _well_typed(report: Report) -> bool:
     """Whether the fields a reader relies on have their types (a JSON line is anyone's to write)."""
     if isinstance(report, Event):
         return (_number(report.t) and isinstance(report.kind, str) and isinstance(report.text, str)
-                and all(v is None or isinstance(v, str) for v in (report.mode, report.param))
-                and (report.armed is None or isinstance(report.armed, bool))
-                and (report.value is None or _number(report.value)))
+                and (report.mode is None or isinstance(report.mode, str))
+                and (report.armed is None or isinstance(report.armed, bool)))
     if isinstance(report, Stats):
         return isinstance(report.values, dict)
     if isinstance(report, Done):

@@ -1,11 +1,12 @@
 """A run's events as the record keeps them: typed, with their sender as a field.
 
 In:  an event's time (s, the flight's clock), kind, text, who reported it (``source``: in a session the
-     vehicle, the controller, the relay or the session; offline none) and who caused it (``by``, a
-     :class:`~bridge.autopilot.simvehicle.Sender`, or None)
+     vehicle, the controller, the relay or the session; offline none), who caused it (``by``, a
+     :class:`~bridge.autopilot.simvehicle.Sender`, or None) and a parameter event's change (``param``, a
+     :class:`~bridge.autopilot.simvehicle.ParamChanged`: name, old and new value, or None)
 Out: :class:`RunEvent`; its dict for ``summary.json["events"]`` (:meth:`RunEvent.as_dict`: ``t`` s rounded
      to 1 us or null, ``kind``, ``text`` with the sender shown as `` [by ...]``, ``source`` when there is one,
-     and the typed fields a vehicle's event has: ``mode`` and ``armed``, ``param`` and ``value``)
+     ``param`` (``{name, old, new}``), ``mode`` and ``armed`` when the event has them)
 
 The written `` [by ...]`` is for people (events.log, summary.json); everything that judges a run reads
 ``by`` (:mod:`bridge.record.policies`), never the text.
@@ -18,7 +19,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from bridge.autopilot.simvehicle import TYPED_FIELDS, Sender, typed_fields
+from bridge.autopilot.simvehicle import ParamChanged, Sender, typed_fields
 
 
 @dataclass(frozen=True)
@@ -30,10 +31,9 @@ class RunEvent:
     text: str
     source: str | None = None
     by: Sender | None = None
-    mode: str | None = None  # the typed fields of the vehicle's events (bridge.autopilot.simvehicle.Event)
+    param: ParamChanged | None = None  # the typed fields of the vehicle's events (bridge.autopilot.simvehicle.Event)
+    mode: str | None = None
     armed: bool | None = None
-    param: str | None = None
-    value: float | None = None
 
     @classmethod
     def at(cls, t: float, kind: str, text: str, source: str | None = None, by: Sender | None = None,
@@ -51,13 +51,16 @@ class RunEvent:
         d: dict[str, Any] = {"t": self.t, "kind": self.kind, "text": self.shown}
         if self.source is not None:
             d["source"] = self.source
-        d.update((k, v) for k, v in typed_fields(self).items() if v is not None)
+        d.update((k, v.as_dict() if isinstance(v, ParamChanged) else v)
+                 for k, v in typed_fields(self).items() if v is not None)
         return d
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> RunEvent:
         """An event as :meth:`as_dict` gave it (``by`` read only when given as an object: a written
         `` [by ...]`` stays text)."""
-        by = d.get("by")
+        by, param = d.get("by"), d.get("param")
         return cls(d.get("t"), d["kind"], d.get("text", ""), d.get("source"),
-                   Sender.from_dict(by) if isinstance(by, Mapping) else None, **{k: d.get(k) for k in TYPED_FIELDS})
+                   Sender.from_dict(by) if isinstance(by, Mapping) else None,
+                   ParamChanged.from_dict(param) if isinstance(param, Mapping) else None,
+                   mode=d.get("mode"), armed=d.get("armed"))

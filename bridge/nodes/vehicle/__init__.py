@@ -9,7 +9,8 @@ In:  actuator targets on the controller link, stamped with the ``time_usec`` of 
 Out: ODOMETRY (NED position m, FRD body velocity m/s, quaternion FRD to NED, FRD rates rad/s;
      ``time_usec`` = simulation time, us), once per control step; HEARTBEAT at 1 Hz (PX4's
      ``custom_mode``), STATUSTEXT on each event, the GCS streams (25 Hz / 10 Hz, ``time_boot_ms`` =
-     simulation time; with sensors HIGHRES_IMU and GPS_RAW_INT), PARAM_VALUE; ``vehicle.tlog``,
+     simulation time; with sensors HIGHRES_IMU and GPS_RAW_INT), PARAM_VALUE, the mission protocol's answers,
+     MISSION_CURRENT (1 Hz) and MISSION_ITEM_REACHED; ``vehicle.tlog``,
      ``vehicle.csv`` rows; its reports on stdout (JSON lines)
 
 Its clocks and its end of the link model: docs/design.md, "Clocks" and "Link model". Its
@@ -63,6 +64,7 @@ Its parts, as PX4 splits an autopilot:
 - :mod:`.authority`     who may command what on which link; who caused an event (its ``by``)
 - :mod:`.commander`     arming, flight modes, commands, the triggers that end a flight
 - :mod:`.paramservice`  PX4's parameters over MAVLink
+- :mod:`.mission`       PX4's mission protocol (upload, download, clear, set current) and the mission held
 - :mod:`.targets`       the controller's answers: actuator targets, the no-target acknowledgement
 - :mod:`.receiver`      the receive path: each message, its sender's authority checked, to its part
 - :mod:`.streams`       the telemetry streams (message id -> builder and rate), HEARTBEAT, ODOMETRY

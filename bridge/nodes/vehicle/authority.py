@@ -10,7 +10,9 @@ Out: why the message is refused for its sender (a :class:`~bridge.mavlink.receiv
 Only the configured controller (its sysid and compid) is heard on the controller link: with
 ``controller_from`` only from that address, else during a flight only from the flight's address. A
 ground station may command on the GCS link (its commands still pass :mod:`bridge.mavlink.receive`'s
-checks). A command for another system is refused as ``target`` whoever sent it.
+checks). A command for another system is refused as ``target`` whoever sent it. The mission is the ground
+station's: the controller may download it (:data:`MISSION_READS`), not change it (:data:`MISSION_WRITES`:
+``not_authorised`` on the controller link).
 """
 
 from __future__ import annotations
@@ -23,10 +25,14 @@ from bridge.mavlink.receive import addressed_elsewhere
 from bridge.nodes.vehicle.config import VehicleConfig
 
 TARGETS = frozenset({"HIL_ACTUATOR_CONTROLS", "SET_ACTUATOR_CONTROL_TARGET"})
-ADDRESSED = frozenset({"COMMAND_LONG", "COMMAND_INT", "MISSION_REQUEST_LIST", "PARAM_REQUEST_LIST",
-                       "PARAM_REQUEST_READ", "PARAM_SET", "SET_MODE"})  # target fields checked first
+# the mission protocol's messages that change the mission: a ground station's, never the controller's
+MISSION_WRITES = frozenset({"MISSION_COUNT", "MISSION_ITEM", "MISSION_ITEM_INT", "MISSION_CLEAR_ALL",
+                            "MISSION_SET_CURRENT"})
+MISSION_READS = frozenset({"MISSION_REQUEST_LIST", "MISSION_REQUEST", "MISSION_REQUEST_INT", "MISSION_ACK"})
+ADDRESSED = frozenset({"COMMAND_LONG", "COMMAND_INT", "PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET",
+                       "SET_MODE", *MISSION_WRITES, *MISSION_READS})  # target fields checked first
 COMMANDS = frozenset({"COMMAND_LONG", "COMMAND_INT"})
-ATTRIBUTED = ("armed", "disarmed", "mode", "interval", "param")  # the events that say who caused them
+ATTRIBUTED = ("armed", "disarmed", "mode", "interval", "param", "mission")  # the events that say who caused them
 
 
 def claim(event: Event, by: Sender | None) -> None:
@@ -68,6 +74,8 @@ class Authority:
             return "target"
         if not self.from_controller(m):
             return "sender" if kind in TARGETS else "not_authorised"
+        if kind in MISSION_WRITES:
+            return "not_authorised"
         if self.pinned is not None and addr != self.pinned:
             return "stranger"
         if not known and peer is not None and flight_on:

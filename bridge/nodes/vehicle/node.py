@@ -9,7 +9,8 @@ Out: ODOMETRY of step k (``time_usec`` = k / rate_hz, us) to the controller; HEA
      through :meth:`Vehicle._report`
 
 The parts (this package): the step clock (:mod:`.clock`), who is heard (:mod:`.authority`), arming,
-modes and commands (:mod:`.commander`), parameters (:mod:`.paramservice`), telemetry (:mod:`.streams`),
+modes and commands (:mod:`.commander`), parameters (:mod:`.paramservice`), the mission protocol and the
+mission (:mod:`.mission`), telemetry (:mod:`.streams`),
 the trace rows (:mod:`.rows`). Here: the loops of the clock's states (lockstep, free-running, idle),
 the receive path and its dispatch, and the wall-clock housekeeping.
 """
@@ -36,6 +37,7 @@ from bridge.nodes.vehicle.authority import Authority, claim
 from bridge.nodes.vehicle.clock import Answer, Clock, ClockState, Trigger
 from bridge.nodes.vehicle.commander import Commander, CommanderPorts
 from bridge.nodes.vehicle.config import CLOCKS, VehicleConfig
+from bridge.nodes.vehicle.mission import MissionManager
 from bridge.nodes.vehicle.paramservice import ParamService
 from bridge.nodes.vehicle.receiver import Receiver, ReceiverPorts, Refusals
 from bridge.nodes.vehicle.rows import Rows
@@ -104,6 +106,8 @@ class Vehicle:
         self.targets = Targets(self.sim, self.clock, self.authority, self.rate, self.actuation, self._reject)
         self._statustext = StatusTexts()
         self.params = ParamService(self.sim, self.authority, self._statustext, self._reject, self._refused)
+        self.missions = MissionManager(self.sim, self.authority, self._statustext, self._to_ground_stations,
+                                       self._refused)
         ports = CommanderPorts(step=lambda: self.k, state_out=self._send_odometry, new_flight=self._new_flight,
                                arm_through_link=lambda: self.vend.receive_arm(self.t),
                                target_wall=lambda: self.targets.wall, message=self._message,
@@ -111,7 +115,7 @@ class Vehicle:
         self.commander = Commander(self.sim, self.clock, self.authority, self._statustext,
                                    {"controller": self.ctl_streams, "gcs": self.streams}, self.substeps, ports)
         self.receiver = Receiver(self.link, self.authority, self._reject, self.targets, self.commander, self.params,
-                                 ReceiverPorts(step=lambda: self.k, flight_on=self._flight_on,
+                                 self.missions, ReceiverPorts(step=lambda: self.k, flight_on=self._flight_on,
                                                announce=self._drain_events, heartbeat=self._heartbeat,
                                                clock_ns=self._clock_ns))
         self._handle = self.receiver.handle  # (an attribute: one call less on the lockstep's hot path)
@@ -397,9 +401,10 @@ class Vehicle:
     def _view(self) -> VehicleView:
         """The vehicle now, as its telemetry reads it."""
         sim, plant, cfg = self.sim, self.plant, self.cfg
+        mission = self.missions.mission
         return VehicleView(plant.state, self.t, sim.mode, sim.onboard.target, sim.armed, self.clock.halted,
                            plant.on_ground, plant.omega, self.flight.profile.omega_max, self.load, sim.sensors,
-                           cfg.home, cfg.sysid)
+                           cfg.home, cfg.sysid, (mission.current, len(mission.items)))
 
     def _heartbeat(self) -> Any:
         return heartbeat(self._view())
@@ -414,6 +419,7 @@ class Vehicle:
         if self.gcs is not None:
             for m, addr in self.gcs.poll():
                 self._handle(self.gcs, m, addr)
+        self.missions.tick(now)
         if now >= self._next_heartbeat:
             self._next_heartbeat = now + HEARTBEAT_S
             hb = self._heartbeat()
@@ -439,6 +445,11 @@ class Vehicle:
         nxt = min([self._next_heartbeat, now + HOUSEKEEPING_S, *self.streams.due.values(),
                    *self.ctl_streams.due.values()])
         self._next_house = max(nxt, now + 0.001)
+
+    def _to_ground_stations(self, msgs: list[Any]) -> None:
+        """``msgs`` to the GCS link's ground station (none without a GCS link)."""
+        if self.gcs is not None:
+            self.gcs.send_many(msgs)
 
     def _flight_on(self) -> bool:
         """Armed, or a lockstep flight on: the controller's address is held."""

@@ -2,15 +2,16 @@
 handed to the part that acts on it.
 
 In:  a message (pymavlink), the :class:`Endpoint` it came in on and its source address (host, port)
-Out: calls into the parts (:class:`Targets`, :class:`Commander`, :class:`ParamService`); answers to the
-     requests that change nothing (TIMESYNC with the vehicle's clock in ns, PING, MISSION_COUNT 0, an FTP
-     NAK); the controller link's peer learned; refusals counted, with whether the flight's controller
-     sent them (:class:`Refusals`)
+Out: calls into the parts (:class:`Targets`, :class:`Commander`, :class:`ParamService`,
+     :class:`MissionManager`); answers to the requests that change nothing (TIMESYNC with the vehicle's clock
+     in ns, PING, an FTP NAK); the controller link's peer learned; refusals counted, with whether the flight's
+     controller sent them (:class:`Refusals`)
 
 Before a flight, a vehicle not told its controller's address (no ``controller_from``) cannot know its
 controller: whoever claims the controller's ids on the controller link is on trial, and every reply to
 the would-be controllers (their peer included) is charged, to each one's reply budget and to one credit
-they share: all together get back at most the bytes they sent (:class:`~bridge.mavlink.receive.ReplyCredit`;
+they share: all together get back at most the bytes they sent, plus one frame
+(:class:`~bridge.mavlink.receive.ReplyCredit`;
 docs/hostile-input.md, "Load shedding"). A flight on, its controller is known and answered freely.
 """
 
@@ -27,6 +28,8 @@ from bridge.mavlink.modes import ftp_nak
 from bridge.mavlink.receive import Rejections, ReplyCredit
 from bridge.nodes.vehicle.authority import COMMANDS, TARGETS, Authority
 from bridge.nodes.vehicle.commander import Commander
+from bridge.nodes.vehicle.mission import MESSAGES as MISSION_MESSAGES
+from bridge.nodes.vehicle.mission import MissionManager
 from bridge.nodes.vehicle.paramservice import MESSAGES as PARAM_MESSAGES
 from bridge.nodes.vehicle.paramservice import ParamService
 from bridge.nodes.vehicle.targets import Targets
@@ -58,13 +61,14 @@ class Receiver:
     """Routes the messages of the controller link (``link``) and the GCS link to the vehicle's parts."""
 
     def __init__(self, link: Endpoint, authority: Authority, refuse: Refusals, targets: Targets,
-                 commander: Commander, params: ParamService, ports: ReceiverPorts) -> None:
+                 commander: Commander, params: ParamService, mission: MissionManager, ports: ReceiverPorts) -> None:
         self.link = link
         self.authority = authority
         self.refuse = refuse
         self.targets = targets
         self.commander = commander
         self.params = params
+        self.mission = mission
         self.ports = ports
         self.trial = ReplyCredit()  # what the would-be controllers may get back (the module docstring)
 
@@ -155,11 +159,9 @@ class Receiver:
         elif kind == "SET_MODE":
             if self.commander.set_mode_message(ep, m, addr, self._link_name(ep)):
                 self.ports.announce()
-        elif kind == "MISSION_REQUEST_LIST":
-            if self.authority.for_others(m):
-                return self.refuse("target")
-            self._request(ep, addr, mavlink.MAVLink_mission_count_message(m.get_srcSystem(), m.get_srcComponent(),
-                                                                          0, m.mission_type))
+        elif kind in MISSION_MESSAGES:
+            if self.mission.handle(ep, m, addr, self._link_name(ep), self.refuse):
+                self.ports.announce()
         elif kind == "FILE_TRANSFER_PROTOCOL":  # no files: a NAK at once (MAVProxy then fetches parameters)
             if self.authority.for_others(m):
                 return self.refuse("target")
