@@ -705,7 +705,8 @@ def _fly_noop(mission: Path, out: Path, when: str, mode: tuple[float, float, flo
     ``"armed"`` (past step 10 of the flight). The exit status and the summary."""
     with instance_slot() as n:
         gcs = Station((255, 190), port=GCS_PORT + n)
-        p = Proc.bsst("sitl", str(mission), "--out", str(out), "--instance", str(n), "--speed", "3", "--no-plots")
+        p = Proc.bsst("sitl", str(mission), "--out", str(out), "--instance", str(n), "--speed", "3", "--no-plots",
+                      "--overwrite")
         try:
             to = (n + 1, 1)
             if when == "disarmed":
@@ -735,9 +736,13 @@ def test_a_mode_request_that_changes_nothing_is_no_takeover(tmp_path, when, mode
     mission = tmp_path / "m.toml"
     mission.write_text(NOOP_MISSION)
     ref = _fly(mission, tmp_path / "ref", None)
-    rc, run = _fly_noop(mission, tmp_path / "run", when, mode)
+    for attempt in range(3):  # disarmed: the selection races the controller's arm (both follow the first heartbeat)
+        rc, run = _fly_noop(mission, tmp_path / "run", when, mode)
+        modes = [e for e in run["events"] if e["kind"] == "mode"]
+        if not (when == "disarmed" and modes and modes[0].get("armed")):
+            break
+        print(f"attempt {attempt}: the controller armed before the selection (a real takeover): again")
     assert ref["outcome"] == "completed"
-    modes = [e for e in run["events"] if e["kind"] == "mode"]
     if mode == OFFBOARD_MODE:
         assert modes == [], modes  # OFFBOARD in OFFBOARD (armed, or selected from the start) changes nothing
     else:  # recorded as a selection for the next arm, made before the controller armed it
