@@ -31,7 +31,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from bridge.core.flight import prepare
 from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, GCS_PORT, LINK_PORT, parse_address
 from bridge.mavlink.missionitems import ItemRefused, parse_item
-from bridge.nodes.report import Ready, parse_line
+from bridge.nodes.report import Ready, Refused, Stats, parse_line
 from bridge.nodes.vehicle import Vehicle, VehicleConfig
 from bridge.nodes.vehicle.mission import PROTOCOL_TIMEOUT_S, REACHED_REPEATS, REACHED_S, RETRY_S
 from bridge.session import instance_slot
@@ -197,10 +197,10 @@ def test_upload_download_round_trip_set_current_clear(tmp_path):
             gcs.mav.mission_clear_all_send(*_tgt(gcs), M.MAV_MISSION_TYPE_MISSION)
             assert _ack(gcs).type == M.MAV_MISSION_ACCEPTED
             assert _download(gcs) == []
-            v.wait_line(lambda s: "mission: uploaded 6 items" in s and "[by 255:190 " in s and s.endswith(" gcs]"))
-            v.wait_line(lambda s: "mission: current item 4 [by 255:190 " in s)
-            v.wait_line(lambda s: "mission: cleared [by 255:190 " in s)
-    assert not any("current item 6" in s for s in v.lines)
+            v.wait_event(lambda s: "mission: uploaded 6 items" in s and "[by 255:190 " in s and s.endswith(" gcs]"))
+            v.wait_event(lambda s: "mission: current item 4 [by 255:190 " in s)
+            v.wait_event(lambda s: "mission: cleared [by 255:190 " in s)
+    assert not any("current item 6" in s for s in v.events())
 
 
 def test_a_dropped_request_is_asked_again(tmp_path):
@@ -266,7 +266,7 @@ def test_an_abandoned_or_cancelled_upload_leaves_the_mission(tmp_path):
             assert _recv(gcs, "MISSION_REQUEST_INT", cond="MISSION_REQUEST_INT.seq==1").seq == 1
             gcs.mav.mission_ack_send(*_tgt(gcs), M.MAV_MISSION_OPERATION_CANCELLED, 0)
             assert [_fields(m) for m in _download(gcs)] == [_fields(m) for m in before]
-    assert sum("mission: uploaded" in s for s in v.lines) == 1
+    assert sum("mission: uploaded" in s for s in v.events()) == 1
 
 
 def _item(seq: int = 1, frame: int = M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, command: int = M.MAV_CMD_NAV_WAYPOINT,
@@ -328,8 +328,8 @@ def test_bad_items_get_px4s_results_and_leave_the_mission(tmp_path):
             nan_params = M.MAVLink_mission_item_int_message(1, 1, 0, M.MAV_FRAME_GLOBAL_INT, M.MAV_CMD_NAV_WAYPOINT,
                                                             0, 1, *([math.nan] * 4), *HOME, 500.0, 0)
             assert _upload(gcs, [nan_params])[0].type == M.MAV_MISSION_ACCEPTED
-    assert sum("mission: uploaded" in s for s in v.lines) == 2
-    assert any(s.startswith("refused mission item 1 (command 82") for s in v.lines)
+    assert sum(s.startswith("mission: uploaded") for s in v.events()) == 2
+    assert any(isinstance(r, Refused) and r.text.startswith("mission item 1 (command 82") for r in v.reports())
 
 
 def test_one_transfer_at_a_time(tmp_path):
@@ -372,8 +372,8 @@ def test_one_transfer_at_a_time(tmp_path):
             for conn in (gcs, other, twin):
                 conn.close()
             assert v.stop() == 0
-    assert sum("busy (getlist)" in s for s in v.lines) == 12
-    assert sum("mission: uploaded 4 items" in s and "[by 255:190 " in s for s in v.lines) == 1
+    assert sum(isinstance(r, Refused) and "busy (getlist)" in r.text for r in v.reports()) == 12
+    assert sum("mission: uploaded 4 items" in s and "[by 255:190 " in s for s in v.events()) == 1
 
 
 def test_fence_and_rally_are_unsupported(tmp_path):
@@ -415,9 +415,9 @@ def test_the_controller_link_hears_no_stranger_and_only_reads(tmp_path):
             assert [_fields(m) for m in got] == [_fields(m) for m in items]
             assert stranger.recv_match(type=MISSION_KINDS, blocking=False) is None
             assert ctl.recv_match(type=["MISSION_ACK", "MISSION_REQUEST_INT"], blocking=False) is None
-    stats = json.loads(next(s for s in v.lines if s.startswith("stats "))[len("stats "):])
+    stats = next(r for r in v.reports() if isinstance(r, Stats)).values
     assert stats["rejected"]["not_authorised"] >= 6, stats["rejected"]
-    assert sum(s.startswith("event ") and " mission: " in s for s in v.lines) == 1
+    assert sum(s.startswith("mission: ") for s in v.events()) == 1
 
 
 # -- MAVSDK ---------------------------------------------------------------------------------------------
@@ -531,7 +531,7 @@ def test_mavsdk_mission_raw_and_mission(tmp_path):
     assert len(mission["got"]) == 4
     for got, sent in zip(mission["got"], mission["sent"], strict=True):
         assert got == pytest.approx(sent, abs=1e-6), (got, sent)
-    assert sum("mission: uploaded 6 items" in s for s in v.lines) == 1
+    assert sum("mission: uploaded 6 items" in s for s in v.events()) == 1
 
 
 # -- MAVProxy -------------------------------------------------------------------------------------------
@@ -578,7 +578,7 @@ def test_mavproxy_wp_load_and_list(tmp_path):
     for got, sent in zip(rows, want, strict=True):
         assert [int(c) for c in got[:4]] == [int(c) for c in sent[:4]] or got[0] == "0"  # home: MAVProxy's own
         assert [float(c) for c in got[4:]] == pytest.approx([float(c) for c in sent[4:]], abs=1e-6), (got, sent)
-    assert sum("mission: uploaded 6 items" in s and " gcs]" in s for s in v.lines) == 1
+    assert sum("mission: uploaded 6 items" in s and " gcs]" in s for s in v.events()) == 1
 
 
 # -- through an impaired link --------------------------------------------------------------------------
@@ -614,7 +614,7 @@ def test_mavsdk_mission_through_a_lossy_slow_link(tmp_path):
     assert out["downloaded"] == out["uploaded"]
     relay_stats = json.loads((tmp_path / "relay.json").read_text())
     assert relay_stats["up"]["lost"] > 0 and relay_stats["down"]["lost"] > 0, relay_stats
-    events = [s for s in v.lines if s.startswith("event ") and " mission: " in s]
+    events = [s for s in v.events() if s.startswith("mission: ")]
     assert len(events) == 1 and f"uploaded {ITEMS_THROUGH_RELAY} items" in events[0], events
     log = mavutil.mavlink_connection(str(tmp_path / "v" / "vehicle.tlog"), dialect="common")
     totals = set()

@@ -32,11 +32,11 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from bridge.autopilot.simvehicle import SimVehicle
+from bridge.autopilot.simvehicle import Sender, SimVehicle
 from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import Endpoint
 from bridge.mavlink.missionitems import ItemRefused, MissionItem, item_message, parse_item
-from bridge.nodes.vehicle.authority import Authority, Sender, attribute
+from bridge.nodes.vehicle.authority import Authority, attribute
 from bridge.nodes.vehicle.streams import StatusTexts
 
 RETRY_S = 0.25  # PX4's MAVLINK_MISSION_RETRY_TIMEOUT_DEFAULT: an item not here this long is requested again
@@ -90,13 +90,13 @@ class MissionManager:
     """Answers the mission protocol for one vehicle and holds its mission (:attr:`mission`)."""
 
     def __init__(self, sim: SimVehicle, authority: Authority, texts: StatusTexts,
-                 broadcast: Callable[[list[Any]], None], report: Callable[[str], None]) -> None:
+                 broadcast: Callable[[list[Any]], None], refused: Callable[[str], None]) -> None:
         self.sim = sim
         self.authority = authority
         self.sysid = authority.cfg.sysid
         self._texts = texts
         self._broadcast = broadcast  # messages to every ground station (the GCS link)
-        self._report = report
+        self._refused = refused  # a message or an upload refused, and why (its report to the session)
         self.mission = Mission()
         self.state = State.IDLE
         self.partner: Partner | None = None
@@ -241,7 +241,7 @@ class MissionManager:
         try:
             item = parse_item(m, self.int_mode)
         except ItemRefused as exc:
-            self._report(f"refused mission item {m.seq} (command {m.command}, frame {m.frame}): {exc}")
+            self._refused(f"mission item {m.seq} (command {m.command}, frame {m.frame}): {exc}")
             self._end_upload(now, f"refused item {m.seq}")
             self._idle()
             self._answer(who, exc.result, text=f"IGN MISSION_ITEM: Invalid item {m.seq}: {exc}")
@@ -273,7 +273,8 @@ class MissionManager:
     def _end_upload(self, now: float, result: str) -> None:
         self.upload.duration_s = now - self.started
         self.upload.result = result
-        self._report(f"mission upload {result}: {self.upload}")
+        if result != "accepted":  # an accepted one is its mission event
+            self._refused(f"mission upload {result}: {self.upload}")
 
     # -- download ---------------------------------------------------------------------------------------
     def _request_list(self, who: Partner, m: Any, now: float) -> None:
@@ -365,5 +366,5 @@ class MissionManager:
 
     def _busy(self, who: Partner, mission_type: int, text: str = BUSY) -> None:
         """Another transfer is on: ``MAV_MISSION_ERROR`` and PX4's STATUSTEXT, to the one who asked."""
-        self._report(f"refused mission message from {who.who.tag.strip()}: busy ({self.state.value})")
+        self._refused(f"mission message from {who.who}: busy ({self.state.value})")
         self._answer(who, mavlink.MAV_MISSION_ERROR, mission_type, text)
