@@ -459,6 +459,7 @@ elif part == "raw-json":  # items given as JSON lists of FIELDS: upload, timed, 
         out["upload_s"] = time.monotonic() - t0
         if out["upload_attempts"][-1] == "SUCCESS":
             break
+        time.sleep(6.0)  # MAVSDK sends no cancel: a vehicle still in the upload ends it after 5 s silent
     out["uploaded"] = raw(items)
     out["download_attempts"] = []  # MAVSDK gives an item up after 5 requests: over a lossy link, ask again
     while len(out["download_attempts"]) < 3:
@@ -600,7 +601,9 @@ def test_mavsdk_mission_through_a_lossy_slow_link(tmp_path):
     sends that ACK once too). So an upload fails with about the ACK's loss, 0.2, plus 30 x 0.2^5 (about
     0.01) for an item lost five times: measured 5 in 15 (each failure a lost final ACK, the vehicle holding
     all 30 items). The script uploads again, at most three times, as a user would (about 0.2^3, under 1 %,
-    that all three fail). A download is the ground station's to drive (PX4 sends an item only when asked):
+    that all three fail), 6 s after a failure: MAVSDK gives up without a cancel, and until its 5 s protocol
+    timeout the vehicle (as PX4) answers a new MISSION_COUNT mid-upload "Busy". A download is the ground
+    station's to drive (PX4 sends an item only when asked):
     MAVSDK gives up after five requests of one item (0.36^6 per item at 20 % loss each way, about one
     download in five of 100 items), so the script asks again, at most three times, too."""
     rows = [[m.seq, m.frame, m.command, int(m.seq == 0), m.autocontinue, *(None if math.isnan(p) else p for p in (
