@@ -174,7 +174,8 @@ def test_a_sweep_whose_every_cell_failed_exits_1_saying_so(tmp_path: Path) -> No
                        "--out", "sw", "--no-plots", "--jobs", "2"], cwd, timeout=300.0)
     assert proc.returncode == 1, proc.stderr[-3000:]
     lines = [ln for ln in proc.stderr.splitlines() if ln.startswith("bsst sweep: every cell failed")]
-    head = "bsst sweep: every cell failed (2 of 2): nothing was measured; the first error: its law failed at t=0.000 s: "
+    head = ("bsst sweep: every cell failed (2 of 2): nothing was measured; the first error: its law failed "
+            "at t=0.000 s: ")
     assert len(lines) == 1 and lines[0].startswith(head), proc.stderr[-3000:]
     assert "update() raised ValueError: this law fails in flight" in lines[0], lines
     assert "Traceback" not in proc.stderr
