@@ -449,12 +449,17 @@ if part == "raw":
 elif part == "raw-json":  # items given as JSON lists of FIELDS: upload, timed, then download
     items = [RawItem(*row) for row in json.loads(open(arg).read())]
     mr = MissionRaw(system)
-    t0 = time.monotonic()
-    try:
-        out["upload"] = mr.upload_mission(items).name
-    except MissionRawError as e:
-        out["upload"] = e.result.name
-    out["upload_s"] = time.monotonic() - t0
+    out["upload_attempts"] = []  # a lost final MISSION_ACK is MAVSDK's TIMEOUT (see the test): upload again
+    while len(out["upload_attempts"]) < 3:
+        t0 = time.monotonic()
+        try:
+            out["upload_attempts"].append(mr.upload_mission(items).name)
+        except MissionRawError as e:
+            out["upload_attempts"].append(e.result.name)
+        out["upload_s"] = time.monotonic() - t0
+        if out["upload_attempts"][-1] == "SUCCESS":
+            break
+        time.sleep(6.0)  # MAVSDK sends no cancel: a vehicle still in the upload ends it after 5 s silent
     out["uploaded"] = raw(items)
     out["download_attempts"] = []  # MAVSDK gives an item up after 5 requests: over a lossy link, ask again
     while len(out["download_attempts"]) < 3:
@@ -590,10 +595,17 @@ def test_mavsdk_mission_through_a_lossy_slow_link(tmp_path):
     none or all of its items (its MISSION_CURRENT totals, its ``mission`` events). (The 100-item figures,
     about 40 s an upload at this setting, are benchmarks/missions_transfer.py's: too long for the suite.)
 
-    The upload never stalls: the vehicle requests a missing item again every 0.25 s. A download is the
-    ground station's to drive (PX4 sends an item only when asked): MAVSDK gives up after five requests of
-    one item (0.36^6 per item at 20 % loss each way, about one download in five of 100 items), so the
-    script asks again, at most three times, as a user would."""
+    The vehicle requests a missing item again every 0.25 s, but MAVSDK ends an upload (TIMEOUT) when it has
+    sent one item five times, and when the final MISSION_ACK is lost: waiting for it, its 0.5 s timer only
+    counts retries (5) and it never sends the last item again, the MAVLink spec's "the GCS gives up" (PX4
+    sends that ACK once too). So an upload fails with about the ACK's loss, 0.2, plus 30 x 0.2^5 (about
+    0.01) for an item lost five times: measured 5 in 15 (each failure a lost final ACK, the vehicle holding
+    all 30 items). The script uploads again, at most three times, as a user would (about 0.2^3, under 1 %,
+    that all three fail), 6 s after a failure: MAVSDK gives up without a cancel, and until its 5 s protocol
+    timeout the vehicle (as PX4) answers a new MISSION_COUNT mid-upload "Busy". A download is the ground
+    station's to drive (PX4 sends an item only when asked):
+    MAVSDK gives up after five requests of one item (0.36^6 per item at 20 % loss each way, about one
+    download in five of 100 items), so the script asks again, at most three times, too."""
     rows = [[m.seq, m.frame, m.command, int(m.seq == 0), m.autocontinue, *(None if math.isnan(p) else p for p in (
         m.param1, m.param2, m.param3, m.param4)), m.x, m.y, m.z, 0] for m in _items(ITEMS_THROUGH_RELAY)]
     (tmp_path / "items.json").write_text(json.dumps(rows))
@@ -609,13 +621,15 @@ def test_mavsdk_mission_through_a_lossy_slow_link(tmp_path):
         finally:
             assert v.stop() == 0
             assert relay.stop() == 0
-    assert out["found"] and out["upload"] == "SUCCESS", out.get("upload")
+    assert out["found"] and out["upload_attempts"][-1] == "SUCCESS", out.get("upload_attempts")
     assert out["download_attempts"][-1] == "SUCCESS", out["download_attempts"]
     assert out["downloaded"] == out["uploaded"]
     relay_stats = json.loads((tmp_path / "relay.json").read_text())
     assert relay_stats["up"]["lost"] > 0 and relay_stats["down"]["lost"] > 0, relay_stats
     events = [s for s in v.events() if s.startswith("mission: ")]
-    assert len(events) == 1 and f"uploaded {ITEMS_THROUGH_RELAY} items" in events[0], events
+    # each attempt whose last item arrived is one upload the vehicle accepted (its ACK may then be lost)
+    assert 1 <= len(events) <= len(out["upload_attempts"]), (events, out["upload_attempts"])
+    assert all(f"uploaded {ITEMS_THROUGH_RELAY} items" in e for e in events), events
     log = mavutil.mavlink_connection(str(tmp_path / "v" / "vehicle.tlog"), dialect="common")
     totals = set()
     while (m := log.recv_match(type="MISSION_CURRENT")) is not None:
