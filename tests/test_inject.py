@@ -171,8 +171,11 @@ def test_mavsdk_failure_plugin_motor_off(tmp_path):
     # a ground station's change: the run is reproducible only up to the step it acted at (it depends on arrival)
     (change,) = [i for i in summary["interventions"] if i["kind"] == "fault"]
     assert change["what"] == "motor 1: off" and change["by"].endswith(" gcs")
+    assert change["step"] == round(faults[0]["t"] * 250)
+    first = summary["interventions"][0]  # MAVSDK's SYS_FAILURE_EN = 1, before the injection (or at its step)
+    assert first["kind"] == "param" and first["name"] == "SYS_FAILURE_EN" and first["step"] <= change["step"]
     assert summary["lockstep"]["reproducible"] is False
-    assert summary["lockstep"]["reproducible_until_step"] == change["step"] == round(faults[0]["t"] * 250)
+    assert summary["lockstep"]["reproducible_until_step"] == first["step"]
     assert summary["ended_by"]["after_faults"] == [f"t={faults[0]['t']:.3f} s: {faults[0]['text']}"]
 
 
