@@ -166,7 +166,8 @@ def add_relay_command(sub: Any) -> None:
     p.add_argument("--mission", metavar="FILE", help="take the [link] tables (and seed) from this mission")
     p.add_argument("--duration", type=number_in("--duration", 0.0, 1e7, lo_open=True), metavar="S",
                    help="stop after S seconds (default: until SIGINT/SIGTERM)")
-    p.add_argument("--stats", metavar="FILE", help="write the statistics to FILE as JSON on exit")
+    p.add_argument("--stats", metavar="FILE", help="write the statistics to FILE as JSON on exit (and every 0.5 s "
+                                                   "while relaying, so that a kill leaves them)")
     p.add_argument("--mission-clock", action="store_true",
                    help="blackout times count from the flight's time 0 (the first actuator target up, less the "
                         "down delay) instead of the relay's start")
@@ -201,7 +202,7 @@ def cmd_relay(args: argparse.Namespace) -> int:
     try:
         relay = Relay(listen, target, settings, listen_direction=args.listen_direction,
                       mission_clock=args.mission_clock, client=client, on_client=learned,
-                      back_port=args.back_port or 0)
+                      back_port=args.back_port or 0, stats_path=args.stats)
     except OSError as exc:
         where = f"--listen {args.listen}" + (f" or --back-port {args.back_port}" if args.back_port else "")
         raise ConfigError(f"{where}: cannot bind ({exc.strerror or exc})") from None

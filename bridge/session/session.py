@@ -32,7 +32,7 @@ from bridge.record.events import RunEvent
 from bridge.record.joiner import TraceJoiner, off_clock_time
 from bridge.record.runlog import EventLog, Run, RunRecord
 from bridge.record.summary import ChildEnd, SessionFacts, SessionSummary, controller_completed, session_summary
-from bridge.session.children import READY_TIMEOUT_S, STOP_GRACE_S, Child, ChildError, free_udp_port
+from bridge.session.children import READY_TIMEOUT_S, STOP_DEADLINE_S, Child, ChildError, free_udp_port
 from params import ConfigError
 
 
@@ -271,7 +271,8 @@ class Session:
         return 5.0 + (1.0 + fs.timeout_s + fs.time_to_land_s(z)) / pace
 
     def _stop_children(self) -> None:
-        """SIGTERM the controller, the relay, the vehicle; SIGKILL whatever is left after the grace."""
+        """SIGTERM the controller, the relay, the vehicle; wait for each to exit (its records closed), SIGKILL
+        whatever is left at the deadline (:data:`~bridge.session.children.STOP_DEADLINE_S`)."""
         children = [c for c in (self.controller, self.relay, self.vehicle) if c is not None]
         for c in children:
             if c.proc.poll() is None:
@@ -279,14 +280,14 @@ class Session:
                     c.proc.send_signal(signal.SIGTERM)
                 except ProcessLookupError:
                     pass
-        deadline = time.monotonic() + STOP_GRACE_S
+        deadline = time.monotonic() + STOP_DEADLINE_S
         for c in children:
             try:
                 c.proc.wait(timeout=max(deadline - time.monotonic(), 0.01))
             except subprocess.TimeoutExpired:
                 c.proc.kill()
                 c.proc.wait()
-                self._note("killed", f"{c.name} (pid {c.pid}) did not stop within {STOP_GRACE_S:g} s: SIGKILL",
+                self._note("killed", f"{c.name} (pid {c.pid}) did not stop within {STOP_DEADLINE_S:g} s: SIGKILL",
                            "session")
             for report in c.reports():
                 self._status(c, report)

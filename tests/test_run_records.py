@@ -1,0 +1,141 @@
+"""Covers bridge.record.runlog (overwriting a run directory), bridge.nodes.relay and bridge.session.children
+(records that survive a stop under load).
+
+Real processes (``python -m bridge ...``) and real UDP on 127.0.0.1. A run directory holds exactly one run:
+``--overwrite`` removes every file a run of ours writes (:data:`bridge.record.runlog.RUN_FILES`) and nothing
+else, and the new run names what it kept. A relay stopped and killed at once under load still leaves a
+whole ``relay.json``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from bridge.session import sitl
+from missions import MISSION_DIR, Mission, Sine
+from tests.sitlkit import ENV, ROOT, Proc
+from tests.waiting import wait_for
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
+
+PLOTS = {"positions.png", "errors.png", "angles.png", "inputs.png", "path3d.png"}
+
+
+def _sim(*args: str | Path) -> subprocess.CompletedProcess[str]:
+    env = dict(ENV, MPLBACKEND="Agg")
+    return subprocess.run([sys.executable, "-m", "bridge", "sim", *map(str, args)], cwd=ROOT, env=env,
+                          capture_output=True, text=True, timeout=180)
+
+
+def _short(tmp_path: Path, seconds: float = 2.0) -> Path:
+    text = (MISSION_DIR / "sine.toml").read_text().replace("duration_s = 30.0", f"duration_s = {seconds}")
+    f = tmp_path / "short.toml"
+    f.write_text(text)
+    return f
+
+
+@pytest.fixture
+def busy_cores() -> Iterator[None]:
+    """Two busy loops, one per core, for the length of a test (killed after, by their ids)."""
+    procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(2)]
+    try:
+        yield
+    finally:
+        for p in procs:
+            p.kill()
+            p.wait()
+
+
+def test_overwrite_without_plots_leaves_no_old_figures_and_keeps_a_users_file(tmp_path: Path) -> None:
+    mission, out = _short(tmp_path), tmp_path / "run"
+    res = _sim(mission, "--out", out)
+    assert res.returncode == 0, res.stderr
+    assert {p.name for p in (out / "plots").iterdir()} >= PLOTS
+    (out / "notes.txt").write_text("mine\n")
+    (out / "plots" / "my-sketch.svg").write_text("<svg/>\n")
+    (out / "link-trace.csv").write_text("t,dir\n")  # as bsst link extract writes it: the old run's
+    res = _sim(mission, "--out", out, "--overwrite", "--no-plots")
+    assert res.returncode == 0, res.stderr
+    assert (out / "notes.txt").read_text() == "mine\n"  # a user's file survives, and so does one in plots/
+    assert {p.name for p in (out / "plots").iterdir()} == {"my-sketch.svg"}
+    assert not (out / "link-trace.csv").exists()
+    assert {p.name for p in out.iterdir()} == {"mission.toml", "trace.csv", "events.log", "summary.json",
+                                               "notes.txt", "plots"}
+    first = (out / "events.log").read_text().splitlines()[0]
+    assert first == "t=0.000 note: kept in the run directory, not written by a run: notes.txt, plots/my-sketch.svg"
+    # with nothing of a user's, no plots/ at all
+    (out / "notes.txt").unlink()
+    (out / "plots" / "my-sketch.svg").unlink()
+    assert _sim(mission, "--out", out, "--overwrite", "--no-plots").returncode == 0
+    assert not (out / "plots").exists()
+    assert "note:" not in (out / "events.log").read_text()
+
+
+def test_a_sim_overwriting_a_relay_run_leaves_none_of_its_files(tmp_path: Path) -> None:
+    out = tmp_path / "rt"
+    run = sitl(Mission(Sine(), duration_s=1.0, name="sine1"), realtime=True, out=out, plots=False, instance=None,
+               link={"delay_ms": 5.0})
+    assert run.outcome == "completed", run.summary["ended_by"]
+    had = {p.name for p in out.iterdir()}
+    assert {"relay.json", "relay.log", "vehicle.tlog", "controller.tlog", "vehicle.csv", "controller.csv"} <= had
+    res = _sim(_short(tmp_path), "--out", out, "--overwrite", "--no-plots")
+    assert res.returncode == 0, res.stderr
+    assert {p.name for p in out.iterdir()} == {"mission.toml", "trace.csv", "events.log", "summary.json"}
+
+
+def _relay_traffic(relay: Proc, port: int, n: int) -> None:
+    """Send ``n`` datagrams through the relay on ``port`` to a target that takes them."""
+    client = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        for i in range(n):
+            client.sendto(f"datagram {i}".encode(), ("127.0.0.1", port))
+    finally:
+        client.close()
+
+
+def test_a_relay_killed_right_after_stop_under_load_leaves_a_whole_relay_json(tmp_path: Path,
+                                                                              busy_cores: None) -> None:
+    target = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    target.bind(("127.0.0.1", 0))
+    stats = tmp_path / "relay.json"
+    relay = Proc.bsst("relay", "--listen", "127.0.0.1:0", "--to", f"127.0.0.1:{target.getsockname()[1]}",
+                      "--delay", "1", "--stats", str(stats), cwd=ROOT)
+    try:
+        ready = json.loads(relay.wait_line(lambda ln: ln.startswith('{"report":"ready"'), timeout=60))
+        port = int(ready["listen"].rpartition(":")[2])
+        _relay_traffic(relay, port, 50)
+        target.settimeout(10.0)
+        for _ in range(50):
+            target.recv(100)
+        # the relay's record is on disk while it serves: a kill at any moment leaves it whole
+        wait_for(lambda: stats.exists() and json.loads(stats.read_text())["forwarded"] == 50, 30,
+                 "relay.json with the 50 datagrams forwarded")
+        relay.p.send_signal(signal.SIGTERM)
+        relay.p.send_signal(signal.SIGKILL)  # no grace at all
+        relay.p.wait(timeout=30)
+    finally:
+        relay.stop()
+        target.close()
+    s = json.loads(stats.read_text())
+    assert s["forwarded"] == 50 and s["up"]["sent"] == 50 and s["up"]["delivered"] == 50
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporary left beside it
+
+
+def test_a_relay_run_under_load_keeps_relay_json(tmp_path: Path, busy_cores: None) -> None:
+    out = tmp_path / "rt"
+    run = sitl(Mission(Sine(), duration_s=2.0, name="sine2"), realtime=True, out=out, plots=False, instance=None,
+               link={"delay_ms": 5.0})
+    relay = json.loads((out / "relay.json").read_text())
+    assert relay["final"] is True  # the relay's own last word, not a snapshot: the session waited for it
+    assert not any(e["kind"] == "killed" for e in run.summary["events"]), run.summary["events"]
+    assert run.summary["link"]["up"]["sent"] == relay["up"]["sent"] > 0
+    assert os.path.getsize(out / "relay.json") > 0
