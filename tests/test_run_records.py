@@ -139,3 +139,32 @@ def test_a_relay_run_under_load_keeps_relay_json(tmp_path: Path, busy_cores: Non
     assert not any(e["kind"] == "killed" for e in run.summary["events"]), run.summary["events"]
     assert run.summary["link"]["up"]["sent"] == relay["up"]["sent"] > 0
     assert os.path.getsize(out / "relay.json") > 0
+
+
+def test_the_controller_reports_a_chunked_statustext_once_joined(tmp_path: Path) -> None:
+    """A real ``bsst controller`` hears a vehicle's 125-character STATUSTEXT in MAVLink 2 chunks (a UTF-8
+    character split between two of them) and a short one: two reports, each text whole."""
+    from pymavlink.dialects.v20 import common as mavlink
+
+    from bridge.mavlink.telemetry import statustext
+    from bridge.nodes.report import StatusText, parse_line
+    from tests.test_offboard_realtime import MISSION, ScriptedVehicle
+
+    long_text = "lockstep: " + "é" * 20 + "x" * 94 + " end"  # the 50-byte boundary cuts an é in two
+    (tmp_path / "m.toml").write_text(MISSION)
+    v = ScriptedVehicle()
+    ctl = Proc.bsst("controller", str(tmp_path / "m.toml"), "--realtime", "--vehicle", f"127.0.0.1:{v.port}",
+                    "--timeout", "30", cwd=ROOT)
+    try:
+        wait_for(lambda: (v.serve(), v.peer)[1] is not None, 60, "the controller's first message")
+        v.heartbeat()
+        for m in statustext(mavlink.MAV_SEVERITY_WARNING, long_text, 42):
+            v.send(m)
+        v.send(mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_INFO, b"short one"))
+        ctl.wait_line(lambda ln: "short one" in ln, timeout=30)
+    finally:
+        ctl.stop()
+        v.sock.close()
+    texts = [r for r in map(parse_line, ctl.lines) if isinstance(r, StatusText)]
+    assert texts == [StatusText(mavlink.MAV_SEVERITY_WARNING, long_text),
+                     StatusText(mavlink.MAV_SEVERITY_INFO, "short one")]

@@ -26,6 +26,7 @@ from bridge.mavlink.endpoint import HIL_ACTUATOR_CONTROLS, SET_ACTUATOR_CONTROL_
 from bridge.mavlink.modes import MAIN_OFFBOARD, PARAM_TYPES, main_mode, param_to_wire, shown_name
 from bridge.mavlink.receive import Rejections, odometry_problem
 from bridge.mavlink.signing import Signing
+from bridge.mavlink.telemetry import StatusTextJoiner
 from bridge.nodes.offboard.config import (
     HOUSEKEEPING_S,
     SPIN_BEFORE_TICK_S,
@@ -51,6 +52,7 @@ class OffboardLink:
         self._status = status or (lambda report: None)
         self.tlog = Tlog(out / "controller.tlog") if out is not None else None
         self.rejected = Rejections()  # what the receive path refused (bridge.mavlink.receive)
+        self._texts = StatusTextJoiner()  # chunked STATUSTEXTs, joined before they are reported
         self.ep = Endpoint(cfg.vehicle, sysid=cfg.sysid, compid=cfg.compid, tlog=self.tlog, name="--vehicle",
                            signing=Signing(cfg.key) if cfg.key is not None else None, rejected=self.rejected,
                            source_port=cfg.source_port)
@@ -226,11 +228,14 @@ class OffboardLink:
                 self._acks[m.command] = m.result
         elif kind == "TIMESYNC":
             self._timesync(m)
-        elif kind == "STATUSTEXT":
-            text = m.text.rstrip("\x00") if isinstance(m.text, str) else m.text.decode(errors="replace")
-            self._status(StatusText(m.severity, text))
-            if text.startswith("lockstep:") and not self.left_lockstep:  # not a lockstep flight any more
-                self.left_lockstep = text
+        elif kind == "STATUSTEXT":  # a chunked one is reported once, joined
+            for severity, text in self._texts.add(m, time.monotonic()):
+                self._statustext(severity, text)
+
+    def _statustext(self, severity: int, text: str) -> None:
+        self._status(StatusText(severity, text))
+        if text.startswith("lockstep:") and not self.left_lockstep:  # not a lockstep flight any more
+            self.left_lockstep = text
 
     def _timesync(self, m: Any) -> None:
         now = time.monotonic_ns()
@@ -260,6 +265,8 @@ class OffboardLink:
         if now >= self._next_ts and self.vsys is not None:
             self._next_ts = now + self.cfg.timesync_s
             self.ep.send(mavlink.MAVLink_timesync_message(0, time.monotonic_ns()))
+        for severity, text in self._texts.expired(now):
+            self._statustext(severity, text)
         refused = self.rejected.report(now)
         if refused is not None:
             self._status(Warning(refused))
