@@ -168,3 +168,30 @@ def test_the_controller_reports_a_chunked_statustext_once_joined(tmp_path: Path)
     texts = [r for r in map(parse_line, ctl.lines) if isinstance(r, StatusText)]
     assert texts == [StatusText(mavlink.MAV_SEVERITY_WARNING, long_text),
                      StatusText(mavlink.MAV_SEVERITY_INFO, "short one")]
+
+
+def _event_lines(path: Path) -> list[tuple[float, str, str]]:
+    """events.log's children's events: (t, kind, source), in the file's order."""
+    out = []
+    for line in (path / "events.log").read_text().splitlines():
+        t_text, _, rest = line.partition(" ")
+        kind = rest.partition(":")[0]
+        source = rest.rpartition(" [")[2].rstrip("]")
+        if source in ("vehicle", "controller", "relay"):
+            out.append((float(t_text.removeprefix("t=")), kind, source))
+    return out
+
+
+@pytest.mark.parametrize("realtime", [False, True], ids=["lockstep", "realtime"])
+def test_events_log_lists_causes_before_their_effects(tmp_path: Path, realtime: bool) -> None:
+    """The two children's events on one clock, in the order they happened: the vehicle's arming and disarming
+    (by the controller's command) before the controller's word that it saw them, times never going back."""
+    out = tmp_path / "run"
+    run = sitl(Mission(Sine(), duration_s=2.0, name="sine2"), realtime=realtime, out=out, plots=False, instance=None)
+    assert run.outcome == "completed", run.summary["ended_by"]
+    events = _event_lines(out)
+    times = [t for t, _, _ in events]
+    assert times == sorted(times), events
+    for kind in ("armed", "disarmed"):
+        said = [src for _, k, src in events if k == kind]
+        assert said[:2] == ["vehicle", "controller"], (kind, events)

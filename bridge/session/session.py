@@ -226,9 +226,7 @@ class Session:
                 sel.select(0.1)
                 if self.interrupted:
                     raise KeyboardInterrupt
-                for child in (veh, ctl):
-                    for report in child.reports():
-                        self._status(child, report)
+                self._handle([(child, r) for child in (veh, ctl) for r in child.reports()])
                 self.joiner.update()
                 self._show_progress()
                 if veh.proc.poll() is not None:
@@ -240,8 +238,8 @@ class Session:
                     self._died(self.relay)
                     return
                 if ctl.proc.poll() is not None and landing_deadline is None:
-                    for report in ctl.reports():
-                        self._status(ctl, report)
+                    # its last words, and the vehicle's about the same moments, in the order they happened
+                    self._handle([(child, r) for child in (veh, ctl) for r in child.reports()])
                     self.joiner.controller_done = True
                     if ctl.done is not None and ctl.done.reason:  # a controller that gave up says why
                         sys.stderr.write(("\n" if self.live else "") + f"bsst sitl: controller: {ctl.done.reason}\n")
@@ -281,6 +279,7 @@ class Session:
                 except ProcessLookupError:
                     pass
         deadline = time.monotonic() + STOP_DEADLINE_S
+        last_words = []
         for c in children:
             try:
                 c.proc.wait(timeout=max(deadline - time.monotonic(), 0.01))
@@ -289,18 +288,30 @@ class Session:
                 c.proc.wait()
                 self._note("killed", f"{c.name} (pid {c.pid}) did not stop within {STOP_DEADLINE_S:g} s: SIGKILL",
                            "session")
-            for report in c.reports():
-                self._status(c, report)
+            last_words += [(c, r) for r in c.reports()]
             c.proc.stdout.close()  # type: ignore[union-attr]
+        self._handle(last_words)
+
+    def _handle(self, reports: list[tuple[Child, Report]]) -> None:
+        """Reports read together from several children, their events in the order of their times on the flight's
+        clock (the vehicle's first on a tie: the controller's events about the vehicle are its answers): each
+        child's pipe is read in turn, so the order read is not the order things happened."""
+        def when(item: tuple[Child, Report]) -> tuple[float, int]:
+            child, r = item
+            t = self._event_time(child, r.t) if isinstance(r, Event) and math.isfinite(r.t) else -math.inf
+            return t, child.name != "vehicle"
+
+        for child, report in sorted(reports, key=when):
+            self._status(child, report)
 
     # -- status lines, events, progress -------------------------------------------------------------
     def _status(self, child: Child, report: Report) -> None:
         if not isinstance(report, Event):
             return
         t, kind = report.t, report.kind
+        if math.isfinite(t):
+            t = self._event_time(child, t)
         if child.name == "vehicle":
-            if self.realtime and math.isfinite(t):
-                t = self._flight_time(t)
             if kind == "armed":
                 self.vehicle_armed = True
             elif kind == "disarmed":
@@ -310,6 +321,11 @@ class Session:
             elif kind == "diverged":
                 self.diverged = True
         self._note(kind, report.text, child.name, t, report.by)
+
+    def _event_time(self, child: Child, t: float) -> float:
+        """An event's time on the clock events.log keeps: real time, the flight's (the vehicle's converted);
+        lockstep, each child's as it said it."""
+        return self._flight_time(t) if self.realtime and child.name == "vehicle" else t
 
     def _flight_time(self, t_vehicle: float) -> float:
         """Real time: the vehicle's clock runs from its start; the flight's (the trace's and

@@ -72,6 +72,7 @@ class Offboard(OffboardLink):
         self.reason = ""
         self.ended_taken_over = False  # the flight ended for a ground station's mode (no more targets sent)
         self._changes = list(flight.param_changes)  # scheduled PARAM_SETs not sent yet, by mission time
+        self._end_wall: float | None = None  # wall time the mission's last state came (the events' clock after it)
 
     @property
     def overruns(self) -> int:
@@ -133,6 +134,7 @@ class Offboard(OffboardLink):
     def _disarm(self) -> bool:
         result = self._command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0.0, float(FORCE_DISARM))
         ok = result == mavlink.MAV_RESULT_ACCEPTED
+        self._at_end_now()
         self.event("disarmed" if ok else "disarm", "vehicle disarmed" if ok else "disarm not acknowledged")
         return ok
 
@@ -162,7 +164,7 @@ class Offboard(OffboardLink):
                         send(*last_frame)  # the vehicle resent: our answer was lost
                     continue
                 if k - k0 >= steps:
-                    return self._end_of_mission()
+                    return self._end_of_mission((k - k0) / rate)
                 if self.taken_over:  # its HEARTBEAT came before this state: no answer to it
                     return self._check_vehicle() or "aborted"
                 t = (k - k0) / rate
@@ -238,7 +240,7 @@ class Offboard(OffboardLink):
                     k0, j = k, 0
                     self.schedule = clock = FixedRate(due, rate, clock.skipped)
                 if k - k0 >= steps:
-                    return self._end_of_mission()
+                    return self._end_of_mission((k - k0) / rate)
                 usec, recv = odo.time_usec, self._odo_recv
                 self._observe(odo, (k - k0) / rate, recv)
                 last_k = k
@@ -308,10 +310,20 @@ class Offboard(OffboardLink):
                   dec.state_age_s if cmd is not None else math.nan)
         return wire
 
-    def _end_of_mission(self) -> str:
-        """The mission's steps are flown: ``failsafe`` if the vehicle's failsafe took over and
-        it is not back under offboard control, else ``completed``. A vehicle its failsafe
-        landed and disarmed is disarmed by command too, which ends its lockstep flight."""
+    def _at_end_now(self) -> None:
+        """After the mission's steps, events are at the time they happen, not at the last step's: in lockstep
+        the vehicle waits at the state that ended the mission, in real time the wall clock has gone on since it
+        came (the session orders the two children's events by time: an answer never comes before its cause)."""
+        if self._end_wall is not None and self.cfg.clock == "realtime":
+            now = time.monotonic()
+            self.t_mission += now - self._end_wall
+            self._end_wall = now
+
+    def _end_of_mission(self, t_end: float) -> str:
+        """The mission's steps are flown (the state of mission time ``t_end``, s, came): ``failsafe`` if the
+        vehicle's failsafe took over and it is not back under offboard control, else ``completed``. A vehicle
+        its failsafe landed and disarmed is disarmed by command too, which ends its lockstep flight."""
+        self.t_mission, self._end_wall = t_end, time.monotonic()
         back = self.vehicle_armed and self.vehicle_state != mavlink.MAV_STATE_CRITICAL
         if not self.failsafe_seen or back:
             return "completed"
