@@ -195,3 +195,24 @@ def test_events_log_lists_causes_before_their_effects(tmp_path: Path, realtime: 
     for kind in ("armed", "disarmed"):
         said = [src for _, k, src in events if k == kind]
         assert said[:2] == ["vehicle", "controller"], (kind, events)
+
+
+def test_a_perfect_loopback_link_loses_nothing_and_says_where_every_packet_went(tmp_path: Path) -> None:
+    """``bsst sitl --realtime`` on a perfect link: lost 0 both ways, and what was sent but not delivered is
+    named (in flight at the ends, refused, shed, dropped by the kernel), in summary.json and the printout."""
+    mission = _short(tmp_path, 3.0)
+    out = tmp_path / "rt"
+    res = subprocess.run([sys.executable, "-m", "bridge", "sitl", str(mission), "--realtime", "--out", str(out),
+                          "--no-plots"], cwd=ROOT, env=ENV, capture_output=True, text=True, timeout=180)
+    assert res.returncode == 0, res.stderr
+    link = json.loads((out / "summary.json").read_text())["link"]
+    for d in ("up", "down"):
+        L = link[d]
+        assert L["lost"] == 0, (d, L)
+        assert L["sent"] == (L["delivered"] + L["lost"] + L["refused"] + L["in_flight"] + L["shed"]
+                             + L["dropped_by_kernel"]), (d, L)
+        assert L["kernel_counts"] is True  # Linux: the receiving socket's counter was read
+        assert L["sent"] > 600
+        line = next(ln for ln in res.stdout.splitlines() if ln.startswith(f"link {d:4}:"))
+        assert (f"sent {L['sent']} delivered {L['delivered']} lost 0 in flight {L['in_flight']} shed 0 "
+                f"dropped by kernel {L['dropped_by_kernel']} ") in line, line

@@ -373,7 +373,9 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
     emit(Stats({"commands": node.commands, "states": node.states, "received": node.ep.received,
                 "sent": node.ep.sent, "stale_ticks": node.stale_ticks, "overruns": node.overruns,
                 "down": node.cend.down.stats.summary() if cfg.clock == "lockstep" else None,
-                "rejected": dict(node.rejected), "rejected_from_vehicle": node.rejected.from_peer}))
+                "rejected": dict(node.rejected), "rejected_from_vehicle": node.rejected.from_peer,
+                "states_refused": node.states_refused, "state_window": node.state_window,
+                "kernel_drops": node.ep.kernel_drops()}))
     left = bool(node.left_lockstep)
     emit(Done(outcome, left, node.reason or None, node.taken_over if node.ended_taken_over else None))
     if outcome != "completed":

@@ -82,6 +82,8 @@ class OffboardLink:
         self.rtt_ns: int | None = None
         self.commands = 0
         self.states = 0
+        self.states_refused = 0  # the vehicle's states refused (stamp or numbers)
+        self.state_window: list[int] | None = None  # [first, last] step of the vehicle's states read
         self.t_mission = 0.0  # the mission time the events are reported at (s)
 
     def event(self, kind: str, text: str) -> None:
@@ -190,8 +192,13 @@ class OffboardLink:
             why = ("sender" if src != self.vsys
                    else stamp_problem(m.time_usec, self._odo_usec, now - self._odo_recv, 1.0 / self.rate,
                                       self._stamp_slack_s) or odometry_problem(m))
+            if src == self.vsys:  # the window of steps this side read: what the vehicle sent outside it never came
+                k = step_of_usec(m.time_usec, self.rate)
+                self.state_window = [min(self.state_window[0], k), max(self.state_window[1], k)] \
+                    if self.state_window else [k, k]
             if why:
                 self.rejected.add(why, True)
+                self.states_refused += src == self.vsys
                 return
             self._odo_usec = m.time_usec
             self.states += 1

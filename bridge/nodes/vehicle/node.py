@@ -174,7 +174,8 @@ class Vehicle:
             "accepted": self.targets.accepted, "rejected": self.rejected, "odometry_sent": self.odometry.count,
             "received": self.link.received, "overruns": self.pace.rebased, "steps": self.k,
             "rejected_from_controller": self.rejected.from_peer, "resends": self.odometry.resends,
-            "answered_again": self.targets.answered_again,
+            "answered_again": self.targets.answered_again, "odometry_steps": self.odometry.steps.ranges,
+            "kernel_drops": self.link.kernel_drops(),
             "up": self.vend.up.stats.summary() if self.cfg.clock == "lockstep" else None}))
 
     def _report(self, line: str) -> None:
