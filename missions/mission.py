@@ -41,6 +41,10 @@ MISSION_RANGES: dict[str, tuple[float, float]] = {
     "seed": (0, 2**31 - 1),
 }
 TRAJECTORIES = ("step", "sine", "waypoints")
+# what the vehicle does once the mission's time is flown (``[end] action``): land where it is with its on-board
+# landing and disarm on the ground, or hold its position until the session ends; never motors off in the air
+END_ACTIONS = ("land", "hold")
+DEFAULT_END_ACTION = "land"
 # The plant's envelope: plant/quadrotor.py Quadrotor.diverged() calls a vehicle farther than this from the
 # origin lost, so no start or reference may leave it (envelope_problem; the loader's wider ranges catch typos).
 # Missions do not import the plant: tests/test_mission.py checks that the two agree.
@@ -73,6 +77,7 @@ class Mission:
     source: str = "<python>"
     wind: Mapping[str, Any] = field(default_factory=dict)  # raw: plant.wind.wind_from_table
     events: tuple[Mapping[str, Any], ...] = ()  # raw [[events]]: plant.events.timeline_from_tables
+    end_action: str = DEFAULT_END_ACTION  # END_ACTIONS: ``[end] action``
 
     def __post_init__(self) -> None:
         why = name_problem(self.name)
@@ -85,6 +90,9 @@ class Mission:
         if self.discretization not in DISCRETIZATIONS:
             raise ConfigError(f"{self.source}: discretization: must be one of {', '.join(DISCRETIZATIONS)}; "
                               f"got {self.discretization!r}"[:300])
+        if self.end_action not in END_ACTIONS:
+            raise ConfigError(f"{self.source}: end.action: must be one of {', '.join(END_ACTIONS)}; "
+                              f"got {self.end_action!r}"[:300])
         outside = envelope_problem(self.trajectory, self.start, self.duration_s)
         if outside:
             raise ConfigError(f"{self.source}: {outside[0]}: {outside[1]}")
@@ -114,6 +122,8 @@ class Mission:
                 d[k] = dict(getattr(self, k))
         if self.events:
             d["events"] = [dict(e) for e in self.events]
+        if self.end_action != DEFAULT_END_ACTION:  # (the default unwritten: mission.toml as before)
+            d["end"] = {"action": self.end_action}
         return d
 
     @property
@@ -263,6 +273,9 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
     st.done()
     trajectory = _trajectory(t.table("trajectory", required=True), duration)
     raw = {k: _table(t, k) for k in ("gains", "effects", "link", "failsafe", "sensors", "estimator", "params", "wind")}
+    end = t.table("end")
+    end_action = end.string("action", DEFAULT_END_ACTION, choices=END_ACTIONS)
+    end.done()
     events = t.raw("events", [])
     if not isinstance(events, list) or not all(isinstance(e, Mapping) for e in events):
         raise t.error("events", "expected an array of tables [[events]] (t_s, kind and its settings)")
@@ -281,6 +294,7 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
         start=start,  # type: ignore[arg-type]
         source=source,
         events=tuple(events),
+        end_action=end_action,
         **raw,
     )
 

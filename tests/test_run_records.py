@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from bridge.session import sitl
+from bridge.session import instance_slot, sitl
 from missions import MISSION_DIR, Mission, Sine
 from tests.sitlkit import ENV, ROOT, Proc
 from tests.waiting import wait_for
@@ -184,17 +184,19 @@ def _event_lines(path: Path) -> list[tuple[float, str, str]]:
 
 @pytest.mark.parametrize("realtime", [False, True], ids=["lockstep", "realtime"])
 def test_events_log_lists_causes_before_their_effects(tmp_path: Path, realtime: bool) -> None:
-    """The two children's events on one clock, in the order they happened: the vehicle's arming and disarming
-    (by the controller's command) before the controller's word that it saw them, times never going back."""
+    """The two children's events on one clock, in the order they happened: the vehicle's arming (by the
+    controller's command) and its end of mission before the controller's word about them, times never going
+    back, the landing's disarm last."""
     out = tmp_path / "run"
     run = sitl(Mission(Sine(), duration_s=2.0, name="sine2"), realtime=realtime, out=out, plots=False, instance=None)
     assert run.outcome == "completed", run.summary["ended_by"]
     events = _event_lines(out)
     times = [t for t, _, _ in events]
     assert times == sorted(times), events
-    for kind in ("armed", "disarmed"):
+    for kind in ("armed", "end"):
         said = [src for _, k, src in events if k == kind]
         assert said[:2] == ["vehicle", "controller"], (kind, events)
+    assert events[-1][1:] == ("disarmed", "vehicle"), events
 
 
 def test_a_perfect_loopback_link_loses_nothing_and_says_where_every_packet_went(tmp_path: Path) -> None:
@@ -202,8 +204,10 @@ def test_a_perfect_loopback_link_loses_nothing_and_says_where_every_packet_went(
     named (in flight at the ends, refused, shed, dropped by the kernel), in summary.json and the printout."""
     mission = _short(tmp_path, 3.0)
     out = tmp_path / "rt"
-    res = subprocess.run([sys.executable, "-m", "bridge", "sitl", str(mission), "--realtime", "--out", str(out),
-                          "--no-plots"], cwd=ROOT, env=ENV, capture_output=True, text=True, timeout=180)
+    with instance_slot() as n:  # ports of our own: sessions of other tests run beside this one
+        res = subprocess.run([sys.executable, "-m", "bridge", "sitl", str(mission), "--realtime", "--out", str(out),
+                              "--no-plots", "--instance", str(n)], cwd=ROOT, env=ENV, capture_output=True, text=True,
+                             timeout=180)
     assert res.returncode == 0, res.stderr
     link = json.loads((out / "summary.json").read_text())["link"]
     for d in ("up", "down"):

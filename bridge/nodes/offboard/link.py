@@ -68,6 +68,7 @@ class OffboardLink:
         self.failsafe_seen = False  # the vehicle reported its failsafe (CRITICAL since we armed it)
         self.left_lockstep = ""  # the vehicle's STATUSTEXT saying it left lockstep, if it did
         self.taken_over = ""  # the mode a ground station switched the armed vehicle to (PX4 custom_mode), if any
+        self.ending = False  # the mission's end action handed to the vehicle: its own mode is no takeover
         self._odo: Any = None  # newest ODOMETRY not yet used
         self._odo_recv = 0.0
         self._acks: dict[int, int] = {}
@@ -89,14 +90,15 @@ class OffboardLink:
     def event(self, kind: str, text: str) -> None:
         self._status(Event.at(self.t_mission, kind, text))
 
-    def _command(self, cmd: int, p1: float, p2: float, tries: int = 30, every_s: float = 0.1) -> int | None:
+    def _command(self, cmd: int, p1: float, p2: float, tries: int = 30, every_s: float = 0.1,
+                 p3: float = 0.0) -> int | None:
         """COMMAND_LONG to the vehicle, repeated (confirmation 0, 1, ...) until ACKed. Every
         0.1 s: an ARM whose ACK was lost has armed the vehicle, whose failsafe takes over
         0.5 s later without a target (ARM_DISARM is idempotent)."""
         self._acks.pop(cmd, None)
         for n in range(tries):
             self.ep.send(mavlink.MAVLink_command_long_message(self.vsys or 0, self.vcomp, cmd, n, p1, p2,
-                                                              0, 0, 0, 0, 0))
+                                                              p3, 0, 0, 0, 0))
             deadline = time.monotonic() + every_s
             while time.monotonic() < deadline and not self.stopping:
                 self._serve(deadline)
@@ -223,7 +225,7 @@ class OffboardLink:
                 # CRITICAL heartbeat may have been lost), or halted by divergence
                 self.failsafe_seen = True
             elif (self.vehicle_armed and m.autopilot == mavlink.MAV_AUTOPILOT_PX4 and not self.taken_over
-                  and main_mode(m.custom_mode) != MAIN_OFFBOARD):
+                  and not self.ending and main_mode(m.custom_mode) != MAIN_OFFBOARD):
                 # armed, not in its failsafe, out of OFFBOARD: a ground station took it (HOLD, LAND, ...)
                 self.taken_over = shown_name(m.custom_mode)
             return

@@ -339,6 +339,7 @@ class Vehicle:
         """Events and divergence; False when the plant is lost (nothing more to send)."""
         if len(self.sim.events) > self._events_sent:
             self._drain_events()
+        self.commander.flight_over()
         if self.commander.diverged():
             self._drain_events()
             return False
