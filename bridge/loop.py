@@ -170,7 +170,7 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
             vehicle.event("policy", violation_text(v))
             shown.append({"t": round(vehicle.t, 6), "kind": "policy", "text": violation_text(v)})
         if outcome == "completed":  # after the mission's figures: nothing of them changes
-            summary["end"] = fly_end(flight, vehicle, vend, shown)
+            summary["end"] = fly_end(flight, vehicle, shown)
     finally:
         _close_record(record, vehicle.events[logged:])
     if record is not None:
@@ -178,12 +178,13 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
     return Run(arrays, summary, path)
 
 
-def fly_end(flight: Flight, vehicle: SimVehicle, vend: VehicleEnd, shown: list[dict[str, Any]]) -> dict[str, Any]:
+def fly_end(flight: Flight, vehicle: SimVehicle, shown: list[dict[str, Any]]) -> dict[str, Any]:
     """The mission's end action offline (``[end] action``, :meth:`SimVehicle.end_mission`), as the vehicle flies
-    it in a session: ``land`` steps the vehicle's own landing (nothing from the controller, the up link still
-    delivering) until it disarms on the ground, bounded by the descent at the failsafe's rate plus 10 s;
-    ``hold`` is engaged and the flight ends with the mission (no session to hold through). Its events are
-    added to ``shown``; returns ``summary.json["end"]`` (:func:`bridge.record.ending.end_block`)."""
+    it in a session: ``land`` steps the vehicle's own landing (nothing from the controller; the mission's link
+    is done with, its statistics the mission's) until it disarms on the ground, bounded by the descent at the
+    failsafe's rate plus 10 s; ``hold`` is engaged and the flight ends with the mission (no session to hold
+    through). Its events are added to ``shown``; returns ``summary.json["end"]``
+    (:func:`bridge.record.ending.end_block`)."""
     m, plant = flight.mission, vehicle.plant
     n0 = len(vehicle.events)
     vehicle.end_mission(m.end_action)
@@ -191,9 +192,8 @@ def fly_end(flight: Flight, vehicle: SimVehicle, vend: VehicleEnd, shown: list[d
     k, rate = m.steps, m.rate_hz
     bound = k + math.ceil((10.0 + flight.failsafe.time_to_land_s(plant.state[4] - m.start[2])) * rate)
     while vehicle.armed and vehicle.mode == LAND and k < bound and not plant.diverged():
-        vend.deliver(k / rate)  # as the vehicle steps each answered state in lockstep
         X = plant.state
-        vend.advance()
+        vehicle.advance()  # the vehicle alone: what the up link still holds stays in flight (its statistics too)
         rows.append((k / rate, X[4], X[5]))
         k += 1
     ended = vehicle.events[n0:]

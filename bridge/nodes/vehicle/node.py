@@ -24,6 +24,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from bridge.autopilot.simvehicle import LAND
 from bridge.core.flight import Flight
 from bridge.core.wire import command_from_wire
 from bridge.link.ends import VehicleEnd
@@ -266,11 +267,16 @@ class Vehicle:
         if wire is not None:
             vend.receive_command(t, command_from_wire(self.actuation, wire), t)
             self.targets.applied = (k, wire, recv)
-        vend.deliver(t)
+        ending = self.sim.mode == LAND  # lockstep and LAND: the mission's end action (Commander.flight_over)
+        if not ending:  # after the mission the vehicle flies alone: the up link's statistics stay the mission's
+            vend.deliver(t)
         X = self.plant.state
         est = self._estimate()
         real = self.plant.realised
-        vend.advance()
+        if ending:
+            self.sim.advance()
+        else:
+            vend.advance()
         self.k = k + 1
         if self.cfg.speed is not None:
             self._wait_until(self.pace.due(self.k * self.substeps))
