@@ -46,7 +46,7 @@ def main() -> int:
     batch_ok = True
     if not args.no_batch:
         sine = load_mission(Path(__file__).resolve().parent.parent / "missions" / "sine.toml")
-        figures = acceptance(sine, 1000, repeats=0, two_workers=False)
+        figures = acceptance(sine, 1000, repeats=0)
         print_acceptance(figures)
         batch_ok = figures["ok"]
     mission = load_mission(args.mission)

@@ -42,8 +42,12 @@ from bridge.record.events import RunEvent
 from bridge.record.metrics import after_faults, impact_text, plant_summary, summarise
 from bridge.record.policies import ended_by_outcome, judge, rules_for, violation_text
 from bridge.record.runlog import Run, RunRecord, check_trace_steps, run_dir, trace_arrays
+from controller.law import LawFailed
 from controller.link_guard import LinkGuard
 from missions import Mission
+from missions.minsnap import Smooth
+
+TOUCHDOWN_M = 0.05  # m above the ground, and m/s: a landing trajectory's end finds the vehicle down, and disarms it
 
 
 def simulate(
@@ -102,6 +106,7 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
     noted = 0
     demanded = wire = (0.0, 0.0, 0.0, 0.0)
     changes = list(flight.param_changes)  # scheduled parameter changes: at the start of their step, as in SITL
+    k = 0
     try:
         for k in range(m.steps):
             t = k / rate
@@ -135,11 +140,7 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
             if trace is not None:
                 trace.row(row)
             vend.advance()
-            while logged < len(vehicle.events):
-                e = vehicle.events[logged]
-                logged += 1
-                if events is not None:
-                    events.event(e.t, e.kind, e.text)
+            logged = _log_new_events(vehicle, events, logged)
             verdict, impact_noted = plant_verdict(vehicle, impact_noted)
             if verdict:
                 outcome = verdict
@@ -151,15 +152,16 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
                 outcome = "completed"  # resumed after a failsafe (the events say so)
             if progress is not None and k % int(rate) == 0:
                 progress(t, m.duration_s, sum((X[i] - ref[j][0]) ** 2 for i, j in ((0, 0), (2, 1), (4, 2))) ** 0.5)
-    except KeyboardInterrupt:
-        outcome = "aborted"
-        vehicle.event("aborted", "interrupted")
+        if outcome == "completed" and isinstance(m.trajectory, Smooth) and m.trajectory.lands:
+            _disarm_landed(vehicle)
+    except (KeyboardInterrupt, LawFailed) as exc:  # interrupted, or a user's law failed: the flight ends, recorded
+        outcome = stopped(vehicle, exc, k, rate)
     except BaseException:
         _close_record(record, vehicle.events[logged:])
         raise
     try:  # the record stays open for the verdicts' lines, and is closed whatever happens
         arrays = trace_arrays(rows, TRACE_COLUMNS)
-        ev = [RunEvent(round(e.t, 6), e.kind, e.text, by=e.by) for e in vehicle.events]
+        ev = [RunEvent(round(e.t, 6), e.kind, e.text, by=e.by, param=e.param) for e in vehicle.events]
         shown = [e.as_dict() for e in ev]
         link = {"up": up.stats.summary(), "down": down.stats.summary(), "rejected": dict(vend.rejected)}
         summary = summarise(arrays, m, flight.gains, clock="offline", outcome=outcome, events=shown, link=link,
@@ -201,6 +203,16 @@ def fly_end(flight: Flight, vehicle: SimVehicle, shown: list[dict[str, Any]]) ->
     return end_block(m.end_action, rows, ended)
 
 
+def stopped(vehicle: SimVehicle, exc: BaseException, k: int, rate: float) -> str:
+    """The outcome of a flight stopped at step ``k`` by ``exc``, its event logged: ``aborted`` (Ctrl-C), or
+    ``law_failed`` (:class:`~controller.law.LawFailed`: a user's law raised, exited or gave no four finite inputs)."""
+    if isinstance(exc, LawFailed):
+        vehicle.event("law_failed", f"{exc} at step {k} (t={k / rate:.3f} s)")
+        return "law_failed"
+    vehicle.event("aborted", "interrupted")
+    return "aborted"
+
+
 def plant_verdict(vehicle: SimVehicle, impact_noted: bool) -> tuple[str | None, bool]:
     """``diverged`` or ``crashed`` when the plant ends the flight now (its event logged), else None; and whether
     its hard touchdown is noted (a disarmed vehicle's is logged once as an ``impact``, and the flight goes on)."""
@@ -213,6 +225,24 @@ def plant_verdict(vehicle: SimVehicle, impact_noted: bool) -> tuple[str | None, 
         return None, impact_noted
     vehicle.event("crashed" if vehicle.armed else "impact", impact_text(plant.impact, vehicle.armed))
     return ("crashed" if vehicle.armed else None), True
+
+
+def _log_new_events(vehicle: SimVehicle, events: Any, logged: int) -> int:
+    """Write the vehicle's events after the first ``logged`` to ``events.log`` (if any); how many are logged now."""
+    for e in vehicle.events[logged:]:
+        if events is not None:
+            events.event(e.t, e.kind, e.text)
+    return len(vehicle.events)
+
+
+def _disarm_landed(vehicle: Any) -> None:
+    """A mission that ends with a landing (NAV_LAND, NAV_RETURN_TO_LAUNCH) ends disarmed on the ground, as
+    PX4's land detector ends it: the vehicle, within :data:`TOUCHDOWN_M` of the ground and at rest, disarms."""
+    X = vehicle.published()
+    if vehicle.armed and X[4] <= TOUCHDOWN_M and abs(X[5]) <= TOUCHDOWN_M:
+        vehicle.disarm("landed: the mission's landing touched down")
+    else:
+        vehicle.event("land", f"not on the ground at the mission's end (z = {X[4]:.3f} m): left armed")
 
 
 def _close_record(record: RunRecord | None, unlogged: list[Any]) -> None:

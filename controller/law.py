@@ -23,7 +23,12 @@ fits is flown with ``--controller path/to/file.py:ClassName`` or
 
 In:  a law spec (built-in name, ``file.py:Class``, ``module:Class``) or factory; the nominal model, gains,
      control rate (Hz)
-Out: a built law that fits :class:`Law` (units in the list above), or a one-line ConfigError
+Out: a built law that fits :class:`Law` (units in the list above), or a one-line ConfigError; a user's law is
+     flown inside :class:`CheckedLaw`, which turns its failures in flight (a raise, ``SystemExit`` too; inputs
+     that are not four finite numbers; a ``desired`` gone bad) into :class:`LawFailed`
+
+A user's law that cannot be loaded (its import or its constructor raises, ``SystemExit`` included) is bad input:
+nothing is flown (exit 2). One that fails in flight ends the flight ``law_failed`` (docs/law.md, "Your own law").
 """
 
 from __future__ import annotations
@@ -112,7 +117,7 @@ def resolve_law(spec: str) -> LawFactory:
             module = importlib.import_module(where)
         except ModuleNotFoundError as exc:
             raise ConfigError(f"controller {spec!r}: no module named {exc.name!r}") from None
-        except Exception as exc:  # the user's module raised while importing: say so in one line
+        except (Exception, SystemExit) as exc:  # the user's module raised (or exited) while importing: one line
             raise ConfigError(f"controller {spec!r}: importing {where} raised {type(exc).__name__}: {exc}") from None
     cls = getattr(module, cls_name, None)
     if cls is None:
@@ -139,7 +144,7 @@ def _load_file(path: Path, spec: str):  # -> module
     sys.modules[name] = module
     try:
         mod_spec.loader.exec_module(module)
-    except Exception as exc:  # a syntax error or a raise in the user's file: one line, no traceback
+    except (Exception, SystemExit) as exc:  # a syntax error, a raise or an exit in the user's file: one line
         del sys.modules[name]
         raise ConfigError(f"controller {spec!r}: loading {path} raised {type(exc).__name__}: {exc}") from None
     return module
@@ -157,13 +162,78 @@ def make_law(spec: str | LawFactory, nominal: Nominal, gains: Gains, rate_hz: fl
             law = BacksteppingSuperTwisting(nominal, gains, rate_hz, discretization=discretization)
         else:
             law = factory(nominal, gains, rate_hz)
-    except Exception as exc:  # the user's constructor: one line naming it
+    except (Exception, SystemExit) as exc:  # the user's constructor (an exit too): one line naming it
         raise ConfigError(f"controller {label!r}: building it as ({label.rpartition(':')[2]})(nominal, gains, "
                           f"rate_hz) raised {type(exc).__name__}: {exc}") from None
     why = law_problem(law)
     if why:
         raise ConfigError(f"controller {label!r}: does not fit the Law interface (controller/law.py): {why}")
-    return law
+    return law if factory in BUILTIN.values() else CheckedLaw(law, label)
+
+
+class LawFailed(Exception):
+    """A user's law failed in flight: ``label`` (its spec) and ``what`` it did (one line)."""
+
+    def __init__(self, label: str, what: str) -> None:
+        super().__init__(f"controller {label!r}: {what}")
+        self.label = label
+        self.what = what
+
+
+def _inputs(u: object) -> Quad | None:
+    """``u`` as four finite floats, or None when it is not that (a string, None, another length, inf, nan)."""
+    if isinstance(u, (str, bytes)) or u is None:
+        return None
+    try:
+        values = tuple(float(v) for v in u)  # type: ignore[attr-defined]
+    except (TypeError, ValueError):
+        return None
+    if len(values) != 4 or not all(math.isfinite(v) for v in values):
+        return None
+    return values  # type: ignore[return-value]
+
+
+class CheckedLaw:
+    """A user's law as the loop flies it: each call's failure (a raise, ``SystemExit`` included, but not
+    Ctrl-C) and each ``update`` that is not four finite numbers, or that leaves ``desired`` bad, is a
+    :class:`LawFailed` naming what it did. The built-in laws are flown bare (their arithmetic is the reference)."""
+
+    def __init__(self, law: Law, label: str) -> None:
+        self.law = law
+        self.label = label
+
+    @property
+    def desired(self) -> tuple[float, float]:
+        return self.law.desired
+
+    def __getattr__(self, name: str) -> object:  # the law's own attributes (its integrators, ...) read through
+        if name == "law":  # not set yet (a copy being built): no recursion
+            raise AttributeError(name)
+        return getattr(self.law, name)
+
+    def _call(self, method: str, *args: object) -> object:
+        try:
+            return getattr(self.law, method)(*args)
+        except (Exception, SystemExit) as exc:
+            raise LawFailed(self.label, f"{method}() raised {type(exc).__name__}: {exc}") from None
+
+    def update(self, t: float, state: tuple[float, ...], ref: Sample, omega_d: float) -> Quad:
+        u = self._call("update", t, state, ref, omega_d)
+        values = _inputs(u)
+        if values is None:
+            shown = repr(u)
+            raise LawFailed(self.label, "update() must return four finite numbers (u1, u2, u3, u4) in N, "
+                                        f"got {shown[:80] + '...' if len(shown) > 80 else shown}")
+        why = law_problem(self.law)
+        if why:
+            raise LawFailed(self.label, f"after update(): {why}")
+        return values
+
+    def advance(self, saturated: tuple[bool, bool, bool, bool], hold: bool = False) -> None:
+        self._call("advance", saturated, hold)
+
+    def reset(self) -> None:
+        self._call("reset")
 
 
 def _label(factory: LawFactory) -> str:

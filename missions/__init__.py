@@ -1,11 +1,16 @@
 """Missions: the paper's scenarios as TOML files and the trajectory references they define.
 
-In:  a mission TOML file (``missions/*.toml`` or a path), or a mission's fields in Python;
+In:  a mission TOML file (``missions/*.toml`` or a path), a ground station's plan (``.plan``, ``.waypoints``),
+     or a mission's fields in Python;
 Out: a validated :class:`Mission` and its :class:`Reference` (x, y, z m and psi rad against t s,
      with four derivatives). Pure: no sockets, no processes; the file is read by :mod:`params`
 
 - :mod:`missions.mission`     the mission file: load, validate, the :class:`Mission`
 - :mod:`missions.references`  the trajectories: set-points, steps, sine, waypoints
+- :mod:`missions.planfiles`   ground stations' plans: QGroundControl ``.plan`` and ``QGC WPL 110`` text
+- :mod:`missions.geodetic`    PX4's projection of latitude, longitude, altitude to the local frames
+- :mod:`missions.route`       a plan's knots, stops, yaw and times from PX4's speed limits
+- :mod:`missions.minsnap`     minimum-snap trajectories through knots (``kind = "smooth"``)
 
 Scripting::
 

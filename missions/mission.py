@@ -1,6 +1,7 @@
 """Mission files: load, validate, and the :class:`Mission` they describe.
 
-In:  a mission TOML file's path (read by :func:`params.load_toml`) or its parsed table, or the
+In:  a mission TOML file's path (read by :func:`params.load_toml`), a ground station's plan (``.plan``,
+     ``.waypoints``, ``.txt``: read by :func:`params.read_text_file`), or a TOML's parsed table, or the
      fields given in Python: a trajectory, ``duration_s`` (s), ``rate_hz`` and ``physics_hz`` (Hz),
      ``start`` (x, y, z in m, psi in rad; paper frame NWU, z up), the profile, law and seed names,
      and the raw tables of the other parts
@@ -24,8 +25,11 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from missions.minsnap import Knot, Smooth, accelerations, demands, stretched
+from missions.planfiles import read_plan_text
 from missions.references import Reference, Setpoint, Sine, Step, Waypoints
-from params import ConfigError, Table, load_toml
+from missions.route import LIMIT_RANGES, Limits, smooth_from_plan
+from params import ConfigError, Table, load_toml, read_text_file
 
 CONTROLLERS = ("bsst", "smc", "pid")
 # how the super-twisting step of ``bsst`` is stepped over the control period (controller.supertwisting):
@@ -40,7 +44,15 @@ MISSION_RANGES: dict[str, tuple[float, float]] = {
     "physics_hz": (100.0, 10000.0),
     "seed": (0, 2**31 - 1),
 }
-TRAJECTORIES = ("step", "sine", "waypoints")
+TRAJECTORIES = ("step", "sine", "waypoints", "smooth", "plan")
+PLAN_SUFFIXES = (".plan", ".waypoints", ".txt")  # QGroundControl's JSON plan; QGC WPL 110 text
+PLAN_MAX_BYTES = 16 << 20  # a plan of MAX_ITEMS items is about 5 MB of JSON
+END_REST_S = 1.0  # s: a plan's mission lasts this long after its trajectory ends (at rest, or on the ground)
+# the share of the airframe's thrust (the profile's u1 limit) and tilt (the law's tilt_max) a trajectory may
+# need in feed-forward: the rest is the law's room to correct (fitted_to_airframe)
+THRUST_SHARE = 0.8
+TILT_SHARE = 0.8
+MAX_STRETCH = 4.0  # a trajectory that still needs too much slowed this much is refused
 # what the vehicle does once the mission's time is flown (``[end] action``): land where it is with its on-board
 # landing and disarm on the ground, or hold its position until the session ends; never motors off in the air
 END_ACTIONS = ("land", "hold")
@@ -173,6 +185,15 @@ def envelope_problem(trajectory: Reference, start: tuple[float, ...], duration_s
             r = math.sqrt(s.x * s.x + s.y * s.y + s.z * s.z)
             if r > ENVELOPE_RADIUS_M:
                 return f"{key}[{i}]", beyond(f"({s.x:g}, {s.y:g}, {s.z:g})", r)
+    elif isinstance(trajectory, Smooth):  # the polynomials may swing past their knots: sampled, 64 a segment
+        ks = trajectory.knots
+        for j in range(len(ks) - 1):
+            for i in range(65):
+                x, y, z, _ = trajectory.sample(ks[j].t + (ks[j + 1].t - ks[j].t) * i / 64)
+                r = math.sqrt(x[0] * x[0] + y[0] * y[0] + z[0] * z[0])
+                if r > ENVELOPE_RADIUS_M:
+                    return f"trajectory.points[{j}]", beyond(f"after this knot, at ({x[0]:.4g}, {y[0]:.4g}, "
+                                                              f"{z[0]:.4g}), the trajectory", r)
     elif isinstance(trajectory, Sine):
         a, z0 = abs(trajectory.amplitude), trajectory.z0
         z_end = z0 + trajectory.climb * duration_s
@@ -245,17 +266,79 @@ def mission_path(path: str | Path) -> Path:
     return shipped if named and shipped.is_file() else p
 
 
+def is_plan_file(path: str | Path) -> bool:
+    """Whether ``path`` names a ground station's mission (by its suffix: :data:`PLAN_SUFFIXES`)."""
+    return Path(path).suffix.lower() in PLAN_SUFFIXES
+
+
 def load_mission(path: str | Path) -> Mission:
-    """Read and validate a mission TOML file (a shipped one by name: :func:`mission_path`)."""
+    """Read and validate a mission TOML file (a shipped one by name: :func:`mission_path`), or a
+    ground station's plan (:func:`is_plan_file`: flown with every other setting at its default)."""
     p = mission_path(path)
+    if is_plan_file(p):
+        return mission_from_plan(read_text_file(p, "a mission plan", PLAN_MAX_BYTES), str(p), p.stem)
     return mission_from_table(load_toml(p), str(p), default_name=p.stem)
+
+
+def plan_trajectory(text: str, source: str, limits: Mapping[str, float] | None = None) -> Smooth:
+    """The smooth trajectory of a plan's text (``.plan`` JSON or ``QGC WPL 110``): its cruise speed is
+    MPC_XY_CRUISE unless ``limits`` (PX4 names, :class:`missions.route.Limits`) give it."""
+    plan = read_plan_text(text, source)
+    given = dict(limits or {})
+    if plan.cruise_m_s is not None and "MPC_XY_CRUISE" not in given:
+        lo, hi = LIMIT_RANGES["MPC_XY_CRUISE"]
+        if not lo <= plan.cruise_m_s <= hi:
+            raise ConfigError(f"{source}: mission.hoverSpeed: {plan.cruise_m_s:g} m/s, must be in [{lo:g}, {hi:g}]")
+        given["MPC_XY_CRUISE"] = plan.cruise_m_s
+    smooth, _ = smooth_from_plan(plan, Limits(**given), ENVELOPE_RADIUS_M)
+    return smooth
+
+
+def mission_from_plan(text: str, source: str, name: str = "mission") -> Mission:
+    """The mission of a plan's text: its trajectory, then :data:`END_REST_S` at rest; defaults otherwise."""
+    smooth = plan_trajectory(text, source)
+    return Mission(trajectory=smooth, duration_s=smooth.end_s + END_REST_S, name=name, source=source)
+
+
+def fitted_to_airframe(m: Mission, mass: float, gravity: float, u1_max: float, tilt_max: float) -> Mission:
+    """``m`` as it may fly on an airframe of ``mass`` (kg) whose law may ask ``u1_max`` (N) of thrust and
+    ``tilt_max`` (rad) of tilt: a :class:`Smooth` trajectory that needs more than :data:`THRUST_SHARE` of the
+    one or :data:`TILT_SHARE` of the other is slowed (its times stretched, the mission as much longer) by the
+    least factor that fits (to 1 %), or refused when even :data:`MAX_STRETCH` does not. Other trajectories,
+    and smooth ones that fit, come back unchanged."""
+    ref = m.trajectory
+    if not isinstance(ref, Smooth):
+        return m
+    f_max, a_max = THRUST_SHARE * u1_max, TILT_SHARE * tilt_max
+    samples = accelerations(ref)  # taken once: stretching only divides them by k²
+
+    def fits(k: float) -> bool:
+        d = demands(ref, mass, gravity, k, samples)
+        return d.thrust_n <= f_max and d.tilt_rad <= a_max
+
+    if fits(1.0):
+        return m
+    d = demands(ref, mass, gravity, 1.0, samples)
+    if mass * gravity > f_max or not fits(MAX_STRETCH):
+        raise ConfigError(
+            f"{m.source}: trajectory: refused: it needs {d.thrust_n:.3g} N of thrust (t = {d.thrust_t:.2f} s) and "
+            f"{math.degrees(d.tilt_rad):.1f} deg of tilt (t = {d.tilt_t:.2f} s); the airframe allows "
+            f"{THRUST_SHARE:.0%} of u1 = {u1_max:.3g} N and {TILT_SHARE:.0%} of tilt_max = "
+            f"{math.degrees(tilt_max):.1f} deg, and slowed {MAX_STRETCH:g} times it still needs more")
+    k = 1.0
+    while not fits(k):
+        k = round(k * 1.01, 6)
+    slow = stretched(ref, k)
+    return replace(m, trajectory=slow, duration_s=m.duration_s + (slow.end_s - ref.end_s))
 
 
 def mission_from_table(data: Mapping[str, Any], source: str, default_name: str = "mission") -> Mission:
     t = Table(data, source)
     name = t.string("name", default_name)
-    duration = t.number("duration_s", lo=MISSION_RANGES["duration_s"][0], lo_open=True,
-                        hi=MISSION_RANGES["duration_s"][1])
+    trajectory_table = t.table("trajectory", required=True)
+    derived = trajectory_table.raw("kind") == "plan" and not t.has("duration_s")  # the plan's own length
+    duration = 0.0 if derived else t.number("duration_s", lo=MISSION_RANGES["duration_s"][0], lo_open=True,
+                                            hi=MISSION_RANGES["duration_s"][1])
     profile = t.string("profile", "paper")
     actuation = t.string("actuation", "", choices=("", "wrench", "motors")) or None
     controller = t.string("controller", "bsst")
@@ -271,7 +354,9 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
     st = t.table("start")
     start = st.vector("position", 3, (0.0, 0.0, 0.0), lo=-1e4, hi=1e4) + (st.number("psi", 0.0, lo=-10, hi=10),)
     st.done()
-    trajectory = _trajectory(t.table("trajectory", required=True), duration)
+    trajectory = _trajectory(trajectory_table, duration if not derived else MISSION_RANGES["duration_s"][1])
+    if derived:
+        duration = trajectory.end_s + END_REST_S  # type: ignore[attr-defined]
     raw = {k: _table(t, k) for k in ("gains", "effects", "link", "failsafe", "sensors", "estimator", "params", "wind")}
     end = t.table("end")
     end_action = end.string("action", DEFAULT_END_ACTION, choices=END_ACTIONS)
@@ -306,7 +391,8 @@ def _table(t: Table, name: str) -> Mapping[str, Any]:
     return v
 
 
-def _setpoints(t: Table, key: str, duration: float) -> tuple[Setpoint, ...]:
+def _setpoints(t: Table, key: str, duration: float, stops: list[bool] | None = None) -> tuple[Setpoint, ...]:
+    """The list of points {t, x, y, z, psi} under ``key``; with ``stops``, each may say ``stop`` (appended)."""
     items = t.raw(key)
     if not isinstance(items, list) or not items:
         raise t.error(key, "expected a non-empty list of tables {t, x, y, z, psi}")
@@ -320,6 +406,8 @@ def _setpoints(t: Table, key: str, duration: float) -> tuple[Setpoint, ...]:
             s.number("z", lo=-1e4, hi=1e4),
             s.number("psi", 0.0, lo=-100.0, hi=100.0),
         )
+        if stops is not None:
+            stops.append(s.boolean("stop", False))
         s.done()
         if out and sp.t <= out[-1].t:
             raise s.error("t", f"must be later than the previous one ({out[-1].t:g})")
@@ -339,7 +427,32 @@ def _trajectory(t: Table, duration: float) -> Reference:
         )
     elif kind == "step":
         ref = Step(_setpoints(t, "setpoints", duration))
-    else:
+    elif kind == "waypoints":
         ref = Waypoints(_setpoints(t, "points", duration))
+    elif kind == "smooth":
+        ref = _smooth(t, duration)
+    else:
+        ref = _plan(t)
     t.done()
     return ref
+
+
+def _smooth(t: Table, duration: float) -> Smooth:
+    """``kind = "smooth"``: knots {t, x, y, z, psi, stop} (the times from 0), ``lands``, ``stretched_by``."""
+    lands = t.boolean("lands", False)
+    factor = t.number("stretched_by", 1.0, lo=1.0, hi=MAX_STRETCH)
+    stops: list[bool] = []
+    points = _setpoints(t, "points", duration, stops)
+    if len(points) < 2:
+        raise t.error("points", "a smooth trajectory needs at least two points")
+    return Smooth(tuple(Knot(p.t, p.x, p.y, p.z, p.psi, s) for p, s in zip(points, stops)), lands, factor)
+
+
+def _plan(t: Table) -> Smooth:
+    """``kind = "plan"``: ``file`` (a ``.plan`` or ``QGC WPL 110`` file, relative to the mission's folder) and
+    PX4's speed and acceleration limits by name (:class:`missions.route.Limits`)."""
+    name = t.string("file")
+    p = Path(name).expanduser()
+    p = p if p.is_absolute() else Path(t._source).parent / p
+    limits = {k: t.number(k, lo=lo, hi=hi) for k, (lo, hi) in LIMIT_RANGES.items() if t.has(k)}
+    return plan_trajectory(read_text_file(p, "a mission plan", PLAN_MAX_BYTES), str(p), limits)

@@ -7,6 +7,7 @@ value always fails with one line naming the file, the key and what is allowed.
 
 from __future__ import annotations
 
+import difflib
 import math
 import os
 import stat
@@ -71,6 +72,16 @@ def _file_kind(mode: int) -> str | None:
     return "not a regular file"
 
 
+def read_text_file(path: str | Path, expected: str, max_bytes: int = MAX_TOML_BYTES) -> str:
+    """The UTF-8 text of a regular file of at most ``max_bytes`` (:func:`read_regular_file`); every
+    problem a :class:`ConfigError` naming the path and ``expected`` (a mission plan, a waypoint file)."""
+    raw = read_regular_file(path, expected, max_bytes)
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError:
+        raise ConfigError(f"{Path(path)}: not a text file (expected {expected})") from None
+
+
 def load_toml(path: str | Path) -> dict[str, Any]:
     """Read a TOML file, turning every I/O or syntax problem into a :class:`ConfigError`:
     not a regular file, over :data:`MAX_TOML_BYTES`, not UTF-8, not TOML, nested over :data:`MAX_DEPTH`."""
@@ -107,10 +118,42 @@ def check_depth(data: Any, source: str, limit: int = MAX_DEPTH) -> None:
         stack.extend((v, depth + 1, name) for name, v in children)
 
 
+TYPO_MIN_LENGTH = 4  # shorter keys of one table are one slip apart (u1 u2, c_p c_v, k1 k2): never taken for typos
+
+
+def is_typo_of(text: str, name: str) -> bool:
+    """Whether ``text`` is ``name`` (of at least :data:`TYPO_MIN_LENGTH` characters) with one typing slip: a
+    character left out, added, changed, or two neighbours swapped (``duraton_s``, ``durattion_s``,
+    ``duratoin_s``); two keys of one table are never that close (``velocity_noise_mps``,
+    ``velocity_noise_z_mps`` are two apart)."""
+    if len(name) < TYPO_MIN_LENGTH or text == name or abs(len(text) - len(name)) > 1:
+        return False
+    i = 0
+    while i < min(len(text), len(name)) and text[i] == name[i]:
+        i += 1
+    a, b = text[i:], name[i:]  # from the first difference on
+    return (a[1:] == b[1:] or a == b[1:] or a[1:] == b
+            or (len(a) == len(b) >= 2 and a[0] == b[1] and a[1] == b[0] and a[2:] == b[2:]))
+
+
+def likely(text: str, known: Iterable[str], cutoff: float = 0.6) -> str | None:
+    """The word of ``known`` that ``text`` most likely misspells: one a single slip away (:func:`is_typo_of`: a
+    swap of neighbours, which difflib ranks low), else difflib's closest from ``cutoff`` on; None if none is."""
+    words = [str(k) for k in known]
+    slips = [w for w in words if is_typo_of(text, w)]
+    if slips:
+        return slips[0]
+    close = difflib.get_close_matches(text, words, n=1, cutoff=cutoff)
+    return close[0] if close else None
+
+
 class Table:
     """One TOML table being validated: typed getters that name the file and the key.
 
-    Call :meth:`done` at the end so that any key nobody asked for is rejected as unknown.
+    Call :meth:`done` at the end so that any key nobody asked for is rejected as unknown, with the
+    likely key suggested (every key the table asked for is a known one). A misspelled required key
+    (``duraton_s``) is reported as the unknown key it is, with ``did you mean 'duration_s'?``, not as
+    the missing key it leaves behind.
     """
 
     def __init__(self, data: Mapping[str, Any], source: str, prefix: str = "") -> None:
@@ -135,6 +178,11 @@ class Table:
         if name in self._data:
             return self._data[name]
         if default is _REQUIRED:
+            # a key not asked for yet, one typing slip from this one, is this one misspelled: say that, not what its
+            # absence leads to
+            typo = [str(k) for k in self._data if k not in self._used and is_typo_of(str(k), name)]
+            if typo:
+                raise self.unknown(typo[0], [name])
             raise self.error(name, "is required")
         return default
 
@@ -208,10 +256,17 @@ class Table:
     def raw(self, name: str, default: Any = None) -> Any:
         return self._get(name, default)
 
+    def unknown(self, name: str, known: Iterable[str]) -> ConfigError:
+        """The error for key ``name``, which the table does not have: where it is, and the key of ``known``
+        it most likely meant (difflib), if one is close."""
+        where = f"in [{self._prefix}]" if self._prefix else "at the top level"
+        like = likely(str(name), known)
+        return self.error(name, f"unknown key {where}" + (f"; did you mean {like!r}?" if like else ""))
+
     def done(self) -> None:
         unknown = sorted(set(self._data) - self._used)
         if unknown:
-            raise self.error(unknown[0], "unknown key")
+            raise self.unknown(unknown[0], sorted(self._used))
 
 
 class _Required:

@@ -86,3 +86,14 @@ def csv_rows(path: Path) -> int:
         return max(path.read_bytes().count(b"\n") - 1, 0)
     except FileNotFoundError:
         return 0
+
+
+def shown(line: str) -> str:
+    """A child's event line as a person reads it, ``kind: text [by ...]``, whether the line is JSON or text
+    (bridge.nodes.report); any other line as it is."""
+    from bridge.nodes.report import Event, parse_line  # lazy: only the tests that read events need it
+
+    report = parse_line(line)
+    if not isinstance(report, Event):
+        return line
+    return f"{report.kind}: {report.text}" + (report.by.suffix if report.by is not None else "")

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, given, note, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import common as mavlink
 
@@ -683,3 +683,113 @@ def test_any_message_from_anyone_changes_nothing_unless_valid_and_authorised(ben
         assert _acks(back) == [M.MAV_RESULT_DENIED], (m, source, ids)
         assert after == before
     assert decoded <= 1
+
+
+# -- issue 22: the ground station's authority, as a property over whole lockstep flights --------------------
+GCS_MISSION = 'name = "gcs"\nduration_s = 3.0\n[trajectory]\nkind = "sine"\n'
+_PX4 = {"OFFBOARD": (6, 0), "HOLD": (4, 3), "TAKEOFF": (4, 2), "LAND": (4, 6)}  # PX4 main, sub mode
+_CUSTOM = M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+
+
+def _param_value(spec: Any) -> st.SearchStrategy[tuple[str, float, int]]:
+    """A PARAM_SET's (name, wire value, type) of ``spec`` inside its range (an INT32 one of its choices)."""
+    from bridge.mavlink.modes import PARAM_TYPES, param_to_wire  # local: only this strategy needs them
+
+    kind = PARAM_TYPES[spec.kind]
+    values = (st.sampled_from(sorted(spec.choices)) if spec.choices
+              else st.floats(spec.lo, spec.hi, allow_nan=False))
+    return values.map(lambda v: (spec.name, param_to_wire(v, kind), kind))
+
+
+def _gcs_frames() -> st.SearchStrategy[Any]:
+    """One valid frame a ground station may send: PARAM_SET, DO_SET_MODE, SET_MODE, NAV_TAKEOFF, NAV_LAND, ARM or
+    DISARM (forced or not); addressed to the vehicle (``target`` filled in when sent)."""
+    from bridge.autopilot.params import PARAMS  # local: only this strategy needs it
+
+    settable = [p for p in PARAMS if not p.at_start_only]
+    mode = st.sampled_from(sorted(_PX4))
+    return st.one_of(
+        st.sampled_from(settable).flatmap(_param_value).map(lambda p: ("PARAM_SET", *p)),
+        mode.map(lambda m: ("DO_SET_MODE", m)),
+        mode.map(lambda m: ("SET_MODE", m)),
+        st.floats(1.0, 5.0).map(lambda alt: ("NAV_TAKEOFF", alt)),
+        st.just(("NAV_LAND",)),
+        st.sampled_from([(1.0, 0.0), (0.0, 0.0), (0.0, 21196.0)]).map(lambda p: ("ARM", *p)),
+    )
+
+
+def _gcs_message(frame: tuple, to: tuple[int, int]) -> Any:
+    kind = frame[0]
+    if kind == "PARAM_SET":
+        return M.MAVLink_param_set_message(*to, frame[1].encode(), frame[2], frame[3])
+    if kind in ("DO_SET_MODE", "SET_MODE"):
+        main, sub = _PX4[frame[1]]
+        if kind == "SET_MODE":
+            return M.MAVLink_set_mode_message(to[0], _CUSTOM, (main << 16) | (sub << 24))
+        return M.MAVLink_command_long_message(*to, M.MAV_CMD_DO_SET_MODE, 0, _CUSTOM, main, sub, 0, 0, 0, 0)
+    if kind == "NAV_TAKEOFF":  # param7: m AMSL (home at 0 m AMSL in SITL's default home: above home)
+        return M.MAVLink_command_long_message(*to, M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, math.nan, math.nan, math.nan,
+                                              frame[1])
+    if kind == "NAV_LAND":
+        return M.MAVLink_command_long_message(*to, M.MAV_CMD_NAV_LAND, 0, 0, 0, 0, math.nan, math.nan, math.nan, 0)
+    return M.MAVLink_command_long_message(*to, ARM, 0, frame[1], frame[2], 0, 0, 0, 0, 0)
+
+
+def _fly_gcs(mission: Path, out: Path, frames: list[tuple[float, tuple]]) -> tuple[int, dict[str, Any]]:
+    """``bsst sitl`` lockstep at 2x real time; each frame of ``frames`` (at the vehicle's time s, in order) sent
+    by a ground station on the GCS link once the vehicle has flown that far. The exit status and summary."""
+    with instance_slot() as n:
+        gcs = Station((255, 190), port=GCS_PORT + n)
+        p = Proc.bsst("sitl", str(mission), "--out", str(out), "--instance", str(n), "--speed", "2", "--no-plots")
+        try:
+            to = (n + 1, 1)
+            for t, frame in frames:
+                wait_for(lambda t=t: csv_rows(out / "vehicle.csv") >= 250 * t or p.p.poll() is not None, 60,
+                         f"the flight at t={t:g} s")
+                if p.p.poll() is not None:
+                    break
+                wait_for(lambda: bool(gcs.poll()) or gcs.dest is not None, 20, "the vehicle's telemetry")
+                gcs.send(_gcs_message(frame, to))
+            p.p.wait(timeout=120)
+        finally:
+            p.stop()
+            gcs.close()
+    return p.p.returncode, json.loads((out / "summary.json").read_text())
+
+
+@pytest.fixture(scope="module")
+def undisturbed(tmp_path_factory) -> tuple[Path, bytes]:
+    """The mission and the trace.csv of its flight with no ground station speaking."""
+    d = tmp_path_factory.mktemp("gcs-ref")
+    mission = d / "m.toml"
+    mission.write_text(GCS_MISSION)
+    rc, s = _fly_gcs(mission, d / "ref", [])
+    assert rc == 0 and s["outcome"] == "completed" and s["lockstep"] == {"held": True}, s
+    return mission, (d / "ref" / "trace.csv").read_bytes()
+
+
+@settings(max_examples=6, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@given(st.lists(st.tuples(st.floats(0.3, 2.5), _gcs_frames()), min_size=1, max_size=3))
+def test_a_ground_stations_frames_leave_the_flight_reproducible_or_are_named_with_their_step(
+        undisturbed, tmp_path_factory, frames):
+    """Issue 22: random valid frames of a ground station during a lockstep flight. Either nothing changed:
+    the trace is the undisturbed run's byte for byte, the summary says completed and held, exit 0; or the
+    summary names each change (its sender, the ground station; what; t and step), the lockstep record says
+    from which step the run is no longer reproducible (or that it left lockstep), and the exit status is 1."""
+    mission, ref = undisturbed
+    out = tmp_path_factory.mktemp("gcs") / "run"
+    rc, s = _fly_gcs(mission, out, sorted(frames, key=lambda f: f[0]))
+    changes = s["interventions"]
+    note(f"{frames}: exit {rc}, {s['outcome']}, changes {[c['what'] for c in changes]}")
+    if not changes:
+        assert (out / "trace.csv").read_bytes() == ref, (frames, s["ended_by"], s["events"])
+        assert s["outcome"] == "completed" and s["lockstep"] == {"held": True} and rc == 0, (frames, s)
+        return
+    assert rc == 1, (frames, s)
+    for c in changes:
+        assert c["by"].startswith("255:190 127.0.0.1:") and c["by"].endswith(" gcs"), c
+        assert c["step"] == round(c["t"] * 250) and c["kind"] in ("param", "mode", "armed", "disarmed"), c
+        assert c["kind"] != "param" or {"name", "old", "new"} <= set(c), c
+    lock = s["lockstep"]
+    assert lock["held"] is False or lock["reproducible_until_step"] == changes[0]["step"], lock

@@ -31,7 +31,7 @@ from bridge.core.flight import prepare
 from bridge.mavlink.endpoint import LINK_PORT
 from bridge.session import instance_slot
 from missions import MISSION_DIR, mission_from_table
-from params import Table, dump_toml, load_toml
+from params import ConfigError, Table, dump_toml, is_typo_of, load_toml
 from tests.sitlkit import ROOT
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -135,6 +135,7 @@ CONVERTER_BAD = {
     "law_spec": ["x", "nofile.py:Law", "no_such_module:Law", "json:JSONDecoder", "bsst:"],
     "law_list": ["x", "bsst,bsst", "bsst,nofile.py:Law"],
     "blackout_window": ["x", "-1:1", "1:0"],
+    "wind_flag": ["x", "-5", "5:x"],
     "_ids": ["x", "999:1", "200"],
     "_home": ["x", "91,0,0", "1,2"],
     "trace_file": ["no_such_trace.csv", "/"],
@@ -161,6 +162,7 @@ TEXT_BAD = {
     "--stats": lambda f: [f.regular / "x.json", f.directory],
     "--dask": lambda f: ["notanaddress"],
     "--key": lambda f: [f.missing, f.key_empty, f.key_open, f.directory],
+    "--at": lambda f: ["x", "5:bogus", "5:gps:sideways"],
 }
 POSITIONAL_BAD = {  # command -> bad values of its positional argument
     "report": lambda f: [f.missing, f.regular, f.directory],
@@ -517,3 +519,124 @@ def test_issue_22_a_bad_trace_is_one_line_through_every_path(tmp_path: Path, kin
         assert f"{bad} {line}: " in lines[0] and why in lines[0], (name, lines[0])
         assert len(lines[0]) < 600, (name, len(lines[0]))  # the line says what is wrong, not the field
     assert not (tmp_path / "runs").exists() and not (tmp_path / "bad.png").exists()
+
+
+# -- issue 23 (defect 7): misspellings get the likely word; each command has only the flags it uses ---------
+def _bsst(*argv: Any, cwd: Path = ROOT) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "bridge", *map(str, argv)], capture_output=True, text=True, cwd=cwd,
+                          timeout=120, stdin=subprocess.DEVNULL)
+
+
+def _one_line(r: subprocess.CompletedProcess[str]) -> str:
+    assert r.returncode == 2, f"exit {r.returncode}: {r.stderr}"
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
+    return lines[0]
+
+
+def test_a_misspelled_required_key_is_an_unknown_key_with_the_likely_one(tmp_path: Path) -> None:
+    mission = tmp_path / "typo.toml"
+    mission.write_text(TINY.replace("duration_s", "duraton_s"))
+    line = _one_line(_bsst("sim", mission, "--out", tmp_path / "out", "--no-plots"))
+    assert line == f"bsst: {mission}: duraton_s: unknown key at the top level; did you mean 'duration_s'?"
+    mission.write_text(TINY + "[link.up]\ndelya_ms = 10\n")
+    line = _one_line(_bsst("sim", mission, "--out", tmp_path / "out", "--no-plots"))
+    assert line == f"bsst: {mission}: link.up.delya_ms: unknown key in [link.up]; did you mean 'delay_ms'?"
+
+
+def _renamed(data: dict[str, Any], dotted: str, slip: Any) -> dict[str, Any] | None:
+    """A deep copy of ``data`` with the key ``dotted`` (``a.b[0].c``) renamed to ``slip(name)`` (None: not there)."""
+    import copy  # only this helper copies
+
+    out = copy.deepcopy(data)
+    node: Any = out
+    *path, last = dotted.split(".")
+    for part in path:
+        name, _, idx = part.partition("[")
+        if not isinstance(node, dict) or name not in node:
+            return None
+        node = node[name][int(idx.rstrip("]"))] if idx else node[name]
+    if not isinstance(node, dict) or last not in node:
+        return None
+    node[slip(last)] = node.pop(last)
+    return out
+
+
+SLIPS = {"doubled first letter": lambda k: k[0] + k,
+         "last letter dropped": lambda k: k[:-1] if len(k) > 3 else k + k[-1]}
+
+
+@pytest.mark.parametrize("slip", SLIPS)
+def test_every_mission_key_misspelled_is_named_with_the_likely_one(slip: str) -> None:
+    """Every key of every table the validators read (required or not, tables too), misspelled: the error is the
+    unknown key, in its table, with the key it most likely meant, whatever else its absence would break."""
+    typo = SLIPS[slip]
+    seen = 0
+    for ctl in ("bsst", "smc", "pid"):
+        data = _full_mission(ctl)
+        for key in _keys_asked(data, "<walk>"):
+            bad = _renamed(data, key, typo)
+            if bad is None:  # a key the walk asked for and the mission leaves to its default
+                continue
+            seen += 1
+            table, _, name = key.rpartition(".")
+            with pytest.raises(ConfigError) as exc:
+                prepare(mission_from_table(bad, "<walk>"))
+            where = f"in [{table}]" if table else "at the top level"
+            want = f"<walk>: {table + '.' if table else ''}{typo(name)}: unknown key {where}; did you mean {name!r}?"
+            assert str(exc.value) == want
+    assert seen > 60
+
+
+def test_a_misspelled_flag_gets_the_likely_one() -> None:
+    line = _one_line(_bsst("sim", "missions/sine.toml", "--dealy", "5"))
+    assert line == "bsst sim: unrecognized arguments: --dealy 5; did you mean --delay?"
+    line = _one_line(_bsst("link", "fit", "examples/link-trace.csv", "--outt", "x"))
+    assert line == "bsst link fit: unrecognized arguments: --outt x; did you mean --out?"
+
+
+@pytest.mark.parametrize("cmd", sorted(set(BASE) - {"link"}))  # link's actions: the test above
+def test_every_flag_misspelled_names_itself(files: Files, capsys: Any, cmd: str) -> None:
+    """Each flag of each command with two neighbouring letters swapped: refused, the command's own flag suggested."""
+    flags = [f for a in _commands()[cmd]._actions for f in a.option_strings if len(f) >= 6]
+    suggested = 0
+    for flag in flags:
+        slip = flag[:3] + flag[4] + flag[3] + flag[5:]
+        if (slip == flag or any(slip == f or f.startswith(slip) for f in flags)  # the same, or still a flag's prefix
+                or sum(is_typo_of(slip, f) for f in flags) > 1):  # as near another flag (--seped: --seed, --speed)
+            continue
+        with _guard():
+            rc = main([cmd, *map(str, BASE[cmd](files)), slip, "1"])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert rc == 2 and len(err) == 1, err
+        if "unrecognized arguments" in err[0]:
+            assert err[0].endswith(f"; did you mean {flag}?"), err[0]
+            suggested += 1
+    assert suggested >= 1
+
+
+def test_bsst_controller_has_no_run_directory_nor_plots(tmp_path: Path) -> None:
+    """The controller alone writes its two files only into --out, and plots nothing: its help says so, and
+    --no-plots is no flag of it."""
+    p = _commands()["controller"]
+    flags = {f: a for a in p._actions for f in a.option_strings}
+    assert "--no-plots" not in flags
+    assert "runs/" not in flags["--out"].help and "controller.tlog" in flags["--out"].help
+    line = _one_line(_bsst("controller", "missions/sine.toml", "--no-plots"))
+    assert line == "bsst controller: unrecognized arguments: --no-plots"
+    r = _bsst("controller", ROOT / "missions" / "sine.toml", "--vehicle", "127.0.0.1:9", "--timeout", "0.2",
+              cwd=tmp_path)
+    assert r.returncode == 1, r.stderr
+    assert list(tmp_path.iterdir()) == [], "bsst controller without --out wrote into the working directory"
+
+
+CONTROLLER_ONLY = {"--compensation": "predict", "--command-lag": "5", "--stale-after": "50", "--stop-after": "100"}
+
+
+def test_bsst_relay_takes_no_controller_flag() -> None:
+    relay = {f for a in _commands()["relay"]._actions for f in a.option_strings}
+    assert not relay & set(CONTROLLER_ONLY)
+    assert set(CONTROLLER_ONLY) <= {f for a in _commands()["sitl"]._actions for f in a.option_strings}
+    for flag, value in CONTROLLER_ONLY.items():
+        line = _one_line(_bsst("relay", "--listen", "127.0.0.1:0", "--to", "127.0.0.1:9", flag, value))
+        assert line.startswith(f"bsst relay: unrecognized arguments: {flag} {value}"), line

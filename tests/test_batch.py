@@ -26,8 +26,9 @@ from bridge.batch import MEASURES, _prepare_all, batch_problem, fly_batch
 from bridge.batch.predict import BatchPredictor
 from bridge.core.flight import prepare
 from bridge.link.ends import EPS_T
+from bridge.link.fates import draw_fates
 from bridge.link.model import FateStream, LinkConfig
-from bridge.link.plan import Clocks, _first_at_or_after, draw_fates
+from bridge.link.plan import Clocks, _first_at_or_after
 from bridge.loop import fly
 from bridge.sweep.cells import row_from_run
 from bridge.sweep.grid import AXES, Cell, Grid, cell_overrides, cells
@@ -166,6 +167,9 @@ def test_batch_problem_names_what_the_batch_cannot_fly(tmp_path: Path) -> None:
     at = [ParamChange(2.0, "MPC_LAND_SPEED", 0.5)]  # a parameter changed in flight: the batch does not model it
     why = batch_problem(m, [{"controller": "bsst", "param_at": at}])
     assert why is not None and "--param-at" in why and "\n" not in why
+    windy = replace(m, wind={"speed_mps": 3.0, "from_deg": 90.0})  # the batch flies still air only
+    why = batch_problem(windy, [{"controller": "bsst"}])
+    assert why is not None and "[wind]" in why and "\n" not in why
     law = f"{ROOT / 'examples' / 'my_law.py'}:MyLaw"
     why = batch_problem(m, [{"controller": law}])
     assert why is not None and "process engine" in why
@@ -327,3 +331,23 @@ def test_both_discretizations_fly_in_one_batch_as_in_the_scalar_loop() -> None:
         assert _close(got["ripple_u2"], want["ripple_u2"], 1e-6), where  # summed otherwise in the batch
         seen[(f.mission.controller, f.mission.discretization, str(f.link))] = got["tv_u2"]
     assert seen[("bsst", "implicit", str(flights[0].link))] * 10 < seen[("bsst", "explicit", str(flights[0].link))]
+
+
+def test_the_rows_do_not_depend_on_the_number_of_threads() -> None:
+    """``jobs`` spreads blocks of cells over threads (bridge.batch.engine._fly_blocks) and the link plan's
+    chunks likewise: every cell flies alone, so 1, 2 or 3 threads give the same rows to the bit. The mixed
+    grid (failsafe, prediction, every link feature, three laws) in blocks of 2 cells, so that the threads
+    take blocks in whatever order they come free."""
+    from bridge.batch import engine
+    from bridge.link import plan
+
+    m = replace(_mission(), duration_s=6.0)
+    over = _overrides()
+    block, chunk = engine.BLOCK_CELLS, plan.PLAN_CHUNK
+    try:
+        engine.BLOCK_CELLS, plan.PLAN_CHUNK = 2, 5
+        by_jobs = {jobs: fly_batch(m, over, jobs=jobs) for jobs in (1, 2, 3)}
+    finally:
+        engine.BLOCK_CELLS, plan.PLAN_CHUNK = block, chunk
+    assert {r["outcome"] for r in by_jobs[1]} >= {"completed", "failsafe"}
+    assert by_jobs[1] == by_jobs[2] == by_jobs[3]

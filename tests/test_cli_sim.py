@@ -10,10 +10,12 @@ with exactly one line on stderr and no traceback; a non-empty --out is refused w
 from __future__ import annotations
 
 import csv
+import importlib.metadata
 import json
 import os
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -184,3 +186,13 @@ def test_a_reader_that_stops_early_costs_no_traceback_nor_the_exit_status(tmp_pa
     err = p.stderr.read().decode()
     assert p.wait(timeout=60) == 0 and "Traceback" not in err and "Exception" not in err, err
     assert (tmp_path / "r" / "summary.json").is_file()
+
+
+def test_bsst_version_prints_the_packages_version() -> None:
+    """``bsst --version``: the installed distribution's version (pyproject.toml's in a checkout never installed)."""
+    try:
+        want = importlib.metadata.version("bsst-sitl")
+    except importlib.metadata.PackageNotFoundError:
+        want = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["version"]
+    r = subprocess.run([PYTHON, "-m", "bridge", "--version"], capture_output=True, text=True, timeout=60, cwd=ROOT)
+    assert (r.returncode, r.stdout, r.stderr) == (0, f"bsst {want}\n", "")

@@ -10,9 +10,7 @@ Walks every module of those packages with ``ast`` (as python-control's ``kwargs_
 - every public function and method (no leading underscore, in a public class or at module level)
   has type hints on all its arguments and its return.
 
-Every failure names ``file:line``. The few modules still over a limit are listed in
-:data:`KNOWN_OVER` and :data:`KNOWN_WITHOUT_PORTS`; a test fails when a listed module is no longer
-over (or has its ports), so the lists can only shrink.
+Every failure names ``file:line``. There is no allow-list: the limits hold for every module.
 """
 
 from __future__ import annotations
@@ -28,14 +26,6 @@ PACKAGES = ("bridge", "controller", "plant", "missions")
 MAX_MODULE_LINES = 500
 MAX_FUNCTION_LINES = 100
 NO_DOCSTRING = {"bridge/__main__.py"}  # ``python -m bridge``: three lines that call the CLI
-
-# being split in issue 21; must be empty. Paths of modules over MAX_MODULE_LINES, and file::function of
-# functions over MAX_FUNCTION_LINES.
-KNOWN_OVER = {
-    "bridge/link/plan.py",
-}
-# being written in issue 21; must be empty. Modules whose docstring has no ports block yet.
-KNOWN_WITHOUT_PORTS: set[str] = set()
 
 
 def modules(root: Path = ROOT) -> Iterator[tuple[str, str, ast.Module]]:
@@ -63,7 +53,7 @@ def functions(tree: ast.AST) -> Iterator[tuple[ast.FunctionDef | ast.AsyncFuncti
 
 
 def size_problems(path: str, src: str, tree: ast.Module) -> dict[str, str]:
-    """{key in :data:`KNOWN_OVER`'s form: the problem, naming file:line} for each limit passed."""
+    """{path, or path::function: the problem, naming file:line} for each limit passed."""
     out = {}
     n = len(src.splitlines())
     if n > MAX_MODULE_LINES:
@@ -124,28 +114,13 @@ ALL = list(modules())
 
 
 def test_no_module_or_function_is_over_its_limit() -> None:
-    problems = [p for path, src, tree in ALL for key, p in size_problems(path, src, tree).items()
-                if key not in KNOWN_OVER]
+    problems = [p for path, src, tree in ALL for p in size_problems(path, src, tree).values()]
     assert not problems, "\n".join(problems)
-
-
-def test_the_known_over_list_names_only_what_is_over() -> None:
-    over = {key for path, src, tree in ALL for key in size_problems(path, src, tree)}
-    stale = sorted(KNOWN_OVER - over)
-    assert not stale, "no longer over (or gone): remove from KNOWN_OVER: " + ", ".join(stale)
 
 
 def test_every_module_opens_with_a_docstring_with_its_ports() -> None:
-    problems = [p for path, _, tree in ALL if path not in KNOWN_WITHOUT_PORTS
-                for p in [docstring_problem(path, tree)] if p]
+    problems = [p for path, _, tree in ALL for p in [docstring_problem(path, tree)] if p]
     assert not problems, "\n".join(problems)
-
-
-def test_the_known_without_ports_list_names_only_modules_without_them() -> None:
-    paths = {path for path, _, _ in ALL}
-    stale = sorted(p for p in KNOWN_WITHOUT_PORTS if p not in paths or not any(
-        path == p and docstring_problem(path, tree) for path, _, tree in ALL))
-    assert not stale, "has its ports block now (or is gone): remove from KNOWN_WITHOUT_PORTS: " + ", ".join(stale)
 
 
 def test_public_functions_have_type_hints() -> None:

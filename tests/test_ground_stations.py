@@ -31,7 +31,7 @@ from bridge.autopilot.params import PARAMS, VehicleParams, read_param
 from bridge.mavlink.endpoint import GCS_PORT
 from bridge.mavlink.modes import FTP_ERR_UNKNOWN_COMMAND, FTP_HEADER, FTP_NAK, FTP_PAYLOAD_LEN, ftp_nak
 from bridge.session import instance_slot
-from tests.sitlkit import ENV, Proc
+from tests.sitlkit import ENV, Proc, shown
 from tests.test_vehicle import _vehicle
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -166,7 +166,7 @@ def test_mavsdk_parameters(tmp_path):
     assert not out["set_out_of_range"].startswith("SUCCESS") and out["get_after_refusal"] == 1.5
     assert out["obl_act"] == -1 and out["set_obl_act"] == "SUCCESS" and out["obl_rc_act"] == 5  # hold
     assert not out["set_sys_id"].startswith("SUCCESS")
-    v.wait_line(lambda s: "param: COM_OF_LOSS_T = 1.5 (was 0.5) [by " in s and " gcs]" in s)
+    v.wait_line(lambda s: "param: COM_OF_LOSS_T = 1.5 (was 0.5) [by " in shown(s) and " gcs]" in shown(s))
     v.wait_line(lambda s: s.startswith("refused COM_OF_LOSS_T: must be in [0.01, 60] s, got 100"))
     v.wait_line(lambda s: s.startswith("refused MAV_SYS_ID: takes effect at start only"))
     assert not any("COM_OF_LOSS_T = 100" in s for s in v.lines)

@@ -134,7 +134,7 @@ def fly(tmp: Path, timesync_skew_s: float = 0.0, spoofs: dict[int, int] | None =
     (tmp / "late.toml").write_text(MISSION)
     v = ScriptedVehicle(timesync_skew_s)
     ctl = Proc.bsst("controller", str(tmp / "late.toml"), "--realtime", "--vehicle", f"127.0.0.1:{v.port}",
-                    "--out", str(tmp / "run"), "--no-plots", "--timeout", "20")
+                    "--out", str(tmp / "run"), "--timeout", "20")
     try:
         deadline = time.monotonic() + 30
         next_hb = 0.0

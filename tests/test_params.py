@@ -49,7 +49,7 @@ from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
 from missions import Mission, Sine
 from params import ConfigError
-from tests.sitlkit import ENV, ROOT, Proc
+from tests.sitlkit import ENV, ROOT, Proc, shown
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -205,8 +205,8 @@ def test_parameter_protocol_over_udp(tmp_path):
         finally:
             assert v.stop() == 0
             gcs.close()
-    v.wait_line(lambda s: "param: COM_OF_LOSS_T = 1.5 (was 0.8) [by 255:190" in s)
-    v.wait_line(lambda s: "param: COM_OBL_RC_ACT = 5 (was -1)" in s)
+    v.wait_line(lambda s: "param: COM_OF_LOSS_T = 1.5 (was 0.8) [by 255:190" in shown(s))
+    v.wait_line(lambda s: "param: COM_OBL_RC_ACT = 5 (was -1)" in shown(s))
     stats = json.loads(v.wait_line(lambda s: s.startswith("stats "))[6:])
     assert stats["rejected"]["param_refused"] == 3
 
@@ -462,7 +462,7 @@ def test_the_documented_minimum_loss_timeout_is_set_over_mavlink(tmp_path):
         finally:
             assert v.stop() == 0
             gcs.close()
-    v.wait_line(lambda s: "param: COM_OF_LOSS_T = 0.01 (was 0.5) [by 255:190" in s)
+    v.wait_line(lambda s: "param: COM_OF_LOSS_T = 0.01 (was 0.5) [by 255:190" in shown(s))
     stats = json.loads(v.wait_line(lambda s: s.startswith("stats "))[6:])
     assert stats["rejected"]["param_refused"] == 1
 
@@ -485,3 +485,82 @@ def test_integer_flags_and_the_minimum_timeout_fly_in_lockstep_as_offline(tmp_pa
     lock, offline = read_trace(tmp_path / "lock" / "trace.csv"), read_trace(tmp_path / "off" / "trace.csv")
     n = min(len(offline["t"]), len(lock["t"]))
     assert max(float(np.max(np.abs(np.asarray(offline[c][:n]) - np.asarray(lock[c][:n])))) for c in "xyz") < 1e-4
+
+
+# -- issue 22, defect 1: a ground station's parameter change is recorded, and ends the clean record ---------
+def test_a_ground_stations_parameter_change_is_recorded_who_what_when_and_ends_reproducibility(tmp_path):
+    """During a lockstep ``bsst sitl`` (7 s of sine, a blackout at 5 s), a ground station sets COM_OF_LOSS_T to
+    the value in force (no change: not recorded), then COM_OBL_ACT = 3 (terminate) at t >= 2 s. The failsafe
+    stops the motors in the blackout: ``ended_by`` names that ground station and its change, not the vehicle;
+    ``interventions`` has the one change (sender, name, old -> new, t and step), the lockstep record says the run
+    is reproducible only until that step, the printout says it was not flown as asked, exit 1."""
+    mission = tmp_path / "short.toml"
+    mission.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 7.0"))
+    out = tmp_path / "run"
+    with instance_slot() as n:
+        gcs = _gcs(n)
+        s = subprocess.Popen([sys.executable, "-m", "bridge", "sitl", str(mission), "--instance", str(n),
+                              "--blackout", "5:2", "--out", str(out), "--no-plots", "--speed", "1"], cwd=ROOT,
+                             env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            gcs.wait_heartbeat(timeout=30)
+            tgt = (gcs.target_system, gcs.target_component)
+            _recv(gcs, "LOCAL_POSITION_NED", "LOCAL_POSITION_NED.time_boot_ms >= 1000", timeout=30)
+            gcs.mav.param_request_read_send(*tgt, b"COM_OF_LOSS_T", -1)
+            now = _recv(gcs, "PARAM_VALUE", "PARAM_VALUE.param_id == 'COM_OF_LOSS_T'").param_value
+            gcs.mav.param_set_send(*tgt, b"COM_OF_LOSS_T", now, M.MAV_PARAM_TYPE_REAL32)  # the value in force
+            assert _recv(gcs, "PARAM_VALUE", "PARAM_VALUE.param_id == 'COM_OF_LOSS_T'").param_value == now
+            _recv(gcs, "LOCAL_POSITION_NED", "LOCAL_POSITION_NED.time_boot_ms >= 2000", timeout=30)
+            gcs.mav.param_set_send(*tgt, b"COM_OBL_ACT", param_to_wire(3, 6), M.MAV_PARAM_TYPE_INT32)
+            m = _recv(gcs, "PARAM_VALUE", "PARAM_VALUE.param_id == 'COM_OBL_ACT'")
+            assert param_from_wire(m.param_value, M.MAV_PARAM_TYPE_INT32) == 3
+            stdout, err = s.communicate(timeout=90)
+        finally:
+            if s.poll() is None:
+                s.kill()
+            gcs.close()
+    assert s.returncode == 1, err
+    summary = json.loads((out / "summary.json").read_text())
+    [change] = summary["interventions"]
+    assert change["by"].startswith("255:190 127.0.0.1:") and change["by"].endswith(" gcs")
+    assert change["kind"] == "param" and change["name"] == "COM_OBL_ACT" and change["new"] == 3
+    assert change["old"] != 3 and change["t"] >= 2.0 and change["step"] == round(change["t"] * 250)
+    assert summary["outcome"] == "failsafe"
+    end = summary["ended_by"]
+    assert end["who"] == change["by"] and "COM_OBL_ACT = 3" in end["how"] and f"(step {change['step']})" in end["how"]
+    lock = summary["lockstep"]
+    assert lock["held"] is True and lock["reproducible"] is False
+    assert lock["reproducible_until_step"] == change["step"] and "COM_OBL_ACT" in lock["because"]
+    assert "not flown as asked" in err and "COM_OBL_ACT" in err
+    assert f"reproducible until step {change['step']}" in stdout
+
+
+# -- issue 22, defect 3: a scheduled change is confirmed by the vehicle's echo, resent until it is, or said lost ---
+@pytest.mark.parametrize("blackout, confirmed", [("2:1", True), ("4:3", False)], ids=["rides-through", "lost"])
+def test_a_scheduled_change_in_a_realtime_blackout_is_resent_until_confirmed_or_said_not_made(tmp_path, blackout,
+                                                                                               confirmed):
+    """``bsst sitl --realtime`` through the relay, the up link blacked out over ``--param-at``'s time (the loss
+    timeout 5 s: the blackout alone is no failsafe). Rides through: the PARAM_SET lost in the blackout is sent
+    again every 0.2 s until the vehicle's PARAM_VALUE echoes it after the blackout; the vehicle made the change,
+    ``param_at`` says confirmed (more than one send), exit 0. Lost (the blackout outlasts the flight): never
+    confirmed, the summary and stderr say it was not made, exit 1."""
+    mission = tmp_path / "short.toml"
+    mission.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 5.0"))
+    at = "2.2" if confirmed else "4.2"
+    with instance_slot() as n:
+        r = _bsst("sitl", str(mission), "--realtime", "--instance", str(n), "--out", str(tmp_path / "run"),
+                  "--no-plots", "--delay", "2", "--param", "COM_OF_LOSS_T=5", "--up-blackout", blackout,
+                  "--param-at", f"{at}:MIS_TAKEOFF_ALT=5")
+    s = json.loads((tmp_path / "run" / "summary.json").read_text())
+    [sent] = s["param_at"]
+    assert sent["name"] == "MIS_TAKEOFF_ALT" and sent["value"] == 5 and sent["sends"] >= 2, sent
+    log = (tmp_path / "run" / "events.log").read_text()
+    if confirmed:
+        assert r.returncode == 0, r.stderr
+        assert sent["confirmed"] is True and sent["confirmed_t"] >= 3.0, sent
+        assert "MIS_TAKEOFF_ALT = 5 (was 2.5)" in log  # the vehicle made it
+    else:
+        assert r.returncode == 1, r.stderr
+        assert sent["confirmed"] is False and sent["confirmed_t"] is None
+        assert "MIS_TAKEOFF_ALT = 5 (was" not in log
+        assert "--param-at 4.2:MIS_TAKEOFF_ALT=5 was never confirmed by the vehicle" in r.stderr

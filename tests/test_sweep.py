@@ -26,7 +26,7 @@ import pytest
 
 from bridge import simulate
 from bridge.cli import main
-from bridge.sweep import CELLS_CSV, COLUMNS, Cell, Classes, Grid, load_sweep, read_cells, sweep
+from bridge.sweep import CELLS_CSV, COLUMNS, Cell, Classes, Grid, SweepFailed, load_sweep, read_cells, sweep
 from bridge.sweep.cells import ripple_rms
 from bridge.sweep.classes import CLASSES, classify
 from bridge.sweep.executors import run_cell
@@ -255,7 +255,9 @@ class Exploding(Sine):
 @pytest.mark.parametrize("how, why", [("raise", "RuntimeError: reference exploded"), ("die", "worker process died")])
 def test_failed_cells_are_recorded_never_abort(tmp_path: Path, how: str, why: str) -> None:
     m = Mission(Exploding(how), duration_s=3.0, name="boom")
-    rows = sweep(m, Grid(delay_ms=(0.0, 5.0)), jobs=2, out=tmp_path / how)
+    with pytest.raises(SweepFailed, match="every cell of the sweep failed") as caught:  # issue 23: never a result
+        sweep(m, Grid(delay_ms=(0.0, 5.0)), jobs=2, out=tmp_path / how)
+    rows = caught.value.outcome.rows
     assert [r["outcome"] for r in rows] == ["error", "error"]
     assert all(r["error"] == why and r["class"] == "error" for r in rows)
     assert "Cells that could not be flown" in (tmp_path / how / "report.md").read_text()

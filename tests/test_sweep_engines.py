@@ -20,6 +20,7 @@ import pytest
 from bridge.sweep import CELLS_CSV, Grid, read_cells, sweep
 from bridge.sweep.executors import BATCH_MIN_CELLS, engine_for
 from bridge.sweep.grid import cells
+from bridge.sweep.margin import margin, parse_until
 from missions import Mission, Sine
 from params import ConfigError
 
@@ -110,3 +111,25 @@ def test_cells_with_sensors_fly_on_the_process_engine_and_say_so() -> None:
     truth = cells(mocap, Grid(estimator=("truth",), delay_ms=delays))
     assert all(c.estimator == "truth" and not c.sensing for c in truth)
     assert engine_for(mocap, truth, "offline", "auto") == ("batch", "the grid allows it")
+
+
+def test_jobs_changes_no_row_of_a_batch_sweep_or_margin(tmp_path: Path) -> None:
+    """``--jobs N``: the batch engine's threads (bridge.batch.engine) fly blocks of cells in whatever order
+    they come free; ``bsst sweep --engine batch`` writes the same cells.csv, byte for byte, with 1 and 2,
+    and ``bsst margin`` finds the same margin from the same cells."""
+    short = tmp_path / "short.toml"
+    short.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 3.0"))
+    outs = {}
+    for jobs in (1, 2):
+        r = subprocess.run([sys.executable, "-m", "bridge", "sweep", str(short),
+                            "--delay", "0,6,12", "--loss", "0,20", "--controller", "bsst,pid", "--seeds", "3",
+                            "--engine", "batch", "--jobs", str(jobs), "--out", str(tmp_path / f"s{jobs}"),
+                            "--no-plots"], cwd=ROOT, capture_output=True, text=True, timeout=300)
+        assert r.returncode == 0, r.stderr
+        assert "engine batch" in r.stdout, r.stdout
+        outs[jobs] = (tmp_path / f"s{jobs}" / CELLS_CSV).read_text()
+    assert len(outs[1].splitlines()) == 1 + 36
+    assert outs[1] == outs[2]
+    found = [margin(SHORT, "delay_ms", parse_until("rms=0.01"), controllers=("bsst", "pid"), seeds=2, resolution=4.0,
+                    jobs=jobs, engine="batch") for jobs in (1, 2)]
+    assert found[0] == found[1] and found[0]["cells_flown"] > 4

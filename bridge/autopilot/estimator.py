@@ -92,6 +92,7 @@ from typing import Protocol
 import numpy as np
 
 from bridge.autopilot.cholesky import weighted_square
+from bridge.autopilot.compiling import announce_compiling
 from plant.sensors import (
     BARO,
     GNSS,
@@ -318,6 +319,7 @@ class Ekf:
     def __init__(self, config: SensorConfig, start: State, gravity: float = 9.81) -> None:
         from bridge.autopilot import ekfkernels as kernels  # numba's import costs ~0.3 s: only an EKF flight pays it
 
+        announce_compiling(kernels.__name__)  # a cold cache: say so before ~13 s of silence
         kernels.ready()
         k = self._k = kernels
         c = config
@@ -436,6 +438,7 @@ def compile_estimator(kind: str) -> None:
     if kind == "ekf":
         from bridge.autopilot import ekfkernels  # numba's import costs ~0.3 s: only an EKF flight pays it
 
+        announce_compiling(ekfkernels.__name__)  # a cold cache: say so before ~13 s of silence
         ekfkernels.ready()
 
 

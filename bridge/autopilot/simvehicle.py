@@ -105,16 +105,36 @@ VEHICLE_LINK = "vehicle"
 ITSELF = Sender(None, None, None, None, VEHICLE_LINK)  # the vehicle's own decision
 
 
+@dataclass(frozen=True)
+class ParamChanged:
+    """A parameter the vehicle changed: its PX4 ``name``, the value it had (``old``) and has (``new``), as
+    PARAM_VALUE reads them (an INT32's as a float)."""
+
+    name: str
+    old: float
+    new: float
+
+    def as_dict(self) -> dict[str, str | float]:
+        return {"name": self.name, "old": self.old, "new": self.new}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> ParamChanged:
+        """The inverse of :meth:`as_dict`; ValueError (or KeyError, TypeError) for anything else."""
+        return cls(str(d["name"]), float(d["old"]), float(d["new"]))
+
+
 @dataclass
 class Event:
     """Something the vehicle did (or was told to do) at plant time ``t`` (s): its ``kind``
-    (``armed``, ``disarmed``, ``mode``, ``failsafe``, ...), a human ``text``, and who caused it
-    (``by``; None: not said, e.g. offline, where only the flight's own controller commands)."""
+    (``armed``, ``disarmed``, ``mode``, ``failsafe``, ...), a human ``text``, who caused it
+    (``by``; None: not said, e.g. offline, where only the flight's own controller commands), and for
+    a ``param`` event the change itself (``param``)."""
 
     t: float
     kind: str
     text: str
     by: Sender | None = None
+    param: ParamChanged | None = None
 
     @property
     def shown(self) -> str:
@@ -267,16 +287,20 @@ class SimVehicle:
         self.onboard.disengage()
         self.land_at = None
 
-    def change_param(self, name: str, value: float, sysid: int = 1) -> str:
+    def change_param(self, name: str, value: float, sysid: int = 1) -> Event | None:
         """Set parameter ``name`` (PX4's name, :mod:`bridge.autopilot.params`) to ``value``, checked
         (:class:`~bridge.autopilot.params.ParamRefused` if it cannot be): it acts from the next control
-        period on (a failsafe already flying keeps the action it began with). An event says it."""
+        period on (a failsafe already flying keeps the action it began with). A ``param`` event says it
+        (returned); a set that leaves every setting as it was is no change: no event, None."""
         before = VehicleParams(self.failsafe, self.takeoff_alt_m, sysid)
         after = change_param(before, name, value)
+        if after == before:
+            return None
         self.failsafe, self.takeoff_alt_m = after.failsafe, after.takeoff_alt_m
-        text = f"{name} = {read_param(after, name):g} (was {read_param(before, name):g})"
-        self.event("param", text)
-        return text
+        old, new = read_param(before, name), read_param(after, name)
+        e = self.event("param", f"{name} = {new:g} (was {old:g})")
+        e.param = ParamChanged(name, float(old), float(new))
+        return e
 
     def fly_onboard(self, target: Target, mode: str) -> None:
         """Hand the motors to the on-board controller flying ``target`` under ``mode`` (not

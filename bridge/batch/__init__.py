@@ -10,12 +10,13 @@ Out: per cell the measured columns of a ``cells.csv`` row (:data:`MEASURES`: ``r
 
 The parts:
 
-- :mod:`bridge.batch.engine`   the batches and the flight loop (what may be flown, the link plan, the steps)
+- :mod:`bridge.batch.engine`   the batches (what may be flown, the link plan, the threads)
+- :mod:`bridge.batch.flight`   each cell's whole flight in one compiled call, cell by cell
 - :mod:`bridge.batch.kernels`  the scalar engine's own plain-float functions, compiled (one source each)
-- :mod:`bridge.batch.control`  the laws and the actuation over the cell axis
-- :mod:`bridge.batch.plant`    the plant over the cell axis
+- :mod:`bridge.batch.control`  the laws the batch flies, one cell's actuation
+- :mod:`bridge.batch.plant`    the plant's start over the cell axis, one cell's physics step
 - :mod:`bridge.batch.predict`  the predictor over the cell axis
-- :mod:`bridge.batch.wire`     the state and the command over the float32 wire
+- :mod:`bridge.batch.wire`     one cell's state and command over the float32 wire
 - :mod:`bridge.batch.metrics`  the running figures and the cells.csv row
 """
 

@@ -2,7 +2,7 @@
 
 In:  nothing at import but the pure functions of controller/, plant/, bridge/core/wire.py and
      bridge/autopilot/failsafe.py
-Out: their compiled twins, called per cell by the batch engine's loops (bridge.batch.control, .plant,
+Out: their compiled twins, called per cell by the batch engine (bridge.batch.flight, .control, .plant,
      .predict, .wire): the BS-ST law (eq. 24-40), PID, the super-twisting integrator (eq. 22, both steps), the
      actuation and allocation (eq. 4 inverted), the RK4 plant step (eq. 6), the predictor's nominal RK4,
      the state and command over the wire, the on-board landing law

@@ -13,14 +13,14 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numba import njit
 
 RIPPLE_WINDOW_S = 0.2  # bridge.sweep.cells.RIPPLE_WINDOW_S (that layer is above this one)
 
 
 @dataclass
 class Metrics:
-    """Running figures of every cell, updated once per control step (the trace row of that step)."""
+    """Running figures of every cell, updated once per control step (the trace row of that step) by the
+    flight's kernel (bridge.batch.flight)."""
 
     sq_sum: np.ndarray  # sum over t >= rms_from of |3-D error|^2
     sq_max: np.ndarray
@@ -111,34 +111,6 @@ def _ripples(u2: np.ndarray, flown: np.ndarray, t: np.ndarray, rate_hz: float) -
     for v in res:
         out.append(_num(v))
     return out
-
-
-@njit(cache=True)
-def measure_step(k: int, X: np.ndarray, ref: np.ndarray, u2: np.ndarray, last_u2: np.ndarray, sq_sum: np.ndarray,
-             sq_max: np.ndarray, last_out: np.ndarray, tv: np.ndarray, band: np.ndarray, seg: int, late: bool,
-             alive: np.ndarray) -> None:  # pragma: no cover
-    """The figures of the trace row of step k: state X [12, n], reference sample ref [4, 5], u2 [n] (and the
-    last step's, last_u2); a cell no longer alive adds nothing."""
-    for j in range(X.shape[1]):
-        if not alive[j]:
-            continue
-        ex = X[0, j] - ref[0, 0]
-        ey = X[2, j] - ref[1, 0]
-        ez = X[4, j] - ref[2, 0]
-        s = ex * ex + ey * ey + ez * ez
-        if late:
-            sq_sum[j] += s
-            if s > sq_max[j] or s != s:  # np.maximum's: a nan stays
-                sq_max[j] = s
-        if seg >= 0:
-            if abs(ex) > band[0]:
-                last_out[seg, 0, j] = k
-            if abs(ey) > band[1]:
-                last_out[seg, 1, j] = k
-            if abs(ez) > band[2]:
-                last_out[seg, 2, j] = k
-        if k:
-            tv[j] += abs(u2[j] - last_u2[j])
 
 
 def _num(v: Any) -> float | None:

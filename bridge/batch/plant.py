@@ -1,10 +1,10 @@
-"""The plant of :class:`plant.quadrotor.Quadrotor` for N cells at once: a compiled loop over the cell axis.
+"""The plant of :class:`plant.quadrotor.Quadrotor` for the batch: N cells' start, and one cell's step, compiled.
 
 In:  one profile and one set of effects for every cell, a seed per cell (the disturbance's phases), the
-     physics rate (Hz) and the start state (eq. 7: m, m/s, rad, rad/s); then per step what each cell's
-     command holds (see :meth:`BatchPlant.held`)
-Out: the states [12, N] (eq. 7 order, NWU), the realised wrench [4, N] (N), ground contact and divergence
-     per cell
+     physics rate (Hz) and the start state (eq. 7: m, m/s, rad, rad/s); per cell and physics step its
+     state, what its command holds (u1..u4 N and omega_d rad/s, or target rotor speeds rad/s) and the time (s)
+Out: :class:`BatchPlant`: the start (states [12, N], rotor speeds, what a command at rest holds, the
+     constants); per cell the state after a physics step, its disturbance, divergence
 
 The same model as the scalar plant: eq. (6) corrected, RK4 with the inputs held over a physics step,
 drag, motor lag, the external disturbance, mass and inertia mismatch, and the ground plane. The step of
@@ -26,6 +26,7 @@ from bridge.batch import kernels as K
 from plant.effects import Effects
 from plant.model import rigid_body
 from plant.profiles import Profile
+from plant.quadrotor import CRASH_SPEED_MPS, CRASH_TILT_RAD
 
 
 class BatchPlant:
@@ -100,87 +101,81 @@ class BatchPlant:
         """Hold what :meth:`held` gave for the cells ``cols`` (all by default) until their next command."""
         self.holding[:, slice(None) if cols is None else cols] = values
 
-    # -- dynamics ----------------------------------------------------------------------------------------
-    def _disturbance(self, t: float, out: np.ndarray) -> None:
-        """The external force (N) and torque (N m) at t into out [6, N] (plant.effects.disturbance_at)."""
-        d = self.effects.disturbance
-        w = 2.0 * math.pi * d.freq_hz * t
-        np.sin(w + self._phases, out=out)
-        out *= self._amp
-        out += self._const
 
-    def step(self) -> None:
-        """Advance every cell one physics step (RK4 of eq. 6, commands and rotor speeds held)."""
-        t, h = self.t, self.dt
-        if self.lagged:
-            self.omega += (self.target - self.omega) * self._lag_k
-            u, od = self._from_speeds(self.omega)
-            self.realised[...] = u
-            self.omega_d[...] = od[0]
-        ext = self._ext
-        if self.disturbed:
-            if self._ext_t == t:  # the last step's end is this one's start
-                ext[0] = ext[2]
-            else:
-                self._disturbance(t, ext[0])
-            self._disturbance(t + 0.5 * h, ext[1])
-            self._disturbance(t + h, ext[2])
-            self._ext_t = t + h
-        _rk4_step(self.X, self.realised, self.omega_d, ext, self.disturbed, self.body.constants, h, self.ground)
-        self.t = t + h
+# -- one cell (what the whole flight's kernel, bridge.batch.flight, runs per cell) ------
+@njit(cache=True, inline="always")
+def rk4_cell(x: tuple, u: tuple, ext: tuple, disturbed: bool, constants: tuple, h: float,
+             ground: bool) -> tuple:  # pragma: no cover
+    """:func:`plant.model.rk4_held` of one cell's state x (eq. 7) with u = (u1..u4 N, omega_d rad/s) held and the
+    external force and torque ext at the step's start, middle and end (read only when ``disturbed``), then
+    :func:`plant.quadrotor.ground_contact` where ``ground`` and below it. (The state, and whether this step
+    touched the ground hard: faster than CRASH_SPEED_MPS or tilted more than CRASH_TILT_RAD, as
+    :meth:`plant.quadrotor.Quadrotor._touchdown` judges it on the state below the ground.)"""
+    if disturbed:
+        y = K.rk4_held(x, u[0], u[1], u[2], u[3], u[4], constants, h, ext)
+    else:
+        y = K.rk4_held(x, u[0], u[1], u[2], u[3], u[4], constants, h, None)
+    hard = False
+    if ground and y[4] < 0.0:
+        speed = math.sqrt(y[1] * y[1] + y[3] * y[3] + y[5] * y[5])
+        tilt = math.acos(max(-1.0, min(1.0, math.cos(y[6]) * math.cos(y[8]))))
+        hard = speed > CRASH_SPEED_MPS or tilt > CRASH_TILT_RAD
+        y = K.ground_contact(y)
+    return y, hard
 
-    @property
-    def on_ground(self) -> np.ndarray:
-        """[N] bool: resting on the ground plane (z <= 0 and not rising)."""
-        X = self.X
-        return (X[4] <= 0.0) & (X[5] <= 0.0) & self.ground
 
-    def diverged(self) -> np.ndarray:
-        """[N] bool: :meth:`Quadrotor.diverged` — not finite, |position| > 100 m, or tilt beyond 90 degrees."""
-        bad = np.empty(self.n, bool)
-        _diverged(self.X, bad)
-        return bad
+@njit(cache=True, inline="always")
+def disturbance_cell(freq_hz: float, const: tuple, amp: tuple, phases: tuple, t: float) -> tuple:  # pragma: no cover
+    """:func:`plant.effects.disturbance_at` (fx, fy, fz N, tx, ty, tz N m) at t (s) for one cell's phases."""
+    w = 2.0 * math.pi * freq_hz * t
+    return (const[0] + amp[0] * math.sin(w + phases[0]), const[1] + amp[1] * math.sin(w + phases[1]),
+            const[2] + amp[2] * math.sin(w + phases[2]), const[3] + amp[3] * math.sin(w + phases[3]),
+            const[4] + amp[4] * math.sin(w + phases[4]), const[5] + amp[5] * math.sin(w + phases[5]))
+
+
+@njit(cache=True, inline="always")
+def from_speeds(o: tuple, b: float, d: float) -> tuple:  # pragma: no cover
+    """Eq. (4) and (5) of one cell: rotor speeds (rad/s) -> (u1..u4 N, omega_d rad/s), as
+    :meth:`BatchPlant._from_speeds` computes them."""
+    w0, w1, w2, w3 = o[0] * o[0], o[1] * o[1], o[2] * o[2], o[3] * o[3]
+    return (b * (w0 + w1 + w2 + w3), b * (w3 - w1), b * (w2 - w0), d * (w1 + w3 - w0 - w2), o[1] + o[3] - o[0] - o[2])
+
+
+@njit(cache=True, inline="always")
+def held_cell(c: tuple, motors: bool, lagged: bool, u_max: tuple, b: float, d: float,
+              omega_max: float) -> tuple:  # pragma: no cover
+    """:meth:`BatchPlant.held` of one cell's normalised command c: (u1..u4, omega_d), or with motor lag the
+    four target speeds (rad/s) and a 0."""
+    if not motors:
+        u = K.wrench_command(c, u_max)
+        return (u[0], u[1], u[2], u[3], K.signed_speed_sum(K.motor_speeds_from_wrench(u, b, d)))
+    o = (_unit(c[0]) * omega_max, _unit(c[1]) * omega_max, _unit(c[2]) * omega_max, _unit(c[3]) * omega_max)
+    if lagged:
+        return (o[0], o[1], o[2], o[3], 0.0)
+    return from_speeds(o, b, d)
+
+
+@njit(cache=True, inline="always")
+def _unit(v: float) -> float:  # pragma: no cover
+    """np.minimum(np.maximum(v, 0), 1): a nan stays a nan."""
+    v = 0.0 if v < 0.0 else v
+    return 1.0 if v > 1.0 else v
+
+
+@njit(cache=True, inline="always")
+def diverged_cell(x: tuple) -> bool:  # pragma: no cover
+    """:meth:`Quadrotor.diverged` of one cell's state: not finite, |position| > 100 m, or tilt beyond 90 degrees."""
+    for i in range(12):
+        if not math.isfinite(x[i]):
+            return True
+    return x[0] * x[0] + x[2] * x[2] + x[4] * x[4] > 1e4 or math.cos(x[6]) * math.cos(x[8]) < 0.0
 
 
 # -- the compiled loops (each cell: the scalar plant's own functions, compiled) ----------------------------
 @njit(cache=True)
-def _rk4_step(X, realised, omega_d, ext, disturbed, constants, h, ground):  # pragma: no cover
-    """:func:`plant.model.rk4_held` of every cell in place (then :func:`plant.quadrotor.ground_contact` where
-    ``ground``). ext [3, 6, N]: the force (N) and torque (N m) at the step's start, middle and end (read only
-    when ``disturbed``)."""
-    for j in range(X.shape[1]):
-        Xj = K.column(X, j)
-        u0, u1, u2, u3, od = realised[0, j], realised[1, j], realised[2, j], realised[3, j], omega_d[j]
-        if disturbed:
-            e = ((ext[0, 0, j], ext[0, 1, j], ext[0, 2, j], ext[0, 3, j], ext[0, 4, j], ext[0, 5, j]),
-                 (ext[1, 0, j], ext[1, 1, j], ext[1, 2, j], ext[1, 3, j], ext[1, 4, j], ext[1, 5, j]),
-                 (ext[2, 0, j], ext[2, 1, j], ext[2, 2, j], ext[2, 3, j], ext[2, 4, j], ext[2, 5, j]))
-            Y = K.rk4_held(Xj, u0, u1, u2, u3, od, constants, h, e)
-        else:
-            Y = K.rk4_held(Xj, u0, u1, u2, u3, od, constants, h, None)
-        if ground and Y[4] < 0.0:
-            Y = K.ground_contact(Y)
-        K.put_column(X, j, Y)
-
-
-@njit(cache=True)
-def _diverged(X: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover
-    """:meth:`Quadrotor.diverged` of every cell into out [N] bool."""
-    for j in range(X.shape[1]):
-        bad = False
-        for i in range(12):
-            if not math.isfinite(X[i, j]):
-                bad = True
-        out[j] = (bad or X[0, j] * X[0, j] + X[2, j] * X[2, j] + X[4, j] * X[4, j] > 1e4
-                  or math.cos(X[6, j]) * math.cos(X[8, j]) < 0.0)
-
-
-@njit(cache=True)
 def _held_wrench(c, u_max, b, d, out):  # pragma: no cover
-    """The ``wrench`` profile's :meth:`BatchPlant.held` per cell (c [4, k] -> out [5, k]): what
-    :meth:`plant.quadrotor.Quadrotor.command` holds, :func:`plant.rotors.wrench_command` and the omega_d of
-    the rotor speeds it gives."""
+    """The ``wrench`` profile's :meth:`BatchPlant.held` per cell (c [4, k] -> out [5, k]): :func:`held_cell`."""
     for j in range(c.shape[1]):
-        u = K.wrench_command((c[0, j], c[1, j], c[2, j], c[3, j]), u_max)
-        out[0, j], out[1, j], out[2, j], out[3, j] = u
-        out[4, j] = K.signed_speed_sum(K.motor_speeds_from_wrench(u, b, d))
+        v = held_cell((c[0, j], c[1, j], c[2, j], c[3, j]), False, False, u_max, b, d, 0.0)
+        for i in range(5):
+            out[i, j] = v[i]

@@ -70,48 +70,67 @@ def _predict_cells(t_state: np.ndarray, X: np.ndarray, aim: np.ndarray, which: n
                    cache_t: np.ndarray, cache_X: np.ndarray, cmd_t: np.ndarray, cmd_u: np.ndarray,
                    total: np.ndarray, dt_max: float, m: float, g: float, c: np.ndarray,
                    out: np.ndarray) -> None:  # pragma: no cover
-    """:meth:`controller.predict.Predictor.predict` of each cell ``which[i]``: X[:, i] (measured at
-    t_state[i] s) carried to aim[i] s in steps of at most dt_max s, through the segments between the
-    times its commands count from (cmd_t, a ring of ``depth`` by number; cmd_u: u1..u4 and omega_d),
-    continuing the cached prediction (from_t, cache_t, cache_X, updated here) while the state is the
-    same one. Into out [12, len(which)]."""
+    """:func:`carry` of each cell ``which[i]``: X[:, i] (measured at t_state[i] s) carried to aim[i] s, into
+    out [12, len(which)]."""
+    for i in range(len(which)):
+        y = carry(which[i], t_state[i], K.column(X, i), aim[i], from_t, cache_t, cache_X, cmd_t, cmd_u, total,
+                  dt_max, m, g, c)
+        K.put_column(out, i, y)
+
+
+@njit(cache=True)
+def carry(j: int, ts: float, x: tuple, to: float, from_t: np.ndarray, cache_t: np.ndarray, cache_X: np.ndarray,
+          cmd_t: np.ndarray, cmd_u: np.ndarray, total: np.ndarray, dt_max: float, m: float, g: float,
+          c: np.ndarray) -> tuple:  # pragma: no cover
+    """:meth:`controller.predict.Predictor.predict` of cell j: its state x (measured at ts s) carried to ``to``
+    (s) in steps of at most dt_max s, through the segments between the times its commands count from
+    (cmd_t [depth, n], a ring by number; cmd_u [depth, 5, n]: u1..u4 and omega_d), continuing the cached
+    prediction (from_t, cache_t, cache_X [12, n], updated here) while the state is the same one."""
     depth = cmd_t.shape[0]
     i1, i2, i3, jr_x, jr_y, l_x, l_y, l_z = c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]
-    for i in range(len(which)):
-        j = which[i]
-        ts, to = t_state[i], aim[i]
-        cont = from_t[j] == ts and cache_t[j] <= to
-        src, col = (cache_X, j) if cont else (X, i)
-        tau = cache_t[j] if cont else ts
-        Xp = (src[0, col], src[1, col], src[2, col], src[3, col], src[4, col], src[5, col], src[6, col],
-              src[7, col], src[8, col], src[9, col], src[10, col], src[11, col])
-        n = total[j]
-        used = min(n, depth)
-        after = 0  # the command in effect at tau: the newest numbered with its time <= tau (-1: none)
-        for k in range(used):
-            if cmd_t[k, j] > tau:
-                after += 1
-        cur = n - 1 - after
-        while tau < to:
-            has_next = cur + 1 < n
-            nxt = cmd_t[(cur + 1) % depth, j] if has_next else to
-            end = nxt if nxt < to else to
-            if cur >= 0:
-                slot = cur % depth
-                u0, u1, u2, u3, od = cmd_u[slot, 0, j], cmd_u[slot, 1, j], cmd_u[slot, 2, j], cmd_u[slot, 3, j], \
-                    cmd_u[slot, 4, j]
-            else:
-                u0 = u1 = u2 = u3 = od = 0.0
-            span = end - tau
-            kk = max(1, int(span / dt_max + 0.999999))
-            h = span / kk
-            for _ in range(kk):
-                Xp = K.nominal_rk4(Xp, u0 / m, g, i1, i2, i3, jr_x, jr_y, l_x * u1, l_y * u2, l_z * u3, od, h)
-            tau = end
-            if end == nxt and has_next:
-                cur += 1
-        from_t[j] = ts
-        cache_t[j] = to
-        for q in range(12):
-            out[q, i] = Xp[q]
-            cache_X[q, j] = Xp[q]
+    cont = from_t[j] == ts and cache_t[j] <= to
+    Xp = K.column(cache_X, j) if cont else x
+    tau = cache_t[j] if cont else ts
+    n = total[j]
+    used = min(n, depth)
+    after = 0  # the command in effect at tau: the newest numbered with its time <= tau (-1: none)
+    for k in range(used):
+        if cmd_t[k, j] > tau:
+            after += 1
+    cur = n - 1 - after
+    while tau < to:
+        has_next = cur + 1 < n
+        nxt = cmd_t[(cur + 1) % depth, j] if has_next else to
+        end = nxt if nxt < to else to
+        if cur >= 0:
+            slot = cur % depth
+            u0, u1, u2, u3, od = cmd_u[slot, 0, j], cmd_u[slot, 1, j], cmd_u[slot, 2, j], cmd_u[slot, 3, j], \
+                cmd_u[slot, 4, j]
+        else:
+            u0 = u1 = u2 = u3 = od = 0.0
+        span = end - tau
+        kk = max(1, int(span / dt_max + 0.999999))
+        h = span / kk
+        for _ in range(kk):
+            Xp = K.nominal_rk4(Xp, u0 / m, g, i1, i2, i3, jr_x, jr_y, l_x * u1, l_y * u2, l_z * u3, od, h)
+        tau = end
+        if end == nxt and has_next:
+            cur += 1
+    from_t[j] = ts
+    cache_t[j] = to
+    K.put_column(cache_X, j, Xp)
+    return Xp
+
+
+@njit(cache=True)
+def record(j: int, t: float, lag: float, u: tuple, omega_d: float, cmd_t: np.ndarray, cmd_u: np.ndarray,
+           total: np.ndarray) -> None:  # pragma: no cover
+    """:meth:`BatchPredictor.sent` of cell j: the command sent at t (s), realisable u1..u4 (N) and omega_d (rad/s),
+    counting from t + lag."""
+    depth = cmd_t.shape[0]
+    slot = total[j] % depth
+    cmd_t[slot, j] = t + lag
+    for i in range(4):
+        cmd_u[slot, i, j] = u[i]
+    cmd_u[slot, 4, j] = omega_d
+    total[j] += 1

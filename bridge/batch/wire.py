@@ -1,7 +1,7 @@
-"""The wire for N cells at once: the state as the laws read it from ODOMETRY, the command as the vehicle
+"""The wire for one cell of the batch: the state as the laws read it from ODOMETRY, the command as the vehicle
 reads it from the actuator target.
 
-In:  the states [12, n] (eq. 7, NWU: m, m/s, rad, rad/s); the normalised paper-frame commands [4, n]
+In:  a cell's state (eq. 7, NWU: m, m/s, rad, rad/s; a 12-tuple); its normalised paper-frame command (4-tuple)
 Out: the same after MAVLink's float32 (ODOMETRY's 13 fields; the actuator target's 4), back in the paper frame
 
 Each cell runs the scalar engine's own functions (bridge.core.wire: :func:`~bridge.core.wire.odometry_fields`
@@ -24,32 +24,21 @@ def _f32(v: float) -> float:
     return np.float64(np.float32(v))
 
 
-@njit(cache=True)
-def states_over_wire(X: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover
-    """:func:`bridge.core.wire.state_over_wire` of every cell (X [12, n] -> out [12, n]; out may be X)."""
-    for j in range(X.shape[1]):
-        f = K.odometry_fields(K.column(X, j))
-        r = (_f32(f[0]), _f32(f[1]), _f32(f[2]), _f32(f[3]), _f32(f[4]), _f32(f[5]), _f32(f[6]), _f32(f[7]),
-             _f32(f[8]), _f32(f[9]), _f32(f[10]), _f32(f[11]), _f32(f[12]))
-        K.put_column(out, j, K.state_from_odometry_fields(r))
+@njit(cache=True, inline="always")
+def state_over_wire(x: tuple[float, ...]) -> tuple[float, ...]:  # pragma: no cover
+    """:func:`bridge.core.wire.state_over_wire` of one cell's 12 states (a tuple, eq. 7 order)."""
+    f = K.odometry_fields(x)
+    r = (_f32(f[0]), _f32(f[1]), _f32(f[2]), _f32(f[3]), _f32(f[4]), _f32(f[5]), _f32(f[6]), _f32(f[7]),
+         _f32(f[8]), _f32(f[9]), _f32(f[10]), _f32(f[11]), _f32(f[12]))
+    return K.state_from_odometry_fields(r)
 
 
-@njit(cache=True)
-def _commands_over_wire(c: np.ndarray, wrench: bool, out: np.ndarray) -> None:  # pragma: no cover
-    for j in range(c.shape[1]):
-        v = (c[0, j], c[1, j], c[2, j], c[3, j])
-        if wrench:
-            w = K.wrench_to_wire(v)
-            v = K.wrench_from_wire((_f32(w[0]), _f32(w[1]), _f32(w[2]), _f32(w[3])))
-        else:
-            v = (_f32(v[0]), _f32(v[1]), _f32(v[2]), _f32(v[3]))
-        for i in range(4):
-            out[i, j] = v[i]
-
-
-def commands_over_wire(c: np.ndarray, actuation: str) -> np.ndarray:
-    """:func:`bridge.core.wire.command_over_wire`'s command as the vehicle reads it, for normalised commands
-    c [4, n] of a ``wrench`` or ``motors`` actuation."""
-    out = np.empty_like(c)
-    _commands_over_wire(np.ascontiguousarray(c), actuation == "wrench", out)
-    return out
+@njit(cache=True, inline="always")
+def command_over_wire(v: tuple[float, float, float, float],
+                      wrench: bool) -> tuple[float, float, float, float]:  # pragma: no cover
+    """:func:`bridge.core.wire.command_over_wire`'s command as the vehicle reads it, for one cell's normalised
+    command v (``wrench``: that actuation, else ``motors``)."""
+    if wrench:
+        w = K.wrench_to_wire(v)
+        return K.wrench_from_wire((_f32(w[0]), _f32(w[1]), _f32(w[2]), _f32(w[3])))
+    return (_f32(v[0]), _f32(v[1]), _f32(v[2]), _f32(v[3]))

@@ -57,7 +57,9 @@ def add_sweep_commands(sub: Any) -> None:
     p.add_argument("--engine", choices=("auto", "batch", "process"), default="auto",
                    help="batch: fly the cells together in one numpy loop; process: one by one in worker processes; "
                         "auto (default): batch where the grid allows it")
-    p.add_argument("--jobs", type=int_in("--jobs", 1, 1024), metavar="N", help="worker processes (default: all cores)")
+    p.add_argument("--jobs", type=int_in("--jobs", 1, 1024), metavar="N",
+                   help="cores: threads of the batch engine, worker processes of the process engine "
+                        "(default: all cores)")
     p.add_argument("--max-cells", type=int_in("--max-cells", 1, 10**9), metavar="N",
                    help="fly a grid of up to N cells (default 10000: a bigger one is refused as a likely mistake)")
     p.add_argument("--dask", metavar="ADDRESS", help="run the cells on this Dask scheduler (e.g. tcp://host:8786)")
@@ -112,6 +114,12 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         print(f"bsst: interrupted; continue with --resume --out {res.path}", file=sys.stderr)
         return EXIT_FAILED
     print(f"sweep directory: {res.path}")
+    if res.status == "all failed":
+        print(f"bsst sweep: every cell failed ({res.failed} of {len(res.rows)}): nothing was measured; the first "
+              f"error: {res.first_error()}", file=sys.stderr)
+    elif res.failed:
+        print(f"bsst sweep: {res.failed} of {len(res.rows)} cells failed (cells.csv's error column); the first: "
+              f"{res.first_error()}", file=sys.stderr)
     return EXIT_FAILED if res.failed else EXIT_OK
 
 
@@ -149,8 +157,9 @@ def add_margin_command(sub: Any) -> None:
                    help="exit 1 when a law's margin is below X (for a user's CI)")
     p.add_argument("--engine", choices=("auto", "batch", "process"), default="auto",
                    help="batch: each round's cells together in one numpy loop (default where it can)")
-    p.add_argument("--jobs", type=int_in("--jobs", 1, 1024), default=2, metavar="N",
-                   help="worker processes for the process engine (default 2)")
+    p.add_argument("--jobs", type=int_in("--jobs", 1, 1024), metavar="N",
+                   help="cores: threads of the batch engine, worker processes of the process engine "
+                        "(default: all cores)")
     p.add_argument("--out", metavar="DIR", help="write margin.json into DIR (default runs/<UTC>-<mission>-margin)")
     p.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out")
     add_link_options(p)

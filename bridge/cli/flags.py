@@ -19,6 +19,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
+from params import likely
+
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
 
 
@@ -26,9 +28,42 @@ class UsageError(Exception):
     """Bad command-line input (exit 2)."""
 
 
+FLAG_CUTOFF = 0.75  # difflib's ratio from which a known flag is suggested (--dealy: --delay 0.86; --compensation
+# to bsst relay: --mission 0.70, not one to suggest)
+UNRECOGNIZED_IN = "_bsst_unrecognized_in"  # on the namespace: the (sub-)parser that met an unknown flag first
+
+
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:  # one line, no usage dump
         raise UsageError(f"{self.prog}: {message}")
+
+    def parse_known_args(self, args: Sequence[str] | None = None,  # type: ignore[override]
+                         namespace: argparse.Namespace | None = None) -> tuple[argparse.Namespace, list[str]]:
+        """As argparse's; a sub-command's parser that is left with an unknown flag records itself on the
+        namespace (the innermost first), so that the error names that command and suggests its flags."""
+        ns, extras = super().parse_known_args(args, namespace)
+        if any(a.startswith("-") for a in extras) and not hasattr(ns, UNRECOGNIZED_IN):
+            setattr(ns, UNRECOGNIZED_IN, self)
+        return ns, extras
+
+    def parse_args(self, args: Sequence[str] | None = None,  # type: ignore[override]
+                   namespace: argparse.Namespace | None = None) -> argparse.Namespace:
+        """As argparse's, and an unknown flag's error adds the command's likely flag: ``did you mean --delay?``."""
+        ns, extras = self.parse_known_args(args, namespace)
+        where = vars(ns).pop(UNRECOGNIZED_IN, self)
+        if extras:
+            raise UsageError(f"{where.prog}: unrecognized arguments: {' '.join(extras)}{where.flag_hint(extras)}")
+        return ns
+
+    def flag_hint(self, extras: Sequence[str]) -> str:
+        """``; did you mean --delay?`` for the first unknown flag of ``extras`` close to one of this parser's
+        flags ('' if none is)."""
+        flags = [f for action in self._actions for f in action.option_strings]
+        for text in extras:
+            if text.startswith("-"):
+                like = likely(text.partition("=")[0], flags, cutoff=FLAG_CUTOFF)
+                return f"; did you mean {like}?" if like else ""
+        return ""
 
 
 def int_in(name: str, lo: int, hi: int) -> Callable[[str], int]:
@@ -263,10 +298,11 @@ GUARD_FLAGS = (  # flag, [link] key, metavar, help: the controller's guard and p
 )
 
 
-def add_link_options(p: argparse.ArgumentParser, skip: Sequence[str] = ()) -> None:
+def add_link_options(p: argparse.ArgumentParser, skip: Sequence[str] = (), controller: bool = True) -> None:
     """The link-impairment flags (``--delay MS`` … for both directions, ``--up-delay``,
-    ``--down-loss`` … for one) and the controller's compensation; ``skip`` omits flag
-    stems a command defines otherwise. :func:`link_table_from_args` reads them back."""
+    ``--down-loss`` … for one) and (``controller``: for a command that flies the controller) the
+    controller's compensation and guards; ``skip`` omits flag stems a command defines otherwise.
+    :func:`link_table_from_args` reads them back."""
     g = p.add_argument_group("link impairment", "override the mission's [link] tables; every flag for both "
                              "directions also exists as --up-FLAG (controller -> vehicle) and --down-FLAG")
     for stem, key, meta, text in LINK_FLAGS:
@@ -285,6 +321,8 @@ def add_link_options(p: argparse.ArgumentParser, skip: Sequence[str] = ()) -> No
     g.add_argument("--jitter-dist", dest="link_jitter", choices=("uniform", "normal"), help="jitter distribution")
     g.add_argument("--link-seed", dest="link_seed", type=link_seed("--link-seed"), metavar="N",
                    help="seed of the link's fates (default: the mission's seed)")
+    if not controller:  # bsst relay: the link alone; what the controller does with its states is not its to set
+        return
     g.add_argument("--compensation", dest="link_compensation", choices=("none", "predict"),
                    help="predict: control on the state carried forward over its age (nominal model)")
     for flag, key, meta, text in GUARD_FLAGS:

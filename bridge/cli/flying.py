@@ -60,6 +60,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
 def report_run(run: Any, command: str) -> int:
     """Print a run's summary, name each violated policy on stderr; its exit status (0: a clean completion)."""
     from bridge.record.policies import run_ok, violation_text  # lazy: numpy
+    from bridge.record.summary import intervention_text, unconfirmed_text  # lazy: numpy
 
     try:
         print_summary(run.summary, run.path)
@@ -70,6 +71,11 @@ def report_run(run: Any, command: str) -> int:
     if not lock.get("held", True):
         print(f"bsst {command}: not a lockstep run: the vehicle left lockstep at t={lock['left_at_s']:.3f} s "
               f"({lock['why']})", file=sys.stderr)
+    for i in run.summary.get("interventions") or []:  # exit 1: the run did not fly as the command asked
+        print(f"bsst {command}: not flown as asked: {intervention_text(i)}", file=sys.stderr)
+    for p in run.summary.get("param_at") or []:
+        if not p.get("confirmed"):
+            print(f"bsst {command}: not flown as asked: {unconfirmed_text(p)}", file=sys.stderr)
     for v in run.summary.get("policies") or []:
         if not v.get("ok"):
             print(f"bsst {command}: policy {violation_text(v)}", file=sys.stderr)
@@ -91,6 +97,11 @@ def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
     if lock and not lock.get("held", True):
         w(f"left lockstep at t={lock['left_at_s']:.3f} s: {lock['why']} (flown on from there on the wall clock: "
           "not a lockstep run)\n")
+    elif lock and lock.get("reproducible") is False:
+        w(f"lockstep held, reproducible until step {lock['reproducible_until_step']}: {lock['because']}\n")
+    for i in s.get("interventions") or []:
+        w(f"not flown as asked: a ground station ({i['by']}) at t={i['t']:.3f} s (step {i['step']}): "
+          + (f"{i['name']} = {i['new']:g} (was {i['old']:g})\n" if "name" in i else f"{i['kind']} {i['what']}\n"))
     rms = s.get("rms_3d")
     w(f"3-D RMS error over t >= {s['rms_from_s']:g} s: {rms:.3e} m\n" if rms is not None else "3-D RMS: n/a\n")
     w(f"{'axis':5} {'rms':>10} {'max':>10} {'settling_s':>11} {'bound_s':>9}\n")
@@ -153,7 +164,7 @@ def add_sitl_commands(sub: Any) -> None:
     p.set_defaults(func=cmd_vehicle)
 
     p = sub.add_parser("controller", help="the offboard controller alone: fly a mission against a MAVLink vehicle")
-    add_flight_options(p, failsafe=False)  # the vehicle flies its failsafe: the controller has no say in it
+    add_flight_options(p, vehicle=False)  # no failsafe of its own (the vehicle flies it), no run directory, no plots
     p.add_argument("--vehicle", metavar="HOST:PORT",
                    help="the vehicle's controller link (default 127.0.0.1:14560 + instance)")
     p.add_argument("--instance", type=int_in("--instance", 0, 9), default=0, metavar="N",

@@ -171,7 +171,7 @@ def add_relay_command(sub: Any) -> None:
     p.add_argument("--mission-clock", action="store_true",
                    help="blackout times count from the flight's time 0 (the first actuator target up, less the "
                         "down delay) instead of the relay's start")
-    add_link_options(p)
+    add_link_options(p, controller=False)  # the relay models the link; compensation and guards are the controller's
     p.set_defaults(func=cmd_relay)
 
 

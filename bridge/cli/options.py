@@ -110,12 +110,19 @@ def sensor_overrides_from_args(args: argparse.Namespace) -> dict[str, Any]:
             "estimator": getattr(args, "estimator", None), "noise": getattr(args, "noise", None)}
 
 
-def add_flight_options(p: argparse.ArgumentParser, failsafe: bool = True) -> None:
-    """Options every flying command shares: overrides of the mission's own values (``failsafe``:
-    with the vehicle's failsafe action, for the commands that fly the vehicle)."""
+def add_flight_options(p: argparse.ArgumentParser, vehicle: bool = True) -> None:
+    """Options every flying command shares: overrides of the mission's own values (``vehicle``: with the
+    vehicle's failsafe action, its weather, its start parameters, and a run directory with plots, for the commands that
+    fly the vehicle and record the whole run, ``sim`` and ``sitl``; ``bsst controller`` writes its own two
+    files only when given ``--out``, and plots nothing)."""
     p.add_argument("mission", help="mission TOML file (see missions/)")
-    p.add_argument("--out", metavar="DIR", help="run directory (default runs/<UTC time>-<mission>)")
-    p.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out")
+    if vehicle:
+        p.add_argument("--out", metavar="DIR", help="run directory (default runs/<UTC time>-<mission>)")
+        p.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out")
+    else:
+        p.add_argument("--out", metavar="DIR", help="write controller.tlog and controller.csv into DIR "
+                                                    "(default: nothing written)")
+        p.add_argument("--overwrite", action="store_true", help="allow replacing those files")
     p.add_argument("--rate", type=mission_number("--rate", "rate_hz"), metavar="HZ",
                    help="control rate, 50-1000 Hz (default: the mission's, 250)")
     p.add_argument("--profile", metavar="NAME", help="vehicle profile: paper, x500 or a profile TOML path")
@@ -123,11 +130,11 @@ def add_flight_options(p: argparse.ArgumentParser, failsafe: bool = True) -> Non
                    help="control law: bsst, smc, pid, or your own (path/to/file.py:Class or package.module:Class)")
     p.add_argument("--seed", type=mission_integer("--seed", "seed"), metavar="N", help="seed of random effects")
     add_discretization_option(p)
-    p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
-    if failsafe:
+    if vehicle:
+        p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
         add_failsafe_options(p)
         add_weather_options(p)
-    add_param_options(p, start=failsafe)  # the controller sets no start values: it schedules changes only
+    add_param_options(p, start=vehicle)  # the controller sets no start values: it schedules changes only
 
 
 def wind_flag(text: str) -> tuple[float, float]:

@@ -40,7 +40,7 @@ from controller import Controller, Gains, Nominal, gains_from_table
 from controller.law import LawFactory, resolve_law
 from controller.link_guard import GuardConfig
 from missions import Mission, Setpoint, Step, load_mission
-from missions.mission import law_spec_from
+from missions.mission import fitted_to_airframe, law_spec_from
 from params import ConfigError, Table
 from plant import Effects, Profile, Quadrotor, load_profile
 from plant.effects import effects_from_table
@@ -253,6 +253,7 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
         prof = prof.with_actuation(m.actuation)
     effects = effects_from_table(Table(m.effects, src, "effects"))
     gains = gains_from_table(m.gains, src) if m.gains else Gains()
+    m = fitted_to_airframe(m, prof.mass, prof.gravity, prof.u_max[0], gains.tilt_max)  # a plan's: slowed or refused
     for key, name in params_as_failsafe(m.params).items():  # two keys of one file for one setting
         if key in m.failsafe:
             raise ConfigError(f"{src}: params.{name} and failsafe.{key} set the same thing: give one of them")

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field, fields
 from enum import StrEnum
 from typing import Any
 
-from bridge.autopilot.simvehicle import ITSELF, VEHICLE_LINK, Sender
+from bridge.autopilot.simvehicle import ITSELF, VEHICLE_LINK, ParamChanged, Sender
 
 
 class Kind(StrEnum):
@@ -83,17 +83,20 @@ class Ready:
 
 @dataclass(frozen=True)
 class Event:
-    """An event at ``t`` (s, to the millisecond: :meth:`at`) of ``kind``, its ``text`` and who caused it."""
+    """An event at ``t`` (s, to the millisecond: :meth:`at`) of ``kind``, its ``text``, who caused it, and
+    a parameter event's change (``param``: name, old and new value; None for the others)."""
 
     t: float
     kind: str
     text: str
     by: Sender | None = None
+    param: ParamChanged | None = None
 
     @classmethod
-    def at(cls, t: float, kind: str, text: str, by: Sender | None = None) -> Event:
+    def at(cls, t: float, kind: str, text: str, by: Sender | None = None,
+           param: ParamChanged | None = None) -> Event:
         """The event at ``t`` rounded to the millisecond: the resolution every child reports at."""
-        return cls(float(f"{t:.3f}"), kind, text, by)
+        return cls(float(f"{t:.3f}"), kind, text, by, param)
 
 
 @dataclass(frozen=True)
@@ -148,7 +151,7 @@ def to_line(report: Report) -> str:
     body: dict[str, Any] = {"report": KIND_OF[type(report)].value}
     for f in fields(report):
         v = getattr(report, f.name)
-        body[f.name] = v.as_dict() if isinstance(v, Sender) else v
+        body[f.name] = v.as_dict() if isinstance(v, (Sender, ParamChanged)) else v
     return json.dumps(body, separators=(",", ":"))
 
 
@@ -163,6 +166,8 @@ def parse_line(line: str) -> Report | None:
         cls = _CLASS_OF[Kind(body.pop("report"))]
         if cls is Event and body.get("by") is not None:
             body["by"] = Sender.from_dict(body["by"])
+        if cls is Event and body.get("param") is not None:
+            body["param"] = ParamChanged.from_dict(body["param"])
         report = cls(**body)
     except (ValueError, KeyError, TypeError, AttributeError):
         return None

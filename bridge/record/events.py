@@ -1,10 +1,12 @@
 """A run's events as the record keeps them: typed, with their sender as a field.
 
 In:  an event's time (s, the flight's clock), kind, text, who reported it (``source``: in a session the
-     vehicle, the controller, the relay or the session; offline none) and who caused it (``by``, a
-     :class:`~bridge.autopilot.simvehicle.Sender`, or None)
+     vehicle, the controller, the relay or the session; offline none), who caused it (``by``, a
+     :class:`~bridge.autopilot.simvehicle.Sender`, or None) and a parameter event's change (``param``, a
+     :class:`~bridge.autopilot.simvehicle.ParamChanged`: name, old and new value, or None)
 Out: :class:`RunEvent`; its dict for ``summary.json["events"]`` (:meth:`RunEvent.as_dict`: ``t`` s rounded
-     to 1 us or null, ``kind``, ``text`` with the sender shown as `` [by ...]``, ``source`` when there is one)
+     to 1 us or null, ``kind``, ``text`` with the sender shown as `` [by ...]``, ``source`` when there is one,
+     ``param`` when there is one)
 
 The written `` [by ...]`` is for people (events.log, summary.json); everything that judges a run reads
 ``by`` (:mod:`bridge.record.policies`), never the text.
@@ -17,7 +19,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from bridge.autopilot.simvehicle import Sender
+from bridge.autopilot.simvehicle import ParamChanged, Sender
 
 
 @dataclass(frozen=True)
@@ -29,11 +31,13 @@ class RunEvent:
     text: str
     source: str | None = None
     by: Sender | None = None
+    param: ParamChanged | None = None
 
     @classmethod
-    def at(cls, t: float, kind: str, text: str, source: str | None = None, by: Sender | None = None) -> RunEvent:
+    def at(cls, t: float, kind: str, text: str, source: str | None = None, by: Sender | None = None,
+           param: ParamChanged | None = None) -> RunEvent:
         """The event at ``t`` (s): rounded to 1 us, None if not finite."""
-        return cls(round(t, 6) if math.isfinite(t) else None, kind, text, source, by)
+        return cls(round(t, 6) if math.isfinite(t) else None, kind, text, source, by, param)
 
     @property
     def shown(self) -> str:
@@ -45,12 +49,15 @@ class RunEvent:
         d: dict[str, Any] = {"t": self.t, "kind": self.kind, "text": self.shown}
         if self.source is not None:
             d["source"] = self.source
+        if self.param is not None:
+            d["param"] = self.param.as_dict()
         return d
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> RunEvent:
         """An event as :meth:`as_dict` gave it (``by`` read only when given as an object: a written
         `` [by ...]`` stays text)."""
-        by = d.get("by")
+        by, param = d.get("by"), d.get("param")
         return cls(d.get("t"), d["kind"], d.get("text", ""), d.get("source"),
-                   Sender.from_dict(by) if isinstance(by, Mapping) else None)
+                   Sender.from_dict(by) if isinstance(by, Mapping) else None,
+                   ParamChanged.from_dict(param) if isinstance(param, Mapping) else None)

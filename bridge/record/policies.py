@@ -401,6 +401,9 @@ def ended_by_outcome(outcome: str, events: Sequence[RunEvent]) -> dict[str, str]
     if outcome == "failsafe":
         e = first("failsafe")
         return {"who": "vehicle", "how": f"failsafe at t={e.t:.3f} s: {e.text}" if e else "failsafe"}
+    if outcome == "law_failed":  # a user's law raised, exited or gave no four finite inputs (controller.law)
+        e = first("law_failed")
+        return {"who": "controller", "how": f"its law failed at t={e.t:.3f} s: {e.text}" if e else "its law failed"}
     return {"who": "user", "how": "interrupted (Ctrl-C or SIGTERM)"}
 
 
@@ -421,6 +424,9 @@ def violation_text(v: Verdict | Mapping[str, Any]) -> str:
 
 def run_ok(summary: Mapping[str, Any]) -> bool:
     """Whether a run is a clean completion (exit status 0): outcome ``completed``, every policy
-    holds, and a lockstep session held lockstep throughout."""
+    holds, a lockstep session held lockstep throughout, nobody but the flight's controller changed
+    the flight (``interventions``, e.g. a ground station's parameter) and the vehicle confirmed every
+    scheduled change (``param_at``): else not flown as asked."""
     return (summary.get("outcome") == "completed" and all_hold(summary.get("policies"))
-            and (summary.get("lockstep") or {"held": True}).get("held", False))
+            and (summary.get("lockstep") or {"held": True}).get("held", False) and not summary.get("interventions")
+            and all(p.get("confirmed") for p in summary.get("param_at") or ()))

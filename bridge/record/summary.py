@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from bridge.autopilot.params import BY_NAME
 from bridge.core.flight import Flight
 from bridge.record.columns import TRACE_COLUMNS
 from bridge.record.events import RunEvent
@@ -35,11 +36,14 @@ from bridge.record.policies import (
     judge,
     lockstep_record,
     rules_for,
+    vehicle_events,
     violation_text,
 )
 from bridge.record.runlog import trace_arrays
 
-FAILED_OUTCOMES = ("failsafe", "diverged", "aborted")  # what a controller may say besides completed
+FAILED_OUTCOMES = ("failsafe", "diverged", "aborted", "law_failed")
+# the vehicle's events that a sender other than the flight's controller may cause and that change the flight
+INTERVENING = ("param", "mode", "armed", "disarmed")  # what a controller may say besides completed
 
 
 @dataclass(frozen=True)
@@ -94,6 +98,8 @@ def outcome_of(facts: SessionFacts, controller: ChildEnd | None) -> str:
     completed = controller_completed(controller) and not (facts.aborted or facts.died)
     if facts.diverged:
         return "diverged"
+    if controller is not None and controller.outcome == "law_failed" and not facts.died:
+        return "law_failed"  # the failsafe that followed is the vehicle's answer to it, not the cause
     if facts.failsafe_seen and not completed:  # completed after a failsafe: resumed ([failsafe] resume)
         return "failsafe"
     if facts.aborted or facts.died:
@@ -103,6 +109,75 @@ def outcome_of(facts: SessionFacts, controller: ChildEnd | None) -> str:
     if controller is not None and controller.outcome is not None:
         return controller.outcome if controller.outcome in FAILED_OUTCOMES else "aborted"
     return "aborted"
+
+
+def interventions(events: Sequence[RunEvent], rate_hz: float,
+                  controller_id: tuple[int, int] = CONTROLLER_ID) -> list[dict[str, Any]]:
+    """``summary.json["interventions"]``: every change to the flight made by a sender other than the flight's
+    controller (a ground station), in order: each one's ``t`` (s, the events' clock), ``step`` (the control
+    step it acted from: round(t * rate_hz); lockstep, the vehicle's step), ``by`` (the sender), ``kind`` and
+    ``what``, and for a parameter its ``name``, ``old`` and ``new`` value. Read from the vehicle's events'
+    typed fields (``by``, ``param``): a parameter change (a set to the value in force makes no event), and
+    while the vehicle is armed a mode, an arm or a disarm; a ground station's arm is one too."""
+    out: list[dict[str, Any]] = []
+    armed = False
+    for e in vehicle_events(events):
+        by = e.by
+        was_armed, armed = armed, (e.kind == "armed") or (armed and e.kind != "disarmed")
+        if e.kind not in INTERVENING or by is None or by.is_vehicle:
+            continue
+        if by.link == "controller" and (by.sysid, by.compid) == controller_id:
+            continue
+        if e.kind == "mode" and not was_armed:  # the mode a later arm of the controller's leaves: no change
+            continue
+        assert e.t is not None  # vehicle_events have a time
+        d: dict[str, Any] = {"t": e.t, "step": round(e.t * rate_hz), "by": str(by), "kind": e.kind, "what": e.text}
+        if e.param is not None:
+            d.update(e.param.as_dict())
+        out.append(d)
+    return out
+
+
+def intervention_text(i: Mapping[str, Any]) -> str:
+    """One intervention as a person reads it: who, what, when (t and step)."""
+    what = (f"changed {i['name']} from {i['old']:g} to {i['new']:g}" if "name" in i
+            else f"{'set the mode' if i['kind'] == 'mode' else i['kind']}: {i['what']}")
+    return f"a ground station ({i['by']}) {what} at t={i['t']:.3f} s (step {i['step']})"
+
+
+def unconfirmed_text(p: Mapping[str, Any]) -> str:
+    """A scheduled change (``summary.json["param_at"]``'s entry) the vehicle never confirmed, for a person."""
+    return (f"--param-at {p['t_s']:g}:{p['name']}={p['value']:g} was never confirmed by the vehicle "
+            f"({p['sends']} PARAM_SETs): not made")
+
+
+def reproducibility(lockstep: dict[str, Any], changes: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """The lockstep record with whether the run can be flown again to the bit: as it was without a change
+    (``held`` says it), or ``reproducible`` false with ``reproducible_until_step`` (the first intervention's
+    step: the steps before it are the mission's, the ones from it on depend on when the change arrived on
+    the wall clock) and ``because`` (that change)."""
+    if not changes:  # held: reproducible (the record stays as it was); not held: its own why
+        return lockstep
+    first = changes[0]
+    return {**lockstep, "reproducible": False, "reproducible_until_step": first["step"],
+            "because": intervention_text(first)}
+
+
+def ended_by_change(end: dict[str, Any], outcome: str, events: Sequence[RunEvent],
+                    changes: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """``ended_by`` naming the ground station whose parameter change made the vehicle's failsafe act as it
+    did (its action, timeout, hold time or descent: a failsafe parameter set before the failsafe began),
+    else ``end`` as it was."""
+    if outcome != "failsafe" or end.get("who") != "vehicle":
+        return end
+    fs = next((e for e in vehicle_events(events) if e.kind == "failsafe"), None)
+    cause = [c for c in changes if "name" in c and BY_NAME[c["name"]].failsafe_key is not None
+             and (fs is None or c["t"] <= (fs.t or 0.0))]
+    if not cause:
+        return end
+    c = cause[-1]
+    return {"who": c["by"], "how": f"{end['how']}, under {c['name']} = {c['new']:g} (was {c['old']:g}) set by a "
+                                   f"ground station at t={c['t']:.3f} s (step {c['step']})"}
 
 
 def airborne(trace: Mapping[str, Any], t: float) -> bool:
@@ -132,6 +207,8 @@ def ended_by(outcome: str, trace: Mapping[str, Any], flight: Flight, facts: Sess
         return outcome, {"who": facts.died, "how": how}
     if outcome == "diverged":
         return outcome, ended_by_outcome(outcome, events)
+    if outcome == "law_failed" and ctl is not None:
+        return outcome, {"who": "controller", "how": f"its law failed: {ctl.reason}"}
     hit = ended_by_command(events, controller_id, before_s=m.duration_s)
     if hit is not None and not (controller_completed(ctl) and hit[1] is None):  # unattributed: the controller's own
         e, who = hit
@@ -287,6 +364,12 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
     children = [c for c in (vehicle, controller, relay) if c is not None]
     summary["outcome"], summary["ended_by"] = ended_by(summary["outcome"], arrays, flight, facts, joined.k0,
                                                        events, children, controller_id)
+    summary["interventions"] = changes = interventions(events, m.rate_hz, controller_id)
+    if cs.get("param_at"):  # the scheduled changes (--param-at) as sent, each confirmed by the vehicle's echo or not
+        summary["param_at"] = list(cs["param_at"])
+    summary["ended_by"] = ended_by_change(summary["ended_by"], summary["outcome"], events, changes)
+    if lockstep is not None:
+        summary["lockstep"] = reproducibility(lockstep, changes)
     rules = rules_for(flight, facts.clock, link, controller_id)
     violated = judge(summary, judged, events, rules, lockstep, off_clock)
     end = summary["ended_by"]
@@ -294,6 +377,11 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
     if lockstep is not None and not lockstep["held"]:
         texts.append(("lockstep", f"not a lockstep run: the vehicle left lockstep at t={lockstep['left_at_s']:.3f} s "
                                   f"({lockstep['why']}) and flew on the wall clock"))
+    elif lockstep is not None and changes:
+        texts.append(("lockstep", f"reproducible until step {changes[0]['step']}: {intervention_text(changes[0])}"))
+    texts += [("intervention", f"not flown as asked: {intervention_text(i)}") for i in changes]
+    texts += [("param", f"not flown as asked: {unconfirmed_text(p)}") for p in summary.get("param_at", ())
+              if not p["confirmed"]]
     texts += [("policy", violation_text(v)) for v in violated]
     t = joined.rows[-1].t if joined.rows else 0.0  # the notes' time: the trace's last row
     notes = [RunEvent.at(t, kind, text, "session") for kind, text in texts]

@@ -31,7 +31,12 @@ Cells run in a local process pool (``jobs`` workers), or on a Dask distributed c
 sweep killed at any point resumes with only its missing cells (``resume=True``); at the end
 the file is rewritten in grid order, so a resumed sweep's file equals an uninterrupted one's.
 A cell that raises (or whose worker process dies) is recorded with outcome ``error`` and
-never stops the sweep.
+never stops the sweep; a sweep whose every cell failed raises :class:`SweepFailed` from
+:func:`sweep` (:func:`run_sweep`'s :class:`Outcome` says ``status == "all failed"``; ``bsst sweep``
+exits 1 naming the first error).
+
+Worker processes import the main script again: a script starts a sweep under
+``if __name__ == "__main__":``, and one that does not is refused at once (a ConfigError naming the line).
 
 Scripting::
 
@@ -39,12 +44,12 @@ Scripting::
     rows = sweep("missions/sine.toml", Grid(delay_ms=(0, 10), loss_pct=(0, 20), seeds=2), jobs=2)
 """
 
-from bridge.sweep.campaign import Outcome, run_sweep, sweep
+from bridge.sweep.campaign import STATUSES, Outcome, SweepFailed, run_sweep, sweep
 from bridge.sweep.cells import CELLS_CSV, COLUMNS, SWEEP_JSON, read_cells, row_from_run
 from bridge.sweep.classes import CLASSES, Classes, classify
 from bridge.sweep.grid import AXES, LINK_AXES, RANGES, SENSING_AXES, Cell, Grid, cells
 from bridge.sweep.spec import Sweep, is_sweep_file, load_sweep
 
-__all__ = ["AXES", "CELLS_CSV", "CLASSES", "COLUMNS", "LINK_AXES", "RANGES", "SENSING_AXES", "SWEEP_JSON", "Cell",
-           "Classes", "Grid", "Outcome", "Sweep", "cells", "classify", "is_sweep_file", "load_sweep", "read_cells",
-           "row_from_run", "run_sweep", "sweep"]
+__all__ = ["AXES", "CELLS_CSV", "CLASSES", "COLUMNS", "LINK_AXES", "RANGES", "SENSING_AXES", "STATUSES",
+           "SWEEP_JSON", "Cell", "Classes", "Grid", "Outcome", "Sweep", "SweepFailed", "cells", "classify",
+           "is_sweep_file", "load_sweep", "read_cells", "row_from_run", "run_sweep", "sweep"]

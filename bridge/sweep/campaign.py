@@ -29,7 +29,15 @@ from bridge.sweep.cells import (
     write_cells,
 )
 from bridge.sweep.classes import Classes, classify
-from bridge.sweep.executors import Progress, engine_for, run_batch, run_batch_dask, run_dask, run_local
+from bridge.sweep.executors import (
+    Progress,
+    check_main_guard,
+    engine_for,
+    run_batch,
+    run_batch_dask,
+    run_dask,
+    run_local,
+)
 from bridge.sweep.grid import Grid
 from bridge.sweep.report import write_report
 from bridge.sweep.spec import Sweep
@@ -67,11 +75,25 @@ def sweep(
     ``auto`` takes the batch where the grid allows it (:func:`bridge.sweep.executors.engine_for`).
     A grid of more than
     ``max_cells`` cells (default :data:`bridge.sweep.spec.MAX_CELLS`) is refused before anything flies.
+
+    A cell that fails is an ``error`` row (its ``error`` column says why); a sweep whose every cell
+    failed raises :class:`SweepFailed` (naming the first error; the rows in its ``outcome``), so that it
+    never passes for a result. :func:`run_sweep` raises nothing for it: its :class:`Outcome`'s ``status``
+    says ``"all failed"``.
+
+    Worker processes import the calling script again: a script calls this under
+    ``if __name__ == "__main__":`` (refused at once without it: :func:`~bridge.sweep.executors.check_main_guard`).
     """
     m = mission if isinstance(mission, Mission) else load_mission(mission)
     spec = Sweep(m, Grid.of(grid), mode, classes or Classes(), max_cells=max_cells)
-    return run_sweep(spec, jobs=jobs, client=client, out=out, resume=resume, overwrite=overwrite, engine=engine,
-                     progress=progress, report=report, plots=plots).rows
+    res = run_sweep(spec, jobs=jobs, client=client, out=out, resume=resume, overwrite=overwrite, engine=engine,
+                    progress=progress, report=report, plots=plots)
+    if res.status == "all failed":
+        raise SweepFailed(res)
+    return res.rows
+
+
+STATUSES = ("ok", "cells failed", "all failed", "interrupted")  # Outcome.status
 
 
 @dataclass
@@ -87,6 +109,29 @@ class Outcome:
     interrupted: bool = False
     engine: str = "process"  # what flew the cells: batch or process (the grid decides for "auto")
     engine_why: str = ""
+
+    @property
+    def status(self) -> str:
+        """One of :data:`STATUSES`: ``ok`` (no cell failed), ``cells failed`` (some), ``all failed`` (every row an
+        ``error``: nothing was measured), ``interrupted`` (stopped before its end; resume it)."""
+        if self.interrupted:
+            return "interrupted"
+        if self.rows and self.failed == len(self.rows):
+            return "all failed"
+        return "cells failed" if self.failed else "ok"
+
+    def first_error(self) -> str:
+        """The ``error`` column of the first failed row ('' if none failed)."""
+        return next((r["error"] or "" for r in self.rows if r["outcome"] == "error"), "")
+
+
+class SweepFailed(Exception):
+    """Every cell of a sweep failed (:func:`sweep`); ``outcome`` is the :class:`Outcome`, its rows included."""
+
+    def __init__(self, outcome: Outcome) -> None:
+        super().__init__(f"every cell of the sweep failed ({outcome.failed} of {len(outcome.rows)}); the first: "
+                         f"{outcome.first_error()}")
+        self.outcome = outcome
 
 
 def run_sweep(
@@ -112,7 +157,9 @@ def run_sweep(
     jobs = jobs or spec.jobs or os.cpu_count() or 1
     results: dict[tuple[Any, ...], dict[str, Any]] = {}
     path: Path | None = None
-    engine_for(spec.mission, all_cells, spec.mode, engine)  # an --engine that cannot be honoured: before any file
+    first, _ = engine_for(spec.mission, all_cells, spec.mode, engine)  # an --engine it cannot honour: before any file
+    if first == "process" and client is None:
+        check_main_guard()  # a pool started from an unguarded script: refused before any file or flight
     if out is not None or write:
         path, kept = _open_dir(spec, out, resume, overwrite, root)
         results.update({row_key(r): r for r in kept if row_key(r) in order})
@@ -137,7 +184,7 @@ def run_sweep(
             if client is not None:
                 run_batch_dask(client, spec.mission, todo, record)
             else:
-                run_batch(spec.mission, todo, record)
+                run_batch(spec.mission, todo, record, jobs=jobs)
         elif todo:
             if client is not None:
                 run_dask(client, spec.mission, todo, spec.mode, record)

@@ -10,6 +10,8 @@ A cell that raises, or whose worker dies, becomes an ``error`` row.
 
 from __future__ import annotations
 
+import ast
+import inspect
 import multiprocessing as mp
 import os
 import select
@@ -21,8 +23,11 @@ from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
+from pathlib import Path
+from types import FrameType
 from typing import Any
 
+from bridge.autopilot.compiling import announce_compiling
 from bridge.loop import fly
 from bridge.nodes.process import die_with_parent
 from bridge.record.runlog import Run
@@ -115,6 +120,58 @@ def _alive(pid: int) -> bool:
     return True
 
 
+def check_main_guard() -> None:
+    """Refuse (ConfigError) to start worker processes from a script's top level without the
+    ``if __name__ == "__main__":`` guard.
+
+    A worker (forkserver, like spawn) imports the main script again to start: unguarded, it ran the
+    script's flights again, then died starting a pool of its own ("An attempt has been made to start a new
+    process before the current process has finished its bootstrapping phase"), and every cell became an
+    ``error`` row. The script's source is read with ``ast``: the line of its top level that led here must
+    lie in the body of an ``if`` that compares ``__name__`` with ``"__main__"``. Where the workers would
+    not import the script again (``python -m package``, an interactive session, ``python -c``) or the
+    source cannot be read, nothing is refused."""
+    main = sys.modules.get("__main__")
+    name = getattr(getattr(main, "__spec__", None), "name", None)
+    path = getattr(main, "__file__", None)
+    if name == "__main__" or (name or "").endswith(".__main__") or path is None or Path(path).stem == "ipython":
+        return  # the rules multiprocessing.spawn follows: the workers run none of the main module's code
+    frame = _main_top_level(main)
+    if frame is None:  # the script's top level is done (a later call): nothing of it runs again here
+        return
+    try:
+        tree = ast.parse(Path(path).read_bytes(), filename=path)
+    except (OSError, SyntaxError, ValueError):
+        return
+    line = frame.f_lineno
+    if any(_is_main_test(n.test) and n.body[0].lineno <= line <= (n.body[-1].end_lineno or line)
+           for n in ast.walk(tree) if isinstance(n, ast.If)):
+        return
+    raise ConfigError(f'{path}:{line}: starts worker processes outside an `if __name__ == "__main__":` block: each '
+                      f"worker imports the script again and would run its flights again; put the script's calls "
+                      f'under `if __name__ == "__main__":` (as the README\'s Python example does)')
+
+
+def _main_top_level(main: Any) -> FrameType | None:
+    """The frame of the main module's own top-level code on this thread's stack (None: not on it)."""
+    frame = inspect.currentframe()  # the stack is the only record of where the call came from
+    found = None
+    while frame is not None:
+        if frame.f_code.co_name == "<module>" and frame.f_globals is getattr(main, "__dict__", None):
+            found = frame
+        frame = frame.f_back
+    return found
+
+
+def _is_main_test(test: ast.expr) -> bool:
+    """Whether an ``if``'s test is ``__name__ == "__main__"`` (either way round)."""
+    if not (isinstance(test, ast.Compare) and len(test.ops) == 1 and isinstance(test.ops[0], ast.Eq)):
+        return False
+    sides = [test.left, *test.comparators]
+    return (any(isinstance(x, ast.Name) and x.id == "__name__" for x in sides)
+            and any(isinstance(x, ast.Constant) and x.value == "__main__" for x in sides))
+
+
 def _pool(jobs: int) -> ProcessPoolExecutor:
     ctx = mp.get_context("forkserver")
     ctx.set_forkserver_preload(["bridge.sweep", "bridge.loop"])
@@ -128,6 +185,7 @@ def run_local(mission: Mission, todo: Sequence[Cell], mode: str, jobs: int, repo
     again one at a time in a fresh one-worker pool: the one that breaks that one too is
     recorded as an error, the others get their real result.
     """
+    check_main_guard()
     queue: deque[Cell] = deque(todo)
     suspects: deque[Cell] = deque()
     while queue or suspects:
@@ -265,13 +323,16 @@ def batch_row(cell: Cell, measures: Mapping[str, Any]) -> dict[str, Any]:
     return {**{a: getattr(cell, a) for a in AXES}, "seed": cell.seed, **measures}
 
 
-def run_batch(mission: Mission, todo: Sequence[Cell], report: Report, chunk: int = BATCH_CHUNK) -> None:
-    """Fly cells with the batch engine in this process, ``chunk`` at a time (rows reported per chunk)."""
+def run_batch(mission: Mission, todo: Sequence[Cell], report: Report, chunk: int = BATCH_CHUNK,
+              jobs: int | None = None) -> None:
+    """Fly cells with the batch engine in this process, ``chunk`` at a time (rows reported per chunk), on
+    ``jobs`` threads (default: every core; the rows do not depend on it)."""
     from bridge.batch import fly_batch  # lazy: numba loads only where the batch flies (engine_for)
 
+    announce_compiling("bridge.batch")  # a cold cache: say so before ~12 s of silence
     for i in range(0, len(todo), chunk):
         part = todo[i:i + chunk]
-        for cell, m in zip(part, fly_batch(mission, [cell_overrides(c) for c in part]), strict=True):
+        for cell, m in zip(part, fly_batch(mission, [cell_overrides(c) for c in part], jobs=jobs), strict=True):
             report(batch_row(cell, m))
 
 

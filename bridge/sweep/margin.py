@@ -25,6 +25,7 @@ the sensors (``raw`` or ``ekf``; ``truth`` ignores them) and a set with noise to
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -123,7 +124,7 @@ def resolution_range(over: str) -> tuple[float, float]:
 
 
 def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[str] | None = None,
-           seeds: int = 1, resolution: float = 0.25, classes: Classes | None = None, jobs: int = 1,
+           seeds: int = 1, resolution: float = 0.25, classes: Classes | None = None, jobs: int | None = None,
            engine: str = "auto", progress: Callable[[str], None] | None = None) -> dict[str, Any]:
     """Search the margin of each law (see the module docstring); the ``margin.json`` content."""
     if over not in OVER:
@@ -156,11 +157,11 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
         # a round of even one cell flies as a batch where it can: this process loads the kernels once
         used, _ = engine_for(mission, probes, "offline", engine, min_cells=1)
         if used == "batch":
-            run_batch(mission, probes, rows.append)
+            run_batch(mission, probes, rows.append, jobs=jobs)
         elif len(probes) <= IN_PROCESS_CELLS:  # a pool's start costs more than a cell or two
             rows += [run_cell(mission, c) for c in probes]
         else:
-            run_local(mission, probes, "offline", jobs, rows.append)
+            run_local(mission, probes, "offline", jobs or os.cpu_count() or 1, rows.append)
         cells_flown += len(rows)
         for s in searches:
             if s.controller not in pending:

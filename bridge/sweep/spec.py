@@ -35,7 +35,7 @@ from bridge.sweep.grid import (
     noise_problem,
 )
 from missions import Mission, load_mission
-from missions.mission import law_spec_from, law_spec_problem, mission_path
+from missions.mission import is_plan_file, law_spec_from, law_spec_problem, mission_path
 from params import ConfigError, Table, load_toml
 
 MAX_CELLS = 10_000  # cells a sweep flies unless told more (max_cells): 48 cells of the 30 s sine take 15 s on 2
@@ -227,6 +227,9 @@ def _int_list(t: Table, key: str, lo: int, hi: int) -> list[int]:
 
 
 def is_sweep_file(path: str | Path) -> bool:
-    """Whether a TOML file declares a sweep (it has a ``[grid]`` table or a ``mission`` key)."""
+    """Whether a TOML file declares a sweep (it has a ``[grid]`` table or a ``mission`` key); a ground
+    station's plan never does."""
+    if is_plan_file(path):
+        return False
     data = load_toml(mission_path(path))
     return "grid" in data or isinstance(data.get("mission"), str)

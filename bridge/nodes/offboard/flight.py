@@ -38,9 +38,11 @@ from bridge.nodes.process import on_stop_signals, report_printer
 from bridge.nodes.report import Done, Ready, Report, Stats
 from bridge.record.columns import CONTROLLER_COLUMNS
 from bridge.record.runlog import LineWriter, side_dir
+from controller.law import LawFailed
 from controller.link_guard import LinkGuard
 
-OUTCOMES = ("completed", "failsafe", "diverged", "aborted")
+OUTCOMES = ("completed", "failsafe", "diverged", "aborted", "law_failed")
+PARAM_SETTLE_S = 1.0  # s of wall time after the flight for the echoes of the last scheduled PARAM_SETs
 
 
 class Offboard(OffboardLink):
@@ -93,7 +95,13 @@ class Offboard(OffboardLink):
         try:
             if not self._connect() or not self._arm():
                 return "aborted"
-            outcome = self._fly_lockstep() if self.cfg.clock == "lockstep" else self._fly_realtime()
+            try:
+                outcome = self._fly_lockstep() if self.cfg.clock == "lockstep" else self._fly_realtime()
+            except LawFailed as exc:  # a user's law failed (an exit too): no more targets, said why
+                self.reason = f"{exc} at step {round(self.t_mission * self.rate)} (t={self.t_mission:.3f} s)"
+                self.event("law_failed", self.reason)
+                return "law_failed"
+            self._await_param_echoes()
             if outcome == "completed":
                 self._fly_end()
             return outcome
@@ -106,6 +114,13 @@ class Offboard(OffboardLink):
         if self.tlog is not None:
             self.tlog.close()
         self.ep.close()
+
+    def _await_param_echoes(self) -> None:
+        """The flight is over: serve the link (resending) for up to PARAM_SETTLE_S of wall time more while a
+        scheduled PARAM_SET is not echoed yet (one sent at the last steps: its echo is on its way)."""
+        deadline = time.monotonic() + PARAM_SETTLE_S
+        while self._pending_params and not self.stopping and time.monotonic() < deadline:
+            self._serve(min(deadline, self._next_house))
 
     def _connect(self) -> bool:
         deadline = time.monotonic() + self.cfg.connect_timeout_s
@@ -425,7 +440,9 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
     node = Offboard(flight, cfg, path, emit)
     on_stop_signals(node.stop)
     outcome = node.run()
-    emit(Stats({"commands": node.commands, "states": node.states, "received": node.ep.received,
+    unconfirmed = node.unconfirmed_params()
+    emit(Stats({"param_at": [p.as_dict() for p in node.param_sets],
+                "commands": node.commands, "states": node.states, "received": node.ep.received,
                 "sent": node.ep.sent, "stale_ticks": node.stale_ticks, "overruns": node.overruns,
                 "down": node.cend.down.stats.summary() if cfg.clock == "lockstep" else None,
                 "rejected": dict(node.rejected), "rejected_from_vehicle": node.rejected.from_peer,
@@ -437,4 +454,7 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
         sys.stderr.write(f"bsst controller: {outcome}" + (f": {node.reason}" if node.reason else "") + "\n")
     elif left:
         sys.stderr.write(f"bsst controller: completed, but not in lockstep: the vehicle said {node.left_lockstep!r}\n")
-    return 0 if outcome == "completed" and not left else 1
+    for p in unconfirmed:
+        sys.stderr.write(f"bsst controller: {p.change.name} = {p.change.value:g} (due at t={p.change.t_s:g} s) "
+                         f"was never confirmed by the vehicle: not made\n")
+    return 0 if outcome == "completed" and not left and not unconfirmed else 1

@@ -5,15 +5,18 @@ In:  the vehicle's messages: ODOMETRY (checked: sender, stamp, range; kept newes
      status CRITICAL = its failsafe, PX4 ``custom_mode``: a ground station's mode), COMMAND_ACK, TIMESYNC (clock
      offset and round trip, ns), STATUSTEXT
 Out: actuator targets stamped with their state's ``time_usec`` (or the lockstep no-target acknowledgement),
-     ARM_DISARM and other COMMAND_LONGs until ACKed, PARAM_SET, HEARTBEAT, TIMESYNC; ``controller.tlog``;
+     ARM_DISARM and other COMMAND_LONGs until ACKed, PARAM_SET until the vehicle's PARAM_VALUE echoes it
+     (every 0.2 s of wall time), HEARTBEAT, TIMESYNC; ``controller.tlog``;
      reports (:mod:`bridge.nodes.report`): events at the mission's time, received STATUSTEXTs, refusals
 """
 
 from __future__ import annotations
 
 import math
+import struct
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -38,6 +41,34 @@ from bridge.nodes.report import Event, Report, StatusText, Warning
 
 _ZERO12 = (0.0,) * 12
 _ZERO16 = (0.0,) * 16
+PARAM_RETRY_S = 0.2  # s of wall time between PARAM_SETs of one scheduled change the vehicle has not echoed
+
+
+def _f32(x: float) -> float:
+    """``x`` as a float32 carries it (PARAM_SET's and PARAM_VALUE's ``param_value``)."""
+    return struct.unpack("<f", struct.pack("<f", x))[0]
+
+
+@dataclass
+class ScheduledSet:
+    """One ``--param-at`` change as sent: its wire value (float32) and MAVLink type, the mission time it was
+    first sent (s), how many PARAM_SETs went, the next resend's wall time, and the mission time the vehicle's
+    PARAM_VALUE echoed it (None: not yet)."""
+
+    change: ParamChange
+    wire: float
+    kind: int
+    sent_t: float
+    sends: int = 0
+    next_send: float = 0.0
+    confirmed_t: float | None = None
+
+    def as_dict(self) -> dict[str, Any]:
+        """Its entry in the controller's ``stats`` (``param_at``) and ``summary.json["param_at"]``."""
+        c = self.change
+        return {"t_s": c.t_s, "name": c.name, "value": c.value, "sent_t": round(self.sent_t, 6), "sends": self.sends,
+                "confirmed": self.confirmed_t is not None,
+                "confirmed_t": None if self.confirmed_t is None else round(self.confirmed_t, 6)}
 
 
 class OffboardLink:
@@ -86,6 +117,8 @@ class OffboardLink:
         self.states_refused = 0  # the vehicle's states refused (stamp or numbers)
         self.state_window: list[int] | None = None  # [first, last] step of the vehicle's states read
         self.t_mission = 0.0  # the mission time the events are reported at (s)
+        self.param_sets: list[ScheduledSet] = []  # the scheduled PARAM_SETs sent, in order
+        self._pending_params: dict[str, ScheduledSet] = {}  # by name: sent, not echoed by the vehicle yet
 
     def event(self, kind: str, text: str) -> None:
         self._status(Event.at(self.t_mission, kind, text))
@@ -162,11 +195,48 @@ class OffboardLink:
 
     def _send_param(self, change: ParamChange) -> None:
         """A scheduled parameter change (``--param-at``): PARAM_SET before this step's answer, so
-        that in lockstep the vehicle makes it before it flies the step (the same step as offline)."""
+        that in lockstep the vehicle makes it before it flies the step (the same step as offline). It
+        is pending until the vehicle's PARAM_VALUE echoes its name and value (:meth:`_on`), sent again
+        every PARAM_RETRY_S of wall time until then (:meth:`_resend_params`: a datagram lost on an impaired
+        link, in a blackout); a newer change of the same name replaces it. The vehicle makes a set to the
+        value in force no change, so a resend never alters a flight."""
         kind = PARAM_TYPES[BY_NAME[change.name].kind]
-        self.ep.send(mavlink.MAVLink_param_set_message(self.vsys or 0, self.vcomp, change.name.encode(),
-                                                       param_to_wire(change.value, kind), kind))
-        self.event("param", f"set {change.name} = {change.value:g}")
+        sent = ScheduledSet(change, _f32(param_to_wire(change.value, kind)), kind, self.t_mission)
+        self.param_sets.append(sent)
+        self._pending_params[change.name] = sent
+        self._send_set(sent)
+        self.event("param", f"PARAM_SET {change.name} = {change.value:g} sent (waiting for the vehicle's echo)")
+
+    def _send_set(self, s: ScheduledSet) -> None:
+        s.sends += 1
+        s.next_send = time.monotonic() + PARAM_RETRY_S
+        self.ep.send(mavlink.MAVLink_param_set_message(self.vsys or 0, self.vcomp, s.change.name.encode(),
+                                                       s.wire, s.kind))
+
+    def _resend_params(self, now: float) -> None:
+        """Each scheduled PARAM_SET the vehicle has not echoed yet, again once its PARAM_RETRY_S is up."""
+        for s in self._pending_params.values():
+            if now >= s.next_send:
+                self._send_set(s)
+
+    def _param_echo(self, m: Any) -> None:
+        """A PARAM_VALUE of the vehicle: the pending scheduled set of that name and value is confirmed."""
+        name = m.param_id.rstrip("\x00") if isinstance(m.param_id, str) else m.param_id.decode(errors="replace")
+        s = self._pending_params.get(name)
+        if s is None or _f32(m.param_value) != s.wire:
+            return
+        del self._pending_params[name]
+        s.confirmed_t = self.t_mission
+        self.event("param", f"{name} = {s.change.value:g} confirmed by the vehicle (after {s.sends} "
+                            f"PARAM_SET{'s' if s.sends > 1 else ''})")
+
+    def unconfirmed_params(self) -> list[ScheduledSet]:
+        """The scheduled sets the vehicle never echoed (each said as an event here: not made)."""
+        out = [s for s in self.param_sets if s.confirmed_t is None]
+        for s in out:
+            self.event("param", f"{s.change.name} = {s.change.value:g} (due at t={s.change.t_s:g} s) never "
+                                f"confirmed by the vehicle after {s.sends} PARAM_SETs: not made")
+        return out
 
     def _send_target(self, time_usec: int, wire: tuple[float, ...]) -> None:
         """The actuator target answering the state stamped ``time_usec`` (hot path)."""
@@ -235,6 +305,9 @@ class OffboardLink:
         if kind == "COMMAND_ACK":
             if m.target_system in (0, self.cfg.sysid):
                 self._acks[m.command] = m.result
+        elif kind == "PARAM_VALUE":
+            if self._pending_params:
+                self._param_echo(m)
         elif kind == "TIMESYNC":
             self._timesync(m)
         elif kind == "STATUSTEXT":  # a chunked one is reported once, joined
@@ -276,6 +349,8 @@ class OffboardLink:
             self.ep.send(mavlink.MAVLink_timesync_message(0, time.monotonic_ns()))
         for severity, text in self._texts.expired(now):
             self._statustext(severity, text)
+        if self._pending_params:
+            self._resend_params(now)
         refused = self.rejected.report(now)
         if refused is not None:
             self._status(Warning(refused))

@@ -57,7 +57,7 @@ def sender_suffix(by: Sender | None) -> str:
 
 def claim(event: Event, by: Sender | None) -> None:
     """Name ``by`` in ``event`` if it is one that says who caused it and names nobody yet."""
-    if event.kind in ATTRIBUTED and " [by " not in event.text:
+    if event.kind in ATTRIBUTED and " [by " not in event.text and event.by is None:  # by: named, typed
         event.text += sender_suffix(by)
 
 

@@ -33,6 +33,8 @@ from bridge.mavlink.endpoint import Endpoint, Tlog, wait
 from bridge.mavlink.receive import Rejections
 from bridge.mavlink.signing import Signing
 from bridge.nodes.process import on_stop_signals, status_printer
+from bridge.nodes.report import Event as EventReport
+from bridge.nodes.report import to_line
 from bridge.nodes.vehicle.authority import Authority, claim
 from bridge.nodes.vehicle.clock import Answer, Clock, ClockState, Trigger
 from bridge.nodes.vehicle.commander import Commander, CommanderPorts
@@ -365,10 +367,13 @@ class Vehicle:
             # flight's controller sent it), or the vehicle's own disarm (landed, diverged)
             peer = self.link.peer
             claim(e, self.authority.controller(peer) if e.kind == "armed" and peer is not None else None)
-            self._report(f"event t={e.t:.3f} {e.kind}: {e.text}")
+            if e.by is not None:  # its sender and change typed (a parameter's): a JSON report line
+                self._report(to_line(EventReport.at(e.t, e.kind, e.text, e.by, e.param)))
+            else:
+                self._report(f"event t={e.t:.3f} {e.kind}: {e.text}")
             sev = (mavlink.MAV_SEVERITY_CRITICAL if e.kind in ("failsafe", "diverged", "lockstep")
                    else mavlink.MAV_SEVERITY_INFO)
-            texts.append(self._statustext(sev, f"{e.kind}: {e.text}"))
+            texts.append(self._statustext(sev, f"{e.kind}: {e.shown}"))
         msgs: list[Any] = []
         for chunks in reversed(texts):  # the newest texts, whole, if many came at once
             if len(msgs) + len(chunks) > MAX_TEXT_MESSAGES:

@@ -3,7 +3,9 @@
 In:  PARAM_REQUEST_LIST, PARAM_REQUEST_READ (by index, or by name with index -1), PARAM_SET (name, value,
      MAV_PARAM_TYPE) from a sender with authority, with the link they came in on
 Out: PARAM_VALUE (all, in one datagram, for a list; the new or unchanged value for a set), STATUSTEXT
-     saying why a set was refused or a name is unknown; a ``param`` event naming the sender of a set;
+     saying why a set was refused or a name is unknown; a ``param`` event of a set that changed a setting,
+     with its sender (``by``) and the change (``param``: name, old and new value) as typed fields (a set
+     to the value in force is no change: answered, no event);
      refusals counted (``target``, ``reply_limited``, ``param_refused``, ``param_unknown``)
 
 The parameters and their checks are :mod:`bridge.autopilot.params`; a set acts from the next control
@@ -18,10 +20,10 @@ from typing import Any
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.autopilot.params import BY_NAME, PARAMS, ParamRefused, VehicleParams, read_param
-from bridge.autopilot.simvehicle import SimVehicle
+from bridge.autopilot.simvehicle import Sender, SimVehicle
 from bridge.mavlink.endpoint import Endpoint
 from bridge.mavlink.modes import PARAM_TYPES, param_from_wire, param_name, param_to_wire
-from bridge.nodes.vehicle.authority import Authority, attribute
+from bridge.nodes.vehicle.authority import Authority
 from bridge.nodes.vehicle.streams import StatusTexts
 
 MESSAGES = frozenset({"PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET"})
@@ -87,9 +89,10 @@ class ParamService:
         try:
             if m.param_type != want:
                 raise ParamRefused(f"{name}: is {spec.kind}, the set says type {m.param_type}")
-            n0 = len(self.sim.events)
-            self.sim.change_param(name, param_from_wire(m.param_value, want), self.sysid)
-            attribute(self.sim.events, n0, self.authority.sender(m, addr, link))
+            changed = self.sim.change_param(name, param_from_wire(m.param_value, want), self.sysid)
+            if changed is not None:  # its sender, typed: the session records who changed what, and when
+                s = self.authority.sender(m, addr, link)
+                changed.by = Sender(s.sysid, s.compid, s.addr[0], s.addr[1], s.link)
         except ParamRefused as exc:
             self._reject("param_refused")
             self._report(f"refused {exc}")

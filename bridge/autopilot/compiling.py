@@ -1,0 +1,68 @@
+"""Say so when numba is about to compile: the first EKF or batch run after an install spends 10-17 s
+compiling kernels, which without a word looks like a hang.
+
+In:  the name of a package or module whose numba kernels (``@njit(cache=True)``) are about to be first
+     called in this process, already imported (:data:`KERNELS`: what they are, in words; how long
+     compiling them takes, s)
+Out: one line on stderr, ``bsst: compiling the EKF's kernels (first run after an install, ~13 s; cached on
+     disk after) ...``, once per process and only when numba's on-disk cache of those kernels is cold:
+     for at least half of them, the index file (``<module>.<function>-<line>.py311.nbi`` in the source's
+     ``__pycache__``, or under ``NUMBA_CACHE_DIR``) absent, of another numba version, or stale (its
+     source changed since)
+
+The check asks each kernel's own numba cache object where its index is and whether it is fresh (what
+numba itself will decide), so that it never disagrees with numba's naming or its cache directory rules.
+Half, not any: a kernel or two is compiled only when first needed (the batch's failsafe landing, when
+a cell first lands), and inlined kernels (``inline="always"``) are never cached on their own; a first
+run after an install, an upgrade or another numba finds them all cold.
+"""
+
+from __future__ import annotations
+
+import pickle
+import sys
+from collections.abc import Iterator
+from typing import Any, TextIO
+
+KERNELS = {  # package of kernels: what they are, in words, and how long compiling them takes on the 2-core VM, s
+    "bridge.autopilot.ekfkernels": ("the EKF's kernels", 13.0),
+    "bridge.batch": ("the batch engine's kernels", 12.0),
+}
+
+_checked: set[str] = set()  # packages looked at in this process: each is announced at most once
+
+
+def announce_compiling(package: str, stream: TextIO | None = None) -> bool:
+    """Print the compiling line for the kernels of ``package`` (a key of :data:`KERNELS`: that module, or
+    that package and its loaded submodules) if numba's cache of them is cold; once per process (later calls
+    return at once). Whether it printed."""
+    what, seconds = KERNELS[package]
+    if package in _checked:
+        return False
+    _checked.add(package)
+    kernels = [d for d in _kernels(package) if getattr(d, "targetoptions", {}).get("inline") != "always"]
+    if not kernels or 2 * sum(_cold(d) for d in kernels) < len(kernels):
+        return False
+    out = stream or sys.stderr
+    out.write(f"bsst: compiling {what} (first run after an install, ~{seconds:g} s; cached on disk after) ...\n")
+    out.flush()
+    return True
+
+
+def _kernels(package: str) -> Iterator[Any]:
+    """The numba dispatchers with an on-disk cache among the attributes of ``package``'s loaded modules."""
+    for name, module in list(sys.modules.items()):
+        if name == package or name.startswith(package + "."):
+            for obj in vars(module).values():
+                if getattr(getattr(obj, "_cache", None), "_cache_file", None) is not None:
+                    yield obj
+
+
+def _cold(dispatcher: Any) -> bool:
+    """Whether numba will compile this kernel rather than load it: no index, or one numba will not use
+    (another numba version; a source changed since: numba's own test, ``_load_index``, gives {} for both)."""
+    try:
+        cache_file = dispatcher._cache._cache_file  # numba's: where its index is, and its freshness test
+        return not dispatcher.overloads and not cache_file._load_index()
+    except (AttributeError, OSError, EOFError, ValueError, pickle.UnpicklingError):  # another numba's layout, a
+        return False  # damaged index: say nothing rather than guess

@@ -1,0 +1,54 @@
+"""Latitude, longitude and altitude to the local frames about a home, as PX4 projects them.
+
+In:  a home (latitude, longitude in degrees, altitude AMSL in m) and a point (the same units)
+Out: the point in local NED about the home (north, east, down in m) and in the paper frame
+     (x north, y west, z up in m: NWU, the ground z = 0 at the home's altitude)
+
+PX4 projects a global position onto its local frame with the azimuthal equidistant projection on a
+sphere of radius ``CONSTANTS_RADIUS_OF_EARTH`` = 6 371 000 m about the reference point
+(``MapProjection::project`` in ``src/lib/geo/geo.cpp``; formulas after Weisstein, "Azimuthal
+Equidistant Projection", MathWorld). Distances and bearings from the home are kept exactly on that
+sphere. PX4 stores the result in float32; we keep float64 (1 km off, float32's step is 6e-5 m).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+EARTH_RADIUS_M = 6_371_000.0  # PX4's CONSTANTS_RADIUS_OF_EARTH (src/lib/geo/geo.h)
+
+
+@dataclass(frozen=True)
+class Home:
+    """The local frames' origin: latitude, longitude (deg), altitude AMSL (m)."""
+
+    lat: float
+    lon: float
+    alt: float
+
+    def ned(self, lat: float, lon: float, alt: float) -> tuple[float, float, float]:
+        """(north, east, down) in m of the point (deg, deg, m AMSL), PX4's projection about the home."""
+        north, east = project(self.lat, self.lon, lat, lon)
+        return north, east, self.alt - alt
+
+    def paper(self, lat: float, lon: float, alt: float) -> tuple[float, float, float]:
+        """(x, y, z) in m of the point in the paper frame (NWU about the home, z up from its altitude)."""
+        north, east, down = self.ned(lat, lon, alt)
+        return north, -east, -down
+
+
+def project(lat0: float, lon0: float, lat: float, lon: float) -> tuple[float, float]:
+    """(north, east) in m of (lat, lon) about (lat0, lon0), all in degrees: PX4's azimuthal
+    equidistant projection (``MapProjection::project``), in float64."""
+    ref_lat, ref_lon = math.radians(lat0), math.radians(lon0)
+    sin_ref, cos_ref = math.sin(ref_lat), math.cos(ref_lat)
+    lat_rad, lon_rad = math.radians(lat), math.radians(lon)
+    sin_lat, cos_lat = math.sin(lat_rad), math.cos(lat_rad)
+    cos_d_lon = math.cos(lon_rad - ref_lon)
+    arg = min(max(sin_ref * sin_lat + cos_ref * cos_lat * cos_d_lon, -1.0), 1.0)
+    c = math.acos(arg)
+    k = c / math.sin(c) if c != 0.0 else 1.0
+    north = k * (cos_ref * sin_lat - sin_ref * cos_lat * cos_d_lon) * EARTH_RADIUS_M
+    east = k * cos_lat * math.sin(lon_rad - ref_lon) * EARTH_RADIUS_M
+    return north, east

@@ -1,0 +1,210 @@
+"""Mission files of the ground stations: QGroundControl ``.plan`` (JSON) and ``QGC WPL 110`` text.
+
+In:  a file's text and its name (for messages); the file is read by :mod:`params` (missions are pure)
+Out: a :class:`PlanFile`: the home (lat, lon deg, alt m AMSL), the multicopter cruise speed (m/s) the
+     file gives, and its :class:`Item` s (MAVLink MAV_CMD, MAV_FRAME, param1..4, lat, lon deg, alt m);
+     anything we do not fly raises :class:`params.ConfigError` naming the file, the item's index and its
+     command (name and number)
+
+``.plan`` follows QGroundControl's documented schema (docs.qgroundcontrol.com, "Plan File Format"):
+``fileType`` "Plan", ``version`` 1, ``mission`` {``version`` 2, ``firmwareType``, ``vehicleType``,
+``cruiseSpeed``, ``hoverSpeed``, ``plannedHomePosition`` [lat, lon, alt AMSL], ``items``}, ``geoFence``,
+``rallyPoints``. An item is a ``SimpleItem`` {``command``, ``frame``, ``params`` [7], ``autoContinue``,
+``doJumpId``, ...} (QGC writes NaN as null) or a ``ComplexItem`` (survey, corridor scan, structure scan),
+which is refused. A ``QGC WPL 110`` file (mavlink.io, "File Formats") is a header line, then one line per
+item: index, current, frame, command, param1..4, x/lat, y/lon, z/alt, autocontinue; line 0 is the home,
+as QGroundControl and MAVProxy write it. Geofence and rally points are read past, not enforced.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from params import ConfigError
+
+NAV_WAYPOINT, NAV_LOITER_TIME, NAV_RETURN_TO_LAUNCH, NAV_LAND, NAV_TAKEOFF, DO_CHANGE_SPEED = 16, 19, 20, 21, 22, 178
+SUPPORTED = {NAV_WAYPOINT: "NAV_WAYPOINT", NAV_LOITER_TIME: "NAV_LOITER_TIME", NAV_RETURN_TO_LAUNCH:
+             "NAV_RETURN_TO_LAUNCH", NAV_LAND: "NAV_LAND", NAV_TAKEOFF: "NAV_TAKEOFF",
+             DO_CHANGE_SPEED: "DO_CHANGE_SPEED"}
+# names of commands a plan often holds that we do not fly (MAVLink common.xml MAV_CMD), for the refusal's text
+OTHER_NAMES = {17: "NAV_LOITER_UNLIM", 18: "NAV_LOITER_TURNS", 31: "NAV_LOITER_TO_ALT", 84: "NAV_VTOL_TAKEOFF",
+               85: "NAV_VTOL_LAND", 93: "NAV_DELAY", 112: "CONDITION_DELAY", 114: "CONDITION_DISTANCE",
+               115: "CONDITION_YAW", 177: "DO_JUMP", 183: "DO_SET_SERVO", 189: "DO_LAND_START",
+               195: "DO_SET_ROI_LOCATION", 201: "DO_SET_ROI", 205: "DO_MOUNT_CONTROL", 206: "DO_SET_CAM_TRIGG_DIST",
+               530: "SET_CAMERA_MODE", 2000: "IMAGE_START_CAPTURE", 2001: "IMAGE_STOP_CAPTURE",
+               2500: "VIDEO_START_CAPTURE"}
+FRAMES = {0: "GLOBAL", 3: "GLOBAL_RELATIVE_ALT", 5: "GLOBAL_INT", 6: "GLOBAL_RELATIVE_ALT_INT"}
+RELATIVE_FRAMES = (3, 6)  # altitude above the home; the others: AMSL
+OTHER_FRAMES = {1: "LOCAL_NED", 2: "MISSION", 4: "LOCAL_ENU", 7: "LOCAL_OFFSET_NED", 8: "BODY_NED",
+                9: "BODY_OFFSET_NED", 10: "GLOBAL_TERRAIN_ALT", 11: "GLOBAL_TERRAIN_ALT_INT"}
+MAX_ITEMS = 10_000  # PX4 keeps at most a few thousand (its dataman); a file with more is not a mission
+
+
+def command_name(cmd: int) -> str:
+    """``NAV_WAYPOINT (16)``: a command as the refusals name it."""
+    return f"{SUPPORTED.get(cmd) or OTHER_NAMES.get(cmd) or 'MAV_CMD'} ({cmd})"
+
+
+@dataclass(frozen=True)
+class Item:
+    """One mission item: where it is in its file (``mission.items[0]``; ``item 1``: a waypoint file's index,
+    the home 0), MAV_CMD, MAV_FRAME, param1..4 (NaN: not given) and position (deg, deg, m in its frame)."""
+
+    label: str
+    command: int
+    frame: int
+    p1: float
+    p2: float
+    p3: float
+    p4: float
+    lat: float
+    lon: float
+    alt: float
+
+    @property
+    def name(self) -> str:
+        return command_name(self.command)
+
+
+@dataclass(frozen=True)
+class PlanFile:
+    """A ground station's mission: home (deg, deg, m AMSL), cruise speed (m/s, None: not given), items."""
+
+    source: str
+    home: tuple[float, float, float]
+    items: tuple[Item, ...]
+    cruise_m_s: float | None = None
+
+    def refuse(self, item: Item, why: str) -> ConfigError:
+        """The refusal of ``item``: file, index, command, why."""
+        return ConfigError(f"{self.source}: {item.label} ({item.name}): {why}")
+
+
+def _number(v: Any) -> float:
+    """A parameter as JSON holds it: a number, or null for NaN (QGroundControl's writing of NaN)."""
+    if v is None:
+        return math.nan
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise ValueError(f"expected a number or null, got {v!r}"[:80])
+    return float(v)
+
+
+def _check_item(source: str, item: Item, auto_continue: bool) -> Item:
+    """``item`` if we fly it, else the refusal naming file, index and command."""
+    where = f"{source}: {item.label} ({item.name})"
+    if item.command not in SUPPORTED:
+        raise ConfigError(f"{where}: not supported; supported: "
+                          f"{', '.join(command_name(c) for c in SUPPORTED)}")
+    if not auto_continue:
+        raise ConfigError(f"{where}: autoContinue false (the mission would wait there for a ground station)")
+    if item.command != DO_CHANGE_SPEED and item.frame not in FRAMES:
+        name = OTHER_FRAMES.get(item.frame, "unknown")
+        raise ConfigError(f"{where}: frame {name} ({item.frame}) not supported; supported: "
+                          f"{', '.join(f'{n} ({f})' for f, n in FRAMES.items())}")
+    return item
+
+
+def read_qgc_plan(text: str, source: str) -> PlanFile:
+    """A QGroundControl ``.plan`` file's text: its home, cruise speed and items (refusals named)."""
+    try:
+        data = json.loads(text)
+    except (json.JSONDecodeError, RecursionError) as exc:
+        raise ConfigError(f"{source}: not a QGroundControl plan (not valid JSON: {exc})"[:300]) from None
+    if not isinstance(data, dict) or data.get("fileType") != "Plan":
+        raise ConfigError(f"{source}: not a QGroundControl plan (fileType must be \"Plan\")")
+    if data.get("version") != 1:
+        raise ConfigError(f"{source}: version: plan file version {data.get('version')!r} not supported (1 is)")
+    mission = data.get("mission")
+    if not isinstance(mission, dict):
+        raise ConfigError(f"{source}: mission: expected an object")
+    if mission.get("version") != 2:
+        raise ConfigError(f"{source}: mission.version: {mission.get('version')!r} not supported (2 is)")
+    home = mission.get("plannedHomePosition")
+    try:
+        lat, lon, alt = (_number(v) for v in home)  # type: ignore[union-attr]
+    except (TypeError, ValueError):
+        raise ConfigError(f"{source}: mission.plannedHomePosition: expected [lat, lon, alt]") from None
+    check_home(source, lat, lon, alt, "mission.plannedHomePosition")
+    try:
+        hover = _number(mission.get("hoverSpeed"))
+    except ValueError as exc:
+        raise ConfigError(f"{source}: mission.hoverSpeed: {exc}") from None
+    raw = mission.get("items")
+    if not isinstance(raw, list) or not raw:
+        raise ConfigError(f"{source}: mission.items: expected a non-empty list")
+    if len(raw) > MAX_ITEMS:
+        raise ConfigError(f"{source}: mission.items: {len(raw)} items, more than {MAX_ITEMS}")
+    items = tuple(_plan_item(source, i, x) for i, x in enumerate(raw))
+    return PlanFile(source, (lat, lon, alt), items, hover if math.isfinite(hover) else None)
+
+
+def _plan_item(source: str, index: int, x: Any) -> Item:
+    label = f"mission.items[{index}]"
+    if not isinstance(x, dict):
+        raise ConfigError(f"{source}: {label}: expected an object")
+    if x.get("type") == "ComplexItem":
+        kind = x.get("complexItemType", "unknown")
+        raise ConfigError(f"{source}: {label} (ComplexItem {str(kind)[:40]!r}): complex items (survey, corridor "
+                          f"scan, structure scan) are not supported; fly their waypoints as simple items")
+    if x.get("type") != "SimpleItem":
+        raise ConfigError(f"{source}: {label}: type {str(x.get('type'))[:40]!r} not supported (SimpleItem is)")
+    cmd, frame, params = x.get("command"), x.get("frame"), x.get("params")
+    if not isinstance(cmd, int) or isinstance(cmd, bool) or not isinstance(frame, int) or isinstance(frame, bool):
+        raise ConfigError(f"{source}: {label}: command and frame must be integers")
+    try:
+        if not isinstance(params, list) or len(params) != 7:
+            raise ValueError("params: expected a list of 7")
+        p = [_number(v) for v in params]
+    except ValueError as exc:
+        raise ConfigError(f"{source}: {label} ({command_name(cmd)}): {exc}") from None
+    item = Item(label, cmd, frame, *p)
+    return _check_item(source, item, x.get("autoContinue", True) is True)
+
+
+def read_wpl(text: str, source: str) -> PlanFile:
+    """A ``QGC WPL 110`` file's text: line 0 the home, then the items (refusals named)."""
+    lines = [ln for ln in text.splitlines() if ln.strip()]
+    if not lines or lines[0].split() != ["QGC", "WPL", "110"]:
+        raise ConfigError(f"{source}: not a waypoint file (the first line must be \"QGC WPL 110\")")
+    if len(lines) < 3:
+        raise ConfigError(f"{source}: expected the home (line 0) and at least one item")
+    if len(lines) > MAX_ITEMS + 2:
+        raise ConfigError(f"{source}: {len(lines) - 2} items, more than {MAX_ITEMS}")
+    rows = []
+    for n, ln in enumerate(lines[1:]):
+        f = ln.split()
+        try:
+            if len(f) != 12:
+                raise ValueError(f"expected 12 fields, got {len(f)}")
+            idx, cur, frame, cmd, auto = int(f[0]), int(f[1]), int(f[2]), int(f[3]), int(f[11])
+            vals = [float(v) for v in f[4:11]]
+        except ValueError as exc:
+            raise ConfigError(f"{source}: line {n + 2}: {exc}"[:300]) from None
+        if idx != n:
+            raise ConfigError(f"{source}: line {n + 2}: index {idx}, expected {n} (items are numbered from 0)")
+        del cur  # which item is current says nothing about the flight
+        rows.append((frame, cmd, vals, auto))
+    frame, _cmd, vals, _auto = rows[0]
+    if frame not in (0, 5):
+        raise ConfigError(f"{source}: line 2 (the home): frame {frame}, expected GLOBAL (0): altitude AMSL")
+    check_home(source, vals[4], vals[5], vals[6], "the home (line 2)")
+    items = tuple(_check_item(source, Item(f"item {i}", cmd, fr, *v), auto == 1)
+                  for i, (fr, cmd, v, auto) in enumerate(rows[1:], start=1))
+    return PlanFile(source, (vals[4], vals[5], vals[6]), items)
+
+
+def check_home(source: str, lat: float, lon: float, alt: float, key: str) -> None:
+    """Refuse a home that is not a place on the earth."""
+    if not (math.isfinite(lat) and math.isfinite(lon) and math.isfinite(alt)):
+        raise ConfigError(f"{source}: {key}: not a position ({lat}, {lon}, {alt})")
+    if not (-90.0 < lat < 90.0 and -180.0 <= lon <= 180.0 and -1000.0 <= alt <= 10000.0):
+        raise ConfigError(f"{source}: {key}: latitude must be in (-90, 90) deg, longitude in [-180, 180] deg, "
+                          f"altitude in [-1000, 10000] m; got ({lat:g}, {lon:g}, {alt:g})")
+
+
+def read_plan_text(text: str, source: str) -> PlanFile:
+    """A ``.plan`` or ``QGC WPL 110`` file's text, told apart by its content."""
+    return read_wpl(text, source) if text.lstrip().startswith("QGC WPL") else read_qgc_plan(text, source)

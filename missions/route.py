@@ -1,0 +1,324 @@
+"""From a ground station's mission to a smooth trajectory: local waypoints, stops, yaw and times.
+
+In:  a :class:`~missions.planfiles.PlanFile` (home deg, deg, m AMSL; items) and the speed and
+     acceleration limits (:class:`Limits`, PX4's parameter names: m/s, m/s²; yaw rate deg/s)
+Out: a :class:`Route`: the knots (t s; x, y, z m and psi rad in the paper frame about the home; stop or
+     pass through) and the waypoints the plan names there; :func:`smooth_from_plan` its
+     :class:`~missions.minsnap.Smooth` trajectory. What cannot be flown is a :class:`params.ConfigError`
+     naming the file, the item and its command
+
+The vehicle starts at rest on the ground at the home. NAV_TAKEOFF climbs over where it is and stops;
+NAV_WAYPOINT passes through (stops when it holds: param1 s); NAV_LOITER_TIME stops and holds param1 s;
+NAV_LAND flies over its point (here if its latitude and longitude are 0), stops, and descends to the
+ground; NAV_RETURN_TO_LAUNCH flies over the home at its altitude, stops and lands; nothing may follow a
+landing. DO_CHANGE_SPEED (param1 0/1 horizontal, 2 up, 3 down; param2 m/s, -1 no change) changes the
+limit of the legs after it. Yaw (param4 deg, clockwise from north; NaN or none) is as given, else
+along the path: the heading of the leg (the bisector of the two at a pass-through corner).
+
+Guide points on every horizontal leg, near its ends, keep the curve close to the legs (:func:`with_guides`).
+Times: each leg first gets 2 sqrt(T) of its constant-speed time T (:func:`_first_time`); then each piece
+between two stops is scaled as one, so that the polynomial's own peak speed, acceleration and yaw rate
+meet the limits exactly where they bind (time scaling is exact: speed goes as 1/k, acceleration 1/k²),
+times rounded up to 1 ms. Per-leg factors were tried: the legs are coupled and that iteration diverges.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+from missions.geodetic import Home
+from missions.minsnap import Knot, Smooth
+from missions.planfiles import (
+    DO_CHANGE_SPEED,
+    NAV_LAND,
+    NAV_LOITER_TIME,
+    NAV_RETURN_TO_LAUNCH,
+    NAV_TAKEOFF,
+    RELATIVE_FRAMES,
+    Item,
+    PlanFile,
+)
+from params import ConfigError
+
+SAME_POINT_M = 0.01  # m: closer than this, two points are one (no leg between them)
+MAX_SPEED_M_S = 12.0  # PX4's MPC_XY_VEL_MAX default: a faster cruise or DO_CHANGE_SPEED is refused
+SAMPLING_MARGIN = 1.002  # the peaks fall between samples: 48 a leg see them to about 1e-5; this keeps them under
+SAMPLES_PER_LEG = 48  # samples of each leg's speed, acceleration and yaw rate against the limits
+GUIDE_SHARE = 0.2  # guide points this share of a horizontal leg from its ends (with_guides)
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Speed and acceleration limits of the trajectory, PX4's multicopter parameters (defaults: PX4's)."""
+
+    MPC_XY_CRUISE: float = 5.0  # m/s, horizontal (a plan's hoverSpeed; DO_CHANGE_SPEED 0 or 1)
+    MPC_ACC_HOR: float = 3.0  # m/s²
+    MPC_Z_V_AUTO_UP: float = 3.0  # m/s (DO_CHANGE_SPEED 2)
+    MPC_Z_V_AUTO_DN: float = 1.5  # m/s (DO_CHANGE_SPEED 3)
+    MPC_ACC_UP_MAX: float = 4.0  # m/s²
+    MPC_ACC_DOWN_MAX: float = 3.0  # m/s²
+    MPC_YAWRAUTO_MAX: float = 45.0  # deg/s
+
+
+LIMIT_RANGES = {"MPC_XY_CRUISE": (0.1, MAX_SPEED_M_S), "MPC_ACC_HOR": (0.1, 20.0), "MPC_Z_V_AUTO_UP": (0.1, 8.0),
+                "MPC_Z_V_AUTO_DN": (0.1, 4.0), "MPC_ACC_UP_MAX": (0.1, 20.0), "MPC_ACC_DOWN_MAX": (0.1, 20.0),
+                "MPC_YAWRAUTO_MAX": (5.0, 360.0)}
+
+
+@dataclass(frozen=True)
+class Stop:
+    """A point of the route before times are given: position (m), yaw (rad, NaN: along the path),
+    whether the vehicle stops, how long it holds (s), the speeds of the leg that ends here (m/s) and
+    the plan item it comes from (its label; '' for the start)."""
+
+    x: float
+    y: float
+    z: float
+    psi: float
+    stop: bool
+    hold_s: float
+    xy: float
+    up: float
+    dn: float
+    item: str
+
+
+@dataclass(frozen=True)
+class Route:
+    """The knots of a plan's trajectory; ``waypoints``: (item label, knot index, stop) of each position
+    the plan names; ``lands``: it ends on the ground."""
+
+    knots: tuple[Knot, ...]
+    waypoints: tuple[tuple[str, int, bool], ...]
+    lands: bool
+
+
+def _finite(plan: PlanFile, item: Item, *vals: float) -> None:
+    if not all(math.isfinite(v) for v in vals):
+        raise plan.refuse(item, f"coordinates must be numbers, got lat {item.lat}, lon {item.lon}, alt {item.alt}")
+
+
+def _local(plan: PlanFile, home: Home, item: Item, envelope_m: float) -> tuple[float, float, float]:
+    """The item's position in the paper frame (m), checked: finite, on the earth, above the ground, inside
+    the plant's envelope (``envelope_m`` from the home)."""
+    _finite(plan, item, item.lat, item.lon, item.alt)
+    if not (-90.0 < item.lat < 90.0 and -180.0 <= item.lon <= 180.0):
+        raise plan.refuse(item, f"latitude {item.lat:g}, longitude {item.lon:g}: not on the earth")
+    x, y, _ = home.paper(item.lat, item.lon, home.alt)
+    z = item.alt if item.frame in RELATIVE_FRAMES else item.alt - home.alt
+    if z < 0.0:
+        raise plan.refuse(item, f"altitude {z:.3f} m above the home: below the ground")
+    r = math.sqrt(x * x + y * y + z * z)
+    if r > envelope_m:
+        raise plan.refuse(item, f"{r:.1f} m from the home, outside the plant's envelope of {envelope_m:g} m "
+                                f"(plant/quadrotor.py: a vehicle farther out has diverged)")
+    return x, y, z
+
+
+def _yaw(plan: PlanFile, item: Item) -> float:
+    """param4 (deg clockwise from north) as the paper frame's psi (rad counter-clockwise), NaN if not given."""
+    if not math.isfinite(item.p4):
+        return math.nan
+    if abs(item.p4) > 360.0:
+        raise plan.refuse(item, f"yaw (param4) {item.p4:g} deg: must be in [-360, 360]")
+    return -math.radians(item.p4)
+
+
+def _hold(plan: PlanFile, item: Item) -> float:
+    h = 0.0 if math.isnan(item.p1) else item.p1
+    if not (math.isfinite(h) and 0.0 <= h <= 3600.0):
+        raise plan.refuse(item, f"hold time (param1) {item.p1:g} s: must be in [0, 3600]")
+    return h
+
+
+def stops_of(plan: PlanFile, limits: Limits, envelope_m: float) -> tuple[list[Stop], bool]:
+    """The plan's points in order (the start first), and whether it lands."""
+    home = Home(*plan.home)
+    xy, up, dn = limits.MPC_XY_CRUISE, limits.MPC_Z_V_AUTO_UP, limits.MPC_Z_V_AUTO_DN
+    pts = [Stop(0.0, 0.0, 0.0, 0.0, True, 0.0, xy, up, dn, "")]
+    landed_by: Item | None = None
+
+    def add(x: float, y: float, z: float, psi: float, stop: bool, hold: float, label: str) -> None:
+        last = pts[-1]
+        if math.dist((x, y, z), (last.x, last.y, last.z)) < SAME_POINT_M:  # the same point: one stop
+            pts[-1] = replace(last, psi=last.psi if math.isnan(psi) else psi, stop=last.stop or stop,
+                              hold_s=last.hold_s + hold, item=label)
+        else:
+            pts.append(Stop(x, y, z, psi, stop, hold, xy, up, dn, label))
+
+    for item in plan.items:
+        if landed_by is not None:
+            raise plan.refuse(item, f"after {landed_by.name} ({landed_by.label}) the flight is over")
+        cmd = item.command
+        if cmd == DO_CHANGE_SPEED:
+            xy, up, dn = _speed(plan, item, xy, up, dn)
+            continue
+        here = pts[-1]
+        if cmd == NAV_RETURN_TO_LAUNCH:
+            add(0.0, 0.0, here.z, math.nan, True, 0.0, item.label)
+            add(0.0, 0.0, 0.0, math.nan, True, 0.0, item.label)
+            landed_by = item
+            continue
+        if cmd in (NAV_LAND, NAV_TAKEOFF) and item.lat == 0.0 and item.lon == 0.0:
+            x, y = here.x, here.y  # no position given: where it is
+            z = 0.0 if cmd == NAV_LAND else _local(plan, home, replace(item, lat=home.lat, lon=home.lon),
+                                                   envelope_m)[2]
+        else:
+            x, y, z = _local(plan, home, item, envelope_m)
+        psi = _yaw(plan, item)
+        if cmd == NAV_TAKEOFF:
+            if z <= here.z + SAME_POINT_M:
+                raise plan.refuse(item, f"takeoff altitude {z:.2f} m is not above the vehicle ({here.z:.2f} m)")
+            add(here.x, here.y, z, psi, True, 0.0, item.label)  # straight up, then to its position
+            add(x, y, z, psi, True, 0.0, item.label)
+        elif cmd == NAV_LAND:
+            add(x, y, here.z, psi, True, 0.0, item.label)  # over the landing point, then down
+            add(x, y, 0.0, psi, True, 0.0, item.label)
+            landed_by = item
+        else:
+            hold = _hold(plan, item)
+            add(x, y, z, psi, cmd == NAV_LOITER_TIME or hold > 0.0, hold, item.label)
+    if len(pts) < 2:
+        raise ConfigError(f"{plan.source}: mission.items: no position to fly to (no NAV_ item)")
+    last = pts[-1]
+    pts[-1] = replace(last, stop=True)
+    return pts, landed_by is not None
+
+
+def _speed(plan: PlanFile, item: Item, xy: float, up: float, dn: float) -> tuple[float, float, float]:
+    """The speeds after DO_CHANGE_SPEED (param1 type: 0 air, 1 ground, 2 climb, 3 descent; param2 m/s)."""
+    kind, v = item.p1, item.p2
+    if kind not in (0.0, 1.0, 2.0, 3.0):
+        raise plan.refuse(item, f"speed type (param1) {kind:g}: must be 0 airspeed, 1 ground speed, 2 climb or "
+                                f"3 descent")
+    if v == -1.0 or v == -2.0:  # no change; -2: back to the default (PX4: the cruise it had)
+        return xy, up, dn
+    lo, hi = LIMIT_RANGES["MPC_XY_CRUISE"] if kind < 2 else LIMIT_RANGES["MPC_Z_V_AUTO_UP" if kind == 2
+                                                                           else "MPC_Z_V_AUTO_DN"]
+    if not (math.isfinite(v) and lo <= v <= hi):
+        raise plan.refuse(item, f"speed (param2) {v:g} m/s: must be in [{lo:g}, {hi:g}] or -1 (no change)")
+    return (v, up, dn) if kind < 2 else ((xy, v, dn) if kind == 2 else (xy, up, v))
+
+
+def _heading(a: Stop, b: Stop) -> float | None:
+    """psi (rad) of the horizontal leg from a to b, None if it is vertical."""
+    dx, dy = b.x - a.x, b.y - a.y
+    return math.atan2(dy, dx) if math.hypot(dx, dy) >= SAME_POINT_M else None
+
+
+def _near(angle: float, ref: float) -> float:
+    """``angle`` plus a whole number of turns, within half a turn of ``ref``."""
+    return ref + math.remainder(angle - ref, 2.0 * math.pi)
+
+
+def yaws(pts: list[Stop]) -> list[float]:
+    """The yaw at each point (rad, unwrapped along the route): as given, else along the path."""
+    out = [pts[0].psi]
+    for i in range(1, len(pts)):
+        p, prev = pts[i], out[-1]
+        h_in = _heading(pts[i - 1], p)
+        h_out = _heading(p, pts[i + 1]) if i + 1 < len(pts) else None
+        if not math.isnan(p.psi):
+            target = p.psi
+        elif h_in is not None and h_out is not None and not p.stop:
+            a = _near(h_in, prev)
+            target = 0.5 * (a + _near(h_out, a))  # the corner's bisector
+        elif h_in is not None:
+            target = h_in
+        elif h_out is not None:
+            target = h_out  # straight up or down, then away: turn to the next leg on the way
+        else:
+            target = prev
+        out.append(_near(target, prev))
+    return out
+
+
+def with_guides(pts: list[Stop], psi: list[float], lim: Limits) -> tuple[list[Stop], list[float]]:
+    """The points with two guide points on every horizontal leg, :data:`GUIDE_SHARE` of its length (at most
+    the braking distance v²/a) from each end: without them the C⁶ curve through sharp corners swings metres
+    wide of the legs; with them it turns near each corner and runs straight between (yaw: the leg's heading
+    when it is along the path)."""
+    out, yaw = [pts[0]], [psi[0]]
+    for i in range(1, len(pts)):
+        a, b = pts[i - 1], pts[i]
+        length = math.hypot(b.x - a.x, b.y - a.y)
+        if length >= 4.0 * SAME_POINT_M:
+            g = min(GUIDE_SHARE * length, b.xy * b.xy / lim.MPC_ACC_HOR)
+            h = math.atan2(b.y - a.y, b.x - a.x)
+            for d in (g, length - g):
+                s = d / length
+                out.append(replace(b, x=a.x + s * (b.x - a.x), y=a.y + s * (b.y - a.y), z=a.z + s * (b.z - a.z),
+                                   psi=math.nan, stop=False, hold_s=0.0, item=""))
+                yaw.append(_near(h, yaw[-1]) if math.isnan(b.psi) else _near(b.psi, yaw[-1]))
+        out.append(b)
+        yaw.append(_near(psi[i], yaw[-1]))
+    return out, yaw
+
+
+def _first_time(a: Stop, b: Stop, lim: Limits) -> float:
+    """A leg's time before scaling: 2 sqrt(T) of its time T at constant speed (plus v/a at each end it
+    stops at) on its slower axis. The square root gives short legs (corners) relatively more time, which
+    keeps the curve near the legs."""
+    dxy, dz = math.hypot(b.x - a.x, b.y - a.y), b.z - a.z
+    vz, az = (b.up, lim.MPC_ACC_UP_MAX) if dz > 0 else (b.dn, lim.MPC_ACC_DOWN_MAX)
+    ramp = max(b.xy / lim.MPC_ACC_HOR if dxy > 0 else 0.0, vz / az if dz != 0 else 0.0)
+    t = max(dxy / b.xy, abs(dz) / vz) + ramp * (int(a.stop) + int(b.stop))
+    return 2.0 * math.sqrt(max(t, 0.01))
+
+
+def _knots(pts: list[Stop], psi: list[float], legs: list[float]) -> tuple[tuple[Knot, ...], list[int]]:
+    """Knots at the times the legs give (a hold adds a knot where it ends); the knot of each point."""
+    knots: list[Knot] = []
+    at: list[int] = []
+    t = 0.0
+    for i, p in enumerate(pts):
+        if i:
+            t += legs[i - 1]
+        at.append(len(knots))
+        knots.append(Knot(t, p.x, p.y, p.z, psi[i], p.stop))
+        if p.hold_s > 0.0:
+            t += p.hold_s
+            knots.append(Knot(t, p.x, p.y, p.z, psi[i], True))
+    return tuple(knots), at
+
+
+def _leg_ratio(ref: Smooth, k0: Knot, k1: Knot, b: Stop, lim: Limits) -> float:
+    """How far the trajectory's peaks on the leg k0 -> k1 exceed the limits: > 1 too fast, < 1 slow;
+    speed ratios count as they are, accelerations as their square root (time scales both so)."""
+    worst = 0.0
+    yaw_max = math.radians(lim.MPC_YAWRAUTO_MAX)
+    for i in range(1, SAMPLES_PER_LEG):
+        x, y, z, p = ref.sample(k0.t + (k1.t - k0.t) * i / SAMPLES_PER_LEG)
+        vz, az = z[1], z[2]
+        worst = max(worst, math.hypot(x[1], y[1]) / b.xy, (vz / b.up) if vz > 0 else (-vz / b.dn),
+                    abs(p[1]) / yaw_max, math.sqrt(math.hypot(x[2], y[2]) / lim.MPC_ACC_HOR),
+                    math.sqrt(az / lim.MPC_ACC_UP_MAX if az > 0 else -az / lim.MPC_ACC_DOWN_MAX))
+    return worst
+
+
+def route_of(plan: PlanFile, limits: Limits, envelope_m: float) -> Route:
+    """The plan's knots with their times (see the module's docstring)."""
+    pts, lands = stops_of(plan, limits, envelope_m)
+    pts, psi = with_guides(pts, yaws(pts), limits)
+    legs = [_first_time(pts[i], pts[i + 1], limits) for i in range(len(pts) - 1)]
+    knots, at = _knots(pts, psi, legs)
+    ref = Smooth(knots)
+    ratios = [_leg_ratio(ref, knots[at[i] + (1 if pts[i].hold_s > 0 else 0)], knots[at[i + 1]], pts[i + 1], limits)
+              for i in range(len(legs))]
+    first = 0  # each piece between two stops is its own problem: scaled alone, its peak meets the limits
+    for i in range(len(legs)):
+        if pts[i + 1].stop:
+            factor = max(ratios[first:i + 1]) * SAMPLING_MARGIN
+            for j in range(first, i + 1):
+                legs[j] = math.ceil(legs[j] * factor * 1000.0) / 1000.0  # whole ms, up: never over the limits
+            first = i + 1
+    knots, at = _knots(pts, psi, legs)
+    waypoints = tuple((p.item, at[i], p.stop) for i, p in enumerate(pts) if p.item)
+    return Route(knots, waypoints, lands)
+
+
+def smooth_from_plan(plan: PlanFile, limits: Limits, envelope_m: float) -> tuple[Smooth, Route]:
+    """The minimum-snap trajectory of a plan, and its route."""
+    route = route_of(plan, limits, envelope_m)
+    return Smooth(route.knots, route.lands), route

@@ -1,0 +1,127 @@
+"""Covers missions.minsnap: the minimum-snap polynomials pass through every knot, stop where asked, are C⁶
+(velocity to snap and beyond continuous) at pass-through knots, give analytic derivatives up to the 4th that
+match finite differences, minimise the snap integral against perturbed curves, and stretch exactly."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from missions.minsnap import ORDER, Knot, Smooth, demands, solve, stretched
+
+KNOTS = (Knot(0.0, 0.0, 0.0, 0.0, 0.0, True), Knot(3.0, 0.0, 0.0, 5.0, 0.0, True),
+         Knot(7.0, 8.0, 1.0, 5.0, 0.5), Knot(10.0, 8.0, 9.0, 6.0, 1.5), Knot(14.0, 0.0, 9.0, 5.0, 2.5),
+         Knot(16.0, 0.0, 9.0, 5.0, 2.5, True), Knot(20.0, 0.0, 0.0, 0.0, 3.0, True))
+
+
+def test_passes_through_every_knot_and_rests_at_stops() -> None:
+    ref = Smooth(KNOTS)
+    for k in KNOTS:
+        for eps in (-1e-9, 1e-9):
+            s = ref.sample(k.t + eps)
+            assert [a[0] for a in s] == pytest.approx([k.x, k.y, k.z, k.psi], abs=1e-6)
+        if k.stop:
+            for axis in ref.sample(k.t + 1e-9)[:3]:
+                assert axis[1:4] == pytest.approx((0.0, 0.0, 0.0), abs=1e-6)
+    assert ref.sample(-1.0) == ref.sample(0.0) and ref.sample(25.0)[2][0] == 0.0
+
+
+@pytest.mark.parametrize("i", [2, 3, 4])
+def test_derivatives_continuous_at_pass_through_knots(i: int) -> None:
+    ref = Smooth(KNOTS)
+    t = KNOTS[i].t
+    before, after = ref.sample(t - 1e-9), ref.sample(t + 1e-9)
+    for a, b in zip(before, after):
+        for m in range(1, 5):
+            assert a[m] == pytest.approx(b[m], rel=1e-5, abs=1e-5)
+    assert math.hypot(after[0][1], after[1][1]) > 0.1  # it does pass through, not stop
+
+
+def test_derivatives_are_those_of_the_position() -> None:
+    ref = Smooth(KNOTS)
+    h = 1e-4
+    for t in np.linspace(0.1, 19.9, 37):
+        for m in range(4):
+            lo, hi = ref.sample(t - h), ref.sample(t + h)
+            for axis in range(4):
+                fd = (hi[axis][m] - lo[axis][m]) / (2 * h)
+                assert ref.sample(t)[axis][m + 1] == pytest.approx(fd, rel=1e-4, abs=1e-4)
+
+
+def qp_minimum_snap(knots: tuple[Knot, ...], axis: int) -> np.ndarray:
+    """The textbook quadratic programme, solved through its KKT system: minimise the integrated squared snap
+    subject to the positions, rest at stops, and only velocity, acceleration and jerk continuous at the other
+    knots (Mellinger and Kumar 2011). Coefficients (segments, 8) in normalised time."""
+    n = len(knots) - 1
+    T = [knots[j + 1].t - knots[j].t for j in range(n)]
+    f = [math.factorial(k) / math.factorial(k - 4) if k >= 4 else 0.0 for k in range(ORDER)]
+    Q = np.zeros((ORDER * n, ORDER * n))
+    for j in range(n):
+        for k in range(4, ORDER):
+            for m in range(4, ORDER):
+                Q[ORDER * j + k, ORDER * j + m] = f[k] * f[m] / (k + m - 7) / T[j] ** 7
+
+    def row(j: int, s: float, d: int) -> np.ndarray:
+        r = np.zeros(ORDER * n)
+        for k in range(d, ORDER):
+            r[ORDER * j + k] = math.factorial(k) / math.factorial(k - d) * s ** (k - d) / T[j] ** d
+        return r
+
+    rows, rhs = [], []
+    value = [(k.x, k.y, k.z, k.psi)[axis] for k in knots]
+    for j in range(n):
+        rows += [row(j, 0.0, 0), row(j, 1.0, 0)]
+        rhs += [value[j], value[j + 1]]
+    for i, k in enumerate(knots):
+        for d in (1, 2, 3):
+            if k.stop or i in (0, n):
+                for j, s in ((i - 1, 1.0), (i, 0.0)):
+                    if 0 <= j < n:
+                        rows.append(row(j, s, d))
+                        rhs.append(0.0)
+            else:
+                rows.append(row(i - 1, 1.0, d) - row(i, 0.0, d))
+                rhs.append(0.0)
+    A = np.array(rows)
+    kkt = np.block([[2 * Q, A.T], [A, np.zeros((len(rows), len(rows)))]])
+    sol = np.linalg.lstsq(kkt, np.concatenate([np.zeros(ORDER * n), rhs]), rcond=None)[0]
+    return sol[:ORDER * n].reshape(n, ORDER)
+
+
+@pytest.mark.parametrize("axis", [0, 1, 2, 3])
+def test_it_is_the_minimum_of_the_snap_integral(axis: int) -> None:
+    ours = solve(KNOTS)[:, axis, :]
+    qp = qp_minimum_snap(KNOTS, axis)
+    assert np.allclose(ours, qp, rtol=1e-6, atol=1e-6)
+
+
+def test_stretching_scales_every_derivative_exactly() -> None:
+    ref = Smooth(KNOTS)
+    slow = stretched(ref, 2.0)
+    assert slow.end_s == 40.0 and slow.stretched_by == 2.0
+    for t in (1.0, 5.0, 8.5, 12.0, 17.0):
+        a, b = ref.sample(t), slow.sample(2.0 * t)
+        for axis in range(4):
+            for m in range(5):
+                assert b[axis][m] == pytest.approx(a[axis][m] / 2.0**m, rel=1e-9, abs=1e-9)
+    d1, d2 = demands(ref, 1.0, 9.81), demands(slow, 1.0, 9.81)
+    assert d2.thrust_n < d1.thrust_n and d2.tilt_rad < d1.tilt_rad
+    assert d2.thrust_n == pytest.approx(demands(ref, 1.0, 9.81, 2.0).thrust_n, rel=1e-9)
+
+
+def test_round_trips_through_its_table() -> None:
+    from missions.mission import _smooth  # the loader's reading of kind = "smooth" (not exported)
+    from params import Table
+
+    ref = Smooth(KNOTS, lands=True)
+    back = _smooth(Table(ref.to_dict(), "<t>"), 100.0)
+    assert back == ref and back.sample(8.123) == ref.sample(8.123)
+
+
+def test_refuses_bad_knots() -> None:
+    with pytest.raises(ValueError):
+        Smooth(KNOTS[:1])
+    with pytest.raises(ValueError):
+        Smooth((KNOTS[0], Knot(0.0, 1.0, 0.0, 0.0)))

@@ -1,0 +1,228 @@
+"""Covers bridge.sweep, bridge.cli and bridge.autopilot.compiling: what a new user meets first (issue 23).
+
+- the README's Python example, verbatim, saved as a script (``python example.py``) and typed into
+  ``python -i``: it flies, its sweep's cells are measured, nothing errors;
+- a script that starts a sweep's pool without the ``if __name__ == "__main__":`` guard fails at
+  once, naming the guard (its workers used to re-run the script and come back as 'error' rows, exit 0);
+- a sweep whose every cell failed never passes for a result: ``bsst sweep`` exits 1 with a line
+  saying so, :func:`bridge.sweep.sweep` raises :class:`bridge.sweep.SweepFailed`;
+- the first EKF and batch run on a cold numba cache say on stderr, once, that they compile; a warm
+  run says nothing.
+
+Every script here runs as a real ``python`` subprocess in a temporary working directory.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import io
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import pytest
+
+from bridge.sweep import Grid, SweepFailed, sweep
+from missions import Mission, Sine
+from params import dump_toml
+
+pytestmark = pytest.mark.process  # starts processes (scripts, pools, SITL sessions): not in make test-fast
+
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
+SHORT = Mission(Sine(), duration_s=3.0, name="short")
+BAD_LAW = '''
+class BadLaw:
+    """Fits the Law interface and is built; fails at its first update, so every cell of a sweep fails."""
+
+    desired = (0.0, 0.0)
+
+    def __init__(self, nominal, gains, rate_hz):
+        pass
+
+    def update(self, t, state, ref, omega_d):
+        raise ValueError("this law fails in flight")
+
+    def advance(self, saturated, hold=False):
+        pass
+
+    def reset(self):
+        pass
+'''
+
+
+def readme_python() -> str:
+    (block,) = re.findall(r"^```python\n(.*?)^```$", README.read_text(encoding="utf-8"), re.S | re.M)
+    return block
+
+
+def env() -> dict[str, str]:
+    """This environment, with the repository importable from any working directory."""
+    paths = [str(ROOT), *filter(None, os.environ.get("PYTHONPATH", "").split(os.pathsep))]
+    return {**os.environ, "PYTHONPATH": os.pathsep.join(paths)}
+
+
+def user_dir(tmp_path: Path) -> Path:
+    """A working directory as a user's: ``missions/`` copied in, nothing else."""
+    shutil.copytree(ROOT / "missions", tmp_path / "missions", ignore=shutil.ignore_patterns("*.py", "__pycache__"))
+    return tmp_path
+
+
+def run_python(args: list[str], cwd: Path, stdin: str | None = None, timeout: float = 600.0,
+               extra_env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, *args], cwd=cwd, input=stdin, capture_output=True, text=True,
+                          timeout=timeout, env={**env(), **(extra_env or {})},
+                          stdin=None if stdin is not None else subprocess.DEVNULL)
+
+
+@contextmanager
+def instance(n: int, timeout_s: float = 600.0) -> Iterator[None]:
+    """Hold SITL instance ``n`` (the README's example flies ``instance=1``) as bridge.session.instance_slot
+    does, so that no other test's session shares its ports meanwhile."""
+    fd = os.open(os.path.join(tempfile.gettempdir(), f"bsst-instance-{n}.lock"), os.O_RDWR | os.O_CREAT, 0o644)
+    deadline = time.monotonic() + timeout_s
+    try:
+        while True:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except BlockingIOError:
+                assert time.monotonic() < deadline, f"SITL instance {n} stayed taken for {timeout_s:g} s"
+                time.sleep(0.05)
+        yield
+    finally:
+        os.close(fd)
+
+
+def assert_clean(proc: subprocess.CompletedProcess[str]) -> None:
+    for bad in ("Traceback", "bootstrapping phase", "worker process died"):
+        assert bad not in proc.stderr, f"{bad!r} in stderr:\n{proc.stderr[-3000:]}"
+
+
+# -- the README's Python example, verbatim ---------------------------------------------------------------
+
+
+def test_the_readmes_python_example_runs_verbatim_as_a_script(tmp_path: Path) -> None:
+    cwd = user_dir(tmp_path)
+    (cwd / "example.py").write_text(readme_python())
+    with instance(1):
+        proc = run_python(["example.py"], cwd)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert_clean(proc)
+    assert (cwd / "runs" / "rt" / "summary.json").is_file()
+
+
+def test_the_readmes_python_example_runs_as_typed_into_python_i(tmp_path: Path) -> None:
+    cwd = user_dir(tmp_path)
+    # typed in: the example, Enter on an empty line to end its block, then a look at what it made
+    typed = readme_python() + "\nprint('ERRORS', [r['error'] for r in rows if r['outcome'] == 'error'], len(rows))\n"
+    with instance(1):
+        proc = run_python(["-i"], cwd, stdin=typed)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert_clean(proc)
+    assert "ERRORS [] 12" in proc.stdout, proc.stdout[-2000:] + proc.stderr[-2000:]
+    assert (cwd / "runs" / "rt" / "summary.json").is_file()
+
+
+# -- a script without the main guard ---------------------------------------------------------------------
+
+
+def test_a_script_without_the_main_guard_fails_at_once_naming_it(tmp_path: Path) -> None:
+    cwd = user_dir(tmp_path)
+    script = cwd / "unguarded.py"
+    script.write_text("from bridge.sweep import Grid, sweep\n\n"
+                      "print('SCRIPT RAN', flush=True)\n"
+                      "rows = sweep('missions/sine.toml', Grid(delay_ms=(0, 10)), jobs=2, engine='process')\n"
+                      "print('ROWS', [r['outcome'] for r in rows])\n")
+    proc = run_python([script.name], cwd, timeout=120.0)
+    assert proc.returncode != 0, f"an unguarded sweep passed: {proc.stdout[-2000:]}"
+    last = proc.stderr.strip().splitlines()[-1]
+    assert "ConfigError" in last and 'if __name__ == "__main__":' in last and "unguarded.py:4" in last, last
+    assert proc.stdout.count("SCRIPT RAN") == 1, "a worker ran the script again"
+    assert "ROWS" not in proc.stdout and "bootstrapping phase" not in proc.stderr
+
+
+def test_the_same_script_under_the_guard_flies(tmp_path: Path) -> None:
+    cwd = user_dir(tmp_path)
+    (cwd / "short.toml").write_text(dump_toml(SHORT.to_dict()))
+    (cwd / "guarded.py").write_text("from bridge.sweep import Grid, sweep\n\n\n"
+                                    "def main():\n"
+                                    "    rows = sweep('short.toml', Grid(delay_ms=(0, 10)), jobs=2, engine='process')\n"
+                                    "    print('ROWS', [r['outcome'] for r in rows])\n\n\n"
+                                    "if __name__ == '__main__':\n"
+                                    "    main()\n")
+    proc = run_python(["guarded.py"], cwd, timeout=300.0)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "ROWS ['completed', 'completed']" in proc.stdout
+
+
+# -- a sweep whose every cell failed -----------------------------------------------------------------------
+
+
+def test_a_sweep_whose_every_cell_failed_exits_1_saying_so(tmp_path: Path) -> None:
+    cwd = user_dir(tmp_path)
+    (cwd / "bad_law.py").write_text(BAD_LAW)
+    (cwd / "short.toml").write_text(dump_toml(SHORT.to_dict()))
+    proc = run_python(["-m", "bridge", "sweep", "short.toml", "--controller", "bad_law.py:BadLaw", "--delay", "0,10",
+                       "--out", "sw", "--no-plots", "--jobs", "2"], cwd, timeout=300.0)
+    assert proc.returncode == 1, proc.stderr[-3000:]
+    lines = [ln for ln in proc.stderr.splitlines() if ln.startswith("bsst sweep: every cell failed")]
+    assert lines == ["bsst sweep: every cell failed (2 of 2): nothing was measured; the first error: "
+                     "ValueError: this law fails in flight"], proc.stderr[-3000:]
+    assert "Traceback" not in proc.stderr
+
+
+def test_a_sweep_whose_every_cell_failed_raises_from_python(tmp_path: Path) -> None:
+    law = tmp_path / "bad_law.py"
+    law.write_text(BAD_LAW)
+    with pytest.raises(SweepFailed, match=r"every cell of the sweep failed \(2 of 2\); the first: ValueError: "
+                                          r"this law fails in flight") as caught:
+        sweep(SHORT, Grid(controller=(f"{law}:BadLaw",), delay_ms=(0.0, 10.0)), jobs=2, engine="process")
+    out = caught.value.outcome
+    assert out.status == "all failed" and [r["outcome"] for r in out.rows] == ["error", "error"]
+
+
+# -- the first compile says so -----------------------------------------------------------------------------
+
+COMPILING = {"ekf": "bsst: compiling the EKF's kernels (first run after an install, ~13 s; cached on disk after) ...",
+             "batch": "bsst: compiling the batch engine's kernels (first run after an install, ~12 s; cached on disk "
+                      "after) ..."}
+
+
+@pytest.mark.parametrize("kernels", ["ekf", "batch"])
+def test_a_cold_numba_cache_is_announced_once_and_a_warm_one_not(tmp_path: Path, kernels: str) -> None:
+    """numba's cache pointed at an empty directory (NUMBA_CACHE_DIR) is a first run after an install."""
+    (tmp_path / "short.toml").write_text(dump_toml(SHORT.to_dict()))
+    cache = {"NUMBA_CACHE_DIR": str(tmp_path / "numba-cache")}
+
+    def run(n: int) -> list[str]:
+        out = f"run{n}"
+        argv = (["sim", "short.toml", "--sensors", "mocap", "--estimator", "ekf", "--out", out, "--no-plots"]
+                if kernels == "ekf" else
+                ["sweep", "short.toml", "--engine", "batch", "--delay", "0,10", "--out", out, "--no-plots"])
+        proc = run_python(["-m", "bridge", *argv], tmp_path, timeout=600.0, extra_env=cache)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        return [ln for ln in proc.stderr.splitlines() if ln.startswith("bsst: compiling")]
+
+    assert run(1) == [COMPILING[kernels]]
+    assert any((tmp_path / "numba-cache").rglob("*.nbi")), "numba cached nothing under NUMBA_CACHE_DIR"
+    assert run(2) == []
+
+
+def test_the_compile_notice_looks_once_per_process() -> None:
+    """Warm or cold, a second call in one process prints nothing and reads no index again."""
+    from bridge.autopilot import compiling, ekfkernels  # noqa: F401 (imported: its kernels are what is looked at)
+
+    compiling._checked.discard("bridge.autopilot.ekfkernels")
+    first, second = io.StringIO(), io.StringIO()
+    compiling.announce_compiling("bridge.autopilot.ekfkernels", first)
+    assert not compiling.announce_compiling("bridge.autopilot.ekfkernels", second)
+    assert second.getvalue() == ""
+    assert first.getvalue() == "", "the suite compiled the EKF's kernels first (tests/conftest.py): the cache is warm"

@@ -1,0 +1,199 @@
+"""Covers missions.planfiles, missions.route and missions.mission: QGroundControl ``.plan`` and
+``QGC WPL 110`` files read, refused with the file, item and command named, turned into a smooth trajectory
+(stops, pass-through corners, yaw, time from PX4's limits), fitted to the airframe, and the shipped box flown
+offline by ``bsst sim`` to the issue's figures (benchmarks/missions.py prints them)."""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from bridge import simulate
+from bridge.core.flight import prepare
+from missions import load_mission
+from missions.minsnap import Smooth, demands
+from missions.mission import mission_from_table
+from missions.planfiles import read_plan_text
+from missions.route import Limits, route_of
+from params import ConfigError
+
+pytestmark = pytest.mark.process  # runs `bsst sim` as a subprocess
+
+ROOT = Path(__file__).resolve().parents[1]
+BOX_PLAN = ROOT / "examples" / "box.plan"
+BOX_WPL = ROOT / "examples" / "box.waypoints"
+PLAN = json.loads(BOX_PLAN.read_text())
+
+
+def write_plan(tmp_path: Path, edit, name: str = "p.plan") -> Path:
+    data = copy.deepcopy(PLAN)
+    edit(data)
+    p = tmp_path / name
+    p.write_text(json.dumps(data))
+    return p
+
+
+def refusal(path: Path) -> str:
+    with pytest.raises(ConfigError) as exc:
+        load_mission(path)
+    return str(exc.value)
+
+
+def test_the_two_shipped_files_are_the_same_flight() -> None:
+    a, b = load_mission(BOX_PLAN), load_mission(BOX_WPL)
+    assert isinstance(a.trajectory, Smooth) and a.trajectory.lands
+    ka, kb = a.trajectory.knots, b.trajectory.knots
+    assert len(ka) == len(kb) and all(abs(p.t - q.t) < 1e-9 and math.dist((p.x, p.y, p.z), (q.x, q.y, q.z)) < 1e-6
+                                      for p, q in zip(ka, kb))
+    assert a.duration_s == pytest.approx(a.trajectory.end_s + 1.0)
+
+
+def test_the_box_route_stops_and_passes_where_the_plan_says() -> None:
+    pf = read_plan_text(BOX_PLAN.read_text(), "box")
+    route = route_of(pf, Limits(), 100.0)
+    kinds = [(label, stop) for label, _, stop in route.waypoints]
+    assert kinds[0] == ("mission.items[0]", True)  # takeoff: stops on top
+    assert [s for _, s in kinds[1:6]] == [False] * 5  # the box's corners: passed through
+    assert kinds[-1][1] and route.lands
+    ref = Smooth(route.knots)
+    speed = max(math.hypot(ref.sample(t / 10)[0][1], ref.sample(t / 10)[1][1]) for t in range(int(ref.end_s * 10)))
+    assert 4.9 <= speed <= 5.0 + 1e-6  # the plan's 5 m/s is reached, never passed
+    climb = max(ref.sample(t / 10)[2][1] for t in range(int(ref.end_s * 10)))
+    assert 2.9 <= climb <= 3.0 + 1e-6  # MPC_Z_V_AUTO_UP
+
+
+def test_a_slower_cruise_is_a_longer_flight() -> None:
+    pf = read_plan_text(BOX_PLAN.read_text().replace('"hoverSpeed": 5', '"hoverSpeed": 2'), "box")
+    slow = route_of(pf, Limits(MPC_XY_CRUISE=2.0), 100.0)
+    fast = route_of(read_plan_text(BOX_PLAN.read_text(), "box"), Limits(), 100.0)
+    assert slow.knots[-1].t == fast.knots[-1].t  # DO_CHANGE_SPEED 5 m/s after takeoff sets the box's speed
+    pf = read_plan_text(BOX_PLAN.read_text().replace('5,\n                    -1', '2,\n                    -1'), "box")
+    assert route_of(pf, Limits(), 100.0).knots[-1].t > fast.knots[-1].t + 10.0
+
+
+@pytest.mark.parametrize("edit, words", [
+    (lambda d: d["mission"]["items"].insert(2, {"type": "ComplexItem", "complexItemType": "survey"}),
+     ["mission.items[2]", "ComplexItem", "survey"]),
+    (lambda d: d["mission"]["items"][2].update(command=177), ["mission.items[2]", "DO_JUMP (177)", "not supported"]),
+    (lambda d: d["mission"]["items"][3].update(command=17), ["mission.items[3]", "NAV_LOITER_UNLIM (17)"]),
+    (lambda d: d["mission"]["items"][2]["params"].__setitem__(4, None), ["mission.items[2]", "NAV_WAYPOINT (16)",
+                                                                        "coordinates"]),
+    (lambda d: d["mission"]["items"][2]["params"].__setitem__(4, 47.5), ["mission.items[2]", "NAV_WAYPOINT (16)",
+                                                                        "envelope"]),
+    (lambda d: d["mission"]["items"][2].update(frame=10), ["mission.items[2]", "GLOBAL_TERRAIN_ALT (10)"]),
+    (lambda d: d["mission"]["items"][2]["params"].__setitem__(6, -5), ["mission.items[2]", "below the ground"]),
+    (lambda d: d["mission"]["items"].append(dict(d["mission"]["items"][2])), ["mission.items[8]",
+                                                                              "after NAV_LAND (21)"]),
+    (lambda d: d["mission"]["items"][1]["params"].__setitem__(1, 50), ["mission.items[1]", "DO_CHANGE_SPEED (178)",
+                                                                      "speed"]),
+    (lambda d: d["mission"]["items"][2].update(autoContinue=False), ["mission.items[2]", "autoContinue"]),
+    (lambda d: d.update(fileType="Fence"), ["not a QGroundControl plan"]),
+    (lambda d: d["mission"].update(plannedHomePosition=[None, 8.5, 488]), ["plannedHomePosition"]),
+])
+def test_refusals_name_the_file_the_item_and_its_command(tmp_path: Path, edit, words: list[str]) -> None:
+    p = write_plan(tmp_path, edit)
+    why = refusal(p)
+    assert why.startswith(str(p)) and "\n" not in why
+    for w in words:
+        assert w in why
+
+
+def test_waypoint_file_refusals(tmp_path: Path) -> None:
+    lines = BOX_WPL.read_text().splitlines()
+    bad = tmp_path / "bad.waypoints"
+    bad.write_text("\n".join(lines[:4] + [lines[4].replace("\t16\t", "\t201\t", 1)] + lines[5:]) + "\n")
+    why = refusal(bad)
+    assert why.startswith(str(bad)) and "item 3 (DO_SET_ROI (201))" in why
+    bad.write_text("QGC WPL 120\n" + "\n".join(lines[1:]))
+    assert "QGC WPL 110" in refusal(bad)
+    bad.write_text("\n".join(lines[:4] + [lines[4].replace("nan", "x")]))
+    assert "line 5" in refusal(bad)  # the file's 5th line
+
+
+def test_a_toml_mission_names_a_plan(tmp_path: Path) -> None:
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "box.plan").write_text(BOX_PLAN.read_text())
+    m = mission_from_table({"name": "boxed", "profile": "x500", "trajectory": {"kind": "plan", "file": "sub/box.plan"},
+                            "link": {"delay_ms": 5}}, str(tmp_path / "m.toml"))
+    direct = load_mission(BOX_PLAN)
+    assert m.trajectory == direct.trajectory and m.duration_s == direct.duration_s and m.link == {"delay_ms": 5}
+    again = mission_from_table({"trajectory": {"kind": "plan", "file": "sub/box.plan", "MPC_XY_CRUISE": 3.0,
+                                               "MPC_ACC_HOR": 1.0}, "duration_s": 300.0}, str(tmp_path / "m.toml"))
+    assert again.duration_s == 300.0 and again.trajectory.end_s > direct.trajectory.end_s
+    with pytest.raises(ConfigError, match="no such file"):
+        mission_from_table({"trajectory": {"kind": "plan", "file": "nope.plan"}}, str(tmp_path / "m.toml"))
+    with pytest.raises(ConfigError, match="MPC_ACC_HOR"):
+        mission_from_table({"trajectory": {"kind": "plan", "file": "sub/box.plan", "MPC_ACC_HOR": 0.0}},
+                           str(tmp_path / "m.toml"))
+    flown = mission_from_table(m.to_dict(), "<flown>")  # the run's mission.toml: the same trajectory to the bit
+    assert flown.trajectory == m.trajectory and flown.trajectory.sample(40.123) == m.trajectory.sample(40.123)
+
+
+def test_too_hard_for_the_airframe_is_slowed_or_refused(tmp_path: Path) -> None:
+    table = {"trajectory": {"kind": "plan", "file": str(BOX_PLAN)}, "gains": {"limits": {"tilt_max": 0.15}}}
+    fast = mission_from_table(table, "<m>")
+    flight = prepare(fast)  # 0.8 x 0.15 rad of tilt allowed: the box's corners at 5 m/s need more
+    slow = flight.mission.trajectory
+    assert isinstance(slow, Smooth) and slow.stretched_by > 1.0 and slow.end_s > fast.trajectory.end_s
+    d = demands(slow, flight.profile.mass, flight.profile.gravity)
+    assert d.thrust_n <= 0.8 * flight.profile.u_max[0] and d.tilt_rad <= 0.8 * flight.gains.tilt_max
+    assert demands(slow, flight.profile.mass, flight.profile.gravity, 1 / 1.0101).tilt_rad > 0.8 * 0.15  # the least
+    assert flight.mission.duration_s - slow.end_s == pytest.approx(fast.duration_s - fast.trajectory.end_s)
+    assert prepare(flight.mission).mission == flight.mission  # fitted once: the flown mission.toml stays
+    assert prepare(load_mission(BOX_PLAN)).mission == load_mission(BOX_PLAN)  # the shipped box fits as it is
+    weak = tmp_path / "weak.toml"  # the paper's airframe with thrust for 1.1 g: hover alone needs over 80 %
+    weak.write_text((ROOT / "plant" / "profiles" / "paper.toml").read_text().replace('name = "paper"', 'name = "weak"')
+                    .replace("u1 = 43.164", "u1 = 11.87"))
+    with pytest.raises(ConfigError, match="refused: it needs .* slowed 4 times it still needs more"):
+        prepare(mission_from_table({**table, "profile": str(weak)}, "<m>"))
+
+
+def test_box_plan_flown_offline_meets_the_figures() -> None:
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    try:
+        import missions as _  # noqa: F401  (the project's package, not the benchmark of the same name)
+        from benchmarks.missions import figures  # type: ignore[import-not-found]
+    finally:
+        sys.path.pop(0)
+    fig = figures(BOX_PLAN)
+    assert fig["outcome"] == "completed" and fig["landed_and_disarmed"]
+    assert all(w["closest_m"] <= 0.1 for w in fig["waypoints"]) and len(fig["waypoints"]) >= 6
+    assert fig["rms_3d_all_m"] <= 1e-3
+    assert len(fig["pass_through"]) >= 4 and all(j["jump_m_s"] <= 1e-6 and j["speed_m_s"] > 0.5
+                                                 for j in fig["pass_through"])
+
+
+def test_bsst_sim_flies_a_plan_and_refuses_a_bad_one(tmp_path: Path) -> None:
+    env = dict(os.environ, MPLBACKEND="Agg")
+    out = tmp_path / "run"
+    p = subprocess.run([sys.executable, "-m", "bridge", "sim", str(BOX_WPL), "--out", str(out), "--no-plots"],
+                       cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["outcome"] == "completed" and summary["events"][-1]["kind"] == "disarmed"
+    assert 'kind = "smooth"' in (out / "mission.toml").read_text()
+    bad = write_plan(tmp_path, lambda d: d["mission"]["items"][2].update(command=177))
+    p = subprocess.run([sys.executable, "-m", "bridge", "sim", str(bad), "--no-plots"], cwd=ROOT, env=env,
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2 and p.stderr.strip().count("\n") == 0 and "DO_JUMP (177)" in p.stderr
+
+
+def test_lockstep_sitl_flies_the_plan_as_offline(tmp_path: Path) -> None:
+    from bridge.session import sitl  # here: the other tests of this module start no SITL session
+
+    offline = simulate(BOX_PLAN, plots=False)
+    lock = sitl(BOX_PLAN, out=tmp_path / "sitl", plots=False, instance=None)
+    assert lock.summary["outcome"] == "completed" and lock.summary["clock"] == "lockstep"
+    n = len(offline.trace["t"])
+    assert len(lock.trace["t"]) == n
+    worst = max(math.dist((offline.trace["x"][i], offline.trace["y"][i], offline.trace["z"][i]),
+                          (lock.trace["x"][i], lock.trace["y"][i], lock.trace["z"][i])) for i in range(n))
+    assert worst <= 1e-4
+    assert lock.summary["events"][-1]["kind"] in ("disarmed", "ended") and abs(lock.trace["z"][-1]) <= 0.05

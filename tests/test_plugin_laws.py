@@ -1,0 +1,117 @@
+"""Covers controller.law, bridge.loop and bridge.nodes.offboard: a user's law that fails (CheckedLaw, LawFailed).
+
+Issue 22, defect 6: every way a plug-in law can fail ends honestly, through the real ``bsst sim`` (and
+``bsst sitl``) as a subprocess, each bad law a small file:
+
+- it cannot be loaded (a raise or ``SystemExit(0)`` at import or in ``__init__``): one line, exit 2,
+  nothing flown (no run directory);
+- it fails in flight (``update`` raises, exits, returns the wrong shape, None, a string, +-inf): one line,
+  exit 1, and ``summary.json`` (outcome ``law_failed``, ``ended_by`` the controller with the exception's type
+  and message, the step and t), the trace so far and ``events.log`` written.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from bridge.session import instance_slot
+from tests.sitlkit import ENV, ROOT
+
+pytestmark = pytest.mark.process  # runs bsst as real processes: not in make test-fast
+
+GOOD = """
+class Law:
+    def __init__(self, nominal, gains, rate_hz):
+        self.m, self.g = nominal.mass, nominal.gravity
+        self.desired = (0.0, 0.0)
+
+    def update(self, t, state, ref, omega_d):
+        {update}
+        return (self.m * self.g, 0.0, 0.0, 0.0)
+
+    def advance(self, saturated, hold=False):
+        pass
+
+    def reset(self):
+        pass
+"""
+FAIL_AT = "if t >= 0.5:"  # s: the law fails from this mission time on
+
+
+def _law(tmp_path: Path, head: str = "", init: str = "", update: str = "pass") -> str:
+    """A law file in ``tmp_path`` (``head`` at import, ``init`` in ``__init__``, ``update``'s first line)."""
+    body = GOOD.replace("{update}", update)
+    if init:
+        body = body.replace("self.desired = (0.0, 0.0)", f"self.desired = (0.0, 0.0)\n        {init}")
+    path = tmp_path / "bad_law.py"
+    path.write_text(head + "\n" + textwrap.dedent(body))
+    return f"{path}:Law"
+
+
+def _sim(tmp_path: Path, spec: str, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "bridge", "sim", "missions/sine.toml", "--controller", spec,
+                           "--out", str(tmp_path / "run"), "--no-plots", *args], cwd=ROOT, env=ENV,
+                          capture_output=True, text=True, timeout=120)
+
+
+@pytest.mark.parametrize("where", ["import", "init"])
+@pytest.mark.parametrize("how", ["raise RuntimeError('no gains for me')", "raise SystemExit(0)"],
+                         ids=["raises", "exits0"])
+def test_a_law_that_cannot_be_loaded_is_bad_input_nothing_flown(tmp_path, where, how):
+    spec = _law(tmp_path, head=how if where == "import" else "", init=how if where == "init" else "")
+    r = _sim(tmp_path, spec)
+    assert r.returncode == 2, (r.stdout, r.stderr)
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "bad_law.py" in lines[0] and "Traceback" not in r.stderr, r.stderr
+    assert ("SystemExit" if "SystemExit" in how else "RuntimeError: no gains for me") in lines[0]
+    assert not (tmp_path / "run").exists()
+
+
+IN_FLIGHT = {
+    "raises": (f"{FAIL_AT} raise ZeroDivisionError('my bad')", "ZeroDivisionError: my bad"),
+    "exits0": (f"{FAIL_AT} raise SystemExit(0)", "update() raised SystemExit"),
+    "shape": (f"{FAIL_AT} return (1.0, 2.0)", "got (1.0, 2.0)"),
+    "none": (f"{FAIL_AT} return None", "got None"),
+    "string": (f"{FAIL_AT} return 'thrust'", "got 'thrust'"),
+    "inf": (f"{FAIL_AT} return (float('inf'), 0.0, 0.0, 0.0)", "got (inf, 0.0, 0.0, 0.0)"),
+    "minus_inf": (f"{FAIL_AT} return (1.0, float('-inf'), 0.0, 0.0)", "got (1.0, -inf, 0.0, 0.0)"),
+}
+
+
+@pytest.mark.parametrize("case", IN_FLIGHT)
+def test_a_law_that_fails_in_flight_ends_law_failed_with_its_record(tmp_path, case):
+    update, says = IN_FLIGHT[case]
+    r = _sim(tmp_path, _law(tmp_path, update=update))
+    assert r.returncode == 1, (r.stdout, r.stderr)
+    assert "Traceback" not in r.stderr + r.stdout, r.stderr
+    assert "outcome: law_failed" in r.stdout
+    run = tmp_path / "run"
+    s = json.loads((run / "summary.json").read_text())
+    assert s["outcome"] == "law_failed"
+    end = s["ended_by"]
+    assert end["who"] == "controller" and says in end["how"] and "at step 125 (t=0.500 s)" in end["how"], end
+    rows = (run / "trace.csv").read_text().splitlines()
+    assert len(rows) == 1 + 125  # the header, and every step flown before the failing one
+    assert "law_failed" in (run / "events.log").read_text()
+
+
+def test_the_sitl_controller_ends_law_failed_when_its_law_exits(tmp_path):
+    """``SystemExit(0)`` in ``update`` inside ``bsst sitl``'s controller: not a controller that completed (exit
+    0, no report), but the outcome ``law_failed`` named, exit 1, the summary written."""
+    spec = _law(tmp_path, update=f"{FAIL_AT} raise SystemExit(0)")
+    mission = tmp_path / "short.toml"
+    mission.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 3.0"))
+    with instance_slot() as n:
+        r = subprocess.run([sys.executable, "-m", "bridge", "sitl", str(mission), "--controller", spec,
+                            "--instance", str(n), "--out", str(tmp_path / "run"), "--no-plots"], cwd=ROOT, env=ENV,
+                           capture_output=True, text=True, timeout=120)
+    assert r.returncode == 1, (r.stdout, r.stderr)
+    s = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert s["outcome"] == "law_failed", s["ended_by"]
+    assert s["ended_by"]["who"] == "controller" and "update() raised SystemExit" in s["ended_by"]["how"]
