@@ -172,7 +172,7 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
             vehicle.event("policy", violation_text(v))
             shown.append({"t": round(vehicle.t, 6), "kind": "policy", "text": violation_text(v)})
         if outcome == "completed":  # after the mission's figures: nothing of them changes
-            summary["end"] = fly_end(flight, vehicle, shown)
+            summary["end"] = fly_end(flight, vehicle, summary["events"])
     finally:
         _close_record(record, vehicle.events[logged:])
     if record is not None:
