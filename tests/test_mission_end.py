@@ -1,6 +1,7 @@
-"""Covers missions.mission (``[end] action``), bridge.autopilot.simvehicle (SimVehicle.end_mission), bridge.loop
-(fly_end), bridge.nodes.offboard (the controller's end of mission), bridge.nodes.vehicle.commander and
-bridge.record.ending.
+"""Covers missions.mission, bridge.autopilot.simvehicle, bridge.loop and bridge.nodes: the mission's end action.
+
+``[end] action`` (missions.mission), SimVehicle.end_mission, the offline loop's fly_end, the controller's end of
+mission (bridge.nodes.offboard), the vehicle's commander (bridge.nodes.vehicle.commander), bridge.record.ending.
 
 The mission's end never leaves the vehicle in the air with its motors off: ``land`` (the default) lands it with
 its on-board landing and disarms it on the ground, ``hold`` holds its position until the session ends, in every

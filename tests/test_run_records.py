@@ -1,5 +1,7 @@
-"""Covers bridge.record.runlog (overwriting a run directory), bridge.nodes.relay and bridge.session.children
-(records that survive a stop under load).
+"""Covers bridge.record.runlog, bridge.nodes.relay, bridge.session and bridge.mavlink: the records of a run.
+
+Overwriting a run directory; records that survive a stop under load (bridge.session.children); chunked
+STATUSTEXTs joined (bridge.mavlink.telemetry); events.log in order; a perfect link's counts.
 
 Real processes (``python -m bridge ...``) and real UDP on 127.0.0.1. A run directory holds exactly one run:
 ``--overwrite`` removes every file a run of ours writes (:data:`bridge.record.runlog.RUN_FILES`) and nothing
