@@ -355,17 +355,20 @@ class Offboard(OffboardLink):
 
     def _await_landing(self) -> bool:
         """Serve the link until the vehicle has disarmed on the ground (True), or :attr:`reason` says why not:
-        silent, or not down within the descent's time at the failsafe's rate plus a margin (wall s)."""
-        fs = self.flight.failsafe
+        silent, or not down within the descent's time at the failsafe's rate plus 10 s (of the vehicle's time:
+        lockstep counts the steps it clocks, whatever the pace; real time the wall clock)."""
         lockstep = self.cfg.clock == "lockstep"
         usec = self._end_usec
-        deadline = time.monotonic() + 10.0 + fs.time_to_land_s(self._end_height_m) * (2.0 if lockstep else 1.5)
+        allowed_s = 10.0 + self.flight.failsafe.time_to_land_s(self._end_height_m)
+        deadline = time.monotonic() + allowed_s
+        last_usec = (usec or 0) + int(allowed_s * 1e6)
         if lockstep and usec is not None:
             self._send_no_target(usec)
         while self.vehicle_armed and not self.stopping:
             now = time.monotonic()
-            if now > deadline or now - self._last_rx > self.cfg.vehicle_timeout_s:
-                self.reason = "the vehicle did not land and disarm after the mission" if now > deadline else \
+            late = usec is not None and usec > last_usec if lockstep else now > deadline
+            if late or now - self._last_rx > self.cfg.vehicle_timeout_s:
+                self.reason = "the vehicle did not land and disarm after the mission" if late else \
                     f"vehicle silent for {self.cfg.vehicle_timeout_s:g} s while landing"
                 return False
             for _, m, _addr in wait((self.ep,), min(deadline, self._next_house), self.ep, self.cfg.spin_s):
