@@ -214,3 +214,34 @@ def test_a_perfect_loopback_link_loses_nothing_and_says_where_every_packet_went(
         line = next(ln for ln in res.stdout.splitlines() if ln.startswith(f"link {d:4}:"))
         assert (f"sent {L['sent']} delivered {L['delivered']} lost 0 in flight {L['in_flight']} shed 0 "
                 f"dropped by kernel {L['dropped_by_kernel']} ") in line, line
+
+
+def test_the_kernels_drop_counter_counts_what_a_full_socket_could_not_take() -> None:
+    """bridge.mavlink.endpoint.socket_drops: a real socket with a small receive buffer, flooded and not read,
+    has its drops counted by the kernel; the relay's summary carries each direction's (bsst relay --stats)."""
+    from bridge.mavlink.endpoint import socket_drops
+    from bridge.nodes.relay import Relay
+
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        rx.bind(("127.0.0.1", 0))
+        assert socket_drops(rx) == 0
+        for _ in range(500):
+            tx.sendto(b"x" * 1000, rx.getsockname())
+        dropped = socket_drops(rx)
+        queued = 0
+        rx.setblocking(False)
+        while True:
+            try:
+                rx.recv(2000)
+            except BlockingIOError:
+                break
+            queued += 1
+        assert dropped is not None and dropped > 0 and queued + dropped == 500, (queued, dropped)
+    finally:
+        rx.close()
+        tx.close()
+    with Relay(("127.0.0.1", 0), ("127.0.0.1", 9)) as relay:
+        assert relay.summary()["kernel_drops"] == {"up": 0, "down": 0}

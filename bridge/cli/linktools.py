@@ -220,7 +220,9 @@ def cmd_relay(args: argparse.Namespace) -> int:
         s = summary[d]
         m_ms = s["measured_ms"]
         fmt = {k: "n/a" if v is None else f"{v:.3f}" for k, v in m_ms.items()}
-        print(f"{d:4}: sent {s['sent']} delivered {s['delivered']} lost {s['lost']} dup {s['duplicated']} "
+        drops = (summary.get("kernel_drops") or {}).get(d)
+        print(f"{d:4}: sent {s['sent']} delivered {s['delivered']} lost {s['lost']} in flight {s['in_flight']} "
+              f"dropped by kernel {'n/a' if drops is None else drops} dup {s['duplicated']} "
               f"reordered {s['reordered']}; added delay p50 {fmt['p50']} ms p99 {fmt['p99']} ms max {fmt['max']} ms")
     refused = summary["refused"]
     print(f"refused {sum(refused.values())}: " + ", ".join(f"{r} {n}" for r, n in refused.items())

@@ -63,6 +63,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from bridge.link.impairment import LinkStats
 from bridge.link.model import LinkImpairment, LinkSettings
 from bridge.mavlink.endpoint import parse_address as endpoint_address
+from bridge.mavlink.endpoint import socket_drops
 from bridge.nodes.report import Event, Ready
 
 Address = tuple[str, int]
@@ -163,6 +164,7 @@ class Relay:
         self.forwarded = 0
         self._thread: threading.Thread | None = None
         self._snapshots = _SnapshotWriter(Path(stats_path)) if stats_path is not None else None
+        self._drops: dict[str, int | None] | None = None  # the kernel's drops on each socket, kept at close
 
     @property
     def address(self) -> Address:
@@ -322,7 +324,8 @@ class Relay:
             st.__dict__.update(link.stats.__dict__)
             st.delays, st.lost_by = array("d", link.stats.delays), dict(link.stats.lost_by)
             stats[d] = st
-        fixed = {"origin_s": self.origin_s, "client": hostport(self.client),
+        drops = self._drops if self._drops is not None else self._socket_drops()
+        fixed = {"origin_s": self.origin_s, "client": hostport(self.client), "kernel_drops": drops,
                  "client_from": "given" if self.client_given else "first sender", "target": hostport(self.target),
                  "refused": dict(self.refused), "forwarded": self.forwarded,
                  "dropped_no_client": self.dropped_no_client, "send_errors": self.send_errors}
@@ -335,7 +338,15 @@ class Relay:
         (a snapshot written while serving says false)."""
         return self._counters(None).summary(final=True)
 
+    def _socket_drops(self) -> dict[str, int | None]:
+        """Datagrams the kernel dropped on each socket before the relay read them, by the direction they travel
+        (:func:`bridge.mavlink.endpoint.socket_drops`; None where it does not say)."""
+        front, back = socket_drops(self.front), socket_drops(self.back)
+        return {self.front_link.direction: front, self.back_link.direction: back}
+
     def close(self) -> None:
+        if getattr(self, "_drops", True) is None and self.front.fileno() >= 0 and self.back.fileno() >= 0:
+            self._drops = self._socket_drops()  # (not when a bind failed, before it is set)
         for s in (self.front, self.back):
             s.close()
         for fd in (getattr(self, "_wake_r", -1), getattr(self, "_wake_w", -1)):

@@ -267,6 +267,8 @@ def link_block(joined: Joined, vehicle: Mapping[str, Any], controller: Mapping[s
             r = relay[d]
             out[d] = {**{k: r[k] for k in ("sent", "delivered", "lost", "duplicated", "reordered", "in_flight",
                                            "lost_by")},
+                      # the relay's socket of this direction: what the kernel dropped before the relay read it
+                      "dropped_by_kernel": (relay.get("kernel_drops") or {}).get(d),
                       "delay_ms": measured[d], "model_delay_ms": r["delay_ms"], "relay_added_ms": r["measured_ms"]}
             if "trace" in r:  # a replayed link trace: its own delays and losses, as offline
                 out[d]["trace"] = r["trace"]

@@ -52,6 +52,9 @@ class CommanderPorts:
     message: Callable[[int], list[Any]]  # the message(s) of an id, as a stream sends them
     reject: Callable[[str], None]  # count a refusal (bridge.mavlink.receive.Rejections)
     report: Callable[[str], None]  # a status line
+    # the events a command made, out now (status lines, STATUSTEXT, HEARTBEAT): before its COMMAND_ACK, so that
+    # whoever the answer reaches (the controller, and what it reports) never speaks of it before the vehicle did
+    announce: Callable[[], None] = lambda: None
 
 
 class Commander:
@@ -85,6 +88,7 @@ class Commander:
         n0 = len(self.sim.events)
         result, follow = self._run_command(m, by)
         attribute(self.sim.events, n0, by)
+        self.ports.announce()
         ack = mavlink.MAVLink_command_ack_message(m.command, result, 0, 0, m.get_srcSystem(), m.get_srcComponent())
         ep.reply((ack, *follow, *self.texts), addr)
         self.texts.clear()
@@ -101,6 +105,7 @@ class Commander:
             return False
         by = self.authority.sender(m, addr, link)
         result = self._set_mode_or_refuse(*requested_custom_mode(m.base_mode, m.custom_mode), by=by)
+        self.ports.announce()
         ack = mavlink.MAVLink_command_ack_message(mavlink.MAV_CMD_DO_SET_MODE, result, 0, 0, m.get_srcSystem(),
                                                   m.get_srcComponent())
         ep.reply((ack, *self.texts), addr)

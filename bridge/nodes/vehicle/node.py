@@ -110,7 +110,7 @@ class Vehicle:
         ports = CommanderPorts(step=lambda: self.k, state_out=self._send_odometry, new_flight=self._new_flight,
                                arm_through_link=lambda: self.vend.receive_arm(self.t),
                                target_wall=lambda: self.targets.wall, message=self._message,
-                               reject=self._reject, report=self._report)
+                               reject=self._reject, report=self._report, announce=self._drain_events)
         self.commander = Commander(self.sim, self.clock, self.authority, self._statustext,
                                    {"controller": self.ctl_streams, "gcs": self.streams}, self.substeps, ports)
         self.receiver = Receiver(self.link, self.authority, self._reject, self.targets, self.commander, self.params,
