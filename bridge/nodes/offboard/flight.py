@@ -102,6 +102,7 @@ class Offboard(OffboardLink):
                 self.event("law_failed", self.reason)
                 return "law_failed"
             self._await_param_echoes()
+            self._pending_params.clear()  # given up (said not made): not resent while the vehicle lands
             if outcome == "completed":
                 self._fly_end()
             return outcome

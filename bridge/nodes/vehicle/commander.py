@@ -52,8 +52,8 @@ class CommanderPorts:
     message: Callable[[int], list[Any]]  # the message(s) of an id, as a stream sends them
     reject: Callable[[str], None]  # count a refusal (bridge.mavlink.receive.Rejections)
     report: Callable[[str], None]  # a status line
-    # the events a command made, out now (status lines, STATUSTEXT, HEARTBEAT): before its COMMAND_ACK, so that
-    # whoever the answer reaches (the controller, and what it reports) never speaks of it before the vehicle did
+    # the events a command made said on stdout now, before its COMMAND_ACK, so that whoever the answer reaches
+    # (the controller, and what it reports) never speaks of it before the vehicle did
     announce: Callable[[], None] = lambda: None
 
 

@@ -99,6 +99,7 @@ class Vehicle:
         self.pace = self.clock.pace  # the wall clock of physics steps
         self._n = 0  # physics steps taken (realtime: for the wall-clock schedule)
         self._events_sent = 0
+        self._events_reported = 0  # events said on stdout (a command's before its answer: _report_events)
         self._load_at = (now, time.process_time())
         self.load = 0
         # lockstep: the controller's targets and re-arms cross the mission's up-link model here
@@ -110,7 +111,7 @@ class Vehicle:
         ports = CommanderPorts(step=lambda: self.k, state_out=self._send_odometry, new_flight=self._new_flight,
                                arm_through_link=lambda: self.vend.receive_arm(self.t),
                                target_wall=lambda: self.targets.wall, message=self._message,
-                               reject=self._reject, report=self._report, announce=self._drain_events)
+                               reject=self._reject, report=self._report, announce=self._report_events)
         self.commander = Commander(self.sim, self.clock, self.authority, self._statustext,
                                    {"controller": self.ctl_streams, "gcs": self.streams}, self.substeps, ports)
         self.receiver = Receiver(self.link, self.authority, self._reject, self.targets, self.commander, self.params,
@@ -353,16 +354,13 @@ class Vehicle:
             return False
         return True
 
-    def _drain_events(self) -> None:
-        """Each new event as a status line and a STATUSTEXT; then a HEARTBEAT at once, so
-        that a ground station sees an arm, disarm or failsafe without waiting up to 1 s."""
+    def _report_events(self) -> None:
+        """Each new event as a status line, at once: a command's before its COMMAND_ACK (Commander.command), so
+        that the controller, which reports what the answer tells it, never speaks of it first."""
         events = self.sim.events
-        if self._events_sent == len(events):
-            return
-        texts: list[list[Any]] = []
-        while self._events_sent < len(events):
-            e = events[self._events_sent]
-            self._events_sent += 1
+        while self._events_reported < len(events):
+            e = events[self._events_reported]
+            self._events_reported += 1
             # not caused by a command handled here: an arm the up-link model delivered (the
             # flight's controller sent it), or the vehicle's own disarm (landed, diverged)
             peer = self.link.peer
@@ -371,6 +369,18 @@ class Vehicle:
                 self._report(to_line(EventReport.at(e.t, e.kind, e.text, e.by, e.param)))
             else:
                 self._report(f"event t={e.t:.3f} {e.kind}: {e.text}")
+
+    def _drain_events(self) -> None:
+        """Each new event as a status line (:meth:`_report_events`) and a STATUSTEXT; then a HEARTBEAT at once,
+        so that a ground station sees an arm, disarm or failsafe without waiting up to 1 s."""
+        events = self.sim.events
+        if self._events_sent == len(events):
+            return
+        self._report_events()
+        texts: list[list[Any]] = []
+        while self._events_sent < len(events):
+            e = events[self._events_sent]
+            self._events_sent += 1
             sev = (mavlink.MAV_SEVERITY_CRITICAL if e.kind in ("failsafe", "diverged", "lockstep")
                    else mavlink.MAV_SEVERITY_INFO)
             texts.append(self._statustext(sev, f"{e.kind}: {e.shown}"))
