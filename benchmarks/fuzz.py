@@ -54,6 +54,8 @@ from bridge.mavlink.modes import (  # noqa: E402
     requested_mode,
 )
 from bridge.mavlink.receive import addressed_elsewhere  # noqa: E402
+from bridge.nodes.vehicle.mission import MESSAGES as MISSION_MESSAGES  # noqa: E402
+from bridge.nodes.vehicle.mission import MISSIONPLANNER  # noqa: E402
 from bridge.session import sitl  # noqa: E402
 from missions import MISSION_DIR, Mission, Sine, load_mission  # noqa: E402
 from tests.hostile import MIN_STEP, Sender, Station, fly_fuzzed, session_thread, udp_queue  # noqa: E402
@@ -77,10 +79,11 @@ PARAM1 = (0.0, 1.0, float(M.MAVLINK_MSG_ID_ATTITUDE), float(M.MAVLINK_MSG_ID_HOM
           float(M.MAVLINK_MSG_ID_AUTOPILOT_VERSION), 0.5, 2.0**24, -1.0, *FLOAT_EXTREMES[:3])
 PARAM2 = (-1.0, 0.0, 1e4, 1e6, 21196.0, 1e12, -5.0, *FLOAT_EXTREMES[:3])
 # what the vehicle handles from a ground station: each such frame is refused (counted) or answered
-GCS_HANDLED = ("COMMAND_LONG", "COMMAND_INT", "MISSION_REQUEST_LIST", "HIL_ACTUATOR_CONTROLS",
-               "SET_ACTUATOR_CONTROL_TARGET", "SET_MODE", "PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET")
+# (the mission protocol's other messages: withheld, see mission_reaching)
+GCS_HANDLED = ("COMMAND_LONG", "COMMAND_INT", "HIL_ACTUATOR_CONTROLS", "SET_ACTUATOR_CONTROL_TARGET", "SET_MODE",
+               "PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET", *sorted(MISSION_MESSAGES))
 # a datagram holding one is the answer to one frame
-ANSWERS = ("COMMAND_ACK", "TIMESYNC", "MISSION_COUNT", "PARAM_VALUE", "FILE_TRANSFER_PROTOCOL")
+ANSWERS = ("COMMAND_ACK", "TIMESYNC", "MISSION_COUNT", "MISSION_ACK", "PARAM_VALUE", "FILE_TRANSFER_PROTOCOL")
 # refusals that are answered too (a DENIED COMMAND_ACK, the unchanged PARAM_VALUE): counted once in the sum
 ANSWERED_REFUSALS = ("bad_number", "param_refused")
 MODE_COMMANDS = (M.MAV_CMD_DO_SET_MODE, M.MAV_CMD_NAV_TAKEOFF, M.MAV_CMD_NAV_LAND)
@@ -119,6 +122,18 @@ def mode_or_param_changing(m: Any, sysid: int) -> bool:
             return False
         return True
     return False
+
+
+def mission_reaching(m: Any, sysid: int) -> bool:
+    """Whether ``m``, from a ground station, is a mission-protocol message for this vehicle other than
+    MISSION_REQUEST_LIST (which is always answered: MISSION_COUNT, or MISSION_ACK): withheld too, by
+    addressing it to another system (refused as ``target``). The protocol ignores some of them by design
+    (a MISSION_ACK, a request with no transfer, an item out of sequence, as PX4 does) and an upload it
+    starts sends requests unasked, so the frame-by-frame count of answers holds only without them; the
+    protocol's own hostile cases are tests/test_mission_protocol.py's."""
+    if m.get_type() not in MISSION_MESSAGES or m.get_type() == "MISSION_REQUEST_LIST":
+        return False
+    return not addressed_elsewhere(m, sysid, 1) or (m.target_system == sysid and m.target_component == MISSIONPLANNER)
 
 
 class CommandFuzzer:
@@ -178,7 +193,7 @@ class CommandFuzzer:
         if gcs and flight_changing(m, self.sysid):
             m.param1 = math.nan
             self.withheld += 1
-        elif gcs and mode_or_param_changing(m, self.sysid):
+        elif gcs and (mode_or_param_changing(m, self.sysid) or mission_reaching(m, self.sysid)):
             m.target_system = self.sysid % 250 + 1  # another vehicle's: refused as target
             self.withheld += 1
         kind = m.get_type()

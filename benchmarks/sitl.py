@@ -41,6 +41,7 @@ sys.path.insert(0, str(ROOT))
 from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
 from bridge.mavlink.endpoint import HIL_ACTUATOR_CONTROLS, ODOMETRY, Endpoint, parse_address, wait  # noqa: E402
+from bridge.nodes.report import Ready, parse_line  # noqa: E402
 from bridge.nodes.vehicle import VehicleConfig  # noqa: E402
 
 RATE_HZ = 250.0
@@ -184,8 +185,9 @@ def profile(mission: str, out: Path) -> dict[str, list[tuple[str, float]]]:
         port = None
         while port is None:
             for line in port_file.read_text().splitlines():
-                if line.startswith("ready"):
-                    port = line.split("listen=")[1].split()[0]
+                report = parse_line(line)
+                if isinstance(report, Ready):
+                    port = report.listen
             if time.monotonic() > deadline:
                 raise RuntimeError("vehicle did not start")
             time.sleep(0.05)

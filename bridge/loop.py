@@ -32,7 +32,7 @@ from array import array
 from pathlib import Path
 from typing import Any
 
-from bridge.autopilot.simvehicle import FAILSAFE, LAND, LANDED, OFFBOARD, SimVehicle
+from bridge.autopilot.simvehicle import FAILSAFE, LAND, LANDED, OFFBOARD, SimVehicle, typed_fields
 from bridge.core.flight import Flight, Overrides, Progress, prepare
 from bridge.core.wire import command_over_wire, state_over_wire
 from bridge.link.ends import ControllerEnd, VehicleEnd
@@ -161,7 +161,7 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
         raise
     try:  # the record stays open for the verdicts' lines, and is closed whatever happens
         arrays = trace_arrays(rows, TRACE_COLUMNS)
-        ev = [RunEvent(round(e.t, 6), e.kind, e.text, by=e.by, param=e.param) for e in vehicle.events]
+        ev = [RunEvent(round(e.t, 6), e.kind, e.text, by=e.by, **typed_fields(e)) for e in vehicle.events]
         shown = [e.as_dict() for e in ev]
         link = {"up": up.stats.summary(), "down": down.stats.summary(), "rejected": dict(vend.rejected)}
         summary = summarise(arrays, m, flight.gains, clock="offline", outcome=outcome, events=shown, link=link,
@@ -199,7 +199,7 @@ def fly_end(flight: Flight, vehicle: SimVehicle, shown: list[dict[str, Any]]) ->
         rows.append((k / rate, X[4], X[5]))
         k += 1
     ended = vehicle.events[n0:]
-    shown.extend(RunEvent(round(e.t, 6), e.kind, e.text, by=e.by).as_dict() for e in ended)
+    shown.extend(RunEvent(round(e.t, 6), e.kind, e.text, by=e.by, **typed_fields(e)).as_dict() for e in ended)
     return end_block(m.end_action, rows, ended)
 
 

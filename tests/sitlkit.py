@@ -14,9 +14,18 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any, TypeVar
+
+from bridge.nodes.report import Event, Report, parse_line
 
 ROOT = Path(__file__).resolve().parent.parent
 ENV = {**os.environ, "MAVLINK20": "1"}
+R = TypeVar("R")
+
+
+def shown(e: Event) -> str:
+    """A child's event as a person reads it: ``kind: text`` and its sender's `` [by ...]``."""
+    return f"{e.kind}: {e.text}" + (e.by.suffix if e.by is not None else "")
 
 
 class Proc:
@@ -67,6 +76,24 @@ class Proc:
         finally:
             sel.close()
 
+    def reports(self) -> list[Report]:
+        """The reports read so far (:func:`bridge.nodes.report.parse_line`; other lines left out)."""
+        self._read()
+        return [r for r in map(parse_line, self.lines) if r is not None]
+
+    def wait_report(self, kind: type[R], pred: Callable[[R], Any] = lambda r: True, timeout: float = 20.0) -> R:
+        """The first report of ``kind`` (seen so far or to come) that satisfies ``pred``."""
+        line = self.wait_line(lambda s: isinstance(r := parse_line(s), kind) and bool(pred(r)), timeout)
+        return parse_line(line)  # type: ignore[return-value]
+
+    def events(self) -> list[str]:
+        """The events reported so far, as :func:`shown`, in order."""
+        return [shown(r) for r in self.reports() if isinstance(r, Event)]
+
+    def wait_event(self, pred: Callable[[str], Any], timeout: float = 20.0) -> Event:
+        """The first event whose :func:`shown` text satisfies ``pred``."""
+        return self.wait_report(Event, lambda e: pred(shown(e)), timeout)
+
     def stop(self, timeout: float = 5.0) -> int:
         """SIGTERM, wait (SIGKILL after ``timeout``), read what is left; the exit status."""
         if self.p.poll() is None:
@@ -86,14 +113,3 @@ def csv_rows(path: Path) -> int:
         return max(path.read_bytes().count(b"\n") - 1, 0)
     except FileNotFoundError:
         return 0
-
-
-def shown(line: str) -> str:
-    """A child's event line as a person reads it, ``kind: text [by ...]``, whether the line is JSON or text
-    (bridge.nodes.report); any other line as it is."""
-    from bridge.nodes.report import Event, parse_line  # lazy: only the tests that read events need it
-
-    report = parse_line(line)
-    if not isinstance(report, Event):
-        return line
-    return f"{report.kind}: {report.text}" + (report.by.suffix if report.by is not None else "")

@@ -33,6 +33,7 @@ from bridge.autopilot.simvehicle import OFFBOARD
 from bridge.core.flight import prepare
 from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, GCS_PORT, LINK_PORT, Endpoint, parse_address
 from bridge.mavlink.receive import REPLY_RATE_HZ, RateLimiter, ReplyBudget
+from bridge.nodes.report import Ready, Stats
 from bridge.nodes.vehicle import Vehicle, VehicleConfig
 from bridge.session import instance_slot
 from missions import Mission, Sine
@@ -63,19 +64,19 @@ def _vehicle(n: int, out: Path, *extra: str) -> Iterator[Proc]:
     """``bsst vehicle`` on instance ``n``, ready; stopped (SIGTERM) whatever happens."""
     v = Proc.bsst("vehicle", "--instance", str(n), "--out", str(out), *extra)
     try:
-        v.wait_line(lambda s: s.startswith("ready"))
+        v.wait_report(Ready)
         yield v
     finally:
         v.stop()
 
 
 def _stats(v: Proc) -> dict[str, Any]:
-    return json.loads(v.wait_line(lambda s: s.startswith("stats "))[len("stats "):])
+    return v.wait_report(Stats).values
 
 
 def _events(v: Proc) -> list[str]:
-    """The vehicle's event texts (``kind: text``), in order."""
-    return [ln.split(" ", 2)[2] for ln in v.lines if ln.startswith("event ")]
+    """The vehicle's events as a person reads them (``kind: text [by ...]``), in order."""
+    return v.events()
 
 
 def _stations(n: int, key: bytes | None = None) -> tuple[Station, Station]:
@@ -686,6 +687,74 @@ def test_any_message_from_anyone_changes_nothing_unless_valid_and_authorised(ben
         assert _acks(back) == [M.MAV_RESULT_DENIED], (m, source, ids)
         assert after == before
     assert decoded <= 1
+
+
+
+# -- issue 22 defect 2: a mode request that changes nothing is no takeover ----------------------------------
+NOOP_MISSION = 'name = "noop-modes"\nduration_s = 4.0\n[trajectory]\nkind = "sine"\n'
+SET_MODE = M.MAV_CMD_DO_SET_MODE
+OFFBOARD_MODE = (29.0, 6.0, 0.0)  # DO_SET_MODE param1..3: custom mode enabled, PX4 main mode OFFBOARD
+HOLD_MODE = (29.0, 4.0, 3.0)  # AUTO.LOITER: PX4's HOLD
+
+
+def _set_mode(gcs: Station, to: tuple[int, int], mode: tuple[float, float, float]) -> int:
+    gcs.send(M.MAVLink_command_long_message(*to, SET_MODE, 0, *mode, 0, 0, 0, 0))
+    return gcs.ack(SET_MODE)
+
+
+def _fly_noop(mission: Path, out: Path, when: str, mode: tuple[float, float, float]) -> tuple[int, dict[str, Any]]:
+    """Lockstep ``bsst sitl`` at 3x real time; a ground station on the GCS port selects ``mode`` (accepted)
+    ``when`` ``"disarmed"`` (at the vehicle's first heartbeat, before its controller can arm it) or
+    ``"armed"`` (past step 10 of the flight). The exit status and the summary."""
+    with instance_slot() as n:
+        gcs = Station((255, 190), port=GCS_PORT + n)
+        p = Proc.bsst("sitl", str(mission), "--out", str(out), "--instance", str(n), "--speed", "3", "--no-plots",
+                      "--overwrite")
+        try:
+            to = (n + 1, 1)
+            if when == "disarmed":
+                hb = gcs.wait(lambda m: m.get_type() == "HEARTBEAT", 30, "the vehicle's first heartbeat")
+                assert not hb.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED
+            else:
+                wait_for(lambda: csv_rows(out / "vehicle.csv") > 10 or p.p.poll() is not None, 60, "the flight")
+                assert p.p.poll() is None, "the session ended before the mode request"
+                gcs.wait(lambda m: True, 10, "the vehicle's telemetry")  # where the vehicle's GCS link is
+            assert _set_mode(gcs, to, mode) == M.MAV_RESULT_ACCEPTED
+            rc = p.p.wait(timeout=120)
+        finally:
+            p.stop()
+            gcs.close()
+    return rc, json.loads((out / "summary.json").read_text())
+
+
+@pytest.mark.parametrize(("when", "mode"), [("armed", OFFBOARD_MODE), ("disarmed", HOLD_MODE),
+                                            ("disarmed", OFFBOARD_MODE)], ids=["offboard-in-offboard",
+                                                                               "hold-before-arming",
+                                                                               "offboard-before-arming"])
+def test_a_mode_request_that_changes_nothing_is_no_takeover(tmp_path, when, mode):
+    """Issue 22, defect 2, with real processes: a ground station's DO_SET_MODE OFFBOARD while the vehicle
+    flies in OFFBOARD, or a mode selected while it is disarmed, before its controller arms it (which arms
+    it in OFFBOARD), changes nothing: the trace is byte for byte the undisturbed run's, and the run says so
+    (completed, ended by the mission, exit 0). Only an armed exit from OFFBOARD ends a flight."""
+    mission = tmp_path / "m.toml"
+    mission.write_text(NOOP_MISSION)
+    ref = _fly(mission, tmp_path / "ref", None)
+    for attempt in range(3):  # disarmed: the selection races the controller's arm (both follow the first heartbeat)
+        rc, run = _fly_noop(mission, tmp_path / "run", when, mode)
+        modes = [e for e in run["events"] if e["kind"] == "mode"]
+        if not (when == "disarmed" and modes and modes[0].get("armed")):
+            break
+        print(f"attempt {attempt}: the controller armed before the selection (a real takeover): again")
+    assert ref["outcome"] == "completed"
+    if mode == OFFBOARD_MODE:
+        assert modes == [], modes  # OFFBOARD in OFFBOARD (armed, or selected from the start) changes nothing
+    else:  # recorded as a selection for the next arm, made before the controller armed it
+        armed = next(e for e in run["events"] if e["kind"] == "armed")
+        assert len(modes) == 1 and modes[0]["armed"] is False and modes[0]["t"] <= armed["t"], run["events"]
+        assert "[by 255:190" in modes[0]["text"]
+    assert (run["outcome"], run["ended_by"], rc) == ("completed", {"who": "mission", "how": "completed"}, 0), \
+        (run["ended_by"], run["events"])
+    assert (tmp_path / "run" / "trace.csv").read_bytes() == (tmp_path / "ref" / "trace.csv").read_bytes()
 
 
 # -- issue 22: the ground station's authority, as a property over whole lockstep flights --------------------

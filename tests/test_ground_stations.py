@@ -30,8 +30,9 @@ from pymavlink import mavutil
 from bridge.autopilot.params import PARAMS, VehicleParams, read_param
 from bridge.mavlink.endpoint import GCS_PORT
 from bridge.mavlink.modes import FTP_ERR_UNKNOWN_COMMAND, FTP_HEADER, FTP_NAK, FTP_PAYLOAD_LEN, ftp_nak
+from bridge.nodes.report import Refused
 from bridge.session import instance_slot
-from tests.sitlkit import ENV, Proc, shown
+from tests.sitlkit import ENV, Proc
 from tests.test_vehicle import _vehicle
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -166,10 +167,10 @@ def test_mavsdk_parameters(tmp_path):
     assert not out["set_out_of_range"].startswith("SUCCESS") and out["get_after_refusal"] == 1.5
     assert out["obl_act"] == -1 and out["set_obl_act"] == "SUCCESS" and out["obl_rc_act"] == 5  # hold
     assert not out["set_sys_id"].startswith("SUCCESS")
-    v.wait_line(lambda s: "param: COM_OF_LOSS_T = 1.5 (was 0.5) [by " in shown(s) and " gcs]" in shown(s))
-    v.wait_line(lambda s: s.startswith("refused COM_OF_LOSS_T: must be in [0.01, 60] s, got 100"))
-    v.wait_line(lambda s: s.startswith("refused MAV_SYS_ID: takes effect at start only"))
-    assert not any("COM_OF_LOSS_T = 100" in s for s in v.lines)
+    v.wait_event(lambda s: "param: COM_OF_LOSS_T = 1.5 (was 0.5) [by " in s and " gcs]" in s)
+    v.wait_report(Refused, lambda r: r.text.startswith("COM_OF_LOSS_T: must be in [0.01, 60] s, got 100"))
+    v.wait_report(Refused, lambda r: r.text.startswith("MAV_SYS_ID: takes effect at start only"))
+    assert not any("COM_OF_LOSS_T = 100" in s for s in v.events())
 
 
 def test_mavsdk_hold_takeoff_land(tmp_path):
@@ -191,10 +192,10 @@ def test_mavsdk_hold_takeoff_land(tmp_path):
         out["modes"]
     assert abs(out["rel_at_height"] - 3.0) < 0.1 and out["top"] < 3.1
     assert abs(out["rel_landed"]) < 0.02
-    v.wait_line(lambda s: "mode: TAKEOFF to 3 m" in s)
-    v.wait_line(lambda s: "mode: HOLD: takeoff done" in s)
-    v.wait_line(lambda s: "mode: LAND at" in s and "2 m/s" in s)
-    v.wait_line(lambda s: "disarmed: landed" in s)
+    v.wait_event(lambda s: "mode: TAKEOFF to 3 m" in s)
+    v.wait_event(lambda s: "mode: HOLD: takeoff done" in s)
+    v.wait_event(lambda s: "mode: LAND at" in s and "2 m/s" in s)
+    v.wait_event(lambda s: "disarmed: landed" in s)
     unanswered, _, _ = _answers(tmp_path / "vehicle.tlog", n + 1)
     assert not unanswered, f"commands MAVSDK sent that got no COMMAND_ACK: {unanswered}"
 
@@ -288,18 +289,18 @@ def test_mavproxy_params_and_modes(tmp_path):
             mp.wait_line(_from(mark, lambda s: "NAV_TAKEOFF: ACCEPTED" in s), timeout=10)
             mp.wait_line(_from(mark, lambda s: "Using minimum takeoff altitude: 490.50 m" in s), timeout=10)
             prompt_names("TAKEOFF")  # ~2 s of climb in real time
-            v.wait_line(lambda s: "mode: HOLD: takeoff done at z=2.500 m" in s, timeout=15)
+            v.wait_event(lambda s: "mode: HOLD: takeoff done at z=2.500 m" in s, timeout=15)
             prompt_names("LOITER")  # at the height: HOLD
             mark = len(mp.lines)
             set_mode("LAND")
-            v.wait_line(lambda s: "disarmed: landed" in s, timeout=15)
+            v.wait_event(lambda s: "disarmed: landed" in s, timeout=15)
             mp.wait_line(_from(mark, lambda s: s.strip().endswith("DISARMED")), timeout=10)
             say("exit")
         finally:
             mp.stop()
             assert v.stop() == 0
-    assert any(s.startswith("refused COM_OF_LOSS_T: must be in") for s in v.lines)
-    assert not any("COM_OF_LOSS_T = 100" in s for s in v.lines)
+    assert any(isinstance(r, Refused) and r.text.startswith("COM_OF_LOSS_T: must be in") for r in v.reports())
+    assert not any("COM_OF_LOSS_T = 100" in s for s in v.events())
     unanswered, ftp_requests, ftp_replies = _answers(tmp_path / "v" / "vehicle.tlog", n + 1)
     assert not unanswered, f"commands MAVProxy sent that got no COMMAND_ACK: {unanswered}"
     assert ftp_requests >= 1 and ftp_replies == ftp_requests  # every FTP request answered (a NAK)

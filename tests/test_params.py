@@ -45,11 +45,12 @@ from bridge.mavlink.modes import (
     requested_mode,
     shown_name,
 )
+from bridge.nodes.report import Ready, Stats
 from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
 from missions import Mission, Sine
 from params import ConfigError
-from tests.sitlkit import ENV, ROOT, Proc, shown
+from tests.sitlkit import ENV, ROOT, Proc
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -172,7 +173,7 @@ def test_parameter_protocol_over_udp(tmp_path):
         gcs = _gcs(n)
         v = Proc.bsst("vehicle", "--instance", str(n), "--out", str(tmp_path), "--param", "COM_OF_LOSS_T=0.8")
         try:
-            v.wait_line(lambda s: s.startswith("ready"))
+            v.wait_report(Ready)
             hb = gcs.wait_heartbeat(timeout=20)
             assert hb.autopilot == M.MAV_AUTOPILOT_PX4 and mavutil.mode_string_v10(hb) == "OFFBOARD"
             tgt = (gcs.target_system, gcs.target_component)
@@ -205,9 +206,10 @@ def test_parameter_protocol_over_udp(tmp_path):
         finally:
             assert v.stop() == 0
             gcs.close()
-    v.wait_line(lambda s: "param: COM_OF_LOSS_T = 1.5 (was 0.8) [by 255:190" in shown(s))
-    v.wait_line(lambda s: "param: COM_OBL_RC_ACT = 5 (was -1)" in shown(s))
-    stats = json.loads(v.wait_line(lambda s: s.startswith("stats "))[6:])
+    e = v.wait_event(lambda s: "param: COM_OF_LOSS_T = 1.5 (was 0.8) [by 255:190" in s)
+    assert (e.param.name, e.param.new, e.by.link) == ("COM_OF_LOSS_T", 1.5, "gcs")  # typed, for the policies
+    v.wait_event(lambda s: "param: COM_OBL_RC_ACT = 5 (was -1)" in s)
+    stats = v.wait_report(Stats).values
     assert stats["rejected"]["param_refused"] == 3
 
 
@@ -220,7 +222,7 @@ def test_modes_takeoff_hold_land_over_udp(tmp_path):
         v = Proc.bsst("vehicle", "--instance", str(n), "--out", str(tmp_path), "--speed", "4",
                       "--param", "MIS_TAKEOFF_ALT=1.5", "--param", "MPC_LAND_SPEED=1.5")
         try:
-            v.wait_line(lambda s: s.startswith("ready"))
+            v.wait_report(Ready)
             gcs.wait_heartbeat(timeout=20)
             tgt = (gcs.target_system, gcs.target_component)
 
@@ -258,7 +260,7 @@ def test_modes_takeoff_hold_land_over_udp(tmp_path):
             gcs.close()
     for text in ("mode: HOLD (disarmed: armed in it next) [by 255:190", "armed: armed, HOLD [by 255:190",
                  "mode: TAKEOFF to 1.5 m", "mode: HOLD: takeoff done", "mode: LAND at", "landed: disarmed"):
-        v.wait_line(lambda s, text=text: text in s)
+        v.wait_event(lambda s, text=text: text in s)
 
 
 # -- whole flights --------------------------------------------------------------------------------
@@ -447,7 +449,7 @@ def test_the_documented_minimum_loss_timeout_is_set_over_mavlink(tmp_path):
         v = Proc.bsst("vehicle", "--instance", str(n), "--out", str(tmp_path), "--param", "MAV_SYS_ID=7",
                       "--param", "COM_OBL_ACT=1")
         try:
-            v.wait_line(lambda s: s.startswith("ready"))
+            v.wait_report(Ready)
             hb = gcs.wait_heartbeat(timeout=20)
             assert hb.get_srcSystem() == 7
             tgt = (7, gcs.target_component)
@@ -462,8 +464,9 @@ def test_the_documented_minimum_loss_timeout_is_set_over_mavlink(tmp_path):
         finally:
             assert v.stop() == 0
             gcs.close()
-    v.wait_line(lambda s: "param: COM_OF_LOSS_T = 0.01 (was 0.5) [by 255:190" in shown(s))
-    stats = json.loads(v.wait_line(lambda s: s.startswith("stats "))[6:])
+    e = v.wait_event(lambda s: "param: COM_OF_LOSS_T = 0.01 (was 0.5) [by 255:190" in s)
+    assert (e.param.name, e.param.new) == ("COM_OF_LOSS_T", 0.01)
+    stats = v.wait_report(Stats).values
     assert stats["rejected"]["param_refused"] == 1
 
 

@@ -244,6 +244,26 @@ def test_who_ended_a_flight_by_command() -> None:
     assert who is None  # it names no sender
 
 
+def test_only_an_armed_exit_from_offboard_is_a_takeover() -> None:
+    """Issue 22, defect 2: a mode event ends a flight only when it took the armed vehicle out of OFFBOARD
+    (its typed ``armed`` and ``mode``, never its text); a selection made disarmed, OFFBOARD again, or the
+    vehicle's own HOLD after a takeoff end nothing."""
+    def mode(t: float, m: str, armed: bool, by: Sender = GCS) -> RunEvent:
+        return RunEvent(t, "mode", "anything", "vehicle", by, mode=m, armed=armed)
+
+    armed = ev(0.0, "armed", "armed, offboard control", by=CONTROLLER)
+    assert ended_by_command([mode(0.0, "hold", False), armed]) is None
+    assert ended_by_command([mode(0.0, "offboard", False), armed]) is None
+    assert ended_by_command([armed, mode(2.0, "offboard", True)]) is None
+    assert ended_by_command([armed, mode(2.0, "hold", True, ITSELF)]) is None
+    e, who = ended_by_command([armed, mode(2.0, "land", True)])
+    assert e.t == 2.0 and who == GCS
+    # a selection made disarmed does not end the armed stretch the failsafe policy watches either
+    tr = trace(3.0, age=math.nan)
+    assert not verdict("failsafe_in_time", tr, [mode(0.0, "hold", False), armed], LOCKSTEP).ok
+    assert verdict("failsafe_in_time", tr, [armed, mode(0.3, "hold", True)], LOCKSTEP).ok
+
+
 def test_a_violation_or_a_lockstep_left_exits_1_and_is_named(capsys) -> None:
     policies = [{"name": n, "ok": True} for n in POLICIES]
     base = {"mission": "m", "controller": "bsst", "profile": "paper", "clock": "lockstep", "rate_hz": RATE,

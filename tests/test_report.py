@@ -7,11 +7,11 @@ test_offboard_realtime.py).
 from __future__ import annotations
 
 import json
-import math
 
 import pytest
 
-from bridge.autopilot.simvehicle import ITSELF, Sender
+from bridge.autopilot.simvehicle import ITSELF, ParamChanged, Sender
+from bridge.autopilot.simvehicle import Event as VehicleEvent
 from bridge.nodes.report import (
     Done,
     Event,
@@ -80,30 +80,35 @@ def test_a_line_that_is_not_a_report_is_none_not_a_traceback(line):
     assert parse_line(line) is None
 
 
-# -- the vehicle's text lines, read until it writes JSON lines (report._legacy) -------------------------------
-def test_legacy_vehicle_ready_line():
-    r = parse_line("ready listen=127.0.0.1:14560 gcs=127.0.0.1:14550 sysid=1 clock=lockstep profile=paper "
-                   "controller_from=127.0.0.1:40000")
-    assert r == EVERY_KIND[0]
-    assert r.describe() == ("listen=127.0.0.1:14560 gcs=127.0.0.1:14550 sysid=1 clock=lockstep profile=paper "
-                            "controller_from=127.0.0.1:40000")
+# -- the vehicle's events: their sender and typed fields travel as fields, never in the text -----------------
+def test_a_vehicle_event_travels_with_its_sender_and_typed_fields():
+    mode = VehicleEvent(1.23456, "mode", "HOLD (disarmed: armed in it next)", GCS, mode="hold", armed=False)
+    r = parse_line(to_line(Event.of(mode)))
+    assert r == Event(1.235, "mode", "HOLD (disarmed: armed in it next)", GCS, mode="hold", armed=False)
+    change = ParamChanged("COM_OF_LOSS_T", 0.5, 0.01)
+    param = VehicleEvent(2.0, "param", "COM_OF_LOSS_T = 0.01 (was 0.5)", GCS, param=change)
+    assert parse_line(to_line(Event.of(param))) == Event(2.0, "param", param.text, GCS, param=change)
+    assert param.shown == "COM_OF_LOSS_T = 0.01 (was 0.5) [by 255:190 127.0.0.1:14550 gcs]"  # for people only
+    landed = parse_line(to_line(Event.of(VehicleEvent(3.0, "disarmed", "landed: disarmed", ITSELF))))
+    assert landed == Event(3.0, "disarmed", "landed: disarmed", ITSELF) and landed.by is ITSELF
 
 
-def test_legacy_vehicle_event_lines_carry_their_sender_as_a_field():
-    assert parse_line("event t=1.250 armed: armed, offboard control [by 200:191 127.0.0.1:40000 controller]") == \
-        EVERY_KIND[3]
-    assert parse_line("event t=3.000 disarmed: landed: disarmed [by vehicle]") == Event(3.0, "disarmed",
-                                                                                       "landed: disarmed", ITSELF)
-    e = parse_line("event t=2.000 failsafe: no actuator target for 0.500 s: land")
-    assert e == Event(2.0, "failsafe", "no actuator target for 0.500 s: land")
-    assert math.isnan(parse_line("event t=x mode: HOLD").t)
+@pytest.mark.parametrize("field, bad", [("mode", 1), ("armed", "yes"), ("armed", 1), ("param", 5),
+                                        ("param", {"name": "X"})])
+def test_a_mistyped_event_field_is_no_report(field, bad):
+    body = json.loads(to_line(Event(1.0, "mode", "x")))
+    assert parse_line(json.dumps({**body, field: bad})) is None
 
 
-def test_legacy_vehicle_refused_and_stats_lines():
-    assert parse_line("refused takeoff: too high") == Refused("takeoff: too high")
-    assert parse_line('stats {"accepted": 3, "rejected": {}}') == Stats({"accepted": 3, "rejected": {}})
-    assert parse_line("stats {torn") is None
-    assert parse_line("stats [1]") is None
+def test_a_vehicle_ready_report_describes_itself():
+    assert EVERY_KIND[0].describe() == ("listen=127.0.0.1:14560 gcs=127.0.0.1:14550 sysid=1 clock=lockstep "
+                                        "profile=paper controller_from=127.0.0.1:40000")
+
+
+def test_text_lines_are_no_reports():
+    for line in ("ready listen=127.0.0.1:14560 sysid=1", "event t=1.250 armed: armed", "refused takeoff: too high",
+                 'stats {"accepted": 3}'):
+        assert parse_line(line) is None
 
 
 def test_a_sender_is_shown_as_the_written_suffix():

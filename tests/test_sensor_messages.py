@@ -24,6 +24,7 @@ from bridge.autopilot.estimator import Covariance, upper_triangle
 from bridge.core.wire import euler_to_quaternion, paper_to_ned, rotate_inverse
 from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import GCS_PORT
+from bridge.nodes.report import Ready
 from bridge.nodes.vehicle import odometry_covariance
 from bridge.session import instance_slot
 from plant import load_profile
@@ -191,7 +192,7 @@ def test_gnss_ekf_vehicle_streams_its_sensors_to_the_ground_station(tmp_path):
         v = Proc.bsst("vehicle", "--instance", str(n), "--out", str(tmp_path), "--realtime",
                       "--sensors", "gnss", "--estimator", "ekf")
         try:
-            v.wait_line(lambda s: s.startswith("ready"))
+            v.wait_report(Ready)
             assert gcs.wait_heartbeat(timeout=20) is not None
             assert gcs.recv_match(type="GPS_RAW_INT", blocking=True, timeout=5, condition="GPS_RAW_INT.fix_type==3")
             heard = _listen(gcs, 1.5)
@@ -232,7 +233,7 @@ def test_truth_vehicle_has_no_sensor_messages(tmp_path):
         gcs = _gcs(n)
         v = Proc.bsst("vehicle", "--instance", str(n), "--out", str(tmp_path))
         try:
-            v.wait_line(lambda s: s.startswith("ready"))
+            v.wait_report(Ready)
             assert gcs.wait_heartbeat(timeout=20) is not None
             for mid in (HIGHRES, GPS):
                 assert _command(gcs, M.MAV_CMD_REQUEST_MESSAGE, mid) == M.MAV_RESULT_UNSUPPORTED

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import hashlib
-import json
 import math
 import os
 from pathlib import Path
@@ -28,6 +27,7 @@ from bridge.mavlink.endpoint import (
 )
 from bridge.mavlink.receive import Rejections
 from bridge.mavlink.signing import SIGNATURE_BYTES, Signing, clock_timestamp, key_from_file
+from bridge.nodes.report import Ready, Stats
 from bridge.session import instance_slot, sitl
 from missions import Mission, Sine
 from params import ConfigError
@@ -252,7 +252,7 @@ def test_signed_vehicle_refuses_unsigned_forged_and_replayed_commands_and_target
         v = Proc.bsst("vehicle", str(mission), "--instance", str(n), "--out", str(tmp_path / "v"), "--key", str(key))
         ctl = None
         try:
-            v.wait_line(lambda s: s.startswith("ready"))
+            v.wait_report(Ready)
             with open(f"/proc/{v.p.pid}/cmdline", "rb") as f:
                 cmdline = f.read()
             assert KEY not in cmdline and KEY.hex().encode() not in cmdline and str(key).encode() in cmdline
@@ -313,7 +313,7 @@ def test_signed_vehicle_refuses_unsigned_forged_and_replayed_commands_and_target
             gcs.close()
             if ctl is not None:
                 ctl.close()
-    stats = json.loads(v.wait_line(lambda s: s.startswith("stats "))[len("stats "):])
+    stats = v.wait_report(Stats).values
     assert stats["rejected"] == sent and all(n == 9 for n in sent.values()), (stats["rejected"], sent)
     _assert_key_nowhere(tmp_path / "v")
 
@@ -352,7 +352,7 @@ def test_a_signed_frame_replayed_from_one_link_onto_the_other_is_refused(tmp_pat
         v = Proc.bsst("vehicle", "--instance", str(n), "--out", str(tmp_path / "v"), "--key", str(key))
         gcs = ctl = None
         try:
-            v.wait_line(lambda s: s.startswith("ready"))
+            v.wait_report(Ready)
             gcs = Station((255, 190), port=GCS_PORT + n, key=KEY, link_id=3)
             gcs.wait(lambda m: m.get_type() == "HEARTBEAT", 20, "the vehicle's heartbeat")
             ctl = Station((200, 191), ("127.0.0.1", LINK_PORT + n), key=KEY, link_id=4)
@@ -374,5 +374,5 @@ def test_a_signed_frame_replayed_from_one_link_onto_the_other_is_refused(tmp_pat
                 if st_ is not None:
                     st_.close()
     assert rc == 0
-    stats = json.loads(v.wait_line(lambda s: s.startswith("stats "))[len("stats "):])
+    stats = v.wait_report(Stats).values
     assert stats["rejected"] == {"replayed": 2}, stats["rejected"]

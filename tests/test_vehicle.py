@@ -22,6 +22,8 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.mavlink.endpoint import GCS_PORT, LINK_PORT
+from bridge.mavlink.receive import MAX_FRAME
+from bridge.nodes.report import Ready, Stats
 from bridge.session import instance_slot
 from tests.sitlkit import ENV, ROOT, Proc
 
@@ -45,13 +47,12 @@ def _ack(conn, command: int, timeout: float = 10.0):
 
 def _vehicle(n: int, tmp_path, *extra: str) -> Proc:
     v = Proc.bsst("vehicle", "--instance", str(n), "--out", str(tmp_path), *extra)
-    v.wait_line(lambda s: s.startswith("ready"))
+    v.wait_report(Ready)
     return v
 
 
 def _stats(v: Proc) -> dict:
-    line = v.wait_line(lambda s: s.startswith("stats "), timeout=10)
-    return json.loads(line[len("stats "):])
+    return v.wait_report(Stats, timeout=10).values
 
 
 def test_pymavlink_ground_station(tmp_path):
@@ -227,7 +228,7 @@ def test_mavproxy_arms_through_stdin(tmp_path):
         finally:
             mp.stop()
             assert v.stop() == 0
-    v.wait_line(lambda s: "armed: armed" in s)
+    v.wait_event(lambda s: s.startswith("armed: armed"))
 
 
 MAVSDK_SCRIPT = r"""
@@ -325,3 +326,41 @@ def test_port_in_use_is_bad_input(tmp_path):
             v.stop()
     assert r.returncode == 2 and "--listen" in r.stderr and "in use" in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1
+
+
+def test_would_be_controllers_get_back_no_more_bytes_than_they_sent(tmp_path):
+    """Issue 22, defect 9: before any flight a bare ``bsst vehicle`` (no ``--controller-from``) cannot know
+    its controller, and each new address claiming the controller's ids (200:191) is a would-be controller.
+    200 of them, each sending one PARAM_REQUEST_LIST (14 bytes; the answer is every PARAM_VALUE, 259 bytes),
+    get back together at most the bytes they sent plus one frame (docs/hostile-input.md, "Load shedding": a
+    flood is not amplified); the excess is refused (``reply_limited``). A real controller still connects afterwards:
+    its ARM is ACCEPTED and its states come."""
+    from tests.hostile import Station  # noqa: PLC0415 - a test helper only this test needs
+
+    with instance_slot() as n:
+        v = _vehicle(n, tmp_path, "--gcs", "none")
+        to = (n + 1, 1)
+        would_be = [Station((200, 191), ("127.0.0.1", LINK_PORT + n)) for _ in range(200)]
+        try:
+            sent = sum(len(s.send(M.MAVLink_param_request_list_message(*to))) for s in would_be)
+            ctl = Station((200, 191), ("127.0.0.1", LINK_PORT + n))  # after them on the vehicle's one socket
+            ctl.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1.0, target=to)
+            assert ctl.ack(M.MAV_CMD_COMPONENT_ARM_DISARM) == M.MAV_RESULT_ACCEPTED
+            ctl.wait(lambda m: m.get_type() == "ODOMETRY", 10, "the controller's first state")
+            back = 0
+            for s in would_be:
+                while True:
+                    try:
+                        back += len(s.sock.recv(65535))
+                    except BlockingIOError:
+                        break
+            ctl.close()
+        finally:
+            for s in would_be:
+                s.close()
+            assert v.stop() == 0
+    stats = _stats(v)
+    print(f"200 would-be controllers: sent {sent} B, got back {back} B; refused {stats['rejected']}")
+    assert sent == 200 * 14
+    assert back <= sent + MAX_FRAME, (back, sent)  # before: 56 266 bytes back
+    assert stats["rejected"].get("reply_limited", 0) >= 180, stats["rejected"]

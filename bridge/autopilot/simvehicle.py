@@ -85,6 +85,11 @@ class Sender:
         return f"{self.sysid}:{self.compid} {self.host}:{self.port} {self.link}"
 
     @property
+    def addr(self) -> tuple[str, int]:
+        """(host, port) it sent from: where its answers go."""
+        return (str(self.host), int(self.port or 0))
+
+    @property
     def suffix(self) -> str:
         """`` [by ...]``: how a written event (events.log, summary.json) names its sender; never parsed back."""
         return f" [by {self}]"
@@ -103,6 +108,12 @@ class Sender:
 
 VEHICLE_LINK = "vehicle"
 ITSELF = Sender(None, None, None, None, VEHICLE_LINK)  # the vehicle's own decision
+TYPED_FIELDS = ("param", "mode", "armed")  # an event's typed fields (:class:`Event`), as it travels
+
+
+def typed_fields(event: Any) -> dict[str, Any]:
+    """The typed fields of an event (this :class:`Event`, a report's, a run's: each carries them), by name."""
+    return {k: getattr(event, k) for k in TYPED_FIELDS}
 
 
 @dataclass(frozen=True)
@@ -126,15 +137,20 @@ class ParamChanged:
 @dataclass
 class Event:
     """Something the vehicle did (or was told to do) at plant time ``t`` (s): its ``kind``
-    (``armed``, ``disarmed``, ``mode``, ``failsafe``, ...), a human ``text``, who caused it
-    (``by``; None: not said, e.g. offline, where only the flight's own controller commands), and for
-    a ``param`` event the change itself (``param``)."""
+    (``armed``, ``disarmed``, ``mode``, ``failsafe``, ...), a human ``text``, and who caused it
+    (``by``; None: not said, e.g. offline, where only the flight's own controller commands).
+
+    What a reader judges by is in fields, never in the text: a ``param`` event's change (``param``:
+    name, old and new value); a ``mode`` event's ``mode`` (the mode it is in after, or will arm in)
+    and ``armed`` (it acted on an armed vehicle now; False: a selection for the next arm)."""
 
     t: float
     kind: str
     text: str
     by: Sender | None = None
     param: ParamChanged | None = None
+    mode: str | None = None
+    armed: bool | None = None
 
     @property
     def shown(self) -> str:
@@ -192,8 +208,9 @@ class SimVehicle:
         assert self.estimator is not None
         return estimator_nees(self.estimator, self.plant.state, estimate)
 
-    def event(self, kind: str, text: str) -> Event:
-        e = Event(self.plant.t, kind, text)
+    def event(self, kind: str, text: str, **fields: Any) -> Event:
+        """Record an event now; ``fields``: its typed fields (:class:`Event`)."""
+        e = Event(self.plant.t, kind, text, **fields)
         self.events.append(e)
         return e
 
@@ -225,19 +242,23 @@ class SimVehicle:
         :attr:`takeoff_alt_m` if None), at the start of a control period. Armed, the vehicle flies it
         from this step: HOLD holds where it is, LAND lands where it is, TAKEOFF climbs over where it
         is, OFFBOARD takes the controller's targets again (its timeout counts from now). Disarmed, it
-        is the mode the next arm from a ground station arms in."""
+        is the mode the next arm from a ground station arms in. A request that changes nothing (OFFBOARD in
+        OFFBOARD; disarmed, the mode already selected) is no event: the flight is the same."""
         alt = self.takeoff_alt_m if takeoff_alt_m is None else takeoff_alt_m
+        if self.mode == mode and (mode == OFFBOARD or (not self.armed and alt == self._takeoff_alt)):
+            return
         if mode == OFFBOARD:
             if self.armed and self.mode != OFFBOARD:
                 self._onboard_off()
                 self.last_command_t = self.plant.t
             self.mode = OFFBOARD
-            self.event("mode", "OFFBOARD" if self.armed else "OFFBOARD (disarmed: armed in it next)")
+            self.event("mode", "OFFBOARD" if self.armed else "OFFBOARD (disarmed: armed in it next)", mode=OFFBOARD,
+                       armed=self.armed)
             return
         self._takeoff_alt = alt
         if not self.armed:
             self.mode = mode
-            self.event("mode", f"{mode.upper()} (disarmed: armed in it next)")
+            self.event("mode", f"{mode.upper()} (disarmed: armed in it next)", mode=mode, armed=False)
             return
         if mode == TAKEOFF and not self.plant.on_ground and self.published()[4] >= self._start_z + alt:
             mode = HOLD  # already above it: PX4 refuses nothing here, it holds
@@ -257,7 +278,7 @@ class SimVehicle:
             target = Takeoff.here(X, self._start_z + alt)
             text = f"TAKEOFF to {alt:g} m over x={X[0]:.3f} y={X[2]:.3f} m"
         self.fly_onboard(target, mode)
-        self.event("mode", text)
+        self.event("mode", text, mode=mode, armed=True)
 
     def end_mission(self, action: str) -> None:
         """The mission's time is flown (``[end] action``, :data:`missions.mission.END_ACTIONS`): ``land`` lands
@@ -298,9 +319,7 @@ class SimVehicle:
             return None
         self.failsafe, self.takeoff_alt_m = after.failsafe, after.takeoff_alt_m
         old, new = read_param(before, name), read_param(after, name)
-        e = self.event("param", f"{name} = {new:g} (was {old:g})")
-        e.param = ParamChanged(name, float(old), float(new))
-        return e
+        return self.event("param", f"{name} = {new:g} (was {old:g})", param=ParamChanged(name, float(old), float(new)))
 
     def fly_onboard(self, target: Target, mode: str) -> None:
         """Hand the motors to the on-board controller flying ``target`` under ``mode`` (not
@@ -389,7 +408,7 @@ class SimVehicle:
             target = self.onboard.target
             if isinstance(target, Takeoff) and abs(self.published()[4] - target.z) < TAKEOFF_DONE_M:
                 self.fly_onboard(PositionHold(target.x, target.y, target.z), HOLD)
-                self.event("mode", f"HOLD: takeoff done at z={target.z:.3f} m")
+                self.event("mode", f"HOLD: takeoff done at z={target.z:.3f} m", mode=HOLD, armed=True)
         onboard = self.onboard
         sensors, estimator = self.sensors, self.estimator
         for i in range(self.substeps):

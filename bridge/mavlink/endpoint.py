@@ -70,6 +70,7 @@ from bridge.mavlink.receive import (
     RateLimiter,
     Rejections,
     ReplyBudget,
+    ReplyCredit,
 )
 from bridge.mavlink.signing import IFLAG_SIGNED, Signing
 from bridge.mavlink.signing import crc16 as _crc16
@@ -182,6 +183,7 @@ class Endpoint:
         self.limiter = limiter or RateLimiter()
         self.exempt_peer = exempt_peer
         self.replies = replies or ReplyBudget()
+        self.trial: ReplyCredit | None = None  # set: the peer is on trial, its replies charged (its owner says)
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
@@ -282,18 +284,28 @@ class Endpoint:
         return self.send_frames([self.pack(m) for m in msgs], to)
 
     def reply_allowed(self, to: tuple[str, int]) -> bool:
-        """Whether a reply to ``to`` is within its budget now (the exempt peer: always)."""
-        return (self.exempt_peer and to == self.peer) or self.replies.allows(to, time.monotonic())
+        """Whether a reply to ``to`` is within its budget now (the exempt peer: always, unless on :attr:`trial`:
+        then within its reply budget and the trial's credit too)."""
+        peer = self.exempt_peer and to == self.peer
+        trial = self.trial if peer else None
+        if peer and trial is None:
+            return True
+        return (trial is None or trial.bytes > 0) and self.replies.allows(to, time.monotonic())
 
     def reply(self, msgs: Sequence[Any], to: tuple[str, int]) -> bool:
         """Answer one request from ``to``: ``msgs`` in one datagram, charged to its reply
-        budget (the exempt peer is not charged); False when nothing was sent."""
+        budget (the exempt peer is not charged, unless on :attr:`trial`: then to the trial's
+        credit too); False when nothing was sent."""
         if not msgs:
             return False
         frames = [self.pack(m) for m in msgs]
-        if not (self.exempt_peer and to == self.peer) and not self.replies.charge(
-                to, time.monotonic(), sum(map(len, frames))):
-            return False
+        peer = self.exempt_peer and to == self.peer
+        trial = self.trial if peer else None
+        if not peer or trial is not None:
+            nbytes = sum(map(len, frames))
+            if (trial is not None and not trial.charge(nbytes)) or not self.replies.charge(to, time.monotonic(),
+                                                                                             nbytes):
+                return False
         return self.send_frames(frames, to)
 
     def send_hot(self, layout: HotLayout, values: tuple[Any, ...], to: tuple[str, int] | None = None) -> bool:

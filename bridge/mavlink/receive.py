@@ -5,7 +5,8 @@ In:  each datagram's sender, size (bytes) and arrival time (s, for the budgets i
      ODOMETRY (position m, quaternion), command parameters (message ids, intervals in us), target ids
 Out: accept, or a refusal reason of :data:`REASONS` counted in :class:`Rejections` (``summary.json``
      ``link.rejected``), and a STATUSTEXT line on them (at most 50 characters) at most once a second;
-     whether a reply to a source is within its budget (:class:`ReplyBudget`)
+     whether a reply to a source is within its budget (:class:`ReplyBudget`), and to the sources on trial
+     together within the bytes they sent (:class:`ReplyCredit`)
 
 Every datagram the vehicle or the controller receives takes the same path before anything
 of it reaches the plant or the law:
@@ -245,6 +246,31 @@ class ReplyBudget:
             return False
         b[0] -= 1.0
         b[2] -= nbytes
+        return True
+
+
+class ReplyCredit:
+    """What the sources on trial (a vehicle's would-be controllers, before a flight makes one its
+    controller) may be sent back, all together: the bytes they sent (:meth:`earn`), kept up to ``cap``
+    bytes, plus one frame's worth from the start (``start``: an answer may be a little longer than its
+    request, as a PING's is). Bytes out never exceed bytes in plus ``start``, however many addresses
+    share the work."""
+
+    def __init__(self, cap: float = REPLY_BYTES_S, start: float = MAX_FRAME) -> None:
+        self.cap = cap
+        self.bytes = float(start)
+        self.cut = 0  # replies that did not fit (not sent)
+
+    def earn(self, nbytes: int) -> None:
+        """A frame of ``nbytes`` from a source on trial: that much more may go back."""
+        self.bytes = min(self.cap, self.bytes + nbytes)
+
+    def charge(self, nbytes: int) -> bool:
+        """Take a reply of ``nbytes``; False (and nothing taken) when it does not fit."""
+        if nbytes > self.bytes:
+            self.cut += 1
+            return False
+        self.bytes -= nbytes
         return True
 
 

@@ -9,7 +9,7 @@ Out: pymavlink messages in NED / FRD (listed below): angles rad, rates rad/s, po
 Pure functions from the plant's state (eq. 7, NWU) to pymavlink messages in MAVLink's
 frames (NED / FRD, via :mod:`bridge.core.wire`): ``ATTITUDE``, ``ATTITUDE_QUATERNION``,
 ``LOCAL_POSITION_NED``, ``GLOBAL_POSITION_INT`` (flat earth around a configurable home),
-``HOME_POSITION``, ``SYS_STATUS``, ``EXTENDED_SYS_STATE``, ``ACTUATOR_OUTPUT_STATUS``,
+``HOME_POSITION``, ``MISSION_CURRENT``, ``SYS_STATUS``, ``EXTENDED_SYS_STATE``, ``ACTUATOR_OUTPUT_STATUS``,
 ``AUTOPILOT_VERSION``. ``time_boot_ms`` is the vehicle's simulation time, as PX4 stamps it
 in lockstep.
 
@@ -36,8 +36,11 @@ _SENSORS = (mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSO
             | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG | mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
             | mavlink.MAV_SYS_STATUS_SENSOR_GPS | mavlink.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
             | mavlink.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION)
+# the mission protocol in both forms (MISSION_ITEM_INT and the legacy MISSION_ITEM), as PX4 says: MAVSDK
+# uploads nothing to an autopilot without MISSION_INT
 CAPABILITIES = (mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-                | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE)
+                | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
+                | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT)
 VERSION = (0 << 24) | (1 << 16) | (0 << 8) | 255  # 0.1.0, FIRMWARE_VERSION_TYPE_OFFICIAL
 
 
@@ -96,6 +99,14 @@ def home_position(home: Home) -> Any:
     return mavlink.MAVLink_home_position_message(
         int(round(home.lat * 1e7)), int(round(home.lon * 1e7)), int(round(home.alt * 1000.0)),
         0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0)
+
+
+def mission_current(seq: int, total: int) -> list[Any]:
+    """``MISSION_CURRENT``: the current item of a mission of ``total`` items, not started (the vehicle does
+    not fly missions yet); none without a mission, as PX4 sends none then."""
+    if total == 0:
+        return []
+    return [mavlink.MAVLink_mission_current_message(seq, total, mavlink.MISSION_STATE_NOT_STARTED, 0)]
 
 
 def sys_status(load_permille: int, healthy: bool) -> Any:

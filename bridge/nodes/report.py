@@ -8,7 +8,9 @@ The kinds, and their fields (times in s of the flight's clock, to the millisecon
 
 - ``ready``: the child is up, bound, its clock chosen (:class:`Ready`: which node, its addresses);
 - ``event``: something happened (:class:`Event`: ``t`` s, ``kind``, ``text``, ``by`` the
-  :class:`~bridge.autopilot.simvehicle.Sender` that caused it, as an object, or null);
+  :class:`~bridge.autopilot.simvehicle.Sender` that caused it, as an object, or null; a vehicle's
+  ``param`` event its change, ``param`` (``{name, old, new}``), a ``mode`` event its ``mode`` and ``armed``,
+  else null);
 - ``statustext``: a STATUSTEXT the controller received (:class:`StatusText`: MAV_SEVERITY, text);
 - ``warning``: what the receive path refused lately (:class:`Warning`,
   :meth:`bridge.mavlink.receive.Rejections.report`);
@@ -24,13 +26,12 @@ This module is the one place that reads them: the session never looks inside a r
 from __future__ import annotations
 
 import json
-import math
-import re
 from dataclasses import dataclass, field, fields
 from enum import StrEnum
 from typing import Any
 
-from bridge.autopilot.simvehicle import ITSELF, VEHICLE_LINK, ParamChanged, Sender
+from bridge.autopilot.simvehicle import Event as VehicleEvent
+from bridge.autopilot.simvehicle import ParamChanged, Sender, typed_fields
 
 
 class Kind(StrEnum):
@@ -84,19 +85,26 @@ class Ready:
 @dataclass(frozen=True)
 class Event:
     """An event at ``t`` (s, to the millisecond: :meth:`at`) of ``kind``, its ``text``, who caused it, and
-    a parameter event's change (``param``: name, old and new value; None for the others)."""
+    the typed fields of the vehicle's events (:class:`bridge.autopilot.simvehicle.Event`: a parameter
+    event's change, ``param``; a mode event's ``mode`` and ``armed``)."""
 
     t: float
     kind: str
     text: str
     by: Sender | None = None
     param: ParamChanged | None = None
+    mode: str | None = None
+    armed: bool | None = None
 
     @classmethod
-    def at(cls, t: float, kind: str, text: str, by: Sender | None = None,
-           param: ParamChanged | None = None) -> Event:
+    def at(cls, t: float, kind: str, text: str, by: Sender | None = None, **fields: Any) -> Event:
         """The event at ``t`` rounded to the millisecond: the resolution every child reports at."""
-        return cls(float(f"{t:.3f}"), kind, text, by, param)
+        return cls(float(f"{t:.3f}"), kind, text, by, **fields)
+
+    @classmethod
+    def of(cls, e: VehicleEvent) -> Event:
+        """The report of one of the vehicle's events (at the millisecond, with its fields)."""
+        return cls.at(e.t, e.kind, e.text, e.by, **typed_fields(e))
 
 
 @dataclass(frozen=True)
@@ -157,10 +165,10 @@ def to_line(report: Report) -> str:
 
 def parse_line(line: str) -> Report | None:
     """The report a line holds, or None when it holds none (not JSON, an unknown kind, a missing or
-    mistyped field). Also reads the vehicle's text lines until it writes JSON (:func:`_legacy`)."""
+    mistyped field)."""
     text = line.strip()
     if not text.startswith("{"):
-        return _legacy(text)
+        return None
     try:
         body = json.loads(text)
         cls = _CLASS_OF[Kind(body.pop("report"))]
@@ -177,8 +185,9 @@ def parse_line(line: str) -> Report | None:
 def _well_typed(report: Report) -> bool:
     """Whether the fields a reader relies on have their types (a JSON line is anyone's to write)."""
     if isinstance(report, Event):
-        return (isinstance(report.t, (int, float)) and not isinstance(report.t, bool)
-                and isinstance(report.kind, str) and isinstance(report.text, str))
+        return (_number(report.t) and isinstance(report.kind, str) and isinstance(report.text, str)
+                and (report.mode is None or isinstance(report.mode, str))
+                and (report.armed is None or isinstance(report.armed, bool)))
     if isinstance(report, Stats):
         return isinstance(report.values, dict)
     if isinstance(report, Done):
@@ -190,43 +199,5 @@ def _well_typed(report: Report) -> bool:
     return isinstance(report.text, str)
 
 
-# -- LEGACY: the vehicle's text lines (bridge/nodes/vehicle.py), until it writes JSON lines ------------------
-# Delete from here to the end of the module once the vehicle emits to_line(...) for its ready, event,
-# refused and stats reports.
-_BY = re.compile(r" \[by (?:(vehicle)|(\d+):(\d+) (\S+):(\d+) (\w+))\]$")
-
-
-def _legacy(line: str) -> Report | None:
-    """The vehicle's status line as a report: ``ready k=v ...``, ``event t=<s> <kind>: <text>[ [by ...]]``,
-    ``refused <why>``, ``stats {json}``; None for anything else."""
-    word, _, rest = line.partition(" ")
-    if word == "ready":
-        pairs = dict(f.partition("=")[::2] for f in rest.split())
-        known = {f.name for f in fields(Ready)}
-        try:
-            return Ready("vehicle", **{k: int(v) if k == "sysid" else v for k, v in pairs.items() if k in known})
-        except ValueError:
-            return None
-    if word == "event":
-        t_text, _, what = rest.partition(" ")
-        kind, _, text = what.partition(": ")
-        try:
-            t = float(t_text.removeprefix("t="))
-        except ValueError:
-            t = math.nan
-        by = None
-        m = _BY.search(text)
-        if m is not None:
-            text = text[:m.start()]
-            by = ITSELF if m.group(1) == VEHICLE_LINK else Sender(int(m.group(2)), int(m.group(3)), m.group(4),
-                                                                    int(m.group(5)), m.group(6))
-        return Event(t, kind, text, by)
-    if word == "refused":
-        return Refused(rest)
-    if word == "stats":
-        try:
-            values = json.loads(rest)
-        except ValueError:
-            return None
-        return Stats(values) if isinstance(values, dict) else None
-    return None
+def _number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)

@@ -6,7 +6,7 @@ In:  an event's time (s, the flight's clock), kind, text, who reported it (``sou
      :class:`~bridge.autopilot.simvehicle.ParamChanged`: name, old and new value, or None)
 Out: :class:`RunEvent`; its dict for ``summary.json["events"]`` (:meth:`RunEvent.as_dict`: ``t`` s rounded
      to 1 us or null, ``kind``, ``text`` with the sender shown as `` [by ...]``, ``source`` when there is one,
-     ``param`` when there is one)
+     ``param`` (``{name, old, new}``), ``mode`` and ``armed`` when the event has them)
 
 The written `` [by ...]`` is for people (events.log, summary.json); everything that judges a run reads
 ``by`` (:mod:`bridge.record.policies`), never the text.
@@ -19,7 +19,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from bridge.autopilot.simvehicle import ParamChanged, Sender
+from bridge.autopilot.simvehicle import ParamChanged, Sender, typed_fields
 
 
 @dataclass(frozen=True)
@@ -31,13 +31,15 @@ class RunEvent:
     text: str
     source: str | None = None
     by: Sender | None = None
-    param: ParamChanged | None = None
+    param: ParamChanged | None = None  # the typed fields of the vehicle's events (bridge.autopilot.simvehicle.Event)
+    mode: str | None = None
+    armed: bool | None = None
 
     @classmethod
     def at(cls, t: float, kind: str, text: str, source: str | None = None, by: Sender | None = None,
-           param: ParamChanged | None = None) -> RunEvent:
-        """The event at ``t`` (s): rounded to 1 us, None if not finite."""
-        return cls(round(t, 6) if math.isfinite(t) else None, kind, text, source, by, param)
+           **fields: Any) -> RunEvent:
+        """The event at ``t`` (s): rounded to 1 us, None if not finite; ``fields``: its typed fields."""
+        return cls(round(t, 6) if math.isfinite(t) else None, kind, text, source, by, **fields)
 
     @property
     def shown(self) -> str:
@@ -49,8 +51,8 @@ class RunEvent:
         d: dict[str, Any] = {"t": self.t, "kind": self.kind, "text": self.shown}
         if self.source is not None:
             d["source"] = self.source
-        if self.param is not None:
-            d["param"] = self.param.as_dict()
+        d.update((k, v.as_dict() if isinstance(v, ParamChanged) else v)
+                 for k, v in typed_fields(self).items() if v is not None)
         return d
 
     @classmethod
@@ -60,4 +62,5 @@ class RunEvent:
         by, param = d.get("by"), d.get("param")
         return cls(d.get("t"), d["kind"], d.get("text", ""), d.get("source"),
                    Sender.from_dict(by) if isinstance(by, Mapping) else None,
-                   ParamChanged.from_dict(param) if isinstance(param, Mapping) else None)
+                   ParamChanged.from_dict(param) if isinstance(param, Mapping) else None,
+                   mode=d.get("mode"), armed=d.get("armed"))

@@ -56,7 +56,7 @@ from typing import Any
 
 import numpy as np
 
-from bridge.autopilot.simvehicle import Sender
+from bridge.autopilot.simvehicle import OFFBOARD, Sender
 from bridge.record.events import RunEvent
 
 POLICIES: dict[str, str] = {
@@ -137,13 +137,17 @@ def lockstep_record(events: Sequence[RunEvent], off_clock_t: float | None = None
 
 def ended_by_command(events: Sequence[RunEvent], controller_id: tuple[int, int] = CONTROLLER_ID,
                      before_s: float = math.inf) -> tuple[RunEvent, Sender | None] | None:
-    """The vehicle's first disarm by command before ``before_s`` (or a mode change) that the
-    configured controller on its own link did not send: the event and its sender (None when the
-    event names none), or None."""
+    """The vehicle's first disarm by command before ``before_s`` (or a takeover: a mode change of the
+    armed vehicle out of OFFBOARD, not the vehicle's own) that the configured controller on its own link
+    did not send: the event and its sender (None when the event names none), or None. A mode selected
+    while disarmed, for the next arm, ends nothing: the controller's arm flies OFFBOARD."""
     for e in vehicle_events(events):
         if e.t >= before_s - EPS_S:
             break
-        commanded = (e.kind == "disarmed" and "by command" in e.text) or e.kind == "mode"
+        # a disarm not of the vehicle's own (landed, stopped by its failsafe, diverged: ``by`` ITSELF)
+        own = e.by is not None and e.by.is_vehicle
+        commanded = ((e.kind == "disarmed" and not own)
+                     or (e.kind == "mode" and bool(e.armed) and e.mode != OFFBOARD and not own))
         if not commanded:
             continue
         who = e.by
@@ -227,11 +231,11 @@ def offboard_intervals(events: Sequence[RunEvent], armed_at_start: bool
             if since is not None:  # armed again without leaving: the timeout restarts
                 out.append((since, e.t, "armed"))
             since = e.t
-        elif e.kind == "mode" and e.text == "OFFBOARD":
+        elif e.kind == "mode" and e.armed and e.mode == OFFBOARD:
             if since is not None:  # OFFBOARD again, armed: the timeout counts from the switch
                 out.append((since, e.t, "mode"))
             since = e.t
-        elif (e.kind in _ENDS_OFFBOARD or (e.kind == "mode" and "(disarmed" not in e.text)) \
+        elif (e.kind in _ENDS_OFFBOARD or (e.kind == "mode" and e.armed)) \
                 and since is not None:  # a failsafe, a disarm, or a ground station's HOLD, LAND, TAKEOFF
             out.append((since, e.t, e.kind))
             since = None
@@ -277,12 +281,10 @@ def failsafe_in_time(t: np.ndarray, age: np.ndarray, events: Sequence[RunEvent],
 
 
 def timeout_changes(events: Sequence[RunEvent]) -> list[tuple[float, float]]:
-    """(t s, new timeout s) of each change of the offboard-loss timeout (COM_OF_LOSS_T) the events tell."""
-    out = []
-    for e in events:
-        if e.kind == "param" and e.text.startswith("COM_OF_LOSS_T = "):
-            out.append((e.t, float(e.text.split()[2])))
-    return out
+    """(t s, new timeout s) of each change of the offboard-loss timeout (COM_OF_LOSS_T) the events tell
+    (a ``param`` event's typed change, ``param``: name, old and new value)."""
+    return [(e.t, e.param.new) for e in events
+            if e.kind == "param" and e.param is not None and e.param.name == "COM_OF_LOSS_T"]
 
 
 def timeout_between(start: float, changes: Sequence[tuple[float, float]], a: float, b: float) -> float:

@@ -191,7 +191,7 @@ def ended_by(outcome: str, trace: Mapping[str, Any], flight: Flight, facts: Sess
              events: Sequence[RunEvent], children: Sequence[ChildEnd],
              controller_id: tuple[int, int] = CONTROLLER_ID) -> tuple[str, dict[str, Any]]:
     """The outcome and ``summary.json["ended_by"]``: who ended the flight, and how. A disarm or
-    mode change by command from anyone but the configured controller, before the mission's
+    takeover (an armed exit from OFFBOARD) from anyone but the configured controller, before the mission's
     end, ended it (named by the vehicle's event's sender), as does a controller that
     reports a completed mission whose trace stops short of the mission's end: both are
     ``aborted``, never ``completed``."""

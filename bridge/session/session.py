@@ -24,7 +24,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from bridge.autopilot.simvehicle import ParamChanged, Sender
+from bridge.autopilot.simvehicle import Sender, typed_fields
 from bridge.core.flight import Flight, Progress
 from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, LINK_PORT
 from bridge.nodes.report import Event, Ready, Report
@@ -339,7 +339,7 @@ class Session:
                 self.failsafe_seen = True
             elif kind == "diverged":
                 self.diverged = True
-        self._note(kind, report.text, child.name, t, report.by, report.param)
+        self._note(kind, report.text, child.name, t, report.by, **typed_fields(report))
 
     def _event_time(self, child: Child, t: float) -> float:
         """An event's time on the clock events.log keeps: real time, the flight's (the vehicle's converted);
@@ -358,10 +358,11 @@ class Session:
         return t_vehicle - joiner.k0 / self.flight.mission.rate_hz
 
     def _note(self, kind: str, text: str, source: str, t: float | None = None, by: Sender | None = None,
-              param: ParamChanged | None = None) -> None:
+              **fields: Any) -> None:
+        """Record an event (``fields``: its typed fields, :func:`~bridge.autopilot.simvehicle.typed_fields`)."""
         if t is None:
             t = self.joiner.rows[-1].t if getattr(self, "joiner", None) and self.joiner.rows else 0.0
-        self.events.append(RunEvent.at(t, kind, text, source, by, param))
+        self.events.append(RunEvent.at(t, kind, text, source, by, **fields))
         if self._event_log is not None:
             self._event_log.event(t if math.isfinite(t) else 0.0, kind, text, by, source)
         if source == "session" and kind in ("died", "killed"):

@@ -20,6 +20,7 @@ from typing import Any
 from bridge.record.runlog import run_dir, write_json_atomic
 from bridge.sweep.cells import (
     CELLS_CSV,
+    FAILED,
     MISSION_HASH,
     SWEEP_JSON,
     CellsFile,
@@ -113,7 +114,7 @@ class Outcome:
     @property
     def status(self) -> str:
         """One of :data:`STATUSES`: ``ok`` (no cell failed), ``cells failed`` (some), ``all failed`` (every row an
-        ``error``: nothing was measured), ``interrupted`` (stopped before its end; resume it)."""
+        ``error`` or ``law_failed``: nothing was measured), ``interrupted`` (stopped before its end; resume it)."""
         if self.interrupted:
             return "interrupted"
         if self.rows and self.failed == len(self.rows):
@@ -122,7 +123,7 @@ class Outcome:
 
     def first_error(self) -> str:
         """The ``error`` column of the first failed row ('' if none failed)."""
-        return next((r["error"] or "" for r in self.rows if r["outcome"] == "error"), "")
+        return next((r["error"] or r["outcome"] for r in self.rows if r["outcome"] in FAILED), "")
 
 
 class SweepFailed(Exception):
@@ -201,7 +202,7 @@ def run_sweep(
         write_cells(path / CELLS_CSV, rows)
         if report:
             write_report(path, rows, spec.identity(), plots=plots)
-    failed = sum(1 for r in rows if r["outcome"] == "error")
+    failed = sum(1 for r in rows if r["outcome"] in FAILED)
     return Outcome(rows, len(rows) - reused, reused, failed, path, time.monotonic() - t0, interrupted, used,
                    used_why)
 

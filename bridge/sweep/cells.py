@@ -42,6 +42,7 @@ INT_COLUMNS = ("seed", "up_sent", "up_lost", "down_sent", "down_lost")
 
 
 STR_COLUMNS = ("controller", "estimator", "outcome", "class", "error")
+FAILED = ("error", "law_failed")  # outcomes of a cell that measured nothing: it could not be flown, or its law failed
 
 
 KEY_COLUMNS = (*AXES, "seed")  # what names a row's cell: never empty
@@ -85,7 +86,8 @@ def row_from_run(cell: Cell, run: Run) -> dict[str, Any]:
         "down_sent": int(down.get("sent", 0)),
         "down_lost": int(down.get("lost", 0)),
         "flown_s": s.get("duration_s"),
-        "error": "",
+        # a law that failed in flight measured nothing: the row says why, as a cell that could not be flown does
+        "error": " ".join(str(s.get("ended_by", {}).get("how", "")).split())[:300] if s["outcome"] in FAILED else "",
     }
 
 

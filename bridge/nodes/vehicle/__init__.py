@@ -9,15 +9,16 @@ In:  actuator targets on the controller link, stamped with the ``time_usec`` of 
 Out: ODOMETRY (NED position m, FRD body velocity m/s, quaternion FRD to NED, FRD rates rad/s;
      ``time_usec`` = simulation time, us), once per control step; HEARTBEAT at 1 Hz (PX4's
      ``custom_mode``), STATUSTEXT on each event, the GCS streams (25 Hz / 10 Hz, ``time_boot_ms`` =
-     simulation time; with sensors HIGHRES_IMU and GPS_RAW_INT), PARAM_VALUE; ``vehicle.tlog``,
-     ``vehicle.csv`` rows; status lines on stdout
+     simulation time; with sensors HIGHRES_IMU and GPS_RAW_INT), PARAM_VALUE, the mission protocol's answers,
+     MISSION_CURRENT (1 Hz) and MISSION_ITEM_REACHED; ``vehicle.tlog``,
+     ``vehicle.csv`` rows; its reports on stdout (JSON lines)
 
 Its clocks and its end of the link model: docs/design.md, "Clocks" and "Link model". Its
 parameters, flight modes (OFFBOARD, HOLD, LAND, TAKEOFF, in PX4's encoding: :mod:`bridge.mavlink.modes`)
 and what a ground station can do with them: docs/ground-station.md. Who may
 do what on which link: docs/design.md, "Authority" (:mod:`.authority`); every
 command's numbers are checked before use (:mod:`bridge.mavlink.receive`), and every command
-that changes the flight is an event naming its sender (:class:`~.authority.Sender`).
+that changes the flight is an event naming its sender (its ``by``, a :class:`~bridge.autopilot.simvehicle.Sender`).
 
 It wraps :class:`bridge.autopilot.simvehicle.SimVehicle` (plant, arming, command timeout, failsafe:
 the same object the offline loop flies) with two UDP links:
@@ -53,16 +54,17 @@ Clocks:
 
 With ``out``, it writes ``vehicle.tlog`` (both directions) and ``vehicle.csv`` (its half of
 the trace: one row per control step flown, columns :data:`VEHICLE_COLUMNS`).
-Status lines (``ready ...``, ``event t=... kind: text``) go to ``status``; the session
-launcher reads them.
+Its reports (:mod:`bridge.nodes.report`: ready, event, refused, stats) go to ``status``, one JSON
+line each under ``bsst vehicle``; the session launcher reads them.
 
 Its parts, as PX4 splits an autopilot:
 
 - :mod:`.clock`         the step clock: one state machine (idle, lockstep, answered, free-running,
                         halted), its transitions in one table
-- :mod:`.authority`     who may command what on which link; who caused an event (`` [by ...]``)
+- :mod:`.authority`     who may command what on which link; who caused an event (its ``by``)
 - :mod:`.commander`     arming, flight modes, commands, the triggers that end a flight
 - :mod:`.paramservice`  PX4's parameters over MAVLink
+- :mod:`.mission`       PX4's mission protocol (upload, download, clear, set current) and the mission held
 - :mod:`.targets`       the controller's answers: actuator targets, the no-target acknowledgement
 - :mod:`.receiver`      the receive path: each message, its sender's authority checked, to its part
 - :mod:`.streams`       the telemetry streams (message id -> builder and rate), HEARTBEAT, ODOMETRY
@@ -71,7 +73,6 @@ Its parts, as PX4 splits an autopilot:
 - :mod:`.node`          :class:`Vehicle`, which wires the parts to the links, and :func:`run_vehicle`
 """
 
-from bridge.nodes.vehicle.authority import BY_VEHICLE, Sender, sender_suffix
 from bridge.nodes.vehicle.clock import TRANSITIONS, Clock, ClockState, IllegalTransition, Trigger
 from bridge.nodes.vehicle.commander import OFFBOARD_STREAM_S
 from bridge.nodes.vehicle.config import CLOCKS, VehicleConfig
@@ -80,7 +81,6 @@ from bridge.nodes.vehicle.rows import MODE_CODES
 from bridge.nodes.vehicle.streams import DEFAULT_STREAMS, STREAMS, StreamTable, odometry_covariance
 
 __all__ = [
-    "BY_VEHICLE",
     "CLOCKS",
     "DEFAULT_STREAMS",
     "MODE_CODES",
@@ -90,12 +90,10 @@ __all__ = [
     "Clock",
     "ClockState",
     "IllegalTransition",
-    "Sender",
     "StreamTable",
     "Trigger",
     "Vehicle",
     "VehicleConfig",
     "odometry_covariance",
     "run_vehicle",
-    "sender_suffix",
 ]

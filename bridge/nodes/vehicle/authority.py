@@ -4,61 +4,42 @@ In:  a message that passed the frame stage (pymavlink), the address it came from
      its link (``controller`` or ``gcs``); the flight's controller address (learned, or None) and
      whether a flight is on
 Out: why the message is refused for its sender (a :class:`~bridge.mavlink.receive.Rejections` reason)
-     or None; the :class:`Sender` of a command; the `` [by ...]`` suffix of the events it caused
+     or None; the :class:`~bridge.autopilot.simvehicle.Sender` of a command, set as the ``by`` field of
+     the events it caused (:data:`~bridge.autopilot.simvehicle.ITSELF`: the vehicle's own)
 
 Only the configured controller (its sysid and compid) is heard on the controller link: with
 ``controller_from`` only from that address, else during a flight only from the flight's address. A
 ground station may command on the GCS link (its commands still pass :mod:`bridge.mavlink.receive`'s
-checks). A command for another system is refused as ``target`` whoever sent it.
+checks). A command for another system is refused as ``target`` whoever sent it. The mission is the ground
+station's: the controller may download it (:data:`MISSION_READS`), not change it (:data:`MISSION_WRITES`:
+``not_authorised`` on the controller link).
 """
 
 from __future__ import annotations
 
 import socket
-from dataclasses import dataclass
 from typing import Any
 
-from bridge.autopilot.simvehicle import Event
+from bridge.autopilot.simvehicle import ITSELF, Event, Sender
 from bridge.mavlink.receive import addressed_elsewhere
 from bridge.nodes.vehicle.config import VehicleConfig
 
 TARGETS = frozenset({"HIL_ACTUATOR_CONTROLS", "SET_ACTUATOR_CONTROL_TARGET"})
-ADDRESSED = frozenset({"COMMAND_LONG", "COMMAND_INT", "MISSION_REQUEST_LIST", "PARAM_REQUEST_LIST",
-                       "PARAM_REQUEST_READ", "PARAM_SET", "SET_MODE"})  # target fields checked first
+# the mission protocol's messages that change the mission: a ground station's, never the controller's
+MISSION_WRITES = frozenset({"MISSION_COUNT", "MISSION_ITEM", "MISSION_ITEM_INT", "MISSION_CLEAR_ALL",
+                            "MISSION_SET_CURRENT"})
+MISSION_READS = frozenset({"MISSION_REQUEST_LIST", "MISSION_REQUEST", "MISSION_REQUEST_INT", "MISSION_ACK"})
+ADDRESSED = frozenset({"COMMAND_LONG", "COMMAND_INT", "PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET",
+                       "SET_MODE", *MISSION_WRITES, *MISSION_READS})  # target fields checked first
 COMMANDS = frozenset({"COMMAND_LONG", "COMMAND_INT"})
-ATTRIBUTED = ("armed", "disarmed", "mode", "interval", "param")  # the events that say who caused them
-BY_VEHICLE = " [by vehicle]"  # the suffix of an arm or disarm the vehicle made itself (failsafe landing, divergence)
-
-
-@dataclass(frozen=True)
-class Sender:
-    """Who sent a command: its sysid and compid, its address, and the link it came in on
-    (``controller`` or ``gcs``)."""
-
-    sysid: int
-    compid: int
-    addr: tuple[str, int]
-    link: str
-
-    @property
-    def tag(self) -> str:
-        """The suffix of the events it caused (:func:`sender_suffix`)."""
-        return sender_suffix(self)
-
-
-def sender_suffix(by: Sender | None) -> str:
-    """The suffix of an event's text naming who caused it: `` [by SYSID:COMPID HOST:PORT LINK]``, or
-    `` [by vehicle]`` (None: the vehicle itself). docs/design.md, "Authority": a policy checker parses it
-    from events.log."""
-    if by is None:
-        return BY_VEHICLE
-    return f" [by {by.sysid}:{by.compid} {by.addr[0]}:{by.addr[1]} {by.link}]"
+ATTRIBUTED = ("armed", "disarmed", "mode", "interval", "param", "mission")  # the events that say who caused them
 
 
 def claim(event: Event, by: Sender | None) -> None:
-    """Name ``by`` in ``event`` if it is one that says who caused it and names nobody yet."""
-    if event.kind in ATTRIBUTED and " [by " not in event.text and event.by is None:  # by: named, typed
-        event.text += sender_suffix(by)
+    """Name ``by`` (None: the vehicle itself, :data:`ITSELF`) as the cause of ``event`` if it is one that
+    says who caused it and names nobody yet."""
+    if event.kind in ATTRIBUTED and event.by is None:
+        event.by = by if by is not None else ITSELF
 
 
 def attribute(events: list[Event], n0: int, by: Sender) -> None:
@@ -93,6 +74,8 @@ class Authority:
             return "target"
         if not self.from_controller(m):
             return "sender" if kind in TARGETS else "not_authorised"
+        if kind in MISSION_WRITES:
+            return "not_authorised"
         if self.pinned is not None and addr != self.pinned:
             return "stranger"
         if not known and peer is not None and flight_on:
@@ -102,9 +85,10 @@ class Authority:
     @staticmethod
     def sender(m: Any, addr: tuple[str, int], link: str) -> Sender:
         """The sender of ``m``, from ``addr`` on ``link``."""
-        return Sender(m.get_srcSystem(), m.get_srcComponent(), addr, link)
+        return Sender(m.get_srcSystem(), m.get_srcComponent(), addr[0], addr[1], link)
 
     def controller(self, peer: tuple[str, int] | None) -> Sender:
         """The flight's controller (configured ids, learned address ``peer``) as a :class:`Sender`."""
         cfg = self.cfg
-        return Sender(cfg.controller_sysid, cfg.controller_compid, peer or ("?", 0), "controller")
+        host, port = peer or ("?", 0)
+        return Sender(cfg.controller_sysid, cfg.controller_compid, host, port, "controller")

@@ -2,12 +2,12 @@
 
 In:  COMMAND_LONG / COMMAND_INT (COMPONENT_ARM_DISARM, DO_SET_MODE, NAV_TAKEOFF m AMSL, NAV_LAND,
      SET/GET_MESSAGE_INTERVAL us, REQUEST_MESSAGE, REQUEST_AUTOPILOT_CAPABILITIES, GET_HOME_POSITION) and
-     SET_MODE from a sender with authority (:class:`~bridge.nodes.vehicle.authority.Sender`); the plant's
+     SET_MODE from a sender with authority (:class:`~bridge.autopilot.simvehicle.Sender`); the plant's
      divergence and the controller's silence (wall time, s)
 Out: COMMAND_ACK (with what a command asked for, and a STATUSTEXT saying why it was refused) in one
      datagram; the flight's changes (arm, disarm, mode) on the :class:`SimVehicle` as events naming their
-     sender; the step clock's transitions (:class:`~bridge.nodes.vehicle.clock.Clock`); ``refused ...``
-     status lines
+     sender; the step clock's transitions (:class:`~bridge.nodes.vehicle.clock.Clock`); why a command was
+     refused (a :class:`~bridge.nodes.report.Refused` report)
 
 Flight modes (OFFBOARD, HOLD, LAND, TAKEOFF, in PX4's encoding: :mod:`bridge.mavlink.modes`) and what a
 ground station can do with them: docs/ground-station.md. Every command's numbers are checked before use
@@ -25,12 +25,12 @@ from typing import Any
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.autopilot.params import BY_NAME
-from bridge.autopilot.simvehicle import GROUND_MODES, HOLD, LAND, OFFBOARD, TAKEOFF, SimVehicle
+from bridge.autopilot.simvehicle import GROUND_MODES, HOLD, LAND, OFFBOARD, TAKEOFF, Sender, SimVehicle
 from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import Endpoint
 from bridge.mavlink.modes import mode_name, requested_custom_mode, requested_mode
 from bridge.mavlink.receive import FORCE_DISARM, arm_disarm_args, interval_arg, message_id_arg
-from bridge.nodes.vehicle.authority import Authority, Sender, attribute
+from bridge.nodes.vehicle.authority import Authority, attribute
 from bridge.nodes.vehicle.clock import Clock, Trigger
 from bridge.nodes.vehicle.streams import HEARTBEAT_S, StatusTexts, StreamTable
 
@@ -51,7 +51,7 @@ class CommanderPorts:
     target_wall: Callable[[], float]  # wall time (s) of the newest actuator target from the controller
     message: Callable[[int], list[Any]]  # the message(s) of an id, as a stream sends them
     reject: Callable[[str], None]  # count a refusal (bridge.mavlink.receive.Rejections)
-    report: Callable[[str], None]  # a status line
+    refused: Callable[[str], None]  # a command refused, and why (its report to the session)
     # the events a command made said on stdout now, before its COMMAND_ACK, so that whoever the answer reaches
     # (the controller, and what it reports) never speaks of it before the vehicle did
     announce: Callable[[], None] = lambda: None
@@ -203,7 +203,7 @@ class Commander:
     def _refuse(self, why: str) -> int:
         """DENIED; a STATUSTEXT saying why follows the COMMAND_ACK to the sender (:attr:`texts`)."""
         self.texts += self._statustext(mavlink.MAV_SEVERITY_WARNING, why)
-        self.ports.report(f"refused {why}")
+        self.ports.refused(why)
         return mavlink.MAV_RESULT_DENIED
 
     def _set_mode_or_refuse(self, mode: str | None, why: str, *, by: Sender,

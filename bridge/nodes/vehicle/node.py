@@ -5,18 +5,18 @@ In:  datagrams on the controller link (``--listen``) and the GCS link (``--gcs``
      commands, parameters, TIMESYNC, PING, ...; wall time (s, ``time.monotonic``)
 Out: ODOMETRY of step k (``time_usec`` = k / rate_hz, us) to the controller; HEARTBEAT (1 Hz), the
      streams, STATUSTEXT on events, answers; ``vehicle.tlog`` and ``vehicle.csv`` (its half of the trace);
-     status lines (``ready ...``, ``event t=... kind: text``, ``refused ...``, ``stats {json}``), all
+     its reports to the session (:mod:`bridge.nodes.report`: ready, event, refused, stats), all
      through :meth:`Vehicle._report`
 
 The parts (this package): the step clock (:mod:`.clock`), who is heard (:mod:`.authority`), arming,
-modes and commands (:mod:`.commander`), parameters (:mod:`.paramservice`), telemetry (:mod:`.streams`),
+modes and commands (:mod:`.commander`), parameters (:mod:`.paramservice`), the mission protocol and the
+mission (:mod:`.mission`), telemetry (:mod:`.streams`),
 the trace rows (:mod:`.rows`). Here: the loops of the clock's states (lockstep, free-running, idle),
 the receive path and its dispatch, and the wall-clock housekeeping.
 """
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -32,13 +32,13 @@ from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import Endpoint, Tlog, wait
 from bridge.mavlink.receive import Rejections
 from bridge.mavlink.signing import Signing
-from bridge.nodes.process import on_stop_signals, status_printer
-from bridge.nodes.report import Event as EventReport
-from bridge.nodes.report import to_line
+from bridge.nodes.process import on_stop_signals, report_printer
+from bridge.nodes.report import Event, Ready, Refused, Report, Stats
 from bridge.nodes.vehicle.authority import Authority, claim
 from bridge.nodes.vehicle.clock import Answer, Clock, ClockState, Trigger
 from bridge.nodes.vehicle.commander import Commander, CommanderPorts
 from bridge.nodes.vehicle.config import CLOCKS, VehicleConfig
+from bridge.nodes.vehicle.mission import MissionManager
 from bridge.nodes.vehicle.paramservice import ParamService
 from bridge.nodes.vehicle.receiver import Receiver, ReceiverPorts, Refusals
 from bridge.nodes.vehicle.rows import Rows
@@ -66,7 +66,7 @@ class Vehicle:
     """One simulated vehicle and its MAVLink links. :meth:`run` until :meth:`stop`."""
 
     def __init__(self, flight: Flight, cfg: VehicleConfig, out: Path | None = None,
-                 status: Callable[[str], None] | None = None) -> None:
+                 status: Callable[[Report], None] | None = None) -> None:
         if cfg.clock not in CLOCKS:
             raise ValueError(f"clock must be one of {', '.join(CLOCKS)}")
         self.flight = flight
@@ -77,7 +77,7 @@ class Vehicle:
         self.actuation = flight.profile.actuation
         self.sim = flight.make_vehicle(armed=False)
         self.plant = self.sim.plant
-        self._status = status or (lambda line: None)
+        self._status = status or (lambda report: None)
         self.tlog = Tlog(out / "vehicle.tlog") if out is not None else None
         # refusals of the receive path (bridge.mavlink.receive), both links, and of the up-link model's end
         self.rejected = Rejections()
@@ -107,15 +107,17 @@ class Vehicle:
         self.odometry = OdometryOut(self.link, self.sim, self.rate, flight.estimator)
         self.targets = Targets(self.sim, self.clock, self.authority, self.rate, self.actuation, self._reject)
         self._statustext = StatusTexts()
-        self.params = ParamService(self.sim, self.authority, self._statustext, self._reject, self._report)
+        self.params = ParamService(self.sim, self.authority, self._statustext, self._reject, self._refused)
+        self.missions = MissionManager(self.sim, self.authority, self._statustext, self._to_ground_stations,
+                                       self._refused)
         ports = CommanderPorts(step=lambda: self.k, state_out=self._send_odometry, new_flight=self._new_flight,
                                arm_through_link=lambda: self.vend.receive_arm(self.t),
                                target_wall=lambda: self.targets.wall, message=self._message,
-                               reject=self._reject, report=self._report, announce=self._report_events)
+                               reject=self._reject, refused=self._refused, announce=self._report_events)
         self.commander = Commander(self.sim, self.clock, self.authority, self._statustext,
                                    {"controller": self.ctl_streams, "gcs": self.streams}, self.substeps, ports)
         self.receiver = Receiver(self.link, self.authority, self._reject, self.targets, self.commander, self.params,
-                                 ReceiverPorts(step=lambda: self.k, flight_on=self._flight_on,
+                                 self.missions, ReceiverPorts(step=lambda: self.k, flight_on=self._flight_on,
                                                announce=self._drain_events, heartbeat=self._heartbeat,
                                                clock_ns=self._clock_ns))
         self._handle = self.receiver.handle  # (an attribute: one call less on the lockstep's hot path)
@@ -142,11 +144,11 @@ class Vehicle:
 
     def run(self) -> None:
         """Serve until :meth:`stop`: step the clock, answer the links, stream telemetry."""
-        gcs = f" gcs={self.gcs.address.hostport}" if self.gcs is not None else ""
         pinned = self.authority.pinned
-        pin = f" controller_from={pinned[0]}:{pinned[1]}" if pinned is not None else ""
-        self._report(f"ready listen={self.link.local[0]}:{self.link.local[1]}{gcs} sysid={self.cfg.sysid} "
-                     f"clock={self.cfg.clock} profile={self.flight.profile.name}{pin}")
+        self._report(Ready("vehicle", listen=f"{self.link.local[0]}:{self.link.local[1]}",
+                           gcs=self.gcs.address.hostport if self.gcs is not None else None, sysid=self.cfg.sysid,
+                           clock=self.cfg.clock, profile=self.flight.profile.name,
+                           controller_from=f"{pinned[0]}:{pinned[1]}" if pinned is not None else None))
         try:
             while not self.stopping:
                 state = self.clock.state
@@ -173,18 +175,22 @@ class Vehicle:
             ep.close()
 
     def report_stats(self) -> None:
-        """The ``stats {json}`` line: what was accepted, refused, sent and received, and the up-link model's."""
-        self._report("stats " + json.dumps({
-            "accepted": self.targets.accepted, "rejected": self.rejected, "odometry_sent": self.odometry.count,
+        """The stats report: what was accepted, refused, sent and received, and the up-link model's."""
+        self._report(Stats({
+            "accepted": self.targets.accepted, "rejected": dict(self.rejected), "odometry_sent": self.odometry.count,
             "received": self.link.received, "overruns": self.pace.rebased, "steps": self.k,
             "rejected_from_controller": self.rejected.from_peer, "resends": self.odometry.resends,
             "answered_again": self.targets.answered_again, "odometry_steps": self.odometry.steps.ranges,
             "kernel_drops": self.link.kernel_drops(),
             "up": self.vend.up.stats.summary() if self.cfg.clock == "lockstep" else None}))
 
-    def _report(self, line: str) -> None:
-        """Every status line of the vehicle goes out here."""
-        self._status(line)
+    def _report(self, report: Report) -> None:
+        """Every report of the vehicle goes out here."""
+        self._status(report)
+
+    def _refused(self, why: str) -> None:
+        """A command or parameter refused, and why (its report)."""
+        self._report(Refused(why))
 
     def _drain_sockets(self, batches: int = 64) -> None:
         """Take in what is already queued on every socket before closing, so that the final
@@ -365,10 +371,7 @@ class Vehicle:
             # flight's controller sent it), or the vehicle's own disarm (landed, diverged)
             peer = self.link.peer
             claim(e, self.authority.controller(peer) if e.kind == "armed" and peer is not None else None)
-            if e.by is not None:  # its sender and change typed (a parameter's): a JSON report line
-                self._report(to_line(EventReport.at(e.t, e.kind, e.text, e.by, e.param)))
-            else:
-                self._report(f"event t={e.t:.3f} {e.kind}: {e.text}")
+            self._report(Event.of(e))
 
     def _drain_events(self) -> None:
         """Each new event as a status line (:meth:`_report_events`) and a STATUSTEXT; then a HEARTBEAT at once,
@@ -390,8 +393,11 @@ class Vehicle:
                 break
             msgs[:0] = chunks
         msgs.append(self._heartbeat())
-        for ep in self.endpoints:
-            ep.send_many(msgs)  # one datagram per link
+        for ep in self.endpoints:  # one datagram per link
+            if ep.trial is not None and ep.peer is not None and not self._flight_on():
+                ep.reply(msgs, ep.peer)  # a would-be controller's doing: within its trial's credit (Receiver)
+            else:
+                ep.send_many(msgs)
 
     # -- sending ---------------------------------------------------------------------------------
     def _send_odometry(self, now: float, fresh: bool = True) -> None:
@@ -413,9 +419,10 @@ class Vehicle:
     def _view(self) -> VehicleView:
         """The vehicle now, as its telemetry reads it."""
         sim, plant, cfg = self.sim, self.plant, self.cfg
+        mission = self.missions.mission
         return VehicleView(plant.state, self.t, sim.mode, sim.onboard.target, sim.armed, self.clock.halted,
                            plant.on_ground, plant.omega, self.flight.profile.omega_max, self.load, sim.sensors,
-                           cfg.home, cfg.sysid)
+                           cfg.home, cfg.sysid, (mission.current, len(mission.items)))
 
     def _heartbeat(self) -> Any:
         return heartbeat(self._view())
@@ -430,6 +437,7 @@ class Vehicle:
         if self.gcs is not None:
             for m, addr in self.gcs.poll():
                 self._handle(self.gcs, m, addr)
+        self.missions.tick(now)
         if now >= self._next_heartbeat:
             self._next_heartbeat = now + HEARTBEAT_S
             hb = self._heartbeat()
@@ -456,6 +464,11 @@ class Vehicle:
                    *self.ctl_streams.due.values()])
         self._next_house = max(nxt, now + 0.001)
 
+    def _to_ground_stations(self, msgs: list[Any]) -> None:
+        """``msgs`` to the GCS link's ground station (none without a GCS link)."""
+        if self.gcs is not None:
+            self.gcs.send_many(msgs)
+
     def _flight_on(self) -> bool:
         """Armed, or a lockstep flight on: the controller's address is held."""
         return self.sim.armed or self.clock.engaged
@@ -475,9 +488,9 @@ class Vehicle:
 
 
 def run_vehicle(flight: Flight, cfg: VehicleConfig, out: str | Path | None = None, overwrite: bool = False) -> int:
-    """``bsst vehicle``: serve until SIGTERM or SIGINT; status lines on stdout; exit status 0."""
+    """``bsst vehicle``: serve until SIGTERM or SIGINT; its reports on stdout (JSON lines); exit status 0."""
     path = side_dir(out, ("vehicle.tlog", "vehicle.csv"), overwrite) if out is not None else None
-    v = Vehicle(flight, cfg, path, status_printer())
+    v = Vehicle(flight, cfg, path, report_printer())
     on_stop_signals(v.stop)
     v.run()
     v.report_stats()

@@ -20,7 +20,7 @@ from typing import Any
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.autopilot.params import BY_NAME, PARAMS, ParamRefused, VehicleParams, read_param
-from bridge.autopilot.simvehicle import Sender, SimVehicle
+from bridge.autopilot.simvehicle import SimVehicle
 from bridge.mavlink.endpoint import Endpoint
 from bridge.mavlink.modes import PARAM_TYPES, param_from_wire, param_name, param_to_wire
 from bridge.nodes.vehicle.authority import Authority
@@ -33,13 +33,13 @@ class ParamService:
     """Answers the parameter protocol for one vehicle (its :class:`SimVehicle` holds the values)."""
 
     def __init__(self, sim: SimVehicle, authority: Authority, texts: StatusTexts,
-                 reject: Callable[[str], None], report: Callable[[str], None]) -> None:
+                 reject: Callable[[str], None], refused: Callable[[str], None]) -> None:
         self.sim = sim
         self.authority = authority
         self.sysid = authority.cfg.sysid
         self._texts = texts
         self._reject = reject
-        self._report = report
+        self._refused = refused  # a set refused, and why (its report to the session)
 
     def params(self) -> VehicleParams:
         return VehicleParams(self.sim.failsafe, self.sim.takeoff_alt_m, self.sysid)
@@ -91,11 +91,10 @@ class ParamService:
                 raise ParamRefused(f"{name}: is {spec.kind}, the set says type {m.param_type}")
             changed = self.sim.change_param(name, param_from_wire(m.param_value, want), self.sysid)
             if changed is not None:  # its sender, typed: the session records who changed what, and when
-                s = self.authority.sender(m, addr, link)
-                changed.by = Sender(s.sysid, s.compid, s.addr[0], s.addr[1], s.link)
+                changed.by = self.authority.sender(m, addr, link)
         except ParamRefused as exc:
             self._reject("param_refused")
-            self._report(f"refused {exc}")
+            self._refused(str(exc))
             ep.reply((self.value(index), *self._texts(mavlink.MAV_SEVERITY_WARNING, str(exc))), addr)
             return False
         ep.reply((self.value(index),), addr)

@@ -2,10 +2,17 @@
 handed to the part that acts on it.
 
 In:  a message (pymavlink), the :class:`Endpoint` it came in on and its source address (host, port)
-Out: calls into the parts (:class:`Targets`, :class:`Commander`, :class:`ParamService`); answers to the
-     requests that change nothing (TIMESYNC with the vehicle's clock in ns, PING, MISSION_COUNT 0, an FTP
-     NAK); the controller link's peer learned; refusals counted, with whether the flight's controller
-     sent them (:class:`Refusals`)
+Out: calls into the parts (:class:`Targets`, :class:`Commander`, :class:`ParamService`,
+     :class:`MissionManager`); answers to the requests that change nothing (TIMESYNC with the vehicle's clock
+     in ns, PING, an FTP NAK); the controller link's peer learned; refusals counted, with whether the flight's
+     controller sent them (:class:`Refusals`)
+
+Before a flight, a vehicle not told its controller's address (no ``controller_from``) cannot know its
+controller: whoever claims the controller's ids on the controller link is on trial, and every reply to
+the would-be controllers (their peer included) is charged, to each one's reply budget and to one credit
+they share: all together get back at most the bytes they sent, plus one frame
+(:class:`~bridge.mavlink.receive.ReplyCredit`;
+docs/hostile-input.md, "Load shedding"). A flight on, its controller is known and answered freely.
 """
 
 from __future__ import annotations
@@ -18,9 +25,11 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.mavlink.endpoint import Endpoint
 from bridge.mavlink.modes import ftp_nak
-from bridge.mavlink.receive import Rejections
+from bridge.mavlink.receive import Rejections, ReplyCredit
 from bridge.nodes.vehicle.authority import COMMANDS, TARGETS, Authority
 from bridge.nodes.vehicle.commander import Commander
+from bridge.nodes.vehicle.mission import MESSAGES as MISSION_MESSAGES
+from bridge.nodes.vehicle.mission import MissionManager
 from bridge.nodes.vehicle.paramservice import MESSAGES as PARAM_MESSAGES
 from bridge.nodes.vehicle.paramservice import ParamService
 from bridge.nodes.vehicle.targets import Targets
@@ -52,14 +61,16 @@ class Receiver:
     """Routes the messages of the controller link (``link``) and the GCS link to the vehicle's parts."""
 
     def __init__(self, link: Endpoint, authority: Authority, refuse: Refusals, targets: Targets,
-                 commander: Commander, params: ParamService, ports: ReceiverPorts) -> None:
+                 commander: Commander, params: ParamService, mission: MissionManager, ports: ReceiverPorts) -> None:
         self.link = link
         self.authority = authority
         self.refuse = refuse
         self.targets = targets
         self.commander = commander
         self.params = params
+        self.mission = mission
         self.ports = ports
+        self.trial = ReplyCredit()  # what the would-be controllers may get back (the module docstring)
 
     def handle(self, ep: Endpoint, m: Any, addr: tuple[str, int]) -> None:
         """A message that passed the frame stage: its sender's authority checked
@@ -77,15 +88,33 @@ class Receiver:
             self.dispatch(ep, m, addr)
             return
         known = self.refuse.from_peer = addr == link.peer
-        why = self.authority.controller_refusal(m, known, addr, link.peer, self.ports.flight_on())
+        flight_on = self.ports.flight_on()
+        why = self.authority.controller_refusal(m, known, addr, link.peer, flight_on)
         if why is not None:
             self.refuse(why)
             if m._type in COMMANDS:
                 ep.reply((mavlink.MAVLink_command_ack_message(m.command, mavlink.MAV_RESULT_DENIED, 0, 0,
                                                               m.get_srcSystem(), m.get_srcComponent()),), addr)
             return
+        if known and flight_on:  # the flight's controller (the lockstep's hot path)
+            self.dispatch(link, m, addr)
+            return
+        if flight_on or self.authority.pinned is not None:
+            self._from_controller(m, addr, known)
+            return
+        self.trial.earn(len(m.get_msgbuf()))  # no controller known yet: on trial (the module docstring)
+        link.trial = self.trial
+        try:
+            self._from_controller(m, addr, known)
+        finally:
+            link.trial = None
+
+    def _from_controller(self, m: Any, addr: tuple[str, int], known: bool) -> None:
+        """A message of the configured controller's that nothing refused: to its part; from a new address
+        (no flight on, or none with a controller yet) its address is learned as the peer."""
+        link = self.link
         if known:
-            self.dispatch(ep, m, addr)
+            self._dispatch_on_trial(m, addr)
             return
         # the controller's ids from a new address, no flight on (or none with a controller yet):
         # it is the peer while its message is handled (an arm's first state goes to it), and
@@ -93,13 +122,21 @@ class Receiver:
         rejected = self.refuse.rejected
         before, refused = link.peer, rejected.total
         link.peer = addr
-        self.dispatch(ep, m, addr)
+        self._dispatch_on_trial(m, addr)
         if rejected.total != refused:
             link.peer = before
         else:
             link.prioritise(addr)
             if addr != before:  # a new controller hears who it talks to now, not at the next 1 Hz heartbeat
-                link.send(self.ports.heartbeat())
+                link.reply((self.ports.heartbeat(),), addr)  # on trial: within its credit (else at 1 Hz)
+
+    def _dispatch_on_trial(self, m: Any, addr: tuple[str, int]) -> None:
+        """:meth:`dispatch` on the controller link; an answer that did not fit the trial's credit was not
+        sent, and is counted ``reply_limited`` (a request whose answer is that long is not served)."""
+        cut = self.trial.cut
+        self.dispatch(self.link, m, addr)
+        if self.trial.cut != cut:
+            self.refuse("reply_limited")
 
     def dispatch(self, ep: Endpoint, m: Any, addr: tuple[str, int]) -> None:
         """A message whose sender may send it, to the part that acts on it."""
@@ -122,11 +159,9 @@ class Receiver:
         elif kind == "SET_MODE":
             if self.commander.set_mode_message(ep, m, addr, self._link_name(ep)):
                 self.ports.announce()
-        elif kind == "MISSION_REQUEST_LIST":
-            if self.authority.for_others(m):
-                return self.refuse("target")
-            self._request(ep, addr, mavlink.MAVLink_mission_count_message(m.get_srcSystem(), m.get_srcComponent(),
-                                                                          0, m.mission_type))
+        elif kind in MISSION_MESSAGES:
+            if self.mission.handle(ep, m, addr, self._link_name(ep), self.refuse):
+                self.ports.announce()
         elif kind == "FILE_TRANSFER_PROTOCOL":  # no files: a NAK at once (MAVProxy then fetches parameters)
             if self.authority.for_others(m):
                 return self.refuse("target")

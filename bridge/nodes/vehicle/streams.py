@@ -52,6 +52,7 @@ class VehicleView:
     sensors: SensorSuite | None  # None: truth
     home: tm.Home
     sysid: int
+    mission: tuple[int, int] = (0, 0)  # the mission's current item and its number of items
 
 
 def heartbeat(v: VehicleView) -> Any:
@@ -103,6 +104,8 @@ STREAMS: dict[int, Stream] = {
     mavlink.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS: Stream(
         lambda v: [tm.actuator_outputs(int(v.t * 1e6), v.omega, v.omega_max)], 0.1),
     mavlink.MAVLINK_MSG_ID_HOME_POSITION: Stream(lambda v: [tm.home_position(v.home)], 0.0),
+    # PX4's mission manager sends it at 1 Hz (its _slow_rate_limiter), and at once on a change
+    mavlink.MAVLINK_MSG_ID_MISSION_CURRENT: Stream(lambda v: tm.mission_current(*v.mission), 1.0),
     mavlink.MAVLINK_MSG_ID_HEARTBEAT: Stream(lambda v: [heartbeat(v)], None),  # its own 1 Hz clock
     mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION: Stream(lambda v: [tm.autopilot_version(v.sysid)], None),
     **{mid: _sensor(mid) for mid in tm.SENSOR_MESSAGES},
