@@ -32,11 +32,12 @@ from array import array
 from pathlib import Path
 from typing import Any
 
-from bridge.autopilot.simvehicle import FAILSAFE, LANDED, OFFBOARD, SimVehicle, typed_fields
+from bridge.autopilot.simvehicle import FAILSAFE, LAND, LANDED, OFFBOARD, SimVehicle, typed_fields
 from bridge.core.flight import Flight, Overrides, Progress, prepare
 from bridge.core.wire import command_over_wire, state_over_wire
 from bridge.link.ends import ControllerEnd, VehicleEnd
 from bridge.record.columns import TRACE_COLUMNS, state_columns, trace_row
+from bridge.record.ending import end_block
 from bridge.record.events import RunEvent
 from bridge.record.metrics import after_faults, plant_blocks, plant_summary, summarise
 from bridge.record.policies import ended_by_outcome, judge, rules_for, violation_text
@@ -169,11 +170,36 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
         for v in judge(summary, arrays, ev, rules_for(flight, "offline", link)):
             vehicle.event("policy", violation_text(v))
             shown.append({"t": round(vehicle.t, 6), "kind": "policy", "text": violation_text(v)})
+        if outcome == "completed":  # after the mission's figures: nothing of them changes
+            summary["end"] = fly_end(flight, vehicle, summary["events"])
     finally:
         _close_record(record, vehicle.events[logged:])
     if record is not None:
         record.finish(arrays, summary, f"{m.name} ({m.controller}, {flight.profile.name})", plots)
     return Run(arrays, summary, path)
+
+
+def fly_end(flight: Flight, vehicle: SimVehicle, shown: list[dict[str, Any]]) -> dict[str, Any]:
+    """The mission's end action offline (``[end] action``, :meth:`SimVehicle.end_mission`), as the vehicle flies
+    it in a session: ``land`` steps the vehicle's own landing (nothing from the controller; the mission's link
+    is done with, its statistics the mission's) until it disarms on the ground, bounded by the descent at the
+    failsafe's rate plus 10 s; ``hold`` is engaged and the flight ends with the mission (no session to hold
+    through). Its events are added to ``shown``; returns ``summary.json["end"]``
+    (:func:`bridge.record.ending.end_block`)."""
+    m, plant = flight.mission, vehicle.plant
+    n0 = len(vehicle.events)
+    vehicle.end_mission(m.end_action)
+    rows: list[tuple[float, float, float]] = []
+    k, rate = m.steps, m.rate_hz
+    bound = k + math.ceil((10.0 + flight.failsafe.time_to_land_s(plant.state[4] - m.start[2])) * rate)
+    while vehicle.armed and vehicle.mode == LAND and k < bound and not plant.diverged():
+        X = plant.state
+        vehicle.advance()  # the vehicle alone: what the up link still holds stays in flight (its statistics too)
+        rows.append((k / rate, X[4], X[5]))
+        k += 1
+    ended = vehicle.events[n0:]
+    shown.extend(RunEvent(round(e.t, 6), e.kind, e.text, by=e.by, **typed_fields(e)).as_dict() for e in ended)
+    return end_block(m.end_action, rows, ended)
 
 
 def stopped(vehicle: SimVehicle, exc: BaseException, k: int, rate: float) -> str:

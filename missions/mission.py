@@ -53,6 +53,10 @@ END_REST_S = 1.0  # s: a plan's mission lasts this long after its trajectory end
 THRUST_SHARE = 0.8
 TILT_SHARE = 0.8
 MAX_STRETCH = 4.0  # a trajectory that still needs too much slowed this much is refused
+# what the vehicle does once the mission's time is flown (``[end] action``): land where it is with its on-board
+# landing and disarm on the ground, or hold its position until the session ends; never motors off in the air
+END_ACTIONS = ("land", "hold")
+DEFAULT_END_ACTION = "land"
 # The plant's envelope: plant/quadrotor.py Quadrotor.diverged() calls a vehicle farther than this from the
 # origin lost, so no start or reference may leave it (envelope_problem; the loader's wider ranges catch typos).
 # Missions do not import the plant: tests/test_mission.py checks that the two agree.
@@ -85,6 +89,7 @@ class Mission:
     source: str = "<python>"
     wind: Mapping[str, Any] = field(default_factory=dict)  # raw: plant.wind.wind_from_table
     events: tuple[Mapping[str, Any], ...] = ()  # raw [[events]]: plant.events.timeline_from_tables
+    end_action: str = DEFAULT_END_ACTION  # END_ACTIONS: ``[end] action``
 
     def __post_init__(self) -> None:
         why = name_problem(self.name)
@@ -97,6 +102,9 @@ class Mission:
         if self.discretization not in DISCRETIZATIONS:
             raise ConfigError(f"{self.source}: discretization: must be one of {', '.join(DISCRETIZATIONS)}; "
                               f"got {self.discretization!r}"[:300])
+        if self.end_action not in END_ACTIONS:
+            raise ConfigError(f"{self.source}: end.action: must be one of {', '.join(END_ACTIONS)}; "
+                              f"got {self.end_action!r}"[:300])
         outside = envelope_problem(self.trajectory, self.start, self.duration_s)
         if outside:
             raise ConfigError(f"{self.source}: {outside[0]}: {outside[1]}")
@@ -126,6 +134,8 @@ class Mission:
                 d[k] = dict(getattr(self, k))
         if self.events:
             d["events"] = [dict(e) for e in self.events]
+        if self.end_action != DEFAULT_END_ACTION:  # (the default unwritten: mission.toml as before)
+            d["end"] = {"action": self.end_action}
         return d
 
     @property
@@ -348,6 +358,9 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
     if derived:
         duration = trajectory.end_s + END_REST_S  # type: ignore[attr-defined]
     raw = {k: _table(t, k) for k in ("gains", "effects", "link", "failsafe", "sensors", "estimator", "params", "wind")}
+    end = t.table("end")
+    end_action = end.string("action", DEFAULT_END_ACTION, choices=END_ACTIONS)
+    end.done()
     events = t.raw("events", [])
     if not isinstance(events, list) or not all(isinstance(e, Mapping) for e in events):
         raise t.error("events", "expected an array of tables [[events]] (t_s, kind and its settings)")
@@ -366,6 +379,7 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
         start=start,  # type: ignore[arg-type]
         source=source,
         events=tuple(events),
+        end_action=end_action,
         **raw,
     )
 

@@ -300,7 +300,7 @@ def test_strangers_and_bad_numbers_during_a_lockstep_session_change_nothing(tmp_
     DISARM, and the ground station sends commands with NaN and infinite numbers: the trace is
     the undisturbed run's byte for byte, the mission completes, every refusal is counted,
     the GCS streams flow on, the states go to the controller only, and events.log names the
-    controller as the only one who armed and disarmed the vehicle."""
+    controller as the only one who armed the vehicle (it disarms itself, landed after the mission)."""
     mission = tmp_path / "m.toml"
     mission.write_text(STRANGE_MISSION)
     ref = _fly(mission, tmp_path / "ref", None)
@@ -317,7 +317,10 @@ def test_strangers_and_bad_numbers_during_a_lockstep_session_change_nothing(tmp_
     log = (tmp_path / "run" / "events.log").read_text().splitlines()
     who = [TAG.search(ln.removesuffix(" [vehicle]")) for ln in log
            if ln.endswith(" [vehicle]") and re.match(r"t=\S+ (armed|disarmed): ", ln)]
-    assert len(who) == 2 and all(w and w.group(1, 2, 5) == ("200", "191", "controller") for w in who), log
+    assert len(who) == 2 and who[0] and who[0].group(1, 2, 5) == ("200", "191", "controller"), log
+    # the disarm is the vehicle's own, on the ground after the mission's landing ([end] action): nobody else's
+    assert [ln for ln in log if re.match(r"t=\S+ disarmed: ", ln)] == [
+        ln for ln in log if ln.endswith("disarmed: landed: disarmed [by vehicle] [vehicle]")], log
 
 
 def _fly(mission: Path, out: Path, seen: dict[str, Any] | None) -> dict[str, Any]:

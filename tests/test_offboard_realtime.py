@@ -90,6 +90,10 @@ class ScriptedVehicle:
                 elif kind == "TIMESYNC" and m.tc1 == 0:  # a request: our clock, at once
                     now_ns = int((time.monotonic() - self.v0) * 1e9) + self.skew_ns
                     self.send(mavlink.MAVLink_timesync_message(now_ns, m.ts1))
+                elif kind == "COMMAND_LONG" and m.command == mavlink.MAV_CMD_NAV_LAND:  # the mission's end
+                    self.armed, self.disarmed = False, True  # landed and disarmed at once
+                    self.send(mavlink.MAVLink_command_ack_message(m.command, mavlink.MAV_RESULT_ACCEPTED))
+                    self.heartbeat()
                 elif kind == "COMMAND_LONG" and m.command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
                     if m.param1 == 1.0 and self.first_arm is None:  # as if its ACK and HEARTBEAT were lost
                         self.first_arm = time.monotonic()
@@ -145,7 +149,7 @@ def fly(tmp: Path, timesync_skew_s: float = 0.0, spoofs: dict[int, int] | None =
                 v.heartbeat()
             v.until(time.monotonic() + 0.01)
         k = k_first = int((time.monotonic() + 0.05 - v.v0) / PERIOD)
-        while not v.disarmed:  # stream until the mission's end disarms us (1.4 s of steps)
+        while not v.disarmed:  # stream until the mission's end lands us (1.4 s of steps)
             assert k - k_first < 5 * RATE and ctl.p.poll() is None, f"no disarm after {k - k_first} steps"
             i = k - k_first
             v.until(v.v0 + k * PERIOD + WAY_DOWN_S + (LATE_S if i in LATE else 0.0))

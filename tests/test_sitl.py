@@ -349,4 +349,7 @@ def test_the_lines_a_child_writes_after_ready_in_the_same_read_are_kept(tmp_path
     ready = session._wait_ready(child)
     child.proc.stdout.close()
     assert ready.listen == "x"
+    # kept, and handled once every child is up, with the others' in the order of their times (Session._start)
+    assert [r.kind for _, r in session._early] == ["armed"]
+    session._handle(session._early)
     assert session.vehicle_armed and [e.kind for e in session.events] == ["armed"]

@@ -118,6 +118,7 @@ def test_the_link_block_through_a_relay_and_without_statistics() -> None:
     # a controller killed before its stats: its rows joined stand for what it sent and received
     bare = link_block(joined(40), {"accepted": 38, "odometry_sent": 45}, {}, None)
     assert bare["up"] == {"sent": 40, "delivered": 38, "lost": 2, "duplicated": 0, "reordered": 0,
+                          "refused": 0, "in_flight": 0, "shed": 0, "dropped_by_kernel": 0, "kernel_counts": False,
                           "delay_ms": {"p50": 0.1, "p95": 0.1, "p99": 0.1, "max": 0.1}}
     assert bare["down"]["sent"] == 45 and bare["down"]["lost"] == 5
 
@@ -211,3 +212,16 @@ def test_trace_rows_have_the_trace_columns_as_names() -> None:
 
 def test_the_part_files_rows_have_their_columns_as_names() -> None:
     assert VehicleRow._fields == VEHICLE_COLUMNS and ControllerRow._fields == CONTROLLER_COLUMNS
+
+
+def test_a_perfect_links_counts_name_where_every_datagram_went() -> None:
+    """Real time with no model between the sockets: what the receiver never read (sent before it listened, after it
+    stopped) is in flight, the kernel's drops are the kernel's, what it refused is refused; lost is the rest."""
+    vehicle = {"accepted": 97, "odometry_sent": 110, "odometry_steps": [[5, 60], [62, 115]], "kernel_drops": 1,
+               "rejected": {}}
+    controller = {"commands": 100, "states": 100, "states_refused": 2, "state_window": [10, 113], "kernel_drops": 1}
+    link = link_block(joined(100), vehicle, controller, None)
+    down = link["down"]
+    assert (down["in_flight"], down["dropped_by_kernel"], down["refused"]) == (5 + 2, 1, 2)  # steps 5-9, 114-115
+    assert down["lost"] == 110 - 100 - 2 - 7 - 1 == 0  # the one step the vehicle skipped (61) was never sent
+    assert link["up"]["dropped_by_kernel"] == 1 and link["up"]["lost"] == 100 - 97 - 1

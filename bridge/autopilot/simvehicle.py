@@ -283,6 +283,23 @@ class SimVehicle:
         self.fly_onboard(target, mode)
         self.event("mode", text, mode=mode, armed=True)
 
+    def end_mission(self, action: str) -> None:
+        """The mission's time is flown (``[end] action``, :data:`missions.mission.END_ACTIONS`): ``land`` lands
+        where it is with the on-board landing and disarms on the ground, ``hold`` holds its position; flown by
+        the on-board controller from this control period, in every clock. An ``end`` event says which (its
+        time: the mission's end, on the vehicle's clock). Only armed under offboard control (a failsafe that
+        already flies keeps its own action)."""
+        if not self.armed or self.mode != OFFBOARD:
+            return
+        X = self.published()
+        if action == "hold":
+            self.fly_onboard(PositionHold.here(X), HOLD)
+            self.event("end", f"mission over: HOLD at x={X[0]:.3f} y={X[2]:.3f} z={X[4]:.3f} m")
+            return
+        self.fly_onboard(Land.here(X, self.failsafe.descent_rate), LAND)
+        self.event("end", f"mission over: LAND at x={X[0]:.3f} y={X[2]:.3f} m from z={X[4]:.3f} m, "
+                          f"{self.failsafe.descent_rate:g} m/s")
+
     def disarm(self, why: str = "disarmed") -> None:
         if self.armed:
             self.armed = False

@@ -119,7 +119,10 @@ def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
         for d in ("up", "down"):
             L = link[d]
             ms = {k: "n/a" if v is None else f"{v:.2f}" for k, v in L["delay_ms"].items()}
-            w(f"link {d:4}: sent {L['sent']} delivered {L['delivered']} lost {L['lost']} dup {L['duplicated']} "
+            more = "".join(f" {name} {L[key]}" for key, name in (("in_flight", "in flight"), ("shed", "shed"),
+                                                                  ("dropped_by_kernel", "dropped by kernel"))
+                           if key in L)
+            w(f"link {d:4}: sent {L['sent']} delivered {L['delivered']} lost {L['lost']}{more} dup {L['duplicated']} "
               f"reordered {L['reordered']} delay p50 {ms['p50']} ms p99 {ms['p99']} ms max {ms['max']} ms\n")
     for e in s.get("events", [])[:8]:
         w(f"event t={e['t']:.3f} {e['kind']}: {e['text']}\n")

@@ -166,7 +166,8 @@ def add_relay_command(sub: Any) -> None:
     p.add_argument("--mission", metavar="FILE", help="take the [link] tables (and seed) from this mission")
     p.add_argument("--duration", type=number_in("--duration", 0.0, 1e7, lo_open=True), metavar="S",
                    help="stop after S seconds (default: until SIGINT/SIGTERM)")
-    p.add_argument("--stats", metavar="FILE", help="write the statistics to FILE as JSON on exit")
+    p.add_argument("--stats", metavar="FILE", help="write the statistics to FILE as JSON on exit (and every 0.5 s "
+                                                   "while relaying, so that a kill leaves them)")
     p.add_argument("--mission-clock", action="store_true",
                    help="blackout times count from the flight's time 0 (the first actuator target up, less the "
                         "down delay) instead of the relay's start")
@@ -201,7 +202,7 @@ def cmd_relay(args: argparse.Namespace) -> int:
     try:
         relay = Relay(listen, target, settings, listen_direction=args.listen_direction,
                       mission_clock=args.mission_clock, client=client, on_client=learned,
-                      back_port=args.back_port or 0)
+                      back_port=args.back_port or 0, stats_path=args.stats)
     except OSError as exc:
         where = f"--listen {args.listen}" + (f" or --back-port {args.back_port}" if args.back_port else "")
         raise ConfigError(f"{where}: cannot bind ({exc.strerror or exc})") from None
@@ -219,7 +220,9 @@ def cmd_relay(args: argparse.Namespace) -> int:
         s = summary[d]
         m_ms = s["measured_ms"]
         fmt = {k: "n/a" if v is None else f"{v:.3f}" for k, v in m_ms.items()}
-        print(f"{d:4}: sent {s['sent']} delivered {s['delivered']} lost {s['lost']} dup {s['duplicated']} "
+        drops = (summary.get("kernel_drops") or {}).get(d)
+        print(f"{d:4}: sent {s['sent']} delivered {s['delivered']} lost {s['lost']} in flight {s['in_flight']} "
+              f"dropped by kernel {'n/a' if drops is None else drops} dup {s['duplicated']} "
               f"reordered {s['reordered']}; added delay p50 {fmt['p50']} ms p99 {fmt['p99']} ms max {fmt['max']} ms")
     refused = summary["refused"]
     print(f"refused {sum(refused.values())}: " + ", ".join(f"{r} {n}" for r, n in refused.items())

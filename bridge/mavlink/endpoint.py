@@ -219,6 +219,8 @@ class Endpoint:
         self.prio_peer: tuple[str, int] | None = None
         self.backlog = False  # the last poll left datagrams on the main socket
         self._turn = 0  # polls since the main socket was read (with a peer socket)
+        self._dropped_before = 0  # the kernel's drops on sockets of this endpoint already closed
+        self._dropped_at_close: int | None = None
 
     def prioritise(self, addr: tuple[str, int]) -> None:
         """Give the datagrams of ``addr`` (the peer) their own socket, if this endpoint was made
@@ -246,6 +248,7 @@ class Endpoint:
 
     def _close_prio(self) -> None:
         if self.prio is not None:
+            self._dropped_before += socket_drops(self.prio) or 0
             self.prio.close()
             self.prio = self.prio_peer = None
 
@@ -423,11 +426,38 @@ class Endpoint:
                 self.peer = addr
         return True
 
+    def kernel_drops(self) -> int | None:
+        """Datagrams the kernel dropped before this endpoint could read them (its receive buffer full), all its
+        sockets so far (:func:`socket_drops`; kept at :meth:`close`); None where the kernel does not say."""
+        if self.fileno < 0:
+            return self._dropped_at_close
+        now = socket_drops(self.sock)
+        prio = socket_drops(self.prio) if self.prio is not None else 0
+        return None if now is None or prio is None else self._dropped_before + now + prio
+
     def close(self) -> None:
         if self.fileno >= 0:
+            self._dropped_at_close = self.kernel_drops()
             self._close_prio()
             self.sock.close()
             self.fileno = -1
+
+
+def socket_drops(sock: socket.socket) -> int | None:
+    """The kernel's count of datagrams it dropped for the UDP socket ``sock`` (its receive buffer full, a bad
+    checksum): the ``drops`` column of ``/proc/net/udp`` (Linux; SO_RXQ_OVFL counts the same per datagram
+    received, the column needs no receive). None where it cannot be read."""
+    try:
+        inode = str(os.fstat(sock.fileno()).st_ino)
+        with open("/proc/net/udp") as f:
+            next(f)
+            for line in f:
+                cols = line.split()
+                if len(cols) >= 13 and cols[9] == inode:
+                    return int(cols[12])
+    except (OSError, ValueError, StopIteration):
+        return None
+    return None
 
 
 def wait(endpoints: Sequence[Endpoint], deadline: float, spin: Endpoint | None = None,

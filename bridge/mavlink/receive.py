@@ -339,3 +339,24 @@ def interval_arg(p2: float) -> float | None:
 def addressed_elsewhere(m: Any, sysid: int, compid: int) -> bool:
     """Whether a message with target fields is for another system or component (0 = all)."""
     return m.target_system not in (0, sysid) or getattr(m, "target_component", 0) not in (0, compid)
+
+
+class StepRanges:
+    """The control steps a stream of per-step messages carried, as inclusive ``[first, last]`` ranges of
+    consecutive steps (a JSON list of pairs, one pair on a link that skipped none; at most :data:`MAX_RANGES`,
+    later steps then extend the last range): what a sender's statistics say it sent, so that a reader can
+    tell which of them reached the receiver's window (``link.*.in_flight`` of a session's summary)."""
+
+    MAX_RANGES = 4096
+
+    def __init__(self) -> None:
+        self.ranges: list[list[int]] = []
+
+    def add(self, k: int) -> None:
+        r = self.ranges
+        if r and r[-1][0] <= k <= r[-1][1] + 1:
+            r[-1][1] = max(r[-1][1], k)
+        elif len(r) < self.MAX_RANGES and (not r or k > r[-1][1]):
+            r.append([k, k])
+        else:  # out of order, or out of room: the last range covers it
+            r[-1][0], r[-1][1] = min(r[-1][0], k), max(r[-1][1], k)

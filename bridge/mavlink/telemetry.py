@@ -150,6 +150,65 @@ def statustext(severity: int, text: str, text_id: int) -> list[Any]:
     return [mavlink.MAVLink_statustext_message(severity, c, text_id, i) for i, c in enumerate(chunks)]
 
 
+STATUSTEXT_WAIT_S = 1.0  # s a chunked text waits for its missing chunks before it is shown as it stands
+STATUSTEXT_OPEN = 16  # chunked texts pending at once, at most (anyone may send chunks that never end)
+MISSING_CHUNK = "[...]"  # in place of a chunk that never came
+
+
+def statustext_bytes(m: Any) -> bytes:
+    """The text of a received STATUSTEXT as its bytes on the wire (NULs at the end dropped): pymavlink
+    decodes each chunk alone, which breaks a UTF-8 character split between two chunks."""
+    buf = m.get_msgbuf()
+    if len(buf) > 10 and buf[0] == 0xFD:  # MAVLink 2: the payload after the 10-byte header, zeros truncated
+        return bytes(buf[11:10 + buf[1]])[:STATUSTEXT_CHUNK].rstrip(b"\x00")
+    text = m.text
+    return (text.encode("utf-8", errors="replace") if isinstance(text, str) else bytes(text)).rstrip(b"\x00")
+
+
+class StatusTextJoiner:
+    """MAVLink 2's chunked STATUSTEXTs joined again (the inverse of :func:`statustext`): a text whose
+    ``id`` is 0 is whole; chunks of one (sender, ``id``) are kept by ``chunk_seq`` until one shorter than
+    50 bytes ends the text. A text still missing chunks after :data:`STATUSTEXT_WAIT_S` (or pushed out by
+    :data:`STATUSTEXT_OPEN` newer ones) is shown as it stands, each missing chunk :data:`MISSING_CHUNK`."""
+
+    def __init__(self) -> None:
+        self._open: dict[tuple[int, int, int], tuple[float, int, dict[int, bytes]]] = {}  # first seen, severity
+
+    def add(self, m: Any, now: float) -> list[tuple[int, str]]:
+        """The texts (severity, text) that ``m`` (a STATUSTEXT received at wall time ``now``, s) completes."""
+        data = statustext_bytes(m)
+        text_id = getattr(m, "id", 0) or 0
+        if not text_id:
+            return [(m.severity, data.decode("utf-8", errors="replace"))]
+        key = (m.get_srcSystem(), m.get_srcComponent(), text_id)
+        first, severity, chunks = self._open.setdefault(key, (now, m.severity, {}))
+        chunks[getattr(m, "chunk_seq", 0) or 0] = data
+        out: list[tuple[int, str]] = []
+        if len(data) < STATUSTEXT_CHUNK:  # its last chunk
+            out.append(self._close(key))
+        while len(self._open) > STATUSTEXT_OPEN:
+            out.append(self._close(min(self._open, key=lambda k: self._open[k][0])))
+        return out
+
+    def expired(self, now: float) -> list[tuple[int, str]]:
+        """The texts whose chunks stopped coming more than :data:`STATUSTEXT_WAIT_S` ago, as they stand."""
+        old = [k for k, (first, _, _) in self._open.items() if now - first > STATUSTEXT_WAIT_S]
+        return [self._close(k) for k in old]
+
+    def _close(self, key: tuple[int, int, int]) -> tuple[int, str]:
+        _, severity, chunks = self._open.pop(key)
+        parts: list[str] = []
+        run = b""
+        for i in range(max(chunks) + 1):
+            if i in chunks:
+                run += chunks[i]
+                continue
+            parts += [run.decode("utf-8", errors="replace"), MISSING_CHUNK]
+            run = b""
+        parts.append(run.decode("utf-8", errors="replace"))
+        return severity, "".join(parts)
+
+
 def autopilot_version(sysid: int) -> Any:
     """``AUTOPILOT_VERSION``: capabilities (MAVLink 2, COMMAND_INT) and a uid from the sysid."""
     return mavlink.MAVLink_autopilot_version_message(

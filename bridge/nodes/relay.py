@@ -6,7 +6,8 @@ In:  UDP datagrams, whatever they hold: from the client on the listen port, from
 Out: the same datagrams, unchanged, forwarded when the link model (on the wall clock, s) says they
      are due; :meth:`Relay.summary` (``relay.json``): per direction the model's statistics and
      ``measured_ms``, the delay really added (ms), plus counts, the client, what was refused by
-     reason, and CPU time (s, us per packet)
+     reason, and CPU time (s, us per packet); with ``stats_path`` that summary kept on disk while serving
+     (a snapshot at most every :data:`STATS_EVERY_S` s, ``"final": false``), written atomically
 
 Topology (docs/design.md, "Link model")::
 
@@ -33,6 +34,12 @@ that sends to the listen port, learned once and never re-learned. Anything else 
 before the link model sees it (so it draws no fate and the seeded run stays the same) and
 counted by reason: ``stranger_front`` (to the listen port, not from the client),
 ``stranger_back`` (to the back socket, not from the target).
+
+**Records that survive a kill.** With ``stats_path`` the statistics are on disk all along: the serving loop
+copies its counters (microseconds) at most every :data:`STATS_EVERY_S` s and a writer thread turns the copy
+into ``relay.json`` under a temporary name and renames it, as ``summary.json`` is written. A SIGKILL at any
+moment leaves the last whole snapshot (``"final": false``); the relay's own last word (``"final": true``) is
+its owner's to write once :meth:`Relay.serve` has returned (:meth:`Relay.summary`).
 """
 
 from __future__ import annotations
@@ -48,12 +55,15 @@ import threading
 import time
 from array import array
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from bridge.link.impairment import LinkStats
 from bridge.link.model import LinkImpairment, LinkSettings
 from bridge.mavlink.endpoint import parse_address as endpoint_address
+from bridge.mavlink.endpoint import socket_drops
 from bridge.nodes.report import Event, Ready
 
 Address = tuple[str, int]
@@ -63,6 +73,7 @@ _TIMESPEC = struct.Struct("qq")
 _ANC_SIZE = socket.CMSG_SPACE(_TIMESPEC.size)
 MAX_READS = 256  # datagrams read from one socket per wake-up: a flood cannot hold up what is due
 REFUSAL_REASONS = ("stranger_front", "stranger_back")  # see the module docstring, "Two ends only"
+STATS_EVERY_S = 0.5  # s between snapshots of the statistics on disk (stats_path): what a kill can lose at most
 # actuator targets (docs/design.md, "The MAVLink contract"): the first one up marks the flight's time 0
 _TARGET_IDS = frozenset((mavlink.MAVLINK_MSG_ID_HIL_ACTUATOR_CONTROLS,
                          mavlink.MAVLINK_MSG_ID_SET_ACTUATOR_CONTROL_TARGET))
@@ -106,7 +117,8 @@ class Relay:
     def __init__(self, listen: Address, target: Address, link: LinkSettings | None = None, *,
                  listen_direction: str = "up", clock: Callable[[], float] = time.perf_counter,
                  mission_clock: bool = False, client: Address | None = None,
-                 on_client: Callable[[Address], None] | None = None, back_port: int = 0) -> None:
+                 on_client: Callable[[Address], None] | None = None, back_port: int = 0,
+                 stats_path: str | Path | None = None) -> None:
         link = link or LinkSettings()
         self.mission_clock = mission_clock
         self.origin_s: float | None = None  # relay time (s) of the flight's time 0 (mission_clock)
@@ -151,6 +163,8 @@ class Relay:
         self.cpu_sys_s = 0.0
         self.forwarded = 0
         self._thread: threading.Thread | None = None
+        self._snapshots = _SnapshotWriter(Path(stats_path)) if stats_path is not None else None
+        self._drops: dict[str, int | None] | None = None  # the kernel's drops on each socket, kept at close
 
     @property
     def address(self) -> Address:
@@ -263,6 +277,8 @@ class Relay:
         end = None if duration_s is None else clock() + duration_s
         rlist = [self.front, self.back, self._wake_r]
         front, back = self.front, self.back
+        snapshots = self._snapshots
+        next_snapshot = clock()
         try:
             while not self._stopping:
                 now = clock()
@@ -282,39 +298,55 @@ class Relay:
                         self._receive(back, self.back_link, False)
                     if self._wake_r in ready:
                         os.read(self._wake_r, 64)
-                self._forward(clock())
+                now = clock()
+                self._forward(now)
+                if snapshots is not None and now >= next_snapshot:
+                    snapshots.put(self._counters(cpu0))
+                    next_snapshot = now + STATS_EVERY_S
         finally:
             cpu1 = resource.getrusage(resource.RUSAGE_SELF)
             self.cpu_user_s += cpu1.ru_utime - cpu0.ru_utime
             self.cpu_sys_s += cpu1.ru_stime - cpu0.ru_stime
+            if snapshots is not None:
+                snapshots.put(self._counters(None))  # whatever is killed from now on, this much is kept
+                snapshots.close()
+
+    def _counters(self, cpu0: Any) -> _Counters:
+        """A copy of everything :meth:`summary` reads (microseconds: the delay arrays are copied whole), with
+        the CPU time since ``cpu0`` added when serving (None: the totals kept)."""
+        user, system = self.cpu_user_s, self.cpu_sys_s
+        if cpu0 is not None:
+            now = resource.getrusage(resource.RUSAGE_SELF)
+            user, system = user + now.ru_utime - cpu0.ru_utime, system + now.ru_stime - cpu0.ru_stime
+        stats = {}
+        for d, link in self.links.items():
+            st = LinkStats()
+            st.__dict__.update(link.stats.__dict__)
+            st.delays, st.lost_by = array("d", link.stats.delays), dict(link.stats.lost_by)
+            stats[d] = st
+        drops = self._drops if self._drops is not None else self._socket_drops()
+        fixed = {"origin_s": self.origin_s, "client": hostport(self.client), "kernel_drops": drops,
+                 "client_from": "given" if self.client_given else "first sender", "target": hostport(self.target),
+                 "refused": dict(self.refused), "forwarded": self.forwarded,
+                 "dropped_no_client": self.dropped_no_client, "send_errors": self.send_errors}
+        return _Counters(stats, {d: array("d", a) for d, a in self.added.items()}, fixed, user, system)
 
     def summary(self) -> dict[str, Any]:
         """Per direction: the model's statistics (``delay_ms`` = scheduled one-way delay) and
         ``measured_ms``, the delay the relay really added, arrival to forward; plus CPU time
-        (user and system, s; meaningful per packet when the relay has its own process)."""
-        from bridge.record.metrics import percentiles  # loads numpy: not needed while relaying
+        (user and system, s; meaningful per packet when the relay has its own process); ``final``: true
+        (a snapshot written while serving says false)."""
+        return self._counters(None).summary(final=True)
 
-        out: dict[str, Any] = {}
-        for d, link in self.links.items():
-            s = link.stats.summary()
-            s["measured_ms"] = percentiles(self.added[d], 1000.0, empty=None)
-            out[d] = s
-        out["origin_s"] = self.origin_s
-        out["client"] = hostport(self.client)
-        out["client_from"] = "given" if self.client_given else "first sender"
-        out["target"] = hostport(self.target)
-        out["refused"] = dict(self.refused)
-        out["forwarded"] = self.forwarded
-        out["dropped_no_client"] = self.dropped_no_client
-        out["send_errors"] = self.send_errors
-        cpu = self.cpu_user_s + self.cpu_sys_s
-        out["cpu_s"] = cpu
-        out["cpu_user_s"] = self.cpu_user_s
-        out["cpu_sys_s"] = self.cpu_sys_s
-        out["cpu_us_per_packet"] = 1e6 * cpu / self.forwarded if self.forwarded else None
-        return out
+    def _socket_drops(self) -> dict[str, int | None]:
+        """Datagrams the kernel dropped on each socket before the relay read them, by the direction they travel
+        (:func:`bridge.mavlink.endpoint.socket_drops`; None where it does not say)."""
+        front, back = socket_drops(self.front), socket_drops(self.back)
+        return {self.front_link.direction: front, self.back_link.direction: back}
 
     def close(self) -> None:
+        if getattr(self, "_drops", True) is None and self.front.fileno() >= 0 and self.back.fileno() >= 0:
+            self._drops = self._socket_drops()  # (not when a bind failed, before it is set)
         for s in (self.front, self.back):
             s.close()
         for fd in (getattr(self, "_wake_r", -1), getattr(self, "_wake_w", -1)):
@@ -333,6 +365,76 @@ class Relay:
         if self._thread is not None:
             self._thread.join(timeout=5.0)
         self.close()
+
+
+class _Counters:
+    """A copy of a relay's counters at one moment, turned into its summary away from the serving loop."""
+
+    def __init__(self, stats: dict[str, LinkStats], added: dict[str, array], fixed: dict[str, Any],
+                 cpu_user_s: float, cpu_sys_s: float) -> None:
+        self.stats, self.added, self.fixed = stats, added, fixed
+        self.cpu_user_s, self.cpu_sys_s = cpu_user_s, cpu_sys_s
+
+    def summary(self, final: bool) -> dict[str, Any]:
+        from bridge.record.metrics import percentiles  # loads numpy: not needed while relaying
+
+        out: dict[str, Any] = {}
+        for d, st in self.stats.items():
+            s = st.summary()
+            s["measured_ms"] = percentiles(self.added[d], 1000.0, empty=None)
+            out[d] = s
+        out.update(self.fixed)
+        cpu = self.cpu_user_s + self.cpu_sys_s
+        forwarded = self.fixed["forwarded"]
+        out["cpu_s"] = cpu
+        out["cpu_user_s"] = self.cpu_user_s
+        out["cpu_sys_s"] = self.cpu_sys_s
+        out["cpu_us_per_packet"] = 1e6 * cpu / forwarded if forwarded else None
+        out["final"] = final
+        return out
+
+
+class _SnapshotWriter:
+    """Writes the newest :class:`_Counters` handed to it to ``path`` atomically, from its own thread (the
+    summary's percentiles and the file's write stay out of the serving loop)."""
+
+    def __init__(self, path: Path) -> None:
+        from bridge.record.runlog import write_json_atomic  # lazy: start-up time, and only a relay with --stats writes
+
+        self._write = write_json_atomic
+        self.path = path
+        self._cond = threading.Condition()
+        self._pending: _Counters | None = None
+        self._closing = False
+        self._thread = threading.Thread(target=self._run, name="bsst-relay-stats", daemon=True)
+        self._thread.start()
+
+    def put(self, counters: _Counters) -> None:
+        with self._cond:
+            self._pending = counters
+            self._cond.notify()
+
+    def close(self) -> None:
+        """Write what is pending, then stop the thread (the final record is the owner's, after this)."""
+        with self._cond:
+            self._closing = True
+            self._cond.notify()
+        self._thread.join()
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while self._pending is None and not self._closing:
+                    self._cond.wait()
+                counters, self._pending = self._pending, None
+                closing = self._closing
+            if counters is not None:
+                try:
+                    self._write(self.path, counters.summary(final=False))
+                except OSError:
+                    pass  # the owner's final write says so, by name
+            if closing and self._pending is None:
+                return
 
 
 def client_event(addr: Address) -> Event:

@@ -37,6 +37,7 @@ from bridge.record.columns import (
     column_index,
     trace_row,
 )
+from bridge.record.ending import END_MODE_CODES
 from bridge.record.runlog import TraceWriter
 
 # groups of columns of a half, by name
@@ -157,6 +158,7 @@ class TraceJoiner:
         self.late_ms: list[float] = []
         self._up_seen: set[int] = set()
         self.missing = 0  # rows without their controller half (never written): demand NaN
+        self.after: list[tuple[float, float, float]] = []  # rows of the end action, after the mission (_after_end)
         self.first_sent: float | None = None  # wall time the first / last joined state was sent
         self.last_sent = math.nan
 
@@ -176,6 +178,9 @@ class TraceJoiner:
         n0 = len(self.rows)
         while self.pending:
             v = self.pending[0]
+            if self._after_end(v):
+                self.pending.popleft()
+                continue
             key = int(v.cmd_k)
             c = self.ctl.get(key) if key >= 0 else None
             if key >= 0 and c is None and not self.controller_done:
@@ -185,6 +190,15 @@ class TraceJoiner:
         if self.trace is not None and len(self.rows) > n0:
             self.trace.flush()
         return len(self.rows) - n0
+
+    def _after_end(self, v: VehicleRow) -> bool:
+        """Whether ``v`` was flown after the mission under its end action (HOLD or LAND past the mission's last
+        step): not the trace's (the mission's figures stay the mission's); kept in :attr:`after` as (t s on
+        the vehicle's clock, z m, vz m/s) for ``summary.json["end"]`` (:func:`bridge.record.ending.end_block`)."""
+        if self.k0 is None or int(v.k) - self.k0 < self.steps or int(v.mode) not in END_MODE_CODES:
+            return False
+        self.after.append((v.t, v.z, v.vz))
+        return True
 
     def _join(self, v: VehicleRow, key: int, c: ControllerRow | None) -> None:
         k = int(v.k)

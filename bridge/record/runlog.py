@@ -77,19 +77,66 @@ def run_dir(
         raise ConfigError(f"--out {path}: directory is not empty (use --overwrite to replace its run)")
     if not create:
         return path
-    # an overwritten run's summary goes first: until the new one is written whole there is none,
-    # never one of another run beside this run's files
-    for old in (path.glob("summary.json") if path.is_dir() else ()):
-        try:
-            old.unlink()
-        except OSError as exc:
-            raise ConfigError(f"--out {path}: cannot replace {old.name} ({exc.strerror})") from None
+    if path.is_dir():
+        clear_run(path)
     try:
-        path.mkdir(parents=True, exist_ok=True)
-        (path / "plots").mkdir(exist_ok=True)
+        path.mkdir(parents=True, exist_ok=True)  # plots/ is made by the figures, when there are figures
     except OSError as exc:
         raise ConfigError(f"--out {path}: cannot create ({exc.strerror})") from None
     return path
+
+
+# Every file (and the one directory) a run of ours writes into its directory, as glob patterns: the one
+# table overwriting reads, so that an overwritten directory holds exactly one run and nothing of a user's is
+# touched. The run itself (sim, sitl), its children, bsst link extract/show, a sweep, a margin, and the
+# temporary names of write_text_atomic.
+RUN_FILES = ("summary.json", "mission.toml", "trace.csv", "events.log", "vehicle.csv", "controller.csv",
+             "vehicle.tlog", "controller.tlog", "vehicle.log", "controller.log", "relay.log", "relay.json",
+             "link-trace.csv", "link-trace.png", "cells.csv", "sweep.json", "report.md", "map_*.png",
+             "margin.json", ".*.tmp*")
+PLOTS_DIR, PLOT_FILES = "plots", ("*.png", ".*.tmp*")  # plots/ and the figures in it
+
+
+def foreign_files(path: Path) -> list[str]:
+    """The names in run directory ``path`` no run of ours writes (:data:`RUN_FILES`), sorted; a user's
+    files in ``plots/`` as ``plots/NAME``."""
+    def ours(p: Path, patterns: Sequence[str]) -> bool:
+        return any(p.match(pat) for pat in patterns)
+
+    out = [p.name for p in path.iterdir() if not ours(p, RUN_FILES) and p.name != PLOTS_DIR]
+    plots = path / PLOTS_DIR
+    if plots.is_dir() and not plots.is_symlink():
+        out += [f"{PLOTS_DIR}/{p.name}" for p in plots.iterdir() if not ours(p, PLOT_FILES)]
+    elif plots.exists() or plots.is_symlink():
+        out.append(PLOTS_DIR)
+    return sorted(out)
+
+
+def clear_run(path: Path) -> list[str]:
+    """Remove the run in ``path`` (``--overwrite``): every file of :data:`RUN_FILES`, the figures in ``plots/``
+    and ``plots/`` itself once empty; the summary first (until the new one is written whole there is none,
+    never one of another run beside this run's files). Nothing else is touched: returns what was kept
+    (:func:`foreign_files`), which the new run's ``events.log`` names. ConfigError if a file cannot go."""
+    def remove(p: Path) -> None:
+        try:
+            p.unlink()
+        except FileNotFoundError:
+            pass
+        except OSError as exc:
+            raise ConfigError(f"--out {path}: cannot replace {p.name} ({exc.strerror})") from None
+
+    remove(path / "summary.json")
+    for p in sorted(path.iterdir()):
+        if p.is_file() and not p.is_symlink() and any(p.match(pat) for pat in RUN_FILES):
+            remove(p)
+    plots = path / PLOTS_DIR
+    if plots.is_dir() and not plots.is_symlink():
+        for p in plots.iterdir():
+            if p.is_file() and any(p.match(pat) for pat in PLOT_FILES):
+                remove(p)
+        if not any(plots.iterdir()):
+            plots.rmdir()
+    return foreign_files(path)
 
 
 class LineWriter:
@@ -154,6 +201,9 @@ class RunRecord:
         write_text_atomic(path / "mission.toml", dump_toml(mission.to_dict()))
         self.trace = TraceWriter(path / "trace.csv")
         self.events = EventLog(path / "events.log")
+        kept = foreign_files(path)
+        if kept:  # an overwritten directory: what was not ours stayed, and is named
+            self.events.event(0.0, "note", f"kept in the run directory, not written by a run: {', '.join(kept)}")
 
     def close(self) -> None:
         """Flush and close the trace and the event log (what was written stays whole)."""

@@ -263,23 +263,22 @@ def link_block(joined: Joined, vehicle: Mapping[str, Any], controller: Mapping[s
     own = int(vs.get("rejected_from_controller", sum(by["vehicle"].values())))  # of the controller's datagrams
     measured = {"up": percentiles(joined.up_ms), "down": percentiles(joined.down_ms)}
     model = {"up": vs.get("up"), "down": cs.get("down")}
-    up_sent = int(cs.get("commands", joined.commands))
-    up_delivered = int(vs.get("accepted", 0))
-    down_sent = int(vs.get("odometry_sent", 0))
-    down_delivered = int(cs.get("states", joined.commands))  # a killed controller left no stats: its rows
-    sides = {
-        "up": {"sent": up_sent, "delivered": up_delivered,
-               "lost": max(0, up_sent - up_delivered - own), "duplicated": 0,
-               "reordered": int(rejected.get("reordered", 0))},
-        "down": {"sent": down_sent, "delivered": down_delivered, "lost": max(0, down_sent - down_delivered),
-                 "duplicated": 0, "reordered": 0},
-    }
+    sides = {"up": socket_counts(int(cs.get("commands", joined.commands)), int(vs.get("accepted", 0)), own, 0,
+                                 vs.get("kernel_drops")),
+             # a killed controller left no stats: its rows
+             "down": socket_counts(int(vs.get("odometry_sent", 0)), int(cs.get("states", joined.commands)),
+                                   int(cs.get("states_refused", 0)),
+                                   steps_outside(vs.get("odometry_steps") or [], cs.get("state_window")),
+                                   cs.get("kernel_drops"))}
+    sides["up"]["reordered"] = int(rejected.get("reordered", 0))
     out: dict[str, Any] = {}
     for d in ("up", "down"):
         if relay is not None:
             r = relay[d]
             out[d] = {**{k: r[k] for k in ("sent", "delivered", "lost", "duplicated", "reordered", "in_flight",
                                            "lost_by")},
+                      # the relay's socket of this direction: what the kernel dropped before the relay read it
+                      "dropped_by_kernel": (relay.get("kernel_drops") or {}).get(d),
                       "delay_ms": measured[d], "model_delay_ms": r["delay_ms"], "relay_added_ms": r["measured_ms"]}
             if "trace" in r:  # a replayed link trace: its own delays and losses, as offline
                 out[d]["trace"] = r["trace"]
@@ -298,6 +297,31 @@ def link_block(joined: Joined, vehicle: Mapping[str, Any], controller: Mapping[s
     if relay is not None:  # datagrams the relay refused, from neither of its two ends, by reason
         out["relay_refused"] = relay.get("refused", {})
     return out
+
+
+def socket_counts(sent: int, delivered: int, refused: int, in_flight: int, kernel: int | None) -> dict[str, Any]:
+    """One direction of a link with no model between the two sockets (real time, perfect link), every datagram
+    sent accounted for under its own name: ``delivered``; ``refused`` by the receiver; ``in_flight``, sent
+    outside the steps the receiver read (before it listened, after it stopped); ``shed`` by the receive
+    budgets (none: the peer is exempt, docs/hostile-input.md); ``dropped_by_kernel`` (the receiving socket's
+    counter, :func:`bridge.mavlink.endpoint.socket_drops`; 0 where unknown); ``lost`` on the link, the rest
+    (sent = delivered + refused + lost + in_flight + shed + dropped_by_kernel)."""
+    dropped = int(kernel or 0)
+    return {"sent": sent, "delivered": delivered, "lost": sent - delivered - refused - in_flight - dropped,
+            "duplicated": 0, "reordered": 0, "refused": refused, "in_flight": in_flight, "shed": 0,
+            "dropped_by_kernel": dropped, "kernel_counts": kernel is not None}
+
+
+def steps_outside(sent: Sequence[Sequence[int]], window: Sequence[int] | None) -> int:
+    """How many of the steps ``sent`` (inclusive ``[first, last]`` ranges,
+    :class:`bridge.mavlink.receive.StepRanges`) lie outside the receiver's ``window`` ([first, last] step read;
+    None: it read none, all of them)."""
+    total = sum(b - a + 1 for a, b in sent)
+    if window is None:
+        return total
+    lo, hi = window
+    inside = sum(max(0, min(b, hi) - max(a, lo) + 1) for a, b in sent)
+    return total - inside
 
 
 def timing_block(joined: Joined, rate_hz: float, wall_s: float, vehicle: Mapping[str, Any],

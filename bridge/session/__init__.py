@@ -29,7 +29,8 @@ Each half is written by the process that owns it, whole lines at a time, so any 
 killed with SIGKILL leaves every file readable up to its last complete row; the join
 only ever appends rows whose two halves are both on disk. A child that dies is reported
 by name and the session ends in exit status 1; Ctrl-C or SIGTERM stops both children
-within 2 s (SIGTERM, then SIGKILL) and still writes the summary (outcome ``aborted``).
+(SIGTERM; SIGKILL for one not gone within ``STOP_DEADLINE_S``, 8 s: under load a child may need seconds to
+close its records) and still writes the summary (outcome ``aborted``).
 
 Every session says honestly how it flew (docs/sitl.md, "Outcomes, exit statuses and safety
 policies"): ``summary.json["ended_by"]`` names who ended the flight (the mission, the sender the

@@ -29,7 +29,10 @@ from bridge.nodes.report import Done, Report, Stats, parse_line
 from params import ConfigError
 
 READY_TIMEOUT_S = 30.0  # s for a child to start (Python, imports, bind) on a loaded machine
-STOP_GRACE_S = 1.5  # s between SIGTERM and SIGKILL: both children gone within 2 s
+# s a child has, after SIGTERM, to close its records and exit before SIGKILL: a deadline on its exit, not a
+# grace it always gets (a child exits within milliseconds of SIGTERM when it can). Generous, since a loaded
+# machine delays a Python process's last writes by seconds; under a sweep worker's 10 s (WORKER_STOP_GRACE_S).
+STOP_DEADLINE_S = 8.0
 
 
 class ChildError(Exception):

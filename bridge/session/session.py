@@ -28,11 +28,12 @@ from bridge.autopilot.simvehicle import Sender, typed_fields
 from bridge.core.flight import Flight, Progress
 from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, LINK_PORT
 from bridge.nodes.report import Event, Ready, Report
+from bridge.record.ending import end_block
 from bridge.record.events import RunEvent
 from bridge.record.joiner import TraceJoiner, off_clock_time
 from bridge.record.runlog import EventLog, Run, RunRecord
 from bridge.record.summary import ChildEnd, SessionFacts, SessionSummary, controller_completed, session_summary
-from bridge.session.children import READY_TIMEOUT_S, STOP_GRACE_S, Child, ChildError, free_udp_port
+from bridge.session.children import READY_TIMEOUT_S, STOP_DEADLINE_S, Child, ChildError, free_udp_port
 from params import ConfigError
 
 
@@ -64,6 +65,7 @@ class Session:
         self.aborted = False
         self.interrupted = False  # set by Ctrl-C / SIGTERM (see _catch_stop_signals)
         self._event_log: EventLog | None = None
+        self._early: list[tuple[Child, Report]] = []  # reports read while starting, handled once all are up
 
     # -- the whole session ---------------------------------------------------------------------
     def run(self, plots: bool, keep: bool) -> Run:
@@ -114,6 +116,11 @@ class Session:
         joined = self.joiner.joined()
         out = session_summary(self.flight, facts, joined, self.events, _end(self.vehicle), _end(self.controller),
                               _end(self.relay), self._relay_stats(), (CONTROLLER_SYSID, CONTROLLER_COMPID))
+        ended = [e for e in self.events if e.source == "vehicle" and e.t is not None]
+        if any(e.kind == "end" for e in ended):  # the mission's end action, flown after its figures' rows
+            shift = (joined.k0 or 0) / self.flight.mission.rate_hz if self.realtime else 0.0  # events' clock
+            rows = [(t - shift, z, vz) for t, z, vz in self.joiner.after]
+            out.summary["end"] = end_block(self.flight.mission.end_action, rows, ended)
         t = joined.rows[-1].t if joined.rows else 0.0
         for e in out.notes:
             self.events.append(e)
@@ -162,13 +169,17 @@ class Session:
         for c in self.flight.param_changes:
             argv += ["--param-at", f"{c.t_s!r}:{c.name}={c.value!r}"]
         self.controller = Child("controller", argv + keyarg, self.path / "controller.log")
-        ready = self._wait_ready(self.vehicle)
-        self._note("started", f"vehicle pid {self.vehicle.pid}: {ready.describe()}", "session")
-        if self.relay is not None:
-            line = self._wait_ready(self.relay).describe()
-            self._note("started", f"relay pid {self.relay.pid}: {line}", "session")
-        self._wait_ready(self.controller)
-        self._note("started", f"controller pid {self.controller.pid}", "session")
+        try:
+            ready = self._wait_ready(self.vehicle)
+            self._note("started", f"vehicle pid {self.vehicle.pid}: {ready.describe()}", "session")
+            if self.relay is not None:
+                line = self._wait_ready(self.relay).describe()
+                self._note("started", f"relay pid {self.relay.pid}: {line}", "session")
+            self._wait_ready(self.controller)
+            self._note("started", f"controller pid {self.controller.pid}", "session")
+        finally:  # what the children said while the others started, in the order it happened
+            early, self._early = self._early, []
+            self._handle(early + self._read_all(self.controller, self.relay, self.vehicle))
 
     def _wait_ready(self, child: Child) -> Ready:
         """Block until ``child`` reports :class:`~bridge.nodes.report.Ready` (returned), or raise
@@ -183,9 +194,10 @@ class Session:
                 # controller may arm the vehicle before its "ready" is read, and its "event ... armed" line
                 # then comes in the same read (dropped, the session saw a flight never armed)
                 for report in child.reports():
-                    self._status(child, report)
                     if isinstance(report, Ready) and ready is None:
                         ready = report
+                    else:
+                        self._early.append((child, report))
                 if ready is not None:
                     return ready
                 if child.eof or child.proc.poll() is not None:
@@ -226,9 +238,7 @@ class Session:
                 sel.select(0.1)
                 if self.interrupted:
                     raise KeyboardInterrupt
-                for child in (veh, ctl):
-                    for report in child.reports():
-                        self._status(child, report)
+                self._handle(self._read_all(ctl, veh))
                 self.joiner.update()
                 self._show_progress()
                 if veh.proc.poll() is not None:
@@ -240,8 +250,8 @@ class Session:
                     self._died(self.relay)
                     return
                 if ctl.proc.poll() is not None and landing_deadline is None:
-                    for report in ctl.reports():
-                        self._status(ctl, report)
+                    # its last words, and the vehicle's about the same moments, in the order they happened
+                    self._handle(self._read_all(ctl, veh))
                     self.joiner.controller_done = True
                     if ctl.done is not None and ctl.done.reason:  # a controller that gave up says why
                         sys.stderr.write(("\n" if self.live else "") + f"bsst sitl: controller: {ctl.done.reason}\n")
@@ -271,7 +281,8 @@ class Session:
         return 5.0 + (1.0 + fs.timeout_s + fs.time_to_land_s(z)) / pace
 
     def _stop_children(self) -> None:
-        """SIGTERM the controller, the relay, the vehicle; SIGKILL whatever is left after the grace."""
+        """SIGTERM the controller, the relay, the vehicle; wait for each to exit (its records closed), SIGKILL
+        whatever is left at the deadline (:data:`~bridge.session.children.STOP_DEADLINE_S`)."""
         children = [c for c in (self.controller, self.relay, self.vehicle) if c is not None]
         for c in children:
             if c.proc.poll() is None:
@@ -279,27 +290,47 @@ class Session:
                     c.proc.send_signal(signal.SIGTERM)
                 except ProcessLookupError:
                     pass
-        deadline = time.monotonic() + STOP_GRACE_S
+        deadline = time.monotonic() + STOP_DEADLINE_S
+        last_words = []
         for c in children:
             try:
                 c.proc.wait(timeout=max(deadline - time.monotonic(), 0.01))
             except subprocess.TimeoutExpired:
                 c.proc.kill()
                 c.proc.wait()
-                self._note("killed", f"{c.name} (pid {c.pid}) did not stop within {STOP_GRACE_S:g} s: SIGKILL",
+                self._note("killed", f"{c.name} (pid {c.pid}) did not stop within {STOP_DEADLINE_S:g} s: SIGKILL",
                            "session")
-            for report in c.reports():
-                self._status(c, report)
+            last_words += [(c, r) for r in c.reports()]
             c.proc.stdout.close()  # type: ignore[union-attr]
+        self._handle(last_words)
+
+    @staticmethod
+    def _read_all(*children: Child | None) -> list[tuple[Child, Report]]:
+        """What ``children`` wrote since last read, read in the order given: the controller before the vehicle,
+        so that a vehicle's event (the cause: written before it answers) is never read after the controller's
+        word about it (the effect), only in the same read or an earlier one."""
+        return [(c, r) for c in children if c is not None for r in c.reports()]
+
+    def _handle(self, reports: list[tuple[Child, Report]]) -> None:
+        """Reports read together from several children, their events in the order of their times on the flight's
+        clock (the vehicle's first on a tie: the controller's events about the vehicle are its answers): each
+        child's pipe is read in turn, so the order read is not the order things happened."""
+        def when(item: tuple[Child, Report]) -> tuple[float, int]:
+            child, r = item
+            t = self._event_time(child, r.t) if isinstance(r, Event) and math.isfinite(r.t) else -math.inf
+            return t, child.name != "vehicle"
+
+        for child, report in sorted(reports, key=when):
+            self._status(child, report)
 
     # -- status lines, events, progress -------------------------------------------------------------
     def _status(self, child: Child, report: Report) -> None:
         if not isinstance(report, Event):
             return
         t, kind = report.t, report.kind
+        if math.isfinite(t):
+            t = self._event_time(child, t)
         if child.name == "vehicle":
-            if self.realtime and math.isfinite(t):
-                t = self._flight_time(t)
             if kind == "armed":
                 self.vehicle_armed = True
             elif kind == "disarmed":
@@ -309,6 +340,11 @@ class Session:
             elif kind == "diverged":
                 self.diverged = True
         self._note(kind, report.text, child.name, t, report.by, **typed_fields(report))
+
+    def _event_time(self, child: Child, t: float) -> float:
+        """An event's time on the clock events.log keeps: real time, the flight's (the vehicle's converted);
+        lockstep, each child's as it said it."""
+        return self._flight_time(t) if self.realtime and child.name == "vehicle" else t
 
     def _flight_time(self, t_vehicle: float) -> float:
         """Real time: the vehicle's clock runs from its start; the flight's (the trace's and

@@ -24,6 +24,7 @@ from bridge.core.wire import command_to_wire, odometry_to_state, step_of_usec
 from bridge.link.ends import ControllerEnd
 from bridge.link.model import LinkImpairment
 from bridge.mavlink.endpoint import FORCE_DISARM, wait
+from bridge.mavlink.modes import MAIN_AUTO, SUB_LOITER
 from bridge.nodes.offboard.config import (
     PHASE_S,
     PHASE_STATES,
@@ -74,6 +75,9 @@ class Offboard(OffboardLink):
         self.reason = ""
         self.ended_taken_over = False  # the flight ended for a ground station's mode (no more targets sent)
         self._changes = list(flight.param_changes)  # scheduled PARAM_SETs not sent yet, by mission time
+        self._end_wall: float | None = None  # wall time the mission's last state came (the events' clock after it)
+        self._end_usec: int | None = None  # lockstep: the stamp of the state that ended the mission, unanswered
+        self._end_height_m = 0.0
 
     @property
     def overruns(self) -> int:
@@ -98,8 +102,9 @@ class Offboard(OffboardLink):
                 self.event("law_failed", self.reason)
                 return "law_failed"
             self._await_param_echoes()
-            if outcome == "completed" and not self._disarm():
-                self.reason = "the vehicle did not acknowledge the disarm"
+            self._pending_params.clear()  # given up (said not made): not resent while the vehicle lands
+            if outcome == "completed":
+                self._fly_end()
             return outcome
         finally:
             self.close()
@@ -148,6 +153,7 @@ class Offboard(OffboardLink):
     def _disarm(self) -> bool:
         result = self._command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0.0, float(FORCE_DISARM))
         ok = result == mavlink.MAV_RESULT_ACCEPTED
+        self._at_end_now()
         self.event("disarmed" if ok else "disarm", "vehicle disarmed" if ok else "disarm not acknowledged")
         return ok
 
@@ -177,7 +183,8 @@ class Offboard(OffboardLink):
                         send(*last_frame)  # the vehicle resent: our answer was lost
                     continue
                 if k - k0 >= steps:
-                    return self._end_of_mission()
+                    self._end_usec = odo.time_usec  # its answer is the end action's first step
+                    return self._end_of_mission((k - k0) / rate, odo)
                 if self.taken_over:  # its HEARTBEAT came before this state: no answer to it
                     return self._check_vehicle() or "aborted"
                 t = (k - k0) / rate
@@ -253,7 +260,7 @@ class Offboard(OffboardLink):
                     k0, j = k, 0
                     self.schedule = clock = FixedRate(due, rate, clock.skipped)
                 if k - k0 >= steps:
-                    return self._end_of_mission()
+                    return self._end_of_mission((k - k0) / rate, odo)
                 usec, recv = odo.time_usec, self._odo_recv
                 self._observe(odo, (k - k0) / rate, recv)
                 last_k = k
@@ -323,10 +330,74 @@ class Offboard(OffboardLink):
                   dec.state_age_s if cmd is not None else math.nan)
         return wire
 
-    def _end_of_mission(self) -> str:
-        """The mission's steps are flown: ``failsafe`` if the vehicle's failsafe took over and
-        it is not back under offboard control, else ``completed``. A vehicle its failsafe
-        landed and disarmed is disarmed by command too, which ends its lockstep flight."""
+    def _fly_end(self) -> None:
+        """The mission's time is flown: the vehicle's own end action (``[end] action``), never a disarm in the
+        air. ``land``: NAV_LAND, then wait until it has landed and disarmed itself, in lockstep answering each
+        state with the no-target acknowledgement (the landing is clocked as the mission was: offline's to the
+        bit); ``hold``: HOLD (DO_SET_MODE AUTO LOITER), the vehicle's until the session ends. What went wrong
+        is the :attr:`reason` (the mission itself was completed)."""
+        self.ending = True
+        hold = self.flight.mission.end_action == "hold"
+        if hold:
+            result = self._command(mavlink.MAV_CMD_DO_SET_MODE, float(mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED),
+                                   float(MAIN_AUTO), p3=float(SUB_LOITER))
+        else:
+            result = self._command(mavlink.MAV_CMD_NAV_LAND, 0.0, 0.0)
+        self._at_end_now()
+        if result != mavlink.MAV_RESULT_ACCEPTED:
+            self.reason = f"the vehicle did not take the mission's end action ({'HOLD' if hold else 'LAND'}): " + (
+                "no answer" if result is None else f"MAV_RESULT {result}")
+            self.event("end", self.reason)
+            return
+        self.event("end", "mission over: the vehicle holds its position" if hold else
+                   "mission over: the vehicle lands where it is and disarms on the ground")
+        if not hold and not self._await_landing():
+            self.event("end", self.reason)
+
+    def _await_landing(self) -> bool:
+        """Serve the link until the vehicle has disarmed on the ground (True), or :attr:`reason` says why not:
+        silent, or not down within the descent's time at the failsafe's rate plus 10 s (of the vehicle's time:
+        lockstep counts the steps it clocks, whatever the pace; real time the wall clock)."""
+        lockstep = self.cfg.clock == "lockstep"
+        usec = self._end_usec
+        allowed_s = 10.0 + self.flight.failsafe.time_to_land_s(self._end_height_m)
+        deadline = time.monotonic() + allowed_s
+        last_usec = (usec or 0) + int(allowed_s * 1e6)
+        if lockstep and usec is not None:
+            self._send_no_target(usec)
+        while self.vehicle_armed and not self.stopping:
+            now = time.monotonic()
+            late = usec is not None and usec > last_usec if lockstep else now > deadline
+            if late or now - self._last_rx > self.cfg.vehicle_timeout_s:
+                self.reason = "the vehicle did not land and disarm after the mission" if late else \
+                    f"vehicle silent for {self.cfg.vehicle_timeout_s:g} s while landing"
+                return False
+            for _, m, _addr in wait((self.ep,), min(deadline, self._next_house), self.ep, self.cfg.spin_s):
+                self._on(m)
+            odo, self._odo = self._odo, None
+            if lockstep and odo is not None and self.vehicle_armed and usec is not None and odo.time_usec >= usec:
+                usec = odo.time_usec
+                self._send_no_target(usec)
+            if time.monotonic() >= self._next_house:
+                self._housekeeping()
+        self._at_end_now()
+        return not self.vehicle_armed
+
+    def _at_end_now(self) -> None:
+        """After the mission's steps, events are at the time they happen, not at the last step's: in lockstep
+        the vehicle waits at the state that ended the mission, in real time the wall clock has gone on since it
+        came (the session orders the two children's events by time: an answer never comes before its cause)."""
+        if self._end_wall is not None and self.cfg.clock == "realtime":
+            now = time.monotonic()
+            self.t_mission += now - self._end_wall
+            self._end_wall = now
+
+    def _end_of_mission(self, t_end: float, odo: Any) -> str:
+        """The mission's steps are flown (the state of mission time ``t_end``, s, came): ``failsafe`` if the
+        vehicle's failsafe took over and it is not back under offboard control, else ``completed``. A vehicle
+        its failsafe landed and disarmed is disarmed by command too, which ends its lockstep flight."""
+        self.t_mission, self._end_wall = t_end, time.monotonic()
+        self._end_height_m = max(-float(odo.z), 0.0)  # m above the start (NED z): the landing's time
         back = self.vehicle_armed and self.vehicle_state != mavlink.MAV_STATE_CRITICAL
         if not self.failsafe_seen or back:
             return "completed"
@@ -378,7 +449,9 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
                 "commands": node.commands, "states": node.states, "received": node.ep.received,
                 "sent": node.ep.sent, "stale_ticks": node.stale_ticks, "overruns": node.overruns,
                 "down": node.cend.down.stats.summary() if cfg.clock == "lockstep" else None,
-                "rejected": dict(node.rejected), "rejected_from_vehicle": node.rejected.from_peer}))
+                "rejected": dict(node.rejected), "rejected_from_vehicle": node.rejected.from_peer,
+                "states_refused": node.states_refused, "state_window": node.state_window,
+                "kernel_drops": node.ep.kernel_drops()}))
     left = bool(node.left_lockstep)
     emit(Done(outcome, left, node.reason or None, node.taken_over if node.ended_taken_over else None))
     if outcome != "completed":

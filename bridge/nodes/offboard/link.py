@@ -29,6 +29,7 @@ from bridge.mavlink.endpoint import HIL_ACTUATOR_CONTROLS, SET_ACTUATOR_CONTROL_
 from bridge.mavlink.modes import MAIN_OFFBOARD, PARAM_TYPES, main_mode, param_to_wire, shown_name
 from bridge.mavlink.receive import Rejections, odometry_problem
 from bridge.mavlink.signing import Signing
+from bridge.mavlink.telemetry import StatusTextJoiner
 from bridge.nodes.offboard.config import (
     HOUSEKEEPING_S,
     SPIN_BEFORE_TICK_S,
@@ -82,6 +83,7 @@ class OffboardLink:
         self._status = status or (lambda report: None)
         self.tlog = Tlog(out / "controller.tlog") if out is not None else None
         self.rejected = Rejections()  # what the receive path refused (bridge.mavlink.receive)
+        self._texts = StatusTextJoiner()  # chunked STATUSTEXTs, joined before they are reported
         self.ep = Endpoint(cfg.vehicle, sysid=cfg.sysid, compid=cfg.compid, tlog=self.tlog, name="--vehicle",
                            signing=Signing(cfg.key) if cfg.key is not None else None, rejected=self.rejected,
                            source_port=cfg.source_port)
@@ -97,6 +99,7 @@ class OffboardLink:
         self.failsafe_seen = False  # the vehicle reported its failsafe (CRITICAL since we armed it)
         self.left_lockstep = ""  # the vehicle's STATUSTEXT saying it left lockstep, if it did
         self.taken_over = ""  # the mode a ground station switched the armed vehicle to (PX4 custom_mode), if any
+        self.ending = False  # the mission's end action handed to the vehicle: its own mode is no takeover
         self._odo: Any = None  # newest ODOMETRY not yet used
         self._odo_recv = 0.0
         self._acks: dict[int, int] = {}
@@ -111,6 +114,8 @@ class OffboardLink:
         self.rtt_ns: int | None = None
         self.commands = 0
         self.states = 0
+        self.states_refused = 0  # the vehicle's states refused (stamp or numbers)
+        self.state_window: list[int] | None = None  # [first, last] step of the vehicle's states read
         self.t_mission = 0.0  # the mission time the events are reported at (s)
         self.param_sets: list[ScheduledSet] = []  # the scheduled PARAM_SETs sent, in order
         self._pending_params: dict[str, ScheduledSet] = {}  # by name: sent, not echoed by the vehicle yet
@@ -118,14 +123,15 @@ class OffboardLink:
     def event(self, kind: str, text: str) -> None:
         self._status(Event.at(self.t_mission, kind, text))
 
-    def _command(self, cmd: int, p1: float, p2: float, tries: int = 30, every_s: float = 0.1) -> int | None:
+    def _command(self, cmd: int, p1: float, p2: float, tries: int = 30, every_s: float = 0.1,
+                 p3: float = 0.0) -> int | None:
         """COMMAND_LONG to the vehicle, repeated (confirmation 0, 1, ...) until ACKed. Every
         0.1 s: an ARM whose ACK was lost has armed the vehicle, whose failsafe takes over
         0.5 s later without a target (ARM_DISARM is idempotent)."""
         self._acks.pop(cmd, None)
         for n in range(tries):
             self.ep.send(mavlink.MAVLink_command_long_message(self.vsys or 0, self.vcomp, cmd, n, p1, p2,
-                                                              0, 0, 0, 0, 0))
+                                                              p3, 0, 0, 0, 0))
             deadline = time.monotonic() + every_s
             while time.monotonic() < deadline and not self.stopping:
                 self._serve(deadline)
@@ -258,8 +264,13 @@ class OffboardLink:
             why = ("sender" if src != self.vsys
                    else stamp_problem(m.time_usec, self._odo_usec, now - self._odo_recv, 1.0 / self.rate,
                                       self._stamp_slack_s) or odometry_problem(m))
+            if src == self.vsys:  # the window of steps this side read: what the vehicle sent outside it never came
+                k = step_of_usec(m.time_usec, self.rate)
+                self.state_window = [min(self.state_window[0], k), max(self.state_window[1], k)] \
+                    if self.state_window else [k, k]
             if why:
                 self.rejected.add(why, True)
+                self.states_refused += src == self.vsys
                 return
             self._odo_usec = m.time_usec
             self.states += 1
@@ -284,7 +295,7 @@ class OffboardLink:
                 # CRITICAL heartbeat may have been lost), or halted by divergence
                 self.failsafe_seen = True
             elif (self.vehicle_armed and m.autopilot == mavlink.MAV_AUTOPILOT_PX4 and not self.taken_over
-                  and main_mode(m.custom_mode) != MAIN_OFFBOARD):
+                  and not self.ending and main_mode(m.custom_mode) != MAIN_OFFBOARD):
                 # armed, not in its failsafe, out of OFFBOARD: a ground station took it (HOLD, LAND, ...)
                 self.taken_over = shown_name(m.custom_mode)
             return
@@ -299,11 +310,14 @@ class OffboardLink:
                 self._param_echo(m)
         elif kind == "TIMESYNC":
             self._timesync(m)
-        elif kind == "STATUSTEXT":
-            text = m.text.rstrip("\x00") if isinstance(m.text, str) else m.text.decode(errors="replace")
-            self._status(StatusText(m.severity, text))
-            if text.startswith("lockstep:") and not self.left_lockstep:  # not a lockstep flight any more
-                self.left_lockstep = text
+        elif kind == "STATUSTEXT":  # a chunked one is reported once, joined
+            for severity, text in self._texts.add(m, time.monotonic()):
+                self._statustext(severity, text)
+
+    def _statustext(self, severity: int, text: str) -> None:
+        self._status(StatusText(severity, text))
+        if text.startswith("lockstep:") and not self.left_lockstep:  # not a lockstep flight any more
+            self.left_lockstep = text
 
     def _timesync(self, m: Any) -> None:
         now = time.monotonic_ns()
@@ -333,6 +347,8 @@ class OffboardLink:
         if now >= self._next_ts and self.vsys is not None:
             self._next_ts = now + self.cfg.timesync_s
             self.ep.send(mavlink.MAVLink_timesync_message(0, time.monotonic_ns()))
+        for severity, text in self._texts.expired(now):
+            self._statustext(severity, text)
         if self._pending_params:
             self._resend_params(now)
         refused = self.rejected.report(now)

@@ -25,7 +25,7 @@ from typing import Any
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.autopilot.params import BY_NAME
-from bridge.autopilot.simvehicle import GROUND_MODES, LAND, OFFBOARD, TAKEOFF, Sender, SimVehicle
+from bridge.autopilot.simvehicle import GROUND_MODES, HOLD, LAND, OFFBOARD, TAKEOFF, Sender, SimVehicle
 from bridge.core.flight import event_problem
 from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import Endpoint
@@ -54,6 +54,9 @@ class CommanderPorts:
     message: Callable[[int], list[Any]]  # the message(s) of an id, as a stream sends them
     reject: Callable[[str], None]  # count a refusal (bridge.mavlink.receive.Rejections)
     refused: Callable[[str], None]  # a command refused, and why (its report to the session)
+    # the events a command made said on stdout now, before its COMMAND_ACK, so that whoever the answer reaches
+    # (the controller, and what it reports) never speaks of it before the vehicle did
+    announce: Callable[[], None] = lambda: None
 
 
 class Commander:
@@ -87,6 +90,7 @@ class Commander:
         n0 = len(self.sim.events)
         result, follow = self._run_command(m, by)
         attribute(self.sim.events, n0, by)
+        self.ports.announce()
         ack = mavlink.MAVLink_command_ack_message(m.command, result, 0, 0, m.get_srcSystem(), m.get_srcComponent())
         ep.reply((ack, *follow, *self.texts), addr)
         self.texts.clear()
@@ -103,6 +107,7 @@ class Commander:
             return False
         by = self.authority.sender(m, addr, link)
         result = self._set_mode_or_refuse(*requested_custom_mode(m.base_mode, m.custom_mode), by=by)
+        self.ports.announce()
         ack = mavlink.MAVLink_command_ack_message(mavlink.MAV_CMD_DO_SET_MODE, result, 0, 0, m.get_srcSystem(),
                                                   m.get_srcComponent())
         ep.reply((ack, *self.texts), addr)
@@ -239,12 +244,31 @@ class Commander:
                 and time.monotonic() - self.ports.target_wall() > OFFBOARD_STREAM_S):
             # PX4 too: OFFBOARD only while a controller streams targets (its failsafe would act at once)
             return self._refuse("OFFBOARD: no controller is sending targets")
+        if by.link == "controller" and mode in (LAND, HOLD) and sim.armed and sim.mode == OFFBOARD:
+            return self._end_mission(mode)
         n0 = len(sim.events)
         was = sim.mode
         sim.set_mode(mode, takeoff_alt_m)
         attribute(sim.events, n0, by)
         self._clock_after_mode(was)
         return mavlink.MAV_RESULT_ACCEPTED
+
+    def _end_mission(self, mode: str) -> int:
+        """The flight's controller hands the vehicle the mission's end action (LAND or HOLD,
+        :meth:`SimVehicle.end_mission`): flown by the vehicle's own controller and no ground station's
+        takeover, so the step clock stays the flight's: lockstep, the controller clocks the landing with its
+        no-target acknowledgements (offline's landing to the bit) and the touchdown ends the flight
+        (:meth:`flight_over`); a hold stands still, holding, until the session ends."""
+        self.sim.end_mission("land" if mode == LAND else "hold")
+        if self.lockstep and mode == HOLD and self.clock.engaged:
+            self.clock.fire(Trigger.DISARM)  # the lockstep flight is over: time stands still
+        return mavlink.MAV_RESULT_ACCEPTED
+
+    def flight_over(self) -> None:
+        """After a control period: a lockstep flight whose vehicle disarmed itself on the ground (the end
+        action's landing) is over; time stands still until it is armed again, as after a disarm by command."""
+        if self.clock.engaged and not self.sim.armed and self.sim.mode == LAND:  # (a ground station's LAND runs free)
+            self.clock.fire(Trigger.DISARM)
 
     def _clock_after_mode(self, was: str) -> None:
         """The step clock after a mode change: a vehicle flown by its own controller (HOLD, LAND,

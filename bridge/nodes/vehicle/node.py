@@ -24,6 +24,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from bridge.autopilot.simvehicle import LAND
 from bridge.core.flight import Flight
 from bridge.core.wire import command_from_wire
 from bridge.link.ends import VehicleEnd
@@ -101,6 +102,7 @@ class Vehicle:
         self.pace = self.clock.pace  # the wall clock of physics steps
         self._n = 0  # physics steps taken (realtime: for the wall-clock schedule)
         self._events_sent = 0
+        self._events_reported = 0  # events said on stdout (a command's before its answer: _report_events)
         self._load_at = (now, time.process_time())
         self.load = 0
         # lockstep: the controller's targets and re-arms cross the mission's up-link model here
@@ -114,7 +116,7 @@ class Vehicle:
         ports = CommanderPorts(step=lambda: self.k, state_out=self._send_odometry, new_flight=self._new_flight,
                                arm_through_link=lambda: self.vend.receive_arm(self.t),
                                target_wall=lambda: self.targets.wall, message=self._message,
-                               reject=self._reject, refused=self._refused)
+                               reject=self._reject, refused=self._refused, announce=self._report_events)
         self.commander = Commander(self.sim, self.clock, self.authority, self._statustext,
                                    {"controller": self.ctl_streams, "gcs": self.streams}, self.substeps, ports)
         self.receiver = Receiver(self.link, self.authority, self._reject, self.targets, self.commander, self.params,
@@ -181,7 +183,8 @@ class Vehicle:
             "accepted": self.targets.accepted, "rejected": dict(self.rejected), "odometry_sent": self.odometry.count,
             "received": self.link.received, "overruns": self.pace.rebased, "steps": self.k,
             "rejected_from_controller": self.rejected.from_peer, "resends": self.odometry.resends,
-            "answered_again": self.targets.answered_again,
+            "answered_again": self.targets.answered_again, "odometry_steps": self.odometry.steps.ranges,
+            "kernel_drops": self.link.kernel_drops(),
             "up": self.vend.up.stats.summary() if self.cfg.clock == "lockstep" else None,
             "plant": plant_blocks(self.plant)}))  # summary.json's wind, battery, impact blocks, as offline
 
@@ -277,11 +280,16 @@ class Vehicle:
         if wire is not None:
             vend.receive_command(t, command_from_wire(self.actuation, wire), t)
             self.targets.applied = (k, wire, recv)
-        vend.deliver(t)
+        ending = self.sim.mode == LAND  # lockstep and LAND: the mission's end action (Commander.flight_over)
+        if not ending:  # after the mission the vehicle flies alone: the up link's statistics stay the mission's
+            vend.deliver(t)
         X = self.plant.state
         est = self._estimate()
         real = self.plant.realised
-        vend.advance()
+        if ending:
+            self.sim.advance()
+        else:
+            vend.advance()
         self.k = k + 1
         if self.cfg.speed is not None:
             self._wait_until(self.pace.due(self.k * self.substeps))
@@ -350,26 +358,36 @@ class Vehicle:
         """Events and divergence; False when the plant is lost (nothing more to send)."""
         if len(self.sim.events) > self._events_sent:
             self._drain_events()
+        self.commander.flight_over()
         if self.commander.diverged():
             self._drain_events()
             return False
         return True
 
-    def _drain_events(self) -> None:
-        """Each new event as a status line and a STATUSTEXT; then a HEARTBEAT at once, so
-        that a ground station sees an arm, disarm or failsafe without waiting up to 1 s."""
+    def _report_events(self) -> None:
+        """Each new event as a status line, at once: a command's before its COMMAND_ACK (Commander.command), so
+        that the controller, which reports what the answer tells it, never speaks of it first."""
         events = self.sim.events
-        if self._events_sent == len(events):
-            return
-        texts: list[list[Any]] = []
-        while self._events_sent < len(events):
-            e = events[self._events_sent]
-            self._events_sent += 1
+        while self._events_reported < len(events):
+            e = events[self._events_reported]
+            self._events_reported += 1
             # not caused by a command handled here: an arm the up-link model delivered (the
             # flight's controller sent it), or the vehicle's own disarm (landed, diverged)
             peer = self.link.peer
             claim(e, self.authority.controller(peer) if e.kind == "armed" and peer is not None else None)
             self._report(Event.of(e))
+
+    def _drain_events(self) -> None:
+        """Each new event as a status line (:meth:`_report_events`) and a STATUSTEXT; then a HEARTBEAT at once,
+        so that a ground station sees an arm, disarm or failsafe without waiting up to 1 s."""
+        events = self.sim.events
+        if self._events_sent == len(events):
+            return
+        self._report_events()
+        texts: list[list[Any]] = []
+        while self._events_sent < len(events):
+            e = events[self._events_sent]
+            self._events_sent += 1
             sev = (mavlink.MAV_SEVERITY_CRITICAL if e.kind in ("failsafe", "diverged", "lockstep")
                    else mavlink.MAV_SEVERITY_INFO)
             texts.append(self._statustext(sev, f"{e.kind}: {e.shown}"))

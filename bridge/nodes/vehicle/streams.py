@@ -28,6 +28,7 @@ from bridge.core.wire import rotate_inverse, state_to_odometry, step_usec
 from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import ODOMETRY, Endpoint
 from bridge.mavlink.modes import heartbeat_mode
+from bridge.mavlink.receive import StepRanges
 from plant.battery import Battery
 from plant.sensors import SensorSuite
 
@@ -261,6 +262,7 @@ class OdometryOut:
         self.sent_at: dict[int, float] = {}  # step -> wall time its state was first sent
         self.count = 0  # ODOMETRY messages sent
         self.resends = 0  # states sent again (nobody answered them)
+        self.steps = StepRanges()  # the steps whose states went out (the summary's link.down.in_flight)
 
     def send(self, k: int, now: float, fresh: bool) -> bool:
         """Send the state of step k at wall time ``now`` (s); ``fresh``: not a resend. False when the
@@ -277,6 +279,7 @@ class OdometryOut:
             tail = estimate_tail(q, sim.estimator.covariance(), self.estimator)
         if self.link.send_hot(ODOMETRY, (step_usec(k, self.rate), *pos, *q, *vel, *rates, *tail)):
             self.count += 1
+            self.steps.add(k)
         sent_at = self.sent_at
         if fresh or k not in sent_at:  # a resent state's round trip counts from its first sending
             sent_at[k] = now

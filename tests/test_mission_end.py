@@ -1,0 +1,140 @@
+"""Covers missions.mission, bridge.autopilot.simvehicle, bridge.loop and bridge.nodes: the mission's end action.
+
+``[end] action`` (missions.mission), SimVehicle.end_mission, the offline loop's fly_end, the controller's end of
+mission (bridge.nodes.offboard), the vehicle's commander (bridge.nodes.vehicle.commander), bridge.record.ending.
+
+The mission's end never leaves the vehicle in the air with its motors off: ``land`` (the default) lands it with
+its on-board landing and disarms it on the ground, ``hold`` holds its position until the session ends, in every
+clock; lockstep's landing equals offline's to the bit, and the mission's trace and figures stay the mission's.
+Real processes for the sessions, waits on events with deadlines.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from bridge.loop import simulate
+from bridge.session import instance_slot, sitl
+from missions import MISSION_DIR, load_mission
+from tests.sitlkit import ENV, ROOT, Proc
+from tests.waiting import wait_for
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
+
+SINE = MISSION_DIR / "sine.toml"
+GROUND_M = 0.1  # m: motors may stop only below this
+
+
+def _mission(tmp_path: Path, seconds: float, end: str | None = None) -> Path:
+    text = SINE.read_text().replace("duration_s = 30.0", f"duration_s = {seconds}")
+    if end is not None:
+        text += f'\n[end]\naction = "{end}"\n'
+    f = tmp_path / f"sine-{end or 'default'}.toml"
+    f.write_text(text)
+    return f
+
+
+def _landed(end: dict) -> None:
+    assert end["action"] == "land" and end["disarmed"] is True, end
+    assert end["disarm_z_m"] < GROUND_M, end  # motors off on the ground, never in the air
+    assert end["rows"] > 100 and 0.5 < end["max_descent_mps"] < 1.0, end  # a landing was flown, at its rate
+
+
+@pytest.fixture(scope="module")
+def sine_runs(tmp_path_factory: pytest.TempPathFactory) -> tuple[object, object, Path]:
+    """The paper's sine offline and in lockstep (run directory kept)."""
+    out = tmp_path_factory.mktemp("end") / "ls"
+    return simulate(SINE, plots=False), sitl(SINE, out=out, plots=False, instance=None), out
+
+
+def test_offline_sine_ends_landed_and_disarmed(sine_runs) -> None:
+    offline, _, _ = sine_runs
+    _landed(offline.summary["end"])
+    kinds = [(e["kind"], e["t"]) for e in offline.summary["events"]]
+    assert ("end", 30.0) in kinds
+    disarms = [t for k, t in kinds if k == "disarmed"]
+    assert len(disarms) == 1 and disarms[0] == pytest.approx(30.0 + offline.summary["end"]["landing_s"])
+    # the mission's trace and figures are the mission's: its rows end at its last step
+    assert len(offline.trace["t"]) == 7500 and offline.rms == 2.4093284288839256e-06
+
+
+def test_lockstep_sine_lands_as_offline_to_the_bit(sine_runs) -> None:
+    offline, lockstep, out = sine_runs
+    assert lockstep.outcome == "completed" and lockstep.summary["lockstep"] == {"held": True}
+    _landed(lockstep.summary["end"])
+    assert lockstep.summary["end"] == offline.summary["end"]
+    assert lockstep.rms == offline.rms and len(lockstep.trace["t"]) == 7500
+    # the vehicle's own record: every row after the mission flown in LAND (vehicle.csv mode 4) on the step clock,
+    # no disarm in the air, nothing by command
+    with open(out / "vehicle.csv") as f:
+        rows = [r for r in csv.DictReader(f) if int(r["k"]) >= 7500]
+    assert len(rows) == lockstep.summary["end"]["rows"]
+    assert {r["mode"] for r in rows} == {"4"} and all(r["k"] == r["cmd_k"] for r in rows)
+    disarms = [e for e in lockstep.summary["events"] if e["kind"] == "disarmed"]
+    assert len(disarms) == 1 and "by command" not in disarms[0]["text"]
+
+
+def test_hold_holds_offline_and_in_lockstep(tmp_path: Path) -> None:
+    mission = _mission(tmp_path, 3.0, "hold")
+    offline = simulate(mission, plots=False)
+    assert offline.summary["end"]["action"] == "hold" and offline.summary["end"]["disarmed"] is False
+    run = sitl(mission, out=tmp_path / "ls", plots=False, instance=None)
+    assert run.outcome == "completed" and run.summary["lockstep"] == {"held": True}
+    end = run.summary["end"]
+    assert end["action"] == "hold" and end["disarmed"] is False, end
+    assert not [e for e in run.summary["events"] if e["kind"] == "disarmed"]
+    assert [e["text"] for e in run.summary["events"] if e["kind"] == "end" and e.get("source") == "vehicle"] == [
+        e["text"] for e in offline.summary["events"] if e["kind"] == "end"]
+
+
+def test_hold_on_the_wall_clock_holds_until_stopped(tmp_path: Path) -> None:
+    """``bsst vehicle`` and ``bsst controller`` in real time: the controller hands over HOLD and exits; the
+    vehicle holds its height, armed, for as long as it runs (here until it has held for 1.5 s)."""
+    mission = _mission(tmp_path, 2.0, "hold")
+    out = tmp_path / "run"
+    with instance_slot() as n:
+        vehicle = Proc.bsst("vehicle", str(mission), "--realtime", "--instance", str(n), "--gcs", "none",
+                            "--out", str(out), cwd=ROOT)
+        try:
+            vehicle.wait_line(lambda ln: ln.startswith("ready") or '"report":"ready"' in ln, timeout=60)
+            ctl = subprocess.run([sys.executable, "-m", "bridge", "controller", str(mission), "--realtime",
+                                  "--instance", str(n), "--out", str(out), "--overwrite"], cwd=ROOT, env=ENV,
+                                 capture_output=True, text=True, timeout=120)
+            assert ctl.returncode == 0, ctl.stderr
+
+            def held_rows() -> list[dict]:
+                with open(out / "vehicle.csv") as f:
+                    return [r for r in csv.DictReader(f) if r["mode"] == "3"]
+
+            wait_for(lambda: len(held_rows()) >= 1.5 * 250, 60, "1.5 s of HOLD rows in vehicle.csv")
+        finally:
+            vehicle.stop()
+    rows = held_rows()
+    z = [float(r["z"]) for r in rows]
+    assert max(z) - min(z) < 0.05, (min(z), max(z))  # held where the mission ended
+    assert any('"kind":"end"' in ln or "event t=" in ln and " end: " in ln for ln in vehicle.lines)
+    assert not any("disarmed" in ln for ln in vehicle.lines if "event" in ln), vehicle.lines[-10:]
+
+
+@pytest.mark.parametrize("value", ['"fly away"', "1"])
+def test_a_bad_end_action_is_one_line_exit_2(tmp_path: Path, value: str) -> None:
+    f = tmp_path / "bad.toml"
+    f.write_text(SINE.read_text() + f"\n[end]\naction = {value}\n")
+    res = subprocess.run([sys.executable, "-m", "bridge", "sim", str(f), "--no-plots", "--out", str(tmp_path / "o")],
+                         cwd=ROOT, env=ENV, capture_output=True, text=True, timeout=60)
+    assert res.returncode == 2 and len(res.stderr.splitlines()) == 1 and "Traceback" not in res.stderr
+    assert res.stderr.startswith(f"bsst: {f}: end.action: "), res.stderr
+
+
+def test_the_end_action_is_the_missions_and_kept_as_flown(tmp_path: Path) -> None:
+    assert load_mission(SINE).end_action == "land"
+    hold = load_mission(_mission(tmp_path, 3.0, "hold"))
+    assert hold.end_action == "hold" and hold.to_dict()["end"] == {"action": "hold"}
+    assert "end" not in load_mission(SINE).to_dict()  # the default unwritten: a run's mission.toml as before
+    assert json.loads(json.dumps(hold.to_dict()))["end"]["action"] == "hold"

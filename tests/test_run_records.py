@@ -1,0 +1,247 @@
+"""Covers bridge.record.runlog, bridge.nodes.relay, bridge.session and bridge.mavlink: the records of a run.
+
+Overwriting a run directory; records that survive a stop under load (bridge.session.children); chunked
+STATUSTEXTs joined (bridge.mavlink.telemetry); events.log in order; a perfect link's counts.
+
+Real processes (``python -m bridge ...``) and real UDP on 127.0.0.1. A run directory holds exactly one run:
+``--overwrite`` removes every file a run of ours writes (:data:`bridge.record.runlog.RUN_FILES`) and nothing
+else, and the new run names what it kept. A relay stopped and killed at once under load still leaves a
+whole ``relay.json``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from bridge.session import instance_slot, sitl
+from missions import Mission, Sine
+from tests.sitlkit import ENV, ROOT, Proc
+from tests.test_cli_sim import bsst as _sim
+from tests.test_cli_sim import short_sine
+from tests.waiting import wait_for
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
+
+PLOTS = {"positions.png", "errors.png", "angles.png", "inputs.png", "path3d.png"}
+
+
+@pytest.fixture
+def busy_cores() -> Iterator[None]:
+    """Two busy loops, one per core, for the length of a test (killed after, by their ids)."""
+    procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(2)]
+    try:
+        yield
+    finally:
+        for p in procs:
+            p.kill()
+            p.wait()
+
+
+def test_overwrite_without_plots_leaves_no_old_figures_and_keeps_a_users_file(tmp_path: Path) -> None:
+    mission, out = short_sine(tmp_path, 2.0), tmp_path / "run"
+    res = _sim(mission, "--out", out)
+    assert res.returncode == 0, res.stderr
+    assert {p.name for p in (out / "plots").iterdir()} >= PLOTS
+    (out / "notes.txt").write_text("mine\n")
+    (out / "plots" / "my-sketch.svg").write_text("<svg/>\n")
+    (out / "link-trace.csv").write_text("t,dir\n")  # as bsst link extract writes it: the old run's
+    res = _sim(mission, "--out", out, "--overwrite", "--no-plots")
+    assert res.returncode == 0, res.stderr
+    assert (out / "notes.txt").read_text() == "mine\n"  # a user's file survives, and so does one in plots/
+    assert {p.name for p in (out / "plots").iterdir()} == {"my-sketch.svg"}
+    assert not (out / "link-trace.csv").exists()
+    assert {p.name for p in out.iterdir()} == {"mission.toml", "trace.csv", "events.log", "summary.json",
+                                               "notes.txt", "plots"}
+    first = (out / "events.log").read_text().splitlines()[0]
+    assert first == "t=0.000 note: kept in the run directory, not written by a run: notes.txt, plots/my-sketch.svg"
+    # with nothing of a user's, no plots/ at all
+    (out / "notes.txt").unlink()
+    (out / "plots" / "my-sketch.svg").unlink()
+    assert _sim(mission, "--out", out, "--overwrite", "--no-plots").returncode == 0
+    assert not (out / "plots").exists()
+    assert "note:" not in (out / "events.log").read_text()
+
+
+def test_a_sim_overwriting_a_relay_run_leaves_none_of_its_files(tmp_path: Path) -> None:
+    out = tmp_path / "rt"
+    run = sitl(Mission(Sine(), duration_s=1.0, name="sine1"), realtime=True, out=out, plots=False, instance=None,
+               link={"delay_ms": 5.0})
+    assert run.outcome == "completed", run.summary["ended_by"]
+    had = {p.name for p in out.iterdir()}
+    assert {"relay.json", "relay.log", "vehicle.tlog", "controller.tlog", "vehicle.csv", "controller.csv"} <= had
+    res = _sim(short_sine(tmp_path, 2.0), "--out", out, "--overwrite", "--no-plots")
+    assert res.returncode == 0, res.stderr
+    assert {p.name for p in out.iterdir()} == {"mission.toml", "trace.csv", "events.log", "summary.json"}
+
+
+def _relay_traffic(relay: Proc, port: int, n: int) -> None:
+    """Send ``n`` datagrams through the relay on ``port`` to a target that takes them."""
+    client = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        for i in range(n):
+            client.sendto(f"datagram {i}".encode(), ("127.0.0.1", port))
+    finally:
+        client.close()
+
+
+def test_a_relay_killed_right_after_stop_under_load_leaves_a_whole_relay_json(tmp_path: Path,
+                                                                              busy_cores: None) -> None:
+    target = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    target.bind(("127.0.0.1", 0))
+    stats = tmp_path / "relay.json"
+    relay = Proc.bsst("relay", "--listen", "127.0.0.1:0", "--to", f"127.0.0.1:{target.getsockname()[1]}",
+                      "--delay", "1", "--stats", str(stats), cwd=ROOT)
+    try:
+        ready = json.loads(relay.wait_line(lambda ln: ln.startswith('{"report":"ready"'), timeout=60))
+        port = int(ready["listen"].rpartition(":")[2])
+        _relay_traffic(relay, port, 50)
+        target.settimeout(10.0)
+        for _ in range(50):
+            target.recv(100)
+        # the relay's record is on disk while it serves: a kill at any moment leaves it whole
+        wait_for(lambda: stats.exists() and json.loads(stats.read_text())["forwarded"] == 50, 30,
+                 "relay.json with the 50 datagrams forwarded")
+        relay.p.send_signal(signal.SIGTERM)
+        relay.p.send_signal(signal.SIGKILL)  # no grace at all
+        relay.p.wait(timeout=30)
+    finally:
+        relay.stop()
+        target.close()
+    s = json.loads(stats.read_text())
+    assert s["forwarded"] == 50 and s["up"]["sent"] == 50 and s["up"]["delivered"] == 50
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporary left beside it
+
+
+def test_a_relay_run_under_load_keeps_relay_json(tmp_path: Path, busy_cores: None) -> None:
+    out = tmp_path / "rt"
+    run = sitl(Mission(Sine(), duration_s=2.0, name="sine2"), realtime=True, out=out, plots=False, instance=None,
+               link={"delay_ms": 5.0})
+    relay = json.loads((out / "relay.json").read_text())
+    assert relay["final"] is True  # the relay's own last word, not a snapshot: the session waited for it
+    assert not any(e["kind"] == "killed" for e in run.summary["events"]), run.summary["events"]
+    assert run.summary["link"]["up"]["sent"] == relay["up"]["sent"] > 0
+    assert os.path.getsize(out / "relay.json") > 0
+
+
+def test_the_controller_reports_a_chunked_statustext_once_joined(tmp_path: Path) -> None:
+    """A real ``bsst controller`` hears a vehicle's 125-character STATUSTEXT in MAVLink 2 chunks (a UTF-8
+    character split between two of them) and a short one: two reports, each text whole."""
+    from pymavlink.dialects.v20 import common as mavlink
+
+    from bridge.mavlink.telemetry import statustext
+    from bridge.nodes.report import StatusText, parse_line
+    from tests.test_offboard_realtime import MISSION, ScriptedVehicle
+
+    long_text = "lockstep: " + "é" * 20 + "x" * 94 + " end"  # the 50-byte boundary cuts an é in two
+    (tmp_path / "m.toml").write_text(MISSION)
+    v = ScriptedVehicle()
+    ctl = Proc.bsst("controller", str(tmp_path / "m.toml"), "--realtime", "--vehicle", f"127.0.0.1:{v.port}",
+                    "--timeout", "30", cwd=ROOT)
+    try:
+        wait_for(lambda: (v.serve(), v.peer)[1] is not None, 60, "the controller's first message")
+        v.heartbeat()
+        for m in statustext(mavlink.MAV_SEVERITY_WARNING, long_text, 42):
+            v.send(m)
+        v.send(mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_INFO, b"short one"))
+        ctl.wait_line(lambda ln: "short one" in ln, timeout=30)
+    finally:
+        ctl.stop()
+        v.sock.close()
+    texts = [r for r in map(parse_line, ctl.lines) if isinstance(r, StatusText)]
+    assert texts == [StatusText(mavlink.MAV_SEVERITY_WARNING, long_text),
+                     StatusText(mavlink.MAV_SEVERITY_INFO, "short one")]
+
+
+def _event_lines(path: Path) -> list[tuple[float, str, str]]:
+    """events.log's children's events: (t, kind, source), in the file's order."""
+    out = []
+    for line in (path / "events.log").read_text().splitlines():
+        t_text, _, rest = line.partition(" ")
+        kind = rest.partition(":")[0]
+        source = rest.rpartition(" [")[2].rstrip("]")
+        if source in ("vehicle", "controller", "relay"):
+            out.append((float(t_text.removeprefix("t=")), kind, source))
+    return out
+
+
+@pytest.mark.parametrize("realtime", [False, True], ids=["lockstep", "realtime"])
+def test_events_log_lists_causes_before_their_effects(tmp_path: Path, realtime: bool) -> None:
+    """The two children's events on one clock, in the order they happened: the vehicle's arming (by the
+    controller's command) and its end of mission before the controller's word about them, times never going
+    back, the landing's disarm last."""
+    out = tmp_path / "run"
+    run = sitl(Mission(Sine(), duration_s=2.0, name="sine2"), realtime=realtime, out=out, plots=False, instance=None)
+    events = _event_lines(out)
+    times = [t for t, _, _ in events]
+    assert times == sorted(times), events
+    # (a real-time flight on a machine loaded by other tests may fail safe: the order holds whatever the outcome)
+    for kind in ("armed", "end") if run.outcome == "completed" or not realtime else ("armed",):
+        said = [src for _, k, src in events if k == kind]
+        assert said[:2] == ["vehicle", "controller"], (kind, events)
+    if run.outcome == "completed":
+        assert events[-1][1:] == ("disarmed", "vehicle"), events
+    else:
+        assert realtime, run.summary["ended_by"]
+
+
+def test_a_perfect_loopback_link_loses_nothing_and_says_where_every_packet_went(tmp_path: Path) -> None:
+    """``bsst sitl --realtime`` on a perfect link: lost 0 both ways, and what was sent but not delivered is
+    named (in flight at the ends, refused, shed, dropped by the kernel), in summary.json and the printout."""
+    mission = short_sine(tmp_path, 3.0)
+    out = tmp_path / "rt"
+    with instance_slot() as n:  # ports of our own: sessions of other tests run beside this one
+        res = subprocess.run([sys.executable, "-m", "bridge", "sitl", str(mission), "--realtime", "--out", str(out),
+                              "--no-plots", "--instance", str(n)], cwd=ROOT, env=ENV, capture_output=True, text=True,
+                             timeout=180)
+    assert res.returncode == 0, res.stderr
+    link = json.loads((out / "summary.json").read_text())["link"]
+    for d in ("up", "down"):
+        L = link[d]
+        assert L["lost"] == 0, (d, L)
+        assert L["sent"] == (L["delivered"] + L["lost"] + L["refused"] + L["in_flight"] + L["shed"]
+                             + L["dropped_by_kernel"]), (d, L)
+        assert L["kernel_counts"] is True  # Linux: the receiving socket's counter was read
+        assert L["sent"] > 600
+        line = next(ln for ln in res.stdout.splitlines() if ln.startswith(f"link {d:4}:"))
+        assert (f"sent {L['sent']} delivered {L['delivered']} lost 0 in flight {L['in_flight']} shed 0 "
+                f"dropped by kernel {L['dropped_by_kernel']} ") in line, line
+
+
+def test_the_kernels_drop_counter_counts_what_a_full_socket_could_not_take() -> None:
+    """bridge.mavlink.endpoint.socket_drops: a real socket with a small receive buffer, flooded and not read,
+    has its drops counted by the kernel; the relay's summary carries each direction's (bsst relay --stats)."""
+    from bridge.mavlink.endpoint import socket_drops
+    from bridge.nodes.relay import Relay
+
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        rx.bind(("127.0.0.1", 0))
+        assert socket_drops(rx) == 0
+        for _ in range(500):
+            tx.sendto(b"x" * 1000, rx.getsockname())
+        dropped = socket_drops(rx)
+        queued = 0
+        rx.setblocking(False)
+        while True:
+            try:
+                rx.recv(2000)
+            except BlockingIOError:
+                break
+            queued += 1
+        assert dropped is not None and dropped > 0 and queued + dropped == 500, (queued, dropped)
+    finally:
+        rx.close()
+        tx.close()
+    with Relay(("127.0.0.1", 0), ("127.0.0.1", 9)) as relay:
+        assert relay.summary()["kernel_drops"] == {"up": 0, "down": 0}
