@@ -1,4 +1,4 @@
-"""Covers bridge.nodes.vehicle.injection, the commander's MAV_CMD_INJECT_FAILURE and SYS_FAILURE_EN.
+"""Covers bridge.nodes.vehicle.injection and bridge.nodes.vehicle.commander: failure injection.
 
 A ground station injects failures as PX4's do (MAVSDK's Failure plugin, pymavlink's COMMAND_LONG), against
 real ``bsst vehicle`` and ``bsst sitl`` processes over UDP on 127.0.0.1: refused (DENIED) while
