@@ -35,6 +35,7 @@ from bridge.nodes.vehicle.authority import Authority, attribute
 from bridge.nodes.vehicle.clock import Clock, Trigger
 from bridge.nodes.vehicle.injection import injection
 from bridge.nodes.vehicle.streams import HEARTBEAT_S, StatusTexts, StreamTable
+from bridge.record.metrics import plant_blocks
 
 OFFBOARD_STREAM_S = 1.0  # s of wall time: a ground station's OFFBOARD needs a target from the controller this recent
 _STREAM_COMMANDS = (mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAV_CMD_GET_MESSAGE_INTERVAL,
@@ -74,6 +75,7 @@ class Commander:
         self.substeps = substeps
         self.ports = ports
         self.texts: list[Any] = []  # STATUSTEXTs saying why a command was refused: sent after its COMMAND_ACK
+        self.plant_at_end: dict[str, Any] | None = None  # the plant's summary blocks when the mission ended
 
     # -- the messages ---------------------------------------------------------------------------------
     def command(self, ep: Endpoint, m: Any, addr: tuple[str, int], link: str) -> bool:
@@ -259,6 +261,8 @@ class Commander:
         takeover, so the step clock stays the flight's: lockstep, the controller clocks the landing with its
         no-target acknowledgements (offline's landing to the bit) and the touchdown ends the flight
         (:meth:`flight_over`); a hold stands still, holding, until the session ends."""
+        # summary.json's plant blocks are the mission's, as offline (taken before the end action flies)
+        self.plant_at_end = plant_blocks(self.sim.plant)
         self.sim.end_mission("land" if mode == LAND else "hold")
         if self.lockstep and mode == HOLD and self.clock.engaged:
             self.clock.fire(Trigger.DISARM)  # the lockstep flight is over: time stands still
