@@ -118,7 +118,10 @@ def test_a_relay_killed_right_after_stop_under_load_leaves_a_whole_relay_json(tm
         target.close()
     s = json.loads(stats.read_text())
     assert s["forwarded"] == 50 and s["up"]["sent"] == 50 and s["up"]["delivered"] == 50
-    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporary left beside it
+    # a SIGKILL that lands inside a write leaves at most that write's temporary (the next --overwrite removes it:
+    # runlog.RUN_FILES); relay.json itself is whole either way
+    left = [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]
+    assert left in ([], [f".relay.json.tmp{relay.p.pid}"]), left
 
 
 def test_a_relay_run_under_load_keeps_relay_json(tmp_path: Path, busy_cores: None) -> None:
