@@ -114,9 +114,9 @@ def test_the_checks_see_links_headings_and_escapes() -> None:
     assert slug("The `[link]` table") == "the-link-table"
     sample = "see [a](docs/a.md#x) and ![b](b.png)\n```sh\n[c](c.md)\n```\n`[d](d.md)` [e](<e f.md>)"
     assert link_targets(sample) == ["docs/a.md#x", "b.png", "e f.md"]
-    assert UP_PATH.findall("read ../shared/LAW.md, ../../x and ../README.md.") == [
-        "../shared/LAW.md", "../../x", "../README.md"]
-    assert not inside_repository(ROOT / "docs" / "../../shared")
+    assert UP_PATH.findall("read ../outside/LAW.md, ../../x and ../README.md.") == [
+        "../outside/LAW.md", "../../x", "../README.md"]
+    assert not inside_repository(ROOT / "docs" / "../../outside")
     assert "the-link-table" in anchors(ROOT / "docs" / "links.md")
 
 

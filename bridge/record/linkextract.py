@@ -1,6 +1,5 @@
-"""A link as it was: per-packet one-way delays and losses of both directions, from a run directory of
-ours or from two tlogs recorded at the two ends of any MAVLink link (``bsst link extract``;
-docs/links.md, "Extracting a trace").
+"""A link as it was: per-packet one-way delays and losses of both directions, from a run directory of ours
+or two tlogs recorded at the two ends of any MAVLink link (``bsst link extract``; docs/links.md).
 
 In:  a real-time run directory (``vehicle.tlog`` and ``controller.tlog``; without them ``vehicle.csv``
      and ``controller.csv``), or a vehicle-end and a controller-end tlog (8-byte big-endian Unix time

@@ -8,10 +8,9 @@ Out: ODOMETRY of step k (``time_usec`` = k / rate_hz, us) to the controller; HEA
      its reports to the session (:mod:`bridge.nodes.report`: ready, event, refused, stats), all
      through :meth:`Vehicle._report`
 
-Parts (this package): step clock (:mod:`.clock`), who is heard (:mod:`.authority`), arming, modes and
-commands (:mod:`.commander`), parameters (:mod:`.paramservice`), the mission protocol (:mod:`.mission`),
-telemetry (:mod:`.streams`), trace rows (:mod:`.rows`). Here: the loops of the clock's states (lockstep,
-free-running, idle), the receive path and its dispatch, and the wall-clock housekeeping.
+Parts: step clock (:mod:`.clock`), who is heard (:mod:`.authority`), commands (:mod:`.commander`),
+parameters (:mod:`.paramservice`), missions (:mod:`.mission`), telemetry (:mod:`.streams`), trace rows
+(:mod:`.rows`). Here: the loops of the clock's states, the receive dispatch, wall-clock housekeeping.
 """
 
 from __future__ import annotations
