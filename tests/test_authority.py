@@ -631,7 +631,7 @@ class _Bench:
         v.link.peer = self.socks["peer"].getsockname()
         if not v.sim.armed:
             v._arm_disarm(1.0, 0.0)
-            v._drain_events()  # its event goes out now, not with the next example's answer
+            v.announcer.drain()  # its event goes out now, not with the next example's answer
         for s in self.socks:
             self.replies(s)
 

@@ -45,13 +45,22 @@ import socket
 import struct
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
 # the codec and the tlog live in their own modules; their names are re-exported here, where the nodes,
 # the tests and the benchmarks import them with the endpoint
+from bridge.mavlink.address import (  # noqa: F401 - re-exported: the nodes import them with the endpoint
+    CONTROLLER_COMPID,
+    CONTROLLER_SYSID,
+    GCS_PORT,
+    LINK_PORT,
+    VEHICLE_COMPID,
+    Address,
+    check_free,
+    parse_address,
+)
 from bridge.mavlink.frames import (  # noqa: F401 - re-exported
     HEADER2,
     HIL_ACTUATOR_CONTROLS,
@@ -77,73 +86,7 @@ from bridge.mavlink.signing import crc16 as _crc16
 from bridge.mavlink.tlog import Tlog
 from params import ConfigError
 
-# Identities and ports of docs/design.md, "The MAVLink contract". Instance N (0-9) adds N to both ports and
-# makes the vehicle sysid N + 1, as PX4 does.
-GCS_PORT = 14550
-LINK_PORT = 14560
-VEHICLE_COMPID = 1  # MAV_COMP_ID_AUTOPILOT1
-CONTROLLER_SYSID = 200  # not 255 (MAVProxy) nor 245 (MAVSDK): a GCS can run beside the controller
-CONTROLLER_COMPID = 191  # MAV_COMP_ID_ONBOARD_COMPUTER
 _MAX_DATAGRAM = 65535
-
-
-@dataclass(frozen=True)
-class Address:
-    """A UDP address and what to do with it: ``udpin`` binds it, ``udpout`` sends to it."""
-
-    mode: str
-    host: str
-    port: int
-
-    def __str__(self) -> str:
-        return f"{self.mode}:{self.host}:{self.port}"
-
-    @property
-    def hostport(self) -> str:
-        return f"{self.host}:{self.port}"
-
-
-def parse_address(text: str, default_mode: str = "udpout", flag: str = "address") -> Address:
-    """``[udpin:|udpout:|udp:]HOST:PORT`` (also ``udpin://HOST:PORT``) -> :class:`Address`.
-
-    ``udp:`` is pymavlink's name for ``udpin``. Errors name ``flag`` (exit 2 material).
-    """
-    s = text.strip()
-    mode = default_mode
-    for prefix, m in (("udpin", "udpin"), ("udpout", "udpout"), ("udp", "udpin")):
-        for sep in ("://", ":"):
-            if s.startswith(prefix + sep):
-                mode, s = m, s[len(prefix) + len(sep):]
-                break
-        else:
-            continue
-        break
-    host, _, port_text = s.rpartition(":")
-    if not host or not port_text:
-        raise ConfigError(f"{flag} {text!r}: expected [udpin:|udpout:]HOST:PORT")
-    try:
-        port = int(port_text)
-    except ValueError:
-        raise ConfigError(f"{flag} {text!r}: port must be an integer") from None
-    lo = 0 if mode == "udpin" else 1
-    if not lo <= port <= 65535:
-        raise ConfigError(f"{flag} {text!r}: port must be in [{lo}, 65535]")
-    try:
-        socket.getaddrinfo(host, port, socket.AF_INET, socket.SOCK_DGRAM)
-    except (socket.gaierror, UnicodeError):
-        raise ConfigError(f"{flag} {text!r}: unknown host {host!r}") from None
-    return Address(mode, host, port)
-
-
-def _check_free(address: Address) -> None:
-    """Raise OSError if ``address`` is bound already (probed without ``SO_REUSEPORT``, which
-    a socket holding the port with it refuses too)."""
-    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    try:
-        probe.bind((address.host, address.port))
-    finally:
-        probe.close()
-
 
 class Endpoint:
     """One MAVLink 2 UDP link: its socket, its ``MAVLink`` codec, its counters.
@@ -189,7 +132,7 @@ class Endpoint:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
             if address.mode == "udpin":
                 if priority:
-                    _check_free(address)  # SO_REUSEPORT must not let a second vehicle share the port
+                    check_free(address)  # SO_REUSEPORT must not let a second vehicle share the port
                     sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEPORT, 1)
                 sock.bind((address.host, address.port))
                 self.peer: tuple[str, int] | None = None
@@ -303,8 +246,9 @@ class Endpoint:
         trial = self.trial if peer else None
         if not peer or trial is not None:
             nbytes = sum(map(len, frames))
-            if (trial is not None and not trial.charge(nbytes)) or not self.replies.charge(to, time.monotonic(),
-                                                                                             nbytes):
+            if (trial is not None and trial.bytes < nbytes) or not self.replies.charge(to, time.monotonic(), nbytes):
+                if trial is not None:
+                    trial.cut += 1
                 return False
         return self.send_frames(frames, to)
 
@@ -346,6 +290,9 @@ class Endpoint:
     def _send_datagram(self, buf: bytes, to: tuple[str, int] | None, last: bytes) -> bool:
         dest = to or self.peer
         if dest is None:
+            return False
+        trial = self.trial  # on trial, every datagram to the peer is charged to its credit (ReplyCredit)
+        if trial is not None and dest == self.peer and not trial.charge(len(buf)):
             return False
         if self.tlog is not None:
             self.tlog.record(last)

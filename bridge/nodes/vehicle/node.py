@@ -8,9 +8,9 @@ Out: ODOMETRY of step k (``time_usec`` = k / rate_hz, us) to the controller; HEA
      its reports to the session (:mod:`bridge.nodes.report`: ready, event, refused, stats), all
      through :meth:`Vehicle._report`
 
-Parts: step clock (:mod:`.clock`), who is heard (:mod:`.authority`), commands (:mod:`.commander`),
-parameters (:mod:`.paramservice`), missions (:mod:`.mission`), telemetry (:mod:`.streams`), trace rows
-(:mod:`.rows`). Here: the loops of the clock's states, the receive dispatch, wall-clock housekeeping.
+Parts: step clock (:mod:`.clock`), who is heard (:mod:`.authority`), commands (:mod:`.commander`), events said
+(:mod:`.announcer`), parameters (:mod:`.paramservice`), missions (:mod:`.mission`), telemetry (:mod:`.streams`),
+trace rows (:mod:`.rows`). Here: the loops of the clock's states, the receive dispatch, wall-clock housekeeping.
 """
 
 from __future__ import annotations
@@ -31,8 +31,9 @@ from bridge.mavlink.endpoint import Endpoint, Tlog, wait
 from bridge.mavlink.receive import Rejections
 from bridge.mavlink.signing import Signing
 from bridge.nodes.process import on_stop_signals, report_printer
-from bridge.nodes.report import Event, Ready, Refused, Report, Stats
-from bridge.nodes.vehicle.authority import Authority, claim
+from bridge.nodes.report import Ready, Refused, Report, Stats
+from bridge.nodes.vehicle.announcer import Announcer
+from bridge.nodes.vehicle.authority import Authority
 from bridge.nodes.vehicle.clock import Answer, Clock, ClockState, Trigger
 from bridge.nodes.vehicle.commander import Commander, CommanderPorts
 from bridge.nodes.vehicle.config import CLOCKS, VehicleConfig
@@ -56,7 +57,6 @@ from bridge.record.metrics import plant_blocks
 from bridge.record.runlog import side_dir
 
 HOUSEKEEPING_S = 0.02  # s of wall time between looks at the GCS socket, streams, file flushes
-MAX_TEXT_MESSAGES = 12  # STATUSTEXTs in one datagram of events (the newest texts, whole)
 RESEND_S = 0.05  # lockstep: resend the state nobody answered (a datagram can be dropped)
 IDLE_ODOMETRY_S = 0.1  # lockstep, disarmed: time stands still; the state is still shown
 _ENGAGED = (ClockState.LOCKSTEP, ClockState.ANSWERED)
@@ -99,8 +99,6 @@ class Vehicle:
         self.clock = Clock(cfg.clock == "realtime", m.physics_hz, cfg.speed or 1.0, now)
         self.pace = self.clock.pace  # the wall clock of physics steps
         self._n = 0  # physics steps taken (realtime: for the wall-clock schedule)
-        self._events_sent = 0
-        self._events_reported = 0  # events said on stdout (a command's before its answer: _report_events)
         self._load_at = (now, time.process_time())
         self.load = 0
         # lockstep: the controller's targets and re-arms cross the mission's up-link model here
@@ -111,16 +109,19 @@ class Vehicle:
         self.params = ParamService(self.sim, self.authority, self._statustext, self._reject, self._refused)
         self.missions = MissionManager(self.sim, self.authority, self._statustext, self._to_ground_stations,
                                        self._refused)
+        self.announcer = Announcer(self.sim, self.authority, self.link, self.endpoints, self._report,
+                                   self._statustext, self._heartbeat)
         ports = CommanderPorts(step=lambda: self.k, state_out=self._send_odometry, new_flight=self._new_flight,
                                arm_through_link=lambda: self.vend.receive_arm(self.t),
                                target_wall=lambda: self.targets.wall, message=self._message,
-                               reject=self._reject, refused=self._refused, announce=self._report_events)
+                               reject=self._reject, refused=self._refused, announce=self.announcer.report_events)
         self.commander = Commander(self.sim, self.clock, self.authority, self._statustext,
                                    {"controller": self.ctl_streams, "gcs": self.streams}, self.substeps, ports)
         self.receiver = Receiver(self.link, self.authority, self._reject, self.targets, self.commander, self.params,
                                  self.missions, ReceiverPorts(step=lambda: self.k, flight_on=self._flight_on,
-                                               announce=self._drain_events, heartbeat=self._heartbeat,
+                                               announce=self.announcer.drain, heartbeat=self._heartbeat,
                                                clock_ns=self._clock_ns))
+        self.announcer.charged = self.receiver.charged
         self._handle = self.receiver.handle  # (an attribute: one call less on the lockstep's hot path)
 
     def _open_links(self, cfg: VehicleConfig) -> None:
@@ -167,7 +168,7 @@ class Vehicle:
     def close(self) -> None:
         """Flush and close every file and socket (idempotent)."""
         self._drain_sockets()
-        self._drain_events()
+        self.announcer.drain()
         if self.rows is not None:
             self.rows.close()
         if self.tlog is not None:
@@ -349,57 +350,19 @@ class Vehicle:
         now = time.monotonic()
         if now >= self._idle_odo_at and not self.clock.halted:
             self._idle_odo_at = now + IDLE_ODOMETRY_S
-            self._send_odometry(now)
+            with self.receiver.charged():  # a would-be controller's: within its trial's credit
+                self._send_odometry(now)
 
     # -- after each control period -------------------------------------------------------------
     def _after_step(self) -> bool:
         """Events and divergence; False when the plant is lost (nothing more to send)."""
-        if len(self.sim.events) > self._events_sent:
-            self._drain_events()
+        if len(self.sim.events) > self.announcer.sent:
+            self.announcer.drain()
         self.commander.flight_over()
         if self.commander.diverged():
-            self._drain_events()
+            self.announcer.drain()
             return False
         return True
-
-    def _report_events(self) -> None:
-        """Each new event as a status line, at once: a command's before its COMMAND_ACK (Commander.command), so
-        that the controller, which reports what the answer tells it, never speaks of it first."""
-        events = self.sim.events
-        while self._events_reported < len(events):
-            e = events[self._events_reported]
-            self._events_reported += 1
-            # not caused by a command handled here: an arm the up-link model delivered (the
-            # flight's controller sent it), or the vehicle's own disarm (landed, diverged)
-            peer = self.link.peer
-            claim(e, self.authority.controller(peer) if e.kind == "armed" and peer is not None else None)
-            self._report(Event.of(e))
-
-    def _drain_events(self) -> None:
-        """Each new event as a status line (:meth:`_report_events`) and a STATUSTEXT; then a HEARTBEAT at once,
-        so that a ground station sees an arm, disarm or failsafe without waiting up to 1 s."""
-        events = self.sim.events
-        if self._events_sent == len(events):
-            return
-        self._report_events()
-        texts: list[list[Any]] = []
-        while self._events_sent < len(events):
-            e = events[self._events_sent]
-            self._events_sent += 1
-            sev = (mavlink.MAV_SEVERITY_CRITICAL if e.kind in ("failsafe", "diverged", "lockstep")
-                   else mavlink.MAV_SEVERITY_INFO)
-            texts.append(self._statustext(sev, f"{e.kind}: {e.shown}"))
-        msgs: list[Any] = []
-        for chunks in reversed(texts):  # the newest texts, whole, if many came at once
-            if len(msgs) + len(chunks) > MAX_TEXT_MESSAGES:
-                break
-            msgs[:0] = chunks
-        msgs.append(self._heartbeat())
-        for ep in self.endpoints:  # one datagram per link
-            if ep.trial is not None and ep.peer is not None and not self._flight_on():
-                ep.reply(msgs, ep.peer)  # a would-be controller's doing: within its trial's credit (Receiver)
-            else:
-                ep.send_many(msgs)
 
     # -- sending ---------------------------------------------------------------------------------
     def _send_odometry(self, now: float, fresh: bool = True) -> None:
@@ -439,25 +402,24 @@ class Vehicle:
         if self.gcs is not None:
             for m, addr in self.gcs.poll():
                 self._handle(self.gcs, m, addr)
-        self.missions.tick(now)
+        with self.receiver.charged():  # a re-request to a would-be controller: within its trial's credit
+            self.missions.tick(now)
         if now >= self._next_heartbeat:
             self._next_heartbeat = now + HEARTBEAT_S
-            hb = self._heartbeat()
-            for ep in self.endpoints:
-                ep.send(hb)
+            self.announcer.to_links([self._heartbeat()])
             cpu = time.process_time()
             w0, c0 = self._load_at
             self.load = int(1000 * (cpu - c0) / max(now - w0, 1e-6))
             self._load_at = (now, cpu)
         refused = self.rejected.report(now)  # once per second while the receive path refuses anything
         if refused is not None:
-            msg = mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_WARNING, refused.encode())
-            for ep in self.endpoints:
-                ep.send(msg)
-        for ep, table in ((self.gcs, self.streams), (self.link, self.ctl_streams)):
-            if ep is None or ep.peer is None:
-                continue
-            table.send_due(now, lambda mid, ep=ep: ep.send_many(self._message(mid)))
+            warning = mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_WARNING, refused.encode())
+            self.announcer.to_links([warning])
+        if self.gcs is not None and self.gcs.peer is not None:
+            self.streams.send_due(now, lambda mid: self.gcs.send_many(self._message(mid)))
+        if self.link.peer is not None:
+            with self.receiver.charged():
+                self.ctl_streams.send_due(now, lambda mid: self.link.send_many(self._message(mid)))
         if self.rows is not None:
             self.rows.flush()
         if self.tlog is not None:
@@ -480,6 +442,7 @@ class Vehicle:
         it has no controller yet (the flight's is the first to speak, :meth:`_handle`)."""
         if from_gcs:
             self.link.forget_peer()
+        self.link.trial = None  # a flight on: its controller is answered freely (its arm's first state included)
         self.targets.applied = None
 
     def _clock_ns(self) -> int:

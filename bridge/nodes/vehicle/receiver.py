@@ -17,7 +17,8 @@ docs/hostile-input.md, "Load shedding"). A flight on, its controller is known an
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
@@ -71,6 +72,7 @@ class Receiver:
         self.mission = mission
         self.ports = ports
         self.trial = ReplyCredit()  # what the would-be controllers may get back (the module docstring)
+        self._flown: tuple[str, int] | None = None  # the address that flew the last flight (:meth:`on_trial`)
 
     def handle(self, ep: Endpoint, m: Any, addr: tuple[str, int]) -> None:
         """A message that passed the frame stage: its sender's authority checked
@@ -100,6 +102,9 @@ class Receiver:
             self.dispatch(link, m, addr)
             return
         if flight_on or self.authority.pinned is not None:
+            self._from_controller(m, addr, known)
+            return
+        if known and addr == self._flown:  # the last flight's controller: trusted until another claims its ids
             self._from_controller(m, addr, known)
             return
         self.trial.earn(len(m.get_msgbuf()))  # no controller known yet: on trial (the module docstring)
@@ -170,6 +175,29 @@ class Receiver:
                 self._request(ep, addr, mavlink.MAVLink_file_transfer_protocol_message(
                     0, m.get_srcSystem(), m.get_srcComponent(), list(nak)))
         return None
+
+    def on_trial(self) -> bool:
+        """Whether the controller link's peer is a would-be controller: no controller pinned, no flight on, and
+        not the address that flew the last flight (trusted until another address claims the controller's ids)."""
+        if self.authority.pinned is not None:
+            return False
+        if self.ports.flight_on():
+            self._flown = self.link.peer
+            return False
+        return self.link.peer != self._flown
+
+    @contextmanager
+    def charged(self) -> Iterator[None]:
+        """While on trial, every datagram the controller link sends its peer is charged to the trial's credit
+        (Endpoint.trial; the module docstring)."""
+        link = self.link
+        before = link.trial
+        if self.on_trial():
+            link.trial = self.trial
+        try:
+            yield
+        finally:
+            link.trial = before
 
     def _link_name(self, ep: Endpoint) -> str:
         return "controller" if ep is self.link else "gcs"

@@ -1,0 +1,82 @@
+"""The vehicle's events said out loud: each new event of the simulated vehicle as a status line to the session
+and a STATUSTEXT on every link, with a HEARTBEAT at once.
+
+In:  the simulated vehicle's event list (appended by its parts); the controller link's peer (who armed)
+Out: Event reports (:mod:`bridge.nodes.report`); one datagram per link of STATUSTEXT(s) and a HEARTBEAT, to a
+     would-be controller within its trial's credit (:meth:`~bridge.nodes.vehicle.receiver.Receiver.charged`)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from contextlib import AbstractContextManager, nullcontext
+from typing import Any
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from bridge.autopilot.simvehicle import SimVehicle
+from bridge.mavlink.endpoint import Endpoint
+from bridge.nodes.report import Event, Report
+from bridge.nodes.vehicle.authority import Authority, claim
+from bridge.nodes.vehicle.streams import StatusTexts
+
+MAX_TEXT_MESSAGES = 12  # STATUSTEXTs in one datagram of events (the newest texts, whole)
+
+
+class Announcer:
+    """Says each new event once as a status line (:meth:`report_events`) and once on the links (:meth:`drain`)."""
+
+    def __init__(self, sim: SimVehicle, authority: Authority, link: Endpoint, endpoints: list[Endpoint],
+                 report: Callable[[Report], None], statustext: StatusTexts, heartbeat: Callable[[], Any]) -> None:
+        self.sim = sim
+        self.authority = authority
+        self.link = link
+        self.endpoints = endpoints
+        self.report = report
+        self.statustext = statustext
+        self.heartbeat = heartbeat
+        # the receive path's trial scope (Receiver.charged), wired once the receiver exists
+        self.charged: Callable[[], AbstractContextManager[None]] = nullcontext
+        self.sent = 0  # events said on the links
+        self.reported = 0  # events said as status lines (a command's before its answer: report_events)
+
+    def report_events(self) -> None:
+        """Each new event as a status line, at once: a command's before its COMMAND_ACK (Commander.command), so
+        that the controller, which reports what the answer tells it, never speaks of it first."""
+        events = self.sim.events
+        while self.reported < len(events):
+            e = events[self.reported]
+            self.reported += 1
+            # not caused by a command handled here: an arm the up-link model delivered (the
+            # flight's controller sent it), or the vehicle's own disarm (landed, diverged)
+            peer = self.link.peer
+            claim(e, self.authority.controller(peer) if e.kind == "armed" and peer is not None else None)
+            self.report(Event.of(e))
+
+    def drain(self) -> None:
+        """Each new event as a status line (:meth:`report_events`) and a STATUSTEXT; then a HEARTBEAT at once,
+        so that a ground station sees an arm, disarm or failsafe without waiting up to 1 s."""
+        events = self.sim.events
+        if self.sent == len(events):
+            return
+        self.report_events()
+        texts: list[list[Any]] = []
+        while self.sent < len(events):
+            e = events[self.sent]
+            self.sent += 1
+            sev = (mavlink.MAV_SEVERITY_CRITICAL if e.kind in ("failsafe", "diverged", "lockstep")
+                   else mavlink.MAV_SEVERITY_INFO)
+            texts.append(self.statustext(sev, f"{e.kind}: {e.shown}"))
+        msgs: list[Any] = []
+        for chunks in reversed(texts):  # the newest texts, whole, if many came at once
+            if len(msgs) + len(chunks) > MAX_TEXT_MESSAGES:
+                break
+            msgs[:0] = chunks
+        msgs.append(self.heartbeat())
+        self.to_links(msgs)
+
+    def to_links(self, msgs: list[Any]) -> None:
+        """``msgs``, one datagram per link (to a would-be controller within its trial's credit)."""
+        with self.charged():
+            for ep in self.endpoints:
+                ep.send_many(msgs)
