@@ -25,6 +25,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from missions.fleet import fleet_from_table
 from missions.minsnap import Knot, Smooth, accelerations, demands, stretched
 from missions.planfiles import read_plan_text
 from missions.references import Reference, Setpoint, Sine, Step, Waypoints
@@ -90,6 +91,8 @@ class Mission:
     wind: Mapping[str, Any] = field(default_factory=dict)  # raw: plant.wind.wind_from_table
     events: tuple[Mapping[str, Any], ...] = ()  # raw [[events]]: plant.events.timeline_from_tables
     end_action: str = DEFAULT_END_ACTION  # END_ACTIONS: ``[end] action``
+    vehicles: tuple[Any, ...] = ()  # [[vehicles]]: missions.fleet.VehicleSpec, validated; () one vehicle
+    separation: Any = None  # [separation]: missions.fleet.Separation; None: its defaults
 
     def __post_init__(self) -> None:
         why = name_problem(self.name)
@@ -136,6 +139,10 @@ class Mission:
             d["events"] = [dict(e) for e in self.events]
         if self.end_action != DEFAULT_END_ACTION:  # (the default unwritten: mission.toml as before)
             d["end"] = {"action": self.end_action}
+        if self.vehicles:  # (a mission of one vehicle writes neither)
+            d["vehicles"] = [v.to_dict() for v in self.vehicles]
+        if self.separation is not None:
+            d["separation"] = self.separation.to_dict()
         return d
 
     @property
@@ -194,8 +201,8 @@ def envelope_problem(trajectory: Reference, start: tuple[float, ...], duration_s
                 if r > ENVELOPE_RADIUS_M:
                     return f"trajectory.points[{j}]", beyond(f"after this knot, at ({x[0]:.4g}, {y[0]:.4g}, "
                                                               f"{z[0]:.4g}), the trajectory", r)
-    elif isinstance(trajectory, Sine):
-        a, z0 = abs(trajectory.amplitude), trajectory.z0
+    elif isinstance(trajectory, Sine):  # its horizontal reach: the circle's centre's distance plus its radius
+        a, z0 = math.hypot(trajectory.x0, trajectory.y0) + abs(trajectory.amplitude), trajectory.z0
         z_end = z0 + trajectory.climb * duration_s
         if a > ENVELOPE_RADIUS_M:
             return "trajectory.amplitude", beyond(f"amplitude {a:g} m: the circle", a)
@@ -341,11 +348,7 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
                                             hi=MISSION_RANGES["duration_s"][1])
     profile = t.string("profile", "paper")
     actuation = t.string("actuation", "", choices=("", "wrench", "motors")) or None
-    controller = t.string("controller", "bsst")
-    why = law_spec_problem(controller)
-    if why:
-        raise t.error("controller", why)
-    controller = law_spec_from(controller, Path(source).parent)
+    controller = _law(t, "controller") or "bsst"
     discretization = t.string("discretization", DEFAULT_DISCRETIZATION, choices=DISCRETIZATIONS)
     r = MISSION_RANGES
     rate = t.number("rate_hz", 250.0, lo=r["rate_hz"][0], hi=r["rate_hz"][1])
@@ -364,6 +367,8 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
     events = t.raw("events", [])
     if not isinstance(events, list) or not all(isinstance(e, Mapping) for e in events):
         raise t.error("events", "expected an array of tables [[events]] (t_s, kind and its settings)")
+    span = duration if not derived else MISSION_RANGES["duration_s"][1]
+    vehicles, separation = fleet_from_table(t, lambda tt: _trajectory(tt, span), _law)
     t.done()
     return Mission(
         trajectory=trajectory,
@@ -380,8 +385,21 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
         source=source,
         events=tuple(events),
         end_action=end_action,
+        vehicles=vehicles,
+        separation=separation,
         **raw,
     )
+
+
+def _law(t: Table, key: str) -> str | None:
+    """A law's name under ``key`` (None if absent), checked, a relative law file made absolute (law_spec_from)."""
+    if t.raw(key) is None:  # (asked for all the same: a misspelled key is named with this one)
+        return None
+    spec = t.string(key)
+    why = law_spec_problem(spec)
+    if why:
+        raise t.error(key, why)
+    return law_spec_from(spec, Path(t._source).parent)
 
 
 def _table(t: Table, name: str) -> Mapping[str, Any]:
@@ -424,6 +442,8 @@ def _trajectory(t: Table, duration: float) -> Reference:
             climb=t.number("climb", 0.1, lo=-100.0, hi=100.0),
             z0=t.number("z0", 0.0, lo=-1e4, hi=1e4),
             psi=t.number("psi", 0.0, lo=-100.0, hi=100.0),
+            x0=t.number("x0", 0.0, lo=-1e4, hi=1e4),
+            y0=t.number("y0", 0.0, lo=-1e4, hi=1e4),
         )
     elif kind == "step":
         ref = Step(_setpoints(t, "setpoints", duration))

@@ -90,28 +90,31 @@ def _sinusoid(amp: float, w: float, phase: float, t: float) -> Derivs:
 
 @dataclass(frozen=True)
 class Sine:
-    """The paper's second scenario: x = A sin(w t), y = A cos(w t), z = z0 + climb t, psi const."""
+    """The paper's second scenario: x = x0 + A sin(w t), y = y0 + A cos(w t), z = z0 + climb t, psi const
+    (x0, y0: a centre moved off the origin, as a vehicle of a formation flies it; 0 in the paper)."""
 
     amplitude: float = 1.0
     omega: float = 0.5
     climb: float = 0.1
     z0: float = 0.0
     psi: float = 0.0
+    x0: float = 0.0
+    y0: float = 0.0
 
     def sample(self, t: float) -> Sample:
-        return (
-            _sinusoid(self.amplitude, self.omega, 0.0, t),
-            _sinusoid(self.amplitude, self.omega, math.pi / 2, t),
-            (self.z0 + self.climb * t, self.climb, 0.0, 0.0, 0.0),
-            _const(self.psi),
-        )
+        x = _sinusoid(self.amplitude, self.omega, 0.0, t)
+        y = _sinusoid(self.amplitude, self.omega, math.pi / 2, t)
+        if self.x0 or self.y0:  # (only then: the paper's centre adds nothing, not even a -0.0 turned 0.0)
+            x, y = (x[0] + self.x0, *x[1:]), (y[0] + self.y0, *y[1:])
+        return (x, y, (self.z0 + self.climb * t, self.climb, 0.0, 0.0, 0.0), _const(self.psi))
 
     def change_times(self) -> tuple[float, ...]:
         return (0.0,)
 
     def to_dict(self) -> dict:
-        return {"kind": "sine", "amplitude": self.amplitude, "omega": self.omega, "climb": self.climb,
-                "z0": self.z0, "psi": self.psi}
+        d = {"kind": "sine", "amplitude": self.amplitude, "omega": self.omega, "climb": self.climb,
+             "z0": self.z0, "psi": self.psi}
+        return d | ({"x0": self.x0, "y0": self.y0} if self.x0 or self.y0 else {})  # the paper's: as before
 
 
 def _min_jerk(p0: float, p1: float, T: float, tau: float) -> Derivs:
