@@ -49,6 +49,7 @@ and a layer imports nothing above it (tests/test_layers.py checks it):
   - :mod:`bridge.nodes.relay`     a real-time UDP relay applying the link model on the wall clock (``bsst relay``)
 
 - :mod:`bridge.loop`: the in-process closed loop (``bsst sim``), :func:`~bridge.loop.simulate`
+- :mod:`bridge.swarm`: several vehicles in one world offline, :func:`bridge.simulate` (``vehicles=``)
 - :mod:`bridge.session`: the SITL session launcher (``bsst sitl``), :func:`~bridge.session.sitl`
 
   - :mod:`bridge.session.session`   the session: start, supervise and stop the children, summarise
@@ -74,8 +75,8 @@ __all__ = ["Overrides", "Run", "simulate"]
 
 def __getattr__(name: str) -> Any:
     # imported on first use, so that ``bsst --help`` or a refused flag does not load the law
-    if name == "simulate":
-        from bridge.loop import simulate  # lazy: start-up time
+    if name == "simulate":  # one vehicle: bridge.loop.simulate, as it always flew; several: bridge.swarm
+        from bridge.swarm import simulate  # lazy: start-up time
 
         return simulate
     if name == "Overrides":

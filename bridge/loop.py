@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from array import array
+from collections.abc import Generator
 from pathlib import Path
 from typing import Any
 
@@ -81,6 +82,20 @@ def simulate(
 
 def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progress: Progress | None = None) -> Run:
     """Fly a prepared :class:`Flight`; write its run directory into ``path`` if given."""
+    steps = flying(flight, path, plots=plots, progress=progress)
+    while True:
+        try:
+            next(steps)
+        except StopIteration as done:
+            return done.value
+
+
+def flying(flight: Flight, path: Path | None = None, *, plots: bool = True,
+           progress: Progress | None = None) -> Generator[tuple[float, ...], str | None, Run]:
+    """:func:`fly` one control step at a time, for a loop that flies several vehicles in one world
+    (:mod:`bridge.swarm`): after each step it yields the plant's true state (eq. 7 order, after the step's
+    physics); sent a text, it ends the flight there with the outcome ``collision`` (that text its event).
+    Returns the :class:`Run`; thrown a KeyboardInterrupt, the flight ends ``aborted``, recorded."""
     m = flight.mission
     check_trace_steps(m)
     vehicle = flight.make_vehicle(armed=True)
@@ -140,6 +155,11 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
                 trace.row(row)
             vend.advance()
             logged = _log_new_events(vehicle, events, logged)
+            contact = yield plant.state
+            if contact is not None:  # another vehicle touched this one (the caller judged the shared world)
+                vehicle.event("collision", contact)
+                outcome = "collision"
+                break
             verdict = vehicle.plant_verdict()
             if verdict:
                 outcome = verdict
@@ -160,23 +180,32 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
         raise
     try:  # the record stays open for the verdicts' lines, and is closed whatever happens
         arrays = trace_arrays(rows, TRACE_COLUMNS)
-        ev = [RunEvent(round(e.t, 6), e.kind, e.text, by=e.by, **typed_fields(e)) for e in vehicle.events]
-        shown = [e.as_dict() for e in ev]
         link = {"up": up.stats.summary(), "down": down.stats.summary(), "rejected": dict(vend.rejected)}
-        summary = summarise(arrays, m, flight.gains, clock="offline", outcome=outcome, events=shown, link=link,
-                            estimator=flight.estimator, sensors=flight.sensors.name)
-        summary.update(plant_summary(plant_blocks(plant), arrays, shown))
-        summary["ended_by"] = {**ended_by_outcome(outcome, ev), **after_faults(outcome, shown)}
-        for v in judge(summary, arrays, ev, rules_for(flight, "offline", link)):
-            vehicle.event("policy", violation_text(v))
-            shown.append({"t": round(vehicle.t, 6), "kind": "policy", "text": violation_text(v)})
-        if outcome == "completed":  # after the mission's figures: nothing of them changes
-            summary["end"] = fly_end(flight, vehicle, summary["events"])
+        summary = _judged(flight, vehicle, arrays, outcome, link)
     finally:
         _close_record(record, vehicle.events[logged:])
     if record is not None:
         record.finish(arrays, summary, f"{m.name} ({m.controller}, {flight.profile.name})", plots)
     return Run(arrays, summary, path)
+
+
+def _judged(flight: Flight, vehicle: SimVehicle, arrays: dict[str, Any], outcome: str,
+            link: dict[str, Any]) -> dict[str, Any]:
+    """The flight's summary: its figures, plant blocks, who ended it, the policies' verdicts (each violation
+    an event), and when it completed, its end action flown (:func:`fly_end`)."""
+    m, plant = flight.mission, vehicle.plant
+    ev = [RunEvent(round(e.t, 6), e.kind, e.text, by=e.by, **typed_fields(e)) for e in vehicle.events]
+    shown = [e.as_dict() for e in ev]
+    summary = summarise(arrays, m, flight.gains, clock="offline", outcome=outcome, events=shown, link=link,
+                        estimator=flight.estimator, sensors=flight.sensors.name)
+    summary.update(plant_summary(plant_blocks(plant), arrays, shown))
+    summary["ended_by"] = {**ended_by_outcome(outcome, ev), **after_faults(outcome, shown)}
+    for v in judge(summary, arrays, ev, rules_for(flight, "offline", link)):
+        vehicle.event("policy", violation_text(v))
+        shown.append({"t": round(vehicle.t, 6), "kind": "policy", "text": violation_text(v)})
+    if outcome == "completed":  # after the mission's figures: nothing of them changes
+        summary["end"] = fly_end(flight, vehicle, summary["events"])
+    return summary
 
 
 def fly_end(flight: Flight, vehicle: SimVehicle, shown: list[dict[str, Any]]) -> dict[str, Any]:

@@ -146,6 +146,7 @@ CONVERTER_BAD = {
     "param_assignment": ["x", "NOPE=1", "COM_OF_LOSS_T=99", "COM_OBL_ACT=2", "COM_OF_LOSS_T=nan",
                          "5:COM_OF_LOSS_T=99", "x:COM_OBL_ACT=1"],
     "system_id": ["x", "0", "255", "1.5"],
+    "fleet_size": ["x", "0", "65", "1.5"],
 }
 # bad values of the flags that take text (a callable of the files: values)
 TEXT_BAD = {
@@ -163,6 +164,7 @@ TEXT_BAD = {
     "--dask": lambda f: ["notanaddress"],
     "--key": lambda f: [f.missing, f.key_empty, f.key_open, f.directory],
     "--at": lambda f: ["x", "5:bogus", "5:gps:sideways"],
+    "--formation": lambda f: ["line", "ring:2", "line:0", "circle:x"],
 }
 POSITIONAL_BAD = {  # command -> bad values of its positional argument
     "report": lambda f: [f.missing, f.regular, f.directory],

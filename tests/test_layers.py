@@ -40,6 +40,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("bridge.mavlink", "bridge.record"),
     ("bridge.nodes",),
     ("bridge.loop", "bridge.batch", "bridge.session"),
+    ("bridge.swarm",),  # several vehicles in one world: the offline loop's flights stepped together
     ("bridge.sweep",),
     ("bridge.cli",),
     ("bridge.__main__",),  # python -m bridge: the CLI

@@ -46,15 +46,67 @@ def add_sim_command(sub: Any) -> None:
     add_flight_options(p)
     add_sensor_options(p)
     add_link_options(p)
+    g = p.add_argument_group("several vehicles (docs/swarm.md)")
+    g.add_argument("--vehicles", type=fleet_size, metavar="N",
+                   help="fly N vehicles (system ids 1..N), laid out by --formation, each with its own law and link")
+    g.add_argument("--formation", metavar="KIND:METRES",
+                   help="line:SPACING (along y), grid:SPACING or circle:RADIUS about the mission's trajectory "
+                        "(default line:2)")
     p.set_defaults(func=cmd_sim)
 
 
+def fleet_size(text: str) -> int:
+    """``--vehicles``: a whole number in the fleet's range (missions.fleet.FLEET_RANGES)."""
+    from missions.fleet import FLEET_RANGES  # lazy: building the parser loads no mission code
+
+    lo, hi = FLEET_RANGES["vehicles"]
+    return int_in("--vehicles", int(lo), int(hi))(text)
+
+
 def cmd_sim(args: argparse.Namespace) -> int:
-    from bridge.loop import simulate  # lazy: start-up time
+    from bridge.swarm import simulate  # lazy: start-up time
 
     run = simulate(args.mission, out=args.out, write=True, overwrite=args.overwrite, plots=not args.no_plots,
-                   overrides=overrides_from_args(args))
+                   overrides=overrides_from_args(args), vehicles=args.vehicles, formation=args.formation)
+    if "vehicles" in run.summary:
+        return report_fleet(run, "sim")
     return report_run(run, "sim")
+
+
+def report_fleet(run: Any, command: str) -> int:
+    """Print a fleet's summary (a line a vehicle, the separation), name what broke on stderr; its exit status
+    (0: every vehicle completed as asked and the separation held)."""
+    from bridge.record.policies import run_ok, violation_text  # lazy: numpy
+
+    s = run.summary
+    try:
+        w = sys.stdout.write
+        w(f"mission {s['mission']}  {len(s['vehicles'])} vehicles  clock {s['clock']}  rate {s['rate_hz']:g} Hz  "
+          f"duration {s['duration_s']:.2f} s\noutcome: {s['outcome']}\n")
+        for v in s["vehicles"]:
+            rms = "n/a" if v["rms_3d"] is None else f"{v['rms_3d']:.3e} m"
+            where = "its own trajectory" if v["trajectory"] == "own" else f"offset {v['offset']} m"
+            w(f"vehicle {v['id']} (sysid {v['sysid']}, {v['profile']}, {where}): {v['outcome']}, "
+              f"3-D RMS {rms}\n")
+        sep = s["separation"]
+        least = "n/a" if sep["closest_m"] is None else f"{sep['closest_m']:.3f} m"
+        w(f"separation: closest approach {least} between rotor discs (minimum {sep['min_m']:g} m)\n")
+        for p in sep["pairs"][:12]:
+            if p["closest_m"] is not None:
+                w(f"  vehicles {p['ids'][0]}-{p['ids'][1]}: {p['closest_m']:.3f} m at t={p['t']:.3f} s\n")
+        if run.path is not None:
+            w(f"run directory: {run.path}\n")
+        sys.stdout.flush()
+    except BrokenPipeError:  # stdout closed early: the run is on disk, its status stands
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    for v in s["vehicles"]:
+        if v["outcome"] != "completed":
+            print(f"bsst {command}: vehicle {v['id']}: {v['outcome']}", file=sys.stderr)
+    for p in s.get("policies") or []:
+        if not p.get("ok"):
+            print(f"bsst {command}: policy {violation_text(p)}", file=sys.stderr)
+    ok = run_ok(s) and all(v["ok"] for v in s["vehicles"])
+    return EXIT_OK if ok else EXIT_FAILED
 
 
 def report_run(run: Any, command: str) -> int:

@@ -400,6 +400,9 @@ def ended_by_outcome(outcome: str, events: Sequence[RunEvent]) -> dict[str, str]
     if outcome == "crashed":
         e = first("crashed")
         return {"who": "plant", "how": f"crashed at t={e.t:.3f} s: {e.text}" if e else "crashed"}
+    if outcome == "collision":  # another vehicle touched this one (bridge.swarm)
+        e = first("collision")
+        return {"who": "plant", "how": f"collision at t={e.t:.3f} s: {e.text}" if e else "collision"}
     if outcome == "failsafe":
         e = first("failsafe")
         return {"who": "vehicle", "how": f"failsafe at t={e.t:.3f} s: {e.text}" if e else "failsafe"}

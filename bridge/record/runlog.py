@@ -95,6 +95,7 @@ RUN_FILES = ("summary.json", "mission.toml", "trace.csv", "events.log", "vehicle
              "link-trace.csv", "link-trace.png", "cells.csv", "sweep.json", "report.md", "map_*.png",
              "margin.json", ".*.tmp*")
 PLOTS_DIR, PLOT_FILES = "plots", ("*.png", ".*.tmp*")  # plots/ and the figures in it
+VEHICLE_DIRS = "vehicle-[0-9]*"  # a fleet's vehicles' own runs (bridge.swarm): each a run directory of its own
 
 
 def foreign_files(path: Path) -> list[str]:
@@ -136,6 +137,11 @@ def clear_run(path: Path) -> list[str]:
                 remove(p)
         if not any(plots.iterdir()):
             plots.rmdir()
+    for p in sorted(path.glob(VEHICLE_DIRS)):  # a fleet's vehicles: their runs go too, a user's files stay
+        if p.is_dir() and not p.is_symlink():
+            clear_run(p)
+            if not any(p.iterdir()):
+                p.rmdir()
     return foreign_files(path)
 
 

@@ -1,0 +1,259 @@
+"""Several vehicles in one world, offline: N plants and N laws stepped in one loop (``bsst sim``).
+
+In:  a mission (a :class:`~missions.Mission` or a TOML path) with ``[[vehicles]]``, or any mission with
+     ``vehicles=N`` and ``formation="line:SPACING"`` (m; :mod:`missions.fleet`), and its overrides (as
+     :func:`bridge.loop.simulate` takes them)
+Out: a :class:`FleetRun`: each vehicle's :class:`~bridge.record.runlog.Run` (system ids 1..N) and the
+     fleet's ``summary.json`` as a dict: ``vehicles`` (id, outcome, RMS m, ...), ``separation`` (the
+     closest approach of every pair, m, and when, s), ``policies``, the worst ``outcome``; with a directory,
+     ``vehicle-<id>/`` (each vehicle's own run: ``trace.csv``, ``summary.json``, ``plots/``), ``mission.toml``
+     (the fleet as flown), ``summary.json`` and ``plots/`` (every vehicle)
+
+A mission without vehicles is flown by :func:`bridge.loop.simulate` as it always was, byte for byte.
+A fleet's vehicles fly one control step each, in id order, then the shared world is judged on their true
+positions after that step (:class:`Watch`): clearance (centres' distance less both disc radii,
+:class:`missions.fleet.Separation`) below ``min_m`` breaks the ``separation`` policy (exit 1); at zero
+or less the two touch and both end ``collision``. Each vehicle is its own flight
+(:func:`missions.fleet.vehicle_mission`: its own seed, so its own link's fates, effects and sensors), on
+the same clock: a vehicle flies exactly as it would alone, until something touches it. A vehicle that
+has ended stays where it ended, an obstacle. The end action (a landing) after the mission is each
+vehicle's own, not judged against the others.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Generator, Sequence
+from pathlib import Path
+from typing import Any
+
+from bridge.core.flight import Flight, Overrides, Progress, prepare
+from bridge.loop import flying
+from bridge.loop import simulate as simulate_one
+from bridge.record.policies import run_ok
+from bridge.record.runlog import Run, check_trace_steps, run_dir, write_json_atomic, write_text_atomic
+from missions import Mission, load_mission
+from missions.fleet import DEFAULT_MIN_SEPARATION_M, Separation, VehicleSpec, formation, link_seeds_moved
+from missions.fleet import vehicle_mission as mission_of
+from params import ConfigError, dump_toml
+
+# the outcomes from best to worst: the fleet's outcome is its worst vehicle's (an unknown one is worst)
+SEVERITY = ("completed", "failsafe", "law_failed", "diverged", "crashed", "collision", "aborted")
+DEFINITION = ("distance between the vehicles' centres less each one's disc radius (its arm plus its rotor "
+              "radius: rotor_radius_m, by default half the arm)")
+
+
+class FleetRun:
+    """The result of a fleet's flight: ``runs`` (each vehicle's :class:`Run`, by id), ``summary``, ``path``."""
+
+    def __init__(self, runs: list[Run], summary: dict[str, Any], path: Path | None) -> None:
+        self.runs = runs
+        self.summary = summary
+        self.path = path
+
+    @property
+    def outcome(self) -> str:
+        return self.summary["outcome"]
+
+    @property
+    def rms(self) -> float | None:
+        """The largest of the vehicles' 3-D RMS errors (m)."""
+        return self.summary["rms_3d"]
+
+    def __repr__(self) -> str:
+        return (f"FleetRun(vehicles={len(self.runs)}, outcome={self.outcome!r}, rms_3d={self.rms!r}, "
+                f"path={str(self.path) if self.path else None!r})")
+
+
+def simulate(mission: Mission | str | Path, *, vehicles: int | Sequence[Any] | None = None,
+             formation: str | None = None, out: str | Path | None = None, write: bool = False,
+             overwrite: bool = False, plots: bool = True, progress: Progress | None = None,
+             overrides: Overrides | None = None, **keywords: Any) -> Run | FleetRun:
+    """Fly a mission offline: one vehicle as :func:`bridge.loop.simulate` flies it (its :class:`Run`), or a
+    fleet (a :class:`FleetRun`): the mission's ``[[vehicles]]``, or ``vehicles`` = N with ``formation``
+    (``line:SPACING``, ``grid:SPACING`` or ``circle:RADIUS``, m; default ``line:2``), or ``vehicles`` = a
+    sequence of :class:`~missions.fleet.VehicleSpec`. ``progress`` follows vehicle 1. Everything else as
+    :func:`bridge.loop.simulate`."""
+    m = mission if isinstance(mission, Mission) else load_mission(mission)
+    fleet = fleet_mission(m, vehicles, formation)
+    if fleet is None:
+        return simulate_one(mission, out=out, write=write, overwrite=overwrite, plots=plots, progress=progress,
+                            overrides=overrides, **keywords)
+    flights = fleet_flights(fleet, Overrides.of(overrides, **keywords))
+    for f in flights:  # before the run directory is made: a refused mission writes nothing
+        check_trace_steps(f.mission)
+    path = run_dir(out, fleet.name, overwrite) if (out is not None or write) else None
+    return fly_fleet(fleet, flights, path, plots=plots, progress=progress)
+
+
+def fleet_mission(m: Mission, vehicles: int | Sequence[Any] | None, layout: str | None) -> Mission | None:
+    """``m`` with its fleet (its own ``[[vehicles]]``, or the one given), or None for a mission of one vehicle."""
+    if vehicles is None:
+        if layout is not None:
+            raise ConfigError(f"--formation {layout}: lays out several vehicles: give --vehicles N")
+        return m if m.vehicles else None
+    if m.vehicles:
+        raise ConfigError(f"{m.source}: vehicles: the mission has its own [[vehicles]]; --vehicles would replace "
+                          "them: give one or the other")
+    if isinstance(vehicles, int) and not isinstance(vehicles, bool):
+        specs = formation(vehicles, layout or "line:2")
+    else:
+        specs = tuple(vehicles) if isinstance(vehicles, Sequence) and not isinstance(vehicles, str) else ()
+        if not specs or not all(isinstance(v, VehicleSpec) for v in specs) or \
+                sorted(v.id for v in specs) != list(range(1, len(specs) + 1)):
+            raise ConfigError(f"vehicles: expected a number of vehicles or VehicleSpec values with ids 1..N, "
+                              f"got {vehicles!r}"[:300])
+        if layout is not None:
+            raise ConfigError(f"--formation {layout}: the vehicles given place themselves: give one or the other")
+        specs = tuple(sorted(specs, key=lambda v: v.id))
+    return m.with_overrides(vehicles=specs)
+
+
+def fleet_flights(m: Mission, over: Overrides) -> list[Flight]:
+    """Each vehicle's :class:`Flight`, by id: its own mission with the overrides laid over it (a ``seed``
+    override, and the seeds a ``[link]`` override names, moved by the vehicle's id less one, as its own)."""
+    flights = []
+    for v in m.vehicles:
+        given = over.given()
+        if "seed" in given:
+            given["seed"] = (given["seed"] + v.id - 1) % 2**31
+        if "link" in given:
+            given["link"] = link_seeds_moved(given["link"], v.id - 1)
+        try:
+            flights.append(prepare(mission_of(m, v), Overrides.of(given)))
+        except ConfigError as exc:
+            raise ConfigError(f"{exc} (vehicle {v.id})"[:400]) from None
+    return flights
+
+
+class Watch:
+    """The shared world's separation policy over a flight: every pair's closest approach (clearance m, at t s),
+    the first time the policy broke, and the pairs in contact now."""
+
+    def __init__(self, ids: Sequence[int], radii: Sequence[float], min_m: float) -> None:
+        self.ids, self.radii, self.min_m = list(ids), list(radii), min_m
+        n = len(ids)
+        self.pairs = [(a, b) for a in range(n) for b in range(a + 1, n)]
+        self.closest = {p: (math.inf, 0.0) for p in self.pairs}  # (clearance m, t s)
+        self.broken: tuple[float, str] | None = None
+
+    def check(self, t: float, positions: Sequence[Sequence[float]]) -> list[tuple[int, int, str]]:
+        """Judge the world at time ``t`` (s) with these centres (m): the pairs (indices) that touch, and why."""
+        touching = []
+        for a, b in self.pairs:
+            pa, pb = positions[a], positions[b]
+            d = math.sqrt((pa[0] - pb[0]) ** 2 + (pa[1] - pb[1]) ** 2 + (pa[2] - pb[2]) ** 2)
+            c = d - self.radii[a] - self.radii[b]
+            if c < self.closest[(a, b)][0]:
+                self.closest[(a, b)] = (c, t)
+            if c < self.min_m and self.broken is None:
+                self.broken = (t, f"vehicles {self.ids[a]} and {self.ids[b]} {c:.3f} m apart (rotor discs), "
+                                  f"under the minimum of {self.min_m:g} m")
+            if c <= 0.0:
+                touching.append((a, b, f"vehicles {self.ids[a]} and {self.ids[b]} touched at t={t:.3f} s "
+                                       f"(centres {d:.3f} m apart, rotor discs {c:.3f} m)"))
+        return touching
+
+    def summary(self) -> dict[str, Any]:
+        """``summary.json["separation"]``: the policy, and every pair's closest approach."""
+        pairs = [{"ids": [self.ids[a], self.ids[b]], "closest_m": _num(c), "t": round(t, 6),
+                  "ok": c >= self.min_m} for (a, b), (c, t) in self.closest.items()]
+        least = min((p["closest_m"] for p in pairs if p["closest_m"] is not None), default=None)
+        return {"min_m": self.min_m, "definition": DEFINITION, "disc_radius_m": dict(zip(map(str, self.ids),
+                self.radii)), "closest_m": least, "pairs": pairs}
+
+    def verdict(self) -> dict[str, Any]:
+        """The ``separation`` policy's verdict, as the other policies' (:class:`bridge.record.policies.Verdict`)."""
+        if self.broken is None:
+            return {"name": "separation", "ok": True}
+        return {"name": "separation", "ok": False, "t": round(self.broken[0], 6), "why": self.broken[1]}
+
+
+def _num(v: float) -> float | None:
+    return round(v, 9) if math.isfinite(v) else None
+
+
+def fly_fleet(m: Mission, flights: list[Flight], path: Path | None, *, plots: bool = True,
+              progress: Progress | None = None) -> FleetRun:
+    """Fly a fleet's prepared flights in one world (the module's docstring); write its directory into ``path``."""
+    ids = [v.id for v in m.vehicles]
+    sep = m.separation or Separation(DEFAULT_MIN_SEPARATION_M)
+    watch = Watch(ids, [sep.disc_radius(f.profile.arm) for f in flights], sep.min_m)
+    dirs: list[Path | None] = [None] * len(ids)
+    if path is not None:
+        write_text_atomic(path / "mission.toml", dump_toml(m.to_dict()))
+        dirs = [path / f"vehicle-{i}" for i in ids]
+        for d in dirs:
+            d.mkdir(exist_ok=True)  # type: ignore[union-attr]  # (an overwritten one may keep a user's files)
+    steps = [flying(f, d, plots=plots, progress=progress if i == 0 else None)
+             for i, (f, d) in enumerate(zip(flights, dirs))]
+    runs = _fly_together(steps, [f.mission.start[:3] for f in flights], flights[0].mission.rate_hz, watch)
+    summary = fleet_summary(m, flights, runs, watch)
+    if path is not None:
+        write_json_atomic(path / "summary.json", summary)
+        if plots:
+            from bridge.record.fleetplots import fleet_plots  # lazy: loads matplotlib
+
+            fleet_plots([r.trace for r in runs], ids, watch.radii, sep.min_m, path / "plots", m.name)
+    return FleetRun(runs, summary, path)
+
+
+def _fly_together(steps: list[Generator[tuple[float, ...], str | None, Run]], starts: list[Sequence[float]],
+                  rate: float, watch: Watch) -> list[Run]:
+    """Step every vehicle's flight once a control step until all have ended; judge the world after each step."""
+    n = len(steps)
+    runs: list[Run | None] = [None] * n
+    positions: list[Sequence[float]] = list(starts)
+    told: list[str | None] = [None] * n  # a contact to tell each vehicle at its next step
+    for a, b, why in watch.check(0.0, positions):
+        told[a] = told[b] = why
+    live = list(range(n))
+    k = 0
+    try:
+        while live:
+            for i in list(live):
+                try:
+                    X = steps[i].send(told[i]) if k else next(steps[i])
+                    positions[i] = (X[0], X[2], X[4])
+                except StopIteration as done:
+                    runs[i] = done.value
+                    live.remove(i)
+                    if done.value.outcome == "aborted":  # Ctrl-C in one vehicle's step: every vehicle stops
+                        raise KeyboardInterrupt from None
+            k += 1
+            for a, b, why in watch.check(k / rate, positions):
+                for i in (a, b):
+                    if i in live:
+                        told[i] = why
+    except KeyboardInterrupt:
+        for i in list(live):
+            try:
+                steps[i].throw(KeyboardInterrupt)
+            except StopIteration as done:
+                runs[i] = done.value
+    except BaseException:
+        for s in steps:
+            s.close()  # each closes its record
+        raise
+    return runs  # type: ignore[return-value]
+
+
+def fleet_summary(m: Mission, flights: list[Flight], runs: list[Run], watch: Watch) -> dict[str, Any]:
+    """The fleet's ``summary.json``: the worst outcome decides, each vehicle's own summary in ``vehicle-<id>/``."""
+    rank = {o: i for i, o in enumerate(SEVERITY)}
+    vehicles = []
+    policies = [watch.verdict()]
+    for v, f, r in zip(m.vehicles, flights, runs):
+        s = r.summary
+        vehicles.append({"id": v.id, "sysid": v.id, "dir": f"vehicle-{v.id}", "outcome": s["outcome"],
+                         "ok": run_ok(s), "rms_3d": s.get("rms_3d"), "profile": f.profile.name,
+                         "controller": f.mission.controller, "seed": f.mission.seed, "offset": list(v.offset),
+                         "trajectory": "own" if v.trajectory is not None else "the mission's",
+                         "start": list(f.mission.start), "ended_by": s.get("ended_by")})
+        policies += [{**p, "name": f"{p['name']} (vehicle {v.id})"} for p in s.get("policies") or ()
+                     if not p.get("ok")]
+    worst = max((x["outcome"] for x in vehicles), key=lambda o: rank.get(o, len(SEVERITY)))
+    rms = [x["rms_3d"] for x in vehicles if x["rms_3d"] is not None]
+    return {"mission": m.name, "clock": "offline", "rate_hz": m.rate_hz, "duration_s": m.duration_s,
+            "controller": m.controller, "profile": m.profile, "outcome": worst, "rms_3d": max(rms) if rms else None,
+            "vehicles": vehicles, "separation": watch.summary(), "policies": policies}

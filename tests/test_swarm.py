@@ -1,0 +1,171 @@
+"""Covers bridge.swarm, bridge.record.fleetplots and bridge.cli: several vehicles in one world, offline.
+
+Real flights, in process: ``bsst sim --vehicles N --formation`` and missions with ``[[vehicles]]`` fly N
+plants and N laws in one loop. Each vehicle flies exactly as it would alone (vehicle 1 of a fleet writes the
+single vehicle's bytes), the separation policy is judged every step (a near miss exits 1, a touch ends both
+vehicles ``collision``), the run directory holds one run per vehicle and the fleet's summary and plots, and a
+mission of one vehicle flies through :func:`bridge.simulate` exactly as through :func:`bridge.loop.simulate`.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+import bridge
+from bridge.cli import main
+from bridge.core.flight import prepare
+from bridge.loop import simulate as simulate_one
+from bridge.swarm import FleetRun, simulate
+from missions import MISSION_DIR, Sine, load_mission
+from missions.fleet import VehicleSpec
+from params import ConfigError
+
+ROOT = Path(__file__).resolve().parents[1]
+NEAR_MISS = ROOT / "examples" / "swarm-near-miss.toml"
+TOUCH = ROOT / "examples" / "swarm-touch.toml"
+
+
+def short_sine(tmp_path: Path, seconds: float = 3.0) -> Path:
+    text = (MISSION_DIR / "sine.toml").read_text().replace("duration_s = 30.0", f"duration_s = {seconds}")
+    f = tmp_path / "short.toml"
+    f.write_text(text)
+    return f
+
+
+def test_four_in_a_line_fly_two_metres_apart_each_tracking_as_one_does(tmp_path: Path) -> None:
+    run = simulate(short_sine(tmp_path), vehicles=4, formation="line:2", out=tmp_path / "run", plots=False)
+    assert isinstance(run, FleetRun) and run.outcome == "completed"
+    s = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert [v["id"] for v in s["vehicles"]] == [1, 2, 3, 4] == [v["sysid"] for v in s["vehicles"]]
+    assert all(v["outcome"] == "completed" and v["ok"] for v in s["vehicles"])
+    one = s["vehicles"][0]["rms_3d"]  # vehicle 1 flies the single vehicle's bytes (the test below)
+    assert all(abs(v["rms_3d"] - one) <= 0.1 * one for v in s["vehicles"]), [v["rms_3d"] for v in s["vehicles"]]
+    assert [v["offset"] for v in s["vehicles"]] == [[0.0, 2.0 * i, 0.0] for i in range(4)]
+    assert s["policies"] == [{"name": "separation", "ok": True}]
+    sep = s["separation"]
+    assert sep["min_m"] == 0.5 and len(sep["pairs"]) == 6 and all(p["ok"] for p in sep["pairs"])
+    assert sep["closest_m"] == pytest.approx(2.0 - 2 * 0.315, abs=1e-3)  # neighbours, less two paper discs
+    for i in range(1, 5):
+        d = tmp_path / "run" / f"vehicle-{i}"
+        assert {p.name for p in d.iterdir()} >= {"trace.csv", "summary.json", "mission.toml", "events.log"}
+        assert json.loads((d / "summary.json").read_text())["outcome"] == "completed"
+    flown = load_mission(tmp_path / "run" / "mission.toml")  # the fleet as flown reads back
+    assert len(flown.vehicles) == 4 and flown.vehicles[3].offset == (0.0, 6.0, 0.0)
+    assert load_mission(tmp_path / "run" / "vehicle-3" / "mission.toml").trajectory == Sine(y0=4.0)
+
+
+def test_each_vehicle_flies_the_bytes_it_would_fly_alone(tmp_path: Path) -> None:
+    mission = short_sine(tmp_path)
+    simulate(mission, vehicles=2, formation="line:3", out=tmp_path / "fleet", plots=False)
+    simulate_one(mission, out=tmp_path / "one", plots=False)
+    fleet = tmp_path / "fleet"
+    assert (fleet / "vehicle-1" / "trace.csv").read_bytes() == (tmp_path / "one" / "trace.csv").read_bytes()
+    alone = replace(load_mission(mission), trajectory=Sine(y0=3.0), start=(0.0, 3.0, 0.0, 0.0), seed=1)
+    simulate_one(alone, out=tmp_path / "two", plots=False)
+    assert (fleet / "vehicle-2" / "trace.csv").read_bytes() == (tmp_path / "two" / "trace.csv").read_bytes()
+
+
+def test_one_vehicle_flies_through_bridge_simulate_exactly_as_before(tmp_path: Path) -> None:
+    mission = short_sine(tmp_path)
+    a = bridge.simulate(mission, out=tmp_path / "a", plots=False, rate_hz=200.0)
+    b = simulate_one(mission, out=tmp_path / "b", plots=False, rate_hz=200.0)
+    assert not isinstance(a, FleetRun) and a.summary == b.summary
+    assert sorted(p.name for p in (tmp_path / "a").iterdir()) == sorted(p.name for p in (tmp_path / "b").iterdir())
+    for name in ("trace.csv", "summary.json", "mission.toml", "events.log"):
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
+
+
+def test_paths_closer_than_the_minimum_break_the_separation_policy_and_exit_1(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["sim", str(NEAR_MISS), "--out", str(tmp_path / "r"), "--no-plots"]) == 1
+    s = json.loads((tmp_path / "r" / "summary.json").read_text())
+    assert s["outcome"] == "completed" and [v["outcome"] for v in s["vehicles"]] == ["completed", "completed"]
+    (verdict,) = s["policies"]
+    assert verdict["name"] == "separation" and not verdict["ok"] and "under the minimum of 0.5 m" in verdict["why"]
+    (pair,) = s["separation"]["pairs"]
+    assert pair["ids"] == [1, 2] and 0.0 < pair["closest_m"] < 0.5 and pair["closest_m"] == pytest.approx(0.27, 1e-2)
+    assert "policy separation violated" in capsys.readouterr().err
+
+
+def test_vehicles_that_touch_both_end_collision(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["sim", str(TOUCH), "--out", str(tmp_path / "r"), "--no-plots"]) == 1
+    s = json.loads((tmp_path / "r" / "summary.json").read_text())
+    assert s["outcome"] == "collision" and [v["outcome"] for v in s["vehicles"]] == ["collision", "collision"]
+    assert s["separation"]["closest_m"] <= 0.0
+    for i in (1, 2):
+        v = json.loads((tmp_path / "r" / f"vehicle-{i}" / "summary.json").read_text())
+        assert v["outcome"] == "collision" and v["ended_by"]["who"] == "plant"
+        assert "collision at t=" in v["ended_by"]["how"] and "touched" in v["ended_by"]["how"]
+        assert "collision: vehicles 1 and 2 touched" in (tmp_path / "r" / f"vehicle-{i}" / "events.log").read_text()
+    assert "vehicle 1: collision" in capsys.readouterr().err
+
+
+def test_the_fleets_plots_show_every_vehicle(tmp_path: Path) -> None:
+    simulate(short_sine(tmp_path, 1.0), vehicles=3, formation="circle:2", out=tmp_path / "r")
+    assert sorted(p.name for p in (tmp_path / "r" / "plots").iterdir()) == ["fleet-paths.png", "fleet-separation.png"]
+    assert (tmp_path / "r" / "vehicle-2" / "plots" / "positions.png").is_file()
+
+
+def test_a_fleet_overwrites_a_fleet_and_one_vehicle_overwrites_both(tmp_path: Path) -> None:
+    mission, out = short_sine(tmp_path, 0.5), tmp_path / "r"
+    simulate(mission, vehicles=3, out=out, plots=False)
+    simulate(mission, vehicles=2, out=out, overwrite=True, plots=False)
+    assert sorted(p.name for p in out.iterdir()) == ["mission.toml", "summary.json", "vehicle-1", "vehicle-2"]
+    simulate(mission, out=out, overwrite=True, plots=False)
+    assert sorted(p.name for p in out.iterdir()) == ["events.log", "mission.toml", "summary.json", "trace.csv"]
+
+
+def test_vehicles_given_from_python_and_their_bad_forms(tmp_path: Path) -> None:
+    mission = short_sine(tmp_path, 0.5)
+    run = simulate(mission, vehicles=[VehicleSpec(2, (3.0, 0.0, 0.0)), VehicleSpec(1)], controller="smc")
+    assert isinstance(run, FleetRun) and [r.outcome for r in run.runs] == ["completed", "completed"]
+    assert run.summary["vehicles"][1]["offset"] == [3.0, 0.0, 0.0] and run.path is None
+    for bad in ("two", [VehicleSpec(2)], [{"id": 1}]):
+        with pytest.raises(ConfigError, match="^vehicles: expected a number of vehicles or VehicleSpec"):
+            simulate(mission, vehicles=bad)  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="^--formation line:2: lays out several vehicles"):
+        simulate(mission, formation="line:2")
+    with pytest.raises(ConfigError, match="has its own \\[\\[vehicles\\]\\]"):
+        simulate(TOUCH, vehicles=2)
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--formation", "line:2"], "give --vehicles N"),
+    (["--vehicles", "0"], "--vehicles must be in [1, 64]"),
+    (["--vehicles", "2", "--formation", "ring:2"], "--formation ring:2: expected line:SPACING"),
+    (["--vehicles", "2", "--formation", "line:0"], "must be in (0, 1000] m"),
+])
+def test_bad_fleet_flags_are_one_line_and_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                 args: list[str], words: str) -> None:
+    out = tmp_path / "r"
+    assert main(["sim", "missions/sine.toml", "--out", str(out), *args]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert words in err[-1] and "Traceback" not in "\n".join(err) and not out.exists()
+
+
+def test_a_bad_vehicle_is_named_with_its_id(tmp_path: Path) -> None:
+    text = NEAR_MISS.read_text().replace('id = 2\n', 'id = 2\nprofile = "nonesuch"\n')
+    f = tmp_path / "bad.toml"
+    f.write_text(text)
+    with pytest.raises(ConfigError, match=r"profile: .*\(vehicle 2\)$"):
+        simulate(f, out=tmp_path / "r")
+    assert not (tmp_path / "r").exists()
+
+
+def test_a_fleet_mission_is_refused_where_one_vehicle_flies() -> None:
+    with pytest.raises(ConfigError, match="vehicles: a mission of several vehicles is flown by bsst sim"):
+        prepare(TOUCH)
+
+
+def test_ctrl_c_in_one_vehicle_stops_every_vehicle(tmp_path: Path) -> None:
+    def interrupt(t: float, duration: float, err: float) -> None:
+        if t >= 1.0:
+            raise KeyboardInterrupt
+
+    run = simulate(short_sine(tmp_path), vehicles=3, progress=interrupt, out=tmp_path / "r", plots=False)
+    assert run.outcome == "aborted" and [r.outcome for r in run.runs] == ["aborted"] * 3
+    assert all(len(r.trace["t"]) < 300 for r in run.runs)
