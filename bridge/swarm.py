@@ -249,7 +249,9 @@ def fleet_summary(m: Mission, flights: list[Flight], runs: list[Run], watch: Wat
                          "ok": run_ok(s), "rms_3d": s.get("rms_3d"), "profile": f.profile.name,
                          "controller": f.mission.controller, "seed": f.mission.seed, "offset": list(v.offset),
                          "trajectory": "own" if v.trajectory is not None else "the mission's",
-                         "start": list(f.mission.start), "ended_by": s.get("ended_by")})
+                         "start": list(f.mission.start), "ended_by": s.get("ended_by"),
+                         "link": {d: {k: (s.get("link") or {}).get(d, {}).get(k) for k in ("sent", "delivered", "lost")}
+                                  for d in ("up", "down")}})
         policies += [{**p, "name": f"{p['name']} (vehicle {v.id})"} for p in s.get("policies") or ()
                      if not p.get("ok")]
     worst = max((x["outcome"] for x in vehicles), key=lambda o: rank.get(o, len(SEVERITY)))

@@ -124,6 +124,7 @@ def test_vehicles_given_from_python_and_their_bad_forms(tmp_path: Path) -> None:
     run = simulate(mission, vehicles=[VehicleSpec(2, (3.0, 0.0, 0.0)), VehicleSpec(1)], controller="smc")
     assert isinstance(run, FleetRun) and [r.outcome for r in run.runs] == ["completed", "completed"]
     assert run.summary["vehicles"][1]["offset"] == [3.0, 0.0, 0.0] and run.path is None
+    assert run.summary["vehicles"][0]["link"]["up"] == {"sent": 125, "delivered": 125, "lost": 0}
     for bad in ("two", [VehicleSpec(2)], [{"id": 1}]):
         with pytest.raises(ConfigError, match="^vehicles: expected a number of vehicles or VehicleSpec"):
             simulate(mission, vehicles=bad)  # type: ignore[arg-type]
@@ -169,3 +170,15 @@ def test_ctrl_c_in_one_vehicle_stops_every_vehicle(tmp_path: Path) -> None:
     run = simulate(short_sine(tmp_path), vehicles=3, progress=interrupt, out=tmp_path / "r", plots=False)
     assert run.outcome == "aborted" and [r.outcome for r in run.runs] == ["aborted"] * 3
     assert all(len(r.trace["t"]) < 300 for r in run.runs)
+
+
+@pytest.mark.parametrize("link", [{"loss_pct": 30.0}, {"loss_pct": 30.0, "seed": 5}])
+def test_each_vehicle_has_its_own_seeded_link(tmp_path: Path, link: dict) -> None:
+    mission = short_sine(tmp_path, 1.0)
+    run = simulate(mission, vehicles=3, link=link)
+    lost = [(v["link"]["up"]["lost"], v["link"]["down"]["lost"]) for v in run.summary["vehicles"]]
+    assert len(set(lost)) == 3, lost  # three links, three draws
+    alone = simulate_one(mission, link=link)
+    assert (alone.summary["link"]["up"]["lost"], alone.summary["link"]["down"]["lost"]) == lost[0]
+    again = simulate(mission, vehicles=3, link=link)
+    assert [(v["link"]["up"]["lost"], v["link"]["down"]["lost"]) for v in again.summary["vehicles"]] == lost
