@@ -31,7 +31,14 @@ from bridge.core.flight import Flight, Overrides, Progress, prepare
 from bridge.loop import flying
 from bridge.loop import simulate as simulate_one
 from bridge.record.policies import run_ok
-from bridge.record.runlog import Run, check_trace_steps, run_dir, write_json_atomic, write_text_atomic
+from bridge.record.runlog import (
+    MAX_TRACE_STEPS,
+    Run,
+    check_trace_steps,
+    run_dir,
+    write_json_atomic,
+    write_text_atomic,
+)
 from missions import Mission, load_mission
 from missions.fleet import DEFAULT_MIN_SEPARATION_M, Separation, VehicleSpec, formation, link_seeds_moved
 from missions.fleet import vehicle_mission as mission_of
@@ -79,11 +86,23 @@ def simulate(mission: Mission | str | Path, *, vehicles: int | Sequence[Any] | N
     if fleet is None:
         return simulate_one(mission, out=out, write=write, overwrite=overwrite, plots=plots, progress=progress,
                             overrides=overrides, **keywords)
-    flights = fleet_flights(fleet, Overrides.of(overrides, **keywords))
-    for f in flights:  # before the run directory is made: a refused mission writes nothing
-        check_trace_steps(f.mission)
+    over = Overrides.of(overrides, **keywords)
+    flights = fleet_flights(fleet, over)
+    check_fleet_steps(fleet, flights)  # before the run directory is made: a refused mission writes nothing
     path = run_dir(out, fleet.name, overwrite) if (out is not None or write) else None
-    return fly_fleet(fleet, flights, path, plots=plots, progress=progress)
+    return fly_fleet(over.laid_over(fleet), flights, path, plots=plots, progress=progress)
+
+
+def check_fleet_steps(m: Mission, flights: list[Flight]) -> None:
+    """Refuse a fleet whose traces together would not fit in memory: every vehicle keeps a row a control step
+    for its summary, and together they may keep what one run may (:func:`bridge.record.runlog.check_trace_steps`)."""
+    for f in flights:
+        check_trace_steps(f.mission)
+    total = sum(f.mission.steps for f in flights)
+    if total > MAX_TRACE_STEPS:
+        raise ConfigError(f"{m.source}: duration_s: {len(flights)} vehicles of {flights[0].mission.steps} control "
+                          f"steps are {total} steps, over the {MAX_TRACE_STEPS} a run keeps in memory for its "
+                          "summary: fly fewer vehicles or a shorter mission")
 
 
 def fleet_mission(m: Mission, vehicles: int | Sequence[Any] | None, layout: str | None) -> Mission | None:
@@ -231,6 +250,10 @@ def _fly_together(steps: list[Generator[tuple[float, ...], str | None, Run]], st
                 steps[i].throw(KeyboardInterrupt)
             except StopIteration as done:
                 runs[i] = done.value
+            except KeyboardInterrupt:  # not started yet (interrupted within the first step): nothing recorded
+                pass
+        if any(r is None for r in runs):
+            raise
     except BaseException:
         for s in steps:
             s.close()  # each closes its record

@@ -182,3 +182,25 @@ def test_each_vehicle_has_its_own_seeded_link(tmp_path: Path, link: dict) -> Non
     assert (alone.summary["link"]["up"]["lost"], alone.summary["link"]["down"]["lost"]) == lost[0]
     again = simulate(mission, vehicles=3, link=link)
     assert [(v["link"]["up"]["lost"], v["link"]["down"]["lost"]) for v in again.summary["vehicles"]] == lost
+
+
+def test_a_fleet_too_long_to_keep_in_memory_is_refused_before_it_writes(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=r"duration_s: 64 vehicles of 7500 control steps are 480000 steps, "
+                                          r"over the 100000"):
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr("bridge.swarm.MAX_TRACE_STEPS", 100_000)
+            simulate("missions/sine.toml", vehicles=64, formation="grid:2", out=tmp_path / "r")
+    assert not (tmp_path / "r").exists()
+
+
+def test_the_fleets_mission_toml_is_the_mission_as_flown(tmp_path: Path) -> None:
+    run = simulate(short_sine(tmp_path, 0.5), vehicles=2, controller="smc", seed=7, out=tmp_path / "r", plots=False)
+    flown = load_mission(tmp_path / "r" / "mission.toml")
+    assert flown.controller == "smc" and flown.seed == 7 and len(flown.vehicles) == 2
+    assert [v["seed"] for v in run.summary["vehicles"]] == [7, 8] and run.summary["controller"] == "smc"
+
+
+def test_a_formation_reaching_past_the_envelope_names_the_first_vehicle_outside(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=r"outside the plant's envelope of 100 m .*\(vehicle 51\)$"):
+        simulate("missions/sine.toml", vehicles=60, formation="line:2", out=tmp_path / "r")
+    assert not (tmp_path / "r").exists()
