@@ -25,9 +25,36 @@ def test_flags_parse_into_event_tables() -> None:
     assert event_table_from_flag("3:gps:jump=1,2,0")["jump"] == [1.0, 2.0, 0.0]
     assert event_table_from_flag("3:wind:8:90") == {"t_s": 3.0, "kind": "wind", "speed_mps": 8.0, "from_deg": 90.0}
     assert event_table_from_flag("3:gust:2,4")["duration_s"] == 2.0
-    for bad in ("x:motor:1=0", "3:quake", "3:motor:one=0", "3:gps:maybe", "3:gyro:bias=1,2", "3:link:lte"):
+    for bad in ("x:motor:1=0", "3:quake", "3:motor:one=0", "3:gps:maybe", "3:gyro:bias=1,2", "3:link:",
+                "3:link:lte,wifi"):
         with pytest.raises(ValueError):
             event_table_from_flag(bad)
+
+
+def test_a_link_handover_parses_and_is_refused_when_bad() -> None:
+    assert event_table_from_flag("10:link:lte") == {"t_s": 10.0, "kind": "link", "profile": "lte"}
+    assert event_table_from_flag("10:link:lte,delay_ms=40,jitter=normal,seed=3") == {
+        "t_s": 10.0, "kind": "link", "profile": "lte", "delay_ms": 40, "jitter": "normal", "seed": 3}
+    for at, why in (("10:link:stale_ms=50", "controller's guard"), ("10:link:delay_ms=-5", "link.delay_ms"),
+                    ("10:link:nope", "link.profile"), ("10:link:delai_ms=5", "delai_ms")):
+        with pytest.raises(ConfigError, match=why):
+            simulate("missions/sine.toml", at=(at,))
+
+
+def test_a_link_handover_acts_from_its_step_in_the_offline_loop() -> None:
+    """Before 20 s the flight is the still link's to the bit; from the control step at 20 s every packet takes the
+    new link (40 ms each way): the delays after it, the event in the summary (kind ``link``), as a flag or a
+    ``[[events]]`` table."""
+    still = simulate("missions/sine.toml")
+    flag = simulate("missions/sine.toml", at=("20:link:delay_ms=40",))
+    table = simulate("missions/sine.toml", at=({"t_s": 20.0, "kind": "link", "delay_ms": 40},))
+    n = int(20.0 * 250)  # control steps before the handover (the sine flies 250 Hz)
+    assert (flag.trace["x"][:n] == still.trace["x"][:n]).all() and flag.trace["x"][n + 20] != still.trace["x"][n + 20]
+    assert flag.summary["rms_3d"] == table.summary["rms_3d"] != still.summary["rms_3d"]
+    up = flag.summary["link"]["up"]["delay_ms"]
+    assert up["p50"] == pytest.approx(0.0) and up["p95"] == pytest.approx(40.0)  # a third of the flight at 40 ms
+    assert [e for e in flag.summary["events"] if e["kind"] == "link"] == [
+        {"t": 20.0, "kind": "link", "text": "link handover to delay_ms=40"}]
 
 
 def test_events_that_cannot_act_on_this_flight_are_refused() -> None:
