@@ -5,22 +5,34 @@ Every flight is the product's own loop, ``bridge.simulate`` (``bsst sim``), with
 ``bsst sim MISSION --wind S:FROM --turbulence L --at T:KIND:ARGS ...`` flies.
 
 ``wind``: ``missions/sine.toml --wind 5:270 --turbulence moderate`` for seeds 0..N-1: outcome, RMS, the mean
-wind along its direction and the turbulence's std per axis over the flight against MIL-HDBK-1797's σ, and the
-same pooled over the seeds (a 30 s flight is a few correlation times of u and v: one flight's sample is spread).
+wind along its direction and the turbulence's std per axis over the flight against MIL-HDBK-1797's σ, each with
+the expected sampling error of a 30 s sample (summary.json's ``sampling``), the same pooled over the seeds, and
+the same generator over 3600 s (``plant.wind.long_run``: the configuration and seed the flight flew).
 ``table``: BS-ST, SMC, PID on the sine, 3-D RMS (m, t >= 10 s) and u2 ripple (N, summary.json's), in still
 air, 5 m/s moderate and 10 m/s severe, on a perfect link and with 20 ms each way (``--delay 20``).
-``faults``: the x500 with ``--at 10:motor:1=E`` for each law; ``--sensors gnss --estimator ekf --at 10:gps:off
---at 20:gps:on``: the drift during the outage and the NEES after.
+``faults``: the x500 with ``--at 10:motor:1=E`` for each law, with the default gains (``missions/sine.toml
+--profile x500``) and with attitude gains sized for the fault (``examples/x500-motor-fault.toml``); ``--sensors
+gnss --estimator ekf --at 10:gps:off --at 20:gps:on``: the drift during the outage and the NEES after.
+``margin``: ``bsst margin missions/sine.toml --over wind_mps --until rms=0.1`` per law, on a perfect link and
+with ``--delay 20`` (``bridge.sweep.margin.margin``, what the command calls).
 
-    python benchmarks/weather.py [wind|table|faults|all] [--seeds N]
+    python benchmarks/weather.py [wind|table|faults|margin|all] [--seeds N] [--jobs N]
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import os
+import sys
+from pathlib import Path
 
-from bridge import simulate
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # missions/ is the repository's, not benchmarks/
+
+from bridge import simulate  # noqa: E402
+from bridge.core.flight import prepare  # noqa: E402
+from bridge.sweep.margin import margin, parse_until  # noqa: E402
+from plant.wind import WindConfig, long_run  # noqa: E402
 
 MISSION = "missions/sine.toml"
 WEATHERS = (("still", {}), ("5 m/s moderate", {"wind": (5.0, 270.0), "turbulence": "moderate"}),
@@ -30,25 +42,30 @@ LAWS = ("bsst", "smc", "pid")
 
 
 def wind_table(seeds: int) -> None:
-    print("## --wind 5:270 --turbulence moderate, sine, per seed\n")
+    print("## --wind 5:270 --turbulence moderate, sine, per seed (30 s; ± the expected sampling error)\n")
     print("| seed | outcome | RMS m | mean along m/s | std u / σ_u | std v / σ_v | std w / σ_w |")
     print("|---|---|---|---|---|---|---|")
     pooled = [0.0, 0.0, 0.0]
     means = []
-    sig = None
+    w: dict = {}
     for seed in range(seeds):
         s = simulate(MISSION, wind=(5.0, 270.0), turbulence="moderate", seed=seed).summary
         w = s["wind"]
-        sig = w["dryden"]["sigma_mps"]
-        std = w["turbulence_std_mps"]
+        sig, std, se = w["dryden"]["sigma_mps"], w["turbulence_std_mps"], w["sampling"]
         means.append(w["mean_mps"]["along"])
         for i, k in enumerate("uvw"):
             pooled[i] += std[k] ** 2
-        print(f"| {seed} | {s['outcome']} | {s['rms_3d']:.4f} | {w['mean_mps']['along']:.2f} | "
-              + " | ".join(f"{std[k] / sig[k]:.2f}" for k in "uvw") + " |")
-    assert sig is not None
+        print(f"| {seed} | {s['outcome']} | {s['rms_3d']:.4f} | {w['mean_mps']['along']:.2f} ± "
+              f"{se['mean_along_se_mps']:.2f} | "
+              + " | ".join(f"{std[k] / sig[k]:.2f} ± {se['std_rel_se'][k]:.2f}" for k in "uvw") + " |")
+    sig = w["dryden"]["sigma_mps"]
     print(f"| pooled | | | {sum(means) / len(means):.2f} | "
           + " | ".join(f"{math.sqrt(pooled[i] / seeds) / sig[k]:.2f}" for i, k in enumerate("uvw")) + " |")
+    lr = long_run(WindConfig(w["speed_mps"], w["from_deg"], w["turbulence"], w["altitude_m"]), seed=0)
+    se = lr["sampling"]
+    print(f"| 3600 s, seed 0 | | | {lr['mean_along_mps']:.2f} ± {se['mean_along_se_mps']:.2f} | "
+          + " | ".join(f"{lr['turbulence_std_mps'][k] / sig[k]:.3f} ± {se['std_rel_se'][k]:.3f}" for k in "uvw")
+          + " |")
     print(f"\nσ (MIL-HDBK-1797, moderate, h = {w['dryden']['model_altitude_m']:.3f} m): "
           + ", ".join(f"{k} {sig[k]:.3f} m/s" for k in "uvw") + "\n")
 
@@ -70,12 +87,13 @@ def law_table() -> None:
 
 def fault_table() -> None:
     print("## x500, sine, --at 10:motor:1=E\n")
-    print("| law | E | outcome | RMS m | ended by |")
-    print("|---|---|---|---|---|")
+    print("| law | attitude gains | E | outcome | RMS m | ended by |")
+    print("|---|---|---|---|---|---|")
     for law in LAWS:
-        for eff in (0.9, 0.75, 0.0):
-            s = simulate(MISSION, profile="x500", controller=law, at=(f"10:motor:1={eff:g}",)).summary
-            print(f"| {law} | {eff:g} | {s['outcome']} | {s['rms_3d']:.4g} | {s['ended_by']['how']} |")
+        for eff in (0.9, 0.75, 0.6, 0.0):
+            for gains, mission in (("default", MISSION), ("fault-sized", "examples/x500-motor-fault.toml")):
+                s = simulate(mission, profile="x500", controller=law, at=(f"10:motor:1={eff:g}",)).summary
+                print(f"| {law} | {gains} | {eff:g} | {s['outcome']} | {s['rms_3d']:.4g} | {s['ended_by']['how']} |")
     print("\n## GPS loss: sine, --sensors gnss --estimator ekf --at 10:gps:off --at 20:gps:on\n")
     s = simulate(MISSION, sensors={"set": "gnss"}, estimator="ekf", at=("10:gps:off", "20:gps:on")).summary
     (o,) = s["gps_outages"]
@@ -84,17 +102,35 @@ def fault_table() -> None:
           f"position error RMS {o['drift_rms_after_m']:.3f} m\n")
 
 
+def margin_table(jobs: int | None) -> None:
+    print("## bsst margin missions/sine.toml --over wind_mps --until rms=0.1\n")
+    print("| law | link | margin m/s | bracket | cells |")
+    print("|---|---|---|---|---|")
+    for law in LAWS:
+        for lname, link in LINKS:
+            m = prepare(MISSION, link=link).mission
+            e = margin(m, "wind_mps", parse_until("rms=0.1"), controllers=(law,), jobs=jobs)
+            row = (e.get("controllers") or [e])[0]
+            print(f"| {law} | {lname} | {row['margin']} | {row['bracket']} | {e['cells_flown']} |")
+    print()
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("what", nargs="?", default="all", choices=("wind", "table", "faults", "all"))
+    ap.add_argument("what", nargs="?", default="all", choices=("wind", "table", "faults", "margin", "all"))
     ap.add_argument("--seeds", type=int, default=8)
+    ap.add_argument("--jobs", type=int, default=None, help="margin's workers (default: all cores)")
     a = ap.parse_args()
+    print("load average (1, 5, 15 min) at the start: {:.2f} {:.2f} {:.2f}\n".format(*os.getloadavg()))
     if a.what in ("wind", "all"):
         wind_table(a.seeds)
     if a.what in ("table", "all"):
         law_table()
     if a.what in ("faults", "all"):
         fault_table()
+    if a.what in ("margin", "all"):
+        margin_table(a.jobs)
+    print("load average (1, 5, 15 min) at the end: {:.2f} {:.2f} {:.2f}".format(*os.getloadavg()))
 
 
 if __name__ == "__main__":

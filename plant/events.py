@@ -16,7 +16,9 @@ mag        ``state`` off|on                                ``off``, ``on``
 gyro       ``bias`` [x, y, z] rad/s (added)                ``bias=X,Y,Z``
 wind       ``speed_mps``, ``from_deg``                     ``SPEED[:FROM_DEG]``
 gust       ``duration_s``, ``amplitude_mps``, ``from_deg``  ``DURATION,AMPLITUDE[,FROM_DEG]``
-link       (refused: the link model is fixed for a flight)  ``PROFILE_OR_KEYS``
+link       ``profile`` and/or ``[link]``'s per-direction    ``PROFILE``, ``KEY=VALUE,...`` or both
+           keys: the link handed over to (checked by
+           :func:`bridge.core.flight.prepare`)
 =========  ==============================================  =========================================
 
 An event acts at the start of the control step that begins at or after ``t_s``: the same step in every clock.
@@ -33,8 +35,7 @@ from params import ConfigError, Table
 
 EVENT_KINDS = ("motor", "gps", "baro", "mag", "gyro", "wind", "gust", "link")
 SENSOR_EVENT_KINDS = ("gps", "baro", "mag", "gyro")
-LINK_REFUSED = ("link events are not supported: the link model is built once for a flight (its fates are drawn "
-                "ahead from the seed); schedule outages with [link] blackouts or --blackout")
+LINK_SCALARS = (str, int, float)  # a handover's keys: a profile name and [link]'s per-direction scalars
 
 
 @dataclass(frozen=True, slots=True)
@@ -74,6 +75,9 @@ class TimedEvent:
             return "gyro bias +({:g}, {:g}, {:g}) rad/s".format(*s["bias"])
         if k == "wind":
             return f"steady wind {s['speed_mps']:g} m/s from {s['from_deg']:g} deg"
+        if k == "link":
+            return "link handover to " + ", ".join(str(v) if n == "profile" else f"{n}={v:g}"
+                                                   if isinstance(v, float) else f"{n}={v}" for n, v in self.settings)
         return f"gust {s['amplitude_mps']:g} m/s from {s['from_deg']:g} deg over {s['duration_s']:g} s"
 
 
@@ -88,9 +92,15 @@ def event_from_table(t: Table, duration_s: float) -> TimedEvent:
         raise t.error("t_s", f"must be before the mission's end ({duration_s:g} s)")
     kind = t.string("kind", choices=EVENT_KINDS)
     s: dict[str, Any] = {}
-    if kind == "link":
-        raise t.error("kind", LINK_REFUSED)
-    if kind == "motor":
+    if kind == "link":  # the keys of the [link] table handed over to: the link model checks them (prepare)
+        for key in sorted(k for k in t._data if k not in ("t_s", "kind")):
+            v = t.raw(key)
+            if isinstance(v, bool) or not isinstance(v, LINK_SCALARS):
+                raise t.error(key, f"a link handover takes a profile and [link]'s scalar keys, got {v!r}"[:200])
+            s[key] = v
+        if not s:
+            raise t.error("kind", "a link handover needs a profile or [link] keys (delay_ms, loss_pct, ...)")
+    elif kind == "motor":
         s["motor"] = t.integer("motor", lo=1, hi=4)
         s["effectiveness"] = t.number("effectiveness", lo=0.0, hi=1.0)
     elif kind in ("gps", "mag"):
@@ -134,6 +144,32 @@ def _numbers(text: str, n: tuple[int, ...], what: str) -> list[float]:
     return values
 
 
+def _scalar(text: str) -> int | float | str:
+    """A flag's value as TOML would read it: an integer, a number, else the text."""
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
+
+
+def _link_args(args: str, text: str) -> dict[str, Any]:
+    """``link:PROFILE``, ``link:KEY=VALUE,...`` or ``link:PROFILE,KEY=VALUE,...`` as a handover's keys."""
+    out: dict[str, Any] = {}
+    for part in (p.strip() for p in args.split(",") if p.strip()):
+        key, eq, value = part.partition("=")
+        if not eq:
+            if "profile" in out:
+                raise ValueError(f"expected link:PROFILE[,KEY=VALUE,...] with one profile, got {text!r}")
+            out["profile"] = key
+            continue
+        out[key.strip()] = _scalar(value.strip())
+    if not out:
+        raise ValueError(f"expected link:PROFILE or link:KEY=VALUE,... (a link profile or [link] keys), got {text!r}")
+    return out
+
+
 def event_table_from_flag(text: str) -> dict[str, Any]:
     """``T:KIND[:ARGS]`` (``--at``) as an ``[[events]]`` table; ValueError saying what is wrong (ranges are
     checked by :func:`event_from_table`)."""
@@ -148,8 +184,8 @@ def event_table_from_flag(text: str) -> dict[str, Any]:
     out: dict[str, Any] = {"t_s": t_s, "kind": kind}
     key, eq, value = args.partition("=")
     if kind == "link":
-        raise ValueError(LINK_REFUSED)
-    if kind == "motor":
+        out.update(_link_args(args, text))
+    elif kind == "motor":
         if not eq or not key.strip().isdigit():
             raise ValueError(f"expected motor:N=EFFECTIVENESS (N 1-4, 0..1), got {text!r}")
         out.update(motor=int(key), effectiveness=_numbers(value, (1,), "an effectiveness 0..1")[0])

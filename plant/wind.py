@@ -238,6 +238,7 @@ class Wind:
         self.across = (-self.along[1], self.along[0])  # 90° to the left of it (z up)
         self.turbulence = (Turbulence(config.turbulence, config.altitude_m or 0.0, config.speed_mps, seed, h)
                            if config.turbulence != "none" else None)
+        self.h = h
         self._n = 0
         self._sum = [0.0] * 6  # Σ along, across, up, Σ of their squares
         self._sum_t = [0.0] * 6  # the same of the turbulence alone
@@ -303,4 +304,40 @@ class Wind:
                              "scale_m": {"u": tu.l_u, "v": tu.l_v, "w": tu.l_w}, "pass_speed_mps": tu.speed,
                              "model_altitude_m": tu.l_w,  # L_w = h: the altitude in the model's range
                              "source": "MIL-F-8785C / MIL-HDBK-1797 low altitude"}
+            out["sampling"] = sampling_errors(tu, self._n * self.h, std_t, self._sum_t[0] / n)
         return out
+
+
+def sampling_errors(tu: Turbulence, duration_s: float, std: list[float], mean_u: float) -> dict:
+    """How far one flight's sample of the turbulence is expected to stray from the σ it was generated with.
+
+    Over T seconds, a zero-mean Gaussian process of autocorrelation R has a sample mean of variance
+    (1/T) ∫R dτ and a mean square (1/T ∫x²) of variance (2/T) ∫R² dτ (integrals over the whole line, T ≫ the
+    correlation time L/V). Dryden's u (R = σ² e^{−Vτ/L}): std error of the mean σ √(2L/VT), relative std
+    error of the sample σ √(L/2VT); v and w (R = σ² (1 − Vτ/2L) e^{−Vτ/L}): σ √(L/VT) and √(5L/16VT).
+    ``z`` is (sample − asked) / its std error: beyond ±2 the generator, not the sample, would be suspect."""
+    t = max(duration_s, 1e-9)
+    v = tu.speed
+    rel = {"u": math.sqrt(tu.l_u / (2.0 * v * t)), "v": math.sqrt(5.0 * tu.l_v / (16.0 * v * t)),
+           "w": math.sqrt(5.0 * tu.l_w / (16.0 * v * t))}
+    sig = {"u": tu.sigma_u, "v": tu.sigma_v, "w": tu.sigma_w}
+    se_mean = tu.sigma_u * math.sqrt(2.0 * tu.l_u / (v * t))
+    return {"duration_s": duration_s, "correlation_times": {k: t * v / ln for k, ln in
+                                                            (("u", tu.l_u), ("v", tu.l_v), ("w", tu.l_w))},
+            "mean_along_se_mps": se_mean, "mean_along_z": mean_u / se_mean,
+            "std_rel_se": rel, "std_z": {k: (std[i] / sig[k] - 1.0) / rel[k] for i, k in enumerate("uvw")}}
+
+
+def long_run(config: WindConfig, seed: int, duration_s: float = 3600.0, h: float = 0.02) -> dict:
+    """The same generator (:class:`Wind`, the same configuration and seed's stream) over a long series: its
+    mean wind along the mean direction and the turbulence's std per axis (m/s), with MIL-HDBK-1797's σ and
+    the expected sampling errors over ``duration_s``. The exact discretization makes the statistics the same
+    for any step h, so a coarser step than the flight's suffices; gusts are left out (they are not turbulence)."""
+    wind = Wind(replace(config, gusts=()), seed, h)
+    for k in range(int(round(duration_s / h))):
+        wind.now(k * h)
+        wind.advance()
+    s = wind.summary()
+    return {"duration_s": duration_s, "step_s": h, "mean_along_mps": s["mean_mps"]["along"],
+            "turbulence_std_mps": s.get("turbulence_std_mps"), "sigma_mps": s.get("dryden", {}).get("sigma_mps"),
+            "sampling": s.get("sampling")}

@@ -210,15 +210,27 @@ gusts = [[11.0, 2.0, 3.0, 90.0]]
 ALL_OFF = tuple(a for i in (1, 2, 3, 4) for a in ("--at", f"5:motor:{i}=0"))  # it falls from 0.5 m: crashed
 
 
-@pytest.mark.parametrize("case", ["wind-battery", "crash"])
+def _trace(path) -> list[list[str]]:
+    """trace.csv's state, reference and law's input columns (t through u4), as text: equal means equal to the
+    bit (the wire's copies, c1..c4 and u*_act, are float32 under sitl)."""
+    rows = path.read_text().splitlines()
+    keep = rows[0].split(",").index("u4") + 1
+    return [r.split(",")[:keep] for r in rows]
+
+
+@pytest.mark.parametrize("case", ["wind-battery", "crash", "flags", "handover"])
 def test_sitl_plant_blocks_equal_offline(tmp_path, case):
     """``bsst sitl`` (lockstep) reports the plant's blocks as ``bsst sim`` does, to the bit: ``wind`` and
     ``battery`` (a windy x500 with its battery), and a hard touchdown's ``crashed`` outcome (every rotor off:
     it falls from 0.5 m), its ``impact``, ``rotor_effectiveness`` and ``ended_by`` (with ``after_faults``),
-    exit 1."""
+    exit 1. ``flags``: the issue's ``--wind 5:270 --turbulence moderate`` (and a gust event) as flags on the
+    sine: the same trace.csv state and inputs too. ``handover``: ``--at 10:link:lte``, a handover from the perfect
+    link to the LTE profile's at 10 s: the same trace, the model's link statistics and the ``link`` event."""
     mission = tmp_path / "windy.toml"
     mission.write_text(WINDY_X500)
-    args = (str(mission),) if case == "wind-battery" else ("missions/sine.toml", "--profile", "x500", *ALL_OFF)
+    args = {"wind-battery": (str(mission),), "crash": ("missions/sine.toml", "--profile", "x500", *ALL_OFF),
+            "flags": ("missions/sine.toml", "--wind", "5:270", "--turbulence", "moderate", "--at", "12:gust:2,3,90"),
+            "handover": ("missions/sine.toml", "--at", "10:link:lte")}[case]
     codes, summaries = [], []
     for command in ("sim", "sitl"):
         out = tmp_path / command
@@ -234,6 +246,17 @@ def test_sitl_plant_blocks_equal_offline(tmp_path, case):
     if case == "crash":
         assert codes == [1, 1] and sitl["outcome"] == "crashed" and sitl["impact"]["speed_mps"] > 2.0
         assert sitl["ended_by"]["after_faults"] == [f"t=5.000 s: motor {i}: off" for i in (1, 2, 3, 4)]
+    elif case in ("flags", "handover"):
+        assert codes == [0, 0] and _trace(tmp_path / "sitl" / "trace.csv") == _trace(tmp_path / "sim" / "trace.csv")
+        if case == "flags":
+            assert sitl["wind"]["sampling"]["duration_s"] > 0.0
+        else:
+            link = [(e["t"], e["text"]) for e in sitl["events"] if e["kind"] == "link"]
+            assert link == [(e["t"], e["text"]) for e in offline["events"] if e["kind"] == "link"] == [
+                (10.0, "link handover to lte")]
+            assert "link handover to lte" in (tmp_path / "sitl" / "events.log").read_text()
+            for d in ("up", "down"):
+                assert sitl["link"][d]["delay_ms"] == offline["link"][d]["delay_ms"]
     else:
         assert codes == [0, 0] and sitl["wind"]["samples"] > 0 and sitl["battery"]["used_mah"] > 0.0
 

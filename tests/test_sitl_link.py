@@ -162,6 +162,23 @@ def test_realtime_events_are_on_the_flights_clock(tmp_path: Path) -> None:
     assert abs((switch - k0) / 250.0 - fs[0]["t"]) <= 0.012, (switch, k0, fs[0]["t"])
 
 
+def test_realtime_link_handover_is_the_relays(tmp_path: Path) -> None:
+    """A handover (``--at 2:link:delay_ms=20``) on the wall clock: a perfect link alone would need no relay, but
+    one handed over to an impaired link does; the relay's models switch at flight time 2 s (its mission clock),
+    so a third of the per-step messages take 20 ms each way, and the vehicle says the handover (on its own clock:
+    docs/weather.md, "Link handover")."""
+    run = sitl(Mission(Sine(), duration_s=3.0, name="ho"), realtime=True, out=tmp_path / "rt", plots=False,
+               instance=None, at=("2:link:delay_ms=20",))
+    assert run.outcome == "completed" and (tmp_path / "rt" / "relay.json").stat().st_size > 0
+    (ho,) = [e for e in run.summary["events"] if e["kind"] == "link"]
+    # the vehicle acts on its timeline on its own clock, which started before the flight's (the first target): on
+    # the flight's clock its line is early by the controller's start-up, as every timeline event's is in real time
+    assert ho["text"] == "link handover to delay_ms=20" and 0.0 < ho["t"] <= 2.0, ho
+    up, down = (run.summary["link"][d]["model_delay_ms"] for d in ("up", "down"))
+    assert up["p50"] == pytest.approx(0.0, abs=1e-6) and up["p99"] == pytest.approx(20.0), up  # the targets: 2 s of 3
+    assert down["max"] == pytest.approx(20.0), down  # the vehicle streams on after the flight: on the new link
+
+
 @pytest.mark.parametrize(("flag", "value"), [("--delay", "-1"), ("--loss", "120"), ("--blackout", "3"),
                                              ("--up-jitter", "x")])
 def test_bad_link_flag_is_one_line_exit_2(flag: str, value: str, capsys) -> None:

@@ -371,6 +371,8 @@ class SimVehicle:
                 p.wind.set_steady(e.get("speed_mps"), e.get("from_deg"))
             else:
                 p.wind.add_gust(Gust(p.t, e.get("duration_s"), e.get("amplitude_mps"), e.get("from_deg")))
+        elif k == "link":
+            pass  # the link models hand over themselves at this step (LinkSettings.handovers): said here, once
         else:
             if self.sensors is None:
                 raise ValueError(f"a {k} event needs the vehicle's sensors (an estimator other than truth)")
@@ -388,7 +390,7 @@ class SimVehicle:
                 bias = self.sensors.gyro_bias
                 for i, b in enumerate(e.get("bias")):
                     bias[i] += b
-        self.event("wind" if k in ("wind", "gust") else "fault", e.text()).by = by
+        self.event("wind" if k in ("wind", "gust") else "link" if k == "link" else "fault", e.text()).by = by
 
     def plant_verdict(self) -> str | None:
         """After a control period: ``diverged`` or ``crashed`` when the plant ends the flight now (its event

@@ -35,7 +35,7 @@ from bridge.autopilot.params import (
     typed_value,
 )
 from bridge.autopilot.simvehicle import SimVehicle
-from bridge.link.model import LinkSettings, absolute_link_paths, link_from_table, merge_link_tables
+from bridge.link.model import LinkConfig, LinkSettings, absolute_link_paths, link_from_table, merge_link_tables
 from controller import Controller, Gains, Nominal, gains_from_table
 from controller.law import LawFactory, resolve_law
 from controller.link_guard import GuardConfig
@@ -284,6 +284,7 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
                 raise ConfigError(f"{src}: {key}: the window [{start:g}, {start + dur:g}) s starts after the "
                                   f"mission's end (duration_s = {m.duration_s:g} s), so it would never happen")
     wind, timeline = weather_of(m, prof, sensor_config, estimator_kind)
+    link_settings = replace(link_settings, handovers=handovers_of(timeline, m))
     try:
         law = resolve_law(m.controller)
         flight = Flight(m, prof, effects, gains, failsafe, link_settings, law, sensor_config, estimator_kind,
@@ -331,6 +332,32 @@ def weather_of(m: Mission, prof: Profile, sensors: SensorConfig, estimator: str)
         heights = [m.trajectory.sample(m.duration_s * k / n)[2][0] for k in range(n + 1)]
         wind = wind.at_altitude(max(sum(heights) / len(heights), 0.0))
     return wind, timeline
+
+
+GUARD_KEYS = ("stale_ms", "stop_ms", "compensation", "command_lag_ms")  # the controller's: not the link's to hand over
+
+
+def handovers_of(timeline: tuple[TimedEvent, ...], m: Mission) -> tuple[tuple[float, LinkConfig, LinkConfig], ...]:
+    """The timeline's ``link`` events as the link model's handovers: (the time of the control step it acts at,
+    s; the up and down links from then), each a ``[link]`` table of its own (a profile and/or keys, unset keys
+    at their defaults, the mission's seed) validated as the mission's is. The controller's guard stays the
+    flight's: guard keys in a handover are refused, a profile's are not used."""
+    out = []
+    for e in timeline:
+        if e.kind != "link":
+            continue
+        where = f"{m.source}: events (t_s = {e.t_s:g}, kind = link)"
+        table = dict(e.settings)
+        guard = [k for k in GUARD_KEYS if k in table]
+        if guard:
+            raise ConfigError(f"{where}: {guard[0]} is the controller's guard, not the link's: it stays the "
+                              f"flight's ([link] {guard[0]}); a handover changes the two directions only")
+        try:
+            ls = link_from_table(table, m.source, seed=m.seed, duration_s=m.duration_s)
+        except ConfigError as exc:
+            raise ConfigError(f"{where}: {str(exc).removeprefix(m.source + ': ')}") from None
+        out.append((e.step(m.rate_hz) / m.rate_hz, ls.up, ls.down))
+    return tuple(out)
 
 
 def merged_failsafe_params(m: Mission, failsafe: Mapping[str, Any] | None,

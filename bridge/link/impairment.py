@@ -1,8 +1,8 @@
 """Link impairment: one seeded model of a bad radio link, used by every clock (docs/design.md, "Link model").
 
 In:  one direction's :class:`~bridge.link.config.LinkConfig` (delays ms, loss %, burst length packets,
-     ``rate_bps`` bytes/s, blackouts s), then packets: send time (s, on the driver's clock), size (bytes),
-     any payload
+     ``rate_bps`` bytes/s, blackouts s) and its handovers (mission time s, the link from then), then packets:
+     send time (s, on the driver's clock), size (bytes), any payload
 Out: the packets due by a time (s), each with its send and due times (s); :class:`LinkStats` (counts,
      one-way delay percentiles, ms)
 
@@ -239,26 +239,35 @@ class LinkImpairment:
     to call :meth:`deliver` next.
     """
 
-    def __init__(self, cfg: LinkConfig | None = None, direction: str = "up") -> None:
+    def __init__(self, cfg: LinkConfig | None = None, direction: str = "up",
+                 handovers: tuple[tuple[float, LinkConfig], ...] = ()) -> None:
         if direction not in DIRECTIONS:
             raise ValueError(f"direction must be 'up' or 'down', got {direction!r}")
-        self.cfg = cfg = cfg or LinkConfig()
         self.direction = direction
-        self.fates = FateStream(cfg, direction)
         self.stats = LinkStats()
-        self._delay = cfg.delay_ms / 1000.0
-        self._rate = cfg.rate_bps
-        self._queue = cfg.queue_ms / 1000.0
-        self._free_at = -math.inf
         self._heap: list[tuple[float, int, Delivery]] = []
         self._order = 0
         self._held: list[Delivery] = []
         self._copies: dict[int, int] = {}  # seq -> copies still to come, for duplicated packets
         self._highest = -1
         self._last_due = -math.inf
-        self._windows = tuple((s, s + d) for s, d in cfg.blackouts)
-        self._replay = Replay(cfg.trace) if cfg.trace is not None else None
         self._origin = 0.0  # this model's clock (s) at mission time 0: where the trace starts
+        self._handovers = list(handovers)  # (mission time s, the link from then), in time order
+        self._use(cfg or LinkConfig())
+
+    def _use(self, cfg: LinkConfig) -> None:
+        """Put packets on the link ``cfg`` from now (a handover: those in flight keep their fates; the packet
+        numbers, and so the fates' draws, run on)."""
+        n = self.fates.n if hasattr(self, "fates") else 0
+        self.cfg = cfg
+        self.fates = FateStream(cfg, self.direction)
+        self.fates.n = n
+        self._delay = cfg.delay_ms / 1000.0
+        self._rate = cfg.rate_bps
+        self._queue = cfg.queue_ms / 1000.0
+        self._free_at = -math.inf
+        self._windows = tuple((s + self._origin, s + d + self._origin) for s, d in cfg.blackouts)
+        self._replay = Replay(cfg.trace) if cfg.trace is not None else None
         self.stats.trace = cfg.trace
 
     def in_blackout(self, t: float) -> bool:
@@ -274,6 +283,8 @@ class LinkImpairment:
     def send(self, t: float, size: int, payload: Any = None) -> int:
         """Put a packet of ``size`` bytes on the link at time t (s); returns its number."""
         st = self.stats
+        while self._handovers and t - self._origin >= self._handovers[0][0] - 1e-9:
+            self._use(self._handovers.pop(0)[1])
         fate = self.fates.next()
         seq = self.fates.n - 1
         st.sent += 1

@@ -153,14 +153,16 @@ class LinkSettings:
     up: LinkConfig = field(default_factory=LinkConfig)
     down: LinkConfig = field(default_factory=LinkConfig)
     guard: GuardConfig = field(default_factory=GuardConfig)
+    handovers: tuple[tuple[float, LinkConfig, LinkConfig], ...] = ()  # (mission time s, up, down) from then on
 
     @property
     def impaired(self) -> bool:
-        return self.up.impaired or self.down.impaired
+        return self.up.impaired or self.down.impaired or any(u.impaired or d.impaired for _, u, d in self.handovers)
 
     def make(self) -> tuple[LinkImpairment, LinkImpairment]:
-        """Fresh (up, down) models."""
-        return LinkImpairment(self.up, "up"), LinkImpairment(self.down, "down")
+        """Fresh (up, down) models, each with its handovers."""
+        return (LinkImpairment(self.up, "up", tuple((t, u) for t, u, _ in self.handovers)),
+                LinkImpairment(self.down, "down", tuple((t, d) for t, _, d in self.handovers)))
 
 
 def link_from_table(data: Mapping[str, Any], source: str, seed: int = 0,
