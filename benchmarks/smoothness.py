@@ -18,6 +18,14 @@ flies), paper profile, seed 0, one flight per cell (the figures are the same eve
 - ``bsst margin missions/sine.toml --over delay_ms --until rms=0.1`` with and without
   ``--compensation predict`` (a real ``bsst`` process each, margin.json read back), ms.
 
+``--scan`` prints instead the sine's 3-D RMS at every whole millisecond of one-way delay (both directions, as
+``bsst margin`` flies it; the link delivers on the 1 kHz physics clock, so a delay flies as the next whole
+millisecond and this is the whole curve), 30-40 ms without and 50-60 ms with ``--compensation predict``, both
+schemes: the bisection of ``bsst margin`` assumes the RMS grows with the delay, and it does not (docs/law.md,
+"The delay margin, scanned"). ``--scan --implicit-virtual-controls`` scans the implicit scheme with its virtual
+controls stepped implicitly too (:func:`implicit_virtual_controls`: an experiment patched into the scalar loop
+here, not a scheme of the product).
+
 Acceptance (issue 24): implicit sine 250 Hz period-2 <= 0.01 N (u2, u3, u4), TV <= 35 /s (u2, u3), RMS <= 1e-5
 m, 100 Hz period-2 <= 0.02 N; step settling <= 5 s and steady error <= 1 mm; robust <= 6 cm; smoothness
 against SMC >= 20x; the delay margin at least the explicit law's.
@@ -27,6 +35,7 @@ t in [20, 20.1) s, both schemes.
 
     .venv/bin/python benchmarks/smoothness.py [--no-margin] [--json]
     .venv/bin/python benchmarks/smoothness.py --figure docs/u2-explicit-vs-implicit.png
+    .venv/bin/python benchmarks/smoothness.py --scan [--implicit-virtual-controls]
 """
 
 from __future__ import annotations
@@ -51,6 +60,8 @@ from estimation import flight  # noqa: E402  (the sensors table's own flight)
 
 from bridge.loop import simulate  # noqa: E402
 from bridge.record.metrics import errors  # noqa: E402
+from controller import bsst  # noqa: E402
+from controller.power import sig_derivs  # noqa: E402
 from missions import DISCRETIZATIONS, Mission, load_mission  # noqa: E402
 
 STEP_CHANGES = (0.0, 10.0, 20.0, 30.0)  # missions/step.toml's set-point times (s), as tests/test_scenarios.py
@@ -95,6 +106,74 @@ def margin(d: str, predict: bool) -> float | None:
         subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=3600, check=False)
         f = Path(tmp) / "margin.json"
         return json.loads(f.read_text()).get("margin") if f.exists() else None
+
+
+SCANS = {"none": range(30, 41), "predict": range(50, 61)}  # one-way delays (ms) around each margin
+
+
+def delay_rms(d: str, delay_ms: float, predict: bool) -> float:
+    """The sine's 3-D RMS (m) with ``delay_ms`` each way: the cell ``bsst margin --over delay_ms`` flies."""
+    link: dict[str, Any] = {"up": {"delay_ms": delay_ms}, "down": {"delay_ms": delay_ms}}
+    if predict:
+        link["compensation"] = "predict"
+    return simulate(mission("sine", d), link=link, plots=False).summary["rms_3d"]
+
+
+def implicit_sig(e: float, P: tuple) -> tuple[float, float, float, float]:
+    """F(e) = sig_beta(z(e)) and its three derivatives, z the backward-Euler step of e' = -c sig_beta(e) over h:
+    z + a sig_beta(z) = e, a = h c (``P[10]``; a plain table without it: sig_beta itself). Newton from e, kept
+    between 0 and e (z + a sig(z) - e is increasing in z), then the implicit function theorem:
+    z1 = 1 / (1 + a sig1), z2 = -a sig2 z1^3, z3 = -a (sig3 z1^4 + 3 sig2 z1^2 z2) (zN the N-th derivative)."""
+    if len(P) < 11:
+        return sig_derivs(e, P)
+    a, z = P[10], e
+    for _ in range(60):
+        f0, f1, _, _ = sig_derivs(z, P)
+        zn = z - (z + a * f0 - e) / (1.0 + a * f1)
+        if (zn < 0.0 or zn > e) if e >= 0.0 else (zn > 0.0 or zn < e):
+            zn = 0.5 * z
+        done = abs(zn - z) <= 1e-15 * (1.0 + abs(z))
+        z = zn
+        if done:
+            break
+    s0, s1, s2, s3 = sig_derivs(z, P)
+    z1 = 1.0 / (1.0 + a * s1)
+    z2 = -a * s2 * z1**3
+    z3 = -a * (s3 * z1**4 + 3.0 * s2 * z1 * z1 * z2)
+    return (s0, s1 * z1, s2 * z1 * z1 + s1 * z2, s3 * z1**3 + 3.0 * s2 * z1 * z2 + s1 * z3)
+
+
+def implicit_virtual_controls() -> None:
+    """Patch the scalar loop (this process only): an implicit law's five sig_beta tables carry a = h c of their
+    step (yaw, z, position, velocity, attitude), and the law reads :func:`implicit_sig` for them."""
+    init = bsst.BacksteppingSuperTwisting.__init__
+
+    def patched(self: Any, *a: Any, **k: Any) -> None:
+        init(self, *a, **k)
+        if self.implicit:
+            K = self.constants
+            cs = (K.c_yaw, K.c_z, K.c_p, K.c_v, K.c_a)
+            self.tables = tuple((*T, self.dt * c) for T, c in zip(self.tables, cs, strict=True))
+
+    bsst.sig_derivs = implicit_sig
+    bsst.BacksteppingSuperTwisting.__init__ = patched
+
+
+def scan_table(limit_m: float = 0.1, schemes: tuple[str, ...] = DISCRETIZATIONS) -> str:
+    """The delay scans of both schemes as markdown (RMS in mm; over ``limit_m`` in bold), and for each the
+    largest delay up to which every delay of the scan holds."""
+    lines = []
+    for comp, delays in SCANS.items():
+        lines += [f"| delay (ms), compensation {comp} | {' | '.join(str(v) for v in delays)} | every delay holds to |",
+                  "|---|" + "---|" * (len(delays) + 1)]
+        for d in schemes:
+            rms = [delay_rms(d, float(v), comp == "predict") for v in delays]
+            cells = [f"**{r * 1e3:.1f}**" if r > limit_m else f"{r * 1e3:.1f}" for r in rms]
+            first_fail = next((v for v, r in zip(delays, rms, strict=True) if r > limit_m), None)
+            held = "all" if first_fail is None else f"{first_fail - 1} ms"
+            lines.append(f"| {d}: 3-D RMS (mm) | {' | '.join(cells)} | {held} |")
+        lines.append("")
+    return "\n".join(lines)
 
 
 def measure(d: str, with_margin: bool) -> dict[str, Any]:
@@ -176,11 +255,21 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-margin", action="store_true", help="skip the four bsst margin searches (minutes)")
     ap.add_argument("--json", action="store_true", help="print the figures as JSON too")
     ap.add_argument("--figure", type=Path, metavar="PATH", help="draw u2 of both schemes over 0.1 s into PATH")
+    ap.add_argument("--scan", action="store_true", help="the sine's RMS at every whole ms of delay, both schemes")
+    ap.add_argument("--implicit-virtual-controls", action="store_true",
+                    help="with --scan: the implicit scheme only, its virtual controls stepped implicitly too")
     args = ap.parse_args(argv)
     if args.figure:
         figure(args.figure)
         return 0
     t0 = time.perf_counter()
+    if args.scan:
+        if args.implicit_virtual_controls:
+            implicit_virtual_controls()
+        print(scan_table(schemes=("implicit",) if args.implicit_virtual_controls else DISCRETIZATIONS))
+        print(f"load average {' '.join(f'{v:.2f}' for v in os.getloadavg())}; {os.cpu_count()} cores; "
+              f"{time.perf_counter() - t0:.0f} s")
+        return 0
     res = {d: measure(d, not args.no_margin) for d in DISCRETIZATIONS}
     print(table(res))
     print(f"\nload average {' '.join(f'{v:.2f}' for v in os.getloadavg())}; {os.cpu_count()} cores; "

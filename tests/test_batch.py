@@ -116,7 +116,8 @@ def test_a_mixed_grid_flies_the_same_in_both_engines() -> None:
 
 def test_cells_of_a_sweep_grid_are_prepared_as_prepare_does() -> None:
     m = _mission()
-    grid = Grid(controller=("bsst", "pid"), delay_ms=(0.0, 10.0), loss_pct=(0.0, 20.0), burst_len=(0.0, 3.0), seeds=2)
+    grid = Grid(controller=("bsst", "pid"), delay_ms=(0.0, 10.0), loss_pct=(0.0, 20.0), burst_len=(0.0, 3.0), seeds=2,
+                discretization=("explicit", "implicit"))
     over = [cell_overrides(c) for c in cells(m, grid)] + _overrides()
     fast = _prepare_all(m, over)
     assert fast == [prepare(m, o) for o in over]  # an Overrides (a cell's) or a mapping of its fields

@@ -1,7 +1,8 @@
 """Covers bridge.sweep.executors and bridge.batch.
 
 ``bsst sweep --engine batch | process | auto``: the same cells.csv rows from either engine,
-``--resume`` with the batch, and an engine that cannot be honoured refused in one line.
+``--resume`` with the batch, and an engine that cannot be honoured refused in one line; the
+``discretization`` axis (issue 24) in both engines, on the command line and in a sweep file.
 
 The cell-by-cell agreement of the batch with the scalar loop over every link feature is
 tests/test_batch.py's; here the sweep's own path is checked end to end: grid -> engine ->
@@ -10,19 +11,23 @@ rows -> cells.csv, with real subprocesses for the command line.
 
 from __future__ import annotations
 
+import json
 import math
+import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 
-from bridge.sweep import CELLS_CSV, Grid, read_cells, sweep
+from bridge import simulate
+from bridge.cli import main
+from bridge.sweep import CELLS_CSV, COLUMNS, Grid, load_sweep, read_cells, sweep
 from bridge.sweep.executors import BATCH_MIN_CELLS, engine_for
-from bridge.sweep.grid import cells
-from bridge.sweep.margin import margin, parse_until
+from bridge.sweep.grid import LINK_AXES, cells, mission_value
+from bridge.sweep.margin import margin, parse_until, probe
 from missions import Mission, Sine
-from params import ConfigError
+from params import ConfigError, dump_toml
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -133,3 +138,89 @@ def test_jobs_changes_no_row_of_a_batch_sweep_or_margin(tmp_path: Path) -> None:
     found = [margin(SHORT, "delay_ms", parse_until("rms=0.01"), controllers=("bsst", "pid"), seeds=2, resolution=4.0,
                     jobs=jobs, engine="batch") for jobs in (1, 2)]
     assert found[0] == found[1] and found[0]["cells_flown"] > 4
+
+
+SCHEMES = Grid(controller=("bsst", "smc"), discretization=("explicit", "implicit"), delay_ms=(0.0, 8.0))
+
+
+def test_a_discretization_axis_flies_each_scheme_in_both_engines(tmp_path: Path) -> None:
+    """Issue 24: ``discretization`` is an axis: each row names its scheme and is the one ``simulate`` of that
+    law, scheme and delay (the process engine's to the bit, the batch's as for every law); bsst flies each
+    scheme its own way, smc (no super-twisting step) the same under both."""
+    rows = {e: sweep(SHORT, SCHEMES, engine=e, jobs=2, out=tmp_path / e, report=False) for e in ("batch", "process")}
+    for a, b in zip(rows["batch"], rows["process"], strict=True):
+        assert a["discretization"] == b["discretization"]
+        _same(a, b)
+    got = rows["process"]
+    assert [(r["controller"], r["delay_ms"], r["discretization"]) for r in got] == [
+        (c, d, s) for c in ("bsst", "smc") for d in (0.0, 8.0) for s in ("explicit", "implicit")]
+    for r in got:
+        run = simulate(SHORT, controller=r["controller"], discretization=r["discretization"],
+                       link={"up": {"delay_ms": r["delay_ms"]}, "down": {"delay_ms": r["delay_ms"]}})
+        assert (run.rms, run.summary["inputs"]["u2"]["tv_per_s"]) == (r["rms"], r["tv_u2"]), r
+    by = {(r["controller"], r["delay_ms"], r["discretization"]): r for r in got}
+    for d in (0.0, 8.0):
+        assert by[("bsst", d, "implicit")]["rms"] != by[("bsst", d, "explicit")]["rms"]
+        assert by[("smc", d, "implicit")]["rms"] == by[("smc", d, "explicit")]["rms"]
+    assert "discretization" in (tmp_path / "batch" / CELLS_CSV).read_text().splitlines()[0].split(",")
+    ident = json.loads((tmp_path / "batch" / "sweep.json").read_text())
+    assert ident["axes"]["discretization"] == ["explicit", "implicit"] and "discretization" in ident["swept"]
+
+
+def test_the_discretization_axis_on_the_command_line_and_in_a_sweep_file(tmp_path: Path, capsys) -> None:
+    """``bsst sweep --discretization explicit,implicit``: rows and report name the scheme, the report's
+    reproduction line carries it; one scheme is an axis of one value; a bad one is one line, exit 2; a sweep
+    file's ``[grid] discretization``; without the flag every cell flies the mission's own scheme."""
+    mission = tmp_path / "short.toml"
+    mission.write_text(dump_toml(SHORT.with_overrides(discretization="implicit").to_dict()))
+    out = tmp_path / "both"
+    assert main(["sweep", str(mission), "--discretization", "explicit,implicit", "--out", str(out),
+                 "--no-plots"]) == 0
+    rows = read_cells(out / CELLS_CSV)
+    assert [r["discretization"] for r in rows] == ["explicit", "implicit"]
+    report = (out / "report.md").read_text()
+    assert "| bsst (explicit) | 1 |" in report and "| bsst (implicit) | 1 |" in report, report
+    assert "--discretization explicit --seed" in report
+    one = tmp_path / "one"
+    assert main(["sim", str(out / "mission.toml"), "--discretization", "explicit", "--no-plots", "--out",
+                 str(one)]) == 0
+    assert json.loads((one / "summary.json").read_text())["rms_3d"] == rows[0]["rms"]
+    assert main(["sweep", str(mission), "--delay", "0", "--out", str(tmp_path / "own"), "--no-plots"]) == 0
+    assert [r["discretization"] for r in read_cells(tmp_path / "own" / CELLS_CSV)] == ["implicit"]
+    assert read_cells(tmp_path / "own" / CELLS_CSV)[0]["rms"] == rows[1]["rms"]
+    capsys.readouterr()
+    assert main(["sweep", str(mission), "--discretization", "explicit,trapezoid", "--out", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--discretization takes distinct names among explicit,implicit" in err, err
+    f = tmp_path / "s.toml"
+    f.write_text(f'mission = "{mission}"\n[grid]\ndiscretization = ["explicit"]\n')
+    assert [c.discretization for c in load_sweep(f).cells()] == ["explicit"]
+    f.write_text(f'mission = "{mission}"\n[grid]\ndiscretization = ["semi"]\n')
+    with pytest.raises(ConfigError, match="discretization: element 0 must be one of explicit, implicit"):
+        load_sweep(f)
+
+
+def test_an_older_sweep_without_the_discretization_column_is_reported(tmp_path: Path) -> None:
+    """A cells.csv written before the axis (issue 24) reads with its mission's scheme (explicit before it)."""
+    out = tmp_path / "old"
+    sweep(SHORT, Grid(delay_ms=(0.0,)), out=out, jobs=1, report=False)
+    keep = [i for i, c in enumerate(COLUMNS) if c != "discretization"]
+    lines = (out / CELLS_CSV).read_text().splitlines()
+    (out / CELLS_CSV).write_text("".join(",".join(line.split(",")[i] for i in keep) + "\n" for line in lines))
+    meta = json.loads((out / "sweep.json").read_text())
+    del meta["mission"]["discretization"]
+    (out / "sweep.json").write_text(json.dumps(meta))
+    assert main(["report", str(out), "--no-plots"]) == 0
+    assert "- `discretization`: explicit" in (out / "report.md").read_text()
+    with pytest.raises(ConfigError, match="a cells.csv of an older bsst \\(no discretization columns\\)"):
+        read_cells(out / CELLS_CSV)
+    shutil.rmtree(out)
+
+
+def test_a_margin_probes_the_missions_own_scheme() -> None:
+    """``bsst margin --discretization implicit``: every probe cell flies the scheme laid over the mission."""
+    m = SHORT.with_overrides(discretization="implicit")
+    base = {a: float(mission_value(m, a)) for a in LINK_AXES}
+    vehicle = {"estimator": "truth", "noise": 1.0, "turbulence": "none"}
+    for over in ("delay_ms", "noise", "wind_mps"):
+        assert probe(m, "bsst", over, 1.0, 0, base, vehicle).discretization == "implicit"

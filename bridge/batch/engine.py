@@ -1,8 +1,8 @@
 """The batch engine's flight: many cells of one mission flown at once, over a cell axis (numpy and numba).
 
 In:  a mission (a :class:`~missions.Mission` or a TOML path) and, per cell, its
-     :class:`~bridge.core.flight.Overrides` (``controller``, ``rate_hz`` Hz, ``seed``, a ``link`` table:
-     what :func:`bridge.sweep.grid.cell_overrides` gives; or those fields as a mapping), or prepared
+     :class:`~bridge.core.flight.Overrides` (``controller``, ``discretization``, ``rate_hz`` Hz, ``seed``, a
+     ``link`` table: what :func:`bridge.sweep.grid.cell_overrides` gives; or those fields as a mapping), or prepared
      :class:`~bridge.core.flight.Flight` s
 Out: per cell the measured columns of a ``cells.csv`` row (:data:`MEASURES`: ``rms``/``max`` m,
      ``settling_s``/``flown_s`` s, ``tv_u2`` N/s, ``ripple_u2`` N, ``outcome``, packet counts, ``error``),
@@ -118,7 +118,7 @@ def _prepare_all(mission: Mission, cells: Sequence[Overrides | Mapping[str, Any]
     """Each cell's Flight, as :func:`prepare` builds it; a cell that cannot be built gives its error's text.
 
     prepare() parses the profile and builds the law (milliseconds each), so it runs once per distinct
-    law and rate; each cell then gets what prepare() does with a seed and a ``link`` table: the mission
+    law, rate and discretization; each cell then gets what prepare() does with a seed and a ``link`` table: the mission
     with that seed and the table laid over ``[link]``, and that ``[link]`` validated (tests/test_batch.py
     checks the result equals prepare()'s, cell by cell)."""
     bases: dict[tuple[Any, ...], Flight | str] = {}
@@ -126,13 +126,13 @@ def _prepare_all(mission: Mission, cells: Sequence[Overrides | Mapping[str, Any]
     for given in cells:
         try:
             over = Overrides.of(given)
-            if not set(over.given()) <= _PER_CELL | {"controller", "rate_hz"}:
+            if not set(over.given()) <= _PER_CELL | {"controller", "rate_hz", "discretization"}:
                 out.append(prepare(mission, over))
                 continue
-            key = (over.controller, over.rate_hz)
+            key = (over.controller, over.rate_hz, over.discretization)
             if key not in bases:
                 try:
-                    bases[key] = prepare(mission, Overrides(controller=key[0], rate_hz=key[1]))
+                    bases[key] = prepare(mission, Overrides(controller=key[0], rate_hz=key[1], discretization=key[2]))
                 except Exception as exc:  # the cell's law or rate is bad input: every such cell says so
                     bases[key] = f"{type(exc).__name__}: {exc}"
             base = bases[key]

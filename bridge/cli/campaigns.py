@@ -1,5 +1,5 @@
-"""``bsst sweep``, ``bsst report`` and ``bsst margin``: campaigns over link impairments, laws, rates and
-sensor noise (bridge.sweep).
+"""``bsst sweep``, ``bsst report`` and ``bsst margin``: campaigns over link impairments, laws, rates, the
+law's discretization and sensor noise (bridge.sweep).
 
 In:  the parsed flags (``argparse.Namespace``): a mission or sweep TOML, swept values (``--delay`` ms,
      ``--loss`` %, ``--rate`` Hz, ...), flags fixed for every cell, ``--until rms=M|class=NAME``
@@ -47,7 +47,10 @@ def add_sweep_commands(sub: Any) -> None:
                        help=f"values of {axis} (link values apply to both directions)")
     p.add_argument("--controller", type=law_list("--controller"), metavar="LAW,...",
                    help="control laws to compare (bsst, smc, pid, or your own file.py:ClassName)")
-    add_discretization_option(p)
+    # the schemes are missions.DISCRETIZATIONS, written out so that building the parser loads no mission code
+    p.add_argument("--discretization", type=name_list("--discretization", ("explicit", "implicit")),
+                   metavar="SCHEME,...", help="how bsst steps its super-twisting step: explicit (the paper as "
+                                              "printed), implicit (chattering-free; docs/law.md), or both to compare")
     p.add_argument("--seeds", type=int_in("--seeds", 1, 10000), metavar="N",
                    help="seeds per grid point: the mission's seed, +1, ... (default 1)")
     mode = p.add_mutually_exclusive_group()
@@ -101,10 +104,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             raise UsageError(f"bsst sweep: --{d}-{clash[0].split('_')[0]} conflicts with the swept {clash[0]} "
                              f"(a swept value applies to both directions)")
     sensors = {"set": args.sensors} if args.sensors is not None else None
-    if fixed or sensors or args.discretization:  # the flags fixed for every cell, laid over the mission by the one
-        # path to its parts
-        spec = replace(spec, mission=prepare(spec.mission, Overrides(link=fixed or None, sensors=sensors,
-                                                                     discretization=args.discretization)).mission)
+    if fixed or sensors:  # the flags fixed for every cell, laid over the mission by the one path to its parts
+        spec = replace(spec, mission=prepare(spec.mission, Overrides(link=fixed or None, sensors=sensors)).mission)
     if args.resume and args.out is None:
         raise UsageError("bsst sweep: --resume needs --out DIR (the sweep to resume)")
     client = connect_dask(args.dask) if args.dask else None

@@ -28,23 +28,27 @@ from params import ConfigError, check_depth, read_regular_file
 
 COLUMNS = (
     "controller", "rate_hz", "delay_ms", "jitter_ms", "loss_pct", "burst_len", "estimator", "noise", "wind_mps",
-    "turbulence", "seed",
+    "turbulence", "discretization", "seed",
     "rms", "max", "settling_s", "tv_u2", "ripple_u2", "outcome", "class",
     "up_sent", "up_lost", "down_sent", "down_lost", "flown_s", "error",
 )
 
 
-# cells.csv before the vehicle's axes (issue 12) and before the air's (issue 27): read (bsst report) with the
-# values its sweep.json's mission flew, never resumed (bridge.sweep.campaign refuses it, naming the file)
-LEGACY_COLUMNS = tuple(c for c in COLUMNS if c not in ("estimator", "noise", "wind_mps", "turbulence"))
-WEATHERLESS_COLUMNS = tuple(c for c in COLUMNS if c not in ("wind_mps", "turbulence"))
-LEGACY_LAYOUTS = (LEGACY_COLUMNS, WEATHERLESS_COLUMNS, tuple(c for c in COLUMNS if c not in ("estimator", "noise")))
+# cells.csv before the vehicle's axes (issue 12), before the air's (issue 27) and before the discretization's (issue
+# 24): read (bsst report) with the values its sweep.json's mission flew, never resumed (bridge.sweep.campaign refuses
+# it, naming the file)
+LEGACY_COLUMNS = tuple(c for c in COLUMNS
+                       if c not in ("estimator", "noise", "wind_mps", "turbulence", "discretization"))
+WEATHERLESS_COLUMNS = tuple(c for c in COLUMNS if c not in ("wind_mps", "turbulence", "discretization"))
+LEGACY_LAYOUTS = (LEGACY_COLUMNS, WEATHERLESS_COLUMNS,
+                  tuple(c for c in COLUMNS if c not in ("estimator", "noise", "discretization")),
+                  tuple(c for c in COLUMNS if c != "discretization"))
 
 
 INT_COLUMNS = ("seed", "up_sent", "up_lost", "down_sent", "down_lost")
 
 
-STR_COLUMNS = ("controller", "estimator", "turbulence", "outcome", "class", "error")
+STR_COLUMNS = ("controller", "estimator", "turbulence", "discretization", "outcome", "class", "error")
 FAILED = ("error", "law_failed")  # outcomes of a cell that measured nothing: it could not be flown, or its law failed
 
 
@@ -156,8 +160,9 @@ def read_cells(path: str | Path, legacy: Mapping[str, Any] | None = None,
     keeps) each row's ``class`` must be the one its outcome, RMS and ripple give by them.
 
     A file of an older sweep (:data:`LEGACY_LAYOUTS`: no ``estimator``, ``noise``, or no ``wind_mps``,
-    ``turbulence``) is read when ``legacy`` gives the values its cells flew (``{"estimator": ..., "noise": ...,
-    "wind_mps": ..., "turbulence": ...}``), refused otherwise."""
+    ``turbulence``, or no ``discretization``) is read when ``legacy`` gives the values its cells flew
+    (``{"estimator": ..., "noise": ..., "wind_mps": ..., "turbulence": ..., "discretization": ...}``), refused
+    otherwise."""
     p = Path(path)
     data = read_regular_file(p, f"a sweep's {CELLS_CSV}")
     try:

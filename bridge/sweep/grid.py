@@ -2,7 +2,8 @@
 
 In:  a mission and a :class:`Grid` (lists of values per axis: law, control rate Hz, one-way
      delay ms, jitter ms, loss %, mean loss-burst length in packets, the vehicle's estimator kind,
-     the noise scale of its sensor set (x every sigma), the steady wind m/s, the turbulence level; seeds)
+     the noise scale of its sensor set (x every sigma), the steady wind m/s, the turbulence level, how ``bsst``
+     steps its super-twisting step (explicit or implicit); seeds)
 Out: the :class:`Cell` list in grid order, and for each cell the overrides that
      :func:`bridge.core.flight.prepare` (the one path from a mission to its parts) applies
 
@@ -24,7 +25,7 @@ from bridge.autopilot.estimator import ESTIMATOR_KINDS
 from bridge.core.flight import Flight, Overrides, prepare
 from bridge.link.model import DIRECTIONS, NUMBER_RANGES
 from missions import MISSION_RANGES, Mission
-from missions.mission import law_spec_problem
+from missions.mission import DEFAULT_DISCRETIZATION, DISCRETIZATIONS, law_spec_problem
 from params import ConfigError
 from plant.profiles import NOISE_SCALE_RANGE
 from plant.sensors import SIGMA_KEYS, SensorConfig
@@ -33,19 +34,19 @@ from plant.wind import TURBULENCE, WIND_RANGES
 # Grid axes, in the order of the product (the last varies fastest; seeds vary faster still). The vehicle's
 # axes come last, so that a grid without them keeps the order (and cells.csv its first columns) it had.
 AXES = ("controller", "rate_hz", "delay_ms", "jitter_ms", "loss_pct", "burst_len", "estimator", "noise", "wind_mps",
-        "turbulence")
+        "turbulence", "discretization")
 
 
 LINK_AXES = ("delay_ms", "jitter_ms", "loss_pct", "burst_len")
 SENSING_AXES = ("estimator", "noise")  # the vehicle's: prepare()'s estimator and noise overrides
 WEATHER_AXES = ("wind_mps", "turbulence")  # the air's: prepare()'s wind (its speed) and turbulence overrides
-NAME_AXES = ("controller", "estimator", "turbulence")  # axes of names; the others are numbers
+NAME_AXES = ("controller", "estimator", "turbulence", "discretization")  # axes of names; the others are numbers
 # Short names: command-line flags (--delay ...) and heat-map file names (map_delay_loss.png).
 
 
 SHORT = {"controller": "controller", "rate_hz": "rate", "delay_ms": "delay", "jitter_ms": "jitter",
          "loss_pct": "loss", "burst_len": "burst", "estimator": "estimator", "noise": "noise", "wind_mps": "wind",
-         "turbulence": "turbulence"}
+         "turbulence": "turbulence", "discretization": "discretization"}
 # Value of a link axis when neither the sweep nor the mission's [link.up] sets it.
 
 
@@ -55,6 +56,9 @@ LINK_DEFAULTS = {"delay_ms": 0.0, "jitter_ms": 0.0, "loss_pct": 0.0, "burst_len"
 
 RANGES = {"rate_hz": MISSION_RANGES["rate_hz"], **{a: NUMBER_RANGES[a] for a in LINK_AXES}, "noise": NOISE_SCALE_RANGE,
           "wind_mps": WIND_RANGES["speed_mps"]}
+
+
+NAME_CHOICES = {"estimator": ESTIMATOR_KINDS, "turbulence": TURBULENCE, "discretization": DISCRETIZATIONS}
 
 
 MODES = ("offline", "lockstep")
@@ -70,7 +74,8 @@ class Grid:
     ``estimator``: the vehicle's estimator kinds (``truth``, ``ekf``, ``raw``); ``noise``: noise scales
     of the mission's sensor set (every sigma times it; 0 = exact sensors, still sampled and late).
     ``wind_mps``: steady wind speeds (m/s, from the mission's ``[wind] from_deg``); ``turbulence``: Dryden
-    levels (``none``, ``light``, ``moderate``, ``severe``).
+    levels (``none``, ``light``, ``moderate``, ``severe``). ``discretization``: how ``bsst`` steps its
+    super-twisting step (``explicit``, ``implicit``; docs/law.md; the other laws fly the same under both).
     ``seeds``: how many seeds per grid point (mission seed, +1, ...) or the seeds themselves.
     """
 
@@ -84,6 +89,7 @@ class Grid:
     noise: tuple[float, ...] = ()
     wind_mps: tuple[float, ...] = ()
     turbulence: tuple[str, ...] = ()
+    discretization: tuple[str, ...] = ()
     seeds: int | tuple[int, ...] = 1
 
     def __post_init__(self) -> None:
@@ -100,8 +106,8 @@ class Grid:
                     why = law_spec_problem(v)
                     if why:
                         raise ConfigError(f"grid.controller: {why}")
-                elif name in ("estimator", "turbulence"):
-                    kinds = ESTIMATOR_KINDS if name == "estimator" else TURBULENCE
+                elif name in NAME_AXES:
+                    kinds = NAME_CHOICES[name]
                     if v not in kinds:
                         raise ConfigError(f"grid.{name}: must be among {', '.join(kinds)}, got {v!r}")
                 else:
@@ -170,6 +176,7 @@ class Cell:
     wind_mps: float = 0.0
     turbulence: str = "none"
     weather: tuple[str, ...] = ()
+    discretization: str = DEFAULT_DISCRETIZATION  # always laid over the mission, as the law and the rate are
 
     def key(self) -> tuple[Any, ...]:
         """What identifies the cell's row in ``cells.csv``."""
@@ -187,6 +194,8 @@ def mission_value(mission: Mission, axis: str) -> Any:
         return mission.controller
     if axis == "rate_hz":
         return float(mission.rate_hz)
+    if axis == "discretization":
+        return mission.discretization
     if axis == "estimator":
         kind = mission.estimator.get("kind", "truth")
         return kind if isinstance(kind, str) else "truth"  # a bad kind: prepare() names it when the cell is built
@@ -227,14 +236,16 @@ def cells(mission: Mission, grid: Grid) -> list[Cell]:
 
 def cell_overrides(cell: Cell) -> Overrides:
     """What a cell changes in its mission, as :func:`bridge.core.flight.prepare`'s overrides:
-    law, rate and seed, the swept link axes in both directions, the vehicle's swept axes and the air's."""
+    law, discretization, rate and seed, the swept link axes in both directions, the vehicle's swept axes and the
+    air's."""
     link = {d: {a: getattr(cell, a) for a in cell.link} for d in DIRECTIONS} if cell.link else None
     weather: dict[str, Any] = {}
     if "wind_mps" in cell.weather:
         weather["wind"] = {"speed_mps": cell.wind_mps}  # over [wind]: its direction (from_deg) stays
     if "turbulence" in cell.weather:
         weather["turbulence"] = cell.turbulence
-    return Overrides(controller=cell.controller, rate_hz=cell.rate_hz, seed=cell.seed, link=link,
+    return Overrides(controller=cell.controller, discretization=cell.discretization, rate_hz=cell.rate_hz,
+                     seed=cell.seed, link=link,
                      **{a: getattr(cell, a) for a in cell.sensing}, **weather)  # estimator, noise; wind, turbulence
 
 

@@ -204,13 +204,14 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
 def probe(mission: Mission, law: str, over: str, value: float, seed: int, link: dict[str, float],
           vehicle: dict[str, Any]) -> Cell:
     """The cell that flies ``value`` of ``over`` for one law and seed: a link axis in both directions, the
-    noise scale or the wind; the other axes at the mission's own values (``link``, ``vehicle``)."""
+    noise scale or the wind; the other axes at the mission's own values (``link``, ``vehicle``, its discretization)."""
+    own = {"seed": seed, "discretization": mission.discretization}
     if over == "noise":
-        return Cell(law, float(mission.rate_hz), **link, seed=seed, estimator=vehicle["estimator"], noise=value,
+        return Cell(law, float(mission.rate_hz), **link, **own, estimator=vehicle["estimator"], noise=value,
                     sensing=("noise",), turbulence=vehicle["turbulence"])
     if over == "wind_mps":
-        return Cell(law, float(mission.rate_hz), **link, seed=seed, **vehicle, wind_mps=value, weather=("wind_mps",))
-    return Cell(law, float(mission.rate_hz), **{**link, over: value}, seed=seed, link=(over,), **vehicle)
+        return Cell(law, float(mission.rate_hz), **link, **own, **vehicle, wind_mps=value, weather=("wind_mps",))
+    return Cell(law, float(mission.rate_hz), **{**link, over: value}, **own, link=(over,), **vehicle)
 
 
 def write_margin(result: dict[str, Any], out: str | Path | None, mission_name: str, overwrite: bool) -> Path:

@@ -94,16 +94,18 @@ def _label(axis: str) -> str:
 
 
 def legacy_values(meta: Mapping[str, Any]) -> dict[str, Any]:
-    """What an older sweep's cells flew on the vehicle's and the air's axes (its ``cells.csv`` has no such
-    columns): its mission's ``[estimator] kind``, ``[sensors] noise_scale``, ``[wind] speed_mps`` and
-    ``turbulence``, else their defaults."""
+    """What an older sweep's cells flew on the vehicle's and the air's axes and the discretization (its
+    ``cells.csv`` has no such columns): its mission's ``[estimator] kind``, ``[sensors] noise_scale``, ``[wind]
+    speed_mps`` and ``turbulence``, ``discretization``, else their defaults (before issue 24: ``explicit``)."""
     mission = meta.get("mission") if isinstance(meta.get("mission"), Mapping) else {}
     est, sensors, wind = (t if isinstance(t := mission.get(k), Mapping) else {}
                           for k in ("estimator", "sensors", "wind"))
     kind, scale = est.get("kind", "truth"), sensors.get("noise_scale", 1.0)
     speed, level = wind.get("speed_mps", 0.0), wind.get("turbulence", "none")
+    d = mission.get("discretization", "explicit")
     return {"estimator": kind if isinstance(kind, str) else "truth", "noise": _number(scale, 1.0),
-            "wind_mps": _number(speed, 0.0), "turbulence": level if isinstance(level, str) else "none"}
+            "wind_mps": _number(speed, 0.0), "turbulence": level if isinstance(level, str) else "none",
+            "discretization": d if isinstance(d, str) else "explicit"}
 
 
 def _number(v: Any, default: float) -> float:
@@ -168,12 +170,16 @@ def write_report(path: Path, rows: Sequence[Mapping[str, Any]], meta: Mapping[st
               "and the median 3-D RMS position error (m, over the summary's RMS window).", ""]
     lines += ["## Overview", "", "| controller | runs | " + " | ".join(CLASSES) + " | median RMS (m) |",
               "|---|---:|" + "---:|" * len(CLASSES) + "---:|"]
-    for c in controllers:
-        mine = [r for r in rows if r["controller"] == c]
+    schemes = _values(rows, "discretization")
+    for c, d in ((c, d) for c in controllers for d in schemes):  # a row per law and discretization flown
+        mine = [r for r in rows if r["controller"] == c and r["discretization"] == d]
+        if not mine:
+            continue
         p = Point(mine, classes)
         counts = [sum(1 for r in mine if classify(r, classes) == k) for k in CLASSES]
         med = f"{p.rms:.3g}" if p.rms is not None else "n/a"
-        lines.append(f"| {c} | {len(mine)} | " + " | ".join(map(str, counts)) + f" | {med} |")
+        name = f"{c} ({d})" if len(schemes) > 1 else c
+        lines.append(f"| {name} | {len(mine)} | " + " | ".join(map(str, counts)) + f" | {med} |")
     maps: list[Path] = []
     files = controller_files(controllers)
     for a, b in prs:
@@ -218,6 +224,7 @@ def reproduce(row: Mapping[str, Any], swept: Sequence[str]) -> str:
     flags += [f"--{SHORT[a]} {row[a]:g}" for a in LINK_AXES if a in swept]
     flags += [f"--estimator {row['estimator']}"] if "estimator" in swept else []
     flags += [f"--noise {row['noise']:g}"] if "noise" in swept else []
+    flags += [f"--discretization {row['discretization']}"] if "discretization" in swept else []
     return f"bsst sim mission.toml {' '.join(flags)} --seed {row['seed']}"
 
 

@@ -17,7 +17,6 @@ from itertools import product
 from pathlib import Path
 from typing import Any
 
-from bridge.autopilot.estimator import ESTIMATOR_KINDS
 from bridge.record.runlog import check_trace_steps
 from bridge.sweep.cells import COLUMNS
 from bridge.sweep.classes import Classes
@@ -25,6 +24,7 @@ from bridge.sweep.grid import (
     AXES,
     LINK_AXES,
     MODES,
+    NAME_CHOICES,
     RANGES,
     SENSING_AXES,
     WEATHER_AXES,
@@ -38,7 +38,6 @@ from bridge.sweep.grid import (
 from missions import Mission, load_mission
 from missions.mission import is_plan_file, law_spec_from, law_spec_problem, mission_path
 from params import ConfigError, Table, load_toml
-from plant.wind import TURBULENCE
 
 MAX_CELLS = 10_000  # cells a sweep flies unless told more (max_cells): 48 cells of the 30 s sine take 15 s on 2
 # cores, so 10^4 take about an hour; 10^6 would take days, which is a typo far more often than a plan
@@ -96,12 +95,13 @@ class Sweep:
         }))
 
     def validate(self) -> None:
-        """Build the flight of every law, every rate, every estimator kind, every noise scale, every wind and
-        turbulence and every combination of link values once (not every cell), so that a bad value fails before
-        any cell runs; first the grid's size; then that a swept noise scale changes something."""
+        """Build the flight of every law, every rate, every discretization, every estimator kind, every noise scale,
+        every wind and turbulence and every combination of link values once (not every cell), so that a bad value
+        fails before any cell runs; first the grid's size; then that a swept noise scale changes something."""
         self.check_size()
         base = self.cells()[0]
-        probes = [_replace_cell(base, **{a: v}) for a in ("controller", "rate_hz") for v in getattr(self.grid, a)]
+        probes = [_replace_cell(base, **{a: v}) for a in ("controller", "rate_hz", "discretization")
+                  for v in getattr(self.grid, a)]
         probes += [_replace_cell(base, **{a: v, "sensing": tuple({*base.sensing, a})}) for a in SENSING_AXES
                    for v in getattr(self.grid, a)]
         probes += [_replace_cell(base, **{a: v, "weather": tuple({*base.weather, a})}) for a in WEATHER_AXES
@@ -164,8 +164,8 @@ def load_sweep(path: str | Path) -> Sweep:
     axes: dict[str, Any] = {}
     for a in AXES:
         if g.has(a):
-            if a in ("estimator", "turbulence"):
-                axes[a] = tuple(_name_list(g, a, ESTIMATOR_KINDS if a == "estimator" else TURBULENCE))
+            if a in NAME_CHOICES:  # estimator, turbulence, discretization
+                axes[a] = tuple(_name_list(g, a, NAME_CHOICES[a]))
             elif a == "controller":
                 v = g.raw(a)
                 if isinstance(v, str):
