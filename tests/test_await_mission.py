@@ -154,10 +154,12 @@ def _upload(gcs: Any, target: tuple[int, int], items: list[Any]) -> None:
         gcs.mav.send(item)
 
 
-def test_mission_start_flies_a_small_plan_in_real_time(tmp_path):
+@pytest.mark.parametrize("link", [[], ["--loss", "10"]], ids=["perfect", "relay-loss-10"])
+def test_mission_start_flies_a_small_plan_in_real_time(tmp_path, link):
     """A pymavlink ground station uploads a takeoff, a waypoint and a landing to ``bsst sitl --await-mission
     --realtime`` and sends MAV_CMD_MISSION_START (ACCEPTED): the controller downloads the three items and flies
-    them on the wall clock; each is reached (MISSION_ITEM_REACHED), the flight completes landed and disarmed."""
+    them on the wall clock; each is reached (MISSION_ITEM_REACHED), the flight completes landed and disarmed.
+    With ``--loss 10`` the download crosses ``bsst relay`` (the session's, on the wire) and still arrives."""
     plan = read_plan_text(SMALL_PLAN, "small")
     items = [M.MAVLink_mission_item_int_message(0, 0, k, it.frame, it.command, 0, 1, it.p1, it.p2, it.p3, it.p4,
                                                 round(it.lat * 1e7), round(it.lon * 1e7), it.alt, 0)
@@ -168,7 +170,7 @@ def test_mission_start_flies_a_small_plan_in_real_time(tmp_path):
         gcs = mavutil.mavlink_connection(f"udpin:127.0.0.1:{GCS_PORT + n}", source_system=255, source_component=190,
                                          dialect="common")
         sitl = Proc.bsst("sitl", "--await-mission", "--realtime", "--instance", str(n), "--out", str(out),
-                         "--no-plots")
+                         "--no-plots", *link)
         try:
             hb = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=30)
             assert hb is not None
@@ -195,6 +197,7 @@ def test_mission_start_flies_a_small_plan_in_real_time(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["outcome"] == "completed" and summary["clock"] == "realtime"
     assert summary["mission_transfer"]["items"] == 3 and summary["end"]["disarmed"]
+    assert (out / "relay.json").exists() == bool(link)
 
 
 def test_the_link_model_acts_on_the_transfer_in_lockstep_and_the_flight_is_offlines(tmp_path):
