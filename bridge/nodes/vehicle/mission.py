@@ -44,7 +44,7 @@ from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import Endpoint
 from bridge.mavlink.missionitems import ItemRefused, MissionItem, TransferStats, item_message, parse_item
 from bridge.nodes.vehicle.authority import Authority, attribute
-from bridge.nodes.vehicle.missionwatch import ItemWatch, goals_of
+from bridge.nodes.vehicle.missionwatch import Goal, ItemWatch, goals_of
 from bridge.nodes.vehicle.streams import StatusTexts
 from params import ConfigError
 
@@ -113,6 +113,7 @@ class MissionManager:
         self.start_requested = False  # started: the controller is to download the mission and fly it
         self.watch: ItemWatch | None = None  # the mission in flight (None: none)
         self.completed = False  # the last started mission's items were all reached
+        self._goals: tuple[Goal, ...] = ()  # the started mission's items, where and how each is reached
         self.home = (authority.cfg.home.lat, authority.cfg.home.lon, authority.cfg.home.alt)
 
     # -- a ground station's start (await_mission) --------------------------------------------------------
