@@ -237,6 +237,45 @@ def test_the_link_model_acts_on_the_transfer_in_lockstep_and_the_flight_is_offli
     assert worst <= 1e-4, worst
 
 
+def test_mavproxy_loads_and_starts_a_waypoint_file(tmp_path):
+    """MAVProxy, unmodified, through stdin: ``wp load`` of a QGC WPL 110 file into ``bsst sitl --await-mission``
+    (lockstep), then ``long MISSION_START``: ACCEPTED, flown to the end, landed and disarmed, every item reached;
+    the run's mission.plan holds what MAVProxy sent: the file's lines, its line 0 (the home) as item 0, a
+    waypoint on the ground at the home (MAVProxy sends it so to PX4 too)."""
+    (tmp_path / "small.txt").write_text(SMALL_PLAN)
+    mavproxy = os.path.join(os.path.dirname(sys.executable), "mavproxy.py")
+    out = tmp_path / "mp"
+    with instance_slot() as n:
+        sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--out", str(out), "--no-plots")
+        mp = Proc([sys.executable, mavproxy, f"--master=udpin:127.0.0.1:{GCS_PORT + n}", "--nowait"],
+                  cwd=tmp_path, stdin=subprocess.PIPE)
+
+        def say(cmd: str) -> None:
+            mp.p.stdin.write(cmd.encode() + b"\n")  # type: ignore[union-attr]
+            mp.p.stdin.flush()  # type: ignore[union-attr]
+
+        try:
+            mp.wait_line(lambda s: "online system" in s, timeout=30)
+            say("wp load small.txt")
+            mp.wait_line(lambda s: "Got MISSION_ACK: TYPE_MISSION: ACCEPTED" in s, timeout=15)
+            say("long MISSION_START 0 0")
+            mp.wait_line(lambda s: "Got COMMAND_ACK: MISSION_START: ACCEPTED" in s, timeout=15)
+            assert sitl.p.wait(timeout=120) == 0, "\n".join(sitl.lines[-30:])
+            say("exit")
+        finally:
+            mp.stop()
+            sitl.stop()
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["outcome"] == "completed" and summary["end"]["disarmed"]
+    assert summary["mission_transfer"]["items"] == 4  # MAVProxy sends the file's line 0 (the home) as item 0
+    reached = [m.seq for m in _tlog(out / "vehicle.tlog", n + 1, ["MISSION_ITEM_REACHED"])]
+    assert list(dict.fromkeys(reached)) == [0, 1, 2, 3]
+    kept = read_plan_text((out / "mission.plan").read_text(), "kept")
+    home = (16, 47.397742, 8.545594, 488.0)  # a waypoint at the home, on the ground (GLOBAL: m AMSL)
+    assert [(i.command, round(i.lat, 7), round(i.lon, 7), i.alt) for i in kept.items] == \
+        [home] + [(i.command, i.lat, i.lon, i.alt) for i in read_plan_text(SMALL_PLAN, "small").items]
+
+
 @pytest.mark.parametrize("args, says", [
     (["--await-mission", "examples/box.plan"], "give no mission file"),
     (["--await-mission", "--gcs", "none"], "needs a GCS link"),
