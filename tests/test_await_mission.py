@@ -293,7 +293,7 @@ def test_the_vehicle_starts_a_mission_only_when_asked_to_await_one():
     """MISSION_START: UNSUPPORTED on a vehicle without --await-mission (as before), DENIED without a mission
     and ACCEPTED with one on a vehicle with it; AUTO.MISSION DENIED without it, selected with it (HEARTBEAT
     AUTO.MISSION), and a ground station's arm then starts the mission (the vehicle stays disarmed: its arm is
-    the controller's)."""
+    the controller's); a mission cleared in flight is no more watched (no MISSION_ITEM_REACHED for its items)."""
     gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     gcs.bind(("127.0.0.1", 0))
     gcs.setblocking(False)
@@ -345,6 +345,11 @@ def test_the_vehicle_starts_a_mission_only_when_asked_to_await_one():
         assert exchange(v, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
         assert v.missions.start_requested and not v.sim.armed
         assert any(e.kind == "mission" and "start requested" in e.text for e in v.sim.events)
+        v.missions.flight_armed()  # (as the controller's arm does): item 0 current, the mission ACTIVE
+        assert v.missions.watch is not None and v.missions.mission_state == M.MISSION_STATE_ACTIVE
+        exchange(v, M.MAVLink_mission_count_message(1, 1, 0, 0), "MISSION_ACK")  # a ground station clears it
+        v.missions.flight_step(0.0, (0.0,) * 12, True)
+        assert v.missions.watch is None and "replaced" in v.sim.events[-1].text  # no reached for a gone item
     finally:
         for v in made:
             v.close()

@@ -114,6 +114,7 @@ class MissionManager:
         self.watch: ItemWatch | None = None  # the mission in flight (None: none)
         self.completed = False  # the last started mission's items were all reached
         self._goals: tuple[Goal, ...] = ()  # the started mission's items, where and how each is reached
+        self._flying: tuple[MissionItem, ...] = ()  # the items of the mission in flight
         self.home = (authority.cfg.home.lat, authority.cfg.home.lon, authority.cfg.home.alt)
 
     # -- a ground station's start (await_mission) --------------------------------------------------------
@@ -167,6 +168,7 @@ class MissionManager:
             return
         self.start_requested = self.selected = self.completed = False
         self.watch = ItemWatch(self._goals)
+        self._flying = self.mission.items
         self.set_current(self.watch.current)
 
     def flight_step(self, t: float, X: tuple[float, ...], armed: bool) -> None:
@@ -174,6 +176,11 @@ class MissionManager:
         is said (MISSION_ITEM_REACHED) and the next made current; disarmed, the mission's flight is over."""
         watch = self.watch
         if watch is None:
+            return
+        if self.mission.items is not self._flying:  # a ground station replaced or cleared it meanwhile
+            self.watch = None
+            self.sim.event("mission", "the mission flown was replaced by an upload: its items are no more watched "
+                                      "(the controller flies the one it downloaded)")
             return
         for seq in watch.step(t, X):
             self.reached(seq)
