@@ -37,6 +37,7 @@ from pymavlink import mavutil  # noqa: E402
 from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
 from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, GCS_PORT, LINK_PORT  # noqa: E402
+from bridge.nodes.report import Ready, parse_line  # noqa: E402
 from bridge.session import instance_slot  # noqa: E402
 
 LOSSES = (0, 10, 20, 40)
@@ -119,10 +120,17 @@ def upload(gcs: Any, mission: list[Any], target: tuple[int, int], patience_s: fl
         sent["items"] += 1
 
 
-def held_mission(n: int) -> list[Any]:
-    """The vehicle's mission, downloaded over its controller link as the configured controller."""
+def controller_end(n: int) -> Any:
+    """The configured controller's end, bound to a port of its own (the vehicle is told it: --controller-from, as
+    ``bsst sitl`` pins it; an unpinned vehicle would answer a would-be controller within its trial's credit only)."""
     ctl = mavutil.mavlink_connection(f"udpout:127.0.0.1:{LINK_PORT + n}", source_system=CONTROLLER_SYSID,
                                      source_component=CONTROLLER_COMPID, dialect="common")
+    ctl.port.bind(("127.0.0.1", 0))
+    return ctl
+
+
+def held_mission(ctl: Any, n: int) -> list[Any]:
+    """The vehicle's mission, downloaded over its controller link as the configured controller."""
     try:
         ctl.mav.mission_request_list_send(n + 1, 1, 0)
         count = ctl.recv_match(type="MISSION_COUNT", blocking=True, timeout=5)
@@ -157,20 +165,25 @@ def cell(loss: int, delay: int, n_items: int, timeout_s: float, seed: int) -> di
     with instance_slot() as n, tempfile.TemporaryDirectory(prefix="bsst-mt-") as tmp:
         relay, line = start(["relay", "--listen", "127.0.0.1:0", "--to", f"127.0.0.1:{GCS_PORT + n}",
                              "--listen-direction", "down", "--loss", str(loss), "--delay", str(delay),
-                             "--link-seed", str(seed), "--stats", f"{tmp}/relay.json"], "listening on",
+                             "--link-seed", str(seed), "--stats", f"{tmp}/relay.json"], '"report":"ready"',
                             Path(tmp) / "relay.log")
-        port = int(line.split("listening on ")[1].split()[0].rsplit(":", 1)[1])
-        vehicle, _ = start(["vehicle", "--instance", str(n), "--gcs", f"udpout:127.0.0.1:{port}", "--out", tmp],
-                           "ready", Path(tmp) / "vehicle.log")
+        ready = parse_line(line)
+        assert isinstance(ready, Ready) and ready.listen is not None, line
+        port = int(ready.listen.rsplit(":", 1)[1])
+        ctl = controller_end(n)
+        vehicle, _ = start(["vehicle", "--instance", str(n), "--gcs", f"udpout:127.0.0.1:{port}", "--out", tmp,
+                            "--controller-from", f"127.0.0.1:{ctl.port.getsockname()[1]}"], "ready",
+                           Path(tmp) / "vehicle.log")
         gcs = mavutil.mavlink_connection(f"udpin:127.0.0.1:{GCS_PORT + n}", source_system=255,
                                          source_component=190, dialect="common")
         try:
             if gcs.wait_heartbeat(timeout=30) is None:
                 raise RuntimeError("no heartbeat through the relay")
             out = upload(gcs, mission, (n + 1, 1), max(1.0, 3 * 2 * delay / 1000), timeout_s)
-            held = held_mission(n)
+            held = held_mission(ctl, n)
         finally:
             gcs.close()
+            ctl.close()
             stop(vehicle)
             stop(relay)
         requests, totals = vehicle_log(Path(tmp) / "vehicle.tlog", n + 1)

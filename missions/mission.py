@@ -27,7 +27,7 @@ from typing import Any
 
 from missions.fleet import fleet_from_table
 from missions.minsnap import Knot, Smooth, accelerations, demands, stretched
-from missions.planfiles import read_plan_text
+from missions.planfiles import PlanFile, read_plan_text
 from missions.references import Reference, Setpoint, Sine, Step, Waypoints
 from missions.route import LIMIT_RANGES, Limits, smooth_from_plan
 from params import ConfigError, Table, load_toml, read_text_file
@@ -290,15 +290,28 @@ def load_mission(path: str | Path) -> Mission:
 def plan_trajectory(text: str, source: str, limits: Mapping[str, float] | None = None) -> Smooth:
     """The smooth trajectory of a plan's text (``.plan`` JSON or ``QGC WPL 110``): its cruise speed is
     MPC_XY_CRUISE unless ``limits`` (PX4 names, :class:`missions.route.Limits`) give it."""
-    plan = read_plan_text(text, source)
+    return plan_smooth(read_plan_text(text, source), limits)
+
+
+def plan_smooth(plan: PlanFile, limits: Mapping[str, float] | None = None) -> Smooth:
+    """The smooth trajectory of a read plan (a file's, or one a ground station uploaded): its cruise speed is
+    MPC_XY_CRUISE unless ``limits`` give it."""
     given = dict(limits or {})
     if plan.cruise_m_s is not None and "MPC_XY_CRUISE" not in given:
         lo, hi = LIMIT_RANGES["MPC_XY_CRUISE"]
         if not lo <= plan.cruise_m_s <= hi:
-            raise ConfigError(f"{source}: mission.hoverSpeed: {plan.cruise_m_s:g} m/s, must be in [{lo:g}, {hi:g}]")
+            raise ConfigError(f"{plan.source}: mission.hoverSpeed: {plan.cruise_m_s:g} m/s, must be in "
+                              f"[{lo:g}, {hi:g}]")
         given["MPC_XY_CRUISE"] = plan.cruise_m_s
     smooth, _ = smooth_from_plan(plan, Limits(**given), ENVELOPE_RADIUS_M)
     return smooth
+
+
+def with_plan(base: Mission, plan: PlanFile, name: str) -> Mission:
+    """``base`` (its settings: profile, law, rates, link, ...) flying ``plan``: its trajectory, then
+    :data:`END_REST_S` at rest, named ``name``."""
+    smooth = plan_smooth(plan)
+    return replace(base, trajectory=smooth, duration_s=smooth.end_s + END_REST_S, name=name)
 
 
 def mission_from_plan(text: str, source: str, name: str = "mission") -> Mission:

@@ -205,6 +205,47 @@ def check_home(source: str, lat: float, lon: float, alt: float, key: str) -> Non
                           f"altitude in [-1000, 10000] m; got ({lat:g}, {lon:g}, {alt:g})")
 
 
+def plan_from_items(source: str, home: tuple[float, float, float],
+                    items: list[tuple[int, int, int, tuple[float, ...], int]]) -> PlanFile:
+    """A mission that came over MAVLink as a plan: ``home`` (deg, deg, m AMSL) and per item (seq, MAV_CMD,
+    MAV_FRAME, (param1..4, lat deg, lon deg, alt m), autocontinue); checked as a file's items are (the
+    refusal names ``item SEQ`` and its command)."""
+    check_home(source, *home, "the vehicle's home")
+    if not items:
+        raise ConfigError(f"{source}: the mission has no items")
+    return PlanFile(source, home, tuple(_check_item(source, Item(f"item {seq}", cmd, frame, *vals), auto == 1)
+                                        for seq, cmd, frame, vals, auto in items))
+
+
+def _json_number(v: float) -> float | int | None:
+    """A number as QGroundControl writes it: NaN as null, whole numbers without a fraction."""
+    if not math.isfinite(v):
+        return None
+    return int(v) if v == int(v) and abs(v) < 2**53 else v
+
+
+def plan_text(plan: PlanFile) -> str:
+    """``plan`` as a QGroundControl ``.plan`` file's text (its documented schema; read back by
+    :func:`read_qgc_plan` to the same items): every item a SimpleItem, altitude mode by its frame."""
+    def item(n: int, it: Item) -> dict[str, Any]:
+        params = [_json_number(v) for v in (it.p1, it.p2, it.p3, it.p4, it.lat, it.lon, it.alt)]
+        out: dict[str, Any] = {"autoContinue": True, "command": it.command, "doJumpId": n + 1, "frame": it.frame,
+                               "params": params, "type": "SimpleItem"}
+        if it.command != DO_CHANGE_SPEED:
+            out.update({"AMSLAltAboveTerrain": None, "Altitude": params[6],
+                        "AltitudeMode": 1 if it.frame in RELATIVE_FRAMES else 2})
+        return out
+
+    mission = {"cruiseSpeed": 15, "firmwareType": 12, "globalPlanAltitudeMode": 1,
+               "hoverSpeed": _json_number(plan.cruise_m_s) if plan.cruise_m_s is not None else 5,
+               "items": [item(n, it) for n, it in enumerate(plan.items)],
+               "plannedHomePosition": [_json_number(v) for v in plan.home], "vehicleType": 2, "version": 2}
+    data = {"fileType": "Plan", "geoFence": {"circles": [], "polygons": [], "version": 2},
+            "groundStation": "bsst", "mission": mission, "rallyPoints": {"points": [], "version": 2},
+            "version": 1}
+    return json.dumps(data, indent=4, sort_keys=True) + "\n"
+
+
 def read_plan_text(text: str, source: str) -> PlanFile:
     """A ``.plan`` or ``QGC WPL 110`` file's text, told apart by its content."""
     return read_wpl(text, source) if text.lstrip().startswith("QGC WPL") else read_qgc_plan(text, source)

@@ -208,6 +208,8 @@ def add_sitl_commands(sub: Any) -> None:
                    help="the only address the controller's ids are heard from (bsst sitl pins it; default: "
                         "learned from the controller's first message)")
     p.add_argument("--home", type=_home, metavar="LAT,LON,ALT", help="home: degrees, degrees, m AMSL")
+    p.add_argument("--await-mission", action="store_true",
+                   help="take MISSION_START and AUTO.MISSION: a ground station's mission, flown by the controller")
     add_failsafe_options(p)
     add_param_options(p, schedule=False)  # a change at a mission time is the controller's to send (--param-at)
     add_sensor_options(p)
@@ -230,11 +232,17 @@ def add_sitl_commands(sub: Any) -> None:
                    help="fly only this vehicle (default: the first autopilot heard)")
     p.add_argument("--timeout", type=number_in("--timeout", 0.0, 3600.0, lo_open=True), default=10.0, metavar="S",
                    help="wait this long for the vehicle's heartbeat (default 10 s)")
+    p.add_argument("--await-mission", action="store_true",
+                   help="the MISSION file gives the settings only: wait for a ground station to start the vehicle's "
+                        "mission, download it and fly it")
     add_key_option(p)
     p.set_defaults(func=cmd_controller)
 
     p = sub.add_parser("sitl", help="fly a mission as SITL: vehicle and controller processes over MAVLink/UDP")
-    add_flight_options(p)
+    add_flight_options(p, optional_mission=True)
+    p.add_argument("--await-mission", action="store_true",
+                   help="no mission file: fly the mission a ground station uploads and starts (MISSION_START, or "
+                        "AUTO.MISSION then arm); docs/missions.md")
     add_sensor_options(p)
     add_port_options(p, vehicle=False)
     add_link_options(p)
@@ -247,7 +255,7 @@ def cmd_sitl(args: argparse.Namespace) -> int:
 
     run = sitl(args.mission, out=args.out, write=True, overwrite=args.overwrite, plots=not args.no_plots,
                realtime=args.realtime, instance=args.instance, gcs=args.gcs, speed=args.speed, live=True,
-               key=args.key, overrides=overrides_from_args(args))
+               key=args.key, overrides=overrides_from_args(args), await_mission=args.await_mission)
     return report_run(run, "sitl")
 
 
@@ -278,7 +286,8 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
         pin = (a.host, a.port)
     cfg = VehicleConfig(listen, gcs, sysid=args.sysid or own or n + 1, controller_sysid=sysid, controller_compid=compid,
                         clock="realtime" if args.realtime else "lockstep", speed=args.speed,
-                        home=Home(*args.home) if args.home else Home(), key=_key(args), controller_from=pin)
+                        home=Home(*args.home) if args.home else Home(), key=_key(args), controller_from=pin,
+                        await_mission=args.await_mission)
     return run_vehicle(flight, cfg, args.out, args.overwrite)
 
 
@@ -294,7 +303,7 @@ def cmd_controller(args: argparse.Namespace) -> int:
         raise ConfigError(f"--vehicle {args.vehicle!r}: the controller sends to the vehicle (udpout)")
     cfg = OffboardConfig(vehicle, sysid=args.sysid, clock="realtime" if args.realtime else "lockstep",
                          target_sysid=args.target_sysid, connect_timeout_s=args.timeout, key=_key(args),
-                         source_port=args.source_port or 0)
+                         source_port=args.source_port or 0, await_mission=args.await_mission)
     return run_controller(flight, cfg, args.out, args.overwrite)
 
 

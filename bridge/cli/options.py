@@ -110,12 +110,17 @@ def sensor_overrides_from_args(args: argparse.Namespace) -> dict[str, Any]:
             "estimator": getattr(args, "estimator", None), "noise": getattr(args, "noise", None)}
 
 
-def add_flight_options(p: argparse.ArgumentParser, vehicle: bool = True) -> None:
+def add_flight_options(p: argparse.ArgumentParser, vehicle: bool = True, optional_mission: bool = False) -> None:
     """Options every flying command shares: overrides of the mission's own values (``vehicle``: with the
     vehicle's failsafe action, its weather, its start parameters, and a run directory with plots, for the commands that
     fly the vehicle and record the whole run, ``sim`` and ``sitl``; ``bsst controller`` writes its own two
-    files only when given ``--out``, and plots nothing)."""
-    p.add_argument("mission", help="mission TOML file (see missions/)")
+    files only when given ``--out``, and plots nothing). ``optional_mission``: ``bsst sitl``, whose
+    ``--await-mission`` takes none."""
+    if optional_mission:
+        p.add_argument("mission", nargs="?", help="mission TOML file or plan (see missions/); none with "
+                                                  "--await-mission")
+    else:
+        p.add_argument("mission", help="mission TOML file (see missions/)")
     if vehicle:
         p.add_argument("--out", metavar="DIR", help="run directory (default runs/<UTC time>-<mission>)")
         p.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out")

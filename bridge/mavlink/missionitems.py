@@ -5,7 +5,9 @@ In:  a MISSION_ITEM_INT (x, y: latitude, longitude in degE7; z m) or a legacy MI
      float32) with its frame, command, param1..4 and autocontinue
 Out: a :class:`MissionItem` (x, y as int degE7 in a global frame, the raw integers of param5 and param6 in
      ``MAV_FRAME_MISSION``; z m; params as sent) or the MAV_MISSION_RESULT PX4 answers the item with
-     (:class:`ItemRefused`); the item as MISSION_ITEM_INT or MISSION_ITEM for a download
+     (:class:`ItemRefused`); the item as MISSION_ITEM_INT or MISSION_ITEM for a download; a held mission as
+     a :class:`~missions.planfiles.PlanFile` (:func:`plan_of`, to be flown); a transfer's figures
+     (:class:`TransferStats`: items, requests, requests again, wall time s, result)
 
 What PX4 refuses, and with which result (its parser, then its mission-type check):
 
@@ -26,10 +28,12 @@ is MAVLink's "use the default" (MAVSDK sends yaw NaN) and is kept.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
+
+from missions.planfiles import PlanFile, plan_from_items
 
 GLOBAL_FRAMES = frozenset({mavlink.MAV_FRAME_GLOBAL, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT})
 GLOBAL_INT_FRAMES = frozenset({mavlink.MAV_FRAME_GLOBAL_INT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT})
@@ -171,3 +175,30 @@ def item_message(item: MissionItem, target: tuple[int, int], current: bool, int_
     return mavlink.MAVLink_mission_item_message(*args, FLOAT_FRAME.get(item.frame, item.frame), item.command,
                                                 int(current), item.autocontinue, *params, item.x / scale,
                                                 item.y / scale, item.z, mavlink.MAV_MISSION_TYPE_MISSION)
+
+
+@dataclass
+class TransferStats:
+    """One transfer's figures (an upload on the vehicle, a download by the controller): its items, the
+    requests sent (first and again), the requests sent again, its wall time (s) and result (``accepted``,
+    ``timeout``, ``refused item N``, ``cancelled``, ...; "" while it runs)."""
+
+    items: int = 0
+    requests: int = 0
+    re_requests: int = 0
+    duration_s: float = 0.0
+    result: str = ""
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def plan_of(items: tuple[MissionItem, ...], home: tuple[float, float, float], source: str) -> PlanFile:
+    """A held mission as a plan to fly, about ``home`` (deg, deg, m AMSL): checked as a plan file's items
+    are (:func:`missions.planfiles.plan_from_items`: a :class:`params.ConfigError` naming the item)."""
+    rows = []
+    for it in items:
+        scale = DEG_E7 if it.global_frame else 1.0
+        rows.append((it.seq, it.command, it.frame, (it.param1, it.param2, it.param3, it.param4, it.x / scale,
+                                                    it.y / scale, it.z), it.autocontinue))
+    return plan_from_items(source, home, rows)

@@ -27,12 +27,16 @@ from bridge.autopilot.simvehicle import FAILSAFE, HOLD, LAND, LANDED, OFFBOARD, 
 
 MAIN_AUTO = 4  # PX4_CUSTOM_MAIN_MODE_AUTO
 MAIN_OFFBOARD = 6  # PX4_CUSTOM_MAIN_MODE_OFFBOARD
-SUB_TAKEOFF, SUB_LOITER, SUB_LAND = 2, 3, 6  # PX4_CUSTOM_SUB_MODE_AUTO_*
+SUB_TAKEOFF, SUB_LOITER, SUB_MISSION, SUB_LAND = 2, 3, 4, 6  # PX4_CUSTOM_SUB_MODE_AUTO_*
+# AUTO.MISSION: a ground station's mission, flown by the offboard controller (bsst sitl --await-mission); shown,
+# selected and started here, never a SimVehicle mode (bridge/nodes/vehicle/mission.py)
+MISSION = "mission"
 PX4_MODES = {  # the modes the vehicle flies: its name -> (main, sub) and the name a ground station shows
     OFFBOARD: (MAIN_OFFBOARD, 0),
     HOLD: (MAIN_AUTO, SUB_LOITER),
     LAND: (MAIN_AUTO, SUB_LAND),
     TAKEOFF: (MAIN_AUTO, SUB_TAKEOFF),
+    MISSION: (MAIN_AUTO, SUB_MISSION),
 }
 _BY_CODE = {code: mode for mode, code in PX4_MODES.items()}
 # PX4's other modes by (main, sub), to name the one refused: px4_custom_mode.h

@@ -101,12 +101,13 @@ def home_position(home: Home) -> Any:
         0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0)
 
 
-def mission_current(seq: int, total: int) -> list[Any]:
-    """``MISSION_CURRENT``: the current item of a mission of ``total`` items, not started (the vehicle does
-    not fly missions yet); none without a mission, as PX4 sends none then."""
+def mission_current(seq: int, total: int, state: int = mavlink.MISSION_STATE_NOT_STARTED) -> list[Any]:
+    """``MISSION_CURRENT``: the current item of a mission of ``total`` items and its MISSION_STATE (not started,
+    active while a ground station's mission flies, complete once its last item is reached); none without a
+    mission, as PX4 sends none then."""
     if total == 0:
         return []
-    return [mavlink.MAVLink_mission_current_message(seq, total, mavlink.MISSION_STATE_NOT_STARTED, 0)]
+    return [mavlink.MAVLink_mission_current_message(seq, total, state, 0)]
 
 
 def sys_status(load_permille: int, healthy: bool, battery: tuple[int, int, int] = (16800, -1, 100)) -> Any:

@@ -17,6 +17,8 @@ The kinds, and their fields (times in s of the flight's clock, to the millisecon
 - ``refused``: a command or parameter the vehicle refused, and why (:class:`Refused`);
 - ``stats``: the child's counts on exit (:class:`Stats`, a JSON object; the keys per child are
   :func:`bridge.nodes.offboard.run_controller`'s and the vehicle's);
+- ``mission``: the controller has a ground station's mission (``bsst controller --await-mission``) and wrote it
+  as flown into its directory (:class:`MissionLoaded`: its name, items, the download's figures);
 - ``done``: the controller's outcome (:class:`Done`: ``completed``, ``failsafe``, ``diverged`` or
   ``aborted``; whether the vehicle left lockstep; why it gave up; the mode a ground station took it into).
 
@@ -42,6 +44,7 @@ class Kind(StrEnum):
     REFUSED = "refused"
     STATS = "stats"
     DONE = "done"
+    MISSION = "mission"
 
 
 @dataclass(frozen=True)
@@ -148,9 +151,21 @@ class Done:
     taken_over: str | None = None
 
 
-Report = Ready | Event | StatusText | Warning | Refused | Stats | Done
+@dataclass(frozen=True)
+class MissionLoaded:
+    """The controller downloaded a ground station's mission and wrote ``mission.plan`` and ``mission.toml``
+    (``name``: the mission's, ``items``: its items, ``transfer``: the download's figures, as
+    :class:`~bridge.mavlink.missionitems.TransferStats` holds them)."""
+
+    name: str
+    items: int
+    transfer: dict[str, Any] = field(default_factory=dict)
+
+
+Report = Ready | Event | StatusText | Warning | Refused | Stats | Done | MissionLoaded
 KIND_OF: dict[type, Kind] = {Ready: Kind.READY, Event: Kind.EVENT, StatusText: Kind.STATUSTEXT,
-                             Warning: Kind.WARNING, Refused: Kind.REFUSED, Stats: Kind.STATS, Done: Kind.DONE}
+                             Warning: Kind.WARNING, Refused: Kind.REFUSED, Stats: Kind.STATS, Done: Kind.DONE,
+                             MissionLoaded: Kind.MISSION}
 _CLASS_OF = {k: c for c, k in KIND_OF.items()}
 
 
@@ -196,6 +211,8 @@ def _well_typed(report: Report) -> bool:
         return isinstance(report.severity, int) and isinstance(report.text, str)
     if isinstance(report, Ready):
         return isinstance(report.node, str)
+    if isinstance(report, MissionLoaded):
+        return isinstance(report.name, str) and isinstance(report.items, int) and isinstance(report.transfer, dict)
     return isinstance(report.text, str)
 
 

@@ -7,7 +7,8 @@ In:  the :class:`~bridge.core.flight.Flight`; the joined trace and the per-packe
      failsafe and divergence, the first step flown off the step clock s, the ``sitl`` block); the relay's
      statistics (``relay.json``'s dict, or None); the events (:class:`~bridge.record.events.RunEvent`)
 Out: :class:`SessionSummary`: the trace arrays, ``summary.json`` (the figures of
-     :func:`bridge.record.metrics.summarise`, the ``link``, ``timing`` and ``sitl`` blocks, the lockstep
+     :func:`bridge.record.metrics.summarise`, the ``link``, ``timing`` and ``sitl`` blocks, a ground station's
+     mission's download (``mission_transfer``, :class:`MissionTransfer`; ``--await-mission`` only), the lockstep
      record, ``ended_by``, the policies' verdicts, the events) and the session's closing notes (its
      ``ended``, ``lockstep`` and ``policy`` events, also in ``summary["events"]``, for events.log)
 
@@ -77,6 +78,37 @@ class SessionFacts:
     diverged: bool = False
     off_clock_t: float | None = None
     sitl: Mapping[str, Any] = field(default_factory=dict)
+    mission_transfer: Mapping[str, Any] | None = None  # --await-mission: the download, as the controller said it
+
+
+@dataclass(frozen=True)
+class MissionTransfer:
+    """``summary.json["mission_transfer"]`` (``bsst sitl --await-mission``): the controller's download of a
+    ground station's mission from the vehicle: its items, the requests sent (``attempts``: the first of each
+    message and every one again), those sent again (``re_requests``), its wall time (s) and ``result``
+    (``accepted``, or why not)."""
+
+    items: int
+    attempts: int
+    re_requests: int
+    duration_s: float
+    result: str
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"items": self.items, "attempts": self.attempts, "re_requests": self.re_requests,
+                "duration_s": self.duration_s, "result": self.result}
+
+
+def mission_transfer(said: Mapping[str, Any] | None) -> MissionTransfer | None:
+    """The :class:`MissionTransfer` of what the controller said (its ``stats``' or ``mission`` report's
+    ``TransferStats`` fields), or None when it said none or not all of it."""
+    if not isinstance(said, Mapping):
+        return None
+    try:
+        return MissionTransfer(int(said["items"]), int(said["requests"]), int(said["re_requests"]),
+                               float(said["duration_s"]), str(said["result"]))
+    except (KeyError, TypeError, ValueError):
+        return None
 
 
 @dataclass(frozen=True)
@@ -382,6 +414,9 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
     summary["outcome"], summary["ended_by"] = ended_by(summary["outcome"], arrays, flight, facts, joined.k0,
                                                        events, children, controller_id)
     summary["interventions"] = changes = interventions(events, m.rate_hz, controller_id)
+    transfer = mission_transfer(cs.get("mission_transfer") or facts.mission_transfer)
+    if transfer is not None:
+        summary["mission_transfer"] = transfer.as_dict()
     if cs.get("param_at"):  # the scheduled changes (--param-at) as sent, each confirmed by the vehicle's echo or not
         summary["param_at"] = list(cs["param_at"])
     summary["ended_by"] = ended_by_change(summary["ended_by"], summary["outcome"], events, changes)

@@ -63,15 +63,25 @@ from bridge.mavlink.signing import key_from_file
 from bridge.record.runlog import Run, check_trace_steps, run_dir
 from bridge.session.children import ChildError, check_port_free, instance_slot
 from bridge.session.session import Session
-from missions import Mission
+from missions import Mission, Setpoint, Step
 from params import ConfigError
 
 __all__ = ["ChildError", "Session", "instance_slot", "sitl"]
 
 
 
+AWAIT_DURATION_S = 600.0  # s: --await-mission's settings' duration (the ground station's mission has its own)
+
+
+def awaiting() -> Mission:
+    """``bsst sitl --await-mission``'s settings before a ground station's mission: at rest at the home, the
+    defaults; the command line's overrides are laid over it, and the mission flown replaces its trajectory."""
+    return Mission(Step((Setpoint(0.0, 0.0, 0.0, 0.0, 0.0),)), duration_s=AWAIT_DURATION_S, name="await-mission",
+                   source="--await-mission")
+
+
 def sitl(
-    mission: Mission | str | Path,
+    mission: Mission | str | Path | None,
     *,
     out: str | Path | None = None,
     write: bool = False,
@@ -85,6 +95,7 @@ def sitl(
     live: bool = False,
     key: str | Path | None = None,
     overrides: Overrides | None = None,
+    await_mission: bool = False,
     **keywords: Any,
 ) -> Run:
     """Fly a mission as a SITL session (vehicle and controller processes over UDP).
@@ -102,7 +113,18 @@ def sitl(
     ``key`` is a MAVLink 2 signing key file (:func:`bridge.mavlink.signing.key_from_file`): both
     sides sign everything they send and accept only what is signed with it; only the file's path
     is passed on.
+    ``await_mission`` (``mission`` None): no mission file; a ground station uploads one to the vehicle and starts
+    it, the controller downloads it and flies it (docs/missions.md, "From a ground station").
     """
+    if await_mission:
+        if mission is not None:
+            raise ConfigError("--await-mission: give no mission file (a ground station uploads the mission)")
+        mission = awaiting()
+        over = Overrides.of(overrides, **keywords)
+        if over.param_at:
+            raise ConfigError("--param-at with --await-mission: not supported (the mission's times are not known yet)")
+    elif mission is None:
+        raise ConfigError("bsst sitl: give a mission file (or --await-mission)")
     if key is not None:
         key_from_file(key)  # a missing, empty or world-readable key file is bad input, before anything starts
     flight = prepare(mission, overrides, **keywords)
@@ -120,6 +142,9 @@ def sitl(
         gcs_text = None
     if gcs_text is not None:
         parse_address(gcs_text, "udpout", "--gcs")  # bad input fails here, before anything starts
+    elif await_mission:
+        raise ConfigError("--await-mission: the vehicle needs a GCS link for the ground station's mission "
+                          "(an --instance, or --gcs HOST:PORT)")
     keep = out is not None or write
     if keep:  # a refused run directory is named before a busy port (both before anything starts)
         run_dir(out, flight.mission.name, overwrite, create=False)
@@ -129,7 +154,8 @@ def sitl(
     path = run_dir(out, flight.mission.name, overwrite) if keep else Path(tempfile.mkdtemp(prefix="bsst-sitl-"))
     try:
         s = Session(flight, path, realtime=realtime, instance=instance, gcs=gcs_text, speed=speed,
-                    progress=progress, live=live, key=Path(key) if key is not None else None)
+                    progress=progress, live=live, key=Path(key) if key is not None else None,
+                    await_mission=await_mission)
         return s.run(plots=plots and keep, keep=keep)
     finally:
         if not keep:

@@ -25,9 +25,9 @@ from pathlib import Path
 from typing import Any
 
 from bridge.autopilot.simvehicle import Sender, typed_fields
-from bridge.core.flight import Flight, Progress
+from bridge.core.flight import Flight, Progress, prepare
 from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, LINK_PORT
-from bridge.nodes.report import Event, Ready, Report
+from bridge.nodes.report import Event, MissionLoaded, Ready, Report
 from bridge.record.ending import end_block
 from bridge.record.events import RunEvent
 from bridge.record.joiner import TraceJoiner, off_clock_time
@@ -41,8 +41,14 @@ class Session:
     """One SITL session in a run directory; :meth:`run` flies it."""
 
     def __init__(self, flight: Flight, path: Path, *, realtime: bool, instance: int | None, gcs: str | None,
-                 speed: float | None, progress: Progress | None, live: bool, key: Path | None = None) -> None:
+                 speed: float | None, progress: Progress | None, live: bool, key: Path | None = None,
+                 await_mission: bool = False) -> None:
         self.flight = flight
+        # --await-mission: ``flight`` holds the settings only; the mission is the controller's, once a ground
+        # station has started one (its ``mission`` report: :meth:`_mission_loaded`); no trace is joined before
+        self.await_mission = await_mission
+        self.mission_known = not await_mission
+        self.transfer: dict[str, Any] | None = None
         self.key = key  # the signing key file (its path only) both children get as --key
         self.path = path
         self.realtime = realtime
@@ -70,7 +76,7 @@ class Session:
     # -- the whole session ---------------------------------------------------------------------
     def run(self, plots: bool, keep: bool) -> Run:
         m = self.flight.mission
-        record = RunRecord(self.path, m)
+        self.record = record = RunRecord(self.path, m)
         self._event_log = record.events
         self.joiner = TraceJoiner(self.path, self.flight, record.trace, lockstep=not self.realtime)
         self.t_wall0 = time.monotonic()
@@ -90,12 +96,13 @@ class Session:
                 finally:
                     restore()
                     self.joiner.controller_done = True
-                    self.joiner.update()
+                    self._join()
                     self.joiner.close()
             done = self._summary(time.monotonic() - self.t_wall0)
             arrays, summary = done.arrays, done.summary
         finally:
             record.close()  # after the summary: events.log ends with how the run ended and its verdicts
+        m = self.flight.mission  # --await-mission: the ground station's
         if keep:
             title = f"{m.name} ({m.controller}, {self.flight.profile.name}, SITL {summary['clock']})"
             record.finish(arrays, summary, title, plots and not self.aborted)
@@ -112,7 +119,8 @@ class Session:
             off_clock_t=None if self.realtime else off_clock_time(self.path / "vehicle.csv",
                                                                    self.flight.mission.rate_hz),
             sitl={"instance": self.instance, "listen": self.listen, "gcs": self.gcs, "sysid": self.sysid,
-                  "speed": self.speed, "died": self.died, "signed": self.key is not None})
+                  "speed": self.speed, "died": self.died, "signed": self.key is not None},
+            mission_transfer=self.transfer)
         joined = self.joiner.joined()
         out = session_summary(self.flight, facts, joined, self.events, _end(self.vehicle), _end(self.controller),
                               _end(self.relay), self._relay_stats(), (CONTROLLER_SYSID, CONTROLLER_COMPID))
@@ -151,6 +159,8 @@ class Session:
                 "--controller-from", f"127.0.0.1:{back}", "--out", str(self.path), "--overwrite"]
         if self.speed is not None:
             argv += ["--speed", repr(self.speed)]
+        if self.await_mission:
+            argv.append("--await-mission")
         keyarg = ["--key", str(self.key)] if self.key is not None else []
         self.vehicle = Child("vehicle", argv + keyarg, self.path / "vehicle.log")
         to = port
@@ -166,6 +176,8 @@ class Session:
                 "--overwrite"]
         if self.realtime:
             argv.append("--realtime")
+        if self.await_mission:
+            argv.append("--await-mission")
         for c in self.flight.param_changes:
             argv += ["--param-at", f"{c.t_s!r}:{c.name}={c.value!r}"]
         self.controller = Child("controller", argv + keyarg, self.path / "controller.log")
@@ -239,7 +251,7 @@ class Session:
                 if self.interrupted:
                     raise KeyboardInterrupt
                 self._handle(self._read_all(ctl, veh))
-                self.joiner.update()
+                self._join()
                 self._show_progress()
                 if veh.proc.poll() is not None:
                     for report in veh.reports():  # its last words: events it said before it went
@@ -324,7 +336,27 @@ class Session:
             self._status(child, report)
 
     # -- status lines, events, progress -------------------------------------------------------------
+    def _join(self) -> None:
+        """Join the rows both halves have written (none before a ground station's mission is known)."""
+        if self.mission_known:
+            self.joiner.update()
+
+    def _mission_loaded(self, report: MissionLoaded) -> None:
+        """--await-mission: the controller has the ground station's mission and wrote it as flown
+        (``mission.toml``): the session's flight, record and join are that mission's from now."""
+        self.flight = flight = prepare(self.path / "mission.toml")
+        self.record.mission = flight.mission
+        self.joiner = TraceJoiner(self.path, flight, self.record.trace, lockstep=not self.realtime)
+        self.mission_known = True
+        self.transfer = report.transfer
+        t = report.transfer
+        self._note("mission", f"the controller downloaded {report.items} items in {t.get('duration_s', 0):.2f} s "
+                              f"({t.get('re_requests')} requests again): {flight.mission.duration_s:.2f} s to fly",
+                   "session")
+
     def _status(self, child: Child, report: Report) -> None:
+        if isinstance(report, MissionLoaded) and child.name == "controller" and self.await_mission:
+            self._mission_loaded(report)
         if not isinstance(report, Event):
             return
         t, kind = report.t, report.kind
@@ -352,7 +384,7 @@ class Session:
         answered. Events before it is known (arming) are at 0."""
         joiner = getattr(self, "joiner", None)
         if joiner is not None:
-            joiner.update()  # k0 may be in a row not joined yet
+            self._join()  # k0 may be in a row not joined yet
         if joiner is None or joiner.k0 is None:
             return 0.0
         return t_vehicle - joiner.k0 / self.flight.mission.rate_hz

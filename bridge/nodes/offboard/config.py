@@ -75,4 +75,7 @@ class OffboardConfig:
     timesync_s: float = 0.5
     key: bytes | None = field(default=None, repr=False)  # MAVLink 2 signing key (never shown)
     source_port: int = 0  # local UDP port it sends from (0: any free one; bsst sitl pins it for the vehicle)
+    # fly a ground station's mission: wait for its start, download it (bridge.nodes.offboard.mission), fly it
+    # in AUTO.MISSION (the vehicle's mode then, not a ground station's takeover)
+    await_mission: bool = False
 

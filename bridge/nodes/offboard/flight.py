@@ -441,6 +441,14 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
     leaving it), else 1 (failsafe, diverged, aborted, or lockstep left)."""
     path = side_dir(out, ("controller.tlog", "controller.csv"), overwrite) if out is not None else None
     emit = report_printer()
+    transfer = None
+    if cfg.await_mission:  # a ground station's mission: waited for, downloaded, flown (bridge.nodes.offboard.mission)
+        from bridge.nodes.offboard.mission import mission_flight  # lazy: only for --await-mission
+
+        got, transfer = mission_flight(flight, cfg, path, emit)
+        if got is None:
+            return 1
+        flight = got
     node = Offboard(flight, cfg, path, emit)
     on_stop_signals(node.stop)
     outcome = node.run()
@@ -451,7 +459,7 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
                 "down": node.cend.down.stats.summary() if cfg.clock == "lockstep" else None,
                 "rejected": dict(node.rejected), "rejected_from_vehicle": node.rejected.from_peer,
                 "states_refused": node.states_refused, "state_window": node.state_window,
-                "kernel_drops": node.ep.kernel_drops()}))
+                "kernel_drops": node.ep.kernel_drops(), "mission_transfer": transfer}))
     left = bool(node.left_lockstep)
     emit(Done(outcome, left, node.reason or None, node.taken_over if node.ended_taken_over else None))
     if outcome != "completed":

@@ -26,7 +26,16 @@ from bridge.autopilot.params import BY_NAME, ParamChange
 from bridge.core.flight import Flight
 from bridge.core.wire import step_of_usec
 from bridge.mavlink.endpoint import HIL_ACTUATOR_CONTROLS, SET_ACTUATOR_CONTROL_TARGET, Endpoint, Tlog, wait
-from bridge.mavlink.modes import MAIN_OFFBOARD, PARAM_TYPES, main_mode, param_to_wire, shown_name
+from bridge.mavlink.modes import (
+    MAIN_AUTO,
+    MAIN_OFFBOARD,
+    PARAM_TYPES,
+    SUB_MISSION,
+    custom_mode,
+    main_mode,
+    param_to_wire,
+    shown_name,
+)
 from bridge.mavlink.receive import Rejections, odometry_problem
 from bridge.mavlink.signing import Signing
 from bridge.mavlink.telemetry import StatusTextJoiner
@@ -295,7 +304,8 @@ class OffboardLink:
                 # CRITICAL heartbeat may have been lost), or halted by divergence
                 self.failsafe_seen = True
             elif (self.vehicle_armed and m.autopilot == mavlink.MAV_AUTOPILOT_PX4 and not self.taken_over
-                  and not self.ending and main_mode(m.custom_mode) != MAIN_OFFBOARD):
+                  and not self.ending and main_mode(m.custom_mode) != MAIN_OFFBOARD
+                  and not (self.cfg.await_mission and m.custom_mode == custom_mode(MAIN_AUTO, SUB_MISSION))):
                 # armed, not in its failsafe, out of OFFBOARD: a ground station took it (HOLD, LAND, ...)
                 self.taken_over = shown_name(m.custom_mode)
             return

@@ -1,6 +1,7 @@
 """The vehicle's commander: arming, flight modes, commands, and the triggers that end a flight.
 
 In:  COMMAND_LONG / COMMAND_INT (COMPONENT_ARM_DISARM, DO_SET_MODE, NAV_TAKEOFF m AMSL, NAV_LAND,
+     MISSION_START (with ``await_mission``: :mod:`.mission`),
      SET/GET_MESSAGE_INTERVAL us, REQUEST_MESSAGE, REQUEST_AUTOPILOT_CAPABILITIES, GET_HOME_POSITION) and
      SET_MODE from a sender with authority (:class:`~bridge.autopilot.simvehicle.Sender`); the plant's
      divergence and the controller's silence (wall time, s)
@@ -29,11 +30,12 @@ from bridge.autopilot.simvehicle import GROUND_MODES, HOLD, LAND, OFFBOARD, TAKE
 from bridge.core.flight import event_problem
 from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import Endpoint
-from bridge.mavlink.modes import mode_name, requested_custom_mode, requested_mode
+from bridge.mavlink.modes import MISSION, mode_name, requested_custom_mode, requested_mode
 from bridge.mavlink.receive import FORCE_DISARM, arm_disarm_args, interval_arg, message_id_arg
 from bridge.nodes.vehicle.authority import Authority, attribute
 from bridge.nodes.vehicle.clock import Clock, Trigger
 from bridge.nodes.vehicle.injection import injection
+from bridge.nodes.vehicle.mission import MissionManager
 from bridge.nodes.vehicle.streams import HEARTBEAT_S, StatusTexts, StreamTable
 from bridge.record.metrics import plant_blocks
 
@@ -58,6 +60,7 @@ class CommanderPorts:
     # the events a command made said on stdout now, before its COMMAND_ACK, so that whoever the answer reaches
     # (the controller, and what it reports) never speaks of it before the vehicle did
     announce: Callable[[], None] = lambda: None
+    missions: MissionManager | None = None  # a ground station's mission start and AUTO.MISSION (await_mission)
 
 
 class Commander:
@@ -124,6 +127,8 @@ class Commander:
             if args is None:
                 self.ports.reject("bad_number")
                 return mavlink.MAV_RESULT_DENIED, ()
+            if args[0] and by.link == "gcs" and not self.sim.armed and self._mission_selected():
+                return self._start_mission(by, 0.0), ()  # AUTO.MISSION, then arm: the mission starts
             if args[0] and self._through_link(m, by):
                 self.ports.arm_through_link()  # acts when the model delivers it, as offline
                 return mavlink.MAV_RESULT_IN_PROGRESS, ()
@@ -139,6 +144,8 @@ class Commander:
             return self._set_mode_or_refuse(TAKEOFF, "", by=by, takeoff_alt_m=alt), ()
         if cmd == mavlink.MAV_CMD_NAV_LAND:  # lands where it is (PX4 with NaN lat/lon); a position is not flown to
             return self._set_mode_or_refuse(LAND, "", by=by), ()
+        if cmd == mavlink.MAV_CMD_MISSION_START and self.cfg.await_mission:
+            return self._start_mission(by, m.param1), ()
         if cmd == mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
             return mavlink.MAV_RESULT_ACCEPTED, (tm.autopilot_version(self.cfg.sysid),)
         if cmd == mavlink.MAV_CMD_GET_HOME_POSITION:
@@ -206,6 +213,21 @@ class Commander:
         return mavlink.MAV_RESULT_ACCEPTED
 
     # -- flight modes (docs/ground-station.md) -------------------------------------------------------
+    def _mission_selected(self) -> bool:
+        return self.ports.missions is not None and self.ports.missions.selected
+
+    def _start_mission(self, by: Sender, first: float) -> int:
+        """MISSION_START, or a ground station's arm with AUTO.MISSION selected: the held mission is started
+        for the offboard controller to download and fly (it arms the vehicle), or DENIED saying why. PX4 arms
+        at once; here the arm is the controller's, once it has the mission."""
+        if self.clock.halted:
+            return self._refuse("MISSION_START: the plant diverged")
+        if self.sim.armed:
+            return self._refuse("MISSION_START: only on the ground, disarmed (the controller flies it from its start)")
+        missions = self.ports.missions
+        why = "MISSION_START: no mission manager" if missions is None else missions.start(by, first)
+        return self._refuse(why) if why else mavlink.MAV_RESULT_ACCEPTED
+
     def _takeoff_altitude(self, param7: float) -> float | str:
         """NAV_TAKEOFF's altitude above home (m) from its param7 (m AMSL, as PX4 reads it; NaN:
         MIS_TAKEOFF_ALT), or why it cannot be flown. MIS_TAKEOFF_ALT is also the least it climbs to: a
@@ -241,6 +263,10 @@ class Commander:
             return self._refuse(why)
         if self.clock.halted:
             return self._refuse(f"mode {mode_name(mode)}: the plant diverged")
+        if mode == MISSION:
+            missions = self.ports.missions
+            refused = "mode MISSION: not flown here" if missions is None else missions.select(self.sim.armed)
+            return self._refuse(refused) if refused else mavlink.MAV_RESULT_ACCEPTED
         sim = self.sim
         if (mode == OFFBOARD and sim.armed and sim.mode != OFFBOARD
                 and time.monotonic() - self.ports.target_wall() > OFFBOARD_STREAM_S):

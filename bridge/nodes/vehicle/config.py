@@ -34,3 +34,6 @@ class VehicleConfig:
     # the only address the controller's ids are heard from on the controller link (bsst sitl pins the
     # controller's source port); None: learned from its first message, as docs/design.md says
     controller_from: tuple[str, int] | None = None
+    # a ground station's mission is flown (bsst sitl --await-mission): MISSION_START and AUTO.MISSION are taken,
+    # and the offboard controller, which downloads the mission, flies it (docs/missions.md, "From a ground station")
+    await_mission: bool = False

@@ -8,8 +8,14 @@ In:  MISSION_COUNT, MISSION_ITEM_INT / MISSION_ITEM, MISSION_REQUEST_LIST, MISSI
 Out: MISSION_REQUEST_INT / MISSION_REQUEST, MISSION_COUNT, MISSION_ITEM_INT / MISSION_ITEM, MISSION_ACK
      (MAV_MISSION_RESULT), MISSION_CURRENT, MISSION_ITEM_REACHED, STATUSTEXT (PX4's texts); the accepted
      mission as typed items (:class:`Mission` of :class:`~bridge.mavlink.missionitems.MissionItem`); a
-     ``mission`` event naming its sender for each accepted upload, clear and set-current; ``refused ...`` and
-     ``mission ...`` status lines
+     ``mission`` event naming its sender for each accepted upload, clear, set-current and start; ``refused ...``
+     and ``mission ...`` status lines
+
+With ``await_mission`` (``bsst sitl --await-mission``) a ground station starts the held mission
+(:meth:`MissionManager.start`: MAV_CMD_MISSION_START, or AUTO.MISSION selected and then an arm): the vehicle
+shows AUTO.MISSION, the offboard controller downloads the mission over its link, arms the vehicle and flies it;
+each control step :meth:`MissionManager.flight_step` watches the items (:mod:`.missionwatch`): MISSION_ITEM_REACHED
+as each is reached, MISSION_CURRENT following.
 
 PX4's state machine: IDLE, GETLIST (an upload: the vehicle requests item after item), SENDLIST (a
 download: the ground station requests them). One transfer at a time, with one partner (sysid, compid,
@@ -24,6 +30,7 @@ fence and rally are answered ``MAV_MISSION_UNSUPPORTED``. The items' checks: :mo
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -35,9 +42,11 @@ from pymavlink.dialects.v20 import common as mavlink
 from bridge.autopilot.simvehicle import Sender, SimVehicle
 from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import Endpoint
-from bridge.mavlink.missionitems import ItemRefused, MissionItem, item_message, parse_item
+from bridge.mavlink.missionitems import ItemRefused, MissionItem, TransferStats, item_message, parse_item
 from bridge.nodes.vehicle.authority import Authority, attribute
+from bridge.nodes.vehicle.missionwatch import Goal, ItemWatch, goals_of
 from bridge.nodes.vehicle.streams import StatusTexts
+from params import ConfigError
 
 RETRY_S = 0.25  # PX4's MAVLINK_MISSION_RETRY_TIMEOUT_DEFAULT: an item not here this long is requested again
 PROTOCOL_TIMEOUT_S = 5.0  # PX4's MAVLINK_MISSION_PROTOCOL_TIMEOUT_DEFAULT: a silent transfer ends
@@ -75,17 +84,6 @@ class Partner:
     ep: Endpoint
 
 
-@dataclass
-class TransferStats:
-    """The last upload's figures: items, requests sent (first and again), wall time (s), its result."""
-
-    items: int = 0
-    requests: int = 0
-    re_requests: int = 0
-    duration_s: float = 0.0
-    result: str = ""
-
-
 class MissionManager:
     """Answers the mission protocol for one vehicle and holds its mission (:attr:`mission`)."""
 
@@ -111,6 +109,85 @@ class MissionManager:
         self.last_reached = -1
         self._reached_left = 0
         self._reached_at = 0.0
+        self.selected = False  # AUTO.MISSION selected (or started) by a ground station, not flown yet
+        self.start_requested = False  # started: the controller is to download the mission and fly it
+        self.watch: ItemWatch | None = None  # the mission in flight (None: none)
+        self.completed = False  # the last started mission's items were all reached
+        self._goals: tuple[Goal, ...] = ()  # the started mission's items, where and how each is reached
+        self._flying: tuple[MissionItem, ...] = ()  # the items of the mission in flight
+        self.home = (authority.cfg.home.lat, authority.cfg.home.lon, authority.cfg.home.alt)
+
+    # -- a ground station's start (await_mission) --------------------------------------------------------
+    def select(self, armed: bool) -> str | None:
+        """AUTO.MISSION asked for (DO_SET_MODE, SET_MODE): selected, disarmed, with a mission (None), or why
+        not. Armed and flying the mission already: nothing to do."""
+        if not self.authority.cfg.await_mission:
+            return "mode MISSION: not flown here; OFFBOARD, HOLD, LAND, TAKEOFF are (and MISSION with --await-mission)"
+        if armed:
+            return None if self.watch is not None else "mode MISSION: only selected on the ground, disarmed"
+        why = self._startable("mode MISSION")
+        if why is None:
+            self.selected = True
+        return why
+
+    def start(self, by: Sender, first: float) -> str | None:
+        """A ground station starts the mission (MAV_CMD_MISSION_START with its first item ``first``, or an arm
+        with AUTO.MISSION selected): a ``mission`` event, the vehicle shows AUTO.MISSION, and the controller is
+        to fly it from item 0 (None), or why not (the mission is checked as the controller will fly it)."""
+        if not (math.isnan(first) or first in (0.0, -1.0)):
+            return f"MISSION_START: only from item 0 (the whole mission), got first item {first:g}"
+        why = self._startable("MISSION_START")
+        if why is not None:
+            return why
+        try:
+            goals = goals_of(self.mission.items, self.home)
+        except ConfigError as exc:
+            return f"MISSION_START: the mission cannot be flown: {exc}"[:200]
+        self.watch = None
+        self._goals = goals
+        self.selected = self.start_requested = True
+        n0 = len(self.sim.events)
+        self.sim.event("mission", f"start requested: {len(self.mission.items)} items, for the controller to fly")
+        attribute(self.sim.events, n0, by)
+        return None
+
+    def _startable(self, what: str) -> str | None:
+        if not self.mission.items:
+            return f"{what}: no mission uploaded"
+        if self.state is not State.IDLE:
+            return f"{what}: a mission transfer is on"
+        return None
+
+    def shows_mission(self, armed: bool, offboard: bool) -> bool:
+        """Whether the vehicle shows AUTO.MISSION: selected or started and disarmed, or flying the mission."""
+        return (self.selected and not armed) or (self.watch is not None and armed and offboard)
+
+    def flight_armed(self) -> None:
+        """The controller armed a new flight: the started mission is flown from now (item 0 current)."""
+        if not self.start_requested:
+            return
+        self.start_requested = self.selected = self.completed = False
+        self.watch = ItemWatch(self._goals)
+        self._flying = self.mission.items
+        self.set_current(self.watch.current)
+
+    def flight_step(self, t: float, X: tuple[float, ...], armed: bool) -> None:
+        """After a control step of the mission's flight (``t`` s, the plant's state ``X``): each item reached
+        is said (MISSION_ITEM_REACHED) and the next made current; disarmed, the mission's flight is over."""
+        watch = self.watch
+        if watch is None:
+            return
+        if self.mission.items is not self._flying:  # a ground station replaced or cleared it meanwhile
+            self.watch = None
+            self.sim.event("mission", "the mission flown was replaced by an upload: its items are no more watched "
+                                      "(the controller flies the one it downloaded)")
+            return
+        for seq in watch.step(t, X):
+            self.reached(seq)
+            self.set_current(watch.current)
+            self.completed = watch.done
+        if not armed:
+            self.watch = None
 
     # -- the flight's side ----------------------------------------------------------------------------
     def reached(self, seq: int) -> None:
@@ -131,7 +208,14 @@ class MissionManager:
 
     def current_message(self) -> list[Any]:
         """MISSION_CURRENT ([] without a mission: PX4 does not broadcast one then)."""
-        return tm.mission_current(self.mission.current, len(self.mission.items))
+        return tm.mission_current(self.mission.current, len(self.mission.items), self.mission_state)
+
+    @property
+    def mission_state(self) -> int:
+        """MISSION_STATE: ACTIVE while a started mission flies, COMPLETE once its last item was reached."""
+        if self.watch is not None and not self.watch.done:
+            return mavlink.MISSION_STATE_ACTIVE
+        return mavlink.MISSION_STATE_COMPLETE if self.completed else mavlink.MISSION_STATE_NOT_STARTED
 
     # -- the wall clock ---------------------------------------------------------------------------------
     def tick(self, now: float) -> None:

@@ -22,12 +22,13 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from bridge.autopilot.simvehicle import LAND
+from bridge.autopilot.simvehicle import LAND, OFFBOARD
 from bridge.core.flight import Flight
 from bridge.core.wire import command_from_wire
 from bridge.link.ends import VehicleEnd
 from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import Endpoint, Tlog, wait
+from bridge.mavlink.modes import MISSION
 from bridge.mavlink.receive import Rejections
 from bridge.mavlink.signing import Signing
 from bridge.nodes.process import on_stop_signals, report_printer
@@ -114,7 +115,8 @@ class Vehicle:
         ports = CommanderPorts(step=lambda: self.k, state_out=self._send_odometry, new_flight=self._new_flight,
                                arm_through_link=lambda: self.vend.receive_arm(self.t),
                                target_wall=lambda: self.targets.wall, message=self._message,
-                               reject=self._reject, refused=self._refused, announce=self.announcer.report_events)
+                               reject=self._reject, refused=self._refused, announce=self.announcer.report_events,
+                               missions=self.missions)
         self.commander = Commander(self.sim, self.clock, self.authority, self._statustext,
                                    {"controller": self.ctl_streams, "gcs": self.streams}, self.substeps, ports)
         self.receiver = Receiver(self.link, self.authority, self._reject, self.targets, self.commander, self.params,
@@ -359,6 +361,8 @@ class Vehicle:
         if len(self.sim.events) > self.announcer.sent:
             self.announcer.drain()
         self.commander.flight_over()
+        if self.missions.watch is not None:  # a ground station's mission in flight: its items reached
+            self.missions.flight_step(self.t, self.plant.state, self.sim.armed)
         if self.commander.diverged():
             self.announcer.drain()
             return False
@@ -385,9 +389,11 @@ class Vehicle:
         """The vehicle now, as its telemetry reads it."""
         sim, plant, cfg = self.sim, self.plant, self.cfg
         mission = self.missions.mission
-        return VehicleView(plant.state, self.t, sim.mode, sim.onboard.target, sim.armed, self.clock.halted,
+        mode = MISSION if self.missions.shows_mission(sim.armed, sim.mode == OFFBOARD) else sim.mode
+        return VehicleView(plant.state, self.t, mode, sim.onboard.target, sim.armed, self.clock.halted,
                            plant.on_ground, plant.omega, self.flight.profile.omega_max, self.load, sim.sensors,
-                           cfg.home, cfg.sysid, (mission.current, len(mission.items)), plant.battery)
+                           cfg.home, cfg.sysid, (mission.current, len(mission.items), self.missions.mission_state),
+                           plant.battery)
 
     def _heartbeat(self) -> Any:
         return heartbeat(self._view())
@@ -444,6 +450,8 @@ class Vehicle:
             self.link.forget_peer()
         self.link.trial = None  # a flight on: its controller is answered freely (its arm's first state included)
         self.targets.applied = None
+        if not from_gcs:
+            self.missions.flight_armed()  # a ground station's started mission: flown from now
 
     def _clock_ns(self) -> int:
         """The vehicle's clock for TIMESYNC: simulation time (ns), as PX4 uses its own clock in

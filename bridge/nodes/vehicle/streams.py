@@ -54,7 +54,7 @@ class VehicleView:
     sensors: SensorSuite | None  # None: truth
     home: tm.Home
     sysid: int
-    mission: tuple[int, int] = (0, 0)  # the mission's current item and its number of items
+    mission: tuple[int, int, int] = (0, 0, 2)  # the mission's current item, its items, its MISSION_STATE
     battery: Battery | None = None  # the plant's flight battery ([effects] battery), None: it flies none
 
 

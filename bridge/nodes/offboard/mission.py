@@ -1,0 +1,248 @@
+"""The offboard controller's wait for a ground station's mission: ``bsst controller --await-mission``.
+
+In:  the vehicle's messages before the flight: HEARTBEAT (``custom_mode`` AUTO.MISSION, disarmed: a ground
+     station started the held mission), MISSION_COUNT, MISSION_ITEM_INT, MISSION_ACK, HOME_POSITION (degE7,
+     mm AMSL); the settings' :class:`~bridge.core.flight.Flight` (profile, law, rates, ``[link]``, ...)
+Out: MISSION_REQUEST_LIST, MISSION_REQUEST_INT (again after
+     :data:`~bridge.nodes.vehicle.mission.RETRY_S` unanswered), the final MISSION_ACK, GET_HOME_POSITION; the
+     mission's :class:`~bridge.core.flight.Flight` (the settings flying the plan's smooth trajectory); in the
+     controller's directory ``mission.plan`` (the items as a QGroundControl plan) and ``mission.toml`` (the
+     mission as flown, resolved: ``kind = "smooth"``); the download's
+     :class:`~bridge.mavlink.missionitems.TransferStats` (items, requests, requests again, wall time s, result)
+
+The download is a ground station's (the vehicle is PX4's server, :mod:`bridge.nodes.vehicle.mission`: it sends
+nothing unasked): MISSION_REQUEST_LIST until MISSION_COUNT comes, then MISSION_REQUEST_INT for each item in
+turn, each sent again after PX4's retry time while its item does not come; a transfer the vehicle is silent in
+for PX4's protocol timeout fails. Each item is checked by the vehicle's own parser
+(:func:`~bridge.mavlink.missionitems.parse_item`) and the mission by the plan files' rules
+(:func:`~bridge.mavlink.missionitems.plan_of`), about the vehicle's home (its HOME_POSITION).
+
+The link model: in lockstep the mission's ``[link]`` acts on the transfer here, both directions (up: what the
+controller sends, down: what the vehicle sends), on the transfer's own clock (s of wall time from its first
+request); in real time an impaired link is ``bsst relay``'s, on the wire. Either way the flight's own models
+start fresh with the flight, so the flight is the same whatever the transfer met.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from bridge.core.flight import Flight, prepare
+from bridge.link.model import LinkImpairment
+from bridge.mavlink.missionitems import ItemRefused, MissionItem, TransferStats, parse_item, plan_of
+from bridge.mavlink.modes import MAIN_AUTO, SUB_MISSION, custom_mode
+from bridge.nodes.offboard.config import OffboardConfig
+from bridge.nodes.offboard.link import OffboardLink
+from bridge.nodes.process import on_stop_signals
+from bridge.nodes.report import Done, MissionLoaded, Ready, Report, Stats
+from bridge.nodes.vehicle.mission import PROTOCOL_TIMEOUT_S, RETRY_S
+from bridge.record.runlog import write_text_atomic
+from missions.mission import with_plan
+from missions.planfiles import plan_text
+from params import ConfigError, dump_toml
+
+MISSION_MODE = custom_mode(MAIN_AUTO, SUB_MISSION)
+MISSION = mavlink.MAV_MISSION_TYPE_MISSION
+TRANSFER_BYTES = 60  # a mission message's MAVLink 2 frame, about (the link model's bandwidth only)
+_WANTED = ("MISSION_COUNT", "MISSION_ITEM_INT", "MISSION_ACK")
+
+
+@dataclass(frozen=True)
+class Fetched:
+    """What the wait gave: the mission's flight (None: none, ``why`` says why) and the download's figures."""
+
+    flight: Flight | None
+    transfer: TransferStats
+    why: str = ""
+
+
+class MissionLink(OffboardLink):
+    """The controller's link before the flight: it waits for the start, downloads the mission, asks the home."""
+
+    def __init__(self, flight: Flight, cfg: OffboardConfig, status: Callable[[Report], None]) -> None:
+        super().__init__(flight, cfg, None, status)
+        self.vehicle_mode: int | None = None  # the vehicle's HEARTBEAT custom_mode
+        self.home: tuple[float, float, float] | None = None
+        self._inbox: list[Any] = []  # mission messages from the vehicle, not through the down model yet
+        model = cfg.clock == "lockstep" and flight.link.impaired
+        self._models: tuple[LinkImpairment, LinkImpairment] | None = flight.link.make() if model else None
+        self._t0 = 0.0
+
+    def stop(self) -> None:
+        self.stopping = True
+
+    def _on(self, m: Any) -> None:
+        src = m.get_srcSystem()
+        kind = m._type
+        if kind == "HEARTBEAT" and (self.vsys is None or src == self.vsys) and m.type != mavlink.MAV_TYPE_GCS \
+                and m.autopilot != mavlink.MAV_AUTOPILOT_INVALID:
+            self.vehicle_mode = m.custom_mode
+        elif src == self.vsys and kind in _WANTED and m.target_system == self.cfg.sysid:
+            self._inbox.append(m)
+        elif src == self.vsys and kind == "HOME_POSITION":
+            self.home = (m.latitude / 1e7, m.longitude / 1e7, m.altitude / 1000.0)
+        super()._on(m)
+
+    # -- the transfer, through the link model in lockstep ---------------------------------------------
+    def _t(self) -> float:
+        return time.monotonic() - self._t0
+
+    def _up(self, msg: Any) -> None:
+        if self._models is None:
+            self.ep.send(msg)
+        else:
+            self._models[0].send(self._t(), TRANSFER_BYTES, msg)
+
+    def _pump(self) -> list[Any]:
+        """What reached the controller: the vehicle's mission messages (through the down model in lockstep);
+        what the up model delivers by now goes out."""
+        got, self._inbox = self._inbox, []
+        if self._models is None:
+            return got
+        up, down = self._models
+        t = self._t()
+        for d in up.deliver(t):
+            self.ep.send(d.payload)
+        for m in got:
+            down.send(t, TRANSFER_BYTES, m)
+        return [d.payload for d in down.deliver(t)]
+
+    def _flush(self) -> None:
+        """The final MISSION_ACK: what the up model has not lost goes out now (nothing waits for it)."""
+        if self._models is not None:
+            for d in self._models[0].drain():
+                self.ep.send(d.payload)
+
+    def _next_due(self) -> float:
+        if self._models is None:
+            return float("inf")
+        due = [d for d in (self._models[0].next_due(), self._models[1].next_due()) if d is not None]
+        return self._t0 + min(due) if due else float("inf")
+
+    def download(self) -> tuple[list[MissionItem], TransferStats]:
+        """The vehicle's mission, item by item (see the module docstring), and the transfer's figures."""
+        st = TransferStats()
+        self._t0 = start = time.monotonic()
+        target = (self.vsys or 0, self.vcomp)
+        items: list[MissionItem] = []
+        count: int | None = None
+
+        def ask() -> Any:
+            st.requests += 1
+            if count is None:
+                return mavlink.MAVLink_mission_request_list_message(*target, MISSION)
+            return mavlink.MAVLink_mission_request_int_message(*target, len(items), MISSION)
+
+        self._up(ask())
+        sent = heard = time.monotonic()
+        while not self.stopping:
+            self._serve(min(sent + RETRY_S, self._next_due(), self._next_house))
+            now = time.monotonic()
+            for m in self._pump():
+                heard = now
+                if m._type == "MISSION_ACK":
+                    st.result = f"the vehicle ended it: MAV_MISSION_RESULT {m.type}"
+                elif count is None and m._type == "MISSION_COUNT" and m.mission_type == MISSION:
+                    count = st.items = m.count
+                    st.result = "" if count else "the vehicle holds no mission"
+                elif count is not None and m._type == "MISSION_ITEM_INT" and m.seq == len(items):
+                    try:
+                        items.append(parse_item(m, True))
+                    except ItemRefused as exc:
+                        st.result = f"item {m.seq} refused: {exc}"
+                else:
+                    continue
+                if st.result:
+                    break
+                if len(items) == count:
+                    self._up(mavlink.MAVLink_mission_ack_message(*target, mavlink.MAV_MISSION_ACCEPTED, MISSION))
+                    self._flush()
+                    st.result = "accepted"
+                    break
+                self._up(ask())
+                sent = now
+            if st.result:
+                break
+            if now - heard > PROTOCOL_TIMEOUT_S:
+                st.result = f"timeout: the vehicle silent for {PROTOCOL_TIMEOUT_S:g} s"
+                break
+            if now - sent >= RETRY_S:
+                st.re_requests += 1
+                self._up(ask())
+                sent = now
+        st.duration_s = round(time.monotonic() - start, 6)
+        if self.stopping and not st.result:
+            st.result = "stopped"
+        return items, st
+
+    def await_start(self) -> bool:
+        """Serve the link until the vehicle shows AUTO.MISSION, disarmed (True), or the controller is stopped."""
+        while not self.stopping:
+            if self._heard and self.vehicle_mode == MISSION_MODE and not self.vehicle_armed:
+                return True
+            self._serve(self._next_house)
+        return False
+
+    def ask_home(self) -> bool:
+        """The vehicle's home (GET_HOME_POSITION, answered with HOME_POSITION)."""
+        self._command(mavlink.MAV_CMD_GET_HOME_POSITION, 0.0, 0.0)
+        return self.home is not None
+
+
+def fetch_mission(flight: Flight, cfg: OffboardConfig, out: Path | None, status: Callable[[Report], None]) -> Fetched:
+    """Wait for a ground station's start, download the mission, build its flight on ``flight``'s settings and
+    write it as flown into ``out`` (``mission.plan``, ``mission.toml``); each step an event."""
+    link = MissionLink(flight, cfg, status)
+    on_stop_signals(link.stop)  # the flight's handler replaces this one after
+    # ready now (the session waits for it, not for a ground station): the flight says ready again when it starts
+    status(Ready("controller", vehicle=cfg.vehicle.hostport, local=f"{link.ep.local[0]}:{link.ep.local[1]}",
+                 clock=cfg.clock))
+    empty = TransferStats()
+    try:
+        link.event("mission", "waiting for a ground station to upload a mission and start it")
+        if not link.await_start():
+            return Fetched(None, empty, "stopped before a mission was started")
+        items, st = link.download()
+        if st.result != "accepted":
+            return Fetched(None, st, f"mission download failed: {st.result}")
+        if not link.ask_home():
+            return Fetched(None, st, "the vehicle did not say its home (GET_HOME_POSITION)")
+        assert link.home is not None
+        try:
+            plan = plan_of(tuple(items), link.home, "the mission from the vehicle")
+            mission = with_plan(flight.mission, plan, flight.mission.name)
+            new = prepare(mission)
+        except ConfigError as exc:
+            return Fetched(None, st, f"the mission cannot be flown: {exc}")
+        if out is not None:
+            write_text_atomic(out / "mission.plan", plan_text(plan))
+            write_text_atomic(out / "mission.toml", dump_toml(new.mission.to_dict()))
+        link.event("mission", f"downloaded {st.items} items in {st.duration_s:.2f} s ({st.requests} requests, "
+                              f"{st.re_requests} again): {new.mission.duration_s:.2f} s to fly")
+        return Fetched(new, st)
+    finally:
+        link.ep.close()
+
+
+
+def mission_flight(flight: Flight, cfg: OffboardConfig, out: Path | None,
+                   emit: Callable[[Report], None]) -> tuple[Flight | None, dict[str, Any]]:
+    """``bsst controller --await-mission`` before its flight: the mission's flight (its ``mission`` report
+    said) and the download's figures; None when there is none to fly (its ``stats`` and ``done`` said, why on
+    stderr: the controller then exits 1)."""
+    got = fetch_mission(flight, cfg, out, emit)
+    transfer = got.transfer.as_dict()
+    if got.flight is None:
+        emit(Stats({"mission_transfer": transfer}))
+        emit(Done("aborted", False, got.why))
+        sys.stderr.write(f"bsst controller: aborted: {got.why}\n")
+        return None, transfer
+    emit(MissionLoaded(got.flight.mission.name, got.transfer.items, transfer))
+    return got.flight, transfer

@@ -1,0 +1,385 @@
+"""Covers bridge.nodes.offboard.mission, bridge.nodes.vehicle.missionwatch and bridge.session: --await-mission.
+
+Also the start of a ground station's mission in bridge.nodes.vehicle.mission and .commander,
+missions.planfiles.plan_text and summary.json's ``mission_transfer`` (bridge.record.summary). With real parts:
+MAVSDK (MissionRaw: import_qgroundcontrol_mission of examples/box.plan, upload, start_mission, progress;
+Action.arm) against ``bsst sitl --await-mission`` in lockstep, whose flight must be the file's (``bsst sitl
+examples/box.plan`` is offline's to the bit: tests/test_plan.py; here against offline, ≤ 1e-4 m); a pymavlink
+ground station that uploads a small plan and sends MAV_CMD_MISSION_START to a ``--realtime`` one and to a lossy
+lockstep one; a vehicle in this process answering MISSION_START and AUTO.MISSION. Every wait has a deadline.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import os
+import socket
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import common as mavlink
+
+from bridge import simulate
+from bridge.core.flight import prepare
+from bridge.mavlink.endpoint import GCS_PORT, parse_address
+from bridge.mavlink.missionitems import MissionItem
+from bridge.nodes.vehicle import Vehicle, VehicleConfig
+from bridge.nodes.vehicle.missionwatch import ItemWatch, goals_of
+from bridge.record.summary import mission_transfer
+from bridge.session import instance_slot
+from missions import Mission, Sine
+from missions.planfiles import plan_text, read_plan_text
+from tests.sitlkit import ENV, ROOT, Proc
+from tests.waiting import wait_for
+
+pytestmark = pytest.mark.process  # starts processes and opens sockets
+
+M = mavlink
+BOX_PLAN = ROOT / "examples" / "box.plan"
+
+MAVSDK_SCRIPT = r"""
+import json, sys, time
+from mavsdk import Mavsdk, Configuration, ComponentType
+from mavsdk.plugins.mission_raw import MissionRaw
+from mavsdk.plugins.action import Action
+
+sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+sdk.add_any_connection(sys.argv[1])
+system = sdk.first_autopilot(30.0)
+out = {"found": system is not None}
+mr = MissionRaw(system)
+items = mr.import_qgroundcontrol_mission(sys.argv[2]).mission_items
+out["items"] = len(items)
+out["upload"] = mr.upload_mission(items).name
+progress = []
+mr.subscribe_mission_progress(lambda p, _ud: progress.append([p.current, p.total]))
+out["start"] = mr.start_mission().name  # PX4: AUTO.MISSION (DO_SET_MODE); then arm
+out["arm"] = Action(system).arm().name
+deadline = time.monotonic() + float(sys.argv[3])
+while time.monotonic() < deadline and not mr.is_mission_finished() and [len(items)] * 2 not in progress:
+    time.sleep(0.1)
+time.sleep(1.5)  # MISSION_CURRENT's next 1 Hz tick says the mission complete
+out["finished"] = mr.is_mission_finished()
+out["progress"] = progress
+print("RESULT " + json.dumps(out), flush=True)
+sdk.destroy()
+"""
+
+
+def _tlog(path: Path, sysid: int, kinds: list[str]) -> list[Any]:
+    log = mavutil.mavlink_connection(str(path), dialect="common")
+    out = []
+    while (m := log.recv_match(type=kinds)) is not None:
+        if m.get_srcSystem() == sysid:
+            out.append(m)
+    return out
+
+
+def _trace(path: Path) -> list[tuple[float, float, float, float]]:
+    rows = path.read_text().splitlines()
+    head = rows[0].split(",")
+    ix = [head.index(c) for c in ("t", "x", "y", "z")]
+    return [tuple(float(r.split(",")[i]) for i in ix) for r in rows[1:]]  # type: ignore[misc]
+
+
+def test_mavsdk_flies_the_box_plan_through_await_mission_as_the_file_flies(tmp_path):
+    """MAVSDK imports examples/box.plan, uploads it, starts it (AUTO.MISSION, arm): the controller downloads the
+    8 items over its link and flies them; the flight is the file's (offline, to ≤ 1e-4 m, as many rows), landed
+    and disarmed; MISSION_ITEM_REACHED says every item in order on the GCS link, MISSION_CURRENT follows to the
+    last, the vehicle shows AUTO.MISSION while it flies; the run keeps mission.plan (the same items) and the
+    resolved mission.toml; summary.json's mission_transfer says the download."""
+    out = tmp_path / "run"
+    with instance_slot() as n:
+        sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--out", str(out), "--no-plots")
+        try:
+            r = subprocess.run([sys.executable, "-c", MAVSDK_SCRIPT, f"udpin://127.0.0.1:{GCS_PORT + n}",
+                                str(BOX_PLAN), "240"], capture_output=True, text=True, timeout=300, env=ENV)
+            lines = [ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")]
+            assert lines, f"MAVSDK script failed:\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
+            gs = json.loads(lines[0][len("RESULT "):])
+            assert sitl.p.wait(timeout=120) == 0, "\n".join(sitl.lines[-30:])
+        finally:
+            sitl.stop()
+    assert gs["upload"] == gs["start"] == gs["arm"] == "SUCCESS" and gs["items"] == 8, gs
+    assert gs["finished"] and gs["progress"][-1] == [8, 8], gs  # MAVSDK: every item reached, mission complete
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["outcome"] == "completed" and summary["end"]["disarmed"], summary["ended_by"]
+    t = summary["mission_transfer"]
+    assert (t["items"], t["result"]) == (8, "accepted") and t["attempts"] == 9 + t["re_requests"], t
+    offline = simulate(BOX_PLAN, plots=False)
+    flown = _trace(out / "trace.csv")
+    assert len(flown) == len(offline.trace["t"])
+    worst = max(math.dist(row[1:], (offline.trace["x"][i], offline.trace["y"][i], offline.trace["z"][i]))
+                for i, row in enumerate(flown))
+    assert worst <= 1e-4, worst
+    kept = read_plan_text((out / "mission.plan").read_text(), "kept")
+    want = read_plan_text(BOX_PLAN.read_text(), "box")
+    assert [(i.command, i.frame) for i in kept.items] == [(i.command, i.frame) for i in want.items]
+    assert all(abs(a.lat - b.lat) < 1e-9 and abs(a.lon - b.lon) < 1e-9 and a.alt == b.alt
+               for a, b in zip(kept.items, want.items, strict=True))
+    assert 'kind = "smooth"' in (out / "mission.toml").read_text()
+    sysid = n + 1
+    reached = [m.seq for m in _tlog(out / "vehicle.tlog", sysid, ["MISSION_ITEM_REACHED"])]
+    assert list(dict.fromkeys(reached)) == list(range(8)), reached  # each in order (then PX4's repeats)
+    current = [m.seq for m in _tlog(out / "vehicle.tlog", sysid, ["MISSION_CURRENT"])]
+    assert current[-1] == 7 and current == sorted(current), current
+    modes = {(m.custom_mode, bool(m.base_mode & 128)) for m in _tlog(out / "vehicle.tlog", sysid, ["HEARTBEAT"])}
+    assert ((4 << 16) | (4 << 24), True) in modes  # AUTO.MISSION, armed
+
+
+SMALL_PLAN = """QGC WPL 110
+0\t1\t0\t16\t0\t0\t0\t0\t47.397742\t8.545594\t488.0\t1
+1\t0\t3\t22\t0\t0\t0\tnan\t47.397742\t8.545594\t3\t1
+2\t0\t3\t16\t0\t0.5\t0\tnan\t47.3977600\t8.5456000\t3\t1
+3\t0\t3\t21\t0\t0\t0\tnan\t47.3977600\t8.5456000\t0\t1
+"""
+
+
+def _upload(gcs: Any, target: tuple[int, int], items: list[Any]) -> None:
+    gcs.mav.mission_count_send(*target, len(items), 0)
+    while True:
+        m = gcs.recv_match(type=["MISSION_REQUEST_INT", "MISSION_ACK"], blocking=True, timeout=5)
+        assert m is not None, "the vehicle stopped asking"
+        if m.get_type() == "MISSION_ACK":
+            assert m.type == M.MAV_MISSION_ACCEPTED
+            return
+        item = items[m.seq]
+        item.target_system, item.target_component = target
+        gcs.mav.send(item)
+
+
+@pytest.mark.parametrize("link", [[], ["--loss", "10"]], ids=["perfect", "relay-loss-10"])
+def test_mission_start_flies_a_small_plan_in_real_time(tmp_path, link):
+    """A pymavlink ground station uploads a takeoff, a waypoint and a landing to ``bsst sitl --await-mission
+    --realtime`` and sends MAV_CMD_MISSION_START (ACCEPTED): the controller downloads the three items and flies
+    them on the wall clock; each is reached (MISSION_ITEM_REACHED), the flight completes landed and disarmed.
+    With ``--loss 10`` the download crosses ``bsst relay`` (the session's, on the wire) and still arrives."""
+    plan = read_plan_text(SMALL_PLAN, "small")
+    items = [M.MAVLink_mission_item_int_message(0, 0, k, it.frame, it.command, 0, 1, it.p1, it.p2, it.p3, it.p4,
+                                                round(it.lat * 1e7), round(it.lon * 1e7), it.alt, 0)
+             for k, it in enumerate(plan.items)]
+    out = tmp_path / "rt"
+    with instance_slot() as n:
+        os.environ["MAVLINK20"] = "1"
+        gcs = mavutil.mavlink_connection(f"udpin:127.0.0.1:{GCS_PORT + n}", source_system=255, source_component=190,
+                                         dialect="common")
+        sitl = Proc.bsst("sitl", "--await-mission", "--realtime", "--instance", str(n), "--out", str(out),
+                         "--no-plots", *link)
+        try:
+            hb = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=30)
+            assert hb is not None
+            target = (hb.get_srcSystem(), hb.get_srcComponent())
+            _upload(gcs, target, items)
+            gcs.mav.command_long_send(*target, M.MAV_CMD_MISSION_START, 0, 0, 0, 0, 0, 0, 0, 0)
+            ack = gcs.recv_match(type="COMMAND_ACK", blocking=True, timeout=5,
+                                 condition=f"COMMAND_ACK.command=={M.MAV_CMD_MISSION_START}")
+            assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
+            reached: list[int] = []
+
+            def all_reached() -> bool:
+                m = gcs.recv_match(type="MISSION_ITEM_REACHED", blocking=True, timeout=0.5)
+                if m is not None and m.seq not in reached:
+                    reached.append(m.seq)
+                return len(reached) == 3
+
+            wait_for(all_reached, 90.0, "MISSION_ITEM_REACHED for the three items", poll_s=0.0)
+            assert sitl.p.wait(timeout=60) == 0, "\n".join(sitl.lines[-30:])
+        finally:
+            gcs.close()
+            sitl.stop()
+    assert reached == [0, 1, 2]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["outcome"] == "completed" and summary["clock"] == "realtime"
+    assert summary["mission_transfer"]["items"] == 3 and summary["end"]["disarmed"]
+    assert (out / "relay.json").exists() == bool(link)
+
+
+def test_the_link_model_acts_on_the_transfer_in_lockstep_and_the_flight_is_offlines(tmp_path):
+    """``bsst sitl --await-mission --loss 30`` in lockstep, a pymavlink ground station's MISSION_START: the
+    download crosses the mission's link model (seeded: requests are lost and asked again), and the flight that
+    follows is offline's with the same link (its model starts fresh at the arm), ≤ 1e-4 m, as many rows."""
+    plan = read_plan_text(SMALL_PLAN, "small")
+    items = [M.MAVLink_mission_item_int_message(0, 0, k, it.frame, it.command, 0, 1, it.p1, it.p2, it.p3, it.p4,
+                                                round(it.lat * 1e7), round(it.lon * 1e7), it.alt, 0)
+             for k, it in enumerate(plan.items)]
+    out = tmp_path / "lossy"
+    with instance_slot() as n:
+        os.environ["MAVLINK20"] = "1"
+        gcs = mavutil.mavlink_connection(f"udpin:127.0.0.1:{GCS_PORT + n}", source_system=255, source_component=190,
+                                         dialect="common")
+        sitl = Proc.bsst("sitl", "--await-mission", "--loss", "30", "--instance", str(n), "--out", str(out),
+                         "--no-plots")
+        try:
+            hb = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=30)
+            assert hb is not None
+            target = (hb.get_srcSystem(), hb.get_srcComponent())
+            _upload(gcs, target, items)
+            gcs.mav.command_long_send(*target, M.MAV_CMD_MISSION_START, 0, 0, 0, 0, 0, 0, 0, 0)
+            assert sitl.p.wait(timeout=120) == 0, "\n".join(sitl.lines[-30:])
+        finally:
+            gcs.close()
+            sitl.stop()
+    summary = json.loads((out / "summary.json").read_text())
+    t = summary["mission_transfer"]
+    assert summary["outcome"] == "completed" and t["result"] == "accepted" and t["re_requests"] >= 1, t
+    (tmp_path / "small.waypoints").write_text(SMALL_PLAN)
+    offline = simulate(tmp_path / "small.waypoints", plots=False, link={"loss_pct": 30})
+    flown = _trace(out / "trace.csv")
+    assert len(flown) == len(offline.trace["t"])
+    worst = max(math.dist(row[1:], (offline.trace["x"][i], offline.trace["y"][i], offline.trace["z"][i]))
+                for i, row in enumerate(flown))
+    assert worst <= 1e-4, worst
+
+
+def test_mavproxy_loads_and_starts_a_waypoint_file(tmp_path):
+    """MAVProxy, unmodified, through stdin: ``wp load`` of a QGC WPL 110 file into ``bsst sitl --await-mission``
+    (lockstep), then ``long MISSION_START``: ACCEPTED, flown to the end, landed and disarmed, every item reached;
+    the run's mission.plan holds what MAVProxy sent: the file's lines, its line 0 (the home) as item 0, a
+    waypoint on the ground at the home (MAVProxy sends it so to PX4 too)."""
+    (tmp_path / "small.txt").write_text(SMALL_PLAN)
+    mavproxy = os.path.join(os.path.dirname(sys.executable), "mavproxy.py")
+    out = tmp_path / "mp"
+    with instance_slot() as n:
+        sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--out", str(out), "--no-plots")
+        mp = Proc([sys.executable, mavproxy, f"--master=udpin:127.0.0.1:{GCS_PORT + n}", "--nowait"],
+                  cwd=tmp_path, stdin=subprocess.PIPE)
+
+        def say(cmd: str) -> None:
+            mp.p.stdin.write(cmd.encode() + b"\n")  # type: ignore[union-attr]
+            mp.p.stdin.flush()  # type: ignore[union-attr]
+
+        try:
+            mp.wait_line(lambda s: "online system" in s, timeout=30)
+            say("wp load small.txt")
+            mp.wait_line(lambda s: "Got MISSION_ACK: TYPE_MISSION: ACCEPTED" in s, timeout=15)
+            say("long MISSION_START 0 0")
+            mp.wait_line(lambda s: "Got COMMAND_ACK: MISSION_START: ACCEPTED" in s, timeout=15)
+            assert sitl.p.wait(timeout=120) == 0, "\n".join(sitl.lines[-30:])
+            say("exit")
+        finally:
+            mp.stop()
+            sitl.stop()
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["outcome"] == "completed" and summary["end"]["disarmed"]
+    assert summary["mission_transfer"]["items"] == 4  # MAVProxy sends the file's line 0 (the home) as item 0
+    reached = [m.seq for m in _tlog(out / "vehicle.tlog", n + 1, ["MISSION_ITEM_REACHED"])]
+    assert list(dict.fromkeys(reached)) == [0, 1, 2, 3]
+    kept = read_plan_text((out / "mission.plan").read_text(), "kept")
+    home = (16, 47.397742, 8.545594, 488.0)  # a waypoint at the home, on the ground (GLOBAL: m AMSL)
+    assert [(i.command, round(i.lat, 7), round(i.lon, 7), i.alt) for i in kept.items] == \
+        [home] + [(i.command, i.lat, i.lon, i.alt) for i in read_plan_text(SMALL_PLAN, "small").items]
+
+
+@pytest.mark.parametrize("args, says", [
+    (["--await-mission", "examples/box.plan"], "give no mission file"),
+    (["--await-mission", "--gcs", "none"], "needs a GCS link"),
+    (["--await-mission", "--param-at", "1:COM_OF_LOSS_T=1"], "--param-at with --await-mission"),
+    ([], "give a mission file (or --await-mission)")])
+def test_await_mission_bad_input_is_one_line_and_exit_2(args, says):
+    r = subprocess.run([sys.executable, "-m", "bridge", "sitl", *args], cwd=ROOT, env=ENV, capture_output=True,
+                       text=True, timeout=60)
+    assert r.returncode == 2 and says in r.stderr and r.stderr.strip().count("\n") == 0, r.stderr
+
+
+# -- in this process -------------------------------------------------------------------------------------
+
+def test_the_vehicle_starts_a_mission_only_when_asked_to_await_one():
+    """MISSION_START: UNSUPPORTED on a vehicle without --await-mission (as before), DENIED without a mission
+    and ACCEPTED with one on a vehicle with it; AUTO.MISSION DENIED without it, selected with it (HEARTBEAT
+    AUTO.MISSION), and a ground station's arm then starts the mission (the vehicle stays disarmed: its arm is
+    the controller's); a mission cleared in flight is no more watched (no MISSION_ITEM_REACHED for its items)."""
+    gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    gcs.bind(("127.0.0.1", 0))
+    gcs.setblocking(False)
+    flight = prepare(Mission(Sine(), duration_s=5.0, name="start"))
+    mav = M.MAVLink(None, srcSystem=255, srcComponent=190)
+    made = []
+
+    def vehicle(await_mission: bool) -> Vehicle:
+        v = Vehicle(flight, VehicleConfig(parse_address("udpin:127.0.0.1:0"),
+                                          parse_address(f"udpout:127.0.0.1:{gcs.getsockname()[1]}"),
+                                          await_mission=await_mission))
+        made.append(v)
+        return v
+
+    def exchange(v: Vehicle, msg: Any, want: str) -> Any:
+        gcs.sendto(msg.pack(mav), v.gcs.local)
+        seen: list[Any] = []
+
+        def answered() -> bool:
+            for m, addr in v.gcs.poll():
+                v._handle(v.gcs, m, addr)
+            with contextlib.suppress(BlockingIOError):
+                while True:
+                    seen.extend(mav.parse_buffer(gcs.recv(65535)) or [])
+            return any(m.get_type() == want for m in seen)
+
+        wait_for(answered, 5.0, f"the vehicle's {want}", poll_s=0.001)
+        return next(m for m in seen if m.get_type() == want)
+
+    start = M.MAVLink_command_long_message(1, 1, M.MAV_CMD_MISSION_START, 0, 0, 0, 0, 0, 0, 0, 0)
+    mode = M.MAVLink_command_long_message(1, 1, M.MAV_CMD_DO_SET_MODE, 0, 1, 4, 4, 0, 0, 0, 0)
+    arm = M.MAVLink_command_long_message(1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+    plan = read_plan_text(SMALL_PLAN, "small")
+    items = [M.MAVLink_mission_item_int_message(1, 1, k, it.frame, it.command, 0, 1, it.p1, it.p2, it.p3, it.p4,
+                                                round(it.lat * 1e7), round(it.lon * 1e7), it.alt, 0)
+             for k, it in enumerate(plan.items)]
+    try:
+        plain = vehicle(False)
+        assert exchange(plain, start, "COMMAND_ACK").result == M.MAV_RESULT_UNSUPPORTED
+        assert exchange(plain, mode, "COMMAND_ACK").result == M.MAV_RESULT_DENIED
+        v = vehicle(True)
+        assert exchange(v, start, "COMMAND_ACK").result == M.MAV_RESULT_DENIED  # no mission
+        exchange(v, M.MAVLink_mission_count_message(1, 1, 3, 0), "MISSION_REQUEST_INT")
+        for it in items[:2]:
+            exchange(v, it, "MISSION_REQUEST_INT")
+        assert exchange(v, items[2], "MISSION_ACK").type == M.MAV_MISSION_ACCEPTED
+        assert exchange(v, mode, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
+        assert v._heartbeat().custom_mode == (4 << 16) | (4 << 24) and v.missions.selected
+        assert exchange(v, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
+        assert v.missions.start_requested and not v.sim.armed
+        assert any(e.kind == "mission" and "start requested" in e.text for e in v.sim.events)
+        v.missions.flight_armed()  # (as the controller's arm does): item 0 current, the mission ACTIVE
+        assert v.missions.watch is not None and v.missions.mission_state == M.MISSION_STATE_ACTIVE
+        exchange(v, M.MAVLink_mission_count_message(1, 1, 0, 0), "MISSION_ACK")  # a ground station clears it
+        v.missions.flight_step(0.0, (0.0,) * 12, True)
+        assert v.missions.watch is None and "replaced" in v.sim.events[-1].text  # no reached for a gone item
+    finally:
+        for v in made:
+            v.close()
+        gcs.close()
+
+
+def test_the_watch_reaches_the_box_items_in_order_along_its_flight():
+    """goals_of (the route's points, about the home) and ItemWatch along the offline flight of the box: every
+    item reached once, in order, the landing last (on the ground)."""
+    plan = read_plan_text(BOX_PLAN.read_text(), "box")
+    items = tuple(MissionItem(k, it.frame, it.command, it.p1, it.p2, it.p3, it.p4,
+                              round(it.lat * 1e7) if it.frame != 2 else 0, round(it.lon * 1e7) if it.frame != 2 else 0,
+                              it.alt, 1) for k, it in enumerate(plan.items))
+    watch = ItemWatch(goals_of(items, plan.home))
+    run = simulate(BOX_PLAN, plots=False)
+    tr = run.trace
+    got = []
+    for i in range(len(tr["t"])):
+        X = (tr["x"][i], 0.0, tr["y"][i], 0.0, tr["z"][i])
+        got += [(seq, tr["t"][i]) for seq in watch.step(tr["t"][i], X)]
+    assert [s for s, _ in got] == list(range(8)) and watch.done
+    assert tr["z"][[round(t * 250) for _, t in got][-1]] <= 0.1  # the landing: within 0.1 m of the ground
+
+
+def test_plan_text_reads_back_and_the_transfer_block_is_typed():
+    plan = read_plan_text(BOX_PLAN.read_text(), "box")
+    again = read_plan_text(plan_text(plan), "again")
+    assert again.items == plan.items  # (QGroundControl's null is math.nan, the same object both times)
+    assert again.home == plan.home and again.cruise_m_s == plan.cruise_m_s
+    said = {"items": 8, "requests": 11, "re_requests": 3, "duration_s": 0.5, "result": "accepted"}
+    assert mission_transfer(said).as_dict() == {"items": 8, "attempts": 11, "re_requests": 3, "duration_s": 0.5,
+                                                "result": "accepted"}
+    assert mission_transfer(None) is None and mission_transfer({"items": 1}) is None
