@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from bridge.autopilot.estimator import Estimator, TruthEstimator, estimator_nees
@@ -185,6 +185,7 @@ class SimVehicle:
         self._takeoff_alt = self.takeoff_alt_m  # m: the altitude the selected TAKEOFF climbs to
         self._zero = (0.0, 0.0, 0.0, 0.0)
         self._pending_events = list(self.timeline)
+        self._mission_t0: float | None = 0.0  # plant time (s) of the mission's time 0 (None: not known yet)
         self._injected: list[tuple[TimedEvent, Sender]] = []  # a ground station's, acted on next period (schedule)
         self._impact_noted = False  # a disarmed vehicle's hard touchdown is logged once (plant_verdict)
         self._period_s = self.plant.dt * self.substeps
@@ -216,6 +217,21 @@ class SimVehicle:
         e = Event(self.plant.t, kind, text, **fields)
         self.events.append(e)
         return e
+
+    def hold_timeline(self) -> None:
+        """Real time: the vehicle's plant runs before the flight, whose time 0 is not known yet; the timeline
+        waits for :meth:`start_mission_clock`."""
+        self._mission_t0 = None
+
+    def start_mission_clock(self, t0: float) -> None:
+        """The mission's time 0 is plant time ``t0`` (s; real time: the state the flight's first target answers):
+        from now the timeline and the wind's gusts count from it (once per vehicle)."""
+        if self._mission_t0 is not None:
+            return
+        self._mission_t0 = t0
+        wind = self.plant.wind
+        if wind is not None:
+            wind.gusts = [replace(g, t_s=g.t_s + t0) for g in wind.gusts]
 
     def arm(self) -> None:
         """Arm and take offboard commands (from failsafe or landed too). Not while armed in a mode a
@@ -424,7 +440,9 @@ class SimVehicle:
         """
         p = self.plant
         pending = self._pending_events
-        while pending and math.ceil(pending[0].t_s / self._period_s - 1e-9) * self._period_s <= p.t + 0.25 * p.dt:
+        t0 = self._mission_t0  # (0.0 offline and in lockstep: the same bits as plant time)
+        while (pending and t0 is not None
+               and math.ceil(pending[0].t_s / self._period_s - 1e-9) * self._period_s + t0 <= p.t + 0.25 * p.dt):
             self.inject(pending.pop(0))
         if self._injected:
             for e, by in self._injected:

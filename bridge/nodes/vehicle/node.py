@@ -77,6 +77,8 @@ class Vehicle:
         self.substeps = flight.substeps
         self.actuation = flight.profile.actuation
         self.sim = flight.make_vehicle(armed=False)
+        if cfg.clock == "realtime":  # the mission's time 0 is its first target's state (SimVehicle.hold_timeline)
+            self.sim.hold_timeline()
         self.plant = self.sim.plant
         self._status = status or (lambda report: None)
         self.tlog = Tlog(out / "vehicle.tlog") if out is not None else None

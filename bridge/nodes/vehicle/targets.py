@@ -91,6 +91,8 @@ class Targets:
             return self._reject("reordered")
         if self.sim.command(command_from_wire(self.actuation, wire)):
             self.accepted += 1
+            if self.applied is None:  # a flight's first target: its stamp is the mission's time 0 (real time)
+                self.sim.start_mission_clock(key / self.rate)
             self.applied = (key, wire, now)
         return None
 
