@@ -39,7 +39,8 @@ from bridge.batch.plant import BatchPlant, disturbance_cell, diverged_cell, from
 from bridge.batch.predict import BatchPredictor, carry, record
 from bridge.batch.wire import command_over_wire, state_over_wire
 from bridge.core.flight import Flight
-from bridge.link.plan import HOLD, NONE, Clocks, LinkPlan
+from bridge.link.plan import Clocks, LinkPlan
+from bridge.link.plan_cell import HOLD, NONE
 from bridge.record.metrics import BANDS, RMS_FROM_S
 from controller.bsst import law_constants, law_tables
 from controller.pid import pid_constants
