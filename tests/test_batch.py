@@ -168,9 +168,11 @@ def test_batch_problem_names_what_the_batch_cannot_fly(tmp_path: Path) -> None:
     at = [ParamChange(2.0, "MPC_LAND_SPEED", 0.5)]  # a parameter changed in flight: the batch does not model it
     why = batch_problem(m, [{"controller": "bsst", "param_at": at}])
     assert why is not None and "--param-at" in why and "\n" not in why
-    windy = replace(m, wind={"speed_mps": 3.0, "from_deg": 90.0})  # the batch flies still air only
-    why = batch_problem(windy, [{"controller": "bsst"}])
-    assert why is not None and "[wind]" in why and "\n" not in why
+    gusty = replace(m, wind={"speed_mps": 3.0, "from_deg": 90.0, "turbulence": "light"})  # steady and gusts only
+    why = batch_problem(gusty, [{"controller": "bsst"}])
+    assert why is not None and "turbulence" in why and "\n" not in why
+    some = batch_problem(m, [{"controller": "bsst"}, {"controller": "bsst", "wind": 3.0}])
+    assert some is not None and "wind" in some  # all cells in a [wind], or none
     law = f"{ROOT / 'examples' / 'my_law.py'}:MyLaw"
     why = batch_problem(m, [{"controller": law}])
     assert why is not None and "process engine" in why
