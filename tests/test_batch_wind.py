@@ -1,4 +1,4 @@
-"""Covers the batch engine in wind (bridge.batch.plant.wind_cell, issue 27): steady wind and 1 - cos gusts.
+"""Covers bridge.batch.plant and bridge.batch.flight: the batch engine in steady wind and 1 - cos gusts.
 
 Cells with their own steady wind and gusts — the three laws, a delayed and lossy link, the x500 (rotor
 drag, motors) — are flown by the batch engine and by the scalar loop and compared as tests/test_batch.py
