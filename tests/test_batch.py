@@ -171,8 +171,7 @@ def test_batch_problem_names_what_the_batch_cannot_fly(tmp_path: Path) -> None:
     gusty = replace(m, wind={"speed_mps": 3.0, "from_deg": 90.0, "turbulence": "light"})  # steady and gusts only
     why = batch_problem(gusty, [{"controller": "bsst"}])
     assert why is not None and "turbulence" in why and "\n" not in why
-    some = batch_problem(m, [{"controller": "bsst"}, {"controller": "bsst", "wind": 3.0}])
-    assert some is not None and "wind" in some  # all cells in a [wind], or none
+    assert batch_problem(m, [{"controller": "bsst"}, {"controller": "bsst", "wind": 3.0}]) is None  # still and windy
     law = f"{ROOT / 'examples' / 'my_law.py'}:MyLaw"
     why = batch_problem(m, [{"controller": law}])
     assert why is not None and "process engine" in why

@@ -18,12 +18,12 @@ figures), blocks of cells on ``jobs`` threads. The metrics are accumulated as th
 sums and maxima, the last step outside the settling band), with one column kept whole, u2, for the
 ripple of each cell's own second half; no trace is held.
 
-Cells may differ in law (``bsst``, ``smc``, ``pid``), seed, control rate (flown as separate batches) and
-every link setting but the bandwidth queue; they must share everything else (profile, effects, gains,
-trajectory, duration; each cell may have its own steady wind and gusts, but either all fly in a
-``[wind]`` or none). Not flown here (:func:`batch_problem`): a user's own law, the bandwidth queue
-(``rate_bps``), a measured link ``trace``, ``[failsafe] resume``, any failsafe ``action`` but ``descend``,
-parameters changed in flight (``--param-at``), the turbulence, timed events and the battery.
+Cells may differ in law (``bsst``, ``smc``, ``pid``), seed, control rate (flown as separate batches) and every
+link setting but the bandwidth queue; they must share everything else (profile, effects, gains, trajectory,
+duration; each cell may have its own steady wind and gusts, or none). Not flown here (:func:`batch_problem`):
+a user's own law, the bandwidth queue (``rate_bps``), a measured link ``trace``, ``[failsafe] resume``, any
+failsafe ``action`` but ``descend``, parameters changed in flight (``--param-at``), the turbulence, timed
+events and the battery.
 """
 
 from __future__ import annotations
@@ -108,8 +108,7 @@ def _differs(a: Flight, b: Flight) -> str | None:
     for what, x, y in (("trajectory", ma.trajectory, mb.trajectory), ("duration_s", ma.duration_s, mb.duration_s),
                        ("physics_hz", ma.physics_hz, mb.physics_hz), ("start", ma.start, mb.start),
                        ("profile", a.profile, b.profile), ("effects", a.effects, b.effects),
-                       ("gains", a.gains, b.gains), ("failsafe", a.failsafe, b.failsafe),
-                       ("whether they fly in wind", a.wind is None, b.wind is None)):
+                       ("gains", a.gains, b.gains), ("failsafe", a.failsafe, b.failsafe)):
         if x != y:
             return what
     return None

@@ -1,9 +1,9 @@
 """The plant of :class:`plant.quadrotor.Quadrotor` for the batch: N cells' start, and one cell's step, compiled.
 
 In:  one profile and one set of effects for every cell, a seed per cell (the disturbance's phases), the
-     physics rate (Hz), the start state (eq. 7: m, m/s, rad, rad/s) and whether the cells fly in wind; per
-     cell and physics step its state, what its command holds (u1..u4 N and omega_d rad/s, or target rotor
-     speeds rad/s), the time (s) and its steady wind and gusts (m/s, s, rad)
+     physics rate (Hz), the start state (eq. 7: m, m/s, rad, rad/s); per cell and physics step its state, what
+     its command holds (u1..u4 N and omega_d rad/s, or target rotor speeds rad/s), the time (s) and its steady
+     wind and gusts (m/s, s, rad)
 Out: :class:`BatchPlant`: the start (states [12, N], rotor speeds, what a command at rest holds, the
      constants); per cell the state after a physics step, its disturbance, divergence
 
@@ -26,7 +26,7 @@ from numba import njit
 
 from bridge.batch import kernels as K
 from plant.effects import Effects
-from plant.model import rigid_body
+from plant.model import RigidBody, rigid_body
 from plant.profiles import Profile
 from plant.quadrotor import CRASH_SPEED_MPS, CRASH_TILT_RAD
 
@@ -35,16 +35,20 @@ class BatchPlant:
     """N quadrotors of one profile and effects, each with its own command and disturbance phases."""
 
     def __init__(self, profile: Profile, effects: Effects | None, seeds: Sequence[int], *, physics_hz: float,
-                 state: Sequence[float], ground: bool = True, windy: bool = False) -> None:
+                 state: Sequence[float], ground: bool = True) -> None:
         e = effects or Effects()
         self.profile = profile
         self.effects = e
         n = len(seeds)
         self.n = n
-        self.body = rigid_body(
-            mass=profile.mass * e.mass_scale, ixx=profile.ixx * e.inertia_scale, iyy=profile.iyy * e.inertia_scale,
-            izz=profile.izz * e.inertia_scale, arm=profile.arm, rotor_inertia=profile.rotor_inertia,
-            gravity=profile.gravity, drag=profile.drag if e.drag or windy else (0.0,) * 6)  # in wind: by the drag
+        def body(drag: tuple) -> RigidBody:
+            return rigid_body(
+                mass=profile.mass * e.mass_scale, ixx=profile.ixx * e.inertia_scale,
+                iyy=profile.iyy * e.inertia_scale, izz=profile.izz * e.inertia_scale, arm=profile.arm,
+                rotor_inertia=profile.rotor_inertia, gravity=profile.gravity, drag=drag)
+
+        self.body = body(profile.drag if e.drag else (0.0,) * 6)
+        self.body_air = body(profile.drag)  # a cell in a [wind]: the air acts through the drag (plant.Quadrotor)
         self.dt = 1.0 / physics_hz
         self.ground = ground
         self.t = 0.0
