@@ -28,7 +28,8 @@ from bridge.core.flight import prepare
 from bridge.link.ends import EPS_T
 from bridge.link.fates import draw_fates
 from bridge.link.model import FateStream, LinkConfig
-from bridge.link.plan import Clocks, _first_at_or_after
+from bridge.link.plan import Clocks
+from bridge.link.plan_cell import first_at_or_after
 from bridge.loop import fly
 from bridge.sweep.cells import row_from_run
 from bridge.sweep.grid import AXES, Cell, Grid, cell_overrides, cells
@@ -168,9 +169,10 @@ def test_batch_problem_names_what_the_batch_cannot_fly(tmp_path: Path) -> None:
     at = [ParamChange(2.0, "MPC_LAND_SPEED", 0.5)]  # a parameter changed in flight: the batch does not model it
     why = batch_problem(m, [{"controller": "bsst", "param_at": at}])
     assert why is not None and "--param-at" in why and "\n" not in why
-    windy = replace(m, wind={"speed_mps": 3.0, "from_deg": 90.0})  # the batch flies still air only
-    why = batch_problem(windy, [{"controller": "bsst"}])
-    assert why is not None and "[wind]" in why and "\n" not in why
+    gusty = replace(m, wind={"speed_mps": 3.0, "from_deg": 90.0, "turbulence": "light"})  # steady and gusts only
+    why = batch_problem(gusty, [{"controller": "bsst"}])
+    assert why is not None and "turbulence" in why and "\n" not in why
+    assert batch_problem(m, [{"controller": "bsst"}, {"controller": "bsst", "wind": 3.0}]) is None  # still and windy
     law = f"{ROOT / 'examples' / 'my_law.py'}:MyLaw"
     why = batch_problem(m, [{"controller": law}])
     assert why is not None and "process engine" in why
@@ -200,7 +202,8 @@ def test_delivery_checks_are_searchsorted_exactly() -> None:
     for thr, per_s in ((up, 1000.0), (t + EPS_T, 250.0)):
         due = np.concatenate([rng.uniform(0.0, 31.0, 100_000), np.round(rng.uniform(0, 30, 50_000) * per_s) / per_s,
                               thr[rng.integers(0, len(thr), 20_000)], [0.0, 1e-12, 40.0]])
-        assert np.array_equal(_first_at_or_after(thr, due, per_s), np.searchsorted(thr, due, side="left"))
+        got = np.array([first_at_or_after(thr, float(d), per_s) for d in due])
+        assert np.array_equal(got, np.searchsorted(thr, due, side="left"))
 
 
 @pytest.mark.parametrize("name, extra", [

@@ -157,7 +157,7 @@ def test_the_finest_resolution_taken_ends_within_its_rounds(over: str) -> None:
 
 def test_the_wind_margin_is_found_inside_its_bracket(tmp_path: Path) -> None:
     """``--over wind_mps`` (issue 27): the steady wind the BS-ST law takes on the sine before its RMS passes
-    10 cm, on the process engine (the batch flies still air only), in at most 80 cells; each end of the
+    10 cm, its probes on the batch engine (steady wind), in at most 80 cells; each end of the
     bracket flown again on its own lands on its side of the bound."""
     r = bsst("margin", "missions/sine.toml", "--over", "wind_mps", "--until", "rms=0.1", "--controller", "bsst",
              "--out", str(tmp_path))

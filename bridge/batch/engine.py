@@ -18,11 +18,12 @@ figures), blocks of cells on ``jobs`` threads. The metrics are accumulated as th
 sums and maxima, the last step outside the settling band), with one column kept whole, u2, for the
 ripple of each cell's own second half; no trace is held.
 
-Cells may differ in law (``bsst``, ``smc``, ``pid``), seed, control rate (flown as separate batches) and
-every link setting but the bandwidth queue; they must share everything else (profile, effects, gains,
-trajectory, duration). Not flown here (:func:`batch_problem`): a user's own law, the bandwidth
-queue (``rate_bps``), a measured link ``trace``, ``[failsafe] resume``, any failsafe ``action`` but
-``descend``, parameters changed in flight (``--param-at``), the wind, timed events and the battery.
+Cells may differ in law (``bsst``, ``smc``, ``pid``), seed, control rate (flown as separate batches) and every
+link setting but the bandwidth queue; they must share everything else (profile, effects, gains, trajectory,
+duration; each cell may have its own steady wind and gusts, or none). Not flown here (:func:`batch_problem`):
+a user's own law, the bandwidth queue (``rate_bps``), a measured link ``trace``, ``[failsafe] resume``, any
+failsafe ``action`` but ``descend``, parameters changed in flight (``--param-at``), the turbulence, timed
+events and the battery.
 """
 
 from __future__ import annotations
@@ -81,10 +82,12 @@ def flights_problem(flights: Sequence[Flight]) -> str | None:
         if f.param_changes:
             return ("--param-at: parameters changed during the flight are not in the batch engine; "
                     "fly it with the process engine")
-        if f.wind is not None or f.timeline or f.effects.battery:
-            what = "[wind]" if f.wind is not None else "[[events]] or --at" if f.timeline else "[effects] battery"
-            return f"{what}: the weather, timed events and the battery are not in the batch engine; fly it with the " \
-                   "process engine"
+        if f.wind is not None and f.wind.turbulence != "none":
+            return (f"[wind] turbulence = {f.wind.turbulence!r}: the batch engine flies steady wind and gusts, not "
+                    "the turbulence; fly it with the process engine")
+        if f.timeline or f.effects.battery:
+            what = "[[events]] or --at" if f.timeline else "[effects] battery"
+            return f"{what}: timed events and the battery are not in the batch engine; fly it with the process engine"
         if f.failsafe.resume:
             return "[failsafe] resume = true: re-arming after a failsafe is not in the batch engine"
         if f.failsafe.action != "descend":

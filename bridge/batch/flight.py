@@ -35,14 +35,24 @@ from numba import njit
 from bridge.autopilot.failsafe import DEFAULT_GAINS
 from bridge.batch import kernels as K
 from bridge.batch.control import BatchActuation, allocate_cell
-from bridge.batch.plant import BatchPlant, disturbance_cell, diverged_cell, from_speeds, held_cell, rk4_cell
+from bridge.batch.plant import (
+    BatchPlant,
+    disturbance_cell,
+    diverged_cell,
+    from_speeds,
+    held_cell,
+    rk4_cell,
+    wind_cell,
+)
 from bridge.batch.predict import BatchPredictor, carry, record
 from bridge.batch.wire import command_over_wire, state_over_wire
 from bridge.core.flight import Flight
-from bridge.link.plan import HOLD, NONE, Clocks, LinkPlan
+from bridge.link.plan import Clocks, LinkPlan
+from bridge.link.plan_cell import HOLD, NONE
 from bridge.record.metrics import BANDS, RMS_FROM_S
 from controller.bsst import law_constants, law_tables
 from controller.pid import pid_constants
+from plant.wind import blowing
 
 _BSST, _SMC, _PID, _BSST_IMPLICIT = 0, 1, 2, 3  # the cells' laws (bsst: its super-twisting step explicit or implicit)
 
@@ -96,6 +106,8 @@ class Constants(NamedTuple):
     coef: tuple
     start: tuple  # the start state (eq. 7)
     band: tuple  # the settling bands x, y, z (m)
+    body_air: tuple  # the same of a cell in a [wind] (the profile's drag on, on the airspeed)
+    rotor_drag: float  # the plant's rotor drag in wind (s/m)
 
 
 class Cells(NamedTuple):
@@ -145,6 +157,10 @@ class Cells(NamedTuple):
     diverged: np.ndarray  # [n] bool
     impact: np.ndarray  # [n] int8: 0 no hard touchdown, 1 one this step, 2 noted (bridge.loop.plant_verdict)
     crashed: np.ndarray  # [n] bool: touched down hard while armed
+    windy: np.ndarray  # [n] bool: the cell flies in a [wind] (steady and gusts: bridge.batch.plant.wind_cell)
+    wind: np.ndarray  # [n, 3] the steady wind (m/s NWU)
+    gusts: np.ndarray  # [n, G, 4] the gusts (t_s s, duration_s s, amplitude m/s, from_deg in rad)
+    n_gusts: np.ndarray  # [n]
 
 
 @njit(cache=True, nogil=True)
@@ -175,6 +191,9 @@ def _fly_cell(j, k0, k1, c, X, ring_X, ring_held, holding, omega, phases, law, x
     integ = (integral_a[j, 0], integral_a[j, 1], integral_a[j, 2])
     od, ptr, fs, armed, u2, lc = omega_d_a[j], ptr_a[j], in_failsafe[j], armed_a[j], u2_now[j], law[j]
     impact = a.impact[j]
+    steady, gusts, n_gusts = (a.wind[j, 0], a.wind[j, 1], a.wind[j, 2]), a.gusts[j], a.n_gusts[j]
+    windy = a.windy[j]
+    body = c.body_air if windy else c.body
     predicts, lag = a.predicts[j], a.lag[j]
     n_ring, n_held, S = ring_X.shape[1], ring_held.shape[1], c.substeps
     for k in range(k0, k1):
@@ -226,7 +245,12 @@ def _fly_cell(j, k0, k1, c, X, ring_X, ring_held, holding, omega, phases, law, x
                 q = ring_held[j, apply_cmd[j, ptr] % n_held]
                 hold = (q[0], q[1], q[2], q[3], q[4])
                 ptr += 1
-            x, hold, om, armed, hard = _physics_step(x, hold, om, fs and armed, armed, ph, t_plant[check], c)
+            air = (0.0, 0.0, 0.0, 0.0)
+            if windy:
+                w = wind_cell(steady, gusts, n_gusts, t_plant[check])
+                air = (w[0], w[1], w[2], c.rotor_drag)
+            x, hold, om, armed, hard = _physics_step(x, hold, om, fs and armed, armed, ph, t_plant[check], air, windy,
+                                                     body, c)
             if hard and impact == 0:  # the first hard touchdown (Quadrotor.impact)
                 impact = 1
         if diverged_cell(x):  # bridge.loop.plant_verdict: diverged, else a hard touchdown armed ends the flight
@@ -296,12 +320,14 @@ def _law_step(xg: tuple, sample: tuple, law: int, xi: tuple, integ: tuple, od: f
 
 
 @njit(cache=True, inline="always")
-def _physics_step(x: tuple, hold: tuple, om: tuple, landing: bool, armed: bool, ph: tuple, t: float,
-                  c: Constants) -> tuple:  # pragma: no cover
+def _physics_step(x: tuple, hold: tuple, om: tuple, landing: bool, armed: bool, ph: tuple, t: float, air: tuple,
+                  windy: bool, body: tuple, c: Constants) -> tuple:  # pragma: no cover
     """One physics step of one cell from state x at t (s), holding ``hold`` (u1..u4 N and omega_d, or target
     speeds under motor lag), rotor speeds om under lag: the ``descend`` landing where ``landing`` (in
     failsafe and armed; on the ground it disarms and commands zero), the motor lag, the disturbance
-    (phases ph), RK4 and the ground. (x, hold, om, armed, whether it touched the ground hard) after it."""
+    (phases ph), RK4 (``body``: plant.model.rk4_constants) in the air ``air`` (wind m/s, rotor drag s/m) where
+    the cell is ``windy``, and the ground.
+    (x, hold, om, armed, whether it touched the ground hard) after it."""
     if landing:
         if x[4] <= 0.0 and x[5] <= 0.0 and c.ground:
             armed = False
@@ -324,7 +350,7 @@ def _physics_step(x: tuple, hold: tuple, om: tuple, landing: bool, armed: bool, 
     else:
         z = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         ext = (z, z, z)
-    y, hard = rk4_cell(x, u, ext, c.disturbed, c.body, c.h, c.ground)
+    y, hard = rk4_cell(x, u, ext, c.disturbed, body, c.h, c.ground, air, windy)
     return y, hold, om, armed, hard
 
 
@@ -366,7 +392,7 @@ def batch_arrays(flights: Sequence[Flight], plan: LinkPlan, clocks: Clocks, refs
          nominal.iyy / nominal.arm, nominal.izz / nominal.arm, og.k_vel_level, og.k_att_level, og.d_att_level,
          og.d_yaw),
         pred.dt_max, pred.m, pred.g, tuple(float(v) for v in pred._coefficients), start,
-        (BANDS["x"], BANDS["y"], BANDS["z"]))
+        (BANDS["x"], BANDS["y"], BANDS["z"]), plant.body_air.constants, float(p.rotor_drag))
     holding = np.zeros((n, 5))
     holding[:, :plant.holding.shape[0]] = plant.holding.T
     changes = list(m.trajectory.change_times())
@@ -384,5 +410,21 @@ def batch_arrays(flights: Sequence[Flight], plan: LinkPlan, clocks: Clocks, refs
         np.zeros((n, steps)), np.zeros(n),
         (np.searchsorted(np.array(changes), t_step, side="right") - 1).astype(np.int64),
         t_step >= min(RMS_FROM_S, 0.5 * m.duration_s), t_step, clocks.plant_t, np.ones(n, bool),
-        np.full(n, steps, np.int64), np.zeros(n, bool), np.zeros(n, np.int8), np.zeros(n, bool))
+        np.full(n, steps, np.int64), np.zeros(n, bool), np.zeros(n, np.int8), np.zeros(n, bool), *_winds(flights))
     return c, a
+
+
+def _winds(flights: Sequence[Flight]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Whether each cell flies in a [wind] [n], its steady wind [n, 3] (m/s NWU, :func:`plant.wind.blowing`),
+    gusts [n, G, 4] (t_s, duration_s, amplitude_mps, from_deg in rad) and their number [n]; zeros in still air."""
+    n = len(flights)
+    most = max([len(f.wind.gusts) for f in flights if f.wind is not None] + [1])
+    wind, gusts, count = np.zeros((n, 3)), np.zeros((n, most, 4)), np.zeros(n, np.int64)
+    for i, f in enumerate(flights):
+        if f.wind is None:
+            continue
+        wind[i] = blowing(f.wind.speed_mps, f.wind.from_deg)
+        count[i] = len(f.wind.gusts)
+        for g, gust in enumerate(f.wind.gusts):
+            gusts[i, g] = gust.t_s, gust.duration_s, gust.amplitude_mps, math.radians(gust.from_deg)
+    return np.array([f.wind is not None for f in flights]), wind, gusts, count

@@ -1,13 +1,15 @@
 """The plant of :class:`plant.quadrotor.Quadrotor` for the batch: N cells' start, and one cell's step, compiled.
 
 In:  one profile and one set of effects for every cell, a seed per cell (the disturbance's phases), the
-     physics rate (Hz) and the start state (eq. 7: m, m/s, rad, rad/s); per cell and physics step its
-     state, what its command holds (u1..u4 N and omega_d rad/s, or target rotor speeds rad/s) and the time (s)
+     physics rate (Hz), the start state (eq. 7: m, m/s, rad, rad/s); per cell and physics step its state, what
+     its command holds (u1..u4 N and omega_d rad/s, or target rotor speeds rad/s), the time (s) and its steady
+     wind and gusts (m/s, s, rad)
 Out: :class:`BatchPlant`: the start (states [12, N], rotor speeds, what a command at rest holds, the
      constants); per cell the state after a physics step, its disturbance, divergence
 
 The same model as the scalar plant: eq. (6) corrected, RK4 with the inputs held over a physics step,
-drag, motor lag, the external disturbance, mass and inertia mismatch, and the ground plane. The step of
+drag, motor lag, the external disturbance, mass and inertia mismatch, steady wind and 1 - cos gusts (drag
+on the airspeed, rotor drag: not the turbulence), and the ground plane. The step of
 each cell is the scalar plant's own :func:`plant.model.rk4_held` and
 :func:`plant.quadrotor.ground_contact`, and a ``wrench`` command is held through
 :func:`plant.rotors.wrench_command` and eq. (4)/(5) as the scalar plant holds it, compiled
@@ -24,7 +26,7 @@ from numba import njit
 
 from bridge.batch import kernels as K
 from plant.effects import Effects
-from plant.model import rigid_body
+from plant.model import RigidBody, rigid_body
 from plant.profiles import Profile
 from plant.quadrotor import CRASH_SPEED_MPS, CRASH_TILT_RAD
 
@@ -39,10 +41,14 @@ class BatchPlant:
         self.effects = e
         n = len(seeds)
         self.n = n
-        self.body = rigid_body(
-            mass=profile.mass * e.mass_scale, ixx=profile.ixx * e.inertia_scale, iyy=profile.iyy * e.inertia_scale,
-            izz=profile.izz * e.inertia_scale, arm=profile.arm, rotor_inertia=profile.rotor_inertia,
-            gravity=profile.gravity, drag=profile.drag if e.drag else (0.0,) * 6)
+        def body(drag: tuple) -> RigidBody:
+            return rigid_body(
+                mass=profile.mass * e.mass_scale, ixx=profile.ixx * e.inertia_scale,
+                iyy=profile.iyy * e.inertia_scale, izz=profile.izz * e.inertia_scale, arm=profile.arm,
+                rotor_inertia=profile.rotor_inertia, gravity=profile.gravity, drag=drag)
+
+        self.body = body(profile.drag if e.drag else (0.0,) * 6)
+        self.body_air = body(profile.drag)  # a cell in a [wind]: the air acts through the drag (plant.Quadrotor)
         self.dt = 1.0 / physics_hz
         self.ground = ground
         self.t = 0.0
@@ -104,14 +110,20 @@ class BatchPlant:
 
 # -- one cell (what the whole flight's kernel, bridge.batch.flight, runs per cell) ------
 @njit(cache=True, inline="always")
-def rk4_cell(x: tuple, u: tuple, ext: tuple, disturbed: bool, constants: tuple, h: float,
-             ground: bool) -> tuple:  # pragma: no cover
+def rk4_cell(x: tuple, u: tuple, ext: tuple, disturbed: bool, constants: tuple, h: float, ground: bool,
+             air: tuple, windy: bool) -> tuple:  # pragma: no cover
     """:func:`plant.model.rk4_held` of one cell's state x (eq. 7) with u = (u1..u4 N, omega_d rad/s) held and the
-    external force and torque ext at the step's start, middle and end (read only when ``disturbed``), then
+    external force and torque ext at the step's start, middle and end (read only when ``disturbed``), in the
+    air ``air`` = (wind m/s NWU, rotor drag s/m) where ``windy`` (else still air: the paper's eq. 6), then
     :func:`plant.quadrotor.ground_contact` where ``ground`` and below it. (The state, and whether this step
     touched the ground hard: faster than CRASH_SPEED_MPS or tilted more than CRASH_TILT_RAD, as
     :meth:`plant.quadrotor.Quadrotor._touchdown` judges it on the state below the ground.)"""
-    if disturbed:
+    if windy:
+        if disturbed:
+            y = K.rk4_held(x, u[0], u[1], u[2], u[3], u[4], constants, h, ext, air)
+        else:
+            y = K.rk4_held(x, u[0], u[1], u[2], u[3], u[4], constants, h, None, air)
+    elif disturbed:
         y = K.rk4_held(x, u[0], u[1], u[2], u[3], u[4], constants, h, ext)
     else:
         y = K.rk4_held(x, u[0], u[1], u[2], u[3], u[4], constants, h, None)
@@ -122,6 +134,23 @@ def rk4_cell(x: tuple, u: tuple, ext: tuple, disturbed: bool, constants: tuple, 
         hard = speed > CRASH_SPEED_MPS or tilt > CRASH_TILT_RAD
         y = K.ground_contact(y)
     return y, hard
+
+
+@njit(cache=True, inline="always")
+def wind_cell(steady: tuple, gusts: np.ndarray, n_gusts: int, t: float) -> tuple:  # pragma: no cover
+    """:meth:`plant.wind.Wind.now` of one cell without turbulence: the steady wind (m/s NWU) plus each gust
+    (gusts[g] = t_s s, duration_s s, amplitude_mps m/s, from_deg in rad) at t (s), as
+    :meth:`plant.wind.Gust.velocity` and :func:`plant.wind.blowing` compute it."""
+    wx, wy, wz = steady
+    for g in range(n_gusts):
+        s = t - gusts[g, 0]
+        if s <= 0.0 or s >= gusts[g, 1]:
+            wx, wy, wz = wx + 0.0, wy + 0.0, wz + 0.0  # the gust's (0, 0, 0), added as the scalar plant adds it
+            continue
+        m = 0.5 * gusts[g, 2] * (1.0 - math.cos(2.0 * math.pi * s / gusts[g, 1]))
+        b = gusts[g, 3]
+        wx, wy, wz = wx + -m * math.cos(b), wy + m * math.sin(b), wz + 0.0
+    return wx, wy, wz
 
 
 @njit(cache=True, inline="always")

@@ -8,5 +8,6 @@ In:  a ``[link]`` table, flags, a trace file or a profile name; Out: each datagr
 - :mod:`bridge.link.fit`      the model's table that fits a trace; traces the model makes
 - :mod:`bridge.link.profile`  named link profiles (``profiles/*.toml``)
 - :mod:`bridge.link.ends`     the two ends of an impaired link in simulation time
-- :mod:`bridge.link.plan`     the batch engine's link planner: every cell's fates at once
+- :mod:`bridge.link.plan`     the batch engine's link planner: every cell's traffic, chunks on threads
+- :mod:`bridge.link.plan_cell` one cell's plan, compiled; :mod:`bridge.link.fates` its packets' draws
 """

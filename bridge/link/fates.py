@@ -1,4 +1,4 @@
-"""Each packet's fate for N cells at once: the link model's counter-based draws over whole arrays.
+"""Each packet's fate, cell by cell and compiled: the link model's counter-based draws.
 
 In:  per cell a :class:`~bridge.link.model.LinkConfig` (loss %, burst length, delays and jitter ms, dup and
      reorder %), a direction (``up``/``down``) and the number of packets
@@ -6,7 +6,8 @@ Out: :class:`Fates`: per cell and packet whether it is lost, its delay (s), whet
      its duplicate's delay (s), drawn bit for bit as :class:`~bridge.link.impairment.LinkImpairment` draws
      them one packet at a time (SplitMix64 of the stream key, direction and packet number)
 
-Split out of :mod:`bridge.link.plan`, which plans every cell's traffic from these fates.
+:func:`draw_cell` draws one direction of one cell (the planner, :mod:`bridge.link.plan_cell`, calls it per
+cell); :func:`draw_fates` lays many cells' out as arrays (tests/test_batch.py checks them draw for draw).
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from dataclasses import dataclass
 from statistics import NormalDist
 
 import numpy as np
+from numba import njit
 
 from bridge.link.impairment import (  # the draw numbers and bound are the model's: one definition of a fate
     _D_DUP,
@@ -32,30 +34,31 @@ from bridge.link.model import LinkConfig
 
 _C1, _C2, _C3 = np.uint64(0x9E3779B97F4A7C15), np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB)
 _U30, _U27, _U31, _U11, _U8 = (np.uint64(v) for v in (30, 27, 31, 11, 8))
+_M48 = np.uint64(0xFFFFFFFFFFFF)
+_NO_LOSS, _BERNOULLI, _GILBERT = 0, 1, 2  # a direction's loss (ints[0])
+_UNIFORM, _NORMAL = 1, 2  # its jitter (ints[1]; 0: none)
+# the columns of a direction's float parameters (fate_params)
+_LOSS, _GE_R, _GE_P, HOLD_P, DUP_P, _SIGMA, BOUND_S, _LO, _HI, DELAY_S = range(10)
+N_PARAMS = 10
 
 
 # -- the draws -------------------------------------------------------------------------------------
-def _mix(z: np.ndarray) -> np.ndarray:
-    """SplitMix64's finaliser (:func:`bridge.link.impairment._mix`) in place on a uint64 array (wrapping)."""
-    z += _C1
-    z ^= z >> _U30
-    z *= _C2
-    z ^= z >> _U27
-    z *= _C3
-    z ^= z >> _U31
-    return z
+@njit(cache=True, inline="always")
+def _mix(z: np.uint64) -> np.uint64:  # pragma: no cover
+    """SplitMix64's finaliser (:func:`bridge.link.impairment._mix`), wrapping."""
+    z = z + _C1
+    z = z ^ (z >> _U30)
+    z = z * _C2
+    z = z ^ (z >> _U27)
+    z = z * _C3
+    return z ^ (z >> _U31)
 
 
-def uniforms(keys: np.ndarray, count: int, draw: int) -> np.ndarray:
-    """``link.uniform(key, n, draw)`` for every key (rows) and n = 0..count-1 (columns): [len(keys), count]."""
-    n = np.arange(count, dtype=np.uint64)
-    inner = _mix(((n & np.uint64(0xFFFFFFFFFFFF)) << _U8) | np.uint64(draw))
-    z = keys[:, None] ^ inner[None, :]
-    _mix(z)
-    out = (z >> _U11).astype(np.float64)
-    out += 0.5
-    out *= 1.0 / 9007199254740992.0
-    return out
+@njit(cache=True, inline="always")
+def _uniform(key: np.uint64, n: int, draw: int) -> float:  # pragma: no cover
+    """``link.uniform(key, n, draw)``: draw number ``draw`` of packet ``n``."""
+    z = _mix(key ^ _mix(((np.uint64(n) & _M48) << _U8) | np.uint64(draw)))
+    return (float(z >> _U11) + 0.5) * (1.0 / 9007199254740992.0)
 
 
 _A = (2.5090809287301226727e+3, 3.3430575583588128105e+4, 6.7265770927008700853e+4, 4.5921953931549871457e+4,
@@ -72,7 +75,8 @@ _F = (2.04426310338993978564e-15, 1.42151175831644588870e-7, 1.84631831751005468
       1.48753612908506148525e-2, 1.36929880922735805310e-1, 5.99832206555887937690e-1, 1.0)
 
 
-def _poly(c: tuple[float, ...], r: np.ndarray) -> np.ndarray:
+@njit(cache=True, inline="always")
+def _poly(c: tuple, r: float) -> float:  # pragma: no cover
     """Horner's rule in the order of statistics' AS241: (((c0 r + c1) r + c2) ... ) + c7."""
     v = c[0] * r + c[1]
     for k in c[2:]:
@@ -80,30 +84,82 @@ def _poly(c: tuple[float, ...], r: np.ndarray) -> np.ndarray:
     return v
 
 
-def normal_inv_cdf(p: np.ndarray, sigma: float) -> np.ndarray:
-    """``NormalDist(0, sigma).inv_cdf(p)`` elementwise, the same operations (Wichura's AS241) in the
-    same order; the tail's log is :func:`math.log` (numpy's differs in the last bit now and then)."""
+@njit(cache=True, inline="always")
+def _normal_inv_cdf(p: float, sigma: float) -> float:  # pragma: no cover
+    """``NormalDist(0, sigma).inv_cdf(p)``: the same operations (Wichura's AS241) in the same order."""
     q = p - 0.5
-    x = np.empty_like(p)
-    mid = np.abs(q) <= 0.425
-    qm = q[mid]
-    r = 0.180625 - qm * qm
-    x[mid] = (_poly(_A, r) * qm) / _poly(_B, r)
-    tail = ~mid
-    if tail.any():
-        qt = q[tail]
-        pt = p[tail]
-        r = np.where(qt <= 0.0, pt, 1.0 - pt)
-        r = np.sqrt(-np.array([math.log(v) for v in r.tolist()]))
-        xt = np.empty_like(r)
-        near = r <= 5.0
-        rn = r[near] - 1.6
-        xt[near] = _poly(_C, rn) / _poly(_D, rn)
-        rf = r[~near] - 5.0
-        xt[~near] = _poly(_E, rf) / _poly(_F, rf)
-        xt = np.where(qt < 0.0, -xt, xt)
-        x[tail] = xt
+    if abs(q) <= 0.425:
+        r = 0.180625 - q * q
+        x = (_poly(_A, r) * q) / _poly(_B, r)
+    else:
+        r = math.sqrt(-math.log(p if q <= 0.0 else 1.0 - p))
+        x = _poly(_C, r - 1.6) / _poly(_D, r - 1.6) if r <= 5.0 else _poly(_E, r - 5.0) / _poly(_F, r - 5.0)
+        x = -x if q < 0.0 else x
     return 0.0 + x * sigma
+
+
+@njit(cache=True, inline="always")
+def _jitter(kind: int, u: float, fp: np.ndarray) -> float:  # pragma: no cover
+    """A packet's jitter (s) from its uniform draw u: uniform in +-bound, or the bounded normal's inverse CDF."""
+    if kind == _UNIFORM:
+        return (2.0 * u - 1.0) * fp[BOUND_S]
+    x = _normal_inv_cdf(fp[_LO] + u * (fp[_HI] - fp[_LO]), fp[_SIGMA])
+    return min(max(x, -fp[BOUND_S]), fp[BOUND_S])
+
+
+@njit(cache=True, nogil=True)
+def draw_cell(key: np.uint64, ints: np.ndarray, fp: np.ndarray, count: int, lost: np.ndarray, jitter: np.ndarray,
+              held: np.ndarray, dup: np.ndarray, dup_jitter: np.ndarray) -> None:  # pragma: no cover
+    """The fates of packets 0..count-1 of one direction of one cell (:func:`fate_params`) into the first
+    ``count`` places of lost, jitter (s), held, dup and dup_jitter (s; 0 where no duplicate)."""
+    loss, jk = ints[0], ints[1]
+    bad = loss == _GILBERT and _uniform(key, 0, _D_GE_START) < fp[_LOSS]  # the chain starts stationary
+    for k in range(count):
+        if loss == _BERNOULLI:
+            lost[k] = _uniform(key, k, _D_LOSS) < fp[_LOSS]
+        elif loss == _GILBERT:  # a Markov chain, sequential in the packet number
+            u = _uniform(key, k, _D_LOSS)
+            bad = u >= fp[_GE_R] if bad else u < fp[_GE_P]
+            lost[k] = bad
+        else:
+            lost[k] = False
+        held[k] = fp[HOLD_P] > 0.0 and _uniform(key, k, _D_HOLD) < fp[HOLD_P]
+        dup[k] = fp[DUP_P] > 0.0 and _uniform(key, k, _D_DUP) < fp[DUP_P]
+        jitter[k] = _jitter(jk, _uniform(key, k, _D_JITTER), fp) if jk else 0.0
+        dup_jitter[k] = _jitter(jk, _uniform(key, k, _D_DUP_JITTER), fp) if jk and dup[k] else 0.0
+
+
+def fate_params(cfgs: Sequence[LinkConfig],
+                direction: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """What :func:`draw_cell` and the planner (bridge.link.plan_cell) take of one direction of each cell:
+    the stream keys [n] uint64, the loss and jitter kinds [n, 2], the float parameters [n, N_PARAMS] (loss
+    fraction, Gilbert-Elliott r and p, reorder and dup fractions, jitter sigma and bound s and the normal's
+    CDF at -+bound, delay s), the blackout windows [n, B, 2] (start, duration s) and their numbers [n]."""
+    n = len(cfgs)
+    keys = np.array([stream_key(c.seed, direction) for c in cfgs], dtype=np.uint64)
+    ints = np.zeros((n, 2), np.int64)
+    fp = np.zeros((n, N_PARAMS))
+    nb = np.array([len(c.blackouts) for c in cfgs], np.int64)
+    bo = np.zeros((n, max(1, int(nb.max()) if n else 1), 2))
+    for i, c in enumerate(cfgs):
+        L = c.loss_pct / 100.0
+        if c.burst_len >= 1.0 and 0.0 < L < 1.0:
+            ints[i, 0] = _GILBERT
+            fp[i, _GE_R] = 1.0 / c.burst_len
+            fp[i, _GE_P] = min(1.0, L * (1.0 / c.burst_len) / (1.0 - L))
+        elif c.loss_pct > 0.0:
+            ints[i, 0] = _BERNOULLI
+        fp[i, _LOSS] = L
+        fp[i, HOLD_P] = c.reorder_pct / 100.0
+        fp[i, DUP_P] = c.dup_pct / 100.0
+        bound, lo, hi = _jitter_params(c)
+        if bound > 0.0:
+            ints[i, 1] = _UNIFORM if c.jitter == "uniform" else _NORMAL
+            fp[i, _SIGMA], fp[i, BOUND_S], fp[i, _LO], fp[i, _HI] = c.jitter_ms / 1000.0, bound, lo, hi
+        fp[i, DELAY_S] = c.delay_ms / 1000.0
+        for w, (start, dur) in enumerate(c.blackouts):
+            bo[i, w] = start, dur
+    return keys, ints, fp, bo, nb
 
 
 @dataclass
@@ -115,9 +171,6 @@ class Fates:
     held: np.ndarray  # bool: held back past its successor
     dup: np.ndarray  # bool: a duplicate follows
     dup_jitter: np.ndarray  # s, the duplicate's
-    jittered: bool = True  # some cell's packets have jitter (else ``jitter`` is all zero)
-    reordered: bool = True  # some cell holds packets back (else ``held`` is all false)
-    duplicated: bool = True  # some cell duplicates (else ``dup`` is all false)
 
 
 def _jitter_params(cfg: LinkConfig) -> tuple[float, float, float]:
@@ -133,57 +186,14 @@ def _jitter_params(cfg: LinkConfig) -> tuple[float, float, float]:
     return b, nd.cdf(-b), nd.cdf(b)
 
 
-def _jitters(cfg: LinkConfig, u: np.ndarray, bound: float, lo: float, hi: float) -> np.ndarray:
-    if cfg.jitter == "uniform":
-        return (2.0 * u - 1.0) * bound
-    x = normal_inv_cdf(lo + u * (hi - lo), cfg.jitter_ms / 1000.0)
-    return np.clip(x, -bound, bound)
-
-
 def draw_fates(cfgs: Sequence[LinkConfig], direction: str, count: int) -> Fates:
-    """The fates :class:`~bridge.link.model.FateStream` gives packets 0..count-1 of ``direction``, per cell."""
+    """The fates :class:`~bridge.link.model.FateStream` gives packets 0..count-1 of ``direction``, per cell
+    (:func:`draw_cell`, cell by cell)."""
     n = len(cfgs)
-    lost = np.zeros((n, count), bool)
-    jitter = np.zeros((n, count))
-    held = np.zeros((n, count), bool)
-    dup = np.zeros((n, count), bool)
-    dup_jitter = np.zeros((n, count))
-    if count == 0:
-        return Fates(lost, jitter, held, dup, dup_jitter, False, False, False)
-    keys = np.array([stream_key(c.seed, direction) for c in cfgs], dtype=np.uint64)
-    ge = [i for i, c in enumerate(cfgs) if c.burst_len >= 1.0 and 0.0 < c.loss_pct / 100.0 < 1.0]
-    bern = [i for i, c in enumerate(cfgs) if c.loss_pct > 0.0 and i not in set(ge)]
-    if bern:
-        loss = np.array([cfgs[i].loss_pct / 100.0 for i in bern])
-        lost[bern] = uniforms(keys[bern], count, _D_LOSS) < loss[:, None]
-    if ge:
-        L = np.array([cfgs[i].loss_pct / 100.0 for i in ge])
-        r = np.array([1.0 / cfgs[i].burst_len for i in ge])
-        p = np.array([min(1.0, (cfgs[i].loss_pct / 100.0) * (1.0 / cfgs[i].burst_len)
-                          / (1.0 - cfgs[i].loss_pct / 100.0)) for i in ge])
-        u = uniforms(keys[ge], count, _D_LOSS)
-        bad = uniforms(keys[ge], 1, _D_GE_START)[:, 0] < L  # the chain starts in its stationary distribution
-        out = np.empty((len(ge), count), bool)
-        for k in range(count):  # a Markov chain: sequential in the packet number, vectorised over cells
-            uk = u[:, k]
-            bad = np.where(bad, uk >= r, uk < p)
-            out[:, k] = bad
-        lost[ge] = out
-    hold = [i for i, c in enumerate(cfgs) if c.reorder_pct > 0.0]
-    if hold:
-        h = np.array([cfgs[i].reorder_pct / 100.0 for i in hold])
-        held[hold] = uniforms(keys[hold], count, _D_HOLD) < h[:, None]
-    dups = [i for i, c in enumerate(cfgs) if c.dup_pct > 0.0]
-    if dups:
-        d = np.array([cfgs[i].dup_pct / 100.0 for i in dups])
-        dup[dups] = uniforms(keys[dups], count, _D_DUP) < d[:, None]
-    jittered = False
-    for i, c in enumerate(cfgs):
-        bound, lo, hi = _jitter_params(c)
-        if bound == 0.0:
-            continue
-        jittered = True
-        jitter[i] = _jitters(c, uniforms(keys[i:i + 1], count, _D_JITTER)[0], bound, lo, hi)
-        if dup[i].any():
-            dup_jitter[i] = _jitters(c, uniforms(keys[i:i + 1], count, _D_DUP_JITTER)[0], bound, lo, hi)
-    return Fates(lost, jitter, held, dup, dup_jitter, jittered, bool(hold), bool(dups))
+    out = Fates(np.zeros((n, count), bool), np.zeros((n, count)), np.zeros((n, count), bool),
+                np.zeros((n, count), bool), np.zeros((n, count)))
+    keys, ints, fp, _, _ = fate_params(cfgs, direction)
+    for i in range(n):
+        draw_cell(keys[i], ints[i], fp[i], count, out.lost[i], out.jitter[i], out.held[i], out.dup[i],
+                  out.dup_jitter[i])
+    return out
