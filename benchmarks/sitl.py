@@ -11,12 +11,16 @@ Measured in one run on this machine, each the median over ``--repeats``:
     processes, flight only: from the first to the last state the vehicle sent);
 (c) (b) / (a) and the lockstep real-time factor (b) / 250 Hz.
 
+(b) and (c) for each of ``--kernels`` (default ``plain,compiled``): the children's law and plant plain, or
+compiled by numba (``BSST_KERNELS``, bridge.core.scalar; the same bits), interleaved with the floors.
+
 Targets: (b) >= 50 % of (a) naive; stretch >= 20x real time.
 
 ``--profile DIR`` also runs the vehicle and the controller alone under cProfile for one
 lockstep sine flight and prints where each spends its time.
 
-    .venv/bin/python benchmarks/sitl.py [--repeats 3] [--trips 5000] [--profile DIR] [--json]
+    .venv/bin/python benchmarks/sitl.py [--repeats 3] [--trips 5000] [--kernels plain,compiled] [--profile DIR]
+        [--json]
 """
 
 from __future__ import annotations
@@ -139,14 +143,16 @@ def pingpong(mode: str, trips: int) -> float:
 
 
 # -- (b) lockstep SITL -----------------------------------------------------------------------------
-def lockstep_rate(mission: str) -> dict[str, float]:
-    """Flight step rate (steps/s) of one lockstep session, its session wall time, and the
-    median step split into its four legs, from both sides' wall-clock stamps (us)."""
+def lockstep_rate(mission: str, kernels: str = "plain") -> dict[str, float]:
+    """Flight step rate (steps/s) of one lockstep session (its children's ``kernels``: plain or compiled), its
+    session wall time, and the median step split into its four legs, from both sides' wall-clock stamps (us)."""
     import tempfile
 
+    from bridge.core.scalar import KERNELS_ENV
     from bridge.record.runlog import read_trace
     from bridge.session import sitl
 
+    os.environ[KERNELS_ENV] = kernels  # the children inherit it
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
         run = sitl(mission, out=Path(tmp) / "run", instance=None, plots=False)
@@ -215,6 +221,8 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--trips", type=int, default=5000)
     ap.add_argument("--mission", default=str(ROOT / "missions" / "sine.toml"))
+    ap.add_argument("--kernels", default="plain,compiled",
+                    help="the children's kernels to measure, comma-separated: plain, compiled (default both)")
     ap.add_argument("--profile", metavar="DIR", help="also profile both sides (cProfile files into DIR)")
     ap.add_argument("--json", action="store_true", help="print the figures as JSON")
     ap.add_argument("--echo", nargs=2, metavar=("MODE", "PORTFILE"), help=argparse.SUPPRESS)
@@ -222,28 +230,27 @@ def main() -> None:
     if args.echo:
         echo(*args.echo)
         return
-    naive, ours, steps = [], [], []
-    for _ in range(args.repeats):  # interleaved, so that a busy moment hits all three alike
+    kinds = [k.strip() for k in args.kernels.split(",") if k.strip()]
+    if not kinds or any(k not in ("plain", "compiled") for k in kinds):
+        ap.error("--kernels: a comma-separated list of plain, compiled")
+    naive, ours = [], []
+    steps: dict[str, list[dict[str, float]]] = {k: [] for k in kinds}
+    for _ in range(args.repeats):  # interleaved, so that a busy moment hits all of them alike
         naive.append(pingpong("naive", args.trips))
         ours.append(pingpong("endpoint", args.trips))
-        steps.append(lockstep_rate(args.mission))
+        for k in kinds:
+            steps[k].append(lockstep_rate(args.mission, k))
     a = statistics.median(naive)
     a2 = statistics.median(ours)
-    b = statistics.median(s["step_rate_hz"] for s in steps)
     res: dict[str, Any] = {
         "machine": f"{platform.machine()} {os.cpu_count()} cpu, Python {platform.python_version()}",
         "load_1min": os.getloadavg()[0],
         "a_pingpong_naive_rt_per_s": a,
         "a_pingpong_endpoint_rt_per_s": a2,
-        "b_lockstep_steps_per_s": b,
-        "c_ratio_b_over_a_naive": b / a,
-        "c_ratio_b_over_a_endpoint": b / a2,
-        "c_lockstep_real_time_factor": b / RATE_HZ,
-        "lockstep_session_wall_s": statistics.median(s["session_wall_s"] for s in steps),
-        "state_to_command_ms_p50": statistics.median(s["state_to_command_ms_p50"] for s in steps),
-        **{k: statistics.median(s[k] for s in steps) for k in LEGS + ("steps_over_1ms_share_of_time",)},
         "repeats": args.repeats,
+        "kernels": {k: _lockstep_figures(runs, a, a2) for k, runs in steps.items()},
     }
+    res.update(res["kernels"][kinds[0]])  # the first kernels' figures at the top level too (as before)
     if args.profile:
         res["profile_own_time_pct"] = profile(args.mission, Path(args.profile))
     if args.json:
@@ -252,17 +259,33 @@ def main() -> None:
     print(f"machine: {res['machine']}, load {res['load_1min']:.2f}, medians of {args.repeats}")
     print(f"(a) ping-pong floor, naive pymavlink (blocking recvfrom): {a:8.0f} round trips/s")
     print(f"    ping-pong floor, bridge.mavlink.endpoint (hot codec + poll):  {a2:8.0f} round trips/s")
-    print(f"(b) lockstep SITL, sine at 250 Hz:                        {b:8.0f} steps/s")
-    print(f"(c) (b)/(a) = {b / a:.2f} (naive), {b / a2:.2f} (endpoint);  lockstep real-time factor {b / RATE_HZ:.1f}x")
-    print(f"    whole session (start, fly 30 s, stop, summary): {res['lockstep_session_wall_s']:.2f} s wall;"
-          f" state-to-command p50 {res['state_to_command_ms_p50']:.3f} ms")
-    print("    median lockstep step, by leg (us): " + ", ".join(f"{k[:-3]} {res[k]:.0f}" for k in LEGS)
-          + f"; steps over 1 ms take {100 * res['steps_over_1ms_share_of_time']:.0f} % of the flight's wall time")
+    for k, r in res["kernels"].items():
+        b = r["b_lockstep_steps_per_s"]
+        print(f"(b) lockstep SITL, sine at 250 Hz, {k} kernels:           {b:8.0f} steps/s")
+        print(f"(c) (b)/(a) = {b / a:.2f} (naive), {b / a2:.2f} (endpoint);  lockstep real-time factor "
+              f"{b / RATE_HZ:.1f}x")
+        print(f"    whole session (start, fly 30 s, stop, summary): {r['lockstep_session_wall_s']:.2f} s wall;"
+              f" state-to-command p50 {r['state_to_command_ms_p50']:.3f} ms")
+        print("    median lockstep step, by leg (us): " + ", ".join(f"{x[:-3]} {r[x]:.0f}" for x in LEGS)
+              + f"; steps over 1 ms take {100 * r['steps_over_1ms_share_of_time']:.0f} % of the flight's wall time")
     for side, rows in res.get("profile_own_time_pct", {}).items():
         print(f"profile, {side} (own time %):")
         for name, pct in rows:
             print(f"    {pct:5.1f}  {name}")
 
+
+def _lockstep_figures(steps: list[dict[str, float]], a: float, a2: float) -> dict[str, float]:
+    """The medians of one kernels' lockstep sessions, and their ratios to the floors ``a`` (naive) and ``a2``."""
+    b = statistics.median(s["step_rate_hz"] for s in steps)
+    return {
+        "b_lockstep_steps_per_s": b,
+        "c_ratio_b_over_a_naive": b / a,
+        "c_ratio_b_over_a_endpoint": b / a2,
+        "c_lockstep_real_time_factor": b / RATE_HZ,
+        "lockstep_session_wall_s": statistics.median(s["session_wall_s"] for s in steps),
+        "state_to_command_ms_p50": statistics.median(s["state_to_command_ms_p50"] for s in steps),
+        **{k: statistics.median(s[k] for s in steps) for k in LEGS + ("steps_over_1ms_share_of_time",)},
+    }
 
 if __name__ == "__main__":
     main()

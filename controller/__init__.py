@@ -6,6 +6,7 @@
 - :mod:`controller.jets`         exact time derivatives by the chain rule
 - :mod:`controller.pid`          cascaded PID baseline
 - :mod:`controller.actuation`    wrench clamp or rotor allocation (inverse of eq. 4)
+- :mod:`controller.kernel`       the built-in BS-ST law's whole step (law, actuation, integrators) in one call
 - :mod:`controller.gains`        gains from TOML, eq. (23) check
 - :mod:`controller.nominal`      the law's nominal vehicle model
 - :mod:`controller.link_guard`   what to do with a state of a given age (track, hold, stop, re-arm)
@@ -21,11 +22,14 @@ Out: a :class:`Command`: the demanded and realisable wrench (N) and the normalis
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 from controller.actuation import MotorActuation, WrenchActuation, make_actuation
 from controller.bsst import BacksteppingSuperTwisting
 from controller.gains import Gains, gains_from_table
+from controller.kernel import Step, control_step
 from controller.law import BUILTIN, Law, LawFactory, make_law, resolve_law
 from controller.nominal import Nominal
 from controller.pid import CascadedPid
@@ -56,9 +60,46 @@ class Controller:
         self.nominal = nominal
         self.actuation = make_actuation(nominal)
         self.rate_hz = rate_hz
+        # the built-in BS-ST and SMC laws: the whole step in one call (controller.kernel), plain until
+        # :meth:`use_kernel` gives its compiled twin; the others: law.update, allocate, law.advance
+        self._kernel: Callable[..., Step] | None = None
+        self._args: tuple[Any, ...] = ()
+        law_ = self.law
+        if isinstance(law_, BacksteppingSuperTwisting):
+            n = nominal
+            alloc = _floats((*n.u_max, n.thrust_coeff, n.drag_coeff, n.omega_max, n.omega_max**2))
+            self._kernel = control_step
+            # floats throughout (a TOML integer would otherwise ask numba for a signature of its own; the plain
+            # arithmetic is the same either way)
+            self._args = (law_.sign, _floats(law_.constants), tuple(_floats(t) for t in law_.tables),
+                          _floats(law_._k2), _floats(law_._xi_max), float(law_.dt),
+                          isinstance(self.actuation, MotorActuation), alloc)
+
+    @property
+    def kernel_args(self) -> tuple[Any, ...]:
+        """The arguments of :attr:`kernel` after the state, reference, omega_d, xi and hold: the law's constants."""
+        return self._args
+
+    @property
+    def kernel(self) -> Callable[..., Step] | None:
+        """The one-call step of a built-in BS-ST law (:func:`controller.kernel.control_step` or its compiled
+        twin), or None (the generic path)."""
+        return self._kernel
+
+    def use_kernel(self, kernel: Callable[..., Step]) -> None:
+        """Step with ``kernel``, the compiled twin of :func:`controller.kernel.control_step` (bit for bit the
+        same results: bridge.core.scalarkernels); only where the law has the one-call step."""
+        if self._kernel is not None:
+            self._kernel = kernel
 
     def step(self, t: float, state: tuple[float, ...], ref: Sample, hold: bool = False) -> Command:
         """Compute the command for ``state`` at time t; ``hold`` freezes the integrators."""
+        kernel = self._kernel
+        if kernel is not None:
+            law, act = self.law, self.actuation
+            u, real, c, act.omega_d, law.xi, law.s, law.desired = kernel(  # type: ignore[attr-defined]
+                state, ref, act.omega_d, law.xi, hold, *self._args)  # type: ignore[attr-defined]
+            return Command(u, real, c)
         u = self.law.update(t, state, ref, self.actuation.omega_d)
         real, c, sat = self.actuation.allocate(u)
         self.law.advance(sat, hold)
@@ -66,6 +107,10 @@ class Controller:
 
     def reset(self) -> None:
         self.law.reset()
+
+
+def _floats(values: tuple[Any, ...]) -> tuple[float, ...]:
+    return tuple(float(v) for v in values)
 
 
 __all__ = [

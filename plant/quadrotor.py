@@ -22,10 +22,11 @@ advances one physics step. Commands are normalised and in the paper's frame:
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 from plant.battery import Battery
 from plant.effects import Effects, disturbance_at
-from plant.model import RigidBody, State, rigid_body, rk4_step_held, state_derivative
+from plant.model import RigidBody, State, rigid_body, rk4_held, state_derivative
 from plant.profiles import Profile
 from plant.rotors import (
     clip,
@@ -81,6 +82,9 @@ class Quadrotor:
             drag=profile.drag if e.drag or wind is not None else (0.0,) * 6,
         )
         self.dt = 1.0 / physics_hz
+        # one RK4 step with the inputs held: the plain function, or its compiled twin (bit for bit the same;
+        # bridge.core.scalarkernels.compile_scalar)
+        self.rk4: Callable[..., tuple[float, ...]] = rk4_held
         self.ground = ground
         self.t = 0.0
         self.state: State = tuple(float(v) for v in state)  # type: ignore[assignment]
@@ -142,7 +146,7 @@ class Quadrotor:
         """Advance one physics step (RK4 of eq. 6, command and rotor speeds held over the step).
 
         The same step as ``plant.integrate.rk4_step(self.derivative, ...)``, specialised
-        (:func:`plant.model.rk4_step_held`)."""
+        (:func:`plant.model.rk4_held`, or its compiled twin: :attr:`rk4`)."""
         t, h = self.t, self.dt
         if self.battery is not None:
             self._draw_battery(h)
@@ -155,11 +159,11 @@ class Quadrotor:
             ext = (disturbance_at(d, ph, t), mid, disturbance_at(d, ph, t + h))
         u1, u2, u3, u4 = self.realised
         if self.wind is None:
-            X = rk4_step_held(self.state, u1, u2, u3, u4, self._omega_d, self.body, h, ext)  # type: ignore[arg-type]
+            X = self.rk4(self.state, u1, u2, u3, u4, self._omega_d, self.body.constants, h, ext)
         else:  # the wind at the step's start, held over it; the turbulence then advances to the next step
             wx, wy, wz = self.wind.now(t)
-            X = rk4_step_held(self.state, u1, u2, u3, u4, self._omega_d, self.body, h, ext,  # type: ignore[arg-type]
-                              (wx, wy, wz, self.profile.rotor_drag))
+            X = self.rk4(self.state, u1, u2, u3, u4, self._omega_d, self.body.constants, h, ext,
+                         (wx, wy, wz, self.profile.rotor_drag))
             self.wind.advance()
         if self.ground and X[4] < 0.0:
             if self.impact is None:

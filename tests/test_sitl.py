@@ -87,6 +87,17 @@ def test_lockstep_is_deterministic(tmp_path):
     assert (tmp_path / "a" / "trace.csv").read_bytes() == (tmp_path / "b" / "trace.csv").read_bytes()
 
 
+def test_lockstep_with_compiled_kernels_is_the_plain_lockstep(tmp_path, monkeypatch):
+    """BSST_KERNELS=compiled (bridge.core.scalar, inherited by both children): the controller's law and the
+    vehicle's plant compiled, the trace byte for byte the plain one's."""
+    monkeypatch.setenv("BSST_KERNELS", "plain")
+    a = sitl(SHORT, out=tmp_path / "a", plots=False, instance=None)
+    monkeypatch.setenv("BSST_KERNELS", "compiled")
+    b = sitl(SHORT, out=tmp_path / "b", plots=False, instance=None)
+    assert a.outcome == b.outcome == "completed"
+    assert (tmp_path / "a" / "trace.csv").read_bytes() == (tmp_path / "b" / "trace.csv").read_bytes()
+
+
 def test_lockstep_x500_motors_match_offline(tmp_path):
     """Motors over HIL_ACTUATOR_CONTROLS (flags bit 0: lockstep) also match offline."""
     off = simulate(SHORT, profile="x500", plots=False)

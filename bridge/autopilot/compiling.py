@@ -27,6 +27,7 @@ from typing import Any, TextIO
 KERNELS = {  # package of kernels: what they are, in words, and how long compiling them takes on the 2-core VM, s
     "bridge.autopilot.ekfkernels": ("the EKF's kernels", 13.0),
     "bridge.batch": ("the batch engine's kernels", 12.0),
+    "bridge.core.scalarkernels": ("the controller's and the plant's kernels", 25.0),
 }
 
 _checked: set[str] = set()  # packages looked at in this process: each is announced at most once

@@ -35,6 +35,7 @@ from bridge.autopilot.params import (
     typed_value,
 )
 from bridge.autopilot.simvehicle import SimVehicle
+from bridge.core.scalar import compile_for, compiled_wanted
 from bridge.link.model import LinkConfig, LinkSettings, absolute_link_paths, link_from_table, merge_link_tables
 from controller import Controller, Gains, Nominal, gains_from_table
 from controller.law import LawFactory, resolve_law
@@ -83,8 +84,11 @@ class Flight:
         m = self.mission
         x, y, z, psi = m.start
         state = (x, 0.0, y, 0.0, z, 0.0, 0.0, 0.0, 0.0, 0.0, psi, 0.0)
-        return Quadrotor(self.profile, self.effects, seed=m.seed, physics_hz=m.physics_hz, state=state,
-                         wind=self.wind)
+        plant = Quadrotor(self.profile, self.effects, seed=m.seed, physics_hz=m.physics_hz, state=state,
+                          wind=self.wind)
+        if self.compiled:
+            compile_for(plant=plant)
+        return plant
 
     def make_vehicle(self, armed: bool = False) -> SimVehicle:
         plant = self.make_plant()
@@ -101,7 +105,15 @@ class Flight:
 
     def make_controller(self) -> Controller:
         m = self.mission
-        return Controller(self.law or m.controller, self.nominal, self.gains, m.rate_hz, m.discretization)
+        ctl = Controller(self.law or m.controller, self.nominal, self.gains, m.rate_hz, m.discretization)
+        if self.compiled:
+            compile_for(ctl=ctl)
+        return ctl
+
+    @property
+    def compiled(self) -> bool:
+        """Whether this flight's controller and plant fly compiled kernels (bridge.core.scalar)."""
+        return compiled_wanted(self.mission.duration_s * self.mission.rate_hz)
 
     @property
     def guard(self) -> GuardConfig:

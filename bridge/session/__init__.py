@@ -151,6 +151,9 @@ def sitl(
     if instance is not None:
         check_port_free(LINK_PORT + n, f"--instance {n}")
     compile_estimator(flight.estimator)  # a first EKF on this machine compiles here, not in the vehicle's start-up
+    if flight.compiled:  # the compiled law and plant (bridge.core.scalar) likewise: not in both children at once
+        flight.make_controller()
+        flight.make_plant()
     path = run_dir(out, flight.mission.name, overwrite) if keep else Path(tempfile.mkdtemp(prefix="bsst-sitl-"))
     try:
         s = Session(flight, path, realtime=realtime, instance=instance, gcs=gcs_text, speed=speed,

@@ -16,13 +16,15 @@ the wall clock (``free-running``), which the **realtime** clock is from the star
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from enum import Enum
+from typing import NamedTuple
 
 from bridge.core.clock import Pace
 
 
 class ClockState(Enum):
+    __hash__ = object.__hash__  # members are singletons: identity, in C (Enum's own hashes the name in Python)
+
     IDLE = "idle"  # lockstep clock, no flight on: time stands still, the state is still shown
     LOCKSTEP = "lockstep"  # a flight on: the state of step k is out, its answer awaited
     ANSWERED = "answered"  # the answer of step k is held: step k is flown next
@@ -31,6 +33,8 @@ class ClockState(Enum):
 
 
 class Trigger(Enum):
+    __hash__ = object.__hash__  # (as ClockState's: the table is looked up at every lockstep step)
+
     ENGAGE = "engage"  # armed in offboard control, or OFFBOARD again while armed (lockstep clock)
     ANSWER = "answer"  # the controller's answer to step k: a target or the no-target acknowledgement
     STEP = "step"  # step k flown with its answer
@@ -73,8 +77,7 @@ class IllegalTransition(RuntimeError):
     """A trigger the clock's table does not allow in its state (a bug, never a peer's doing)."""
 
 
-@dataclass(frozen=True)
-class Answer:
+class Answer(NamedTuple):
     """The controller's answer to step k: its actuator target on the wire (None: the no-target
     acknowledgement) and the wall time it came (s)."""
 

@@ -423,17 +423,20 @@ class Vehicle:
         if refused is not None:
             warning = mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_WARNING, refused.encode())
             self.announcer.to_links([warning])
+        nxt = min(self._next_heartbeat, now + HOUSEKEEPING_S)
         if self.gcs is not None and self.gcs.peer is not None:
             self.streams.send_due(now, lambda mid: self.gcs.send_many(self._message(mid)))
-        if self.link.peer is not None:
+            nxt = min(nxt, *self.streams.due.values())
+        if self.link.peer is not None and self.ctl_streams.due:
             with self.receiver.charged():
                 self.ctl_streams.send_due(now, lambda mid: self.link.send_many(self._message(mid)))
+            nxt = min(nxt, *self.ctl_streams.due.values())
         if self.rows is not None:
             self.rows.flush()
         if self.tlog is not None:
             self.tlog.flush()
-        nxt = min([self._next_heartbeat, now + HOUSEKEEPING_S, *self.streams.due.values(),
-                   *self.ctl_streams.due.values()])
+        # a table's streams count only while its link has someone to send them to (else they are never sent, and
+        # their stale due times would bring housekeeping back every millisecond, in the lockstep's way)
         self._next_house = max(nxt, now + 0.001)
 
     def _to_ground_stations(self, msgs: list[Any]) -> None:

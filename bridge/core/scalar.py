@@ -1,0 +1,44 @@
+"""Which kernels the scalar engine flies: the plain-float functions, or their numba-compiled twins.
+
+In:  the number of control steps a flight has (its mission's duration s times its rate Hz); the environment
+     variable ``BSST_KERNELS``: ``plain``, ``compiled`` or ``auto`` (unset: ``auto``)
+Out: whether to compile (:func:`compiled_wanted`), and a controller and a plant given their compiled twins
+     (:func:`compile_for`: bridge.core.scalarkernels, imported only then, numba with it)
+
+Both give the same bits (tests/test_kernels.py). A compiled call is faster (the BS-ST controller step ~4.6 us
+against ~21 us plain; an RK4 step ~2 us against ~7 us: ``benchmarks/offline.py``), but a process that uses
+them first pays numba's import and the cached kernels' load, ~1-2.5 s (docs/figures.md, "Compiled or plain"):
+~36 us saved per control step of a lockstep flight (controller and vehicle) pays that back only after about
+:data:`AUTO_STEPS` steps. So ``auto`` compiles for flights at least that long and flies the short ones (every
+shipped mission, the tests, ``make demo``) plain; ``compiled`` always (the SITL speed benchmark), ``plain``
+never. Only the built-in BS-ST and SMC laws have the one-call compiled step; ``pid`` and a user's own law
+stay plain (their plant is compiled all the same).
+"""
+
+from __future__ import annotations
+
+import os
+
+from controller import Controller
+from params import ConfigError
+from plant import Quadrotor
+
+KERNELS_ENV = "BSST_KERNELS"
+CHOICES = ("plain", "compiled", "auto")
+AUTO_STEPS = 60_000  # control steps from which ``auto`` compiles: 240 s at 250 Hz
+
+
+def compiled_wanted(steps: float) -> bool:
+    """Whether a flight of ``steps`` control steps flies the compiled kernels (module docstring); a
+    ``BSST_KERNELS`` that is none of :data:`CHOICES` is a ConfigError naming it."""
+    choice = os.environ.get(KERNELS_ENV, "auto").strip().lower() or "auto"
+    if choice not in CHOICES:
+        raise ConfigError(f"{KERNELS_ENV}={choice!r} (environment): must be one of {', '.join(CHOICES)}")
+    return choice == "compiled" or (choice == "auto" and steps >= AUTO_STEPS)
+
+
+def compile_for(ctl: Controller | None = None, plant: Quadrotor | None = None) -> None:
+    """Give ``ctl`` and ``plant`` their compiled kernels (:func:`bridge.core.scalarkernels.compile_scalar`)."""
+    from bridge.core.scalarkernels import compile_scalar  # numba's import (~1 s): only where compiled kernels fly
+
+    compile_scalar(ctl, plant)
