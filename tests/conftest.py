@@ -35,7 +35,7 @@ def _kernels_compiled(tmp_path_factory: pytest.TempPathFactory, worker_id: str) 
             KERNELS[kind]()
 
 
-@pytest.hookimpl(tryfirst=True)  # before pytest-xdist's own, which would make its loadscope scheduler
+@pytest.hookimpl(tryfirst=True, optionalhook=True)  # before pytest-xdist's own (which makes its loadscope one)
 def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object | None:
     """``--dist loadscope`` (pyproject.toml): the tests that share a module-scoped fixture on one worker,
     every other test on whichever worker is free (tests/scheduling.py says why)."""
