@@ -8,8 +8,9 @@ Out: :func:`scope_of`, the unit of work the test belongs to: the test alone, or,
      group of all the module's tests that do, so that one worker makes the fixture once;
      :class:`SharedFixtureScheduling`, pytest-xdist's ``loadscope`` scheduler with those units
 
-Why: with ``--dist load`` a module's tests go to whichever worker is free, so both workers set up each
-module-scoped fixture (measured: both did, for every such module); ``--dist loadfile`` (or pytest-xdist's own
+Why: ``--dist load`` hands tests out round-robin, then in chunks, whatever their module, so a module's tests
+may go to both workers and each then sets up its module-scoped fixture (a 40-test sample module: both did);
+``--dist loadfile`` (or pytest-xdist's own
 ``loadscope``) keeps each whole file on one worker, which leaves a worker idle while the other finishes a
 long file. Here only the tests that share a fixture are kept together: the groups go first (the largest
 first, pytest-xdist's ``--loadscope-reorder``), then every other test one at a time to the worker that is
