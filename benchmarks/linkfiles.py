@@ -85,7 +85,8 @@ def _tlogs(frames: int) -> tuple[bytes, bytes]:
 
 
 def bench_extract(frames: int) -> int:
-    from bridge.record.linkextract import extract_tlogs, parse_tlog
+    from bridge.record.linkextract import extract_tlogs
+    from bridge.record.tlogmatch import parse_tlog
 
     v, c = _tlogs(frames)
     fv, fc = parse_tlog(v, "vehicle.tlog"), parse_tlog(c, "controller.tlog")

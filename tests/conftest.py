@@ -33,3 +33,21 @@ def _kernels_compiled(tmp_path_factory: pytest.TempPathFactory, worker_id: str) 
         with open(shared / f"compile-{kind}.lock", "w") as lock:
             fcntl.flock(lock, fcntl.LOCK_EX)
             KERNELS[kind]()
+
+
+@pytest.hookimpl(tryfirst=True, optionalhook=True)  # before pytest-xdist's own (which makes its loadscope one)
+def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object | None:
+    """``--dist loadscope`` (pyproject.toml): the tests that share a module-scoped fixture on one worker,
+    every other test on whichever worker is free (tests/scheduling.py says why)."""
+    if config.getvalue("dist") != "loadscope":
+        return None
+    from tests.scheduling import SharedFixtureScheduling  # the controller only: xdist is not loaded without -n
+
+    return SharedFixtureScheduling(config, log)
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The tests that start processes or open sockets (``pytest.mark.process``: the long ones) first, the
+    pure ones after, each in its files' order: the workers end on many short tests, not on one long one.
+    Both workers sort alike (pytest-xdist requires one collection)."""
+    items.sort(key=lambda item: item.get_closest_marker("process") is None)

@@ -727,18 +727,27 @@ def _fly_noop(mission: Path, out: Path, when: str, mode: tuple[float, float, flo
     return rc, json.loads((out / "summary.json").read_text())
 
 
+@pytest.fixture(scope="module")
+def noop_ref(tmp_path_factory) -> tuple[Path, dict[str, Any], bytes]:
+    """NOOP_MISSION's file, and the summary and trace.csv of its flight with no ground station speaking:
+    the one reference of the three cases below."""
+    d = tmp_path_factory.mktemp("noop-ref")
+    mission = d / "m.toml"
+    mission.write_text(NOOP_MISSION)
+    ref = _fly(mission, d / "ref", None)
+    return mission, ref, (d / "ref" / "trace.csv").read_bytes()
+
+
 @pytest.mark.parametrize(("when", "mode"), [("armed", OFFBOARD_MODE), ("disarmed", HOLD_MODE),
                                             ("disarmed", OFFBOARD_MODE)], ids=["offboard-in-offboard",
                                                                                "hold-before-arming",
                                                                                "offboard-before-arming"])
-def test_a_mode_request_that_changes_nothing_is_no_takeover(tmp_path, when, mode):
+def test_a_mode_request_that_changes_nothing_is_no_takeover(noop_ref, tmp_path, when, mode):
     """Issue 22, defect 2, with real processes: a ground station's DO_SET_MODE OFFBOARD while the vehicle
     flies in OFFBOARD, or a mode selected while it is disarmed, before its controller arms it (which arms
     it in OFFBOARD), changes nothing: the trace is byte for byte the undisturbed run's, and the run says so
     (completed, ended by the mission, exit 0). Only an armed exit from OFFBOARD ends a flight."""
-    mission = tmp_path / "m.toml"
-    mission.write_text(NOOP_MISSION)
-    ref = _fly(mission, tmp_path / "ref", None)
+    mission, ref, ref_trace = noop_ref
     for attempt in range(3):  # disarmed: the selection races the controller's arm (both follow the first heartbeat)
         rc, run = _fly_noop(mission, tmp_path / "run", when, mode)
         modes = [e for e in run["events"] if e["kind"] == "mode"]
@@ -754,7 +763,7 @@ def test_a_mode_request_that_changes_nothing_is_no_takeover(tmp_path, when, mode
         assert "[by 255:190" in modes[0]["text"]
     assert (run["outcome"], run["ended_by"], rc) == ("completed", {"who": "mission", "how": "completed"}, 0), \
         (run["ended_by"], run["events"])
-    assert (tmp_path / "run" / "trace.csv").read_bytes() == (tmp_path / "ref" / "trace.csv").read_bytes()
+    assert (tmp_path / "run" / "trace.csv").read_bytes() == ref_trace
 
 
 # -- issue 22: the ground station's authority, as a property over whole lockstep flights --------------------

@@ -173,19 +173,28 @@ def test_any_datagram_leaves_the_vehicle_as_it_was_unless_valid(armed_vehicle, d
         v._arm_disarm(1.0, 0.0)
 
 
-def test_fuzz_during_a_lockstep_mission(tmp_path):
+FUZZED = Mission(Sine(), duration_s=8.0, name="fuzz")  # the lockstep mission both fuzzers fly
+
+
+@pytest.fixture(scope="module")
+def undisturbed(tmp_path_factory):
+    """:data:`FUZZED` flown in lockstep with nobody else speaking: the run, and its directory (trace.csv)."""
+    out = tmp_path_factory.mktemp("undisturbed") / "ref"
+    return sitl(FUZZED, out=out, plots=False, instance=None), out
+
+
+def test_fuzz_during_a_lockstep_mission(undisturbed, tmp_path):
     """30 000 hostile datagrams from 64 sources into the vehicle's controller link while it
     flies a lockstep mission: the trace is the undisturbed run's byte for byte, both
     processes stay up, and the refusals add up to what was sent (the benchmark sends 10^6)."""
-    mission = Mission(Sine(), duration_s=8.0, name="fuzz")
-    ref = sitl(mission, out=tmp_path / "ref", plots=False, instance=None)
+    mission, (ref, ref_dir) = FUZZED, undisturbed
     assert ref.outcome == "completed" and ref.summary["link"]["rejected"] == {}
     f = fly_fuzzed(mission, tmp_path / "fuzz", FUZZ_DATAGRAMS)
     assert f.flown < mission.steps, "the mission ended before the fuzz did: fly longer"
     s = f.run.summary
     assert s["outcome"] == "completed" and s["sitl"]["died"] is None
     assert s["sitl"]["vehicle_exit"] == s["sitl"]["controller_exit"] == "exited with status 0"
-    assert (tmp_path / "fuzz" / "trace.csv").read_bytes() == (tmp_path / "ref" / "trace.csv").read_bytes()
+    assert (tmp_path / "fuzz" / "trace.csv").read_bytes() == (ref_dir / "trace.csv").read_bytes()
     assert f.drops == 0, f"the kernel dropped {f.drops} datagrams: the count cannot add up"
     link = s["link"]
     by_vehicle = link["rejected_by"]["vehicle"]
@@ -216,7 +225,7 @@ def test_a_flood_from_another_source_is_shed_and_the_flight_holds(tmp_path):
     assert by["controller"] == {}  # the flood never reached it
 
 
-def test_valid_frames_of_every_message_id_from_strangers_and_a_gcs_change_nothing(tmp_path):
+def test_valid_frames_of_every_message_id_from_strangers_and_a_gcs_change_nothing(undisturbed, tmp_path):
     """The command surface (issue 11; benchmarks/fuzz.py --commands sends 10^5): 3000 valid
     pymavlink frames, message ids of the whole common dialect in turn and commands the vehicle
     acts on, every field random or extreme, from strangers to the controller link and from the
@@ -225,11 +234,10 @@ def test_valid_frames_of_every_message_id_from_strangers_and_a_gcs_change_nothin
     GCS frame the vehicle handles is refused or answered, and no safety policy is violated."""
     from benchmarks.fuzz import command_checks, fly_commands  # the benchmark's fuzzer: one copy of it
 
-    mission = Mission(Sine(), duration_s=8.0, name="cmdfuzz")
-    ref = sitl(mission, out=tmp_path / "ref", plots=False, instance=None)
+    mission, (ref, ref_dir) = FUZZED, undisturbed
     assert ref.outcome == "completed"
     f = fly_commands(mission, tmp_path / "cmd", 3000, speed=2.0)
-    res = command_checks(f, tmp_path / "ref" / "trace.csv", mission.steps)
+    res = command_checks(f, ref_dir / "trace.csv", mission.steps)
     assert res["done_before_mission_end"], "the mission ended before the fuzz did: fly longer"
     assert {c.msgname for c in mavlink.mavlink_map.values()} <= set(f.fuzz.sent), "not every message id was sent"
     assert res["outcome"] == "completed" and res["trace_identical"], res

@@ -1,4 +1,4 @@
-"""Covers bridge.link.trace, bridge.link.fit, bridge.link.profile and bridge.record.linkextract.
+"""Covers bridge.link.trace, bridge.link.fit, bridge.link.profile, bridge.record.linkextract, bridge.record.tlogmatch.
 
 Real links, replayed: measured traces in every clock, extracted from run directories and tlogs,
 fitted to the model, and the named profiles (issue 15; docs/links.md).
@@ -36,7 +36,8 @@ from bridge.link.profile import PROFILE_DIR, load_link_profile, profile_names
 from bridge.link.trace import DirectionTrace, Records, Replay, make_records, parse_trace, read_trace, trace_text
 from bridge.loop import simulate
 from bridge.nodes.relay import Relay
-from bridge.record.linkextract import extract_tlogs, parse_tlog
+from bridge.record.linkextract import extract_tlogs
+from bridge.record.tlogmatch import parse_tlog
 from bridge.session import instance_slot, sitl
 from bridge.session.children import check_port_free
 from missions import Mission, Sine

@@ -1,7 +1,9 @@
 """Covers bridge.sweep, bridge.cli and bridge.autopilot.compiling: what a new user meets first (issue 23).
 
 - the README's Python example, verbatim, saved as a script (``python example.py``) and typed into
-  ``python -i``: it flies, its sweep's cells are measured, nothing errors;
+  ``python -i``: it flies, its sweep's cells are measured, nothing errors (typed in, the same code
+  reads a 3-second ``missions/sine.toml``: what that test adds is how the code arrives, an interactive
+  ``__main__`` the sweep's workers cannot import, not a second 30-second flight and 12 cells of it);
 - a script that starts a sweep's pool without the ``if __name__ == "__main__":`` guard fails at
   once, naming the guard (its workers used to re-run the script and come back as 'error' rows, exit 0);
 - a sweep whose every cell failed never passes for a result: ``bsst sweep`` exits 1 with a line
@@ -23,6 +25,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import tomllib
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -75,6 +78,14 @@ def user_dir(tmp_path: Path) -> Path:
     return tmp_path
 
 
+def short_sine(cwd: Path) -> None:
+    """The user directory's ``missions/sine.toml`` flown for 3 s, not 30 (every other key as shipped)."""
+    sine = cwd / "missions" / "sine.toml"
+    text = sine.read_text(encoding="utf-8")
+    assert "\nduration_s = 30.0\n" in text, "missions/sine.toml no longer says duration_s = 30.0"
+    sine.write_text(text.replace("\nduration_s = 30.0\n", "\nduration_s = 3.0\n"), encoding="utf-8")
+
+
 def run_python(args: list[str], cwd: Path, stdin: str | None = None, timeout: float = 600.0,
                extra_env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, *args], cwd=cwd, input=stdin, capture_output=True, text=True,
@@ -121,6 +132,7 @@ def test_the_readmes_python_example_runs_verbatim_as_a_script(tmp_path: Path) ->
 
 def test_the_readmes_python_example_runs_as_typed_into_python_i(tmp_path: Path) -> None:
     cwd = user_dir(tmp_path)
+    short_sine(cwd)
     # typed in: the example, Enter on an empty line to end its block, then a look at what it made
     typed = readme_python() + "\nprint('ERRORS', [r['error'] for r in rows if r['outcome'] == 'error'], len(rows))\n"
     with instance(1):
@@ -129,6 +141,8 @@ def test_the_readmes_python_example_runs_as_typed_into_python_i(tmp_path: Path) 
     assert_clean(proc)
     assert "ERRORS [] 12" in proc.stdout, proc.stdout[-2000:] + proc.stderr[-2000:]
     assert (cwd / "runs" / "rt" / "summary.json").is_file()
+    flown = tomllib.loads((cwd / "runs" / "rt" / "mission.toml").read_text(encoding="utf-8"))
+    assert flown["duration_s"] == 3.0, flown
 
 
 # -- a script without the main guard ---------------------------------------------------------------------

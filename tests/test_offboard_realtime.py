@@ -40,6 +40,9 @@ LATE = set(range(12, 72, 6))  # steps whose state is sent LATE_S after its time
 # phase-locks on the first five), 33 one in flight
 DROPPED = {5, 6, 33}
 WAY_DOWN_S = 0.030  # every state is sent this long after the time it carries (its way down)
+# a state this process sent later than it meant to by more than this (its own scheduling on a loaded machine:
+# measured 11-35 ms at load 8) may miss even a waiting tick (half a period from a state LATE_S late): not judged
+HICCUP_S = PERIOD / 2 - LATE_S
 MISSION = 'name = "late"\nduration_s = 1.4\nrate_hz = 50\n[trajectory]\nkind = "sine"\n'
 HOVER = (0.0,) * 12
 
@@ -128,6 +131,7 @@ class Flown:
     run: Path  # the controller's run directory
     lines: list[str]  # the controller's status lines
     arm_to_target_s: float  # from the first ARM (armed, answers lost) to the first target
+    sent_late: dict[int, float]  # per step streamed: how much later than meant its state left this process, s
 
 
 def fly(tmp: Path, timesync_skew_s: float = 0.0, spoofs: dict[int, int] | None = None) -> Flown:
@@ -137,6 +141,7 @@ def fly(tmp: Path, timesync_skew_s: float = 0.0, spoofs: dict[int, int] | None =
     state of step i, another one stamped ``spoofs[i]`` us, from the vehicle's own socket."""
     (tmp / "late.toml").write_text(MISSION)
     v = ScriptedVehicle(timesync_skew_s)
+    sent_late: dict[int, float] = {}
     ctl = Proc.bsst("controller", str(tmp / "late.toml"), "--realtime", "--vehicle", f"127.0.0.1:{v.port}",
                     "--out", str(tmp / "run"), "--timeout", "20")
     try:
@@ -152,9 +157,11 @@ def fly(tmp: Path, timesync_skew_s: float = 0.0, spoofs: dict[int, int] | None =
         while not v.disarmed:  # stream until the mission's end lands us (1.4 s of steps)
             assert k - k_first < 5 * RATE and ctl.p.poll() is None, f"no disarm after {k - k_first} steps"
             i = k - k_first
-            v.until(v.v0 + k * PERIOD + WAY_DOWN_S + (LATE_S if i in LATE else 0.0))
+            due = v.v0 + k * PERIOD + WAY_DOWN_S + (LATE_S if i in LATE else 0.0)
+            v.until(due)
             if i not in DROPPED:
                 v.odometry(k)
+                sent_late[i] = time.monotonic() - due
             if spoofs and i in spoofs:
                 v.odometry(k, spoofs[i])
             if k % 5 == 0:
@@ -167,7 +174,7 @@ def fly(tmp: Path, timesync_skew_s: float = 0.0, spoofs: dict[int, int] | None =
     # steps renumbered from the first one streamed, as LATE and DROPPED count them
     targets = Counter({(usec - step_usec(k_first, RATE)) // step_usec(1, RATE): n for usec, n in v.targets.items()})
     assert v.first_arm is not None and v.first_target is not None
-    return Flown(targets, range(k - k_first), tmp / "run", ctl.lines, v.first_target - v.first_arm)
+    return Flown(targets, range(k - k_first), tmp / "run", ctl.lines, v.first_target - v.first_arm, sent_late)
 
 
 @pytest.fixture(scope="module")
@@ -184,17 +191,21 @@ def controller_ages(run: Path) -> np.ndarray:
 
 
 def test_a_late_state_is_waited_for_and_a_lost_one_costs_one_tick(flown: Flown) -> None:
+    """Judged on the states this process sent when it meant to (within :data:`HICCUP_S`): on a loaded
+    machine it sends some later, and the controller cannot answer a state that comes after its tick gave up."""
     k = len(flown.steps)
     answered = {s for s in range(k) if flown.targets[s]}
-    flown = [s for s in range(min(answered), max(answered) + 1)]
-    late = LATE & set(flown)
+    steps = range(min(answered), max(answered) + 1)
+    meant = {s for s in steps if flown.sent_late.get(s, 0.0) <= HICCUP_S}  # DROPPED: never sent, so as meant
+    late = LATE & set(steps)
     assert len(late) >= 7, (sorted(late), min(answered))
     # each late state is answered with its own stamp (at most one lost to a machine hiccup)
-    assert len(late - answered) <= 1, sorted(late - answered)
+    assert len((late & meant) - answered) <= 1, sorted((late & meant) - answered)
     for s in DROPPED - {d - 1 for d in DROPPED}:  # a lost state's tick waited in vain; the next is answered
-        assert s + 1 in answered, sorted(a for a in answered if abs(a - s) < 5)
-    on_time = [s for s in flown if s not in LATE | DROPPED]
-    assert sum(s in answered for s in on_time) >= len(on_time) - 2
+        assert s + 1 in answered or s + 1 not in meant, sorted(a for a in answered if abs(a - s) < 5)
+    on_time = [s for s in steps if s not in LATE | DROPPED and s in meant]
+    assert len(on_time) >= 20, f"{len(steps) - len(meant)} of {len(steps)} states left this process late: too few"
+    assert sum(s in answered for s in on_time) >= len(on_time) - 2, sorted(set(on_time) - answered)
 
 
 def test_the_state_age_counts_its_way_down(flown: Flown) -> None:

@@ -1,4 +1,4 @@
-"""Covers tests and tests.waiting: the suite's own layout, so that a newcomer can find their way in it.
+"""Covers tests, tests.waiting and tests.scheduling: the suite's own layout, so a newcomer can find their way.
 
 - every ``tests/test_*.py`` opens with a docstring whose first line names what it covers:
   ``Covers bridge.link.model: ...`` (modules or packages of the project, each of which exists);
@@ -6,7 +6,10 @@
   (``make test-fast`` runs the others: ``pytest -m "not process"``); one without the marker neither
   imports what does (:data:`PROCESS_IMPORTS`, the kits ``tests/sitlkit.py`` and ``tests/hostile.py``,
   a marked test module) nor runs a ``bsst`` command that starts processes (:data:`PROCESS_COMMANDS`);
-- :func:`tests.waiting.wait_for` waits, and fails naming what it waited for.
+- :func:`tests.waiting.wait_for` waits, and fails naming what it waited for;
+- the tests that share a module-scoped fixture are one unit of work for pytest-xdist
+  (:func:`tests.scheduling.scope_of`), so that one worker makes the fixture once; every other test is a
+  unit of its own; the cheap fixtures left out of it are module-scoped fixtures that exist.
 
 Checked with ``ast`` on each file's source, and shown failing on broken samples.
 """
@@ -20,6 +23,7 @@ from pathlib import Path
 
 import pytest
 
+from tests.scheduling import CHEAP, scope_of, shared_groups
 from tests.waiting import wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -161,3 +165,56 @@ def test_wait_for_returns_once_the_predicate_holds_and_names_what_never_came() -
     assert time.monotonic() >= due
     with pytest.raises(AssertionError, match=r"^the impossible: not within 0.05 s$"):
         wait_for(lambda: False, 0.05, "the impossible")
+
+
+SHARING = '''
+import pytest
+
+@pytest.fixture(scope="module")
+def flight(tmp_path_factory):
+    return 1
+
+@pytest.fixture(scope="module")
+def sweep():
+    return 2
+
+@pytest.fixture
+def trace(flight, tmp_path):
+    return flight
+
+@pytest.fixture(scope="module")
+def cheap():
+    return 3
+
+def test_a(flight): pass
+def test_b(trace, tmp_path): pass
+def test_c(tmp_path): pass
+def test_d(sweep): pass
+def test_e(sweep, cheap): pass
+def test_f(cheap): pass
+'''
+
+
+def test_the_tests_sharing_a_module_fixture_are_one_unit_of_work() -> None:
+    groups = shared_groups(SHARING, "tests/test_x.py")
+    assert groups == {"test_a": "flight", "test_b": "flight", "test_d": "cheap+sweep", "test_e": "cheap+sweep",
+                      "test_f": "cheap+sweep"}, groups
+    assert shared_groups(SHARING.replace("def test_e(sweep, cheap)", "def test_e(sweep)"), "tests/test_x.py") == {
+        "test_a": "flight", "test_b": "flight", "test_d": "sweep", "test_e": "sweep", "test_f": "cheap"}
+    CHEAP[("tests/test_x.py", "cheap")] = "for this test"
+    try:
+        assert "test_f" not in shared_groups(SHARING, "tests/test_x.py")
+    finally:
+        del CHEAP[("tests/test_x.py", "cheap")]
+    # in the suite: a flight several tests read, and a test that shares nothing
+    shared = scope_of("tests/test_mission_end.py::test_offline_sine_ends_landed_and_disarmed")
+    assert shared == scope_of("tests/test_mission_end.py::test_lockstep_sine_lands_as_offline_to_the_bit") != \
+        "tests/test_mission_end.py::test_offline_sine_ends_landed_and_disarmed"
+    alone = "tests/test_link_trace.py::test_every_bad_row_is_named_by_file_and_line[x]"
+    assert scope_of(alone) == alone
+
+
+def test_the_cheap_fixtures_left_unshared_are_module_fixtures_that_exist() -> None:
+    for (path, name), why in CHEAP.items():
+        source = (ROOT / path).read_text()
+        assert re.search(rf'@pytest\.fixture\(scope="module"\)\ndef {name}\(', source), (path, name, why)

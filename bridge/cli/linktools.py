@@ -71,8 +71,9 @@ def cmd_link_extract(args: argparse.Namespace) -> int:
     """``bsst link extract``: write the trace, print each direction's figures."""
     from pathlib import Path  # lazy: with the command
 
-    from bridge.record.linkextract import extract_run_dir, extract_tlogs, extraction_text, read_tlog  # lazy
+    from bridge.record.linkextract import extract_run_dir, extract_tlogs, extraction_text  # lazy
     from bridge.record.runlog import write_text_atomic  # lazy: start-up time
+    from bridge.record.tlogmatch import read_tlog  # lazy
 
     src = args.source
     if len(src) not in (1, 2):

@@ -9,5 +9,6 @@
 - :mod:`bridge.record.policies` the safety policies checked over every run
 - :mod:`bridge.record.plots`    the paper-style figures
 - :mod:`bridge.record.linkextract`  a link's trace from a run directory or two tlogs
+- :mod:`bridge.record.tlogmatch`    tlog frames, and one link's packets matched between its two ends
 - :mod:`bridge.record.linkplots`    a link trace's figure
 """
