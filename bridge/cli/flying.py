@@ -46,13 +46,18 @@ def add_sim_command(sub: Any) -> None:
     add_flight_options(p)
     add_sensor_options(p)
     add_link_options(p)
+    add_fleet_options(p)
+    p.set_defaults(func=cmd_sim)
+
+
+def add_fleet_options(p: argparse.ArgumentParser) -> None:
+    """``--vehicles N --formation KIND:METRES`` of ``bsst sim`` and ``bsst sitl`` (docs/swarm.md)."""
     g = p.add_argument_group("several vehicles (docs/swarm.md)")
     g.add_argument("--vehicles", type=fleet_size, metavar="N",
                    help="fly N vehicles (system ids 1..N), laid out by --formation, each with its own law and link")
     g.add_argument("--formation", metavar="KIND:METRES",
                    help="line:SPACING (along y), grid:SPACING or circle:RADIUS about the mission's trajectory "
                         "(default line:2)")
-    p.set_defaults(func=cmd_sim)
 
 
 def fleet_size(text: str) -> int:
@@ -238,16 +243,19 @@ def add_sitl_commands(sub: Any) -> None:
     add_sensor_options(p)
     add_port_options(p, vehicle=False)
     add_link_options(p)
+    add_fleet_options(p)
     p.set_defaults(func=cmd_sitl)
 
 
 
 def cmd_sitl(args: argparse.Namespace) -> int:
-    from bridge.session import sitl  # lazy: start-up time
+    from bridge.swarm import sitl  # lazy: start-up time
 
     run = sitl(args.mission, out=args.out, write=True, overwrite=args.overwrite, plots=not args.no_plots,
                realtime=args.realtime, instance=args.instance, gcs=args.gcs, speed=args.speed, live=True,
-               key=args.key, overrides=overrides_from_args(args))
+               key=args.key, overrides=overrides_from_args(args), vehicles=args.vehicles, formation=args.formation)
+    if "vehicles" in run.summary:
+        return report_fleet(run, "sitl")
     return report_run(run, "sitl")
 
 
