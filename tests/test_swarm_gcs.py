@@ -4,14 +4,18 @@ Real processes: ``bridge.swarm.sitl`` flies three vehicles (a vehicle and a cont
 ground-station links all go to one UDP port, where a pymavlink ground station (sysid 255) listens. It sees
 HEARTBEATs from systems 1, 2 and 3, reads a parameter of each by its ``target_system`` (only that system
 answers), and a disarm (COMMAND_LONG to system 3, sent to every vehicle as a MAVLink router would) disarms
-system 3 alone: 1 and 2 fly their missions to the end. And, without processes, the vehicle's authority refuses
+system 3 alone: 1 and 2 fly their missions to the end. The same with MAVSDK's native binding (one ``System``
+per vehicle, ``Action.kill`` on system 3). And, without processes, the vehicle's authority refuses
 every kind of message a ground station addresses to another system (``target``), and takes its own and
 broadcasts.
 """
 
 from __future__ import annotations
 
+import json
 import socket
+import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -26,6 +30,7 @@ from bridge.nodes.vehicle.config import VehicleConfig
 from bridge.session.children import free_udp_port
 from bridge.swarm import sitl
 from missions import MISSION_DIR
+from tests.sitlkit import ENV
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes, opens sockets
@@ -74,22 +79,40 @@ class Station:
                 and all(getattr(m, k) == v for k, v in fields.items())]
 
 
-def test_one_ground_station_sees_three_vehicles_reads_each_and_disarms_only_system_3(tmp_path: Path) -> None:
-    port = free_udp_port()
-    gcs = Station(port)
+def _fly_fleet(tmp_path: Path, port: int, seconds: float) -> tuple[threading.Thread, dict[str, Any]]:
+    """Three vehicles of the sine in lockstep at real time's pace, their GCS links to ``port``, in a thread."""
     mission = tmp_path / "sine.toml"
-    mission.write_text((MISSION_DIR / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 12.0"))
+    mission.write_text((MISSION_DIR / "sine.toml").read_text().replace("duration_s = 30.0",
+                                                                      f"duration_s = {seconds}"))
     result: dict[str, Any] = {}
 
     def fly() -> None:
         try:
             result["run"] = sitl(mission, vehicles=3, formation="line:2", instance=None, gcs=f"127.0.0.1:{port}",
                                  speed=1.0, out=tmp_path / "run", plots=False)
-        except BaseException as exc:  # noqa: BLE001  (named by the assertion below)
+        except BaseException as exc:  # noqa: BLE001  (named by the caller's assertion)
             result["error"] = exc
 
     flight = threading.Thread(target=fly, daemon=True)
     flight.start()
+    return flight, result
+
+
+def _only_three_disarmed(result: dict[str, Any], port: int) -> None:
+    """The fleet's summary: 1 and 2 completed, 3 ended by the ground station's disarm."""
+    assert "error" not in result, result.get("error")
+    s = result["run"].summary
+    by_id = {v["id"]: v for v in s["vehicles"]}
+    assert by_id[1]["outcome"] == by_id[2]["outcome"] == "completed" and by_id[1]["ok"] and by_id[2]["ok"]
+    assert by_id[3]["outcome"] != "completed" and not by_id[3]["ok"]
+    assert "255" in str(by_id[3]["ended_by"]) or "245" in str(by_id[3]["ended_by"]), by_id[3]["ended_by"]
+    assert s["sitl"]["gcs"] == f"127.0.0.1:{port}"
+
+
+def test_one_ground_station_sees_three_vehicles_reads_each_and_disarms_only_system_3(tmp_path: Path) -> None:
+    port = free_udp_port()
+    gcs = Station(port)
+    flight, result = _fly_fleet(tmp_path, port, 12.0)
     try:
         def all_armed() -> bool:
             gcs.pump()
@@ -125,13 +148,58 @@ def test_one_ground_station_sees_three_vehicles_reads_each_and_disarms_only_syst
     finally:
         flight.join(180)
         gcs.sock.close()
-    assert "error" not in result, result.get("error")
-    s = result["run"].summary
-    by_id = {v["id"]: v for v in s["vehicles"]}
-    assert by_id[1]["outcome"] == by_id[2]["outcome"] == "completed" and by_id[1]["ok"] and by_id[2]["ok"]
-    assert by_id[3]["outcome"] != "completed" and not by_id[3]["ok"]
-    assert "255" in str(by_id[3]["ended_by"]), by_id[3]["ended_by"]  # the ground station's disarm ended it
-    assert s["sitl"]["gcs"] == f"127.0.0.1:{port}"
+    _only_three_disarmed(result, port)
+
+
+MAVSDK_SCRIPT = r"""
+import json, sys, time
+from mavsdk import Mavsdk, Configuration, ComponentType
+from mavsdk.plugins.action import Action
+from mavsdk.plugins.param import Param
+from mavsdk.plugins.telemetry import Telemetry
+
+sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+sdk.add_any_connection(sys.argv[1])
+out = {}
+def until(pred, timeout):
+    deadline = time.monotonic() + timeout
+    while not pred():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.05)
+    return True
+out["three_found"] = until(lambda: sum(s.has_autopilot() for s in sdk.get_systems()) >= 3, 90)
+by = {s.get_system_id(): s for s in sdk.get_systems() if s.has_autopilot()}
+out["ids"] = sorted(by)
+out["MAV_SYS_ID"] = {str(i): Param(s).get_param_int("MAV_SYS_ID") for i, s in by.items()}
+tel = {i: Telemetry(s) for i, s in by.items()}
+out["all_armed"] = until(lambda: all(t.armed() for t in tel.values()), 30)
+out["kill_3"] = Action(by[3]).kill().name
+out["three_disarmed"] = until(lambda: not tel[3].armed(), 20)
+out["armed_after"] = {str(i): t.armed() for i, t in tel.items()}
+print("RESULT " + json.dumps(out), flush=True)
+sdk.destroy()
+"""
+
+
+def test_mavsdk_sees_three_systems_on_one_port_reads_each_and_kills_only_system_3(tmp_path: Path) -> None:
+    """MAVSDK's native binding, one ``System`` per vehicle on the one port: ids 1-3, each one's MAV_SYS_ID read
+    through its own System, and ``Action.kill`` (a forced disarm) on system 3 disarms only 3."""
+    port = free_udp_port()
+    flight, result = _fly_fleet(tmp_path, port, 20.0)
+    try:
+        r = subprocess.run([sys.executable, "-c", MAVSDK_SCRIPT, f"udpin://127.0.0.1:{port}"], capture_output=True,
+                           text=True, timeout=240, env=ENV)
+    finally:
+        flight.join(240)
+    lines = [ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")]
+    assert lines, f"MAVSDK script failed (exit {r.returncode}):\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
+    out = json.loads(lines[0][len("RESULT "):])
+    assert out["three_found"] and out["ids"] == [1, 2, 3], out
+    assert out["MAV_SYS_ID"] == {"1": 1, "2": 2, "3": 3}, out
+    assert out["all_armed"] and out["kill_3"] == "SUCCESS" and out["three_disarmed"], out
+    assert out["armed_after"] == {"1": True, "2": True, "3": False}, out
+    _only_three_disarmed(result, port)
 
 
 def _addressed(kind: str, target: int) -> Any:
