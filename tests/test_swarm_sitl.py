@@ -10,6 +10,8 @@ flights went on past it (the vehicles share no clock). The records have the offl
 from __future__ import annotations
 
 import json
+import signal
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +22,8 @@ from bridge.cli.flying import report_fleet
 from bridge.swarm import CONTINUED, FleetRun, Watch, judge_traces, simulate, sitl
 from missions import MISSION_DIR
 from params import ConfigError
+from tests.sitlkit import Proc, csv_rows
+from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes
 
@@ -99,3 +103,27 @@ def test_a_fleet_past_the_last_instance_is_refused_before_anything_starts(tmp_pa
     assert main(["sitl", str(short_sine(tmp_path)), "--vehicles", "4", "--instance", "7", "--out",
                  str(tmp_path / "no")]) == 2
     assert "instances are 0-9" in capsys.readouterr().err and not (tmp_path / "no").exists()
+
+
+FLY = ("import sys; from bridge.swarm import sitl; from bridge.cli.flying import report_fleet; "
+       "r = sitl(sys.argv[1], vehicles=2, instance=None, out=sys.argv[2], plots=False); "
+       "sys.exit(report_fleet(r, 'sitl'))")
+
+
+def test_ctrl_c_stops_every_pair_and_each_summary_says_aborted(tmp_path: Path) -> None:
+    run = tmp_path / "run"
+    p = Proc([sys.executable, "-c", FLY, str(short_sine(tmp_path, 30.0)), str(run)], cwd=ROOT)
+    try:
+        wait_for(lambda: all(csv_rows(run / f"vehicle-{i}" / "trace.csv") > 250 for i in (1, 2)), 90,
+                 "a second of flight of both vehicles")
+        p.p.send_signal(signal.SIGINT)
+        p.p.wait(timeout=30)
+    finally:
+        p.stop()
+    assert p.p.returncode == 1, p.lines[-20:]
+    s = json.loads((run / "summary.json").read_text())
+    assert s["outcome"] == "aborted" and [v["outcome"] for v in s["vehicles"]] == ["aborted", "aborted"]
+    for i in (1, 2):
+        own = json.loads((run / f"vehicle-{i}" / "summary.json").read_text())
+        assert own["ended_by"]["who"] == "user"
+        assert csv_rows(run / f"vehicle-{i}" / "trace.csv") < 30 * 250
