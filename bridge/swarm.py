@@ -310,11 +310,12 @@ CONTINUED = ("the flights continued past the contact: under bsst sitl each vehic
              "controller, the vehicles share no clock, so nothing stopped them at it (docs/swarm.md)")
 
 
-def sitl(mission: Mission | str | Path, *, vehicles: int | Sequence[Any] | None = None,
+def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] | None = None,
          formation: str | None = None, out: str | Path | None = None, write: bool = False, overwrite: bool = False,
          plots: bool = True, realtime: bool = False, instance: int | None = 0, gcs: str | None = None,
          speed: float | None = None, key: str | Path | None = None, live: bool = False,
-         progress: Progress | None = None, overrides: Overrides | None = None, **keywords: Any) -> Run | FleetRun:
+         progress: Progress | None = None, overrides: Overrides | None = None, await_mission: bool = False,
+         **keywords: Any) -> Run | FleetRun:
     """Fly a mission as SITL: one vehicle as :func:`bridge.session.sitl` flies it (every keyword as there), or a
     fleet (``vehicles``, ``formation`` or the mission's ``[[vehicles]]``, as :func:`simulate` takes them) as one
     vehicle process and one controller process per vehicle (:mod:`bridge.session.fleet`): vehicle i is instance
@@ -325,12 +326,17 @@ def sitl(mission: Mission | str | Path, *, vehicles: int | Sequence[Any] | None 
     from bridge.session import sitl as sitl_one  # lazy: start-up time
     from bridge.session.fleet import check_fleet, check_fleet_ports, fly_sessions  # lazy: start-up time
 
-    m = mission if isinstance(mission, Mission) else load_mission(mission)
-    fleet = fleet_mission(m, vehicles, formation)
+    if await_mission or mission is None:  # a ground station's mission (bsst sitl --await-mission): one vehicle
+        if vehicles is not None or formation is not None:
+            raise ConfigError("--vehicles with --await-mission: a ground station's mission flies one vehicle")
+        fleet = None
+    else:
+        m = mission if isinstance(mission, Mission) else load_mission(mission)
+        fleet = fleet_mission(m, vehicles, formation)
     if fleet is None:
         return sitl_one(mission, out=out, write=write, overwrite=overwrite, plots=plots, realtime=realtime,
                         instance=instance, gcs=gcs, speed=speed, key=key, live=live, progress=progress,
-                        overrides=overrides, **keywords)
+                        overrides=overrides, **({"await_mission": True} if await_mission else {}), **keywords)
     over = Overrides.of(overrides, **keywords)
     flights = fleet_flights(fleet, over)
     check_fleet_steps(fleet, flights)

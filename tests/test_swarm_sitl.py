@@ -127,3 +127,8 @@ def test_ctrl_c_stops_every_pair_and_each_summary_says_aborted(tmp_path: Path) -
         own = json.loads((run / f"vehicle-{i}" / "summary.json").read_text())
         assert own["ended_by"]["who"] == "user"
         assert csv_rows(run / f"vehicle-{i}" / "trace.csv") < 30 * 250
+
+
+def test_a_fleet_awaiting_a_ground_stations_mission_is_refused() -> None:
+    with pytest.raises(ConfigError, match="--vehicles with --await-mission"):
+        sitl(None, vehicles=2, await_mission=True)
