@@ -9,11 +9,18 @@
   the exit status (1);
 - speed: the wall time of one vehicle's sine and of the four, in the same process, interleaved, their ratio
   (4 vehicles' steps cost about 4 single ones: the loop adds only the separation check), and the real-time
-  factor of the four; with the load average, since other work on the machine slows every figure alike.
+  factor of the four; with the load average, since other work on the machine slows every figure alike;
+- SITL in lockstep (``bsst sitl missions/sine.toml --vehicles 4 --formation line:2``, through
+  ``bridge.swarm.sitl`` on free ports so that it runs beside other sessions): each vehicle's largest distance
+  from the offline fleet's trace (target <= 1e-4 m), the fleet's real-time factor (the mission's time over the
+  wall time from start to the last summary: start-up included) and each pair's own (its ``timing`` block:
+  the flight alone), against one vehicle's session run just before; target >= 4x real time on 2 cores
+  (eight processes for four vehicles: a machine shared with other work gives less, and the load average
+  says how shared it was). ``--no-sitl`` leaves it out.
 
 Each run goes through ``bridge.cli.main`` (the command's own exit status), into a temporary directory.
 
-    .venv/bin/python benchmarks/swarm.py [--repeats 3] [--json]
+    .venv/bin/python benchmarks/swarm.py [--repeats 3] [--json] [--no-sitl]
 """
 
 from __future__ import annotations
@@ -74,12 +81,58 @@ def figures(repeats: int) -> dict[str, Any]:
     }
 
 
+def sitl_figures() -> dict[str, Any]:
+    """Four vehicles of the sine in lockstep SITL against the offline fleet, and one vehicle's session."""
+    import numpy as np
+
+    from bridge.swarm import simulate, sitl
+
+    os.chdir(ROOT)
+    mission = "missions/sine.toml"
+    load0 = os.getloadavg()
+    t0 = time.perf_counter()
+    one = sitl(mission, instance=None, plots=False)
+    one_wall = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    four = sitl(mission, vehicles=4, formation="line:2", instance=None, plots=False)
+    four_wall = time.perf_counter() - t0
+    off = simulate(mission, vehicles=4, formation="line:2", plots=False)
+    gaps = {}
+    for v, a, b in zip(four.summary["vehicles"], four.runs, off.runs):
+        n = min(len(a.trace["t"]), len(b.trace["t"]))
+        gap = max(float(np.max(np.abs(a.trace[c][:n] - b.trace[c][:n]))) for c in ("x", "y", "z"))
+        gaps[v["id"]] = gap if len(a.trace["t"]) == len(b.trace["t"]) else float("inf")
+    duration = four.summary["duration_s"]
+    return {"outcome": four.outcome, "separation_ok": four.summary["policies"][0]["ok"], "gap_m": gaps,
+            "one_rtf": duration / one_wall, "one_flight_rtf": one.summary["timing"]["real_time_factor"],
+            "fleet_rtf": duration / four_wall, "wall_s": four_wall,
+            "pair_rtf": {v["id"]: r.summary["timing"]["real_time_factor"] for v, r in zip(four.summary["vehicles"],
+                                                                                          four.runs)},
+            "loadavg_before": load0, "loadavg_after": os.getloadavg()}
+
+
+def print_sitl(f: dict[str, Any]) -> None:
+    print("bsst sitl missions/sine.toml --vehicles 4 --formation line:2 (lockstep, free ports)")
+    for i, g in f["gap_m"].items():
+        print(f"  vehicle {i}: largest distance from the offline fleet's trace {g:.3e} m "
+              f"({'<=' if g <= TARGET_RMS_M else '>'} {TARGET_RMS_M:g} m)")
+    print(f"  outcome {f['outcome']}; separation policy {'holds' if f['separation_ok'] else 'BROKEN'}")
+    print(f"  real-time factor: the fleet {f['fleet_rtf']:.2f}x (wall {f['wall_s']:.1f} s, start-up included; "
+          f"target >= 4x on 2 cores); each pair's flight " + ", ".join(f"{v:.2f}x" for v in f["pair_rtf"].values()))
+    print(f"  one vehicle's session just before: {f['one_rtf']:.2f}x (its flight {f['one_flight_rtf']:.2f}x)")
+    print("  load average before " + " ".join(f"{x:.2f}" for x in f["loadavg_before"]) + ", after " +
+          " ".join(f"{x:.2f}" for x in f["loadavg_after"]) + " (a machine shared with other work)")
+
+
 def main_() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--no-sitl", action="store_true", help="leave out the SITL fleet's figures")
     a = ap.parse_args()
     f = figures(a.repeats)
+    if not a.no_sitl:
+        f["sitl"] = sitl_figures()
     if a.json:
         print(json.dumps(f, indent=2))
         return 0
@@ -98,6 +151,8 @@ def main_() -> int:
           f"{sp['four_vehicles_s']:.2f} s, ratio {sp['ratio']:.2f}; four fly {sp['four_real_time_factor']:.1f}x "
           "real time")
     print("load average: " + " ".join(f"{x:.2f}" for x in f["loadavg"]))
+    if "sitl" in f:
+        print_sitl(f["sitl"])
     return 0
 
 

@@ -6,8 +6,9 @@ In:  a mission (a TOML file or a :class:`missions.Mission`) and its overrides (a
 Out: a :class:`~bridge.record.runlog.Run` (trace arrays in SI units, ``summary.json`` as a dict, the
      run directory), MAVLink 2 over UDP between the nodes, sweep directories, ``bsst``'s exit status
 
-Public names: :func:`bridge.simulate`, :class:`bridge.Overrides` and :class:`bridge.Run` (imported on first use),
-:func:`bridge.session.sitl`, :class:`bridge.sweep.Grid`, :func:`bridge.sweep.sweep`.
+Public names: :func:`bridge.simulate`, :func:`bridge.sitl` (a fleet too), :class:`bridge.Overrides` and
+:class:`bridge.Run` (imported on first use), :func:`bridge.session.sitl`, :class:`bridge.sweep.Grid`,
+:func:`bridge.sweep.sweep`.
 
 The layers (docs/design.md, "Parts and layers"), listed lowest first. An arrow means "may import",
 and a layer imports nothing above it (tests/test_layers.py checks it):
@@ -70,7 +71,7 @@ and a layer imports nothing above it (tests/test_layers.py checks it):
 
 from typing import Any
 
-__all__ = ["Overrides", "Run", "simulate"]
+__all__ = ["Overrides", "Run", "simulate", "sitl"]
 
 
 def __getattr__(name: str) -> Any:
@@ -79,6 +80,10 @@ def __getattr__(name: str) -> Any:
         from bridge.swarm import simulate  # lazy: start-up time
 
         return simulate
+    if name == "sitl":  # one vehicle: bridge.session.sitl; several: bridge.swarm (a process pair per vehicle)
+        from bridge.swarm import sitl  # lazy: start-up time
+
+        return sitl
     if name == "Overrides":
         from bridge.core.flight import Overrides  # lazy: start-up time
 

@@ -23,6 +23,8 @@ vehicle's own, not judged against the others.
 from __future__ import annotations
 
 import math
+import shutil
+import tempfile
 from collections.abc import Generator, Sequence
 from pathlib import Path
 from typing import Any
@@ -195,26 +197,43 @@ def _num(v: float) -> float | None:
 def fly_fleet(m: Mission, flights: list[Flight], path: Path | None, *, plots: bool = True,
               progress: Progress | None = None) -> FleetRun:
     """Fly a fleet's prepared flights in one world (the module's docstring); write its directory into ``path``."""
-    ids = [v.id for v in m.vehicles]
-    sep = m.separation or Separation(DEFAULT_MIN_SEPARATION_M)
-    watch = Watch(ids, [sep.disc_radius(f.profile.arm) for f in flights], sep.min_m)
-    dirs: list[Path | None] = [None] * len(ids)
-    if path is not None:
-        write_text_atomic(path / "mission.toml", dump_toml(m.to_dict()))
-        dirs = [path / f"vehicle-{i}" for i in ids]
-        for d in dirs:
-            d.mkdir(exist_ok=True)  # type: ignore[union-attr]  # (an overwritten one may keep a user's files)
+    watch = _watch(m, flights)
+    dirs = _vehicle_dirs(m, path)
     steps = [flying(f, d, plots=plots, progress=progress if i == 0 else None)
              for i, (f, d) in enumerate(zip(flights, dirs))]
     runs = _fly_together(steps, [f.mission.start[:3] for f in flights], flights[0].mission.rate_hz, watch)
     summary = fleet_summary(m, flights, runs, watch)
-    if path is not None:
-        write_json_atomic(path / "summary.json", summary)
-        if plots:
-            from bridge.record.fleetplots import fleet_plots  # lazy: loads matplotlib
-
-            fleet_plots([r.trace for r in runs], ids, watch.radii, sep.min_m, path / "plots", m.name)
+    _finish(m, path, runs, watch, summary, plots)
     return FleetRun(runs, summary, path)
+
+
+def _watch(m: Mission, flights: list[Flight]) -> Watch:
+    """The fleet's separation policy (its ``[separation]``, else the default) over its vehicles' discs."""
+    sep = m.separation or Separation(DEFAULT_MIN_SEPARATION_M)
+    return Watch([v.id for v in m.vehicles], [sep.disc_radius(f.profile.arm) for f in flights], sep.min_m)
+
+
+def _vehicle_dirs(m: Mission, path: Path | None) -> list[Path | None]:
+    """Write the fleet as flown (``mission.toml``) and make each vehicle's ``vehicle-<id>/`` (None: no files)."""
+    if path is None:
+        return [None] * len(m.vehicles)
+    write_text_atomic(path / "mission.toml", dump_toml(m.to_dict()))
+    dirs = [path / f"vehicle-{v.id}" for v in m.vehicles]
+    for d in dirs:
+        d.mkdir(exist_ok=True)  # (an overwritten one may keep a user's files)
+    return list(dirs)
+
+
+def _finish(m: Mission, path: Path | None, runs: list[Run], watch: Watch, summary: dict[str, Any],
+            plots: bool) -> None:
+    """Write the fleet's ``summary.json`` and its figures (every vehicle) into ``path``."""
+    if path is None:
+        return
+    write_json_atomic(path / "summary.json", summary)
+    if plots:
+        from bridge.record.fleetplots import fleet_plots  # lazy: loads matplotlib
+
+        fleet_plots([r.trace for r in runs], watch.ids, watch.radii, watch.min_m, path / "plots", m.name)
 
 
 def _fly_together(steps: list[Generator[tuple[float, ...], str | None, Run]], starts: list[Sequence[float]],
@@ -261,7 +280,8 @@ def _fly_together(steps: list[Generator[tuple[float, ...], str | None, Run]], st
     return runs  # type: ignore[return-value]
 
 
-def fleet_summary(m: Mission, flights: list[Flight], runs: list[Run], watch: Watch) -> dict[str, Any]:
+def fleet_summary(m: Mission, flights: list[Flight], runs: list[Run], watch: Watch,
+                  clock: str = "offline") -> dict[str, Any]:
     """The fleet's ``summary.json``: the worst outcome decides, each vehicle's own summary in ``vehicle-<id>/``."""
     rank = {o: i for i, o in enumerate(SEVERITY)}
     vehicles = []
@@ -273,12 +293,100 @@ def fleet_summary(m: Mission, flights: list[Flight], runs: list[Run], watch: Wat
                          "controller": f.mission.controller, "seed": f.mission.seed, "offset": list(v.offset),
                          "trajectory": "own" if v.trajectory is not None else "the mission's",
                          "start": list(f.mission.start), "ended_by": s.get("ended_by"),
+                         **({"contact": s["contact"]} if "contact" in s else {}),
                          "link": {d: {k: (s.get("link") or {}).get(d, {}).get(k) for k in ("sent", "delivered", "lost")}
                                   for d in ("up", "down")}})
         policies += [{**p, "name": f"{p['name']} (vehicle {v.id})"} for p in s.get("policies") or ()
                      if not p.get("ok")]
     worst = max((x["outcome"] for x in vehicles), key=lambda o: rank.get(o, len(SEVERITY)))
     rms = [x["rms_3d"] for x in vehicles if x["rms_3d"] is not None]
-    return {"mission": m.name, "clock": "offline", "rate_hz": m.rate_hz, "duration_s": m.duration_s,
+    return {"mission": m.name, "clock": clock, "rate_hz": m.rate_hz, "duration_s": m.duration_s,
             "controller": m.controller, "profile": m.profile, "outcome": worst, "rms_3d": max(rms) if rms else None,
             "vehicles": vehicles, "separation": watch.summary(), "policies": policies}
+
+
+# -- the same fleet as SITL sessions (bsst sitl --vehicles) ---------------------------------------------------
+CONTINUED = ("the flights continued past the contact: under bsst sitl each vehicle keeps its own lockstep with its "
+             "controller, the vehicles share no clock, so nothing stopped them at it (docs/swarm.md)")
+
+
+def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] | None = None,
+         formation: str | None = None, out: str | Path | None = None, write: bool = False, overwrite: bool = False,
+         plots: bool = True, realtime: bool = False, instance: int | None = 0, gcs: str | None = None,
+         speed: float | None = None, key: str | Path | None = None, live: bool = False,
+         progress: Progress | None = None, overrides: Overrides | None = None, await_mission: bool = False,
+         **keywords: Any) -> Run | FleetRun:
+    """Fly a mission as SITL: one vehicle as :func:`bridge.session.sitl` flies it (every keyword as there), or a
+    fleet (``vehicles``, ``formation`` or the mission's ``[[vehicles]]``, as :func:`simulate` takes them) as one
+    vehicle process and one controller process per vehicle (:mod:`bridge.session.fleet`): vehicle i is instance
+    ``instance`` + i - 1 with system id i, every vehicle's ground-station traffic goes to ``gcs`` (default
+    127.0.0.1:14550 + ``instance``); ``live`` and ``progress`` are the single session's only. The world is
+    judged on the vehicles' traces at matching steps
+    (:func:`judge_traces`); a contact makes both ``collision`` (the flights went on: :data:`CONTINUED`)."""
+    from bridge.session import sitl as sitl_one  # lazy: start-up time
+    from bridge.session.fleet import check_fleet, check_fleet_ports, fly_sessions  # lazy: start-up time
+
+    if await_mission or mission is None:  # a ground station's mission (bsst sitl --await-mission): one vehicle
+        if vehicles is not None or formation is not None:
+            raise ConfigError("--vehicles with --await-mission: a ground station's mission flies one vehicle")
+        fleet = None
+    else:
+        m = mission if isinstance(mission, Mission) else load_mission(mission)
+        fleet = fleet_mission(m, vehicles, formation)
+    if fleet is None:
+        return sitl_one(mission, out=out, write=write, overwrite=overwrite, plots=plots, realtime=realtime,
+                        instance=instance, gcs=gcs, speed=speed, key=key, live=live, progress=progress,
+                        overrides=overrides, **({"await_mission": True} if await_mission else {}), **keywords)
+    over = Overrides.of(overrides, **keywords)
+    flights = fleet_flights(fleet, over)
+    check_fleet_steps(fleet, flights)
+    gcs_text = check_fleet(len(flights), realtime=realtime, instance=instance, gcs=gcs, speed=speed, key=key)
+    keep = out is not None or write
+    if keep:  # a refused run directory is named before a busy port (both before anything starts)
+        run_dir(out, fleet.name, overwrite, create=False)
+    check_fleet_ports(len(flights), instance)
+    path = run_dir(out, fleet.name, overwrite) if keep else Path(tempfile.mkdtemp(prefix="bsst-sitl-fleet-"))
+    try:
+        fm = over.laid_over(fleet)
+        dirs = [d for d in _vehicle_dirs(fm, path) if d is not None]
+        ids = [v.id for v in fm.vehicles]
+        runs = fly_sessions(flights, ids, dirs, realtime=realtime, instance=instance, gcs=gcs_text, speed=speed,
+                            key=Path(key) if key is not None else None, plots=plots, keep=keep)
+        watch = _watch(fm, flights)
+        contacts = judge_traces(watch, [r.trace for r in runs], fm.rate_hz)
+        runs = [_touched(r, contacts.get(j)) for j, r in enumerate(runs)]
+        summary = fleet_summary(fm, flights, runs, watch, "realtime" if realtime else "lockstep")
+        summary["sitl"] = {"instances": None if instance is None else list(range(instance, instance + len(ids))),
+                           "gcs": gcs_text, "sysids": ids, "shared_clock": False, "signed": key is not None}
+        if contacts:
+            summary["sitl"]["note"] = CONTINUED
+        _finish(fm, path if keep else None, runs, watch, summary, plots)
+        return FleetRun(runs, summary, path if keep else None)
+    finally:
+        if not keep:
+            shutil.rmtree(path, ignore_errors=True)
+
+
+def judge_traces(watch: Watch, traces: Sequence[dict[str, Any]], rate: float) -> dict[int, dict[str, Any]]:
+    """Judge the shared world on finished traces, with the offline loop's :class:`Watch`: row j of every trace
+    (the true positions at t = j / rate; row 0 the start) is the world after step j - 1, as the loop judges it;
+    a trace that ended early stays at its last row. The first contact of each vehicle (by index): its step, time,
+    the other's id and why."""
+    n = max((len(tr["t"]) for tr in traces), default=0)
+    first: dict[int, dict[str, Any]] = {}
+    for j in range(n):
+        rows = [min(j, len(tr["t"]) - 1) for tr in traces]
+        positions = [(float(tr["x"][r]), float(tr["y"][r]), float(tr["z"][r])) for tr, r in zip(traces, rows)]
+        for a, b, why in watch.check(j / rate, positions):
+            for i, other in ((a, b), (b, a)):
+                first.setdefault(i, {"step": j, "t": round(j / rate, 6), "with": watch.ids[other], "why": why,
+                                     "continued": CONTINUED})
+    return first
+
+
+def _touched(run: Run, contact: dict[str, Any] | None) -> Run:
+    """``run`` with the outcome ``collision`` and its ``contact`` when another vehicle touched it (its own
+    ``summary.json`` in ``vehicle-<id>/`` stays as its session wrote it: the flight as flown, on past the contact)."""
+    if contact is None:
+        return run
+    return Run(run.trace, {**run.summary, "outcome": "collision", "contact": contact}, run.path)

@@ -46,13 +46,18 @@ def add_sim_command(sub: Any) -> None:
     add_flight_options(p)
     add_sensor_options(p)
     add_link_options(p)
+    add_fleet_options(p)
+    p.set_defaults(func=cmd_sim)
+
+
+def add_fleet_options(p: argparse.ArgumentParser) -> None:
+    """``--vehicles N --formation KIND:METRES`` of ``bsst sim`` and ``bsst sitl`` (docs/swarm.md)."""
     g = p.add_argument_group("several vehicles (docs/swarm.md)")
     g.add_argument("--vehicles", type=fleet_size, metavar="N",
                    help="fly N vehicles (system ids 1..N), laid out by --formation, each with its own law and link")
     g.add_argument("--formation", metavar="KIND:METRES",
                    help="line:SPACING (along y), grid:SPACING or circle:RADIUS about the mission's trajectory "
                         "(default line:2)")
-    p.set_defaults(func=cmd_sim)
 
 
 def fleet_size(text: str) -> int:
@@ -101,7 +106,10 @@ def report_fleet(run: Any, command: str) -> int:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
     for v in s["vehicles"]:
         if v["outcome"] != "completed":
-            print(f"bsst {command}: vehicle {v['id']}: {v['outcome']}", file=sys.stderr)
+            c = v.get("contact")  # SITL: judged on the traces, after flights that went on past it
+            said = f" (touched vehicle {c['with']} at step {c['step']}, t={c['t']:.3f} s; the flights went on: " \
+                   "the vehicles share no clock under bsst sitl)" if c else ""
+            print(f"bsst {command}: vehicle {v['id']}: {v['outcome']}{said}", file=sys.stderr)
     for p in s.get("policies") or []:
         if not p.get("ok"):
             print(f"bsst {command}: policy {violation_text(p)}", file=sys.stderr)
@@ -246,16 +254,20 @@ def add_sitl_commands(sub: Any) -> None:
     add_sensor_options(p)
     add_port_options(p, vehicle=False)
     add_link_options(p)
+    add_fleet_options(p)
     p.set_defaults(func=cmd_sitl)
 
 
 
 def cmd_sitl(args: argparse.Namespace) -> int:
-    from bridge.session import sitl  # lazy: start-up time
+    from bridge.swarm import sitl  # lazy: start-up time
 
     run = sitl(args.mission, out=args.out, write=True, overwrite=args.overwrite, plots=not args.no_plots,
                realtime=args.realtime, instance=args.instance, gcs=args.gcs, speed=args.speed, live=True,
-               key=args.key, overrides=overrides_from_args(args), await_mission=args.await_mission)
+               key=args.key, overrides=overrides_from_args(args), await_mission=args.await_mission,
+               vehicles=args.vehicles, formation=args.formation)
+    if "vehicles" in run.summary:
+        return report_fleet(run, "sitl")
     return report_run(run, "sitl")
 
 

@@ -260,8 +260,9 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
     m = over.laid_over(m)
     src = m.source
     if m.vehicles:  # each vehicle's flight is prepared from its own mission (missions.fleet.vehicle_mission)
-        raise ConfigError(f"{src}: vehicles: a mission of several vehicles is flown by bsst sim (bridge.simulate) "
-                          "only, for now: bsst sitl, sweeps, bsst vehicle and bsst controller fly one vehicle")
+        raise ConfigError(f"{src}: vehicles: a mission of several vehicles is flown by bsst sim and bsst sitl "
+                          "(bridge.simulate, bridge.swarm.sitl): sweeps, bsst margin, bsst vehicle and bsst "
+                          "controller fly one vehicle")
     try:
         prof = load_profile(m.profile)
     except ConfigError as exc:

@@ -66,7 +66,7 @@ from bridge.session.session import Session
 from missions import Mission, Setpoint, Step
 from params import ConfigError
 
-__all__ = ["ChildError", "Session", "instance_slot", "sitl"]
+__all__ = ["ChildError", "Session", "check_options", "instance_slot", "sitl"]
 
 
 
@@ -78,6 +78,24 @@ def awaiting() -> Mission:
     defaults; the command line's overrides are laid over it, and the mission flown replaces its trajectory."""
     return Mission(Step((Setpoint(0.0, 0.0, 0.0, 0.0, 0.0),)), duration_s=AWAIT_DURATION_S, name="await-mission",
                    source="--await-mission")
+
+
+def check_options(*, realtime: bool, instance: int | None, gcs: str | None, speed: float | None) -> str | None:
+    """Check a session's clock, instance and pace (ConfigError naming the flag, before anything starts); the
+    ground-station address its vehicles send to: ``gcs``, else 127.0.0.1:14550 + instance (None: no GCS link)."""
+    if instance is not None and not (isinstance(instance, int) and 0 <= instance <= 9):
+        raise ConfigError(f"--instance must be in [0, 9], got {instance!r}")
+    if speed is not None and not (math.isfinite(speed) and speed > 0):
+        raise ConfigError(f"--speed must be a positive number, got {speed!r}")
+    if realtime and speed is not None and speed != 1.0:  # the controller's schedule is the wall clock's
+        raise ConfigError(f"--speed {speed:g} with --realtime: a real-time flight runs at the wall clock's pace "
+                          "(the controller keeps its rate on it, the plant would outrun it); --speed paces lockstep")
+    gcs_text = gcs if gcs is not None else (None if instance is None else f"127.0.0.1:{GCS_PORT + instance}")
+    if gcs_text is not None and gcs_text.strip().lower() == "none":
+        gcs_text = None
+    if gcs_text is not None:
+        parse_address(gcs_text, "udpout", "--gcs")  # bad input fails here, before anything starts
+    return gcs_text
 
 
 def sitl(
@@ -129,20 +147,9 @@ def sitl(
         key_from_file(key)  # a missing, empty or world-readable key file is bad input, before anything starts
     flight = prepare(mission, overrides, **keywords)
     check_trace_steps(flight.mission)  # the session keeps every trace row for its summary: a cap, said up front
-    if instance is not None and not (isinstance(instance, int) and 0 <= instance <= 9):
-        raise ConfigError(f"--instance must be in [0, 9], got {instance!r}")
-    if speed is not None and not (math.isfinite(speed) and speed > 0):
-        raise ConfigError(f"--speed must be a positive number, got {speed!r}")
-    if realtime and speed is not None and speed != 1.0:  # the controller's schedule is the wall clock's
-        raise ConfigError(f"--speed {speed:g} with --realtime: a real-time flight runs at the wall clock's pace "
-                          "(the controller keeps its rate on it, the plant would outrun it); --speed paces lockstep")
+    gcs_text = check_options(realtime=realtime, instance=instance, gcs=gcs, speed=speed)
     n = instance or 0
-    gcs_text = gcs if gcs is not None else (None if instance is None else f"127.0.0.1:{GCS_PORT + n}")
-    if gcs_text is not None and gcs_text.strip().lower() == "none":
-        gcs_text = None
-    if gcs_text is not None:
-        parse_address(gcs_text, "udpout", "--gcs")  # bad input fails here, before anything starts
-    elif await_mission:
+    if gcs_text is None and await_mission:
         raise ConfigError("--await-mission: the vehicle needs a GCS link for the ground station's mission "
                           "(an --instance, or --gcs HOST:PORT)")
     keep = out is not None or write

@@ -42,7 +42,7 @@ class Session:
 
     def __init__(self, flight: Flight, path: Path, *, realtime: bool, instance: int | None, gcs: str | None,
                  speed: float | None, progress: Progress | None, live: bool, key: Path | None = None,
-                 await_mission: bool = False) -> None:
+                 await_mission: bool = False, sysid: int | None = None) -> None:
         self.flight = flight
         # --await-mission: ``flight`` holds the settings only; the mission is the controller's, once a ground
         # station has started one (its ``mission`` report: :meth:`_mission_loaded`); no trace is joined before
@@ -57,8 +57,9 @@ class Session:
         self.speed = speed
         self.progress = progress
         self.live = live and sys.stderr.isatty()
-        # a mission's MAV_SYS_ID is the vehicle's system id; else the instance's, as PX4 SITL's
-        self.sysid = flight.params.sysid if "MAV_SYS_ID" in flight.mission.params else (instance or 0) + 1
+        # a fleet's vehicle i is system i; else a mission's MAV_SYS_ID, else the instance's, as PX4 SITL's
+        self.sysid = sysid if sysid is not None else \
+            flight.params.sysid if "MAV_SYS_ID" in flight.mission.params else (instance or 0) + 1
         self.listen = f"127.0.0.1:{LINK_PORT + instance}" if instance is not None else "127.0.0.1:0"
         self.events: list[RunEvent] = []
         self.vehicle: Child | None = None

@@ -1,0 +1,124 @@
+"""Several SITL sessions at once: one vehicle process and one controller process per vehicle (``bsst sitl --vehicles``).
+
+In:  each vehicle's prepared :class:`~bridge.core.flight.Flight` with its system id (1..N) and run directory, the
+     fleet's options: clock (lockstep or real time), first instance B (0-9, or None: free ports), the one
+     ground-station address every vehicle sends to (``HOST:PORT``, or None), ``speed`` (x real time), a signing
+     key file
+Out: each vehicle's :class:`~bridge.record.runlog.Run` (its own ``trace.csv``, tlogs, ``summary.json`` in its
+     directory), in the order given
+
+Each vehicle is one :class:`~bridge.session.session.Session` (the single vehicle's, unchanged), run in a thread
+of this process: vehicle i is PX4's instance B + i - 1 (its controller link on 127.0.0.1:14560 + B + i - 1),
+with system id i, and every vehicle's ground-station traffic goes to the one address, so a ground station
+there sees N systems. Each pair keeps its own lockstep: the vehicles share no clock, so each pair's flight is
+its own deterministic flight, the one the offline loop flies for that vehicle; the shared world (separation,
+contacts) is judged afterwards on their traces (:mod:`bridge.swarm`). Ctrl-C or SIGTERM stops every pair
+(each session's own stop: SIGTERM, then SIGKILL at its deadline) and each still writes its summary.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from bridge.autopilot.estimator import compile_estimator
+from bridge.core.flight import Flight
+from bridge.mavlink.endpoint import LINK_PORT
+from bridge.mavlink.signing import key_from_file
+from bridge.record.runlog import Run, blackout_windows, finish_run
+from bridge.session import check_options
+from bridge.session.children import check_port_free
+from bridge.session.session import Session
+from params import ConfigError
+
+MAX_INSTANCE = 9  # instances 0-9, as bridge.session.children.instance_slot holds them
+
+
+def check_fleet(count: int, *, realtime: bool, instance: int | None, gcs: str | None, speed: float | None,
+                key: str | Path | None) -> str | None:
+    """Check a fleet's options as :func:`bridge.session.sitl` checks one session's (ConfigError naming the flag,
+    before anything starts): the key file, the clock and pace, instances B..B + N - 1 within 0-9; the one
+    ground-station address every vehicle sends to (``gcs``, else 127.0.0.1:14550 + B; None: none)."""
+    if key is not None:
+        key_from_file(key)
+    gcs_text = check_options(realtime=realtime, instance=instance, gcs=gcs, speed=speed)
+    if instance is None:
+        return gcs_text
+    last = instance + count - 1
+    if last > MAX_INSTANCE:
+        raise ConfigError(f"--vehicles {count} from --instance {instance}: vehicle i is instance {instance} + i - 1, "
+                          f"up to {last}; instances are 0-{MAX_INSTANCE}: fly at most {MAX_INSTANCE + 1 - instance} "
+                          "vehicles from this instance")
+    return gcs_text
+
+
+def check_fleet_ports(count: int, instance: int | None) -> None:
+    """Refuse a fleet whose vehicles' controller ports (14560 + B .. 14560 + B + N - 1) are taken."""
+    for n in range(instance, instance + count) if instance is not None else ():
+        check_port_free(LINK_PORT + n, f"--instance {instance} (vehicle {n - instance + 1})")
+
+
+def fly_sessions(flights: Sequence[Flight], ids: Sequence[int], dirs: Sequence[Path], *, realtime: bool,
+                 instance: int | None, gcs: str | None, speed: float | None, key: Path | None, plots: bool,
+                 keep: bool) -> list[Run]:
+    """Fly every vehicle's session at once (the module's docstring); each vehicle's :class:`Run`, in order.
+    A session that fails to start (bad input, a child dead at start) stops the others; its error is raised."""
+    for f in flights:
+        compile_estimator(f.estimator)  # a first EKF on this machine compiles here, once, before any child starts
+    sessions = [Session(f, d, realtime=realtime, instance=None if instance is None else instance + i - 1,
+                        gcs=gcs, speed=speed, progress=None, live=False, key=key, sysid=i)
+                for f, i, d in zip(flights, ids, dirs)]
+    runs: list[Run | None] = [None] * len(sessions)
+    errors: list[BaseException] = []
+
+    def fly(j: int) -> None:
+        try:
+            runs[j] = sessions[j].run(plots=False, keep=keep)  # the figures after: matplotlib is not thread-safe
+        except BaseException as exc:  # noqa: BLE001  (raised in the caller's thread, after every session stopped)
+            errors.append(exc)
+            for s in sessions:
+                s.interrupted = True
+
+    threads = [threading.Thread(target=fly, args=(j,), name=f"vehicle-{ids[j]}", daemon=True)
+               for j in range(len(sessions))]
+    restore = _stop_all_on_signals(sessions)
+    try:
+        for t in threads:
+            t.start()
+        for t in threads:
+            while t.is_alive():
+                t.join(0.2)
+    finally:
+        restore()
+    if errors:
+        raise errors[0]
+    done: list[Run] = [r for r in runs if r is not None]
+    if keep and plots:
+        for f, r in zip(flights, done):
+            if r.path is not None and r.summary.get("outcome") != "aborted":
+                m = f.mission
+                title = f"{m.name} ({m.controller}, {f.profile.name}, SITL {r.summary['clock']})"
+                finish_run(r.path, r.trace, r.summary, title, True, blackout_windows(m))
+    return done
+
+
+def _stop_all_on_signals(sessions: Sequence[Session]) -> Any:
+    """While the fleet flies, Ctrl-C and SIGTERM set every session's ``interrupted`` (each stops its children
+    between whole steps, as a single session does). Main thread only."""
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+
+    def handler(signum: int, frame: Any) -> None:
+        for s in sessions:
+            s.interrupted = True
+
+    old = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
+
+    def restore() -> None:
+        for sig, h in old.items():
+            signal.signal(sig, h)
+
+    return restore

@@ -1,0 +1,241 @@
+"""Covers bridge.session.fleet and bridge.nodes.vehicle.authority: one ground station, every vehicle of a fleet.
+
+Real processes: ``bridge.swarm.sitl`` flies three vehicles (a vehicle and a controller process each) whose
+ground-station links all go to one UDP port, where a pymavlink ground station (sysid 255) listens. It sees
+HEARTBEATs from systems 1, 2 and 3, reads a parameter of each by its ``target_system`` (only that system
+answers), and a disarm (COMMAND_LONG to system 3, sent to every vehicle as a MAVLink router would) disarms
+system 3 alone: 1 and 2 fly their missions to the end. The same with MAVSDK's native binding (one ``System``
+per vehicle, ``Action.kill`` on system 3). And, without processes, the vehicle's authority refuses
+every kind of message a ground station addresses to another system (``target``), and takes its own and
+broadcasts.
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+from pymavlink.dialects.v20 import common as mavlink
+
+from bridge.mavlink.address import parse_address
+from bridge.nodes.vehicle.authority import ADDRESSED, Authority
+from bridge.nodes.vehicle.config import VehicleConfig
+from bridge.session.children import free_udp_port
+from bridge.swarm import sitl
+from missions import MISSION_DIR
+from tests.sitlkit import ENV
+from tests.waiting import wait_for
+
+pytestmark = pytest.mark.process  # starts processes, opens sockets
+
+FORCE = 21196  # param2 of a disarm in flight (PX4's magic number)
+ARMED = mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+
+
+class Station:
+    """A ground station on one UDP port: every message heard, the address each system speaks from."""
+
+    def __init__(self, port: int) -> None:
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", port))
+        self.sock.setblocking(False)
+        self.mav = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+        self.addr: dict[int, tuple[str, int]] = {}
+        self.armed: dict[int, bool] = {}
+        self.heard: list[Any] = []
+
+    def pump(self) -> None:
+        while True:
+            try:
+                data, addr = self.sock.recvfrom(65536)
+            except BlockingIOError:
+                return
+            try:
+                msgs = self.mav.parse_buffer(data) or []
+            except mavlink.MAVError:
+                continue
+            for m in msgs:
+                src = m.get_srcSystem()
+                self.addr[src] = addr
+                self.heard.append(m)
+                if m.get_type() == "HEARTBEAT" and m.autopilot != mavlink.MAV_AUTOPILOT_INVALID:
+                    self.armed[src] = bool(m.base_mode & ARMED)
+
+    def to_all(self, msg: Any) -> None:
+        """Send ``msg`` to every vehicle heard (a router's broadcast): its target_system decides who acts."""
+        buf = msg.pack(self.mav)
+        for a in self.addr.values():
+            self.sock.sendto(buf, a)
+
+    def answers(self, kind: str, since: int, **fields: Any) -> list[Any]:
+        return [m for m in self.heard[since:] if m.get_type() == kind
+                and all(getattr(m, k) == v for k, v in fields.items())]
+
+
+def _fly_fleet(tmp_path: Path, port: int, seconds: float) -> tuple[threading.Thread, dict[str, Any]]:
+    """Three vehicles of the sine in lockstep at real time's pace, their GCS links to ``port``, in a thread."""
+    mission = tmp_path / "sine.toml"
+    mission.write_text((MISSION_DIR / "sine.toml").read_text().replace("duration_s = 30.0",
+                                                                      f"duration_s = {seconds}"))
+    result: dict[str, Any] = {}
+
+    def fly() -> None:
+        try:
+            result["run"] = sitl(mission, vehicles=3, formation="line:2", instance=None, gcs=f"127.0.0.1:{port}",
+                                 speed=1.0, out=tmp_path / "run", plots=False)
+        except BaseException as exc:  # noqa: BLE001  (named by the caller's assertion)
+            result["error"] = exc
+
+    flight = threading.Thread(target=fly, daemon=True)
+    flight.start()
+    return flight, result
+
+
+def _only_three_disarmed(result: dict[str, Any], port: int) -> None:
+    """The fleet's summary: 1 and 2 completed, 3 ended by the ground station's disarm."""
+    assert "error" not in result, result.get("error")
+    s = result["run"].summary
+    by_id = {v["id"]: v for v in s["vehicles"]}
+    assert by_id[1]["outcome"] == by_id[2]["outcome"] == "completed" and by_id[1]["ok"] and by_id[2]["ok"]
+    assert by_id[3]["outcome"] != "completed" and not by_id[3]["ok"]
+    assert "255" in str(by_id[3]["ended_by"]) or "245" in str(by_id[3]["ended_by"]), by_id[3]["ended_by"]
+    assert s["sitl"]["gcs"] == f"127.0.0.1:{port}"
+
+
+def test_one_ground_station_sees_three_vehicles_reads_each_and_disarms_only_system_3(tmp_path: Path) -> None:
+    port = free_udp_port()
+    gcs = Station(port)
+    flight, result = _fly_fleet(tmp_path, port, 12.0)
+    try:
+        def all_armed() -> bool:
+            gcs.pump()
+            return sorted(s for s, a in gcs.armed.items() if a) == [1, 2, 3]
+
+        wait_for(all_armed, 90, "heartbeats of systems 1, 2 and 3, armed")
+        for i in (1, 2, 3):  # each vehicle's parameter, read by its id: only that system answers
+            mark = len(gcs.heard)
+            gcs.to_all(gcs.mav.param_request_read_encode(i, 1, b"MAV_SYS_ID", -1))
+
+            def answered(i: int = i, mark: int = mark) -> bool:
+                gcs.pump()
+                return bool(gcs.answers("PARAM_VALUE", mark, param_id="MAV_SYS_ID"))
+
+            wait_for(answered, 20, f"PARAM_VALUE MAV_SYS_ID from system {i}")
+            time.sleep(0.3)  # the other vehicles' chance to answer wrongly (an absence: no event to wait on)
+            gcs.pump()
+            replies = gcs.answers("PARAM_VALUE", mark, param_id="MAV_SYS_ID")
+            assert {m.get_srcSystem() for m in replies} == {i}, [str(m) for m in replies]
+        mark = len(gcs.heard)
+        gcs.to_all(gcs.mav.command_long_encode(3, 1, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0,
+                                                    0, FORCE, 0, 0, 0, 0, 0))
+
+        def three_disarmed() -> bool:
+            gcs.pump()
+            return gcs.armed.get(3) is False
+
+        wait_for(three_disarmed, 20, "system 3 disarmed")
+        acks = gcs.answers("COMMAND_ACK", mark, command=mavlink.MAV_CMD_COMPONENT_ARM_DISARM)
+        assert {m.get_srcSystem() for m in acks} == {3} and acks[0].result == mavlink.MAV_RESULT_ACCEPTED
+        assert gcs.armed[1] and gcs.armed[2]  # still flying
+        flight.join(180)
+    finally:
+        flight.join(180)
+        gcs.sock.close()
+    _only_three_disarmed(result, port)
+
+
+MAVSDK_SCRIPT = r"""
+import json, sys, time
+from mavsdk import Mavsdk, Configuration, ComponentType
+from mavsdk.plugins.action import Action
+from mavsdk.plugins.param import Param
+from mavsdk.plugins.telemetry import Telemetry
+
+sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+sdk.add_any_connection(sys.argv[1])
+out = {}
+def until(pred, timeout):
+    deadline = time.monotonic() + timeout
+    while not pred():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.05)
+    return True
+out["three_found"] = until(lambda: sum(s.has_autopilot() for s in sdk.get_systems()) >= 3, 90)
+by = {s.get_system_id(): s for s in sdk.get_systems() if s.has_autopilot()}
+out["ids"] = sorted(by)
+out["MAV_SYS_ID"] = {str(i): Param(s).get_param_int("MAV_SYS_ID") for i, s in by.items()}
+tel = {i: Telemetry(s) for i, s in by.items()}
+out["all_armed"] = until(lambda: all(t.armed() for t in tel.values()), 30)
+out["kill_3"] = Action(by[3]).kill().name
+out["three_disarmed"] = until(lambda: not tel[3].armed(), 20)
+out["armed_after"] = {str(i): t.armed() for i, t in tel.items()}
+print("RESULT " + json.dumps(out), flush=True)
+sdk.destroy()
+"""
+
+
+def test_mavsdk_sees_three_systems_on_one_port_reads_each_and_kills_only_system_3(tmp_path: Path) -> None:
+    """MAVSDK's native binding, one ``System`` per vehicle on the one port: ids 1-3, each one's MAV_SYS_ID read
+    through its own System, and ``Action.kill`` (a forced disarm) on system 3 disarms only 3."""
+    port = free_udp_port()
+    flight, result = _fly_fleet(tmp_path, port, 20.0)
+    try:
+        r = subprocess.run([sys.executable, "-c", MAVSDK_SCRIPT, f"udpin://127.0.0.1:{port}"], capture_output=True,
+                           text=True, timeout=240, env=ENV)
+    finally:
+        flight.join(240)
+    lines = [ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")]
+    assert lines, f"MAVSDK script failed (exit {r.returncode}):\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
+    out = json.loads(lines[0][len("RESULT "):])
+    assert out["three_found"] and out["ids"] == [1, 2, 3], out
+    assert out["MAV_SYS_ID"] == {"1": 1, "2": 2, "3": 3}, out
+    assert out["all_armed"] and out["kill_3"] == "SUCCESS" and out["three_disarmed"], out
+    assert out["armed_after"] == {"1": True, "2": True, "3": False}, out
+    _only_three_disarmed(result, port)
+
+
+def _addressed(kind: str, target: int) -> Any:
+    """A message of ``kind`` as a ground station sends it, to system ``target``, component 1."""
+    t, c = target, 1
+    make = {
+        "COMMAND_LONG": lambda: mavlink.MAVLink_command_long_message(t, c, 400, 0, 0, 0, 0, 0, 0, 0, 0),
+        "COMMAND_INT": lambda: mavlink.MAVLink_command_int_message(t, c, 0, 176, 0, 0, 0, 0, 0, 0, 0, 0, 0),
+        "PARAM_REQUEST_LIST": lambda: mavlink.MAVLink_param_request_list_message(t, c),
+        "PARAM_REQUEST_READ": lambda: mavlink.MAVLink_param_request_read_message(t, c, b"MAV_SYS_ID", -1),
+        "PARAM_SET": lambda: mavlink.MAVLink_param_set_message(t, c, b"COM_OF_LOSS_T", 1.0, 9),
+        "SET_MODE": lambda: mavlink.MAVLink_set_mode_message(t, 1, 0),
+        "MISSION_COUNT": lambda: mavlink.MAVLink_mission_count_message(t, c, 1, 0),
+        "MISSION_ITEM": lambda: mavlink.MAVLink_mission_item_message(t, c, 0, 6, 16, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0),
+        "MISSION_ITEM_INT": lambda: mavlink.MAVLink_mission_item_int_message(t, c, 0, 6, 16, 0, 1, 0, 0, 0, 0, 0, 0,
+                                                                             0, 0),
+        "MISSION_CLEAR_ALL": lambda: mavlink.MAVLink_mission_clear_all_message(t, c, 0),
+        "MISSION_SET_CURRENT": lambda: mavlink.MAVLink_mission_set_current_message(t, c, 0),
+        "MISSION_REQUEST_LIST": lambda: mavlink.MAVLink_mission_request_list_message(t, c, 0),
+        "MISSION_REQUEST": lambda: mavlink.MAVLink_mission_request_message(t, c, 0, 0),
+        "MISSION_REQUEST_INT": lambda: mavlink.MAVLink_mission_request_int_message(t, c, 0, 0),
+        "MISSION_ACK": lambda: mavlink.MAVLink_mission_ack_message(t, c, 0, 0),
+    }
+    m = make[kind]()
+    raw = m.pack(mavlink.MAVLink(None, srcSystem=255, srcComponent=190))
+    return mavlink.MAVLink(None).decode(bytearray(raw))  # as the vehicle receives it: its sender's ids set
+
+
+@pytest.mark.parametrize("kind", sorted(ADDRESSED))
+def test_the_vehicle_refuses_every_ground_station_message_for_another_system(kind: str) -> None:
+    """Vehicle 2 of a fleet: a message for system 3 is for another (refused as ``target``); one for 2, or for
+    everyone (0), is its own."""
+    cfg = VehicleConfig(parse_address("127.0.0.1:14561", "udpin"), parse_address("127.0.0.1:14550"), sysid=2)
+    who = Authority(cfg)
+    assert who.for_others(_addressed(kind, 3))
+    assert not who.for_others(_addressed(kind, 2))
+    assert not who.for_others(_addressed(kind, 0))
+    gcs = ("127.0.0.1", 14550)
+    assert who.controller_refusal(_addressed(kind, 3), False, gcs, None, True) == "target"

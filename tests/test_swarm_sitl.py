@@ -1,0 +1,134 @@
+"""Covers bridge.session.fleet, bridge.swarm and bridge.cli: several vehicles as SITL sessions (bsst sitl).
+
+Real processes: one ``bsst vehicle`` and one ``bsst controller`` per vehicle, over UDP on 127.0.0.1 (free ports,
+``instance=None``, so the tests run beside other sessions). Each pair keeps its own lockstep, so each vehicle's
+trace equals the offline fleet's for that vehicle (≤ 1e-4 m), the separation judged on the traces is the
+offline loop's, and a contact ends both vehicles ``collision`` at the offline loop's step, with the note that the
+flights went on past it (the vehicles share no clock). The records have the offline fleet's layout.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bridge.cli import main
+from bridge.cli.flying import report_fleet
+from bridge.swarm import CONTINUED, FleetRun, Watch, judge_traces, simulate, sitl
+from missions import MISSION_DIR
+from params import ConfigError
+from tests.sitlkit import Proc, csv_rows
+from tests.waiting import wait_for
+
+pytestmark = pytest.mark.process  # starts processes
+
+ROOT = Path(__file__).resolve().parents[1]
+TOUCH = ROOT / "examples" / "swarm-touch.toml"
+
+
+def short_sine(tmp_path: Path, seconds: float = 2.0) -> Path:
+    text = (MISSION_DIR / "sine.toml").read_text().replace("duration_s = 30.0", f"duration_s = {seconds}")
+    f = tmp_path / "short.toml"
+    f.write_text(text)
+    return f
+
+
+def worst_gap(a: dict, b: dict) -> float:
+    assert len(a["t"]) == len(b["t"])
+    return max(float(np.max(np.abs(np.asarray(a[c]) - np.asarray(b[c])))) for c in ("x", "y", "z"))
+
+
+def test_four_in_a_line_fly_in_sitl_as_offline_vehicle_by_vehicle(tmp_path: Path) -> None:
+    mission = short_sine(tmp_path)
+    run = sitl(mission, vehicles=4, formation="line:2", instance=None, out=tmp_path / "sitl", plots=False)
+    off = simulate(mission, vehicles=4, formation="line:2", plots=False)
+    assert isinstance(run, FleetRun) and run.outcome == "completed", run.summary
+    s = run.summary
+    assert s["clock"] == "lockstep" and s["sitl"]["sysids"] == [1, 2, 3, 4] and s["sitl"]["shared_clock"] is False
+    for a, b in zip(run.runs, off.runs):
+        assert a.summary["clock"] == "lockstep" and a.summary["lockstep"] == {"held": True}
+        assert worst_gap(a.trace, b.trace) <= 1e-4
+    # the separation judged on the traces is the offline loop's, pair by pair
+    for p, q in zip(s["separation"]["pairs"], off.summary["separation"]["pairs"]):
+        assert p["ids"] == q["ids"] and abs(p["closest_m"] - q["closest_m"]) <= 1e-4 and p["ok"] and q["ok"]
+    assert [p["ok"] for p in s["policies"]] == [True]
+    # the records: the offline fleet's layout, each vehicle with its session's files
+    root = tmp_path / "sitl"
+    top = json.loads((root / "summary.json").read_text())
+    assert [v["dir"] for v in top["vehicles"]] == [f"vehicle-{i}" for i in range(1, 5)]
+    for i in range(1, 5):
+        d = root / f"vehicle-{i}"
+        assert all((d / f).is_file() for f in ("trace.csv", "vehicle.tlog", "controller.tlog", "summary.json"))
+        assert json.loads((d / "summary.json").read_text())["sitl"]["sysid"] == i
+    assert report_fleet(run, "sitl") == 0
+
+
+def test_a_touch_in_sitl_is_collision_for_both_at_the_offline_step_and_says_the_flights_went_on(
+        tmp_path: Path) -> None:
+    run = sitl(TOUCH, instance=None, out=tmp_path / "touch", plots=False)
+    off = simulate(TOUCH, plots=False)
+    assert isinstance(run, FleetRun) and run.outcome == "collision"
+    offline_step = len(off.runs[0].trace["t"])  # the offline flights end at the step they touch
+    for v, other in zip(run.summary["vehicles"], (2, 1)):
+        c = v["contact"]
+        assert v["outcome"] == "collision" and not v["ok"]
+        assert c["step"] == offline_step and c["with"] == other and c["continued"] == CONTINUED
+    assert run.summary["sitl"]["note"] == CONTINUED
+    assert not run.summary["policies"][0]["ok"]  # separation broke before they touched
+    # the flights went on: each vehicle's own record is its whole flight, past the contact
+    assert len(run.runs[0].trace["t"]) > offline_step
+    assert report_fleet(run, "sitl") == 1
+
+
+def test_the_trace_judge_is_the_offline_watch() -> None:
+    """A near miss flown offline, its traces judged afterwards (as SITL's are): the offline loop's verdict and
+    closest approach (the loop also judges the state after the last step, which no trace row holds)."""
+    off = simulate(ROOT / "examples" / "swarm-near-miss.toml", plots=False)
+    sep = off.summary["separation"]
+    watch = Watch([1, 2], list(sep["disc_radius_m"].values()), sep["min_m"])
+    assert judge_traces(watch, [r.trace for r in off.runs], off.summary["rate_hz"]) == {}
+    assert watch.verdict() == off.summary["policies"][0] and not watch.verdict()["ok"]
+    assert watch.summary()["pairs"] == sep["pairs"]
+
+
+def test_a_fleet_past_the_last_instance_is_refused_before_anything_starts(tmp_path: Path, capsys) -> None:
+    with pytest.raises(ConfigError, match="instances are 0-9"):
+        sitl(short_sine(tmp_path), vehicles=3, instance=8, out=tmp_path / "no")
+    assert not (tmp_path / "no").exists()
+    assert main(["sitl", str(short_sine(tmp_path)), "--vehicles", "4", "--instance", "7", "--out",
+                 str(tmp_path / "no")]) == 2
+    assert "instances are 0-9" in capsys.readouterr().err and not (tmp_path / "no").exists()
+
+
+FLY = ("import sys; from bridge.swarm import sitl; from bridge.cli.flying import report_fleet; "
+       "r = sitl(sys.argv[1], vehicles=2, instance=None, out=sys.argv[2], plots=False); "
+       "sys.exit(report_fleet(r, 'sitl'))")
+
+
+def test_ctrl_c_stops_every_pair_and_each_summary_says_aborted(tmp_path: Path) -> None:
+    run = tmp_path / "run"
+    p = Proc([sys.executable, "-c", FLY, str(short_sine(tmp_path, 30.0)), str(run)], cwd=ROOT)
+    try:
+        wait_for(lambda: all(csv_rows(run / f"vehicle-{i}" / "trace.csv") > 250 for i in (1, 2)), 90,
+                 "a second of flight of both vehicles")
+        p.p.send_signal(signal.SIGINT)
+        p.p.wait(timeout=30)
+    finally:
+        p.stop()
+    assert p.p.returncode == 1, p.lines[-20:]
+    s = json.loads((run / "summary.json").read_text())
+    assert s["outcome"] == "aborted" and [v["outcome"] for v in s["vehicles"]] == ["aborted", "aborted"]
+    for i in (1, 2):
+        own = json.loads((run / f"vehicle-{i}" / "summary.json").read_text())
+        assert own["ended_by"]["who"] == "user"
+        assert csv_rows(run / f"vehicle-{i}" / "trace.csv") < 30 * 250
+
+
+def test_a_fleet_awaiting_a_ground_stations_mission_is_refused() -> None:
+    with pytest.raises(ConfigError, match="--vehicles with --await-mission"):
+        sitl(None, vehicles=2, await_mission=True)
