@@ -8,13 +8,13 @@ Out: :func:`scope_of`, the unit of work the test belongs to: the test alone, or,
      group of all the module's tests that do, so that one worker makes the fixture once;
      :class:`SharedFixtureScheduling`, pytest-xdist's ``loadscope`` scheduler with those units
 
-Why: ``--dist load`` hands tests out round-robin, then in chunks, whatever their module, so a module's tests
-may go to both workers and each then sets up its module-scoped fixture (a 40-test sample module: both did);
-``--dist loadfile`` (or pytest-xdist's own ``loadscope``) keeps each whole file on one worker, which leaves
-a worker idle while the other finishes a long file. Here only the tests that share a fixture are kept
-together: the groups go first (the largest first, pytest-xdist's ``--loadscope-reorder``), then every other
-test one at a time to the worker that is free. (pytest-xdist's ``loadgroup`` would do this from ``xdist_group`` marks, but under pytest 9 it renames
-``item._nodeid``, which pytest 9 no longer reads: its groups are silently ignored.)
+Why: ``--dist load`` hands tests out round-robin, then in chunks, whatever their module, so a module's tests may
+go to both workers and each then sets up its module-scoped fixture (a 40-test sample module: both did); ``--dist
+loadfile`` (or pytest-xdist's own ``loadscope``) keeps each whole file on one worker, which leaves a worker idle
+while the other finishes a long file. Here only the tests that share a fixture are kept together: the groups go
+first (the largest first, pytest-xdist's ``--loadscope-reorder``), then every other test one at a time to the
+worker that is free. (pytest-xdist's ``loadgroup`` would do this from ``xdist_group`` marks, but under pytest 9
+it renames ``item._nodeid``, which pytest 9 no longer reads: its groups are silently ignored.)
 
 The controller does not collect tests, so the fixtures are read from each module's source with ``ast``: a
 function decorated ``@pytest.fixture(scope="module")``, and any fixture of the module that takes one as an
