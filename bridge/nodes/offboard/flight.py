@@ -76,6 +76,7 @@ class Offboard(OffboardLink):
         self.ended_taken_over = False  # the flight ended for a ground station's mode (no more targets sent)
         self._changes = list(flight.param_changes)  # scheduled PARAM_SETs not sent yet, by mission time
         self._end_wall: float | None = None  # wall time the mission's last state came (the events' clock after it)
+        self._way_down: float | None = None  # real time: the states' way down (s), the vehicle's clock ahead of ours
         self._end_usec: int | None = None  # lockstep: the stamp of the state that ended the mission, unanswered
         self._end_height_m = 0.0
 
@@ -241,7 +242,7 @@ class Offboard(OffboardLink):
                 self._on(m)
             self._await_state(k0 + j, due + STATE_WAIT_PERIODS * period)  # at once if it is in
             if way_down is None:
-                way_down = self._way_down_s(phase)
+                way_down = self._way_down = self._way_down_s(phase)
             outcome = self._check_vehicle()
             if outcome:
                 return outcome
@@ -396,7 +397,9 @@ class Offboard(OffboardLink):
         """The mission's steps are flown (the state of mission time ``t_end``, s, came): ``failsafe`` if the
         vehicle's failsafe took over and it is not back under offboard control, else ``completed``. A vehicle
         its failsafe landed and disarmed is disarmed by command too, which ends its lockstep flight."""
-        self.t_mission, self._end_wall = t_end, time.monotonic()
+        # on the vehicle's clock (the session orders both children's events by time): it measured that state
+        # the way down before it came
+        self.t_mission, self._end_wall = t_end, time.monotonic() - (self._way_down or 0.0)
         self._end_height_m = max(-float(odo.z), 0.0)  # m above the start (NED z): the landing's time
         back = self.vehicle_armed and self.vehicle_state != mavlink.MAV_STATE_CRITICAL
         if not self.failsafe_seen or back:

@@ -275,7 +275,8 @@ class MissionManager:
             self._busy(who, m.mission_type if kind == "MISSION_CLEAR_ALL" else MISSION)
             return False
         if kind == "MISSION_CLEAR_ALL":
-            self._accept(who, Mission(), "cleared")
+            if self.mission.items:  # clearing no mission changes nothing: answered, not said as a change
+                self._accept(who, Mission(), "cleared")
             self._answer(who, mavlink.MAV_MISSION_ACCEPTED, m.mission_type)
             return True
         return self._set_current(who, m)
