@@ -19,7 +19,7 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.loop import simulate
-from bridge.mavlink.endpoint import GCS_PORT
+from bridge.mavlink.endpoint import GCS_PORT, LINK_PORT
 from bridge.record.columns import TRACE_COLUMNS
 from bridge.record.policies import POLICIES
 from bridge.record.runlog import read_trace
@@ -364,3 +364,21 @@ def test_the_lines_a_child_writes_after_ready_in_the_same_read_are_kept(tmp_path
     assert [r.kind for _, r in session._early] == ["armed"]
     session._handle(session._early)
     assert session.vehicle_armed and [e.kind for e in session.events] == ["armed"]
+
+
+def test_an_instance_whose_port_another_program_holds_is_passed_over() -> None:
+    """instance_slot: a slot whose ground-station or vehicle port something outside the locks has bound (a ground
+    station listening, or a process of the slot's last holder still closing: the suite's "Address already in use")
+    is not handed out; once the port is free the slot is taken again."""
+    import socket
+
+    with instance_slot() as n:
+        pass
+    for port in (GCS_PORT + n, LINK_PORT + n):  # its ground station's port, then its vehicle's
+        holder = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        holder.bind(("127.0.0.1", port))
+        try:
+            with instance_slot() as m:
+                assert m != n
+        finally:
+            holder.close()

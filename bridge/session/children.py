@@ -24,6 +24,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+from bridge.mavlink.address import GCS_PORT, LINK_PORT
 from bridge.nodes.process import die_with_parent
 from bridge.nodes.report import Done, Report, Stats, parse_line
 from params import ConfigError
@@ -127,9 +128,22 @@ class Child:
         return lines[-1].strip() if lines else ""
 
 
+def _ports_free(n: int) -> bool:
+    """Whether instance N's two UDP ports, 127.0.0.1:14550 + N (its ground station's) and 14560 + N (its
+    vehicle's), can be bound now."""
+    for port in (GCS_PORT + n, LINK_PORT + n):
+        try:
+            check_port_free(port, "instance")
+        except ConfigError:
+            return False
+    return True
+
+
 @contextlib.contextmanager
 def instance_slot(timeout_s: float = 600.0) -> Iterator[int]:
-    """Hold instance number N (0-9) of this machine exclusively while the block runs.
+    """Hold instance number N (0-9) of this machine exclusively while the block runs: one whose ports are free
+    too (a ground station listening on 14550 + N, or a process of an earlier holder still closing its socket, would
+    take this session's telemetry or refuse its bind: that slot is passed over).
 
     An advisory ``flock`` on ``<tmp>/bsst-instance-N.lock`` (the convention ``bsst sweep``
     uses too), so sessions started by tests, sweeps or scripts side by side never share
@@ -143,6 +157,9 @@ def instance_slot(timeout_s: float = 600.0) -> Iterator[int]:
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:
+                os.close(fd)
+                continue
+            if not _ports_free(n):  # held by a program outside the locks (or one still closing): another slot
                 os.close(fd)
                 continue
             try:
