@@ -370,13 +370,15 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
 def judge_traces(watch: Watch, traces: Sequence[dict[str, Any]], rate: float) -> dict[int, dict[str, Any]]:
     """Judge the shared world on finished traces, with the offline loop's :class:`Watch`: row j of every trace
     (the true positions at t = j / rate; row 0 the start) is the world after step j - 1, as the loop judges it;
-    a trace that ended early stays at its last row. The first contact of each vehicle (by index): its step, time,
-    the other's id and why."""
+    a trace that ended early stays at its last row; an empty one (a vehicle that flew no step) is nowhere, and
+    touches no one. The first contact of each vehicle (by index): its step, time, the other's id and why."""
     n = max((len(tr["t"]) for tr in traces), default=0)
     first: dict[int, dict[str, Any]] = {}
+    nowhere = (math.nan, math.nan, math.nan)  # NaN distances: never closer, never touching (Watch.check)
     for j in range(n):
         rows = [min(j, len(tr["t"]) - 1) for tr in traces]
-        positions = [(float(tr["x"][r]), float(tr["y"][r]), float(tr["z"][r])) for tr, r in zip(traces, rows)]
+        positions = [(float(tr["x"][r]), float(tr["y"][r]), float(tr["z"][r])) if r >= 0 else nowhere
+                     for tr, r in zip(traces, rows)]
         for a, b, why in watch.check(j / rate, positions):
             for i, other in ((a, b), (b, a)):
                 first.setdefault(i, {"step": j, "t": round(j / rate, 6), "with": watch.ids[other], "why": why,
