@@ -64,7 +64,9 @@ out["arm"] = Action(system).arm().name
 deadline = time.monotonic() + float(sys.argv[3])
 while time.monotonic() < deadline and not mr.is_mission_finished() and [len(items)] * 2 not in progress:
     time.sleep(0.1)
-time.sleep(1.5)  # MISSION_CURRENT's next 1 Hz tick says the mission complete
+done_by = time.monotonic() + 10.0  # the last MISSION_CURRENT (sent as its item is reached) says it complete
+while time.monotonic() < done_by and not mr.is_mission_finished():
+    time.sleep(0.05)
 out["finished"] = mr.is_mission_finished()
 out["progress"] = progress
 print("RESULT " + json.dumps(out), flush=True)

@@ -186,6 +186,7 @@ class MissionManager:
             self.reached(seq)
             self.set_current(watch.current)
             self.completed = watch.done
+            self._broadcast(self.current_message())  # the change at once, as PX4 does, not at the next 1 Hz tick
         if not armed:
             self.watch = None
 
