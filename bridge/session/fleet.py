@@ -18,11 +18,9 @@ contacts) is judged afterwards on their traces (:mod:`bridge.swarm`). Ctrl-C or 
 
 from __future__ import annotations
 
-import signal
 import threading
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 from bridge.autopilot.estimator import compile_estimator
 from bridge.core.flight import Flight
@@ -31,7 +29,7 @@ from bridge.mavlink.signing import key_from_file
 from bridge.record.runlog import Run, blackout_windows, finish_run
 from bridge.session import check_options
 from bridge.session.children import check_port_free
-from bridge.session.session import Session
+from bridge.session.session import Session, catch_stop_signals
 from params import ConfigError
 
 MAX_INSTANCE = 9  # instances 0-9, as bridge.session.children.instance_slot holds them
@@ -84,7 +82,7 @@ def fly_sessions(flights: Sequence[Flight], ids: Sequence[int], dirs: Sequence[P
 
     threads = [threading.Thread(target=fly, args=(j,), name=f"vehicle-{ids[j]}", daemon=True)
                for j in range(len(sessions))]
-    restore = _stop_all_on_signals(sessions)
+    restore = catch_stop_signals(sessions)
     try:
         for t in threads:
             t.start()
@@ -103,22 +101,3 @@ def fly_sessions(flights: Sequence[Flight], ids: Sequence[int], dirs: Sequence[P
                 title = f"{m.name} ({m.controller}, {f.profile.name}, SITL {r.summary['clock']})"
                 finish_run(r.path, r.trace, r.summary, title, True, blackout_windows(m))
     return done
-
-
-def _stop_all_on_signals(sessions: Sequence[Session]) -> Any:
-    """While the fleet flies, Ctrl-C and SIGTERM set every session's ``interrupted`` (each stops its children
-    between whole steps, as a single session does). Main thread only."""
-    if threading.current_thread() is not threading.main_thread():
-        return lambda: None
-
-    def handler(signum: int, frame: Any) -> None:
-        for s in sessions:
-            s.interrupted = True
-
-    old = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
-
-    def restore() -> None:
-        for sig, h in old.items():
-            signal.signal(sig, h)
-
-    return restore

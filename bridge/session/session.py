@@ -20,7 +20,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -70,7 +70,7 @@ class Session:
         self.diverged = False
         self.died: str | None = None
         self.aborted = False
-        self.interrupted = False  # set by Ctrl-C / SIGTERM (see _catch_stop_signals)
+        self.interrupted = False  # set by Ctrl-C / SIGTERM (see catch_stop_signals)
         self._event_log: EventLog | None = None
         self._early: list[tuple[Child, Report]] = []  # reports read while starting, handled once all are up
 
@@ -81,7 +81,7 @@ class Session:
         self._event_log = record.events
         self.joiner = TraceJoiner(self.path, self.flight, record.trace, lockstep=not self.realtime)
         self.t_wall0 = time.monotonic()
-        restore = _catch_stop_signals(self)
+        restore = catch_stop_signals([self])
         try:
             try:
                 self._start()
@@ -436,15 +436,16 @@ def _end(child: Child | None) -> ChildEnd | None:
                     done.outcome if done is not None else None, done.reason if done is not None else None)
 
 
-def _catch_stop_signals(session: Session) -> Callable[[], None]:
-    """While a session runs, Ctrl-C (SIGINT) and SIGTERM only set ``session.interrupted``;
-    the session checks it between whole steps, so no file is left half-written by an
-    exception raised in the middle of a write. Main thread only (signals go there)."""
+def catch_stop_signals(sessions: Sequence[Session]) -> Callable[[], None]:
+    """While sessions run (one, or a fleet's), Ctrl-C (SIGINT) and SIGTERM only set each one's ``interrupted``;
+    a session checks it between whole steps, so no file is left half-written by an exception raised in the
+    middle of a write. Main thread only (signals go there). Returns what restores the handlers before."""
     if threading.current_thread() is not threading.main_thread():
         return lambda: None
 
     def handler(signum: int, frame: Any) -> None:
-        session.interrupted = True
+        for s in sessions:
+            s.interrupted = True
 
     old = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
 
