@@ -541,9 +541,14 @@ def test_a_ground_stations_parameter_change_is_recorded_who_what_when_and_ends_r
 # -- issue 22, defect 3: a scheduled change is confirmed by the vehicle's echo, resent until it is, or said lost ---
 # lost: the blackout outlasts the controller's end (its disarm's 3 s of tries): the held command brings the vehicle
 # down hard at 5.8 s (crashed, issue 27), after which a resend reaching it at the blackout's end would be answered
-@pytest.mark.parametrize("blackout, confirmed", [("2:1", True), ("4:30", False)], ids=["rides-through", "lost"])
-def test_a_scheduled_change_in_a_realtime_blackout_is_resent_until_confirmed_or_said_not_made(tmp_path, blackout,
-                                                                                               confirmed):
+# rides-through flies PID: a blackout holds the last target (as PX4 does until COM_OF_LOSS_T), and the BS-ST
+# law's torques alternate by several N·m (issue 24), so which one is held for the 1 s is the wall clock's draw,
+# and some draws tip the vehicle into the ground (seen under load: "no new state from the vehicle", crashed).
+# PID's torques are below 0.3 N·m from 3 s on: the same hold is a small drift, every time.
+@pytest.mark.parametrize("blackout, at, law, confirmed", [("3:1", "3.2", "pid", True), ("4:30", "4.2", "bsst", False)],
+                         ids=["rides-through", "lost"])
+def test_a_scheduled_change_in_a_realtime_blackout_is_resent_until_confirmed_or_said_not_made(tmp_path, blackout, at,
+                                                                                               law, confirmed):
     """``bsst sitl --realtime`` through the relay, the up link blacked out over ``--param-at``'s time (the loss
     timeout 5 s: the blackout alone is no failsafe). Rides through: the PARAM_SET lost in the blackout is sent
     again every 0.2 s until the vehicle's PARAM_VALUE echoes it after the blackout; the vehicle made the change,
@@ -551,18 +556,17 @@ def test_a_scheduled_change_in_a_realtime_blackout_is_resent_until_confirmed_or_
     controller's end): never confirmed, the summary and stderr say it was not made, exit 1."""
     mission = tmp_path / "short.toml"
     mission.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 5.0"))
-    at = "2.2" if confirmed else "4.2"
     with instance_slot() as n:
         r = _bsst("sitl", str(mission), "--realtime", "--instance", str(n), "--out", str(tmp_path / "run"),
-                  "--no-plots", "--delay", "2", "--param", "COM_OF_LOSS_T=5", "--up-blackout", blackout,
-                  "--param-at", f"{at}:MIS_TAKEOFF_ALT=5")
+                  "--no-plots", "--controller", law, "--delay", "2", "--param", "COM_OF_LOSS_T=5",
+                  "--up-blackout", blackout, "--param-at", f"{at}:MIS_TAKEOFF_ALT=5")
     s = json.loads((tmp_path / "run" / "summary.json").read_text())
     [sent] = s["param_at"]
     assert sent["name"] == "MIS_TAKEOFF_ALT" and sent["value"] == 5 and sent["sends"] >= 2, sent
     log = (tmp_path / "run" / "events.log").read_text()
     if confirmed:
         assert r.returncode == 0, r.stderr
-        assert sent["confirmed"] is True and sent["confirmed_t"] >= 3.0, sent
+        assert sent["confirmed"] is True and sent["confirmed_t"] >= 4.0, sent
         assert "MIS_TAKEOFF_ALT = 5 (was 2.5)" in log  # the vehicle made it
     else:
         assert r.returncode == 1, r.stderr
