@@ -185,11 +185,31 @@ def test_bsst_sim_flies_a_plan_and_refuses_a_bad_one(tmp_path: Path) -> None:
     assert p.returncode == 2 and p.stderr.strip().count("\n") == 0 and "DO_JUMP (177)" in p.stderr
 
 
+def l_plan(tmp_path: Path) -> Path:
+    """The box plan cut to an L (takeoff to 3 m, 10 m north, a pass-through corner, 10 m east, land): 20 s of
+    flight where the box has 90, with every kind of item the box has (its figures: the offline test above)."""
+    def cut(data: dict) -> None:
+        items = data["mission"]["items"]
+        takeoff, speed, corner, land = (copy.deepcopy(items[i]) for i in (0, 1, 2, 7))
+        north, east = corner, copy.deepcopy(corner)
+        for item, (lat, lon) in ((takeoff, (47.397742, 8.545594)), (north, (47.397832, 8.545594)),
+                                 (east, (47.397832, 8.545727)), (land, (47.397832, 8.545727))):
+            item["params"][4:6] = [lat, lon]
+            if item is not land:
+                item["params"][6] = item["Altitude"] = 3
+        data["mission"]["items"] = [takeoff, speed, north, east, land]
+        for k, item in enumerate(data["mission"]["items"]):
+            item["doJumpId"] = k + 1
+    return write_plan(tmp_path, cut, "l.plan")
+
+
 def test_lockstep_sitl_flies_the_plan_as_offline(tmp_path: Path) -> None:
     from bridge.session import sitl  # here: the other tests of this module start no SITL session
 
-    offline = simulate(BOX_PLAN, plots=False)
-    lock = sitl(BOX_PLAN, out=tmp_path / "sitl", plots=False, instance=None)
+    plan = l_plan(tmp_path)
+    offline = simulate(plan, plots=False)
+    assert offline.summary["outcome"] == "completed" and len(offline.trace["t"]) >= 20 * 250
+    lock = sitl(plan, out=tmp_path / "sitl", plots=False, instance=None)
     assert lock.summary["outcome"] == "completed" and lock.summary["clock"] == "lockstep"
     n = len(offline.trace["t"])
     assert len(lock.trace["t"]) == n
