@@ -78,12 +78,23 @@ def test_a_law_without_desired_does_not_fit(nominal: Nominal) -> None:
         make_law(NoDesired, nominal, Gains(), 250.0)
 
 
+def _sine(tmp_path: Path, duration_s: float) -> Path:
+    """missions/sine.toml flown for ``duration_s``, not 30 s (every other key as shipped): the same steps
+    compared, fewer of them (the 30 s sine's lockstep-equals-offline is tests/test_sitl.py's)."""
+    path = tmp_path / "sine.toml"
+    text = (ROOT / "missions" / "sine.toml").read_text()
+    assert "duration_s = 30.0" in text
+    path.write_text(text.replace("duration_s = 30.0", f"duration_s = {duration_s}"))
+    return path
+
+
 def test_the_template_flies_the_sine_offline_and_in_lockstep_alike(tmp_path: Path) -> None:
-    offline = simulate(ROOT / "missions" / "sine.toml", controller="examples/my_law.py:MyLaw", plots=False)
+    sine = _sine(tmp_path, 12.0)
+    offline = simulate(sine, controller="examples/my_law.py:MyLaw", plots=False)
     assert offline.outcome == "completed"
     assert offline.rms < 0.02
     with instance_slot() as n:
-        r = subprocess.run([sys.executable, "-m", "bridge", "sitl", "missions/sine.toml", "--controller",
+        r = subprocess.run([sys.executable, "-m", "bridge", "sitl", str(sine), "--controller",
                             "examples/my_law.py:MyLaw", "--instance", str(n), "--no-plots", "--out",
                             str(tmp_path / "sitl")], cwd=ROOT, capture_output=True, text=True, timeout=240)
     assert r.returncode == 0, r.stderr
@@ -167,10 +178,11 @@ def test_bsst_flies_the_same_in_lockstep_and_offline_with_either_scheme(tmp_path
     lockstep session flies what ``bsst sim`` flies with either scheme, within the float32 wire's 1e-4 m; the
     command's period-2 component (the explicit scheme's alternation, the implicit's absence of it) is the
     offline one's over the wire too."""
-    mission = load_mission(ROOT / "missions" / "sine.toml").with_overrides(discretization=scheme)
+    sine = _sine(tmp_path, 15.0)  # the period-2 component is measured from 10 s on
+    mission = load_mission(sine).with_overrides(discretization=scheme)
     offline = simulate(mission, plots=False)
     with instance_slot() as n:
-        r = subprocess.run([sys.executable, "-m", "bridge", "sitl", "missions/sine.toml", "--discretization",
+        r = subprocess.run([sys.executable, "-m", "bridge", "sitl", str(sine), "--discretization",
                             scheme, "--instance", str(n), "--no-plots", "--out", str(tmp_path / "sitl")],
                            cwd=ROOT, capture_output=True, text=True, timeout=240)
     assert r.returncode == 0, r.stderr
