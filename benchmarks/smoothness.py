@@ -97,7 +97,8 @@ def step(d: str, law: str = "bsst") -> tuple[dict[str, Any], dict[str, Any]]:
     return axes, tv
 
 
-def margin(d: str, predict: bool) -> float | None:
+def margin(d: str, predict: bool) -> dict[str, Any]:
+    """``bsst margin``'s margin.json: ``margin`` (the bisection's), ``holds_below``, ``monotone``, ``failed_below``."""
     with tempfile.TemporaryDirectory() as tmp:
         cmd = [sys.executable, "-m", "bridge", "margin", "missions/sine.toml", "--over", "delay_ms", "--until",
                "rms=0.1", "--discretization", d, "--out", tmp, "--overwrite"]
@@ -105,7 +106,8 @@ def margin(d: str, predict: bool) -> float | None:
             cmd += ["--compensation", "predict"]
         subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=3600, check=False)
         f = Path(tmp) / "margin.json"
-        return json.loads(f.read_text()).get("margin") if f.exists() else None
+        res = json.loads(f.read_text()) if f.exists() else {}
+        return {k: res.get(k) for k in ("margin", "holds_below", "monotone", "failed_below")}
 
 
 SCANS = {"none": range(30, 41), "predict": range(50, 61)}  # one-way delays (ms) around each margin
@@ -225,9 +227,37 @@ def table(res: dict[str, dict[str, Any]]) -> str:
     for kind in ("raw", "ekf"):
         row(f"mocap {kind}: 3-D RMS (m)", lambda r, kind=kind: r[f"mocap_{kind}"]["rms_3d"])
         row(f"mocap {kind}: u2 ripple (N)", lambda r, kind=kind: r[f"mocap_{kind}"]["ripple_u2"])
-    row("margin delay_ms, rms=0.1 (ms)", lambda r: r["margin_ms"]["none"], "g")
-    row("margin delay_ms, rms=0.1, predict (ms)", lambda r: r["margin_ms"]["predict"], "g")
+    for comp in ("none", "predict"):
+        what = "margin delay_ms, rms=0.1" + (", predict" if comp == "predict" else "")
+        row(f"{what} (ms, bisection)", lambda r, c=comp: r["margin_ms"][c]["margin"], "g")
+        row(f"{what}: holds_below (ms)", lambda r, c=comp: r["margin_ms"][c]["holds_below"], "g")
+        row(f"{what}: monotone below", lambda r, c=comp: str(r["margin_ms"][c]["monotone"]), "s")
     return "\n".join(lines)
+
+
+def acceptance(res: dict[str, dict[str, Any]]) -> list[str]:
+    """Issue 24's "What must be true" of the implicit scheme, each with the figure that decides it."""
+    imp, exp = res["implicit"], res["explicit"]
+    s250, s100, step_ = imp["sine_250"], imp["sine_100"], imp["step"]
+    checks = [
+        ("period-2 of u2, u3, u4 at 250 Hz <= 0.01 N", max(s250[f"p2_{u}"] for u in ("u2", "u3", "u4")), 0.01),
+        ("TV of u2, u3 at 250 Hz <= 35 /s", max(s250["tv_u2"], s250["tv_u3"]), 35.0),
+        ("sine 3-D RMS at 250 Hz <= 1e-5 m", s250["rms_3d"], 1e-5),
+        ("period-2 of u2, u3, u4 at 100 Hz <= 0.02 N", max(s100[f"p2_{u}"] for u in ("u2", "u3", "u4")), 0.02),
+        ("step settling, every axis <= 5 s", max(v["settling_s"] for v in step_.values()), 5.0),
+        ("step steady error <= 1 mm", max(step_[a]["steady"] for a in ("x", "y", "z")), 1e-3),
+        ("robust <= 6 cm", imp["robust"], 0.06),
+        ("robust-x500 <= 6 cm", imp["robust-x500"], 0.06),
+    ]
+    out = [f"{'holds' if v <= top else 'FAILS'}: {what} ({v:.3g})" for what, v, top in checks]
+    if "margin_ms" in imp:
+        for comp in ("none", "predict"):
+            i, e = imp["margin_ms"][comp], exp["margin_ms"][comp]
+            ok = None not in (i["margin"], e["margin"]) and i["margin"] >= e["margin"]
+            out.append(f"{'holds' if ok else 'FAILS'}: bsst margin (compensation {comp}) implicit >= explicit "
+                       f"({i['margin']} against {e['margin']} ms; holds_below {i['holds_below']} against "
+                       f"{e['holds_below']} ms)")
+    return out
 
 
 def figure(path: Path, t0: float = 20.0, span: float = 0.1) -> None:
@@ -272,6 +302,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     res = {d: measure(d, not args.no_margin) for d in DISCRETIZATIONS}
     print(table(res))
+    print("\n" + "\n".join(acceptance(res)))
     print(f"\nload average {' '.join(f'{v:.2f}' for v in os.getloadavg())}; {os.cpu_count()} cores; "
           f"{time.perf_counter() - t0:.0f} s")
     if args.json:
