@@ -93,7 +93,7 @@ def test_the_check_below_can_be_turned_off(tmp_path: Path) -> None:
 
 def test_require_fails_a_users_ci_when_the_margin_is_short(tmp_path: Path) -> None:
     r = bsst("margin", "missions/sine.toml", "--over", "delay_ms", "--until", "rms=0.1", "--resolution", "4",
-             "--require", "50", "--out", str(tmp_path))
+             "--check-below", "4", "--require", "50", "--out", str(tmp_path))
     assert r.returncode == 1 and "below --require 50" in r.stderr, r.stderr
 
 
