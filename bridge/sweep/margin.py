@@ -6,9 +6,10 @@ applied to both directions as a sweep's axes are, or ``noise``: the scale of eve
 mission's sensor set, flown with its estimator, or ``wind_mps``: the steady wind's speed, from the
 mission's ``[wind] from_deg``, with its turbulence), the failure criterion (``rms=X``: the 3-D
 RMS error passes X m; ``class=NAME``: the cell's class is NAME or worse, see
-:mod:`bridge.sweep.classes`), the laws and the seeds. Out: per law the margin (the largest
-value flown that did not fail, in the axis's unit), its bracket ``[margin, first failing
-value]``, and every cell flown; ``margin.json`` when a directory is given.
+:mod:`bridge.sweep.classes`), the laws, the seeds and the band checked below the margin (axis unit).
+Out: per law the margin (the largest value flown that did not fail, in the axis's unit), its bracket
+``[margin, first failing value]``, ``monotone``, ``failed_below`` and ``holds_below`` (the check
+below it), and every cell flown; ``margin.json`` when a directory is given.
 
 A value fails when any of its seeds fails. The search first doubles from ``start`` until it
 finds a failing value (or reaches the axis's range), then halves the bracket until it is no
