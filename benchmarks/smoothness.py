@@ -24,7 +24,9 @@ millisecond and this is the whole curve), 30-40 ms without and 50-60 ms with ``-
 schemes: the bisection of ``bsst margin`` assumes the RMS grows with the delay, and it does not (docs/law.md,
 "The delay margin, scanned"). ``--scan --implicit-virtual-controls`` scans the implicit scheme with its virtual
 controls stepped implicitly too (:func:`implicit_virtual_controls`: an experiment patched into the scalar loop
-here, not a scheme of the product).
+here, not a scheme of the product). ``--implicit-horizon LAM`` flies the implicit scheme with its step solved over
+LAM periods (:func:`implicit_horizon`, the same kind of experiment), the scan or the table (its margins by
+``bsst margin``'s bisection in this process, without the check below).
 
 Acceptance (issue 24): implicit sine 250 Hz period-2 <= 0.01 N (u2, u3, u4), TV <= 35 /s (u2, u3), RMS <= 1e-5
 m, 100 Hz period-2 <= 0.02 N; step settling <= 5 s and steady error <= 1 mm; robust <= 6 cm; smoothness
@@ -36,6 +38,7 @@ t in [20, 20.1) s, both schemes.
     .venv/bin/python benchmarks/smoothness.py [--no-margin] [--json]
     .venv/bin/python benchmarks/smoothness.py --figure docs/u2-explicit-vs-implicit.png
     .venv/bin/python benchmarks/smoothness.py --scan [--implicit-virtual-controls]
+    .venv/bin/python benchmarks/smoothness.py [--scan] --implicit-horizon 4
 """
 
 from __future__ import annotations
@@ -97,7 +100,8 @@ def step(d: str, law: str = "bsst") -> tuple[dict[str, Any], dict[str, Any]]:
     return axes, tv
 
 
-def margin(d: str, predict: bool) -> float | None:
+def margin(d: str, predict: bool) -> dict[str, Any]:
+    """``bsst margin``'s margin.json: ``margin`` (the bisection's), ``holds_below``, ``monotone``, ``failed_below``."""
     with tempfile.TemporaryDirectory() as tmp:
         cmd = [sys.executable, "-m", "bridge", "margin", "missions/sine.toml", "--over", "delay_ms", "--until",
                "rms=0.1", "--discretization", d, "--out", tmp, "--overwrite"]
@@ -105,9 +109,11 @@ def margin(d: str, predict: bool) -> float | None:
             cmd += ["--compensation", "predict"]
         subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=3600, check=False)
         f = Path(tmp) / "margin.json"
-        return json.loads(f.read_text()).get("margin") if f.exists() else None
+        res = json.loads(f.read_text()) if f.exists() else {}
+        return {k: res.get(k) for k in ("margin", "holds_below", "monotone", "failed_below")}
 
 
+HORIZON: list[float] = []  # --implicit-horizon: the patched scalar loop's lam (the margins then bisect here)
 SCANS = {"none": range(30, 41), "predict": range(50, 61)}  # one-way delays (ms) around each margin
 
 
@@ -159,6 +165,40 @@ def implicit_virtual_controls() -> None:
     bsst.BacksteppingSuperTwisting.__init__ = patched
 
 
+def implicit_horizon(lam: float) -> None:
+    """Patch the scalar loop (this process only): the implicit step solved over lam control periods H = lam h
+    instead of one. The command is (s~ - s_k) / H, s~ the backward-Euler step of the super-twisting law over H
+    (the dead zone's gain 1 / H: s shrinks by 1 - 1/lam a step there instead of reaching 0 in one), and xi moves
+    by 1/lam of the step over H (outside the dead zone: -h k2 sign(w), as the scheme's own). lam = 1 is the
+    product's scheme. An experiment, not a scheme of the product (docs/law.md, "The delay margin, scanned")."""
+    from controller import supertwisting
+
+    step = supertwisting.implicit_twisting
+
+    def twisting(s: float, xi: float, k1: float, k2: float, h: float) -> tuple[float, float]:
+        u, xi_h = step(s, xi, k1, k2, lam * h)
+        return u, xi + (xi_h - xi) / lam
+
+    def advance(xi: float, s: float, k1: float, k2: float, h: float, xi_max: float, hold: bool) -> float:
+        x = xi if hold else twisting(s, xi, k1, k2, h)[1]
+        return xi_max if x > xi_max else -xi_max if x < -xi_max else x
+
+    bsst.implicit_twisting, bsst.advance_xi_implicit = twisting, advance
+
+
+def bisect(d: str, predict: bool) -> dict[str, Any]:
+    """``bsst margin``'s bisection in this process (the process engine flies a round of one cell here: a
+    patched scalar loop flies it), without the check below: the scan gives it."""
+    from bridge.sweep.margin import margin as search
+    from bridge.sweep.margin import parse_until
+
+    m = mission("sine", d)
+    if predict:
+        m = m.with_overrides(link={"compensation": "predict"})
+    r = search(m, "delay_ms", parse_until("rms=0.1"), engine="process", below=0.0)
+    return {"margin": r["margin"], "holds_below": None, "monotone": None, "failed_below": None}
+
+
 def scan_table(limit_m: float = 0.1, schemes: tuple[str, ...] = DISCRETIZATIONS) -> str:
     """The delay scans of both schemes as markdown (RMS in mm; over ``limit_m`` in bold), and for each the
     largest delay up to which every delay of the scan holds."""
@@ -189,7 +229,8 @@ def measure(d: str, with_margin: bool) -> dict[str, Any]:
         f = flight(mission("sine", d), kind=kind)  # type: ignore[arg-type]
         r[f"mocap_{kind}"] = {"rms_3d": f["rms_3d_m"], "ripple_u2": f["ripple_u2_n"]}
     if with_margin:
-        r["margin_ms"] = {"none": margin(d, False), "predict": margin(d, True)}
+        find = bisect if HORIZON else margin
+        r["margin_ms"] = {"none": find(d, False), "predict": find(d, True)}
     return r
 
 
@@ -225,9 +266,37 @@ def table(res: dict[str, dict[str, Any]]) -> str:
     for kind in ("raw", "ekf"):
         row(f"mocap {kind}: 3-D RMS (m)", lambda r, kind=kind: r[f"mocap_{kind}"]["rms_3d"])
         row(f"mocap {kind}: u2 ripple (N)", lambda r, kind=kind: r[f"mocap_{kind}"]["ripple_u2"])
-    row("margin delay_ms, rms=0.1 (ms)", lambda r: r["margin_ms"]["none"], "g")
-    row("margin delay_ms, rms=0.1, predict (ms)", lambda r: r["margin_ms"]["predict"], "g")
+    for comp in ("none", "predict"):
+        what = "margin delay_ms, rms=0.1" + (", predict" if comp == "predict" else "")
+        row(f"{what} (ms, bisection)", lambda r, c=comp: r["margin_ms"][c]["margin"], "g")
+        row(f"{what}: holds_below (ms)", lambda r, c=comp: r["margin_ms"][c]["holds_below"], "g")
+        row(f"{what}: monotone below", lambda r, c=comp: str(r["margin_ms"][c]["monotone"]), "s")
     return "\n".join(lines)
+
+
+def acceptance(res: dict[str, dict[str, Any]]) -> list[str]:
+    """Issue 24's "What must be true" of the implicit scheme, each with the figure that decides it."""
+    imp, exp = res["implicit"], res["explicit"]
+    s250, s100, step_ = imp["sine_250"], imp["sine_100"], imp["step"]
+    checks = [
+        ("period-2 of u2, u3, u4 at 250 Hz <= 0.01 N", max(s250[f"p2_{u}"] for u in ("u2", "u3", "u4")), 0.01),
+        ("TV of u2, u3 at 250 Hz <= 35 /s", max(s250["tv_u2"], s250["tv_u3"]), 35.0),
+        ("sine 3-D RMS at 250 Hz <= 1e-5 m", s250["rms_3d"], 1e-5),
+        ("period-2 of u2, u3, u4 at 100 Hz <= 0.02 N", max(s100[f"p2_{u}"] for u in ("u2", "u3", "u4")), 0.02),
+        ("step settling, every axis <= 5 s", max(v["settling_s"] for v in step_.values()), 5.0),
+        ("step steady error <= 1 mm", max(step_[a]["steady"] for a in ("x", "y", "z")), 1e-3),
+        ("robust <= 6 cm", imp["robust"], 0.06),
+        ("robust-x500 <= 6 cm", imp["robust-x500"], 0.06),
+    ]
+    out = [f"{'holds' if v <= top else 'FAILS'}: {what} ({v:.3g})" for what, v, top in checks]
+    if "margin_ms" in imp:
+        for comp in ("none", "predict"):
+            i, e = imp["margin_ms"][comp], exp["margin_ms"][comp]
+            ok = None not in (i["margin"], e["margin"]) and i["margin"] >= e["margin"]
+            out.append(f"{'holds' if ok else 'FAILS'}: bsst margin (compensation {comp}) implicit >= explicit "
+                       f"({i['margin']} against {e['margin']} ms; holds_below {i['holds_below']} against "
+                       f"{e['holds_below']} ms)")
+    return out
 
 
 def figure(path: Path, t0: float = 20.0, span: float = 0.1) -> None:
@@ -256,6 +325,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", action="store_true", help="print the figures as JSON too")
     ap.add_argument("--figure", type=Path, metavar="PATH", help="draw u2 of both schemes over 0.1 s into PATH")
     ap.add_argument("--scan", action="store_true", help="the sine's RMS at every whole ms of delay, both schemes")
+    ap.add_argument("--implicit-horizon", type=float, metavar="LAM",
+                    help="the implicit scheme only, its step solved over LAM periods (an experiment: see "
+                         "implicit_horizon); with --scan or the table (its margins by bisection, no check below)")
     ap.add_argument("--implicit-virtual-controls", action="store_true",
                     help="with --scan: the implicit scheme only, its virtual controls stepped implicitly too")
     args = ap.parse_args(argv)
@@ -263,15 +335,22 @@ def main(argv: list[str] | None = None) -> int:
         figure(args.figure)
         return 0
     t0 = time.perf_counter()
+    schemes = DISCRETIZATIONS
+    if args.implicit_horizon:
+        implicit_horizon(args.implicit_horizon)
+        HORIZON.append(args.implicit_horizon)
+        schemes = ("implicit",)
     if args.scan:
         if args.implicit_virtual_controls:
             implicit_virtual_controls()
-        print(scan_table(schemes=("implicit",) if args.implicit_virtual_controls else DISCRETIZATIONS))
+        print(scan_table(schemes=("implicit",) if args.implicit_virtual_controls else schemes))
         print(f"load average {' '.join(f'{v:.2f}' for v in os.getloadavg())}; {os.cpu_count()} cores; "
               f"{time.perf_counter() - t0:.0f} s")
         return 0
-    res = {d: measure(d, not args.no_margin) for d in DISCRETIZATIONS}
+    res = {d: measure(d, not args.no_margin) for d in schemes}
     print(table(res))
+    if "explicit" in res:
+        print("\n" + "\n".join(acceptance(res)))
     print(f"\nload average {' '.join(f'{v:.2f}' for v in os.getloadavg())}; {os.cpu_count()} cores; "
           f"{time.perf_counter() - t0:.0f} s")
     if args.json:

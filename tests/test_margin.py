@@ -5,7 +5,9 @@
 The figures are the README's (docs/figures.md, "A bad link"): the sine mission's BS-ST loop
 holds a 3-D RMS under 10 cm up to 36 ms of equal delay both ways, and up to 57 ms with
 prediction (the offline loop flies the float32 wire as SITL does: lockstep gives the same); a
-grid at the same 0.25 ms over 0-100 ms would fly 400 cells.
+grid at the same 0.25 ms over 0-100 ms would fly 400 cells. Below its 36 ms the sine fails again
+at 34.25-35 ms: the check below the margin says so (``monotone``, ``failed_below``, ``holds_below``),
+and ``--require`` reads ``holds_below``.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ pytestmark = pytest.mark.process  # starts processes or opens sockets: not in ma
 
 ROOT = Path(__file__).resolve().parents[1]
 SHORT = Mission(Sine(), duration_s=6.0, name="short")  # the raw estimator's RMS: 2.9 cm at noise 1, 8.1 cm at 2
+# SHORT's 3-D RMS over t >= 3 s with an equal delay both ways (cm): 9.3 at 36 ms, 12.7 at 37, 4.9 at 38, 18.1 at 39
 
 
 def bsst(*argv: str) -> subprocess.CompletedProcess[str]:
@@ -32,24 +35,65 @@ def bsst(*argv: str) -> subprocess.CompletedProcess[str]:
                           timeout=600)
 
 
-@pytest.mark.parametrize("extra, expected", [([], 36.0), (["--compensation", "predict"], 57.0)])
-def test_the_delay_margin_is_found_inside_its_bracket(tmp_path: Path, extra: list[str], expected: float) -> None:
+@pytest.mark.parametrize("extra, expected, holds", [([], 36.0, 34.0), (["--compensation", "predict"], 57.0, 57.0)])
+def test_the_delay_margin_is_found_inside_its_bracket(tmp_path: Path, extra: list[str], expected: float,
+                                                     holds: float) -> None:
+    """The bisection's margin (36 and 57 ms, issue 21's figures), then the 4 ms below it flown at 0.25 ms:
+    without prediction 34.25-35 ms fail (every delay flown holds up to 34 ms), with it every one holds."""
     r = bsst("margin", "missions/sine.toml", "--over", "delay_ms", "--until", "rms=0.1", "--out", str(tmp_path),
              *extra)
     assert r.returncode == 0, r.stderr
     res = json.loads((tmp_path / "margin.json").read_text())
     lo, hi = res["bracket"]
-    assert res["over"] == "delay_ms" and res["until"] == "rms=0.1" and res["margin"] == lo
-    assert lo <= expected <= hi and hi - lo <= 0.25
+    assert res["over"] == "delay_ms" and res["until"] == "rms=0.1" and res["margin"] == lo == expected
+    assert hi - lo <= 0.25 and res["checked_below"] == [expected - 4.0, expected] and res["check_below"] == 4.0
     assert res["cells_flown"] <= 80 and len(res["cells"]) == res["cells_flown"]
-    assert all(c["failed"] for c in res["cells"] if c["delay_ms"] >= hi)
-    assert not any(c["failed"] for c in res["cells"] if c["delay_ms"] <= lo)
+    bisection = [c for c in res["cells"] if c["phase"] == "bisection"]
+    assert all(c["failed"] for c in bisection if c["delay_ms"] >= hi)
+    assert not any(c["failed"] for c in bisection if c["delay_ms"] <= lo)
+    below = sorted(c["delay_ms"] for c in res["cells"] if c["phase"] == "below")
+    flown = {c["delay_ms"] for c in bisection}  # not flown again
+    assert below == [v for v in (expected - 0.25 * k for k in range(16, 0, -1)) if v not in flown]
+    assert res["holds_below"] == holds and res["monotone"] is (holds == expected)
+    assert res["failed_below"] == ([] if holds == expected else [34.25, 34.5, 34.75, 35.0])
     assert f"delay_ms {lo:g}" in r.stdout
+    if holds == expected:
+        assert "monotone below the margin" in r.stdout and "warning" not in r.stderr
+    else:
+        assert "NOT MONOTONE below the margin: fails at 34.25, 34.5, 34.75, 35 in [32, 36); holds_below 34" in r.stdout
+        assert "warning: bsst is not monotone over delay_ms" in r.stderr
+
+
+def test_require_reads_the_value_every_smaller_one_holds_to(tmp_path: Path) -> None:
+    """SHORT at 1 ms: the bisection holds at 38 ms (fails at 39) but 37 ms, the one value it skipped in the
+    2 ms below, fails: --require 37 fails a user's CI although the margin is 38, and says why."""
+    mission = tmp_path / "short.toml"
+    mission.write_text(dump_toml(SHORT.to_dict()))
+    r = bsst("margin", str(mission), "--over", "delay_ms", "--until", "rms=0.1", "--resolution", "1",
+             "--check-below", "2", "--require", "37", "--out", str(tmp_path / "m"))
+    res = json.loads((tmp_path / "m" / "margin.json").read_text())
+    assert r.returncode == 1 and "below --require 37 (holds_below): bsst" in r.stderr, r.stderr
+    assert res["margin"] == 38.0 and res["bracket"] == [38.0, 39.0] and res["checked_below"] == [36.0, 38.0]
+    assert res["monotone"] is False and res["failed_below"] == [37.0] and res["holds_below"] == 36.0
+    assert sorted((c["delay_ms"], c["phase"]) for c in res["cells"] if 36 <= c["delay_ms"] <= 39) == [
+        (36.0, "bisection"), (37.0, "below"), (38.0, "bisection"), (39.0, "bisection")]
+    assert "NOT MONOTONE below the margin: fails at 37 in [36, 38); holds_below 36" in r.stdout
+    assert "margin bsst: delay_ms 38 (bracket [38, 39]" in r.stdout
+
+
+def test_the_check_below_can_be_turned_off(tmp_path: Path) -> None:
+    """``below=0``: the bisection alone, as before the check; ``monotone`` is then unknown (None), not true."""
+    from bridge.sweep.margin import Until, margin
+
+    res = margin(SHORT, "delay_ms", Until(rms=0.1), resolution=1.0, below=0.0)
+    assert res["margin"] == 38.0 and res["monotone"] is None and res["checked_below"] is None
+    assert res["holds_below"] == 38.0 and res["failed_below"] == []
+    assert {c["phase"] for c in res["cells"]} == {"bisection"} and res["cells_flown"] == 8
 
 
 def test_require_fails_a_users_ci_when_the_margin_is_short(tmp_path: Path) -> None:
     r = bsst("margin", "missions/sine.toml", "--over", "delay_ms", "--until", "rms=0.1", "--resolution", "4",
-             "--require", "50", "--out", str(tmp_path))
+             "--check-below", "4", "--require", "50", "--out", str(tmp_path))
     assert r.returncode == 1 and "below --require 50" in r.stderr, r.stderr
 
 
@@ -64,6 +108,8 @@ def test_require_fails_a_users_ci_when_the_margin_is_short(tmp_path: Path) -> No
      "--noise conflicts with --over noise"),
     (["--over", "noise", "--until", "rms=0.1", "--sensors", "mocap", "--estimator", "ekf", "--engine", "batch"],
      "--engine batch: [estimator] kind = 'ekf'"),
+    (["--over", "delay_ms", "--until", "rms=0.1", "--check-below", "300"], "--check-below must be in [0, 1024 x"),
+    (["--over", "delay_ms", "--until", "rms=0.1", "--check-below", "-1"], "--check-below"),
 ])
 def test_bad_margin_input_is_one_line(argv: list[str], names: str) -> None:
     r = bsst("margin", "missions/sine.toml", *argv)
@@ -77,13 +123,14 @@ def test_the_noise_margin_is_found_inside_its_bracket(tmp_path: Path) -> None:
     mission = tmp_path / "short.toml"
     mission.write_text(dump_toml(SHORT.to_dict()))
     r = bsst("margin", str(mission), "--over", "noise", "--until", "rms=0.05", "--sensors", "mocap", "--estimator",
-             "raw", "--out", str(tmp_path / "m"))
+             "raw", "--check-below", "0.5", "--out", str(tmp_path / "m"))
     assert r.returncode == 0, r.stderr
     res = json.loads((tmp_path / "m" / "margin.json").read_text())
     lo, hi = res["bracket"]
     assert res["over"] == "noise" and res["estimator"] == "raw" and res["sensors"] == "mocap"
     assert res["margin"] == lo and 1.0 <= lo < hi <= 2.0 and hi - lo <= 0.25, res
-    assert res["cells_flown"] == len(res["cells"]) <= 6
+    assert res["cells_flown"] == len(res["cells"]) <= 8 and res["checked_below"] == [lo - 0.5, lo]
+    assert res["monotone"] is True and res["holds_below"] == lo and "monotone below the margin" in r.stdout
     assert all(c["failed"] for c in res["cells"] if c["noise"] >= hi)
     assert not any(c["failed"] for c in res["cells"] if c["noise"] <= lo)
     fly = SHORT.with_overrides(sensors={"set": "mocap"}, estimator={"kind": "raw"})
@@ -100,7 +147,8 @@ def test_a_law_that_fails_everywhere_has_no_margin(tmp_path: Path) -> None:
     r = bsst("margin", str(mission), "--over", "noise", "--until", "rms=0.001", "--sensors", "mocap", "--estimator",
              "raw", "--require", "0", "--out", str(tmp_path / "m"))
     res = json.loads((tmp_path / "m" / "margin.json").read_text())
-    assert r.returncode == 1 and "below --require 0: bsst" in r.stderr, r.stderr
+    assert r.returncode == 1 and "below --require 0 (holds_below): bsst" in r.stderr, r.stderr
+    assert res["monotone"] is None and res["holds_below"] is None and res["checked_below"] is None
     assert res["margin"] is None and res["bracket"] == [None, 0.0] and all(c["failed"] for c in res["cells"])
     assert [c["noise"] for c in res["cells"]] == [1.0, 0.5, 0.25, 0.0]
     assert "margin bsst: noise: none" in r.stdout

@@ -136,7 +136,7 @@ def test_jobs_changes_no_row_of_a_batch_sweep_or_margin(tmp_path: Path) -> None:
     assert len(outs[1].splitlines()) == 1 + 36
     assert outs[1] == outs[2]
     found = [margin(SHORT, "delay_ms", parse_until("rms=0.01"), controllers=("bsst", "pid"), seeds=2, resolution=4.0,
-                    jobs=jobs, engine="batch") for jobs in (1, 2)]
+                    below=8.0, jobs=jobs, engine="batch") for jobs in (1, 2)]
     assert found[0] == found[1] and found[0]["cells_flown"] > 4
 
 

@@ -162,8 +162,12 @@ def add_margin_command(sub: Any) -> None:
                    help="seeds per value: a value fails when any seed fails (default 1)")
     p.add_argument("--resolution", type=number_in("--resolution", 0.0, 1e6, lo_open=True), default=0.25,
                    metavar="X", help="stop when the bracket is this narrow, in the axis's unit (default 0.25)")
+    p.add_argument("--check-below", type=number_in("--check-below", 0.0, 1e9), metavar="X",
+                   help="then fly every --resolution step in [margin - X, margin) to check that failing is monotone "
+                        "(default 16 x --resolution; 0: no check)")
     p.add_argument("--require", type=number_in("--require", 0.0, 1e9), metavar="X",
-                   help="exit 1 when a law's margin is below X (for a user's CI)")
+                   help="exit 1 when a law's holds_below (the margin, or less where a value below it failed) "
+                        "is below X (for a user's CI)")
     p.add_argument("--engine", choices=("auto", "batch", "process"), default="auto",
                    help="batch: each round's cells together in one numpy loop (default where it can)")
     p.add_argument("--jobs", type=int_in("--jobs", 1, 1024), metavar="N",
@@ -204,29 +208,51 @@ def cmd_margin(args: argparse.Namespace) -> int:
             sys.stderr.flush()
 
     res = margin(mission, args.over, until, controllers=args.controller, seeds=args.seeds,
-                 resolution=args.resolution, jobs=args.jobs, engine=args.engine, progress=show)
+                 resolution=args.resolution, jobs=args.jobs, engine=args.engine, progress=show,
+                 below=args.check_below)
     if live:
         sys.stderr.write("\n")
     path = write_margin(res, args.out, mission.name, args.overwrite)
     entries = res.get("controllers") or [res]
-    low = []
+    what = f" x the sigmas of {res['sensors']}, estimator {res['estimator']}" if args.over == "noise" else ""
     for e in entries:
-        lo, hi = e["bracket"]
-        what = f" x the sigmas of {res['sensors']}, estimator {res['estimator']}" if args.over == "noise" else ""
-        if e["margin"] is None:  # no value held, the range's low end included
-            print(f"margin {e['controller']}: {args.over}: none{what} (fails at every value flown, down to {hi:g}, "
-                  f"the low end of its range; until {res['until']})")
-        else:
-            tail = f"fails at {hi:g}" if hi is not None else "held over the whole range"
-            print(f"margin {e['controller']}: {args.over} {e['margin']:g}{what} (bracket [{lo:g}, "
-                  f"{'-' if hi is None else f'{hi:g}'}], {tail}; until {res['until']})")
-        if args.require is not None and (e["margin"] is None or e["margin"] < args.require):
-            low.append(e["controller"])
+        for line in margin_lines(e, args.over, what, res["until"]):
+            print(line)
+        if e["monotone"] is False:
+            print(f"bsst margin: warning: {e['controller']} is not monotone over {args.over}: it fails at "
+                  f"{', '.join(f'{v:g}' for v in e['failed_below'])}, below its margin {e['margin']:g}; every value "
+                  f"flown holds only up to {e['holds_below']:g}", file=sys.stderr)
     print(f"{res['cells_flown']} cells flown; margin.json: {path / 'margin.json'}")
+    low = [e["controller"] for e in entries if args.require is not None
+           and (e["holds_below"] is None or e["holds_below"] < args.require)]
     if low:
-        print(f"bsst margin: below --require {args.require:g}: {', '.join(low)}", file=sys.stderr)
+        print(f"bsst margin: below --require {args.require:g} (holds_below): {', '.join(low)}", file=sys.stderr)
         return EXIT_FAILED
     return EXIT_OK
+
+
+def margin_lines(e: dict[str, Any], over: str, what: str, until: str) -> list[str]:
+    """The console lines of one law's margin: the bisection's answer and its bracket, then the check below it."""
+    lo, hi = e["bracket"]
+    if e["margin"] is None:  # no value held, the range's low end included
+        return [f"margin {e['controller']}: {over}: none{what} (fails at every value flown, down to {hi:g}, "
+                f"the low end of its range; until {until})"]
+    tail = f"fails at {hi:g}" if hi is not None else "held over the whole range"
+    lines = [f"margin {e['controller']}: {over} {e['margin']:g}{what} (bracket [{lo:g}, "
+             f"{'-' if hi is None else f'{hi:g}'}], {tail}; until {until})"]
+    band = e["checked_below"]
+    if band is None:
+        lines.append(f"  below the margin: not checked (--check-below 0); holds_below {e['holds_below']:g} assumes "
+                     "failing is monotone")
+    elif e["monotone"]:
+        lines.append(f"  monotone below the margin: every value flown in [{band[0]:g}, {band[1]:g}) holds; "
+                     f"holds_below {e['holds_below']:g}")
+    else:
+        deeper = " (the band's lowest value failed: widen --check-below)" if band[0] in e["failed_below"] else ""
+        lines.append(f"  NOT MONOTONE below the margin: fails at {', '.join(f'{v:g}' for v in e['failed_below'])} "
+                     f"in [{band[0]:g}, {band[1]:g}); holds_below {e['holds_below']:g}: every value flown up to it "
+                     f"holds{deeper}")
+    return lines
 
 
 

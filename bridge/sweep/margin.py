@@ -6,16 +6,23 @@ applied to both directions as a sweep's axes are, or ``noise``: the scale of eve
 mission's sensor set, flown with its estimator, or ``wind_mps``: the steady wind's speed, from the
 mission's ``[wind] from_deg``, with its turbulence), the failure criterion (``rms=X``: the 3-D
 RMS error passes X m; ``class=NAME``: the cell's class is NAME or worse, see
-:mod:`bridge.sweep.classes`), the laws and the seeds. Out: per law the margin (the largest
-value flown that did not fail, in the axis's unit), its bracket ``[margin, first failing
-value]``, and every cell flown; ``margin.json`` when a directory is given.
+:mod:`bridge.sweep.classes`), the laws, the seeds and the band checked below the margin (axis unit).
+Out: per law the margin (the largest value flown that did not fail, in the axis's unit), its bracket
+``[margin, first failing value]``, ``monotone``, ``failed_below`` and ``holds_below`` (the check
+below it), and every cell flown; ``margin.json`` when a directory is given.
 
 A value fails when any of its seeds fails. The search first doubles from ``start`` until it
 finds a failing value (or reaches the axis's range), then halves the bracket until it is no
 wider than ``resolution``. All laws' probes of one round fly together, with their seeds, as
-one batch (:mod:`bridge.batch`) where it can fly them (a round of one cell too), one by one otherwise. This assumes
-that failure is monotonic in the axis over the bracket (more delay is never better); the
-cells in ``margin.json`` show what was flown if it is not.
+one batch (:mod:`bridge.batch`) where it can fly them (a round of one cell too), one by one otherwise.
+
+The bisection assumes that failure is monotonic in the axis (more delay is never better); it need
+not be (the sine's delay fails at 34.25-35 ms, holds at 35.25-36 and fails from 36.25). So after it,
+every value of ``[margin - below, margin)`` at ``resolution`` steps that was not flown yet is flown
+(one more round, all laws and seeds together; ``below`` defaults to ``BELOW_STEPS`` x ``resolution``,
+0 skips it): ``monotone`` says whether every value flown below the margin held, ``failed_below``
+lists those that did not, and ``holds_below`` is the largest value flown such that every value
+flown at or below it held (the margin when monotone). ``margin`` stays the bisection's answer.
 
 Over ``noise`` the batch engine cannot fly the cells (it has no sensors): every probe is a
 scalar flight on the process engine, one at a time for one law and seed (a pool costs more
@@ -50,6 +57,8 @@ MARGIN_JSON = "margin.json"
 IN_PROCESS_CELLS = 2  # a round of at most this many process-engine cells flies in this process
 MAX_HALVINGS = 24  # the finest --resolution is an axis's range / 2^24 (delay: 3.6 us, loss: 6e-6 %)
 RESOLUTION_TOP = 1e6  # the coarsest (the flag's own top)
+BELOW_STEPS = 16  # the monotonicity check's default band: the bisection's bracket four halvings before its end
+MAX_BELOW = 1024  # the widest band, in resolution steps
 
 
 @dataclass(frozen=True)
@@ -118,6 +127,40 @@ class Search:
         else:
             self.lo, self.held = value, True
 
+    def take(self, over: str, value: float, rows: list[dict[str, Any]], until: Until, classes: Classes,
+             phase: str) -> bool:
+        """Record this law's cells of ``value`` among ``rows`` (``phase``: bisection | below); whether it failed."""
+        mine = [r for r in rows if r["controller"] == self.controller and r[over] == value]
+        cells = [{over: value, "seed": r["seed"], "rms": r["rms"], "outcome": r["outcome"],
+                  "class": classify(r, classes), "failed": until.failed(r, classes), "phase": phase} for r in mine]
+        self.cells += cells
+        return any(c["failed"] for c in cells)
+
+    def band(self, over: str, below: float, resolution: float, floor: float) -> list[float]:
+        """The values of ``[margin - below, margin)`` at ``resolution`` steps (not under ``floor``) not flown yet."""
+        if not self.held or below <= 0:
+            return []
+        flown = {c[over] for c in self.cells}
+        steps = int(math.floor(below / resolution + 1e-9))
+        values = (self.lo - k * resolution for k in range(1, steps + 1))
+        return [v for v in values if v >= floor and v not in flown]
+
+    def below(self, over: str, checked: list[float] | None) -> dict[str, Any]:
+        """The monotonicity fields of ``margin.json``: ``monotone`` (None: not checked), ``failed_below``
+        (the values under the margin that failed), ``holds_below``, ``checked_below`` (the band flown)."""
+        if not self.held:
+            return {"monotone": None, "failed_below": [], "holds_below": None, "checked_below": None}
+        failed = {c[over] for c in self.cells if c["failed"]}
+        flown = sorted({c[over] for c in self.cells if c[over] <= self.lo})
+        holds = None
+        for v in flown:
+            if v in failed:
+                break
+            holds = v
+        under = sorted(v for v in failed if v < self.lo)
+        return {"monotone": None if checked is None else not under, "failed_below": under, "holds_below": holds,
+                "checked_below": checked}
+
 
 def resolution_range(over: str) -> tuple[float, float]:
     """The ``--resolution`` a search over ``over`` takes: at least its range / 2^MAX_HALVINGS, so that the
@@ -128,8 +171,10 @@ def resolution_range(over: str) -> tuple[float, float]:
 
 def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[str] | None = None,
            seeds: int = 1, resolution: float = 0.25, classes: Classes | None = None, jobs: int | None = None,
-           engine: str = "auto", progress: Callable[[str], None] | None = None) -> dict[str, Any]:
-    """Search the margin of each law (see the module docstring); the ``margin.json`` content."""
+           engine: str = "auto", progress: Callable[[str], None] | None = None,
+           below: float | None = None) -> dict[str, Any]:
+    """Search the margin of each law, then check the band ``below`` it (default ``BELOW_STEPS`` x
+    ``resolution``, 0: no check; see the module docstring); the ``margin.json`` content."""
     if over not in OVER:
         raise ConfigError(f"--over must be one of {', '.join(OVER)}, got {over!r}")
     least, most = resolution_range(over)
@@ -137,6 +182,10 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
         raise ConfigError(f"--resolution must be in [{least:.3g}, {most:g}] for --over {over} (its range "
                           f"[{RANGES[over][0]:g}, {RANGES[over][1]:g}] in at most {MAX_HALVINGS} halvings), "
                           f"got {resolution:g}")
+    below = BELOW_STEPS * resolution if below is None else below
+    if not (math.isfinite(below) and 0 <= below <= MAX_BELOW * resolution):
+        raise ConfigError(f"--check-below must be in [0, {MAX_BELOW} x --resolution = {MAX_BELOW * resolution:g}] "
+                          f"(at most {MAX_BELOW} values per law and seed), got {below:g}")
     classes = classes or Classes()
     lo_range, top = RANGES[over]
     laws = list(controllers or (mission.controller,))
@@ -160,38 +209,37 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
     cells_flown = 0
     while pending:
         probes = [probe(mission, c, over, v, s, base, vehicle) for c, v in pending.items() for s in seed_list]
-        rows: list[dict[str, Any]] = []
-        # a round of even one cell flies as a batch where it can: this process loads the kernels once
-        used, _ = engine_for(mission, probes, "offline", engine, min_cells=1)
-        if used == "batch":
-            run_batch(mission, probes, rows.append, jobs=jobs)
-        elif len(probes) <= IN_PROCESS_CELLS:  # a pool's start costs more than a cell or two
-            rows += [run_cell(mission, c) for c in probes]
-        else:
-            run_local(mission, probes, "offline", jobs or os.cpu_count() or 1, rows.append)
+        rows = fly_round(mission, probes, engine, jobs)
         cells_flown += len(rows)
         for s in searches:
             if s.controller not in pending:
                 continue
             v = pending[s.controller]
-            mine = [r for r in rows if r["controller"] == s.controller and r[over] == v]
-            s.cells += [{over: v, "seed": r["seed"], "rms": r["rms"], "outcome": r["outcome"],
-                         "class": classify(r, classes), "failed": until.failed(r, classes)} for r in mine]
-            s.record(v, any(until.failed(r, classes) for r in mine))
+            s.record(v, s.take(over, v, rows, until, classes, "bisection"))
             nxt = s.next_value(resolution, top)
-            if s.hi is None and nxt is None:  # held up to the top of the axis's range
-                del pending[s.controller]
-            elif nxt is None:
+            if nxt is None:  # bracketed to the resolution, or held up to the top of the axis's range
                 del pending[s.controller]
             else:
                 pending[s.controller] = nxt
         if progress is not None:
             progress(", ".join(f"{s.controller} [{s.lo:g}, {'-' if s.hi is None else f'{s.hi:g}'}]"
                                for s in searches))
+    bands = {s.controller: s.band(over, below, resolution, lo_range) for s in searches}
+    probes = [probe(mission, c, over, v, s, base, vehicle) for c, vs in bands.items() for v in vs for s in seed_list]
+    if probes:
+        if progress is not None:
+            progress(f"checking {len(probes)} values below the margin{'s' if len(searches) > 1 else ''}")
+        rows = fly_round(mission, probes, engine, jobs)
+        cells_flown += len(rows)
+        for s in searches:
+            for v in bands[s.controller]:
+                s.take(over, v, rows, until, classes, "below")
+    checked = {s.controller: [max(s.lo - below, lo_range), s.lo] if s.held and below > 0 else None for s in searches}
     entries = [{"controller": s.controller, "margin": s.lo if s.held else None,  # None: it failed at every value
-                "bracket": [s.lo if s.held else None, s.hi], "cells": s.cells, "held_to_range": s.hi is None}
-               for s in searches]
-    out: dict[str, Any] = {"over": over, "until": until.text(), "resolution": resolution, "seeds": seed_list,
+                "bracket": [s.lo if s.held else None, s.hi], **s.below(over, checked[s.controller]),
+                "cells": s.cells, "held_to_range": s.hi is None} for s in searches]
+    out: dict[str, Any] = {"over": over, "until": until.text(), "resolution": resolution, "check_below": below,
+                           "seeds": seed_list,
                            "mission": mission.name, "cells_flown": cells_flown, "estimator": flight.estimator,
                            "sensors": flight.sensors.name}
     if len(entries) == 1:
@@ -199,6 +247,20 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
     else:
         out["controllers"] = entries
     return out
+
+
+def fly_round(mission: Mission, probes: list[Cell], engine: str, jobs: int | None) -> list[dict[str, Any]]:
+    """Fly one round's cells: as a batch where it can (even one cell: this process loads the kernels
+    once), in this process for a cell or two, in a process pool otherwise; their rows."""
+    rows: list[dict[str, Any]] = []
+    used, _ = engine_for(mission, probes, "offline", engine, min_cells=1)
+    if used == "batch":
+        run_batch(mission, probes, rows.append, jobs=jobs)
+    elif len(probes) <= IN_PROCESS_CELLS:  # a pool's start costs more than a cell or two
+        rows += [run_cell(mission, c) for c in probes]
+    else:
+        run_local(mission, probes, "offline", jobs or os.cpu_count() or 1, rows.append)
+    return rows
 
 
 def probe(mission: Mission, law: str, over: str, value: float, seed: int, link: dict[str, float],
