@@ -37,6 +37,7 @@ OTHER_NAMES = {17: "NAV_LOITER_UNLIM", 18: "NAV_LOITER_TURNS", 31: "NAV_LOITER_T
                530: "SET_CAMERA_MODE", 2000: "IMAGE_START_CAPTURE", 2001: "IMAGE_STOP_CAPTURE",
                2500: "VIDEO_START_CAPTURE"}
 FRAMES = {0: "GLOBAL", 3: "GLOBAL_RELATIVE_ALT", 5: "GLOBAL_INT", 6: "GLOBAL_RELATIVE_ALT_INT"}
+MISSION_FRAME = 2  # MAV_FRAME_MISSION: no position
 RELATIVE_FRAMES = (3, 6)  # altitude above the home; the others: AMSL
 OTHER_FRAMES = {1: "LOCAL_NED", 2: "MISSION", 4: "LOCAL_ENU", 7: "LOCAL_OFFSET_NED", 8: "BODY_NED",
                 9: "BODY_OFFSET_NED", 10: "GLOBAL_TERRAIN_ALT", 11: "GLOBAL_TERRAIN_ALT_INT"}
@@ -100,7 +101,9 @@ def _check_item(source: str, item: Item, auto_continue: bool) -> Item:
                           f"{', '.join(command_name(c) for c in SUPPORTED)}")
     if not auto_continue:
         raise ConfigError(f"{where}: autoContinue false (the mission would wait there for a ground station)")
-    if item.command != DO_CHANGE_SPEED and item.frame not in FRAMES:
+    # (QGroundControl writes RTL in frame MISSION, PX4 takes it only so: it names no position)
+    if item.command != DO_CHANGE_SPEED and item.frame not in FRAMES and not (
+            item.command == NAV_RETURN_TO_LAUNCH and item.frame == MISSION_FRAME):
         name = OTHER_FRAMES.get(item.frame, "unknown")
         raise ConfigError(f"{where}: frame {name} ({item.frame}) not supported; supported: "
                           f"{', '.join(f'{n} ({f})' for f, n in FRAMES.items())}")

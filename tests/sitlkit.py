@@ -55,12 +55,12 @@ class Proc:
             *full, self._buf = self._buf.split(b"\n")
             self.lines += [ln.decode(errors="replace") for ln in full]
 
-    def wait_line(self, pred: Callable[[str], bool], timeout: float = 20.0) -> str:
-        """The first line (seen so far or to come) that satisfies ``pred``."""
+    def wait_line(self, pred: Callable[[str], bool], timeout: float = 20.0, start: int = 0) -> str:
+        """The first line (seen so far from index ``start`` on, or to come) that satisfies ``pred``."""
         deadline = time.monotonic() + timeout
         sel = selectors.DefaultSelector()
         sel.register(self.p.stdout, selectors.EVENT_READ)  # type: ignore[arg-type]
-        seen = 0
+        seen = start
         try:
             while True:
                 self._read()
@@ -105,6 +105,26 @@ class Proc:
             self.p.wait()
         self._read()
         return self.p.returncode
+
+
+class MavProxy(Proc):
+    """MAVProxy, unmodified, as a user runs it: ``mavproxy.py --master=MASTER --nowait`` in ``cwd`` (where its
+    ``wp load`` / ``wp list`` files are), typed to through its stdin."""
+
+    def __init__(self, master: str, cwd: Path) -> None:
+        mavproxy = os.path.join(os.path.dirname(sys.executable), "mavproxy.py")
+        super().__init__([sys.executable, mavproxy, f"--master={master}", "--nowait"], cwd=cwd, stdin=subprocess.PIPE)
+
+    def say(self, cmd: str) -> int:
+        """Type ``cmd``; the index of the first line that can answer it."""
+        mark = len(self.lines)
+        self.p.stdin.write(cmd.encode() + b"\n")  # type: ignore[union-attr]
+        self.p.stdin.flush()  # type: ignore[union-attr]
+        return mark
+
+    def wait_online(self, timeout: float = 30.0) -> str:
+        """MAVProxy has heard the vehicle (its ``online system`` line, or ``Detected vehicle``)."""
+        return self.wait_line(lambda s: "online system" in s or "Detected vehicle" in s, timeout)
 
 
 def csv_rows(path: Path) -> int:

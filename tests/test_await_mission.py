@@ -18,6 +18,7 @@ import os
 import socket
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -26,16 +27,19 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge import simulate
+from bridge.autopilot.params import parse_change
 from bridge.core.flight import prepare
 from bridge.mavlink.endpoint import GCS_PORT, parse_address
 from bridge.mavlink.missionitems import MissionItem
+from bridge.nodes.report import Ready, parse_line
 from bridge.nodes.vehicle import Vehicle, VehicleConfig
+from bridge.nodes.vehicle.mission import START_ARM, START_COMMAND
 from bridge.nodes.vehicle.missionwatch import ItemWatch, goals_of
 from bridge.record.summary import mission_transfer
 from bridge.session import instance_slot
 from missions import Mission, Sine
 from missions.planfiles import plan_text, read_plan_text
-from tests.sitlkit import ENV, ROOT, Proc
+from tests.sitlkit import ENV, ROOT, MavProxy, Proc
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes and opens sockets
@@ -114,6 +118,7 @@ def test_mavsdk_flies_the_box_plan_through_await_mission_as_the_file_flies(tmp_p
     assert summary["outcome"] == "completed" and summary["end"]["disarmed"], summary["ended_by"]
     t = summary["mission_transfer"]
     assert (t["items"], t["result"]) == (8, "accepted") and t["attempts"] == 9 + t["re_requests"], t
+    assert t["started_by"]["command"] == START_ARM and t["started_by"]["by"].endswith(" gcs"), t  # MAVSDK's ids
     offline = simulate(BOX_PLAN, plots=False)
     flown = _trace(out / "trace.csv")
     assert len(flown) == len(offline.trace["t"])
@@ -156,12 +161,15 @@ def _upload(gcs: Any, target: tuple[int, int], items: list[Any]) -> None:
         gcs.mav.send(item)
 
 
-@pytest.mark.parametrize("link", [[], ["--loss", "10"]], ids=["perfect", "relay-loss-10"])
-def test_mission_start_flies_a_small_plan_in_real_time(tmp_path, link):
+@pytest.mark.parametrize("link, how", [([], START_ARM), (["--loss", "10"], START_COMMAND)],
+                         ids=["perfect-mode-then-arm", "relay-loss-10-mission-start"])
+def test_mission_start_flies_a_small_plan_in_real_time(tmp_path, link, how):
     """A pymavlink ground station uploads a takeoff, a waypoint and a landing to ``bsst sitl --await-mission
-    --realtime`` and sends MAV_CMD_MISSION_START (ACCEPTED): the controller downloads the three items and flies
-    them on the wall clock; each is reached (MISSION_ITEM_REACHED), the flight completes landed and disarmed.
-    With ``--loss 10`` the download crosses ``bsst relay`` (the session's, on the wire) and still arrives."""
+    --realtime`` and starts it, as PX4's is started: AUTO.MISSION (DO_SET_MODE 4/4) while disarmed, then arm; or
+    MAV_CMD_MISSION_START (each ACCEPTED). The controller downloads the three items and flies them on the wall
+    clock; each is reached (MISSION_ITEM_REACHED), the flight completes landed and disarmed, and summary.json's
+    ``mission_transfer.started_by`` says how and by whom. With ``--loss 10`` the download crosses ``bsst relay``
+    (the session's, on the wire) and still arrives."""
     plan = read_plan_text(SMALL_PLAN, "small")
     items = [M.MAVLink_mission_item_int_message(0, 0, k, it.frame, it.command, 0, 1, it.p1, it.p2, it.p3, it.p4,
                                                 round(it.lat * 1e7), round(it.lon * 1e7), it.alt, 0)
@@ -178,10 +186,14 @@ def test_mission_start_flies_a_small_plan_in_real_time(tmp_path, link):
             assert hb is not None
             target = (hb.get_srcSystem(), hb.get_srcComponent())
             _upload(gcs, target, items)
-            gcs.mav.command_long_send(*target, M.MAV_CMD_MISSION_START, 0, 0, 0, 0, 0, 0, 0, 0)
-            ack = gcs.recv_match(type="COMMAND_ACK", blocking=True, timeout=5,
-                                 condition=f"COMMAND_ACK.command=={M.MAV_CMD_MISSION_START}")
-            assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
+            steps = [(M.MAV_CMD_MISSION_START, (0, 0))] if how == START_COMMAND else \
+                [(M.MAV_CMD_DO_SET_MODE, (M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4, 4)),
+                 (M.MAV_CMD_COMPONENT_ARM_DISARM, (1,))]
+            for cmd, params in steps:
+                gcs.mav.command_long_send(*target, cmd, 0, *params, *[0] * (7 - len(params)))
+                ack = gcs.recv_match(type="COMMAND_ACK", blocking=True, timeout=5,
+                                     condition=f"COMMAND_ACK.command=={cmd}")
+                assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED, (cmd, ack)
             reached: list[int] = []
 
             def all_reached() -> bool:
@@ -199,13 +211,16 @@ def test_mission_start_flies_a_small_plan_in_real_time(tmp_path, link):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["outcome"] == "completed" and summary["clock"] == "realtime"
     assert summary["mission_transfer"]["items"] == 3 and summary["end"]["disarmed"]
+    assert summary["mission_transfer"]["started_by"] == {"command": how, "by": f"255:190 127.0.0.1:{GCS_PORT + n} gcs"}
     assert (out / "relay.json").exists() == bool(link)
 
 
 def test_the_link_model_acts_on_the_transfer_in_lockstep_and_the_flight_is_offlines(tmp_path):
-    """``bsst sitl --await-mission --loss 30`` in lockstep, a pymavlink ground station's MISSION_START: the
-    download crosses the mission's link model (seeded: requests are lost and asked again), and the flight that
-    follows is offline's with the same link (its model starts fresh at the arm), ≤ 1e-4 m, as many rows."""
+    """``bsst sitl --await-mission --loss 30 --param-at 3:COM_OF_LOSS_T=1`` in lockstep, a pymavlink ground
+    station's MISSION_START: the download crosses the mission's link model (seeded: requests are lost and asked
+    again), and the flight that follows is offline's with the same link (its model starts fresh at the arm) and
+    the same scheduled change, ≤ 1e-4 m, as many rows; the change was sent at mission time 3 s (time 0: the
+    flight's first step, the controller's arm once it has the mission) and confirmed."""
     plan = read_plan_text(SMALL_PLAN, "small")
     items = [M.MAVLink_mission_item_int_message(0, 0, k, it.frame, it.command, 0, 1, it.p1, it.p2, it.p3, it.p4,
                                                 round(it.lat * 1e7), round(it.lon * 1e7), it.alt, 0)
@@ -215,8 +230,8 @@ def test_the_link_model_acts_on_the_transfer_in_lockstep_and_the_flight_is_offli
         os.environ["MAVLINK20"] = "1"
         gcs = mavutil.mavlink_connection(f"udpin:127.0.0.1:{GCS_PORT + n}", source_system=255, source_component=190,
                                          dialect="common")
-        sitl = Proc.bsst("sitl", "--await-mission", "--loss", "30", "--instance", str(n), "--out", str(out),
-                         "--no-plots")
+        sitl = Proc.bsst("sitl", "--await-mission", "--loss", "30", "--param-at", "3:COM_OF_LOSS_T=1", "--instance",
+                         str(n), "--out", str(out), "--no-plots")
         try:
             hb = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=30)
             assert hb is not None
@@ -230,8 +245,12 @@ def test_the_link_model_acts_on_the_transfer_in_lockstep_and_the_flight_is_offli
     summary = json.loads((out / "summary.json").read_text())
     t = summary["mission_transfer"]
     assert summary["outcome"] == "completed" and t["result"] == "accepted" and t["re_requests"] >= 1, t
+    assert t["started_by"] == {"command": START_COMMAND, "by": f"255:190 127.0.0.1:{GCS_PORT + n} gcs"}, t
+    [change] = summary["param_at"]
+    assert change["sent_t"] == change["t_s"] == 3.0 and change["confirmed"], change
     (tmp_path / "small.waypoints").write_text(SMALL_PLAN)
-    offline = simulate(tmp_path / "small.waypoints", plots=False, link={"loss_pct": 30})
+    offline = simulate(tmp_path / "small.waypoints", plots=False, link={"loss_pct": 30},
+                       param_at=[parse_change("3:COM_OF_LOSS_T=1")])
     flown = _trace(out / "trace.csv")
     assert len(flown) == len(offline.trace["t"])
     worst = max(math.dist(row[1:], (offline.trace["x"][i], offline.trace["y"][i], offline.trace["z"][i]))
@@ -245,25 +264,18 @@ def test_mavproxy_loads_and_starts_a_waypoint_file(tmp_path):
     the run's mission.plan holds what MAVProxy sent: the file's lines, its line 0 (the home) as item 0, a
     waypoint on the ground at the home (MAVProxy sends it so to PX4 too)."""
     (tmp_path / "small.txt").write_text(SMALL_PLAN)
-    mavproxy = os.path.join(os.path.dirname(sys.executable), "mavproxy.py")
     out = tmp_path / "mp"
     with instance_slot() as n:
         sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--out", str(out), "--no-plots")
-        mp = Proc([sys.executable, mavproxy, f"--master=udpin:127.0.0.1:{GCS_PORT + n}", "--nowait"],
-                  cwd=tmp_path, stdin=subprocess.PIPE)
-
-        def say(cmd: str) -> None:
-            mp.p.stdin.write(cmd.encode() + b"\n")  # type: ignore[union-attr]
-            mp.p.stdin.flush()  # type: ignore[union-attr]
-
+        mp = MavProxy(f"udpin:127.0.0.1:{GCS_PORT + n}", tmp_path)
         try:
-            mp.wait_line(lambda s: "online system" in s, timeout=30)
-            say("wp load small.txt")
+            mp.wait_online()
+            mp.say("wp load small.txt")
             mp.wait_line(lambda s: "Got MISSION_ACK: TYPE_MISSION: ACCEPTED" in s, timeout=15)
-            say("long MISSION_START 0 0")
+            mp.say("long MISSION_START 0 0")
             mp.wait_line(lambda s: "Got COMMAND_ACK: MISSION_START: ACCEPTED" in s, timeout=15)
             assert sitl.p.wait(timeout=120) == 0, "\n".join(sitl.lines[-30:])
-            say("exit")
+            mp.say("exit")
         finally:
             mp.stop()
             sitl.stop()
@@ -278,10 +290,80 @@ def test_mavproxy_loads_and_starts_a_waypoint_file(tmp_path):
         [home] + [(i.command, i.lat, i.lon, i.alt) for i in read_plan_text(SMALL_PLAN, "small").items]
 
 
+def _retype(mp: MavProxy, cmd: str, done: Callable[[str], bool], each_s: float, tries: int) -> str:
+    """Type ``cmd`` until a line after it satisfies ``done`` (each try waits ``each_s`` s), as a user types a
+    command again when MAVProxy shows no answer: that line."""
+    for k in range(tries):
+        mark = mp.say(cmd)
+        try:
+            line = mp.wait_line(done, timeout=each_s, start=mark)
+        except AssertionError:  # what MAVProxy said instead (shown with pytest -s)
+            print(f"MAVProxy: {cmd!r} try {k + 1} unanswered; it said: {mp.lines[mark:][-8:]}")
+            continue
+        print(f"MAVProxy: {cmd!r} answered after {k + 1} tries")
+        return line
+    raise AssertionError(f"MAVProxy: {cmd!r} typed {tries} times, never answered as awaited:\n"
+                         + "\n".join(mp.lines[-30:]))
+
+
+def test_mavproxy_through_a_lossy_slow_link(tmp_path):
+    """MAVProxy, unmodified, through ``bsst relay --loss 20 --delay 100`` (both directions) to ``bsst sitl
+    --await-mission``: ``wp load`` of a waypoint file, ``wp list`` (the list MAVProxy saves is what it loaded),
+    ``long MISSION_START``: the flight completes, landed and disarmed, every item reached.
+
+    MAVProxy sends MISSION_COUNT, MISSION_REQUEST_LIST and a command once, and ignores the vehicle's requests
+    for its last item once it has sent it (so a lost last item ends the upload at the vehicle's 5 s timeout,
+    "Operation timeout", the mission as it was): a user types the command again when MAVProxy shows no answer,
+    and so does this test (``_retype``: at most 6 times; with the relay's default seed, in 8 runs at load 11-15
+    wp load and wp list were answered at their first typing, MISSION_START 6 times at its first, twice at its
+    third; a start typed again after an ACCEPTED that did not show is DENIED, so its answer is ACCEPTED, the
+    vehicle's start event or MAVProxy's "Mode MISSION").
+    A download is MAVProxy's to drive: it asks for five items at once and each missing one again after 2 s, so
+    the vehicle answers a request for any item of the mission, in any order (PX4 ends a download at the first
+    request out of order: over this link every MAVProxy download then failed), and a download whose every item
+    went out holds up no start (MAVProxy sends no ACK after ``wp list``)."""
+    (tmp_path / "small.txt").write_text(SMALL_PLAN)
+    out = tmp_path / "lossy"
+    with instance_slot() as n:
+        relay = Proc.bsst("relay", "--listen", "127.0.0.1:0", "--to", f"127.0.0.1:{GCS_PORT + n}",
+                          "--listen-direction", "down", "--loss", "20", "--delay", "100",
+                          "--stats", str(tmp_path / "relay.json"))
+        ready = parse_line(relay.wait_line(lambda s: isinstance(parse_line(s), Ready)))
+        sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--gcs", ready.listen, "--out", str(out),
+                         "--no-plots")
+        mp = MavProxy(f"udpin:127.0.0.1:{GCS_PORT + n}", tmp_path)
+        try:
+            mp.wait_online()
+            _retype(mp, "wp load small.txt", lambda s: "MISSION_ACK: TYPE_MISSION: ACCEPTED" in s
+                    or "mission: uploaded 4 items" in s, 9.0, 6)
+            saved = _retype(mp, "wp list", lambda s: "Saved 4 waypoints to " in s, 8.0, 6)
+            _retype(mp, "long MISSION_START 0 0", lambda s: "MISSION_START: ACCEPTED" in s or "Mode MISSION" in s
+                    or "mission: start requested" in s, 3.0, 6)
+            assert sitl.p.wait(timeout=120) == 0, "\n".join(sitl.lines[-30:])
+            mp.say("exit")
+        finally:
+            mp.stop()
+            sitl.stop()
+            assert relay.stop() == 0
+    rows = [ln.split("\t") for ln in (tmp_path / saved.split(" to ")[1].strip()).read_text().splitlines()[1:]]
+    want = [ln.split("\t") for ln in SMALL_PLAN.splitlines()[1:]]
+    assert len(rows) == len(want) == 4
+    for got, sent in zip(rows[1:], want[1:], strict=True):  # (line 0: the home, MAVProxy's own)
+        assert [int(c) for c in got[:4]] == [int(c) for c in sent[:4]]
+        assert [float(c) for c in got[4:]] == pytest.approx([float(c) for c in sent[4:]], abs=1e-6, nan_ok=True)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["outcome"] == "completed" and summary["end"]["disarmed"]
+    assert summary["mission_transfer"]["items"] == 4
+    reached = [m.seq for m in _tlog(out / "vehicle.tlog", n + 1, ["MISSION_ITEM_REACHED"])]
+    assert list(dict.fromkeys(reached)) == [0, 1, 2, 3]
+    relay_stats = json.loads((tmp_path / "relay.json").read_text())
+    assert relay_stats["up"]["lost"] > 0 and relay_stats["down"]["lost"] > 0, relay_stats
+
+
 @pytest.mark.parametrize("args, says", [
     (["--await-mission", "examples/box.plan"], "give no mission file"),
     (["--await-mission", "--gcs", "none"], "needs a GCS link"),
-    (["--await-mission", "--param-at", "1:COM_OF_LOSS_T=1"], "--param-at with --await-mission"),
+    (["--await-mission", "--param-at", "600:COM_OF_LOSS_T=1"], "with --await-mission the time is mission time"),
     ([], "give a mission file (or --await-mission)")])
 def test_await_mission_bad_input_is_one_line_and_exit_2(args, says):
     r = subprocess.run([sys.executable, "-m", "bridge", "sitl", *args], cwd=ROOT, env=ENV, capture_output=True,
@@ -342,11 +424,14 @@ def test_the_vehicle_starts_a_mission_only_when_asked_to_await_one():
         for it in items[:2]:
             exchange(v, it, "MISSION_REQUEST_INT")
         assert exchange(v, items[2], "MISSION_ACK").type == M.MAV_MISSION_ACCEPTED
+        legacy = M.MAVLink_set_mode_message(1, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, (4 << 16) | (4 << 24))
+        assert exchange(v, legacy, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED  # SET_MODE: selects it too
         assert exchange(v, mode, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
         assert v._heartbeat().custom_mode == (4 << 16) | (4 << 24) and v.missions.selected
         assert exchange(v, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
         assert v.missions.start_requested and not v.sim.armed
-        assert any(e.kind == "mission" and "start requested" in e.text for e in v.sim.events)
+        assert any(e.kind == "mission" and "start requested by AUTO.MISSION, then arm" in e.text for e in v.sim.events)
+        assert v.missions.started == {"command": START_ARM, "by": str(v.sim.events[-1].by)}
         v.missions.flight_armed()  # (as the controller's arm does): item 0 current, the mission ACTIVE
         assert v.missions.watch is not None and v.missions.mission_state == M.MISSION_STATE_ACTIVE
         exchange(v, M.MAVLink_mission_count_message(1, 1, 0, 0), "MISSION_ACK")  # a ground station clears it
@@ -383,5 +468,7 @@ def test_plan_text_reads_back_and_the_transfer_block_is_typed():
     assert again.home == plan.home and again.cruise_m_s == plan.cruise_m_s
     said = {"items": 8, "requests": 11, "re_requests": 3, "duration_s": 0.5, "result": "accepted"}
     assert mission_transfer(said).as_dict() == {"items": 8, "attempts": 11, "re_requests": 3, "duration_s": 0.5,
-                                                "result": "accepted"}
+                                                "result": "accepted", "started_by": None}
+    by = {"command": START_ARM, "by": "255:190 127.0.0.1:14550 gcs"}
+    assert mission_transfer(said, by).as_dict()["started_by"] == by
     assert mission_transfer(None) is None and mission_transfer({"items": 1}) is None

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import re
 import subprocess
 import sys
@@ -32,7 +31,7 @@ from bridge.mavlink.endpoint import GCS_PORT
 from bridge.mavlink.modes import FTP_ERR_UNKNOWN_COMMAND, FTP_HEADER, FTP_NAK, FTP_PAYLOAD_LEN, ftp_nak
 from bridge.nodes.report import Refused
 from bridge.session import instance_slot
-from tests.sitlkit import ENV, Proc
+from tests.sitlkit import ENV, MavProxy
 from tests.test_vehicle import _vehicle
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -221,18 +220,10 @@ def test_mavproxy_params_and_modes(tmp_path):
     show``, ``param set`` and ``param show`` again; an out-of-range set refused (the vehicle's
     STATUSTEXT shown, the value unchanged); HOLD (MAVProxy's LOITER), arm, TAKEOFF, LAND, with
     MAVProxy naming each mode in its prompt."""
-    mavproxy = os.path.join(os.path.dirname(sys.executable), "mavproxy.py")
     with instance_slot() as n:
         v = _vehicle(n, tmp_path / "v", "--param", "MPC_LAND_SPEED=1.5")  # real time: TAKEOFF lasts ~2 s
-        mp = Proc([sys.executable, mavproxy, f"--master=udpin:127.0.0.1:{GCS_PORT + n}", "--nowait"],
-                  cwd=tmp_path, stdin=subprocess.PIPE)
-
-        def say(cmd: str) -> int:
-            """Type ``cmd``; the index of the first line that can answer it."""
-            mark = len(mp.lines)
-            mp.p.stdin.write(cmd.encode() + b"\n")  # type: ignore[union-attr]
-            mp.p.stdin.flush()  # type: ignore[union-attr]
-            return mark
+        mp = MavProxy(f"udpin:127.0.0.1:{GCS_PORT + n}", tmp_path)
+        say = mp.say
 
         def prompt_names(name: str) -> None:
             """Wait until MAVProxy's prompt names mode ``name`` (its "Mode X" line comes at most every

@@ -36,7 +36,7 @@ from bridge.nodes.vehicle import Vehicle, VehicleConfig
 from bridge.nodes.vehicle.mission import PROTOCOL_TIMEOUT_S, REACHED_REPEATS, REACHED_S, RETRY_S
 from bridge.session import instance_slot
 from missions import Mission, Sine
-from tests.sitlkit import ENV, Proc
+from tests.sitlkit import ENV, MavProxy, Proc
 from tests.test_vehicle import _vehicle
 from tests.waiting import wait_for
 
@@ -556,24 +556,17 @@ def test_mavproxy_wp_load_and_list(tmp_path):
     a speed change, a landing) is ACCEPTED; ``wp list`` downloads the six items and saves them, and the
     saved file says what the loaded one said."""
     (tmp_path / "box.txt").write_text(WPL)
-    mavproxy = os.path.join(os.path.dirname(sys.executable), "mavproxy.py")
     with instance_slot() as n:
         v = _vehicle(n, tmp_path / "v")
-        mp = Proc([sys.executable, mavproxy, f"--master=udpin:127.0.0.1:{GCS_PORT + n}", "--nowait"],
-                  cwd=tmp_path, stdin=subprocess.PIPE)
-
-        def say(cmd: str) -> None:
-            mp.p.stdin.write(cmd.encode() + b"\n")  # type: ignore[union-attr]
-            mp.p.stdin.flush()  # type: ignore[union-attr]
-
+        mp = MavProxy(f"udpin:127.0.0.1:{GCS_PORT + n}", tmp_path)
         try:
-            mp.wait_line(lambda s: "online system" in s, timeout=30)
-            say("wp load box.txt")
+            mp.wait_online()
+            mp.say("wp load box.txt")
             mp.wait_line(lambda s: "Sent all 6 waypoints" in s, timeout=15)
             mp.wait_line(lambda s: "Got MISSION_ACK: TYPE_MISSION: ACCEPTED" in s, timeout=15)
-            say("wp list")
+            mp.say("wp list")
             saved = mp.wait_line(lambda s: s.startswith("Saved 6 waypoints to "), timeout=15)
-            say("exit")
+            mp.say("exit")
         finally:
             mp.stop()
             assert v.stop() == 0
@@ -606,36 +599,46 @@ def test_mavsdk_mission_through_a_lossy_slow_link(tmp_path):
     station's to drive (PX4 sends an item only when asked):
     MAVSDK gives up after five requests of one item (0.36^6 per item at 20 % loss each way, about one
     download in five of 100 items), so the script asks again, at most three times, too."""
+    out, events, relay_stats, totals = mavsdk_through_relay(tmp_path, ITEMS_THROUGH_RELAY)
+    assert out["found"] and out["upload_attempts"][-1] == "SUCCESS", out.get("upload_attempts")
+    assert out["download_attempts"][-1] == "SUCCESS", out["download_attempts"]
+    assert out["downloaded"] == out["uploaded"]
+    assert relay_stats["up"]["lost"] > 0 and relay_stats["down"]["lost"] > 0, relay_stats
+    # each attempt whose last item arrived is one upload the vehicle accepted (its ACK may then be lost)
+    assert 1 <= len(events) <= len(out["upload_attempts"]), (events, out["upload_attempts"])
+    assert all(f"uploaded {ITEMS_THROUGH_RELAY} items" in e for e in events), events
+    assert totals == {ITEMS_THROUGH_RELAY}, totals
+
+
+def mavsdk_through_relay(tmp_path: Path, n_items: int, loss: int = 20, delay_ms: int = 100,
+                         seed: int = 7) -> tuple[dict, list[str], dict, set[int]]:
+    """``n_items`` (:func:`_items`) uploaded by MAVSDK's MissionRaw to a ``bsst vehicle`` through ``bsst relay
+    --loss LOSS --delay DELAY_MS`` (both directions) and downloaded back (the script's ``raw-json`` part): what
+    the script said, the vehicle's ``mission`` events, the relay's statistics, and the totals the vehicle's
+    MISSION_CURRENTs named (its tlog). Also benchmarks/missions_mavsdk.py's, at the acceptance's 100 items."""
     rows = [[m.seq, m.frame, m.command, int(m.seq == 0), m.autocontinue, *(None if math.isnan(p) else p for p in (
-        m.param1, m.param2, m.param3, m.param4)), m.x, m.y, m.z, 0] for m in _items(ITEMS_THROUGH_RELAY)]
+        m.param1, m.param2, m.param3, m.param4)), m.x, m.y, m.z, 0] for m in _items(n_items)]
     (tmp_path / "items.json").write_text(json.dumps(rows))
     with instance_slot() as n:
         relay = Proc.bsst("relay", "--listen", "127.0.0.1:0", "--to", f"127.0.0.1:{GCS_PORT + n}",
-                          "--listen-direction", "down", "--loss", "20", "--delay", "100", "--link-seed", "7",
-                          "--stats", str(tmp_path / "relay.json"))
+                          "--listen-direction", "down", "--loss", str(loss), "--delay", str(delay_ms),
+                          "--link-seed", str(seed), "--stats", str(tmp_path / "relay.json"))
         ready = parse_line(relay.wait_line(lambda s: isinstance(parse_line(s), Ready)))
         port = int(ready.listen.rsplit(":", 1)[1])
         v = _vehicle(n, tmp_path / "v", "--gcs", f"udpout:127.0.0.1:{port}")
         try:
-            out = _mavsdk(f"udpin://127.0.0.1:{GCS_PORT + n}", "raw-json", str(tmp_path / "items.json"), 300)
+            out = _mavsdk(f"udpin://127.0.0.1:{GCS_PORT + n}", "raw-json", str(tmp_path / "items.json"),
+                          300 + 3 * n_items)
         finally:
             assert v.stop() == 0
             assert relay.stop() == 0
-    assert out["found"] and out["upload_attempts"][-1] == "SUCCESS", out.get("upload_attempts")
-    assert out["download_attempts"][-1] == "SUCCESS", out["download_attempts"]
-    assert out["downloaded"] == out["uploaded"]
-    relay_stats = json.loads((tmp_path / "relay.json").read_text())
-    assert relay_stats["up"]["lost"] > 0 and relay_stats["down"]["lost"] > 0, relay_stats
-    events = [s for s in v.events() if s.startswith("mission: ")]
-    # each attempt whose last item arrived is one upload the vehicle accepted (its ACK may then be lost)
-    assert 1 <= len(events) <= len(out["upload_attempts"]), (events, out["upload_attempts"])
-    assert all(f"uploaded {ITEMS_THROUGH_RELAY} items" in e for e in events), events
     log = mavutil.mavlink_connection(str(tmp_path / "v" / "vehicle.tlog"), dialect="common")
     totals = set()
     while (m := log.recv_match(type="MISSION_CURRENT")) is not None:
         if m.get_srcSystem() == n + 1:
             totals.add(m.total)
-    assert totals == {ITEMS_THROUGH_RELAY}, totals
+    events = [s for s in v.events() if s.startswith("mission: ")]
+    return out, events, json.loads((tmp_path / "relay.json").read_text()), totals
 
 
 # -- the flight's side, in process -----------------------------------------------------------------------

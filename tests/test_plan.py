@@ -69,6 +69,36 @@ def test_the_box_route_stops_and_passes_where_the_plan_says() -> None:
     assert 2.9 <= climb <= 3.0 + 1e-6  # MPC_Z_V_AUTO_UP
 
 
+ITEMS_AND_FRAMES = """QGC WPL 110
+0\t1\t0\t16\t0\t0\t0\t0\t47.397742\t8.545594\t488.0\t1
+1\t0\t3\t22\t0\t0\t0\tnan\t47.397742\t8.545594\t10\t1
+2\t0\t0\t16\t2\t0\t0\t90\t47.3978319\t8.545594\t498.0\t1
+3\t0\t6\t19\t3\t0\t0\tnan\t47.3978319\t8.5457268\t10\t1
+4\t0\t5\t16\t0\t0\t0\tnan\t47.397742\t8.5457268\t498.0\t1
+5\t0\t2\t20\t0\t0\t0\t0\t0\t0\t0\t1
+"""
+
+
+def test_the_other_items_and_frames() -> None:
+    """A waypoint in GLOBAL (AMSL) holding 2 s with a yaw given (90 deg: east), NAV_LOITER_TIME 3 s in
+    GLOBAL_RELATIVE_ALT_INT, a waypoint in GLOBAL_INT passed through, NAV_RETURN_TO_LAUNCH in frame MISSION (as
+    QGroundControl writes it and PX4 takes it): each where and as the plan says, about the home, 10 m up."""
+    route = route_of(read_plan_text(ITEMS_AND_FRAMES, "frames"), Limits(), 100.0)
+    assert [(label, stop) for label, _, stop in route.waypoints] == [
+        ("item 1", True), ("item 2", True), ("item 3", True), ("item 4", False), ("item 5", True), ("item 5", True)]
+    assert route.lands
+    at = {label: route.knots[k] for label, k, _ in route.waypoints}  # (item 5: its last, on the ground)
+    north, east = 10.0, 10.0  # the file's 1e-7 deg: within 5 mm
+    for label, (x, y) in {"item 2": (north, 0.0), "item 3": (north, -east), "item 4": (0.0, -east)}.items():
+        assert (at[label].x, at[label].y, at[label].z) == pytest.approx((x, y, 10.0), abs=5e-3), label
+    assert at["item 2"].psi == pytest.approx(-math.pi / 2)  # 90 deg clockwise from north, the paper frame's psi
+    for (_, k, _), hold in zip(route.waypoints[1:3], (2.0, 3.0), strict=True):  # the hold, the loiter
+        here, then = route.knots[k], route.knots[k + 1]
+        assert (then.t - here.t, then.x, then.y, then.z) == pytest.approx((hold, here.x, here.y, here.z))
+    home_high, home = route.knots[-2], route.knots[-1]  # RTL: over the home at its altitude, then down
+    assert (home_high.x, home_high.y, home_high.z, home.x, home.y, home.z) == (0.0, 0.0, 10.0, 0.0, 0.0, 0.0)
+
+
 def test_a_slower_cruise_is_a_longer_flight() -> None:
     pf = read_plan_text(BOX_PLAN.read_text().replace('"hoverSpeed": 5', '"hoverSpeed": 2'), "box")
     slow = route_of(pf, Limits(MPC_XY_CRUISE=2.0), 100.0)

@@ -25,7 +25,7 @@ from bridge.mavlink.endpoint import GCS_PORT, LINK_PORT
 from bridge.mavlink.receive import MAX_FRAME
 from bridge.nodes.report import Ready, Stats
 from bridge.session import instance_slot
-from tests.sitlkit import ENV, ROOT, Proc
+from tests.sitlkit import ENV, ROOT, MavProxy, Proc
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -200,18 +200,12 @@ def test_a_slow_answer_to_a_resent_state_is_taken_once_and_refuses_nothing(tmp_p
 def test_mavproxy_arms_through_stdin(tmp_path):
     """MAVProxy, unmodified, as the issue runs it: heartbeat and attitude seen, and
     ``arm throttle`` typed into it is ACKed and arms the vehicle."""
-    mavproxy = os.path.join(os.path.dirname(sys.executable), "mavproxy.py")
     with instance_slot() as n:
         v = _vehicle(n, tmp_path / "v")
-        mp = Proc([sys.executable, mavproxy, f"--master=udpin:127.0.0.1:{GCS_PORT + n}", "--nowait"],
-                  cwd=tmp_path, stdin=subprocess.PIPE)
+        mp = MavProxy(f"udpin:127.0.0.1:{GCS_PORT + n}", tmp_path)
+        say = mp.say
         try:
-            mp.wait_line(lambda s: "Detected vehicle" in s or "online system" in s, timeout=30)
-
-            def say(cmd: str) -> None:
-                mp.p.stdin.write(cmd.encode() + b"\n")
-                mp.p.stdin.flush()
-
+            mp.wait_online()
             deadline = time.monotonic() + 20
             while True:  # "status" lists what MAVProxy has received so far: ask until attitude is in it
                 say("status")

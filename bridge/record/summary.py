@@ -86,27 +86,34 @@ class MissionTransfer:
     """``summary.json["mission_transfer"]`` (``bsst sitl --await-mission``): the controller's download of a
     ground station's mission from the vehicle: its items, the requests sent (``attempts``: the first of each
     message and every one again), those sent again (``re_requests``), its wall time (s) and ``result``
-    (``accepted``, or why not)."""
+    (``accepted``, or why not); ``started_by``, as the vehicle said it: how the ground station started the
+    mission (``command``: ``MISSION_START``, or ``AUTO.MISSION, then arm``) and who (``by``: ``SYSID:COMPID
+    HOST:PORT LINK``), None if the vehicle said no start."""
 
     items: int
     attempts: int
     re_requests: int
     duration_s: float
     result: str
+    started_by: Mapping[str, str] | None = None
 
     def as_dict(self) -> dict[str, Any]:
         return {"items": self.items, "attempts": self.attempts, "re_requests": self.re_requests,
-                "duration_s": self.duration_s, "result": self.result}
+                "duration_s": self.duration_s, "result": self.result,
+                "started_by": dict(self.started_by) if self.started_by is not None else None}
 
 
-def mission_transfer(said: Mapping[str, Any] | None) -> MissionTransfer | None:
+def mission_transfer(said: Mapping[str, Any] | None, started: Any = None) -> MissionTransfer | None:
     """The :class:`MissionTransfer` of what the controller said (its ``stats``' or ``mission`` report's
-    ``TransferStats`` fields), or None when it said none or not all of it."""
+    ``TransferStats`` fields) and of the vehicle's start (its ``stats``' ``mission_start``), or None when the
+    controller said none or not all of it."""
     if not isinstance(said, Mapping):
         return None
+    start = ({"command": str(started["command"]), "by": str(started["by"])}
+             if isinstance(started, Mapping) and {"command", "by"} <= started.keys() else None)
     try:
         return MissionTransfer(int(said["items"]), int(said["requests"]), int(said["re_requests"]),
-                               float(said["duration_s"]), str(said["result"]))
+                               float(said["duration_s"]), str(said["result"]), start)
     except (KeyError, TypeError, ValueError):
         return None
 
@@ -414,7 +421,7 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
     summary["outcome"], summary["ended_by"] = ended_by(summary["outcome"], arrays, flight, facts, joined.k0,
                                                        events, children, controller_id)
     summary["interventions"] = changes = interventions(events, m.rate_hz, controller_id)
-    transfer = mission_transfer(cs.get("mission_transfer") or facts.mission_transfer)
+    transfer = mission_transfer(cs.get("mission_transfer") or facts.mission_transfer, vs.get("mission_start"))
     if transfer is not None:
         summary["mission_transfer"] = transfer.as_dict()
     if cs.get("param_at"):  # the scheduled changes (--param-at) as sent, each confirmed by the vehicle's echo or not

@@ -138,9 +138,11 @@ def sitl(
         if mission is not None:
             raise ConfigError("--await-mission: give no mission file (a ground station uploads the mission)")
         mission = awaiting()
-        over = Overrides.of(overrides, **keywords)
-        if over.param_at:
-            raise ConfigError("--param-at with --await-mission: not supported (the mission's times are not known yet)")
+        for c in Overrides.of(overrides, **keywords).param_at or ():  # checked again against the mission flown
+            if not (math.isfinite(c.t_s) and 0.0 <= c.t_s < AWAIT_DURATION_S):
+                raise ConfigError(f"--param-at {c.t_s:g}:{c.name}={c.value!r}: with --await-mission the time is "
+                                  f"mission time, in [0, {AWAIT_DURATION_S:g}) s; the ground station's mission, once "
+                                  "downloaded, must last longer than it")
     elif mission is None:
         raise ConfigError("bsst sitl: give a mission file (or --await-mission)")
     if key is not None:

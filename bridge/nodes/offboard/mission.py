@@ -218,7 +218,7 @@ def fetch_mission(flight: Flight, cfg: OffboardConfig, out: Path | None, status:
         try:
             plan = plan_of(tuple(items), link.home, "the mission from the vehicle")
             mission = with_plan(flight.mission, plan, flight.mission.name)
-            new = prepare(mission)
+            new = prepare(mission, param_at=flight.param_changes)  # --param-at: in this mission's time
         except ConfigError as exc:
             return Fetched(None, st, f"the mission cannot be flown: {exc}")
         if out is not None:

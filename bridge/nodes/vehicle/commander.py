@@ -35,7 +35,7 @@ from bridge.mavlink.receive import FORCE_DISARM, arm_disarm_args, interval_arg, 
 from bridge.nodes.vehicle.authority import Authority, attribute
 from bridge.nodes.vehicle.clock import Clock, Trigger
 from bridge.nodes.vehicle.injection import injection
-from bridge.nodes.vehicle.mission import MissionManager
+from bridge.nodes.vehicle.mission import START_ARM, START_COMMAND, MissionManager
 from bridge.nodes.vehicle.streams import HEARTBEAT_S, StatusTexts, StreamTable
 from bridge.record.metrics import plant_blocks
 
@@ -128,7 +128,7 @@ class Commander:
                 self.ports.reject("bad_number")
                 return mavlink.MAV_RESULT_DENIED, ()
             if args[0] and by.link == "gcs" and not self.sim.armed and self._mission_selected():
-                return self._start_mission(by, 0.0), ()  # AUTO.MISSION, then arm: the mission starts
+                return self._start_mission(by, 0.0, START_ARM), ()  # AUTO.MISSION, then arm: the mission starts
             if args[0] and self._through_link(m, by):
                 self.ports.arm_through_link()  # acts when the model delivers it, as offline
                 return mavlink.MAV_RESULT_IN_PROGRESS, ()
@@ -216,7 +216,7 @@ class Commander:
     def _mission_selected(self) -> bool:
         return self.ports.missions is not None and self.ports.missions.selected
 
-    def _start_mission(self, by: Sender, first: float) -> int:
+    def _start_mission(self, by: Sender, first: float, how: str = START_COMMAND) -> int:
         """MISSION_START, or a ground station's arm with AUTO.MISSION selected: the held mission is started
         for the offboard controller to download and fly (it arms the vehicle), or DENIED saying why. PX4 arms
         at once; here the arm is the controller's, once it has the mission."""
@@ -225,7 +225,7 @@ class Commander:
         if self.sim.armed:
             return self._refuse("MISSION_START: only on the ground, disarmed (the controller flies it from its start)")
         missions = self.ports.missions
-        why = "MISSION_START: no mission manager" if missions is None else missions.start(by, first)
+        why = "MISSION_START: no mission manager" if missions is None else missions.start(by, first, how)
         return self._refuse(why) if why else mavlink.MAV_RESULT_ACCEPTED
 
     def _takeoff_altitude(self, param7: float) -> float | str:

@@ -58,6 +58,8 @@ MISSION = mavlink.MAV_MISSION_TYPE_MISSION
 MESSAGES = frozenset({"MISSION_COUNT", "MISSION_ITEM", "MISSION_ITEM_INT", "MISSION_REQUEST_LIST", "MISSION_REQUEST",
                       "MISSION_REQUEST_INT", "MISSION_ACK", "MISSION_CLEAR_ALL", "MISSION_SET_CURRENT"})
 BUSY = "WPM: REJ. CMD: Busy"
+START_COMMAND = "MISSION_START"  # how a ground station started the mission (summary.json mission_transfer)
+START_ARM = "AUTO.MISSION, then arm"
 
 
 class State(Enum):
@@ -102,6 +104,7 @@ class MissionManager:
         self.seq = 0  # the transfer's next item (PX4's _transfer_seq); kept when idle, to spot a repeated last item
         self.count = 0  # the transfer's items
         self.staged: list[MissionItem] = []  # an upload's items so far
+        self.sent: set[int] = set()  # a download's items sent so far
         self.staged_current = 0
         self.sending: Mission = self.mission  # a download's mission, as it was when it began
         self.last_recv = self.last_sent = self.started = 0.0
@@ -110,6 +113,7 @@ class MissionManager:
         self._reached_left = 0
         self._reached_at = 0.0
         self.selected = False  # AUTO.MISSION selected (or started) by a ground station, not flown yet
+        self.started: dict[str, str] | None = None  # the last start: how (``command``) and by whom (``by``)
         self.start_requested = False  # started: the controller is to download the mission and fly it
         self.watch: ItemWatch | None = None  # the mission in flight (None: none)
         self.completed = False  # the last started mission's items were all reached
@@ -130,10 +134,11 @@ class MissionManager:
             self.selected = True
         return why
 
-    def start(self, by: Sender, first: float) -> str | None:
-        """A ground station starts the mission (MAV_CMD_MISSION_START with its first item ``first``, or an arm
-        with AUTO.MISSION selected): a ``mission`` event, the vehicle shows AUTO.MISSION, and the controller is
-        to fly it from item 0 (None), or why not (the mission is checked as the controller will fly it)."""
+    def start(self, by: Sender, first: float, how: str = START_COMMAND) -> str | None:
+        """A ground station starts the mission (``how``: :data:`START_COMMAND`, MAV_CMD_MISSION_START with its
+        first item ``first``, or :data:`START_ARM`, an arm with AUTO.MISSION selected): a ``mission`` event, the
+        vehicle shows AUTO.MISSION, and the controller is to fly it from item 0 (None), or why not (the mission
+        is checked as the controller will fly it). :attr:`started` says how and by whom (summary.json)."""
         if not (math.isnan(first) or first in (0.0, -1.0)):
             return f"MISSION_START: only from item 0 (the whole mission), got first item {first:g}"
         why = self._startable("MISSION_START")
@@ -147,13 +152,16 @@ class MissionManager:
         self._goals = goals
         self.selected = self.start_requested = True
         n0 = len(self.sim.events)
-        self.sim.event("mission", f"start requested: {len(self.mission.items)} items, for the controller to fly")
+        self.sim.event("mission", f"start requested by {how}: {len(self.mission.items)} items, for the controller "
+                                  "to fly")
         attribute(self.sim.events, n0, by)
+        self.started = {"command": how, "by": str(by)}
         return None
 
     def _startable(self, what: str) -> str | None:
         if not self.mission.items:
             return f"{what}: no mission uploaded"
+        self._idle_if_sent()  # (MAVProxy sends no ACK after a download: its transfer would hold the start 5 s)
         if self.state is not State.IDLE:
             return f"{what}: a mission transfer is on"
         return None
@@ -265,8 +273,7 @@ class MissionManager:
                 kind == "MISSION_CLEAR_ALL" and m.mission_type == mavlink.MAV_MISSION_TYPE_ALL):
             self._answer(who, mavlink.MAV_MISSION_UNSUPPORTED, m.mission_type)  # no fence, no rally points
             return False
-        if self.state is State.SENDLIST and self.seq == self.count:
-            self._idle()  # every item went out: its final ACK was lost (PX4: on a new MISSION_REQUEST_LIST)
+        self._idle_if_sent()
         if kind == "MISSION_COUNT":
             return self._count(who, m, now)
         if kind == "MISSION_REQUEST_LIST":
@@ -369,14 +376,17 @@ class MissionManager:
             self._busy(who, MISSION, "Mission download request ignored, already active")
             return
         self.state, self.partner, self.sending = State.SENDLIST, who, self.mission
-        self.seq, self.count = 0, len(self.mission.items)
+        self.seq, self.count, self.sent = 0, len(self.mission.items), set()
         self.last_recv = self.last_sent = now
         who.ep.reply((mavlink.MAVLink_mission_count_message(who.who.sysid, who.who.compid, self.count, MISSION),),
                      who.who.addr)
 
     def _request(self, who: Partner, m: Any, now: float) -> None:
-        """MISSION_REQUEST(_INT): the next item (or the last again) to the download's partner; any other
-        one ends the download (``MAV_MISSION_ERROR``)."""
+        """MISSION_REQUEST(_INT): the item asked for, to the download's partner, in whatever order it asks;
+        one past the mission ends the download (``MAV_MISSION_ERROR``). PX4 also ends it on a request other
+        than the next item or the last again; ArduPilot answers any, as here: MAVProxy asks for five items
+        at once and each lost one again 2 s later, so over a lossy link PX4's rule ends every download
+        whose requests were not all delivered in order (docs/ground-station.md, "Missions")."""
         if not self._is_partner(who):
             if self.state is not State.IDLE:
                 self._busy(who, MISSION)
@@ -387,12 +397,12 @@ class MissionManager:
         if self.state is not State.SENDLIST or m.mission_type != MISSION:
             return
         self.last_recv = now
-        if m.seq == self.seq and self.seq < self.count:
-            self.seq += 1
-        elif m.seq != self.seq - 1:  # neither the next item nor the last one again
+        if not 0 <= m.seq < self.count:
             self._idle()
             self._answer(who, mavlink.MAV_MISSION_ERROR, text="WPM: REJ. CMD: Req. WP was unexpected")
             return
+        self.seq = max(self.seq, m.seq + 1)
+        self.sent.add(m.seq)
         sending = self.sending
         item = sending.items[m.seq]
         self.last_sent = now
@@ -430,6 +440,12 @@ class MissionManager:
     def _is_partner(self, who: Partner) -> bool:
         p = self.partner
         return p is not None and p.who == who.who
+
+    def _idle_if_sent(self) -> None:
+        """A download whose every item went out ends here (its final ACK lost, or never sent), as PX4 ends it
+        on a new MISSION_REQUEST_LIST, so that it holds up no new transfer or start."""
+        if self.state is State.SENDLIST and len(self.sent) == self.count:
+            self._idle()
 
     def _idle(self) -> None:
         """Back to IDLE: a staged upload is dropped (the mission stays as it was)."""

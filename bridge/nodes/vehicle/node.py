@@ -189,7 +189,8 @@ class Vehicle:
             "answered_again": self.targets.answered_again, "odometry_steps": self.odometry.steps.ranges,
             "kernel_drops": self.link.kernel_drops(),
             "up": self.vend.up.stats.summary() if self.cfg.clock == "lockstep" else None,
-            "plant": self.commander.plant_at_end or plant_blocks(self.plant)}))  # wind, battery, impact, as offline
+            "plant": self.commander.plant_at_end or plant_blocks(self.plant),  # wind, battery, impact, as offline
+            "mission_start": self.missions.started}))
 
     def _report(self, report: Report) -> None:
         """Every report of the vehicle goes out here."""
