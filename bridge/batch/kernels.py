@@ -33,6 +33,7 @@ from bridge.core.kernels import (  # noqa: F401  (the batch's names for them)
     signed_speed_sum,
     state_from_odometry_fields,
     wrench_command,
+    wrench_from_degraded_rotors,
     wrench_from_wire,
     wrench_to_wire,
 )
