@@ -15,8 +15,13 @@ air, 5 m/s moderate and 10 m/s severe, on a perfect link and with 20 ms each way
 gnss --estimator ekf --at 10:gps:off --at 20:gps:on``: the drift during the outage and the NEES after.
 ``margin``: ``bsst margin missions/sine.toml --over wind_mps --until rms=0.1`` per law, on a perfect link and
 with ``--delay 20`` (``bridge.sweep.margin.margin``, what the command calls).
+``batch``: the batch engine against the process engine: ``bsst sweep missions/sine.toml --controller
+bsst,smc,pid --wind 0,5,10 --turbulence none,moderate,severe --delay 0,20`` flown by each (``--engine batch``,
+``--engine process``), the largest relative RMS difference per law, the outcomes that differ and each engine's
+wall time; then the x500's motor faults (``--at 10:motor:1=E``, fault-sized gains) flown by the batch
+(``bridge.batch.fly_batch``) against ``bsst sim``.
 
-    python benchmarks/weather.py [wind|table|faults|margin|all] [--seeds N] [--jobs N]
+    python benchmarks/weather.py [wind|table|faults|margin|batch|all] [--seeds N] [--jobs N]
 """
 
 from __future__ import annotations
@@ -115,11 +120,51 @@ def margin_table(jobs: int | None) -> None:
     print()
 
 
+def batch_table(jobs: int | None) -> None:
+    import tempfile
+    import time
+
+    from bridge.batch import fly_batch
+    from bridge.sweep import Grid, sweep
+
+    grid = Grid(controller=LAWS, wind_mps=(0.0, 5.0, 10.0), turbulence=("none", "moderate", "severe"),
+                delay_ms=(0.0, 20.0))
+    print("## batch against process: sine, --controller bsst,smc,pid --wind 0,5,10 --turbulence "
+          "none,moderate,severe --delay 0,20 (54 cells, 30 s)\n")
+    rows, wall = {}, {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for engine in ("batch", "process"):
+            t0 = time.perf_counter()
+            rows[engine] = sweep(MISSION, grid, engine=engine, jobs=jobs, out=Path(tmp) / engine, report=False)
+            wall[engine] = time.perf_counter() - t0
+    worst: dict[str, float] = {}
+    differ = 0
+    for a, b in zip(rows["batch"], rows["process"], strict=True):
+        differ += a["outcome"] != b["outcome"]
+        rel = abs(a["rms"] - b["rms"]) / max(abs(b["rms"]), 1e-300)
+        worst[a["controller"]] = max(worst.get(a["controller"], 0.0), rel)
+    print("| law | largest relative RMS difference |\n|---|---|")
+    for law in LAWS:
+        print(f"| {law} | {worst[law]:.2e} |")
+    print(f"\noutcomes that differ: {differ} of {len(rows['batch'])}; wall time: batch {wall['batch']:.1f} s "
+          f"(its kernels compiled or loaded included), process {wall['process']:.1f} s "
+          f"(--jobs {jobs or os.cpu_count()})\n")
+    print("## x500 motor faults (examples/x500-motor-fault.toml --at 10:motor:1=E): batch against bsst sim\n")
+    print("| law | E | batch outcome / RMS m | bsst sim outcome / RMS m |\n|---|---|---|---|")
+    fault = "examples/x500-motor-fault.toml"
+    cells = [{"controller": law, "at": (f"10:motor:1={e:g}",)} for law in LAWS for e in (0.9, 0.75, 0.6, 0.0)]
+    for c, got in zip(cells, fly_batch(fault, cells), strict=True):
+        s = simulate(fault, **c).summary
+        print(f"| {c['controller']} | {c['at'][0].rsplit('=', 1)[1]} | {got['outcome']} / {got['rms']:.6g} | "
+              f"{s['outcome']} / {s['rms_3d']:.6g} |")
+    print()
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("what", nargs="?", default="all", choices=("wind", "table", "faults", "margin", "all"))
+    ap.add_argument("what", nargs="?", default="all", choices=("wind", "table", "faults", "margin", "batch", "all"))
     ap.add_argument("--seeds", type=int, default=8)
-    ap.add_argument("--jobs", type=int, default=None, help="margin's workers (default: all cores)")
+    ap.add_argument("--jobs", type=int, default=None, help="margin's and batch's workers (default: all cores)")
     a = ap.parse_args()
     print("load average (1, 5, 15 min) at the start: {:.2f} {:.2f} {:.2f}\n".format(*os.getloadavg()))
     if a.what in ("wind", "all"):
@@ -130,6 +175,8 @@ def main() -> None:
         fault_table()
     if a.what in ("margin", "all"):
         margin_table(a.jobs)
+    if a.what in ("batch", "all"):
+        batch_table(a.jobs)
     print("load average (1, 5, 15 min) at the end: {:.2f} {:.2f} {:.2f}".format(*os.getloadavg()))
 
 

@@ -3,9 +3,10 @@ and bridge/autopilot/failsafe.py, compiled with numba for the batch engine and t
 
 In:  nothing at import but those pure functions (importing this module imports numba: ~0.6-1.2 s)
 Out: their compiled twins: the BS-ST law (eq. 24-40), PID, the super-twisting integrator (eq. 22, both steps),
-     the actuation and allocation (eq. 4 inverted), the RK4 plant step (eq. 6), the predictor's nominal RK4, the
-     state and command over the wire, the on-board landing law (called per cell by bridge.batch); the scalar
-     engine's own (the one-call control step, the plant's RK4 step) are :mod:`bridge.core.scalarkernels`
+     the actuation and allocation (eq. 4 inverted), eq. 4 with rotor faults, the RK4 plant step (eq. 6), the
+     predictor's nominal RK4, the state and command over the wire, the on-board landing law (called per cell by
+     bridge.batch); the scalar engine's own (the one-call control step, the plant's RK4 step) are
+     :mod:`bridge.core.scalarkernels`
 
 One source per equation (issue 21): each function here is ``numba.njit(f)`` of the very function the scalar
 engine calls, so the two engines cannot drift apart. The helpers those functions call by name are registered as
