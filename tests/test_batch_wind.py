@@ -2,12 +2,12 @@
 with a timeline.
 
 Cells with their own steady wind, Dryden turbulence and gusts — the three laws, a delayed and lossy link, the
-x500 (rotor drag, motors) — and the timeline's motor, wind and gust events (the x500 with and without motor
-lag) are flown by the batch engine and by the scalar loop and compared as tests/test_batch.py compares still
-air: the same outcome, packet counts and flown time; for ``bsst`` and ``pid`` the figures within 1e-6
-relative, for ``smc`` (a switching law) the RMS within 1 %. The turbulence's samples are the scalar
-generator's own (plant.wind.turbulence_series: checked equal to what Wind.now adds). A ``link`` event and the
-battery are refused: tests/test_batch.py.
+x500 (rotor drag, motors) — and the timeline's motor, wind and gust events (the x500 without and with its
+battery, with motor lag) are flown by the batch engine and by the scalar loop and compared as
+tests/test_batch.py compares still air: the same outcome, packet counts and flown time; for ``bsst`` and
+``pid`` the figures within 1e-6 relative, for ``smc`` (a switching law) the RMS within 1 %. The turbulence's
+samples are the scalar generator's own (plant.wind.turbulence_series: checked equal to what Wind.now adds). A
+``link`` event is refused: tests/test_batch.py.
 """
 
 from __future__ import annotations
@@ -61,13 +61,12 @@ def test_wind_turbulence_and_gusts_fly_as_in_the_scalar_loop(name: str, cells: l
     _agree(replace(load_mission(ROOT / "missions" / name), duration_s=6.0), cells)
 
 
-@pytest.mark.parametrize("lag", [False, True])
-def test_motor_events_fly_as_in_the_scalar_loop(lag: bool) -> None:
+@pytest.mark.parametrize("effects", [{}, {"battery": True}, {"battery": True, "motor_lag": True}])
+def test_motor_events_and_the_battery_fly_as_in_the_scalar_loop(effects: dict) -> None:
     # the x500 with fault-sized gains: a rotor at 75 % (flown), one off (diverged), faults with wind events and
-    # turbulence, a cell without events beside them; with and without motor lag (the speeds held, not the wrench)
-    m = replace(load_mission(ROOT / "examples" / "x500-motor-fault.toml"), duration_s=5.0)
-    if lag:
-        m = replace(m, effects={**m.effects, "motor_lag": True})
+    # turbulence, a cell without events beside them; without and with the battery (its cap on the rotors' speed
+    # taken at each command's arrival and each physics step), with motor lag (the speeds held, not the wrench)
+    m = replace(load_mission(ROOT / "examples" / "x500-motor-fault.toml"), duration_s=5.0, effects=effects)
     cells = [{"controller": "bsst", "at": ("2:motor:1=0.75",)},
              {"controller": "pid", "at": ("1:gust:1,2,45", "2:motor:2=0.6", "3:wind:3:90"), "link": {"delay_ms": 10.0}},
              {"controller": "smc"},
@@ -75,6 +74,9 @@ def test_motor_events_fly_as_in_the_scalar_loop(lag: bool) -> None:
              {"controller": "bsst", "wind": {"speed_mps": 4.0, "turbulence": "light"}, "at": ("2:motor:3=0.8",)}]
     rows = _agree(m, cells)
     assert rows[3]["outcome"] == "diverged" and rows[0]["outcome"] == "completed"
+    if effects.get("battery"):  # the sag capped a rotor somewhere (the battery acts on the flight only so)
+        still = fly_batch(replace(m, effects={k: v for k, v in effects.items() if k != "battery"}), cells)
+        assert any(a["tv_u2"] != b["tv_u2"] for a, b in zip(rows, still, strict=True)), (rows, still)
 
 
 def test_the_turbulence_series_is_what_the_scalar_wind_adds() -> None:

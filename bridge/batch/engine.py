@@ -20,10 +20,10 @@ ripple of each cell's own second half; no trace is held.
 
 Cells may differ in law (``bsst``, ``smc``, ``pid``), seed, control rate (flown as separate batches) and every
 link setting but the bandwidth queue; they must share everything else (profile, effects, gains, trajectory,
-duration; each cell may have its own wind, turbulence, gusts and ``motor``, ``wind`` and ``gust`` events, or
-none: bridge.batch.weather). Not flown here (:func:`batch_problem`): a user's own law, the bandwidth queue
-(``rate_bps``), a measured link ``trace``, ``[failsafe] resume``, any failsafe ``action`` but ``descend``,
-parameters changed in flight (``--param-at``), ``link`` events (a handover) and the battery.
+duration, the battery too; each cell may have its own wind, turbulence, gusts and ``motor``, ``wind`` and
+``gust`` events, or none: bridge.batch.weather). Not flown here (:func:`batch_problem`): a user's own law, the
+bandwidth queue (``rate_bps``), a measured link ``trace``, ``[failsafe] resume``, any failsafe ``action`` but
+``descend``, parameters changed in flight (``--param-at``) and ``link`` events (a handover).
 """
 
 from __future__ import annotations
@@ -90,8 +90,6 @@ def flights_problem(flights: Sequence[Flight]) -> str | None:
         if other:
             return (f"a {other[0]} event ([[events]] or --at): the batch engine flies the timeline's "
                     f"{', '.join(BATCH_EVENT_KINDS)} events only; fly it with the process engine")
-        if f.effects.battery:
-            return "[effects] battery: the battery's sag is not in the batch engine; fly it with the process engine"
         if f.failsafe.resume:
             return "[failsafe] resume = true: re-arming after a failsafe is not in the batch engine"
         if f.failsafe.action != "descend":

@@ -3,14 +3,15 @@
 In:  one profile and one set of effects for every cell, a seed per cell (the disturbance's phases), the
      physics rate (Hz), the start state (eq. 7: m, m/s, rad, rad/s); per cell and physics step its state, what
      its command holds (u1..u4 N and omega_d rad/s, or target rotor speeds rad/s), the time (s), its steady
-     wind plus the turbulence's sample and gusts (m/s, s, rad), its rotors' effectiveness (0..1)
+     wind plus the turbulence's sample and gusts (m/s, s, rad), its rotors' effectiveness (0..1), its battery's
+     charge (mAh, A s) and speed cap
 Out: :class:`BatchPlant`: the start (states [12, N], rotor speeds, what a command at rest holds, the
      constants); per cell the state after a physics step, its disturbance, divergence
 
 The same model as the scalar plant: eq. (6) corrected, RK4 with the inputs held over a physics step,
-drag, motor lag, rotor faults, the external disturbance, mass and inertia mismatch, steady wind, Dryden
-turbulence (the scalar generator's samples: bridge.batch.weather) and 1 - cos gusts (drag on the airspeed,
-rotor drag), and the ground plane. The step of
+drag, motor lag, rotor faults, the battery's sag, the external disturbance, mass and inertia mismatch, steady
+wind, Dryden turbulence (the scalar generator's samples: bridge.batch.weather) and 1 - cos gusts (drag on the
+airspeed, rotor drag), and the ground plane. The step of
 each cell is the scalar plant's own :func:`plant.model.rk4_held` and
 :func:`plant.quadrotor.ground_contact`, and a ``wrench`` command is held through
 :func:`plant.rotors.wrench_command` and eq. (4)/(5) as the scalar plant holds it, compiled
@@ -27,6 +28,7 @@ import numpy as np
 from numba import njit
 
 from bridge.batch import kernels as K
+from plant.battery import pack_constants
 from plant.effects import Effects
 from plant.model import RigidBody, rigid_body
 from plant.profiles import Profile
@@ -60,7 +62,12 @@ class BatchPlant:
         # a command holds rotor speeds (not their wrench) under motor lag, or when a rotor may fail (``faulty``:
         # the wrench then comes from the speeds and each rotor's effectiveness at every physics step)
         self.faulty = self.motors and faulty
-        self.speeds = self.lagged or self.faulty
+        battery = profile.battery if e.battery and self.motors else None  # (Quadrotor builds one so)
+        self.battery = battery is not None
+        # (battery?, plant.battery.pack_constants, the rotors' drag-torque factor N m s^2, the full pack's V)
+        self.pack = (self.battery, pack_constants(battery) if battery else (1.0,) * 6,
+                     profile.drag_coeff * profile.arm, battery.full_v if battery else 1.0)
+        self.speeds = self.lagged or self.faulty or self.battery
         self._lag_k = 1.0 - math.exp(-self.dt / profile.motor_time_constant)
         d = e.disturbance
         self.disturbed = d.active
@@ -202,6 +209,29 @@ def events_cell(j: int, k: int, steady: tuple, eff: tuple, a: Any) -> tuple:  # 
         e += 1
     a.next_event[j] = e
     return steady, eff
+
+
+@njit(cache=True, inline="always")
+def targets_cell(q: tuple, cap: float, omega_max: float) -> tuple:  # pragma: no cover
+    """:meth:`Quadrotor.command`'s target speeds (rad/s) under a battery: clip(c_i, 0, cap) * omega_max for the
+    normalised command q (its first four), and a 0."""
+    return (K.clip(q[0], 0.0, cap) * omega_max, K.clip(q[1], 0.0, cap) * omega_max,
+            K.clip(q[2], 0.0, cap) * omega_max, K.clip(q[3], 0.0, cap) * omega_max, 0.0)
+
+
+@njit(cache=True, inline="always")
+def battery_cell(hold: tuple, om: tuple, pk: tuple, lagged: bool, pack: tuple, torque_factor: float, h: float,
+                 full_v: float, omega_max: float) -> tuple:  # pragma: no cover
+    """:meth:`Quadrotor._draw_battery` of one cell: the pack (pk: used mAh, drawn A s, cap) feeds the rotors at
+    their speeds now (om under motor lag, else the held targets) over h (:func:`plant.battery.pack_step`); the
+    targets ``hold`` above the new cap come down to it. (hold, pk) after it."""
+    speeds = om if lagged else (hold[0], hold[1], hold[2], hold[3])
+    v, _, drawn, used = K.pack_step(pack, pk[0], pk[1], speeds, torque_factor, h)
+    cap = min(v / full_v, 1.0)
+    top = cap * omega_max
+    hold = (top if hold[0] > top else hold[0], top if hold[1] > top else hold[1], top if hold[2] > top else hold[2],
+            top if hold[3] > top else hold[3], hold[4])
+    return hold, (used, drawn, cap)
 
 
 @njit(cache=True, inline="always")
