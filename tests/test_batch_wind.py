@@ -15,6 +15,7 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from bridge.batch import fly_batch
@@ -90,6 +91,28 @@ def test_the_turbulence_series_is_what_the_scalar_wind_adds() -> None:
         assert got == tuple(b + s for b, s in zip(base, series[k], strict=True)), k
         wind.advance()
     assert series.std(axis=0).min() > 0.1  # it is turbulence, not zeros
+
+
+def test_the_fault_and_battery_kernels_give_the_plain_bits() -> None:
+    # bridge.core.kernels compiles plant.rotors.wrench_from_degraded_rotors, .clip and plant.battery.pack_step
+    from bridge.core import kernels as K
+    from plant.battery import pack_constants, pack_step
+    from plant.profiles import load_profile
+    from plant.rotors import clip, wrench_from_degraded_rotors
+
+    p = load_profile("x500")
+    pack = pack_constants(p.battery)
+    rng = np.random.default_rng(27)
+    for _ in range(300):
+        om = tuple(float(v) for v in rng.uniform(0.0, p.omega_max, 4))
+        eff = tuple(float(v) for v in rng.choice([0.0, 0.6, 1.0], 4))
+        assert K.wrench_from_degraded_rotors(om, eff, p.thrust_coeff, p.drag_coeff) == \
+            wrench_from_degraded_rotors(om, eff, p.thrust_coeff, p.drag_coeff)
+        used = float(rng.uniform(0.0, 6000.0))
+        args = (pack, used, used * 3.6, om, p.drag_coeff * p.arm, 1e-3)
+        assert K.pack_step(*args) == pack_step(*args)
+        v = float(rng.normal(0.5, 1.0))
+        assert K.clip(v, 0.0, 0.9) == clip(v, 0.0, 0.9)
 
 
 def _agree(m, cells: list[dict]) -> list[dict]:
