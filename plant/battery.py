@@ -66,15 +66,9 @@ class Battery:
     def step(self, omega: tuple[float, ...], torque_factor: float, h: float) -> float:
         """Draw the rotors' power over h (s); returns the rotors' speed cap (rad/s) as a fraction of ω_max."""
         c = self.config
-        power = torque_factor * sum(o * o * o for o in omega) / c.efficiency  # W from the pack
-        e = c.cells * (c.cell_full_v - (c.cell_full_v - c.cell_empty_v) * min(self.used_mah / c.capacity_mah, 1.0))
-        r = c.cells * c.cell_resistance_ohm
-        disc = e * e - 4.0 * power * r
-        v = 0.5 * (e + math.sqrt(disc)) if disc > 0.0 else 0.5 * e  # beyond the pack's peak power: it gives half
-        i = power / v if v > 0.0 else 0.0
+        v, i, self._charge_as, self.used_mah = pack_step(pack_constants(c), self.used_mah, self._charge_as, omega,
+                                                         torque_factor, h)
         self.voltage, self.current = v, i
-        self._charge_as += i * h
-        self.used_mah = self._charge_as / 3.6
         self.min_voltage = min(self.min_voltage, v)
         self.max_current = max(self.max_current, i)
         return v / c.full_v
@@ -83,3 +77,25 @@ class Battery:
         return {"voltage_v": self.voltage, "min_voltage_v": self.min_voltage, "current_a": self.current,
                 "max_current_a": self.max_current, "used_mah": self.used_mah,
                 "capacity_mah": self.config.capacity_mah, "cells": self.config.cells}
+
+
+def pack_constants(c: BatteryConfig) -> tuple[float, float, float, float, float, float]:
+    """The numbers :func:`pack_step` takes: (cells, capacity mAh, cell V full, cell V empty, ohm a cell, efficiency)."""
+    return (float(c.cells), c.capacity_mah, c.cell_full_v, c.cell_empty_v, c.cell_resistance_ohm, c.efficiency)
+
+
+def pack_step(c: tuple[float, float, float, float, float, float], used_mah: float, charge_as: float,
+              omega: tuple[float, ...], torque_factor: float, h: float) -> tuple[float, float, float, float]:
+    """One physics step of h (s) of the pack (:func:`pack_constants`) at ``used_mah`` (mAh) and ``charge_as`` (A s
+    drawn) feeding rotors at ``omega`` (4 speeds rad/s; ``torque_factor`` N m s^2): (terminal voltage V, current A,
+    charge drawn A s and used mAh after it). Plain floats: the batch engine compiles this function."""
+    cells, capacity, full, empty, resistance, efficiency = c
+    cubes = omega[0] * omega[0] * omega[0] + omega[1] * omega[1] * omega[1] + omega[2] * omega[2] * omega[2]
+    power = torque_factor * (cubes + omega[3] * omega[3] * omega[3]) / efficiency  # W from the pack
+    e = cells * (full - (full - empty) * min(used_mah / capacity, 1.0))
+    r = cells * resistance
+    disc = e * e - 4.0 * power * r
+    v = 0.5 * (e + math.sqrt(disc)) if disc > 0.0 else 0.5 * e  # beyond the pack's peak power: it gives half
+    i = power / v if v > 0.0 else 0.0
+    charge_as += i * h
+    return v, i, charge_as, charge_as / 3.6

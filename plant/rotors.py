@@ -40,7 +40,9 @@ def wrench_from_motor_speeds(omega: Quad, b: float, d: float) -> Quad:
 def wrench_from_degraded_rotors(omega: Quad, effectiveness: Quad, b: float, d: float) -> Quad:
     """Eq. (4) with rotor i giving ``effectiveness[i]`` (0..1) of its thrust and drag torque (a damaged or
     failed rotor: 0 is off)."""
-    w1, w2, w3, w4 = (o * o * e for o, e in zip(omega, effectiveness, strict=True))
+    e = effectiveness  # (plain arithmetic, no zip: the batch engine compiles this function)
+    w1, w2, w3, w4 = (omega[0] * omega[0] * e[0], omega[1] * omega[1] * e[1], omega[2] * omega[2] * e[2],
+                      omega[3] * omega[3] * e[3])
     return (b * (w1 + w2 + w3 + w4), b * (w4 - w2), b * (w3 - w1), d * (w2 + w4 - w1 - w3))
 
 

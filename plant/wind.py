@@ -4,7 +4,8 @@ In:  a mission's ``[wind]`` table (``speed_mps`` m/s, ``from_deg`` the compass d
      ``turbulence`` none|light|moderate|severe, ``altitude_m`` m, ``gusts`` [[t_s, duration_s, amplitude_mps,
      from_deg]]), a seed, the physics step (s)
 Out: the wind velocity (m/s, paper frame NWU: x north, y west, z up) held over each physics step, and its
-     statistics over the flight (the ``wind`` block of ``summary.json``)
+     statistics over the flight (the ``wind`` block of ``summary.json``); the turbulence's samples of a whole
+     flight (:func:`turbulence_series`, m/s NWU per physics step: what the batch engine flies)
 
 Every formula and number, with its source: docs/weather.md.
 
@@ -254,11 +255,9 @@ class Wind:
     def now(self, t: float) -> Vec3:
         """The wind at t (m/s, NWU): steady + turbulence + gusts; counted in the statistics."""
         wx, wy, wz = self.steady
-        tu = self.turbulence
         tx = ty = tz = 0.0
-        if tu is not None:
-            (ax, ay), (cx, cy) = self.along, self.across
-            tx, ty, tz = tu.u * ax + tu.v * cx, tu.u * ay + tu.v * cy, tu.w
+        if self.turbulence is not None:
+            tx, ty, tz = self.turbulence_now()
             wx, wy, wz = wx + tx, wy + ty, wz + tz
         for g in self.gusts:
             gx, gy, gz = g.velocity(t)
@@ -270,6 +269,14 @@ class Wind:
         if speed > self.peak_mps:
             self.peak_mps = speed
         return (wx, wy, wz)
+
+    def turbulence_now(self) -> Vec3:
+        """The turbulence's part of :meth:`now` (m/s, NWU): u along the initial mean wind, v across it, w up."""
+        tu = self.turbulence
+        if tu is None:
+            return (0.0, 0.0, 0.0)
+        (ax, ay), (cx, cy) = self.along, self.across
+        return (tu.u * ax + tu.v * cx, tu.u * ay + tu.v * cy, tu.w)
 
     def _count(self, wx: float, wy: float, wz: float, s: list[float]) -> None:
         (ax, ay), (cx, cy) = self.along, self.across
@@ -326,6 +333,19 @@ def sampling_errors(tu: Turbulence, duration_s: float, std: list[float], mean_u:
                                                             (("u", tu.l_u), ("v", tu.l_v), ("w", tu.l_w))},
             "mean_along_se_mps": se_mean, "mean_along_z": mean_u / se_mean,
             "std_rel_se": rel, "std_z": {k: (std[i] / sig[k] - 1.0) / rel[k] for i, k in enumerate("uvw")}}
+
+
+def turbulence_series(config: WindConfig, seed: int, h: float, steps: int) -> np.ndarray:
+    """[steps, 3]: the turbulence (m/s, NWU) :meth:`Wind.now` adds at each of a flight's first ``steps`` physics
+    steps of ``h`` s, from this very generator (:class:`Wind`, the configuration and seed's stream), so that the
+    batch engine flies the scalar plant's air sample for sample; zeros without turbulence."""
+    wind = Wind(replace(config, gusts=()), seed, h)
+    out = [(0.0, 0.0, 0.0)] * steps
+    now, advance = wind.turbulence_now, wind.advance
+    for k in range(steps):
+        out[k] = now()
+        advance()
+    return np.array(out, dtype=np.float64).reshape(steps, 3)
 
 
 def long_run(config: WindConfig, seed: int, duration_s: float = 3600.0, h: float = 0.02) -> dict:

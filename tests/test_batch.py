@@ -169,9 +169,11 @@ def test_batch_problem_names_what_the_batch_cannot_fly(tmp_path: Path) -> None:
     at = [ParamChange(2.0, "MPC_LAND_SPEED", 0.5)]  # a parameter changed in flight: the batch does not model it
     why = batch_problem(m, [{"controller": "bsst", "param_at": at}])
     assert why is not None and "--param-at" in why and "\n" not in why
-    gusty = replace(m, wind={"speed_mps": 3.0, "from_deg": 90.0, "turbulence": "light"})  # steady and gusts only
-    why = batch_problem(gusty, [{"controller": "bsst"}])
-    assert why is not None and "turbulence" in why and "\n" not in why
+    turbulent = replace(m, wind={"speed_mps": 3.0, "from_deg": 90.0, "turbulence": "light"})  # flown: test_batch_wind
+    assert batch_problem(turbulent, [{"controller": "bsst", "at": ("2:motor:1=0.5",), "profile": "x500"}]) is None
+    why = batch_problem(m, [{"controller": "bsst", "at": ("2:link:lte",)}])  # a handover: not in the link plan
+    assert why is not None and "link event" in why and "\n" not in why
+    assert batch_problem(replace(m, effects={"battery": True}), [{"controller": "bsst", "profile": "x500"}]) is None
     assert batch_problem(m, [{"controller": "bsst"}, {"controller": "bsst", "wind": 3.0}]) is None  # still and windy
     law = f"{ROOT / 'examples' / 'my_law.py'}:MyLaw"
     why = batch_problem(m, [{"controller": law}])

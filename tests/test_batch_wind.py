@@ -1,10 +1,13 @@
-"""Covers bridge.batch.plant and bridge.batch.flight: the batch engine in steady wind and 1 - cos gusts.
+"""Covers bridge.batch.plant, bridge.batch.flight and bridge.batch.weather: the batch engine in the air and
+with a timeline.
 
-Cells with their own steady wind and gusts — the three laws, a delayed and lossy link, the x500 (rotor
-drag, motors) — are flown by the batch engine and by the scalar loop and compared as tests/test_batch.py
-compares still air: the same outcome, packet counts and flown time; for ``bsst`` and ``pid`` the figures
-within 1e-6 relative, for ``smc`` (a switching law) the RMS within 1 %. Turbulence is refused (its
-draws are numpy's generator, not in the kernel): tests/test_batch.py.
+Cells with their own steady wind, Dryden turbulence and gusts — the three laws, a delayed and lossy link, the
+x500 (rotor drag, motors) — and the timeline's motor, wind and gust events (the x500 without and with its
+battery, with motor lag) are flown by the batch engine and by the scalar loop and compared as
+tests/test_batch.py compares still air: the same outcome, packet counts and flown time; for ``bsst`` and
+``pid`` the figures within 1e-6 relative, for ``smc`` (a switching law) the RMS within 1 %. The turbulence's
+samples are the scalar generator's own (plant.wind.turbulence_series: checked equal to what Wind.now adds). A
+``link`` event is refused: tests/test_batch.py.
 """
 
 from __future__ import annotations
@@ -12,6 +15,7 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from bridge.batch import fly_batch
@@ -20,9 +24,11 @@ from bridge.loop import fly
 from bridge.sweep.cells import row_from_run
 from bridge.sweep.grid import Cell
 from missions import load_mission
+from plant.wind import Wind, WindConfig, turbulence_series
 
 ROOT = Path(__file__).resolve().parents[1]
 GUSTS = [[2.0, 1.5, 4.0, 45.0], [4.0, 2.0, 3.0, 200.0], [4.5, 0.5, 2.0, 0.0]]  # t_s, duration_s, m/s, from_deg
+MODERATE = {"speed_mps": 5.0, "from_deg": 270.0, "turbulence": "moderate"}
 
 
 def _close(a: float | None, b: float | None, rel: float) -> bool:
@@ -40,13 +46,77 @@ def _close(a: float | None, b: float | None, rel: float) -> bool:
         {"controller": "bsst", "wind": {"speed_mps": 8.0, "from_deg": 135.0, "gusts": GUSTS[:1]},
          "link": {"delay_ms": 12.0, "compensation": "predict"}},
     ]),
+    ("sine.toml", [  # Dryden turbulence: each cell its seed's samples; still air and a wind event beside it
+        {"controller": "bsst", "wind": MODERATE},
+        {"controller": "pid", "wind": {**MODERATE, "gusts": GUSTS}, "seed": 3, "link": {"delay_ms": 10.0}},
+        {"controller": "smc", "wind": {"speed_mps": 0.0, "turbulence": "light"}},
+        {"controller": "bsst", "at": ("2:wind:4:90", "3:gust:1.5,3,200")},
+        {"controller": "pid"},
+    ]),
     ("robust-x500.toml", [  # rotor drag, allocation on real rotors
         {"controller": "bsst", "wind": {"speed_mps": 4.0, "from_deg": 90.0, "gusts": GUSTS}},
         {"controller": "pid", "wind": {"speed_mps": 2.0, "from_deg": 10.0}, "link": {"delay_ms": 6.0}},
     ]),
 ])
-def test_steady_wind_and_gusts_fly_as_in_the_scalar_loop(name: str, cells: list[dict]) -> None:
-    m = replace(load_mission(ROOT / "missions" / name), duration_s=6.0)
+def test_wind_turbulence_and_gusts_fly_as_in_the_scalar_loop(name: str, cells: list[dict]) -> None:
+    _agree(replace(load_mission(ROOT / "missions" / name), duration_s=6.0), cells)
+
+
+@pytest.mark.parametrize("effects", [{}, {"battery": True}, {"battery": True, "motor_lag": True}])
+def test_motor_events_and_the_battery_fly_as_in_the_scalar_loop(effects: dict) -> None:
+    # the x500 with fault-sized gains: a rotor at 75 % (flown), one off (diverged), faults with wind events and
+    # turbulence, a cell without events beside them; without and with the battery (its cap on the rotors' speed
+    # taken at each command's arrival and each physics step), with motor lag (the speeds held, not the wrench)
+    m = replace(load_mission(ROOT / "examples" / "x500-motor-fault.toml"), duration_s=5.0, effects=effects)
+    cells = [{"controller": "bsst", "at": ("2:motor:1=0.75",)},
+             {"controller": "pid", "at": ("1:gust:1,2,45", "2:motor:2=0.6", "3:wind:3:90"), "link": {"delay_ms": 10.0}},
+             {"controller": "smc"},
+             {"controller": "bsst", "at": ("2:motor:1=0",)},
+             {"controller": "bsst", "wind": {"speed_mps": 4.0, "turbulence": "light"}, "at": ("2:motor:3=0.8",)}]
+    rows = _agree(m, cells)
+    assert rows[3]["outcome"] == "diverged" and rows[0]["outcome"] == "completed"
+    if effects.get("battery"):  # the sag capped a rotor somewhere (the battery acts on the flight only so)
+        still = fly_batch(replace(m, effects={k: v for k, v in effects.items() if k != "battery"}), cells)
+        assert any(a["tv_u2"] != b["tv_u2"] for a, b in zip(rows, still, strict=True)), (rows, still)
+
+
+def test_the_turbulence_series_is_what_the_scalar_wind_adds() -> None:
+    config = WindConfig(**MODERATE, altitude_m=1.5)
+    series = turbulence_series(config, 7, 0.001, 500)
+    wind, steady = Wind(config, 7, 0.001), Wind(WindConfig(5.0, 270.0), 7, 0.001)
+    for k in range(500):
+        t = k * 0.001
+        got = wind.now(t)
+        base = steady.now(t)
+        assert got == tuple(b + s for b, s in zip(base, series[k], strict=True)), k
+        wind.advance()
+    assert series.std(axis=0).min() > 0.1  # it is turbulence, not zeros
+
+
+def test_the_fault_and_battery_kernels_give_the_plain_bits() -> None:
+    # bridge.core.kernels compiles plant.rotors.wrench_from_degraded_rotors, .clip and plant.battery.pack_step
+    from bridge.core import kernels as K
+    from plant.battery import pack_constants, pack_step
+    from plant.profiles import load_profile
+    from plant.rotors import clip, wrench_from_degraded_rotors
+
+    p = load_profile("x500")
+    pack = pack_constants(p.battery)
+    rng = np.random.default_rng(27)
+    for _ in range(300):
+        om = tuple(float(v) for v in rng.uniform(0.0, p.omega_max, 4))
+        eff = tuple(float(v) for v in rng.choice([0.0, 0.6, 1.0], 4))
+        assert K.wrench_from_degraded_rotors(om, eff, p.thrust_coeff, p.drag_coeff) == \
+            wrench_from_degraded_rotors(om, eff, p.thrust_coeff, p.drag_coeff)
+        used = float(rng.uniform(0.0, 6000.0))
+        args = (pack, used, used * 3.6, om, p.drag_coeff * p.arm, 1e-3)
+        assert K.pack_step(*args) == pack_step(*args)
+        v = float(rng.normal(0.5, 1.0))
+        assert K.clip(v, 0.0, 0.9) == clip(v, 0.0, 0.9)
+
+
+def _agree(m, cells: list[dict]) -> list[dict]:
+    """Fly ``cells`` of mission m in one batch and each alone in the scalar loop: the same rows (see the docstring)."""
     rows = fly_batch(m, cells)
     for over, got in zip(cells, rows, strict=True):
         run = fly(prepare(m, **over), plots=False)
@@ -59,6 +129,7 @@ def test_steady_wind_and_gusts_fly_as_in_the_scalar_loop(name: str, cells: list[
             continue
         for k in ("rms", "max", "tv_u2", "ripple_u2"):
             assert _close(got[k], want[k], 1e-6), f"{k}: {where}"
+    return rows
 
 
 def test_still_and_windy_cells_fly_in_one_batch_as_alone() -> None:

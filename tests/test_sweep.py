@@ -627,14 +627,14 @@ def test_resume_refuses_a_mission_toml_edited_after_the_sweep(small_sweep: tuple
 
 def test_a_wind_by_turbulence_grid(mission_file: Path, tmp_path: Path, capsys) -> None:
     """``--wind 0,5 --turbulence none,moderate``: two axes of ``cells.csv``; each row is the one ``bsst sim``
-    with those flags (a still-air cell of a still-air mission is that mission, untouched); ``auto`` flies them
-    on the process engine (the batch flies no turbulence) and ``--engine batch`` refuses the turbulence in one
-    line; without it ``--engine batch`` flies the wind, within 1e-6 of the process engine's rows."""
+    with those flags (a still-air cell of a still-air mission is that mission, untouched); ``auto`` flies these
+    four on the process engine (fewer than 32 cells) and ``--engine batch`` flies the same grid, turbulence too,
+    within 1e-6 of the process engine's rows."""
     out = tmp_path / "wind"
     assert main(["sweep", str(mission_file), "--wind", "0,5", "--turbulence", "none,moderate", "--out", str(out),
                  "--no-plots", "--jobs", "2"]) == 0
     printed = capsys.readouterr().out
-    assert "engine process (the batch engine cannot fly this grid: [wind]" in printed, printed
+    assert "engine process (fewer than 32 cells to fly)" in printed, printed
     rows = read_cells(out / CELLS_CSV)
     assert [(r["wind_mps"], r["turbulence"]) for r in rows] == [(0.0, "none"), (0.0, "moderate"), (5.0, "none"),
                                                                 (5.0, "moderate")]
@@ -650,15 +650,12 @@ def test_a_wind_by_turbulence_grid(mission_file: Path, tmp_path: Path, capsys) -
                  "--out", str(one)]) == 0
     assert json.loads((one / "summary.json").read_text())["rms_3d"] == rows[3]["rms"]
     capsys.readouterr()
-    assert main(["sweep", str(mission_file), "--wind", "0,5", "--turbulence", "moderate", "--engine", "batch",
-                 "--out", str(tmp_path / "b"), "--no-plots"]) == 2
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "--engine batch: [wind] turbulence" in err, err
-    assert main(["sweep", str(mission_file), "--wind", "0,5", "--engine", "batch", "--out", str(tmp_path / "s"),
-                 "--no-plots"]) == 0
-    steady = read_cells(tmp_path / "s" / CELLS_CSV)
-    assert [r["wind_mps"] for r in steady] == [0.0, 5.0]
-    for got, want in zip(steady, (rows[0], rows[2]), strict=True):
+    assert main(["sweep", str(mission_file), "--wind", "0,5", "--turbulence", "none,moderate", "--engine", "batch",
+                 "--out", str(tmp_path / "b"), "--no-plots"]) == 0
+    assert "engine batch (asked for)" in capsys.readouterr().out
+    batch = read_cells(tmp_path / "b" / CELLS_CSV)
+    assert [(r["wind_mps"], r["turbulence"]) for r in batch] == [(r["wind_mps"], r["turbulence"]) for r in rows]
+    for got, want in zip(batch, rows, strict=True):
         assert got["outcome"] == want["outcome"] and math.isclose(got["rms"], want["rms"], rel_tol=1e-6), (got, want)
     assert main(["sweep", str(mission_file), "--turbulence", "gale", "--out", str(tmp_path / "c")]) == 2
     assert "--turbulence" in capsys.readouterr().err

@@ -1,6 +1,7 @@
 """Covers bridge.sweep.executors and bridge.batch.
 
-``bsst sweep --engine batch | process | auto``: the same cells.csv rows from either engine,
+``bsst sweep --engine batch | process | auto``: the same cells.csv rows from either engine (a link grid, and a
+grid of wind, turbulence and laws: issue 27),
 ``--resume`` with the batch, and an engine that cannot be honoured refused in one line; the
 ``discretization`` axis (issue 24) in both engines, on the command line and in a sweep file.
 
@@ -57,6 +58,23 @@ def test_a_mixed_grid_gives_the_same_rows_with_either_engine(tmp_path: Path) -> 
     assert [r["rms"] for r in on_disk] == [r["rms"] for r in batch]
     assert (tmp_path / "b" / CELLS_CSV).read_text().splitlines()[0] == \
         (tmp_path / "p" / CELLS_CSV).read_text().splitlines()[0]
+
+
+def test_a_wind_turbulence_and_law_grid_gives_the_same_rows_with_either_engine(tmp_path: Path) -> None:
+    """Issue 27's batch agreement: steady wind (0, 6 m/s) x turbulence (none, moderate) x the three laws; the
+    batch flies each cell's own turbulence samples (its seed's: bridge.batch.weather), so its cells.csv rows are
+    the process engine's within what the batch keeps (bsst, pid 1e-6; smc 1 %)."""
+    short = Mission(Sine(), duration_s=3.0, name="short3")
+    grid = Grid(controller=("bsst", "pid", "smc"), wind_mps=(0.0, 6.0), turbulence=("none", "moderate"))
+    batch = sweep(short, grid, engine="batch", out=tmp_path / "b", report=False)
+    process = sweep(short, grid, engine="process", jobs=2, out=tmp_path / "p", report=False)
+    assert len(batch) == len(process) == 12
+    for a, b in zip(batch, process, strict=True):
+        assert (a["wind_mps"], a["turbulence"]) == (b["wind_mps"], b["turbulence"])
+        _same(a, b)
+    rms = {(r["controller"], r["wind_mps"], r["turbulence"]): r["rms"] for r in batch}
+    for law in grid.controller:  # the turbulence is flown, not ignored
+        assert rms[law, 6.0, "moderate"] != rms[law, 6.0, "none"] and rms[law, 0.0, "moderate"] != rms[law, 0.0, "none"]
 
 
 def test_resume_with_the_batch_engine_flies_only_the_missing_cells(tmp_path: Path) -> None:

@@ -20,10 +20,10 @@ ripple of each cell's own second half; no trace is held.
 
 Cells may differ in law (``bsst``, ``smc``, ``pid``), seed, control rate (flown as separate batches) and every
 link setting but the bandwidth queue; they must share everything else (profile, effects, gains, trajectory,
-duration; each cell may have its own steady wind and gusts, or none). Not flown here (:func:`batch_problem`):
-a user's own law, the bandwidth queue (``rate_bps``), a measured link ``trace``, ``[failsafe] resume``, any
-failsafe ``action`` but ``descend``, parameters changed in flight (``--param-at``), the turbulence, timed
-events and the battery.
+duration, the battery too; each cell may have its own wind, turbulence, gusts and ``motor``, ``wind`` and
+``gust`` events, or none: bridge.batch.weather). Not flown here (:func:`batch_problem`): a user's own law, the
+bandwidth queue (``rate_bps``), a measured link ``trace``, ``[failsafe] resume``, any failsafe ``action`` but
+``descend``, parameters changed in flight (``--param-at``) and ``link`` events (a handover).
 """
 
 from __future__ import annotations
@@ -40,6 +40,7 @@ import numpy as np
 from bridge.batch.control import BATCH_LAWS
 from bridge.batch.flight import Cells, Constants, batch_arrays, fly_cells
 from bridge.batch.metrics import Metrics, measured_rows
+from bridge.batch.weather import BATCH_EVENT_KINDS, turbulent
 from bridge.core.flight import Flight, Overrides, prepare
 from bridge.link.model import link_from_table, merge_link_tables
 from bridge.link.plan import Clocks, plan_links
@@ -50,6 +51,9 @@ from missions import MISSION_DIR, Mission, Sine, load_mission
 MEASURES = ("rms", "max", "settling_s", "tv_u2", "ripple_u2", "outcome", "up_sent", "up_lost", "down_sent",
             "down_lost", "flown_s", "error")
 CELL_STEPS = 8_000_000  # cells x control steps in one batch: bounds its memory (1000 x 7500: 457 MiB peak RSS)
+# cells x physics steps of a batch that meets turbulence (its samples, 3 floats a physics step, are held for the
+# whole flight: bridge.batch.weather): 120 MiB of them (the 30 s sine at 1 kHz: 166 cells a batch)
+TURBULENCE_STEPS = 5_000_000
 BLOCK_CELLS = 8  # cells a thread flies in one compiled call (~0.1 s of the 30 s sine): small enough to share out evenly
 Progress = Callable[[int, int], None]  # (cells done, cells in all), now and then
 
@@ -82,12 +86,10 @@ def flights_problem(flights: Sequence[Flight]) -> str | None:
         if f.param_changes:
             return ("--param-at: parameters changed during the flight are not in the batch engine; "
                     "fly it with the process engine")
-        if f.wind is not None and f.wind.turbulence != "none":
-            return (f"[wind] turbulence = {f.wind.turbulence!r}: the batch engine flies steady wind and gusts, not "
-                    "the turbulence; fly it with the process engine")
-        if f.timeline or f.effects.battery:
-            what = "[[events]] or --at" if f.timeline else "[effects] battery"
-            return f"{what}: timed events and the battery are not in the batch engine; fly it with the process engine"
+        other = [e.kind for e in f.timeline if e.kind not in BATCH_EVENT_KINDS]
+        if other:
+            return (f"a {other[0]} event ([[events]] or --at): the batch engine flies the timeline's "
+                    f"{', '.join(BATCH_EVENT_KINDS)} events only; fly it with the process engine")
         if f.failsafe.resume:
             return "[failsafe] resume = true: re-arming after a failsafe is not in the batch engine"
         if f.failsafe.action != "descend":
@@ -203,7 +205,11 @@ def fly_flights(flights: Sequence[Flight], *, progress: Progress | None = None,
     total = len(flights) if total is None else total
     done = total - len(flights)
     for idx in by_rate.values():
-        size = max(1, min(len(idx), CELL_STEPS // max(1, flights[idx[0]].mission.steps), 1024))
+        f0 = flights[idx[0]]
+        most = 1024
+        if turbulent([flights[i] for i in idx]):
+            most = TURBULENCE_STEPS // max(1, f0.mission.steps * f0.substeps)
+        size = max(1, min(len(idx), CELL_STEPS // max(1, f0.mission.steps), most))
         for a in range(0, len(idx), size):
             part = idx[a:a + size]
 

@@ -37,14 +37,18 @@ from bridge.batch import kernels as K
 from bridge.batch.control import BatchActuation, allocate_cell
 from bridge.batch.plant import (
     BatchPlant,
+    battery_cell,
     disturbance_cell,
     diverged_cell,
-    from_speeds,
+    events_cell,
     held_cell,
+    realised_cell,
     rk4_cell,
+    targets_cell,
     wind_cell,
 )
 from bridge.batch.predict import BatchPredictor, carry, record
+from bridge.batch.weather import faulty, weather_arrays
 from bridge.batch.wire import command_over_wire, state_over_wire
 from bridge.core.flight import Flight
 from bridge.link.plan import Clocks, LinkPlan
@@ -52,7 +56,6 @@ from bridge.link.plan_cell import HOLD, NONE
 from bridge.record.metrics import BANDS, RMS_FROM_S
 from controller.bsst import law_constants, law_tables
 from controller.pid import pid_constants
-from plant.wind import blowing
 
 _BSST, _SMC, _PID, _BSST_IMPLICIT = 0, 1, 2, 3  # the cells' laws (bsst: its super-twisting step explicit or implicit)
 
@@ -108,6 +111,12 @@ class Constants(NamedTuple):
     band: tuple  # the settling bands x, y, z (m)
     body_air: tuple  # the same of a cell in a [wind] (the profile's drag on, on the airspeed)
     rotor_drag: float  # the plant's rotor drag in wind (s/m)
+    speeds: bool  # a command holds rotor speeds (motor lag, or faults), not their wrench
+    faulty: bool  # a cell's rotor may fail (motor events): the wrench from the speeds and each rotor's effectiveness
+    battery: bool  # the x500's battery ([effects] battery): its sag caps the rotors' speed
+    pack: tuple  # plant.battery.pack_constants; the rotors' drag-torque factor (N m s^2); the full pack's V
+    torque_factor: float
+    full_v: float
 
 
 class Cells(NamedTuple):
@@ -157,10 +166,18 @@ class Cells(NamedTuple):
     diverged: np.ndarray  # [n] bool
     impact: np.ndarray  # [n] int8: 0 no hard touchdown, 1 one this step, 2 noted (bridge.loop.plant_verdict)
     crashed: np.ndarray  # [n] bool: touched down hard while armed
-    windy: np.ndarray  # [n] bool: the cell flies in a [wind] (steady and gusts: bridge.batch.plant.wind_cell)
+    # the cells' air and events (bridge.batch.weather.Weather)
+    windy: np.ndarray  # [n] bool: the cell flies in air (bridge.batch.plant.wind_cell)
     wind: np.ndarray  # [n, 3] the steady wind (m/s NWU)
     gusts: np.ndarray  # [n, G, 4] the gusts (t_s s, duration_s s, amplitude m/s, from_deg in rad)
     n_gusts: np.ndarray  # [n]
+    turb_idx: np.ndarray  # [n] the cell's row of turb (-1: none)
+    turb: np.ndarray  # [rows, physics steps, 3] the turbulence's samples (m/s NWU)
+    event_step: np.ndarray  # [n, E + 1] the control step of each event
+    events: np.ndarray  # [n, E + 1, 4] what each does
+    next_event: np.ndarray  # [n]
+    effectiveness: np.ndarray  # [n, 4] the rotors'
+    pack: np.ndarray  # [n, 3] the battery's charge used (mAh), drawn (A s), and the speed cap (of omega_max)
 
 
 @njit(cache=True, nogil=True)
@@ -191,11 +208,11 @@ def _fly_cell(j, k0, k1, c, X, ring_X, ring_held, holding, omega, phases, law, x
     integ = (integral_a[j, 0], integral_a[j, 1], integral_a[j, 2])
     od, ptr, fs, armed, u2, lc = omega_d_a[j], ptr_a[j], in_failsafe[j], armed_a[j], u2_now[j], law[j]
     impact = a.impact[j]
-    steady, gusts, n_gusts = (a.wind[j, 0], a.wind[j, 1], a.wind[j, 2]), a.gusts[j], a.n_gusts[j]
-    windy = a.windy[j]
-    body = c.body_air if windy else c.body
+    steady, pk = (a.wind[j, 0], a.wind[j, 1], a.wind[j, 2]), (a.pack[j, 0], a.pack[j, 1], a.pack[j, 2])
+    eff = (a.effectiveness[j, 0], a.effectiveness[j, 1], a.effectiveness[j, 2], a.effectiveness[j, 3])
+    body = c.body_air if a.windy[j] else c.body
     predicts, lag = a.predicts[j], a.lag[j]
-    n_ring, n_held, S = ring_X.shape[1], ring_held.shape[1], c.substeps
+    n_ring, n_held = ring_X.shape[1], ring_held.shape[1]
     for k in range(k0, k1):
         t = k / c.rate_hz
         w = state_over_wire(x)  # what the laws read: ODOMETRY float32, as offline
@@ -214,8 +231,9 @@ def _fly_cell(j, k0, k1, c, X, ring_X, ring_held, holding, omega, phases, law, x
             if predicts:
                 record(j, t, lag, real, od, a.cmd_t, a.cmd_u, a.total)
             u2 = u[1]
-            held = held_cell(command_over_wire(cmd, c.wrench_wire), c.motors, c.lagged, c.u_max, c.b, c.d,
-                             c.omega_max)
+            cw = command_over_wire(cmd, c.wrench_wire)  # under a battery: the command itself (targets_cell)
+            held = (cw[0], cw[1], cw[2], cw[3], 0.0) if c.battery else held_cell(cw, c.motors, c.speeds, c.u_max,
+                                                                                  c.b, c.d, c.omega_max)
             hslot = k % n_held
             for i in range(5):
                 ring_held[j, hslot, i] = held[i]
@@ -239,20 +257,10 @@ def _fly_cell(j, k0, k1, c, X, ring_X, ring_held, holding, omega, phases, law, x
         u2_a[j, k] = u2
         if failsafe_step[j] == k:
             fs = True
-        for i in range(S):
-            check = k * S + i
-            if apply_check[j, ptr] == check:  # a command takes effect at this physics step
-                q = ring_held[j, apply_cmd[j, ptr] % n_held]
-                hold = (q[0], q[1], q[2], q[3], q[4])
-                ptr += 1
-            air = (0.0, 0.0, 0.0, 0.0)
-            if windy:
-                w = wind_cell(steady, gusts, n_gusts, t_plant[check])
-                air = (w[0], w[1], w[2], c.rotor_drag)
-            x, hold, om, armed, hard = _physics_step(x, hold, om, fs and armed, armed, ph, t_plant[check], air, windy,
-                                                     body, c)
-            if hard and impact == 0:  # the first hard touchdown (Quadrotor.impact)
-                impact = 1
+        if a.event_step[j, a.next_event[j]] <= k:  # the timeline's events of this step, before its physics
+            steady, eff = events_cell(j, k, steady, eff, a)
+        x, hold, om, armed, impact, ptr, pk = _substeps(j, k, x, hold, om, fs, armed, impact, ptr, ph, steady, eff,
+                                                        pk, body, apply_check, apply_cmd, ring_held, t_plant, c, a)
         if diverged_cell(x):  # bridge.loop.plant_verdict: diverged, else a hard touchdown armed ends the flight
             diverged[j] = True
             alive[j] = False
@@ -273,10 +281,45 @@ def _fly_cell(j, k0, k1, c, X, ring_X, ring_held, holding, omega, phases, law, x
     for i in range(4):
         omega[j, i] = om[i]
         xi_a[j, i] = xi[i]
+        a.effectiveness[j, i] = eff[i]
+    for i in range(3):
+        a.wind[j, i] = steady[i]
+        a.pack[j, i] = pk[i]
     for i in range(3):
         integral_a[j, i] = integ[i]
     omega_d_a[j], ptr_a[j], in_failsafe[j], armed_a[j], u2_now[j] = od, ptr, fs, armed, u2
     a.impact[j] = impact
+
+
+@njit(cache=True, inline="always")
+def _substeps(j, k, x, hold, om, fs, armed, impact, ptr, ph, steady, eff, pk, body, apply_check, apply_cmd,
+              ring_held, t_plant, c, a):  # pragma: no cover
+    """Cell j's physics steps of control step k: the command that takes effect at each, the air (the steady wind,
+    the turbulence's sample, the gusts) and :func:`_physics_step`. (x, hold, om, armed, impact, ptr, pk) after
+    them."""
+    S, n_held = c.substeps, ring_held.shape[1]
+    windy, ti = a.windy[j], a.turb_idx[j]
+    for i in range(S):
+        check = k * S + i
+        if apply_check[j, ptr] == check:  # a command takes effect at this physics step
+            q = ring_held[j, apply_cmd[j, ptr] % n_held]
+            hold = (q[0], q[1], q[2], q[3], q[4])
+            if c.battery:  # Quadrotor.command under the battery's speed cap now
+                hold = targets_cell(hold, pk[2], c.omega_max)
+            ptr += 1
+        air = (0.0, 0.0, 0.0, 0.0)
+        if windy:
+            st = steady
+            if ti >= 0:  # Wind.now: the steady wind plus the turbulence, then the gusts
+                st = (steady[0] + a.turb[ti, check, 0], steady[1] + a.turb[ti, check, 1],
+                      steady[2] + a.turb[ti, check, 2])
+            w = wind_cell(st, a.gusts[j], a.n_gusts[j], t_plant[check])
+            air = (w[0], w[1], w[2], c.rotor_drag)
+        x, hold, om, armed, hard, pk = _physics_step(x, hold, om, fs and armed, armed, ph, t_plant[check], air,
+                                                     windy, body, eff, pk, c)
+        if hard and impact == 0:  # the first hard touchdown (Quadrotor.impact)
+            impact = 1
+    return x, hold, om, armed, impact, ptr, pk
 
 
 @njit(cache=True, inline="always")
@@ -321,13 +364,15 @@ def _law_step(xg: tuple, sample: tuple, law: int, xi: tuple, integ: tuple, od: f
 
 @njit(cache=True, inline="always")
 def _physics_step(x: tuple, hold: tuple, om: tuple, landing: bool, armed: bool, ph: tuple, t: float, air: tuple,
-                  windy: bool, body: tuple, c: Constants) -> tuple:  # pragma: no cover
+                  windy: bool, body: tuple, eff: tuple, pk: tuple, c: Constants) -> tuple:  # pragma: no cover
     """One physics step of one cell from state x at t (s), holding ``hold`` (u1..u4 N and omega_d, or target
-    speeds under motor lag), rotor speeds om under lag: the ``descend`` landing where ``landing`` (in
-    failsafe and armed; on the ground it disarms and commands zero), the motor lag, the disturbance
+    speeds under motor lag or faults), rotor speeds om under lag: the ``descend`` landing where ``landing`` (in
+    failsafe and armed; on the ground it disarms and commands zero), the motor lag, the rotors'
+    effectiveness ``eff`` (0..1, where the batch is ``faulty``), the battery's draw and cap (``pk``: used mAh,
+    charge A s, speed cap; plant.battery), the disturbance
     (phases ph), RK4 (``body``: plant.model.rk4_constants) in the air ``air`` (wind m/s, rotor drag s/m) where
     the cell is ``windy``, and the ground.
-    (x, hold, om, armed, whether it touched the ground hard) after it."""
+    (x, hold, om, armed, whether it touched the ground hard, pk) after it."""
     if landing:
         if x[4] <= 0.0 and x[5] <= 0.0 and c.ground:
             armed = False
@@ -336,11 +381,17 @@ def _physics_step(x: tuple, hold: tuple, om: tuple, landing: bool, armed: bool, 
             w = K.level_wrench(x, c.land[0], c.land[1], c.land[2], c.land[3], c.land[4], c.land[5], c.land[6],
                                c.land[7], c.land[8], c.land[9])
             cmd = allocate_cell(w, c.nom_motors, c.nom_u_max, c.nom_b, c.nom_d, c.nom_omega_max, c.nom_w2_max)[1]
-        hold = held_cell(cmd, c.motors, c.lagged, c.u_max, c.b, c.d, c.omega_max)
+        hold = targets_cell(cmd, pk[2], c.omega_max) if c.battery else held_cell(cmd, c.motors, c.speeds, c.u_max,
+                                                                                c.b, c.d, c.omega_max)
+    if c.battery:  # Quadrotor._draw_battery: the draw at the speeds now, the targets under its cap
+        hold, pk = battery_cell(hold, om, pk, c.lagged, c.pack, c.torque_factor, c.h, c.full_v, c.omega_max)
     if c.lagged:
         om = (om[0] + (hold[0] - om[0]) * c.lag_k, om[1] + (hold[1] - om[1]) * c.lag_k,
               om[2] + (hold[2] - om[2]) * c.lag_k, om[3] + (hold[3] - om[3]) * c.lag_k)
-        u = from_speeds(om, c.b, c.d)
+        u = realised_cell(om, eff, c.faulty, c.b, c.d)
+    elif c.speeds:  # the rotors at the held speeds (a cell whose rotors may fail)
+        om = (hold[0], hold[1], hold[2], hold[3])
+        u = realised_cell(om, eff, c.faulty, c.b, c.d)
     else:
         u = hold
     if c.disturbed:
@@ -351,7 +402,7 @@ def _physics_step(x: tuple, hold: tuple, om: tuple, landing: bool, armed: bool, 
         z = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         ext = (z, z, z)
     y, hard = rk4_cell(x, u, ext, c.disturbed, body, c.h, c.ground, air, windy)
-    return y, hold, om, armed, hard
+    return y, hold, om, armed, hard, pk
 
 
 def batch_arrays(flights: Sequence[Flight], plan: LinkPlan, clocks: Clocks, refs: np.ndarray,
@@ -365,7 +416,7 @@ def batch_arrays(flights: Sequence[Flight], plan: LinkPlan, clocks: Clocks, refs
     x0, y0, z0, psi0 = m.start
     start = (float(x0), 0.0, float(y0), 0.0, float(z0), 0.0, 0.0, 0.0, 0.0, 0.0, float(psi0), 0.0)
     plant = BatchPlant(f0.profile, f0.effects, [f.mission.seed for f in flights], physics_hz=m.physics_hz,
-                       state=start)
+                       state=start, faulty=faulty(flights))
     act = BatchActuation(nominal, n)
     dist = plant.effects.disturbance
     st = (gains.z_st, gains.attitude_st, gains.attitude_st, gains.yaw_st)  # z, phi (u2), theta (u3), yaw
@@ -392,7 +443,8 @@ def batch_arrays(flights: Sequence[Flight], plan: LinkPlan, clocks: Clocks, refs
          nominal.iyy / nominal.arm, nominal.izz / nominal.arm, og.k_vel_level, og.k_att_level, og.d_att_level,
          og.d_yaw),
         pred.dt_max, pred.m, pred.g, tuple(float(v) for v in pred._coefficients), start,
-        (BANDS["x"], BANDS["y"], BANDS["z"]), plant.body_air.constants, float(p.rotor_drag))
+        (BANDS["x"], BANDS["y"], BANDS["z"]), plant.body_air.constants, float(p.rotor_drag), plant.speeds,
+        plant.faulty, *plant.pack)
     holding = np.zeros((n, 5))
     holding[:, :plant.holding.shape[0]] = plant.holding.T
     changes = list(m.trajectory.change_times())
@@ -410,21 +462,7 @@ def batch_arrays(flights: Sequence[Flight], plan: LinkPlan, clocks: Clocks, refs
         np.zeros((n, steps)), np.zeros(n),
         (np.searchsorted(np.array(changes), t_step, side="right") - 1).astype(np.int64),
         t_step >= min(RMS_FROM_S, 0.5 * m.duration_s), t_step, clocks.plant_t, np.ones(n, bool),
-        np.full(n, steps, np.int64), np.zeros(n, bool), np.zeros(n, np.int8), np.zeros(n, bool), *_winds(flights))
+        np.full(n, steps, np.int64), np.zeros(n, bool), np.zeros(n, np.int8), np.zeros(n, bool),
+        *weather_arrays(flights, clocks), np.tile([0.0, 0.0, 1.0], (n, 1)))
     return c, a
 
-
-def _winds(flights: Sequence[Flight]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Whether each cell flies in a [wind] [n], its steady wind [n, 3] (m/s NWU, :func:`plant.wind.blowing`),
-    gusts [n, G, 4] (t_s, duration_s, amplitude_mps, from_deg in rad) and their number [n]; zeros in still air."""
-    n = len(flights)
-    most = max([len(f.wind.gusts) for f in flights if f.wind is not None] + [1])
-    wind, gusts, count = np.zeros((n, 3)), np.zeros((n, most, 4)), np.zeros(n, np.int64)
-    for i, f in enumerate(flights):
-        if f.wind is None:
-            continue
-        wind[i] = blowing(f.wind.speed_mps, f.wind.from_deg)
-        count[i] = len(f.wind.gusts)
-        for g, gust in enumerate(f.wind.gusts):
-            gusts[i, g] = gust.t_s, gust.duration_s, gust.amplitude_mps, math.radians(gust.from_deg)
-    return np.array([f.wind is not None for f in flights]), wind, gusts, count

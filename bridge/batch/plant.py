@@ -2,14 +2,16 @@
 
 In:  one profile and one set of effects for every cell, a seed per cell (the disturbance's phases), the
      physics rate (Hz), the start state (eq. 7: m, m/s, rad, rad/s); per cell and physics step its state, what
-     its command holds (u1..u4 N and omega_d rad/s, or target rotor speeds rad/s), the time (s) and its steady
-     wind and gusts (m/s, s, rad)
+     its command holds (u1..u4 N and omega_d rad/s, or target rotor speeds rad/s), the time (s), its steady
+     wind plus the turbulence's sample and gusts (m/s, s, rad), its rotors' effectiveness (0..1), its battery's
+     charge (mAh, A s) and speed cap
 Out: :class:`BatchPlant`: the start (states [12, N], rotor speeds, what a command at rest holds, the
      constants); per cell the state after a physics step, its disturbance, divergence
 
 The same model as the scalar plant: eq. (6) corrected, RK4 with the inputs held over a physics step,
-drag, motor lag, the external disturbance, mass and inertia mismatch, steady wind and 1 - cos gusts (drag
-on the airspeed, rotor drag: not the turbulence), and the ground plane. The step of
+drag, motor lag, rotor faults, the battery's sag, the external disturbance, mass and inertia mismatch, steady
+wind, Dryden turbulence (the scalar generator's samples: bridge.batch.weather) and 1 - cos gusts (drag on the
+airspeed, rotor drag), and the ground plane. The step of
 each cell is the scalar plant's own :func:`plant.model.rk4_held` and
 :func:`plant.quadrotor.ground_contact`, and a ``wrench`` command is held through
 :func:`plant.rotors.wrench_command` and eq. (4)/(5) as the scalar plant holds it, compiled
@@ -20,11 +22,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from numba import njit
 
 from bridge.batch import kernels as K
+from plant.battery import pack_constants
 from plant.effects import Effects
 from plant.model import RigidBody, rigid_body
 from plant.profiles import Profile
@@ -35,7 +39,7 @@ class BatchPlant:
     """N quadrotors of one profile and effects, each with its own command and disturbance phases."""
 
     def __init__(self, profile: Profile, effects: Effects | None, seeds: Sequence[int], *, physics_hz: float,
-                 state: Sequence[float], ground: bool = True) -> None:
+                 state: Sequence[float], ground: bool = True, faulty: bool = False) -> None:
         e = effects or Effects()
         self.profile = profile
         self.effects = e
@@ -55,6 +59,15 @@ class BatchPlant:
         self.X = np.repeat(np.asarray(state, float)[:, None], n, axis=1)
         self.motors = profile.actuation == "motors"
         self.lagged = self.motors and e.motor_lag
+        # a command holds rotor speeds (not their wrench) under motor lag, or when a rotor may fail (``faulty``:
+        # the wrench then comes from the speeds and each rotor's effectiveness at every physics step)
+        self.faulty = self.motors and faulty
+        battery = profile.battery if e.battery and self.motors else None  # (Quadrotor builds one so)
+        self.battery = battery is not None
+        # (battery?, plant.battery.pack_constants, the rotors' drag-torque factor N m s^2, the full pack's V)
+        self.pack = (self.battery, pack_constants(battery) if battery else (1.0,) * 6,
+                     profile.drag_coeff * profile.arm, battery.full_v if battery else 1.0)
+        self.speeds = self.lagged or self.faulty or self.battery
         self._lag_k = 1.0 - math.exp(-self.dt / profile.motor_time_constant)
         d = e.disturbance
         self.disturbed = d.active
@@ -71,16 +84,16 @@ class BatchPlant:
         self._u = np.zeros((5, n))  # what the step integrates with: the realised u1..u4 (N) and omega_d (rad/s)
         self.realised = self._u[:4]
         self.omega_d = self._u[4]
-        # what a command holds (see held): the target speeds with motor lag, else the rows of _u
-        self.holding = self.target if self.lagged else self._u
+        # what a command holds (see held): the target speeds (motor lag, faults), else the rows of _u
+        self.holding = self.target if self.speeds else self._u
         self._u_max = tuple(float(v) for v in profile.u_max)
         self.hold(self.held(np.zeros((4, n))))
 
     # -- actuation -------------------------------------------------------------------------------------
     def held(self, c: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """What :meth:`Quadrotor.command` holds for normalised commands c [4, k]: ``wrench`` and ``motors``
-        without lag the realised u1..u4 (N) and omega_d (rad/s), [5, k]; ``motors`` with lag the four
-        target speeds (rad/s), [4, k]. Into ``out`` if given (and returned)."""
+        without lag or faults the realised u1..u4 (N) and omega_d (rad/s), [5, k]; ``motors`` with lag or
+        faults (:attr:`speeds`) the four target speeds (rad/s), [4, k]. Into ``out`` if given (and returned)."""
         p = self.profile
         if not self.motors:
             if out is None:
@@ -88,7 +101,7 @@ class BatchPlant:
             _held_wrench(np.ascontiguousarray(c), self._u_max, p.thrust_coeff, p.drag_coeff, out)
             return out
         target = np.minimum(np.maximum(c, 0.0), 1.0) * p.omega_max
-        v = target if self.lagged else np.vstack(self._from_speeds(target))
+        v = target if self.speeds else np.vstack(self._from_speeds(target))
         if out is None:
             return v
         out[...] = v
@@ -138,7 +151,8 @@ def rk4_cell(x: tuple, u: tuple, ext: tuple, disturbed: bool, constants: tuple, 
 
 @njit(cache=True, inline="always")
 def wind_cell(steady: tuple, gusts: np.ndarray, n_gusts: int, t: float) -> tuple:  # pragma: no cover
-    """:meth:`plant.wind.Wind.now` of one cell without turbulence: the steady wind (m/s NWU) plus each gust
+    """:meth:`plant.wind.Wind.now` of one cell: ``steady`` (m/s NWU: the steady wind, plus the turbulence's sample
+    where the cell meets turbulence, as the scalar plant adds it) plus each gust
     (gusts[g] = t_s s, duration_s s, amplitude_mps m/s, from_deg in rad) at t (s), as
     :meth:`plant.wind.Gust.velocity` and :func:`plant.wind.blowing` compute it."""
     wx, wy, wz = steady
@@ -171,15 +185,65 @@ def from_speeds(o: tuple, b: float, d: float) -> tuple:  # pragma: no cover
 
 
 @njit(cache=True, inline="always")
-def held_cell(c: tuple, motors: bool, lagged: bool, u_max: tuple, b: float, d: float,
+def realised_cell(om: tuple, eff: tuple, faulty: bool, b: float, d: float) -> tuple:  # pragma: no cover
+    """(u1..u4 N, omega_d rad/s) of rotor speeds om (rad/s): eq. (4)/(5), with each rotor's effectiveness ``eff``
+    where the batch is ``faulty`` (:func:`plant.rotors.wrench_from_degraded_rotors`, as Quadrotor._set_omega)."""
+    if faulty:
+        r = K.wrench_from_degraded_rotors(om, eff, b, d)
+        return (r[0], r[1], r[2], r[3], K.signed_speed_sum(om))
+    return from_speeds(om, b, d)
+
+
+@njit(cache=True, inline="always")
+def events_cell(j: int, k: int, steady: tuple, eff: tuple, a: Any) -> tuple:  # pragma: no cover
+    """Cell j's events that act at control step k (bridge.batch.weather: SimVehicle.inject's ``motor`` and
+    ``wind``): (the steady wind m/s NWU, the rotors' effectiveness 0..1) after them."""
+    e = a.next_event[j]
+    while e < a.event_step.shape[1] and a.event_step[j, e] <= k:
+        v = a.events[j, e]
+        if v[0] == 0.0:  # EV_MOTOR: rotor v[1] (0-3) at effectiveness v[2]
+            r, x = int(v[1]), v[2]
+            eff = (x if r == 0 else eff[0], x if r == 1 else eff[1], x if r == 2 else eff[2], x if r == 3 else eff[3])
+        else:  # EV_WIND: the steady wind from now (Wind.set_steady)
+            steady = (v[1], v[2], v[3])
+        e += 1
+    a.next_event[j] = e
+    return steady, eff
+
+
+@njit(cache=True, inline="always")
+def targets_cell(q: tuple, cap: float, omega_max: float) -> tuple:  # pragma: no cover
+    """:meth:`Quadrotor.command`'s target speeds (rad/s) under a battery: clip(c_i, 0, cap) * omega_max for the
+    normalised command q (its first four), and a 0."""
+    return (K.clip(q[0], 0.0, cap) * omega_max, K.clip(q[1], 0.0, cap) * omega_max,
+            K.clip(q[2], 0.0, cap) * omega_max, K.clip(q[3], 0.0, cap) * omega_max, 0.0)
+
+
+@njit(cache=True, inline="always")
+def battery_cell(hold: tuple, om: tuple, pk: tuple, lagged: bool, pack: tuple, torque_factor: float, h: float,
+                 full_v: float, omega_max: float) -> tuple:  # pragma: no cover
+    """:meth:`Quadrotor._draw_battery` of one cell: the pack (pk: used mAh, drawn A s, cap) feeds the rotors at
+    their speeds now (om under motor lag, else the held targets) over h (:func:`plant.battery.pack_step`); the
+    targets ``hold`` above the new cap come down to it. (hold, pk) after it."""
+    speeds = om if lagged else (hold[0], hold[1], hold[2], hold[3])
+    v, _, drawn, used = K.pack_step(pack, pk[0], pk[1], speeds, torque_factor, h)
+    cap = min(v / full_v, 1.0)
+    top = cap * omega_max
+    hold = (top if hold[0] > top else hold[0], top if hold[1] > top else hold[1], top if hold[2] > top else hold[2],
+            top if hold[3] > top else hold[3], hold[4])
+    return hold, (used, drawn, cap)
+
+
+@njit(cache=True, inline="always")
+def held_cell(c: tuple, motors: bool, speeds: bool, u_max: tuple, b: float, d: float,
               omega_max: float) -> tuple:  # pragma: no cover
-    """:meth:`BatchPlant.held` of one cell's normalised command c: (u1..u4, omega_d), or with motor lag the
-    four target speeds (rad/s) and a 0."""
+    """:meth:`BatchPlant.held` of one cell's normalised command c: (u1..u4, omega_d), or where the plant holds
+    ``speeds`` (motor lag, faults) the four target speeds (rad/s) and a 0."""
     if not motors:
         u = K.wrench_command(c, u_max)
         return (u[0], u[1], u[2], u[3], K.signed_speed_sum(K.motor_speeds_from_wrench(u, b, d)))
     o = (_unit(c[0]) * omega_max, _unit(c[1]) * omega_max, _unit(c[2]) * omega_max, _unit(c[3]) * omega_max)
-    if lagged:
+    if speeds:
         return (o[0], o[1], o[2], o[3], 0.0)
     return from_speeds(o, b, d)
 

@@ -3,9 +3,10 @@ and bridge/autopilot/failsafe.py, compiled with numba for the batch engine and t
 
 In:  nothing at import but those pure functions (importing this module imports numba: ~0.6-1.2 s)
 Out: their compiled twins: the BS-ST law (eq. 24-40), PID, the super-twisting integrator (eq. 22, both steps),
-     the actuation and allocation (eq. 4 inverted), the RK4 plant step (eq. 6), the predictor's nominal RK4, the
-     state and command over the wire, the on-board landing law (called per cell by bridge.batch); the scalar
-     engine's own (the one-call control step, the plant's RK4 step) are :mod:`bridge.core.scalarkernels`
+     the actuation and allocation (eq. 4 inverted), eq. 4 with rotor faults, the battery's step, the RK4 plant
+     step (eq. 6), the predictor's nominal RK4, the state and command over the wire, the on-board landing law
+     (called per cell by bridge.batch); the scalar engine's own (the one-call control step, the plant's RK4
+     step) are :mod:`bridge.core.scalarkernels`
 
 One source per equation (issue 21): each function here is ``numba.njit(f)`` of the very function the scalar
 engine calls, so the two engines cannot drift apart. The helpers those functions call by name are registered as
@@ -22,7 +23,7 @@ from numba.extending import register_jitable
 from bridge.autopilot import failsafe
 from bridge.core import wire
 from controller import actuation, bsst, jets, pid, power, predict, supertwisting
-from plant import model, quadrotor, rotors
+from plant import battery, model, quadrotor, rotors
 
 for _helper in (
     jets.add, jets.sub, jets.mul, jets.chain, jets.sqrt_, jets.atan2,
@@ -50,6 +51,9 @@ ground_contact = njit(cache=True)(quadrotor.ground_contact)
 wrench_command = njit(cache=True)(rotors.wrench_command)
 motor_speeds_from_wrench = njit(cache=True)(rotors.motor_speeds_from_wrench)
 signed_speed_sum = njit(cache=True)(rotors.signed_speed_sum)
+wrench_from_degraded_rotors = njit(cache=True)(rotors.wrench_from_degraded_rotors)
+clip = njit(cache=True)(rotors.clip)
+pack_step = njit(cache=True)(battery.pack_step)
 nominal_rk4 = njit(cache=True)(predict.nominal_rk4)
 odometry_fields = njit(cache=True)(wire.odometry_fields)
 state_from_odometry_fields = njit(cache=True)(wire.state_from_odometry_fields)

@@ -28,7 +28,7 @@ Over ``noise`` the batch engine cannot fly the cells (it has no sensors): every 
 scalar flight on the process engine, one at a time for one law and seed (a pool costs more
 than a few cells), so keep ``seeds`` and the laws few. Noise needs an estimator that reads
 the sensors (``raw`` or ``ekf``; ``truth`` ignores them) and a set with noise to scale. Over
-``wind_mps`` the batch engine flies the probes (steady wind), unless the mission has turbulence.
+``wind_mps`` the batch engine flies the probes (steady wind, and the mission's turbulence if it has one).
 """
 
 from __future__ import annotations
