@@ -27,6 +27,7 @@ from bridge.cli.flags import (
     mission_number,
     number_in,
     system_id,
+    yes_no,
 )
 from bridge.cli.options import (
     add_failsafe_options,
@@ -58,6 +59,9 @@ def add_fleet_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--formation", metavar="KIND:METRES",
                    help="line:SPACING (along y), grid:SPACING or circle:RADIUS about the mission's trajectory "
                         "(default line:2)")
+    g.add_argument("--shared-link", dest="link_shared", nargs="?", const=True, type=yes_no("--shared-link"),
+                   metavar="true|false", help="every vehicle behind one radio: one bandwidth budget and queue each "
+                   "way ([link] shared; bsst sim only for now; bare: true)")
 
 
 def fleet_size(text: str) -> int:
