@@ -7,15 +7,17 @@ Out: a :class:`FleetRun`: each vehicle's :class:`~bridge.record.runlog.Run` (sys
      fleet's ``summary.json`` as a dict: ``vehicles`` (id, outcome, RMS m, ...), ``separation`` (the
      closest approach of every pair, m, and when, s), ``policies``, the worst ``outcome``; with a directory,
      ``vehicle-<id>/`` (each vehicle's own run: ``trace.csv``, ``summary.json``, ``plots/``), ``mission.toml``
-     (the fleet as flown), ``summary.json`` and ``plots/`` (every vehicle)
+     (the fleet as flown), ``summary.json`` and ``plots/`` (every vehicle); on one shared radio
+     (``[link] shared``, ``--shared-link``) ``radio``: each vehicle's share of it (bytes/s), its queue waits (ms)
 
 A mission without vehicles is flown by :func:`bridge.loop.simulate` as it always was, byte for byte.
-A fleet's vehicles fly one control step each, in id order, then the shared world is judged on their true
+A fleet's vehicles fly one control step each, in turn (:data:`TURNS`), then the shared world is judged on their true
 positions after that step (:class:`Watch`): clearance (centres' distance less both disc radii,
 :class:`missions.fleet.Separation`) below ``min_m`` breaks the ``separation`` policy (exit 1); at zero
 or less the two touch and both end ``collision``. Each vehicle is its own flight
 (:func:`missions.fleet.vehicle_mission`: its own seed, so its own link's fates, effects and sensors), on
-the same clock: a vehicle flies exactly as it would alone, until something touches it. A vehicle that
+the same clock: a vehicle flies exactly as it would alone, until something touches it (or, on one shared
+radio, :mod:`bridge.link.radio`, its packets wait behind the others'). A vehicle that
 has ended stays where it ended, an obstacle. The end action (a landing) after the mission is each
 vehicle's own, not judged against the others.
 """
@@ -48,10 +50,10 @@ from missions.fleet import DEFAULT_MIN_SEPARATION_M, Separation, VehicleSpec, fo
 from missions.fleet import vehicle_mission as mission_of
 from params import ConfigError, dump_toml
 
-# the outcomes from best to worst: the fleet's outcome is its worst vehicle's (an unknown one is worst)
 TURNS = ("each control step every vehicle flies its step in turn, the first one rotating (step k: the (k mod N)-th "
          "of the N still flying, by id): on one radio, whose packets sent at the same instant queue first")
 LINK_FIGURES = ("sent", "delivered", "lost", "lost_by", "delay_ms")  # each vehicle's, each way, in the fleet's summary
+# the outcomes from best to worst: the fleet's outcome is its worst vehicle's (an unknown one is worst)
 SEVERITY = ("completed", "failsafe", "law_failed", "diverged", "crashed", "collision", "aborted")
 DEFINITION = ("distance between the vehicles' centres less each one's disc radius (its arm plus its rotor "
               "radius: rotor_radius_m, by default half the arm)")

@@ -68,7 +68,8 @@ MISSION_HASH = "mission_toml_sha256"  # sweep.json: the hash of the mission.toml
 
 
 def row_from_run(cell: Cell, run: Run) -> dict[str, Any]:
-    """A ``cells.csv`` row from a finished run (without ``class``)."""
+    """A ``cells.csv`` row from a finished run (without ``class``, and without a fleet's ``worst_vehicle`` and
+    ``closest_m``: empty for one vehicle, as in a batch row)."""
     s = run.summary
     tr = run.trace
     t = tr["t"]
@@ -96,8 +97,6 @@ def row_from_run(cell: Cell, run: Run) -> dict[str, Any]:
         "down_sent": int(down.get("sent", 0)),
         "down_lost": int(down.get("lost", 0)),
         "flown_s": s.get("duration_s"),
-        "worst_vehicle": None,  # a fleet's (row_from_fleet); one vehicle: none to name
-        "closest_m": None,
         # a law that failed in flight measured nothing: the row says why, as a cell that could not be flown does
         "error": " ".join(str(s.get("ended_by", {}).get("how", "")).split())[:300] if s["outcome"] in FAILED else "",
     }
