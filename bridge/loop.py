@@ -37,6 +37,7 @@ from bridge.autopilot.simvehicle import FAILSAFE, LAND, LANDED, OFFBOARD, SimVeh
 from bridge.core.flight import Flight, Overrides, Progress, prepare
 from bridge.core.wire import command_over_wire, state_over_wire
 from bridge.link.ends import ControllerEnd, VehicleEnd
+from bridge.link.radio import Radio
 from bridge.record.columns import TRACE_COLUMNS, state_columns, trace_row
 from bridge.record.ending import end_block
 from bridge.record.events import RunEvent
@@ -90,12 +91,13 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
             return done.value
 
 
-def flying(flight: Flight, path: Path | None = None, *, plots: bool = True,
-           progress: Progress | None = None) -> Generator[tuple[float, ...], str | None, Run]:
+def flying(flight: Flight, path: Path | None = None, *, plots: bool = True, progress: Progress | None = None,
+           radios: tuple[Radio, Radio] | None = None, user: int = 0) -> Generator[tuple[float, ...], str | None, Run]:
     """:func:`fly` one control step at a time, for a loop that flies several vehicles in one world
     (:mod:`bridge.swarm`): after each step it yields the plant's true state (eq. 7 order, after the step's
     physics); sent a text, it ends the flight there with the outcome ``collision`` (that text its event).
-    Returns the :class:`Run`; thrown a KeyboardInterrupt, the flight ends ``aborted``, recorded."""
+    Returns the :class:`Run`; thrown a KeyboardInterrupt, the flight ends ``aborted``, recorded. ``radios``:
+    the (up, down) radios the flight's links share with other vehicles', as their user ``user``."""
     m = flight.mission
     check_trace_steps(m)
     vehicle = flight.make_vehicle(armed=True)
@@ -105,7 +107,7 @@ def flying(flight: Flight, path: Path | None = None, *, plots: bool = True,
     actuation = flight.profile.actuation
     sample = m.trajectory.sample
     rate = m.rate_hz
-    up, down = flight.link.make()
+    up, down = flight.link.make(radios, user)
     guard = LinkGuard(ctl, flight.guard)
     vend = VehicleEnd(vehicle, up, actuation)
     cend = ControllerEnd(guard, down)

@@ -7,15 +7,17 @@ Out: a :class:`FleetRun`: each vehicle's :class:`~bridge.record.runlog.Run` (sys
      fleet's ``summary.json`` as a dict: ``vehicles`` (id, outcome, RMS m, ...), ``separation`` (the
      closest approach of every pair, m, and when, s), ``policies``, the worst ``outcome``; with a directory,
      ``vehicle-<id>/`` (each vehicle's own run: ``trace.csv``, ``summary.json``, ``plots/``), ``mission.toml``
-     (the fleet as flown), ``summary.json`` and ``plots/`` (every vehicle)
+     (the fleet as flown), ``summary.json`` and ``plots/`` (every vehicle); on one shared radio
+     (``[link] shared``, ``--shared-link``) ``radio``: each vehicle's share of it (bytes/s), its queue waits (ms)
 
 A mission without vehicles is flown by :func:`bridge.loop.simulate` as it always was, byte for byte.
-A fleet's vehicles fly one control step each, in id order, then the shared world is judged on their true
+A fleet's vehicles fly one control step each, in turn (:data:`TURNS`), then the shared world is judged on their true
 positions after that step (:class:`Watch`): clearance (centres' distance less both disc radii,
 :class:`missions.fleet.Separation`) below ``min_m`` breaks the ``separation`` policy (exit 1); at zero
 or less the two touch and both end ``collision``. Each vehicle is its own flight
 (:func:`missions.fleet.vehicle_mission`: its own seed, so its own link's fates, effects and sensors), on
-the same clock: a vehicle flies exactly as it would alone, until something touches it. A vehicle that
+the same clock: a vehicle flies exactly as it would alone, until something touches it (or, on one shared
+radio, :mod:`bridge.link.radio`, its packets wait behind the others'). A vehicle that
 has ended stays where it ended, an obstacle. The end action (a landing) after the mission is each
 vehicle's own, not judged against the others.
 """
@@ -30,6 +32,8 @@ from pathlib import Path
 from typing import Any
 
 from bridge.core.flight import Flight, Overrides, Progress, prepare
+from bridge.link.model import merge_link_tables
+from bridge.link.radio import Radio
 from bridge.loop import flying
 from bridge.loop import simulate as simulate_one
 from bridge.record.policies import run_ok
@@ -46,6 +50,9 @@ from missions.fleet import DEFAULT_MIN_SEPARATION_M, Separation, VehicleSpec, fo
 from missions.fleet import vehicle_mission as mission_of
 from params import ConfigError, dump_toml
 
+TURNS = ("each control step every vehicle flies its step in turn, the first one rotating (step k: the (k mod N)-th "
+         "of the N still flying, by id): on one radio, whose packets sent at the same instant queue first")
+LINK_FIGURES = ("sent", "delivered", "lost", "lost_by", "delay_ms")  # each vehicle's, each way, in the fleet's summary
 # the outcomes from best to worst: the fleet's outcome is its worst vehicle's (an unknown one is worst)
 SEVERITY = ("completed", "failsafe", "law_failed", "diverged", "crashed", "collision", "aborted")
 DEFINITION = ("distance between the vehicles' centres less each one's disc radius (its arm plus its rotor "
@@ -91,8 +98,9 @@ def simulate(mission: Mission | str | Path, *, vehicles: int | Sequence[Any] | N
     over = Overrides.of(overrides, **keywords)
     flights = fleet_flights(fleet, over)
     check_fleet_steps(fleet, flights)  # before the run directory is made: a refused mission writes nothing
+    radios = shared_radios(fleet, flights)
     path = run_dir(out, fleet.name, overwrite) if (out is not None or write) else None
-    return fly_fleet(over.laid_over(fleet), flights, path, plots=plots, progress=progress)
+    return fly_fleet(over.laid_over(fleet), flights, path, plots=plots, progress=progress, radios=radios)
 
 
 def check_fleet_steps(m: Mission, flights: list[Flight]) -> None:
@@ -194,15 +202,34 @@ def _num(v: float) -> float | None:
     return round(v, 9) if math.isfinite(v) else None
 
 
+def shared_radios(m: Mission, flights: list[Flight]) -> tuple[Radio, Radio] | None:
+    """The fleet's one radio, (up, down) (:mod:`bridge.link.radio`: every vehicle's traffic of a direction in one
+    queue behind one bandwidth budget, each vehicle a user, by id), when its ``[link]`` says ``shared``; else
+    None (each vehicle its own link). A handover (an event of kind ``link``) on a shared radio is refused."""
+    if not flights[0].link.shared:
+        return None
+    if any(f.link.handovers for f in flights):
+        raise ConfigError(f"{m.source}: link.shared: a fleet on one radio with link handovers (events of kind link) "
+                          "is not modelled yet: give one or the other")
+    up, down, n = flights[0].link.up, flights[0].link.down, len(flights)
+    return Radio(up.rate_bps, up.queue_ms / 1000.0, n), Radio(down.rate_bps, down.queue_ms / 1000.0, n)
+
+
 def fly_fleet(m: Mission, flights: list[Flight], path: Path | None, *, plots: bool = True,
-              progress: Progress | None = None) -> FleetRun:
-    """Fly a fleet's prepared flights in one world (the module's docstring); write its directory into ``path``."""
+              progress: Progress | None = None, radios: tuple[Radio, Radio] | None = None) -> FleetRun:
+    """Fly a fleet's prepared flights in one world (the module's docstring), on one shared radio if ``radios``
+    (:func:`shared_radios`); write its directory into ``path``."""
     watch = _watch(m, flights)
     dirs = _vehicle_dirs(m, path)
-    steps = [flying(f, d, plots=plots, progress=progress if i == 0 else None)
+    steps = [flying(f, d, plots=plots, progress=progress if i == 0 else None, radios=radios, user=i)
              for i, (f, d) in enumerate(zip(flights, dirs))]
     runs = _fly_together(steps, [f.mission.start[:3] for f in flights], flights[0].mission.rate_hz, watch)
     summary = fleet_summary(m, flights, runs, watch)
+    if radios is not None:
+        ids = [v.id for v in m.vehicles]
+        until = max(len(r.trace["t"]) for r in runs) / flights[0].mission.rate_hz  # the steps flown, s
+        summary["radio"] = {"shared": True, "order": TURNS,
+                            **{d: r.occupancy(ids, until) for d, r in zip(("up", "down"), radios)}}
     _finish(m, path, runs, watch, summary, plots)
     return FleetRun(runs, summary, path)
 
@@ -249,7 +276,8 @@ def _fly_together(steps: list[Generator[tuple[float, ...], str | None, Run]], st
     k = 0
     try:
         while live:
-            for i in list(live):
+            turn = k % len(live)  # who goes first this step (TURNS): on one radio, the first in its queue
+            for i in live[turn:] + live[:turn]:
                 try:
                     X = steps[i].send(told[i]) if k else next(steps[i])
                     positions[i] = (X[0], X[2], X[4])
@@ -294,7 +322,7 @@ def fleet_summary(m: Mission, flights: list[Flight], runs: list[Run], watch: Wat
                          "trajectory": "own" if v.trajectory is not None else "the mission's",
                          "start": list(f.mission.start), "ended_by": s.get("ended_by"),
                          **({"contact": s["contact"]} if "contact" in s else {}),
-                         "link": {d: {k: (s.get("link") or {}).get(d, {}).get(k) for k in ("sent", "delivered", "lost")}
+                         "link": {d: {k: (s.get("link") or {}).get(d, {}).get(k) for k in LINK_FIGURES}
                                   for d in ("up", "down")}})
         policies += [{**p, "name": f"{p['name']} (vehicle {v.id})"} for p in s.get("policies") or ()
                      if not p.get("ok")]
@@ -308,6 +336,10 @@ def fleet_summary(m: Mission, flights: list[Flight], runs: list[Run], watch: Wat
 # -- the same fleet as SITL sessions (bsst sitl --vehicles) ---------------------------------------------------
 CONTINUED = ("the flights continued past the contact: under bsst sitl each vehicle keeps its own lockstep with its "
              "controller, the vehicles share no clock, so nothing stopped them at it (docs/swarm.md)")
+
+
+SITL_SHARED = ("--shared-link ([link] shared = true): one radio for a fleet is offline only for now (bsst sim); "
+               "under bsst sitl it waits for the fleet's shared clock (docs/swarm.md)")
 
 
 def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] | None = None,
@@ -326,6 +358,7 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
     from bridge.session import sitl as sitl_one  # lazy: start-up time
     from bridge.session.fleet import check_fleet, check_fleet_ports, fly_sessions  # lazy: start-up time
 
+    given_link = Overrides.of(overrides, **keywords).link or {}
     if await_mission or mission is None:  # a ground station's mission (bsst sitl --await-mission): one vehicle
         if vehicles is not None or formation is not None:
             raise ConfigError("--vehicles with --await-mission: a ground station's mission flies one vehicle")
@@ -333,6 +366,9 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
     else:
         m = mission if isinstance(mission, Mission) else load_mission(mission)
         fleet = fleet_mission(m, vehicles, formation)
+        given_link = merge_link_tables(m.link, given_link)
+    if given_link.get("shared") is True:
+        raise ConfigError(SITL_SHARED)
     if fleet is None:
         return sitl_one(mission, out=out, write=write, overwrite=overwrite, plots=plots, realtime=realtime,
                         instance=instance, gcs=gcs, speed=speed, key=key, live=live, progress=progress,

@@ -38,7 +38,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # the flag of each key that no LINK_FLAGS / GUARD_FLAGS row names
 OTHER_FLAGS = {"jitter": "--jitter-dist", "seed": "--link-seed", "blackouts": "--blackout",
                "compensation": "--compensation", "trace": "--link-trace", "trace_loop": "--link-trace-loop",
-               "profile": "--link-profile"}
+               "profile": "--link-profile", "shared": "--shared-link"}
 SAMPLE = {"jitter": "normal", "seed": "7", "blackouts": "3:1", "compensation": "predict", "stop_ms": "100",
           "trace": str(ROOT / "examples" / "link-trace.csv"), "profile": "wifi"}
 

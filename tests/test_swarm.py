@@ -124,7 +124,9 @@ def test_vehicles_given_from_python_and_their_bad_forms(tmp_path: Path) -> None:
     run = simulate(mission, vehicles=[VehicleSpec(2, (3.0, 0.0, 0.0)), VehicleSpec(1)], controller="smc")
     assert isinstance(run, FleetRun) and [r.outcome for r in run.runs] == ["completed", "completed"]
     assert run.summary["vehicles"][1]["offset"] == [3.0, 0.0, 0.0] and run.path is None
-    assert run.summary["vehicles"][0]["link"]["up"] == {"sent": 125, "delivered": 125, "lost": 0}
+    up = run.summary["vehicles"][0]["link"]["up"]
+    assert {k: up[k] for k in ("sent", "delivered", "lost")} == {"sent": 125, "delivered": 125, "lost": 0}
+    assert up["lost_by"]["queue"] == 0 and up["delay_ms"]["max"] == 0.0
     for bad in ("two", [VehicleSpec(2)], [{"id": 1}]):
         with pytest.raises(ConfigError, match="^vehicles: expected a number of vehicles or VehicleSpec"):
             simulate(mission, vehicles=bad)  # type: ignore[arg-type]

@@ -28,7 +28,7 @@ import pytest
 from bridge import simulate
 from bridge.cli import main
 from bridge.sweep import CELLS_CSV, COLUMNS, Cell, Classes, Grid, SweepFailed, load_sweep, read_cells, sweep
-from bridge.sweep.cells import ripple_rms
+from bridge.sweep.cells import FLEET_COLUMNS, ripple_rms
 from bridge.sweep.classes import CLASSES, classify
 from bridge.sweep.executors import run_cell
 from bridge.sweep.grid import cells as grid_cells
@@ -507,7 +507,7 @@ def test_a_sweep_of_an_older_bsst_is_reported_not_resumed(small_sweep: tuple[Pat
     is lost."""
     d = tmp_path / "old"
     shutil.copytree(small_sweep[0], d)
-    keep = [i for i, c in enumerate(COLUMNS) if c not in ("estimator", "noise", "discretization")]
+    keep = [i for i, c in enumerate(COLUMNS) if c not in ("estimator", "noise", "discretization", *FLEET_COLUMNS)]
     lines = (d / CELLS_CSV).read_text().splitlines()
     (d / CELLS_CSV).write_text("".join(",".join(line.split(",")[i] for i in keep) + "\n" for line in lines))
     meta = json.loads((d / "sweep.json").read_text())
@@ -521,7 +521,8 @@ def test_a_sweep_of_an_older_bsst_is_reported_not_resumed(small_sweep: tuple[Pat
     assert {p.name: p.read_bytes() for p in d.iterdir() if p.name in before} == before
     assert main(["report", str(d), "--no-plots"]) == 0
     assert "- `estimator`: truth" in (d / "report.md").read_text()
-    rows = read_cells(d / CELLS_CSV, legacy={"estimator": "truth", "noise": 1.0, "discretization": "explicit"})
+    rows = read_cells(d / CELLS_CSV, legacy={"estimator": "truth", "noise": 1.0, "discretization": "explicit",
+                                             "vehicles": 1, "worst_vehicle": None, "closest_m": None})
     assert [r["delay_ms"] for r in rows] == [0.0, 10.0] and {r["estimator"] for r in rows} == {"truth"}
     with pytest.raises(ConfigError, match="cells.csv: line 1: a cells.csv of an older bsst"):
         read_cells(d / CELLS_CSV)  # where a sweep would add to it

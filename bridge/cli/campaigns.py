@@ -26,6 +26,7 @@ from bridge.cli.flags import (
     link_table_from_args,
     name_list,
     number_in,
+    value_list,
 )
 from bridge.cli.options import (
     add_discretization_option,
@@ -51,6 +52,9 @@ def add_sweep_commands(sub: Any) -> None:
     p.add_argument("--discretization", type=name_list("--discretization", ("explicit", "implicit")),
                    metavar="SCHEME,...", help="how bsst steps its super-twisting step: explicit (the paper as "
                                               "printed), implicit (chattering-free; docs/law.md), or both to compare")
+    p.add_argument("--vehicles", type=fleet_sizes, metavar="N,...",
+                   help="fleet sizes: each cell flies N vehicles together, offline, in a line 2 m apart "
+                        "(docs/campaigns.md; 1: the mission alone)")
     p.add_argument("--seeds", type=int_in("--seeds", 1, 10000), metavar="N",
                    help="seeds per grid point: the mission's seed, +1, ... (default 1)")
     mode = p.add_mutually_exclusive_group()
@@ -84,6 +88,17 @@ def add_sweep_commands(sub: Any) -> None:
     p.add_argument("--no-plots", action="store_true", help="skip the heat maps")
     p.set_defaults(func=cmd_report)
 
+
+
+def fleet_sizes(text: str) -> tuple[int, ...]:
+    """``bsst sweep --vehicles 1,2,4``: whole numbers in the fleet's range (:data:`bridge.sweep.grid.RANGES`)."""
+    from bridge.sweep.grid import RANGES  # lazy: only a sweep loads the sweep
+
+    lo, hi = RANGES["vehicles"]
+    values = value_list("--vehicles", lo, hi)(text)
+    if not all(v.is_integer() for v in values):
+        raise argparse.ArgumentTypeError(f"--vehicles: expected whole numbers of vehicles, got {text!r}")
+    return tuple(int(v) for v in values)
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:

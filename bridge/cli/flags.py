@@ -430,7 +430,7 @@ def link_table_from_args(args: argparse.Namespace) -> dict[str, Any]:
                 raise UsageError(f"bsst: --link-trace / --{d}-link-trace cannot be combined with {clash} (--delay, "
                                  f"--jitter, --loss, --burst) in the {d} direction: the trace gives the delays and "
                                  f"the losses")
-    for key in ("compensation", "profile", *(k for _, k, *_ in GUARD_FLAGS)):
+    for key in ("compensation", "profile", "shared", *(k for _, k, *_ in GUARD_FLAGS)):
         v = getattr(args, f"link_{key}", None)
         if v is not None:
             out[key] = v

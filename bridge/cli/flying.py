@@ -27,6 +27,7 @@ from bridge.cli.flags import (
     mission_number,
     number_in,
     system_id,
+    yes_no,
 )
 from bridge.cli.options import (
     add_failsafe_options,
@@ -58,6 +59,9 @@ def add_fleet_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--formation", metavar="KIND:METRES",
                    help="line:SPACING (along y), grid:SPACING or circle:RADIUS about the mission's trajectory "
                         "(default line:2)")
+    g.add_argument("--shared-link", dest="link_shared", nargs="?", const=True, type=yes_no("--shared-link"),
+                   metavar="true|false", help="every vehicle behind one radio: one bandwidth budget and queue each "
+                   "way ([link] shared; bsst sim only for now; bare: true)")
 
 
 def fleet_size(text: str) -> int:
@@ -93,6 +97,10 @@ def report_fleet(run: Any, command: str) -> int:
             where = "its own trajectory" if v["trajectory"] == "own" else f"offset {v['offset']} m"
             w(f"vehicle {v['id']} (sysid {v['sysid']}, {v['profile']}, {where}): {v['outcome']}, "
               f"3-D RMS {rms}\n")
+        for d, r in ((d, s["radio"][d]) for d in ("up", "down") if "radio" in s):
+            cap = f"of {r['rate_bps']:g} B/s (occupancy {r['occupancy']:.2f})" if r["rate_bps"] else "(no rate cap)"
+            w(f"one radio, {d}: {r['share_bps']:.0f} B/s {cap}, {r['lost_queue']} queue drops; by vehicle "
+              + ", ".join(f"{v['id']}: {v['share_bps']:.0f} B/s" for v in r["vehicles"]) + "\n")
         sep = s["separation"]
         least = "n/a" if sep["closest_m"] is None else f"{sep['closest_m']:.3f} m"
         w(f"separation: closest approach {least} between rotor discs (minimum {sep['min_m']:g} m)\n")

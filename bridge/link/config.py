@@ -125,7 +125,7 @@ COMMAND_LAG_RANGE_MS = GUARD_RANGES["command_lag_ms"]
 SEED_RANGE = (0, 2**31 - 1)
 # every key a direction's table takes, and every key [link] itself takes (besides [link.up] and [link.down])
 DIRECTION_KEYS = (*NUMBER_RANGES, "jitter", "seed", "blackouts", "trace", "trace_loop")
-LINK_KEYS = (*DIRECTION_KEYS, "profile", "compensation", *GUARD_RANGES)
+LINK_KEYS = (*DIRECTION_KEYS, "profile", "compensation", *GUARD_RANGES, "shared")
 BLACKOUT_START_RANGE_S = (0.0, 1e6)  # a window's start, s of mission time
 BLACKOUT_DURATION_RANGE_S = (0.0, 1e6)  # its duration, s (0 excluded)
 

@@ -18,7 +18,8 @@ packets are due by a later time. What can happen to a packet, in this order:
    packets on average and the long-run loss fraction is ``loss_pct``);
 3. **bandwidth cap** (``rate_bps``, in **bytes per second**, 0 = none): packets queue behind
    each other at the sender, each occupying the link for size / rate; a packet that would
-   wait longer than ``queue_ms`` is dropped (tail drop). Sizes are real MAVLink 2 frame
+   wait longer than ``queue_ms`` is dropped (tail drop); on a radio shared by a fleet
+   (:mod:`bridge.link.radio`) they queue behind every vehicle's packets. Sizes are real MAVLink 2 frame
    sizes (:data:`FRAME_BYTES`) offline and the datagram's length in the relay;
 4. **delay**: fixed ``delay_ms`` plus **jitter** ``jitter_ms`` — ``uniform`` on ±jitter_ms
    or ``normal`` with σ = jitter_ms, truncated symmetrically to ±min(delay_ms, bound) so
@@ -61,6 +62,7 @@ from statistics import NormalDist
 from typing import Any
 
 from bridge.link.config import DIRECTIONS, LinkConfig
+from bridge.link.radio import Radio
 from bridge.link.trace import DirectionTrace, Replay, own_figures
 
 # MAVLink 2 frame sizes in bytes (header 10 + payload with trailing zeros truncated + CRC 2,
@@ -233,6 +235,8 @@ class Delivery:
 class LinkImpairment:
     """One direction of an impaired link (see the module docstring).
 
+    ``radio``: a :class:`~bridge.link.radio.Radio` this link shares with others (as its user ``user``: a
+    fleet on one radio); by default the link has a radio of its own, made from its config's cap and queue.
     ``send(t, size, payload)`` puts a packet on the link at time t (s) and returns its
     number; ``deliver(t)`` returns every packet due by t, in delivery order. Times only
     need to be non-decreasing across calls. ``next_due()`` tells a real-time driver when
@@ -240,9 +244,14 @@ class LinkImpairment:
     """
 
     def __init__(self, cfg: LinkConfig | None = None, direction: str = "up",
-                 handovers: tuple[tuple[float, LinkConfig], ...] = ()) -> None:
+                 handovers: tuple[tuple[float, LinkConfig], ...] = (), radio: Radio | None = None,
+                 user: int = 0) -> None:
         if direction not in DIRECTIONS:
             raise ValueError(f"direction must be 'up' or 'down', got {direction!r}")
+        if radio is not None and handovers:
+            raise ValueError("a link on a shared radio takes no handovers (the radio's rate is the fleet's)")
+        self._shared = radio  # a radio shared with other links (this link its user ``user``), or None: its own
+        self._user = user
         self.direction = direction
         self.stats = LinkStats()
         self._heap: list[tuple[float, int, Delivery]] = []
@@ -263,9 +272,7 @@ class LinkImpairment:
         self.fates = FateStream(cfg, self.direction)
         self.fates.n = n
         self._delay = cfg.delay_ms / 1000.0
-        self._rate = cfg.rate_bps
-        self._queue = cfg.queue_ms / 1000.0
-        self._free_at = -math.inf
+        self.radio = self._shared if self._shared is not None else Radio(cfg.rate_bps, cfg.queue_ms / 1000.0)
         self._windows = tuple((s + self._origin, s + d + self._origin) for s, d in cfg.blackouts)
         self._replay = Replay(cfg.trace) if cfg.trace is not None else None
         self.stats.trace = cfg.trace
@@ -300,13 +307,10 @@ class LinkImpairment:
             if delay != delay:  # the trace lost it
                 st.lost_by["trace"] += 1
                 return seq
-        tx = t
-        if self._rate > 0.0:
-            start = self._free_at if self._free_at > t else t
-            if start - t > self._queue:
-                st.lost_by["queue"] += 1
-                return seq
-            tx = self._free_at = start + size / self._rate
+        tx = self.radio.admit(t, size, self._user)  # the bandwidth cap: its own radio's, or a shared one's
+        if tx is None:
+            st.lost_by["queue"] += 1
+            return seq
         due = tx + delay + fate.jitter_s
         st.in_flight += 1
         d = Delivery(seq, t, due, payload)

@@ -47,6 +47,7 @@ from bridge.link.impairment import (
     uniform,
 )
 from bridge.link.profile import load_link_profile
+from bridge.link.radio import Radio
 from bridge.link.trace import (
     LENGTH_SLACK_S,
     DirectionTrace,
@@ -62,7 +63,7 @@ __all__ = [  # re-exported: the link model's one import (absolute_link_paths: wh
     "BLACKOUT_DURATION_RANGE_S", "BLACKOUT_START_RANGE_S", "COMMAND_LAG_RANGE_MS", "DIRECTION_KEYS", "DIRECTIONS",
     "FRAME_BYTES", "GUARD_RANGES", "JITTER_KINDS", "LINK_KEYS", "LO_OPEN", "NUMBER_RANGES", "SEED_RANGE",
     "TRACE_EXCLUSIVE", "Delivery", "Fate", "FateStream", "LinkConfig", "LinkImpairment", "LinkSettings",
-    "LinkStats", "absolute_link_paths", "burst_problem", "fates", "link_from_table", "merge_link_tables",
+    "LinkStats", "Radio", "absolute_link_paths", "burst_problem", "fates", "link_from_table", "merge_link_tables",
     "stream_key", "trace_clash", "uniform",
 ]
 
@@ -154,13 +155,18 @@ class LinkSettings:
     down: LinkConfig = field(default_factory=LinkConfig)
     guard: GuardConfig = field(default_factory=GuardConfig)
     handovers: tuple[tuple[float, LinkConfig, LinkConfig], ...] = ()  # (mission time s, up, down) from then on
+    shared: bool = False  # a fleet's vehicles behind one radio ([link] shared, --shared-link; docs/swarm.md)
 
     @property
     def impaired(self) -> bool:
         return self.up.impaired or self.down.impaired or any(u.impaired or d.impaired for _, u, d in self.handovers)
 
-    def make(self) -> tuple[LinkImpairment, LinkImpairment]:
-        """Fresh (up, down) models, each with its handovers."""
+    def make(self, radios: tuple[Radio, Radio] | None = None, user: int = 0) -> tuple[LinkImpairment, LinkImpairment]:
+        """Fresh (up, down) models, each with its handovers; with ``radios``, on those (up, down) radios shared
+        with other links, as their user ``user`` (a fleet on one radio: no handovers)."""
+        if radios is not None:
+            return (LinkImpairment(self.up, "up", radio=radios[0], user=user),
+                    LinkImpairment(self.down, "down", radio=radios[1], user=user))
         return (LinkImpairment(self.up, "up", tuple((t, u) for t, u, _ in self.handovers)),
                 LinkImpairment(self.down, "down", tuple((t, d) for t, _, d in self.handovers)))
 
@@ -175,12 +181,14 @@ def link_from_table(data: Mapping[str, Any], source: str, seed: int = 0,
     age of the newest state), and ``profile`` (a named link profile the table is laid over).
     ``[link.up]`` and ``[link.down]`` override per direction. ``seed`` defaults to the mission's
     seed; the two directions always draw different streams. A ``trace`` file is read here; with
-    ``duration_s`` (the mission's, s) one shorter than it is refused unless it loops.
+    ``duration_s`` (the mission's, s) one shorter than it is refused unless it loops. ``shared = true``: a
+    fleet's vehicles behind one radio (:mod:`bridge.link.radio`; one vehicle: its own link, the same flight).
     """
     t = Table(data, source, "link")
     profile = t.string("profile", "")
     if profile:
         return _with_profile(profile, data, source, seed, duration_s)
+    shared = t.boolean("shared", False)
     both = _direction(t, _defaults(seed))
     g = GuardConfig()
     compensation = t.string("compensation", g.compensation, choices=COMPENSATIONS)
@@ -202,7 +210,7 @@ def link_from_table(data: Mapping[str, Any], source: str, seed: int = 0,
     t.done()
     guard = GuardConfig(stale_s=stale_ms / 1000.0, stop_s=stop_ms / 1000.0, compensation=compensation,
                         lag_s=lag_ms / 1000.0)
-    return LinkSettings(dirs["up"], dirs["down"], guard)
+    return LinkSettings(dirs["up"], dirs["down"], guard, shared=shared)
 
 
 def _with_profile(name: str, data: Mapping[str, Any], source: str, seed: int,
@@ -213,6 +221,9 @@ def _with_profile(name: str, data: Mapping[str, Any], source: str, seed: int,
         prof = load_link_profile(name)
     except ConfigError as exc:
         raise ConfigError(f"{source}: link.profile: {exc}") from None
+    if "shared" in prof.link:
+        raise ConfigError(f"{prof.path}: link.shared: a profile describes one radio; whether a fleet shares it is "
+                          f"the mission's ([link] shared) or --shared-link's")
     link_from_table(prof.link, str(prof.path), seed)
     over = {k: v for k, v in data.items() if k != "profile"}
     return link_from_table(merge_link_tables(prof.link, over), source, seed, duration_s)

@@ -22,30 +22,33 @@ import numpy as np
 
 from bridge.record.metrics import errors, ripple_rms  # ripple_rms lives with the other metrics
 from bridge.record.runlog import LineWriter, Run
+from bridge.swarm import SEVERITY, FleetRun
 from bridge.sweep.classes import Classes, classify
 from bridge.sweep.grid import AXES, Cell
 from params import ConfigError, check_depth, read_regular_file
 
 COLUMNS = (
     "controller", "rate_hz", "delay_ms", "jitter_ms", "loss_pct", "burst_len", "estimator", "noise", "wind_mps",
-    "turbulence", "discretization", "seed",
+    "turbulence", "discretization", "vehicles", "seed",
     "rms", "max", "settling_s", "tv_u2", "ripple_u2", "outcome", "class",
-    "up_sent", "up_lost", "down_sent", "down_lost", "flown_s", "error",
+    "up_sent", "up_lost", "down_sent", "down_lost", "flown_s", "worst_vehicle", "closest_m", "error",
 )
+FLEET_COLUMNS = ("vehicles", "worst_vehicle", "closest_m")  # since issue 28: a cell of several vehicles (a fleet)
 
 
-# cells.csv before the vehicle's axes (issue 12), before the air's (issue 27) and before the discretization's (issue
-# 24): read (bsst report) with the values its sweep.json's mission flew, never resumed (bridge.sweep.campaign refuses
-# it, naming the file)
-LEGACY_COLUMNS = tuple(c for c in COLUMNS
+# cells.csv before the vehicle's axes (issue 12), before the air's (issue 27), before the discretization's (issue
+# 24) and before fleets (issue 28): read (bsst report) with the values its sweep.json's mission flew (one vehicle),
+# never resumed (bridge.sweep.campaign refuses it, naming the file)
+_SINGLE = tuple(c for c in COLUMNS if c not in FLEET_COLUMNS)
+LEGACY_COLUMNS = tuple(c for c in _SINGLE
                        if c not in ("estimator", "noise", "wind_mps", "turbulence", "discretization"))
-WEATHERLESS_COLUMNS = tuple(c for c in COLUMNS if c not in ("wind_mps", "turbulence", "discretization"))
+WEATHERLESS_COLUMNS = tuple(c for c in _SINGLE if c not in ("wind_mps", "turbulence", "discretization"))
 LEGACY_LAYOUTS = (LEGACY_COLUMNS, WEATHERLESS_COLUMNS,
-                  tuple(c for c in COLUMNS if c not in ("estimator", "noise", "discretization")),
-                  tuple(c for c in COLUMNS if c != "discretization"))
+                  tuple(c for c in _SINGLE if c not in ("estimator", "noise", "discretization")),
+                  tuple(c for c in _SINGLE if c != "discretization"), _SINGLE)
 
 
-INT_COLUMNS = ("seed", "up_sent", "up_lost", "down_sent", "down_lost")
+INT_COLUMNS = ("vehicles", "seed", "up_sent", "up_lost", "down_sent", "down_lost", "worst_vehicle")
 
 
 STR_COLUMNS = ("controller", "estimator", "turbulence", "discretization", "outcome", "class", "error")
@@ -65,7 +68,8 @@ MISSION_HASH = "mission_toml_sha256"  # sweep.json: the hash of the mission.toml
 
 
 def row_from_run(cell: Cell, run: Run) -> dict[str, Any]:
-    """A ``cells.csv`` row from a finished run (without ``class``)."""
+    """A ``cells.csv`` row from a finished run (without ``class``, and without a fleet's ``worst_vehicle`` and
+    ``closest_m``: empty for one vehicle, as in a batch row)."""
     s = run.summary
     tr = run.trace
     t = tr["t"]
@@ -96,6 +100,37 @@ def row_from_run(cell: Cell, run: Run) -> dict[str, Any]:
         # a law that failed in flight measured nothing: the row says why, as a cell that could not be flown does
         "error": " ".join(str(s.get("ended_by", {}).get("how", "")).split())[:300] if s["outcome"] in FAILED else "",
     }
+
+
+WORST_OF = ("rms", "max", "settling_s", "tv_u2", "ripple_u2")  # a fleet's row: the largest of its vehicles'
+
+
+def row_from_fleet(cell: Cell, run: FleetRun) -> dict[str, Any]:
+    """A ``cells.csv`` row from a fleet's flight (without ``class``): each figure of :data:`WORST_OF` the worst
+    vehicle's (the largest any vehicle flew), the fleet's ``outcome`` (its worst vehicle's), the packets of every
+    vehicle's link summed, ``worst_vehicle`` the id of the vehicle with the worst outcome and then the largest RMS,
+    and ``closest_m`` the closest approach between any two rotor discs (m)."""
+    rows = [row_from_run(cell, r) for r in run.runs]
+    ids = [v["id"] for v in run.summary["vehicles"]]
+    rank = {o: i for i, o in enumerate(SEVERITY)}
+    outcomes = [v["outcome"] for v in run.summary["vehicles"]]  # a contact made it "collision" for both
+
+    def badness(i: int) -> tuple[int, float]:
+        rms = rows[i]["rms"]
+        return rank.get(outcomes[i], len(SEVERITY)), math.inf if rms is None else rms
+
+    worst = max(range(len(rows)), key=badness)
+    out = dict(rows[worst])
+    for c in WORST_OF:
+        values = [r[c] for r in rows if r[c] is not None]
+        out[c] = max(values) if values else None
+    for c in ("up_sent", "up_lost", "down_sent", "down_lost"):
+        out[c] = sum(r[c] for r in rows)
+    out["flown_s"] = max((r["flown_s"] for r in rows if r["flown_s"] is not None), default=None)
+    errors = [f"vehicle {i}: {r['error']}" for i, r in zip(ids, rows) if r["error"]]
+    out.update(outcome=run.summary["outcome"], worst_vehicle=ids[worst],
+               closest_m=run.summary["separation"]["closest_m"], error=" ".join(errors)[:300])
+    return out
 
 
 def error_row(cell: Cell, why: str) -> dict[str, Any]:

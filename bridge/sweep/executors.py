@@ -32,8 +32,9 @@ from bridge.loop import fly
 from bridge.nodes.process import die_with_parent
 from bridge.record.runlog import Run
 from bridge.session import instance_slot, sitl
-from bridge.sweep.cells import error_row, row_from_run
-from bridge.sweep.grid import AXES, Cell, cell_flight, cell_overrides
+from bridge.swarm import simulate as simulate_fleet
+from bridge.sweep.cells import error_row, row_from_fleet, row_from_run
+from bridge.sweep.grid import AXES, FLEET_FORMATION, Cell, cell_flight, cell_overrides
 from missions import Mission
 from params import ConfigError
 
@@ -45,6 +46,10 @@ def run_cell(mission: Mission, cell: Cell, mode: str = "offline") -> dict[str, A
     """
     _idle.clear()
     try:
+        if cell.vehicles > 1:  # a fleet, offline (Sweep refuses lockstep fleets): one row, its worst vehicle's
+            fleet = simulate_fleet(mission, vehicles=cell.vehicles, formation=FLEET_FORMATION,
+                                   overrides=cell_overrides(cell), plots=False)
+            return row_from_fleet(cell, fleet)  # type: ignore[arg-type]
         flight = cell_flight(mission, cell)
         run = _fly_lockstep(flight.mission) if mode == "lockstep" else fly(flight, plots=False)
         return row_from_run(cell, run)
@@ -307,7 +312,10 @@ def engine_for(mission: Mission, todo: Sequence[Cell], mode: str, engine: str,
         return "process", "asked for"
     from bridge.batch import batch_problem  # numba's import (~0.3 s): only where cells are to be flown
 
+    fleets = sorted({c.vehicles for c in todo if c.vehicles > 1})
     why = "lockstep cells fly as SITL sessions" if mode == "lockstep" else (
+        f"cells of {', '.join(map(str, fleets))} vehicles (--vehicles) fly a fleet in one world, which the batch "
+        "engine does not" if fleets else
         batch_problem(mission, [cell_overrides(c) for c in todo]) if todo else None)
     if why is not None:
         if engine == "batch":

@@ -3,7 +3,8 @@
 In:  a mission and a :class:`Grid` (lists of values per axis: law, control rate Hz, one-way
      delay ms, jitter ms, loss %, mean loss-burst length in packets, the vehicle's estimator kind,
      the noise scale of its sensor set (x every sigma), the steady wind m/s, the turbulence level, how ``bsst``
-     steps its super-twisting step (explicit or implicit); seeds)
+     steps its super-twisting step (explicit or implicit), the number of vehicles flown together (a fleet in a
+     ``line:2`` formation, docs/swarm.md); seeds)
 Out: the :class:`Cell` list in grid order, and for each cell the overrides that
      :func:`bridge.core.flight.prepare` (the one path from a mission to its parts) applies
 
@@ -25,6 +26,7 @@ from bridge.autopilot.estimator import ESTIMATOR_KINDS
 from bridge.core.flight import Flight, Overrides, prepare
 from bridge.link.model import DIRECTIONS, NUMBER_RANGES
 from missions import MISSION_RANGES, Mission
+from missions.fleet import FLEET_RANGES
 from missions.mission import DEFAULT_DISCRETIZATION, DISCRETIZATIONS, law_spec_problem
 from params import ConfigError
 from plant.profiles import NOISE_SCALE_RANGE
@@ -34,7 +36,9 @@ from plant.wind import TURBULENCE, WIND_RANGES
 # Grid axes, in the order of the product (the last varies fastest; seeds vary faster still). The vehicle's
 # axes come last, so that a grid without them keeps the order (and cells.csv its first columns) it had.
 AXES = ("controller", "rate_hz", "delay_ms", "jitter_ms", "loss_pct", "burst_len", "estimator", "noise", "wind_mps",
-        "turbulence", "discretization")
+        "turbulence", "discretization", "vehicles")
+INT_AXES = ("vehicles",)  # whole numbers: a fleet's size (1: the mission's one vehicle, as without the axis)
+FLEET_FORMATION = "line:2"  # how a cell of several vehicles lays them out (bridge.swarm; docs/campaigns.md)
 
 
 LINK_AXES = ("delay_ms", "jitter_ms", "loss_pct", "burst_len")
@@ -46,7 +50,7 @@ NAME_AXES = ("controller", "estimator", "turbulence", "discretization")  # axes 
 
 SHORT = {"controller": "controller", "rate_hz": "rate", "delay_ms": "delay", "jitter_ms": "jitter",
          "loss_pct": "loss", "burst_len": "burst", "estimator": "estimator", "noise": "noise", "wind_mps": "wind",
-         "turbulence": "turbulence", "discretization": "discretization"}
+         "turbulence": "turbulence", "discretization": "discretization", "vehicles": "vehicles"}
 # Value of a link axis when neither the sweep nor the mission's [link.up] sets it.
 
 
@@ -55,7 +59,7 @@ LINK_DEFAULTS = {"delay_ms": 0.0, "jitter_ms": 0.0, "loss_pct": 0.0, "burst_len"
 
 
 RANGES = {"rate_hz": MISSION_RANGES["rate_hz"], **{a: NUMBER_RANGES[a] for a in LINK_AXES}, "noise": NOISE_SCALE_RANGE,
-          "wind_mps": WIND_RANGES["speed_mps"]}
+          "wind_mps": WIND_RANGES["speed_mps"], "vehicles": FLEET_RANGES["vehicles"]}
 
 
 NAME_CHOICES = {"estimator": ESTIMATOR_KINDS, "turbulence": TURBULENCE, "discretization": DISCRETIZATIONS}
@@ -76,6 +80,8 @@ class Grid:
     ``wind_mps``: steady wind speeds (m/s, from the mission's ``[wind] from_deg``); ``turbulence``: Dryden
     levels (``none``, ``light``, ``moderate``, ``severe``). ``discretization``: how ``bsst`` steps its
     super-twisting step (``explicit``, ``implicit``; docs/law.md; the other laws fly the same under both).
+    ``vehicles``: fleet sizes (whole numbers, 1-64), each flown offline in a ``line:2`` formation
+    (:data:`FLEET_FORMATION`; 1: the mission as it flies alone).
     ``seeds``: how many seeds per grid point (mission seed, +1, ...) or the seeds themselves.
     """
 
@@ -90,6 +96,7 @@ class Grid:
     wind_mps: tuple[float, ...] = ()
     turbulence: tuple[str, ...] = ()
     discretization: tuple[str, ...] = ()
+    vehicles: tuple[int, ...] = ()
     seeds: int | tuple[int, ...] = 1
 
     def __post_init__(self) -> None:
@@ -98,6 +105,10 @@ class Grid:
             if isinstance(values, (str, int, float)):
                 values = (values,)
             values = tuple(values) if name in NAME_AXES else tuple(float(v) for v in values)
+            if name in INT_AXES:
+                if not all(float(v).is_integer() for v in values):
+                    raise ConfigError(f"grid.{name}: must be whole numbers, got {list(values)}")
+                values = tuple(int(v) for v in values)
             object.__setattr__(self, name, values)
             if len(set(values)) != len(values):
                 raise ConfigError(f"grid.{name}: repeated value in {list(values)}")
@@ -177,13 +188,14 @@ class Cell:
     turbulence: str = "none"
     weather: tuple[str, ...] = ()
     discretization: str = DEFAULT_DISCRETIZATION  # always laid over the mission, as the law and the rate are
+    vehicles: int = 1  # how many vehicles fly the cell together (more than 1: a fleet, FLEET_FORMATION)
 
     def key(self) -> tuple[Any, ...]:
         """What identifies the cell's row in ``cells.csv``."""
         return tuple(getattr(self, a) for a in (*AXES, "seed"))
 
     def label(self) -> str:
-        return " ".join(f"{a}={getattr(self, a)}" if a in NAME_AXES else f"{a}={getattr(self, a):g}"
+        return " ".join(f"{a}={getattr(self, a)}" if a in NAME_AXES + INT_AXES else f"{a}={getattr(self, a):g}"
                         for a in (*AXES, "seed"))
 
 
@@ -196,6 +208,8 @@ def mission_value(mission: Mission, axis: str) -> Any:
         return float(mission.rate_hz)
     if axis == "discretization":
         return mission.discretization
+    if axis == "vehicles":
+        return len(mission.vehicles) or 1  # (a mission with [[vehicles]] is refused where a cell is built)
     if axis == "estimator":
         kind = mission.estimator.get("kind", "truth")
         return kind if isinstance(kind, str) else "truth"  # a bad kind: prepare() names it when the cell is built

@@ -96,7 +96,8 @@ def _label(axis: str) -> str:
 def legacy_values(meta: Mapping[str, Any]) -> dict[str, Any]:
     """What an older sweep's cells flew on the vehicle's and the air's axes and the discretization (its
     ``cells.csv`` has no such columns): its mission's ``[estimator] kind``, ``[sensors] noise_scale``, ``[wind]
-    speed_mps`` and ``turbulence``, ``discretization``, else their defaults (before issue 24: ``explicit``)."""
+    speed_mps`` and ``turbulence``, ``discretization``, else their defaults (before issue 24: ``explicit``); one
+    vehicle (before issue 28), so no worst vehicle and no closest approach."""
     mission = meta.get("mission") if isinstance(meta.get("mission"), Mapping) else {}
     est, sensors, wind = (t if isinstance(t := mission.get(k), Mapping) else {}
                           for k in ("estimator", "sensors", "wind"))
@@ -105,7 +106,8 @@ def legacy_values(meta: Mapping[str, Any]) -> dict[str, Any]:
     d = mission.get("discretization", "explicit")
     return {"estimator": kind if isinstance(kind, str) else "truth", "noise": _number(scale, 1.0),
             "wind_mps": _number(speed, 0.0), "turbulence": level if isinstance(level, str) else "none",
-            "discretization": d if isinstance(d, str) else "explicit"}
+            "discretization": d if isinstance(d, str) else "explicit", "vehicles": 1, "worst_vehicle": None,
+            "closest_m": None}
 
 
 def _number(v: Any, default: float) -> float:

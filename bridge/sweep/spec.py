@@ -18,10 +18,13 @@ from pathlib import Path
 from typing import Any
 
 from bridge.record.runlog import check_trace_steps
+from bridge.swarm import check_fleet_steps, fleet_flights, fleet_mission
 from bridge.sweep.cells import COLUMNS
 from bridge.sweep.classes import Classes
 from bridge.sweep.grid import (
     AXES,
+    FLEET_FORMATION,
+    INT_AXES,
     LINK_AXES,
     MODES,
     NAME_CHOICES,
@@ -31,6 +34,7 @@ from bridge.sweep.grid import (
     Cell,
     Grid,
     cell_flight,
+    cell_overrides,
     cells,
     mission_value,
     noise_problem,
@@ -57,6 +61,9 @@ class Sweep:
     def __post_init__(self) -> None:
         if self.mode not in MODES:
             raise ConfigError(f"mode: must be one of {', '.join(MODES)}; got {self.mode!r}")
+        if self.mode == "lockstep" and any(n > 1 for n in self.grid.vehicles):
+            raise ConfigError("grid.vehicles (--vehicles): cells of several vehicles fly offline only for now; "
+                              "a lockstep fleet (bsst sitl --vehicles) is not a sweep's cell yet: drop --lockstep")
         if self.max_cells is not None and (isinstance(self.max_cells, bool) or not isinstance(self.max_cells, int)
                                            or self.max_cells < 1):
             raise ConfigError(f"max_cells: must be a positive integer, got {self.max_cells!r}")
@@ -113,6 +120,14 @@ class Sweep:
                 check_trace_steps(cell_flight(self.mission, c).mission)  # each rate: its steps within the cap
             except ConfigError as exc:
                 raise ConfigError(f"sweep cell ({c.label()}): {exc}") from None
+        if any(n > 1 for n in self.grid.vehicles):  # the largest fleet laid out: each vehicle inside the envelope
+            n = max(self.grid.vehicles)
+            try:
+                fleet = fleet_mission(self.mission, n, FLEET_FORMATION)
+                assert fleet is not None
+                check_fleet_steps(fleet, fleet_flights(fleet, cell_overrides(_replace_cell(base, vehicles=n))))
+            except ConfigError as exc:
+                raise ConfigError(f"grid.vehicles (--vehicles {n}): {exc}") from None
         why = self.noise_problem()
         if why:
             raise ConfigError(f"grid.noise (--noise): {why}")
@@ -164,7 +179,10 @@ def load_sweep(path: str | Path) -> Sweep:
     axes: dict[str, Any] = {}
     for a in AXES:
         if g.has(a):
-            if a in NAME_CHOICES:  # estimator, turbulence, discretization
+            if a in INT_AXES:
+                lo, hi = RANGES[a]
+                axes[a] = tuple(int(v) for v in _int_list(g, a, int(lo), int(hi)))
+            elif a in NAME_CHOICES:  # estimator, turbulence, discretization
                 axes[a] = tuple(_name_list(g, a, NAME_CHOICES[a]))
             elif a == "controller":
                 v = g.raw(a)
@@ -225,9 +243,9 @@ def _name_list(t: Table, key: str, choices: tuple[str, ...]) -> list[str]:
 def _int_list(t: Table, key: str, lo: int, hi: int) -> list[int]:
     v = t.raw(key)
     if not isinstance(v, list) or not v or not all(isinstance(x, int) and not isinstance(x, bool) for x in v):
-        raise t.error(key, f"expected a count or a non-empty list of integers, got {v!r}")
+        raise t.error(key, f"expected {'a count or ' if key == 'seeds' else ''}a non-empty list of integers, got {v!r}")
     if not all(lo <= x <= hi for x in v) or len(set(v)) != len(v):
-        raise t.error(key, f"seeds must be distinct and in [{lo}, {hi}]")
+        raise t.error(key, f"{'seeds' if key == 'seeds' else 'the values'} must be distinct and in [{lo}, {hi}]")
     return list(v)
 
 
