@@ -19,7 +19,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from bridge.nodes.report import Event, Refused, parse_line
 from bridge.nodes.vehicle.injection import injection
 from bridge.session import instance_slot
-from tests.sitlkit import ENV, Proc
+from tests.sitlkit import ENV, ROOT, Proc
 from tests.test_ground_stations import _mavsdk
 from tests.test_vehicle import _ack, _gcs, _vehicle
 
@@ -228,9 +228,11 @@ def test_sitl_plant_blocks_equal_offline(tmp_path, case):
     link to the LTE profile's at 10 s: the same trace, the model's link statistics and the ``link`` event."""
     mission = tmp_path / "windy.toml"
     mission.write_text(WINDY_X500)
-    args = {"wind-battery": (str(mission),), "crash": ("missions/sine.toml", "--profile", "x500", *ALL_OFF),
-            "flags": ("missions/sine.toml", "--wind", "5:270", "--turbulence", "moderate", "--at", "12:gust:2,3,90"),
-            "handover": ("missions/sine.toml", "--at", "10:link:lte")}[case]
+    sine = tmp_path / "sine15.toml"  # the paper's sine cut to 15 s: past the gust at 12 s and the handover at 10 s
+    sine.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 15.0"))
+    args = {"wind-battery": (str(mission),), "crash": (str(sine), "--profile", "x500", *ALL_OFF),
+            "flags": (str(sine), "--wind", "5:270", "--turbulence", "moderate", "--at", "12:gust:2,3,90"),
+            "handover": (str(sine), "--at", "10:link:lte")}[case]
     codes, summaries = [], []
     for command in ("sim", "sitl"):
         out = tmp_path / command
