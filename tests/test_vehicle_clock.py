@@ -61,7 +61,7 @@ def test_listed_transition_leads_where_the_table_says(state: ClockState, trigger
     assert clock.state is TRANSITIONS[state, trigger]
     if clock.state is not ClockState.ANSWERED:
         assert clock.answer is None  # no answer outlives ANSWERED
-    assert clock.engaged == (clock.state in (ClockState.LOCKSTEP, ClockState.ANSWERED))
+    assert clock.engaged == (clock.state in (ClockState.LOCKSTEP, ClockState.ANSWERED, ClockState.GATED))
     assert clock.halted == (clock.state is ClockState.HALTED)
 
 

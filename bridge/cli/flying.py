@@ -218,6 +218,8 @@ def add_sitl_commands(sub: Any) -> None:
     p.add_argument("--home", type=_home, metavar="LAT,LON,ALT", help="home: degrees, degrees, m AMSL")
     p.add_argument("--await-mission", action="store_true",
                    help="take MISSION_START and AUTO.MISSION: a ground station's mission, flown by the controller")
+    p.add_argument("--gate", metavar="FILE", help="lockstep: step on a fleet's shared clock with the vehicles FILE "
+                                                  "names (bsst sitl --vehicles writes it; docs/swarm.md)")
     add_failsafe_options(p)
     add_param_options(p, schedule=False)  # a change at a mission time is the controller's to send (--param-at)
     add_sensor_options(p)
@@ -240,6 +242,9 @@ def add_sitl_commands(sub: Any) -> None:
                    help="fly only this vehicle (default: the first autopilot heard)")
     p.add_argument("--timeout", type=number_in("--timeout", 0.0, 3600.0, lo_open=True), default=10.0, metavar="S",
                    help="wait this long for the vehicle's heartbeat (default 10 s)")
+    p.add_argument("--start-timeout", type=number_in("--start-timeout", 0.0, 3600.0, lo_open=True), metavar="S",
+                   help="wait this long for the mission's second state (default 2 s, as for any state; a lockstep "
+                        "fleet's first step waits for its slowest vehicle to start)")
     p.add_argument("--await-mission", action="store_true",
                    help="the MISSION file gives the settings only: wait for a ground station to start the vehicle's "
                         "mission, download it and fly it")
@@ -278,6 +283,7 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
     from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, GCS_PORT, LINK_PORT, parse_address  # lazy
     from bridge.mavlink.telemetry import Home  # lazy: start-up time
     from bridge.nodes.vehicle import VehicleConfig, run_vehicle  # lazy: start-up time
+    from bridge.nodes.vehicle.gate import GateConfig  # lazy: start-up time
 
     flight = prepare(args.mission or at_rest(), overrides_from_args(args))
     n = args.instance
@@ -299,7 +305,8 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
     cfg = VehicleConfig(listen, gcs, sysid=args.sysid or own or n + 1, controller_sysid=sysid, controller_compid=compid,
                         clock="realtime" if args.realtime else "lockstep", speed=args.speed,
                         home=Home(*args.home) if args.home else Home(), key=_key(args), controller_from=pin,
-                        await_mission=args.await_mission)
+                        await_mission=args.await_mission,
+                        gate=GateConfig.load(args.gate) if args.gate and not args.realtime else None)
     return run_vehicle(flight, cfg, args.out, args.overwrite)
 
 
@@ -315,7 +322,8 @@ def cmd_controller(args: argparse.Namespace) -> int:
         raise ConfigError(f"--vehicle {args.vehicle!r}: the controller sends to the vehicle (udpout)")
     cfg = OffboardConfig(vehicle, sysid=args.sysid, clock="realtime" if args.realtime else "lockstep",
                          target_sysid=args.target_sysid, connect_timeout_s=args.timeout, key=_key(args),
-                         source_port=args.source_port or 0, await_mission=args.await_mission)
+                         source_port=args.source_port or 0, await_mission=args.await_mission,
+                         start_timeout_s=args.start_timeout)
     return run_controller(flight, cfg, args.out, args.overwrite)
 
 

@@ -11,7 +11,10 @@ time stands still) until a flight engages it; then the state of step k goes out 
 controller's answer is held (``answered``) and step k is flown (``lockstep`` again, step k + 1). A
 controller silent too long, or a mode the vehicle flies itself (HOLD, LAND, TAKEOFF), leaves lockstep for
 the wall clock (``free-running``), which the **realtime** clock is from the start. A diverged plant is
-``halted`` for good. A trigger the table does not list for the state is a bug: :class:`IllegalTransition`.
+``halted`` for good. In a SITL fleet on one shared clock (:mod:`.gate`), step k flown, the vehicle is ``gated``
+until every other vehicle has flown it too; then the state of step k + 1 goes out (``lockstep``), or, touched
+by another vehicle, its flight ends there (``halted``). A trigger the table does not list for the state is a
+bug: :class:`IllegalTransition`.
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ class ClockState(Enum):
     IDLE = "idle"  # lockstep clock, no flight on: time stands still, the state is still shown
     LOCKSTEP = "lockstep"  # a flight on: the state of step k is out, its answer awaited
     ANSWERED = "answered"  # the answer of step k is held: step k is flown next
+    GATED = "gated"  # a fleet's shared clock: step k flown, the others' awaited before the state of k + 1 goes out
     FREE_RUNNING = "free-running"  # physics on the wall clock (realtime; lockstep lost or a ground mode)
     HALTED = "halted"  # diverged: the plant is not stepped any more
 
@@ -43,6 +47,9 @@ class Trigger(Enum):
     GROUND = "ground"  # a ground station's mode, flown by the vehicle's own controller
     DISARM = "disarm"  # disarmed by command: a lockstep flight is over
     DIVERGE = "diverge"  # the plant diverged
+    GATE = "gate"  # a fleet's shared clock: step k flown, wait for every other vehicle to fly it
+    RELEASE = "release"  # every other vehicle has flown step k: the state of k + 1 goes out
+    COLLIDE = "collide"  # another vehicle touched this one at the shared clock's step: the flight is over
 
 
 S, T = ClockState, Trigger
@@ -68,9 +75,15 @@ TRANSITIONS: dict[tuple[ClockState, Trigger], ClockState] = {
     (S.LOCKSTEP, T.DIVERGE): S.HALTED,
     (S.ANSWERED, T.DIVERGE): S.HALTED,
     (S.FREE_RUNNING, T.DIVERGE): S.HALTED,
+    (S.LOCKSTEP, T.GATE): S.GATED,
+    (S.GATED, T.RELEASE): S.LOCKSTEP,
+    (S.GATED, T.ENGAGE): S.GATED,  # OFFBOARD again while gated: the state goes out when the gate opens
+    (S.GATED, T.GROUND): S.FREE_RUNNING,
+    (S.GATED, T.DISARM): S.IDLE,
+    (S.GATED, T.COLLIDE): S.HALTED,
 }
 del S, T
-_ENGAGED = frozenset({ClockState.LOCKSTEP, ClockState.ANSWERED})
+_ENGAGED = frozenset({ClockState.LOCKSTEP, ClockState.ANSWERED, ClockState.GATED})
 
 
 class IllegalTransition(RuntimeError):

@@ -33,7 +33,7 @@ from bridge.mavlink.endpoint import Endpoint
 from bridge.mavlink.modes import MISSION, mode_name, requested_custom_mode, requested_mode
 from bridge.mavlink.receive import FORCE_DISARM, arm_disarm_args, interval_arg, message_id_arg
 from bridge.nodes.vehicle.authority import Authority, attribute
-from bridge.nodes.vehicle.clock import Clock, Trigger
+from bridge.nodes.vehicle.clock import Clock, ClockState, Trigger
 from bridge.nodes.vehicle.injection import injection
 from bridge.nodes.vehicle.mission import MissionManager
 from bridge.nodes.vehicle.streams import HEARTBEAT_S, StatusTexts, StreamTable
@@ -323,7 +323,8 @@ class Commander:
     def _engage_lockstep(self, now: float) -> None:
         """Lockstep from now: the state of step k goes out and its target is awaited."""
         self.clock.engage(now, self.ports.step() * self.substeps)
-        self.ports.state_out(now)
+        if self.clock.state is not ClockState.GATED:  # (gated: it goes out when the fleet's gate opens)
+            self.ports.state_out(now)
 
     # -- arming ----------------------------------------------------------------------------------------
     def arm_disarm(self, p1: float, p2: float, by: Sender | None = None) -> int:
@@ -364,6 +365,13 @@ class Commander:
         self.sim.event("lockstep", f"controller silent for {self.cfg.lost_after_s:g} s of wall time: "
                                    "leaving lockstep, running on the wall clock")
         self.clock.run_free(Trigger.LOSE, now, self.ports.step() * self.substeps)
+
+    def collided(self, why: str) -> None:
+        """A fleet's shared clock: another vehicle touched this one (``why``); the flight ends there, disarmed,
+        the clock halted, as offline (``collision``)."""
+        self.sim.event("collision", why)
+        self.sim.disarm(f"collision: {why}")
+        self.clock.fire(Trigger.COLLIDE)
 
     def diverged(self) -> bool:
         """After a control period: whether the plant ended the flight (diverged, or crashed while armed:

@@ -27,17 +27,17 @@ from bridge.core.flight import Flight
 from bridge.core.wire import command_from_wire
 from bridge.link.ends import VehicleEnd
 from bridge.mavlink import telemetry as tm
-from bridge.mavlink.endpoint import Endpoint, Tlog, wait
+from bridge.mavlink.endpoint import Tlog, wait
 from bridge.mavlink.modes import MISSION
 from bridge.mavlink.receive import Rejections
-from bridge.mavlink.signing import Signing
 from bridge.nodes.process import on_stop_signals, report_printer
 from bridge.nodes.report import Ready, Refused, Report, Stats
 from bridge.nodes.vehicle.announcer import Announcer
 from bridge.nodes.vehicle.authority import Authority
 from bridge.nodes.vehicle.clock import Answer, Clock, ClockState, Trigger
 from bridge.nodes.vehicle.commander import Commander, CommanderPorts
-from bridge.nodes.vehicle.config import CLOCKS, VehicleConfig
+from bridge.nodes.vehicle.config import CLOCKS, VehicleConfig, open_links
+from bridge.nodes.vehicle.gate import Gate
 from bridge.nodes.vehicle.mission import MissionManager
 from bridge.nodes.vehicle.paramservice import ParamService
 from bridge.nodes.vehicle.receiver import Receiver, ReceiverPorts, Refusals
@@ -86,7 +86,8 @@ class Vehicle:
         self.rejected = Rejections()
         self._reject = Refusals(self.rejected)
         self.authority = Authority(cfg)
-        self._open_links(cfg)
+        self.link, self.gcs = open_links(cfg, self.tlog, self.rejected)
+        self.endpoints = [self.link] + ([self.gcs] if self.gcs is not None else [])
         self.rows = Rows(out / "vehicle.csv", self.rate) if out is not None else None
         self.k = 0  # control step of the plant's state: t_k = k / rate_hz
         self.stopping = False
@@ -127,21 +128,10 @@ class Vehicle:
                                                clock_ns=self._clock_ns))
         self.announcer.charged = self.receiver.charged
         self._handle = self.receiver.handle  # (an attribute: one call less on the lockstep's hot path)
-
-    def _open_links(self, cfg: VehicleConfig) -> None:
-        """The controller link (``--listen``) and the GCS link (``--gcs``, if any), signed with ``cfg.key``."""
-        # one replay table for both links: a signed frame replayed from one link onto the other is refused
-        replay: dict[tuple[int, int, int], int] = {}
-        sign = ((lambda link_id: Signing(cfg.key, link_id, replay)) if cfg.key is not None
-                else (lambda link_id: None))
-        self.link = Endpoint(cfg.listen, sysid=cfg.sysid, compid=cfg.compid, tlog=self.tlog, name="--listen",
-                             signing=sign(0), rejected=self.rejected, priority=True)
-        self.link.follow = False  # ODOMETRY goes to the flight's controller only (see Receiver.handle)
-        # a ground station is charged like any source, and its refusals are not the controller's
-        self.gcs = (Endpoint(cfg.gcs, sysid=cfg.sysid, compid=cfg.compid, tlog=self.tlog, name="--gcs",
-                             signing=sign(1), rejected=self.rejected, exempt_peer=False)
-                    if cfg.gcs is not None else None)
-        self.endpoints = [self.link] + ([self.gcs] if self.gcs is not None else [])
+        # a lockstep fleet's shared clock (bsst sitl --vehicles): step by step with the other vehicles
+        self.gate = (Gate(cfg.gate, self.clock, lambda: (self.plant.state[0], self.plant.state[2],
+                                                          self.plant.state[4]), self.rate)
+                     if cfg.gate is not None and cfg.clock == "lockstep" else None)
 
     # -- public --------------------------------------------------------------------------
     def stop(self) -> None:
@@ -162,6 +152,9 @@ class Vehicle:
                     self._freerun_period()
                 elif state in _ENGAGED:
                     self._lockstep_wait()
+                elif state is ClockState.GATED:
+                    self.gate.serve(self.endpoints, self._next_house, self._handle,  # type: ignore[union-attr]
+                                    self.commander.collided, self._send_odometry)
                 else:  # idle, halted
                     self._idle()
                 if time.monotonic() >= self._next_house:
@@ -179,6 +172,8 @@ class Vehicle:
             self.tlog.close()
         for ep in self.endpoints:
             ep.close()
+        if self.gate is not None:
+            self.gate.close()
 
     def report_stats(self) -> None:
         """The stats report: what was accepted, refused, sent and received, and the up-link model's."""
@@ -189,7 +184,8 @@ class Vehicle:
             "answered_again": self.targets.answered_again, "odometry_steps": self.odometry.steps.ranges,
             "kernel_drops": self.link.kernel_drops(),
             "up": self.vend.up.stats.summary() if self.cfg.clock == "lockstep" else None,
-            "plant": self.commander.plant_at_end or plant_blocks(self.plant)}))  # wind, battery, impact, as offline
+            "plant": self.commander.plant_at_end or plant_blocks(self.plant),
+            **({"gate": self.gate.stats()} if self.gate is not None else {})}))  # wind, battery, impact, as offline
 
     def _report(self, report: Report) -> None:
         """Every report of the vehicle goes out here."""
@@ -296,7 +292,9 @@ class Vehicle:
         self.k = k + 1
         if self.cfg.speed is not None:
             self._wait_until(self.pace.due(self.k * self.substeps))
-        if self._after_step():
+        alive = self._after_step()
+        gated = self.gate is not None and self.gate.after_step(self.k, ending, alive)
+        if alive and not gated:
             self._send_odometry(time.monotonic())
         # off the critical path: the controller is computing step k+1 meanwhile
         if self.rows is not None:
@@ -307,6 +305,8 @@ class Vehicle:
     def _freerun_period(self) -> None:
         """One control period on the wall clock: state out, row, physics steps on schedule."""
         k = self.k
+        if self.gate is not None:
+            self.gate.over(k)
         n0 = k * self.substeps
         if not self._wait_until(self.pace.due(n0)):
             return
@@ -348,6 +348,8 @@ class Vehicle:
     # -- idle -----------------------------------------------------------------------------------
     def _idle(self) -> None:
         """Lockstep and disarmed (or halted): time stands still; serve the links."""
+        if self.gate is not None:
+            self.gate.over(self.k)
         deadline = min(self._next_house, self._idle_odo_at)
         for ep, m, addr in wait(self.endpoints, deadline):
             self._handle(ep, m, addr)

@@ -1,0 +1,188 @@
+"""Covers bridge.nodes.vehicle.gate, bridge.session.fleet and bridge.swarm: a lockstep SITL fleet's shared step clock.
+
+The gate alone (real UDP sockets on 127.0.0.1, in this process): no vehicle passes step k before every other one
+has flown it, a contact is judged as the offline loop judges it (its text, its pair), a vehicle that left stays an
+obstacle where it said, one silent too long is taken as gone; the trace judge with where each vehicle stayed.
+Whole fleets (real ``bsst vehicle`` and ``bsst controller`` processes, free ports): two runs of one fleet write
+the same ``trace.csv`` bytes, and two vehicles that touch both end ``collision`` at the offline loop's step, their
+traces the offline ones (≤ 1e-4 m), the separation and its closest approaches the offline fleet's.
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bridge.cli.flying import report_fleet
+from bridge.nodes.vehicle import gate as gatemod
+from bridge.nodes.vehicle.clock import Clock, ClockState, Trigger
+from bridge.nodes.vehicle.gate import Gate, GateConfig
+from bridge.swarm import CONTINUED, FleetRun, Watch, judge_traces, simulate, sitl
+from missions import MISSION_DIR
+from params import ConfigError
+from tests.waiting import wait_for
+
+pytestmark = pytest.mark.process  # starts processes, opens sockets
+
+ROOT = Path(__file__).resolve().parents[1]
+TOUCH = ROOT / "examples" / "swarm-touch.toml"
+RATE = 250.0
+
+
+def free_ports(n: int) -> tuple[int, ...]:
+    socks = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(n)]
+    for s in socks:
+        s.bind(("127.0.0.1", 0))
+    ports = tuple(s.getsockname()[1] for s in socks)
+    for s in socks:
+        s.close()
+    return ports
+
+
+def gates(n: int, radii: float = 0.3) -> list[tuple[Gate, Clock, list]]:
+    """n gates of one fleet, each with a lockstep clock engaged and a position the test moves."""
+    ports, out = free_ports(n), []
+    for i in range(n):
+        clock = Clock(False, 1000.0, 1.0, 0.0)
+        clock.fire(Trigger.ENGAGE)
+        where = [(0.0, 2.0 * i, 1.0)]
+        cfg = GateConfig(i, tuple(range(1, n + 1)), (radii,) * n, ports)
+        out.append((Gate(cfg, clock, lambda w=where: w[0], RATE), clock, where))
+    return out
+
+
+def verdict_when_complete(g: Gate) -> str:
+    def done() -> bool:
+        g.poll()
+        return g.complete()
+    wait_for(done, 10, "every other vehicle's word at the gate")
+    v = g.verdict(RATE)
+    assert v is not None
+    return v
+
+
+def test_no_vehicle_passes_a_step_before_every_other_has_flown_it() -> None:
+    (a, ca, _), (b, cb, _), (c, cc, _) = fleet = gates(3)
+    try:
+        assert a.after_step(1, ending=False, alive=True) and ca.state is ClockState.GATED
+        assert b.after_step(1, ending=False, alive=True)
+        a.poll()
+        assert not a.complete() and a.verdict(RATE) is None  # vehicle 3 has not flown step 1
+        assert c.after_step(1, ending=False, alive=True)
+        assert [verdict_when_complete(g) for g, _, _ in fleet] == ["", "", ""]
+        # one step ahead: a flies step 2 before b and c have taken step 1's word; nothing is lost or mixed up
+        a.clock.fire(Trigger.RELEASE)
+        assert a.after_step(2, ending=False, alive=True)
+        a.poll()
+        assert a.verdict(RATE) is None
+        for g, clock in ((b, cb), (c, cc)):
+            clock.fire(Trigger.RELEASE)
+            assert g.after_step(2, ending=False, alive=True)
+        assert [verdict_when_complete(g) for g, _, _ in fleet] == ["", "", ""]
+        assert a.stats()["steps"] == 2 and a.stats()["contact"] is None
+    finally:
+        for g, _, _ in fleet:
+            g.close()
+
+
+def test_a_contact_is_judged_as_the_offline_loop_judges_it_and_a_vehicle_gone_stays_an_obstacle() -> None:
+    (a, _, wa), (b, _, wb), (c, _, wc) = fleet = gates(3)
+    try:
+        wa[0], wb[0], wc[0] = (0.0, 0.0, 1.0), (0.5, 0.0, 1.0), (0.0, 5.0, 1.0)  # 1 and 2 overlap; 3 clear
+        for g, _, _ in fleet:
+            assert g.after_step(7, ending=False, alive=True)
+        told = [verdict_when_complete(g) for g, _, _ in fleet]
+        watch = Watch([1, 2, 3], [0.3] * 3, 0.5)
+        offline = {i: why for x, y, why in watch.check(7 / RATE, [wa[0], wb[0], wc[0]]) for i in (x, y)}
+        assert told == [offline[0], offline[1], ""] and "touched at t=0.028 s" in told[0]
+        assert a.stats()["contact"]["with"] == 2 and b.stats()["contact"]["with"] == 1
+        a.leave()
+        b.leave()
+        c.clock.fire(Trigger.RELEASE)
+        wc[0] = (0.0, 0.3, 1.0)  # 3 flies into where 1 stayed
+        assert c.after_step(8, ending=False, alive=True)
+        assert "vehicles 2 and 3 touched" in verdict_when_complete(c)  # the last pair in id order, as offline
+        assert a.stats()["left"] == {"step": 7, "position": [0.0, 0.0, 1.0]}
+    finally:
+        for g, _, _ in fleet:
+            g.close()
+
+
+def test_a_vehicle_silent_too_long_is_taken_as_gone_and_said(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(gatemod, "SILENT_S", 0.2)
+    (a, _, _), (b, _, _) = gates(2)
+    try:
+        b.close()
+        assert a.after_step(1, ending=False, alive=True)
+        wait_for(lambda: a.verdict(RATE) is not None, 10, "vehicle 2 taken as gone")
+        assert a.stats()["dropped"] and "vehicle 2 silent" in a.stats()["dropped"][0]
+    finally:
+        a.close()
+
+
+def test_a_bad_gate_file_is_named(tmp_path: Path) -> None:
+    f = tmp_path / "gate.json"
+    f.write_text('{"index": 3, "ids": [1, 2], "radii": [0.3, 0.3], "ports": [5000, 5001]}')
+    with pytest.raises(ConfigError, match=r"--gate .*gate.json: expected index 0..N-1"):
+        GateConfig.load(f)
+    f.write_text("nope")
+    with pytest.raises(ConfigError, match="not a fleet gate file"):
+        GateConfig.load(f)
+
+
+def test_the_trace_judge_keeps_each_vehicle_where_it_stayed() -> None:
+    """Where each stayed (the shared clock's word) is the world after the last row's step: a contact there is found
+    at that step, as the offline loop finds it; without it (real time) the flights are said to have gone on."""
+    one = {"t": np.array([0.0, 0.004]), "x": np.zeros(2), "y": np.zeros(2), "z": np.ones(2)}
+    two = {**one, "y": np.full(2, 1.0)}
+    watch = Watch([1, 2], [0.3, 0.3], 0.5)
+    assert judge_traces(watch, [one, two], RATE) == {}
+    found = judge_traces(Watch([1, 2], [0.3, 0.3], 0.5), [one, two], RATE, [(0.0, 0.0, 1.0), (0.0, 0.5, 1.0)])
+    assert found[0]["step"] == 2 and found[1]["with"] == 1 and "continued" not in found[0]
+    far = {**one, "y": np.array([1.0, 0.5])}
+    assert judge_traces(Watch([1, 2], [0.3, 0.3], 0.5), [one, far], RATE)[0]["continued"] == CONTINUED
+
+
+# -- whole fleets ------------------------------------------------------------------------------------------
+def short_sine(tmp_path: Path, seconds: float = 1.0) -> Path:
+    text = (MISSION_DIR / "sine.toml").read_text().replace("duration_s = 30.0", f"duration_s = {seconds}")
+    f = tmp_path / "short.toml"
+    f.write_text(text)
+    return f
+
+
+def test_two_flights_of_one_lockstep_fleet_write_the_same_traces(tmp_path: Path) -> None:
+    mission = short_sine(tmp_path)
+    runs = [sitl(mission, vehicles=3, formation="line:2", instance=None, out=tmp_path / f"run{n}", plots=False)
+            for n in (1, 2)]
+    for run in runs:
+        assert isinstance(run, FleetRun) and run.outcome == "completed", run.summary
+        assert run.summary["sitl"]["shared_clock"] is True
+        gate = run.summary["sitl"]["gate"]
+        assert all(g["steps"] == 250 and g["dropped"] == [] and g["left"]["step"] == 250 for g in gate.values())
+    for i in (1, 2, 3):
+        a, b = ((tmp_path / f"run{n}" / f"vehicle-{i}" / "trace.csv").read_bytes() for n in (1, 2))
+        assert a == b and a.count(b"\n") == 251
+
+
+def test_a_touch_ends_both_flights_at_the_offline_step_as_offline(tmp_path: Path) -> None:
+    run = sitl(TOUCH, instance=None, out=tmp_path / "touch", plots=False)
+    off = simulate(TOUCH, plots=False)
+    assert isinstance(run, FleetRun) and run.outcome == "collision" == off.outcome
+    step = len(off.runs[0].trace["t"])  # the offline flights end at the step they touch
+    for v, other, a, b in zip(run.summary["vehicles"], (2, 1), run.runs, off.runs):
+        assert v["outcome"] == "collision" and not v["ok"]
+        assert v["contact"]["step"] == step and v["contact"]["with"] == other and "continued" not in v["contact"]
+        assert len(a.trace["t"]) == step == len(b.trace["t"])  # the flight ended there
+        assert max(float(np.max(np.abs(a.trace[c] - b.trace[c]))) for c in ("x", "y", "z")) <= 1e-4
+        assert a.summary["outcome"] == "collision" and a.summary["ended_by"]["who"] == "plant"
+    assert "note" not in run.summary["sitl"]
+    assert run.summary["separation"]["pairs"] == off.summary["separation"]["pairs"]
+    assert run.summary["policies"][0] == off.summary["policies"][0] and not run.summary["policies"][0]["ok"]
+    own = json.loads((tmp_path / "touch" / "vehicle-1" / "summary.json").read_text())
+    assert own["outcome"] == "collision" and own["sitl"]["gate"]["contact"]["step"] == step
+    assert report_fleet(run, "sitl") == 1
