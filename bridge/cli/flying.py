@@ -220,6 +220,7 @@ def add_sitl_commands(sub: Any) -> None:
                    help="take MISSION_START and AUTO.MISSION: a ground station's mission, flown by the controller")
     p.add_argument("--gate", metavar="FILE", help="lockstep: step on a fleet's shared clock with the vehicles FILE "
                                                   "names (bsst sitl --vehicles writes it; docs/swarm.md)")
+    _spin_option(p)
     add_failsafe_options(p)
     add_param_options(p, schedule=False)  # a change at a mission time is the controller's to send (--param-at)
     add_sensor_options(p)
@@ -245,6 +246,7 @@ def add_sitl_commands(sub: Any) -> None:
     p.add_argument("--start-timeout", type=number_in("--start-timeout", 0.0, 3600.0, lo_open=True), metavar="S",
                    help="wait this long for the mission's second state (default 2 s, as for any state; a lockstep "
                         "fleet's first step waits for its slowest vehicle to start)")
+    _spin_option(p)
     p.add_argument("--await-mission", action="store_true",
                    help="the MISSION file gives the settings only: wait for a ground station to start the vehicle's "
                         "mission, download it and fly it")
@@ -306,7 +308,8 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
                         clock="realtime" if args.realtime else "lockstep", speed=args.speed,
                         home=Home(*args.home) if args.home else Home(), key=_key(args), controller_from=pin,
                         await_mission=args.await_mission,
-                        gate=GateConfig.load(args.gate) if args.gate and not args.realtime else None)
+                        gate=GateConfig.load(args.gate) if args.gate and not args.realtime else None,
+                        **({"spin_s": args.spin} if args.spin is not None else {}))
     return run_vehicle(flight, cfg, args.out, args.overwrite)
 
 
@@ -323,9 +326,15 @@ def cmd_controller(args: argparse.Namespace) -> int:
     cfg = OffboardConfig(vehicle, sysid=args.sysid, clock="realtime" if args.realtime else "lockstep",
                          target_sysid=args.target_sysid, connect_timeout_s=args.timeout, key=_key(args),
                          source_port=args.source_port or 0, await_mission=args.await_mission,
-                         start_timeout_s=args.start_timeout)
+                         start_timeout_s=args.start_timeout, **({"spin_s": args.spin} if args.spin is not None else {}))
     return run_controller(flight, cfg, args.out, args.overwrite)
 
+
+
+def _spin_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--spin", type=number_in("--spin", 0.0, 0.01), metavar="S",
+                   help="lockstep: poll this long (s) before sleeping while the other side's message is due "
+                        "(default 0.0002; 0 where processes outnumber the cores, as in a bsst sitl fleet)")
 
 
 def _key(args: argparse.Namespace) -> bytes | None:

@@ -166,8 +166,8 @@ class Session:
             argv += ["--speed", repr(self.speed)]
         if self.await_mission:
             argv.append("--await-mission")
-        if self.gate is not None:
-            argv += ["--gate", str(self.gate)]
+        if self.gate is not None:  # a fleet: its processes outnumber the cores, so none polls before it sleeps
+            argv += ["--gate", str(self.gate), "--spin", "0"]
         keyarg = ["--key", str(self.key)] if self.key is not None else []
         self.vehicle = Child("vehicle", argv + keyarg, self.path / "vehicle.log")
         to = port
@@ -184,7 +184,7 @@ class Session:
         if self.realtime:
             argv.append("--realtime")
         if self.start_timeout is not None:
-            argv += ["--start-timeout", repr(self.start_timeout)]
+            argv += ["--start-timeout", repr(self.start_timeout), "--spin", "0"]
         if self.await_mission:
             argv.append("--await-mission")
         for c in self.flight.param_changes:
