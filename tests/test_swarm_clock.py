@@ -1,8 +1,9 @@
 """Covers bridge.nodes.vehicle.gate, bridge.session.fleet and bridge.swarm: a lockstep SITL fleet's shared step clock.
 
-The gate alone (real UDP sockets on 127.0.0.1, in this process): no vehicle passes step k before every other one
-has flown it, a contact is judged as the offline loop judges it (its text, its pair), a vehicle that left stays an
-obstacle where it said, one silent too long is taken as gone; the trace judge with where each vehicle stayed.
+The gate alone (real UDP sockets on 127.0.0.1, in this process): no vehicle flies step k before every other one has
+flown step k - 1 (its answer held meanwhile), a contact is judged as the offline loop judges it (its text, its
+pair), a vehicle that left stays an obstacle where it said, one silent too long is taken as gone; the trace judge
+with where each vehicle stayed.
 Whole fleets (real ``bsst vehicle`` and ``bsst controller`` processes, free ports): two runs of one fleet write
 the same ``trace.csv`` bytes, and two vehicles that touch both end ``collision`` at the offline loop's step, their
 traces the offline ones (≤ 1e-4 m), the separation and its closest approaches the offline fleet's.
@@ -19,7 +20,7 @@ import pytest
 
 from bridge.cli.flying import report_fleet
 from bridge.nodes.vehicle import gate as gatemod
-from bridge.nodes.vehicle.clock import Clock, ClockState, Trigger
+from bridge.nodes.vehicle.clock import Answer, Clock, ClockState, Trigger
 from bridge.nodes.vehicle.gate import Gate, GateConfig
 from bridge.swarm import CONTINUED, FleetRun, Watch, judge_traces, simulate, sitl
 from missions import MISSION_DIR
@@ -31,6 +32,7 @@ pytestmark = pytest.mark.process  # starts processes, opens sockets
 ROOT = Path(__file__).resolve().parents[1]
 TOUCH = ROOT / "examples" / "swarm-touch.toml"
 RATE = 250.0
+ANSWER = Answer((0.5, 0.5, 0.5, 0.5), 1.0)
 
 
 def free_ports(n: int) -> tuple[int, ...]:
@@ -55,34 +57,35 @@ def gates(n: int, radii: float = 0.3) -> list[tuple[Gate, Clock, list]]:
     return out
 
 
-def verdict_when_complete(g: Gate) -> str:
-    def done() -> bool:
-        g.poll()
-        return g.complete()
-    wait_for(done, 10, "every other vehicle's word at the gate")
-    v = g.verdict(RATE)
-    assert v is not None
-    return v
+def at(g: Gate, clock: Clock, k: int) -> None:
+    """Step k - 1 flown: the state of step k out (the others told), and its answer come."""
+    g.after_step(k, ending=False, alive=True)
+    clock.hold(ANSWER)
 
 
-def test_no_vehicle_passes_a_step_before_every_other_has_flown_it() -> None:
+def cleared(g: Gate) -> str | None:
+    """Wait until step k may be flown (None) or the flight ended in a contact (its text)."""
+    told: list[str] = []
+    wait_for(lambda: g.clear(told.append) or g.judged == g.step, 10, "every other vehicle's word at the gate")
+    return told[0] if told else None
+
+
+def test_no_vehicle_flies_a_step_before_every_other_has_flown_the_one_before() -> None:
     (a, ca, _), (b, cb, _), (c, cc, _) = fleet = gates(3)
     try:
-        assert a.after_step(1, ending=False, alive=True) and ca.state is ClockState.GATED
-        assert b.after_step(1, ending=False, alive=True)
-        a.poll()
-        assert not a.complete() and a.verdict(RATE) is None  # vehicle 3 has not flown step 1
-        assert c.after_step(1, ending=False, alive=True)
-        assert [verdict_when_complete(g) for g, _, _ in fleet] == ["", "", ""]
-        # one step ahead: a flies step 2 before b and c have taken step 1's word; nothing is lost or mixed up
-        a.clock.fire(Trigger.RELEASE)
-        assert a.after_step(2, ending=False, alive=True)
-        a.poll()
-        assert a.verdict(RATE) is None
+        at(a, ca, 1)
+        at(b, cb, 1)
+        assert not a.clear(pytest.fail) and ca.state is ClockState.GATED  # vehicle 3 has not flown step 0
+        assert ca.answer == ANSWER  # held while gated
+        at(c, cc, 1)
+        assert [cleared(g) for g, _, _ in fleet] == [None, None, None]
+        assert ca.state is ClockState.ANSWERED and ca.take() == ANSWER
+        at(a, ca, 2)  # one step ahead: a's word for step 2 comes before b and c have flown step 1
+        assert not a.clear(pytest.fail)
         for g, clock in ((b, cb), (c, cc)):
-            clock.fire(Trigger.RELEASE)
-            assert g.after_step(2, ending=False, alive=True)
-        assert [verdict_when_complete(g) for g, _, _ in fleet] == ["", "", ""]
+            clock.take()
+            at(g, clock, 2)
+        assert [cleared(g) for g, _, _ in fleet] == [None, None, None]
         assert a.stats()["steps"] == 2 and a.stats()["contact"] is None
     finally:
         for g, _, _ in fleet:
@@ -90,23 +93,21 @@ def test_no_vehicle_passes_a_step_before_every_other_has_flown_it() -> None:
 
 
 def test_a_contact_is_judged_as_the_offline_loop_judges_it_and_a_vehicle_gone_stays_an_obstacle() -> None:
-    (a, _, wa), (b, _, wb), (c, _, wc) = fleet = gates(3)
+    (a, ca, wa), (b, cb, wb), (c, cc, wc) = fleet = gates(3)
     try:
         wa[0], wb[0], wc[0] = (0.0, 0.0, 1.0), (0.5, 0.0, 1.0), (0.0, 5.0, 1.0)  # 1 and 2 overlap; 3 clear
-        for g, _, _ in fleet:
-            assert g.after_step(7, ending=False, alive=True)
-        told = [verdict_when_complete(g) for g, _, _ in fleet]
+        for g, clock, _ in fleet:
+            at(g, clock, 7)
+        told = [cleared(g) for g, _, _ in fleet]
         watch = Watch([1, 2, 3], [0.3] * 3, 0.5)
         offline = {i: why for x, y, why in watch.check(7 / RATE, [wa[0], wb[0], wc[0]]) for i in (x, y)}
-        assert told == [offline[0], offline[1], ""] and "touched at t=0.028 s" in told[0]
+        assert told == [offline[0], offline[1], None] and "touched at t=0.028 s" in told[0]
         assert a.stats()["contact"]["with"] == 2 and b.stats()["contact"]["with"] == 1
-        a.leave()
-        b.leave()
-        c.clock.fire(Trigger.RELEASE)
-        wc[0] = (0.0, 0.3, 1.0)  # 3 flies into where 1 stayed
-        assert c.after_step(8, ending=False, alive=True)
-        assert "vehicles 2 and 3 touched" in verdict_when_complete(c)  # the last pair in id order, as offline
-        assert a.stats()["left"] == {"step": 7, "position": [0.0, 0.0, 1.0]}
+        assert a.stats()["left"] == {"step": 7, "position": [0.0, 0.0, 1.0]}  # it stays there, an obstacle
+        cc.take()
+        wc[0] = (0.0, 0.3, 1.0)  # 3 flies into where 1 and 2 stayed
+        at(c, cc, 8)
+        assert "vehicles 2 and 3 touched" in cleared(c)  # the last pair in id order, as offline
     finally:
         for g, _, _ in fleet:
             g.close()
@@ -114,11 +115,11 @@ def test_a_contact_is_judged_as_the_offline_loop_judges_it_and_a_vehicle_gone_st
 
 def test_a_vehicle_silent_too_long_is_taken_as_gone_and_said(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(gatemod, "SILENT_S", 0.2)
-    (a, _, _), (b, _, _) = gates(2)
+    (a, ca, _), (b, _, _) = gates(2)
     try:
         b.close()
-        assert a.after_step(1, ending=False, alive=True)
-        wait_for(lambda: a.verdict(RATE) is not None, 10, "vehicle 2 taken as gone")
+        at(a, ca, 1)
+        assert cleared(a) is None
         assert a.stats()["dropped"] and "vehicle 2 silent" in a.stats()["dropped"][0]
     finally:
         a.close()

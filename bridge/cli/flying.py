@@ -244,8 +244,8 @@ def add_sitl_commands(sub: Any) -> None:
     p.add_argument("--timeout", type=number_in("--timeout", 0.0, 3600.0, lo_open=True), default=10.0, metavar="S",
                    help="wait this long for the vehicle's heartbeat (default 10 s)")
     p.add_argument("--start-timeout", type=number_in("--start-timeout", 0.0, 3600.0, lo_open=True), metavar="S",
-                   help="wait this long for the mission's second state (default 2 s, as for any state; a lockstep "
-                        "fleet's first step waits for its slowest vehicle to start)")
+                   help="wait this long for the mission's second and third states (default 2 s, as for any state; a "
+                        "lockstep fleet's first steps wait for its slowest vehicle to start)")
     _spin_option(p)
     p.add_argument("--await-mission", action="store_true",
                    help="the MISSION file gives the settings only: wait for a ground station to start the vehicle's "

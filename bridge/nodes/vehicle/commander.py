@@ -33,7 +33,7 @@ from bridge.mavlink.endpoint import Endpoint
 from bridge.mavlink.modes import MISSION, mode_name, requested_custom_mode, requested_mode
 from bridge.mavlink.receive import FORCE_DISARM, arm_disarm_args, interval_arg, message_id_arg
 from bridge.nodes.vehicle.authority import Authority, attribute
-from bridge.nodes.vehicle.clock import Clock, ClockState, Trigger
+from bridge.nodes.vehicle.clock import Clock, Trigger
 from bridge.nodes.vehicle.injection import injection
 from bridge.nodes.vehicle.mission import MissionManager
 from bridge.nodes.vehicle.streams import HEARTBEAT_S, StatusTexts, StreamTable
@@ -323,8 +323,7 @@ class Commander:
     def _engage_lockstep(self, now: float) -> None:
         """Lockstep from now: the state of step k goes out and its target is awaited."""
         self.clock.engage(now, self.ports.step() * self.substeps)
-        if self.clock.state is not ClockState.GATED:  # (gated: it goes out when the fleet's gate opens)
-            self.ports.state_out(now)
+        self.ports.state_out(now)
 
     # -- arming ----------------------------------------------------------------------------------------
     def arm_disarm(self, p1: float, p2: float, by: Sender | None = None) -> int:

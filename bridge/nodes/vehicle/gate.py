@@ -4,15 +4,17 @@ In:  the fleet's gate file (JSON, written by :mod:`bridge.session.fleet`: this v
      system id, disc radius (m) and gate port on 127.0.0.1); the plant's true position (m, x y z, the paper's
      frame) after each lockstep step k; the other vehicles' gate datagrams; wall time (s, ``time.monotonic``)
 Out: datagrams to the other vehicles' gates (this vehicle at step k and where, or gone from step k and where it
-     stays); :meth:`Gate.verdict`: None while a vehicle has not flown step k, else "" (fly on) or the contact's
-     text (a rotor disc touches this one's: the flight ends ``collision`` there); :meth:`Gate.stats` (ms waited,
-     steps, the step and place it left, its contact)
+     stays); :meth:`Gate.clear`: whether step k may be flown (every other vehicle has flown step k - 1), else the
+     clock ``gated``, or the contact's text to end the flight with (``collision``); :meth:`Gate.stats` (steps,
+     seconds gated, the step and place it left, its contact, any vehicle taken as gone)
 
 The offline fleet (:mod:`bridge.swarm`) flies every vehicle one step, then judges the world on their positions.
-Here each vehicle, its step k flown, sends its position to every other vehicle and waits until it has every
-other vehicle's position at step k (or that vehicle is gone, an obstacle where it stays), then judges the
-world itself with :func:`missions.fleet.clearance`, the offline loop's test: every vehicle judges the same
-positions, so each knows alone, at the same step, whether it touched, and whom. No vehicle is more than one
+Here each vehicle, its step k - 1 flown, sends the state of step k to its controller and its position to every
+other vehicle; before it flies step k with its controller's answer, it waits until it has every other vehicle's
+position at step k (or that vehicle is gone, an obstacle where it stays), then judges the world itself with
+:func:`missions.fleet.clearance`, the offline loop's test: every vehicle judges the same positions, so each
+knows alone, at the same step, whether it touched, and whom. So the controllers compute while the vehicles
+wait for each other, and no vehicle flies step k before every other has flown step k - 1. No vehicle is more than one
 step ahead of another, so a datagram carries the last two positions, and one lost is made good by the next or
 by the resend every :data:`RESEND_S`. A vehicle silent for :data:`SILENT_S` (its process stopped) is taken as
 gone where it was last, and said so (:attr:`Gate.dropped`).
@@ -72,8 +74,8 @@ class GateConfig:
 
 
 class Gate:
-    """One vehicle's side of the shared clock (the module's docstring). :meth:`arrive` at step k, :meth:`wait`
-    serving the links, :meth:`verdict`; :meth:`leave` when its lockstep flight is over."""
+    """One vehicle's side of the shared clock (the module's docstring): :meth:`after_step` (its word to the others),
+    :meth:`clear` before each step, :meth:`serve` while gated, :meth:`over` (it leaves when its flight is over)."""
 
     def __init__(self, cfg: GateConfig, clock: Clock, position: Callable[[], tuple[float, float, float]],
                  rate: float) -> None:
@@ -94,6 +96,7 @@ class Gate:
         self.flying = False  # arrived at a step once: a member of the shared clock until it leaves
         self.left: tuple[int, tuple[float, float, float]] | None = None
         self.step = -1  # the step it waits at
+        self.judged = -1  # the last step judged (its verdict given)
         self.pos = self.prev = (math.nan, math.nan, math.nan)
         self._last = b""
         self._sent_at = 0.0
@@ -103,42 +106,54 @@ class Gate:
         self.contact: dict[str, Any] | None = None
 
     # -- in the vehicle's loop ----------------------------------------------------------------------
-    def after_step(self, k: int, ending: bool, alive: bool) -> bool:
+    def after_step(self, k: int, ending: bool, alive: bool) -> None:
         """Lockstep step k - 1 flown, the plant now at step k (``alive``: not diverged or crashed; ``ending``: it
-        was the end action's, the mission over): True if the vehicle waits at the gate (``gated``), the state
-        of step k to go out when :meth:`serve` opens it; False if it goes out now (or none does). The vehicle
-        leaves the shared clock when its lockstep flight is over: where its last step at the gate left it
+        was the end action's, the mission over), its state gone to the controller: tell every other vehicle. The
+        vehicle leaves the shared clock when its lockstep flight is over: where its last step at the gate left it
         (the mission's end), or where it is now."""
         if self.left is not None:
-            return False
+            return
         if ending:
             self.leave()
-            return False
-        if not alive or self.clock.state is not ClockState.LOCKSTEP:
+        elif not alive or self.clock.state is not ClockState.LOCKSTEP:
             self.leave(k, self.position())
+        else:
+            self.arrive(k, self.position())
+
+    def clear(self, collide: Callable[[str], None]) -> bool:
+        """The answer of step k held (ANSWERED or GATED): whether step k may be flown now, every other vehicle
+        having flown step k - 1 and none touching this one. If not yet, the clock is GATED until :meth:`serve`
+        clears it; touched, ``collide`` ends the flight (and the vehicle leaves, where it is)."""
+        if self.left is not None or self.judged == self.step:
+            return True
+        self.poll()
+        why = self.verdict(self.rate)
+        if why is None:
+            if self.clock.state is ClockState.ANSWERED:
+                self.clock.fire(Trigger.GATE)
+                self._since = time.monotonic()
             return False
-        self.clock.fire(Trigger.GATE)
-        self.arrive(k, self.position())
+        self.judged = self.step
+        if self._since is not None:  # the time its answer was held for the others (gated)
+            self.wait_s += time.monotonic() - self._since
+            self._since = None
+        if why:
+            collide(why)
+            self.leave()
+            return False
+        if self.clock.state is ClockState.GATED:
+            self.clock.fire(Trigger.RELEASE)
         return True
 
     def serve(self, endpoints: Sequence[Endpoint], deadline: float,
               handle: Callable[[Endpoint, Any, tuple[str, int]], None], collide: Callable[[str], None],
-              state_out: Callable[[float], None]) -> None:
-        """Gated: serve the links until ``deadline`` or every other vehicle has flown the step; then the state
-        goes out (``state_out``), or, touched by another vehicle, the flight ends there (``collide``)."""
+              fly: Callable[[], None]) -> None:
+        """Gated: serve the links until ``deadline`` or every other vehicle has flown the step before; then the
+        held answer's step is flown (``fly``), or, touched by another vehicle, the flight ends (``collide``)."""
         for ep, m, addr in self.wait(endpoints, deadline):
             handle(ep, m, addr)
-        if self.clock.state is not ClockState.GATED:
-            return
-        why = self.verdict(self.rate)
-        if why is None:
-            return
-        if why:
-            collide(why)
-            self.leave()
-            return
-        self.clock.fire(Trigger.RELEASE)
-        state_out(time.monotonic())
+        if self.clock.state is ClockState.GATED and self.clear(collide):
+            fly()
 
     def over(self, k: int) -> None:
         """Not in lockstep any more (disarmed, on the wall clock, halted): a flight that was at the gate leaves it."""
@@ -152,7 +167,6 @@ class Gate:
         self.prev, self.pos, self.step = self.pos, pos, k
         self._send(AT, k, pos, self.prev)
         self.steps += 1
-        self._since = time.monotonic()
 
     def leave(self, k: int | None = None, pos: tuple[float, float, float] | None = None) -> None:
         """This vehicle's lockstep flight is over: it stays at ``pos`` from step ``k`` (default: the last step it
@@ -222,9 +236,6 @@ class Gate:
                 self._silence(j)
                 return None
             where.append((j, p))
-        if self._since is not None:
-            self.wait_s += time.monotonic() - self._since
-            self._since = None
         for j in self.others:
             seen = self.at[j]
             for s in [s for s in seen if s < k]:

@@ -154,7 +154,7 @@ class Vehicle:
                     self._lockstep_wait()
                 elif state is ClockState.GATED:
                     self.gate.serve(self.endpoints, self._next_house, self._handle,  # type: ignore[union-attr]
-                                    self.commander.collided, self._send_odometry)
+                                    self.commander.collided, self._step_lockstep)
                 else:  # idle, halted
                     self._idle()
                 if time.monotonic() >= self._next_house:
@@ -257,7 +257,8 @@ class Vehicle:
         for ep, m, addr in wait(self.endpoints, deadline, self.link, self.cfg.spin_s):
             self._handle(ep, m, addr)
         if self.clock.state is ClockState.ANSWERED:
-            self._step_lockstep()
+            if self.gate is None or self.gate.clear(self.commander.collided):  # (a fleet: the others flew k - 1)
+                self._step_lockstep()
             return
         if self.clock.state is not ClockState.LOCKSTEP:
             return
@@ -293,9 +294,10 @@ class Vehicle:
         if self.cfg.speed is not None:
             self._wait_until(self.pace.due(self.k * self.substeps))
         alive = self._after_step()
-        gated = self.gate is not None and self.gate.after_step(self.k, ending, alive)
-        if alive and not gated:
+        if alive:
             self._send_odometry(time.monotonic())
+        if self.gate is not None:
+            self.gate.after_step(self.k, ending, alive)
         # off the critical path: the controller is computing step k+1 meanwhile
         if self.rows is not None:
             self.rows.lockstep(k, X, self.sim.mode, wire, real, t - vend.applied_state_t, recv - sent, sent, recv,
