@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bridge.cli import main
 from bridge.cli.flying import report_fleet
 from bridge.nodes.vehicle import gate as gatemod
 from bridge.nodes.vehicle.clock import Answer, Clock, ClockState, Trigger
@@ -133,6 +134,21 @@ def test_a_bad_gate_file_is_named(tmp_path: Path) -> None:
     f.write_text("nope")
     with pytest.raises(ConfigError, match="not a fleet gate file"):
         GateConfig.load(f)
+
+
+def test_a_gate_with_the_wall_clock_or_on_a_taken_port_is_refused(tmp_path: Path, capsys) -> None:
+    f = tmp_path / "gate.json"
+    taken = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    taken.bind(("127.0.0.1", 0))
+    try:
+        cfg = GateConfig(0, (1, 2), (0.3, 0.3), (taken.getsockname()[1], 9))
+        cfg.dump(f)
+        assert main(["vehicle", "--gate", str(f), "--realtime"]) == 2
+        assert "--gate with --realtime" in capsys.readouterr().err
+        with pytest.raises(ConfigError, match="--gate: cannot bind 127.0.0.1"):
+            Gate(cfg, Clock(False, 1000.0, 1.0, 0.0), lambda: (0.0, 0.0, 0.0), RATE)
+    finally:
+        taken.close()
 
 
 def test_the_trace_judge_keeps_each_vehicle_where_it_stayed() -> None:

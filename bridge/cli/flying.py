@@ -287,6 +287,9 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
     from bridge.nodes.vehicle import VehicleConfig, run_vehicle  # lazy: start-up time
     from bridge.nodes.vehicle.gate import GateConfig  # lazy: start-up time
 
+    if args.gate and args.realtime:
+        raise ConfigError("--gate with --realtime: a fleet's shared step clock is lockstep's (real time keeps the "
+                          "wall clock)")
     flight = prepare(args.mission or at_rest(), overrides_from_args(args))
     n = args.instance
     own = flight.params.sysid if "MAV_SYS_ID" in flight.mission.params else None  # [params] or --param
@@ -308,7 +311,7 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
                         clock="realtime" if args.realtime else "lockstep", speed=args.speed,
                         home=Home(*args.home) if args.home else Home(), key=_key(args), controller_from=pin,
                         await_mission=args.await_mission,
-                        gate=GateConfig.load(args.gate) if args.gate and not args.realtime else None,
+                        gate=GateConfig.load(args.gate) if args.gate else None,
                         **({"spin_s": args.spin} if args.spin is not None else {}))
     return run_vehicle(flight, cfg, args.out, args.overwrite)
 

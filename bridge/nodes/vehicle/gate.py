@@ -85,7 +85,11 @@ class Gate:
         self.rate = rate
         self.me = cfg.index
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind(("127.0.0.1", cfg.ports[self.me]))
+        try:
+            self.sock.bind(("127.0.0.1", cfg.ports[self.me]))
+        except OSError as exc:
+            self.sock.close()
+            raise ConfigError(f"--gate: cannot bind 127.0.0.1:{cfg.ports[self.me]} ({exc.strerror})") from None
         self.sock.setblocking(False)
         self.others = [j for j in range(len(cfg.ids)) if j != self.me]
         self._to = [("127.0.0.1", cfg.ports[j]) for j in self.others]
