@@ -24,8 +24,8 @@ from bridge.nodes.vehicle import gate as gatemod
 from bridge.nodes.vehicle.clock import Answer, Clock, ClockState, Trigger
 from bridge.nodes.vehicle.gate import Gate, GateConfig
 from bridge.swarm import CONTINUED, FleetRun, Watch, judge_traces, simulate, sitl
-from missions import MISSION_DIR
 from params import ConfigError
+from tests.test_swarm_sitl import short_sine
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes, opens sockets
@@ -165,15 +165,8 @@ def test_the_trace_judge_keeps_each_vehicle_where_it_stayed() -> None:
 
 
 # -- whole fleets ------------------------------------------------------------------------------------------
-def short_sine(tmp_path: Path, seconds: float = 1.0) -> Path:
-    text = (MISSION_DIR / "sine.toml").read_text().replace("duration_s = 30.0", f"duration_s = {seconds}")
-    f = tmp_path / "short.toml"
-    f.write_text(text)
-    return f
-
-
 def test_two_flights_of_one_lockstep_fleet_write_the_same_traces(tmp_path: Path) -> None:
-    mission = short_sine(tmp_path)
+    mission = short_sine(tmp_path, 1.0)
     runs = [sitl(mission, vehicles=3, formation="line:2", instance=None, out=tmp_path / f"run{n}", plots=False)
             for n in (1, 2)]
     for run in runs:
