@@ -179,7 +179,7 @@ def test_two_flights_of_one_lockstep_fleet_write_the_same_traces(tmp_path: Path)
         assert a == b and a.count(b"\n") == 251
 
 
-def test_a_touch_ends_both_flights_at_the_offline_step_as_offline(tmp_path: Path) -> None:
+def test_a_touch_ends_both_flights_at_the_offline_step_as_offline(tmp_path: Path, capsys) -> None:
     run = sitl(TOUCH, instance=None, out=tmp_path / "touch", plots=False)
     off = simulate(TOUCH, plots=False)
     assert isinstance(run, FleetRun) and run.outcome == "collision" == off.outcome
@@ -196,3 +196,5 @@ def test_a_touch_ends_both_flights_at_the_offline_step_as_offline(tmp_path: Path
     own = json.loads((tmp_path / "touch" / "vehicle-1" / "summary.json").read_text())
     assert own["outcome"] == "collision" and own["sitl"]["gate"]["contact"]["step"] == step
     assert report_fleet(run, "sitl") == 1
+    assert f"vehicle 2: collision (touched vehicle 1 at step {step}, t=6.352 s; both flights ended there)" in \
+        capsys.readouterr().err

@@ -106,9 +106,10 @@ def report_fleet(run: Any, command: str) -> int:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
     for v in s["vehicles"]:
         if v["outcome"] != "completed":
-            c = v.get("contact")  # SITL: judged on the traces, after flights that went on past it
-            said = f" (touched vehicle {c['with']} at step {c['step']}, t={c['t']:.3f} s; the flights went on: " \
-                   "the vehicles share no clock under bsst sitl)" if c else ""
+            c = v.get("contact")  # SITL: lockstep, both flights ended there; real time, they went on past it
+            went = ("; the flights went on: in real time the vehicles share no clock" if c and c.get("continued")
+                    else "; both flights ended there")
+            said = f" (touched vehicle {c['with']} at step {c['step']}, t={c['t']:.3f} s{went})" if c else ""
             print(f"bsst {command}: vehicle {v['id']}: {v['outcome']}{said}", file=sys.stderr)
     for p in s.get("policies") or []:
         if not p.get("ok"):
