@@ -114,6 +114,22 @@ def test_a_contact_is_judged_as_the_offline_loop_judges_it_and_a_vehicle_gone_st
             g.close()
 
 
+def test_a_word_from_anywhere_but_the_vehicles_own_gate_port_is_not_heard() -> None:
+    (a, ca, _), (b, cb, wb) = fleet = gates(2)
+    stranger = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        at(a, ca, 1)
+        word = gatemod._WIRE.pack(gatemod._MAGIC, gatemod.AT, 1, 1, *wb[0], *wb[0])  # vehicle 2's word, forged
+        stranger.sendto(word, ("127.0.0.1", a.cfg.ports[0]))  # (on loopback, queued before sendto returns)
+        assert not a.clear(pytest.fail) and not a.complete()
+        at(b, cb, 1)
+        assert cleared(a) is None  # vehicle 2's own word
+    finally:
+        stranger.close()
+        for g, _, _ in fleet:
+            g.close()
+
+
 def test_a_vehicle_silent_too_long_is_taken_as_gone_and_said(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(gatemod, "SILENT_S", 0.2)
     (a, ca, _), (b, _, _) = gates(2)

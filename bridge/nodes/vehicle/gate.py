@@ -17,7 +17,8 @@ knows alone, at the same step, whether it touched, and whom. So the controllers 
 wait for each other, and no vehicle flies step k before every other has flown step k - 1. No vehicle is more than one
 step ahead of another, so a datagram carries the last two positions, and one lost is made good by the next or
 by the resend every :data:`RESEND_S`. A vehicle silent for :data:`SILENT_S` (its process stopped) is taken as
-gone where it was last, and said so (:attr:`Gate.dropped`).
+gone where it was last, and said so (:attr:`Gate.dropped`). A vehicle is heard from its own gate port only
+(which no other process can bind while it runs); the gate has no signing, as the links without ``--key``.
 """
 
 from __future__ import annotations
@@ -93,6 +94,7 @@ class Gate:
         self.sock.setblocking(False)
         self.others = [j for j in range(len(cfg.ids)) if j != self.me]
         self._to = [("127.0.0.1", cfg.ports[j]) for j in self.others]
+        self._from = dict(zip(self.others, self._to))
         self.at: dict[int, dict[int, tuple[float, float, float]]] = {j: {} for j in self.others}
         self.gone: dict[int, tuple[int, tuple[float, float, float]]] = {}  # index: (from step, where it stays)
         self.heard = {j: time.monotonic() for j in self.others}
@@ -197,7 +199,7 @@ class Gate:
         now = time.monotonic()
         while True:
             try:
-                data = self.sock.recv(256)
+                data, addr = self.sock.recvfrom(256)
             except (BlockingIOError, InterruptedError):
                 return
             except OSError:
@@ -205,8 +207,8 @@ class Gate:
             if len(data) != _WIRE.size:
                 continue
             magic, kind, j, k, *xs = _WIRE.unpack(data)
-            if magic != _MAGIC or j not in self.heard:
-                continue
+            if magic != _MAGIC or self._from.get(j) != addr:
+                continue  # (heard from vehicle j's own gate port only, as the controller from its pinned port)
             self.heard[j] = now
             if kind == GONE:
                 self.gone.setdefault(j, (k, (xs[0], xs[1], xs[2])))
