@@ -180,12 +180,12 @@ class Vehicle:
         self._report(Stats({
             "accepted": self.targets.accepted, "rejected": dict(self.rejected), "odometry_sent": self.odometry.count,
             "received": self.link.received, "overruns": self.pace.rebased, "steps": self.k,
+            **({"gate": self.gate.stats()} if self.gate is not None else {}),  # a fleet's shared clock
             "rejected_from_controller": self.rejected.from_peer, "resends": self.odometry.resends,
             "answered_again": self.targets.answered_again, "odometry_steps": self.odometry.steps.ranges,
             "kernel_drops": self.link.kernel_drops(),
             "up": self.vend.up.stats.summary() if self.cfg.clock == "lockstep" else None,
-            "plant": self.commander.plant_at_end or plant_blocks(self.plant),
-            **({"gate": self.gate.stats()} if self.gate is not None else {})}))  # wind, battery, impact, as offline
+            "plant": self.commander.plant_at_end or plant_blocks(self.plant)}))  # wind, battery, impact, as offline
 
     def _report(self, report: Report) -> None:
         """Every report of the vehicle goes out here."""
