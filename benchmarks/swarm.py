@@ -11,12 +11,15 @@
   (4 vehicles' steps cost about 4 single ones: the loop adds only the separation check), and the real-time
   factor of the four; with the load average, since other work on the machine slows every figure alike;
 - SITL in lockstep (``bsst sitl missions/sine.toml --vehicles 4 --formation line:2``, through
-  ``bridge.swarm.sitl`` on free ports so that it runs beside other sessions): each vehicle's largest distance
-  from the offline fleet's trace (target <= 1e-4 m), the fleet's real-time factor (the mission's time over the
-  wall time from start to the last summary: start-up included) and each pair's own (its ``timing`` block:
-  the flight alone), against one vehicle's session run just before; target >= 4x real time on 2 cores
-  (eight processes for four vehicles: a machine shared with other work gives less, and the load average
-  says how shared it was). ``--no-sitl`` leaves it out.
+  ``bridge.swarm.sitl`` on free ports so that it runs beside other sessions), on the fleet's one shared step
+  clock: each vehicle's largest distance from the offline fleet's trace (target <= 1e-4 m), the fleet's
+  real-time factor (the mission's time over the wall time from start to the last summary: start-up included)
+  and each pair's own (its ``timing`` block: the flight alone), against one vehicle's session run just before;
+  target >= 4x real time on 2 cores (eight processes for four vehicles: a machine shared with other work gives
+  less, and the load average says how shared it was). Since the machine is shared, also the CPU time the fleet
+  used (its processes' user + system, start-up included), per vehicle and step, and the real-time factor that
+  CPU time allows on two cores of its own (the mission's time over half the CPU time): what an idle 2-core
+  machine would give at best. ``--no-sitl`` leaves it out.
 
 Each run goes through ``bridge.cli.main`` (the command's own exit status), into a temporary directory.
 
@@ -90,12 +93,12 @@ def sitl_figures() -> dict[str, Any]:
     os.chdir(ROOT)
     mission = "missions/sine.toml"
     load0 = os.getloadavg()
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), cpu_s()
     one = sitl(mission, instance=None, plots=False)
-    one_wall = time.perf_counter() - t0
-    t0 = time.perf_counter()
+    one_wall, one_cpu = time.perf_counter() - t0, cpu_s() - c0
+    t0, c0 = time.perf_counter(), cpu_s()
     four = sitl(mission, vehicles=4, formation="line:2", instance=None, plots=False)
-    four_wall = time.perf_counter() - t0
+    four_wall, four_cpu = time.perf_counter() - t0, cpu_s() - c0
     off = simulate(mission, vehicles=4, formation="line:2", plots=False)
     gaps = {}
     for v, a, b in zip(four.summary["vehicles"], four.runs, off.runs):
@@ -105,10 +108,19 @@ def sitl_figures() -> dict[str, Any]:
     duration = four.summary["duration_s"]
     return {"outcome": four.outcome, "separation_ok": four.summary["policies"][0]["ok"], "gap_m": gaps,
             "one_rtf": duration / one_wall, "one_flight_rtf": one.summary["timing"]["real_time_factor"],
-            "fleet_rtf": duration / four_wall, "wall_s": four_wall,
+            "fleet_rtf": duration / four_wall, "wall_s": four_wall, "cpu_s": four_cpu, "one_cpu_s": one_cpu,
+            "steps": duration * four.summary["rate_hz"], "duration_s": duration,
+            "shared_clock": four.summary["sitl"]["shared_clock"],
+            "gate_wait_s": {i: (g or {}).get("wait_s") for i, g in (four.summary["sitl"].get("gate") or {}).items()},
             "pair_rtf": {v["id"]: r.summary["timing"]["real_time_factor"] for v, r in zip(four.summary["vehicles"],
                                                                                           four.runs)},
             "loadavg_before": load0, "loadavg_after": os.getloadavg()}
+
+
+def cpu_s() -> float:
+    """CPU seconds (user + system) of this process and of its children waited for (the sessions' processes)."""
+    t = os.times()
+    return t.user + t.system + t.children_user + t.children_system
 
 
 def print_sitl(f: dict[str, Any]) -> None:
@@ -120,6 +132,12 @@ def print_sitl(f: dict[str, Any]) -> None:
     print(f"  real-time factor: the fleet {f['fleet_rtf']:.2f}x (wall {f['wall_s']:.1f} s, start-up included; "
           f"target >= 4x on 2 cores); each pair's flight " + ", ".join(f"{v:.2f}x" for v in f["pair_rtf"].values()))
     print(f"  one vehicle's session just before: {f['one_rtf']:.2f}x (its flight {f['one_flight_rtf']:.2f}x)")
+    per = 1e6 * f["cpu_s"] / (4 * f["steps"])
+    print(f"  CPU time (all processes, start-up included): the fleet {f['cpu_s']:.1f} s ({per:.0f} us per vehicle "
+          f"and step), one vehicle's session {f['one_cpu_s']:.1f} s; on two cores of its own the fleet's CPU time "
+          f"allows at best {f['duration_s'] / (f['cpu_s'] / 2):.2f}x real time")
+    print(f"  shared step clock: {f['shared_clock']}; seconds each vehicle waited at its gate: "
+          + ", ".join(f"{i}: {w}" for i, w in f["gate_wait_s"].items()))
     print("  load average before " + " ".join(f"{x:.2f}" for x in f["loadavg_before"]) + ", after " +
           " ".join(f"{x:.2f}" for x in f["loadavg_after"]) + " (a machine shared with other work)")
 

@@ -46,7 +46,14 @@ from bridge.record.runlog import (
     write_text_atomic,
 )
 from missions import Mission, load_mission
-from missions.fleet import DEFAULT_MIN_SEPARATION_M, Separation, VehicleSpec, formation, link_seeds_moved
+from missions.fleet import (
+    DEFAULT_MIN_SEPARATION_M,
+    Separation,
+    VehicleSpec,
+    clearance,
+    formation,
+    link_seeds_moved,
+)
 from missions.fleet import vehicle_mission as mission_of
 from params import ConfigError, dump_toml
 
@@ -170,9 +177,7 @@ class Watch:
         """Judge the world at time ``t`` (s) with these centres (m): the pairs (indices) that touch, and why."""
         touching = []
         for a, b in self.pairs:
-            pa, pb = positions[a], positions[b]
-            d = math.sqrt((pa[0] - pb[0]) ** 2 + (pa[1] - pb[1]) ** 2 + (pa[2] - pb[2]) ** 2)
-            c = d - self.radii[a] - self.radii[b]
+            d, c = clearance(positions[a], positions[b], self.radii[a], self.radii[b])
             if c < self.closest[(a, b)][0]:
                 self.closest[(a, b)] = (c, t)
             if c < self.min_m and self.broken is None:
@@ -334,8 +339,8 @@ def fleet_summary(m: Mission, flights: list[Flight], runs: list[Run], watch: Wat
 
 
 # -- the same fleet as SITL sessions (bsst sitl --vehicles) ---------------------------------------------------
-CONTINUED = ("the flights continued past the contact: under bsst sitl each vehicle keeps its own lockstep with its "
-             "controller, the vehicles share no clock, so nothing stopped them at it (docs/swarm.md)")
+CONTINUED = ("the flights continued past the contact: in real time each vehicle keeps its own wall clock, the "
+             "vehicles share no clock, so nothing stopped them at it (docs/swarm.md)")
 
 
 SITL_SHARED = ("--shared-link ([link] shared = true): one radio for a fleet is offline only for now (bsst sim); "
@@ -352,9 +357,10 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
     fleet (``vehicles``, ``formation`` or the mission's ``[[vehicles]]``, as :func:`simulate` takes them) as one
     vehicle process and one controller process per vehicle (:mod:`bridge.session.fleet`): vehicle i is instance
     ``instance`` + i - 1 with system id i, every vehicle's ground-station traffic goes to ``gcs`` (default
-    127.0.0.1:14550 + ``instance``); ``live`` and ``progress`` are the single session's only. The world is
-    judged on the vehicles' traces at matching steps
-    (:func:`judge_traces`); a contact makes both ``collision`` (the flights went on: :data:`CONTINUED`)."""
+    127.0.0.1:14550 + ``instance``); ``live`` and ``progress`` are the single session's only. In lockstep the
+    vehicles step on one shared clock, and a contact ends both flights at its step (``collision``), as offline;
+    the world is judged on the vehicles' traces (and where each stayed) at matching steps (:func:`judge_traces`).
+    In real time a contact makes both ``collision`` too, found afterwards (the flights went on: :data:`CONTINUED`)."""
     from bridge.session import sitl as sitl_one  # lazy: start-up time
     from bridge.session.fleet import check_fleet, check_fleet_ports, fly_sessions  # lazy: start-up time
 
@@ -386,15 +392,20 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
         fm = over.laid_over(fleet)
         dirs = [d for d in _vehicle_dirs(fm, path) if d is not None]
         ids = [v.id for v in fm.vehicles]
-        runs = fly_sessions(flights, ids, dirs, realtime=realtime, instance=instance, gcs=gcs_text, speed=speed,
-                            key=Path(key) if key is not None else None, plots=plots, keep=keep)
         watch = _watch(fm, flights)
-        contacts = judge_traces(watch, [r.trace for r in runs], fm.rate_hz)
+        shared = not realtime  # lockstep: one shared step clock (bridge.nodes.vehicle.gate)
+        runs = fly_sessions(flights, ids, dirs, realtime=realtime, instance=instance, gcs=gcs_text, speed=speed,
+                            key=Path(key) if key is not None else None, plots=plots, keep=keep,
+                            radii=watch.radii if shared else None)
+        finals = [_stayed(r) for r in runs] if shared else None
+        contacts = judge_traces(watch, [r.trace for r in runs], fm.rate_hz, finals)
         runs = [_touched(r, contacts.get(j)) for j, r in enumerate(runs)]
         summary = fleet_summary(fm, flights, runs, watch, "realtime" if realtime else "lockstep")
         summary["sitl"] = {"instances": None if instance is None else list(range(instance, instance + len(ids))),
-                           "gcs": gcs_text, "sysids": ids, "shared_clock": False, "signed": key is not None}
-        if contacts:
+                           "gcs": gcs_text, "sysids": ids, "shared_clock": shared, "signed": key is not None}
+        if shared:
+            summary["sitl"]["gate"] = {str(i): (r.summary.get("sitl") or {}).get("gate") for i, r in zip(ids, runs)}
+        if contacts and not shared:
             summary["sitl"]["note"] = CONTINUED
         _finish(fm, path if keep else None, runs, watch, summary, plots)
         return FleetRun(runs, summary, path if keep else None)
@@ -403,23 +414,35 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
             shutil.rmtree(path, ignore_errors=True)
 
 
-def judge_traces(watch: Watch, traces: Sequence[dict[str, Any]], rate: float) -> dict[int, dict[str, Any]]:
+def judge_traces(watch: Watch, traces: Sequence[dict[str, Any]], rate: float,
+                 finals: Sequence[tuple[float, float, float] | None] | None = None) -> dict[int, dict[str, Any]]:
     """Judge the shared world on finished traces, with the offline loop's :class:`Watch`: row j of every trace
     (the true positions at t = j / rate; row 0 the start) is the world after step j - 1, as the loop judges it;
-    a trace that ended early stays at its last row; an empty one (a vehicle that flew no step) is nowhere, and
-    touches no one. The first contact of each vehicle (by index): its step, time, the other's id and why."""
-    n = max((len(tr["t"]) for tr in traces), default=0)
+    a trace that ended early stays at its last row, or with ``finals`` (a lockstep fleet's shared clock: where
+    each vehicle stayed, m, after its last row's step) there, as the loop keeps it; an empty one (a vehicle that
+    flew no step) is nowhere, and touches no one. The first contact of each vehicle (by index): its step, time,
+    the other's id and why (without ``finals``, that the flights went on: :data:`CONTINUED`)."""
+    last = [finals[i] if finals is not None else None for i in range(len(traces))]
+    n = max((len(tr["t"]) + (p is not None) for tr, p in zip(traces, last)), default=0)
     first: dict[int, dict[str, Any]] = {}
     nowhere = (math.nan, math.nan, math.nan)  # NaN distances: never closer, never touching (Watch.check)
+    more = {} if finals is not None else {"continued": CONTINUED}
     for j in range(n):
-        rows = [min(j, len(tr["t"]) - 1) for tr in traces]
-        positions = [(float(tr["x"][r]), float(tr["y"][r]), float(tr["z"][r])) if r >= 0 else nowhere
-                     for tr, r in zip(traces, rows)]
+        positions = []
+        for tr, p in zip(traces, last):
+            r = min(j, len(tr["t"]) - 1)
+            positions.append(p if p is not None and j > r else
+                             (float(tr["x"][r]), float(tr["y"][r]), float(tr["z"][r])) if r >= 0 else nowhere)
         for a, b, why in watch.check(j / rate, positions):
             for i, other in ((a, b), (b, a)):
-                first.setdefault(i, {"step": j, "t": round(j / rate, 6), "with": watch.ids[other], "why": why,
-                                     "continued": CONTINUED})
+                first.setdefault(i, {"step": j, "t": round(j / rate, 6), "with": watch.ids[other], "why": why, **more})
     return first
+
+
+def _stayed(run: Run) -> tuple[float, float, float] | None:
+    """Where a vehicle of a lockstep fleet stayed when it left the shared clock (its gate's word; None: unknown)."""
+    left = ((run.summary.get("sitl") or {}).get("gate") or {}).get("left")
+    return tuple(left["position"]) if left else None  # type: ignore[return-value]
 
 
 def _touched(run: Run, contact: dict[str, Any] | None) -> Run:

@@ -23,7 +23,7 @@ as the profiles give no propeller size). Below ``min_m`` the policy is broken; a
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any, TypeVar
 
@@ -59,6 +59,13 @@ class Separation:
     def to_dict(self) -> dict[str, Any]:
         d: dict[str, Any] = {"min_m": self.min_m}
         return d | ({"rotor_radius_m": self.rotor_radius_m} if self.rotor_radius_m is not None else {})
+
+
+def clearance(pa: Sequence[float], pb: Sequence[float], ra: float, rb: float) -> tuple[float, float]:
+    """Two vehicles' centres ``pa``, ``pb`` (m, x y z) and disc radii (m): (the centres' distance, the clearance
+    between their rotor discs), m. The one test of the shared world, offline and in a SITL fleet's shared clock."""
+    d = math.sqrt((pa[0] - pb[0]) ** 2 + (pa[1] - pb[1]) ** 2 + (pa[2] - pb[2]) ** 2)
+    return d, d - ra - rb
 
 
 @dataclass(frozen=True)

@@ -165,6 +165,7 @@ TEXT_BAD = {
     "--key": lambda f: [f.missing, f.key_empty, f.key_open, f.directory],
     "--at": lambda f: ["x", "5:bogus", "5:gps:sideways"],
     "--formation": lambda f: ["line", "ring:2", "line:0", "circle:x"],
+    "--gate": lambda f: [f.missing, f.directory, f.regular],
 }
 POSITIONAL_BAD = {  # command -> bad values of its positional argument
     "report": lambda f: [f.missing, f.regular, f.directory],

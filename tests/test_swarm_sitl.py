@@ -1,10 +1,10 @@
 """Covers bridge.session.fleet, bridge.swarm and bridge.cli: several vehicles as SITL sessions (bsst sitl).
 
 Real processes: one ``bsst vehicle`` and one ``bsst controller`` per vehicle, over UDP on 127.0.0.1 (free ports,
-``instance=None``, so the tests run beside other sessions). Each pair keeps its own lockstep, so each vehicle's
-trace equals the offline fleet's for that vehicle (≤ 1e-4 m), the separation judged on the traces is the
-offline loop's, and a contact ends both vehicles ``collision`` at the offline loop's step, with the note that the
-flights went on past it (the vehicles share no clock). The records have the offline fleet's layout.
+``instance=None``, so the tests run beside other sessions). In lockstep the vehicles share one step clock
+(its own tests: tests/test_swarm_clock.py), so each vehicle's trace equals the offline fleet's for that vehicle
+(≤ 1e-4 m) and the separation judged on the traces is the offline loop's; the trace judge alone (as real time
+uses it) is the offline loop's too. The records have the offline fleet's layout.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import pytest
 
 from bridge.cli import main
 from bridge.cli.flying import report_fleet
-from bridge.swarm import CONTINUED, FleetRun, Watch, judge_traces, simulate, sitl
+from bridge.swarm import FleetRun, Watch, judge_traces, simulate, sitl
 from missions import MISSION_DIR
 from params import ConfigError
 from tests.sitlkit import Proc, csv_rows
@@ -28,7 +28,6 @@ from tests.waiting import wait_for
 pytestmark = pytest.mark.process  # starts processes
 
 ROOT = Path(__file__).resolve().parents[1]
-TOUCH = ROOT / "examples" / "swarm-touch.toml"
 
 
 def short_sine(tmp_path: Path, seconds: float = 2.0) -> Path:
@@ -49,7 +48,7 @@ def test_four_in_a_line_fly_in_sitl_as_offline_vehicle_by_vehicle(tmp_path: Path
     off = simulate(mission, vehicles=4, formation="line:2", plots=False)
     assert isinstance(run, FleetRun) and run.outcome == "completed", run.summary
     s = run.summary
-    assert s["clock"] == "lockstep" and s["sitl"]["sysids"] == [1, 2, 3, 4] and s["sitl"]["shared_clock"] is False
+    assert s["clock"] == "lockstep" and s["sitl"]["sysids"] == [1, 2, 3, 4] and s["sitl"]["shared_clock"] is True
     for a, b in zip(run.runs, off.runs):
         assert a.summary["clock"] == "lockstep" and a.summary["lockstep"] == {"held": True}
         assert worst_gap(a.trace, b.trace) <= 1e-4
@@ -66,23 +65,6 @@ def test_four_in_a_line_fly_in_sitl_as_offline_vehicle_by_vehicle(tmp_path: Path
         assert all((d / f).is_file() for f in ("trace.csv", "vehicle.tlog", "controller.tlog", "summary.json"))
         assert json.loads((d / "summary.json").read_text())["sitl"]["sysid"] == i
     assert report_fleet(run, "sitl") == 0
-
-
-def test_a_touch_in_sitl_is_collision_for_both_at_the_offline_step_and_says_the_flights_went_on(
-        tmp_path: Path) -> None:
-    run = sitl(TOUCH, instance=None, out=tmp_path / "touch", plots=False)
-    off = simulate(TOUCH, plots=False)
-    assert isinstance(run, FleetRun) and run.outcome == "collision"
-    offline_step = len(off.runs[0].trace["t"])  # the offline flights end at the step they touch
-    for v, other in zip(run.summary["vehicles"], (2, 1)):
-        c = v["contact"]
-        assert v["outcome"] == "collision" and not v["ok"]
-        assert c["step"] == offline_step and c["with"] == other and c["continued"] == CONTINUED
-    assert run.summary["sitl"]["note"] == CONTINUED
-    assert not run.summary["policies"][0]["ok"]  # separation broke before they touched
-    # the flights went on: each vehicle's own record is its whole flight, past the contact
-    assert len(run.runs[0].trace["t"]) > offline_step
-    assert report_fleet(run, "sitl") == 1
 
 
 def test_the_trace_judge_is_the_offline_watch() -> None:

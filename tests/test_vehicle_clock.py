@@ -30,7 +30,8 @@ def path_from_idle() -> dict[ClockState, list[Trigger]]:
 
 
 def clock_in(state: ClockState) -> Clock:
-    """A lockstep clock brought to ``state`` by listed transitions only (an answer held when it is ANSWERED)."""
+    """A lockstep clock brought to ``state`` by listed transitions only (an answer held when it is ANSWERED or
+    GATED)."""
     clock = Clock(False, 1000.0, 1.0, 0.0)
     for trigger in path_from_idle()[state]:
         if trigger is Trigger.ANSWER:
@@ -59,9 +60,11 @@ def test_listed_transition_leads_where_the_table_says(state: ClockState, trigger
     else:
         assert clock.fire(trigger) is TRANSITIONS[state, trigger]
     assert clock.state is TRANSITIONS[state, trigger]
-    if clock.state is not ClockState.ANSWERED:
-        assert clock.answer is None  # no answer outlives ANSWERED
-    assert clock.engaged == (clock.state in (ClockState.LOCKSTEP, ClockState.ANSWERED))
+    if clock.state in (ClockState.ANSWERED, ClockState.GATED):
+        assert clock.answer == ANSWER  # held from ANSWERED to GATED and back
+    else:
+        assert clock.answer is None  # no answer outlives ANSWERED (and GATED)
+    assert clock.engaged == (clock.state in (ClockState.LOCKSTEP, ClockState.ANSWERED, ClockState.GATED))
     assert clock.halted == (clock.state is ClockState.HALTED)
 
 

@@ -114,9 +114,10 @@ def report_fleet(run: Any, command: str) -> int:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
     for v in s["vehicles"]:
         if v["outcome"] != "completed":
-            c = v.get("contact")  # SITL: judged on the traces, after flights that went on past it
-            said = f" (touched vehicle {c['with']} at step {c['step']}, t={c['t']:.3f} s; the flights went on: " \
-                   "the vehicles share no clock under bsst sitl)" if c else ""
+            c = v.get("contact")  # SITL: lockstep, both flights ended there; real time, they went on past it
+            went = ("; the flights went on: in real time the vehicles share no clock" if c and c.get("continued")
+                    else "; both flights ended there")
+            said = f" (touched vehicle {c['with']} at step {c['step']}, t={c['t']:.3f} s{went})" if c else ""
             print(f"bsst {command}: vehicle {v['id']}: {v['outcome']}{said}", file=sys.stderr)
     for p in s.get("policies") or []:
         if not p.get("ok"):
@@ -226,6 +227,9 @@ def add_sitl_commands(sub: Any) -> None:
     p.add_argument("--home", type=_home, metavar="LAT,LON,ALT", help="home: degrees, degrees, m AMSL")
     p.add_argument("--await-mission", action="store_true",
                    help="take MISSION_START and AUTO.MISSION: a ground station's mission, flown by the controller")
+    p.add_argument("--gate", metavar="FILE", help="lockstep: step on a fleet's shared clock with the vehicles FILE "
+                                                  "names (bsst sitl --vehicles writes it; docs/swarm.md)")
+    _spin_option(p)
     add_failsafe_options(p)
     add_param_options(p, schedule=False)  # a change at a mission time is the controller's to send (--param-at)
     add_sensor_options(p)
@@ -248,6 +252,10 @@ def add_sitl_commands(sub: Any) -> None:
                    help="fly only this vehicle (default: the first autopilot heard)")
     p.add_argument("--timeout", type=number_in("--timeout", 0.0, 3600.0, lo_open=True), default=10.0, metavar="S",
                    help="wait this long for the vehicle's heartbeat (default 10 s)")
+    p.add_argument("--start-timeout", type=number_in("--start-timeout", 0.0, 3600.0, lo_open=True), metavar="S",
+                   help="wait this long for the mission's second and third states (default 2 s, as for any state; a "
+                        "lockstep fleet's first steps wait for its slowest vehicle to start)")
+    _spin_option(p)
     p.add_argument("--await-mission", action="store_true",
                    help="the MISSION file gives the settings only: wait for a ground station to start the vehicle's "
                         "mission, download it and fly it")
@@ -286,7 +294,11 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
     from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, GCS_PORT, LINK_PORT, parse_address  # lazy
     from bridge.mavlink.telemetry import Home  # lazy: start-up time
     from bridge.nodes.vehicle import VehicleConfig, run_vehicle  # lazy: start-up time
+    from bridge.nodes.vehicle.gate import GateConfig  # lazy: start-up time
 
+    if args.gate and args.realtime:
+        raise ConfigError("--gate with --realtime: a fleet's shared step clock is lockstep's (real time keeps the "
+                          "wall clock)")
     flight = prepare(args.mission or at_rest(), overrides_from_args(args))
     n = args.instance
     own = flight.params.sysid if "MAV_SYS_ID" in flight.mission.params else None  # [params] or --param
@@ -307,7 +319,9 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
     cfg = VehicleConfig(listen, gcs, sysid=args.sysid or own or n + 1, controller_sysid=sysid, controller_compid=compid,
                         clock="realtime" if args.realtime else "lockstep", speed=args.speed,
                         home=Home(*args.home) if args.home else Home(), key=_key(args), controller_from=pin,
-                        await_mission=args.await_mission)
+                        await_mission=args.await_mission,
+                        gate=GateConfig.load(args.gate) if args.gate else None,
+                        **({"spin_s": args.spin} if args.spin is not None else {}))
     return run_vehicle(flight, cfg, args.out, args.overwrite)
 
 
@@ -323,9 +337,16 @@ def cmd_controller(args: argparse.Namespace) -> int:
         raise ConfigError(f"--vehicle {args.vehicle!r}: the controller sends to the vehicle (udpout)")
     cfg = OffboardConfig(vehicle, sysid=args.sysid, clock="realtime" if args.realtime else "lockstep",
                          target_sysid=args.target_sysid, connect_timeout_s=args.timeout, key=_key(args),
-                         source_port=args.source_port or 0, await_mission=args.await_mission)
+                         source_port=args.source_port or 0, await_mission=args.await_mission,
+                         start_timeout_s=args.start_timeout, **({"spin_s": args.spin} if args.spin is not None else {}))
     return run_controller(flight, cfg, args.out, args.overwrite)
 
+
+
+def _spin_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--spin", type=number_in("--spin", 0.0, 0.01), metavar="S",
+                   help="lockstep: poll this long (s) before sleeping while the other side's message is due "
+                        "(default 0.0002; 0 where processes outnumber the cores, as in a bsst sitl fleet)")
 
 
 def _key(args: argparse.Namespace) -> bytes | None:

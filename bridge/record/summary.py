@@ -43,7 +43,8 @@ from bridge.record.policies import (
 from bridge.record.runlog import trace_arrays
 
 FAILED_OUTCOMES = ("failsafe", "diverged", "aborted", "law_failed")
-PLANT_OUTCOMES = ("diverged", "crashed")  # the plant ended the flight (SimVehicle.plant_verdict), as offline
+# the plant ended the flight (SimVehicle.plant_verdict, or a fleet's contact), as offline
+PLANT_OUTCOMES = ("diverged", "crashed", "collision")
 # the vehicle's events that a sender other than the flight's controller may cause and that change the flight
 INTERVENING = ("param", "mode", "armed", "disarmed", "fault")  # fault: a ground station's injected failure
 
@@ -222,11 +223,13 @@ def ended_by_change(end: dict[str, Any], outcome: str, events: Sequence[RunEvent
 
 def plant_outcome(outcome: str, facts: SessionFacts, events: Sequence[RunEvent]) -> str:
     """``crashed`` when the vehicle's events say it hit the ground armed (its ``crashed`` event: the flight's
-    end, as offline) and nothing came before it (the plant diverged, the user interrupted, a child died); else
+    end, as offline), ``collision`` when another vehicle touched it (its ``collision`` event), and nothing came
+    before it (the plant diverged, the user interrupted, a child died); else
     ``outcome``."""
     if outcome == "diverged" or facts.aborted or facts.died:
         return outcome
-    return "crashed" if any(e.kind == "crashed" for e in vehicle_events(events)) else outcome
+    kinds = {e.kind for e in vehicle_events(events)}  # collision: a fleet's shared clock ended it
+    return "collision" if "collision" in kinds else "crashed" if "crashed" in kinds else outcome
 
 
 def airborne(trace: Mapping[str, Any], t: float) -> bool:

@@ -10,10 +10,14 @@ Out: each vehicle's :class:`~bridge.record.runlog.Run` (its own ``trace.csv``, t
 Each vehicle is one :class:`~bridge.session.session.Session` (the single vehicle's, unchanged), run in a thread
 of this process: vehicle i is PX4's instance B + i - 1 (its controller link on 127.0.0.1:14560 + B + i - 1),
 with system id i, and every vehicle's ground-station traffic goes to the one address, so a ground station
-there sees N systems. Each pair keeps its own lockstep: the vehicles share no clock, so each pair's flight is
-its own deterministic flight, the one the offline loop flies for that vehicle; the shared world (separation,
-contacts) is judged afterwards on their traces (:mod:`bridge.swarm`). Ctrl-C or SIGTERM stops every pair
-(each session's own stop: SIGTERM, then SIGKILL at its deadline) and each still writes its summary.
+there sees N systems. In lockstep the vehicles step on one shared clock (given the vehicles' disc radii, m): each
+vehicle's gate file (``vehicle-<id>/gate.json``: every vehicle's id, disc radius and gate port) makes its
+vehicle wait, after each step, for every other vehicle to fly it, and end its flight ``collision`` at the step
+it touches another (:mod:`bridge.nodes.vehicle.gate`); each controller then waits up to
+:data:`~bridge.session.children.READY_TIMEOUT_S` for the mission's second state, since the first step waits for
+the slowest vehicle to start. In real time each pair keeps its own wall clock, and the shared world is judged
+afterwards on their traces (:mod:`bridge.swarm`). Ctrl-C or SIGTERM stops every pair (each session's own stop:
+SIGTERM, then SIGKILL at its deadline) and each still writes its summary.
 """
 
 from __future__ import annotations
@@ -26,9 +30,10 @@ from bridge.autopilot.estimator import compile_estimator
 from bridge.core.flight import Flight
 from bridge.mavlink.endpoint import LINK_PORT
 from bridge.mavlink.signing import key_from_file
+from bridge.nodes.vehicle.gate import GateConfig
 from bridge.record.runlog import Run, blackout_windows, finish_run
 from bridge.session import check_options
-from bridge.session.children import check_port_free
+from bridge.session.children import READY_TIMEOUT_S, check_port_free, free_udp_port
 from bridge.session.session import Session, catch_stop_signals
 from params import ConfigError
 
@@ -61,14 +66,22 @@ def check_fleet_ports(count: int, instance: int | None) -> None:
 
 def fly_sessions(flights: Sequence[Flight], ids: Sequence[int], dirs: Sequence[Path], *, realtime: bool,
                  instance: int | None, gcs: str | None, speed: float | None, key: Path | None, plots: bool,
-                 keep: bool) -> list[Run]:
+                 keep: bool, radii: Sequence[float] | None = None) -> list[Run]:
     """Fly every vehicle's session at once (the module's docstring); each vehicle's :class:`Run`, in order.
-    A session that fails to start (bad input, a child dead at start) stops the others; its error is raised."""
+    ``radii`` (m, each vehicle's disc), in lockstep: on one shared clock. A session that fails to start (bad
+    input, a child dead at start) stops the others; its error is raised."""
     for f in flights:
         compile_estimator(f.estimator)  # a first EKF on this machine compiles here, once, before any child starts
+    gates: list[Path | None] = [None] * len(flights)
+    if radii is not None and not realtime and len(flights) > 1:
+        ports = tuple(free_udp_port() for _ in flights)
+        for j, d in enumerate(dirs):
+            gates[j] = d / "gate.json"
+            GateConfig(j, tuple(ids), tuple(radii), ports).dump(d / "gate.json")
     sessions = [Session(f, d, realtime=realtime, instance=None if instance is None else instance + i - 1,
-                        gcs=gcs, speed=speed, progress=None, live=False, key=key, sysid=i)
-                for f, i, d in zip(flights, ids, dirs)]
+                        gcs=gcs, speed=speed, progress=None, live=False, key=key, sysid=i, gate=g,
+                        start_timeout=READY_TIMEOUT_S if g is not None else None)
+                for f, i, d, g in zip(flights, ids, dirs, gates)]
     runs: list[Run | None] = [None] * len(sessions)
     errors: list[BaseException] = []
 

@@ -42,8 +42,11 @@ class Session:
 
     def __init__(self, flight: Flight, path: Path, *, realtime: bool, instance: int | None, gcs: str | None,
                  speed: float | None, progress: Progress | None, live: bool, key: Path | None = None,
-                 await_mission: bool = False, sysid: int | None = None) -> None:
+                 await_mission: bool = False, sysid: int | None = None, gate: Path | None = None,
+                 start_timeout: float | None = None) -> None:
         self.flight = flight
+        self.gate = gate  # a lockstep fleet's shared clock: the vehicle's gate file (bridge.session.fleet)
+        self.start_timeout = start_timeout  # s: the controller's --start-timeout (None: its default)
         # --await-mission: ``flight`` holds the settings only; the mission is the controller's, once a ground
         # station has started one (its ``mission`` report: :meth:`_mission_loaded`); no trace is joined before
         self.await_mission = await_mission
@@ -120,7 +123,8 @@ class Session:
             off_clock_t=None if self.realtime else off_clock_time(self.path / "vehicle.csv",
                                                                    self.flight.mission.rate_hz),
             sitl={"instance": self.instance, "listen": self.listen, "gcs": self.gcs, "sysid": self.sysid,
-                  "speed": self.speed, "died": self.died, "signed": self.key is not None},
+                  "speed": self.speed, "died": self.died, "signed": self.key is not None,
+                  **({"gate": self.vehicle.stats.get("gate") if self.vehicle else None} if self.gate else {})},
             mission_transfer=self.transfer)
         joined = self.joiner.joined()
         out = session_summary(self.flight, facts, joined, self.events, _end(self.vehicle), _end(self.controller),
@@ -162,6 +166,8 @@ class Session:
             argv += ["--speed", repr(self.speed)]
         if self.await_mission:
             argv.append("--await-mission")
+        if self.gate is not None:  # a fleet: its processes outnumber the cores, so none polls before it sleeps
+            argv += ["--gate", str(self.gate), "--spin", "0"]
         keyarg = ["--key", str(self.key)] if self.key is not None else []
         self.vehicle = Child("vehicle", argv + keyarg, self.path / "vehicle.log")
         to = port
@@ -177,6 +183,8 @@ class Session:
                 "--overwrite"]
         if self.realtime:
             argv.append("--realtime")
+        if self.start_timeout is not None:
+            argv += ["--start-timeout", repr(self.start_timeout), "--spin", "0"]
         if self.await_mission:
             argv.append("--await-mission")
         for c in self.flight.param_changes:

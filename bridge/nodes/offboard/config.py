@@ -71,6 +71,9 @@ class OffboardConfig:
     target_sysid: int | None = None  # None: the first autopilot that sends a heartbeat
     connect_timeout_s: float = 10.0  # s of wall time to wait for the vehicle's heartbeat
     vehicle_timeout_s: float = 2.0  # s of wall time without any message: the vehicle is lost
+    # s of wall time for the mission's second and third states (a lockstep fleet's first steps wait for its slowest
+    # vehicle to start: bridge.nodes.vehicle.gate); None: vehicle_timeout_s
+    start_timeout_s: float | None = None
     spin_s: float = 0.0002  # as the vehicle's (bridge.nodes.vehicle.VehicleConfig.spin_s)
     timesync_s: float = 0.5
     key: bytes | None = field(default=None, repr=False)  # MAVLink 2 signing key (never shown)

@@ -70,6 +70,7 @@ class Offboard(OffboardLink):
         self.rows = (LineWriter(out / "controller.csv", ",".join(CONTROLLER_COLUMNS), batch=1)
                      if out is not None else None)
         self._last_state = time.monotonic()  # wall time of the newest state flown
+        self._started = False  # the mission's third state come (before it: start_timeout_s)
         self.stale_ticks = 0
         self.schedule: FixedRate | None = None  # realtime: the tick schedule, once phase-locked
         self.reason = ""
@@ -294,7 +295,7 @@ class Offboard(OffboardLink):
         X = odometry_to_state((odo.x, odo.y, odo.z), odo.q, (odo.vx, odo.vy, odo.vz),
                               (odo.rollspeed, odo.pitchspeed, odo.yawspeed))
         self.cend.receive_state(t_state, X, self.vehicle_armed and self.vehicle_state != mavlink.MAV_STATE_CRITICAL)
-        self._last_state = recv
+        self._last_state, self._started = recv, t_state * self.rate > 1.5
 
     def _decide(self, t: float, k: int, time_usec: int, recv: float, late: float) -> tuple[float, ...] | None:
         """The control step at mission time t (s): the guard decides on the newest state the
@@ -429,7 +430,7 @@ class Offboard(OffboardLink):
             self.reason = f"vehicle silent for {timeout:g} s"
         elif self.armed_seen and not self.vehicle_armed and not self.failsafe_seen:
             self.reason = "the vehicle was disarmed during the mission"
-        elif now - self._last_state > timeout:
+        elif now - self._last_state > (timeout if self._started else self.cfg.start_timeout_s or timeout):
             self.reason = f"no new state from the vehicle for {timeout:g} s"
         else:
             return None

@@ -11,7 +11,10 @@ time stands still) until a flight engages it; then the state of step k goes out 
 controller's answer is held (``answered``) and step k is flown (``lockstep`` again, step k + 1). A
 controller silent too long, or a mode the vehicle flies itself (HOLD, LAND, TAKEOFF), leaves lockstep for
 the wall clock (``free-running``), which the **realtime** clock is from the start. A diverged plant is
-``halted`` for good. A trigger the table does not list for the state is a bug: :class:`IllegalTransition`.
+``halted`` for good. In a SITL fleet on one shared clock (:mod:`.gate`), the answer of step k held, the vehicle
+is ``gated`` until every other vehicle has flown step k - 1 too; then step k is flown (``answered``), or,
+touched by another vehicle, its flight ends there (``halted``). A trigger the table does not list for the state
+is a bug: :class:`IllegalTransition`.
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ class ClockState(Enum):
     IDLE = "idle"  # lockstep clock, no flight on: time stands still, the state is still shown
     LOCKSTEP = "lockstep"  # a flight on: the state of step k is out, its answer awaited
     ANSWERED = "answered"  # the answer of step k is held: step k is flown next
+    GATED = "gated"  # a fleet's shared clock: the answer of step k held, the others' step k - 1 awaited
     FREE_RUNNING = "free-running"  # physics on the wall clock (realtime; lockstep lost or a ground mode)
     HALTED = "halted"  # diverged: the plant is not stepped any more
 
@@ -43,6 +47,9 @@ class Trigger(Enum):
     GROUND = "ground"  # a ground station's mode, flown by the vehicle's own controller
     DISARM = "disarm"  # disarmed by command: a lockstep flight is over
     DIVERGE = "diverge"  # the plant diverged
+    GATE = "gate"  # a fleet's shared clock: an answer held before every other vehicle has flown step k - 1
+    RELEASE = "release"  # every other vehicle has flown step k - 1: step k is flown with the held answer
+    COLLIDE = "collide"  # another vehicle touched this one at the shared clock's step: the flight is over
 
 
 S, T = ClockState, Trigger
@@ -68,9 +75,16 @@ TRANSITIONS: dict[tuple[ClockState, Trigger], ClockState] = {
     (S.LOCKSTEP, T.DIVERGE): S.HALTED,
     (S.ANSWERED, T.DIVERGE): S.HALTED,
     (S.FREE_RUNNING, T.DIVERGE): S.HALTED,
+    (S.ANSWERED, T.GATE): S.GATED,  # (the answer still held)
+    (S.GATED, T.RELEASE): S.ANSWERED,
+    (S.GATED, T.ENGAGE): S.LOCKSTEP,  # (its held answer dropped, as from ANSWERED)
+    (S.GATED, T.GROUND): S.FREE_RUNNING,
+    (S.GATED, T.DISARM): S.IDLE,
+    (S.ANSWERED, T.COLLIDE): S.HALTED,
+    (S.GATED, T.COLLIDE): S.HALTED,
 }
 del S, T
-_ENGAGED = frozenset({ClockState.LOCKSTEP, ClockState.ANSWERED})
+_ENGAGED = frozenset({ClockState.LOCKSTEP, ClockState.ANSWERED, ClockState.GATED})
 
 
 class IllegalTransition(RuntimeError):
@@ -90,20 +104,20 @@ class Clock:
 
     def __init__(self, realtime: bool, physics_hz: float, speed: float, now: float) -> None:
         self.state = ClockState.FREE_RUNNING if realtime else ClockState.IDLE
-        self.answer: Answer | None = None  # held in ANSWERED only
+        self.answer: Answer | None = None  # held in ANSWERED and GATED only
         self.pace = Pace(physics_hz, speed, now)  # the wall clock of physics steps
         self._halted_on_wall = False  # halted from the wall clock: its time runs on (TIMESYNC)
 
     def fire(self, trigger: Trigger) -> ClockState:
         """Make the transition ``trigger`` from the current state; :class:`IllegalTransition` if the
-        table has none. Leaving ANSWERED drops the held answer."""
+        table has none. Leaving ANSWERED (for anywhere but GATED) drops the held answer."""
         state = self.state
         nxt = TRANSITIONS.get((state, trigger))
         if nxt is None:
             raise IllegalTransition(f"clock: {trigger.value} is not allowed while {state.value}")
         if nxt is ClockState.HALTED and state is not ClockState.HALTED:
             self._halted_on_wall = state is ClockState.FREE_RUNNING
-        if nxt is not ClockState.ANSWERED:
+        if nxt is not ClockState.ANSWERED and nxt is not ClockState.GATED:
             self.answer = None
         self.state = nxt
         return nxt

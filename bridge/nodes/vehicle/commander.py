@@ -365,6 +365,13 @@ class Commander:
                                    "leaving lockstep, running on the wall clock")
         self.clock.run_free(Trigger.LOSE, now, self.ports.step() * self.substeps)
 
+    def collided(self, why: str) -> None:
+        """A fleet's shared clock: another vehicle touched this one (``why``); the flight ends there, disarmed,
+        the clock halted, as offline (``collision``)."""
+        self.sim.event("collision", why)
+        self.sim.disarm(f"collision: {why}")
+        self.clock.fire(Trigger.COLLIDE)
+
     def diverged(self) -> bool:
         """After a control period: whether the plant ended the flight (diverged, or crashed while armed:
         :meth:`SimVehicle.plant_verdict`, as offline); then disarmed, and the clock halted for good."""

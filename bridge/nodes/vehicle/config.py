@@ -1,7 +1,8 @@
-"""How the vehicle is reached and clocked: :class:`VehicleConfig`, shared by all its parts.
+"""How the vehicle is reached and clocked: :class:`VehicleConfig`, shared by all its parts, and its two links.
 
-In:  the ``bsst vehicle`` options (addresses, MAVLink ids, clock, speed, timeouts, home, signing key)
-Out: one frozen :class:`VehicleConfig` (wall times in s, ``speed`` in x real time)
+In:  the ``bsst vehicle`` options (addresses, MAVLink ids, clock, speed, timeouts, home, signing key, a fleet's gate)
+Out: one frozen :class:`VehicleConfig` (wall times in s, ``speed`` in x real time); :func:`open_links`: its
+     controller link and GCS link, bound
 """
 
 from __future__ import annotations
@@ -9,7 +10,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from bridge.mavlink import telemetry as tm
-from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, VEHICLE_COMPID, Address
+from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, VEHICLE_COMPID, Address, Endpoint, Tlog
+from bridge.mavlink.receive import Rejections
+from bridge.mavlink.signing import Signing
+from bridge.nodes.vehicle.gate import GateConfig
 
 CLOCKS = ("lockstep", "realtime")
 
@@ -37,3 +41,21 @@ class VehicleConfig:
     # a ground station's mission is flown (bsst sitl --await-mission): MISSION_START and AUTO.MISSION are taken,
     # and the offboard controller, which downloads the mission, flies it (docs/missions.md, "From a ground station")
     await_mission: bool = False
+    # a lockstep fleet's shared step clock (bsst sitl --vehicles, :mod:`bridge.nodes.vehicle.gate`); None: alone
+    gate: GateConfig | None = None
+
+
+def open_links(cfg: VehicleConfig, tlog: Tlog | None, rejected: Rejections) -> tuple[Endpoint, Endpoint | None]:
+    """The controller link (``--listen``) and the GCS link (``--gcs``, if any), signed with ``cfg.key``."""
+    # one replay table for both links: a signed frame replayed from one link onto the other is refused
+    replay: dict[tuple[int, int, int], int] = {}
+    sign = ((lambda link_id: Signing(cfg.key, link_id, replay)) if cfg.key is not None
+            else (lambda link_id: None))
+    link = Endpoint(cfg.listen, sysid=cfg.sysid, compid=cfg.compid, tlog=tlog, name="--listen",
+                    signing=sign(0), rejected=rejected, priority=True)
+    link.follow = False  # ODOMETRY goes to the flight's controller only (see Receiver.handle)
+    # a ground station is charged like any source, and its refusals are not the controller's
+    gcs = (Endpoint(cfg.gcs, sysid=cfg.sysid, compid=cfg.compid, tlog=tlog, name="--gcs",
+                    signing=sign(1), rejected=rejected, exempt_peer=False)
+           if cfg.gcs is not None else None)
+    return link, gcs

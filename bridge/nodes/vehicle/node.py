@@ -27,17 +27,17 @@ from bridge.core.flight import Flight
 from bridge.core.wire import command_from_wire
 from bridge.link.ends import VehicleEnd
 from bridge.mavlink import telemetry as tm
-from bridge.mavlink.endpoint import Endpoint, Tlog, wait
+from bridge.mavlink.endpoint import Tlog, wait
 from bridge.mavlink.modes import MISSION
 from bridge.mavlink.receive import Rejections
-from bridge.mavlink.signing import Signing
 from bridge.nodes.process import on_stop_signals, report_printer
 from bridge.nodes.report import Ready, Refused, Report, Stats
 from bridge.nodes.vehicle.announcer import Announcer
 from bridge.nodes.vehicle.authority import Authority
 from bridge.nodes.vehicle.clock import Answer, Clock, ClockState, Trigger
 from bridge.nodes.vehicle.commander import Commander, CommanderPorts
-from bridge.nodes.vehicle.config import CLOCKS, VehicleConfig
+from bridge.nodes.vehicle.config import CLOCKS, VehicleConfig, open_links
+from bridge.nodes.vehicle.gate import Gate
 from bridge.nodes.vehicle.mission import MissionManager
 from bridge.nodes.vehicle.paramservice import ParamService
 from bridge.nodes.vehicle.receiver import Receiver, ReceiverPorts, Refusals
@@ -86,7 +86,8 @@ class Vehicle:
         self.rejected = Rejections()
         self._reject = Refusals(self.rejected)
         self.authority = Authority(cfg)
-        self._open_links(cfg)
+        self.link, self.gcs = open_links(cfg, self.tlog, self.rejected)
+        self.endpoints = [self.link] + ([self.gcs] if self.gcs is not None else [])
         self.rows = Rows(out / "vehicle.csv", self.rate) if out is not None else None
         self.k = 0  # control step of the plant's state: t_k = k / rate_hz
         self.stopping = False
@@ -127,21 +128,10 @@ class Vehicle:
                                                clock_ns=self._clock_ns))
         self.announcer.charged = self.receiver.charged
         self._handle = self.receiver.handle  # (an attribute: one call less on the lockstep's hot path)
-
-    def _open_links(self, cfg: VehicleConfig) -> None:
-        """The controller link (``--listen``) and the GCS link (``--gcs``, if any), signed with ``cfg.key``."""
-        # one replay table for both links: a signed frame replayed from one link onto the other is refused
-        replay: dict[tuple[int, int, int], int] = {}
-        sign = ((lambda link_id: Signing(cfg.key, link_id, replay)) if cfg.key is not None
-                else (lambda link_id: None))
-        self.link = Endpoint(cfg.listen, sysid=cfg.sysid, compid=cfg.compid, tlog=self.tlog, name="--listen",
-                             signing=sign(0), rejected=self.rejected, priority=True)
-        self.link.follow = False  # ODOMETRY goes to the flight's controller only (see Receiver.handle)
-        # a ground station is charged like any source, and its refusals are not the controller's
-        self.gcs = (Endpoint(cfg.gcs, sysid=cfg.sysid, compid=cfg.compid, tlog=self.tlog, name="--gcs",
-                             signing=sign(1), rejected=self.rejected, exempt_peer=False)
-                    if cfg.gcs is not None else None)
-        self.endpoints = [self.link] + ([self.gcs] if self.gcs is not None else [])
+        # a lockstep fleet's shared clock (bsst sitl --vehicles): step by step with the other vehicles
+        self.gate = (Gate(cfg.gate, self.clock, lambda: (self.plant.state[0], self.plant.state[2],
+                                                          self.plant.state[4]), self.rate)
+                     if cfg.gate is not None and cfg.clock == "lockstep" else None)
 
     # -- public --------------------------------------------------------------------------
     def stop(self) -> None:
@@ -162,6 +152,9 @@ class Vehicle:
                     self._freerun_period()
                 elif state in _ENGAGED:
                     self._lockstep_wait()
+                elif state is ClockState.GATED:
+                    self.gate.serve(self.endpoints, self._next_house, self._handle,  # type: ignore[union-attr]
+                                    self.commander.collided, self._step_lockstep)
                 else:  # idle, halted
                     self._idle()
                 if time.monotonic() >= self._next_house:
@@ -179,12 +172,15 @@ class Vehicle:
             self.tlog.close()
         for ep in self.endpoints:
             ep.close()
+        if self.gate is not None:
+            self.gate.close()
 
     def report_stats(self) -> None:
         """The stats report: what was accepted, refused, sent and received, and the up-link model's."""
         self._report(Stats({
             "accepted": self.targets.accepted, "rejected": dict(self.rejected), "odometry_sent": self.odometry.count,
             "received": self.link.received, "overruns": self.pace.rebased, "steps": self.k,
+            **({"gate": self.gate.stats()} if self.gate is not None else {}),  # a fleet's shared clock
             "rejected_from_controller": self.rejected.from_peer, "resends": self.odometry.resends,
             "answered_again": self.targets.answered_again, "odometry_steps": self.odometry.steps.ranges,
             "kernel_drops": self.link.kernel_drops(),
@@ -262,7 +258,8 @@ class Vehicle:
         for ep, m, addr in wait(self.endpoints, deadline, self.link, self.cfg.spin_s):
             self._handle(ep, m, addr)
         if self.clock.state is ClockState.ANSWERED:
-            self._step_lockstep()
+            if self.gate is None or self.gate.clear(self.commander.collided):  # (a fleet: the others flew k - 1)
+                self._step_lockstep()
             return
         if self.clock.state is not ClockState.LOCKSTEP:
             return
@@ -297,8 +294,11 @@ class Vehicle:
         self.k = k + 1
         if self.cfg.speed is not None:
             self._wait_until(self.pace.due(self.k * self.substeps))
-        if self._after_step():
+        alive = self._after_step()
+        if alive:
             self._send_odometry(time.monotonic())
+        if self.gate is not None:
+            self.gate.after_step(self.k, ending, alive)
         # off the critical path: the controller is computing step k+1 meanwhile
         if self.rows is not None:
             self.rows.lockstep(k, X, self.sim.mode, wire, real, t - vend.applied_state_t, recv - sent, sent, recv,
@@ -308,6 +308,8 @@ class Vehicle:
     def _freerun_period(self) -> None:
         """One control period on the wall clock: state out, row, physics steps on schedule."""
         k = self.k
+        if self.gate is not None:
+            self.gate.over(k)
         n0 = k * self.substeps
         if not self._wait_until(self.pace.due(n0)):
             return
@@ -349,6 +351,8 @@ class Vehicle:
     # -- idle -----------------------------------------------------------------------------------
     def _idle(self) -> None:
         """Lockstep and disarmed (or halted): time stands still; serve the links."""
+        if self.gate is not None:
+            self.gate.over(self.k)
         deadline = min(self._next_house, self._idle_odo_at)
         for ep, m, addr in wait(self.endpoints, deadline):
             self._handle(ep, m, addr)

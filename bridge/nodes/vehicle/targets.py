@@ -82,7 +82,7 @@ class Targets:
             return self._reject(why)
         key = step_of_usec(m.time_usec, self.rate)
         if clock.engaged:
-            if key != k or clock.state is ClockState.ANSWERED:
+            if key != k or clock.state is not ClockState.LOCKSTEP:
                 return self._behind(key, k)
             self.accepted += 1
             clock.hold(Answer(wire, now))
@@ -105,7 +105,7 @@ class Targets:
         if not clock.engaged:
             return None
         key = step_of_usec(m.time_usec, self.rate)
-        if key != k or clock.state is ClockState.ANSWERED:
+        if key != k or clock.state is not ClockState.LOCKSTEP:
             return self._behind(key, k)
         clock.hold(Answer(None, time.monotonic()))
         return None

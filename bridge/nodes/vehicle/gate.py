@@ -1,0 +1,301 @@
+"""A SITL fleet's shared step clock, one vehicle's side: the barrier between the vehicles of one lockstep fleet.
+
+In:  the fleet's gate file (JSON, written by :mod:`bridge.session.fleet`: this vehicle's index, every vehicle's
+     system id, disc radius (m) and gate port on 127.0.0.1); the plant's true position (m, x y z, the paper's
+     frame) after each lockstep step k; the other vehicles' gate datagrams; wall time (s, ``time.monotonic``)
+Out: datagrams to the other vehicles' gates (this vehicle at step k and where, or gone from step k and where it
+     stays); :meth:`Gate.clear`: whether step k may be flown (every other vehicle has flown step k - 1), else the
+     clock ``gated``, or the contact's text to end the flight with (``collision``); :meth:`Gate.stats` (steps,
+     seconds gated, the step and place it left, its contact, any vehicle taken as gone)
+
+The offline fleet (:mod:`bridge.swarm`) flies every vehicle one step, then judges the world on their positions.
+Here each vehicle, its step k - 1 flown, sends the state of step k to its controller and its position to every
+other vehicle; before it flies step k with its controller's answer, it waits until it has every other vehicle's
+position at step k (or that vehicle is gone, an obstacle where it stays), then judges the world itself with
+:func:`missions.fleet.clearance`, the offline loop's test: every vehicle judges the same positions, so each
+knows alone, at the same step, whether it touched, and whom. So the controllers compute while the vehicles
+wait for each other, and no vehicle flies step k before every other has flown step k - 1. No vehicle is more than one
+step ahead of another, so a datagram carries the last two positions, and one lost is made good by the next or
+by the resend every :data:`RESEND_S`. A vehicle silent for :data:`SILENT_S` (its process stopped) is taken as
+gone where it was last, and said so (:attr:`Gate.dropped`). A vehicle is heard from its own gate port only
+(which no other process can bind while it runs); the gate has no signing, as the links without ``--key``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import select
+import socket
+import struct
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from bridge.mavlink.endpoint import Endpoint
+from bridge.nodes.vehicle.clock import Clock, ClockState, Trigger
+from missions.fleet import clearance
+from params import ConfigError
+
+RESEND_S = 0.1  # s of wall time waiting at the gate before this vehicle's last word is sent again
+SILENT_S = 30.0  # s of wall time without a word from a vehicle that has not flown step k: taken as gone
+AT, GONE = 0, 1
+_WIRE = struct.Struct("<4sBBqdddddd")  # magic, kind, index, step, position at step, position at step - 1
+_MAGIC = b"BSSG"
+
+
+@dataclass(frozen=True)
+class GateConfig:
+    """The fleet's shared clock as one vehicle sees it: its index, and every vehicle's id, disc radius, port."""
+
+    index: int
+    ids: tuple[int, ...]
+    radii: tuple[float, ...]  # m
+    ports: tuple[int, ...]  # UDP on 127.0.0.1
+
+    @staticmethod
+    def load(path: str | Path) -> GateConfig:
+        """Read a gate file; a bad one is a ConfigError naming it and what is wrong."""
+        try:
+            d = json.loads(Path(path).read_text())
+            cfg = GateConfig(int(d["index"]), tuple(map(int, d["ids"])), tuple(map(float, d["radii"])),
+                             tuple(map(int, d["ports"])))
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise ConfigError(f"--gate {path}: not a fleet gate file ({exc})"[:300]) from None
+        n = len(cfg.ids)
+        if not (n >= 2 and len(cfg.radii) == n and len(cfg.ports) == n and 0 <= cfg.index < n
+                and all(0 < p < 65536 for p in cfg.ports) and all(r > 0 and math.isfinite(r) for r in cfg.radii)):
+            raise ConfigError(f"--gate {path}: expected index 0..N-1 and N >= 2 ids, disc radii > 0 m and ports")
+        return cfg
+
+    def dump(self, path: Path) -> None:
+        path.write_text(json.dumps({"index": self.index, "ids": self.ids, "radii": self.radii, "ports": self.ports}))
+
+
+class Gate:
+    """One vehicle's side of the shared clock (the module's docstring): :meth:`after_step` (its word to the others),
+    :meth:`clear` before each step, :meth:`serve` while gated, :meth:`over` (it leaves when its flight is over)."""
+
+    def __init__(self, cfg: GateConfig, clock: Clock, position: Callable[[], tuple[float, float, float]],
+                 rate: float) -> None:
+        self.cfg = cfg
+        self.clock = clock
+        self.position = position  # the plant's true centre now (m)
+        self.rate = rate
+        self.me = cfg.index
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            self.sock.bind(("127.0.0.1", cfg.ports[self.me]))
+        except OSError as exc:
+            self.sock.close()
+            raise ConfigError(f"--gate: cannot bind 127.0.0.1:{cfg.ports[self.me]} ({exc.strerror})") from None
+        self.sock.setblocking(False)
+        self.others = [j for j in range(len(cfg.ids)) if j != self.me]
+        self._to = [("127.0.0.1", cfg.ports[j]) for j in self.others]
+        self._from = dict(zip(self.others, self._to))
+        self.at: dict[int, dict[int, tuple[float, float, float]]] = {j: {} for j in self.others}
+        self.gone: dict[int, tuple[int, tuple[float, float, float]]] = {}  # index: (from step, where it stays)
+        self.heard = {j: time.monotonic() for j in self.others}
+        self.dropped: list[str] = []  # the vehicles taken as gone for their silence, and when
+        self.flying = False  # arrived at a step once: a member of the shared clock until it leaves
+        self.left: tuple[int, tuple[float, float, float]] | None = None
+        self.step = -1  # the step it waits at
+        self.judged = -1  # the last step judged (its verdict given)
+        self.pos = self.prev = (math.nan, math.nan, math.nan)
+        self._last = b""
+        self._sent_at = 0.0
+        self.steps = 0
+        self.wait_s = 0.0
+        self._since: float | None = None
+        self.contact: dict[str, Any] | None = None
+
+    # -- in the vehicle's loop ----------------------------------------------------------------------
+    def after_step(self, k: int, ending: bool, alive: bool) -> None:
+        """Lockstep step k - 1 flown, the plant now at step k (``alive``: not diverged or crashed; ``ending``: it
+        was the end action's, the mission over), its state gone to the controller: tell every other vehicle. The
+        vehicle leaves the shared clock when its lockstep flight is over: where its last step at the gate left it
+        (the mission's end), or where it is now."""
+        if self.left is not None:
+            return
+        if ending:
+            self.leave()
+        elif not alive or self.clock.state is not ClockState.LOCKSTEP:
+            self.leave(k, self.position())
+        else:
+            self.arrive(k, self.position())
+
+    def clear(self, collide: Callable[[str], None]) -> bool:
+        """The answer of step k held (ANSWERED or GATED): whether step k may be flown now, every other vehicle
+        having flown step k - 1 and none touching this one. If not yet, the clock is GATED until :meth:`serve`
+        clears it; touched, ``collide`` ends the flight (and the vehicle leaves, where it is)."""
+        if self.left is not None or self.judged == self.step:
+            return True
+        self.poll()
+        why = self.verdict(self.rate)
+        if why is None:
+            if self.clock.state is ClockState.ANSWERED:
+                self.clock.fire(Trigger.GATE)
+                self._since = time.monotonic()
+            return False
+        self.judged = self.step
+        if self._since is not None:  # the time its answer was held for the others (gated)
+            self.wait_s += time.monotonic() - self._since
+            self._since = None
+        if why:
+            collide(why)
+            self.leave()
+            return False
+        if self.clock.state is ClockState.GATED:
+            self.clock.fire(Trigger.RELEASE)
+        return True
+
+    def serve(self, endpoints: Sequence[Endpoint], deadline: float,
+              handle: Callable[[Endpoint, Any, tuple[str, int]], None], collide: Callable[[str], None],
+              fly: Callable[[], None]) -> None:
+        """Gated: serve the links until ``deadline`` or every other vehicle has flown the step before; then the
+        held answer's step is flown (``fly``), or, touched by another vehicle, the flight ends (``collide``)."""
+        for ep, m, addr in self.wait(endpoints, deadline):
+            handle(ep, m, addr)
+        if self.clock.state is ClockState.GATED and self.clear(collide):
+            fly()
+
+    def over(self, k: int) -> None:
+        """Not in lockstep any more (disarmed, on the wall clock, halted): a flight that was at the gate leaves it."""
+        if self.flying and self.left is None:
+            self.leave(k, self.position())
+
+    # -- this vehicle ------------------------------------------------------------------------------
+    def arrive(self, k: int, pos: tuple[float, float, float]) -> None:
+        """Step k flown (its true position after it, m): tell every other vehicle, and wait at the gate."""
+        self.flying = True
+        self.prev, self.pos, self.step = self.pos, pos, k
+        self._send(AT, k, pos, self.prev)
+        self.steps += 1
+
+    def leave(self, k: int | None = None, pos: tuple[float, float, float] | None = None) -> None:
+        """This vehicle's lockstep flight is over: it stays at ``pos`` from step ``k`` (default: the last step it
+        arrived at, where it was then), an obstacle; the others wait for it no more."""
+        if self.left is not None:
+            return
+        k, pos = (self.step, self.pos) if k is None or pos is None else (k, pos)
+        self.left = (k, pos)
+        for _ in range(2):  # (a copy: nothing waits for an answer to this one)
+            self._send(GONE, k, pos, pos)
+
+    def _send(self, kind: int, k: int, pos: Sequence[float], prev: Sequence[float]) -> None:
+        self._last = _WIRE.pack(_MAGIC, kind, self.me, k, *pos, *prev)
+        self._sent_at = time.monotonic()
+        for a in self._to:
+            try:
+                self.sock.sendto(self._last, a)
+            except OSError:
+                pass  # a vehicle not bound yet, or gone: its resend or its silence decides
+
+    # -- the others -------------------------------------------------------------------------------
+    def poll(self) -> None:
+        """Take every datagram waiting on the gate's socket (never blocks)."""
+        now = time.monotonic()
+        while True:
+            try:
+                data, addr = self.sock.recvfrom(256)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError:
+                continue  # (an ICMP refusal of an earlier send to a vehicle not bound yet)
+            if len(data) != _WIRE.size:
+                continue
+            magic, kind, j, k, *xs = _WIRE.unpack(data)
+            if magic != _MAGIC or self._from.get(j) != addr:
+                continue  # (heard from vehicle j's own gate port only, as the controller from its pinned port)
+            self.heard[j] = now
+            if kind == GONE:
+                self.gone.setdefault(j, (k, (xs[0], xs[1], xs[2])))
+            elif kind == AT and j not in self.gone:
+                seen = self.at[j]
+                seen[k] = (xs[0], xs[1], xs[2])
+                seen.setdefault(k - 1, (xs[3], xs[4], xs[5]))
+
+    def _where(self, j: int, k: int) -> tuple[float, float, float] | None:
+        """Vehicle j's position at step k, None if not known yet."""
+        p = self.at[j].get(k)
+        if p is not None:
+            return p
+        g = self.gone.get(j)
+        return g[1] if g is not None and g[0] <= k else None
+
+    def complete(self) -> bool:
+        """Whether every other vehicle's position at the step waited at is known."""
+        k = self.step
+        return all(self._where(j, k) is not None for j in self.others)
+
+    def verdict(self, rate: float) -> str | None:
+        """Waiting at step k: None until every other vehicle's position at k is known; then "" (no contact) or
+        the contact's text, as the offline loop tells it (its last pair, in id order, touching this vehicle;
+        ``rate`` Hz, for its time)."""
+        k = self.step
+        where = []
+        for j in self.others:
+            p = self._where(j, k)
+            if p is None:
+                self._silence(j)
+                return None
+            where.append((j, p))
+        for j in self.others:
+            seen = self.at[j]
+            for s in [s for s in seen if s < k]:
+                del seen[s]
+        why = ""
+        me, ids, radii, t = self.me, self.cfg.ids, self.cfg.radii, k / rate
+        for j, p in where:
+            d, c = clearance(self.pos, p, radii[me], radii[j])
+            if c <= 0.0:
+                a, b = min(me, j), max(me, j)
+                why = (f"vehicles {ids[a]} and {ids[b]} touched at t={t:.3f} s (centres {d:.3f} m apart, "
+                       f"rotor discs {c:.3f} m)")
+                self.contact = {"step": k, "with": ids[j], "why": why}
+        return why
+
+    def _silence(self, j: int) -> None:
+        """Vehicle j has not flown step k: send this vehicle's word again now and then; silent too long, j is
+        taken as gone where it was last heard of."""
+        now = time.monotonic()
+        if now - self._sent_at >= RESEND_S and self._last:
+            for a in self._to:
+                try:
+                    self.sock.sendto(self._last, a)
+                except OSError:
+                    pass
+            self._sent_at = now
+        if now - self.heard[j] >= SILENT_S:
+            seen = self.at[j]
+            last = seen[max(seen)] if seen else (math.nan, math.nan, math.nan)
+            self.gone[j] = (self.step, last)
+            self.dropped.append(f"vehicle {self.cfg.ids[j]} silent for {SILENT_S:g} s at step {self.step}: "
+                                "taken as gone where it was last")
+
+    def wait(self, endpoints: Sequence[Endpoint], deadline: float) -> list[tuple[Endpoint, Any, tuple[str, int]]]:
+        """Messages from the links, waiting at most until ``deadline`` (``time.monotonic``) or the gate's word."""
+        self.poll()
+        out = [(ep, m, a) for ep in endpoints for m, a in ep.poll(deadline)]
+        if out or self.complete():
+            return out
+        left = min(deadline, self._sent_at + RESEND_S) - time.monotonic()
+        if left > 0.0:
+            try:
+                select.select([self.sock] + [ep.wake_socket for ep in endpoints], [], [], left)
+            except InterruptedError:
+                pass
+        self.poll()
+        return [(ep, m, a) for ep in endpoints for m, a in ep.poll(deadline)]
+
+    def stats(self) -> dict[str, Any]:
+        """The shared clock as this vehicle saw it (its stats report's ``gate``)."""
+        left = self.left
+        return {"steps": self.steps, "wait_s": round(self.wait_s, 3), "contact": self.contact,
+                "left": None if left is None else {"step": left[0], "position": list(left[1])},
+                "dropped": self.dropped}
+
+    def close(self) -> None:
+        self.sock.close()

@@ -1,0 +1,216 @@
+"""Covers bridge.nodes.vehicle.gate, bridge.session.fleet and bridge.swarm: a lockstep SITL fleet's shared step clock.
+
+The gate alone (real UDP sockets on 127.0.0.1, in this process): no vehicle flies step k before every other one has
+flown step k - 1 (its answer held meanwhile), a contact is judged as the offline loop judges it (its text, its
+pair), a vehicle that left stays an obstacle where it said, one silent too long is taken as gone; the trace judge
+with where each vehicle stayed.
+Whole fleets (real ``bsst vehicle`` and ``bsst controller`` processes, free ports): two runs of one fleet write
+the same ``trace.csv`` bytes, and two vehicles that touch both end ``collision`` at the offline loop's step, their
+traces the offline ones (≤ 1e-4 m), the separation and its closest approaches the offline fleet's.
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bridge.cli import main
+from bridge.cli.flying import report_fleet
+from bridge.nodes.vehicle import gate as gatemod
+from bridge.nodes.vehicle.clock import Answer, Clock, ClockState, Trigger
+from bridge.nodes.vehicle.gate import Gate, GateConfig
+from bridge.swarm import CONTINUED, FleetRun, Watch, judge_traces, simulate, sitl
+from params import ConfigError
+from tests.test_swarm_sitl import short_sine
+from tests.waiting import wait_for
+
+pytestmark = pytest.mark.process  # starts processes, opens sockets
+
+ROOT = Path(__file__).resolve().parents[1]
+TOUCH = ROOT / "examples" / "swarm-touch.toml"
+RATE = 250.0
+ANSWER = Answer((0.5, 0.5, 0.5, 0.5), 1.0)
+
+
+def free_ports(n: int) -> tuple[int, ...]:
+    socks = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(n)]
+    for s in socks:
+        s.bind(("127.0.0.1", 0))
+    ports = tuple(s.getsockname()[1] for s in socks)
+    for s in socks:
+        s.close()
+    return ports
+
+
+def gates(n: int, radii: float = 0.3) -> list[tuple[Gate, Clock, list]]:
+    """n gates of one fleet, each with a lockstep clock engaged and a position the test moves."""
+    ports, out = free_ports(n), []
+    for i in range(n):
+        clock = Clock(False, 1000.0, 1.0, 0.0)
+        clock.fire(Trigger.ENGAGE)
+        where = [(0.0, 2.0 * i, 1.0)]
+        cfg = GateConfig(i, tuple(range(1, n + 1)), (radii,) * n, ports)
+        out.append((Gate(cfg, clock, lambda w=where: w[0], RATE), clock, where))
+    return out
+
+
+def at(g: Gate, clock: Clock, k: int) -> None:
+    """Step k - 1 flown: the state of step k out (the others told), and its answer come."""
+    g.after_step(k, ending=False, alive=True)
+    clock.hold(ANSWER)
+
+
+def cleared(g: Gate) -> str | None:
+    """Wait until step k may be flown (None) or the flight ended in a contact (its text)."""
+    told: list[str] = []
+    wait_for(lambda: g.clear(told.append) or g.judged == g.step, 10, "every other vehicle's word at the gate")
+    return told[0] if told else None
+
+
+def test_no_vehicle_flies_a_step_before_every_other_has_flown_the_one_before() -> None:
+    (a, ca, _), (b, cb, _), (c, cc, _) = fleet = gates(3)
+    try:
+        at(a, ca, 1)
+        at(b, cb, 1)
+        assert not a.clear(pytest.fail) and ca.state is ClockState.GATED  # vehicle 3 has not flown step 0
+        assert ca.answer == ANSWER  # held while gated
+        at(c, cc, 1)
+        assert [cleared(g) for g, _, _ in fleet] == [None, None, None]
+        assert ca.state is ClockState.ANSWERED and ca.take() == ANSWER
+        at(a, ca, 2)  # one step ahead: a's word for step 2 comes before b and c have flown step 1
+        assert not a.clear(pytest.fail)
+        for g, clock in ((b, cb), (c, cc)):
+            clock.take()
+            at(g, clock, 2)
+        assert [cleared(g) for g, _, _ in fleet] == [None, None, None]
+        assert a.stats()["steps"] == 2 and a.stats()["contact"] is None
+    finally:
+        for g, _, _ in fleet:
+            g.close()
+
+
+def test_a_contact_is_judged_as_the_offline_loop_judges_it_and_a_vehicle_gone_stays_an_obstacle() -> None:
+    (a, ca, wa), (b, cb, wb), (c, cc, wc) = fleet = gates(3)
+    try:
+        wa[0], wb[0], wc[0] = (0.0, 0.0, 1.0), (0.5, 0.0, 1.0), (0.0, 5.0, 1.0)  # 1 and 2 overlap; 3 clear
+        for g, clock, _ in fleet:
+            at(g, clock, 7)
+        told = [cleared(g) for g, _, _ in fleet]
+        watch = Watch([1, 2, 3], [0.3] * 3, 0.5)
+        offline = {i: why for x, y, why in watch.check(7 / RATE, [wa[0], wb[0], wc[0]]) for i in (x, y)}
+        assert told == [offline[0], offline[1], None] and "touched at t=0.028 s" in told[0]
+        assert a.stats()["contact"]["with"] == 2 and b.stats()["contact"]["with"] == 1
+        assert a.stats()["left"] == {"step": 7, "position": [0.0, 0.0, 1.0]}  # it stays there, an obstacle
+        cc.take()
+        wc[0] = (0.0, 0.3, 1.0)  # 3 flies into where 1 and 2 stayed
+        at(c, cc, 8)
+        assert "vehicles 2 and 3 touched" in cleared(c)  # the last pair in id order, as offline
+    finally:
+        for g, _, _ in fleet:
+            g.close()
+
+
+def test_a_word_from_anywhere_but_the_vehicles_own_gate_port_is_not_heard() -> None:
+    (a, ca, _), (b, cb, wb) = fleet = gates(2)
+    stranger = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        at(a, ca, 1)
+        word = gatemod._WIRE.pack(gatemod._MAGIC, gatemod.AT, 1, 1, *wb[0], *wb[0])  # vehicle 2's word, forged
+        stranger.sendto(word, ("127.0.0.1", a.cfg.ports[0]))  # (on loopback, queued before sendto returns)
+        assert not a.clear(pytest.fail) and not a.complete()
+        at(b, cb, 1)
+        assert cleared(a) is None  # vehicle 2's own word
+    finally:
+        stranger.close()
+        for g, _, _ in fleet:
+            g.close()
+
+
+def test_a_vehicle_silent_too_long_is_taken_as_gone_and_said(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(gatemod, "SILENT_S", 0.2)
+    (a, ca, _), (b, _, _) = gates(2)
+    try:
+        b.close()
+        at(a, ca, 1)
+        assert cleared(a) is None
+        assert a.stats()["dropped"] and "vehicle 2 silent" in a.stats()["dropped"][0]
+    finally:
+        a.close()
+
+
+def test_a_bad_gate_file_is_named(tmp_path: Path) -> None:
+    f = tmp_path / "gate.json"
+    f.write_text('{"index": 3, "ids": [1, 2], "radii": [0.3, 0.3], "ports": [5000, 5001]}')
+    with pytest.raises(ConfigError, match=r"--gate .*gate.json: expected index 0..N-1"):
+        GateConfig.load(f)
+    f.write_text("nope")
+    with pytest.raises(ConfigError, match="not a fleet gate file"):
+        GateConfig.load(f)
+
+
+def test_a_gate_with_the_wall_clock_or_on_a_taken_port_is_refused(tmp_path: Path, capsys) -> None:
+    f = tmp_path / "gate.json"
+    taken = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    taken.bind(("127.0.0.1", 0))
+    try:
+        cfg = GateConfig(0, (1, 2), (0.3, 0.3), (taken.getsockname()[1], 9))
+        cfg.dump(f)
+        assert main(["vehicle", "--gate", str(f), "--realtime"]) == 2
+        assert "--gate with --realtime" in capsys.readouterr().err
+        with pytest.raises(ConfigError, match="--gate: cannot bind 127.0.0.1"):
+            Gate(cfg, Clock(False, 1000.0, 1.0, 0.0), lambda: (0.0, 0.0, 0.0), RATE)
+    finally:
+        taken.close()
+
+
+def test_the_trace_judge_keeps_each_vehicle_where_it_stayed() -> None:
+    """Where each stayed (the shared clock's word) is the world after the last row's step: a contact there is found
+    at that step, as the offline loop finds it; without it (real time) the flights are said to have gone on."""
+    one = {"t": np.array([0.0, 0.004]), "x": np.zeros(2), "y": np.zeros(2), "z": np.ones(2)}
+    two = {**one, "y": np.full(2, 1.0)}
+    watch = Watch([1, 2], [0.3, 0.3], 0.5)
+    assert judge_traces(watch, [one, two], RATE) == {}
+    found = judge_traces(Watch([1, 2], [0.3, 0.3], 0.5), [one, two], RATE, [(0.0, 0.0, 1.0), (0.0, 0.5, 1.0)])
+    assert found[0]["step"] == 2 and found[1]["with"] == 1 and "continued" not in found[0]
+    far = {**one, "y": np.array([1.0, 0.5])}
+    assert judge_traces(Watch([1, 2], [0.3, 0.3], 0.5), [one, far], RATE)[0]["continued"] == CONTINUED
+
+
+# -- whole fleets ------------------------------------------------------------------------------------------
+def test_two_flights_of_one_lockstep_fleet_write_the_same_traces(tmp_path: Path) -> None:
+    mission = short_sine(tmp_path, 1.0)
+    runs = [sitl(mission, vehicles=3, formation="line:2", instance=None, out=tmp_path / f"run{n}", plots=False)
+            for n in (1, 2)]
+    for run in runs:
+        assert isinstance(run, FleetRun) and run.outcome == "completed", run.summary
+        assert run.summary["sitl"]["shared_clock"] is True
+        gate = run.summary["sitl"]["gate"]
+        assert all(g["steps"] == 250 and g["dropped"] == [] and g["left"]["step"] == 250 for g in gate.values())
+    for i in (1, 2, 3):
+        a, b = ((tmp_path / f"run{n}" / f"vehicle-{i}" / "trace.csv").read_bytes() for n in (1, 2))
+        assert a == b and a.count(b"\n") == 251
+
+
+def test_a_touch_ends_both_flights_at_the_offline_step_as_offline(tmp_path: Path, capsys) -> None:
+    run = sitl(TOUCH, instance=None, out=tmp_path / "touch", plots=False)
+    off = simulate(TOUCH, plots=False)
+    assert isinstance(run, FleetRun) and run.outcome == "collision" == off.outcome
+    step = len(off.runs[0].trace["t"])  # the offline flights end at the step they touch
+    for v, other, a, b in zip(run.summary["vehicles"], (2, 1), run.runs, off.runs):
+        assert v["outcome"] == "collision" and not v["ok"]
+        assert v["contact"]["step"] == step and v["contact"]["with"] == other and "continued" not in v["contact"]
+        assert len(a.trace["t"]) == step == len(b.trace["t"])  # the flight ended there
+        assert max(float(np.max(np.abs(a.trace[c] - b.trace[c]))) for c in ("x", "y", "z")) <= 1e-4
+        assert a.summary["outcome"] == "collision" and a.summary["ended_by"]["who"] == "plant"
+    assert "note" not in run.summary["sitl"]
+    assert run.summary["separation"]["pairs"] == off.summary["separation"]["pairs"]
+    assert run.summary["policies"][0] == off.summary["policies"][0] and not run.summary["policies"][0]["ok"]
+    own = json.loads((tmp_path / "touch" / "vehicle-1" / "summary.json").read_text())
+    assert own["outcome"] == "collision" and own["sitl"]["gate"]["contact"]["step"] == step
+    assert report_fleet(run, "sitl") == 1
+    assert f"vehicle 2: collision (touched vehicle 1 at step {step}, t=6.352 s; both flights ended there)" in \
+        capsys.readouterr().err
