@@ -115,3 +115,22 @@ def test_the_fast_state_over_wire_is_the_definition_to_the_bit():
     for _ in range(20000):
         X = tuple(rng.uniform(-3.0, 3.0) * (30.0 if j in (0, 2, 4) else 1.0) for j in range(12))
         assert state_over_wire(X) == state_over_wire_reference(X), X
+
+
+def test_each_flat_half_is_its_definition_to_the_bit():
+    """The vehicle sends ODOMETRY by odometry_fields and the controller reads it by state_from_odometry_fields
+    (one call each on the lockstep's hot path): each half bit for bit its definition (state_to_odometry;
+    odometry_to_state of the float32 fields as the wire carries them), over attitudes up to +-3 rad."""
+    import random
+
+    from bridge.core.wire import odometry_fields, state_from_odometry_fields
+
+    f32 = struct.Struct("<13f")
+    rng = random.Random(25)
+    for _ in range(20000):
+        X = tuple(rng.uniform(-3.0, 3.0) * (30.0 if j in (0, 2, 4) else 1.0) for j in range(12))
+        pos, q, vel, rates = state_to_odometry(X)
+        f = odometry_fields(X)
+        assert f == (*pos, *q, *vel, *rates), X
+        w = f32.unpack(f32.pack(*f))
+        assert state_from_odometry_fields(w) == odometry_to_state(w[0:3], w[3:7], w[7:10], w[10:13]), X

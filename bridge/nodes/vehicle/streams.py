@@ -24,7 +24,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.autopilot.estimator import Covariance
 from bridge.autopilot.simvehicle import FAILSAFE, LANDED, SimVehicle
-from bridge.core.wire import rotate_inverse, state_to_odometry, step_usec
+from bridge.core.wire import odometry_fields, rotate_inverse, step_usec
 from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import ODOMETRY, Endpoint
 from bridge.mavlink.modes import heartbeat_mode
@@ -271,13 +271,13 @@ class OdometryOut:
         X = sim.published()
         if not tm.finite(X):
             return False
-        pos, q, vel, rates = state_to_odometry(X)
+        f = odometry_fields(X)  # state_to_odometry written out, flat (one call: the hot path; tests/test_wire.py)
         if sim.sensors is None:
             tail = ODOMETRY_TAIL
         else:
             assert sim.estimator is not None
-            tail = estimate_tail(q, sim.estimator.covariance(), self.estimator)
-        if self.link.send_hot(ODOMETRY, (step_usec(k, self.rate), *pos, *q, *vel, *rates, *tail)):
+            tail = estimate_tail((f[3], f[4], f[5], f[6]), sim.estimator.covariance(), self.estimator)
+        if self.link.send_hot(ODOMETRY, (step_usec(k, self.rate), *f, *tail)):
             self.count += 1
             self.steps.add(k)
         sent_at = self.sent_at
