@@ -22,6 +22,7 @@ from bridge.sweep.cells import (
     CELLS_CSV,
     COLUMNS,
     FAILED,
+    FLEET_COLUMNS,
     MISSION_HASH,
     SWEEP_JSON,
     CellsFile,
@@ -175,6 +176,8 @@ def run_sweep(
         if row["outcome"] == "aborted":  # interrupted, not a result: resume flies it again
             return
         row["class"] = classify(row, spec.classes)
+        for column in FLEET_COLUMNS:  # one vehicle's row (and a batch row): empty, as cells.csv reads back
+            row.setdefault(column, None)
         results[row_key(row)] = row
         if sink is not None:
             sink.append(row)
