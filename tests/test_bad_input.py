@@ -132,6 +132,7 @@ CONVERTER_BAD = {
     "mission_integer": ["x", "-1", "99999999999", "1.5"],
     "link_seed": ["x", "-1", "99999999999", "1.5"],
     "axis_values": ["x", "-1e300", "1,1", ""],
+    "fleet_sizes": ["x", "0", "1.5", "1,1", "1e300"],
     "law_spec": ["x", "nofile.py:Law", "no_such_module:Law", "json:JSONDecoder", "bsst:"],
     "law_list": ["x", "bsst,bsst", "bsst,nofile.py:Law"],
     "blackout_window": ["x", "-1:1", "1:0"],

@@ -247,3 +247,22 @@ def test_lockstep_sitl_flies_the_plan_as_offline(tmp_path: Path) -> None:
                           (lock.trace["x"][i], lock.trace["y"][i], lock.trace["z"][i])) for i in range(n))
     assert worst <= 1e-4
     assert lock.summary["events"][-1]["kind"] in ("disarmed", "ended") and abs(lock.trace["z"][-1]) <= 0.05
+
+
+def test_a_plan_is_swept_and_its_delay_margin_searched(tmp_path: Path, capsys) -> None:
+    """``bsst sweep`` and ``bsst margin`` take a plan file as they take a TOML mission (the L of
+    :func:`l_plan`): the sweep's two cells complete and say what they flew, the margin search brackets a
+    delay; both write the plan's resolved mission next to their results."""
+    from bridge.cli import main  # noqa: PLC0415 - the command line in this process
+
+    plan = l_plan(tmp_path)
+    assert main(["sweep", str(plan), "--delay", "0,20", "--out", str(tmp_path / "sweep"), "--no-plots",
+                 "--jobs", "1"]) == 0
+    cells = (tmp_path / "sweep" / "cells.csv").read_text().splitlines()
+    assert len(cells) == 3 and all(",completed," in row for row in cells[1:]), cells
+    assert 'kind = "smooth"' in (tmp_path / "sweep" / "mission.toml").read_text()
+    assert main(["margin", str(plan), "--over", "delay_ms", "--until", "rms=0.1", "--resolution", "8",
+                 "--check-below", "0", "--out", str(tmp_path / "margin")]) == 0
+    found = json.loads((tmp_path / "margin" / "margin.json").read_text())
+    assert found["margin"] is not None and found["margin"] < found["bracket"][1], found
+    capsys.readouterr()
