@@ -6,9 +6,11 @@ process exit) with a deadline, and fails with what was seen so far.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import selectors
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -16,7 +18,10 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar
 
+from pymavlink.dialects.v20 import common as mavlink
+
 from bridge.nodes.report import Event, Report, parse_line
+from tests.waiting import wait_for
 
 ROOT = Path(__file__).resolve().parent.parent
 ENV = {**os.environ, "MAVLINK20": "1"}
@@ -133,3 +138,47 @@ def csv_rows(path: Path) -> int:
         return max(path.read_bytes().count(b"\n") - 1, 0)
     except FileNotFoundError:
         return 0
+
+
+class GcsSocket:
+    """A ground station's UDP socket on 127.0.0.1 (system 255, component 190) for a vehicle built in this process
+    (``bridge.nodes.vehicle.Vehicle`` with ``gcs=`` :attr:`url`): it sends a frame to the vehicle's GCS link, lets
+    the vehicle take in what came, and reads the answers; no processes, no sleeps."""
+
+    def __init__(self) -> None:
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.setblocking(False)
+        self.mav = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+
+    @property
+    def url(self) -> str:
+        """The vehicle's ``--gcs``: where its GCS link sends."""
+        return f"udpout:127.0.0.1:{self.sock.getsockname()[1]}"
+
+    def received(self) -> list[Any]:
+        """The messages waiting on the socket now (none: an empty list)."""
+        got: list[Any] = []
+        with contextlib.suppress(BlockingIOError):
+            while True:
+                got.extend(self.mav.parse_buffer(self.sock.recv(65535)) or [])
+        return got
+
+    def exchange(self, vehicle: Any, msg: Any | None, want: str) -> Any:
+        """Send ``msg`` (if any) to ``vehicle``'s GCS link and let it take in what came, until a ``want`` message
+        is back (5 s deadline): the first one; what came with it is dropped."""
+        if msg is not None:
+            self.sock.sendto(msg.pack(self.mav), vehicle.gcs.local)
+        seen: list[Any] = []
+
+        def answered() -> bool:
+            for m, addr in vehicle.gcs.poll():
+                vehicle._handle(vehicle.gcs, m, addr)
+            seen.extend(self.received())
+            return any(m.get_type() == want for m in seen)
+
+        wait_for(answered, 5.0, f"the vehicle's {want}", poll_s=0.001)
+        return next(m for m in seen if m.get_type() == want)
+
+    def close(self) -> None:
+        self.sock.close()

@@ -11,11 +11,9 @@ lockstep one; a vehicle in this process answering MISSION_START and AUTO.MISSION
 
 from __future__ import annotations
 
-import contextlib
 import json
 import math
 import os
-import socket
 import subprocess
 import sys
 from collections.abc import Callable
@@ -39,7 +37,7 @@ from bridge.record.summary import mission_transfer
 from bridge.session import instance_slot
 from missions import Mission, Sine
 from missions.planfiles import plan_text, read_plan_text
-from tests.sitlkit import ENV, ROOT, MavProxy, Proc
+from tests.sitlkit import ENV, ROOT, GcsSocket, MavProxy, Proc
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes and opens sockets
@@ -148,6 +146,27 @@ SMALL_PLAN = """QGC WPL 110
 """
 
 
+def _small_plan_items(target: tuple[int, int] = (0, 0)) -> list[Any]:
+    """SMALL_PLAN's items as MISSION_ITEM_INT messages for ``target`` (system, component)."""
+    return [M.MAVLink_mission_item_int_message(*target, k, it.frame, it.command, 0, 1, it.p1, it.p2, it.p3, it.p4,
+                                               round(it.lat * 1e7), round(it.lon * 1e7), it.alt, 0)
+            for k, it in enumerate(read_plan_text(SMALL_PLAN, "small").items)]
+
+
+def _ground_station(n: int) -> Any:
+    """A pymavlink ground station (255:190, MAVLink 2) on instance ``n``'s ground-station port."""
+    os.environ["MAVLINK20"] = "1"
+    return mavutil.mavlink_connection(f"udpin:127.0.0.1:{GCS_PORT + n}", source_system=255, source_component=190,
+                                      dialect="common")
+
+
+def _vehicle_of(gcs: Any) -> tuple[int, int]:
+    """The (system, component) of the first HEARTBEAT the ground station hears (30 s deadline)."""
+    hb = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=30)
+    assert hb is not None, "no HEARTBEAT within 30 s"
+    return hb.get_srcSystem(), hb.get_srcComponent()
+
+
 def _upload(gcs: Any, target: tuple[int, int], items: list[Any]) -> None:
     gcs.mav.mission_count_send(*target, len(items), 0)
     while True:
@@ -170,21 +189,14 @@ def test_mission_start_flies_a_small_plan_in_real_time(tmp_path, link, how):
     clock; each is reached (MISSION_ITEM_REACHED), the flight completes landed and disarmed, and summary.json's
     ``mission_transfer.started_by`` says how and by whom. With ``--loss 10`` the download crosses ``bsst relay``
     (the session's, on the wire) and still arrives."""
-    plan = read_plan_text(SMALL_PLAN, "small")
-    items = [M.MAVLink_mission_item_int_message(0, 0, k, it.frame, it.command, 0, 1, it.p1, it.p2, it.p3, it.p4,
-                                                round(it.lat * 1e7), round(it.lon * 1e7), it.alt, 0)
-             for k, it in enumerate(plan.items)]
+    items = _small_plan_items()
     out = tmp_path / "rt"
     with instance_slot() as n:
-        os.environ["MAVLINK20"] = "1"
-        gcs = mavutil.mavlink_connection(f"udpin:127.0.0.1:{GCS_PORT + n}", source_system=255, source_component=190,
-                                         dialect="common")
+        gcs = _ground_station(n)
         sitl = Proc.bsst("sitl", "--await-mission", "--realtime", "--instance", str(n), "--out", str(out),
                          "--no-plots", *link)
         try:
-            hb = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=30)
-            assert hb is not None
-            target = (hb.get_srcSystem(), hb.get_srcComponent())
+            target = _vehicle_of(gcs)
             _upload(gcs, target, items)
             steps = [(M.MAV_CMD_MISSION_START, (0, 0))] if how == START_COMMAND else \
                 [(M.MAV_CMD_DO_SET_MODE, (M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4, 4)),
@@ -221,21 +233,14 @@ def test_the_link_model_acts_on_the_transfer_in_lockstep_and_the_flight_is_offli
     again), and the flight that follows is offline's with the same link (its model starts fresh at the arm) and
     the same scheduled change, ≤ 1e-4 m, as many rows; the change was sent at mission time 3 s (time 0: the
     flight's first step, the controller's arm once it has the mission) and confirmed."""
-    plan = read_plan_text(SMALL_PLAN, "small")
-    items = [M.MAVLink_mission_item_int_message(0, 0, k, it.frame, it.command, 0, 1, it.p1, it.p2, it.p3, it.p4,
-                                                round(it.lat * 1e7), round(it.lon * 1e7), it.alt, 0)
-             for k, it in enumerate(plan.items)]
+    items = _small_plan_items()
     out = tmp_path / "lossy"
     with instance_slot() as n:
-        os.environ["MAVLINK20"] = "1"
-        gcs = mavutil.mavlink_connection(f"udpin:127.0.0.1:{GCS_PORT + n}", source_system=255, source_component=190,
-                                         dialect="common")
+        gcs = _ground_station(n)
         sitl = Proc.bsst("sitl", "--await-mission", "--loss", "30", "--param-at", "3:COM_OF_LOSS_T=1", "--instance",
                          str(n), "--out", str(out), "--no-plots")
         try:
-            hb = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=30)
-            assert hb is not None
-            target = (hb.get_srcSystem(), hb.get_srcComponent())
+            target = _vehicle_of(gcs)
             _upload(gcs, target, items)
             gcs.mav.command_long_send(*target, M.MAV_CMD_MISSION_START, 0, 0, 0, 0, 0, 0, 0, 0)
             assert sitl.p.wait(timeout=120) == 0, "\n".join(sitl.lines[-30:])
@@ -378,42 +383,21 @@ def test_the_vehicle_starts_a_mission_only_when_asked_to_await_one():
     and ACCEPTED with one on a vehicle with it; AUTO.MISSION DENIED without it, selected with it (HEARTBEAT
     AUTO.MISSION), and a ground station's arm then starts the mission (the vehicle stays disarmed: its arm is
     the controller's); a mission cleared in flight is no more watched (no MISSION_ITEM_REACHED for its items)."""
-    gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    gcs.bind(("127.0.0.1", 0))
-    gcs.setblocking(False)
+    gcs = GcsSocket()
     flight = prepare(Mission(Sine(), duration_s=5.0, name="start"))
-    mav = M.MAVLink(None, srcSystem=255, srcComponent=190)
     made = []
 
     def vehicle(await_mission: bool) -> Vehicle:
-        v = Vehicle(flight, VehicleConfig(parse_address("udpin:127.0.0.1:0"),
-                                          parse_address(f"udpout:127.0.0.1:{gcs.getsockname()[1]}"),
+        v = Vehicle(flight, VehicleConfig(parse_address("udpin:127.0.0.1:0"), parse_address(gcs.url),
                                           await_mission=await_mission))
         made.append(v)
         return v
 
-    def exchange(v: Vehicle, msg: Any, want: str) -> Any:
-        gcs.sendto(msg.pack(mav), v.gcs.local)
-        seen: list[Any] = []
-
-        def answered() -> bool:
-            for m, addr in v.gcs.poll():
-                v._handle(v.gcs, m, addr)
-            with contextlib.suppress(BlockingIOError):
-                while True:
-                    seen.extend(mav.parse_buffer(gcs.recv(65535)) or [])
-            return any(m.get_type() == want for m in seen)
-
-        wait_for(answered, 5.0, f"the vehicle's {want}", poll_s=0.001)
-        return next(m for m in seen if m.get_type() == want)
-
+    exchange = gcs.exchange
     start = M.MAVLink_command_long_message(1, 1, M.MAV_CMD_MISSION_START, 0, 0, 0, 0, 0, 0, 0, 0)
     mode = M.MAVLink_command_long_message(1, 1, M.MAV_CMD_DO_SET_MODE, 0, 1, 4, 4, 0, 0, 0, 0)
     arm = M.MAVLink_command_long_message(1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
-    plan = read_plan_text(SMALL_PLAN, "small")
-    items = [M.MAVLink_mission_item_int_message(1, 1, k, it.frame, it.command, 0, 1, it.p1, it.p2, it.p3, it.p4,
-                                                round(it.lat * 1e7), round(it.lon * 1e7), it.alt, 0)
-             for k, it in enumerate(plan.items)]
+    items = _small_plan_items(target=(1, 1))
     try:
         plain = vehicle(False)
         assert exchange(plain, start, "COMMAND_ACK").result == M.MAV_RESULT_UNSUPPORTED

@@ -16,7 +16,6 @@ import contextlib
 import json
 import math
 import os
-import socket
 import subprocess
 import sys
 import time
@@ -36,9 +35,8 @@ from bridge.nodes.vehicle import Vehicle, VehicleConfig
 from bridge.nodes.vehicle.mission import PROTOCOL_TIMEOUT_S, REACHED_REPEATS, REACHED_S, RETRY_S
 from bridge.session import instance_slot
 from missions import Mission, Sine
-from tests.sitlkit import ENV, MavProxy, Proc
+from tests.sitlkit import ENV, GcsSocket, MavProxy, Proc
 from tests.test_vehicle import _vehicle
-from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -647,32 +645,12 @@ def test_reached_and_current_from_the_flight():
     """The flight's API on a vehicle in this process: ``reached(seq)`` sends MISSION_ITEM_REACHED on the GCS
     link at once and again at each of the next ten 1 Hz ticks (PX4's repeats), then no more; ``set_current``
     moves MISSION_CURRENT; a seq outside the mission is a ValueError, not a message."""
-    gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    gcs.bind(("127.0.0.1", 0))
-    gcs.setblocking(False)
+    gcs = GcsSocket()
     flight = prepare(Mission(Sine(), duration_s=5.0, name="reached"))
-    v = Vehicle(flight, VehicleConfig(parse_address("udpin:127.0.0.1:0"),
-                                      parse_address(f"udpout:127.0.0.1:{gcs.getsockname()[1]}")))
-    mav = M.MAVLink(None, srcSystem=255, srcComponent=190)
-    seen: list[Any] = []
+    v = Vehicle(flight, VehicleConfig(parse_address("udpin:127.0.0.1:0"), parse_address(gcs.url)))
 
     def exchange(msg: Any | None, want: str) -> Any:
-        """Send ``msg`` (if any) to the GCS link, let the vehicle take it in; the first ``want`` back."""
-        if msg is not None:
-            gcs.sendto(msg.pack(mav), v.gcs.local)
-
-        def answered() -> bool:
-            for m, addr in v.gcs.poll():
-                v._handle(v.gcs, m, addr)
-            with contextlib.suppress(BlockingIOError):
-                while True:
-                    seen.extend(mav.parse_buffer(gcs.recv(65535)) or [])
-            return any(m.get_type() == want for m in seen)
-
-        wait_for(answered, 5.0, f"the vehicle's {want}", poll_s=0.001)
-        got = next(m for m in seen if m.get_type() == want)
-        seen.clear()
-        return got
+        return gcs.exchange(v, msg, want)
 
     try:
         with pytest.raises(ValueError, match="the mission has 0 items"):
@@ -692,9 +670,7 @@ def test_reached_and_current_from_the_flight():
         t = time.monotonic()
         for k in range(1, REACHED_REPEATS + 3):
             v.missions.tick(t + k * (REACHED_S + 0.01))
-        with contextlib.suppress(BlockingIOError):
-            while True:
-                seen.extend(mav.parse_buffer(gcs.recv(65535)) or [])
+        seen = gcs.received()
         assert [m.seq for m in seen if m.get_type() == "MISSION_ITEM_REACHED"] == [1] * REACHED_REPEATS
     finally:
         v.close()
