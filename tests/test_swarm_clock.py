@@ -206,6 +206,11 @@ def test_a_touch_ends_both_flights_at_the_offline_step_as_offline(tmp_path: Path
         assert len(a.trace["t"]) == step == len(b.trace["t"])  # the flight ended there
         assert max(float(np.max(np.abs(a.trace[c] - b.trace[c]))) for c in ("x", "y", "z")) <= 1e-4
         assert a.summary["outcome"] == "collision" and a.summary["ended_by"]["who"] == "plant"
+        kinds = [(e["kind"], e["source"]) for e in a.summary["events"]]
+        # said as it happened, before its controller gave up on the halted clock; and, disarmed at the touch,
+        # no landing to wait for (the vehicle said its events only as it exited, after an 8 s wait: a bug)
+        assert kinds.index(("disarmed", "vehicle")) < kinds.index(("failsafe", "controller")), kinds
+        assert ("waiting", "session") not in kinds, kinds
     assert "note" not in run.summary["sitl"]
     assert run.summary["separation"]["pairs"] == off.summary["separation"]["pairs"]
     assert run.summary["policies"][0] == off.summary["policies"][0] and not run.summary["policies"][0]["ok"]

@@ -154,7 +154,7 @@ class Vehicle:
                     self._lockstep_wait()
                 elif state is ClockState.GATED:
                     self.gate.serve(self.endpoints, self._next_house, self._handle,  # type: ignore[union-attr]
-                                    self.commander.collided, self._step_lockstep)
+                                    self._collided, self._step_lockstep)
                 else:  # idle, halted
                     self._idle()
                 if time.monotonic() >= self._next_house:
@@ -247,6 +247,12 @@ class Vehicle:
         if self.clock.state is ClockState.ANSWERED:
             self.clock.fire(Trigger.DROP)
 
+    def _collided(self, why: str) -> None:
+        """Another vehicle of the fleet touched this one: the flight ends (:meth:`Commander.collided`), and its
+        events are said at once (the session waits on the disarm to end the run)."""
+        self.commander.collided(why)
+        self.announcer.drain()
+
     def _arm_disarm(self, p1: float, p2: float) -> int:
         """Arm or disarm as the controller would (:meth:`Commander.arm_disarm`)."""
         return self.commander.arm_disarm(p1, p2)
@@ -258,7 +264,7 @@ class Vehicle:
         for ep, m, addr in wait(self.endpoints, deadline, self.link, self.cfg.spin_s):
             self._handle(ep, m, addr)
         if self.clock.state is ClockState.ANSWERED:
-            if self.gate is None or self.gate.clear(self.commander.collided):  # (a fleet: the others flew k - 1)
+            if self.gate is None or self.gate.clear(self._collided):  # (a fleet: the others flew k - 1)
                 self._step_lockstep()
             return
         if self.clock.state is not ClockState.LOCKSTEP:
@@ -353,7 +359,8 @@ class Vehicle:
         """Lockstep and disarmed (or halted): time stands still; serve the links."""
         if self.gate is not None:
             self.gate.over(self.k)
-        deadline = min(self._next_house, self._idle_odo_at)
+        # halted: no idle state goes out, so its time must not be waited on (it stays in the past: a busy loop)
+        deadline = self._next_house if self.clock.halted else min(self._next_house, self._idle_odo_at)
         for ep, m, addr in wait(self.endpoints, deadline):
             self._handle(ep, m, addr)
         now = time.monotonic()
