@@ -1,8 +1,17 @@
-"""Shared test fixtures."""
+"""Shared test fixtures, and the environment every test and every process it starts runs in."""
 
 from __future__ import annotations
 
 import fcntl
+import os
+
+# Set before numpy loads here, inherited by every child: bsst's own processes give numpy's BLAS one thread
+# (bridge/cli/__init__.py says why), and so does each test process.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+# The compiled kernels pay numba's load (~1 s of CPU) in each process that flies them; ``auto`` picks them for
+# flights of 240 s and more, which in this suite are only the bare vehicles (``bsst vehicle`` without a
+# mission: a day at rest) that live a few seconds. The tests of the compiled kernels ask for them by name.
+os.environ.setdefault("BSST_KERNELS", "plain")
 from pathlib import Path
 
 import pytest
