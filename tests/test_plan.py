@@ -5,7 +5,6 @@ offline by ``bsst sim`` to the issue's figures (benchmarks/missions.py prints th
 
 from __future__ import annotations
 
-import copy
 import json
 import math
 import os
@@ -23,21 +22,11 @@ from missions.mission import mission_from_table
 from missions.planfiles import read_plan_text
 from missions.route import Limits, route_of
 from params import ConfigError
+from tests.plans import BOX_PLAN, ROOT, l_plan, write_plan
 
 pytestmark = pytest.mark.process  # runs `bsst sim` as a subprocess
 
-ROOT = Path(__file__).resolve().parents[1]
-BOX_PLAN = ROOT / "examples" / "box.plan"
 BOX_WPL = ROOT / "examples" / "box.waypoints"
-PLAN = json.loads(BOX_PLAN.read_text())
-
-
-def write_plan(tmp_path: Path, edit, name: str = "p.plan") -> Path:
-    data = copy.deepcopy(PLAN)
-    edit(data)
-    p = tmp_path / name
-    p.write_text(json.dumps(data))
-    return p
 
 
 def refusal(path: Path) -> str:
@@ -213,24 +202,6 @@ def test_bsst_sim_flies_a_plan_and_refuses_a_bad_one(tmp_path: Path) -> None:
     p = subprocess.run([sys.executable, "-m", "bridge", "sim", str(bad), "--no-plots"], cwd=ROOT, env=env,
                        capture_output=True, text=True, timeout=120)
     assert p.returncode == 2 and p.stderr.strip().count("\n") == 0 and "DO_JUMP (177)" in p.stderr
-
-
-def l_plan(tmp_path: Path) -> Path:
-    """The box plan cut to an L (takeoff to 3 m, 10 m north, a pass-through corner, 10 m east, land): 20 s of
-    flight where the box has 90, with every kind of item the box has (its figures: the offline test above)."""
-    def cut(data: dict) -> None:
-        items = data["mission"]["items"]
-        takeoff, speed, corner, land = (copy.deepcopy(items[i]) for i in (0, 1, 2, 7))
-        north, east = corner, copy.deepcopy(corner)
-        for item, (lat, lon) in ((takeoff, (47.397742, 8.545594)), (north, (47.397832, 8.545594)),
-                                 (east, (47.397832, 8.545727)), (land, (47.397832, 8.545727))):
-            item["params"][4:6] = [lat, lon]
-            if item is not land:
-                item["params"][6] = item["Altitude"] = 3
-        data["mission"]["items"] = [takeoff, speed, north, east, land]
-        for k, item in enumerate(data["mission"]["items"]):
-            item["doJumpId"] = k + 1
-    return write_plan(tmp_path, cut, "l.plan")
 
 
 def test_lockstep_sitl_flies_the_plan_as_offline(tmp_path: Path) -> None:
