@@ -241,6 +241,7 @@ def test_sitl_plant_blocks_equal_offline(tmp_path, case):
             r = subprocess.run([sys.executable, "-m", "bridge", command, *args, "--out", str(out), "--no-plots",
                                 *extra], capture_output=True, text=True, timeout=300, env=ENV)
         codes.append(r.returncode)
+        assert (out / "summary.json").exists(), f"bsst {command}: exit {r.returncode}: {r.stderr[-2000:]}"
         summaries.append(json.loads((out / "summary.json").read_text()))
     offline, sitl = summaries
     keys = ("outcome", "ended_by", "wind", "battery", "impact", "rotor_effectiveness", "rms_3d")
