@@ -17,7 +17,6 @@ from collections.abc import Sequence
 
 import numpy as np
 import pytest
-from scipy.stats import chi2
 
 from bridge.autopilot.closedloop import ClosedLoopRecord, fly_closed_loop
 from bridge.autopilot.estimator import (
@@ -38,6 +37,14 @@ from plant.sensors import IDEAL, Measurement, SensorConfig, SensorSuite, rotatio
 
 SINE = "missions/sine.toml"
 
+
+
+def chi2_ppf(q: float, dof: float) -> float:
+    """The χ² distribution's quantile ``q`` for ``dof`` degrees of freedom (scipy.stats, imported here: it costs
+    every pytest worker ~1.3 s, and each worker collects every test file)."""
+    from scipy.stats import chi2
+
+    return float(chi2.ppf(q, dof))
 
 def fly(kind: str, sensors: str | SensorConfig = "mocap", *, profile: str | None = None, seconds: float = 10.0,
         seed: int = 0, law_on: str = "estimate", nees_every: int = 0, controller: str = "bsst",
@@ -97,7 +104,7 @@ def test_ekf_is_consistent_with_motion_capture() -> None:
     ne = np.concatenate(samples)
     n = len(ne)
     assert n == 4 * 18
-    lo, hi = chi2.ppf(0.005, 9 * n) / n, chi2.ppf(0.995, 9 * n) / n
+    lo, hi = chi2_ppf(0.005, 9 * n) / n, chi2_ppf(0.995, 9 * n) / n
     assert lo <= ne.mean() <= hi, (ne.mean(), lo, hi)
     zr = np.sqrt(np.mean(np.concatenate(z) ** 2, axis=0))
     positions_velocities_angles = zr[[0, 1, 2, 3, 4, 5, 6, 8, 10]]
@@ -110,7 +117,7 @@ def test_ekf_is_not_overconfident_with_gnss() -> None:
     not uselessly pessimistic either."""
     rec, est, _ = fly("ekf", "gnss", profile="x500", nees_every=25)
     ne = nees_samples(rec)
-    assert (ne <= chi2.ppf(0.99, 9)).mean() >= 0.97
+    assert (ne <= chi2_ppf(0.99, 9)).mean() >= 0.97
     assert 9 / 3 <= ne.mean() <= 9 * 1.3, ne.mean()
     assert est.rejected == {}  # type: ignore[attr-defined]
 
