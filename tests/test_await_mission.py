@@ -144,10 +144,12 @@ def test_mavsdk_flies_a_plan_file_through_await_mission_as_the_file_flies(tmp_pa
     assert ((4 << 16) | (4 << 24), True) in modes  # AUTO.MISSION, armed
 
 
+# a takeoff to 1.5 m, a waypoint 2 m away held 0.5 s, a landing: 9.1 s of flight (12.1 s at 3 m), flown on the wall
+# clock by several tests
 SMALL_PLAN = """QGC WPL 110
 0\t1\t0\t16\t0\t0\t0\t0\t47.397742\t8.545594\t488.0\t1
-1\t0\t3\t22\t0\t0\t0\tnan\t47.397742\t8.545594\t3\t1
-2\t0\t3\t16\t0\t0.5\t0\tnan\t47.3977600\t8.5456000\t3\t1
+1\t0\t3\t22\t0\t0\t0\tnan\t47.397742\t8.545594\t1.5\t1
+2\t0\t3\t16\t0\t0.5\t0\tnan\t47.3977600\t8.5456000\t1.5\t1
 3\t0\t3\t21\t0\t0\t0\tnan\t47.3977600\t8.5456000\t0\t1
 """
 
