@@ -22,6 +22,7 @@ from typing import Any
 
 from bridge.nodes.report import Report, to_line
 
+_PR_SET_TIMERSLACK = 29  # prctl(2): the thread's timer slack, ns
 _PR_SET_PDEATHSIG = 1
 
 
@@ -49,6 +50,17 @@ def on_stop_signals(stop: Callable[[], None]) -> None:
 
     signal.signal(signal.SIGTERM, handler)
     signal.signal(signal.SIGINT, handler)
+
+
+def tight_timer_slack() -> None:
+    """Let this process's timed waits (``select``) wake within 1 us of their deadline, not Linux's default
+    50 us late: a real-time node then sleeps until just before its tick instead of polling for it (Linux;
+    a no-op elsewhere)."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_TIMERSLACK, 1000, 0, 0, 0)
+    except (OSError, AttributeError):
+        pass
 
 
 def die_with_parent() -> None:

@@ -24,7 +24,9 @@ STATE_WAIT_PERIODS = 0.5
 # vehicle's stamps and its TIMESYNC clock differ; the ages then count from the arrivals
 WAY_DOWN_SLACK_S = 0.005
 WAY_DOWN_MAX_S = 2.0
-SPIN_BEFORE_TICK_S = 0.0003  # realtime: sleep until this long before a tick, then poll: select wakes late
+# realtime: sleep until this long before a tick, then poll (select wakes late; with the 1 us timer slack the
+# controller asks for, 0.1 ms: 0.3 ms polled 7.5 % of a core away; docs/figures.md, fourth session)
+SPIN_BEFORE_TICK_S = 0.0001
 # a state's stamp may run ahead of the newest accepted state's by one step, plus the wall time
 # between their arrivals at up to STAMP_PACE x real time (a vehicle's stamps follow its steps:
 # lockstep answers or the wall clock; the factor lets a stream that fell behind catch up),

@@ -34,7 +34,7 @@ from bridge.nodes.offboard.config import (
     OffboardConfig,
 )
 from bridge.nodes.offboard.link import OffboardLink
-from bridge.nodes.process import on_stop_signals, report_printer
+from bridge.nodes.process import on_stop_signals, report_printer, tight_timer_slack
 from bridge.nodes.report import Done, Ready, Report, Stats
 from bridge.record.columns import CONTROLLER_COLUMNS
 from bridge.record.runlog import LineWriter, side_dir
@@ -203,6 +203,7 @@ class Offboard(OffboardLink):
         return "aborted"
 
     def _fly_realtime(self) -> str:
+        tight_timer_slack()  # it sleeps to just before each tick (SPIN_BEFORE_TICK_S), then polls
         rate = self.rate
         period = 1.0 / rate
         steps = self.steps
