@@ -12,6 +12,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 # flights of 240 s and more, which in this suite are only the bare vehicles (``bsst vehicle`` without a
 # mission: a day at rest) that live a few seconds. The tests of the compiled kernels ask for them by name.
 os.environ.setdefault("BSST_KERNELS", "plain")
+
 from pathlib import Path
 
 import pytest

@@ -38,13 +38,13 @@ from plant.sensors import IDEAL, Measurement, SensorConfig, SensorSuite, rotatio
 SINE = "missions/sine.toml"
 
 
-
 def chi2_ppf(q: float, dof: float) -> float:
     """The χ² distribution's quantile ``q`` for ``dof`` degrees of freedom (scipy.stats, imported here: it costs
     every pytest worker ~1.3 s, and each worker collects every test file)."""
     from scipy.stats import chi2
 
     return float(chi2.ppf(q, dof))
+
 
 def fly(kind: str, sensors: str | SensorConfig = "mocap", *, profile: str | None = None, seconds: float = 10.0,
         seed: int = 0, law_on: str = "estimate", nees_every: int = 0, controller: str = "bsst",

@@ -26,8 +26,9 @@ import sys
 from collections.abc import Sequence
 
 # Every bsst process is single-threaded by design (parallel work is --jobs processes), so numpy's BLAS gets
-# one thread unless the user says otherwise: OpenBLAS's pool costs each process ~0.08 s of CPU at import
-# and its idle threads only contend with the other processes of a session or sweep. Set before numpy loads.
+# one thread unless the user says otherwise: OpenBLAS's pool cost each process 0.1-0.4 s of CPU (a 10 s
+# bsst sim: 1.0 CPU-s with it, 0.55 without) and its idle threads only contend with the other processes of
+# a session or sweep. Set before numpy loads.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from bridge.cli.commands import EXIT_BAD_INPUT, EXIT_FAILED, build_parser, print_summary
