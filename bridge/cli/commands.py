@@ -13,7 +13,6 @@ flag stay fast.
 from __future__ import annotations
 
 import argparse
-import importlib.metadata
 import tomllib
 from pathlib import Path
 from typing import Any, NoReturn
@@ -33,6 +32,8 @@ PYPROJECT = Path(__file__).resolve().parents[2] / "pyproject.toml"  # beside the
 def package_version() -> str:
     """This bsst's version: the installed distribution's metadata, else (a checkout run from its source,
     never installed) ``pyproject.toml``'s ``[project] version``; ``unknown`` if neither says."""
+    import importlib.metadata  # only when asked: with its email and zipfile imports, ~50 ms of every bsst's start
+
     try:
         return importlib.metadata.version(DISTRIBUTION)
     except importlib.metadata.PackageNotFoundError:
