@@ -25,6 +25,7 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.core.wire import state_to_odometry, step_usec
+from bridge.nodes.offboard.link import TIMESYNC_WINDOW
 from bridge.nodes.report import Done, Stats, parse_line
 from tests.sitlkit import Proc
 
@@ -65,6 +66,7 @@ class ScriptedVehicle:
         self.targets: Counter[int] = Counter()
         self.first_arm: float | None = None  # wall time of the first ARM received (its answers are lost)
         self.first_target: float | None = None  # wall time of the first actuator target
+        self.timesync_asked: list[float] = []  # wall time of each TIMESYNC request received
         self.v0 = time.monotonic() - 1.0  # the vehicle's clock reads monotonic - v0 (never 0)
 
     def send(self, msg: object) -> None:
@@ -91,6 +93,7 @@ class ScriptedVehicle:
                     self.targets[m.time_usec] += 1
                     self.first_target = self.first_target or time.monotonic()
                 elif kind == "TIMESYNC" and m.tc1 == 0:  # a request: our clock, at once
+                    self.timesync_asked.append(time.monotonic())
                     now_ns = int((time.monotonic() - self.v0) * 1e9) + self.skew_ns
                     self.send(mavlink.MAVLink_timesync_message(now_ns, m.ts1))
                 elif kind == "COMMAND_LONG" and m.command == mavlink.MAV_CMD_NAV_LAND:  # the mission's end
@@ -132,6 +135,7 @@ class Flown:
     lines: list[str]  # the controller's status lines
     arm_to_target_s: float  # from the first ARM (armed, answers lost) to the first target
     sent_late: dict[int, float]  # per step streamed: how much later than meant its state left this process, s
+    timesync_asked: list[float]  # wall time of each TIMESYNC request, s from the first target (< 0: before it)
 
 
 def fly(tmp: Path, timesync_skew_s: float = 0.0, spoofs: dict[int, int] | None = None) -> Flown:
@@ -174,7 +178,8 @@ def fly(tmp: Path, timesync_skew_s: float = 0.0, spoofs: dict[int, int] | None =
     # steps renumbered from the first one streamed, as LATE and DROPPED count them
     targets = Counter({(usec - step_usec(k_first, RATE)) // step_usec(1, RATE): n for usec, n in v.targets.items()})
     assert v.first_arm is not None and v.first_target is not None
-    return Flown(targets, range(k - k_first), tmp / "run", ctl.lines, v.first_target - v.first_arm, sent_late)
+    return Flown(targets, range(k - k_first), tmp / "run", ctl.lines, v.first_target - v.first_arm, sent_late,
+                 [t - v.first_target for t in v.timesync_asked])
 
 
 @pytest.fixture(scope="module")
@@ -218,6 +223,18 @@ def test_the_state_age_counts_its_way_down(flown: Flown) -> None:
     # comes 0.3 ms after its state on an idle machine, but a busy one delays the tick, not the stamps)
     assert WAY_DOWN_S <= np.median(age) <= WAY_DOWN_S + 0.010, np.median(age)
     assert not any("timesync" in line for line in flown.lines)
+
+
+def test_the_clock_offset_comes_from_a_burst_of_timesyncs_before_the_first_tick(flown: Flown) -> None:
+    """The way down is fixed at the first tick from the best of the latest TIMESYNC answers: the controller
+    asks every 10 ms until it has a window of them (on a busy machine one answer alone can be milliseconds
+    late), then every 0.5 s."""
+    asked = np.array(flown.timesync_asked)
+    assert (asked < 0.0).sum() >= TIMESYNC_WINDOW, asked[:12]
+    burst = np.diff(asked[:TIMESYNC_WINDOW])
+    assert np.median(burst) < 0.1 * 0.5, burst  # not the steady 0.5 s
+    steady = np.diff(asked[TIMESYNC_WINDOW + 1:])
+    assert len(steady) >= 1 and np.median(steady) >= 0.4, steady
 
 
 def test_a_timesync_clock_off_the_stamps_is_not_believed(tmp_path: Path) -> None:

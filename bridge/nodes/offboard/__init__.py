@@ -5,7 +5,8 @@ In:  ODOMETRY from the vehicle (NED position m, FRD body velocity m/s, quaternio
 Out: one actuator target per state answered, stamped with its ``time_usec``: HIL_ACTUATOR_CONTROLS
      (``motors``: c1..c4 = omega / omega_max, each in [0, 1]) or SET_ACTUATOR_CONTROL_TARGET group 0
      (``wrench``: roll, pitch, yaw in [-1, 1], thrust in [0, 1]), or the no-target acknowledgement;
-     ARM_DISARM, HEARTBEAT at 1 Hz (10 Hz until the vehicle's is heard), TIMESYNC every 0.5 s;
+     ARM_DISARM, HEARTBEAT at 1 Hz (10 Hz until the vehicle's is heard), TIMESYNC every 10 ms until
+     8 answers are in, then every 0.5 s;
      ``controller.tlog``, ``controller.csv`` rows; reports on stdout (:mod:`bridge.nodes.report`); the outcome
 
 It flies a mission against any vehicle that keeps the contract of docs/design.md, "The MAVLink contract": it

@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 import struct
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -51,6 +52,8 @@ from bridge.nodes.report import Event, Report, StatusText, Warning
 _ZERO12 = (0.0,) * 12
 _ZERO16 = (0.0,) * 16
 PARAM_RETRY_S = 0.2  # s of wall time between PARAM_SETs of one scheduled change the vehicle has not echoed
+TIMESYNC_WINDOW = 8  # the clock offset is the best (shortest round trip) of this many latest TIMESYNC answers
+TIMESYNC_BURST_S = 0.01  # s of wall time between TIMESYNC requests until that many answers are in (then timesync_s)
 
 
 def _f32(x: float) -> float:
@@ -117,8 +120,7 @@ class OffboardLink:
         self._next_hb = now
         self._next_ts = now
         self._next_house = now
-        self._ts_best: tuple[int, int] | None = None  # (rtt ns, offset ns) of the best recent TIMESYNC
-        self._ts_age = 0
+        self._ts_recent: deque[tuple[int, int]] = deque(maxlen=TIMESYNC_WINDOW)  # (rtt ns, offset ns) answers
         self.offset_ns: int | None = None  # vehicle clock - our clock
         self.rtt_ns: int | None = None
         self.commands = 0
@@ -338,13 +340,10 @@ class OffboardLink:
         if rtt < 0 or rtt > 1_000_000_000:
             return
         offset = m.tc1 - (m.ts1 + now) // 2
-        # keep the sample with the smallest round trip among the last few: its offset is the
-        # least disturbed by queueing on either side
-        self._ts_age += 1
-        if self._ts_best is None or rtt <= self._ts_best[0] or self._ts_age > 8:
-            self._ts_best = (rtt, offset)
-            self._ts_age = 0
-        self.rtt_ns, self.offset_ns = self._ts_best
+        # the answer with the smallest round trip among the last few: its offset is the least
+        # disturbed by queueing on either side (a busy machine delays some answers by milliseconds)
+        self._ts_recent.append((rtt, offset))
+        self.rtt_ns, self.offset_ns = min(self._ts_recent)
 
     def _housekeeping(self) -> None:
         now = time.monotonic()
@@ -355,7 +354,10 @@ class OffboardLink:
                                                            mavlink.MAV_AUTOPILOT_INVALID, 0, 0,
                                                            mavlink.MAV_STATE_ACTIVE, 3))
         if now >= self._next_ts and self.vsys is not None:
-            self._next_ts = now + self.cfg.timesync_s
+            # a burst until the window is full: a real-time flight fixes the states' way down at its
+            # first tick (flight.py, _way_down_s), from the best of several answers, not from one
+            warm = len(self._ts_recent) >= TIMESYNC_WINDOW
+            self._next_ts = now + (self.cfg.timesync_s if warm else TIMESYNC_BURST_S)
             self.ep.send(mavlink.MAVLink_timesync_message(0, time.monotonic_ns()))
         for severity, text in self._texts.expired(now):
             self._statustext(severity, text)
