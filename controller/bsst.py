@@ -42,7 +42,7 @@ from controller.gains import Backstep, Gains
 from controller.nominal import Coefficients, Nominal
 from controller.power import SigTable, sig_derivs, sig_table
 from controller.supertwisting import advance_xi, advance_xi_implicit, implicit_twisting, reaching
-from missions.mission import DISCRETIZATIONS
+from missions.mission import DEFAULT_DISCRETIZATION, DISCRETIZATIONS
 from missions.references import Sample
 
 Quad = tuple[float, float, float, float]
@@ -255,15 +255,15 @@ class BacksteppingSuperTwisting:
     integrators (:func:`controller.supertwisting.advance_xi`).
 
     ``reaching="sign"`` gives the first-order sliding-mode baseline (same backstepping,
-    sign function in the last step). ``discretization``: the super-twisting step stepped ``explicit`` (the
-    paper as printed) or ``implicit`` (backward Euler, :func:`controller.supertwisting.implicit_twisting`);
-    the sign baseline is always flown as printed.
+    sign function in the last step). ``discretization``: the super-twisting step stepped ``implicit`` (the
+    default: backward Euler, :func:`controller.supertwisting.implicit_twisting`) or ``explicit`` (the paper
+    as printed); the sign baseline is always flown as printed.
     """
 
     name = "bsst"
 
     def __init__(self, nominal: Nominal, gains: Gains, rate_hz: float, reaching: str = "st",
-                 discretization: str = "explicit") -> None:
+                 discretization: str = DEFAULT_DISCRETIZATION) -> None:
         if reaching not in ("st", "sign"):
             raise ValueError(f"reaching must be 'st' or 'sign', got {reaching!r}")
         if discretization not in DISCRETIZATIONS:

@@ -133,8 +133,8 @@ def test_compensation_stretches_the_tolerable_round_trip_delay(scheme: str, fail
     """Equal delay both ways. Bisection (``bsst margin missions/sine.toml --over delay_ms --until rms=0.1``)
     puts the largest delay with RMS < 10 cm at 36 ms without compensation and 57 ms with it for the paper's
     explicit law (issue 21's figures: 38 ms already fails without, and 1.5 x 38 = 57 ms still holds with), at
-    35 and 56 ms for the implicit step (36 ms fails without, 56 ms holds with: docs/law.md, "The delay margin,
-    scanned")."""
+    35 and 56 ms for the implicit step, the default (36 ms fails without, 56 ms holds with: docs/law.md, "The
+    delay margin, scanned")."""
     assert sine_rms(scheme, delay_ms=fails) >= 0.1
     assert sine_rms(scheme, delay_ms=holds, compensation="predict") < 0.1
 
