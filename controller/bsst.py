@@ -11,9 +11,9 @@ Four subsystems (docs/law.md, "The law, step by step"):
 - psi in 2 steps (eq. 39-40).
 
 Here ST(s) = -k1 |s|^1/2 sign(s) + xi, xi' = -k2 sign(s) (eq. 22), or -k sign(s) for the
-first-order SMC baseline (``reaching="sign"``). ST is stepped over the control period either explicitly
-(the paper as printed) or implicitly (backward Euler in closed form,
-:func:`controller.supertwisting.implicit_twisting`): ``discretization`` of :class:`BacksteppingSuperTwisting`,
+first-order SMC baseline (``reaching="sign"``). ST is stepped over the control period either implicitly
+(backward Euler in closed form, :func:`controller.supertwisting.implicit_twisting`; the default) or explicitly
+(the paper as printed): ``discretization`` of :class:`BacksteppingSuperTwisting`,
 ``LawConstants.h``. c' = c 2^-alpha and sig = sig_beta with beta = 2 alpha - 1 (regularised,
 :mod:`controller.power`).
 
