@@ -33,6 +33,7 @@ from controller.kernel import Step, control_step
 from controller.law import BUILTIN, Law, LawFactory, make_law, resolve_law
 from controller.nominal import Nominal
 from controller.pid import CascadedPid
+from missions import DEFAULT_DISCRETIZATION
 from missions.references import Sample
 
 Quad = tuple[float, float, float, float]
@@ -53,7 +54,7 @@ class Controller:
     """A law and its actuation, stepped at the control rate."""
 
     def __init__(self, law: str | LawFactory, nominal: Nominal, gains: Gains | None = None,
-                 rate_hz: float = 250.0, discretization: str = "explicit") -> None:
+                 rate_hz: float = 250.0, discretization: str = DEFAULT_DISCRETIZATION) -> None:
         """``law``: a built-in name, ``file.py:Class`` / ``module:Class``, or a factory (controller.law);
         ``discretization``: how ``bsst`` steps its super-twisting step (controller.bsst.DISCRETIZATIONS)."""
         self.law: Law = make_law(law, nominal, gains or Gains(), rate_hz, discretization)

@@ -11,9 +11,9 @@ Four subsystems (docs/law.md, "The law, step by step"):
 - psi in 2 steps (eq. 39-40).
 
 Here ST(s) = -k1 |s|^1/2 sign(s) + xi, xi' = -k2 sign(s) (eq. 22), or -k sign(s) for the
-first-order SMC baseline (``reaching="sign"``). ST is stepped over the control period either explicitly
-(the paper as printed) or implicitly (backward Euler in closed form,
-:func:`controller.supertwisting.implicit_twisting`): ``discretization`` of :class:`BacksteppingSuperTwisting`,
+first-order SMC baseline (``reaching="sign"``). ST is stepped over the control period either implicitly
+(backward Euler in closed form, :func:`controller.supertwisting.implicit_twisting`; the default) or explicitly
+(the paper as printed): ``discretization`` of :class:`BacksteppingSuperTwisting`,
 ``LawConstants.h``. c' = c 2^-alpha and sig = sig_beta with beta = 2 alpha - 1 (regularised,
 :mod:`controller.power`).
 
@@ -42,7 +42,7 @@ from controller.gains import Backstep, Gains
 from controller.nominal import Coefficients, Nominal
 from controller.power import SigTable, sig_derivs, sig_table
 from controller.supertwisting import advance_xi, advance_xi_implicit, implicit_twisting, reaching
-from missions.mission import DISCRETIZATIONS
+from missions.mission import DEFAULT_DISCRETIZATION, DISCRETIZATIONS
 from missions.references import Sample
 
 Quad = tuple[float, float, float, float]
@@ -255,15 +255,15 @@ class BacksteppingSuperTwisting:
     integrators (:func:`controller.supertwisting.advance_xi`).
 
     ``reaching="sign"`` gives the first-order sliding-mode baseline (same backstepping,
-    sign function in the last step). ``discretization``: the super-twisting step stepped ``explicit`` (the
-    paper as printed) or ``implicit`` (backward Euler, :func:`controller.supertwisting.implicit_twisting`);
-    the sign baseline is always flown as printed.
+    sign function in the last step). ``discretization``: the super-twisting step stepped ``implicit`` (the
+    default: backward Euler, :func:`controller.supertwisting.implicit_twisting`) or ``explicit`` (the paper
+    as printed); the sign baseline is always flown as printed.
     """
 
     name = "bsst"
 
     def __init__(self, nominal: Nominal, gains: Gains, rate_hz: float, reaching: str = "st",
-                 discretization: str = "explicit") -> None:
+                 discretization: str = DEFAULT_DISCRETIZATION) -> None:
         if reaching not in ("st", "sign"):
             raise ValueError(f"reaching must be 'st' or 'sign', got {reaching!r}")
         if discretization not in DISCRETIZATIONS:

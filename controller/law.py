@@ -47,7 +47,7 @@ from controller.bsst import BacksteppingSuperTwisting
 from controller.gains import Gains
 from controller.nominal import Nominal
 from controller.pid import CascadedPid
-from missions import CONTROLLERS
+from missions import CONTROLLERS, DEFAULT_DISCRETIZATION
 from missions.references import Sample
 from params import ConfigError
 
@@ -151,7 +151,7 @@ def _load_file(path: Path, spec: str):  # -> module
 
 
 def make_law(spec: str | LawFactory, nominal: Nominal, gains: Gains, rate_hz: float,
-             discretization: str = "explicit") -> Law:
+             discretization: str = DEFAULT_DISCRETIZATION) -> Law:
     """Build the law ``spec`` (a name of :func:`resolve_law`, or a factory) and check that it fits.
     ``discretization`` (controller.bsst.DISCRETIZATIONS) reaches the super-twisting law ``bsst``; the
     others (``smc``'s sign, ``pid``, a user's law) have no super-twisting step to discretize."""

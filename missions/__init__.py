@@ -20,6 +20,7 @@ Scripting::
 
 from missions.mission import (
     CONTROLLERS,
+    DEFAULT_DISCRETIZATION,
     DISCRETIZATIONS,
     MISSION_RANGES,
     Mission,
@@ -32,6 +33,7 @@ from missions.references import Reference, Setpoint, Sine, Step, Waypoints
 
 __all__ = [
     "CONTROLLERS",
+    "DEFAULT_DISCRETIZATION",
     "DISCRETIZATIONS",
     "MISSION_RANGES",
     "MISSION_DIR",

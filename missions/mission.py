@@ -36,7 +36,10 @@ CONTROLLERS = ("bsst", "smc", "pid")
 # how the super-twisting step of ``bsst`` is stepped over the control period (controller.supertwisting):
 # forward Euler as the paper prints it, or backward Euler solved in closed form (docs/law.md, "Discretization")
 DISCRETIZATIONS = ("explicit", "implicit")
-DEFAULT_DISCRETIZATION = "explicit"
+# the one default of the whole tree (mission key, flags, Python API, batch engine): implicit keeps every
+# acceptance figure of the paper without the explicit step's period-2 chattering (issue 24's rule; docs/law.md,
+# "Which is the default"); ``explicit`` flies the paper as printed, bit for bit
+DEFAULT_DISCRETIZATION = "implicit"
 # the allowed range [lo, hi] of each top-level number of a mission (duration_s: lo excluded), shared by
 # the loader, the command-line flags (--rate, --seed) and the sweep axes: one range per key
 MISSION_RANGES: dict[str, tuple[float, float]] = {

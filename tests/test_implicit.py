@@ -2,26 +2,33 @@
 
 Issue 24. The closed form of :func:`controller.supertwisting.implicit_twisting` solves its implicit (backward
 Euler) equation, on random inputs; the command it gives is continuous in (s, xi), across the dead zone too.
-``explicit`` stays the paper's law to the bit (the sine's 2.4093284288839256e-06 m); ``implicit`` flies the
-sine at 250 Hz with a period-2 component of u2, u3, u4 <= 0.01 N, a total variation of u2, u3 <= 35 /s and a
-3-D RMS <= 1e-5 m, and at 100 Hz a period-2 component <= 0.02 N. The mission's ``discretization`` key and
-the Mission field refuse a bad value in one line naming it. :func:`bridge.record.metrics.period2` is seen on
-known signals.
+``implicit`` is the default wherever a law is built; ``explicit``, asked for by name, stays the paper's law to
+the bit (the sine's 2.4093284288839256e-06 m); ``implicit`` flies the sine at 250 Hz with a period-2 component
+of u2, u3, u4 <= 0.01 N, a total variation of u2, u3 <= 35 /s and a 3-D RMS <= 1e-5 m, and at 100 Hz a
+period-2 component <= 0.02 N. The mission's ``discretization`` key and the Mission field refuse a bad value in
+one line naming it. :func:`bridge.record.metrics.period2` is seen on known signals.
 """
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from bridge.cli import build_parser, main
 from bridge.loop import simulate
 from bridge.record.metrics import period2
+from bridge.sweep.grid import Cell
+from controller import Controller, Gains, Nominal
+from controller.bsst import BacksteppingSuperTwisting
+from controller.law import make_law
 from controller.supertwisting import advance_xi_implicit, implicit_twisting
-from missions import load_mission
+from missions import DEFAULT_DISCRETIZATION, Mission, Sine, load_mission
 from params import ConfigError
+from plant import load_profile
 
 ROOT = Path(__file__).resolve().parents[1]
 SINE = ROOT / "missions" / "sine.toml"
@@ -80,12 +87,30 @@ def test_period2_of_known_signals() -> None:
     assert period2(np.array([1.0, np.nan, 1.0, -1.0, 1.0])) == pytest.approx(1.0)
 
 
-def test_explicit_is_the_paper_law_to_the_bit() -> None:
-    m = load_mission(SINE)
-    assert m.discretization == "explicit"
-    run = simulate(m.with_overrides(discretization="explicit"), plots=False)
-    assert run.summary["rms_3d"] == 2.4093284288839256e-06
-    assert run.summary["inputs"]["u2"]["period2"] == pytest.approx(0.705, abs=0.005)  # issue 24's figure
+def test_explicit_is_the_paper_law_to_the_bit(tmp_path: Path) -> None:
+    """``bsst sim missions/sine.toml --discretization explicit``: asked for by name, the default being
+    ``implicit`` (test_the_default_is_implicit_wherever_a_law_is_built)."""
+    assert main(["sim", str(SINE), "--discretization", "explicit", "--no-plots", "--out", str(tmp_path)]) == 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["discretization"] == "explicit" and summary["rms_3d"] == 2.4093284288839256e-06
+    assert summary["inputs"]["u2"]["period2"] == pytest.approx(0.705, abs=0.005)  # issue 24's figure
+
+
+def test_the_default_is_implicit_wherever_a_law_is_built() -> None:
+    """Issue 24's rule: ``implicit`` keeps every acceptance figure of the paper (tests/test_scenarios.py flies
+    them with the default), so it is the default of the mission file, the Mission, the sweep's cell and the
+    controller's own constructors alike; ``explicit`` only when asked for."""
+    assert DEFAULT_DISCRETIZATION == "implicit"
+    m = load_mission(SINE)  # no discretization key
+    assert m.discretization == "implicit" and m.to_dict()["discretization"] == "implicit"
+    assert Mission(Sine(), duration_s=1.0).discretization == "implicit"
+    assert Cell("bsst", 250.0, 0.0, 0.0, 0.0, 0.0, 0).discretization == "implicit"
+    nominal = Nominal.from_profile(load_profile("paper"))
+    assert BacksteppingSuperTwisting(nominal, Gains(), 250.0).implicit
+    assert make_law("bsst", nominal, Gains(), 250.0).implicit  # type: ignore[attr-defined]
+    assert Controller("bsst", nominal).law.implicit  # type: ignore[attr-defined]
+    assert not BacksteppingSuperTwisting(nominal, Gains(), 250.0, discretization="explicit").implicit
+    assert build_parser().parse_args(["sim", str(SINE)]).discretization is None  # no flag: the mission's
 
 
 @pytest.fixture(scope="module")

@@ -2,12 +2,14 @@
 
 ``bsst margin``: the boundary of one impairment by bisection, within a few dozen cells.
 
-The figures are the README's (docs/figures.md, "A bad link"): the sine mission's BS-ST loop
-holds a 3-D RMS under 10 cm up to 36 ms of equal delay both ways, and up to 57 ms with
-prediction (the offline loop flies the float32 wire as SITL does: lockstep gives the same); a
-grid at the same 0.25 ms over 0-100 ms would fly 400 cells. Below its 36 ms the sine fails again
-at 34.25-35 ms: the check below the margin says so (``monotone``, ``failed_below``, ``holds_below``),
-and ``--require`` reads ``holds_below``.
+The figures are the README's and docs/law.md's ("The delay margin, scanned"): the sine mission's BS-ST
+loop with the paper's explicit step (asked for by name: ``--discretization explicit``) holds a 3-D RMS
+under 10 cm up to 36 ms of equal delay both ways by bisection, and up to 57 ms with prediction (the
+offline loop flies the float32 wire as SITL does: lockstep gives the same); a grid at the same 0.25 ms
+over 0-100 ms would fly 400 cells. Below its 36 ms the sine fails again at 34.25-35 ms: the check below
+the margin says so (``monotone``, ``failed_below``, ``holds_below``), and ``--require`` reads
+``holds_below``. The default, the implicit step, holds to 35 ms, monotone below it. ``SHORT`` flies the
+explicit step too: its figures below are that law's.
 """
 
 from __future__ import annotations
@@ -26,7 +28,8 @@ from params import dump_toml
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 ROOT = Path(__file__).resolve().parents[1]
-SHORT = Mission(Sine(), duration_s=6.0, name="short")  # the raw estimator's RMS: 2.9 cm at noise 1, 8.1 cm at 2
+# the raw estimator's RMS: 2.9 cm at noise 1, 8.1 cm at 2 (explicit: the figures here are the paper's law's)
+SHORT = Mission(Sine(), duration_s=6.0, name="short", discretization="explicit")
 # SHORT's 3-D RMS over t >= 3 s with an equal delay both ways (cm): 9.3 at 36 ms, 12.7 at 37, 4.9 at 38, 18.1 at 39
 
 
@@ -35,11 +38,16 @@ def bsst(*argv: str) -> subprocess.CompletedProcess[str]:
                           timeout=600)
 
 
-@pytest.mark.parametrize("extra, expected, holds", [([], 36.0, 34.0), (["--compensation", "predict"], 57.0, 57.0)])
+@pytest.mark.parametrize("extra, expected, holds", [
+    (["--discretization", "explicit"], 36.0, 34.0),
+    (["--discretization", "explicit", "--compensation", "predict"], 57.0, 57.0),
+    ([], 35.0, 35.0),  # the default, implicit: the README's example
+])
 def test_the_delay_margin_is_found_inside_its_bracket(tmp_path: Path, extra: list[str], expected: float,
                                                      holds: float) -> None:
-    """The bisection's margin (36 and 57 ms, issue 21's figures), then the 4 ms below it flown at 0.25 ms:
-    without prediction 34.25-35 ms fail (every delay flown holds up to 34 ms), with it every one holds."""
+    """The bisection's margin (explicit: 36 and 57 ms, issue 21's figures; implicit, the default: 35 ms), then
+    the 4 ms below it flown at 0.25 ms: the explicit step without prediction fails at 34.25-35 ms (every
+    delay flown holds up to 34 ms); with prediction, and the implicit step, every one holds."""
     r = bsst("margin", "missions/sine.toml", "--over", "delay_ms", "--until", "rms=0.1", "--out", str(tmp_path),
              *extra)
     assert r.returncode == 0, r.stderr

@@ -50,8 +50,9 @@ def add_sweep_commands(sub: Any) -> None:
                    help="control laws to compare (bsst, smc, pid, or your own file.py:ClassName)")
     # the schemes are missions.DISCRETIZATIONS, written out so that building the parser loads no mission code
     p.add_argument("--discretization", type=name_list("--discretization", ("explicit", "implicit")),
-                   metavar="SCHEME,...", help="how bsst steps its super-twisting step: explicit (the paper as "
-                                              "printed), implicit (chattering-free; docs/law.md), or both to compare")
+                   metavar="SCHEME,...", help="how bsst steps its super-twisting step: implicit (chattering-free, "
+                                              "the default; docs/law.md), explicit (the paper as printed), or both "
+                                              "to compare (default: the mission's)")
     p.add_argument("--vehicles", type=fleet_sizes, metavar="N,...",
                    help="fleet sizes: each cell flies N vehicles together, offline, in a line 2 m apart "
                         "(docs/campaigns.md; 1: the mission alone)")

@@ -174,8 +174,9 @@ def add_discretization_option(p: argparse.ArgumentParser) -> None:
     from missions import DISCRETIZATIONS  # lazy: start-up time
 
     p.add_argument("--discretization", choices=DISCRETIZATIONS,
-                   help="how bsst steps its super-twisting step: explicit (the paper as printed) or implicit "
-                        "(backward Euler, chattering-free; docs/law.md) (default: the mission's)")
+                   help="how bsst steps its super-twisting step: implicit (backward Euler, chattering-free; "
+                        "docs/law.md) or explicit (the paper as printed, bit for bit) (default: the mission's "
+                        "discretization key, else implicit)")
 
 
 def overrides_from_args(args: argparse.Namespace) -> Overrides:

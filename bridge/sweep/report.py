@@ -39,6 +39,9 @@ from params import ConfigError
 from plant.wind import TURBULENCE
 
 NUMERIC_AXES = tuple(a for a in AXES if a not in NAME_AXES)
+# what a sweep without a discretization column flew: it was written before issue 24, when bsst knew only the
+# paper's explicit step (not missions.DEFAULT_DISCRETIZATION, which is what a new mission flies)
+LEGACY_DISCRETIZATION = "explicit"
 # the axes a table (and a heat map) may have: the numbers, the estimator kind, the turbulence (a few names, like a law;
 # the laws get a table each instead)
 MAP_AXES = tuple(a for a in AXES if a != "controller")
@@ -96,17 +99,17 @@ def _label(axis: str) -> str:
 def legacy_values(meta: Mapping[str, Any]) -> dict[str, Any]:
     """What an older sweep's cells flew on the vehicle's and the air's axes and the discretization (its
     ``cells.csv`` has no such columns): its mission's ``[estimator] kind``, ``[sensors] noise_scale``, ``[wind]
-    speed_mps`` and ``turbulence``, ``discretization``, else their defaults (before issue 24: ``explicit``); one
-    vehicle (before issue 28), so no worst vehicle and no closest approach."""
+    speed_mps`` and ``turbulence``, ``discretization``, else their defaults (:data:`LEGACY_DISCRETIZATION`, the
+    only scheme before issue 24); one vehicle (before issue 28), so no worst vehicle and no closest approach."""
     mission = meta.get("mission") if isinstance(meta.get("mission"), Mapping) else {}
     est, sensors, wind = (t if isinstance(t := mission.get(k), Mapping) else {}
                           for k in ("estimator", "sensors", "wind"))
     kind, scale = est.get("kind", "truth"), sensors.get("noise_scale", 1.0)
     speed, level = wind.get("speed_mps", 0.0), wind.get("turbulence", "none")
-    d = mission.get("discretization", "explicit")
+    d = mission.get("discretization", LEGACY_DISCRETIZATION)
     return {"estimator": kind if isinstance(kind, str) else "truth", "noise": _number(scale, 1.0),
             "wind_mps": _number(speed, 0.0), "turbulence": level if isinstance(level, str) else "none",
-            "discretization": d if isinstance(d, str) else "explicit", "vehicles": 1, "worst_vehicle": None,
+            "discretization": d if isinstance(d, str) else LEGACY_DISCRETIZATION, "vehicles": 1, "worst_vehicle": None,
             "closest_m": None}
 
 
