@@ -262,7 +262,10 @@ def diverged_cell(x: tuple) -> bool:  # pragma: no cover
     for i in range(12):
         if not math.isfinite(x[i]):
             return True
-    return x[0] * x[0] + x[2] * x[2] + x[4] * x[4] > 1e4 or math.cos(x[6]) * math.cos(x[8]) < 0.0
+    if x[0] * x[0] + x[2] * x[2] + x[4] * x[4] > 1e4:
+        return True
+    # cos > 0.07 within 1.5 rad (< pi/2): the product is positive there without its two cos calls a step
+    return not (abs(x[6]) < 1.5 and abs(x[8]) < 1.5) and math.cos(x[6]) * math.cos(x[8]) < 0.0
 
 
 # -- the compiled loops (each cell: the scalar plant's own functions, compiled) ----------------------------
