@@ -13,7 +13,10 @@ the GIL: one compiled call per block of cells instead of a few dozen Python call
 cell's state stays in the core's cache, and threads fly other blocks meanwhile (one per core:
 bridge.batch.engine). The per-step helpers, here and in .plant, .control and .wire, are inlined
 (``inline="always"``): called, each took the shared constants (a few hundred floats) by value, and the
-step cost 1.44 us a cell instead of 1.0-1.1. A cell's
+step cost 1.44 us a cell instead of 1.0-1.1. In the step loop no array is read as a field of ``Cells`` or
+through a view, nor handed to an inlined helper with branches (but a windy cell's gusts and turbulence, to
+``_air``; events, on their steps): each costs two atomic reference counts a time, which numba's pruning
+leaves, and they were a third of the step's time. A cell's
 flight depends on nothing of another cell's, so the rows are the same whatever the number of threads.
 Per cell and step it runs what the engine ran over the cell axis before, in the same order and with the
 same functions (bridge.batch.kernels, .wire, .plant, .control, .predict): the state over the float32 wire
