@@ -51,7 +51,10 @@ TWO_PI = 2.0 * pi
 
 def wrap_angle(a: float) -> float:
     """Wrap to (-pi, pi]."""
-    a = (a + pi) % TWO_PI - pi
+    b = a + pi
+    # b % TWO_PI is b itself where 0 <= b < TWO_PI (the angles already wrapped, nearly all): the modulo, a library
+    # call once compiled (~3 % of a batch cell-step), is skipped there; the same float either way
+    a = (b if 0.0 <= b < TWO_PI else b % TWO_PI) - pi
     return pi if a == -pi else a
 
 

@@ -13,7 +13,10 @@ the GIL: one compiled call per block of cells instead of a few dozen Python call
 cell's state stays in the core's cache, and threads fly other blocks meanwhile (one per core:
 bridge.batch.engine). The per-step helpers, here and in .plant, .control and .wire, are inlined
 (``inline="always"``): called, each took the shared constants (a few hundred floats) by value, and the
-step cost 1.44 us a cell instead of 1.0-1.1. A cell's
+step cost 1.44 us a cell instead of 1.0-1.1. In the step loop no array is read as a field of ``Cells`` or
+through a view, nor handed to an inlined helper with branches (but a windy cell's gusts and turbulence, to
+``_air``; events, on their steps): each costs two atomic reference counts a time, which numba's pruning
+leaves, and they were a third of the step's time. A cell's
 flight depends on nothing of another cell's, so the rows are the same whatever the number of threads.
 Per cell and step it runs what the engine ran over the cell axis before, in the same order and with the
 same functions (bridge.batch.kernels, .wire, .plant, .control, .predict): the state over the float32 wire
@@ -183,36 +186,31 @@ class Cells(NamedTuple):
 @njit(cache=True, nogil=True)
 def fly_cells(lo: int, hi: int, k0: int, k1: int, c: Constants, a: Cells) -> None:  # pragma: no cover
     """Control steps k0..k1-1 of the cells lo..hi-1 still flying; without the GIL, so that threads fly
-    other cells meanwhile. The arrays are taken out of ``a`` once here: a tuple of arrays handed to a
-    function per step would cost an atomic reference count per array and call (measured: 3x the work)."""
+    other cells meanwhile."""
     for j in range(lo, hi):
         if a.alive[j]:
-            _fly_cell(j, k0, k1, c, a.X, a.ring_X, a.ring_held, a.holding, a.omega, a.phases, a.law, a.xi,
-                      a.integral, a.omega_d, a.mode, a.state_step, a.apply_check, a.apply_cmd, a.failsafe_step,
-                      a.ptr, a.in_failsafe, a.armed, a.u2, a.u2_now, a.refs, a.ref_idx, a.seg_of, a.late,
-                      a.t_plant, a.last_out, a.sq_sum, a.sq_max, a.tv, a.alive, a.flown, a.diverged, a)
+            _fly_cell(j, k0, k1, c, a)
 
 
 @njit(cache=True)
-def _fly_cell(j, k0, k1, c, X, ring_X, ring_held, holding, omega, phases, law, xi_a, integral_a, omega_d_a, mode,
-              state_step, apply_check, apply_cmd, failsafe_step, ptr_a, in_failsafe, armed_a, u2_a, u2_now, refs,
-              ref_idx, seg_of, late, t_plant, last_out, sq_sum, sq_max, tv, alive, flown, diverged,
-              a):  # pragma: no cover
-    """Cell j's steps k0..k1-1: its state read into locals, flown, written back."""
-    x = (X[j, 0], X[j, 1], X[j, 2], X[j, 3], X[j, 4], X[j, 5], X[j, 6], X[j, 7], X[j, 8], X[j, 9], X[j, 10],
-         X[j, 11])
-    hold = (holding[j, 0], holding[j, 1], holding[j, 2], holding[j, 3], holding[j, 4])
-    om = (omega[j, 0], omega[j, 1], omega[j, 2], omega[j, 3])
-    ph = (phases[j, 0], phases[j, 1], phases[j, 2], phases[j, 3], phases[j, 4], phases[j, 5])
-    xi = (xi_a[j, 0], xi_a[j, 1], xi_a[j, 2], xi_a[j, 3])
-    integ = (integral_a[j, 0], integral_a[j, 1], integral_a[j, 2])
-    od, ptr, fs, armed, u2, lc = omega_d_a[j], ptr_a[j], in_failsafe[j], armed_a[j], u2_now[j], law[j]
-    impact = a.impact[j]
-    steady, pk = (a.wind[j, 0], a.wind[j, 1], a.wind[j, 2]), (a.pack[j, 0], a.pack[j, 1], a.pack[j, 2])
-    eff = (a.effectiveness[j, 0], a.effectiveness[j, 1], a.effectiveness[j, 2], a.effectiveness[j, 3])
-    body = c.body_air if a.windy[j] else c.body
-    predicts, lag = a.predicts[j], a.lag[j]
-    n_ring, n_held = ring_X.shape[1], ring_held.shape[1]
+def _fly_cell(j: int, k0: int, k1: int, c: Constants, a: Cells) -> None:  # pragma: no cover
+    """Cell j's steps k0..k1-1: its state read into locals, flown, written back. Every array the loop touches
+    is taken out of ``a`` once, here, and indexed in place, element by element: a field of ``a`` read in the
+    loop, a view (``ring_X[j, s]``) or an array handed to an inlined helper each cost two atomic reference
+    counts a time, and they were a third of the step's time (perf: NRT_incref and NRT_decref)."""
+    x, hold, om, xi, integ, od, ptr, fs, armed, u2, impact, steady, pk, eff = _cell_state(j, a)
+    ph = (a.phases[j, 0], a.phases[j, 1], a.phases[j, 2], a.phases[j, 3], a.phases[j, 4], a.phases[j, 5])
+    lc, windy, ti, predicts, lag, table, fs_step = a.law[j], a.windy[j], a.turb_idx[j], a.predicts[j], a.lag[j], \
+        a.ref_idx[j], a.failsafe_step[j]
+    ring_X, ring_held, mode, state_step, refs, late, seg_of, t_plant = a.ring_X, a.ring_held, a.mode, a.state_step, \
+        a.refs, a.late, a.seg_of, a.t_plant
+    apply_check, apply_cmd, u2_a, last_out, t_step = a.apply_check, a.apply_cmd, a.u2, a.last_out, a.t_step
+    from_t, cache_t, cache_X, cmd_t, cmd_u, total = a.from_t, a.cache_t, a.cache_X, a.cmd_t, a.cmd_u, a.total
+    next_event, event_step, events, turb, gusts, n_gusts = a.next_event, a.event_step, a.events, a.turb, a.gusts, \
+        a.n_gusts
+    body = c.body_air if windy else c.body
+    sq_sum, sq_max, tv = a.sq_sum[j], a.sq_max[j], a.tv[j]
+    n_ring, n_held, S = ring_X.shape[1], ring_held.shape[1], c.substeps
     for k in range(k0, k1):
         t = k / c.rate_hz
         w = state_over_wire(x)  # what the laws read: ODOMETRY float32, as offline
@@ -221,15 +219,17 @@ def _fly_cell(j, k0, k1, c, X, ring_X, ring_held, holding, omega, phases, law, x
             ring_X[j, slot, i] = w[i]
         m = mode[j, k]
         if m != NONE:
-            r = ring_X[j, state_step[j, k] % n_ring]
-            xg = (r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], r[9], r[10], r[11])
+            s = state_step[j, k] % n_ring
+            xg = (ring_X[j, s, 0], ring_X[j, s, 1], ring_X[j, s, 2], ring_X[j, s, 3], ring_X[j, s, 4],
+                  ring_X[j, s, 5], ring_X[j, s, 6], ring_X[j, s, 7], ring_X[j, s, 8], ring_X[j, s, 9],
+                  ring_X[j, s, 10], ring_X[j, s, 11])
             if predicts:
-                xg = carry(j, a.t_step[state_step[j, k]], xg, t + lag, a.from_t, a.cache_t, a.cache_X,
-                           a.cmd_t, a.cmd_u, a.total, c.dt_max, c.pm, c.pg, c.coef)
-            u, real, cmd, od, xi, integ = _law_step(xg, _sample(refs, ref_idx[j], k), lc, xi, integ, od,
-                                                    m == HOLD, c)
+                xg = carry(j, t_step[state_step[j, k]], xg, t + lag, from_t, cache_t, cache_X, cmd_t, cmd_u,
+                           total, c.dt_max, c.pm, c.pg, c.coef)
+            ref = (_row(refs, table, k, 0), _row(refs, table, k, 1), _row(refs, table, k, 2), _row(refs, table, k, 3))
+            u, real, cmd, od, xi, integ = _law_step(xg, ref, lc, xi, integ, od, m == HOLD, c)
             if predicts:
-                record(j, t, lag, real, od, a.cmd_t, a.cmd_u, a.total)
+                record(j, t, lag, real, od, cmd_t, cmd_u, total)
             u2 = u[1]
             cw = command_over_wire(cmd, c.wrench_wire)  # under a battery: the command itself (targets_cell)
             held = (cw[0], cw[1], cw[2], cw[3], 0.0) if c.battery else held_cell(cw, c.motors, c.speeds, c.u_max,
@@ -237,15 +237,15 @@ def _fly_cell(j, k0, k1, c, X, ring_X, ring_held, holding, omega, phases, law, x
             hslot = k % n_held
             for i in range(5):
                 ring_held[j, hslot, i] = held[i]
-        # the figures of the trace row of step k (bridge.batch.metrics.Metrics)
+        # the figures of the trace row of step k (bridge.batch.metrics.Metrics), summed in locals
         ex, ey, ez = x[0] - refs[0, k, 0, 0], x[2] - refs[0, k, 1, 0], x[4] - refs[0, k, 2, 0]
         e2 = ex * ex + ey * ey + ez * ez
         if late[k]:
-            sq_sum[j] += e2
-            if e2 > sq_max[j] or e2 != e2:  # np.maximum's: a nan stays
-                sq_max[j] = e2
+            sq_sum += e2
+            if e2 > sq_max or e2 != e2:  # np.maximum's: a nan stays
+                sq_max = e2
         seg = seg_of[k]
-        if seg >= 0:
+        if seg >= 0:  # the last step outside the settling band so far, per axis
             if abs(ex) > c.band[0]:
                 last_out[seg, 0, j] = k
             if abs(ey) > c.band[1]:
@@ -253,81 +253,90 @@ def _fly_cell(j, k0, k1, c, X, ring_X, ring_held, holding, omega, phases, law, x
             if abs(ez) > c.band[2]:
                 last_out[seg, 2, j] = k
         if k:
-            tv[j] += abs(u2 - u2_a[j, k - 1])
+            tv += abs(u2 - u2_a[j, k - 1])
         u2_a[j, k] = u2
-        if failsafe_step[j] == k:
-            fs = True
-        if a.event_step[j, a.next_event[j]] <= k:  # the timeline's events of this step, before its physics
-            steady, eff = events_cell(j, k, steady, eff, a)
-        x, hold, om, armed, impact, ptr, pk = _substeps(j, k, x, hold, om, fs, armed, impact, ptr, ph, steady, eff,
-                                                        pk, body, apply_check, apply_cmd, ring_held, t_plant, c, a)
+        fs = fs or fs_step == k
+        if event_step[j, next_event[j]] <= k:  # the timeline's events of this step, before its physics
+            steady, eff = events_cell(j, k, steady, eff, next_event, event_step, events)
+        for i in range(S):  # the physics steps, each after the command that takes effect there
+            check = k * S + i
+            if apply_check[j, ptr] == check:
+                q = apply_cmd[j, ptr] % n_held
+                hold = (ring_held[j, q, 0], ring_held[j, q, 1], ring_held[j, q, 2], ring_held[j, q, 3],
+                        ring_held[j, q, 4])
+                if c.battery:  # Quadrotor.command under the battery's speed cap now
+                    hold = targets_cell(hold, pk[2], c.omega_max)
+                ptr += 1
+            air = _air(steady, turb, ti, check, gusts[j], n_gusts[j], t_plant[check], c.rotor_drag) if windy else \
+                (0.0, 0.0, 0.0, 0.0)
+            x, hold, om, armed, hard, pk = _physics_step(x, hold, om, fs and armed, armed, ph, t_plant[check], air,
+                                                         windy, body, eff, pk, c)
+            if hard and impact == 0:  # the first hard touchdown (Quadrotor.impact)
+                impact = 1
         if diverged_cell(x):  # bridge.loop.plant_verdict: diverged, else a hard touchdown armed ends the flight
-            diverged[j] = True
-            alive[j] = False
-            flown[j] = k + 1
+            a.diverged[j], a.alive[j], a.flown[j] = True, False, k + 1
             x = c.start  # a resting state: no nan downstream
             break
         if impact == 1:
             impact = 2  # noted: disarmed, the flight goes on
             if armed:
-                a.crashed[j] = True
-                alive[j] = False
-                flown[j] = k + 1
+                a.crashed[j], a.alive[j], a.flown[j] = True, False, k + 1
                 break
+    a.sq_sum[j], a.sq_max[j], a.tv[j] = sq_sum, sq_max, tv
+    _put_cell_state(j, a, x, hold, om, xi, integ, od, ptr, fs, armed, u2, impact, steady, pk, eff)
+
+
+@njit(cache=True, inline="always")
+def _cell_state(j: int, a: Cells) -> tuple:  # pragma: no cover
+    """Cell j's flight state as locals: (x, hold, om, xi, integ, od, ptr, fs, armed, u2, impact, steady, pk, eff)
+    (the fields of :class:`Cells` of the same names)."""
+    X, h, o, xi, ig, w, p, e = a.X, a.holding, a.omega, a.xi, a.integral, a.wind, a.pack, a.effectiveness
+    x = (X[j, 0], X[j, 1], X[j, 2], X[j, 3], X[j, 4], X[j, 5], X[j, 6], X[j, 7], X[j, 8], X[j, 9], X[j, 10],
+         X[j, 11])
+    return (x, (h[j, 0], h[j, 1], h[j, 2], h[j, 3], h[j, 4]), (o[j, 0], o[j, 1], o[j, 2], o[j, 3]),
+            (xi[j, 0], xi[j, 1], xi[j, 2], xi[j, 3]), (ig[j, 0], ig[j, 1], ig[j, 2]), a.omega_d[j], a.ptr[j],
+            a.in_failsafe[j], a.armed[j], a.u2_now[j], a.impact[j], (w[j, 0], w[j, 1], w[j, 2]),
+            (p[j, 0], p[j, 1], p[j, 2]), (e[j, 0], e[j, 1], e[j, 2], e[j, 3]))
+
+
+@njit(cache=True, inline="always")
+def _put_cell_state(j: int, a: Cells, x: tuple, hold: tuple, om: tuple, xi: tuple, integ: tuple, od: float,
+                    ptr: int, fs: bool, armed: bool, u2: float, impact: int, steady: tuple, pk: tuple,
+                    eff: tuple) -> None:  # pragma: no cover
+    """Write cell j's flight state back into ``a`` (:func:`_cell_state`'s fields)."""
     for i in range(12):
-        X[j, i] = x[i]
+        a.X[j, i] = x[i]
     for i in range(5):
-        holding[j, i] = hold[i]
+        a.holding[j, i] = hold[i]
     for i in range(4):
-        omega[j, i] = om[i]
-        xi_a[j, i] = xi[i]
+        a.omega[j, i] = om[i]
+        a.xi[j, i] = xi[i]
         a.effectiveness[j, i] = eff[i]
     for i in range(3):
+        a.integral[j, i] = integ[i]
         a.wind[j, i] = steady[i]
         a.pack[j, i] = pk[i]
-    for i in range(3):
-        integral_a[j, i] = integ[i]
-    omega_d_a[j], ptr_a[j], in_failsafe[j], armed_a[j], u2_now[j] = od, ptr, fs, armed, u2
-    a.impact[j] = impact
+    a.omega_d[j], a.ptr[j], a.in_failsafe[j], a.armed[j], a.u2_now[j], a.impact[j] = od, ptr, fs, armed, u2, impact
 
 
 @njit(cache=True, inline="always")
-def _substeps(j, k, x, hold, om, fs, armed, impact, ptr, ph, steady, eff, pk, body, apply_check, apply_cmd,
-              ring_held, t_plant, c, a):  # pragma: no cover
-    """Cell j's physics steps of control step k: the command that takes effect at each, the air (the steady wind,
-    the turbulence's sample, the gusts) and :func:`_physics_step`. (x, hold, om, armed, impact, ptr, pk) after
-    them."""
-    S, n_held = c.substeps, ring_held.shape[1]
-    windy, ti = a.windy[j], a.turb_idx[j]
-    for i in range(S):
-        check = k * S + i
-        if apply_check[j, ptr] == check:  # a command takes effect at this physics step
-            q = ring_held[j, apply_cmd[j, ptr] % n_held]
-            hold = (q[0], q[1], q[2], q[3], q[4])
-            if c.battery:  # Quadrotor.command under the battery's speed cap now
-                hold = targets_cell(hold, pk[2], c.omega_max)
-            ptr += 1
-        air = (0.0, 0.0, 0.0, 0.0)
-        if windy:
-            st = steady
-            if ti >= 0:  # Wind.now: the steady wind plus the turbulence, then the gusts
-                st = (steady[0] + a.turb[ti, check, 0], steady[1] + a.turb[ti, check, 1],
-                      steady[2] + a.turb[ti, check, 2])
-            w = wind_cell(st, a.gusts[j], a.n_gusts[j], t_plant[check])
-            air = (w[0], w[1], w[2], c.rotor_drag)
-        x, hold, om, armed, hard, pk = _physics_step(x, hold, om, fs and armed, armed, ph, t_plant[check], air,
-                                                     windy, body, eff, pk, c)
-        if hard and impact == 0:  # the first hard touchdown (Quadrotor.impact)
-            impact = 1
-    return x, hold, om, armed, impact, ptr, pk
+def _air(steady: tuple, turb: np.ndarray, ti: int, check: int, gusts: np.ndarray, n_gusts: int, t: float,
+         rotor_drag: float) -> tuple:  # pragma: no cover
+    """The air of a windy cell's physics step ``check`` at t (s): (wind m/s NWU, the rotor drag s/m). Wind.now:
+    the steady wind plus the turbulence's sample (row ti of turb; -1: none), then the gusts."""
+    st = steady
+    if ti >= 0:
+        st = (steady[0] + turb[ti, check, 0], steady[1] + turb[ti, check, 1], steady[2] + turb[ti, check, 2])
+    w = wind_cell(st, gusts, n_gusts, t)
+    return (w[0], w[1], w[2], rotor_drag)
 
 
 @njit(cache=True, inline="always")
-def _sample(refs: np.ndarray, table: int, k: int) -> tuple:  # pragma: no cover
-    """The reference sample of step k in table ``table`` of refs [tables, steps, 4, 5]: four 5-tuples."""
-    r = refs[table, k]
-    return ((r[0, 0], r[0, 1], r[0, 2], r[0, 3], r[0, 4]), (r[1, 0], r[1, 1], r[1, 2], r[1, 3], r[1, 4]),
-            (r[2, 0], r[2, 1], r[2, 2], r[2, 3], r[2, 4]), (r[3, 0], r[3, 1], r[3, 2], r[3, 3], r[3, 4]))
+def _row(refs: np.ndarray, table: int, k: int, r: int) -> tuple:  # pragma: no cover
+    """Row r (x, y, z, psi) of the reference sample of step k in table ``table`` of refs [tables, steps, 4, 5]:
+    value and 4 derivatives, read element by element (no view)."""
+    return (refs[table, k, r, 0], refs[table, k, r, 1], refs[table, k, r, 2], refs[table, k, r, 3],
+            refs[table, k, r, 4])
 
 
 @njit(cache=True, inline="always")

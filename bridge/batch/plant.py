@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Any
 
 import numpy as np
 from numba import njit
@@ -195,19 +194,21 @@ def realised_cell(om: tuple, eff: tuple, faulty: bool, b: float, d: float) -> tu
 
 
 @njit(cache=True, inline="always")
-def events_cell(j: int, k: int, steady: tuple, eff: tuple, a: Any) -> tuple:  # pragma: no cover
+def events_cell(j: int, k: int, steady: tuple, eff: tuple, next_event: np.ndarray, event_step: np.ndarray,
+                events: np.ndarray) -> tuple:  # pragma: no cover
     """Cell j's events that act at control step k (bridge.batch.weather: SimVehicle.inject's ``motor`` and
-    ``wind``): (the steady wind m/s NWU, the rotors' effectiveness 0..1) after them."""
-    e = a.next_event[j]
-    while e < a.event_step.shape[1] and a.event_step[j, e] <= k:
-        v = a.events[j, e]
+    ``wind``; the arrays of bridge.batch.flight.Cells): (the steady wind m/s NWU, the rotors' effectiveness 0..1)
+    after them."""
+    e = next_event[j]
+    while e < event_step.shape[1] and event_step[j, e] <= k:
+        v = events[j, e]
         if v[0] == 0.0:  # EV_MOTOR: rotor v[1] (0-3) at effectiveness v[2]
             r, x = int(v[1]), v[2]
             eff = (x if r == 0 else eff[0], x if r == 1 else eff[1], x if r == 2 else eff[2], x if r == 3 else eff[3])
         else:  # EV_WIND: the steady wind from now (Wind.set_steady)
             steady = (v[1], v[2], v[3])
         e += 1
-    a.next_event[j] = e
+    next_event[j] = e
     return steady, eff
 
 
@@ -261,7 +262,10 @@ def diverged_cell(x: tuple) -> bool:  # pragma: no cover
     for i in range(12):
         if not math.isfinite(x[i]):
             return True
-    return x[0] * x[0] + x[2] * x[2] + x[4] * x[4] > 1e4 or math.cos(x[6]) * math.cos(x[8]) < 0.0
+    if x[0] * x[0] + x[2] * x[2] + x[4] * x[4] > 1e4:
+        return True
+    # cos > 0.07 within 1.5 rad (< pi/2): the product is positive there without its two cos calls a step
+    return not (abs(x[6]) < 1.5 and abs(x[8]) < 1.5) and math.cos(x[6]) * math.cos(x[8]) < 0.0
 
 
 # -- the compiled loops (each cell: the scalar plant's own functions, compiled) ----------------------------
