@@ -197,6 +197,39 @@ def test_a_slow_answer_to_a_resent_state_is_taken_once_and_refuses_nothing(tmp_p
     assert float(row["rtt_s"]) >= 0.05  # its round trip from the state's first sending, not from the copy
 
 
+def test_answers_to_the_idle_and_the_armed_state_of_one_step_refuse_nothing(tmp_path):
+    """Disarmed in lockstep, time stands still and the vehicle shows its state of step k every 0.1 s; armed,
+    it sends that step's state again and awaits its answer. A controller that read an idle copy while arming
+    answers it, then the armed one: two answers to step k. The vehicle steps once and counts the second in
+    ``answered_again``, not as a ``repeated`` or ``stale`` refusal (seen under load: a lockstep session's
+    summary with ``rejected: {"repeated": 1}``)."""
+    with instance_slot() as n:
+        v = _vehicle(n, tmp_path)
+        os.environ["MAVLINK20"] = "1"
+        ctl = mavutil.mavlink_connection(f"udpout:127.0.0.1:{LINK_PORT + n}", source_system=200,
+                                         source_component=191, dialect="common")
+        try:
+            ctl.mav.heartbeat_send(M.MAV_TYPE_ONBOARD_CONTROLLER, M.MAV_AUTOPILOT_INVALID, 0, 0, 4)
+            idle = ctl.recv_match(type="ODOMETRY", blocking=True, timeout=20, condition="ODOMETRY.time_usec==0")
+            assert idle is not None  # disarmed: step 0's state, shown while time stands still
+            sysid = n + 1
+            ctl.mav.command_long_send(sysid, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+            assert _ack(ctl, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+            wire = [0.0, 0.0, 0.0, 1.1 * 9.81 / 43.164] + [0.0] * 4  # hover, paper profile
+            for _ in range(2):  # the idle copy's answer, then the armed state's
+                ctl.mav.set_actuator_control_target_send(0, 0, sysid, 1, wire)
+            nxt = ctl.recv_match(type="ODOMETRY", blocking=True, timeout=5, condition="ODOMETRY.time_usec==4000")
+            assert nxt is not None
+            ctl.mav.command_long_send(sysid, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 21196, 0, 0, 0, 0, 0)
+            assert _ack(ctl, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+        finally:
+            assert v.stop() == 0
+            ctl.close()
+    s = _stats(v)
+    assert s["steps"] == 1 and s["accepted"] == 1
+    assert s["answered_again"] == 1 and s["rejected"] == {}
+
+
 def test_mavproxy_arms_through_stdin(tmp_path):
     """MAVProxy, unmodified, as the issue runs it: heartbeat and attitude seen, and
     ``arm throttle`` typed into it is ACKed and arms the vehicle."""

@@ -368,6 +368,9 @@ class Vehicle:
             self._idle_odo_at = now + IDLE_ODOMETRY_S
             with self.receiver.charged():  # a would-be controller's: within its trial's credit
                 self._send_odometry(now)
+            # a copy of step k's state, as the one arming sends again: a controller that read it while arming
+            # answers both, and the second answer is an answer to a copy (answered_again), not a refusal
+            self.targets.resent(self.k)
 
     # -- after each control period -------------------------------------------------------------
     def _after_step(self) -> bool:
