@@ -160,28 +160,31 @@ def test_targets_only_from_the_configured_controller(tmp_path):
     assert len(lines) == 2 and lines[1].startswith("0,0.0,")  # one row: step 0
 
 
-def test_a_slow_answer_to_a_resent_state_is_taken_once_and_refuses_nothing(tmp_path):
-    """Lockstep resends a state unanswered for 50 ms of wall time, and the controller answers
-    every copy: an answer that was slow (not lost) comes twice. The vehicle steps once on the
-    first and counts the second in ``answered_again``, not as a ``stale`` refusal (that made a
-    loaded machine's lockstep summary differ from the offline one)."""
+HOVER_WIRE = [0.0, 0.0, 0.0, 1.1 * 9.81 / 43.164] + [0.0] * 4  # hover, paper profile
+
+
+def _two_answers_to_step_0(tmp_path, idle_copy: bool) -> dict:
+    """A scripted controller arms a lockstep vehicle and answers step 0 twice: the idle copy of its state read
+    before arming and the state arming sends (``idle_copy``), or the state and the copy resent 50 ms later. Then
+    step 1's state, a disarm, and the vehicle's stats."""
     with instance_slot() as n:
         v = _vehicle(n, tmp_path)
         os.environ["MAVLINK20"] = "1"
         ctl = mavutil.mavlink_connection(f"udpout:127.0.0.1:{LINK_PORT + n}", source_system=200,
                                          source_component=191, dialect="common")
+        sysid = n + 1
         try:
             ctl.mav.heartbeat_send(M.MAV_TYPE_ONBOARD_CONTROLLER, M.MAV_AUTOPILOT_INVALID, 0, 0, 4)
-            assert ctl.recv_match(type="HEARTBEAT", blocking=True, timeout=20) is not None
-            sysid = n + 1
+            heard = ("ODOMETRY", "ODOMETRY.time_usec==0") if idle_copy else ("HEARTBEAT", None)
+            assert ctl.recv_match(type=heard[0], blocking=True, timeout=20, condition=heard[1]) is not None
             ctl.mav.command_long_send(sysid, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
             assert _ack(ctl, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
-            first = ctl.recv_match(type="ODOMETRY", blocking=True, timeout=5, condition="ODOMETRY.time_usec==0")
-            again = ctl.recv_match(type="ODOMETRY", blocking=True, timeout=5, condition="ODOMETRY.time_usec==0")
-            assert first is not None and again is not None  # step 0's state, then its copy (not answered)
-            wire = [0.0, 0.0, 0.0, 1.1 * 9.81 / 43.164] + [0.0] * 4  # hover, paper profile
-            for _ in (first, again):  # one answer to each copy, as the controller does
-                ctl.mav.set_actuator_control_target_send(0, 0, sysid, 1, wire)
+            if not idle_copy:
+                first = ctl.recv_match(type="ODOMETRY", blocking=True, timeout=5, condition="ODOMETRY.time_usec==0")
+                again = ctl.recv_match(type="ODOMETRY", blocking=True, timeout=5, condition="ODOMETRY.time_usec==0")
+                assert first is not None and again is not None  # step 0's state, then its copy (not answered)
+            for _ in range(2):  # one answer to each copy, as the controller does
+                ctl.mav.set_actuator_control_target_send(0, 0, sysid, 1, HOVER_WIRE)
             nxt = ctl.recv_match(type="ODOMETRY", blocking=True, timeout=5, condition="ODOMETRY.time_usec==4000")
             assert nxt is not None
             ctl.mav.command_long_send(sysid, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 21196, 0, 0, 0, 0, 0)
@@ -189,7 +192,15 @@ def test_a_slow_answer_to_a_resent_state_is_taken_once_and_refuses_nothing(tmp_p
         finally:
             assert v.stop() == 0
             ctl.close()
-    s = _stats(v)
+    return _stats(v)
+
+
+def test_a_slow_answer_to_a_resent_state_is_taken_once_and_refuses_nothing(tmp_path):
+    """Lockstep resends a state unanswered for 50 ms of wall time, and the controller answers
+    every copy: an answer that was slow (not lost) comes twice. The vehicle steps once on the
+    first and counts the second in ``answered_again``, not as a ``stale`` refusal (that made a
+    loaded machine's lockstep summary differ from the offline one)."""
+    s = _two_answers_to_step_0(tmp_path, idle_copy=False)
     assert s["steps"] == 1 and s["accepted"] == 1 and s["resends"] >= 1
     assert s["answered_again"] == 1 and s["rejected"] == {}
     with open(tmp_path / "vehicle.csv", newline="") as f:
@@ -203,29 +214,7 @@ def test_answers_to_the_idle_and_the_armed_state_of_one_step_refuse_nothing(tmp_
     answers it, then the armed one: two answers to step k. The vehicle steps once and counts the second in
     ``answered_again``, not as a ``repeated`` or ``stale`` refusal (seen under load: a lockstep session's
     summary with ``rejected: {"repeated": 1}``)."""
-    with instance_slot() as n:
-        v = _vehicle(n, tmp_path)
-        os.environ["MAVLINK20"] = "1"
-        ctl = mavutil.mavlink_connection(f"udpout:127.0.0.1:{LINK_PORT + n}", source_system=200,
-                                         source_component=191, dialect="common")
-        try:
-            ctl.mav.heartbeat_send(M.MAV_TYPE_ONBOARD_CONTROLLER, M.MAV_AUTOPILOT_INVALID, 0, 0, 4)
-            idle = ctl.recv_match(type="ODOMETRY", blocking=True, timeout=20, condition="ODOMETRY.time_usec==0")
-            assert idle is not None  # disarmed: step 0's state, shown while time stands still
-            sysid = n + 1
-            ctl.mav.command_long_send(sysid, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
-            assert _ack(ctl, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
-            wire = [0.0, 0.0, 0.0, 1.1 * 9.81 / 43.164] + [0.0] * 4  # hover, paper profile
-            for _ in range(2):  # the idle copy's answer, then the armed state's
-                ctl.mav.set_actuator_control_target_send(0, 0, sysid, 1, wire)
-            nxt = ctl.recv_match(type="ODOMETRY", blocking=True, timeout=5, condition="ODOMETRY.time_usec==4000")
-            assert nxt is not None
-            ctl.mav.command_long_send(sysid, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 21196, 0, 0, 0, 0, 0)
-            assert _ack(ctl, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
-        finally:
-            assert v.stop() == 0
-            ctl.close()
-    s = _stats(v)
+    s = _two_answers_to_step_0(tmp_path, idle_copy=True)
     assert s["steps"] == 1 and s["accepted"] == 1
     assert s["answered_again"] == 1 and s["rejected"] == {}
 
