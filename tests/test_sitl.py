@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -24,6 +25,7 @@ from bridge.record.columns import TRACE_COLUMNS
 from bridge.record.policies import POLICIES
 from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
+from bridge.session.children import CHOSEN_PORTS_LOW, ephemeral_ports, free_udp_port
 from missions import MISSION_DIR, Mission, Sine
 from tests.sitlkit import ENV, ROOT, csv_rows
 from tests.waiting import wait_for
@@ -197,6 +199,19 @@ def test_ctrl_c_stops_everything_within_2_s(tmp_path):
     assert len(trace["t"]) > 250 and list(trace) == list(TRACE_COLUMNS)
     assert _tlog_types(run / "vehicle.tlog")["ODOMETRY"] > 250
     assert _tlog_types(run / "controller.tlog")["SET_ACTUATOR_CONTROL_TARGET"] > 250
+
+
+def test_a_sessions_ports_are_picked_below_the_kernels_ephemeral_range():
+    """The ports a session names to its children before they bind them (the controller's source port, the
+    vehicle's listen port) come from below the range the kernel hands to sockets bound to port 0, so that no
+    other socket takes one in between; each is free when picked."""
+    lo, _ = ephemeral_ports()
+    ports = [free_udp_port() for _ in range(50)]
+    assert all(CHOSEN_PORTS_LOW <= p < lo for p in ports), ports
+    assert len(set(ports)) > 40  # at random, not one port again and again
+    for port in ports[:5]:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.bind(("127.0.0.1", port))
 
 
 def test_two_instances_fly_side_by_side(tmp_path):

@@ -14,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import os
+import random
 import signal
 import socket
 import subprocess
@@ -52,15 +53,40 @@ def check_port_free(port: int, flag: str) -> None:
         s.close()
 
 
-def free_udp_port() -> int:
-    """A UDP port of 127.0.0.1 free now (the kernel's choice), for a child to bind next: the session
-    names its controller's source port to the vehicle before either child starts."""
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+CHOSEN_PORTS_LOW = 20000  # the lowest port free_udp_port picks (above the instances' 14550 + N, 14560 + N)
+
+
+def ephemeral_ports() -> tuple[int, int]:
+    """The kernel's range for sockets bound to port 0 (Linux: /proc/sys/net/ipv4/ip_local_port_range; its
+    default elsewhere)."""
     try:
+        lo, hi = (int(v) for v in Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split())
+        return lo, hi
+    except (OSError, ValueError):
+        return 32768, 60999
+
+
+def free_udp_port() -> int:
+    """A UDP port of 127.0.0.1 free now, for a child to bind next: the session names its controller's
+    source port to the vehicle before either child starts.
+
+    Picked at random below the kernel's ephemeral range and checked by binding it: a port from that range
+    can be handed to any socket bound to port 0 (a ground station's, a test's, another session's) between
+    this choice and the child's bind, which a full suite run met ("--source-port 56185: cannot bind (Address
+    already in use)"); below it, only another explicit choice can take it. The kernel's choice where the
+    range leaves no room below it."""
+    lo, _ = ephemeral_ports()
+    for _ in range(64 if lo - 1 > CHOSEN_PORTS_LOW else 0):
+        port = random.randrange(CHOSEN_PORTS_LOW, lo)
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            return port
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
-    finally:
-        s.close()
 
 
 class Child:
