@@ -21,8 +21,8 @@ from bridge.core.wire import (
     state_to_odometry,
     step_of_usec,
     step_usec,
-    wrap_pi,
 )
+from controller.bsst import wrap_angle
 
 finite = st.floats(min_value=-50.0, max_value=50.0, allow_nan=False)
 angle = st.floats(min_value=-pi + 1e-6, max_value=pi)
@@ -41,7 +41,7 @@ def test_odometry_round_trip(X):
     """paper -> ODOMETRY fields -> paper returns the state (psi wrapped)."""
     back = odometry_to_state(*state_to_odometry(X))
     assert _close(back[:10], X[:10], 1e-9)
-    assert abs(wrap_pi(back[10] - X[10])) < 1e-9
+    assert abs(wrap_angle(back[10] - X[10])) < 1e-9
     assert abs(back[11] - X[11]) < 1e-9 * (1.0 + abs(X[11]))
 
 

@@ -22,19 +22,11 @@ and body rates are the exact kinematic transform of the Euler rates in the wire'
 from __future__ import annotations
 
 import struct
-from math import asin, atan2, cos, pi, sin, sqrt, tan
+from math import asin, atan2, cos, sin, sqrt, tan
+
+from controller.bsst import wrap_angle  # (-pi, pi]: the law's own, one function for both
 
 Quad = tuple[float, float, float, float]
-TWO_PI = 2.0 * pi
-
-
-def wrap_pi(a: float) -> float:
-    """Wrap an angle to (-pi, pi]."""
-    b = a + pi
-    # b % TWO_PI is b itself where 0 <= b < TWO_PI (the angles already wrapped, nearly all): the modulo, a library
-    # call once compiled (~3 % of a batch cell-step), is skipped there; the same float either way
-    a = (b if 0.0 <= b < TWO_PI else b % TWO_PI) - pi
-    return pi if a == -pi else a
 
 
 # -- actuator targets ---------------------------------------------------------------
@@ -107,7 +99,7 @@ def quaternion_to_euler(q: Quad) -> tuple[float, float, float]:
 def paper_to_ned(X: tuple[float, ...]) -> dict[str, float | Quad]:
     """Paper state (eq. 7, NWU) -> NED position, NED velocity, attitude and FRD body rates."""
     x, vx, y, vy, z, vz, phi, dphi, th, dth, psi, dpsi = X
-    roll, pitch, yaw = phi, -th, wrap_pi(-psi)
+    roll, pitch, yaw = phi, -th, wrap_angle(-psi)
     p, q, r = euler_rates_to_body_rates(roll, pitch, dphi, -dth, -dpsi)
     return {
         "pos": (x, -y, -z),
@@ -124,7 +116,7 @@ def ned_to_paper(pos: tuple[float, float, float], vel: tuple[float, float, float
     roll, pitch, yaw = quaternion_to_euler(q)
     droll, dpitch, dyaw = body_rates_to_euler_rates(roll, pitch, *rates)
     return (pos[0], vel[0], -pos[1], -vel[1], -pos[2], -vel[2],
-            roll, droll, -pitch, -dpitch, wrap_pi(-yaw), -dyaw)
+            roll, droll, -pitch, -dpitch, wrap_angle(-yaw), -dyaw)
 
 
 # -- ODOMETRY (frame LOCAL_NED, child BODY_FRD) ---------------------------------------
@@ -158,7 +150,7 @@ def state_to_odometry(X: tuple[float, ...]) -> tuple[Vec3, Quad, Vec3, Vec3]:
     """Paper state (eq. 7, NWU) -> ODOMETRY fields: NED position (m), attitude quaternion
     (w, x, y, z; FRD body to NED), FRD body velocity (m/s), FRD body rates (rad/s)."""
     x, vx, y, vy, z, vz, phi, dphi, th, dth, psi, dpsi = X
-    roll, pitch, yaw = phi, -th, wrap_pi(-psi)
+    roll, pitch, yaw = phi, -th, wrap_angle(-psi)
     q = euler_to_quaternion(roll, pitch, yaw)
     return (x, -y, -z), q, rotate_inverse(q, (vx, -vy, -vz)), euler_rates_to_body_rates(roll, pitch, dphi, -dth, -dpsi)
 
@@ -180,7 +172,7 @@ def odometry_fields(X: tuple[float, ...]) -> tuple[float, ...]:
     velocity m/s, FRD body rates rad/s) in float64, before MAVLink rounds them to float32. The same operations
     in the same order (tested). Plain floats: the batch engine compiles this same function."""
     x, vx, y, vy, z, vz, phi, dphi, th, dth, psi, dpsi = X
-    roll, pitch, yaw = phi, -th, wrap_pi(-psi)
+    roll, pitch, yaw = phi, -th, wrap_angle(-psi)
     cr, sr = cos(0.5 * roll), sin(0.5 * roll)
     cp, sp = cos(0.5 * pitch), sin(0.5 * pitch)
     cy, sy = cos(0.5 * yaw), sin(0.5 * yaw)
@@ -226,7 +218,7 @@ def state_from_odometry_fields(f: tuple[float, ...]) -> tuple[float, ...]:
     p, q, r = f[10], f[11], f[12]
     k = q * sR + r * cR
     return (f[0], v0, -f[1], -v1, -f[2], -v2,
-            roll, p + k * tan(pitch), -pitch, -(q * cR - r * sR), wrap_pi(-yaw), -(k / cos(pitch)))
+            roll, p + k * tan(pitch), -pitch, -(q * cR - r * sR), wrap_angle(-yaw), -(k / cos(pitch)))
 
 
 def state_over_wire(X: tuple[float, ...]) -> tuple[float, ...]:
