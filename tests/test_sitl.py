@@ -25,7 +25,7 @@ from bridge.record.columns import TRACE_COLUMNS
 from bridge.record.policies import POLICIES
 from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
-from bridge.session.children import CHOSEN_PORTS_LOW, ephemeral_ports, free_udp_port
+from bridge.session.children import CHOSEN_PORTS_LOW, ephemeral_low, free_udp_port
 from missions import MISSION_DIR, Mission, Sine
 from tests.sitlkit import ENV, ROOT, csv_rows
 from tests.waiting import wait_for
@@ -205,7 +205,7 @@ def test_a_sessions_ports_are_picked_below_the_kernels_ephemeral_range():
     """The ports a session names to its children before they bind them (the controller's source port, the
     vehicle's listen port) come from below the range the kernel hands to sockets bound to port 0, so that no
     other socket takes one in between; each is free when picked."""
-    lo, _ = ephemeral_ports()
+    lo = ephemeral_low()
     ports = [free_udp_port() for _ in range(50)]
     assert all(CHOSEN_PORTS_LOW <= p < lo for p in ports), ports
     assert len(set(ports)) > 40  # at random, not one port again and again

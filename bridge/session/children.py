@@ -56,14 +56,13 @@ def check_port_free(port: int, flag: str) -> None:
 CHOSEN_PORTS_LOW = 20000  # the lowest port free_udp_port picks (above the instances' 14550 + N, 14560 + N)
 
 
-def ephemeral_ports() -> tuple[int, int]:
-    """The kernel's range for sockets bound to port 0 (Linux: /proc/sys/net/ipv4/ip_local_port_range; its
-    default elsewhere)."""
+def ephemeral_low() -> int:
+    """The lowest port the kernel hands to sockets bound to port 0 (Linux: the first number of
+    /proc/sys/net/ipv4/ip_local_port_range; its default elsewhere)."""
     try:
-        lo, hi = (int(v) for v in Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split())
-        return lo, hi
-    except (OSError, ValueError):
-        return 32768, 60999
+        return int(Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        return 32768
 
 
 def free_udp_port() -> int:
@@ -75,8 +74,8 @@ def free_udp_port() -> int:
     this choice and the child's bind, which a full suite run met ("--source-port 56185: cannot bind (Address
     already in use)"); below it, only another explicit choice can take it. The kernel's choice where the
     range leaves no room below it."""
-    lo, _ = ephemeral_ports()
-    for _ in range(64 if lo - 1 > CHOSEN_PORTS_LOW else 0):
+    lo = ephemeral_low()
+    for _ in range(64 if lo > CHOSEN_PORTS_LOW else 0):
         port = random.randrange(CHOSEN_PORTS_LOW, lo)
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
             try:
