@@ -20,6 +20,7 @@ from typing import Any, TypeVar
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from bridge.nodes.process import die_with_parent
 from bridge.nodes.report import Event, Report, parse_line
 from tests.waiting import wait_for
 
@@ -38,8 +39,10 @@ class Proc:
 
     def __init__(self, argv: list[str], cwd: Path | None = None, stdin: int | None = subprocess.DEVNULL) -> None:
         self.argv = argv
+        # its own session (a test signals its group), and SIGTERM if the test process dies: a bare vehicle runs
+        # until stopped, so one left by a killed pytest would hold its instance's ports for the next run
         self.p = subprocess.Popen(argv, cwd=cwd, stdin=stdin, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                  env=ENV, start_new_session=True)
+                                  env=ENV, start_new_session=True, preexec_fn=die_with_parent)
         os.set_blocking(self.p.stdout.fileno(), False)  # type: ignore[union-attr]
         self._buf = b""
         self.lines: list[str] = []

@@ -10,11 +10,13 @@ import json
 import os
 import random
 import signal
+import sys
 
 import pytest
 
+from bridge.session import instance_slot
 from tests.hostile import CRASH_STEPS, kill_session
-from tests.sitlkit import Proc
+from tests.sitlkit import ROOT, Proc
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -113,3 +115,34 @@ def test_sigkill_of_a_sweep_ends_its_workers_and_their_children(tmp_path, mode):
         for entry in _left(seen, p.p.pid):  # only what this test started, by pid: a failed run leaves nothing
             os.kill(int(entry.split()[0]), signal.SIGKILL)
         p.stop()
+
+
+# -- the suite's own children: a bare vehicle (it runs until stopped) does not outlive a killed test process ----
+HOLDER = """
+import sys, time
+from bridge.nodes.report import Ready
+from tests.sitlkit import Proc
+p = Proc.bsst("vehicle", "--instance", sys.argv[1])
+p.wait_report(Ready, timeout=60)
+print(p.p.pid, flush=True)
+time.sleep(600)
+"""
+
+
+def test_a_bare_vehicle_started_by_a_test_dies_with_the_test_process():
+    """tests/sitlkit.py's ``Proc`` starts a child in its own session (so a test can signal its group) and asks
+    for SIGTERM when its parent dies: a pytest killed mid-test leaves no bare vehicle holding its ports."""
+    vehicle = -1
+    with instance_slot() as n:
+        holder = Proc([sys.executable, "-c", HOLDER, str(n)], cwd=ROOT)
+        try:
+            line = holder.wait_line(lambda s: s.strip().isdigit(), timeout=60)
+            vehicle = int(line)
+            assert vehicle in _processes(), "the vehicle was not running"
+            os.kill(holder.p.pid, signal.SIGKILL)
+            holder.p.wait(timeout=10)
+            wait_for(lambda: vehicle not in _processes(), 30, "the orphaned vehicle's exit")
+        finally:
+            if vehicle in _processes():  # only what this test started: a failed run leaves nothing behind
+                os.kill(vehicle, signal.SIGKILL)
+            holder.stop()
