@@ -12,8 +12,10 @@ import json
 import math
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
+from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.nodes.report import Event, Refused, parse_line
@@ -218,6 +220,18 @@ def _trace(path) -> list[list[str]]:
     return [r.split(",")[:keep] for r in rows]
 
 
+def _heartbeats_and_last(tlog: Path) -> tuple[list[tuple[float, int]], float]:
+    """From a controller's tlog: each vehicle HEARTBEAT's (wall time s, system_status), and the wall time of its
+    last record."""
+    log = mavutil.mavlink_connection(str(tlog), dialect="common")
+    beats, last = [], math.nan
+    while (m := log.recv_match()) is not None:
+        last = m._timestamp
+        if m.get_type() == "HEARTBEAT" and m.get_srcSystem() != 200:
+            beats.append((m._timestamp, m.system_status))
+    return beats, last
+
+
 @pytest.mark.parametrize("case", ["wind-battery", "crash", "flags", "handover"])
 def test_sitl_plant_blocks_equal_offline(tmp_path, case):
     """``bsst sitl`` (lockstep) reports the plant's blocks as ``bsst sim`` does, to the bit: ``wind`` and
@@ -249,6 +263,11 @@ def test_sitl_plant_blocks_equal_offline(tmp_path, case):
     if case == "crash":
         assert codes == [1, 1] and sitl["outcome"] == "crashed" and sitl["impact"]["speed_mps"] > 2.0
         assert sitl["ended_by"]["after_faults"] == [f"t=5.000 s: motor {i}: off" for i in (1, 2, 3, 4)]
+        # the crashed vehicle's HEARTBEAT says EMERGENCY, and its controller ends on hearing it: its tlog (wall
+        # stamps) ends within a second of it, where it waited out its 2 s state timeout before (a bug)
+        frames = _heartbeats_and_last(tmp_path / "sitl" / "controller.tlog")
+        emergency = [t for t, status in frames[0] if status == mavlink.MAV_STATE_EMERGENCY]
+        assert emergency and frames[1] - emergency[0] < 1.0, (emergency[:1], frames[1])
     elif case in ("flags", "handover"):
         assert codes == [0, 0] and _trace(tmp_path / "sitl" / "trace.csv") == _trace(tmp_path / "sim" / "trace.csv")
         if case == "flags":

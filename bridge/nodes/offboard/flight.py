@@ -421,8 +421,8 @@ class Offboard(OffboardLink):
 
     def _check_vehicle(self) -> str | None:
         """The outcome if the vehicle is lost to the flight (silent, no more states, disarmed
-        other than by its failsafe, taken out of OFFBOARD by a ground station), else None. Its
-        failsafe alone does not end the flight."""
+        other than by its failsafe, its flight ended by its plant, taken out of OFFBOARD by a ground
+        station), else None. Its failsafe alone does not end the flight."""
         now = time.monotonic()
         timeout = self._silence_s
         if self.taken_over:
@@ -432,6 +432,10 @@ class Offboard(OffboardLink):
             self.reason = f"vehicle silent for {timeout:g} s"
         elif self.armed_seen and not self.vehicle_armed and not self.failsafe_seen:
             self.reason = "the vehicle was disarmed during the mission"
+        elif self.armed_seen and self.vehicle_state == mavlink.MAV_STATE_EMERGENCY:
+            # at once: its clock halted, so waiting out the state timeout would only delay the end
+            self.reason = ("the vehicle's flight ended: it crashed, diverged or was touched "
+                           "(HEARTBEAT system_status EMERGENCY)")
         elif now - self._last_state > (timeout if self._started else self.cfg.start_timeout_s or timeout):
             self.reason = f"no new state from the vehicle for {timeout:g} s"
         else:

@@ -301,9 +301,10 @@ class OffboardLink:
             self.vehicle_state = m.system_status
             if self.vehicle_armed:
                 self.armed_seen = True
-            if self.armed_seen and m.system_status == mavlink.MAV_STATE_CRITICAL:
-                # armed: flying its failsafe; disarmed: landed by it (on a real link the armed
-                # CRITICAL heartbeat may have been lost), or halted by divergence
+            if self.armed_seen and m.system_status in (mavlink.MAV_STATE_CRITICAL, mavlink.MAV_STATE_EMERGENCY):
+                # CRITICAL, armed: flying its failsafe; disarmed: landed by it (on a real link the armed
+                # CRITICAL heartbeat may have been lost). EMERGENCY: its plant ended the flight (crashed,
+                # diverged, touched by another vehicle) and its clock halted: no more states will come
                 self.failsafe_seen = True
             elif (self.vehicle_armed and m.autopilot == mavlink.MAV_AUTOPILOT_PX4 and not self.taken_over
                   and not self.ending and main_mode(m.custom_mode) != MAIN_OFFBOARD

@@ -92,7 +92,9 @@ _CHARGE_STATES = ((5, mavlink.MAV_BATTERY_CHARGE_STATE_EMERGENCY), (7, mavlink.M
 def heartbeat(v: VehicleView) -> Any:
     """HEARTBEAT: PX4's encoding of the mode (bridge.mavlink.modes), so that ground stations name it."""
     base, custom = heartbeat_mode(v.mode, v.target, v.armed)
-    if v.halted or v.mode in (FAILSAFE, LANDED):
+    if v.halted:  # crashed, diverged or touched by another vehicle: its flight is over, its plant stepped no more
+        state = mavlink.MAV_STATE_EMERGENCY
+    elif v.mode in (FAILSAFE, LANDED):
         state = mavlink.MAV_STATE_CRITICAL
     elif v.armed:
         state = mavlink.MAV_STATE_ACTIVE
