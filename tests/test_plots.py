@@ -112,15 +112,18 @@ def _check_legends(name: str, fig) -> int:
     r = fig.canvas.get_renderer()
     whole = fig.bbox
     legends = _legends(fig)
+    if not legends:
+        return 0
+    points = [(ax, _display_points(ax)) for ax in fig.axes]  # once per figure: the same for every legend
+    texts = [(t.get_text(), t.get_window_extent(r)) for t in _texts(fig)]
     for leg in legends:
         box = leg.get_window_extent(r)
         assert whole.x0 <= box.x0 and box.x1 <= whole.x1 and whole.y0 <= box.y0 and box.y1 <= whole.y1, name
-        for ax in fig.axes:
-            xy = _display_points(ax)
+        for ax, xy in points:
             inside = (xy[:, 0] > box.x0) & (xy[:, 0] < box.x1) & (xy[:, 1] > box.y0) & (xy[:, 1] < box.y1)
             assert not inside.any(), f"{name}: legend {[t.get_text() for t in leg.texts]} covers data of {ax}"
-        for t in _texts(fig):
-            assert not box.overlaps(t.get_window_extent(r)), f"{name}: legend over the text {t.get_text()!r}"
+        for text, extent in texts:
+            assert not box.overlaps(extent), f"{name}: legend over the text {text!r}"
     return len(legends)
 
 
