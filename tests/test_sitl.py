@@ -214,6 +214,19 @@ def test_a_sessions_ports_are_picked_below_the_kernels_ephemeral_range():
             s.bind(("127.0.0.1", port))
 
 
+def test_an_automatic_instance_is_the_highest_free_one(tmp_path, monkeypatch):
+    """``instance_slot`` takes the highest free instance first, so that the low ones stay for the sessions a
+    person starts by number (0 is ``bsst sitl``'s default; the README's example takes 1). Its lock files here
+    in a directory of this test's own, so that no other test's slots count; a slot whose ports another process
+    holds is passed over, as ever."""
+    import tempfile
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    with instance_slot() as a, instance_slot() as b, instance_slot() as c:
+        assert a > b > c, (a, b, c)
+    assert {f"bsst-instance-{n}.lock" for n in (a, b, c)} <= {p.name for p in tmp_path.iterdir()}
+
+
 def test_two_instances_fly_side_by_side(tmp_path):
     mission = tmp_path / "sine6.toml"
     mission.write_text(SINE_6S)

@@ -173,10 +173,14 @@ def instance_slot(timeout_s: float = 600.0) -> Iterator[int]:
     An advisory ``flock`` on ``<tmp>/bsst-instance-N.lock`` (the convention ``bsst sweep``
     uses too), so sessions started by tests, sweeps or scripts side by side never share
     ports 14550 + N / 14560 + N. Raises TimeoutError when all ten stay taken.
+
+    The highest free number first: the low ones are those a person names (``bsst sitl`` flies instance 0 by
+    default, whose 14550 is a ground station's default port; the README's example takes 1), and a session that
+    names its instance waits for it while an automatic pick holds it (the suite's README example waited 28 s).
     """
     deadline = time.monotonic() + timeout_s
     while True:
-        for n in range(10):
+        for n in range(9, -1, -1):
             fd = os.open(os.path.join(tempfile.gettempdir(), f"bsst-instance-{n}.lock"), os.O_RDWR | os.O_CREAT,
                          0o644)
             try:
