@@ -18,6 +18,7 @@ import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
+from bridge.mavlink.endpoint import CONTROLLER_SYSID
 from bridge.nodes.report import Event, Refused, parse_line
 from bridge.nodes.vehicle.injection import injection
 from bridge.session import instance_slot
@@ -227,7 +228,7 @@ def _heartbeats_and_last(tlog: Path) -> tuple[list[tuple[float, int]], float]:
     beats, last = [], math.nan
     while (m := log.recv_match()) is not None:
         last = m._timestamp
-        if m.get_type() == "HEARTBEAT" and m.get_srcSystem() != 200:
+        if m.get_type() == "HEARTBEAT" and m.get_srcSystem() != CONTROLLER_SYSID:
             beats.append((m._timestamp, m.system_status))
     return beats, last
 

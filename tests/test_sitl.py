@@ -11,6 +11,7 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -219,8 +220,6 @@ def test_an_automatic_instance_is_the_highest_free_one(tmp_path, monkeypatch):
     person starts by number (0 is ``bsst sitl``'s default; the README's example takes 1). Its lock files here
     in a directory of this test's own, so that no other test's slots count; a slot whose ports another process
     holds is passed over, as ever."""
-    import tempfile
-
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     with instance_slot() as a, instance_slot() as b, instance_slot() as c:
         assert a > b > c, (a, b, c)

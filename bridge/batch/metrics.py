@@ -128,8 +128,7 @@ def _ripple_cells(u2: np.ndarray, cells: np.ndarray, L: int, idx: np.ndarray, n_
     for c in cells:
         u0 = u2[c, 0]
         csum[0] = 0.0
-        csum[1] = u2[c, 0] - u0  # np.cumsum: out[0] = u[0], then out[k] = out[k - 1] + u[k]
-        for k in range(1, L):
+        for k in range(L):  # np.cumsum's order: out[k] = out[k - 1] + u[k] (u[0] = 0.0: out[0] is 0.0 + 0.0)
             csum[k + 1] = csum[k] + (u2[c, k] - u0)
         s = 0.0
         for i in idx:
