@@ -91,7 +91,8 @@ if sys.argv[2] == "params":
     out["obl_act"] = par.get_param_int("COM_OBL_ACT")
     out["set_obl_act"] = par.set_param_int("COM_OBL_ACT", 1).name
     out["obl_rc_act"] = par.get_param_int("COM_OBL_RC_ACT")  # the same setting under PX4 1.14's name
-    out["set_sys_id"] = refused(par.set_param_int, "MAV_SYS_ID", 9)
+    # 42: never an instance's own id (instances 0-9 are systems 1-10), whose echo MAVSDK would take as made
+    out["set_sys_id"] = refused(par.set_param_int, "MAV_SYS_ID", 42)
 else:
     tel, act = Telemetry(system), Action(system)
     cond = threading.Condition()

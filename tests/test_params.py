@@ -195,7 +195,7 @@ def test_parameter_protocol_over_udp(tmp_path):
             assert _recv(gcs, "PARAM_VALUE").param_value == 1.5
             for name, value, kind, why in (("COM_OF_LOSS_T", 100.0, M.MAV_PARAM_TYPE_REAL32, "must be in"),
                                            ("COM_OF_LOSS_T", 1.0, M.MAV_PARAM_TYPE_INT32, "REAL32"),
-                                           ("MAV_SYS_ID", param_to_wire(9, 6), 6, "at start only")):
+                                           ("MAV_SYS_ID", param_to_wire(42, 6), 6, "at start only")):
                 gcs.mav.param_set_send(*tgt, name.encode(), value, kind)
                 m = _recv(gcs, "PARAM_VALUE")
                 text = _recv(gcs, "STATUSTEXT", f"'{why}' in STATUSTEXT.text")
