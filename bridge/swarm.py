@@ -343,8 +343,8 @@ CONTINUED = ("the flights continued past the contact: in real time each vehicle 
              "vehicles share no clock, so nothing stopped them at it (docs/swarm.md)")
 
 
-SITL_SHARED = ("--shared-link ([link] shared = true): one radio for a fleet is offline only for now (bsst sim); "
-               "under bsst sitl it waits for the fleet's shared clock (docs/swarm.md)")
+SITL_SHARED = ("--shared-link ([link] shared = true): one radio for a fleet in lockstep is not modelled yet: fly it "
+               "offline (bsst sim) or in real time (bsst sitl --realtime); docs/swarm.md")
 
 
 def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] | None = None,
@@ -362,7 +362,7 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
     the world is judged on the vehicles' traces (and where each stayed) at matching steps (:func:`judge_traces`).
     In real time a contact makes both ``collision`` too, found afterwards (the flights went on: :data:`CONTINUED`)."""
     from bridge.session import sitl as sitl_one  # lazy: start-up time
-    from bridge.session.fleet import check_fleet, check_fleet_ports, fly_sessions  # lazy: start-up time
+    from bridge.session.fleet import check_fleet, check_fleet_ports, fly_sessions, radio_block  # lazy: start-up
 
     given_link = Overrides.of(overrides, **keywords).link or {}
     if await_mission or mission is None:  # a ground station's mission (bsst sitl --await-mission): one vehicle
@@ -373,7 +373,8 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
         m = mission if isinstance(mission, Mission) else load_mission(mission)
         fleet = fleet_mission(m, vehicles, formation)
         given_link = merge_link_tables(m.link, given_link)
-    if given_link.get("shared") is True:
+    shared = given_link.get("shared") is True and fleet is not None  # one vehicle: its own radio, the same link
+    if shared and not realtime:
         raise ConfigError(SITL_SHARED)
     if fleet is None:
         return sitl_one(mission, out=out, write=write, overwrite=overwrite, plots=plots, realtime=realtime,
@@ -393,19 +394,23 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
         dirs = [d for d in _vehicle_dirs(fm, path) if d is not None]
         ids = [v.id for v in fm.vehicles]
         watch = _watch(fm, flights)
-        shared = not realtime  # lockstep: one shared step clock (bridge.nodes.vehicle.gate)
+        if shared:
+            shared_radios(fm, flights)  # a handover on one radio is refused, as offline
+        clocked = not realtime  # lockstep: one shared step clock (bridge.nodes.vehicle.gate)
         runs = fly_sessions(flights, ids, dirs, realtime=realtime, instance=instance, gcs=gcs_text, speed=speed,
                             key=Path(key) if key is not None else None, plots=plots, keep=keep,
-                            radii=watch.radii if shared else None)
-        finals = [_stayed(r) for r in runs] if shared else None
+                            radii=watch.radii if clocked else None, shared_radio=shared)
+        finals = [_stayed(r) for r in runs] if clocked else None
         contacts = judge_traces(watch, [r.trace for r in runs], fm.rate_hz, finals)
         runs = [_touched(r, contacts.get(j)) for j, r in enumerate(runs)]
         summary = fleet_summary(fm, flights, runs, watch, "realtime" if realtime else "lockstep")
-        summary["sitl"] = {"instances": None if instance is None else list(range(instance, instance + len(ids))),
-                           "gcs": gcs_text, "sysids": ids, "shared_clock": shared, "signed": key is not None}
         if shared:
+            summary["radio"] = radio_block(ids, flights, runs)
+        summary["sitl"] = {"instances": None if instance is None else list(range(instance, instance + len(ids))),
+                           "gcs": gcs_text, "sysids": ids, "shared_clock": clocked, "signed": key is not None}
+        if clocked:
             summary["sitl"]["gate"] = {str(i): (r.summary.get("sitl") or {}).get("gate") for i, r in zip(ids, runs)}
-        if contacts and not shared:
+        if contacts and not clocked:
             summary["sitl"]["note"] = CONTINUED
         _finish(fm, path if keep else None, runs, watch, summary, plots)
         return FleetRun(runs, summary, path if keep else None)

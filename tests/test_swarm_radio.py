@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from bridge.cli import main
-from bridge.link.radio import Radio
+from bridge.link.radio import ProcessRadio, Radio, finished_part, make_radio_file, occupancy_of_parts
 from bridge.swarm import SITL_SHARED, simulate
 from bridge.swarm import sitl as swarm_sitl
 from missions import MISSION_DIR
@@ -92,10 +92,50 @@ def test_the_radio_admits_in_order_and_drops_what_would_wait_too_long() -> None:
     assert Radio(0.0, 1.0).admit(3.0, 100) == 3.0  # no cap: sent at once, counted
 
 
-def test_shared_link_is_refused_under_sitl_and_where_it_means_nothing(tmp_path: Path) -> None:
-    with pytest.raises(ConfigError) as exc:
+def test_radios_of_two_processes_on_one_file_queue_as_one_radio(tmp_path: Path) -> None:
+    """Two users of one radio file (each its own descriptor and clock origin, as two relays' are) give each
+    packet the fate one in-memory radio gives it, and their parts make its occupancy block."""
+    f = tmp_path / "radio"
+    make_radio_file(f, 2)
+    one = Radio(1000.0, 0.05, users=2)
+    a, b = (ProcessRadio(f, "down", 1000.0, 0.05, user=u, offset=off) for u, off in ((0, 100.0), (1, 103.5)))
+    up = ProcessRadio(f, "up", 1000.0, 0.05, user=0, offset=100.0)  # the other direction: a queue of its own
+    packets = [(0.0, 20, 0), (0.0, 20, 1), (0.003, 20, 1), (0.005, 20, 0), (0.2, 50, 0), (0.21, 10, 1)]
+    for t, size, u in packets:  # (t: s since 100.0, the first user's origin)
+        want = one.admit(t, size, u)
+        got = a.admit(t, size, 0) if u == 0 else b.admit(t - 3.5, size, 1)
+        got = got if got is None or u == 0 else got + 3.5
+        assert (got is None and want is None) or got == pytest.approx(want, abs=1e-9), (t, size, u)
+    assert up.admit(0.0, 20, 0) == pytest.approx(0.020)  # nothing queued ahead of it in its direction
+    parts = [finished_part(a.part()), finished_part(b.part())]
+    assert [p["lost_queue"] for p in parts] == one.dropped == [1, 0]
+    merged, alone = occupancy_of_parts(parts, [7, 8], 1000.0, 0.05), one.occupancy([7, 8], 0.0)
+    assert merged["span_s"] == pytest.approx(alone["span_s"]) and merged["occupancy"] <= 1.0
+    for x, y in zip(merged["vehicles"], alone["vehicles"]):
+        assert x["bytes"] == y["bytes"] and x["share_bps"] == pytest.approx(y["share_bps"])
+        assert x["queue_wait_ms"] == pytest.approx(y["queue_wait_ms"])
+    for r in (a, b, up):
+        r.close()
+
+
+@pytest.mark.parametrize("what, says", [
+    ("missing", "cannot open"), ("short", "not a radio file (24 bytes expected)"),
+    ("user", "no user 2 in it (users 0-1)")])
+def test_a_bad_radio_file_is_named(tmp_path: Path, what: str, says: str) -> None:
+    """(``bsst relay --radio`` says the same: tests/test_swarm_radio_sitl.py.)"""
+    f = tmp_path / "radio"
+    if what == "short":
+        f.write_bytes(b"BSSR")
+    elif what == "user":
+        make_radio_file(f, 2)
+    with pytest.raises(ConfigError, match=f"--radio {f}: .*{says}".replace("(", r"\(").replace(")", r"\)")):
+        ProcessRadio(f, "up", 1000.0, 0.05, user=2 if what == "user" else 0)
+
+
+def test_shared_link_is_refused_in_lockstep_sitl_and_where_it_means_nothing(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError) as exc:  # (real time flies it: tests/test_swarm_radio_sitl.py)
         swarm_sitl(short_sine(tmp_path), vehicles=2, link={"shared": True})
-    assert str(exc.value) == SITL_SHARED and "offline only" in SITL_SHARED and "\n" not in SITL_SHARED
+    assert str(exc.value) == SITL_SHARED and "in lockstep is not modelled" in SITL_SHARED and "\n" not in SITL_SHARED
     with pytest.raises(ConfigError, match="events of kind link"):  # a handover on one radio: not modelled
         simulate(short_sine(tmp_path), vehicles=2, link={"shared": True}, at=("1:link:wifi",))
     with pytest.raises(ConfigError, match="shared: a link handover takes a profile"):  # the flight's, not an event's

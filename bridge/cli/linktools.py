@@ -172,6 +172,11 @@ def add_relay_command(sub: Any) -> None:
     p.add_argument("--mission-clock", action="store_true",
                    help="blackout times count from the flight's time 0 (the first actuator target up, less the "
                         "down delay) instead of the relay's start")
+    p.add_argument("--radio", metavar="FILE", help="share each direction's bandwidth and queue with other relays "
+                                                   "through this radio file (a fleet's one radio in real time: "
+                                                   "bsst sitl --vehicles N --shared-link --realtime makes it)")
+    p.add_argument("--radio-user", type=int_in("--radio-user", 0, 255), default=0, metavar="N",
+                   help="this relay's user number on --radio (its vehicle's place in the fleet, from 0)")
     add_link_options(p, controller=False)  # the relay models the link; compensation and guards are the controller's
     p.set_defaults(func=cmd_relay)
 
@@ -203,7 +208,8 @@ def cmd_relay(args: argparse.Namespace) -> int:
     try:
         relay = Relay(listen, target, settings, listen_direction=args.listen_direction,
                       mission_clock=args.mission_clock, client=client, on_client=learned,
-                      back_port=args.back_port or 0, stats_path=args.stats)
+                      back_port=args.back_port or 0, stats_path=args.stats,
+                      radio=(args.radio, args.radio_user) if args.radio else None)
     except OSError as exc:
         where = f"--listen {args.listen}" + (f" or --back-port {args.back_port}" if args.back_port else "")
         raise ConfigError(f"{where}: cannot bind ({exc.strerror or exc})") from None

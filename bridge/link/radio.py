@@ -6,6 +6,13 @@ In:  the cap ``rate_bps`` (bytes/s; 0: none) and the longest wait ``queue_s`` (s
 Out: each packet's end of transmission (s) or None (tail-dropped); per user the bytes put on the air, the
      packets dropped and each packet's wait in the queue (s); :meth:`Radio.occupancy` for ``summary.json``
 
+A radio shared by processes (real time: one ``bsst relay`` per vehicle, :class:`ProcessRadio`) keeps its one
+number of state, when it is free again (s on ``CLOCK_MONOTONIC``, the clock ``time.perf_counter`` reads on
+Linux, one for every process of the machine), in a small file every user maps (:func:`make_radio_file`: a
+magic, the number of users, one slot per direction); each packet reads and moves it under an exclusive
+``flock``. Each process counts its own user's bytes, drops and waits (:meth:`ProcessRadio.part`), and the fleet
+puts the parts together (:func:`occupancy_of_parts`).
+
 The model (docs/design.md, "Link model", step 3; docs/swarm.md, "One radio"): packets queue at the sender
 in the order they are sent, first in first out, each occupying the radio for size / rate; a packet that would
 wait longer than ``queue_s`` is dropped (tail drop). A link of its own has a radio of its own
@@ -17,9 +24,23 @@ end of the last transmission, divided by that span, are together at most the rat
 
 from __future__ import annotations
 
+import fcntl
 import math
+import mmap
+import os
+import struct
 from array import array
+from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import Any
+
+from params import ConfigError
+
+DIRECTIONS = ("up", "down")  # a radio file's slots, in this order
+_HEADER = struct.Struct("<4sI")  # magic, users
+_SLOT = struct.Struct("<d")  # when the direction's radio is free again (s, CLOCK_MONOTONIC; -inf: never used)
+_MAGIC = b"BSSR"
+RADIO_FILE_BYTES = _HEADER.size + _SLOT.size * len(DIRECTIONS)
 
 
 class Radio:
@@ -56,16 +77,118 @@ class Radio:
         together are never more than the rate): bytes, bytes/s, fraction of the rate, queue drops, and its
         packets' waits in the queue (ms: mean, p50, p95, max)."""
         span = max(until_s, self.free_at if math.isfinite(self.free_at) else 0.0)
-        users = []
-        for i, uid in enumerate(ids):
-            bps = self.bytes[i] / span if span > 0.0 else 0.0
-            users.append({"id": uid, "bytes": self.bytes[i], "share_bps": bps,
-                          "share": bps / self.rate if self.rate > 0.0 else None,
-                          "lost_queue": self.dropped[i], "queue_wait_ms": _waits_ms(self.waits[i])})
-        total = sum(self.bytes) / span if span > 0.0 else 0.0
-        return {"rate_bps": self.rate or None, "queue_ms": self.queue_s * 1000.0 if self.rate > 0.0 else None,
-                "span_s": span, "share_bps": total, "occupancy": total / self.rate if self.rate > 0.0 else None,
-                "lost_queue": sum(self.dropped), "vehicles": users}
+        return occupancy_block(self.rate, self.queue_s, span, ids, self.bytes, self.dropped,
+                               [_waits_ms(w) for w in self.waits])
+
+
+def occupancy_block(rate: float, queue_s: float, span: float, ids: Sequence[int], sent: Sequence[int],
+                    dropped: Sequence[int], waits_ms: Sequence[Mapping[str, float | None]]) -> dict[str, Any]:
+    """One direction's ``summary.json["radio"]`` block: the rate (bytes/s), the queue (ms), the span (s) and, per
+    user (``ids`` in order), its bytes, its share of the rate over the span (bytes/s and fraction), its queue drops
+    and its waits (ms); the same totals for the radio."""
+    users = []
+    for i, uid in enumerate(ids):
+        bps = sent[i] / span if span > 0.0 else 0.0
+        users.append({"id": uid, "bytes": sent[i], "share_bps": bps, "share": bps / rate if rate > 0.0 else None,
+                      "lost_queue": dropped[i], "queue_wait_ms": dict(waits_ms[i])})
+    total = sum(sent) / span if span > 0.0 else 0.0
+    return {"rate_bps": rate or None, "queue_ms": queue_s * 1000.0 if rate > 0.0 else None,
+            "span_s": span, "share_bps": total, "occupancy": total / rate if rate > 0.0 else None,
+            "lost_queue": sum(dropped), "vehicles": users}
+
+
+def make_radio_file(path: str | Path, users: int) -> None:
+    """Create the file of a radio that ``users`` processes share (the module's docstring): never used yet."""
+    Path(path).write_bytes(_HEADER.pack(_MAGIC, users) + _SLOT.pack(-math.inf) * len(DIRECTIONS))
+
+
+class ProcessRadio(Radio):
+    """One direction of a radio shared by processes on this machine, on the wall clock (the module's
+    docstring), as its user ``user``: times given to :meth:`admit` are s since ``offset`` (s on the monotonic
+    clock), the queue's state is the file's. A bad file, or a user it does not have, is a ConfigError naming it."""
+
+    __slots__ = ("offset", "user", "first_s", "last_end_s", "_fd", "_map", "_at")
+
+    def __init__(self, path: str | Path, direction: str, rate_bps: float, queue_s: float, user: int,
+                 offset: float = 0.0) -> None:
+        try:
+            fd = os.open(path, os.O_RDWR)
+        except OSError as exc:
+            raise ConfigError(f"--radio {path}: cannot open ({exc.strerror or exc})") from None
+        try:
+            if os.fstat(fd).st_size != RADIO_FILE_BYTES:
+                raise ConfigError(f"--radio {path}: not a radio file ({RADIO_FILE_BYTES} bytes expected)")
+            self._map = mmap.mmap(fd, RADIO_FILE_BYTES)
+            magic, users = _HEADER.unpack_from(self._map, 0)
+            if magic != _MAGIC or not 0 <= user < users:
+                raise ConfigError(f"--radio {path}: not a radio file, or no user {user} in it (users 0-{users - 1})")
+        except BaseException:
+            os.close(fd)
+            raise
+        super().__init__(rate_bps, queue_s, users)
+        self._fd = fd
+        self._at = _HEADER.size + _SLOT.size * DIRECTIONS.index(direction)
+        self.offset = offset
+        self.user = user
+        self.first_s: float | None = None  # the first packet's send time (s, monotonic clock)
+        self.last_end_s: float | None = None  # the end of this user's last transmission (s, monotonic clock)
+
+    def admit(self, t: float, size: int, user: int = 0) -> float | None:
+        """As :meth:`Radio.admit`, behind every other process's packets: the file's state read and moved under an
+        exclusive lock. The send times of several processes come in the order they take the lock (first come,
+        first served), each a few microseconds apart at most from when it arrived."""
+        if self.first_s is None:
+            self.first_s = t + self.offset
+        if self.rate <= 0.0:
+            end: float | None = super().admit(t, size, user)
+        else:
+            fcntl.flock(self._fd, fcntl.LOCK_EX)
+            try:
+                self.free_at = _SLOT.unpack_from(self._map, self._at)[0] - self.offset
+                end = super().admit(t, size, user)
+                _SLOT.pack_into(self._map, self._at, self.free_at + self.offset)
+            finally:
+                fcntl.flock(self._fd, fcntl.LOCK_UN)
+        if end is not None:
+            self.last_end_s = end + self.offset
+        return end
+
+    def part(self) -> dict[str, Any]:
+        """A copy of this user's share of the radio (cheap: no percentiles, for a serving loop): bytes, queue
+        drops, each packet's wait (s, ``waits``), and when it first sent and last finished sending (s, monotonic
+        clock; None: nothing yet). :func:`finished_part` makes it ``summary.json``'s."""
+        u = self.user
+        return {"user": u, "bytes": self.bytes[u], "lost_queue": self.dropped[u], "waits": array("d", self.waits[u]),
+                "first_s": self.first_s, "last_end_s": self.last_end_s}
+
+    def close(self) -> None:
+        if self._fd >= 0:
+            self._map.close()
+            os.close(self._fd)
+            self._fd = -1
+
+
+def finished_part(part: Mapping[str, Any]) -> dict[str, Any]:
+    """A :meth:`ProcessRadio.part` as JSON: its waits as ms (mean, p50, p95, max: ``queue_wait_ms``)."""
+    out = {k: v for k, v in part.items() if k != "waits"}
+    out["queue_wait_ms"] = _waits_ms(part["waits"])
+    return out
+
+
+def occupancy_of_parts(parts: Sequence[Mapping[str, Any] | None], ids: Sequence[int], rate: float,
+                       queue_s: float) -> dict[str, Any]:
+    """One direction of a radio shared by processes, from each user's :func:`finished_part` (in the order of
+    ``ids``; None: a user that left none, counted as nothing sent): :func:`occupancy_block` over the span from
+    the first packet any user sent to the end of the last transmission. Every transmission lies within it and
+    none overlaps another, so the shares together are never more than the rate."""
+    got = [p for p in parts if p is not None]
+    firsts = [p["first_s"] for p in got if p["first_s"] is not None]
+    ends = [p["last_end_s"] for p in got if p["last_end_s"] is not None]
+    span = max(ends) - min(firsts) if firsts and ends else 0.0
+    none = {"mean": None, "p50": None, "p95": None, "max": None}
+    return occupancy_block(rate, queue_s, max(span, 0.0), ids, [p["bytes"] if p else 0 for p in parts],
+                           [p["lost_queue"] if p else 0 for p in parts],
+                           [p["queue_wait_ms"] if p else none for p in parts])
 
 
 def _waits_ms(waits: array) -> dict[str, float | None]:

@@ -2,12 +2,14 @@
 
 In:  UDP datagrams, whatever they hold: from the client on the listen port, from the target on the
      back socket; the ``[link]`` settings (delays ms, loss %, ``rate_bps`` bytes/s, blackouts s);
-     optionally the client's address
+     optionally the client's address; optionally a fleet's one radio (its file, this vehicle's user number:
+     :class:`bridge.link.radio.ProcessRadio`), whose queue each direction shares with the other vehicles' relays
 Out: the same datagrams, unchanged, forwarded when the link model (on the wall clock, s) says they
      are due; :meth:`Relay.summary` (``relay.json``): per direction the model's statistics and
      ``measured_ms``, the delay really added (ms), plus counts, the client, what was refused by
-     reason, and CPU time (s, us per packet); with ``stats_path`` that summary kept on disk while serving
-     (a snapshot at most every :data:`STATS_EVERY_S` s, ``"final": false``), written atomically
+     reason, and CPU time (s, us per packet), on a shared radio this vehicle's part of it (``radio``); with
+     ``stats_path`` that summary kept on disk while serving (a snapshot at most every :data:`STATS_EVERY_S` s,
+     ``"final": false``), written atomically
 
 Topology (docs/design.md, "Link model")::
 
@@ -62,6 +64,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.link.impairment import LinkStats
 from bridge.link.model import LinkImpairment, LinkSettings
+from bridge.link.radio import ProcessRadio, finished_part
 from bridge.mavlink.endpoint import parse_address as endpoint_address
 from bridge.mavlink.endpoint import socket_drops
 from bridge.nodes.report import Event, Ready
@@ -118,11 +121,14 @@ class Relay:
                  listen_direction: str = "up", clock: Callable[[], float] = time.perf_counter,
                  mission_clock: bool = False, client: Address | None = None,
                  on_client: Callable[[Address], None] | None = None, back_port: int = 0,
-                 stats_path: str | Path | None = None) -> None:
+                 stats_path: str | Path | None = None, radio: tuple[str | Path, int] | None = None) -> None:
         link = link or LinkSettings()
         self.mission_clock = mission_clock
         self.origin_s: float | None = None  # relay time (s) of the flight's time 0 (mission_clock)
-        up, down = link.make()
+        # a fleet's one radio (real time): (its file, this vehicle's user number), each direction's queue shared
+        self.radios = {d: ProcessRadio(radio[0], d, cfg.rate_bps, cfg.queue_ms / 1000.0, radio[1])
+                       for d, cfg in (("up", link.up), ("down", link.down))} if radio is not None else {}
+        up, down = link.make((self.radios["up"], self.radios["down"]), radio[1]) if radio else link.make()
         self.front_link, self.back_link = (up, down) if listen_direction == "up" else (down, up)
         self.links = {"up": up, "down": down}
         if mission_clock:  # no blackout before the flight's time 0 is known
@@ -159,6 +165,8 @@ class Relay:
         os.set_blocking(self._wake_w, False)
         self._stopping = False
         self.t0 = clock()
+        for r in self.radios.values():  # a shared radio counts on the monotonic clock every process reads
+            r.offset = self.t0
         self.cpu_user_s = 0.0  # CPU time of the serving process while serving (all its threads)
         self.cpu_sys_s = 0.0
         self.forwarded = 0
@@ -329,6 +337,8 @@ class Relay:
                  "client_from": "given" if self.client_given else "first sender", "target": hostport(self.target),
                  "refused": dict(self.refused), "forwarded": self.forwarded,
                  "dropped_no_client": self.dropped_no_client, "send_errors": self.send_errors}
+        if self.radios:  # this vehicle's part of the fleet's one radio, by direction
+            fixed["radio"] = {d: r.part() for d, r in self.radios.items()}
         return _Counters(stats, {d: array("d", a) for d, a in self.added.items()}, fixed, user, system)
 
     def summary(self) -> dict[str, Any]:
@@ -349,6 +359,8 @@ class Relay:
             self._drops = self._socket_drops()  # (not when a bind failed, before it is set)
         for s in (self.front, self.back):
             s.close()
+        for r in getattr(self, "radios", {}).values():
+            r.close()
         for fd in (getattr(self, "_wake_r", -1), getattr(self, "_wake_w", -1)):
             if fd >= 0:
                 try:
@@ -384,6 +396,8 @@ class _Counters:
             s["measured_ms"] = percentiles(self.added[d], 1000.0, empty=None)
             out[d] = s
         out.update(self.fixed)
+        if "radio" in out:
+            out["radio"] = {d: finished_part(p) for d, p in out["radio"].items()}
         cpu = self.cpu_user_s + self.cpu_sys_s
         forwarded = self.fixed["forwarded"]
         out["cpu_s"] = cpu

@@ -338,6 +338,8 @@ def link_block(joined: Joined, vehicle: Mapping[str, Any], controller: Mapping[s
                                    "controller": max(0, sum(by["controller"].values()) - ctl_own)}
     if relay is not None:  # datagrams the relay refused, from neither of its two ends, by reason
         out["relay_refused"] = relay.get("refused", {})
+        if relay.get("radio"):  # a fleet's one radio in real time: this vehicle's part of it, by direction
+            out["radio"] = relay["radio"]
     return out
 
 

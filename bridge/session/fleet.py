@@ -22,12 +22,16 @@ SIGTERM, then SIGKILL at its deadline) and each still writes its summary.
 
 from __future__ import annotations
 
+import os
+import tempfile
 import threading
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from bridge.autopilot.estimator import compile_estimator
 from bridge.core.flight import Flight
+from bridge.link.radio import make_radio_file, occupancy_of_parts
 from bridge.mavlink.endpoint import LINK_PORT
 from bridge.mavlink.signing import key_from_file
 from bridge.nodes.vehicle.gate import GateConfig
@@ -37,7 +41,9 @@ from bridge.session.children import READY_TIMEOUT_S, check_port_free, free_udp_p
 from bridge.session.session import Session, catch_stop_signals
 from params import ConfigError
 
-MAX_INSTANCE = 9  # instances 0-9, as bridge.session.children.instance_slot holds them
+MAX_INSTANCE = 9
+ARRIVAL = ("first come, first served on the wall clock: each vehicle's relay puts its packets in the one queue as "
+           "they arrive")  # instances 0-9, as bridge.session.children.instance_slot holds them
 
 
 def check_fleet(count: int, *, realtime: bool, instance: int | None, gcs: str | None, speed: float | None,
@@ -66,10 +72,40 @@ def check_fleet_ports(count: int, instance: int | None) -> None:
 
 def fly_sessions(flights: Sequence[Flight], ids: Sequence[int], dirs: Sequence[Path], *, realtime: bool,
                  instance: int | None, gcs: str | None, speed: float | None, key: Path | None, plots: bool,
-                 keep: bool, radii: Sequence[float] | None = None) -> list[Run]:
+                 keep: bool, radii: Sequence[float] | None = None, shared_radio: bool = False) -> list[Run]:
     """Fly every vehicle's session at once (the module's docstring); each vehicle's :class:`Run`, in order.
-    ``radii`` (m, each vehicle's disc), in lockstep: on one shared clock. A session that fails to start (bad
-    input, a child dead at start) stops the others; its error is raised."""
+    ``radii`` (m, each vehicle's disc), in lockstep: on one shared clock. ``shared_radio``, in real time: the
+    fleet's one radio (a file in the temporary directory, :func:`bridge.link.radio.make_radio_file`, removed
+    after), vehicle j (from 0) its user j through its relay. A session that fails to start (bad input, a child
+    dead at start) stops the others; its error is raised."""
+    if not shared_radio:
+        return _fly(flights, ids, dirs, realtime=realtime, instance=instance, gcs=gcs, speed=speed, key=key,
+                    plots=plots, keep=keep, radii=radii, radio=None)
+    fd, name = tempfile.mkstemp(prefix="bsst-radio-")
+    os.close(fd)
+    try:
+        make_radio_file(name, len(flights))
+        return _fly(flights, ids, dirs, realtime=realtime, instance=instance, gcs=gcs, speed=speed, key=key,
+                    plots=plots, keep=keep, radii=radii, radio=Path(name))
+    finally:
+        os.unlink(name)
+
+
+def radio_block(ids: Sequence[int], flights: Sequence[Flight], runs: Sequence[Run]) -> dict[str, Any]:
+    """A real-time fleet's ``summary.json["radio"]``: each direction's occupancy of the one radio, from every
+    vehicle's part of it (its relay's, in its ``summary.json["link"]["radio"]``), as offline's
+    (:func:`bridge.link.radio.occupancy_of_parts`)."""
+    link = flights[0].link
+    parts = [(r.summary.get("link") or {}).get("radio") or {} for r in runs]
+    return {"shared": True, "order": ARRIVAL,
+            **{d: occupancy_of_parts([p.get(d) for p in parts], ids, cfg.rate_bps, cfg.queue_ms / 1000.0)
+               for d, cfg in (("up", link.up), ("down", link.down))}}
+
+
+def _fly(flights: Sequence[Flight], ids: Sequence[int], dirs: Sequence[Path], *, realtime: bool,
+         instance: int | None, gcs: str | None, speed: float | None, key: Path | None, plots: bool,
+         keep: bool, radii: Sequence[float] | None, radio: Path | None) -> list[Run]:
+    """:func:`fly_sessions`, ``radio`` the fleet's one radio file (None: each link its own)."""
     for f in flights:
         compile_estimator(f.estimator)  # a first EKF on this machine compiles here, once, before any child starts
     gates: list[Path | None] = [None] * len(flights)
@@ -80,8 +116,9 @@ def fly_sessions(flights: Sequence[Flight], ids: Sequence[int], dirs: Sequence[P
             GateConfig(j, tuple(ids), tuple(radii), ports).dump(d / "gate.json")
     sessions = [Session(f, d, realtime=realtime, instance=None if instance is None else instance + i - 1,
                         gcs=gcs, speed=speed, progress=None, live=False, key=key, sysid=i, gate=g,
-                        start_timeout=READY_TIMEOUT_S if g is not None else None)
-                for f, i, d, g in zip(flights, ids, dirs, gates)]
+                        start_timeout=READY_TIMEOUT_S if g is not None else None,
+                        radio=(radio, j) if radio is not None else None)
+                for j, (f, i, d, g) in enumerate(zip(flights, ids, dirs, gates))]
     runs: list[Run | None] = [None] * len(sessions)
     errors: list[BaseException] = []
 

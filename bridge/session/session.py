@@ -43,8 +43,9 @@ class Session:
     def __init__(self, flight: Flight, path: Path, *, realtime: bool, instance: int | None, gcs: str | None,
                  speed: float | None, progress: Progress | None, live: bool, key: Path | None = None,
                  await_mission: bool = False, sysid: int | None = None, gate: Path | None = None,
-                 start_timeout: float | None = None) -> None:
+                 start_timeout: float | None = None, radio: tuple[Path, int] | None = None) -> None:
         self.flight = flight
+        self.radio = radio  # a real-time fleet's one radio: its file and this vehicle's user (the relay's --radio)
         self.gate = gate  # a lockstep fleet's shared clock: the vehicle's gate file (bridge.session.fleet)
         self.start_timeout = start_timeout  # s: the controller's --start-timeout (None: its default)
         # --await-mission: ``flight`` holds the settings only; the mission is the controller's, once a ground
@@ -176,7 +177,8 @@ class Session:
             self.relay = Child("relay", ["relay", "--listen", f"127.0.0.1:{to}", "--to", f"127.0.0.1:{port}",
                                          "--back-port", str(back), "--client", f"127.0.0.1:{source}",
                                          "--mission", mission, "--mission-clock",
-                                         "--stats", str(self.path / "relay.json")], self.path / "relay.log")
+                                         "--stats", str(self.path / "relay.json"), *self._radio_args()],
+                               self.path / "relay.log")
         # its wait for the vehicle's heartbeat now includes the vehicle's start-up: the session's budget for it
         argv = ["controller", mission, "--vehicle", f"127.0.0.1:{to}", "--target-sysid", str(self.sysid),
                 "--source-port", str(source), "--timeout", f"{READY_TIMEOUT_S:g}", "--out", str(self.path),
@@ -424,6 +426,10 @@ class Session:
             sys.stderr.write(f"\rsitl t {t:7.2f} / {self.flight.mission.duration_s:.2f} s   "
                              f"real-time factor {t / max(wall, 1e-9):6.1f}x   3-D error {err:.2e} m   ")
             sys.stderr.flush()
+
+    def _radio_args(self) -> list[str]:
+        """The relay's flags for the fleet's one radio (none: the link's own radio)."""
+        return ["--radio", str(self.radio[0]), "--radio-user", str(self.radio[1])] if self.radio else []
 
     def _relay_stats(self) -> dict[str, Any] | None:
         """What ``bsst relay --stats`` wrote on exit (None without a relay or a readable file)."""

@@ -1,0 +1,80 @@
+"""Covers bridge.link.radio, bridge.nodes.relay, bridge.session.fleet and bridge.swarm: a real-time SITL fleet
+behind one shared radio (``bsst sitl --vehicles N --shared-link --realtime``).
+
+Real processes: per vehicle a ``bsst vehicle``, a ``bsst controller`` and the ``bsst relay`` that applies its link
+on the wall clock, over UDP on 127.0.0.1 (free ports, ``instance=None``). On one radio every relay puts its
+vehicle's packets of a direction in the one queue (a radio file they all map), so two vehicles whose states
+each fit the radio's rate overflow it together; on radios of their own neither queues out. The fleet's
+``radio`` block is made of each relay's part, which is that vehicle's own queue losses.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import pytest
+
+from bridge.link.radio import make_radio_file
+from bridge.swarm import sitl
+from missions import MISSION_DIR
+from tests.sitlkit import ENV, ROOT
+
+pytestmark = pytest.mark.process  # starts processes
+
+# 242-byte states at 100 Hz are 24 200 B/s down, 76 % of 32 000 B/s: one vehicle fits (its 100 ms queue rides
+# out a burst of 13 states), two offer 1.5 times the rate
+RADIO = {"rate_bps": 32000.0, "queue_ms": 100.0, "loss_pct": 5.0}
+
+
+def fly(tmp_path: Path, name: str, shared: bool) -> dict:
+    text = (MISSION_DIR / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 3.0")
+    (tmp_path / "short.toml").write_text(text)
+    run = sitl(tmp_path / "short.toml", vehicles=2, realtime=True, instance=None, out=tmp_path / name,
+               plots=False, rate_hz=100.0, link={**RADIO, "shared": shared})
+    assert json.loads((tmp_path / name / "summary.json").read_text()) == run.summary  # what was written
+    return run.summary
+
+
+def test_two_vehicles_on_one_radio_in_real_time_share_its_rate_and_overflow_it_where_each_alone_fits(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    private = tmp_path / "tmp"
+    private.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(private))  # where the fleet keeps its radio file
+    s = fly(tmp_path, "shared", True)
+    radio = s["radio"]
+    assert radio["shared"] is True and radio["order"].startswith("first come, first served on the wall clock")
+    for d in ("up", "down"):
+        r = radio[d]
+        shares = [v["share_bps"] for v in r["vehicles"]]
+        assert [v["id"] for v in r["vehicles"]] == [1, 2] and all(x > 0 for x in shares)
+        assert r["rate_bps"] == RADIO["rate_bps"] and r["queue_ms"] == RADIO["queue_ms"] and r["span_s"] > 2.0
+        assert sum(shares) <= r["rate_bps"] * (1 + 1e-9) and math.isclose(sum(shares), r["share_bps"])
+        for v, flown in zip(r["vehicles"], s["vehicles"]):  # each relay's part: its vehicle's own queue losses
+            assert v["lost_queue"] == flown["link"][d]["lost_by"]["queue"]
+            assert v["queue_wait_ms"]["max"] <= RADIO["queue_ms"] + 1e-6
+    down = radio["down"]
+    assert down["occupancy"] > 0.9 and down["lost_queue"] > 0, down  # the two vehicles' states overflow it
+    assert all(v["queue_wait_ms"]["p50"] > 0 for v in down["vehicles"])
+    assert s["sitl"]["shared_clock"] is False and s["clock"] == "realtime"
+    assert not list(private.iterdir())  # the radio file is gone with the fleet
+    alone = fly(tmp_path, "own", False)  # on radios of their own, each vehicle's states fit: none queues out
+    assert "radio" not in alone
+    assert all(v["link"][d]["lost_by"]["queue"] == 0 for v in alone["vehicles"] for d in ("up", "down")), alone
+
+
+@pytest.mark.parametrize("what, says", [("missing", "cannot open"), ("user", "no user 2 in it (users 0-1)")])
+def test_a_relay_given_a_bad_radio_file_names_it_in_one_line_and_exits_2(tmp_path: Path, what: str,
+                                                                           says: str) -> None:
+    f = tmp_path / "radio"
+    if what == "user":
+        make_radio_file(f, 2)
+    p = subprocess.run([sys.executable, "-m", "bridge", "relay", "--listen", "127.0.0.1:0", "--to", "127.0.0.1:9",
+                        "--radio", str(f), "--radio-user", "2", "--bandwidth", "1000"],
+                       capture_output=True, text=True, cwd=ROOT, env=ENV, timeout=60)
+    assert p.returncode == 2 and p.stdout == ""
+    assert p.stderr.startswith(f"bsst: --radio {f}: ") and says in p.stderr and p.stderr.count("\n") == 1, p.stderr
