@@ -167,6 +167,7 @@ TEXT_BAD = {
     "--at": lambda f: ["x", "5:bogus", "5:gps:sideways"],
     "--formation": lambda f: ["line", "ring:2", "line:0", "circle:x"],
     "--gate": lambda f: [f.missing, f.directory, f.regular],
+    "--radio": lambda f: [f.missing, f.directory, f.regular, f.socket_path],
 }
 POSITIONAL_BAD = {  # command -> bad values of its positional argument
     "report": lambda f: [f.missing, f.regular, f.directory],
