@@ -3,7 +3,8 @@ installed by tests/conftest.py's ``pytest_xdist_make_scheduler``).
 
 In:  a test id as pytest-xdist's controller sees it (``tests/test_x.py::test_name[params]``), and the source of
      that test module
-Out: :func:`scope_of`, the unit of work the test belongs to: the test alone, or, for a test that uses a
+Out: :func:`is_marked_process` (a module whose tests all start processes or open sockets); :func:`scope_of`,
+     the unit of work the test belongs to: the test alone, or, for a test that uses a
      module-scoped fixture of its module (a flight, a sweep, a SITL session made once for several tests), the
      group of all the module's tests that do, so that one worker makes the fixture once;
      :class:`SharedFixtureScheduling`, pytest-xdist's ``loadscope`` scheduler with those units
@@ -30,6 +31,14 @@ from pathlib import Path
 from xdist.scheduler import LoadScopeScheduling
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def is_marked_process(tree: ast.Module) -> bool:
+    """Whether the module sets ``pytestmark`` to ``pytest.mark.process`` (alone or in a list)."""
+    for node in tree.body:
+        if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "pytestmark" for t in node.targets):
+            return any(isinstance(n, ast.Attribute) and n.attr == "process" for n in ast.walk(node.value))
+    return False
 
 
 def _fixture_scope(dec: ast.expr) -> str | None:

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.scheduling import CHEAP, scope_of, shared_groups
+from tests.scheduling import CHEAP, is_marked_process, scope_of, shared_groups
 from tests.waiting import wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -55,14 +55,6 @@ def covers_problem(path: str, source: str) -> str | None:
     if missing:
         return f"{path}:1: covers {', '.join(missing)}, which is no module of the project"
     return None
-
-
-def is_marked_process(tree: ast.Module) -> bool:
-    """Whether the module sets ``pytestmark`` to ``pytest.mark.process`` (alone or in a list)."""
-    for node in tree.body:
-        if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "pytestmark" for t in node.targets):
-            return any(isinstance(n, ast.Attribute) and n.attr == "process" for n in ast.walk(node.value))
-    return False
 
 
 def process_uses(path: str, tree: ast.Module, marked_modules: set[str]) -> list[str]:
