@@ -67,14 +67,18 @@ def test_two_vehicles_on_one_radio_in_real_time_share_its_rate_and_overflow_it_w
     assert all(v["link"][d]["lost_by"]["queue"] == 0 for v in alone["vehicles"] for d in ("up", "down")), alone
 
 
-@pytest.mark.parametrize("what, says", [("missing", "cannot open"), ("user", "no user 2 in it (users 0-1)")])
+@pytest.mark.parametrize("what, says", [("missing", "cannot open"), ("user", "no user 2 in it (users 0-1)"),
+                                        ("handover", "the link has handovers (events of kind link)")])
 def test_a_relay_given_a_bad_radio_file_names_it_in_one_line_and_exits_2(tmp_path: Path, what: str,
                                                                            says: str) -> None:
-    f = tmp_path / "radio"
-    if what == "user":
+    f, mission = tmp_path / "radio", tmp_path / "handover.toml"
+    if what != "missing":
         make_radio_file(f, 2)
+    mission.write_text((MISSION_DIR / "step.toml").read_text() + '\n[[events]]\nt_s = 1.0\nkind = "link"\n'
+                       'profile = "wifi"\n')
+    extra = ["--radio-user", "0", "--mission", str(mission)] if what == "handover" else ["--radio-user", "2"]
     p = subprocess.run([sys.executable, "-m", "bridge", "relay", "--listen", "127.0.0.1:0", "--to", "127.0.0.1:9",
-                        "--radio", str(f), "--radio-user", "2", "--bandwidth", "1000"],
+                        "--radio", str(f), "--bandwidth", "1000", *extra],
                        capture_output=True, text=True, cwd=ROOT, env=ENV, timeout=60)
     assert p.returncode == 2 and p.stdout == ""
     assert p.stderr.startswith(f"bsst: --radio {f}: ") and says in p.stderr and p.stderr.count("\n") == 1, p.stderr

@@ -202,6 +202,10 @@ def cmd_relay(args: argparse.Namespace) -> int:
     # and the relay flies the link it gives
     settings = prepare(load_mission(args.mission) if args.mission else at_rest(), overrides_from_args(args)).link
 
+    if args.radio and settings.handovers:  # (as bsst sim refuses a fleet on one radio with handovers)
+        raise ConfigError(f"--radio {args.radio}: the link has handovers (events of kind link); a shared radio "
+                          "takes none: not modelled yet")
+
     def learned(addr: Any) -> None:  # a report (bridge.nodes.report): the session logs the event
         print(to_line(client_event(addr)), flush=True)
 
