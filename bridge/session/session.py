@@ -36,6 +36,10 @@ from bridge.record.summary import ChildEnd, SessionFacts, SessionSummary, contro
 from bridge.session.children import READY_TIMEOUT_S, STOP_DEADLINE_S, Child, ChildError, free_udp_port
 from params import ConfigError
 
+# the kinds of event the controller says about the vehicle's own event of that kind, after it: it armed it, it
+# took the mission's end action (bridge.nodes.offboard)
+ANSWERS = ("armed", "end")
+
 
 class Session:
     """One SITL session in a run directory; :meth:`run` flies it."""
@@ -76,6 +80,7 @@ class Session:
         self.aborted = False
         self.interrupted = False  # set by Ctrl-C / SIGTERM (see catch_stop_signals)
         self._event_log: EventLog | None = None
+        self._answered: dict[str, float] = {}  # the vehicle's last event of each kind in ANSWERS: its time (s)
         self._early: list[tuple[Child, Report]] = []  # reports read while starting, handled once all are up
 
     # -- the whole session ---------------------------------------------------------------------
@@ -265,8 +270,7 @@ class Session:
                 self._join()
                 self._show_progress()
                 if veh.proc.poll() is not None:
-                    for report in veh.reports():  # its last words: events it said before it went
-                        self._status(veh, report)
+                    self._handle([(veh, r) for r in veh.reports()])  # its last words: events it said before it went
                     self._died(veh)
                     return
                 if self.relay is not None and self.relay.proc.poll() is not None:
@@ -337,14 +341,20 @@ class Session:
     def _handle(self, reports: list[tuple[Child, Report]]) -> None:
         """Reports read together from several children, their events in the order of their times on the flight's
         clock (the vehicle's first on a tie: the controller's events about the vehicle are its answers): each
-        child's pipe is read in turn, so the order read is not the order things happened."""
-        def when(item: tuple[Child, Report]) -> tuple[float, int]:
-            child, r = item
+        child's pipe is read in turn, so the order read is not the order things happened. The controller's word
+        about a vehicle's own event (:data:`ANSWERS`: it arms it, it takes the mission's end action) is never put
+        before that event: in real time the two clocks are mapped onto one only to within a few ms."""
+        timed = []
+        for child, r in reports:
             t = self._event_time(child, r.t) if isinstance(r, Event) and math.isfinite(r.t) else -math.inf
-            return t, child.name != "vehicle"
-
-        for child, report in sorted(reports, key=when):
-            self._status(child, report)
+            if isinstance(r, Event) and r.kind in ANSWERS:
+                if child.name == "vehicle":  # (read with or before the controller's answer: _read_all)
+                    self._answered[r.kind] = max(t, self._answered.get(r.kind, -math.inf))
+                elif child.name == "controller" and self.realtime:
+                    t = max(t, self._answered.get(r.kind, -math.inf))
+            timed.append((t, child.name != "vehicle", child, r))
+        for t, _, child, report in sorted(timed, key=lambda x: x[:2]):
+            self._status(child, report, t)
 
     # -- status lines, events, progress -------------------------------------------------------------
     def _join(self) -> None:
@@ -365,14 +375,15 @@ class Session:
                               f"({t.get('re_requests')} requests again): {flight.mission.duration_s:.2f} s to fly",
                    "session")
 
-    def _status(self, child: Child, report: Report) -> None:
+    def _status(self, child: Child, report: Report, t: float) -> None:
+        """Act on one report (an event at ``t``, s on the events' clock: :meth:`_handle`)."""
         if isinstance(report, MissionLoaded) and child.name == "controller" and self.await_mission:
             self._mission_loaded(report)
         if not isinstance(report, Event):
             return
-        t, kind = report.t, report.kind
-        if math.isfinite(t):
-            t = self._event_time(child, t)
+        kind = report.kind
+        if not math.isfinite(report.t):
+            t = report.t
         if child.name == "vehicle":
             if kind == "armed":
                 self.vehicle_armed = True
