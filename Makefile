@@ -1,7 +1,7 @@
 # Two entry points, both creating or reusing .venv with nothing but Python 3.11+:
 #   make demo   fly the default mission (the paper's sine scenario) end to end
 #   make test   run the test suite
-#   make test-fast  the pure tests only (no processes, no sockets): about a minute (61-64 s; the target is under one)
+#   make test-fast  the pure tests only (no processes, no sockets): under a minute (48-59 s on the 2-core VM)
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
