@@ -31,11 +31,11 @@ pytestmark = pytest.mark.process  # starts processes
 RADIO = {"rate_bps": 32000.0, "queue_ms": 100.0, "loss_pct": 5.0}
 
 
-def fly(tmp_path: Path, name: str, shared: bool) -> dict:
-    text = (MISSION_DIR / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 3.0")
+def fly(tmp_path: Path, name: str, shared: bool, radio: dict | None = None, seconds: float = 3.0) -> dict:
+    text = (MISSION_DIR / "sine.toml").read_text().replace("duration_s = 30.0", f"duration_s = {seconds}")
     (tmp_path / "short.toml").write_text(text)
     run = sitl(tmp_path / "short.toml", vehicles=2, realtime=True, instance=None, out=tmp_path / name,
-               plots=False, rate_hz=100.0, link={**RADIO, "shared": shared})
+               plots=False, rate_hz=100.0, link={**(RADIO if radio is None else radio), "shared": shared})
     assert json.loads((tmp_path / name / "summary.json").read_text()) == run.summary  # what was written
     return run.summary
 
@@ -65,6 +65,17 @@ def test_two_vehicles_on_one_radio_in_real_time_share_its_rate_and_overflow_it_w
     alone = fly(tmp_path, "own", False)  # on radios of their own, each vehicle's states fit: none queues out
     assert "radio" not in alone
     assert all(v["link"][d]["lost_by"]["queue"] == 0 for v in alone["vehicles"] for d in ("up", "down")), alone
+
+
+def test_one_radio_without_a_rate_counts_every_vehicles_bytes_in_real_time(tmp_path: Path) -> None:
+    """A perfect link shared: the relays are the radio all the same (as offline, the bytes only)."""
+    s = fly(tmp_path, "perfect", True, radio={}, seconds=1.0)
+    for d in ("up", "down"):
+        r = s["radio"][d]
+        assert r["rate_bps"] is None and r["occupancy"] is None and r["lost_queue"] == 0
+        assert [v["id"] for v in r["vehicles"]] == [1, 2] and all(v["bytes"] > 0 for v in r["vehicles"]), r
+    for i in (1, 2):
+        assert (tmp_path / "perfect" / f"vehicle-{i}" / "relay.json").is_file()
 
 
 @pytest.mark.parametrize("what, says", [("missing", "cannot open"), ("user", "no user 2 in it (users 0-1)"),

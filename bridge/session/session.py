@@ -160,7 +160,8 @@ class Session:
         # controller's ids from that address only (through a relay, from the relay's back port), so no
         # other process can claim them, not even before the controller's first message
         source = free_udp_port()
-        relayed = self.realtime and self.flight.link.impaired
+        # (a fleet's one radio is its relays', even on a perfect link: without a rate it counts the bytes only)
+        relayed = self.realtime and (self.flight.link.impaired or self.radio is not None)
         back = free_udp_port() if relayed else source
         if self.listen.endswith(":0"):
             self.listen = f"127.0.0.1:{free_udp_port()}"
