@@ -269,6 +269,11 @@ def test_sitl_plant_blocks_equal_offline(tmp_path, case):
         frames = _heartbeats_and_last(tmp_path / "sitl" / "controller.tlog")
         emergency = [t for t, status in frames[0] if status == mavlink.MAV_STATE_EMERGENCY]
         assert emergency and frames[1] - emergency[0] < 1.0, (emergency[:1], frames[1])
+        # and its word about the crash is in the records after the crash, never stamped before it
+        said = [(e["t"], e["source"], e["kind"]) for e in sitl["events"] if e["source"] in ("vehicle", "controller")]
+        crash = next(i for i, e in enumerate(said) if e[2] == "crashed")
+        answer = next(i for i, e in enumerate(said) if e[1] == "controller" and e[0] >= 5.0)
+        assert answer > crash and said[answer][0] >= said[crash][0], said
     elif case in ("flags", "handover"):
         assert codes == [0, 0] and _trace(tmp_path / "sitl" / "trace.csv") == _trace(tmp_path / "sim" / "trace.csv")
         if case == "flags":

@@ -35,6 +35,7 @@ EVERY_KIND = [
     Event(1.25, "armed", "armed, offboard control", Sender(200, 191, "127.0.0.1", 40000, "controller")),
     Event(3.0, "disarmed", "landed: disarmed", ITSELF),
     Event(0.5, "connected", "vehicle sysid 1 compid 1"),
+    Event(5.328, "failsafe", "the vehicle's flight ended", answers=("crashed", "diverged", "collision")),
     StatusText(2, "lockstep: left (no answer)"),
     Warning("rejected 3: sender 2, crc 1"),
     Refused("PARAM_SET MPC_XY_VEL_MAX: out of range"),
@@ -73,6 +74,8 @@ def test_event_times_are_reported_to_the_millisecond():
     '{"report": "event", "t": "soon", "kind": "armed", "text": "x", "by": null}',
     '{"report": "event", "t": 1.0, "kind": "armed", "text": "x", "by": {"link": "gcs"}}',
     '{"report": "stats", "values": [1, 2]}',
+    '{"report": "event", "t": 1.0, "kind": "end", "text": "x", "by": null, "answers": [1]}',
+    '{"report": "event", "t": 1.0, "kind": "end", "text": "x", "by": null, "answers": "end"}',
     '{"report": "warning", "text": 5}',
     "relay: listening on 127.0.0.1:5",  # a person's line, not a report
 ])

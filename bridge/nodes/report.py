@@ -89,7 +89,9 @@ class Ready:
 class Event:
     """An event at ``t`` (s, to the millisecond: :meth:`at`) of ``kind``, its ``text``, who caused it, and
     the typed fields of the vehicle's events (:class:`bridge.autopilot.simvehicle.Event`: a parameter
-    event's change, ``param``; a mode event's ``mode`` and ``armed``)."""
+    event's change, ``param``; a mode event's ``mode`` and ``armed``). ``answers``: a controller's event said in
+    answer to the vehicle's own events of these kinds (its arming, its end action, its crash): the session puts
+    it no earlier than the latest of them, whatever the two clocks say."""
 
     t: float
     kind: str
@@ -98,6 +100,7 @@ class Event:
     param: ParamChanged | None = None
     mode: str | None = None
     armed: bool | None = None
+    answers: tuple[str, ...] | None = None
 
     @classmethod
     def at(cls, t: float, kind: str, text: str, by: Sender | None = None, **fields: Any) -> Event:
@@ -191,6 +194,8 @@ def parse_line(line: str) -> Report | None:
             body["by"] = Sender.from_dict(body["by"])
         if cls is Event and body.get("param") is not None:
             body["param"] = ParamChanged.from_dict(body["param"])
+        if cls is Event and isinstance(body.get("answers"), list):
+            body["answers"] = tuple(body["answers"])
         report = cls(**body)
     except (ValueError, KeyError, TypeError, AttributeError):
         return None
@@ -202,7 +207,9 @@ def _well_typed(report: Report) -> bool:
     if isinstance(report, Event):
         return (_number(report.t) and isinstance(report.kind, str) and isinstance(report.text, str)
                 and (report.mode is None or isinstance(report.mode, str))
-                and (report.armed is None or isinstance(report.armed, bool)))
+                and (report.armed is None or isinstance(report.armed, bool))
+                and (report.answers is None or (isinstance(report.answers, tuple)
+                                                and all(isinstance(k, str) for k in report.answers))))
     if isinstance(report, Stats):
         return isinstance(report.values, dict)
     if isinstance(report, Done):

@@ -36,10 +36,6 @@ from bridge.record.summary import ChildEnd, SessionFacts, SessionSummary, contro
 from bridge.session.children import READY_TIMEOUT_S, STOP_DEADLINE_S, Child, ChildError, free_udp_port
 from params import ConfigError
 
-# the kinds of event the controller says about the vehicle's own event of that kind, after it: it armed it, it
-# took the mission's end action (bridge.nodes.offboard)
-ANSWERS = ("armed", "end")
-
 
 class Session:
     """One SITL session in a run directory; :meth:`run` flies it."""
@@ -80,7 +76,7 @@ class Session:
         self.aborted = False
         self.interrupted = False  # set by Ctrl-C / SIGTERM (see catch_stop_signals)
         self._event_log: EventLog | None = None
-        self._answered: dict[str, float] = {}  # the vehicle's last event of each kind in ANSWERS: its time (s)
+        self._vehicle_said: dict[str, float] = {}  # the vehicle's latest event of each kind: its time (s)
         self._early: list[tuple[Child, Report]] = []  # reports read while starting, handled once all are up
 
     # -- the whole session ---------------------------------------------------------------------
@@ -342,17 +338,17 @@ class Session:
     def _handle(self, reports: list[tuple[Child, Report]]) -> None:
         """Reports read together from several children, their events in the order of their times on the flight's
         clock (the vehicle's first on a tie: the controller's events about the vehicle are its answers): each
-        child's pipe is read in turn, so the order read is not the order things happened. The controller's word
-        about a vehicle's own event (:data:`ANSWERS`: it arms it, it takes the mission's end action) is never put
-        before that event: in real time the two clocks are mapped onto one only to within a few ms."""
+        child's pipe is read in turn, so the order read is not the order things happened. A controller's event
+        said in answer to the vehicle's own (its ``answers``: it armed it, took the end action, saw it crash) is
+        never put before the latest of them: the controller stamps its word at the last state it answered, and
+        in real time the two clocks are mapped onto the flight's only to within a few ms."""
         timed = []
         for child, r in reports:
             t = self._event_time(child, r.t) if isinstance(r, Event) and math.isfinite(r.t) else -math.inf
-            if isinstance(r, Event) and r.kind in ANSWERS:
-                if child.name == "vehicle":  # (read with or before the controller's answer: _read_all)
-                    self._answered[r.kind] = max(t, self._answered.get(r.kind, -math.inf))
-                elif child.name == "controller" and self.realtime:
-                    t = max(t, self._answered.get(r.kind, -math.inf))
+            if isinstance(r, Event) and child.name == "vehicle":  # (read with or before its answer: _read_all)
+                self._vehicle_said[r.kind] = max(t, self._vehicle_said.get(r.kind, -math.inf))
+            elif isinstance(r, Event) and r.answers:
+                t = max(t, *(self._vehicle_said.get(k, -math.inf) for k in r.answers))
             timed.append((t, child.name != "vehicle", child, r))
         for t, _, child, report in sorted(timed, key=lambda x: x[:2]):
             self._status(child, report, t)

@@ -149,7 +149,7 @@ class Offboard(OffboardLink):
         # armed under offboard control from now on: its state of step k0 may come before the heartbeat saying so
         self.vehicle_armed = self.armed_seen = True
         self.vehicle_state = mavlink.MAV_STATE_ACTIVE
-        self.event("armed", "vehicle armed, offboard control")
+        self.event("armed", "vehicle armed, offboard control", answers=("armed",))
         return True
 
     def _disarm(self) -> bool:
@@ -354,7 +354,7 @@ class Offboard(OffboardLink):
             self.event("end", self.reason)
             return
         self.event("end", "mission over: the vehicle holds its position" if hold else
-                   "mission over: the vehicle lands where it is and disarms on the ground")
+                   "mission over: the vehicle lands where it is and disarms on the ground", answers=("end",))
         if not hold and not self._await_landing():
             self.event("end", self.reason)
 
@@ -408,7 +408,7 @@ class Offboard(OffboardLink):
         if not self.failsafe_seen or back:
             return "completed"
         self.reason = "the vehicle's failsafe took over (HEARTBEAT system_status CRITICAL)"
-        self.event("failsafe", self.reason)
+        self.event("failsafe", self.reason, answers=("failsafe",))
         if not self.vehicle_armed:
             self._disarm()
         return "failsafe"
@@ -425,23 +425,25 @@ class Offboard(OffboardLink):
         station), else None. Its failsafe alone does not end the flight."""
         now = time.monotonic()
         timeout = self._silence_s
+        answers: tuple[str, ...] | None = None  # the vehicle's own events this outcome answers
         if self.taken_over:
             self.reason = f"the vehicle was switched to {self.taken_over}: no more targets sent"
             self.ended_taken_over = True
         elif now - self._last_rx > timeout:
             self.reason = f"vehicle silent for {timeout:g} s"
         elif self.armed_seen and not self.vehicle_armed and not self.failsafe_seen:
-            self.reason = "the vehicle was disarmed during the mission"
+            self.reason, answers = "the vehicle was disarmed during the mission", ("disarmed",)
         elif self.armed_seen and self.vehicle_state == mavlink.MAV_STATE_EMERGENCY:
             # at once: its clock halted, so waiting out the state timeout would only delay the end
             self.reason = ("the vehicle's flight ended: it crashed, diverged or was touched "
                            "(HEARTBEAT system_status EMERGENCY)")
+            answers = ("crashed", "diverged", "collision")
         elif now - self._last_state > (timeout if self._started else self.cfg.start_timeout_s or timeout):
             self.reason = f"no new state from the vehicle for {timeout:g} s"
         else:
             return None
         outcome = "failsafe" if self.failsafe_seen else "aborted"
-        self.event(outcome, self.reason)
+        self.event(outcome, self.reason, answers)
         return outcome
 
 

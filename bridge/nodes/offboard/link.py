@@ -131,8 +131,10 @@ class OffboardLink:
         self.param_sets: list[ScheduledSet] = []  # the scheduled PARAM_SETs sent, in order
         self._pending_params: dict[str, ScheduledSet] = {}  # by name: sent, not echoed by the vehicle yet
 
-    def event(self, kind: str, text: str) -> None:
-        self._status(Event.at(self.t_mission, kind, text))
+    def event(self, kind: str, text: str, answers: tuple[str, ...] | None = None) -> None:
+        """Report an event at the mission time; ``answers``: the vehicle's own event kinds it answers
+        (:class:`bridge.nodes.report.Event`)."""
+        self._status(Event.at(self.t_mission, kind, text, answers=answers))
 
     def _command(self, cmd: int, p1: float, p2: float, tries: int = 30, every_s: float = 0.1,
                  p3: float = 0.0) -> int | None:
