@@ -76,7 +76,7 @@ class Session:
         self.aborted = False
         self.interrupted = False  # set by Ctrl-C / SIGTERM (see catch_stop_signals)
         self._event_log: EventLog | None = None
-        self._vehicle_said: dict[str, float] = {}  # the vehicle's latest event of each kind: its time (s)
+        self._vehicle_said: dict[str, float] = {}  # the vehicle's latest event of each kind in earlier reads (s)
         self._early: list[tuple[Child, Report]] = []  # reports read while starting, handled once all are up
 
     # -- the whole session ---------------------------------------------------------------------
@@ -340,16 +340,25 @@ class Session:
         clock (the vehicle's first on a tie: the controller's events about the vehicle are its answers): each
         child's pipe is read in turn, so the order read is not the order things happened. A controller's event
         said in answer to the vehicle's own (its ``answers``: it armed it, took the end action, saw it crash) is
-        never put before the latest of them: the controller stamps its word at the last state it answered, and
-        in real time the two clocks are mapped onto the flight's only to within a few ms."""
+        never put before its cause, the latest of them read before it or the earliest read with it: the
+        controller stamps its word at the last state it answered, and in real time the two clocks are mapped onto
+        the flight's only to within a few ms."""
+        times = [self._event_time(c, r.t) if isinstance(r, Event) and math.isfinite(r.t) else -math.inf
+                 for c, r in reports]
+        # the vehicle's events of this read, each kind's earliest and latest: the controller's pipe is read first
+        # (_read_all), so an answer's cause is read with it or before it
+        first: dict[str, float] = {}
+        last: dict[str, float] = {}
+        for (child, r), t in zip(reports, times):
+            if isinstance(r, Event) and child.name == "vehicle":
+                first[r.kind], last[r.kind] = min(t, first.get(r.kind, math.inf)), max(t, last.get(r.kind, -math.inf))
         timed = []
-        for child, r in reports:
-            t = self._event_time(child, r.t) if isinstance(r, Event) and math.isfinite(r.t) else -math.inf
-            if isinstance(r, Event) and child.name == "vehicle":  # (read with or before its answer: _read_all)
-                self._vehicle_said[r.kind] = max(t, self._vehicle_said.get(r.kind, -math.inf))
-            elif isinstance(r, Event) and r.answers:
-                t = max(t, *(self._vehicle_said.get(k, -math.inf) for k in r.answers))
+        for (child, r), t in zip(reports, times):
+            if isinstance(r, Event) and child.name != "vehicle" and r.answers:
+                t = max(t, *(max(self._vehicle_said.get(k, -math.inf), first.get(k, -math.inf)) for k in r.answers))
             timed.append((t, child.name != "vehicle", child, r))
+        for kind, t in last.items():
+            self._vehicle_said[kind] = max(t, self._vehicle_said.get(kind, -math.inf))
         for t, _, child, report in sorted(timed, key=lambda x: x[:2]):
             self._status(child, report, t)
 
