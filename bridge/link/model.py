@@ -164,13 +164,10 @@ class LinkSettings:
     def make(self, radios: tuple[Radio, Radio] | None = None, user: int = 0) -> tuple[LinkImpairment, LinkImpairment]:
         """Fresh (up, down) models, each with its handovers; with ``radios``, on those (up, down) radios shared
         with other links, as their user ``user`` (a fleet on one radio: no handovers, ValueError)."""
-        if radios is not None:
-            return (LinkImpairment(self.up, "up", tuple((t, u) for t, u, _ in self.handovers), radio=radios[0],
-                                   user=user),
-                    LinkImpairment(self.down, "down", tuple((t, d) for t, _, d in self.handovers), radio=radios[1],
-                                   user=user))
-        return (LinkImpairment(self.up, "up", tuple((t, u) for t, u, _ in self.handovers)),
-                LinkImpairment(self.down, "down", tuple((t, d) for t, _, d in self.handovers)))
+        up, down = radios if radios is not None else (None, None)
+        user = user if radios is not None else 0  # (a radio of its own has one user)
+        return (LinkImpairment(self.up, "up", tuple((t, u) for t, u, _ in self.handovers), radio=up, user=user),
+                LinkImpairment(self.down, "down", tuple((t, d) for t, _, d in self.handovers), radio=down, user=user))
 
 
 def link_from_table(data: Mapping[str, Any], source: str, seed: int = 0,

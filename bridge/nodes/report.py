@@ -90,8 +90,8 @@ class Event:
     """An event at ``t`` (s, to the millisecond: :meth:`at`) of ``kind``, its ``text``, who caused it, and
     the typed fields of the vehicle's events (:class:`bridge.autopilot.simvehicle.Event`: a parameter
     event's change, ``param``; a mode event's ``mode`` and ``armed``). ``answers``: a controller's event said in
-    answer to the vehicle's own events of these kinds (its arming, its end action, its crash): the session puts
-    it no earlier than the latest of them, whatever the two clocks say."""
+    answer to the vehicle's own events of these kinds (its arming, its end action, its crash): the session never
+    puts it before its cause, whatever the two clocks say (:meth:`bridge.session.session.Session._handle`)."""
 
     t: float
     kind: str

@@ -22,10 +22,11 @@ SIGTERM, then SIGKILL at its deadline) and each still writes its summary.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import tempfile
 import threading
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -41,9 +42,9 @@ from bridge.session.children import READY_TIMEOUT_S, check_port_free, free_udp_p
 from bridge.session.session import Session, catch_stop_signals
 from params import ConfigError
 
-MAX_INSTANCE = 9
+MAX_INSTANCE = 9  # instances 0-9, as bridge.session.children.instance_slot holds them
 ARRIVAL = ("first come, first served on the wall clock: each vehicle's relay puts its packets in the one queue as "
-           "they arrive")  # instances 0-9, as bridge.session.children.instance_slot holds them
+           "they arrive")
 
 
 def check_fleet(count: int, *, realtime: bool, instance: int | None, gcs: str | None, speed: float | None,
@@ -78,15 +79,19 @@ def fly_sessions(flights: Sequence[Flight], ids: Sequence[int], dirs: Sequence[P
     fleet's one radio (a file in the temporary directory, :func:`bridge.link.radio.make_radio_file`, removed
     after), vehicle j (from 0) its user j through its relay. A session that fails to start (bad input, a child
     dead at start) stops the others; its error is raised."""
-    if not shared_radio:
+    with _radio_file(len(flights)) if shared_radio else contextlib.nullcontext() as radio:
         return _fly(flights, ids, dirs, realtime=realtime, instance=instance, gcs=gcs, speed=speed, key=key,
-                    plots=plots, keep=keep, radii=radii, radio=None)
+                    plots=plots, keep=keep, radii=radii, radio=radio)
+
+
+@contextlib.contextmanager
+def _radio_file(users: int) -> Iterator[Path]:
+    """A fresh radio file for ``users`` vehicles in the temporary directory, removed after."""
     fd, name = tempfile.mkstemp(prefix="bsst-radio-")
     os.close(fd)
     try:
-        make_radio_file(name, len(flights))
-        return _fly(flights, ids, dirs, realtime=realtime, instance=instance, gcs=gcs, speed=speed, key=key,
-                    plots=plots, keep=keep, radii=radii, radio=Path(name))
+        make_radio_file(name, users)
+        yield Path(name)
     finally:
         os.unlink(name)
 
