@@ -44,7 +44,7 @@ sys.path.insert(0, str(ROOT))
 
 from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
-from bridge.mavlink.endpoint import HIL_ACTUATOR_CONTROLS, ODOMETRY, Endpoint, parse_address, wait  # noqa: E402
+from bridge.mavlink.endpoint import HIL_ACTUATOR_CONTROLS, ODOMETRY, Endpoint, Spinner, parse_address, wait  # noqa: E402
 from bridge.nodes.report import Ready, parse_line  # noqa: E402
 from bridge.nodes.vehicle import VehicleConfig  # noqa: E402
 
@@ -78,10 +78,11 @@ def echo(mode: str, port_file: str) -> None:
                 sock.sendto(reply.pack(mav), addr)
                 mav.seq = (mav.seq + 1) & 0xFF
     ep = Endpoint(parse_address("udpin:127.0.0.1:0"), sysid=200, compid=191)
+    spinner = Spinner(ep, SPIN)
     Path(port_file).write_text(str(ep.local[1]))
     controls = (0.5,) * 4 + (0.0,) * 12
     while True:
-        for _, m, _a in wait((ep,), time.monotonic() + 60.0, ep, SPIN):
+        for _, m, _a in wait((ep,), time.monotonic() + 60.0, spinner):
             if m.time_usec == STOP:
                 return
             ep.send_hot(HIL_ACTUATOR_CONTROLS, (m.time_usec, 1, *controls, 128))
@@ -117,12 +118,13 @@ def pingpong(mode: str, trips: int) -> float:
                 sock.sendto(_odometry(STOP).pack(mav), dest)
         else:
             ep = Endpoint(parse_address(f"udpout:127.0.0.1:{port}"), sysid=1, compid=1)
+            spinner = Spinner(ep, SPIN)
             tail = (1.0, 2.0, -3.0, 1.0, 0.0, 0.0, 0.0, 0.1, 0.2, 0.3, 0.01, 0.02, 0.03, *COV, *COV, 1, 12, 0, 1, 100)
 
             def trip(k: int) -> None:
                 ep.send_hot(ODOMETRY, (k, *tail))
                 while True:
-                    if any(m.time_usec == k for _, m, _a in wait((ep,), time.monotonic() + 5.0, ep, SPIN)):
+                    if any(m.time_usec == k for _, m, _a in wait((ep,), time.monotonic() + 5.0, spinner)):
                         return
 
             def stop() -> None:

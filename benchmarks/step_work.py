@@ -129,7 +129,7 @@ def controller_side(n: int) -> Callable[[], tuple[int, bool]]:
         t0 = time.perf_counter_ns()
         veh.sendto(frames[k[0]], dest)
         k[0] += 1
-        for _, m, _a in wait((ep,), time.monotonic() + 1.0, ep, o.cfg.spin_s):  # as Offboard._fly_lockstep
+        for _, m, _a in wait((ep,), time.monotonic() + 1.0, o.spinner):  # as Offboard._fly_lockstep
             o._on(m)
         odo, o._odo = o._odo, None
         if odo is not None:

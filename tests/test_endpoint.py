@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import os
+import select
 import socket
 import subprocess
 import sys
@@ -18,13 +19,16 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.mavlink.endpoint import (
+    CORES,
     HIL_ACTUATOR_CONTROLS,
     ODOMETRY,
     SET_ACTUATOR_CONTROL_TARGET,
     Endpoint,
+    Spinner,
     Tlog,
     hot_frame,
     parse_address,
+    runnable_tasks,
     wait,
 )
 from bridge.mavlink.receive import RateLimiter, ReplyBudget
@@ -168,11 +172,51 @@ def test_udp_exchange_peer_and_bad_data(tmp_path):
         tb.close()
 
 
+def test_a_spinner_polls_while_the_machine_has_a_core_to_spare_and_sleeps_at_once_when_busy(tmp_path):
+    """The machine's runnable tasks are read from /proc/loadavg (this process among them). With more CPU-bound
+    tasks than cores, the spinner looks within SPIN_LOOK_S, finds the machine busy and skips its poll even with
+    an answer waiting (``skipped`` counts it); wait() then takes the answer from its sleep."""
+    assert 1 <= runnable_tasks()
+    a, b, ta, tb = _pair(tmp_path, tlog_a=False)
+    spinner = Spinner(a, 0.02)
+    hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(CORES + 1)]
+    try:
+        wait_for(lambda: spinner.spin(time.monotonic() + 0.001) == [] and spinner.skipped, 10.0,
+                 "a wait skipped for a busy machine")
+        b.send(mavlink.MAVLink_heartbeat_message(18, 8, 0, 0, 4, 3))
+        wait_for(lambda: select.select([a.sock], [], [], 0.1)[0], 5.0, "the heartbeat in the socket")
+        skipped = spinner.skipped
+        assert spinner.spin(time.monotonic() + 1.0) == [] and spinner.skipped == skipped + 1  # not polled
+        assert [m.get_type() for _, m, _a in wait((a,), time.monotonic() + 5.0, spinner)] == ["HEARTBEAT"]
+    finally:
+        for h in hogs:
+            h.kill()
+            h.wait()
+        a.close()
+        b.close()
+        tb.close()
+
+
+def test_a_spinner_takes_an_answer_within_its_window(tmp_path):
+    """However busy the machine, a spinner given an answer takes it: by its poll on a machine with a core to
+    spare, else by wait()'s sleep; a spinner with no window never polls."""
+    a, b, ta, tb = _pair(tmp_path, tlog_a=False)
+    try:
+        assert Spinner(a, 0.0).spin(time.monotonic() + 1.0) == []
+        b.send(mavlink.MAVLink_heartbeat_message(18, 8, 0, 0, 4, 3))
+        got = wait((a,), time.monotonic() + 5.0, Spinner(a, 0.05))
+        assert [m.get_type() for _, m, _a in got] == ["HEARTBEAT"]
+    finally:
+        a.close()
+        b.close()
+        tb.close()
+
+
 def test_wait_honours_its_deadline(tmp_path):
     a, b, ta, tb = _pair(tmp_path, tlog_a=False)
     try:
         t0 = time.monotonic()
-        assert wait((a,), t0 + 0.05, a, 0.01) == []
+        assert wait((a,), t0 + 0.05, Spinner(a, 0.01)) == []
         assert 0.045 <= time.monotonic() - t0 < 1.0
     finally:
         a.close()

@@ -44,7 +44,7 @@ CONTROLLER = Sender(200, 191, "127.0.0.1", 40000, "controller")
 GCS = Sender(255, 190, "127.0.0.1", 14550, "gcs")
 ARMED = RunEvent(0.0, "armed", "armed, offboard control", "vehicle", CONTROLLER)
 VEHICLE_STATS = {"accepted": STEPS, "odometry_sent": STEPS, "rejected": {"sender": 2}, "rejected_from_controller": 0,
-                 "resends": 3, "answered_again": 1,
+                 "resends": 3, "answered_again": 1, "spin_skipped": 4,
                  "up": {"sent": STEPS, "delivered": STEPS, "lost": 0, "delay_ms": {"max": 0.0}}}
 CONTROLLER_STATS = {"commands": STEPS, "states": STEPS, "stale_ticks": 0, "overruns": 0, "rejected": {},
                     "rejected_from_vehicle": 0,
@@ -128,6 +128,7 @@ def test_the_timing_block() -> None:
     assert t["sim_s"] == STEPS / RATE and t["wall_s"] == 3.0
     assert t["step_rate_hz"] == pytest.approx(2 * RATE) and t["real_time_factor"] == pytest.approx(2.0)
     assert t["lockstep_resends"] == 3 and t["answered_again"] == 1 and t["missing_rows"] == 0
+    assert t["spin_skipped"] == {"vehicle": 4, "controller": 0}
     assert t["state_to_command_ms"]["max"] == 0.3
     empty = timing_block(Joined(), RATE, 1.0, {}, {})
     assert empty["flight_wall_s"] is None and empty["step_rate_hz"] is None and empty["sim_s"] == 0.0

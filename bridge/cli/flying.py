@@ -345,8 +345,8 @@ def cmd_controller(args: argparse.Namespace) -> int:
 
 def _spin_option(p: argparse.ArgumentParser) -> None:
     p.add_argument("--spin", type=number_in("--spin", 0.0, 0.01), metavar="S",
-                   help="lockstep: poll this long (s) before sleeping while the other side's message is due "
-                        "(default 0.0002; 0 where processes outnumber the cores, as in a bsst sitl fleet)")
+                   help="lockstep: poll this long (s) before sleeping while the other side's message is due, "
+                        "while no runnable task waits for a core (default 0.0002; a bsst sitl fleet gives 0)")
 
 
 def _key(args: argparse.Namespace) -> bytes | None:

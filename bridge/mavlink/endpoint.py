@@ -32,9 +32,11 @@ pymavlink's own message metadata (field order, ``crc_extra``), signed and verifi
 frame is decoded by pymavlink's ``decode`` once it has passed the same checks. Both paths
 give the same fields and bytes (tests/test_endpoint.py, tests/test_signing.py).
 
-Waiting is :func:`wait`: it first polls the hot socket for a short while (a reply that
-comes within tens of microseconds is taken without a sleep and wake-up, which costs more
-than the poll on loopback), then blocks in ``select`` on every socket until the deadline.
+Waiting is :func:`wait`: with a :class:`Spinner` it first polls the hot socket for a short while (a reply
+that comes within tens of microseconds is taken without a sleep and wake-up, which costs more than the poll
+on loopback), then blocks in ``select`` on every socket until the deadline. The spinner polls only while the
+machine has more cores than runnable tasks (on a busy one the poll takes CPU from the peer it waits for, or
+from other work).
 """
 
 from __future__ import annotations
@@ -49,8 +51,6 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
-# the codec and the tlog live in their own modules; their names are re-exported here, where the nodes,
-# the tests and the benchmarks import them with the endpoint
 from bridge.mavlink.address import (  # noqa: F401 - re-exported: the nodes import them with the endpoint
     CONTROLLER_COMPID,
     CONTROLLER_SYSID,
@@ -83,6 +83,10 @@ from bridge.mavlink.receive import (
 )
 from bridge.mavlink.signing import IFLAG_SIGNED, Signing
 from bridge.mavlink.signing import crc16 as _crc16
+
+# the codec and the tlog live in their own modules; their names are re-exported here, where the nodes,
+# the tests and the benchmarks import them with the endpoint
+from bridge.mavlink.spinner import CORES, Spinner, runnable_tasks  # noqa: F401 - re-exported with wait
 from bridge.mavlink.tlog import Tlog
 from params import ConfigError
 
@@ -407,26 +411,20 @@ def socket_drops(sock: socket.socket) -> int | None:
     return None
 
 
-def wait(endpoints: Sequence[Endpoint], deadline: float, spin: Endpoint | None = None,
-         spin_s: float = 0.0) -> list[tuple[Endpoint, Any, tuple[str, int]]]:
+def wait(endpoints: Sequence[Endpoint], deadline: float,
+         spinner: Spinner | None = None) -> list[tuple[Endpoint, Any, tuple[str, int]]]:
     """Messages from any endpoint, waiting at most until ``deadline`` (``time.monotonic``).
 
-    With ``spin``, that endpoint is polled without sleeping for up to ``spin_s`` first:
-    on loopback the answer to a message often arrives within that, and a sleeping
-    process pays a scheduler wake-up (tens of microseconds) to receive it.
+    With a ``spinner``, its endpoint is polled without sleeping first (:meth:`Spinner.spin`): on loopback the
+    answer to a message often arrives within its window, and a sleeping process pays a scheduler wake-up (tens
+    of microseconds) to receive it.
     """
     mono = time.monotonic
-    if spin is not None and spin_s > 0.0:
-        end = min(mono() + spin_s, deadline)
-        while True:
-            got = spin.poll()
-            if got:
-                return [(spin, m, a) for m, a in got]
-            if mono() >= end:
-                break
-            # let any other runnable task on this core go first: on a busy machine the peer
-            # we are waiting for may be that task; on an idle one this returns at once
-            os.sched_yield()
+    if spinner is not None:
+        got = spinner.spin(deadline)
+        if got:
+            ep = spinner.endpoint
+            return [(ep, m, a) for m, a in got]
     while True:
         out = [(ep, m, a) for ep in endpoints for m, a in ep.poll(deadline)]
         if out:

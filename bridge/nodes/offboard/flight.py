@@ -23,7 +23,7 @@ from bridge.core.flight import Flight
 from bridge.core.wire import command_to_wire, state_from_odometry_fields, step_of_usec
 from bridge.link.ends import ControllerEnd
 from bridge.link.model import LinkImpairment
-from bridge.mavlink.endpoint import FORCE_DISARM, wait
+from bridge.mavlink.endpoint import FORCE_DISARM, Spinner, wait
 from bridge.mavlink.modes import MAIN_AUTO, SUB_LOITER
 from bridge.nodes.offboard.config import (
     PHASE_S,
@@ -67,6 +67,7 @@ class Offboard(OffboardLink):
             (d for _, d in flight.link.up.blackouts + flight.link.down.blackouts), default=0.0)
         self._sample = m.trajectory.sample
         super().__init__(flight, cfg, out, status)
+        self.spinner = Spinner(self.ep, cfg.spin_s)  # a lockstep state is polled for before sleeping
         self.rows = (LineWriter(out / "controller.csv", ",".join(CONTROLLER_COLUMNS), batch=1)
                      if out is not None else None)
         self._last_state = time.monotonic()  # wall time of the newest state flown
@@ -166,12 +167,12 @@ class Offboard(OffboardLink):
         send = self._answer
         k0 = last_k = None
         last_frame: tuple[int, tuple[float, ...] | None] | None = None
-        spin = self.cfg.spin_s
+        spin = self.spinner
         mono = time.monotonic
         self._last_state = mono()
         while not self.stopping:
             deadline = min(self._next_house, self._last_rx + self.cfg.vehicle_timeout_s)
-            for _, m, _addr in wait((ep,), deadline, ep, spin):
+            for _, m, _addr in wait((ep,), deadline, spin):
                 self._on(m)
             odo = self._odo
             if odo is not None:
@@ -376,7 +377,7 @@ class Offboard(OffboardLink):
                 self.reason = "the vehicle did not land and disarm after the mission" if late else \
                     f"vehicle silent for {self.cfg.vehicle_timeout_s:g} s while landing"
                 return False
-            for _, m, _addr in wait((self.ep,), min(deadline, self._next_house), self.ep, self.cfg.spin_s):
+            for _, m, _addr in wait((self.ep,), min(deadline, self._next_house), self.spinner):
                 self._on(m)
             odo, self._odo = self._odo, None
             if lockstep and odo is not None and self.vehicle_armed and usec is not None and odo.time_usec >= usec:
@@ -468,6 +469,7 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
     emit(Stats({"param_at": [p.as_dict() for p in node.param_sets],
                 "commands": node.commands, "states": node.states, "received": node.ep.received,
                 "sent": node.ep.sent, "stale_ticks": node.stale_ticks, "overruns": node.overruns,
+                "spin_skipped": node.spinner.skipped,
                 "down": node.cend.down.stats.summary() if cfg.clock == "lockstep" else None,
                 "rejected": dict(node.rejected), "rejected_from_vehicle": node.rejected.from_peer,
                 "states_refused": node.states_refused, "state_window": node.state_window,

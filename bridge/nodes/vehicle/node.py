@@ -27,7 +27,7 @@ from bridge.core.flight import Flight
 from bridge.core.wire import command_from_wire
 from bridge.link.ends import VehicleEnd
 from bridge.mavlink import telemetry as tm
-from bridge.mavlink.endpoint import Tlog, wait
+from bridge.mavlink.endpoint import Spinner, Tlog, wait
 from bridge.mavlink.modes import MISSION
 from bridge.mavlink.receive import Rejections
 from bridge.nodes.process import on_stop_signals, report_printer
@@ -88,6 +88,7 @@ class Vehicle:
         self.authority = Authority(cfg)
         self.link, self.gcs = open_links(cfg, self.tlog, self.rejected)
         self.endpoints = [self.link] + ([self.gcs] if self.gcs is not None else [])
+        self.spinner = Spinner(self.link, cfg.spin_s)  # a lockstep answer is polled for before sleeping
         self.rows = Rows(out / "vehicle.csv", self.rate) if out is not None else None
         self.k = 0  # control step of the plant's state: t_k = k / rate_hz
         self.stopping = False
@@ -182,7 +183,8 @@ class Vehicle:
             "received": self.link.received, "overruns": self.pace.rebased, "steps": self.k,
             **({"gate": self.gate.stats()} if self.gate is not None else {}),  # a fleet's shared clock
             "rejected_from_controller": self.rejected.from_peer, "resends": self.odometry.resends,
-            "answered_again": self.targets.answered_again, "odometry_steps": self.odometry.steps.ranges,
+            "answered_again": self.targets.answered_again, "spin_skipped": self.spinner.skipped,
+            "odometry_steps": self.odometry.steps.ranges,
             "kernel_drops": self.link.kernel_drops(),
             "up": self.vend.up.stats.summary() if self.cfg.clock == "lockstep" else None,
             "plant": self.commander.plant_at_end or plant_blocks(self.plant),  # wind, battery, impact, as offline
@@ -261,7 +263,7 @@ class Vehicle:
     def _lockstep_wait(self) -> None:
         """Wait for the target of step k; step when it is here, or give the controller up."""
         deadline = min(self._next_house, self._resend_at, self._lost_at)
-        for ep, m, addr in wait(self.endpoints, deadline, self.link, self.cfg.spin_s):
+        for ep, m, addr in wait(self.endpoints, deadline, self.spinner):
             self._handle(ep, m, addr)
         if self.clock.state is ClockState.ANSWERED:
             if self.gate is None or self.gate.clear(self._collided):  # (a fleet: the others flew k - 1)
