@@ -395,14 +395,19 @@ def test_fence_and_rally_are_unsupported(tmp_path):
 
 def test_the_controller_link_hears_no_stranger_and_only_reads(tmp_path):
     """On the controller link a stranger (a ground station's ids) gets nothing for any mission message;
-    the configured controller may download the mission but not change it (``not_authorised``)."""
+    the configured controller may download the mission but not change it (``not_authorised``). The
+    controller's address is pinned (``--controller-from``), as ``bsst sitl`` pins it: a would-be controller
+    (no address given) is answered only within its trial's credit (docs/hostile-input.md), which an idle
+    ODOMETRY sent before the download can spend, and then its items are ``reply_limited``."""
     items = _items(3)
     with instance_slot() as n:
-        with _started(n, tmp_path) as (v, gcs):
+        link = ("127.0.0.1", LINK_PORT + n)
+        ctl = _to(link, CONTROLLER_SYSID, CONTROLLER_COMPID, n + 1)
+        ctl.mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0)  # binds its port (nobody hears)
+        pinned = f"127.0.0.1:{ctl.port.getsockname()[1]}"
+        with _started(n, tmp_path, "--controller-from", pinned) as (v, gcs):
             assert _upload(gcs, items)[0].type == M.MAV_MISSION_ACCEPTED
-            link = ("127.0.0.1", LINK_PORT + n)
             stranger = _to(link, 255, 190, n + 1)
-            ctl = _to(link, CONTROLLER_SYSID, CONTROLLER_COMPID, n + 1)
             stranger.mav.mission_request_list_send(*_tgt(stranger), 0)
             stranger.mav.mission_count_send(*_tgt(stranger), 1, 0)
             stranger.mav.mission_clear_all_send(*_tgt(stranger), 0)
