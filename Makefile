@@ -26,8 +26,9 @@ test: $(STAMP)
 	env -u PYTHONDONTWRITEBYTECODE $(BIN)/python -m pytest
 
 # the test modules marked `pytestmark = pytest.mark.process` start processes or open sockets; the rest is pure
+# (and CPU-bound: one worker per core, where make test runs three)
 test-fast: $(STAMP)
-	env -u PYTHONDONTWRITEBYTECODE $(BIN)/python -m pytest -m "not process"
+	env -u PYTHONDONTWRITEBYTECODE $(BIN)/python -m pytest -n 2 -m "not process"
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

@@ -65,8 +65,8 @@ def _kernels_compiled(tmp_path_factory: pytest.TempPathFactory, worker_id: str) 
     on-disk cache, once per test process before any test: as ``bsst sitl`` does before it starts a vehicle, so that a
     test that starts a subprocess (a vehicle, ``bsst sweep``) does not have it compile them (~12 s each
     on a fresh clone) inside its start-up time, and the pure tests fly compiled (``_compiled_kernels_in_pure_tests``).
-    On a fresh clone the two workers compile one set each, at once (gw1 the batch engine's first), under a lock
-    per set: the other then loads it from the cache."""
+    On a fresh clone the workers compile one set each, at once (gw1 the batch engine's first), under a lock
+    per set: the others then load it from the cache."""
     order = ["batch", "ekf", "scalar"] if worker_id == "gw1" else ["ekf", "scalar", "batch"]
     shared = tmp_path_factory.getbasetemp().parent  # the same directory for every worker of a session
     for kind in order:

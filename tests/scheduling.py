@@ -1,4 +1,4 @@
-"""How ``make test`` shares the suite between pytest-xdist's two workers (``--dist loadscope``, pyproject.toml;
+"""How ``make test`` shares the suite between pytest-xdist's workers (``--dist loadscope``, pyproject.toml;
 installed by tests/conftest.py's ``pytest_xdist_make_scheduler``).
 
 In:  a test id as pytest-xdist's controller sees it (``tests/test_x.py::test_name[params]``), and the source of
