@@ -19,7 +19,6 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.mavlink.endpoint import (
-    CORES,
     HIL_ACTUATOR_CONTROLS,
     ODOMETRY,
     SET_ACTUATOR_CONTROL_TARGET,
@@ -28,10 +27,10 @@ from bridge.mavlink.endpoint import (
     Tlog,
     hot_frame,
     parse_address,
-    runnable_tasks,
     wait,
 )
 from bridge.mavlink.receive import RateLimiter, ReplyBudget
+from bridge.mavlink.spinner import CORES, runnable_tasks
 from params import ConfigError
 from tests.hostile import packed_requests, udp_queue
 from tests.waiting import wait_for
@@ -202,8 +201,9 @@ def test_a_spinner_takes_an_answer_within_its_window(tmp_path):
     spare, else by wait()'s sleep; a spinner with no window never polls."""
     a, b, ta, tb = _pair(tmp_path, tlog_a=False)
     try:
-        assert Spinner(a, 0.0).spin(time.monotonic() + 1.0) == []
         b.send(mavlink.MAVLink_heartbeat_message(18, 8, 0, 0, 4, 3))
+        wait_for(lambda: select.select([a.sock], [], [], 0.1)[0], 5.0, "the heartbeat in the socket")
+        assert Spinner(a, 0.0).spin(time.monotonic() + 1.0) == []  # no window: not polled, though it waits
         got = wait((a,), time.monotonic() + 5.0, Spinner(a, 0.05))
         assert [m.get_type() for _, m, _a in got] == ["HEARTBEAT"]
     finally:

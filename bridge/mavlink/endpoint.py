@@ -34,9 +34,9 @@ give the same fields and bytes (tests/test_endpoint.py, tests/test_signing.py).
 
 Waiting is :func:`wait`: with a :class:`Spinner` it first polls the hot socket for a short while (a reply
 that comes within tens of microseconds is taken without a sleep and wake-up, which costs more than the poll
-on loopback), then blocks in ``select`` on every socket until the deadline. The spinner polls only while the
-machine has more cores than runnable tasks (on a busy one the poll takes CPU from the peer it waits for, or
-from other work).
+on loopback), then blocks in ``select`` on every socket until the deadline. The spinner polls only while no
+runnable task waits for a core (on an oversubscribed machine the poll takes CPU from the peer it waits for,
+or from other work).
 """
 
 from __future__ import annotations
@@ -51,6 +51,8 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
+# the codec and the tlog live in their own modules; their names are re-exported here, where the nodes,
+# the tests and the benchmarks import them with the endpoint
 from bridge.mavlink.address import (  # noqa: F401 - re-exported: the nodes import them with the endpoint
     CONTROLLER_COMPID,
     CONTROLLER_SYSID,
@@ -83,10 +85,7 @@ from bridge.mavlink.receive import (
 )
 from bridge.mavlink.signing import IFLAG_SIGNED, Signing
 from bridge.mavlink.signing import crc16 as _crc16
-
-# the codec and the tlog live in their own modules; their names are re-exported here, where the nodes,
-# the tests and the benchmarks import them with the endpoint
-from bridge.mavlink.spinner import CORES, Spinner, runnable_tasks  # noqa: F401 - re-exported with wait
+from bridge.mavlink.spinner import Spinner  # noqa: F401 - re-exported with wait
 from bridge.mavlink.tlog import Tlog
 from params import ConfigError
 

@@ -28,7 +28,7 @@ def runnable_tasks() -> int | None:
 
 class Spinner:
     """Polling one endpoint (the peer's answer is due on it) before :func:`~bridge.mavlink.endpoint.wait`
-    sleeps, for at most ``window_s`` (s), while the machine has a core to spare.
+    sleeps, for at most ``window_s`` (s), while no runnable task waits for a core.
 
     On a machine with idle cores a lockstep answer comes within the window and is taken without a sleep and a
     wake-up (which cost more CPU and time than the poll on loopback). On a busy one the poll takes a core that
@@ -73,5 +73,3 @@ class Spinner:
             # let any other runnable task on this core go first: on a busy machine the peer we are waiting for
             # may be that task; on an idle one this returns at once
             os.sched_yield()
-
-
