@@ -44,6 +44,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from bridge.cli import main  # noqa: E402
+from bridge.nodes.forkserver import forked_cpu_s  # noqa: E402
 
 TARGET_RMS_M = 1e-4
 
@@ -118,9 +119,10 @@ def sitl_figures() -> dict[str, Any]:
 
 
 def cpu_s() -> float:
-    """CPU seconds (user + system) of this process and of its children waited for (the sessions' processes)."""
+    """CPU seconds (user + system) of this process, of its children waited for, and of the sessions' processes
+    (forked by this process's fork server: bridge.nodes.forkserver)."""
     t = os.times()
-    return t.user + t.system + t.children_user + t.children_system
+    return t.user + t.system + t.children_user + t.children_system + forked_cpu_s()
 
 
 def print_sitl(f: dict[str, Any]) -> None:

@@ -60,6 +60,7 @@ from bridge.autopilot.estimator import compile_estimator
 from bridge.core.flight import Overrides, Progress, prepare
 from bridge.mavlink.endpoint import GCS_PORT, LINK_PORT, parse_address
 from bridge.mavlink.signing import key_from_file
+from bridge.nodes.forkserver import warm
 from bridge.record.runlog import Run, check_trace_steps, run_dir
 from bridge.session.children import ChildError, check_port_free, instance_slot
 from bridge.session.session import Session
@@ -159,6 +160,7 @@ def sitl(
         run_dir(out, flight.mission.name, overwrite, create=False)
     if instance is not None:
         check_port_free(LINK_PORT + n, f"--instance {n}")
+    warm()  # the fork server's imports (bridge.nodes.forkserver) overlap what follows
     compile_estimator(flight.estimator)  # a first EKF on this machine compiles here, not in the vehicle's start-up
     if flight.compiled:  # the compiled law and plant (bridge.core.scalar) likewise: not in both children at once
         flight.make_controller()

@@ -18,7 +18,6 @@ import random
 import signal
 import socket
 import subprocess
-import sys
 import tempfile
 import time
 from collections.abc import Iterator
@@ -26,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from bridge.mavlink.address import GCS_PORT, LINK_PORT
-from bridge.nodes.process import die_with_parent
+from bridge.nodes.forkserver import ForkedChild, start_child
 from bridge.nodes.report import Done, Report, Stats, parse_line
 from params import ConfigError
 
@@ -93,12 +92,17 @@ class Child:
 
     def __init__(self, name: str, argv: list[str], log: Path) -> None:
         self.name = name
-        with open(log, "wb") as err:
-            self.proc = subprocess.Popen(
-                [sys.executable, "-m", "bridge", *argv], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                stderr=err, start_new_session=True, preexec_fn=die_with_parent)
+        read, write = os.pipe()
+        try:
+            with open(log, "wb") as err:
+                self.proc: ForkedChild | subprocess.Popen[bytes] = start_child(argv, write, err.fileno())
+        except BaseException:
+            os.close(read)
+            raise
+        finally:
+            os.close(write)  # the child's now: its end of the pipe closes with it (our read then sees EOF)
         self.log = log
-        self.fd = self.proc.stdout.fileno()  # type: ignore[union-attr]
+        self.fd = read
         os.set_blocking(self.fd, False)
         self._buf = b""
         self.eof = False
@@ -108,6 +112,10 @@ class Child:
     @property
     def pid(self) -> int:
         return self.proc.pid
+
+    def close(self) -> None:
+        """Close our end of its stdout (after its last reports are read)."""
+        os.close(self.fd)
 
     def reports(self) -> list[Report]:
         """The reports in the complete lines written since the last call (other lines are skipped)."""

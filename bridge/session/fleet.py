@@ -35,6 +35,7 @@ from bridge.core.flight import Flight
 from bridge.link.radio import make_radio_file, occupancy_of_parts
 from bridge.mavlink.endpoint import LINK_PORT
 from bridge.mavlink.signing import key_from_file
+from bridge.nodes.forkserver import warm
 from bridge.nodes.vehicle.gate import GateConfig
 from bridge.record.runlog import Run, blackout_windows, finish_run
 from bridge.session import check_options
@@ -111,6 +112,7 @@ def _fly(flights: Sequence[Flight], ids: Sequence[int], dirs: Sequence[Path], *,
          instance: int | None, gcs: str | None, speed: float | None, key: Path | None, plots: bool,
          keep: bool, radii: Sequence[float] | None, radio: Path | None) -> list[Run]:
     """:func:`fly_sessions`, ``radio`` the fleet's one radio file (None: each link its own)."""
+    warm()  # the fork server's imports (bridge.nodes.forkserver) overlap what follows
     for f in flights:
         compile_estimator(f.estimator)  # a first EKF on this machine compiles here, once, before any child starts
     gates: list[Path | None] = [None] * len(flights)

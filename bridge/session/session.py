@@ -325,7 +325,7 @@ class Session:
                 self._note("killed", f"{c.name} (pid {c.pid}) did not stop within {STOP_DEADLINE_S:g} s: SIGKILL",
                            "session")
             last_words += [(c, r) for r in c.reports()]
-            c.proc.stdout.close()  # type: ignore[union-attr]
+            c.close()
         self._handle(last_words)
 
     @staticmethod

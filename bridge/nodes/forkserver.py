@@ -1,0 +1,352 @@
+"""Children started warm: a fork server that has imported the nodes once forks each ``bsst`` child.
+
+In:  a command line for ``python -m bridge`` (``["vehicle", MISSION, ...]``), the child's stdin, stdout and stderr
+     (file descriptors), its working directory and environment
+Out: a running child (:class:`ForkedChild`, or a :class:`subprocess.Popen` where no server runs) with the
+     ``Popen`` calls a session uses: ``pid``, ``poll``, ``wait``, ``send_signal``, ``kill``, ``returncode``
+
+Why: a child started with ``exec`` spends ~0.35 s of CPU importing Python, numpy, pymavlink and the bridge before
+it does anything (docs/figures.md, "Children started warm"). A session starts two or three children; a test
+suite or a script that flies many sessions starts hundreds. The server pays the imports once per process that
+flies sessions; each child is then a ``fork`` of it (a few milliseconds), the same code with the same
+arguments, its own process (own pid, session, files, exit status), as PX4's and ArduPilot's SITL launchers
+start theirs from a ready binary.
+
+- :func:`start_child` forks through this process's server (started on first use, one per process, shared by
+  threads), and falls back to ``exec`` when the server cannot start or answer, or when
+  ``BSST_FORK_SERVER=0`` (:data:`ENV`).
+- The server (``python -m bridge.cli.forkserver FD``: :func:`serve`) speaks over a Unix ``SOCK_SEQPACKET``
+  pair: a request is one JSON message (``id``, ``argv``, ``cwd``, ``env``) carrying the three descriptors
+  (``SCM_RIGHTS``); it answers ``{"id", "pid"}`` (or ``{"id", "error"}``), and ``{"exit": pid, "rc": rc}``
+  when a child ends (``rc`` as ``Popen.returncode``: negative for a signal).
+- Lifetimes: the server exits when its socket closes (the owning process exited, however it ended); each
+  child gets SIGTERM when the server goes (``PR_SET_PDEATHSIG``), as an ``exec``'d child does when its
+  launcher dies. Signals go through a pidfd, so a pid reused after its child ended is never signalled.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import gc
+import importlib.util
+import io
+import json
+import os
+import select
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+import traceback
+import types
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from bridge.nodes.process import die_with_parent
+
+ENV = "BSST_FORK_SERVER"  # "0": every child exec'd (the fork server never started)
+SERVER_MODULE = "bridge.cli.forkserver"
+ANSWER_TIMEOUT_S = 30.0  # s for the server to answer a request: its start-up (imports) included, on a loaded machine
+_MAX_MESSAGE = 1 << 20
+TITLE_ROOM = 4096  # bytes of command line the server reserves (a padding argument) for its children's
+
+
+class ServerGone(OSError):
+    """The fork server did not answer (it could not start, or it died)."""
+
+
+class ForkedChild:
+    """A child forked by the server, with the ``Popen`` calls a session makes. Its exit status comes from the
+    server (the child's parent); its exit itself is seen on a pidfd, which also carries the signals."""
+
+    def __init__(self, server: _Server, pid: int) -> None:
+        self.pid = pid
+        self.returncode: int | None = None
+        self.args = ["fork", str(pid)]
+        self._server = server
+        self._pidfd = os.pidfd_open(pid)
+
+    def poll(self) -> int | None:
+        return self.wait(0.0, raising=False)
+
+    def wait(self, timeout: float | None = None, raising: bool = True) -> int | None:
+        """The exit status once the child has ended; None (``raising=False``) or ``subprocess.TimeoutExpired``
+        if it has not within ``timeout`` s (None: wait as long as it takes)."""
+        if self.returncode is not None:
+            return self.returncode
+        ready, _, _ = select.select([self._pidfd], [], [], timeout)
+        if not ready:
+            if raising:
+                raise subprocess.TimeoutExpired(self.args, timeout or 0.0)
+            return None
+        self.returncode = self._server.exit_status(self.pid)
+        os.close(self._pidfd)
+        return self.returncode
+
+    def send_signal(self, sig: int) -> None:
+        if self.poll() is None:
+            try:
+                signal.pidfd_send_signal(self._pidfd, sig)
+            except ProcessLookupError:  # it ended since poll(): as Popen, nothing to signal
+                pass
+
+    def terminate(self) -> None:
+        self.send_signal(signal.SIGTERM)
+
+    def kill(self) -> None:
+        self.send_signal(signal.SIGKILL)
+
+
+class _Server:
+    """This process's end of one fork server: requests out, answers and exit statuses in, under one lock
+    (a fleet's sessions start their children from threads)."""
+
+    def __init__(self) -> None:
+        ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+        self.owner = os.getpid()
+        try:
+            self.proc = subprocess.Popen(
+                [sys.executable, "-m", SERVER_MODULE, str(theirs.fileno()), " " * TITLE_ROOM],
+                pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                start_new_session=True)
+        finally:
+            theirs.close()
+        self.sock = ours
+        self.lock = threading.Lock()
+        self.next_id = 0
+        self.answers: dict[int, dict[str, Any]] = {}
+        self.exits: dict[int, int] = {}
+        self.children_cpu_s = 0.0  # s, user + system, of the children that have ended and been heard of
+        self.gone = False
+
+    def cpu_s(self) -> float:
+        """CPU seconds (user + system) of the server itself (its imports) and of its children heard to have ended."""
+        try:
+            with open(f"/proc/{self.proc.pid}/stat") as f:
+                fields = f.read().rpartition(")")[2].split()
+            own = (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime, stime (proc(5))
+        except (OSError, IndexError, ValueError):
+            own = 0.0
+        with self.lock:
+            return own + self.children_cpu_s
+
+    def spawn(self, argv: Sequence[str], fds: Sequence[int], cwd: str, env: dict[str, str]) -> ForkedChild:
+        with self.lock:
+            self.next_id += 1
+            rid = self.next_id
+            request = json.dumps({"id": rid, "argv": list(argv), "cwd": cwd, "env": env}).encode()
+            try:
+                socket.send_fds(self.sock, [request], list(fds))
+            except OSError as exc:
+                self.gone = True
+                raise ServerGone(f"fork server: {exc}") from exc
+            answer = self._until(lambda: self.answers.pop(rid, None), ANSWER_TIMEOUT_S)
+        if "pid" not in answer:
+            raise ServerGone(f"fork server: {answer.get('error', 'no pid')}")
+        return ForkedChild(self, int(answer["pid"]))
+
+    def exit_status(self, pid: int) -> int:
+        """The exit status of ``pid``, which has ended (the server sends it on reaping it, at once); a child
+        whose server died first was ended by the server's death (PR_SET_PDEATHSIG): -SIGTERM."""
+        with self.lock:
+            try:
+                return self._until(lambda: self.exits.pop(pid, None), ANSWER_TIMEOUT_S)
+            except ServerGone:
+                return -signal.SIGTERM
+
+    def _until(self, found: Callable[[], Any], timeout_s: float) -> Any:
+        """Read the server's messages (holding the lock) until ``found()`` gives something, and give it."""
+        deadline = time.monotonic() + timeout_s
+        while (got := found()) is None:
+            left = deadline - time.monotonic()
+            if self.gone or left <= 0:
+                self.gone = True
+                raise ServerGone("fork server: no answer")
+            ready, _, _ = select.select([self.sock], [], [], left)
+            if ready:
+                self._read_one()
+        return got
+
+    def _read_one(self) -> None:
+        data = self.sock.recv(_MAX_MESSAGE)
+        if not data:
+            self.gone = True
+            return
+        msg = json.loads(data)
+        if "exit" in msg:
+            self.exits[int(msg["exit"])] = int(msg["rc"])
+            self.children_cpu_s += float(msg["cpu_s"])
+        else:
+            self.answers[int(msg["id"])] = msg
+
+
+_server: _Server | None = None
+_servers: list[_Server] = []  # every one this process started (their CPU time: forked_cpu_s)
+_server_lock = threading.Lock()
+
+
+def _the_server() -> _Server:
+    """This process's fork server, started on first use (again if it died, or in a forked copy of the owner)."""
+    global _server
+    with _server_lock:
+        if _server is None or _server.gone or _server.owner != os.getpid() or _server.proc.poll() is not None:
+            _server = _Server()
+            _servers.append(_server)
+        return _server
+
+
+def forked_cpu_s() -> float:
+    """CPU seconds (user + system) spent by this process's fork servers and the children they forked, ended ones
+    (``os.times()`` does not see them: they are the server's children, not ours). For benchmarks."""
+    return sum(s.cpu_s() for s in _servers)
+
+
+def warm() -> None:
+    """Start this process's fork server now, so that its imports overlap the caller's own preparation (a
+    no-op when children are exec'd)."""
+    if os.environ.get(ENV, "1") != "0":
+        try:
+            _the_server()
+        except OSError:
+            pass
+
+
+def start_child(argv: Sequence[str], stdout: int, stderr: int, *, stdin: int | None = None, cwd: str | None = None,
+                env: dict[str, str] | None = None) -> ForkedChild | subprocess.Popen[bytes]:
+    """``python -m bridge ARGV`` as a child of its own session: stdout and stderr the descriptors given, stdin
+    the one given (default: empty), in ``cwd`` with ``env`` (default: this process's); forked by the fork
+    server, or exec'd if there is none (module docstring)."""
+    cwd = os.getcwd() if cwd is None else os.fspath(cwd)
+    env = dict(os.environ) if env is None else dict(env)
+    if env.get(ENV, "1") != "0":
+        try:
+            with open(os.devnull, "rb") as null:
+                fds = (null.fileno() if stdin is None else stdin, stdout, stderr)
+                return _the_server().spawn(argv, fds, cwd, env)
+        except OSError:
+            pass  # exec'd instead: the same child, only slower to start
+    return subprocess.Popen([sys.executable, "-m", "bridge", *argv], stdin=subprocess.DEVNULL if stdin is None
+                            else stdin, stdout=stdout, stderr=stderr, cwd=cwd, env=env, start_new_session=True,
+                            preexec_fn=die_with_parent)
+
+
+# -- the server ------------------------------------------------------------------------------------------------------
+def serve(fd: int, run: Callable[[list[str]], int]) -> None:
+    """Serve fork requests on the socket ``fd`` until it closes; each child runs ``run(argv)`` (the CLI's main)
+    and exits with its status. The modules a child needs are imported by the caller first."""
+    sock = socket.socket(fileno=fd)
+    gc.collect()
+    gc.freeze()  # what is here now is shared with every child, never collected (nor copied) in one
+    live: dict[int, int] = {}  # pidfd -> pid
+    while True:
+        ready, _, _ = select.select([sock.fileno(), *live], [], [])
+        for r in ready:
+            if r != sock.fileno():
+                pid = live.pop(r)
+                os.close(r)
+                _, status, usage = os.wait4(pid, 0)
+                _send(sock, {"exit": pid, "rc": os.waitstatus_to_exitcode(status),
+                             "cpu_s": usage.ru_utime + usage.ru_stime})
+                continue
+            try:
+                data, fds, _, _ = socket.recv_fds(sock, _MAX_MESSAGE, 3)
+            except ConnectionError:
+                data = b""
+            if not data:
+                return  # the owner is gone: so are we, and our children with us (PR_SET_PDEATHSIG)
+            req = json.loads(data)
+            try:
+                pid = _fork(req, fds, run, [sock.fileno(), *live])
+            except OSError as exc:
+                _send(sock, {"id": req["id"], "error": str(exc)})
+            else:
+                live[os.pidfd_open(pid)] = pid
+                _send(sock, {"id": req["id"], "pid": pid})
+            finally:
+                for f in fds:
+                    os.close(f)
+
+
+def _as_python_m_bridge() -> None:
+    """Make ``__main__`` the module ``python -m bridge`` runs (not the server's), as a cold child has it: what
+    looks at it (multiprocessing's start of a sweep's workers) sees the same thing either way."""
+    spec = importlib.util.find_spec("bridge.__main__")
+    main = types.ModuleType("__main__")
+    main.__spec__, main.__package__ = spec, "bridge"
+    if spec is not None:
+        main.__file__, main.__loader__ = spec.origin, spec.loader
+    sys.modules["__main__"] = main
+
+
+def show_command_line(words: Sequence[str]) -> None:
+    """Show ``words`` as this process's command line (``/proc/PID/cmdline``, ``ps``, ``pkill -f``), written over
+    the area of the server's own arguments, which its padding argument (:data:`TITLE_ROOM`) made long enough; cut
+    to fit. Linux; a no-op where ``/proc/self/stat`` does not say where that area is."""
+    try:
+        with open("/proc/self/stat") as f:
+            fields = f.read().rpartition(")")[2].split()
+        start, end = int(fields[45]), int(fields[46])  # arg_start, arg_end: proc(5), fields 48 and 49
+    except (OSError, IndexError, ValueError):
+        return
+    room = end - start
+    if room < 2:
+        return
+    title = " ".join(words).encode()[: room - 1]
+    # a last byte that is not NUL tells the kernel the area was rewritten: it then reads up to the first NUL
+    ctypes.memmove(start, title + b"\0" + b" " * (room - len(title) - 1), room)
+
+
+def _send(sock: socket.socket, msg: dict[str, Any]) -> None:
+    try:
+        sock.send(json.dumps(msg).encode())
+    except OSError:  # the owner is gone; the loop sees it next
+        pass
+
+
+def _fork(req: dict[str, Any], fds: list[int], run: Callable[[list[str]], int], close: list[int]) -> int:
+    if len(fds) != 3:
+        raise OSError(f"a request carries stdin, stdout and stderr: {len(fds)} descriptors given")
+    pid = os.fork()
+    if pid:
+        return pid
+    rc = 1
+    try:  # the child: as `python -m bridge ARGV` would start, without the imports
+        os.setsid()
+        die_with_parent()
+        for f in close:
+            os.close(f)
+        for target, f in enumerate(fds):
+            os.dup2(f, target)
+            os.close(f)
+        os.chdir(req["cwd"])
+        os.environ.clear()
+        os.environ.update(req["env"])
+        for sig in (signal.SIGTERM, signal.SIGCHLD, signal.SIGHUP):
+            signal.signal(sig, signal.SIG_DFL)
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        unbuffered = bool(os.environ.get("PYTHONUNBUFFERED"))
+        sys.stdout = io.TextIOWrapper(io.FileIO(1, "w", closefd=False), write_through=unbuffered)
+        sys.stderr = io.TextIOWrapper(io.FileIO(2, "w", closefd=False), errors="backslashreplace",
+                                      line_buffering=True, write_through=unbuffered)
+        sys.stdin = io.TextIOWrapper(io.FileIO(0, "r", closefd=False))
+        argv = list(req["argv"])
+        sys.argv = [os.path.join(os.path.dirname(os.path.dirname(__file__)), "__main__.py"), *argv]
+        _as_python_m_bridge()
+        show_command_line([sys.executable, "-m", "bridge", *argv])  # what ps shows for an exec'd child
+        rc = run(argv)
+    except SystemExit as exc:
+        rc = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+        if exc.code is not None and not isinstance(exc.code, int):
+            print(exc.code, file=sys.stderr)
+    except BaseException:  # as Python would: the traceback on stderr, status 1
+        traceback.print_exc()
+        rc = 1
+    finally:
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):
+                pass
+        os._exit(rc if isinstance(rc, int) else 1)

@@ -1,0 +1,160 @@
+"""Covers bridge.nodes.forkserver and bridge.cli.forkserver: a child forked warm behaves as an exec'd one.
+
+Real processes throughout: the fork server this test process starts, ``bsst`` children forked by it (a relay
+runs until stopped, a ``bsst sim`` of bad input ends at once), and a helper process killed with SIGKILL.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from bridge.nodes import forkserver
+from bridge.nodes.forkserver import ENV, ForkedChild, forked_cpu_s, start_child
+from bridge.nodes.report import Ready, parse_line
+from tests.waiting import wait_for
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
+
+
+@pytest.fixture(autouse=True)
+def _the_server_on(monkeypatch):
+    """The fork server as a user has it by default (a suite run with BSST_FORK_SERVER=0 tests it all the same)."""
+    monkeypatch.delenv(ENV, raising=False)
+
+
+def _alive(pid: int) -> bool:
+    """Whether ``pid`` runs (a zombie does not)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rpartition(")")[2].split()[0] not in ("Z", "X")
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+
+
+class Started:
+    """A ``bsst`` child started by :func:`start_child`, its stdout a pipe, its stderr a file."""
+
+    def __init__(self, tmp_path: Path, *argv: str) -> None:
+        self.read, write = os.pipe()
+        self.err = tmp_path / f"{argv[0]}-{os.getpid()}-{id(self)}.err"
+        with open(self.err, "wb") as err:
+            self.child = start_child(list(argv), write, err.fileno())
+        os.close(write)
+        os.set_blocking(self.read, False)
+        self.out = b""
+
+    def stdout(self) -> bytes:
+        try:
+            while chunk := os.read(self.read, 65536):
+                self.out += chunk
+        except BlockingIOError:
+            pass
+        return self.out
+
+    def ready(self) -> bool:
+        return any(isinstance(parse_line(ln), Ready) for ln in self.stdout().decode().splitlines())
+
+    def close(self) -> None:
+        if self.child.poll() is None:
+            self.child.kill()
+            self.child.wait(30)
+        os.close(self.read)
+
+
+def _relay(tmp_path: Path) -> Started:
+    r = Started(tmp_path, "relay", "--listen", "127.0.0.1:0", "--to", "127.0.0.1:9")
+    wait_for(lambda: r.ready() or r.child.poll() is not None, 30, "the relay ready")
+    assert r.child.poll() is None, r.err.read_text()
+    return r
+
+
+def test_a_forked_child_runs_its_command_with_its_own_files_environment_and_directory(tmp_path, monkeypatch):
+    forkserver.warm()  # the server starts first: what changes after must still reach the child
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("BSST_KERNELS", "bogus")
+    (tmp_path / "m.toml").write_text('name = "m"\nduration_s = 1.0\n[trajectory]\nkind = "sine"\n')
+    s = Started(tmp_path, "sim", "m.toml", "--no-plots")
+    assert isinstance(s.child, ForkedChild)
+    assert s.child.wait(60) == 2  # bad input, as exec'd
+    # the relative path read in this directory, the variable from this environment (set after the server began)
+    assert s.err.read_text() == "bsst: m.toml: BSST_KERNELS='bogus' (environment): must be one of plain, compiled, " \
+                                "auto\n"
+    assert s.stdout() == b""
+    s.close()
+
+
+def test_a_forked_child_shows_its_command_line_runs_in_its_own_session_and_obeys_signals(tmp_path):
+    r = _relay(tmp_path)
+    pid = r.child.pid
+    with open(f"/proc/{pid}/cmdline", "rb") as f:
+        shown = f.read().rstrip(b"\0").decode()
+    assert shown.startswith(f"{sys.executable} -m bridge relay --listen 127.0.0.1:0 --to 127.0.0.1:9"), shown
+    assert os.getsid(pid) == pid and os.getsid(pid) != os.getsid(0)  # its own session, as start_new_session
+    assert r.child.poll() is None
+    r.child.send_signal(signal.SIGTERM)  # a relay stops on SIGTERM and exits 0
+    assert r.child.wait(30) == 0 and r.child.returncode == 0 and not _alive(pid)
+    r.close()
+    k = _relay(tmp_path)
+    k.child.kill()
+    assert k.child.wait(30) == -signal.SIGKILL
+    k.close()
+    running = _relay(tmp_path)
+    with pytest.raises(subprocess.TimeoutExpired):  # a deadline on a running one's exit, as Popen's
+        running.child.wait(0.05)
+    running.close()
+
+
+def test_a_child_ends_with_its_server_and_the_next_child_gets_a_new_server(tmp_path):
+    r = _relay(tmp_path)
+    server = forkserver._the_server()
+    os.kill(server.proc.pid, signal.SIGKILL)
+    assert r.child.wait(30) is not None  # SIGTERM from the server's death (PR_SET_PDEATHSIG): it stopped
+    assert not _alive(r.child.pid)
+    r.close()
+    again = _relay(tmp_path)
+    assert forkserver._the_server() is not server and again.child.poll() is None
+    again.close()
+
+
+HOLDER = """
+import os, sys, time
+from bridge.nodes.forkserver import _the_server, start_child
+r, w = os.pipe()
+child = start_child(["relay", "--listen", "127.0.0.1:0", "--to", "127.0.0.1:9"], w, 2)
+print(_the_server().proc.pid, child.pid, flush=True)
+time.sleep(600)
+"""
+
+
+def test_the_owners_death_ends_its_server_and_every_child(tmp_path):
+    p = subprocess.Popen([sys.executable, "-c", textwrap.dedent(HOLDER)], stdout=subprocess.PIPE, text=True,
+                         cwd=Path(__file__).resolve().parents[1])
+    try:
+        server, child = (int(x) for x in p.stdout.readline().split())  # type: ignore[union-attr]
+        assert _alive(server) and _alive(child)
+        p.kill()
+        p.wait(30)
+        wait_for(lambda: not _alive(server) and not _alive(child), 30, "the server and its child gone")
+    finally:
+        p.kill()
+        p.wait(30)
+
+
+def test_without_the_server_a_child_is_execd_and_the_cpu_of_forked_ones_is_counted(tmp_path, monkeypatch):
+    before = forked_cpu_s()
+    s = Started(tmp_path, "sim", str(tmp_path / "none.toml"))
+    assert isinstance(s.child, ForkedChild) and s.child.wait(60) == 2
+    wait_for(lambda: forked_cpu_s() > before, 10, "the forked child's CPU time counted")
+    s.close()
+    monkeypatch.setenv(ENV, "0")
+    e = Started(tmp_path, "sim", str(tmp_path / "none.toml"))
+    assert isinstance(e.child, subprocess.Popen) and e.child.wait(60) == 2
+    assert e.err.read_text() == s.err.read_text()  # the same one line either way
+    e.close()
