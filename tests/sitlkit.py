@@ -13,6 +13,7 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -20,6 +21,7 @@ from typing import Any, TypeVar
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from bridge.nodes.forkserver import ForkedChild, start_child
 from bridge.nodes.process import die_with_parent
 from bridge.nodes.report import Event, Report, parse_line
 from tests.waiting import wait_for
@@ -27,6 +29,29 @@ from tests.waiting import wait_for
 ROOT = Path(__file__).resolve().parent.parent
 ENV = {**os.environ, "MAVLINK20": "1"}
 R = TypeVar("R")
+
+
+def run_bsst(*args: str | Path, cwd: Path = ROOT, env: dict[str, str] | None = None, timeout: float = 300.0,
+             input: str | None = None) -> subprocess.CompletedProcess[str]:
+    """``bsst ARGS`` (``python -m bridge ARGS``) run to its end in ``cwd``, as ``subprocess.run(...,
+    capture_output=True, text=True)`` gives it; forked warm by the fork server, as a session's children are
+    (docs/testing.md). ``input``: its stdin (default: empty)."""
+    argv = [str(a) for a in args]
+    with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err, tempfile.TemporaryFile() as given:
+        given.write((input or "").encode())
+        given.seek(0)
+        child = start_child(argv, out.fileno(), err.fileno(), stdin=given.fileno(), cwd=str(cwd),
+                            env=env)
+        try:
+            rc = child.wait(timeout)
+        except subprocess.TimeoutExpired:
+            child.kill()
+            child.wait()
+            raise
+        out.seek(0)
+        err.seek(0)
+        return subprocess.CompletedProcess([sys.executable, "-m", "bridge", *argv], rc,
+                                           out.read().decode(errors="replace"), err.read().decode(errors="replace"))
 
 
 def shown(e: Event) -> str:
@@ -37,24 +62,36 @@ def shown(e: Event) -> str:
 class Proc:
     """A child process whose stdout is read line by line without blocking."""
 
-    def __init__(self, argv: list[str], cwd: Path | None = None, stdin: int | None = subprocess.DEVNULL) -> None:
+    def __init__(self, argv: list[str], cwd: Path | None = None, stdin: int | None = subprocess.DEVNULL,
+                 bsst: bool = False) -> None:
         self.argv = argv
-        # its own session (a test signals its group), and SIGTERM if the test process dies: a bare vehicle runs
-        # until stopped, so one left by a killed pytest would hold its instance's ports for the next run
-        self.p = subprocess.Popen(argv, cwd=cwd, stdin=stdin, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                  env=ENV, start_new_session=True, preexec_fn=die_with_parent)
-        os.set_blocking(self.p.stdout.fileno(), False)  # type: ignore[union-attr]
+        self.p: subprocess.Popen[bytes] | ForkedChild
+        if bsst:  # forked warm by the fork server, as a session's children are (docs/testing.md)
+            read, write = os.pipe()
+            try:
+                self.p = start_child(argv[3:], write, write, cwd=str(cwd or os.getcwd()), env=ENV)
+            finally:
+                os.close(write)
+            self.fd = read
+        else:
+            # its own session (a test signals its group), and SIGTERM if the test process dies: a bare vehicle
+            # runs until stopped, so one left by a killed pytest would hold its instance's ports for the next run
+            self.p = subprocess.Popen(argv, cwd=cwd, stdin=stdin, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                      env=ENV, start_new_session=True, preexec_fn=die_with_parent)
+            self.fd = self.p.stdout.fileno()  # type: ignore[union-attr]
+        os.set_blocking(self.fd, False)
         self._buf = b""
         self.lines: list[str] = []
 
     @classmethod
     def bsst(cls, *args: str, cwd: Path | None = None) -> Proc:
-        return cls([sys.executable, "-m", "bridge", *args], cwd=cwd)
+        """``bsst ARGS`` (``python -m bridge ARGS``), its stdout and stderr read as one."""
+        return cls([sys.executable, "-m", "bridge", *args], cwd=cwd, bsst=True)
 
     def _read(self) -> None:
         while True:
             try:
-                data = os.read(self.p.stdout.fileno(), 65536)  # type: ignore[union-attr]
+                data = os.read(self.fd, 65536)
             except BlockingIOError:
                 return
             if not data:
@@ -67,7 +104,7 @@ class Proc:
         """The first line (seen so far from index ``start`` on, or to come) that satisfies ``pred``."""
         deadline = time.monotonic() + timeout
         sel = selectors.DefaultSelector()
-        sel.register(self.p.stdout, selectors.EVENT_READ)  # type: ignore[arg-type]
+        sel.register(self.fd, selectors.EVENT_READ)
         seen = start
         try:
             while True:

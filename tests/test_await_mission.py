@@ -38,7 +38,7 @@ from bridge.session import instance_slot
 from missions import Mission, Sine
 from missions.planfiles import plan_text, read_plan_text
 from tests.plans import l_plan
-from tests.sitlkit import ENV, ROOT, GcsSocket, MavProxy, Proc
+from tests.sitlkit import ENV, ROOT, GcsSocket, MavProxy, Proc, run_bsst
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes and opens sockets
@@ -379,8 +379,7 @@ def test_mavproxy_through_a_lossy_slow_link(tmp_path):
     (["--await-mission", "--param-at", "600:COM_OF_LOSS_T=1"], "with --await-mission the time is mission time"),
     ([], "give a mission file (or --await-mission)")])
 def test_await_mission_bad_input_is_one_line_and_exit_2(args, says):
-    r = subprocess.run([sys.executable, "-m", "bridge", "sitl", *args], cwd=ROOT, env=ENV, capture_output=True,
-                       text=True, timeout=60)
+    r = run_bsst("sitl", *args, cwd=ROOT, env=ENV, timeout=60)
     assert r.returncode == 2 and says in r.stderr and r.stderr.strip().count("\n") == 0, r.stderr
 
 

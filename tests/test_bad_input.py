@@ -19,7 +19,6 @@ import os
 import signal
 import socket
 import subprocess
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -32,7 +31,7 @@ from bridge.mavlink.endpoint import LINK_PORT
 from bridge.session import instance_slot
 from missions import MISSION_DIR, mission_from_table
 from params import ConfigError, Table, dump_toml, is_typo_of, load_toml
-from tests.sitlkit import ROOT
+from tests.sitlkit import ROOT, run_bsst
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -413,7 +412,7 @@ def test_a_file_without_read_permission(files, capsys):
     (["report", "/nonexistent/sweep"], "/nonexistent/sweep"),
 ])
 def test_as_a_real_process_one_line_and_no_traceback(argv, names):
-    r = subprocess.run([sys.executable, "-m", "bridge", *argv], capture_output=True, text=True, cwd=ROOT, timeout=60)
+    r = run_bsst(*argv, cwd=ROOT, timeout=60)
     assert r.returncode == 2, r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and names in r.stderr and "Traceback" not in r.stderr
 
@@ -467,7 +466,7 @@ def test_issue_11_files_and_missions_exit_2_with_one_line(tmp_path: Path, argv: 
     work.mkdir()
     files = _bad_files_of_issue_11(tmp_path)
     cmd = [a.format(**files) for a in argv]
-    r = subprocess.run([sys.executable, "-m", "bridge", *cmd], capture_output=True, text=True, cwd=work, timeout=60)
+    r = run_bsst(*cmd, cwd=work, timeout=60)
     lines = r.stderr.strip().splitlines()
     assert r.returncode == 2, (cmd, r.returncode, r.stderr)
     assert len(lines) == 1 and lines[0].startswith("bsst: ") and "Traceback" not in r.stderr, r.stderr
@@ -516,8 +515,7 @@ def test_issue_22_a_bad_trace_is_one_line_through_every_path(tmp_path: Path, kin
         "link show": ["link", "show", str(bad), "--out", str(tmp_path / "bad.png")],
     }
     for name, argv in paths.items():
-        r = subprocess.run([sys.executable, "-m", "bridge", *argv], capture_output=True, text=True, cwd=tmp_path,
-                           timeout=60)
+        r = run_bsst(*argv, cwd=tmp_path, timeout=60)
         lines = r.stderr.strip().splitlines()
         assert r.returncode == 2, (name, r.returncode, r.stderr[-2000:])
         assert len(lines) == 1 and "Traceback" not in r.stderr, (name, r.stderr[-2000:])
@@ -528,8 +526,7 @@ def test_issue_22_a_bad_trace_is_one_line_through_every_path(tmp_path: Path, kin
 
 # -- issue 23 (defect 7): misspellings get the likely word; each command has only the flags it uses ---------
 def _bsst(*argv: Any, cwd: Path = ROOT) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "bridge", *map(str, argv)], capture_output=True, text=True, cwd=cwd,
-                          timeout=120, stdin=subprocess.DEVNULL)
+    return run_bsst(*map(str, argv), cwd=cwd, timeout=120)
 
 
 def _one_line(r: subprocess.CompletedProcess[str]) -> str:

@@ -21,6 +21,7 @@ from pathlib import Path
 import pytest
 
 from missions import MISSION_DIR, load_mission
+from tests.sitlkit import run_bsst
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -42,8 +43,7 @@ PLOTS = {"positions.png", "errors.png", "angles.png", "inputs.png", "path3d.png"
 
 def bsst(*args: str | Path, cwd: Path = ROOT) -> subprocess.CompletedProcess[str]:
     env = dict(os.environ, MPLBACKEND="Agg")
-    return subprocess.run([PYTHON, "-m", "bridge", "sim", *map(str, args)], cwd=cwd, env=env,
-                          capture_output=True, text=True, timeout=120)
+    return run_bsst("sim", *map(str, args), cwd=cwd, env=env, timeout=120)
 
 
 def short_sine(tmp_path: Path, seconds: float = 4.0) -> Path:
@@ -194,5 +194,5 @@ def test_bsst_version_prints_the_packages_version() -> None:
         want = importlib.metadata.version("bsst-sitl")
     except importlib.metadata.PackageNotFoundError:
         want = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["version"]
-    r = subprocess.run([PYTHON, "-m", "bridge", "--version"], capture_output=True, text=True, timeout=60, cwd=ROOT)
+    r = run_bsst("--version", cwd=ROOT, timeout=60)
     assert (r.returncode, r.stdout, r.stderr) == (0, f"bsst {want}\n", "")

@@ -9,7 +9,6 @@ import csv
 import json
 import math
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +25,7 @@ from bridge.record.columns import ESTIMATE_COLUMNS, TRACE_COLUMNS
 from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
 from missions import MISSION_DIR
-from tests.sitlkit import ENV, ROOT
+from tests.sitlkit import ENV, ROOT, run_bsst
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -37,8 +36,7 @@ SINE_6S = 'name = "sine6"\nduration_s = 6.0\nseed = {seed}\n[trajectory]\nkind =
 
 
 def _bsst(*argv: object, timeout: float = 300.0) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "bridge", *map(str, argv)], cwd=ROOT, env=ENV, capture_output=True,
-                          text=True, timeout=timeout)
+    return run_bsst(*map(str, argv), cwd=ROOT, env=ENV, timeout=timeout)
 
 
 def test_truth_and_ideal_sensors_leave_the_sine_unchanged():

@@ -6,8 +6,6 @@ Motor faults, sensor faults, weather changes; honest outcomes (crashed, diverged
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import pytest
 
@@ -15,6 +13,7 @@ from bridge import simulate
 from params import ConfigError
 from plant import Quadrotor, load_profile
 from plant.events import event_table_from_flag
+from tests.sitlkit import run_bsst
 
 pytestmark = pytest.mark.process  # runs bsst as a real process: not in make test-fast
 
@@ -82,9 +81,8 @@ def test_a_full_rotor_changes_nothing_and_a_weak_one_is_logged_and_reproducible(
 
 def test_one_motor_off_on_the_x500_ends_not_completed_and_says_why(tmp_path) -> None:
     out = tmp_path / "run"
-    proc = subprocess.run([sys.executable, "-m", "bridge", "sim", "missions/sine.toml", "--profile", "x500",
-                           "--at", "10:motor:1=0", "--out", str(out), "--no-plots"], capture_output=True, text=True,
-                          timeout=300)
+    proc = run_bsst("sim", "missions/sine.toml", "--profile", "x500", "--at", "10:motor:1=0", "--out", str(out),
+                    "--no-plots", timeout=300)
     assert proc.returncode == 1, proc.stderr
     s = json.loads((out / "summary.json").read_text())
     assert s["outcome"] in ("diverged", "crashed")

@@ -10,8 +10,6 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -22,7 +20,7 @@ from bridge.mavlink.endpoint import CONTROLLER_SYSID
 from bridge.nodes.report import Event, Refused, parse_line
 from bridge.nodes.vehicle.injection import injection
 from bridge.session import instance_slot
-from tests.sitlkit import ENV, ROOT, Proc
+from tests.sitlkit import ENV, ROOT, Proc, run_bsst
 from tests.test_ground_stations import _mavsdk
 from tests.test_vehicle import _ack, _gcs, _vehicle
 
@@ -253,8 +251,7 @@ def test_sitl_plant_blocks_equal_offline(tmp_path, case):
         out = tmp_path / command
         with instance_slot() as n:
             extra = ("--instance", str(n)) if command == "sitl" else ()
-            r = subprocess.run([sys.executable, "-m", "bridge", command, *args, "--out", str(out), "--no-plots",
-                                *extra], capture_output=True, text=True, timeout=300, env=ENV)
+            r = run_bsst(command, *args, "--out", str(out), "--no-plots", *extra, env=ENV, timeout=300)
         codes.append(r.returncode)
         assert (out / "summary.json").exists(), f"bsst {command}: exit {r.returncode}: {r.stderr[-2000:]}"
         summaries.append(json.loads((out / "summary.json").read_text()))

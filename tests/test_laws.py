@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
 import sys
 from pathlib import Path
 
@@ -28,6 +27,7 @@ from controller.law import BUILTIN, Law, law_problem, make_law, resolve_law
 from missions import Mission, Sine, load_mission
 from params import ConfigError
 from plant import load_profile
+from tests.sitlkit import run_bsst
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -94,9 +94,8 @@ def test_the_template_flies_the_sine_offline_and_in_lockstep_alike(tmp_path: Pat
     assert offline.outcome == "completed"
     assert offline.rms < 0.02
     with instance_slot() as n:
-        r = subprocess.run([sys.executable, "-m", "bridge", "sitl", str(sine), "--controller",
-                            "examples/my_law.py:MyLaw", "--instance", str(n), "--no-plots", "--out",
-                            str(tmp_path / "sitl")], cwd=ROOT, capture_output=True, text=True, timeout=240)
+        r = run_bsst("sitl", str(sine), "--controller", "examples/my_law.py:MyLaw", "--instance", str(n),
+                     "--no-plots", "--out", str(tmp_path / "sitl"), cwd=ROOT, timeout=240)
     assert r.returncode == 0, r.stderr
     lock = read_trace(tmp_path / "sitl" / "trace.csv")
     assert len(lock["t"]) == len(offline.trace["t"])
@@ -145,8 +144,7 @@ BAD_LAWS = {  # file name -> source of a law file that does not fit, and what th
     ("json:JSONDecoder", "JSONDecoder"),
 ])
 def test_a_law_that_cannot_be_flown_is_refused_in_one_line(command: str, spec: str, names: str) -> None:
-    r = subprocess.run([sys.executable, "-m", "bridge", command, "missions/sine.toml", "--controller", spec],
-                       cwd=ROOT, capture_output=True, text=True, timeout=60)
+    r = run_bsst(command, "missions/sine.toml", "--controller", spec, cwd=ROOT, timeout=60)
     lines = r.stderr.strip().splitlines()
     assert r.returncode == 2, r.stderr
     assert len(lines) == 1 and names in lines[0] and "Traceback" not in r.stderr, r.stderr
@@ -156,8 +154,7 @@ def test_a_law_that_cannot_be_flown_is_refused_in_one_line(command: str, spec: s
 def test_a_law_file_that_does_not_fit_is_named(tmp_path: Path, name: str) -> None:
     source, names = BAD_LAWS[name]
     (tmp_path / name).write_text(source)
-    r = subprocess.run([sys.executable, "-m", "bridge", "sim", "missions/sine.toml", "--controller",
-                        f"{tmp_path / name}:L"], cwd=ROOT, capture_output=True, text=True, timeout=60)
+    r = run_bsst("sim", "missions/sine.toml", "--controller", f"{tmp_path / name}:L", cwd=ROOT, timeout=60)
     lines = r.stderr.strip().splitlines()
     assert r.returncode == 2 and len(lines) == 1, r.stderr
     assert names in lines[0] and name in lines[0], lines[0]
@@ -182,9 +179,8 @@ def test_bsst_flies_the_same_in_lockstep_and_offline_with_either_scheme(tmp_path
     mission = load_mission(sine).with_overrides(discretization=scheme)
     offline = simulate(mission, plots=False)
     with instance_slot() as n:
-        r = subprocess.run([sys.executable, "-m", "bridge", "sitl", str(sine), "--discretization",
-                            scheme, "--instance", str(n), "--no-plots", "--out", str(tmp_path / "sitl")],
-                           cwd=ROOT, capture_output=True, text=True, timeout=240)
+        r = run_bsst("sitl", str(sine), "--discretization", scheme, "--instance", str(n), "--no-plots", "--out",
+                     str(tmp_path / "sitl"), cwd=ROOT, timeout=240)
     assert r.returncode == 0, r.stderr
     assert load_mission(tmp_path / "sitl" / "mission.toml").discretization == scheme
     lock = read_trace(tmp_path / "sitl" / "trace.csv")

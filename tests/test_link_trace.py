@@ -17,7 +17,6 @@ import re
 import socket
 import struct
 import subprocess
-import sys
 import time
 import tomllib
 from collections.abc import Iterator
@@ -42,7 +41,7 @@ from bridge.session import instance_slot, sitl
 from bridge.session.children import check_port_free
 from missions import Mission, Sine
 from params import ConfigError
-from tests.sitlkit import ENV, ROOT
+from tests.sitlkit import ENV, ROOT, run_bsst
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -82,8 +81,7 @@ def free_instance() -> Iterator[int]:
 
 
 def bsst(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "bridge", *args], cwd=cwd or ROOT, env=ENV, capture_output=True,
-                          text=True, timeout=300)
+    return run_bsst(*args, cwd=cwd or ROOT, env=ENV, timeout=300)
 
 
 def one_line_error(p: subprocess.CompletedProcess) -> str:

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -24,6 +23,7 @@ import pytest
 from bridge import simulate
 from missions import Mission, Sine
 from params import dump_toml
+from tests.sitlkit import run_bsst
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -34,8 +34,7 @@ SHORT = Mission(Sine(), duration_s=6.0, name="short", discretization="explicit")
 
 
 def bsst(*argv: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "bridge", *argv], cwd=ROOT, capture_output=True, text=True,
-                          timeout=600)
+    return run_bsst(*argv, cwd=ROOT, timeout=600)
 
 
 @pytest.mark.parametrize("extra, expected, holds", [
@@ -166,9 +165,8 @@ def test_a_refused_out_directory_is_named_before_any_flight(tmp_path: Path) -> N
     """A non-empty --out is refused up front: with 1000 seeds a probe, a search that flew first would
     run for many minutes before it refused to write (the deadline below would end the test)."""
     (tmp_path / "kept.txt").write_text("a user's file\n")
-    r = subprocess.run([sys.executable, "-m", "bridge", "margin", "missions/sine.toml", "--over", "delay_ms",
-                        "--until", "rms=0.1", "--seeds", "1000", "--out", str(tmp_path)],
-                       cwd=ROOT, capture_output=True, text=True, timeout=60)
+    r = run_bsst("margin", "missions/sine.toml", "--over", "delay_ms", "--until", "rms=0.1", "--seeds", "1000",
+                 "--out", str(tmp_path), cwd=ROOT, timeout=60)
     assert r.returncode == 2 and "--out" in r.stderr and "not empty" in r.stderr, r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
     assert (tmp_path / "kept.txt").read_text() == "a user's file\n" and not (tmp_path / "margin.json").exists()
@@ -177,8 +175,8 @@ def test_a_refused_out_directory_is_named_before_any_flight(tmp_path: Path) -> N
 # -- issue 22, defect 8: every --resolution the search takes ends ------------------------------------------------------
 @pytest.mark.parametrize("over", ["delay_ms", "loss_pct", "jitter_ms", "burst_len", "noise", "wind_mps"])
 def test_a_resolution_too_fine_to_end_is_refused_naming_the_flag_and_its_range(over: str) -> None:
-    r = subprocess.run([sys.executable, "-m", "bridge", "margin", "missions/sine.toml", "--over", over, "--until",
-                        "rms=0.1", "--resolution", "1e-300"], cwd=ROOT, capture_output=True, text=True, timeout=60)
+    r = run_bsst("margin", "missions/sine.toml", "--over", over, "--until", "rms=0.1", "--resolution", "1e-300",
+                 cwd=ROOT, timeout=60)
     lines = r.stderr.strip().splitlines()
     assert r.returncode == 2 and len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
     assert "--resolution must be in [" in lines[0] and f"for --over {over}" in lines[0] and "1e-300" in lines[0]

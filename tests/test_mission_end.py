@@ -13,8 +13,6 @@ from __future__ import annotations
 
 import csv
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -22,7 +20,7 @@ import pytest
 from bridge.loop import simulate
 from bridge.session import instance_slot, sitl
 from missions import MISSION_DIR, load_mission
-from tests.sitlkit import ENV, ROOT, Proc
+from tests.sitlkit import ENV, ROOT, Proc, run_bsst
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -105,9 +103,8 @@ def test_hold_on_the_wall_clock_holds_until_stopped(tmp_path: Path) -> None:
                             "--out", str(out), cwd=ROOT)
         try:
             vehicle.wait_line(lambda ln: ln.startswith("ready") or '"report":"ready"' in ln, timeout=60)
-            ctl = subprocess.run([sys.executable, "-m", "bridge", "controller", str(mission), "--realtime",
-                                  "--instance", str(n), "--out", str(out), "--overwrite"], cwd=ROOT, env=ENV,
-                                 capture_output=True, text=True, timeout=120)
+            ctl = run_bsst("controller", str(mission), "--realtime", "--instance", str(n), "--out", str(out),
+                           "--overwrite", cwd=ROOT, env=ENV, timeout=120)
             assert ctl.returncode == 0, ctl.stderr
 
             def held_rows() -> list[dict]:
@@ -128,8 +125,7 @@ def test_hold_on_the_wall_clock_holds_until_stopped(tmp_path: Path) -> None:
 def test_a_bad_end_action_is_one_line_exit_2(tmp_path: Path, value: str) -> None:
     f = tmp_path / "bad.toml"
     f.write_text(SINE.read_text() + f"\n[end]\naction = {value}\n")
-    res = subprocess.run([sys.executable, "-m", "bridge", "sim", str(f), "--no-plots", "--out", str(tmp_path / "o")],
-                         cwd=ROOT, env=ENV, capture_output=True, text=True, timeout=60)
+    res = run_bsst("sim", str(f), "--no-plots", "--out", str(tmp_path / "o"), cwd=ROOT, env=ENV, timeout=60)
     assert res.returncode == 2 and len(res.stderr.splitlines()) == 1 and "Traceback" not in res.stderr
     assert res.stderr.startswith(f"bsst: {f}: end.action: "), res.stderr
 

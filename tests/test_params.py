@@ -50,7 +50,7 @@ from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
 from missions import Mission, Sine
 from params import ConfigError
-from tests.sitlkit import ENV, ROOT, Proc
+from tests.sitlkit import ENV, ROOT, Proc, run_bsst
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -143,8 +143,7 @@ def test_a_missions_params_table_and_the_flags_are_checked_and_ordered(tmp_path)
     (["--param-at", "5:MAV_SYS_ID=3"], "at start only"),
 ])
 def test_bad_parameter_flags_are_one_line_exit_2(args, says):
-    r = subprocess.run([sys.executable, "-m", "bridge", "sim", "missions/sine.toml", *args], capture_output=True,
-                       text=True, cwd=ROOT, timeout=60)
+    r = run_bsst("sim", "missions/sine.toml", *args, cwd=ROOT, timeout=60)
     assert r.returncode == 2 and says in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
 
 
@@ -357,8 +356,7 @@ def _f32(x: float) -> float:
 
 
 def _bsst(*args: str, cwd=ROOT) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "bridge", *args], capture_output=True, text=True, cwd=cwd,
-                          env=ENV, timeout=120)
+    return run_bsst(*args, cwd=cwd, env=ENV, timeout=120)
 
 
 @pytest.mark.parametrize("name, value", [("COM_OBL_ACT", "1"), ("COM_OBL_RC_ACT", "5"), ("MAV_SYS_ID", "7")])

@@ -8,7 +8,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import subprocess
 import sys
 from pathlib import Path
 
@@ -23,6 +22,7 @@ from missions.planfiles import read_plan_text
 from missions.route import Limits, route_of
 from params import ConfigError
 from tests.plans import BOX_PLAN, ROOT, l_plan, write_plan
+from tests.sitlkit import run_bsst
 
 pytestmark = pytest.mark.process  # runs `bsst sim` as a subprocess
 
@@ -192,15 +192,13 @@ def test_box_plan_flown_offline_meets_the_figures() -> None:
 def test_bsst_sim_flies_a_plan_and_refuses_a_bad_one(tmp_path: Path) -> None:
     env = dict(os.environ, MPLBACKEND="Agg")
     out = tmp_path / "run"
-    p = subprocess.run([sys.executable, "-m", "bridge", "sim", str(BOX_WPL), "--out", str(out), "--no-plots"],
-                       cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+    p = run_bsst("sim", str(BOX_WPL), "--out", str(out), "--no-plots", cwd=ROOT, env=env, timeout=300)
     assert p.returncode == 0, p.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["outcome"] == "completed" and summary["events"][-1]["kind"] == "disarmed"
     assert 'kind = "smooth"' in (out / "mission.toml").read_text()
     bad = write_plan(tmp_path, lambda d: d["mission"]["items"][2].update(command=177))
-    p = subprocess.run([sys.executable, "-m", "bridge", "sim", str(bad), "--no-plots"], cwd=ROOT, env=env,
-                       capture_output=True, text=True, timeout=120)
+    p = run_bsst("sim", str(bad), "--no-plots", cwd=ROOT, env=env, timeout=120)
     assert p.returncode == 2 and p.stderr.strip().count("\n") == 0 and "DO_JUMP (177)" in p.stderr
 
 

@@ -14,14 +14,13 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 import textwrap
 from pathlib import Path
 
 import pytest
 
 from bridge.session import instance_slot
-from tests.sitlkit import ENV, ROOT
+from tests.sitlkit import ENV, ROOT, run_bsst
 
 pytestmark = pytest.mark.process  # runs bsst as real processes: not in make test-fast
 
@@ -55,9 +54,8 @@ def _law(tmp_path: Path, head: str = "", init: str = "", update: str = "pass") -
 
 
 def _sim(tmp_path: Path, spec: str, *args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "bridge", "sim", "missions/sine.toml", "--controller", spec,
-                           "--out", str(tmp_path / "run"), "--no-plots", *args], cwd=ROOT, env=ENV,
-                          capture_output=True, text=True, timeout=120)
+    return run_bsst("sim", "missions/sine.toml", "--controller", spec, "--out", str(tmp_path / "run"), "--no-plots",
+                    *args, cwd=ROOT, env=ENV, timeout=120)
 
 
 @pytest.mark.parametrize("where", ["import", "init"])
@@ -108,9 +106,8 @@ def test_the_sitl_controller_ends_law_failed_when_its_law_exits(tmp_path):
     mission = tmp_path / "short.toml"
     mission.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 3.0"))
     with instance_slot() as n:
-        r = subprocess.run([sys.executable, "-m", "bridge", "sitl", str(mission), "--controller", spec,
-                            "--instance", str(n), "--out", str(tmp_path / "run"), "--no-plots"], cwd=ROOT, env=ENV,
-                           capture_output=True, text=True, timeout=120)
+        r = run_bsst("sitl", str(mission), "--controller", spec, "--instance", str(n), "--out", str(tmp_path / "run"),
+                     "--no-plots", cwd=ROOT, env=ENV, timeout=120)
     assert r.returncode == 1, (r.stdout, r.stderr)
     s = json.loads((tmp_path / "run" / "summary.json").read_text())
     assert s["outcome"] == "law_failed", s["ended_by"]

@@ -24,7 +24,7 @@ import pytest
 
 from bridge.session import instance_slot, sitl
 from missions import Mission, Sine
-from tests.sitlkit import ENV, ROOT, Proc
+from tests.sitlkit import ENV, ROOT, Proc, run_bsst
 from tests.test_cli_sim import bsst as _sim
 from tests.test_cli_sim import short_sine
 from tests.waiting import wait_for
@@ -202,9 +202,8 @@ def test_a_perfect_loopback_link_loses_nothing_and_says_where_every_packet_went(
     mission = short_sine(tmp_path, 3.0)
     out = tmp_path / "rt"
     with instance_slot() as n:  # ports of our own: sessions of other tests run beside this one
-        res = subprocess.run([sys.executable, "-m", "bridge", "sitl", str(mission), "--realtime", "--out", str(out),
-                              "--no-plots", "--instance", str(n)], cwd=ROOT, env=ENV, capture_output=True, text=True,
-                             timeout=180)
+        res = run_bsst("sitl", str(mission), "--realtime", "--out", str(out), "--no-plots", "--instance", str(n),
+                       cwd=ROOT, env=ENV, timeout=180)
     assert res.returncode == 0, res.stderr
     link = json.loads((out / "summary.json").read_text())["link"]
     for d in ("up", "down"):

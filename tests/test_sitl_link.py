@@ -12,8 +12,6 @@ from __future__ import annotations
 
 import csv
 import json
-import subprocess
-import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -26,7 +24,7 @@ from bridge.record.columns import TRACE_COLUMNS
 from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
 from missions import MISSION_DIR, Mission, Sine, load_mission
-from tests.sitlkit import ENV, ROOT
+from tests.sitlkit import ENV, ROOT, run_bsst
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -100,9 +98,8 @@ def test_long_blackout_failsafe_descends_disarms_exit_1(tmp_path: Path) -> None:
     mission.write_text('name = "sine8"\nduration_s = 8.0\n[trajectory]\nkind = "sine"\n')
     out = tmp_path / "run"
     with instance_slot() as n:
-        p = subprocess.run([sys.executable, "-m", "bridge", "sitl", str(mission), "--instance", str(n), "--out",
-                            str(out), "--no-plots", "--blackout", "3:2"], cwd=ROOT, env=ENV, capture_output=True,
-                           text=True, timeout=120)
+        p = run_bsst("sitl", str(mission), "--instance", str(n), "--out", str(out), "--no-plots", "--blackout", "3:2",
+                     cwd=ROOT, env=ENV, timeout=120)
     assert p.returncode == 1, p.stderr
     assert "outcome: failsafe" in p.stdout
     summary = json.loads((out / "summary.json").read_text())

@@ -12,8 +12,6 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
@@ -22,7 +20,7 @@ import pytest
 from bridge.link.radio import make_radio_file
 from bridge.swarm import sitl
 from missions import MISSION_DIR
-from tests.sitlkit import ENV, ROOT
+from tests.sitlkit import ENV, ROOT, run_bsst
 
 pytestmark = pytest.mark.process  # starts processes
 
@@ -88,8 +86,7 @@ def test_a_relay_given_a_bad_radio_file_names_it_in_one_line_and_exits_2(tmp_pat
     mission.write_text((MISSION_DIR / "step.toml").read_text() + '\n[[events]]\nt_s = 1.0\nkind = "link"\n'
                        'profile = "wifi"\n')
     extra = ["--radio-user", "0", "--mission", str(mission)] if what == "handover" else ["--radio-user", "2"]
-    p = subprocess.run([sys.executable, "-m", "bridge", "relay", "--listen", "127.0.0.1:0", "--to", "127.0.0.1:9",
-                        "--radio", str(f), "--bandwidth", "1000", *extra],
-                       capture_output=True, text=True, cwd=ROOT, env=ENV, timeout=60)
+    p = run_bsst("relay", "--listen", "127.0.0.1:0", "--to", "127.0.0.1:9", "--radio", str(f), "--bandwidth", "1000",
+                 *extra, cwd=ROOT, env=ENV, timeout=60)
     assert p.returncode == 2 and p.stdout == ""
     assert p.stderr.startswith(f"bsst: --radio {f}: ") and says in p.stderr and p.stderr.count("\n") == 1, p.stderr

@@ -34,6 +34,7 @@ from bridge.sweep.executors import run_cell
 from bridge.sweep.grid import cells as grid_cells
 from missions import Mission, Sine
 from params import ConfigError, dump_toml
+from tests.sitlkit import run_bsst
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -233,8 +234,7 @@ def test_bad_flags_one_line_exit_2(mission_file: Path, tmp_path: Path, capsys, a
 
 
 def test_bad_input_from_the_shell_has_no_traceback(tmp_path: Path) -> None:
-    r = subprocess.run([sys.executable, "-m", "bridge", "sweep", str(tmp_path / "none.toml"), "--delay", "0"],
-                       cwd=ROOT, capture_output=True, text=True, timeout=60)
+    r = run_bsst("sweep", str(tmp_path / "none.toml"), "--delay", "0", cwd=ROOT, timeout=60)
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "no such file" in r.stderr
 
 
@@ -549,8 +549,7 @@ def test_a_sweep_with_a_plug_in_law_writes_its_maps(tmp_path: Path) -> None:
     env = dict(os.environ, MPLBACKEND="Agg")
 
     def bsst(*args: str) -> subprocess.CompletedProcess[str]:
-        return subprocess.run([sys.executable, "-m", "bridge", *args], cwd=ROOT, env=env, capture_output=True,
-                              text=True, timeout=300)
+        return run_bsst(*args, cwd=ROOT, env=env, timeout=300)
 
     r = bsst("sweep", str(mission), "--controller", "bsst,examples/my_law.py:MyLaw", "--delay", "0,10",
              "--jobs", "2", "--out", str(out))

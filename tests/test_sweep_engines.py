@@ -15,8 +15,6 @@ from __future__ import annotations
 import json
 import math
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -30,6 +28,7 @@ from bridge.sweep.grid import LINK_AXES, cells, mission_value
 from bridge.sweep.margin import margin, parse_until, probe
 from missions import Mission, Sine
 from params import ConfigError, dump_toml
+from tests.sitlkit import run_bsst
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -107,18 +106,16 @@ def test_auto_takes_the_batch_for_a_large_offline_grid_and_says_why_not_otherwis
 ])
 def test_an_engine_that_cannot_be_honoured_is_refused_in_one_line(tmp_path: Path, extra: list[str],
                                                                    names: str) -> None:
-    r = subprocess.run([sys.executable, "-m", "bridge", "sweep", "missions/sine.toml", "--delay", "0,5",
-                        "--engine", "batch", "--out", str(tmp_path / "s"), *extra],
-                       cwd=ROOT, capture_output=True, text=True, timeout=120)
+    r = run_bsst("sweep", "missions/sine.toml", "--delay", "0,5", "--engine", "batch", "--out", str(tmp_path / "s"),
+                 *extra, cwd=ROOT, timeout=120)
     lines = r.stderr.strip().splitlines()
     assert r.returncode == 2 and len(lines) == 1 and names in lines[0], r.stderr
     assert not (tmp_path / "s").exists()
 
 
 def test_the_command_line_says_which_engine_flew(tmp_path: Path) -> None:
-    r = subprocess.run([sys.executable, "-m", "bridge", "sweep", "missions/sine.toml", "--delay", "0,5",
-                        "--out", str(tmp_path / "s"), "--no-plots"], cwd=ROOT, capture_output=True, text=True,
-                       timeout=120)
+    r = run_bsst("sweep", "missions/sine.toml", "--delay", "0,5", "--out", str(tmp_path / "s"), "--no-plots",
+                 cwd=ROOT, timeout=120)
     assert r.returncode == 0, r.stderr
     assert f"engine process (fewer than {BATCH_MIN_CELLS} cells to fly)" in r.stdout
 
@@ -145,10 +142,9 @@ def test_jobs_changes_no_row_of_a_batch_sweep_or_margin(tmp_path: Path) -> None:
     short.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 3.0"))
     outs = {}
     for jobs in (1, 2):
-        r = subprocess.run([sys.executable, "-m", "bridge", "sweep", str(short),
-                            "--delay", "0,6,12", "--loss", "0,20", "--controller", "bsst,pid", "--seeds", "3",
-                            "--engine", "batch", "--jobs", str(jobs), "--out", str(tmp_path / f"s{jobs}"),
-                            "--no-plots"], cwd=ROOT, capture_output=True, text=True, timeout=300)
+        r = run_bsst("sweep", str(short), "--delay", "0,6,12", "--loss", "0,20", "--controller", "bsst,pid",
+                     "--seeds", "3", "--engine", "batch", "--jobs", str(jobs), "--out", str(tmp_path / f"s{jobs}"),
+                     "--no-plots", cwd=ROOT, timeout=300)
         assert r.returncode == 0, r.stderr
         assert "engine batch" in r.stdout, r.stdout
         outs[jobs] = (tmp_path / f"s{jobs}" / CELLS_CSV).read_text()

@@ -25,7 +25,7 @@ from bridge.mavlink.endpoint import GCS_PORT, LINK_PORT
 from bridge.mavlink.receive import MAX_FRAME
 from bridge.nodes.report import Ready, Stats
 from bridge.session import instance_slot
-from tests.sitlkit import ENV, ROOT, MavProxy, Proc
+from tests.sitlkit import ENV, ROOT, MavProxy, Proc, run_bsst
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -325,8 +325,7 @@ def test_mavsdk_finds_reads_arms_disarms(tmp_path):
     (["sitl", "missions/sine.toml", "--realtime", "--speed", "nan"], "--speed"),
 ])
 def test_bad_input_is_one_line_exit_2(args, names):
-    r = subprocess.run([sys.executable, "-m", "bridge", *args], capture_output=True, text=True, cwd=ROOT,
-                       timeout=60)
+    r = run_bsst(*args, cwd=ROOT, timeout=60)
     assert r.returncode == 2, r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and names in r.stderr, r.stderr
     assert "Traceback" not in r.stderr
@@ -336,8 +335,7 @@ def test_port_in_use_is_bad_input(tmp_path):
     with instance_slot() as n:
         v = _vehicle(n, tmp_path)
         try:
-            r = subprocess.run([sys.executable, "-m", "bridge", "vehicle", "--instance", str(n)],
-                               capture_output=True, text=True, timeout=60)
+            r = run_bsst("vehicle", "--instance", str(n), timeout=60)
         finally:
             v.stop()
     assert r.returncode == 2 and "--listen" in r.stderr and "in use" in r.stderr
