@@ -6,8 +6,10 @@ runs until stopped, a ``bsst sim`` of bad input ends at once), and a helper proc
 
 from __future__ import annotations
 
+import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import textwrap
@@ -121,6 +123,24 @@ def test_a_child_ends_with_its_server_and_the_next_child_gets_a_new_server(tmp_p
     again = _relay(tmp_path)
     assert forkserver._the_server() is not server and again.child.poll() is None
     again.close()
+
+
+def test_a_child_ended_and_reaped_before_its_answer_is_read_is_still_the_one_waited_for(tmp_path):
+    """The answer carries the pidfd the server opened as it forked: a child that ends (and is reaped, its pid free
+    for another process) before the owner reads the answer is still the one waited for, never a stranger."""
+    server = forkserver._the_server()
+    out = tmp_path / "version.out"
+    with open(out, "wb") as f, open(os.devnull, "rb") as null, server.lock:  # nobody else reads the answers
+        request = {"id": 0, "argv": ["--version"], "cwd": os.getcwd(), "env": dict(os.environ)}
+        socket.send_fds(server.sock, [json.dumps(request).encode()], [null.fileno(), f.fileno(), f.fileno()])
+        answer = server._until(lambda: server.answers.pop(0, None), 30)
+        pid = answer["pid"]
+        server._until(lambda: pid in server.exits or None, 30)
+    assert not _alive(pid)  # ended and reaped before we looked at the answer
+    child = ForkedChild(server, pid, answer["fds"][0])
+    with pytest.raises(ProcessLookupError):  # the pidfd is that process's: gone, whatever now holds its pid
+        signal.pidfd_send_signal(answer["fds"][0], 0)
+    assert child.wait(5) == 0 and out.read_text().count("bsst") == 1  # run once, not again by exec
 
 
 HOLDER = """

@@ -21,7 +21,9 @@ start theirs from a ready binary.
   when a child ends (``rc`` as ``Popen.returncode``: negative for a signal).
 - Lifetimes: the server exits when its socket closes (the owning process exited, however it ended); each
   child gets SIGTERM when the server goes (``PR_SET_PDEATHSIG``), as an ``exec``'d child does when its
-  launcher dies. Signals go through a pidfd, so a pid reused after its child ended is never signalled.
+  launcher dies. The server opens a pidfd on each child as it forks it and hands it over with its answer: the
+  owner waits and signals through it, so a pid reused after its child ended (a child can end, and be reaped, before
+  the owner reads the answer) is never waited for nor signalled.
 """
 
 from __future__ import annotations
@@ -61,12 +63,12 @@ class ForkedChild:
     """A child forked by the server, with the ``Popen`` calls a session makes. Its exit status comes from the
     server (the child's parent); its exit itself is seen on a pidfd, which also carries the signals."""
 
-    def __init__(self, server: _Server, pid: int) -> None:
+    def __init__(self, server: _Server, pid: int, pidfd: int) -> None:
         self.pid = pid
         self.returncode: int | None = None
         self.args = ["fork", str(pid)]
         self._server = server
-        self._pidfd = os.pidfd_open(pid)
+        self._pidfd = pidfd  # the server's, opened as it forked: this very process, even once reaped
 
     def poll(self) -> int | None:
         return self.wait(0.0, raising=False)
@@ -143,9 +145,11 @@ class _Server:
                 self.gone = True
                 raise ServerGone(f"fork server: {exc}") from exc
             answer = self._until(lambda: self.answers.pop(rid, None), ANSWER_TIMEOUT_S)
-        if "pid" not in answer:
+        if "pid" not in answer or len(answer.get("fds", ())) != 1:
+            for fd in answer.get("fds", ()):
+                os.close(fd)
             raise ServerGone(f"fork server: {answer.get('error', 'no pid')}")
-        return ForkedChild(self, int(answer["pid"]))
+        return ForkedChild(self, int(answer["pid"]), answer["fds"][0])
 
     def exit_status(self, pid: int) -> int:
         """The exit status of ``pid``, which has ended (the server sends it on reaping it, at once); a child
@@ -170,11 +174,12 @@ class _Server:
         return got
 
     def _read_one(self) -> None:
-        data = self.sock.recv(_MAX_MESSAGE)
+        data, fds, _, _ = socket.recv_fds(self.sock, _MAX_MESSAGE, 1)
         if not data:
             self.gone = True
             return
         msg = json.loads(data)
+        msg["fds"] = fds
         if "exit" in msg:
             self.exits[int(msg["exit"])] = int(msg["rc"])
             self.children_cpu_s += float(msg["cpu_s"])
@@ -206,7 +211,7 @@ def forked_cpu_s() -> float:
 def warm() -> None:
     """Start this process's fork server now, so that its imports overlap the caller's own preparation (a
     no-op when children are exec'd)."""
-    if os.environ.get(ENV, "1") != "0":
+    if os.environ.get(ENV, "1") != "0" and hasattr(os, "pidfd_open"):
         try:
             _the_server()
         except OSError:
@@ -220,7 +225,7 @@ def start_child(argv: Sequence[str], stdout: int, stderr: int, *, stdin: int | N
     server, or exec'd if there is none (module docstring)."""
     cwd = os.getcwd() if cwd is None else os.fspath(cwd)
     env = dict(os.environ) if env is None else dict(env)
-    if env.get(ENV, "1") != "0":
+    if env.get(ENV, "1") != "0" and hasattr(os, "pidfd_open"):  # (Linux 5.3+; elsewhere exec'd)
         try:
             with open(os.devnull, "rb") as null:
                 fds = (null.fileno() if stdin is None else stdin, stdout, stderr)
@@ -262,8 +267,9 @@ def serve(fd: int, run: Callable[[list[str]], int]) -> None:
             except OSError as exc:
                 _send(sock, {"id": req["id"], "error": str(exc)})
             else:
-                live[os.pidfd_open(pid)] = pid
-                _send(sock, {"id": req["id"], "pid": pid})
+                pidfd = os.pidfd_open(pid)  # before the child can end and be reaped (only this loop reaps)
+                live[pidfd] = pid
+                _send(sock, {"id": req["id"], "pid": pid}, pidfd)
             finally:
                 for f in fds:
                     os.close(f)
@@ -298,9 +304,9 @@ def show_command_line(words: Sequence[str]) -> None:
     ctypes.memmove(start, title + b"\0" + b" " * (room - len(title) - 1), room)
 
 
-def _send(sock: socket.socket, msg: dict[str, Any]) -> None:
+def _send(sock: socket.socket, msg: dict[str, Any], fd: int | None = None) -> None:
     try:
-        sock.send(json.dumps(msg).encode())
+        socket.send_fds(sock, [json.dumps(msg).encode()], [] if fd is None else [fd])
     except OSError:  # the owner is gone; the loop sees it next
         pass
 
