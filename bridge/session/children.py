@@ -11,6 +11,7 @@ Out: the child's reports (its stdout, read without blocking, each line parsed by
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import fcntl
 import os
@@ -19,6 +20,7 @@ import signal
 import socket
 import subprocess
 import tempfile
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -64,6 +66,11 @@ def ephemeral_low() -> int:
         return 32768
 
 
+RECENT_PORTS = 256  # the choices of free_udp_port a process remembers (a fleet of ten takes ~40)
+_recent: collections.deque[int] = collections.deque(maxlen=RECENT_PORTS)
+_recent_lock = threading.Lock()
+
+
 def free_udp_port() -> int:
     """A UDP port of 127.0.0.1 free now, for a child to bind next: the session names its controller's
     source port to the vehicle before either child starts.
@@ -72,16 +79,24 @@ def free_udp_port() -> int:
     can be handed to any socket bound to port 0 (a ground station's, a test's, another session's) between
     this choice and the child's bind, which a full suite run met ("--source-port 56185: cannot bind (Address
     already in use)"); below it, only another explicit choice can take it. The kernel's choice where the
-    range leaves no room below it."""
+    range leaves no room below it.
+
+    Never one this process handed out in its last :data:`RECENT_PORTS` choices: a port chosen is free until its
+    child binds it, so a second choice in the same session could be the same number (a relay's listen and back
+    ports once were: "cannot bind (Address already in use)", one session in some thousands)."""
     lo = ephemeral_low()
-    for _ in range(64 if lo > CHOSEN_PORTS_LOW else 0):
-        port = random.randrange(CHOSEN_PORTS_LOW, lo)
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-            try:
-                s.bind(("127.0.0.1", port))
-            except OSError:
+    with _recent_lock:  # (a fleet's sessions start in threads)
+        for _ in range(64 if lo > CHOSEN_PORTS_LOW else 0):
+            port = random.randrange(CHOSEN_PORTS_LOW, lo)
+            if port in _recent:
                 continue
-            return port
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+                try:
+                    s.bind(("127.0.0.1", port))
+                except OSError:
+                    continue
+                _recent.append(port)
+                return port
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
