@@ -52,7 +52,7 @@ ENV = "BSST_FORK_SERVER"  # "0": every child exec'd (the fork server never start
 SERVER_MODULE = "bridge.cli.forkserver"
 ANSWER_TIMEOUT_S = 30.0  # s for the server to answer a request: its start-up (imports) included, on a loaded machine
 _MAX_MESSAGE = 1 << 20
-TITLE_ROOM = 4096  # bytes of command line the server reserves (a padding argument) for its children's
+TITLE_ROOM = 4096  # bytes the server's padding argument reserves for its children's command lines
 
 
 class ServerGone(OSError):
@@ -84,8 +84,16 @@ class ForkedChild:
                 raise subprocess.TimeoutExpired(self.args, timeout or 0.0)
             return None
         self.returncode = self._server.exit_status(self.pid)
-        os.close(self._pidfd)
+        self._close()
         return self.returncode
+
+    def _close(self) -> None:
+        if self._pidfd >= 0:
+            os.close(self._pidfd)
+            self._pidfd = -1
+
+    def __del__(self) -> None:  # one never waited for (a caller that gave up on it): its pidfd, not its process
+        self._close()
 
     def send_signal(self, sig: int) -> None:
         if self.poll() is None:
@@ -113,6 +121,9 @@ class _Server:
                 [sys.executable, "-m", SERVER_MODULE, str(theirs.fileno()), " " * TITLE_ROOM],
                 pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                 start_new_session=True)
+        except BaseException:
+            ours.close()
+            raise
         finally:
             theirs.close()
         self.sock = ours
