@@ -28,6 +28,7 @@ from tests.waiting import wait_for
 
 ROOT = Path(__file__).resolve().parent.parent
 ENV = {**os.environ, "MAVLINK20": "1"}
+BSST = [sys.executable, "-m", "bridge"]  # the command line of `bsst` that the forked children show
 R = TypeVar("R")
 
 
@@ -50,7 +51,7 @@ def run_bsst(*args: str | Path, cwd: Path = ROOT, env: dict[str, str] | None = N
             raise
         out.seek(0)
         err.seek(0)
-        return subprocess.CompletedProcess([sys.executable, "-m", "bridge", *argv], rc,
+        return subprocess.CompletedProcess([*BSST, *argv], rc,
                                            out.read().decode(errors="replace"), err.read().decode(errors="replace"))
 
 
@@ -69,7 +70,7 @@ class Proc:
         if bsst:  # forked warm by the fork server, as a session's children are (docs/testing.md)
             read, write = os.pipe()
             try:
-                self.p = start_child(argv[3:], write, write, cwd=str(cwd or os.getcwd()), env=ENV)
+                self.p = start_child(argv[len(BSST):], write, write, cwd=str(cwd or os.getcwd()), env=ENV)
             finally:
                 os.close(write)
             self.fd = read
@@ -86,7 +87,7 @@ class Proc:
     @classmethod
     def bsst(cls, *args: str, cwd: Path | None = None) -> Proc:
         """``bsst ARGS`` (``python -m bridge ARGS``), its stdout and stderr read as one."""
-        return cls([sys.executable, "-m", "bridge", *args], cwd=cwd, bsst=True)
+        return cls([*BSST, *args], cwd=cwd, bsst=True)
 
     def _read(self) -> None:
         while True:

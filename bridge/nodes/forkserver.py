@@ -43,7 +43,7 @@ import threading
 import time
 import traceback
 import types
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from bridge.nodes.process import die_with_parent
@@ -219,10 +219,15 @@ def forked_cpu_s() -> float:
     return sum(s.cpu_s() for s in _servers)
 
 
+def _forking(env: Mapping[str, str]) -> bool:
+    """Whether children are forked: not with ``BSST_FORK_SERVER=0`` in ``env``, nor without pidfds (Linux 5.3+)."""
+    return env.get(ENV, "1") != "0" and hasattr(os, "pidfd_open")
+
+
 def warm() -> None:
     """Start this process's fork server now, so that its imports overlap the caller's own preparation (a
     no-op when children are exec'd)."""
-    if os.environ.get(ENV, "1") != "0" and hasattr(os, "pidfd_open"):
+    if _forking(os.environ):
         try:
             _the_server()
         except OSError:
@@ -236,7 +241,7 @@ def start_child(argv: Sequence[str], stdout: int, stderr: int, *, stdin: int | N
     server, or exec'd if there is none (module docstring)."""
     cwd = os.getcwd() if cwd is None else os.fspath(cwd)
     env = dict(os.environ) if env is None else dict(env)
-    if env.get(ENV, "1") != "0" and hasattr(os, "pidfd_open"):  # (Linux 5.3+; elsewhere exec'd)
+    if _forking(env):
         try:
             with open(os.devnull, "rb") as null:
                 fds = (null.fileno() if stdin is None else stdin, stdout, stderr)
@@ -366,4 +371,4 @@ def _fork(req: dict[str, Any], fds: list[int], run: Callable[[list[str]], int], 
                 stream.flush()
             except (OSError, ValueError):
                 pass
-        os._exit(rc if isinstance(rc, int) else 1)
+        os._exit(rc)
