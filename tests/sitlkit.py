@@ -14,6 +14,7 @@ import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -53,6 +54,74 @@ def run_bsst(*args: str | Path, cwd: Path = ROOT, env: dict[str, str] | None = N
         err.seek(0)
         return subprocess.CompletedProcess([*BSST, *argv], rc,
                                            out.read().decode(errors="replace"), err.read().decode(errors="replace"))
+
+
+class Bsst:
+    """``bsst ARGS`` started and left running, forked warm as :func:`run_bsst`'s: the ``subprocess.Popen`` calls
+    the tests make of it (``pid``, ``poll``, ``wait``, ``send_signal``, ``kill``, ``returncode``,
+    ``communicate``), its stdout and stderr each a text pipe (``stdout``, ``stderr``) or, with ``False``,
+    discarded. It is its own process group (``os.killpg(p.pid, ...)`` reaches its children too)."""
+
+    def __init__(self, *args: str | Path, cwd: Path = ROOT, env: dict[str, str] | None = None,
+                 stdout: bool = True, stderr: bool = True) -> None:
+        self.args = [*BSST, *map(str, args)]
+        ends: list[tuple[int, int] | None] = [os.pipe() if keep else None for keep in (stdout, stderr)]
+        with open(os.devnull, "wb") as null:
+            fds = [null.fileno() if e is None else e[1] for e in ends]
+            try:
+                self.p = start_child(self.args[len(BSST):], fds[0], fds[1], cwd=str(cwd),
+                                     env=ENV if env is None else env)
+            finally:
+                for e in ends:
+                    if e is not None:
+                        os.close(e[1])
+        self.stdout, self.stderr = (None if e is None else open(e[0], encoding="utf-8", errors="replace")
+                                    for e in ends)
+        self.pid = self.p.pid
+
+    @property
+    def returncode(self) -> int | None:
+        return self.p.returncode
+
+    def poll(self) -> int | None:
+        return self.p.poll()
+
+    def wait(self, timeout: float | None = None) -> int:
+        return self.p.wait(timeout)  # type: ignore[return-value]
+
+    def send_signal(self, sig: int) -> None:
+        self.p.send_signal(sig)
+
+    def kill(self) -> None:
+        self.p.kill()
+
+    def communicate(self, timeout: float | None = None) -> tuple[str, str]:
+        """What is left on stdout and stderr (each read to its end by a thread of its own, "" for one
+        discarded) and the exit, within ``timeout`` s (``subprocess.TimeoutExpired`` if not; the reading goes on
+        for the next call)."""
+        deadline = None if timeout is None else time.monotonic() + timeout
+        if not hasattr(self, "_readers"):
+            self._texts: dict[int, str] = {}
+
+            def drain(i: int, f: Any) -> None:
+                self._texts[i] = f.read()
+
+            self._readers = [threading.Thread(target=drain, args=(i, f), daemon=True)
+                             for i, f in enumerate((self.stdout, self.stderr)) if f is not None]
+            for t in self._readers:
+                t.start()
+        for t in self._readers:
+            t.join(None if deadline is None else max(0.0, deadline - time.monotonic()))
+            if t.is_alive():
+                raise subprocess.TimeoutExpired(self.args, timeout or 0.0)
+        try:
+            self.wait(None if deadline is None else max(0.0, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            raise subprocess.TimeoutExpired(self.args, timeout or 0.0) from None
+        for f in (self.stdout, self.stderr):
+            if f is not None:
+                f.close()
+        return self._texts.get(0, ""), self._texts.get(1, "")
 
 
 def shown(e: Event) -> str:

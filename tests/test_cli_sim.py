@@ -14,19 +14,17 @@ import importlib.metadata
 import json
 import os
 import subprocess
-import sys
 import tomllib
 from pathlib import Path
 
 import pytest
 
 from missions import MISSION_DIR, load_mission
-from tests.sitlkit import run_bsst
+from tests.sitlkit import Bsst, run_bsst
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 ROOT = Path(__file__).resolve().parent.parent
-PYTHON = str(ROOT / ".venv" / "bin" / "python") if (ROOT / ".venv" / "bin" / "python").exists() else sys.executable
 
 # docs/design.md, "Files of a run": fixed names (more may follow)
 TRACE_COLUMNS = [
@@ -177,13 +175,9 @@ def test_divergence_exits_1_and_is_recorded(tmp_path: Path) -> None:
 def test_a_reader_that_stops_early_costs_no_traceback_nor_the_exit_status(tmp_path):
     """``bsst sim ... | head -1``: the summary's print meets a closed pipe; the run is on disk and
     the exit status is the run's (0), with nothing on stderr."""
-    import subprocess
-    import sys
-
-    p = subprocess.Popen([sys.executable, "-m", "bridge", "sim", "missions/sine.toml", "--no-plots", "--out",
-                          str(tmp_path / "r")], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    p = Bsst("sim", "missions/sine.toml", "--no-plots", "--out", str(tmp_path / "r"))
     p.stdout.close()  # as head does once it has its lines: every write of the summary meets a closed pipe
-    err = p.stderr.read().decode()
+    err = p.stderr.read()
     assert p.wait(timeout=60) == 0 and "Traceback" not in err and "Exception" not in err, err
     assert (tmp_path / "r" / "summary.json").is_file()
 

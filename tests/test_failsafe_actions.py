@@ -19,7 +19,6 @@ import json
 import os
 import signal
 import subprocess
-import sys
 from collections.abc import Iterator
 from math import cos
 from pathlib import Path
@@ -38,7 +37,7 @@ from bridge.session import instance_slot, sitl
 from bridge.session.children import check_port_free
 from missions import MISSION_DIR, Mission, Setpoint, Sine, Step
 from params import ConfigError, load_toml
-from tests.sitlkit import ENV, ROOT
+from tests.sitlkit import Bsst
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -69,10 +68,8 @@ def _bsst_sitl(out: Path, action: str) -> subprocess.CompletedProcess:
     """``bsst sitl missions/sine.toml --blackout 15:2 --failsafe-action ACTION`` as a real process on
     an instance of its own; on a hang its whole process group (vehicle, controller) is killed."""
     with _free_instance() as n:
-        p = subprocess.Popen([sys.executable, "-m", "bridge", "sitl", str(SINE), "--blackout", "15:2",
-                              "--failsafe-action", action, "--instance", str(n), "--out", str(out), "--no-plots"],
-                             cwd=ROOT, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                             start_new_session=True)
+        p = Bsst("sitl", str(SINE), "--blackout", "15:2", "--failsafe-action", action, "--instance", str(n),
+                 "--out", str(out), "--no-plots")
         try:
             stdout, stderr = p.communicate(timeout=FLIGHT_TIMEOUT_S)
         except subprocess.TimeoutExpired:

@@ -17,7 +17,6 @@ import math
 import os
 import struct
 import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -50,7 +49,7 @@ from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
 from missions import Mission, Sine
 from params import ConfigError
-from tests.sitlkit import ENV, ROOT, Proc, run_bsst
+from tests.sitlkit import ENV, ROOT, Bsst, Proc, run_bsst
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -296,9 +295,8 @@ def test_a_ground_stations_hold_ends_a_lockstep_flight_named(tmp_path):
     with instance_slot() as n:
         gcs = _gcs(n)
         out = tmp_path / "run"
-        s = subprocess.Popen([sys.executable, "-m", "bridge", "sitl", "missions/step.toml", "--instance", str(n),
-                              "--out", str(out), "--no-plots", "--speed", "2"], cwd=ROOT, env=ENV,
-                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        s = Bsst("sitl", "missions/step.toml", "--instance", str(n), "--out", str(out), "--no-plots", "--speed", "2",
+                 stdout=False)
         try:
             gcs.wait_heartbeat(timeout=30)
             _recv(gcs, "LOCAL_POSITION_NED", "LOCAL_POSITION_NED.time_boot_ms >= 3000", timeout=30)
@@ -500,9 +498,8 @@ def test_a_ground_stations_parameter_change_is_recorded_who_what_when_and_ends_r
     out = tmp_path / "run"
     with instance_slot() as n:
         gcs = _gcs(n)
-        s = subprocess.Popen([sys.executable, "-m", "bridge", "sitl", str(mission), "--instance", str(n),
-                              "--blackout", "5:2", "--out", str(out), "--no-plots", "--speed", "1"], cwd=ROOT,
-                             env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        s = Bsst("sitl", str(mission), "--instance", str(n), "--blackout", "5:2", "--out", str(out), "--no-plots",
+                 "--speed", "1")
         try:
             gcs.wait_heartbeat(timeout=30)
             tgt = (gcs.target_system, gcs.target_component)

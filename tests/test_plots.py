@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import os
 import struct
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -33,7 +32,6 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (after the backend is chosen)
 
 ROOT = Path(__file__).resolve().parent.parent
-PYTHON = str(ROOT / ".venv" / "bin" / "python") if (ROOT / ".venv" / "bin" / "python").exists() else sys.executable
 # the paper's explicit step, asked for by name: its u4 alternates every step (the implicit default's does not),
 # which the inputs' close-up must show as it is
 SHORT = Mission(Sine(), duration_s=8.0, name="short", discretization="explicit")

@@ -20,6 +20,7 @@ import pytest
 from bridge.link.model import LinkConfig, LinkSettings
 from bridge.nodes.relay import Relay, parse_address
 from bridge.nodes.report import Ready, parse_line
+from tests.sitlkit import Bsst
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -118,10 +119,8 @@ def test_bsst_relay_process_stops_on_sigterm_and_writes_stats(tmp_path: Path) ->
     target, client = udp(), udp()
     tport = target.getsockname()[1]
     stats = tmp_path / "relay.json"
-    proc = subprocess.Popen([sys.executable, "-m", "bridge", "relay", "--listen", "127.0.0.1:0",
-                             "--to", f"127.0.0.1:{tport}", "--down-delay", "5", "--stats", str(stats)],
-                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    proc = Bsst("relay", "--listen", "127.0.0.1:0", "--to", f"127.0.0.1:{tport}", "--down-delay", "5", "--stats",
+                str(stats), env={**os.environ, "PYTHONUNBUFFERED": "1"})
     try:
         line = proc.stdout.readline()  # the ready report, printed once bound
         ready = parse_line(line)

@@ -28,7 +28,7 @@ from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
 from bridge.session.children import CHOSEN_PORTS_LOW, RECENT_PORTS, ephemeral_low, free_udp_port
 from missions import MISSION_DIR, Mission, Sine
-from tests.sitlkit import ENV, ROOT, csv_rows
+from tests.sitlkit import Bsst, csv_rows
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -128,10 +128,8 @@ def test_realtime_tracks_and_records_its_timing(tmp_path):
     assert np.all(run.trace["state_age_s"][10:] > 0.0)  # the command in force answers an older state
 
 
-def _start_session(tmp_path: Path, n: int, mission: Path = SINE) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "bridge", "sitl", str(mission), "--instance", str(n),
-                             "--out", str(tmp_path / "run"), "--no-plots"], cwd=ROOT, env=ENV,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+def _start_session(tmp_path: Path, n: int, mission: Path = SINE) -> Bsst:
+    return Bsst("sitl", str(mission), "--instance", str(n), "--out", str(tmp_path / "run"), "--no-plots")
 
 
 def _pids(run: Path) -> dict[str, int]:
@@ -144,7 +142,7 @@ def _pids(run: Path) -> dict[str, int]:
     return pids
 
 
-def _interrupted(tmp_path: Path, interrupt) -> tuple[subprocess.Popen, Path, str, str, dict[str, int], float]:
+def _interrupted(tmp_path: Path, interrupt) -> tuple[Bsst, Path, str, str, dict[str, int], float]:
     """Start ``bsst sitl``, let it fly a second, call ``interrupt(launcher, children pids)``;
     return the launcher (exited), its run directory, stdout, stderr, the pids and how long
     the launcher took to exit after the interrupt (s)."""
@@ -266,10 +264,8 @@ def test_a_clean_session_passes_every_policy(tmp_path):
     assert lock.summary["lockstep"] == {"held": True} and "lockstep" not in real.summary
 
 
-def _bsst_sitl(n: int, mission: Path, out: Path, *extra: str) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "bridge", "sitl", str(mission), "--instance", str(n),
-                             "--out", str(out), "--no-plots", *extra], cwd=ROOT, env=ENV,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+def _bsst_sitl(n: int, mission: Path, out: Path, *extra: str) -> Bsst:
+    return Bsst("sitl", str(mission), "--instance", str(n), "--out", str(out), "--no-plots", *extra)
 
 
 def test_a_lockstep_run_that_leaves_lockstep_says_so_and_exits_1(tmp_path):

@@ -18,7 +18,6 @@ import shutil
 import signal
 import stat
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -34,7 +33,7 @@ from bridge.sweep.executors import run_cell
 from bridge.sweep.grid import cells as grid_cells
 from missions import Mission, Sine
 from params import ConfigError, dump_toml
-from tests.sitlkit import run_bsst
+from tests.sitlkit import Bsst, run_bsst
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -118,8 +117,7 @@ def test_fixed_link_flags_apply_to_every_cell(mission_file: Path, tmp_path: Path
 def test_kill_then_resume_flies_only_missing_cells(mission_file: Path, tmp_path: Path, capsys) -> None:
     args = ["sweep", str(mission_file), "--delay", "0,5,10", "--loss", "0,20", "--seeds", "2"]
     killed = tmp_path / "killed"
-    proc = subprocess.Popen([sys.executable, "-m", "bridge", *args, "--jobs", "1", "--out", str(killed)], cwd=ROOT,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    proc = Bsst(*args, "--jobs", "1", "--out", str(killed), stdout=False)
     try:
         sel = selectors.DefaultSelector()
         sel.register(proc.stderr, selectors.EVENT_READ)
@@ -306,9 +304,8 @@ def test_ripple_detects_oscillation_not_slow_motion() -> None:
 
 # -- issue 11: a grid too big to mean, malformed sweep files -------------------------------------------
 def test_a_grid_over_the_cell_cap_is_refused_unless_raised(mission_file: Path, tmp_path: Path, capsys) -> None:
-    big = [sys.executable, "-m", "bridge", "sweep", str(mission_file), "--delay", ",".join(map(str, range(100))),
-           "--loss", ",".join(map(str, range(100))), "--seeds", "100", "--out", str(tmp_path / "big")]
-    r = subprocess.run(big, cwd=ROOT, capture_output=True, text=True, timeout=60)
+    r = run_bsst("sweep", str(mission_file), "--delay", ",".join(map(str, range(100))),
+                 "--loss", ",".join(map(str, range(100))), "--seeds", "100", "--out", str(tmp_path / "big"), timeout=60)
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "Traceback" not in r.stderr, r.stderr
     assert "grid: 1000000 cells (100 delay_ms x 100 loss_pct x 100 seeds), over the cap of 10000" in r.stderr
     assert "--max-cells 1000000" in r.stderr and not (tmp_path / "big").exists()
@@ -433,8 +430,7 @@ def test_malformed_sweep_files_exit_2_with_one_line(small_sweep: tuple[Path, lis
         pass  # a resume refuses these as another sweep's (its identity differs), tested below
     else:
         commands.append([*small_sweep[1], "--out", str(d), "--resume"])
-    procs = [subprocess.Popen([sys.executable, "-m", "bridge", *argv], cwd=ROOT, stdout=subprocess.DEVNULL,
-                              stderr=subprocess.PIPE, text=True) for argv in commands]  # side by side: half the wait
+    procs = [Bsst(*argv, stdout=False) for argv in commands]  # side by side: half the wait
     try:
         for argv, p in zip(commands, procs, strict=True):
             err = p.communicate(timeout=60)[1]
