@@ -20,6 +20,8 @@ import pytest
 from bridge.nodes import forkserver
 from bridge.nodes.forkserver import ENV, ForkedChild, forked_cpu_s, start_child
 from bridge.nodes.report import Ready, parse_line
+from bridge.session.children import instance_slot
+from tests.sitlkit import Bsst
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -178,3 +180,50 @@ def test_without_the_server_a_child_is_execd_and_the_cpu_of_forked_ones_is_count
     assert isinstance(e.child, subprocess.Popen) and e.child.wait(60) == 2
     assert e.err.read_text() == s.err.read_text()  # the same one line either way
     e.close()
+
+
+def _children_of(ppid: int) -> dict[int, str]:
+    """The running processes whose parent is ``ppid``: pid -> command line."""
+    found = {}
+    for entry in os.listdir("/proc"):
+        if entry.isdigit() and _alive(int(entry)):
+            try:
+                with open(f"/proc/{entry}/stat") as f:
+                    parent = int(f.read().rpartition(")")[2].split()[1])
+                with open(f"/proc/{entry}/cmdline", "rb") as f:
+                    line = f.read().rstrip(b"\0").replace(b"\0", b" ").decode(errors="replace")
+            except (OSError, ValueError, IndexError):
+                continue
+            if parent == ppid:
+                found[int(entry)] = line
+    return found
+
+
+def test_a_forked_bsst_forks_its_children_through_the_same_server_and_they_end_with_it(tmp_path):
+    """A ``bsst sitl`` forked by this process's server starts no server of its own: its vehicle and controller
+    are forked by the same one (siblings of it), and when it is killed (SIGKILL: no clean-up of its own), they get
+    SIGTERM from the server, as they would from a server of its own going with it."""
+    server = forkserver._the_server()
+    (tmp_path / "m.toml").write_text('name = "m"\nduration_s = 30.0\n[trajectory]\nkind = "sine"\n')
+    with instance_slot() as n:
+        launcher = Bsst("sitl", "m.toml", "--realtime", "--instance", str(n), "--no-plots", "--out",
+                        str(tmp_path / "run"), cwd=tmp_path, stdout=False)
+        try:
+            def nodes() -> set[int]:
+                return {pid for pid, line in _children_of(server.proc.pid).items()
+                        if f"{sys.executable} -m bridge vehicle " in line
+                        or f"{sys.executable} -m bridge controller " in line}
+
+            wait_for(lambda: len(nodes()) >= 2 or launcher.poll() is not None, 60,
+                     "the vehicle and the controller started")
+            assert launcher.poll() is None, launcher.communicate(10)[1]
+            kids = nodes()
+            assert len(kids) == 2 and launcher.pid in _children_of(server.proc.pid), kids
+            assert _children_of(launcher.pid) == {}  # no server of its own, no child of its own
+            launcher.kill()
+            wait_for(lambda: not any(_alive(p) for p in kids), 30, "the killed launcher's children gone")
+            assert launcher.wait(30) == -signal.SIGKILL
+        finally:
+            if launcher.poll() is None:
+                launcher.kill()
+                launcher.wait(30)

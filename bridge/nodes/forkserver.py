@@ -19,11 +19,14 @@ start theirs from a ready binary.
   pair: a request is one JSON message (``id``, ``argv``, ``cwd``, ``env``) carrying the three descriptors
   (``SCM_RIGHTS``); it answers ``{"id", "pid"}`` (or ``{"id", "error"}``), and ``{"exit": pid, "rc": rc}``
   when a child ends (``rc`` as ``Popen.returncode``: negative for a signal).
-- Lifetimes: the server exits when its socket closes (the owning process exited, however it ended); each
+- Each child is given a connection of its own to the server that forked it: a child that starts children
+  (a ``bsst sitl`` started warm) forks them there too, instead of starting (and importing) a server of its own.
+- Lifetimes: the server exits when its owner's socket closes (the owning process exited, however it ended); each
   child gets SIGTERM when the server goes (``PR_SET_PDEATHSIG``), as an ``exec``'d child does when its
-  launcher dies. The server opens a pidfd on each child as it forks it and hands it over with its answer: the
-  owner waits and signals through it, so a pid reused after its child ended (a child can end, and be reaped, before
-  the owner reads the answer) is never waited for nor signalled.
+  launcher dies; when a child's own connection closes, the children forked for it get SIGTERM. The server
+  opens a pidfd on each child as it forks it and hands it over with its answer: the owner waits and signals
+  through it, so a pid reused after its child ended (a child can end, and be reaped, before the owner reads
+  the answer) is never waited for nor signalled.
 """
 
 from __future__ import annotations
@@ -113,11 +116,23 @@ class _Server:
     """This process's end of one fork server: requests out, answers and exit statuses in, under one lock
     (a fleet's sessions start their children from threads)."""
 
-    def __init__(self) -> None:
-        ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+    def __init__(self, sock: socket.socket, proc: subprocess.Popen[bytes] | None) -> None:
+        self.sock = sock
+        self.proc = proc  # None: the server this process was forked by (we are one of its clients)
         self.owner = os.getpid()
+        self.lock = threading.Lock()
+        self.next_id = 0
+        self.answers: dict[int, dict[str, Any]] = {}
+        self.exits: dict[int, int] = {}
+        self.children_cpu_s = 0.0  # s, user + system, of the children that have ended and been heard of
+        self.gone = False
+
+    @classmethod
+    def start(cls) -> _Server:
+        """A server process of this process's own."""
+        ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
         try:
-            self.proc = subprocess.Popen(
+            proc = subprocess.Popen(
                 [sys.executable, "-m", SERVER_MODULE, str(theirs.fileno()), " " * TITLE_ROOM],
                 pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                 start_new_session=True)
@@ -126,22 +141,22 @@ class _Server:
             raise
         finally:
             theirs.close()
-        self.sock = ours
-        self.lock = threading.Lock()
-        self.next_id = 0
-        self.answers: dict[int, dict[str, Any]] = {}
-        self.exits: dict[int, int] = {}
-        self.children_cpu_s = 0.0  # s, user + system, of the children that have ended and been heard of
-        self.gone = False
+        return cls(ours, proc)
+
+    def alive(self) -> bool:
+        return not self.gone and self.owner == os.getpid() and (self.proc is None or self.proc.poll() is None)
 
     def cpu_s(self) -> float:
-        """CPU seconds (user + system) of the server itself (its imports) and of its children heard to have ended."""
+        """CPU seconds (user + system) of the server itself (its imports; not counted for a server this process
+        shares with the one that forked it) and of the children it forked for us heard to have ended."""
+        own = 0.0
         try:
-            with open(f"/proc/{self.proc.pid}/stat") as f:
-                fields = f.read().rpartition(")")[2].split()
-            own = (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime, stime (proc(5))
+            if self.proc is not None:
+                with open(f"/proc/{self.proc.pid}/stat") as f:
+                    fields = f.read().rpartition(")")[2].split()
+                own = (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime, stime (proc(5))
         except (OSError, IndexError, ValueError):
-            own = 0.0
+            pass
         with self.lock:
             return own + self.children_cpu_s
 
@@ -199,16 +214,23 @@ class _Server:
 
 
 _server: _Server | None = None
-_servers: list[_Server] = []  # every one this process started (their CPU time: forked_cpu_s)
+_servers: list[_Server] = []  # every one this process used (their CPU time: forked_cpu_s)
 _server_lock = threading.Lock()
+_inherited: tuple[int, int] | None = None  # (pid, fd): a forked child's own connection to the server that forked it
 
 
 def _the_server() -> _Server:
-    """This process's fork server, started on first use (again if it died, or in a forked copy of the owner)."""
-    global _server
+    """This process's fork server: in a child forked by one, that same server (over the connection it was
+    forked with); otherwise one of its own, started on first use (again if it died, or in a forked copy of
+    the owner)."""
+    global _server, _inherited
     with _server_lock:
-        if _server is None or _server.gone or _server.owner != os.getpid() or _server.proc.poll() is not None:
-            _server = _Server()
+        if _server is None or not _server.alive():
+            if _inherited is not None and _inherited[0] == os.getpid():
+                _server = _Server(socket.socket(fileno=_inherited[1]), None)
+            else:
+                _server = _Server.start()
+            _inherited = None  # used once: if it fails, a server of our own
             _servers.append(_server)
         return _server
 
@@ -256,39 +278,79 @@ def start_child(argv: Sequence[str], stdout: int, stderr: int, *, stdin: int | N
 # -- the server ------------------------------------------------------------------------------------------------------
 def serve(fd: int, run: Callable[[list[str]], int]) -> None:
     """Serve fork requests on the socket ``fd`` until it closes; each child runs ``run(argv)`` (the CLI's main)
-    and exits with its status. The modules a child needs are imported by the caller first."""
-    sock = socket.socket(fileno=fd)
+    and exits with its status. The modules a child needs are imported by the caller first.
+
+    Each child is also given a connection of its own to this server, which becomes a client like the owner: a
+    ``bsst sitl`` forked here forks its vehicle and controller here too, instead of starting a server of its
+    own. When a client's connection closes (it ended, however), the children forked for it get SIGTERM, as
+    they would from PR_SET_PDEATHSIG when a server of the client's own went with it."""
+    root = socket.socket(fileno=fd)
+    clients: dict[int, socket.socket] = {fd: root}
+    live: dict[int, tuple[int, socket.socket | None]] = {}  # pidfd -> (pid, the client it was forked for)
     gc.collect()
     gc.freeze()  # what is here now is shared with every child, never collected (nor copied) in one
-    live: dict[int, int] = {}  # pidfd -> pid
     while True:
-        ready, _, _ = select.select([sock.fileno(), *live], [], [])
+        ready, _, _ = select.select([*clients, *live], [], [])
         for r in ready:
-            if r != sock.fileno():
-                pid = live.pop(r)
-                os.close(r)
-                _, status, usage = os.wait4(pid, 0)
-                _send(sock, {"exit": pid, "rc": os.waitstatus_to_exitcode(status),
-                             "cpu_s": usage.ru_utime + usage.ru_stime})
+            if r in live:
+                _reap(r, live.pop(r))
                 continue
+            sock = clients.get(r)
+            if sock is None:
+                continue  # dropped this round
             try:
                 data, fds, _, _ = socket.recv_fds(sock, _MAX_MESSAGE, 3)
             except ConnectionError:
-                data = b""
+                data, fds = b"", []
             if not data:
-                return  # the owner is gone: so are we, and our children with us (PR_SET_PDEATHSIG)
-            req = json.loads(data)
+                if sock is root:
+                    return  # the owner is gone: so are we, and our children with us (PR_SET_PDEATHSIG)
+                _drop(clients.pop(r), live)
+                continue
             try:
-                pid = _fork(req, fds, run, [sock.fileno(), *live])
-            except OSError as exc:
-                _send(sock, {"id": req["id"], "error": str(exc)})
-            else:
-                pidfd = os.pidfd_open(pid)  # before the child can end and be reaped (only this loop reaps)
-                live[pidfd] = pid
-                _send(sock, {"id": req["id"], "pid": pid}, pidfd)
+                _answer(json.loads(data), fds, sock, run, clients, live)
             finally:
                 for f in fds:
                     os.close(f)
+
+
+def _answer(req: dict[str, Any], fds: list[int], sock: socket.socket, run: Callable[[list[str]], int],
+            clients: dict[int, socket.socket], live: dict[int, tuple[int, socket.socket | None]]) -> None:
+    """Fork the child ``req`` asks ``sock``'s client for, with a connection of its own; answer its pid and pidfd."""
+    ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+    try:
+        pid = _fork(req, fds, run, [*clients, *live, ours.fileno()], theirs.fileno())
+    except OSError as exc:
+        ours.close()
+        _send(sock, {"id": req["id"], "error": str(exc)})
+        return
+    finally:
+        theirs.close()
+    pidfd = os.pidfd_open(pid)  # before the child can end and be reaped (only this loop reaps)
+    clients[ours.fileno()] = ours
+    live[pidfd] = (pid, sock)
+    _send(sock, {"id": req["id"], "pid": pid}, pidfd)
+
+
+def _reap(pidfd: int, child: tuple[int, socket.socket | None]) -> None:
+    """A child has ended: reap it, tell the client it was forked for (if still connected) its status and CPU."""
+    pid, client = child
+    os.close(pidfd)
+    _, status, usage = os.wait4(pid, 0)
+    if client is not None:
+        _send(client, {"exit": pid, "rc": os.waitstatus_to_exitcode(status), "cpu_s": usage.ru_utime + usage.ru_stime})
+
+
+def _drop(client: socket.socket, live: dict[int, tuple[int, socket.socket | None]]) -> None:
+    """A client's connection closed: SIGTERM the children forked for it (reaped as they end, told to no one)."""
+    for pidfd, (pid, owner) in list(live.items()):
+        if owner is client:
+            live[pidfd] = (pid, None)
+            try:
+                signal.pidfd_send_signal(pidfd, signal.SIGTERM)
+            except ProcessLookupError:
+                pass
+    client.close()
 
 
 def _as_python_m_bridge() -> None:
@@ -327,7 +389,11 @@ def _send(sock: socket.socket, msg: dict[str, Any], fd: int | None = None) -> No
         pass
 
 
-def _fork(req: dict[str, Any], fds: list[int], run: Callable[[list[str]], int], close: list[int]) -> int:
+def _fork(req: dict[str, Any], fds: list[int], run: Callable[[list[str]], int], close: list[int],
+          connection: int) -> int:
+    """Fork the child: it closes the server's descriptors ``close``, keeps ``connection`` (its own to the
+    server, :func:`_the_server`), takes ``fds`` as stdin, stdout and stderr, and runs ``run(argv)``."""
+    global _inherited
     if len(fds) != 3:
         raise OSError(f"a request carries stdin, stdout and stderr: {len(fds)} descriptors given")
     pid = os.fork()
@@ -339,6 +405,7 @@ def _fork(req: dict[str, Any], fds: list[int], run: Callable[[list[str]], int], 
         die_with_parent()
         for f in close:
             os.close(f)
+        _inherited = (os.getpid(), connection)
         for target, f in enumerate(fds):
             os.dup2(f, target)
             os.close(f)
