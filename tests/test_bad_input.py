@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import os
 import signal
 import socket
@@ -174,7 +175,9 @@ POSITIONAL_BAD = {  # command -> bad values of its positional argument
 }
 
 
+@functools.cache
 def _commands() -> dict[str, argparse.ArgumentParser]:
+    """Each command's parser, of one parser built once (read, never changed, by the tests)."""
     parser = build_parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     return dict(sub.choices)
