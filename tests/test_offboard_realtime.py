@@ -138,11 +138,13 @@ class Flown:
     timesync_asked: list[float]  # wall time of each TIMESYNC request, s from the first target (< 0: before it)
 
 
-def fly(tmp: Path, timesync_skew_s: float = 0.0, spoofs: dict[int, int] | None = None) -> Flown:
+def fly(tmp: Path, timesync_skew_s: float = 0.0, spoofs: dict[int, int] | None = None, bunched: bool = False) -> Flown:
     """One real-time flight of ``bsst controller`` against the scripted vehicle: state k
     carries time k / RATE on the vehicle's clock and leaves WAY_DOWN_S after it (LATE_S
     later still for the steps in LATE, never for those in DROPPED). ``spoofs``: after the
-    state of step i, another one stamped ``spoofs[i]`` us, from the vehicle's own socket."""
+    state of step i, another one stamped ``spoofs[i]`` us, from the vehicle's own socket.
+    ``bunched``: the state of step 6 leaves at step 5's time (step 5's lost), so that it comes within the
+    mission's first tick, as states bunched by a busy machine's scheduling do."""
     (tmp / "late.toml").write_text(MISSION)
     v = ScriptedVehicle(timesync_skew_s)
     sent_late: dict[int, float] = {}
@@ -168,6 +170,8 @@ def fly(tmp: Path, timesync_skew_s: float = 0.0, spoofs: dict[int, int] | None =
                 sent_late[i] = time.monotonic() - due
             if spoofs and i in spoofs:
                 v.odometry(k, spoofs[i])
+            if bunched and i == min(DROPPED):
+                v.odometry(k + 1)
             if k % 5 == 0:
                 v.heartbeat()
             k += 1
@@ -253,6 +257,19 @@ def test_the_mission_starts_with_its_first_state(flown: Flown) -> None:
     head = rows[0].split(",")
     first = dict(zip(head, map(float, rows[1].split(","))))
     assert first["t"] == pytest.approx(first["state_age_s"], abs=1e-9), first
+
+
+def test_a_later_state_in_the_first_tick_starts_the_mission_answered_at_once(tmp_path: Path) -> None:
+    """The mission's first state lost and the next one come within the first tick (states bunched, as on a busy
+    machine): the mission starts with that state and its first row answers it at once. (It once kept the lost
+    state's time 0, so the state that came was a step in the future: its first row sent no target, and the
+    vehicle's timeline, whose time 0 is the state its first target answers, ran a step behind the trace's.)"""
+    f = fly(tmp_path, bunched=True)
+    rows = (f.run / "controller.csv").read_text().splitlines()
+    first = dict(zip(rows[0].split(","), map(float, rows[1].split(","))))
+    assert first["state_age_s"] == first["state_age_s"], first  # a target sent: the row has its state's age
+    assert first["t"] == pytest.approx(first["state_age_s"], abs=1e-9), first  # at the mission's time 0
+    assert min(f.targets) == min(DROPPED) + 1, sorted(f.targets)[:3]  # the state that came, answered
 
 
 def test_an_arm_whose_answers_are_lost_is_repeated_before_the_failsafe(flown: Flown) -> None:

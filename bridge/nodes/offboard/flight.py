@@ -258,11 +258,13 @@ class Offboard(OffboardLink):
             else:
                 self._odo = None
                 k = step_of_usec(odo.time_usec, rate)
-                if last_k < k0 and j:
-                    # the first state of the mission came after the first tick (the earlier
-                    # ones were lost): the mission starts with it, as the trace does
+                if last_k < k0 and (j or k != k0):
+                    # the first state of the mission is not the first tick's (the earlier ones were lost, or
+                    # a later one came with it, as states bunched on a busy machine do): the mission starts
+                    # with it, as the trace and the vehicle's timeline do (their time 0 is the state the
+                    # first target answers), its tick where its state was due (phase + k / rate)
+                    self.schedule = clock = FixedRate(due + (k - k0 - j) * period, rate, clock.skipped)
                     k0, j = k, 0
-                    self.schedule = clock = FixedRate(due, rate, clock.skipped)
                 if k - k0 >= steps:
                     return self._end_of_mission((k - k0) / rate, odo)
                 usec, recv = odo.time_usec, self._odo_recv
