@@ -1,7 +1,7 @@
 # Two entry points, both creating or reusing .venv with nothing but Python 3.11+:
 #   make demo   fly the default mission (the paper's sine scenario) end to end
 #   make test   run the test suite
-#   make test-fast  the pure tests only (no processes, no sockets): under a minute (48-59 s on the 2-core VM)
+#   make test-fast  the pure tests only (no processes, no sockets): 48-59 s on the 2-core VM, 70-83 s in its slow hours
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
