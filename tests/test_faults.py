@@ -6,10 +6,12 @@ Motor faults, sensor faults, weather changes; honest outcomes (crashed, diverged
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import pytest
 
 from bridge import simulate
+from missions import load_mission
 from params import ConfigError
 from plant import Quadrotor, load_profile
 from plant.events import event_table_from_flag
@@ -70,11 +72,12 @@ def test_events_that_cannot_act_on_this_flight_are_refused() -> None:
 
 
 def test_a_full_rotor_changes_nothing_and_a_weak_one_is_logged_and_reproducible() -> None:
-    still = simulate("missions/sine.toml", profile="x500")
-    same = simulate("missions/sine.toml", profile="x500", at=("10:motor:2=1",))
+    first = replace(load_mission("missions/sine.toml"), duration_s=15.0)  # the sine's first 15 s: 5 s after it
+    still = simulate(first, profile="x500")
+    same = simulate(first, profile="x500", at=("10:motor:2=1",))
     assert same.rms == still.rms
-    weak = simulate("missions/sine.toml", profile="x500", at=("10:motor:1=0.9",))
-    again = simulate("missions/sine.toml", profile="x500", at=("10:motor:1=0.9",))
+    weak = simulate(first, profile="x500", at=("10:motor:1=0.9",))
+    again = simulate(first, profile="x500", at=("10:motor:1=0.9",))
     assert weak.rms == again.rms and weak.rms != still.rms
     assert {"t": 10.0, "kind": "fault", "text": "motor 1: 0.9 of its thrust"} in weak.summary["events"]
 
