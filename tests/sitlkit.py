@@ -18,7 +18,7 @@ import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, Literal, TypeVar
 
 from pymavlink.dialects.v20 import common as mavlink
 
@@ -38,45 +38,42 @@ def run_bsst(*args: str | Path, cwd: Path = ROOT, env: dict[str, str] | None = N
     """``bsst ARGS`` (``python -m bridge ARGS``) run to its end in ``cwd``, as ``subprocess.run(...,
     capture_output=True, text=True)`` gives it; forked warm by the fork server, as a session's children are
     (docs/testing.md). ``input``: its stdin (default: empty)."""
-    argv = [str(a) for a in args]
-    with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err, tempfile.TemporaryFile() as given:
-        given.write((input or "").encode())
-        given.seek(0)
-        child = start_child(argv, out.fileno(), err.fileno(), stdin=given.fileno(), cwd=str(cwd),
-                            env=env)
-        try:
-            rc = child.wait(timeout)
-        except subprocess.TimeoutExpired:
-            child.kill()
-            child.wait()
-            raise
-        out.seek(0)
-        err.seek(0)
-        return subprocess.CompletedProcess([*BSST, *argv], rc,
-                                           out.read().decode(errors="replace"), err.read().decode(errors="replace"))
+    p = Bsst(*args, cwd=cwd, env=env, input=input)
+    try:
+        out, err = p.communicate(timeout)
+    except subprocess.TimeoutExpired:
+        p.kill()
+        p.wait()
+        raise
+    return subprocess.CompletedProcess(p.args, p.returncode, out, err)
 
 
 class Bsst:
-    """``bsst ARGS`` started and left running, forked warm as :func:`run_bsst`'s: the ``subprocess.Popen`` calls
+    """``bsst ARGS`` started and left running, forked warm by the fork server: the ``subprocess.Popen`` calls
     the tests make of it (``pid``, ``poll``, ``wait``, ``send_signal``, ``kill``, ``returncode``,
-    ``communicate``), its stdout and stderr each a text pipe (``stdout``, ``stderr``) or, with ``False``,
-    discarded. It is its own process group (``os.killpg(p.pid, ...)`` reaches its children too)."""
+    ``communicate``), its stdout and stderr each a text pipe (``stdout``, ``stderr``), discarded (``False``), or
+    stderr into stdout's pipe (``stderr="stdout"``, as ``subprocess.STDOUT``); ``env``: this process's environment
+    unless given; ``input``: its stdin (default: empty). It is its own process group (``os.killpg(p.pid, ...)``)."""
 
     def __init__(self, *args: str | Path, cwd: Path = ROOT, env: dict[str, str] | None = None,
-                 stdout: bool = True, stderr: bool = True) -> None:
+                 stdout: bool = True, stderr: bool | Literal["stdout"] = True, input: str | None = None) -> None:
         self.args = [*BSST, *map(str, args)]
-        ends: list[tuple[int, int] | None] = [os.pipe() if keep else None for keep in (stdout, stderr)]
-        with open(os.devnull, "wb") as null:
-            fds = [null.fileno() if e is None else e[1] for e in ends]
+        out = os.pipe() if stdout else None
+        err = os.pipe() if stderr is True else None
+        with open(os.devnull, "wb") as null, tempfile.TemporaryFile() as given:
+            given.write((input or "").encode())
+            given.seek(0)
+            out_fd = null.fileno() if out is None else out[1]
+            err_fd = out_fd if stderr == "stdout" else null.fileno() if err is None else err[1]
             try:
-                self.p = start_child(self.args[len(BSST):], fds[0], fds[1], cwd=str(cwd),
-                                     env=ENV if env is None else env)
+                self.p = start_child(self.args[len(BSST):], out_fd, err_fd, stdin=given.fileno(), cwd=str(cwd),
+                                     env=env)
             finally:
-                for e in ends:
+                for e in (out, err):
                     if e is not None:
                         os.close(e[1])
         self.stdout, self.stderr = (None if e is None else open(e[0], encoding="utf-8", errors="replace")
-                                    for e in ends)
+                                    for e in (out, err))
         self.pid = self.p.pid
 
     @property
@@ -137,12 +134,10 @@ class Proc:
         self.argv = argv
         self.p: subprocess.Popen[bytes] | ForkedChild
         if bsst:  # forked warm by the fork server, as a session's children are (docs/testing.md)
-            read, write = os.pipe()
-            try:
-                self.p = start_child(argv[len(BSST):], write, write, cwd=str(cwd or os.getcwd()), env=ENV)
-            finally:
-                os.close(write)
-            self.fd = read
+            forked = Bsst(*argv[len(BSST):], cwd=cwd or Path.cwd(), env=ENV, stderr="stdout")
+            self.p = forked.p
+            self._out = forked.stdout  # (held: closing it would close the pipe)
+            self.fd = forked.stdout.fileno()  # type: ignore[union-attr]
         else:
             # its own session (a test signals its group), and SIGTERM if the test process dies: a bare vehicle
             # runs until stopped, so one left by a killed pytest would hold its instance's ports for the next run

@@ -37,7 +37,7 @@ from bridge.session import instance_slot, sitl
 from bridge.session.children import check_port_free
 from missions import MISSION_DIR, Mission, Setpoint, Sine, Step
 from params import ConfigError, load_toml
-from tests.sitlkit import Bsst
+from tests.sitlkit import ENV, Bsst
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -69,7 +69,7 @@ def _bsst_sitl(out: Path, action: str) -> subprocess.CompletedProcess:
     an instance of its own; on a hang its whole process group (vehicle, controller) is killed."""
     with _free_instance() as n:
         p = Bsst("sitl", str(SINE), "--blackout", "15:2", "--failsafe-action", action, "--instance", str(n),
-                 "--out", str(out), "--no-plots")
+                 "--out", str(out), "--no-plots", env=ENV)
         try:
             stdout, stderr = p.communicate(timeout=FLIGHT_TIMEOUT_S)
         except subprocess.TimeoutExpired:

@@ -296,7 +296,7 @@ def test_a_ground_stations_hold_ends_a_lockstep_flight_named(tmp_path):
         gcs = _gcs(n)
         out = tmp_path / "run"
         s = Bsst("sitl", "missions/step.toml", "--instance", str(n), "--out", str(out), "--no-plots", "--speed", "2",
-                 stdout=False)
+                 env=ENV, stdout=False)
         try:
             gcs.wait_heartbeat(timeout=30)
             _recv(gcs, "LOCAL_POSITION_NED", "LOCAL_POSITION_NED.time_boot_ms >= 3000", timeout=30)
@@ -499,7 +499,7 @@ def test_a_ground_stations_parameter_change_is_recorded_who_what_when_and_ends_r
     with instance_slot() as n:
         gcs = _gcs(n)
         s = Bsst("sitl", str(mission), "--instance", str(n), "--blackout", "5:2", "--out", str(out), "--no-plots",
-                 "--speed", "1")
+                 "--speed", "1", env=ENV)
         try:
             gcs.wait_heartbeat(timeout=30)
             tgt = (gcs.target_system, gcs.target_component)

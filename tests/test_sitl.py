@@ -28,7 +28,7 @@ from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
 from bridge.session.children import CHOSEN_PORTS_LOW, RECENT_PORTS, ephemeral_low, free_udp_port
 from missions import MISSION_DIR, Mission, Sine
-from tests.sitlkit import Bsst, csv_rows
+from tests.sitlkit import ENV, Bsst, csv_rows
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -129,7 +129,7 @@ def test_realtime_tracks_and_records_its_timing(tmp_path):
 
 
 def _start_session(tmp_path: Path, n: int, mission: Path = SINE) -> Bsst:
-    return Bsst("sitl", str(mission), "--instance", str(n), "--out", str(tmp_path / "run"), "--no-plots")
+    return Bsst("sitl", str(mission), "--instance", str(n), "--out", str(tmp_path / "run"), "--no-plots", env=ENV)
 
 
 def _pids(run: Path) -> dict[str, int]:
@@ -265,7 +265,7 @@ def test_a_clean_session_passes_every_policy(tmp_path):
 
 
 def _bsst_sitl(n: int, mission: Path, out: Path, *extra: str) -> Bsst:
-    return Bsst("sitl", str(mission), "--instance", str(n), "--out", str(out), "--no-plots", *extra)
+    return Bsst("sitl", str(mission), "--instance", str(n), "--out", str(out), "--no-plots", *extra, env=ENV)
 
 
 def test_a_lockstep_run_that_leaves_lockstep_says_so_and_exits_1(tmp_path):
