@@ -231,3 +231,52 @@ def test_relay_mission_clock_starts_blackouts_at_the_first_target() -> None:
     finally:
         target.close()
         client.close()
+
+
+def test_relay_mission_clock_counts_from_the_state_the_first_target_answers() -> None:
+    """The flight's time 0 is when the vehicle sent the state the first target answers (its ODOMETRY's
+    ``time_usec``), however long the controller took to answer: a first answer held up (a loaded machine)
+    put every blackout that much late, and the suite under load once saw a failsafe at 3.612 s where 3.5 was
+    due. A target answering a state the relay never saw falls back to its own arrival less the down delay."""
+    import socket
+    import time
+
+    from pymavlink.dialects.v20 import common as mavlink
+
+    from bridge.link.model import LinkConfig, LinkSettings
+    from bridge.nodes.relay import Relay
+    from tests.waiting import wait_for
+
+    held_s = 0.3
+    nan21 = [float("nan")] * 21
+    for seen in (True, False):
+        vehicle = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        vehicle.bind(("127.0.0.1", 0))
+        client = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            with Relay(("127.0.0.1", 0), vehicle.getsockname(), LinkSettings(LinkConfig(), LinkConfig(delay_ms=5.0)),
+                       mission_clock=True) as relay:
+                relay.start()
+                mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+                client.sendto(mavlink.MAVLink_heartbeat_message(18, 8, 0, 0, 4, 3).pack(mav), relay.address)
+                wait_for(lambda: relay.client is not None, 10.0, "the controller side learned")
+                stamp = 4_000_000
+                odo = mavlink.MAVLink_odometry_message(stamp, 1, 8, 1.0, 2.0, -3.0, [1.0, 0.0, 0.0, 0.0], 0.1, 0.2,
+                                                       0.3, 0.0, 0.0, 0.0, nan21, nan21)
+                sent_at = relay.clock() - relay.t0
+                vehicle.sendto(odo.pack(mav), relay.back_address)
+                wait_for(lambda: relay.links["down"].stats.sent == 1, 10.0, "the state into the down link")
+                while relay.clock() - relay.t0 < sent_at + held_s:  # the controller's answer, held up
+                    time.sleep(0.01)
+                target_at = relay.clock() - relay.t0
+                answered = stamp if seen else stamp + 4000
+                client.sendto(mavlink.MAVLink_hil_actuator_controls_message(answered, [0.5] * 16, 128, 0).pack(mav),
+                              relay.address)
+                wait_for(lambda: relay.origin_s is not None, 10.0, "the flight's time 0")
+                if seen:
+                    assert sent_at <= relay.origin_s < sent_at + 0.1, (sent_at, relay.origin_s)
+                else:
+                    assert relay.origin_s >= target_at - 0.005, (target_at, relay.origin_s)
+        finally:
+            vehicle.close()
+            client.close()

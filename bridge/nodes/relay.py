@@ -21,9 +21,10 @@ the names) and leave from the back socket to the target; whatever the target sen
 to the back socket travels the other way, to the client. Each
 direction has its own :class:`bridge.link.model.LinkImpairment`, driven with the seconds since
 the relay started (so blackouts are in relay time; with ``mission_clock`` they are in the
-flight's time instead: t = 0 is put at the first actuator target that arrives on the
-listen side, less the down link's configured delay, i.e. when the vehicle sent the state
-that target answers, as ``bsst sitl --realtime`` counts mission time). Datagrams pass unchanged; the relay
+flight's time instead: t = 0 is when the vehicle sent the state the first actuator target that
+arrives on the listen side answers, as ``bsst sitl --realtime`` counts mission time: the arrival of
+the ``ODOMETRY`` with the target's ``time_usec``, or, if the relay never saw that state, the
+target's arrival less the down link's configured delay). Datagrams pass unchanged; the relay
 stamps each one on arrival — with the kernel's receive time stamp (``SO_TIMESTAMPNS``) on
 Linux, so that the relay's own wake-up latency counts — and measures, when it hands it to
 the kernel to forward it, the delay it really added (scheduled delay + the relay's own
@@ -80,6 +81,8 @@ STATS_EVERY_S = 0.5  # s between snapshots of the statistics on disk (stats_path
 # actuator targets (docs/design.md, "The MAVLink contract"): the first one up marks the flight's time 0
 _TARGET_IDS = frozenset((mavlink.MAVLINK_MSG_ID_HIL_ACTUATOR_CONTROLS,
                          mavlink.MAVLINK_MSG_ID_SET_ACTUATOR_CONTROL_TARGET))
+_STATE_IDS = frozenset((mavlink.MAVLINK_MSG_ID_ODOMETRY,))  # the vehicle's state: its stamp is what a target answers
+STATES_KEPT = 4096  # states' arrivals kept while the flight's time 0 is not known (16 s at 250 Hz)
 
 
 def parse_address(text: str, flag: str, bind: bool = False) -> Address:
@@ -125,6 +128,7 @@ class Relay:
         link = link or LinkSettings()
         self.mission_clock = mission_clock
         self.origin_s: float | None = None  # relay time (s) of the flight's time 0 (mission_clock)
+        self.states_seen: dict[int, float] = {}  # until the origin: a state's time_usec -> relay time of its arrival
         # a fleet's one radio (real time): (its file, this vehicle's user number), each direction's queue shared
         self.radios = {d: ProcessRadio(radio[0], d, cfg.rate_bps, cfg.queue_ms / 1000.0, radio[1])
                        for d, cfg in (("up", link.up), ("down", link.down))} if radio is not None else {}
@@ -239,8 +243,8 @@ class Relay:
                     lag = (wall_ns - sec * 1_000_000_000 - nsec) * 1e-9
                     if 0.0 < lag < 1.0:
                         now -= lag
-            if from_front and self.mission_clock and self.origin_s is None and _is_target(data):
-                self._set_origin(now - t0)
+            if self.mission_clock and self.origin_s is None:
+                self._look_for_origin(data, from_front, now - t0)
             link.send(now - t0, len(data), (data, now))
 
     def _learn_client(self, addr: Address) -> None:
@@ -249,12 +253,31 @@ class Relay:
         if self.on_client is not None:
             self.on_client(addr)
 
+    def _look_for_origin(self, data: bytes, from_front: bool, t: float) -> None:
+        """Before the flight's time 0 is known: keep when each state came from the vehicle (relay time t, s), and
+        at the first actuator target from the controller put time 0 where the state it answers came, as the
+        vehicle's own timeline does. A target answering a state the relay did not see (not from this flight)
+        puts it at its own arrival less the down link's configured delay: a first answer held up (a loaded
+        machine's controller) would put it late by that much, and every blackout with it."""
+        if not from_front:
+            stamp = _stamp(data, _STATE_IDS)
+            if stamp is not None:
+                if len(self.states_seen) >= STATES_KEPT:
+                    self.states_seen.pop(next(iter(self.states_seen)))
+                self.states_seen.setdefault(stamp, t)
+            return
+        stamp = _stamp(data, _TARGET_IDS)
+        if stamp is None:
+            return
+        sent = self.states_seen.get(stamp)
+        self._set_origin(sent if sent is not None else t - self.links["down"].cfg.delay_ms / 1000.0)
+        self.states_seen.clear()
+
     def _set_origin(self, t: float) -> None:
-        """The first actuator target arrived at relay time t (s): the flight's time 0 is when
-        the state it answers left the vehicle, t less the down link's configured delay."""
-        self.origin_s = t - self.links["down"].cfg.delay_ms / 1000.0
+        """The flight's time 0 is at relay time t (s): the blackouts count from there."""
+        self.origin_s = t
         for link in self.links.values():
-            link.shift_blackouts(self.origin_s)
+            link.shift_blackouts(t)
 
     def _forward(self, now: float) -> None:
         t = now - self.t0
@@ -457,6 +480,9 @@ def client_event(addr: Address) -> Event:
                                 "any other sender is refused")
 
 
-def _is_target(data: bytes) -> bool:
-    """Whether a datagram is (starts with) a MAVLink 2 actuator target frame."""
-    return len(data) >= 10 and data[0] == 0xFD and (data[7] | data[8] << 8 | data[9] << 16) in _TARGET_IDS
+def _stamp(data: bytes, ids: frozenset[int]) -> int | None:
+    """The ``time_usec`` of a datagram that starts with a MAVLink 2 frame of one of ``ids`` (each has it first
+    in its payload), or None; a payload MAVLink 2 truncated is zero-padded."""
+    if len(data) < 10 or data[0] != 0xFD or (data[7] | data[8] << 8 | data[9] << 16) not in ids:
+        return None
+    return int.from_bytes(data[10:min(18, 10 + data[1])], "little")
