@@ -227,3 +227,27 @@ def test_a_forked_bsst_forks_its_children_through_the_same_server_and_they_end_w
             if launcher.poll() is None:
                 launcher.kill()
                 launcher.wait(30)
+
+
+def _maps_llvm(pid: int) -> bool:
+    """Whether process ``pid`` has numba's compiler (llvmlite's library) mapped: compiled kernels loaded."""
+    with open(f"/proc/{pid}/maps") as f:
+        return "llvmlite" in f.read()
+
+
+@pytest.mark.parametrize("kernels", ["compiled", "plain"])
+def test_a_server_started_for_compiled_kernels_forks_children_that_have_them_loaded(tmp_path, monkeypatch, kernels):
+    """``BSST_KERNELS=compiled`` when the server starts: it loads the compiled kernels once (numba, the cached
+    kernels), and each child it forks starts with them in its memory instead of loading them itself; otherwise
+    the server does not load numba at all (a plain or ``auto`` session pays nothing for it)."""
+    monkeypatch.setenv("BSST_KERNELS", kernels)
+    old = forkserver._the_server()
+    os.kill(old.proc.pid, signal.SIGKILL)  # the next child starts a server in this environment
+    wait_for(lambda: not _alive(old.proc.pid), 30, "the old server gone")
+    r = _relay(tmp_path)  # a relay never loads kernels itself
+    try:
+        server = forkserver._the_server()
+        assert server is not old
+        assert _maps_llvm(server.proc.pid) == _maps_llvm(r.child.pid) == (kernels == "compiled")
+    finally:
+        r.close()

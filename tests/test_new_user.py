@@ -69,9 +69,11 @@ def readme_python() -> str:
 
 
 def env() -> dict[str, str]:
-    """This environment, with the repository importable from any working directory."""
+    """This environment, with the repository importable from any working directory, and no ``BSST_KERNELS`` (the
+    suite's choice, tests/conftest.py): a new user's ``auto``."""
     paths = [str(ROOT), *filter(None, os.environ.get("PYTHONPATH", "").split(os.pathsep))]
-    return {**os.environ, "PYTHONPATH": os.pathsep.join(paths)}
+    mine = {k: v for k, v in os.environ.items() if k != "BSST_KERNELS"}
+    return {**mine, "PYTHONPATH": os.pathsep.join(paths)}
 
 
 def user_dir(tmp_path: Path) -> Path:
@@ -225,7 +227,8 @@ def test_a_cold_numba_cache_is_announced_once_and_a_warm_one_not(tmp_path: Path,
     (tmp_path / "short.toml").write_text(dump_toml(SHORT.to_dict()))
     argv = [sys.executable, "-m", "bridge", "sim", "short.toml", "--sensors", "mocap", "--estimator", "ekf",
             "--no-plots"]
-    cold = Proc(["env", f"NUMBA_CACHE_DIR={tmp_path / 'numba-cache'}", *argv, "--out", "cold"], cwd=tmp_path)
+    cold = Proc(["env", "-u", "BSST_KERNELS", f"NUMBA_CACHE_DIR={tmp_path / 'numba-cache'}", *argv, "--out", "cold"],
+                cwd=tmp_path)  # a new user's ``auto`` (env()): the controller's and the plant's kernels stay plain
     try:
         said = cold.wait_line(lambda ln: ln.startswith("bsst: "), timeout=120.0)
     finally:

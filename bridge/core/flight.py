@@ -22,7 +22,7 @@ from numbers import Integral, Real
 from pathlib import Path
 from typing import Any
 
-from bridge.autopilot.estimator import ESTIMATOR_KINDS, make_estimator
+from bridge.autopilot.estimator import ESTIMATOR_KINDS, compile_estimator, make_estimator
 from bridge.autopilot.failsafe import FailsafeConfig, failsafe_from_table
 from bridge.autopilot.params import (
     BY_NAME,
@@ -40,7 +40,7 @@ from bridge.link.model import LinkConfig, LinkSettings, absolute_link_paths, lin
 from controller import Controller, Gains, Nominal, gains_from_table
 from controller.law import LawFactory, resolve_law
 from controller.link_guard import GuardConfig
-from missions import Mission, Setpoint, Step, load_mission
+from missions import Mission, Setpoint, Sine, Step, load_mission
 from missions.mission import fitted_to_airframe, law_spec_from
 from params import ConfigError, Table
 from plant import Effects, Profile, Quadrotor, load_profile
@@ -412,3 +412,14 @@ def at_rest() -> Mission:
     profile at rest at the origin; its tables are the command line's."""
     return Mission(Step((Setpoint(0.0, 0.0, 0.0, 0.0, 0.0),)), duration_s=86400.0, name="vehicle",
                    source="command line")
+
+
+def load_compiled_kernels(ekf: bool = True) -> None:
+    """Load the scalar engine's compiled kernels (a built-in law's step, the plant's RK4 step) into this process,
+    and with ``ekf`` the EKF's, from numba's cache on disk (numba's import and the load: ~1 s of CPU; a cold cache
+    compiles them). The fork server does it when every flight asks for them (``BSST_KERNELS=compiled``), so that
+    each child it forks starts with them loaded instead of paying the load itself (bridge.cli.forkserver)."""
+    flight = prepare(Mission(Sine(), duration_s=1.0, name="kernels"))
+    compile_for(ctl=flight.make_controller(), plant=flight.make_plant())
+    if ekf:
+        compile_estimator("ekf")

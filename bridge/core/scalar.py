@@ -3,7 +3,8 @@
 In:  the number of control steps a flight has (its mission's duration s times its rate Hz); the environment
      variable ``BSST_KERNELS``: ``plain``, ``compiled`` or ``auto`` (unset: ``auto``)
 Out: whether to compile (:func:`compiled_wanted`), and a controller and a plant given their compiled twins
-     (:func:`compile_for`: bridge.core.scalarkernels, imported only then, numba with it)
+     (:func:`compile_for`: bridge.core.scalarkernels, imported only then, numba with it); whether every flight
+     asks for them (:func:`compiled_everywhere`: the fork server then loads them once for all its children)
 
 Both give the same bits (tests/test_kernels.py). A compiled call is faster (the BS-ST controller step ~4.6 us
 against ~21 us plain; an RK4 step ~2 us against ~7 us: ``benchmarks/offline.py``), but a process that uses
@@ -31,7 +32,7 @@ AUTO_STEPS = 60_000  # control steps from which ``auto`` compiles: 240 s at 250 
 def compiled_wanted(steps: float) -> bool:
     """Whether a flight of ``steps`` control steps flies the compiled kernels (module docstring); a
     ``BSST_KERNELS`` that is none of :data:`CHOICES` is a ConfigError naming it."""
-    choice = os.environ.get(KERNELS_ENV, "auto").strip().lower() or "auto"
+    choice = _choice()
     if choice not in CHOICES:
         raise ConfigError(f"{KERNELS_ENV}={choice!r} (environment): must be one of {', '.join(CHOICES)}")
     return choice == "compiled" or (choice == "auto" and steps >= AUTO_STEPS)
@@ -42,3 +43,13 @@ def compile_for(ctl: Controller | None = None, plant: Quadrotor | None = None) -
     from bridge.core.scalarkernels import compile_scalar  # numba's import (~1 s): only where compiled kernels fly
 
     compile_scalar(ctl, plant)
+
+
+def compiled_everywhere() -> bool:
+    """Whether ``BSST_KERNELS`` asks for the compiled kernels for every flight (``compiled``)."""
+    return _choice() == "compiled"
+
+
+def _choice() -> str:
+    return os.environ.get(KERNELS_ENV, "auto").strip().lower() or "auto"
+
