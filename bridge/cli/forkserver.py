@@ -13,16 +13,15 @@ from __future__ import annotations
 import sys
 
 from bridge.cli import _parser, main
-from bridge.core.flight import load_compiled_kernels
-from bridge.core.scalar import compiled_everywhere
 from bridge.nodes.forkserver import serve, show_command_line
 
 
 def preload() -> None:
     """Import what the children import lazily at their start (bridge.cli.flying, linktools), and build the
     parser, so that a forked child starts with all of it done; with ``BSST_KERNELS=compiled``, load the compiled
-    kernels too (each child would load them: bridge.core.flight.load_compiled_kernels)."""
+    kernels too (each child would load them: bridge.core.kernelpreload)."""
     import bridge.core.flight  # noqa: F401  (lazy in the children: preloaded here for every child at once)
+    import bridge.core.kernelpreload  # noqa: F401  (with BSST_KERNELS=compiled: the kernels, once for all children)
     import bridge.mavlink.signing  # noqa: F401  (lazy in the children, as above)
     import bridge.mavlink.telemetry  # noqa: F401  (lazy in the children, as above)
     import bridge.nodes.offboard  # noqa: F401  (lazy in the children, as above)
@@ -31,8 +30,6 @@ def preload() -> None:
     import bridge.nodes.vehicle.gate  # noqa: F401  (lazy in the children, as above)
 
     _parser()
-    if compiled_everywhere():
-        load_compiled_kernels()
 
 
 if __name__ == "__main__":

@@ -170,8 +170,8 @@ def add_relay_command(sub: Any) -> None:
     p.add_argument("--stats", metavar="FILE", help="write the statistics to FILE as JSON on exit (and every 0.5 s "
                                                    "while relaying, so that a kill leaves them)")
     p.add_argument("--mission-clock", action="store_true",
-                   help="blackout times count from the flight's time 0 (the first actuator target up, less the "
-                        "down delay) instead of the relay's start")
+                   help="blackout times count from the flight's time 0 (when the state the first actuator target "
+                        "up answers came from the vehicle) instead of the relay's start")
     p.add_argument("--radio", metavar="FILE", help="share each direction's bandwidth and queue with other relays "
                                                    "through this radio file (a fleet's one radio in real time: "
                                                    "bsst sitl --vehicles N --shared-link --realtime makes it)")

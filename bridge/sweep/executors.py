@@ -179,7 +179,8 @@ def _is_main_test(test: ast.expr) -> bool:
 
 def _pool(jobs: int) -> ProcessPoolExecutor:
     ctx = mp.get_context("forkserver")
-    ctx.set_forkserver_preload(["bridge.sweep", "bridge.loop"])
+    # bridge.core.kernelpreload: with BSST_KERNELS=compiled the kernels are loaded once, not in each worker
+    ctx.set_forkserver_preload(["bridge.sweep", "bridge.loop", "bridge.core.kernelpreload"])
     return ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_worker_init, initargs=(os.getpid(),))
 
 
