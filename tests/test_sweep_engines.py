@@ -14,7 +14,10 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -240,3 +243,27 @@ def test_a_margin_probes_the_missions_own_scheme() -> None:
     vehicle = {"estimator": "truth", "noise": 1.0, "turbulence": "none"}
     for over in ("delay_ms", "noise", "wind_mps"):
         assert probe(m, "bsst", over, 1.0, 0, base, vehicle).discretization == "implicit"
+
+
+POOL_SCRIPT = """
+import json, sys
+from multiprocessing import forkserver
+from bridge.sweep import Grid, sweep
+from missions import Mission, Sine
+rows = sweep(Mission(Sine(), duration_s=0.2, name="k"), Grid(delay_ms=(0.0, 10.0)), jobs=2, engine="process")
+pid = forkserver._forkserver._forkserver_pid  # the pool's fork server: every worker is forked from it
+with open(f"/proc/{pid}/maps") as f:
+    print(json.dumps({"outcomes": [r["outcome"] for r in rows], "kernels_loaded": "llvmlite" in f.read()}))
+"""
+
+
+@pytest.mark.parametrize("kernels", ["compiled", "plain"])
+def test_the_process_pools_workers_are_forked_with_the_compiled_kernels_loaded_when_asked(kernels: str) -> None:
+    """``BSST_KERNELS=compiled``: the process engine's pool loads the kernels once, in the fork server its workers
+    are forked from (bridge.core.kernelpreload), not in each worker (~1 s of CPU each: the suite's sweep files
+    took 113 CPU-s with the kernels loaded per worker, 83 so); otherwise it does not load numba at all."""
+    r = subprocess.run([sys.executable, "-c", POOL_SCRIPT], capture_output=True, text=True, timeout=300, cwd=ROOT,
+                       env={**os.environ, "BSST_KERNELS": kernels})
+    assert r.returncode == 0, r.stderr[-3000:]
+    out = json.loads(r.stdout.strip().splitlines()[-1])
+    assert out == {"outcomes": ["completed", "completed"], "kernels_loaded": kernels == "compiled"}, out
