@@ -245,9 +245,10 @@ def test_a_server_started_for_compiled_kernels_forks_children_that_have_them_loa
     os.kill(old.proc.pid, signal.SIGKILL)  # the next child starts a server in this environment
     wait_for(lambda: not _alive(old.proc.pid), 30, "the old server gone")
     r = _relay(tmp_path)  # a relay never loads kernels itself
+    server = forkserver._the_server()
     try:
-        server = forkserver._the_server()
         assert server is not old
         assert _maps_llvm(server.proc.pid) == _maps_llvm(r.child.pid) == (kernels == "compiled")
     finally:
         r.close()
+        os.kill(server.proc.pid, signal.SIGKILL)  # the worker's next child starts one in the suite's environment

@@ -52,4 +52,3 @@ def compiled_everywhere() -> bool:
 
 def _choice() -> str:
     return os.environ.get(KERNELS_ENV, "auto").strip().lower() or "auto"
-
