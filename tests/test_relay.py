@@ -6,11 +6,13 @@ from __future__ import annotations
 
 import json
 import os
+import select
 import signal
 import socket
 import struct
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -69,19 +71,56 @@ def ping_pong(client: socket.socket, target: socket.socket, relay_addr, rounds: 
     return up, down
 
 
+class TimerLateness(threading.Thread):
+    """The control: how late this machine wakes a thread from a 20 ms timed sleep, measured in this process
+    while the test runs (ms). A relay's hold ends in such a wake-up and each datagram's arrival in another; on
+    an oversubscribed machine the scheduler makes both late, whatever the relay does."""
+
+    def __init__(self) -> None:
+        super().__init__(daemon=True)
+        self.late_ms: list[float] = []
+        self._stop_r, self._stop_w = os.pipe()
+
+    def run(self) -> None:
+        while True:
+            t0 = time.perf_counter()
+            if select.select([self._stop_r], [], [], 0.020)[0]:
+                return
+            self.late_ms.append((time.perf_counter() - t0 - 0.020) * 1000.0)
+
+    def __enter__(self) -> TimerLateness:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        os.write(self._stop_w, b"x")
+        self.join(5.0)
+        os.close(self._stop_r)
+        os.close(self._stop_w)
+
+    def median(self) -> float:
+        assert self.late_ms, "the control never woke"
+        return float(np.median(self.late_ms))
+
+
 def test_twenty_ms_each_way_measured_within_two_ms() -> None:
+    """20 ms each way, never early, and at most 2 ms late beyond this machine's own wake-up lateness measured
+    in the same seconds (on a quiet machine ~0.1 ms: 20 +- 2 ms; two loaded suite runs put the median at
+    22.1 and 22.46 ms, docs/figures.md)."""
     target, client = udp(), udp()
     cfg = LinkConfig(delay_ms=20.0)
-    with Relay(("127.0.0.1", 0), target.getsockname(), LinkSettings(cfg, cfg)) as relay:
+    with TimerLateness() as control, Relay(("127.0.0.1", 0), target.getsockname(), LinkSettings(cfg, cfg)) as relay:
         relay.start()
         up, down = ping_pong(client, target, relay.address, 40)
-    for d in (up, down):
-        assert abs(np.median(d) * 1000.0 - 20.0) <= 2.0
+    os_late_ms = control.median()
+    for d in (up, down):  # two wake-ups a datagram: the relay's at the due time, the receiver's
+        assert np.median(d) * 1000.0 - 20.0 <= 2.0 + 2.0 * os_late_ms, (np.median(d), os_late_ms)
         assert min(d) >= 0.020  # never early
     s = relay.summary()
     assert s["up"]["sent"] == s["up"]["delivered"] == 40 == s["down"]["delivered"]
     assert s["up"]["delay_ms"]["p50"] == pytest.approx(20.0)
-    assert abs(s["up"]["measured_ms"]["p50"] - 20.0) <= 2.0
+    # the relay's own measure (the kernel's receive stamp to its sendto): one wake-up
+    assert 20.0 <= s["up"]["measured_ms"]["p50"] <= 22.0 + os_late_ms, (s["up"]["measured_ms"], os_late_ms)
     target.close()
     client.close()
 
