@@ -10,13 +10,11 @@ import sys
 # Set before numpy loads here, inherited by every child: bsst's own processes give numpy's BLAS one thread
 # (bridge/cli/__init__.py says why), and so does each test process.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-# The compiled kernels pay numba's load (~1 s of CPU) in each process that flies them; ``auto`` picks them for
-# flights of 240 s and more, which in this suite are only the bare vehicles (``bsst vehicle`` without a
-# mission: a day at rest) that live a few seconds. So every process the suite starts flies plain; the pure tests
-# fly compiled in the test process itself (``_compiled_kernels_in_pure_tests``), which loads numba anyway
-# (``_kernels_compiled``). The tests of the kernels ask for either by name. (Compiled everywhere, with each fork
-# server loading the kernels once for its children, measured no faster: docs/testing.md.)
-os.environ.setdefault("BSST_KERNELS", "plain")
+# ``BSST_KERNELS`` is left as users have it (unset: ``auto``): each test worker loads the compiled kernels once
+# (``_kernels_compiled``), so its own flights fly them (``auto`` takes kernels already loaded, the same bits as the
+# plain ones: tests/test_kernels.py), and so do the children its fork server forks once it has forked one
+# session's pair (bridge.core.kernelpreload.KernelWarmer); a ``bsst`` process started cold flies short flights
+# plain, as a user's does (docs/testing.md).
 
 from pathlib import Path
 
@@ -58,7 +56,7 @@ def _kernels_compiled(tmp_path_factory: pytest.TempPathFactory, worker_id: str) 
     """Compile numba's kernels (the EKF's, the batch engine's, the scalar engine's), or load them from their
     on-disk cache, once per test process before any test: as ``bsst sitl`` does before it starts a vehicle, so that a
     test that starts a subprocess (a vehicle, ``bsst sweep``) does not have it compile them (~12 s each
-    on a fresh clone) inside its start-up time, and the pure tests fly compiled (``_compiled_kernels_in_pure_tests``).
+    on a fresh clone) inside its start-up time, and the worker's own flights fly them (``auto``).
     On a fresh clone the workers compile one set each, at once (gw1 the batch engine's first), under a lock
     per set: the others then load it from the cache."""
     order = ["batch", "ekf", "scalar"] if worker_id == "gw1" else ["ekf", "scalar", "batch"]
@@ -67,16 +65,6 @@ def _kernels_compiled(tmp_path_factory: pytest.TempPathFactory, worker_id: str) 
         with open(shared / f"compile-{kind}.lock", "w") as lock:
             fcntl.flock(lock, fcntl.LOCK_EX)
             KERNELS[kind]()
-
-
-@pytest.fixture(autouse=True)
-def _compiled_kernels_in_pure_tests(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> None:
-    """A pure test (no ``process`` marker: it starts no process, tests/test_suite_layout.py checks) flies the
-    scalar engine's compiled kernels: the same bits as the plain ones (tests/test_kernels.py), in about half the
-    time once this process has loaded them (``_kernels_compiled``): ``make test-fast`` 77 -> 60 s. A test that
-    asks for plain or compiled kernels by name (``monkeypatch.setenv``) gets what it asks for."""
-    if request.node.get_closest_marker("process") is None:
-        monkeypatch.setenv("BSST_KERNELS", "compiled")
 
 
 @pytest.hookimpl(tryfirst=True, optionalhook=True)  # before pytest-xdist's own (which makes its loadscope one)

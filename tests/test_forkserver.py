@@ -1,4 +1,6 @@
-"""Covers bridge.nodes.forkserver and bridge.cli.forkserver: a child forked warm behaves as an exec'd one.
+"""Covers bridge.nodes.forkserver, bridge.cli.forkserver and bridge.core.kernelpreload: a child forked warm.
+
+It behaves as an exec'd one, and starts with the compiled kernels when its server loaded them.
 
 Real processes throughout: the fork server this test process starts, ``bsst`` children forked by it (a relay
 runs until stopped, a ``bsst sim`` of bad input ends at once), and a helper process killed with SIGKILL.
@@ -251,4 +253,41 @@ def test_a_server_started_for_compiled_kernels_forks_children_that_have_them_loa
         assert _maps_llvm(server.proc.pid) == _maps_llvm(r.child.pid) == (kernels == "compiled")
     finally:
         r.close()
+        os.kill(server.proc.pid, signal.SIGKILL)  # the worker's next child starts one in the suite's environment
+
+
+def _vehicle(tmp_path: Path) -> Started:
+    """A vehicle of a one-second mission, waiting for a controller (its flight short: ``auto`` alone would fly it
+    plain, loading nothing)."""
+    mission = tmp_path / "m.toml"
+    mission.write_text('name = "m"\nduration_s = 1.0\n[trajectory]\nkind = "sine"\n')
+    v = Started(tmp_path, "vehicle", str(mission), "--listen", "127.0.0.1:0", "--gcs", "none")
+    wait_for(lambda: v.ready() or v.child.poll() is not None, 30, "the vehicle ready")
+    assert v.child.poll() is None, v.err.read_text()
+    return v
+
+
+@pytest.mark.parametrize("kernels", ["auto", "plain"])
+def test_under_auto_a_server_loads_the_compiled_kernels_before_its_third_child_that_flies(tmp_path, monkeypatch,
+                                                                                       kernels):
+    """``BSST_KERNELS=auto``: a relay does not count, one session's pair (two vehicles here) is forked plain,
+    and before the third child that flies the server loads the kernels, so that the child starts with them (and
+    ``auto`` flies what is loaded: tests/test_kernels.py); ``plain``: never."""
+    monkeypatch.setenv("BSST_KERNELS", kernels)
+    old = forkserver._the_server()
+    os.kill(old.proc.pid, signal.SIGKILL)  # the next child starts a server in this environment
+    wait_for(lambda: not _alive(old.proc.pid), 30, "the old server gone")
+    started = [_relay(tmp_path)]
+    server = forkserver._the_server()
+    try:
+        assert server is not old
+        started += [_vehicle(tmp_path), _vehicle(tmp_path)]
+        assert not any(_maps_llvm(pid) for pid in (server.proc.pid, *(s.child.pid for s in started)))
+        started.append(_vehicle(tmp_path))
+        loaded = kernels == "auto"
+        assert _maps_llvm(server.proc.pid) == _maps_llvm(started[-1].child.pid) == loaded
+        assert not any(_maps_llvm(s.child.pid) for s in started[:-1])  # the earlier children are as they were
+    finally:
+        for s in started:
+            s.close()
         os.kill(server.proc.pid, signal.SIGKILL)  # the worker's next child starts one in the suite's environment

@@ -8,6 +8,7 @@ Which of the two flies (``BSST_KERNELS``) is checked as the pure function it is.
 from __future__ import annotations
 
 import dataclasses
+import sys
 
 import numpy as np
 import pytest
@@ -91,7 +92,14 @@ def test_an_offline_flight_with_compiled_kernels_is_the_plain_flight(monkeypatch
 
 
 def test_which_kernels_fly(monkeypatch) -> None:
+    """``auto`` flies a long flight compiled, and a short one compiled only where this process holds the kernels
+    already (this test process does: conftest loads them; a process without them is one where their module was
+    never imported)."""
+    assert scalar.compiled_loaded()
     monkeypatch.delenv(scalar.KERNELS_ENV, raising=False)
+    assert scalar.compiled_wanted(7500) and scalar.compiled_wanted(scalar.AUTO_STEPS)
+    monkeypatch.delitem(sys.modules, "bridge.core.scalarkernels")  # as in a process that never loaded them
+    assert not scalar.compiled_loaded()
     assert not scalar.compiled_wanted(7500) and scalar.compiled_wanted(scalar.AUTO_STEPS)
     for value, short, long in (("plain", False, False), ("compiled", True, True), ("AUTO", False, True)):
         monkeypatch.setenv(scalar.KERNELS_ENV, value)

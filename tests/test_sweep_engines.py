@@ -1,4 +1,4 @@
-"""Covers bridge.sweep.executors and bridge.batch.
+"""Covers bridge.sweep.executors, bridge.core.kernelwarm and bridge.batch.
 
 ``bsst sweep --engine batch | process | auto``: the same cells.csv rows from either engine (a link grid, and a
 grid of wind, turbulence and laws: issue 27),
@@ -26,7 +26,7 @@ from bridge import simulate
 from bridge.cli import main
 from bridge.sweep import CELLS_CSV, COLUMNS, Grid, load_sweep, read_cells, sweep
 from bridge.sweep.cells import FLEET_COLUMNS
-from bridge.sweep.executors import BATCH_MIN_CELLS, engine_for
+from bridge.sweep.executors import BATCH_MIN_CELLS, WARM_CELLS, engine_for
 from bridge.sweep.grid import LINK_AXES, cells, mission_value
 from bridge.sweep.margin import margin, parse_until, probe
 from missions import Mission, Sine
@@ -250,20 +250,26 @@ import json, sys
 from multiprocessing import forkserver
 from bridge.sweep import Grid, sweep
 from missions import Mission, Sine
-rows = sweep(Mission(Sine(), duration_s=0.2, name="k"), Grid(delay_ms=(0.0, 10.0)), jobs=2, engine="process")
+delays = tuple(float(d) for d in range(int(sys.argv[1])))
+rows = sweep(Mission(Sine(), duration_s=0.2, name="k"), Grid(delay_ms=delays), jobs=2, engine="process")
 pid = forkserver._forkserver._forkserver_pid  # the pool's fork server: every worker is forked from it
 with open(f"/proc/{pid}/maps") as f:
     print(json.dumps({"outcomes": [r["outcome"] for r in rows], "kernels_loaded": "llvmlite" in f.read()}))
 """
 
 
-@pytest.mark.parametrize("kernels", ["compiled", "plain"])
-def test_the_process_pools_workers_are_forked_with_the_compiled_kernels_loaded_when_asked(kernels: str) -> None:
+@pytest.mark.parametrize("kernels, cells, loaded", [("compiled", 2, True), ("plain", 4, False), ("auto", 2, False),
+                                                    ("auto", 4, True)])
+def test_the_process_pools_workers_are_forked_with_the_compiled_kernels_loaded_when_asked(kernels: str, cells: int,
+                                                                                         loaded: bool) -> None:
     """``BSST_KERNELS=compiled``: the process engine's pool loads the kernels once, in the fork server its workers
     are forked from (bridge.core.kernelpreload), not in each worker (~1 s of CPU each: the suite's sweep files
-    took 113 CPU-s with the kernels loaded per worker, 83 so); otherwise it does not load numba at all."""
-    r = subprocess.run([sys.executable, "-c", POOL_SCRIPT], capture_output=True, text=True, timeout=300, cwd=ROOT,
-                       env={**os.environ, "BSST_KERNELS": kernels})
+    took 113 CPU-s with the kernels loaded per worker, 83 so); under ``auto`` it does so for a grid of at least
+    WARM_CELLS offline cells (bridge.core.kernelwarm: ``auto`` then flies them), and for a smaller one, or with
+    ``plain``, it does not load numba at all."""
+    assert WARM_CELLS == 4
+    r = subprocess.run([sys.executable, "-c", POOL_SCRIPT, str(cells)], capture_output=True, text=True, timeout=300,
+                       cwd=ROOT, env={**os.environ, "BSST_KERNELS": kernels})
     assert r.returncode == 0, r.stderr[-3000:]
     out = json.loads(r.stdout.strip().splitlines()[-1])
-    assert out == {"outcomes": ["completed", "completed"], "kernels_loaded": kernels == "compiled"}, out
+    assert out == {"outcomes": ["completed"] * cells, "kernels_loaded": loaded}, out

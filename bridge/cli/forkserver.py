@@ -5,7 +5,8 @@ In:  FD, this process's end of the socket its owner made (passed to it open); PA
 Out: children forked on request, each running the CLI's ``main`` on its argv; nothing on stdout
 
 It imports, once, what the session's children (``bsst vehicle``, ``bsst controller``, ``bsst relay``) import
-when they start, then serves until its owner closes the socket.
+when they start, then serves until its owner closes the socket; under ``BSST_KERNELS=auto`` it loads the compiled
+kernels before the third child that flies (bridge.core.kernelpreload.KernelWarmer).
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from __future__ import annotations
 import sys
 
 from bridge.cli import _parser, main
+from bridge.core.kernelpreload import KernelWarmer
 from bridge.nodes.forkserver import serve, show_command_line
 
 
@@ -21,7 +23,6 @@ def preload() -> None:
     parser, so that a forked child starts with all of it done; with ``BSST_KERNELS=compiled``, load the compiled
     kernels too (each child would load them: bridge.core.kernelpreload)."""
     import bridge.core.flight  # noqa: F401  (lazy in the children: preloaded here for every child at once)
-    import bridge.core.kernelpreload  # noqa: F401  (with BSST_KERNELS=compiled: the kernels, once for all children)
     import bridge.mavlink.signing  # noqa: F401  (lazy in the children, as above)
     import bridge.mavlink.telemetry  # noqa: F401  (lazy in the children, as above)
     import bridge.nodes.offboard  # noqa: F401  (lazy in the children, as above)
@@ -39,4 +40,4 @@ if __name__ == "__main__":
         sys.exit(2)
     show_command_line([sys.executable, "-m", "bridge.cli.forkserver", sys.argv[1]])  # not the padding
     preload()
-    serve(int(sys.argv[1]), main)
+    serve(int(sys.argv[1]), main, KernelWarmer())

@@ -35,7 +35,7 @@ from bridge.autopilot.params import (
     typed_value,
 )
 from bridge.autopilot.simvehicle import SimVehicle
-from bridge.core.scalar import compile_for, compiled_wanted
+from bridge.core.scalar import checked_choice, compile_for, compiled_wanted
 from bridge.link.model import LinkConfig, LinkSettings, absolute_link_paths, link_from_table, merge_link_tables
 from controller import Controller, Gains, Nominal, gains_from_table
 from controller.law import LawFactory, resolve_law
@@ -104,11 +104,15 @@ class Flight:
                           failure_injection=self.params.failure_injection)
 
     def make_controller(self) -> Controller:
-        m = self.mission
-        ctl = Controller(self.law or m.controller, self.nominal, self.gains, m.rate_hz, m.discretization)
+        ctl = self._controller()
         if self.compiled:
             compile_for(ctl=ctl)
         return ctl
+
+    def _controller(self) -> Controller:
+        """The flight's law, built (a user's law checked), not yet given its compiled kernels."""
+        m = self.mission
+        return Controller(self.law or m.controller, self.nominal, self.gains, m.rate_hz, m.discretization)
 
     @property
     def compiled(self) -> bool:
@@ -302,7 +306,9 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
         law = resolve_law(m.controller)
         flight = Flight(m, prof, effects, gains, failsafe, link_settings, law, sensor_config, estimator_kind,
                         vehicle_params, changes, wind, timeline)
-        flight.make_controller()  # a user's law is built once here, so that one that does not fit is bad input
+        checked_choice()  # BSST_KERNELS: bad input before anything flies
+        flight._controller()  # a user's law is built once here, so that one that does not fit is bad input (not
+        # compiled: a process that only prepares, a relay or a planner, never loads numba for it)
     except ConfigError as exc:
         raise ConfigError(f"{src}: {exc}") from None
     return flight

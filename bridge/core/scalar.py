@@ -1,7 +1,8 @@
 """Which kernels the scalar engine flies: the plain-float functions, or their numba-compiled twins.
 
 In:  the number of control steps a flight has (its mission's duration s times its rate Hz); the environment
-     variable ``BSST_KERNELS``: ``plain``, ``compiled`` or ``auto`` (unset: ``auto``)
+     variable ``BSST_KERNELS``: ``plain``, ``compiled`` or ``auto`` (unset: ``auto``); whether this process
+     holds the compiled kernels already
 Out: whether to compile (:func:`compiled_wanted`), and a controller and a plant given their compiled twins
      (:func:`compile_for`: bridge.core.scalarkernels, imported only then, numba with it); whether every flight
      asks for them (:func:`compiled_everywhere`: the fork server then loads them once for all its children)
@@ -10,15 +11,18 @@ Both give the same bits (tests/test_kernels.py). A compiled call is faster (the 
 against ~21 us plain; an RK4 step ~2 us against ~7 us: ``benchmarks/offline.py``), but a process that uses
 them first pays numba's import and the cached kernels' load, ~1-2.5 s (docs/figures.md, "Compiled or plain"):
 ~36 us saved per control step of a lockstep flight (controller and vehicle) pays that back only after about
-:data:`AUTO_STEPS` steps. So ``auto`` compiles for flights at least that long and flies the short ones (every
-shipped mission, the tests, ``make demo``) plain; ``compiled`` always (the SITL speed benchmark), ``plain``
-never. Only the built-in BS-ST and SMC laws have the one-call compiled step; ``pid`` and a user's own law
-stay plain (their plant is compiled all the same).
+:data:`AUTO_STEPS` steps. So ``auto`` compiles for flights at least that long, and for any flight in a process
+that already holds the kernels (:func:`compiled_loaded`: it flew compiled before, or its fork server loaded them,
+bridge.core.kernelpreload), and otherwise flies the short ones (every shipped mission, ``make demo``) plain;
+``compiled`` always (the SITL speed benchmark), ``plain`` never. Only the built-in BS-ST and SMC laws have the
+one-call compiled step; ``pid`` and a user's own law stay plain (their plant is compiled all the same).
 """
 
 from __future__ import annotations
 
 import os
+import sys
+from collections.abc import Mapping
 
 from controller import Controller
 from params import ConfigError
@@ -32,10 +36,24 @@ AUTO_STEPS = 60_000  # control steps from which ``auto`` compiles: 240 s at 250 
 def compiled_wanted(steps: float) -> bool:
     """Whether a flight of ``steps`` control steps flies the compiled kernels (module docstring); a
     ``BSST_KERNELS`` that is none of :data:`CHOICES` is a ConfigError naming it."""
-    choice = _choice()
+    choice = checked_choice()
+    return choice == "compiled" or (choice == "auto" and (steps >= AUTO_STEPS or compiled_loaded()))
+
+
+def checked_choice() -> str:
+    """This process's ``BSST_KERNELS`` (:func:`kernels_choice`); one that is none of :data:`CHOICES` is a
+    ConfigError naming it."""
+    choice = kernels_choice()
     if choice not in CHOICES:
         raise ConfigError(f"{KERNELS_ENV}={choice!r} (environment): must be one of {', '.join(CHOICES)}")
-    return choice == "compiled" or (choice == "auto" and steps >= AUTO_STEPS)
+    return choice
+
+
+def compiled_loaded() -> bool:
+    """Whether this process already holds the compiled kernels (loaded by an earlier flight, or by the fork server
+    it was forked from): then they cost nothing more, and ``auto`` flies them."""
+    kernels = sys.modules.get("bridge.core.scalarkernels")
+    return kernels is not None and bool(kernels.rk4_held.signatures)
 
 
 def compile_for(ctl: Controller | None = None, plant: Quadrotor | None = None) -> None:
@@ -47,8 +65,10 @@ def compile_for(ctl: Controller | None = None, plant: Quadrotor | None = None) -
 
 def compiled_everywhere() -> bool:
     """Whether ``BSST_KERNELS`` asks for the compiled kernels for every flight (``compiled``)."""
-    return _choice() == "compiled"
+    return kernels_choice() == "compiled"
 
 
-def _choice() -> str:
-    return os.environ.get(KERNELS_ENV, "auto").strip().lower() or "auto"
+def kernels_choice(env: Mapping[str, str] | None = None) -> str:
+    """``BSST_KERNELS`` as set in ``env`` (default: this process's environment), lower case; unset: ``auto``
+    (not checked: :func:`compiled_wanted` refuses a value that is none of :data:`CHOICES`)."""
+    return (os.environ if env is None else env).get(KERNELS_ENV, "auto").strip().lower() or "auto"

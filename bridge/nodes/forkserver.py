@@ -276,9 +276,12 @@ def start_child(argv: Sequence[str], stdout: int, stderr: int, *, stdin: int | N
 
 
 # -- the server ------------------------------------------------------------------------------------------------------
-def serve(fd: int, run: Callable[[list[str]], int]) -> None:
+def serve(fd: int, run: Callable[[list[str]], int],
+          before_fork: Callable[[Sequence[str], Mapping[str, str]], None] | None = None) -> None:
     """Serve fork requests on the socket ``fd`` until it closes; each child runs ``run(argv)`` (the CLI's main)
-    and exits with its status. The modules a child needs are imported by the caller first.
+    and exits with its status. The modules a child needs are imported by the caller first; ``before_fork(argv,
+    env)``, if given, is called in the server before each child is forked (what it loads, every later child
+    starts with).
 
     Each child is also given a connection of its own to this server, which becomes a client like the owner: a
     ``bsst sitl`` forked here forks its vehicle and controller here too, instead of starting a server of its
@@ -308,7 +311,10 @@ def serve(fd: int, run: Callable[[list[str]], int]) -> None:
                 _drop(clients.pop(r), live)
                 continue
             try:
-                _answer(json.loads(data), fds, sock, run, clients, live)
+                req = json.loads(data)
+                if before_fork is not None:
+                    before_fork(req.get("argv") or [], req.get("env") or {})
+                _answer(req, fds, sock, run, clients, live)
             finally:
                 for f in fds:
                     os.close(f)

@@ -28,6 +28,7 @@ from types import FrameType
 from typing import Any
 
 from bridge.autopilot.compiling import announce_compiling
+from bridge.core.scalar import kernels_choice
 from bridge.loop import fly
 from bridge.nodes.process import die_with_parent
 from bridge.record.runlog import Run
@@ -74,6 +75,9 @@ Report = Callable[[dict[str, Any]], None]  # called in the main process with eac
 
 
 WORKER_STOP_GRACE_S = 10.0  # after its sweep died: time for a lockstep cell to stop its children and clean up
+
+
+WARM_CELLS = 4  # offline cells from which a first pool's fork server loads the compiled kernels under auto
 
 
 def _worker_init(sweep_pid: int) -> None:
@@ -177,10 +181,16 @@ def _is_main_test(test: ast.expr) -> bool:
             and any(isinstance(x, ast.Constant) and x.value == "__main__" for x in sides))
 
 
-def _pool(jobs: int) -> ProcessPoolExecutor:
+def _pool(jobs: int, cells: int = 0, mode: str = "offline") -> ProcessPoolExecutor:
+    """A pool of ``jobs`` workers forked from multiprocessing's fork server, which imports the sweep's modules once
+    when it starts (the first pool of this process): with ``BSST_KERNELS=compiled`` the kernels too
+    (bridge.core.kernelpreload), and under ``auto`` too when this first pool flies at least :data:`WARM_CELLS`
+    ``cells`` offline (bridge.core.kernelwarm): once, not in each worker, and ``auto`` flies what is loaded."""
     ctx = mp.get_context("forkserver")
-    # bridge.core.kernelpreload: with BSST_KERNELS=compiled the kernels are loaded once, not in each worker
-    ctx.set_forkserver_preload(["bridge.sweep", "bridge.loop", "bridge.core.kernelpreload"])
+    preload = ["bridge.sweep", "bridge.loop", "bridge.core.kernelpreload"]
+    if mode == "offline" and cells >= WARM_CELLS and kernels_choice() == "auto":
+        preload.append("bridge.core.kernelwarm")
+    ctx.set_forkserver_preload(preload)  # (no effect once the fork server runs: the first pool's list stays)
     return ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_worker_init, initargs=(os.getpid(),))
 
 
@@ -204,7 +214,7 @@ def run_local(mission: Mission, todo: Sequence[Cell], mode: str, jobs: int, repo
                     row = error_row(cell, "worker process died")
             report(row)
             continue
-        pool = _pool(jobs)
+        pool = _pool(jobs, len(queue), mode)
         inflight: dict[Any, Cell] = {}
         try:
             while queue or inflight:
