@@ -291,3 +291,31 @@ def test_under_auto_a_server_loads_the_compiled_kernels_before_its_third_child_t
         for s in started:
             s.close()
         os.kill(server.proc.pid, signal.SIGKILL)  # the worker's next child starts one in the suite's environment
+
+
+WARMER_SCRIPT = """
+import json
+from bridge.core.flight import compiled_kernels_cached
+from bridge.core.kernelpreload import KernelWarmer
+from bridge.core.scalar import compiled_loaded
+warm = KernelWarmer()
+for argv in (["relay"], ["vehicle"], ["controller"], ["vehicle"], ["controller"]):
+    warm(argv, {})
+print(json.dumps({"cached": compiled_kernels_cached(), "loaded": compiled_loaded()}))
+"""
+
+
+@pytest.mark.parametrize("cache", ["warm", "cold"])
+def test_the_warmer_loads_from_numbas_cache_and_never_compiles_on_the_childrens_behalf(tmp_path, cache) -> None:
+    """With numba's cache on disk (the suite's, filled by conftest) the warmer loads the kernels at the third
+    child that flies; with it cold (an empty ``NUMBA_CACHE_DIR``: a first run after an install) it does not
+    compile them (~40 s, while a session waited for its child): the children fly plain."""
+    env = {**os.environ, "BSST_KERNELS": "auto"}
+    if cache == "cold":
+        env["NUMBA_CACHE_DIR"] = str(tmp_path / "empty-cache")
+    r = subprocess.run([sys.executable, "-c", WARMER_SCRIPT], capture_output=True, text=True, timeout=300,
+                       cwd=Path(__file__).resolve().parent.parent, env=env)
+    assert r.returncode == 0, r.stderr[-3000:]
+    out = json.loads(r.stdout.strip().splitlines()[-1])
+    assert (out["cached"], out["loaded"]) == ((True, True) if cache == "warm" else (False, False)), out
+    assert "compiling" not in r.stderr, r.stderr  # nothing compiled, so nothing announced

@@ -41,13 +41,19 @@ def announce_compiling(package: str, stream: TextIO | None = None) -> bool:
     if package in _checked:
         return False
     _checked.add(package)
-    kernels = [d for d in _kernels(package) if getattr(d, "targetoptions", {}).get("inline") != "always"]
-    if not kernels or 2 * sum(_cold(d) for d in kernels) < len(kernels):
+    if not cold(package):
         return False
     out = stream or sys.stderr
     out.write(f"bsst: compiling {what} (first run after an install, ~{seconds:g} s; cached on disk after) ...\n")
     out.flush()
     return True
+
+
+def cold(package: str) -> bool:
+    """Whether numba's on-disk cache of ``package``'s kernels (a key of :data:`KERNELS`, imported) is cold: for at
+    least half of them, numba would compile rather than load (module docstring)."""
+    kernels = [d for d in _kernels(package) if getattr(d, "targetoptions", {}).get("inline") != "always"]
+    return bool(kernels) and 2 * sum(_cold(d) for d in kernels) >= len(kernels)
 
 
 def _kernels(package: str) -> Iterator[Any]:

@@ -22,6 +22,7 @@ from numbers import Integral, Real
 from pathlib import Path
 from typing import Any
 
+from bridge.autopilot.compiling import cold
 from bridge.autopilot.estimator import ESTIMATOR_KINDS, compile_estimator, make_estimator
 from bridge.autopilot.failsafe import FailsafeConfig, failsafe_from_table
 from bridge.autopilot.params import (
@@ -418,6 +419,17 @@ def at_rest() -> Mission:
     profile at rest at the origin; its tables are the command line's."""
     return Mission(Step((Setpoint(0.0, 0.0, 0.0, 0.0, 0.0),)), duration_s=86400.0, name="vehicle",
                    source="command line")
+
+
+def compiled_kernels_cached(ekf: bool = True) -> bool:
+    """Whether :func:`load_compiled_kernels` would load the kernels from numba's cache on disk, not compile them
+    (~25 s, the EKF's ~13 s more): what ``auto`` asks before it loads them on behalf of children that would fly
+    plain otherwise (bridge.core.kernelpreload, bridge.core.kernelwarm). Imports numba (~0.6 s) to look."""
+    import bridge.autopilot.ekfkernels  # noqa: F401  (imported: its dispatchers are looked at)
+    import bridge.core.scalarkernels  # noqa: F401  (as above)
+
+    packages = ["bridge.core.scalarkernels", *(["bridge.autopilot.ekfkernels"] if ekf else [])]
+    return not any(cold(p) for p in packages)
 
 
 def load_compiled_kernels(ekf: bool = True) -> None:

@@ -20,7 +20,7 @@ from __future__ import annotations
 import gc
 from collections.abc import Mapping, Sequence
 
-from bridge.core.flight import load_compiled_kernels
+from bridge.core.flight import compiled_kernels_cached, load_compiled_kernels
 from bridge.core.scalar import compiled_everywhere, compiled_loaded, kernels_choice
 
 if compiled_everywhere():
@@ -39,7 +39,9 @@ class KernelWarmer:
     third child that flies (a vehicle or a controller) is forked, so that it and every later one flies them (the
     same bits, bridge.core.scalar) without paying numba's load (~1 s of CPU) itself. One session (a vehicle and
     its controller, a relay between them or not) never pays it; a fleet, or a process flying session after
-    session (a script, the test suite), pays it once and saves ~36 us of CPU per control step thereafter."""
+    session (a script, the test suite), pays it once and saves ~36 us of CPU per control step thereafter. Only
+    from numba's cache on disk: with it cold (a first run after an install) nothing is compiled on the children's
+    behalf, and they fly plain."""
 
     def __init__(self, warm_after: int = WARM_AFTER) -> None:
         self.warm_after = warm_after
@@ -55,6 +57,8 @@ class KernelWarmer:
         if kernels_choice(env) != "auto":
             return  # plain asked for; compiled: loaded at the server's start (above)
         try:
+            if not compiled_kernels_cached():
+                return  # a cold cache would be compiled here (~40 s) while a session waits for its child
             load_compiled_kernels()
         except Exception:  # noqa: BLE001  (the children fly plain, as before; a server must not die of it)
             return

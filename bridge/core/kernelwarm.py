@@ -7,17 +7,19 @@ Out: the importing process holds the scalar engine's and the EKF's compiled kern
 
 The sweep's process pool (bridge.sweep.executors) names this module in its fork server's preload list under
 ``auto`` when it flies at least :data:`bridge.sweep.executors.WARM_CELLS` cells offline: a 30 s sine cell costs
-~1.2 s of CPU plain and ~0.75 s compiled, so the load pays back from the third cell. A load that fails here
-leaves the workers plain (a fork server must not die of it).
+~1.2 s of CPU plain and ~0.75 s compiled, so the load pays back from the third cell. Only from numba's cache on
+disk (a cold one is not compiled here), and a load that fails leaves the workers plain (a fork server must not
+die of it).
 """
 
 from __future__ import annotations
 
-from bridge.core.flight import load_compiled_kernels
+from bridge.core.flight import compiled_kernels_cached, load_compiled_kernels
 from bridge.core.scalar import kernels_choice
 
 if kernels_choice() != "plain":
     try:
-        load_compiled_kernels()
+        if compiled_kernels_cached():  # a cold cache is not compiled on the workers' behalf: they fly plain
+            load_compiled_kernels()
     except Exception:  # noqa: BLE001  (the workers fly plain, or load them themselves with ``compiled``)
         pass
