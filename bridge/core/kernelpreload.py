@@ -56,11 +56,19 @@ class KernelWarmer:
             return
         if kernels_choice(env) != "auto":
             return  # plain asked for; compiled: loaded at the server's start (above)
-        try:
-            if not compiled_kernels_cached():
-                return  # a cold cache would be compiled here (~40 s) while a session waits for its child
-            load_compiled_kernels()
-        except Exception:  # noqa: BLE001  (the children fly plain, as before; a server must not die of it)
-            return
-        gc.collect()
-        gc.freeze()  # numba's objects too: shared with every later child, never copied into one
+        if load_cached_kernels():
+            gc.collect()
+            gc.freeze()  # numba's objects too: shared with every later child, never copied into one
+
+
+def load_cached_kernels() -> bool:
+    """Load the compiled kernels on behalf of children that would fly plain otherwise (``auto``), only from numba's
+    cache on disk: a cold one would be compiled here (~40 s, while a session waits for its child), so then
+    nothing. Whether they were loaded; a failure is not (the children fly plain; a fork server must not die of it)."""
+    try:
+        if not compiled_kernels_cached():
+            return False
+        load_compiled_kernels()
+    except Exception:  # noqa: BLE001  (see the docstring)
+        return False
+    return True

@@ -14,12 +14,8 @@ die of it).
 
 from __future__ import annotations
 
-from bridge.core.flight import compiled_kernels_cached, load_compiled_kernels
+from bridge.core.kernelpreload import load_cached_kernels
 from bridge.core.scalar import kernels_choice
 
-if kernels_choice() != "plain":
-    try:
-        if compiled_kernels_cached():  # a cold cache is not compiled on the workers' behalf: they fly plain
-            load_compiled_kernels()
-    except Exception:  # noqa: BLE001  (the workers fly plain, or load them themselves with ``compiled``)
-        pass
+if kernels_choice() != "plain":  # (the pool names this module under ``auto`` only)
+    load_cached_kernels()
