@@ -86,7 +86,11 @@ def load_toml(path: str | Path) -> dict[str, Any]:
     """Read a TOML file, turning every I/O or syntax problem into a :class:`ConfigError`:
     not a regular file, over :data:`MAX_TOML_BYTES`, not UTF-8, not TOML, nested over :data:`MAX_DEPTH`."""
     p = Path(path)
-    raw = read_regular_file(p, "a TOML file", MAX_TOML_BYTES)
+    return toml_from_bytes(read_regular_file(p, "a TOML file", MAX_TOML_BYTES), p)
+
+
+def toml_from_bytes(raw: bytes, p: Path) -> dict[str, Any]:
+    """The table in ``raw``, the bytes of the TOML file ``p`` (:func:`load_toml`'s errors, naming ``p``)."""
     try:
         data = tomllib.loads(raw.decode("utf-8"))
     except UnicodeDecodeError:

@@ -63,6 +63,21 @@ def test_load_by_path(tmp_path: Path) -> None:
     assert load_profile(str(f)) == load_profile(f)
 
 
+def test_a_file_edited_between_two_loads_gives_its_new_profile_at_once(tmp_path: Path) -> None:
+    """Parsed profiles are kept by their file's bytes: an edit of the same size, in the same clock tick, is
+    seen; the same bytes give the same (frozen) object, and a bad edit is refused as from a fresh load."""
+    f = tmp_path / "mine.toml"
+    f.write_text(X500_TEXT.replace('mass = 2.0', 'mass = 2.1'))
+    first = load_profile(f)
+    f.write_text(X500_TEXT.replace('mass = 2.0', 'mass = 2.2'))
+    second = load_profile(f)
+    assert (first.mass, second.mass) == (2.1, 2.2)
+    assert load_profile(f) is second
+    f.write_text(X500_TEXT.replace('mass = 2.0', 'mass = -2.0'))
+    with pytest.raises(ConfigError, match="mass"):
+        load_profile(f)
+
+
 def _edit(text: str, key: str, value: str | None) -> str:
     """Replace (or with None, delete) the line ``key = ...`` of a profile."""
     out = []
