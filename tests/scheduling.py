@@ -56,7 +56,8 @@ def _fixture_scope(dec: ast.expr) -> str | None:
 
 # module-scoped fixtures too cheap to hold their tests together (a worker may well make them twice)
 CHEAP = {("tests/test_sweep.py", "mission_file"): "writes a 10-line mission file",
-         ("tests/test_laws.py", "nominal"): "a dataclass from the paper's profile"}
+         ("tests/test_laws.py", "nominal"): "a dataclass from the paper's profile",
+         ("tests/test_bad_input.py", "shared_files"): "writes eight small files"}
 
 
 def shared_groups(source: str, path: str = "") -> dict[str, str]:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import copy
 import functools
 import os
 import signal
@@ -103,6 +104,16 @@ class Files:
 @pytest.fixture
 def files(tmp_path: Path) -> Iterator[Files]:
     f = Files(tmp_path)
+    yield f
+    f.close()
+
+
+@pytest.fixture(scope="module")
+def shared_files(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Files]:
+    """One :class:`Files` for the walks whose tests only read them and write ``bad.toml`` (each overwrites
+    it): the key walk's ~1 500 tests made ~1 500 directories of eight files each (~5 s of a worker's CPU
+    to make and later delete, on this VM's disk)."""
+    f = Files(tmp_path_factory.mktemp("files"))
     yield f
     f.close()
 
@@ -226,9 +237,14 @@ def test_every_flag_refuses_a_bad_value(files, capsys, cmd, flag):
 
 
 # -- mission and sweep keys ----------------------------------------------------------------------------
+@functools.cache
+def _robust() -> dict[str, Any]:
+    return load_toml(MISSION_DIR / "robust.toml")
+
+
 def _full_mission(controller: str) -> dict[str, Any]:
     """A mission with every table the validators read (the robust one, a link, a failsafe, gains)."""
-    d = load_toml(MISSION_DIR / "robust.toml")
+    d = copy.deepcopy(_robust())
     d.update(controller=controller, duration_s=0.2, actuation="wrench", physics_hz=1000.0)
     d["start"] = {"position": [0.0, 0.0, 0.0], "psi": 0.0}
     d["link"] = {"delay_ms": 0.0, "stale_ms": 50.0, "up": {"loss_pct": 0.0}, "down": {"loss_pct": 0.0}}
@@ -300,11 +316,12 @@ def _set(data: dict[str, Any], dotted: str, value: Any) -> dict[str, Any]:
 
 def _key_cases() -> list[tuple[str, str, Any]]:
     src = "<walk>"
-    cases = []
+    cases, seen = [], set()
     for ctl in ("bsst", "smc", "pid"):
         for key, (getter, a, kw) in _keys_asked(_full_mission(ctl), src).items():
             for bad in _bad_key_values(getter, a, kw):
-                if (ctl, key, repr(bad)) not in {(c[0], c[1], repr(c[2])) for c in cases}:
+                if (ctl, key, repr(bad)) not in seen:
+                    seen.add((ctl, key, repr(bad)))
                     cases.append((ctl, key, bad))
     return cases
 
@@ -320,19 +337,19 @@ def test_the_key_walk_covers_every_table():
 
 
 @pytest.mark.parametrize("ctl, key, bad", KEY_CASES, ids=[f"{c}-{k}={b!r}" for c, k, b in KEY_CASES])
-def test_every_mission_key_refuses_a_bad_value(files, capsys, ctl, key, bad):
-    mission = files.root / "bad.toml"
+def test_every_mission_key_refuses_a_bad_value(shared_files, capsys, ctl, key, bad):
+    mission = shared_files.root / "bad.toml"
     mission.write_text(dump_toml(_set(_full_mission(ctl), key, bad)))
-    _refused(capsys, ["sim", mission, "--out", files.out, "--no-plots"], key)
+    _refused(capsys, ["sim", mission, "--out", shared_files.out, "--no-plots"], key)
 
 
 @pytest.mark.parametrize("cmd", ["sitl", "vehicle", "controller", "relay", "sweep"])
 @pytest.mark.parametrize("key, bad", [("duration_s", "long"), ("link.up.delay_ms", -5.0), ("speed", 3),
                                       ("trajectory.omega", 1e9), ("failsafe.resume", "yes")])
-def test_every_command_reads_missions_alike(files, capsys, cmd, key, bad):
-    mission = files.root / "bad.toml"
+def test_every_command_reads_missions_alike(shared_files, capsys, cmd, key, bad):
+    mission = shared_files.root / "bad.toml"
     mission.write_text(dump_toml(_set(_full_mission("bsst"), key, bad)))
-    argv = [cmd, *BASE[cmd](files)]
+    argv = [cmd, *BASE[cmd](shared_files)]
     argv = argv + ["--mission", mission] if cmd == "relay" else [cmd, mission, *argv[2:]]
     _refused(capsys, argv, key)
 

@@ -13,7 +13,6 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
-from scipy.integrate import solve_ivp
 
 from plant import Disturbance, Effects, Quadrotor, load_profile
 from plant.integrate import rk4_step
@@ -83,6 +82,8 @@ def commands(t: float, hover: float) -> tuple[float, float, float, float]:
 
 
 def test_rk4_matches_solve_ivp_on_a_10s_flight() -> None:
+    from scipy.integrate import solve_ivp  # lazy: ~1 s of every worker's collection otherwise
+
     p = load_profile("paper")
     effects = Effects(drag=True, disturbance=Disturbance(force_amp=(0.3, 0.2, 0.1), torque_amp=(0.05, 0.05, 0.02),
                                                          freq_hz=0.4, random_phase=True))

@@ -15,7 +15,6 @@ import struct
 from collections.abc import Iterator
 from pathlib import Path
 
-import matplotlib
 import numpy as np
 import pytest
 
@@ -28,8 +27,20 @@ from bridge.record.runlog import blackout_windows
 from bridge.sweep.report import HEAT_DPI, HEAT_TEXT_PT, controller_files, heat_map_figure, pair_title
 from missions import Mission, Sine
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402  (after the backend is chosen)
+
+@pytest.fixture(scope="module", autouse=True)
+def _agg() -> None:
+    """matplotlib on its file backend, imported by the worker that runs these tests only (~0.7 s of each
+    worker's collection otherwise)."""
+    import matplotlib  # lazy: see the docstring
+
+    matplotlib.use("Agg")
+
+
+def _close(fig: object) -> None:
+    import matplotlib.pyplot as plt  # lazy: as _agg
+
+    plt.close(fig)
 
 ROOT = Path(__file__).resolve().parent.parent
 # the paper's explicit step, asked for by name: its u4 alternates every step (the implicit default's does not),
@@ -66,7 +77,7 @@ def _open(figs: dict) -> Iterator[tuple[str, object]]:
             yield name, fig
     finally:
         for fig in figs.values():
-            plt.close(fig)
+            _close(fig)
 
 
 def _only(trace: dict, name: str) -> object:
@@ -74,7 +85,7 @@ def _only(trace: dict, name: str) -> object:
     figs = figures(trace)
     keep = figs.pop(name)
     for fig in figs.values():
-        plt.close(fig)
+        _close(fig)
     return keep
 
 
@@ -158,7 +169,7 @@ def test_the_figures_are_written_at_their_dpi(clean: dict, tmp_path: Path) -> No
     sizes = {name: fig.get_size_inches() for name, fig in figs.items()}
     assert all(fig.dpi == DPI for fig in figs.values())
     for fig in figs.values():
-        plt.close(fig)
+        _close(fig)
     for p in make_plots(clean, tmp_path, "short"):
         head = p.read_bytes()[:24]
         assert head[:8] == b"\x89PNG\r\n\x1a\n"
@@ -248,7 +259,7 @@ def test_a_lossless_trace_says_it_lost_nothing(tmp_path: Path) -> None:
         assert loss.get_xlim() == fig.axes[0].get_xlim()
         assert _check_legends("link trace", fig) == 2 and fig.dpi == DPI
     finally:
-        plt.close(fig)
+        _close(fig)
 
 
 def _row(controller: str, delay: float, loss: float, rms: float) -> dict:
@@ -278,7 +289,7 @@ def test_heat_maps_are_readable_with_a_colour_scale_per_law() -> None:
         assert len(bars) == 3 and all("[m]" in ax.get_ylabel() for ax in bars)
         assert fig._suptitle.get_text().startswith("delay_ms x loss_pct")
     finally:
-        plt.close(fig)
+        _close(fig)
 
 
 def test_a_one_axis_sweep_is_titled_by_its_axis() -> None:
