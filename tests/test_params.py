@@ -361,8 +361,9 @@ def _bsst(*args: str, cwd=ROOT) -> subprocess.CompletedProcess:
 def test_an_integer_parameter_flag_is_parsed_as_an_integer(tmp_path, name, value):
     """Issue 22, defect 4: ``--param COM_OBL_ACT=1`` flies (it was refused as 'expected an integer, got
     1.0', blamed on the mission file); the run's mission.toml holds the integer."""
-    r = _bsst("sim", "missions/sine.toml", "--param", f"{name}={value}", "--out", str(tmp_path / "r"),
-              "--no-plots")
+    mission = tmp_path / "short.toml"  # the flag is read and written before the flight: a second of it will do
+    mission.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 1.0"))
+    r = _bsst("sim", str(mission), "--param", f"{name}={value}", "--out", str(tmp_path / "r"), "--no-plots")
     assert r.returncode == 0, r.stderr
     assert f"{name} = {value}\n" in (tmp_path / "r" / "mission.toml").read_text()
 
