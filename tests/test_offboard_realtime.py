@@ -53,8 +53,9 @@ class ScriptedVehicle:
     """A vehicle that arms on command and streams ODOMETRY of a resting state at ``RATE`` on
     its own schedule; it records the time_usec of every actuator target it receives."""
 
-    def __init__(self, timesync_skew_s: float = 0.0) -> None:
+    def __init__(self, timesync_skew_s: float = 0.0, in_progress_after: bool = False) -> None:
         self.skew_ns = int(timesync_skew_s * 1e9)  # TIMESYNC answers this far off the stamps' clock
+        self.in_progress_after = in_progress_after  # an IN_PROGRESS right behind the ARM's ACCEPTED
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind(("127.0.0.1", 0))
         self.sock.setblocking(False)
@@ -107,6 +108,8 @@ class ScriptedVehicle:
                         continue
                     self.armed, self.disarmed = m.param1 == 1.0, m.param1 == 0.0
                     self.send(mavlink.MAVLink_command_ack_message(m.command, mavlink.MAV_RESULT_ACCEPTED))
+                    if self.in_progress_after and self.armed:
+                        self.send(mavlink.MAVLink_command_ack_message(m.command, mavlink.MAV_RESULT_IN_PROGRESS))
                     self.heartbeat()
 
     def until(self, due: float) -> None:
@@ -139,7 +142,8 @@ class Flown:
     timesync_asked: list[float]  # wall time of each TIMESYNC request, s from the first target (< 0: before it)
 
 
-def fly(tmp: Path, timesync_skew_s: float = 0.0, spoofs: dict[int, int] | None = None, bunched: bool = False) -> Flown:
+def fly(tmp: Path, timesync_skew_s: float = 0.0, spoofs: dict[int, int] | None = None, bunched: bool = False,
+        in_progress_after: bool = False) -> Flown:
     """One real-time flight of ``bsst controller`` against the scripted vehicle: state k
     carries time k / RATE on the vehicle's clock and leaves WAY_DOWN_S after it (LATE_S
     later still for the steps in LATE, never for those in DROPPED). ``spoofs``: after the
@@ -147,7 +151,7 @@ def fly(tmp: Path, timesync_skew_s: float = 0.0, spoofs: dict[int, int] | None =
     ``bunched``: the state of step 6 leaves at step 5's time (step 5's lost), so that it comes within the
     mission's first tick, as states bunched by a busy machine's scheduling do."""
     (tmp / "late.toml").write_text(MISSION)
-    v = ScriptedVehicle(timesync_skew_s)
+    v = ScriptedVehicle(timesync_skew_s, in_progress_after)
     sent_late: dict[int, float] = {}
     ctl = Proc.bsst("controller", str(tmp / "late.toml"), "--realtime", "--vehicle", f"127.0.0.1:{v.port}",
                     "--out", str(tmp / "run"), "--timeout", "20")
@@ -278,6 +282,13 @@ def test_an_arm_whose_answers_are_lost_is_repeated_before_the_failsafe(flown: Fl
     asks again soon enough that its first target comes inside the vehicle's 0.5 s
     failsafe timeout (it asked every 0.5 s, and a lost ACK under 10 % loss cost the flight)."""
     assert flown.arm_to_target_s <= 0.45, flown.arm_to_target_s  # 50 Hz: 5 states to phase-lock take 0.1 s
+
+
+def test_an_in_progress_behind_the_arms_accepted_does_not_hide_it(tmp_path: Path) -> None:
+    """ACCEPTED, then IN_PROGRESS for the same ARM in one read (the answer to a resend, overtaking): the
+    controller keeps the final result and flies (it took the last ACK: "arming refused (MAV_RESULT 5)")."""
+    run = fly(tmp_path, in_progress_after=True)
+    assert run.targets and not any("arming refused" in line for line in run.lines), run.lines[-5:]
 
 
 def test_a_state_stamped_far_ahead_or_back_is_refused_and_the_mission_flies_on(tmp_path: Path) -> None:

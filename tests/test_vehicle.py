@@ -195,6 +195,38 @@ def _two_answers_to_step_0(tmp_path, idle_copy: bool) -> dict:
     return _stats(v)
 
 
+def test_a_resent_arm_finds_the_vehicle_armed_and_is_accepted_without_crossing_the_link(tmp_path):
+    """The controller resends its ARM (confirmation 1, 2, ...) every 0.1 s of wall time until an ACK comes; on
+    a loaded machine the first ACCEPTED can come after the resend has left. The resend, reaching a lockstep
+    vehicle armed in OFFBOARD, is ACCEPTED and does nothing: it answered IN_PROGRESS and entered the up-link
+    model, whose packet fates offline never drew, and its IN_PROGRESS overtook the ACCEPTED in the controller
+    ("arming refused (MAV_RESULT 5)", a flight of tests/test_params.py under load). A guard's ask to arm
+    again (confirmation 0) still crosses the model as offline's does: IN_PROGRESS."""
+    with instance_slot() as n:
+        v = _vehicle(n, tmp_path)
+        os.environ["MAVLINK20"] = "1"
+        ctl = mavutil.mavlink_connection(f"udpout:127.0.0.1:{LINK_PORT + n}", source_system=200,
+                                         source_component=191, dialect="common")
+        sysid = n + 1
+        arm = M.MAV_CMD_COMPONENT_ARM_DISARM
+        try:
+            ctl.mav.heartbeat_send(M.MAV_TYPE_ONBOARD_CONTROLLER, M.MAV_AUTOPILOT_INVALID, 0, 0, 4)
+            assert ctl.recv_match(type="HEARTBEAT", blocking=True, timeout=20) is not None
+            ctl.mav.command_long_send(sysid, 1, arm, 0, 1, 0, 0, 0, 0, 0, 0)
+            assert _ack(ctl, arm).result == M.MAV_RESULT_ACCEPTED
+            assert ctl.recv_match(type="ODOMETRY", blocking=True, timeout=5,
+                                  condition="ODOMETRY.time_usec==0") is not None
+            ctl.mav.command_long_send(sysid, 1, arm, 1, 1, 0, 0, 0, 0, 0, 0)  # the resend
+            assert _ack(ctl, arm).result == M.MAV_RESULT_ACCEPTED
+            ctl.mav.command_long_send(sysid, 1, arm, 0, 1, 0, 0, 0, 0, 0, 0)  # a guard's ask
+            assert _ack(ctl, arm).result == M.MAV_RESULT_IN_PROGRESS
+            ctl.mav.command_long_send(sysid, 1, arm, 0, 0, 21196, 0, 0, 0, 0, 0)
+            assert _ack(ctl, arm).result == M.MAV_RESULT_ACCEPTED
+        finally:
+            assert v.stop() == 0
+            ctl.close()
+
+
 def test_a_slow_answer_to_a_resent_state_is_taken_once_and_refuses_nothing(tmp_path):
     """Lockstep resends a state unanswered for 50 ms of wall time, and the controller answers
     every copy: an answer that was slow (not lost) comes twice. The vehicle steps once on the

@@ -138,9 +138,10 @@ class OffboardLink:
 
     def _command(self, cmd: int, p1: float, p2: float, tries: int = 30, every_s: float = 0.1,
                  p3: float = 0.0) -> int | None:
-        """COMMAND_LONG to the vehicle, repeated (confirmation 0, 1, ...) until ACKed. Every
-        0.1 s: an ARM whose ACK was lost has armed the vehicle, whose failsafe takes over
-        0.5 s later without a target (ARM_DISARM is idempotent)."""
+        """COMMAND_LONG to the vehicle, repeated (confirmation 0, 1, ...) until ACKed with a final result
+        (IN_PROGRESS is not one). Every 0.1 s: an ARM whose ACK was lost has armed the vehicle, whose failsafe
+        takes over 0.5 s later without a target (ARM_DISARM is idempotent; a resent ARM the vehicle finds
+        armed in OFFBOARD is ACCEPTED and does nothing: ``Commander._run_command`` in bridge.nodes.vehicle)."""
         self._acks.pop(cmd, None)
         for n in range(tries):
             self.ep.send(mavlink.MAVLink_command_long_message(self.vsys or 0, self.vcomp, cmd, n, p1, p2,
@@ -148,7 +149,7 @@ class OffboardLink:
             deadline = time.monotonic() + every_s
             while time.monotonic() < deadline and not self.stopping:
                 self._serve(deadline)
-                if cmd in self._acks:
+                if self._acks.get(cmd, mavlink.MAV_RESULT_IN_PROGRESS) != mavlink.MAV_RESULT_IN_PROGRESS:
                     return self._acks.pop(cmd)
             if self.stopping:
                 return None
@@ -318,7 +319,9 @@ class OffboardLink:
             return
         self._last_rx = time.monotonic()
         if kind == "COMMAND_ACK":
-            if m.target_system in (0, self.cfg.sysid):
+            # IN_PROGRESS is not an answer (MAVLink's command protocol): it never hides a final one already in
+            if m.target_system in (0, self.cfg.sysid) and (m.result != mavlink.MAV_RESULT_IN_PROGRESS
+                                                           or m.command not in self._acks):
                 self._acks[m.command] = m.result
         elif kind == "PARAM_VALUE":
             if self._pending_params:

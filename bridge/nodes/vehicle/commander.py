@@ -130,6 +130,11 @@ class Commander:
             if args[0] and by.link == "gcs" and not self.sim.armed and self._mission_selected():
                 return self._start_mission(by, 0.0, START_ARM), ()  # AUTO.MISSION, then arm: the mission starts
             if args[0] and self._through_link(m, by):
+                if getattr(m, "confirmation", 0) > 0 and self.sim.armed and self.sim.mode == OFFBOARD:
+                    # the controller's ARM again, its first ACCEPTED late on a loaded machine: armed already.
+                    # Through the link model it would take a packet's fate offline never drew (and its
+                    # IN_PROGRESS overtook the ACCEPTED: "arming refused (MAV_RESULT 5)")
+                    return mavlink.MAV_RESULT_ACCEPTED, ()
                 self.ports.arm_through_link()  # acts when the model delivers it, as offline
                 return mavlink.MAV_RESULT_IN_PROGRESS, ()
             return self.arm_disarm(m.param1, m.param2, by), ()
