@@ -51,6 +51,13 @@ def _vehicle(n: int, tmp_path, *extra: str) -> Proc:
     return v
 
 
+def _controller_link(n: int, sysid: int = 200):
+    """A scripted controller's link to the vehicle of instance ``n`` (as ``bsst controller``'s: 200 / 191)."""
+    os.environ["MAVLINK20"] = "1"
+    return mavutil.mavlink_connection(f"udpout:127.0.0.1:{LINK_PORT + n}", source_system=sysid,
+                                      source_component=191, dialect="common")
+
+
 def _stats(v: Proc) -> dict:
     return v.wait_report(Stats, timeout=10).values
 
@@ -119,11 +126,8 @@ def test_targets_only_from_the_configured_controller(tmp_path):
     from sysid 200 / compid 191, armed; others are rejected and counted."""
     with instance_slot() as n:
         v = _vehicle(n, tmp_path)
-        os.environ["MAVLINK20"] = "1"
-        ctl = mavutil.mavlink_connection(f"udpout:127.0.0.1:{LINK_PORT + n}", source_system=200,
-                                         source_component=191, dialect="common")
-        impostor = mavutil.mavlink_connection(f"udpout:127.0.0.1:{LINK_PORT + n}", source_system=201,
-                                              source_component=191, dialect="common")
+        ctl = _controller_link(n)
+        impostor = _controller_link(n, sysid=201)
         try:
             ctl.mav.heartbeat_send(M.MAV_TYPE_ONBOARD_CONTROLLER, M.MAV_AUTOPILOT_INVALID, 0, 0, 4)
             hb = ctl.recv_match(type="HEARTBEAT", blocking=True, timeout=20)
@@ -169,9 +173,7 @@ def _two_answers_to_step_0(tmp_path, idle_copy: bool) -> dict:
     step 1's state, a disarm, and the vehicle's stats."""
     with instance_slot() as n:
         v = _vehicle(n, tmp_path)
-        os.environ["MAVLINK20"] = "1"
-        ctl = mavutil.mavlink_connection(f"udpout:127.0.0.1:{LINK_PORT + n}", source_system=200,
-                                         source_component=191, dialect="common")
+        ctl = _controller_link(n)
         sysid = n + 1
         try:
             ctl.mav.heartbeat_send(M.MAV_TYPE_ONBOARD_CONTROLLER, M.MAV_AUTOPILOT_INVALID, 0, 0, 4)
@@ -204,9 +206,7 @@ def test_a_resent_arm_finds_the_vehicle_armed_and_is_accepted_without_crossing_t
     again (confirmation 0) still crosses the model as offline's does: IN_PROGRESS."""
     with instance_slot() as n:
         v = _vehicle(n, tmp_path)
-        os.environ["MAVLINK20"] = "1"
-        ctl = mavutil.mavlink_connection(f"udpout:127.0.0.1:{LINK_PORT + n}", source_system=200,
-                                         source_component=191, dialect="common")
+        ctl = _controller_link(n)
         sysid = n + 1
         arm = M.MAV_CMD_COMPONENT_ARM_DISARM
         try:
