@@ -197,7 +197,7 @@ def _two_answers_to_step_0(tmp_path, idle_copy: bool) -> dict:
     return _stats(v)
 
 
-def test_a_resent_arm_finds_the_vehicle_armed_and_is_accepted_without_crossing_the_link(tmp_path):
+def test_a_resent_arm_that_finds_the_vehicle_armed_is_accepted_not_in_progress(tmp_path):
     """The controller resends its ARM (confirmation 1, 2, ...) every 0.1 s of wall time until an ACK comes; on
     a loaded machine the first ACCEPTED can come after the resend has left. The resend, reaching a lockstep
     vehicle armed in OFFBOARD, is ACCEPTED and does nothing: it answered IN_PROGRESS and entered the up-link

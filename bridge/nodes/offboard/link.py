@@ -149,7 +149,7 @@ class OffboardLink:
             deadline = time.monotonic() + every_s
             while time.monotonic() < deadline and not self.stopping:
                 self._serve(deadline)
-                if self._acks.get(cmd, mavlink.MAV_RESULT_IN_PROGRESS) != mavlink.MAV_RESULT_IN_PROGRESS:
+                if cmd in self._acks:
                     return self._acks.pop(cmd)
             if self.stopping:
                 return None
@@ -319,9 +319,8 @@ class OffboardLink:
             return
         self._last_rx = time.monotonic()
         if kind == "COMMAND_ACK":
-            # IN_PROGRESS is not an answer (MAVLink's command protocol): it never hides a final one already in
-            if m.target_system in (0, self.cfg.sysid) and (m.result != mavlink.MAV_RESULT_IN_PROGRESS
-                                                           or m.command not in self._acks):
+            # IN_PROGRESS is not an answer (MAVLink's command protocol): only a final result is kept
+            if m.target_system in (0, self.cfg.sysid) and m.result != mavlink.MAV_RESULT_IN_PROGRESS:
                 self._acks[m.command] = m.result
         elif kind == "PARAM_VALUE":
             if self._pending_params:
