@@ -287,3 +287,29 @@ class GcsSocket:
 
     def close(self) -> None:
         self.sock.close()
+
+
+def unexplained_outages(trace: dict[str, Any], stalls: dict[str, Any], over_s: float = 0.03) -> dict[str, list]:
+    """A real-time run on a perfect link against its ``timing.stalls``: ``rows``, the trace's times (s) whose
+    command in force answered a state more than ``over_s`` old outside every listed stall (its t - 10 ms to its
+    end + 20 ms: the catch-up after it); ``stalls``, the listed stalls of 2 ``over_s`` or more, ending inside the
+    trace, with no such row in their window. Both empty: the stalls explain every outage the trace shows."""
+    t, age = trace["t"], trace["state_age_s"]
+    windows = [(s["t"] - 0.01, s["t"] + s["ms"] / 1e3 + 0.02, s) for s in stalls["at"]]
+    old = [float(x) for x, a in zip(t, age) if a > over_s]
+    rows = [x for x in old if not any(lo <= x <= hi for lo, hi, _ in windows)]
+    end = float(t[-1]) if len(t) else 0.0
+    missed = [s for lo, hi, s in windows if s["ms"] >= 2e3 * over_s and hi <= end
+              and not any(lo <= x <= hi for x in old)]
+    return {"rows": rows, "stalls": missed}
+
+
+def stalled(summary: dict[str, Any]) -> bool:
+    """Whether the machine stalled this real-time run (its ``timing.stalls``): then it was not flown as asked and
+    exits 1, whatever else went right (a host that takes its cores back stalls the suite's real-time runs)."""
+    return bool(((summary.get("timing") or {}).get("stalls") or {}).get("count"))
+
+
+def clean_exit(summary: dict[str, Any]) -> int:
+    """The exit status of a run that flew as asked but for the machine's stalls: 0, or 1 if it stalled."""
+    return 1 if stalled(summary) else 0

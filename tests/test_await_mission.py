@@ -38,7 +38,7 @@ from bridge.session import instance_slot
 from missions import Mission, Sine
 from missions.planfiles import plan_text, read_plan_text
 from tests.plans import l_plan
-from tests.sitlkit import ENV, ROOT, GcsSocket, MavProxy, Proc, run_bsst
+from tests.sitlkit import ENV, ROOT, GcsSocket, MavProxy, Proc, clean_exit, run_bsst
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes and opens sockets
@@ -223,12 +223,13 @@ def test_mission_start_flies_a_small_plan_in_real_time(tmp_path, link, how):
                 return len(reached) == 3
 
             wait_for(all_reached, 90.0, "MISSION_ITEM_REACHED for the three items", poll_s=0.0)
-            assert sitl.p.wait(timeout=60) == 0, "\n".join(sitl.lines[-30:])
+            rc = sitl.p.wait(timeout=60)
         finally:
             gcs.close()
             sitl.stop()
     assert reached == [0, 1, 2]
     summary = json.loads((out / "summary.json").read_text())
+    assert rc == clean_exit(summary), "\n".join(sitl.lines[-30:])
     assert summary["outcome"] == "completed" and summary["clock"] == "realtime"
     assert summary["mission_transfer"]["items"] == 3 and summary["end"]["disarmed"]
     assert summary["mission_transfer"]["started_by"] == {"command": how, "by": f"255:190 127.0.0.1:{GCS_PORT + n} gcs"}

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from bridge.core.clock import REBASE_S, FixedRate, Pace
+from bridge.core.clock import REBASE_S, STALL_S, STALLS_KEPT, FixedRate, Pace, Stalls
 
 
 def test_pace_runs_speed_times_real_time_from_its_restart():
@@ -32,3 +32,24 @@ def test_fixed_rate_keeps_its_phase_and_skips_what_it_missed():
     j = c.catch_up(10, now=2.04 + 0.0101)  # 2.5 periods late: ticks 10 and 11 are lost
     assert j == 12 and c.skipped == 2
     assert c.due(j) == pytest.approx(2.048)  # the schedule is kept, not re-based on the late tick
+
+
+def test_a_stall_is_one_record_however_many_late_wake_ups_its_catch_up_makes():
+    s = Stalls()
+    s.note(1.000, STALL_S)  # at the threshold: the machine's ordinary jitter, not a stall
+    s.note(1.000, 0.5 * STALL_S)
+    assert s.report() == {"count": 0, "worst_ms": 0.0, "at": []}
+    # a 100 ms stall at t = 2 s: the 1 kHz steps due in it are each woken late as the pace catches up
+    for n in range(100):
+        s.note(2.0 + n * 1e-3, 0.1 - n * 1e-3 + 20e-6 * n)
+    s.note(2.3, 0.012)  # a second, shorter one after it
+    assert s.report() == {"count": 2, "worst_ms": 100.0, "at": [[2.0, 100.0], [2.3, 12.0]]}
+
+
+def test_stalls_past_the_kept_ones_are_counted_not_listed():
+    s = Stalls()
+    for i in range(STALLS_KEPT + 5):
+        s.note(float(i), 0.05 + i * 1e-4)
+    r = s.report()
+    assert r["count"] == STALLS_KEPT + 5 and len(r["at"]) == STALLS_KEPT
+    assert r["worst_ms"] == pytest.approx(1e3 * (0.05 + (STALLS_KEPT + 4) * 1e-4), abs=0.05)

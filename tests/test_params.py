@@ -49,7 +49,7 @@ from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
 from missions import Mission, Sine
 from params import ConfigError
-from tests.sitlkit import ENV, ROOT, Bsst, Proc, run_bsst
+from tests.sitlkit import ENV, ROOT, Bsst, Proc, clean_exit, run_bsst
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -561,7 +561,7 @@ def test_a_scheduled_change_in_a_realtime_blackout_is_resent_until_confirmed_or_
     assert sent["name"] == "MIS_TAKEOFF_ALT" and sent["value"] == 5 and sent["sends"] >= 2, sent
     log = (tmp_path / "run" / "events.log").read_text()
     if confirmed:
-        assert r.returncode == 0, r.stderr
+        assert r.returncode == clean_exit(s), r.stderr
         assert sent["confirmed"] is True and sent["confirmed_t"] >= 4.0, sent
         assert "MIS_TAKEOFF_ALT = 5 (was 2.5)" in log  # the vehicle made it
     else:

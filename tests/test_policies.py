@@ -285,3 +285,13 @@ def test_a_violation_or_a_lockstep_left_exits_1_and_is_named(capsys) -> None:
     assert "left lockstep at t=1.200 s: controller silent" in out
     assert err == f"bsst sitl: not a lockstep run: the vehicle left lockstep at t=1.200 s ({LEFT})\n"
     assert not run_ok({**base, "outcome": "aborted"})
+    stalled = {**base, "clock": "realtime", "lockstep": None,
+               "timing": {"stalls": {"threshold_ms": 10.0, "count": 1, "worst_ms": 97.0,
+                                     "at": [{"t": 2.5, "ms": 97.0, "side": "vehicle"}]}}}
+    assert not run_ok(stalled) and report_run(Run({}, stalled, None), "sitl") == 1
+    out, err = capsys.readouterr()
+    said = ("not flown as asked: the machine stalled the real-time loop 1 time(s), worst 97 ms "
+            "(vehicle 97 ms at t=2.500 s)")
+    assert said in out and err.startswith(f"bsst sitl: {said}")
+    calm = {**stalled, "timing": {"stalls": {"threshold_ms": 10.0, "count": 0, "worst_ms": 0.0, "at": []}}}
+    assert run_ok(calm) and report_run(Run({}, calm, None), "sitl") == 0

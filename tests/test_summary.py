@@ -33,6 +33,7 @@ from bridge.record.summary import (
     link_block,
     outcome_of,
     session_summary,
+    stalls_block,
     timing_block,
 )
 from missions import Mission, Sine
@@ -226,3 +227,29 @@ def test_a_perfect_links_counts_name_where_every_datagram_went() -> None:
     assert (down["in_flight"], down["dropped_by_kernel"], down["refused"]) == (5 + 2, 1, 2)  # steps 5-9, 114-115
     assert down["lost"] == 110 - 100 - 2 - 7 - 1 == 0  # the one step the vehicle skipped (61) was never sent
     assert link["up"]["dropped_by_kernel"] == 1 and link["up"]["lost"] == 100 - 97 - 1
+
+
+def test_a_real_time_run_the_machine_stalled_lists_each_stall_on_the_flights_clock_and_says_so() -> None:
+    """The children's stalls (their own clocks) on the flight's clock (the vehicle's less step k0's time: k0 = 5,
+    0.02 s), the mission's only (an arming stall before t = 0 and a landing one after its end are left out),
+    earliest first; the note and the exit status say the run was not flown as asked."""
+    vehicle_stalls = {"count": 3, "worst_ms": 120.0, "at": [[0.01, 120.0], [0.52, 97.0], [1.5, 30.0]]}
+    controller_stalls = {"count": 1, "worst_ms": 41.0, "at": [[0.3, 41.0]]}
+    block = stalls_block({"stalls": vehicle_stalls}, {"stalls": controller_stalls}, 5, RATE, 1.0)
+    assert block == {"threshold_ms": 10.0, "count": 2, "worst_ms": 97.0,
+                     "at": [{"t": 0.3, "ms": 41.0, "side": "controller"}, {"t": 0.5, "ms": 97.0, "side": "vehicle"}]}
+    # a side that listed only some of its stalls: the others count, their times unknown
+    assert stalls_block({"stalls": {**controller_stalls, "count": 4}}, {}, 5, RATE, 1.0)["count"] == 4
+    vehicle, controller = ends()
+    vehicle = ChildEnd("vehicle", 0, "exited with status 0", {**VEHICLE_STATS, "stalls": vehicle_stalls})
+    controller = ChildEnd("controller", 0, "exited with status 0", {**CONTROLLER_STATS, "stalls": controller_stalls},
+                          "completed")
+    out = session_summary(FLIGHT, facts(clock="realtime"), joined(), [ARMED], vehicle, controller)
+    assert out.summary["timing"]["stalls"] == block and out.summary["outcome"] == "completed"
+    assert [n.kind for n in out.notes] == ["ended", "stall"]
+    assert out.notes[1].text.startswith("not flown as asked: the machine stalled the real-time loop 2 time(s), "
+                                        "worst 97 ms (controller 41 ms at t=0.300 s, vehicle 97 ms at t=0.500 s)")
+    calm = session_summary(FLIGHT, facts(clock="realtime"), joined(), [ARMED], *ends())
+    assert calm.summary["timing"]["stalls"]["count"] == 0 and [n.kind for n in calm.notes] == ["ended"]
+    lockstep = session_summary(FLIGHT, facts(), joined(), [ARMED], *ends())
+    assert "stalls" not in lockstep.summary["timing"]  # lockstep waits for its answers: nothing to stall

@@ -2,13 +2,17 @@
 
 In:  ``time.monotonic`` wall times (s), step or tick numbers, rates (Hz), a speed factor (x real time)
 Out: the wall time (s) each step or tick is due, the paced clock's time (s), the tick to run after
-     a late wake-up; counts of re-based schedules and skipped ticks
+     a late wake-up; counts of re-based schedules and skipped ticks; the machine's stalls (s of the
+     clock, ms)
 
 - :class:`Pace` — the vehicle's: physics step n of a counter running ``speed`` times real
   time is due at w0 + (n - n0) / (rate_hz * speed). Used by the real-time clock, by a
   lockstep vehicle paced with ``--speed``, and by a lockstep vehicle that lost its
   controller. A schedule fallen more than :data:`REBASE_S` behind (the machine stalled) is
   re-based on the present instead of caught up in a burst faster than ``speed``.
+- :class:`Stalls` — the stretches a real-time process woke more than :data:`STALL_S` late: the
+  machine, not the link model, held the loop (a virtual machine whose host takes its cores back
+  stops every process in it, whatever its priority, for up to 100 ms).
 - :class:`FixedRate` — the controller's: tick j is due at t0 + j / rate_hz, drift-free; a
   tick woken more than a period late skips the ticks it missed, keeping the schedule (a
   fixed-rate law keeps its phase to the vehicle's states).
@@ -19,9 +23,13 @@ lockstep on HIL_ACTUATOR_CONTROLS), so simulation time is the step count.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 
 REBASE_S = 0.25  # a pace this far behind the wall clock is re-based, not caught up
+# a wake-up this late is the machine's stall: Linux's own wake-up jitter stays under 9 ms with both cores busy
+STALL_S = 0.010
+STALLS_KEPT = 1000  # stalls listed one by one (an hour at one a second, 20 kB); the rest only counted
 
 
 @dataclass
@@ -78,3 +86,30 @@ class FixedRate:
         skip = int(late / period)
         self.skipped += skip
         return j + skip
+
+
+@dataclass
+class Stalls:
+    """The stalls a real-time process met: each a stretch of wake-ups more than :data:`STALL_S`
+    late, kept as ``[t, ms]`` (the clock's time, s, the wake-up was due at; how late the first
+    of the stretch woke, ms). The wake-ups of the catch-up that follows a stall (each due
+    before the stall's end) belong to it."""
+
+    count: int = 0
+    worst_s: float = 0.0
+    kept: list[list[float]] = field(default_factory=list)
+    _until: float = -math.inf  # the clock's time (s) the current stall reaches
+
+    def note(self, t: float, late_s: float) -> None:
+        """A wake-up due at ``t`` (s of the process's clock) came ``late_s`` (s) late."""
+        if late_s <= STALL_S or t < self._until:
+            return
+        self.count += 1
+        self.worst_s = max(self.worst_s, late_s)
+        self._until = t + late_s
+        if len(self.kept) < STALLS_KEPT:
+            self.kept.append([round(t, 3), round(1e3 * late_s, 1)])
+
+    def report(self) -> dict[str, object]:
+        """What the process reports on exit (its ``stats``' ``stalls``)."""
+        return {"count": self.count, "worst_ms": round(1e3 * self.worst_s, 1), "at": self.kept}

@@ -430,8 +430,10 @@ def violation_text(v: Verdict | Mapping[str, Any]) -> str:
 def run_ok(summary: Mapping[str, Any]) -> bool:
     """Whether a run is a clean completion (exit status 0): outcome ``completed``, every policy
     holds, a lockstep session held lockstep throughout, nobody but the flight's controller changed
-    the flight (``interventions``, e.g. a ground station's parameter) and the vehicle confirmed every
-    scheduled change (``param_at``): else not flown as asked."""
+    the flight (``interventions``, e.g. a ground station's parameter), the vehicle confirmed every
+    scheduled change (``param_at``) and (real time) the machine never stalled the loop (``timing.stalls``):
+    else not flown as asked."""
     return (summary.get("outcome") == "completed" and all_hold(summary.get("policies"))
             and (summary.get("lockstep") or {"held": True}).get("held", False) and not summary.get("interventions")
-            and all(p.get("confirmed") for p in summary.get("param_at") or ()))
+            and all(p.get("confirmed") for p in summary.get("param_at") or ())
+            and not ((summary.get("timing") or {}).get("stalls") or {}).get("count"))

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from bridge.autopilot.params import BY_NAME
+from bridge.core.clock import STALL_S
 from bridge.core.flight import Flight
 from bridge.record.columns import TRACE_COLUMNS
 from bridge.record.events import RunEvent
@@ -397,6 +398,33 @@ def timing_block(joined: Joined, rate_hz: float, wall_s: float, vehicle: Mapping
     }
 
 
+def stalls_block(vehicle: Mapping[str, Any], controller: Mapping[str, Any], k0: int | None,
+                 rate_hz: float, duration_s: float) -> dict[str, Any]:
+    """``summary.json["timing"]["stalls"]`` (real time): the wake-ups of the vehicle's physics and of the controller's
+    ticks more than :data:`~bridge.core.clock.STALL_S` late (:class:`~bridge.core.clock.Stalls`) during the mission
+    (0 <= t < ``duration_s`` on the flight's clock: the vehicle's clock less its step k0's time), each ``{t, ms,
+    side}``, earliest first. ``count`` adds a side's stalls past those it listed (its clock's times unknown)."""
+    at, count, worst = [], 0, 0.0
+    for side, stats, shift in (("vehicle", vehicle, (k0 or 0) / rate_hz), ("controller", controller, 0.0)):
+        got = stats.get("stalls") or {}
+        listed = got.get("at", ())
+        count += max(0, int(got.get("count", 0)) - len(listed))
+        for t, ms in listed:
+            if 0.0 <= t - shift < duration_s:
+                at.append({"t": round(t - shift, 3), "ms": ms, "side": side})
+                worst = max(worst, ms)
+    return {"threshold_ms": 1e3 * STALL_S, "count": count + len(at), "worst_ms": worst,
+            "at": sorted(at, key=lambda s: s["t"])}
+
+
+def stalls_text(stalls: Mapping[str, Any]) -> str:
+    """The note of a real-time run the machine stalled (its events and printed summary)."""
+    first = ", ".join(f"{s['side']} {s['ms']:g} ms at t={s['t']:.3f} s" for s in stalls["at"][:3])
+    more = f" and {stalls['count'] - 3} more" if stalls["count"] > 3 else ""
+    return (f"not flown as asked: the machine stalled the real-time loop {stalls['count']} time(s), worst "
+            f"{stalls['worst_ms']:g} ms ({first}{more}): outages no link model asked for")
+
+
 def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events: Sequence[RunEvent],
                     vehicle: ChildEnd | None, controller: ChildEnd | None, relay: ChildEnd | None = None,
                     relay_stats: Mapping[str, Any] | None = None,
@@ -420,6 +448,8 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
     # events' own texts (an injected fault's shown text names its sender)
     summary.update(plant_summary(vs.get("plant") or {}, judged, [{**e.as_dict(), "text": e.text} for e in ev]))
     summary["timing"] = timing_block(joined, m.rate_hz, facts.wall_s, vs, cs)
+    if facts.clock == "realtime":
+        summary["timing"]["stalls"] = stalls_block(vs, cs, joined.k0, m.rate_hz, m.duration_s)
     summary["sitl"] = {**facts.sitl, "vehicle_exit": vehicle.exit_text if vehicle else None,
                        "controller_exit": controller.exit_text if controller else None}
     lockstep, off_clock = None, None
@@ -452,6 +482,8 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
     texts += [("param", f"not flown as asked: {unconfirmed_text(p)}") for p in summary.get("param_at", ())
               if not p["confirmed"]]
     texts += [("policy", violation_text(v)) for v in violated]
+    if summary["timing"].get("stalls", {}).get("count"):
+        texts.append(("stall", stalls_text(summary["timing"]["stalls"])))
     t = joined.rows[-1].t if joined.rows else 0.0  # the notes' time: the trace's last row
     notes = [RunEvent.at(t, kind, text, "session") for kind, text in texts]
     summary["events"] = [e.as_dict() for e in (*events, *notes)]

@@ -18,7 +18,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from bridge.core.clock import FixedRate
+from bridge.core.clock import FixedRate, Stalls
 from bridge.core.flight import Flight
 from bridge.core.wire import command_to_wire, state_from_odometry_fields, step_of_usec
 from bridge.link.ends import ControllerEnd
@@ -73,6 +73,7 @@ class Offboard(OffboardLink):
         self._last_state = time.monotonic()  # wall time of the newest state flown
         self._started = False  # the mission's third state come (before it: start_timeout_s)
         self.stale_ticks = 0
+        self.stalls = Stalls()  # real time: the ticks the machine woke us too late for
         self.schedule: FixedRate | None = None  # realtime: the tick schedule, once phase-locked
         self.reason = ""
         self.ended_taken_over = False  # the flight ended for a ground station's mode (no more targets sent)
@@ -233,11 +234,16 @@ class Offboard(OffboardLink):
         self.schedule = clock = FixedRate(phase + k0 * period + PHASE_S, rate)
         last_k = k0 - 1
         usec, recv = 0, math.nan  # the newest state's stamp and arrival
+        woke = math.inf  # when the last tick woke (s, time.monotonic)
         way_down: float | None = None  # the states' one-way trip (s), once TIMESYNC tells it
         j = 0
         while not self.stopping:
             self._sleep_until(clock.due(j))
             now = mono()
+            # a stall: more than a period since the last tick woke (lateness against the schedule would count
+            # a schedule re-phased into the past on the first state, below, which is arithmetic, not a stall)
+            self.stalls.note(j / rate, now - woke - period)
+            woke = now
             j = clock.catch_up(j, now)  # missed ticks are skipped, the schedule kept (no drift)
             due = clock.due(j)
             late = now - due
@@ -471,6 +477,7 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
     emit(Stats({"param_at": [p.as_dict() for p in node.param_sets],
                 "commands": node.commands, "states": node.states, "received": node.ep.received,
                 "sent": node.ep.sent, "stale_ticks": node.stale_ticks, "overruns": node.overruns,
+                "stalls": node.stalls.report(),
                 "spin_skipped": node.spinner.skipped,
                 "down": node.cend.down.stats.summary() if cfg.clock == "lockstep" else None,
                 "rejected": dict(node.rejected), "rejected_from_vehicle": node.rejected.from_peer,

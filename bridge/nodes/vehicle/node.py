@@ -23,6 +23,7 @@ from typing import Any
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.autopilot.simvehicle import LAND, OFFBOARD
+from bridge.core.clock import Stalls
 from bridge.core.flight import Flight
 from bridge.core.wire import command_from_wire
 from bridge.link.ends import VehicleEnd
@@ -103,6 +104,7 @@ class Vehicle:
         self._resend_at = self._lost_at = self._idle_odo_at = now
         self.clock = Clock(cfg.clock == "realtime", m.physics_hz, cfg.speed or 1.0, now)
         self.pace = self.clock.pace  # the wall clock of physics steps
+        self.stalls = Stalls()  # real time: the physics steps the machine woke us too late for
         self._n = 0  # physics steps taken (realtime: for the wall-clock schedule)
         self._load_at = (now, time.process_time())
         self.load = 0
@@ -181,6 +183,7 @@ class Vehicle:
         self._report(Stats({
             "accepted": self.targets.accepted, "rejected": dict(self.rejected), "odometry_sent": self.odometry.count,
             "received": self.link.received, "overruns": self.pace.rebased, "steps": self.k,
+            "stalls": self.stalls.report(),
             **({"gate": self.gate.stats()} if self.gate is not None else {}),  # a fleet's shared clock
             "rejected_from_controller": self.rejected.from_peer, "resends": self.odometry.resends,
             "answered_again": self.targets.answered_again, "spin_skipped": self.spinner.skipped,
@@ -344,6 +347,8 @@ class Vehicle:
         """Serve the links until wall time ``due`` of the pace; False if stopping. A pace
         stalled far behind is re-based (:meth:`Pace.rebase_if_stalled`), not caught up."""
         now = time.monotonic()
+        if self.cfg.clock == "realtime" and now >= due:  # the machine may have held us: a stall
+            self.stalls.note(self.pace.time_s(due), now - due)
         if self.pace.rebase_if_stalled(now, due):
             return not self.stopping
         while not self.stopping:
