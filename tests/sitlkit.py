@@ -313,3 +313,16 @@ def stalled(summary: dict[str, Any]) -> bool:
 def clean_exit(summary: dict[str, Any]) -> int:
     """The exit status of a run that flew as asked but for the machine's stalls: 0, or 1 if it stalled."""
     return 1 if stalled(summary) else 0
+
+
+def stall_blackouts(stalls: dict[str, Any], duration_s: float) -> list[list[float]]:
+    """A real-time run's stalls as the ``[link] blackouts`` (``[[t_s, duration_s], ...]``, both directions) that
+    fly the same outages offline: a stalled process neither reads nor sends, and the vehicle holds its target
+    (docs/sitl.md, "Stalls"). Overlapping stalls (both sides at once, as a host stops both cores) are one."""
+    merged: list[list[float]] = []
+    for lo, hi in sorted((s["t"], s["t"] + s["ms"] / 1e3) for s in stalls["at"]):
+        if merged and lo <= merged[-1][1]:
+            merged[-1][1] = max(merged[-1][1], hi)
+        else:
+            merged.append([lo, hi])
+    return [[round(lo, 3), round(min(hi, duration_s) - lo, 3)] for lo, hi in merged if lo < duration_s]

@@ -1,10 +1,12 @@
-"""Covers bridge.core.clock: the arithmetic of the real-time clocks (pure: times are given, not read)."""
+"""Covers bridge.core.clock and bridge.nodes.vehicle.catchup: the arithmetic of the real-time clocks, and a stalled
+vehicle's catch-up (pure: times are given, not read)."""
 
 from __future__ import annotations
 
 import pytest
 
 from bridge.core.clock import REBASE_S, STALL_S, STALLS_KEPT, FixedRate, Pace, Stalls
+from bridge.nodes.vehicle.catchup import CatchUp
 
 
 def test_pace_runs_speed_times_real_time_from_its_restart():
@@ -53,3 +55,21 @@ def test_stalls_past_the_kept_ones_are_counted_not_listed():
     r = s.report()
     assert r["count"] == STALLS_KEPT + 5 and len(r["at"]) == STALLS_KEPT
     assert r["worst_ms"] == pytest.approx(1e3 * (0.05 + (STALLS_KEPT + 4) * 1e-4), abs=0.05)
+
+
+def test_what_a_stalled_vehicle_read_late_waits_for_the_physics_to_catch_up_to_when_it_was_read():
+    """1 kHz physics from wall time 0; the wait for step 100 (due 0.100) returns at 0.200 with a target read
+    then: the steps due before 0.200, flown in the catch-up, go without it; the step due at 0.200 takes it."""
+    pace = Pace(rate_hz=1000.0)
+    pace.restart(now=0.0, n=0)
+    c = CatchUp(pace)
+    assert not c.overslept(pace.due(50), pace.due(50) + 0.5 * STALL_S, ["on time"])  # a wait that ended in time
+    assert c.overslept(pace.due(100), 0.200, ["read at 0.200"])
+    c.woke(pace.due(100), 0.200)
+    assert c.stalls.report() == {"count": 1, "worst_ms": 100.0, "at": [[0.1, 100.0]]}
+    for n in range(101, 200):  # the catch-up: each step late, none takes what was read at 0.200
+        c.woke(pace.due(n), 0.200 + (n - 100) * 30e-6)
+        assert c.release(pace.due(n)) == []
+    assert c.release(pace.due(200)) == ["read at 0.200"] and c.release(pace.due(201)) == []
+    assert c.stalls.report()["count"] == 1  # the catch-up's late steps are the one stall
+    assert c.overslept(pace.due(300), 0.4, []) and c.release(10.0) == []  # an empty wait holds nothing

@@ -222,12 +222,11 @@ def test_a_flood_from_another_source_is_shed_and_the_flight_holds(tmp_path):
     run, flood = fly_flooded(mission, tmp_path / "flood", 20)
     assert ref.outcome == run.outcome == "completed" and flood is not None
     assert flood.sent >= 0.9 * 20 * 250 * flood.elapsed_s
-    for r in (ref, run):  # each outage either trace shows is a stall its processes measured, and said
+    # the host's stalls (docs/sitl.md, "Stalls"), listed, explain each outage either trace shows; a stalled vehicle
+    # holds its target, so they hardly move the robust mission's RMS
+    for r in (ref, run):
         assert unexplained_outages(r.trace, r.summary["timing"]["stalls"]) == {"rows": [], "stalls": []}
-    if not (ref.summary["timing"]["stalls"]["count"] or run.summary["timing"]["stalls"]["count"]):
-        # both flown in real time as asked (a host that takes its cores back stalls a run, and then no two
-        # runs compare: docs/sitl.md, "Stalls")
-        assert abs(run.rms / ref.rms - 1.0) <= 0.10, (run.rms, ref.rms)
+    assert abs(run.rms / ref.rms - 1.0) <= 0.10, (run.rms, ref.rms)
     by = run.summary["link"]["rejected_by"]
     assert by["vehicle"].get("rate_limited", 0) > 0 and by["vehicle"].get("sender", 0) > 0
     assert by["controller"] == {}  # the flood never reached it

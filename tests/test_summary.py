@@ -238,6 +238,8 @@ def test_a_real_time_run_the_machine_stalled_lists_each_stall_on_the_flights_clo
     block = stalls_block({"stalls": vehicle_stalls}, {"stalls": controller_stalls}, 5, RATE, 1.0)
     assert block == {"threshold_ms": 10.0, "count": 2, "worst_ms": 97.0,
                      "at": [{"t": 0.3, "ms": 41.0, "side": "controller"}, {"t": 0.5, "ms": 97.0, "side": "vehicle"}]}
+    relayed = stalls_block({}, {}, 5, RATE, 1.0, {"stalls": {"count": 1, "worst_ms": 12.5, "at": [[0.7, 12.5]]}})
+    assert relayed["at"] == [{"t": 0.7, "ms": 12.5, "side": "relay"}]  # the relay's are on the flight's clock
     # a side that listed only some of its stalls: the others count, their times unknown
     assert stalls_block({"stalls": {**controller_stalls, "count": 4}}, {}, 5, RATE, 1.0)["count"] == 4
     vehicle, controller = ends()

@@ -20,7 +20,7 @@ import pytest
 from bridge.link.radio import make_radio_file
 from bridge.swarm import sitl
 from missions import MISSION_DIR
-from tests.sitlkit import ENV, ROOT, run_bsst
+from tests.sitlkit import ENV, ROOT, run_bsst, stall_blackouts
 
 pytestmark = pytest.mark.process  # starts processes
 
@@ -56,7 +56,12 @@ def test_two_vehicles_on_one_radio_in_real_time_share_its_rate_and_overflow_it_w
             assert v["lost_queue"] == flown["link"][d]["lost_by"]["queue"]
             assert v["queue_wait_ms"]["max"] <= RADIO["queue_ms"] + 1e-6
     down = radio["down"]
-    assert down["occupancy"] > 0.9 and down["lost_queue"] > 0, down  # the two vehicles' states overflow it
+    # the two vehicles' states overflow it; but while the machine stalls a vehicle or a relay (which is the radio:
+    # timing.stalls, docs/sitl.md) nothing is offered or handed on, and that time may stand idle
+    stalls = [a for i in (1, 2) for a in
+              json.loads((tmp_path / "shared" / f"vehicle-{i}" / "summary.json").read_text())["timing"]["stalls"]["at"]]
+    idle_s = sum(d for _, d in stall_blackouts({"at": stalls}, math.inf))  # their union
+    assert down["occupancy"] > 0.9 - idle_s / down["span_s"] and down["lost_queue"] > 0, (down, idle_s)
     assert all(v["queue_wait_ms"]["p50"] > 0 for v in down["vehicles"])
     assert s["sitl"]["shared_clock"] is False and s["clock"] == "realtime"
     assert not list(private.iterdir())  # the radio file is gone with the fleet

@@ -112,4 +112,4 @@ class Stalls:
 
     def report(self) -> dict[str, object]:
         """What the process reports on exit (its ``stats``' ``stalls``)."""
-        return {"count": self.count, "worst_ms": round(1e3 * self.worst_s, 1), "at": self.kept}
+        return {"count": self.count, "worst_ms": round(1e3 * self.worst_s, 1), "at": list(self.kept)}

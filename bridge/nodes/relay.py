@@ -63,6 +63,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from bridge.core.clock import Stalls
 from bridge.link.impairment import LinkStats
 from bridge.link.model import LinkImpairment, LinkSettings
 from bridge.link.radio import ProcessRadio, finished_part
@@ -128,6 +129,7 @@ class Relay:
         link = link or LinkSettings()
         self.mission_clock = mission_clock
         self.origin_s: float | None = None  # relay time (s) of the flight's time 0 (mission_clock)
+        self.stalls = Stalls()  # packets handed on more than STALL_S after they were due, from time 0
         self.states_seen: dict[int, float] = {}  # until the origin: a state's time_usec -> relay time of its arrival
         # a fleet's one radio (real time): (its file, this vehicle's user number), each direction's queue shared
         self.radios = {d: ProcessRadio(radio[0], d, cfg.rate_bps, cfg.queue_ms / 1000.0, radio[1])
@@ -287,6 +289,8 @@ class Relay:
                 continue
             added = self.added[link.direction]
             for d in due:
+                if self.origin_s is not None:  # a packet handed on late: the machine stalled us (flight time, s)
+                    self.stalls.note(d.due_t - self.origin_s, t - d.due_t)
                 data, arrived = d.payload
                 dest = self.client if to_front else self.target
                 if dest is None:
@@ -359,7 +363,8 @@ class Relay:
         fixed = {"origin_s": self.origin_s, "client": hostport(self.client), "kernel_drops": drops,
                  "client_from": "given" if self.client_given else "first sender", "target": hostport(self.target),
                  "refused": dict(self.refused), "forwarded": self.forwarded,
-                 "dropped_no_client": self.dropped_no_client, "send_errors": self.send_errors}
+                 "dropped_no_client": self.dropped_no_client, "send_errors": self.send_errors,
+                 "stalls": self.stalls.report()}
         if self.radios:  # this vehicle's part of the fleet's one radio, by direction
             fixed["radio"] = {d: r.part() for d, r in self.radios.items()}
         return _Counters(stats, {d: array("d", a) for d, a in self.added.items()}, fixed, user, system)

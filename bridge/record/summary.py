@@ -399,13 +399,15 @@ def timing_block(joined: Joined, rate_hz: float, wall_s: float, vehicle: Mapping
 
 
 def stalls_block(vehicle: Mapping[str, Any], controller: Mapping[str, Any], k0: int | None,
-                 rate_hz: float, duration_s: float) -> dict[str, Any]:
+                 rate_hz: float, duration_s: float, relay: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """``summary.json["timing"]["stalls"]`` (real time): the wake-ups of the vehicle's physics and of the controller's
-    ticks more than :data:`~bridge.core.clock.STALL_S` late (:class:`~bridge.core.clock.Stalls`) during the mission
-    (0 <= t < ``duration_s`` on the flight's clock: the vehicle's clock less its step k0's time), each ``{t, ms,
-    side}``, earliest first. ``count`` adds a side's stalls past those it listed (its clock's times unknown)."""
+    ticks, and the relay's packets handed on, more than :data:`~bridge.core.clock.STALL_S` late
+    (:class:`~bridge.core.clock.Stalls`) during the mission (0 <= t < ``duration_s`` on the flight's clock: the
+    vehicle's clock less its step k0's time), each ``{t, ms, side}``, earliest first. ``count`` adds a side's
+    stalls past those it listed (its clock's times unknown)."""
     at, count, worst = [], 0, 0.0
-    for side, stats, shift in (("vehicle", vehicle, (k0 or 0) / rate_hz), ("controller", controller, 0.0)):
+    sides = (("vehicle", vehicle, (k0 or 0) / rate_hz), ("controller", controller, 0.0), ("relay", relay or {}, 0.0))
+    for side, stats, shift in sides:
         got = stats.get("stalls") or {}
         listed = got.get("at", ())
         count += max(0, int(got.get("count", 0)) - len(listed))
@@ -449,7 +451,8 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
     summary.update(plant_summary(vs.get("plant") or {}, judged, [{**e.as_dict(), "text": e.text} for e in ev]))
     summary["timing"] = timing_block(joined, m.rate_hz, facts.wall_s, vs, cs)
     if facts.clock == "realtime":
-        summary["timing"]["stalls"] = stalls_block(vs, cs, joined.k0, m.rate_hz, m.duration_s)
+        summary["timing"]["stalls"] = stalls_block(vs, cs, joined.k0, m.rate_hz, m.duration_s,
+                                                   relay_stats if relay is not None else None)
     summary["sitl"] = {**facts.sitl, "vehicle_exit": vehicle.exit_text if vehicle else None,
                        "controller_exit": controller.exit_text if controller else None}
     lockstep, off_clock = None, None

@@ -23,7 +23,6 @@ from typing import Any
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.autopilot.simvehicle import LAND, OFFBOARD
-from bridge.core.clock import Stalls
 from bridge.core.flight import Flight
 from bridge.core.wire import command_from_wire
 from bridge.link.ends import VehicleEnd
@@ -35,6 +34,7 @@ from bridge.nodes.process import on_stop_signals, report_printer
 from bridge.nodes.report import Ready, Refused, Report, Stats
 from bridge.nodes.vehicle.announcer import Announcer
 from bridge.nodes.vehicle.authority import Authority
+from bridge.nodes.vehicle.catchup import CatchUp
 from bridge.nodes.vehicle.clock import Answer, Clock, ClockState, Trigger
 from bridge.nodes.vehicle.commander import Commander, CommanderPorts
 from bridge.nodes.vehicle.config import CLOCKS, VehicleConfig, open_links
@@ -83,8 +83,7 @@ class Vehicle:
         self.plant = self.sim.plant
         self._status = status or (lambda report: None)
         self.tlog = Tlog(out / "vehicle.tlog") if out is not None else None
-        # refusals of the receive path (bridge.mavlink.receive), both links, and of the up-link model's end
-        self.rejected = Rejections()
+        self.rejected = Rejections()  # refusals of the receive path, both links, and of the up-link model's end
         self._reject = Refusals(self.rejected)
         self.authority = Authority(cfg)
         self.link, self.gcs = open_links(cfg, self.tlog, self.rejected)
@@ -99,15 +98,13 @@ class Vehicle:
         self.streams = StreamTable({**DEFAULT_STREAMS, **tm.sensor_streams(sensors),
                                     **battery_streams(self.plant.battery)}, now)
         self.ctl_streams = StreamTable(dict.fromkeys(self.streams, 0.0), now)  # the controller link's: none
-        self._next_heartbeat = now
-        self._next_house = now
+        self._next_heartbeat = self._next_house = now
         self._resend_at = self._lost_at = self._idle_odo_at = now
         self.clock = Clock(cfg.clock == "realtime", m.physics_hz, cfg.speed or 1.0, now)
         self.pace = self.clock.pace  # the wall clock of physics steps
-        self.stalls = Stalls()  # real time: the physics steps the machine woke us too late for
+        self.catchup = CatchUp(self.pace)  # real time: the machine's stalls, and what they held back
         self._n = 0  # physics steps taken (realtime: for the wall-clock schedule)
-        self._load_at = (now, time.process_time())
-        self.load = 0
+        self._load_at, self.load = (now, time.process_time()), 0
         # lockstep: the controller's targets and re-arms cross the mission's up-link model here
         self.vend = VehicleEnd(self.sim, flight.link.make()[0], self.actuation, rejected=self.rejected)
         self.odometry = OdometryOut(self.link, self.sim, self.rate, flight.estimator)
@@ -183,7 +180,7 @@ class Vehicle:
         self._report(Stats({
             "accepted": self.targets.accepted, "rejected": dict(self.rejected), "odometry_sent": self.odometry.count,
             "received": self.link.received, "overruns": self.pace.rebased, "steps": self.k,
-            "stalls": self.stalls.report(),
+            "stalls": self.catchup.stalls.report(),
             **({"gate": self.gate.stats()} if self.gate is not None else {}),  # a fleet's shared clock
             "rejected_from_controller": self.rejected.from_peer, "resends": self.odometry.resends,
             "answered_again": self.targets.answered_again, "spin_skipped": self.spinner.skipped,
@@ -347,16 +344,21 @@ class Vehicle:
         """Serve the links until wall time ``due`` of the pace; False if stopping. A pace
         stalled far behind is re-based (:meth:`Pace.rebase_if_stalled`), not caught up."""
         now = time.monotonic()
-        if self.cfg.clock == "realtime" and now >= due:  # the machine may have held us: a stall
-            self.stalls.note(self.pace.time_s(due), now - due)
+        realtime = self.cfg.clock == "realtime"
+        if realtime:  # the machine may have stalled us; what a stall held back is taken when its time comes
+            self.catchup.woke(due, now)
+            for ep, m, addr in self.catchup.release(due):
+                self._handle(ep, m, addr)
         if self.pace.rebase_if_stalled(now, due):
             return not self.stopping
         while not self.stopping:
             if now >= due:
                 return True
-            for ep, m, addr in wait(self.endpoints, min(due, self._next_house)):
-                self._handle(ep, m, addr)
+            got = wait(self.endpoints, min(due, self._next_house))
             now = time.monotonic()
+            if not (realtime and self.catchup.overslept(due, now, got)):
+                for ep, m, addr in got:
+                    self._handle(ep, m, addr)
             if now >= self._next_house:
                 self._housekeeping()
         return False
