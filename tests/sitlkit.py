@@ -326,3 +326,15 @@ def stall_blackouts(stalls: dict[str, Any], duration_s: float) -> list[list[floa
         else:
             merged.append([lo, hi])
     return [[round(lo, 3), round(min(hi, duration_s) - lo, 3)] for lo, hi in merged if lo < duration_s]
+
+
+def child_pids(run: Path) -> dict[str, int]:
+    """A session's children's pids by name (``vehicle``, ``controller``, ``relay``), as its launcher logged them
+    in ``events.log`` (``started: NAME pid N...``): those started so far, read while it flies."""
+    pids = {}
+    path = run / "events.log"
+    for line in (path.read_text() if path.is_file() else "").splitlines():
+        if "started:" in line and " pid " in line:
+            name, pid = line.split("started: ")[1].split(" pid ")
+            pids[name] = int(pid.split(":")[0].split()[0])
+    return pids

@@ -28,7 +28,7 @@ from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
 from bridge.session.children import CHOSEN_PORTS_LOW, RECENT_PORTS, ephemeral_low, free_udp_port
 from missions import MISSION_DIR, Mission, Sine
-from tests.sitlkit import ENV, Bsst, csv_rows, stall_blackouts, unexplained_outages
+from tests.sitlkit import ENV, Bsst, child_pids, csv_rows, stall_blackouts, unexplained_outages
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -148,7 +148,7 @@ def test_a_real_time_run_the_machine_stalls_lists_each_stall_by_side_and_exits_1
         try:
             for rows, side in ((250, "vehicle"), (700, "controller"), (1150, "relay")):
                 wait_for(lambda rows=rows: csv_rows(run / "controller.csv") > rows, 60, f"{rows} rows flown")
-                pid = _pids(run)[side]
+                pid = child_pids(run)[side]
                 os.kill(pid, signal.SIGSTOP)
                 time.sleep(0.15)  # the stall itself, not a wait for something to happen
                 os.kill(pid, signal.SIGCONT)
@@ -173,16 +173,6 @@ def _start_session(tmp_path: Path, n: int, mission: Path = SINE) -> Bsst:
     return Bsst("sitl", str(mission), "--instance", str(n), "--out", str(tmp_path / "run"), "--no-plots", env=ENV)
 
 
-def _pids(run: Path) -> dict[str, int]:
-    """Children pids, as the launcher logged them in events.log."""
-    pids = {}
-    for line in (run / "events.log").read_text().splitlines():
-        if "started:" in line and " pid " in line:
-            name, pid = line.split("started: ")[1].split(" pid ")
-            pids[name] = int(pid.split(":")[0].split()[0])
-    return pids
-
-
 def _interrupted(tmp_path: Path, interrupt) -> tuple[Bsst, Path, str, str, dict[str, int], float]:
     """Start ``bsst sitl``, let it fly a second, call ``interrupt(launcher, children pids)``;
     return the launcher (exited), its run directory, stdout, stderr, the pids and how long
@@ -192,7 +182,7 @@ def _interrupted(tmp_path: Path, interrupt) -> tuple[Bsst, Path, str, str, dict[
         run = tmp_path / "run"
         try:
             wait_for(lambda: csv_rows(run / "controller.csv") > 250, 60, "a second of flight")
-            pids = _pids(run)
+            pids = child_pids(run)
             t0 = time.monotonic()
             interrupt(p, pids)
             out, err = p.communicate(timeout=60)
@@ -322,7 +312,7 @@ def test_a_lockstep_run_that_leaves_lockstep_says_so_and_exits_1(tmp_path):
         p = _bsst_sitl(n, mission, run)
         try:
             wait_for(lambda: csv_rows(run / "controller.csv") > 250 or p.poll() is not None, 60, "a second of flight")
-            pid = _pids(run)["controller"]
+            pid = child_pids(run)["controller"]
             os.kill(pid, signal.SIGSTOP)
             try:
                 wait_for(lambda: "lockstep: controller silent" in (run / "events.log").read_text(), 20,
