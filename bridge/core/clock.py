@@ -8,8 +8,11 @@ Out: the wall time (s) each step or tick is due, the paced clock's time (s), the
 - :class:`Pace` — the vehicle's: physics step n of a counter running ``speed`` times real
   time is due at w0 + (n - n0) / (rate_hz * speed). Used by the real-time clock, by a
   lockstep vehicle paced with ``--speed``, and by a lockstep vehicle that lost its
-  controller. A schedule fallen more than :data:`REBASE_S` behind (the machine stalled) is
-  re-based on the present instead of caught up in a burst faster than ``speed``.
+  controller. A paced lockstep schedule fallen more than :data:`REBASE_S` behind (the machine stalled)
+  is re-based on the present instead of caught up in a burst faster than ``speed``; the real-time clock
+  never is (the controller's fixed-rate schedule keeps the wall's time, and a vehicle re-based 0.25 s
+  behind it sent states the controller took for 0.25 s old ever after: its guard stopped commanding and the
+  vehicle's failsafe landed it).
 - :class:`Stalls` — the stretches a real-time process woke more than :data:`STALL_S` late: the
   machine, not the link model, held the loop (a virtual machine whose host takes its cores back
   stops every process in it, whatever its priority, for up to 100 ms).

@@ -341,15 +341,15 @@ class Vehicle:
         self._after_step()
 
     def _wait_until(self, due: float) -> bool:
-        """Serve the links until wall time ``due`` of the pace; False if stopping. A pace
-        stalled far behind is re-based (:meth:`Pace.rebase_if_stalled`), not caught up."""
+        """Serve the links until wall time ``due`` of the pace; False if stopping. Real time catches every stall
+        up (the controller's schedule is the wall's); a paced lockstep far behind is re-based, not caught up."""
         now = time.monotonic()
         realtime = self.cfg.clock == "realtime"
         if realtime:  # the machine may have stalled us; what a stall held back is taken when its time comes
             self.catchup.woke(due, now)
             for ep, m, addr in self.catchup.release(due):
                 self._handle(ep, m, addr)
-        if self.pace.rebase_if_stalled(now, due):
+        elif self.pace.rebase_if_stalled(now, due):
             return not self.stopping
         while not self.stopping:
             if now >= due:
