@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.core.flight import prepare
+from bridge.loop import simulate
 from bridge.mavlink.endpoint import parse_address, parse_datagram
 from bridge.mavlink.receive import MAX_POSITION_M, Rejections, odometry_problem, wire_problem
 from bridge.mavlink.signing import Signing
@@ -22,7 +23,7 @@ from bridge.nodes.vehicle import Vehicle, VehicleConfig
 from bridge.session import sitl
 from missions import MISSION_DIR, Mission, Sine, load_mission
 from tests.hostile import Fuzzer, fly_flooded, fly_fuzzed
-from tests.sitlkit import unexplained_outages
+from tests.sitlkit import stall_blackouts, unexplained_outages
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -222,11 +223,17 @@ def test_a_flood_from_another_source_is_shed_and_the_flight_holds(tmp_path):
     run, flood = fly_flooded(mission, tmp_path / "flood", 20)
     assert ref.outcome == run.outcome == "completed" and flood is not None
     assert flood.sent >= 0.9 * 20 * 250 * flood.elapsed_s
-    # the host's stalls (docs/sitl.md, "Stalls"), listed, explain each outage either trace shows; a stalled vehicle
-    # holds its target, so they hardly move the robust mission's RMS
+    # the host's stalls (docs/sitl.md, "Stalls"), listed, explain each outage either trace shows
+    stalled = False
     for r in (ref, run):
-        assert unexplained_outages(r.trace, r.summary["timing"]["stalls"]) == {"rows": [], "stalls": []}
-    assert abs(run.rms / ref.rms - 1.0) <= 0.10, (run.rms, ref.rms)
+        stalls = r.summary["timing"]["stalls"]
+        assert unexplained_outages(r.trace, stalls) == {"rows": [], "stalls": []}
+        if stalls["count"]:  # each run flies as offline through its stalls does, within the jitter of a loaded
+            stalled = True  # machine (0.88 to 1.10 of it with both cores busy and the suite running)
+            offline = simulate(mission, plots=False, link={"blackouts": stall_blackouts(stalls, mission.duration_s)})
+            assert abs(r.rms / offline.rms - 1.0) <= 0.20, (r.rms, offline.rms, stalls)
+    if not stalled:  # the machine gave both real time: the flood is all that differs
+        assert abs(run.rms / ref.rms - 1.0) <= 0.10, (run.rms, ref.rms)
     by = run.summary["link"]["rejected_by"]
     assert by["vehicle"].get("rate_limited", 0) > 0 and by["vehicle"].get("sender", 0) > 0
     assert by["controller"] == {}  # the flood never reached it

@@ -219,7 +219,11 @@ def test_a_late_state_is_waited_for_and_a_lost_one_costs_one_tick(flown: Flown) 
         assert s + 1 in answered or s + 1 not in meant, sorted(a for a in answered if abs(a - s) < 5)
     on_time = [s for s in steps if s not in LATE | DROPPED and s in meant]
     assert len(on_time) >= 20, f"{len(steps) - len(meant)} of {len(steps)} states left this process late: too few"
-    assert sum(s in answered for s in on_time) >= len(on_time) - 2, sorted(set(on_time) - answered)
+    # two lost to hiccups, and the ticks the machine's stalls of the controller skipped (its timing.stalls: a
+    # stall of d ms skips up to d / period of them, and the tick it woke in may miss its state too)
+    stalls = next(r for r in map(parse_line, flown.lines) if isinstance(r, Stats)).values["stalls"]
+    allowed = 2 + sum(math.ceil(ms / 1e3 / PERIOD) + 1 for _, ms in stalls["at"])
+    assert sum(s in answered for s in on_time) >= len(on_time) - allowed, (sorted(set(on_time) - answered), stalls)
 
 
 def test_the_state_age_counts_its_way_down(flown: Flown) -> None:
