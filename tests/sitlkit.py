@@ -25,6 +25,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from bridge.nodes.forkserver import ForkedChild, start_child
 from bridge.nodes.process import die_with_parent
 from bridge.nodes.report import Event, Report, parse_line
+from bridge.record.policies import stalls_of
 from tests.waiting import wait_for
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -304,15 +305,10 @@ def unexplained_outages(trace: dict[str, Any], stalls: dict[str, Any], over_s: f
     return {"rows": rows, "stalls": missed}
 
 
-def stalled(summary: dict[str, Any]) -> bool:
-    """Whether the machine stalled this real-time run (its ``timing.stalls``): then it was not flown as asked and
-    exits 1, whatever else went right (a host that takes its cores back stalls the suite's real-time runs)."""
-    return bool(((summary.get("timing") or {}).get("stalls") or {}).get("count"))
-
-
 def clean_exit(summary: dict[str, Any]) -> int:
-    """The exit status of a run that flew as asked but for the machine's stalls: 0, or 1 if it stalled."""
-    return 1 if stalled(summary) else 0
+    """The exit status of a run that flew as asked but for the machine's stalls: 0, or 1 if it stalled (a host
+    that takes its cores back stalls the suite's real-time runs: ``timing.stalls``)."""
+    return 0 if stalls_of(summary) is None else 1
 
 
 def stall_blackouts(stalls: dict[str, Any], duration_s: float) -> list[list[float]]:

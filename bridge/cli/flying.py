@@ -128,7 +128,7 @@ def report_fleet(run: Any, command: str) -> int:
 
 def report_run(run: Any, command: str) -> int:
     """Print a run's summary, name each violated policy on stderr; its exit status (0: a clean completion)."""
-    from bridge.record.policies import run_ok, violation_text  # lazy: numpy
+    from bridge.record.policies import run_ok, stalls_of, violation_text  # lazy: numpy
     from bridge.record.summary import intervention_text, stalls_text, unconfirmed_text  # lazy: numpy
 
     try:
@@ -145,8 +145,8 @@ def report_run(run: Any, command: str) -> int:
     for p in run.summary.get("param_at") or []:
         if not p.get("confirmed"):
             print(f"bsst {command}: not flown as asked: {unconfirmed_text(p)}", file=sys.stderr)
-    stalls = (run.summary.get("timing") or {}).get("stalls")
-    if stalls and stalls["count"]:
+    stalls = stalls_of(run.summary)
+    if stalls is not None:
         print(f"bsst {command}: {stalls_text(stalls)}", file=sys.stderr)
     for v in run.summary.get("policies") or []:
         if not v.get("ok"):
@@ -174,10 +174,10 @@ def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
     for i in s.get("interventions") or []:
         w(f"not flown as asked: a ground station ({i['by']}) at t={i['t']:.3f} s (step {i['step']}): "
           + (f"{i['name']} = {i['new']:g} (was {i['old']:g})\n" if "name" in i else f"{i['kind']} {i['what']}\n"))
-    stalls = (s.get("timing") or {}).get("stalls")
-    if stalls and stalls["count"]:
-        from bridge.record.summary import stalls_text  # lazy: a real-time run's only
-        w(stalls_text(stalls) + "\n")
+    if (s.get("timing") or {}).get("stalls", {}).get("count"):  # a real-time run the machine stalled
+        from bridge.record.summary import stalls_text  # lazy: numpy
+
+        w(stalls_text(s["timing"]["stalls"]) + "\n")
     rms = s.get("rms_3d")
     w(f"3-D RMS error over t >= {s['rms_from_s']:g} s: {rms:.3e} m\n" if rms is not None else "3-D RMS: n/a\n")
     w(f"{'axis':5} {'rms':>10} {'max':>10} {'settling_s':>11} {'bound_s':>9}\n")

@@ -427,6 +427,12 @@ def violation_text(v: Verdict | Mapping[str, Any]) -> str:
     return f"{d['name']} violated{at}: {d.get('why')}"
 
 
+def stalls_of(summary: Mapping[str, Any]) -> Mapping[str, Any] | None:
+    """A real-time run's ``timing.stalls`` when the machine stalled it (not flown as asked), else None."""
+    stalls = (summary.get("timing") or {}).get("stalls")
+    return stalls if stalls and stalls.get("count") else None
+
+
 def run_ok(summary: Mapping[str, Any]) -> bool:
     """Whether a run is a clean completion (exit status 0): outcome ``completed``, every policy
     holds, a lockstep session held lockstep throughout, nobody but the flight's controller changed
@@ -436,4 +442,4 @@ def run_ok(summary: Mapping[str, Any]) -> bool:
     return (summary.get("outcome") == "completed" and all_hold(summary.get("policies"))
             and (summary.get("lockstep") or {"held": True}).get("held", False) and not summary.get("interventions")
             and all(p.get("confirmed") for p in summary.get("param_at") or ())
-            and not ((summary.get("timing") or {}).get("stalls") or {}).get("count"))
+            and stalls_of(summary) is None)

@@ -38,6 +38,7 @@ from bridge.record.policies import (
     judge,
     lockstep_record,
     rules_for,
+    stalls_of,
     vehicle_events,
     violation_text,
 )
@@ -485,8 +486,8 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
     texts += [("param", f"not flown as asked: {unconfirmed_text(p)}") for p in summary.get("param_at", ())
               if not p["confirmed"]]
     texts += [("policy", violation_text(v)) for v in violated]
-    if summary["timing"].get("stalls", {}).get("count"):
-        texts.append(("stall", stalls_text(summary["timing"]["stalls"])))
+    if (stalls := stalls_of(summary)) is not None:
+        texts.append(("stall", stalls_text(stalls)))
     t = joined.rows[-1].t if joined.rows else 0.0  # the notes' time: the trace's last row
     notes = [RunEvent.at(t, kind, text, "session") for kind, text in texts]
     summary["events"] = [e.as_dict() for e in (*events, *notes)]

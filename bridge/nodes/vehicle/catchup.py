@@ -30,7 +30,7 @@ class CatchUp:
 
     def woke(self, due: float, now: float) -> None:
         """The physics step due at wall time ``due`` is taken at ``now``: a stall if more than STALL_S late."""
-        if now >= due:
+        if now - due > STALL_S:  # (the clock's time only then: this is every physics step's path)
             self.stalls.note(self.pace.time_s(due), now - due)
 
     def overslept(self, due: float, now: float, got: list[Any]) -> bool:
@@ -44,6 +44,8 @@ class CatchUp:
 
     def release(self, due: float) -> list[Any]:
         """What was read by wall time ``due`` and held: to take before flying the step due then."""
+        if not self._held or self._held[0][0] > due:  # every physics step's path: nothing held, almost always
+            return []
         out: list[Any] = []
         while self._held and self._held[0][0] <= due:
             out += self._held.pop(0)[1]
