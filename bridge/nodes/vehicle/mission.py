@@ -161,9 +161,10 @@ class MissionManager:
     def _startable(self, what: str) -> str | None:
         if not self.mission.items:
             return f"{what}: no mission uploaded"
-        self._idle_if_sent()  # (MAVProxy sends no ACK after a download: its transfer would hold the start 5 s)
-        if self.state is not State.IDLE:
-            return f"{what}: a mission transfer is on"
+        # an upload is about to change the mission; a download changes nothing, and the controller's own
+        # download begins the moment AUTO.MISSION shows (MAVSDK's arm then comes during it, as a loaded CI showed)
+        if self.state is State.GETLIST:
+            return f"{what}: a mission upload is on"
         return None
 
     def shows_mission(self, armed: bool, offboard: bool) -> bool:
