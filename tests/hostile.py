@@ -50,7 +50,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID
+from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, udp_table_row
 from bridge.session import instance_slot
 from tests.sitlkit import Proc, csv_rows
 from tests.waiting import wait_for
@@ -181,16 +181,8 @@ def udp_queue(port: int) -> tuple[int, int] | None:
     bound to 127.0.0.1:``port`` (``/proc/net/udp``), or None when there is none. The vehicle's
     controller gets a connected socket on the same port (Endpoint.prioritise): not that one."""
     want = f"0100007F:{port:04X}"
-    try:
-        with open("/proc/net/udp") as f:
-            next(f)
-            for line in f:
-                parts = line.split()
-                if parts[1] == want and parts[2] == "00000000:0000":
-                    return int(parts[4].split(":")[1], 16), int(parts[-1])
-    except OSError:
-        return None
-    return None
+    row = udp_table_row(lambda cols: cols[1] == want and cols[2] == "00000000:0000")
+    return (int(row[4].split(":")[1], 16), int(row[-1])) if row is not None else None
 
 
 class Sender:
