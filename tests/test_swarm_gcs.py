@@ -1,10 +1,10 @@
 """Covers bridge.session.fleet and bridge.nodes.vehicle.authority: one ground station, every vehicle of a fleet.
 
-Real processes: ``bridge.swarm.sitl`` flies three vehicles (a vehicle and a controller process each) whose
+Real processes: ``bridge.swarm.sitl`` flies four vehicles (a vehicle and a controller process each) whose
 ground-station links all go to one UDP port, where a pymavlink ground station (sysid 255) listens. It sees
-HEARTBEATs from systems 1, 2 and 3, reads a parameter of each by its ``target_system`` (only that system
+HEARTBEATs from systems 1 to 4, reads a parameter of each by its ``target_system`` (only that system
 answers), and a disarm (COMMAND_LONG to system 3, sent to every vehicle as a MAVLink router would) disarms
-system 3 alone: 1 and 2 fly their missions to the end. The same with MAVSDK's native binding (one ``System``
+system 3 alone: 1, 2 and 4 fly their missions to the end. The same with MAVSDK's native binding (one ``System``
 per vehicle, ``Action.kill`` on system 3). And, without processes, the vehicle's authority refuses
 every kind of message a ground station addresses to another system (``target``), and takes its own and
 broadcasts.
@@ -80,7 +80,7 @@ class Station:
 
 
 def _fly_fleet(tmp_path: Path, port: int, seconds: float) -> tuple[threading.Thread, dict[str, Any]]:
-    """Three vehicles of the sine in lockstep at real time's pace, their GCS links to ``port``, in a thread."""
+    """Four vehicles of the sine in lockstep at real time's pace, their GCS links to ``port``, in a thread."""
     mission = tmp_path / "sine.toml"
     mission.write_text((MISSION_DIR / "sine.toml").read_text().replace("duration_s = 30.0",
                                                                       f"duration_s = {seconds}"))
@@ -88,7 +88,7 @@ def _fly_fleet(tmp_path: Path, port: int, seconds: float) -> tuple[threading.Thr
 
     def fly() -> None:
         try:
-            result["run"] = sitl(mission, vehicles=3, formation="line:2", instance=None, gcs=f"127.0.0.1:{port}",
+            result["run"] = sitl(mission, vehicles=4, formation="line:2", instance=None, gcs=f"127.0.0.1:{port}",
                                  speed=1.0, out=tmp_path / "run", plots=False)
         except BaseException as exc:  # noqa: BLE001  (named by the caller's assertion)
             result["error"] = exc
@@ -99,27 +99,27 @@ def _fly_fleet(tmp_path: Path, port: int, seconds: float) -> tuple[threading.Thr
 
 
 def _only_three_disarmed(result: dict[str, Any], port: int) -> None:
-    """The fleet's summary: 1 and 2 completed, 3 ended by the ground station's disarm."""
+    """The fleet's summary: 1, 2 and 4 completed, 3 ended by the ground station's disarm."""
     assert "error" not in result, result.get("error")
     s = result["run"].summary
     by_id = {v["id"]: v for v in s["vehicles"]}
-    assert by_id[1]["outcome"] == by_id[2]["outcome"] == "completed" and by_id[1]["ok"] and by_id[2]["ok"]
+    assert all(by_id[i]["outcome"] == "completed" and by_id[i]["ok"] for i in (1, 2, 4)), by_id
     assert by_id[3]["outcome"] != "completed" and not by_id[3]["ok"]
     assert "255" in str(by_id[3]["ended_by"]) or "245" in str(by_id[3]["ended_by"]), by_id[3]["ended_by"]
     assert s["sitl"]["gcs"] == f"127.0.0.1:{port}"
 
 
-def test_one_ground_station_sees_three_vehicles_reads_each_and_disarms_only_system_3(tmp_path: Path) -> None:
+def test_one_ground_station_sees_four_vehicles_reads_each_and_disarms_only_system_3(tmp_path: Path) -> None:
     port = free_udp_port()
     gcs = Station(port)
     flight, result = _fly_fleet(tmp_path, port, 12.0)
     try:
         def all_armed() -> bool:
             gcs.pump()
-            return sorted(s for s, a in gcs.armed.items() if a) == [1, 2, 3]
+            return sorted(s for s, a in gcs.armed.items() if a) == [1, 2, 3, 4]
 
-        wait_for(all_armed, 90, "heartbeats of systems 1, 2 and 3, armed")
-        for i in (1, 2, 3):  # each vehicle's parameter, read by its id: only that system answers
+        wait_for(all_armed, 90, "heartbeats of systems 1 to 4, armed")
+        for i in (1, 2, 3, 4):  # each vehicle's parameter, read by its id: only that system answers
             mark = len(gcs.heard)
             gcs.to_all(gcs.mav.param_request_read_encode(i, 1, b"MAV_SYS_ID", -1))
 
@@ -143,7 +143,7 @@ def test_one_ground_station_sees_three_vehicles_reads_each_and_disarms_only_syst
         wait_for(three_disarmed, 20, "system 3 disarmed")
         acks = gcs.answers("COMMAND_ACK", mark, command=mavlink.MAV_CMD_COMPONENT_ARM_DISARM)
         assert {m.get_srcSystem() for m in acks} == {3} and acks[0].result == mavlink.MAV_RESULT_ACCEPTED
-        assert gcs.armed[1] and gcs.armed[2]  # still flying
+        assert gcs.armed[1] and gcs.armed[2] and gcs.armed[4]  # still flying
         flight.join(180)
     finally:
         flight.join(180)
@@ -168,7 +168,7 @@ def until(pred, timeout):
             return False
         time.sleep(0.05)
     return True
-out["three_found"] = until(lambda: sum(s.has_autopilot() for s in sdk.get_systems()) >= 3, 90)
+out["four_found"] = until(lambda: sum(s.has_autopilot() for s in sdk.get_systems()) >= 4, 90)
 by = {s.get_system_id(): s for s in sdk.get_systems() if s.has_autopilot()}
 out["ids"] = sorted(by)
 out["MAV_SYS_ID"] = {str(i): Param(s).get_param_int("MAV_SYS_ID") for i, s in by.items()}
@@ -182,8 +182,8 @@ sdk.destroy()
 """
 
 
-def test_mavsdk_sees_three_systems_on_one_port_reads_each_and_kills_only_system_3(tmp_path: Path) -> None:
-    """MAVSDK's native binding, one ``System`` per vehicle on the one port: ids 1-3, each one's MAV_SYS_ID read
+def test_mavsdk_sees_four_systems_on_one_port_reads_each_and_kills_only_system_3(tmp_path: Path) -> None:
+    """MAVSDK's native binding, one ``System`` per vehicle on the one port: ids 1-4, each one's MAV_SYS_ID read
     through its own System, and ``Action.kill`` (a forced disarm) on system 3 disarms only 3."""
     port = free_udp_port()
     flight, result = _fly_fleet(tmp_path, port, 20.0)
@@ -195,10 +195,10 @@ def test_mavsdk_sees_three_systems_on_one_port_reads_each_and_kills_only_system_
     lines = [ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")]
     assert lines, f"MAVSDK script failed (exit {r.returncode}):\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
     out = json.loads(lines[0][len("RESULT "):])
-    assert out["three_found"] and out["ids"] == [1, 2, 3], out
-    assert out["MAV_SYS_ID"] == {"1": 1, "2": 2, "3": 3}, out
+    assert out["four_found"] and out["ids"] == [1, 2, 3, 4], out
+    assert out["MAV_SYS_ID"] == {"1": 1, "2": 2, "3": 3, "4": 4}, out
     assert out["all_armed"] and out["kill_3"] == "SUCCESS" and out["three_disarmed"], out
-    assert out["armed_after"] == {"1": True, "2": True, "3": False}, out
+    assert out["armed_after"] == {"1": True, "2": True, "3": False, "4": True}, out
     _only_three_disarmed(result, port)
 
 
