@@ -46,7 +46,13 @@ from missions.mission import fitted_to_airframe, law_spec_from
 from params import ConfigError, Table
 from plant import Effects, Profile, Quadrotor, load_profile
 from plant.effects import effects_from_table
-from plant.events import SENSOR_EVENT_KINDS, TimedEvent, event_table_from_flag, timeline_from_tables
+from plant.events import (
+    SENSOR_EVENT_KINDS,
+    TimedEvent,
+    event_from_table,
+    event_table_from_flag,
+    timeline_from_tables,
+)
 from plant.profiles import sensors_from_table
 from plant.sensors import IDEAL, SensorConfig, SensorSuite
 from plant.wind import WindConfig, wind_from_table
@@ -171,17 +177,21 @@ class Overrides:
             _check_type("wind", w, Mapping, "a table, a speed (m/s) or (speed m/s, from deg)")
             if w is not None:
                 object.__setattr__(self, "wind", dict(w))
-        events = []
-        for e in tuple(self.at):
+        events, named = [], []
+        for i, e in enumerate(tuple(self.at)):
             if isinstance(e, str):
+                named.append(f"--at {e}")
                 try:
                     e = event_table_from_flag(e)
                 except ValueError as exc:
                     raise ConfigError(f"--at {e}: {exc}"[:300]) from None
+            else:
+                named.append(f"at[{i}]")
             if not isinstance(e, Mapping):
                 raise ConfigError(f"at: expected event tables or 'T:KIND[:ARGS]' strings, got {e!r}"[:200])
             events.append(dict(e))
         object.__setattr__(self, "at", tuple(events))
+        object.__setattr__(self, "_at_named", tuple(named))  # (not a field) each event as its caller gave it
         for f in ("profile", "controller", "discretization", "actuation", "estimator"):
             _check_type(f, getattr(self, f), str, "a string")
         for f in ("rate_hz", "noise"):
@@ -232,6 +242,8 @@ class Overrides:
         # a law file given on the command line or from Python: from the working directory
         law = law_spec_from(self.controller, Path(".")) if self.controller is not None else None
         wind = merged_tables(m.wind, self.wind, {} if self.turbulence is None else {"turbulence": self.turbulence})
+        for e, named in zip(self.at, self._at_named, strict=True):  # each checked alone first: errors name its flag
+            event_from_table(Table(e, named), m.duration_s)
         events = (*m.events, *self.at) if self.at else None
         return m.with_overrides(profile=self.profile, controller=law, discretization=self.discretization,
                                 rate_hz=self.rate_hz, seed=self.seed,
