@@ -193,10 +193,11 @@ def _upload(gcs: Any, target: tuple[int, int], items: list[Any]) -> None:
 def test_mission_start_flies_a_small_plan_in_real_time(tmp_path, link, how):
     """A pymavlink ground station uploads a takeoff, a waypoint and a landing to ``bsst sitl --await-mission
     --realtime`` and starts it, as PX4's is started: AUTO.MISSION (DO_SET_MODE 4/4) while disarmed, then arm; or
-    MAV_CMD_MISSION_START (each ACCEPTED). The controller downloads the three items and flies them on the wall
-    clock; each is reached (MISSION_ITEM_REACHED), the flight completes landed and disarmed, and summary.json's
-    ``mission_transfer.started_by`` says how and by whom. With ``--loss 10`` the download crosses ``bsst relay``
-    (the session's, on the wire) and still arrives."""
+    MAV_CMD_MISSION_START (each ACCEPTED). AUTO.MISSION alone starts nothing: the controller says it waits for
+    the start, and the vehicle is armed only after it. The controller downloads the three items and flies them
+    on the wall clock; each is reached (MISSION_ITEM_REACHED), the flight completes landed and disarmed, and
+    summary.json's ``mission_transfer.started_by`` says how and by whom. With ``--loss 10`` the download crosses
+    ``bsst relay`` (the session's, on the wire) and still arrives."""
     items = _small_plan_items()
     out = tmp_path / "rt"
     with instance_slot() as n:
@@ -214,6 +215,9 @@ def test_mission_start_flies_a_small_plan_in_real_time(tmp_path, link, how):
                 ack = gcs.recv_match(type="COMMAND_ACK", blocking=True, timeout=5,
                                      condition=f"COMMAND_ACK.command=={cmd}")
                 assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED, (cmd, ack)
+                if cmd == M.MAV_CMD_DO_SET_MODE:  # selected alone, it starts nothing: the controller waits for the arm
+                    wait_for(lambda log=out / "events.log": log.exists() and "waiting for its start" in log.read_text(),
+                             30, "the controller waiting for the start (events.log)")
             reached: list[int] = []
 
             def all_reached() -> bool:
@@ -233,6 +237,12 @@ def test_mission_start_flies_a_small_plan_in_real_time(tmp_path, link, how):
     assert summary["outcome"] == "completed" and summary["clock"] == "realtime"
     assert summary["mission_transfer"]["items"] == 3 and summary["end"]["disarmed"]
     assert summary["mission_transfer"]["started_by"] == {"command": how, "by": f"255:190 127.0.0.1:{GCS_PORT + n} gcs"}
+    if how == START_ARM:  # the vehicle flew only once armed: AUTO.MISSION alone left it on the ground, disarmed
+        said = [(e["source"], e["kind"], e["text"]) for e in summary["events"]]
+        waiting = next(i for i, e in enumerate(said) if "waiting for its start" in e[2])
+        started = next(i for i, e in enumerate(said) if e[0] == "vehicle" and "start requested" in e[2])
+        armed = next(i for i, e in enumerate(said) if e[0] == "vehicle" and e[1] == "armed")
+        assert waiting < started < armed, said[:12]
     assert (out / "relay.json").exists() == bool(link)
 
 
@@ -420,12 +430,16 @@ def test_the_vehicle_starts_a_mission_only_when_asked_to_await_one():
         assert exchange(v, legacy, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED  # SET_MODE: selects it too
         assert exchange(v, mode, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
         assert v._heartbeat().custom_mode == (4 << 16) | (4 << 24) and v.missions.selected
+        ask = M.MAVLink_command_long_message(1, 1, M.MAV_CMD_REQUEST_MESSAGE, 0, M.MAVLINK_MSG_ID_MISSION_CURRENT,
+                                             0, 0, 0, 0, 0, 0)
+        assert exchange(v, ask, "MISSION_CURRENT").mission_state == M.MISSION_STATE_NOT_STARTED  # selected alone
         # a download under way (the controller's begins as AUTO.MISSION shows) holds up no start
         assert exchange(v, M.MAVLink_mission_request_list_message(1, 1, 0), "MISSION_COUNT").count == 3
         exchange(v, M.MAVLink_mission_request_int_message(1, 1, 0, 0), "MISSION_ITEM_INT")
         assert v.missions.state.value == "sendlist"
         assert exchange(v, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
         assert v.missions.start_requested and not v.sim.armed
+        assert exchange(v, ask, "MISSION_CURRENT").mission_state == M.MISSION_STATE_ACTIVE  # the controller's cue
         for seq in (1, 2):  # the download ends (every item out: the next transfer may begin)
             exchange(v, M.MAVLink_mission_request_int_message(1, 1, seq, 0), "MISSION_ITEM_INT")
         assert any(e.kind == "mission" and "start requested by AUTO.MISSION, then arm" in e.text for e in v.sim.events)

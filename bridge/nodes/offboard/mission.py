@@ -1,9 +1,11 @@
 """The offboard controller's wait for a ground station's mission: ``bsst controller --await-mission``.
 
-In:  the vehicle's messages before the flight: HEARTBEAT (``custom_mode`` AUTO.MISSION, disarmed: a ground
-     station started the held mission), MISSION_COUNT, MISSION_ITEM_INT, MISSION_ACK, HOME_POSITION (degE7,
+In:  the vehicle's messages before the flight: HEARTBEAT (``custom_mode`` AUTO.MISSION, disarmed) and
+     MISSION_CURRENT (``mission_state`` ACTIVE: a ground station started the held mission; asked for with
+     REQUEST_MESSAGE while AUTO.MISSION shows), MISSION_COUNT,
+     MISSION_ITEM_INT, MISSION_ACK, HOME_POSITION (degE7,
      mm AMSL); the settings' :class:`~bridge.core.flight.Flight` (profile, law, rates, ``[link]``, ...)
-Out: MISSION_REQUEST_LIST, MISSION_REQUEST_INT (again after
+Out: REQUEST_MESSAGE (MISSION_CURRENT), MISSION_REQUEST_LIST, MISSION_REQUEST_INT (again after
      :data:`~bridge.nodes.vehicle.mission.RETRY_S` unanswered), the final MISSION_ACK, GET_HOME_POSITION; the
      mission's :class:`~bridge.core.flight.Flight` (the settings flying the plan's smooth trajectory); in the
      controller's directory ``mission.plan`` (the items as a QGroundControl plan) and ``mission.toml`` (the
@@ -51,6 +53,7 @@ from params import ConfigError, dump_toml
 MISSION_MODE = custom_mode(MAIN_AUTO, SUB_MISSION)
 MISSION = mavlink.MAV_MISSION_TYPE_MISSION
 TRANSFER_BYTES = 60  # a mission message's MAVLink 2 frame, about (the link model's bandwidth only)
+MISSION_CURRENT_S = 0.1  # s: how often the waiting controller asks for the vehicle's MISSION_CURRENT (the start's cue)
 _WANTED = ("MISSION_COUNT", "MISSION_ITEM_INT", "MISSION_ACK")
 
 
@@ -69,6 +72,7 @@ class MissionLink(OffboardLink):
     def __init__(self, flight: Flight, cfg: OffboardConfig, status: Callable[[Report], None]) -> None:
         super().__init__(flight, cfg, None, status)
         self.vehicle_mode: int | None = None  # the vehicle's HEARTBEAT custom_mode
+        self.mission_state: int | None = None  # its MISSION_CURRENT's: ACTIVE once a ground station started it
         self.home: tuple[float, float, float] | None = None
         self._inbox: list[Any] = []  # mission messages from the vehicle, not through the down model yet
         model = cfg.clock == "lockstep" and flight.link.impaired
@@ -88,6 +92,8 @@ class MissionLink(OffboardLink):
             self._inbox.append(m)
         elif src == self.vsys and kind == "HOME_POSITION":
             self.home = (m.latitude / 1e7, m.longitude / 1e7, m.altitude / 1000.0)
+        elif src == self.vsys and kind == "MISSION_CURRENT":
+            self.mission_state = m.mission_state
         super()._on(m)
 
     # -- the transfer, through the link model in lockstep ---------------------------------------------
@@ -183,11 +189,27 @@ class MissionLink(OffboardLink):
         return items, st
 
     def await_start(self) -> bool:
-        """Serve the link until the vehicle shows AUTO.MISSION, disarmed (True), or the controller is stopped."""
+        """Serve the link until a ground station has started the mission (True): the vehicle shows AUTO.MISSION,
+        disarmed, and its MISSION_CURRENT says ACTIVE (asked for with REQUEST_MESSAGE every
+        :data:`MISSION_CURRENT_S` while AUTO.MISSION shows). AUTO.MISSION selected alone is not a start: PX4 stays
+        on the ground until it is armed or sent MISSION_START. False: the controller was stopped."""
+        said = False
         while not self.stopping:
             if self._heard and self.vehicle_mode == MISSION_MODE and not self.vehicle_armed:
-                return True
-            self._serve(self._next_house)
+                if self.mission_state == mavlink.MISSION_STATE_ACTIVE:
+                    return True
+                if self.mission_state is not None and not said:
+                    said = True
+                    self.event("mission", "AUTO.MISSION selected, not started: waiting for its start (an arm, or "
+                                          "MISSION_START)")
+                self.mission_state = None  # the answer to this request decides
+                self._command(mavlink.MAV_CMD_REQUEST_MESSAGE, float(mavlink.MAVLINK_MSG_ID_MISSION_CURRENT), 0.0,
+                              tries=1, every_s=MISSION_CURRENT_S)
+                if self.mission_state == mavlink.MISSION_STATE_ACTIVE:
+                    continue
+                self._serve(min(time.monotonic() + MISSION_CURRENT_S, self._next_house))
+            else:
+                self._serve(self._next_house)
         return False
 
     def ask_home(self) -> bool:

@@ -13,9 +13,10 @@ Out: MISSION_REQUEST_INT / MISSION_REQUEST, MISSION_COUNT, MISSION_ITEM_INT / MI
 
 With ``await_mission`` (``bsst sitl --await-mission``) a ground station starts the held mission
 (:meth:`MissionManager.start`: MAV_CMD_MISSION_START, or AUTO.MISSION selected and then an arm): the vehicle
-shows AUTO.MISSION, the offboard controller downloads the mission over its link, arms the vehicle and flies it;
-each control step :meth:`MissionManager.flight_step` watches the items (:mod:`.missionwatch`): MISSION_ITEM_REACHED
-as each is reached, MISSION_CURRENT following.
+shows AUTO.MISSION and MISSION_CURRENT says ACTIVE, the offboard controller (which asks for MISSION_CURRENT while
+AUTO.MISSION shows) downloads the mission over its link, arms the vehicle and flies it (AUTO.MISSION selected alone
+starts nothing); each control step :meth:`MissionManager.flight_step` watches the items (:mod:`.missionwatch`):
+MISSION_ITEM_REACHED as each is reached, MISSION_CURRENT following.
 
 PX4's state machine: IDLE, GETLIST (an upload: the vehicle requests item after item), SENDLIST (a
 download: the ground station requests them). One transfer at a time, with one partner (sysid, compid,
@@ -222,8 +223,10 @@ class MissionManager:
 
     @property
     def mission_state(self) -> int:
-        """MISSION_STATE: ACTIVE while a started mission flies, COMPLETE once its last item was reached."""
-        if self.watch is not None and not self.watch.done:
+        """MISSION_STATE: ACTIVE once a ground station started the mission (the controller's cue to fly it: AUTO.MISSION
+        selected alone is NOT_STARTED, and the vehicle stays on the ground, as PX4's does) and while it flies,
+        COMPLETE once its last item was reached."""
+        if self.start_requested or (self.watch is not None and not self.watch.done):
             return mavlink.MISSION_STATE_ACTIVE
         return mavlink.MISSION_STATE_COMPLETE if self.completed else mavlink.MISSION_STATE_NOT_STARTED
 
