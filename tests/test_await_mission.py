@@ -455,6 +455,47 @@ def test_the_vehicle_starts_a_mission_only_when_asked_to_await_one():
         gcs.close()
 
 
+def test_another_mode_selected_after_auto_mission_wins_until_the_mission_starts():
+    """As on PX4 the latest selection wins: AUTO.MISSION then HOLD, disarmed, shows HOLD and a ground station's arm
+    arms in HOLD (no start). AUTO.MISSION then an arm starts the mission; a mode asked for then, while the
+    controller is to arm the vehicle, is DENIED saying why (the start stands)."""
+    gcs = GcsSocket()
+    flight = prepare(Mission(Sine(), duration_s=5.0, name="start"))
+    made = []
+    exchange = gcs.exchange
+
+    def mode(main: int, sub: int) -> Any:
+        return M.MAVLink_command_long_message(1, 1, M.MAV_CMD_DO_SET_MODE, 0, 1, main, sub, 0, 0, 0, 0)
+
+    arm = M.MAVLink_command_long_message(1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+    try:
+        for then_hold in (True, False):
+            v = Vehicle(flight, VehicleConfig(parse_address("udpin:127.0.0.1:0"), parse_address(gcs.url),
+                                              await_mission=True))
+            made.append(v)
+            exchange(v, M.MAVLink_mission_count_message(1, 1, 3, 0), "MISSION_REQUEST_INT")
+            items = _small_plan_items(target=(1, 1))
+            for it in items[:2]:
+                exchange(v, it, "MISSION_REQUEST_INT")
+            assert exchange(v, items[2], "MISSION_ACK").type == M.MAV_MISSION_ACCEPTED
+            assert exchange(v, mode(4, 4), "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
+            assert v._heartbeat().custom_mode == (4 << 16) | (4 << 24)
+            if then_hold:
+                assert exchange(v, mode(4, 3), "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
+                assert v._heartbeat().custom_mode == (4 << 16) | (3 << 24) and not v.missions.selected
+                assert exchange(v, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
+                assert v.sim.armed and v.sim.mode == "hold" and not v.missions.start_requested
+            else:
+                assert exchange(v, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
+                assert v.missions.start_requested and not v.sim.armed
+                assert exchange(v, mode(4, 3), "COMMAND_ACK").result == M.MAV_RESULT_DENIED
+                assert v.missions.start_requested and v._heartbeat().custom_mode == (4 << 16) | (4 << 24)
+    finally:
+        for v in made:
+            v.close()
+        gcs.close()
+
+
 def test_the_watch_reaches_the_box_items_in_order_along_its_flight():
     """goals_of (the route's points, about the home) and ItemWatch along the offline flight of the box: every
     item reached once, in order, the landing last (on the ground)."""

@@ -273,6 +273,10 @@ class Commander:
             refused = "mode MISSION: not flown here" if missions is None else missions.select(self.sim.armed)
             return self._refuse(refused) if refused else mavlink.MAV_RESULT_ACCEPTED
         sim = self.sim
+        if not sim.armed and self.ports.missions is not None:  # AUTO.MISSION no longer selected, or starting
+            refused = self.ports.missions.select_other(mode_name(mode))
+            if refused:
+                return self._refuse(refused)
         if (mode == OFFBOARD and sim.armed and sim.mode != OFFBOARD
                 and time.monotonic() - self.ports.target_wall() > OFFBOARD_STREAM_S):
             # PX4 too: OFFBOARD only while a controller streams targets (its failsafe would act at once)

@@ -135,6 +135,16 @@ class MissionManager:
             self.selected = True
         return why
 
+    def select_other(self, mode: str) -> str | None:
+        """Another mode (``mode``, its name) asked for while disarmed: AUTO.MISSION is no longer selected (the
+        latest selection wins, as on PX4: an arm then arms in that mode), or why not: a started mission's arm is
+        the controller's and is on its way."""
+        if self.start_requested:
+            return (f"mode {mode}: the mission is starting (the controller arms the vehicle once it has it); "
+                    "switch modes once it flies")
+        self.selected = False
+        return None
+
     def start(self, by: Sender, first: float, how: str = START_COMMAND) -> str | None:
         """A ground station starts the mission (``how``: :data:`START_COMMAND`, MAV_CMD_MISSION_START with its
         first item ``first``, or :data:`START_ARM`, an arm with AUTO.MISSION selected): a ``mission`` event, the
