@@ -41,7 +41,7 @@ from bridge.session import instance_slot, sitl
 from bridge.session.children import check_port_free
 from missions import Mission, Sine
 from params import ConfigError
-from tests.sitlkit import ENV, ROOT, run_bsst
+from tests.sitlkit import ENV, ROOT, TimerLateness, run_bsst
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -294,7 +294,7 @@ def test_the_relay_replays_a_trace_on_the_wall_clock(tmp_path: Path) -> None:
     f.write_text("t_s,delay_ms,direction\n0,25,up\n0,,down\n")  # up: 25 ms always; down: every packet lost
     settings = link_from_table({"trace": str(f), "trace_loop": True}, "m.toml")
     target, client = udp(), udp()
-    with Relay(("127.0.0.1", 0), target.getsockname(), settings) as relay:
+    with TimerLateness() as control, Relay(("127.0.0.1", 0), target.getsockname(), settings) as relay:
         relay.start()
         delays = []
         for i in range(20):
@@ -305,7 +305,11 @@ def test_the_relay_replays_a_trace_on_the_wall_clock(tmp_path: Path) -> None:
         wait_for(lambda: relay.summary()["down"]["sent"] >= 20, 5.0, "the relay sending the 20 states down",
                  poll_s=0.005)
         s = relay.summary()
-    assert abs(float(np.median(delays)) * 1000.0 - 25.0) <= 2.0 and min(delays) >= 0.025
+    # at most 2 ms late beyond this machine's own wake-up lateness in the same seconds (two wake-ups a datagram:
+    # the relay's at the due time and the receiver's; a loaded suite once put the median at 27.9 ms)
+    late_ms = control.median()
+    assert float(np.median(delays)) * 1000.0 - 25.0 <= 2.0 + 2.0 * late_ms, (np.median(delays), late_ms)
+    assert min(delays) >= 0.025  # never early
     assert s["up"]["delivered"] == 20 and s["up"]["trace"]["delay_ms"]["p50"] == 25.0
     assert s["down"]["lost_by"]["trace"] == 20 and s["down"]["delivered"] == 0
     client.settimeout(0.05)

@@ -6,13 +6,11 @@ from __future__ import annotations
 
 import json
 import os
-import select
 import signal
 import socket
 import struct
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
@@ -22,7 +20,7 @@ import pytest
 from bridge.link.model import LinkConfig, LinkSettings
 from bridge.nodes.relay import Relay, parse_address
 from bridge.nodes.report import Ready, parse_line
-from tests.sitlkit import Bsst
+from tests.sitlkit import Bsst, TimerLateness
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -69,38 +67,6 @@ def ping_pong(client: socket.socket, target: socket.socket, relay_addr, rounds: 
         down.append(time.perf_counter() - t_sent)
         assert n == i and len(data) == 242
     return up, down
-
-
-class TimerLateness(threading.Thread):
-    """The control: how late this machine wakes a thread from a 20 ms timed sleep, measured in this process
-    while the test runs (ms). A relay's hold ends in such a wake-up and each datagram's arrival in another; on
-    an oversubscribed machine the scheduler makes both late, whatever the relay does."""
-
-    def __init__(self) -> None:
-        super().__init__(daemon=True)
-        self.late_ms: list[float] = []
-        self._stop_r, self._stop_w = os.pipe()
-
-    def run(self) -> None:
-        while True:
-            t0 = time.perf_counter()
-            if select.select([self._stop_r], [], [], 0.020)[0]:
-                return
-            self.late_ms.append((time.perf_counter() - t0 - 0.020) * 1000.0)
-
-    def __enter__(self) -> TimerLateness:
-        self.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        os.write(self._stop_w, b"x")
-        self.join(5.0)
-        os.close(self._stop_r)
-        os.close(self._stop_w)
-
-    def median(self) -> float:
-        assert self.late_ms, "the control never woke"
-        return float(np.median(self.late_ms))
 
 
 def test_twenty_ms_each_way_measured_within_two_ms() -> None:
