@@ -74,7 +74,7 @@ M = mavlink
 ARM = M.MAV_CMD_COMPONENT_ARM_DISARM
 COMMANDS = (ARM, M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAV_CMD_GET_MESSAGE_INTERVAL, M.MAV_CMD_REQUEST_MESSAGE,
             M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, M.MAV_CMD_GET_HOME_POSITION, M.MAV_CMD_DO_SET_MODE,
-            M.MAV_CMD_NAV_TAKEOFF)
+            M.MAV_CMD_NAV_TAKEOFF, M.MAV_CMD_NAV_RETURN_TO_LAUNCH)
 PARAM1 = (0.0, 1.0, float(M.MAVLINK_MSG_ID_ATTITUDE), float(M.MAVLINK_MSG_ID_HOME_POSITION),
           float(M.MAVLINK_MSG_ID_AUTOPILOT_VERSION), 0.5, 2.0**24, -1.0, *FLOAT_EXTREMES[:3])
 PARAM2 = (-1.0, 0.0, 1e4, 1e6, 21196.0, 1e12, -5.0, *FLOAT_EXTREMES[:3])
@@ -86,7 +86,7 @@ GCS_HANDLED = ("COMMAND_LONG", "COMMAND_INT", "HIL_ACTUATOR_CONTROLS", "SET_ACTU
 ANSWERS = ("COMMAND_ACK", "TIMESYNC", "MISSION_COUNT", "MISSION_ACK", "PARAM_VALUE", "FILE_TRANSFER_PROTOCOL")
 # refusals that are answered too (a DENIED COMMAND_ACK, the unchanged PARAM_VALUE): counted once in the sum
 ANSWERED_REFUSALS = ("bad_number", "param_refused")
-MODE_COMMANDS = (M.MAV_CMD_DO_SET_MODE, M.MAV_CMD_NAV_TAKEOFF, M.MAV_CMD_NAV_LAND)
+MODE_COMMANDS = (M.MAV_CMD_DO_SET_MODE, M.MAV_CMD_NAV_TAKEOFF, M.MAV_CMD_NAV_LAND, M.MAV_CMD_NAV_RETURN_TO_LAUNCH)
 GCS_IDS = (255, 190)
 
 
@@ -100,8 +100,8 @@ def flight_changing(m: Any, sysid: int) -> bool:
 
 def mode_or_param_changing(m: Any, sysid: int) -> bool:
     """Whether ``m``, from a ground station, for this vehicle, would change its mode (DO_SET_MODE of a
-    mode it flies, NAV_TAKEOFF, NAV_LAND, SET_MODE) or a parameter (a valid PARAM_SET): withheld too,
-    by addressing it to another system (refused as ``target``), so that the trace stays the same."""
+    mode it flies, NAV_TAKEOFF, NAV_LAND, NAV_RETURN_TO_LAUNCH, SET_MODE) or a parameter (a valid PARAM_SET):
+    withheld too, by addressing it to another system (refused as ``target``), so that the trace stays the same."""
     kind = m.get_type()
     if getattr(m, "target_system", -1) not in (0, sysid) or getattr(m, "target_component", 0) not in (0, 1):
         return False

@@ -20,14 +20,14 @@ import os
 import signal
 import subprocess
 from collections.abc import Iterator
-from math import cos
+from math import cos, hypot
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from bridge.autopilot.failsafe import FAILSAFE_ACTIONS, Level, PositionHold, Takeoff
-from bridge.autopilot.simvehicle import FAILSAFE, LANDED
+from bridge.autopilot.failsafe import FAILSAFE_ACTIONS, Level, PositionHold, ReturnHome, Takeoff
+from bridge.autopilot.simvehicle import FAILSAFE, LANDED, RTL
 from bridge.cli import build_parser, main
 from bridge.core.flight import prepare
 from bridge.loop import simulate
@@ -311,6 +311,28 @@ def test_takeoff_climbs_to_its_height_and_holds_there() -> None:
     assert max(s[4] for s in states) < 2.1
     end = states[-1]
     assert abs(end[4] - 2.0) < 0.02 and abs(end[0]) < 1e-6 and abs(end[2]) < 1e-6 and sim.armed
+
+
+def test_return_mode_climbs_flies_home_comes_down_and_lands() -> None:
+    """RTL (PX4's Return, home type) from a hover 6.7 m from home at 2 m, RTL_RETURN_ALT 4 m, RTL_DESCEND_ALT
+    2.5 m: it stops and climbs to 4 m where it is, flies home at 4 m, comes down to 2.5 m over home, lands and
+    disarms on the ground at home; its phases in that order, each once."""
+    sim = prepare(_ground_mission(), params={"RTL_RETURN_ALT": 4.0, "RTL_DESCEND_ALT": 2.5}).make_vehicle(armed=True)
+    sim.plant.state = (6.0, 0.0, 3.0, 0.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    sim.set_mode(RTL)
+    target = sim.onboard.target
+    assert isinstance(target, ReturnHome) and (target.x, target.y, target.z_return, target.z_descend) == \
+        (0.0, 0.0, 4.0, 2.5)
+    states = _fly(sim, 40.0)
+    phases = [target.phase(X) for X in states[:[s[4] for s in states].index(min(s[4] for s in states)) + 1]]
+    assert list(dict.fromkeys(phases)) == ["climb", "return", "descend", "land"], list(dict.fromkeys(phases))
+    climbing = [X for X, ph in zip(states, phases) if ph == "climb"]
+    assert max(hypot(X[0] - 6.0, X[2] - 3.0) for X in climbing) < 0.3  # it climbs where it is
+    home_run = [X for X, ph in zip(states, phases) if ph == "return"]
+    assert max(abs(X[4] - 4.0) for X in home_run) < 0.35 and max(X[4] for X in states) < 4.2
+    end = states[-1]
+    assert not sim.armed and hypot(end[0], end[2]) < 0.2 and end[4] < 0.01, (sim.armed, end[:6])
+    assert [e.kind for e in sim.events][-1] == "disarmed"
 
 
 def test_position_hold_takes_up_a_heavier_plant_with_its_integral() -> None:

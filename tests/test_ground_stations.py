@@ -31,7 +31,8 @@ from bridge.mavlink.endpoint import GCS_PORT
 from bridge.mavlink.modes import FTP_ERR_UNKNOWN_COMMAND, FTP_HEADER, FTP_NAK, FTP_PAYLOAD_LEN, ftp_nak
 from bridge.nodes.report import Refused
 from bridge.session import instance_slot
-from tests.sitlkit import ENV, MavProxy
+from missions import MISSION_DIR
+from tests.sitlkit import ENV, MavProxy, Proc
 from tests.test_vehicle import _vehicle
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -93,6 +94,41 @@ if sys.argv[2] == "params":
     out["obl_rc_act"] = par.get_param_int("COM_OBL_RC_ACT")  # the same setting under PX4 1.14's name
     # 42: never an instance's own id (instances 0-9 are systems 1-10), whose echo MAVSDK would take as made
     out["set_sys_id"] = refused(par.set_param_int, "MAV_SYS_ID", 42)
+elif sys.argv[2] == "rtl":  # the controller flies the step mission; at its second set-point, Return
+    tel, act = Telemetry(system), Action(system)
+    cond = threading.Condition()
+    modes, seen = [], {"armed": None, "ned": None, "rel": None, "top": -1.0}
+    def on_mode(m, ud=None):
+        with cond:
+            if not modes or modes[-1] != m.name:
+                modes.append(m.name)
+            cond.notify_all()
+    def on_armed(a, ud=None):
+        with cond:
+            seen["armed"] = a
+            cond.notify_all()
+    def on_ned(pv, ud=None):
+        with cond:
+            seen["ned"] = (pv.position.north_m, pv.position.east_m, -pv.position.down_m)
+            if modes and modes[-1] == "RETURN_TO_LAUNCH":
+                seen["top"] = max(seen["top"], -pv.position.down_m)
+            cond.notify_all()
+    tel.subscribe_flight_mode(on_mode)
+    tel.subscribe_armed(on_armed)
+    tel.subscribe_position_velocity_ned(on_ned)
+    def until(what, pred, timeout):
+        with cond:
+            out[what] = cond.wait_for(pred, timeout)
+    away = lambda: seen["ned"] is not None and (seen["ned"][0] ** 2 + seen["ned"][1] ** 2) ** 0.5 > 2.0 \
+        and seen["ned"][2] > 1.8
+    until("away", away, 60)
+    out["from"] = seen["ned"]
+    out["rtl"] = act.return_to_launch().name
+    until("rtl_seen", lambda: modes and modes[-1] == "RETURN_TO_LAUNCH", 10)
+    until("disarmed_seen", lambda: seen["armed"] is False, 60)
+    until("on_ground", lambda: abs(seen["ned"][2]) < 0.02, 5)  # positions come at 25 Hz: the next ones
+    with cond:
+        out.update(modes=modes, landed_at=seen["ned"], top=seen["top"])
 else:
     tel, act = Telemetry(system), Action(system)
     cond = threading.Condition()
@@ -200,6 +236,33 @@ def test_mavsdk_hold_takeoff_land(tmp_path):
     v.wait_event(lambda s: "disarmed: landed" in s)
     unanswered, _, _ = _answers(tmp_path / "vehicle.tlog", n + 1)
     assert not unanswered, f"commands MAVSDK sent that got no COMMAND_ACK: {unanswered}"
+
+
+def test_mavsdk_return_to_launch(tmp_path):
+    """``Action.return_to_launch`` (MAV_CMD_NAV_RETURN_TO_LAUNCH: PX4's Return mode) while ``bsst controller`` flies
+    the step mission, at its second set-point (2.2 m from home, 2 m up): MAVSDK shows RETURN_TO_LAUNCH; the
+    vehicle climbs to RTL_RETURN_ALT (3 m), flies home, comes down to RTL_DESCEND_ALT and lands at home,
+    disarmed; the controller, its vehicle taken, ends aborted (exit 1); the vehicle's events name MAVSDK."""
+    mission = tmp_path / "step.toml"
+    mission.write_text((MISSION_DIR / "step.toml").read_text().replace("duration_s = 30.0", "duration_s = 20.0"))
+    with instance_slot() as n:
+        v = _vehicle(n, tmp_path / "v", str(mission), "--speed", "4", "--param", "MPC_LAND_SPEED=1.5",
+                     "--param", "RTL_RETURN_ALT=3", "--param", "RTL_DESCEND_ALT=2.5")
+        ctl = Proc.bsst("controller", str(mission), "--instance", str(n), "--out", str(tmp_path / "c"))
+        try:
+            out = _mavsdk(n, "rtl")
+            assert ctl.p.wait(timeout=60) == 1, ctl.lines[-10:]
+        finally:
+            ctl.stop()
+            assert v.stop() == 0
+    assert out["found"] and out["away"] and out["rtl"] == "SUCCESS", out
+    assert out["rtl_seen"] and out["disarmed_seen"] and out["on_ground"], out
+    assert out["modes"][-1] == "RETURN_TO_LAUNCH", out
+    assert 2.9 < out["top"] < 3.1, out  # climbed to RTL_RETURN_ALT, no higher
+    north, east, up = out["landed_at"]
+    assert (north ** 2 + east ** 2) ** 0.5 < 0.2 and abs(up) < 0.05, out  # at home, on the ground
+    v.wait_event(lambda s: "mode: RTL from" in s and "[by 245:190" in s)
+    v.wait_event(lambda s: "disarmed: landed" in s)
 
 
 # -- MAVProxy --------------------------------------------------------------------------------------

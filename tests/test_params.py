@@ -106,8 +106,9 @@ def test_px4_modes_decode_and_others_are_named_when_refused():
     assert requested_mode(29, 4, 3) == ("hold", "")
     assert requested_mode(1, 6, 0) == ("offboard", "")
     assert requested_custom_mode(1, (4 << 16) | (6 << 24)) == ("land", "")
-    mode, why = requested_mode(29, 4, 5)
-    assert mode is None and "RTL" in why
+    assert requested_mode(29, 4, 5) == ("rtl", "")  # PX4's Return
+    mode, why = requested_mode(29, 4, 7)
+    assert mode is None and "RTGS" in why
     assert requested_mode(0, 4, 3)[0] is None  # no CUSTOM_MODE_ENABLED
     assert requested_mode(29, math.nan, 3)[0] is None
     assert shown_name((4 << 16) | (2 << 24)) == "TAKEOFF"

@@ -5,7 +5,8 @@ In:  the ``[failsafe]`` table (``timeout_s`` s, ``descent_rate`` m/s, ``resume``
      m, m/s, rad, rad/s)
 Out: a :class:`FailsafeConfig`; the on-board controller's wrench demand (u1..u4, N) and the normalised
      paper-frame command the profile's actuation makes of it, for a target (:class:`Level`,
-     :class:`PositionHold`, :class:`Land`, :class:`Takeoff`)
+     :class:`PositionHold`, :class:`Land`, :class:`Takeoff`, :class:`ReturnHome`); Return mode's heights
+     (:class:`ReturnConfig`, m above home)
 
 No valid actuator target for longer than ``timeout_s`` of vehicle time and the vehicle
 leaves offboard control; what it does then is ``action`` (PX4's offboard-loss action,
@@ -54,8 +55,8 @@ on position with kp = 4.5 /s², kd = 3 /s: 2.1 rad/s, damping 0.71, a fifth of t
 v_down = 1 m/s, tilt_max = 0.35 rad (20 deg). ``Level`` (``descend``) is the earlier landing loop
 exactly: level attitude at 6 rad/s (36, 12), velocity P only with k_vel,level = 2 /s and no
 integral, u1 = m (g + 2 (-descent_rate - z')) / max(cos phi cos theta, 0.5). A later HOLD,
-NAV_LAND or NAV_TAKEOFF mode flies the same controller with :class:`PositionHold`, :class:`Land`
-or :class:`Takeoff` (``SimVehicle.fly_onboard``).
+NAV_LAND, NAV_TAKEOFF or RTL mode flies the same controller with :class:`PositionHold`, :class:`Land`,
+:class:`Takeoff` or :class:`ReturnHome` (``SimVehicle.fly_onboard``).
 """
 
 from __future__ import annotations
@@ -244,6 +245,60 @@ class Takeoff(Target):
 
     def setpoint(self, X: tuple[float, ...], g: OnboardGains) -> Setpoint:
         return Setpoint(_xy_velocity(self.x, self.y, X, g), _z_velocity(self.z, X, g, self.rate), self.psi)
+
+
+@dataclass(frozen=True)
+class ReturnConfig:
+    """Return mode's heights above home (m): PX4's RTL_RETURN_ALT (climb to it, if lower, before flying home) and
+    RTL_DESCEND_ALT (over home, come down to it, then land); their ranges: :data:`RETURN_RANGES`."""
+
+    return_alt_m: float = 60.0
+    descend_alt_m: float = 30.0
+
+
+RETURN_RANGES = {"return_alt_m": (0.0, 100.0), "descend_alt_m": (2.0, 100.0)}  # m: PX4's, inside the 100 m envelope
+RETURN_NEAR_M = 1.0  # m: home is reached within this horizontal distance (then the descent)
+RETURN_Z_TOL_M = 0.3  # m: the climb is done, or the descent, this close to its height
+
+
+@dataclass(frozen=True)
+class ReturnHome(Target):
+    """Return mode (PX4's RTL, home return type) over home (x, y) in m: below ``z_return`` and away from home,
+    stop and climb to it; then fly home at that height; over home (within :data:`RETURN_NEAR_M`), come down to
+    ``z_descend`` at most ``v_down``, then land at ``rate`` m/s and disarm on the ground. Each phase follows from
+    the state alone (a dip below the return height on the way climbs again before going on)."""
+
+    x: float
+    y: float
+    z_return: float
+    z_descend: float
+    rate: float
+    lands = True
+
+    @classmethod
+    def toward(cls, X: tuple[float, ...], home: tuple[float, float, float], cfg: ReturnConfig,
+               rate: float) -> ReturnHome:
+        """From state X: the return height is RTL_RETURN_ALT above home, or the height now if higher (PX4 does
+        not come down to return); the descent's at most that."""
+        z_return = max(X[4], home[2] + cfg.return_alt_m)
+        return cls(home[0], home[1], z_return, min(home[2] + cfg.descend_alt_m, z_return), rate)
+
+    def phase(self, X: tuple[float, ...]) -> str:
+        """``climb``, ``return``, ``descend`` or ``land``."""
+        if hypot(self.x - X[0], self.y - X[2]) > RETURN_NEAR_M:
+            return "climb" if X[4] < self.z_return - RETURN_Z_TOL_M else "return"
+        return "descend" if X[4] > self.z_descend + RETURN_Z_TOL_M else "land"
+
+    def setpoint(self, X: tuple[float, ...], g: OnboardGains) -> Setpoint:
+        phase = self.phase(X)
+        if phase == "climb":
+            return Setpoint((0.0, 0.0), _z_velocity(self.z_return, X, g, g.v_up), None)
+        v_xy = _xy_velocity(self.x, self.y, X, g)
+        if phase == "return":
+            return Setpoint(v_xy, _z_velocity(self.z_return, X, g, g.v_up), None)
+        if phase == "descend":
+            return Setpoint(v_xy, _z_velocity(self.z_descend, X, g, g.v_up), None)
+        return Setpoint(v_xy, -self.rate, None)
 
 
 def failsafe_target(cfg: FailsafeConfig, X: tuple[float, ...]) -> Target:

@@ -32,7 +32,7 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
-from bridge.autopilot.failsafe import FAILSAFE_RANGES, FailsafeConfig
+from bridge.autopilot.failsafe import FAILSAFE_RANGES, RETURN_RANGES, FailsafeConfig, ReturnConfig
 from params import ConfigError, Table
 
 REAL32 = "REAL32"
@@ -49,6 +49,7 @@ class VehicleParams:
     takeoff_alt_m: float = 2.5  # m above home: NAV_TAKEOFF's altitude when it gives none (PX4's default)
     sysid: int = 1
     failure_injection: int = 0  # SYS_FAILURE_EN: 1 acts on MAV_CMD_INJECT_FAILURE, 0 denies it (PX4's default)
+    rtl: ReturnConfig = ReturnConfig()  # RTL_RETURN_ALT, RTL_DESCEND_ALT: Return mode's heights above home, m
 
 
 @dataclass(frozen=True)
@@ -91,11 +92,16 @@ PARAMS: tuple[ParamSpec, ...] = (
               "takeoff altitude above home when NAV_TAKEOFF gives none, and the least it climbs to"),
     ParamSpec("MAV_SYS_ID", INT32, "", *SYSID_RANGE, "the vehicle's MAVLink system id (at start only)",
               at_start_only=True),
+    ParamSpec("RTL_RETURN_ALT", REAL32, "m", *RETURN_RANGES["return_alt_m"],
+              "Return mode: the height above home it climbs to (if lower) before it flies home"),
+    ParamSpec("RTL_DESCEND_ALT", REAL32, "m", *RETURN_RANGES["descend_alt_m"],
+              "Return mode: the height above home it comes down to over home before it lands"),
     ParamSpec("SYS_FAILURE_EN", INT32, "", 0, 1,
               "failure injection: 1 acts on a ground station's MAV_CMD_INJECT_FAILURE, 0 denies it (docs/weather.md)",
               choices={0: "disabled", 1: "enabled"}),
 )
 BY_NAME = {p.name: p for p in PARAMS}
+_RTL_FIELDS = {"RTL_RETURN_ALT": "return_alt_m", "RTL_DESCEND_ALT": "descend_alt_m"}  # -> ReturnConfig's field
 
 
 class ParamRefused(ValueError):
@@ -111,6 +117,8 @@ def read_param(p: VehicleParams, name: str) -> float:
         return float(getattr(p.failsafe, spec.failsafe_key))
     if name == "SYS_FAILURE_EN":
         return float(p.failure_injection)
+    if name in _RTL_FIELDS:
+        return float(getattr(p.rtl, _RTL_FIELDS[name]))
     return float(p.takeoff_alt_m if name == "MIS_TAKEOFF_ALT" else p.sysid)
 
 
@@ -178,6 +186,8 @@ def change_param(p: VehicleParams, name: str, value: float, running: bool = True
         return replace(p, takeoff_alt_m=float(value))
     if name == "SYS_FAILURE_EN":
         return replace(p, failure_injection=int(value))
+    if name in _RTL_FIELDS:
+        return replace(p, rtl=replace(p.rtl, **{_RTL_FIELDS[name]: float(value)}))
     return replace(p, sysid=int(value))
 
 

@@ -39,6 +39,8 @@ from bridge.autopilot.failsafe import (
     Land,
     OnboardController,
     PositionHold,
+    ReturnConfig,
+    ReturnHome,
     Takeoff,
     Target,
     failsafe_target,
@@ -54,10 +56,11 @@ NEES_EVERY = 10  # control steps between NEES samples (its solve costs a fifth o
 OFFBOARD = "offboard"
 FAILSAFE = "failsafe"
 LANDED = "landed"  # the failsafe landed it (or stopped its motors): disarmed
-HOLD = "hold"  # the modes a ground station selects (bridge/nodes/vehicle.py, PX4's names: HOLD, LAND, TAKEOFF)
+HOLD = "hold"  # the modes a ground station selects (bridge/nodes/vehicle.py, PX4's names)
 LAND = "land"
 TAKEOFF = "takeoff"
-GROUND_MODES = (HOLD, LAND, TAKEOFF)  # flown by the on-board controller, set by a ground station
+RTL = "rtl"  # Return: home at RTL_RETURN_ALT, down to RTL_DESCEND_ALT, land (armed only, as PX4)
+GROUND_MODES = (HOLD, LAND, TAKEOFF, RTL)  # flown by the on-board controller, set by a ground station
 TAKEOFF_DONE_M = 0.1  # m from its height: a takeoff is done and the vehicle holds there (PX4: HOLD after TAKEOFF)
 
 
@@ -171,6 +174,7 @@ class SimVehicle:
     takeoff_alt_m: float = 2.5  # m above the start: NAV_TAKEOFF's altitude when it gives none (MIS_TAKEOFF_ALT)
     timeline: tuple[TimedEvent, ...] = ()  # faults and weather changes (plant/events.py), in time order
     failure_injection: int = 0  # SYS_FAILURE_EN: a ground station's MAV_CMD_INJECT_FAILURE is acted on (1) or not
+    rtl: ReturnConfig = field(default_factory=ReturnConfig)  # Return mode's heights (RTL_RETURN_ALT, RTL_DESCEND_ALT)
 
     def __post_init__(self) -> None:
         if self.estimator is None:
@@ -181,7 +185,9 @@ class SimVehicle:
         self.landing = self.onboard  # the name bridge/nodes/vehicle.py reads its failsafe rows' demand from
         self.last_command_t = 0.0
         self.land_at: float | None = None  # hold: the plant time its hold ends and it lands
-        self._start_z = self.plant.state[4]  # m: TAKEOFF's altitude is above the start
+        X0 = self.plant.state
+        self._start_z = X0[4]  # m: TAKEOFF's altitude is above the start
+        self.home = (X0[0], X0[2], X0[4])  # m: where Return mode flies back to (the start: the ground station's home)
         self._takeoff_alt = self.takeoff_alt_m  # m: the altitude the selected TAKEOFF climbs to
         self._zero = (0.0, 0.0, 0.0, 0.0)
         self._pending_events = list(self.timeline)
@@ -293,6 +299,10 @@ class SimVehicle:
         elif mode == LAND:
             target = Land.here(X, self.failsafe.descent_rate)
             text = f"LAND at x={X[0]:.3f} y={X[2]:.3f} m, {self.failsafe.descent_rate:g} m/s"
+        elif mode == RTL:
+            target = ReturnHome.toward(X, self.home, self.rtl, self.failsafe.descent_rate)
+            text = (f"RTL from x={X[0]:.3f} y={X[2]:.3f} z={X[4]:.3f} m: home x={self.home[0]:.3f} "
+                    f"y={self.home[1]:.3f} m at z={target.z_return:.3f} m, down to {target.z_descend:.3f} m, land")
         else:
             target = Takeoff.here(X, self._start_z + alt)
             text = f"TAKEOFF to {alt:g} m over x={X[0]:.3f} y={X[2]:.3f} m"
@@ -327,17 +337,21 @@ class SimVehicle:
         self.onboard.disengage()
         self.land_at = None
 
+    def params(self, sysid: int = 1) -> VehicleParams:
+        """The settings the parameters read (:mod:`bridge.autopilot.params`), as they are now."""
+        return VehicleParams(self.failsafe, self.takeoff_alt_m, sysid, self.failure_injection, self.rtl)
+
     def change_param(self, name: str, value: float, sysid: int = 1) -> Event | None:
         """Set parameter ``name`` (PX4's name, :mod:`bridge.autopilot.params`) to ``value``, checked
         (:class:`~bridge.autopilot.params.ParamRefused` if it cannot be): it acts from the next control
         period on (a failsafe already flying keeps the action it began with). A ``param`` event says it
         (returned); a set that leaves every setting as it was is no change: no event, None."""
-        before = VehicleParams(self.failsafe, self.takeoff_alt_m, sysid, self.failure_injection)
+        before = self.params(sysid)
         after = change_param(before, name, value)
         if after == before:
             return None
         self.failsafe, self.takeoff_alt_m = after.failsafe, after.takeoff_alt_m
-        self.failure_injection = after.failure_injection
+        self.failure_injection, self.rtl = after.failure_injection, after.rtl
         old, new = read_param(before, name), read_param(after, name)
         return self.event("param", f"{name} = {new:g} (was {old:g})", param=ParamChanged(name, float(old), float(new)))
 

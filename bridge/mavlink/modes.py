@@ -23,11 +23,11 @@ from typing import Any
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.autopilot.failsafe import Land, Level, PositionHold, Takeoff, Target
-from bridge.autopilot.simvehicle import FAILSAFE, HOLD, LAND, LANDED, OFFBOARD, TAKEOFF
+from bridge.autopilot.simvehicle import FAILSAFE, HOLD, LAND, LANDED, OFFBOARD, RTL, TAKEOFF
 
 MAIN_AUTO = 4  # PX4_CUSTOM_MAIN_MODE_AUTO
 MAIN_OFFBOARD = 6  # PX4_CUSTOM_MAIN_MODE_OFFBOARD
-SUB_TAKEOFF, SUB_LOITER, SUB_MISSION, SUB_LAND = 2, 3, 4, 6  # PX4_CUSTOM_SUB_MODE_AUTO_*
+SUB_TAKEOFF, SUB_LOITER, SUB_MISSION, SUB_RTL, SUB_LAND = 2, 3, 4, 5, 6  # PX4_CUSTOM_SUB_MODE_AUTO_*
 # AUTO.MISSION: a ground station's mission, flown by the offboard controller (bsst sitl --await-mission); shown,
 # selected and started here, never a SimVehicle mode (bridge/nodes/vehicle/mission.py)
 MISSION = "mission"
@@ -37,11 +37,12 @@ PX4_MODES = {  # the modes the vehicle flies: its name -> (main, sub) and the na
     LAND: (MAIN_AUTO, SUB_LAND),
     TAKEOFF: (MAIN_AUTO, SUB_TAKEOFF),
     MISSION: (MAIN_AUTO, SUB_MISSION),
+    RTL: (MAIN_AUTO, SUB_RTL),
 }
 _BY_CODE = {code: mode for mode, code in PX4_MODES.items()}
 # PX4's other modes by (main, sub), to name the one refused: px4_custom_mode.h
 _PX4_NAMES = {(1, 0): "MANUAL", (2, 0): "ALTCTL", (3, 0): "POSCTL", (4, 1): "AUTO READY", (4, 4): "MISSION",
-              (4, 5): "RTL", (4, 7): "RTGS", (4, 8): "FOLLOW_TARGET", (4, 9): "PRECLAND", (5, 0): "ACRO",
+              (4, 7): "RTGS", (4, 8): "FOLLOW_TARGET", (4, 9): "PRECLAND", (5, 0): "ACRO",
               (7, 0): "STABILIZED", (8, 0): "RATTITUDE"}
 # base_mode as PX4 sends it in these modes: custom mode, auto, guided, stabilized (29), and armed
 BASE_MODE = (mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mavlink.MAV_MODE_FLAG_AUTO_ENABLED
@@ -92,7 +93,7 @@ def requested_mode(base: float, main: float, sub: float) -> tuple[str | None, st
     mode = _BY_CODE.get(code)
     if mode is None:
         name = _PX4_NAMES.get(code, f"main {code[0]} sub {code[1]}")
-        return None, f"mode {name}: not flown here; OFFBOARD, HOLD, LAND, TAKEOFF are"
+        return None, f"mode {name}: not flown here; OFFBOARD, HOLD, LAND, TAKEOFF, RTL are"
     return mode, ""
 
 

@@ -52,7 +52,7 @@ nothing but, with ``resume``, asks it to arm again (ARM_DISARM, through the link
 lockstep) once the state is fresh. A failsafe does not end the flight: the controller keeps
 answering steps to the mission's end, whose outcome is then ``failsafe`` unless the vehicle
 was back under offboard control. A vehicle that a ground station switches out of OFFBOARD while
-armed (its PX4 HEARTBEAT's ``custom_mode``: HOLD, LAND, TAKEOFF, not in its failsafe) is the ground
+armed (its PX4 HEARTBEAT's ``custom_mode``: HOLD, LAND, TAKEOFF, RTL, not in its failsafe) is the ground
 station's: no more targets are sent, the flight ends ``aborted`` with that reason, and the session
 names the ground station from the vehicle's event. Parameter changes scheduled at mission times
 (``--param-at``, :class:`bridge.autopilot.params.ParamChange`) go out as PARAM_SET just before the

@@ -14,7 +14,7 @@ Out: ODOMETRY (NED position m, FRD body velocity m/s, quaternion FRD to NED, FRD
      ``vehicle.csv`` rows; its reports on stdout (JSON lines)
 
 Its clocks and its end of the link model: docs/design.md, "Clocks" and "Link model". Its
-parameters, flight modes (OFFBOARD, HOLD, LAND, TAKEOFF, in PX4's encoding: :mod:`bridge.mavlink.modes`)
+parameters, flight modes (OFFBOARD, HOLD, LAND, TAKEOFF, RTL, in PX4's encoding: :mod:`bridge.mavlink.modes`)
 and what a ground station can do with them: docs/ground-station.md. Who may
 do what on which link: docs/design.md, "Authority" (:mod:`.authority`); every
 command's numbers are checked before use (:mod:`bridge.mavlink.receive`), and every command

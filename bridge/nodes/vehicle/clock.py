@@ -9,7 +9,7 @@ Out: :attr:`Clock.state` (a :class:`ClockState`), the held :class:`Answer` of st
 The clocks themselves are docs/design.md, "Clocks": in **lockstep** the vehicle is ``idle`` (no flight:
 time stands still) until a flight engages it; then the state of step k goes out (``lockstep``), the
 controller's answer is held (``answered``) and step k is flown (``lockstep`` again, step k + 1). A
-controller silent too long, or a mode the vehicle flies itself (HOLD, LAND, TAKEOFF), leaves lockstep for
+controller silent too long, or a mode the vehicle flies itself (HOLD, LAND, TAKEOFF, RTL), leaves lockstep for
 the wall clock (``free-running``), which the **realtime** clock is from the start. A diverged plant is
 ``halted`` for good. In a SITL fleet on one shared clock (:mod:`.gate`), the answer of step k held, the vehicle
 is ``gated`` until every other vehicle has flown step k - 1 too; then step k is flown (``answered``), or,

@@ -1,6 +1,6 @@
 """The vehicle's commander: arming, flight modes, commands, and the triggers that end a flight.
 
-In:  COMMAND_LONG / COMMAND_INT (COMPONENT_ARM_DISARM, DO_SET_MODE, NAV_TAKEOFF m AMSL, NAV_LAND,
+In:  COMMAND_LONG / COMMAND_INT (COMPONENT_ARM_DISARM, DO_SET_MODE, NAV_TAKEOFF m AMSL, NAV_LAND, NAV_RETURN_TO_LAUNCH,
      MISSION_START (with ``await_mission``: :mod:`.mission`),
      SET/GET_MESSAGE_INTERVAL us, REQUEST_MESSAGE, REQUEST_AUTOPILOT_CAPABILITIES, GET_HOME_POSITION) and
      SET_MODE from a sender with authority (:class:`~bridge.autopilot.simvehicle.Sender`); the plant's
@@ -10,7 +10,7 @@ Out: COMMAND_ACK (with what a command asked for, and a STATUSTEXT saying why it 
      sender; the step clock's transitions (:class:`~bridge.nodes.vehicle.clock.Clock`); why a command was
      refused (a :class:`~bridge.nodes.report.Refused` report)
 
-Flight modes (OFFBOARD, HOLD, LAND, TAKEOFF, in PX4's encoding: :mod:`bridge.mavlink.modes`) and what a
+Flight modes (OFFBOARD, HOLD, LAND, TAKEOFF, RTL, in PX4's encoding: :mod:`bridge.mavlink.modes`) and what a
 ground station can do with them: docs/ground-station.md. Every command's numbers are checked before use
 (:mod:`bridge.mavlink.receive`): a bad one is DENIED and counted (``bad_number``), nothing done.
 """
@@ -26,7 +26,7 @@ from typing import Any
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.autopilot.params import BY_NAME
-from bridge.autopilot.simvehicle import GROUND_MODES, HOLD, LAND, OFFBOARD, TAKEOFF, Sender, SimVehicle
+from bridge.autopilot.simvehicle import GROUND_MODES, HOLD, LAND, OFFBOARD, RTL, TAKEOFF, Sender, SimVehicle
 from bridge.core.flight import event_problem
 from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import Endpoint
@@ -149,6 +149,8 @@ class Commander:
             return self._set_mode_or_refuse(TAKEOFF, "", by=by, takeoff_alt_m=alt), ()
         if cmd == mavlink.MAV_CMD_NAV_LAND:  # lands where it is (PX4 with NaN lat/lon); a position is not flown to
             return self._set_mode_or_refuse(LAND, "", by=by), ()
+        if cmd == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:  # Return mode, as PX4's commander takes it
+            return self._set_mode_or_refuse(RTL, "", by=by), ()
         if cmd == mavlink.MAV_CMD_MISSION_START and self.cfg.await_mission:
             return self._start_mission(by, m.param1), ()
         if cmd == mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
@@ -273,6 +275,8 @@ class Commander:
             refused = "mode MISSION: not flown here" if missions is None else missions.select(self.sim.armed)
             return self._refuse(refused) if refused else mavlink.MAV_RESULT_ACCEPTED
         sim = self.sim
+        if mode == RTL and not sim.armed:
+            return self._refuse("mode RTL: only armed (PX4 does not arm in Return mode)")
         if not sim.armed and self.ports.missions is not None:  # AUTO.MISSION no longer selected, or starting
             refused = self.ports.missions.select_other(mode_name(mode))
             if refused:

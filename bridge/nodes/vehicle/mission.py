@@ -127,7 +127,8 @@ class MissionManager:
         """AUTO.MISSION asked for (DO_SET_MODE, SET_MODE): selected, disarmed, with a mission (None), or why
         not. Armed and flying the mission already: nothing to do."""
         if not self.authority.cfg.await_mission:
-            return "mode MISSION: not flown here; OFFBOARD, HOLD, LAND, TAKEOFF are (and MISSION with --await-mission)"
+            return ("mode MISSION: not flown here; OFFBOARD, HOLD, LAND, TAKEOFF, RTL are (and MISSION with "
+                    "--await-mission)")
         if armed:
             return None if self.watch is not None else "mode MISSION: only selected on the ground, disarmed"
         why = self._startable("mode MISSION")

@@ -42,7 +42,7 @@ class ParamService:
         self._refused = refused  # a set refused, and why (its report to the session)
 
     def params(self) -> VehicleParams:
-        return VehicleParams(self.sim.failsafe, self.sim.takeoff_alt_m, self.sysid, self.sim.failure_injection)
+        return self.sim.params(self.sysid)
 
     def value(self, index: int, params: VehicleParams | None = None) -> Any:
         """PARAM_VALUE of the ``index`` th parameter."""
