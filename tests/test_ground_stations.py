@@ -94,45 +94,10 @@ if sys.argv[2] == "params":
     out["obl_rc_act"] = par.get_param_int("COM_OBL_RC_ACT")  # the same setting under PX4 1.14's name
     # 42: never an instance's own id (instances 0-9 are systems 1-10), whose echo MAVSDK would take as made
     out["set_sys_id"] = refused(par.set_param_int, "MAV_SYS_ID", 42)
-elif sys.argv[2] == "rtl":  # the controller flies the step mission; at its second set-point, Return
+else:  # the flight parts: what MAVSDK's telemetry shows, each callback under one condition
     tel, act = Telemetry(system), Action(system)
     cond = threading.Condition()
-    modes, seen = [], {"armed": None, "ned": None, "rel": None, "top": -1.0}
-    def on_mode(m, ud=None):
-        with cond:
-            if not modes or modes[-1] != m.name:
-                modes.append(m.name)
-            cond.notify_all()
-    def on_armed(a, ud=None):
-        with cond:
-            seen["armed"] = a
-            cond.notify_all()
-    def on_ned(pv, ud=None):
-        with cond:
-            seen["ned"] = (pv.position.north_m, pv.position.east_m, -pv.position.down_m)
-            if modes and modes[-1] == "RETURN_TO_LAUNCH":
-                seen["top"] = max(seen["top"], -pv.position.down_m)
-            cond.notify_all()
-    tel.subscribe_flight_mode(on_mode)
-    tel.subscribe_armed(on_armed)
-    tel.subscribe_position_velocity_ned(on_ned)
-    def until(what, pred, timeout):
-        with cond:
-            out[what] = cond.wait_for(pred, timeout)
-    away = lambda: seen["ned"] is not None and (seen["ned"][0] ** 2 + seen["ned"][1] ** 2) ** 0.5 > 2.0 \
-        and seen["ned"][2] > 1.8
-    until("away", away, 60)
-    out["from"] = seen["ned"]
-    out["rtl"] = act.return_to_launch().name
-    until("rtl_seen", lambda: modes and modes[-1] == "RETURN_TO_LAUNCH", 10)
-    until("disarmed_seen", lambda: seen["armed"] is False, 60)
-    until("on_ground", lambda: abs(seen["ned"][2]) < 0.02, 5)  # positions come at 25 Hz: the next ones
-    with cond:
-        out.update(modes=modes, landed_at=seen["ned"], top=seen["top"])
-else:
-    tel, act = Telemetry(system), Action(system)
-    cond = threading.Condition()
-    modes, seen = [], {"armed": None, "rel": None, "top": -1.0}
+    modes, seen = [], {"armed": None, "rel": None, "top": -1.0, "ned": None, "rtl_top": -1.0}
     def on_mode(m, ud=None):
         with cond:
             if not modes or modes[-1] != m.name:
@@ -147,12 +112,31 @@ else:
             seen["rel"] = p.relative_altitude_m
             seen["top"] = max(seen["top"], p.relative_altitude_m)
             cond.notify_all()
+    def on_ned(pv, ud=None):
+        with cond:
+            seen["ned"] = (pv.position.north_m, pv.position.east_m, -pv.position.down_m)
+            if modes and modes[-1] == "RETURN_TO_LAUNCH":
+                seen["rtl_top"] = max(seen["rtl_top"], -pv.position.down_m)
+            cond.notify_all()
     tel.subscribe_flight_mode(on_mode)
     tel.subscribe_armed(on_armed)
     tel.subscribe_position(on_position)
+    tel.subscribe_position_velocity_ned(on_ned)
     def until(what, pred, timeout):
         with cond:
             out[what] = cond.wait_for(pred, timeout)
+if sys.argv[2] == "rtl":  # the controller flies the step mission; at its second set-point, Return
+    away = lambda: seen["ned"] is not None and (seen["ned"][0] ** 2 + seen["ned"][1] ** 2) ** 0.5 > 2.0 \
+        and seen["ned"][2] > 1.8
+    until("away", away, 60)
+    out["from"] = seen["ned"]
+    out["rtl"] = act.return_to_launch().name
+    until("rtl_seen", lambda: modes and modes[-1] == "RETURN_TO_LAUNCH", 10)
+    until("disarmed_seen", lambda: seen["armed"] is False, 60)
+    until("on_ground", lambda: abs(seen["ned"][2]) < 0.02, 5)  # positions come at 25 Hz: the next ones
+    with cond:
+        out.update(modes=modes, landed_at=seen["ned"], top=seen["rtl_top"])
+elif sys.argv[2] == "flight":
     out["hold"] = act.hold().name
     until("hold_seen", lambda: modes and modes[-1] == "HOLD", 10)
     out["arm"] = act.arm().name
