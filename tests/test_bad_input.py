@@ -155,7 +155,7 @@ CONVERTER_BAD = {
     "link_profile": ["no_such_profile", "no_such_profile.toml", "/"],
     "sensor_set_name": ["", "mo.cap", "bogus"],
     "noise_scale": ["x", "-1", "nan", "1e300"],
-    "param_assignment": ["x", "NOPE=1", "COM_OF_LOSS_T=99", "COM_OBL_ACT=2", "COM_OF_LOSS_T=nan",
+    "param_assignment": ["x", "NOPE=1", "COM_OF_LOSS_T=99", "COM_OBL_RC_ACT=2", "COM_OF_LOSS_T=nan",
                          "5:COM_OF_LOSS_T=99", "x:COM_OBL_ACT=1"],
     "system_id": ["x", "0", "255", "1.5"],
     "fleet_size": ["x", "0", "65", "1.5"],

@@ -43,6 +43,8 @@ pytestmark = pytest.mark.process  # starts processes or opens sockets: not in ma
 
 SINE = MISSION_DIR / "sine.toml"
 BLACKOUT = {"blackouts": [[15.0, 2.0]]}
+# the sine's failsafe at 15.5 s begins 1.0 m from home, where Return lands at once (as land): return has its own test
+SINE_ACTIONS = tuple(a for a in FAILSAFE_ACTIONS if a != "return")
 STEP_S = 1 / 250  # one control step of the sine mission
 FLIGHT_TIMEOUT_S = 180  # a lockstep sine flies in seconds; this only stops a hang
 
@@ -86,7 +88,7 @@ def flown(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict]:
     busy) and offline."""
     root = tmp_path_factory.mktemp("failsafe_actions")
     runs: dict[str, dict] = {}
-    for a in FAILSAFE_ACTIONS:
+    for a in SINE_ACTIONS:
         out = root / a
         p = _bsst_sitl(out, a)
         summary = json.loads((out / "summary.json").read_text())
@@ -117,7 +119,7 @@ def _touchdown(trace: dict, after: float) -> float:
 
 
 # -- the four actions in lockstep, as the issue's acceptance says ------------------------------------
-@pytest.mark.parametrize("action", FAILSAFE_ACTIONS)
+@pytest.mark.parametrize("action", SINE_ACTIONS)
 def test_each_action_ends_in_failsafe_exit_1_and_flies_as_written(flown, action: str) -> None:
     run = flown[action]
     assert run["rc"] == 1, run["stderr"]
@@ -182,6 +184,39 @@ def test_land_drifts_at_most_half_a_metre_lands_and_disarms(flown) -> None:
     assert np.hypot(dtr["x"] - d0[0], dtr["y"] - d0[1]).max() > 1.0
 
 
+def test_return_flies_home_from_the_step_missions_second_set_point_in_lockstep_as_offline(tmp_path: Path) -> None:
+    """``return`` (PX4 3, Return): the step mission's link blacked out at 12 s, at its second set-point (2.2 m from
+    home, 2 m up), RTL_RETURN_ALT 3 m, RTL_DESCEND_ALT 2.5 m: ``bsst sitl`` (lockstep, real processes) ends
+    ``failsafe``, exit 1; the vehicle climbs to 3 m, flies home, comes down and lands within 0.2 m of home,
+    disarmed; offline flies the same rows to 1e-9 m until touchdown, and the same events."""
+    step = MISSION_DIR / "step.toml"
+    rtl = ("--param", "RTL_RETURN_ALT=3", "--param", "RTL_DESCEND_ALT=2.5")
+    with _free_instance() as n:
+        p = Bsst("sitl", str(step), "--blackout", "12:6", "--failsafe-action", "return", *rtl, "--instance", str(n),
+                 "--out", str(tmp_path / "r"), "--no-plots", env=ENV)
+        p.communicate(timeout=FLIGHT_TIMEOUT_S)
+    assert p.returncode == 1
+    summary = json.loads((tmp_path / "r" / "summary.json").read_text())
+    assert summary["outcome"] == "failsafe"
+    v = {e["kind"]: e["t"] for e in summary["events"] if e["source"] == "vehicle"}
+    tr = read_trace(tmp_path / "r" / "trace.csv")
+    t0 = v["failsafe"]
+    i0 = _at(tr, t0)
+    assert hypot(tr["x"][i0], tr["y"][i0]) > 2.0 and tr["z"][i0] > 1.9  # away from home, below the return height
+    flying = (tr["t"] >= t0) & (tr["t"] <= v["disarmed"])
+    assert 2.9 < tr["z"][flying].max() < 3.1  # climbed to RTL_RETURN_ALT
+    end = _at(tr, v["disarmed"] + 0.5)
+    assert hypot(tr["x"][end], tr["y"][end]) < 0.2 and tr["z"][end] == 0.0  # home, on the ground
+    assert "failsafe: no actuator target for 0.504 s: return home (RTL), then land" in \
+        (tmp_path / "r" / "events.log").read_text()
+    off = simulate(step, plots=False, link={"blackouts": [[12.0, 6.0]]}, failsafe={"action": "return"},
+                   params={"RTL_RETURN_ALT": 3.0, "RTL_DESCEND_ALT": 2.5})
+    assert [(e["kind"], round(e["t"], 3)) for e in off.summary["events"] if e["kind"] in ("failsafe", "disarmed")] \
+        == [("failsafe", round(t0, 3)), ("disarmed", round(v["disarmed"], 3))]
+    until = tr["t"] < _touchdown(off.trace, t0)
+    assert max(float(np.max(np.abs(tr[c][until] - off.trace[c][until]))) for c in ("x", "y", "z")) < 1e-9
+
+
 def test_disarm_stops_the_motors_within_one_control_step(flown) -> None:
     run = flown["disarm"]
     v = run["vehicle"]
@@ -195,7 +230,7 @@ def test_disarm_stops_the_motors_within_one_control_step(flown) -> None:
     assert t_ground - v["failsafe"] < 0.7  # it fell: from 1.55 m, 0.56 s
 
 
-@pytest.mark.parametrize("action", FAILSAFE_ACTIONS)
+@pytest.mark.parametrize("action", SINE_ACTIONS)
 def test_offline_and_lockstep_fly_the_same_failsafe(flown, action: str) -> None:
     run = flown[action]
     off = run["offline"]

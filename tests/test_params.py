@@ -74,7 +74,7 @@ def test_every_parameter_reads_back_what_was_set_and_refuses_outside_its_range()
     with pytest.raises(ParamRefused, match="no such parameter"):
         change_param(p, "FS_GCS_ENABLE", 1)
     with pytest.raises(ParamRefused, match="not one the vehicle flies"):
-        change_param(p, "COM_OBL_RC_ACT", 3)  # PX4's Return: not flown here
+        change_param(p, "COM_OBL_RC_ACT", 0)  # PX4's Position mode: not flown here
     with pytest.raises(ParamRefused, match="INT32"):
         change_param(p, "COM_OBL_ACT", 0.5)
 
@@ -138,7 +138,7 @@ def test_a_missions_params_table_and_the_flags_are_checked_and_ordered(tmp_path)
 @pytest.mark.parametrize("args, says", [
     (["--param", "COM_OF_LOSS_T=99"], "COM_OF_LOSS_T: must be in [0.01, 60] s"),
     (["--param", "NOPE=1"], "NOPE: no such parameter"),
-    (["--param", "COM_OBL_ACT=2"], "not one the vehicle flies"),
+    (["--param", "COM_OBL_RC_ACT=1"], "not one the vehicle flies"),
     (["--param-at", "x:COM_OBL_ACT=1"], "--param-at"),
     (["--param-at", "5:MAV_SYS_ID=3"], "at start only"),
 ])

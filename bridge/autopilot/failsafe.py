@@ -24,6 +24,8 @@ leaves offboard control; what it does then is ``action`` (PX4's offboard-loss ac
   ``fromOffboardLossActParam``: 4 Land mode, 5 Hold mode, 7 Disarm); ``hold_s`` is that wait, with
   its default and range, and the landing after it is that action.
 - ``disarm``: stop the motors at once (PX4 7, Disarm); the vehicle falls.
+- ``return``: Return mode from where the failsafe began (PX4 3, Return; :class:`ReturnHome`: climb to
+  RTL_RETURN_ALT, home, down to RTL_DESCEND_ALT, land), disarm on the ground.
 
 A failsafe that begins on the ground disarms at once, whatever the action. The vehicle returns
 to offboard control only when armed again.
@@ -72,10 +74,10 @@ from controller.nominal import Nominal
 from controller.pid import tilt_from_acceleration
 from params import Table
 
-FAILSAFE_ACTIONS = ("descend", "land", "hold", "disarm")
-# PX4's COM_OBL_RC_ACT value of the actions it has (commander_params.c: 4 Land, 5 Hold, 7 Disarm);
+FAILSAFE_ACTIONS = ("descend", "land", "hold", "disarm", "return")
+# PX4's COM_OBL_RC_ACT value of the actions it has (commander_params.c: 3 Return, 4 Land, 5 Hold, 7 Disarm);
 # ``descend`` (level, no position) has none.
-PX4_OFFBOARD_LOSS_ACTION = {"land": 4, "hold": 5, "disarm": 7}
+PX4_OFFBOARD_LOSS_ACTION = {"land": 4, "hold": 5, "disarm": 7, "return": 3}
 HOLD_RANGE_S = (0.0, 25.0)  # PX4's COM_FAIL_ACT_T range
 # the one range of each number of ``[failsafe]``, shared by the table, the flags and the parameters
 # (bridge.autopilot.params: COM_OF_LOSS_T, MPC_LAND_SPEED, COM_FAIL_ACT_T)
@@ -85,6 +87,7 @@ ACTION_TEXT = {  # the failsafe event says what the vehicle does
     "land": "land here",
     "hold": "hold here, then land",
     "disarm": "stop the motors",
+    "return": "return home (RTL), then land",
 }
 
 
@@ -301,8 +304,22 @@ class ReturnHome(Target):
         return Setpoint(v_xy, -self.rate, None)
 
 
-def failsafe_target(cfg: FailsafeConfig, X: tuple[float, ...]) -> Target:
-    """What the failsafe flies first from state X (``disarm`` flies nothing: see SimVehicle)."""
+def return_time_s(cfg: ReturnConfig, away_m: float, z_m: float, rate: float, g: OnboardGains = DEFAULT_GAINS) -> float:
+    """Vehicle time (s) Return mode takes from ``z_m`` above home and ``away_m`` from it, at the on-board
+    controller's speed limits: the climb to RTL_RETURN_ALT, the way home, the descent to RTL_DESCEND_ALT and the
+    landing at ``rate`` m/s (each approach's tail, where the set-point's P slows it, is the caller's margin)."""
+    z_return = max(z_m, cfg.return_alt_m)
+    z_descend = min(cfg.descend_alt_m, z_return)
+    return ((z_return - max(z_m, 0.0)) / g.v_up + away_m / g.v_xy_max + (z_return - z_descend) / g.v_down
+            + z_descend / rate)
+
+
+def failsafe_target(cfg: FailsafeConfig, X: tuple[float, ...], home: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                    rtl: ReturnConfig = ReturnConfig()) -> Target:
+    """What the failsafe flies first from state X (``disarm`` flies nothing: see SimVehicle); ``return`` flies
+    home (``home``, m) with ``rtl``'s heights."""
+    if cfg.action == "return":
+        return ReturnHome.toward(X, home, rtl, cfg.descent_rate)
     if cfg.action == "land":
         return Land.here(X, cfg.descent_rate)
     if cfg.action == "hold":

@@ -70,18 +70,18 @@ class ParamSpec:
 
 
 # PX4's offboard-loss action values, old and new, of the actions the vehicle flies
-_OBL_ACT = {-1: "descend", 0: "land", 1: "hold", 3: "disarm"}
-_OBL_RC_ACT = {-1: "descend", 4: "land", 5: "hold", 7: "disarm"}
+_OBL_ACT = {-1: "descend", 0: "land", 1: "hold", 2: "return", 3: "disarm"}
+_OBL_RC_ACT = {-1: "descend", 3: "return", 4: "land", 5: "hold", 7: "disarm"}
 _fr = FAILSAFE_RANGES
 PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("COM_OF_LOSS_T", REAL32, "s", *_fr["timeout_s"],
               "offboard loss timeout: no actuator target for this long and the failsafe acts "
               "([failsafe] timeout_s)", failsafe_key="timeout_s"),
     ParamSpec("COM_OBL_ACT", INT32, "", -1, 3,
-              "offboard loss action, PX4 1.13 values: -1 descend, 0 land, 1 hold, 3 terminate (disarm) "
+              "offboard loss action, PX4 1.13 values: -1 descend, 0 land, 1 hold, 2 return, 3 terminate (disarm) "
               "([failsafe] action)", failsafe_key="action", choices=_OBL_ACT),
     ParamSpec("COM_OBL_RC_ACT", INT32, "", -1, 7,
-              "offboard loss action, PX4 1.14 values: -1 descend, 4 land, 5 hold, 7 disarm "
+              "offboard loss action, PX4 1.14 values: -1 descend, 3 return, 4 land, 5 hold, 7 disarm "
               "([failsafe] action)", failsafe_key="action", choices=_OBL_RC_ACT),
     ParamSpec("COM_FAIL_ACT_T", REAL32, "s", *_fr["hold_s"],
               "hold failsafe: how long it holds before it lands ([failsafe] hold_s)", failsafe_key="hold_s"),

@@ -370,7 +370,7 @@ class SimVehicle:
             self.mode = LANDED
             self.disarm("landed: disarmed" if p.on_ground else "failsafe: motors stopped")
             return
-        self.fly_onboard(failsafe_target(fs, self.published()), FAILSAFE)
+        self.fly_onboard(failsafe_target(fs, self.published(), self.home, self.rtl), FAILSAFE)
         if fs.action == "hold":
             self.land_at = p.t + fs.hold_s
 

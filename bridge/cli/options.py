@@ -37,10 +37,10 @@ def add_failsafe_options(p: argparse.ArgumentParser) -> None:
     reads it back."""
     # the choices are bridge.autopilot.failsafe.FAILSAFE_ACTIONS (tests/test_failsafe_actions.py keeps them equal),
     # written out so that building the parser loads no flight code
-    p.add_argument("--failsafe-action", choices=("descend", "land", "hold", "disarm"),
+    p.add_argument("--failsafe-action", choices=("descend", "land", "hold", "disarm", "return"),
                    help="what the vehicle does when its targets stop: descend (default: level, sink, disarm on the "
-                        "ground), land (here), hold (here for [failsafe] hold_s, 5 s, then land) or disarm "
-                        "(motors off at once)")
+                        "ground), land (here), hold (here for [failsafe] hold_s, 5 s, then land), disarm "
+                        "(motors off at once) or return (Return mode: home at RTL_RETURN_ALT, then land)")
 
 
 def add_param_options(p: argparse.ArgumentParser, start: bool = True, schedule: bool = True) -> None:

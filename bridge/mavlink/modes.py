@@ -22,7 +22,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from bridge.autopilot.failsafe import Land, Level, PositionHold, Takeoff, Target
+from bridge.autopilot.failsafe import Land, Level, PositionHold, ReturnHome, Takeoff, Target
 from bridge.autopilot.simvehicle import FAILSAFE, HOLD, LAND, LANDED, OFFBOARD, RTL, TAKEOFF
 
 MAIN_AUTO = 4  # PX4_CUSTOM_MAIN_MODE_AUTO
@@ -59,13 +59,15 @@ def custom_mode(main: int, sub: int = 0) -> int:
 
 def shown_mode(mode: str, target: Target | None) -> str:
     """The mode a ground station is shown for the vehicle's ``mode`` and on-board ``target``: the
-    failsafe flies as HOLD (a hold) or LAND (land, descend), a landed vehicle shows LAND."""
+    failsafe flies as HOLD (a hold), RTL (a return) or LAND (land, descend), a landed vehicle shows LAND."""
     if mode in PX4_MODES:
         return mode
     if mode == FAILSAFE and isinstance(target, PositionHold):
         return HOLD
     if mode == FAILSAFE and isinstance(target, Takeoff):
         return TAKEOFF
+    if mode == FAILSAFE and isinstance(target, ReturnHome):
+        return RTL
     assert mode in (FAILSAFE, LANDED) and (target is None or isinstance(target, (Land, Level)))
     return LAND
 

@@ -24,6 +24,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from bridge.autopilot.failsafe import return_time_s
 from bridge.autopilot.simvehicle import Sender, typed_fields
 from bridge.core.flight import Flight, Progress, prepare
 from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, LINK_PORT
@@ -298,11 +299,19 @@ class Session:
 
     def _landing_time(self) -> float:
         """Wall time allowed to a vehicle flying its failsafe alone: lockstep loss, timeout,
-        descent from the highest point the trace reached, with a margin."""
-        z = max((r.z for r in self.joiner.rows[-2000:]), default=0.0)
+        descent from the highest point the trace reached (``return``: the way home from the farthest, at half
+        the on-board controller's speeds), with a margin."""
+        rows = self.joiner.rows[-2000:]
+        z = max((r.z for r in rows), default=0.0)
         fs = self.flight.failsafe
         pace = self.speed or 1.0
-        return 5.0 + (1.0 + fs.timeout_s + fs.time_to_land_s(z)) / pace
+        if fs.action == "return":
+            x0, y0, z0 = self.flight.mission.start[:3]
+            away = max((math.hypot(r.x - x0, r.y - y0) for r in rows), default=0.0)
+            flying = 2.0 * return_time_s(self.flight.params.rtl, away, z - z0, fs.descent_rate)
+        else:
+            flying = fs.time_to_land_s(z)
+        return 5.0 + (1.0 + fs.timeout_s + flying) / pace
 
     def _stop_children(self) -> None:
         """SIGTERM the controller, the relay, the vehicle; wait for each to exit (its records closed), SIGKILL
