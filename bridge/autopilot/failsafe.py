@@ -314,8 +314,8 @@ def return_time_s(cfg: ReturnConfig, away_m: float, z_m: float, rate: float, g: 
             + z_descend / rate)
 
 
-def failsafe_target(cfg: FailsafeConfig, X: tuple[float, ...], home: tuple[float, float, float] = (0.0, 0.0, 0.0),
-                    rtl: ReturnConfig = ReturnConfig()) -> Target:
+def failsafe_target(cfg: FailsafeConfig, X: tuple[float, ...], home: tuple[float, float, float],
+                    rtl: ReturnConfig) -> Target:
     """What the failsafe flies first from state X (``disarm`` flies nothing: see SimVehicle); ``return`` flies
     home (``home``, m) with ``rtl``'s heights."""
     if cfg.action == "return":

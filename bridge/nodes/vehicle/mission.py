@@ -458,7 +458,7 @@ class MissionManager:
 
     def _idle_if_sent(self) -> None:
         """A download whose every item went out ends here (its final ACK lost, or never sent), as PX4 ends it
-        on a new MISSION_REQUEST_LIST, so that it holds up no new transfer or start."""
+        on a new MISSION_REQUEST_LIST, so that it holds up no new transfer (no download holds up a start)."""
         if self.state is State.SENDLIST and len(self.sent) == self.count:
             self._idle()
 
