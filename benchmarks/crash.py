@@ -2,8 +2,8 @@
 three at once, at a random moment of a lockstep ``bsst sitl`` session, ``--runs`` times.
 
 After each kill, once every process is gone, the run directory is checked
-(:func:`tests.hostile.check_run_dir`): ``trace.csv`` and both part files parse to their last
-complete row, both tlogs open with pymavlink's ``mavlogdump.py``, ``summary.json`` is
+(:func:`tests.hostile.check_run_dir`): ``trace.csv`` and both halves (``vehicle.bin``, ``controller.bin``)
+read to their last complete row, both tlogs open with pymavlink's ``mavlogdump.py``, ``summary.json`` is
 complete or absent. Prints one line per run and a tally; exit status 1 if any check failed.
 
     .venv/bin/python benchmarks/crash.py [--runs 20] [--seed 0] [--key FILE]
@@ -49,8 +49,8 @@ def main() -> int:
                 failures += 1
         tally[f"{victim}: {'ok' if ok == 'ok' else 'failed'}"] += 1
         print(f"run {i + 1:2d}: SIGKILL {victim:10s} at step {at:4d}: exit {rc}, summary {found.get('summary')}, "
-              f"trace rows {found.get('trace.csv')}, vehicle.csv {found.get('vehicle.csv')}, "
-              f"controller.csv {found.get('controller.csv')}, mavlogdump vehicle.tlog {found.get('vehicle.tlog')} / "
+              f"trace rows {found.get('trace.csv')}, vehicle.bin {found.get('vehicle.bin')}, "
+              f"controller.bin {found.get('controller.bin')}, mavlogdump vehicle.tlog {found.get('vehicle.tlog')} / "
               f"controller.tlog {found.get('controller.tlog')} lines: {ok}", flush=True)
     counts = ", ".join(f"{k} {v}" for k, v in sorted(tally.items()))
     print(f"{args.runs} runs in {time.monotonic() - t0:.0f} s: {counts}; {failures} failed")

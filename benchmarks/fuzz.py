@@ -56,10 +56,10 @@ from bridge.mavlink.modes import (  # noqa: E402
 from bridge.mavlink.receive import addressed_elsewhere  # noqa: E402
 from bridge.nodes.vehicle.mission import MESSAGES as MISSION_MESSAGES  # noqa: E402
 from bridge.nodes.vehicle.mission import MISSIONPLANNER  # noqa: E402
+from bridge.record.halves import count_records  # noqa: E402
 from bridge.session import sitl  # noqa: E402
 from missions import MISSION_DIR, Mission, Sine, load_mission  # noqa: E402
 from tests.hostile import MIN_STEP, Sender, Station, fly_fuzzed, session_thread, udp_queue  # noqa: E402
-from tests.sitlkit import csv_rows  # noqa: E402
 from tests.waiting import wait_for  # noqa: E402
 
 # -- the command surface (issue 11): valid frames of every message id, from strangers and a GCS ------
@@ -270,8 +270,8 @@ def fly_commands(mission: Mission, out: Path, frames: int, seed: int = 11, sourc
             ground = round(frames * gcs_rate_hz / rate_hz)
             grounded = [fuzz.make(i, GCS_IDS, gcs=True) for i in range(ground)]
             strange = [fuzz.make(i, fuzz.stranger_ids()) for i in range(frames - ground)]
-            vcsv = out / "vehicle.csv"
-            wait_for(lambda: csv_rows(vcsv) > MIN_STEP or not th.is_alive(), 60, "the flight starting")
+            vhalf = out / "vehicle.bin"
+            wait_for(lambda: count_records(vhalf) > MIN_STEP or not th.is_alive(), 60, "the flight starting")
             gcs.wait(lambda m: True, 10, "a datagram on the GCS link")
             failed: list[BaseException] = []
 
@@ -295,7 +295,7 @@ def fly_commands(mission: Mission, out: Path, frames: int, seed: int = 11, sourc
                      poll_s=0.001)
             drops = to_link.drained(timeout=120) + (udp_queue(gcs_port) or (0, 0))[1]
             elapsed = time.monotonic() - t0
-            flown = csv_rows(vcsv)
+            flown = count_records(vhalf)
             # the last answers: the vehicle answers a frame in the housekeeping tick that read it (ms)
             quiet = t0 + elapsed + 0.2
 

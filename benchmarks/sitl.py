@@ -151,7 +151,7 @@ def lockstep_rate(mission: str, kernels: str = "plain") -> dict[str, float]:
     import tempfile
 
     from bridge.core.scalar import KERNELS_ENV
-    from bridge.record.runlog import read_trace
+    from bridge.record.halves import read_half
     from bridge.session import sitl
 
     os.environ[KERNELS_ENV] = kernels  # the children inherit it
@@ -161,8 +161,8 @@ def lockstep_rate(mission: str, kernels: str = "plain") -> dict[str, float]:
         wall = time.perf_counter() - t0
         if run.outcome != "completed":
             raise RuntimeError(f"lockstep session ended {run.outcome}")
-        v = read_trace(Path(tmp) / "run" / "vehicle.csv")
-        c = read_trace(Path(tmp) / "run" / "controller.csv")
+        v = read_half(Path(tmp) / "run" / "vehicle.bin")
+        c = read_half(Path(tmp) / "run" / "controller.bin")
     n = min(len(v["k"]), len(c["k"]))
     us = 1e6
     legs = {

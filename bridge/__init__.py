@@ -33,9 +33,9 @@ and a layer imports nothing above it (tests/test_layers.py checks it):
 
 - :mod:`bridge.record`: the files of a run, no sockets
 
-  - :mod:`bridge.record.columns`  every CSV's columns (trace.csv, vehicle.csv, controller.csv)
+  - :mod:`bridge.record.columns`  every record's columns (trace.csv, vehicle.bin, controller.bin)
   - :mod:`bridge.record.runlog`   the run directory: trace, events, summary; :class:`~bridge.record.runlog.Run`
-  - :mod:`bridge.record.joiner`   vehicle.csv + controller.csv -> trace.csv rows (SITL)
+  - :mod:`bridge.record.joiner`   vehicle.bin + controller.bin -> trace.csv rows (SITL)
   - :mod:`bridge.record.metrics`  RMS, settling, finite-time bound, total variation, the summary
   - :mod:`bridge.record.events`   a run's events, typed, with their sender as a field
   - :mod:`bridge.record.summary`  a SITL session's summary.json, pure functions of what the session saw

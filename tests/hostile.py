@@ -48,11 +48,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, udp_table_row
+from bridge.record.halves import count_records, read_half
 from bridge.session import instance_slot
-from tests.sitlkit import Proc, csv_rows
+from tests.sitlkit import Proc
 from tests.waiting import wait_for
 
 MIN_STEP = 10  # the stale targets are for step 0: fuzz only once the vehicle is past this step
@@ -258,6 +260,18 @@ def check_trace(path: Path) -> int:
     return len(rows)
 
 
+def check_half(path: Path) -> int:
+    """``path`` (a trace half, bridge.record.halves) is whole up to its last complete record: its header parses,
+    only a last record (a write cut by SIGKILL) may be short, and every record's step ``k`` is a whole number
+    >= 0 (a record out of alignment would read as garbage). Returns the complete records."""
+    half = read_half(path)
+    k = half["k"]
+    assert np.all((k >= 0) & (k == np.floor(k))), f"{path}: a record whose k is not a step number"
+    head = path.read_bytes().index(b"\n") + 1
+    assert (path.stat().st_size - head) // (8 * len(half)) == len(k)
+    return len(k)
+
+
 def check_tlog(path: Path) -> int:
     """``path`` opens with pymavlink's ``mavlogdump.py`` (exit 0); the messages it printed."""
     r = subprocess.run([sys.executable, str(MAVLOGDUMP), str(path)], capture_output=True, text=True, timeout=120,
@@ -276,12 +290,14 @@ def check_summary(path: Path) -> str | None:
 
 
 def check_run_dir(run: Path) -> dict[str, Any]:
-    """Every file a SIGKILL may have cut, checked: trace and part files, tlogs, summary; no
+    """Every file a SIGKILL may have cut, checked: the trace and its halves, tlogs, summary; no
     temporary file of an atomic write left beside a summary."""
     out: dict[str, Any] = {"summary": check_summary(run / "summary.json")}
-    for name in ("trace.csv", "vehicle.csv", "controller.csv"):
+    if (run / "trace.csv").exists():
+        out["trace.csv"] = check_trace(run / "trace.csv")
+    for name in ("vehicle.bin", "controller.bin"):
         if (run / name).exists():
-            out[name] = check_trace(run / name)
+            out[name] = check_half(run / name)
     for name in ("vehicle.tlog", "controller.tlog"):
         if (run / name).exists():
             out[name] = check_tlog(run / name)
@@ -312,7 +328,7 @@ def kill_session(tmp_path: Path, victim: str, at_step: int, key: str | None = No
         p = Proc.bsst("sitl", str(mission), "--out", str(run), "--instance", str(n), "--speed", SPEED, "--no-plots",
                       *(["--key", key] if key else []))
         try:
-            wait_for(lambda: csv_rows(run / "vehicle.csv") >= at_step or p.p.poll() is not None, 60,
+            wait_for(lambda: count_records(run / "vehicle.bin") >= at_step or p.p.poll() is not None, 60,
                      f"{at_step} steps flown")
             assert p.p.poll() is None, "the session ended before the kill"
             pids = session_pids(run)
@@ -466,7 +482,7 @@ def fly_flooded(mission: Any, out: Path, multiple: float, **kw: Any) -> tuple[An
     flood = None
     with session_thread(mission, out, realtime=True, **kw) as (n, th, result):
         try:
-            wait_for(lambda: csv_rows(out / "vehicle.csv") > 0 or not th.is_alive(), 60, "the flight starting",
+            wait_for(lambda: count_records(out / "vehicle.bin") > 0 or not th.is_alive(), 60, "the flight starting",
                        poll_s=0.005)
             if multiple > 0 and th.is_alive():
                 flood = Flood(LINK_PORT + n, multiple * mission.rate_hz, n + 1).start()
@@ -506,8 +522,8 @@ def fly_fuzzed(mission: Any, out: Path, datagrams: int, seed: int = 7, sources: 
         with session_thread(mission, out, speed=speed) as (n, th, result):
             gcs.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 21)
             gcs.bind(("127.0.0.1", GCS_PORT + n))
-            vcsv = out / "vehicle.csv"
-            wait_for(lambda: csv_rows(vcsv) > MIN_STEP or not th.is_alive(), 60, "the fuzzed flight starting",
+            vhalf = out / "vehicle.bin"
+            wait_for(lambda: count_records(vhalf) > MIN_STEP or not th.is_alive(), 60, "the fuzzed flight starting",
                        poll_s=0.01)
             pid = session_pids(out)["vehicle"]
             fuzz = Fuzzer(seed=seed, sysid=n + 1)
@@ -519,7 +535,7 @@ def fly_fuzzed(mission: Any, out: Path, datagrams: int, seed: int = 7, sources: 
             finally:
                 sender.close()
             elapsed, cpu = time.monotonic() - t0, _cpu_s(pid) - cpu0
-            flown = csv_rows(vcsv)
+            flown = count_records(vhalf)
         gcs.setblocking(False)
         texts = []
         mav = mavlink.MAVLink(None)

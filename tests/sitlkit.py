@@ -241,7 +241,7 @@ class MavProxy(Proc):
 
 
 def csv_rows(path: Path) -> int:
-    """Complete data rows of a part file so far (0 if it does not exist yet)."""
+    """Complete data rows of a CSV (``trace.csv``) so far (0 if it does not exist yet)."""
     try:
         return max(path.read_bytes().count(b"\n") - 1, 0)
     except FileNotFoundError:

@@ -35,10 +35,11 @@ from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, GCS_POR
 from bridge.mavlink.receive import REPLY_RATE_HZ, RateLimiter, ReplyBudget
 from bridge.nodes.report import Ready, Stats
 from bridge.nodes.vehicle import Vehicle, VehicleConfig
+from bridge.record.halves import count_records
 from bridge.session import instance_slot
 from missions import Mission, Sine
 from tests.hostile import Flood, Station, packed_requests
-from tests.sitlkit import Proc, csv_rows
+from tests.sitlkit import Proc
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -344,7 +345,7 @@ def _attack(n: int, out: Path, gcs: Station, p: Proc, seen: dict[str, Any]) -> N
     """Once instance ``n``'s flight is past step 10: another system's ARM, forced DISARM and
     streams off; a second of spoofed controller heartbeats and a spoofed forced DISARM; the
     ground station's bad numbers (each DENIED). What the attackers saw goes into ``seen``."""
-    wait_for(lambda: csv_rows(out / "vehicle.csv") > 10 or p.p.poll() is not None, 60, "the flight starting")
+    wait_for(lambda: count_records(out / "vehicle.bin") > 10 or p.p.poll() is not None, 60, "the flight starting")
     assert p.p.poll() is None, "the session ended before the attack"
     to = (n + 1, 1)
     other = Station((201, 191), ("127.0.0.1", LINK_PORT + n))
@@ -370,7 +371,7 @@ def _attack(n: int, out: Path, gcs: Station, p: Proc, seen: dict[str, Any]) -> N
     seen["spoof_replies"] = flood.replies
     gcs.wait(lambda m: m.get_type() == "ATTITUDE", 5, "ATTITUDE after the attack")
     seen["attitude_after"] = gcs.got["ATTITUDE"]
-    seen["flown"] = csv_rows(out / "vehicle.csv")
+    seen["flown"] = count_records(out / "vehicle.bin")
     for s in (other, spoof):
         s.poll()
     seen["other_odometry"] = other.got["ODOMETRY"] + spoof.got["ODOMETRY"]
@@ -717,7 +718,7 @@ def _fly_noop(mission: Path, out: Path, when: str, mode: tuple[float, float, flo
                 hb = gcs.wait(lambda m: m.get_type() == "HEARTBEAT", 30, "the vehicle's first heartbeat")
                 assert not hb.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED
             else:
-                wait_for(lambda: csv_rows(out / "vehicle.csv") > 10 or p.p.poll() is not None, 60, "the flight")
+                wait_for(lambda: count_records(out / "vehicle.bin") > 10 or p.p.poll() is not None, 60, "the flight")
                 assert p.p.poll() is None, "the session ended before the mode request"
                 gcs.wait(lambda m: True, 10, "the vehicle's telemetry")  # where the vehicle's GCS link is
             assert _set_mode(gcs, to, mode) == M.MAV_RESULT_ACCEPTED
@@ -832,7 +833,7 @@ def _fly_gcs(mission: Path, out: Path, frames: list[tuple[float, tuple]]) -> tup
         try:
             to = (n + 1, 1)
             for t, frame in frames:
-                wait_for(lambda t=t: csv_rows(out / "vehicle.csv") >= 250 * t or p.p.poll() is not None, 60,
+                wait_for(lambda t=t: count_records(out / "vehicle.bin") >= 250 * t or p.p.poll() is not None, 60,
                          f"the flight at t={t:g} s")
                 if p.p.poll() is not None:
                     break

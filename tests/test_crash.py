@@ -26,11 +26,11 @@ pytestmark = pytest.mark.process  # starts processes or opens sockets: not in ma
 def test_sigkill_at_a_random_moment_leaves_every_file_readable(tmp_path, victim):
     at = random.Random(f"crash-{victim}").randint(1, CRASH_STEPS - 300)
     rc, found = kill_session(tmp_path, victim, at)
-    assert found["vehicle.csv"] >= at - 1
+    assert found["vehicle.bin"] >= at - 1
     if victim == "launcher":  # killed mid-join: the trace may lag its halves, never lead them
-        assert found["trace.csv"] <= min(found["vehicle.csv"], found["controller.csv"]), found
+        assert found["trace.csv"] <= min(found["vehicle.bin"], found["controller.bin"]), found
     else:  # the launcher survives and joins the rest: one trace row per step the vehicle wrote
-        assert found["trace.csv"] == found["vehicle.csv"], found
+        assert found["trace.csv"] == found["vehicle.bin"], found
     assert found["vehicle.tlog"] > 0 and found["controller.tlog"] > 0
     summary = tmp_path / f"run-{victim}" / "summary.json"
     if victim == "launcher":

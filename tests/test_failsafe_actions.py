@@ -32,6 +32,7 @@ from bridge.cli import build_parser, main
 from bridge.core.flight import prepare
 from bridge.loop import simulate
 from bridge.mavlink.endpoint import LINK_PORT
+from bridge.record.halves import read_half
 from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
 from bridge.session.children import check_port_free
@@ -261,10 +262,7 @@ def test_hold_on_the_wall_clock_brakes_and_returns_to_where_it_began(tmp_path: P
     assert run.outcome == "failsafe"
     fs = [e for e in run.summary["events"] if e["kind"] == "failsafe" and e["source"] == "vehicle"]
     assert len(fs) == 1 and "hold here" in fs[0]["text"]
-    rows = (tmp_path / "rt" / "vehicle.csv").read_text().splitlines()
-    head = rows[0].split(",")
-    vals = np.array([[float(v) for v in r.split(",")] for r in rows[1:]])
-    col = {c: vals[:, head.index(c)] for c in ("mode", "x", "y", "z", "vx", "vy", "vz")}
+    col = read_half(tmp_path / "rt" / "vehicle.bin")
     holding = np.flatnonzero(col["mode"] == 1)[:500]  # the vehicle's own rows, its first 2 s of holding
     assert len(holding) == 500 and np.all(np.diff(holding) == 1)
     p0 = np.array([col[c][holding[0]] for c in ("x", "y", "z")])

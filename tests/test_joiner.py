@@ -1,7 +1,7 @@
-"""Covers bridge.record.joiner: vehicle.csv + controller.csv -> trace.csv rows, on real part files.
+"""Covers bridge.record.joiner: vehicle.bin + controller.bin -> trace.csv rows, on real halves.
 
-The files are written here as the vehicle and the controller write them (their headers, one line
-a row), for the case a SITL flight cannot produce on demand: a controller killed between sending a
+The files are written here as the vehicle and the controller write them (bridge.record.halves' writer), for
+the case a SITL flight cannot produce on demand: a controller killed between sending a
 command and writing its row.
 """
 
@@ -16,7 +16,8 @@ import pytest
 from bridge.core.flight import prepare
 from bridge.nodes.vehicle import MODE_CODES
 from bridge.record.columns import CONTROLLER_COLUMNS, TRACE_COLUMNS, VEHICLE_COLUMNS, ControllerRow, VehicleRow
-from bridge.record.joiner import PartReader, TraceJoiner
+from bridge.record.halves import HalfReader, HalfWriter
+from bridge.record.joiner import TraceJoiner
 from bridge.record.metrics import ripple_rms
 from missions import MISSION_DIR
 
@@ -24,8 +25,10 @@ RATE = 250.0
 
 
 def _write(path: Path, columns: tuple[str, ...], rows: list[dict[str, float]]) -> None:
-    lines = [",".join(columns)] + [",".join(repr(float(r.get(c, 0.0))) for c in columns) for r in rows]
-    path.write_text("\n".join(lines) + "\n")
+    out = HalfWriter(path, columns)
+    for r in rows:
+        out.write([float(r.get(c, 0.0)) for c in columns])
+    out.close()
 
 
 def test_steps_flown_on_a_command_whose_row_was_never_written_are_kept_with_the_demand_unknown(tmp_path: Path) -> None:
@@ -43,8 +46,8 @@ def test_steps_flown_on_a_command_whose_row_was_never_written_are_kept_with_the_
         if k <= 4:
             controller.append({"k": k, "t": k / RATE, "u1": 4.0 + k, "u2": 0.1, "phi_d": 0.01, "theta_d": 0.02,
                                "odo_recv_wall": 100.0 + k / RATE, "cmd_sent_wall": 100.0 + k / RATE})
-    _write(tmp_path / "vehicle.csv", VEHICLE_COLUMNS, vehicle)
-    _write(tmp_path / "controller.csv", CONTROLLER_COLUMNS, controller)
+    _write(tmp_path / "vehicle.bin", VEHICLE_COLUMNS, vehicle)
+    _write(tmp_path / "controller.bin", CONTROLLER_COLUMNS, controller)
     j = TraceJoiner(tmp_path, flight, None, lockstep=True)
     assert j.update() == 5  # rows 0..4 joined; row 5 waits for a controller row that may still come
     j.controller_done = True
@@ -69,12 +72,12 @@ def test_ripple_ignores_an_unknown_stretch_of_demand() -> None:
     assert math.isfinite(got) and abs(got - clean) < 0.05 * clean
 
 
-def test_a_part_file_is_read_by_its_own_header(tmp_path: Path) -> None:
+def test_a_half_is_read_by_its_own_header(tmp_path: Path) -> None:
     """Columns in another order are read by name; a missing column is an error that names it."""
     shuffled = tuple(reversed(CONTROLLER_COLUMNS))
-    _write(tmp_path / "controller.csv", shuffled, [{"k": 3.0, "u1": 4.5, "cmd_sent_wall": 7.0}])
-    rows = PartReader(tmp_path / "controller.csv", ControllerRow).read()
+    _write(tmp_path / "controller.bin", shuffled, [{"k": 3.0, "u1": 4.5, "cmd_sent_wall": 7.0}])
+    rows = HalfReader(tmp_path / "controller.bin", ControllerRow).read()
     assert [(r.k, r.u1, r.cmd_sent_wall, r.u2) for r in rows] == [(3.0, 4.5, 7.0, 0.0)]
-    _write(tmp_path / "vehicle.csv", tuple(c for c in VEHICLE_COLUMNS if c != "cmd_k"), [{"k": 0.0}])
-    with pytest.raises(ValueError, match="vehicle.csv: no column 'cmd_k'"):
-        PartReader(tmp_path / "vehicle.csv", VehicleRow).read()
+    _write(tmp_path / "vehicle.bin", tuple(c for c in VEHICLE_COLUMNS if c != "cmd_k"), [{"k": 0.0}])
+    with pytest.raises(ValueError, match="vehicle.bin: no column 'cmd_k'"):
+        HalfReader(tmp_path / "vehicle.bin", VehicleRow).read()

@@ -11,13 +11,14 @@ Real processes for the sessions, waits on events with deadlines.
 
 from __future__ import annotations
 
-import csv
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from bridge.loop import simulate
+from bridge.record.halves import count_records, read_half
 from bridge.session import instance_slot, sitl
 from missions import MISSION_DIR, load_mission
 from tests.sitlkit import ENV, ROOT, Proc, run_bsst
@@ -70,12 +71,12 @@ def test_lockstep_sine_lands_as_offline_to_the_bit(sine_runs) -> None:
     _landed(lockstep.summary["end"])
     assert lockstep.summary["end"] == offline.summary["end"]
     assert lockstep.rms == offline.rms and len(lockstep.trace["t"]) == 7500
-    # the vehicle's own record: every row after the mission flown in LAND (vehicle.csv mode 4) on the step clock,
-    # no disarm in the air, nothing by command
-    with open(out / "vehicle.csv") as f:
-        rows = [r for r in csv.DictReader(f) if int(r["k"]) >= 7500]
-    assert len(rows) == lockstep.summary["end"]["rows"]
-    assert {r["mode"] for r in rows} == {"4"} and all(r["k"] == r["cmd_k"] for r in rows)
+    # the vehicle's own record: every record after the mission flown in LAND (vehicle.bin mode 4) on the step
+    # clock, no disarm in the air, nothing by command
+    v = read_half(out / "vehicle.bin")
+    after = v["k"] >= 7500
+    assert np.count_nonzero(after) == lockstep.summary["end"]["rows"]
+    assert set(v["mode"][after]) == {4.0} and np.array_equal(v["k"][after], v["cmd_k"][after])
     disarms = [e for e in lockstep.summary["events"] if e["kind"] == "disarmed"]
     assert len(disarms) == 1 and "by command" not in disarms[0]["text"]
 
@@ -107,15 +108,14 @@ def test_hold_on_the_wall_clock_holds_until_stopped(tmp_path: Path) -> None:
                            "--overwrite", cwd=ROOT, env=ENV, timeout=120)
             assert ctl.returncode == 0, ctl.stderr
 
-            def held_rows() -> list[dict]:
-                with open(out / "vehicle.csv") as f:
-                    return [r for r in csv.DictReader(f) if r["mode"] == "3"]
+            def held_z() -> np.ndarray:
+                v = read_half(out / "vehicle.bin") if count_records(out / "vehicle.bin") else {"mode": (), "z": ()}
+                return np.asarray(v["z"])[np.asarray(v["mode"]) == 3]
 
-            wait_for(lambda: len(held_rows()) >= 1.5 * 250, 60, "1.5 s of HOLD rows in vehicle.csv")
+            wait_for(lambda: len(held_z()) >= 1.5 * 250, 60, "1.5 s of HOLD records in vehicle.bin")
         finally:
             vehicle.stop()
-    rows = held_rows()
-    z = [float(r["z"]) for r in rows]
+    z = held_z()
     assert max(z) - min(z) < 0.05, (min(z), max(z))  # held where the mission ended
     assert any('"kind":"end"' in ln or "event t=" in ln and " end: " in ln for ln in vehicle.lines)
     assert not any("disarmed" in ln for ln in vehicle.lines if "event" in ln), vehicle.lines[-10:]

@@ -28,6 +28,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from bridge.core.wire import state_to_odometry, step_usec
 from bridge.nodes.offboard.link import TIMESYNC_WINDOW
 from bridge.nodes.report import Done, Stats, parse_line
+from bridge.record.halves import read_half
 from tests.sitlkit import Proc
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -197,11 +198,14 @@ def flown(tmp_path_factory: pytest.TempPathFactory) -> Flown:
 
 
 def controller_ages(run: Path) -> np.ndarray:
-    """``state_age_s`` of every row of the controller's ``controller.csv`` that has one."""
-    rows = (run / "controller.csv").read_text().splitlines()
-    col = rows[0].split(",").index("state_age_s")
-    age = np.array([float(r.split(",")[col]) for r in rows[1:]])
+    """``state_age_s`` of every record of the controller's ``controller.bin`` that has one."""
+    age = read_half(run / "controller.bin")["state_age_s"]
     return age[np.isfinite(age)]
+
+
+def first_record(path: Path) -> dict[str, float]:
+    """A half's first record, by column name."""
+    return {c: float(v[0]) for c, v in read_half(path).items()}
 
 
 def test_a_late_state_is_waited_for_and_a_lost_one_costs_one_tick(flown: Flown) -> None:
@@ -227,7 +231,7 @@ def test_a_late_state_is_waited_for_and_a_lost_one_costs_one_tick(flown: Flown) 
 
 
 def test_the_state_age_counts_its_way_down(flown: Flown) -> None:
-    """The controller's age of each state it controlled on (controller.csv ``state_age_s``)
+    """The controller's age of each state it controlled on (controller.bin ``state_age_s``)
     includes the WAY_DOWN_S the states spent on the way, learnt from TIMESYNC (answered at
     once here: a symmetric link), plus the tick's 0.3 ms after the arrival."""
     age = controller_ages(flown.run)
@@ -262,9 +266,7 @@ def test_the_mission_starts_with_its_first_state(flown: Flown) -> None:
     """The mission's first states were lost: its time 0 is the first state that came, as the
     trace's is (the joined trace counts from the first state the controller answered), so
     the first row's time is that state's age and no more."""
-    rows = (flown.run / "controller.csv").read_text().splitlines()
-    head = rows[0].split(",")
-    first = dict(zip(head, map(float, rows[1].split(","))))
+    first = first_record(flown.run / "controller.bin")
     assert first["t"] == pytest.approx(first["state_age_s"], abs=1e-9), first
 
 
@@ -274,8 +276,7 @@ def test_a_later_state_in_the_first_tick_starts_the_mission_answered_at_once(tmp
     state's time 0, so the state that came was a step in the future: its first row sent no target, and the
     vehicle's timeline, whose time 0 is the state its first target answers, ran a step behind the trace's.)"""
     f = fly(tmp_path, bunched=True)
-    rows = (f.run / "controller.csv").read_text().splitlines()
-    first = dict(zip(rows[0].split(","), map(float, rows[1].split(","))))
+    first = first_record(f.run / "controller.bin")
     assert math.isfinite(first["state_age_s"]), first  # a target sent: the row has its state's age
     assert first["t"] == pytest.approx(first["state_age_s"], abs=1e-9), first  # at the mission's time 0
     assert min(f.targets) == min(DROPPED) + 1, sorted(f.targets)[:3]  # the state that came, answered

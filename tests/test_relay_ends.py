@@ -22,9 +22,10 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.core.wire import state_to_odometry
 from bridge.nodes.report import Event, Ready, parse_line
+from bridge.record.halves import count_records
 from missions import Mission, Sine
 from tests.hostile import session_thread
-from tests.sitlkit import Proc, csv_rows
+from tests.sitlkit import Proc
 from tests.test_relay import udp
 from tests.waiting import wait_for
 
@@ -153,7 +154,7 @@ def test_a_strangers_far_future_state_does_not_end_a_relayed_flight(tmp_path: Pa
     run_dir = tmp_path / "run"
     sent = 5
     with session_thread(mission, run_dir, realtime=True, link={"delay_ms": 20.0}) as (n, th, result):
-        wait_for(lambda: csv_rows(run_dir / "controller.csv") > 25 or not th.is_alive(), 60,
+        wait_for(lambda: count_records(run_dir / "controller.bin") > 25 or not th.is_alive(), 60,
                    "the relayed flight under way", poll_s=0.005)
         assert th.is_alive(), "the flight ended before the spoofing"
         front, back = relay_ports(run_dir)
@@ -165,7 +166,7 @@ def test_a_strangers_far_future_state_does_not_end_a_relayed_flight(tmp_path: Pa
                 stranger.sendto(spoof, ("127.0.0.1", back))
         finally:
             stranger.close()
-        spoofed_at = csv_rows(run_dir / "controller.csv")
+        spoofed_at = count_records(run_dir / "controller.bin")
     run = result["run"]
     s = run.summary
     assert spoofed_at < mission.steps - 250, "the spoof came too late in the flight to tell"

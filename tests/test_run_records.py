@@ -77,7 +77,7 @@ def test_a_sim_overwriting_a_relay_run_leaves_none_of_its_files(tmp_path: Path) 
                link={"delay_ms": 5.0})
     assert run.outcome == "completed", run.summary["ended_by"]
     had = {p.name for p in out.iterdir()}
-    assert {"relay.json", "relay.log", "vehicle.tlog", "controller.tlog", "vehicle.csv", "controller.csv"} <= had
+    assert {"relay.json", "relay.log", "vehicle.tlog", "controller.tlog", "vehicle.bin", "controller.bin"} <= had
     res = _sim(short_sine(tmp_path, 2.0), "--out", out, "--overwrite", "--no-plots")
     assert res.returncode == 0, res.stderr
     assert {p.name for p in out.iterdir()} == {"mission.toml", "trace.csv", "events.log", "summary.json"}

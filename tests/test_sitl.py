@@ -23,12 +23,13 @@ from pymavlink.dialects.v20 import common as mavlink
 from bridge.loop import simulate
 from bridge.mavlink.endpoint import GCS_PORT, LINK_PORT
 from bridge.record.columns import TRACE_COLUMNS
+from bridge.record.halves import count_records, read_half
 from bridge.record.policies import POLICIES
 from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
 from bridge.session.children import CHOSEN_PORTS_LOW, RECENT_PORTS, ephemeral_low, free_udp_port
 from missions import MISSION_DIR, Mission, Sine
-from tests.sitlkit import ENV, Bsst, child_pids, csv_rows, stall_blackouts, unexplained_outages
+from tests.sitlkit import ENV, Bsst, child_pids, stall_blackouts, unexplained_outages
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -68,7 +69,7 @@ def test_lockstep_sine_matches_offline(tmp_path):
     assert run.summary["timing"]["step_rate_hz"] > 250  # faster than real time
     d = run.path
     for f in ("mission.toml", "vehicle.tlog", "controller.tlog", "trace.csv", "summary.json", "events.log",
-              "vehicle.csv", "controller.csv"):
+              "vehicle.bin", "controller.bin"):
         assert (d / f).stat().st_size > 0, f
     on_disk = read_trace(d / "trace.csv")
     assert list(on_disk) == list(TRACE_COLUMNS)
@@ -148,7 +149,7 @@ def test_a_real_time_run_the_machine_stalls_lists_each_stall_by_side_and_exits_1
                  "--no-plots", "--delay", "2", env=ENV)
         try:
             for rows, side, stop_s in ((250, "vehicle", 0.3), (700, "controller", 0.2), (1150, "relay", 0.2)):
-                wait_for(lambda rows=rows: csv_rows(run / "controller.csv") > rows, 60, f"{rows} rows flown")
+                wait_for(lambda rows=rows: count_records(run / "controller.bin") > rows, 60, f"{rows} rows flown")
                 pid = child_pids(run)[side]
                 os.kill(pid, signal.SIGSTOP)
                 time.sleep(stop_s)  # the stall itself, not a wait for something to happen
@@ -182,7 +183,7 @@ def _interrupted(tmp_path: Path, interrupt) -> tuple[Bsst, Path, str, str, dict[
         p = _start_session(tmp_path, n)
         run = tmp_path / "run"
         try:
-            wait_for(lambda: csv_rows(run / "controller.csv") > 250, 60, "a second of flight")
+            wait_for(lambda: count_records(run / "controller.bin") > 250, 60, "a second of flight")
             pids = child_pids(run)
             t0 = time.monotonic()
             interrupt(p, pids)
@@ -200,7 +201,7 @@ def test_controller_sigkill_means_failsafe_landing_exit_1(tmp_path):
     summary = json.loads((run / "summary.json").read_text())
     assert summary["outcome"] == "failsafe" and "outcome: failsafe" in out
     events = {e["kind"]: e for e in summary["events"] if e["source"] == "vehicle"}
-    v = read_trace(run / "vehicle.csv")
+    v = read_half(run / "vehicle.bin")
     last_cmd_t = v["cmd_k"][v["cmd_k"] >= 0].max() / 250.0
     t_fs = events["failsafe"]["t"]
     assert 0.5 < t_fs - last_cmd_t <= 0.5 + 1 / 250 + 1e-6  # within the timeout plus one step
@@ -312,7 +313,8 @@ def test_a_lockstep_run_that_leaves_lockstep_says_so_and_exits_1(tmp_path):
     with instance_slot() as n:
         p = _bsst_sitl(n, mission, run)
         try:
-            wait_for(lambda: csv_rows(run / "controller.csv") > 250 or p.poll() is not None, 60, "a second of flight")
+            wait_for(lambda: count_records(run / "controller.bin") > 250 or p.poll() is not None, 60,
+                     "a second of flight")
             pid = child_pids(run)["controller"]
             os.kill(pid, signal.SIGSTOP)
             try:
@@ -358,7 +360,7 @@ def test_a_ground_station_that_disarms_the_vehicle_in_flight_is_named(tmp_path):
             def flown_2s() -> bool:  # reading the telemetry meanwhile, as a ground station does: a full
                 while gcs.recv_msg() is not None:  # socket buffer would drop the COMMAND_ACK to come
                     pass
-                return csv_rows(run / "vehicle.csv") > 500 or p.poll() is not None
+                return count_records(run / "vehicle.bin") > 500 or p.poll() is not None
 
             wait_for(flown_2s, 60, "2 s of flight")
             bad = bytearray(gcs.mav.heartbeat_encode(6, 8, 0, 0, 4, 3).pack(gcs.mav))

@@ -10,7 +10,6 @@ with deadlines (a session's end, a process's exit), never sleeps.
 
 from __future__ import annotations
 
-import csv
 import json
 from dataclasses import replace
 from pathlib import Path
@@ -21,6 +20,7 @@ import pytest
 from bridge.cli import main
 from bridge.loop import simulate
 from bridge.record.columns import TRACE_COLUMNS
+from bridge.record.halves import read_half
 from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
 from missions import MISSION_DIR, Mission, Sine, load_mission
@@ -134,10 +134,9 @@ def test_realtime_through_the_relay_measures_20ms_each_way(tmp_path: Path) -> No
     assert any(e["kind"] == "started" and e["text"].startswith("relay pid") for e in run.summary["events"])
     # what each side says it sent: every target the controller sent (a row each), every state the vehicle sent
     # (a row with its send time); in real time a loaded side may answer fewer than the 750 steps, never lose one
-    with open(tmp_path / "rt" / "controller.csv") as f:
-        targets = sum(1 for _ in csv.DictReader(f))
-    with open(tmp_path / "rt" / "vehicle.csv") as f:
-        states = sum(1 for r in csv.DictReader(f) if r["odo_sent_wall"] != "nan")
+    ctl = read_half(tmp_path / "rt" / "controller.bin")
+    targets = len(ctl["k"])
+    states = int(np.count_nonzero(~np.isnan(read_half(tmp_path / "rt" / "vehicle.bin")["odo_sent_wall"])))
     assert targets > 0 and states > 0
     for d, own in (("up", targets), ("down", states)):
         link = run.summary["link"][d]
@@ -148,9 +147,7 @@ def test_realtime_through_the_relay_measures_20ms_each_way(tmp_path: Path) -> No
         assert link["sent"] >= own and link["lost"] == 0, (d, link, own)
         assert link["delivered"] + link["in_flight"] == link["sent"], (d, link)
     # the controller's age of its states includes their 20 ms way down (TIMESYNC; a symmetric link)
-    ctl = (tmp_path / "rt" / "controller.csv").read_text().splitlines()
-    col = ctl[0].split(",").index("state_age_s")
-    age = np.array([float(r.split(",")[col]) for r in ctl[1:]])
+    age = ctl["state_age_s"]
     assert 0.018 <= np.nanmedian(age) <= 0.025, np.nanmedian(age)
 
 
@@ -167,9 +164,9 @@ def test_realtime_events_are_on_the_flights_clock(tmp_path: Path) -> None:
     fs = [e for e in run.summary["events"] if e["kind"] == "failsafe" and e["source"] == "vehicle"]
     assert len(fs) == 1 and 3.45 <= fs[0]["t"] <= 3.56, fs
     # the vehicle's rows: step k is at flight time (k - k0) / rate, k0 the controller's first row
-    k0 = int(float((tmp_path / "rt" / "controller.csv").read_text().splitlines()[1].split(",")[0]))
-    rows = [r.split(",") for r in (tmp_path / "rt" / "vehicle.csv").read_text().splitlines()]
-    k, mode = (np.array([float(r[rows[0].index(c)]) for r in rows[1:]]) for c in ("k", "mode"))
+    k0 = int(read_half(tmp_path / "rt" / "controller.bin")["k"][0])
+    vehicle = read_half(tmp_path / "rt" / "vehicle.bin")
+    k, mode = vehicle["k"], vehicle["mode"]
     switch = k[np.argmax((mode != mode[0]) & (k > k0))]
     assert abs((switch - k0) / 250.0 - fs[0]["t"]) <= 0.012, (switch, k0, fs[0]["t"])
 

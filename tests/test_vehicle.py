@@ -9,7 +9,6 @@ Each test holds an instance slot (bridge.session.instance_slot), so the ports 14
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 import os
@@ -24,6 +23,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from bridge.mavlink.endpoint import GCS_PORT, LINK_PORT
 from bridge.mavlink.receive import MAX_FRAME
 from bridge.nodes.report import Ready, Stats
+from bridge.record.halves import read_half
 from bridge.session import instance_slot
 from tests.sitlkit import ENV, ROOT, MavProxy, Proc, run_bsst
 
@@ -160,8 +160,8 @@ def test_targets_only_from_the_configured_controller(tmp_path):
     s = _stats(v)
     assert s["accepted"] == 1 and s["steps"] == 1
     assert s["rejected"] == {"not_offboard": 1, "sender": 1, "message": 1, "group": 1, "future": 1}
-    lines = (tmp_path / "vehicle.csv").read_text().splitlines()
-    assert len(lines) == 2 and lines[1].startswith("0,0.0,")  # one row: step 0
+    v = read_half(tmp_path / "vehicle.bin")
+    assert list(v["k"]) == [0.0] and list(v["t"]) == [0.0]  # one record: step 0
 
 
 HOVER_WIRE = [0.0, 0.0, 0.0, 1.1 * 9.81 / 43.164] + [0.0] * 4  # hover, paper profile
@@ -235,9 +235,8 @@ def test_a_slow_answer_to_a_resent_state_is_taken_once_and_refuses_nothing(tmp_p
     s = _two_answers_to_step_0(tmp_path, idle_copy=False)
     assert s["steps"] == 1 and s["accepted"] == 1 and s["resends"] >= 1
     assert s["answered_again"] == 1 and s["rejected"] == {}
-    with open(tmp_path / "vehicle.csv", newline="") as f:
-        row = next(csv.DictReader(f))
-    assert float(row["rtt_s"]) >= 0.05  # its round trip from the state's first sending, not from the copy
+    # its round trip from the state's first sending, not from the copy
+    assert read_half(tmp_path / "vehicle.bin")["rtt_s"][0] >= 0.05
 
 
 def test_answers_to_the_idle_and_the_armed_state_of_one_step_refuse_nothing(tmp_path):

@@ -125,7 +125,7 @@ def add_flight_options(p: argparse.ArgumentParser, vehicle: bool = True, optiona
         p.add_argument("--out", metavar="DIR", help="run directory (default runs/<UTC time>-<mission>)")
         p.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out")
     else:
-        p.add_argument("--out", metavar="DIR", help="write controller.tlog and controller.csv into DIR "
+        p.add_argument("--out", metavar="DIR", help="write controller.tlog and controller.bin into DIR "
                                                     "(default: nothing written)")
         p.add_argument("--overwrite", action="store_true", help="allow replacing those files")
     p.add_argument("--rate", type=mission_number("--rate", "rate_hz"), metavar="HZ",

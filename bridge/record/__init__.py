@@ -1,8 +1,8 @@
 """The files of a run: columns, writers, the SITL joiner, metrics and figures. No sockets.
 
-- :mod:`bridge.record.columns`  every CSV's columns (trace.csv, vehicle.csv, controller.csv)
+- :mod:`bridge.record.columns`  every record's columns (trace.csv, vehicle.bin, controller.bin)
 - :mod:`bridge.record.runlog`   run directory, line writers, atomic writes, :class:`~bridge.record.runlog.Run`
-- :mod:`bridge.record.joiner`   vehicle.csv + controller.csv -> trace.csv rows, by column name
+- :mod:`bridge.record.joiner`   vehicle.bin + controller.bin -> trace.csv rows, by column name
 - :mod:`bridge.record.metrics`  RMS, settling, finite-time bound, total variation, the summary
 - :mod:`bridge.record.events`   a run's events, typed, with their sender as a field
 - :mod:`bridge.record.summary`  a SITL session's summary.json as pure functions of what the session saw

@@ -1,4 +1,4 @@
-"""The columns of every CSV of a run: one table, imported by the writers and the readers.
+"""The columns of every per-step record of a run: one table, imported by the writers and the readers.
 
 In:  nothing but, for the helpers, an eq. (7) state (:func:`state_columns`) or a file's header
      (:func:`column_index`)
@@ -6,8 +6,8 @@ Out: column-name tuples; :class:`TraceRow`, :class:`VehicleRow`, :class:`Control
      with its columns as named fields; a state in the trace's column order; the positions of named columns
 
 - :data:`TRACE_COLUMNS`: ``trace.csv``, one row per control step (offline and SITL alike);
-- :data:`VEHICLE_COLUMNS`: ``vehicle.csv``, the vehicle's half of a SITL trace;
-- :data:`CONTROLLER_COLUMNS`: ``controller.csv``, the controller's half.
+- :data:`VEHICLE_COLUMNS`: ``vehicle.bin``, the vehicle's half of a SITL trace (:mod:`bridge.record.halves`);
+- :data:`CONTROLLER_COLUMNS`: ``controller.bin``, the controller's half.
 
 Units: time s, position m, velocity m/s, angles rad, rates rad/s, ``u1..u4`` N (paper frame;
 the torques are l·u2..u4 in N m), ``c1..c4`` normalised actuator command, ``*_wall`` monotonic wall clock s.
@@ -47,10 +47,10 @@ CONTROLLER_COLUMNS = (
 TraceRow = namedtuple("TraceRow", TRACE_COLUMNS)
 TraceRow.__doc__ = "One ``trace.csv`` row (:data:`TRACE_COLUMNS`, in order; units in the module docstring)."
 VehicleRow = namedtuple("VehicleRow", VEHICLE_COLUMNS)
-VehicleRow.__doc__ = ("One ``vehicle.csv`` row (:data:`VEHICLE_COLUMNS`), filled by the file's header "
-                      "(:class:`bridge.record.joiner.PartReader`).")
+VehicleRow.__doc__ = ("One ``vehicle.bin`` record (:data:`VEHICLE_COLUMNS`), filled by the file's header "
+                      "(:class:`bridge.record.halves.HalfReader`).")
 ControllerRow = namedtuple("ControllerRow", CONTROLLER_COLUMNS)
-ControllerRow.__doc__ = "One ``controller.csv`` row (:data:`CONTROLLER_COLUMNS`), filled by the file's header."
+ControllerRow.__doc__ = "One ``controller.bin`` record (:data:`CONTROLLER_COLUMNS`), filled by the file's header."
 
 _new_row = tuple.__new__  # TraceRow from one tuple at once: a third of the time of its 45-argument constructor
 

@@ -10,7 +10,7 @@ Out: :func:`end_block`, ``summary.json["end"]``: ``action``; ``rows``; ``disarme
 
 The mission's trace and figures stop at its end (``trace.csv`` holds the mission's rows only, so that every
 figure is the mission's); the end action is summarised here, from the same rows in every clock (offline: the
-loop's; a session: ``vehicle.csv``'s), so that a lockstep landing can be compared with offline's to the bit.
+loop's; a session: ``vehicle.bin``'s), so that a lockstep landing can be compared with offline's to the bit.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any, Protocol
 
-END_MODE_CODES = (3, 4)  # vehicle.csv's ``mode`` of HOLD and LAND (bridge.nodes.vehicle.rows.MODE_CODES)
+END_MODE_CODES = (3, 4)  # vehicle.bin's ``mode`` of HOLD and LAND (bridge.nodes.vehicle.rows.MODE_CODES)
 
 
 class _Event(Protocol):

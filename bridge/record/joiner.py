@@ -1,6 +1,6 @@
 """The SITL trace joiner: the vehicle's and the controller's halves -> ``trace.csv`` rows.
 
-In:  ``vehicle.csv`` (:data:`~bridge.record.columns.VEHICLE_COLUMNS`) and ``controller.csv``
+In:  ``vehicle.bin`` (:data:`~bridge.record.columns.VEHICLE_COLUMNS`) and ``controller.bin``
      (:data:`~bridge.record.columns.CONTROLLER_COLUMNS`), appended by the two processes as they fly
 Out: rows (:class:`~bridge.record.columns.TraceRow`, units as there), also appended to ``trace.csv``, and
      the per-packet times (ms: up, down, round trip, state to command, tick lateness) the session's
@@ -15,13 +15,11 @@ error that names it, and the join reads every value by name.
 from __future__ import annotations
 
 import math
-import os
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
 from operator import attrgetter
 from pathlib import Path
-from typing import Any
 
 from bridge.core.flight import Flight
 from bridge.record.columns import (
@@ -34,10 +32,10 @@ from bridge.record.columns import (
     ControllerRow,
     TraceRow,
     VehicleRow,
-    column_index,
     trace_row,
 )
 from bridge.record.ending import END_MODE_CODES
+from bridge.record.halves import HalfReader, read_half
 from bridge.record.runlog import TraceWriter
 
 # groups of columns of a half, by name
@@ -70,56 +68,6 @@ class Joined:
     late_ms: Sequence[float] = ()
 
 
-class PartReader:
-    """Reads the complete new lines of a part file (``vehicle.csv``, ``controller.csv``) as named rows of
-    ``row_type``, each value taken from its column of the file's own header (ValueError naming a missing one)."""
-
-    def __init__(self, path: Path, row_type: Any) -> None:
-        self.path = path
-        self.row_type = row_type
-        self._fd = -1
-        self._buf = b""
-        self.columns: tuple[str, ...] | None = None  # the file's header, once read
-        self._pick: list[int] | None = None  # the header's positions of row_type's fields (None: the same order)
-
-    def read(self) -> list[Any]:
-        if self._fd < 0:
-            try:
-                self._fd = os.open(self.path, os.O_RDONLY)
-            except FileNotFoundError:
-                return []
-        chunks = []
-        while True:
-            data = os.read(self._fd, 1 << 20)
-            if not data:
-                break
-            chunks.append(data)
-        if not chunks:
-            return []
-        *full, self._buf = (self._buf + b"".join(chunks)).split(b"\n")
-        if self.columns is None and full:
-            self.columns = tuple(full[0].decode(errors="replace").strip().split(","))
-            fields = self.row_type._fields
-            if self.columns != fields:
-                where = column_index(self.columns, fields, str(self.path))
-                self._pick = [where[n] for n in fields]
-            full = full[1:]
-        make, pick = self.row_type._make, self._pick
-        if pick is None:
-            return [make([float(x) for x in line.split(b",")]) for line in full if line]
-        rows = []
-        for line in full:
-            if line:
-                values = [float(x) for x in line.split(b",")]
-                rows.append(make([values[i] for i in pick]))
-        return rows
-
-    def close(self) -> None:
-        if self._fd >= 0:
-            os.close(self._fd)
-            self._fd = -1
-
-
 class TraceJoiner:
     """Joins the vehicle's and the controller's halves into trace rows (live, append-only).
 
@@ -139,8 +87,8 @@ class TraceJoiner:
     """
 
     def __init__(self, path: Path, flight: Flight, trace: TraceWriter | None, lockstep: bool = False) -> None:
-        self.v = PartReader(path / "vehicle.csv", VehicleRow)
-        self.c = PartReader(path / "controller.csv", ControllerRow)
+        self.v = HalfReader(path / "vehicle.bin", VehicleRow)
+        self.c = HalfReader(path / "controller.bin", ControllerRow)
         self.lockstep = lockstep
         self.trace = trace
         self.rate = flight.mission.rate_hz
@@ -248,18 +196,11 @@ class TraceJoiner:
 
 
 def off_clock_time(path: Path, rate_hz: float) -> float | None:
-    """Lockstep: the vehicle's time (s) of its first row of ``vehicle.csv`` (at ``path``) not flown on the
-    step clock (the command in force answers another step, or none), or None; read as a stream."""
+    """Lockstep: the vehicle's time (s) of its first record of ``vehicle.bin`` (at ``path``) not flown on the
+    step clock (the command in force answers another step, or none), or None (also for a file that cannot be read)."""
     try:
-        with open(path) as f:
-            header = f.readline().strip().split(",")
-            ik, ic = header.index("k"), header.index("cmd_k")
-            for line in f:
-                parts = line.split(",")
-                if not line.endswith("\n") or len(parts) != len(header):
-                    break  # a torn last line
-                if parts[ik] != parts[ic] and float(parts[ik]) != float(parts[ic]):
-                    return float(parts[ik]) / rate_hz
+        half = read_half(path)
     except (OSError, ValueError):
         return None
-    return None
+    off = (half["k"] != half["cmd_k"]).nonzero()[0]
+    return float(half["k"][off[0]]) / rate_hz if len(off) else None

@@ -1,8 +1,8 @@
 """A link as it was: per-packet one-way delays and losses of both directions, from a run directory of ours
 or two tlogs recorded at the two ends of any MAVLink link (``bsst link extract``; docs/links.md).
 
-In:  a real-time run directory (``vehicle.tlog`` and ``controller.tlog``; without them ``vehicle.csv``
-     and ``controller.csv``), or a vehicle-end and a controller-end tlog (8-byte big-endian Unix time
+In:  a real-time run directory (``vehicle.tlog`` and ``controller.tlog``; without them ``vehicle.bin``
+     and ``controller.bin``), or a vehicle-end and a controller-end tlog (8-byte big-endian Unix time
      in us + one MAVLink 1 or 2 frame, repeated: what MAVProxy and our nodes write); which clock the two
      ends' stamps are on (``same``, or ``timesync``: the offset estimated from TIMESYNC exchanges)
 Out: :class:`Extraction`: per direction the records (send time s from the trace's start, one-way delay
@@ -17,7 +17,6 @@ target answers left the vehicle), a pair of tlogs' at the first frame.
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 from collections import defaultdict
@@ -26,6 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from bridge.link.trace import trace_text
+from bridge.record.halves import half_arrays
 from bridge.record.tlogmatch import (
     STAMP_SLACK_S,
     DirectionRecords,
@@ -170,7 +170,7 @@ def run_clock(path: Path) -> str | None:
 
 
 def extract_run_dir(path: str | Path, clock: str = "same") -> Extraction:
-    """Both directions of a real-time run's link: from its tlogs, else from vehicle.csv and controller.csv."""
+    """Both directions of a real-time run's link: from its tlogs, else from vehicle.bin and controller.bin."""
     p = Path(path)
     if not p.is_dir():
         raise ConfigError(f"{p}: not a run directory (or give a vehicle tlog and a controller tlog)")
@@ -182,44 +182,36 @@ def extract_run_dir(path: str | Path, clock: str = "same") -> Extraction:
     v, c = p / "vehicle.tlog", p / "controller.tlog"
     if v.is_file() and c.is_file():
         return extract_tlogs(read_tlog(v), read_tlog(c), clock, run_dir=True, inputs=(str(v), str(c)))
-    vc, cc = p / "vehicle.csv", p / "controller.csv"
-    if vc.is_file() and cc.is_file():
+    vh, ch = p / "vehicle.bin", p / "controller.bin"
+    if vh.is_file() and ch.is_file():
         if clock != "same":
-            raise ConfigError(f"--clock {clock}: {p} has no tlogs; its CSVs are on one host's monotonic clock")
-        return extract_csvs(vc, cc)
-    raise ConfigError(f"{p}: neither vehicle.tlog and controller.tlog nor vehicle.csv and controller.csv: "
+            raise ConfigError(f"--clock {clock}: {p} has no tlogs; its trace halves are on one host's monotonic "
+                              f"clock")
+        return extract_halves(vh, ch)
+    raise ConfigError(f"{p}: neither vehicle.tlog and controller.tlog nor vehicle.bin and controller.bin: "
                       f"no record of a link to extract")
 
 
-def _csv_rows(path: Path, names: Sequence[str]) -> list[dict[str, float]]:
-    text = read_regular_file(path, "a CSV").decode("utf-8", errors="replace")
-    reader = csv.reader(text.splitlines())
-    head = next(reader, None)
-    if head is None:
-        raise ConfigError(f"{path}: empty")
-    missing = [n for n in names if n not in head]
+def _half_rows(path: Path, names: Sequence[str]) -> list[dict[str, float]]:
+    try:
+        half = half_arrays(read_regular_file(path, "a trace half"), str(path))
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
+    missing = [n for n in names if n not in half]
     if missing:
         raise ConfigError(f"{path}: no column {missing[0]!r} in its header")
-    pos = [head.index(n) for n in names]
-    out = []
-    for row in reader:
-        if len(row) != len(head):
-            continue  # a row cut by a kill: the last one
-        try:
-            out.append({n: float(row[i]) if row[i] != "" else math.nan for n, i in zip(names, pos, strict=True)})
-        except ValueError:
-            continue
-    return out
+    columns = [half[n].tolist() for n in names]
+    return [dict(zip(names, values, strict=True)) for values in zip(*columns, strict=True)]
 
 
-def extract_csvs(vehicle_csv: Path, controller_csv: Path) -> Extraction:
+def extract_halves(vehicle_half: Path, controller_half: Path) -> Extraction:
     """Both directions from each side's half of the trace (one host's monotonic clock). Approximate:
     a state or command is known by its step k, so a command superseded within one control period
     counts as lost, and a tick that reuses a state sends a command with the same k (the first counts)."""
-    v = _csv_rows(vehicle_csv, ("k", "odo_sent_wall", "cmd_k", "cmd_recv_wall"))
-    c = _csv_rows(controller_csv, ("k", "odo_recv_wall", "cmd_sent_wall"))
+    v = _half_rows(vehicle_half, ("k", "odo_sent_wall", "cmd_k", "cmd_recv_wall"))
+    c = _half_rows(controller_half, ("k", "odo_recv_wall", "cmd_sent_wall"))
     if not v or not c:
-        raise ConfigError(f"{vehicle_csv if not v else controller_csv}: no rows")
+        raise ConfigError(f"{vehicle_half if not v else controller_half}: no records")
     state_sent = {int(r["k"]): r["odo_sent_wall"] for r in v}
     state_recv: dict[int, float] = {}
     cmd_sent: dict[int, float] = {}
@@ -240,10 +232,10 @@ def extract_csvs(vehicle_csv: Path, controller_csv: Path) -> Extraction:
     origin = state_sent.get(k0, min(t for t, _ in down.records))
     for d in (up, down):
         d.records = [(t - origin, x) for t, x in d.records if t >= origin and math.isfinite(t)]
-    note = ("from vehicle.csv and controller.csv (no tlogs): approximate, by step number; a command superseded "
+    note = ("from vehicle.bin and controller.bin (no tlogs): approximate, by step number; a command superseded "
             "within one control period counts as lost")
     return Extraction(up, down, "the flight's time 0 (the first state the controller answered left the vehicle)",
-                      "same", 0.0, None, (str(vehicle_csv), str(controller_csv)), [note])
+                      "same", 0.0, None, (str(vehicle_half), str(controller_half)), [note])
 
 
 # -- the trace file -------------------------------------------------------------------------------------

@@ -90,7 +90,7 @@ def run_dir(
 # table overwriting reads, so that an overwritten directory holds exactly one run and nothing of a user's is
 # touched. The run itself (sim, sitl), its children, bsst link extract/show, a sweep, a margin, and the
 # temporary names of write_text_atomic.
-RUN_FILES = ("summary.json", "mission.toml", "trace.csv", "events.log", "vehicle.csv", "controller.csv",
+RUN_FILES = ("summary.json", "mission.toml", "trace.csv", "events.log", "vehicle.bin", "controller.bin",
              "vehicle.tlog", "controller.tlog", "vehicle.log", "controller.log", "relay.log", "relay.json",
              "link-trace.csv", "link-trace.png", "cells.csv", "sweep.json", "report.md", "map_*.png",
              "margin.json", ".*.tmp*")

@@ -13,7 +13,7 @@ and leaves the run directory of docs/design.md, "Files of a run":
 
 - ``mission.toml`` (as flown, overrides applied: both children read this file),
 - ``vehicle.tlog``, ``controller.tlog`` (both directions of each side),
-- ``vehicle.csv``, ``controller.csv``: each side's half of the trace, appended as it flies,
+- ``vehicle.bin``, ``controller.bin``: each side's half of the trace, appended as it flies,
 - ``trace.csv``: the two halves joined live, one row per control step, the same columns
   and meaning as the offline loop's (:data:`bridge.record.columns.TRACE_COLUMNS`),
 - ``summary.json`` (with the ``link`` block and a ``timing`` block), ``events.log``,

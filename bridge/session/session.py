@@ -123,7 +123,7 @@ class Session:
         facts = SessionFacts(
             clock="realtime" if self.realtime else "lockstep", wall_s=wall, aborted=self.aborted, died=self.died,
             failsafe_seen=self.failsafe_seen, diverged=self.diverged,
-            off_clock_t=None if self.realtime else off_clock_time(self.path / "vehicle.csv",
+            off_clock_t=None if self.realtime else off_clock_time(self.path / "vehicle.bin",
                                                                    self.flight.mission.rate_hz),
             sitl={"instance": self.instance, "listen": self.listen, "gcs": self.gcs, "sysid": self.sysid,
                   "speed": self.speed, "died": self.died, "signed": self.key is not None,

@@ -7,7 +7,7 @@ Out: one actuator target per state answered, stamped with its ``time_usec``: HIL
      (``wrench``: roll, pitch, yaw in [-1, 1], thrust in [0, 1]), or the no-target acknowledgement;
      ARM_DISARM, HEARTBEAT at 1 Hz (10 Hz until the vehicle's is heard), TIMESYNC every 10 ms until
      8 answers are in, then every 0.5 s;
-     ``controller.tlog``, ``controller.csv`` rows; reports on stdout (:mod:`bridge.nodes.report`); the outcome
+     ``controller.tlog``, ``controller.bin`` rows; reports on stdout (:mod:`bridge.nodes.report`); the outcome
 
 It flies a mission against any vehicle that keeps the contract of docs/design.md, "The MAVLink contract": it
 sends its own HEARTBEAT, waits for the vehicle's, arms it (COMMAND_LONG ARM_DISARM, until
@@ -57,8 +57,8 @@ station's: no more targets are sent, the flight ends ``aborted`` with that reaso
 names the ground station from the vehicle's event. Parameter changes scheduled at mission times
 (``--param-at``, :class:`bridge.autopilot.params.ParamChange`) go out as PARAM_SET just before the
 answer of their step. Each command is sent first, then its row of
-``controller.csv`` (:data:`CONTROLLER_COLUMNS`, one ``write`` each, so the file is whole
-up to its last row whatever kills the process). A controller killed between the send and
+``controller.bin`` (:data:`CONTROLLER_COLUMNS`, one ``write`` each, so the file is whole
+up to its last record whatever kills the process). A controller killed between the send and
 the write leaves one command without its row: the session keeps the steps flown on that
 command in ``trace.csv`` with the law's demand unknown (NaN; ``missing_rows``) rather than
 guess it.

@@ -2,7 +2,7 @@
 
 In:  the vehicle's states and state of mind through :class:`~bridge.nodes.offboard.link.OffboardLink`; the
      :class:`~bridge.core.flight.Flight` (mission, law, link guard, ``[link]`` down model, parameter changes)
-Out: one answer per state (lockstep) or per tick (real time, s on the wall clock); ``controller.csv`` rows
+Out: one answer per state (lockstep) or per tick (real time, s on the wall clock); ``controller.bin`` records
      (:data:`~bridge.record.columns.CONTROLLER_COLUMNS`); the outcome (:data:`OUTCOMES`) and why;
      :func:`run_controller`: the ``stats`` and ``done`` reports and the exit status of ``bsst controller``
 """
@@ -37,7 +37,8 @@ from bridge.nodes.offboard.link import OffboardLink
 from bridge.nodes.process import on_stop_signals, report_printer, tight_timer_slack
 from bridge.nodes.report import Done, Ready, Report, Stats
 from bridge.record.columns import CONTROLLER_COLUMNS
-from bridge.record.runlog import LineWriter, side_dir
+from bridge.record.halves import HalfWriter
+from bridge.record.runlog import side_dir
 from controller.law import LawFailed
 from controller.link_guard import LinkGuard
 
@@ -68,8 +69,7 @@ class Offboard(OffboardLink):
         self._sample = m.trajectory.sample
         super().__init__(flight, cfg, out, status)
         self.spinner = Spinner(self.ep, cfg.spin_s)  # a lockstep state is polled for before sleeping
-        self.rows = (LineWriter(out / "controller.csv", ",".join(CONTROLLER_COLUMNS), batch=1)
-                     if out is not None else None)
+        self.rows = HalfWriter(out / "controller.bin", CONTROLLER_COLUMNS, batch=1) if out is not None else None
         self._last_state = time.monotonic()  # wall time of the newest state flown
         self._started = False  # the mission's third state come (before it: start_timeout_s)
         self.stale_ticks = 0
@@ -425,8 +425,8 @@ class Offboard(OffboardLink):
     def _row(self, k: int, t: float, ref: Any, u: Any, wire: Any, desired: Any, recv: float, sent: float,
              s2c: float, late: float, age: float) -> None:
         if self.rows is not None:
-            self.rows.write(",".join(map(repr, (k, t, ref[0][0], ref[1][0], ref[2][0], ref[3][0], *u, *wire,
-                                                *desired, recv, sent, s2c, late, age))))
+            self.rows.write((k, t, ref[0][0], ref[1][0], ref[2][0], ref[3][0], *u, *wire, *desired, recv, sent, s2c,
+                             late, age))
 
     def _check_vehicle(self) -> str | None:
         """The outcome if the vehicle is lost to the flight (silent, no more states, disarmed
@@ -460,7 +460,7 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
                    overwrite: bool = False) -> int:
     """``bsst controller``: fly, then exit 0 if the mission completed (in lockstep: without the vehicle
     leaving it), else 1 (failsafe, diverged, aborted, or lockstep left)."""
-    path = side_dir(out, ("controller.tlog", "controller.csv"), overwrite) if out is not None else None
+    path = side_dir(out, ("controller.tlog", "controller.bin"), overwrite) if out is not None else None
     emit = report_printer()
     transfer = None
     if cfg.await_mission:  # a ground station's mission: waited for, downloaded, flown (bridge.nodes.offboard.mission)

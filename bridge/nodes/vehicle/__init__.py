@@ -11,7 +11,7 @@ Out: ODOMETRY (NED position m, FRD body velocity m/s, quaternion FRD to NED, FRD
      ``custom_mode``), STATUSTEXT on each event, the GCS streams (25 Hz / 10 Hz, ``time_boot_ms`` =
      simulation time; with sensors HIGHRES_IMU and GPS_RAW_INT), PARAM_VALUE, the mission protocol's answers,
      MISSION_CURRENT (1 Hz) and MISSION_ITEM_REACHED; ``vehicle.tlog``,
-     ``vehicle.csv`` rows; its reports on stdout (JSON lines)
+     ``vehicle.bin`` rows; its reports on stdout (JSON lines)
 
 Its clocks and its end of the link model: docs/design.md, "Clocks" and "Link model". Its
 parameters, flight modes (OFFBOARD, HOLD, LAND, TAKEOFF, RTL, in PX4's encoding: :mod:`bridge.mavlink.modes`)
@@ -52,7 +52,7 @@ Clocks:
 - **realtime**: physics steps against the wall clock at the physics rate; a target is
   applied at the physics step it arrives in and held; ODOMETRY goes out at the control rate.
 
-With ``out``, it writes ``vehicle.tlog`` (both directions) and ``vehicle.csv`` (its half of
+With ``out``, it writes ``vehicle.tlog`` (both directions) and ``vehicle.bin`` (its half of
 the trace: one row per control step flown, columns :data:`VEHICLE_COLUMNS`).
 Its reports (:mod:`bridge.nodes.report`: ready, event, refused, stats) go to ``status``, one JSON
 line each under ``bsst vehicle``; the session launcher reads them.
@@ -68,7 +68,7 @@ Its parts, as PX4 splits an autopilot:
 - :mod:`.targets`       the controller's answers: actuator targets, the no-target acknowledgement
 - :mod:`.receiver`      the receive path: each message, its sender's authority checked, to its part
 - :mod:`.streams`       the telemetry streams (message id -> builder and rate), HEARTBEAT, ODOMETRY
-- :mod:`.rows`          ``vehicle.csv``
+- :mod:`.rows`          ``vehicle.bin``
 - :mod:`.config`        :class:`VehicleConfig`
 - :mod:`.node`          :class:`Vehicle`, which wires the parts to the links, and :func:`run_vehicle`
 """

@@ -4,7 +4,7 @@ In:  datagrams on the controller link (``--listen``) and the GCS link (``--gcs``
      stamped with the ``time_usec`` (us) of the state they answer, the no-target acknowledgement,
      commands, parameters, TIMESYNC, PING, ...; wall time (s, ``time.monotonic``)
 Out: ODOMETRY of step k (``time_usec`` = k / rate_hz, us) to the controller; HEARTBEAT (1 Hz), the
-     streams, STATUSTEXT on events, answers; ``vehicle.tlog`` and ``vehicle.csv`` (its half of the trace);
+     streams, STATUSTEXT on events, answers; ``vehicle.tlog`` and ``vehicle.bin`` (its half of the trace);
      its reports to the session (:mod:`bridge.nodes.report`: ready, event, refused, stats), all
      through :meth:`Vehicle._report`
 
@@ -89,7 +89,7 @@ class Vehicle:
         self.link, self.gcs = open_links(cfg, self.tlog, self.rejected)
         self.endpoints = [self.link] + ([self.gcs] if self.gcs is not None else [])
         self.spinner = Spinner(self.link, cfg.spin_s)  # a lockstep answer is polled for before sleeping
-        self.rows = Rows(out / "vehicle.csv", self.rate) if out is not None else None
+        self.rows = Rows(out / "vehicle.bin", self.rate) if out is not None else None
         self.k = 0  # control step of the plant's state: t_k = k / rate_hz
         self.stopping = False
         now = time.monotonic()
@@ -491,7 +491,7 @@ class Vehicle:
 
 def run_vehicle(flight: Flight, cfg: VehicleConfig, out: str | Path | None = None, overwrite: bool = False) -> int:
     """``bsst vehicle``: serve until SIGTERM or SIGINT; its reports on stdout (JSON lines); exit status 0."""
-    path = side_dir(out, ("vehicle.tlog", "vehicle.csv"), overwrite) if out is not None else None
+    path = side_dir(out, ("vehicle.tlog", "vehicle.bin"), overwrite) if out is not None else None
     v = Vehicle(flight, cfg, path, report_printer())
     on_stop_signals(v.stop)
     v.run()

@@ -1,4 +1,4 @@
-"""The vehicle's half of the trace: ``vehicle.csv``, one row per control step flown.
+"""The vehicle's half of the trace: ``vehicle.bin`` (:mod:`bridge.record.halves`), one record per control step flown.
 
 In:  the step k, the plant's true state X taken at t_k (paper frame, eq. 7), the flight mode, the target
      in force (wire units: ``motors`` omega / omega_max, ``wrench`` normalised), the failsafe's demand and
@@ -15,19 +15,19 @@ from pathlib import Path
 from bridge.autopilot.simvehicle import FAILSAFE, HOLD, LAND, LANDED, OFFBOARD, TAKEOFF, SimVehicle
 from bridge.core.wire import command_to_wire
 from bridge.record.columns import VEHICLE_COLUMNS, state_columns
-from bridge.record.runlog import LineWriter
+from bridge.record.halves import HalfWriter
 
-MODE_CODES = {OFFBOARD: 0, FAILSAFE: 1, LANDED: 2, HOLD: 3, LAND: 4, TAKEOFF: 5}  # vehicle.csv's ``mode``
+MODE_CODES = {OFFBOARD: 0, FAILSAFE: 1, LANDED: 2, HOLD: 3, LAND: 4, TAKEOFF: 5}  # the half's ``mode``
 NAN4 = (math.nan,) * 4
 Estimate = tuple[tuple[float, ...], float]  # (the published estimate, its NEES)
 
 
 class Rows:
-    """``vehicle.csv``, written in batches."""
+    """``vehicle.bin``, written in batches."""
 
     def __init__(self, path: Path, rate_hz: float) -> None:
         self.rate = rate_hz
-        self.out = LineWriter(path, ",".join(VEHICLE_COLUMNS), batch=100)
+        self.out = HalfWriter(path, VEHICLE_COLUMNS, batch=100)
 
     def write(self, k: int, X: tuple[float, ...], mode: str, key: int, wire: tuple[float, ...],
               dem: tuple[float, ...], real: tuple[float, ...], age: float, rtt: float, sent: float, recv: float,
@@ -35,8 +35,8 @@ class Rows:
         """One row; ``est``: (estimate, NEES) taken with ``X``."""
         E, nees = est
         code = MODE_CODES.get(mode, 0)
-        self.out.write(",".join(map(repr, (k, k / self.rate, *state_columns(X), code, key, *wire, *dem, *real,
-                                           age, rtt, sent, recv, *state_columns(E), nees))))
+        self.out.write((k, k / self.rate, *state_columns(X), code, key, *wire, *dem, *real, age, rtt, sent, recv,
+                        *state_columns(E), nees))
 
     def lockstep(self, k: int, X: tuple[float, ...], mode: str, wire: tuple[float, ...] | None,
                  real: tuple[float, ...], age: float, rtt: float, sent: float, recv: float, est: Estimate) -> None:

@@ -1,0 +1,75 @@
+"""Covers bridge.record.halves: a SITL side's half of the trace as binary records (vehicle.bin, controller.bin),
+written and read back as the vehicle, the controller and the session do, on real files."""
+
+from __future__ import annotations
+
+import json
+import math
+import random
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bridge.record.columns import CONTROLLER_COLUMNS, ControllerRow
+from bridge.record.halves import HalfReader, HalfWriter, count_records, header_line, read_half
+
+
+def _values(rng: random.Random) -> list[float]:
+    special = [math.nan, math.inf, -0.0, 5e-324, 1.7976931348623157e308, 0.1]
+    return [rng.choice(special) if rng.random() < 0.2 else rng.uniform(-1e6, 1e6) for _ in CONTROLLER_COLUMNS]
+
+
+def test_every_value_comes_back_to_the_bit_by_both_readers(tmp_path: Path) -> None:
+    rng = random.Random(7)
+    rows = [_values(rng) for _ in range(257)]
+    out = HalfWriter(tmp_path / "controller.bin", CONTROLLER_COLUMNS, batch=10)
+    for r in rows:
+        out.write(r)
+    out.close()
+    back = HalfReader(tmp_path / "controller.bin", ControllerRow).read()
+    assert np.array(back, dtype="<f8").tobytes() == np.array(rows, dtype="<f8").tobytes()
+    assert all(type(r) is ControllerRow for r in back)
+    arrays = read_half(tmp_path / "controller.bin")
+    assert list(arrays) == list(CONTROLLER_COLUMNS)
+    got = np.column_stack([arrays[c] for c in CONTROLLER_COLUMNS])
+    assert got.tobytes() == np.array(rows, dtype="<f8").tobytes()  # the bits, NaNs and signed zeros included
+    assert count_records(tmp_path / "controller.bin") == 257
+
+
+def test_a_record_cut_short_is_read_when_it_is_whole(tmp_path: Path) -> None:
+    """The session reads while the side writes: a header or a record not yet whole is left for the next read,
+    and a record a killed writer cut short is never read as one."""
+    path = tmp_path / "controller.bin"
+    record = np.arange(len(CONTROLLER_COLUMNS), dtype="<f8").tobytes()
+    head = header_line(CONTROLLER_COLUMNS)
+    reader = HalfReader(path, ControllerRow)
+    assert reader.read() == []  # no file yet
+    with open(path, "wb", buffering=0) as f:
+        f.write(head[:10])
+        assert reader.read() == [] and count_records(path) == 0
+        f.write(head[10:] + record + record[:13])
+        assert [r.k for r in reader.read()] == [0.0]
+        assert count_records(path) == 1 and len(read_half(path)["k"]) == 1
+        f.write(record[13:] + record)
+        assert [r.t for r in reader.read()] == [1.0, 1.0]
+        assert reader.read() == []
+    reader.close()
+
+
+@pytest.mark.parametrize(("first_line", "says"), [
+    (b"k,t,x_ref\n", "not a JSON header"),
+    (json.dumps({"format": "other", "version": 1, "columns": ["k"], "dtype": "<f8"}).encode() + b"\n", "format"),
+    (json.dumps({"format": "bsst-half", "version": 2, "columns": ["k"], "dtype": "<f8"}).encode() + b"\n",
+     "version 2"),
+    (json.dumps({"format": "bsst-half", "version": 1, "columns": ["k"], "dtype": ">f4"}).encode() + b"\n", "dtype"),
+    (json.dumps({"format": "bsst-half", "version": 1, "columns": "k", "dtype": "<f8"}).encode() + b"\n",
+     "not a list"),
+])
+def test_a_file_that_is_not_a_half_is_an_error_that_names_it(tmp_path: Path, first_line: bytes, says: str) -> None:
+    path = tmp_path / "vehicle.bin"
+    path.write_bytes(first_line + b"\0" * 64)
+    for read in (lambda: read_half(path), lambda: HalfReader(path, ControllerRow).read(), lambda: count_records(path)):
+        with pytest.raises(ValueError, match=says) as exc:
+            read()
+        assert str(path) in str(exc.value)
