@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from bridge.record.columns import column_index
+from bridge.record.runlog import LineWriter
 
 FORMAT, VERSION, DTYPE = "bsst-half", 1, "<f8"
 _MAX_HEADER = 1 << 16  # bytes: a header line longer than this is not ours
@@ -50,33 +51,24 @@ def parse_header(line: bytes, where: str) -> tuple[str, ...]:
     return tuple(columns)
 
 
-class HalfWriter:
+class HalfWriter(LineWriter):
     """Appends records to a half, in batches of ``batch`` records, one write each (``batch=1``: each at once)."""
 
     def __init__(self, path: str | Path, columns: Sequence[str], batch: int = 100) -> None:
-        self.path = Path(path)
+        super().__init__(path, header_line(columns).decode().rstrip("\n"), batch)
         self._pack = struct.Struct(f"<{len(columns)}d").pack
-        self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND, 0o644)
-        os.write(self._fd, header_line(columns))
-        self._pending: list[bytes] = []
-        self._batch = batch
+        self._records: list[bytes] = []
 
-    def write(self, values: Sequence[float]) -> None:
+    def write(self, values: Sequence[float]) -> None:  # type: ignore[override]  # a record, not a line
         """One record: exactly one value per column (``struct.error`` otherwise: a writer's bug)."""
-        self._pending.append(self._pack(*values))
-        if len(self._pending) >= self._batch:
+        self._records.append(self._pack(*values))
+        if len(self._records) >= self._batch:
             self.flush()
 
     def flush(self) -> None:
-        if self._pending and self._fd >= 0:
-            os.write(self._fd, b"".join(self._pending))
-            self._pending.clear()
-
-    def close(self) -> None:
-        if self._fd >= 0:
-            self.flush()
-            os.close(self._fd)
-            self._fd = -1
+        if self._records and self._fd >= 0:
+            os.write(self._fd, b"".join(self._records))
+            self._records.clear()
 
 
 class HalfReader:
