@@ -56,6 +56,32 @@ def _tlog_types(path: Path) -> dict[str, int]:
     return seen
 
 
+def test_a_lockstep_flight_shows_its_progress_from_the_halves_and_writes_its_trace_at_the_end(tmp_path):
+    """In lockstep the halves are the flight's live record: the progress callback follows the vehicle's newest
+    record (its t rising to the mission's end, its error the trace's at that t), while ``trace.csv`` stays a
+    header until the controller is done (writing it took a core's share from the flight, issue 25), and then
+    holds every row of the run."""
+    out = tmp_path / "run"
+    seen: list[tuple[float, float, int]] = []
+
+    def progress(t: float, duration: float, err: float) -> None:
+        seen.append((t, err, (out / "trace.csv").read_bytes().count(b"\n") if (out / "trace.csv").exists() else 0))
+
+    run = sitl(Mission(Sine(), duration_s=10.0, name="sine10"), out=out, plots=False, instance=None, speed=10.0,
+               progress=progress)
+    assert run.outcome == "completed"
+    during = [s for s in seen if s[0] < 9.0]
+    assert len(during) >= 3, seen  # ~1 s of flight at 10x real time, a look every 0.1 s
+    assert all(b[0] >= a[0] for a, b in zip(seen, seen[1:], strict=False)), seen
+    assert during[-1][0] > 5.0 and max(t for t, _, _ in seen) <= 10.0 - 1 / 250  # the mission's steps only
+    assert all(lines <= 1 for _, _, lines in during), during  # the header alone while the flight flies
+    err = np.sqrt(sum((run.trace[c] - run.trace[f"{c}_ref"]) ** 2 for c in ("x", "y", "z")))
+    for t, e, _ in during:
+        assert e == pytest.approx(err[round(t * 250)], rel=1e-9, abs=1e-12), (t, e)
+    on_disk = read_trace(out / "trace.csv")
+    assert len(on_disk["t"]) == 2500 and np.array_equal(on_disk["x"], run.trace["x"])
+
+
 def test_lockstep_sine_matches_offline(tmp_path):
     """The acceptance: every trace row within 1e-4 m of ``bsst sim`` (float32 wire only)."""
     off = simulate(SINE, plots=False)

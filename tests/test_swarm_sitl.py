@@ -19,6 +19,7 @@ import pytest
 
 from bridge.cli import main
 from bridge.cli.flying import report_fleet
+from bridge.record.halves import count_records
 from bridge.swarm import FleetRun, Watch, judge_traces, simulate, sitl
 from missions import MISSION_DIR
 from params import ConfigError
@@ -107,7 +108,8 @@ def test_ctrl_c_stops_every_pair_and_each_summary_says_aborted(tmp_path: Path) -
     run = tmp_path / "run"
     p = Proc([sys.executable, "-c", FLY, str(short_sine(tmp_path, 30.0)), str(run)], cwd=ROOT)
     try:
-        wait_for(lambda: all(csv_rows(run / f"vehicle-{i}" / "trace.csv") > 250 for i in (1, 2)), 90,
+        # in lockstep the halves are the live record (trace.csv is written once the flight is over)
+        wait_for(lambda: all(count_records(run / f"vehicle-{i}" / "vehicle.bin") > 250 for i in (1, 2)), 90,
                  "a second of flight of both vehicles")
         p.p.send_signal(signal.SIGINT)
         p.p.wait(timeout=30)

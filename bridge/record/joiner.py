@@ -35,7 +35,7 @@ from bridge.record.columns import (
     trace_row,
 )
 from bridge.record.ending import END_MODE_CODES
-from bridge.record.halves import HalfReader, read_half
+from bridge.record.halves import HalfReader, last_record, read_half
 from bridge.record.runlog import TraceWriter
 
 # groups of columns of a half, by name
@@ -84,6 +84,12 @@ class TraceJoiner:
     ``c1..c4`` and ``state_age_s`` from the controller's row, as the offline loop writes them:
     the last command sent, and the age of the state this step's command was computed from
     (nan when the guard sent none).
+
+    ``trace.csv`` is appended as rows are joined in real time; in lockstep, once the controller is done (the
+    rows are joined live all the same: the progress line and the events' clock read them): writing a row's 45 floats
+    as text is most of the join's cost, and during a lockstep flight it took a core's share from the two
+    processes flying (issue 25: 0.25-0.29 of the endpoint floor with it, 0.39-0.40 without, and the
+    whole session no slower, docs/figures.md). The halves are the live record of a lockstep flight.
     """
 
     def __init__(self, path: Path, flight: Flight, trace: TraceWriter | None, lockstep: bool = False) -> None:
@@ -107,6 +113,7 @@ class TraceJoiner:
         self._up_seen: set[int] = set()
         self.missing = 0  # rows without their controller half (never written): demand NaN
         self.after: list[tuple[float, float, float]] = []  # rows of the end action, after the mission (_after_end)
+        self._written = 0  # rows already appended to trace.csv
         self.first_sent: float | None = None  # wall time the first / last joined state was sent
         self.last_sent = math.nan
 
@@ -135,9 +142,18 @@ class TraceJoiner:
                 break  # its row is on its way (written just after the send)
             self.pending.popleft()
             self._join(v, key, c)
-        if self.trace is not None and len(self.rows) > n0:
-            self.trace.flush()
+        if self.trace is not None and (not self.lockstep or self.controller_done):
+            self._write()
         return len(self.rows) - n0
+
+    def _write(self) -> None:
+        """Append the rows not yet in ``trace.csv`` (see the class docstring for when)."""
+        assert self.trace is not None
+        if self._written < len(self.rows):
+            for row in self.rows[self._written:]:
+                self.trace.row(row)
+            self._written = len(self.rows)
+            self.trace.flush()
 
     def _after_end(self, v: VehicleRow) -> bool:
         """Whether ``v`` was flown after the mission under its end action (HOLD or LAND past the mission's last
@@ -180,10 +196,23 @@ class TraceJoiner:
         wire, age = _WIRE(v), v.state_age_s
         if self.lockstep and c is not None and key == k:
             wire, age = _WIRE(c), c.state_age_s
-        row = trace_row(t, _STATE(v), ref, u, wire, _REALISED(v), age, desired, _ESTIMATE(v), v.nees)
-        self.rows.append(row)
-        if self.trace is not None:
-            self.trace.row(row)
+        self.rows.append(trace_row(t, _STATE(v), ref, u, wire, _REALISED(v), age, desired, _ESTIMATE(v), v.nees))
+
+    def newest(self) -> tuple[float, float] | None:
+        """(t s, 3-D position error m) of the newest step flown, for a progress line: the last joined row, or, in
+        lockstep while the controller flies (rows joined at the end), the vehicle's newest record; None before
+        the flight's time 0 and after the mission's last step."""
+        v = last_record(self.v.path, VehicleRow) if self.lockstep and not self.controller_done else None
+        if v is not None:
+            if self.k0 is None or not 0 <= int(v.k) - self.k0 < self.steps:
+                return None  # before the flight's time 0, or flying the end action after the mission
+            t = (int(v.k) - self.k0) / self.rate
+            ref = self.sample(t)
+            return t, math.sqrt((v.x - ref[0][0]) ** 2 + (v.y - ref[1][0]) ** 2 + (v.z - ref[2][0]) ** 2)
+        if not self.rows:
+            return None
+        r = self.rows[-1]
+        return r.t, math.sqrt((r.x - r.x_ref) ** 2 + (r.y - r.y_ref) ** 2 + (r.z - r.z_ref) ** 2)
 
     def joined(self) -> Joined:
         """The rows joined so far and what the join measured."""

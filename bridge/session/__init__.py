@@ -14,8 +14,9 @@ and leaves the run directory of docs/design.md, "Files of a run":
 - ``mission.toml`` (as flown, overrides applied: both children read this file),
 - ``vehicle.tlog``, ``controller.tlog`` (both directions of each side),
 - ``vehicle.bin``, ``controller.bin``: each side's half of the trace, appended as it flies,
-- ``trace.csv``: the two halves joined live, one row per control step, the same columns
-  and meaning as the offline loop's (:data:`bridge.record.columns.TRACE_COLUMNS`),
+- ``trace.csv``: the two halves joined (appended live in real time; in lockstep written once the controller
+  is done, the halves being the flight's live record), one row per control step, the same columns and meaning
+  as the offline loop's (:data:`bridge.record.columns.TRACE_COLUMNS`),
 - ``summary.json`` (with the ``link`` block and a ``timing`` block), ``events.log``,
   ``plots/``, and ``vehicle.log`` / ``controller.log`` (each child's stderr).
 
@@ -25,8 +26,8 @@ it in simulation time to what crossed the socket (the offline loop's ends,
 real time, when the link is impaired, a third child, ``bsst relay`` (``relay.log``,
 ``relay.json``), sits between controller and vehicle and applies it on the wall clock.
 
-Each half is written by the process that owns it, whole lines at a time, so any process
-killed with SIGKILL leaves every file readable up to its last complete row; the join
+Each half is written by the process that owns it, whole records at a time, so any process
+killed with SIGKILL leaves every file readable up to its last complete record; the join
 only ever appends rows whose two halves are both on disk. A child that dies is reported
 by name and the session ends in exit status 1; Ctrl-C or SIGTERM stops both children
 (SIGTERM; SIGKILL for one not gone within ``STOP_DEADLINE_S``, 8 s: under load a child may need seconds to

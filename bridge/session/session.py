@@ -265,7 +265,7 @@ class Session:
                 if self.interrupted:
                     raise KeyboardInterrupt
                 self._handle(self._read_all(ctl, veh))
-                self._join()
+                self._join_in_flight()
                 self._show_progress()
                 if veh.proc.poll() is not None:
                     self._handle([(veh, r) for r in veh.reports()])  # its last words: events it said before it went
@@ -278,6 +278,7 @@ class Session:
                     # its last words, and the vehicle's about the same moments, in the order they happened
                     self._handle(self._read_all(ctl, veh))
                     self.joiner.controller_done = True
+                    self._join()  # all the controller wrote (the landing time below reads the rows)
                     if ctl.done is not None and ctl.done.reason:  # a controller that gave up says why
                         sys.stderr.write(("\n" if self.live else "") + f"bsst sitl: controller: {ctl.done.reason}\n")
                     taken = ctl.done is not None and ctl.done.taken_over is not None
@@ -377,6 +378,15 @@ class Session:
         if self.mission_known:
             self.joiner.update()
 
+    def _join_in_flight(self) -> None:
+        """Real time: join as the flight goes (``trace.csv`` grows with it). Lockstep: join until the flight's time
+        0 is known (the first state the controller answered), then only once the controller is done, or when a
+        note needs the time: the join took a core's share from the two processes flying the lockstep ping-pong
+        (issue 25; docs/figures.md, sixteenth session), and the halves are the flight's live record meanwhile
+        (the progress line reads the vehicle's newest record: :meth:`_show_progress`)."""
+        if self.realtime or self.joiner.k0 is None or self.joiner.controller_done:
+            self._join()
+
     def _mission_loaded(self, report: MissionLoaded) -> None:
         """--await-mission: the controller has the ground station's mission and wrote it as flown
         (``mission.toml``): the session's flight, record and join are that mission's from now."""
@@ -429,6 +439,8 @@ class Session:
     def _note(self, kind: str, text: str, source: str, t: float | None = None, by: Sender | None = None,
               **fields: Any) -> None:
         """Record an event (``fields``: its typed fields, :func:`~bridge.autopilot.simvehicle.typed_fields`)."""
+        if t is None and getattr(self, "joiner", None):
+            self._join()  # lockstep joins only on demand during the flight (_join_in_flight)
         if t is None:
             t = self.joiner.rows[-1].t if getattr(self, "joiner", None) and self.joiner.rows else 0.0
         self.events.append(RunEvent.at(t, kind, text, source, by, **fields))
@@ -438,12 +450,10 @@ class Session:
             sys.stderr.write(("\n" if self.live else "") + f"bsst sitl: {text}\n")
 
     def _show_progress(self) -> None:
-        rows = self.joiner.rows
-        if not rows or not (self.live or self.progress):
+        now = self.joiner.newest() if self.live or self.progress else None
+        if now is None:
             return
-        r = rows[-1]
-        t = r.t
-        err = math.sqrt((r.x - r.x_ref) ** 2 + (r.y - r.y_ref) ** 2 + (r.z - r.z_ref) ** 2)
+        t, err = now
         if self.progress is not None:
             self.progress(t, self.flight.mission.duration_s, err)
         if self.live:
