@@ -14,6 +14,7 @@ import json
 import math
 import os
 import re
+import shutil
 import socket
 import struct
 import subprocess
@@ -345,6 +346,18 @@ def test_extract_a_real_time_run_gives_its_delay_and_loss(tmp_path: Path) -> Non
         assert abs(float(np.nanmedian(np.array(rec.delay_s))) * 1000.0 - 20.0) <= 2.0
         assert abs(100.0 * rec.lost / rec.n - 5.0) <= 1.5 and rec.n > trace.records(d).n
     assert "exists" in one_line_error(bsst("link", "extract", str(run.path)))  # nothing already written is lost
+    # without the tlogs, from the trace's halves (vehicle.bin, controller.bin): by step number, one host's clock
+    bare = tmp_path / "bare"
+    shutil.copytree(run.path, bare, ignore=shutil.ignore_patterns("*.tlog", "link-trace.*"))
+    assert "one host's monotonic clock" in one_line_error(bsst("link", "extract", str(bare), "--clock", "timesync"))
+    halves = bsst("link", "extract", str(bare))
+    assert halves.returncode == 0, halves.stderr
+    assert "from vehicle.bin and controller.bin (no tlogs)" in (bare / "link-trace.csv").read_text()
+    by_step = read_trace(bare / "link-trace.csv")
+    for d in ("up", "down"):
+        rec = by_step.records(d)
+        assert abs(float(np.nanmedian(np.array(rec.delay_s))) * 1000.0 - 20.0) <= 2.0, d
+        assert 2.0 <= 100.0 * rec.lost / rec.n <= 10.0, (d, rec.lost, rec.n)
     # and replayed offline, the flight meets the link the session met
     replay = simulate(SHORT, plots=False, link={"trace": str(run.path / "link-trace.csv")})
     assert replay.outcome == "completed"

@@ -22,7 +22,7 @@ import subprocess
 import tempfile
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -222,3 +222,24 @@ def instance_slot(timeout_s: float = 600.0) -> Iterator[int]:
         if time.monotonic() > deadline:
             raise TimeoutError(f"no free SITL instance (0-9) within {timeout_s:g} s")
         time.sleep(0.05)  # all ten held by other sessions: look again shortly
+
+
+def catch_stop_signals(sessions: Sequence[Any]) -> Callable[[], None]:
+    """While sessions run (one, or a fleet's: :class:`bridge.session.session.Session`), Ctrl-C (SIGINT) and
+    SIGTERM only set each one's ``interrupted``;
+    a session checks it between whole steps, so no file is left half-written by an exception raised in the
+    middle of a write. Main thread only (signals go there). Returns what restores the handlers before."""
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+
+    def handler(signum: int, frame: Any) -> None:
+        for s in sessions:
+            s.interrupted = True
+
+    old = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
+
+    def restore() -> None:
+        for sig, h in old.items():
+            signal.signal(sig, h)
+
+    return restore

@@ -39,8 +39,8 @@ from bridge.nodes.forkserver import warm
 from bridge.nodes.vehicle.gate import GateConfig
 from bridge.record.runlog import Run, blackout_windows, finish_run
 from bridge.session import check_options
-from bridge.session.children import READY_TIMEOUT_S, check_port_free, free_udp_port
-from bridge.session.session import Session, catch_stop_signals
+from bridge.session.children import READY_TIMEOUT_S, catch_stop_signals, check_port_free, free_udp_port
+from bridge.session.session import Session
 from params import ConfigError
 
 MAX_INSTANCE = 9  # instances 0-9, as bridge.session.children.instance_slot holds them

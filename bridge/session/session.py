@@ -18,9 +18,7 @@ import selectors
 import signal
 import subprocess
 import sys
-import threading
 import time
-from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -34,7 +32,14 @@ from bridge.record.events import RunEvent
 from bridge.record.joiner import TraceJoiner, off_clock_time
 from bridge.record.runlog import EventLog, Run, RunRecord
 from bridge.record.summary import ChildEnd, SessionFacts, SessionSummary, controller_completed, session_summary
-from bridge.session.children import READY_TIMEOUT_S, STOP_DEADLINE_S, Child, ChildError, free_udp_port
+from bridge.session.children import (
+    READY_TIMEOUT_S,
+    STOP_DEADLINE_S,
+    Child,
+    ChildError,
+    catch_stop_signals,
+    free_udp_port,
+)
 from params import ConfigError
 
 
@@ -484,26 +489,3 @@ def _end(child: Child | None) -> ChildEnd | None:
     done = child.done
     return ChildEnd(child.name, child.proc.returncode, child.exit_text(), child.stats,
                     done.outcome if done is not None else None, done.reason if done is not None else None)
-
-
-def catch_stop_signals(sessions: Sequence[Session]) -> Callable[[], None]:
-    """While sessions run (one, or a fleet's), Ctrl-C (SIGINT) and SIGTERM only set each one's ``interrupted``;
-    a session checks it between whole steps, so no file is left half-written by an exception raised in the
-    middle of a write. Main thread only (signals go there). Returns what restores the handlers before."""
-    if threading.current_thread() is not threading.main_thread():
-        return lambda: None
-
-    def handler(signum: int, frame: Any) -> None:
-        for s in sessions:
-            s.interrupted = True
-
-    old = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
-
-    def restore() -> None:
-        for sig, h in old.items():
-            signal.signal(sig, h)
-
-    return restore
-
-
-
