@@ -85,17 +85,19 @@ class TraceJoiner:
     the last command sent, and the age of the state this step's command was computed from
     (nan when the guard sent none).
 
-    ``trace.csv`` is appended as rows are joined in real time; in lockstep, once the controller is done (the
-    rows are joined live all the same: the progress line and the events' clock read them): writing a row's 45 floats
+    ``trace.csv`` is appended as rows are joined when ``live`` (real time, and a lockstep fleet's sessions, whose
+    processes share the cores anyway); else (a lockstep session) once the controller is done: writing a row's 45 floats
     as text is most of the join's cost, and during a lockstep flight it took a core's share from the two
     processes flying (issue 25: 0.25-0.29 of the endpoint floor with it, 0.39-0.40 without, and the
     whole session no slower, docs/figures.md). The halves are the live record of a lockstep flight.
     """
 
-    def __init__(self, path: Path, flight: Flight, trace: TraceWriter | None, lockstep: bool = False) -> None:
+    def __init__(self, path: Path, flight: Flight, trace: TraceWriter | None, lockstep: bool = False,
+                 live: bool | None = None) -> None:
         self.v = HalfReader(path / "vehicle.bin", VehicleRow)
         self.c = HalfReader(path / "controller.bin", ControllerRow)
         self.lockstep = lockstep
+        self.live = not lockstep if live is None else live  # trace.csv written as the flight goes
         self.trace = trace
         self.rate = flight.mission.rate_hz
         self.steps = flight.mission.steps
@@ -142,7 +144,7 @@ class TraceJoiner:
                 break  # its row is on its way (written just after the send)
             self.pending.popleft()
             self._join(v, key, c)
-        if self.trace is not None and (not self.lockstep or self.controller_done):
+        if self.trace is not None and (self.live or self.controller_done):
             self._write()
         return len(self.rows) - n0
 
@@ -199,10 +201,10 @@ class TraceJoiner:
         self.rows.append(trace_row(t, _STATE(v), ref, u, wire, _REALISED(v), age, desired, _ESTIMATE(v), v.nees))
 
     def newest(self) -> tuple[float, float] | None:
-        """(t s, 3-D position error m) of the newest step flown, for a progress line: the last joined row, or, in
-        lockstep while the controller flies (rows joined at the end), the vehicle's newest record; None before
-        the flight's time 0 and after the mission's last step."""
-        v = last_record(self.v.path, VehicleRow) if self.lockstep and not self.controller_done else None
+        """(t s, 3-D position error m) of the newest step flown, for a progress line: the last joined row, or,
+        while the controller flies a flight not joined ``live`` (rows joined at the end), the vehicle's newest
+        record; None before the flight's time 0 and after the mission's last step."""
+        v = last_record(self.v.path, VehicleRow) if not self.live and not self.controller_done else None
         if v is not None:
             if self.k0 is None or not 0 <= int(v.k) - self.k0 < self.steps:
                 return None  # before the flight's time 0, or flying the end action after the mission

@@ -90,7 +90,7 @@ class Session:
         m = self.flight.mission
         self.record = record = RunRecord(self.path, m)
         self._event_log = record.events
-        self.joiner = TraceJoiner(self.path, self.flight, record.trace, lockstep=not self.realtime)
+        self.joiner = self._joiner(self.flight)
         self.t_wall0 = time.monotonic()
         restore = catch_stop_signals([self])
         try:
@@ -383,13 +383,19 @@ class Session:
         if self.mission_known:
             self.joiner.update()
 
+    def _joiner(self, flight: Flight) -> TraceJoiner:
+        """The join of ``flight``'s halves, live (``trace.csv`` written as the flight goes) in real time and in a
+        lockstep fleet, whose eight and more processes share the two cores anyway (joined at the end, the
+        fleet's four traces were written one after the other in one process while the cores idled)."""
+        return TraceJoiner(self.path, flight, self.record.trace, lockstep=not self.realtime,
+                           live=self.realtime or self.gate is not None)
+
     def _join_in_flight(self) -> None:
-        """Real time: join as the flight goes (``trace.csv`` grows with it). Lockstep: join until the flight's time
-        0 is known (the first state the controller answered), then only once the controller is done, or when a
-        note needs the time: the join took a core's share from the two processes flying the lockstep ping-pong
-        (issue 25; docs/figures.md, sixteenth session), and the halves are the flight's live record meanwhile
-        (the progress line reads the vehicle's newest record: :meth:`_show_progress`)."""
-        if self.realtime or self.joiner.k0 is None or self.joiner.controller_done:
+        """Join as the flight goes (a live join, :meth:`_joiner`), or else (one lockstep session) until the
+        flight's time 0 is known, then once the controller is done, or when a note needs the time: that join took
+        a core's share from the two processes flying the ping-pong (issue 25; docs/figures.md, sixteenth
+        session); the halves are the live record meanwhile (the progress line reads the vehicle's newest)."""
+        if self.joiner.live or self.joiner.k0 is None or self.joiner.controller_done:
             self._join()
 
     def _mission_loaded(self, report: MissionLoaded) -> None:
@@ -397,7 +403,7 @@ class Session:
         (``mission.toml``): the session's flight, record and join are that mission's from now."""
         self.flight = flight = prepare(self.path / "mission.toml")
         self.record.mission = flight.mission
-        self.joiner = TraceJoiner(self.path, flight, self.record.trace, lockstep=not self.realtime)
+        self.joiner = self._joiner(flight)
         self.mission_known = True
         self.transfer = report.transfer
         t = report.transfer
