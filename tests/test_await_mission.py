@@ -436,7 +436,7 @@ def test_the_vehicle_starts_a_mission_only_when_asked_to_await_one():
         # a download under way (the controller's begins as AUTO.MISSION shows) holds up no start
         assert exchange(v, M.MAVLink_mission_request_list_message(1, 1, 0), "MISSION_COUNT").count == 3
         exchange(v, M.MAVLink_mission_request_int_message(1, 1, 0, 0), "MISSION_ITEM_INT")
-        assert v.missions.state.value == "sendlist"
+        assert v.missions.transfers["gcs"].state.value == "sendlist"
         assert exchange(v, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
         assert v.missions.start_requested and not v.sim.armed
         assert exchange(v, ask, "MISSION_CURRENT").mission_state == M.MISSION_STATE_ACTIVE  # the controller's cue

@@ -16,6 +16,7 @@ import contextlib
 import json
 import math
 import os
+import socket
 import subprocess
 import sys
 import time
@@ -32,11 +33,13 @@ from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, GCS_POR
 from bridge.mavlink.missionitems import ItemRefused, parse_item
 from bridge.nodes.report import Ready, Refused, Stats, parse_line
 from bridge.nodes.vehicle import Vehicle, VehicleConfig
-from bridge.nodes.vehicle.mission import PROTOCOL_TIMEOUT_S, REACHED_REPEATS, REACHED_S, RETRY_S
+from bridge.nodes.vehicle.mission import REACHED_REPEATS, REACHED_S
+from bridge.nodes.vehicle.missiontransfer import PROTOCOL_TIMEOUT_S, RETRY_S
 from bridge.session import instance_slot
 from missions import Mission, Sine
 from tests.sitlkit import ENV, GcsSocket, MavProxy, Proc
 from tests.test_vehicle import _vehicle
+from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -683,3 +686,63 @@ def test_reached_and_current_from_the_flight():
     finally:
         v.close()
         gcs.close()
+
+
+def test_a_ground_stations_unfinished_download_does_not_hold_up_the_controllers():
+    """Each link has its own transfers, as each PX4 MAVLink instance has its own mission manager: a ground
+    station's download left unfinished on the GCS link (MAVProxy's ``wp list`` over a lossy link leaves one so,
+    and sends no final ACK) and the controller's download on its own link go on at once; the ground station's
+    goes on after it. (A loaded suite once aborted ``bsst sitl --await-mission`` this way: the vehicle answered
+    the controller's MISSION_REQUEST_LIST "busy", MAV_MISSION_ERROR. Another station on the same link is still
+    "busy" there: test_one_transfer_at_a_time.)"""
+    gcs = GcsSocket()
+    flight = prepare(Mission(Sine(), duration_s=5.0, name="two-links"))
+    v = Vehicle(flight, VehicleConfig(parse_address("udpin:127.0.0.1:0"), parse_address(gcs.url)))
+    ctl = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    ctl.bind(("127.0.0.1", 0))
+    ctl.setblocking(False)
+    ctl_mav = M.MAVLink(None, srcSystem=CONTROLLER_SYSID, srcComponent=CONTROLLER_COMPID)
+
+    def from_controller(msg: Any, want: str) -> Any:
+        ctl.sendto(msg.pack(ctl_mav), v.link.local)
+        seen: list[Any] = []
+
+        def answered() -> bool:
+            for m, addr in v.link.poll():
+                v._handle(v.link, m, addr)
+            with contextlib.suppress(BlockingIOError):
+                while True:
+                    seen.extend(ctl_mav.parse_buffer(ctl.recv(65535)) or [])
+            return any(m.get_type() == want for m in seen)
+
+        wait_for(answered, 5.0, f"the vehicle's {want} on the controller link", poll_s=0.001)
+        return next(m for m in seen if m.get_type() == want)
+
+    try:
+        items = _items(3)
+        gcs.exchange(v, M.MAVLink_mission_count_message(1, 1, 3, 0), "MISSION_REQUEST_INT")
+        for it in items[:2]:
+            gcs.exchange(v, it, "MISSION_REQUEST_INT")
+        assert gcs.exchange(v, items[2], "MISSION_ACK").type == M.MAV_MISSION_ACCEPTED
+        assert gcs.exchange(v, M.MAVLink_mission_request_list_message(1, 1, 0), "MISSION_COUNT").count == 3
+        assert gcs.exchange(v, M.MAVLink_mission_request_int_message(1, 1, 0, 0), "MISSION_ITEM_INT").seq == 0
+        # the controller's download, beside it
+        assert from_controller(M.MAVLink_mission_request_list_message(1, 1, 0), "MISSION_COUNT").count == 3
+        for seq in range(3):
+            got = from_controller(M.MAVLink_mission_request_int_message(1, 1, seq, 0), "MISSION_ITEM_INT")
+            assert (got.seq, got.x, got.y) == (seq, items[seq].x, items[seq].y)
+        ctl.sendto(M.MAVLink_mission_ack_message(1, 1, M.MAV_MISSION_ACCEPTED, 0).pack(ctl_mav), v.link.local)
+
+        def controller_done() -> bool:
+            for m, addr in v.link.poll():
+                v._handle(v.link, m, addr)
+            return v.missions.transfers["controller"].state.value == "idle"
+
+        wait_for(controller_done, 5.0, "the controller's download ended by its ACK", poll_s=0.001)
+        assert v.missions.transfers["gcs"].state.value == "sendlist"
+        # the ground station's download goes on where it was
+        assert gcs.exchange(v, M.MAVLink_mission_request_int_message(1, 1, 1, 0), "MISSION_ITEM_INT").seq == 1
+    finally:
+        v.close()
+        gcs.close()
+        ctl.close()

@@ -44,7 +44,7 @@ from bridge.nodes.offboard.config import OffboardConfig
 from bridge.nodes.offboard.link import OffboardLink
 from bridge.nodes.process import on_stop_signals
 from bridge.nodes.report import Done, MissionLoaded, Ready, Report, Stats
-from bridge.nodes.vehicle.mission import PROTOCOL_TIMEOUT_S, RETRY_S
+from bridge.nodes.vehicle.missiontransfer import PROTOCOL_TIMEOUT_S, RETRY_S
 from bridge.record.runlog import write_text_atomic
 from missions.mission import with_plan
 from missions.planfiles import plan_text

@@ -1,0 +1,326 @@
+"""One link's mission transfers: PX4's ``MavlinkMissionManager`` state machine, of which PX4 runs one per MAVLink
+instance (src/modules/mavlink/mavlink_mission.cpp).
+
+In:  a mission message already checked for authority and target, its sender and the endpoint its answers go out
+     on (:class:`Partner`), wall time (s, ``time.monotonic``); the vehicle's mission from its host
+     (:class:`TransferHost`: :class:`bridge.nodes.vehicle.mission.MissionManager`)
+Out: MISSION_REQUEST_INT / MISSION_REQUEST, MISSION_COUNT, MISSION_ITEM_INT / MISSION_ITEM, MISSION_ACK
+     (MAV_MISSION_RESULT), STATUSTEXT (PX4's texts) to the partner; to the host, an accepted upload, a clear or
+     a new current item (``accept``) and what was refused and why (``refused``)
+
+PX4's states: IDLE, GETLIST (an upload: the vehicle requests item after item), SENDLIST (a download: the ground
+station requests them). One transfer at a time on a link, with one partner (sysid, compid, address): anyone else
+who starts or joins one there is answered ``MAV_MISSION_ERROR`` with PX4's "Busy" STATUSTEXT. Each link has its
+own (the offboard controller's and the ground stations'), as each PX4 MAVLink instance has its own: a ground
+station's download does not hold up the controller's. Uploads are one at a time across the links (PX4's static
+``_transfer_in_progress``): the host's ``upload_link``. An upload is staged and swapped in at its last item, so a
+failed, refused or abandoned upload leaves the mission as it was, and the vehicle never holds a mission shorter
+than the one it acknowledged; a download sends the mission as it was when it began. While it waits for an item
+the vehicle requests it again every :data:`RETRY_S`; a transfer nobody spoke in for :data:`PROTOCOL_TIMEOUT_S`
+ends ("Operation timeout"). Only ``MAV_MISSION_TYPE_MISSION``: fence and rally are answered
+``MAV_MISSION_UNSUPPORTED``. The items' checks: :mod:`bridge.mavlink.missionitems`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import Enum
+from typing import Any, Protocol
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from bridge.autopilot.simvehicle import Sender
+from bridge.mavlink.endpoint import Endpoint
+from bridge.mavlink.missionitems import ItemRefused, MissionItem, TransferStats, item_message, parse_item
+
+RETRY_S = 0.25  # PX4's MAVLINK_MISSION_RETRY_TIMEOUT_DEFAULT: an item not here this long is requested again
+PROTOCOL_TIMEOUT_S = 5.0  # PX4's MAVLINK_MISSION_PROTOCOL_TIMEOUT_DEFAULT: a silent transfer ends
+MAX_ITEMS = 65534  # PX4 SITL's NUM_MISSIONS_SUPPORTED (UINT16_MAX - 1): a larger count is MAV_MISSION_NO_SPACE
+MISSION = mavlink.MAV_MISSION_TYPE_MISSION
+BUSY = "WPM: REJ. CMD: Busy"
+
+
+class State(Enum):
+    """PX4's MAVLINK_WPM_STATES."""
+
+    IDLE = "idle"
+    SENDLIST = "sendlist"  # a download: items go out on request
+    GETLIST = "getlist"  # an upload: items come in on request
+
+
+@dataclass(frozen=True)
+class Mission:
+    """The mission the vehicle holds: its items (seq 0..n-1) and the current one."""
+
+    items: tuple[MissionItem, ...] = ()
+    current: int = 0
+
+
+@dataclass(frozen=True)
+class Partner:
+    """The other end of a transfer: who (:class:`Sender`) and the endpoint its answers go out on."""
+
+    who: Sender
+    ep: Endpoint
+
+
+class TransferHost(Protocol):
+    """What a link's transfers share with the others: the vehicle's mission and the one upload at a time."""
+
+    mission: Mission
+    upload_link: str | None  # the link an upload is on (None: none)
+
+    def accept(self, who: Partner, mission: Mission, what: str) -> None: ...
+
+    def refused(self, text: str) -> None: ...
+
+    def texts(self, severity: int, text: str) -> list[Any]: ...
+
+    def current_message(self) -> list[Any]: ...
+
+
+class LinkTransfer:
+    """The mission protocol on one link (``link``: ``controller`` or ``gcs``)."""
+
+    def __init__(self, link: str, host: TransferHost) -> None:
+        self.link = link
+        self.host = host
+        self.state = State.IDLE
+        self.partner: Partner | None = None
+        self.int_mode = True  # MISSION_REQUEST_INT / ITEM_INT (else the legacy float ones), as the partner speaks
+        self.seq = 0  # the transfer's next item (PX4's _transfer_seq); kept when idle, to spot a repeated last item
+        self.count = 0  # the transfer's items
+        self.staged: list[MissionItem] = []  # an upload's items so far
+        self.staged_current = 0
+        self.sent: set[int] = set()  # a download's items sent so far
+        self.sending = Mission()  # a download's mission, as it was when it began
+        self.last_recv = self.last_sent = self.started = 0.0
+        self.upload = TransferStats()
+
+    def handle(self, who: Partner, m: Any, now: float) -> bool:
+        """One mission message (its target and the sender's authority checked); True when it changed the
+        mission (its event is to be announced)."""
+        kind = m._type
+        if kind in ("MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_REQUEST_INT", "MISSION_REQUEST") and (
+                self.state is State.IDLE or self._is_partner(who)):  # the form the partner speaks (not another's)
+            self.int_mode = kind.endswith("_INT")
+        if kind in ("MISSION_ITEM_INT", "MISSION_ITEM"):
+            return self._item(who, m, now)
+        if kind in ("MISSION_REQUEST_INT", "MISSION_REQUEST"):
+            self._request(who, m, now)
+            return False
+        if kind == "MISSION_ACK":
+            self._ack(who, m, now)
+            return False
+        if kind != "MISSION_SET_CURRENT" and m.mission_type != MISSION and not (
+                kind == "MISSION_CLEAR_ALL" and m.mission_type == mavlink.MAV_MISSION_TYPE_ALL):
+            self._answer(who, mavlink.MAV_MISSION_UNSUPPORTED, m.mission_type)  # no fence, no rally points
+            return False
+        self._idle_if_sent()
+        if kind == "MISSION_COUNT":
+            return self._count(who, m, now)
+        if kind == "MISSION_REQUEST_LIST":
+            self._request_list(who, now)
+            return False
+        if self.state is not State.IDLE:  # this link's transfer only, as PX4's instance checks its own
+            self._busy(who, m.mission_type if kind == "MISSION_CLEAR_ALL" else MISSION)
+            return False
+        if kind == "MISSION_CLEAR_ALL":
+            if self.host.mission.items:  # clearing no mission changes nothing: answered, not said as a change
+                self.host.accept(who, Mission(), "cleared")
+            self._answer(who, mavlink.MAV_MISSION_ACCEPTED, m.mission_type)
+            return True
+        return self._set_current(who, m)
+
+    def tick(self, now: float) -> None:
+        """Request the awaited item again after :data:`RETRY_S`; end a transfer silent for
+        :data:`PROTOCOL_TIMEOUT_S`."""
+        p = self.partner
+        if self.state is State.GETLIST and p is not None and now - self.last_sent > RETRY_S:
+            self.upload.re_requests += 1
+            self._send_request(p, now)
+        elif self.state is not State.IDLE and p is not None and now - self.last_recv > PROTOCOL_TIMEOUT_S:
+            if self.state is State.GETLIST:
+                self._end_upload(now, "timeout")
+            self._idle()
+            p.ep.send_many(self.host.texts(mavlink.MAV_SEVERITY_CRITICAL, "Operation timeout"), p.who.addr)
+
+    # -- upload -----------------------------------------------------------------------------------------
+    def _count(self, who: Partner, m: Any, now: float) -> bool:
+        """MISSION_COUNT: an upload begins (0 items: the mission is cleared at once)."""
+        if self.state is State.GETLIST and self._is_partner(who) and self.seq == 0:
+            self.last_recv = now  # our first request was lost: ask again
+            self._send_request(who, now)
+            return False
+        if self.state is not State.IDLE or self.host.upload_link is not None:
+            self._busy(who, MISSION)
+            return False
+        if m.count > MAX_ITEMS:
+            self._answer(who, mavlink.MAV_MISSION_NO_SPACE)
+            return False
+        if m.count == 0:
+            self.host.accept(who, Mission(), "cleared (an upload of 0 items)")
+            self._answer(who, mavlink.MAV_MISSION_ACCEPTED)
+            return True
+        self.state, self.partner, self.host.upload_link = State.GETLIST, who, self.link
+        self.seq, self.count, self.staged, self.staged_current = 0, m.count, [], 0
+        self.last_recv = self.started = now
+        self.upload = TransferStats(items=m.count)
+        self._send_request(who, now)
+        return False
+
+    def _item(self, who: Partner, m: Any, now: float) -> bool:
+        """MISSION_ITEM(_INT): the awaited item staged and the next requested, or the upload done; a bad
+        item ends the upload with PX4's result; one out of sequence is ignored (it is requested again)."""
+        if self.state is State.IDLE:
+            if self._is_partner(who) and self.count > 0 and self.seq == m.seq + 1 == self.count:
+                self._answer(who, mavlink.MAV_MISSION_ACCEPTED)  # the last item again: our ACK was lost
+            else:
+                self._answer(who, mavlink.MAV_MISSION_ERROR, text="IGN MISSION_ITEM: No transfer")
+            return False
+        if self.state is State.SENDLIST or not self._is_partner(who):
+            self._busy(who, MISSION)
+            return False
+        if m.mission_type != MISSION:
+            self._answer(who, mavlink.MAV_MISSION_ERROR)  # PX4: answered, the upload goes on
+            return False
+        self.last_recv = now
+        if m.seq != self.seq:
+            return False
+        try:
+            item = parse_item(m, self.int_mode)
+        except ItemRefused as exc:
+            self.host.refused(f"mission item {m.seq} (command {m.command}, frame {m.frame}): {exc}")
+            self._end_upload(now, f"refused item {m.seq}")
+            self._idle()
+            self._answer(who, exc.result, text=f"IGN MISSION_ITEM: Invalid item {m.seq}: {exc}")
+            return False
+        self.staged.append(item)
+        if m.current:
+            self.staged_current = m.seq
+        self.seq += 1
+        if self.seq < self.count:
+            self._send_request(who, now)
+            return False
+        self._end_upload(now, "accepted")
+        self._idle()
+        up = self.upload
+        self.host.accept(who, Mission(tuple(self.staged), self.staged_current),
+                         f"uploaded {up.items} items in {up.duration_s:.2f} s, {up.re_requests} requested again")
+        self._answer(who, mavlink.MAV_MISSION_ACCEPTED)
+        return True
+
+    def _send_request(self, p: Partner, now: float) -> None:
+        """MISSION_REQUEST_INT (or MISSION_REQUEST, as the partner speaks) for the awaited item."""
+        self.last_sent = now
+        self.upload.requests += 1
+        target = (p.who.sysid, p.who.compid)
+        msg = (mavlink.MAVLink_mission_request_int_message(*target, self.seq, MISSION) if self.int_mode
+               else mavlink.MAVLink_mission_request_message(*target, self.seq, MISSION))
+        p.ep.send(msg, p.who.addr)
+
+    def _end_upload(self, now: float, result: str) -> None:
+        self.upload.duration_s = now - self.started
+        self.upload.result = result
+        if result != "accepted":  # an accepted one is its mission event
+            self.host.refused(f"mission upload {result}: {self.upload}")
+
+    # -- download ---------------------------------------------------------------------------------------
+    def _request_list(self, who: Partner, now: float) -> None:
+        """MISSION_REQUEST_LIST: a download begins (again, for its partner)."""
+        if not (self.state is State.IDLE or (self.state is State.SENDLIST and self._is_partner(who))):
+            self._busy(who, MISSION, "Mission download request ignored, already active")
+            return
+        mission = self.host.mission
+        self.state, self.partner, self.sending = State.SENDLIST, who, mission
+        self.seq, self.count, self.sent = 0, len(mission.items), set()
+        self.last_recv = self.last_sent = now
+        who.ep.reply((mavlink.MAVLink_mission_count_message(who.who.sysid, who.who.compid, self.count, MISSION),),
+                     who.who.addr)
+
+    def _request(self, who: Partner, m: Any, now: float) -> None:
+        """MISSION_REQUEST(_INT): the item asked for, to the download's partner, in whatever order it asks;
+        one past the mission ends the download (``MAV_MISSION_ERROR``). PX4 also ends it on a request other
+        than the next item or the last again; ArduPilot answers any, as here: MAVProxy asks for five items
+        at once and each lost one again 2 s later, so over a lossy link PX4's rule ends every download
+        whose requests were not all delivered in order (docs/ground-station.md, "Missions")."""
+        if not self._is_partner(who):
+            if self.state is not State.IDLE:
+                self._busy(who, MISSION)
+            return  # no transfer: ignored, as PX4 does (some on-screen displays ask anyway)
+        if self.state is State.GETLIST:
+            who.ep.reply(tuple(self.host.texts(mavlink.MAV_SEVERITY_CRITICAL, BUSY)), who.who.addr)
+            return
+        if self.state is not State.SENDLIST or m.mission_type != MISSION:
+            return
+        self.last_recv = now
+        if not 0 <= m.seq < self.count:
+            self._idle()
+            self._answer(who, mavlink.MAV_MISSION_ERROR, text="WPM: REJ. CMD: Req. WP was unexpected")
+            return
+        self.seq = max(self.seq, m.seq + 1)
+        self.sent.add(m.seq)
+        sending = self.sending
+        item = sending.items[m.seq]
+        self.last_sent = now
+        who.ep.reply((item_message(item, (who.who.sysid, who.who.compid), m.seq == sending.current, self.int_mode),),
+                     who.who.addr)
+
+    def _ack(self, who: Partner, m: Any, now: float) -> None:
+        """MISSION_ACK from the partner: a download ends; an upload is cancelled
+        (MAV_MISSION_OPERATION_CANCELLED) or its requests switch between _INT and float (UNSUPPORTED)."""
+        if not self._is_partner(who) or m.mission_type != MISSION:
+            return
+        if self.state is State.SENDLIST:
+            self.last_recv = now
+            self._idle()
+        elif self.state is State.GETLIST:
+            if m.type == mavlink.MAV_MISSION_OPERATION_CANCELLED:
+                self._end_upload(now, "cancelled")
+                self._idle()
+            elif m.type == mavlink.MAV_MISSION_UNSUPPORTED:
+                self.int_mode = not self.int_mode
+                self._send_request(who, now)
+
+    # -- set current ------------------------------------------------------------------------------------
+    def _set_current(self, who: Partner, m: Any) -> bool:
+        """MISSION_SET_CURRENT: the current item, answered with MISSION_CURRENT (PX4 publishes it at once)."""
+        mission = self.host.mission
+        if not 0 <= m.seq < len(mission.items):
+            who.ep.reply(tuple(self.host.texts(mavlink.MAV_SEVERITY_CRITICAL, "WPM: WP CURR CMD: Not in list")),
+                         who.who.addr)
+            return False
+        self.host.accept(who, Mission(mission.items, m.seq), f"current item {m.seq}")
+        who.ep.reply(tuple(self.host.current_message()), who.who.addr)
+        return True
+
+    # -- helpers ----------------------------------------------------------------------------------------
+    def _is_partner(self, who: Partner) -> bool:
+        p = self.partner
+        return p is not None and p.who == who.who
+
+    def _idle_if_sent(self) -> None:
+        """A download whose every item went out ends here (its final ACK lost, or never sent), as PX4 ends it
+        on a new MISSION_REQUEST_LIST, so that it holds up no new transfer on its link."""
+        if self.state is State.SENDLIST and len(self.sent) == self.count:
+            self._idle()
+
+    def _idle(self) -> None:
+        """Back to IDLE: a staged upload is dropped (the mission stays as it was), and the upload's turn goes."""
+        if self.state is State.GETLIST:
+            if self.seq < self.count:
+                self.staged = []
+            self.host.upload_link = None
+        self.state = State.IDLE
+
+    def _answer(self, who: Partner, result: int, mission_type: int = MISSION, text: str | None = None) -> None:
+        """MISSION_ACK with ``result`` to ``who`` (and a STATUSTEXT saying why, in the same datagram)."""
+        ack = mavlink.MAVLink_mission_ack_message(who.who.sysid, who.who.compid, result, mission_type)
+        texts = self.host.texts(mavlink.MAV_SEVERITY_CRITICAL, text) if text is not None else []
+        who.ep.reply((ack, *texts), who.who.addr)
+
+    def _busy(self, who: Partner, mission_type: int, text: str = BUSY) -> None:
+        """Another transfer is on: ``MAV_MISSION_ERROR`` and PX4's STATUSTEXT, to the one who asked."""
+        why = self.state.value if self.state is not State.IDLE else f"an upload on the {self.host.upload_link} link"
+        self.host.refused(f"mission message from {who.who}: busy ({why})")
+        self._answer(who, mavlink.MAV_MISSION_ERROR, mission_type, text)
