@@ -7,7 +7,7 @@ Out: the file: one JSON header line, ``{"format": "bsst-half", "version": 1, "co
      records only, so a record being written is read next time) or as numpy arrays by column (:func:`read_half`)
 
 Why binary: each side wrote its half as CSV text, and the session parsed it back to join ``trace.csv`` while the
-flight ran; in lockstep that text (``repr`` of 49 floats a vehicle row, their parsing in the session) cost more CPU
+flight ran; in lockstep that text (``repr`` of 45 floats a vehicle row, their parsing in the session) cost more CPU
 than the step's own work and competed with the flight for the two cores (docs/figures.md). A record is packed
 in one C call and read in one, and a float64 keeps every value to the bit, as ``repr`` did.
 """
