@@ -47,7 +47,7 @@ M = mavlink
 BOX_PLAN = ROOT / "examples" / "box.plan"
 
 MAVSDK_SCRIPT = r"""
-import json, sys, time
+import json, sys, threading, time
 from mavsdk import Mavsdk, Configuration, ComponentType
 from mavsdk.plugins.mission_raw import MissionRaw
 from mavsdk.plugins.action import Action
@@ -62,8 +62,21 @@ out["items"] = len(items)
 out["upload"] = mr.upload_mission(items).name
 progress = []
 mr.subscribe_mission_progress(lambda p, _ud: progress.append([p.current, p.total]))
-out["start"] = mr.start_mission().name  # PX4: AUTO.MISSION (DO_SET_MODE); then arm
-out["arm"] = Action(system).arm().name
+# AUTO.MISSION (DO_SET_MODE), and the arm sent at once behind it: MAVSDK's Action.arm switches a PX4 to HOLD
+# first when its last HEARTBEAT showed AUTO.MISSION (ActionImpl::need_hold_before_arm), and the arm then arms in
+# HOLD, on PX4 as here; sent one after the other, whether it had seen it was a race with the 1 Hz HEARTBEAT
+answers, both = {}, threading.Event()
+def answered(name):
+    def callback(result, _ud):
+        answers[name] = result.name
+        if len(answers) == 2:
+            both.set()
+    return callback
+action = Action(system)
+mr.start_mission_async(answered("start"))
+action.arm_async(answered("arm"))
+both.wait(30.0)
+out["start"], out["arm"] = answers.get("start"), answers.get("arm")
 deadline = time.monotonic() + float(sys.argv[3])
 while time.monotonic() < deadline and not mr.is_mission_finished() and [len(items)] * 2 not in progress:
     time.sleep(0.1)
