@@ -203,7 +203,8 @@ def test_a_resent_arm_that_finds_the_vehicle_armed_is_accepted_not_in_progress(t
     vehicle armed in OFFBOARD, is ACCEPTED and does nothing: it answered IN_PROGRESS and entered the up-link
     model, whose packet fates offline never drew, and its IN_PROGRESS overtook the ACCEPTED in the controller
     ("arming refused (MAV_RESULT 5)", a flight of tests/test_params.py under load). A guard's ask to arm
-    again (confirmation 0) still crosses the model as offline's does: IN_PROGRESS."""
+    again (confirmation 0) still crosses the model as offline's does: IN_PROGRESS, and its final ACCEPTED
+    once the model has delivered it and the vehicle acted on it (MAVLink's command protocol)."""
     with instance_slot() as n:
         v = _vehicle(n, tmp_path)
         ctl = _controller_link(n)
@@ -220,6 +221,10 @@ def test_a_resent_arm_that_finds_the_vehicle_armed_is_accepted_not_in_progress(t
             assert _ack(ctl, arm).result == M.MAV_RESULT_ACCEPTED
             ctl.mav.command_long_send(sysid, 1, arm, 0, 1, 0, 0, 0, 0, 0, 0)  # a guard's ask
             assert _ack(ctl, arm).result == M.MAV_RESULT_IN_PROGRESS
+            # step 0 answered: the vehicle steps, the model delivers the arm, and its final answer follows
+            ctl.mav.set_actuator_control_target_send(0, 0, sysid, 1, HOVER_WIRE)
+            final = _ack(ctl, arm)
+            assert (final.result, final.target_system, final.target_component) == (M.MAV_RESULT_ACCEPTED, 200, 191)
             ctl.mav.command_long_send(sysid, 1, arm, 0, 0, 21196, 0, 0, 0, 0, 0)
             assert _ack(ctl, arm).result == M.MAV_RESULT_ACCEPTED
         finally:

@@ -47,7 +47,10 @@ class CommandMsg:
 
 @dataclass(frozen=True, slots=True)
 class ArmMsg:
-    """COMMAND_LONG ARM_DISARM(1) as it travels up."""
+    """COMMAND_LONG ARM_DISARM(1) as it travels up; ``acted``: called once it has been acted on (the MAVLink
+    vehicle's final COMMAND_ACK after its IN_PROGRESS), None offline."""
+
+    acted: Callable[[], None] | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -83,9 +86,10 @@ class VehicleEnd:
         """The controller's actuator target crossed the socket at step time t (s)."""
         self.up.send(t, self.frame_bytes, CommandMsg(c, state_t))
 
-    def receive_arm(self, t: float) -> None:
-        """An arm request crossed the socket at step time t (s)."""
-        self.up.send(t, FRAME_BYTES["COMMAND_LONG"], ArmMsg())
+    def receive_arm(self, t: float, acted: Callable[[], None] | None = None) -> None:
+        """An arm request crossed the socket at step time t (s); ``acted`` is called once the model delivers it
+        and the vehicle has acted on it (never, if the model loses it)."""
+        self.up.send(t, FRAME_BYTES["COMMAND_LONG"], ArmMsg(acted))
 
     def deliver(self, t: float) -> None:
         """Apply what the link delivers by plant time t (s)."""
@@ -93,6 +97,8 @@ class VehicleEnd:
             msg = d.payload
             if isinstance(msg, ArmMsg):
                 self.vehicle.arm()
+                if msg.acted is not None:
+                    msg.acted()
             elif d.sent_t <= self.newest_sent_t:
                 why = "duplicate" if d.sent_t == self.newest_sent_t else "out_of_order"
                 self.rejected[why] = self.rejected.get(why, 0) + 1

@@ -52,7 +52,8 @@ class CommanderPorts:
     step: Callable[[], int]  # the current control step k
     state_out: Callable[[float], None]  # send step k's state at wall time now (s): lockstep awaits its answer
     new_flight: Callable[[bool], None]  # a new flight is armed (True: by a ground station)
-    arm_through_link: Callable[[], None]  # the controller's arm enters the up-link model now (lockstep)
+    # the controller's arm enters the up-link model now (lockstep); the callable: when it has been acted on
+    arm_through_link: Callable[[Callable[[], None]], None]
     target_wall: Callable[[], float]  # wall time (s) of the newest actuator target from the controller
     message: Callable[[int], list[Any]]  # the message(s) of an id, as a stream sends them
     reject: Callable[[str], None]  # count a refusal (bridge.mavlink.receive.Rejections)
@@ -61,6 +62,25 @@ class CommanderPorts:
     # (the controller, and what it reports) never speaks of it before the vehicle did
     announce: Callable[[], None] = lambda: None
     missions: MissionManager | None = None  # a ground station's mission start and AUTO.MISSION (await_mission)
+
+
+class FinalAck:
+    """The final COMMAND_ACK of a controller's arm answered IN_PROGRESS (lockstep: it crossed the up-link model),
+    sent to its sender once the vehicle has acted on it, as MAVLink's command protocol asks after IN_PROGRESS:
+    ACCEPTED if it is armed in OFFBOARD then, else FAILED. An arm the model loses gets none, as a command lost
+    on a real link does."""
+
+    def __init__(self, command: int, sysid: int, compid: int, sim: SimVehicle) -> None:
+        self.command, self.sysid, self.compid, self.sim = command, sysid, compid, sim
+        self.reply_to: tuple[Endpoint, tuple[str, int]] | None = None  # set once its IN_PROGRESS went out
+
+    def __call__(self) -> None:
+        if self.reply_to is None:
+            return
+        ep, addr = self.reply_to
+        ok = self.sim.armed and self.sim.mode == OFFBOARD
+        ep.send(mavlink.MAVLink_command_ack_message(self.command, mavlink.MAV_RESULT_ACCEPTED if ok else
+                                                    mavlink.MAV_RESULT_FAILED, 0, 0, self.sysid, self.compid), addr)
 
 
 class Commander:
@@ -79,6 +99,7 @@ class Commander:
         self.ports = ports
         self.texts: list[Any] = []  # STATUSTEXTs saying why a command was refused: sent after its COMMAND_ACK
         self.plant_at_end: dict[str, Any] | None = None  # the plant's summary blocks when the mission ended
+        self._acted: FinalAck | None = None  # the final answer of the last arm answered IN_PROGRESS
 
     # -- the messages ---------------------------------------------------------------------------------
     def command(self, ep: Endpoint, m: Any, addr: tuple[str, int], link: str) -> bool:
@@ -93,7 +114,10 @@ class Commander:
             return False
         by = self.authority.sender(m, addr, link)
         n0 = len(self.sim.events)
+        self._acted = None
         result, follow = self._run_command(m, by)
+        if result == mavlink.MAV_RESULT_IN_PROGRESS and self._acted is not None:
+            self._acted.reply_to = (ep, addr)
         attribute(self.sim.events, n0, by)
         self.ports.announce()
         ack = mavlink.MAVLink_command_ack_message(m.command, result, 0, 0, m.get_srcSystem(), m.get_srcComponent())
@@ -135,7 +159,8 @@ class Commander:
                     # Through the link model it would take a packet's fate offline never drew (and its
                     # IN_PROGRESS overtook the ACCEPTED: "arming refused (MAV_RESULT 5)")
                     return mavlink.MAV_RESULT_ACCEPTED, ()
-                self.ports.arm_through_link()  # acts when the model delivers it, as offline
+                self._acted = FinalAck(m.command, m.get_srcSystem(), m.get_srcComponent(), self.sim)
+                self.ports.arm_through_link(self._acted)  # acts when the model delivers it, as offline
                 return mavlink.MAV_RESULT_IN_PROGRESS, ()
             return self.arm_disarm(m.param1, m.param2, by), ()
         if cmd in _STREAM_COMMANDS:

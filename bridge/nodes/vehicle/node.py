@@ -116,7 +116,7 @@ class Vehicle:
         self.announcer = Announcer(self.sim, self.authority, self.link, self.endpoints, self._report,
                                    self._statustext, self._heartbeat)
         ports = CommanderPorts(step=lambda: self.k, state_out=self._send_odometry, new_flight=self._new_flight,
-                               arm_through_link=lambda: self.vend.receive_arm(self.t),
+                               arm_through_link=lambda acted: self.vend.receive_arm(self.t, acted),
                                target_wall=lambda: self.targets.wall, message=self._message,
                                reject=self._reject, refused=self._refused, announce=self.announcer.report_events,
                                missions=self.missions)
