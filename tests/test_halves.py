@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from bridge.record.columns import CONTROLLER_COLUMNS, ControllerRow
-from bridge.record.halves import HalfReader, HalfWriter, count_records, header_line, last_record, read_half
+from bridge.record.halves import HalfReader, HalfWriter, count_records, header_line, read_half
 
 
 def _values(rng: random.Random) -> list[float]:
@@ -44,18 +44,18 @@ def test_a_record_cut_short_is_read_when_it_is_whole(tmp_path: Path) -> None:
     record = np.arange(len(CONTROLLER_COLUMNS), dtype="<f8").tobytes()
     head = header_line(CONTROLLER_COLUMNS)
     reader = HalfReader(path, ControllerRow)
-    assert reader.read() == [] and last_record(path, ControllerRow) is None  # no file yet
+    assert reader.read() == [] and reader.last() is None  # no file yet
     with open(path, "wb", buffering=0) as f:
         f.write(head[:10])
         assert reader.read() == [] and count_records(path) == 0
         f.write(head[10:] + record + record[:13])
         assert [r.k for r in reader.read()] == [0.0]
         assert count_records(path) == 1 and len(read_half(path)["k"]) == 1
-        assert last_record(path, ControllerRow).k == 0.0  # the whole one, not the one cut short
+        assert reader.last().k == 0.0  # the whole one, not the one cut short
         f.write(record[13:] + (2 * np.arange(len(CONTROLLER_COLUMNS), dtype="<f8")).tobytes())
         assert [r.t for r in reader.read()] == [1.0, 2.0]
         assert reader.read() == []
-        assert last_record(path, ControllerRow).t == 2.0
+        assert reader.last().t == 2.0
     reader.close()
 
 

@@ -52,23 +52,23 @@ def parse_header(line: bytes, where: str) -> tuple[str, ...]:
 
 
 class HalfWriter(LineWriter):
-    """Appends records to a half, in batches of ``batch`` records, one write each (``batch=1``: each at once)."""
+    """Appends records to a half, in batches of ``batch`` records, one write each (``batch=1``: each at once):
+    a :class:`LineWriter` whose pending lines are packed records."""
 
     def __init__(self, path: str | Path, columns: Sequence[str], batch: int = 100) -> None:
         super().__init__(path, header_line(columns).decode().rstrip("\n"), batch)
         self._pack = struct.Struct(f"<{len(columns)}d").pack
-        self._records: list[bytes] = []
 
     def write(self, values: Sequence[float]) -> None:  # type: ignore[override]  # a record, not a line
         """One record: exactly one value per column (``struct.error`` otherwise: a writer's bug)."""
-        self._records.append(self._pack(*values))
-        if len(self._records) >= self._batch:
+        self._pending.append(self._pack(*values))  # type: ignore[arg-type]  # bytes here
+        if len(self._pending) >= self._batch:
             self.flush()
 
     def flush(self) -> None:
-        if self._records and self._fd >= 0:
-            os.write(self._fd, b"".join(self._records))
-            self._records.clear()
+        if self._pending and self._fd >= 0:
+            os.write(self._fd, b"".join(self._pending))  # type: ignore[arg-type]
+            self._pending.clear()
 
 
 class HalfReader:
@@ -82,7 +82,8 @@ class HalfReader:
         self._fd = -1
         self._buf = b""
         self._unpack: Any = None
-        self._size = 0
+        self._size = 0  # bytes a record
+        self._head = 0  # bytes of the header line
         self._pick: list[int] | None = None  # the header's positions of row_type's fields (None: the same order)
 
     def read(self) -> list[Any]:
@@ -103,15 +104,28 @@ class HalfReader:
                 self._buf = buf
                 return []
             self._start(parse_header(buf[:end], str(self.path)))
+            self._head = end + 1
             buf = buf[end + 1:]
         whole = len(buf) - len(buf) % self._size
         self._buf = buf[whole:]
         if not whole:
             return []
-        new, make, pick = tuple.__new__, self.row_type, self._pick
-        if pick is None:
-            return [new(make, v) for v in self._unpack(buf[:whole])]
-        return [new(make, [v[i] for i in pick]) for v in self._unpack(buf[:whole])]
+        return [self._row(v) for v in self._unpack(buf[:whole])]
+
+    def last(self) -> Any | None:
+        """The newest whole record in the file now, as a row, without moving :meth:`read` on (None: its header
+        not read yet, or no record): a look at a flight in progress, one ``pread``."""
+        if self.columns is None:
+            return None
+        n = (os.fstat(self._fd).st_size - self._head) // self._size
+        if n <= 0:
+            return None
+        return self._row(struct.unpack(f"<{len(self.columns)}d",
+                                       os.pread(self._fd, self._size, self._head + (n - 1) * self._size)))
+
+    def _row(self, values: tuple[float, ...]) -> Any:
+        pick = self._pick
+        return tuple.__new__(self.row_type, values if pick is None else [values[i] for i in pick])
 
     def _start(self, columns: tuple[str, ...]) -> None:
         self.columns = columns
@@ -160,22 +174,3 @@ def count_records(path: str | Path) -> int:
         return 0
     return (size - len(head)) // (8 * len(parse_header(head[:-1], str(path))))
 
-
-def last_record(path: str | Path, row_type: Any) -> Any | None:
-    """The newest whole record of a half as a ``row_type`` row, read alone (None: no record yet); for a look at a
-    flight in progress without reading all of it."""
-    try:
-        with open(path, "rb") as f:
-            head = f.readline(_MAX_HEADER)
-            if not head.endswith(b"\n"):
-                return None
-            columns = parse_header(head[:-1], str(path))
-            size = 8 * len(columns)
-            n = (os.fstat(f.fileno()).st_size - len(head)) // size
-            if n <= 0:
-                return None
-            values = struct.unpack(f"<{len(columns)}d", os.pread(f.fileno(), size, len(head) + (n - 1) * size))
-    except FileNotFoundError:
-        return None
-    where = column_index(columns, row_type._fields, str(path))
-    return row_type._make(values[where[c]] for c in row_type._fields)

@@ -35,7 +35,7 @@ from bridge.record.columns import (
     trace_row,
 )
 from bridge.record.ending import END_MODE_CODES
-from bridge.record.halves import HalfReader, last_record, read_half
+from bridge.record.halves import HalfReader, read_half
 from bridge.record.runlog import TraceWriter
 
 # groups of columns of a half, by name
@@ -204,7 +204,7 @@ class TraceJoiner:
         """(t s, 3-D position error m) of the newest step flown, for a progress line: the last joined row, or,
         while the controller flies a flight not joined ``live`` (rows joined at the end), the vehicle's newest
         record; None before the flight's time 0 and after the mission's last step."""
-        v = last_record(self.v.path, VehicleRow) if not self.live and not self.controller_done else None
+        v = self.v.last() if not self.live and not self.controller_done else None
         if v is not None:
             if self.k0 is None or not 0 <= int(v.k) - self.k0 < self.steps:
                 return None  # before the flight's time 0, or flying the end action after the mission

@@ -70,17 +70,15 @@ class FinalAck:
     ACCEPTED if it is armed in OFFBOARD then, else FAILED. An arm the model loses gets none, as a command lost
     on a real link does."""
 
-    def __init__(self, command: int, sysid: int, compid: int, sim: SimVehicle) -> None:
-        self.command, self.sysid, self.compid, self.sim = command, sysid, compid, sim
-        self.reply_to: tuple[Endpoint, tuple[str, int]] | None = None  # set once its IN_PROGRESS went out
+    def __init__(self, m: Any, ep: Endpoint, addr: tuple[str, int], sim: SimVehicle) -> None:
+        self.command, self.sysid, self.compid = m.command, m.get_srcSystem(), m.get_srcComponent()
+        self.ep, self.addr, self.sim = ep, addr, sim
 
     def __call__(self) -> None:
-        if self.reply_to is None:
-            return
-        ep, addr = self.reply_to
         ok = self.sim.armed and self.sim.mode == OFFBOARD
-        ep.send(mavlink.MAVLink_command_ack_message(self.command, mavlink.MAV_RESULT_ACCEPTED if ok else
-                                                    mavlink.MAV_RESULT_FAILED, 0, 0, self.sysid, self.compid), addr)
+        result = mavlink.MAV_RESULT_ACCEPTED if ok else mavlink.MAV_RESULT_FAILED
+        self.ep.send(mavlink.MAVLink_command_ack_message(self.command, result, 0, 0, self.sysid, self.compid),
+                     self.addr)
 
 
 class Commander:
@@ -99,7 +97,6 @@ class Commander:
         self.ports = ports
         self.texts: list[Any] = []  # STATUSTEXTs saying why a command was refused: sent after its COMMAND_ACK
         self.plant_at_end: dict[str, Any] | None = None  # the plant's summary blocks when the mission ended
-        self._acted: FinalAck | None = None  # the final answer of the last arm answered IN_PROGRESS
 
     # -- the messages ---------------------------------------------------------------------------------
     def command(self, ep: Endpoint, m: Any, addr: tuple[str, int], link: str) -> bool:
@@ -114,10 +111,7 @@ class Commander:
             return False
         by = self.authority.sender(m, addr, link)
         n0 = len(self.sim.events)
-        self._acted = None
-        result, follow = self._run_command(m, by)
-        if result == mavlink.MAV_RESULT_IN_PROGRESS and self._acted is not None:
-            self._acted.reply_to = (ep, addr)
+        result, follow = self._run_command(m, by, ep, addr)
         attribute(self.sim.events, n0, by)
         self.ports.announce()
         ack = mavlink.MAVLink_command_ack_message(m.command, result, 0, 0, m.get_srcSystem(), m.get_srcComponent())
@@ -143,8 +137,9 @@ class Commander:
         self.texts.clear()
         return True
 
-    def _run_command(self, m: Any, by: Sender) -> Result:
-        """Act on a command whose sender has authority: (MAV_RESULT, the messages it asked for)."""
+    def _run_command(self, m: Any, by: Sender, ep: Endpoint, addr: tuple[str, int]) -> Result:
+        """Act on a command whose sender has authority (``ep``, ``addr``: where its answers go): (MAV_RESULT, the
+        messages it asked for)."""
         cmd = m.command
         if cmd == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
             args = arm_disarm_args(m.param1, m.param2)
@@ -159,8 +154,8 @@ class Commander:
                     # Through the link model it would take a packet's fate offline never drew (and its
                     # IN_PROGRESS overtook the ACCEPTED: "arming refused (MAV_RESULT 5)")
                     return mavlink.MAV_RESULT_ACCEPTED, ()
-                self._acted = FinalAck(m.command, m.get_srcSystem(), m.get_srcComponent(), self.sim)
-                self.ports.arm_through_link(self._acted)  # acts when the model delivers it, as offline
+                # acts when the model delivers it, as offline; then its final answer
+                self.ports.arm_through_link(FinalAck(m, ep, addr, self.sim))
                 return mavlink.MAV_RESULT_IN_PROGRESS, ()
             return self.arm_disarm(m.param1, m.param2, by), ()
         if cmd in _STREAM_COMMANDS:
