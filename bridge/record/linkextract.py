@@ -206,8 +206,9 @@ def _half_rows(path: Path, names: Sequence[str]) -> list[dict[str, float]]:
 
 def extract_halves(vehicle_half: Path, controller_half: Path) -> Extraction:
     """Both directions from each side's half of the trace (one host's monotonic clock). Approximate:
-    a state or command is known by its step k, so a command superseded within one control period
-    counts as lost, and a tick that reuses a state sends a command with the same k (the first counts)."""
+    a state or command is known by its step k, so one superseded within one of its reader's ticks (two
+    arrived in one period) counts as lost, and a tick that reuses a state sends a command with the same k
+    (the first counts)."""
     v = _half_rows(vehicle_half, ("k", "odo_sent_wall", "cmd_k", "cmd_recv_wall"))
     c = _half_rows(controller_half, ("k", "odo_recv_wall", "cmd_sent_wall"))
     if not v or not c:
@@ -232,8 +233,8 @@ def extract_halves(vehicle_half: Path, controller_half: Path) -> Extraction:
     origin = state_sent.get(k0, min(t for t, _ in down.records))
     for d in (up, down):
         d.records = [(t - origin, x) for t, x in d.records if t >= origin and math.isfinite(t)]
-    note = ("from vehicle.bin and controller.bin (no tlogs): approximate, by step number; a command superseded "
-            "within one control period counts as lost")
+    note = ("from vehicle.bin and controller.bin (no tlogs): approximate, by step number; a state or command "
+            "superseded within one of its reader's ticks counts as lost")
     return Extraction(up, down, "the flight's time 0 (the first state the controller answered left the vehicle)",
                       "same", 0.0, None, (str(vehicle_half), str(controller_half)), [note])
 
