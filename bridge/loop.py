@@ -33,7 +33,8 @@ from collections.abc import Generator
 from pathlib import Path
 from typing import Any
 
-from bridge.autopilot.simvehicle import FAILSAFE, LAND, LANDED, OFFBOARD, SimVehicle, typed_fields
+from bridge.autopilot.simvehicle import FAILSAFE, LAND, LANDED, OFFBOARD, SimVehicle
+from bridge.autopilot.vehicleevents import typed_fields
 from bridge.core.flight import Flight, Overrides, Progress, prepare
 from bridge.core.wire import command_over_wire, state_over_wire
 from bridge.link.ends import ControllerEnd, VehicleEnd

@@ -16,7 +16,7 @@ import math
 import numpy as np
 import pytest
 
-from bridge.autopilot.simvehicle import ITSELF, Sender
+from bridge.autopilot.vehicleevents import ITSELF, Sender
 from bridge.cli.commands import report_run
 from bridge.record.events import RunEvent
 from bridge.record.policies import (

@@ -10,8 +10,8 @@ import json
 
 import pytest
 
-from bridge.autopilot.simvehicle import ITSELF, ParamChanged, Sender
-from bridge.autopilot.simvehicle import Event as VehicleEvent
+from bridge.autopilot.vehicleevents import ITSELF, ParamChanged, Sender
+from bridge.autopilot.vehicleevents import Event as VehicleEvent
 from bridge.nodes.report import (
     Done,
     Event,

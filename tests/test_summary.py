@@ -12,7 +12,7 @@ import math
 
 import pytest
 
-from bridge.autopilot.simvehicle import ITSELF, Sender
+from bridge.autopilot.vehicleevents import ITSELF, Sender
 from bridge.core.flight import prepare
 from bridge.record.columns import (
     CONTROLLER_COLUMNS,

@@ -5,8 +5,8 @@ In:  normalised paper-frame commands (``wrench``: u / u_max; ``motors``: omega /
      faults and weather changes (:mod:`plant.events`, mission times s) acted on at the start of their period
 Out: what the vehicle publishes after each control period (:meth:`SimVehicle.published`: its
      on-board estimate of the state, eq. 7, NWU: m, m/s, rad, rad/s; the true state under the
-     ``truth`` estimator), the mode (offboard, failsafe, landed) and the events (:class:`Event`: t s, kind,
-     text, and who caused it, :class:`Sender`)
+     ``truth`` estimator), the mode (offboard, failsafe, landed) and the events
+     (:class:`~bridge.autopilot.vehicleevents.Event`: t s, kind, text, and who caused it)
 
 Shared by the in-process loop and the MAVLink vehicle so that both fly, time out and land
 the same way. Time advances in control periods of ``physics_hz / rate_hz`` physics steps;
@@ -28,7 +28,7 @@ the plant's state itself, read directly, so truth flights are the same to the bi
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -46,6 +46,7 @@ from bridge.autopilot.failsafe import (
     failsafe_target,
 )
 from bridge.autopilot.params import VehicleParams, change_param, read_param
+from bridge.autopilot.vehicleevents import Event, ParamChanged, Sender
 from controller.nominal import Nominal
 from plant import Quadrotor
 from plant.events import TimedEvent
@@ -62,103 +63,6 @@ TAKEOFF = "takeoff"
 RTL = "rtl"  # Return: home at RTL_RETURN_ALT, down to RTL_DESCEND_ALT, land (armed only, as PX4)
 GROUND_MODES = (HOLD, LAND, TAKEOFF, RTL)  # flown by the on-board controller, set by a ground station
 TAKEOFF_DONE_M = 0.1  # m from its height: a takeoff is done and the vehicle holds there (PX4: HOLD after TAKEOFF)
-
-
-@dataclass(frozen=True)
-class Sender:
-    """Who caused an event: the sysid and compid of a command's sender, the address (``host``,
-    ``port``) it came from and the link it came in on (``controller`` or ``gcs``); or the vehicle
-    itself (:data:`ITSELF`: its own disarm after a failsafe landing, a divergence), with no ids."""
-
-    sysid: int | None
-    compid: int | None
-    host: str | None
-    port: int | None
-    link: str
-
-    @property
-    def is_vehicle(self) -> bool:
-        """Whether the vehicle decided it itself (no command, no sender on any link)."""
-        return self.link == VEHICLE_LINK
-
-    def __str__(self) -> str:
-        """``SYSID:COMPID HOST:PORT LINK``, or ``vehicle``: as events.log and summary.json name it."""
-        if self.is_vehicle:
-            return VEHICLE_LINK
-        return f"{self.sysid}:{self.compid} {self.host}:{self.port} {self.link}"
-
-    @property
-    def addr(self) -> tuple[str, int]:
-        """(host, port) it sent from: where its answers go."""
-        return (str(self.host), int(self.port or 0))
-
-    @property
-    def suffix(self) -> str:
-        """`` [by ...]``: how a written event (events.log, summary.json) names its sender; never parsed back."""
-        return f" [by {self}]"
-
-    def as_dict(self) -> dict[str, int | str | None]:
-        return {"sysid": self.sysid, "compid": self.compid, "host": self.host, "port": self.port, "link": self.link}
-
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> Sender:
-        """The inverse of :meth:`as_dict`; ValueError (or KeyError, TypeError) for anything else."""
-        link = str(d["link"])
-        if link == VEHICLE_LINK:
-            return ITSELF
-        return cls(int(d["sysid"]), int(d["compid"]), str(d["host"]), int(d["port"]), link)
-
-
-VEHICLE_LINK = "vehicle"
-ITSELF = Sender(None, None, None, None, VEHICLE_LINK)  # the vehicle's own decision
-TYPED_FIELDS = ("param", "mode", "armed")  # an event's typed fields (:class:`Event`), as it travels
-
-
-def typed_fields(event: Any) -> dict[str, Any]:
-    """The typed fields of an event (this :class:`Event`, a report's, a run's: each carries them), by name."""
-    return {k: getattr(event, k) for k in TYPED_FIELDS}
-
-
-@dataclass(frozen=True)
-class ParamChanged:
-    """A parameter the vehicle changed: its PX4 ``name``, the value it had (``old``) and has (``new``), as
-    PARAM_VALUE reads them (an INT32's as a float)."""
-
-    name: str
-    old: float
-    new: float
-
-    def as_dict(self) -> dict[str, str | float]:
-        return {"name": self.name, "old": self.old, "new": self.new}
-
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> ParamChanged:
-        """The inverse of :meth:`as_dict`; ValueError (or KeyError, TypeError) for anything else."""
-        return cls(str(d["name"]), float(d["old"]), float(d["new"]))
-
-
-@dataclass
-class Event:
-    """Something the vehicle did (or was told to do) at plant time ``t`` (s): its ``kind``
-    (``armed``, ``disarmed``, ``mode``, ``failsafe``, ...), a human ``text``, and who caused it
-    (``by``; None: not said, e.g. offline, where only the flight's own controller commands).
-
-    What a reader judges by is in fields, never in the text: a ``param`` event's change (``param``:
-    name, old and new value); a ``mode`` event's ``mode`` (the mode it is in after, or will arm in)
-    and ``armed`` (it acted on an armed vehicle now; False: a selection for the next arm)."""
-
-    t: float
-    kind: str
-    text: str
-    by: Sender | None = None
-    param: ParamChanged | None = None
-    mode: str | None = None
-    armed: bool | None = None
-
-    @property
-    def shown(self) -> str:
-        """The text as written to events.log and summary.json: with its sender's `` [by ...]``."""
-        return self.text + (self.by.suffix if self.by is not None else "")
 
 
 @dataclass

@@ -8,7 +8,7 @@ The kinds, and their fields (times in s of the flight's clock, to the millisecon
 
 - ``ready``: the child is up, bound, its clock chosen (:class:`Ready`: which node, its addresses);
 - ``event``: something happened (:class:`Event`: ``t`` s, ``kind``, ``text``, ``by`` the
-  :class:`~bridge.autopilot.simvehicle.Sender` that caused it, as an object, or null; a vehicle's
+  :class:`~bridge.autopilot.vehicleevents.Sender` that caused it, as an object, or null; a vehicle's
   ``param`` event its change, ``param`` (``{name, old, new}``), a ``mode`` event its ``mode`` and ``armed``,
   else null);
 - ``statustext``: a STATUSTEXT the controller received (:class:`StatusText`: MAV_SEVERITY, text);
@@ -32,8 +32,8 @@ from dataclasses import dataclass, field, fields
 from enum import StrEnum
 from typing import Any
 
-from bridge.autopilot.simvehicle import Event as VehicleEvent
-from bridge.autopilot.simvehicle import ParamChanged, Sender, typed_fields
+from bridge.autopilot.vehicleevents import Event as VehicleEvent
+from bridge.autopilot.vehicleevents import ParamChanged, Sender, typed_fields
 
 
 class Kind(StrEnum):
@@ -88,7 +88,7 @@ class Ready:
 @dataclass(frozen=True)
 class Event:
     """An event at ``t`` (s, to the millisecond: :meth:`at`) of ``kind``, its ``text``, who caused it, and
-    the typed fields of the vehicle's events (:class:`bridge.autopilot.simvehicle.Event`: a parameter
+    the typed fields of the vehicle's events (:class:`bridge.autopilot.vehicleevents.Event`: a parameter
     event's change, ``param``; a mode event's ``mode`` and ``armed``). ``answers``: a controller's event said in
     answer to the vehicle's own events of these kinds (its arming, its end action, its crash): the session never
     puts it before its cause, whatever the two clocks say (:meth:`bridge.session.session.Session._handle`)."""

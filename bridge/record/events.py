@@ -2,8 +2,8 @@
 
 In:  an event's time (s, the flight's clock), kind, text, who reported it (``source``: in a session the
      vehicle, the controller, the relay or the session; offline none), who caused it (``by``, a
-     :class:`~bridge.autopilot.simvehicle.Sender`, or None) and a parameter event's change (``param``, a
-     :class:`~bridge.autopilot.simvehicle.ParamChanged`: name, old and new value, or None)
+     :class:`~bridge.autopilot.vehicleevents.Sender`, or None) and a parameter event's change (``param``, a
+     :class:`~bridge.autopilot.vehicleevents.ParamChanged`: name, old and new value, or None)
 Out: :class:`RunEvent`; its dict for ``summary.json["events"]`` (:meth:`RunEvent.as_dict`: ``t`` s rounded
      to 1 us or null, ``kind``, ``text`` with the sender shown as `` [by ...]``, ``source`` when there is one,
      ``param`` (``{name, old, new}``), ``mode`` and ``armed`` when the event has them)
@@ -19,7 +19,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from bridge.autopilot.simvehicle import ParamChanged, Sender, typed_fields
+from bridge.autopilot.vehicleevents import ParamChanged, Sender, typed_fields
 
 
 @dataclass(frozen=True)
@@ -31,7 +31,7 @@ class RunEvent:
     text: str
     source: str | None = None
     by: Sender | None = None
-    param: ParamChanged | None = None  # the typed fields of the vehicle's events (bridge.autopilot.simvehicle.Event)
+    param: ParamChanged | None = None  # the typed fields of the vehicle's events (bridge.autopilot.vehicleevents.Event)
     mode: str | None = None
     armed: bool | None = None
 

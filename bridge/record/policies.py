@@ -56,7 +56,8 @@ from typing import Any
 
 import numpy as np
 
-from bridge.autopilot.simvehicle import OFFBOARD, Sender
+from bridge.autopilot.simvehicle import OFFBOARD
+from bridge.autopilot.vehicleevents import Sender
 from bridge.record.events import RunEvent
 
 POLICIES: dict[str, str] = {

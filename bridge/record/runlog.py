@@ -22,7 +22,7 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from bridge.autopilot.simvehicle import Sender
+from bridge.autopilot.vehicleevents import Sender
 from bridge.link.model import link_from_table
 from bridge.record.columns import TRACE_COLUMNS
 from missions import Mission

@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from bridge.autopilot.failsafe import return_time_s
-from bridge.autopilot.simvehicle import Sender, typed_fields
+from bridge.autopilot.vehicleevents import Sender, typed_fields
 from bridge.core.flight import Flight, Progress, prepare
 from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, LINK_PORT
 from bridge.nodes.report import Event, MissionLoaded, Ready, Report

@@ -18,7 +18,7 @@ parameters, flight modes (OFFBOARD, HOLD, LAND, TAKEOFF, RTL, in PX4's encoding:
 and what a ground station can do with them: docs/ground-station.md. Who may
 do what on which link: docs/design.md, "Authority" (:mod:`.authority`); every
 command's numbers are checked before use (:mod:`bridge.mavlink.receive`), and every command
-that changes the flight is an event naming its sender (its ``by``, a :class:`~bridge.autopilot.simvehicle.Sender`).
+that changes the flight is an event naming its sender (its ``by``, a :class:`~bridge.autopilot.vehicleevents.Sender`).
 
 It wraps :class:`bridge.autopilot.simvehicle.SimVehicle` (plant, arming, command timeout, failsafe:
 the same object the offline loop flies) with two UDP links:

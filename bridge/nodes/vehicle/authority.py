@@ -4,8 +4,8 @@ In:  a message that passed the frame stage (pymavlink), the address it came from
      its link (``controller`` or ``gcs``); the flight's controller address (learned, or None) and
      whether a flight is on
 Out: why the message is refused for its sender (a :class:`~bridge.mavlink.receive.Rejections` reason)
-     or None; the :class:`~bridge.autopilot.simvehicle.Sender` of a command, set as the ``by`` field of
-     the events it caused (:data:`~bridge.autopilot.simvehicle.ITSELF`: the vehicle's own)
+     or None; the :class:`~bridge.autopilot.vehicleevents.Sender` of a command, set as the ``by`` field of
+     the events it caused (:data:`~bridge.autopilot.vehicleevents.ITSELF`: the vehicle's own)
 
 Only the configured controller (its sysid and compid) is heard on the controller link: with
 ``controller_from`` only from that address, else during a flight only from the flight's address. A
@@ -20,7 +20,7 @@ from __future__ import annotations
 import socket
 from typing import Any
 
-from bridge.autopilot.simvehicle import ITSELF, Event, Sender
+from bridge.autopilot.vehicleevents import ITSELF, Event, Sender
 from bridge.mavlink.receive import addressed_elsewhere
 from bridge.nodes.vehicle.config import VehicleConfig
 

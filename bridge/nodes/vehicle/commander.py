@@ -3,7 +3,7 @@
 In:  COMMAND_LONG / COMMAND_INT (COMPONENT_ARM_DISARM, DO_SET_MODE, NAV_TAKEOFF m AMSL, NAV_LAND, NAV_RETURN_TO_LAUNCH,
      MISSION_START (with ``await_mission``: :mod:`.mission`),
      SET/GET_MESSAGE_INTERVAL us, REQUEST_MESSAGE, REQUEST_AUTOPILOT_CAPABILITIES, GET_HOME_POSITION) and
-     SET_MODE from a sender with authority (:class:`~bridge.autopilot.simvehicle.Sender`); the plant's
+     SET_MODE from a sender with authority (:class:`~bridge.autopilot.vehicleevents.Sender`); the plant's
      divergence and the controller's silence (wall time, s)
 Out: COMMAND_ACK (with what a command asked for, and a STATUSTEXT saying why it was refused) in one
      datagram; the flight's changes (arm, disarm, mode) on the :class:`SimVehicle` as events naming their
@@ -26,7 +26,8 @@ from typing import Any
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.autopilot.params import BY_NAME
-from bridge.autopilot.simvehicle import GROUND_MODES, HOLD, LAND, OFFBOARD, RTL, TAKEOFF, Sender, SimVehicle
+from bridge.autopilot.simvehicle import GROUND_MODES, HOLD, LAND, OFFBOARD, RTL, TAKEOFF, SimVehicle
+from bridge.autopilot.vehicleevents import Sender
 from bridge.core.flight import event_problem
 from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import Endpoint

@@ -32,7 +32,8 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from bridge.autopilot.simvehicle import Sender, SimVehicle
+from bridge.autopilot.simvehicle import SimVehicle
+from bridge.autopilot.vehicleevents import Sender
 from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import Endpoint
 from bridge.mavlink.missionitems import MissionItem

@@ -29,7 +29,7 @@ from typing import Any, Protocol
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from bridge.autopilot.simvehicle import Sender
+from bridge.autopilot.vehicleevents import Sender
 from bridge.mavlink.endpoint import Endpoint
 from bridge.mavlink.missionitems import ItemRefused, MissionItem, TransferStats, item_message, parse_item
 
