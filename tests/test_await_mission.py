@@ -2,9 +2,10 @@
 
 Also the start of a ground station's mission in bridge.nodes.vehicle.mission and .commander,
 missions.planfiles.plan_text and summary.json's ``mission_transfer`` (bridge.record.summary). With real parts:
-MAVSDK (MissionRaw: import_qgroundcontrol_mission of examples/box.plan, upload, start_mission, progress;
-Action.arm) against ``bsst sitl --await-mission`` in lockstep, whose flight must be the file's (``bsst sitl
-examples/box.plan`` is offline's to the bit: tests/test_plan.py; here against offline, ≤ 1e-4 m); a pymavlink
+MAVSDK (MissionRaw: import_qgroundcontrol_mission of examples/box.plan, upload, progress; Action.arm, then
+MissionRaw.start_mission, its own order) against ``bsst sitl --await-mission`` in lockstep, whose flight must be
+the file's (``bsst sitl examples/box.plan`` is offline's to the bit: tests/test_plan.py; here against offline,
+≤ 1e-4 m); a pymavlink
 ground station that uploads a small plan and sends MAV_CMD_MISSION_START to a ``--realtime`` one and to a lossy
 lockstep one; a vehicle in this process answering MISSION_START and AUTO.MISSION. Every wait has a deadline.
 """
@@ -26,14 +27,18 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from bridge import simulate
 from bridge.autopilot.params import parse_change
+from bridge.autopilot.vehicleevents import Sender, typed_fields
 from bridge.core.flight import prepare
 from bridge.mavlink.endpoint import GCS_PORT, parse_address
 from bridge.mavlink.missionitems import MissionItem
 from bridge.nodes.report import Ready, parse_line
 from bridge.nodes.vehicle import Vehicle, VehicleConfig
-from bridge.nodes.vehicle.mission import START_ARM, START_COMMAND
+from bridge.nodes.vehicle.clock import ClockState
+from bridge.nodes.vehicle.mission import START_ARM, START_ARMED, START_COMMAND
 from bridge.nodes.vehicle.missionwatch import ItemWatch, goals_of
-from bridge.record.summary import mission_transfer
+from bridge.record.events import RunEvent
+from bridge.record.policies import ended_by_command
+from bridge.record.summary import interventions, mission_transfer
 from bridge.session import instance_slot
 from missions import Mission, Sine
 from missions.planfiles import plan_text, read_plan_text
@@ -47,7 +52,7 @@ M = mavlink
 BOX_PLAN = ROOT / "examples" / "box.plan"
 
 MAVSDK_SCRIPT = r"""
-import json, sys, threading, time
+import json, sys, time
 from mavsdk import Mavsdk, Configuration, ComponentType
 from mavsdk.plugins.mission_raw import MissionRaw
 from mavsdk.plugins.action import Action
@@ -62,21 +67,10 @@ out["items"] = len(items)
 out["upload"] = mr.upload_mission(items).name
 progress = []
 mr.subscribe_mission_progress(lambda p, _ud: progress.append([p.current, p.total]))
-# AUTO.MISSION (DO_SET_MODE), and the arm sent at once behind it: MAVSDK's Action.arm switches a PX4 to HOLD
-# first when its last HEARTBEAT showed AUTO.MISSION (ActionImpl::need_hold_before_arm), and the arm then arms in
-# HOLD, on PX4 as here; sent one after the other, whether it had seen it was a race with the 1 Hz HEARTBEAT
-answers, both = {}, threading.Event()
-def answered(name):
-    def callback(result, _ud):
-        answers[name] = result.name
-        if len(answers) == 2:
-            both.set()
-    return callback
-action = Action(system)
-mr.start_mission_async(answered("start"))
-action.arm_async(answered("arm"))
-both.wait(30.0)
-out["start"], out["arm"] = answers.get("start"), answers.get("arm")
+# MAVSDK's own order, as its mission examples fly a PX4: arm (in HOLD, on the ground), then start the mission
+# (AUTO.MISSION)
+out["arm"] = Action(system).arm().name
+out["start"] = mr.start_mission().name
 deadline = time.monotonic() + float(sys.argv[3])
 while time.monotonic() < deadline and not mr.is_mission_finished() and [len(items)] * 2 not in progress:
     time.sleep(0.1)
@@ -109,7 +103,8 @@ def _trace(path: Path) -> list[tuple[float, float, float, float]]:
 
 def test_mavsdk_flies_a_plan_file_through_await_mission_as_the_file_flies(tmp_path):
     """MAVSDK imports a QGroundControl plan (examples/box.plan cut to an L: takeoff, speed change, waypoint,
-    pass-through corner, land; tests/plans.py), uploads it, starts it (AUTO.MISSION, arm): the controller
+    pass-through corner, land; tests/plans.py), uploads it, arms (HOLD) and starts it (AUTO.MISSION), MAVSDK's
+    own order: the controller
     downloads the 5 items over its link and flies them; the flight is the file's (offline, to ≤ 1e-4 m, as many
     rows), landed and disarmed; MISSION_ITEM_REACHED says every item in order on the GCS link, MISSION_CURRENT
     follows to the last, the vehicle shows AUTO.MISSION while it flies; the run keeps mission.plan (the same
@@ -135,7 +130,8 @@ def test_mavsdk_flies_a_plan_file_through_await_mission_as_the_file_flies(tmp_pa
     assert summary["outcome"] == "completed" and summary["end"]["disarmed"], summary["ended_by"]
     t = summary["mission_transfer"]
     assert (t["items"], t["result"]) == (5, "accepted") and t["attempts"] == 6 + t["re_requests"], t
-    assert t["started_by"]["command"] == START_ARM and t["started_by"]["by"].endswith(" gcs"), t  # MAVSDK's ids
+    assert t["started_by"]["command"] == START_ARMED and t["started_by"]["by"].endswith(" gcs"), t  # MAVSDK's ids
+    assert summary["interventions"] == [] and summary["lockstep"]["held"], summary["lockstep"]  # the arm: the start's
     offline = simulate(plan, plots=False)
     flown = _trace(out / "trace.csv")
     assert len(flown) == len(offline.trace["t"])
@@ -503,6 +499,69 @@ def test_another_mode_selected_after_auto_mission_wins_until_the_mission_starts(
                 assert v.missions.start_requested and not v.sim.armed
                 assert exchange(v, mode(4, 3), "COMMAND_ACK").result == M.MAV_RESULT_DENIED
                 assert v.missions.start_requested and v._heartbeat().custom_mode == (4 << 16) | (4 << 24)
+    finally:
+        for v in made:
+            v.close()
+        gcs.close()
+
+
+def test_an_arm_in_hold_on_the_ground_then_auto_mission_starts_the_mission_and_times_out_alone():
+    """MAVSDK's own order, as PX4 flies it: the vehicle awaiting a mission waits in HOLD (PX4 without sticks), a
+    ground station's arm arms it there on the ground (lockstep: time stands still, the clock idle), and AUTO.MISSION
+    then starts the mission (started_by ``arm, then AUTO.MISSION``; AUTO.MISSION shows, armed; MISSION_CURRENT
+    ACTIVE; another mode then DENIED); the controller's arm takes the vehicle from HOLD to OFFBOARD and the lockstep
+    flight begins, item 0 current. Neither the arm nor its HOLD is an intervention or ends the flight. Armed and
+    never started, it disarms itself after COM_DISARM_PRFLT (set to 0.2 s by PARAM_SET), clock still idle."""
+    gcs = GcsSocket()
+    flight = prepare(Mission(Sine(), duration_s=5.0, name="start"))
+    exchange, made = gcs.exchange, []
+
+    def command(cmd: int, *params: float) -> Any:
+        return M.MAVLink_command_long_message(1, 1, cmd, 0, *params, *[0.0] * (7 - len(params)))
+
+    def vehicle_with_mission() -> Vehicle:
+        v = Vehicle(flight, VehicleConfig(parse_address("udpin:127.0.0.1:0"), parse_address(gcs.url),
+                                          await_mission=True))
+        made.append(v)
+        exchange(v, M.MAVLink_mission_count_message(1, 1, 3, 0), "MISSION_REQUEST_INT")
+        items = _small_plan_items(target=(1, 1))
+        for it in items[:2]:
+            exchange(v, it, "MISSION_REQUEST_INT")
+        assert exchange(v, items[2], "MISSION_ACK").type == M.MAV_MISSION_ACCEPTED
+        return v
+
+    hold, mission = (4 << 16) | (3 << 24), (4 << 16) | (4 << 24)
+    arm = command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+    try:
+        v = vehicle_with_mission()
+        assert v._heartbeat().custom_mode == hold and not v.sim.armed  # waits in HOLD, disarmed
+        assert exchange(v, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
+        assert v.sim.armed and v.sim.mode == "hold" and v.clock.state is ClockState.IDLE
+        assert v._heartbeat().custom_mode == hold and v.commander.pre_start_at is not None
+        assert exchange(v, command(M.MAV_CMD_DO_SET_MODE, 1, 4, 4), "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
+        assert v.missions.started is not None and v.missions.started["command"] == START_ARMED
+        beat = v._heartbeat()
+        assert beat.custom_mode == mission and beat.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED
+        ask = command(M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_MISSION_CURRENT)
+        assert exchange(v, ask, "MISSION_CURRENT").mission_state == M.MISSION_STATE_ACTIVE
+        assert exchange(v, command(M.MAV_CMD_NAV_LAND), "COMMAND_ACK").result == M.MAV_RESULT_DENIED  # starting
+        assert v.commander.pre_start_at is None and v.clock.state is ClockState.IDLE
+        controller = Sender(200, 191, "127.0.0.1", 1, "controller")
+        assert v.commander.arm_disarm(1.0, 0.0, controller) == M.MAV_RESULT_ACCEPTED  # the controller's arm
+        assert v.sim.mode == "offboard" and v.clock.engaged and v.missions.watch is not None
+        assert v.missions.mission.current == 0 and v._heartbeat().custom_mode == mission
+        events = [RunEvent.at(e.t, e.kind, e.text, "vehicle", e.by, **typed_fields(e)) for e in v.sim.events]
+        assert [e.kind for e in events if e.pre_start] == ["armed", "mode"]  # the arm in HOLD, its HOLD
+        assert interventions(events, 250.0) == [] and ended_by_command(events) is None
+        # armed and never started: the vehicle disarms itself after COM_DISARM_PRFLT
+        w = vehicle_with_mission()
+        set_param = M.MAVLink_param_set_message(1, 1, b"COM_DISARM_PRFLT", 0.2, M.MAV_PARAM_TYPE_REAL32)
+        assert exchange(w, set_param, "PARAM_VALUE").param_value == pytest.approx(0.2)
+        assert exchange(w, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED and w.sim.armed
+        wait_for(lambda: w._housekeeping() or not w.sim.armed, 5.0, "the vehicle's pre-takeoff disarm")
+        last = w.sim.events[-1]
+        assert last.kind == "disarmed" and last.pre_start and "COM_DISARM_PRFLT = 0.2 s" in last.text
+        assert w.clock.state is ClockState.IDLE and w.commander.pre_start_at is None
     finally:
         for v in made:
             v.close()

@@ -37,6 +37,7 @@ from params import ConfigError, Table
 
 REAL32 = "REAL32"
 INT32 = "INT32"
+PREFLIGHT_DISARM_RANGE_S = (-1.0, 600.0)  # COM_DISARM_PRFLT: PX4 gives no bounds; -1 (any value <= 0) is off
 TAKEOFF_ALT_RANGE_M = (0.5, 50.0)  # MIS_TAKEOFF_ALT: inside the plant's 100 m envelope; PX4: 0..80 m
 SYSID_RANGE = (1, 254)  # MAV_SYS_ID and --sysid (0 is broadcast, 255 a ground station's by custom)
 
@@ -50,6 +51,7 @@ class VehicleParams:
     sysid: int = 1
     failure_injection: int = 0  # SYS_FAILURE_EN: 1 acts on MAV_CMD_INJECT_FAILURE, 0 denies it (PX4's default)
     rtl: ReturnConfig = ReturnConfig()  # RTL_RETURN_ALT, RTL_DESCEND_ALT: Return mode's heights above home, m
+    preflight_disarm_s: float = 10.0  # COM_DISARM_PRFLT: armed on the ground, disarmed if not started by then (s)
 
 
 @dataclass(frozen=True)
@@ -99,6 +101,9 @@ PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("SYS_FAILURE_EN", INT32, "", 0, 1,
               "failure injection: 1 acts on a ground station's MAV_CMD_INJECT_FAILURE, 0 denies it (docs/weather.md)",
               choices={0: "disabled", 1: "enabled"}),
+    ParamSpec("COM_DISARM_PRFLT", REAL32, "s", *PREFLIGHT_DISARM_RANGE_S,
+              "armed on the ground by a ground station and not started within this time, the vehicle disarms "
+              "itself (PX4's pre-takeoff timeout, default 10 s; 0 or less: never; docs/missions.md)"),
 )
 BY_NAME = {p.name: p for p in PARAMS}
 _RTL_FIELDS = {"RTL_RETURN_ALT": "return_alt_m", "RTL_DESCEND_ALT": "descend_alt_m"}  # -> ReturnConfig's field
@@ -117,6 +122,8 @@ def read_param(p: VehicleParams, name: str) -> float:
         return float(getattr(p.failsafe, spec.failsafe_key))
     if name == "SYS_FAILURE_EN":
         return float(p.failure_injection)
+    if name == "COM_DISARM_PRFLT":
+        return float(p.preflight_disarm_s)
     if name in _RTL_FIELDS:
         return float(getattr(p.rtl, _RTL_FIELDS[name]))
     return float(p.takeoff_alt_m if name == "MIS_TAKEOFF_ALT" else p.sysid)
@@ -186,6 +193,8 @@ def change_param(p: VehicleParams, name: str, value: float, running: bool = True
         return replace(p, takeoff_alt_m=float(value))
     if name == "SYS_FAILURE_EN":
         return replace(p, failure_injection=int(value))
+    if name == "COM_DISARM_PRFLT":
+        return replace(p, preflight_disarm_s=float(value))
     if name in _RTL_FIELDS:
         return replace(p, rtl=replace(p.rtl, **{_RTL_FIELDS[name]: float(value)}))
     return replace(p, sysid=int(value))

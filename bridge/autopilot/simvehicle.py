@@ -79,6 +79,7 @@ class SimVehicle:
     timeline: tuple[TimedEvent, ...] = ()  # faults and weather changes (plant/events.py), in time order
     failure_injection: int = 0  # SYS_FAILURE_EN: a ground station's MAV_CMD_INJECT_FAILURE is acted on (1) or not
     rtl: ReturnConfig = field(default_factory=ReturnConfig)  # Return mode's heights (RTL_RETURN_ALT, RTL_DESCEND_ALT)
+    preflight_disarm_s: float = 10.0  # COM_DISARM_PRFLT (s): a ground station's arm on the ground times out
 
     def __post_init__(self) -> None:
         if self.estimator is None:
@@ -143,11 +144,11 @@ class SimVehicle:
         if wind is not None:
             wind.gusts = [replace(g, t_s=g.t_s + t0) for g in wind.gusts]
 
-    def arm(self) -> None:
+    def arm(self, from_hold: bool = False) -> None:
         """Arm and take offboard commands (from failsafe or landed too). Not while armed in a mode a
         ground station chose (HOLD, LAND, TAKEOFF): the vehicle is the ground station's until it
-        selects OFFBOARD again (:meth:`set_mode`)."""
-        if self.armed and self.mode in GROUND_MODES:
+        selects OFFBOARD again (:meth:`set_mode`), or (``from_hold``) it started a mission armed in HOLD."""
+        if self.armed and self.mode in GROUND_MODES and not from_hold:
             return
         if not self.armed or self.mode != OFFBOARD:
             self.armed = True
@@ -243,7 +244,8 @@ class SimVehicle:
 
     def params(self, sysid: int = 1) -> VehicleParams:
         """The settings the parameters read (:mod:`bridge.autopilot.params`), as they are now."""
-        return VehicleParams(self.failsafe, self.takeoff_alt_m, sysid, self.failure_injection, self.rtl)
+        return VehicleParams(self.failsafe, self.takeoff_alt_m, sysid, self.failure_injection, self.rtl,
+                             self.preflight_disarm_s)
 
     def change_param(self, name: str, value: float, sysid: int = 1) -> Event | None:
         """Set parameter ``name`` (PX4's name, :mod:`bridge.autopilot.params`) to ``value``, checked
@@ -256,6 +258,7 @@ class SimVehicle:
             return None
         self.failsafe, self.takeoff_alt_m = after.failsafe, after.takeoff_alt_m
         self.failure_injection, self.rtl = after.failure_injection, after.rtl
+        self.preflight_disarm_s = after.preflight_disarm_s
         old, new = read_param(before, name), read_param(after, name)
         return self.event("param", f"{name} = {new:g} (was {old:g})", param=ParamChanged(name, float(old), float(new)))
 

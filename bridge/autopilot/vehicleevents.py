@@ -60,7 +60,7 @@ class Sender:
 
 VEHICLE_LINK = "vehicle"
 ITSELF = Sender(None, None, None, None, VEHICLE_LINK)  # the vehicle's own decision
-TYPED_FIELDS = ("param", "mode", "armed")  # an event's typed fields (:class:`Event`), as it travels
+TYPED_FIELDS = ("param", "mode", "armed", "pre_start")  # an event's typed fields (:class:`Event`), as it travels
 
 
 def typed_fields(event: Any) -> dict[str, Any]:
@@ -94,7 +94,9 @@ class Event:
 
     What a reader judges by is in fields, never in the text: a ``param`` event's change (``param``:
     name, old and new value); a ``mode`` event's ``mode`` (the mode it is in after, or will arm in)
-    and ``armed`` (it acted on an armed vehicle now; False: a selection for the next arm)."""
+    and ``armed`` (it acted on an armed vehicle now; False: a selection for the next arm); an ``armed`` or
+    ``disarmed`` event's ``pre_start`` (True: a ground station's arm in HOLD on the ground, awaiting a
+    mission's start, or the vehicle's disarm when none came: nothing flown, part of the start, docs/missions.md)."""
 
     t: float
     kind: str
@@ -103,6 +105,7 @@ class Event:
     param: ParamChanged | None = None
     mode: str | None = None
     armed: bool | None = None
+    pre_start: bool | None = None
 
     @property
     def shown(self) -> str:

@@ -89,9 +89,10 @@ class Ready:
 class Event:
     """An event at ``t`` (s, to the millisecond: :meth:`at`) of ``kind``, its ``text``, who caused it, and
     the typed fields of the vehicle's events (:class:`bridge.autopilot.vehicleevents.Event`: a parameter
-    event's change, ``param``; a mode event's ``mode`` and ``armed``). ``answers``: a controller's event said in
-    answer to the vehicle's own events of these kinds (its arming, its end action, its crash): the session never
-    puts it before its cause, whatever the two clocks say (:meth:`bridge.session.session.Session._handle`)."""
+    event's change, ``param``; a mode event's ``mode`` and ``armed``; an arm's ``pre_start``). ``answers``: a
+    controller's event said in answer to the vehicle's own events of these kinds (its arming, its end action, its
+    crash): the session never puts it before its cause, whatever the two clocks say
+    (:meth:`bridge.session.session.Session._handle`)."""
 
     t: float
     kind: str
@@ -100,6 +101,7 @@ class Event:
     param: ParamChanged | None = None
     mode: str | None = None
     armed: bool | None = None
+    pre_start: bool | None = None
     answers: tuple[str, ...] | None = None
 
     @classmethod
@@ -208,6 +210,7 @@ def _well_typed(report: Report) -> bool:
         return (_number(report.t) and isinstance(report.kind, str) and isinstance(report.text, str)
                 and (report.mode is None or isinstance(report.mode, str))
                 and (report.armed is None or isinstance(report.armed, bool))
+                and (report.pre_start is None or isinstance(report.pre_start, bool))
                 and (report.answers is None or (isinstance(report.answers, tuple)
                                                 and all(isinstance(k, str) for k in report.answers))))
     if isinstance(report, Stats):

@@ -6,7 +6,7 @@ In:  an event's time (s, the flight's clock), kind, text, who reported it (``sou
      :class:`~bridge.autopilot.vehicleevents.ParamChanged`: name, old and new value, or None)
 Out: :class:`RunEvent`; its dict for ``summary.json["events"]`` (:meth:`RunEvent.as_dict`: ``t`` s rounded
      to 1 us or null, ``kind``, ``text`` with the sender shown as `` [by ...]``, ``source`` when there is one,
-     ``param`` (``{name, old, new}``), ``mode`` and ``armed`` when the event has them)
+     ``param`` (``{name, old, new}``), ``mode``, ``armed`` and ``pre_start`` when the event has them)
 
 The written `` [by ...]`` is for people (events.log, summary.json); everything that judges a run reads
 ``by`` (:mod:`bridge.record.policies`), never the text.
@@ -34,6 +34,7 @@ class RunEvent:
     param: ParamChanged | None = None  # the typed fields of the vehicle's events (bridge.autopilot.vehicleevents.Event)
     mode: str | None = None
     armed: bool | None = None
+    pre_start: bool | None = None
 
     @classmethod
     def at(cls, t: float, kind: str, text: str, source: str | None = None, by: Sender | None = None,
@@ -63,4 +64,4 @@ class RunEvent:
         return cls(d.get("t"), d["kind"], d.get("text", ""), d.get("source"),
                    Sender.from_dict(by) if isinstance(by, Mapping) else None,
                    ParamChanged.from_dict(param) if isinstance(param, Mapping) else None,
-                   mode=d.get("mode"), armed=d.get("armed"))
+                   mode=d.get("mode"), armed=d.get("armed"), pre_start=d.get("pre_start"))

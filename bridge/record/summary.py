@@ -161,13 +161,15 @@ def interventions(events: Sequence[RunEvent], rate_hz: float,
     step it acted from: round(t * rate_hz); lockstep, the vehicle's step), ``by`` (the sender), ``kind`` and
     ``what``, and for a parameter its ``name``, ``old`` and ``new`` value. Read from the vehicle's events'
     typed fields (``by``, ``param``): a parameter change (a set to the value in force makes no event), and
-    while the vehicle is armed a mode, an arm or a disarm; a ground station's arm is one too."""
+    while the vehicle is armed a mode, an arm or a disarm; a ground station's arm is one too, except its arm in
+    HOLD on the ground awaiting a mission's start (``pre_start``: nothing flies until the start, which the
+    flight's controller flies from its own arm; docs/missions.md)."""
     out: list[dict[str, Any]] = []
     armed = False
     for e in vehicle_events(events):
         by = e.by
         was_armed, armed = armed, (e.kind == "armed") or (armed and e.kind != "disarmed")
-        if e.kind not in INTERVENING or by is None or by.is_vehicle:
+        if e.kind not in INTERVENING or by is None or by.is_vehicle or e.pre_start:
             continue
         if by.link == "controller" and (by.sysid, by.compid) == controller_id:
             continue

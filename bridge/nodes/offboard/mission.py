@@ -195,7 +195,7 @@ class MissionLink(OffboardLink):
         on the ground until it is armed or sent MISSION_START. False: the controller was stopped."""
         said = False
         while not self.stopping:
-            if self._heard and self.vehicle_mode == MISSION_MODE and not self.vehicle_armed:
+            if self._heard and self.vehicle_mode == MISSION_MODE:  # (armed: armed in HOLD, then AUTO.MISSION)
                 if self.mission_state == mavlink.MISSION_STATE_ACTIVE:
                     return True
                 if self.mission_state is not None and not said:

@@ -50,6 +50,7 @@ MESSAGES = frozenset({"MISSION_COUNT", "MISSION_ITEM", "MISSION_ITEM_INT", "MISS
                       "MISSION_REQUEST_INT", "MISSION_ACK", "MISSION_CLEAR_ALL", "MISSION_SET_CURRENT"})
 START_COMMAND = "MISSION_START"  # how a ground station started the mission (summary.json mission_transfer)
 START_ARM = "AUTO.MISSION, then arm"
+START_ARMED = "arm, then AUTO.MISSION"  # armed in HOLD on the ground first (MAVSDK's arm(), then start_mission())
 
 
 class MissionManager:
@@ -136,8 +137,10 @@ class MissionManager:
         return None
 
     def shows_mission(self, armed: bool, offboard: bool) -> bool:
-        """Whether the vehicle shows AUTO.MISSION: selected or started and disarmed, or flying the mission."""
-        return (self.selected and not armed) or (self.watch is not None and armed and offboard)
+        """Whether the vehicle shows AUTO.MISSION: selected or started and disarmed, started armed in HOLD on the
+        ground (the controller's arm to come), or flying the mission."""
+        return (self.selected and (not armed or self.start_requested)) or (self.watch is not None and armed
+                                                                          and offboard)
 
     def flight_armed(self) -> None:
         """The controller armed a new flight: the started mission is flown from now (item 0 current)."""
