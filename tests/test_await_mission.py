@@ -505,13 +505,15 @@ def test_another_mode_selected_after_auto_mission_wins_until_the_mission_starts(
         gcs.close()
 
 
-def test_an_arm_in_hold_on_the_ground_then_auto_mission_starts_the_mission_and_times_out_alone():
+@pytest.mark.parametrize("clock", ["lockstep", "realtime"])
+def test_an_arm_in_hold_on_the_ground_then_auto_mission_starts_the_mission_and_times_out_alone(clock):
     """MAVSDK's own order, as PX4 flies it: the vehicle awaiting a mission waits in HOLD (PX4 without sticks), a
     ground station's arm arms it there on the ground (lockstep: time stands still, the clock idle), and AUTO.MISSION
     then starts the mission (started_by ``arm, then AUTO.MISSION``; AUTO.MISSION shows, armed; MISSION_CURRENT
     ACTIVE; another mode then DENIED); the controller's arm takes the vehicle from HOLD to OFFBOARD and the lockstep
-    flight begins, item 0 current. Neither the arm nor its HOLD is an intervention or ends the flight. Armed and
-    never started, it disarms itself after COM_DISARM_PRFLT (set to 0.2 s by PARAM_SET), clock still idle."""
+    flight begins, item 0 current (real time: the wall clock runs throughout). Neither the arm nor its HOLD is an
+    intervention or ends the flight. Armed and never started, it disarms itself after COM_DISARM_PRFLT (set to
+    0.2 s by PARAM_SET), the lockstep clock still idle."""
     gcs = GcsSocket()
     flight = prepare(Mission(Sine(), duration_s=5.0, name="start"))
     exchange, made = gcs.exchange, []
@@ -521,7 +523,7 @@ def test_an_arm_in_hold_on_the_ground_then_auto_mission_starts_the_mission_and_t
 
     def vehicle_with_mission() -> Vehicle:
         v = Vehicle(flight, VehicleConfig(parse_address("udpin:127.0.0.1:0"), parse_address(gcs.url),
-                                          await_mission=True))
+                                          await_mission=True, clock=clock))
         made.append(v)
         exchange(v, M.MAVLink_mission_count_message(1, 1, 3, 0), "MISSION_REQUEST_INT")
         items = _small_plan_items(target=(1, 1))
@@ -531,12 +533,13 @@ def test_an_arm_in_hold_on_the_ground_then_auto_mission_starts_the_mission_and_t
         return v
 
     hold, mission = (4 << 16) | (3 << 24), (4 << 16) | (4 << 24)
+    idle = ClockState.IDLE if clock == "lockstep" else ClockState.FREE_RUNNING  # (real time: the wall clock's)
     arm = command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
     try:
         v = vehicle_with_mission()
         assert v._heartbeat().custom_mode == hold and not v.sim.armed  # waits in HOLD, disarmed
         assert exchange(v, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
-        assert v.sim.armed and v.sim.mode == "hold" and v.clock.state is ClockState.IDLE
+        assert v.sim.armed and v.sim.mode == "hold" and v.clock.state is idle
         assert v._heartbeat().custom_mode == hold and v.commander.pre_start_at is not None
         assert exchange(v, command(M.MAV_CMD_DO_SET_MODE, 1, 4, 4), "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
         assert v.missions.started is not None and v.missions.started["command"] == START_ARMED
@@ -545,10 +548,10 @@ def test_an_arm_in_hold_on_the_ground_then_auto_mission_starts_the_mission_and_t
         ask = command(M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_MISSION_CURRENT)
         assert exchange(v, ask, "MISSION_CURRENT").mission_state == M.MISSION_STATE_ACTIVE
         assert exchange(v, command(M.MAV_CMD_NAV_LAND), "COMMAND_ACK").result == M.MAV_RESULT_DENIED  # starting
-        assert v.commander.pre_start_at is None and v.clock.state is ClockState.IDLE
+        assert v.commander.pre_start_at is None and v.clock.state is idle
         controller = Sender(200, 191, "127.0.0.1", 1, "controller")
         assert v.commander.arm_disarm(1.0, 0.0, controller) == M.MAV_RESULT_ACCEPTED  # the controller's arm
-        assert v.sim.mode == "offboard" and v.clock.engaged and v.missions.watch is not None
+        assert v.sim.mode == "offboard" and v.clock.engaged is (clock == "lockstep") and v.missions.watch is not None
         assert v.missions.mission.current == 0 and v._heartbeat().custom_mode == mission
         events = [RunEvent.at(e.t, e.kind, e.text, "vehicle", e.by, **typed_fields(e)) for e in v.sim.events]
         assert [e.kind for e in events if e.pre_start] == ["armed", "mode"]  # the arm in HOLD, its HOLD
@@ -561,7 +564,7 @@ def test_an_arm_in_hold_on_the_ground_then_auto_mission_starts_the_mission_and_t
         wait_for(lambda: w._housekeeping() or not w.sim.armed, 5.0, "the vehicle's pre-takeoff disarm")
         last = w.sim.events[-1]
         assert last.kind == "disarmed" and last.pre_start and "COM_DISARM_PRFLT = 0.2 s" in last.text
-        assert w.clock.state is ClockState.IDLE and w.commander.pre_start_at is None
+        assert w.clock.state is idle and w.commander.pre_start_at is None
     finally:
         for v in made:
             v.close()
