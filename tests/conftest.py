@@ -51,20 +51,34 @@ def missions_dir() -> Path:
     return MISSIONS
 
 
+def _load_kernels(kind: str, shared: Path) -> None:
+    """Compile one set of numba's kernels, or load it from its on-disk cache, under a lock per set shared by
+    every worker of the session: one worker compiles it, the others then load it."""
+    with open(shared / f"compile-{kind}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        KERNELS[kind]()
+
+
 @pytest.fixture(scope="session", autouse=True)
 def _kernels_compiled(tmp_path_factory: pytest.TempPathFactory, worker_id: str) -> None:
-    """Compile numba's kernels (the EKF's, the batch engine's, the scalar engine's), or load them from their
-    on-disk cache, once per test process before any test: as ``bsst sitl`` does before it starts a vehicle, so that a
-    test that starts a subprocess (a vehicle, ``bsst sweep``) does not have it compile them (~12 s each
-    on a fresh clone) inside its start-up time, and the worker's own flights fly them (``auto``).
-    On a fresh clone the workers compile one set each, at once (gw1 the batch engine's first), under a lock
-    per set: the others then load it from the cache."""
-    order = ["batch", "ekf", "scalar"] if worker_id == "gw1" else ["ekf", "scalar", "batch"]
+    """Compile numba's kernels (the EKF's, the scalar engine's; gw1 the batch engine's too, first), or load them
+    from their on-disk cache, once per test process before any test: as ``bsst sitl`` does before it starts a
+    vehicle, so that a test that starts a vehicle does not have it compile them (~12 s on a fresh clone) inside
+    its start-up time, and the worker's own flights fly them (``auto``). The batch engine's (~28 s of one core
+    on a fresh clone, one kernel) the other workers load only before a test that flies it (``batch_kernels``):
+    on a fresh clone they run other tests meanwhile, where they waited for it (a loaded suite's first tests took
+    60 s of each worker)."""
+    order = ["batch", "ekf", "scalar"] if worker_id == "gw1" else ["ekf", "scalar"]
     shared = tmp_path_factory.getbasetemp().parent  # the same directory for every worker of a session
     for kind in order:
-        with open(shared / f"compile-{kind}.lock", "w") as lock:
-            fcntl.flock(lock, fcntl.LOCK_EX)
-            KERNELS[kind]()
+        _load_kernels(kind, shared)
+
+
+@pytest.fixture(scope="session")
+def batch_kernels(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """The batch engine's kernels compiled or loaded in this worker (and so on disk for the processes a test
+    starts: ``bsst sweep``, ``bsst margin``), for the modules whose tests fly it (their ``pytestmark``)."""
+    _load_kernels("batch", tmp_path_factory.getbasetemp().parent)
 
 
 @pytest.hookimpl(tryfirst=True, optionalhook=True)  # before pytest-xdist's own (which makes its loadscope one)

@@ -38,6 +38,8 @@ from controller.predict import Predictor
 from missions import load_mission
 from plant.profiles import load_profile
 
+pytestmark = pytest.mark.usefixtures("batch_kernels")  # flies the batch engine: its kernels loaded first
+
 ROOT = Path(__file__).resolve().parents[1]
 
 

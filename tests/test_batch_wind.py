@@ -26,6 +26,8 @@ from bridge.sweep.grid import Cell
 from missions import load_mission
 from plant.wind import Wind, WindConfig, turbulence_series
 
+pytestmark = pytest.mark.usefixtures("batch_kernels")  # flies the batch engine: its kernels loaded first
+
 ROOT = Path(__file__).resolve().parents[1]
 GUSTS = [[2.0, 1.5, 4.0, 45.0], [4.0, 2.0, 3.0, 200.0], [4.5, 0.5, 2.0, 0.0]]  # t_s, duration_s, m/s, from_deg
 MODERATE = {"speed_mps": 5.0, "from_deg": 270.0, "turbulence": "moderate"}

@@ -27,7 +27,8 @@ from bridge.session import instance_slot, sitl
 from missions import MISSION_DIR
 from tests.sitlkit import ENV, ROOT, run_bsst
 
-pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
+# starts processes or opens sockets (not in make test-fast); flies the batch engine (its kernels loaded first)
+pytestmark = [pytest.mark.process, pytest.mark.usefixtures("batch_kernels")]
 
 SINE = MISSION_DIR / "sine.toml"
 EKF_MOCAP = {"sensors": {"set": "mocap"}, "estimator": "ekf"}

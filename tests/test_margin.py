@@ -25,7 +25,8 @@ from missions import Mission, Sine
 from params import dump_toml
 from tests.sitlkit import run_bsst
 
-pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
+# starts processes or opens sockets (not in make test-fast); flies the batch engine (its kernels loaded first)
+pytestmark = [pytest.mark.process, pytest.mark.usefixtures("batch_kernels")]
 
 ROOT = Path(__file__).resolve().parents[1]
 # the raw estimator's RMS: 2.9 cm at noise 1, 8.1 cm at 2 (explicit: the figures here are the paper's law's)

@@ -24,7 +24,8 @@ from params import ConfigError
 from tests.plans import BOX_PLAN, ROOT, l_plan, write_plan
 from tests.sitlkit import run_bsst
 
-pytestmark = pytest.mark.process  # runs `bsst sim` as a subprocess
+# runs `bsst sim` as a subprocess; `bsst margin` flies the batch engine (its kernels loaded first)
+pytestmark = [pytest.mark.process, pytest.mark.usefixtures("batch_kernels")]
 
 BOX_WPL = ROOT / "examples" / "box.waypoints"
 

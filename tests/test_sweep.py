@@ -35,7 +35,8 @@ from missions import Mission, Sine
 from params import ConfigError, dump_toml
 from tests.sitlkit import Bsst, run_bsst
 
-pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
+# starts processes or opens sockets (not in make test-fast); flies the batch engine (its kernels loaded first)
+pytestmark = [pytest.mark.process, pytest.mark.usefixtures("batch_kernels")]
 
 ROOT = Path(__file__).resolve().parent.parent
 SHORT = Mission(Sine(), duration_s=6.0, name="short")

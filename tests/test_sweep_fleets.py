@@ -24,7 +24,7 @@ from bridge.sweep.report import legacy_values
 from missions import MISSION_DIR, load_mission
 from params import ConfigError
 
-pytestmark = pytest.mark.process  # a sweep's worker pool
+pytestmark = [pytest.mark.process, pytest.mark.usefixtures("batch_kernels")]  # a sweep's worker pool
 
 
 def short_sine(tmp_path: Path) -> Path:
