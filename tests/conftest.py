@@ -6,6 +6,7 @@ import atexit
 import fcntl
 import os
 import sys
+from collections import Counter
 
 # Set before numpy loads here, inherited by every child: bsst's own processes give numpy's BLAS one thread
 # (bridge/cli/__init__.py says why), and so does each test process.
@@ -68,7 +69,8 @@ def _kernels_compiled(tmp_path_factory: pytest.TempPathFactory, worker_id: str) 
     on a fresh clone, one kernel) the other workers load only before a test that flies it (``batch_kernels``):
     on a fresh clone they run other tests meanwhile, where they waited for it (a loaded suite's first tests took
     60 s of each worker)."""
-    order = ["batch", "ekf", "scalar"] if worker_id == "gw1" else ["ekf", "scalar"]
+    # on a fresh clone each worker compiles a different set first, the others loading it after
+    order = {"gw1": ["batch", "ekf", "scalar"], "gw2": ["scalar", "ekf"]}.get(worker_id, ["ekf", "scalar"])
     shared = tmp_path_factory.getbasetemp().parent  # the same directory for every worker of a session
     for kind in order:
         _load_kernels(kind, shared)
@@ -109,7 +111,23 @@ def pytest_ignore_collect(collection_path: Path, config: pytest.Config) -> bool 
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """The tests that start processes or open sockets (``pytest.mark.process``: the long ones) first, the
-    pure ones after, each in its files' order: the workers end on many short tests, not on one long one.
-    Both workers sort alike (pytest-xdist requires one collection)."""
-    items.sort(key=lambda item: item.get_closest_marker("process") is None)
+    """The order the workers are handed the tests in (tests/scheduling.py): first the groups of tests that share
+    a module-scoped fixture, the largest first; then every other test, those that start processes or open sockets
+    (``pytest.mark.process``: the long ones) before the pure ones, each in its files' order, so that the workers
+    end on many short tests, not on one long one. Among the groups, and among the process tests, those that fly
+    the batch engine (``batch_kernels``) come last: on a fresh clone its kernel is still compiling on gw1 while
+    the others begin. Every worker sorts alike (pytest-xdist requires one collection)."""
+    from tests.scheduling import scope_of  # (pure: each module's source read once)
+
+    scopes = [scope_of(item.nodeid) for item in items]
+    size = Counter(scopes)
+    first = {scope: i for i, scope in reversed(list(enumerate(scopes)))}
+
+    def key(i: int) -> tuple[int, ...]:
+        item, scope = items[i], scopes[i]
+        batch = int("batch_kernels" in item.fixturenames)
+        if size[scope] > 1:
+            return (0, batch, -size[scope], first[scope], i)
+        return (1, int(item.get_closest_marker("process") is None), batch, i)
+
+    items[:] = [items[i] for i in sorted(range(len(items)), key=key)]

@@ -13,9 +13,10 @@ Why: ``--dist load`` hands tests out round-robin, then in chunks, whatever their
 go to both workers and each then sets up its module-scoped fixture (a 40-test sample module: both did); ``--dist
 loadfile`` (or pytest-xdist's own ``loadscope``) keeps each whole file on one worker, which leaves a worker idle
 while the other finishes a long file. Here only the tests that share a fixture are kept together: the groups go
-first (the largest first, pytest-xdist's ``--loadscope-reorder``), then every other test one at a time to the
-worker that is free. (pytest-xdist's ``loadgroup`` would do this from ``xdist_group`` marks, but under pytest 9
-it renames ``item._nodeid``, which pytest 9 no longer reads: its groups are silently ignored.)
+first (the largest first, those flying the batch engine after the others: tests/conftest.py orders them), then
+every other test one at a time to the worker that is free. (pytest-xdist's ``loadgroup`` would do this from
+``xdist_group`` marks, but under pytest 9 it renames ``item._nodeid``, which pytest 9 no longer reads: its groups
+are silently ignored.)
 
 The controller does not collect tests, so the fixtures are read from each module's source with ``ast``: a
 function decorated ``@pytest.fixture(scope="module")``, and any fixture of the module that takes one as an
@@ -27,6 +28,7 @@ from __future__ import annotations
 import ast
 import functools
 from pathlib import Path
+from typing import Any
 
 from xdist.scheduler import LoadScopeScheduling
 
@@ -109,7 +111,14 @@ def scope_of(nodeid: str) -> str:
 
 
 class SharedFixtureScheduling(LoadScopeScheduling):
-    """pytest-xdist's ``loadscope`` with :func:`scope_of`'s units (module docstring)."""
+    """pytest-xdist's ``loadscope`` with :func:`scope_of`'s units (module docstring), handed out in the
+    collection's order, which tests/conftest.py's ``pytest_collection_modifyitems`` makes (the groups first, the
+    largest first): not re-sorted by size here (``--loadscope-reorder`` off), so that the groups flying the batch
+    engine can come after the others."""
+
+    def __init__(self, config: Any, log: Any = None) -> None:
+        super().__init__(config, log)
+        config.option.loadscopereorder = False  # (read once, by schedule(); this scheduler's run only)
 
     def _split_scope(self, nodeid: str) -> str:
         return scope_of(nodeid)
