@@ -59,6 +59,25 @@ def test_a_record_cut_short_is_read_when_it_is_whole(tmp_path: Path) -> None:
     reader.close()
 
 
+
+def test_the_newest_record_is_seen_without_a_read_after_the_header_came(tmp_path: Path) -> None:
+    """A lockstep session reads the vehicle's half until the flight's time 0 is known, then only looks at its
+    newest record (the progress line): a header that came after the last read is read by the look itself, which
+    moves no read on (a CI run's progress callback saw nothing for a whole flight: the header had come late)."""
+    path = tmp_path / "vehicle.bin"
+    records = [np.full(len(CONTROLLER_COLUMNS), float(i), dtype="<f8").tobytes() for i in range(3)]
+    reader = HalfReader(path, ControllerRow)
+    with open(path, "wb", buffering=0) as f:
+        assert reader.read() == [] and reader.last() is None  # the file, no header yet
+        f.write(header_line(CONTROLLER_COLUMNS) + records[0] + records[1])
+        assert reader.last().k == 1.0
+        f.write(records[2])
+        assert reader.last().k == 2.0
+        assert [r.k for r in reader.read()] == [0.0, 1.0, 2.0]  # the look read nothing on
+        assert reader.read() == [] and reader.last().k == 2.0
+    reader.close()
+
+
 @pytest.mark.parametrize(("first_line", "says"), [
     (b"k,t,x_ref\n", "not a JSON header"),
     (json.dumps({"format": "other", "version": 1, "columns": ["k"], "dtype": "<f8"}).encode() + b"\n", "format"),

@@ -84,27 +84,40 @@ class HalfReader:
         self._unpack: Any = None
         self._size = 0  # bytes a record
         self._head = 0  # bytes of the header line
+        self._read_past_head = False  # read() has passed the header (last() may have parsed it first)
         self._pick: list[int] | None = None  # the header's positions of row_type's fields (None: the same order)
 
-    def read(self) -> list[Any]:
+    def _open(self) -> bool:
         if self._fd < 0:
             try:
                 self._fd = os.open(self.path, os.O_RDONLY)
             except FileNotFoundError:
-                return []
+                return False
+        return True
+
+    def _header_end(self, buf: bytes) -> int:
+        """Where the header line in ``buf`` (the file's first bytes) ends, -1 if not yet whole."""
+        end = buf.find(b"\n")
+        if end < 0 and len(buf) > _MAX_HEADER:
+            raise ValueError(f"{self.path}: no header line in its first {_MAX_HEADER} bytes")
+        if end >= 0 and self.columns is None:
+            self._start(parse_header(buf[:end], str(self.path)))
+            self._head = end + 1
+        return end
+
+    def read(self) -> list[Any]:
+        if not self._open():
+            return []
         chunks = [self._buf]
         while data := os.read(self._fd, 1 << 20):
             chunks.append(data)
         buf = b"".join(chunks)
-        if self.columns is None:
-            end = buf.find(b"\n")
+        if not self._read_past_head:
+            end = self._header_end(buf)
             if end < 0:
-                if len(buf) > _MAX_HEADER:
-                    raise ValueError(f"{self.path}: no header line in its first {_MAX_HEADER} bytes")
                 self._buf = buf
                 return []
-            self._start(parse_header(buf[:end], str(self.path)))
-            self._head = end + 1
+            self._read_past_head = True
             buf = buf[end + 1:]
         whole = len(buf) - len(buf) % self._size
         self._buf = buf[whole:]
@@ -113,9 +126,9 @@ class HalfReader:
         return [self._row(v) for v in self._unpack(buf[:whole])]
 
     def last(self) -> Any | None:
-        """The newest whole record in the file now, as a row, without moving :meth:`read` on (None: its header
-        not read yet, or no record): a look at a flight in progress, one ``pread``."""
-        if self.columns is None:
+        """The newest whole record in the file now, as a row, without moving :meth:`read` on (None: no header
+        yet, or no record): a look at a flight in progress, one ``pread`` (two while the header is not read)."""
+        if self.columns is None and (not self._open() or self._header_end(os.pread(self._fd, _MAX_HEADER + 1, 0)) < 0):
             return None
         n = (os.fstat(self._fd).st_size - self._head) // self._size
         if n <= 0:
