@@ -67,11 +67,12 @@ def test_a_lockstep_flight_shows_its_progress_from_the_halves_and_writes_its_tra
     def progress(t: float, duration: float, err: float) -> None:
         seen.append((t, err, (out / "trace.csv").read_bytes().count(b"\n") if (out / "trace.csv").exists() else 0))
 
-    run = sitl(Mission(Sine(), duration_s=10.0, name="sine10"), out=out, plots=False, instance=None, speed=10.0,
+    run = sitl(Mission(Sine(), duration_s=10.0, name="sine10"), out=out, plots=False, instance=None, speed=4.0,
                progress=progress)
     assert run.outcome == "completed"
     during = [s for s in seen if s[0] < 9.0]
-    assert len(during) >= 3, seen  # ~1 s of flight at 10x real time, a look every 0.1 s
+    # 2.5 s of flight at 4x real time, a look every 0.1 s (at 10x, 1 s, a fresh clone's loaded CI run saw none)
+    assert len(during) >= 3, seen
     assert all(b[0] >= a[0] for a, b in zip(seen, seen[1:], strict=False)), seen
     assert during[-1][0] > 5.0 and max(t for t, _, _ in seen) <= 10.0 - 1 / 250  # the mission's steps only
     assert all(lines <= 1 for _, _, lines in during), during  # the header alone while the flight flies
