@@ -464,6 +464,18 @@ def test_the_vehicle_starts_a_mission_only_when_asked_to_await_one():
         gcs.close()
 
 
+def _vehicle_holding_the_small_plan(gcs: GcsSocket, flight: Any, clock: str = "lockstep") -> Vehicle:
+    """A vehicle in this process awaiting a mission (``clock``), the small plan uploaded by ``gcs``."""
+    v = Vehicle(flight, VehicleConfig(parse_address("udpin:127.0.0.1:0"), parse_address(gcs.url),
+                                      await_mission=True, clock=clock))
+    gcs.exchange(v, M.MAVLink_mission_count_message(1, 1, 3, 0), "MISSION_REQUEST_INT")
+    items = _small_plan_items(target=(1, 1))
+    for it in items[:2]:
+        gcs.exchange(v, it, "MISSION_REQUEST_INT")
+    assert gcs.exchange(v, items[2], "MISSION_ACK").type == M.MAV_MISSION_ACCEPTED
+    return v
+
+
 def test_another_mode_selected_after_auto_mission_wins_until_the_mission_starts():
     """As on PX4 the latest selection wins: AUTO.MISSION then HOLD, disarmed, shows HOLD and a ground station's arm
     arms in HOLD (no start). AUTO.MISSION then an arm starts the mission; a mode asked for then, while the
@@ -479,14 +491,8 @@ def test_another_mode_selected_after_auto_mission_wins_until_the_mission_starts(
     arm = M.MAVLink_command_long_message(1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
     try:
         for then_hold in (True, False):
-            v = Vehicle(flight, VehicleConfig(parse_address("udpin:127.0.0.1:0"), parse_address(gcs.url),
-                                              await_mission=True))
+            v = _vehicle_holding_the_small_plan(gcs, flight)
             made.append(v)
-            exchange(v, M.MAVLink_mission_count_message(1, 1, 3, 0), "MISSION_REQUEST_INT")
-            items = _small_plan_items(target=(1, 1))
-            for it in items[:2]:
-                exchange(v, it, "MISSION_REQUEST_INT")
-            assert exchange(v, items[2], "MISSION_ACK").type == M.MAV_MISSION_ACCEPTED
             assert exchange(v, mode(4, 4), "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
             assert v._heartbeat().custom_mode == (4 << 16) | (4 << 24)
             if then_hold:
@@ -522,15 +528,8 @@ def test_an_arm_in_hold_on_the_ground_then_auto_mission_starts_the_mission_and_t
         return M.MAVLink_command_long_message(1, 1, cmd, 0, *params, *[0.0] * (7 - len(params)))
 
     def vehicle_with_mission() -> Vehicle:
-        v = Vehicle(flight, VehicleConfig(parse_address("udpin:127.0.0.1:0"), parse_address(gcs.url),
-                                          await_mission=True, clock=clock))
-        made.append(v)
-        exchange(v, M.MAVLink_mission_count_message(1, 1, 3, 0), "MISSION_REQUEST_INT")
-        items = _small_plan_items(target=(1, 1))
-        for it in items[:2]:
-            exchange(v, it, "MISSION_REQUEST_INT")
-        assert exchange(v, items[2], "MISSION_ACK").type == M.MAV_MISSION_ACCEPTED
-        return v
+        made.append(_vehicle_holding_the_small_plan(gcs, flight, clock))
+        return made[-1]
 
     hold, mission = (4 << 16) | (3 << 24), (4 << 16) | (4 << 24)
     idle = ClockState.IDLE if clock == "lockstep" else ClockState.FREE_RUNNING  # (real time: the wall clock's)
