@@ -1,7 +1,8 @@
 """Hostile input for the tests and benchmarks of issues 7 and 11: a seeded fuzzer of datagrams
 that a vehicle must refuse, the kernel's view of a UDP socket, a paced sender, a flood (of
 fuzz, or of packed requests: :func:`packed_requests`) that counts what comes back, and a
-scripted MAVLink speaker (:class:`Station`: a ground station, a controller, a stranger).
+scripted MAVLink speaker (:class:`Station`: a ground station, a controller, a stranger), and what an in-process
+vehicle's state is for a property test (:func:`vehicle_state`, :func:`drop_held_answer`).
 
 Every datagram :class:`Fuzzer` makes must be refused by the vehicle while it flies a
 lockstep mission (armed, at a step k >= :data:`MIN_STEP`), and each kind says which reason
@@ -65,6 +66,24 @@ KINDS: dict[str, str | None] = {
 }
 HUGE = 65507  # bytes: the largest UDP payload over IPv4
 FUTURE_USEC = 10**12  # a step no mission reaches (11.6 days)
+
+
+def vehicle_state(v: Any) -> tuple:
+    """What an in-process :class:`~bridge.nodes.vehicle.Vehicle` is now, as its parts hold it: the plant, arming,
+    mode and step, the clock's held answer and state, the target in force, the streams and the controller's
+    address, the up link's newest send (a refused datagram must change none of it)."""
+    s, clock = v.sim, v.clock
+    return (v.plant.state, s.armed, s.mode, v.k, clock.answer, v.targets.applied, clock.state, clock.on_wall_clock,
+            tuple(sorted(v.streams.items())), tuple(sorted(v.ctl_streams.items())), v.link.peer,
+            v.vend.newest_sent_t, v.vend.up.stats.sent)
+
+
+def drop_held_answer(v: Any) -> None:
+    """The answer of step k held by a vehicle's clock, thrown away unflown (a test taking a step back)."""
+    from bridge.nodes.vehicle.clock import ClockState, Trigger
+
+    if v.clock.state is ClockState.ANSWERED:
+        v.clock.fire(Trigger.DROP)
 
 
 class Fuzzer:

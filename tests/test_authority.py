@@ -38,7 +38,7 @@ from bridge.nodes.vehicle import Vehicle, VehicleConfig
 from bridge.record.halves import count_records
 from bridge.session import instance_slot
 from missions import Mission, Sine
-from tests.hostile import Flood, Station, packed_requests
+from tests.hostile import Flood, Station, drop_held_answer, packed_requests, vehicle_state
 from tests.sitlkit import Proc
 from tests.waiting import wait_for
 
@@ -552,11 +552,6 @@ def _may_change(link: str, source: str, ids: tuple[int, int], m: Any) -> bool:
     return False
 
 
-def _snapshot(v: Vehicle) -> tuple:
-    s = v.sim
-    return (v.plant.state, s.armed, s.mode, v.k, v.pending, v.applied, v.engaged, v.freerun, v.halted,
-            tuple(sorted(v.streams.items())), tuple(sorted(v.ctl_streams.items())), v.link.peer,
-            v.vend.newest_sent_t, v.vend.up.stats.sent)
 
 
 class _Bench:
@@ -589,7 +584,7 @@ class _Bench:
         self.dest = {"peer": v.link.local, "stranger": v.link.local, "gcs": v.gcs.local, "intruder": v.gcs.local}
         ctl = M.MAVLink(None, srcSystem=CTL_IDS[0], srcComponent=CTL_IDS[1])
         self.deliver("peer", M.MAVLink_command_long_message(SYSID, 1, ARM, 0, 1, 0, 0, 0, 0, 0, 0).pack(ctl))
-        assert v.sim.armed and v.engaged and v.link.peer == socks["peer"].getsockname()
+        assert v.sim.armed and v.clock.engaged and v.link.peer == socks["peer"].getsockname()
 
     def endpoint(self, source: str) -> Endpoint:
         return self.v.link if source in ("peer", "stranger") else self.v.gcs
@@ -623,16 +618,16 @@ class _Bench:
     def reset(self) -> None:
         """Armed at step 0 of its flight, that step not answered, the controller its peer."""
         v = self.v
-        if v.sim.mode != OFFBOARD or v.freerun or v.halted:
+        if v.sim.mode != OFFBOARD or v.clock.on_wall_clock or v.clock.halted:
             v.close()
             self._build()
             for s in self.socks:
                 self.replies(s)
             v = self.v
-        v.pending = None
+        drop_held_answer(v)
         v.link.peer = self.socks["peer"].getsockname()
         if not v.sim.armed:
-            v._arm_disarm(1.0, 0.0)
+            v.commander.arm_disarm(1.0, 0.0)
             v.announcer.drain()  # its event goes out now, not with the next example's answer
         for s in self.socks:
             self.replies(s)
@@ -670,10 +665,10 @@ def test_any_message_from_anyone_changes_nothing_unless_valid_and_authorised(ben
     v = bench.v
     link = "controller" if source in ("peer", "stranger") else "gcs"
     data = bytes(m.pack(M.MAVLink(None, srcSystem=ids[0], srcComponent=ids[1])))
-    before = _snapshot(v)
+    before = vehicle_state(v)
     decoded, refused = bench.deliver(source, data)
     may = _may_change(link, source, ids, m)
-    after = _snapshot(v)
+    after = vehicle_state(v)
     if not may:
         assert after == before, (m, source, ids)
     authorised = source == "gcs" or (source == "peer" and ids == CTL_IDS)

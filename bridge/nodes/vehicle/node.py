@@ -35,7 +35,7 @@ from bridge.nodes.report import Ready, Refused, Report, Stats
 from bridge.nodes.vehicle.announcer import Announcer
 from bridge.nodes.vehicle.authority import Authority
 from bridge.nodes.vehicle.catchup import CatchUp
-from bridge.nodes.vehicle.clock import Answer, Clock, ClockState, Trigger
+from bridge.nodes.vehicle.clock import Clock, ClockState
 from bridge.nodes.vehicle.commander import Commander, CommanderPorts
 from bridge.nodes.vehicle.config import CLOCKS, VehicleConfig, open_links
 from bridge.nodes.vehicle.gate import Gate
@@ -217,47 +217,11 @@ class Vehicle:
         """Simulation time of the current step (s)."""
         return self.k / self.rate
 
-    # -- the clock's flags as they were (tests look at them) ---------------------------------------
-    @property
-    def freerun(self) -> bool:
-        """Time runs on the wall clock (realtime, or lockstep lost; halted from there too)."""
-        return self.clock.on_wall_clock
-
-    @property
-    def engaged(self) -> bool:
-        return self.clock.engaged
-
-    @property
-    def halted(self) -> bool:
-        return self.clock.halted
-
-    @property
-    def applied(self) -> tuple[int, tuple[float, ...], float] | None:
-        """The target in force: (the step it answered, wire, wall time received)."""
-        return self.targets.applied
-
-    @property
-    def pending(self) -> Answer | None:
-        """The answer of step k held for its step (None: none)."""
-        return self.clock.answer
-
-    @pending.setter
-    def pending(self, value: None) -> None:
-        """Drop the held answer (only None may be set)."""
-        if value is not None:
-            raise ValueError("only None may be set: the answer comes from the controller")
-        if self.clock.state is ClockState.ANSWERED:
-            self.clock.fire(Trigger.DROP)
-
     def _collided(self, why: str) -> None:
         """Another vehicle of the fleet touched this one: the flight ends (:meth:`Commander.collided`), and its
         events are said at once (the session waits on the disarm to end the run)."""
         self.commander.collided(why)
         self.announcer.drain()
-
-    def _arm_disarm(self, p1: float, p2: float) -> int:
-        """Arm or disarm as the controller would (:meth:`Commander.arm_disarm`)."""
-        return self.commander.arm_disarm(p1, p2)
 
     # -- lockstep --------------------------------------------------------------------------
     def _lockstep_wait(self) -> None:
