@@ -62,15 +62,16 @@ def _load_kernels(kind: str, shared: Path) -> None:
 
 @pytest.fixture(scope="session", autouse=True)
 def _kernels_compiled(tmp_path_factory: pytest.TempPathFactory, worker_id: str) -> None:
-    """Compile numba's kernels (the EKF's, the scalar engine's; gw1 the batch engine's too, first), or load them
-    from their on-disk cache, once per test process before any test: as ``bsst sitl`` does before it starts a
-    vehicle, so that a test that starts a vehicle does not have it compile them (~12 s on a fresh clone) inside
-    its start-up time, and the worker's own flights fly them (``auto``). The batch engine's (~28 s of one core
-    on a fresh clone, one kernel) the other workers load only before a test that flies it (``batch_kernels``):
-    on a fresh clone they run other tests meanwhile, where they waited for it (a loaded suite's first tests took
-    60 s of each worker)."""
-    # on a fresh clone each worker compiles a different set first, the others loading it after
-    order = {"gw1": ["batch", "ekf", "scalar"], "gw2": ["scalar", "ekf"]}.get(worker_id, ["ekf", "scalar"])
+    """Compile numba's kernels (the EKF's, the scalar engine's), or load them from their on-disk cache, once per
+    test process before any test: as ``bsst sitl`` does before it starts a vehicle, so that a test that starts a
+    vehicle does not have it compile them (~12 s on a fresh clone) inside its start-up time, and the worker's own
+    flights fly them (``auto``). The batch engine's (~28 s of one core on a fresh clone, one kernel) a worker
+    loads only before a test that flies it (``batch_kernels``), compiled meanwhile by a process of its own
+    (:func:`pytest_configure`): on a fresh clone every worker waited for it before its first test (60 s each in a
+    loaded suite), then one did (70 s)."""
+    # on a fresh clone each worker compiles a different set first, the others loading it after (the batch
+    # engine's: the process pytest_configure started, or the first test that flies it)
+    order = ["scalar", "ekf"] if worker_id == "gw1" else ["ekf", "scalar"]
     shared = tmp_path_factory.getbasetemp().parent  # the same directory for every worker of a session
     for kind in order:
         _load_kernels(kind, shared)
@@ -81,6 +82,38 @@ def batch_kernels(tmp_path_factory: pytest.TempPathFactory) -> None:
     """The batch engine's kernels compiled or loaded in this worker (and so on disk for the processes a test
     starts: ``bsst sweep``, ``bsst margin``), for the modules whose tests fly it (their ``pytestmark``)."""
     _load_kernels("batch", tmp_path_factory.getbasetemp().parent)
+
+
+_BATCH_COMPILE = """
+from bridge.batch import compile_batch
+compile_batch()  # the session's batch lock, taken by the parent, is held until this process ends
+"""
+
+
+@pytest.hookimpl(trylast=True)  # after the tmpdir plugin's: the session's base directory is known
+def pytest_configure(config: pytest.Config) -> None:
+    """pytest-xdist's controller (``-n N``, N > 0): compile (or load) the batch engine's kernels in a process of
+    its own while the workers start and run their first tests, holding the session's batch lock until it is done;
+    a worker's ``batch_kernels`` takes the lock after it and loads them from the cache (if the process fails, the
+    worker compiles them itself). The process is ended with the session (:func:`pytest_unconfigure`)."""
+    if os.environ.get("PYTEST_XDIST_WORKER") or not getattr(config.option, "numprocesses", 0):
+        return
+    import subprocess
+
+    shared = config._tmp_path_factory.getbasetemp()  # type: ignore[attr-defined]  # the workers' base's parent
+    lock = os.open(shared / "compile-batch.lock", os.O_WRONLY | os.O_CREAT, 0o644)
+    fcntl.flock(lock, fcntl.LOCK_EX)  # held by the open file, which the child shares (pass_fds) until it ends
+    config._batch_compile = subprocess.Popen(  # type: ignore[attr-defined]
+        [sys.executable, "-c", _BATCH_COMPILE], cwd=ROOT, pass_fds=(lock,), stdin=subprocess.DEVNULL,
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    os.close(lock)
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    proc = getattr(config, "_batch_compile", None)
+    if proc is not None and proc.poll() is None:
+        proc.kill()
+        proc.wait()
 
 
 @pytest.hookimpl(tryfirst=True, optionalhook=True)  # before pytest-xdist's own (which makes its loadscope one)
