@@ -540,6 +540,9 @@ def test_an_arm_in_hold_on_the_ground_then_auto_mission_starts_the_mission_and_t
         assert exchange(v, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
         assert v.sim.armed and v.sim.mode == "hold" and v.clock.state is idle
         assert v._heartbeat().custom_mode == hold and v.commander.pre_start_at is not None
+        at = v.commander.pre_start_at
+        assert exchange(v, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED  # again (a resend): nothing changes
+        assert v.clock.state is idle and v.commander.pre_start_at == at
         assert exchange(v, command(M.MAV_CMD_DO_SET_MODE, 1, 4, 4), "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
         assert v.missions.started is not None and v.missions.started["command"] == START_ARMED
         beat = v._heartbeat()
@@ -547,6 +550,7 @@ def test_an_arm_in_hold_on_the_ground_then_auto_mission_starts_the_mission_and_t
         ask = command(M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_MISSION_CURRENT)
         assert exchange(v, ask, "MISSION_CURRENT").mission_state == M.MISSION_STATE_ACTIVE
         assert exchange(v, command(M.MAV_CMD_NAV_LAND), "COMMAND_ACK").result == M.MAV_RESULT_DENIED  # starting
+        assert exchange(v, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED  # an arm now starts no timeout
         assert v.commander.pre_start_at is None and v.clock.state is idle
         controller = Sender(200, 191, "127.0.0.1", 1, "controller")
         assert v.commander.arm_disarm(1.0, 0.0, controller) == M.MAV_RESULT_ACCEPTED  # the controller's arm

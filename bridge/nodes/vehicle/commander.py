@@ -269,11 +269,15 @@ class Commander:
         """A ground station started the mission; the controller's arm, once it has it, is still to come."""
         return self.ports.missions is not None and self.ports.missions.start_requested
 
-    def _awaits_start(self) -> bool:
-        """Armed in HOLD on the ground with a mission's start to come (``--await-mission``, nothing flown yet)."""
+    def _held_before_flight(self) -> bool:
+        """Armed in HOLD on the ground before the mission's flight (``--await-mission``, nothing flown yet)."""
         missions = self.ports.missions
         return (self.cfg.await_mission and missions is not None and missions.watch is None and not missions.completed
                 and self.sim.armed and self.sim.mode == HOLD and self.sim.plant.on_ground)
+
+    def _awaits_start(self) -> bool:
+        """Armed in HOLD on the ground with no start yet: the pre-takeoff timeout runs."""
+        return self._held_before_flight() and not self._mission_starting()
 
     def tick(self, now: float) -> None:
         """Wall-clock duty: armed in HOLD awaiting a start for COM_DISARM_PRFLT (``now``: wall time, s), the vehicle
@@ -415,10 +419,12 @@ class Commander:
                 sim.arm_in_mode()  # in the mode it selected (HOLD, LAND, TAKEOFF), else offboard
             else:  # the controller's: a started mission's arm takes the vehicle armed in HOLD on the ground
                 sim.arm(from_hold=self._mission_starting() and sim.mode == HOLD)
-            if from_gcs and self.pre_start_at is None and self._awaits_start():
-                # nothing flies until the mission's start: in lockstep time stands still, as disarmed
-                self.pre_start_at = now
-                self._mark_pre_start(n0)
+            if from_gcs and self._held_before_flight():
+                # nothing flies until the mission's start: in lockstep time stands still, as disarmed (an arm
+                # again, or after the start, changes nothing)
+                if self.pre_start_at is None and not self._mission_starting():
+                    self.pre_start_at = now
+                    self._mark_pre_start(n0)
                 return mavlink.MAV_RESULT_ACCEPTED
             if sim.mode in GROUND_MODES:  # the vehicle's own controller flies: no controller's answers
                 if self.lockstep and not self.clock.free_running:
