@@ -518,8 +518,8 @@ def test_an_arm_in_hold_on_the_ground_then_auto_mission_starts_the_mission_and_t
     then starts the mission (started_by ``arm, then AUTO.MISSION``; AUTO.MISSION shows, armed; MISSION_CURRENT
     ACTIVE; another mode then DENIED); the controller's arm takes the vehicle from HOLD to OFFBOARD and the lockstep
     flight begins, item 0 current (real time: the wall clock runs throughout). Neither the arm nor its HOLD is an
-    intervention or ends the flight. Armed and never started, it disarms itself after COM_DISARM_PRFLT (set to
-    0.2 s by PARAM_SET), the lockstep clock still idle."""
+    intervention or ends the flight, nor does a disarm by command before the start. Armed and never started, it
+    disarms itself after COM_DISARM_PRFLT (set to 0.2 s by PARAM_SET), the lockstep clock still idle."""
     gcs = GcsSocket()
     flight = prepare(Mission(Sine(), duration_s=5.0, name="start"))
     exchange, made = gcs.exchange, []
@@ -563,6 +563,12 @@ def test_an_arm_in_hold_on_the_ground_then_auto_mission_starts_the_mission_and_t
         w = vehicle_with_mission()
         set_param = M.MAVLink_param_set_message(1, 1, b"COM_DISARM_PRFLT", 0.2, M.MAV_PARAM_TYPE_REAL32)
         assert exchange(w, set_param, "PARAM_VALUE").param_value == pytest.approx(0.2)
+        assert exchange(w, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED and w.sim.armed
+        disarm = command(M.MAV_CMD_COMPONENT_ARM_DISARM, 0)
+        assert exchange(w, disarm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED and not w.sim.armed
+        events = [RunEvent.at(e.t, e.kind, e.text, "vehicle", e.by, **typed_fields(e)) for e in w.sim.events]
+        assert events[-1].kind == "disarmed" and events[-1].pre_start  # nothing flew: no intervention, no end
+        assert [i["kind"] for i in interventions(events, 250.0)] == ["param"] and ended_by_command(events) is None
         assert exchange(w, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED and w.sim.armed
         wait_for(lambda: w._housekeeping() or not w.sim.armed, 5.0, "the vehicle's pre-takeoff disarm")
         last = w.sim.events[-1]

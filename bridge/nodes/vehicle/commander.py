@@ -438,13 +438,17 @@ class Commander:
         forced = p2 == FORCE_DISARM
         if sim.armed and not sim.plant.on_ground and not forced:
             return mavlink.MAV_RESULT_DENIED  # in the air: only a forced disarm (PX4 does the same)
+        held, n0 = self._held_before_flight(), len(sim.events)
         sim.disarm("disarmed by command (forced)" if forced else "disarmed by command")
+        if held:  # armed in HOLD before the mission's flight: nothing flew, nothing ends
+            self._mark_pre_start(n0)
         self.clock.fire(Trigger.DISARM)  # a lockstep flight is over: time stands still until armed again
         return mavlink.MAV_RESULT_ACCEPTED
 
     def _mark_pre_start(self, n0: int) -> None:
-        """The events from ``n0`` on are a ground station's arm awaiting a mission's start, or the vehicle's
-        disarm when none came: part of the start, not a change to a flight (summary.json interventions)."""
+        """The events from ``n0`` on are a ground station's arm awaiting a mission's start, or a disarm before
+        the start (by command, or the vehicle's when none came): part of the start, not a change to a flight
+        (summary.json interventions, ended_by)."""
         for e in self.sim.events[n0:]:
             e.pre_start = True
 
