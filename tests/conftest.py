@@ -148,8 +148,9 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     a module-scoped fixture, the largest first; then every other test, those that start processes or open sockets
     (``pytest.mark.process``: the long ones) before the pure ones, each in its files' order, so that the workers
     end on many short tests, not on one long one. Among the groups, and among the process tests, those that fly
-    the batch engine (``batch_kernels``) come last: on a fresh clone its kernel is still compiling on gw1 while
-    the others begin. Every worker sorts alike (pytest-xdist requires one collection)."""
+    the batch engine (``batch_kernels``) come last: on a fresh clone its kernel is still compiling in its own
+    process (:func:`pytest_configure`) when the workers begin. Every worker sorts alike (pytest-xdist requires one
+    collection)."""
     from tests.scheduling import scope_of  # (pure: each module's source read once)
 
     scopes = [scope_of(item.nodeid) for item in items]
