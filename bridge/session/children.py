@@ -176,6 +176,30 @@ class Child:
         return lines[-1].strip() if lines else ""
 
 
+def stop_children(children: Sequence[Child]) -> tuple[list[tuple[Child, Report]], list[Child]]:
+    """SIGTERM each of ``children`` (in order), wait for each to exit (its records closed), SIGKILL whatever is left
+    at the deadline (:data:`STOP_DEADLINE_S`); close them. Returns their last words (what each wrote, in the order
+    given) and the children killed."""
+    for c in children:
+        if c.proc.poll() is None:
+            try:
+                c.proc.send_signal(signal.SIGTERM)
+            except ProcessLookupError:
+                pass
+    deadline = time.monotonic() + STOP_DEADLINE_S
+    last_words, killed = [], []
+    for c in children:
+        try:
+            c.proc.wait(timeout=max(deadline - time.monotonic(), 0.01))
+        except subprocess.TimeoutExpired:
+            c.proc.kill()
+            c.proc.wait()
+            killed.append(c)
+        last_words += [(c, r) for r in c.reports()]
+        c.close()
+    return last_words, killed
+
+
 def _ports_free(n: int) -> bool:
     """Whether instance N's two UDP ports, 127.0.0.1:14550 + N (its ground station's) and 14560 + N (its
     vehicle's), can be bound now."""

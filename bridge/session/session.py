@@ -15,8 +15,6 @@ from __future__ import annotations
 import json
 import math
 import selectors
-import signal
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -39,6 +37,7 @@ from bridge.session.children import (
     ChildError,
     catch_stop_signals,
     free_udp_port,
+    stop_children,
 )
 from params import ConfigError
 
@@ -320,27 +319,12 @@ class Session:
         return 5.0 + (1.0 + fs.timeout_s + flying) / pace
 
     def _stop_children(self) -> None:
-        """SIGTERM the controller, the relay, the vehicle; wait for each to exit (its records closed), SIGKILL
-        whatever is left at the deadline (:data:`~bridge.session.children.STOP_DEADLINE_S`)."""
-        children = [c for c in (self.controller, self.relay, self.vehicle) if c is not None]
-        for c in children:
-            if c.proc.poll() is None:
-                try:
-                    c.proc.send_signal(signal.SIGTERM)
-                except ProcessLookupError:
-                    pass
-        deadline = time.monotonic() + STOP_DEADLINE_S
-        last_words = []
-        for c in children:
-            try:
-                c.proc.wait(timeout=max(deadline - time.monotonic(), 0.01))
-            except subprocess.TimeoutExpired:
-                c.proc.kill()
-                c.proc.wait()
-                self._note("killed", f"{c.name} (pid {c.pid}) did not stop within {STOP_DEADLINE_S:g} s: SIGKILL",
-                           "session")
-            last_words += [(c, r) for r in c.reports()]
-            c.close()
+        """Stop the controller, the relay, the vehicle (:func:`~bridge.session.children.stop_children`): what they
+        said last is handled, a child killed at the deadline said so."""
+        last_words, killed = stop_children([c for c in (self.controller, self.relay, self.vehicle) if c is not None])
+        for c in killed:
+            self._note("killed", f"{c.name} (pid {c.pid}) did not stop within {STOP_DEADLINE_S:g} s: SIGKILL",
+                       "session")
         self._handle(last_words)
 
     @staticmethod
