@@ -539,10 +539,10 @@ def test_an_arm_in_hold_on_the_ground_then_auto_mission_starts_the_mission_and_t
         assert v._heartbeat().custom_mode == hold and not v.sim.armed  # waits in HOLD, disarmed
         assert exchange(v, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
         assert v.sim.armed and v.sim.mode == "hold" and v.clock.state is idle
-        assert v._heartbeat().custom_mode == hold and v.commander.pre_start_at is not None
-        at = v.commander.pre_start_at
+        assert v._heartbeat().custom_mode == hold and v.commander.pre_start.at is not None
+        at = v.commander.pre_start.at
         assert exchange(v, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED  # again (a resend): nothing changes
-        assert v.clock.state is idle and v.commander.pre_start_at == at
+        assert v.clock.state is idle and v.commander.pre_start.at == at
         assert exchange(v, command(M.MAV_CMD_DO_SET_MODE, 1, 4, 4), "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
         assert v.missions.started is not None and v.missions.started["command"] == START_ARMED
         beat = v._heartbeat()
@@ -551,7 +551,7 @@ def test_an_arm_in_hold_on_the_ground_then_auto_mission_starts_the_mission_and_t
         assert exchange(v, ask, "MISSION_CURRENT").mission_state == M.MISSION_STATE_ACTIVE
         assert exchange(v, command(M.MAV_CMD_NAV_LAND), "COMMAND_ACK").result == M.MAV_RESULT_DENIED  # starting
         assert exchange(v, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED  # an arm now starts no timeout
-        assert v.commander.pre_start_at is None and v.clock.state is idle
+        assert v.commander.pre_start.at is None and v.clock.state is idle
         controller = Sender(200, 191, "127.0.0.1", 1, "controller")
         assert v.commander.arm_disarm(1.0, 0.0, controller) == M.MAV_RESULT_ACCEPTED  # the controller's arm
         assert v.sim.mode == "offboard" and v.clock.engaged is (clock == "lockstep") and v.missions.watch is not None
@@ -573,7 +573,7 @@ def test_an_arm_in_hold_on_the_ground_then_auto_mission_starts_the_mission_and_t
         wait_for(lambda: w._housekeeping() or not w.sim.armed, 5.0, "the vehicle's pre-takeoff disarm")
         last = w.sim.events[-1]
         assert last.kind == "disarmed" and last.pre_start and "COM_DISARM_PRFLT = 0.2 s" in last.text
-        assert w.clock.state is idle and w.commander.pre_start_at is None
+        assert w.clock.state is idle and w.commander.pre_start.at is None
     finally:
         for v in made:
             v.close()

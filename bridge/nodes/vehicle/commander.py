@@ -37,6 +37,7 @@ from bridge.nodes.vehicle.authority import Authority, attribute
 from bridge.nodes.vehicle.clock import Clock, Trigger
 from bridge.nodes.vehicle.injection import injection
 from bridge.nodes.vehicle.mission import START_ARM, START_ARMED, START_COMMAND, MissionManager
+from bridge.nodes.vehicle.prestart import PreStart
 from bridge.nodes.vehicle.streams import HEARTBEAT_S, StatusTexts, StreamTable
 from bridge.record.metrics import plant_blocks
 
@@ -98,9 +99,8 @@ class Commander:
         self.ports = ports
         self.texts: list[Any] = []  # STATUSTEXTs saying why a command was refused: sent after its COMMAND_ACK
         self.plant_at_end: dict[str, Any] | None = None  # the plant's summary blocks when the mission ended
-        # a ground station's arm in HOLD on the ground awaiting a mission's start: its wall time (s), for
-        # COM_DISARM_PRFLT (None: no such arm pending)
-        self.pre_start_at: float | None = None
+        # a ground station's arm in HOLD on the ground awaiting a mission's start (--await-mission)
+        self.pre_start = PreStart(sim, clock, ports.missions, self.cfg.await_mission)
         if self.cfg.await_mission and ports.missions is not None:
             sim.mode = HOLD  # as PX4 without RC sticks waits in Hold: a ground station's arm arms there
 
@@ -255,46 +255,15 @@ class Commander:
         at once; here the arm is the controller's, once it has the mission."""
         if self.clock.halted:
             return self._refuse("MISSION_START: the plant diverged")
-        if self.sim.armed and self.pre_start_at is None:
+        if self.sim.armed and self.pre_start.at is None:
             return self._refuse("MISSION_START: only on the ground, disarmed or armed in HOLD (the controller flies "
                                 "it from its start)")
         missions = self.ports.missions
         why = "MISSION_START: no mission manager" if missions is None else missions.start(by, first, how)
         if why:
             return self._refuse(why)
-        self.pre_start_at = None  # started: no pre-takeoff timeout while the controller downloads it
+        self.pre_start.at = None  # started: no pre-takeoff timeout while the controller downloads it
         return mavlink.MAV_RESULT_ACCEPTED
-
-    def _mission_starting(self) -> bool:
-        """A ground station started the mission; the controller's arm, once it has it, is still to come."""
-        return self.ports.missions is not None and self.ports.missions.start_requested
-
-    def _held_before_flight(self) -> bool:
-        """Armed in HOLD on the ground before the mission's flight (``--await-mission``, nothing flown yet)."""
-        missions = self.ports.missions
-        return (self.cfg.await_mission and missions is not None and missions.watch is None and not missions.completed
-                and self.sim.armed and self.sim.mode == HOLD and self.sim.plant.on_ground)
-
-    def _awaits_start(self) -> bool:
-        """Armed in HOLD on the ground with no start yet: the pre-takeoff timeout runs."""
-        return self._held_before_flight() and not self._mission_starting()
-
-    def tick(self, now: float) -> None:
-        """Wall-clock duty: armed in HOLD awaiting a start for COM_DISARM_PRFLT (``now``: wall time, s), the vehicle
-        disarms itself, as PX4's pre-takeoff timeout does (its event ``pre_start``: nothing flew)."""
-        at = self.pre_start_at
-        if at is None:
-            return
-        if not self._awaits_start():
-            self.pre_start_at = None  # disarmed, another mode, or started
-            return
-        limit = self.sim.preflight_disarm_s
-        if limit > 0.0 and now - at >= limit:
-            self.pre_start_at = None
-            n0 = len(self.sim.events)
-            self.sim.disarm(f"disarmed: no mission started within COM_DISARM_PRFLT = {limit:g} s of arming")
-            self._mark_pre_start(n0)
-            self.clock.fire(Trigger.DISARM)
 
     def _takeoff_altitude(self, param7: float) -> float | str:
         """NAV_TAKEOFF's altitude above home (m) from its param7 (m AMSL, as PX4 reads it; NaN:
@@ -332,7 +301,7 @@ class Commander:
         if self.clock.halted:
             return self._refuse(f"mode {mode_name(mode)}: the plant diverged")
         if mode == MISSION:
-            if self.pre_start_at is not None:  # armed in HOLD on the ground: AUTO.MISSION starts the mission
+            if self.pre_start.at is not None:  # armed in HOLD on the ground: AUTO.MISSION starts the mission
                 return self._start_mission(by, 0.0, START_ARMED)
             missions = self.ports.missions
             refused = "mode MISSION: not flown here" if missions is None else missions.select(self.sim.armed)
@@ -340,7 +309,7 @@ class Commander:
         sim = self.sim
         if mode == RTL and not sim.armed:
             return self._refuse("mode RTL: only armed (PX4 does not arm in Return mode)")
-        if self.ports.missions is not None and (not sim.armed or self._mission_starting()):
+        if self.ports.missions is not None and (not sim.armed or self.pre_start.starting()):
             # AUTO.MISSION no longer selected, or the mission starting
             refused = self.ports.missions.select_other(mode_name(mode))
             if refused:
@@ -418,13 +387,10 @@ class Commander:
             if from_gcs:
                 sim.arm_in_mode()  # in the mode it selected (HOLD, LAND, TAKEOFF), else offboard
             else:  # the controller's: a started mission's arm takes the vehicle armed in HOLD on the ground
-                sim.arm(from_hold=self._mission_starting() and sim.mode == HOLD)
-            if from_gcs and self._held_before_flight():
-                # nothing flies until the mission's start: in lockstep time stands still, as disarmed (an arm
-                # again, or after the start, changes nothing)
-                if self.pre_start_at is None and not self._mission_starting():
-                    self.pre_start_at = now
-                    self._mark_pre_start(n0)
+                sim.arm(from_hold=self.pre_start.starting() and sim.mode == HOLD)
+            if from_gcs and self.pre_start.held():
+                # nothing flies until the mission's start: in lockstep time stands still, as disarmed
+                self.pre_start.armed(now, n0)
                 return mavlink.MAV_RESULT_ACCEPTED
             if sim.mode in GROUND_MODES:  # the vehicle's own controller flies: no controller's answers
                 if self.lockstep and not self.clock.free_running:
@@ -438,19 +404,12 @@ class Commander:
         forced = p2 == FORCE_DISARM
         if sim.armed and not sim.plant.on_ground and not forced:
             return mavlink.MAV_RESULT_DENIED  # in the air: only a forced disarm (PX4 does the same)
-        held, n0 = self._held_before_flight(), len(sim.events)
+        held, n0 = self.pre_start.held(), len(sim.events)
         sim.disarm("disarmed by command (forced)" if forced else "disarmed by command")
         if held:  # armed in HOLD before the mission's flight: nothing flew, nothing ends
-            self._mark_pre_start(n0)
+            self.pre_start.mark(n0)
         self.clock.fire(Trigger.DISARM)  # a lockstep flight is over: time stands still until armed again
         return mavlink.MAV_RESULT_ACCEPTED
-
-    def _mark_pre_start(self, n0: int) -> None:
-        """The events from ``n0`` on are a ground station's arm awaiting a mission's start, or a disarm before
-        the start (by command, or the vehicle's when none came): part of the start, not a change to a flight
-        (summary.json interventions, ended_by)."""
-        for e in self.sim.events[n0:]:
-            e.pre_start = True
 
     # -- what ends a flight --------------------------------------------------------------------------
     def controller_lost(self, now: float) -> None:

@@ -400,7 +400,7 @@ class Vehicle:
                 self._handle(self.gcs, m, addr)
         with self.receiver.charged():  # a re-request to a would-be controller: within its trial's credit
             self.missions.tick(now)
-        self.commander.tick(now)  # COM_DISARM_PRFLT
+        self.commander.pre_start.tick(now)  # COM_DISARM_PRFLT
         if now >= self._next_heartbeat:
             self._next_heartbeat = now + HEARTBEAT_S
             self.announcer.to_links([self._heartbeat()])

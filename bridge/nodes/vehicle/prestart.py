@@ -1,0 +1,74 @@
+"""Before an awaited mission's flight (``--await-mission``): a ground station's arm in HOLD on the ground, and
+PX4's pre-takeoff timeout (COM_DISARM_PRFLT).
+
+In:  the simulated vehicle (armed, mode, on the ground, its events, ``preflight_disarm_s``), the mission manager
+     (a start requested, a mission flying or completed), wall time (s, ``time.monotonic``)
+Out: whether the vehicle is armed in HOLD before the mission's flight (:meth:`PreStart.held`) and awaits its start
+     (:meth:`PreStart.awaits`); the events of such an arm, and of a disarm before the start, marked ``pre_start``
+     (part of the start, not a change to a flight: summary.json's interventions and ended_by skip them); the
+     vehicle's own disarm once COM_DISARM_PRFLT has passed with no start (:meth:`PreStart.tick`: the clock's
+     DISARM)
+
+As PX4 without RC sticks, the vehicle awaiting a mission waits in HOLD; a ground station's arm arms it there and
+nothing flies until the start (in lockstep time stands still), which the controller's arm takes from HOLD to
+OFFBOARD (docs/missions.md).
+"""
+
+from __future__ import annotations
+
+from bridge.autopilot.simvehicle import HOLD, SimVehicle
+from bridge.nodes.vehicle.clock import Clock, Trigger
+from bridge.nodes.vehicle.mission import MissionManager
+
+
+class PreStart:
+    """A ground station's arm awaiting an awaited mission's start, for one vehicle."""
+
+    def __init__(self, sim: SimVehicle, clock: Clock, missions: MissionManager | None, await_mission: bool) -> None:
+        self.sim = sim
+        self.clock = clock
+        self.missions = missions if await_mission else None
+        self.at: float | None = None  # wall time (s) of the arm whose timeout runs (None: none runs)
+
+    def starting(self) -> bool:
+        """A ground station started the mission; the controller's arm, once it has it, is still to come."""
+        return self.missions is not None and self.missions.start_requested
+
+    def held(self) -> bool:
+        """Armed in HOLD on the ground before the mission's flight (nothing flown yet)."""
+        m, sim = self.missions, self.sim
+        return (m is not None and m.watch is None and not m.completed and sim.armed and sim.mode == HOLD
+                and sim.plant.on_ground)
+
+    def awaits(self) -> bool:
+        """Held with no start yet: the pre-takeoff timeout runs."""
+        return self.held() and not self.starting()
+
+    def armed(self, now: float, n0: int) -> None:
+        """A ground station's arm left the vehicle held (its events from ``n0``): the first one starts the timeout
+        and is the start's; one again, or after the start, changes nothing."""
+        if self.at is None and not self.starting():
+            self.at = now
+            self.mark(n0)
+
+    def mark(self, n0: int) -> None:
+        """The vehicle's events from ``n0`` on are the start's (``pre_start``)."""
+        for e in self.sim.events[n0:]:
+            e.pre_start = True
+
+    def tick(self, now: float) -> None:
+        """Wall-clock duty: held and not started for COM_DISARM_PRFLT (> 0) since the arm, the vehicle disarms
+        itself, as PX4's pre-takeoff timeout does."""
+        at = self.at
+        if at is None:
+            return
+        if not self.awaits():
+            self.at = None  # disarmed, another mode, or started
+            return
+        limit = self.sim.preflight_disarm_s
+        if limit > 0.0 and now - at >= limit:
+            self.at = None
+            n0 = len(self.sim.events)
+            self.sim.disarm(f"disarmed: no mission started within COM_DISARM_PRFLT = {limit:g} s of arming")
+            self.mark(n0)
+            self.clock.fire(Trigger.DISARM)
