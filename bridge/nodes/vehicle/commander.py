@@ -101,8 +101,6 @@ class Commander:
         self.plant_at_end: dict[str, Any] | None = None  # the plant's summary blocks when the mission ended
         # a ground station's arm in HOLD on the ground awaiting a mission's start (--await-mission)
         self.pre_start = PreStart(sim, clock, ports.missions, self.cfg.await_mission)
-        if self.cfg.await_mission and ports.missions is not None:
-            sim.mode = HOLD  # as PX4 without RC sticks waits in Hold: a ground station's arm arms there
 
     # -- the messages ---------------------------------------------------------------------------------
     def command(self, ep: Endpoint, m: Any, addr: tuple[str, int], link: str) -> bool:
@@ -255,7 +253,7 @@ class Commander:
         at once; here the arm is the controller's, once it has the mission."""
         if self.clock.halted:
             return self._refuse("MISSION_START: the plant diverged")
-        if self.sim.armed and self.pre_start.at is None:
+        if self.sim.armed and not self.pre_start.awaits():
             return self._refuse("MISSION_START: only on the ground, disarmed or armed in HOLD (the controller flies "
                                 "it from its start)")
         missions = self.ports.missions
@@ -301,7 +299,7 @@ class Commander:
         if self.clock.halted:
             return self._refuse(f"mode {mode_name(mode)}: the plant diverged")
         if mode == MISSION:
-            if self.pre_start.at is not None:  # armed in HOLD on the ground: AUTO.MISSION starts the mission
+            if self.pre_start.awaits():  # armed in HOLD on the ground: AUTO.MISSION starts the mission
                 return self._start_mission(by, 0.0, START_ARMED)
             missions = self.ports.missions
             refused = "mode MISSION: not flown here" if missions is None else missions.select(self.sim.armed)

@@ -3,11 +3,11 @@ PX4's pre-takeoff timeout (COM_DISARM_PRFLT).
 
 In:  the simulated vehicle (armed, mode, on the ground, its events, ``preflight_disarm_s``), the mission manager
      (a start requested, a mission flying or completed), wall time (s, ``time.monotonic``)
-Out: whether the vehicle is armed in HOLD before the mission's flight (:meth:`PreStart.held`) and awaits its start
-     (:meth:`PreStart.awaits`); the events of such an arm, and of a disarm before the start, marked ``pre_start``
-     (part of the start, not a change to a flight: summary.json's interventions and ended_by skip them); the
-     vehicle's own disarm once COM_DISARM_PRFLT has passed with no start (:meth:`PreStart.tick`: the clock's
-     DISARM)
+Out: the vehicle's mode before its first arm (HOLD); whether it is armed in HOLD before the mission's flight
+     (:meth:`PreStart.held`) and awaits its start (:meth:`PreStart.awaits`); the events of such an arm, and of a
+     disarm before the start, marked ``pre_start`` (part of the start, not a change to a flight: summary.json's
+     interventions and ended_by skip them); the vehicle's own disarm once COM_DISARM_PRFLT has passed with no start
+     (:meth:`PreStart.tick`: the clock's DISARM)
 
 As PX4 without RC sticks, the vehicle awaiting a mission waits in HOLD; a ground station's arm arms it there and
 nothing flies until the start (in lockstep time stands still), which the controller's arm takes from HOLD to
@@ -29,6 +29,8 @@ class PreStart:
         self.clock = clock
         self.missions = missions if await_mission else None
         self.at: float | None = None  # wall time (s) of the arm whose timeout runs (None: none runs)
+        if self.missions is not None:
+            sim.mode = HOLD  # as PX4 without RC sticks waits in Hold: a ground station's arm arms there
 
     def starting(self) -> bool:
         """A ground station started the mission; the controller's arm, once it has it, is still to come."""
