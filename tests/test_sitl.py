@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import random
 import signal
 import socket
 import subprocess
@@ -27,7 +28,7 @@ from bridge.record.halves import count_records, read_half
 from bridge.record.policies import POLICIES
 from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
-from bridge.session.children import CHOSEN_PORTS_LOW, RECENT_PORTS, ephemeral_low, free_udp_port
+from bridge.session.children import CHOSEN_PORTS_LOW, PORT_LOCKS, RECENT_PORTS, ephemeral_low, free_udp_port
 from missions import MISSION_DIR, Mission, Sine
 from tests.sitlkit import ENV, Bsst, child_pids, stall_blackouts, unexplained_outages
 from tests.waiting import wait_for
@@ -274,6 +275,57 @@ def test_a_sessions_ports_are_picked_below_the_kernels_ephemeral_range():
     for port in ports[:5]:
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
             s.bind(("127.0.0.1", port))
+
+
+# another process on the machine: it holds the port lock file's bytes from LO up to HI but KEEP, or says which
+# of the PORTS it could not lock (each held by a process of its own)
+_HOLD_BUT_ONE = """
+import fcntl, os, sys
+fd = os.open(sys.argv[1], os.O_RDWR | os.O_CREAT, 0o666)
+lo, hi, keep = map(int, sys.argv[2:5])
+fcntl.lockf(fd, fcntl.LOCK_EX | fcntl.LOCK_NB, keep - lo, lo)
+fcntl.lockf(fd, fcntl.LOCK_EX | fcntl.LOCK_NB, hi - keep - 1, keep + 1)
+print("held", flush=True)
+sys.stdin.read()
+"""
+_HELD_ELSEWHERE = """
+import fcntl, json, os, sys
+fd = os.open(sys.argv[1], os.O_RDWR | os.O_CREAT, 0o666)
+held = []
+for port in map(int, sys.argv[2:]):
+    try:
+        fcntl.lockf(fd, fcntl.LOCK_EX | fcntl.LOCK_NB, 1, port)
+        held.append(False)
+    except OSError:
+        held.append(True)
+print(json.dumps(held))
+"""
+
+
+def test_a_port_chosen_in_one_process_is_never_chosen_in_another_before_it_is_forgotten(tmp_path, monkeypatch):
+    """Two processes that start sessions side by side (the suite's workers) choose ports from the same range; a
+    port is free until its child binds it, so each choice is held machine-wide (a byte of ``bsst-ports.lock`` in
+    the temporary directory, here this test's own): another process sees it held, and skips the ports another
+    process holds (the CI's suite met "--source-port 27523: cannot bind (Address already in use)")."""
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    lock = tmp_path / PORT_LOCKS
+    lo = ephemeral_low()
+    keep = random.randrange(CHOSEN_PORTS_LOW + 1, lo - 1)
+    holder = subprocess.Popen([sys.executable, "-c", _HOLD_BUT_ONE, str(lock), str(CHOSEN_PORTS_LOW), str(lo),
+                               str(keep)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline() == "held\n"  # type: ignore[union-attr]
+        picks = [free_udp_port() for _ in range(10)]
+    finally:
+        holder.stdin.close()  # type: ignore[union-attr]
+        holder.wait(timeout=30)
+    mine = [free_udp_port() for _ in range(3)]  # (the other process gone: any port of the range again)
+    probe = subprocess.run([sys.executable, "-c", _HELD_ELSEWHERE, str(lock), *map(str, mine)],
+                           capture_output=True, text=True, timeout=60, check=True)
+    assert json.loads(probe.stdout) == [True, True, True]
+    assert all(CHOSEN_PORTS_LOW <= p < lo for p in mine), mine
+    # the one port left, or (64 random tries missing it) the kernel's choice above the range: never a held one
+    assert all(p == keep or p >= lo for p in picks), picks
 
 
 def test_an_automatic_instance_is_the_highest_free_one(tmp_path, monkeypatch):

@@ -67,8 +67,44 @@ def ephemeral_low() -> int:
 
 
 RECENT_PORTS = 256  # the choices of free_udp_port a process remembers (a fleet of ten takes ~40)
-_recent: collections.deque[int] = collections.deque(maxlen=RECENT_PORTS)
+PORT_LOCKS = "bsst-ports.lock"  # in the temporary directory: byte N locked while a process may hand port N out
+_recent: collections.deque[tuple[int, int]] = collections.deque()  # (lock file's descriptor or -1, port)
 _recent_lock = threading.Lock()
+_lock_files: dict[str, int] = {}  # path -> descriptor, open for the process's life (closing drops its locks)
+
+
+def _port_lock_file() -> int:
+    """This process's descriptor of ``<tmp>/bsst-ports.lock`` (opened once: closing any descriptor of a file drops
+    every POSIX lock the process holds on it), or -1 where it cannot be opened (another user's file)."""
+    path = os.path.join(tempfile.gettempdir(), PORT_LOCKS)
+    fd = _lock_files.get(path)
+    if fd is None:
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+        except OSError:
+            fd = -1
+        _lock_files[path] = fd
+    return fd
+
+
+def _reserve(fd: int, port: int) -> bool:
+    """Lock byte ``port`` of the port lock file (never waits): False if another process holds it."""
+    if fd < 0:
+        return True
+    try:
+        fcntl.lockf(fd, fcntl.LOCK_EX | fcntl.LOCK_NB, 1, port)
+    except OSError:
+        return False
+    return True
+
+
+def _remember(fd: int, port: int) -> None:
+    """Add a choice to the recent ones; the oldest, forgotten, is released to other processes."""
+    if len(_recent) >= RECENT_PORTS:
+        old_fd, old = _recent.popleft()
+        if old_fd >= 0:
+            fcntl.lockf(old_fd, fcntl.LOCK_UN, 1, old)
+    _recent.append((fd, port))
 
 
 def free_udp_port() -> int:
@@ -81,22 +117,30 @@ def free_udp_port() -> int:
     already in use)"); below it, only another explicit choice can take it. The kernel's choice where the
     range leaves no room below it.
 
-    Never one this process handed out in its last :data:`RECENT_PORTS` choices: a port chosen is free until its
-    child binds it, so a second choice in the same session could be the same number (a relay's listen and back
-    ports once were: "cannot bind (Address already in use)", one session in some thousands)."""
+    Never one this process handed out in its last :data:`RECENT_PORTS` choices, nor one another process on this
+    machine still holds: a port chosen is free until its child binds it, so a second choice in that time, in this
+    process or in another (the suite's two workers; sessions started side by side), could be the same number
+    (a relay's listen and back ports once were, one session in some thousands; the CI's suite met "--source-port
+    27523: cannot bind (Address already in use)" across its workers). Each choice holds byte N of
+    ``<tmp>/bsst-ports.lock`` (``fcntl.lockf``: released when the process forgets the choice, or exits) and skips
+    a port whose byte another process holds."""
     lo = ephemeral_low()
     with _recent_lock:  # (a fleet's sessions start in threads)
+        fd = _port_lock_file()
+        mine = {port for _, port in _recent}
         for _ in range(64 if lo > CHOSEN_PORTS_LOW else 0):
             port = random.randrange(CHOSEN_PORTS_LOW, lo)
-            if port in _recent:
+            if port in mine or not _reserve(fd, port):
                 continue
             with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
                 try:
                     s.bind(("127.0.0.1", port))
                 except OSError:
+                    if fd >= 0:
+                        fcntl.lockf(fd, fcntl.LOCK_UN, 1, port)
                     continue
-                _recent.append(port)
-                return port
+            _remember(fd, port)
+            return port
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
