@@ -109,8 +109,10 @@ def commands_in_force(e: np.ndarray, S: int, pt: np.ndarray, timeout_s: float, r
             m += 1
         if v < following:
             following = v
-    rec_check[:m] = rec_check[:m][::-1].copy()
-    rec_cmd[:m] = rec_cmd[:m][::-1].copy()
+    for a in range(m // 2):  # into increasing order (a loop: an array slice's copy costs ~1.5 s of compile)
+        b = m - 1 - a
+        rec_check[a], rec_check[b] = rec_check[b], rec_check[a]
+        rec_cmd[a], rec_cmd[b] = rec_cmd[b], rec_cmd[a]
     f = NEVER
     i = 0
     last = -1
@@ -128,8 +130,9 @@ def commands_in_force(e: np.ndarray, S: int, pt: np.ndarray, timeout_s: float, r
     while kept < m and rec_check[kept] < limit:  # the records arrive in increasing order: a prefix
         worst = max(worst, rec_check[kept] // S - rec_cmd[kept])
         kept += 1
-    rec_check[kept:] = NEVER
-    rec_cmd[kept:] = 0
+    for j in range(kept, rec_check.shape[0]):
+        rec_check[j] = NEVER
+        rec_cmd[j] = 0
     return f, kept, worst
 
 
@@ -145,6 +148,8 @@ def plan_cells(lo: int, hi: int, keys: np.ndarray, ints: np.ndarray, fps: np.nda
     failsafe[i], count[i], ages[i] = (oldest command used, oldest state used; control steps), and rows i - lo
     of rec_check / rec_cmd [hi - lo, steps]."""
     steps = t.shape[0]
+    # counts as int64 variables, not literals: a literal argument compiles its callee once more (~1 s each)
+    zero, one = steps - steps, S // S
     lost = np.zeros(steps, np.bool_)
     jit = np.zeros(steps)
     held = np.zeros(steps, np.bool_)
@@ -169,14 +174,14 @@ def plan_cells(lo: int, hi: int, keys: np.ndarray, ints: np.ndarray, fps: np.nda
             d = lost[k] or _blacked_out(bos[0, i], nbos[0, i], t[k])
             down_lost[i, k] = d
             ok[k] = not d
-        _arrivals(ok, seq, steps, t, fps[0, i], jit, held, dup, dup_jit, down_thr, rate_hz, 1, due, nxt, arrive)
+        _arrivals(ok, seq, steps, t, fps[0, i], jit, held, dup, dup_jit, down_thr, rate_hz, one, due, nxt, arrive)
         newest[:] = -1
         for j in range(steps):
             a = arrive[j]
             if a < steps and j > newest[a]:
                 newest[a] = j
         stale, stop = guard[i, 0], guard[i, 1]
-        n_sent = 0
+        n_sent = zero
         for k in range(steps):
             if k and newest[k] < newest[k - 1]:
                 newest[k] = newest[k - 1]
