@@ -65,7 +65,7 @@ def _kernels_compiled(tmp_path_factory: pytest.TempPathFactory, worker_id: str) 
     """Compile numba's kernels (the EKF's, the scalar engine's), or load them from their on-disk cache, once per
     test process before any test: as ``bsst sitl`` does before it starts a vehicle, so that a test that starts a
     vehicle does not have it compile them (~12 s on a fresh clone) inside its start-up time, and the worker's own
-    flights fly them (``auto``). The batch engine's (~28 s of one core on a fresh clone, one kernel) a worker
+    flights fly them (``auto``). The batch engine's (~23 s of one core on a fresh clone, one kernel) a worker
     loads only before a test that flies it (``batch_kernels``), compiled meanwhile by a process of its own
     (:func:`pytest_configure`): on a fresh clone every worker waited for it before its first test (60 s each in a
     loaded suite), then one did (70 s)."""

@@ -212,8 +212,8 @@ def test_a_sweep_whose_every_cell_failed_raises_from_python(tmp_path: Path) -> N
 
 # -- the first compile says so -----------------------------------------------------------------------------
 
-COMPILING = {"ekf": "bsst: compiling the EKF's kernels (first run after an install, ~13 s; cached on disk after) ...",
-             "batch": "bsst: compiling the batch engine's kernels (first run after an install, ~12 s; cached on disk "
+COMPILING = {"ekf": "bsst: compiling the EKF's kernels (first run after an install, ~7 s; cached on disk after) ...",
+             "batch": "bsst: compiling the batch engine's kernels (first run after an install, ~24 s; cached on disk "
                       "after) ..."}
 
 

@@ -1,10 +1,10 @@
-"""Say so when numba is about to compile: the first EKF or batch run after an install spends 10-17 s
+"""Say so when numba is about to compile: the first EKF or batch run after an install spends 7-24 s
 compiling kernels, which without a word looks like a hang.
 
 In:  the name of a package or module whose numba kernels (``@njit(cache=True)``) are about to be first
      called in this process, already imported (:data:`KERNELS`: what they are, in words; how long
      compiling them takes, s)
-Out: one line on stderr, ``bsst: compiling the EKF's kernels (first run after an install, ~13 s; cached on
+Out: one line on stderr, ``bsst: compiling the EKF's kernels (first run after an install, ~7 s; cached on
      disk after) ...``, once per process and only when numba's on-disk cache of those kernels is cold:
      for at least half of them, the index file (``<module>.<function>-<line>.py311.nbi`` in the source's
      ``__pycache__``, or under ``NUMBA_CACHE_DIR``) absent, of another numba version, or stale (its
@@ -25,9 +25,9 @@ from collections.abc import Iterator
 from typing import Any, TextIO
 
 KERNELS = {  # package of kernels: what they are, in words, and how long compiling them takes on the 2-core VM, s
-    "bridge.autopilot.ekfkernels": ("the EKF's kernels", 13.0),
-    "bridge.batch": ("the batch engine's kernels", 12.0),
-    "bridge.core.scalarkernels": ("the controller's and the plant's kernels", 25.0),
+    "bridge.autopilot.ekfkernels": ("the EKF's kernels", 7.0),  # 6.6 s of CPU (docs/figures.md, eighteenth session)
+    "bridge.batch": ("the batch engine's kernels", 24.0),  # 23.1 s
+    "bridge.core.scalarkernels": ("the controller's and the plant's kernels", 4.0),  # 3.3 s
 }
 
 _checked: set[str] = set()  # packages looked at in this process: each is announced at most once

@@ -13,7 +13,7 @@ The filter is described in :mod:`bridge.autopilot.estimator`; this module and
 :mod:`bridge.autopilot.ekfstate` (the state's layout, its buffer, P carried in time) are its arithmetic,
 nothing else, compiled with numba so that a flight with the EKF pays about a microsecond of call per
 measurement rather than the tens that the same work costs in small numpy calls. Each kernel is cached on
-disk (``cache=True``): the first flight with the EKF on a machine compiles them (~13 s on a 2-core VM),
+disk (``cache=True``): the first flight with the EKF on a machine compiles them (~7 s on a 2-core VM),
 later ones load them.
 """
 
@@ -245,8 +245,8 @@ def _position_first(x: np.ndarray, c: np.ndarray, P: np.ndarray, hist: np.ndarra
     s = np.empty(9)
     _state_at(x, hist, hs, t_valid, s)
     dx = np.zeros(15)
-    have = _update_block(c, P, counts, kind, 0, z0 - s[0], z1 - s[1], z2 - s[2],
-                         (vp0, 0.0, 0.0, 0.0, vp1, 0.0, 0.0, 0.0, vp2), dx, False)
+    have = _update_block(c, P, counts, kind, np.int64(0), z0 - s[0], z1 - s[1], z2 - s[2],
+                         (vp0, 0.0, 0.0, 0.0, vp1, 0.0, 0.0, 0.0, vp2), dx, np.bool_(False))
     return s, dx, have
 
 
@@ -257,7 +257,10 @@ def fuse_pose(x: np.ndarray, c: np.ndarray, P: np.ndarray, hist: np.ndarray, hs:
     """A motion-capture pose: position (z0, z1, z2) m with variances vp, Euler angles (z3, z4, z5) rad with
     variances v, valid at t_valid s; fused as two 3-value blocks, the attitude's as the small rotation
     E·r of its residual r with noise E·diag(v)·Eᵀ."""
-    s, dx, have = _position_first(x, c, P, hist, hs, counts, K_POSE, t_valid, z0, z1, z2, vp0, vp1, vp2)
+    # kinds and offsets as np.int64, not literals: numba compiles a callee once per literal value it is given
+    # (four _gate, four _update_block: ~2 s of a fresh machine's first EKF)
+    s, dx, have = _position_first(x, c, P, hist, hs, counts, np.int64(K_POSE), t_valid, z0, z1, z2, vp0, vp1,
+                                  vp2)
     e0, e1, e2 = _wrap_angle(z3 - s[6]), _wrap_angle(z4 - s[7]), _wrap_angle(z5 - s[8])
     cp, sp, ct, st = math.cos(s[8]), math.sin(s[8]), math.cos(s[7]), math.sin(s[7])
     a, b = cp * ct, sp * ct  # E = [[a, -sp, 0], [b, cp, 0], [-st, 0, 1]]
@@ -265,7 +268,8 @@ def fuse_pose(x: np.ndarray, c: np.ndarray, P: np.ndarray, hist: np.ndarray, hs:
     r02 = -a * st * v0
     r12 = -b * st * v0
     Rm = (a * a * v0 + sp * sp * v1, r01, r02, r01, b * b * v0 + cp * cp * v1, r12, r02, r12, st * st * v0 + v2)
-    have |= _update_block(c, P, counts, K_POSE, 6, a * e0 - sp * e1, b * e0 + cp * e1, e2 - st * e0, Rm, dx, have)
+    have |= _update_block(c, P, counts, np.int64(K_POSE), np.int64(6), a * e0 - sp * e1, b * e0 + cp * e1,
+                          e2 - st * e0, Rm, dx, have)
     if have:
         _fused(x, dx)
 
@@ -275,8 +279,9 @@ def fuse_gnss(x: np.ndarray, c: np.ndarray, P: np.ndarray, hist: np.ndarray, hs:
               t_valid: float, z0: float, z1: float, z2: float, z3: float, z4: float, z5: float, vp0: float,
               vp1: float, vp2: float, vv0: float, vv1: float, vv2: float) -> None:
     """A GNSS fix: position (z0, z1, z2) m and velocity (z3, z4, z5) m/s with their variances, valid at t_valid."""
-    s, dx, have = _position_first(x, c, P, hist, hs, counts, K_GNSS, t_valid, z0, z1, z2, vp0, vp1, vp2)
-    have |= _update_block(c, P, counts, K_GNSS, 3, z3 - s[3], z4 - s[4], z5 - s[5],
+    s, dx, have = _position_first(x, c, P, hist, hs, counts, np.int64(K_GNSS), t_valid, z0, z1, z2, vp0, vp1,
+                                  vp2)
+    have |= _update_block(c, P, counts, np.int64(K_GNSS), np.int64(3), z3 - s[3], z4 - s[4], z5 - s[5],
                           (vv0, 0.0, 0.0, 0.0, vv1, 0.0, 0.0, 0.0, vv2), dx, have)
     if have:
         _fused(x, dx)
@@ -291,7 +296,7 @@ def fuse_baro(x: np.ndarray, c: np.ndarray, P: np.ndarray, hist: np.ndarray, hs:
     _state_at(x, hist, hs, t_valid, s)
     h = np.zeros(15)
     h[2] = 1.0
-    _update_scalar(x, c, P, counts, K_BARO, h, z - s[2], var)
+    _update_scalar(x, c, P, counts, np.int64(K_BARO), h, z - s[2], var)
 
 
 @njit(cache=True)
@@ -306,7 +311,7 @@ def fuse_heading(x: np.ndarray, c: np.ndarray, P: np.ndarray, hist: np.ndarray, 
     h[6] = math.cos(s[8]) * tt
     h[7] = math.sin(s[8]) * tt
     h[8] = 1.0
-    _update_scalar(x, c, P, counts, K_HEADING, h, _wrap_angle(z - s[8]), var)
+    _update_scalar(x, c, P, counts, np.int64(K_HEADING), h, _wrap_angle(z - s[8]), var)
 
 
 @njit(cache=True)

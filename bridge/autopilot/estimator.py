@@ -79,7 +79,7 @@ loop's order, for the estimator's own tests (the product's loops carry the estim
 :class:`Ekf` owns the state as arrays and each measurement is one call of a numba kernel of
 :mod:`bridge.autopilot.ekfkernels` (about 2 µs for an IMU sample, 4 µs for a pose reading). numba is imported,
 and the kernels loaded from their on-disk cache (~0.8 s), only when an EKF is built; the first EKF on
-a machine compiles them first (~13 s on the 2-core VM).
+a machine compiles them first (~7 s on the 2-core VM).
 """
 
 from __future__ import annotations
@@ -319,7 +319,7 @@ class Ekf:
     def __init__(self, config: SensorConfig, start: State, gravity: float = 9.81) -> None:
         from bridge.autopilot import ekfkernels as kernels  # numba's import costs ~0.3 s: only an EKF flight pays it
 
-        announce_compiling(kernels.__name__)  # a cold cache: say so before ~13 s of silence
+        announce_compiling(kernels.__name__)  # a cold cache: say so before ~7 s of silence
         kernels.ready()
         k = self._k = kernels
         c = config
@@ -438,7 +438,7 @@ def compile_estimator(kind: str) -> None:
     if kind == "ekf":
         from bridge.autopilot import ekfkernels  # numba's import costs ~0.3 s: only an EKF flight pays it
 
-        announce_compiling(ekfkernels.__name__)  # a cold cache: say so before ~13 s of silence
+        announce_compiling(ekfkernels.__name__)  # a cold cache: say so before ~7 s of silence
         ekfkernels.ready()
 
 

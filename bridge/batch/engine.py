@@ -175,7 +175,7 @@ def fly_batch(mission: Mission | str | Path, cells: Sequence[Overrides | Mapping
 def compile_batch() -> None:
     """Compile, or load from numba's on-disk cache, this engine's kernels in this process, by flying a
     few steps of every kind of cell: each law, wrench (paper) and motors (x500), plant effects, a lossy
-    delayed link with prediction. A first batch on a machine compiles them (~22 s of CPU here: the whole
+    delayed link with prediction. A first batch on a machine compiles them (~23 s of CPU here: the whole
     flight's kernel inlines its helpers); after it, ~1 s."""
     cells = [{"controller": law} for law in ("bsst", "smc", "pid")]
     cells.append({"link": {"delay_ms": 8.0, "loss_pct": 10.0, "compensation": "predict"}})

@@ -437,7 +437,7 @@ def at_rest() -> Mission:
 
 def compiled_kernels_cached(ekf: bool = True) -> bool:
     """Whether :func:`load_compiled_kernels` would load the kernels from numba's cache on disk, not compile them
-    (~25 s, the EKF's ~13 s more): what ``auto`` asks before it loads them on behalf of children that would fly
+    (~4 s, the EKF's ~7 s more): what ``auto`` asks before it loads them on behalf of children that would fly
     plain otherwise (bridge.core.kernelpreload, bridge.core.kernelwarm). Imports numba (~0.6 s) to look."""
     import bridge.autopilot.ekfkernels  # noqa: F401  (imported: its dispatchers are looked at)
     import bridge.core.scalarkernels  # noqa: F401  (as above)

@@ -348,7 +348,7 @@ def run_batch(mission: Mission, todo: Sequence[Cell], report: Report, chunk: int
     ``jobs`` threads (default: every core; the rows do not depend on it)."""
     from bridge.batch import fly_batch  # lazy: numba loads only where the batch flies (engine_for)
 
-    announce_compiling("bridge.batch")  # a cold cache: say so before ~12 s of silence
+    announce_compiling("bridge.batch")  # a cold cache: say so before ~24 s of silence
     for i in range(0, len(todo), chunk):
         part = todo[i:i + chunk]
         for cell, m in zip(part, fly_batch(mission, [cell_overrides(c) for c in part], jobs=jobs), strict=True):
