@@ -23,6 +23,7 @@ from bridge.cli.flying import report_fleet
 from bridge.nodes.vehicle import gate as gatemod
 from bridge.nodes.vehicle.clock import Answer, Clock, ClockState, Trigger
 from bridge.nodes.vehicle.gate import Gate, GateConfig
+from bridge.session.children import free_udp_port
 from bridge.swarm import CONTINUED, FleetRun, Watch, judge_traces, simulate, sitl
 from params import ConfigError
 from tests.test_swarm_sitl import short_sine
@@ -36,19 +37,9 @@ RATE = 250.0
 ANSWER = Answer((0.5, 0.5, 0.5, 0.5), 1.0)
 
 
-def free_ports(n: int) -> tuple[int, ...]:
-    socks = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(n)]
-    for s in socks:
-        s.bind(("127.0.0.1", 0))
-    ports = tuple(s.getsockname()[1] for s in socks)
-    for s in socks:
-        s.close()
-    return ports
-
-
 def gates(n: int, radii: float = 0.3) -> list[tuple[Gate, Clock, list]]:
     """n gates of one fleet, each with a lockstep clock engaged and a position the test moves."""
-    ports, out = free_ports(n), []
+    ports, out = tuple(free_udp_port() for _ in range(n)), []
     for i in range(n):
         clock = Clock(False, 1000.0, 1.0, 0.0)
         clock.fire(Trigger.ENGAGE)
