@@ -44,6 +44,7 @@ AT_REST: State = (0.0,) * 12  # type: ignore[assignment]
 
 CRASH_SPEED_MPS = 2.0  # m/s: a touchdown faster than this breaks the vehicle (docs/weather.md "Outcomes")
 CRASH_TILT_RAD = math.radians(30.0)  # rad: a touchdown tilted more than this lands on a rotor, not the legs
+ENVELOPE_M = 100.0  # m from the origin (home): farther, the flight has diverged (the paper's missions stay within 10 m)
 
 
 def ground_contact(X: tuple[float, ...]) -> State:
@@ -199,8 +200,8 @@ class Quadrotor:
         X = self.state
         if not math.isfinite(sum(X)) and not all(math.isfinite(v) for v in X):  # the sum: one cheap test
             return "state is not finite"
-        if X[0] * X[0] + X[2] * X[2] + X[4] * X[4] > 1e4:
-            return "position beyond 100 m"
+        if X[0] * X[0] + X[2] * X[2] + X[4] * X[4] > ENVELOPE_M * ENVELOPE_M:
+            return f"position beyond {ENVELOPE_M:g} m"
         if math.cos(X[6]) * math.cos(X[8]) < 0.0:
             return "tilt beyond 90 degrees"
         return None

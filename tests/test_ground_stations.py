@@ -25,15 +25,17 @@ from pathlib import Path
 
 import pytest
 from pymavlink import mavutil
+from pymavlink.dialects.v20 import common as M
 
 from bridge.autopilot.params import PARAMS, VehicleParams, read_param
 from bridge.mavlink.endpoint import GCS_PORT
 from bridge.mavlink.modes import FTP_ERR_UNKNOWN_COMMAND, FTP_HEADER, FTP_NAK, FTP_PAYLOAD_LEN, ftp_nak
 from bridge.nodes.report import Refused
+from bridge.nodes.vehicle.reposition import UNSET_INT
 from bridge.session import instance_slot
 from missions import MISSION_DIR
 from tests.sitlkit import ENV, MavProxy, Proc
-from tests.test_vehicle import _vehicle
+from tests.test_vehicle import _ack, _gcs, _vehicle
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -111,6 +113,11 @@ else:  # the flight parts: what MAVSDK's telemetry shows, each callback under on
         with cond:
             seen["rel"] = p.relative_altitude_m
             seen["top"] = max(seen["top"], p.relative_altitude_m)
+            seen["geo"] = (p.latitude_deg, p.longitude_deg, p.absolute_altitude_m)
+            cond.notify_all()
+    def on_heading(h, ud=None):
+        with cond:
+            seen["heading"] = h.heading_deg
             cond.notify_all()
     def on_ned(pv, ud=None):
         with cond:
@@ -122,6 +129,7 @@ else:  # the flight parts: what MAVSDK's telemetry shows, each callback under on
     tel.subscribe_armed(on_armed)
     tel.subscribe_position(on_position)
     tel.subscribe_position_velocity_ned(on_ned)
+    tel.subscribe_heading(on_heading)
     def until(what, pred, timeout):
         with cond:
             out[what] = cond.wait_for(pred, timeout)
@@ -136,6 +144,28 @@ if sys.argv[2] == "rtl":  # the controller flies the step mission; at its second
     until("on_ground", lambda: abs(seen["ned"][2]) < 0.02, 5)  # positions come at 25 Hz: the next ones
     with cond:
         out.update(modes=modes, landed_at=seen["ned"], top=seen["rtl_top"])
+elif sys.argv[2] == "goto":  # take off to 3 m, then goto_location 4 m north, 3 m east, 5 m up, facing east
+    out["hold"] = act.hold().name
+    out["arm"] = act.arm().name
+    until("armed_seen", lambda: seen["armed"] is True, 10)
+    out["set_takeoff_altitude"] = act.set_takeoff_altitude(3.0).name
+    out["takeoff"] = act.takeoff().name
+    until("at_height", lambda: modes[-2:] == ["TAKEOFF", "HOLD"] and seen["rel"] > 2.9, 15)
+    with cond:
+        lat0, lon0, amsl = seen["geo"]
+        start = seen["ned"]
+    R = 6371000.0  # the vehicle's projection's sphere (PX4's): the target within a centimetre of 4 m, 3 m here
+    lat = lat0 + (4.0 - start[0]) / R * 180.0 / 3.141592653589793
+    lon = lon0 + (3.0 - start[1]) / (R * __import__("math").cos(lat0 * 3.141592653589793 / 180.0)) * 180.0 \
+        / 3.141592653589793
+    out["goto"] = act.goto_location(lat, lon, amsl - start[2] + 5.0, 90.0).name
+    there = lambda: sum((a - b) ** 2 for a, b in zip(seen["ned"], (4.0, 3.0, 5.0))) ** 0.5 < 0.1 \
+        and abs(seen["heading"] - 90.0) < 3.0
+    until("there", there, 30)
+    with cond:
+        out.update(modes=list(modes), at=seen["ned"], heading=seen["heading"])
+    out["land"] = act.land().name
+    until("disarmed_seen", lambda: seen["armed"] is False, 30)
 elif sys.argv[2] == "flight":
     out["hold"] = act.hold().name
     until("hold_seen", lambda: modes and modes[-1] == "HOLD", 10)
@@ -164,6 +194,19 @@ def _mavsdk(n: int, part: str, script: str = MAVSDK_SCRIPT) -> dict:
     lines = [ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")]
     assert lines, f"MAVSDK script failed (exit {r.returncode}):\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
     return json.loads(lines[0][len("RESULT "):])
+
+
+def _mavsdk_on_a_vehicle(tmp_path: Path, part: str) -> tuple[dict, Proc, int]:
+    """The MAVSDK script's ``part`` against a ``bsst vehicle`` at 4x (:data:`FAST`) on an instance of its own,
+    stopped after: (its RESULT, having found the vehicle; the vehicle's process; the instance)."""
+    with instance_slot() as n:
+        v = _vehicle(n, tmp_path, *FAST)
+        try:
+            out = _mavsdk(n, part)
+        finally:
+            assert v.stop() == 0
+    assert out["found"]
+    return out, v, n
 
 
 def test_mavsdk_parameters(tmp_path):
@@ -199,13 +242,7 @@ def test_mavsdk_hold_takeoff_land(tmp_path):
     """``Action.hold``, ``arm``, ``set_takeoff_altitude`` / ``takeoff`` (TAKEOFF, then HOLD at the
     height), ``land`` (LAND, then disarmed on the ground), with ``Telemetry.flight_mode`` naming
     each mode; every command MAVSDK sent was answered."""
-    with instance_slot() as n:
-        v = _vehicle(n, tmp_path, *FAST)
-        try:
-            out = _mavsdk(n, "flight")
-        finally:
-            assert v.stop() == 0
-    assert out["found"]
+    out, v, n = _mavsdk_on_a_vehicle(tmp_path, "flight")
     assert [out[k] for k in ("hold", "arm", "set_takeoff_altitude", "takeoff", "land")] == ["SUCCESS"] * 5
     assert all(out[k] for k in ("hold_seen", "armed_seen", "at_height", "disarmed_seen", "on_ground")), out
     assert out["takeoff_altitude"] == 3.0  # MIS_TAKEOFF_ALT, set and read back through the parameters
@@ -247,6 +284,60 @@ def test_mavsdk_return_to_launch(tmp_path):
     assert (north ** 2 + east ** 2) ** 0.5 < 0.2 and abs(up) < 0.05, out  # at home, on the ground
     v.wait_event(lambda s: "mode: RTL from" in s and "[by 245:190" in s)
     v.wait_event(lambda s: "disarmed: landed" in s)
+
+
+def test_mavsdk_goto_location_flies_hold_to_the_point_and_faces_its_heading(tmp_path):
+    """``Action.goto_location`` (MAV_CMD_DO_REPOSITION, COMMAND_INT in GLOBAL_INT: the point AMSL, the heading in
+    radians) after a takeoff to 3 m: ACCEPTED, the vehicle stays in HOLD (AUTO.LOITER), flies to 4 m north,
+    3 m east and 5 m up and faces east (90 deg), all as MAVSDK's telemetry shows; its event names the point in
+    the paper frame (y west: x=4.00 y=-3.00) and MAVSDK as the sender; then it lands."""
+    out, v, n = _mavsdk_on_a_vehicle(tmp_path, "goto")
+    assert [out[k] for k in ("hold", "arm", "set_takeoff_altitude", "takeoff", "goto", "land")] == ["SUCCESS"] * 6
+    assert all(out[k] for k in ("armed_seen", "at_height", "there", "disarmed_seen")), out
+    assert out["modes"][-3:] == ["HOLD", "TAKEOFF", "HOLD"], out["modes"]  # goto: HOLD stays HOLD
+    north, east, up = out["at"]  # (the script's point, from float32 telemetry: within a few millimetres of it)
+    assert abs(north - 4.0) < 0.1 and abs(east - 3.0) < 0.1 and abs(up - 5.0) < 0.1 and abs(out["heading"] - 90) < 3
+    v.wait_event(lambda s: "mode: HOLD, repositioned: from x=" in s and " z=5.000 m, heading -1.571 rad [by 245:190"
+                 in s)
+    v.wait_event(lambda s: "disarmed: landed" in s)
+    unanswered, _, _ = _answers(tmp_path / "vehicle.tlog", n + 1)
+    assert not unanswered, f"commands MAVSDK sent that got no COMMAND_ACK: {unanswered}"
+
+
+def test_do_reposition_disarmed_takes_hold_on_the_ground_is_denied_and_other_flags_are_unsupported(tmp_path):
+    """DO_REPOSITION as PX4 answers it where it flies nowhere: flags other than CHANGE_MODE are UNSUPPORTED; disarmed,
+    ACCEPTED as the mode alone (HOLD, armed in it next: PX4's navigator keeps no point for a vehicle not armed);
+    armed on the ground, DENIED ("take off first"); each refusal with its STATUSTEXT and the vehicle's report."""
+    with instance_slot() as n:
+        gcs = _gcs(n)
+        v = _vehicle(n, tmp_path)
+        try:
+            assert gcs.wait_heartbeat(timeout=20) is not None
+
+            def reposition(flags: float) -> int:
+                gcs.mav.command_int_send(n + 1, 1, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_CMD_DO_REPOSITION, 0, 0,
+                                         -1.0, flags, 0.0, math.nan, UNSET_INT, UNSET_INT, 5.0)
+                return _ack(gcs, M.MAV_CMD_DO_REPOSITION).result
+
+            def said(words: str) -> None:
+                m = gcs.recv_match(type="STATUSTEXT", blocking=True, timeout=10,
+                                   condition=f"'{words}' in STATUSTEXT.text")
+                assert m is not None, f"no STATUSTEXT saying {words!r}"
+
+            assert reposition(0.0) == M.MAV_RESULT_UNSUPPORTED
+            said("param2 (flags) must be 1")
+            assert reposition(1.0) == M.MAV_RESULT_ACCEPTED
+            v.wait_event(lambda s: "mode: HOLD (disarmed: armed in it next) [by 255:190" in s)
+            gcs.mav.command_long_send(n + 1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+            assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+            v.wait_event(lambda s: "armed, HOLD" in s)
+            assert reposition(1.0) == M.MAV_RESULT_DENIED
+            said("take off first")
+            v.wait_report(Refused, lambda r: r.text == "DO_REPOSITION: on the ground: take off first (NAV_TAKEOFF)")
+        finally:
+            gcs.close()
+            assert v.stop() == 0
+    assert not any("repositioned" in s for s in v.events())
 
 
 # -- MAVProxy --------------------------------------------------------------------------------------

@@ -167,10 +167,11 @@ class SimVehicle:
         self.event("armed", f"armed, {self.mode.upper()}")
         self._engage(self.mode, self._takeoff_alt)
 
-    def set_mode(self, mode: str, takeoff_alt_m: float | None = None) -> None:
+    def set_mode(self, mode: str, takeoff_alt_m: float | None = None, hold_at: PositionHold | None = None) -> None:
         """A ground station's mode (OFFBOARD, HOLD, LAND, TAKEOFF to ``takeoff_alt_m`` above the start,
         :attr:`takeoff_alt_m` if None), at the start of a control period. Armed, the vehicle flies it
-        from this step: HOLD holds where it is, LAND lands where it is, TAKEOFF climbs over where it
+        from this step: HOLD holds where it is (or flies to ``hold_at`` and holds there: DO_REPOSITION), LAND
+        lands where it is, TAKEOFF climbs over where it
         is, OFFBOARD takes the controller's targets again (its timeout counts from now). Disarmed, it
         is the mode the next arm from a ground station arms in. A request that changes nothing (OFFBOARD in
         OFFBOARD; disarmed, the mode already selected) is no event: the flight is the same."""
@@ -194,12 +195,17 @@ class SimVehicle:
             mode = HOLD  # already above it: PX4 refuses nothing here, it holds
         self.land_at = None
         self.mode = mode
-        self._engage(mode, alt)
+        self._engage(mode, alt, hold_at)
 
-    def _engage(self, mode: str, alt: float) -> None:
+    def _engage(self, mode: str, alt: float, hold_at: PositionHold | None = None) -> None:
         X = self.published()
-        if mode == HOLD:
-            target: Target = PositionHold.here(X)
+        if mode == HOLD and hold_at is not None:
+            target: Target = hold_at
+            heading = "" if hold_at.psi is None else f", heading {hold_at.psi:.3f} rad"
+            text = (f"HOLD, repositioned: from x={X[0]:.3f} y={X[2]:.3f} z={X[4]:.3f} m to x={hold_at.x:.3f} "
+                    f"y={hold_at.y:.3f} z={hold_at.z:.3f} m{heading}")
+        elif mode == HOLD:
+            target = PositionHold.here(X)
             text = f"HOLD at x={X[0]:.3f} y={X[2]:.3f} z={X[4]:.3f} m"
         elif mode == LAND:
             target = Land.here(X, self.failsafe.descent_rate)

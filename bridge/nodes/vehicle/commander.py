@@ -25,6 +25,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from bridge.autopilot.failsafe import PositionHold
 from bridge.autopilot.params import BY_NAME
 from bridge.autopilot.simvehicle import GROUND_MODES, HOLD, LAND, OFFBOARD, RTL, TAKEOFF, SimVehicle
 from bridge.autopilot.vehicleevents import Sender
@@ -38,6 +39,7 @@ from bridge.nodes.vehicle.clock import Clock, Trigger
 from bridge.nodes.vehicle.injection import injection
 from bridge.nodes.vehicle.mission import START_ARM, START_ARMED, START_COMMAND, MissionManager
 from bridge.nodes.vehicle.prestart import PreStart
+from bridge.nodes.vehicle.reposition import reposition
 from bridge.nodes.vehicle.streams import HEARTBEAT_S, StatusTexts, StreamTable
 from bridge.record.metrics import plant_blocks
 
@@ -175,6 +177,8 @@ class Commander:
             return self._set_mode_or_refuse(LAND, "", by=by), ()
         if cmd == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:  # Return mode, as PX4's commander takes it
             return self._set_mode_or_refuse(RTL, "", by=by), ()
+        if cmd == mavlink.MAV_CMD_DO_REPOSITION:  # MAVSDK's goto_location, QGroundControl's "Go to location"
+            return self._reposition(m, by), ()
         if cmd == mavlink.MAV_CMD_MISSION_START and self.cfg.await_mission:
             return self._start_mission(by, m.param1), ()
         if cmd == mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
@@ -205,6 +209,24 @@ class Commander:
         for e in got.events:
             sim.schedule(e, by)
         return mavlink.MAV_RESULT_ACCEPTED
+
+    def _reposition(self, m: Any, by: Sender) -> int:
+        """DO_REPOSITION, as PX4: HOLD (AUTO.LOITER); armed in the air, HOLD flies to the point given and holds
+        it (:mod:`.reposition`); disarmed, only the mode is taken (PX4's navigator keeps no point for a vehicle
+        not armed); armed on the ground, DENIED (take off first). A point not flown is refused saying why."""
+        sim = self.sim
+        got = reposition(m, self.cfg.home, sim.published())
+        if got.to is None:
+            if got.result == mavlink.MAV_RESULT_DENIED:
+                return self._refuse(got.why or "DO_REPOSITION")
+            self.texts += self._statustext(mavlink.MAV_SEVERITY_WARNING, got.why)
+            self.ports.refused(got.why or "DO_REPOSITION")
+            return got.result
+        if not sim.armed:
+            return self._set_mode_or_refuse(HOLD, "", by=by)
+        if sim.plant.on_ground:
+            return self._refuse("DO_REPOSITION: on the ground: take off first (NAV_TAKEOFF)")
+        return self._set_mode_or_refuse(HOLD, "", by=by, hold_at=PositionHold(*got.to, psi=got.psi))
 
     def _through_link(self, m: Any, by: Sender) -> bool:
         """Whether a command crosses the up-link model: the controller's, on its link, in a lockstep flight."""
@@ -291,7 +313,7 @@ class Commander:
         return mavlink.MAV_RESULT_DENIED
 
     def _set_mode_or_refuse(self, mode: str | None, why: str, *, by: Sender,
-                            takeoff_alt_m: float | None = None) -> int:
+                            takeoff_alt_m: float | None = None, hold_at: PositionHold | None = None) -> int:
         """A ground station's (or the controller's) mode change: made at the start of the next
         control period, or DENIED with a STATUSTEXT saying why."""
         if mode is None:
@@ -316,11 +338,11 @@ class Commander:
                 and time.monotonic() - self.ports.target_wall() > OFFBOARD_STREAM_S):
             # PX4 too: OFFBOARD only while a controller streams targets (its failsafe would act at once)
             return self._refuse("OFFBOARD: no controller is sending targets")
-        if by.link == "controller" and mode in (LAND, HOLD) and sim.armed and sim.mode == OFFBOARD:
+        if by.link == "controller" and mode in (LAND, HOLD) and hold_at is None and sim.armed and sim.mode == OFFBOARD:
             return self._end_mission(mode)
         n0 = len(sim.events)
         was = sim.mode
-        sim.set_mode(mode, takeoff_alt_m)
+        sim.set_mode(mode, takeoff_alt_m, hold_at)
         attribute(sim.events, n0, by)
         self._clock_after_mode(was)
         return mavlink.MAV_RESULT_ACCEPTED
