@@ -378,6 +378,23 @@ def test_position_hold_takes_up_a_heavier_plant_with_its_integral() -> None:
     assert abs(states[-1][4] - 2.0) < 0.01  # and the integral brought it back
 
 
+def test_position_hold_flies_to_a_distant_point_at_its_speed_and_holds_it() -> None:
+    """HOLD sent 6 m away (DO_REPOSITION): across at most the on-board 2 m/s, or at a ground speed it was given
+    (0.5 m/s, PX4's param1; a faster one, 7 m/s, flies as the 2 m/s), the velocity loop's integral overshooting
+    the limit by ~15 % at its peak; at the point within 5 cm, at rest."""
+    flown = {}
+    for speed, limit, flight_s in ((None, 2.0, 9.0), (0.5, 0.5, 18.0), (7.0, 2.0, 9.0)):
+        sim = prepare(_ground_mission()).make_vehicle(armed=True)
+        sim.plant.state = (0.0, 0.0, 0.0, 0.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        sim.fly_onboard(PositionHold(6.0, 0.0, 2.0, speed=speed), "hold")
+        states = flown[speed] = _fly(sim, flight_s)
+        fastest = max(hypot(s[1], s[3]) for s in states)
+        assert limit < fastest < limit * 1.2, (speed, fastest)
+        end = states[-1]
+        assert hypot(end[0] - 6.0, end[2]) < 0.05 and abs(end[4] - 2.0) < 0.05 and hypot(end[1], end[3]) < 0.05, end
+    assert flown[7.0] == flown[None]
+
+
 def test_a_failsafe_on_the_ground_disarms_at_once_whatever_the_action() -> None:
     for action in FAILSAFE_ACTIONS:
         sim = prepare(_ground_mission(), failsafe={"action": action}).make_vehicle(armed=True)

@@ -102,3 +102,12 @@ def test_a_point_not_flown_is_refused_saying_why(m, result: int, words: str) -> 
     got = reposition(m, HOME, X)
     assert got.result == result and got.to is None, got
     assert got.why is not None and got.why.startswith("DO_REPOSITION: ") and words in got.why, got.why
+
+
+@pytest.mark.parametrize("param1, speed", [(0.5, 0.5), (-1.0, None), (0.0, None), (math.nan, None)])
+def test_a_ground_speed_above_zero_is_the_speed_across(param1: float, speed: float | None) -> None:
+    """param1 > 0 is PX4's ground speed for the way there (the on-board controller holds it to 2 m/s); -1, 0
+    and NaN leave the controller's own."""
+    m = M.MAVLink_command_int_message(1, 1, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_CMD_DO_REPOSITION, 0, 0,
+                                      param1, CHANGE_MODE, 0.0, math.nan, UNSET_INT, UNSET_INT, 4.0)
+    assert reposition(m, HOME, X).speed == speed

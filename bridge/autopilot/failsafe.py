@@ -162,10 +162,13 @@ class Setpoint:
     level: bool = False
 
 
-def _xy_velocity(x: float, y: float, X: tuple[float, ...], g: OnboardGains) -> tuple[float, float]:
+def _xy_velocity(x: float, y: float, X: tuple[float, ...], g: OnboardGains,
+                 v_max: float | None = None) -> tuple[float, float]:
+    """Toward (x, y) in m, P on the distance, at most ``g.v_xy_max`` m/s (or ``v_max``, if lower)."""
+    top = g.v_xy_max if v_max is None else min(v_max, g.v_xy_max)
     vx, vy = g.k_pos_xy * (x - X[0]), g.k_pos_xy * (y - X[2])
     n = hypot(vx, vy)
-    return (vx, vy) if n <= g.v_xy_max else (vx * g.v_xy_max / n, vy * g.v_xy_max / n)
+    return (vx, vy) if n <= top else (vx * top / n, vy * top / n)
 
 
 def _z_velocity(z: float, X: tuple[float, ...], g: OnboardGains, up: float) -> float:
@@ -197,19 +200,21 @@ class Level(Target):
 @dataclass(frozen=True)
 class PositionHold(Target):
     """Hold (x, y, z) in m (HOLD; ``hold`` failsafe) and the heading ``psi`` rad, or with ``psi``
-    None only stop turning (the yaw rate is damped; the heading stays where that leaves it)."""
+    None only stop turning (the yaw rate is damped; the heading stays where that leaves it); flown to
+    across at most ``speed`` m/s if given (DO_REPOSITION's ground speed), else the gains' ``v_xy_max``."""
 
     x: float
     y: float
     z: float
     psi: float | None = None
+    speed: float | None = None
 
     @classmethod
     def here(cls, X: tuple[float, ...]) -> PositionHold:
         return cls(X[0], X[2], X[4])
 
     def setpoint(self, X: tuple[float, ...], g: OnboardGains) -> Setpoint:
-        return Setpoint(_xy_velocity(self.x, self.y, X, g), _z_velocity(self.z, X, g, g.v_up), self.psi)
+        return Setpoint(_xy_velocity(self.x, self.y, X, g, self.speed), _z_velocity(self.z, X, g, g.v_up), self.psi)
 
 
 @dataclass(frozen=True)

@@ -202,6 +202,7 @@ class SimVehicle:
         if mode == HOLD and hold_at is not None:
             target: Target = hold_at
             heading = "" if hold_at.psi is None else f", heading {hold_at.psi:.3f} rad"
+            heading += "" if hold_at.speed is None else f", at most {hold_at.speed:g} m/s across"
             text = (f"HOLD, repositioned: from x={X[0]:.3f} y={X[2]:.3f} z={X[4]:.3f} m to x={hold_at.x:.3f} "
                     f"y={hold_at.y:.3f} z={hold_at.z:.3f} m{heading}")
         elif mode == HOLD:

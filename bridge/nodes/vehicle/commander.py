@@ -226,7 +226,7 @@ class Commander:
             return self._set_mode_or_refuse(HOLD, "", by=by)
         if sim.plant.on_ground:
             return self._refuse("DO_REPOSITION: on the ground: take off first (NAV_TAKEOFF)")
-        return self._set_mode_or_refuse(HOLD, "", by=by, hold_at=PositionHold(*got.to, psi=got.psi))
+        return self._set_mode_or_refuse(HOLD, "", by=by, hold_at=PositionHold(*got.to, psi=got.psi, speed=got.speed))
 
     def _through_link(self, m: Any, by: Sender) -> bool:
         """Whether a command crosses the up-link model: the controller's, on its link, in a lockstep flight."""

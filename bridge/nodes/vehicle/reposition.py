@@ -4,14 +4,16 @@ In:  the command (COMMAND_LONG: param5/param6 latitude/longitude in degrees, par
      COMMAND_INT: x/y in degE7 and z in m, AMSL in frame GLOBAL(_INT), above home in GLOBAL_RELATIVE_ALT(_INT));
      param2 its flags, param4 the heading (rad, clockwise from north, as PX4 reads it; NaN: as now); the home
      (deg, deg, m AMSL: the paper frame's origin); the vehicle's published state X (eq. 7, paper frame)
-Out: :class:`Reposition`: the MAV_RESULT PX4 answers, the point (x, y, z m, paper frame: NWU about home) and
-     heading psi (rad, paper frame; None: keep turning as now) to hold, and why not (a STATUSTEXT's text)
+Out: :class:`Reposition`: the MAV_RESULT PX4 answers, the point (x, y, z m, paper frame: NWU about home),
+     heading psi (rad, paper frame; None: keep turning as now) and ground speed (m/s; None: the on-board
+     controller's) to hold, and why not (a STATUSTEXT's text)
 
 As PX4 (``Commander::handle_command``, then its navigator): the command asks for AUTO.LOITER (HOLD) and only
 that (param2 must be MAV_DO_REPOSITION_FLAGS_CHANGE_MODE, 1: anything else is UNSUPPORTED); a latitude and
 longitude not given (NaN, or INT32_MAX in COMMAND_INT) keep the position now, an altitude not given the height
-now, a heading not given the heading. PX4's cruise speed (param1) is not taken: HOLD flies there within the
-on-board controller's limits (2 m/s across, 1.5 m/s up, 1 m/s down; bridge.autopilot.failsafe.OnboardGains).
+now, a heading not given the heading. HOLD flies there within the on-board controller's limits (2 m/s across,
+1.5 m/s up, 1 m/s down; bridge.autopilot.failsafe.OnboardGains); a ground speed in param1 (> 0; -1: the
+default) lowers the first, as PX4's cruise speed (a faster one is held to 2 m/s: the gains are tuned for it).
 A point this plant cannot fly to is DENIED, saying why: below :data:`LOWEST_M` above home, or farther than
 :data:`FARTHEST_M` from it (the plant's envelope is 100 m, plant.quadrotor.ENVELOPE_M).
 """
@@ -43,6 +45,7 @@ class Reposition:
     result: int
     to: tuple[float, float, float] | None = None  # m, paper frame (x north, y west, z up about home)
     psi: float | None = None  # rad, paper frame (counter-clockwise from north); None: as now
+    speed: float | None = None  # m/s across (param1 > 0: PX4's ground speed); None: the on-board controller's
     why: str | None = None
 
 
@@ -83,4 +86,5 @@ def reposition(m: Any, home: Home, X: tuple[float, ...]) -> Reposition:
         return _refused(mavlink.MAV_RESULT_DENIED, f"{far:.1f} m from home: must be within {FARTHEST_M:g} m "
                                                    f"(the plant's envelope is {ENVELOPE_M:g} m)")
     psi = wrap_angle(-m.param4) if math.isfinite(m.param4) else None
-    return Reposition(mavlink.MAV_RESULT_ACCEPTED, (x, y, z), psi)
+    speed = float(m.param1) if math.isfinite(m.param1) and m.param1 > 0.0 else None
+    return Reposition(mavlink.MAV_RESULT_ACCEPTED, (x, y, z), psi, speed)
