@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from missions.fleet import fleet_from_table
-from missions.minsnap import Knot, Smooth, accelerations, demands, stretched
+from missions.minsnap import Knot, Smooth
 from missions.planfiles import PlanFile, read_plan_text
 from missions.references import Reference, Setpoint, Sine, Step, Waypoints
 from missions.route import LIMIT_RANGES, Limits, smooth_from_plan
@@ -52,11 +52,7 @@ TRAJECTORIES = ("step", "sine", "waypoints", "smooth", "plan")
 PLAN_SUFFIXES = (".plan", ".waypoints", ".txt")  # QGroundControl's JSON plan; QGC WPL 110 text
 PLAN_MAX_BYTES = 16 << 20  # a plan of MAX_ITEMS items is about 5 MB of JSON
 END_REST_S = 1.0  # s: a plan's mission lasts this long after its trajectory ends (at rest, or on the ground)
-# the share of the airframe's thrust (the profile's u1 limit) and tilt (the law's tilt_max) a trajectory may
-# need in feed-forward: the rest is the law's room to correct (fitted_to_airframe)
-THRUST_SHARE = 0.8
-TILT_SHARE = 0.8
-MAX_STRETCH = 4.0  # a trajectory that still needs too much slowed this much is refused
+MAX_STRETCH = 4.0  # the most a trajectory is slowed (``stretched_by``; missions.airframe fits a plan's with it)
 # what the vehicle does once the mission's time is flown (``[end] action``): land where it is with its on-board
 # landing and disarm on the ground, or hold its position until the session ends; never motors off in the air
 END_ACTIONS = ("land", "hold")
@@ -321,38 +317,6 @@ def mission_from_plan(text: str, source: str, name: str = "mission") -> Mission:
     """The mission of a plan's text: its trajectory, then :data:`END_REST_S` at rest; defaults otherwise."""
     smooth = plan_trajectory(text, source)
     return Mission(trajectory=smooth, duration_s=smooth.end_s + END_REST_S, name=name, source=source)
-
-
-def fitted_to_airframe(m: Mission, mass: float, gravity: float, u1_max: float, tilt_max: float) -> Mission:
-    """``m`` as it may fly on an airframe of ``mass`` (kg) whose law may ask ``u1_max`` (N) of thrust and
-    ``tilt_max`` (rad) of tilt: a :class:`Smooth` trajectory that needs more than :data:`THRUST_SHARE` of the
-    one or :data:`TILT_SHARE` of the other is slowed (its times stretched, the mission as much longer) by the
-    least factor that fits (to 1 %), or refused when even :data:`MAX_STRETCH` does not. Other trajectories,
-    and smooth ones that fit, come back unchanged."""
-    ref = m.trajectory
-    if not isinstance(ref, Smooth):
-        return m
-    f_max, a_max = THRUST_SHARE * u1_max, TILT_SHARE * tilt_max
-    samples = accelerations(ref)  # taken once: stretching only divides them by k²
-
-    def fits(k: float) -> bool:
-        d = demands(ref, mass, gravity, k, samples)
-        return d.thrust_n <= f_max and d.tilt_rad <= a_max
-
-    if fits(1.0):
-        return m
-    d = demands(ref, mass, gravity, 1.0, samples)
-    if mass * gravity > f_max or not fits(MAX_STRETCH):
-        raise ConfigError(
-            f"{m.source}: trajectory: refused: it needs {d.thrust_n:.3g} N of thrust (t = {d.thrust_t:.2f} s) and "
-            f"{math.degrees(d.tilt_rad):.1f} deg of tilt (t = {d.tilt_t:.2f} s); the airframe allows "
-            f"{THRUST_SHARE:.0%} of u1 = {u1_max:.3g} N and {TILT_SHARE:.0%} of tilt_max = "
-            f"{math.degrees(tilt_max):.1f} deg, and slowed {MAX_STRETCH:g} times it still needs more")
-    k = 1.0
-    while not fits(k):
-        k = round(k * 1.01, 6)
-    slow = stretched(ref, k)
-    return replace(m, trajectory=slow, duration_s=m.duration_s + (slow.end_s - ref.end_s))
 
 
 def mission_from_table(data: Mapping[str, Any], source: str, default_name: str = "mission") -> Mission:

@@ -42,7 +42,8 @@ from controller import Controller, Gains, Nominal, gains_from_table
 from controller.law import LawFactory, resolve_law
 from controller.link_guard import GuardConfig
 from missions import Mission, Setpoint, Sine, Step, load_mission
-from missions.mission import fitted_to_airframe, law_spec_from
+from missions.airframe import fitted_to_airframe
+from missions.mission import law_spec_from
 from params import ConfigError, Table
 from plant import Effects, Profile, Quadrotor, load_profile
 from plant.effects import effects_from_table
