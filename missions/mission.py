@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from missions.fleet import fleet_from_table
+from missions.geofence import geofence_from_table
 from missions.minsnap import Knot, Smooth
 from missions.planfiles import PlanFile, read_plan_text
 from missions.references import Reference, Setpoint, Sine, Step, Waypoints
@@ -92,6 +93,7 @@ class Mission:
     end_action: str = DEFAULT_END_ACTION  # END_ACTIONS: ``[end] action``
     vehicles: tuple[Any, ...] = ()  # [[vehicles]]: missions.fleet.VehicleSpec, validated; () one vehicle
     separation: Any = None  # [separation]: missions.fleet.Separation; None: its defaults
+    geofence: Any = None  # [geofence], or a plan's geoFence: missions.geofence.Geofence; None: none
 
     def __post_init__(self) -> None:
         why = name_problem(self.name)
@@ -142,6 +144,8 @@ class Mission:
             d["vehicles"] = [v.to_dict() for v in self.vehicles]
         if self.separation is not None:
             d["separation"] = self.separation.to_dict()
+        if self.geofence is not None:
+            d["geofence"] = self.geofence.to_dict()
         return d
 
     @property
@@ -310,13 +314,15 @@ def with_plan(base: Mission, plan: PlanFile, name: str) -> Mission:
     """``base`` (its settings: profile, law, rates, link, ...) flying ``plan``: its trajectory, then
     :data:`END_REST_S` at rest, named ``name``."""
     smooth = plan_smooth(plan)
-    return replace(base, trajectory=smooth, duration_s=smooth.end_s + END_REST_S, name=name)
+    return replace(base, trajectory=smooth, duration_s=smooth.end_s + END_REST_S, name=name, geofence=plan.fence)
 
 
 def mission_from_plan(text: str, source: str, name: str = "mission") -> Mission:
     """The mission of a plan's text: its trajectory, then :data:`END_REST_S` at rest; defaults otherwise."""
-    smooth = plan_trajectory(text, source)
-    return Mission(trajectory=smooth, duration_s=smooth.end_s + END_REST_S, name=name, source=source)
+    plan = read_plan_text(text, source)
+    smooth = plan_smooth(plan)
+    return Mission(trajectory=smooth, duration_s=smooth.end_s + END_REST_S, name=name, source=source,
+                   geofence=plan.fence)
 
 
 def mission_from_table(data: Mapping[str, Any], source: str, default_name: str = "mission") -> Mission:
@@ -349,6 +355,7 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
         raise t.error("events", "expected an array of tables [[events]] (t_s, kind and its settings)")
     span = duration if not derived else MISSION_RANGES["duration_s"][1]
     vehicles, separation = fleet_from_table(t, lambda tt: _trajectory(tt, span), _law)
+    fence = geofence_from_table(t.table("geofence")) if t.has("geofence") else _plan_fence(trajectory_table)
     t.done()
     return Mission(
         trajectory=trajectory,
@@ -367,6 +374,7 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
         end_action=end_action,
         vehicles=vehicles,
         separation=separation,
+        geofence=fence,
         **raw,
     )
 
@@ -451,8 +459,21 @@ def _smooth(t: Table, duration: float) -> Smooth:
 def _plan(t: Table) -> Smooth:
     """``kind = "plan"``: ``file`` (a ``.plan`` or ``QGC WPL 110`` file, relative to the mission's folder) and
     PX4's speed and acceleration limits by name (:class:`missions.route.Limits`)."""
-    name = t.string("file")
-    p = Path(name).expanduser()
-    p = p if p.is_absolute() else Path(t._source).parent / p
+    p = _plan_path(t, t.string("file"))
     limits = {k: t.number(k, lo=lo, hi=hi) for k, (lo, hi) in LIMIT_RANGES.items() if t.has(k)}
     return plan_trajectory(read_text_file(p, "a mission plan", PLAN_MAX_BYTES), str(p), limits)
+
+
+def _plan_path(t: Table, name: str) -> Path:
+    """A ``kind = "plan"`` trajectory's ``file``: relative to the mission's folder."""
+    p = Path(name).expanduser()
+    return p if p.is_absolute() else Path(t._source).parent / p
+
+
+def _plan_fence(t: Table) -> Any:
+    """A ``kind = "plan"`` trajectory's plan's geofence (its file read again: the trajectory parser returns the
+    path only), or None."""
+    if t.raw("kind") != "plan" or not isinstance(t.raw("file"), str):
+        return None
+    p = _plan_path(t, t.raw("file"))
+    return read_plan_text(read_text_file(p, "a mission plan", PLAN_MAX_BYTES), str(p)).fence

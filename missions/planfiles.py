@@ -13,7 +13,8 @@ Out: a :class:`PlanFile`: the home (lat, lon deg, alt m AMSL), the multicopter c
 ``doJumpId``, ...} (QGC writes NaN as null) or a ``ComplexItem`` (survey, corridor scan, structure scan),
 which is refused. A ``QGC WPL 110`` file (mavlink.io, "File Formats") is a header line, then one line per
 item: index, current, frame, command, param1..4, x/lat, y/lon, z/alt, autocontinue; line 0 is the home,
-as QGroundControl and MAVProxy write it. Geofence and rally points are read past, not enforced.
+as QGroundControl and MAVProxy write it. A ``.plan``'s geofence is read (:mod:`missions.geofence`: checked over
+the run, not enforced); its rally points are read past.
 """
 
 from __future__ import annotations
@@ -23,6 +24,8 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from missions.geodetic import Home
+from missions.geofence import geofence_from_plan
 from params import ConfigError
 
 NAV_WAYPOINT, NAV_LOITER_TIME, NAV_RETURN_TO_LAUNCH, NAV_LAND, NAV_TAKEOFF, DO_CHANGE_SPEED = 16, 19, 20, 21, 22, 178
@@ -78,6 +81,7 @@ class PlanFile:
     home: tuple[float, float, float]
     items: tuple[Item, ...]
     cruise_m_s: float | None = None
+    fence: Any = None  # missions.geofence.Geofence of a .plan's geoFence (None: none drawn)
 
     def refuse(self, item: Item, why: str) -> ConfigError:
         """The refusal of ``item``: file, index, command, why."""
@@ -141,7 +145,8 @@ def read_qgc_plan(text: str, source: str) -> PlanFile:
     if len(raw) > MAX_ITEMS:
         raise ConfigError(f"{source}: mission.items: {len(raw)} items, more than {MAX_ITEMS}")
     items = tuple(_plan_item(source, i, x) for i, x in enumerate(raw))
-    return PlanFile(source, (lat, lon, alt), items, hover if math.isfinite(hover) else None)
+    fence = geofence_from_plan(data.get("geoFence"), Home(lat, lon, alt), source)
+    return PlanFile(source, (lat, lon, alt), items, hover if math.isfinite(hover) else None, fence)
 
 
 def _plan_item(source: str, index: int, x: Any) -> Item:

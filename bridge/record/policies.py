@@ -41,6 +41,9 @@ What each policy reads, and why it cannot be fooled by a run's own claims:
   event, or a vehicle row flown off the step clock) has a record saying so (``held`` false, the
   time of the first event); a row off the step clock with no ``lockstep`` event before it is a
   vehicle that left silently.
+- ``geofence``: every trace row's position is inside the mission's geofence (a ``.plan``'s ``geoFence`` or a
+  mission's ``[geofence]``: inside an inclusion zone if there is one, outside every exclusion zone, as PX4's
+  navigator judges it); the fence is checked, not enforced (PX4 would act: GF_ACTION).
 - ``time_steady``: the trace's ``t`` increases by exactly one control period from row to row
   (a missing row, a repeated step or a jump of the mission's clock breaks it), except over
   steps the vehicle flew disarmed: on the wall clock it writes no rows then (real time,
@@ -68,6 +71,8 @@ POLICIES: dict[str, str] = {
                      "controller only; GCS link: any ground station)",
     "lockstep_recorded": "lockstep is never left without a record",
     "time_steady": "the mission's time never jumps: trace t increases by one control period each row",
+    "geofence": "the vehicle stays inside its mission's geofence (a plan's geoFence, or [geofence]): checked, not "
+                "enforced; PX4 would act on a breach (GF_ACTION)",
 }
 EPS_S = 1e-5  # s: event times are rounded to 1 us; a physics step is at least 100 us
 ZERO_N = 1e-9  # N: a realised wrench this small is zero
@@ -92,6 +97,7 @@ class Rules:
     hold_slack_s: float = 0.0
     controller_id: tuple[int, int] = CONTROLLER_ID
     spin_down: bool = False
+    geofence: Any = None  # the mission's missions.geofence.Geofence (None: none)
 
     @property
     def period_s(self) -> float:
@@ -173,6 +179,7 @@ def check(trace: Mapping[str, Any], events: Sequence[RunEvent], rules: Rules,
         arm_authority(ev, rules),
         lockstep_recorded(ev, rules, lockstep, off_clock_t),
         time_steady(t, rules, ev),
+        geofence_kept(t, trace, rules),
     ]
 
 
@@ -346,6 +353,18 @@ def lockstep_recorded(events: Sequence[RunEvent], rules: Rules, record: Mapping[
     return Verdict(name, True)
 
 
+def geofence_kept(t: np.ndarray, trace: Mapping[str, Any], rules: Rules) -> Verdict:
+    """Every row's position (``x``, ``y``) inside the mission's geofence (:mod:`missions.geofence`); ok without one."""
+    name = "geofence"
+    if rules.geofence is None or len(t) == 0:
+        return Verdict(name, True)
+    breach = rules.geofence.first_breach(t, trace["x"], trace["y"])
+    if breach is None:
+        return Verdict(name, True)
+    return Verdict(name, False, breach[0], f"{breach[1]}: PX4 would have acted on it (GF_ACTION); "
+                                            "here the fence is checked, not enforced")
+
+
 def time_steady(t: np.ndarray, rules: Rules, events: Sequence[RunEvent] = ()) -> Verdict:
     """``t`` finite and increasing by exactly one control period from row to row. The one gap
     allowed is over steps the vehicle's events say it flew disarmed (a vehicle on the wall
@@ -384,7 +403,7 @@ def rules_for(flight: Any, clock: str, link: Mapping[str, Any] | None,
     return Rules(rate_hz=m.rate_hz, timeout_s=flight.failsafe.timeout_s, clock=clock,
                  armed_at_start=clock == "offline", command_slack_s=up + physics,
                  hold_slack_s=flight.guard.stop_s + up + down + 1.0 / m.rate_hz, controller_id=controller_id,
-                 spin_down=lag)
+                 spin_down=lag, geofence=m.geofence)
 
 
 def ended_by_outcome(outcome: str, events: Sequence[RunEvent]) -> dict[str, str]:

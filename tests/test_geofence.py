@@ -1,0 +1,126 @@
+"""Covers missions.geofence and bridge.record.policies: a plan's ``geoFence`` read into the mission's
+``[geofence]``, PX4's rule for a position (inside an inclusion zone, outside every exclusion zone), the refusals
+of a malformed fence, and a run that leaves the fence saying where and when (the ``geofence`` policy;
+docs/missions.md, "The geofence")."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bridge import simulate
+from bridge.cli.flying import report_run
+from missions import load_mission
+from missions.geofence import Geofence, Zone, geofence_from_table
+from missions.mission import mission_from_table
+from params import ConfigError, Table
+from tests.plans import l_plan
+
+M_PER_DEG = 6_371_000.0 * math.pi / 180.0  # the projection's sphere: metres per degree of latitude
+HOME = (47.397742, 8.545594)  # the L plan's home and start
+
+
+def _latlon(north: float, east: float) -> list[float]:
+    return [HOME[0] + north / M_PER_DEG, HOME[1] + east / (M_PER_DEG * math.cos(math.radians(HOME[0])))]
+
+
+def _rectangle(south: float, north: float, west: float, east: float) -> list[list[float]]:
+    """The corners of a rectangle in metres north and east of home, as a plan's [lat, lon] polygon."""
+    return [_latlon(south, -west), _latlon(north, -west), _latlon(north, east), _latlon(south, east)]
+
+
+def _fenced_l(tmp_path: Path, fence: dict, name: str) -> Path:
+    """The L plan (10 m north, then 10 m east, at 3 m) with ``fence`` as its geoFence."""
+    p = l_plan(tmp_path)
+    data = json.loads(p.read_text())
+    data["geoFence"] = {"version": 2, "polygons": [], "circles": [], **fence}
+    out = tmp_path / name
+    out.write_text(json.dumps(data))
+    return out
+
+
+SQUARE = Zone(True, points=((0.0, 0.0), (4.0, 0.0), (4.0, 4.0), (0.0, 4.0)))
+L_SHAPE = Zone(True, points=((0.0, 0.0), (4.0, 0.0), (4.0, 1.0), (1.0, 1.0), (1.0, 4.0), (0.0, 4.0)))  # concave
+
+
+def test_a_polygon_and_a_circle_contain_what_they_should() -> None:
+    x, y = np.array([2.0, 5.0, 0.5, 3.0, -0.1]), np.array([2.0, 2.0, 3.0, 3.0, 2.0])
+    assert SQUARE.contains(x, y).tolist() == [True, False, True, True, False]
+    assert L_SHAPE.contains(x, y).tolist() == [False, False, True, False, False]  # (2, 2) is in the notch
+    circle = Zone(False, center=(1.0, 1.0), radius_m=1.5)
+    assert circle.contains(x, y).tolist() == [True, False, False, False, True]
+
+
+def test_px4s_rule_inside_some_inclusion_zone_and_outside_every_exclusion_zone() -> None:
+    t = [0.0, 1.0, 2.0, 3.0]
+    two = Geofence((SQUARE, Zone(True, center=(10.0, 0.0), radius_m=1.0)))
+    assert two.first_breach(t, [1.0, 10.0, 10.5, 2.0], [1.0, 0.0, 0.5, 2.0]) is None  # in one or the other
+    breach = two.first_breach(t, [1.0, 6.0, 10.0, 2.0], [1.0, 0.0, 0.0, 2.0])
+    assert breach is not None and breach[0] == 1.0 and "outside every inclusion zone" in breach[1]
+    holed = Geofence((SQUARE, Zone(False, center=(2.0, 2.0), radius_m=0.5)))
+    breach = holed.first_breach(t, [1.0, 2.2, 3.0, 3.0], [1.0, 2.0, 3.0, 3.0])
+    assert breach == (1.0, "at x=2.200 y=2.000 m, inside exclusion circle 1 of the geofence")
+    only_out = Geofence((Zone(False, points=((5.0, 5.0), (6.0, 5.0), (6.0, 6.0))),))  # no inclusion zone
+    assert only_out.first_breach(t, [0.0, 100.0, -50.0, 3.0], [0.0, 0.0, 9.0, 3.0]) is None
+
+
+@pytest.mark.parametrize("zone, words", [
+    ({"kind": "ring", "inclusion": True}, "kind: must be one of polygon, circle"),
+    ({"kind": "polygon", "inclusion": True, "points": [[0, 0], [1, 0]]}, "points: expected 3 to 1000 points"),
+    ({"kind": "polygon", "inclusion": True, "points": [[0, 0], [1, 0], [1, float("nan")]]}, "point 2: expected"),
+    ({"kind": "circle", "inclusion": False, "center": [0, 0], "radius_m": 0.0}, "radius_m: must be in (0, 100000]"),
+    ({"kind": "circle", "inclusion": "yes", "center": [0, 0], "radius_m": 1.0}, "inclusion: expected true or false"),
+    ({"kind": "circle", "inclusion": True, "center": [0, 0], "radius_m": 1.0, "height": 3}, "unknown key"),
+])
+def test_a_malformed_zone_is_refused_naming_its_key(zone: dict, words: str) -> None:
+    with pytest.raises(ConfigError) as e:
+        geofence_from_table(Table({"zones": [zone]}, "m.toml", "geofence"))
+    assert str(e.value).startswith("m.toml: geofence.zones[0].") and words in str(e.value), str(e.value)
+
+
+def test_a_plans_fence_is_read_about_its_home_and_kept_in_mission_toml(tmp_path: Path) -> None:
+    """A polygon 3 m round the L and an exclusion circle: in the paper frame (x north, y west), to the
+    projection's millimetre; ``mission.toml`` of the run holds the fence, and flying it again judges the same."""
+    plan = _fenced_l(tmp_path, {"polygons": [{"inclusion": True, "version": 1, "polygon": _rectangle(-3, 13, 3, 13)}],
+                                "circles": [{"inclusion": False, "version": 1,
+                                             "circle": {"center": _latlon(5.0, 20.0), "radius": 2.0}}]}, "fenced.plan")
+    fence = load_mission(plan).geofence
+    poly, circle = fence.zones
+    assert poly.inclusion and not circle.inclusion and circle.radius_m == 2.0
+    assert np.allclose(poly.points, [(-3, 3), (13, 3), (13, -13), (-3, -13)], atol=2e-3), poly.points
+    assert np.allclose(circle.center, (5.0, -20.0), atol=2e-3)
+    run = simulate(plan, out=tmp_path / "run", plots=False)
+    assert run.summary["outcome"] == "completed" and all(p["ok"] for p in run.summary["policies"])
+    again = mission_from_table(__import__("tomllib").loads((tmp_path / "run" / "mission.toml").read_text()), "m.toml")
+    assert again.geofence == fence
+
+
+def test_a_run_that_leaves_the_fence_says_where_and_when_and_exits_1(tmp_path: Path, capsys) -> None:
+    """The fence covers the L's north leg only (to 5 m east): the east leg leaves it. The flight is flown on (the
+    fence is not enforced); the ``geofence`` policy names the first row outside it, the run exits 1."""
+    plan = _fenced_l(tmp_path, {"polygons": [{"inclusion": True, "version": 1, "polygon": _rectangle(-3, 13, 3, 5)}]},
+                     "leaves.plan")
+    run = simulate(plan, out=tmp_path / "run", plots=False)
+    assert run.summary["outcome"] == "completed"
+    verdict = next(p for p in run.summary["policies"] if p["name"] == "geofence")
+    assert not verdict["ok"] and "outside every inclusion zone of the geofence" in verdict["why"]
+    i = int(np.searchsorted(run.trace["t"], verdict["t"] - 1e-9))
+    assert -run.trace["y"][i] > 5.0 and -run.trace["y"][i - 1] <= 5.0 + 1e-3  # the first row past 5 m east
+    assert report_run(run, "sim") == 1
+    assert "geofence" in capsys.readouterr().err
+
+
+def test_a_malformed_plan_fence_is_one_error_naming_the_file_and_key(tmp_path: Path) -> None:
+    bad = _fenced_l(tmp_path, {"polygons": [{"inclusion": True, "polygon": [[95.0, 8.5], [47.4, 8.5], [47.4, 8.6]]}]},
+                    "bad.plan")
+    with pytest.raises(ConfigError) as e:
+        load_mission(bad)
+    assert str(e.value) == f"{bad}: geoFence.polygons[0]: latitude 95, longitude 8.5: not a place on earth"
+    bad = _fenced_l(tmp_path, {"circles": [{"inclusion": True, "circle": {"radius": 3.0}}]}, "bad2.plan")
+    with pytest.raises(ConfigError) as e:
+        load_mission(bad)
+    assert "geoFence.circles[0]: expected inclusion and circle {center [lat, lon], radius}" in str(e.value)
