@@ -90,6 +90,8 @@ from bridge.mavlink.tlog import Tlog
 from params import ConfigError
 
 _MAX_DATAGRAM = 65535
+EARLY_READS = 64  # batches of the main socket read when the peer's own opens (64 x BATCH datagrams at most)
+
 
 class Endpoint:
     """One MAVLink 2 UDP link: its socket, its ``MAVLink`` codec, its counters.
@@ -164,6 +166,7 @@ class Endpoint:
         self.prio: socket.socket | None = None  # the peer's own socket (see the class docstring)
         self.prio_peer: tuple[str, int] | None = None
         self.backlog = False  # the last poll left datagrams on the main socket
+        self._early: list[tuple[Any, tuple[str, int]]] = []  # read off the main socket when the peer's opened
         self._turn = 0  # polls since the main socket was read (with a peer socket)
         self._dropped_before = 0  # the kernel's drops on sockets of this endpoint already closed
         self._dropped_at_close: int | None = None
@@ -186,6 +189,12 @@ class Endpoint:
             return
         s.setblocking(False)
         self.prio, self.prio_peer = s, addr
+        # what the peer sent before now waits on the main socket, older than anything its own socket gets: read it
+        # now, in the order it came, and hand it out first (a signed stream's timestamps are checked in that order:
+        # read after newer ones, these frames were refused as replayed, one session in some hundreds under load)
+        for _ in range(EARLY_READS):
+            if not self._read(self.sock, self._early, None, False):
+                break
 
     def forget_peer(self) -> None:
         """No peer any more (its own socket closed): the owner learns the next one."""
@@ -316,6 +325,9 @@ class Endpoint:
         stops reading the main socket once that time has come (looked at every 8 datagrams),
         so that a backlog never delays its caller's next duty past it; :attr:`backlog` then
         says that datagrams may be left."""
+        if self._early:  # read when the peer's socket opened: older than anything on it
+            out, self._early = self._early, []
+            return out
         out: list[tuple[Any, tuple[str, int]]] = []
         if self.prio is not None:
             self._read(self.prio, out, None, True)
