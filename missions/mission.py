@@ -26,9 +26,11 @@ from pathlib import Path
 from typing import Any
 
 from missions.fleet import fleet_from_table
+from missions.geodetic import Home as GeoHome
 from missions.geofence import geofence_from_table
 from missions.minsnap import Knot, Smooth
 from missions.planfiles import PlanFile, read_plan_text
+from missions.rally import rally_dict, rally_from_plan, rally_from_table
 from missions.references import Reference, Setpoint, Sine, Step, Waypoints
 from missions.route import LIMIT_RANGES, Limits, smooth_from_plan
 from params import ConfigError, Table, load_toml, read_text_file
@@ -94,6 +96,7 @@ class Mission:
     vehicles: tuple[Any, ...] = ()  # [[vehicles]]: missions.fleet.VehicleSpec, validated; () one vehicle
     separation: Any = None  # [separation]: missions.fleet.Separation; None: its defaults
     geofence: Any = None  # [geofence], or a plan's geoFence: missions.geofence.Geofence; None: none
+    rally: tuple[tuple[float, float], ...] = ()  # [rally] points (x, y m), or a plan's rallyPoints: missions.rally
 
     def __post_init__(self) -> None:
         why = name_problem(self.name)
@@ -146,6 +149,8 @@ class Mission:
             d["separation"] = self.separation.to_dict()
         if self.geofence is not None:
             d["geofence"] = self.geofence.to_dict()
+        if self.rally:
+            d["rally"] = rally_dict(self.rally)
         return d
 
     @property
@@ -314,7 +319,8 @@ def with_plan(base: Mission, plan: PlanFile, name: str) -> Mission:
     """``base`` (its settings: profile, law, rates, link, ...) flying ``plan``: its trajectory, then
     :data:`END_REST_S` at rest, named ``name``."""
     smooth = plan_smooth(plan)
-    return replace(base, trajectory=smooth, duration_s=smooth.end_s + END_REST_S, name=name, geofence=plan.fence)
+    return replace(base, trajectory=smooth, duration_s=smooth.end_s + END_REST_S, name=name, geofence=plan.fence,
+                   rally=_plan_rally(plan))
 
 
 def mission_from_plan(text: str, source: str, name: str = "mission") -> Mission:
@@ -322,7 +328,12 @@ def mission_from_plan(text: str, source: str, name: str = "mission") -> Mission:
     plan = read_plan_text(text, source)
     smooth = plan_smooth(plan)
     return Mission(trajectory=smooth, duration_s=smooth.end_s + END_REST_S, name=name, source=source,
-                   geofence=plan.fence)
+                   geofence=plan.fence, rally=_plan_rally(plan))
+
+
+def _plan_rally(plan: PlanFile) -> tuple[tuple[float, float], ...]:
+    """A plan's rally points in the paper frame about its home (within the plant's envelope)."""
+    return rally_from_plan(plan.rally, GeoHome(*plan.home), plan.source, ENVELOPE_RADIUS_M)
 
 
 def mission_from_table(data: Mapping[str, Any], source: str, default_name: str = "mission") -> Mission:
@@ -355,7 +366,9 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
         raise t.error("events", "expected an array of tables [[events]] (t_s, kind and its settings)")
     span = duration if not derived else MISSION_RANGES["duration_s"][1]
     vehicles, separation = fleet_from_table(t, lambda tt: _trajectory(tt, span), _law)
-    fence = geofence_from_table(t.table("geofence")) if t.has("geofence") else _plan_fence(trajectory_table)
+    fence, rally = _plan_extras(trajectory_table)  # a plan's, unless the mission gives its own
+    fence = geofence_from_table(t.table("geofence")) if t.has("geofence") else fence
+    rally = rally_from_table(t.table("rally"), ENVELOPE_RADIUS_M) if t.has("rally") else rally
     t.done()
     return Mission(
         trajectory=trajectory,
@@ -375,6 +388,7 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
         vehicles=vehicles,
         separation=separation,
         geofence=fence,
+        rally=rally,
         **raw,
     )
 
@@ -470,10 +484,11 @@ def _plan_path(t: Table, name: str) -> Path:
     return p if p.is_absolute() else Path(t._source).parent / p
 
 
-def _plan_fence(t: Table) -> Any:
-    """A ``kind = "plan"`` trajectory's plan's geofence (its file read again: the trajectory parser returns the
-    path only), or None."""
+def _plan_extras(t: Table) -> tuple[Any, tuple[tuple[float, float], ...]]:
+    """A ``kind = "plan"`` trajectory's plan's geofence and rally points (the file read again: the trajectory
+    parser keeps only its route), or (None, ())."""
     if t.raw("kind") != "plan" or not isinstance(t.raw("file"), str):
-        return None
+        return None, ()
     p = _plan_path(t, t.raw("file"))
-    return read_plan_text(read_text_file(p, "a mission plan", PLAN_MAX_BYTES), str(p)).fence
+    plan = read_plan_text(read_text_file(p, "a mission plan", PLAN_MAX_BYTES), str(p))
+    return plan.fence, _plan_rally(plan)

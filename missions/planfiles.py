@@ -14,7 +14,7 @@ Out: a :class:`PlanFile`: the home (lat, lon deg, alt m AMSL), the multicopter c
 which is refused. A ``QGC WPL 110`` file (mavlink.io, "File Formats") is a header line, then one line per
 item: index, current, frame, command, param1..4, x/lat, y/lon, z/alt, autocontinue; line 0 is the home,
 as QGroundControl and MAVProxy write it. A ``.plan``'s geofence is read (:mod:`missions.geofence`: checked over
-the run, not enforced); its rally points are read past.
+the run, not enforced); its rally points are where Return may land (:mod:`missions.rally`).
 """
 
 from __future__ import annotations
@@ -82,6 +82,7 @@ class PlanFile:
     items: tuple[Item, ...]
     cruise_m_s: float | None = None
     fence: Any = None  # missions.geofence.Geofence of a .plan's geoFence (None: none drawn)
+    rally: Any = None  # a .plan's rallyPoints object, as read (missions.rally.rally_from_plan reads it)
 
     def refuse(self, item: Item, why: str) -> ConfigError:
         """The refusal of ``item``: file, index, command, why."""
@@ -146,7 +147,8 @@ def read_qgc_plan(text: str, source: str) -> PlanFile:
         raise ConfigError(f"{source}: mission.items: {len(raw)} items, more than {MAX_ITEMS}")
     items = tuple(_plan_item(source, i, x) for i, x in enumerate(raw))
     fence = geofence_from_plan(data.get("geoFence"), Home(lat, lon, alt), source)
-    return PlanFile(source, (lat, lon, alt), items, hover if math.isfinite(hover) else None, fence)
+    return PlanFile(source, (lat, lon, alt), items, hover if math.isfinite(hover) else None, fence,
+                    data.get("rallyPoints"))
 
 
 def _plan_item(source: str, index: int, x: Any) -> Item:

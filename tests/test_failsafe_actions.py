@@ -20,13 +20,23 @@ import os
 import signal
 import subprocess
 from collections.abc import Iterator
+from dataclasses import replace
 from math import cos, hypot
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from bridge.autopilot.failsafe import FAILSAFE_ACTIONS, Level, PositionHold, ReturnHome, Takeoff
+from bridge.autopilot.failsafe import (
+    FAILSAFE_ACTIONS,
+    FailsafeConfig,
+    Level,
+    PositionHold,
+    ReturnHome,
+    Takeoff,
+    failsafe_target,
+    return_point,
+)
 from bridge.autopilot.simvehicle import FAILSAFE, LANDED, RTL
 from bridge.cli import build_parser, main
 from bridge.core.flight import prepare
@@ -366,6 +376,26 @@ def test_return_mode_climbs_flies_home_comes_down_and_lands() -> None:
     end = states[-1]
     assert not sim.armed and hypot(end[0], end[2]) < 0.2 and end[4] < 0.01, (sim.armed, end[:6])
     assert [e.kind for e in sim.events][-1] == "disarmed"
+
+
+def test_return_lands_at_the_closest_of_home_and_the_rally_points() -> None:
+    """With rally points (a plan's rallyPoints, ``[rally]``), Return flies to the closest, horizontally, of the
+    home and them (PX4's RTL_TYPE 0) and lands there; its event names the rally point. Home wins a tie, and a
+    rally point farther than home changes nothing; the ``return`` failsafe picks the same way."""
+    assert return_point((6.0, 0, 3.0, 0, 2.0), (0.0, 0.0, 0.0), ((9.0, 6.0), (5.0, 5.0))) == ((5.0, 5.0, 0.0), 1)
+    assert return_point((3.0, 0, 0.0, 0, 2.0), (0.0, 0.0, 0.0), ((6.0, 0.0),)) == ((0.0, 0.0, 0.0), None)  # a tie
+    assert return_point((1.0, 0, 1.0, 0, 2.0), (0.0, 0.0, 0.0), ((9.0, 9.0),)) == ((0.0, 0.0, 0.0), None)
+    mission = replace(_ground_mission(), rally=((9.0, 6.0), (5.0, 5.0)))
+    sim = prepare(mission, params={"RTL_RETURN_ALT": 4.0, "RTL_DESCEND_ALT": 2.5}).make_vehicle(armed=True)
+    sim.plant.state = (6.0, 0.0, 3.0, 0.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    sim.set_mode(RTL)
+    assert "rally point 1 x=5.000 y=5.000 m" in sim.events[-1].text, sim.events[-1].text
+    states = _fly(sim, 30.0)
+    end = states[-1]
+    assert not sim.armed and hypot(end[0] - 5.0, end[2] - 5.0) < 0.2 and end[4] < 0.01, (sim.armed, end[:6])
+    target = failsafe_target(FailsafeConfig(action="return"), (6.0, 0, 3.0, 0, 2.0, 0, 0, 0, 0, 0, 0, 0),
+                             (0.0, 0.0, 0.0), sim.rtl, mission.rally)
+    assert isinstance(target, ReturnHome) and (target.x, target.y) == (5.0, 5.0)
 
 
 def test_position_hold_takes_up_a_heavier_plant_with_its_integral() -> None:

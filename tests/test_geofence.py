@@ -1,7 +1,7 @@
-"""Covers missions.geofence and bridge.record.policies: a plan's ``geoFence`` read into the mission's
-``[geofence]``, PX4's rule for a position (inside an inclusion zone, outside every exclusion zone), the refusals
-of a malformed fence, and a run that leaves the fence saying where and when (the ``geofence`` policy;
-docs/missions.md, "The geofence")."""
+"""Covers missions.geofence, missions.rally and bridge.record.policies: a plan's ``geoFence`` read into the
+mission's ``[geofence]``, PX4's rule for a position (inside an inclusion zone, outside every exclusion zone), the
+refusals of a malformed fence, a run that leaves the fence saying where and when (the ``geofence`` policy); a
+plan's ``rallyPoints`` read into ``[rally]`` (docs/missions.md, "The geofence", "Rally points")."""
 
 from __future__ import annotations
 
@@ -124,3 +124,25 @@ def test_a_malformed_plan_fence_is_one_error_naming_the_file_and_key(tmp_path: P
     with pytest.raises(ConfigError) as e:
         load_mission(bad)
     assert "geoFence.circles[0]: expected inclusion and circle {center [lat, lon], radius}" in str(e.value)
+
+
+def test_a_plans_rally_points_are_read_about_its_home_and_kept_in_mission_toml(tmp_path: Path) -> None:
+    """``rallyPoints`` [[lat, lon, alt], ...]: each point's x, y in the paper frame (its height not used: Return
+    lands on the flat ground there); mission.toml holds ``[rally]``, which reads back the same."""
+    plan = _fenced_l(tmp_path, {}, "rally.plan")
+    data = json.loads(plan.read_text())
+    data["rallyPoints"] = {"version": 2, "points": [[*_latlon(5.0, 5.0), 500.0], [*_latlon(-2.0, 0.0), 490.0]]}
+    plan.write_text(json.dumps(data))
+    m = load_mission(plan)
+    assert np.allclose(m.rally, [(5.0, -5.0), (-2.0, 0.0)], atol=2e-3), m.rally
+    run = simulate(plan, out=tmp_path / "run", plots=False)
+    again = mission_from_table(__import__("tomllib").loads((tmp_path / "run" / "mission.toml").read_text()), "m.toml")
+    assert again.rally == m.rally and run.summary["outcome"] == "completed"
+    data["rallyPoints"]["points"][1] = [*_latlon(150.0, 0.0), 490.0]
+    plan.write_text(json.dumps(data))
+    with pytest.raises(ConfigError) as e:
+        load_mission(plan)
+    assert f"{plan}: rallyPoints.points: point 1: expected [x, y], finite, within 100 m of the home" in str(e.value)
+    with pytest.raises(ConfigError) as e:
+        mission_from_table({"duration_s": 1.0, "trajectory": {"kind": "sine"}, "rally": {"points": [[1.0]]}}, "m.toml")
+    assert str(e.value).startswith("m.toml: rally.points: point 0: expected [x, y]"), str(e.value)

@@ -319,12 +319,27 @@ def return_time_s(cfg: ReturnConfig, away_m: float, z_m: float, rate: float, g: 
             + z_descend / rate)
 
 
+def return_point(X: tuple[float, ...], home: tuple[float, float, float],
+                 rally: tuple[tuple[float, float], ...] = ()) -> tuple[tuple[float, float, float], int | None]:
+    """Where Return flies from state X, as PX4's RTL_TYPE 0: the closest, horizontally, of the home (x, y, z m)
+    and the rally points (x, y m, on the ground at the home's height); (that point, None for the home, else the
+    rally point's index). The home wins a tie."""
+    best, index = home, None
+    far = hypot(home[0] - X[0], home[1] - X[2])
+    for i, (x, y) in enumerate(rally):
+        d = hypot(x - X[0], y - X[2])
+        if d < far:
+            best, index, far = (x, y, home[2]), i, d
+    return best, index
+
+
 def failsafe_target(cfg: FailsafeConfig, X: tuple[float, ...], home: tuple[float, float, float],
-                    rtl: ReturnConfig) -> Target:
+                    rtl: ReturnConfig, rally: tuple[tuple[float, float], ...] = ()) -> Target:
     """What the failsafe flies first from state X (``disarm`` flies nothing: see SimVehicle); ``return`` flies
-    home (``home``, m) with ``rtl``'s heights."""
+    to the closest of the home (``home``, m) and the ``rally`` points (:func:`return_point`) with ``rtl``'s
+    heights."""
     if cfg.action == "return":
-        return ReturnHome.toward(X, home, rtl, cfg.descent_rate)
+        return ReturnHome.toward(X, return_point(X, home, rally)[0], rtl, cfg.descent_rate)
     if cfg.action == "land":
         return Land.here(X, cfg.descent_rate)
     if cfg.action == "hold":

@@ -44,6 +44,7 @@ from bridge.autopilot.failsafe import (
     Takeoff,
     Target,
     failsafe_target,
+    return_point,
 )
 from bridge.autopilot.params import VehicleParams, change_param, read_param
 from bridge.autopilot.vehicleevents import Event, ParamChanged, Sender
@@ -80,6 +81,7 @@ class SimVehicle:
     failure_injection: int = 0  # SYS_FAILURE_EN: a ground station's MAV_CMD_INJECT_FAILURE is acted on (1) or not
     rtl: ReturnConfig = field(default_factory=ReturnConfig)  # Return mode's heights (RTL_RETURN_ALT, RTL_DESCEND_ALT)
     preflight_disarm_s: float = 10.0  # COM_DISARM_PRFLT (s): a ground station's arm on the ground times out
+    rally: tuple[tuple[float, float], ...] = ()  # m: rally points, where Return may land instead (missions.rally)
 
     def __post_init__(self) -> None:
         if self.estimator is None:
@@ -212,9 +214,11 @@ class SimVehicle:
             target = Land.here(X, self.failsafe.descent_rate)
             text = f"LAND at x={X[0]:.3f} y={X[2]:.3f} m, {self.failsafe.descent_rate:g} m/s"
         elif mode == RTL:
-            target = ReturnHome.toward(X, self.home, self.rtl, self.failsafe.descent_rate)
-            text = (f"RTL from x={X[0]:.3f} y={X[2]:.3f} z={X[4]:.3f} m: home x={self.home[0]:.3f} "
-                    f"y={self.home[1]:.3f} m at z={target.z_return:.3f} m, down to {target.z_descend:.3f} m, land")
+            to, rally = return_point(X, self.home, self.rally)
+            target = ReturnHome.toward(X, to, self.rtl, self.failsafe.descent_rate)
+            where = "home" if rally is None else f"rally point {rally}"
+            text = (f"RTL from x={X[0]:.3f} y={X[2]:.3f} z={X[4]:.3f} m: {where} x={to[0]:.3f} "
+                    f"y={to[1]:.3f} m at z={target.z_return:.3f} m, down to {target.z_descend:.3f} m, land")
         else:
             target = Takeoff.here(X, self._start_z + alt)
             text = f"TAKEOFF to {alt:g} m over x={X[0]:.3f} y={X[2]:.3f} m"
@@ -284,7 +288,7 @@ class SimVehicle:
             self.mode = LANDED
             self.disarm("landed: disarmed" if p.on_ground else "failsafe: motors stopped")
             return
-        self.fly_onboard(failsafe_target(fs, self.published(), self.home, self.rtl), FAILSAFE)
+        self.fly_onboard(failsafe_target(fs, self.published(), self.home, self.rtl, self.rally), FAILSAFE)
         if fs.action == "hold":
             self.land_at = p.t + fs.hold_s
 

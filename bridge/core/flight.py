@@ -104,14 +104,14 @@ class Flight:
             return SimVehicle(plant, self.substeps, self.failsafe, armed=armed,
                               takeoff_alt_m=self.params.takeoff_alt_m, timeline=self.timeline,
                               failure_injection=self.params.failure_injection, rtl=self.params.rtl,
-                          preflight_disarm_s=self.params.preflight_disarm_s)
+                              preflight_disarm_s=self.params.preflight_disarm_s, rally=self.mission.rally)
         m = self.mission
         suite = SensorSuite(self.sensors, m.seed, m.physics_hz, self.profile.gravity)
         est = make_estimator(self.estimator, self.sensors, plant.state, self.profile.gravity, lambda: plant.state)
         return SimVehicle(plant, self.substeps, self.failsafe, armed=armed, sensors=suite, estimator=est,
                           takeoff_alt_m=self.params.takeoff_alt_m, timeline=self.timeline,
                           failure_injection=self.params.failure_injection, rtl=self.params.rtl,
-                          preflight_disarm_s=self.params.preflight_disarm_s)
+                          preflight_disarm_s=self.params.preflight_disarm_s, rally=m.rally)
 
     def make_controller(self) -> Controller:
         ctl = self._controller()

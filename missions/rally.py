@@ -1,0 +1,67 @@
+"""A mission's rally points: where Return may land instead of the home (PX4's RTL_TYPE 0, the closest safe point).
+
+In:  a mission's ``[rally]`` table (``points`` [[x, y], ...]: m, the paper frame, x north, y west about the home),
+     or a plan's ``rallyPoints`` (``points`` [[lat, lon, alt AMSL], ...]) and its home (deg, deg, m AMSL); the
+     radius (m) the points must lie within (the plant's envelope)
+Out: the points (x, y) in m, in order; :func:`rally_dict` for a mission as flown
+
+A rally point's height is not used: the ground is flat at the home's altitude, and Return lands on it there
+(bridge.autopilot.failsafe.return_point picks the closest of the home and the rally points).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+from missions.geodetic import Home
+from params import ConfigError, Table
+
+MAX_RALLY = 100  # points; QGroundControl plans hold a handful
+Point = tuple[float, float]
+
+
+def rally_from_table(t: Table, radius_m: float) -> tuple[Point, ...]:
+    """A mission's ``[rally]`` (the module's docstring), validated: each error names the key."""
+    raw = t.raw("points", [])
+    if not isinstance(raw, list) or not 1 <= len(raw) <= MAX_RALLY:
+        raise t.error("points", f"expected 1 to {MAX_RALLY} points [x, y] (m), got {str(raw)[:60]}")
+    points = []
+    for i, p in enumerate(raw):
+        if (not isinstance(p, (list, tuple)) or len(p) != 2
+                or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in p)
+                or math.hypot(p[0], p[1]) > radius_m):
+            raise t.error("points", f"point {i}: expected [x, y], finite, within {radius_m:g} m of the home "
+                                    f"(the plant's envelope), got {str(p)[:60]}")
+        points.append((float(p[0]), float(p[1])))
+    t.done()
+    return tuple(points)
+
+
+def rally_from_plan(raw: Any, home: Home, source: str, radius_m: float) -> tuple[Point, ...]:
+    """The rally points of a plan's ``rallyPoints`` object about ``home`` (() when none; a malformed one is a
+    ConfigError naming the file and the key)."""
+    if raw is None:
+        return ()
+    if not isinstance(raw, Mapping) or not isinstance(raw.get("points", []), list):
+        raise ConfigError(f"{source}: rallyPoints: expected an object with points [[lat, lon, alt], ...]")
+    local = []
+    for i, p in enumerate(raw.get("points", [])):
+        try:
+            lat, lon, _alt = (float(v) for v in p)
+        except (TypeError, ValueError):
+            raise ConfigError(f"{source}: rallyPoints.points[{i}]: expected [lat, lon, alt]") from None
+        if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+            raise ConfigError(f"{source}: rallyPoints.points[{i}]: latitude {lat:g}, longitude {lon:g}: "
+                              "not a place on earth")
+        x, y, _ = home.paper(lat, lon, home.alt)
+        local.append([x, y])
+    if not local:
+        return ()
+    return rally_from_table(Table({"points": local}, source, "rallyPoints"), radius_m)
+
+
+def rally_dict(points: tuple[Point, ...]) -> dict[str, Any]:
+    """``[rally]`` of a mission as flown."""
+    return {"points": [list(p) for p in points]}
