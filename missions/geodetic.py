@@ -1,8 +1,10 @@
 """Latitude, longitude and altitude to the local frames about a home, as PX4 projects them.
 
-In:  a home (latitude, longitude in degrees, altitude AMSL in m) and a point (the same units)
+In:  a home (latitude, longitude in degrees, altitude AMSL in m) and a point (the same units), or a local
+     offset (north, east, down in m)
 Out: the point in local NED about the home (north, east, down in m) and in the paper frame
-     (x north, y west, z up in m: NWU, the ground z = 0 at the home's altitude)
+     (x north, y west, z up in m: NWU, the ground z = 0 at the home's altitude); an offset back on earth
+     (:meth:`Home.global_of`, PX4's ``MapProjection::reproject``: what the vehicle's telemetry reports)
 
 PX4 projects a global position onto its local frame with the azimuthal equidistant projection on a
 sphere of radius ``CONSTANTS_RADIUS_OF_EARTH`` = 6 371 000 m about the reference point
@@ -32,6 +34,11 @@ class Home:
         north, east = project(self.lat, self.lon, lat, lon)
         return north, east, self.alt - alt
 
+    def global_of(self, north: float, east: float, down: float) -> tuple[float, float, float]:
+        """(lat, lon deg, alt m AMSL) of the NED offset (m) about the home: the inverse of :meth:`ned`."""
+        lat, lon = reproject(self.lat, self.lon, north, east)
+        return lat, lon, self.alt - down
+
     def paper(self, lat: float, lon: float, alt: float) -> tuple[float, float, float]:
         """(x, y, z) in m of the point in the paper frame (NWU about the home, z up from its altitude)."""
         north, east, down = self.ned(lat, lon, alt)
@@ -52,3 +59,19 @@ def project(lat0: float, lon0: float, lat: float, lon: float) -> tuple[float, fl
     north = k * (cos_ref * sin_lat - sin_ref * cos_lat * cos_d_lon) * EARTH_RADIUS_M
     east = k * cos_lat * math.sin(lon_rad - ref_lon) * EARTH_RADIUS_M
     return north, east
+
+
+def reproject(lat0: float, lon0: float, north: float, east: float) -> tuple[float, float]:
+    """(lat, lon) in degrees of the point ``north``, ``east`` m from (lat0, lon0): the inverse of :func:`project`
+    on the same sphere (PX4's ``MapProjection::reproject``; the inverse azimuthal equidistant projection)."""
+    ref_lat, ref_lon = math.radians(lat0), math.radians(lon0)
+    x, y = north / EARTH_RADIUS_M, east / EARTH_RADIUS_M  # the point's angular offsets (rad)
+    c = math.hypot(x, y)  # its angular distance from the reference
+    if c == 0.0:
+        return lat0, lon0
+    sin_c, cos_c = math.sin(c), math.cos(c)
+    sin_ref, cos_ref = math.sin(ref_lat), math.cos(ref_lat)
+    lat = math.asin(min(1.0, max(-1.0, cos_c * sin_ref + x * sin_c * cos_ref / c)))
+    lon = ref_lon + math.atan2(y * sin_c, c * cos_ref * cos_c - x * sin_ref * sin_c)
+    return math.degrees(lat), math.degrees(lon)
+

@@ -1,6 +1,6 @@
 """Covers missions.geodetic: PX4's azimuthal equidistant projection about a home, checked against an
 independent formula (great-circle distance and initial bearing on the same sphere: the projection keeps
-both exactly) to 1 mm at 1 km, and the paper frame's signs (x north, y west, z up)."""
+both exactly) to 1 mm at 1 km, the paper frame's signs (x north, y west, z up), and its inverse (the telemetry's)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import math
 
 import pytest
 
-from missions.geodetic import EARTH_RADIUS_M, Home, project
+from missions.geodetic import EARTH_RADIUS_M, Home, project, reproject
 
 HOMES = [(47.397742, 8.545594), (-33.86, 151.21), (0.0, 0.0), (64.1, -21.9), (-77.8, 166.7), (35.0, 179.99)]
 
@@ -58,3 +58,27 @@ def test_the_home_itself_and_the_frames() -> None:
     assert (x, y, z) == (n, -e, 10.0)  # NWU: west is -east, up is -down
     lat, lon = destination(home.lat, home.lon, 50.0, 0.0)  # 50 m north
     assert home.paper(lat, lon, 488.0)[0] == pytest.approx(50.0, abs=1e-6)
+
+
+@pytest.mark.parametrize("home", HOMES)
+def test_reproject_is_the_projections_inverse_and_the_vehicles_telemetry_uses_it(home: tuple[float, float]) -> None:
+    """:func:`reproject` undoes :func:`project` (to a micrometre out to 10 km; PX4's own pair, one sphere), and
+    agrees with the independent destination formula; the vehicle's GLOBAL_POSITION_INT reports a state the
+    plan reader maps back onto it, to degE7's resolution (it once used a flat earth of the WGS-84 radius: 11 cm
+    off at 100 m)."""
+    for k in range(12):
+        bearing = 2 * math.pi * k / 12 + 0.2
+        for dist in (0.5, 100.0, 10_000.0):
+            n, e = dist * math.cos(bearing), dist * math.sin(bearing)
+            lat, lon = reproject(*home, n, e)
+            n2, e2 = project(*home, lat, lon)
+            assert math.hypot(n2 - n, e2 - e) < 1e-6, (home, dist, bearing)
+            lat3, lon3 = destination(*home, dist, bearing)
+            assert abs(lat3 - lat) < 1e-9 and abs(math.remainder(lon3 - lon, 360.0)) < 1e-9
+    assert reproject(*home, 0.0, 0.0) == home
+    from bridge.mavlink import telemetry as tm  # (the vehicle's side: its telemetry module)
+
+    gcs_home = tm.Home(home[0], home[1], 488.0)
+    m = tm.global_position((100.0, 0.0, -50.0, 0.0, 10.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0), 0, gcs_home)
+    x, y, z = Home(*home, 488.0).paper(m.lat * 1e-7, m.lon * 1e-7, m.alt * 1e-3)
+    assert abs(x - 100.0) < 0.012 and abs(y + 50.0) < 0.012 and abs(z - 10.0) < 1e-3, (x, y, z)

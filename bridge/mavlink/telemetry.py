@@ -8,7 +8,7 @@ Out: pymavlink messages in NED / FRD (listed below): angles rad, rates rad/s, po
 
 Pure functions from the plant's state (eq. 7, NWU) to pymavlink messages in MAVLink's
 frames (NED / FRD, via :mod:`bridge.core.wire`): ``ATTITUDE``, ``ATTITUDE_QUATERNION``,
-``LOCAL_POSITION_NED``, ``GLOBAL_POSITION_INT`` (flat earth around a configurable home),
+``LOCAL_POSITION_NED``, ``GLOBAL_POSITION_INT`` (PX4's reprojection about a configurable home),
 ``HOME_POSITION``, ``MISSION_CURRENT``, ``SYS_STATUS``, ``EXTENDED_SYS_STATE``, ``ACTUATOR_OUTPUT_STATUS``,
 ``AUTOPILOT_VERSION``. ``time_boot_ms`` is the vehicle's simulation time, as PX4 stamps it
 in lockstep.
@@ -28,9 +28,9 @@ from typing import Any
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.core.wire import paper_to_ned
+from missions.geodetic import reproject
 from plant.sensors import BARO, GNSS, IMU, Measurement, SensorConfig, SensorSuite
 
-EARTH_RADIUS_M = 6_378_137.0  # WGS-84 equatorial radius: flat-earth offsets around home
 # the sensors a ground station expects to see healthy before it shows a vehicle as ready
 _SENSORS = (mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
             | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG | mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
@@ -53,9 +53,9 @@ class Home:
     alt: float = 488.0
 
     def to_global(self, north: float, east: float, down: float) -> tuple[float, float, float]:
-        """NED offset (m) -> latitude, longitude (deg), altitude AMSL (m), flat earth."""
-        lat = self.lat + math.degrees(north / EARTH_RADIUS_M)
-        lon = self.lon + math.degrees(east / (EARTH_RADIUS_M * math.cos(math.radians(self.lat))))
+        """NED offset (m) -> latitude, longitude (deg), altitude AMSL (m): PX4's reprojection about the home
+        (missions.geodetic), the inverse of the projection a plan's positions are read with, on one sphere."""
+        lat, lon = reproject(self.lat, self.lon, north, east)
         return lat, lon, self.alt - down
 
 
