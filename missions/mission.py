@@ -25,6 +25,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from missions.envelope import ENVELOPE_RADIUS_M, envelope_problem
 from missions.fleet import fleet_from_table
 from missions.geodetic import Home as GeoHome
 from missions.geofence import geofence_from_table
@@ -60,10 +61,6 @@ MAX_STRETCH = 4.0  # the most a trajectory is slowed (``stretched_by``; missions
 # landing and disarm on the ground, or hold its position until the session ends; never motors off in the air
 END_ACTIONS = ("land", "hold")
 DEFAULT_END_ACTION = "land"
-# The plant's envelope: plant/quadrotor.py Quadrotor.diverged() calls a vehicle farther than this from the
-# origin lost, so no start or reference may leave it (envelope_problem; the loader's wider ranges catch typos).
-# Missions do not import the plant: tests/test_mission.py checks that the two agree.
-ENVELOPE_RADIUS_M = 100.0
 NAME_MAX_BYTES = 100  # a run directory is runs/<UTC time>-<name>[-N]: well under a file system's 255 bytes
 
 
@@ -174,53 +171,6 @@ def name_problem(name: object) -> str | None:
         return f"must be printable, without newlines, tabs or other control characters; got {name!r}"[:200]
     if len(name.encode()) > NAME_MAX_BYTES:
         return f"must be at most {NAME_MAX_BYTES} bytes of UTF-8 (it names the run directory), got {len(name.encode())}"
-    return None
-
-
-def envelope_problem(trajectory: Reference, start: tuple[float, ...], duration_s: float) -> tuple[str, str] | None:
-    """The key and the reason when the start or the reference leaves the plant's envelope
-    (:data:`ENVELOPE_RADIUS_M` from the origin) at some time of the mission, or None.
-
-    Step set-points and waypoints are checked point by point: a minimum-jerk segment runs on the
-    straight line between its two points (a convex blend), and the envelope is a ball. A sine's
-    horizontal radius is its amplitude and its height is linear in t, so its farthest points are
-    at t = 0 and t = ``duration_s``. Other references (written in Python) are not checked here:
-    the plant's own divergence check still stops them."""
-    def beyond(what: str, r: float) -> str:
-        return (f"{what} is {r:.4g} m from the origin, outside the plant's envelope of {ENVELOPE_RADIUS_M:g} m "
-                f"(plant/quadrotor.py: a vehicle farther out has diverged)")
-
-    r = math.sqrt(sum(v * v for v in start[:3]))
-    if r > ENVELOPE_RADIUS_M:
-        return "start.position", beyond("the start", r)
-    if isinstance(trajectory, (Step, Waypoints)):
-        key, points = (("trajectory.setpoints", trajectory.setpoints) if isinstance(trajectory, Step)
-                       else ("trajectory.points", trajectory.points))
-        for i, s in enumerate(points):
-            r = math.sqrt(s.x * s.x + s.y * s.y + s.z * s.z)
-            if r > ENVELOPE_RADIUS_M:
-                return f"{key}[{i}]", beyond(f"({s.x:g}, {s.y:g}, {s.z:g})", r)
-    elif isinstance(trajectory, Smooth):  # the polynomials may swing past their knots: sampled, 64 a segment
-        ks = trajectory.knots
-        for j in range(len(ks) - 1):
-            for i in range(65):
-                x, y, z, _ = trajectory.sample(ks[j].t + (ks[j + 1].t - ks[j].t) * i / 64)
-                r = math.sqrt(x[0] * x[0] + y[0] * y[0] + z[0] * z[0])
-                if r > ENVELOPE_RADIUS_M:
-                    return f"trajectory.points[{j}]", beyond(f"after this knot, at ({x[0]:.4g}, {y[0]:.4g}, "
-                                                              f"{z[0]:.4g}), the trajectory", r)
-    elif isinstance(trajectory, Sine):  # its horizontal reach: the circle's centre's distance plus its radius
-        a, z0 = math.hypot(trajectory.x0, trajectory.y0) + abs(trajectory.amplitude), trajectory.z0
-        z_end = z0 + trajectory.climb * duration_s
-        if a > ENVELOPE_RADIUS_M:
-            return "trajectory.amplitude", beyond(f"amplitude {a:g} m: the circle", a)
-        if math.hypot(a, z0) > ENVELOPE_RADIUS_M:
-            return "trajectory.z0", beyond(f"at t = 0 (amplitude {a:g} m, z0 {z0:g} m) the reference",
-                                           math.hypot(a, z0))
-        if math.hypot(a, z_end) > ENVELOPE_RADIUS_M:
-            return "trajectory.climb", beyond(
-                f"climbing {trajectory.climb:g} m/s from z0 {z0:g} m, at t = {duration_s:g} s (z = {z_end:g} m) "
-                f"the reference", math.hypot(a, z_end))
     return None
 
 

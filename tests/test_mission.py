@@ -17,7 +17,7 @@ from bridge import simulate
 from bridge.core.flight import prepare
 from bridge.record.runlog import run_dir
 from missions import MISSION_DIR, Mission, Setpoint, Sine, Step, Waypoints, load_mission, mission_from_table
-from missions.mission import ENVELOPE_RADIUS_M
+from missions.envelope import ENVELOPE_RADIUS_M
 from params import ConfigError, dump_toml
 from plant import Quadrotor, load_profile
 

@@ -20,7 +20,7 @@ import math
 from dataclasses import dataclass
 
 from bridge.mavlink.missionitems import MissionItem, plan_of
-from missions.mission import ENVELOPE_RADIUS_M
+from missions.envelope import ENVELOPE_RADIUS_M
 from missions.planfiles import NAV_LAND, NAV_RETURN_TO_LAUNCH, NAV_WAYPOINT
 from missions.route import Limits, stops_of
 
