@@ -102,7 +102,10 @@ class Geofence:
 
 def geofence_from_table(t: Table) -> Geofence:
     """A mission's ``[geofence]`` table (the module's docstring), validated: each error names the key."""
-    raw = t.raw("zones", [])
+    raw = t.raw("zones")
+    if raw is None:
+        t.done()  # a misspelled key is named as such ("did you mean 'zones'?")
+        raise t.error("zones", "is required")
     if not isinstance(raw, list) or not all(isinstance(z, Mapping) for z in raw):
         raise t.error("zones", "expected an array of tables (kind polygon or circle, inclusion, points or center "
                                "and radius_m)")
@@ -153,6 +156,9 @@ def geofence_from_plan(raw: Any, home: Home, source: str) -> Geofence | None:
             where = f"geoFence.{key}[{i}]"
             try:
                 if key == "polygons":
+                    if not isinstance(z["polygon"], list) or not 3 <= len(z["polygon"]) <= MAX_POINTS:
+                        raise ValueError(f"polygon: expected 3 to {MAX_POINTS} points [lat, lon], "
+                                         f"got {str(z['polygon'])[:60]}")
                     pts = [_local(home, lat, lon) for lat, lon in z["polygon"]]
                     zone = {"kind": "polygon", "inclusion": z["inclusion"], "points": pts}
                 else:
@@ -161,8 +167,8 @@ def geofence_from_plan(raw: Any, home: Home, source: str) -> Geofence | None:
                             "radius_m": radius}
             except (KeyError, TypeError, ValueError) as exc:
                 shape = "polygon [[lat, lon], ...]" if key == "polygons" else "circle {center [lat, lon], radius}"
-                why = str(exc) if isinstance(exc, ValueError) and str(exc).startswith("latitude") else \
-                    f"expected inclusion and {shape}"
+                why = str(exc) if isinstance(exc, ValueError) and str(exc).startswith(("latitude", "polygon:")) \
+                    else f"expected inclusion and {shape}"
                 raise ConfigError(f"{source}: {where}: {why}") from None
             zones.append(_zone(Table(zone, source, where)))
     if len(zones) > MAX_ZONES:

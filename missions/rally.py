@@ -24,7 +24,10 @@ Point = tuple[float, float]
 
 def rally_from_table(t: Table, radius_m: float) -> tuple[Point, ...]:
     """A mission's ``[rally]`` (the module's docstring), validated: each error names the key."""
-    raw = t.raw("points", [])
+    raw = t.raw("points")
+    if raw is None:
+        t.done()  # a misspelled key is named as such ("did you mean 'points'?")
+        raise t.error("points", "is required")
     if not isinstance(raw, list) or not 1 <= len(raw) <= MAX_RALLY:
         raise t.error("points", f"expected 1 to {MAX_RALLY} points [x, y] (m), got {str(raw)[:60]}")
     points = []

@@ -124,6 +124,15 @@ def test_a_malformed_plan_fence_is_one_error_naming_the_file_and_key(tmp_path: P
     with pytest.raises(ConfigError) as e:
         load_mission(bad)
     assert "geoFence.circles[0]: expected inclusion and circle {center [lat, lon], radius}" in str(e.value)
+    bad = _fenced_l(tmp_path, {"polygons": [{"inclusion": True, "polygon": [[47.4, 8.5], [47.4, 8.6]]}]}, "bad3.plan")
+    with pytest.raises(ConfigError) as e:
+        load_mission(bad)
+    assert str(e.value) == (f"{bad}: geoFence.polygons[0]: polygon: expected 3 to 1000 points [lat, lon], "
+                            "got [[47.4, 8.5], [47.4, 8.6]]")
+    for table, typo, key in (("geofence", "zone", "zones"), ("rally", "point", "points")):
+        with pytest.raises(ConfigError) as e:
+            mission_from_table({"duration_s": 1.0, "trajectory": {"kind": "sine"}, table: {typo: []}}, "m.toml")
+        assert str(e.value) == f"m.toml: {table}.{typo}: unknown key in [{table}]; did you mean '{key}'?"
 
 
 def test_a_plans_rally_points_are_read_about_its_home_and_kept_in_mission_toml(tmp_path: Path) -> None:
