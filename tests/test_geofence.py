@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import math
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -95,7 +96,7 @@ def test_a_plans_fence_is_read_about_its_home_and_kept_in_mission_toml(tmp_path:
     assert np.allclose(circle.center, (5.0, -20.0), atol=2e-3)
     run = simulate(plan, out=tmp_path / "run", plots=False)
     assert run.summary["outcome"] == "completed" and all(p["ok"] for p in run.summary["policies"])
-    again = mission_from_table(__import__("tomllib").loads((tmp_path / "run" / "mission.toml").read_text()), "m.toml")
+    again = mission_from_table(tomllib.loads((tmp_path / "run" / "mission.toml").read_text()), "m.toml")
     assert again.geofence == fence
 
 
@@ -145,7 +146,7 @@ def test_a_plans_rally_points_are_read_about_its_home_and_kept_in_mission_toml(t
     m = load_mission(plan)
     assert np.allclose(m.rally, [(5.0, -5.0), (-2.0, 0.0)], atol=2e-3), m.rally
     run = simulate(plan, out=tmp_path / "run", plots=False)
-    again = mission_from_table(__import__("tomllib").loads((tmp_path / "run" / "mission.toml").read_text()), "m.toml")
+    again = mission_from_table(tomllib.loads((tmp_path / "run" / "mission.toml").read_text()), "m.toml")
     assert again.rally == m.rally and run.summary["outcome"] == "completed"
     data["rallyPoints"]["points"][1] = [*_latlon(150.0, 0.0), 490.0]
     plan.write_text(json.dumps(data))

@@ -203,10 +203,10 @@ class SimVehicle:
         X = self.published()
         if mode == HOLD and hold_at is not None:
             target: Target = hold_at
-            heading = "" if hold_at.psi is None else f", heading {hold_at.psi:.3f} rad"
-            heading += "" if hold_at.speed is None else f", at most {hold_at.speed:g} m/s across"
+            extra = "" if hold_at.psi is None else f", heading {hold_at.psi:.3f} rad"
+            extra += "" if hold_at.speed is None else f", at most {hold_at.speed:g} m/s across"
             text = (f"HOLD, repositioned: from x={X[0]:.3f} y={X[2]:.3f} z={X[4]:.3f} m to x={hold_at.x:.3f} "
-                    f"y={hold_at.y:.3f} z={hold_at.z:.3f} m{heading}")
+                    f"y={hold_at.y:.3f} z={hold_at.z:.3f} m{extra}")
         elif mode == HOLD:
             target = PositionHold.here(X)
             text = f"HOLD at x={X[0]:.3f} y={X[2]:.3f} z={X[4]:.3f} m"

@@ -202,10 +202,7 @@ class Commander:
         if got.why is not None:
             if got.result == mavlink.MAV_RESULT_DENIED:
                 self.ports.reject("bad_number")
-                return self._refuse(got.why)
-            self.texts += self._statustext(mavlink.MAV_SEVERITY_WARNING, got.why)
-            self.ports.refused(got.why)
-            return got.result
+            return self._refuse(got.why, got.result)
         for e in got.events:
             sim.schedule(e, by)
         return mavlink.MAV_RESULT_ACCEPTED
@@ -217,11 +214,7 @@ class Commander:
         sim = self.sim
         got = reposition(m, self.cfg.home, sim.published())
         if got.to is None:
-            if got.result == mavlink.MAV_RESULT_DENIED:
-                return self._refuse(got.why or "DO_REPOSITION")
-            self.texts += self._statustext(mavlink.MAV_SEVERITY_WARNING, got.why)
-            self.ports.refused(got.why or "DO_REPOSITION")
-            return got.result
+            return self._refuse(got.why or "DO_REPOSITION", got.result)
         if not sim.armed:
             return self._set_mode_or_refuse(HOLD, "", by=by)
         if sim.plant.on_ground:
@@ -306,11 +299,12 @@ class Commander:
             return least
         return rel
 
-    def _refuse(self, why: str) -> int:
-        """DENIED; a STATUSTEXT saying why follows the COMMAND_ACK to the sender (:attr:`texts`)."""
+    def _refuse(self, why: str, result: int = mavlink.MAV_RESULT_DENIED) -> int:
+        """``result`` (DENIED, or UNSUPPORTED); a STATUSTEXT saying why follows the COMMAND_ACK to the sender
+        (:attr:`texts`)."""
         self.texts += self._statustext(mavlink.MAV_SEVERITY_WARNING, why)
         self.ports.refused(why)
-        return mavlink.MAV_RESULT_DENIED
+        return result
 
     def _set_mode_or_refuse(self, mode: str | None, why: str, *, by: Sender,
                             takeoff_alt_m: float | None = None, hold_at: PositionHold | None = None) -> int:
