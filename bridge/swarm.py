@@ -34,6 +34,7 @@ from typing import Any
 from bridge.core.flight import Flight, Overrides, Progress, prepare
 from bridge.link.model import merge_link_tables
 from bridge.link.radio import Radio
+from bridge.link.turns import TURNS, turn_order
 from bridge.loop import flying
 from bridge.loop import simulate as simulate_one
 from bridge.record.policies import run_ok
@@ -57,8 +58,6 @@ from missions.fleet import (
 from missions.fleet import vehicle_mission as mission_of
 from params import ConfigError, dump_toml
 
-TURNS = ("each control step every vehicle flies its step in turn, the first one rotating (step k: the (k mod N)-th "
-         "of the N still flying, by id): on one radio, whose packets sent at the same instant queue first")
 LINK_FIGURES = ("sent", "delivered", "lost", "lost_by", "delay_ms")  # each vehicle's, each way, in the fleet's summary
 # the outcomes from best to worst: the fleet's outcome is its worst vehicle's (an unknown one is worst)
 SEVERITY = ("completed", "failsafe", "law_failed", "diverged", "crashed", "collision", "aborted")
@@ -281,8 +280,7 @@ def _fly_together(steps: list[Generator[tuple[float, ...], str | None, Run]], st
     k = 0
     try:
         while live:
-            turn = k % len(live)  # who goes first this step (TURNS): on one radio, the first in its queue
-            for i in live[turn:] + live[:turn]:
+            for i in turn_order(live, k):  # who goes first this step (TURNS): on one radio, the first in its queue
                 try:
                     X = steps[i].send(told[i]) if k else next(steps[i])
                     positions[i] = (X[0], X[2], X[4])
@@ -343,10 +341,6 @@ CONTINUED = ("the flights continued past the contact: in real time each vehicle 
              "vehicles share no clock, so nothing stopped them at it (docs/swarm.md)")
 
 
-SITL_SHARED = ("--shared-link ([link] shared = true): one radio for a fleet in lockstep is not modelled yet: fly it "
-               "offline (bsst sim) or in real time (bsst sitl --realtime); docs/swarm.md")
-
-
 def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] | None = None,
          formation: str | None = None, out: str | Path | None = None, write: bool = False, overwrite: bool = False,
          plots: bool = True, realtime: bool = False, instance: int | None = 0, gcs: str | None = None,
@@ -374,8 +368,6 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
         fleet = fleet_mission(m, vehicles, formation)
         given_link = merge_link_tables(m.link, given_link)
     shared = given_link.get("shared") is True and fleet is not None  # one vehicle: its own radio, the same link
-    if shared and not realtime:
-        raise ConfigError(SITL_SHARED)
     if fleet is None:
         return sitl_one(mission, out=out, write=write, overwrite=overwrite, plots=plots, realtime=realtime,
                         instance=instance, gcs=gcs, speed=speed, key=key, live=live, progress=progress,
@@ -405,7 +397,7 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
         runs = [_touched(r, contacts.get(j)) for j, r in enumerate(runs)]
         summary = fleet_summary(fm, flights, runs, watch, "realtime" if realtime else "lockstep")
         if shared:
-            summary["radio"] = radio_block(ids, flights, runs)
+            summary["radio"] = radio_block(ids, flights, runs, realtime)
         summary["sitl"] = {"instances": None if instance is None else list(range(instance, instance + len(ids))),
                            "gcs": gcs_text, "sysids": ids, "shared_clock": clocked, "signed": key is not None}
         if clocked:

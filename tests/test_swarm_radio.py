@@ -16,7 +16,8 @@ import pytest
 
 from bridge.cli import main
 from bridge.link.radio import ProcessRadio, Radio, finished_part, make_radio_file, occupancy_of_parts
-from bridge.swarm import SITL_SHARED, simulate
+from bridge.link.turns import TurnRadio
+from bridge.swarm import simulate
 from bridge.swarm import sitl as swarm_sitl
 from missions import MISSION_DIR
 from params import ConfigError
@@ -119,7 +120,7 @@ def test_radios_of_two_processes_on_one_file_queue_as_one_radio(tmp_path: Path) 
 
 
 @pytest.mark.parametrize("what, says", [
-    ("missing", "cannot open"), ("short", "not a radio file (24 bytes expected)"),
+    ("missing", "cannot open"), ("short", "not a radio file (its magic or size is wrong)"),
     ("user", "no user 2 in it (users 0-1)")])
 def test_a_bad_radio_file_is_named(tmp_path: Path, what: str, says: str) -> None:
     """(``bsst relay --radio`` says the same: tests/test_swarm_radio_sitl.py.)"""
@@ -128,16 +129,15 @@ def test_a_bad_radio_file_is_named(tmp_path: Path, what: str, says: str) -> None
         f.write_bytes(b"BSSR")
     elif what == "user":
         make_radio_file(f, 2)
-    with pytest.raises(ConfigError, match=f"--radio {f}: .*{says}".replace("(", r"\(").replace(")", r"\)")):
-        ProcessRadio(f, "up", 1000.0, 0.05, user=2 if what == "user" else 0)
+    for radio in (ProcessRadio, TurnRadio):  # (the file is the same in real time and in lockstep)
+        with pytest.raises(ConfigError, match=f"--radio {f}: .*{says}".replace("(", r"\(").replace(")", r"\)")):
+            radio(f, "up", 1000.0, 0.05, user=2 if what == "user" else 0)
 
 
-def test_shared_link_is_refused_in_lockstep_sitl_and_where_it_means_nothing(tmp_path: Path) -> None:
-    with pytest.raises(ConfigError) as exc:  # (real time flies it: tests/test_swarm_radio_sitl.py)
-        swarm_sitl(short_sine(tmp_path), vehicles=2, link={"shared": True})
-    assert str(exc.value) == SITL_SHARED and "in lockstep is not modelled" in SITL_SHARED and "\n" not in SITL_SHARED
-    with pytest.raises(ConfigError, match="events of kind link"):  # a handover on one radio: not modelled
-        simulate(short_sine(tmp_path), vehicles=2, link={"shared": True}, at=("1:link:wifi",))
+def test_shared_link_is_refused_where_it_means_nothing(tmp_path: Path) -> None:
+    for fly_it in (simulate, swarm_sitl):  # a handover on one radio: not modelled, in any clock (before any process)
+        with pytest.raises(ConfigError, match="events of kind link"):
+            fly_it(short_sine(tmp_path), vehicles=2, link={"shared": True}, at=("1:link:wifi",))
     with pytest.raises(ConfigError, match="shared: a link handover takes a profile"):  # the flight's, not an event's
         simulate(short_sine(tmp_path), vehicles=2, at=({"t_s": 1.0, "kind": "link", "shared": True},))
     with pytest.raises(ConfigError, match="link.shared: expected true or false"):

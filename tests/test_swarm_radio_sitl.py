@@ -1,11 +1,13 @@
-"""Covers bridge.link.radio, bridge.nodes.relay, bridge.session.fleet and bridge.swarm: a real-time SITL fleet
-behind one shared radio (``bsst sitl --vehicles N --shared-link --realtime``).
+"""Covers bridge.link.radio, bridge.link.turns, bridge.nodes.relay, bridge.session.fleet and bridge.swarm: a SITL
+fleet behind one shared radio (``bsst sitl --vehicles N --shared-link [--realtime]``).
 
 Real processes: per vehicle a ``bsst vehicle``, a ``bsst controller`` and the ``bsst relay`` that applies its link
 on the wall clock, over UDP on 127.0.0.1 (free ports, ``instance=None``). On one radio every relay puts its
 vehicle's packets of a direction in the one queue (a radio file they all map), so two vehicles whose states
 each fit the radio's rate overflow it together; on radios of their own neither queues out. The fleet's
-``radio`` block is made of each relay's part, which is that vehicle's own queue losses.
+``radio`` block is made of each relay's part, which is that vehicle's own queue losses. In lockstep the vehicles
+(commands) and the controllers (states) take turns on the radio's file in the offline loop's order: the flights
+and the radio block are the offline fleet's, bit for bit, also when vehicles leave.
 """
 
 from __future__ import annotations
@@ -15,11 +17,13 @@ import math
 import tempfile
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from bridge.link.radio import make_radio_file
+from bridge.link.turns import TURNS
 from bridge.session.children import PORT_LOCKS
-from bridge.swarm import sitl
+from bridge.swarm import simulate, sitl
 from missions import MISSION_DIR
 from tests.sitlkit import ENV, ROOT, run_bsst, stall_blackouts
 
@@ -97,3 +101,58 @@ def test_a_relay_given_a_bad_radio_file_names_it_in_one_line_and_exits_2(tmp_pat
                  *extra, cwd=ROOT, env=ENV, timeout=60)
     assert p.returncode == 2 and p.stdout == ""
     assert p.stderr.startswith(f"bsst: --radio {f}: ") and says in p.stderr and p.stderr.count("\n") == 1, p.stderr
+
+
+# -- in lockstep: the offline fleet's radio, bit for bit (bridge.link.turns) ------------------------------------
+def _offline_and_lockstep(tmp_path: Path, n: int, seconds: float, rate: float, link: dict, **kw: object) -> tuple:
+    text = (MISSION_DIR / "sine.toml").read_text().replace("duration_s = 30.0", f"duration_s = {seconds}")
+    (tmp_path / "short.toml").write_text(text)
+    args = {"vehicles": n, "plots": False, "rate_hz": rate, "link": {**link, "shared": True}, **kw}
+    off = simulate(tmp_path / "short.toml", **args)
+    run = sitl(tmp_path / "short.toml", instance=None, out=tmp_path / "lockstep", **args)
+    return off, run
+
+
+def _same_flights(off: object, run: object) -> None:
+    for a, b in zip(off.runs, run.runs):  # type: ignore[attr-defined]
+        assert a.outcome == b.outcome and len(a.trace["t"]) == len(b.trace["t"])
+        for c in ("x", "y", "z", "phi", "u1_act", "u2_act", "state_age_s"):
+            assert np.array_equal(a.trace[c], b.trace[c], equal_nan=True), c
+    for d in ("up", "down"):
+        assert run.summary["radio"][d] == off.summary["radio"][d]  # type: ignore[attr-defined]
+    assert run.summary["radio"]["order"] == off.summary["radio"]["order"] == TURNS  # type: ignore[attr-defined]
+    assert run.summary["radio"]["late_turns"] == {str(i): [] for i in range(1, len(off.runs) + 1)}  # type: ignore
+
+
+def test_a_lockstep_fleet_on_one_radio_flies_the_offline_fleets_packets_bit_for_bit(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Three vehicles whose states overflow the radio together (each alone fits): every vehicle's trace, and each
+    direction's radio block (bytes, queue drops and waits per vehicle), are the offline fleet's."""
+    private = tmp_path / "tmp"
+    private.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(private))  # where the fleet keeps its radio file
+    off, run = _offline_and_lockstep(tmp_path, 3, 2.0, 100.0, RADIO)
+    _same_flights(off, run)
+    down = run.summary["radio"]["down"]
+    assert down["occupancy"] > 0.99 and all(v["lost_queue"] > 0 for v in down["vehicles"])
+    assert run.summary["clock"] == "lockstep" and run.summary["sitl"]["shared_clock"] is True
+    assert {f.name for f in private.iterdir()} <= {PORT_LOCKS}  # the radio file is gone with the fleet
+
+
+def test_vehicles_that_leave_a_lockstep_radio_leave_its_turns_as_offline(tmp_path: Path) -> None:
+    """On one sik-57600 radio at 50 Hz two of four vehicles diverge within a second and leave; the two others fly
+    on in failsafe, their turns over the two left: the same flights and radio as offline."""
+    off, run = _offline_and_lockstep(tmp_path, 4, 3.0, 50.0, {"profile": "sik-57600"}, formation="line:2")
+    assert [r.outcome for r in off.runs] == ["diverged", "diverged", "failsafe", "failsafe"]
+    _same_flights(off, run)
+
+
+def test_a_controller_given_a_bad_radio_names_it_in_one_line_and_exits_2(tmp_path: Path) -> None:
+    f = tmp_path / "radio"
+    make_radio_file(f, 2)
+    for extra, says in ((["--radio", str(tmp_path / "none")], "cannot open"),
+                        (["--radio", str(f), "--radio-user", "2"], "no user 2 in it (users 0-1)"),
+                        (["--radio", str(f), "--realtime"], "--radio with --realtime")):
+        p = run_bsst("controller", str(MISSION_DIR / "sine.toml"), "--vehicle", "127.0.0.1:9", "--timeout", "1",
+                     *extra, cwd=ROOT, env=ENV, timeout=60)
+        assert p.returncode == 2 and p.stderr.count("\n") == 1 and says in p.stderr, p.stderr

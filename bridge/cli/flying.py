@@ -263,6 +263,11 @@ def add_sitl_commands(sub: Any) -> None:
                    help="wait this long for the mission's second and third states (default 2 s, as for any state; a "
                         "lockstep fleet's first steps wait for its slowest vehicle to start)")
     _spin_option(p)
+    p.add_argument("--radio", metavar="FILE", help="lockstep: the down link's states queue on a fleet's one radio "
+                                                   "FILE with the other controllers' (bsst sitl --vehicles N "
+                                                   "--shared-link makes it)")
+    p.add_argument("--radio-user", type=int_in("--radio-user", 0, 255), default=0, metavar="N",
+                   help="this controller's user number on --radio (its vehicle's place in the fleet, from 0)")
     p.add_argument("--await-mission", action="store_true",
                    help="the MISSION file gives the settings only: wait for a ground station to start the vehicle's "
                         "mission, download it and fly it")
@@ -342,10 +347,15 @@ def cmd_controller(args: argparse.Namespace) -> int:
     vehicle = parse_address(args.vehicle or f"127.0.0.1:{LINK_PORT + args.instance}", "udpout", "--vehicle")
     if vehicle.mode != "udpout":
         raise ConfigError(f"--vehicle {args.vehicle!r}: the controller sends to the vehicle (udpout)")
+    if args.radio and args.realtime:
+        raise ConfigError("--radio with --realtime: a fleet's one radio in real time is its relays' (bsst relay "
+                          "--radio); the controller's is lockstep's")
     cfg = OffboardConfig(vehicle, sysid=args.sysid, clock="realtime" if args.realtime else "lockstep",
                          target_sysid=args.target_sysid, connect_timeout_s=args.timeout, key=_key(args),
                          source_port=args.source_port or 0, await_mission=args.await_mission,
-                         start_timeout_s=args.start_timeout, **({"spin_s": args.spin} if args.spin is not None else {}))
+                         start_timeout_s=args.start_timeout,
+                         radio=(args.radio, args.radio_user) if args.radio else None,
+                         **({"spin_s": args.spin} if args.spin is not None else {}))
     return run_controller(flight, cfg, args.out, args.overwrite)
 
 

@@ -81,15 +81,30 @@ class VehicleEnd:
         # reasons and these (duplicate, out_of_order, not_offboard) are counted in one place
         self.rejected: dict[str, int] = rejected if rejected is not None else {}
         self._deliver = self.deliver  # bound once, handed to SimVehicle.advance
+        # a fleet's one radio in lockstep (bridge.link.turns): what crossed the socket waits for the vehicle's turn
+        self.held: list[tuple[float, int, Any]] | None = None
 
     def receive_command(self, t: float, c: Quad, state_t: float) -> None:
         """The controller's actuator target crossed the socket at step time t (s)."""
-        self.up.send(t, self.frame_bytes, CommandMsg(c, state_t))
+        self._send(t, self.frame_bytes, CommandMsg(c, state_t))
 
     def receive_arm(self, t: float, acted: Callable[[], None] | None = None) -> None:
         """An arm request crossed the socket at step time t (s); ``acted`` is called once the model delivers it
         and the vehicle has acted on it (never, if the model loses it)."""
-        self.up.send(t, FRAME_BYTES["COMMAND_LONG"], ArmMsg(acted))
+        self._send(t, FRAME_BYTES["COMMAND_LONG"], ArmMsg(acted))
+
+    def _send(self, t: float, size: int, msg: Any) -> None:
+        if self.held is None:
+            self.up.send(t, size, msg)
+        else:
+            self.held.append((t, size, msg))
+
+    def release(self) -> None:
+        """Held (:attr:`held`, a list): what crossed the socket since the last release enters the model now, in
+        the order it came."""
+        held, self.held = self.held or [], []
+        for t, size, msg in held:
+            self.up.send(t, size, msg)
 
     def deliver(self, t: float) -> None:
         """Apply what the link delivers by plant time t (s)."""

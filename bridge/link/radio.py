@@ -38,9 +38,19 @@ from params import ConfigError
 
 DIRECTIONS = ("up", "down")  # a radio file's slots, in this order
 _HEADER = struct.Struct("<4sI")  # magic, users
-_SLOT = struct.Struct("<d")  # when the direction's radio is free again (s, CLOCK_MONOTONIC; -inf: never used)
+# when the direction's radio is free again (s: CLOCK_MONOTONIC in real time, mission time in lockstep; -inf: never)
+_SLOT = struct.Struct("<d")
+# lockstep (bridge.link.turns), one row a user: the last step it took its turn in, up and down, and the step it
+# left the fleet's turns from (NEVER: still flying); real time leaves them as made
+_TURNS = struct.Struct("<qqq")
 _MAGIC = b"BSSR"
-RADIO_FILE_BYTES = _HEADER.size + _SLOT.size * len(DIRECTIONS)
+NOT_YET = -1  # a user's last turn before its first
+NEVER = 2**63 - 1  # the step a user still flying leaves from
+
+
+def radio_file_bytes(users: int) -> int:
+    """The size of a radio file of ``users`` users (bytes)."""
+    return _HEADER.size + _SLOT.size * len(DIRECTIONS) + _TURNS.size * users
 
 
 class Radio:
@@ -78,7 +88,7 @@ class Radio:
         packets' waits in the queue (ms: mean, p50, p95, max)."""
         span = max(until_s, self.free_at if math.isfinite(self.free_at) else 0.0)
         return occupancy_block(self.rate, self.queue_s, span, ids, self.bytes, self.dropped,
-                               [_waits_ms(w) for w in self.waits])
+                               [waits_ms(w) for w in self.waits])
 
 
 def occupancy_block(rate: float, queue_s: float, span: float, ids: Sequence[int], sent: Sequence[int],
@@ -99,7 +109,64 @@ def occupancy_block(rate: float, queue_s: float, span: float, ids: Sequence[int]
 
 def make_radio_file(path: str | Path, users: int) -> None:
     """Create the file of a radio that ``users`` processes share (the module's docstring): never used yet."""
-    Path(path).write_bytes(_HEADER.pack(_MAGIC, users) + _SLOT.pack(-math.inf) * len(DIRECTIONS))
+    Path(path).write_bytes(_HEADER.pack(_MAGIC, users) + _SLOT.pack(-math.inf) * len(DIRECTIONS)
+                           + _TURNS.pack(NOT_YET, NOT_YET, NEVER) * users)
+
+
+class RadioFile:
+    """A radio file mapped (:func:`make_radio_file`), as its user ``user``: each direction's free time and every
+    user's turns, read and written under an exclusive ``flock`` (:meth:`locked`). A bad file, or a user it does
+    not have, is a ConfigError naming ``flag`` and the file."""
+
+    def __init__(self, path: str | Path, user: int, flag: str = "--radio") -> None:
+        try:
+            fd = os.open(path, os.O_RDWR)
+        except OSError as exc:
+            raise ConfigError(f"{flag} {path}: cannot open ({exc.strerror or exc})") from None
+        try:
+            size = os.fstat(fd).st_size
+            head = os.pread(fd, _HEADER.size, 0)
+            magic, users = _HEADER.unpack(head) if len(head) == _HEADER.size else (b"", 0)
+            if magic != _MAGIC or size != radio_file_bytes(users):
+                raise ConfigError(f"{flag} {path}: not a radio file (its magic or size is wrong)")
+            if not 0 <= user < users:
+                raise ConfigError(f"{flag} {path}: no user {user} in it (users 0-{users - 1})")
+            self.map = mmap.mmap(fd, size)
+        except BaseException:
+            os.close(fd)
+            raise
+        self.fd = fd
+        self.users = users
+        self.user = user
+
+    def lock(self) -> None:
+        fcntl.flock(self.fd, fcntl.LOCK_EX)
+
+    def unlock(self) -> None:
+        fcntl.flock(self.fd, fcntl.LOCK_UN)
+
+    def free_at(self, direction: int) -> float:
+        """When the direction's radio is free again (s; hold the lock)."""
+        return _SLOT.unpack_from(self.map, _HEADER.size + _SLOT.size * direction)[0]
+
+    def set_free_at(self, direction: int, t: float) -> None:
+        _SLOT.pack_into(self.map, _HEADER.size + _SLOT.size * direction, t)
+
+    def turns(self) -> list[tuple[int, int, int]]:
+        """Every user's (last turn up, last turn down, left from step) (hold the lock)."""
+        at = _HEADER.size + _SLOT.size * len(DIRECTIONS)
+        return [_TURNS.unpack_from(self.map, at + _TURNS.size * i) for i in range(self.users)]
+
+    def set_turn(self, column: int, value: int) -> None:
+        """This user's last turn of a direction (column 0 up, 1 down), or (column 2) the step it left from."""
+        at = _HEADER.size + _SLOT.size * len(DIRECTIONS) + _TURNS.size * self.user + 8 * column
+        struct.pack_into("<q", self.map, at, value)
+
+    def close(self) -> None:
+        if self.fd >= 0:
+            self.map.close()
+            os.close(self.fd)
+            self.fd = -1
 
 
 class ProcessRadio(Radio):
@@ -107,27 +174,13 @@ class ProcessRadio(Radio):
     docstring), as its user ``user``: times given to :meth:`admit` are s since ``offset`` (s on the monotonic
     clock), the queue's state is the file's. A bad file, or a user it does not have, is a ConfigError naming it."""
 
-    __slots__ = ("offset", "user", "first_s", "last_end_s", "_fd", "_map", "_at")
+    __slots__ = ("offset", "user", "first_s", "last_end_s", "_file", "_dir")
 
     def __init__(self, path: str | Path, direction: str, rate_bps: float, queue_s: float, user: int,
                  offset: float = 0.0) -> None:
-        try:
-            fd = os.open(path, os.O_RDWR)
-        except OSError as exc:
-            raise ConfigError(f"--radio {path}: cannot open ({exc.strerror or exc})") from None
-        try:
-            if os.fstat(fd).st_size != RADIO_FILE_BYTES:
-                raise ConfigError(f"--radio {path}: not a radio file ({RADIO_FILE_BYTES} bytes expected)")
-            self._map = mmap.mmap(fd, RADIO_FILE_BYTES)
-            magic, users = _HEADER.unpack_from(self._map, 0)
-            if magic != _MAGIC or not 0 <= user < users:
-                raise ConfigError(f"--radio {path}: not a radio file, or no user {user} in it (users 0-{users - 1})")
-        except BaseException:
-            os.close(fd)
-            raise
-        super().__init__(rate_bps, queue_s, users)
-        self._fd = fd
-        self._at = _HEADER.size + _SLOT.size * DIRECTIONS.index(direction)
+        self._file = RadioFile(path, user)
+        super().__init__(rate_bps, queue_s, self._file.users)
+        self._dir = DIRECTIONS.index(direction)
         self.offset = offset
         self.user = user
         self.first_s: float | None = None  # the first packet's send time (s, monotonic clock)
@@ -142,13 +195,14 @@ class ProcessRadio(Radio):
         if self.rate <= 0.0:
             end: float | None = super().admit(t, size, user)
         else:
-            fcntl.flock(self._fd, fcntl.LOCK_EX)
+            f = self._file
+            f.lock()
             try:
-                self.free_at = _SLOT.unpack_from(self._map, self._at)[0] - self.offset
+                self.free_at = f.free_at(self._dir) - self.offset
                 end = super().admit(t, size, user)
-                _SLOT.pack_into(self._map, self._at, self.free_at + self.offset)
+                f.set_free_at(self._dir, self.free_at + self.offset)
             finally:
-                fcntl.flock(self._fd, fcntl.LOCK_UN)
+                f.unlock()
         if end is not None:
             self.last_end_s = end + self.offset
         return end
@@ -162,36 +216,36 @@ class ProcessRadio(Radio):
                 "first_s": self.first_s, "last_end_s": self.last_end_s}
 
     def close(self) -> None:
-        if self._fd >= 0:
-            self._map.close()
-            os.close(self._fd)
-            self._fd = -1
+        self._file.close()
 
 
 def finished_part(part: Mapping[str, Any]) -> dict[str, Any]:
     """A :meth:`ProcessRadio.part` as JSON: its waits as ms (mean, p50, p95, max: ``queue_wait_ms``)."""
     out = {k: v for k, v in part.items() if k != "waits"}
-    out["queue_wait_ms"] = _waits_ms(part["waits"])
+    out["queue_wait_ms"] = waits_ms(part["waits"])
     return out
 
 
 def occupancy_of_parts(parts: Sequence[Mapping[str, Any] | None], ids: Sequence[int], rate: float,
-                       queue_s: float) -> dict[str, Any]:
+                       queue_s: float, until_s: float | None = None) -> dict[str, Any]:
     """One direction of a radio shared by processes, from each user's :func:`finished_part` (in the order of
     ``ids``; None: a user that left none, counted as nothing sent): :func:`occupancy_block` over the span from
-    the first packet any user sent to the end of the last transmission. Every transmission lies within it and
-    none overlaps another, so the shares together are never more than the rate."""
+    the first packet any user sent to the end of the last transmission, or to ``until_s`` if later (lockstep:
+    the steps flown, as :meth:`Radio.occupancy`). Every transmission lies within it and none overlaps another,
+    so the shares together are never more than the rate."""
     got = [p for p in parts if p is not None]
     firsts = [p["first_s"] for p in got if p["first_s"] is not None]
     ends = [p["last_end_s"] for p in got if p["last_end_s"] is not None]
     span = max(ends) - min(firsts) if firsts and ends else 0.0
+    if until_s is not None:
+        span = max(span, until_s - min(firsts, default=0.0))
     none = {"mean": None, "p50": None, "p95": None, "max": None}
     return occupancy_block(rate, queue_s, max(span, 0.0), ids, [p["bytes"] if p else 0 for p in parts],
                            [p["lost_queue"] if p else 0 for p in parts],
                            [p["queue_wait_ms"] if p else none for p in parts])
 
 
-def _waits_ms(waits: array) -> dict[str, float | None]:
+def waits_ms(waits: array) -> dict[str, float | None]:
     """Mean, p50, p95 and max of a user's queue waits, in ms (None without packets)."""
     if not waits:
         return {"mean": None, "p50": None, "p95": None, "max": None}

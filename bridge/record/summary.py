@@ -344,6 +344,8 @@ def link_block(joined: Joined, vehicle: Mapping[str, Any], controller: Mapping[s
         out["relay_refused"] = relay.get("refused", {})
         if relay.get("radio"):  # a fleet's one radio in real time: this vehicle's part of it, by direction
             out["radio"] = relay["radio"]
+    elif vs.get("radio") or cs.get("radio"):  # in lockstep: the vehicle's commands, the controller's states
+        out["radio"] = {"up": vs.get("radio"), "down": cs.get("radio")}
     return out
 
 

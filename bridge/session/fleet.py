@@ -33,6 +33,7 @@ from typing import Any
 from bridge.autopilot.estimator import compile_estimator
 from bridge.core.flight import Flight
 from bridge.link.radio import make_radio_file, occupancy_of_parts
+from bridge.link.turns import TURNS
 from bridge.mavlink.endpoint import LINK_PORT
 from bridge.mavlink.signing import key_from_file
 from bridge.nodes.forkserver import warm
@@ -76,9 +77,10 @@ def fly_sessions(flights: Sequence[Flight], ids: Sequence[int], dirs: Sequence[P
                  instance: int | None, gcs: str | None, speed: float | None, key: Path | None, plots: bool,
                  keep: bool, radii: Sequence[float] | None = None, shared_radio: bool = False) -> list[Run]:
     """Fly every vehicle's session at once (the module's docstring); each vehicle's :class:`Run`, in order.
-    ``radii`` (m, each vehicle's disc), in lockstep: on one shared clock. ``shared_radio``, in real time: the
-    fleet's one radio (a file in the temporary directory, :func:`bridge.link.radio.make_radio_file`, removed
-    after), vehicle j (from 0) its user j through its relay. A session that fails to start (bad input, a child
+    ``radii`` (m, each vehicle's disc), in lockstep: on one shared clock. ``shared_radio``: the fleet's one radio
+    (a file in the temporary directory, :func:`bridge.link.radio.make_radio_file`, removed after), vehicle j (from
+    0) its user j: in real time through its relay; in lockstep its vehicle (by its gate file) and its controller
+    (``--radio``) take turns on it (:mod:`bridge.link.turns`). A session that fails to start (bad input, a child
     dead at start) stops the others; its error is raised."""
     with _radio_file(len(flights)) if shared_radio else contextlib.nullcontext() as radio:
         return _fly(flights, ids, dirs, realtime=realtime, instance=instance, gcs=gcs, speed=speed, key=key,
@@ -97,15 +99,22 @@ def _radio_file(users: int) -> Iterator[Path]:
         os.unlink(name)
 
 
-def radio_block(ids: Sequence[int], flights: Sequence[Flight], runs: Sequence[Run]) -> dict[str, Any]:
-    """A real-time fleet's ``summary.json["radio"]``: each direction's occupancy of the one radio, from every
-    vehicle's part of it (its relay's, in its ``summary.json["link"]["radio"]``), as offline's
-    (:func:`bridge.link.radio.occupancy_of_parts`)."""
+def radio_block(ids: Sequence[int], flights: Sequence[Flight], runs: Sequence[Run], realtime: bool) -> dict[str, Any]:
+    """A SITL fleet's ``summary.json["radio"]``: each direction's occupancy of the one radio, from every
+    vehicle's part of it (in its ``summary.json["link"]["radio"]``: its relay's in real time; in lockstep its
+    vehicle's, up, and its controller's, down), as offline's (:func:`bridge.link.radio.occupancy_of_parts`; in
+    lockstep over the steps flown, as offline). In lockstep a state that entered out of turn (a controller that
+    waited :data:`~bridge.nodes.offboard.radioturn.TURN_WAIT_S` for another) is listed: that flight is not the
+    offline one."""
     link = flights[0].link
     parts = [(r.summary.get("link") or {}).get("radio") or {} for r in runs]
-    return {"shared": True, "order": ARRIVAL,
-            **{d: occupancy_of_parts([p.get(d) for p in parts], ids, cfg.rate_bps, cfg.queue_ms / 1000.0)
-               for d, cfg in (("up", link.up), ("down", link.down))}}
+    until = None if realtime else max(len(r.trace["t"]) for r in runs) / flights[0].mission.rate_hz
+    out = {"shared": True, "order": ARRIVAL if realtime else TURNS,
+           **{d: occupancy_of_parts([p.get(d) for p in parts], ids, cfg.rate_bps, cfg.queue_ms / 1000.0, until)
+              for d, cfg in (("up", link.up), ("down", link.down))}}
+    if not realtime:
+        out["late_turns"] = {str(i): (p.get("down") or {}).get("late_turns", []) for i, p in zip(ids, parts)}
+    return out
 
 
 def _fly(flights: Sequence[Flight], ids: Sequence[int], dirs: Sequence[Path], *, realtime: bool,
@@ -120,7 +129,7 @@ def _fly(flights: Sequence[Flight], ids: Sequence[int], dirs: Sequence[Path], *,
         ports = tuple(free_udp_port() for _ in flights)
         for j, d in enumerate(dirs):
             gates[j] = d / "gate.json"
-            GateConfig(j, tuple(ids), tuple(radii), ports).dump(d / "gate.json")
+            GateConfig(j, tuple(ids), tuple(radii), ports, str(radio) if radio is not None else None).dump(gates[j])
     sessions = [Session(f, d, realtime=realtime, instance=None if instance is None else instance + i - 1,
                         gcs=gcs, speed=speed, progress=None, live=False, key=key, sysid=i, gate=g,
                         start_timeout=READY_TIMEOUT_S if g is not None else None,

@@ -50,7 +50,7 @@ class Session:
                  await_mission: bool = False, sysid: int | None = None, gate: Path | None = None,
                  start_timeout: float | None = None, radio: tuple[Path, int] | None = None) -> None:
         self.flight = flight
-        self.radio = radio  # a real-time fleet's one radio: its file and this vehicle's user (the relay's --radio)
+        self.radio = radio  # a fleet's one radio: its file, this vehicle's user (relay's or controller's --radio)
         self.gate = gate  # a lockstep fleet's shared clock: the vehicle's gate file (bridge.session.fleet)
         self.start_timeout = start_timeout  # s: the controller's --start-timeout (None: its default)
         # --await-mission: ``flight`` holds the settings only; the mission is the controller's, once a ground
@@ -194,6 +194,8 @@ class Session:
             argv.append("--realtime")
         if self.start_timeout is not None:
             argv += ["--start-timeout", repr(self.start_timeout), "--spin", "0"]
+        if not self.realtime:  # a lockstep fleet's one radio: the controllers' states queue on it (the vehicles':
+            argv += self._radio_args()  # their commands, by their gate file)
         if self.await_mission:
             argv.append("--await-mission")
         for c in self.flight.param_changes:

@@ -83,4 +83,6 @@ class OffboardConfig:
     # fly a ground station's mission: wait for its start, download it (bridge.nodes.offboard.mission), fly it
     # in AUTO.MISSION (the vehicle's mode then, not a ground station's takeover)
     await_mission: bool = False
+    # lockstep: a fleet's one radio (its file, this controller's user: its vehicle's place from 0; bridge.link.turns)
+    radio: tuple[str, int] | None = None
 

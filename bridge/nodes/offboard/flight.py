@@ -22,7 +22,6 @@ from bridge.core.clock import FixedRate, Stalls
 from bridge.core.flight import Flight
 from bridge.core.wire import command_to_wire, state_from_odometry_fields, step_of_usec
 from bridge.link.ends import ControllerEnd
-from bridge.link.model import LinkImpairment
 from bridge.mavlink.endpoint import FORCE_DISARM, Spinner, wait
 from bridge.mavlink.modes import MAIN_AUTO, SUB_LOITER
 from bridge.nodes.offboard.config import (
@@ -34,6 +33,7 @@ from bridge.nodes.offboard.config import (
     OffboardConfig,
 )
 from bridge.nodes.offboard.link import OffboardLink
+from bridge.nodes.offboard.radioturn import down_link
 from bridge.nodes.process import on_stop_signals, report_printer, tight_timer_slack
 from bridge.nodes.report import Done, Ready, Report, Stats
 from bridge.record.columns import CONTROLLER_COLUMNS
@@ -56,9 +56,9 @@ class Offboard(OffboardLink):
         self.steps = m.steps
         self.ctl = flight.make_controller()
         self.guard = LinkGuard(self.ctl, flight.guard)
-        # lockstep: the mission's down-link model acts here, on what crossed the socket; real
-        # time: the relay applies it on the wire and this end passes the states straight on
-        down = flight.link.make()[1] if cfg.clock == "lockstep" else LinkImpairment(direction="down")
+        # lockstep: the mission's down-link model acts here, on what crossed the socket (a fleet's one radio: at
+        # this controller's turns); real time: the relay applies it on the wire, states pass straight on
+        down, self.turns = down_link(flight, cfg, self.event)
         self.cend = ControllerEnd(self.guard, down)
         self._blackouts = flight.blackout_notes()
         self._noted = 0  # guard events already reported
@@ -119,6 +119,8 @@ class Offboard(OffboardLink):
         if self.tlog is not None:
             self.tlog.close()
         self.ep.close()
+        if self.turns is not None:
+            self.turns.close()
 
     def _await_param_echoes(self) -> None:
         """The flight is over: serve the link (resending) for up to PARAM_SETTLE_S of wall time more while a
@@ -192,7 +194,10 @@ class Offboard(OffboardLink):
                 if self.taken_over:  # its HEARTBEAT came before this state: no answer to it
                     return self._check_vehicle() or "aborted"
                 t = (k - k0) / rate
-                self._observe(odo, t, recv)
+                if self.turns is None:
+                    self._observe(odo, t, recv)
+                else:  # a fleet's one radio: the states of step k enter it in the offline order
+                    self.turns.enter(k - k0, ep, self._on, lambda o=odo, t=t, r=recv: self._observe(o, t, r))
                 last_frame = (odo.time_usec, self._decide(t, k, odo.time_usec, recv, math.nan))
                 last_k = k
                 if mono() < self._next_house:
@@ -284,10 +289,9 @@ class Offboard(OffboardLink):
         return "aborted"
 
     def _way_down_s(self, phase: float) -> float | None:
-        """Real time: the one-way trip of the earliest-arriving states (s, >= 0), from the
-        phase of their arrivals and the vehicle's clock offset by TIMESYNC; None until a
-        TIMESYNC answer is in. The offset takes the two ways as equal, so an asymmetric link
-        (a delay on the way down only) is credited with half of the difference."""
+        """Real time: the one-way trip of the earliest-arriving states (s, >= 0), from the phase of their arrivals
+        and the vehicle's clock offset by TIMESYNC; None until a TIMESYNC answer is in. The offset takes the two
+        ways as equal, so an asymmetric link (a delay on the way down only) is credited with half of the difference."""
         if self.offset_ns is None:
             return None
         trip = phase + self.offset_ns * 1e-9
@@ -299,9 +303,9 @@ class Offboard(OffboardLink):
         return max(trip, 0.0)
 
     def _observe(self, odo: Any, t_state: float, recv: float) -> None:
-        """A new state of the vehicle, measured at mission time ``t_state`` (s), crossed the
-        socket: into the down-link model with the vehicle's offboard bit (its HEARTBEAT:
-        armed and not CRITICAL; sent before the state on every change, so it is this step's)."""
+        """A new state of the vehicle, measured at mission time ``t_state`` (s), crossed the socket: into the
+        down-link model with the vehicle's offboard bit (its HEARTBEAT: armed and not CRITICAL; sent before the
+        state on every change, so it is this step's)."""
         q = odo.q  # odometry_to_state written out, flat (one call: the hot path; tests/test_wire.py)
         X = state_from_odometry_fields((odo.x, odo.y, odo.z, q[0], q[1], q[2], q[3], odo.vx, odo.vy, odo.vz,
                                         odo.rollspeed, odo.pitchspeed, odo.yawspeed))
@@ -480,6 +484,7 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
                 "stalls": node.stalls.report(),
                 "spin_skipped": node.spinner.skipped,
                 "down": node.cend.down.stats.summary() if cfg.clock == "lockstep" else None,
+                **({"radio": node.turns.stats()} if node.turns is not None else {}),  # its part of the fleet's radio
                 "rejected": dict(node.rejected), "rejected_from_vehicle": node.rejected.from_peer,
                 "states_refused": node.states_refused, "state_window": node.state_window,
                 "kernel_drops": node.ep.kernel_drops(), "mission_transfer": transfer}))

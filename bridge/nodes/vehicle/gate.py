@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from bridge.link.turns import TurnRadio
 from bridge.mavlink.endpoint import Endpoint
 from bridge.nodes.vehicle.clock import Clock, ClockState, Trigger
 from missions.fleet import clearance
@@ -41,7 +42,9 @@ from params import ConfigError
 
 RESEND_S = 0.1  # s of wall time waiting at the gate before this vehicle's last word is sent again
 SILENT_S = 30.0  # s of wall time without a word from a vehicle that has not flown step k: taken as gone
-AT, GONE = 0, 1
+# s of wall time between two looks at the radio's turns while waiting for one (a lost TURN word's cost)
+TURN_LOOK_S = 0.005
+AT, GONE, TURN = 0, 1, 2  # TURN: a turn on the fleet's one radio taken (only wakes the others up)
 _WIRE = struct.Struct("<4sBBqdddddd")  # magic, kind, index, step, position at step, position at step - 1
 _MAGIC = b"BSSG"
 
@@ -54,6 +57,7 @@ class GateConfig:
     ids: tuple[int, ...]
     radii: tuple[float, ...]  # m
     ports: tuple[int, ...]  # UDP on 127.0.0.1
+    radio: str | None = None  # the fleet's one radio's file (bridge.link.turns; this vehicle its user ``index``)
 
     @staticmethod
     def load(path: str | Path) -> GateConfig:
@@ -61,8 +65,8 @@ class GateConfig:
         try:
             d = json.loads(Path(path).read_text())
             cfg = GateConfig(int(d["index"]), tuple(map(int, d["ids"])), tuple(map(float, d["radii"])),
-                             tuple(map(int, d["ports"])))
-        except (OSError, ValueError, KeyError, TypeError) as exc:
+                             tuple(map(int, d["ports"])), None if d.get("radio") is None else str(d["radio"]))
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
             raise ConfigError(f"--gate {path}: not a fleet gate file ({exc})"[:300]) from None
         n = len(cfg.ids)
         if not (n >= 2 and len(cfg.radii) == n and len(cfg.ports) == n and 0 <= cfg.index < n
@@ -71,7 +75,8 @@ class GateConfig:
         return cfg
 
     def dump(self, path: Path) -> None:
-        path.write_text(json.dumps({"index": self.index, "ids": self.ids, "radii": self.radii, "ports": self.ports}))
+        path.write_text(json.dumps({"index": self.index, "ids": self.ids, "radii": self.radii, "ports": self.ports,
+                                    "radio": self.radio}))
 
 
 class Gate:
@@ -79,8 +84,10 @@ class Gate:
     :meth:`clear` before each step, :meth:`serve` while gated, :meth:`over` (it leaves when its flight is over)."""
 
     def __init__(self, cfg: GateConfig, clock: Clock, position: Callable[[], tuple[float, float, float]],
-                 rate: float) -> None:
+                 rate: float, turns: TurnRadio | None = None) -> None:
         self.cfg = cfg
+        self.turns = turns  # the fleet's one radio (up): this vehicle's turns on it
+        self.turn_at: int | None = None  # the step whose turn on the radio it waits for
         self.clock = clock
         self.position = position  # the plant's true centre now (m)
         self.rate = rate
@@ -126,30 +133,56 @@ class Gate:
         else:
             self.arrive(k, self.position())
 
-    def clear(self, collide: Callable[[str], None]) -> bool:
+    def clear(self, collide: Callable[[str], None], turn: int | None = None) -> bool:
         """The answer of step k held (ANSWERED or GATED): whether step k may be flown now, every other vehicle
-        having flown step k - 1 and none touching this one. If not yet, the clock is GATED until :meth:`serve`
+        having flown step k - 1 and none touching this one, and on the fleet's one radio this vehicle's ``turn``
+        of step k come (None: no turn, the mission's end). If not yet, the clock is GATED until :meth:`serve`
         clears it; touched, ``collide`` ends the flight (and the vehicle leaves, where it is)."""
-        if self.left is not None or self.judged == self.step:
+        if self.left is not None:
+            self.turn_at = None
             return True
-        self.poll()
-        why = self.verdict(self.rate)
-        if why is None:
-            if self.clock.state is ClockState.ANSWERED:
-                self.clock.fire(Trigger.GATE)
-                self._since = time.monotonic()
-            return False
-        self.judged = self.step
-        if self._since is not None:  # the time its answer was held for the others (gated)
-            self.wait_s += time.monotonic() - self._since
-            self._since = None
-        if why:
-            collide(why)
-            self.leave()
-            return False
+        self.turn_at = turn if self.turns is not None else None
+        if self.judged != self.step:
+            self.poll()
+            why = self.verdict(self.rate)
+            if why is None:
+                return self._gated()
+            self.judged = self.step
+            if why:
+                self._waited()
+                collide(why)
+                self.leave()
+                return False
+        if self.turn_at is not None and self.turns.blocking(self.turn_at):  # type: ignore[union-attr]
+            return self._gated()
+        self.turn_at = None
+        self._waited()
         if self.clock.state is ClockState.GATED:
             self.clock.fire(Trigger.RELEASE)
         return True
+
+    def _gated(self) -> bool:
+        """Not clear yet: the held answer waits (GATED), from now if it just came."""
+        if self.clock.state is ClockState.ANSWERED:
+            self.clock.fire(Trigger.GATE)
+            self._since = time.monotonic()
+        return False
+
+    def _waited(self) -> None:
+        if self._since is not None:  # the time its answer was held for the others (gated)
+            self.wait_s += time.monotonic() - self._since
+            self._since = None
+
+    def took(self, k: int) -> None:
+        """This vehicle's turn of step k on the fleet's one radio is taken (its packets of the step admitted):
+        said in the radio's file, and the other vehicles woken up to look."""
+        self.turns.took(k)  # type: ignore[union-attr]
+        word = _WIRE.pack(_MAGIC, TURN, self.me, k, *self.pos, *self.prev)
+        for a in self._to:
+            try:
+                self.sock.sendto(word, a)
+            except OSError:
+                pass  # (a vehicle gone: nothing waits on it)
 
     def serve(self, endpoints: Sequence[Endpoint], deadline: float,
               handle: Callable[[Endpoint, Any, tuple[str, int]], None], collide: Callable[[str], None],
@@ -158,7 +191,7 @@ class Gate:
         held answer's step is flown (``fly``), or, touched by another vehicle, the flight ends (``collide``)."""
         for ep, m, addr in self.wait(endpoints, deadline):
             handle(ep, m, addr)
-        if self.clock.state is ClockState.GATED and self.clear(collide):
+        if self.clock.state is ClockState.GATED and self.clear(collide, self.turn_at):
             fly()
 
     def over(self, k: int) -> None:
@@ -181,6 +214,8 @@ class Gate:
             return
         k, pos = (self.step, self.pos) if k is None or pos is None else (k, pos)
         self.left = (k, pos)
+        if self.turns is not None:  # in the radio's file before any vehicle hears of it (bridge.link.turns)
+            self.turns.leave(k)
         for _ in range(2):  # (a copy: nothing waits for an answer to this one)
             self._send(GONE, k, pos, pos)
 
@@ -260,6 +295,18 @@ class Gate:
     def _silence(self, j: int) -> None:
         """Vehicle j has not flown step k: send this vehicle's word again now and then; silent too long, j is
         taken as gone where it was last heard of."""
+        now = self._resend()
+        if now - self.heard[j] >= SILENT_S:
+            seen = self.at[j]
+            last = seen[max(seen)] if seen else (math.nan, math.nan, math.nan)
+            self.gone[j] = (self.step, last)
+            self.dropped.append(f"vehicle {self.cfg.ids[j]} silent for {SILENT_S:g} s at step {self.step}: "
+                                "taken as gone where it was last")
+
+    def _resend(self) -> float:
+        """Waiting at the gate (for the others, or for a turn on the radio): this vehicle's last word again once
+        :data:`RESEND_S` has passed since it was sent (one sent before another vehicle's gate was bound, or lost,
+        is made good so); the time now."""
         now = time.monotonic()
         if now - self._sent_at >= RESEND_S and self._last:
             for a in self._to:
@@ -268,20 +315,19 @@ class Gate:
                 except OSError:
                     pass
             self._sent_at = now
-        if now - self.heard[j] >= SILENT_S:
-            seen = self.at[j]
-            last = seen[max(seen)] if seen else (math.nan, math.nan, math.nan)
-            self.gone[j] = (self.step, last)
-            self.dropped.append(f"vehicle {self.cfg.ids[j]} silent for {SILENT_S:g} s at step {self.step}: "
-                                "taken as gone where it was last")
+        return now
 
     def wait(self, endpoints: Sequence[Endpoint], deadline: float) -> list[tuple[Endpoint, Any, tuple[str, int]]]:
         """Messages from the links, waiting at most until ``deadline`` (``time.monotonic``) or the gate's word."""
         self.poll()
         out = [(ep, m, a) for ep in endpoints for m, a in ep.poll(deadline)]
-        if out or self.complete():
+        turn = self.turn_at is not None
+        if out or (self.complete() and not turn):
             return out
-        left = min(deadline, self._sent_at + RESEND_S) - time.monotonic()
+        if turn:  # (judged: _silence does not run)
+            self._resend()
+        left = min(deadline, self._sent_at + RESEND_S, time.monotonic() + TURN_LOOK_S if turn else math.inf)
+        left -= time.monotonic()
         if left > 0.0:
             try:
                 select.select([self.sock] + [ep.wake_socket for ep in endpoints], [], [], left)

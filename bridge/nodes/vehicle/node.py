@@ -26,6 +26,7 @@ from bridge.autopilot.simvehicle import LAND, OFFBOARD
 from bridge.core.flight import Flight
 from bridge.core.wire import command_from_wire
 from bridge.link.ends import VehicleEnd
+from bridge.link.turns import TurnRadio
 from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import Spinner, Tlog, wait
 from bridge.mavlink.modes import MISSION
@@ -38,7 +39,7 @@ from bridge.nodes.vehicle.catchup import CatchUp
 from bridge.nodes.vehicle.clock import Clock, ClockState
 from bridge.nodes.vehicle.commander import Commander, CommanderPorts
 from bridge.nodes.vehicle.config import CLOCKS, VehicleConfig, open_links
-from bridge.nodes.vehicle.gate import Gate
+from bridge.nodes.vehicle.gate import SILENT_S, Gate
 from bridge.nodes.vehicle.mission import MissionManager
 from bridge.nodes.vehicle.paramservice import ParamService
 from bridge.nodes.vehicle.receiver import Receiver, ReceiverPorts, Refusals
@@ -105,8 +106,19 @@ class Vehicle:
         self.catchup = CatchUp(self.pace)  # real time: the machine's stalls, and what they held back
         self._n = 0  # physics steps taken (realtime: for the wall-clock schedule)
         self._load_at, self.load = (now, time.process_time()), 0
-        # lockstep: the controller's targets and re-arms cross the mission's up-link model here
-        self.vend = VehicleEnd(self.sim, flight.link.make()[0], self.actuation, rejected=self.rejected)
+        # lockstep: the controller's targets and re-arms cross the mission's up-link model here; a lockstep fleet's
+        # one radio (its gate file's) takes them at this vehicle's turn (bridge.link.turns)
+        gate = cfg.gate if cfg.clock == "lockstep" else None
+        self.turns = (TurnRadio(gate.radio, "up", flight.link.up.rate_bps, flight.link.up.queue_ms / 1000.0,
+                                gate.index, "--gate") if gate is not None and gate.radio is not None else None)
+        up = flight.link.make((self.turns, None), gate.index)[0] if self.turns else flight.link.make()[0]
+        self.vend = VehicleEnd(self.sim, up, self.actuation, rejected=self.rejected)
+        # its controller's first turns on one radio wait for the slowest vehicle and controller to start, as the
+        # gate waits for a silent vehicle: the answers of steps 0 and 1 may take that long (bridge.link.turns)
+        self._first_answers_s = cfg.lost_after_s
+        if self.turns is not None:
+            self.vend.held = []
+            self._first_answers_s = max(SILENT_S, cfg.lost_after_s)
         self.odometry = OdometryOut(self.link, self.sim, self.rate, flight.estimator)
         self.targets = Targets(self.sim, self.clock, self.authority, self.rate, self.actuation, self._reject)
         self._statustext = StatusTexts()
@@ -129,9 +141,8 @@ class Vehicle:
         self.announcer.charged = self.receiver.charged
         self._handle = self.receiver.handle  # (an attribute: one call less on the lockstep's hot path)
         # a lockstep fleet's shared clock (bsst sitl --vehicles): step by step with the other vehicles
-        self.gate = (Gate(cfg.gate, self.clock, lambda: (self.plant.state[0], self.plant.state[2],
-                                                          self.plant.state[4]), self.rate)
-                     if cfg.gate is not None and cfg.clock == "lockstep" else None)
+        self.gate = (Gate(gate, self.clock, lambda: (self.plant.state[0], self.plant.state[2], self.plant.state[4]),
+                          self.rate, self.turns) if gate is not None else None)
 
     # -- public --------------------------------------------------------------------------
     def stop(self) -> None:
@@ -174,6 +185,8 @@ class Vehicle:
             ep.close()
         if self.gate is not None:
             self.gate.close()
+        if self.turns is not None:
+            self.turns.close()
 
     def report_stats(self) -> None:
         """The stats report: what was accepted, refused, sent and received, and the up-link model's."""
@@ -182,6 +195,7 @@ class Vehicle:
             "received": self.link.received, "overruns": self.pace.rebased, "steps": self.k,
             "stalls": self.catchup.stalls.report(),
             **({"gate": self.gate.stats()} if self.gate is not None else {}),  # a fleet's shared clock
+            **({"radio": self.turns.part()} if self.turns is not None else {}),  # its part of the fleet's one radio
             "rejected_from_controller": self.rejected.from_peer, "resends": self.odometry.resends,
             "answered_again": self.targets.answered_again, "spin_skipped": self.spinner.skipped,
             "odometry_steps": self.odometry.steps.ranges,
@@ -230,7 +244,8 @@ class Vehicle:
         for ep, m, addr in wait(self.endpoints, deadline, self.spinner):
             self._handle(ep, m, addr)
         if self.clock.state is ClockState.ANSWERED:
-            if self.gate is None or self.gate.clear(self._collided):  # (a fleet: the others flew k - 1)
+            # (a fleet: the others flew k - 1; on one radio, its turn of step k came, unless the mission is over)
+            if self.gate is None or self.gate.clear(self._collided, None if self.sim.mode == LAND else self.k):
                 self._step_lockstep()
             return
         if self.clock.state is not ClockState.LOCKSTEP:
@@ -254,6 +269,9 @@ class Vehicle:
             vend.receive_command(t, command_from_wire(self.actuation, wire), t)
             self.targets.applied = (k, wire, recv)
         ending = self.sim.mode == LAND  # lockstep and LAND: the mission's end action (Commander.flight_over)
+        if vend.held is not None and not ending:  # a fleet's one radio: its turn of step k (Gate.clear)
+            vend.release()
+            self.gate.took(k)  # type: ignore[union-attr]
         if not ending:  # after the mission the vehicle flies alone: the up link's statistics stay the mission's
             vend.deliver(t)
         X = self.plant.state
@@ -271,6 +289,7 @@ class Vehicle:
             self._send_odometry(time.monotonic())
         if self.gate is not None:
             self.gate.after_step(self.k, ending, alive)
+            self._turns_over()
         # off the critical path: the controller is computing step k+1 meanwhile
         if self.rows is not None:
             self.rows.lockstep(k, X, self.sim.mode, wire, real, t - vend.applied_state_t, recv - sent, sent, recv,
@@ -282,6 +301,7 @@ class Vehicle:
         k = self.k
         if self.gate is not None:
             self.gate.over(k)
+            self._turns_over()
         n0 = k * self.substeps
         if not self._wait_until(self.pace.due(n0)):
             return
@@ -332,6 +352,7 @@ class Vehicle:
         """Lockstep and disarmed (or halted): time stands still; serve the links."""
         if self.gate is not None:
             self.gate.over(self.k)
+            self._turns_over()
         # halted: no idle state goes out, so its time must not be waited on (it stays in the past: a busy loop)
         deadline = self._next_house if self.clock.halted else min(self._next_house, self._idle_odo_at)
         for ep, m, addr in wait(self.endpoints, deadline):
@@ -346,6 +367,13 @@ class Vehicle:
             self.targets.resent(self.k)
 
     # -- after each control period -------------------------------------------------------------
+    def _turns_over(self) -> None:
+        """A fleet's one radio: once this vehicle has left the shared clock it takes no turns; what it held, and
+        what it receives from now on, enters its up-link model at once."""
+        if self.vend.held is not None and self.gate is not None and self.gate.left is not None:
+            self.vend.release()
+            self.vend.held = None
+
     def _after_step(self) -> bool:
         """Events and divergence; False when the plant is lost (nothing more to send)."""
         if len(self.sim.events) > self.announcer.sent:
@@ -368,7 +396,7 @@ class Vehicle:
             self.targets.resent(self.k)
         self._resend_at = now + RESEND_S
         if fresh:
-            self._lost_at = now + self.cfg.lost_after_s
+            self._lost_at = now + (self.cfg.lost_after_s if self.k > 1 else self._first_answers_s)
 
     def _estimate(self) -> tuple[tuple[float, ...], float]:
         """The published estimate now and its NEES against the true state (nan under truth)."""
