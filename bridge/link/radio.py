@@ -40,9 +40,10 @@ DIRECTIONS = ("up", "down")  # a radio file's slots, in this order
 _HEADER = struct.Struct("<4sI")  # magic, users
 # when the direction's radio is free again (s: CLOCK_MONOTONIC in real time, mission time in lockstep; -inf: never)
 _SLOT = struct.Struct("<d")
-# lockstep (bridge.link.turns), one row a user: the last step it took its turn in, up and down, and the step it
-# left the fleet's turns from (NEVER: still flying); real time leaves them as made
-_TURNS = struct.Struct("<qqq")
+# lockstep (bridge.link.turns), one row a user: the last step it took its turn in, up and down, the step it left the
+# fleet's turns from (NEVER: still flying), and the UDP port on 127.0.0.1 its controller is woken up on when another
+# takes a turn (0: none yet); real time leaves them as made
+_TURNS = struct.Struct("<qqqq")
 _MAGIC = b"BSSR"
 NOT_YET = -1  # a user's last turn before its first
 NEVER = 2**63 - 1  # the step a user still flying leaves from
@@ -110,7 +111,7 @@ def occupancy_block(rate: float, queue_s: float, span: float, ids: Sequence[int]
 def make_radio_file(path: str | Path, users: int) -> None:
     """Create the file of a radio that ``users`` processes share (the module's docstring): never used yet."""
     Path(path).write_bytes(_HEADER.pack(_MAGIC, users) + _SLOT.pack(-math.inf) * len(DIRECTIONS)
-                           + _TURNS.pack(NOT_YET, NOT_YET, NEVER) * users)
+                           + _TURNS.pack(NOT_YET, NOT_YET, NEVER, 0) * users)
 
 
 class RadioFile:
@@ -152,13 +153,14 @@ class RadioFile:
     def set_free_at(self, direction: int, t: float) -> None:
         _SLOT.pack_into(self.map, _HEADER.size + _SLOT.size * direction, t)
 
-    def turns(self) -> list[tuple[int, int, int]]:
-        """Every user's (last turn up, last turn down, left from step) (hold the lock)."""
+    def turns(self) -> list[tuple[int, ...]]:
+        """Every user's (last turn up, last turn down, left from step, controller's wake port) (hold the lock)."""
         at = _HEADER.size + _SLOT.size * len(DIRECTIONS)
         return [_TURNS.unpack_from(self.map, at + _TURNS.size * i) for i in range(self.users)]
 
     def set_turn(self, column: int, value: int) -> None:
-        """This user's last turn of a direction (column 0 up, 1 down), or (column 2) the step it left from."""
+        """This user's last turn of a direction (column 0 up, 1 down), (2) the step it left from, (3) its
+        controller's wake port."""
         at = _HEADER.size + _SLOT.size * len(DIRECTIONS) + _TURNS.size * self.user + 8 * column
         struct.pack_into("<q", self.map, at, value)
 

@@ -28,9 +28,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from bridge.link.radio import DIRECTIONS, NEVER, Radio, RadioFile, waits_ms
+from bridge.link.radio import DIRECTIONS, Radio, RadioFile, waits_ms
 
-LEFT = 2  # a radio file's turns column: the step a user leaves from
+LEFT, WAKE = 2, 3  # a radio file's turns columns: the step a user leaves from; its controller's wake port
 TURNS = ("each control step every vehicle flies its step in turn, the first one rotating (step k: the (k mod N)-th "
          "of the N still flying, by id): on one radio, whose packets sent at the same instant queue first")
 
@@ -42,7 +42,7 @@ def turn_order(live: Sequence[int], k: int) -> list[int]:
     return [*live[turn:], *live[:turn]]
 
 
-def blocking(user: int, k: int, direction: int, turns: Sequence[tuple[int, int, int]]) -> list[int]:
+def blocking(user: int, k: int, direction: int, turns: Sequence[tuple[int, ...]]) -> list[int]:
     """The users ``user`` waits for before its turn of step k in ``direction`` (0 up, 1 down), given every user's
     (last turn up, last turn down, left from step): the users of step k (not left before it) before it in
     :func:`turn_order` that have not taken step k's turn, and those after it that have not taken step k - 1's. A
@@ -75,13 +75,16 @@ class TurnRadio(Radio):
 
     def blocking(self, k: int) -> list[int]:
         """The users this one waits for before its packets of step k (empty: its turn; :func:`blocking`)."""
+        return blocking(self.user, k, self.direction, self.rows())
+
+    def rows(self) -> list[tuple[int, ...]]:
+        """Every user's row of the file (:meth:`bridge.link.radio.RadioFile.turns`)."""
         f = self.file
         f.lock()
         try:
-            turns = f.turns()
+            return f.turns()
         finally:
             f.unlock()
-        return blocking(self.user, k, self.direction, turns)
 
     def admit(self, t: float, size: int, user: int = 0) -> float | None:
         """As :meth:`Radio.admit`, behind every packet admitted before it in turn order (its turn taken)."""
@@ -105,14 +108,9 @@ class TurnRadio(Radio):
         """This user's vehicle takes no turn from step k on (both directions: the file's row is the vehicle's)."""
         self._write(LEFT, k)
 
-    def left(self) -> bool:
-        """Whether this user's vehicle has left the turns."""
-        f = self.file
-        f.lock()
-        try:
-            return f.turns()[self.user][LEFT] != NEVER
-        finally:
-            f.unlock()
+    def wake_on(self, port: int) -> None:
+        """This user's controller is woken up on UDP port ``port`` of 127.0.0.1 when another takes a turn."""
+        self._write(WAKE, port)
 
     def _write(self, column: int, value: int) -> None:
         f = self.file

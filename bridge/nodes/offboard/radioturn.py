@@ -8,26 +8,27 @@ Out: :func:`down_link`: the down-link model the controller's end puts states thr
      returns once this controller's turn of step k has come (or, after :data:`TURN_WAIT_S` of wall time, late:
      counted and said); :meth:`DownTurns.stats`
 
-The controllers of a fleet have no socket among them: a controller whose turn has not come looks at the radio's
-file again after a short sleep in ``select`` on its own link (serving it meanwhile), the sleep doubling from
-:data:`LOOK_FIRST_S` to :data:`LOOK_MOST_S`. Its predecessors' states of the step are in their sockets when its
-own is (each vehicle sends its state after the same gate), so the wait is short.
+A controller whose turn has not come sleeps in ``select`` on its own link and on a wake socket of its own (a UDP
+port of 127.0.0.1 it writes into the radio's file), serving its link meanwhile; a controller that took its turn
+sends one datagram to every other controller's wake port, and the file says whether the turn has come. A wake-up
+that is lost costs at most :data:`LOOK_S`.
 """
 
 from __future__ import annotations
 
+import select
+import socket
 import time
 from collections.abc import Callable
 from typing import Any
 
 from bridge.core.flight import Flight
 from bridge.link.model import LinkImpairment
-from bridge.link.turns import TurnRadio
-from bridge.mavlink.endpoint import Endpoint, wait
+from bridge.link.turns import WAKE, TurnRadio
+from bridge.mavlink.endpoint import Endpoint
 from bridge.nodes.offboard.config import OffboardConfig
 
-LOOK_FIRST_S = 0.0001  # s: the first sleep before looking at the turns again
-LOOK_MOST_S = 0.002  # s: the longest
+LOOK_S = 0.002  # s: the longest sleep before looking at the turns again without a wake-up
 TURN_WAIT_S = 30.0  # s of wall time waited for a turn before the state enters out of turn (a stuck fleet)
 
 
@@ -37,8 +38,26 @@ class DownTurns:
     def __init__(self, radio: TurnRadio, event: Callable[[str, str], None]) -> None:
         self.radio = radio
         self.event = event
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.setblocking(False)
+        radio.wake_on(self.sock.getsockname()[1])
         self.waits = 0  # states whose turn had not come when they arrived
         self.late: list[int] = []  # steps whose state entered out of turn (waited TURN_WAIT_S)
+
+    def enter(self, k: int, ep: Endpoint, handle: Callable[[Any], None], observe: Callable[[], None]) -> None:
+        """The state of step k: at this controller's turn (:meth:`wait`), ``observe`` puts it through the model;
+        then the turn is over, and the other controllers are woken up to look."""
+        self.wait(k, ep, handle)
+        observe()
+        radio = self.radio
+        radio.took(k)
+        for i, row in enumerate(radio.rows()):
+            if row[WAKE] and i != radio.user:
+                try:
+                    self.sock.sendto(b"T", ("127.0.0.1", row[WAKE]))
+                except OSError:
+                    pass  # (a controller gone: nothing waits on it)
 
     def wait(self, k: int, ep: Endpoint, handle: Callable[[Any], None]) -> None:
         """Return when this controller's turn of step k has come, ``handle`` taking each message its link ``ep``
@@ -49,31 +68,38 @@ class DownTurns:
         self.waits += 1
         now = time.monotonic()
         give_up = now + TURN_WAIT_S
-        look = LOOK_FIRST_S
         while waiting:
             if now >= give_up:
                 self.late.append(k)
                 self.event("radio", f"state of step {k} entered the fleet's radio out of turn: users "
                                     f"{', '.join(map(str, waiting))} took no turn for {TURN_WAIT_S:g} s")
                 return
-            for _, m, _addr in wait((ep,), min(now + look, give_up)):
+            try:
+                select.select([self.sock, ep.wake_socket], [], [], min(LOOK_S, give_up - now))
+            except InterruptedError:
+                pass
+            self._drain()
+            for m, _addr in ep.poll():
                 handle(m)
-            look = min(2.0 * look, LOOK_MOST_S)
             now = time.monotonic()
             waiting = self.radio.blocking(k)
 
-    def enter(self, k: int, ep: Endpoint, handle: Callable[[Any], None], observe: Callable[[], None]) -> None:
-        """The state of step k: at this controller's turn (:meth:`wait`), ``observe`` puts it through the model;
-        then the turn is over."""
-        self.wait(k, ep, handle)
-        observe()
-        self.radio.took(k)
+    def _drain(self) -> None:
+        """Read the wake-ups (their content says nothing: the file does)."""
+        while True:
+            try:
+                self.sock.recv(16)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError:
+                continue
 
     def stats(self) -> dict[str, Any]:
         """This controller's part of the radio (its ``radio`` stats), with its waits and late turns."""
         return {**self.radio.part(), "turn_waits": self.waits, "late_turns": self.late}
 
     def close(self) -> None:
+        self.sock.close()
         self.radio.close()
 
 
