@@ -12,8 +12,11 @@ complete, with the time it ended), and the down radio's occupancy, queue wait (p
 flies each row as SITL on the wall clock instead (``bsst sitl ... --realtime``, through ``bridge.swarm.sitl`` on
 free ports: a vehicle, a controller and a relay per vehicle, every relay on the one radio when shared), each row
 taking up to the mission's 30 s; with the load average, since a real-time flight is what the machine gives it.
+``--lockstep`` flies each row as SITL in lockstep (``bsst sitl ...``, vehicles and controllers taking turns on the
+one radio: bridge.link.turns) and says whether it is the offline row bit for bit (every vehicle's trace, the
+radio block) and its wall time.
 
-    .venv/bin/python benchmarks/swarm_radio.py [--vehicles 1,2,4] [--predict] [--realtime] [--json]
+    .venv/bin/python benchmarks/swarm_radio.py [--vehicles 1,2,4] [--predict] [--realtime | --lockstep] [--json]
 """
 
 from __future__ import annotations
@@ -28,6 +31,8 @@ from typing import Any
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+
+import numpy as np  # noqa: E402
 
 from bridge.core.flight import prepare  # noqa: E402
 from bridge.link.ends import command_frame_bytes  # noqa: E402
@@ -45,23 +50,30 @@ def fitting_rate(n: int, up_bps: float, down_bps: float, command_bytes: int) -> 
     return min(down_bps / (n * FRAME_BYTES["ODOMETRY"]), up_bps / (n * command_bytes))
 
 
-def row(n: int, shared: bool, rate: float, predict: bool, realtime: bool = False) -> dict[str, Any]:
+def row(n: int, shared: bool, rate: float, predict: bool, clock: str = "offline") -> dict[str, Any]:
     link: dict[str, Any] = {"profile": PROFILE, "shared": shared}
     if predict:
         link["compensation"] = "predict"
+    kw = {"vehicles": n, "formation": "line:2", "rate_hz": rate, "link": link, "plots": False}
     t0 = time.perf_counter()
-    if realtime:
-        run = sitl(MISSION, vehicles=n, formation="line:2", rate_hz=rate, link=link, plots=False, realtime=True,
-                   instance=None)
+    if clock == "offline":
+        run = simulate(MISSION, **kw)
     else:
-        run = simulate(MISSION, vehicles=n, formation="line:2", rate_hz=rate, link=link, plots=False)
+        run = sitl(MISSION, realtime=clock == "realtime", instance=None, **kw)
     wall = time.perf_counter() - t0
+    same = None
+    if clock == "lockstep":  # the offline fleet, bit for bit?
+        off = simulate(MISSION, **kw)
+        same = all(np.array_equal(a.trace[c], b.trace[c], equal_nan=True) for a, b in zip(off.runs, run.runs)
+                   for c in ("t", "x", "y", "z", "u1_act", "u2_act"))
+        same = same and off.summary.get("radio", {}).get("down") == run.summary.get("radio", {}).get("down")
     s = run.summary
     vehicles = [{"id": v["id"], "outcome": v["outcome"], "rms_3d": v["rms_3d"],
                  "ended_s": len(r.trace["t"]) / rate, "lost": {d: v["link"][d]["lost_by"] for d in ("up", "down")}}
                 for v, r in zip(s["vehicles"], run.runs)]
     out: dict[str, Any] = {"vehicles_n": n, "radio": "one shared" if shared else "one each", "rate_hz": rate,
-                           "predict": predict, "vehicles": vehicles, "wall_s": wall, "clock": s["clock"]}
+                           "predict": predict, "vehicles": vehicles, "wall_s": wall, "clock": s["clock"],
+                           "same_as_offline": same}
     if shared:
         down = s["radio"]["down"]
         out["down"] = {"occupancy": down["occupancy"], "share_bps_sum": down["share_bps"],
@@ -70,7 +82,7 @@ def row(n: int, shared: bool, rate: float, predict: bool, realtime: bool = False
     return out
 
 
-def figures(counts: list[int], predict: bool, realtime: bool = False) -> dict[str, Any]:
+def figures(counts: list[int], predict: bool, clock: str = "offline") -> dict[str, Any]:
     os.chdir(ROOT)
     settings = link_from_table({"profile": PROFILE}, "benchmark")
     command = command_frame_bytes(prepare(load_mission(MISSION)).profile.actuation)  # in the mission's actuation
@@ -82,7 +94,7 @@ def figures(counts: list[int], predict: bool, realtime: bool = False) -> dict[st
         offered = n * rate * FRAME_BYTES["ODOMETRY"] / settings.down.rate_bps
         for shared in (False, True):
             for p in ((False, True) if predict else (False,)):
-                r = row(n, shared, rate, p, realtime)
+                r = row(n, shared, rate, p, clock)
                 r.update(fits_hz=fit, offered_down=offered)
                 rows.append(r)
     return {"profile": PROFILE, "up_bps": settings.up.rate_bps,
@@ -115,8 +127,10 @@ def print_table(f: dict[str, Any]) -> None:
         else:
             drops = sum(v["lost"]["down"]["queue"] for v in r["vehicles"])
             radio = f"(each its own) queue drops {drops}"
+        same = "" if r["same_as_offline"] is None else (
+            f" {'offline, bit for bit' if r['same_as_offline'] else 'NOT the offline row'}, {r['wall_s']:.1f} s |")
         print(f"| {r['vehicles_n']} | {r['radio']} | {law} | {r['rate_hz']:g} Hz ({r['fits_hz']:.1f} Hz) | "
-              f"{r['offered_down']:.1f}x | {rms} | {radio} |")
+              f"{r['offered_down']:.1f}x | {rms} | {radio} |{same}")
     print("load average: " + " ".join(f"{x:.2f}" for x in f["loadavg"]))
 
 
@@ -124,10 +138,13 @@ def main_() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--vehicles", default="1,2,4", help="fleet sizes, comma-separated (default 1,2,4)")
     ap.add_argument("--predict", action="store_true", help="also fly each row with --compensation predict")
-    ap.add_argument("--realtime", action="store_true", help="fly each row as SITL on the wall clock (bsst sitl)")
+    clock = ap.add_mutually_exclusive_group()
+    clock.add_argument("--realtime", action="store_true", help="fly each row as SITL on the wall clock (bsst sitl)")
+    clock.add_argument("--lockstep", action="store_true", help="fly each row as SITL in lockstep, against offline")
     ap.add_argument("--json", action="store_true")
     a = ap.parse_args()
-    f = figures([int(x) for x in a.vehicles.split(",")], a.predict, a.realtime)
+    f = figures([int(x) for x in a.vehicles.split(",")], a.predict,
+                "realtime" if a.realtime else "lockstep" if a.lockstep else "offline")
     if a.json:
         print(json.dumps(f, indent=2))
     else:
