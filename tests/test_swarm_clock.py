@@ -2,8 +2,8 @@
 
 The gate alone (real UDP sockets on 127.0.0.1, in this process): no vehicle flies step k before every other one has
 flown step k - 1 (its answer held meanwhile), a contact is judged as the offline loop judges it (its text, its
-pair), a vehicle that left stays an obstacle where it said, one silent too long is taken as gone; the trace judge
-with where each vehicle stayed.
+pair), a vehicle that left stays an obstacle where it said, one silent too long is taken as gone, one waiting for
+its turn on the fleet's one radio says its word again; the trace judge with where each vehicle stayed.
 Whole fleets (real ``bsst vehicle`` and ``bsst controller`` processes, free ports): two runs of one fleet write
 the same ``trace.csv`` bytes, and two vehicles that touch both end ``collision`` at the offline loop's step, their
 traces the offline ones (≤ 1e-4 m), the separation and its closest approaches the offline fleet's.
@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import socket
+import time
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +21,8 @@ import pytest
 
 from bridge.cli import main
 from bridge.cli.flying import report_fleet
+from bridge.link.radio import make_radio_file
+from bridge.link.turns import TurnRadio
 from bridge.nodes.vehicle import gate as gatemod
 from bridge.nodes.vehicle.clock import Answer, Clock, ClockState, Trigger
 from bridge.nodes.vehicle.gate import Gate, GateConfig
@@ -103,6 +106,42 @@ def test_a_contact_is_judged_as_the_offline_loop_judges_it_and_a_vehicle_gone_st
     finally:
         for g, _, _ in fleet:
             g.close()
+
+
+def test_a_vehicle_waiting_for_its_turn_on_one_radio_says_its_word_again(tmp_path: Path) -> None:
+    """A vehicle's word for step 1 goes out before the other's gate is bound. Step 1's order on the fleet's radio
+    is the other vehicle, then this one: it has every position but waits for the other's turn, while the other
+    waits for its word. Waiting for a turn, it says its word again every RESEND_S, so both fly, in turn order."""
+    f = tmp_path / "radio"
+    make_radio_file(f, 2)
+    ports = (free_udp_port(), free_udp_port())
+
+    def gate(i: int) -> tuple[Gate, Clock]:
+        clock = Clock(False, 1000.0, 1.0, 0.0)
+        clock.fire(Trigger.ENGAGE)
+        cfg = GateConfig(i, (1, 2), (0.3, 0.3), ports, str(f))
+        return Gate(cfg, clock, lambda: (0.0, 2.0 * i, 1.0), RATE, TurnRadio(f, "up", 1000.0, 0.05, i)), clock
+
+    a, ca = gate(0)
+    a.took(0)  # (its turn of step 0, the first; then step 0 flown)
+    at(a, ca, 1)  # its word for step 1 goes nowhere: the other gate is not bound yet
+    b, cb = gate(1)
+    try:
+        b.took(0)
+        at(b, cb, 1)
+        assert not a.clear(pytest.fail, 1) and ca.state is ClockState.GATED and a.judged == 1  # b's turn first
+        assert not b.clear(pytest.fail, 1) and b.judged < 1  # a's word not heard
+        flown: list[str] = []
+
+        def serve(g: Gate, name: str) -> None:
+            if g.clock.state is ClockState.GATED:
+                g.serve([], time.monotonic() + 0.02, pytest.fail, pytest.fail, lambda: (g.took(1), flown.append(name)))
+
+        wait_for(lambda: serve(b, "b") or serve(a, "a") or len(flown) == 2, 10, "both vehicles' turns of step 1")
+        assert flown == ["b", "a"]
+    finally:
+        a.close()
+        b.close()
 
 
 def test_a_word_from_anywhere_but_the_vehicles_own_gate_port_is_not_heard() -> None:
