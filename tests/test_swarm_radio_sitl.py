@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bridge.cli.flying import report_fleet
 from bridge.link.radio import make_radio_file
 from bridge.link.turns import TURNS
 from bridge.session.children import PORT_LOCKS
@@ -137,6 +138,17 @@ def test_a_lockstep_fleet_on_one_radio_flies_the_offline_fleets_packets_bit_for_
     assert down["occupancy"] > 0.99 and all(v["lost_queue"] > 0 for v in down["vehicles"])
     assert run.summary["clock"] == "lockstep" and run.summary["sitl"]["shared_clock"] is True
     assert {f.name for f in private.iterdir()} <= {PORT_LOCKS}  # the radio file is gone with the fleet
+
+
+def test_a_state_that_entered_the_radio_out_of_turn_is_said_and_exits_1(tmp_path: Path, capsys) -> None:
+    """(A controller that waited TURN_WAIT_S for another's turn: the summary's radio.late_turns, which
+    bsst sitl reads.) The fleet above as recorded, with vehicle 2's state of step 7 entered out of turn."""
+    off, run = _offline_and_lockstep(tmp_path, 2, 0.5, 100.0, RADIO)
+    assert report_fleet(run, "sitl") == 0
+    run.summary["radio"]["late_turns"]["2"] = [7]
+    assert report_fleet(run, "sitl") == 1
+    assert "bsst sitl: vehicle 2: its states of steps 7 entered the radio out of turn: not the offline fleet's " \
+        "flight" in capsys.readouterr().err
 
 
 def test_vehicles_that_leave_a_lockstep_radio_leave_its_turns_as_offline(tmp_path: Path) -> None:

@@ -122,7 +122,12 @@ def report_fleet(run: Any, command: str) -> int:
     for p in s.get("policies") or []:
         if not p.get("ok"):
             print(f"bsst {command}: policy {violation_text(p)}", file=sys.stderr)
-    ok = run_ok(s) and all(v["ok"] for v in s["vehicles"])
+    # a lockstep fleet on one radio whose states entered out of turn (a controller waited too long for another)
+    late = {i: ks for i, ks in ((s.get("radio") or {}).get("late_turns") or {}).items() if ks}
+    for i, ks in late.items():
+        print(f"bsst {command}: vehicle {i}: its states of steps {', '.join(map(str, ks))} entered the radio out of "
+              "turn: not the offline fleet's flight", file=sys.stderr)
+    ok = run_ok(s) and all(v["ok"] for v in s["vehicles"]) and not late
     return EXIT_OK if ok else EXIT_FAILED
 
 

@@ -110,7 +110,7 @@ class Vehicle:
         # one radio (its gate file's) takes them at this vehicle's turn (bridge.link.turns)
         gate = cfg.gate if cfg.clock == "lockstep" else None
         self.turns = (TurnRadio(gate.radio, "up", flight.link.up.rate_bps, flight.link.up.queue_ms / 1000.0,
-                                gate.index, "--gate") if gate is not None and gate.radio is not None else None)
+                                gate.index, "--gate's radio") if gate is not None and gate.radio is not None else None)
         up = flight.link.make((self.turns, None), gate.index)[0] if self.turns else flight.link.make()[0]
         self.vend = VehicleEnd(self.sim, up, self.actuation, rejected=self.rejected)
         # its controller's first turns on one radio wait for the slowest vehicle and controller to start, as the
