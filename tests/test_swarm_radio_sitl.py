@@ -151,6 +151,17 @@ def test_a_state_that_entered_the_radio_out_of_turn_is_said_and_exits_1(tmp_path
         "flight" in capsys.readouterr().err
 
 
+def test_a_lockstep_radio_without_a_rate_counts_the_bytes_as_offline_without_turns(tmp_path: Path) -> None:
+    """Without a rate no packet waits, so the order changes nothing and no turns are taken: the same flights and
+    byte counts as offline, and the file's turn columns never written."""
+    off, run = _offline_and_lockstep(tmp_path, 2, 1.0, 100.0, {})
+    _same_flights(off, run)
+    assert run.summary["radio"]["down"]["rate_bps"] is None and run.summary["radio"]["down"]["share_bps"] > 0
+    for i in (1, 2):
+        own = json.loads((tmp_path / "lockstep" / f"vehicle-{i}" / "summary.json").read_text())
+        assert own["link"]["radio"]["down"]["turn_waits"] == 0
+
+
 def test_vehicles_that_leave_a_lockstep_radio_leave_its_turns_as_offline(tmp_path: Path) -> None:
     """On one sik-57600 radio at 50 Hz two of four vehicles diverge within a second and leave; the two others fly
     on in failsafe, their turns over the two left: the same flights and radio as offline."""

@@ -73,9 +73,15 @@ class TurnRadio(Radio):
         self.direction = DIRECTIONS.index(direction)
         self.last_end_s: float | None = None  # the end of this user's last transmission (mission time, s)
 
+    @property
+    def ordered(self) -> bool:
+        """Whether the order of the packets matters: a radio with a rate. Without one nobody waits for anybody
+        (each packet is sent at once and only counted), so no turns are taken."""
+        return self.rate > 0.0
+
     def blocking(self, k: int) -> list[int]:
         """The users this one waits for before its packets of step k (empty: its turn; :func:`blocking`)."""
-        return blocking(self.user, k, self.direction, self.rows())
+        return blocking(self.user, k, self.direction, self.rows()) if self.rate > 0.0 else []
 
     def rows(self) -> list[tuple[int, ...]]:
         """Every user's row of the file (:meth:`bridge.link.radio.RadioFile.turns`)."""
@@ -102,7 +108,8 @@ class TurnRadio(Radio):
 
     def took(self, k: int) -> None:
         """This user's turn of step k is over (its packets of step k admitted, or none)."""
-        self._write(self.direction, k)
+        if self.rate > 0.0:
+            self._write(self.direction, k)
 
     def leave(self, k: int) -> None:
         """This user's vehicle takes no turn from step k on (both directions: the file's row is the vehicle's)."""

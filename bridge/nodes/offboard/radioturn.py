@@ -48,9 +48,12 @@ class DownTurns:
     def enter(self, k: int, ep: Endpoint, handle: Callable[[Any], None], observe: Callable[[], None]) -> None:
         """The state of step k: at this controller's turn (:meth:`wait`), ``observe`` puts it through the model;
         then the turn is over, and the other controllers are woken up to look."""
+        radio = self.radio
+        if not radio.ordered:  # (no rate: the order changes nothing, nobody waits)
+            observe()
+            return
         self.wait(k, ep, handle)
         observe()
-        radio = self.radio
         radio.took(k)
         for i, row in enumerate(radio.rows()):
             if row[WAKE] and i != radio.user:

@@ -116,7 +116,7 @@ class Vehicle:
         # its controller's first turns on one radio wait for the slowest vehicle and controller to start, as the
         # gate waits for a silent vehicle: the answers of steps 0 and 1 may take that long (bridge.link.turns)
         self._first_answers_s = cfg.lost_after_s
-        if self.turns is not None:
+        if self.turns is not None and self.turns.ordered:  # (no rate: no turns, see TurnRadio.ordered)
             self.vend.held = []
             self._first_answers_s = max(SILENT_S, cfg.lost_after_s)
         self.odometry = OdometryOut(self.link, self.sim, self.rate, flight.estimator)
