@@ -65,7 +65,8 @@ guess it.
 
 The parts: :mod:`~bridge.nodes.offboard.config` (settings, stamp checks), :mod:`~bridge.nodes.offboard.link`
 (the endpoint and what the vehicle's messages tell), :mod:`~bridge.nodes.offboard.flight` (the flight loops,
-the outcome, ``bsst controller``).
+the outcome), :mod:`~bridge.nodes.offboard.radioturn` (the down-link model, a lockstep fleet's turns on one
+radio), :mod:`~bridge.nodes.offboard.run` (``bsst controller``: the reports, the exit status).
 """
 
 from bridge.nodes.offboard.config import (
@@ -82,8 +83,9 @@ from bridge.nodes.offboard.config import (
     stamp_problem,
     stamp_slack_s,
 )
-from bridge.nodes.offboard.flight import OUTCOMES, Offboard, run_controller
+from bridge.nodes.offboard.flight import OUTCOMES, Offboard
 from bridge.nodes.offboard.link import OffboardLink
+from bridge.nodes.offboard.run import run_controller
 
 __all__ = [
     "HOUSEKEEPING_S", "OUTCOMES", "PHASE_S", "PHASE_STATES", "SPIN_BEFORE_TICK_S", "STAMP_PACE", "STAMP_SLACK_S",

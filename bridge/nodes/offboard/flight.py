@@ -3,14 +3,12 @@
 In:  the vehicle's states and state of mind through :class:`~bridge.nodes.offboard.link.OffboardLink`; the
      :class:`~bridge.core.flight.Flight` (mission, law, link guard, ``[link]`` down model, parameter changes)
 Out: one answer per state (lockstep) or per tick (real time, s on the wall clock); ``controller.bin`` records
-     (:data:`~bridge.record.columns.CONTROLLER_COLUMNS`); the outcome (:data:`OUTCOMES`) and why;
-     :func:`run_controller`: the ``stats`` and ``done`` reports and the exit status of ``bsst controller``
+     (:data:`~bridge.record.columns.CONTROLLER_COLUMNS`); the outcome (:data:`OUTCOMES`) and why
 """
 
 from __future__ import annotations
 
 import math
-import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -34,11 +32,10 @@ from bridge.nodes.offboard.config import (
 )
 from bridge.nodes.offboard.link import OffboardLink
 from bridge.nodes.offboard.radioturn import down_link
-from bridge.nodes.process import on_stop_signals, report_printer, tight_timer_slack
-from bridge.nodes.report import Done, Ready, Report, Stats
+from bridge.nodes.process import tight_timer_slack
+from bridge.nodes.report import Ready, Report
 from bridge.record.columns import CONTROLLER_COLUMNS
 from bridge.record.halves import HalfWriter
-from bridge.record.runlog import side_dir
 from controller.law import LawFailed
 from controller.link_guard import LinkGuard
 
@@ -458,43 +455,3 @@ class Offboard(OffboardLink):
         outcome = "failsafe" if self.failsafe_seen else "aborted"
         self.event(outcome, self.reason, answers)
         return outcome
-
-
-def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None = None,
-                   overwrite: bool = False) -> int:
-    """``bsst controller``: fly, then exit 0 if the mission completed (in lockstep: without the vehicle
-    leaving it), else 1 (failsafe, diverged, aborted, or lockstep left)."""
-    path = side_dir(out, ("controller.tlog", "controller.bin"), overwrite) if out is not None else None
-    emit = report_printer()
-    transfer = None
-    if cfg.await_mission:  # a ground station's mission: waited for, downloaded, flown (bridge.nodes.offboard.mission)
-        from bridge.nodes.offboard.mission import mission_flight  # lazy: only for --await-mission
-
-        got, transfer = mission_flight(flight, cfg, path, emit)
-        if got is None:
-            return 1
-        flight = got
-    node = Offboard(flight, cfg, path, emit)
-    on_stop_signals(node.stop)
-    outcome = node.run()
-    unconfirmed = node.unconfirmed_params()
-    emit(Stats({"param_at": [p.as_dict() for p in node.param_sets],
-                "commands": node.commands, "states": node.states, "received": node.ep.received,
-                "sent": node.ep.sent, "stale_ticks": node.stale_ticks, "overruns": node.overruns,
-                "stalls": node.stalls.report(),
-                "spin_skipped": node.spinner.skipped,
-                "down": node.cend.down.stats.summary() if cfg.clock == "lockstep" else None,
-                **({"radio": node.turns.stats()} if node.turns is not None else {}),  # its part of the fleet's radio
-                "rejected": dict(node.rejected), "rejected_from_vehicle": node.rejected.from_peer,
-                "states_refused": node.states_refused, "state_window": node.state_window,
-                "kernel_drops": node.ep.kernel_drops(), "mission_transfer": transfer}))
-    left = bool(node.left_lockstep)
-    emit(Done(outcome, left, node.reason or None, node.taken_over if node.ended_taken_over else None))
-    if outcome != "completed":
-        sys.stderr.write(f"bsst controller: {outcome}" + (f": {node.reason}" if node.reason else "") + "\n")
-    elif left:
-        sys.stderr.write(f"bsst controller: completed, but not in lockstep: the vehicle said {node.left_lockstep!r}\n")
-    for p in unconfirmed:
-        sys.stderr.write(f"bsst controller: {p.change.name} = {p.change.value:g} (due at t={p.change.t_s:g} s) "
-                         f"was never confirmed by the vehicle: not made\n")
-    return 0 if outcome == "completed" and not left and not unconfirmed else 1

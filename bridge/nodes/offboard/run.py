@@ -1,0 +1,60 @@
+"""``bsst controller``: one offboard controller's flight from its start to its exit status.
+
+In:  the :class:`~bridge.core.flight.Flight`, the controller's settings (:class:`OffboardConfig`), the run
+     directory (or None), whether to overwrite it
+Out: the ``stats`` and ``done`` reports on stdout (JSON lines, :mod:`bridge.nodes.report`), what did not go as
+     asked on stderr, and the exit status: 0 the mission completed in lockstep (or on the wall clock) with every
+     scheduled change confirmed, else 1
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from bridge.core.flight import Flight
+from bridge.nodes.offboard.config import OffboardConfig
+from bridge.nodes.offboard.flight import Offboard
+from bridge.nodes.process import on_stop_signals, report_printer
+from bridge.nodes.report import Done, Stats
+from bridge.record.runlog import side_dir
+
+
+def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None = None,
+                   overwrite: bool = False) -> int:
+    """``bsst controller``: fly, then exit 0 if the mission completed (in lockstep: without the vehicle
+    leaving it), else 1 (failsafe, diverged, aborted, or lockstep left)."""
+    path = side_dir(out, ("controller.tlog", "controller.bin"), overwrite) if out is not None else None
+    emit = report_printer()
+    transfer = None
+    if cfg.await_mission:  # a ground station's mission: waited for, downloaded, flown (bridge.nodes.offboard.mission)
+        from bridge.nodes.offboard.mission import mission_flight  # lazy: only for --await-mission
+
+        got, transfer = mission_flight(flight, cfg, path, emit)
+        if got is None:
+            return 1
+        flight = got
+    node = Offboard(flight, cfg, path, emit)
+    on_stop_signals(node.stop)
+    outcome = node.run()
+    unconfirmed = node.unconfirmed_params()
+    emit(Stats({"param_at": [p.as_dict() for p in node.param_sets],
+                "commands": node.commands, "states": node.states, "received": node.ep.received,
+                "sent": node.ep.sent, "stale_ticks": node.stale_ticks, "overruns": node.overruns,
+                "stalls": node.stalls.report(),
+                "spin_skipped": node.spinner.skipped,
+                "down": node.cend.down.stats.summary() if cfg.clock == "lockstep" else None,
+                **({"radio": node.turns.stats()} if node.turns is not None else {}),  # its part of the fleet's radio
+                "rejected": dict(node.rejected), "rejected_from_vehicle": node.rejected.from_peer,
+                "states_refused": node.states_refused, "state_window": node.state_window,
+                "kernel_drops": node.ep.kernel_drops(), "mission_transfer": transfer}))
+    left = bool(node.left_lockstep)
+    emit(Done(outcome, left, node.reason or None, node.taken_over if node.ended_taken_over else None))
+    if outcome != "completed":
+        sys.stderr.write(f"bsst controller: {outcome}" + (f": {node.reason}" if node.reason else "") + "\n")
+    elif left:
+        sys.stderr.write(f"bsst controller: completed, but not in lockstep: the vehicle said {node.left_lockstep!r}\n")
+    for p in unconfirmed:
+        sys.stderr.write(f"bsst controller: {p.change.name} = {p.change.value:g} (due at t={p.change.t_s:g} s) "
+                         f"was never confirmed by the vehicle: not made\n")
+    return 0 if outcome == "completed" and not left and not unconfirmed else 1
