@@ -85,3 +85,18 @@ def test_turns_taken_in_the_order_give_each_packet_the_fate_one_radio_gives_it(t
         assert part["bytes"] == one.bytes[u] and part["lost_queue"] == one.dropped[u] > 0
         assert part["first_s"] == 0.0
         users[u].close()
+
+
+def test_a_radio_without_a_rate_takes_no_turns(tmp_path: Path) -> None:
+    """Without a rate nothing queues, so the order is moot: nobody waits, and no turn is written in the file."""
+    f = tmp_path / "radio"
+    make_radio_file(f, 2)
+    free, capped = TurnRadio(f, "up", 0.0, 0.05, 1), TurnRadio(f, "up", 1000.0, 0.05, 1)
+    assert not free.ordered and capped.ordered
+    assert free.blocking(3) == [] and capped.blocking(3) == [0]  # user 0 has taken no turn yet
+    free.took(3)
+    assert capped.rows()[1][UP] == NOT_YET
+    capped.took(3)
+    assert capped.rows()[1][UP] == 3
+    free.close()
+    capped.close()

@@ -153,7 +153,7 @@ def test_a_state_that_entered_the_radio_out_of_turn_is_said_and_exits_1(tmp_path
 
 def test_a_lockstep_radio_without_a_rate_counts_the_bytes_as_offline_without_turns(tmp_path: Path) -> None:
     """Without a rate no packet waits, so the order changes nothing and no turns are taken: the same flights and
-    byte counts as offline, and the file's turn columns never written."""
+    byte counts as offline, and no controller ever waited for a turn (tests/test_radio_turns.py: none is taken)."""
     off, run = _offline_and_lockstep(tmp_path, 2, 1.0, 100.0, {})
     _same_flights(off, run)
     assert run.summary["radio"]["down"]["rate_bps"] is None and run.summary["radio"]["down"]["share_bps"] > 0

@@ -42,6 +42,7 @@ class DownTurns:
         self.sock.bind(("127.0.0.1", 0))
         self.sock.setblocking(False)
         radio.wake_on(self.sock.getsockname()[1])
+        self._wake: list[int] = []  # the other controllers' wake ports, once every one has written its own
         self.waits = 0  # states whose turn had not come when they arrived
         self.late: list[int] = []  # steps whose state entered out of turn (waited TURN_WAIT_S)
 
@@ -55,10 +56,13 @@ class DownTurns:
         self.wait(k, ep, handle)
         observe()
         radio.took(k)
-        for i, row in enumerate(radio.rows()):
-            if row[WAKE] and i != radio.user:
+        ports = self._wake or [row[WAKE] for i, row in enumerate(radio.rows()) if i != radio.user]
+        if all(ports):  # (until every controller has started, the file is read again at each turn)
+            self._wake = ports
+        for port in ports:
+            if port:
                 try:
-                    self.sock.sendto(b"T", ("127.0.0.1", row[WAKE]))
+                    self.sock.sendto(b"T", ("127.0.0.1", port))
                 except OSError:
                     pass  # (a controller gone: nothing waits on it)
 
