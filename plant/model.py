@@ -237,3 +237,17 @@ def rk4_held(X: tuple[float, ...], u1: float, u2: float, u3: float, u4: float, o
         psi + h6 * (k1[10] + 2.0 * (k2[10] + k3[10]) + k4[10]),
         dpsi + h6 * (k1[11] + 2.0 * (k2[11] + k3[11]) + k4[11]),
     )
+
+
+def rk4_held_steps(X: tuple[float, ...], u1: float, u2: float, u3: float, u4: float, omega_d: float,
+                   K: tuple[float, ...], h: float, n: int, ground: bool) -> tuple[tuple[float, ...], int]:
+    """Up to n RK4 steps of eq. (6), h (s) each, inputs (N, N m) and omega_d (rad/s) held, in still air with no
+    external force: a control period's physics steps in one call (the compiled twin's call costs about as
+    much as one step's arithmetic). With ``ground``, it stops after the first step that ends below the ground
+    plane (z < 0 m), which its caller resolves. Returns the state and the steps taken; each step is
+    :func:`rk4_held`'s, so n steps here are the bits of n calls of it."""
+    for i in range(n):
+        X = rk4_held(X, u1, u2, u3, u4, omega_d, K, h, None)
+        if ground and X[4] < 0.0:
+            return X, i + 1
+    return X, n

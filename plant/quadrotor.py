@@ -26,7 +26,7 @@ from collections.abc import Callable
 
 from plant.battery import Battery
 from plant.effects import Effects, disturbance_at
-from plant.model import RigidBody, State, rigid_body, rk4_held, state_derivative
+from plant.model import RigidBody, State, rigid_body, rk4_held, rk4_held_steps, state_derivative
 from plant.profiles import Profile
 from plant.rotors import (
     clip,
@@ -86,6 +86,7 @@ class Quadrotor:
         # one RK4 step with the inputs held: the plain function, or its compiled twin (bit for bit the same;
         # bridge.core.scalarkernels.compile_scalar)
         self.rk4: Callable[..., tuple[float, ...]] = rk4_held
+        self.rk4_steps: Callable[..., tuple[tuple[float, ...], int]] = rk4_held_steps  # several steps, one call
         self.ground = ground
         self.t = 0.0
         self.state: State = tuple(float(v) for v in state)  # type: ignore[assignment]
@@ -172,6 +173,29 @@ class Quadrotor:
             X = ground_contact(X)
         self.state = X  # type: ignore[assignment]
         self.t = t + h
+
+    def steps(self, n: int) -> None:
+        """Advance n physics steps, the command held: the bits of n calls of :meth:`step`, in one kernel call
+        (:func:`plant.model.rk4_held_steps`) when nothing changes between the steps but the state (still air, no
+        disturbance, no battery, no motor lag)."""
+        if self.battery is not None or self._lagged or self._disturbed or self.wind is not None:
+            for _ in range(n):
+                self.step()
+            return
+        u1, u2, u3, u4 = self.realised
+        h = self.dt
+        X, taken = self.rk4_steps(self.state, u1, u2, u3, u4, self._omega_d, self.body.constants, h, n, self.ground)
+        t = self.t
+        for _ in range(taken):
+            t += h  # the clock as step() keeps it: a sum of physics steps
+        if self.ground and X[4] < 0.0:  # the last step taken ended below the ground (step's own resolution)
+            if self.impact is None:
+                self._touchdown(t, X)
+            X = ground_contact(X)
+        self.state = X  # type: ignore[assignment]
+        self.t = t
+        if taken < n:
+            self.steps(n - taken)
 
     def _touchdown(self, t: float, X: tuple[float, ...]) -> None:
         """Record a touchdown too fast (over CRASH_SPEED_MPS) or too tilted (over CRASH_TILT_RAD) as the impact."""

@@ -363,12 +363,16 @@ class SimVehicle:
         self.last_command_t = self.plant.t
         return True
 
-    def advance(self, deliver: Callable[[float], None] | None = None) -> None:
+    def advance(self, deliver: Callable[[float], None] | None = None,
+                next_due: Callable[[], float | None] | None = None) -> None:
         """One control period: failsafe check, then the physics substeps.
 
         ``deliver(t)``, if given, is called with the plant time (s) before the check and
         before each substep, so that messages an impaired link delivers in the middle of
         the period (see :mod:`bridge.link.model`) act at the physics step they arrive in.
+        ``next_due()``, if given, says when ``deliver`` has its next message (s; None: none in flight): with
+        none due within the period, no sensors and the offboard command in force, the substeps are one call
+        (:meth:`plant.Quadrotor.steps`, the same bits).
         """
         p = self.plant
         pending = self._pending_events
@@ -393,6 +397,10 @@ class SimVehicle:
                 self.event("mode", f"HOLD: takeoff done at z={target.z:.3f} m", mode=HOLD, armed=True)
         onboard = self.onboard
         sensors, estimator = self.sensors, self.estimator
+        if sensors is None and not (self.armed and self.mode != OFFBOARD and onboard.target is not None) and (
+                deliver is None or (next_due is not None and _none_before(next_due(), p.t + self._period_s))):
+            p.steps(self.substeps)  # nothing can happen between the physics steps: one call
+            return
         for i in range(self.substeps):
             if deliver is not None and i:
                 deliver(p.t)
@@ -409,6 +417,11 @@ class SimVehicle:
                 arrived = sensors.sample(p.t, p.state)
                 if arrived:
                     estimator.step(p.t, arrived)
+
+
+def _none_before(due: float | None, end: float) -> bool:
+    """Whether nothing is due (``due`` s, None: nothing in flight) before the period's ``end`` (s)."""
+    return due is None or due > end
 
 
 def impact_text(impact: tuple[float, float, float], armed: bool = True) -> str:

@@ -34,7 +34,7 @@ for _helper in (
     pid._clip, pid.tilt_from_acceleration, pid.pid_integrals,
     actuation._clip, actuation.rotor_squares, actuation._omega_d, actuation.allocate_wrench, actuation.allocate_motors,
     rotors.clip, rotors.motor_speeds_from_wrench, rotors.signed_speed_sum, rotors.wrench_command,
-    quadrotor.ground_contact,
+    quadrotor.ground_contact, model.rk4_held,
     wire.wrench_to_wire, wire.wrench_from_wire,
 ):
     register_jitable(_helper)

@@ -81,6 +81,7 @@ class VehicleEnd:
         # reasons and these (duplicate, out_of_order, not_offboard) are counted in one place
         self.rejected: dict[str, int] = rejected if rejected is not None else {}
         self._deliver = self.deliver  # bound once, handed to SimVehicle.advance
+        self._next_due = up.next_due
         # a fleet's one radio in lockstep (bridge.link.turns): what crossed the socket waits for the vehicle's turn
         self.held: list[tuple[float, int, Any]] | None = None
 
@@ -125,7 +126,7 @@ class VehicleEnd:
 
     def advance(self) -> None:
         """One control period of the vehicle, delivering commands as they arrive."""
-        self.vehicle.advance(self._deliver)
+        self.vehicle.advance(self._deliver, self._next_due)
 
 
 class ControllerEnd:
