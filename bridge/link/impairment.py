@@ -112,6 +112,9 @@ class Fate:
     dup_jitter_s: float | None  # a duplicate follows with this jitter; None: no duplicate
 
 
+_CERTAIN = Fate(False, 0.0, False, None)  # a packet's fate on a link that leaves nothing to chance
+
+
 class FateStream:
     """The fates of packets 0, 1, 2, … of one direction, in order (:meth:`next`).
 
@@ -146,6 +149,8 @@ class FateStream:
                 self._jit = b
         self._dup = cfg.dup_pct / 100.0
         self._hold = cfg.reorder_pct / 100.0
+        # nothing left to chance (no loss, jitter, hold-back or duplicate): every fate is _CERTAIN, no draw made
+        self._certain = not self._ge and L <= 0.0 and self._jit == 0.0 and self._dup <= 0.0 and self._hold <= 0.0
 
     def _jitter(self, n: int, draw: int) -> float:
         if self._jit == 0.0:
@@ -159,6 +164,8 @@ class FateStream:
     def next(self) -> Fate:
         n = self.n
         self.n += 1
+        if self._certain:
+            return _CERTAIN
         key = self.key
         if self._ge:
             u = uniform(key, n, _D_LOSS)

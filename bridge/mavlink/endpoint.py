@@ -306,15 +306,17 @@ class Endpoint:
         trial = self.trial  # on trial, every datagram to the peer is charged to its credit (ReplyCredit)
         if trial is not None and dest == self.peer and not trial.charge(len(buf)):
             return False
-        if self.tlog is not None:
-            self.tlog.record(last)
         try:
             self.sock.sendto(buf, dest)
         except OSError:  # e.g. ECONNREFUSED from an earlier ICMP, ENOBUFS
             self.send_errors += 1
-            return False
-        self.sent += 1
-        return True
+            sent = False
+        else:
+            self.sent += 1
+            sent = True
+        if self.tlog is not None:  # after the datagram is gone: the record is not on the peer's critical path
+            self.tlog.record(last)
+        return sent
 
     # -- receiving ----------------------------------------------------------------------
     def poll(self, until: float | None = None) -> list[tuple[Any, tuple[str, int]]]:
