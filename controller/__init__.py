@@ -87,11 +87,14 @@ class Controller:
         twin), or None (the generic path)."""
         return self._kernel
 
-    def use_kernel(self, kernel: Callable[..., Step]) -> None:
+    def use_kernel(self, kernel: Callable[..., Step], args: tuple[Any, ...] | None = None) -> None:
         """Step with ``kernel``, the compiled twin of :func:`controller.kernel.control_step` (bit for bit the
-        same results: bridge.core.scalarkernels); only where the law has the one-call step."""
+        same results: bridge.core.scalarkernels), given ``args`` for :attr:`kernel_args` (the same values in the
+        types it takes; None: as they are); only where the law has the one-call step."""
         if self._kernel is not None:
             self._kernel = kernel
+            if args is not None:
+                self._args = args
 
     def step(self, t: float, state: tuple[float, ...], ref: Sample, hold: bool = False) -> Command:
         """Compute the command for ``state`` at time t; ``hold`` freezes the integrators."""

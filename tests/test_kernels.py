@@ -23,7 +23,7 @@ from controller.kernel import control_step
 from missions import MISSION_DIR, load_mission
 from params import ConfigError
 from plant import load_profile
-from plant.model import rigid_body, rk4_held
+from plant.model import rigid_body, rk4_held, rk4_held_steps
 
 
 def test_the_one_call_step_is_the_generic_path_to_the_bit() -> None:
@@ -45,8 +45,8 @@ def test_the_one_call_step_is_the_generic_path_to_the_bit() -> None:
 
 
 def test_compiled_twins_give_the_plain_bits_on_random_inputs() -> None:
-    """bridge.core.scalarkernels' control_step and rk4_held against the plain functions: both reachings, both
-    super-twisting steps, both actuations, with and without external forces and wind."""
+    """bridge.core.scalarkernels' control_step, rk4_held and rk4_held_steps against the plain functions: both
+    reachings, both super-twisting steps, both actuations, with and without external forces and wind."""
     from bridge.core import scalarkernels as K
 
     rng = np.random.default_rng(25)
@@ -66,13 +66,17 @@ def test_compiled_twins_give_the_plain_bits_on_random_inputs() -> None:
                 for motors in (False, True):
                     args = (X, ref, float(rng.normal(0.0, 50.0)), xi, i % 7 == 0, sign, K_, tables,
                             (1.0, 2.0, 3.0, 4.0), (5.0,) * 4, 4e-3, motors, alloc)
-                    assert K.control_step(*args) == control_step(*args), (name, i, sign, motors)
+                    fast = (*args[:5], *K.kernel_arrays(args[5:]))  # the constants as the twin takes them
+                    assert K.control_step(*fast) == control_step(*args), (name, i, sign, motors)
             u = (float(rng.uniform(0.0, pr.u_max[0])), *(float(v) for v in rng.normal(0.0, 0.5, 3)))
             ext = tuple(tuple(float(v) for v in rng.normal(0.0, 0.3, 6)) for _ in range(3))
             air = (*(float(v) for v in rng.normal(0.0, 3.0, 3)), 0.05)
             for e, w in ((None, None), (ext, None), (None, air), (ext, air)):
                 a = (X, *u, float(rng.normal(0.0, 50.0)), body.constants, 1e-3, e, w)
                 assert K.rk4_held(*a) == rk4_held(*a), (name, i)
+            for steps, ground in ((4, False), (4, True), (1, True)):  # several steps in one call; z < 0 stops it
+                a = (X, *u, float(rng.normal(0.0, 50.0)), body.constants, 1e-3, steps, ground)
+                assert K.rk4_held_steps(*a) == rk4_held_steps(*a), (name, i, steps, ground)
 
 
 @pytest.mark.parametrize("mission, law", [("sine.toml", "bsst"), ("robust-x500.toml", "smc"),
@@ -107,3 +111,44 @@ def test_which_kernels_fly(monkeypatch) -> None:
     monkeypatch.setenv(scalar.KERNELS_ENV, "fast")
     with pytest.raises(ConfigError, match="BSST_KERNELS='fast'.*plain, compiled, auto"):
         scalar.compiled_wanted(7500)
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+def test_a_periods_steps_in_one_call_are_the_steps_one_by_one(compiled) -> None:
+    """Quadrotor.steps(4) (one kernel call in still air) == four Quadrotor.step calls, state, clock and impact to
+    the bit: in flight, and falling onto the ground, where the call stops at the step that ends below it."""
+    from bridge.core.scalarkernels import compile_scalar
+    from plant import Quadrotor
+
+    rng = np.random.default_rng(7)
+    for start_z, c in ((2.0, (0.6, 0.02, -0.01, 0.0)), (0.004, (0.0, 0.0, 0.0, 0.0)), (0.03, (0.1, 0.3, 0.0, 0.0))):
+        one, four = (Quadrotor(load_profile("paper")) for _ in range(2))
+        if compiled:
+            compile_scalar(plant=one)
+            compile_scalar(plant=four)
+        for q in (one, four):
+            q.state = (0.1, 0.0, 0.0, -0.1, start_z, -3.0 if start_z < 1.0 else 0.2, 0.05, 0.0, -0.02, 0.0, 0.0, 0.0)
+        for _ in range(50):
+            kick = tuple(float(v) for v in np.clip(np.asarray(c) + rng.normal(0.0, 0.05, 4), -1.0, 1.0))
+            one.command(kick)
+            four.command(kick)
+            for _ in range(4):
+                one.step()
+            four.steps(4)
+            assert (four.state, four.t, four.impact) == (one.state, one.t, one.impact)
+        assert one.impact is not None or start_z > 1.0  # the falling ones did hit the ground
+
+
+def test_the_wire_twins_give_the_plain_bits_on_random_states() -> None:
+    """bridge.core.scalar.wire_for(True): a state's ODOMETRY fields and the state of those fields, compiled, against
+    bridge.core.wire's plain functions (the vehicle's state out and the controller's state in, in lockstep)."""
+    from bridge.core import wire
+
+    out, into = scalar.wire_for(True)
+    assert scalar.wire_for(False) == (wire.odometry_fields, wire.state_from_odometry_fields)
+    rng = np.random.default_rng(11)
+    for _ in range(500):
+        X = tuple(float(v) for v in rng.normal(0.0, 2.0, 12))
+        f = wire.odometry_fields(X)
+        assert out(X) == f
+        assert into(f) == wire.state_from_odometry_fields(f)

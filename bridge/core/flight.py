@@ -36,7 +36,7 @@ from bridge.autopilot.params import (
     typed_value,
 )
 from bridge.autopilot.simvehicle import SimVehicle
-from bridge.core.scalar import checked_choice, compile_for, compiled_wanted
+from bridge.core.scalar import checked_choice, compile_for, compiled_wanted, wire_for
 from bridge.link.model import LinkConfig, LinkSettings, absolute_link_paths, link_from_table, merge_link_tables
 from controller import Controller, Gains, Nominal, gains_from_table
 from controller.law import LawFactory, resolve_law
@@ -128,6 +128,11 @@ class Flight:
     def compiled(self) -> bool:
         """Whether this flight's controller and plant fly compiled kernels (bridge.core.scalar)."""
         return compiled_wanted(self.mission.duration_s * self.mission.rate_hz)
+
+    def wire(self) -> tuple[Callable[..., tuple[float, ...]], Callable[..., tuple[float, ...]]]:
+        """The state's wire conversion as this flight calls it, out (a state's ODOMETRY fields) and in (the state
+        of ODOMETRY's fields): compiled when its kernels are (bridge.core.scalar.wire_for; the same bits)."""
+        return wire_for(self.compiled)
 
     @property
     def guard(self) -> GuardConfig:
@@ -454,5 +459,6 @@ def load_compiled_kernels(ekf: bool = True) -> None:
     each child it forks starts with them loaded instead of paying the load itself (bridge.cli.forkserver)."""
     flight = prepare(Mission(Sine(), duration_s=1.0, name="kernels"))
     compile_for(ctl=flight.make_controller(), plant=flight.make_plant())
+    wire_for(True)
     if ekf:
         compile_estimator("ekf")

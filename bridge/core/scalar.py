@@ -22,8 +22,9 @@ from __future__ import annotations
 
 import os
 import sys
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 
+from bridge.core.wire import odometry_fields, state_from_odometry_fields
 from controller import Controller
 from params import ConfigError
 from plant import Quadrotor
@@ -61,6 +62,16 @@ def compile_for(ctl: Controller | None = None, plant: Quadrotor | None = None) -
     from bridge.core.scalarkernels import compile_scalar  # numba's import (~1 s): only where compiled kernels fly
 
     compile_scalar(ctl, plant)
+
+
+def wire_for(compiled: bool) -> tuple[Callable[..., tuple[float, ...]], Callable[..., tuple[float, ...]]]:
+    """:func:`bridge.core.wire.odometry_fields` and :func:`~bridge.core.wire.state_from_odometry_fields` as a flight
+    with ``compiled`` kernels calls them: their compiled twins (bridge.core.scalarkernels.wire_twins), or plain."""
+    if not compiled:
+        return odometry_fields, state_from_odometry_fields
+    from bridge.core.scalarkernels import wire_twins  # numba's import (~1 s): only where compiled kernels fly
+
+    return wire_twins()
 
 
 def compiled_everywhere() -> bool:

@@ -18,7 +18,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.core.clock import FixedRate, Stalls
 from bridge.core.flight import Flight
-from bridge.core.wire import command_to_wire, state_from_odometry_fields, step_of_usec
+from bridge.core.wire import command_to_wire, step_of_usec
 from bridge.link.ends import ControllerEnd
 from bridge.mavlink.endpoint import FORCE_DISARM, Spinner, wait
 from bridge.mavlink.modes import MAIN_AUTO, SUB_LOITER
@@ -52,6 +52,7 @@ class Offboard(OffboardLink):
         m = flight.mission
         self.steps = m.steps
         self.ctl = flight.make_controller()
+        self._state_in = flight.wire()[1]  # ODOMETRY's fields to the state (compiled with the law's kernels)
         self.guard = LinkGuard(self.ctl, flight.guard)
         # lockstep: the mission's down-link model acts here, on what crossed the socket (a fleet's one radio: at
         # this controller's turns); real time: the relay applies it on the wire, states pass straight on
@@ -304,7 +305,7 @@ class Offboard(OffboardLink):
         down-link model with the vehicle's offboard bit (its HEARTBEAT: armed and not CRITICAL; sent before the
         state on every change, so it is this step's)."""
         q = odo.q  # odometry_to_state written out, flat (one call: the hot path; tests/test_wire.py)
-        X = state_from_odometry_fields((odo.x, odo.y, odo.z, q[0], q[1], q[2], q[3], odo.vx, odo.vy, odo.vz,
+        X = self._state_in((odo.x, odo.y, odo.z, q[0], q[1], q[2], q[3], odo.vx, odo.vy, odo.vz,
                                         odo.rollspeed, odo.pitchspeed, odo.yawspeed))
         self.cend.receive_state(t_state, X, self.vehicle_armed and self.vehicle_state != mavlink.MAV_STATE_CRITICAL)
         self._last_state, self._started = recv, t_state * self.rate > 1.5

@@ -119,7 +119,7 @@ class Vehicle:
         if self.turns is not None and self.turns.ordered:  # (no rate: no turns, see TurnRadio.ordered)
             self.vend.held = []
             self._first_answers_s = max(SILENT_S, cfg.lost_after_s)
-        self.odometry = OdometryOut(self.link, self.sim, self.rate, flight.estimator)
+        self.odometry = OdometryOut(self.link, self.sim, self.rate, flight.estimator, flight.wire()[0])
         self.targets = Targets(self.sim, self.clock, self.authority, self.rate, self.actuation, self._reject)
         self._statustext = StatusTexts()
         self.params = ParamService(self.sim, self.authority, self._statustext, self._reject, self._refused)

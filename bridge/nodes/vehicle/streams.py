@@ -256,8 +256,10 @@ class OdometryOut:
     """ODOMETRY of step k to the controller link: the vehicle's published state (its estimate; the true
     state under truth), and the wall time each step's state was first sent (its round trip counts from it)."""
 
-    def __init__(self, link: Endpoint, sim: SimVehicle, rate_hz: float, estimator: str) -> None:
+    def __init__(self, link: Endpoint, sim: SimVehicle, rate_hz: float, estimator: str,
+                 fields: Callable[[tuple[float, ...]], tuple[float, ...]] = odometry_fields) -> None:
         self.link = link
+        self.fields = fields  # a state's ODOMETRY fields: bridge.core.wire's, or its compiled twin (the same bits)
         self.sim = sim
         self.rate = rate_hz
         self.estimator = estimator  # truth, raw or ekf
@@ -273,7 +275,7 @@ class OdometryOut:
         X = sim.published()
         if not tm.finite(X):
             return False
-        f = odometry_fields(X)  # state_to_odometry written out, flat (one call: the hot path; tests/test_wire.py)
+        f = self.fields(X)  # state_to_odometry written out, flat (one call: the hot path; tests/test_wire.py)
         if sim.sensors is None:
             tail = ODOMETRY_TAIL
         else:
