@@ -35,6 +35,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from controller import Command, Controller
 from controller.predict import Predictor
@@ -63,9 +64,9 @@ class GuardConfig:
             raise ValueError(f"lag_s must be >= 0 and needs compensation 'predict', got {self.lag_s:g}")
 
 
-@dataclass(frozen=True, slots=True)
-class Decision:
-    """One step's verdict. ``command`` None: send nothing this step."""
+class Decision(NamedTuple):
+    """One step's verdict. ``command`` None: send nothing this step. (A named tuple: one a control step, made in a
+    third of a frozen dataclass's time.)"""
 
     mode: str  # track | hold | stop | rearm | idle
     command: Command | None

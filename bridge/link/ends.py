@@ -25,7 +25,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 from bridge.autopilot.simvehicle import SimVehicle
 from bridge.link.model import FRAME_BYTES, LinkImpairment
@@ -36,8 +36,7 @@ Quad = tuple[float, float, float, float]
 EPS_T = 1e-9  # s: the plant's clock is a sum of physics steps; compare times with this slack
 
 
-@dataclass(frozen=True, slots=True)
-class CommandMsg:
+class CommandMsg(NamedTuple):
     """An actuator target as it travels up: normalised paper-frame command and the time
     stamp of the state it answers (s)."""
 
@@ -53,8 +52,7 @@ class ArmMsg:
     acted: Callable[[], None] | None = None
 
 
-@dataclass(frozen=True, slots=True)
-class StateMsg:
+class StateMsg(NamedTuple):
     """ODOMETRY (+ the armed/offboard bit of HEARTBEAT) as it travels down."""
 
     t: float

@@ -280,8 +280,13 @@ class OffboardLink:
                                       self._stamp_slack_s) or odometry_problem(m))
             if src == self.vsys:  # the window of steps this side read: what the vehicle sent outside it never came
                 k = step_of_usec(m.time_usec, self.rate)
-                self.state_window = [min(self.state_window[0], k), max(self.state_window[1], k)] \
-                    if self.state_window else [k, k]
+                window = self.state_window
+                if window is None:
+                    self.state_window = [k, k]
+                elif k > window[1]:  # the usual case: the next step (no new list a state)
+                    window[1] = k
+                elif k < window[0]:
+                    window[0] = k
             if why:
                 self.rejected.add(why, True)
                 self.states_refused += src == self.vsys
