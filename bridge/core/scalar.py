@@ -7,8 +7,8 @@ Out: whether to compile (:func:`compiled_wanted`), and a controller and a plant 
      (:func:`compile_for`: bridge.core.scalarkernels, imported only then, numba with it); whether every flight
      asks for them (:func:`compiled_everywhere`: the fork server then loads them once for all its children)
 
-Both give the same bits (tests/test_kernels.py). A compiled call is faster (the BS-ST controller step ~4.6 us
-against ~21 us plain; an RK4 step ~2 us against ~7 us: ``benchmarks/offline.py``), but a process that uses
+Both give the same bits (tests/test_kernels.py). A compiled call is faster (the BS-ST controller step ~2.8 us
+against ~18 us plain; an RK4 step ~1.2 us against ~4.6 us: ``benchmarks/offline.py``), but a process that uses
 them first pays numba's import and the cached kernels' load, ~1-2.5 s (docs/figures.md, "Compiled or plain"):
 ~36 us saved per control step of a lockstep flight (controller and vehicle) pays that back only after about
 :data:`AUTO_STEPS` steps. So ``auto`` compiles for flights at least that long, and for any flight in a process
