@@ -23,11 +23,11 @@ EARTH_RADIUS_M = 6_371_000.0  # PX4's CONSTANTS_RADIUS_OF_EARTH (src/lib/geo/geo
 
 @dataclass(frozen=True)
 class Home:
-    """The local frames' origin: latitude, longitude (deg), altitude AMSL (m)."""
+    """The local frames' origin: latitude, longitude (deg), altitude AMSL (m); by default PX4 SITL's (Zurich)."""
 
-    lat: float
-    lon: float
-    alt: float
+    lat: float = 47.397742
+    lon: float = 8.545594
+    alt: float = 488.0
 
     def ned(self, lat: float, lon: float, alt: float) -> tuple[float, float, float]:
         """(north, east, down) in m of the point (deg, deg, m AMSL), PX4's projection about the home."""

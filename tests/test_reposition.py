@@ -9,9 +9,8 @@ import math
 import pytest
 from pymavlink.dialects.v20 import common as M
 
-from bridge.mavlink.telemetry import Home
 from bridge.nodes.vehicle.reposition import FARTHEST_M, LOWEST_M, UNSET_INT, reposition
-from missions.geodetic import Home as GeoHome
+from missions.geodetic import Home
 
 HOME = Home()  # PX4 SITL's (Zurich, 488 m AMSL)
 X = (1.0, 0.0, -2.0, 0.0, 3.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.4, 0.0)  # hovering 3 m up at x = 1, y = -2 m
@@ -21,7 +20,7 @@ CHANGE_MODE = M.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE
 def _global(north: float, east: float) -> tuple[float, float]:
     """Latitude and longitude (deg) of the point ``north``, ``east`` m from home (the inverse of the vehicle's
     projection, found by Newton's method on it: the test does not trust a second formula)."""
-    geo = GeoHome(HOME.lat, HOME.lon, HOME.alt)
+    geo = HOME
     lat, lon = HOME.lat, HOME.lon
     for _ in range(6):
         n, e, _ = geo.ned(lat, lon, HOME.alt)

@@ -95,7 +95,7 @@ def test_gps_raw_int_units_frames_and_accuracies():
     # 100 m north, 50 m east (y = -50, west positive), 10 m up; moving 3 m/s north and 4 m/s east
     fix = Measurement(GNSS, 2.0, 2.12, (100.0, -50.0, 10.0, 3.0, -4.0, 0.5), (1.0, 1.0, 2.0, 0.1, 0.1, 0.2))
     m = _wire(tm.gps_raw_int(fix, HOME))
-    lat, lon, alt = HOME.to_global(100.0, 50.0, -10.0)
+    lat, lon, alt = HOME.global_of(100.0, 50.0, -10.0)
     assert (m.lat, m.lon, m.alt) == (round(lat * 1e7), round(lon * 1e7), round(alt * 1000.0))
     assert m.lat > 473977420 and m.lon > 85455940 and m.alt == 498_000  # north, east, mm AMSL
     assert m.fix_type == M.GPS_FIX_TYPE_3D_FIX and m.satellites_visible == tm.SATELLITES_VISIBLE

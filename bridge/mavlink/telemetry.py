@@ -22,13 +22,12 @@ streams they go out on and their intervals: :func:`sensor_streams`.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.core.wire import paper_to_ned
-from missions.geodetic import reproject
+from missions.geodetic import Home  # where the local NED origin is on earth (re-exported: the vehicle's home)
 from plant.sensors import BARO, GNSS, IMU, Measurement, SensorConfig, SensorSuite
 
 # the sensors a ground station expects to see healthy before it shows a vehicle as ready
@@ -42,21 +41,6 @@ CAPABILITIES = (mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mavlink.MAV_PROTOCOL_
                 | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
                 | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT)
 VERSION = (0 << 24) | (1 << 16) | (0 << 8) | 255  # 0.1.0, FIRMWARE_VERSION_TYPE_OFFICIAL
-
-
-@dataclass(frozen=True)
-class Home:
-    """Where the local NED origin is on earth: degrees, degrees, metres above mean sea level."""
-
-    lat: float = 47.397742  # PX4 SITL's default home (Zurich)
-    lon: float = 8.545594
-    alt: float = 488.0
-
-    def to_global(self, north: float, east: float, down: float) -> tuple[float, float, float]:
-        """NED offset (m) -> latitude, longitude (deg), altitude AMSL (m): PX4's reprojection about the home
-        (missions.geodetic), the inverse of the projection a plan's positions are read with, on one sphere."""
-        lat, lon = reproject(self.lat, self.lon, north, east)
-        return lat, lon, self.alt - down
 
 
 def finite(X: tuple[float, ...]) -> bool:
@@ -87,7 +71,7 @@ def global_position(X: tuple[float, ...], ms: int, home: Home) -> Any:
     n = paper_to_ned(X)
     north, east, down = n["pos"]
     vn, ve, vd = n["vel"]
-    lat, lon, alt = home.to_global(north, east, down)
+    lat, lon, alt = home.global_of(north, east, down)
     hdg = int(round(math.degrees(n["euler"][2]) * 100.0)) % 36000
     return mavlink.MAVLink_global_position_int_message(
         ms, int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000.0)), int(round(-down * 1000.0)),
@@ -299,7 +283,7 @@ def highres_imu(imu: Measurement | None, baro: Measurement | None, home: Home, u
 
 def gps_raw_int(fix: Measurement, home: Home) -> Any:
     """``GPS_RAW_INT`` of a GNSS fix (x, y, z m and their rates m/s, paper frame): a 3-D fix at
-    lat/lon (degE7) and alt (mm AMSL) from ``home`` (:meth:`Home.to_global`), ground speed ``vel``
+    lat/lon (degE7) and alt (mm AMSL) from ``home`` (:meth:`Home.global_of`), ground speed ``vel``
     (cm/s) and course over ground ``cog`` (cdeg, 0..35999) of the measured velocity. ``eph``/``epv``:
     the sensor's horizontal / vertical σ in cm (as PX4's SITL GPS plugin fills them; MAVLink calls
     them HDOP / VDOP x 100), and the same σ in ``h_acc``/``v_acc`` (mm), the horizontal velocity σ in
@@ -309,7 +293,7 @@ def gps_raw_int(fix: Measurement, home: Home) -> Any:
     n = paper_to_ned((x, vx, y, vy, z, vz, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
     north, east, down = n["pos"]
     vn, ve, _vd = n["vel"]
-    lat, lon, alt = home.to_global(north, east, down)
+    lat, lon, alt = home.global_of(north, east, down)
     sh, sz, svh = fix.sigma[0], fix.sigma[2], fix.sigma[3]
     cog = int(round(math.degrees(math.atan2(ve, vn)) * 100.0)) % 36000
     return mavlink.MAVLink_gps_raw_int_message(

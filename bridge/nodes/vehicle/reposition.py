@@ -26,9 +26,8 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from bridge.mavlink.telemetry import Home
 from controller.bsst import wrap_angle
-from missions.geodetic import Home as GeoHome
+from missions.geodetic import Home
 from plant.quadrotor import ENVELOPE_M
 
 LOWEST_M = 0.5  # m above home: the least height HOLD is sent to (MIS_TAKEOFF_ALT's least)
@@ -60,7 +59,6 @@ def reposition(m: Any, home: Home, X: tuple[float, ...]) -> Reposition:
         return _refused(mavlink.MAV_RESULT_UNSUPPORTED, f"param2 (flags) must be "
                                                         f"{mavlink.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE} "
                                                         f"(change mode), as PX4 takes it; got {m.param2:g}")
-    geo = GeoHome(home.lat, home.lon, home.alt)
     up = 0.0  # the altitude's datum above home's (m)
     if m._type == "COMMAND_INT":
         if m.frame not in _AMSL + _ABOVE_HOME:
@@ -77,7 +75,7 @@ def reposition(m: Any, home: Home, X: tuple[float, ...]) -> Reposition:
                                                    "(NaN leaves one as it is)")
     if given and not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
         return _refused(mavlink.MAV_RESULT_DENIED, f"latitude {lat:g}, longitude {lon:g}: not a place on earth")
-    x, y, _ = geo.paper(lat, lon, home.alt) if given else (X[0], X[2], 0.0)
+    x, y, _ = home.paper(lat, lon, home.alt) if given else (X[0], X[2], 0.0)
     z = alt + up - home.alt if math.isfinite(alt) else X[4]
     if z < LOWEST_M:
         return _refused(mavlink.MAV_RESULT_DENIED, f"{z:.2f} m above home: must be at least {LOWEST_M:g} m")
