@@ -14,7 +14,7 @@ Measured in one run on this machine, each the median over ``--repeats``:
 (b) and (c) for each of ``--kernels`` (default ``plain,compiled``): the children's law and plant plain, or
 compiled by numba (``BSST_KERNELS``, bridge.core.scalar; the same bits), interleaved with the floors.
 
-Targets: (b) >= 50 % of (a) naive; stretch >= 20x real time.
+Targets: (b) >= 50 % of (a) naive; stretch >= 20x real time; compiled, (b) >= 0.4 of (a) endpoint (issue 25).
 
 ``--profile DIR`` also runs the vehicle and the controller alone under cProfile for one
 lockstep sine flight and prints where each spends its time.
@@ -49,6 +49,7 @@ from bridge.nodes.report import Ready, parse_line  # noqa: E402
 from bridge.nodes.vehicle import VehicleConfig  # noqa: E402
 
 RATE_HZ = 250.0
+FLOOR_SHARE_TARGET = 0.4  # issue 25: a compiled lockstep step at least 0.4 of the endpoint ping-pong's round trip
 LEGS = ("down_us", "controller_us", "up_us", "vehicle_us", "step_us")
 WAITING = ("sched_yield", "select.select", "recvfrom", "poll", "wait")  # where a side waits for the other
 SPIN = VehicleConfig.spin_s  # the endpoint ping-pong polls as long as the SITL's vehicle does
@@ -270,6 +271,9 @@ def main() -> None:
               f" state-to-command p50 {r['state_to_command_ms_p50']:.3f} ms")
         print("    median lockstep step, by leg (us): " + ", ".join(f"{x[:-3]} {r[x]:.0f}" for x in LEGS)
               + f"; steps over 1 ms take {100 * r['steps_over_1ms_share_of_time']:.0f} % of the flight's wall time")
+        if k == "compiled":
+            print(f"    issue 25: (b)/(a) endpoint >= {FLOOR_SHARE_TARGET}: "
+                  f"{'met' if b / a2 >= FLOOR_SHARE_TARGET else 'NOT met'} ({b / a2:.2f})")
     for side, rows in res.get("profile_own_time_pct", {}).items():
         print(f"profile, {side} (own time %):")
         for name, pct in rows:
