@@ -3,7 +3,8 @@
 In:  a reference's parameters (set-points and waypoints: x, y, z in m, psi in rad, each with its time
      in s; the sine's amplitude m, omega rad/s, climb m/s, z0 m, psi rad), then a time t (s)
 Out: ``sample(t)``: for x, y, z (m) and psi (rad) each (value, 1st, 2nd, 3rd, 4th derivative)
-     (m/s .. m/s⁴, rad/s .. rad/s⁴); ``change_times()`` (s); ``to_dict()`` the ``[trajectory]`` table
+     (m/s .. m/s⁴, rad/s .. rad/s⁴); ``change_times()`` (s); ``to_dict()`` the ``[trajectory]`` table;
+     :class:`Prefetched`, a reference's newest sample kept (and the next computed ahead)
 
 Every reference maps time t (s) to four axes (x, y, z, psi), each a tuple
 (value, 1st, 2nd, 3rd, 4th derivative) in the paper's frame (z up, psi counter-clockwise).
@@ -14,6 +15,7 @@ from __future__ import annotations
 
 import bisect
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -174,3 +176,28 @@ class Waypoints:
 
     def to_dict(self) -> dict:
         return {"kind": "waypoints", "points": [_sp_dict(p) for p in self.points]}
+
+
+class Prefetched:
+    """A reference's samples with the newest kept: asked for the same time t (s) again, the sample is returned, not
+    computed again, and :meth:`ahead` computes the next one before it is asked for (a lockstep controller does it
+    after its command is out, off the step's critical path). The reference must be a function of t alone (every
+    :class:`Reference` here is)."""
+
+    __slots__ = ("_sample", "_t", "_s")
+
+    def __init__(self, sample: Callable[[float], Sample]) -> None:
+        self._sample = sample
+        self._t = math.nan  # (nan equals nothing: the first call computes)
+        self._s: Sample | None = None
+
+    def __call__(self, t: float) -> Sample:
+        if t == self._t:
+            return self._s  # type: ignore[return-value]
+        s = self._s = self._sample(t)
+        self._t = t
+        return s
+
+    def ahead(self, t: float) -> None:
+        """Compute the sample at t (s) now, for a later call at that time."""
+        self(t)

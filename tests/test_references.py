@@ -14,7 +14,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from missions import Setpoint, Sine, Step, Waypoints
-from missions.references import Reference
+from missions.references import Prefetched, Reference
 
 H = 1e-5  # s, central-difference step
 
@@ -107,3 +107,22 @@ def test_waypoints_are_minimum_jerk() -> None:
     assert mid[0][0] == pytest.approx((a.x + b.x) / 2)
     assert mid[0][1] == pytest.approx(15 / 8 * (b.x - a.x) / T)
     assert mid[0][2] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_a_prefetched_reference_is_the_reference_computed_once_a_time() -> None:
+    """Prefetched gives the reference's own samples; a time asked for again (or computed ahead) is not computed
+    again; another time is."""
+    sine = Sine()
+    calls: list[float] = []
+
+    def counted(t: float):
+        calls.append(t)
+        return sine.sample(t)
+
+    ref = Prefetched(counted)
+    for k in range(50):
+        t = k / 250.0
+        assert ref(t) == sine.sample(t)
+        assert ref(t) == sine.sample(t)  # the row's second look: no computation
+        ref.ahead((k + 1) / 250.0)  # the next step's, before it is asked for
+    assert calls == [k / 250.0 for k in range(51)]  # each time once: t = 0 by the first call, the rest ahead

@@ -38,6 +38,7 @@ from bridge.record.columns import CONTROLLER_COLUMNS
 from bridge.record.halves import HalfWriter
 from controller.law import LawFailed
 from controller.link_guard import LinkGuard
+from missions.references import Prefetched
 
 OUTCOMES = ("completed", "failsafe", "diverged", "aborted", "law_failed")
 PARAM_SETTLE_S = 1.0  # s of wall time after the flight for the echoes of the last scheduled PARAM_SETs
@@ -64,7 +65,7 @@ class Offboard(OffboardLink):
         # a scheduled blackout of the real wire (the relay) silences the vehicle: wait that much longer
         self._silence_s = cfg.vehicle_timeout_s + max(
             (d for _, d in flight.link.up.blackouts + flight.link.down.blackouts), default=0.0)
-        self._sample = m.trajectory.sample
+        self._sample = Prefetched(m.trajectory.sample)  # the next step's sampled once its command is out
         super().__init__(flight, cfg, out, status)
         self.spinner = Spinner(self.ep, cfg.spin_s)  # a lockstep state is polled for before sleeping
         self.rows = HalfWriter(out / "controller.bin", CONTROLLER_COLUMNS, batch=1) if out is not None else None
@@ -198,6 +199,7 @@ class Offboard(OffboardLink):
                     self.turns.enter(k - k0, ep, self._on, lambda o=odo, t=t, r=recv: self._observe(o, t, r))
                 last_frame = (odo.time_usec, self._decide(t, k, odo.time_usec, recv, math.nan))
                 last_k = k
+                self._sample.ahead((k + 1 - k0) / rate)  # the next step's reference, while the vehicle flies
                 if mono() < self._next_house:
                     continue
             outcome = self._check_vehicle()
