@@ -41,6 +41,7 @@ from bridge.record.policies import ended_by_command
 from bridge.record.summary import interventions, mission_transfer
 from bridge.session import instance_slot
 from missions import Mission, Sine
+from missions.geodetic import Home
 from missions.planfiles import plan_text, read_plan_text
 from tests.plans import l_plan
 from tests.sitlkit import ENV, ROOT, GcsSocket, MavProxy, Proc, clean_exit, run_bsst
@@ -65,6 +66,14 @@ mr = MissionRaw(system)
 items = mr.import_qgroundcontrol_mission(sys.argv[2]).mission_items
 out["items"] = len(items)
 out["upload"] = mr.upload_mission(items).name
+if len(sys.argv) > 4 and sys.argv[4] == "zones":  # the plan's fence and rally points too, then read back
+    data = mr.import_qgroundcontrol_mission(sys.argv[2])
+    def fields(its):
+        return [[i.seq, i.frame, i.command, i.param1, i.x, i.y, i.mission_type] for i in its]
+    out["fence_upload"] = mr.upload_geofence(data.geofence_items).name
+    out["rally_upload"] = mr.upload_rally_points(data.rally_items).name
+    out["fence_sent"], out["rally_sent"] = fields(data.geofence_items), fields(data.rally_items)
+    out["fence_got"], out["rally_got"] = fields(mr.download_geofence()), fields(mr.download_rallypoints())
 progress = []
 mr.subscribe_mission_progress(lambda p, _ud: progress.append([p.current, p.total]))
 # MAVSDK's own order, as its mission examples fly a PX4: arm (in HOLD, on the ground), then start the mission
@@ -101,6 +110,21 @@ def _trace(path: Path) -> list[tuple[float, float, float, float]]:
     return [tuple(float(r.split(",")[i]) for i in ix) for r in rows[1:]]  # type: ignore[misc]
 
 
+def _mavsdk_flies(n: int, plan: Path, out: Path, status: int, *extra: str) -> dict[str, Any]:
+    """``bsst sitl --await-mission`` (instance ``n``, into ``out``) and the MAVSDK script flying ``plan`` through it
+    (``extra``: the script's further arguments); the session's exit status asserted; what MAVSDK reported."""
+    sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--out", str(out), "--no-plots")
+    try:
+        r = subprocess.run([sys.executable, "-c", MAVSDK_SCRIPT, f"udpin://127.0.0.1:{GCS_PORT + n}", str(plan),
+                            "240", *extra], capture_output=True, text=True, timeout=300, env=ENV)
+        lines = [ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")]
+        assert lines, f"MAVSDK script failed:\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
+        assert sitl.p.wait(timeout=120) == status, "\n".join(sitl.lines[-30:])
+        return json.loads(lines[0][len("RESULT "):])
+    finally:
+        sitl.stop()
+
+
 def test_mavsdk_flies_a_plan_file_through_await_mission_as_the_file_flies(tmp_path):
     """MAVSDK imports a QGroundControl plan (examples/box.plan cut to an L: takeoff, speed change, waypoint,
     pass-through corner, land; tests/plans.py), uploads it, arms (HOLD) and starts it (AUTO.MISSION), MAVSDK's
@@ -114,16 +138,7 @@ def test_mavsdk_flies_a_plan_file_through_await_mission_as_the_file_flies(tmp_pa
     plan = l_plan(tmp_path)
     out = tmp_path / "run"
     with instance_slot() as n:
-        sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--out", str(out), "--no-plots")
-        try:
-            r = subprocess.run([sys.executable, "-c", MAVSDK_SCRIPT, f"udpin://127.0.0.1:{GCS_PORT + n}",
-                                str(plan), "240"], capture_output=True, text=True, timeout=300, env=ENV)
-            lines = [ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")]
-            assert lines, f"MAVSDK script failed:\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
-            gs = json.loads(lines[0][len("RESULT "):])
-            assert sitl.p.wait(timeout=120) == 0, "\n".join(sitl.lines[-30:])
-        finally:
-            sitl.stop()
+        gs = _mavsdk_flies(n, plan, out, 0)
     assert gs["upload"] == gs["start"] == gs["arm"] == "SUCCESS" and gs["items"] == 5, gs
     assert gs["finished"] and gs["progress"][-1] == [5, 5], gs  # MAVSDK: every item reached, mission complete
     summary = json.loads((out / "summary.json").read_text())
@@ -151,6 +166,38 @@ def test_mavsdk_flies_a_plan_file_through_await_mission_as_the_file_flies(tmp_pa
     assert current[-1] == 4 and current == sorted(current), current
     modes = {(m.custom_mode, bool(m.base_mode & 128)) for m in _tlog(out / "vehicle.tlog", sysid, ["HEARTBEAT"])}
     assert ((4 << 16) | (4 << 24), True) in modes  # AUTO.MISSION, armed
+
+
+def test_mavsdk_uploads_a_plans_fence_and_rally_points_and_the_flight_leaving_the_fence_fails(tmp_path):
+    """MAVSDK MissionRaw uploads the L plan's mission, and its geoFence (an inclusion rectangle about the north
+    leg only) and rallyPoints as the fence's and rally points' mission types, reads both back item for item, and
+    flies the mission: the east leg leaves the fence, so the vehicle says so (its ``geofence`` event, once) and
+    ``bsst sitl`` exits 1 with the geofence policy failing at that time; the flight itself is completed (the
+    fence is checked, not enforced). Each upload a ``mission`` event naming MAVSDK."""
+    def fenced(data: dict) -> None:
+        data["geoFence"]["polygons"] = [{"inclusion": True, "version": 1, "polygon": [
+            [47.39770, 8.54555], [47.39770, 8.54564], [47.39790, 8.54564], [47.39790, 8.54555]]}]
+        data["rallyPoints"]["points"] = [[47.39779, 8.54562, 10.0]]
+    plan = l_plan(tmp_path)
+    data = json.loads(plan.read_text())
+    fenced(data)
+    plan.write_text(json.dumps(data))
+    out = tmp_path / "run"
+    with instance_slot() as n:
+        gs = _mavsdk_flies(n, plan, out, 1, "zones")
+    assert gs["fence_upload"] == gs["rally_upload"] == gs["upload"] == "SUCCESS", gs
+    assert len(gs["fence_sent"]) == 4 and gs["fence_got"] == gs["fence_sent"], gs
+    assert len(gs["rally_sent"]) == 1 and gs["rally_got"] == gs["rally_sent"], gs
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["outcome"] == "completed", summary["ended_by"]
+    fence = next(p for p in summary["policies"] if p["name"] == "geofence")
+    assert not fence["ok"] and "outside the uploaded fence" in fence["why"], fence
+    events = (out / "events.log").read_text()
+    assert sum(" geofence: " in ln for ln in events.splitlines()) == 1 and "fence uploaded 4 items" in events, events
+    assert "rally points uploaded 1 items" in events
+    edge = Home().paper(47.39780, 8.54564, 488.0)[1]  # the fence's east side (y west, m)
+    east = next(t for t, x, y, z in _trace(out / "trace.csv") if y < edge)
+    assert abs(fence["t"] - east) <= 0.005, (fence["t"], east)  # (the event: after the step, at its end)
 
 
 # a takeoff to 1.5 m, a waypoint 2 m away held 0.5 s, a landing: 9.1 s of flight (12.1 s at 3 m), flown on the wall

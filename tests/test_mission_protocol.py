@@ -13,6 +13,7 @@ callback with a deadline.
 from __future__ import annotations
 
 import contextlib
+import copy
 import json
 import math
 import os
@@ -377,23 +378,82 @@ def test_one_transfer_at_a_time(tmp_path):
     assert sum("mission: uploaded 4 items" in s and "[by 255:190 " in s for s in v.events()) == 1
 
 
-def test_fence_and_rally_are_unsupported(tmp_path):
-    """Geofence and rally points: MAV_MISSION_UNSUPPORTED for an upload, a download and a clear, with the
-    mission type asked for; MAV_MISSION_TYPE_ALL clears the mission."""
+def _zone_items(mission_type: int) -> list[Any]:
+    """A fence (an inclusion square of four vertices about the home, an exclusion circle) or two rally points, as
+    MISSION_ITEM_INTs of ``mission_type``."""
+    if mission_type == M.MAV_MISSION_TYPE_RALLY:
+        return [M.MAVLink_mission_item_int_message(1, 1, seq, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                                                   M.MAV_CMD_NAV_RALLY_POINT, 0, 1, 0.0, 0.0, 0.0, 0.0,
+                                                   HOME[0] + 500 * seq, HOME[1] - 700, 10.0, mission_type)
+                for seq in range(2)]
+    corners = ((-900, -1300), (-900, 1300), (900, 1300), (900, -1300))
+    items = [M.MAVLink_mission_item_int_message(1, 1, seq, M.MAV_FRAME_GLOBAL_INT,
+                                                M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION, 0, 1, 4.0, 0.0, 0.0,
+                                                0.0, HOME[0] + dn, HOME[1] + de, 0.0, mission_type)
+             for seq, (dn, de) in enumerate(corners)]
+    return items + [M.MAVLink_mission_item_int_message(1, 1, 4, M.MAV_FRAME_GLOBAL_INT,
+                                                       M.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION, 0, 1, 2.0, 0.0, 0.0, 0.0,
+                                                       HOME[0] + 300, HOME[1] + 300, 0.0, mission_type)]
+
+
+def _download_type(conn: Any, mission_type: int) -> list[Any]:
+    """A download of ``mission_type``'s items (MISSION_REQUEST_INT each), then MISSION_ACK."""
+    conn.mav.mission_request_list_send(*_tgt(conn), mission_type)
+    count = _recv(conn, "MISSION_COUNT", cond=f"MISSION_COUNT.mission_type=={mission_type}").count
+    got = []
+    for seq in range(count):
+        conn.mav.mission_request_int_send(*_tgt(conn), seq, mission_type)
+        got.append(_recv(conn, "MISSION_ITEM_INT", cond=f"MISSION_ITEM_INT.seq=={seq}"))
+    conn.mav.mission_ack_send(*_tgt(conn), M.MAV_MISSION_ACCEPTED, mission_type)
+    return got
+
+
+def test_a_fence_and_rally_points_are_held_apart_from_the_mission(tmp_path):
+    """Fence and rally points as PX4 holds them: each uploaded, downloaded back item for item (of its type, none
+    current), apart from the mission; a fence that cannot be read (a polygon short of its vertices) and a bad item
+    are refused and leave the fence held; a clear of one type clears it alone, of MAV_MISSION_TYPE_ALL all three;
+    an unknown mission type is MAV_MISSION_UNSUPPORTED. AUTOPILOT_VERSION says MISSION_FENCE and MISSION_RALLY.
+    Each accepted upload a ``mission`` event naming the ground station."""
+    fence, rally = _zone_items(M.MAV_MISSION_TYPE_FENCE), _zone_items(M.MAV_MISSION_TYPE_RALLY)
     with instance_slot() as n:
         with _started(n, tmp_path) as (v, gcs):
-            for kind in (M.MAV_MISSION_TYPE_FENCE, M.MAV_MISSION_TYPE_RALLY):
-                for ask in (lambda k: gcs.mav.mission_count_send(*_tgt(gcs), 3, k),
-                            lambda k: gcs.mav.mission_request_list_send(*_tgt(gcs), k),
-                            lambda k: gcs.mav.mission_clear_all_send(*_tgt(gcs), k)):
-                    ask(kind)
-                    ack = _ack(gcs)
-                    assert (ack.type, ack.mission_type) == (M.MAV_MISSION_UNSUPPORTED, kind)
-            assert _upload(gcs, _items(2))[0].type == M.MAV_MISSION_ACCEPTED
+            gcs.mav.command_long_send(*_tgt(gcs), M.MAV_CMD_REQUEST_MESSAGE, 0, M.MAVLINK_MSG_ID_AUTOPILOT_VERSION,
+                                      0, 0, 0, 0, 0, 0)
+            caps = _recv(gcs, "AUTOPILOT_VERSION").capabilities
+            assert caps & M.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE and caps & M.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY
+            assert _upload(gcs, _items(3))[0].type == M.MAV_MISSION_ACCEPTED
+            for kind, items in ((M.MAV_MISSION_TYPE_FENCE, fence), (M.MAV_MISSION_TYPE_RALLY, rally)):
+                ack = _upload(gcs, items, mission_type=kind)[0]
+                assert (ack.type, ack.mission_type) == (M.MAV_MISSION_ACCEPTED, kind)
+                got = _download_type(gcs, kind)
+                assert [_fields(m) for m in got] == [_fields(m) for m in items]
+                assert {(m.mission_type, m.current) for m in got} == {(kind, 0)}
+            assert len(_download(gcs)) == 3  # the mission as it was
+            short = [copy.copy(m) for m in fence[:3] + fence[4:]]  # a polygon of 4 with 3 vertices: refused at
+            for seq, m in enumerate(short):  # its end
+                m.seq = seq
+            ack = _upload(gcs, short, mission_type=M.MAV_MISSION_TYPE_FENCE)[0]
+            assert (ack.type, ack.mission_type) == (M.MAV_MISSION_ERROR, M.MAV_MISSION_TYPE_FENCE)
+            bad = [copy.copy(fence[0])]
+            bad[0].param1 = 2.0  # too few vertices: PX4's MAV_MISSION_ERROR at the item
+            ack = _upload(gcs, bad, mission_type=M.MAV_MISSION_TYPE_FENCE)[0]
+            assert ack.type == M.MAV_MISSION_ERROR
+            assert [_fields(m) for m in _download_type(gcs, M.MAV_MISSION_TYPE_FENCE)] == [_fields(m) for m in fence]
+            gcs.mav.mission_count_send(*_tgt(gcs), 1, 7)  # no such mission type
+            assert _ack(gcs).type == M.MAV_MISSION_UNSUPPORTED
+            gcs.mav.mission_clear_all_send(*_tgt(gcs), M.MAV_MISSION_TYPE_RALLY)
+            assert _ack(gcs).type == M.MAV_MISSION_ACCEPTED
+            assert _download_type(gcs, M.MAV_MISSION_TYPE_RALLY) == []
+            assert len(_download_type(gcs, M.MAV_MISSION_TYPE_FENCE)) == 5
             gcs.mav.mission_clear_all_send(*_tgt(gcs), M.MAV_MISSION_TYPE_ALL)
             ack = _ack(gcs)
             assert (ack.type, ack.mission_type) == (M.MAV_MISSION_ACCEPTED, M.MAV_MISSION_TYPE_ALL)
-            assert _download(gcs) == []
+            assert _download(gcs) == [] and _download_type(gcs, M.MAV_MISSION_TYPE_FENCE) == []
+    events = v.events()
+    assert sum(s.startswith("mission: fence uploaded 5 items") and "[by 255:190 " in s for s in events) == 1, events
+    assert sum(s.startswith("mission: rally points uploaded 2 items") for s in events) == 1, events
+    refused = [r.text for r in v.reports() if isinstance(r, Refused)]
+    assert any("a polygon of 4 vertices" in t for t in refused), refused
 
 
 def test_the_controller_link_hears_no_stranger_and_only_reads(tmp_path):

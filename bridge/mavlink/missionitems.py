@@ -121,7 +121,7 @@ def _whole(v: float, lo: int, hi: int, result: int, what: str) -> int:
     return round(v)
 
 
-def _position(m: Any, int_mode: bool) -> tuple[int, int]:
+def item_position(m: Any, int_mode: bool) -> tuple[int, int]:
     """x, y of a global-frame item as degE7, checked (latitude within +-90, longitude within +-180 deg)."""
     if int_mode:
         x, y = int(m.x), int(m.y)
@@ -144,7 +144,7 @@ def parse_item(m: Any, int_mode: bool) -> MissionItem:
             raise ItemRefused(mavlink.MAV_MISSION_UNSUPPORTED, f"command {command} unsupported in frame {frame}")
         if command in _ROI and _roi_mode(m.param1) not in ROI_MODES_GLOBAL:
             raise ItemRefused(mavlink.MAV_MISSION_INVALID_PARAM1, f"ROI mode {m.param1} unsupported here")
-        x, y = _position(m, int_mode)
+        x, y = item_position(m, int_mode)
         if not math.isfinite(m.z):
             raise ItemRefused(mavlink.MAV_MISSION_INVALID_PARAM7, f"altitude {m.z} is not a number")
     elif frame == mavlink.MAV_FRAME_MISSION:
@@ -162,19 +162,21 @@ def parse_item(m: Any, int_mode: bool) -> MissionItem:
     return MissionItem(m.seq, frame, command, m.param1, m.param2, m.param3, m.param4, x, y, m.z, m.autocontinue)
 
 
-def item_message(item: MissionItem, target: tuple[int, int], current: bool, int_mode: bool) -> Any:
+def item_message(item: MissionItem, target: tuple[int, int], current: bool, int_mode: bool,
+                 mission_type: int = mavlink.MAV_MISSION_TYPE_MISSION) -> Any:
     """``item`` as MISSION_ITEM_INT (``int_mode``) or MISSION_ITEM (x, y in deg, a global _INT frame as
-    its float form) to ``target`` (sysid, compid), ``current`` set on the mission's current item."""
+    its float form) to ``target`` (sysid, compid), ``current`` set on the mission's current item; of
+    ``mission_type`` (a mission's, a fence's or rally points')."""
     args = (*target, item.seq)
     params = (item.param1, item.param2, item.param3, item.param4)
     if int_mode:
         return mavlink.MAVLink_mission_item_int_message(*args, item.frame, item.command, int(current),
                                                         item.autocontinue, *params, item.x, item.y, item.z,
-                                                        mavlink.MAV_MISSION_TYPE_MISSION)
+                                                        mission_type)
     scale = DEG_E7 if item.global_frame else 1.0
     return mavlink.MAVLink_mission_item_message(*args, FLOAT_FRAME.get(item.frame, item.frame), item.command,
                                                 int(current), item.autocontinue, *params, item.x / scale,
-                                                item.y / scale, item.z, mavlink.MAV_MISSION_TYPE_MISSION)
+                                                item.y / scale, item.z, mission_type)
 
 
 @dataclass

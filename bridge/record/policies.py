@@ -43,7 +43,8 @@ What each policy reads, and why it cannot be fooled by a run's own claims:
   vehicle that left silently.
 - ``geofence``: every trace row's position is inside the mission's geofence (a ``.plan``'s ``geoFence`` or a
   mission's ``[geofence]``: inside an inclusion zone if there is one, outside every exclusion zone, as PX4's
-  navigator judges it); the fence is checked, not enforced (PX4 would act: GF_ACTION).
+  navigator judges it), and the vehicle never said it was outside a fence a ground station uploaded (its
+  ``geofence`` event); a fence is checked, not enforced (PX4 would act: GF_ACTION).
 - ``time_steady``: the trace's ``t`` increases by exactly one control period from row to row
   (a missing row, a repeated step or a jump of the mission's clock breaks it), except over
   steps the vehicle flew disarmed: on the wall clock it writes no rows then (real time,
@@ -71,8 +72,8 @@ POLICIES: dict[str, str] = {
                      "controller only; GCS link: any ground station)",
     "lockstep_recorded": "lockstep is never left without a record",
     "time_steady": "the mission's time never jumps: trace t increases by one control period each row",
-    "geofence": "the vehicle stays inside its mission's geofence (a plan's geoFence, or [geofence]): checked, not "
-                "enforced; PX4 would act on a breach (GF_ACTION)",
+    "geofence": "the vehicle stays inside its mission's geofence (a plan's geoFence, or [geofence]) and any fence a "
+                "ground station uploaded: checked, not enforced; PX4 would act on a breach (GF_ACTION)",
 }
 EPS_S = 1e-5  # s: event times are rounded to 1 us; a physics step is at least 100 us
 ZERO_N = 1e-9  # N: a realised wrench this small is zero
@@ -179,7 +180,7 @@ def check(trace: Mapping[str, Any], events: Sequence[RunEvent], rules: Rules,
         arm_authority(ev, rules),
         lockstep_recorded(ev, rules, lockstep, off_clock_t),
         time_steady(t, rules, ev),
-        geofence_kept(t, trace, rules),
+        geofence_kept(t, trace, rules, ev),
     ]
 
 
@@ -353,12 +354,15 @@ def lockstep_recorded(events: Sequence[RunEvent], rules: Rules, record: Mapping[
     return Verdict(name, True)
 
 
-def geofence_kept(t: np.ndarray, trace: Mapping[str, Any], rules: Rules) -> Verdict:
-    """Every row's position (``x``, ``y``) inside the mission's geofence (:mod:`missions.geofence`); ok without one."""
+def geofence_kept(t: np.ndarray, trace: Mapping[str, Any], rules: Rules, events: Sequence[RunEvent] = ()) -> Verdict:
+    """Every row's position (``x``, ``y``) inside the mission's geofence (:mod:`missions.geofence`), and no
+    ``geofence`` event of the vehicle (outside a fence a ground station uploaded: bridge.nodes.vehicle.zones); ok
+    without either."""
     name = "geofence"
-    if rules.geofence is None or len(t) == 0:
-        return Verdict(name, True)
-    breach = rules.geofence.first_breach(t, trace["x"], trace["y"])
+    left = next((e for e in events if e.kind == "geofence"), None)
+    breach = rules.geofence.first_breach(t, trace["x"], trace["y"]) if rules.geofence is not None and len(t) else None
+    if left is not None and (breach is None or (left.t is not None and left.t < breach[0])):
+        return Verdict(name, False, left.t, left.text)
     if breach is None:
         return Verdict(name, True)
     return Verdict(name, False, breach[0], f"{breach[1]}: PX4 would have acted on it (GF_ACTION); "

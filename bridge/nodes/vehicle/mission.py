@@ -41,6 +41,7 @@ from bridge.nodes.vehicle.authority import Authority, attribute
 from bridge.nodes.vehicle.missiontransfer import LinkTransfer, Mission, Partner
 from bridge.nodes.vehicle.missionwatch import Goal, ItemWatch, goals_of
 from bridge.nodes.vehicle.streams import StatusTexts
+from bridge.nodes.vehicle.zones import HeldZones
 from params import ConfigError
 
 REACHED_REPEATS = 10  # PX4 sends MISSION_ITEM_REACHED once more at each of its next 10 1 Hz ticks
@@ -50,6 +51,7 @@ MESSAGES = frozenset({"MISSION_COUNT", "MISSION_ITEM", "MISSION_ITEM_INT", "MISS
                       "MISSION_REQUEST_INT", "MISSION_ACK", "MISSION_CLEAR_ALL", "MISSION_SET_CURRENT"})
 START_COMMAND = "MISSION_START"  # how a ground station started the mission (summary.json mission_transfer)
 START_ARM = "AUTO.MISSION, then arm"
+_ZONES = {mavlink.MAV_MISSION_TYPE_FENCE: "fence", mavlink.MAV_MISSION_TYPE_RALLY: "rally points"}
 START_ARMED = "arm, then AUTO.MISSION"  # armed in HOLD on the ground first (MAVSDK's arm(), then start_mission())
 
 
@@ -78,6 +80,7 @@ class MissionManager:
         self._goals: tuple[Goal, ...] = ()  # the started mission's items, where and how each is reached
         self._flying: tuple[MissionItem, ...] = ()  # the items of the mission in flight
         self.home = (authority.cfg.home.lat, authority.cfg.home.lon, authority.cfg.home.alt)
+        self.zones = HeldZones(sim, self.home)  # an uploaded fence and rally points
 
     # -- a ground station's start (await_mission) --------------------------------------------------------
     def select(self, armed: bool) -> str | None:
@@ -227,9 +230,22 @@ class MissionManager:
         return transfer.handle(Partner(self.authority.sender(m, addr, link), ep), m, time.monotonic())
 
     # -- what the links' transfers share (.missiontransfer.TransferHost) ------------------------------------
-    def accept(self, who: Partner, mission: Mission, what: str) -> None:
-        """The mission the ground station made: held, and a ``mission`` event naming it."""
-        self.mission = mission
+    def held(self, mission_type: int) -> Mission:
+        """The items held of ``mission_type``: the mission, the fence or the rally points (:mod:`.zones`)."""
+        return self.mission if mission_type == mavlink.MAV_MISSION_TYPE_MISSION else self.zones.items[mission_type]
+
+    def accept(self, who: Partner, mission: Mission, what: str,
+               mission_type: int = mavlink.MAV_MISSION_TYPE_MISSION) -> str | None:
+        """What the ground station made of ``mission_type``: held, and a ``mission`` event naming it; or why a fence
+        or rally points cannot be read (nothing held, nothing said here: the transfer refuses the upload)."""
+        if mission_type == mavlink.MAV_MISSION_TYPE_MISSION:
+            self.mission = mission
+        else:
+            why = self.zones.accept(mission, mission_type)
+            if why is not None:
+                return why
+            what = f"{_ZONES[mission_type]} {what}"
         n0 = len(self.sim.events)
         self.sim.event("mission", what)
         attribute(self.sim.events, n0, who.who)
+        return None

@@ -17,8 +17,10 @@ station's download does not hold up the controller's. Uploads are one at a time 
 failed, refused or abandoned upload leaves the mission as it was, and the vehicle never holds a mission shorter
 than the one it acknowledged; a download sends the mission as it was when it began. While it waits for an item
 the vehicle requests it again every :data:`RETRY_S`; a transfer nobody spoke in for :data:`PROTOCOL_TIMEOUT_S`
-ends ("Operation timeout"). Only ``MAV_MISSION_TYPE_MISSION``: fence and rally are answered
-``MAV_MISSION_UNSUPPORTED``. The items' checks: :mod:`bridge.mavlink.missionitems`.
+ends ("Operation timeout"). Three mission types, each held apart, as PX4 holds them: the mission, the fence and
+the rally points (a transfer is of one type; MISSION_CLEAR_ALL of MAV_MISSION_TYPE_ALL clears the three). The
+items' checks: :mod:`bridge.mavlink.missionitems` (a mission's), :mod:`bridge.mavlink.fenceitems` (a fence's and
+rally points').
 """
 
 from __future__ import annotations
@@ -31,13 +33,18 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.autopilot.vehicleevents import Sender
 from bridge.mavlink.endpoint import Endpoint
+from bridge.mavlink.fenceitems import parse_zone_item
 from bridge.mavlink.missionitems import ItemRefused, MissionItem, TransferStats, item_message, parse_item
 
 RETRY_S = 0.25  # PX4's MAVLINK_MISSION_RETRY_TIMEOUT_DEFAULT: an item not here this long is requested again
 PROTOCOL_TIMEOUT_S = 5.0  # PX4's MAVLINK_MISSION_PROTOCOL_TIMEOUT_DEFAULT: a silent transfer ends
 MAX_ITEMS = 65534  # PX4 SITL's NUM_MISSIONS_SUPPORTED (UINT16_MAX - 1): a larger count is MAV_MISSION_NO_SPACE
 MISSION = mavlink.MAV_MISSION_TYPE_MISSION
+TYPES = (MISSION, mavlink.MAV_MISSION_TYPE_FENCE, mavlink.MAV_MISSION_TYPE_RALLY)
+# the most items of an upload of each type: PX4 SITL's missions; a fence's and rally points' as a plan file's
+MAX_COUNT = {MISSION: MAX_ITEMS, mavlink.MAV_MISSION_TYPE_FENCE: 1000, mavlink.MAV_MISSION_TYPE_RALLY: 100}
 BUSY = "WPM: REJ. CMD: Busy"
+_NOUN = {MISSION: "mission", mavlink.MAV_MISSION_TYPE_FENCE: "fence", mavlink.MAV_MISSION_TYPE_RALLY: "rally point"}
 
 
 class State(Enum):
@@ -65,12 +72,15 @@ class Partner:
 
 
 class TransferHost(Protocol):
-    """What a link's transfers share with the others: the vehicle's mission and the one upload at a time."""
+    """What a link's transfers share with the others: the vehicle's mission, fence and rally points (each a
+    :class:`Mission` of its type), and the one upload at a time."""
 
     mission: Mission
     upload_link: str | None  # the link an upload is on (None: none)
 
-    def accept(self, who: Partner, mission: Mission, what: str) -> None: ...
+    def held(self, mission_type: int) -> Mission: ...
+
+    def accept(self, who: Partner, mission: Mission, what: str, mission_type: int = MISSION) -> str | None: ...
 
     def refused(self, text: str) -> None: ...
 
@@ -96,6 +106,7 @@ class LinkTransfer:
         self.sending = Mission()  # a download's mission, as it was when it began
         self.last_recv = self.last_sent = self.started = 0.0
         self.upload = TransferStats()
+        self.mtype = MISSION  # the transfer's mission type (kept when idle, as seq is)
 
     def handle(self, who: Partner, m: Any, now: float) -> bool:
         """One mission message (its target and the sender's authority checked); True when it changed the
@@ -112,23 +123,24 @@ class LinkTransfer:
         if kind == "MISSION_ACK":
             self._ack(who, m, now)
             return False
-        if kind != "MISSION_SET_CURRENT" and m.mission_type != MISSION and not (
-                kind == "MISSION_CLEAR_ALL" and m.mission_type == mavlink.MAV_MISSION_TYPE_ALL):
-            self._answer(who, mavlink.MAV_MISSION_UNSUPPORTED, m.mission_type)  # no fence, no rally points
+        mtype = MISSION if kind == "MISSION_SET_CURRENT" else m.mission_type
+        if mtype not in TYPES and not (kind == "MISSION_CLEAR_ALL" and mtype == mavlink.MAV_MISSION_TYPE_ALL):
+            self._answer(who, mavlink.MAV_MISSION_UNSUPPORTED, mtype)
             return False
         self._idle_if_sent()
         if kind == "MISSION_COUNT":
             return self._count(who, m, now)
         if kind == "MISSION_REQUEST_LIST":
-            self._request_list(who, now)
+            self._request_list(who, mtype, now)
             return False
         if self.state is not State.IDLE:  # this link's transfer only, as PX4's instance checks its own
-            self._busy(who, m.mission_type if kind == "MISSION_CLEAR_ALL" else MISSION)
+            self._busy(who, mtype)
             return False
         if kind == "MISSION_CLEAR_ALL":
-            if self.host.mission.items:  # clearing no mission changes nothing: answered, not said as a change
-                self.host.accept(who, Mission(), "cleared")
-            self._answer(who, mavlink.MAV_MISSION_ACCEPTED, m.mission_type)
+            for t in TYPES if mtype == mavlink.MAV_MISSION_TYPE_ALL else (mtype,):
+                if self.host.held(t).items:  # clearing nothing changes nothing: answered, not said as a change
+                    self.host.accept(who, Mission(), "cleared", t)
+            self._answer(who, mavlink.MAV_MISSION_ACCEPTED, mtype)
             return True
         return self._set_current(who, m)
 
@@ -152,14 +164,16 @@ class LinkTransfer:
             self.last_recv = now  # our first request was lost: ask again
             self._send_request(who, now)
             return False
+        mtype = m.mission_type
         if self.state is not State.IDLE or self.host.upload_link is not None:
-            self._busy(who, MISSION)
+            self._busy(who, mtype)
             return False
-        if m.count > MAX_ITEMS:
-            self._answer(who, mavlink.MAV_MISSION_NO_SPACE)
+        if m.count > MAX_COUNT[mtype]:
+            self._answer(who, mavlink.MAV_MISSION_NO_SPACE, mtype)
             return False
+        self.mtype = mtype
         if m.count == 0:
-            self.host.accept(who, Mission(), "cleared (an upload of 0 items)")
+            self.host.accept(who, Mission(), "cleared (an upload of 0 items)", mtype)
             self._answer(who, mavlink.MAV_MISSION_ACCEPTED)
             return True
         self.state, self.partner, self.host.upload_link = State.GETLIST, who, self.link
@@ -179,18 +193,19 @@ class LinkTransfer:
                 self._answer(who, mavlink.MAV_MISSION_ERROR, text="IGN MISSION_ITEM: No transfer")
             return False
         if self.state is State.SENDLIST or not self._is_partner(who):
-            self._busy(who, MISSION)
+            self._busy(who, self.mtype)
             return False
-        if m.mission_type != MISSION:
-            self._answer(who, mavlink.MAV_MISSION_ERROR)  # PX4: answered, the upload goes on
+        if m.mission_type != self.mtype:
+            self._answer(who, mavlink.MAV_MISSION_ERROR, m.mission_type)  # PX4: answered, the upload goes on
             return False
         self.last_recv = now
         if m.seq != self.seq:
             return False
         try:
-            item = parse_item(m, self.int_mode)
+            item = parse_item(m, self.int_mode) if self.mtype == MISSION else parse_zone_item(m, self.int_mode,
+                                                                                               self.mtype)
         except ItemRefused as exc:
-            self.host.refused(f"mission item {m.seq} (command {m.command}, frame {m.frame}): {exc}")
+            self.host.refused(f"{_NOUN[self.mtype]} item {m.seq} (command {m.command}, frame {m.frame}): {exc}")
             self._end_upload(now, f"refused item {m.seq}")
             self._idle()
             self._answer(who, exc.result, text=f"IGN MISSION_ITEM: Invalid item {m.seq}: {exc}")
@@ -202,11 +217,16 @@ class LinkTransfer:
         if self.seq < self.count:
             self._send_request(who, now)
             return False
-        self._end_upload(now, "accepted")
-        self._idle()
         up = self.upload
-        self.host.accept(who, Mission(tuple(self.staged), self.staged_current),
-                         f"uploaded {up.items} items in {up.duration_s:.2f} s, {up.re_requests} requested again")
+        up.duration_s = now - self.started
+        why = self.host.accept(who, Mission(tuple(self.staged), self.staged_current),
+                               f"uploaded {up.items} items in {up.duration_s:.2f} s, {up.re_requests} requested again",
+                               self.mtype)
+        self._end_upload(now, "accepted" if why is None else f"refused: {why}")
+        self._idle()
+        if why is not None:  # the whole fence or rally points cannot be read: PX4's navigator would ignore them
+            self._answer(who, mavlink.MAV_MISSION_ERROR, text=f"WPM: {why}")
+            return False
         self._answer(who, mavlink.MAV_MISSION_ACCEPTED)
         return True
 
@@ -215,8 +235,8 @@ class LinkTransfer:
         self.last_sent = now
         self.upload.requests += 1
         target = (p.who.sysid, p.who.compid)
-        msg = (mavlink.MAVLink_mission_request_int_message(*target, self.seq, MISSION) if self.int_mode
-               else mavlink.MAVLink_mission_request_message(*target, self.seq, MISSION))
+        msg = (mavlink.MAVLink_mission_request_int_message(*target, self.seq, self.mtype) if self.int_mode
+               else mavlink.MAVLink_mission_request_message(*target, self.seq, self.mtype))
         p.ep.send(msg, p.who.addr)
 
     def _end_upload(self, now: float, result: str) -> None:
@@ -226,16 +246,16 @@ class LinkTransfer:
             self.host.refused(f"mission upload {result}: {self.upload}")
 
     # -- download ---------------------------------------------------------------------------------------
-    def _request_list(self, who: Partner, now: float) -> None:
-        """MISSION_REQUEST_LIST: a download begins (again, for its partner)."""
+    def _request_list(self, who: Partner, mtype: int, now: float) -> None:
+        """MISSION_REQUEST_LIST: a download of ``mtype``'s items begins (again, for its partner)."""
         if not (self.state is State.IDLE or (self.state is State.SENDLIST and self._is_partner(who))):
-            self._busy(who, MISSION, "Mission download request ignored, already active")
+            self._busy(who, mtype, "Mission download request ignored, already active")
             return
-        mission = self.host.mission
-        self.state, self.partner, self.sending = State.SENDLIST, who, mission
+        mission = self.host.held(mtype)
+        self.state, self.partner, self.sending, self.mtype = State.SENDLIST, who, mission, mtype
         self.seq, self.count, self.sent = 0, len(mission.items), set()
         self.last_recv = self.last_sent = now
-        who.ep.reply((mavlink.MAVLink_mission_count_message(who.who.sysid, who.who.compid, self.count, MISSION),),
+        who.ep.reply((mavlink.MAVLink_mission_count_message(who.who.sysid, who.who.compid, self.count, mtype),),
                      who.who.addr)
 
     def _request(self, who: Partner, m: Any, now: float) -> None:
@@ -246,12 +266,12 @@ class LinkTransfer:
         whose requests were not all delivered in order (docs/ground-station.md, "Missions")."""
         if not self._is_partner(who):
             if self.state is not State.IDLE:
-                self._busy(who, MISSION)
+                self._busy(who, m.mission_type)
             return  # no transfer: ignored, as PX4 does (some on-screen displays ask anyway)
         if self.state is State.GETLIST:
             who.ep.reply(tuple(self.host.texts(mavlink.MAV_SEVERITY_CRITICAL, BUSY)), who.who.addr)
             return
-        if self.state is not State.SENDLIST or m.mission_type != MISSION:
+        if self.state is not State.SENDLIST or m.mission_type != self.mtype:
             return
         self.last_recv = now
         if not 0 <= m.seq < self.count:
@@ -263,13 +283,14 @@ class LinkTransfer:
         sending = self.sending
         item = sending.items[m.seq]
         self.last_sent = now
-        who.ep.reply((item_message(item, (who.who.sysid, who.who.compid), m.seq == sending.current, self.int_mode),),
+        current = self.mtype == MISSION and m.seq == sending.current  # (a fence's or rally points': none current)
+        who.ep.reply((item_message(item, (who.who.sysid, who.who.compid), current, self.int_mode, self.mtype),),
                      who.who.addr)
 
     def _ack(self, who: Partner, m: Any, now: float) -> None:
         """MISSION_ACK from the partner: a download ends; an upload is cancelled
         (MAV_MISSION_OPERATION_CANCELLED) or its requests switch between _INT and float (UNSUPPORTED)."""
-        if not self._is_partner(who) or m.mission_type != MISSION:
+        if not self._is_partner(who) or m.mission_type != self.mtype:
             return
         if self.state is State.SENDLIST:
             self.last_recv = now
@@ -313,9 +334,11 @@ class LinkTransfer:
             self.host.upload_link = None
         self.state = State.IDLE
 
-    def _answer(self, who: Partner, result: int, mission_type: int = MISSION, text: str | None = None) -> None:
-        """MISSION_ACK with ``result`` to ``who`` (and a STATUSTEXT saying why, in the same datagram)."""
-        ack = mavlink.MAVLink_mission_ack_message(who.who.sysid, who.who.compid, result, mission_type)
+    def _answer(self, who: Partner, result: int, mission_type: int | None = None, text: str | None = None) -> None:
+        """MISSION_ACK with ``result`` to ``who`` (and a STATUSTEXT saying why, in the same datagram), of
+        ``mission_type`` (None: the transfer's)."""
+        ack = mavlink.MAVLink_mission_ack_message(who.who.sysid, who.who.compid, result,
+                                                  self.mtype if mission_type is None else mission_type)
         texts = self.host.texts(mavlink.MAV_SEVERITY_CRITICAL, text) if text is not None else []
         who.ep.reply((ack, *texts), who.who.addr)
 

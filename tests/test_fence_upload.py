@@ -1,0 +1,129 @@
+"""Covers bridge.mavlink.fenceitems, bridge.nodes.vehicle.zones and bridge.record.policies: a fence and rally points
+as a ground station uploads them (MAV_MISSION_TYPE_FENCE, _RALLY), checked, held, read as a plan's, the rally
+points given to Return, the fence watched in flight, and the geofence policy's use of the vehicle's ``geofence``
+event. Pure: the protocol over UDP is tests/test_mission_protocol.py's, MAVSDK's upload and a flight leaving the
+fence tests/test_await_mission.py's."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from pymavlink.dialects.v20 import common as M
+
+from bridge.core.flight import prepare
+from bridge.mavlink.fenceitems import FENCE, RALLY, fence_plan, parse_zone_item
+from bridge.mavlink.missionitems import ItemRefused
+from bridge.nodes.vehicle.missiontransfer import Mission
+from bridge.nodes.vehicle.zones import HeldZones
+from bridge.record.events import RunEvent
+from bridge.record.policies import Rules, geofence_kept
+from missions import MISSION_DIR
+from missions.geodetic import Home
+
+HOME = Home()  # the vehicle's default home (PX4 SITL's)
+POLY_IN, POLY_OUT = M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION, M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION
+CIRCLE_IN, CIRCLE_OUT = M.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION, M.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION
+
+
+def _at(x: float, y: float) -> tuple[int, int]:
+    """degE7 of the point x m north, y m west of the home (the paper frame)."""
+    lat, lon, _ = HOME.global_of(x, -y, 0.0)
+    return round(lat * 1e7), round(lon * 1e7)
+
+
+def _item(seq: int, command: int, p1: float, x: float, y: float, frame: int = M.MAV_FRAME_GLOBAL_INT,
+          mission_type: int = FENCE) -> M.MAVLink_mission_item_int_message:
+    lat, lon = _at(x, y)
+    return M.MAVLink_mission_item_int_message(1, 1, seq, frame, command, 0, 1, p1, 0.0, 0.0, 0.0, lat, lon, 0.0,
+                                              mission_type)
+
+
+def _square(half: float, command: int = POLY_IN, first: int = 0) -> list[M.MAVLink_mission_item_int_message]:
+    corners = ((-half, -half), (-half, half), (half, half), (half, -half))
+    return [_item(first + i, command, 4.0, x, y) for i, (x, y) in enumerate(corners)]
+
+
+def _held(items: list[M.MAVLink_mission_item_int_message], mission_type: int = FENCE) -> Mission:
+    return Mission(tuple(parse_zone_item(m, True, mission_type) for m in items))
+
+
+@pytest.mark.parametrize("item, mission_type, result", [
+    (_item(0, POLY_IN, 2.0, 0.0, 0.0), FENCE, M.MAV_MISSION_ERROR),  # PX4's "Fence: too few vertices"
+    (_item(0, CIRCLE_IN, 0.0, 0.0, 0.0), FENCE, M.MAV_MISSION_INVALID_PARAM1),
+    (_item(0, CIRCLE_OUT, math.nan, 0.0, 0.0), FENCE, M.MAV_MISSION_INVALID_PARAM1),
+    (_item(0, M.MAV_CMD_NAV_WAYPOINT, 0.0, 0.0, 0.0), FENCE, M.MAV_MISSION_UNSUPPORTED),
+    (_item(0, M.MAV_CMD_NAV_RALLY_POINT, 0.0, 0.0, 0.0), FENCE, M.MAV_MISSION_UNSUPPORTED),
+    (_item(0, CIRCLE_IN, 5.0, 0.0, 0.0, mission_type=RALLY), RALLY, M.MAV_MISSION_UNSUPPORTED),
+    (_item(0, M.MAV_CMD_NAV_RALLY_POINT, 0.0, 0.0, 0.0, frame=M.MAV_FRAME_LOCAL_NED), RALLY,
+     M.MAV_MISSION_UNSUPPORTED_FRAME),
+], ids=["two-vertices", "zero-radius", "nan-radius", "waypoint-in-fence", "rally-in-fence", "circle-in-rally",
+        "local-frame"])
+def test_a_bad_zone_item_gets_its_result(item, mission_type, result) -> None:
+    with pytest.raises(ItemRefused) as exc:
+        parse_zone_item(item, True, mission_type)
+    assert exc.value.result == result
+
+
+def test_a_fence_reads_as_a_plans_polygons_and_circles() -> None:
+    """Four vertices of an inclusion square and an exclusion circle: one polygon and one circle, the corners
+    and the centre where they were sent (degE7); a legacy MISSION_ITEM (deg) reads the same."""
+    items = [*_square(10.0), _item(4, CIRCLE_OUT, 2.5, 3.0, -3.0)]
+    plan = fence_plan(_held(items).items)
+    assert [p["inclusion"] for p in plan["polygons"]] == [True] and len(plan["polygons"][0]["polygon"]) == 4
+    assert plan["polygons"][0]["polygon"][0] == [items[0].x / 1e7, items[0].y / 1e7]
+    assert plan["circles"] == [{"inclusion": False, "circle": {"center": [items[4].x / 1e7, items[4].y / 1e7],
+                                                               "radius": 2.5}}]
+    legacy = M.MAVLink_mission_item_message(1, 1, 0, M.MAV_FRAME_GLOBAL, CIRCLE_OUT, 0, 1, 2.5, 0, 0, 0,
+                                            items[4].x / 1e7, items[4].y / 1e7, 0.0, FENCE)
+    assert parse_zone_item(legacy, False, FENCE).x == items[4].x
+
+
+def test_a_polygon_short_of_its_vertices_is_named() -> None:
+    items = [*_square(10.0)[:3], _item(3, CIRCLE_IN, 50.0, 0.0, 0.0)]
+    with pytest.raises(ValueError, match="fence item 0: a polygon of 4 vertices"):
+        fence_plan(_held(items).items)
+
+
+def test_held_zones_give_return_its_rally_points_and_watch_the_fence() -> None:
+    """A real vehicle (the sine's): uploaded rally points are its Return's, in the paper frame; a fence is
+    watched after each step, its first breach said once as a ``geofence`` event (a new fence afresh); a fence
+    that cannot be read is refused with why, and the one held stays."""
+    sim = prepare(MISSION_DIR / "sine.toml").make_vehicle()
+    zones = HeldZones(sim, (HOME.lat, HOME.lon, HOME.alt))
+    rally = [_item(0, M.MAV_CMD_NAV_RALLY_POINT, 0.0, 4.0, -6.0, mission_type=RALLY)]
+    assert zones.accept(_held(rally, RALLY), RALLY) is None
+    assert np.allclose(sim.rally, [(4.0, -6.0)], atol=0.02), sim.rally
+    fence = _held([*_square(5.0), _item(4, CIRCLE_OUT, 1.0, 2.0, 2.0)])
+    assert zones.accept(fence, FENCE) is None and zones.items[FENCE] is fence
+    X = [0.0] * 12
+    for x, y in ((0.0, 0.0), (4.0, -4.0)):
+        X[0], X[2] = x, y
+        zones.step(1.0, tuple(X))
+    assert not [e for e in sim.events if e.kind == "geofence"]
+    X[0], X[2] = 2.0, 2.2  # inside the excluded circle
+    zones.step(2.0, tuple(X))
+    X[0] = 6.0  # and out of the square
+    zones.step(3.0, tuple(X))
+    left = [e for e in sim.events if e.kind == "geofence"]
+    assert len(left) == 1 and "outside the uploaded fence" in left[0].text
+    short = _held(_square(5.0)[:3])
+    assert "a polygon of 4 vertices" in (zones.accept(short, FENCE) or "")
+    assert zones.items[FENCE] is fence
+    assert zones.accept(_held(_square(50.0)), FENCE) is None  # a new fence: watched afresh
+    zones.step(4.0, tuple(X))
+    assert len([e for e in sim.events if e.kind == "geofence"]) == 1  # (inside the new one)
+    assert zones.accept(Mission(), RALLY) is None and sim.rally == ()  # a clear: Return goes home
+
+
+def test_the_geofence_policy_fails_on_the_vehicles_geofence_event() -> None:
+    """No mission fence, but the vehicle said it left an uploaded one: the policy fails at that time, with its
+    words; without the event it holds."""
+    t = np.arange(0.0, 1.0, 0.004)
+    trace = {"x": np.zeros_like(t), "y": np.zeros_like(t)}
+    rules = Rules(rate_hz=250.0, timeout_s=0.5, clock="lockstep")
+    assert geofence_kept(t, trace, rules).ok
+    left = RunEvent.at(0.5, "geofence", "outside the uploaded fence: x")
+    v = geofence_kept(t, trace, rules, [left])
+    assert (v.ok, v.t, v.why) == (False, 0.5, "outside the uploaded fence: x")
