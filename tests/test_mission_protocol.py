@@ -449,7 +449,12 @@ def test_a_fence_and_rally_points_are_held_apart_from_the_mission(tmp_path):
             ack = _ack(gcs)
             assert (ack.type, ack.mission_type) == (M.MAV_MISSION_ACCEPTED, M.MAV_MISSION_TYPE_ALL)
             assert _download(gcs) == [] and _download_type(gcs, M.MAV_MISSION_TYPE_FENCE) == []
+            gcs.mav.mission_count_send(*_tgt(gcs), 0, M.MAV_MISSION_TYPE_FENCE)  # clears of nothing: answered,
+            assert _ack(gcs).type == M.MAV_MISSION_ACCEPTED  # not said as a change
+            gcs.mav.mission_clear_all_send(*_tgt(gcs), M.MAV_MISSION_TYPE_RALLY)
+            assert _ack(gcs).type == M.MAV_MISSION_ACCEPTED
     events = v.events()
+    assert sum(s.startswith("mission: ") and "cleared" in s for s in events) == 3, events  # rally; mission, fence
     assert sum(s.startswith("mission: fence uploaded 5 items") and "[by 255:190 " in s for s in events) == 1, events
     assert sum(s.startswith("mission: rally points uploaded 2 items") for s in events) == 1, events
     refused = [r.text for r in v.reports() if isinstance(r, Refused)]

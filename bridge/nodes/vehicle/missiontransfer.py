@@ -137,11 +137,12 @@ class LinkTransfer:
             self._busy(who, mtype)
             return False
         if kind == "MISSION_CLEAR_ALL":
-            for t in TYPES if mtype == mavlink.MAV_MISSION_TYPE_ALL else (mtype,):
-                if self.host.held(t).items:  # clearing nothing changes nothing: answered, not said as a change
-                    self.host.accept(who, Mission(), "cleared", t)
+            types = TYPES if mtype == mavlink.MAV_MISSION_TYPE_ALL else (mtype,)
+            held = [t for t in types if self.host.held(t).items]
+            for t in held:  # clearing nothing changes nothing: answered, not said as a change
+                self.host.accept(who, Mission(), "cleared", t)
             self._answer(who, mavlink.MAV_MISSION_ACCEPTED, mtype)
-            return True
+            return bool(held)
         return self._set_current(who, m)
 
     def tick(self, now: float) -> None:
@@ -172,10 +173,12 @@ class LinkTransfer:
             self._answer(who, mavlink.MAV_MISSION_NO_SPACE, mtype)
             return False
         self.mtype = mtype
-        if m.count == 0:
-            self.host.accept(who, Mission(), "cleared (an upload of 0 items)", mtype)
+        if m.count == 0:  # a clear (of nothing: answered, not said as a change)
+            held = bool(self.host.held(mtype).items)
+            if held:
+                self.host.accept(who, Mission(), "cleared (an upload of 0 items)", mtype)
             self._answer(who, mavlink.MAV_MISSION_ACCEPTED)
-            return True
+            return held
         self.state, self.partner, self.host.upload_link = State.GETLIST, who, self.link
         self.seq, self.count, self.staged, self.staged_current = 0, m.count, [], 0
         self.last_recv = self.started = now
