@@ -113,7 +113,7 @@ else:  # the flight parts: what MAVSDK's telemetry shows, each callback under on
         with cond:
             seen["rel"] = p.relative_altitude_m
             seen["top"] = max(seen["top"], p.relative_altitude_m)
-            seen["geo"] = (p.latitude_deg, p.longitude_deg, p.absolute_altitude_m)
+            seen["geo"] = (p.latitude_deg, p.longitude_deg, p.absolute_altitude_m, p.relative_altitude_m)
             cond.notify_all()
     def on_heading(h, ud=None):
         with cond:
@@ -152,13 +152,15 @@ elif sys.argv[2] == "goto":  # take off to 3 m, then goto_location 4 m north, 3 
     out["takeoff"] = act.takeoff().name
     until("at_height", lambda: modes[-2:] == ["TAKEOFF", "HOLD"] and seen["rel"] > 2.9, 15)
     with cond:
-        lat0, lon0, amsl = seen["geo"]
+        lat0, lon0, amsl, rel = seen["geo"]
         start = seen["ned"]
     R = 6371000.0  # the vehicle's projection's sphere (PX4's): the target within a centimetre of 4 m, 3 m here
     lat = lat0 + (4.0 - start[0]) / R * 180.0 / 3.141592653589793
     lon = lon0 + (3.0 - start[1]) / (R * __import__("math").cos(lat0 * 3.141592653589793 / 180.0)) * 180.0 \
         / 3.141592653589793
-    out["goto"] = act.goto_location(lat, lon, amsl - start[2] + 5.0, 90.0).name
+    # 5 m above home: the home's altitude from one message (GLOBAL_POSITION_INT's alt and relative_alt, in mm),
+    # not from two taken at different moments (a CI run once got 3.5 cm of the climb between them)
+    out["goto"] = act.goto_location(lat, lon, amsl - rel + 5.0, 90.0).name
     there = lambda: sum((a - b) ** 2 for a, b in zip(seen["ned"], (4.0, 3.0, 5.0))) ** 0.5 < 0.1 \
         and abs(seen["heading"] - 90.0) < 3.0
     until("there", there, 30)
