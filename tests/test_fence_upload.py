@@ -1,8 +1,9 @@
-"""Covers bridge.mavlink.fenceitems, bridge.nodes.vehicle.zones and bridge.record.policies: a fence and rally points
-as a ground station uploads them (MAV_MISSION_TYPE_FENCE, _RALLY), checked, held, read as a plan's, the rally
-points given to Return, the fence watched in flight, and the geofence policy's use of the vehicle's ``geofence``
-event. Pure: the protocol over UDP is tests/test_mission_protocol.py's, MAVSDK's upload and a flight leaving the
-fence tests/test_await_mission.py's."""
+"""Covers bridge.mavlink.fenceitems, bridge.nodes.vehicle.zones and bridge.autopilot.simvehicle: a fence and rally
+points as a ground station uploads them (MAV_MISSION_TYPE_FENCE, _RALLY), checked, held, read as a plan's, the rally
+points given to Return, the fence watched in flight; PX4's GF_MAX_HOR_DIST and GF_MAX_VER_DIST watched by the
+vehicle in every clock; and the geofence policy's use of the vehicle's ``geofence`` event. Pure: the protocol over
+UDP is tests/test_mission_protocol.py's, MAVSDK's upload and a flight leaving the fence
+tests/test_await_mission.py's."""
 
 from __future__ import annotations
 
@@ -12,6 +13,8 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as M
 
+from bridge import simulate
+from bridge.autopilot.simvehicle import limits_passed
 from bridge.core.flight import prepare
 from bridge.mavlink.fenceitems import FENCE, RALLY, fence_plan, parse_zone_item
 from bridge.mavlink.missionitems import ItemRefused
@@ -127,3 +130,27 @@ def test_the_geofence_policy_fails_on_the_vehicles_geofence_event() -> None:
     left = RunEvent.at(0.5, "geofence", "outside the uploaded fence: x")
     v = geofence_kept(t, trace, rules, [left])
     assert (v.ok, v.t, v.why) == (False, 0.5, "outside the uploaded fence: x")
+
+
+def test_gf_max_limits_are_px4s_distances_from_home() -> None:
+    """Horizontal distance from home and height above it, each against its limit; 0 is no limit."""
+    home = (1.0, 2.0, 0.5)
+    X = (4.0, 0.0, 6.0, 0.0, 3.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # 5 m away, 3 m up
+    assert [w for w, _ in limits_passed(X, home, 4.9, 2.9)] == ["hor", "ver"]
+    assert limits_passed(X, home, 5.1, 3.1) == [] and limits_passed(X, home, 0.0, 0.0) == []
+    assert "5.00 m from home, beyond GF_MAX_HOR_DIST = 4.9 m" in limits_passed(X, home, 4.9, 0.0)[0][1]
+
+
+def test_a_flight_above_gf_max_ver_dist_fails_the_geofence_policy_once() -> None:
+    """The sine climbs 0.1 m/s: with GF_MAX_VER_DIST = 2 m (a ``[params]`` entry or ``--param``) the vehicle says
+    once, at 20 s, that it is above it, and the geofence policy fails there (the flight itself completes: checked,
+    not enforced); GF_MAX_HOR_DIST = 2.5 m, which the 1 m circle about (0, 1) never passes from its start, holds;
+    without them, nothing."""
+    run = simulate("missions/sine.toml", params={"GF_MAX_VER_DIST": 2.0, "GF_MAX_HOR_DIST": 2.5}, plots=False)
+    left = [e for e in run.summary["events"] if e["kind"] == "geofence"]
+    assert len(left) == 1 and "beyond GF_MAX_VER_DIST = 2 m" in left[0]["text"], left
+    assert 20.0 <= left[0]["t"] <= 20.1, left
+    fence = next(p for p in run.summary["policies"] if p["name"] == "geofence")
+    assert not fence["ok"] and fence["t"] == left[0]["t"] and run.summary["outcome"] == "completed"
+    quiet = simulate("missions/sine.toml", plots=False)
+    assert next(p for p in quiet.summary["policies"] if p["name"] == "geofence")["ok"]

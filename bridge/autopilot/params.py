@@ -39,6 +39,8 @@ REAL32 = "REAL32"
 INT32 = "INT32"
 PREFLIGHT_DISARM_RANGE_S = (-1.0, 600.0)  # COM_DISARM_PRFLT: PX4 gives no bounds; -1 (any value <= 0) is off
 TAKEOFF_ALT_RANGE_M = (0.5, 50.0)  # MIS_TAKEOFF_ALT: inside the plant's 100 m envelope; PX4: 0..80 m
+GF_MAX_HOR_RANGE_M = (0.0, 10000.0)  # GF_MAX_HOR_DIST: PX4's range; 0 is off
+GF_MAX_VER_RANGE_M = (0.0, 1000.0)  # GF_MAX_VER_DIST: PX4's range; 0 is off
 SYSID_RANGE = (1, 254)  # MAV_SYS_ID and --sysid (0 is broadcast, 255 a ground station's by custom)
 
 
@@ -52,6 +54,8 @@ class VehicleParams:
     failure_injection: int = 0  # SYS_FAILURE_EN: 1 acts on MAV_CMD_INJECT_FAILURE, 0 denies it (PX4's default)
     rtl: ReturnConfig = ReturnConfig()  # RTL_RETURN_ALT, RTL_DESCEND_ALT: Return mode's heights above home, m
     preflight_disarm_s: float = 10.0  # COM_DISARM_PRFLT: armed on the ground, disarmed if not started by then (s)
+    max_hor_m: float = 0.0  # GF_MAX_HOR_DIST: the farthest from home (m, horizontally) the vehicle may fly; 0: any
+    max_ver_m: float = 0.0  # GF_MAX_VER_DIST: the highest above home (m) it may fly; 0: any
 
 
 @dataclass(frozen=True)
@@ -104,9 +108,18 @@ PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("COM_DISARM_PRFLT", REAL32, "s", *PREFLIGHT_DISARM_RANGE_S,
               "armed on the ground by a ground station and not started within this time, the vehicle disarms "
               "itself (PX4's pre-takeoff timeout, default 10 s; 0 or less: never; docs/missions.md)"),
+    ParamSpec("GF_MAX_HOR_DIST", REAL32, "m", *GF_MAX_HOR_RANGE_M,
+              "geofence: the farthest from home the vehicle may fly, horizontally (0: no limit); beyond it the run's "
+              "geofence policy fails (checked, not enforced)"),
+    ParamSpec("GF_MAX_VER_DIST", REAL32, "m", *GF_MAX_VER_RANGE_M,
+              "geofence: the highest above home the vehicle may fly (0: no limit); above it the run's geofence "
+              "policy fails (checked, not enforced)"),
 )
 BY_NAME = {p.name: p for p in PARAMS}
 _RTL_FIELDS = {"RTL_RETURN_ALT": "return_alt_m", "RTL_DESCEND_ALT": "descend_alt_m"}  # -> ReturnConfig's field
+# the REAL32 parameters that are one field of VehicleParams each
+_FIELDS = {"COM_DISARM_PRFLT": "preflight_disarm_s", "GF_MAX_HOR_DIST": "max_hor_m", "GF_MAX_VER_DIST": "max_ver_m",
+           "MIS_TAKEOFF_ALT": "takeoff_alt_m"}
 
 
 class ParamRefused(ValueError):
@@ -122,11 +135,11 @@ def read_param(p: VehicleParams, name: str) -> float:
         return float(getattr(p.failsafe, spec.failsafe_key))
     if name == "SYS_FAILURE_EN":
         return float(p.failure_injection)
-    if name == "COM_DISARM_PRFLT":
-        return float(p.preflight_disarm_s)
+    if name in _FIELDS:
+        return float(getattr(p, _FIELDS[name]))
     if name in _RTL_FIELDS:
         return float(getattr(p.rtl, _RTL_FIELDS[name]))
-    return float(p.takeoff_alt_m if name == "MIS_TAKEOFF_ALT" else p.sysid)
+    return float(p.sysid)
 
 
 def _float32(x: float) -> float | None:
@@ -189,12 +202,10 @@ def change_param(p: VehicleParams, name: str, value: float, running: bool = True
         return replace(p, failsafe=replace(p.failsafe, action=(spec.choices or {})[int(value)]))
     if spec.failsafe_key is not None:
         return replace(p, failsafe=replace(p.failsafe, **{spec.failsafe_key: float(value)}))
-    if name == "MIS_TAKEOFF_ALT":
-        return replace(p, takeoff_alt_m=float(value))
+    if name in _FIELDS:
+        return replace(p, **{_FIELDS[name]: float(value)})
     if name == "SYS_FAILURE_EN":
         return replace(p, failure_injection=int(value))
-    if name == "COM_DISARM_PRFLT":
-        return replace(p, preflight_disarm_s=float(value))
     if name in _RTL_FIELDS:
         return replace(p, rtl=replace(p.rtl, **{_RTL_FIELDS[name]: float(value)}))
     return replace(p, sysid=int(value))

@@ -82,6 +82,8 @@ class SimVehicle:
     rtl: ReturnConfig = field(default_factory=ReturnConfig)  # Return mode's heights (RTL_RETURN_ALT, RTL_DESCEND_ALT)
     preflight_disarm_s: float = 10.0  # COM_DISARM_PRFLT (s): a ground station's arm on the ground times out
     rally: tuple[tuple[float, float], ...] = ()  # m: rally points, where Return may land instead (missions.rally)
+    max_hor_m: float = 0.0  # GF_MAX_HOR_DIST (m): the farthest from home it may fly, horizontally; 0: any
+    max_ver_m: float = 0.0  # GF_MAX_VER_DIST (m): the highest above home it may fly; 0: any
 
     def __post_init__(self) -> None:
         if self.estimator is None:
@@ -102,6 +104,7 @@ class SimVehicle:
         self._injected: list[tuple[TimedEvent, Sender]] = []  # a ground station's, acted on next period (schedule)
         self._impact_noted = False  # a disarmed vehicle's hard touchdown is logged once (plant_verdict)
         self._period_s = self.plant.dt * self.substeps
+        self._beyond: set[str] = set()  # the GF_MAX_* limits said to be passed (once each, until one changes)
 
     @property
     def t(self) -> float:
@@ -256,7 +259,7 @@ class SimVehicle:
     def params(self, sysid: int = 1) -> VehicleParams:
         """The settings the parameters read (:mod:`bridge.autopilot.params`), as they are now."""
         return VehicleParams(self.failsafe, self.takeoff_alt_m, sysid, self.failure_injection, self.rtl,
-                             self.preflight_disarm_s)
+                             self.preflight_disarm_s, self.max_hor_m, self.max_ver_m)
 
     def change_param(self, name: str, value: float, sysid: int = 1) -> Event | None:
         """Set parameter ``name`` (PX4's name, :mod:`bridge.autopilot.params`) to ``value``, checked
@@ -270,8 +273,19 @@ class SimVehicle:
         self.failsafe, self.takeoff_alt_m = after.failsafe, after.takeoff_alt_m
         self.failure_injection, self.rtl = after.failure_injection, after.rtl
         self.preflight_disarm_s = after.preflight_disarm_s
+        if (self.max_hor_m, self.max_ver_m) != (after.max_hor_m, after.max_ver_m):
+            self.max_hor_m, self.max_ver_m = after.max_hor_m, after.max_ver_m
+            self._beyond.clear()  # a new limit is watched afresh
         old, new = read_param(before, name), read_param(after, name)
         return self.event("param", f"{name} = {new:g} (was {old:g})", param=ParamChanged(name, float(old), float(new)))
+
+    def _check_limits(self) -> None:
+        """The first time the vehicle is beyond GF_MAX_HOR_DIST or GF_MAX_VER_DIST, a ``geofence`` event says so
+        (the run's geofence policy then fails); checked, not enforced."""
+        for which, why in limits_passed(self.plant.state, self.home, self.max_hor_m, self.max_ver_m):
+            if which not in self._beyond:
+                self._beyond.add(which)
+                self.event("geofence", f"{why} (checked, not enforced: PX4 would act on it, GF_ACTION)")
 
     def fly_onboard(self, target: Target, mode: str) -> None:
         """Hand the motors to the on-board controller flying ``target`` under ``mode`` (not
@@ -375,6 +389,8 @@ class SimVehicle:
         (:meth:`plant.Quadrotor.steps`, the same bits).
         """
         p = self.plant
+        if self.armed and (self.max_hor_m > 0.0 or self.max_ver_m > 0.0):
+            self._check_limits()
         pending = self._pending_events
         t0 = self._mission_t0  # (0.0 offline and in lockstep: the same bits as plant time)
         while (pending and t0 is not None
@@ -417,6 +433,19 @@ class SimVehicle:
                 arrived = sensors.sample(p.t, p.state)
                 if arrived:
                     estimator.step(p.t, arrived)
+
+
+def limits_passed(X: tuple[float, ...], home: tuple[float, float, float], max_hor_m: float,
+                  max_ver_m: float) -> list[tuple[str, str]]:
+    """The GF_MAX_HOR_DIST and GF_MAX_VER_DIST limits (m; 0: none) state X (paper frame) is beyond, about ``home``
+    (x, y, z m), as PX4's geofence judges them (horizontal distance from home, height above it): (which, why)."""
+    out = []
+    d, up = math.hypot(X[0] - home[0], X[2] - home[1]), X[4] - home[2]
+    if max_hor_m > 0.0 and d > max_hor_m:
+        out.append(("hor", f"{d:.2f} m from home, beyond GF_MAX_HOR_DIST = {max_hor_m:g} m"))
+    if max_ver_m > 0.0 and up > max_ver_m:
+        out.append(("ver", f"{up:.2f} m above home, beyond GF_MAX_VER_DIST = {max_ver_m:g} m"))
+    return out
 
 
 def _none_before(due: float | None, end: float) -> bool:

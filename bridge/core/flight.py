@@ -100,18 +100,15 @@ class Flight:
 
     def make_vehicle(self, armed: bool = False) -> SimVehicle:
         plant = self.make_plant()
+        p, m = self.params, self.mission
+        settings = {"armed": armed, "takeoff_alt_m": p.takeoff_alt_m, "timeline": self.timeline,
+                    "failure_injection": p.failure_injection, "rtl": p.rtl, "preflight_disarm_s": p.preflight_disarm_s,
+                    "max_hor_m": p.max_hor_m, "max_ver_m": p.max_ver_m, "rally": m.rally}
         if self.estimator == "truth":  # no sensors to sample: the plant's state is published as it is
-            return SimVehicle(plant, self.substeps, self.failsafe, armed=armed,
-                              takeoff_alt_m=self.params.takeoff_alt_m, timeline=self.timeline,
-                              failure_injection=self.params.failure_injection, rtl=self.params.rtl,
-                              preflight_disarm_s=self.params.preflight_disarm_s, rally=self.mission.rally)
-        m = self.mission
+            return SimVehicle(plant, self.substeps, self.failsafe, **settings)
         suite = SensorSuite(self.sensors, m.seed, m.physics_hz, self.profile.gravity)
         est = make_estimator(self.estimator, self.sensors, plant.state, self.profile.gravity, lambda: plant.state)
-        return SimVehicle(plant, self.substeps, self.failsafe, armed=armed, sensors=suite, estimator=est,
-                          takeoff_alt_m=self.params.takeoff_alt_m, timeline=self.timeline,
-                          failure_injection=self.params.failure_injection, rtl=self.params.rtl,
-                          preflight_disarm_s=self.params.preflight_disarm_s, rally=m.rally)
+        return SimVehicle(plant, self.substeps, self.failsafe, sensors=suite, estimator=est, **settings)
 
     def make_controller(self) -> Controller:
         ctl = self._controller()
