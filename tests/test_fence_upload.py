@@ -8,6 +8,7 @@ tests/test_await_mission.py's."""
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -89,6 +90,12 @@ def test_a_polygon_short_of_its_vertices_is_named() -> None:
         fence_plan(_held(items).items)
 
 
+def _period_at(sim: Any, x: float, y: float) -> None:
+    """One control period of ``sim`` from x, y (m, paper frame), 1 m up at rest."""
+    sim.plant.state = (x, 0.0, y, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    sim.advance()
+
+
 def test_held_zones_give_return_its_rally_points_and_watch_the_fence() -> None:
     """A real vehicle (the sine's): uploaded rally points are its Return's, in the paper frame; a fence is
     watched after each step, its first breach said once as a ``geofence`` event (a new fence afresh); a fence
@@ -100,22 +107,19 @@ def test_held_zones_give_return_its_rally_points_and_watch_the_fence() -> None:
     assert np.allclose(sim.rally, [(4.0, -6.0)], atol=0.02), sim.rally
     fence = _held([*_square(5.0), _item(4, CIRCLE_OUT, 1.0, 2.0, 2.0)])
     assert zones.accept(fence, FENCE) is None and zones.items[FENCE] is fence
-    X = [0.0] * 12
+    sim.arm()  # (the vehicle watches its fence while armed, each control period as it begins)
     for x, y in ((0.0, 0.0), (4.0, -4.0)):
-        X[0], X[2] = x, y
-        zones.step(1.0, tuple(X))
+        _period_at(sim, x, y)
     assert not [e for e in sim.events if e.kind == "geofence"]
-    X[0], X[2] = 2.0, 2.2  # inside the excluded circle
-    zones.step(2.0, tuple(X))
-    X[0] = 6.0  # and out of the square
-    zones.step(3.0, tuple(X))
+    _period_at(sim, 2.0, 2.2)  # inside the excluded circle
+    _period_at(sim, 6.0, 2.2)  # and out of the square
     left = [e for e in sim.events if e.kind == "geofence"]
     assert len(left) == 1 and "outside the uploaded fence" in left[0].text
     short = _held(_square(5.0)[:3])
     assert "a polygon of 4 vertices" in (zones.accept(short, FENCE) or "")
     assert zones.items[FENCE] is fence
     assert zones.accept(_held(_square(50.0)), FENCE) is None  # a new fence: watched afresh
-    zones.step(4.0, tuple(X))
+    _period_at(sim, 6.0, 2.2)
     assert len([e for e in sim.events if e.kind == "geofence"]) == 1  # (inside the new one)
     assert zones.accept(Mission(), RALLY) is None and sim.rally == ()  # a clear: Return goes home
 

@@ -32,6 +32,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+import numpy as np
+
 from bridge.autopilot.estimator import Estimator, TruthEstimator, estimator_nees
 from bridge.autopilot.failsafe import (
     ACTION_TEXT,
@@ -49,6 +51,7 @@ from bridge.autopilot.failsafe import (
 from bridge.autopilot.params import VehicleParams, change_param, read_param
 from bridge.autopilot.vehicleevents import Event, ParamChanged, Sender
 from controller.nominal import Nominal
+from missions.geofence import Geofence
 from plant import Quadrotor
 from plant.events import TimedEvent
 from plant.sensors import SensorSuite
@@ -84,6 +87,7 @@ class SimVehicle:
     rally: tuple[tuple[float, float], ...] = ()  # m: rally points, where Return may land instead (missions.rally)
     max_hor_m: float = 0.0  # GF_MAX_HOR_DIST (m): the farthest from home it may fly, horizontally; 0: any
     max_ver_m: float = 0.0  # GF_MAX_VER_DIST (m): the highest above home it may fly; 0: any
+    fence: Geofence | None = None  # a fence a ground station uploaded (bridge.nodes.vehicle.zones), watched as these
 
     def __post_init__(self) -> None:
         if self.estimator is None:
@@ -104,7 +108,7 @@ class SimVehicle:
         self._injected: list[tuple[TimedEvent, Sender]] = []  # a ground station's, acted on next period (schedule)
         self._impact_noted = False  # a disarmed vehicle's hard touchdown is logged once (plant_verdict)
         self._period_s = self.plant.dt * self.substeps
-        self._beyond: set[str] = set()  # the GF_MAX_* limits said to be passed (once each, until one changes)
+        self._beyond: set[str] = set()  # limits said to be passed: GF_MAX_* and the fence (once each, until changed)
 
     @property
     def t(self) -> float:
@@ -279,10 +283,22 @@ class SimVehicle:
         old, new = read_param(before, name), read_param(after, name)
         return self.event("param", f"{name} = {new:g} (was {old:g})", param=ParamChanged(name, float(old), float(new)))
 
+    def watch_fence(self, fence: Geofence | None) -> None:
+        """Watch ``fence`` (a ground station's; None: none) from now on, afresh."""
+        self.fence = fence
+        self._beyond.discard("fence")
+
     def _check_limits(self) -> None:
-        """The first time the vehicle is beyond GF_MAX_HOR_DIST or GF_MAX_VER_DIST, a ``geofence`` event says so
-        (the run's geofence policy then fails); checked, not enforced."""
-        for which, why in limits_passed(self.plant.state, self.home, self.max_hor_m, self.max_ver_m):
+        """The first time the vehicle is beyond GF_MAX_HOR_DIST or GF_MAX_VER_DIST, or outside the fence a ground
+        station uploaded, a ``geofence`` event says so (the run's geofence policy then fails); checked, not
+        enforced."""
+        X = self.plant.state
+        passed = limits_passed(X, self.home, self.max_hor_m, self.max_ver_m)
+        if self.fence is not None and "fence" not in self._beyond:
+            breach = self.fence.first_breach(np.array((self.plant.t,)), np.array((X[0],)), np.array((X[2],)))
+            if breach is not None:
+                passed.append(("fence", f"outside the uploaded fence: {breach[1]}"))
+        for which, why in passed:
             if which not in self._beyond:
                 self._beyond.add(which)
                 self.event("geofence", f"{why} (checked, not enforced: PX4 would act on it, GF_ACTION)")
@@ -389,7 +405,7 @@ class SimVehicle:
         (:meth:`plant.Quadrotor.steps`, the same bits).
         """
         p = self.plant
-        if self.armed and (self.max_hor_m > 0.0 or self.max_ver_m > 0.0):
+        if self.armed and (self.max_hor_m > 0.0 or self.max_ver_m > 0.0 or self.fence is not None):
             self._check_limits()
         pending = self._pending_events
         t0 = self._mission_t0  # (0.0 offline and in lockstep: the same bits as plant time)

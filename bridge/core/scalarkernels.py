@@ -6,7 +6,7 @@ In:  a :class:`~controller.Controller` and a :class:`~plant.Quadrotor` (importin
 Out: the two given their compiled twins (:func:`compile_scalar`): ``numba.njit`` of
      :func:`controller.kernel.control_step` and of :func:`plant.model.rk4_held` (and ``rk4_held_steps``), no
      ``fastmath``, bit for bit the plain functions (tests/test_kernels.py); the ODOMETRY fields of a state and
-     the state of ODOMETRY's fields (:func:`wire_twins`, bridge.core.wire's, the same bits)
+     the state of ODOMETRY's fields (:func:`wire_twins`: bridge.core.kernels' twins of bridge.core.wire's, checked)
 
 Dispatchers of their own (the batch engine's ``rk4_held`` is another, over the same source and the same cache
 on disk), so that the compiling notice (bridge.autopilot.compiling) looks at these two only.
@@ -21,6 +21,7 @@ from numba import njit
 
 import bridge.core.kernels  # noqa: F401  (registers the helpers these kernels call by name)
 from bridge.core import wire
+from bridge.core.kernels import odometry_fields, state_from_odometry_fields
 from controller import Controller, kernel
 from plant import model
 from plant.quadrotor import Quadrotor
@@ -28,8 +29,6 @@ from plant.quadrotor import Quadrotor
 control_step = njit(cache=True)(kernel.control_step)
 rk4_held = njit(cache=True)(model.rk4_held)
 rk4_held_steps = njit(cache=True)(model.rk4_held_steps)
-odometry_fields = njit(cache=True)(wire.odometry_fields)
-state_from_odometry_fields = njit(cache=True)(wire.state_from_odometry_fields)
 
 
 def compile_scalar(ctl: Controller | None = None, plant: Quadrotor | None = None) -> None:

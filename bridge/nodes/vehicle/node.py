@@ -381,8 +381,6 @@ class Vehicle:
         self.commander.flight_over()
         if self.missions.watch is not None:  # a ground station's mission in flight: its items reached
             self.missions.flight_step(self.t, self.plant.state, self.sim.armed)
-        if self.missions.zones.fence is not None:  # a ground station's fence: left? (said once)
-            self.missions.zones.step(self.plant.t, self.plant.state)
         if self.commander.diverged():
             self.announcer.drain()
             return False

@@ -2,11 +2,11 @@
 held, read as a plan file's are, the rally points given to the vehicle's Return, the fence watched in flight.
 
 In:  an accepted upload's or a clear's items (:mod:`bridge.nodes.vehicle.missiontransfer`), the home (deg, deg,
-     m AMSL); the plant's time (s) and state (paper frame: x, y m at indices 0 and 2) after each control step
+     m AMSL)
 Out: the items held of each type (a download sends them); the vehicle's rally points (``SimVehicle.rally``, m,
-     the paper frame: an upload or a clear replaces the mission's own); a ``geofence`` event the first time the
-     vehicle is outside an uploaded fence (the run's ``geofence`` policy then fails, bridge.record.policies);
-     why an upload cannot be read as a fence or rally points (None: held)
+     the paper frame: an upload or a clear replaces the mission's own) and the fence it watches
+     (:meth:`SimVehicle.watch_fence`: its first breach a ``geofence`` event, which fails the run's ``geofence``
+     policy, bridge.record.policies); why an upload cannot be read as a fence or rally points (None: held)
 
 As PX4's navigator judges a position against its stored fence (missions.geofence: inside an inclusion zone if
 there is one, outside every exclusion zone), checked here, not enforced: PX4 would act on a breach (GF_ACTION),
@@ -15,7 +15,6 @@ this vehicle flies on and says where it left the fence, as it does for a plan's 
 
 from __future__ import annotations
 
-import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.autopilot.simvehicle import SimVehicle
@@ -23,7 +22,7 @@ from bridge.mavlink.fenceitems import fence_plan, rally_plan
 from bridge.nodes.vehicle.missiontransfer import Mission
 from missions.envelope import ENVELOPE_RADIUS_M
 from missions.geodetic import Home
-from missions.geofence import Geofence, geofence_from_plan
+from missions.geofence import geofence_from_plan
 from missions.rally import rally_from_plan
 from params import ConfigError
 
@@ -37,8 +36,6 @@ class HeldZones:
         self.sim = sim
         self.home = Home(*home)
         self.items = {FENCE: Mission(), RALLY: Mission()}
-        self.fence: Geofence | None = None  # the uploaded fence read (None: none, or only a return point)
-        self._left = False  # the vehicle was outside the fence held now (said once per fence)
 
     def accept(self, mission: Mission, mission_type: int) -> str | None:
         """Hold an upload's (or a clear's: no items) fence or rally points, read as a plan's are; why they cannot
@@ -53,18 +50,7 @@ class HeldZones:
             return str(exc)
         self.items[mission_type] = mission
         if mission_type == FENCE:
-            self.fence, self._left = fence, False
+            self.sim.watch_fence(fence)  # (None: no zones, or only a return point)
         else:
             self.sim.rally = rally
         return None
-
-    def step(self, t: float, X: tuple[float, ...]) -> None:
-        """After a control step at plant time ``t`` (s) in state ``X``: the first time the vehicle is outside the
-        fence held, a ``geofence`` event says where."""
-        if self.fence is None or self._left:
-            return
-        breach = self.fence.first_breach(np.array((t,)), np.array((X[0],)), np.array((X[2],)))
-        if breach is not None:
-            self._left = True
-            self.sim.event("geofence", f"outside the uploaded fence: {breach[1]} (checked, not enforced: PX4 "
-                                       "would act on it, GF_ACTION)")
