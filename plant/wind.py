@@ -1,8 +1,8 @@
 """The air the vehicle flies through: steady wind, Dryden turbulence and discrete 1 − cos gusts (pure, seeded).
 
 In:  a mission's ``[wind]`` table (``speed_mps`` m/s, ``from_deg`` the compass direction it blows FROM,
-     ``turbulence`` none|light|moderate|severe, ``altitude_m`` m, ``gusts`` [[t_s, duration_s, amplitude_mps,
-     from_deg]]), a seed, the physics step (s)
+     ``turbulence`` none|light|moderate|severe, ``turbulence_scaling`` exact|none, ``altitude_m`` m, ``gusts``
+     [[t_s, duration_s, amplitude_mps, from_deg]]), the mission's duration (s), a seed, the physics step (s)
 Out: the wind velocity (m/s, paper frame NWU: x north, y west, z up) held over each physics step, and its
      statistics over the flight (the ``wind`` block of ``summary.json``); the turbulence's samples of a whole
      flight (:func:`turbulence_series`, m/s NWU per physics step: what the batch engine flies)
@@ -24,6 +24,9 @@ Every formula and number, with its source: docs/weather.md.
   H(s) = σ √(L/V) (1 + √3 (L/V) s) / (1 + (L/V) s)² in state space, stepped with its matrix exponential
   and the exact covariance of the noise it integrates over h (Q_d = ∫₀ʰ e^{Aτ} B Bᵀ e^{Aᵀτ} dτ, in closed
   form). Each filter starts in its stationary distribution, so the turbulence is stationary from t = 0.
+- **Scaling** (``turbulence_scaling``): ``exact`` (the default) flies the filters' samples over the mission as
+  one record, each axis shifted to a zero mean and scaled to its σ (:class:`TurbulenceRecord`: TurbSim's
+  ScaleIEC); ``none`` flies them as they come (a 30 s flight's sample then strays by seconds-long correlation).
 - **Gusts** (MIL-F-8785C §3.7.4, the 1 − cos shape of CS-25.341): from t_s for duration_s,
   ``amplitude/2 · (1 − cos(2π (t − t_s) / duration))`` along the gust's direction, then nothing.
 
@@ -43,6 +46,7 @@ from params import ConfigError, Table
 FT = 0.3048  # m per foot
 KT = 1852.0 / 3600.0  # m/s per knot
 TURBULENCE = ("none", "light", "moderate", "severe")
+SCALING = ("exact", "none")  # [wind] turbulence_scaling: the flight's record scaled to the asked σ, or free-running
 W20_KT = {"light": 15.0, "moderate": 30.0, "severe": 45.0}  # MIL-F-8785C fig. 11 / MIL-HDBK-1797: W20 by level
 LOW_ALTITUDE_FT = (10.0, 1000.0)  # the low-altitude model's range of h
 MIN_PASS_SPEED_MPS = 1.0  # the frozen field passes the vehicle at least this fast (no mean wind: still defined)
@@ -81,12 +85,15 @@ class WindConfig:
     turbulence: str = "none"
     altitude_m: float | None = None
     gusts: tuple[Gust, ...] = ()
+    scaling: str = "exact"  # SCALING: exact (TurbulenceRecord) or none (the free-running filters)
+    record_s: float = 60.0  # the record's length (s) under exact scaling: the mission's duration (wind_from_table)
 
     def at_altitude(self, altitude_m: float) -> WindConfig:
         return replace(self, altitude_m=altitude_m)
 
     def as_table(self) -> dict:
-        d: dict = {"speed_mps": self.speed_mps, "from_deg": self.from_deg, "turbulence": self.turbulence}
+        d: dict = {"speed_mps": self.speed_mps, "from_deg": self.from_deg, "turbulence": self.turbulence,
+                   "turbulence_scaling": self.scaling}
         if self.altitude_m is not None:
             d["altitude_m"] = self.altitude_m
         if self.gusts:
@@ -106,13 +113,14 @@ def wind_from_table(t: Table, duration_s: float) -> WindConfig:
     speed = t.number("speed_mps", 0.0, lo=r["speed_mps"][0], hi=r["speed_mps"][1])
     from_deg = t.number("from_deg", 0.0, lo=r["from_deg"][0], hi=r["from_deg"][1])
     level = t.string("turbulence", "none", choices=TURBULENCE)
+    scaling = t.string("turbulence_scaling", "exact", choices=SCALING)
     altitude = t.number("altitude_m", lo=r["altitude_m"][0], hi=r["altitude_m"][1]) if t.has("altitude_m") else None
     raw = t.raw("gusts", [])
     if not isinstance(raw, list):
         raise t.error("gusts", "expected a list of [t_s, duration_s, amplitude_mps, from_deg]")
     gusts = tuple(gust_from_list(g, f"{t.key('gusts')}[{i}]", t, duration_s) for i, g in enumerate(raw))
     t.done()
-    return WindConfig(speed, from_deg, level, altitude, gusts)
+    return WindConfig(speed, from_deg, level, altitude, gusts, scaling, duration_s)
 
 
 def gust_from_list(g: object, where: str, t: Table, duration_s: float) -> Gust:
@@ -209,6 +217,10 @@ class Turbulence:
         self._i += 1
         return row
 
+    def now(self) -> tuple[float, float, float]:
+        """This physics step's (u, v, w), m/s."""
+        return (self.u, self.v, self.w)
+
     def _output(self, j: int) -> float:
         _, _, out, x = self._vw[j]
         return out[0] * x[0] + out[1] * x[1]
@@ -226,6 +238,59 @@ class Turbulence:
         self.w = self._output(1)
 
 
+class TurbulenceRecord:
+    """Dryden turbulence as a flight's record (``turbulence_scaling = "exact"``, the default): the shaping
+    filters' (:class:`Turbulence`) samples over ``steps`` physics steps, each axis then shifted to a zero mean
+    and scaled to MIL-HDBK-1797's σ over the record, as TurbSim scales its records to the exact target σ
+    (its ``ScaleIEC``) and as any FFT generator leaves a record's mean at the asked mean wind.
+
+    Why: over a flight of T s, the part of Dryden's u slower than 1/T is, in the flight, a different mean wind
+    (Reynolds' decomposition over T); at L_u/V = 4.6 s and T = 30 s one free-running sample strays ±1.7 m/s on
+    the mean and ±28 % on σ_u (:func:`sampling_errors`), so "moderate" would be flown at 0.55-1.22 of its σ
+    by seed. A record gives every flight the asked mean wind and σ; the spectrum's shape is the filters', its
+    level the record's scale (reported: ``record.scale``). A flight longer than its record flies the next
+    record, the filters continued (each record scaled alone)."""
+
+    def __init__(self, free: Turbulence, steps: int) -> None:
+        self.free = free
+        self.sigma_u, self.sigma_v, self.sigma_w = free.sigma_u, free.sigma_v, free.sigma_w
+        self.l_u, self.l_v, self.l_w = free.l_u, free.l_v, free.l_w
+        self.speed, self.h = free.speed, free.h
+        self.steps = max(int(steps), 2)
+        self.records = 0
+        self.first: dict = {}  # the first record's raw mean and std and its scale per axis (summary.json)
+        self._rows: list[list[float]] = []
+        self._k = 0
+        self._next_record()
+
+    def _next_record(self) -> None:
+        f = self.free
+        raw = [(0.0, 0.0, 0.0)] * self.steps
+        for k in range(self.steps):
+            raw[k] = (f.u, f.v, f.w)
+            f.advance()
+        x = np.array(raw, dtype=np.float64)
+        mean = x.mean(axis=0)
+        dev = x - mean
+        std = np.sqrt((dev * dev).mean(axis=0))
+        sigma = np.array([self.sigma_u, self.sigma_v, self.sigma_w])
+        scale = np.where(std > 0.0, sigma / np.where(std > 0.0, std, 1.0), 0.0)
+        self._rows = (dev * scale).tolist()
+        self._k = 0
+        if not self.records:
+            self.first = {"mean": mean.tolist(), "std": std.tolist(), "scale": scale.tolist()}
+        self.records += 1
+
+    def now(self) -> list[float]:
+        """This physics step's (u, v, w), m/s (the next record worked out only when a step needs it)."""
+        if self._k >= self.steps:
+            self._next_record()
+        return self._rows[self._k]
+
+    def advance(self) -> None:
+        self._k += 1
+
+
 class Wind:
     """The wind the plant flies through: :meth:`now` at a physics step's start (held over it), then
     :meth:`advance`. Its statistics (along, across the initial mean wind, up) accumulate at every step."""
@@ -237,8 +302,11 @@ class Wind:
         b = math.radians(config.from_deg) if config.speed_mps > 0.0 else math.pi  # no wind: u points north
         self.along = (-math.cos(b), math.sin(b))  # unit vector the mean wind blows toward (x, y)
         self.across = (-self.along[1], self.along[0])  # 90° to the left of it (z up)
-        self.turbulence = (Turbulence(config.turbulence, config.altitude_m or 0.0, config.speed_mps, seed, h)
-                           if config.turbulence != "none" else None)
+        self.turbulence: Turbulence | TurbulenceRecord | None = None
+        if config.turbulence != "none":
+            free = Turbulence(config.turbulence, config.altitude_m or 0.0, config.speed_mps, seed, h)
+            self.turbulence = (TurbulenceRecord(free, round(config.record_s / h)) if config.scaling == "exact"
+                               else free)
         self.h = h
         self._n = 0
         self._sum = [0.0] * 6  # Σ along, across, up, Σ of their squares
@@ -276,7 +344,8 @@ class Wind:
         if tu is None:
             return (0.0, 0.0, 0.0)
         (ax, ay), (cx, cy) = self.along, self.across
-        return (tu.u * ax + tu.v * cx, tu.u * ay + tu.v * cy, tu.w)
+        u, v, w = tu.now()
+        return (u * ax + v * cx, u * ay + v * cy, w)
 
     def _count(self, wx: float, wy: float, wz: float, s: list[float]) -> None:
         (ax, ay), (cx, cy) = self.along, self.across
@@ -311,11 +380,18 @@ class Wind:
                              "scale_m": {"u": tu.l_u, "v": tu.l_v, "w": tu.l_w}, "pass_speed_mps": tu.speed,
                              "model_altitude_m": tu.l_w,  # L_w = h: the altitude in the model's range
                              "source": "MIL-F-8785C / MIL-HDBK-1797 low altitude"}
-            out["sampling"] = sampling_errors(tu, self._n * self.h, std_t, self._sum_t[0] / n)
+            if isinstance(tu, TurbulenceRecord):  # what was scaled: the free-running sample's own figures
+                r = tu.first
+                out["record"] = {"length_s": tu.steps * tu.h, "records": tu.records,
+                                 "scale": dict(zip("uvw", r["scale"])),
+                                 "removed_mean_mps": dict(zip("uvw", r["mean"]))}
+                out["sampling"] = sampling_errors(tu, tu.steps * tu.h, r["std"], r["mean"][0])
+            else:
+                out["sampling"] = sampling_errors(tu, self._n * self.h, std_t, self._sum_t[0] / n)
         return out
 
 
-def sampling_errors(tu: Turbulence, duration_s: float, std: list[float], mean_u: float) -> dict:
+def sampling_errors(tu: Turbulence | TurbulenceRecord, duration_s: float, std: list[float], mean_u: float) -> dict:
     """How far one flight's sample of the turbulence is expected to stray from the σ it was generated with.
 
     Over T seconds, a zero-mean Gaussian process of autocorrelation R has a sample mean of variance
@@ -349,11 +425,12 @@ def turbulence_series(config: WindConfig, seed: int, h: float, steps: int) -> np
 
 
 def long_run(config: WindConfig, seed: int, duration_s: float = 3600.0, h: float = 0.02) -> dict:
-    """The same generator (:class:`Wind`, the same configuration and seed's stream) over a long series: its
-    mean wind along the mean direction and the turbulence's std per axis (m/s), with MIL-HDBK-1797's σ and
-    the expected sampling errors over ``duration_s``. The exact discretization makes the statistics the same
-    for any step h, so a coarser step than the flight's suffices; gusts are left out (they are not turbulence)."""
-    wind = Wind(replace(config, gusts=()), seed, h)
+    """The same filters (:class:`Wind`, the same configuration and seed's stream), free-running (a record scaled
+    to σ would show σ by construction), over a long series: its mean wind along the mean direction and the
+    turbulence's std per axis (m/s), with MIL-HDBK-1797's σ and the expected sampling errors over ``duration_s``.
+    The exact discretization makes the statistics the same for any step h, so a coarser step than the flight's
+    suffices; gusts are left out (they are not turbulence)."""
+    wind = Wind(replace(config, gusts=(), scaling="none"), seed, h)
     for k in range(int(round(duration_s / h))):
         wind.now(k * h)
         wind.advance()

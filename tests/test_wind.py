@@ -17,6 +17,7 @@ from plant.wind import (
     KT,
     Gust,
     Turbulence,
+    TurbulenceRecord,
     WindConfig,
     blowing,
     dryden_low_altitude,
@@ -60,14 +61,17 @@ def test_the_second_order_step_is_exact() -> None:
         assert np.allclose(L @ L.T, P - F @ P @ F.T, rtol=1e-6, atol=1e-15)
 
 
-def test_turbulence_spectrum_is_drydens_at_three_frequencies() -> None:
-    """A long run (8000 s at 50 Hz): Welch's PSD of u, v, w against the Dryden forms at 0.1, 0.3 and 1 Hz."""
+@pytest.mark.parametrize("scaling", ["none", "exact"])
+def test_turbulence_spectrum_is_drydens_at_three_frequencies(scaling: str) -> None:
+    """A long run (8000 s at 50 Hz): Welch's PSD of u, v, w against the Dryden forms at 0.1, 0.3 and 1 Hz; the
+    filters free-running (``none``) and as one record scaled to σ (``exact``, the default)."""
     V, h = 5.0, 0.02
-    tu = Turbulence("moderate", 5.0, V, seed=3, h=h)
     n = 400_000
+    tu = Turbulence("moderate", 5.0, V, seed=3, h=h)
+    tu = TurbulenceRecord(tu, n) if scaling == "exact" else tu
     out = np.empty((n, 3))
     for i in range(n):
-        out[i] = (tu.u, tu.v, tu.w)
+        out[i] = tu.now()
         tu.advance()
     f, psd = welch(out[:, 0], 1 / h, 4096)
     _, psd_v = welch(out[:, 1], 1 / h, 4096)
@@ -131,6 +135,8 @@ def test_bad_wind_is_refused_with_the_key_named() -> None:
         simulate("missions/sine.toml", wind={"turbulence": "gale"})
     with pytest.raises(ConfigError, match="wind.speed_mps"):
         simulate("missions/sine.toml", wind=80.0)
+    with pytest.raises(ConfigError, match=r"wind.turbulence_scaling.*exact.*none"):
+        simulate("missions/sine.toml", wind={"turbulence": "light", "turbulence_scaling": "ieC"})
     with pytest.raises(ConfigError, match=r"wind.gusts\[0\]"):
         simulate("missions/sine.toml", wind={"gusts": [[50.0, 1.0, 2.0]]})
 
@@ -139,7 +145,9 @@ def test_the_sines_wind_over_a_long_series_has_milhdbks_mean_and_sigma() -> None
     """The issue's acceptance, measured where it can converge: ``--wind 5:270 --turbulence moderate`` on the sine
     at the flight's altitude (summary.json's ``altitude_m``), the flight's seed and generator, over 3600 s
     (u's correlation time L_u/V is 4.6 s; a 30 s flight's own sample strays ±28 % on σ_u and ±1.7 m/s on the
-    mean: its ``sampling`` block says so). Mean within 0.5 m/s of 5, each σ within 20 % of MIL-HDBK-1797's."""
+    mean: its ``sampling`` block says so, of the record it scaled). Mean within 0.5 m/s of 5, each σ within 20 %
+    of MIL-HDBK-1797's: the free-running filters, as :func:`long_run` flies them (the flight's own scaled record:
+    tests/test_wind_record.py)."""
     s = simulate("missions/sine.toml", wind=(5.0, 270.0), turbulence="moderate").summary["wind"]
     smp = s["sampling"]
     assert smp["duration_s"] == pytest.approx(30.0) and smp["std_rel_se"]["u"] == pytest.approx(0.277, abs=0.001)

@@ -162,6 +162,10 @@ def add_weather_options(p: argparse.ArgumentParser) -> None:
     # the levels are plant.wind.TURBULENCE, written out so that building the parser loads no flight code
     p.add_argument("--turbulence", choices=("none", "light", "moderate", "severe"),
                    help="Dryden turbulence of MIL-HDBK-1797 at low altitude")
+    p.add_argument("--turbulence-scaling", choices=("exact", "none"),  # plant.wind.SCALING
+                   help="exact (default): the flight's turbulence record shifted to a zero mean and scaled to "
+                        "the level's sigma, as TurbSim's ScaleIEC; none: the filters free-running (a short "
+                        "flight's sample strays from both)")
     p.add_argument("--at", action="append", metavar="T:KIND[:ARGS]",
                    help="an event at mission time T s: motor:N=EFF, gps:off|on|jump=DX,DY,DZ, baro:drift=M_PER_S, "
                         "mag:off|on, gyro:bias=X,Y,Z, wind:SPEED[:FROM], gust:DURATION,AMPLITUDE[,FROM], "
@@ -190,6 +194,7 @@ def overrides_from_args(args: argparse.Namespace) -> Overrides:
                      failsafe=failsafe_table_from_args(args) or None, **sensor_overrides_from_args(args),
                      **param_overrides_from_args(args),
                      wind=getattr(args, "wind", None), turbulence=getattr(args, "turbulence", None),
+                     turbulence_scaling=getattr(args, "turbulence_scaling", None),
                      at=tuple(getattr(args, "at", None) or ()))
 
 

@@ -169,10 +169,12 @@ class Overrides:
     wind: Mapping[str, Any] | float | tuple[float, float] | None = None  # over [wind]: a table, SPEED m/s, or
     #   (SPEED m/s, FROM_DEG compass direction it blows from)
     turbulence: str | None = None  # [wind] turbulence: none, light, moderate or severe
+    turbulence_scaling: str | None = None  # [wind] turbulence_scaling: exact (the flight's record at σ) or none
     at: tuple[Mapping[str, Any] | str, ...] = ()  # events after the mission's [[events]]: tables or "T:KIND[:ARGS]"
 
     def __post_init__(self) -> None:
         _check_type("turbulence", self.turbulence, str, "a string")
+        _check_type("turbulence_scaling", self.turbulence_scaling, str, "a string")
         w = self.wind
         if isinstance(w, (int, float)) and not isinstance(w, bool):
             object.__setattr__(self, "wind", {"speed_mps": float(w)})
@@ -246,7 +248,8 @@ class Overrides:
         estimator = merged_tables(m.estimator, {} if self.estimator is None else {"kind": self.estimator})
         # a law file given on the command line or from Python: from the working directory
         law = law_spec_from(self.controller, Path(".")) if self.controller is not None else None
-        wind = merged_tables(m.wind, self.wind, {} if self.turbulence is None else {"turbulence": self.turbulence})
+        wind = merged_tables(m.wind, self.wind, {} if self.turbulence is None else {"turbulence": self.turbulence},
+                             {} if self.turbulence_scaling is None else {"turbulence_scaling": self.turbulence_scaling})
         for e, named in zip(self.at, self._at_named, strict=True):  # each checked alone first: errors name its flag
             event_from_table(Table(e, named), m.duration_s)
         events = (*m.events, *self.at) if self.at else None
