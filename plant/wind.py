@@ -26,7 +26,8 @@ Every formula and number, with its source: docs/weather.md.
   form). Each filter starts in its stationary distribution, so the turbulence is stationary from t = 0.
 - **Scaling** (``turbulence_scaling``): ``exact`` (the default) flies the filters' samples over the mission as
   one record, each axis shifted to a zero mean and scaled to its σ (:class:`TurbulenceRecord`: TurbSim's
-  ScaleIEC); ``none`` flies them as they come (a 30 s flight's sample then strays by seconds-long correlation).
+  ScaleIEC), then on through the filters, free, should the flight outlast its mission; ``none`` flies them as
+  they come (a 30 s flight's sample then strays by seconds-long correlation).
 - **Gusts** (MIL-F-8785C §3.7.4, the 1 − cos shape of CS-25.341): from t_s for duration_s,
   ``amplitude/2 · (1 − cos(2π (t − t_s) / duration))`` along the gust's direction, then nothing.
 
@@ -221,6 +222,19 @@ class Turbulence:
         """This physics step's (u, v, w), m/s."""
         return (self.u, self.v, self.w)
 
+    def rescale(self, scale: list[float], offset: list[float]) -> None:
+        """Map each filter's state so that its output y becomes scale · (y − offset) (u, v, w): the filters then
+        continue a record so scaled without a jump. u is its own state; v and w shift x1 (y = K(a² x1 + √3 a
+        x2): the offset over K a²) and scale both states."""
+        self.u = scale[0] * (self.u - offset[0])
+        for j in range(2):
+            _, _, out, x = self._vw[j]
+            c = scale[1 + j]
+            x[0] = c * x[0] - c * offset[1 + j] / out[0]
+            x[1] = c * x[1]
+        self.v = self._output(0)
+        self.w = self._output(1)
+
     def _output(self, j: int) -> float:
         _, _, out, x = self._vw[j]
         return out[0] * x[0] + out[1] * x[1]
@@ -248,8 +262,10 @@ class TurbulenceRecord:
     (Reynolds' decomposition over T); at L_u/V = 4.6 s and T = 30 s one free-running sample strays ±1.7 m/s on
     the mean and ±28 % on σ_u (:func:`sampling_errors`), so "moderate" would be flown at 0.55-1.22 of its σ
     by seed. A record gives every flight the asked mean wind and σ; the spectrum's shape is the filters', its
-    level the record's scale (reported: ``record.scale``). A flight longer than its record flies the next
-    record, the filters continued (each record scaled alone)."""
+    level the record's scale (reported: ``record.scale``). A flight longer than its record (a vehicle that
+    flies on after its mission, a real-time vehicle's steps before it) flies on through the filters, free,
+    from where the record ends (:meth:`Turbulence.rescale`: continuous), at one step's cost a step: no new
+    record is worked out while a real-time vehicle flies."""
 
     def __init__(self, free: Turbulence, steps: int) -> None:
         self.free = free
@@ -257,18 +273,10 @@ class TurbulenceRecord:
         self.l_u, self.l_v, self.l_w = free.l_u, free.l_v, free.l_w
         self.speed, self.h = free.speed, free.h
         self.steps = max(int(steps), 2)
-        self.records = 0
-        self.first: dict = {}  # the first record's raw mean and std and its scale per axis (summary.json)
-        self._rows: list[list[float]] = []
-        self._k = 0
-        self._next_record()
-
-    def _next_record(self) -> None:
-        f = self.free
         raw = [(0.0, 0.0, 0.0)] * self.steps
         for k in range(self.steps):
-            raw[k] = (f.u, f.v, f.w)
-            f.advance()
+            raw[k] = free.now()
+            free.advance()
         x = np.array(raw, dtype=np.float64)
         mean = x.mean(axis=0)
         dev = x - mean
@@ -276,19 +284,24 @@ class TurbulenceRecord:
         sigma = np.array([self.sigma_u, self.sigma_v, self.sigma_w])
         scale = np.where(std > 0.0, sigma / np.where(std > 0.0, std, 1.0), 0.0)
         self._rows = (dev * scale).tolist()
-        self._k = 0
-        if not self.records:
-            self.first = {"mean": mean.tolist(), "std": std.tolist(), "scale": scale.tolist()}
-        self.records += 1
+        self.first = {"mean": mean.tolist(), "std": std.tolist(), "scale": scale.tolist()}  # summary.json
+        free.rescale(scale.tolist(), mean.tolist())  # its next sample continues the record's last
+        self._k = 0  # the physics steps flown
 
-    def now(self) -> list[float]:
-        """This physics step's (u, v, w), m/s (the next record worked out only when a step needs it)."""
-        if self._k >= self.steps:
-            self._next_record()
-        return self._rows[self._k]
+    def now(self) -> list[float] | tuple[float, float, float]:
+        """This physics step's (u, v, w), m/s: the record's, then the filters' (free) after it."""
+        k = self._k
+        return self._rows[k] if k < self.steps else self.free.now()
 
     def advance(self) -> None:
+        if self._k >= self.steps:
+            self.free.advance()
         self._k += 1
+
+    @property
+    def free_after_s(self) -> float:
+        """How long the flight has flown past its record (s): through the filters, free."""
+        return max(self._k - self.steps, 0) * self.h
 
 
 class Wind:
@@ -382,7 +395,7 @@ class Wind:
                              "source": "MIL-F-8785C / MIL-HDBK-1797 low altitude"}
             if isinstance(tu, TurbulenceRecord):  # what was scaled: the free-running sample's own figures
                 r = tu.first
-                out["record"] = {"length_s": tu.steps * tu.h, "records": tu.records,
+                out["record"] = {"length_s": tu.steps * tu.h, "free_after_s": tu.free_after_s,
                                  "scale": dict(zip("uvw", r["scale"])),
                                  "removed_mean_mps": dict(zip("uvw", r["mean"]))}
                 out["sampling"] = sampling_errors(tu, tu.steps * tu.h, r["std"], r["mean"][0])

@@ -6,6 +6,7 @@ so that ``bsst sim missions/sine.toml --wind 5:270 --turbulence moderate`` repor
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -18,9 +19,10 @@ from plant.wind import Turbulence, TurbulenceRecord
 SINE = "missions/sine.toml"
 
 
-def test_each_record_has_a_zero_mean_and_the_asked_sigma_and_continues_the_filters() -> None:
-    """Three records of 700 steps: each is its stretch of the free-running filters (the same seed's stream,
-    never restarted), less its mean, times σ over its RMS; the next record is worked out when a step needs it."""
+def test_the_record_has_a_zero_mean_and_the_asked_sigma_and_the_filters_fly_on_from_its_end() -> None:
+    """A record of 700 steps is its stretch of the free-running filters (the same seed's stream), less its mean,
+    times σ over its RMS. Past it the filters fly on, free, from where it ends: the first sample after it is
+    the raw next sample mapped as the record was (no jump), then u keeps its own recursion on the same noise."""
     h, steps = 0.01, 700
     rec = TurbulenceRecord(Turbulence("moderate", 1.5, 5.0, seed=2, h=h), steps)
     free = Turbulence("moderate", 1.5, 5.0, seed=2, h=h)
@@ -30,18 +32,24 @@ def test_each_record_has_a_zero_mean_and_the_asked_sigma_and_continues_the_filte
         raw.append(free.now())
         rec.advance()
         free.advance()
-    assert rec.records == 3
+    assert rec.free_after_s == pytest.approx(2 * steps * h)
     got_a, raw_a = np.array(got), np.array(raw)
     sigma = np.array([free.sigma_u, free.sigma_v, free.sigma_w])
-    for r in range(3):
-        block, source = got_a[r * steps:(r + 1) * steps], raw_a[r * steps:(r + 1) * steps]
-        assert np.abs(block.mean(axis=0)).max() < 1e-12
-        assert np.sqrt((block * block).mean(axis=0)) == pytest.approx(sigma, rel=1e-12)
-        dev = source - source.mean(axis=0)
-        assert np.allclose(block, dev * (sigma / np.sqrt((dev * dev).mean(axis=0))), rtol=1e-12, atol=1e-12)
-    first = raw_a[:steps]
-    assert rec.first["mean"] == pytest.approx(first.mean(axis=0).tolist(), abs=1e-12)
-    assert rec.first["scale"] == pytest.approx((sigma / first.std(axis=0)).tolist(), rel=1e-12)
+    block, source = got_a[:steps], raw_a[:steps]
+    assert np.abs(block.mean(axis=0)).max() < 1e-12
+    assert np.sqrt((block * block).mean(axis=0)) == pytest.approx(sigma, rel=1e-12)
+    dev = source - source.mean(axis=0)
+    scale = sigma / np.sqrt((dev * dev).mean(axis=0))
+    assert np.allclose(block, dev * scale, rtol=1e-12, atol=1e-12)
+    assert rec.first["mean"] == pytest.approx(source.mean(axis=0).tolist(), abs=1e-12)
+    assert rec.first["scale"] == pytest.approx(scale.tolist(), rel=1e-12)
+    mapped_next = (raw_a[steps] - source.mean(axis=0)) * scale
+    assert got_a[steps] == pytest.approx(mapped_next, rel=1e-12, abs=1e-12)  # continuous: no jump at the seam
+    phi = math.exp(-free.speed / free.l_u * h)
+    after = got_a[steps:, 0]
+    twin = raw_a[steps:, 0]
+    assert np.allclose(after[1:] - phi * after[:-1], twin[1:] - phi * twin[:-1], rtol=0, atol=1e-12)
+    assert not np.allclose(after, twin)  # the record's state, not the raw filter's
 
 
 def _sim(tmp_path: Path, name: str, *flags: str) -> dict:
@@ -64,7 +72,7 @@ def test_the_sine_in_moderate_turbulence_has_the_asked_mean_wind_and_milhdbks_si
         assert w["turbulence_std_mps"][k] == pytest.approx(w["dryden"]["sigma_mps"][k], rel=0.2), k
         assert w["turbulence_std_mps"][k] == pytest.approx(w["dryden"]["sigma_mps"][k], rel=1e-9), k
     assert w["dryden"]["sigma_mps"]["u"] == pytest.approx(3.030, abs=0.001)  # moderate at the 10 ft floor
-    assert (w["record"]["length_s"], w["record"]["records"], w["samples"]) == (pytest.approx(30.0), 1, 30000)
+    assert (w["record"]["length_s"], w["record"]["free_after_s"], w["samples"]) == (pytest.approx(30.0), 0.0, 30000)
     free = _sim(tmp_path, "none", "--turbulence-scaling", "none")
     fw = free["wind"]
     assert fw["turbulence_scaling"] == "none" and "record" not in fw
