@@ -498,14 +498,16 @@ def test_a_noise_by_estimator_grid(mission_file: Path, tmp_path: Path, capsys) -
     assert ident["swept"] == ["estimator", "noise"] and ident["mission"]["sensors"] == {"set": "mocap"}
 
 
+@pytest.mark.parametrize("dropped", [("estimator", "noise", "discretization", *FLEET_COLUMNS, "policies"),
+                                     ("policies",)], ids=["before-the-vehicle-axes", "before-policies"])
 def test_a_sweep_of_an_older_bsst_is_reported_not_resumed(small_sweep: tuple[Path, list[str]], tmp_path: Path,
-                                                          capsys) -> None:
-    """A cells.csv without the estimator, noise and discretization columns (an older bsst's): ``bsst report``
-    reads it with the values its mission flew; ``--resume`` is refused in one line naming the file, and nothing
-    is lost."""
+                                                          capsys, dropped: tuple[str, ...]) -> None:
+    """A cells.csv without the estimator, noise and discretization columns, or only without the policies column
+    (an older bsst's): ``bsst report`` reads it with the values its mission flew (policies not judged: ""); ``--resume``
+    is refused in one line naming the file, and nothing is lost."""
     d = tmp_path / "old"
     shutil.copytree(small_sweep[0], d)
-    keep = [i for i, c in enumerate(COLUMNS) if c not in ("estimator", "noise", "discretization", *FLEET_COLUMNS)]
+    keep = [i for i, c in enumerate(COLUMNS) if c not in dropped]
     lines = (d / CELLS_CSV).read_text().splitlines()
     (d / CELLS_CSV).write_text("".join(",".join(line.split(",")[i] for i in keep) + "\n" for line in lines))
     meta = json.loads((d / "sweep.json").read_text())
@@ -520,8 +522,9 @@ def test_a_sweep_of_an_older_bsst_is_reported_not_resumed(small_sweep: tuple[Pat
     assert main(["report", str(d), "--no-plots"]) == 0
     assert "- `estimator`: truth" in (d / "report.md").read_text()
     rows = read_cells(d / CELLS_CSV, legacy={"estimator": "truth", "noise": 1.0, "discretization": "explicit",
-                                             "vehicles": 1, "worst_vehicle": None, "closest_m": None})
+                                             "vehicles": 1, "worst_vehicle": None, "closest_m": None, "policies": ""})
     assert [r["delay_ms"] for r in rows] == [0.0, 10.0] and {r["estimator"] for r in rows} == {"truth"}
+    assert {r["policies"] for r in rows} == {""}  # not judged: the column was not there
     with pytest.raises(ConfigError, match="cells.csv: line 1: a cells.csv of an older bsst"):
         read_cells(d / CELLS_CSV)  # where a sweep would add to it
 

@@ -49,7 +49,7 @@ from missions import MISSION_DIR, Mission, Sine, load_mission
 
 # the columns of a cells.csv row this engine measures (the cell's own axes and seed come from the cell)
 MEASURES = ("rms", "max", "settling_s", "tv_u2", "ripple_u2", "outcome", "up_sent", "up_lost", "down_sent",
-            "down_lost", "flown_s", "error")
+            "down_lost", "flown_s", "error", "policies")
 CELL_STEPS = 8_000_000  # cells x control steps in one batch: bounds its memory (1000 x 7500: 457 MiB peak RSS)
 # cells x physics steps of a batch that meets turbulence (its samples, 3 floats a physics step, are held for the
 # whole flight: bridge.batch.weather): 120 MiB of them (the 30 s sine at 1 kHz: 166 cells a batch)
@@ -94,6 +94,10 @@ def flights_problem(flights: Sequence[Flight]) -> str | None:
             return "[failsafe] resume = true: re-arming after a failsafe is not in the batch engine"
         if f.failsafe.action != "descend":
             return f"[failsafe] action = {f.failsafe.action!r}: the batch engine flies only the default, 'descend'"
+        if m.geofence is not None or f.params.max_hor_m > 0.0 or f.params.max_ver_m > 0.0:
+            return ("a geofence ([geofence], a plan's geoFence, GF_MAX_HOR_DIST or GF_MAX_VER_DIST): the batch engine "
+                    "keeps no trace to judge a cell's policies by, so a cell that left it would read as flown; fly it "
+                    "with the process engine")
         if m.steps > CELL_STEPS:
             return f"the mission has {m.steps} control steps: more than the batch engine holds ({CELL_STEPS})"
         if first is None:
@@ -187,7 +191,7 @@ def compile_batch() -> None:
 def error_measures(why: str) -> dict[str, Any]:
     """The measured columns of a cell that could not be flown (outcome ``error``)."""
     out: dict[str, Any] = {c: None for c in MEASURES}
-    out.update(outcome="error", error=" ".join(why.split())[:300])
+    out.update(outcome="error", error=" ".join(why.split())[:300], policies="")
     return out
 
 

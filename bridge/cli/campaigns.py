@@ -143,6 +143,11 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     elif res.failed:
         print(f"bsst sweep: {res.failed} of {len(res.rows)} cells failed (cells.csv's error column); the first: "
               f"{res.first_error()}", file=sys.stderr)
+    broken = [r for r in res.rows if r.get("policies") not in (None, "", "ok")]
+    if broken:  # measured, as a diverged cell is (the exit status stays the sweep's), but said: not flown as asked
+        print(f"bsst sweep: {len(broken)} of {len(res.rows)} cells broke a safety policy (cells.csv's policies "
+              f"column, report.md's Policies); the first: {broken[0]['controller']}, seed {broken[0]['seed']}: "
+              f"{broken[0]['policies']}", file=sys.stderr)
     return EXIT_FAILED if res.failed else EXIT_OK
 
 

@@ -4,7 +4,8 @@ the file written a whole line at a time (so a killed sweep resumes with what it 
 In:  a :class:`~bridge.sweep.grid.Cell` and its :class:`~bridge.record.runlog.Run`; a ``cells.csv`` or
      ``sweep.json`` to read back
 Out: rows of :data:`COLUMNS` (units: ``rms``/``max`` m, ``settling_s``/``flown_s`` s, ``tv_u2`` N/s,
-     ``ripple_u2`` N, packet counts), appended to ``cells.csv`` one whole line each
+     ``ripple_u2`` N, packet counts; ``policies``: ``ok``, the broken policies' names, ``""`` not judged),
+     appended to ``cells.csv`` one whole line each
 """
 
 from __future__ import annotations
@@ -31,27 +32,29 @@ COLUMNS = (
     "controller", "rate_hz", "delay_ms", "jitter_ms", "loss_pct", "burst_len", "estimator", "noise", "wind_mps",
     "turbulence", "discretization", "vehicles", "seed",
     "rms", "max", "settling_s", "tv_u2", "ripple_u2", "outcome", "class",
-    "up_sent", "up_lost", "down_sent", "down_lost", "flown_s", "worst_vehicle", "closest_m", "error",
+    "up_sent", "up_lost", "down_sent", "down_lost", "flown_s", "worst_vehicle", "closest_m", "error", "policies",
 )
 FLEET_COLUMNS = ("vehicles", "worst_vehicle", "closest_m")  # since issue 28: a cell of several vehicles (a fleet)
+POLICIES_OK = "ok"  # the policies column: every policy held; else the broken ones' names; "" not judged
 
 
 # cells.csv before the vehicle's axes (issue 12), before the air's (issue 27), before the discretization's (issue
-# 24) and before fleets (issue 28): read (bsst report) with the values its sweep.json's mission flew (one vehicle),
-# never resumed (bridge.sweep.campaign refuses it, naming the file)
-_SINGLE = tuple(c for c in COLUMNS if c not in FLEET_COLUMNS)
+# 24), before fleets (issue 28) and before the policies column: read (bsst report) with the values its sweep.json's
+# mission flew (one vehicle; policies not judged), never resumed (bridge.sweep.campaign refuses it, naming the file)
+_BEFORE_POLICIES = tuple(c for c in COLUMNS if c != "policies")
+_SINGLE = tuple(c for c in _BEFORE_POLICIES if c not in FLEET_COLUMNS)
 LEGACY_COLUMNS = tuple(c for c in _SINGLE
                        if c not in ("estimator", "noise", "wind_mps", "turbulence", "discretization"))
 WEATHERLESS_COLUMNS = tuple(c for c in _SINGLE if c not in ("wind_mps", "turbulence", "discretization"))
 LEGACY_LAYOUTS = (LEGACY_COLUMNS, WEATHERLESS_COLUMNS,
                   tuple(c for c in _SINGLE if c not in ("estimator", "noise", "discretization")),
-                  tuple(c for c in _SINGLE if c != "discretization"), _SINGLE)
+                  tuple(c for c in _SINGLE if c != "discretization"), _SINGLE, _BEFORE_POLICIES)
 
 
 INT_COLUMNS = ("vehicles", "seed", "up_sent", "up_lost", "down_sent", "down_lost", "worst_vehicle")
 
 
-STR_COLUMNS = ("controller", "estimator", "turbulence", "discretization", "outcome", "class", "error")
+STR_COLUMNS = ("controller", "estimator", "turbulence", "discretization", "outcome", "class", "error", "policies")
 FAILED = ("error", "law_failed")  # outcomes of a cell that measured nothing: it could not be flown, or its law failed
 
 
@@ -99,7 +102,20 @@ def row_from_run(cell: Cell, run: Run) -> dict[str, Any]:
         "flown_s": s.get("duration_s"),
         # a law that failed in flight measured nothing: the row says why, as a cell that could not be flown does
         "error": " ".join(str(s.get("ended_by", {}).get("how", "")).split())[:300] if s["outcome"] in FAILED else "",
+        "policies": policies_cell([s.get("policies")]),
     }
+
+
+def policies_cell(verdicts: Sequence[Sequence[Mapping[str, Any]] | None]) -> str:
+    """The ``policies`` column of one or more runs' ``summary["policies"]`` (bridge.record.policies): ``ok`` when
+    every policy of every run held, else the broken ones' names (space-separated, in the order judged); ``""``
+    (not judged) when a run has none."""
+    if any(v is None for v in verdicts):
+        return ""
+    broken: list[str] = []
+    for v in verdicts:
+        broken += [d["name"] for d in v or () if not d.get("ok") and d["name"] not in broken]
+    return " ".join(broken) if broken else POLICIES_OK
 
 
 WORST_OF = ("rms", "max", "settling_s", "tv_u2", "ripple_u2")  # a fleet's row: the largest of its vehicles'
@@ -129,7 +145,8 @@ def row_from_fleet(cell: Cell, run: FleetRun) -> dict[str, Any]:
     out["flown_s"] = max((r["flown_s"] for r in rows if r["flown_s"] is not None), default=None)
     errors = [f"vehicle {i}: {r['error']}" for i, r in zip(ids, rows) if r["error"]]
     out.update(outcome=run.summary["outcome"], worst_vehicle=ids[worst],
-               closest_m=run.summary["separation"]["closest_m"], error=" ".join(errors)[:300])
+               closest_m=run.summary["separation"]["closest_m"], error=" ".join(errors)[:300],
+               policies=policies_cell([r.summary.get("policies") for r in run.runs]))
     return out
 
 
@@ -137,7 +154,7 @@ def error_row(cell: Cell, why: str) -> dict[str, Any]:
     """The row of a cell that could not be flown (outcome ``error``)."""
     row: dict[str, Any] = {c: None for c in COLUMNS}
     row.update({a: getattr(cell, a) for a in AXES})
-    row.update(seed=cell.seed, outcome="error", error=" ".join(why.split())[:300])
+    row.update(seed=cell.seed, outcome="error", error=" ".join(why.split())[:300], policies="")
     return row
 
 
@@ -195,9 +212,9 @@ def read_cells(path: str | Path, legacy: Mapping[str, Any] | None = None,
     keeps) each row's ``class`` must be the one its outcome, RMS and ripple give by them.
 
     A file of an older sweep (:data:`LEGACY_LAYOUTS`: no ``estimator``, ``noise``, or no ``wind_mps``,
-    ``turbulence``, or no ``discretization``) is read when ``legacy`` gives the values its cells flew
-    (``{"estimator": ..., "noise": ..., "wind_mps": ..., "turbulence": ..., "discretization": ...}``), refused
-    otherwise."""
+    ``turbulence``, or no ``discretization``, or no ``policies``) is read when ``legacy`` gives the values its
+    cells flew (``{"estimator": ..., "noise": ..., "wind_mps": ..., "turbulence": ..., "discretization": ...,
+    "policies": ""}``), refused otherwise."""
     p = Path(path)
     data = read_regular_file(p, f"a sweep's {CELLS_CSV}")
     try:

@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from bridge.autopilot.estimator import ESTIMATOR_KINDS
-from bridge.sweep.cells import CELLS_CSV, SWEEP_JSON, read_cells, read_sweep_json
+from bridge.sweep.cells import CELLS_CSV, POLICIES_OK, SWEEP_JSON, read_cells, read_sweep_json
 from bridge.sweep.classes import CLASSES, Classes, classify, thresholds_text
 from bridge.sweep.grid import AXES, LINK_AXES, NAME_AXES, SHORT
 from params import ConfigError
@@ -100,7 +100,8 @@ def legacy_values(meta: Mapping[str, Any]) -> dict[str, Any]:
     """What an older sweep's cells flew on the vehicle's and the air's axes and the discretization (its
     ``cells.csv`` has no such columns): its mission's ``[estimator] kind``, ``[sensors] noise_scale``, ``[wind]
     speed_mps`` and ``turbulence``, ``discretization``, else their defaults (:data:`LEGACY_DISCRETIZATION`, the
-    only scheme before issue 24); one vehicle (before issue 28), so no worst vehicle and no closest approach."""
+    only scheme before issue 24); one vehicle (before issue 28), so no worst vehicle and no closest approach; its
+    policies not judged (``""``: before the column)."""
     mission = meta.get("mission") if isinstance(meta.get("mission"), Mapping) else {}
     est, sensors, wind = (t if isinstance(t := mission.get(k), Mapping) else {}
                           for k in ("estimator", "sensors", "wind"))
@@ -110,7 +111,7 @@ def legacy_values(meta: Mapping[str, Any]) -> dict[str, Any]:
     return {"estimator": kind if isinstance(kind, str) else "truth", "noise": _number(scale, 1.0),
             "wind_mps": _number(speed, 0.0), "turbulence": level if isinstance(level, str) else "none",
             "discretization": d if isinstance(d, str) else LEGACY_DISCRETIZATION, "vehicles": 1, "worst_vehicle": None,
-            "closest_m": None}
+            "closest_m": None, "policies": ""}
 
 
 def _number(v: Any, default: float) -> float:
@@ -213,6 +214,7 @@ def write_report(path: Path, rows: Sequence[Mapping[str, Any]], meta: Mapping[st
         for r in failed[:50]:
             lines.append(f"| {r['controller']} | " + " | ".join(_fmt(r[a]) for a in MAP_AXES)
                          + f" | {r['seed']} | {r['error']} |")
+    lines += policies_section(rows)
     lines += ["", "## Reproducing a row", "",
               "Each row of `cells.csv` is one offline flight of `mission.toml` (in this directory); for example the "
               "first one:", "", "```sh", reproduce(rows[0], swept), "```", ""]
@@ -221,6 +223,24 @@ def write_report(path: Path, rows: Sequence[Mapping[str, Any]], meta: Mapping[st
     tmp.write_text("\n".join(lines))
     tmp.replace(out)
     return out
+
+
+def policies_section(rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    """``report.md``'s policies: how many runs kept every safety policy (bridge.record.policies), which broke one
+    (each, up to 50: its cell and the names), how many were not judged (the batch engine, a cell not flown, an
+    older sweep's rows: ``policies`` empty)."""
+    broken = [r for r in rows if r["policies"] not in ("", POLICIES_OK)]
+    kept = sum(1 for r in rows if r["policies"] == POLICIES_OK)
+    unjudged = len(rows) - kept - len(broken)
+    lines = ["", "## Policies", "", f"{kept} runs kept every policy, {len(broken)} broke one, {unjudged} not judged "
+             "(the batch engine keeps no trace to judge by; a cell not flown; an older sweep's rows)."]
+    if broken:
+        lines += ["", "| controller | " + " | ".join(MAP_AXES) + " | seed | outcome | broken |",
+                  "|---" * (len(MAP_AXES) + 4) + "|"]
+        for r in broken[:50]:
+            lines.append(f"| {r['controller']} | " + " | ".join(_fmt(r[a]) for a in MAP_AXES)
+                         + f" | {r['seed']} | {r['outcome']} | {r['policies']} |")
+    return lines
 
 
 def reproduce(row: Mapping[str, Any], swept: Sequence[str]) -> str:
