@@ -9,9 +9,9 @@ Out: :class:`Geofence` (its zones in the paper frame, :meth:`Geofence.to_dict` f
      :meth:`Geofence.first_breach`: the first of a path's positions outside it, and why
 
 As PX4's navigator judges a position (``Geofence::checkPolygons``): inside at least one inclusion zone, when
-there is one, and outside every exclusion zone; heights are not part of a plan's fence. Here the fence is
-checked over every run (the ``geofence`` policy, bridge.record.policies), not enforced: PX4 would act on a
-breach (GF_ACTION, Hold by default), this vehicle flies on and the run says where it left the fence.
+there is one, and outside every exclusion zone; heights are not part of a plan's fence. The fence is checked
+over every run (the ``geofence`` policy, bridge.record.policies), and the vehicle holds it as PX4 does, acting on
+a breach by GF_ACTION (Hold by default: bridge.autopilot.fencewatch); the run says where it left the fence.
 """
 
 from __future__ import annotations

@@ -14,7 +14,8 @@ Out: a :class:`PlanFile`: the home (lat, lon deg, alt m AMSL), the multicopter c
 which is refused. A ``QGC WPL 110`` file (mavlink.io, "File Formats") is a header line, then one line per
 item: index, current, frame, command, param1..4, x/lat, y/lon, z/alt, autocontinue; line 0 is the home,
 as QGroundControl and MAVProxy write it. A ``.plan``'s geofence is read (:mod:`missions.geofence`: checked over
-the run, not enforced); its rally points are where Return may land (:mod:`missions.rally`).
+the run, held by the vehicle, which acts on a breach by GF_ACTION); its rally points are where Return may land
+(:mod:`missions.rally`).
 """
 
 from __future__ import annotations

@@ -57,6 +57,7 @@ import json, sys, time
 from mavsdk import Mavsdk, Configuration, ComponentType
 from mavsdk.plugins.mission_raw import MissionRaw
 from mavsdk.plugins.action import Action
+from mavsdk.plugins.telemetry import Telemetry
 
 sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
 sdk.add_any_connection(sys.argv[1])
@@ -76,18 +77,31 @@ if len(sys.argv) > 4 and sys.argv[4] == "zones":  # the plan's fence and rally p
     out["fence_got"], out["rally_got"] = fields(mr.download_geofence()), fields(mr.download_rallypoints())
 progress = []
 mr.subscribe_mission_progress(lambda p, _ud: progress.append([p.current, p.total]))
+telemetry = Telemetry(system)
+armed = []  # the vehicle's armed state as MAVSDK's telemetry reports it: a flight its failsafe ended disarms early
+zones = len(sys.argv) > 4 and sys.argv[4] == "zones"  # (its flight leaves the fence: it may end before the mission)
+def landed_early():
+    if not zones:
+        return False
+    a = telemetry.armed()
+    if not armed or armed[-1] != a:
+        armed.append(a)
+    return True in armed and not a and not mr.is_mission_finished()
 # MAVSDK's own order, as its mission examples fly a PX4: arm (in HOLD, on the ground), then start the mission
 # (AUTO.MISSION)
 out["arm"] = Action(system).arm().name
 out["start"] = mr.start_mission().name
 deadline = time.monotonic() + float(sys.argv[3])
-while time.monotonic() < deadline and not mr.is_mission_finished() and [len(items)] * 2 not in progress:
+while (time.monotonic() < deadline and not mr.is_mission_finished() and [len(items)] * 2 not in progress
+       and not landed_early()):
     time.sleep(0.1)
 done_by = time.monotonic() + 10.0  # the last MISSION_CURRENT (sent as its item is reached) says it complete;
 # the progress callback runs on MAVSDK's own thread, so [n, n] may land after is_mission_finished() turns true
-while time.monotonic() < done_by and not (mr.is_mission_finished() and [len(items)] * 2 in progress):
+while (time.monotonic() < done_by and not (mr.is_mission_finished() and [len(items)] * 2 in progress)
+       and not landed_early()):
     time.sleep(0.05)
 out["finished"] = mr.is_mission_finished()
+out["landed_early"] = landed_early()
 out["progress"] = progress
 print("RESULT " + json.dumps(out), flush=True)
 sdk.destroy()
@@ -110,10 +124,12 @@ def _trace(path: Path) -> list[tuple[float, float, float, float]]:
     return [tuple(float(r.split(",")[i]) for i in ix) for r in rows[1:]]  # type: ignore[misc]
 
 
-def _mavsdk_flies(n: int, plan: Path, out: Path, status: int, *extra: str) -> dict[str, Any]:
-    """``bsst sitl --await-mission`` (instance ``n``, into ``out``) and the MAVSDK script flying ``plan`` through it
-    (``extra``: the script's further arguments); the session's exit status asserted; what MAVSDK reported."""
-    sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--out", str(out), "--no-plots")
+def _mavsdk_flies(n: int, plan: Path, out: Path, status: int, *extra: str, sitl_args: tuple[str, ...] = ()
+                  ) -> dict[str, Any]:
+    """``bsst sitl --await-mission`` (instance ``n``, into ``out``, with ``sitl_args``) and the MAVSDK script flying
+    ``plan`` through it (``extra``: the script's further arguments); the session's exit status asserted; what MAVSDK
+    reported."""
+    sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--out", str(out), "--no-plots", *sitl_args)
     try:
         r = subprocess.run([sys.executable, "-c", MAVSDK_SCRIPT, f"udpin://127.0.0.1:{GCS_PORT + n}", str(plan),
                             "240", *extra], capture_output=True, text=True, timeout=300, env=ENV)
@@ -171,9 +187,10 @@ def test_mavsdk_flies_a_plan_file_through_await_mission_as_the_file_flies(tmp_pa
 def test_mavsdk_uploads_a_plans_fence_and_rally_points_and_the_flight_leaving_the_fence_fails(tmp_path):
     """MAVSDK MissionRaw uploads the L plan's mission, and its geoFence (an inclusion rectangle about the north
     leg only) and rallyPoints as the fence's and rally points' mission types, reads both back item for item, and
-    flies the mission: the east leg leaves the fence, so the vehicle says so (its ``geofence`` event, once) and
-    ``bsst sitl`` exits 1 with the geofence policy failing at that time; the flight itself is completed (the
-    fence is checked, not enforced). Each upload a ``mission`` event naming MAVSDK."""
+    flies the mission: the east leg leaves the fence, so the vehicle says so (its ``geofence`` event, once), lands
+    there (``--param GF_ACTION=5``; 2, PX4's default, would hold until the session gives up: its failsafe, outcome
+    ``failsafe``) and ``bsst sitl`` exits 1 with the geofence policy failing at that time. Each upload a
+    ``mission`` event naming MAVSDK."""
     def fenced(data: dict) -> None:
         data["geoFence"]["polygons"] = [{"inclusion": True, "version": 1, "polygon": [
             [47.39770, 8.54555], [47.39770, 8.54564], [47.39790, 8.54564], [47.39790, 8.54555]]}]
@@ -184,16 +201,20 @@ def test_mavsdk_uploads_a_plans_fence_and_rally_points_and_the_flight_leaving_th
     plan.write_text(json.dumps(data))
     out = tmp_path / "run"
     with instance_slot() as n:
-        gs = _mavsdk_flies(n, plan, out, 1, "zones")
+        gs = _mavsdk_flies(n, plan, out, 1, "zones", sitl_args=("--param", "GF_ACTION=5"))
     assert gs["fence_upload"] == gs["rally_upload"] == gs["upload"] == "SUCCESS", gs
+    assert gs["landed_early"] and not gs["finished"], gs  # MAVSDK saw it land, the mission unfinished
     assert len(gs["fence_sent"]) == 4 and gs["fence_got"] == gs["fence_sent"], gs
     assert len(gs["rally_sent"]) == 1 and gs["rally_got"] == gs["rally_sent"], gs
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["outcome"] == "completed", summary["ended_by"]
+    assert summary["outcome"] == "failsafe", summary["ended_by"]
     fence = next(p for p in summary["policies"] if p["name"] == "geofence")
-    assert not fence["ok"] and "outside the uploaded fence" in fence["why"], fence
+    assert not fence["ok"] and "outside its fence" in fence["why"] and "GF_ACTION = 5: land" in fence["why"], fence
     events = (out / "events.log").read_text()
-    assert sum(" geofence: " in ln for ln in events.splitlines()) == 1 and "fence uploaded 4 items" in events, events
+    kinds = [ln.split(" ", 2)[1] for ln in events.splitlines() if ln.startswith("t=")]
+    assert kinds.count("geofence:") == 1 and "fence uploaded 4 items" in events, events
+    assert "geofence: outside its fence" in events and ": land here [vehicle]" in events, events
+    assert "disarmed: landed: disarmed" in events, events
     assert "rally points uploaded 1 items" in events
     edge = Home().paper(47.39780, 8.54564, 488.0)[1]  # the fence's east side (y west, m)
     east = next(t for t, x, y, z in _trace(out / "trace.csv") if y < edge)

@@ -1,7 +1,8 @@
-"""Covers bridge.mavlink.fenceitems, bridge.nodes.vehicle.zones and bridge.autopilot.simvehicle: a fence and rally
+"""Covers bridge.mavlink.fenceitems, bridge.nodes.vehicle.zones and bridge.autopilot.fencewatch: a fence and rally
 points as a ground station uploads them (MAV_MISSION_TYPE_FENCE, _RALLY), checked, held, read as a plan's, the rally
-points given to Return, the fence watched in flight; PX4's GF_MAX_HOR_DIST and GF_MAX_VER_DIST watched by the
-vehicle in every clock; and the geofence policy's use of the vehicle's ``geofence`` event. Pure: the protocol over
+points given to Return, the fence watched in flight (bridge.autopilot.simvehicle); PX4's GF_MAX_HOR_DIST and
+GF_MAX_VER_DIST watched by the vehicle in every clock, and its GF_ACTION at a breach (none, warning, hold, return,
+terminate, land); and the geofence policy's use of the vehicle's ``geofence`` event. Pure: the protocol over
 UDP is tests/test_mission_protocol.py's, MAVSDK's upload and a flight leaving the fence
 tests/test_await_mission.py's."""
 
@@ -15,7 +16,8 @@ import pytest
 from pymavlink.dialects.v20 import common as M
 
 from bridge import simulate
-from bridge.autopilot.simvehicle import limits_passed
+from bridge.autopilot.fencewatch import limits_passed
+from bridge.autopilot.simvehicle import FAILSAFE
 from bridge.core.flight import prepare
 from bridge.mavlink.fenceitems import FENCE, RALLY, fence_plan, parse_zone_item
 from bridge.mavlink.missionitems import ItemRefused
@@ -114,7 +116,8 @@ def test_held_zones_give_return_its_rally_points_and_watch_the_fence() -> None:
     _period_at(sim, 2.0, 2.2)  # inside the excluded circle
     _period_at(sim, 6.0, 2.2)  # and out of the square
     left = [e for e in sim.events if e.kind == "geofence"]
-    assert len(left) == 1 and "outside the uploaded fence" in left[0].text
+    assert len(left) == 1 and "outside its fence" in left[0].text and "GF_ACTION = 2: hold" in left[0].text
+    assert sim.mode == FAILSAFE  # GF_ACTION 2, PX4's default: it holds, out of offboard control
     short = _held(_square(5.0)[:3])
     assert "a polygon of 4 vertices" in (zones.accept(short, FENCE) or "")
     assert zones.items[FENCE] is fence
@@ -147,14 +150,48 @@ def test_gf_max_limits_are_px4s_distances_from_home() -> None:
 
 def test_a_flight_above_gf_max_ver_dist_fails_the_geofence_policy_once() -> None:
     """The sine climbs 0.1 m/s: with GF_MAX_VER_DIST = 2 m (a ``[params]`` entry or ``--param``) the vehicle says
-    once, at 20 s, that it is above it, and the geofence policy fails there (the flight itself completes: checked,
-    not enforced); GF_MAX_HOR_DIST = 2.5 m, which the 1 m circle about (0, 1) never passes from its start, holds;
-    without them, nothing."""
-    run = simulate("missions/sine.toml", params={"GF_MAX_VER_DIST": 2.0, "GF_MAX_HOR_DIST": 2.5}, plots=False)
-    left = [e for e in run.summary["events"] if e["kind"] == "geofence"]
-    assert len(left) == 1 and "beyond GF_MAX_VER_DIST = 2 m" in left[0]["text"], left
-    assert 20.0 <= left[0]["t"] <= 20.1, left
-    fence = next(p for p in run.summary["policies"] if p["name"] == "geofence")
-    assert not fence["ok"] and fence["t"] == left[0]["t"] and run.summary["outcome"] == "completed"
+    once, at 20 s, that it is above it, and the geofence policy fails there; by GF_ACTION 2 (PX4's default) it
+    holds there (outcome ``failsafe``), by 1 (warning) it flies on (``completed``), by 0 it does not watch (no
+    event, the policy holds); GF_MAX_HOR_DIST = 2.5 m, which the 1 m circle about (0, 1) never passes from its
+    start, holds; without them, nothing."""
+    limits = {"GF_MAX_VER_DIST": 2.0, "GF_MAX_HOR_DIST": 2.5}
+    for action, outcome in ((2, "failsafe"), (1, "completed")):
+        run = simulate("missions/sine.toml", params={**limits, "GF_ACTION": action}, plots=False)
+        left = [e for e in run.summary["events"] if e["kind"] == "geofence"]
+        assert len(left) == 1 and "beyond GF_MAX_VER_DIST = 2 m" in left[0]["text"], left
+        assert 20.0 <= left[0]["t"] <= 20.1, left
+        fence = next(p for p in run.summary["policies"] if p["name"] == "geofence")
+        assert not fence["ok"] and fence["t"] == left[0]["t"] and run.summary["outcome"] == outcome
+        late = run.trace["t"] > 25.0
+        top = run.trace["z"][late].max()
+        assert (top < 2.2) if action == 2 else (top > 2.4), top  # held at 2 m, or climbing on
+    off = simulate("missions/sine.toml", params={**limits, "GF_ACTION": 0}, plots=False)
+    assert not [e for e in off.summary["events"] if e["kind"] == "geofence"] and off.summary["outcome"] == "completed"
+    assert next(p for p in off.summary["policies"] if p["name"] == "geofence")["ok"]
     quiet = simulate("missions/sine.toml", plots=False)
     assert next(p for p in quiet.summary["policies"] if p["name"] == "geofence")["ok"]
+
+
+@pytest.mark.parametrize("action, then, end_xy", [
+    (3, "landed: disarmed", (0.0, 0.0)),  # Return: home (the start), then land
+    (4, "geofence: flight terminated, motors stopped", None),  # Terminate: the motors stop at once; it falls
+    (5, "landed: disarmed", (-0.54, -0.84)),  # Land where it is
+])
+def test_gf_action_return_terminate_and_land_each_fly_their_failsafe(action: int, then: str,
+                                                                     end_xy: tuple[float, float] | None) -> None:
+    """Above GF_MAX_VER_DIST = 2 m at 20 s, GF_ACTION 3, 4 and 5 fly the vehicle's failsafe (a ``failsafe`` event
+    naming the geofence, outcome ``failsafe``, ended by it): Return flies home (RTL_RETURN_ALT 0: at its height)
+    and lands, Terminate stops the motors (the fall is an ``impact``, disarmed), Land lands where it is."""
+    params = {"GF_MAX_VER_DIST": 2.0, "GF_ACTION": action, "RTL_RETURN_ALT": 0.0, "RTL_DESCEND_ALT": 2.0}
+    run = simulate("missions/sine.toml", params=params, plots=False)
+    s = run.summary
+    assert s["outcome"] == "failsafe" and "geofence" in s["ended_by"]["how"], s["ended_by"]
+    (fs,) = [e for e in s["events"] if e["kind"] == "failsafe"]
+    assert fs["t"] == pytest.approx(20.0, abs=0.01) and fs["text"].startswith("geofence: 2.00 m above home")
+    (off,) = [e for e in s["events"] if e["kind"] == "disarmed"]
+    assert off["text"] == then and off["t"] < 24.0, off
+    assert run.trace["z"][-1] == pytest.approx(0.0, abs=1e-6)  # on the ground
+    if end_xy is None:
+        assert any(e["kind"] == "impact" for e in s["events"]) and off["t"] == fs["t"]
+    else:
+        assert (run.trace["x"][-1], run.trace["y"][-1]) == pytest.approx(end_xy, abs=0.05)

@@ -101,18 +101,30 @@ def test_a_plans_fence_is_read_about_its_home_and_kept_in_mission_toml(tmp_path:
 
 
 def test_a_run_that_leaves_the_fence_says_where_and_when_and_exits_1(tmp_path: Path, capsys) -> None:
-    """The fence covers the L's north leg only (to 5 m east): the east leg leaves it. The flight is flown on (the
-    fence is not enforced); the ``geofence`` policy names the first row outside it, the run exits 1."""
+    """The fence covers the L's north leg only (to 5 m east): the east leg leaves it. The vehicle holds the plan's
+    fence as PX4 does and acts by GF_ACTION: 2 (PX4's default) holds where it left it (its failsafe: outcome
+    ``failsafe``, ended by the geofence); 1 (warning) flies on. Either way the ``geofence`` policy names the first
+    row outside, the vehicle's ``geofence`` event is at that row, and the run exits 1."""
     plan = _fenced_l(tmp_path, {"polygons": [{"inclusion": True, "version": 1, "polygon": _rectangle(-3, 13, 3, 5)}]},
                      "leaves.plan")
-    run = simulate(plan, out=tmp_path / "run", plots=False)
-    assert run.summary["outcome"] == "completed"
-    verdict = next(p for p in run.summary["policies"] if p["name"] == "geofence")
-    assert not verdict["ok"] and "outside every inclusion zone of the geofence" in verdict["why"]
-    i = int(np.searchsorted(run.trace["t"], verdict["t"] - 1e-9))
-    assert -run.trace["y"][i] > 5.0 and -run.trace["y"][i - 1] <= 5.0 + 1e-3  # the first row past 5 m east
-    assert report_run(run, "sim") == 1
-    assert "geofence" in capsys.readouterr().err
+    for action, outcome in ((2, "failsafe"), (1, "completed")):
+        run = simulate(plan, out=tmp_path / f"run{action}", plots=False, params={"GF_ACTION": action})
+        assert run.summary["outcome"] == outcome, run.summary["ended_by"]
+        verdict = next(p for p in run.summary["policies"] if p["name"] == "geofence")
+        assert not verdict["ok"] and "outside every inclusion zone of the geofence" in verdict["why"]
+        i = int(np.searchsorted(run.trace["t"], verdict["t"] - 1e-9))
+        assert -run.trace["y"][i] > 5.0 and -run.trace["y"][i - 1] <= 5.0 + 1e-3  # the first row past 5 m east
+        (left,) = [e for e in run.summary["events"] if e["kind"] == "geofence"]
+        assert left["t"] == pytest.approx(verdict["t"], abs=1e-6) and f"GF_ACTION = {action}" in left["text"]
+        assert report_run(run, "sim") == 1
+        assert "geofence" in capsys.readouterr().err
+        east = -run.trace["y"][i:]
+        if action == 2:  # held where it left (a 2 m overshoot braking from the leg's speed), and stays there
+            assert "failsafe" in run.summary["ended_by"]["how"] and "geofence" in run.summary["ended_by"]["how"]
+            assert east.max() < 7.5 and abs(east[-1] - east[0]) < 0.3 and abs(east[-1] - east[-500]) < 0.1, (
+                east.max(), east[0], east[-500], east[-1])
+        else:  # flown on down the east leg, to its end 10 m east
+            assert east.max() > 9.9
 
 
 def test_a_malformed_plan_fence_is_one_error_naming_the_file_and_key(tmp_path: Path) -> None:

@@ -36,11 +36,11 @@ def test_a_cell_that_leaves_its_geofence_says_so_in_its_row_on_stderr_and_in_the
     err = capsys.readouterr().err
     assert "2 of 2 cells broke a safety policy" in err and ": geofence" in err, err
     rows = read_cells(out / CELLS_CSV)
-    assert [(r["delay_ms"], r["outcome"], r["policies"]) for r in rows] == [(0.0, "completed", "geofence"),
-                                                                             (10.0, "completed", "geofence")]
-    report = (out / "report.md").read_text()
+    assert [(r["delay_ms"], r["outcome"], r["policies"]) for r in rows] == [(0.0, "failsafe", "geofence"),
+                                                                             (10.0, "failsafe", "geofence")]
+    report = (out / "report.md").read_text()  # (GF_ACTION 2, PX4's default: each held where it left: failsafe)
     assert "0 runs kept every policy, 2 broke one, 0 not judged" in report
-    assert report.count("| completed | geofence |") == 2
+    assert report.count("| failsafe | geofence |") == 2
     wide = tmp_path / "wide"  # 5 m: the same flights keep it
     assert main(["sweep", str(fenced_sine(tmp_path, 5.0)), "--delay", "0,10", "--jobs", "1", "--no-plots",
                  "--out", str(wide)]) == 0

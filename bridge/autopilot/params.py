@@ -56,6 +56,7 @@ class VehicleParams:
     preflight_disarm_s: float = 10.0  # COM_DISARM_PRFLT: armed on the ground, disarmed if not started by then (s)
     max_hor_m: float = 0.0  # GF_MAX_HOR_DIST: the farthest from home (m, horizontally) the vehicle may fly; 0: any
     max_ver_m: float = 0.0  # GF_MAX_VER_DIST: the highest above home (m) it may fly; 0: any
+    fence_action: int = 2  # GF_ACTION: what the vehicle does beyond a limit or outside a fence (PX4's default: Hold)
 
 
 @dataclass(frozen=True)
@@ -75,6 +76,8 @@ class ParamSpec:
     at_start_only: bool = False
 
 
+# GF_ACTION's values (PX4's geofence_result GF_ACTION_*): what the vehicle does at a breach
+FENCE_ACTIONS = {0: "none", 1: "warning", 2: "hold", 3: "return", 4: "terminate", 5: "land"}
 # PX4's offboard-loss action values, old and new, of the actions the vehicle flies
 _OBL_ACT = {-1: "descend", 0: "land", 1: "hold", 2: "return", 3: "disarm"}
 _OBL_RC_ACT = {-1: "descend", 3: "return", 4: "land", 5: "hold", 7: "disarm"}
@@ -109,17 +112,22 @@ PARAMS: tuple[ParamSpec, ...] = (
               "armed on the ground by a ground station and not started within this time, the vehicle disarms "
               "itself (PX4's pre-takeoff timeout, default 10 s; 0 or less: never; docs/missions.md)"),
     ParamSpec("GF_MAX_HOR_DIST", REAL32, "m", *GF_MAX_HOR_RANGE_M,
-              "geofence: the farthest from home the vehicle may fly, horizontally (0: no limit); beyond it the run's "
-              "geofence policy fails (checked, not enforced)"),
+              "geofence: the farthest from home the vehicle may fly, horizontally (0: no limit); beyond it the vehicle "
+              "acts by GF_ACTION and the run's geofence policy fails"),
     ParamSpec("GF_MAX_VER_DIST", REAL32, "m", *GF_MAX_VER_RANGE_M,
-              "geofence: the highest above home the vehicle may fly (0: no limit); above it the run's geofence "
-              "policy fails (checked, not enforced)"),
+              "geofence: the highest above home the vehicle may fly (0: no limit); above it the vehicle acts by "
+              "GF_ACTION and the run's geofence policy fails"),
+    ParamSpec("GF_ACTION", INT32, "", 0, 5,
+              "geofence action, PX4's values: 0 none (not watched), 1 warning, 2 hold (PX4's default), 3 return, "
+              "4 terminate (motors off), 5 land; 2-5 are the vehicle's failsafe (docs/missions.md)",
+              choices=FENCE_ACTIONS),
 )
 BY_NAME = {p.name: p for p in PARAMS}
 _RTL_FIELDS = {"RTL_RETURN_ALT": "return_alt_m", "RTL_DESCEND_ALT": "descend_alt_m"}  # -> ReturnConfig's field
 # the REAL32 parameters that are one field of VehicleParams each
 _FIELDS = {"COM_DISARM_PRFLT": "preflight_disarm_s", "GF_MAX_HOR_DIST": "max_hor_m", "GF_MAX_VER_DIST": "max_ver_m",
            "MIS_TAKEOFF_ALT": "takeoff_alt_m"}
+_INT_FIELDS = {"SYS_FAILURE_EN": "failure_injection", "GF_ACTION": "fence_action"}  # the INT32s that are one field
 
 
 class ParamRefused(ValueError):
@@ -133,8 +141,8 @@ def read_param(p: VehicleParams, name: str) -> float:
         return float(next(v for v, a in (spec.choices or {}).items() if a == p.failsafe.action))
     if spec.failsafe_key is not None:
         return float(getattr(p.failsafe, spec.failsafe_key))
-    if name == "SYS_FAILURE_EN":
-        return float(p.failure_injection)
+    if name in _INT_FIELDS:
+        return float(getattr(p, _INT_FIELDS[name]))
     if name in _FIELDS:
         return float(getattr(p, _FIELDS[name]))
     if name in _RTL_FIELDS:
@@ -204,8 +212,8 @@ def change_param(p: VehicleParams, name: str, value: float, running: bool = True
         return replace(p, failsafe=replace(p.failsafe, **{spec.failsafe_key: float(value)}))
     if name in _FIELDS:
         return replace(p, **{_FIELDS[name]: float(value)})
-    if name == "SYS_FAILURE_EN":
-        return replace(p, failure_injection=int(value))
+    if name in _INT_FIELDS:
+        return replace(p, **{_INT_FIELDS[name]: int(value)})
     if name in _RTL_FIELDS:
         return replace(p, rtl=replace(p.rtl, **{_RTL_FIELDS[name]: float(value)}))
     return replace(p, sysid=int(value))

@@ -48,7 +48,8 @@ from bridge.autopilot.failsafe import (
     failsafe_target,
     return_point,
 )
-from bridge.autopilot.params import VehicleParams, change_param, read_param
+from bridge.autopilot.fencewatch import FENCE_ACTION_TEXT, breach_action, limits_passed
+from bridge.autopilot.params import FENCE_ACTIONS, VehicleParams, change_param, read_param
 from bridge.autopilot.vehicleevents import Event, ParamChanged, Sender
 from controller.nominal import Nominal
 from missions.geofence import Geofence
@@ -87,7 +88,8 @@ class SimVehicle:
     rally: tuple[tuple[float, float], ...] = ()  # m: rally points, where Return may land instead (missions.rally)
     max_hor_m: float = 0.0  # GF_MAX_HOR_DIST (m): the farthest from home it may fly, horizontally; 0: any
     max_ver_m: float = 0.0  # GF_MAX_VER_DIST (m): the highest above home it may fly; 0: any
-    fence: Geofence | None = None  # a fence a ground station uploaded (bridge.nodes.vehicle.zones), watched as these
+    fence: Geofence | None = None  # the fence it holds (the mission's, or a ground station's upload), watched as these
+    fence_action: int = 2  # GF_ACTION: at a breach 0 nothing (unwatched), 1 warn, 2 hold, 3 return, 4 terminate, 5 land
 
     def __post_init__(self) -> None:
         if self.estimator is None:
@@ -263,7 +265,7 @@ class SimVehicle:
     def params(self, sysid: int = 1) -> VehicleParams:
         """The settings the parameters read (:mod:`bridge.autopilot.params`), as they are now."""
         return VehicleParams(self.failsafe, self.takeoff_alt_m, sysid, self.failure_injection, self.rtl,
-                             self.preflight_disarm_s, self.max_hor_m, self.max_ver_m)
+                             self.preflight_disarm_s, self.max_hor_m, self.max_ver_m, self.fence_action)
 
     def change_param(self, name: str, value: float, sysid: int = 1) -> Event | None:
         """Set parameter ``name`` (PX4's name, :mod:`bridge.autopilot.params`) to ``value``, checked
@@ -276,7 +278,7 @@ class SimVehicle:
             return None
         self.failsafe, self.takeoff_alt_m = after.failsafe, after.takeoff_alt_m
         self.failure_injection, self.rtl = after.failure_injection, after.rtl
-        self.preflight_disarm_s = after.preflight_disarm_s
+        self.preflight_disarm_s, self.fence_action = after.preflight_disarm_s, after.fence_action
         if (self.max_hor_m, self.max_ver_m) != (after.max_hor_m, after.max_ver_m):
             self.max_hor_m, self.max_ver_m = after.max_hor_m, after.max_ver_m
             self._beyond.clear()  # a new limit is watched afresh
@@ -289,19 +291,23 @@ class SimVehicle:
         self._beyond.discard("fence")
 
     def _check_limits(self) -> None:
-        """The first time the vehicle is beyond GF_MAX_HOR_DIST or GF_MAX_VER_DIST, or outside the fence a ground
-        station uploaded, a ``geofence`` event says so (the run's geofence policy then fails); checked, not
-        enforced."""
+        """The first time the vehicle is beyond GF_MAX_HOR_DIST or GF_MAX_VER_DIST, or outside the fence it holds, a
+        ``geofence`` event says so (the run's geofence policy then fails), and GF_ACTION 2-5 fly the failsafe it
+        names (:mod:`bridge.autopilot.fencewatch`), unless a failsafe already flies."""
         X = self.plant.state
         passed = limits_passed(X, self.home, self.max_hor_m, self.max_ver_m)
         if self.fence is not None and "fence" not in self._beyond:
             breach = self.fence.first_breach(np.array((self.plant.t,)), np.array((X[0],)), np.array((X[2],)))
             if breach is not None:
-                passed.append(("fence", f"outside the uploaded fence: {breach[1]}"))
-        for which, why in passed:
-            if which not in self._beyond:
-                self._beyond.add(which)
-                self.event("geofence", f"{why} (checked, not enforced: PX4 would act on it, GF_ACTION)")
+                passed.append(("fence", f"outside its fence: {breach[1]}"))
+        new = [(which, why) for which, why in passed if which not in self._beyond]
+        for which, why in new:
+            self._beyond.add(which)
+            self.event("geofence", f"{why} (GF_ACTION = {self.fence_action}: {FENCE_ACTIONS[self.fence_action]})")
+        action = breach_action(self.fence_action)
+        if new and action is not None and self.mode not in (FAILSAFE, LANDED):
+            self._fly_failsafe(action, f"geofence: {new[0][1]}: {FENCE_ACTION_TEXT[action]}",
+                               "geofence: flight terminated, motors stopped")
 
     def fly_onboard(self, target: Target, mode: str) -> None:
         """Hand the motors to the on-board controller flying ``target`` under ``mode`` (not
@@ -311,16 +317,24 @@ class SimVehicle:
 
     def _enter_failsafe(self, silent_s: float) -> None:
         """No target for ``silent_s``: the failsafe's action, from the state it began in."""
-        p, fs = self.plant, self.failsafe
+        fs = self.failsafe
+        text = f"no actuator target for {silent_s:.3f} s: {ACTION_TEXT[fs.action]}"
+        if self._fly_failsafe(fs.action, text, "failsafe: motors stopped") and fs.action == "hold":
+            self.land_at = self.plant.t + fs.hold_s
+
+    def _fly_failsafe(self, action: str, text: str, stopped: str) -> bool:
+        """Mode failsafe, a ``failsafe`` event saying ``text``, and ``action`` (a ``[failsafe] action``) flown from
+        here; on the ground, or ``disarm``, the motors stop now (``stopped``: why). Whether it flies on."""
+        p = self.plant
         self.mode = FAILSAFE
-        self.event("failsafe", f"no actuator target for {silent_s:.3f} s: {ACTION_TEXT[fs.action]}")
-        if p.on_ground or fs.action == "disarm":  # nothing to fly: motors off now, in this control step
+        self.event("failsafe", text)
+        if p.on_ground or action == "disarm":  # nothing to fly: motors off now, in this control step
             self.mode = LANDED
-            self.disarm("landed: disarmed" if p.on_ground else "failsafe: motors stopped")
-            return
-        self.fly_onboard(failsafe_target(fs, self.published(), self.home, self.rtl, self.rally), FAILSAFE)
-        if fs.action == "hold":
-            self.land_at = p.t + fs.hold_s
+            self.disarm("landed: disarmed" if p.on_ground else stopped)
+            return False
+        self.fly_onboard(failsafe_target(replace(self.failsafe, action=action), self.published(), self.home, self.rtl,
+                                         self.rally), FAILSAFE)
+        return True
 
     def _end_hold(self) -> None:
         """``hold``: its time is up; land where it held."""
@@ -405,7 +419,7 @@ class SimVehicle:
         (:meth:`plant.Quadrotor.steps`, the same bits).
         """
         p = self.plant
-        if self.armed and (self.max_hor_m > 0.0 or self.max_ver_m > 0.0 or self.fence is not None):
+        if self.armed and self.fence_action and (self.max_hor_m or self.max_ver_m or self.fence is not None):
             self._check_limits()
         pending = self._pending_events
         t0 = self._mission_t0  # (0.0 offline and in lockstep: the same bits as plant time)
@@ -449,19 +463,6 @@ class SimVehicle:
                 arrived = sensors.sample(p.t, p.state)
                 if arrived:
                     estimator.step(p.t, arrived)
-
-
-def limits_passed(X: tuple[float, ...], home: tuple[float, float, float], max_hor_m: float,
-                  max_ver_m: float) -> list[tuple[str, str]]:
-    """The GF_MAX_HOR_DIST and GF_MAX_VER_DIST limits (m; 0: none) state X (paper frame) is beyond, about ``home``
-    (x, y, z m), as PX4's geofence judges them (horizontal distance from home, height above it): (which, why)."""
-    out = []
-    d, up = math.hypot(X[0] - home[0], X[2] - home[1]), X[4] - home[2]
-    if max_hor_m > 0.0 and d > max_hor_m:
-        out.append(("hor", f"{d:.2f} m from home, beyond GF_MAX_HOR_DIST = {max_hor_m:g} m"))
-    if max_ver_m > 0.0 and up > max_ver_m:
-        out.append(("ver", f"{up:.2f} m above home, beyond GF_MAX_VER_DIST = {max_ver_m:g} m"))
-    return out
 
 
 def _none_before(due: float | None, end: float) -> bool:

@@ -103,7 +103,8 @@ class Flight:
         p, m = self.params, self.mission
         settings = {"armed": armed, "takeoff_alt_m": p.takeoff_alt_m, "timeline": self.timeline,
                     "failure_injection": p.failure_injection, "rtl": p.rtl, "preflight_disarm_s": p.preflight_disarm_s,
-                    "max_hor_m": p.max_hor_m, "max_ver_m": p.max_ver_m, "rally": m.rally}
+                    "max_hor_m": p.max_hor_m, "max_ver_m": p.max_ver_m, "rally": m.rally, "fence": m.geofence,
+                    "fence_action": p.fence_action}
         if self.estimator == "truth":  # no sensors to sample: the plant's state is published as it is
             return SimVehicle(plant, self.substeps, self.failsafe, **settings)
         suite = SensorSuite(self.sensors, m.seed, m.physics_hz, self.profile.gravity)

@@ -44,7 +44,7 @@ What each policy reads, and why it cannot be fooled by a run's own claims:
 - ``geofence``: every trace row's position is inside the mission's geofence (a ``.plan``'s ``geoFence`` or a
   mission's ``[geofence]``: inside an inclusion zone if there is one, outside every exclusion zone, as PX4's
   navigator judges it), and the vehicle never said it was outside a fence a ground station uploaded or beyond
-  GF_MAX_HOR_DIST / GF_MAX_VER_DIST (its ``geofence`` event); checked, not enforced (PX4 would act: GF_ACTION).
+  GF_MAX_HOR_DIST / GF_MAX_VER_DIST (its ``geofence`` event); the vehicle also acts on a breach (GF_ACTION).
 - ``time_steady``: the trace's ``t`` increases by exactly one control period from row to row
   (a missing row, a repeated step or a jump of the mission's clock breaks it), except over
   steps the vehicle flew disarmed: on the wall clock it writes no rows then (real time,
@@ -73,8 +73,8 @@ POLICIES: dict[str, str] = {
     "lockstep_recorded": "lockstep is never left without a record",
     "time_steady": "the mission's time never jumps: trace t increases by one control period each row",
     "geofence": "the vehicle stays inside its mission's geofence (a plan's geoFence, or [geofence]), any fence a "
-                "ground station uploaded, and GF_MAX_HOR_DIST / GF_MAX_VER_DIST: checked, not enforced; PX4 would "
-                "act on a breach (GF_ACTION)",
+                "ground station uploaded, and GF_MAX_HOR_DIST / GF_MAX_VER_DIST (the vehicle acts on a breach by "
+                "GF_ACTION, as PX4)",
 }
 EPS_S = 1e-5  # s: event times are rounded to 1 us; a physics step is at least 100 us
 ZERO_N = 1e-9  # N: a realised wrench this small is zero
@@ -366,8 +366,7 @@ def geofence_kept(t: np.ndarray, trace: Mapping[str, Any], rules: Rules, events:
         return Verdict(name, False, left.t, left.text)
     if breach is None:
         return Verdict(name, True)
-    return Verdict(name, False, breach[0], f"{breach[1]}: PX4 would have acted on it (GF_ACTION); "
-                                            "here the fence is checked, not enforced")
+    return Verdict(name, False, breach[0], f"{breach[1]} (the vehicle acts by GF_ACTION)")
 
 
 def time_steady(t: np.ndarray, rules: Rules, events: Sequence[RunEvent] = ()) -> Verdict:

@@ -9,8 +9,8 @@ Out: the items held of each type (a download sends them); the vehicle's rally po
      policy, bridge.record.policies); why an upload cannot be read as a fence or rally points (None: held)
 
 As PX4's navigator judges a position against its stored fence (missions.geofence: inside an inclusion zone if
-there is one, outside every exclusion zone), checked here, not enforced: PX4 would act on a breach (GF_ACTION),
-this vehicle flies on and says where it left the fence, as it does for a plan's fence (docs/missions.md).
+there is one, outside every exclusion zone); the vehicle acts on a breach by GF_ACTION (bridge.autopilot.fencewatch:
+Hold, PX4's default) and says where it left the fence, as it does for a plan's fence (docs/missions.md).
 """
 
 from __future__ import annotations

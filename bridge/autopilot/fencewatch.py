@@ -1,0 +1,39 @@
+"""The vehicle's geofence: the limits and the fence it watches, and what it does at a breach (PX4's GF_ACTION).
+
+In:  the state X (paper frame, m), home (x, y, z m), GF_MAX_HOR_DIST and GF_MAX_VER_DIST (m; 0: none), a fence
+     it holds (:class:`missions.geofence.Geofence`: the mission's, or one a ground station uploaded), GF_ACTION
+Out: the limits X is beyond, each (which, why) (:func:`limits_passed`); the failsafe action a breach asks for
+     (:func:`breach_action`: a ``[failsafe] action`` name, or None for none and warning) and its event's text
+
+PX4's geofence (navigator's ``Geofence``, ``GeofenceResult.GF_ACTION_*``): armed, beyond a limit or outside the
+fence, the vehicle does GF_ACTION: 0 nothing (it does not watch), 1 warns, 2 holds where it is (PX4's default),
+3 returns (Return mode: home or the nearest rally point), 4 terminates the flight (motors off), 5 lands where it
+is. 2 to 5 take the vehicle out of offboard control as its failsafe does, and it stays so until the flight ends.
+"""
+
+from __future__ import annotations
+
+import math
+
+FENCE_FAILSAFE = {2: "hold", 3: "return", 4: "disarm", 5: "land"}  # GF_ACTION -> the failsafe action flown
+FENCE_ACTION_TEXT = {"hold": "hold here", "return": "return home (RTL), then land", "disarm": "terminate: motors off",
+                     "land": "land here"}
+
+
+def limits_passed(X: tuple[float, ...], home: tuple[float, float, float], max_hor_m: float,
+                  max_ver_m: float) -> list[tuple[str, str]]:
+    """The GF_MAX_HOR_DIST and GF_MAX_VER_DIST limits (m; 0: none) state X (paper frame) is beyond, about ``home``
+    (x, y, z m), as PX4's geofence judges them (horizontal distance from home, height above it): (which, why)."""
+    out = []
+    d, up = math.hypot(X[0] - home[0], X[2] - home[1]), X[4] - home[2]
+    if max_hor_m > 0.0 and d > max_hor_m:
+        out.append(("hor", f"{d:.2f} m from home, beyond GF_MAX_HOR_DIST = {max_hor_m:g} m"))
+    if max_ver_m > 0.0 and up > max_ver_m:
+        out.append(("ver", f"{up:.2f} m above home, beyond GF_MAX_VER_DIST = {max_ver_m:g} m"))
+    return out
+
+
+def breach_action(fence_action: int) -> str | None:
+    """The ``[failsafe] action`` GF_ACTION ``fence_action`` flies at a breach (hold, return, disarm, land), or
+    None (0 none, 1 warning: the vehicle flies on)."""
+    return FENCE_FAILSAFE.get(fence_action)
