@@ -19,7 +19,7 @@ from bridge import simulate
 from bridge.autopilot.fencewatch import limits_passed
 from bridge.autopilot.simvehicle import FAILSAFE
 from bridge.core.flight import prepare
-from bridge.mavlink.fenceitems import FENCE, RALLY, fence_plan, parse_zone_item
+from bridge.mavlink.fenceitems import FENCE, RALLY, fence_plan, parse_zone_item, rally_plan
 from bridge.mavlink.missionitems import ItemRefused
 from bridge.nodes.vehicle.missiontransfer import Mission
 from bridge.nodes.vehicle.zones import HeldZones
@@ -195,3 +195,31 @@ def test_gf_action_return_terminate_and_land_each_fly_their_failsafe(action: int
         assert any(e["kind"] == "impact" for e in s["events"]) and off["t"] == fs["t"]
     else:
         assert (run.trace["x"][-1], run.trace["y"][-1]) == pytest.approx(end_xy, abs=0.05)
+
+
+def test_a_ground_station_downloads_the_missions_own_fence_and_rally_points_before_any_upload() -> None:
+    """The vehicle holds the mission's fence (and acts on it by GF_ACTION): before any upload a ground station's
+    download gets it, and the rally points, as PX4's items (a polygon's vertices in a row with their count, a
+    circle's radius), which read back as the same zones and points to degE7's resolution (1e-7 deg: 6 mm at most
+    off by rounding)."""
+    from missions.envelope import ENVELOPE_RADIUS_M
+    from missions.geofence import Geofence, Zone, geofence_from_plan
+    from missions.rally import rally_from_plan
+
+    sim = prepare(MISSION_DIR / "sine.toml").make_vehicle()
+    sim.fence = Geofence((Zone(True, points=((-3.0, 3.0), (13.0, 3.0), (13.0, -13.0), (-3.0, -13.0))),
+                          Zone(False, center=(5.0, -2.0), radius_m=1.5)))
+    sim.rally = ((4.0, -6.0), (-2.0, 1.0))
+    zones = HeldZones(sim, (HOME.lat, HOME.lon, HOME.alt))
+    fence, rally = zones.items[FENCE].items, zones.items[RALLY].items
+    assert [(it.seq, it.command, it.param1) for it in fence] == (
+        [(i, M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION, 4.0) for i in range(4)]
+        + [(4, M.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION, 1.5)])
+    back = geofence_from_plan(fence_plan(fence), HOME, "downloaded")
+    assert back is not None and len(back.zones) == 2
+    assert np.allclose(back.zones[0].points, sim.fence.zones[0].points, atol=6e-3)
+    assert np.allclose(back.zones[1].center, (5.0, -2.0), atol=6e-3) and back.zones[1].radius_m == 1.5
+    points = rally_from_plan(rally_plan(rally), HOME, "downloaded", ENVELOPE_RADIUS_M)
+    assert np.allclose(points, sim.rally, atol=6e-3) and {it.command for it in rally} == {M.MAV_CMD_NAV_RALLY_POINT}
+    bare = HeldZones(prepare(MISSION_DIR / "sine.toml").make_vehicle(), (HOME.lat, HOME.lon, HOME.alt))
+    assert bare.items[FENCE].items == () and bare.items[RALLY].items == ()  # the sine has neither

@@ -1,8 +1,8 @@
 """Covers bridge.sweep and bridge.batch: the safety policies of every cell (bridge.record.policies) in a sweep.
 
 Each process-engine row's ``policies`` column says ``ok`` or names the policies its run broke (``geofence``: the
-2 s sine leaves a 0.3 m GF_MAX_HOR_DIST at t = 0.94 s); ``bsst sweep`` says so on stderr and report.md lists the
-cells. The batch engine keeps no trace to judge by: its rows say ``""`` (not judged), and it refuses a mission with
+1 s sine leaves a 0.2 m GF_MAX_HOR_DIST at t = 0.80 s, and holds there: GF_ACTION 2); ``bsst sweep`` says so on
+stderr and report.md lists the cells. The batch engine keeps no trace to judge by: its rows say ``""`` (not judged), and it refuses a mission with
 a geofence, so ``--engine batch`` stops and ``auto`` flies it by the process engine, saying why.
 """
 
@@ -21,8 +21,8 @@ pytestmark = [pytest.mark.process, pytest.mark.usefixtures("batch_kernels")]  # 
 
 
 def fenced_sine(tmp_path: Path, limit_m: float | None) -> Path:
-    """The sine flown for 2 s (0.89 m from home at most), under GF_MAX_HOR_DIST = ``limit_m`` (None: none)."""
-    text = (MISSION_DIR / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 2.0")
+    """The sine flown for 1 s (0.33 m from home at most), under GF_MAX_HOR_DIST = ``limit_m`` (None: none)."""
+    text = (MISSION_DIR / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 1.0")
     f = tmp_path / f"fenced-{limit_m}.toml"
     f.write_text(text + (f"\n[params]\nGF_MAX_HOR_DIST = {limit_m}\n" if limit_m is not None else ""))
     return f
@@ -31,7 +31,7 @@ def fenced_sine(tmp_path: Path, limit_m: float | None) -> Path:
 def test_a_cell_that_leaves_its_geofence_says_so_in_its_row_on_stderr_and_in_the_report(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "fenced"
-    assert main(["sweep", str(fenced_sine(tmp_path, 0.3)), "--delay", "0,10", "--jobs", "1", "--no-plots",
+    assert main(["sweep", str(fenced_sine(tmp_path, 0.2)), "--delay", "0,10", "--jobs", "1", "--no-plots",
                  "--out", str(out)]) == 0
     err = capsys.readouterr().err
     assert "2 of 2 cells broke a safety policy" in err and ": geofence" in err, err
@@ -53,7 +53,7 @@ def test_the_batch_engine_judges_no_policy_and_refuses_a_geofence(tmp_path: Path
                                                                    capsys: pytest.CaptureFixture[str]) -> None:
     rows = sweep(fenced_sine(tmp_path, None), Grid(delay_ms=(0.0, 10.0)), engine="batch", report=False)
     assert {r["policies"] for r in rows} == {""}  # not judged, never "ok"
-    fenced = fenced_sine(tmp_path, 0.3)
+    fenced = fenced_sine(tmp_path, 0.2)
     with pytest.raises(ConfigError, match="geofence .*GF_MAX_HOR_DIST.*fly it with the process engine"):
         sweep(fenced, Grid(delay_ms=(0.0, 10.0)), engine="batch", report=False)
     delays = ",".join(str(d) for d in range(40))  # enough cells for auto to want the batch

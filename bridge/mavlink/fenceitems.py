@@ -6,7 +6,8 @@ In:  a MISSION_ITEM_INT (x, y: latitude, longitude in degE7) or MISSION_ITEM (de
 Out: a :class:`~bridge.mavlink.missionitems.MissionItem`, or :class:`~bridge.mavlink.missionitems.ItemRefused`
      with the MAV_MISSION_RESULT PX4 answers; the items as a plan's ``geoFence`` object (:func:`fence_plan`:
      polygons and circles, for :func:`missions.geofence.geofence_from_plan`) or ``rallyPoints`` object
-     (:func:`rally_plan`, for :func:`missions.rally.rally_from_plan`)
+     (:func:`rally_plan`, for :func:`missions.rally.rally_from_plan`); a mission's own fence and rally points (paper
+     frame, m) as the items a ground station downloads (:func:`fence_items`, :func:`rally_items`)
 
 As PX4 stores them: a polygon's vertices are consecutive items, each with the polygon's vertex count in param1
 (fewer than 3: ``MAV_MISSION_ERROR``, PX4's "Fence: too few vertices"); a circle is one item with its radius (m)
@@ -29,6 +30,8 @@ from typing import Any
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.mavlink.missionitems import GLOBAL_FRAMES, GLOBAL_INT_FRAMES, ItemRefused, MissionItem, item_position
+from missions.geodetic import Home
+from missions.geofence import Geofence
 
 _C = mavlink
 POLYGONS = {_C.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION: True, _C.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION: False}
@@ -81,3 +84,32 @@ def fence_plan(items: tuple[MissionItem, ...]) -> dict[str, Any]:
 def rally_plan(items: tuple[MissionItem, ...]) -> dict[str, Any]:
     """Held rally points as a plan's ``rallyPoints`` object ([lat, lon, alt] each: deg, deg, m as sent)."""
     return {"points": [[it.lat_deg, it.lon_deg, float(it.z)] for it in items]}
+
+
+def _global_item(seq: int, frame: int, command: int, param1: float, home: Home, x_m: float, y_m: float) -> MissionItem:
+    """An item at the paper-frame point (x north, y west, m about ``home``), latitude and longitude in degE7."""
+    lat, lon, _ = home.global_of(x_m, -y_m, 0.0)
+    return MissionItem(seq, frame, command, float(param1), 0.0, 0.0, 0.0, round(lat * 1e7), round(lon * 1e7), 0.0, 1)
+
+
+def fence_items(fence: Geofence | None, home: Home) -> tuple[MissionItem, ...]:
+    """A mission's fence (paper frame, m, about ``home``) as PX4 holds a fence's items: each polygon's vertices in a
+    row with its vertex count in param1, each circle one item with its radius (m) in param1; MAV_FRAME_GLOBAL, no
+    height (heights are not part of a fence). :func:`fence_plan` reads them back as the same zones."""
+    items: list[MissionItem] = []
+    for z in fence.zones if fence is not None else ():
+        if z.center is not None:
+            command = next(c for c, inc in CIRCLES.items() if inc == z.inclusion)
+            items.append(_global_item(len(items), _C.MAV_FRAME_GLOBAL, command, z.radius_m, home, *z.center))
+            continue
+        command = next(c for c, inc in POLYGONS.items() if inc == z.inclusion)
+        for x, y in z.points:
+            items.append(_global_item(len(items), _C.MAV_FRAME_GLOBAL, command, len(z.points), home, x, y))
+    return tuple(items)
+
+
+def rally_items(points: tuple[tuple[float, float], ...], home: Home) -> tuple[MissionItem, ...]:
+    """A mission's rally points (paper frame, m, about ``home``) as NAV_RALLY_POINT items (frame
+    GLOBAL_RELATIVE_ALT, at the home's height: a rally point's height is not used)."""
+    return tuple(_global_item(i, _C.MAV_FRAME_GLOBAL_RELATIVE_ALT, _C.MAV_CMD_NAV_RALLY_POINT, 0.0, home, x, y)
+                 for i, (x, y) in enumerate(points))

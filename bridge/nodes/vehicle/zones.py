@@ -3,7 +3,8 @@ held, read as a plan file's are, the rally points given to the vehicle's Return,
 
 In:  an accepted upload's or a clear's items (:mod:`bridge.nodes.vehicle.missiontransfer`), the home (deg, deg,
      m AMSL)
-Out: the items held of each type (a download sends them); the vehicle's rally points (``SimVehicle.rally``, m,
+Out: the items held of each type (a download sends them; before any upload, the mission's own fence and rally
+     points); the vehicle's rally points (``SimVehicle.rally``, m,
      the paper frame: an upload or a clear replaces the mission's own) and the fence it watches
      (:meth:`SimVehicle.watch_fence`: its first breach a ``geofence`` event, which fails the run's ``geofence``
      policy, bridge.record.policies); why an upload cannot be read as a fence or rally points (None: held)
@@ -18,7 +19,7 @@ from __future__ import annotations
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.autopilot.simvehicle import SimVehicle
-from bridge.mavlink.fenceitems import fence_plan, rally_plan
+from bridge.mavlink.fenceitems import fence_items, fence_plan, rally_items, rally_plan
 from bridge.nodes.vehicle.missiontransfer import Mission
 from missions.envelope import ENVELOPE_RADIUS_M
 from missions.geodetic import Home
@@ -35,7 +36,9 @@ class HeldZones:
     def __init__(self, sim: SimVehicle, home: tuple[float, float, float]) -> None:
         self.sim = sim
         self.home = Home(*home)
-        self.items = {FENCE: Mission(), RALLY: Mission()}
+        # what it holds from the start: the mission's own fence and rally points, as a ground station downloads them
+        self.items = {FENCE: Mission(fence_items(sim.fence, self.home)),
+                      RALLY: Mission(rally_items(sim.rally, self.home))}
 
     def accept(self, mission: Mission, mission_type: int) -> str | None:
         """Hold an upload's (or a clear's: no items) fence or rally points, read as a plan's are; why they cannot
