@@ -3,7 +3,8 @@
 Each process-engine row's ``policies`` column says ``ok`` or names the policies its run broke (``geofence``: the
 1 s sine leaves a 0.2 m GF_MAX_HOR_DIST at t = 0.80 s, and holds there: GF_ACTION 2); ``bsst sweep`` says so on
 stderr and report.md lists the cells. The batch engine keeps no trace to judge by: its rows say ``""`` (not
-judged), and it refuses a mission with a geofence, so ``--engine batch`` stops and ``auto`` flies it by the process engine, saying why.
+judged), and it refuses a mission with a geofence, so ``--engine batch`` stops and ``auto`` flies it by the
+process engine, saying why.
 """
 
 from __future__ import annotations
