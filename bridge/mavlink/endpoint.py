@@ -306,6 +306,11 @@ class Endpoint:
         trial = self.trial  # on trial, every datagram to the peer is charged to its credit (ReplyCredit)
         if trial is not None and dest == self.peer and not trial.charge(len(buf)):
             return False
+        tlog = self.tlog
+        # stamped as it is handed to the kernel, recorded once it is gone (off the peer's critical path): a stamp
+        # taken after sendto is late by however long a loaded machine kept this process off the CPU, and a
+        # TIMESYNC exchange with a late-stamped request has the shortest round trip (link extract picks it)
+        stamp = time.time_ns() // 1000 if tlog is not None else 0
         try:
             self.sock.sendto(buf, dest)
         except OSError:  # e.g. ECONNREFUSED from an earlier ICMP, ENOBUFS
@@ -314,8 +319,8 @@ class Endpoint:
         else:
             self.sent += 1
             sent = True
-        if self.tlog is not None:  # after the datagram is gone: the record is not on the peer's critical path
-            self.tlog.record(last)
+        if tlog is not None:
+            tlog.record(last, stamp)
         return sent
 
     # -- receiving ----------------------------------------------------------------------

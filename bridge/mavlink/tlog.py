@@ -33,8 +33,9 @@ class Tlog:
         self._batch = batch_bytes
         self.records = 0
 
-    def record(self, frame: bytes) -> None:
-        self._buf.append(_STAMP.pack(time.time_ns() // 1000))
+    def record(self, frame: bytes, stamp_us: int | None = None) -> None:
+        """Log ``frame`` stamped ``stamp_us`` (us since the epoch; None: now)."""
+        self._buf.append(_STAMP.pack(time.time_ns() // 1000 if stamp_us is None else stamp_us))
         self._buf.append(frame)
         self._size += 8 + len(frame)
         self.records += 1
