@@ -6,9 +6,11 @@ Out: the limits X is beyond, each (which, why) (:func:`limits_passed`); the fail
      (:func:`breach_action`: a ``[failsafe] action`` name, or None for none and warning) and its event's text
 
 PX4's geofence (navigator's ``Geofence``, ``GeofenceResult.GF_ACTION_*``): armed, beyond a limit or outside the
-fence, the vehicle does GF_ACTION: 0 nothing (it does not watch), 1 warns, 2 holds where it is (PX4's default),
-3 returns (Return mode: home or the nearest rally point), 4 terminates the flight (motors off), 5 lands where it
-is. 2 to 5 take the vehicle out of offboard control as its failsafe does, and it stays so until the flight ends.
+fence, the vehicle does GF_ACTION: 0 nothing (it does not watch), 1 warns, 2 holds where it is (PX4's default;
+here for COM_FAIL_ACT_T, then it lands, as the link-loss hold does, so that a flight ends on the ground in every
+clock: PX4 holds until someone acts), 3 returns (Return mode: home or the nearest rally point), 4 terminates the
+flight (motors off), 5 lands where it is. 2 to 5 take the vehicle out of offboard control as its failsafe does,
+and it stays so until the flight ends.
 """
 
 from __future__ import annotations
@@ -16,8 +18,8 @@ from __future__ import annotations
 import math
 
 FENCE_FAILSAFE = {2: "hold", 3: "return", 4: "disarm", 5: "land"}  # GF_ACTION -> the failsafe action flown
-FENCE_ACTION_TEXT = {"hold": "hold here", "return": "return home (RTL), then land", "disarm": "terminate: motors off",
-                     "land": "land here"}
+FENCE_ACTION_TEXT = {"hold": "hold here, then land", "return": "return home (RTL), then land",
+                     "disarm": "terminate: motors off", "land": "land here"}
 
 
 def limits_passed(X: tuple[float, ...], home: tuple[float, float, float], max_hor_m: float,

@@ -306,8 +306,10 @@ class SimVehicle:
             self.event("geofence", f"{why} (GF_ACTION = {self.fence_action}: {FENCE_ACTIONS[self.fence_action]})")
         action = breach_action(self.fence_action)
         if new and action is not None and self.mode not in (FAILSAFE, LANDED):
-            self._fly_failsafe(action, f"geofence: {new[0][1]}: {FENCE_ACTION_TEXT[action]}",
-                               "geofence: flight terminated, motors stopped")
+            flies = self._fly_failsafe(action, f"geofence: {new[0][1]}: {FENCE_ACTION_TEXT[action]}",
+                                       "geofence: flight terminated, motors stopped")
+            if flies and action == "hold":  # as the link-loss hold: COM_FAIL_ACT_T, then it lands
+                self.land_at = self.plant.t + self.failsafe.hold_s
 
     def fly_onboard(self, target: Target, mode: str) -> None:
         """Hand the motors to the on-board controller flying ``target`` under ``mode`` (not
