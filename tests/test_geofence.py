@@ -103,8 +103,9 @@ def test_a_plans_fence_is_read_about_its_home_and_kept_in_mission_toml(tmp_path:
 def test_a_run_that_leaves_the_fence_says_where_and_when_and_exits_1(tmp_path: Path, capsys) -> None:
     """The fence covers the L's north leg only (to 5 m east): the east leg leaves it. The vehicle holds the plan's
     fence as PX4 does and acts by GF_ACTION: 2 (PX4's default) holds where it left it, for COM_FAIL_ACT_T, then
-    lands (its failsafe: outcome ``failsafe``, ended by the geofence); 1 (warning) flies on. Either way the ``geofence`` policy names the first
-    row outside, the vehicle's ``geofence`` event is at that row, and the run exits 1."""
+    lands (its failsafe: outcome ``failsafe``, ended by the geofence); 1 (warning) flies on. Either way the
+    ``geofence`` policy names the first row outside, the vehicle's ``geofence`` event is at that row, and the run
+    exits 1."""
     plan = _fenced_l(tmp_path, {"polygons": [{"inclusion": True, "version": 1, "polygon": _rectangle(-3, 13, 3, 5)}]},
                      "leaves.plan")
     for action, outcome in ((2, "failsafe"), (1, "completed")):
