@@ -62,3 +62,16 @@ def test_the_batch_engine_judges_no_policy_and_refuses_a_geofence(tmp_path: Path
     out = capsys.readouterr().out
     assert "engine process (the batch engine cannot fly this grid: a geofence" in out, out
     assert {r["policies"] for r in read_cells(tmp_path / "auto" / CELLS_CSV)} == {"geofence"}
+
+
+def test_a_margin_probe_that_breaks_a_policy_does_not_hold() -> None:
+    """``bsst margin``'s criterion (bridge.sweep.margin.Until): a probe that completed within the RMS but broke a
+    policy fails; one that kept them (``ok``) or was not judged (``""``: the batch engine) holds by its figures."""
+    from bridge.sweep.classes import Classes
+    from bridge.sweep.margin import Until
+
+    row = {"outcome": "completed", "rms": 1e-4, "ripple_u2": 1.0}  # clean by its figures
+    for until in (Until(rms=0.1), Until(cls="degraded")):
+        assert until.failed({**row, "policies": "geofence"}, Classes())
+        assert not until.failed({**row, "policies": "ok"}, Classes())
+        assert not until.failed({**row, "policies": ""}, Classes())

@@ -42,6 +42,7 @@ from typing import Any
 
 from bridge.core.flight import prepare
 from bridge.record.runlog import run_dir, write_json_atomic
+from bridge.sweep.cells import POLICIES_OK
 from bridge.sweep.classes import CLASSES, Classes, classify
 from bridge.sweep.executors import engine_for, run_batch, run_cell, run_local
 from bridge.sweep.grid import LINK_AXES, RANGES, Cell, mission_value, noise_problem
@@ -69,8 +70,12 @@ class Until:
     cls: str | None = None
 
     def failed(self, row: dict[str, Any], classes: Classes) -> bool:
+        """Whether a probe's row fails: the criterion, or a safety policy its run broke (its ``policies``
+        column names one: a probe that left its geofence does not hold, whatever its RMS)."""
         if row["outcome"] == "error":
             raise ConfigError(f"margin: a cell could not be flown: {row.get('error')}")
+        if row.get("policies") not in (None, "", POLICIES_OK):
+            return True
         if self.rms is not None:
             rms = row["rms"]
             return rms is None or not math.isfinite(rms) or rms > self.rms or row["outcome"] != "completed"
