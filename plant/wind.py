@@ -268,10 +268,7 @@ class TurbulenceRecord:
     record is worked out while a real-time vehicle flies."""
 
     def __init__(self, free: Turbulence, steps: int) -> None:
-        self.free = free
-        self.sigma_u, self.sigma_v, self.sigma_w = free.sigma_u, free.sigma_v, free.sigma_w
-        self.l_u, self.l_v, self.l_w = free.l_u, free.l_v, free.l_w
-        self.speed, self.h = free.speed, free.h
+        self.free = free  # the filters: their σ, scales and step are the record's
         self.steps = max(int(steps), 2)
         raw = [(0.0, 0.0, 0.0)] * self.steps
         for k in range(self.steps):
@@ -281,8 +278,7 @@ class TurbulenceRecord:
         mean = x.mean(axis=0)
         dev = x - mean
         std = np.sqrt((dev * dev).mean(axis=0))
-        sigma = np.array([self.sigma_u, self.sigma_v, self.sigma_w])
-        scale = np.where(std > 0.0, sigma / np.where(std > 0.0, std, 1.0), 0.0)
+        scale = np.array([free.sigma_u, free.sigma_v, free.sigma_w]) / std  # (a filter's output is never constant)
         self._rows = (dev * scale).tolist()
         self.first = {"mean": mean.tolist(), "std": std.tolist(), "scale": scale.tolist()}  # summary.json
         free.rescale(scale.tolist(), mean.tolist())  # its next sample continues the record's last
@@ -301,7 +297,7 @@ class TurbulenceRecord:
     @property
     def free_after_s(self) -> float:
         """How long the flight has flown past its record (s): through the filters, free."""
-        return max(self._k - self.steps, 0) * self.h
+        return max(self._k - self.steps, 0) * self.free.h
 
 
 class Wind:
@@ -386,25 +382,26 @@ class Wind:
         out: dict = {**c.as_table(), "samples": self._n, "mean_mps": {"along": mean[0], "across": mean[1],
                                                                       "up": mean[2]},
                      "mean_speed_mps": math.hypot(mean[0], mean[1]), "peak_mps": self.peak_mps}
-        tu = self.turbulence
-        if tu is not None:
+        rec = self.turbulence
+        if rec is not None:
+            tu = rec.free if isinstance(rec, TurbulenceRecord) else rec  # the filters: what was asked of them
             out["turbulence_std_mps"] = {"u": std_t[0], "v": std_t[1], "w": std_t[2]}
             out["dryden"] = {"sigma_mps": {"u": tu.sigma_u, "v": tu.sigma_v, "w": tu.sigma_w},
                              "scale_m": {"u": tu.l_u, "v": tu.l_v, "w": tu.l_w}, "pass_speed_mps": tu.speed,
                              "model_altitude_m": tu.l_w,  # L_w = h: the altitude in the model's range
                              "source": "MIL-F-8785C / MIL-HDBK-1797 low altitude"}
-            if isinstance(tu, TurbulenceRecord):  # what was scaled: the free-running sample's own figures
-                r = tu.first
-                out["record"] = {"length_s": tu.steps * tu.h, "free_after_s": tu.free_after_s,
+            if isinstance(rec, TurbulenceRecord):  # what was scaled: the free-running sample's own figures
+                r = rec.first
+                out["record"] = {"length_s": rec.steps * tu.h, "free_after_s": rec.free_after_s,
                                  "scale": dict(zip("uvw", r["scale"])),
                                  "removed_mean_mps": dict(zip("uvw", r["mean"]))}
-                out["sampling"] = sampling_errors(tu, tu.steps * tu.h, r["std"], r["mean"][0])
+                out["sampling"] = sampling_errors(tu, rec.steps * tu.h, r["std"], r["mean"][0])
             else:
                 out["sampling"] = sampling_errors(tu, self._n * self.h, std_t, self._sum_t[0] / n)
         return out
 
 
-def sampling_errors(tu: Turbulence | TurbulenceRecord, duration_s: float, std: list[float], mean_u: float) -> dict:
+def sampling_errors(tu: Turbulence, duration_s: float, std: list[float], mean_u: float) -> dict:
     """How far one flight's sample of the turbulence is expected to stray from the σ it was generated with.
 
     Over T seconds, a zero-mean Gaussian process of autocorrelation R has a sample mean of variance

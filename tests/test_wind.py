@@ -67,12 +67,12 @@ def test_turbulence_spectrum_is_drydens_at_three_frequencies(scaling: str) -> No
     filters free-running (``none``) and as one record scaled to σ (``exact``, the default)."""
     V, h = 5.0, 0.02
     n = 400_000
-    tu = Turbulence("moderate", 5.0, V, seed=3, h=h)
-    tu = TurbulenceRecord(tu, n) if scaling == "exact" else tu
+    tu = Turbulence("moderate", 5.0, V, seed=3, h=h)  # the filters: their sigma and scale lengths are asked for
+    flown = TurbulenceRecord(tu, n) if scaling == "exact" else tu
     out = np.empty((n, 3))
     for i in range(n):
-        out[i] = tu.now()
-        tu.advance()
+        out[i] = flown.now()
+        flown.advance()
     f, psd = welch(out[:, 0], 1 / h, 4096)
     _, psd_v = welch(out[:, 1], 1 / h, 4096)
     _, psd_w = welch(out[:, 2], 1 / h, 4096)

@@ -3,7 +3,7 @@
 In:  the state X (paper frame, m), home (x, y, z m), GF_MAX_HOR_DIST and GF_MAX_VER_DIST (m; 0: none), a fence
      it holds (:class:`missions.geofence.Geofence`: the mission's, or one a ground station uploaded), GF_ACTION
 Out: the limits X is beyond, each (which, why) (:func:`limits_passed`); the failsafe action a breach asks for
-     (:func:`breach_action`: a ``[failsafe] action`` name, or None for none and warning) and its event's text
+     (:data:`FENCE_FAILSAFE`: a ``[failsafe] action`` name by GF_ACTION; none for 0 and 1) and its event's text
 
 PX4's geofence (navigator's ``Geofence``, ``GeofenceResult.GF_ACTION_*``): armed, beyond a limit or outside the
 fence, the vehicle does GF_ACTION: 0 nothing (it does not watch), 1 warns, 2 holds where it is (PX4's default;
@@ -34,8 +34,3 @@ def limits_passed(X: tuple[float, ...], home: tuple[float, float, float], max_ho
         out.append(("ver", f"{up:.2f} m above home, beyond GF_MAX_VER_DIST = {max_ver_m:g} m"))
     return out
 
-
-def breach_action(fence_action: int) -> str | None:
-    """The ``[failsafe] action`` GF_ACTION ``fence_action`` flies at a breach (hold, return, disarm, land), or
-    None (0 none, 1 warning: the vehicle flies on)."""
-    return FENCE_FAILSAFE.get(fence_action)

@@ -48,7 +48,7 @@ from bridge.autopilot.failsafe import (
     failsafe_target,
     return_point,
 )
-from bridge.autopilot.fencewatch import FENCE_ACTION_TEXT, breach_action, limits_passed
+from bridge.autopilot.fencewatch import FENCE_ACTION_TEXT, FENCE_FAILSAFE, limits_passed
 from bridge.autopilot.params import FENCE_ACTIONS, VehicleParams, change_param, read_param
 from bridge.autopilot.vehicleevents import Event, ParamChanged, Sender
 from controller.nominal import Nominal
@@ -304,12 +304,10 @@ class SimVehicle:
         for which, why in new:
             self._beyond.add(which)
             self.event("geofence", f"{why} (GF_ACTION = {self.fence_action}: {FENCE_ACTIONS[self.fence_action]})")
-        action = breach_action(self.fence_action)
+        action = FENCE_FAILSAFE.get(self.fence_action)  # None: 0 none, 1 warning (it flies on)
         if new and action is not None and self.mode not in (FAILSAFE, LANDED):
-            flies = self._fly_failsafe(action, f"geofence: {new[0][1]}: {FENCE_ACTION_TEXT[action]}",
-                                       "geofence: flight terminated, motors stopped")
-            if flies and action == "hold":  # as the link-loss hold: COM_FAIL_ACT_T, then it lands
-                self.land_at = self.plant.t + self.failsafe.hold_s
+            self._fly_failsafe(action, f"geofence: {new[0][1]}: {FENCE_ACTION_TEXT[action]}",
+                               "geofence: flight terminated, motors stopped")
 
     def fly_onboard(self, target: Target, mode: str) -> None:
         """Hand the motors to the on-board controller flying ``target`` under ``mode`` (not
@@ -319,24 +317,25 @@ class SimVehicle:
 
     def _enter_failsafe(self, silent_s: float) -> None:
         """No target for ``silent_s``: the failsafe's action, from the state it began in."""
-        fs = self.failsafe
-        text = f"no actuator target for {silent_s:.3f} s: {ACTION_TEXT[fs.action]}"
-        if self._fly_failsafe(fs.action, text, "failsafe: motors stopped") and fs.action == "hold":
-            self.land_at = self.plant.t + fs.hold_s
+        action = self.failsafe.action
+        self._fly_failsafe(action, f"no actuator target for {silent_s:.3f} s: {ACTION_TEXT[action]}",
+                           "failsafe: motors stopped")
 
-    def _fly_failsafe(self, action: str, text: str, stopped: str) -> bool:
+    def _fly_failsafe(self, action: str, text: str, stopped: str) -> None:
         """Mode failsafe, a ``failsafe`` event saying ``text``, and ``action`` (a ``[failsafe] action``) flown from
-        here; on the ground, or ``disarm``, the motors stop now (``stopped``: why). Whether it flies on."""
+        here (``hold``: for COM_FAIL_ACT_T, then it lands); on the ground, or ``disarm``, the motors stop now
+        (``stopped``: why)."""
         p = self.plant
         self.mode = FAILSAFE
         self.event("failsafe", text)
         if p.on_ground or action == "disarm":  # nothing to fly: motors off now, in this control step
             self.mode = LANDED
             self.disarm("landed: disarmed" if p.on_ground else stopped)
-            return False
+            return
         self.fly_onboard(failsafe_target(replace(self.failsafe, action=action), self.published(), self.home, self.rtl,
                                          self.rally), FAILSAFE)
-        return True
+        if action == "hold":
+            self.land_at = p.t + self.failsafe.hold_s
 
     def _end_hold(self) -> None:
         """``hold``: its time is up; land where it held."""

@@ -105,6 +105,7 @@ def fleet_sizes(text: str) -> tuple[int, ...]:
 def cmd_sweep(args: argparse.Namespace) -> int:
     from bridge.core.flight import Overrides, prepare  # lazy: start-up time
     from bridge.sweep import AXES, Grid, Sweep, is_sweep_file, load_sweep, run_sweep  # lazy: start-up time
+    from bridge.sweep.cells import broke_policy  # lazy: start-up time
     from missions import load_mission  # lazy: start-up time
 
     spec = load_sweep(args.mission) if is_sweep_file(args.mission) else Sweep(load_mission(args.mission), Grid())
@@ -143,7 +144,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     elif res.failed:
         print(f"bsst sweep: {res.failed} of {len(res.rows)} cells failed (cells.csv's error column); the first: "
               f"{res.first_error()}", file=sys.stderr)
-    broken = [r for r in res.rows if r.get("policies") not in (None, "", "ok")]
+    broken = [r for r in res.rows if broke_policy(r)]
     if broken:  # measured, as a diverged cell is (the exit status stays the sweep's), but said: not flown as asked
         print(f"bsst sweep: {len(broken)} of {len(res.rows)} cells broke a safety policy (cells.csv's policies "
               f"column, report.md's Policies); the first: {broken[0]['controller']}, seed {broken[0]['seed']}: "

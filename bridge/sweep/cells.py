@@ -106,6 +106,11 @@ def row_from_run(cell: Cell, run: Run) -> dict[str, Any]:
     }
 
 
+def broke_policy(row: Mapping[str, Any]) -> bool:
+    """Whether a row's run broke a safety policy: its ``policies`` names one (``ok`` and not judged do not)."""
+    return row.get("policies") not in (None, "", POLICIES_OK)
+
+
 def policies_cell(verdicts: Sequence[Sequence[Mapping[str, Any]] | None]) -> str:
     """The ``policies`` column of one or more runs' ``summary["policies"]`` (bridge.record.policies): ``ok`` when
     every policy of every run held, else the broken ones' names (space-separated, in the order judged); ``""``

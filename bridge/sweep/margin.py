@@ -42,7 +42,7 @@ from typing import Any
 
 from bridge.core.flight import prepare
 from bridge.record.runlog import run_dir, write_json_atomic
-from bridge.sweep.cells import POLICIES_OK
+from bridge.sweep.cells import broke_policy
 from bridge.sweep.classes import CLASSES, Classes, classify
 from bridge.sweep.executors import engine_for, run_batch, run_cell, run_local
 from bridge.sweep.grid import LINK_AXES, RANGES, Cell, mission_value, noise_problem
@@ -74,7 +74,7 @@ class Until:
         column names one: a probe that left its geofence does not hold, whatever its RMS)."""
         if row["outcome"] == "error":
             raise ConfigError(f"margin: a cell could not be flown: {row.get('error')}")
-        if row.get("policies") not in (None, "", POLICIES_OK):
+        if broke_policy(row):
             return True
         if self.rms is not None:
             rms = row["rms"]

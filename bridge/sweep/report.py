@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from bridge.autopilot.estimator import ESTIMATOR_KINDS
-from bridge.sweep.cells import CELLS_CSV, POLICIES_OK, SWEEP_JSON, read_cells, read_sweep_json
+from bridge.sweep.cells import CELLS_CSV, POLICIES_OK, SWEEP_JSON, broke_policy, read_cells, read_sweep_json
 from bridge.sweep.classes import CLASSES, Classes, classify, thresholds_text
 from bridge.sweep.grid import AXES, LINK_AXES, NAME_AXES, SHORT
 from params import ConfigError
@@ -229,7 +229,7 @@ def policies_section(rows: Sequence[Mapping[str, Any]]) -> list[str]:
     """``report.md``'s policies: how many runs kept every safety policy (bridge.record.policies), which broke one
     (each, up to 50: its cell and the names), how many were not judged (the batch engine, a cell not flown, an
     older sweep's rows: ``policies`` empty)."""
-    broken = [r for r in rows if r["policies"] not in ("", POLICIES_OK)]
+    broken = [r for r in rows if broke_policy(r)]
     kept = sum(1 for r in rows if r["policies"] == POLICIES_OK)
     unjudged = len(rows) - kept - len(broken)
     lines = ["", "## Policies", "", f"{kept} runs kept every policy, {len(broken)} broke one, {unjudged} not judged "
