@@ -1,18 +1,25 @@
 """Where the suite's wall time goes, worker by worker: a pytest plug-in and its report (docs/testing.md).
 
-In:  (plug-in) each test's start and end as pytest-xdist's workers run it, wall clock s; ``BSST_TIMELINE_DIR``,
-     the directory to write to; (report) that directory
-Out: (plug-in) one file per worker, ``<worker>.txt``, a line per test start (``S <t> <test id>``) and end
-     (``E <t> <test id>``); (report) each worker's span and busy time, whether they ended together (a tail
-     that ordering could cut), the worker-seconds by file and the slowest tests
+In:  (plug-in) each test's start and end as pytest-xdist's workers run it: the wall clock, s; the CPU time the
+     worker and the processes it has reaped have used, s; the whole machine's CPU time so far (its root cgroup's
+     count), s; ``BSST_TIMELINE_DIR``, the directory to write to; (report) that directory
+Out: (plug-in) one file per worker, ``<worker>.txt``, a line per test start (``S <t> <cpu> <machine> <test id>``)
+     and end (``E ...``); (report) each worker's span and busy time, whether they ended together (a tail that
+     ordering could cut), the worker-seconds and CPU-seconds by file and the slowest and costliest tests.
+     On a loaded machine wall time measures the load as much as the test; CPU time is the test's own cost, but
+     the worker's count misses what it does not reap (a session's children forked by the fork server). Run with
+     ``-n 0`` (one worker, nothing else running) and the machine's CPU time during each test is its whole cost:
+     the report then ranks files and tests by that
 
     BSST_TIMELINE_DIR=/tmp/tl .venv/bin/python -m pytest -p tests.timeline   # make test's suite, timed
+    BSST_TIMELINE_DIR=/tmp/tl1 .venv/bin/python -m pytest -n 0 -p tests.timeline   # each test's whole CPU cost
     .venv/bin/python -m tests.timeline /tmp/tl
 """
 
 from __future__ import annotations
 
 import os
+import resource
 import sys
 import time
 from collections import Counter
@@ -24,6 +31,21 @@ import pytest
 _out: TextIO | None = None
 
 
+def _machine_busy() -> float:
+    """The CPU time the whole machine has run tasks, s: the root cgroup's scheduler count (cgroup v1's cpuacct or
+    v2's cpu.stat; 0 where neither is). Not /proc/stat: its tick samples miss a process that runs in short bursts
+    between ticks, as a lockstep vehicle does (a four-vehicle test read 1 CPU-s there, 6 here)."""
+    try:
+        return int(Path("/sys/fs/cgroup/cpuacct/cpuacct.usage").read_text()) / 1e9
+    except (OSError, ValueError):
+        pass
+    try:
+        stat = dict(line.split() for line in Path("/sys/fs/cgroup/cpu.stat").read_text().splitlines())
+        return int(stat["usage_usec"]) / 1e6
+    except (OSError, ValueError, KeyError):
+        return 0.0
+
+
 def _log(kind: str, nodeid: str) -> None:
     global _out
     where = os.environ.get("BSST_TIMELINE_DIR")
@@ -32,7 +54,9 @@ def _log(kind: str, nodeid: str) -> None:
     if _out is None:
         Path(where).mkdir(parents=True, exist_ok=True)
         _out = open(Path(where) / f"{os.environ.get('PYTEST_XDIST_WORKER', 'main')}.txt", "a")  # noqa: SIM115
-    _out.write(f"{kind} {time.time():.3f} {nodeid}\n")
+    me, reaped = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = me.ru_utime + me.ru_stime + reaped.ru_utime + reaped.ru_stime
+    _out.write(f"{kind} {time.time():.3f} {cpu:.3f} {_machine_busy():.2f} {nodeid}\n")
     _out.flush()
 
 
@@ -48,22 +72,25 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> 
 
 def report(where: Path, slowest: int = 20) -> str:
     """The timeline's figures (module docstring), as text."""
-    spans, per_file, tests = [], Counter(), []
+    spans, per_file, cpu_per_file, machine_per_file, tests = [], Counter(), Counter(), Counter(), []
     for f in sorted(where.glob("*.txt")):
-        started: dict[str, float] = {}
+        started: dict[str, tuple[float, float]] = {}
         first = last = busy = None
         for line in f.read_text().splitlines():
-            kind, t_text, nodeid = line.split(" ", 2)
-            t = float(t_text)
+            kind, t_text, cpu_text, machine_text, nodeid = line.split(" ", 4)
+            t, cpu, machine = float(t_text), float(cpu_text), float(machine_text)
             if kind == "S":
-                started[nodeid] = t
+                started[nodeid] = (t, cpu, machine)
                 first = t if first is None else first
             elif nodeid in started:
-                d = t - started.pop(nodeid)
+                t0, cpu0, machine0 = started.pop(nodeid)
+                d = t - t0
+                machine_per_file[nodeid.split("::")[0]] += machine - machine0
                 busy = (busy or 0.0) + d
                 last = t
                 per_file[nodeid.split("::")[0]] += d
-                tests.append((d, nodeid))
+                cpu_per_file[nodeid.split("::")[0]] += cpu - cpu0
+                tests.append((d, cpu - cpu0, machine - machine0, nodeid))
         if first is not None and last is not None:
             spans.append((f.stem, first, last, busy or 0.0))
     if not spans:
@@ -73,9 +100,17 @@ def report(where: Path, slowest: int = 20) -> str:
            for name, a, b, busy in spans]
     ends = [s[2] for s in spans]
     out.append(f"workers ended within {max(ends) - min(ends):.1f} s of each other; "
-               f"{sum(per_file.values()):.1f} worker-seconds in all")
+               f"{sum(per_file.values()):.1f} worker-seconds in all, {sum(cpu_per_file.values()):.1f} CPU-seconds")
     out += ["worker-seconds by file:"] + [f"  {d:7.1f} {name}" for name, d in per_file.most_common(15)]
-    out += ["slowest tests (setup included):"] + [f"  {d:6.1f} {n}" for d, n in sorted(tests, reverse=True)[:slowest]]
+    out += ["CPU-seconds by file:"] + [f"  {c:7.1f} {name}" for name, c in cpu_per_file.most_common(15)]
+    if len(spans) == 1:  # one worker (-n 0): the machine's busy time while a test ran is that test's whole cost
+        out += ["machine CPU-seconds by file:"]
+        out += [f"  {c:7.1f} {name}" for name, c in machine_per_file.most_common(40)]
+    out += ["slowest tests (setup included; wall s, CPU s):"]
+    out += [f"  {d:6.1f} {c:6.1f} {n}" for d, c, _, n in sorted(tests, reverse=True)[:slowest]]
+    cost = 2 if len(spans) == 1 else 1  # the machine's CPU if one worker ran, else the worker's own
+    out += ["costliest tests (CPU s, wall s):"]
+    out += [f"  {t[cost]:6.1f} {t[0]:6.1f} {t[3]}" for t in sorted(tests, key=lambda t: -t[cost])[:slowest]]
     return "\n".join(out)
 
 
