@@ -173,6 +173,16 @@ def test_a_refused_out_directory_is_named_before_any_flight(tmp_path: Path) -> N
     assert (tmp_path / "kept.txt").read_text() == "a user's file\n" and not (tmp_path / "margin.json").exists()
 
 
+def test_a_law_that_cannot_be_built_is_named_before_any_flight(tmp_path: Path) -> None:
+    """Every law of ``--controller`` is built before the first probe flies: a search that flew the good law's
+    probes first (1000 seeds of them here) refused the missing file only minutes later on a loaded machine."""
+    r = run_bsst("margin", "missions/sine.toml", "--over", "delay_ms", "--until", "rms=0.1", "--seeds", "1000",
+                 "--controller", "bsst,nofile.py:Law", "--out", str(tmp_path / "m"), cwd=ROOT, timeout=60)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert "--controller nofile.py:Law: " in r.stderr and "no file" in r.stderr, r.stderr
+    assert not (tmp_path / "m").exists()
+
+
 # -- issue 22, defect 8: every --resolution the search takes ends ------------------------------------------------------
 @pytest.mark.parametrize("over", ["delay_ms", "loss_pct", "jitter_ms", "burst_len", "noise", "wind_mps"])
 def test_a_resolution_too_fine_to_end_is_refused_naming_the_flag_and_its_range(over: str) -> None:

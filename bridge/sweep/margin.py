@@ -45,7 +45,7 @@ from bridge.record.runlog import run_dir, write_json_atomic
 from bridge.sweep.cells import broke_policy
 from bridge.sweep.classes import CLASSES, Classes, classify
 from bridge.sweep.executors import engine_for, run_batch, run_cell, run_local
-from bridge.sweep.grid import LINK_AXES, RANGES, Cell, mission_value, noise_problem
+from bridge.sweep.grid import LINK_AXES, RANGES, Cell, cell_flight, mission_value, noise_problem
 from missions import Mission
 from params import ConfigError
 
@@ -209,6 +209,11 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
     vehicle = {"estimator": flight.estimator, "noise": mission_value(mission, "noise"),
                "turbulence": mission_value(mission, "turbulence")}
     seed_list = [mission.seed + i for i in range(seeds)]
+    for c in laws:  # each law's file, module and class before any cell flies (as a sweep's validate does)
+        try:
+            cell_flight(mission, probe(mission, c, over, START[over], mission.seed, base, vehicle))
+        except ConfigError as exc:
+            raise ConfigError(f"--controller {c}: {exc}") from None
     searches = [Search(c, lo_range) for c in laws]
     pending = {s.controller: START[over] for s in searches}
     cells_flown = 0
