@@ -26,7 +26,7 @@ test: $(STAMP)
 	env -u PYTHONDONTWRITEBYTECODE $(BIN)/python -m pytest
 
 # the test modules marked `pytestmark = pytest.mark.process` start processes or open sockets; the rest is pure
-# (and CPU-bound: one worker per core, where make test runs three)
+# (and CPU-bound: one worker per core, where make test runs six)
 test-fast: $(STAMP)
 	env -u PYTHONDONTWRITEBYTECODE $(BIN)/python -m pytest -n 2 -m "not process"
 
