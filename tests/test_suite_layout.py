@@ -1,4 +1,4 @@
-"""Covers tests, tests.waiting and tests.scheduling: the suite's own layout, so a newcomer can find their way.
+"""Covers tests, tests.waiting, tests.scheduling and tests.timeline: the suite's own layout and its timing.
 
 - every ``tests/test_*.py`` opens with a docstring whose first line names what it covers:
   ``Covers bridge.link.model: ...`` (modules or packages of the project, each of which exists);
@@ -9,7 +9,9 @@
 - :func:`tests.waiting.wait_for` waits, and fails naming what it waited for;
 - the tests that share a module-scoped fixture are one unit of work for pytest-xdist
   (:func:`tests.scheduling.scope_of`), so that one worker makes the fixture once; every other test is a
-  unit of its own; the cheap fixtures left out of it are module-scoped fixtures that exist.
+  unit of its own; the cheap fixtures left out of it are module-scoped fixtures that exist;
+- :func:`tests.timeline.report` sums each file's wall and CPU time from the workers' lines, and with one worker
+  ranks the tests by the machine's CPU time during each.
 
 Checked with ``ast`` on each file's source, and shown failing on broken samples.
 """
@@ -24,6 +26,7 @@ from pathlib import Path
 import pytest
 
 from tests.scheduling import CHEAP, is_marked_process, scope_of, shared_groups
+from tests.timeline import report
 from tests.waiting import wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -210,3 +213,23 @@ def test_the_cheap_fixtures_left_unshared_are_module_fixtures_that_exist() -> No
     for (path, name), why in CHEAP.items():
         source = (ROOT / path).read_text()
         assert re.search(rf'@pytest\.fixture\(scope="module"\)\ndef {name}\(', source), (path, name, why)
+
+
+def test_the_timeline_sums_wall_and_cpu_by_file_and_ranks_by_the_machines_cpu_with_one_worker(tmp_path: Path) -> None:
+    """Two tests on one worker: wall 2 s and 1 s, the worker's CPU 0.5 and 0.25 s, the machine's 3 and 0.5 s."""
+    (tmp_path / "main.txt").write_text(
+        "S 100.000 1.000 50.00 tests/test_a.py::test_one\n"
+        "E 102.000 1.500 53.00 tests/test_a.py::test_one\n"
+        "S 102.000 1.500 53.00 tests/test_b.py::test_two\n"
+        "E 103.000 1.750 53.50 tests/test_b.py::test_two\n")
+    lines = report(tmp_path).splitlines()
+    assert "3.0 worker-seconds in all, 0.8 CPU-seconds" in lines[1], lines
+    machine = lines[lines.index("machine CPU-seconds by file:") + 1:][:2]
+    assert [ln.split() for ln in machine] == [["3.0", "tests/test_a.py"], ["0.5", "tests/test_b.py"]], lines
+    costliest = lines[lines.index("costliest tests (CPU s, wall s):") + 1:]
+    assert costliest[0].split() == ["3.0", "2.0", "tests/test_a.py::test_one"], lines
+    (tmp_path / "gw1.txt").write_text("S 100.000 0.000 50.00 tests/test_c.py::test_three\n"
+                                      "E 101.000 0.100 54.00 tests/test_c.py::test_three\n")
+    two = report(tmp_path).splitlines()  # two workers: the machine's time is theirs together, not ranked
+    assert "machine CPU-seconds by file:" not in two
+    assert two[two.index("costliest tests (CPU s, wall s):") + 1].split() == ["0.5", "2.0", "tests/test_a.py::test_one"]
