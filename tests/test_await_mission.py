@@ -221,6 +221,59 @@ def test_mavsdk_uploads_a_plans_fence_and_rally_points_and_the_flight_leaving_th
     assert abs(fence["t"] - east) <= 0.005, (fence["t"], east)  # (the event: after the step, at its end)
 
 
+MAVSDK_GEOFENCE_SCRIPT = r"""
+import json, sys
+from mavsdk import Mavsdk, Configuration, ComponentType
+from mavsdk.plugins.geofence import Circle, FenceType, Geofence, GeofenceData, Point, Polygon
+
+sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+sdk.add_any_connection(sys.argv[1])
+system = sdk.first_autopilot(30.0)
+fence = Geofence(system)
+def read(data):
+    return {"polygons": [[p.fence_type.name, [[q.latitude_deg, q.longitude_deg] for q in p.points]]
+                         for p in data.polygons],
+            "circles": [[c.fence_type.name, c.point.latitude_deg, c.point.longitude_deg, c.radius]
+                        for c in data.circles]}
+square = [Point(47.39770, 8.54555), Point(47.39770, 8.54564), Point(47.39790, 8.54564), Point(47.39790, 8.54555)]
+hole = Circle(Point(47.39780, 8.54560), 3.0, FenceType.EXCLUSION)
+sent = GeofenceData([Polygon(square, FenceType.INCLUSION)], [hole])
+out = {"sent": read(sent), "upload": fence.upload_geofence(sent).name, "got": read(fence.download_geofence())}
+out["clear"] = fence.clear_geofence().name
+out["after_clear"] = read(fence.download_geofence())
+print("RESULT " + json.dumps(out), flush=True)
+sdk.destroy()
+"""
+
+
+def test_mavsdks_geofence_plugin_uploads_reads_back_and_clears_a_polygon_and_a_circle(tmp_path):
+    """MAVSDK's Geofence plugin (not MissionRaw's items: its own polygon and circle types) against a vehicle
+    awaiting its mission: an inclusion square and an exclusion circle uploaded, read back as sent (degE7's
+    1e-7 deg; the radius a float32), cleared, and read back empty; the vehicle's events say each."""
+    out = tmp_path / "run"
+    with instance_slot() as n:
+        sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--out", str(out), "--no-plots")
+        try:
+            r = subprocess.run([sys.executable, "-c", MAVSDK_GEOFENCE_SCRIPT, f"udpin://127.0.0.1:{GCS_PORT + n}"],
+                               capture_output=True, text=True, timeout=120, env=ENV)
+        finally:
+            sitl.stop()
+    lines = [ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")]
+    assert lines, f"MAVSDK script failed:\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
+    gs = json.loads(lines[0][len("RESULT "):])
+    assert gs["upload"] == gs["clear"] == "SUCCESS", gs
+    assert gs["after_clear"] == {"polygons": [], "circles": []}, gs
+    (kind, square), = gs["got"]["polygons"]
+    (want_kind, want_square), = gs["sent"]["polygons"]
+    assert kind == want_kind == "INCLUSION" and len(square) == 4
+    assert all(math.dist(a, b) < 1.5e-7 for a, b in zip(square, want_square, strict=True)), (square, want_square)
+    (got_circle,), (sent_circle,) = gs["got"]["circles"], gs["sent"]["circles"]
+    assert got_circle[0] == sent_circle[0] == "EXCLUSION" and got_circle[3] == sent_circle[3] == 3.0, gs
+    assert math.dist(got_circle[1:3], sent_circle[1:3]) < 1.5e-7, gs
+    events = (out / "events.log").read_text()
+    assert "fence uploaded 5 items" in events and "fence cleared" in events, events
+
+
 # a takeoff to 1.5 m, a waypoint 2 m away held 0.5 s, a landing: 9.1 s of flight (12.1 s at 3 m), flown on the wall
 # clock by several tests
 SMALL_PLAN = """QGC WPL 110
