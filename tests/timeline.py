@@ -74,7 +74,7 @@ def report(where: Path, slowest: int = 20) -> str:
     """The timeline's figures (module docstring), as text."""
     spans, per_file, cpu_per_file, machine_per_file, tests = [], Counter(), Counter(), Counter(), []
     for f in sorted(where.glob("*.txt")):
-        started: dict[str, tuple[float, float]] = {}
+        started: dict[str, tuple[float, float, float]] = {}  # test id: its start's wall, worker and machine s
         first = last = busy = None
         for line in f.read_text().splitlines():
             kind, t_text, cpu_text, machine_text, nodeid = line.split(" ", 4)
@@ -84,12 +84,12 @@ def report(where: Path, slowest: int = 20) -> str:
                 first = t if first is None else first
             elif nodeid in started:
                 t0, cpu0, machine0 = started.pop(nodeid)
-                d = t - t0
-                machine_per_file[nodeid.split("::")[0]] += machine - machine0
+                d, file = t - t0, nodeid.split("::")[0]
                 busy = (busy or 0.0) + d
                 last = t
-                per_file[nodeid.split("::")[0]] += d
-                cpu_per_file[nodeid.split("::")[0]] += cpu - cpu0
+                per_file[file] += d
+                cpu_per_file[file] += cpu - cpu0
+                machine_per_file[file] += machine - machine0
                 tests.append((d, cpu - cpu0, machine - machine0, nodeid))
         if first is not None and last is not None:
             spans.append((f.stem, first, last, busy or 0.0))
