@@ -34,7 +34,7 @@ _out: TextIO | None = None
 def _machine_busy() -> float:
     """The CPU time the whole machine has run tasks, s: the root cgroup's scheduler count (cgroup v1's cpuacct or
     v2's cpu.stat; 0 where neither is). Not /proc/stat: its tick samples miss a process that runs in short bursts
-    between ticks, as a lockstep vehicle does (a four-vehicle test read 1 CPU-s there, 6 here)."""
+    between ticks, as a lockstep vehicle does (a four-vehicle test read 1.1 CPU-s there, 6.4 here: docs/testing.md)."""
     try:
         return int(Path("/sys/fs/cgroup/cpuacct/cpuacct.usage").read_text()) / 1e9
     except (OSError, ValueError):
