@@ -26,7 +26,8 @@ schemes: the bisection of ``bsst margin`` assumes the RMS grows with the delay, 
 controls stepped implicitly too (:func:`implicit_virtual_controls`: an experiment patched into the scalar loop
 here, not a scheme of the product). ``--implicit-horizon LAM`` flies the implicit scheme with its step solved over
 LAM periods (:func:`implicit_horizon`, the same kind of experiment), the scan or the table (its margins by
-``bsst margin``'s bisection in this process, without the check below).
+``bsst margin``'s bisection in this process, without the check below). ``--two-step-deadbeat`` flies the implicit
+scheme with its integrator stepped on the measured s_k first (:func:`two_step_deadbeat`, the same kind).
 
 Acceptance (issue 24): implicit sine 250 Hz period-2 <= 0.01 N (u2, u3, u4), TV <= 35 /s (u2, u3), RMS <= 1e-5
 m, 100 Hz period-2 <= 0.02 N; step settling <= 5 s and steady error <= 1 mm; robust <= 6 cm; smoothness
@@ -39,6 +40,7 @@ t in [20, 20.1) s, both schemes.
     .venv/bin/python benchmarks/smoothness.py --figure docs/u2-explicit-vs-implicit.png
     .venv/bin/python benchmarks/smoothness.py --scan [--implicit-virtual-controls]
     .venv/bin/python benchmarks/smoothness.py [--scan] --implicit-horizon 4
+    .venv/bin/python benchmarks/smoothness.py [--scan] --two-step-deadbeat
 """
 
 from __future__ import annotations
@@ -113,7 +115,7 @@ def margin(d: str, predict: bool) -> dict[str, Any]:
         return {k: res.get(k) for k in ("margin", "holds_below", "monotone", "failed_below")}
 
 
-HORIZON: list[float] = []  # --implicit-horizon: the patched scalar loop's lam (the margins then bisect here)
+PATCHED: list[str] = []  # the experiment patched into this process's scalar loop (the margins then bisect here)
 SCANS = {"none": range(30, 41), "predict": range(50, 61)}  # one-way delays (ms) around each margin
 
 
@@ -186,6 +188,30 @@ def implicit_horizon(lam: float) -> None:
     bsst.implicit_twisting, bsst.advance_xi_implicit = twisting, advance
 
 
+def two_step_deadbeat() -> None:
+    """Patch the scalar loop (this process only): the integrator stepped implicitly on the measured s_k, then the
+    root term implicitly on s alone, as if xi cancelled the disturbance exactly:
+        xi_{k+1} = xi_k - h k2 Sign(q),  q + h^2 k2 Sign(q) contains s_k   (dead zone |s_k| <= h^2 k2: xi_k - s_k/h)
+        u_k = -k1 |s~|^1/2 sign(s~) + xi_{k+1},  s~ + h k1 |s~|^1/2 sign(s~) = s_k
+    Near s = 0 it is u_k = xi_k - 2 s_k/h, xi_{k+1} = xi_k - s_k/h: both poles of the nominal loop at 0 (deadbeat
+    in two steps, s then left at h^2 times the disturbance's change over a step, the O(h^2) band of the
+    explicit law without its cycle). An experiment, not a scheme of the product (docs/law.md, "The delay margin,
+    scanned")."""
+
+    def twisting(s: float, xi: float, k1: float, k2: float, h: float) -> tuple[float, float]:
+        dz = h * h * k2
+        xi1 = xi - s / h if -dz <= s <= dz else xi - h * k2 if s > 0.0 else xi + h * k2
+        b, a = h * k1, abs(s)
+        r = 2.0 * a / (b + np.sqrt(b * b + 4.0 * a)) if a > 0.0 else 0.0
+        return (xi1 - k1 * r if s >= 0.0 else xi1 + k1 * r), xi1
+
+    def advance(xi: float, s: float, k1: float, k2: float, h: float, xi_max: float, hold: bool) -> float:
+        x = xi if hold else twisting(s, xi, k1, k2, h)[1]
+        return xi_max if x > xi_max else -xi_max if x < -xi_max else x
+
+    bsst.implicit_twisting, bsst.advance_xi_implicit = twisting, advance
+
+
 def bisect(d: str, predict: bool) -> dict[str, Any]:
     """``bsst margin``'s bisection in this process (the process engine flies a round of one cell here: a
     patched scalar loop flies it), without the check below: the scan gives it."""
@@ -229,7 +255,7 @@ def measure(d: str, with_margin: bool) -> dict[str, Any]:
         f = flight(mission("sine", d), kind=kind)  # type: ignore[arg-type]
         r[f"mocap_{kind}"] = {"rms_3d": f["rms_3d_m"], "ripple_u2": f["ripple_u2_n"]}
     if with_margin:
-        find = bisect if HORIZON else margin
+        find = bisect if PATCHED else margin
         r["margin_ms"] = {"none": find(d, False), "predict": find(d, True)}
     return r
 
@@ -328,6 +354,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--implicit-horizon", type=float, metavar="LAM",
                     help="the implicit scheme only, its step solved over LAM periods (an experiment: see "
                          "implicit_horizon); with --scan or the table (its margins by bisection, no check below)")
+    ap.add_argument("--two-step-deadbeat", action="store_true",
+                    help="the implicit scheme only, its integrator stepped on s_k first (an experiment: see "
+                         "two_step_deadbeat); with --scan or the table (its margins by bisection, no check below)")
     ap.add_argument("--implicit-virtual-controls", action="store_true",
                     help="with --scan: the implicit scheme only, its virtual controls stepped implicitly too")
     args = ap.parse_args(argv)
@@ -338,7 +367,11 @@ def main(argv: list[str] | None = None) -> int:
     schemes = DISCRETIZATIONS
     if args.implicit_horizon:
         implicit_horizon(args.implicit_horizon)
-        HORIZON.append(args.implicit_horizon)
+        PATCHED.append("implicit-horizon")
+        schemes = ("implicit",)
+    if args.two_step_deadbeat:
+        two_step_deadbeat()
+        PATCHED.append("two-step-deadbeat")
         schemes = ("implicit",)
     if args.scan:
         if args.implicit_virtual_controls:
