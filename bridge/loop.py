@@ -117,7 +117,9 @@ def flying(flight: Flight, path: Path | None = None, *, plots: bool = True, prog
     record = RunRecord(path, m) if path is not None else None
     trace = record.trace if record is not None else None
     events = record.events if record is not None else None
-    outcome = "completed"
+    # PX4's pre-arm check denied the arm the flight starts with (its preflight event says why): nothing flies, as
+    # in a session, where the controller's arm is refused and it aborts
+    outcome = "completed" if vehicle.armed else "aborted"
     failsafe_seen = False
     logged = 0
     noted = 0
@@ -125,7 +127,7 @@ def flying(flight: Flight, path: Path | None = None, *, plots: bool = True, prog
     changes = list(flight.param_changes)  # scheduled parameter changes: at the start of their step, as in SITL
     k = 0
     try:
-        for k in range(m.steps):
+        for k in range(m.steps if vehicle.armed else 0):
             t = k / rate
             while changes and changes[0].step(rate) <= k:
                 c = changes.pop(0)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import copy
 import json
+import math
 from collections.abc import Callable
 from pathlib import Path
 
@@ -45,3 +46,35 @@ def l_plan(tmp_path: Path) -> Path:
         for k, item in enumerate(data["mission"]["items"]):
             item["doJumpId"] = k + 1
     return write_plan(tmp_path, cut, "l.plan")
+
+
+M_PER_DEG = 6_371_000.0 * math.pi / 180.0  # the projection's sphere: metres per degree of latitude
+L_HOME = (47.397742, 8.545594)  # the L plan's home and start
+# why a vehicle at the start of outside_fence_plan is not armed (PX4's pre-arm geofence check)
+OUTSIDE_WHY = "arming denied: outside its fence: at x=0.000 y=0.000 m, outside every inclusion zone of the geofence"
+
+
+def l_latlon(north: float, east: float) -> list[float]:
+    """[lat, lon] of the point ``north`` m north and ``east`` m east of the L plan's home."""
+    return [L_HOME[0] + north / M_PER_DEG, L_HOME[1] + east / (M_PER_DEG * math.cos(math.radians(L_HOME[0])))]
+
+
+def l_rectangle(south: float, north: float, west: float, east: float) -> list[list[float]]:
+    """The corners of a rectangle in metres north and east of the L's home, as a plan's [lat, lon] polygon."""
+    return [l_latlon(south, -west), l_latlon(north, -west), l_latlon(north, east), l_latlon(south, east)]
+
+
+def fenced_l(tmp_path: Path, fence: dict, name: str) -> Path:
+    """The L plan (10 m north, then 10 m east, at 3 m) with ``fence`` as its geoFence."""
+    p = l_plan(tmp_path)
+    data = json.loads(p.read_text())
+    data["geoFence"] = {"version": 2, "polygons": [], "circles": [], **fence}
+    out = tmp_path / name
+    out.write_text(json.dumps(data))
+    return out
+
+
+def outside_fence_plan(tmp_path: Path) -> Path:
+    """The L plan fenced from 2 m north of its start: the vehicle starts outside the fence."""
+    fence = {"polygons": [{"inclusion": True, "version": 1, "polygon": l_rectangle(2, 13, 3, 13)}]}
+    return fenced_l(tmp_path, fence, "outside.plan")

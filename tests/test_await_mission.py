@@ -42,6 +42,7 @@ from bridge.record.summary import interventions, mission_transfer
 from bridge.session import instance_slot
 from missions import Mission, Sine
 from missions.geodetic import Home
+from missions.geofence import Geofence, Zone
 from missions.planfiles import plan_text, read_plan_text
 from tests.plans import l_plan
 from tests.sitlkit import ENV, ROOT, GcsSocket, MavProxy, Proc, clean_exit, run_bsst
@@ -246,21 +247,27 @@ sdk.destroy()
 """
 
 
-def test_mavsdks_geofence_plugin_uploads_reads_back_and_clears_a_polygon_and_a_circle(tmp_path):
-    """MAVSDK's Geofence plugin (not MissionRaw's items: its own polygon and circle types) against a vehicle
-    awaiting its mission: an inclusion square and an exclusion circle uploaded, read back as sent (degE7's
-    1e-7 deg; the radius a float32), cleared, and read back empty; the vehicle's events say each."""
-    out = tmp_path / "run"
+def _mavsdk_against_await_mission(script: str, out: Path) -> dict[str, Any]:
+    """``bsst sitl --await-mission`` (into ``out``) and a MAVSDK ``script`` against its ground-station port, stopped
+    once the script is done: the script's RESULT."""
     with instance_slot() as n:
         sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--out", str(out), "--no-plots")
         try:
-            r = subprocess.run([sys.executable, "-c", MAVSDK_GEOFENCE_SCRIPT, f"udpin://127.0.0.1:{GCS_PORT + n}"],
+            r = subprocess.run([sys.executable, "-c", script, f"udpin://127.0.0.1:{GCS_PORT + n}"],
                                capture_output=True, text=True, timeout=120, env=ENV)
         finally:
             sitl.stop()
     lines = [ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")]
     assert lines, f"MAVSDK script failed:\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
-    gs = json.loads(lines[0][len("RESULT "):])
+    return json.loads(lines[0][len("RESULT "):])
+
+
+def test_mavsdks_geofence_plugin_uploads_reads_back_and_clears_a_polygon_and_a_circle(tmp_path):
+    """MAVSDK's Geofence plugin (not MissionRaw's items: its own polygon and circle types) against a vehicle
+    awaiting its mission: an inclusion square and an exclusion circle uploaded, read back as sent (degE7's
+    1e-7 deg; the radius a float32), cleared, and read back empty; the vehicle's events say each."""
+    out = tmp_path / "run"
+    gs = _mavsdk_against_await_mission(MAVSDK_GEOFENCE_SCRIPT, out)
     assert gs["upload"] == gs["clear"] == "SUCCESS", gs
     assert gs["after_clear"] == {"polygons": [], "circles": []}, gs
     (kind, square), = gs["got"]["polygons"]
@@ -272,6 +279,55 @@ def test_mavsdks_geofence_plugin_uploads_reads_back_and_clears_a_polygon_and_a_c
     assert math.dist(got_circle[1:3], sent_circle[1:3]) < 1.5e-7, gs
     events = (out / "events.log").read_text()
     assert "fence uploaded 5 items" in events and "fence cleared" in events, events
+
+
+MAVSDK_ARM_OUTSIDE_SCRIPT = r"""
+import json, sys, time
+from mavsdk import Mavsdk, Configuration, ComponentType
+from mavsdk.plugins.action import Action, ActionError
+from mavsdk.plugins.geofence import FenceType, Geofence, GeofenceData, Point, Polygon
+from mavsdk.plugins.telemetry import Telemetry
+
+sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+sdk.add_any_connection(sys.argv[1])
+system = sdk.first_autopilot(30.0)
+texts = []
+Telemetry(system).subscribe_status_text(lambda s, *_: texts.append([s.type.name, s.text]))
+fence, act = Geofence(system), Action(system)
+def arm():
+    try:
+        return act.arm().name
+    except ActionError as e:
+        return e.result.name
+north = [Point(47.39790, 8.54555), Point(47.39790, 8.54564), Point(47.39800, 8.54564), Point(47.39800, 8.54555)]
+out = {"upload": fence.upload_geofence(GeofenceData([Polygon(north, FenceType.INCLUSION)], [])).name}
+out["arm_outside"] = arm()
+out["clear"] = fence.clear_geofence().name
+out["arm_cleared"] = arm()
+out["disarm"] = act.disarm().name
+deadline = time.monotonic() + 10.0  # the STATUSTEXTs come on MAVSDK's own thread: until the disarm's is in
+while time.monotonic() < deadline and not any(t.startswith("disarmed") for _, t in texts):
+    time.sleep(0.02)
+out["texts"] = texts
+print("RESULT " + json.dumps(out), flush=True)
+sdk.destroy()
+"""
+
+
+def test_mavsdks_arm_outside_an_uploaded_fence_is_denied_saying_why_and_arms_once_it_is_cleared(tmp_path):
+    """PX4's pre-arm geofence check against MAVSDK's Action and Geofence plugins: an inclusion square uploaded
+    11-23 m north of the vehicle, so it stands outside it; Action.arm() is denied (the vehicle's TEMPORARILY_REJECTED,
+    which MAVSDK reports as COMMAND_DENIED, as against a PX4), a CRITICAL STATUSTEXT says why, and nothing is armed;
+    with the fence cleared the same arm succeeds (in HOLD on the ground), and the disarm too."""
+    out = tmp_path / "run"
+    gs = _mavsdk_against_await_mission(MAVSDK_ARM_OUTSIDE_SCRIPT, out)
+    assert (gs["upload"], gs["arm_outside"], gs["clear"], gs["arm_cleared"], gs["disarm"]) == (
+        "SUCCESS", "COMMAND_DENIED", "SUCCESS", "SUCCESS", "SUCCESS"), gs
+    denied = [text for sev, text in gs["texts"] if text.startswith("preflight: arming denied")]
+    assert len(denied) == 1 and "outside its fence" in denied[0] and "(GF_ACTION = 2: hold)" in denied[0], gs
+    assert ["CRITICAL", denied[0]] in gs["texts"], gs
+    kinds = [e["kind"] for e in json.loads((out / "summary.json").read_text())["events"]]
+    assert kinds.index("preflight") < kinds.index("armed") and kinds.count("armed") == 1, kinds
 
 
 # a takeoff to 1.5 m, a waypoint 2 m away held 0.5 s, a landing: 9.1 s of flight (12.1 s at 3 m), flown on the wall
@@ -629,6 +685,32 @@ def test_another_mode_selected_after_auto_mission_wins_until_the_mission_starts(
     finally:
         for v in made:
             v.close()
+        gcs.close()
+
+
+def test_an_arm_with_auto_mission_selected_outside_the_fence_starts_nothing_until_gf_action_is_0():
+    """PX4 arms at once on a ground station's arm with AUTO.MISSION selected, so its pre-arm geofence check comes
+    first: the vehicle stands 1 m from a fence square 2-4 m out, so the arm is TEMPORARILY_REJECTED, the mission not
+    started, nothing armed, and a ``preflight`` event says why; with GF_ACTION set to 0 (PARAM_SET) the same arm
+    starts the mission."""
+    gcs = GcsSocket()
+    square = Zone(True, points=((2.0, 2.0), (4.0, 2.0), (4.0, 4.0), (2.0, 4.0)))
+    flight = prepare(Mission(Sine(), duration_s=5.0, name="fenced", geofence=Geofence((square,))))
+    exchange = gcs.exchange
+    arm = M.MAVLink_command_long_message(1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+    v = _vehicle_holding_the_small_plan(gcs, flight)
+    try:
+        select = M.MAVLink_command_long_message(1, 1, M.MAV_CMD_DO_SET_MODE, 0, 1, 4, 4, 0, 0, 0, 0)
+        assert exchange(v, select, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
+        assert exchange(v, arm, "COMMAND_ACK").result == M.MAV_RESULT_TEMPORARILY_REJECTED
+        assert not v.missions.start_requested and not v.sim.armed
+        assert v.sim.events[-1].kind == "preflight" and "outside its fence" in v.sim.events[-1].text
+        off = M.MAVLink_param_set_message(1, 1, b"GF_ACTION", 0.0, M.MAV_PARAM_TYPE_INT32)
+        assert exchange(v, off, "PARAM_VALUE").param_id == "GF_ACTION" and v.sim.fence_action == 0
+        assert exchange(v, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
+        assert v.missions.start_requested and v.sim.arming_refused is None
+    finally:
+        v.close()
         gcs.close()
 
 

@@ -148,6 +148,27 @@ def test_gf_max_limits_are_px4s_distances_from_home() -> None:
     assert "5.00 m from home, beyond GF_MAX_HOR_DIST = 4.9 m" in limits_passed(X, home, 4.9, 0.0)[0][1]
 
 
+def test_a_vehicle_beyond_gf_max_hor_dist_is_not_armed_again_until_gf_action_is_0() -> None:
+    """PX4's pre-arm geofence check on the limits too: landed (disarmed) 6 m from home with GF_MAX_HOR_DIST = 5 m,
+    an arm is denied (a ``preflight`` event saying why, :attr:`arming_refused` kept), for a ground station's arm in
+    its selected mode as for the controller's; within the limit, or with GF_ACTION 0, it arms."""
+    sim = prepare(MISSION_DIR / "sine.toml", params={"GF_MAX_HOR_DIST": 5.0}).make_vehicle()
+    hx, hy, hz = sim.home  # (the sine's start)
+    sim.plant.state = (hx + 6.0, 0.0, hy, 0.0, hz, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    for arm in (sim.arm, sim.arm_in_mode):
+        arm()
+        assert not sim.armed and sim.events[-1].kind == "preflight", sim.events[-1]
+        assert sim.events[-1].text == ("arming denied: 6.00 m from home, beyond GF_MAX_HOR_DIST = 5 m "
+                                       "(GF_ACTION = 2: hold)") == sim.arming_refused
+    sim.change_param("GF_ACTION", 0.0)
+    sim.arm()
+    assert sim.armed and sim.arming_refused is None and sim.events[-1].kind == "armed"
+    near = prepare(MISSION_DIR / "sine.toml", params={"GF_MAX_HOR_DIST": 5.0}).make_vehicle()
+    near.plant.state = (hx + 4.9, 0.0, hy, 0.0, hz, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    near.arm()
+    assert near.armed and not [e for e in near.events if e.kind == "preflight"]
+
+
 def test_a_flight_above_gf_max_ver_dist_fails_the_geofence_policy_once() -> None:
     """The sine climbs 0.1 m/s: with GF_MAX_VER_DIST = 2 m (a ``[params]`` entry or ``--param``) the vehicle says
     once, at 20 s, that it is above it, and the geofence policy fails there; by GF_ACTION 2 (PX4's default) it

@@ -6,7 +6,6 @@ plan's ``rallyPoints`` read into ``[rally]`` (docs/missions.md, "The geofence", 
 from __future__ import annotations
 
 import json
-import math
 import tomllib
 from pathlib import Path
 
@@ -19,30 +18,7 @@ from missions import load_mission
 from missions.geofence import Geofence, Zone, geofence_from_table
 from missions.mission import mission_from_table
 from params import ConfigError, Table
-from tests.plans import l_plan
-
-M_PER_DEG = 6_371_000.0 * math.pi / 180.0  # the projection's sphere: metres per degree of latitude
-HOME = (47.397742, 8.545594)  # the L plan's home and start
-
-
-def _latlon(north: float, east: float) -> list[float]:
-    return [HOME[0] + north / M_PER_DEG, HOME[1] + east / (M_PER_DEG * math.cos(math.radians(HOME[0])))]
-
-
-def _rectangle(south: float, north: float, west: float, east: float) -> list[list[float]]:
-    """The corners of a rectangle in metres north and east of home, as a plan's [lat, lon] polygon."""
-    return [_latlon(south, -west), _latlon(north, -west), _latlon(north, east), _latlon(south, east)]
-
-
-def _fenced_l(tmp_path: Path, fence: dict, name: str) -> Path:
-    """The L plan (10 m north, then 10 m east, at 3 m) with ``fence`` as its geoFence."""
-    p = l_plan(tmp_path)
-    data = json.loads(p.read_text())
-    data["geoFence"] = {"version": 2, "polygons": [], "circles": [], **fence}
-    out = tmp_path / name
-    out.write_text(json.dumps(data))
-    return out
-
+from tests.plans import OUTSIDE_WHY, fenced_l, l_latlon, l_rectangle, outside_fence_plan
 
 SQUARE = Zone(True, points=((0.0, 0.0), (4.0, 0.0), (4.0, 4.0), (0.0, 4.0)))
 L_SHAPE = Zone(True, points=((0.0, 0.0), (4.0, 0.0), (4.0, 1.0), (1.0, 1.0), (1.0, 4.0), (0.0, 4.0)))  # concave
@@ -86,9 +62,9 @@ def test_a_malformed_zone_is_refused_naming_its_key(zone: dict, words: str) -> N
 def test_a_plans_fence_is_read_about_its_home_and_kept_in_mission_toml(tmp_path: Path) -> None:
     """A polygon 3 m round the L and an exclusion circle: in the paper frame (x north, y west), to the
     projection's millimetre; ``mission.toml`` of the run holds the fence, and flying it again judges the same."""
-    plan = _fenced_l(tmp_path, {"polygons": [{"inclusion": True, "version": 1, "polygon": _rectangle(-3, 13, 3, 13)}],
-                                "circles": [{"inclusion": False, "version": 1,
-                                             "circle": {"center": _latlon(5.0, 20.0), "radius": 2.0}}]}, "fenced.plan")
+    plan = fenced_l(tmp_path, {"polygons": [{"inclusion": True, "version": 1, "polygon": l_rectangle(-3, 13, 3, 13)}],
+                               "circles": [{"inclusion": False, "version": 1,
+                                            "circle": {"center": l_latlon(5.0, 20.0), "radius": 2.0}}]}, "fenced.plan")
     fence = load_mission(plan).geofence
     poly, circle = fence.zones
     assert poly.inclusion and not circle.inclusion and circle.radius_m == 2.0
@@ -106,8 +82,8 @@ def test_a_run_that_leaves_the_fence_says_where_and_when_and_exits_1(tmp_path: P
     lands (its failsafe: outcome ``failsafe``, ended by the geofence); 1 (warning) flies on. Either way the
     ``geofence`` policy names the first row outside, the vehicle's ``geofence`` event is at that row, and the run
     exits 1."""
-    plan = _fenced_l(tmp_path, {"polygons": [{"inclusion": True, "version": 1, "polygon": _rectangle(-3, 13, 3, 5)}]},
-                     "leaves.plan")
+    plan = fenced_l(tmp_path, {"polygons": [{"inclusion": True, "version": 1, "polygon": l_rectangle(-3, 13, 3, 5)}]},
+                    "leaves.plan")
     for action, outcome in ((2, "failsafe"), (1, "completed")):
         run = simulate(plan, out=tmp_path / f"run{action}", plots=False, params={"GF_ACTION": action})
         assert run.summary["outcome"] == outcome, run.summary["ended_by"]
@@ -129,17 +105,36 @@ def test_a_run_that_leaves_the_fence_says_where_and_when_and_exits_1(tmp_path: P
             assert east.max() > 9.9
 
 
+def test_a_flight_that_starts_outside_its_fence_is_not_armed(tmp_path: Path, capsys) -> None:
+    """PX4's pre-arm geofence check: the fence begins 2 m north of the L's start, so with GF_ACTION > 0 (1, warning,
+    included: PX4 denies for any action but none) the vehicle does not arm. Offline nothing flies: outcome
+    ``aborted``, ended by the vehicle saying why (its ``preflight`` event), exit 1 (``bsst sitl`` of the same plan:
+    tests/test_sitl.py). GF_ACTION 0 arms and flies (the geofence policy still fails the run)."""
+    plan = outside_fence_plan(tmp_path)
+    why = OUTSIDE_WHY
+    for action in (1, 2):
+        run = simulate(plan, out=tmp_path / f"run{action}", plots=False, params={"GF_ACTION": action})
+        assert run.summary["outcome"] == "aborted" and len(run.trace["t"]) == 0, run.summary["ended_by"]
+        assert run.summary["ended_by"]["who"] == "vehicle", run.summary["ended_by"]
+        assert run.summary["ended_by"]["how"].startswith(f"{why} (GF_ACTION = {action}: "), run.summary["ended_by"]
+        assert [e["kind"] for e in run.summary["events"]] == ["preflight"], run.summary["events"]
+        assert report_run(run, "sim") == 1
+        assert "input  n/a (nothing flew)" in capsys.readouterr().out
+    flown = simulate(plan, plots=False, params={"GF_ACTION": 0})
+    assert flown.summary["outcome"] == "completed" and len(flown.trace["t"]) > 0
+
+
 def test_a_malformed_plan_fence_is_one_error_naming_the_file_and_key(tmp_path: Path) -> None:
-    bad = _fenced_l(tmp_path, {"polygons": [{"inclusion": True, "polygon": [[95.0, 8.5], [47.4, 8.5], [47.4, 8.6]]}]},
-                    "bad.plan")
+    bad = fenced_l(tmp_path, {"polygons": [{"inclusion": True, "polygon": [[95.0, 8.5], [47.4, 8.5], [47.4, 8.6]]}]},
+                   "bad.plan")
     with pytest.raises(ConfigError) as e:
         load_mission(bad)
     assert str(e.value) == f"{bad}: geoFence.polygons[0]: latitude 95, longitude 8.5: not a place on earth"
-    bad = _fenced_l(tmp_path, {"circles": [{"inclusion": True, "circle": {"radius": 3.0}}]}, "bad2.plan")
+    bad = fenced_l(tmp_path, {"circles": [{"inclusion": True, "circle": {"radius": 3.0}}]}, "bad2.plan")
     with pytest.raises(ConfigError) as e:
         load_mission(bad)
     assert "geoFence.circles[0]: expected inclusion and circle {center [lat, lon], radius}" in str(e.value)
-    bad = _fenced_l(tmp_path, {"polygons": [{"inclusion": True, "polygon": [[47.4, 8.5], [47.4, 8.6]]}]}, "bad3.plan")
+    bad = fenced_l(tmp_path, {"polygons": [{"inclusion": True, "polygon": [[47.4, 8.5], [47.4, 8.6]]}]}, "bad3.plan")
     with pytest.raises(ConfigError) as e:
         load_mission(bad)
     assert str(e.value) == (f"{bad}: geoFence.polygons[0]: polygon: expected 3 to 1000 points [lat, lon], "
@@ -153,16 +148,16 @@ def test_a_malformed_plan_fence_is_one_error_naming_the_file_and_key(tmp_path: P
 def test_a_plans_rally_points_are_read_about_its_home_and_kept_in_mission_toml(tmp_path: Path) -> None:
     """``rallyPoints`` [[lat, lon, alt], ...]: each point's x, y in the paper frame (its height not used: Return
     lands on the flat ground there); mission.toml holds ``[rally]``, which reads back the same."""
-    plan = _fenced_l(tmp_path, {}, "rally.plan")
+    plan = fenced_l(tmp_path, {}, "rally.plan")
     data = json.loads(plan.read_text())
-    data["rallyPoints"] = {"version": 2, "points": [[*_latlon(5.0, 5.0), 500.0], [*_latlon(-2.0, 0.0), 490.0]]}
+    data["rallyPoints"] = {"version": 2, "points": [[*l_latlon(5.0, 5.0), 500.0], [*l_latlon(-2.0, 0.0), 490.0]]}
     plan.write_text(json.dumps(data))
     m = load_mission(plan)
     assert np.allclose(m.rally, [(5.0, -5.0), (-2.0, 0.0)], atol=2e-3), m.rally
     run = simulate(plan, out=tmp_path / "run", plots=False)
     again = mission_from_table(tomllib.loads((tmp_path / "run" / "mission.toml").read_text()), "m.toml")
     assert again.rally == m.rally and run.summary["outcome"] == "completed"
-    data["rallyPoints"]["points"][1] = [*_latlon(150.0, 0.0), 490.0]
+    data["rallyPoints"]["points"][1] = [*l_latlon(150.0, 0.0), 490.0]
     plan.write_text(json.dumps(data))
     with pytest.raises(ConfigError) as e:
         load_mission(plan)

@@ -30,7 +30,8 @@ from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
 from bridge.session.children import CHOSEN_PORTS_LOW, PORT_LOCKS, RECENT_PORTS, ephemeral_low, free_udp_port
 from missions import MISSION_DIR, Mission, Sine
-from tests.sitlkit import ENV, Bsst, child_pids, stall_blackouts, unexplained_outages
+from tests.plans import OUTSIDE_WHY, outside_fence_plan
+from tests.sitlkit import ENV, ROOT, Bsst, child_pids, run_bsst, stall_blackouts, unexplained_outages
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -521,3 +522,22 @@ def test_an_instance_whose_port_another_program_holds_is_passed_over() -> None:
                 assert m != n
         finally:
             holder.close()
+
+
+def test_a_mission_that_starts_outside_its_fence_ends_as_offline(tmp_path: Path) -> None:
+    """PX4's pre-arm geofence check in a session: the controller's arm of a vehicle standing outside its fence is
+    answered TEMPORARILY_REJECTED, as PX4's commander answers it; the session ends as ``bsst sim`` does
+    (tests/test_geofence.py): ``aborted``, ended by the vehicle saying why, nothing flown, exit 1."""
+    plan = outside_fence_plan(tmp_path)
+    offline = simulate(plan, plots=False)
+    with instance_slot() as n:
+        r = run_bsst("sitl", str(plan), "--instance", str(n), "--no-plots", "--out", str(tmp_path / "sitl"), cwd=ROOT,
+                     timeout=120)
+    assert r.returncode == 1, r.stdout[-2000:] + r.stderr[-2000:]
+    summary = json.loads((tmp_path / "sitl" / "summary.json").read_text())
+    assert summary["outcome"] == offline.summary["outcome"] == "aborted", summary["ended_by"]
+    assert summary["ended_by"] == offline.summary["ended_by"], (summary["ended_by"], offline.summary["ended_by"])
+    assert summary["ended_by"]["how"].startswith(f"{OUTSIDE_WHY} (GF_ACTION = 2: hold)"), summary["ended_by"]
+    said = {e["kind"]: e["text"] for e in summary["events"]}
+    assert said["preflight"].startswith(OUTSIDE_WHY) and "MAV_RESULT_TEMPORARILY_REJECTED" in said["aborted"], said
+    assert len(read_trace(tmp_path / "sitl" / "trace.csv")["t"]) == 0

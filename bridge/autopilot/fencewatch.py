@@ -3,19 +3,27 @@
 In:  the state X (paper frame, m), home (x, y, z m), GF_MAX_HOR_DIST and GF_MAX_VER_DIST (m; 0: none), a fence
      it holds (:class:`missions.geofence.Geofence`: the mission's, or one a ground station uploaded), GF_ACTION
 Out: the limits X is beyond, each (which, why) (:func:`limits_passed`); the failsafe action a breach asks for
-     (:data:`FENCE_FAILSAFE`: a ``[failsafe] action`` name by GF_ACTION; none for 0 and 1) and its event's text
+     (:data:`FENCE_FAILSAFE`: a ``[failsafe] action`` name by GF_ACTION; none for 0 and 1) and its event's text;
+     why arming is denied where the vehicle stands (:func:`arming_refusal`), or None
 
 PX4's geofence (navigator's ``Geofence``, ``GeofenceResult.GF_ACTION_*``): armed, beyond a limit or outside the
 fence, the vehicle does GF_ACTION: 0 nothing (it does not watch), 1 warns, 2 holds where it is (PX4's default;
 here for COM_FAIL_ACT_T, then it lands, as the link-loss hold does, so that a flight ends on the ground in every
 clock: PX4 holds until someone acts), 3 returns (Return mode: home or the nearest rally point), 4 terminates the
 flight (motors off), 5 lands where it is. 2 to 5 take the vehicle out of offboard control as its failsafe does,
-and it stays so until the flight ends.
+and it stays so until the flight ends. Before that, PX4's pre-arm geofence check (commander's
+``HealthAndArmingChecks/checks/geofenceCheck``): with GF_ACTION > 0, a vehicle beyond a limit or outside its fence is
+not armed (COMMAND_ACK TEMPORARILY_REJECTED) and says why.
 """
 
 from __future__ import annotations
 
 import math
+
+import numpy as np
+
+from bridge.autopilot.params import FENCE_ACTIONS
+from missions.geofence import Geofence
 
 FENCE_FAILSAFE = {2: "hold", 3: "return", 4: "disarm", 5: "land"}  # GF_ACTION -> the failsafe action flown
 FENCE_ACTION_TEXT = {"hold": "hold here, then land", "return": "return home (RTL), then land",
@@ -34,3 +42,24 @@ def limits_passed(X: tuple[float, ...], home: tuple[float, float, float], max_ho
         out.append(("ver", f"{up:.2f} m above home, beyond GF_MAX_VER_DIST = {max_ver_m:g} m"))
     return out
 
+
+
+def breaches(X: tuple[float, ...], t: float, home: tuple[float, float, float], max_hor_m: float, max_ver_m: float,
+             fence: Geofence | None) -> list[tuple[str, str]]:
+    """The limits (:func:`limits_passed`) and the fence (if given) state X (paper frame, m) at time t (s) is beyond,
+    each (which, why): which is ``hor``, ``ver`` or ``fence``."""
+    passed = limits_passed(X, home, max_hor_m, max_ver_m)
+    if fence is not None:
+        breach = fence.first_breach(np.array((t,)), np.array((X[0],)), np.array((X[2],)))
+        if breach is not None:
+            passed.append(("fence", f"outside its fence: {breach[1]}"))
+    return passed
+
+
+def arming_refusal(passed: list[tuple[str, str]], action: int) -> str | None:
+    """Why arming is denied, given the limits and fence the vehicle is beyond where it stands (``passed``, each
+    (which, why)) and GF_ACTION (``action``): PX4 denies it for any breach unless GF_ACTION is 0 (unwatched, 1
+    included: it only warns in flight); None: arming may go on."""
+    if action == 0 or not passed:
+        return None
+    return f"arming denied: {'; '.join(why for _, why in passed)} (GF_ACTION = {action}: {FENCE_ACTIONS[action]})"

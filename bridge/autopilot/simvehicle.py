@@ -32,8 +32,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-import numpy as np
-
 from bridge.autopilot.estimator import Estimator, TruthEstimator, estimator_nees
 from bridge.autopilot.failsafe import (
     ACTION_TEXT,
@@ -48,7 +46,7 @@ from bridge.autopilot.failsafe import (
     failsafe_target,
     return_point,
 )
-from bridge.autopilot.fencewatch import FENCE_ACTION_TEXT, FENCE_FAILSAFE, limits_passed
+from bridge.autopilot.fencewatch import FENCE_ACTION_TEXT, FENCE_FAILSAFE, arming_refusal, breaches
 from bridge.autopilot.params import FENCE_ACTIONS, VehicleParams, change_param, read_param
 from bridge.autopilot.vehicleevents import Event, ParamChanged, Sender
 from controller.nominal import Nominal
@@ -111,6 +109,9 @@ class SimVehicle:
         self._impact_noted = False  # a disarmed vehicle's hard touchdown is logged once (plant_verdict)
         self._period_s = self.plant.dt * self.substeps
         self._beyond: set[str] = set()  # limits said to be passed: GF_MAX_* and the fence (once each, until changed)
+        self.arming_refused: str | None = None  # why the last arm was denied (arming_denied), until it arms
+        if self.armed and self.arming_denied():  # offline: armed at the start, if its pre-arm check passes
+            self.armed = False
 
     @property
     def t(self) -> float:
@@ -161,6 +162,8 @@ class SimVehicle:
         selects OFFBOARD again (:meth:`set_mode`), or (``from_hold``) it started a mission armed in HOLD."""
         if self.armed and self.mode in GROUND_MODES and not from_hold:
             return
+        if not self.armed and self.arming_denied():
+            return
         if not self.armed or self.mode != OFFBOARD:
             self.armed = True
             self.mode = OFFBOARD
@@ -173,6 +176,8 @@ class SimVehicle:
         controller from now), else as :meth:`arm` (offboard control)."""
         if self.armed or self.mode not in GROUND_MODES:
             self.arm()
+            return
+        if self.arming_denied():
             return
         self.armed = True
         self.event("armed", f"armed, {self.mode.upper()}")
@@ -294,13 +299,7 @@ class SimVehicle:
         """The first time the vehicle is beyond GF_MAX_HOR_DIST or GF_MAX_VER_DIST, or outside the fence it holds, a
         ``geofence`` event says so (the run's geofence policy then fails), and GF_ACTION 2-5 fly the failsafe it
         names (:mod:`bridge.autopilot.fencewatch`), unless a failsafe already flies."""
-        X = self.plant.state
-        passed = limits_passed(X, self.home, self.max_hor_m, self.max_ver_m)
-        if self.fence is not None and "fence" not in self._beyond:
-            breach = self.fence.first_breach(np.array((self.plant.t,)), np.array((X[0],)), np.array((X[2],)))
-            if breach is not None:
-                passed.append(("fence", f"outside its fence: {breach[1]}"))
-        new = [(which, why) for which, why in passed if which not in self._beyond]
+        new = [(which, why) for which, why in self._breaches("fence" in self._beyond) if which not in self._beyond]
         for which, why in new:
             self._beyond.add(which)
             self.event("geofence", f"{why} (GF_ACTION = {self.fence_action}: {FENCE_ACTIONS[self.fence_action]})")
@@ -308,6 +307,20 @@ class SimVehicle:
         if new and action is not None and self.mode not in (FAILSAFE, LANDED):
             self._fly_failsafe(action, f"geofence: {new[0][1]}: {FENCE_ACTION_TEXT[action]}",
                                "geofence: flight terminated, motors stopped")
+
+    def _breaches(self, fence_known: bool = False) -> list[tuple[str, str]]:
+        """:func:`~bridge.autopilot.fencewatch.breaches` of the true state now (not the fence if ``fence_known``)."""
+        p = self.plant
+        return breaches(p.state, p.t, self.home, self.max_hor_m, self.max_ver_m, None if fence_known else self.fence)
+
+    def arming_denied(self) -> bool:
+        """PX4's pre-arm geofence check (:func:`~bridge.autopilot.fencewatch.arming_refusal`): whether arming is
+        denied where the vehicle stands; if so a ``preflight`` event says why, and :attr:`arming_refused` keeps
+        it until the vehicle arms."""
+        self.arming_refused = arming_refusal(self._breaches(), self.fence_action)
+        if self.arming_refused is not None:
+            self.event("preflight", self.arming_refused)
+        return self.arming_refused is not None
 
     def fly_onboard(self, target: Target, mode: str) -> None:
         """Hand the motors to the on-board controller flying ``target`` under ``mode`` (not

@@ -117,7 +117,9 @@ def report_fleet(run: Any, command: str) -> int:
             c = v.get("contact")  # SITL: lockstep, both flights ended there; real time, they went on past it
             went = ("; the flights went on: in real time the vehicles share no clock" if c and c.get("continued")
                     else "; both flights ended there")
-            said = f" (touched vehicle {c['with']} at step {c['step']}, t={c['t']:.3f} s{went})" if c else ""
+            eb = v.get("ended_by") or {}
+            said = (f" (touched vehicle {c['with']} at step {c['step']}, t={c['t']:.3f} s{went})" if c
+                    else f": ended by {eb['who']}: {eb['how']}" if eb else "")
             print(f"bsst {command}: vehicle {v['id']}: {v['outcome']}{said}", file=sys.stderr)
     for p in s.get("policies") or []:
         if not p.get("ok"):
@@ -188,12 +190,13 @@ def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
     w(f"{'axis':5} {'rms':>10} {'max':>10} {'settling_s':>11} {'bound_s':>9}\n")
     for a, v in s["axes"].items():
         def f(x: Any, spec: str) -> str:
-            return format(x, spec) if x is not None else "n/a"
+            return format(x, spec) if x is not None else format("n/a", ">" + spec.split(".")[0])
         w(f"{a:5} {f(v['rms'], '10.3e')} {f(v['max'], '10.3e')} "
           f"{f(v['settling_s'], '11.3f')} {f(v['bound_s'], '9.3f')}\n")
-    w("input  " + "  ".join(f"{u}: [{v['min']:.3g}, {v['max']:.3g}] tv/s {v['tv_per_s']:.3g}"
-                            + (f" p2 {v['period2']:.3g}" if v.get("period2") is not None else "")
-                            for u, v in s["inputs"].items() if v["min"] is not None) + "\n")
+    inputs = [f"{u}: [{v['min']:.3g}, {v['max']:.3g}] tv/s {v['tv_per_s']:.3g}"
+              + (f" p2 {v['period2']:.3g}" if v.get("period2") is not None else "")
+              for u, v in s["inputs"].items() if v["min"] is not None]
+    w("input  " + ("  ".join(inputs) or "n/a (nothing flew)") + "\n")
     link = s.get("link", {})
     if any(L.get("lost") or L.get("duplicated") or L.get("reordered") or (L.get("delay_ms") or {}).get("max")
            for L in (link.get("up", {}), link.get("down", {}))):

@@ -412,8 +412,9 @@ def rules_for(flight: Any, clock: str, link: Mapping[str, Any] | None,
 
 def ended_by_outcome(outcome: str, events: Sequence[RunEvent]) -> dict[str, str]:
     """``summary.json["ended_by"]`` as the outcome and the vehicle's events tell it: the mission
-    (completed), the vehicle (its failsafe, with its event), the plant (diverged), or whoever
-    interrupted it. A session knows more (a child that died, a command from someone) and says so."""
+    (completed), the vehicle (its failsafe, or its pre-arm check that denied the arm, with its event), the plant
+    (diverged), or whoever interrupted it. A session knows more (a child that died, a command from someone) and
+    says so."""
     ev = vehicle_events(events)
 
     def first(kind: str) -> RunEvent | None:
@@ -436,7 +437,20 @@ def ended_by_outcome(outcome: str, events: Sequence[RunEvent]) -> dict[str, str]
     if outcome == "law_failed":  # a user's law raised, exited or gave no four finite inputs (controller.law)
         e = first("law_failed")
         return {"who": "controller", "how": f"its law failed at t={e.t:.3f} s: {e.text}" if e else "its law failed"}
+    denied = arming_denied_end(events)
+    if outcome == "aborted" and denied is not None:
+        return denied
     return {"who": "user", "how": "interrupted (Ctrl-C or SIGTERM)"}
+
+
+def arming_denied_end(events: Sequence[RunEvent]) -> dict[str, str] | None:
+    """``ended_by`` of a flight that never armed because the vehicle's pre-arm check denied it (its ``preflight``
+    event, and no ``armed`` one): the vehicle, with why; None for any other flight."""
+    ev = vehicle_events(events)
+    denied = next((e for e in ev if e.kind == "preflight"), None)
+    if denied is None or any(e.kind == "armed" for e in ev):
+        return None
+    return {"who": "vehicle", "how": f"{denied.text} (t={denied.t:.3f} s)"}
 
 
 def judge(summary: dict[str, Any], trace: Mapping[str, Any], events: Sequence[RunEvent], rules: Rules,

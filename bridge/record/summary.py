@@ -33,6 +33,7 @@ from bridge.record.joiner import Joined
 from bridge.record.metrics import after_faults, percentiles, plant_summary, summarise
 from bridge.record.policies import (
     CONTROLLER_ID,
+    arming_denied_end,
     ended_by_command,
     ended_by_outcome,
     judge,
@@ -281,7 +282,8 @@ def ended_by(outcome: str, trace: Mapping[str, Any], flight: Flight, facts: Sess
         flown = float(t[-1]) + 1.0 / m.rate_hz if len(t) else 0.0
         return "aborted", {"who": "controller", "how": f"ended the mission after {flown:.3f} s of its "
                                                        f"{m.duration_s:g} s"}
-    if outcome == "aborted" and ctl is not None and ctl.reason:
+    # (a controller's abort that answers the vehicle's refusal to arm: the vehicle ended it, ended_by_outcome says)
+    if outcome == "aborted" and ctl is not None and ctl.reason and arming_denied_end(events) is None:
         return outcome, {"who": "controller", "how": ctl.reason}
     return outcome, ended_by_outcome(outcome, events)
 

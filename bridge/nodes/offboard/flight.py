@@ -146,7 +146,9 @@ class Offboard(OffboardLink):
     def _arm(self) -> bool:
         result = self._command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0, 0.0)
         if result != mavlink.MAV_RESULT_ACCEPTED:
-            self.reason = "arming not acknowledged" if result is None else f"arming refused (MAV_RESULT {result})"
+            entry = mavlink.enums["MAV_RESULT"].get(result) if result is not None else None
+            self.reason = ("arming not acknowledged" if result is None
+                           else f"arming refused: {entry.name if entry else 'unknown result'} (MAV_RESULT {result})")
             self.event("aborted", self.reason)
             return False
         # armed under offboard control from now on: its state of step k0 may come before the heartbeat saying so

@@ -64,7 +64,7 @@ class Announcer:
         while self.sent < len(events):
             e = events[self.sent]
             self.sent += 1
-            sev = (mavlink.MAV_SEVERITY_CRITICAL if e.kind in ("failsafe", "diverged", "lockstep")
+            sev = (mavlink.MAV_SEVERITY_CRITICAL if e.kind in ("failsafe", "diverged", "lockstep", "preflight")
                    else mavlink.MAV_SEVERITY_INFO)
             texts.append(self.statustext(sev, f"{e.kind}: {e.shown}"))
         msgs: list[Any] = []

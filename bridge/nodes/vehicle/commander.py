@@ -71,16 +71,17 @@ class CommanderPorts:
 class FinalAck:
     """The final COMMAND_ACK of a controller's arm answered IN_PROGRESS (lockstep: it crossed the up-link model),
     sent to its sender once the vehicle has acted on it, as MAVLink's command protocol asks after IN_PROGRESS:
-    ACCEPTED if it is armed in OFFBOARD then, else FAILED. An arm the model loses gets none, as a command lost
-    on a real link does."""
+    ACCEPTED if it is armed in OFFBOARD then, TEMPORARILY_REJECTED if its pre-arm check denied it, else FAILED.
+    An arm the model loses gets none, as a command lost on a real link does."""
 
     def __init__(self, m: Any, ep: Endpoint, addr: tuple[str, int], sim: SimVehicle) -> None:
         self.command, self.sysid, self.compid = m.command, m.get_srcSystem(), m.get_srcComponent()
         self.ep, self.addr, self.sim = ep, addr, sim
 
     def __call__(self) -> None:
-        ok = self.sim.armed and self.sim.mode == OFFBOARD
-        result = mavlink.MAV_RESULT_ACCEPTED if ok else mavlink.MAV_RESULT_FAILED
+        sim = self.sim
+        result = (mavlink.MAV_RESULT_ACCEPTED if sim.armed and sim.mode == OFFBOARD
+                  else mavlink.MAV_RESULT_TEMPORARILY_REJECTED if sim.arming_refused else mavlink.MAV_RESULT_FAILED)
         self.ep.send(mavlink.MAVLink_command_ack_message(self.command, result, 0, 0, self.sysid, self.compid),
                      self.addr)
 
@@ -153,6 +154,8 @@ class Commander:
                 self.ports.reject("bad_number")
                 return mavlink.MAV_RESULT_DENIED, ()
             if args[0] and by.link == "gcs" and not self.sim.armed and self._mission_selected():
+                if self.sim.arming_denied():  # PX4 arms at once, so checks first: the mission does not start
+                    return mavlink.MAV_RESULT_TEMPORARILY_REJECTED, ()
                 return self._start_mission(by, 0.0, START_ARM), ()  # AUTO.MISSION, then arm: the mission starts
             if args[0] and self._through_link(m, by):
                 if getattr(m, "confirmation", 0) > 0 and self.sim.armed and self.sim.mode == OFFBOARD:
@@ -389,7 +392,8 @@ class Commander:
     def arm_disarm(self, p1: float, p2: float, by: Sender | None = None) -> int:
         """Arm (``p1`` 1) or disarm (0; in the air only with ``p2`` = 21196, forced), checked
         values (:func:`bridge.mavlink.receive.arm_disarm_args`). A new flight armed from a
-        ground station learns its controller's address afresh (``new_flight``)."""
+        ground station learns its controller's address afresh (``new_flight``). An arm PX4's pre-arm check
+        denies (:meth:`SimVehicle.arming_denied`) is TEMPORARILY_REJECTED, as PX4's commander answers it."""
         sim = self.sim
         now = time.monotonic()
         if p1 == 1.0:
@@ -402,6 +406,8 @@ class Commander:
                 sim.arm_in_mode()  # in the mode it selected (HOLD, LAND, TAKEOFF), else offboard
             else:  # the controller's: a started mission's arm takes the vehicle armed in HOLD on the ground
                 sim.arm(from_hold=self.pre_start.starting() and sim.mode == HOLD)
+            if not sim.armed:  # PX4's pre-arm check denied it: its preflight event says why, on every link
+                return mavlink.MAV_RESULT_TEMPORARILY_REJECTED
             if from_gcs and self.pre_start.held():
                 # nothing flies until the mission's start: in lockstep time stands still, as disarmed
                 self.pre_start.armed(now, n0)
