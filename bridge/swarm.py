@@ -287,7 +287,7 @@ def _fly_together(steps: list[Generator[tuple[float, ...], str | None, Run]], st
                 except StopIteration as done:
                     runs[i] = done.value
                     live.remove(i)
-                    if done.value.outcome == "aborted":  # Ctrl-C in one vehicle's step: every vehicle stops
+                    if done.value.interrupted:  # Ctrl-C in one vehicle's step: every vehicle stops
                         raise KeyboardInterrupt from None
             k += 1
             for a, b, why in watch.check(k / rate, positions):
@@ -393,7 +393,8 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
                             key=Path(key) if key is not None else None, plots=plots, keep=keep,
                             radii=watch.radii if clocked else None, shared_radio=shared)
         finals = [_stayed(r) for r in runs] if clocked else None
-        contacts = judge_traces(watch, [r.trace for r in runs], fm.rate_hz, finals)
+        contacts = judge_traces(watch, [r.trace for r in runs], fm.rate_hz, finals,
+                                [f.mission.start for f in flights] if clocked else None)
         runs = [_touched(r, contacts.get(j)) for j, r in enumerate(runs)]
         summary = fleet_summary(fm, flights, runs, watch, "realtime" if realtime else "lockstep")
         if shared:
@@ -412,24 +413,27 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
 
 
 def judge_traces(watch: Watch, traces: Sequence[dict[str, Any]], rate: float,
-                 finals: Sequence[tuple[float, float, float] | None] | None = None) -> dict[int, dict[str, Any]]:
+                 finals: Sequence[tuple[float, float, float] | None] | None = None,
+                 starts: Sequence[Sequence[float]] | None = None) -> dict[int, dict[str, Any]]:
     """Judge the shared world on finished traces, with the offline loop's :class:`Watch`: row j of every trace
     (the true positions at t = j / rate; row 0 the start) is the world after step j - 1, as the loop judges it;
     a trace that ended early stays at its last row, or with ``finals`` (a lockstep fleet's shared clock: where
     each vehicle stayed, m, after its last row's step) there, as the loop keeps it; an empty one (a vehicle that
-    flew no step) is nowhere, and touches no one. The first contact of each vehicle (by index): its step, time,
+    flew no step) is at its start with ``starts`` (m: one never armed stands there, as the loop keeps it), else
+    nowhere, and touches no one. The first contact of each vehicle (by index): its step, time,
     the other's id and why (without ``finals``, that the flights went on: :data:`CONTINUED`)."""
     last = [finals[i] if finals is not None else None for i in range(len(traces))]
     n = max((len(tr["t"]) + (p is not None) for tr, p in zip(traces, last)), default=0)
     first: dict[int, dict[str, Any]] = {}
     nowhere = (math.nan, math.nan, math.nan)  # NaN distances: never closer, never touching (Watch.check)
+    unflown = [tuple(s[:3]) for s in starts] if starts is not None else [nowhere] * len(traces)
     more = {} if finals is not None else {"continued": CONTINUED}
     for j in range(n):
         positions = []
-        for tr, p in zip(traces, last):
+        for tr, p, home in zip(traces, last, unflown):
             r = min(j, len(tr["t"]) - 1)
             positions.append(p if p is not None and j > r else
-                             (float(tr["x"][r]), float(tr["y"][r]), float(tr["z"][r])) if r >= 0 else nowhere)
+                             (float(tr["x"][r]), float(tr["y"][r]), float(tr["z"][r])) if r >= 0 else home)
         for a, b, why in watch.check(j / rate, positions):
             for i, other in ((a, b), (b, a)):
                 first.setdefault(i, {"step": j, "t": round(j / rate, 6), "with": watch.ids[other], "why": why, **more})

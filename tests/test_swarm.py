@@ -10,6 +10,7 @@ mission of one vehicle flies through :func:`bridge.simulate` exactly as through 
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import replace
 from pathlib import Path
 
@@ -162,6 +163,25 @@ def test_a_bad_vehicle_is_named_with_its_id(tmp_path: Path) -> None:
 def test_a_fleet_mission_is_refused_where_one_vehicle_flies() -> None:
     with pytest.raises(ConfigError, match="vehicles: a mission of several vehicles is flown by bsst sim"):
         prepare(TOUCH)
+
+
+def test_a_vehicle_outside_the_fence_stays_at_its_start_and_the_others_fly(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The near miss with a fence round vehicle 1's leg only: vehicle 2 starts outside it, so PX4's pre-arm check
+    denies its arm: it stays on the ground at its start, ``aborted``, ended by the vehicle saying why (stderr names
+    it), and that is no Ctrl-C: vehicle 1 flies its whole mission, judged against vehicle 2 standing there."""
+    fenced = tmp_path / "fenced.toml"
+    fenced.write_text(NEAR_MISS.read_text() + '\n[geofence]\nzones = [{ kind = "polygon", inclusion = true, points = '
+                      '[[-5.0, -0.5], [5.0, -0.5], [5.0, 0.5], [-5.0, 0.5]] }]\n')
+    assert main(["sim", str(fenced), "--out", str(tmp_path / "r"), "--no-plots"]) == 1
+    s = json.loads((tmp_path / "r" / "summary.json").read_text())
+    one, two = s["vehicles"]
+    assert (one["outcome"], two["outcome"]) == ("completed", "aborted"), s["vehicles"]
+    assert two["ended_by"]["who"] == "vehicle" and two["ended_by"]["how"].startswith(
+        "arming denied: outside its fence: at x=3.000 y=0.900 m"), two["ended_by"]
+    (pair,) = s["separation"]["pairs"]  # vehicle 1 ends 1 m over (3, 0), 0.9 m from vehicle 2 at its start
+    assert pair["closest_m"] == pytest.approx(math.hypot(0.9, 1.0) - 2 * 0.315, abs=0.01) and pair["t"] > 10.0, pair
+    assert "vehicle 2: aborted: ended by vehicle: arming denied: outside its fence" in capsys.readouterr().err
 
 
 def test_ctrl_c_in_one_vehicle_stops_every_vehicle(tmp_path: Path) -> None:

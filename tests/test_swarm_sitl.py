@@ -81,13 +81,17 @@ def test_the_trace_judge_is_the_offline_watch() -> None:
 
 def test_a_vehicle_that_flew_no_step_touches_no_one_in_the_trace_judge() -> None:
     """A SITL fleet whose vehicle was disarmed before its first row (seen under load: the judge raised
-    IndexError and the fleet had no summary): its empty trace is nowhere; the others are judged as before."""
+    IndexError and the fleet had no summary): its empty trace is nowhere; the others are judged as before. Given
+    the starts, it stands at its own."""
     empty = {c: np.array([]) for c in ("t", "x", "y", "z")}
     flown = {"t": np.array([0.0, 0.004]), "x": np.zeros(2), "y": np.zeros(2), "z": np.zeros(2)}
     beside = {**flown, "y": np.full(2, 0.5)}  # centres 0.5 m apart: rotor discs overlap
     watch = Watch([1, 2, 3], [0.3, 0.3, 0.3], 0.5)
     contacts = judge_traces(watch, [flown, empty, beside], 250.0)
     assert sorted(contacts) == [0, 2] and contacts[0]["with"] == 3
+    # a lockstep fleet gives the starts: one never armed (its arm denied) stands at its own, as offline
+    at_start = judge_traces(watch, [flown, empty, beside], 250.0, starts=[(0.0, 0.0, 0.0), (0.0, -0.4, 0.0)] * 2)
+    assert sorted(at_start) == [0, 1, 2] and at_start[1]["with"] == 1, at_start
 
 
 def test_a_fleet_past_the_last_instance_is_refused_before_anything_starts(tmp_path: Path, capsys) -> None:
