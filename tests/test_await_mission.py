@@ -783,6 +783,41 @@ def test_an_arm_in_hold_on_the_ground_then_auto_mission_starts_the_mission_and_t
         gcs.close()
 
 
+def test_a_ground_stations_arm_in_hold_on_the_ground_times_out_with_no_mission_awaited_too():
+    """PX4's pre-takeoff timeout (Commander's auto-disarm while it has not taken off since arming) without
+    --await-mission: a ground station's arm in HOLD on the ground disarms itself after COM_DISARM_PRFLT (0.2 s by
+    PARAM_SET), an event saying so (not the start's: none is awaited); a TAKEOFF asked for in time stops it."""
+    gcs = GcsSocket()
+    v = Vehicle(prepare(Mission(Sine(), duration_s=5.0, name="held")),
+                VehicleConfig(parse_address("udpin:127.0.0.1:0"), parse_address(gcs.url)))
+    exchange = gcs.exchange
+
+    def command(cmd: int, *params: float) -> Any:
+        return M.MAVLink_command_long_message(1, 1, cmd, 0, *params, *[0.0] * (7 - len(params)))
+
+    hold, arm = command(M.MAV_CMD_DO_SET_MODE, 1, 4, 3), command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+    try:
+        set_param = M.MAVLink_param_set_message(1, 1, b"COM_DISARM_PRFLT", 0.2, M.MAV_PARAM_TYPE_REAL32)
+        assert exchange(v, set_param, "PARAM_VALUE").param_value == pytest.approx(0.2)
+        assert exchange(v, hold, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
+        assert exchange(v, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED and v.sim.mode == "hold"
+        at = v.commander.pre_start.at
+        assert at is not None and v.sim.armed
+        assert exchange(v, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED and v.commander.pre_start.at == at
+        wait_for(lambda: v._housekeeping() or not v.sim.armed, 5.0, "the vehicle's pre-takeoff disarm")
+        last = v.sim.events[-1]
+        assert last.kind == "disarmed" and last.text == "disarmed: no takeoff within COM_DISARM_PRFLT = 0.2 s of arming"
+        assert not last.pre_start and v.commander.pre_start.at is None
+        assert exchange(v, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED and v.commander.pre_start.at is not None
+        takeoff = command(M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, math.nan, math.nan, math.nan)
+        assert exchange(v, takeoff, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED and v.sim.mode == "takeoff"
+        v.commander.pre_start.tick(v.commander.pre_start.at + 1.0)  # past the timeout, but taking off
+        assert v.sim.armed and v.commander.pre_start.at is None
+    finally:
+        v.close()
+        gcs.close()
+
+
 def test_the_watch_reaches_the_box_items_in_order_along_its_flight():
     """goals_of (the route's points, about the home) and ItemWatch along the offline flight of the box: every
     item reached once, in order, the landing last (on the ground)."""

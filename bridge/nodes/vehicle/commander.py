@@ -415,6 +415,8 @@ class Commander:
             if sim.mode in GROUND_MODES:  # the vehicle's own controller flies: no controller's answers
                 if self.lockstep and not self.clock.free_running:
                     self._ground_takes_over(now)
+                if from_gcs:
+                    self.pre_start.ground_armed(now)  # in HOLD on the ground: PX4's pre-takeoff timeout
                 return mavlink.MAV_RESULT_ACCEPTED
             if not was_offboard:
                 self.ports.new_flight(from_gcs)  # no target of the last flight is in force

@@ -1,5 +1,6 @@
 """Before an awaited mission's flight (``--await-mission``): a ground station's arm in HOLD on the ground, and
-PX4's pre-takeoff timeout (COM_DISARM_PRFLT).
+PX4's pre-takeoff timeout (COM_DISARM_PRFLT), which also ends a ground station's arm in HOLD on the ground of a
+vehicle awaiting no mission.
 
 In:  the simulated vehicle (armed, mode, on the ground, its events, ``preflight_disarm_s``), the mission manager
      (a start requested, a mission flying or completed), wall time (s, ``time.monotonic``)
@@ -46,6 +47,20 @@ class PreStart:
         """Held with no start yet: the pre-takeoff timeout runs."""
         return self.held() and not self.starting()
 
+    def times_out(self) -> bool:
+        """Whether the pre-takeoff timeout runs now: awaiting the mission's start (:meth:`awaits`), or, with no
+        mission awaited, armed in HOLD on the ground (a ground station's arm: nothing takes off from there)."""
+        if self.missions is not None:
+            return self.awaits()
+        sim = self.sim
+        return sim.armed and sim.mode == HOLD and sim.plant.on_ground
+
+    def ground_armed(self, now: float) -> None:
+        """With no mission awaited: a ground station's arm left the vehicle armed in HOLD on the ground at wall time
+        ``now`` (s): PX4's pre-takeoff timeout runs from it (the events are not the start's: none is awaited)."""
+        if self.missions is None and self.at is None and self.times_out():  # (an arm again: the timeout runs on)
+            self.at = now
+
     def armed(self, now: float, n0: int) -> None:
         """A ground station's arm left the vehicle held (its events from ``n0``): the first one starts the timeout
         and is the start's; one again, or after the start, changes nothing."""
@@ -59,18 +74,20 @@ class PreStart:
             e.pre_start = True
 
     def tick(self, now: float) -> None:
-        """Wall-clock duty: held and not started for COM_DISARM_PRFLT (> 0) since the arm, the vehicle disarms
-        itself, as PX4's pre-takeoff timeout does."""
+        """Wall-clock duty: held and not started (or, no mission awaited, armed in HOLD on the ground) for
+        COM_DISARM_PRFLT (> 0) since the arm, the vehicle disarms itself, as PX4's pre-takeoff timeout does."""
         at = self.at
         if at is None:
             return
-        if not self.awaits():
-            self.at = None  # disarmed, another mode, or started
+        if not self.times_out():
+            self.at = None  # disarmed, another mode, taken off, or started
             return
         limit = self.sim.preflight_disarm_s
         if limit > 0.0 and now - at >= limit:
             self.at = None
             n0 = len(self.sim.events)
-            self.sim.disarm(f"disarmed: no mission started within COM_DISARM_PRFLT = {limit:g} s of arming")
-            self.mark(n0)
+            what = "no mission started" if self.missions is not None else "no takeoff"
+            self.sim.disarm(f"disarmed: {what} within COM_DISARM_PRFLT = {limit:g} s of arming")
+            if self.missions is not None:
+                self.mark(n0)
             self.clock.fire(Trigger.DISARM)
