@@ -25,7 +25,7 @@ from bridge.link.radio import make_radio_file
 from bridge.link.turns import TurnRadio
 from bridge.nodes.vehicle import gate as gatemod
 from bridge.nodes.vehicle.clock import Answer, Clock, ClockState, Trigger
-from bridge.nodes.vehicle.gate import Gate, GateConfig
+from bridge.nodes.vehicle.gate import Gate, GateConfig, resting
 from bridge.session.children import free_udp_port
 from bridge.swarm import CONTINUED, FleetRun, Watch, judge_traces, simulate, sitl
 from params import ConfigError
@@ -105,6 +105,44 @@ def test_a_contact_is_judged_as_the_offline_loop_judges_it_and_a_vehicle_gone_st
         assert "vehicles 2 and 3 touched" in cleared(c)  # the last pair in id order, as offline
     finally:
         for g, _, _ in fleet:
+            g.close()
+
+
+def test_a_vehicle_disarmed_in_the_air_stays_on_the_ground_below_not_in_the_air() -> None:
+    """A ground station's disarm in flight: lockstep time stands still for that vehicle (its plant never flies the
+    fall), so it leaves the shared clock to lie on the ground below where it was (:func:`resting`), as the offline
+    fleet's vehicle falls and lies there; another flying through where it hung passes. (Under load a vehicle
+    disarmed 0.65 m up once hung there, and its neighbour's circle ran into it: both ended ``collision``.)"""
+    assert resting((1.0, 0.0, 2.0, 0.0, 0.65, -0.1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0), armed=False) == (1.0, 2.0, 0.0)
+    assert resting((1.0, 0.0, 2.0, 0.0, 0.65, -0.1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0), armed=True) == (1.0, 2.0, 0.65)
+    ports = (free_udp_port(), free_udp_port())
+    fleet = []
+    for i in range(2):
+        clock = Clock(False, 1000.0, 1.0, 0.0)
+        clock.fire(Trigger.ENGAGE)
+        where, armed = [(0.0, 0.8 * i, 1.0)], [True]
+
+        def rest(w: list = where, a: list = armed) -> tuple[float, float, float]:
+            x, y, z = w[0]
+            return resting((x, 0.0, y, 0.0, z, *[0.0] * 7), a[0])
+
+        cfg = GateConfig(i, (1, 2), (0.3, 0.3), ports)
+        fleet.append((Gate(cfg, clock, lambda w=where: w[0], RATE, None, rest), clock, where, armed))
+    (a, ca, wa, arm_a), (b, cb, wb, _) = fleet
+    try:
+        for g, clock, _, _ in fleet:
+            at(g, clock, 3)
+        assert [cleared(g) for g, _, _, _ in fleet] == [None, None]
+        arm_a[0] = False
+        ca.fire(Trigger.DISARM)  # disarmed by command, 1 m up: idle
+        a.over(3)
+        assert a.stats()["left"] == {"step": 3, "position": [0.0, 0.0, 0.0]}
+        cb.take()
+        wb[0] = (0.0, 0.3, 1.0)  # through where 1 hung: 0.3 m off, 1 m above it on the ground
+        at(b, cb, 4)
+        assert cleared(b) is None
+    finally:
+        for g, _, _, _ in fleet:
             g.close()
 
 

@@ -79,17 +79,26 @@ class GateConfig:
                                     "radio": self.radio}))
 
 
+def resting(X: tuple[float, ...], armed: bool) -> tuple[float, float, float]:
+    """Where a vehicle of state X (paper frame, m) stays once out of the shared clock: its centre, or, disarmed in
+    the air, on the ground below it: lockstep time stands still for a disarmed vehicle, so its plant never flies
+    the fall (the offline fleet's does, and lies there)."""
+    return X[0], X[2], X[4] if armed or X[4] <= 0.0 else 0.0
+
+
 class Gate:
     """One vehicle's side of the shared clock (the module's docstring): :meth:`after_step` (its word to the others),
     :meth:`clear` before each step, :meth:`serve` while gated, :meth:`over` (it leaves when its flight is over)."""
 
     def __init__(self, cfg: GateConfig, clock: Clock, position: Callable[[], tuple[float, float, float]],
-                 rate: float, turns: TurnRadio | None = None) -> None:
+                 rate: float, turns: TurnRadio | None = None,
+                 rest: Callable[[], tuple[float, float, float]] | None = None) -> None:
         self.cfg = cfg
         self.turns = turns  # the fleet's one radio (up): this vehicle's turns on it
         self.turn_at: int | None = None  # the step whose turn on the radio it waits for
         self.clock = clock
         self.position = position  # the plant's true centre now (m)
+        self.rest = rest or position  # where it stays once out of the shared clock (m): disarmed, on the ground
         self.rate = rate
         self.me = cfg.index
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -129,7 +138,7 @@ class Gate:
         if ending:
             self.leave()
         elif not alive or self.clock.state is not ClockState.LOCKSTEP:
-            self.leave(k, self.position())
+            self.leave(k, self.rest())
         else:
             self.arrive(k, self.position())
 
@@ -195,9 +204,10 @@ class Gate:
             fly()
 
     def over(self, k: int) -> None:
-        """Not in lockstep any more (disarmed, on the wall clock, halted): a flight that was at the gate leaves it."""
+        """Not in lockstep any more (disarmed, on the wall clock, halted): a flight that was at the gate leaves it, to
+        stay where it comes to rest (:attr:`rest`)."""
         if self.flying and self.left is None:
-            self.leave(k, self.position())
+            self.leave(k, self.rest())
 
     # -- this vehicle ------------------------------------------------------------------------------
     def arrive(self, k: int, pos: tuple[float, float, float]) -> None:

@@ -39,7 +39,7 @@ from bridge.nodes.vehicle.catchup import CatchUp
 from bridge.nodes.vehicle.clock import Clock, ClockState
 from bridge.nodes.vehicle.commander import Commander, CommanderPorts
 from bridge.nodes.vehicle.config import CLOCKS, VehicleConfig, open_links
-from bridge.nodes.vehicle.gate import SILENT_S, Gate
+from bridge.nodes.vehicle.gate import SILENT_S, Gate, resting
 from bridge.nodes.vehicle.mission import MissionManager
 from bridge.nodes.vehicle.paramservice import ParamService
 from bridge.nodes.vehicle.receiver import Receiver, ReceiverPorts, Refusals
@@ -142,7 +142,8 @@ class Vehicle:
         self._handle = self.receiver.handle  # (an attribute: one call less on the lockstep's hot path)
         # a lockstep fleet's shared clock (bsst sitl --vehicles): step by step with the other vehicles
         self.gate = (Gate(gate, self.clock, lambda: (self.plant.state[0], self.plant.state[2], self.plant.state[4]),
-                          self.rate, self.turns) if gate is not None else None)
+                          self.rate, self.turns, lambda: resting(self.plant.state, self.sim.armed))
+                     if gate is not None else None)
 
     # -- public --------------------------------------------------------------------------
     def stop(self) -> None:
