@@ -118,8 +118,8 @@ def flying(flight: Flight, path: Path | None = None, *, plots: bool = True, prog
     trace = record.trace if record is not None else None
     events = record.events if record is not None else None
     # PX4's pre-arm check denied the arm the flight starts with (its preflight event says why): nothing flies, as
-    # in a session, where the controller's arm is refused and it aborts
-    outcome = "completed" if vehicle.armed else "aborted"
+    # in a session, where the controller's arm is refused
+    outcome = "completed" if vehicle.armed else "denied"
     failsafe_seen = False
     logged = 0
     noted = 0

@@ -60,7 +60,7 @@ from params import ConfigError, dump_toml
 
 LINK_FIGURES = ("sent", "delivered", "lost", "lost_by", "delay_ms")  # each vehicle's, each way, in the fleet's summary
 # the outcomes from best to worst: the fleet's outcome is its worst vehicle's (an unknown one is worst)
-SEVERITY = ("completed", "failsafe", "law_failed", "diverged", "crashed", "collision", "aborted")
+SEVERITY = ("completed", "failsafe", "law_failed", "denied", "diverged", "crashed", "collision", "aborted")
 DEFINITION = ("distance between the vehicles' centres less each one's disc radius (its arm plus its rotor "
               "radius: rotor_radius_m, by default half the arm)")
 
@@ -287,7 +287,7 @@ def _fly_together(steps: list[Generator[tuple[float, ...], str | None, Run]], st
                 except StopIteration as done:
                     runs[i] = done.value
                     live.remove(i)
-                    if done.value.interrupted:  # Ctrl-C in one vehicle's step: every vehicle stops
+                    if done.value.outcome == "aborted":  # Ctrl-C in one vehicle's step: every vehicle stops
                         raise KeyboardInterrupt from None
             k += 1
             for a, b, why in watch.check(k / rate, positions):

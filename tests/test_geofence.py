@@ -108,13 +108,13 @@ def test_a_run_that_leaves_the_fence_says_where_and_when_and_exits_1(tmp_path: P
 def test_a_flight_that_starts_outside_its_fence_is_not_armed(tmp_path: Path, capsys) -> None:
     """PX4's pre-arm geofence check: the fence begins 2 m north of the L's start, so with GF_ACTION > 0 (1, warning,
     included: PX4 denies for any action but none) the vehicle does not arm. Offline nothing flies: outcome
-    ``aborted``, ended by the vehicle saying why (its ``preflight`` event), exit 1 (``bsst sitl`` of the same plan:
+    ``denied``, ended by the vehicle saying why (its ``preflight`` event), exit 1 (``bsst sitl`` of the same plan:
     tests/test_sitl.py). GF_ACTION 0 arms and flies (the geofence policy still fails the run)."""
     plan = outside_fence_plan(tmp_path)
     why = OUTSIDE_WHY
     for action in (1, 2):
         run = simulate(plan, out=tmp_path / f"run{action}", plots=False, params={"GF_ACTION": action})
-        assert run.summary["outcome"] == "aborted" and len(run.trace["t"]) == 0, run.summary["ended_by"]
+        assert run.summary["outcome"] == "denied" and len(run.trace["t"]) == 0, run.summary["ended_by"]
         assert run.summary["ended_by"]["who"] == "vehicle", run.summary["ended_by"]
         assert run.summary["ended_by"]["how"].startswith(f"{why} (GF_ACTION = {action}: "), run.summary["ended_by"]
         assert [e["kind"] for e in run.summary["events"]] == ["preflight"], run.summary["events"]

@@ -527,7 +527,8 @@ def test_an_instance_whose_port_another_program_holds_is_passed_over() -> None:
 def test_a_mission_that_starts_outside_its_fence_ends_as_offline(tmp_path: Path) -> None:
     """PX4's pre-arm geofence check in a session: the controller's arm of a vehicle standing outside its fence is
     answered TEMPORARILY_REJECTED, as PX4's commander answers it; the session ends as ``bsst sim`` does
-    (tests/test_geofence.py): ``aborted``, ended by the vehicle saying why, nothing flown, exit 1."""
+    (tests/test_geofence.py): ``denied``, ended by the vehicle saying why, nothing flown, exit 1. A sweep of it
+    measures nothing (its cells ``denied``, exit 1); a margin search refuses it (exit 2, one line)."""
     plan = outside_fence_plan(tmp_path)
     offline = simulate(plan, plots=False)
     with instance_slot() as n:
@@ -535,9 +536,18 @@ def test_a_mission_that_starts_outside_its_fence_ends_as_offline(tmp_path: Path)
                      timeout=120)
     assert r.returncode == 1, r.stdout[-2000:] + r.stderr[-2000:]
     summary = json.loads((tmp_path / "sitl" / "summary.json").read_text())
-    assert summary["outcome"] == offline.summary["outcome"] == "aborted", summary["ended_by"]
+    assert summary["outcome"] == offline.summary["outcome"] == "denied", summary["ended_by"]
     assert summary["ended_by"] == offline.summary["ended_by"], (summary["ended_by"], offline.summary["ended_by"])
     assert summary["ended_by"]["how"].startswith(f"{OUTSIDE_WHY} (GF_ACTION = 2: hold)"), summary["ended_by"]
     said = {e["kind"]: e["text"] for e in summary["events"]}
     assert said["preflight"].startswith(OUTSIDE_WHY) and "MAV_RESULT_TEMPORARILY_REJECTED" in said["aborted"], said
     assert len(read_trace(tmp_path / "sitl" / "trace.csv")["t"]) == 0
+    # a campaign of it measures nothing: a sweep's cells say why (exit 1), a margin search refuses it (exit 2)
+    r = run_bsst("sweep", str(plan), "--delay", "0,20", "--out", str(tmp_path / "sweep"), "--no-plots", cwd=ROOT)
+    assert r.returncode == 1 and "every cell failed (2 of 2)" in r.stderr, r.stderr
+    cells = (tmp_path / "sweep" / "cells.csv").read_text().splitlines()
+    assert len(cells) == 3 and all(",denied,error," in c and OUTSIDE_WHY in c for c in cells[1:]), cells
+    r = run_bsst("margin", str(plan), "--over", "delay_ms", "--until", "rms=0.1", "--out", str(tmp_path / "m"),
+                 cwd=ROOT)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+    assert r.stderr.startswith("bsst: margin: a cell could not be flown: arming denied: outside its fence"), r.stderr

@@ -168,7 +168,7 @@ def test_a_fleet_mission_is_refused_where_one_vehicle_flies() -> None:
 def test_a_vehicle_outside_the_fence_stays_at_its_start_and_the_others_fly(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """The near miss with a fence round vehicle 1's leg only: vehicle 2 starts outside it, so PX4's pre-arm check
-    denies its arm: it stays on the ground at its start, ``aborted``, ended by the vehicle saying why (stderr names
+    denies its arm: it stays on the ground at its start, ``denied``, ended by the vehicle saying why (stderr names
     it), and that is no Ctrl-C: vehicle 1 flies its whole mission, judged against vehicle 2 standing there."""
     fenced = tmp_path / "fenced.toml"
     fenced.write_text(NEAR_MISS.read_text() + '\n[geofence]\nzones = [{ kind = "polygon", inclusion = true, points = '
@@ -176,12 +176,12 @@ def test_a_vehicle_outside_the_fence_stays_at_its_start_and_the_others_fly(
     assert main(["sim", str(fenced), "--out", str(tmp_path / "r"), "--no-plots"]) == 1
     s = json.loads((tmp_path / "r" / "summary.json").read_text())
     one, two = s["vehicles"]
-    assert (one["outcome"], two["outcome"]) == ("completed", "aborted"), s["vehicles"]
+    assert (one["outcome"], two["outcome"]) == ("completed", "denied") and s["outcome"] == "denied", s["vehicles"]
     assert two["ended_by"]["who"] == "vehicle" and two["ended_by"]["how"].startswith(
         "arming denied: outside its fence: at x=3.000 y=0.900 m"), two["ended_by"]
     (pair,) = s["separation"]["pairs"]  # vehicle 1 ends 1 m over (3, 0), 0.9 m from vehicle 2 at its start
     assert pair["closest_m"] == pytest.approx(math.hypot(0.9, 1.0) - 2 * 0.315, abs=0.01) and pair["t"] > 10.0, pair
-    assert "vehicle 2: aborted: ended by vehicle: arming denied: outside its fence" in capsys.readouterr().err
+    assert "vehicle 2: denied: ended by vehicle: arming denied: outside its fence" in capsys.readouterr().err
 
 
 def test_ctrl_c_in_one_vehicle_stops_every_vehicle(tmp_path: Path) -> None:

@@ -437,15 +437,14 @@ def ended_by_outcome(outcome: str, events: Sequence[RunEvent]) -> dict[str, str]
     if outcome == "law_failed":  # a user's law raised, exited or gave no four finite inputs (controller.law)
         e = first("law_failed")
         return {"who": "controller", "how": f"its law failed at t={e.t:.3f} s: {e.text}" if e else "its law failed"}
-    denied = arming_denied_end(events)
-    if outcome == "aborted" and denied is not None:
-        return denied
+    if outcome == "denied":  # PX4's pre-arm check denied the flight's arm: nothing flew
+        return arming_denied_end(events) or {"who": "vehicle", "how": "arming denied"}
     return {"who": "user", "how": "interrupted (Ctrl-C or SIGTERM)"}
 
 
 def arming_denied_end(events: Sequence[RunEvent]) -> dict[str, str] | None:
-    """``ended_by`` of a flight that never armed because the vehicle's pre-arm check denied it (its ``preflight``
-    event, and no ``armed`` one): the vehicle, with why; None for any other flight."""
+    """``ended_by`` of a flight that never armed because the vehicle's pre-arm check denied it (outcome ``denied``:
+    its ``preflight`` event, and no ``armed`` one): the vehicle, with why; None for any other flight."""
     ev = vehicle_events(events)
     denied = next((e for e in ev if e.kind == "preflight"), None)
     if denied is None or any(e.kind == "armed" for e in ev):

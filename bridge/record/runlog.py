@@ -273,11 +273,6 @@ class Run:
         return self.summary["outcome"]
 
     @property
-    def interrupted(self) -> bool:
-        """Whether someone stopped it (Ctrl-C, SIGTERM): aborted by the user, not by the vehicle (a denied arm)."""
-        return self.outcome == "aborted" and self.summary.get("ended_by", {}).get("who") == "user"
-
-    @property
     def rms(self) -> float:
         """3-D position RMS error over t >= summary['rms_from_s']."""
         return self.summary["rms_3d"]

@@ -45,9 +45,8 @@ from bridge.record.policies import (
 )
 from bridge.record.runlog import trace_arrays
 
-FAILED_OUTCOMES = ("failsafe", "diverged", "aborted", "law_failed")
-# the plant ended the flight (SimVehicle.plant_verdict, or a fleet's contact), as offline
-PLANT_OUTCOMES = ("diverged", "crashed", "collision")
+FAILED_OUTCOMES = ("failsafe", "diverged", "aborted", "law_failed", "denied")
+PLANT_OUTCOMES = ("diverged", "crashed", "collision")  # the plant ended it (SimVehicle.plant_verdict, a contact)
 # the vehicle's events that a sender other than the flight's controller may cause and that change the flight
 INTERVENING = ("param", "mode", "armed", "disarmed", "fault")  # fault: a ground station's injected failure
 
@@ -262,7 +261,9 @@ def ended_by(outcome: str, trace: Mapping[str, Any], flight: Flight, facts: Sess
         if outcome == "failsafe":
             how += "; the vehicle's failsafe took over"
         return outcome, {"who": facts.died, "how": how}
-    if outcome in PLANT_OUTCOMES:
+    if outcome == "aborted" and arming_denied_end(events) is not None:
+        outcome = "denied"  # the controller's abort answers the vehicle's refusal to arm, as offline
+    if outcome in (*PLANT_OUTCOMES, "denied"):
         return outcome, ended_by_outcome(outcome, events)
     if outcome == "law_failed" and ctl is not None:
         return outcome, {"who": "controller", "how": f"its law failed: {ctl.reason}"}
@@ -282,8 +283,7 @@ def ended_by(outcome: str, trace: Mapping[str, Any], flight: Flight, facts: Sess
         flown = float(t[-1]) + 1.0 / m.rate_hz if len(t) else 0.0
         return "aborted", {"who": "controller", "how": f"ended the mission after {flown:.3f} s of its "
                                                        f"{m.duration_s:g} s"}
-    # (a controller's abort that answers the vehicle's refusal to arm: the vehicle ended it, ended_by_outcome says)
-    if outcome == "aborted" and ctl is not None and ctl.reason and arming_denied_end(events) is None:
+    if outcome == "aborted" and ctl is not None and ctl.reason:
         return outcome, {"who": "controller", "how": ctl.reason}
     return outcome, ended_by_outcome(outcome, events)
 

@@ -55,7 +55,8 @@ INT_COLUMNS = ("vehicles", "seed", "up_sent", "up_lost", "down_sent", "down_lost
 
 
 STR_COLUMNS = ("controller", "estimator", "turbulence", "discretization", "outcome", "class", "error", "policies")
-FAILED = ("error", "law_failed")  # outcomes of a cell that measured nothing: it could not be flown, or its law failed
+# outcomes of a cell that measured nothing: it could not be flown, its law failed, or its vehicle denied the arm
+FAILED = ("error", "law_failed", "denied")
 
 
 KEY_COLUMNS = (*AXES, "seed")  # what names a row's cell: never empty

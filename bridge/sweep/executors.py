@@ -34,7 +34,7 @@ from bridge.nodes.process import die_with_parent
 from bridge.record.runlog import Run
 from bridge.session import instance_slot, sitl
 from bridge.swarm import simulate as simulate_fleet
-from bridge.sweep.cells import error_row, row_from_fleet, row_from_run
+from bridge.sweep.cells import FAILED, error_row, row_from_fleet, row_from_run
 from bridge.sweep.grid import AXES, FLEET_FORMATION, Cell, cell_flight, cell_overrides
 from missions import Mission
 from params import ConfigError
@@ -279,7 +279,7 @@ class Progress:
     def update(self, row: Mapping[str, Any]) -> None:
         self.done += 1
         self.ran += 1
-        if row["outcome"] == "error":
+        if row["outcome"] in FAILED:  # (as the sweep's summary counts them)
             self.failed += 1
         if self._bar is not None:
             self._bar.set_postfix(failed=self.failed, refresh=False)

@@ -72,7 +72,7 @@ class Until:
     def failed(self, row: dict[str, Any], classes: Classes) -> bool:
         """Whether a probe's row fails: the criterion, or a safety policy its run broke (its ``policies``
         column names one: a probe that left its geofence does not hold, whatever its RMS)."""
-        if row["outcome"] == "error":
+        if row["outcome"] in ("error", "denied"):  # (denied: its vehicle was not armed, at any value)
             raise ConfigError(f"margin: a cell could not be flown: {row.get('error')}")
         if broke_policy(row):
             return True
