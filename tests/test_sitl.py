@@ -547,6 +547,8 @@ def test_a_mission_that_starts_outside_its_fence_ends_as_offline(tmp_path: Path)
     assert r.returncode == 1 and "every cell failed (2 of 2)" in r.stderr, r.stderr
     cells = (tmp_path / "sweep" / "cells.csv").read_text().splitlines()
     assert len(cells) == 3 and all(",denied,error," in c and OUTSIDE_WHY in c for c in cells[1:]), cells
+    report = (tmp_path / "sweep" / "report.md").read_text()
+    assert report.count(f"| {OUTSIDE_WHY}") == 2 and "## Cells that could not be flown" in report, report
     r = run_bsst("margin", str(plan), "--over", "delay_ms", "--until", "rms=0.1", "--out", str(tmp_path / "m"),
                  cwd=ROOT)
     assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr

@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from bridge.autopilot.estimator import ESTIMATOR_KINDS
-from bridge.sweep.cells import CELLS_CSV, POLICIES_OK, SWEEP_JSON, broke_policy, read_cells, read_sweep_json
+from bridge.sweep.cells import CELLS_CSV, FAILED, POLICIES_OK, SWEEP_JSON, broke_policy, read_cells, read_sweep_json
 from bridge.sweep.classes import CLASSES, Classes, classify, thresholds_text
 from bridge.sweep.grid import AXES, LINK_AXES, NAME_AXES, SHORT
 from params import ConfigError
@@ -207,7 +207,7 @@ def write_report(path: Path, rows: Sequence[Mapping[str, Any]], meta: Mapping[st
             lines += ["", f"![{c}: {title}]({fname})", ""]
         if plots:
             maps += heat_maps(path, rows, a, b, controllers, classes)
-    failed = [r for r in rows if r["outcome"] == "error"]
+    failed = [r for r in rows if r["outcome"] in FAILED]  # (error, law_failed, denied: each row says why)
     if failed:
         lines += ["", "## Cells that could not be flown", "", "| controller | " + " | ".join(MAP_AXES)
                   + " | seed | error |", "|---" * (len(MAP_AXES) + 3) + "|"]
@@ -215,9 +215,10 @@ def write_report(path: Path, rows: Sequence[Mapping[str, Any]], meta: Mapping[st
             lines.append(f"| {r['controller']} | " + " | ".join(_fmt(r[a]) for a in MAP_AXES)
                          + f" | {r['seed']} | {r['error']} |")
     lines += policies_section(rows)
-    lines += ["", "## Reproducing a row", "",
-              "Each row of `cells.csv` is one offline flight of `mission.toml` (in this directory); for example the "
-              "first one:", "", "```sh", reproduce(rows[0], swept), "```", ""]
+    if rows:  # (none: a sweep of no cells, or a report of an empty cells.csv)
+        lines += ["", "## Reproducing a row", "",
+                  "Each row of `cells.csv` is one offline flight of `mission.toml` (in this directory); for example "
+                  "the first one:", "", "```sh", reproduce(rows[0], swept), "```", ""]
     out = path / "report.md"
     tmp = path / ".report.md.tmp"
     tmp.write_text("\n".join(lines))
