@@ -43,7 +43,6 @@ def limits_passed(X: tuple[float, ...], home: tuple[float, float, float], max_ho
     return out
 
 
-
 def breaches(X: tuple[float, ...], t: float, home: tuple[float, float, float], max_hor_m: float, max_ver_m: float,
              fence: Geofence | None) -> list[tuple[str, str]]:
     """The limits (:func:`limits_passed`) and the fence (if given) state X (paper frame, m) at time t (s) is beyond,
