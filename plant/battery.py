@@ -2,8 +2,8 @@
 
 In:  a profile's ``[battery]`` table (cells, capacity mAh, cell volts full and empty, internal resistance
      ohm per cell, motor and ESC efficiency), then per physics step the rotor speeds (rad/s), the rotors'
-     drag-torque factor (N m s^2) and the step (s)
-Out: the terminal voltage (V), the current (A), the charge used (mAh) and the rotors' speed cap (rad/s)
+     drag-torque factor (N m s^2) and the step (s); the pack's charge at the start (% of capacity; 100 by default)
+Out: the terminal voltage (V), the current (A), the charge used (mAh) and left (0..1), the rotors' speed cap (rad/s)
 
 The model (docs/weather.md "Battery"): the open-circuit voltage falls linearly with the charge used,
 E = n (v_full − (v_full − v_empty) · used / capacity); the shaft power the rotors draw is
@@ -54,14 +54,15 @@ def battery_from_table(t: Table) -> BatteryConfig:
 class Battery:
     """The pack's state: charge used (mAh), terminal voltage (V), current (A); their extremes over the flight."""
 
-    def __init__(self, config: BatteryConfig) -> None:
+    def __init__(self, config: BatteryConfig, start_pct: float = 100.0) -> None:
         self.config = config
-        self.used_mah = 0.0
-        self.voltage = config.full_v
+        self.used_mah = config.capacity_mah * (1.0 - start_pct / 100.0)  # (a pack not full at the start)
+        self.voltage = config.cells * (config.cell_full_v - (config.cell_full_v - config.cell_empty_v)
+                                       * self.used_mah / config.capacity_mah)  # open-circuit, at rest
         self.current = 0.0
         self.min_voltage = self.voltage
         self.max_current = 0.0
-        self._charge_as = 0.0  # A s drawn
+        self._charge_as = self.used_mah * 3.6  # A s drawn (pack_step: used mAh = A s / 3.6)
 
     def step(self, omega: tuple[float, ...], torque_factor: float, h: float) -> float:
         """Draw the rotors' power over h (s); returns the rotors' speed cap (rad/s) as a fraction of ω_max."""
@@ -72,6 +73,11 @@ class Battery:
         self.min_voltage = min(self.min_voltage, v)
         self.max_current = max(self.max_current, i)
         return v / c.full_v
+
+    @property
+    def remaining(self) -> float:
+        """The charge left, a fraction of the capacity (0..1): what SYS_STATUS reports and the vehicle watches."""
+        return min(max(1.0 - self.used_mah / self.config.capacity_mah, 0.0), 1.0)
 
     def summary(self) -> dict:
         return {"voltage_v": self.voltage, "min_voltage_v": self.min_voltage, "current_a": self.current,

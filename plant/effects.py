@@ -2,7 +2,8 @@
 disturbance and parameter mismatch. The controller never sees them: they are what its
 super-twisting terms must reject.
 
-In:  a mission's ``[effects]`` table (drag on/off, motor lag on/off, battery on/off, disturbance N and N m, Hz;
+In:  a mission's ``[effects]`` table (drag on/off, motor lag on/off, battery on/off and its start charge %,
+     disturbance N and N m, Hz;
      mass and inertia scales), a seed
 Out: :class:`Effects`, the disturbance force (N) and torque (N m) at a time (s)
 """
@@ -63,6 +64,7 @@ class Effects:
     mass_scale: float = 1.0
     inertia_scale: float = 1.0
     battery: bool = False  # the profile's [battery]: its voltage sags under load and caps the rotors' speed
+    battery_start_pct: float = 100.0  # the pack's charge at the start, % of its capacity
 
 
 
@@ -71,6 +73,7 @@ def effects_from_table(t: Table) -> Effects:
     drag = t.boolean("drag", False)
     motor_lag = t.boolean("motor_lag", False)
     battery = t.boolean("battery", False)
+    start_pct = t.number("battery_start_pct", 100.0, lo=1.0, hi=100.0)
     d = t.table("disturbance")
     dist = Disturbance(
         force_const=d.vector("force", 3, _ZERO3, lo=-1e4, hi=1e4),
@@ -86,4 +89,4 @@ def effects_from_table(t: Table) -> Effects:
     inertia_scale = m.number("inertia_scale", 1.0, lo=0.1, hi=10.0)
     m.done()
     t.done()
-    return Effects(drag, motor_lag, dist, mass_scale, inertia_scale, battery)
+    return Effects(drag, motor_lag, dist, mass_scale, inertia_scale, battery, start_pct)

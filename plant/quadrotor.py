@@ -99,7 +99,8 @@ class Quadrotor:
         self.realised: tuple[float, float, float, float] = (0.0,) * 4
         self._omega_d = 0.0
         self.effectiveness: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)  # each rotor's, 0..1
-        self.battery = Battery(profile.battery) if e.battery and profile.battery is not None else None
+        self.battery = (Battery(profile.battery, e.battery_start_pct) if e.battery and profile.battery is not None
+                        else None)
         self._speed_cap = 1.0  # the rotors' top speed now, a fraction of omega_max (the battery's sag)
         self.impact: tuple[float, float, float] | None = None  # the first hard touchdown: (t s, speed m/s, tilt rad)
         self.command((0.0, 0.0, 0.0, 0.0))

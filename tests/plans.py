@@ -78,3 +78,22 @@ def outside_fence_plan(tmp_path: Path) -> Path:
     """The L plan fenced from 2 m north of its start: the vehicle starts outside the fence."""
     fence = {"polygons": [{"inclusion": True, "version": 1, "polygon": l_rectangle(2, 13, 3, 13)}]}
     return fenced_l(tmp_path, fence, "outside.plan")
+
+
+def battery_mission(tmp_path: Path, start_pct: float) -> Path:
+    """The x500 with its battery from ``start_pct`` % of its charge: 5 s climbing to 3 m, then 5 m north; 12 s."""
+    p = tmp_path / f"battery-{start_pct:g}.toml"
+    p.write_text(f"""name = "battery"
+duration_s = 12.0
+profile = "x500"
+
+[trajectory]
+kind = "waypoints"
+points = [{{ t = 0.0, x = 0.0, y = 0.0, z = 0.0 }}, {{ t = 5.0, x = 0.0, y = 0.0, z = 3.0 }},
+          {{ t = 12.0, x = 5.0, y = 0.0, z = 3.0 }}]
+
+[effects]
+battery = true
+battery_start_pct = {start_pct}
+""")
+    return p

@@ -8,9 +8,12 @@ sender; each unit and type answered as PX4's handlers answer it (docs/weather.md
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 from pymavlink import mavutil
@@ -286,39 +289,70 @@ def test_sitl_plant_blocks_equal_offline(tmp_path, case):
         assert codes == [0, 0] and sitl["wind"]["samples"] > 0 and sitl["battery"]["used_mah"] > 0.0
 
 
+def test_a_pack_below_its_critical_level_shows_critical_and_is_not_armed(tmp_path):
+    """PX4's battery levels and pre-arm battery check on the ground-station link: the x500's pack at 24 %, with
+    BAT_CRIT_THR 25 %: BATTERY_STATUS shows charge state CRITICAL at rest, and a ground station's arm is
+    TEMPORARILY_REJECTED with a CRITICAL STATUSTEXT saying why; BAT_CRIT_THR back to 7 %, OK, and the same arm is
+    ACCEPTED (docs/weather.md, "Battery")."""
+    with _x500_on_battery(tmp_path, "battery_start_pct = 24.0\n", "--param", "BAT_CRIT_THR=0.25") as gcs:
+        rest = gcs.recv_match(type="BATTERY_STATUS", blocking=True, timeout=10)
+        assert rest is not None and (rest.battery_remaining, rest.charge_state) == (
+            24, M.MAV_BATTERY_CHARGE_STATE_CRITICAL)
+        tgt = (gcs.target_system, gcs.target_component)
+        gcs.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+        assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_TEMPORARILY_REJECTED
+        why = gcs.recv_match(type="STATUSTEXT", blocking=True, timeout=5,
+                             condition="STATUSTEXT.severity == 2")  # MAV_SEVERITY_CRITICAL
+        assert why is not None and why.text.startswith("preflight: arming denied: battery critical: 24.0 %")
+        gcs.mav.param_set_send(*tgt, b"BAT_CRIT_THR", 0.07, M.MAV_PARAM_TYPE_REAL32)
+        assert gcs.recv_match(type="PARAM_VALUE", blocking=True, timeout=5) is not None
+        ok = gcs.recv_match(type="BATTERY_STATUS", blocking=True, timeout=10)
+        assert ok is not None and ok.charge_state == M.MAV_BATTERY_CHARGE_STATE_OK  # 24 %: above the 15 % low
+        gcs.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+        assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+
+
+@contextlib.contextmanager
+def _x500_on_battery(tmp_path: Path, effects: str, *args: str) -> Iterator[Any]:
+    """``bsst vehicle`` (``args``) of an x500 flying its battery (``effects``: more ``[effects]`` keys), and a
+    ground station that has heard it; the vehicle stopped after (exit 0)."""
+    mission = tmp_path / "battery.toml"
+    mission.write_text(WINDY_X500.replace("[wind]", "[unused]").split("[unused]")[0] + effects)
+    with instance_slot() as n:
+        gcs = _gcs(n)
+        v = _vehicle(n, tmp_path, str(mission), *args)
+        try:
+            assert gcs.wait_heartbeat(timeout=20) is not None
+            yield gcs
+        finally:
+            assert v.stop() == 0
+
+
 def test_battery_on_the_ground_station_link(tmp_path):
     """An x500 flying its battery ([effects] battery): SYS_STATUS carries its voltage, current and remaining
     charge, BATTERY_STATUS streams at PX4's 0.5 Hz; at rest the pack is full and idle, in a takeoff (the
     ground station's NAV_TAKEOFF and arm) it draws current and its voltage sags. Without a battery, no
     BATTERY_STATUS stream (SET_MESSAGE_INTERVAL of it UNSUPPORTED)."""
-    mission = tmp_path / "battery.toml"
-    mission.write_text(WINDY_X500.replace("[wind]", "[unused]").split("[unused]")[0])
-    with instance_slot() as n:
-        gcs = _gcs(n)
-        v = _vehicle(n, tmp_path, str(mission), "--speed", "2")
-        try:
-            assert gcs.wait_heartbeat(timeout=20) is not None
-            rest = gcs.recv_match(type="BATTERY_STATUS", blocking=True, timeout=10)
-            after = gcs.recv_match(type="BATTERY_STATUS", blocking=True, timeout=10)
-            assert rest is not None and after is not None
-            assert 1.5 < (after._timestamp - rest._timestamp) < 2.5  # 0.5 Hz (wall clock)
-            assert (rest.voltages[0], rest.current_battery, rest.current_consumed, rest.battery_remaining) == (
-                16800, 0, 0, 100)
-            status = gcs.recv_match(type="SYS_STATUS", blocking=True, timeout=5)
-            assert (status.voltage_battery, status.current_battery, status.battery_remaining) == (16800, 0, 100)
-            tgt = (gcs.target_system, gcs.target_component)
-            gcs.mav.command_long_send(*tgt, M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 0, math.nan)
-            assert _ack(gcs, M.MAV_CMD_NAV_TAKEOFF).result == M.MAV_RESULT_ACCEPTED
-            gcs.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
-            assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
-            loaded = gcs.recv_match(type="SYS_STATUS", blocking=True, timeout=10,
-                                    condition="SYS_STATUS.current_battery > 500")  # over 5 A: the rotors spin
-            assert loaded is not None and 14000 < loaded.voltage_battery < 16800
-            flying = gcs.recv_match(type="BATTERY_STATUS", blocking=True, timeout=10,
-                                    condition="BATTERY_STATUS.current_battery > 500")
-            assert flying is not None and flying.voltages[0] < 16800 and flying.voltages[1] == 65535
-        finally:
-            assert v.stop() == 0
+    with _x500_on_battery(tmp_path, "", "--speed", "2") as gcs:
+        rest = gcs.recv_match(type="BATTERY_STATUS", blocking=True, timeout=10)
+        after = gcs.recv_match(type="BATTERY_STATUS", blocking=True, timeout=10)
+        assert rest is not None and after is not None
+        assert 1.5 < (after._timestamp - rest._timestamp) < 2.5  # 0.5 Hz (wall clock)
+        assert (rest.voltages[0], rest.current_battery, rest.current_consumed, rest.battery_remaining) == (
+            16800, 0, 0, 100)
+        status = gcs.recv_match(type="SYS_STATUS", blocking=True, timeout=5)
+        assert (status.voltage_battery, status.current_battery, status.battery_remaining) == (16800, 0, 100)
+        tgt = (gcs.target_system, gcs.target_component)
+        gcs.mav.command_long_send(*tgt, M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 0, math.nan)
+        assert _ack(gcs, M.MAV_CMD_NAV_TAKEOFF).result == M.MAV_RESULT_ACCEPTED
+        gcs.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+        assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+        loaded = gcs.recv_match(type="SYS_STATUS", blocking=True, timeout=10,
+                                condition="SYS_STATUS.current_battery > 500")  # over 5 A: the rotors spin
+        assert loaded is not None and 14000 < loaded.voltage_battery < 16800
+        flying = gcs.recv_match(type="BATTERY_STATUS", blocking=True, timeout=10,
+                                condition="BATTERY_STATUS.current_battery > 500")
+        assert flying is not None and flying.voltages[0] < 16800 and flying.voltages[1] == 65535
     with instance_slot() as n:
         gcs = _gcs(n)
         v = _vehicle(n, tmp_path / "no-battery", "--profile", "x500")

@@ -23,6 +23,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.loop import simulate
 from bridge.mavlink.endpoint import GCS_PORT, LINK_PORT
+from bridge.mavlink.telemetry import StatusTextJoiner
 from bridge.record.columns import TRACE_COLUMNS
 from bridge.record.halves import count_records, read_half
 from bridge.record.policies import POLICIES
@@ -30,7 +31,7 @@ from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
 from bridge.session.children import CHOSEN_PORTS_LOW, PORT_LOCKS, RECENT_PORTS, ephemeral_low, free_udp_port
 from missions import MISSION_DIR, Mission, Sine
-from tests.plans import OUTSIDE_WHY, outside_fence_plan
+from tests.plans import OUTSIDE_WHY, battery_mission, outside_fence_plan
 from tests.sitlkit import ENV, ROOT, Bsst, child_pids, run_bsst, stall_blackouts, unexplained_outages
 from tests.waiting import wait_for
 
@@ -553,3 +554,41 @@ def test_a_mission_that_starts_outside_its_fence_ends_as_offline(tmp_path: Path)
                  cwd=ROOT)
     assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
     assert r.stderr.startswith("bsst: margin: a cell could not be flown: arming denied: outside its fence"), r.stderr
+
+
+def test_the_battery_failsafe_flies_in_lockstep_as_offline_and_the_ground_station_sees_it(tmp_path: Path) -> None:
+    """The x500 from 26 % of its pack, BAT_CRIT_THR 25 %, COM_LOW_BAT_ACT 2 (tests/test_battery_failsafe.py): the
+    session flies what ``bsst sim`` flies (the same events at the same times, the trace within the float32 wire's
+    1e-4 m), and the ground-station link says it: CRITICAL STATUSTEXTs of the levels, and BATTERY_STATUS's charge
+    state LOW."""
+    mission = battery_mission(tmp_path, 26.0)
+    params = ("--param", "BAT_LOW_THR=0.5", "--param", "BAT_CRIT_THR=0.25", "--param", "COM_LOW_BAT_ACT=2")
+    offline = simulate(mission, plots=False, params={"BAT_LOW_THR": 0.5, "BAT_CRIT_THR": 0.25, "COM_LOW_BAT_ACT": 2})
+    with instance_slot() as n:
+        r = run_bsst("sitl", str(mission), *params, "--instance", str(n), "--no-plots", "--out", str(tmp_path / "s"),
+                     cwd=ROOT, timeout=240)
+    assert r.returncode == 1, r.stdout[-2000:] + r.stderr[-2000:]
+    summary = json.loads((tmp_path / "s" / "summary.json").read_text())
+    assert summary["outcome"] == offline.summary["outcome"] == "failsafe"
+    assert summary["ended_by"] == offline.summary["ended_by"], (summary["ended_by"], offline.summary["ended_by"])
+
+    def said(events: list) -> list:  # the vehicle's (a session's events carry the controller's too)
+        return [(e["t"], e["text"]) for e in events if e["kind"] in ("battery", "failsafe")
+                and e.get("source", "vehicle") == "vehicle"]
+
+    assert said(summary["events"]) == said(offline.summary["events"]) and len(said(offline.summary["events"])) == 3
+    lock = read_trace(tmp_path / "s" / "trace.csv")
+    k = min(len(lock["t"]), len(offline.trace["t"]))
+    assert max(float(np.max(np.abs(lock[c][:k] - offline.trace[c][:k]))) for c in ("x", "y", "z")) < 1e-4
+    log = mavutil.mavlink_connection(str(tmp_path / "s" / "vehicle.tlog"), dialect="common")
+    texts, states, joiner = [], [], StatusTextJoiner()  # (the chunks of a long text joined, as a ground station does)
+    while (m := log.recv_match(type=["STATUSTEXT", "BATTERY_STATUS"])) is not None:
+        if m.get_type() == "STATUSTEXT":
+            texts += joiner.add(m, 0.0)
+        elif not states or states[-1] != m.charge_state:
+            states.append(m.charge_state)
+    crit = list(dict.fromkeys(t for sev, t in texts  # (each once: the tlog holds both links' copies)
+                              if sev == mavlink.MAV_SEVERITY_CRITICAL and t.startswith(("battery:", "failsafe: b"))))
+    assert crit[:2] == ["battery: low: 26.0 % left (BAT_LOW_THR = 50 %)",
+                        "battery: critical: 25.0 % left (BAT_CRIT_THR = 25 %)"], texts
+    assert states[0] == mavlink.MAV_BATTERY_CHARGE_STATE_LOW, states  # (0.5 Hz of wall time: CRITICAL, test_inject)

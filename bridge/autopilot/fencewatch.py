@@ -58,7 +58,7 @@ def breaches(X: tuple[float, ...], t: float, home: tuple[float, float, float], m
 def arming_refusal(passed: list[tuple[str, str]], action: int) -> str | None:
     """Why arming is denied, given the limits and fence the vehicle is beyond where it stands (``passed``, each
     (which, why)) and GF_ACTION (``action``): PX4 denies it for any breach unless GF_ACTION is 0 (unwatched, 1
-    included: it only warns in flight); None: arming may go on."""
+    included: it only warns in flight); None: not for the geofence."""
     if action == 0 or not passed:
         return None
-    return f"arming denied: {'; '.join(why for _, why in passed)} (GF_ACTION = {action}: {FENCE_ACTIONS[action]})"
+    return f"{'; '.join(why for _, why in passed)} (GF_ACTION = {action}: {FENCE_ACTIONS[action]})"

@@ -41,6 +41,8 @@ PREFLIGHT_DISARM_RANGE_S = (-1.0, 600.0)  # COM_DISARM_PRFLT: PX4 gives no bound
 TAKEOFF_ALT_RANGE_M = (0.5, 50.0)  # MIS_TAKEOFF_ALT: inside the plant's 100 m envelope; PX4: 0..80 m
 GF_MAX_HOR_RANGE_M = (0.0, 10000.0)  # GF_MAX_HOR_DIST: PX4's range; 0 is off
 GF_MAX_VER_RANGE_M = (0.0, 1000.0)  # GF_MAX_VER_DIST: PX4's range; 0 is off
+# PX4's battery levels (fractions of the charge) and their ranges: BAT_LOW_THR, BAT_CRIT_THR, BAT_EMERGEN_THR
+BAT_LOW_RANGE, BAT_CRIT_RANGE, BAT_EMERGEN_RANGE = (0.12, 0.5), (0.05, 0.25), (0.03, 0.1)
 SYSID_RANGE = (1, 254)  # MAV_SYS_ID and --sysid (0 is broadcast, 255 a ground station's by custom)
 
 
@@ -57,6 +59,10 @@ class VehicleParams:
     max_hor_m: float = 0.0  # GF_MAX_HOR_DIST: the farthest from home (m, horizontally) the vehicle may fly; 0: any
     max_ver_m: float = 0.0  # GF_MAX_VER_DIST: the highest above home (m) it may fly; 0: any
     fence_action: int = 2  # GF_ACTION: what the vehicle does beyond a limit or outside a fence (PX4's default: Hold)
+    battery_low: float = 0.15  # BAT_LOW_THR: the charge left (0..1) below which the battery is low (a warning)
+    battery_critical: float = 0.07  # BAT_CRIT_THR: critical (COM_LOW_BAT_ACT acts; arming denied below it)
+    battery_emergency: float = 0.05  # BAT_EMERGEN_THR: emergency (COM_LOW_BAT_ACT 3 lands)
+    low_battery_action: int = 0  # COM_LOW_BAT_ACT: 0 warning (PX4's default), 2 land, 3 return then land
 
 
 @dataclass(frozen=True)
@@ -78,6 +84,8 @@ class ParamSpec:
 
 # GF_ACTION's values (PX4's geofence_result GF_ACTION_*): what the vehicle does at a breach
 FENCE_ACTIONS = {0: "none", 1: "warning", 2: "hold", 3: "return", 4: "terminate", 5: "land"}
+# COM_LOW_BAT_ACT's values (PX4 1.14's): what the vehicle does at the battery's critical and emergency levels
+LOW_BATTERY_ACTIONS = {0: "warning", 2: "land", 3: "return at critical, land at emergency"}
 # PX4's offboard-loss action values, old and new, of the actions the vehicle flies
 _OBL_ACT = {-1: "descend", 0: "land", 1: "hold", 2: "return", 3: "disarm"}
 _OBL_RC_ACT = {-1: "descend", 3: "return", 4: "land", 5: "hold", 7: "disarm"}
@@ -121,13 +129,25 @@ PARAMS: tuple[ParamSpec, ...] = (
               "geofence action, PX4's values: 0 none (not watched), 1 warning, 2 hold (PX4's default), 3 return, "
               "4 terminate (motors off), 5 land; 2-5 are the vehicle's failsafe (docs/missions.md)",
               choices=FENCE_ACTIONS),
+    ParamSpec("BAT_LOW_THR", REAL32, "", *BAT_LOW_RANGE,
+              "battery low level: below this share of its charge a warning (a battery event; docs/weather.md)"),
+    ParamSpec("BAT_CRIT_THR", REAL32, "", *BAT_CRIT_RANGE,
+              "battery critical level: below it COM_LOW_BAT_ACT acts, and arming is denied"),
+    ParamSpec("BAT_EMERGEN_THR", REAL32, "", *BAT_EMERGEN_RANGE,
+              "battery emergency level: below it COM_LOW_BAT_ACT 3 lands"),
+    ParamSpec("COM_LOW_BAT_ACT", INT32, "", 0, 3,
+              "low battery action, PX4's values: 0 warning (PX4's default), 2 land at critical, 3 return at critical "
+              "and land at emergency; 2 and 3 are the vehicle's failsafe (docs/weather.md)",
+              choices=LOW_BATTERY_ACTIONS),
 )
 BY_NAME = {p.name: p for p in PARAMS}
 _RTL_FIELDS = {"RTL_RETURN_ALT": "return_alt_m", "RTL_DESCEND_ALT": "descend_alt_m"}  # -> ReturnConfig's field
 # the REAL32 parameters that are one field of VehicleParams each
 _FIELDS = {"COM_DISARM_PRFLT": "preflight_disarm_s", "GF_MAX_HOR_DIST": "max_hor_m", "GF_MAX_VER_DIST": "max_ver_m",
-           "MIS_TAKEOFF_ALT": "takeoff_alt_m"}
-_INT_FIELDS = {"SYS_FAILURE_EN": "failure_injection", "GF_ACTION": "fence_action"}  # the INT32s that are one field
+           "MIS_TAKEOFF_ALT": "takeoff_alt_m", "BAT_LOW_THR": "battery_low", "BAT_CRIT_THR": "battery_critical",
+           "BAT_EMERGEN_THR": "battery_emergency"}
+_INT_FIELDS = {"SYS_FAILURE_EN": "failure_injection", "GF_ACTION": "fence_action",  # the INT32s that are one field
+               "COM_LOW_BAT_ACT": "low_battery_action"}
 
 
 class ParamRefused(ValueError):

@@ -32,6 +32,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from bridge.autopilot.batterywatch import BatteryWatch
 from bridge.autopilot.estimator import Estimator, TruthEstimator, estimator_nees
 from bridge.autopilot.failsafe import (
     ACTION_TEXT,
@@ -40,13 +41,22 @@ from bridge.autopilot.failsafe import (
     OnboardController,
     PositionHold,
     ReturnConfig,
-    ReturnHome,
     Takeoff,
     Target,
     failsafe_target,
-    return_point,
 )
 from bridge.autopilot.fencewatch import FENCE_ACTION_TEXT, FENCE_FAILSAFE, arming_refusal, breaches
+from bridge.autopilot.modes import (  # noqa: F401  (the modes: imported from here by the rest of the bridge)
+    FAILSAFE,
+    GROUND_MODES,
+    HOLD,
+    LAND,
+    LANDED,
+    OFFBOARD,
+    RTL,
+    TAKEOFF,
+    mode_target,
+)
 from bridge.autopilot.params import FENCE_ACTIONS, VehicleParams, change_param, read_param
 from bridge.autopilot.vehicleevents import Event, ParamChanged, Sender
 from controller.nominal import Nominal
@@ -57,14 +67,6 @@ from plant.sensors import SensorSuite
 from plant.wind import Gust
 
 NEES_EVERY = 10  # control steps between NEES samples (its solve costs a fifth of an EKF flight if every step)
-OFFBOARD = "offboard"
-FAILSAFE = "failsafe"
-LANDED = "landed"  # the failsafe landed it (or stopped its motors): disarmed
-HOLD = "hold"  # the modes a ground station selects (bridge/nodes/vehicle.py, PX4's names)
-LAND = "land"
-TAKEOFF = "takeoff"
-RTL = "rtl"  # Return: home at RTL_RETURN_ALT, down to RTL_DESCEND_ALT, land (armed only, as PX4)
-GROUND_MODES = (HOLD, LAND, TAKEOFF, RTL)  # flown by the on-board controller, set by a ground station
 TAKEOFF_DONE_M = 0.1  # m from its height: a takeoff is done and the vehicle holds there (PX4: HOLD after TAKEOFF)
 
 
@@ -88,6 +90,7 @@ class SimVehicle:
     max_ver_m: float = 0.0  # GF_MAX_VER_DIST (m): the highest above home it may fly; 0: any
     fence: Geofence | None = None  # the fence it holds (the mission's, or a ground station's upload), watched as these
     fence_action: int = 2  # GF_ACTION: at a breach 0 nothing (unwatched), 1 warn, 2 hold, 3 return, 4 terminate, 5 land
+    battery_watch: BatteryWatch = field(default_factory=BatteryWatch)  # BAT_*_THR, COM_LOW_BAT_ACT
 
     def __post_init__(self) -> None:
         if self.estimator is None:
@@ -214,28 +217,9 @@ class SimVehicle:
         self._engage(mode, alt, hold_at)
 
     def _engage(self, mode: str, alt: float, hold_at: PositionHold | None = None) -> None:
-        X = self.published()
-        if mode == HOLD and hold_at is not None:
-            target: Target = hold_at
-            extra = "" if hold_at.psi is None else f", heading {hold_at.psi:.3f} rad"
-            extra += "" if hold_at.speed is None else f", at most {hold_at.speed:g} m/s across"
-            text = (f"HOLD, repositioned: from x={X[0]:.3f} y={X[2]:.3f} z={X[4]:.3f} m to x={hold_at.x:.3f} "
-                    f"y={hold_at.y:.3f} z={hold_at.z:.3f} m{extra}")
-        elif mode == HOLD:
-            target = PositionHold.here(X)
-            text = f"HOLD at x={X[0]:.3f} y={X[2]:.3f} z={X[4]:.3f} m"
-        elif mode == LAND:
-            target = Land.here(X, self.failsafe.descent_rate)
-            text = f"LAND at x={X[0]:.3f} y={X[2]:.3f} m, {self.failsafe.descent_rate:g} m/s"
-        elif mode == RTL:
-            to, rally = return_point(X, self.home, self.rally)
-            target = ReturnHome.toward(X, to, self.rtl, self.failsafe.descent_rate)
-            where = "home" if rally is None else f"rally point {rally}"
-            text = (f"RTL from x={X[0]:.3f} y={X[2]:.3f} z={X[4]:.3f} m: {where} x={to[0]:.3f} "
-                    f"y={to[1]:.3f} m at z={target.z_return:.3f} m, down to {target.z_descend:.3f} m, land")
-        else:
-            target = Takeoff.here(X, self._start_z + alt)
-            text = f"TAKEOFF to {alt:g} m over x={X[0]:.3f} y={X[2]:.3f} m"
+        target, text = mode_target(mode, self.published(), takeoff_z=self._start_z + alt, alt=alt, home=self.home,
+                                   descent_rate=self.failsafe.descent_rate, rally=self.rally, rtl=self.rtl,
+                                   hold_at=hold_at)
         self.fly_onboard(target, mode)
         self.event("mode", text, mode=mode, armed=True)
 
@@ -269,8 +253,10 @@ class SimVehicle:
 
     def params(self, sysid: int = 1) -> VehicleParams:
         """The settings the parameters read (:mod:`bridge.autopilot.params`), as they are now."""
+        b = self.battery_watch
         return VehicleParams(self.failsafe, self.takeoff_alt_m, sysid, self.failure_injection, self.rtl,
-                             self.preflight_disarm_s, self.max_hor_m, self.max_ver_m, self.fence_action)
+                             self.preflight_disarm_s, self.max_hor_m, self.max_ver_m, self.fence_action, b.low,
+                             b.critical, b.emergency, b.action)
 
     def change_param(self, name: str, value: float, sysid: int = 1) -> Event | None:
         """Set parameter ``name`` (PX4's name, :mod:`bridge.autopilot.params`) to ``value``, checked
@@ -284,6 +270,9 @@ class SimVehicle:
         self.failsafe, self.takeoff_alt_m = after.failsafe, after.takeoff_alt_m
         self.failure_injection, self.rtl = after.failure_injection, after.rtl
         self.preflight_disarm_s, self.fence_action = after.preflight_disarm_s, after.fence_action
+        b = self.battery_watch
+        b.low, b.critical, b.emergency, b.action = (after.battery_low, after.battery_critical,
+                                                    after.battery_emergency, after.low_battery_action)
         if (self.max_hor_m, self.max_ver_m) != (after.max_hor_m, after.max_ver_m):
             self.max_hor_m, self.max_ver_m = after.max_hor_m, after.max_ver_m
             self._beyond.clear()  # a new limit is watched afresh
@@ -314,13 +303,26 @@ class SimVehicle:
         return breaches(p.state, p.t, self.home, self.max_hor_m, self.max_ver_m, None if fence_known else self.fence)
 
     def arming_denied(self) -> bool:
-        """PX4's pre-arm geofence check (:func:`~bridge.autopilot.fencewatch.arming_refusal`): whether arming is
-        denied where the vehicle stands; if so a ``preflight`` event says why, and :attr:`arming_refused` keeps
-        it until the vehicle arms."""
-        self.arming_refused = arming_refusal(self._breaches(), self.fence_action)
+        """PX4's pre-arm checks of the geofence (:func:`~bridge.autopilot.fencewatch.arming_refusal`) and the battery
+        (:meth:`~bridge.autopilot.batterywatch.BatteryWatch.arming_refusal`): whether arming is denied now; if so a
+        ``preflight`` event says why, and :attr:`arming_refused` keeps it until the vehicle arms."""
+        pack = self.plant.battery
+        why = [w for w in (arming_refusal(self._breaches(), self.fence_action),
+                           pack and self.battery_watch.arming_refusal(pack.remaining)) if w]
+        self.arming_refused = f"arming denied: {'; '.join(why)}" if why else None
         if self.arming_refused is not None:
             self.event("preflight", self.arming_refused)
         return self.arming_refused is not None
+
+    def _check_battery(self, remaining: float) -> None:
+        """Each battery level the charge left (0..1) passes, said once (a ``battery`` event), and COM_LOW_BAT_ACT's
+        action flown (:mod:`bridge.autopilot.batterywatch`): over any mode but a failsafe, or over its own Return."""
+        b = self.battery_watch
+        for _, text, act in b.passed(remaining):
+            self.event("battery", text)
+            if act is not None and (self.mode not in (FAILSAFE, LANDED) or (b.returning and self.mode == FAILSAFE)):
+                b.returning = act == "return"
+                self._fly_failsafe(act, f"battery {text}: {act}", "battery: motors stopped")
 
     def fly_onboard(self, target: Target, mode: str) -> None:
         """Hand the motors to the on-board controller flying ``target`` under ``mode`` (not
@@ -435,6 +437,8 @@ class SimVehicle:
         p = self.plant
         if self.armed and self.fence_action and (self.max_hor_m or self.max_ver_m or self.fence is not None):
             self._check_limits()
+        if self.armed and p.battery is not None:
+            self._check_battery(p.battery.remaining)
         pending = self._pending_events
         t0 = self._mission_t0  # (0.0 offline and in lockstep: the same bits as plant time)
         while (pending and t0 is not None

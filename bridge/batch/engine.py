@@ -98,6 +98,9 @@ def flights_problem(flights: Sequence[Flight]) -> str | None:
             return ("a geofence ([geofence], a plan's geoFence, GF_MAX_HOR_DIST or GF_MAX_VER_DIST): the batch engine "
                     "keeps no trace to judge a cell's policies by, so a cell that left it would read as flown; fly it "
                     "with the process engine")
+        if f.effects.battery and (f.effects.battery_start_pct < 100.0 or f.params.low_battery_action):
+            return ("the battery's levels ([effects] battery_start_pct below 100, or COM_LOW_BAT_ACT > 0): the "
+                    "vehicle's battery failsafe is not in the batch engine; fly it with the process engine")
         if m.steps > CELL_STEPS:
             return f"the mission has {m.steps} control steps: more than the batch engine holds ({CELL_STEPS})"
         if first is None:

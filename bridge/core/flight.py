@@ -22,6 +22,7 @@ from numbers import Integral, Real
 from pathlib import Path
 from typing import Any
 
+from bridge.autopilot.batterywatch import BatteryWatch
 from bridge.autopilot.compiling import cold
 from bridge.autopilot.estimator import ESTIMATOR_KINDS, compile_estimator, make_estimator
 from bridge.autopilot.failsafe import FailsafeConfig, failsafe_from_table
@@ -104,7 +105,9 @@ class Flight:
         settings = {"armed": armed, "takeoff_alt_m": p.takeoff_alt_m, "timeline": self.timeline,
                     "failure_injection": p.failure_injection, "rtl": p.rtl, "preflight_disarm_s": p.preflight_disarm_s,
                     "max_hor_m": p.max_hor_m, "max_ver_m": p.max_ver_m, "rally": m.rally, "fence": m.geofence,
-                    "fence_action": p.fence_action}
+                    "fence_action": p.fence_action,
+                    "battery_watch": BatteryWatch(p.battery_low, p.battery_critical, p.battery_emergency,
+                                                  p.low_battery_action)}
         if self.estimator == "truth":  # no sensors to sample: the plant's state is published as it is
             return SimVehicle(plant, self.substeps, self.failsafe, **settings)
         suite = SensorSuite(self.sensors, m.seed, m.physics_hz, self.profile.gravity)

@@ -20,6 +20,7 @@ from bridge.nodes.report import Event, Report
 from bridge.nodes.vehicle.authority import Authority, claim
 from bridge.nodes.vehicle.streams import StatusTexts
 
+CRITICAL_KINDS = ("failsafe", "diverged", "lockstep", "preflight", "battery")  # events sent as CRITICAL STATUSTEXT
 MAX_TEXT_MESSAGES = 12  # STATUSTEXTs in one datagram of events (the newest texts, whole)
 
 
@@ -64,8 +65,7 @@ class Announcer:
         while self.sent < len(events):
             e = events[self.sent]
             self.sent += 1
-            sev = (mavlink.MAV_SEVERITY_CRITICAL if e.kind in ("failsafe", "diverged", "lockstep", "preflight")
-                   else mavlink.MAV_SEVERITY_INFO)
+            sev = mavlink.MAV_SEVERITY_CRITICAL if e.kind in CRITICAL_KINDS else mavlink.MAV_SEVERITY_INFO
             texts.append(self.statustext(sev, f"{e.kind}: {e.shown}"))
         msgs: list[Any] = []
         for chunks in reversed(texts):  # the newest texts, whole, if many came at once

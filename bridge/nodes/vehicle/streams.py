@@ -56,23 +56,23 @@ class VehicleView:
     sysid: int
     mission: tuple[int, int, int] = (0, 0, 2)  # the mission's current item, its items, its MISSION_STATE
     battery: Battery | None = None  # the plant's flight battery ([effects] battery), None: it flies none
+    battery_level: int = 0  # its level by the vehicle's BAT_*_THR: 0 none, 1 low, 2 critical, 3 emergency
 
 
 def battery_fields(b: Battery) -> tuple[int, int, int]:
     """SYS_STATUS's battery fields of the plant's battery: terminal voltage mV, current cA, remaining %."""
-    remaining = 100.0 * (1.0 - b.used_mah / b.config.capacity_mah)
-    return int(round(b.voltage * 1000.0)), int(round(b.current * 100.0)), int(round(min(max(remaining, 0.0), 100.0)))
+    return int(round(b.voltage * 1000.0)), int(round(b.current * 100.0)), int(round(100.0 * b.remaining))
 
 
 def battery_status(v: VehicleView) -> list[Any]:
     """BATTERY_STATUS of the plant's battery ([] without one): the pack voltage in cell 0 (the cells are not
-    modelled one by one: MAVLink's convention), current, charge drawn, remaining, and the charge state by PX4's
-    default thresholds (BAT_LOW_THR, BAT_CRIT_THR, BAT_EMERGEN_THR: 15 %, 7 %, 5 %)."""
+    modelled one by one: MAVLink's convention), current, charge drawn, remaining, and the charge state by the
+    vehicle's levels (BAT_LOW_THR, BAT_CRIT_THR, BAT_EMERGEN_THR: PX4's 15 %, 7 %, 5 % by default)."""
     b = v.battery
     if b is None:
         return []
     mv, ca, remaining = battery_fields(b)
-    state = next((s for limit, s in _CHARGE_STATES if remaining <= limit), mavlink.MAV_BATTERY_CHARGE_STATE_OK)
+    state = _CHARGE_STATES[v.battery_level]
     return [mavlink.MAVLink_battery_status_message(
         0, mavlink.MAV_BATTERY_FUNCTION_ALL, mavlink.MAV_BATTERY_TYPE_LIPO, _INT16_MAX, [mv] + [_UINT16_MAX] * 9, ca,
         int(round(b.used_mah)), -1, remaining, 0, state)]
@@ -85,8 +85,8 @@ def _sys_status(v: VehicleView) -> list[Any]:
 
 
 _INT16_MAX, _UINT16_MAX = 2**15 - 1, 2**16 - 1  # MAVLink's "unknown" temperature and cell voltage
-_CHARGE_STATES = ((5, mavlink.MAV_BATTERY_CHARGE_STATE_EMERGENCY), (7, mavlink.MAV_BATTERY_CHARGE_STATE_CRITICAL),
-                  (15, mavlink.MAV_BATTERY_CHARGE_STATE_LOW))
+_CHARGE_STATES = (mavlink.MAV_BATTERY_CHARGE_STATE_OK, mavlink.MAV_BATTERY_CHARGE_STATE_LOW,  # by level
+                  mavlink.MAV_BATTERY_CHARGE_STATE_CRITICAL, mavlink.MAV_BATTERY_CHARGE_STATE_EMERGENCY)
 
 
 def heartbeat(v: VehicleView) -> Any:
