@@ -435,7 +435,8 @@ HANDLED = [M.MAVLink_heartbeat_message, M.MAVLink_command_long_message, M.MAVLin
            M.MAVLink_timesync_message, M.MAVLink_ping_message, M.MAVLink_mission_request_list_message,
            M.MAVLink_hil_actuator_controls_message, M.MAVLink_set_actuator_control_target_message]
 COMMANDS = [ARM, SET_IV, GET_IV, REQ, M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, M.MAV_CMD_GET_HOME_POSITION,
-            M.MAV_CMD_DO_SET_MODE, M.MAV_CMD_NAV_TAKEOFF]
+            M.MAV_CMD_DO_SET_MODE, M.MAV_CMD_NAV_TAKEOFF, M.MAV_CMD_NAV_LAND, M.MAV_CMD_NAV_RETURN_TO_LAUNCH,
+            M.MAV_CMD_DO_REPOSITION]
 EXTREME_FLOATS = [NAN, INF, -INF, 0.0, -0.0, 1.0, -1.0, 0.5, 21196.0, 3.4e38, -3.4e38, 1e-45, 2.0**24, 33.0]
 INT_RANGES = {"int8_t": (-2**7, 2**7 - 1), "uint8_t": (0, 2**8 - 1), "int16_t": (-2**15, 2**15 - 1),
               "uint16_t": (0, 2**16 - 1), "int32_t": (-2**31, 2**31 - 1), "uint32_t": (0, 2**32 - 1),
@@ -542,7 +543,9 @@ def _may_change(link: str, source: str, ids: tuple[int, int], m: Any) -> bool:
             return math.isnan(alt) or (math.isfinite(alt) and alt - HOME_ALT_M <= 50.0)
         if m.command == M.MAV_CMD_DO_SET_MODE:  # PX4's custom modes: AUTO (4, a sub mode) or OFFBOARD (6)
             return math.isfinite(m.param1) and int(m.param1) & 1 == 1 and m.param2 in (4.0, 6.0)
-        return False  # requests answer, they change nothing
+        if m.command in (M.MAV_CMD_NAV_LAND, M.MAV_CMD_NAV_RETURN_TO_LAUNCH):  # LAND, RTL: no number is read
+            return True  # (a CI run drew RTL, command 20, among the random ones: this spec had missed it)
+        return False  # requests answer, they change nothing; DO_REPOSITION is DENIED on the ground
     if kind == "SET_ACTUATOR_CONTROL_TARGET" and link == "controller":
         c = m.controls
         return (m.group_mlx == 0 and m.target_system in (0, SYSID) and m.target_component in (0, 1)
