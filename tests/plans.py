@@ -81,10 +81,10 @@ def outside_fence_plan(tmp_path: Path) -> Path:
 
 
 def battery_mission(tmp_path: Path, start_pct: float) -> Path:
-    """The x500 with its battery from ``start_pct`` % of its charge: 5 s climbing to 3 m, then 5 m north; 12 s."""
+    """The x500 with its battery from ``start_pct`` % of its charge: 5 s climbing to 3 m, then 5 m north, held; 15 s."""
     p = tmp_path / f"battery-{start_pct:g}.toml"
     p.write_text(f"""name = "battery"
-duration_s = 12.0
+duration_s = 15.0
 profile = "x500"
 
 [trajectory]

@@ -19,8 +19,6 @@ from params import ConfigError, Table
 from plant.effects import effects_from_table
 from tests.plans import battery_mission
 
-LIMITS = {"BAT_LOW_THR": 0.5, "BAT_CRIT_THR": 0.25}  # the x500's linear pack climbs no more below ~22 % (below)
-
 
 def test_the_levels_are_judged_worst_first_and_each_said_once_in_order_with_its_action() -> None:
     w = BatteryWatch(action=3)
@@ -43,32 +41,35 @@ def test_the_levels_are_judged_worst_first_and_each_said_once_in_order_with_its_
                                                    (3, "failsafe", "return")])
 def test_the_x500_below_its_critical_level_flies_com_low_bat_act(tmp_path: Path, action: int, outcome: str,
                                                                   then: str | None) -> None:
-    """The x500 from 26 % of its pack, BAT_CRIT_THR 25 %: low at once (a warning), critical at 7.452 s on its way
+    """The x500 from 8 % of its pack, PX4's levels: low at once (a warning), critical (7 %) at 7.796 s on its way
     north; COM_LOW_BAT_ACT 0 flies on (warnings only), 2 lands there, 3 returns; the failsafe ends the run (outcome
     ``failsafe``, as any)."""
-    run = simulate(battery_mission(tmp_path, 26.0), plots=False, params={**LIMITS, "COM_LOW_BAT_ACT": action})
+    run = simulate(battery_mission(tmp_path, 8.0), plots=False, params={"COM_LOW_BAT_ACT": action})
     s = run.summary
     assert s["outcome"] == outcome, s["ended_by"]
     said = [(e["t"], e["text"]) for e in s["events"] if e["kind"] == "battery"]
-    assert said[0] == (0.0, "low: 26.0 % left (BAT_LOW_THR = 50 %)")
-    assert said[1][0] == pytest.approx(7.452) and said[1][1].startswith("critical: 25.0 % left (BAT_CRIT_THR = 25 %)")
+    assert said[:2] == [(0.0, "low: 8.0 % left (BAT_LOW_THR = 15 %)"),
+                        (7.796, "critical: 7.0 % left (BAT_CRIT_THR = 7 %)")]
     fs = [e for e in s["events"] if e["kind"] == "failsafe"]
     if then is None:
         assert not fs and run.trace["z"].max() > 2.9
         return
-    assert fs[0]["text"].endswith(f"(BAT_CRIT_THR = 25 %): {then}") and "battery critical" in s["ended_by"]["how"]
-    if then == "land":  # (Return climbs to RTL_RETURN_ALT first, on a pack that barely lifts the x500)
+    assert fs[0]["text"].endswith(f"(BAT_CRIT_THR = 7 %): {then}") and "battery critical" in s["ended_by"]["how"]
+    if then == "land":  # (3: Return first climbs to RTL_RETURN_ALT, from 1.6 m from home here)
         assert run.trace["z"][-1] == pytest.approx(0.0, abs=1e-6)  # landed, and disarmed there
         assert any(e["kind"] == "disarmed" and e["text"] == "landed: disarmed" for e in s["events"])
 
 
 def test_below_the_critical_level_the_arm_is_denied_and_nothing_flies(tmp_path: Path) -> None:
-    """PX4's pre-arm battery check: from 24 % with BAT_CRIT_THR 25 % the vehicle is not armed (``denied``, ended by
-    the vehicle saying why); at the low level it arms (a warning only)."""
-    run = simulate(battery_mission(tmp_path, 24.0), plots=False, params=LIMITS)
+    """PX4's pre-arm battery check: from 6 % (PX4's BAT_CRIT_THR 7 %) the vehicle is not armed (``denied``, ended by
+    the vehicle saying why); with BAT_CRIT_THR 5 % it arms, and flies its mission (the LiPo's rest voltage holds up
+    to its last few per cent)."""
+    run = simulate(battery_mission(tmp_path, 6.0), plots=False)
     assert run.summary["outcome"] == "denied" and len(run.trace["t"]) == 0
-    assert run.summary["ended_by"]["how"] == ("arming denied: battery critical: 24.0 % left (BAT_CRIT_THR = 25 %) "
+    assert run.summary["ended_by"]["how"] == ("arming denied: battery critical: 6.0 % left (BAT_CRIT_THR = 7 %) "
                                              "(t=0.000 s)")
+    flown = simulate(battery_mission(tmp_path, 6.0), plots=False, params={"BAT_CRIT_THR": 0.05})
+    assert flown.summary["outcome"] == "completed" and flown.summary["rms_3d"] < 1e-5, flown.summary["ended_by"]
 
 
 def test_the_emergency_level_lands_over_the_batterys_own_return_only(tmp_path: Path) -> None:

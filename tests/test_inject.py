@@ -290,24 +290,24 @@ def test_sitl_plant_blocks_equal_offline(tmp_path, case):
 
 
 def test_a_pack_below_its_critical_level_shows_critical_and_is_not_armed(tmp_path):
-    """PX4's battery levels and pre-arm battery check on the ground-station link: the x500's pack at 24 %, with
-    BAT_CRIT_THR 25 %: BATTERY_STATUS shows charge state CRITICAL at rest, and a ground station's arm is
-    TEMPORARILY_REJECTED with a CRITICAL STATUSTEXT saying why; BAT_CRIT_THR back to 7 %, OK, and the same arm is
+    """PX4's battery levels and pre-arm battery check on the ground-station link: the x500's pack at 6 %, below
+    PX4's BAT_CRIT_THR of 7 %: BATTERY_STATUS shows charge state CRITICAL at rest, and a ground station's arm is
+    TEMPORARILY_REJECTED with a CRITICAL STATUSTEXT saying why; BAT_CRIT_THR set to 5 %, LOW, and the same arm is
     ACCEPTED (docs/weather.md, "Battery")."""
-    with _x500_on_battery(tmp_path, "battery_start_pct = 24.0\n", "--param", "BAT_CRIT_THR=0.25") as gcs:
+    with _x500_on_battery(tmp_path, "battery_start_pct = 6.0\n") as gcs:
         rest = gcs.recv_match(type="BATTERY_STATUS", blocking=True, timeout=10)
         assert rest is not None and (rest.battery_remaining, rest.charge_state) == (
-            24, M.MAV_BATTERY_CHARGE_STATE_CRITICAL)
+            6, M.MAV_BATTERY_CHARGE_STATE_CRITICAL)
         tgt = (gcs.target_system, gcs.target_component)
         gcs.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
         assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_TEMPORARILY_REJECTED
         why = gcs.recv_match(type="STATUSTEXT", blocking=True, timeout=5,
                              condition="STATUSTEXT.severity == 2")  # MAV_SEVERITY_CRITICAL
-        assert why is not None and why.text.startswith("preflight: arming denied: battery critical: 24.0 %")
-        gcs.mav.param_set_send(*tgt, b"BAT_CRIT_THR", 0.07, M.MAV_PARAM_TYPE_REAL32)
+        assert why is not None and why.text.startswith("preflight: arming denied: battery critical: 6.0 %")
+        gcs.mav.param_set_send(*tgt, b"BAT_CRIT_THR", 0.05, M.MAV_PARAM_TYPE_REAL32)
         assert gcs.recv_match(type="PARAM_VALUE", blocking=True, timeout=5) is not None
-        ok = gcs.recv_match(type="BATTERY_STATUS", blocking=True, timeout=10)
-        assert ok is not None and ok.charge_state == M.MAV_BATTERY_CHARGE_STATE_OK  # 24 %: above the 15 % low
+        low = gcs.recv_match(type="BATTERY_STATUS", blocking=True, timeout=10)
+        assert low is not None and low.charge_state == M.MAV_BATTERY_CHARGE_STATE_LOW  # 6 %: below the 15 % low
         gcs.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
         assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
 

@@ -557,13 +557,13 @@ def test_a_mission_that_starts_outside_its_fence_ends_as_offline(tmp_path: Path)
 
 
 def test_the_battery_failsafe_flies_in_lockstep_as_offline_and_the_ground_station_sees_it(tmp_path: Path) -> None:
-    """The x500 from 26 % of its pack, BAT_CRIT_THR 25 %, COM_LOW_BAT_ACT 2 (tests/test_battery_failsafe.py): the
+    """The x500 from 8 % of its pack, COM_LOW_BAT_ACT 2 (tests/test_battery_failsafe.py): the
     session flies what ``bsst sim`` flies (the same events at the same times, the trace within the float32 wire's
     1e-4 m), and the ground-station link says it: CRITICAL STATUSTEXTs of the levels, and BATTERY_STATUS's charge
     state LOW."""
-    mission = battery_mission(tmp_path, 26.0)
-    params = ("--param", "BAT_LOW_THR=0.5", "--param", "BAT_CRIT_THR=0.25", "--param", "COM_LOW_BAT_ACT=2")
-    offline = simulate(mission, plots=False, params={"BAT_LOW_THR": 0.5, "BAT_CRIT_THR": 0.25, "COM_LOW_BAT_ACT": 2})
+    mission = battery_mission(tmp_path, 8.0)
+    params = ("--param", "COM_LOW_BAT_ACT=2")
+    offline = simulate(mission, plots=False, params={"COM_LOW_BAT_ACT": 2})
     with instance_slot() as n:
         r = run_bsst("sitl", str(mission), *params, "--instance", str(n), "--no-plots", "--out", str(tmp_path / "s"),
                      cwd=ROOT, timeout=240)
@@ -589,6 +589,6 @@ def test_the_battery_failsafe_flies_in_lockstep_as_offline_and_the_ground_statio
             states.append(m.charge_state)
     crit = list(dict.fromkeys(t for sev, t in texts  # (each once: the tlog holds both links' copies)
                               if sev == mavlink.MAV_SEVERITY_CRITICAL and t.startswith(("battery:", "failsafe: b"))))
-    assert crit[:2] == ["battery: low: 26.0 % left (BAT_LOW_THR = 50 %)",
-                        "battery: critical: 25.0 % left (BAT_CRIT_THR = 25 %)"], texts
+    assert crit[:2] == ["battery: low: 8.0 % left (BAT_LOW_THR = 15 %)",
+                        "battery: critical: 7.0 % left (BAT_CRIT_THR = 7 %)"], texts
     assert states[0] == mavlink.MAV_BATTERY_CHARGE_STATE_LOW, states  # (0.5 Hz of wall time: CRITICAL, test_inject)

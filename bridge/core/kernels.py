@@ -35,7 +35,7 @@ for _helper in (
     actuation._clip, actuation.rotor_squares, actuation._omega_d, actuation.allocate_wrench, actuation.allocate_motors,
     rotors.clip, rotors.motor_speeds_from_wrench, rotors.signed_speed_sum, rotors.wrench_command,
     quadrotor.ground_contact, model.rk4_held,
-    wire.wrench_to_wire, wire.wrench_from_wire,
+    wire.wrench_to_wire, wire.wrench_from_wire, battery.open_circuit_v,
 ):
     register_jitable(_helper)
 
