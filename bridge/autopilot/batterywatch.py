@@ -53,7 +53,8 @@ class BatteryWatch:
     def arming_refusal(self, remaining: float) -> str | None:
         """Why arming is denied at this charge (PX4's pre-arm battery check: at the critical level or below), or
         None."""
-        if self.level(remaining) < 2:
+        level = self.level(remaining)
+        if level < 2:
             return None
-        return f"battery {LEVELS[self.level(remaining) - 1]}: {100.0 * remaining:.1f} % left " \
-               f"(BAT_CRIT_THR = {100.0 * self.critical:g} %)"
+        limit = 100.0 * self.critical
+        return f"battery {LEVELS[level - 1]}: {100.0 * remaining:.1f} % left (BAT_CRIT_THR = {limit:g} %)"
