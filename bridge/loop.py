@@ -117,9 +117,7 @@ def flying(flight: Flight, path: Path | None = None, *, plots: bool = True, prog
     record = RunRecord(path, m) if path is not None else None
     trace = record.trace if record is not None else None
     events = record.events if record is not None else None
-    # PX4's pre-arm check denied the arm the flight starts with (its preflight event says why): nothing flies, as
-    # in a session, where the controller's arm is refused
-    outcome = "completed" if vehicle.armed else "denied"
+    outcome = "completed" if vehicle.armed else "denied"  # denied: its pre-arm check refused (a preflight event)
     failsafe_seen = False
     logged = 0
     noted = 0

@@ -18,6 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 LEVELS = ("low", "critical", "emergency")  # PX4's battery_status warning levels, in order
+LEVEL_PARAMS = ("BAT_LOW_THR", "BAT_CRIT_THR", "BAT_EMERGEN_THR")  # each level's parameter
 _ACTIONS = {2: {"critical": "land"}, 3: {"critical": "return", "emergency": "land"}}  # COM_LOW_BAT_ACT -> level -> act
 
 
@@ -40,13 +41,11 @@ class BatteryWatch:
     def passed(self, remaining: float) -> list[tuple[str, str, str | None]]:
         """The levels passed since the last call, each (level, text, failsafe action or None)."""
         now, out = self.level(remaining), []
+        limits = (self.low, self.critical, self.emergency)
         for i in range(self.said, now):
             name = LEVELS[i]
-            limit = (self.low, self.critical, self.emergency)[i]
-            act = _ACTIONS.get(self.action, {}).get(name)
-            key = ("BAT_LOW_THR", "BAT_CRIT_THR", "BAT_EMERGEN_THR")[i]
-            text = f"{name}: {100.0 * remaining:.1f} % left ({key} = {100.0 * limit:g} %)"
-            out.append((name, text, act))
+            text = f"{name}: {100.0 * remaining:.1f} % left ({LEVEL_PARAMS[i]} = {100.0 * limits[i]:g} %)"
+            out.append((name, text, _ACTIONS.get(self.action, {}).get(name)))
         self.said = max(self.said, now)
         return out
 

@@ -308,7 +308,7 @@ class SimVehicle:
         ``preflight`` event says why, and :attr:`arming_refused` keeps it until the vehicle arms."""
         pack = self.plant.battery
         why = [w for w in (arming_refusal(self._breaches(), self.fence_action),
-                           pack and self.battery_watch.arming_refusal(pack.remaining)) if w]
+                           None if pack is None else self.battery_watch.arming_refusal(pack.remaining)) if w]
         self.arming_refused = f"arming denied: {'; '.join(why)}" if why else None
         if self.arming_refused is not None:
             self.event("preflight", self.arming_refused)

@@ -246,11 +246,10 @@ def airborne(trace: Mapping[str, Any], t: float) -> bool:
 def ended_by(outcome: str, trace: Mapping[str, Any], flight: Flight, facts: SessionFacts, k0: int | None,
              events: Sequence[RunEvent], children: Sequence[ChildEnd],
              controller_id: tuple[int, int] = CONTROLLER_ID) -> tuple[str, dict[str, Any]]:
-    """The outcome and ``summary.json["ended_by"]``: who ended the flight, and how. A disarm or
-    takeover (an armed exit from OFFBOARD) from anyone but the configured controller, before the mission's
-    end, ended it (named by the vehicle's event's sender), as does a controller that
-    reports a completed mission whose trace stops short of the mission's end: both are
-    ``aborted``, never ``completed``."""
+    """The outcome and ``summary.json["ended_by"]``: who ended the flight, and how. A disarm or takeover (an armed
+    exit from OFFBOARD) from anyone but the configured controller, before the mission's end, ended it (named by the
+    vehicle's event's sender), as does a controller that reports a completed mission whose trace stops short of the
+    mission's end: both are ``aborted``, never ``completed``. A refused arm is ``denied``, as offline."""
     m = flight.mission
     ctl = next((c for c in children if c.name == "controller"), None)
     if facts.aborted:
@@ -262,7 +261,7 @@ def ended_by(outcome: str, trace: Mapping[str, Any], flight: Flight, facts: Sess
             how += "; the vehicle's failsafe took over"
         return outcome, {"who": facts.died, "how": how}
     if outcome == "aborted" and arming_denied_end(events) is not None:
-        outcome = "denied"  # the controller's abort answers the vehicle's refusal to arm, as offline
+        outcome = "denied"  # the controller's abort answers the vehicle's refusal to arm
     if outcome in (*PLANT_OUTCOMES, "denied"):
         return outcome, ended_by_outcome(outcome, events)
     if outcome == "law_failed" and ctl is not None:
