@@ -36,8 +36,7 @@ lint: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/offline.py
 
-# numba caches a compiled kernel with the kernels it calls compiled into it, and checks only the kernel's own
-# source file: after a change to a callee (plant/battery.py, controller/...), its callers' caches are stale
+# numba's caches need no cleaning after a change (bridge/autopilot/kernelcache.py); clean removes them anyway
 clean:
 	rm -rf runs .pytest_cache
 	find . -path ./.venv -prune -o \( -name '*.nbi' -o -name '*.nbc' \) -print | xargs rm -f

@@ -47,8 +47,7 @@ from typing import Any
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from numba import njit  # noqa: E402
-
+from bridge.autopilot.kernelcache import njit  # noqa: E402
 from bridge.batch import fly_batch  # noqa: E402
 from bridge.batch.engine import _references  # noqa: E402
 from bridge.batch.flight import batch_arrays, fly_cells  # noqa: E402

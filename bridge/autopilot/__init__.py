@@ -11,4 +11,5 @@ Out: the flown state, the estimate the vehicle reports, failsafe decisions and e
 - :mod:`bridge.autopilot.ekfstate`    the EKF's state layout, its buffer of past states, P carried in time
 - :mod:`bridge.autopilot.closedloop`  the estimator's offline harness (plant, sensors, estimator, law)
 - :mod:`bridge.autopilot.cholesky`    a small weighted-square helper of the EKF
+- :mod:`bridge.autopilot.kernelcache` the project's one ``njit``: a cache stale when any source it compiles in changed
 """

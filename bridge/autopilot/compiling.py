@@ -7,8 +7,8 @@ In:  the name of a package or module whose numba kernels (``@njit(cache=True)``)
 Out: one line on stderr, ``bsst: compiling the EKF's kernels (first run after an install, ~7 s; cached on
      disk after) ...``, once per process and only when numba's on-disk cache of those kernels is cold:
      for at least half of them, the index file (``<module>.<function>-<line>.py311.nbi`` in the source's
-     ``__pycache__``, or under ``NUMBA_CACHE_DIR``) absent, of another numba version, or stale (its
-     source changed since)
+     ``__pycache__``, or under ``NUMBA_CACHE_DIR``) absent, of another numba version, or stale (a
+     source it compiles in changed since: bridge.autopilot.kernelcache)
 
 The check asks each kernel's own numba cache object where its index is and whether it is fresh (what
 numba itself will decide), so that it never disagrees with numba's naming or its cache directory rules.

@@ -22,7 +22,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 # the layout and the state's kernels, re-exported: Ekf and the tests read them here
 from bridge.autopilot.ekfstate import (  # noqa: F401 - re-exported
@@ -75,6 +74,7 @@ from bridge.autopilot.ekfstate import (  # noqa: F401 - re-exported
     flush,
     remember,
 )
+from bridge.autopilot.kernelcache import njit
 
 
 @njit(cache=True)

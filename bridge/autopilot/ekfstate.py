@@ -18,10 +18,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 from numba.extending import overload
 
 from bridge.autopilot.cholesky import weighted_square
+from bridge.autopilot.kernelcache import njit
 from plant import sensors as _s
 
 # the nominal state x: position, velocity, attitude R (row-major, body FLU -> NWU), biases, the output's

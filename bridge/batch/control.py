@@ -13,8 +13,8 @@ by cell in the flight's kernel (bridge.batch.flight), compiled (bridge.batch.ker
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
+from bridge.autopilot.kernelcache import njit
 from bridge.batch import kernels as K
 from controller.nominal import Nominal
 

@@ -33,9 +33,9 @@ from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
-from numba import njit
 
 from bridge.autopilot.failsafe import DEFAULT_GAINS
+from bridge.autopilot.kernelcache import njit
 from bridge.batch import kernels as K
 from bridge.batch.control import BatchActuation, allocate_cell
 from bridge.batch.plant import (
@@ -54,9 +54,9 @@ from bridge.batch.predict import BatchPredictor, carry, record
 from bridge.batch.weather import faulty, weather_arrays
 from bridge.batch.wire import command_over_wire, state_over_wire
 from bridge.core.flight import Flight
+from bridge.link import plan_cell  # its constants compiled in as plan_cell.X: the cache's closure (kernelcache)
 from bridge.link.plan import Clocks, LinkPlan
-from bridge.link.plan_cell import HOLD, NONE
-from bridge.record.metrics import BANDS, RMS_FROM_S
+from bridge.record import metrics as record_metrics
 from controller.bsst import law_constants, law_tables
 from controller.pid import pid_constants
 
@@ -218,7 +218,7 @@ def _fly_cell(j: int, k0: int, k1: int, c: Constants, a: Cells) -> None:  # prag
         for i in range(12):
             ring_X[j, slot, i] = w[i]
         m = mode[j, k]
-        if m != NONE:
+        if m != plan_cell.NONE:
             s = state_step[j, k] % n_ring
             xg = (ring_X[j, s, 0], ring_X[j, s, 1], ring_X[j, s, 2], ring_X[j, s, 3], ring_X[j, s, 4],
                   ring_X[j, s, 5], ring_X[j, s, 6], ring_X[j, s, 7], ring_X[j, s, 8], ring_X[j, s, 9],
@@ -227,7 +227,7 @@ def _fly_cell(j: int, k0: int, k1: int, c: Constants, a: Cells) -> None:  # prag
                 xg = carry(j, t_step[state_step[j, k]], xg, t + lag, from_t, cache_t, cache_X, cmd_t, cmd_u,
                            total, c.dt_max, c.pm, c.pg, c.coef)
             ref = (_row(refs, table, k, 0), _row(refs, table, k, 1), _row(refs, table, k, 2), _row(refs, table, k, 3))
-            u, real, cmd, od, xi, integ = _law_step(xg, ref, lc, xi, integ, od, m == HOLD, c)
+            u, real, cmd, od, xi, integ = _law_step(xg, ref, lc, xi, integ, od, m == plan_cell.HOLD, c)
             if predicts:
                 record(j, t, lag, real, od, cmd_t, cmd_u, total)
             u2 = u[1]
@@ -452,7 +452,8 @@ def batch_arrays(flights: Sequence[Flight], plan: LinkPlan, clocks: Clocks, refs
          nominal.iyy / nominal.arm, nominal.izz / nominal.arm, og.k_vel_level, og.k_att_level, og.d_att_level,
          og.d_yaw),
         pred.dt_max, pred.m, pred.g, tuple(float(v) for v in pred._coefficients), start,
-        (BANDS["x"], BANDS["y"], BANDS["z"]), plant.body_air.constants, float(p.rotor_drag), plant.speeds,
+        tuple(record_metrics.BANDS[axis] for axis in "xyz"), plant.body_air.constants, float(p.rotor_drag),
+        plant.speeds,
         plant.faulty, *plant.pack)
     holding = np.zeros((n, 5))
     holding[:, :plant.holding.shape[0]] = plant.holding.T
@@ -470,7 +471,7 @@ def batch_arrays(flights: Sequence[Flight], plan: LinkPlan, clocks: Clocks, refs
         np.zeros(n), np.zeros(n), np.full((max(1, len(changes)), 3, n), -1, np.int64), np.zeros(n),
         np.zeros((n, steps)), np.zeros(n),
         (np.searchsorted(np.array(changes), t_step, side="right") - 1).astype(np.int64),
-        t_step >= min(RMS_FROM_S, 0.5 * m.duration_s), t_step, clocks.plant_t, np.ones(n, bool),
+        t_step >= min(record_metrics.RMS_FROM_S, 0.5 * m.duration_s), t_step, clocks.plant_t, np.ones(n, bool),
         np.full(n, steps, np.int64), np.zeros(n, bool), np.zeros(n, np.int8), np.zeros(n, bool),
         *weather_arrays(flights, clocks), np.tile([0.0, 0.0, 1.0], (n, 1)))
     return c, a

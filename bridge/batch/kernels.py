@@ -14,8 +14,8 @@ dispatchers), so the two engines cannot drift apart and numba registers each hel
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
+from bridge.autopilot.kernelcache import njit
 from bridge.core.kernels import (  # noqa: F401  (the batch's names for them)
     advance_xi,
     advance_xi_implicit,

@@ -13,7 +13,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numba import njit
+
+from bridge.autopilot.kernelcache import njit
 
 RIPPLE_WINDOW_S = 0.2  # bridge.sweep.cells.RIPPLE_WINDOW_S (that layer is above this one)
 

@@ -24,8 +24,8 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-from numba import njit
 
+from bridge.autopilot.kernelcache import njit
 from bridge.batch import kernels as K
 from plant.battery import pack_constants
 from plant.effects import Effects

@@ -12,8 +12,8 @@ Each step is the scalar predictor's own :func:`controller.predict.nominal_rk4`, 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
+from bridge.autopilot.kernelcache import njit
 from bridge.batch import kernels as K
 from controller.nominal import Coefficients, Nominal
 

@@ -13,8 +13,8 @@ and :func:`~bridge.core.wire.state_from_odometry_fields` around the float32 roun
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
+from bridge.autopilot.kernelcache import njit
 from bridge.batch import kernels as K
 
 

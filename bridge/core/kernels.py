@@ -17,10 +17,10 @@ fused multiply-adds, the same libm) gives bit for bit what the plain functions g
 
 from __future__ import annotations
 
-from numba import njit
 from numba.extending import register_jitable
 
 from bridge.autopilot import failsafe
+from bridge.autopilot.kernelcache import njit
 from bridge.core import wire
 from controller import actuation, bsst, jets, pid, power, predict, supertwisting
 from plant import battery, model, quadrotor, rotors

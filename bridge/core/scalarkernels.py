@@ -17,9 +17,9 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from numba import njit
 
 import bridge.core.kernels  # noqa: F401  (registers the helpers these kernels call by name)
+from bridge.autopilot.kernelcache import njit
 from bridge.core import wire
 from bridge.core.kernels import odometry_fields, state_from_odometry_fields
 from controller import Controller, kernel

@@ -18,8 +18,8 @@ from dataclasses import dataclass
 from statistics import NormalDist
 
 import numpy as np
-from numba import njit
 
+from bridge.autopilot.kernelcache import njit
 from bridge.link.impairment import (  # the draw numbers and bound are the model's: one definition of a fate
     _D_DUP,
     _D_DUP_JITTER,

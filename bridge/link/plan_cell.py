@@ -20,9 +20,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
-from bridge.link.ends import EPS_T
+from bridge.autopilot.kernelcache import njit
+from bridge.link import ends  # ends.EPS_T compiled in: the cache's closure reaches it (kernelcache)
 from bridge.link.fates import BOUND_S, DELAY_S, DUP_P, HOLD_P, draw_cell
 
 NONE, TRACK, HOLD = 0, 1, 2  # the guard's decision per step: no command (stop or idle), command, command on hold
@@ -162,10 +162,10 @@ def plan_cells(lo: int, hi: int, keys: np.ndarray, ints: np.ndarray, fps: np.nda
     arrive = np.empty(steps, np.int64)
     newest = np.empty(steps, np.int64)
     mode0 = np.empty(steps, np.int8)
-    down_thr = t + EPS_T  # the controller's deliver(t)
-    up_thr = pt[:-1] + EPS_T
+    down_thr = t + ends.EPS_T  # the controller's deliver(t)
+    up_thr = pt[:-1] + ends.EPS_T
     for k in range(steps):  # the loop's deliver(t) and the period's deliver(p.t)
-        up_thr[k * S] = max(t[k], pt[k * S]) + EPS_T
+        up_thr[k * S] = max(t[k], pt[k * S]) + ends.EPS_T
     for i in range(lo, hi):
         # down: a state every step; the guard controls on the newest delivered (ControllerEnd, LinkGuard.observe)
         draw_cell(keys[0, i], ints[0, i], fps[0, i], steps, lost, jit, held, dup, dup_jit)

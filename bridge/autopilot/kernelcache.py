@@ -1,0 +1,122 @@
+"""numba's on-disk cache, judged fresh by every source a kernel compiles in: the project's one ``njit``.
+
+In:  a plain Python function and numba's ``njit`` options (``cache=True``, ``inline``, ``nogil``, ...)
+Out: its numba dispatcher, whose on-disk cache (``cache=True``) is fresh only while every project source file
+     it could compile in is unchanged: :func:`source_closure` names those modules, :func:`closure_digest`
+     folds their contents (SHA-256) into the cache's source stamp
+
+Why: numba compiles a kernel's callees into it and caches the whole, but judges the cache fresh by the
+kernel's *own* source file only. A change to a callee in another file (``plant/battery.py`` under the batch
+engine's cell kernel in ``bridge/batch/flight.py``) left the caller's cache flying the old callee, silently,
+until the cache was removed by hand. Here the stamp numba compares (its index file's ``source_stamp``)
+becomes ``(numba's own stamp, digest of the closure)``, so numba itself finds such a cache stale and
+compiles afresh, once, after a pull, an upgrade or an edit.
+
+The closure is what numba can reach by name from the kernel: the module of its Python function, and every
+project module (``bridge``, ``controller``, ``plant``, ``missions``, ``params``) that module's globals
+lead to (a module, a function, a dispatcher, a class; a constant bound by name in several modules counts
+for each of them), and so on. It over-reaches (a whole module, not the functions used): a change anywhere
+in the closure compiles the kernel again, never the other way round. Every kernel of the project is made
+with this ``njit`` (tests/test_kernelcache.py walks the package and checks).
+"""
+
+from __future__ import annotations
+
+import enum
+import hashlib
+import sys
+from collections.abc import Callable
+from types import FunctionType, ModuleType
+from typing import Any
+
+import numba
+
+PROJECT_PACKAGES = ("bridge", "controller", "plant", "missions", "params")
+
+_file_digests: dict[str, bytes] = {}  # source path -> SHA-256 of its bytes, once per process
+_references: dict[tuple[str, int], frozenset[str]] = {}  # (module, size of its namespace) -> modules it names
+
+
+def njit(func: Callable[..., Any] | None = None, **options: Any) -> Any:
+    """``numba.njit(**options)(func)`` (or the decorator, without ``func``); with ``cache=True`` its cache's
+    source stamp also carries :func:`closure_digest` of the function's module (module docstring)."""
+    if func is None:
+        return lambda f: njit(f, **options)
+    dispatcher = numba.njit(**options)(func)
+    if options.get("cache"):
+        restamp(dispatcher)
+    return dispatcher
+
+
+def restamp(dispatcher: Any) -> None:
+    """Fold the closure's digest into ``dispatcher``'s on-disk cache stamp (numba's ``IndexDataCacheFile``:
+    the stamp it writes into the index and compares on load). Done once, at the dispatcher's making."""
+    cache_file = getattr(getattr(dispatcher, "_cache", None), "_cache_file", None)
+    if cache_file is None or not hasattr(cache_file, "_source_stamp"):
+        return  # no on-disk cache here (NUMBA_DISABLE_JIT, another numba's layout): numba's own judgement
+    cache_file._source_stamp = (cache_file._source_stamp, closure_digest(dispatcher.py_func.__module__))
+
+
+def closure_digest(module: str) -> str:
+    """SHA-256 (hex) over the names and source contents of :func:`source_closure` of ``module``."""
+    h = hashlib.sha256()
+    for name in sorted(source_closure(module)):
+        path = getattr(sys.modules[name], "__file__", None)
+        if path:
+            h.update(name.encode() + b"\0" + _file_digest(path))
+    return h.hexdigest()
+
+
+def source_closure(module: str) -> frozenset[str]:
+    """The project modules a kernel of ``module`` (imported) can compile in: it, and every project module its
+    globals lead to, transitively (module docstring)."""
+    seen: set[str] = set()
+    todo = [module]
+    while todo:
+        name = todo.pop()
+        if name in seen or name not in sys.modules:
+            continue
+        seen.add(name)
+        todo.extend(_named_modules(sys.modules[name]) - seen)
+    return frozenset(seen)
+
+
+def _named_modules(module: ModuleType) -> frozenset[str]:
+    """The project modules ``module``'s globals name, remembered per module and size of its namespace (a module
+    still being imported grows; one imported does not change). A package's submodules are left out: the import
+    system binds each one in its package's namespace when anyone imports it, so following them would make the
+    closure hang on what this process happened to import first."""
+    space = vars(module)
+    key = (module.__name__, len(space))
+    if key not in _references:
+        out = {home for value in list(space.values()) if (home := _origin(value))}
+        prefix = module.__name__ + "."
+        out = {m for m in out if m != module.__name__ and not (hasattr(module, "__path__") and m.startswith(prefix)
+                                                             and space.get(m[len(prefix):]) is sys.modules.get(m))}
+        _references[key] = frozenset(out)
+    return _references[key]
+
+
+def _origin(value: Any) -> str | None:
+    """The project module one global can bring into a kernel: a module is itself; a function or dispatcher, its
+    defining module; a class numba compiles (a named tuple, an enum) or an instance of one, its class's. Other
+    classes (a dataclass, a session) are Python's alone: numba cannot compile them into a kernel."""
+    if isinstance(value, ModuleType):
+        home = value.__name__
+    elif isinstance(value, FunctionType) or hasattr(value, "py_func"):
+        home = getattr(value, "py_func", value).__module__
+    else:
+        kind = value if isinstance(value, type) else type(value)
+        home = kind.__module__ if issubclass(kind, (tuple, enum.Enum)) else None
+    return home if isinstance(home, str) and _ours(home) else None
+
+
+def _ours(module: str) -> bool:
+    return module.partition(".")[0] in PROJECT_PACKAGES
+
+
+def _file_digest(path: str) -> bytes:
+    if path not in _file_digests:
+        with open(path, "rb") as f:
+            _file_digests[path] = hashlib.sha256(f.read()).digest()
+    return _file_digests[path]
