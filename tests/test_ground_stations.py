@@ -99,7 +99,8 @@ if sys.argv[2] == "params":
 else:  # the flight parts: what MAVSDK's telemetry shows, each callback under one condition
     tel, act = Telemetry(system), Action(system)
     cond = threading.Condition()
-    modes, seen = [], {"armed": None, "rel": None, "top": -1.0, "ned": None, "rtl_top": -1.0}
+    modes, seen = [], {"armed": None, "rel": None, "top": -1.0, "ned": None, "rtl_top": -1.0, "hud": None,
+                       "climb_top": 0.0}
     def on_mode(m, ud=None):
         with cond:
             if not modes or modes[-1] != m.name:
@@ -125,7 +126,14 @@ else:  # the flight parts: what MAVSDK's telemetry shows, each callback under on
             if modes and modes[-1] == "RETURN_TO_LAUNCH":
                 seen["rtl_top"] = max(seen["rtl_top"], -pv.position.down_m)
             cond.notify_all()
+    def on_hud(f, ud=None):  # VFR_HUD
+        with cond:
+            seen["hud"] = (f.throttle_percentage, f.climb_rate_m_s, f.groundspeed_m_s, f.absolute_altitude_m,
+                           f.heading_deg, f.airspeed_m_s)
+            seen["climb_top"] = max(seen["climb_top"], f.climb_rate_m_s)
+            cond.notify_all()
     tel.subscribe_flight_mode(on_mode)
+    tel.subscribe_fixedwing_metrics(on_hud)
     tel.subscribe_armed(on_armed)
     tel.subscribe_position(on_position)
     tel.subscribe_position_velocity_ned(on_ned)
@@ -178,11 +186,15 @@ elif sys.argv[2] == "flight":
     out["takeoff"] = act.takeoff().name
     until("at_height", lambda: modes[-2:] == ["TAKEOFF", "HOLD"] and seen["rel"] > 2.9, 15)
     out["rel_at_height"] = seen["rel"]
+    # holding still at 3 m: the HUD's altitude is the position's (4 Hz and 10 Hz: wait for them to agree)
+    until("hud_at_height", lambda: abs(seen["hud"][3] - seen["geo"][2]) < 0.05 and abs(seen["hud"][1]) < 0.05, 5)
+    out["hud_at_height"], out["climb_top"] = seen["hud"], seen["climb_top"]
     out["land"] = act.land().name
     until("disarmed_seen", lambda: seen["armed"] is False, 15)
     until("on_ground", lambda: abs(seen["rel"]) < 0.02, 5)  # positions come at 10 Hz: the next ones
+    until("hud_landed", lambda: seen["hud"][0] == 0.0, 5)  # disarmed: no thrust
     with cond:
-        out.update(modes=modes, rel_landed=seen["rel"], top=seen["top"])
+        out.update(modes=modes, rel_landed=seen["rel"], top=seen["top"], hud_landed=seen["hud"])
 print("RESULT " + json.dumps(out), flush=True)
 sdk.destroy()
 """
@@ -243,7 +255,8 @@ def test_mavsdk_parameters(tmp_path):
 def test_mavsdk_hold_takeoff_land(tmp_path):
     """``Action.hold``, ``arm``, ``set_takeoff_altitude`` / ``takeoff`` (TAKEOFF, then HOLD at the
     height), ``land`` (LAND, then disarmed on the ground), with ``Telemetry.flight_mode`` naming
-    each mode; every command MAVSDK sent was answered."""
+    each mode and ``fixedwing_metrics`` (VFR_HUD) the climb, throttle and altitude; every command MAVSDK sent
+    was answered."""
     out, v, n = _mavsdk_on_a_vehicle(tmp_path, "flight")
     assert [out[k] for k in ("hold", "arm", "set_takeoff_altitude", "takeoff", "land")] == ["SUCCESS"] * 5
     assert all(out[k] for k in ("hold_seen", "armed_seen", "at_height", "disarmed_seen", "on_ground")), out
@@ -253,6 +266,13 @@ def test_mavsdk_hold_takeoff_land(tmp_path):
         out["modes"]
     assert abs(out["rel_at_height"] - 3.0) < 0.1 and out["top"] < 3.1
     assert abs(out["rel_landed"]) < 0.02
+    # VFR_HUD (MAVSDK's fixed-wing metrics): climbing in TAKEOFF, a hover's throttle at 3 m facing north, no
+    # throttle once disarmed; airspeed 0, as PX4 sends it for a multicopter without an airspeed sensor. MAVSDK
+    # gives the throttle as a fraction (VFR_HUD's percent / 100)
+    throttle, climb, ground, amsl, heading, airspeed = out["hud_at_height"]
+    assert out["climb_top"] > 0.5 and 0.2 < throttle < 0.9 and ground < 0.05 and airspeed == 0.0, out
+    assert heading in (0.0, 359.0) and abs(amsl - 491.0) < 0.1  # home 488 m AMSL + 3 m
+    assert out["hud_landed"][0] == 0.0 and abs(out["hud_landed"][3] - 488.0) < 0.05
     v.wait_event(lambda s: "mode: TAKEOFF to 3 m" in s)
     v.wait_event(lambda s: "mode: HOLD: takeoff done" in s)
     v.wait_event(lambda s: "mode: LAND at" in s and "1.5 m/s" in s)

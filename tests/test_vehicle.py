@@ -111,7 +111,7 @@ def test_pymavlink_ground_station(tmp_path):
             ts = gcs.recv_match(type="TIMESYNC", blocking=True, timeout=5, condition="TIMESYNC.tc1!=0")
             assert ts is not None and ts.ts1 == 123456789
             for kind in ("ATTITUDE", "LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "SYS_STATUS",
-                         "ACTUATOR_OUTPUT_STATUS"):
+                         "ACTUATOR_OUTPUT_STATUS", "VFR_HUD"):
                 assert gcs.recv_match(type=kind, blocking=True, timeout=5) is not None, kind
             pos = gcs.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=5)
             assert abs(pos.lat - 473977420) < 10 and abs(pos.lon - 85455940) < 10  # the default home

@@ -79,6 +79,18 @@ def global_position(X: tuple[float, ...], ms: int, home: Home) -> Any:
         _cm(vn), _cm(ve), _cm(vd), hdg)
 
 
+def vfr_hud(X: tuple[float, ...], home: Home, thrust_fraction: float) -> Any:
+    """``VFR_HUD`` as PX4 fills it for a multicopter: airspeed 0 (no airspeed sensor), ground speed (m/s, the
+    horizontal speed), heading (deg, 0..359), throttle (%: the rotors' thrust as a fraction of their full thrust;
+    0 disarmed), altitude AMSL (m) and climb rate (m/s, up)."""
+    n = paper_to_ned(X)
+    vn, ve, vd = n["vel"]
+    alt = home.alt - n["pos"][2]  # m AMSL, as GLOBAL_POSITION_INT's (Home.global_of)
+    heading = int(round(math.degrees(n["euler"][2]))) % 360
+    throttle = max(0, min(100, int(round(100.0 * thrust_fraction))))
+    return mavlink.MAVLink_vfr_hud_message(0.0, math.hypot(vn, ve), heading, throttle, alt, -vd)
+
+
 def home_position(home: Home) -> Any:
     """``HOME_POSITION``: the local origin, level, facing north."""
     return mavlink.MAVLink_home_position_message(

@@ -34,6 +34,7 @@ from plant.sensors import SensorSuite
 
 MIN_INTERVAL_S = 0.005  # the shortest stream interval (200 Hz)
 HEARTBEAT_S = 1.0
+VFR_HUD_S = 0.25  # PX4's default rate of VFR_HUD on a normal link (mavlink_main.cpp: 4 Hz)
 BATTERY_STATUS_S = 2.0  # PX4's default rate of BATTERY_STATUS on a normal link (mavlink_main.cpp: 0.5 Hz)
 
 
@@ -104,6 +105,11 @@ def heartbeat(v: VehicleView) -> Any:
                                              custom, state, 3)
 
 
+def _thrust(v: VehicleView) -> float:
+    """The rotors' thrust as a fraction of their full thrust (thrust goes with ω²), 0 disarmed (VFR_HUD)."""
+    return sum(w * w for w in v.omega) / (len(v.omega) * v.omega_max ** 2) if v.armed and v.omega else 0.0
+
+
 def _ms(v: VehicleView) -> int:
     return int(v.t * 1000.0)
 
@@ -140,6 +146,7 @@ STREAMS: dict[int, Stream] = {
         lambda v: [tm.extended_sys_state(v.on_ground, v.mode == FAILSAFE)], 0.1),
     mavlink.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS: Stream(
         lambda v: [tm.actuator_outputs(int(v.t * 1e6), v.omega, v.omega_max)], 0.1),
+    mavlink.MAVLINK_MSG_ID_VFR_HUD: Stream(_if_finite(lambda v: [tm.vfr_hud(v.X, v.home, _thrust(v))]), VFR_HUD_S),
     mavlink.MAVLINK_MSG_ID_HOME_POSITION: Stream(lambda v: [tm.home_position(v.home)], 0.0),
     # PX4's mission manager sends it at 1 Hz (its _slow_rate_limiter), and at once on a change
     mavlink.MAVLINK_MSG_ID_MISSION_CURRENT: Stream(lambda v: tm.mission_current(*v.mission), 1.0),
