@@ -282,7 +282,7 @@ def test_mavsdks_geofence_plugin_uploads_reads_back_and_clears_a_polygon_and_a_c
 
 
 MAVSDK_ARM_OUTSIDE_SCRIPT = r"""
-import json, sys, time
+import json, sys, threading, time
 from mavsdk import Mavsdk, Configuration, ComponentType
 from mavsdk.plugins.action import Action, ActionError
 from mavsdk.plugins.geofence import FenceType, Geofence, GeofenceData, Point, Polygon
@@ -292,7 +292,17 @@ sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATI
 sdk.add_any_connection(sys.argv[1])
 system = sdk.first_autopilot(30.0)
 texts = []
-Telemetry(system).subscribe_status_text(lambda s, *_: texts.append([s.type.name, s.text]))
+tel = Telemetry(system)
+tel.subscribe_status_text(lambda s, *_: texts.append([s.type.name, s.text]))
+cond, health = threading.Condition(), {"armable": None}
+def on_health(h, *_):  # SYS_STATUS's pre-arm bit, as MAVSDK reads it
+    with cond:
+        health["armable"] = h.is_armable
+        cond.notify_all()
+tel.subscribe_health(on_health)
+def armable(value):
+    with cond:
+        return cond.wait_for(lambda: health["armable"] is value, 5.0)
 fence, act = Geofence(system), Action(system)
 def arm():
     try:
@@ -300,9 +310,12 @@ def arm():
     except ActionError as e:
         return e.result.name
 north = [Point(47.39790, 8.54555), Point(47.39790, 8.54564), Point(47.39800, 8.54564), Point(47.39800, 8.54555)]
-out = {"upload": fence.upload_geofence(GeofenceData([Polygon(north, FenceType.INCLUSION)], [])).name}
+out = {"armable_at_start": armable(True)}
+out["upload"] = fence.upload_geofence(GeofenceData([Polygon(north, FenceType.INCLUSION)], [])).name
+out["not_armable_outside"] = armable(False)
 out["arm_outside"] = arm()
 out["clear"] = fence.clear_geofence().name
+out["armable_cleared"] = armable(True)
 out["arm_cleared"] = arm()
 out["disarm"] = act.disarm().name
 deadline = time.monotonic() + 10.0  # the STATUSTEXTs come on MAVSDK's own thread: until the disarm's is in
@@ -318,11 +331,14 @@ def test_mavsdks_arm_outside_an_uploaded_fence_is_denied_saying_why_and_arms_onc
     """PX4's pre-arm geofence check against MAVSDK's Action and Geofence plugins: an inclusion square uploaded
     11-23 m north of the vehicle, so it stands outside it; Action.arm() is denied (the vehicle's TEMPORARILY_REJECTED,
     which MAVSDK reports as COMMAND_DENIED, as against a PX4), a CRITICAL STATUSTEXT says why, and nothing is armed;
-    with the fence cleared the same arm succeeds (in HOLD on the ground), and the disarm too."""
+    with the fence cleared the same arm succeeds (in HOLD on the ground), and the disarm too. ``health.is_armable``
+    follows: true at the start, false once the fence leaves the vehicle outside, true again when it is cleared."""
     out = tmp_path / "run"
     gs = _mavsdk_against_await_mission(MAVSDK_ARM_OUTSIDE_SCRIPT, out)
     assert (gs["upload"], gs["arm_outside"], gs["clear"], gs["arm_cleared"], gs["disarm"]) == (
         "SUCCESS", "COMMAND_DENIED", "SUCCESS", "SUCCESS", "SUCCESS"), gs
+    # MAVSDK's health.is_armable (SYS_STATUS's pre-arm bit, as PX4 sets it) says so before each arm
+    assert gs["armable_at_start"] and gs["not_armable_outside"] and gs["armable_cleared"], gs
     denied = [text for sev, text in gs["texts"] if text.startswith("preflight: arming denied")]
     assert len(denied) == 1 and "outside its fence" in denied[0] and "(GF_ACTION = 2: hold)" in denied[0], gs
     assert ["CRITICAL", denied[0]] in gs["texts"], gs

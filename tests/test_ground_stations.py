@@ -100,7 +100,7 @@ else:  # the flight parts: what MAVSDK's telemetry shows, each callback under on
     tel, act = Telemetry(system), Action(system)
     cond = threading.Condition()
     modes, seen = [], {"armed": None, "rel": None, "top": -1.0, "ned": None, "rtl_top": -1.0, "hud": None,
-                       "climb_top": 0.0}
+                       "climb_top": 0.0, "altitude": None}
     def on_mode(m, ud=None):
         with cond:
             if not modes or modes[-1] != m.name:
@@ -132,8 +132,13 @@ else:  # the flight parts: what MAVSDK's telemetry shows, each callback under on
                            f.heading_deg, f.airspeed_m_s)
             seen["climb_top"] = max(seen["climb_top"], f.climb_rate_m_s)
             cond.notify_all()
+    def on_altitude(a, ud=None):  # ALTITUDE
+        with cond:
+            seen["altitude"] = (a.altitude_amsl_m, a.altitude_local_m, a.altitude_relative_m, a.altitude_terrain_m)
+            cond.notify_all()
     tel.subscribe_flight_mode(on_mode)
     tel.subscribe_fixedwing_metrics(on_hud)
+    tel.subscribe_altitude(on_altitude)
     tel.subscribe_armed(on_armed)
     tel.subscribe_position(on_position)
     tel.subscribe_position_velocity_ned(on_ned)
@@ -187,8 +192,10 @@ elif sys.argv[2] == "flight":
     until("at_height", lambda: modes[-2:] == ["TAKEOFF", "HOLD"] and seen["rel"] > 2.9, 15)
     out["rel_at_height"] = seen["rel"]
     # holding still at 3 m: the HUD's altitude is the position's (4 Hz and 10 Hz: wait for them to agree)
-    until("hud_at_height", lambda: abs(seen["hud"][3] - seen["geo"][2]) < 0.05 and abs(seen["hud"][1]) < 0.05, 5)
-    out["hud_at_height"], out["climb_top"] = seen["hud"], seen["climb_top"]
+    until("hud_at_height", lambda: seen["hud"] and abs(seen["hud"][3] - seen["geo"][2]) < 0.05
+          and abs(seen["hud"][1]) < 0.05, 5)
+    until("altitude_at_height", lambda: seen["altitude"] and abs(seen["altitude"][2] - seen["rel"]) < 0.05, 5)  # 1 Hz
+    out["hud_at_height"], out["climb_top"], out["altitude"] = seen["hud"], seen["climb_top"], seen["altitude"]
     out["land"] = act.land().name
     until("disarmed_seen", lambda: seen["armed"] is False, 15)
     until("on_ground", lambda: abs(seen["rel"]) < 0.02, 5)  # positions come at 10 Hz: the next ones
@@ -255,8 +262,8 @@ def test_mavsdk_parameters(tmp_path):
 def test_mavsdk_hold_takeoff_land(tmp_path):
     """``Action.hold``, ``arm``, ``set_takeoff_altitude`` / ``takeoff`` (TAKEOFF, then HOLD at the
     height), ``land`` (LAND, then disarmed on the ground), with ``Telemetry.flight_mode`` naming
-    each mode and ``fixedwing_metrics`` (VFR_HUD) the climb, throttle and altitude; every command MAVSDK sent
-    was answered."""
+    each mode, ``fixedwing_metrics`` (VFR_HUD) the climb, throttle and altitude and ``altitude`` (ALTITUDE) the
+    heights; every command MAVSDK sent was answered."""
     out, v, n = _mavsdk_on_a_vehicle(tmp_path, "flight")
     assert [out[k] for k in ("hold", "arm", "set_takeoff_altitude", "takeoff", "land")] == ["SUCCESS"] * 5
     assert all(out[k] for k in ("hold_seen", "armed_seen", "at_height", "disarmed_seen", "on_ground")), out
@@ -273,6 +280,8 @@ def test_mavsdk_hold_takeoff_land(tmp_path):
     assert out["climb_top"] > 0.5 and 0.2 < throttle < 0.9 and ground < 0.05 and airspeed == 0.0, out
     assert heading in (0.0, 359.0) and abs(amsl - 491.0) < 0.1  # home 488 m AMSL + 3 m
     assert out["hud_landed"][0] == 0.0 and abs(out["hud_landed"][3] - 488.0) < 0.05
+    amsl, local, relative, terrain = out["altitude"]  # ALTITUDE (MAVSDK's altitude): the home is the local origin
+    assert abs(amsl - 491.0) < 0.1 and local == relative and abs(relative - 3.0) < 0.1 and math.isnan(terrain)
     v.wait_event(lambda s: "mode: TAKEOFF to 3 m" in s)
     v.wait_event(lambda s: "mode: HOLD: takeoff done" in s)
     v.wait_event(lambda s: "mode: LAND at" in s and "1.5 m/s" in s)

@@ -302,14 +302,18 @@ class SimVehicle:
         p = self.plant
         return breaches(p.state, p.t, self.home, self.max_hor_m, self.max_ver_m, None if fence_known else self.fence)
 
-    def arming_denied(self) -> bool:
-        """PX4's pre-arm checks of the geofence (:func:`~bridge.autopilot.fencewatch.arming_refusal`) and the battery
-        (:meth:`~bridge.autopilot.batterywatch.BatteryWatch.arming_refusal`): whether arming is denied now; if so a
-        ``preflight`` event says why, and :attr:`arming_refused` keeps it until the vehicle arms."""
+    def prearm_refusal(self) -> str | None:
+        """Why PX4's pre-arm checks deny arming now, or None: the geofence's (fencewatch.arming_refusal) and the
+        battery's (:meth:`~bridge.autopilot.batterywatch.BatteryWatch.arming_refusal`)."""
         pack = self.plant.battery
-        why = [w for w in (arming_refusal(self._breaches(), self.fence_action),
+        why = [w for w in (arming_refusal(self._breaches() if self.fence_action else [], self.fence_action),
                            None if pack is None else self.battery_watch.arming_refusal(pack.remaining)) if w]
-        self.arming_refused = f"arming denied: {'; '.join(why)}" if why else None
+        return f"arming denied: {'; '.join(why)}" if why else None
+
+    def arming_denied(self) -> bool:
+        """Whether arming is denied now (:meth:`prearm_refusal`); if so a ``preflight`` event says why, and
+        :attr:`arming_refused` keeps it until the vehicle arms."""
+        self.arming_refused = self.prearm_refusal()
         if self.arming_refused is not None:
             self.event("preflight", self.arming_refused)
         return self.arming_refused is not None

@@ -91,6 +91,14 @@ def vfr_hud(X: tuple[float, ...], home: Home, thrust_fraction: float) -> Any:
     return mavlink.MAVLink_vfr_hud_message(0.0, math.hypot(vn, ve), heading, throttle, alt, -vd)
 
 
+def altitude(X: tuple[float, ...], home: Home, usec: int) -> Any:
+    """``ALTITUDE`` as PX4 fills it: monotonic and AMSL the altitude above the sea (m; PX4's monotonic is its
+    barometer's, here the state's as every stream's), local and relative the height above the home (m, up: the
+    local origin is the home); terrain and bottom clearance unknown (NaN: no distance sensor)."""
+    up = X[4]
+    return mavlink.MAVLink_altitude_message(usec, home.alt + up, home.alt + up, up, up, math.nan, math.nan)
+
+
 def home_position(home: Home) -> Any:
     """``HOME_POSITION``: the local origin, level, facing north."""
     return mavlink.MAVLink_home_position_message(
@@ -107,14 +115,17 @@ def mission_current(seq: int, total: int, state: int = mavlink.MISSION_STATE_NOT
     return [mavlink.MAVLink_mission_current_message(seq, total, state, 0)]
 
 
-def sys_status(load_permille: int, healthy: bool, battery: tuple[int, int, int] = (16800, -1, 100)) -> Any:
+def sys_status(load_permille: int, healthy: bool, battery: tuple[int, int, int] = (16800, -1, 100),
+               armable: bool = True) -> Any:
     """``SYS_STATUS``: simulated sensors present and healthy; ``battery``: voltage mV, current cA (-1: not
-    measured) and remaining % (a full 4S battery unless the plant flies one)."""
+    measured) and remaining % (a full 4S battery unless the plant flies one); the pre-arm check's bit healthy
+    when ``armable`` (PX4's: MAVSDK's ``health.is_armable`` reads it)."""
     # the geofence bit is set healthy although there is no fence: MAVProxy reads a clear
     # health bit as "fence breach" even on a vehicle that has none
-    health = (_SENSORS | mavlink.MAV_SYS_STATUS_GEOFENCE) if healthy else 0
-    return mavlink.MAVLink_sys_status_message(_SENSORS, _SENSORS, health, max(0, min(1000, load_permille)),
-                                              *battery, 0, 0, 0, 0, 0, 0)
+    prearm = mavlink.MAV_SYS_STATUS_PREARM_CHECK
+    health = (_SENSORS | mavlink.MAV_SYS_STATUS_GEOFENCE | (prearm if armable else 0)) if healthy else 0
+    return mavlink.MAVLink_sys_status_message(_SENSORS | prearm, _SENSORS | prearm, health,
+                                              max(0, min(1000, load_permille)), *battery, 0, 0, 0, 0, 0, 0)
 
 
 def extended_sys_state(on_ground: bool, descending: bool) -> Any:

@@ -35,6 +35,7 @@ from plant.sensors import SensorSuite
 MIN_INTERVAL_S = 0.005  # the shortest stream interval (200 Hz)
 HEARTBEAT_S = 1.0
 VFR_HUD_S = 0.25  # PX4's default rate of VFR_HUD on a normal link (mavlink_main.cpp: 4 Hz)
+ALTITUDE_S = 1.0  # PX4's default rate of ALTITUDE on a normal link (1 Hz)
 BATTERY_STATUS_S = 2.0  # PX4's default rate of BATTERY_STATUS on a normal link (mavlink_main.cpp: 0.5 Hz)
 
 
@@ -58,6 +59,7 @@ class VehicleView:
     mission: tuple[int, int, int] = (0, 0, 2)  # the mission's current item, its items, its MISSION_STATE
     battery: Battery | None = None  # the plant's flight battery ([effects] battery), None: it flies none
     battery_level: int = 0  # its level by the vehicle's BAT_*_THR: 0 none, 1 low, 2 critical, 3 emergency
+    armable: bool = True  # PX4's pre-arm checks pass (SimVehicle.prearm_refusal) and the flight is not over
 
 
 def battery_fields(b: Battery) -> tuple[int, int, int]:
@@ -81,8 +83,8 @@ def battery_status(v: VehicleView) -> list[Any]:
 
 def _sys_status(v: VehicleView) -> list[Any]:
     if v.battery is None:
-        return [tm.sys_status(v.load, not v.halted)]
-    return [tm.sys_status(v.load, not v.halted, battery_fields(v.battery))]
+        return [tm.sys_status(v.load, not v.halted, armable=v.armable)]
+    return [tm.sys_status(v.load, not v.halted, battery_fields(v.battery), v.armable)]
 
 
 _INT16_MAX, _UINT16_MAX = 2**15 - 1, 2**16 - 1  # MAVLink's "unknown" temperature and cell voltage
@@ -147,6 +149,8 @@ STREAMS: dict[int, Stream] = {
     mavlink.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS: Stream(
         lambda v: [tm.actuator_outputs(int(v.t * 1e6), v.omega, v.omega_max)], 0.1),
     mavlink.MAVLINK_MSG_ID_VFR_HUD: Stream(_if_finite(lambda v: [tm.vfr_hud(v.X, v.home, _thrust(v))]), VFR_HUD_S),
+    mavlink.MAVLINK_MSG_ID_ALTITUDE: Stream(_if_finite(lambda v: [tm.altitude(v.X, v.home, int(v.t * 1e6))]),
+                                            ALTITUDE_S),
     mavlink.MAVLINK_MSG_ID_HOME_POSITION: Stream(lambda v: [tm.home_position(v.home)], 0.0),
     # PX4's mission manager sends it at 1 Hz (its _slow_rate_limiter), and at once on a change
     mavlink.MAVLINK_MSG_ID_MISSION_CURRENT: Stream(lambda v: tm.mission_current(*v.mission), 1.0),

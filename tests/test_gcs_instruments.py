@@ -1,0 +1,93 @@
+"""Covers bridge.mavlink.telemetry and bridge.nodes.vehicle.streams: what a ground station's instruments read.
+
+Built from the vehicle's view and sent through real MAVLink 2 bytes. VFR_HUD: the ground speed is the horizontal
+speed, the heading the compass heading of the paper frame's yaw (NWU, counter-clockwise) in NED, the climb rate up,
+the altitude AMSL as GLOBAL_POSITION_INT's, the throttle the rotors' thrust as a percentage of their full thrust (0
+disarmed), the airspeed 0 as PX4 sends it for a multicopter with no airspeed sensor. ALTITUDE: the heights, the home
+the local origin. SYS_STATUS: the pre-arm bit healthy while PX4's pre-arm checks pass. The same numbers reach
+MAVSDK's ``fixedwing_metrics``, ``altitude`` and ``health`` from real vehicles in tests/test_ground_stations.py
+and tests/test_await_mission.py.
+"""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from pymavlink.dialects.v20 import common as M
+
+from bridge.core.flight import prepare
+from bridge.mavlink import telemetry as tm
+from bridge.nodes.vehicle.streams import ALTITUDE_S, DEFAULT_STREAMS, VFR_HUD_S, VehicleView, message
+from missions import Mission, Sine
+from missions.geofence import Geofence, Zone
+
+HOME = tm.Home(47.0, 8.0, 500.0)
+
+
+def _view(X: tuple[float, ...], armed: bool = True, omega: tuple[float, ...] = (500.0,) * 4,
+          armable: bool = True) -> VehicleView:
+    return VehicleView(X, 1.0, "offboard", None, armed, False, False, omega, 1000.0, 0, None, HOME, 1,
+                       armable=armable)
+
+
+def _sent(mid: int, view: VehicleView):
+    (msg,) = message(mid, view)
+    mav = M.MAVLink(None, srcSystem=1, srcComponent=1)
+    return mav.parse_char(msg.pack(mav))
+
+
+def _hud(view: VehicleView):
+    return _sent(M.MAVLINK_MSG_ID_VFR_HUD, view)
+
+
+@pytest.mark.parametrize(("psi", "heading"), [(0.0, 0), (math.pi / 2, 270), (-math.pi / 2, 90), (3.0, 188)])
+def test_heading_is_the_compass_heading_of_the_papers_yaw(psi: float, heading: int) -> None:
+    """ψ counter-clockwise from north (NWU): ψ = π/2 faces west, 270° on a compass."""
+    X = (0.0,) * 10 + (psi, 0.0)
+    assert _hud(_view(X)).heading == heading
+
+
+def test_speeds_altitude_and_throttle() -> None:
+    # x north 3 m/s, y (west) 4 m/s, z up 1.5 m/s, 12 m above home
+    X = (1.0, 3.0, 2.0, 4.0, 12.0, 1.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    hud = _hud(_view(X, omega=(500.0, 600.0, 700.0, 800.0)))
+    assert hud.groundspeed == pytest.approx(5.0) and hud.climb == pytest.approx(1.5)
+    assert hud.alt == pytest.approx(512.0) and hud.airspeed == 0.0
+    assert hud.throttle == round(100 * (500**2 + 600**2 + 700**2 + 800**2) / (4 * 1000.0**2))  # 44 %
+    assert _hud(_view(X, armed=False)).throttle == 0
+    assert _hud(_view(X, omega=(2000.0,) * 4)).throttle == 100  # never past full
+
+
+def test_altitude_gives_the_heights_above_the_sea_and_the_home() -> None:
+    X = (1.0, 0.0, 2.0, 0.0, 12.5, -0.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    alt = _sent(M.MAVLINK_MSG_ID_ALTITUDE, _view(X))
+    assert alt.altitude_amsl == alt.altitude_monotonic == pytest.approx(512.5) and alt.time_usec == 1_000_000
+    assert alt.altitude_local == alt.altitude_relative == pytest.approx(12.5)
+    assert math.isnan(alt.altitude_terrain) and math.isnan(alt.bottom_clearance)  # no distance sensor
+
+
+def test_each_is_a_default_stream_at_px4s_rate_and_silent_for_a_state_not_finite() -> None:
+    assert DEFAULT_STREAMS[M.MAVLINK_MSG_ID_VFR_HUD] == VFR_HUD_S == 0.25  # 4 Hz
+    assert DEFAULT_STREAMS[M.MAVLINK_MSG_ID_ALTITUDE] == ALTITUDE_S == 1.0
+    X = (math.nan,) + (0.0,) * 11
+    assert message(M.MAVLINK_MSG_ID_VFR_HUD, _view(X)) == message(M.MAVLINK_MSG_ID_ALTITUDE, _view(X)) == []
+
+
+def test_sys_status_says_whether_the_pre_arm_checks_pass() -> None:
+    bit = M.MAV_SYS_STATUS_PREARM_CHECK
+    ok, refused = (_sent(M.MAVLINK_MSG_ID_SYS_STATUS, _view((0.0,) * 12, armable=a)) for a in (True, False))
+    assert ok.onboard_control_sensors_present & ok.onboard_control_sensors_enabled & bit
+    assert ok.onboard_control_sensors_health & bit and not refused.onboard_control_sensors_health & bit
+    assert refused.onboard_control_sensors_health & M.MAV_SYS_STATUS_SENSOR_3D_GYRO  # the rest stays healthy
+
+
+def test_the_pre_arm_checks_can_be_asked_without_an_event() -> None:
+    """``prearm_refusal`` (what SYS_STATUS's bit reads, ten times a second) says why and records nothing;
+    ``arming_denied`` (an arm) records the ``preflight`` event."""
+    square = Zone(True, points=((2.0, 2.0), (4.0, 2.0), (4.0, 4.0), (2.0, 4.0)))
+    fenced = Mission(Sine(), duration_s=5.0, name="fenced", geofence=Geofence((square,)))
+    sim = prepare(fenced, params={"GF_ACTION": 2}).make_vehicle()
+    assert "outside its fence" in sim.prearm_refusal() and sim.events == []
+    assert sim.arming_denied() and [e.kind for e in sim.events] == ["preflight"]
+    assert prepare(fenced, params={"GF_ACTION": 0}).make_vehicle().prearm_refusal() is None
