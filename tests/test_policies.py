@@ -20,9 +20,11 @@ from bridge.autopilot.vehicleevents import ITSELF, Sender
 from bridge.cli.commands import report_run
 from bridge.record.events import RunEvent
 from bridge.record.policies import (
+    CONTROLLER_ID,
     POLICIES,
     Rules,
     arm_authority,
+    arming_denied_end,
     check,
     ended_by_command,
     failsafe_in_time,
@@ -242,6 +244,22 @@ def test_who_ended_a_flight_by_command() -> None:
     assert ended_by_command([ev(3.0, "disarmed", "landed: disarmed", by=ITSELF)]) is None  # not a command
     e, who = ended_by_command([ev(3.0, "disarmed", "disarmed by command")])
     assert who is None  # it names no sender
+
+
+def test_a_denied_flight_is_the_vehicles_only_when_its_last_denial_answered_the_controller() -> None:
+    """``denied`` names the vehicle's last ``preflight`` event; in a session only when that denial answered the
+    configured controller's arm: a ground station's denied arm, followed by a controller that gave up for another
+    reason (its arm unanswered), is not a denied flight. Any arm at all makes it none."""
+    gcs = ev(1.0, "preflight", "arming denied: battery critical", by=GCS)
+    ctl = ev(2.0, "preflight", "arming denied: outside its fence", by=CONTROLLER)
+    assert arming_denied_end([gcs], CONTROLLER_ID) is None
+    assert arming_denied_end([gcs, ctl], CONTROLLER_ID) == {"who": "vehicle",
+                                                            "how": "arming denied: outside its fence (t=2.000 s)"}
+    assert arming_denied_end([ctl, gcs], CONTROLLER_ID) is None  # the last denial was the ground station's
+    offline = ev(0.0, "preflight", "arming denied: outside its fence")  # the loop's own arm: no sender
+    assert arming_denied_end([offline], CONTROLLER_ID)["how"].startswith("arming denied: outside")
+    assert arming_denied_end([gcs]) is not None  # without a controller to answer: the denial is the end
+    assert arming_denied_end([ctl, ev(3.0, "armed", "armed, offboard control", by=CONTROLLER)], CONTROLLER_ID) is None
 
 
 def test_only_an_armed_exit_from_offboard_is_a_takeover() -> None:

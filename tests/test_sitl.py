@@ -527,8 +527,9 @@ def test_an_instance_whose_port_another_program_holds_is_passed_over() -> None:
 
 def test_a_mission_that_starts_outside_its_fence_ends_as_offline(tmp_path: Path) -> None:
     """PX4's pre-arm geofence check in a session: the controller's arm of a vehicle standing outside its fence is
-    answered TEMPORARILY_REJECTED, as PX4's commander answers it; the session ends as ``bsst sim`` does
-    (tests/test_geofence.py): ``denied``, ended by the vehicle saying why, nothing flown, exit 1. A sweep of it
+    answered TEMPORARILY_REJECTED, as PX4's commander answers it (its event names whose arm); the session ends as
+    ``bsst sim`` does (tests/test_geofence.py): ``denied``, ended by the vehicle saying why, nothing flown, exit 1.
+    A sweep of it
     measures nothing (its cells ``denied``, exit 1); a margin search refuses it (exit 2, one line)."""
     plan = outside_fence_plan(tmp_path)
     offline = simulate(plan, plots=False)
@@ -542,6 +543,7 @@ def test_a_mission_that_starts_outside_its_fence_ends_as_offline(tmp_path: Path)
     assert summary["ended_by"]["how"].startswith(f"{OUTSIDE_WHY} (GF_ACTION = 2: hold)"), summary["ended_by"]
     said = {e["kind"]: e["text"] for e in summary["events"]}
     assert said["preflight"].startswith(OUTSIDE_WHY) and "MAV_RESULT_TEMPORARILY_REJECTED" in said["aborted"], said
+    assert " [by 200:191 127.0.0.1:" in said["preflight"] and said["preflight"].endswith(" controller]"), said  # whose
     assert len(read_trace(tmp_path / "sitl" / "trace.csv")["t"]) == 0
     # a campaign of it measures nothing: a sweep's cells say why (exit 1), a margin search refuses it (exit 2)
     r = run_bsst("sweep", str(plan), "--delay", "0,20", "--out", str(tmp_path / "sweep"), "--no-plots", cwd=ROOT)

@@ -442,12 +442,19 @@ def ended_by_outcome(outcome: str, events: Sequence[RunEvent]) -> dict[str, str]
     return {"who": "user", "how": "interrupted (Ctrl-C or SIGTERM)"}
 
 
-def arming_denied_end(events: Sequence[RunEvent]) -> dict[str, str] | None:
+def arming_denied_end(events: Sequence[RunEvent], controller_id: tuple[int, int] | None = None
+                      ) -> dict[str, str] | None:
     """``ended_by`` of a flight that never armed because the vehicle's pre-arm check denied it (outcome ``denied``:
-    its ``preflight`` event, and no ``armed`` one): the vehicle, with why; None for any other flight."""
+    a ``preflight`` event, and no ``armed`` one): the vehicle, with why (its last denial); None for any other
+    flight. With ``controller_id`` (a session), only if that last denial answered the configured controller's arm
+    on its link (a ground station's denied arm does not explain why the controller gave up)."""
     ev = vehicle_events(events)
-    denied = next((e for e in ev if e.kind == "preflight"), None)
+    denied = next((e for e in reversed(ev) if e.kind == "preflight"), None)
     if denied is None or any(e.kind == "armed" for e in ev):
+        return None
+    who = denied.by
+    if controller_id is not None and who is not None and (who.link, (who.sysid, who.compid)) != (
+            "controller", controller_id):
         return None
     return {"who": "vehicle", "how": f"{denied.text} (t={denied.t:.3f} s)"}
 

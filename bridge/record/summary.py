@@ -260,7 +260,7 @@ def ended_by(outcome: str, trace: Mapping[str, Any], flight: Flight, facts: Sess
         if outcome == "failsafe":
             how += "; the vehicle's failsafe took over"
         return outcome, {"who": facts.died, "how": how}
-    if outcome == "aborted" and arming_denied_end(events) is not None:
+    if outcome == "aborted" and arming_denied_end(events, controller_id) is not None:
         outcome = "denied"  # the controller's abort answers the vehicle's refusal to arm
     if outcome in (*PLANT_OUTCOMES, "denied"):
         return outcome, ended_by_outcome(outcome, events)

@@ -32,7 +32,8 @@ MISSION_READS = frozenset({"MISSION_REQUEST_LIST", "MISSION_REQUEST", "MISSION_R
 ADDRESSED = frozenset({"COMMAND_LONG", "COMMAND_INT", "PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET",
                        "SET_MODE", *MISSION_WRITES, *MISSION_READS})  # target fields checked first
 COMMANDS = frozenset({"COMMAND_LONG", "COMMAND_INT"})
-ATTRIBUTED = ("armed", "disarmed", "mode", "interval", "param", "mission")  # the events that say who caused them
+# the events that say who caused them (``preflight``: whose arm was denied)
+ATTRIBUTED = ("armed", "disarmed", "mode", "interval", "param", "mission", "preflight")
 
 
 def claim(event: Event, by: Sender | None) -> None:
