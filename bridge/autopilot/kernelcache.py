@@ -14,10 +14,13 @@ compiles afresh, once, after a pull, an upgrade or an edit.
 
 The closure is what numba can reach by name from the kernel: the module of its Python function, and every
 project module (``bridge``, ``controller``, ``plant``, ``missions``, ``params``) that module's globals
-lead to (a module, a function, a dispatcher, a class; a constant bound by name in several modules counts
-for each of them), and so on. It over-reaches (a whole module, not the functions used): a change anywhere
-in the closure compiles the kernel again, never the other way round. Every kernel of the project is made
-with this ``njit`` (tests/test_kernelcache.py walks the package and checks).
+lead to (a module; a function or dispatcher, its module; a named tuple or enum, or an instance of one, its
+class's module), and so on. It over-reaches (a whole module, not the functions used): a change anywhere in
+the closure compiles the kernel again. It does not follow a package's submodules through the package (the
+import system binds them there in whatever order a process imports them: the stamp would differ between
+processes) nor see where a bare number came from: a kernel module names such a constant through its module
+(``plan_cell.HOLD``). tests/test_kernelcache.py walks the package for both, and checks that every kernel is
+made with this ``njit``.
 """
 
 from __future__ import annotations
@@ -117,6 +120,9 @@ def _ours(module: str) -> bool:
 
 def _file_digest(path: str) -> bytes:
     if path not in _file_digests:
-        with open(path, "rb") as f:
-            _file_digests[path] = hashlib.sha256(f.read()).digest()
+        try:
+            with open(path, "rb") as f:
+                _file_digests[path] = hashlib.sha256(f.read()).digest()
+        except OSError:  # not a file on disk (a zip import): no digest, numba's own stamp still judges
+            _file_digests[path] = b""
     return _file_digests[path]
