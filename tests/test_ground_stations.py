@@ -28,13 +28,15 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as M
 
 from bridge.autopilot.params import PARAMS, VehicleParams, read_param
-from bridge.mavlink.endpoint import GCS_PORT
+from bridge.core.flight import prepare
+from bridge.mavlink.endpoint import GCS_PORT, parse_address
 from bridge.mavlink.modes import FTP_ERR_UNKNOWN_COMMAND, FTP_HEADER, FTP_NAK, FTP_PAYLOAD_LEN, ftp_nak
 from bridge.nodes.report import Refused
+from bridge.nodes.vehicle import Vehicle, VehicleConfig
 from bridge.nodes.vehicle.reposition import UNSET_INT
 from bridge.session import instance_slot
-from missions import MISSION_DIR
-from tests.sitlkit import ENV, MavProxy, Proc
+from missions import MISSION_DIR, Mission, Sine
+from tests.sitlkit import ENV, GcsSocket, MavProxy, Proc
 from tests.test_vehicle import _ack, _gcs, _vehicle
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -64,7 +66,7 @@ def _answers(tlog: Path, sysid: int) -> tuple[set[int], int, int]:
 # -- MAVSDK ---------------------------------------------------------------------------------------
 
 MAVSDK_SCRIPT = r"""
-import json, sys, threading
+import json, sys, threading, time
 from mavsdk import Mavsdk, Configuration, ComponentType
 from mavsdk.plugins.action import Action
 from mavsdk.plugins.param import Param, ParamError
@@ -181,11 +183,13 @@ elif sys.argv[2] == "goto":  # take off to 3 m, then goto_location 4 m north, 3 
         out.update(modes=list(modes), at=seen["ned"], heading=seen["heading"])
     out["land"] = act.land().name
     until("disarmed_seen", lambda: seen["armed"] is False, 30)
-elif sys.argv[2] == "flight":
-    out["hold"] = act.hold().name
-    until("hold_seen", lambda: modes and modes[-1] == "HOLD", 10)
+elif sys.argv[2] == "flight":  # MAVSDK's own takeoff_and_land example: arm, wait, take off, land
+    until("hold_seen", lambda: modes and modes[-1] == "HOLD", 10)  # the boot mode, as PX4's
     out["arm"] = act.arm().name
     until("armed_seen", lambda: seen["armed"] is True, 10)
+    time.sleep(0.5)  # 2 s of the vehicle's at --speed 4: four offboard timeouts, were it in OFFBOARD
+    with cond:
+        out["after_arm"] = (seen["armed"], modes[-1])
     out["set_takeoff_altitude"] = act.set_takeoff_altitude(3.0).name
     out["takeoff_altitude"] = act.get_takeoff_altitude()
     out["takeoff"] = act.takeoff().name
@@ -259,18 +263,18 @@ def test_mavsdk_parameters(tmp_path):
     assert not any("COM_OF_LOSS_T = 100" in s for s in v.events())
 
 
-def test_mavsdk_hold_takeoff_land(tmp_path):
-    """``Action.hold``, ``arm``, ``set_takeoff_altitude`` / ``takeoff`` (TAKEOFF, then HOLD at the
-    height), ``land`` (LAND, then disarmed on the ground), with ``Telemetry.flight_mode`` naming
-    each mode, ``fixedwing_metrics`` (VFR_HUD) the climb, throttle and altitude and ``altitude`` (ALTITUDE) the
-    heights; every command MAVSDK sent was answered."""
+def test_mavsdk_arm_takeoff_land(tmp_path):
+    """MAVSDK's own example's flow against a fresh vehicle: it boots in HOLD (PX4's), so ``Action.arm`` arms it
+    in HOLD on the ground, where it waits (no controller needed); ``set_takeoff_altitude`` / ``takeoff``
+    (TAKEOFF, then HOLD at the height), ``land`` (LAND, then disarmed on the ground), with
+    ``Telemetry.flight_mode`` naming each mode, ``fixedwing_metrics`` (VFR_HUD) the climb, throttle and altitude
+    and ``altitude`` (ALTITUDE) the heights; every command MAVSDK sent was answered."""
     out, v, n = _mavsdk_on_a_vehicle(tmp_path, "flight")
-    assert [out[k] for k in ("hold", "arm", "set_takeoff_altitude", "takeoff", "land")] == ["SUCCESS"] * 5
+    assert [out[k] for k in ("arm", "set_takeoff_altitude", "takeoff", "land")] == ["SUCCESS"] * 4
     assert all(out[k] for k in ("hold_seen", "armed_seen", "at_height", "disarmed_seen", "on_ground")), out
+    assert out["after_arm"] == [True, "HOLD"], out  # armed and waiting on the ground, no failsafe
     assert out["takeoff_altitude"] == 3.0  # MIS_TAKEOFF_ALT, set and read back through the parameters
-    # the first callback is the mode at subscription (OFFBOARD, the boot mode) or, if it came first, HOLD's
-    assert out["modes"][:-4] in ([], ["OFFBOARD"]) and out["modes"][-4:] == ["HOLD", "TAKEOFF", "HOLD", "LAND"], \
-        out["modes"]
+    assert out["modes"] == ["HOLD", "TAKEOFF", "HOLD", "LAND"], out["modes"]
     assert abs(out["rel_at_height"] - 3.0) < 0.1 and out["top"] < 3.1
     assert abs(out["rel_landed"]) < 0.02
     # VFR_HUD (MAVSDK's fixed-wing metrics): climbing in TAKEOFF, a hover's throttle at 3 m facing north, no
@@ -288,6 +292,27 @@ def test_mavsdk_hold_takeoff_land(tmp_path):
     v.wait_event(lambda s: "disarmed: landed" in s)
     unanswered, _, _ = _answers(tmp_path / "vehicle.tlog", n + 1)
     assert not unanswered, f"commands MAVSDK sent that got no COMMAND_ACK: {unanswered}"
+
+
+def test_a_sessions_vehicle_armed_by_a_ground_station_before_its_controller_holds_and_says_it_left_lockstep():
+    """The vehicle boots in HOLD, as PX4's: in a lockstep session (its controller's address pinned) a ground
+    station's arm that comes before the controller's arms it in HOLD on the ground, off the step clock, which it
+    says (a ``lockstep`` event: the session's record then agrees, and names the ground station); the controller's
+    arm after it changes nothing (the vehicle is the ground station's until it selects OFFBOARD again)."""
+    gcs = GcsSocket()
+    flight = prepare(Mission(Sine(), duration_s=5.0, name="boot"))
+    v = Vehicle(flight, VehicleConfig(parse_address("udpin:127.0.0.1:0"), parse_address(gcs.url), clock="lockstep",
+                                      controller_from=("127.0.0.1", 9)))
+    try:
+        assert v._heartbeat().custom_mode == (4 << 16) | (3 << 24)  # HOLD (AUTO.LOITER)
+        arm = M.MAVLink_command_long_message(1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+        assert gcs.exchange(v, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
+        assert v.sim.armed and v.sim.mode == "hold" and v.clock.free_running
+        assert [e.kind for e in v.sim.events] == ["armed", "mode", "lockstep"], v.sim.events
+        assert v.commander.arm_disarm(1.0, 0.0) == M.MAV_RESULT_ACCEPTED and v.sim.mode == "hold"
+    finally:
+        v.close()
+        gcs.close()
 
 
 def test_mavsdk_return_to_launch(tmp_path):
@@ -357,6 +382,9 @@ def test_do_reposition_disarmed_takes_hold_on_the_ground_is_denied_and_other_fla
 
             assert reposition(0.0) == M.MAV_RESULT_UNSUPPORTED
             said("param2 (flags) must be 1")
+            # LAND selected first (the vehicle boots in HOLD, as PX4): the reposition selects HOLD again
+            gcs.mav.command_long_send(n + 1, 1, M.MAV_CMD_DO_SET_MODE, 0, 29, 4, 6, 0, 0, 0, 0)
+            assert _ack(gcs, M.MAV_CMD_DO_SET_MODE).result == M.MAV_RESULT_ACCEPTED
             assert reposition(1.0) == M.MAV_RESULT_ACCEPTED
             v.wait_event(lambda s: "mode: HOLD (disarmed: armed in it next) [by 255:190" in s)
             gcs.mav.command_long_send(n + 1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)

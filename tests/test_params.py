@@ -174,7 +174,7 @@ def test_parameter_protocol_over_udp(tmp_path):
         try:
             v.wait_report(Ready)
             hb = gcs.wait_heartbeat(timeout=20)
-            assert hb.autopilot == M.MAV_AUTOPILOT_PX4 and mavutil.mode_string_v10(hb) == "OFFBOARD"
+            assert hb.autopilot == M.MAV_AUTOPILOT_PX4 and mavutil.mode_string_v10(hb) == "LOITER"  # HOLD at boot
             tgt = (gcs.target_system, gcs.target_component)
             gcs.mav.param_request_list_send(*tgt)
             got = {}
@@ -213,8 +213,9 @@ def test_parameter_protocol_over_udp(tmp_path):
 
 
 def test_modes_takeoff_hold_land_over_udp(tmp_path):
-    """HOLD selected on the ground, armed in it; NAV_TAKEOFF above the envelope is refused, below
-    MIS_TAKEOFF_ALT (below home) raised to it, which it climbs to and then holds; SET_MODE LAND lands
+    """HOLD (the boot mode, as PX4's) selected again on the ground, which changes nothing, armed in it; NAV_TAKEOFF
+    above the envelope is refused, below MIS_TAKEOFF_ALT (below home) raised to it, which it climbs to and then
+    holds; SET_MODE LAND lands
     and disarms; modes a ground station cannot have are refused, named."""
     with instance_slot() as n:
         gcs = _gcs(n)
@@ -257,9 +258,10 @@ def test_modes_takeoff_hold_land_over_udp(tmp_path):
         finally:
             assert v.stop() == 0
             gcs.close()
-    for text in ("mode: HOLD (disarmed: armed in it next) [by 255:190", "armed: armed, HOLD [by 255:190",
+    for text in ("armed: armed, HOLD [by 255:190",
                  "mode: TAKEOFF to 1.5 m", "mode: HOLD: takeoff done", "mode: LAND at", "landed: disarmed"):
         v.wait_event(lambda s, text=text: text in s)
+    assert not any("disarmed: armed in it next" in s for s in v.events())  # HOLD in HOLD: no event
 
 
 # -- whole flights --------------------------------------------------------------------------------

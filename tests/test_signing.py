@@ -277,6 +277,10 @@ def test_signed_vehicle_refuses_unsigned_forged_and_replayed_commands_and_target
 
             bad(gcs, arm(1))
             assert not _armed(_heartbeat_now(gcs))  # none of them armed it
+            # OFFBOARD selected for the arm (signed): the vehicle boots in HOLD, as PX4's, where the controller's
+            # targets would not be taken
+            gcs.mav.command_long_send(sysid, 1, mavlink.MAV_CMD_DO_SET_MODE, 0, 29, 6, 0, 0, 0, 0, 0)
+            assert _ack(gcs, mavlink.MAV_CMD_DO_SET_MODE).result == mavlink.MAV_RESULT_ACCEPTED
             good_arm = arm(1).pack(gcs.mav)
             gcs.write(good_arm)
             assert _ack(gcs, 400).result == mavlink.MAV_RESULT_ACCEPTED

@@ -72,7 +72,8 @@ def test_pymavlink_ground_station(tmp_path):
             assert hb is not None
             assert (hb.type, hb.autopilot, hb.system_status) == (M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_PX4,
                                                                    M.MAV_STATE_STANDBY)
-            assert hb.custom_mode == 6 << 16 and mavutil.mode_string_v10(hb) == "OFFBOARD"  # PX4's main mode 6
+            # PX4's boot mode: HOLD (AUTO.LOITER: main mode 4, sub mode 3)
+            assert hb.custom_mode == (4 << 16) | (3 << 24) and mavutil.mode_string_v10(hb) == "LOITER"
             assert gcs.target_system == n + 1 and not hb.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED
             tgt = (gcs.target_system, gcs.target_component)
 

@@ -36,7 +36,7 @@ from bridge.autopilot.params import (
     params_from_table,
     typed_value,
 )
-from bridge.autopilot.simvehicle import SimVehicle
+from bridge.autopilot.simvehicle import HOLD, OFFBOARD, SimVehicle
 from bridge.core.scalar import checked_choice, compile_for, compiled_wanted, wire_for
 from bridge.link.model import LinkConfig, LinkSettings, absolute_link_paths, link_from_table, merge_link_tables
 from controller import Controller, Gains, Nominal, gains_from_table
@@ -102,10 +102,12 @@ class Flight:
     def make_vehicle(self, armed: bool = False) -> SimVehicle:
         plant = self.make_plant()
         p, m = self.params, self.mission
-        settings = {"armed": armed, "takeoff_alt_m": p.takeoff_alt_m, "timeline": self.timeline,
-                    "failure_injection": p.failure_injection, "rtl": p.rtl, "preflight_disarm_s": p.preflight_disarm_s,
-                    "max_hor_m": p.max_hor_m, "max_ver_m": p.max_ver_m, "rally": m.rally, "fence": m.geofence,
-                    "fence_action": p.fence_action,
+        # disarmed, it boots in HOLD, as PX4 does: a ground station's arm holds it on the ground until a takeoff;
+        # the controller's arm takes offboard control
+        settings = {"armed": armed, "mode": OFFBOARD if armed else HOLD, "takeoff_alt_m": p.takeoff_alt_m,
+                    "timeline": self.timeline, "failure_injection": p.failure_injection, "rtl": p.rtl,
+                    "preflight_disarm_s": p.preflight_disarm_s, "max_hor_m": p.max_hor_m, "max_ver_m": p.max_ver_m,
+                    "rally": m.rally, "fence": m.geofence, "fence_action": p.fence_action,
                     "battery_watch": BatteryWatch(p.battery_low, p.battery_critical, p.battery_emergency,
                                                   p.low_battery_action)}
         if self.estimator == "truth":  # no sensors to sample: the plant's state is published as it is

@@ -377,8 +377,9 @@ class Commander:
 
     def _ground_takes_over(self, now: float) -> None:
         """Lockstep, a ground station's mode flown by the vehicle's own controller: on the wall clock
-        from now; a lockstep flight that was on says so (its record: it left lockstep here)."""
-        if self.clock.engaged:
+        from now; a lockstep flight that was on, or a session's vehicle awaiting its controller (a ground
+        station's arm in HOLD before the controller's), says so (its record: it left lockstep here)."""
+        if self.clock.engaged or self.cfg.controller_from is not None:
             self.sim.event("lockstep", f"{mode_name(self.sim.mode)} set by a ground station: flown by the "
                                        "vehicle on the wall clock")
         self.clock.run_free(Trigger.GROUND, now, self.ports.step() * self.substeps)
