@@ -18,7 +18,7 @@ from pymavlink.dialects.v20 import common as M
 
 from bridge.core.flight import prepare
 from bridge.mavlink import telemetry as tm
-from bridge.nodes.vehicle.streams import ALTITUDE_S, DEFAULT_STREAMS, VFR_HUD_S, VehicleView, message
+from bridge.nodes.vehicle.streams import ALTITUDE_S, DEFAULT_STREAMS, HOME_POSITION_S, VFR_HUD_S, VehicleView, message
 from missions import Mission, Sine
 from missions.geofence import Geofence, Zone
 
@@ -70,6 +70,7 @@ def test_altitude_gives_the_heights_above_the_sea_and_the_home() -> None:
 def test_each_is_a_default_stream_at_px4s_rate_and_silent_for_a_state_not_finite() -> None:
     assert DEFAULT_STREAMS[M.MAVLINK_MSG_ID_VFR_HUD] == VFR_HUD_S == 0.25  # 4 Hz
     assert DEFAULT_STREAMS[M.MAVLINK_MSG_ID_ALTITUDE] == ALTITUDE_S == 1.0
+    assert DEFAULT_STREAMS[M.MAVLINK_MSG_ID_HOME_POSITION] == HOME_POSITION_S == 2.0  # 0.5 Hz
     X = (math.nan,) + (0.0,) * 11
     assert message(M.MAVLINK_MSG_ID_VFR_HUD, _view(X)) == message(M.MAVLINK_MSG_ID_ALTITUDE, _view(X)) == []
 

@@ -36,6 +36,7 @@ MIN_INTERVAL_S = 0.005  # the shortest stream interval (200 Hz)
 HEARTBEAT_S = 1.0
 VFR_HUD_S = 0.25  # PX4's default rate of VFR_HUD on a normal link (mavlink_main.cpp: 4 Hz)
 ALTITUDE_S = 1.0  # PX4's default rate of ALTITUDE on a normal link (1 Hz)
+HOME_POSITION_S = 2.0  # and of HOME_POSITION (0.5 Hz)
 BATTERY_STATUS_S = 2.0  # PX4's default rate of BATTERY_STATUS on a normal link (mavlink_main.cpp: 0.5 Hz)
 
 
@@ -151,7 +152,7 @@ STREAMS: dict[int, Stream] = {
     mavlink.MAVLINK_MSG_ID_VFR_HUD: Stream(_if_finite(lambda v: [tm.vfr_hud(v.X, v.home, _thrust(v))]), VFR_HUD_S),
     mavlink.MAVLINK_MSG_ID_ALTITUDE: Stream(_if_finite(lambda v: [tm.altitude(v.X, v.home, int(v.t * 1e6))]),
                                             ALTITUDE_S),
-    mavlink.MAVLINK_MSG_ID_HOME_POSITION: Stream(lambda v: [tm.home_position(v.home)], 0.0),
+    mavlink.MAVLINK_MSG_ID_HOME_POSITION: Stream(lambda v: [tm.home_position(v.home)], HOME_POSITION_S),
     # PX4's mission manager sends it at 1 Hz (its _slow_rate_limiter), and at once on a change
     mavlink.MAVLINK_MSG_ID_MISSION_CURRENT: Stream(lambda v: tm.mission_current(*v.mission), 1.0),
     mavlink.MAVLINK_MSG_ID_HEARTBEAT: Stream(lambda v: [heartbeat(v)], None),  # its own 1 Hz clock
