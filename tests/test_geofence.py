@@ -14,7 +14,7 @@ import pytest
 
 from bridge import simulate
 from bridge.cli.flying import report_run
-from missions import load_mission
+from missions import Mission, Sine, load_mission
 from missions.geofence import Geofence, Zone, geofence_from_table
 from missions.mission import mission_from_table
 from params import ConfigError, Table
@@ -165,3 +165,21 @@ def test_a_plans_rally_points_are_read_about_its_home_and_kept_in_mission_toml(t
     with pytest.raises(ConfigError) as e:
         mission_from_table({"duration_s": 1.0, "trajectory": {"kind": "sine"}, "rally": {"points": [[1.0]]}}, "m.toml")
     assert str(e.value).startswith("m.toml: rally.points: point 0: expected [x, y]"), str(e.value)
+
+
+def test_the_vehicle_watches_its_fence_by_its_estimate_as_px4s_geofence_does() -> None:
+    """PX4's geofence reads the estimate, not the truth. A GPS jump of 12 m north at 3 s under the raw estimator
+    puts the position the vehicle knows outside an 8 m square: it holds there (GF_ACTION 2) at the next fix, its
+    event and the run's ``geofence`` verdict saying "by its estimate", while the true position never leaves the
+    square. Under the EKF the same jump is gated out and the flight completes; under truth nothing changes (the
+    tests above)."""
+    square = Zone(True, points=((-8.0, -8.0), (8.0, -8.0), (8.0, 8.0), (-8.0, 8.0)))
+    fenced = Mission(Sine(), duration_s=8.0, name="jump", geofence=Geofence((square,)))
+    jump = {"sensors": {"set": "gnss"}, "at": ("3:gps:jump=12,0,0",), "params": {"GF_ACTION": 2}, "plots": False}
+    raw = simulate(fenced, estimator="raw", **jump)
+    [left] = [e for e in raw.summary["events"] if e["kind"] == "geofence"]
+    assert 3.0 < left["t"] < 3.5 and "(by its estimate)" in left["text"], left
+    assert raw.summary["outcome"] == "failsafe" and "(by its estimate)" in raw.summary["ended_by"]["how"]
+    assert np.abs(raw.trace["x"]).max() < 8.0 and np.abs(raw.trace["y"]).max() < 8.0  # truly inside throughout
+    ekf = simulate(fenced, estimator="ekf", **jump)
+    assert ekf.summary["outcome"] == "completed", ekf.summary["ended_by"]

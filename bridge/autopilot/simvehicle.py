@@ -58,7 +58,7 @@ from bridge.autopilot.modes import (  # noqa: F401  (the modes: imported from he
     mode_target,
 )
 from bridge.autopilot.params import FENCE_ACTIONS, VehicleParams, change_param, read_param
-from bridge.autopilot.vehicleevents import Event, ParamChanged, Sender
+from bridge.autopilot.vehicleevents import Event, ParamChanged, Sender, impact_text
 from controller.nominal import Nominal
 from missions.geofence import Geofence
 from plant import Quadrotor
@@ -288,7 +288,8 @@ class SimVehicle:
         """The first time the vehicle is beyond GF_MAX_HOR_DIST or GF_MAX_VER_DIST, or outside the fence it holds, a
         ``geofence`` event says so (the run's geofence policy then fails), and GF_ACTION 2-5 fly the failsafe it
         names (:mod:`bridge.autopilot.fencewatch`), unless a failsafe already flies."""
-        new = [(which, why) for which, why in self._breaches("fence" in self._beyond) if which not in self._beyond]
+        known = "" if self.sensors is None else " (by its estimate)"  # PX4's geofence reads the estimate too
+        new = [(w, why + known) for w, why in self._breaches("fence" in self._beyond) if w not in self._beyond]
         for which, why in new:
             self._beyond.add(which)
             self.event("geofence", f"{why} (GF_ACTION = {self.fence_action}: {FENCE_ACTIONS[self.fence_action]})")
@@ -298,9 +299,10 @@ class SimVehicle:
                                "geofence: flight terminated, motors stopped")
 
     def _breaches(self, fence_known: bool = False) -> list[tuple[str, str]]:
-        """:func:`~bridge.autopilot.fencewatch.breaches` of the true state now (not the fence if ``fence_known``)."""
-        p = self.plant
-        return breaches(p.state, p.t, self.home, self.max_hor_m, self.max_ver_m, None if fence_known else self.fence)
+        """:func:`~bridge.autopilot.fencewatch.breaches` of the state the vehicle knows (its estimate, as PX4's
+        geofence reads it; the true state under truth) now, not the fence if ``fence_known``."""
+        fence = None if fence_known else self.fence
+        return breaches(self.published(), self.plant.t, self.home, self.max_hor_m, self.max_ver_m, fence)
 
     def prearm_refusal(self) -> str | None:
         """Why PX4's pre-arm checks deny arming now, or None: the geofence's (fencewatch.arming_refusal) and the
@@ -490,9 +492,3 @@ class SimVehicle:
 def _none_before(due: float | None, end: float) -> bool:
     """Whether nothing is due (``due`` s, None: nothing in flight) before the period's ``end`` (s)."""
     return due is None or due > end
-
-
-def impact_text(impact: tuple[float, float, float], armed: bool = True) -> str:
-    """A hard touchdown (t s, speed m/s, tilt rad) as the ``crashed`` (or, disarmed, ``impact``) event's text."""
-    text = f"hit the ground at {impact[1]:.2f} m/s, tilted {math.degrees(impact[2]):.1f} deg"
-    return text if armed else f"{text} (disarmed, motors off)"

@@ -3,11 +3,13 @@
 In:  what the vehicle did or was told to do (kind, text, plant time s) and its sender's ids and address
 Out: :class:`Event` (t s, kind, text, :class:`Sender`, and its typed fields: a :class:`ParamChanged`, the mode,
      whether it acted on an armed vehicle, whether it was the ground-side arm before a mission's start);
-     :func:`typed_fields`, those fields by name as they travel (JSON lines, summary.json)
+     :func:`typed_fields`, those fields by name as they travel (JSON lines, summary.json); :func:`impact_text`, a
+     hard touchdown's words
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -111,3 +113,9 @@ class Event:
     def shown(self) -> str:
         """The text as written to events.log and summary.json: with its sender's `` [by ...]``."""
         return self.text + (self.by.suffix if self.by is not None else "")
+
+
+def impact_text(impact: tuple[float, float, float], armed: bool = True) -> str:
+    """A hard touchdown (t s, speed m/s, tilt rad) as the ``crashed`` (or, disarmed, ``impact``) event's text."""
+    text = f"hit the ground at {impact[1]:.2f} m/s, tilted {math.degrees(impact[2]):.1f} deg"
+    return text if armed else f"{text} (disarmed, motors off)"
