@@ -16,9 +16,18 @@ import math
 import pytest
 from pymavlink.dialects.v20 import common as M
 
+from bridge.autopilot.failsafe import Land, Level, PositionHold, ReturnHome, Takeoff
 from bridge.core.flight import prepare
 from bridge.mavlink import telemetry as tm
-from bridge.nodes.vehicle.streams import ALTITUDE_S, DEFAULT_STREAMS, HOME_POSITION_S, VFR_HUD_S, VehicleView, message
+from bridge.nodes.vehicle.streams import (
+    ALTITUDE_S,
+    DEFAULT_STREAMS,
+    HOME_POSITION_S,
+    VFR_HUD_S,
+    VehicleView,
+    landed_state,
+    message,
+)
 from missions import Mission, Sine
 from missions.geofence import Geofence, Zone
 
@@ -26,8 +35,8 @@ HOME = tm.Home(47.0, 8.0, 500.0)
 
 
 def _view(X: tuple[float, ...], armed: bool = True, omega: tuple[float, ...] = (500.0,) * 4,
-          armable: bool = True) -> VehicleView:
-    return VehicleView(X, 1.0, "offboard", None, armed, False, False, omega, 1000.0, 0, None, HOME, 1,
+          armable: bool = True, target: object = None, on_ground: bool = False, mode: str = "offboard") -> VehicleView:
+    return VehicleView(X, 1.0, mode, target, armed, False, on_ground, omega, 1000.0, 0, None, HOME, 1,
                        armable=armable)
 
 
@@ -92,3 +101,25 @@ def test_the_pre_arm_checks_can_be_asked_without_an_event() -> None:
     assert "outside its fence" in sim.prearm_refusal() and sim.events == []
     assert sim.arming_denied() and [e.kind for e in sim.events] == ["preflight"]
     assert prepare(fenced, params={"GF_ACTION": 0}).make_vehicle().prearm_refusal() is None
+
+
+def test_the_landed_state_says_taking_off_and_landing_as_px4s() -> None:
+    """EXTENDED_SYS_STATE: on the ground; TAKEOFF while the vehicle's own controller climbs to a takeoff's height;
+    LANDING while it lands (LAND, the failsafe's land or descend, Return's last phase over home); IN_AIR under
+    offboard control, in a hold, and on Return's way home (PX4 says LANDING only for a landing setpoint)."""
+    X = (0.0, 0.0, 0.0, 0.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # 2 m up over home
+    home_return = ReturnHome(0.0, 0.0, 10.0, 5.0, 0.7)
+    cases = [(None, False, M.MAV_LANDED_STATE_IN_AIR), (None, True, M.MAV_LANDED_STATE_ON_GROUND),
+             (Land(0.0, 0.0, 0.7), False, M.MAV_LANDED_STATE_LANDING),
+             (Level(0.5), False, M.MAV_LANDED_STATE_LANDING),
+             (PositionHold(0.0, 0.0, 2.0), False, M.MAV_LANDED_STATE_IN_AIR),
+             (home_return, False, M.MAV_LANDED_STATE_LANDING),  # over home, below its descent height: landing
+             (ReturnHome(20.0, 0.0, 10.0, 5.0, 0.7), False, M.MAV_LANDED_STATE_IN_AIR),  # 20 m from home: climbing
+             (Land(0.0, 0.0, 0.7), True, M.MAV_LANDED_STATE_ON_GROUND)]
+    for target, ground, want in cases:
+        view = _view(X, target=target, on_ground=ground, mode="failsafe" if target else "offboard")
+        assert landed_state(view) == want, (target, ground)
+        assert _sent(M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, view).landed_state == want
+    climbing, held = (_view(X, target=Takeoff(0.0, 0.0, 3.0), mode=m) for m in ("takeoff", "hold"))
+    assert landed_state(climbing) == M.MAV_LANDED_STATE_TAKEOFF
+    assert landed_state(held) == M.MAV_LANDED_STATE_IN_AIR  # at its height, holding there

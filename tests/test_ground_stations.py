@@ -138,7 +138,14 @@ else:  # the flight parts: what MAVSDK's telemetry shows, each callback under on
         with cond:
             seen["altitude"] = (a.altitude_amsl_m, a.altitude_local_m, a.altitude_relative_m, a.altitude_terrain_m)
             cond.notify_all()
+    landed = []
+    def on_landed(s, ud=None):  # EXTENDED_SYS_STATE
+        with cond:
+            if not landed or landed[-1] != s.name:
+                landed.append(s.name)
+            cond.notify_all()
     tel.subscribe_flight_mode(on_mode)
+    tel.subscribe_landed_state(on_landed)
     tel.subscribe_fixedwing_metrics(on_hud)
     tel.subscribe_altitude(on_altitude)
     tel.subscribe_armed(on_armed)
@@ -184,6 +191,7 @@ elif sys.argv[2] == "goto":  # take off to 3 m, then goto_location 4 m north, 3 
     out["land"] = act.land().name
     until("disarmed_seen", lambda: seen["armed"] is False, 30)
 elif sys.argv[2] == "flight":  # MAVSDK's own takeoff_and_land example: arm, wait, take off, land
+    tel.set_rate_landed_state(10.0)  # MAVSDK asks for 1 Hz of EXTENDED_SYS_STATE: a takeoff at --speed 4 is shorter
     until("hold_seen", lambda: modes and modes[-1] == "HOLD", 10)  # the boot mode, as PX4's
     out["arm"] = act.arm().name
     until("armed_seen", lambda: seen["armed"] is True, 10)
@@ -204,8 +212,9 @@ elif sys.argv[2] == "flight":  # MAVSDK's own takeoff_and_land example: arm, wai
     until("disarmed_seen", lambda: seen["armed"] is False, 15)
     until("on_ground", lambda: abs(seen["rel"]) < 0.02, 5)  # positions come at 10 Hz: the next ones
     until("hud_landed", lambda: seen["hud"][0] == 0.0, 5)  # disarmed: no thrust
+    until("landed_on_ground", lambda: landed[-1] == "ON_GROUND", 5)
     with cond:
-        out.update(modes=modes, rel_landed=seen["rel"], top=seen["top"], hud_landed=seen["hud"])
+        out.update(modes=modes, rel_landed=seen["rel"], top=seen["top"], hud_landed=seen["hud"], landed=landed)
 print("RESULT " + json.dumps(out), flush=True)
 sdk.destroy()
 """
@@ -275,6 +284,11 @@ def test_mavsdk_arm_takeoff_land(tmp_path):
     assert out["after_arm"] == [True, "HOLD"], out  # armed and waiting on the ground, no failsafe
     assert out["takeoff_altitude"] == 3.0  # MIS_TAKEOFF_ALT, set and read back through the parameters
     assert out["modes"] == ["HOLD", "TAKEOFF", "HOLD", "LAND"], out["modes"]
+    # MAVSDK's landed_state (EXTENDED_SYS_STATE at 10 Hz) as PX4 tells it: taking off, in the air, landing, on the
+    # ground (the climb lasts ~0.5 s of wall time: a stalled machine may show none of it; tests/test_gcs_instruments.py
+    # pins the states themselves)
+    full = ["ON_GROUND", "TAKING_OFF", "IN_AIR", "LANDING", "ON_GROUND"]
+    assert out["landed"] in (full, full[:1] + full[2:]), out["landed"]
     assert abs(out["rel_at_height"] - 3.0) < 0.1 and out["top"] < 3.1
     assert abs(out["rel_landed"]) < 0.02
     # VFR_HUD (MAVSDK's fixed-wing metrics): climbing in TAKEOFF, a hover's throttle at 3 m facing north, no

@@ -128,11 +128,9 @@ def sys_status(load_permille: int, healthy: bool, battery: tuple[int, int, int] 
                                               max(0, min(1000, load_permille)), *battery, 0, 0, 0, 0, 0, 0)
 
 
-def extended_sys_state(on_ground: bool, descending: bool) -> Any:
-    """``EXTENDED_SYS_STATE``: landed state (on ground, landing, in air)."""
-    state = (mavlink.MAV_LANDED_STATE_ON_GROUND if on_ground
-             else mavlink.MAV_LANDED_STATE_LANDING if descending else mavlink.MAV_LANDED_STATE_IN_AIR)
-    return mavlink.MAVLink_extended_sys_state_message(mavlink.MAV_VTOL_STATE_UNDEFINED, state)
+def extended_sys_state(landed_state: int) -> Any:
+    """``EXTENDED_SYS_STATE``: the landed state (MAV_LANDED_STATE: on the ground, taking off, in the air, landing)."""
+    return mavlink.MAVLink_extended_sys_state_message(mavlink.MAV_VTOL_STATE_UNDEFINED, landed_state)
 
 
 def actuator_outputs(usec: int, omega: tuple[float, ...], omega_max: float) -> Any:

@@ -23,7 +23,8 @@ from typing import Any
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.autopilot.estimator import Covariance
-from bridge.autopilot.simvehicle import FAILSAFE, LANDED, SimVehicle
+from bridge.autopilot.failsafe import Land, Level, ReturnHome, Takeoff
+from bridge.autopilot.simvehicle import FAILSAFE, LANDED, TAKEOFF, SimVehicle
 from bridge.core.wire import odometry_fields, rotate_inverse, step_usec
 from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import ODOMETRY, Endpoint
@@ -80,6 +81,19 @@ def battery_status(v: VehicleView) -> list[Any]:
     return [mavlink.MAVLink_battery_status_message(
         0, mavlink.MAV_BATTERY_FUNCTION_ALL, mavlink.MAV_BATTERY_TYPE_LIPO, _INT16_MAX, [mv] + [_UINT16_MAX] * 9, ca,
         int(round(b.used_mah)), -1, remaining, 0, state)]
+
+
+def landed_state(v: VehicleView) -> int:
+    """EXTENDED_SYS_STATE's landed state, as PX4 tells it: on the ground; off it, taking off or landing while the
+    vehicle's own controller flies a takeoff or a landing (TAKEOFF; LAND, the failsafe's land or descend, Return's
+    last phase), else in the air (offboard control, HOLD, Return on its way)."""
+    if v.on_ground:
+        return mavlink.MAV_LANDED_STATE_ON_GROUND
+    if isinstance(v.target, Takeoff) and v.mode == TAKEOFF:  # (once at its height it holds there: HOLD)
+        return mavlink.MAV_LANDED_STATE_TAKEOFF
+    if isinstance(v.target, (Land, Level)) or (isinstance(v.target, ReturnHome) and v.target.phase(v.X) == "land"):
+        return mavlink.MAV_LANDED_STATE_LANDING
+    return mavlink.MAV_LANDED_STATE_IN_AIR
 
 
 def _sys_status(v: VehicleView) -> list[Any]:
@@ -146,7 +160,7 @@ STREAMS: dict[int, Stream] = {
     mavlink.MAVLINK_MSG_ID_SYS_STATUS: Stream(_sys_status, 0.1),
     mavlink.MAVLINK_MSG_ID_BATTERY_STATUS: Stream(battery_status, None),  # a battery's: battery_streams
     mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: Stream(
-        lambda v: [tm.extended_sys_state(v.on_ground, v.mode == FAILSAFE)], 0.1),
+        lambda v: [tm.extended_sys_state(landed_state(v))], 0.1),
     mavlink.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS: Stream(
         lambda v: [tm.actuator_outputs(int(v.t * 1e6), v.omega, v.omega_max)], 0.1),
     mavlink.MAVLINK_MSG_ID_VFR_HUD: Stream(_if_finite(lambda v: [tm.vfr_hud(v.X, v.home, _thrust(v))]), VFR_HUD_S),
