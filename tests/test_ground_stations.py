@@ -329,6 +329,33 @@ def test_a_sessions_vehicle_armed_by_a_ground_station_before_its_controller_hold
         gcs.close()
 
 
+def test_offboard_selected_disarmed_needs_a_controller_to_fly_it():
+    """PX4 switches to OFFBOARD only while a controller streams setpoints. Disarmed, the selection is for the next
+    arm, so it is refused (with a STATUSTEXT) while no controller has spoken on the controller link and none is
+    pinned: armed in OFFBOARD with nobody to fly it, the failsafe would disarm it at once. A session's vehicle (its
+    controller pinned) takes it."""
+    select = M.MAVLink_command_long_message(1, 1, M.MAV_CMD_DO_SET_MODE, 0, 29, 6, 0, 0, 0, 0, 0)
+    flight = prepare(Mission(Sine(), duration_s=5.0, name="offboard"))
+    for pinned, want in ((None, M.MAV_RESULT_DENIED), (("127.0.0.1", 9), M.MAV_RESULT_ACCEPTED)):
+        gcs = GcsSocket()
+        v = Vehicle(flight, VehicleConfig(parse_address("udpin:127.0.0.1:0"), parse_address(gcs.url),
+                                          controller_from=pinned))
+        try:
+            assert gcs.exchange(v, select, "COMMAND_ACK").result == want, pinned
+            assert v.sim.mode == ("hold" if pinned is None else "offboard")
+        finally:
+            v.close()
+            gcs.close()
+    text = "OFFBOARD: no controller has spoken on the controller link"
+    gcs = GcsSocket()
+    v = Vehicle(flight, VehicleConfig(parse_address("udpin:127.0.0.1:0"), parse_address(gcs.url)))
+    try:
+        assert gcs.exchange(v, select, "STATUSTEXT").text == text[:50]
+    finally:
+        v.close()
+        gcs.close()
+
+
 def test_mavsdk_return_to_launch(tmp_path):
     """``Action.return_to_launch`` (MAV_CMD_NAV_RETURN_TO_LAUNCH: PX4's Return mode) while ``bsst controller`` flies
     the step mission, at its second set-point (2.2 m from home, 2 m up): MAVSDK shows RETURN_TO_LAUNCH; the

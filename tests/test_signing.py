@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import math
 import os
+import time
 from pathlib import Path
 from typing import Any
 
@@ -277,8 +278,17 @@ def test_signed_vehicle_refuses_unsigned_forged_and_replayed_commands_and_target
 
             bad(gcs, arm(1))
             assert not _armed(_heartbeat_now(gcs))  # none of them armed it
-            # OFFBOARD selected for the arm (signed): the vehicle boots in HOLD, as PX4's, where the controller's
-            # targets would not be taken
+            # the signed controller speaks on its link (the vehicle answers with its heartbeat), and OFFBOARD is
+            # selected for the arm (signed): the vehicle boots in HOLD, as PX4's, where its targets would not be taken
+            ctl = mavutil.mavlink_connection(f"udpout:127.0.0.1:{LINK_PORT + n}", source_system=200,
+                                             source_component=191, dialect="common")
+            ctl.setup_signing(KEY, sign_outgoing=True)
+            deadline = time.monotonic() + 10.0  # heartbeats until the vehicle's answers (a stranger is on trial:
+            while True:  # its first small message earns too little to be answered, as bsst controller meets it)
+                ctl.mav.heartbeat_send(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 4)
+                if ctl.recv_match(type="HEARTBEAT", blocking=True, timeout=0.2) is not None:
+                    break
+                assert time.monotonic() < deadline, "the vehicle never answered the controller's heartbeats"
             gcs.mav.command_long_send(sysid, 1, mavlink.MAV_CMD_DO_SET_MODE, 0, 29, 6, 0, 0, 0, 0, 0)
             assert _ack(gcs, mavlink.MAV_CMD_DO_SET_MODE).result == mavlink.MAV_RESULT_ACCEPTED
             good_arm = arm(1).pack(gcs.mav)
@@ -286,10 +296,8 @@ def test_signed_vehicle_refuses_unsigned_forged_and_replayed_commands_and_target
             assert _ack(gcs, 400).result == mavlink.MAV_RESULT_ACCEPTED
             assert _armed(_heartbeat_now(gcs))
 
-            # actuator targets on the controller link: the signed controller steps the vehicle
-            ctl = mavutil.mavlink_connection(f"udpout:127.0.0.1:{LINK_PORT + n}", source_system=200,
-                                             source_component=191, dialect="common")
-            ctl.setup_signing(KEY, sign_outgoing=True)
+            # actuator targets on the controller link: the signed controller steps the vehicle (a flight armed from
+            # a ground station learns its controller afresh: it speaks again)
             ctl.mav.heartbeat_send(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 4)
             odo = ctl.recv_match(type="ODOMETRY", blocking=True, timeout=10)
             assert odo is not None

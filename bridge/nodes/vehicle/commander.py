@@ -59,6 +59,7 @@ class CommanderPorts:
     # the controller's arm enters the up-link model now (lockstep); the callable: when it has been acted on
     arm_through_link: Callable[[Callable[[], None]], None]
     target_wall: Callable[[], float]  # wall time (s) of the newest actuator target from the controller
+    controller_heard: Callable[[], bool]  # whether a controller has spoken on the controller link
     message: Callable[[int], list[Any]]  # the message(s) of an id, as a stream sends them
     reject: Callable[[str], None]  # count a refusal (bridge.mavlink.receive.Rejections)
     refused: Callable[[str], None]  # a command refused, and why (its report to the session)
@@ -335,6 +336,11 @@ class Commander:
                 and time.monotonic() - self.ports.target_wall() > OFFBOARD_STREAM_S):
             # PX4 too: OFFBOARD only while a controller streams targets (its failsafe would act at once)
             return self._refuse("OFFBOARD: no controller is sending targets")
+        unattended = self.cfg.controller_from is None and not self.ports.controller_heard()
+        if mode == OFFBOARD and not sim.armed and unattended:
+            # disarmed, for the next arm: refused while no controller is there to fly it (armed, its failsafe would
+            # disarm it at once); a session's controller, pinned, is on its way
+            return self._refuse("OFFBOARD: no controller has spoken on the controller link")
         if by.link == "controller" and mode in (LAND, HOLD) and hold_at is None and sim.armed and sim.mode == OFFBOARD:
             return self._end_mission(mode)
         n0 = len(sim.events)

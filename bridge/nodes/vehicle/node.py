@@ -129,7 +129,8 @@ class Vehicle:
                                    self._statustext, self._heartbeat)
         ports = CommanderPorts(step=lambda: self.k, state_out=self._send_odometry, new_flight=self._new_flight,
                                arm_through_link=lambda acted: self.vend.receive_arm(self.t, acted),
-                               target_wall=lambda: self.targets.wall, message=self._message,
+                               target_wall=lambda: self.targets.wall,
+                               controller_heard=lambda: self.link.peer is not None, message=self._message,
                                reject=self._reject, refused=self._refused, announce=self.announcer.report_events,
                                missions=self.missions)
         self.commander = Commander(self.sim, self.clock, self.authority, self._statustext,
