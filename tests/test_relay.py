@@ -79,10 +79,12 @@ def test_twenty_ms_each_way_measured_within_two_ms() -> None:
         relay.start()
         up, down = ping_pong(client, target, relay.address, 40)
     os_late_ms = control.median()
-    for d in (up, down):  # two wake-ups a datagram: the relay's at the due time, the receiver's
-        assert np.median(d) * 1000.0 - 20.0 <= 2.0 + 2.0 * os_late_ms, (np.median(d), os_late_ms)
-        assert min(d) >= 0.020  # never early
     s = relay.summary()
+    for d, way in ((up, "up"), (down, "down")):  # two wake-ups a datagram: the relay's at the due time, the receiver's
+        # a failure names the relay's own measure too (its receive stamp to its sendto): which side was late
+        assert np.median(d) * 1000.0 - 20.0 <= 2.0 + 2.0 * os_late_ms, (np.median(d), os_late_ms,
+                                                                        s[way]["measured_ms"])
+        assert min(d) >= 0.020  # never early
     assert s["up"]["sent"] == s["up"]["delivered"] == 40 == s["down"]["delivered"]
     assert s["up"]["delay_ms"]["p50"] == pytest.approx(20.0)
     # the relay's own measure (the kernel's receive stamp to its sendto): one wake-up
