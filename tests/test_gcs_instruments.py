@@ -36,8 +36,9 @@ HOME = tm.Home(47.0, 8.0, 500.0)
 
 def _view(X: tuple[float, ...], armed: bool = True, omega: tuple[float, ...] = (500.0,) * 4,
           armable: bool = True, target: object = None, on_ground: bool = False, mode: str = "offboard") -> VehicleView:
+    refusal = None if armable else "arming denied: outside its fence"
     return VehicleView(X, 1.0, mode, target, armed, False, on_ground, omega, 1000.0, 0, None, HOME, 1,
-                       armable=armable)
+                       prearm_refusal=lambda: refusal)
 
 
 def _sent(mid: int, view: VehicleView):

@@ -92,12 +92,15 @@ def _named_modules(module: ModuleType) -> frozenset[str]:
     space = vars(module)
     key = (module.__name__, len(space))
     if key not in _references:
-        out = {home for value in list(space.values()) if (home := _origin(value))}
-        prefix = module.__name__ + "."
-        out = {m for m in out if m != module.__name__ and not (hasattr(module, "__path__") and m.startswith(prefix)
-                                                             and space.get(m[len(prefix):]) is sys.modules.get(m))}
-        _references[key] = frozenset(out)
+        homes = {home for value in list(space.values()) if (home := _origin(value))}
+        _references[key] = frozenset(m for m in homes if m != module.__name__ and not _bound_submodule(module, m))
     return _references[key]
+
+
+def _bound_submodule(module: ModuleType, name: str) -> bool:
+    """Whether ``name`` is a submodule of package ``module`` that the import system bound in its namespace."""
+    parent, _, leaf = name.rpartition(".")
+    return hasattr(module, "__path__") and parent == module.__name__ and vars(module).get(leaf) is sys.modules.get(name)
 
 
 def _origin(value: Any) -> str | None:

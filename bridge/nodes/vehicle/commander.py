@@ -336,8 +336,8 @@ class Commander:
                 and time.monotonic() - self.ports.target_wall() > OFFBOARD_STREAM_S):
             # PX4 too: OFFBOARD only while a controller streams targets (its failsafe would act at once)
             return self._refuse("OFFBOARD: no controller is sending targets")
-        unattended = self.cfg.controller_from is None and not self.ports.controller_heard()
-        if mode == OFFBOARD and not sim.armed and unattended:
+        if (mode == OFFBOARD and not sim.armed and self.cfg.controller_from is None
+                and not self.ports.controller_heard()):
             # disarmed, for the next arm: refused while no controller is there to fly it (armed, its failsafe would
             # disarm it at once); a session's controller, pinned, is on its way
             return self._refuse("OFFBOARD: no controller has spoken on the controller link")

@@ -414,7 +414,7 @@ class Vehicle:
                            plant.on_ground, plant.omega, self.flight.profile.omega_max, self.load, sim.sensors,
                            cfg.home, cfg.sysid, (mission.current, len(mission.items), self.missions.mission_state),
                            plant.battery, sim.battery_watch.level(plant.battery.remaining) if plant.battery else 0,
-                           not self.clock.halted and sim.prearm_refusal() is None)
+                           sim.prearm_refusal)
 
     def _heartbeat(self) -> Any:
         return heartbeat(self._view())

@@ -61,7 +61,9 @@ class VehicleView:
     mission: tuple[int, int, int] = (0, 0, 2)  # the mission's current item, its items, its MISSION_STATE
     battery: Battery | None = None  # the plant's flight battery ([effects] battery), None: it flies none
     battery_level: int = 0  # its level by the vehicle's BAT_*_THR: 0 none, 1 low, 2 critical, 3 emergency
-    armable: bool = True  # PX4's pre-arm checks pass (SimVehicle.prearm_refusal) and the flight is not over
+    # why PX4's pre-arm checks deny an arm now, or None (SimVehicle.prearm_refusal): asked only by SYS_STATUS, which
+    # alone needs it (with a fence and an estimator it costs tens of microseconds, and a view is built per message)
+    prearm_refusal: Callable[[], str | None] = lambda: None
 
 
 def battery_fields(b: Battery) -> tuple[int, int, int]:
@@ -97,9 +99,11 @@ def landed_state(v: VehicleView) -> int:
 
 
 def _sys_status(v: VehicleView) -> list[Any]:
+    healthy = not v.halted  # (a flight over is healthy in nothing, the pre-arm bit included)
+    armable = healthy and v.prearm_refusal() is None
     if v.battery is None:
-        return [tm.sys_status(v.load, not v.halted, armable=v.armable)]
-    return [tm.sys_status(v.load, not v.halted, battery_fields(v.battery), v.armable)]
+        return [tm.sys_status(v.load, healthy, armable=armable)]
+    return [tm.sys_status(v.load, healthy, battery_fields(v.battery), armable)]
 
 
 _INT16_MAX, _UINT16_MAX = 2**15 - 1, 2**16 - 1  # MAVLink's "unknown" temperature and cell voltage
