@@ -46,6 +46,7 @@ from typing import Any
 import numpy as np
 
 from params import Table
+from plant.angles import wrap_angle  # re-exported: the estimator and the tests read it here
 from plant.sensorfaults import SensorFaults
 
 State = tuple[float, ...]
@@ -244,14 +245,6 @@ def matmul(A: Mat3, B: Mat3) -> Mat3:
 def transpose_mul(A: Mat3, B: Mat3) -> Mat3:
     """Aᵀ·B."""
     return matmul((A[0], A[3], A[6], A[1], A[4], A[7], A[2], A[5], A[8]), B)
-
-
-def wrap_angle(a: float) -> float:
-    """a wrapped to (−π, π]."""
-    w = math.fmod(a + math.pi, 2.0 * math.pi)
-    if w <= 0.0:
-        w += 2.0 * math.pi
-    return w - math.pi
 
 
 def imu_mean(X0: State, X1: State, dt: float, gravity: float) -> tuple[float, ...]:

@@ -15,10 +15,7 @@ updates, the estimate), compiled with numba (``cache=True``). The 3-vector and 3
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
-from numba.extending import overload
 
 from bridge.autopilot.cholesky import weighted_square
 from bridge.autopilot.kernelcache import njit
@@ -39,14 +36,6 @@ K_POSE, K_GNSS, K_BARO, K_HEADING = 0, 1, 2, 3
 N_REJ, N_ROW = 0, 1
 HIST_COLS = 19  # t, p, v, (phi, theta, psi), the nine corrections at that time
 
-
-
-@overload(math.fmod)
-def _fmod(a, b):  # noqa: ANN001, ANN202 - numba has no math.fmod, which wrap_angle uses
-    def impl(a, b):  # noqa: ANN001, ANN202
-        return np.fmod(a, b)  # exact in IEEE arithmetic, as math.fmod: the same floats
-
-    return impl
 
 
 _rotation_of = njit(cache=True)(_s.rotation_of)
