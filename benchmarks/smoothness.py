@@ -29,6 +29,10 @@ LAM periods (:func:`implicit_horizon`, the same kind of experiment), the scan or
 ``bsst margin``'s bisection in this process, without the check below). ``--two-step-deadbeat`` flies the implicit
 scheme with its integrator stepped on the measured s_k first (:func:`two_step_deadbeat`, the same kind).
 
+``--ensemble`` runs ``bsst margin``'s search (with its check below) on the sine with its centre moved along x by
+-10 to +10 mm (the vehicle starts that far off its path), both schemes, and counts at 33-37 ms how many of those
+flights hold (:func:`ensemble`; docs/law.md, "One initial condition"): a margin of one flight is one draw.
+
 Acceptance (issue 24): implicit sine 250 Hz period-2 <= 0.01 N (u2, u3, u4), TV <= 35 /s (u2, u3), RMS <= 1e-5
 m, 100 Hz period-2 <= 0.02 N; step settling <= 5 s and steady error <= 1 mm; robust <= 6 cm; smoothness
 against SMC >= 20x; the delay margin at least the explicit law's.
@@ -41,6 +45,7 @@ t in [20, 20.1) s, both schemes.
     .venv/bin/python benchmarks/smoothness.py --scan [--implicit-virtual-controls]
     .venv/bin/python benchmarks/smoothness.py [--scan] --implicit-horizon 4
     .venv/bin/python benchmarks/smoothness.py [--scan] --two-step-deadbeat
+    .venv/bin/python benchmarks/smoothness.py --ensemble
 """
 
 from __future__ import annotations
@@ -52,6 +57,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -225,6 +231,45 @@ def bisect(d: str, predict: bool) -> dict[str, Any]:
     return {"margin": r["margin"], "holds_below": None, "monotone": None, "failed_below": None}
 
 
+CENTRE_OFFSETS_M = (-0.01, -0.005, -0.002, 0.0, 0.002, 0.005, 0.01)  # --ensemble: the sine's centre moved along x
+BAND_MS = (33, 34, 35, 36, 37)  # --ensemble: the one-way delays around the margins whose outcomes it counts
+
+
+def ensemble(limit_m: float = 0.1, schemes: tuple[str, ...] = DISCRETIZATIONS) -> str:
+    """``bsst margin``'s search (bisection, then its check below) on the sine with its centre moved along x by each
+    of :data:`CENTRE_OFFSETS_M` (the vehicle starts that far off its path; 0 is the mission as it stands), both
+    schemes, and at each delay of :data:`BAND_MS` how many of those flights hold: is one scheme's margin above the
+    other's for the sine, or for one initial condition of it? With an experiment patched in, the searches fly
+    in this process (its scalar loop), as :func:`bisect`'s, without the check below (``holds_below`` nan)."""
+    from bridge.sweep.margin import margin as search
+    from bridge.sweep.margin import parse_until
+
+    heads = " | ".join(f"{x * 1e3:+g}" if x else "0" for x in CENTRE_OFFSETS_M)
+    lines = [f"| centre moved (mm) | {heads} | mean |", "|---|" + "---|" * (len(CENTRE_OFFSETS_M) + 1)]
+    held: dict[str, list[int]] = {}
+    for d in schemes:
+        found: dict[str, list[float]] = {"margin": [], "holds_below": []}
+        held[d] = [0] * len(BAND_MS)
+        for x0 in CENTRE_OFFSETS_M:
+            m = mission("sine", d)
+            m = replace(m, trajectory=replace(m.trajectory, x0=x0))
+            # patched: one cell a round flies here, so no check below (a round of many flies in other processes)
+            r = search(m, "delay_ms", parse_until(f"rms={limit_m:g}"), engine="process" if PATCHED else "auto",
+                       below=0.0 if PATCHED else None)
+            for k in found:  # patched: holds_below unchecked (nan)
+                found[k].append(r[k] if r.get(k) is not None and not (PATCHED and k == "holds_below") else np.nan)
+            for i, v in enumerate(BAND_MS):
+                link = {"up": {"delay_ms": float(v)}, "down": {"delay_ms": float(v)}}
+                held[d][i] += simulate(m, link=link, plots=False).summary["rms_3d"] <= limit_m
+        for k, vals in found.items():
+            what = "margin (bisection)" if k == "margin" else k
+            lines.append(f"| {d}: {what} (ms) | {' | '.join(f'{v:g}' for v in vals)} | {np.mean(vals):.2f} |")
+    n = len(CENTRE_OFFSETS_M)
+    lines += ["", f"| one-way delay (ms) | {' | '.join(str(v) for v in BAND_MS)} |", "|---|" + "---|" * len(BAND_MS)]
+    lines += [f"| {d}: flights that hold (of {n}) | {' | '.join(str(c) for c in held[d])} |" for d in schemes]
+    return "\n".join(lines)
+
+
 def scan_table(limit_m: float = 0.1, schemes: tuple[str, ...] = DISCRETIZATIONS) -> str:
     """The delay scans of both schemes as markdown (RMS in mm; over ``limit_m`` in bold), and for each the
     largest delay up to which every delay of the scan holds."""
@@ -351,6 +396,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", action="store_true", help="print the figures as JSON too")
     ap.add_argument("--figure", type=Path, metavar="PATH", help="draw u2 of both schemes over 0.1 s into PATH")
     ap.add_argument("--scan", action="store_true", help="the sine's RMS at every whole ms of delay, both schemes")
+    ap.add_argument("--ensemble", action="store_true",
+                    help="bsst margin's search on the sine with its centre moved by -10..10 mm, both schemes")
     ap.add_argument("--implicit-horizon", type=float, metavar="LAM",
                     help="the implicit scheme only, its step solved over LAM periods (an experiment: see "
                          "implicit_horizon); with --scan or the table (its margins by bisection, no check below)")
@@ -373,6 +420,11 @@ def main(argv: list[str] | None = None) -> int:
         two_step_deadbeat()
         PATCHED.append("two-step-deadbeat")
         schemes = ("implicit",)
+    if args.ensemble:
+        print(ensemble(schemes=schemes))
+        print(f"load average {' '.join(f'{v:.2f}' for v in os.getloadavg())}; {os.cpu_count()} cores; "
+              f"{time.perf_counter() - t0:.0f} s")
+        return 0
     if args.scan:
         if args.implicit_virtual_controls:
             implicit_virtual_controls()
