@@ -18,9 +18,11 @@ from missions.references import Reference, Sine, Step, Waypoints
 ENVELOPE_RADIUS_M = 100.0
 
 
-def envelope_problem(trajectory: Reference, start: tuple[float, ...], duration_s: float) -> tuple[str, str] | None:
-    """The key and the reason when the start or the reference leaves the plant's envelope
-    (:data:`ENVELOPE_RADIUS_M` from the origin) at some time of the mission, or None.
+def envelope_problem(trajectory: Reference, start: tuple[float, ...], duration_s: float,
+                     scatter_m: float = 0.0) -> tuple[str, str] | None:
+    """The key and the reason when the start (anywhere within ``scatter_m`` of it: missions.scatter) or the
+    reference leaves the plant's envelope (:data:`ENVELOPE_RADIUS_M` from the origin) at some time of the
+    mission, or None.
 
     Step set-points and waypoints are checked point by point: a minimum-jerk segment runs on the
     straight line between its two points (a convex blend), and the envelope is a ball. A sine's
@@ -31,9 +33,9 @@ def envelope_problem(trajectory: Reference, start: tuple[float, ...], duration_s
         return (f"{what} is {r:.4g} m from the origin, outside the plant's envelope of {ENVELOPE_RADIUS_M:g} m "
                 f"(plant/quadrotor.py: a vehicle farther out has diverged)")
 
-    r = math.sqrt(sum(v * v for v in start[:3]))
+    r = math.hypot(math.hypot(*start[:2]) + scatter_m, start[2])  # the farthest point of the start's disc
     if r > ENVELOPE_RADIUS_M:
-        return "start.position", beyond("the start", r)
+        return "start.position", beyond("the start" + (" with its scatter" if scatter_m else ""), r)
     if isinstance(trajectory, (Step, Waypoints)):
         key, points = (("trajectory.setpoints", trajectory.setpoints) if isinstance(trajectory, Step)
                        else ("trajectory.points", trajectory.points))

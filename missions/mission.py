@@ -34,6 +34,7 @@ from missions.planfiles import PlanFile, read_plan_text
 from missions.rally import rally_dict, rally_from_plan, rally_from_table
 from missions.references import Reference, Setpoint, Sine, Step, Waypoints
 from missions.route import LIMIT_RANGES, Limits, smooth_from_plan
+from missions.scatter import scattered_start
 from params import ConfigError, Table, load_toml, read_text_file
 
 CONTROLLERS = ("bsst", "smc", "pid")
@@ -51,6 +52,7 @@ MISSION_RANGES: dict[str, tuple[float, float]] = {
     "rate_hz": (50.0, 1000.0),
     "physics_hz": (100.0, 10000.0),
     "seed": (0, 2**31 - 1),
+    "start_scatter_m": (0.0, 100.0),  # [start] scatter_m, --scatter: missions.scatter
 }
 TRAJECTORIES = ("step", "sine", "waypoints", "smooth", "plan")
 PLAN_SUFFIXES = (".plan", ".waypoints", ".txt")  # QGroundControl's JSON plan; QGC WPL 110 text
@@ -79,6 +81,7 @@ class Mission:
     physics_hz: float = 1000.0
     seed: int = 0
     start: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)  # x, y, z, psi at rest
+    start_scatter_m: float = 0.0  # [start] scatter_m: each seed starts in a disc this wide around it (flight_start)
     gains: Mapping[str, Any] = field(default_factory=dict)
     effects: Mapping[str, Any] = field(default_factory=dict)
     link: Mapping[str, Any] = field(default_factory=dict)
@@ -109,9 +112,22 @@ class Mission:
         if self.end_action not in END_ACTIONS:
             raise ConfigError(f"{self.source}: end.action: must be one of {', '.join(END_ACTIONS)}; "
                               f"got {self.end_action!r}"[:300])
-        outside = envelope_problem(self.trajectory, self.start, self.duration_s)
+        lo, hi = MISSION_RANGES["start_scatter_m"]
+        if not lo <= self.start_scatter_m <= hi:  # also refuses nan
+            raise ConfigError(f"{self.source}: start.scatter_m: must be in [{lo:g}, {hi:g}] m; "
+                              f"got {self.start_scatter_m!r}"[:300])
+        if self.start_scatter_m and self.vehicles:
+            raise ConfigError(f"{self.source}: start.scatter_m: a fleet's starts are its formation's ([[vehicles]], "
+                              "--vehicles): scatter the starts of a mission of one vehicle")
+        outside = envelope_problem(self.trajectory, self.start, self.duration_s, self.start_scatter_m)
         if outside:
             raise ConfigError(f"{self.source}: {outside[0]}: {outside[1]}")
+
+    @property
+    def flight_start(self) -> tuple[float, float, float, float]:
+        """Where this flight begins (x, y, z m, psi rad): ``start``, or with ``start_scatter_m`` a point drawn
+        around it from the seed (:func:`missions.scatter.scattered_start`)."""
+        return scattered_start(self.start, self.start_scatter_m, self.seed)
 
     def with_overrides(self, **kw: Any) -> Mission:
         """A copy with some fields replaced (None values are ignored), validated again."""
@@ -132,6 +148,8 @@ class Mission:
         if self.actuation:
             d["actuation"] = self.actuation
         d["start"] = {"position": list(self.start[:3]), "psi": self.start[3]}
+        if self.start_scatter_m:  # (none: mission.toml as before)
+            d["start"]["scatter_m"] = self.start_scatter_m
         d["trajectory"] = self.trajectory.to_dict()
         for k in ("gains", "effects", "link", "failsafe", "sensors", "estimator", "params", "wind"):
             if getattr(self, k):
@@ -303,6 +321,7 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
     seed = t.integer("seed", 0, lo=int(r["seed"][0]), hi=int(r["seed"][1]))
     st = t.table("start")
     start = st.vector("position", 3, (0.0, 0.0, 0.0), lo=-1e4, hi=1e4) + (st.number("psi", 0.0, lo=-10, hi=10),)
+    scatter = st.number("scatter_m", 0.0, lo=r["start_scatter_m"][0], hi=r["start_scatter_m"][1])
     st.done()
     trajectory = _trajectory(trajectory_table, duration if not derived else MISSION_RANGES["duration_s"][1])
     if derived:
@@ -332,6 +351,7 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
         physics_hz=physics,
         seed=seed,
         start=start,  # type: ignore[arg-type]
+        start_scatter_m=scatter,
         source=source,
         events=tuple(events),
         end_action=end_action,

@@ -139,7 +139,7 @@ CONVERTER_BAD = {
     "int_in": ["x", "-99999999999", "99999999999", "1.5"],
     "value_list": ["x", "-1e300", "1,1", ""],
     "name_list": ["x", "bsst,bsst"],
-    "mission_number": ["x", "-1e300", "nan", "inf", "49"],
+    "mission_number": ["x", "-1e300", "nan", "inf", "1001"],  # 1001: past --rate (1000 Hz) and --scatter (100 m)
     "mission_integer": ["x", "-1", "99999999999", "1.5"],
     "link_seed": ["x", "-1", "99999999999", "1.5"],
     "axis_values": ["x", "-1e300", "1,1", ""],

@@ -116,6 +116,7 @@ def _differs(a: Flight, b: Flight) -> str | None:
     ma, mb = a.mission, b.mission
     for what, x, y in (("trajectory", ma.trajectory, mb.trajectory), ("duration_s", ma.duration_s, mb.duration_s),
                        ("physics_hz", ma.physics_hz, mb.physics_hz), ("start", ma.start, mb.start),
+                       ("start_scatter_m", ma.start_scatter_m, mb.start_scatter_m),
                        ("profile", a.profile, b.profile), ("effects", a.effects, b.effects),
                        ("gains", a.gains, b.gains), ("failsafe", a.failsafe, b.failsafe)):
         if x != y:

@@ -422,10 +422,12 @@ def batch_arrays(flights: Sequence[Flight], plan: LinkPlan, clocks: Clocks, refs
     f0 = flights[0]
     m, nominal, gains = f0.mission, f0.nominal, f0.gains
     n, steps, rate = len(flights), clocks.steps, clocks.rate_hz
-    x0, y0, z0, psi0 = m.start
-    start = (float(x0), 0.0, float(y0), 0.0, float(z0), 0.0, 0.0, 0.0, 0.0, 0.0, float(psi0), 0.0)
+    # each flight's own start: the mission's, or with [start] scatter_m the one its seed draws (missions.scatter)
+    states = np.array([(x, 0.0, y, 0.0, z, 0.0, 0.0, 0.0, 0.0, 0.0, psi, 0.0)
+                       for x, y, z, psi in (f.mission.flight_start for f in flights)], float).T
+    start = tuple(float(v) for v in states[:, 0])  # a resting state (a diverged cell's)
     plant = BatchPlant(f0.profile, f0.effects, [f.mission.seed for f in flights], physics_hz=m.physics_hz,
-                       state=start, faulty=faulty(flights))
+                       state=states, faulty=faulty(flights))
     act = BatchActuation(nominal, n)
     dist = plant.effects.disturbance
     st = (gains.z_st, gains.attitude_st, gains.attitude_st, gains.yaw_st)  # z, phi (u2), theta (u3), yaw

@@ -38,7 +38,7 @@ class BatchPlant:
     """N quadrotors of one profile and effects, each with its own command and disturbance phases."""
 
     def __init__(self, profile: Profile, effects: Effects | None, seeds: Sequence[int], *, physics_hz: float,
-                 state: Sequence[float], ground: bool = True, faulty: bool = False) -> None:
+                 state: Sequence[float] | np.ndarray, ground: bool = True, faulty: bool = False) -> None:
         e = effects or Effects()
         self.profile = profile
         self.effects = e
@@ -55,7 +55,8 @@ class BatchPlant:
         self.dt = 1.0 / physics_hz
         self.ground = ground
         self.t = 0.0
-        self.X = np.repeat(np.asarray(state, float)[:, None], n, axis=1)
+        X = np.asarray(state, float)  # one start for all, or [12, n]: each flight's own
+        self.X = X.copy() if X.ndim == 2 else np.repeat(X[:, None], n, axis=1)
         self.motors = profile.actuation == "motors"
         self.lagged = self.motors and e.motor_lag
         # a command holds rotor speeds (not their wrench) under motor lag, or when a rotor may fail (``faulty``:

@@ -30,6 +30,7 @@ from bridge.cli.flags import (
 )
 from bridge.cli.options import (
     add_discretization_option,
+    add_scatter_option,
     add_sensor_axes,
     add_sensor_options,
     sensor_overrides_from_args,
@@ -58,6 +59,7 @@ def add_sweep_commands(sub: Any) -> None:
                         "(docs/campaigns.md; 1: the mission alone)")
     p.add_argument("--seeds", type=int_in("--seeds", 1, 10000), metavar="N",
                    help="seeds per grid point: the mission's seed, +1, ... (default 1)")
+    add_scatter_option(p)  # fixed for every cell: with --seeds, N starts around the mission's
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--offline", dest="mode", action="store_const", const="offline",
                       help="fly each cell in-process (default)")
@@ -121,8 +123,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             raise UsageError(f"bsst sweep: --{d}-{clash[0].split('_')[0]} conflicts with the swept {clash[0]} "
                              f"(a swept value applies to both directions)")
     sensors = {"set": args.sensors} if args.sensors is not None else None
-    if fixed or sensors:  # the flags fixed for every cell, laid over the mission by the one path to its parts
-        spec = replace(spec, mission=prepare(spec.mission, Overrides(link=fixed or None, sensors=sensors)).mission)
+    if fixed or sensors or args.scatter is not None:  # fixed for every cell, laid over by the one path to its parts
+        spec = replace(spec, mission=prepare(spec.mission, Overrides(link=fixed or None, sensors=sensors,
+                                                                     scatter_m=args.scatter)).mission)
     if args.resume and args.out is None:
         raise UsageError("bsst sweep: --resume needs --out DIR (the sweep to resume)")
     client = connect_dask(args.dask) if args.dask else None
@@ -182,6 +185,7 @@ def add_margin_command(sub: Any) -> None:
     add_discretization_option(p)
     p.add_argument("--seeds", type=int_in("--seeds", 1, 1000), default=1, metavar="N",
                    help="seeds per value: a value fails when any seed fails (default 1)")
+    add_scatter_option(p)  # with --seeds N: the margin every one of N starts holds
     p.add_argument("--resolution", type=number_in("--resolution", 0.0, 1e6, lo_open=True), default=0.25,
                    metavar="X", help="stop when the bracket is this narrow, in the axis's unit (default 0.25)")
     p.add_argument("--check-below", type=number_in("--check-below", 0.0, 1e9), metavar="X",
@@ -220,7 +224,8 @@ def cmd_margin(args: argparse.Namespace) -> int:
     if args.over == "noise" and sensing["noise"] is not None:
         raise UsageError("bsst margin: --noise conflicts with --over noise (the noise scale is what is searched)")
     mission = prepare(load_mission(args.mission), Overrides(link=fixed or None, discretization=args.discretization,
-                                                            turbulence=args.turbulence, **sensing)).mission
+                                                            turbulence=args.turbulence, scatter_m=args.scatter,
+                                                            **sensing)).mission
     run_dir(args.out, f"{mission.name}-margin", args.overwrite, create=False)  # a refused --out before any flight
     live = sys.stderr.isatty()
 
@@ -244,7 +249,9 @@ def cmd_margin(args: argparse.Namespace) -> int:
             print(f"bsst margin: warning: {e['controller']} is not monotone over {args.over}: it fails at "
                   f"{', '.join(f'{v:g}' for v in e['failed_below'])}, below its margin {e['margin']:g}; every value "
                   f"flown holds only up to {e['holds_below']:g}", file=sys.stderr)
-    print(f"{res['cells_flown']} cells flown; margin.json: {path / 'margin.json'}")
+    starts = (f"; each value from {len(res['seeds'])} starts within {res['start_scatter_m']:g} m of the mission's"
+              if res["start_scatter_m"] else "")
+    print(f"{res['cells_flown']} cells flown{starts}; margin.json: {path / 'margin.json'}")
     low = [e["controller"] for e in entries if args.require is not None
            and (e["holds_below"] is None or e["holds_below"] < args.require)]
     if low:

@@ -134,6 +134,7 @@ def add_flight_options(p: argparse.ArgumentParser, vehicle: bool = True, optiona
     p.add_argument("--controller", type=law_spec("--controller"), metavar="LAW",
                    help="control law: bsst, smc, pid, or your own (path/to/file.py:Class or package.module:Class)")
     p.add_argument("--seed", type=mission_integer("--seed", "seed"), metavar="N", help="seed of random effects")
+    add_scatter_option(p)
     add_discretization_option(p)
     if vehicle:
         p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
@@ -173,6 +174,13 @@ def add_weather_options(p: argparse.ArgumentParser) -> None:
 
 
 
+def add_scatter_option(p: argparse.ArgumentParser) -> None:
+    """``--scatter M``: the Overrides field ``scatter_m`` ([start] scatter_m; missions/scatter.py)."""
+    p.add_argument("--scatter", type=mission_number("--scatter", "start_scatter_m"), metavar="M",
+                   help="start each seed's flight at a point drawn in a horizontal disc of M metres around the "
+                        "mission's start (0-100 m; default: the mission's [start] scatter_m, else 0)")
+
+
 def add_discretization_option(p: argparse.ArgumentParser) -> None:
     """``--discretization explicit|implicit``: the Overrides field of the same name (docs/law.md)."""
     from missions import DISCRETIZATIONS  # lazy: start-up time
@@ -190,7 +198,8 @@ def overrides_from_args(args: argparse.Namespace) -> Overrides:
 
     return Overrides(profile=getattr(args, "profile", None), controller=getattr(args, "controller", None),
                      discretization=getattr(args, "discretization", None), rate_hz=getattr(args, "rate", None),
-                     seed=getattr(args, "seed", None), link=link_table_from_args(args) or None,
+                     seed=getattr(args, "seed", None), scatter_m=getattr(args, "scatter", None),
+                     link=link_table_from_args(args) or None,
                      failsafe=failsafe_table_from_args(args) or None, **sensor_overrides_from_args(args),
                      **param_overrides_from_args(args),
                      wind=getattr(args, "wind", None), turbulence=getattr(args, "turbulence", None),

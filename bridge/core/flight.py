@@ -91,7 +91,7 @@ class Flight:
 
     def make_plant(self) -> Quadrotor:
         m = self.mission
-        x, y, z, psi = m.start
+        x, y, z, psi = m.flight_start  # the mission's start, or its seed's draw around it ([start] scatter_m)
         state = (x, 0.0, y, 0.0, z, 0.0, 0.0, 0.0, 0.0, 0.0, psi, 0.0)
         plant = Quadrotor(self.profile, self.effects, seed=m.seed, physics_hz=m.physics_hz, state=state,
                           wind=self.wind)
@@ -164,6 +164,7 @@ class Overrides:
     discretization: str | None = None  # how bsst steps its super-twisting step: explicit or implicit (docs/law.md)
     rate_hz: float | None = None  # control rate, Hz
     seed: int | None = None  # seed of the random effects (and of the link's fates, unless [link] seed)
+    scatter_m: float | None = None  # [start] scatter_m, m: each seed starts in a disc this wide (missions.scatter)
     actuation: str | None = None  # the profile's actuation: wrench or motors
     link: Mapping[str, Any] | None = None  # over [link] (merge_link_tables): delay_ms ms, loss_pct %, blackouts s, ...
     failsafe: Mapping[str, Any] | None = None  # over [failsafe], key by key: timeout_s s, descent_rate m/s, action
@@ -180,6 +181,7 @@ class Overrides:
 
     def __post_init__(self) -> None:
         _check_type("turbulence", self.turbulence, str, "a string")
+        _check_type("scatter_m", self.scatter_m, (int, float), "a number (m)")
         _check_type("turbulence_scaling", self.turbulence_scaling, str, "a string")
         w = self.wind
         if isinstance(w, (int, float)) and not isinstance(w, bool):
@@ -260,7 +262,7 @@ class Overrides:
             event_from_table(Table(e, named), m.duration_s)
         events = (*m.events, *self.at) if self.at else None
         return m.with_overrides(profile=self.profile, controller=law, discretization=self.discretization,
-                                rate_hz=self.rate_hz, seed=self.seed,
+                                rate_hz=self.rate_hz, seed=self.seed, start_scatter_m=self.scatter_m,
                                 actuation=self.actuation, link=link, failsafe=failsafe, sensors=sensors,
                                 estimator=estimator, params=params, wind=wind, events=events)
 

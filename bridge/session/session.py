@@ -313,7 +313,7 @@ class Session:
         fs = self.flight.failsafe
         pace = self.speed or 1.0
         if fs.action == "return":
-            x0, y0, z0 = self.flight.mission.start[:3]
+            x0, y0, z0 = self.flight.mission.flight_start[:3]
             away = max((math.hypot(r.x - x0, r.y - y0) for r in rows), default=0.0)
             flying = 2.0 * return_time_s(self.flight.params.rtl, away, z - z0, fs.descent_rate)
         else:

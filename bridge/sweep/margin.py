@@ -249,7 +249,7 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
                 "bracket": [s.lo if s.held else None, s.hi], **s.below(over, checked[s.controller]),
                 "cells": s.cells, "held_to_range": s.hi is None} for s in searches]
     out: dict[str, Any] = {"over": over, "until": until.text(), "resolution": resolution, "check_below": below,
-                           "seeds": seed_list,
+                           "seeds": seed_list, "start_scatter_m": mission.start_scatter_m,  # 0: one start, every seed
                            "mission": mission.name, "cells_flown": cells_flown, "estimator": flight.estimator,
                            "sensors": flight.sensors.name}
     if len(entries) == 1:
