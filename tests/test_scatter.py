@@ -104,6 +104,13 @@ def test_margin_over_scattered_starts_records_them(tmp_path: Path) -> None:
     assert "each value from 2 starts within 0.01 m of the mission's" in r.stdout, r.stdout
     res = json.loads((tmp_path / "m" / "margin.json").read_text())
     assert res["start_scatter_m"] == 0.01 and res["seeds"] == [0, 1] and res["margin"] > 0
+    assert res["seeds_alike"] is False and "flew the same flight" not in r.stderr
+    # without the scatter the two seeds fly one flight twice: margin.json and a warning say so
+    same = run_bsst("margin", f, "--over", "delay_ms", "--until", "rms=0.1", "--seeds", "2", "--resolution", "1",
+                    "--check-below", "0", "--out", tmp_path / "m2")
+    assert same.returncode == 0, same.stderr
+    assert json.loads((tmp_path / "m2" / "margin.json").read_text())["seeds_alike"] is True
+    assert "warning: the 2 seeds of each value flew the same flight" in same.stderr and "--scatter M" in same.stderr
     bad = run_bsst("margin", f, "--over", "delay_ms", "--until", "rms=0.1", "--scatter", "-1")
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "--scatter" in bad.stderr, bad.stderr
     assert "[0, 100]" in bad.stderr and "Traceback" not in bad.stderr

@@ -249,6 +249,10 @@ def cmd_margin(args: argparse.Namespace) -> int:
             print(f"bsst margin: warning: {e['controller']} is not monotone over {args.over}: it fails at "
                   f"{', '.join(f'{v:g}' for v in e['failed_below'])}, below its margin {e['margin']:g}; every value "
                   f"flown holds only up to {e['holds_below']:g}", file=sys.stderr)
+    if any(e["seeds_alike"] for e in entries):  # N copies of one flight: say so, and what gives N draws
+        print(f"bsst margin: warning: the {len(res['seeds'])} seeds of each value flew the same flight (the mission "
+              "draws nothing at random): --seeds added nothing; --scatter M starts each seed at its own point",
+              file=sys.stderr)
     starts = (f"; each value from {len(res['seeds'])} starts within {res['start_scatter_m']:g} m of the mission's"
               if res["start_scatter_m"] else "")
     print(f"{res['cells_flown']} cells flown{starts}; margin.json: {path / 'margin.json'}")
