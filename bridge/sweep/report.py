@@ -147,6 +147,21 @@ def rebuild(path: str | Path, plots: bool = True) -> Path:
     return write_report(Path(path), rows, meta, plots=plots)
 
 
+def _seeds_note(rows: Sequence[Mapping[str, Any]], seeds: list[Any], meta: Mapping[str, Any]) -> list[str]:
+    """What the seeds drew: each its own start ([start] scatter_m), or, where every grid point's seeds flew the same
+    flight (a mission that draws nothing at random), that they added nothing."""
+    scatter = (meta.get("mission", {}).get("start") or {}).get("scatter_m")
+    if scatter:
+        return [f"- start: each seed's own, within {_fmt(scatter)} m of the mission's (`[start] scatter_m`)"]
+    flights: dict[tuple[Any, ...], set[tuple[Any, Any]]] = {}
+    for r in rows:
+        flights.setdefault(tuple(r[a] for a in AXES), set()).add((r["rms"], r["outcome"]))
+    if len(seeds) > 1 and all(len(f) == 1 for f in flights.values()):
+        return ["- the seeds of every grid point flew the same flight (the mission draws nothing at random): they "
+                "added nothing; `--scatter M` starts each at its own point (docs/campaigns.md)"]
+    return []
+
+
 def write_report(path: Path, rows: Sequence[Mapping[str, Any]], meta: Mapping[str, Any], plots: bool = True) -> Path:
     """Write ``report.md`` (and the ``map_*.png`` heat maps) into the sweep directory."""
     try:
@@ -161,6 +176,7 @@ def write_report(path: Path, rows: Sequence[Mapping[str, Any]], meta: Mapping[st
     lines = [f"# Sweep report: {mission}", ""]
     lines.append(f"Mode `{meta.get('mode', '?')}`, {len(rows)} runs: controllers {', '.join(controllers)}; "
                  f"seeds {', '.join(map(str, seeds))}.")
+    lines += _seeds_note(rows, seeds, meta)
     for a in MAP_AXES:
         vals = _values(rows, a)
         unit = f" {UNITS[a]}" if a in UNITS else ""
