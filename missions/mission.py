@@ -3,9 +3,10 @@
 In:  a mission TOML file's path (read by :func:`params.load_toml`), a ground station's plan (``.plan``,
      ``.waypoints``, ``.txt``: read by :func:`params.read_text_file`), or a TOML's parsed table, or the
      fields given in Python: a trajectory, ``duration_s`` (s), ``rate_hz`` and ``physics_hz`` (Hz),
-     ``start`` (x, y, z in m, psi in rad; paper frame NWU, z up), the profile, law and seed names,
-     and the raw tables of the other parts
-Out: a frozen, validated :class:`Mission` (its trajectory a :class:`~missions.references.Reference`);
+     ``start`` (x, y, z in m, psi in rad; paper frame NWU, z up) and its ``scatter_m`` (m), the profile, law
+     and seed names, and the raw tables of the other parts
+Out: a frozen, validated :class:`Mission` (its trajectory a :class:`~missions.references.Reference`; its
+     ``flight_start``, where its seed's flight begins: :mod:`missions.scatter`);
      a bad value as a :class:`params.ConfigError` naming the file and the key; ``to_dict`` the
      TOML-ready table a run's ``mission.toml`` holds
 
