@@ -154,3 +154,15 @@ def test_a_sweeps_report_says_what_its_seeds_drew(tmp_path: Path) -> None:
     assert load_mission(tmp_path / "scattered" / "mission.toml").start_scatter_m == 0.01
     assert not any("flew the same flight" in s for s in lines["scattered"])
     assert any(s.startswith("- the seeds of every grid point flew the same flight") for s in lines["plain"])
+
+
+def test_over_sixteen_starts_the_implicit_scheme_keeps_the_explicit_laws_delay_margin() -> None:
+    """docs/law.md, "One initial condition": one start gives the sine's explicit law 36 ms and the implicit scheme
+    35 (tests/test_margin.py); 16 starts within 1 cm, every one of which must hold, give 32 and 33 ms."""
+    from bridge.sweep.margin import margin, parse_until
+
+    m = replace(load_mission("missions/sine.toml"), start_scatter_m=0.01)
+    found = {d: margin(replace(m, discretization=d), "delay_ms", parse_until("rms=0.1"), seeds=16, below=0.0)
+             for d in ("explicit", "implicit")}
+    assert {d: r["margin"] for d, r in found.items()} == {"explicit": 32.0, "implicit": 33.0}
+    assert all(r["seeds_alike"] is False and r["start_scatter_m"] == 0.01 for r in found.values())
