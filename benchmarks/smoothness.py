@@ -261,7 +261,8 @@ def ensemble(limit_m: float = 0.1, schemes: tuple[str, ...] = DISCRETIZATIONS) -
             r = search(m, "delay_ms", parse_until(f"rms={limit_m:g}"), engine="process" if PATCHED else "auto",
                        below=0.0 if PATCHED else None)
             for k in found:  # patched: holds_below unchecked (nan)
-                found[k].append(r[k] if r.get(k) is not None and not (PATCHED and k == "holds_below") else np.nan)
+                v = None if PATCHED and k == "holds_below" else r.get(k)
+                found[k].append(np.nan if v is None else v)
             for i, v in enumerate(BAND_MS):
                 link = {"up": {"delay_ms": float(v)}, "down": {"delay_ms": float(v)}}
                 held[d][i] += simulate(m, link=link, plots=False).summary["rms_3d"] <= limit_m

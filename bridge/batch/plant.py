@@ -35,10 +35,11 @@ from plant.quadrotor import CRASH_SPEED_MPS, CRASH_TILT_RAD
 
 
 class BatchPlant:
-    """N quadrotors of one profile and effects, each with its own command and disturbance phases."""
+    """N quadrotors of one profile and effects, each with its own start (``state`` [12, n]), command and disturbance
+    phases."""
 
     def __init__(self, profile: Profile, effects: Effects | None, seeds: Sequence[int], *, physics_hz: float,
-                 state: Sequence[float] | np.ndarray, ground: bool = True, faulty: bool = False) -> None:
+                 state: np.ndarray, ground: bool = True, faulty: bool = False) -> None:
         e = effects or Effects()
         self.profile = profile
         self.effects = e
@@ -55,8 +56,7 @@ class BatchPlant:
         self.dt = 1.0 / physics_hz
         self.ground = ground
         self.t = 0.0
-        X = np.asarray(state, float)  # one start for all, or [12, n]: each flight's own
-        self.X = X.copy() if X.ndim == 2 else np.repeat(X[:, None], n, axis=1)
+        self.X = np.array(state, float)  # [12, n]: each flight's own start
         self.motors = profile.actuation == "motors"
         self.lagged = self.motors and e.motor_lag
         # a command holds rotor speeds (not their wrench) under motor lag, or when a rotor may fail (``faulty``:

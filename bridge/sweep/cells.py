@@ -15,7 +15,7 @@ import io
 import json
 import math
 import os
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -110,6 +110,18 @@ def row_from_run(cell: Cell, run: Run) -> dict[str, Any]:
 def broke_policy(row: Mapping[str, Any]) -> bool:
     """Whether a row's run broke a safety policy: its ``policies`` names one (``ok`` and not judged do not)."""
     return row.get("policies") not in (None, "", POLICIES_OK)
+
+
+def seeds_alike(rows: Sequence[Mapping[str, Any]], point: Callable[[Mapping[str, Any]], Any]) -> bool | None:
+    """Whether, at every ``point`` (a row's grid point or probed value), the rows' seeds flew the same flight (RMS
+    and outcome alike: a mission that draws nothing at random), so that its seeds added nothing; None with fewer
+    than two seeds."""
+    flights: dict[Any, set[tuple[Any, Any]]] = {}
+    for r in rows:
+        flights.setdefault(point(r), set()).add((r["rms"], r["outcome"]))
+    if len({r["seed"] for r in rows}) < 2:
+        return None
+    return all(len(f) == 1 for f in flights.values())
 
 
 def policies_cell(verdicts: Sequence[Sequence[Mapping[str, Any]] | None]) -> str:

@@ -37,12 +37,13 @@ import math
 import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from operator import itemgetter
 from pathlib import Path
 from typing import Any
 
 from bridge.core.flight import prepare
 from bridge.record.runlog import run_dir, write_json_atomic
-from bridge.sweep.cells import broke_policy
+from bridge.sweep.cells import broke_policy, seeds_alike
 from bridge.sweep.classes import CLASSES, Classes, classify
 from bridge.sweep.executors import engine_for, run_batch, run_cell, run_local
 from bridge.sweep.grid import LINK_AXES, RANGES, Cell, cell_flight, mission_value, noise_problem
@@ -150,16 +151,6 @@ class Search:
         values = (self.lo - k * resolution for k in range(1, steps + 1))
         return [v for v in values if v >= floor and v not in flown]
 
-    def seeds_alike(self, over: str) -> bool | None:
-        """Whether every value's seeds flew the same flight (RMS and outcome alike: a mission that draws nothing
-        at random, without ``[start] scatter_m``), so that its seeds added nothing; None with one seed."""
-        by_value: dict[float, set[tuple[Any, str]]] = {}
-        seeds = set()
-        for c in self.cells:
-            by_value.setdefault(c[over], set()).add((c["rms"], c["outcome"]))
-            seeds.add(c["seed"])
-        return None if len(seeds) < 2 else all(len(v) == 1 for v in by_value.values())
-
     def below(self, over: str, checked: list[float] | None) -> dict[str, Any]:
         """The monotonicity fields of ``margin.json``: ``monotone`` (None: not checked), ``failed_below``
         (the values under the margin that failed), ``holds_below``, ``checked_below`` (the band flown)."""
@@ -257,7 +248,8 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
     checked = {s.controller: [max(s.lo - below, lo_range), s.lo] if s.held and below > 0 else None for s in searches}
     entries = [{"controller": s.controller, "margin": s.lo if s.held else None,  # None: it failed at every value
                 "bracket": [s.lo if s.held else None, s.hi], **s.below(over, checked[s.controller]),
-                "seeds_alike": s.seeds_alike(over), "cells": s.cells, "held_to_range": s.hi is None} for s in searches]
+                "seeds_alike": seeds_alike(s.cells, itemgetter(over)), "cells": s.cells,
+                "held_to_range": s.hi is None} for s in searches]
     out: dict[str, Any] = {"over": over, "until": until.text(), "resolution": resolution, "check_below": below,
                            "seeds": seed_list, "start_scatter_m": mission.start_scatter_m,  # 0: one start, every seed
                            "mission": mission.name, "cells_flown": cells_flown, "estimator": flight.estimator,

@@ -32,7 +32,16 @@ from pathlib import Path
 from typing import Any
 
 from bridge.autopilot.estimator import ESTIMATOR_KINDS
-from bridge.sweep.cells import CELLS_CSV, FAILED, POLICIES_OK, SWEEP_JSON, broke_policy, read_cells, read_sweep_json
+from bridge.sweep.cells import (
+    CELLS_CSV,
+    FAILED,
+    POLICIES_OK,
+    SWEEP_JSON,
+    broke_policy,
+    read_cells,
+    read_sweep_json,
+    seeds_alike,
+)
 from bridge.sweep.classes import CLASSES, Classes, classify, thresholds_text
 from bridge.sweep.grid import AXES, LINK_AXES, NAME_AXES, SHORT
 from params import ConfigError
@@ -147,16 +156,13 @@ def rebuild(path: str | Path, plots: bool = True) -> Path:
     return write_report(Path(path), rows, meta, plots=plots)
 
 
-def _seeds_note(rows: Sequence[Mapping[str, Any]], seeds: list[Any], meta: Mapping[str, Any]) -> list[str]:
+def _seeds_note(rows: Sequence[Mapping[str, Any]], meta: Mapping[str, Any]) -> list[str]:
     """What the seeds drew: each its own start ([start] scatter_m), or, where every grid point's seeds flew the same
     flight (a mission that draws nothing at random), that they added nothing."""
     scatter = (meta.get("mission", {}).get("start") or {}).get("scatter_m")
     if scatter:
         return [f"- start: each seed's own, within {_fmt(scatter)} m of the mission's (`[start] scatter_m`)"]
-    flights: dict[tuple[Any, ...], set[tuple[Any, Any]]] = {}
-    for r in rows:
-        flights.setdefault(tuple(r[a] for a in AXES), set()).add((r["rms"], r["outcome"]))
-    if len(seeds) > 1 and all(len(f) == 1 for f in flights.values()):
+    if seeds_alike(rows, lambda r: tuple(r[a] for a in AXES)):
         return ["- the seeds of every grid point flew the same flight (the mission draws nothing at random): they "
                 "added nothing; `--scatter M` starts each at its own point (docs/campaigns.md)"]
     return []
@@ -176,7 +182,7 @@ def write_report(path: Path, rows: Sequence[Mapping[str, Any]], meta: Mapping[st
     lines = [f"# Sweep report: {mission}", ""]
     lines.append(f"Mode `{meta.get('mode', '?')}`, {len(rows)} runs: controllers {', '.join(controllers)}; "
                  f"seeds {', '.join(map(str, seeds))}.")
-    lines += _seeds_note(rows, seeds, meta)
+    lines += _seeds_note(rows, meta)
     for a in MAP_AXES:
         vals = _values(rows, a)
         unit = f" {UNITS[a]}" if a in UNITS else ""
