@@ -1,5 +1,6 @@
 """Covers bridge.record.halves: a SITL side's half of the trace as binary records (vehicle.bin, controller.bin),
-written and read back as the vehicle, the controller and the session do, on real files."""
+written and read back as the vehicle, the controller and the session do, on real files; and the link read from the
+halves alone (bridge.record.linkextract.extract_halves)."""
 
 from __future__ import annotations
 
@@ -11,8 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bridge.record.columns import CONTROLLER_COLUMNS, ControllerRow
+from bridge.record.columns import CONTROLLER_COLUMNS, VEHICLE_COLUMNS, ControllerRow
 from bridge.record.halves import HalfReader, HalfWriter, count_records, header_line, read_half
+from bridge.record.linkextract import extract_halves
 
 
 def _values(rng: random.Random) -> list[float]:
@@ -94,3 +96,47 @@ def test_a_file_that_is_not_a_half_is_an_error_that_names_it(tmp_path: Path, fir
         with pytest.raises(ValueError, match=says) as exc:
             read()
         assert str(path) in str(exc.value)
+
+
+# -- the link read from the halves alone (bsst link extract of a run without its tlogs) -----------------------------
+def _halves(out: Path, counted: bool) -> tuple[Path, Path]:
+    """A 250 Hz flight of steps 0..9, 10 ms down and 10 ms up (walls in s): the controller took state 3 with state 4
+    in one tick and never got state 6; the vehicle took the targets of steps 1 and 2 in one tick, never got 5's.
+    ``counted`` False: halves written before the counts (no ``odo_arrived``, ``cmd_arrived``)."""
+    vcols = VEHICLE_COLUMNS if counted else VEHICLE_COLUMNS[:-1]
+    ccols = CONTROLLER_COLUMNS if counted else CONTROLLER_COLUMNS[:-1]
+    sent = {k: 1.0 + k * 0.004 for k in range(10)}
+    # each tick answers the state it took with a target of the same step
+    ctl = [{"k": k, "odo_recv_wall": sent[k] + 0.010, "cmd_sent_wall": sent[k] + 0.011,
+            "odo_arrived": 2 if k == 4 else 1} for k in (0, 1, 2, 4, 5, 7, 8, 9)]
+    in_force = [(-1, 0), (0, 1), (0, 0), (2, 2), (2, 0), (4, 1), (4, 0), (7, 1), (8, 1), (9, 1)]  # (cmd_k, arrived)
+    veh = [{"k": step, "odo_sent_wall": sent[step], "cmd_k": key,
+            "cmd_recv_wall": sent[key] + 0.021 if key >= 0 else math.nan, "cmd_arrived": n}
+           for step, (key, n) in enumerate(in_force)]
+    out.mkdir(exist_ok=True)
+    paths = out / "vehicle.bin", out / "controller.bin"
+    for path, cols, rows in ((paths[0], vcols, veh), (paths[1], ccols, ctl)):
+        half = HalfWriter(path, cols, batch=1)
+        for r in rows:
+            half.write([float(r.get(c, 0.0)) for c in cols])
+        half.close()
+    return paths
+
+
+def _by_step(records: list, sent_s: float) -> dict[int, float | None]:
+    return {round((t - sent_s) / 0.004): d for t, d in records}
+
+
+def test_a_step_superseded_in_its_readers_tick_is_delivered_by_the_readers_count(tmp_path: Path) -> None:
+    ex = extract_halves(*_halves(tmp_path / "new", counted=True))
+    down, up = _by_step(ex.down.records, 0.0), _by_step(ex.up.records, 0.011)
+    assert [k for k, d in down.items() if d is None] == [6]
+    assert down[3] == pytest.approx(0.014) and down[4] == pytest.approx(0.010)  # 3 taken in 4's read
+    assert [k for k, d in up.items() if d is None] == [5]
+    assert up[1] == pytest.approx(0.014) and up[2] == pytest.approx(0.010)
+    assert "approximate" not in ex.notes[0]
+    # halves written before the counts: each superseded step reads as lost, and the note says so
+    old = extract_halves(*_halves(tmp_path / "old", counted=False))
+    assert [k for k, d in _by_step(old.down.records, 0.0).items() if d is None] == [3, 6]
+    assert [k for k, d in _by_step(old.up.records, 0.011).items() if d is None] == [1, 5]
+    assert "approximate" in old.notes[0] and "superseded" in old.notes[0]

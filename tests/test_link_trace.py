@@ -354,13 +354,14 @@ def test_extract_a_real_time_run_gives_its_delay_and_loss(tmp_path: Path) -> Non
     assert halves.returncode == 0, halves.stderr
     assert "from vehicle.bin and controller.bin (no tlogs)" in (bare / "link-trace.csv").read_text()
     by_step = read_trace(bare / "link-trace.csv")
-    # by step number, a state (command) superseded within one tick of its reader counts as lost too: never less
-    # than the tlogs' loss, more by what the machine's wake-ups bunched (loaded CI runs: +2.3 and +5.2 points)
+    # by step number, a state (command) superseded within one tick of its reader is known by the reader's count
+    # (odo_arrived, cmd_arrived), so what the machine's wake-ups bunched is not read as lost (a loaded CI run read
+    # 16.8 % against the tlogs' 5.6 % before the count); the tlogs count frames, the halves steps
     for d in ("up", "down"):
         rec, truth = by_step.records(d), trace.records(d)
         assert abs(float(np.nanmedian(np.array(rec.delay_s))) * 1000.0 - 20.0) <= 2.0, d
-        floor = 100.0 * truth.lost / truth.n
-        assert floor - 1.5 <= 100.0 * rec.lost / rec.n <= floor + 10.0, (d, rec.lost, rec.n, truth.lost, truth.n)
+        tlogs = 100.0 * truth.lost / truth.n
+        assert abs(100.0 * rec.lost / rec.n - tlogs) <= 1.5, (d, rec.lost, rec.n, truth.lost, truth.n)
     # and replayed offline, the flight meets the link the session met
     replay = simulate(SHORT, plots=False, link={"trace": str(run.path / "link-trace.csv")})
     assert replay.outcome == "completed"

@@ -14,7 +14,10 @@ the torques are l·u2..u4 in N m), ``c1..c4`` normalised actuator command, ``*_w
 The state columns are the true state; the ``*_est`` columns (last, so the older columns keep their
 places) the vehicle's on-board estimate of it, what the controller was sent (equal to the truth
 under the ``truth`` estimator), and ``nees`` its NEES against its own covariance (every 10th step,
-nan between; 0 under truth: no error).
+nan between; 0 under truth: no error). ``cmd_arrived`` (vehicle) and ``odo_arrived`` (controller) count the
+targets of new steps (states) taken from the link since the side's previous record, the row's own included: one
+superseded before it was used (two arrived in one period) is counted there, so the link's loss can be read from
+the halves alone (:mod:`bridge.record.linkextract`).
 """
 
 from __future__ import annotations
@@ -35,11 +38,11 @@ TRACE_COLUMNS = (
 )
 VEHICLE_COLUMNS = (
     ("k", "t") + STATE_COLUMNS + ("mode", "cmd_k") + WIRE_COLUMNS + INPUT_COLUMNS + REALISED_COLUMNS
-    + ("state_age_s", "rtt_s", "odo_sent_wall", "cmd_recv_wall") + ESTIMATE_COLUMNS + ("nees",)
+    + ("state_age_s", "rtt_s", "odo_sent_wall", "cmd_recv_wall") + ESTIMATE_COLUMNS + ("nees", "cmd_arrived")
 )
 CONTROLLER_COLUMNS = (
     ("k", "t") + REF_COLUMNS + INPUT_COLUMNS + WIRE_COLUMNS + DESIRED_COLUMNS
-    + ("odo_recv_wall", "cmd_sent_wall", "state_to_cmd_s", "period_error_s", "state_age_s")
+    + ("odo_recv_wall", "cmd_sent_wall", "state_to_cmd_s", "period_error_s", "state_age_s", "odo_arrived")
 )
 
 # one row of each file with its columns as named fields (a tuple of floats: written, stacked into arrays and

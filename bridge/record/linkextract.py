@@ -192,7 +192,8 @@ def extract_run_dir(path: str | Path, clock: str = "same") -> Extraction:
                       f"no record of a link to extract")
 
 
-def _half_rows(path: Path, names: Sequence[str]) -> list[dict[str, float]]:
+def _half_rows(path: Path, names: Sequence[str], optional: str) -> list[dict[str, float]]:
+    """The half's records, each the named columns (and ``optional``, when the file has it)."""
     try:
         half = half_arrays(read_regular_file(path, "a trace half"), str(path))
     except ValueError as exc:
@@ -200,30 +201,54 @@ def _half_rows(path: Path, names: Sequence[str]) -> list[dict[str, float]]:
     missing = [n for n in names if n not in half]
     if missing:
         raise ConfigError(f"{path}: no column {missing[0]!r} in its header")
+    names = tuple(names) + ((optional,) if optional in half else ())
     columns = [half[n].tolist() for n in names]
     return [dict(zip(names, values, strict=True)) for values in zip(*columns, strict=True)]
 
 
+def _arrivals(rows: Sequence[dict[str, float]], key: str, wall: str, count: str, sent: dict[int, float]
+              ) -> tuple[dict[int, float], bool]:
+    """When the reader took each step's state (command) off the link (monotonic s), from its records of the step
+    it used (``key``, its ``wall`` time taken) and how many it took since its previous record (``count``): those
+    beyond the one it used, superseded before it could use them, are the sent steps just below it, taken in the
+    same read. Without ``count`` (a half from before it was recorded) a superseded step reads as lost: the second
+    value is False then."""
+    taken: dict[int, float] = {}
+    counted = bool(rows) and count in rows[0]
+    first_sent = min(sent, default=0)
+    before = first_sent - 1  # the step the previous record used (none yet: just before the first sent)
+    for r in rows:
+        k = int(r[key])
+        if k < 0 or k <= before:
+            continue
+        taken[k] = r[wall]
+        extra = int(r[count]) - 1 if counted else 0
+        j = k - 1
+        while extra > 0 and j > before:
+            if j in sent and j not in taken:
+                taken[j] = r[wall]
+                extra -= 1
+            j -= 1
+        before = k
+    return taken, counted
+
+
 def extract_halves(vehicle_half: Path, controller_half: Path) -> Extraction:
-    """Both directions from each side's half of the trace (one host's monotonic clock). Approximate:
-    a state or command is known by its step k, so one superseded within one of its reader's ticks (two
-    arrived in one period) counts as lost, and a tick that reuses a state sends a command with the same k
-    (the first counts)."""
-    v = _half_rows(vehicle_half, ("k", "odo_sent_wall", "cmd_k", "cmd_recv_wall"))
-    c = _half_rows(controller_half, ("k", "odo_recv_wall", "cmd_sent_wall"))
+    """Both directions from each side's half of the trace (one host's monotonic clock). A state or command is
+    known by its step k; one superseded within one of its reader's ticks (two arrived in one period) is known by
+    the reader's count (``odo_arrived``, ``cmd_arrived``); a tick that reuses a state sends a command with the
+    same k (the first counts)."""
+    v = _half_rows(vehicle_half, ("k", "odo_sent_wall", "cmd_k", "cmd_recv_wall"), "cmd_arrived")
+    c = _half_rows(controller_half, ("k", "odo_recv_wall", "cmd_sent_wall"), "odo_arrived")
     if not v or not c:
         raise ConfigError(f"{vehicle_half if not v else controller_half}: no records")
     state_sent = {int(r["k"]): r["odo_sent_wall"] for r in v}
-    state_recv: dict[int, float] = {}
     cmd_sent: dict[int, float] = {}
     for r in c:
-        state_recv.setdefault(int(r["k"]), r["odo_recv_wall"])
         cmd_sent.setdefault(int(r["k"]), r["cmd_sent_wall"])
-    cmd_recv: dict[int, float] = {}
-    for r in v:
-        if r["cmd_k"] >= 0:
-            cmd_recv.setdefault(int(r["cmd_k"]), r["cmd_recv_wall"])
-    k0, k1 = min(state_recv), max(state_recv)
+    state_recv, counted_down = _arrivals(c, "k", "odo_recv_wall", "odo_arrived", state_sent)
+    cmd_recv, counted_up = _arrivals(v, "cmd_k", "cmd_recv_wall", "cmd_arrived", cmd_sent)
+    k0, k1 = int(c[0]["k"]), max(state_recv)  # from the first state the controller used (before it: phase-lock)
     down = DirectionRecords([(state_sent[k], state_recv[k] - state_sent[k] if k in state_recv else None)
                              for k in sorted(state_sent) if k0 <= k <= k1])
     delivered = [k for k in cmd_sent if k in cmd_recv]
@@ -233,8 +258,10 @@ def extract_halves(vehicle_half: Path, controller_half: Path) -> Extraction:
     origin = state_sent.get(k0, min(t for t, _ in down.records))
     for d in (up, down):
         d.records = [(t - origin, x) for t, x in d.records if t >= origin and math.isfinite(t)]
-    note = ("from vehicle.bin and controller.bin (no tlogs): approximate, by step number; a state or command "
-            "superseded within one of its reader's ticks counts as lost")
+    note = "from vehicle.bin and controller.bin (no tlogs): by step number, on one host's monotonic clock"
+    if not (counted_down and counted_up):
+        note += ("; approximate: these halves do not count what their reader took, so a state or command "
+                 "superseded within one of its reader's ticks counts as lost")
     return Extraction(up, down, "the flight's time 0 (the first state the controller answered left the vehicle)",
                       "same", 0.0, None, (str(vehicle_half), str(controller_half)), [note])
 

@@ -69,6 +69,7 @@ class Offboard(OffboardLink):
         super().__init__(flight, cfg, out, status)
         self.spinner = Spinner(self.ep, cfg.spin_s)  # a lockstep state is polled for before sleeping
         self.rows = HalfWriter(out / "controller.bin", CONTROLLER_COLUMNS, batch=1) if out is not None else None
+        self._states_rowed = 0  # self.states when the last row was written
         self._last_state = time.monotonic()  # wall time of the newest state flown
         self._started = False  # the mission's third state come (before it: start_timeout_s)
         self.stale_ticks = 0
@@ -430,9 +431,10 @@ class Offboard(OffboardLink):
 
     def _row(self, k: int, t: float, ref: Any, u: Any, wire: Any, desired: Any, recv: float, sent: float,
              s2c: float, late: float, age: float) -> None:
-        if self.rows is not None:
+        if self.rows is not None:  # odo_arrived: the states taken since the previous row, this one's included
+            arrived, self._states_rowed = self.states - self._states_rowed, self.states
             self.rows.write((k, t, ref[0][0], ref[1][0], ref[2][0], ref[3][0], *u, *wire, *desired, recv, sent, s2c,
-                             late, age))
+                             late, age, arrived))
 
     def _check_vehicle(self) -> str | None:
         """The outcome if the vehicle is lost to the flight (silent, no more states, disarmed

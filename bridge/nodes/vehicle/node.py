@@ -90,7 +90,7 @@ class Vehicle:
         self.link, self.gcs = open_links(cfg, self.tlog, self.rejected)
         self.endpoints = [self.link] + ([self.gcs] if self.gcs is not None else [])
         self.spinner = Spinner(self.link, cfg.spin_s)  # a lockstep answer is polled for before sleeping
-        self.rows = Rows(out / "vehicle.bin", self.rate) if out is not None else None
+        self.rows = Rows(out / "vehicle.bin", self.rate, lambda: self.targets.new_steps) if out is not None else None
         self.k = 0  # control step of the plant's state: t_k = k / rate_hz
         self.stopping = False
         now = time.monotonic()

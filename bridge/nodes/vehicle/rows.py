@@ -2,7 +2,8 @@
 
 In:  the step k, the plant's true state X taken at t_k (paper frame, eq. 7), the flight mode, the target
      in force (wire units: ``motors`` omega / omega_max, ``wrench`` normalised), the failsafe's demand and
-     command, the realised command, ages and wall times (s), the published estimate and its NEES
+     command, the realised command, ages and wall times (s), the published estimate and its NEES, and a count of
+     the targets of new steps taken from the link so far
 Out: rows of :data:`~bridge.record.columns.VEHICLE_COLUMNS` (``mode`` coded by :data:`MODE_CODES`)
 """
 
@@ -25,9 +26,13 @@ Estimate = tuple[tuple[float, ...], float]  # (the published estimate, its NEES)
 class Rows:
     """``vehicle.bin``, written in batches."""
 
-    def __init__(self, path: Path, rate_hz: float) -> None:
+    def __init__(self, path: Path, rate_hz: float, arrived: Callable[[], int]) -> None:
+        """``arrived``: how many targets of new steps the vehicle has taken so far (each row records those since
+        the previous row: ``cmd_arrived``)."""
         self.rate = rate_hz
         self.out = HalfWriter(path, VEHICLE_COLUMNS, batch=100)
+        self._arrived = arrived
+        self._arrived_before = 0
 
     def write(self, k: int, X: tuple[float, ...], mode: str, key: int, wire: tuple[float, ...],
               dem: tuple[float, ...], real: tuple[float, ...], age: float, rtt: float, sent: float, recv: float,
@@ -35,8 +40,9 @@ class Rows:
         """One row; ``est``: (estimate, NEES) taken with ``X``."""
         E, nees = est
         code = MODE_CODES.get(mode, 0)
+        arrived, self._arrived_before = self._arrived() - self._arrived_before, self._arrived()
         self.out.write((k, k / self.rate, *state_columns(X), code, key, *wire, *dem, *real, age, rtt, sent, recv,
-                        *state_columns(E), nees))
+                        *state_columns(E), nees, arrived))
 
     def lockstep(self, k: int, X: tuple[float, ...], mode: str, wire: tuple[float, ...] | None,
                  real: tuple[float, ...], age: float, rtt: float, sent: float, recv: float, est: Estimate) -> None:

@@ -41,6 +41,7 @@ class Targets:
         self._reject = reject
         self.applied: Applied | None = None  # the target in force
         self.accepted = 0
+        self.new_steps = 0  # accepted targets of a step newer than any before (vehicle.bin's ``cmd_arrived``)
         self.wall = -math.inf  # wall time of the newest actuator target from the controller (checked)
         # lockstep: the steps whose state was resent (RESEND_S unanswered), and the answers that came for
         # one of them after its first answer had been taken: the controller answers every copy, so a slow
@@ -85,12 +86,14 @@ class Targets:
             if key != k or clock.state is not ClockState.LOCKSTEP:
                 return self._behind(key, k)
             self.accepted += 1
+            self.new_steps += 1
             clock.hold(Answer(wire, now))
             return None
         if self.applied is not None and key < self.applied[0]:
             return self._reject("reordered")
         if self.sim.command(command_from_wire(self.actuation, wire)):
             self.accepted += 1
+            self.new_steps += self.applied is None or key > self.applied[0]
             if self.applied is None:  # a flight's first target: its stamp is the mission's time 0 (real time)
                 self.sim.start_mission_clock(key / self.rate)
             self.applied = (key, wire, now)
