@@ -224,10 +224,14 @@ def test_a_flood_from_another_source_is_shed_and_the_flight_holds(tmp_path):
     for r in (ref, run):
         stalls = r.summary["timing"]["stalls"]
         assert unexplained_outages(r.trace, stalls) == {"rows": [], "stalls": []}
-        if stalls["count"]:  # each run flies as offline through its stalls does, within the jitter of a loaded
-            stalled = True  # machine (0.88 to 1.10 of it with both cores busy and the suite running)
+        # a run the machine disturbed (a stall, or more than 1 % of the controller's ticks skipped for waking a
+        # period late: a loaded CI run's reference skipped 46 of 1250 and flew 0.92 of offline, its flood run
+        # none and 1.02) flies as offline through its stalls does, within the jitter of a loaded machine (0.88
+        # to 1.10 of it with both cores busy and the suite running)
+        if stalls["count"] or r.summary["timing"]["overruns"] > 0.01 * mission.duration_s * mission.rate_hz:
+            stalled = True
             offline = simulate(mission, plots=False, link={"blackouts": stall_blackouts(stalls, mission.duration_s)})
-            assert abs(r.rms / offline.rms - 1.0) <= 0.20, (r.rms, offline.rms, stalls)
+            assert abs(r.rms / offline.rms - 1.0) <= 0.20, (r.rms, offline.rms, stalls, r.summary["timing"])
     if not stalled:  # the machine gave both real time: the flood is all that differs
         assert abs(run.rms / ref.rms - 1.0) <= 0.10, (run.rms, ref.rms)
     by = run.summary["link"]["rejected_by"]
