@@ -29,6 +29,10 @@ class Home:
     lon: float = 8.545594
     alt: float = 488.0
 
+    def amsl(self, up: float) -> float:
+        """The altitude AMSL (m) of a point ``up`` m above the home (down = -up): one sum for every stream."""
+        return self.alt + up
+
     def ned(self, lat: float, lon: float, alt: float) -> tuple[float, float, float]:
         """(north, east, down) in m of the point (deg, deg, m AMSL), PX4's projection about the home."""
         north, east = project(self.lat, self.lon, lat, lon)
@@ -37,7 +41,7 @@ class Home:
     def global_of(self, north: float, east: float, down: float) -> tuple[float, float, float]:
         """(lat, lon deg, alt m AMSL) of the NED offset (m) about the home: the inverse of :meth:`ned`."""
         lat, lon = reproject(self.lat, self.lon, north, east)
-        return lat, lon, self.alt - down
+        return lat, lon, self.amsl(-down)
 
     def paper(self, lat: float, lon: float, alt: float) -> tuple[float, float, float]:
         """(x, y, z) in m of the point in the paper frame (NWU about the home, z up from its altitude)."""

@@ -85,7 +85,7 @@ def vfr_hud(X: tuple[float, ...], home: Home, thrust_fraction: float) -> Any:
     0 disarmed), altitude AMSL (m) and climb rate (m/s, up)."""
     n = paper_to_ned(X)
     vn, ve, vd = n["vel"]
-    alt = home.alt - n["pos"][2]  # m AMSL, as GLOBAL_POSITION_INT's (Home.global_of)
+    alt = home.amsl(-n["pos"][2])
     heading = int(round(math.degrees(n["euler"][2]))) % 360
     throttle = max(0, min(100, int(round(100.0 * thrust_fraction))))
     return mavlink.MAVLink_vfr_hud_message(0.0, math.hypot(vn, ve), heading, throttle, alt, -vd)
@@ -96,7 +96,7 @@ def altitude(X: tuple[float, ...], home: Home, usec: int) -> Any:
     barometer's, here the state's as every stream's), local and relative the height above the home (m, up: the
     local origin is the home); terrain and bottom clearance unknown (NaN: no distance sensor)."""
     up = X[4]
-    return mavlink.MAVLink_altitude_message(usec, home.alt + up, home.alt + up, up, up, math.nan, math.nan)
+    return mavlink.MAVLink_altitude_message(usec, home.amsl(up), home.amsl(up), up, up, math.nan, math.nan)
 
 
 def home_position(home: Home) -> Any:
@@ -292,7 +292,7 @@ def highres_imu(imu: Measurement | None, baro: Measurement | None, home: Home, u
     stamp = usec
     if baro is not None:
         fields |= _BARO_FIELDS
-        alt = home.alt + baro.values[0]
+        alt = home.amsl(baro.values[0])
         pressure = isa_pressure_hpa(alt)
         stamp = _usec(baro.t_valid)
     if imu is not None:
