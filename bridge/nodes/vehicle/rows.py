@@ -40,7 +40,8 @@ class Rows:
         """One row; ``est``: (estimate, NEES) taken with ``X``."""
         E, nees = est
         code = MODE_CODES.get(mode, 0)
-        arrived, self._arrived_before = self._arrived() - self._arrived_before, self._arrived()
+        so_far = self._arrived()
+        arrived, self._arrived_before = so_far - self._arrived_before, so_far
         self.out.write((k, k / self.rate, *state_columns(X), code, key, *wire, *dem, *real, age, rtt, sent, recv,
                         *state_columns(E), nees, arrived))
 
