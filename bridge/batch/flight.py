@@ -425,7 +425,7 @@ def batch_arrays(flights: Sequence[Flight], plan: LinkPlan, clocks: Clocks, refs
     # each flight's own start: the mission's, or with [start] scatter_m the one its seed draws (missions.scatter)
     states = np.array([(x, 0.0, y, 0.0, z, 0.0, 0.0, 0.0, 0.0, 0.0, psi, 0.0)
                        for x, y, z, psi in (f.mission.flight_start for f in flights)], float).T
-    start = tuple(float(v) for v in states[:, 0])  # a resting state (a diverged cell's)
+    start = tuple(float(v) for v in states[:, 0])  # the first flight's: where a diverged cell is put (no nan)
     plant = BatchPlant(f0.profile, f0.effects, [f.mission.seed for f in flights], physics_hz=m.physics_hz,
                        state=states, faulty=faulty(flights))
     act = BatchActuation(nominal, n)

@@ -116,11 +116,11 @@ def seeds_alike(rows: Sequence[Mapping[str, Any]], point: Callable[[Mapping[str,
     """Whether, at every ``point`` (a row's grid point or probed value), the rows' seeds flew the same flight (RMS
     and outcome alike: a mission that draws nothing at random), so that its seeds added nothing; None with fewer
     than two seeds."""
+    if len({r["seed"] for r in rows}) < 2:
+        return None
     flights: dict[Any, set[tuple[Any, Any]]] = {}
     for r in rows:
         flights.setdefault(point(r), set()).add((r["rms"], r["outcome"]))
-    if len({r["seed"] for r in rows}) < 2:
-        return None
     return all(len(f) == 1 for f in flights.values())
 
 
