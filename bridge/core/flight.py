@@ -349,7 +349,7 @@ def event_problem(kind: str, prof: Profile, sensors: SensorConfig | None) -> str
     set, a compass event a heading sensor. The timeline's check, and a ground station's injection's."""
     if kind == "motor" and prof.actuation != "motors":
         return (f"profile {prof.name!r} flies ideal wrench actuation: it has no rotors to fail (fly --profile x500, "
-                "or --actuation motors)")
+                "or set the mission's actuation = \"motors\")")
     if kind in SENSOR_EVENT_KINDS and sensors is None:
         return ("the truth estimator reads the true state, no sensor to fail: fly --estimator ekf (or raw), with "
                 "--sensors gnss or mocap")

@@ -90,8 +90,8 @@ class MissionTransfer:
     ground station's mission from the vehicle: its items, the requests sent (``attempts``: the first of each
     message and every one again), those sent again (``re_requests``), its wall time (s) and ``result``
     (``accepted``, or why not); ``started_by``, as the vehicle said it: how the ground station started the
-    mission (``command``: ``MISSION_START``, or ``AUTO.MISSION, then arm``) and who (``by``: ``SYSID:COMPID
-    HOST:PORT LINK``), None if the vehicle said no start."""
+    mission (``command``: ``MISSION_START``, ``AUTO.MISSION, then arm`` or ``arm, then AUTO.MISSION``) and
+    who (``by``: ``SYSID:COMPID HOST:PORT LINK``), None if the vehicle said no start."""
 
     items: int
     attempts: int
