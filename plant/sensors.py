@@ -350,6 +350,9 @@ class SensorSuite:
         self._pending: deque[Measurement] = deque()  # latent position fixes, in order of arrival
         self.next_event = -math.inf  # nothing to do before this time (s), give or take eps
         self._latest: dict[str, Measurement] = {}  # kind -> the newest released (what a ground station is shown)
+        # the first position fix taken (at the first sample, t = 0), released or still in its latency: what a vehicle
+        # at rest at its start has had since before its clock began (a ground station is shown it until one arrives)
+        self.first_fix: Measurement | None = None
         self.faults = SensorFaults()  # what a timeline's sensor events changed (plant/events.py)
         if self._gnss:
             h, z, vh, vz = c.position_noise_m, c.position_noise_z_m, c.velocity_noise_mps, c.velocity_noise_z_mps
@@ -385,6 +388,8 @@ class SensorSuite:
             fix = self._sample_position(t, state)
             if self.faults.gps_on:  # off: drawn and dropped (plant/sensorfaults.py)
                 self._pending.append(fix)
+                if self.first_fix is None:
+                    self.first_fix = fix
         pending = self._pending
         while pending and pending[0].t_arrival <= te:
             out.append(pending.popleft())

@@ -15,8 +15,9 @@ in lockstep.
 
 From the vehicle's sensors (:class:`plant.sensors.SensorSuite`, paper frame, SI), not the true state:
 ``HIGHRES_IMU`` (FRD specific force m/s^2 and rates rad/s, barometric pressure hPa and pressure
-altitude m) and, with a GNSS position sensor, ``GPS_RAW_INT`` (degE7, mm AMSL, cm/s, cdeg); the
-streams they go out on and their intervals: :func:`sensor_streams`.
+altitude m) and, with a GNSS position sensor, ``GPS_RAW_INT`` (degE7, mm AMSL, cm/s, cdeg; NO_GPS once its
+fixes stop: :func:`gps_lost`, which SYS_STATUS's GPS bit says too); the streams they go out on and their
+intervals: :func:`sensor_streams`.
 """
 
 from __future__ import annotations
@@ -116,14 +117,17 @@ def mission_current(seq: int, total: int, state: int = mavlink.MISSION_STATE_NOT
 
 
 def sys_status(load_permille: int, healthy: bool, battery: tuple[int, int, int] = (16800, -1, 100),
-               armable: bool = True) -> Any:
+               armable: bool = True, gps: bool = True) -> Any:
     """``SYS_STATUS``: simulated sensors present and healthy; ``battery``: voltage mV, current cA (-1: not
     measured) and remaining % (a full 4S battery unless the plant flies one); the pre-arm check's bit healthy
-    when ``armable`` (PX4's: MAVSDK's ``health.is_armable`` reads it)."""
+    when ``armable`` (PX4's: MAVSDK's ``health.is_armable`` reads it); the GPS's bit present and enabled, healthy
+    only while ``gps`` (its fixes arrive: :func:`gps_lost`; MAVSDK's ``health.is_global_position_ok`` and
+    ``is_local_position_ok`` read it)."""
     # the geofence bit is set healthy although there is no fence: MAVProxy reads a clear
     # health bit as "fence breach" even on a vehicle that has none
     prearm = mavlink.MAV_SYS_STATUS_PREARM_CHECK
-    health = (_SENSORS | mavlink.MAV_SYS_STATUS_GEOFENCE | (prearm if armable else 0)) if healthy else 0
+    lost = 0 if gps else mavlink.MAV_SYS_STATUS_SENSOR_GPS
+    health = ((_SENSORS & ~lost) | mavlink.MAV_SYS_STATUS_GEOFENCE | (prearm if armable else 0)) if healthy else 0
     return mavlink.MAVLink_sys_status_message(_SENSORS | prearm, _SENSORS | prearm, health,
                                               max(0, min(1000, load_permille)), *battery, 0, 0, 0, 0, 0, 0)
 
@@ -234,6 +238,10 @@ def _cm(v: float) -> int:
 SENSOR_STREAM_MAX_HZ = 50.0
 SATELLITES_VISIBLE = 10  # a plausible open-sky count: the GNSS model has no constellation
 UINT16_UNKNOWN = 65535  # MAVLink's "unknown" for GPS_RAW_INT's eph, epv, vel, cog
+UINT8_UNKNOWN = 255  # and for its satellites_visible
+# s of simulation time without a new fix before the GPS counts as lost: PX4's GPS_RAW_INT stream then sends NO_GPS
+# (GPS_RAW_INT.hpp, kNoGpsSendInterval), and EKF2 calls its GNSS intermittent (2 x GNSS_MAX_INTERVAL)
+GPS_LOST_S = 1.0
 _IMU_FIELDS = (mavlink.HIGHRES_IMU_UPDATED_XACC | mavlink.HIGHRES_IMU_UPDATED_YACC | mavlink.HIGHRES_IMU_UPDATED_ZACC
                | mavlink.HIGHRES_IMU_UPDATED_XGYRO | mavlink.HIGHRES_IMU_UPDATED_YGYRO
                | mavlink.HIGHRES_IMU_UPDATED_ZGYRO)
@@ -255,8 +263,9 @@ def sensor_streams(config: SensorConfig | None) -> dict[int, float]:
 
 def sensor_message(mid: int, sensors: SensorSuite | None, home: Home, usec: int) -> list[Any]:
     """``HIGHRES_IMU`` or ``GPS_RAW_INT`` (``mid``) from the newest samples of ``sensors`` ([] under truth,
-    for a GPS_RAW_INT without a GNSS sensor, or once a sample is not finite: a diverged plant).
-    ``usec``: simulation time now (us), the stamp of a message no sample dates yet."""
+    for a GPS_RAW_INT without a GNSS sensor, or once a sample is not finite: a diverged plant); a GPS_RAW_INT of
+    a GPS lost (no new fix for :data:`GPS_LOST_S`) says NO_GPS, as PX4's. ``usec``: simulation time now (us), the
+    stamp of a message no sample dates yet."""
     if sensors is None:
         return []
     if mid == mavlink.MAVLINK_MSG_ID_HIGHRES_IMU:
@@ -265,11 +274,31 @@ def sensor_message(mid: int, sensors: SensorSuite | None, home: Home, usec: int)
             return []
         return [highres_imu(imu, baro, home, usec)]
     if mid == mavlink.MAVLINK_MSG_ID_GPS_RAW_INT and sensors.config.position_class == "gnss":
-        fix = sensors.latest(GNSS)
+        fix = gnss_fix(sensors)
         if fix is None:
             return [gps_no_fix(usec)]
+        if usec * 1e-6 - fix.t_arrival > GPS_LOST_S:
+            return [gps_no_gps()]
         return [gps_raw_int(fix, home)] if finite(fix.values) else []
     return []
+
+
+def gnss_fix(sensors: SensorSuite) -> Measurement | None:
+    """The GNSS fix a ground station is shown: the newest that has arrived, or, before the first arrives, the first
+    the receiver took (:attr:`~plant.sensors.SensorSuite.first_fix`: at rest at its start, the vehicle has had a fix
+    since before its clock began; a lockstep vehicle's clock stands still until its first flight); None: none."""
+    fix = sensors.latest(GNSS)
+    return fix if fix is not None else sensors.first_fix
+
+
+def gps_lost(sensors: SensorSuite | None, t: float) -> bool:
+    """Whether the vehicle's GPS is lost at simulation time ``t`` (s): a GNSS set whose newest fix
+    (:func:`gnss_fix`) arrived more than :data:`GPS_LOST_S` ago (its fixes stopped: a ``gps off``), or that has
+    none; never for a vehicle without a GNSS receiver (truth, or a pose sensor)."""
+    if sensors is None or sensors.config.position_class != "gnss":
+        return False
+    fix = gnss_fix(sensors)
+    return fix is None or t - fix.t_arrival > GPS_LOST_S
 
 
 def isa_pressure_hpa(alt_m: float) -> float:
@@ -325,9 +354,16 @@ def gps_raw_int(fix: Measurement, home: Home) -> Any:
 
 
 def gps_no_fix(usec: int) -> Any:
-    """``GPS_RAW_INT`` before the first fix has arrived: a receiver with no fix, every figure unknown."""
+    """``GPS_RAW_INT`` of a receiver that has taken no fix yet: no fix, every figure unknown."""
     return mavlink.MAVLink_gps_raw_int_message(usec, mavlink.GPS_FIX_TYPE_NO_FIX, 0, 0, 0, UINT16_UNKNOWN,
                                                UINT16_UNKNOWN, UINT16_UNKNOWN, UINT16_UNKNOWN, 0)
+
+
+def gps_no_gps() -> Any:
+    """``GPS_RAW_INT`` once the fixes have stopped for :data:`GPS_LOST_S`, as PX4's stream sends it then
+    (GPS_RAW_INT.hpp): fix type NO_GPS, position 0, eph, epv, vel and cog unknown, satellites 255, time 0."""
+    return mavlink.MAVLink_gps_raw_int_message(0, mavlink.GPS_FIX_TYPE_NO_GPS, 0, 0, 0, UINT16_UNKNOWN,
+                                               UINT16_UNKNOWN, UINT16_UNKNOWN, UINT16_UNKNOWN, UINT8_UNKNOWN)
 
 
 def _frd(v: tuple[float, float, float]) -> tuple[float, float, float]:

@@ -101,9 +101,10 @@ def landed_state(v: VehicleView) -> int:
 def _sys_status(v: VehicleView) -> list[Any]:
     healthy = not v.halted  # (a flight over is healthy in nothing, the pre-arm bit included)
     armable = healthy and v.prearm_refusal() is None
+    gps = not tm.gps_lost(v.sensors, v.t)  # a GNSS receiver's fixes stopped: its bit unhealthy, as GPS_RAW_INT says
     if v.battery is None:
-        return [tm.sys_status(v.load, healthy, armable=armable)]
-    return [tm.sys_status(v.load, healthy, battery_fields(v.battery), armable)]
+        return [tm.sys_status(v.load, healthy, armable=armable, gps=gps)]
+    return [tm.sys_status(v.load, healthy, battery_fields(v.battery), armable, gps)]
 
 
 _INT16_MAX, _UINT16_MAX = 2**15 - 1, 2**16 - 1  # MAVLink's "unknown" temperature and cell voltage
