@@ -19,18 +19,18 @@ from __future__ import annotations
 
 import json
 import math
-from collections import defaultdict
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from bridge.link.trace import trace_text
+from bridge.link.trace import DELAY_RANGE_MS, trace_text
 from bridge.record.halves import half_arrays
 from bridge.record.tlogmatch import (
     STAMP_SLACK_S,
     DirectionRecords,
     Frame,
     Source,
+    by_source,
     direction_records,
     merge_directions,
     read_tlog,
@@ -101,7 +101,7 @@ def extract_tlogs(vehicle: Sequence[Frame], controller: Sequence[Frame], clock: 
             notes.append(f"TIMESYNC puts the vehicle's clock {ts[0] * 1e3:+.1f} ms from the controller's (round trip "
                          f"{ts[1] * 1e3:.1f} ms): if the two ends' clocks differ, use --clock timesync")
     _check_overlap(vehicle, controller, shift_c, names)
-    v_by, c_by = _by_source(vehicle), _by_source(controller)
+    v_by, c_by = by_source(vehicle), by_source(controller)
     per: dict[str, list[DirectionRecords]] = {"up": [], "down": []}
     for src, end in sorted(ends.items()):
         if end == "a":  # the vehicle's: down
@@ -111,14 +111,11 @@ def extract_tlogs(vehicle: Sequence[Frame], controller: Sequence[Frame], clock: 
             per["up"].append(direction_records(sent, v_by[src], 0.0))
     up, down = merge_directions(per["up"]), merge_directions(per["down"])
     _check_matched(up, down, names)
-    negative = [x for d in (up, down) for _, x in d.records if x is not None and x < -STAMP_SLACK_S]
-    if negative and clock == "same":
-        raise ConfigError(f"{names}: {len(negative)} frames arrived before they were sent by the stamps (by up to "
-                          f"{-min(negative):.6g} s): the two ends' clocks differ (use --clock timesync) or these are "
-                          f"not the two ends of one link")
-    if negative:
-        notes.append(f"{len(negative)} frames arrived before they were sent by the stamps (by up to "
-                     f"{-min(negative) * 1e3:.1f} ms): the TIMESYNC offset is off by at least that much")
+    outside = up.outside + down.outside
+    if outside:
+        notes.append(f"{_frames(outside)} received before the other end's tlog starts or after it ends (a tlog cut "
+                     f"short?) left out: only the time both tlogs cover counts")
+    notes += _delays_in_range(up, down, clock, names)
     origin = _flight_origin(vehicle, controller, ends, shift_c) if run_dir else None
     what = "the flight's time 0 (the state the first actuator target answers left the vehicle)"
     if origin is None:
@@ -128,11 +125,34 @@ def extract_tlogs(vehicle: Sequence[Frame], controller: Sequence[Frame], clock: 
     return Extraction(up, down, what, clock, shift_c, ts, inputs, notes)
 
 
-def _by_source(frames: Sequence[Frame]) -> dict[Source, list[Frame]]:
-    out: dict[Source, list[Frame]] = defaultdict(list)
-    for f in frames:
-        out[f.src].append(f)
-    return out
+def _delays_in_range(up: DirectionRecords, down: DirectionRecords, clock: str, names: str) -> list[str]:
+    """Make every delay one a trace may give (:data:`bridge.link.trace.DELAY_RANGE_MS`), or refuse; the notes
+    that say what was changed. A frame stamped received before it was sent, by more than the stamps' resolution
+    (:data:`STAMP_SLACK_S`) on one clock, is refused (clocks that differ, or not one link); within it, or on
+    the TIMESYNC clock (whose offset is then off by that much), its delay is written as 0, and said so."""
+    negative = [x for d in (up, down) for _, x in d.records if x is not None and x < 0.0]
+    longest = max((x for d in (up, down) for _, x in d.records if x is not None), default=0.0)
+    if longest > DELAY_RANGE_MS[1] / 1e3:
+        raise ConfigError(f"{names}: a frame took {longest:.6g} s to arrive by the stamps, longer than a link trace "
+                          f"may give ({DELAY_RANGE_MS[1] / 1e3:g} s): the two ends' clocks differ (use --clock "
+                          f"timesync) or these are not the two ends of one link")
+    if not negative:
+        return []
+    early = -min(negative)
+    if early > STAMP_SLACK_S and clock == "same":
+        raise ConfigError(f"{names}: {sum(x < -STAMP_SLACK_S for x in negative)} frames arrived before they were "
+                          f"sent by the stamps (by up to {early:.6g} s): the two ends' clocks differ (use --clock "
+                          f"timesync) or these are not the two ends of one link")
+    for d in (up, down):
+        d.records = [(t, None if x is None else max(x, 0.0)) for t, x in d.records]
+    why = (f"within the stamps' resolution ({STAMP_SLACK_S * 1e3:g} ms)" if early <= STAMP_SLACK_S
+           else "the TIMESYNC offset is off by at least that much")
+    return [f"{_frames(len(negative))} arrived before they were sent by the stamps (by up to {early * 1e3:.3f} ms; "
+            f"{why}): their delays are written as 0"]
+
+
+def _frames(n: int) -> str:
+    return f"{n} frame{'s' if n != 1 else ''}"
 
 
 def _check_overlap(vehicle: Sequence[Frame], controller: Sequence[Frame], shift_c: float, names: str) -> None:
