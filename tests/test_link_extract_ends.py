@@ -64,6 +64,26 @@ def our_link(steps: int, early_at: int | None = None, early_s: float = 0.0) -> t
     return _tlog(vlog), _tlog(clog)
 
 
+def test_two_tlogs_given_the_wrong_way_round_are_refused_and_the_right_way_extracted(tmp_path: Path) -> None:
+    v, c = our_link(500)
+    (tmp_path / "vehicle.tlog").write_bytes(v)
+    (tmp_path / "controller.tlog").write_bytes(c)
+    out = tmp_path / "t.csv"
+    err = refused(bsst("link", "extract", tmp_path / "controller.tlog", tmp_path / "vehicle.tlog", "--out", out))
+    assert err == (f"bsst link extract: the tlogs are given the wrong way round (both ends say so): "
+                   f"{tmp_path / 'vehicle.tlog'} looks like the vehicle's end (8:1 sent an autopilot's HEARTBEAT or "
+                   f"ODOMETRY) and {tmp_path / 'controller.tlog'} looks like the controller's end (200:191 sent "
+                   f"actuator targets); give the vehicle's tlog first: bsst link extract {tmp_path / 'vehicle.tlog'} "
+                   f"{tmp_path / 'controller.tlog'}"), err
+    assert not out.exists()
+    p = bsst("link", "extract", tmp_path / "vehicle.tlog", tmp_path / "controller.tlog", "--out", out)
+    assert p.returncode == 0, p.stderr
+    tf = read_trace(out)
+    assert tf.up is not None and tf.down is not None
+    assert np.allclose(tf.up.delay_s, UP_S, atol=2e-6) and np.allclose(tf.down.delay_s, DOWN_S, atol=2e-6)
+    assert tf.up.lost == tf.down.lost == 0
+
+
 @pytest.mark.parametrize("v_part,c_part", [(1.0, 0.4), (0.3, 1.0), (0.9, 0.55)])
 def test_tlogs_cut_short_give_each_source_to_its_sender_and_a_trace_fit_takes(tmp_path: Path, v_part: float,
                                                                             c_part: float) -> None:

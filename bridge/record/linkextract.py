@@ -43,6 +43,7 @@ from params import ConfigError, read_regular_file
 CLOCKS = ("same", "timesync")
 _ODOMETRY = 331
 _TARGETS = (93, 139)  # HIL_ACTUATOR_CONTROLS, SET_ACTUATOR_CONTROL_TARGET: both open with time_usec
+_HEARTBEAT, _AUTOPILOT_INVALID = 0, 8  # a HEARTBEAT's autopilot (payload byte 5): MAV_AUTOPILOT_INVALID is none
 
 
 @dataclass
@@ -88,6 +89,7 @@ def extract_tlogs(vehicle: Sequence[Frame], controller: Sequence[Frame], clock: 
     if not ends:
         raise ConfigError(f"{names}: no MAVLink source appears in both, so no frame crossed between them: not the "
                           f"two ends of one link")
+    _check_order(vehicle, controller, ends, inputs)
     ts = timesync_offset(vehicle, controller, ends)
     notes = []
     if clock == "timesync":
@@ -153,6 +155,46 @@ def _delays_in_range(up: DirectionRecords, down: DirectionRecords, clock: str, n
 
 def _frames(n: int) -> str:
     return f"{n} frame{'s' if n != 1 else ''}"
+
+
+def _roles(frames: Sequence[Frame], own: set[Source]) -> tuple[set[Source], set[Source]]:
+    """Of the sources ``own`` (those an end sent): the vehicles (a HEARTBEAT naming an autopilot, or ODOMETRY)
+    and the offboard controllers (actuator targets)."""
+    pilots, controllers = set(), set()
+    for f in frames:
+        if f.src not in own:
+            continue
+        if f.msgid == _HEARTBEAT and f.payload.ljust(6, b"\0")[5] != _AUTOPILOT_INVALID or f.msgid == _ODOMETRY:
+            pilots.add(f.src)
+        elif f.msgid in _TARGETS:
+            controllers.add(f.src)
+    return pilots, controllers
+
+
+def _check_order(vehicle: Sequence[Frame], controller: Sequence[Frame], ends: dict[Source, str],
+                 inputs: tuple[str, ...]) -> None:
+    """Refuse the two tlogs given the wrong way round: the first (the vehicle's end) sent no vehicle's frames (an
+    autopilot's HEARTBEAT, ODOMETRY) and no actuator targets, which the second sent. Each end is known by the
+    sources it sent (their MAVLink ids, :func:`sender_ends`) and what they sent. A link neither says (two ground
+    stations, say) is taken in the order given."""
+    v_name, c_name = inputs if len(inputs) == 2 else ("the vehicle's tlog", "the controller's tlog")
+    v_pilots, v_ctl = _roles(vehicle, {s for s, e in ends.items() if e == "a"})
+    c_pilots, c_ctl = _roles(controller, {s for s, e in ends.items() if e == "b"})
+    if (v_pilots or c_ctl) or not (c_pilots or v_ctl):
+        return
+    said = []
+    if c_pilots:
+        said.append(f"{c_name} looks like the vehicle's end ({_ids(c_pilots)} sent an autopilot's HEARTBEAT or "
+                    f"ODOMETRY)")
+    if v_ctl:
+        said.append(f"{v_name} looks like the controller's end ({_ids(v_ctl)} sent actuator targets)")
+    raise ConfigError(f"bsst link extract: the tlogs are given the wrong way round"
+                      f"{' (both ends say so)' if c_pilots and v_ctl else ''}: {' and '.join(said)}; give the "
+                      f"vehicle's tlog first: bsst link extract {c_name} {v_name}")
+
+
+def _ids(sources: set[Source]) -> str:
+    return ", ".join(f"{a}:{b}" for a, b in sorted(sources))
 
 
 def _check_overlap(vehicle: Sequence[Frame], controller: Sequence[Frame], shift_c: float, names: str) -> None:
