@@ -125,3 +125,15 @@ def test_a_frame_stamped_received_just_before_it_was_sent_is_written_with_delay_
     (tmp_path / "c.tlog").write_bytes(c)
     err = refused(bsst("link", "extract", tmp_path / "v.tlog", tmp_path / "c.tlog", "--out", tmp_path / "u.csv"))
     assert "1 frames arrived before they were sent by the stamps (by up to 0.003 s)" in err, err
+
+
+def test_a_bad_run_directory_is_named_as_given_not_as_the_out_it_would_make(tmp_path: Path) -> None:
+    (tmp_path / "summary.json").write_text("{}\n")
+    (tmp_path / "vehicle.tlog").write_bytes(our_link(10)[0])
+    give = "give a real-time run directory, or the vehicle's tlog and the controller's tlog"
+    for arg, why in ((tmp_path / "nosuchdir", "no such file or directory"),
+                     (tmp_path / "summary.json", "a file, not a run directory"),
+                     (tmp_path / "vehicle.tlog", "one tlog (the other end's is missing)")):
+        err = refused(bsst("link", "extract", arg))
+        assert err == f"bsst link extract: {arg}: {why}; {give}", err
+        assert "--out" not in err and not (tmp_path / "link-trace.csv").exists()

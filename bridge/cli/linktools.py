@@ -71,7 +71,7 @@ def cmd_link_extract(args: argparse.Namespace) -> int:
     """``bsst link extract``: write the trace, print each direction's figures."""
     from pathlib import Path  # lazy: with the command
 
-    from bridge.record.linkextract import extract_run_dir, extract_tlogs, extraction_text  # lazy
+    from bridge.record.linkextract import check_run_dir, extract_run_dir, extract_tlogs, extraction_text  # lazy
     from bridge.record.runlog import write_text_atomic  # lazy: start-up time
     from bridge.record.tlogmatch import read_tlog  # lazy
 
@@ -80,6 +80,8 @@ def cmd_link_extract(args: argparse.Namespace) -> int:
         raise UsageError("bsst link extract: give a run directory, or a vehicle tlog and a controller tlog")
     if len(src) == 2 and Path(src[0]).resolve() == Path(src[1]).resolve():
         raise UsageError(f"bsst link extract: {src[0]} given as both ends: the same file twice")
+    if len(src) == 1:
+        check_run_dir(src[0])  # before the --out it would name: what is wrong is the argument given
     out = _new_output(args.out or (Path(src[0]) / "link-trace.csv" if len(src) == 1 else "link-trace.csv"),
                       "--out", args.overwrite)
     if len(src) == 1:

@@ -231,11 +231,24 @@ def run_clock(path: Path) -> str | None:
         return None
 
 
+def check_run_dir(path: str | Path) -> Path:
+    """``path`` as a directory to extract a run's link from; a ``ConfigError`` saying what it is otherwise."""
+    p = Path(path)
+    if p.is_dir():
+        return p
+    give = "give a real-time run directory, or the vehicle's tlog and the controller's tlog"
+    if not p.exists():
+        why = "no such file or directory" if not p.is_symlink() else "a broken symbolic link"
+    elif p.is_file():
+        why = "one tlog (the other end's is missing)" if p.suffix.lower() == ".tlog" else "a file, not a run directory"
+    else:
+        why = "not a run directory"
+    raise ConfigError(f"bsst link extract: {p}: {why}; {give}")
+
+
 def extract_run_dir(path: str | Path, clock: str = "same") -> Extraction:
     """Both directions of a real-time run's link: from its tlogs, else from vehicle.bin and controller.bin."""
-    p = Path(path)
-    if not p.is_dir():
-        raise ConfigError(f"{p}: not a run directory (or give a vehicle tlog and a controller tlog)")
+    p = check_run_dir(path)
     flown = run_clock(p)
     if flown in ("lockstep", "offline"):
         raise ConfigError(f"{p}: flown {'in lockstep' if flown == 'lockstep' else 'offline'}: its link model acted in "
