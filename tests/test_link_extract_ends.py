@@ -5,7 +5,7 @@ the wrong way round are refused (each end is known by what its MAVLink sources s
 different points (a truncated copy, a logger stopped early) still give each source to the end that sent it,
 so no delay comes out negative, and what they give is a trace ``bsst link fit`` takes; a frame stamped received
 a little before it was sent (the stamps' resolution) is written with delay 0 and said so; a bad argument is
-named as given, not as the ``--out`` it would have made.
+named as given, not as the ``--out`` it would have made; an ``--out`` that is the command's own input is refused.
 """
 
 from __future__ import annotations
@@ -137,3 +137,27 @@ def test_a_bad_run_directory_is_named_as_given_not_as_the_out_it_would_make(tmp_
         err = refused(bsst("link", "extract", arg))
         assert err == f"bsst link extract: {arg}: {why}; {give}", err
         assert "--out" not in err and not (tmp_path / "link-trace.csv").exists()
+
+
+def test_an_out_that_is_the_commands_own_input_is_refused_even_with_overwrite(tmp_path: Path) -> None:
+    """``--overwrite`` lets extract, fit and show replace an old output, never the file they read."""
+    v, c = our_link(300)
+    (tmp_path / "vehicle.tlog").write_bytes(v)
+    (tmp_path / "controller.tlog").write_bytes(c)
+    (tmp_path / "summary.json").write_text('{"clock": "realtime"}\n')
+    for args, out in ((("link", "extract", tmp_path), tmp_path / "vehicle.tlog"),
+                      (("link", "extract", tmp_path / "vehicle.tlog", tmp_path / "controller.tlog"),
+                       tmp_path / "controller.tlog")):
+        err = refused(bsst(*args, "--out", out, "--overwrite"))
+        assert err == (f"bsst: --out {out}: is {out}, an input of this command, which writing would destroy; write the "
+                       "output elsewhere"), err
+    assert (tmp_path / "vehicle.tlog").read_bytes() == v and (tmp_path / "controller.tlog").read_bytes() == c
+    assert bsst("link", "extract", tmp_path).returncode == 0  # RUN/link-trace.csv
+    trace = tmp_path / "link-trace.csv"
+    text = trace.read_text()
+    (tmp_path / "t.png").symlink_to(trace)  # the figure's name, the trace's file
+    for verb, out in (("fit", trace), ("show", tmp_path / "t.png")):
+        err = refused(bsst("link", verb, trace, "--out", out, "--overwrite"))
+        assert err == f"bsst: --out {out}: is {trace}, an input of this command, which writing would destroy; write " \
+                      "the output elsewhere", err
+    assert trace.read_text() == text

@@ -41,6 +41,7 @@ from bridge.record.tlogmatch import (
 from params import ConfigError, read_regular_file
 
 CLOCKS = ("same", "timesync")
+RUN_INPUTS = ("vehicle.tlog", "controller.tlog", "vehicle.bin", "controller.bin", "summary.json")  # what it reads
 _ODOMETRY = 331
 _TARGETS = (93, 139)  # HIL_ACTUATOR_CONTROLS, SET_ACTUATOR_CONTROL_TARGET: both open with time_usec
 _HEARTBEAT, _AUTOPILOT_INVALID = 0, 8  # a HEARTBEAT's autopilot (payload byte 5): MAV_AUTOPILOT_INVALID is none
