@@ -49,7 +49,7 @@ from controller.nominal import Nominal
 from controller.pid import CascadedPid
 from missions import CONTROLLERS, DEFAULT_DISCRETIZATION
 from missions.references import Sample
-from params import ConfigError
+from params import ConfigError, note_input
 
 Quad = tuple[float, float, float, float]
 
@@ -134,6 +134,7 @@ def resolve_law(spec: str) -> LawFactory:
 def _load_file(path: Path, spec: str):  # -> module
     if not path.is_file():
         raise ConfigError(f"controller {spec!r}: no file {path}")
+    note_input(path)  # a user's file this process reads (an --overwrite never replaces it)
     name = f"bsst_user_law_{abs(hash(str(path.resolve())))}"
     if name in sys.modules:  # one module per file per process, as an import would
         return sys.modules[name]

@@ -26,11 +26,29 @@ MAX_DEPTH = 32  # tables and lists nested deeper are refused: ours nest 6 deep, 
 # Python's recursion limit (tomllib itself gives up at about 450 levels of arrays or inline tables)
 
 
+_INPUTS: dict[str, str] = {}  # every file this process read as input: its real path -> the path as first given
+
+
+def note_input(path: str | Path) -> None:
+    """Record ``path`` as a file this process reads as input (:func:`inputs_read`). Every reader of a user's
+    file calls it: :func:`read_regular_file` (missions, plans, profiles, link traces, sweeps, tlogs), a
+    controller plug-in's loader and the signing key's."""
+    _INPUTS.setdefault(os.path.realpath(path), str(path))
+
+
+def inputs_read() -> dict[str, str]:
+    """Every file this process has read as input so far: its real path (symbolic links resolved) -> the path it
+    was first read by. ``--overwrite`` refuses to replace one (:func:`bridge.record.runlog.run_dir`)."""
+    return dict(_INPUTS)
+
+
 def read_regular_file(path: str | Path, expected: str = "file", max_bytes: int | None = None) -> bytes:
     """The bytes of ``path``, which must be a regular file (never blocks: a FIFO, socket or device is
     refused before it is read, and opened without blocking should one be swapped in after the check).
-    Every problem is a :class:`ConfigError` naming the path and saying that ``expected`` was wanted."""
+    Every problem is a :class:`ConfigError` naming the path and saying that ``expected`` was wanted.
+    The path is recorded as an input (:func:`note_input`)."""
     p = Path(path)
+    note_input(p)
     try:
         kind = _file_kind(os.stat(p).st_mode)
     except FileNotFoundError:

@@ -73,6 +73,70 @@ def test_overwrite_without_plots_leaves_no_old_figures_and_keeps_a_users_file(tm
     assert "note:" not in (out / "events.log").read_text()
 
 
+def _whole(out: Path) -> dict[str, bytes]:
+    """Every regular file of run directory ``out`` (one level) and its bytes."""
+    return {p.name: p.read_bytes() for p in out.iterdir() if p.is_file() and not p.is_symlink()}
+
+
+@pytest.mark.parametrize("name,kind", [("trace.csv", "a directory"), ("summary.json", "a directory"),
+                                       ("plots/positions.png", "a directory"), ("events.log", "a symbolic link")])
+def test_overwrite_refuses_a_run_files_name_that_is_no_run_file_and_loses_nothing(tmp_path: Path, name: str,
+                                                                                  kind: str) -> None:
+    """An entry of a run file's name that is not a file (a directory; a link a run would write through) is
+    refused before anything is removed, with one line naming it, whichever run file it is."""
+    mission, out = short_sine(tmp_path, 1.0), tmp_path / "run"
+    assert _sim(mission, "--out", out, "--no-plots").returncode == 0
+    target = tmp_path / "elsewhere.txt"
+    target.write_text("mine\n")
+    (out / name).unlink(missing_ok=True)
+    if kind == "a directory":
+        (out / name).mkdir(parents=True)
+    else:
+        (out / name).symlink_to(target)
+    before = _whole(out)
+    res = _sim(mission, "--out", out, "--overwrite")
+    assert res.returncode == 2 and res.stderr == (
+        f"bsst: --out {out}: cannot replace {name}: it is {kind}, not a file a run wrote (move it away, or write "
+        "the run elsewhere)\n"), res.stderr
+    assert _whole(out) == before and target.read_text() == "mine\n"  # the old run whole, the link's file too
+
+
+def test_overwrite_refuses_to_replace_the_commands_own_inputs(tmp_path: Path) -> None:
+    """A mission, a link trace, a profile read from the run directory under a run file's name: ``--overwrite``
+    would replace them, so sim, a fleet, sitl, sweep and margin refuse (one line naming the input), and nothing
+    is removed; a file of the same names elsewhere, or one the run keeps, flies."""
+    out = tmp_path / "ow"
+    out.mkdir()
+    mission = out / "mission.toml"
+    mission.write_text(short_sine(tmp_path, 1.0).read_text())
+    trace = out / "trace.csv"  # a measured link trace, kept where a run writes its own trace
+    trace.write_text("t_s,delay_ms\n0,10\n0.5,12\n")
+    (out / "relay.json").write_text((ROOT / "plant" / "profiles" / "x500.toml").read_text())  # a profile
+    before = _whole(out)
+    link = ("--link-trace", str(trace), "--link-trace-loop")
+    cases = [("sim", str(mission)), ("sim", str(mission), "--vehicles", "2"), ("sitl", str(mission)),
+             ("sweep", str(mission), "--controller", "bsst,pid"),
+             ("margin", str(mission), "--over", "wind_mps", "--until", "rms=0.1"),
+             ("sim", str(short_sine(tmp_path, 1.0)), *link), ("sweep", str(short_sine(tmp_path, 1.0)), *link),
+             ("sim", str(short_sine(tmp_path, 1.0)), "--profile", str(out / "relay.json"))]
+    for args in cases:
+        res = run_bsst(*args, "--out", str(out), "--overwrite", *(("--no-plots",) if args[0] != "margin" else ()),
+                       cwd=ROOT, env=ENV, timeout=120)
+        given = next(a for a in args[1:] if Path(a).parent == out)
+        assert res.returncode == 2 and len(res.stderr.splitlines()) == 1, (args, res.stderr)
+        assert res.stderr.startswith(f"bsst: {given}: an input of this command, which --overwrite would overwrite "
+                                     f"(--out {out}: {Path(given).name})"), (args, res.stderr)
+        assert _whole(out) == before, args
+    # the same trace outside the run directory: the old run is replaced, and a kept file of the user's named
+    (tmp_path / "measured.csv").write_text(trace.read_text())
+    trace.unlink()
+    (out / "notes.csv").write_text("mine\n")
+    res = _sim(short_sine(tmp_path, 1.0), "--link-trace", tmp_path / "measured.csv", "--link-trace-loop",
+               "--out", out, "--overwrite", "--no-plots")
+    assert res.returncode == 0, res.stderr
+    assert (out / "notes.csv").read_text() == "mine\n" and not (out / "relay.json").exists()
+
+
 def test_a_sim_overwriting_a_relay_run_leaves_none_of_its_files(tmp_path: Path) -> None:
     out = tmp_path / "rt"
     run = sitl(Mission(Sine(), duration_s=1.0, name="sine1"), realtime=True, out=out, plots=False, instance=None,

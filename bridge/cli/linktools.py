@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
+from collections.abc import Sequence
 from typing import Any
 
 from bridge.cli.flags import (
@@ -56,13 +57,20 @@ def add_link_commands(sub: Any) -> None:
 
 
 
-def _new_output(path: Any, flag: str, overwrite: bool) -> Any:
-    """``path`` as a file this command may write: writable, and new unless ``--overwrite`` (exit 2 otherwise)."""
+def _new_output(path: Any, flag: str, overwrite: bool, inputs: Sequence[Any] = ()) -> Any:
+    """``path`` as a file this command may write: writable, new unless ``--overwrite``, and none of the
+    ``inputs`` it reads (real paths compared: ``--overwrite`` would destroy it); exit 2 otherwise."""
+    import os  # lazy: with the command
+
     from bridge.record.runlog import check_writable  # lazy: start-up time
 
     p = check_writable(path, flag)
     if p.exists() and not overwrite:
         raise ConfigError(f"{flag} {p}: exists; --overwrite to replace it")
+    for f in inputs:
+        if os.path.realpath(f) == os.path.realpath(p):
+            raise ConfigError(f"{flag} {p}: is {f}, an input of this command, which writing would destroy; write "
+                              "the output elsewhere")
     return p
 
 
@@ -71,7 +79,13 @@ def cmd_link_extract(args: argparse.Namespace) -> int:
     """``bsst link extract``: write the trace, print each direction's figures."""
     from pathlib import Path  # lazy: with the command
 
-    from bridge.record.linkextract import extract_run_dir, extract_tlogs, extraction_text  # lazy
+    from bridge.record.linkextract import (  # lazy
+        RUN_INPUTS,
+        check_run_dir,
+        extract_run_dir,
+        extract_tlogs,
+        extraction_text,
+    )
     from bridge.record.runlog import write_text_atomic  # lazy: start-up time
     from bridge.record.tlogmatch import read_tlog  # lazy
 
@@ -80,8 +94,11 @@ def cmd_link_extract(args: argparse.Namespace) -> int:
         raise UsageError("bsst link extract: give a run directory, or a vehicle tlog and a controller tlog")
     if len(src) == 2 and Path(src[0]).resolve() == Path(src[1]).resolve():
         raise UsageError(f"bsst link extract: {src[0]} given as both ends: the same file twice")
+    if len(src) == 1:
+        check_run_dir(src[0])  # before the --out it would name: what is wrong is the argument given
+    read = [Path(src[0]) / f for f in RUN_INPUTS] if len(src) == 1 else src
     out = _new_output(args.out or (Path(src[0]) / "link-trace.csv" if len(src) == 1 else "link-trace.csv"),
-                      "--out", args.overwrite)
+                      "--out", args.overwrite, read)
     if len(src) == 1:
         ex = extract_run_dir(src[0], args.clock)
     else:
@@ -111,7 +128,7 @@ def cmd_link_fit(args: argparse.Namespace) -> int:
     from bridge.link.trace import read_trace  # lazy: start-up time
     from bridge.record.runlog import write_text_atomic  # lazy: start-up time
 
-    out = _new_output(args.out, "--out", args.overwrite) if args.out else None
+    out = _new_output(args.out, "--out", args.overwrite, [args.trace]) if args.out else None
     tf = read_trace(args.trace)
     fits = fit_trace(tf, args.blackout_after)
     text = fit_toml(fits, str(Path(args.trace).absolute()))
@@ -143,7 +160,7 @@ def cmd_link_show(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path(args.trace).with_suffix(".png")
     if out.suffix.lower() != ".png":
         raise UsageError(f"bsst link show: --out {out}: the figure is a PNG (name it *.png)")
-    _new_output(out, "--out", args.overwrite)
+    _new_output(out, "--out", args.overwrite, [args.trace])
     tf = read_trace(args.trace)
     print(f"figure: {trace_figure(tf, out)}")
     return EXIT_OK

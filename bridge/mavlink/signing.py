@@ -38,7 +38,7 @@ from pathlib import Path
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from params import ConfigError
+from params import ConfigError, note_input
 
 try:  # pymavlink uses fastcrc when it is installed; so do the hot codec and the signer
     from fastcrc.crc16 import mcrf4xx as crc16
@@ -79,6 +79,7 @@ def key_from_file(path: str | os.PathLike[str], flag: str = "--key") -> bytes:
     if st.st_mode & (stat.S_IROTH | stat.S_IWOTH):
         raise ConfigError(f"{flag} {p}: readable or writable by others (mode {stat.S_IMODE(st.st_mode):04o}); "
                           f"chmod 600 it")
+    note_input(p)  # a user's file this process reads (an --overwrite never replaces it)
     try:
         data = p.read_bytes()
     except OSError as exc:

@@ -19,18 +19,18 @@ from __future__ import annotations
 
 import json
 import math
-from collections import defaultdict
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from bridge.link.trace import trace_text
+from bridge.link.trace import DELAY_RANGE_MS, trace_text
 from bridge.record.halves import half_arrays
 from bridge.record.tlogmatch import (
     STAMP_SLACK_S,
     DirectionRecords,
     Frame,
     Source,
+    by_source,
     direction_records,
     merge_directions,
     read_tlog,
@@ -41,8 +41,10 @@ from bridge.record.tlogmatch import (
 from params import ConfigError, read_regular_file
 
 CLOCKS = ("same", "timesync")
+RUN_INPUTS = ("vehicle.tlog", "controller.tlog", "vehicle.bin", "controller.bin", "summary.json")  # what it reads
 _ODOMETRY = 331
 _TARGETS = (93, 139)  # HIL_ACTUATOR_CONTROLS, SET_ACTUATOR_CONTROL_TARGET: both open with time_usec
+_HEARTBEAT, _AUTOPILOT_INVALID = 0, 8  # a HEARTBEAT's autopilot (payload byte 5): MAV_AUTOPILOT_INVALID is none
 
 
 @dataclass
@@ -88,6 +90,7 @@ def extract_tlogs(vehicle: Sequence[Frame], controller: Sequence[Frame], clock: 
     if not ends:
         raise ConfigError(f"{names}: no MAVLink source appears in both, so no frame crossed between them: not the "
                           f"two ends of one link")
+    _check_order(vehicle, controller, ends, inputs)
     ts = timesync_offset(vehicle, controller, ends)
     notes = []
     if clock == "timesync":
@@ -101,7 +104,7 @@ def extract_tlogs(vehicle: Sequence[Frame], controller: Sequence[Frame], clock: 
             notes.append(f"TIMESYNC puts the vehicle's clock {ts[0] * 1e3:+.1f} ms from the controller's (round trip "
                          f"{ts[1] * 1e3:.1f} ms): if the two ends' clocks differ, use --clock timesync")
     _check_overlap(vehicle, controller, shift_c, names)
-    v_by, c_by = _by_source(vehicle), _by_source(controller)
+    v_by, c_by = by_source(vehicle), by_source(controller)
     per: dict[str, list[DirectionRecords]] = {"up": [], "down": []}
     for src, end in sorted(ends.items()):
         if end == "a":  # the vehicle's: down
@@ -111,14 +114,11 @@ def extract_tlogs(vehicle: Sequence[Frame], controller: Sequence[Frame], clock: 
             per["up"].append(direction_records(sent, v_by[src], 0.0))
     up, down = merge_directions(per["up"]), merge_directions(per["down"])
     _check_matched(up, down, names)
-    negative = [x for d in (up, down) for _, x in d.records if x is not None and x < -STAMP_SLACK_S]
-    if negative and clock == "same":
-        raise ConfigError(f"{names}: {len(negative)} frames arrived before they were sent by the stamps (by up to "
-                          f"{-min(negative):.6g} s): the two ends' clocks differ (use --clock timesync) or these are "
-                          f"not the two ends of one link")
-    if negative:
-        notes.append(f"{len(negative)} frames arrived before they were sent by the stamps (by up to "
-                     f"{-min(negative) * 1e3:.1f} ms): the TIMESYNC offset is off by at least that much")
+    outside = up.outside + down.outside
+    if outside:
+        notes.append(f"{_frames(outside)} received before the other end's tlog starts or after it ends (a tlog cut "
+                     f"short?) left out: only the time both tlogs cover counts")
+    notes += _delays_in_range(up, down, clock, names)
     origin = _flight_origin(vehicle, controller, ends, shift_c) if run_dir else None
     what = "the flight's time 0 (the state the first actuator target answers left the vehicle)"
     if origin is None:
@@ -128,11 +128,74 @@ def extract_tlogs(vehicle: Sequence[Frame], controller: Sequence[Frame], clock: 
     return Extraction(up, down, what, clock, shift_c, ts, inputs, notes)
 
 
-def _by_source(frames: Sequence[Frame]) -> dict[Source, list[Frame]]:
-    out: dict[Source, list[Frame]] = defaultdict(list)
+def _delays_in_range(up: DirectionRecords, down: DirectionRecords, clock: str, names: str) -> list[str]:
+    """Make every delay one a trace may give (:data:`bridge.link.trace.DELAY_RANGE_MS`), or refuse; the notes
+    that say what was changed. A frame stamped received before it was sent, by more than the stamps' resolution
+    (:data:`STAMP_SLACK_S`) on one clock, is refused (clocks that differ, or not one link); within it, or on
+    the TIMESYNC clock (whose offset is then off by that much), its delay is written as 0, and said so."""
+    negative = [x for d in (up, down) for _, x in d.records if x is not None and x < 0.0]
+    longest = max((x for d in (up, down) for _, x in d.records if x is not None), default=0.0)
+    if longest > DELAY_RANGE_MS[1] / 1e3:
+        raise ConfigError(f"{names}: a frame took {longest:.6g} s to arrive by the stamps, longer than a link trace "
+                          f"may give ({DELAY_RANGE_MS[1] / 1e3:g} s): the two ends' clocks differ (use --clock "
+                          f"timesync) or these are not the two ends of one link")
+    if not negative:
+        return []
+    early = -min(negative)
+    if early > STAMP_SLACK_S and clock == "same":
+        raise ConfigError(f"{names}: {sum(x < -STAMP_SLACK_S for x in negative)} frames arrived before they were "
+                          f"sent by the stamps (by up to {early:.6g} s): the two ends' clocks differ (use --clock "
+                          f"timesync) or these are not the two ends of one link")
+    for d in (up, down):
+        d.records = [(t, None if x is None else max(x, 0.0)) for t, x in d.records]
+    why = (f"within the stamps' resolution ({STAMP_SLACK_S * 1e3:g} ms)" if early <= STAMP_SLACK_S
+           else "the TIMESYNC offset is off by at least that much")
+    return [f"{_frames(len(negative))} arrived before they were sent by the stamps (by up to {early * 1e3:.3f} ms; "
+            f"{why}): their delays are written as 0"]
+
+
+def _frames(n: int) -> str:
+    return f"{n} frame{'s' if n != 1 else ''}"
+
+
+def _roles(frames: Sequence[Frame], own: set[Source]) -> tuple[set[Source], set[Source]]:
+    """Of the sources ``own`` (those an end sent): the vehicles (a HEARTBEAT naming an autopilot, or ODOMETRY)
+    and the offboard controllers (actuator targets)."""
+    pilots, controllers = set(), set()
     for f in frames:
-        out[f.src].append(f)
-    return out
+        if f.src not in own:
+            continue
+        if f.msgid == _HEARTBEAT and f.payload.ljust(6, b"\0")[5] != _AUTOPILOT_INVALID or f.msgid == _ODOMETRY:
+            pilots.add(f.src)
+        elif f.msgid in _TARGETS:
+            controllers.add(f.src)
+    return pilots, controllers
+
+
+def _check_order(vehicle: Sequence[Frame], controller: Sequence[Frame], ends: dict[Source, str],
+                 inputs: tuple[str, ...]) -> None:
+    """Refuse the two tlogs given the wrong way round: the first (the vehicle's end) sent no vehicle's frames (an
+    autopilot's HEARTBEAT, ODOMETRY) and no actuator targets, which the second sent. Each end is known by the
+    sources it sent (their MAVLink ids, :func:`sender_ends`) and what they sent. A link neither says (two ground
+    stations, say) is taken in the order given."""
+    v_name, c_name = inputs if len(inputs) == 2 else ("the vehicle's tlog", "the controller's tlog")
+    v_pilots, v_ctl = _roles(vehicle, {s for s, e in ends.items() if e == "a"})
+    c_pilots, c_ctl = _roles(controller, {s for s, e in ends.items() if e == "b"})
+    if (v_pilots or c_ctl) or not (c_pilots or v_ctl):
+        return
+    said = []
+    if c_pilots:
+        said.append(f"{c_name} looks like the vehicle's end ({_ids(c_pilots)} sent an autopilot's HEARTBEAT or "
+                    f"ODOMETRY)")
+    if v_ctl:
+        said.append(f"{v_name} looks like the controller's end ({_ids(v_ctl)} sent actuator targets)")
+    raise ConfigError(f"bsst link extract: the tlogs are given the wrong way round"
+                      f"{' (both ends say so)' if c_pilots and v_ctl else ''}: {' and '.join(said)}; give the "
+                      f"vehicle's tlog first: bsst link extract {c_name} {v_name}")
+
+
+def _ids(sources: set[Source]) -> str:
+    return ", ".join(f"{a}:{b}" for a, b in sorted(sources))
 
 
 def _check_overlap(vehicle: Sequence[Frame], controller: Sequence[Frame], shift_c: float, names: str) -> None:
@@ -169,11 +232,24 @@ def run_clock(path: Path) -> str | None:
         return None
 
 
+def check_run_dir(path: str | Path) -> Path:
+    """``path`` as a directory to extract a run's link from; a ``ConfigError`` saying what it is otherwise."""
+    p = Path(path)
+    if p.is_dir():
+        return p
+    give = "give a real-time run directory, or the vehicle's tlog and the controller's tlog"
+    if not p.exists():
+        why = "no such file or directory" if not p.is_symlink() else "a broken symbolic link"
+    elif p.is_file():
+        why = "one tlog (the other end's is missing)" if p.suffix.lower() == ".tlog" else "a file, not a run directory"
+    else:
+        why = "not a run directory"
+    raise ConfigError(f"bsst link extract: {p}: {why}; {give}")
+
+
 def extract_run_dir(path: str | Path, clock: str = "same") -> Extraction:
     """Both directions of a real-time run's link: from its tlogs, else from vehicle.bin and controller.bin."""
-    p = Path(path)
-    if not p.is_dir():
-        raise ConfigError(f"{p}: not a run directory (or give a vehicle tlog and a controller tlog)")
+    p = check_run_dir(path)
     flown = run_clock(p)
     if flown in ("lockstep", "offline"):
         raise ConfigError(f"{p}: flown {'in lockstep' if flown == 'lockstep' else 'offline'}: its link model acted in "

@@ -27,7 +27,7 @@ from bridge.link.model import link_from_table
 from bridge.record.columns import TRACE_COLUMNS
 from missions import Mission
 from missions.mission import name_problem
-from params import ConfigError, dump_toml
+from params import ConfigError, dump_toml, inputs_read
 
 MAX_TRACE_STEPS = 500_000  # control steps a run that keeps its trace for its summary may fly (see check_trace_steps)
 
@@ -73,8 +73,10 @@ def run_dir(
         path = Path(out)
     if path.exists() and not path.is_dir():
         raise ConfigError(f"--out {path}: exists and is not a directory")
-    if path.is_dir() and any(path.iterdir()) and not overwrite:
-        raise ConfigError(f"--out {path}: directory is not empty (use --overwrite to replace its run)")
+    if path.is_dir() and any(path.iterdir()):
+        if not overwrite:
+            raise ConfigError(f"--out {path}: directory is not empty (use --overwrite to replace its run)")
+        check_overwrite(path)
     if not create:
         return path
     if path.is_dir():
@@ -98,16 +100,51 @@ PLOTS_DIR, PLOT_FILES = "plots", ("*.png", ".*.tmp*")  # plots/ and the figures 
 VEHICLE_DIRS = "vehicle-[0-9]*"  # a fleet's vehicles' own runs (bridge.swarm): each a run directory of its own
 
 
+def _ours(p: Path, patterns: Sequence[str]) -> bool:
+    return any(p.match(pat) for pat in patterns)
+
+
+def run_entries(path: Path) -> list[Path]:
+    """What ``--overwrite`` replaces in run directory ``path``, whatever each is: the entries named as a run's
+    files (:data:`RUN_FILES`), the figures in ``plots/`` and, in a fleet's ``vehicle-<id>/``, theirs. A run's
+    files are removed (:func:`clear_run`) and written anew under these names."""
+    out = [p for p in sorted(path.iterdir()) if _ours(p, RUN_FILES)]
+    plots = path / PLOTS_DIR
+    if plots.is_dir() and not plots.is_symlink():
+        out += [p for p in sorted(plots.iterdir()) if _ours(p, PLOT_FILES)]
+    for d in sorted(path.glob(VEHICLE_DIRS)):
+        if d.is_dir() and not d.is_symlink():
+            out += run_entries(d)
+    return out
+
+
+def check_overwrite(path: Path) -> None:
+    """Refuse an ``--overwrite`` of run directory ``path`` that would lose what is not a run's, before anything
+    is removed: a file this command reads as input (:func:`params.inputs_read`: its mission, link trace,
+    profile, plan, controller plug-in, key ...) among those it replaces (:func:`run_entries`), or an entry of a
+    run's name that is no run's file (a directory; a symbolic link, which a run would write through)."""
+    inputs = inputs_read()
+    entries = run_entries(path)
+    for p in entries:
+        given = inputs.get(os.path.realpath(p))
+        if given is not None:
+            raise ConfigError(f"{given}: an input of this command, which --overwrite would overwrite (--out {path}: "
+                              f"{p.relative_to(path)}); move it out of {path}, or write the run elsewhere")
+    for p in entries:
+        kind = ("a symbolic link" if p.is_symlink() else "a directory" if p.is_dir()
+                else None if p.is_file() else "not a regular file")
+        if kind:
+            raise ConfigError(f"--out {path}: cannot replace {p.relative_to(path)}: it is {kind}, not a file a run "
+                              "wrote (move it away, or write the run elsewhere)")
+
+
 def foreign_files(path: Path) -> list[str]:
     """The names in run directory ``path`` no run of ours writes (:data:`RUN_FILES`), sorted; a user's
     files in ``plots/`` as ``plots/NAME``."""
-    def ours(p: Path, patterns: Sequence[str]) -> bool:
-        return any(p.match(pat) for pat in patterns)
-
-    out = [p.name for p in path.iterdir() if not ours(p, RUN_FILES) and p.name != PLOTS_DIR]
+    out = [p.name for p in path.iterdir() if not _ours(p, RUN_FILES) and p.name != PLOTS_DIR]
     plots = path / PLOTS_DIR
     if plots.is_dir() and not plots.is_symlink():
-        out += [f"{PLOTS_DIR}/{p.name}" for p in plots.iterdir() if not ours(p, PLOT_FILES)]
+        out += [f"{PLOTS_DIR}/{p.name}" for p in plots.iterdir() if not _ours(p, PLOT_FILES)]
     elif plots.exists() or plots.is_symlink():
         out.append(PLOTS_DIR)
     return sorted(out)
@@ -117,7 +154,8 @@ def clear_run(path: Path) -> list[str]:
     """Remove the run in ``path`` (``--overwrite``): every file of :data:`RUN_FILES`, the figures in ``plots/``
     and ``plots/`` itself once empty; the summary first (until the new one is written whole there is none,
     never one of another run beside this run's files). Nothing else is touched: returns what was kept
-    (:func:`foreign_files`), which the new run's ``events.log`` names. ConfigError if a file cannot go."""
+    (:func:`foreign_files`), which the new run's ``events.log`` names. ConfigError if a file cannot go
+    (:func:`check_overwrite` has refused, before, what is not a run's file)."""
     def remove(p: Path) -> None:
         try:
             p.unlink()
@@ -128,12 +166,12 @@ def clear_run(path: Path) -> list[str]:
 
     remove(path / "summary.json")
     for p in sorted(path.iterdir()):
-        if p.is_file() and not p.is_symlink() and any(p.match(pat) for pat in RUN_FILES):
+        if p.is_file() and not p.is_symlink() and _ours(p, RUN_FILES):
             remove(p)
     plots = path / PLOTS_DIR
     if plots.is_dir() and not plots.is_symlink():
         for p in plots.iterdir():
-            if p.is_file() and any(p.match(pat) for pat in PLOT_FILES):
+            if p.is_file() and _ours(p, PLOT_FILES):
                 remove(p)
         if not any(plots.iterdir()):
             plots.rmdir()

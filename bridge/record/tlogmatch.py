@@ -22,8 +22,9 @@ from __future__ import annotations
 
 import bisect
 import itertools
+import math
 import struct
-from collections import Counter, defaultdict
+from collections import defaultdict
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -56,7 +57,8 @@ class DirectionRecords:
 
     records: list[tuple[float, float | None]] = field(default_factory=list)
     duplicates: int = 0
-    unmatched: int = 0  # received frames the sender never logged
+    unmatched: int = 0  # received frames the sender never logged, while it logged
+    outside: int = 0  # received frames stamped before the sender's log of their source starts or after it ends
     gaps_counted: int = 0  # losses from a sequence gap, their send time spread evenly
 
     @property
@@ -76,7 +78,8 @@ class DirectionRecords:
             "max": float(d.max())} if len(d) else {"p50": None, "p95": None, "p99": None, "max": None}
         return {"sent": self.sent, "delivered": self.sent - self.lost, "lost": self.lost,
                 "loss_pct": 100.0 * self.lost / self.sent if self.sent else None, "delay_ms": pct,
-                "duplicates": self.duplicates, "unmatched": self.unmatched, "gaps_counted": self.gaps_counted}
+                "duplicates": self.duplicates, "unmatched": self.unmatched, "outside": self.outside,
+                "gaps_counted": self.gaps_counted}
 
 
 # -- reading tlogs -----------------------------------------------------------------------------------
@@ -124,18 +127,42 @@ def _timesync(payload: bytes) -> tuple[int, int]:
 
 # -- matching the two ends ------------------------------------------------------------------------------
 def sender_ends(a: Sequence[Frame], b: Sequence[Frame]) -> dict[Source, str]:
-    """For each source in both logs, the end ("a" or "b") that sent it (module docstring)."""
-    ca, cb = Counter(f.src for f in a), Counter(f.src for f in b)
-    first_a: dict[Source, float] = {}
-    first_b: dict[Source, float] = {}
-    for f in a:
-        first_a.setdefault(f.src, f.t)
-    for f in b:
-        first_b.setdefault(f.src, f.t)
+    """For each source in both logs, the end ("a" or "b") that sent it (module docstring). The frames counted are
+    those between the source's first and last frame seen at both ends, in each log: a log cut short (a truncated
+    tlog, a logger started late) lacks what the other end logged past its cut, which is no sign of who sent it.
+    Ties (a link that lost nothing): the end that stamped most of the frames seen at both ends first."""
+    by_a, by_b = by_source(a), by_source(b)
     out = {}
-    for s in set(ca) & set(cb):
-        out[s] = ("a" if ca[s] > cb[s] else "b") if ca[s] != cb[s] else ("a" if first_a[s] <= first_b[s] else "b")
+    for s in by_a.keys() & by_b.keys():
+        fa, fb = by_a[s], by_b[s]
+        ta: dict[bytes, float] = {}
+        tb: dict[bytes, float] = {}
+        for f in fa:
+            ta.setdefault(f.raw, f.t)
+        for f in fb:
+            tb.setdefault(f.raw, f.t)
+        common = ta.keys() & tb.keys()
+        na, nb = (_span_count(fa, common), _span_count(fb, common)) if common else (len(fa), len(fb))
+        if na != nb:
+            out[s] = "a" if na > nb else "b"
+            continue
+        votes = sum(1 if ta[r] <= tb[r] else -1 for r in common) if common else 0
+        out[s] = ("a" if votes > 0 else "b") if votes else ("a" if fa[0].t <= fb[0].t else "b")
     return out
+
+
+def by_source(frames: Sequence[Frame]) -> dict[Source, list[Frame]]:
+    """The frames of each source, in the log's order."""
+    out: dict[Source, list[Frame]] = defaultdict(list)
+    for f in frames:
+        out[f.src].append(f)
+    return out
+
+
+def _span_count(frames: Sequence[Frame], common: set[bytes]) -> int:
+    """How many of ``frames`` lie between the first and the last of them whose bytes are in ``common``."""
+    idx = [i for i, f in enumerate(frames) if f.raw in common]
+    return idx[-1] - idx[0] + 1
 
 
 class _Copies:
@@ -183,12 +210,17 @@ def direction_records(sent: Sequence[Frame], recv: Sequence[Frame], shift_recv_s
     for i, f in enumerate(sent):
         by_bytes[f.raw].append(i)
     sent_t = [f.t for f in sent]
+    lo, hi = min(sent_t, default=math.inf), max(sent_t, default=-math.inf)
     copies: dict[bytes, _Copies] = {}
     arrival: dict[int, float] = {}
     for r in recv:
         cands = by_bytes.get(r.raw)
         if not cands:
-            out.unmatched += 1
+            t = r.t + shift_recv_s  # past the sender's log (one cut short): no sign of another link
+            if t < lo or t > hi:
+                out.outside += 1
+            else:
+                out.unmatched += 1
             continue
         pool = copies.get(r.raw)
         if pool is None:
@@ -227,6 +259,7 @@ def merge_directions(parts: Iterable[DirectionRecords]) -> DirectionRecords:
         out.records += p.records
         out.duplicates += p.duplicates
         out.unmatched += p.unmatched
+        out.outside += p.outside
         out.gaps_counted += p.gaps_counted
     out.records.sort(key=lambda r: r[0])
     return out

@@ -1,0 +1,163 @@
+"""Covers bridge.record.linkextract, bridge.record.tlogmatch and bridge.cli.linktools: which end is which.
+
+``bsst link extract`` as a real subprocess on tlogs of real pymavlink frames written to disk: two tlogs given
+the wrong way round are refused (each end is known by what its MAVLink sources sent); tlogs cut short at
+different points (a truncated copy, a logger stopped early) still give each source to the end that sent it,
+so no delay comes out negative, and what they give is a trace ``bsst link fit`` takes; a frame stamped received
+a little before it was sent (the stamps' resolution) is written with delay 0 and said so; a bad argument is
+named as given, not as the ``--out`` it would have made; an ``--out`` that is the command's own input is refused.
+"""
+
+from __future__ import annotations
+
+import math
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pymavlink.dialects.v20 import common as mavlink
+
+from bridge.link.trace import read_trace
+from tests.sitlkit import ENV, ROOT, run_bsst
+from tests.test_link_trace import _frame, _tlog
+
+pytestmark = pytest.mark.process  # starts processes: not in make test-fast
+
+DOWN_S, UP_S, PERIOD_S = 0.003, 0.005, 0.004
+
+
+def bsst(*args: str | Path) -> subprocess.CompletedProcess[str]:
+    return run_bsst(*map(str, args), cwd=ROOT, env=ENV, timeout=120)
+
+
+def refused(p: subprocess.CompletedProcess[str]) -> str:
+    """The one line of a refusal: exit 2, no traceback."""
+    assert p.returncode == 2 and len(p.stderr.splitlines()) == 1 and "Traceback" not in p.stderr, (p.returncode,
+                                                                                                    p.stderr)
+    return p.stderr.strip()
+
+
+def our_link(steps: int, early_at: int | None = None, early_s: float = 0.0) -> tuple[bytes, bytes]:
+    """A vehicle's (8:1: an autopilot's HEARTBEAT, ODOMETRY down) and a controller's (200:191: its HEARTBEAT,
+    SET_ACTUATOR_CONTROL_TARGET up) tlogs of a lossless link, as bsst sitl --realtime writes them: 3 ms down,
+    5 ms up. ``early_at``: that step's target is stamped received ``early_s`` before it was sent."""
+    veh = mavlink.MAVLink(None, srcSystem=8, srcComponent=1)
+    ctl = mavlink.MAVLink(None, srcSystem=200, srcComponent=191)
+    vlog: list[tuple[float, bytes]] = []
+    clog: list[tuple[float, bytes]] = []
+    for k in range(steps):
+        t = 1000.0 + k * PERIOD_S
+        if k % 25 == 0:
+            for m, log, other, delay, hb in ((veh, vlog, clog, DOWN_S, (2, 12)), (ctl, clog, vlog, UP_S, (18, 8))):
+                f = _frame(m, m.heartbeat_encode(*hb, 0, 0, 3))
+                log.append((t, f))
+                other.append((t + delay, f))
+        state = _frame(veh, veh.odometry_encode(k * 4000, 1, 1, 0, 0, 0, [1, 0, 0, 0], 0, 0, 0, 0, 0, 0,
+                                                [math.nan] * 21, [math.nan] * 21))
+        vlog.append((t + 0.0001, state))
+        clog.append((t + 0.0001 + DOWN_S, state))
+        target = _frame(ctl, ctl.set_actuator_control_target_encode(k * 4000, 0, 8, 1, [0.1] * 8))
+        sent = t + 0.0001 + DOWN_S + 0.0002
+        clog.append((sent, target))
+        vlog.append((sent - early_s if k == early_at else sent + UP_S, target))
+    return _tlog(vlog), _tlog(clog)
+
+
+def test_two_tlogs_given_the_wrong_way_round_are_refused_and_the_right_way_extracted(tmp_path: Path) -> None:
+    v, c = our_link(500)
+    (tmp_path / "vehicle.tlog").write_bytes(v)
+    (tmp_path / "controller.tlog").write_bytes(c)
+    out = tmp_path / "t.csv"
+    err = refused(bsst("link", "extract", tmp_path / "controller.tlog", tmp_path / "vehicle.tlog", "--out", out))
+    assert err == (f"bsst link extract: the tlogs are given the wrong way round (both ends say so): "
+                   f"{tmp_path / 'vehicle.tlog'} looks like the vehicle's end (8:1 sent an autopilot's HEARTBEAT or "
+                   f"ODOMETRY) and {tmp_path / 'controller.tlog'} looks like the controller's end (200:191 sent "
+                   f"actuator targets); give the vehicle's tlog first: bsst link extract {tmp_path / 'vehicle.tlog'} "
+                   f"{tmp_path / 'controller.tlog'}"), err
+    assert not out.exists()
+    p = bsst("link", "extract", tmp_path / "vehicle.tlog", tmp_path / "controller.tlog", "--out", out)
+    assert p.returncode == 0, p.stderr
+    tf = read_trace(out)
+    assert tf.up is not None and tf.down is not None
+    assert np.allclose(tf.up.delay_s, UP_S, atol=2e-6) and np.allclose(tf.down.delay_s, DOWN_S, atol=2e-6)
+    assert tf.up.lost == tf.down.lost == 0
+
+
+@pytest.mark.parametrize("v_part,c_part", [(1.0, 0.4), (0.3, 1.0), (0.9, 0.55)])
+def test_tlogs_cut_short_give_each_source_to_its_sender_and_a_trace_fit_takes(tmp_path: Path, v_part: float,
+                                                                            c_part: float) -> None:
+    """A controller's tlog cut at 40 % of its bytes held fewer of the controller's frames than the vehicle's: the
+    source went to the vehicle, every up delay came out negative and bsst link fit refused the trace. Cut (mid
+    frame) anywhere, the frames past either cut are left out, and said so."""
+    v, c = our_link(1500)
+    (tmp_path / "v.tlog").write_bytes(v[:int(len(v) * v_part) - 7])
+    (tmp_path / "c.tlog").write_bytes(c[:int(len(c) * c_part) - 7])
+    out = tmp_path / "t.csv"
+    p = bsst("link", "extract", tmp_path / "v.tlog", tmp_path / "c.tlog", "--out", out)
+    assert p.returncode == 0, p.stderr
+    assert "left out: only the time both tlogs cover counts" in p.stdout
+    tf = read_trace(out)
+    assert tf.up is not None and tf.down is not None and tf.up.n > 100 and tf.down.n > 100
+    assert np.allclose(tf.up.delay_s, UP_S, atol=2e-6) and np.allclose(tf.down.delay_s, DOWN_S, atol=2e-6)
+    fit = bsst("link", "fit", out)
+    assert fit.returncode == 0, fit.stderr
+
+
+def test_a_frame_stamped_received_just_before_it_was_sent_is_written_with_delay_zero(tmp_path: Path) -> None:
+    """Within the stamps' resolution (2 ms) on one clock, a frame received 0.4 ms "before" it left is delay 0 in the
+    trace, with a note saying how many and by how much (bsst link fit and --link-trace refuse a negative delay);
+    3 ms before is refused as before: the clocks differ."""
+    v, c = our_link(300, early_at=100, early_s=0.0004)
+    (tmp_path / "v.tlog").write_bytes(v)
+    (tmp_path / "c.tlog").write_bytes(c)
+    out = tmp_path / "t.csv"
+    p = bsst("link", "extract", tmp_path / "v.tlog", tmp_path / "c.tlog", "--out", out)
+    assert p.returncode == 0, p.stderr
+    note = ("1 frame arrived before they were sent by the stamps (by up to 0.400 ms; within the stamps' resolution "
+            "(2 ms)): their delays are written as 0")
+    assert f"note: {note}" in p.stdout and f"# {note}" in out.read_text()
+    tf = read_trace(out)
+    assert tf.up is not None and min(tf.up.delay_s) == 0.0 and sorted(tf.up.delay_s)[1] == pytest.approx(UP_S)
+    assert bsst("link", "fit", out).returncode == 0
+    v, c = our_link(300, early_at=100, early_s=0.003)
+    (tmp_path / "v.tlog").write_bytes(v)
+    (tmp_path / "c.tlog").write_bytes(c)
+    err = refused(bsst("link", "extract", tmp_path / "v.tlog", tmp_path / "c.tlog", "--out", tmp_path / "u.csv"))
+    assert "1 frames arrived before they were sent by the stamps (by up to 0.003 s)" in err, err
+
+
+def test_a_bad_run_directory_is_named_as_given_not_as_the_out_it_would_make(tmp_path: Path) -> None:
+    (tmp_path / "summary.json").write_text("{}\n")
+    (tmp_path / "vehicle.tlog").write_bytes(our_link(10)[0])
+    give = "give a real-time run directory, or the vehicle's tlog and the controller's tlog"
+    for arg, why in ((tmp_path / "nosuchdir", "no such file or directory"),
+                     (tmp_path / "summary.json", "a file, not a run directory"),
+                     (tmp_path / "vehicle.tlog", "one tlog (the other end's is missing)")):
+        err = refused(bsst("link", "extract", arg))
+        assert err == f"bsst link extract: {arg}: {why}; {give}", err
+        assert "--out" not in err and not (tmp_path / "link-trace.csv").exists()
+
+
+def test_an_out_that_is_the_commands_own_input_is_refused_even_with_overwrite(tmp_path: Path) -> None:
+    """``--overwrite`` lets extract, fit and show replace an old output, never the file they read."""
+    v, c = our_link(300)
+    (tmp_path / "vehicle.tlog").write_bytes(v)
+    (tmp_path / "controller.tlog").write_bytes(c)
+    (tmp_path / "summary.json").write_text('{"clock": "realtime"}\n')
+    for args, out in ((("link", "extract", tmp_path), tmp_path / "vehicle.tlog"),
+                      (("link", "extract", tmp_path / "vehicle.tlog", tmp_path / "controller.tlog"),
+                       tmp_path / "controller.tlog")):
+        err = refused(bsst(*args, "--out", out, "--overwrite"))
+        assert err == (f"bsst: --out {out}: is {out}, an input of this command, which writing would destroy; write the "
+                       "output elsewhere"), err
+    assert (tmp_path / "vehicle.tlog").read_bytes() == v and (tmp_path / "controller.tlog").read_bytes() == c
+    assert bsst("link", "extract", tmp_path).returncode == 0  # RUN/link-trace.csv
+    trace = tmp_path / "link-trace.csv"
+    text = trace.read_text()
+    (tmp_path / "t.png").symlink_to(trace)  # the figure's name, the trace's file
+    for verb, out in (("fit", trace), ("show", tmp_path / "t.png")):
+        err = refused(bsst("link", verb, trace, "--out", out, "--overwrite"))
+        assert err == f"bsst: --out {out}: is {trace}, an input of this command, which writing would destroy; write " \
+                      "the output elsewhere", err
+    assert trace.read_text() == text
