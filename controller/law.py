@@ -40,6 +40,7 @@ import math
 import sys
 from collections.abc import Callable
 from functools import partial
+from numbers import Real
 from pathlib import Path
 from typing import Protocol, runtime_checkable
 
@@ -84,14 +85,24 @@ assert tuple(BUILTIN) == CONTROLLERS  # the names a mission may give are the law
 _METHODS = ("update", "advance", "reset")
 
 
+def is_number(v: object) -> bool:
+    """Whether ``v`` is a finite real number as the contract means it: an int or a float (numpy's too), never a
+    bool (numpy's ``bool_`` neither), a complex, a string or None."""
+    if not isinstance(v, Real) or isinstance(v, bool):
+        return False
+    try:
+        return math.isfinite(v)
+    except (TypeError, ValueError, OverflowError):  # a Real of the user's own whose float() fails
+        return False
+
+
 def law_problem(law: object) -> str | None:
     """Why ``law`` (a built law) does not fit :class:`Law`, or None if it does."""
     for name in _METHODS:
         if not callable(getattr(law, name, None)):
             return f"has no method {name}()"
     desired = getattr(law, "desired", None)
-    if not (isinstance(desired, tuple) and len(desired) == 2
-            and all(isinstance(v, (int, float)) and math.isfinite(v) for v in desired)):
+    if not (isinstance(desired, tuple) and len(desired) == 2 and all(is_number(v) for v in desired)):
         return f"its 'desired' must be a tuple (phi_d, theta_d) of two finite numbers, got {desired!r}"
     return None
 
@@ -180,17 +191,23 @@ class LawFailed(Exception):
         self.what = what
 
 
-def _inputs(u: object) -> Quad | None:
-    """``u`` as four finite floats, or None when it is not that (a string, None, another length, inf, nan)."""
+def _inputs(u: object) -> tuple[Quad | None, str]:
+    """``u`` as four finite floats, or None and why not: not a sequence of four (a string, None, another length),
+    or a value that is no finite real number (inf, nan, a bool, a complex, a string: :func:`is_number`)."""
     if isinstance(u, (str, bytes)) or u is None:
-        return None
+        return None, "not a sequence of four numbers"
     try:
-        values = tuple(float(v) for v in u)  # type: ignore[attr-defined]
-    except (TypeError, ValueError):
-        return None
-    if len(values) != 4 or not all(math.isfinite(v) for v in values):
-        return None
-    return values  # type: ignore[return-value]
+        given = tuple(u)  # type: ignore[call-overload]
+    except Exception:  # not iterable, or its own iteration raised
+        return None, "not a sequence of four numbers"
+    if len(given) != 4:
+        return None, f"{len(given)} values, not 4"
+    for name, v in zip(("u1", "u2", "u3", "u4"), given, strict=True):
+        if not is_number(v):
+            kind = type(v).__name__
+            return None, (f"{name} is {v!r}, not a finite number" if isinstance(v, Real) and not isinstance(v, bool)
+                          else f"{name} is a {kind}, not a number")
+    return (float(given[0]), float(given[1]), float(given[2]), float(given[3])), ""
 
 
 class CheckedLaw:
@@ -219,11 +236,11 @@ class CheckedLaw:
 
     def update(self, t: float, state: tuple[float, ...], ref: Sample, omega_d: float) -> Quad:
         u = self._call("update", t, state, ref, omega_d)
-        values = _inputs(u)
+        values, why = _inputs(u)
         if values is None:
             shown = repr(u)
             raise LawFailed(self.label, "update() must return four finite numbers (u1, u2, u3, u4) in N, "
-                                        f"got {shown[:80] + '...' if len(shown) > 80 else shown}")
+                                        f"got {shown[:80] + '...' if len(shown) > 80 else shown} ({why})")
         why = law_problem(self.law)
         if why:
             raise LawFailed(self.label, f"after update(): {why}")

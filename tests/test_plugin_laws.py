@@ -5,7 +5,8 @@ Issue 22, defect 6: every way a plug-in law can fail ends honestly, through the 
 
 - it cannot be loaded (a raise or ``SystemExit(0)`` at import or in ``__init__``): one line, exit 2,
   nothing flown (no run directory);
-- it fails in flight (``update`` raises, exits, returns the wrong shape, None, a string, +-inf): one line,
+- it fails in flight (``update`` raises, exits, returns the wrong shape, None, a string, +-inf, or four values
+  that are not numbers though ``float()`` takes them: bools, numpy bools, complex, numeric strings): one line,
   exit 1, and ``summary.json`` (outcome ``law_failed``, ``ended_by`` the controller with the exception's type
   and message, the step and t), the trace so far and ``events.log`` written.
 """
@@ -79,6 +80,12 @@ IN_FLIGHT = {
     "string": (f"{FAIL_AT} return 'thrust'", "got 'thrust'"),
     "inf": (f"{FAIL_AT} return (float('inf'), 0.0, 0.0, 0.0)", "got (inf, 0.0, 0.0, 0.0)"),
     "minus_inf": (f"{FAIL_AT} return (1.0, float('-inf'), 0.0, 0.0)", "got (1.0, -inf, 0.0, 0.0)"),
+    # four values that float() takes but that are not numbers: refused, never flown as 1.0 and 0.0
+    "bools": (f"{FAIL_AT} return (True, False, False, False)", "(u1 is a bool, not a number)"),
+    "numpy_bools": (f"{FAIL_AT} return __import__('numpy').array([1, 0, 0, 0], dtype=bool)",
+                    "(u1 is a bool, not a number)"),  # (numpy's bool_ is named bool too)
+    "complex": (f"{FAIL_AT} return (self.m * self.g, 0j, 0.0, 0.0)", "(u2 is a complex, not a number)"),
+    "numeric_strings": (f"{FAIL_AT} return ('9.81', '0', '0', '0')", "(u1 is a str, not a number)"),
 }
 
 
