@@ -37,12 +37,14 @@ import importlib
 import importlib.util
 import inspect
 import math
+import os
 import sys
 from collections.abc import Callable
 from functools import partial
 from numbers import Real
 from pathlib import Path
-from typing import Protocol, runtime_checkable
+from types import TracebackType
+from typing import NoReturn, Protocol, runtime_checkable
 
 from controller.bsst import BacksteppingSuperTwisting
 from controller.gains import Gains
@@ -88,6 +90,8 @@ _METHODS = ("update", "advance", "reset")
 def is_number(v: object) -> bool:
     """Whether ``v`` is a finite real number as the contract means it: an int or a float (numpy's too), never a
     bool (numpy's ``bool_`` neither), a complex, a string or None."""
+    if type(v) is float:  # the common case, first: a law's every step
+        return math.isfinite(v)
     if not isinstance(v, Real) or isinstance(v, bool):
         return False
     try:
@@ -125,11 +129,12 @@ def resolve_law(spec: str) -> LawFactory:
         module = _load_file(Path(where), spec)
     else:
         try:
-            module = importlib.import_module(where)
+            with RefusedExit():
+                module = importlib.import_module(where)
         except ModuleNotFoundError as exc:
             raise ConfigError(f"controller {spec!r}: no module named {exc.name!r}") from None
-        except (Exception, SystemExit) as exc:  # the user's module raised (or exited) while importing: one line
-            raise ConfigError(f"controller {spec!r}: importing {where} raised {type(exc).__name__}: {exc}") from None
+        except (Exception, SystemExit, ExitCalled) as exc:  # the user's module raised (or exited) importing: one line
+            raise ConfigError(f"controller {spec!r}: importing {where} {did(exc)}") from None
     cls = getattr(module, cls_name, None)
     if cls is None:
         raise ConfigError(f"controller {spec!r}: {where} has no class {cls_name!r}")
@@ -154,10 +159,11 @@ def _load_file(path: Path, spec: str):  # -> module
     module = importlib.util.module_from_spec(mod_spec)
     sys.modules[name] = module
     try:
-        mod_spec.loader.exec_module(module)
-    except (Exception, SystemExit) as exc:  # a syntax error, a raise or an exit in the user's file: one line
+        with RefusedExit():
+            mod_spec.loader.exec_module(module)
+    except (Exception, SystemExit, ExitCalled) as exc:  # a syntax error, a raise or an exit in the file: one line
         del sys.modules[name]
-        raise ConfigError(f"controller {spec!r}: loading {path} raised {type(exc).__name__}: {exc}") from None
+        raise ConfigError(f"controller {spec!r}: loading {path} {did(exc)}") from None
     return module
 
 
@@ -172,14 +178,70 @@ def make_law(spec: str | LawFactory, nominal: Nominal, gains: Gains, rate_hz: fl
         if factory is BacksteppingSuperTwisting:
             law = BacksteppingSuperTwisting(nominal, gains, rate_hz, discretization=discretization)
         else:
-            law = factory(nominal, gains, rate_hz)
-    except (Exception, SystemExit) as exc:  # the user's constructor (an exit too): one line naming it
+            with RefusedExit():
+                law = factory(nominal, gains, rate_hz)
+    except (Exception, SystemExit, ExitCalled) as exc:  # the user's constructor (an exit too): one line naming it
         raise ConfigError(f"controller {label!r}: building it as ({label.rpartition(':')[2]})(nominal, gains, "
-                          f"rate_hz) raised {type(exc).__name__}: {exc}") from None
+                          f"rate_hz) {did(exc)}") from None
     why = law_problem(law)
     if why:
         raise ConfigError(f"controller {label!r}: does not fit the Law interface (controller/law.py): {why}")
     return law if factory in BUILTIN.values() else CheckedLaw(law, label)
+
+
+class ExitCalled(BaseException):
+    """A user's law called ``os._exit(code)`` while bsst ran its code (:class:`RefusedExit`): raised instead, so
+    that the process stays and the law's failure is recorded as a raise is. A BaseException, as SystemExit is:
+    the law's own ``except Exception`` does not swallow it."""
+
+    def __init__(self, code: object) -> None:
+        super().__init__(f"os._exit({code!r})")
+        self.code = code
+
+
+_REAL_EXIT = os._exit
+_refusing = False  # a user's law code runs now, under RefusedExit, in this process
+
+
+def _refused_exit(code: int) -> NoReturn:
+    """``os._exit`` while a user's law code runs: :class:`ExitCalled`; else (a process the law forked, a name the
+    law bound under the guard and called outside it) the process ends as asked."""
+    if not _refusing:
+        _REAL_EXIT(code)
+    raise ExitCalled(code)
+
+
+def _forked() -> None:
+    global _refusing
+    _refusing = False  # a child the law forked is not the flight's process
+
+
+os.register_at_fork(after_in_child=_forked)
+
+
+class RefusedExit:
+    """``with RefusedExit():`` runs a user's law code (loading, building, each call) with ``os._exit`` raising
+    :class:`ExitCalled`: a law that ended the process would leave no record and exit 0 (bsst is one thread; what
+    the law binds under this guard, ``from os import _exit`` at import, is refused too). A signal, ``os.abort()``
+    or a crash in a C extension still ends the process: ``bsst sim`` flies a user's law in a watched child
+    process for those (bridge.cli.watched)."""
+
+    def __enter__(self) -> None:
+        global _refusing
+        self._saved = (os._exit, _refusing)
+        os._exit, _refusing = _refused_exit, True
+
+    def __exit__(self, kind: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        global _refusing
+        os._exit, _refusing = self._saved
+
+
+def did(exc: BaseException) -> str:
+    """What a user's code did, for the one line: ``called os._exit(0)`` or ``raised Kind: message``."""
+    if isinstance(exc, ExitCalled):
+        return f"called os._exit({exc.code!r})"
+    return f"raised {type(exc).__name__}: {exc}"
 
 
 class LawFailed(Exception):
@@ -202,12 +264,12 @@ def _inputs(u: object) -> tuple[Quad | None, str]:
         return None, "not a sequence of four numbers"
     if len(given) != 4:
         return None, f"{len(given)} values, not 4"
-    for name, v in zip(("u1", "u2", "u3", "u4"), given, strict=True):
+    for i, v in enumerate(given):
         if not is_number(v):
-            kind = type(v).__name__
-            return None, (f"{name} is {v!r}, not a finite number" if isinstance(v, Real) and not isinstance(v, bool)
-                          else f"{name} is a {kind}, not a number")
-    return (float(given[0]), float(given[1]), float(given[2]), float(given[3])), ""
+            what = (f"is {v!r}, not a finite number" if isinstance(v, Real) and not isinstance(v, bool)
+                    else f"is a {type(v).__name__}, not a number")
+            return None, f"u{i + 1} {what}"
+    return tuple(map(float, given)), ""  # type: ignore[return-value]
 
 
 class CheckedLaw:
@@ -229,10 +291,15 @@ class CheckedLaw:
         return getattr(self.law, name)
 
     def _call(self, method: str, *args: object) -> object:
+        global _refusing
+        saved = os._exit, _refusing  # RefusedExit, written out: every step's two calls
+        os._exit, _refusing = _refused_exit, True
         try:
             return getattr(self.law, method)(*args)
-        except (Exception, SystemExit) as exc:
-            raise LawFailed(self.label, f"{method}() raised {type(exc).__name__}: {exc}") from None
+        except (Exception, SystemExit, ExitCalled) as exc:
+            raise LawFailed(self.label, f"{method}() {did(exc)}") from None
+        finally:
+            os._exit, _refusing = saved
 
     def update(self, t: float, state: tuple[float, ...], ref: Sample, omega_d: float) -> Quad:
         u = self._call("update", t, state, ref, omega_d)

@@ -3,12 +3,12 @@
 Issue 22, defect 6: every way a plug-in law can fail ends honestly, through the real ``bsst sim`` (and
 ``bsst sitl``) as a subprocess, each bad law a small file:
 
-- it cannot be loaded (a raise or ``SystemExit(0)`` at import or in ``__init__``): one line, exit 2,
-  nothing flown (no run directory);
-- it fails in flight (``update`` raises, exits, returns the wrong shape, None, a string, +-inf, or four values
-  that are not numbers though ``float()`` takes them: bools, numpy bools, complex, numeric strings): one line,
-  exit 1, and ``summary.json`` (outcome ``law_failed``, ``ended_by`` the controller with the exception's type
-  and message, the step and t), the trace so far and ``events.log`` written.
+- it cannot be loaded (a raise, ``SystemExit(0)`` or ``os._exit(0)`` at import or in ``__init__``): one line,
+  exit 2, nothing flown (no run directory);
+- it fails in flight (``update`` raises, exits, ``os._exit`` in ``update`` or ``advance``, returns the wrong shape,
+  None, a string, +-inf, or four values that are not numbers though ``float()`` takes them: bools, numpy bools,
+  complex, numeric strings): one line, exit 1, and ``summary.json`` (outcome ``law_failed``, ``ended_by`` the
+  controller with the exception's type and message, the step and t), the trace so far and ``events.log`` written.
 """
 
 from __future__ import annotations
@@ -26,17 +26,23 @@ from tests.sitlkit import ENV, ROOT, run_bsst
 pytestmark = pytest.mark.process  # runs bsst as real processes: not in make test-fast
 
 GOOD = """
+import os
+from os import _exit  # bound while bsst loads the file: refused as os._exit is
+
+
 class Law:
     def __init__(self, nominal, gains, rate_hz):
         self.m, self.g = nominal.mass, nominal.gravity
         self.desired = (0.0, 0.0)
+        self.t = 0.0
 
     def update(self, t, state, ref, omega_d):
+        self.t = t
         {update}
         return (self.m * self.g, 0.0, 0.0, 0.0)
 
     def advance(self, saturated, hold=False):
-        pass
+        {advance}
 
     def reset(self):
         pass
@@ -44,9 +50,10 @@ class Law:
 FAIL_AT = "if t >= 0.5:"  # s: the law fails from this mission time on
 
 
-def _law(tmp_path: Path, head: str = "", init: str = "", update: str = "pass") -> str:
-    """A law file in ``tmp_path`` (``head`` at import, ``init`` in ``__init__``, ``update``'s first line)."""
-    body = GOOD.replace("{update}", update)
+def _law(tmp_path: Path, head: str = "", init: str = "", update: str = "pass", advance: str = "pass") -> str:
+    """A law file in ``tmp_path`` (``head`` at import, ``init`` in ``__init__``, ``update``'s and ``advance``'s
+    first line)."""
+    body = GOOD.replace("{update}", update).replace("{advance}", advance)
     if init:
         body = body.replace("self.desired = (0.0, 0.0)", f"self.desired = (0.0, 0.0)\n        {init}")
     path = tmp_path / "bad_law.py"
@@ -59,40 +66,51 @@ def _sim(tmp_path: Path, spec: str, *args: str) -> subprocess.CompletedProcess:
                     *args, cwd=ROOT, env=ENV, timeout=120)
 
 
+LOAD_FAILS = {  # case: (the line at import or in __init__, what the one line says)
+    "raises": ("raise RuntimeError('no gains for me')", "raised RuntimeError: no gains for me"),
+    "exits0": ("raise SystemExit(0)", "raised SystemExit"),
+    "os_exit0": ("__import__('os')._exit(0)", "called os._exit(0)"),
+}
+
+
 @pytest.mark.parametrize("where", ["import", "init"])
-@pytest.mark.parametrize("how", ["raise RuntimeError('no gains for me')", "raise SystemExit(0)"],
-                         ids=["raises", "exits0"])
+@pytest.mark.parametrize("how", LOAD_FAILS)
 def test_a_law_that_cannot_be_loaded_is_bad_input_nothing_flown(tmp_path, where, how):
-    spec = _law(tmp_path, head=how if where == "import" else "", init=how if where == "init" else "")
+    line, says = LOAD_FAILS[how]
+    spec = _law(tmp_path, head=line if where == "import" else "", init=line if where == "init" else "")
     r = _sim(tmp_path, spec)
     assert r.returncode == 2, (r.stdout, r.stderr)
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and "bad_law.py" in lines[0] and "Traceback" not in r.stderr, r.stderr
-    assert ("SystemExit" if "SystemExit" in how else "RuntimeError: no gains for me") in lines[0]
+    assert says in lines[0], lines[0]
     assert not (tmp_path / "run").exists()
 
 
-IN_FLIGHT = {
-    "raises": (f"{FAIL_AT} raise ZeroDivisionError('my bad')", "ZeroDivisionError: my bad"),
-    "exits0": (f"{FAIL_AT} raise SystemExit(0)", "update() raised SystemExit"),
-    "shape": (f"{FAIL_AT} return (1.0, 2.0)", "got (1.0, 2.0)"),
-    "none": (f"{FAIL_AT} return None", "got None"),
-    "string": (f"{FAIL_AT} return 'thrust'", "got 'thrust'"),
-    "inf": (f"{FAIL_AT} return (float('inf'), 0.0, 0.0, 0.0)", "got (inf, 0.0, 0.0, 0.0)"),
-    "minus_inf": (f"{FAIL_AT} return (1.0, float('-inf'), 0.0, 0.0)", "got (1.0, -inf, 0.0, 0.0)"),
+IN_FLIGHT = {  # case: (the method that fails, its first line, what the line says)
+    "raises": ("update", f"{FAIL_AT} raise ZeroDivisionError('my bad')", "ZeroDivisionError: my bad"),
+    "exits0": ("update", f"{FAIL_AT} raise SystemExit(0)", "update() raised SystemExit"),
+    "shape": ("update", f"{FAIL_AT} return (1.0, 2.0)", "got (1.0, 2.0)"),
+    "none": ("update", f"{FAIL_AT} return None", "got None"),
+    "string": ("update", f"{FAIL_AT} return 'thrust'", "got 'thrust'"),
+    "inf": ("update", f"{FAIL_AT} return (float('inf'), 0.0, 0.0, 0.0)", "got (inf, 0.0, 0.0, 0.0)"),
+    "minus_inf": ("update", f"{FAIL_AT} return (1.0, float('-inf'), 0.0, 0.0)", "got (1.0, -inf, 0.0, 0.0)"),
     # four values that float() takes but that are not numbers: refused, never flown as 1.0 and 0.0
-    "bools": (f"{FAIL_AT} return (True, False, False, False)", "(u1 is a bool, not a number)"),
-    "numpy_bools": (f"{FAIL_AT} return __import__('numpy').array([1, 0, 0, 0], dtype=bool)",
+    "bools": ("update", f"{FAIL_AT} return (True, False, False, False)", "(u1 is a bool, not a number)"),
+    "numpy_bools": ("update", f"{FAIL_AT} return __import__('numpy').array([1, 0, 0, 0], dtype=bool)",
                     "(u1 is a bool, not a number)"),  # (numpy's bool_ is named bool too)
-    "complex": (f"{FAIL_AT} return (self.m * self.g, 0j, 0.0, 0.0)", "(u2 is a complex, not a number)"),
-    "numeric_strings": (f"{FAIL_AT} return ('9.81', '0', '0', '0')", "(u1 is a str, not a number)"),
+    "complex": ("update", f"{FAIL_AT} return (self.m * self.g, 0j, 0.0, 0.0)", "(u2 is a complex, not a number)"),
+    "numeric_strings": ("update", f"{FAIL_AT} return ('9.81', '0', '0', '0')", "(u1 is a str, not a number)"),
+    # a law that ends the process: os._exit raises in its calls, so the flight ends recorded, not at exit 0
+    "os_exit0": ("advance", "if self.t >= 0.5: os._exit(0)", "advance() called os._exit(0)"),
+    "os_exit3_update": ("update", f"{FAIL_AT} os._exit(3)", "update() called os._exit(3)"),
+    "bound_exit": ("advance", "if self.t >= 0.5: _exit(0)", "advance() called os._exit(0)"),
 }
 
 
 @pytest.mark.parametrize("case", IN_FLIGHT)
 def test_a_law_that_fails_in_flight_ends_law_failed_with_its_record(tmp_path, case):
-    update, says = IN_FLIGHT[case]
-    r = _sim(tmp_path, _law(tmp_path, update=update))
+    method, line, says = IN_FLIGHT[case]
+    r = _sim(tmp_path, _law(tmp_path, **{method: line}))
     assert r.returncode == 1, (r.stdout, r.stderr)
     assert "Traceback" not in r.stderr + r.stdout, r.stderr
     assert "outcome: law_failed" in r.stdout
