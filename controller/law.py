@@ -224,7 +224,7 @@ class RefusedExit:
     :class:`ExitCalled`: a law that ended the process would leave no record and exit 0 (bsst is one thread; what
     the law binds under this guard, ``from os import _exit`` at import, is refused too). A signal, ``os.abort()``
     or a crash in a C extension still ends the process: ``bsst sim`` flies a user's law in a watched child
-    process for those (bridge.cli.watched)."""
+    process for those (bridge.nodes.watched)."""
 
     def __enter__(self) -> None:
         global _refusing

@@ -8,7 +8,9 @@ Issue 22, defect 6: every way a plug-in law can fail ends honestly, through the 
 - it fails in flight (``update`` raises, exits, ``os._exit`` in ``update`` or ``advance``, returns the wrong shape,
   None, a string, +-inf, or four values that are not numbers though ``float()`` takes them: bools, numpy bools,
   complex, numeric strings): one line, exit 1, and ``summary.json`` (outcome ``law_failed``, ``ended_by`` the
-  controller with the exception's type and message, the step and t), the trace so far and ``events.log`` written.
+  controller with the exception's type and message, the step and t), the trace so far and ``events.log`` written;
+- it ends ``bsst sim``'s process past any guard in it (a signal, ``posix._exit``): exit 1 and one line saying so
+  (bridge.nodes.watched).
 """
 
 from __future__ import annotations
@@ -122,6 +124,28 @@ def test_a_law_that_fails_in_flight_ends_law_failed_with_its_record(tmp_path, ca
     rows = (run / "trace.csv").read_text().splitlines()
     assert len(rows) == 1 + 125  # the header, and every step flown before the failing one
     assert "law_failed" in (run / "events.log").read_text()
+
+
+PROCESS_ENDS = {  # case: (advance's line: a law that ends bsst sim's process past any guard in it, how it is said)
+    "sigkill": ("if self.t >= 0.5: os.kill(os.getpid(), 9)", "killed by signal SIGKILL"),
+    "posix_exit0": ("if self.t >= 0.5: __import__('posix')._exit(0)", "exit status 0"),  # as a C extension's exit(0)
+}
+
+
+@pytest.mark.parametrize("case", PROCESS_ENDS)
+def test_a_law_that_ends_bsst_sims_process_ends_the_command_exit_1_said(tmp_path, case):
+    """bsst sim flies a law of the user's own in a watched child process: its death is the command's exit 1 and
+    one line naming how it ended and the law, never exit 0 and silence; what was written before stays."""
+    line, how = PROCESS_ENDS[case]
+    r = _sim(tmp_path, _law(tmp_path, advance=line))
+    assert r.returncode == 1, (r.stdout, r.stderr)
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
+    assert f"bsst sim: the flight's process ended before the flight did ({how})" in lines[0], lines[0]
+    assert "bad_law.py:Law" in lines[0] and "no summary.json" in lines[0], lines[0]
+    run = tmp_path / "run"
+    assert (run / "trace.csv").is_file() and (run / "mission.toml").is_file()
+    assert not (run / "summary.json").exists()
 
 
 def test_the_sitl_controller_ends_law_failed_when_its_law_exits(tmp_path):

@@ -47,6 +47,7 @@ from bridge.sweep.cells import broke_policy, seeds_alike
 from bridge.sweep.classes import CLASSES, Classes, classify
 from bridge.sweep.executors import engine_for, run_batch, run_cell, run_local
 from bridge.sweep.grid import LINK_AXES, RANGES, Cell, cell_flight, mission_value, noise_problem
+from controller.law import is_builtin
 from missions import Mission
 from params import ConfigError
 
@@ -263,12 +264,13 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
 
 def fly_round(mission: Mission, probes: list[Cell], engine: str, jobs: int | None) -> list[dict[str, Any]]:
     """Fly one round's cells: as a batch where it can (even one cell: this process loads the kernels
-    once), in this process for a cell or two, in a process pool otherwise; their rows."""
+    once), in this process for a cell or two of the built-in laws, in a process pool otherwise; their rows."""
     rows: list[dict[str, Any]] = []
     used, _ = engine_for(mission, probes, "offline", engine, min_cells=1)
     if used == "batch":
         run_batch(mission, probes, rows.append, jobs=jobs)
-    elif len(probes) <= IN_PROCESS_CELLS:  # a pool's start costs more than a cell or two
+    elif len(probes) <= IN_PROCESS_CELLS and all(is_builtin(c.controller) for c in probes):  # a pool's start
+        # costs more than a cell or two; a law of the user's own flies in a worker, whose death is a failed cell
         rows += [run_cell(mission, c) for c in probes]
     else:
         run_local(mission, probes, "offline", jobs or os.cpu_count() or 1, rows.append)
