@@ -38,6 +38,7 @@ import importlib.util
 import inspect
 import math
 import os
+import stat
 import sys
 from collections.abc import Callable
 from functools import partial
@@ -111,6 +112,18 @@ def law_problem(law: object) -> str | None:
     return None
 
 
+class LawError(ConfigError):
+    """A law that cannot be flown (bad input, one line): ``where`` it was named (``controller 'SPEC'``, then where
+    the spec came from: :func:`bridge.core.flight.prepare` names the mission's key or the ``--controller`` flag)
+    and ``what`` is wrong with it."""
+
+    def __init__(self, spec: str, what: str, where: str | None = None) -> None:
+        self.where = where or f"controller {spec!r}"
+        self.spec = spec
+        self.what = what
+        super().__init__(f"{self.where}: {what}")
+
+
 def is_builtin(spec: str) -> bool:
     return spec in BUILTIN
 
@@ -123,7 +136,7 @@ def resolve_law(spec: str) -> LawFactory:
         return BUILTIN[spec]
     where, sep, cls_name = spec.rpartition(":")
     if not sep or not where or not cls_name.isidentifier():
-        raise ConfigError(f"controller {spec!r}: must be one of {', '.join(BUILTIN)}, "
+        raise LawError(spec, f"must be one of {', '.join(BUILTIN)}, "
                           "or path/to/file.py:ClassName, or package.module:ClassName")
     if where.endswith(".py") or "/" in where or "\\" in where:
         module = _load_file(Path(where), spec)
@@ -132,30 +145,38 @@ def resolve_law(spec: str) -> LawFactory:
             with RefusedExit():
                 module = importlib.import_module(where)
         except ModuleNotFoundError as exc:
-            raise ConfigError(f"controller {spec!r}: no module named {exc.name!r}") from None
+            raise LawError(spec, f"no module named {exc.name!r}") from None
         except (Exception, SystemExit, ExitCalled) as exc:  # the user's module raised (or exited) importing: one line
-            raise ConfigError(f"controller {spec!r}: importing {where} {did(exc)}") from None
+            raise LawError(spec, f"importing {where} {did(exc)}") from None
     cls = getattr(module, cls_name, None)
     if cls is None:
-        raise ConfigError(f"controller {spec!r}: {where} has no class {cls_name!r}")
+        raise LawError(spec, f"{where} has no class {cls_name!r}")
     if not inspect.isclass(cls):
-        raise ConfigError(f"controller {spec!r}: {cls_name} is not a class")
+        raise LawError(spec, f"{cls_name} is not a class")
     missing = [m for m in _METHODS if not callable(getattr(cls, m, None))]
     if missing:
-        raise ConfigError(f"controller {spec!r}: {cls_name} does not fit the Law interface "
+        raise LawError(spec, f"{cls_name} does not fit the Law interface "
                           f"(controller/law.py): no method {missing[0]}()")
     return cls
 
 
 def _load_file(path: Path, spec: str):  # -> module
-    if not path.is_file():
-        raise ConfigError(f"controller {spec!r}: no file {path}")
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        raise LawError(spec, f"no file {path}") from None
+    except OSError as exc:
+        raise LawError(spec, f"cannot read {path} ({exc.strerror})") from None
+    if stat.S_ISDIR(mode):
+        raise LawError(spec, f"{path} is a directory, not a Python file")
+    if not stat.S_ISREG(mode):  # (a FIFO would block the import for ever)
+        raise LawError(spec, f"{path} is not a regular file, not a Python file")
     name = f"bsst_user_law_{abs(hash(str(path.resolve())))}"
     if name in sys.modules:  # one module per file per process, as an import would
         return sys.modules[name]
     mod_spec = importlib.util.spec_from_file_location(name, path)
     if mod_spec is None or mod_spec.loader is None:
-        raise ConfigError(f"controller {spec!r}: {path} is not a Python file")
+        raise LawError(spec, f"{path} is not a Python file")
     module = importlib.util.module_from_spec(mod_spec)
     sys.modules[name] = module
     try:
@@ -163,7 +184,7 @@ def _load_file(path: Path, spec: str):  # -> module
             mod_spec.loader.exec_module(module)
     except (Exception, SystemExit, ExitCalled) as exc:  # a syntax error, a raise or an exit in the file: one line
         del sys.modules[name]
-        raise ConfigError(f"controller {spec!r}: loading {path} {did(exc)}") from None
+        raise LawError(spec, f"loading {path} {did(exc)}") from None
     return module
 
 
@@ -181,11 +202,11 @@ def make_law(spec: str | LawFactory, nominal: Nominal, gains: Gains, rate_hz: fl
             with RefusedExit():
                 law = factory(nominal, gains, rate_hz)
     except (Exception, SystemExit, ExitCalled) as exc:  # the user's constructor (an exit too): one line naming it
-        raise ConfigError(f"controller {label!r}: building it as ({label.rpartition(':')[2]})(nominal, gains, "
+        raise LawError(label, f"building it as ({label.rpartition(':')[2]})(nominal, gains, "
                           f"rate_hz) {did(exc)}") from None
     why = law_problem(law)
     if why:
-        raise ConfigError(f"controller {label!r}: does not fit the Law interface (controller/law.py): {why}")
+        raise LawError(label, f"does not fit the Law interface (controller/law.py): {why}")
     return law if factory in BUILTIN.values() else CheckedLaw(law, label)
 
 

@@ -161,3 +161,34 @@ def test_the_sitl_controller_ends_law_failed_when_its_law_exits(tmp_path):
     s = json.loads((tmp_path / "run" / "summary.json").read_text())
     assert s["outcome"] == "law_failed", s["ended_by"]
     assert s["ended_by"]["who"] == "controller" and "update() raised SystemExit" in s["ended_by"]["how"]
+
+
+NAMED_WHERE = {  # case: (argv, with {m} the mission; the line's start: the flag when the flag gave the law)
+    "sim_flag_no_file": (["sim", "{m}", "--controller", "./nofile.py:Law"],
+                         "bsst: --controller ./nofile.py:Law: no file {d}/nofile.py"),
+    "sim_flag_directory": (["sim", "{m}", "--controller", "./dirlaw.py:Law"],
+                           "bsst: --controller ./dirlaw.py:Law: {d}/dirlaw.py is a directory, not a Python file"),
+    "sim_key_directory": (["sim", "{d}/keyed.toml"],
+                          "bsst: {d}/keyed.toml: controller '{d}/dirlaw.py:Law': {d}/dirlaw.py is a directory"),
+    "sitl_flag": (["sitl", "{m}", "--controller", "nofile.py:Law", "--gcs", "none"],
+                  "bsst: --controller nofile.py:Law: no file {d}/nofile.py"),
+    "controller_flag": (["controller", "{m}", "--controller", "nofile.py:Law"],
+                        "bsst: --controller nofile.py:Law: no file {d}/nofile.py"),
+    "margin_flag": (["margin", "{m}", "--over", "delay_ms", "--until", "rms=1", "--controller", "bsst,nofile.py:Law"],
+                    "bsst: --controller nofile.py:Law: no file {d}/nofile.py"),
+}
+
+
+@pytest.mark.parametrize("case", NAMED_WHERE)
+def test_a_law_that_cannot_be_flown_is_named_where_it_was_given(tmp_path, case):
+    """A law from ``--controller`` is the flag's, not the mission file's ``controller`` key; one from the key is the
+    file's; a directory given as a law file is said to be one (not "no file")."""
+    (tmp_path / "dirlaw.py").mkdir()
+    mission = (ROOT / "missions" / "sine.toml").read_text()
+    (tmp_path / "keyed.toml").write_text(mission.replace('controller = "bsst"', 'controller = "dirlaw.py:Law"'))
+    argv, start = NAMED_WHERE[case]
+    r = run_bsst(*(a.format(m=ROOT / "missions" / "sine.toml", d=tmp_path) for a in argv), cwd=tmp_path, env=ENV,
+                 timeout=60)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
+    assert lines[0].startswith(start.format(d=tmp_path)), lines[0]

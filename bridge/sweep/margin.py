@@ -47,7 +47,7 @@ from bridge.sweep.cells import broke_policy, seeds_alike
 from bridge.sweep.classes import CLASSES, Classes, classify
 from bridge.sweep.executors import engine_for, run_batch, run_cell, run_local
 from bridge.sweep.grid import LINK_AXES, RANGES, Cell, cell_flight, mission_value, noise_problem
-from controller.law import is_builtin
+from controller.law import LawError, is_builtin
 from missions import Mission
 from params import ConfigError
 
@@ -214,8 +214,11 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
     for c in laws:  # each law's file, module and class before any cell flies (as a sweep's validate does)
         try:
             cell_flight(mission, probe(mission, c, over, START[over], mission.seed, base, vehicle))
-        except ConfigError as exc:
-            raise ConfigError(f"--controller {c}: {exc}") from None
+        except LawError:  # named where it was given: --controller, or the mission's controller key
+            raise
+        except ConfigError as exc:  # the probe's own values (the search's first) with the mission's
+            raise ConfigError(f"margin over {over}: its first probe ({over} = {START[over]:g}) cannot be flown: "
+                              f"{exc}") from None
     searches = [Search(c, lo_range) for c in laws]
     pending = {s.controller: START[over] for s in searches}
     cells_flown = 0
