@@ -46,7 +46,7 @@ from bridge.record.runlog import run_dir, write_json_atomic
 from bridge.sweep.cells import broke_policy, seeds_alike
 from bridge.sweep.classes import CLASSES, Classes, classify
 from bridge.sweep.executors import engine_for, run_batch, run_cell, run_local
-from bridge.sweep.grid import LINK_AXES, RANGES, Cell, cell_flight, mission_value, noise_problem
+from bridge.sweep.grid import LINK_AXES, RANGES, Cell, cell_flight, link_trace, mission_value, noise_problem
 from controller.law import LawError, is_builtin
 from missions import Mission
 from params import ConfigError
@@ -204,6 +204,11 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
         raise ConfigError(f"margin over wind_mps: the mission's [wind] already sets speed_mps = "
                           f"{mission_value(mission, over):g}; search from a mission without it")
     flight = prepare(mission)
+    trace = link_trace(flight) if over in LINK_AXES else None
+    if trace:
+        raise ConfigError(f"margin over {over}: {mission.source} replays the link trace {trace}, which gives the "
+                          f"link's {', '.join(LINK_AXES)}: {over} cannot be searched over it; search from a mission "
+                          "without the trace, or over noise or wind_mps")
     if over == "noise":
         why = noise_problem((flight.estimator,), prepare(mission, noise=1.0).sensors)  # the set's own sigmas
         if why:
