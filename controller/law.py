@@ -37,11 +37,15 @@ import importlib
 import importlib.util
 import inspect
 import math
+import os
+import stat
 import sys
 from collections.abc import Callable
 from functools import partial
+from numbers import Real
 from pathlib import Path
-from typing import Protocol, runtime_checkable
+from types import TracebackType
+from typing import NoReturn, Protocol, runtime_checkable
 
 from controller.bsst import BacksteppingSuperTwisting
 from controller.gains import Gains
@@ -84,16 +88,40 @@ assert tuple(BUILTIN) == CONTROLLERS  # the names a mission may give are the law
 _METHODS = ("update", "advance", "reset")
 
 
+def is_number(v: object) -> bool:
+    """Whether ``v`` is a finite real number as the contract means it: an int or a float (numpy's too), never a
+    bool (numpy's ``bool_`` neither), a complex, a string or None."""
+    if type(v) is float:  # the common case, first: a law's every step
+        return math.isfinite(v)
+    if not isinstance(v, Real) or isinstance(v, bool):
+        return False
+    try:
+        return math.isfinite(v)
+    except (TypeError, ValueError, OverflowError):  # a Real of the user's own whose float() fails
+        return False
+
+
 def law_problem(law: object) -> str | None:
     """Why ``law`` (a built law) does not fit :class:`Law`, or None if it does."""
     for name in _METHODS:
         if not callable(getattr(law, name, None)):
             return f"has no method {name}()"
     desired = getattr(law, "desired", None)
-    if not (isinstance(desired, tuple) and len(desired) == 2
-            and all(isinstance(v, (int, float)) and math.isfinite(v) for v in desired)):
+    if not (isinstance(desired, tuple) and len(desired) == 2 and all(is_number(v) for v in desired)):
         return f"its 'desired' must be a tuple (phi_d, theta_d) of two finite numbers, got {desired!r}"
     return None
+
+
+class LawError(ConfigError):
+    """A law that cannot be flown (bad input, one line): ``where`` it was named (``controller 'SPEC'``, then where
+    the spec came from: :func:`bridge.core.flight.prepare` names the mission's key or the ``--controller`` flag)
+    and ``what`` is wrong with it."""
+
+    def __init__(self, spec: str, what: str, where: str | None = None) -> None:
+        self.where = where or f"controller {spec!r}"
+        self.spec = spec
+        self.what = what
+        super().__init__(f"{self.where}: {what}")
 
 
 def is_builtin(spec: str) -> bool:
@@ -108,46 +136,56 @@ def resolve_law(spec: str) -> LawFactory:
         return BUILTIN[spec]
     where, sep, cls_name = spec.rpartition(":")
     if not sep or not where or not cls_name.isidentifier():
-        raise ConfigError(f"controller {spec!r}: must be one of {', '.join(BUILTIN)}, "
+        raise LawError(spec, f"must be one of {', '.join(BUILTIN)}, "
                           "or path/to/file.py:ClassName, or package.module:ClassName")
     if where.endswith(".py") or "/" in where or "\\" in where:
         module = _load_file(Path(where), spec)
     else:
         try:
-            module = importlib.import_module(where)
+            with RefusedExit():
+                module = importlib.import_module(where)
         except ModuleNotFoundError as exc:
-            raise ConfigError(f"controller {spec!r}: no module named {exc.name!r}") from None
-        except (Exception, SystemExit) as exc:  # the user's module raised (or exited) while importing: one line
-            raise ConfigError(f"controller {spec!r}: importing {where} raised {type(exc).__name__}: {exc}") from None
+            raise LawError(spec, f"no module named {exc.name!r}") from None
+        except (Exception, SystemExit, ExitCalled) as exc:  # the user's module raised (or exited) importing: one line
+            raise LawError(spec, f"importing {where} {did(exc)}") from None
     cls = getattr(module, cls_name, None)
     if cls is None:
-        raise ConfigError(f"controller {spec!r}: {where} has no class {cls_name!r}")
+        raise LawError(spec, f"{where} has no class {cls_name!r}")
     if not inspect.isclass(cls):
-        raise ConfigError(f"controller {spec!r}: {cls_name} is not a class")
+        raise LawError(spec, f"{cls_name} is not a class")
     missing = [m for m in _METHODS if not callable(getattr(cls, m, None))]
     if missing:
-        raise ConfigError(f"controller {spec!r}: {cls_name} does not fit the Law interface "
+        raise LawError(spec, f"{cls_name} does not fit the Law interface "
                           f"(controller/law.py): no method {missing[0]}()")
     return cls
 
 
 def _load_file(path: Path, spec: str):  # -> module
-    if not path.is_file():
-        raise ConfigError(f"controller {spec!r}: no file {path}")
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        raise LawError(spec, f"no file {path}") from None
+    except OSError as exc:
+        raise LawError(spec, f"cannot read {path} ({exc.strerror})") from None
+    if stat.S_ISDIR(mode):
+        raise LawError(spec, f"{path} is a directory, not a Python file")
+    if not stat.S_ISREG(mode):  # (a FIFO would block the import for ever)
+        raise LawError(spec, f"{path} is not a regular file, not a Python file")
     note_input(path)  # a user's file this process reads (an --overwrite never replaces it)
     name = f"bsst_user_law_{abs(hash(str(path.resolve())))}"
     if name in sys.modules:  # one module per file per process, as an import would
         return sys.modules[name]
     mod_spec = importlib.util.spec_from_file_location(name, path)
     if mod_spec is None or mod_spec.loader is None:
-        raise ConfigError(f"controller {spec!r}: {path} is not a Python file")
+        raise LawError(spec, f"{path} is not a Python file")
     module = importlib.util.module_from_spec(mod_spec)
     sys.modules[name] = module
     try:
-        mod_spec.loader.exec_module(module)
-    except (Exception, SystemExit) as exc:  # a syntax error, a raise or an exit in the user's file: one line
+        with RefusedExit():
+            mod_spec.loader.exec_module(module)
+    except (Exception, SystemExit, ExitCalled) as exc:  # a syntax error, a raise or an exit in the file: one line
         del sys.modules[name]
-        raise ConfigError(f"controller {spec!r}: loading {path} raised {type(exc).__name__}: {exc}") from None
+        raise LawError(spec, f"loading {path} {did(exc)}") from None
     return module
 
 
@@ -162,14 +200,70 @@ def make_law(spec: str | LawFactory, nominal: Nominal, gains: Gains, rate_hz: fl
         if factory is BacksteppingSuperTwisting:
             law = BacksteppingSuperTwisting(nominal, gains, rate_hz, discretization=discretization)
         else:
-            law = factory(nominal, gains, rate_hz)
-    except (Exception, SystemExit) as exc:  # the user's constructor (an exit too): one line naming it
-        raise ConfigError(f"controller {label!r}: building it as ({label.rpartition(':')[2]})(nominal, gains, "
-                          f"rate_hz) raised {type(exc).__name__}: {exc}") from None
+            with RefusedExit():
+                law = factory(nominal, gains, rate_hz)
+    except (Exception, SystemExit, ExitCalled) as exc:  # the user's constructor (an exit too): one line naming it
+        raise LawError(label, f"building it as ({label.rpartition(':')[2]})(nominal, gains, "
+                          f"rate_hz) {did(exc)}") from None
     why = law_problem(law)
     if why:
-        raise ConfigError(f"controller {label!r}: does not fit the Law interface (controller/law.py): {why}")
+        raise LawError(label, f"does not fit the Law interface (controller/law.py): {why}")
     return law if factory in BUILTIN.values() else CheckedLaw(law, label)
+
+
+class ExitCalled(BaseException):
+    """A user's law called ``os._exit(code)`` while bsst ran its code (:class:`RefusedExit`): raised instead, so
+    that the process stays and the law's failure is recorded as a raise is. A BaseException, as SystemExit is:
+    the law's own ``except Exception`` does not swallow it."""
+
+    def __init__(self, code: object) -> None:
+        super().__init__(f"os._exit({code!r})")
+        self.code = code
+
+
+_REAL_EXIT = os._exit
+_refusing = False  # a user's law code runs now, under RefusedExit, in this process
+
+
+def _refused_exit(code: int) -> NoReturn:
+    """``os._exit`` while a user's law code runs: :class:`ExitCalled`; else (a process the law forked, a name the
+    law bound under the guard and called outside it) the process ends as asked."""
+    if not _refusing:
+        _REAL_EXIT(code)
+    raise ExitCalled(code)
+
+
+def _forked() -> None:
+    global _refusing
+    _refusing = False  # a child the law forked is not the flight's process
+
+
+os.register_at_fork(after_in_child=_forked)
+
+
+class RefusedExit:
+    """``with RefusedExit():`` runs a user's law code (loading, building, each call) with ``os._exit`` raising
+    :class:`ExitCalled`: a law that ended the process would leave no record and exit 0 (bsst is one thread; what
+    the law binds under this guard, ``from os import _exit`` at import, is refused too). A signal, ``os.abort()``
+    or a crash in a C extension still ends the process: ``bsst sim`` flies a user's law in a watched child
+    process for those (bridge.nodes.watched)."""
+
+    def __enter__(self) -> None:
+        global _refusing
+        self._saved = (os._exit, _refusing)
+        os._exit, _refusing = _refused_exit, True
+
+    def __exit__(self, kind: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        global _refusing
+        os._exit, _refusing = self._saved
+
+
+def did(exc: BaseException) -> str:
+    """What a user's code did, for the one line: ``called os._exit(0)`` or ``raised Kind: message``."""
+    if isinstance(exc, ExitCalled):
+        return f"called os._exit({exc.code!r})"
+    return f"raised {type(exc).__name__}: {exc}"
 
 
 class LawFailed(Exception):
@@ -181,17 +275,23 @@ class LawFailed(Exception):
         self.what = what
 
 
-def _inputs(u: object) -> Quad | None:
-    """``u`` as four finite floats, or None when it is not that (a string, None, another length, inf, nan)."""
+def _inputs(u: object) -> tuple[Quad | None, str]:
+    """``u`` as four finite floats, or None and why not: not a sequence of four (a string, None, another length),
+    or a value that is no finite real number (inf, nan, a bool, a complex, a string: :func:`is_number`)."""
     if isinstance(u, (str, bytes)) or u is None:
-        return None
+        return None, "not a sequence of four numbers"
     try:
-        values = tuple(float(v) for v in u)  # type: ignore[attr-defined]
-    except (TypeError, ValueError):
-        return None
-    if len(values) != 4 or not all(math.isfinite(v) for v in values):
-        return None
-    return values  # type: ignore[return-value]
+        given = tuple(u)  # type: ignore[call-overload]
+    except Exception:  # not iterable, or its own iteration raised
+        return None, "not a sequence of four numbers"
+    if len(given) != 4:
+        return None, f"{len(given)} values, not 4"
+    for i, v in enumerate(given):
+        if not is_number(v):
+            what = (f"is {v!r}, not a finite number" if isinstance(v, Real) and not isinstance(v, bool)
+                    else f"is a {type(v).__name__}, not a number")
+            return None, f"u{i + 1} {what}"
+    return tuple(map(float, given)), ""  # type: ignore[return-value]
 
 
 class CheckedLaw:
@@ -213,18 +313,23 @@ class CheckedLaw:
         return getattr(self.law, name)
 
     def _call(self, method: str, *args: object) -> object:
+        global _refusing
+        saved = os._exit, _refusing  # RefusedExit, written out: every step's two calls
+        os._exit, _refusing = _refused_exit, True
         try:
             return getattr(self.law, method)(*args)
-        except (Exception, SystemExit) as exc:
-            raise LawFailed(self.label, f"{method}() raised {type(exc).__name__}: {exc}") from None
+        except (Exception, SystemExit, ExitCalled) as exc:
+            raise LawFailed(self.label, f"{method}() {did(exc)}") from None
+        finally:
+            os._exit, _refusing = saved
 
     def update(self, t: float, state: tuple[float, ...], ref: Sample, omega_d: float) -> Quad:
         u = self._call("update", t, state, ref, omega_d)
-        values = _inputs(u)
+        values, why = _inputs(u)
         if values is None:
             shown = repr(u)
             raise LawFailed(self.label, "update() must return four finite numbers (u1, u2, u3, u4) in N, "
-                                        f"got {shown[:80] + '...' if len(shown) > 80 else shown}")
+                                        f"got {shown[:80] + '...' if len(shown) > 80 else shown} ({why})")
         why = law_problem(self.law)
         if why:
             raise LawFailed(self.label, f"after update(): {why}")

@@ -429,6 +429,8 @@ def test_a_file_without_read_permission(files, capsys):
     (["controller", "missions/sine.toml", "--key", "/nonexistent/key"], "--key"),
     (["relay", "--listen", "127.0.0.1:0", "--to", "nowhere"], "--to"),
     (["sweep", "missions/sine.toml", "--delay", "-5"], "--delay"),
+    (["sweep", "missions/sine.toml", "--delay", "0,10", "--link-trace", "examples/link-trace.csv"],
+     "bsst sweep: --delay with --link-trace: the trace gives the link's delay_ms"),  # not a cell's clash
     (["report", "/nonexistent/sweep"], "/nonexistent/sweep"),
 ])
 def test_as_a_real_process_one_line_and_no_traceback(argv, names):

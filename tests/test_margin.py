@@ -118,11 +118,38 @@ def test_require_fails_a_users_ci_when_the_margin_is_short(tmp_path: Path) -> No
      "--engine batch: [estimator] kind = 'ekf'"),
     (["--over", "delay_ms", "--until", "rms=0.1", "--check-below", "300"], "--check-below must be in [0, 1024 x"),
     (["--over", "delay_ms", "--until", "rms=0.1", "--check-below", "-1"], "--check-below"),
+    # a link trace gives every link axis: refused up front, naming the two flags (not the search's first probe)
+    (["--over", "delay_ms", "--until", "rms=0.1", "--link-trace", "examples/link-trace.csv"],
+     "bsst margin: --over delay_ms with --link-trace: the trace gives the link's delay_ms, jitter_ms, loss_pct, "
+     "burst_len, so delay_ms cannot be searched over it; drop --link-trace"),
+    (["--over", "burst_len", "--until", "rms=0.1", "--down-link-trace", "examples/link-trace.csv"],
+     "bsst margin: --over burst_len with --down-link-trace"),
 ])
 def test_bad_margin_input_is_one_line(argv: list[str], names: str) -> None:
     r = bsst("margin", "missions/sine.toml", *argv)
     lines = r.stderr.strip().splitlines()
     assert r.returncode == 2 and len(lines) == 1 and names in lines[0], r.stderr
+
+
+@pytest.mark.parametrize("argv, names", [
+    (["margin", "{m}", "--over", "loss_pct", "--until", "rms=0.1"],
+     "margin over loss_pct: {m} replays the link trace {t}, which gives the link's delay_ms, jitter_ms, loss_pct, "
+     "burst_len: loss_pct cannot be searched over it"),
+    (["sweep", "{m}", "--delay", "0,10", "--no-plots"],
+     "grid.delay_ms (--delay): {m} replays the link trace {t}"),
+])
+def test_a_link_axis_is_not_searched_over_the_missions_own_link_trace(tmp_path: Path, argv: list[str],
+                                                                      names: str) -> None:
+    """The mission's ``[link] trace`` gives the link's delays and losses: a margin or a sweep over a link axis is
+    refused before any cell flies, naming the file and the trace (not a probe's value the user never gave)."""
+    trace = ROOT / "examples" / "link-trace.csv"
+    m = tmp_path / "traced.toml"
+    m.write_text(dump_toml({**SHORT.to_dict(), "link": {"trace": str(trace)}}))
+    r = run_bsst(*(a.format(m=m) for a in argv), "--out", str(tmp_path / "out"), cwd=tmp_path, timeout=120)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
+    assert names.format(m=m, t=trace) in lines[0] and "--controller" not in lines[0], lines[0]
+    assert not (tmp_path / "out").exists()
 
 
 def test_the_noise_margin_is_found_inside_its_bracket(tmp_path: Path) -> None:

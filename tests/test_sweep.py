@@ -378,6 +378,12 @@ def _damage(d: Path, name: str) -> str:
         parts[COLUMNS.index("rms")] = "inf"
         cells.write_text(lines[0] + ",".join(parts) + lines[2])
         return "cells.csv: line 2: rms: expected a finite number, got 'inf'"
+    if name == "unknown-outcome":  # an edited outcome is not some failed cell: refused, naming what it may be
+        parts = row.split(",")
+        parts[COLUMNS.index("outcome")] = "bogus"
+        cells.write_text(lines[0] + ",".join(parts) + lines[2])
+        return ("cells.csv: line 2: outcome: expected one of completed, failsafe, law_failed, denied, diverged, "
+                "crashed, collision, aborted, error, got 'bogus'")
     if name == "empty-axis":
         parts = row.split(",")
         parts[COLUMNS.index("delay_ms")] = ""
@@ -410,9 +416,9 @@ def _damage(d: Path, name: str) -> str:
 
 
 DAMAGES = ["non-utf8", "cells-dir", "cells-fifo", "truncated-row", "extra-column", "text-in-number",
-           "text-in-integer", "infinite", "empty-axis", "bad-quote", "other-header", "nul", "json-null", "json-list",
-           "json-truncated", "json-non-utf8", "json-deep", "json-swept-number", "json-swept-unknown",
-           "json-mission-string", "json-classes-list"]
+           "text-in-integer", "infinite", "unknown-outcome", "empty-axis", "bad-quote", "other-header", "nul",
+           "json-null", "json-list", "json-truncated", "json-non-utf8", "json-deep", "json-swept-number",
+           "json-swept-unknown", "json-mission-string", "json-classes-list"]
 
 
 @pytest.mark.parametrize("damage", DAMAGES)

@@ -108,6 +108,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     from bridge.core.flight import Overrides, prepare  # lazy: start-up time
     from bridge.sweep import AXES, Grid, Sweep, is_sweep_file, load_sweep, run_sweep  # lazy: start-up time
     from bridge.sweep.cells import broke_policy  # lazy: start-up time
+    from bridge.sweep.grid import LINK_AXES, SHORT  # lazy: start-up time
     from missions import load_mission  # lazy: start-up time
 
     spec = load_sweep(args.mission) if is_sweep_file(args.mission) else Sweep(load_mission(args.mission), Grid())
@@ -122,6 +123,13 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         if clash:
             raise UsageError(f"bsst sweep: --{d}-{clash[0].split('_')[0]} conflicts with the swept {clash[0]} "
                              f"(a swept value applies to both directions)")
+    link_swept = [a for a in LINK_AXES if getattr(spec.grid, a)]
+    trace = trace_flag(args)
+    if link_swept and trace:
+        a = link_swept[0]
+        given = f"--{SHORT[a]}" if a in axes else f"grid.{a}"
+        raise UsageError(f"bsst sweep: {given} with {trace}: the trace gives the link's {', '.join(LINK_AXES)}, so "
+                         f"{a} cannot be swept over it; drop one of them")
     sensors = {"set": args.sensors} if args.sensors is not None else None
     if fixed or sensors or args.scatter is not None:  # fixed for every cell, laid over by the one path to its parts
         spec = replace(spec, mission=prepare(spec.mission, Overrides(link=fixed or None, sensors=sensors,
@@ -154,6 +162,15 @@ def cmd_sweep(args: argparse.Namespace) -> int:
               f"{broken[0]['policies']}", file=sys.stderr)
     return EXIT_FAILED if res.failed else EXIT_OK
 
+
+
+def trace_flag(args: argparse.Namespace) -> str | None:
+    """The link-trace flag given (``--link-trace``, ``--up-link-trace``, ``--down-link-trace``; not ``none``)."""
+    for dest, flag in (("link_trace", "--link-trace"), ("link_up_trace", "--up-link-trace"),
+                       ("link_down_trace", "--down-link-trace")):
+        if getattr(args, dest, None):
+            return flag
+    return None
 
 
 def connect_dask(address: str) -> Any:
@@ -212,6 +229,7 @@ def add_margin_command(sub: Any) -> None:
 def cmd_margin(args: argparse.Namespace) -> int:
     from bridge.core.flight import Overrides, prepare  # lazy: start-up time
     from bridge.record.runlog import run_dir  # lazy: start-up time
+    from bridge.sweep.grid import LINK_AXES  # lazy: start-up time
     from bridge.sweep.margin import margin, parse_until, write_margin  # lazy: start-up time
     from missions import load_mission  # lazy: start-up time
 
@@ -220,6 +238,11 @@ def cmd_margin(args: argparse.Namespace) -> int:
     for d in ("up", "down"):
         if args.over in fixed.get(d, {}):
             raise UsageError(f"bsst margin: a {args.over} flag conflicts with --over {args.over}")
+    trace = trace_flag(args)
+    if args.over in LINK_AXES and trace:
+        raise UsageError(f"bsst margin: --over {args.over} with {trace}: the trace gives the link's "
+                         f"{', '.join(LINK_AXES)}, so {args.over} cannot be searched over it; drop {trace}, or "
+                         "search --over noise or wind_mps")
     sensing = sensor_overrides_from_args(args)
     if args.over == "noise" and sensing["noise"] is not None:
         raise UsageError("bsst margin: --noise conflicts with --over noise (the noise scale is what is searched)")

@@ -13,12 +13,14 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
 from typing import Any
 
 from bridge.cli.flags import (
     EXIT_FAILED,
     EXIT_OK,
+    UsageError,
     _home,
     _ids,
     add_link_options,
@@ -73,6 +75,26 @@ def fleet_size(text: str) -> int:
 
 
 def cmd_sim(args: argparse.Namespace) -> int:
+    """``bsst sim``; a law of the user's own flies in a watched child process (bridge.nodes.watched): one that
+    ends the process (a signal, a C extension's exit) ends the command exit 1, said, never exit 0 and silent."""
+    from bridge.nodes.watched import run_watched  # lazy: start-up time
+
+    laws = own_laws(args)
+    if not laws:
+        return _sim(args)
+    end = run_watched(lambda: _sim(args), (UsageError, ConfigError))
+    if end.signalled is not None:  # this command was ended (SIGTERM, SIGHUP): its flight with it
+        print(f"bsst sim: ended by signal {signal.Signals(end.signalled).name}", file=sys.stderr)
+        return 128 + end.signalled
+    if end.status is None:
+        print(f"bsst sim: the flight's process ended before the flight did ({end.how}): a law of your own flew in "
+              f"it ({', '.join(laws)}), and one that ends the process (a signal, os.abort(), a C extension's exit) "
+              "leaves no summary.json; the run directory keeps what was written before", file=sys.stderr)
+        return EXIT_FAILED
+    return end.status
+
+
+def _sim(args: argparse.Namespace) -> int:
     from bridge.swarm import simulate  # lazy: start-up time
 
     run = simulate(args.mission, out=args.out, write=True, overwrite=args.overwrite, plots=not args.no_plots,
@@ -80,6 +102,19 @@ def cmd_sim(args: argparse.Namespace) -> int:
     if "vehicles" in run.summary:
         return report_fleet(run, "sim")
     return report_run(run, "sim")
+
+
+def own_laws(args: argparse.Namespace) -> list[str]:
+    """The laws of the user's own a flying command flies (not bsst, smc, pid): ``--controller``'s, else the
+    mission's and its vehicles' (as the mission names them)."""
+    from controller.law import is_builtin  # lazy: start-up time
+    from missions import load_mission  # lazy: start-up time
+
+    if args.controller is not None:
+        return [] if is_builtin(args.controller) else [args.controller]
+    m = load_mission(args.mission)
+    specs = {m.controller, *(v.controller for v in m.vehicles if v.controller)}
+    return sorted(s for s in specs if not is_builtin(s))
 
 
 def report_fleet(run: Any, command: str) -> int:

@@ -40,7 +40,7 @@ from bridge.autopilot.simvehicle import HOLD, OFFBOARD, SimVehicle
 from bridge.core.scalar import checked_choice, compile_for, compiled_wanted, wire_for
 from bridge.link.model import LinkConfig, LinkSettings, absolute_link_paths, link_from_table, merge_link_tables
 from controller import Controller, Gains, Nominal, gains_from_table
-from controller.law import LawFactory, resolve_law
+from controller.law import LawError, LawFactory, resolve_law
 from controller.link_guard import GuardConfig
 from missions import Mission, Setpoint, Sine, Step, load_mission
 from missions.airframe import fitted_to_airframe
@@ -290,6 +290,7 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
     """
     over = Overrides.of(overrides, **keywords)
     m = mission if isinstance(mission, Mission) else load_mission(mission)
+    own_law = m.controller
     m = over.laid_over(m)
     src = m.source
     if m.vehicles:  # each vehicle's flight is prepared from its own mission (missions.fleet.vehicle_mission)
@@ -338,6 +339,10 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
         checked_choice()  # BSST_KERNELS: bad input before anything flies
         flight._controller()  # a user's law is built once here, so that one that does not fit is bad input (not
         # compiled: a process that only prepares, a relay or a planner, never loads numba for it)
+    except LawError as exc:  # named where the law was given: the override (--controller), else the mission's key
+        given = over.controller is not None and m.controller != own_law
+        raise LawError(exc.spec, exc.what, f"--controller {over.controller}" if given else f"{src}: {exc.where}") \
+            from None
     except ConfigError as exc:
         raise ConfigError(f"{src}: {exc}") from None
     return flight

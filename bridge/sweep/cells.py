@@ -57,6 +57,7 @@ INT_COLUMNS = ("vehicles", "seed", "up_sent", "up_lost", "down_sent", "down_lost
 STR_COLUMNS = ("controller", "estimator", "turbulence", "discretization", "outcome", "class", "error", "policies")
 # outcomes of a cell that measured nothing: it could not be flown, its law failed, or its vehicle denied the arm
 FAILED = ("error", "law_failed", "denied")
+OUTCOMES = (*SEVERITY, "error")  # a row's outcome: a run's (a fleet's worst vehicle's), or error (not flown)
 
 
 KEY_COLUMNS = (*AXES, "seed")  # what names a row's cell: never empty
@@ -194,12 +195,15 @@ def _cell_text(v: Any) -> str:
 def parse_row(values: Sequence[str], columns: Sequence[str] = COLUMNS) -> dict[str, Any]:
     """A ``cells.csv`` record (strings, in ``columns`` order) back to typed values; a
     ``ValueError`` names the column and what it holds when a value is not of its column's kind
-    (numbers finite, the axes and the seed never empty: what a sweep writes)."""
+    (numbers finite, the axes and the seed never empty, the outcome one of :data:`OUTCOMES`: what a sweep
+    writes)."""
     if len(values) != len(columns):
         n = len(values)
         raise ValueError(f"{n} field{'s' if n != 1 else ''}, expected {len(columns)} ({','.join(columns[:3])},...)")
     row: dict[str, Any] = {}
     for c, v in zip(columns, values, strict=True):
+        if c == "outcome" and v not in OUTCOMES:
+            raise ValueError(f"outcome: expected one of {', '.join(OUTCOMES)}, got {v[:40]!r}")
         if c in STR_COLUMNS:
             row[c] = v
         elif v == "":

@@ -24,7 +24,7 @@ from typing import Any
 
 from bridge.autopilot.estimator import ESTIMATOR_KINDS
 from bridge.core.flight import Flight, Overrides, prepare
-from bridge.link.model import DIRECTIONS, NUMBER_RANGES
+from bridge.link.model import DIRECTIONS, NUMBER_RANGES, TRACE_EXCLUSIVE
 from missions import MISSION_RANGES, Mission
 from missions.fleet import FLEET_RANGES
 from missions.mission import DEFAULT_DISCRETIZATION, DISCRETIZATIONS, law_spec_problem
@@ -42,6 +42,7 @@ FLEET_FORMATION = "line:2"  # how a cell of several vehicles lays them out (brid
 
 
 LINK_AXES = ("delay_ms", "jitter_ms", "loss_pct", "burst_len")
+assert set(LINK_AXES) == set(TRACE_EXCLUSIVE)  # what a link trace gives: link.trace refuses a swept link axis
 SENSING_AXES = ("estimator", "noise")  # the vehicle's: prepare()'s estimator and noise overrides
 WEATHER_AXES = ("wind_mps", "turbulence")  # the air's: prepare()'s wind (its speed) and turbulence overrides
 NAME_AXES = ("controller", "estimator", "turbulence", "discretization")  # axes of names; the others are numbers
@@ -271,6 +272,15 @@ def noiseless(sensors: SensorConfig) -> bool:
 def cell_flight(mission: Mission, cell: Cell) -> Flight:
     """The parts a cell flies, by the one path from a mission and its overrides."""
     return prepare(mission, cell_overrides(cell))
+
+
+def link_trace(flight: Flight) -> str | None:
+    """The link trace file a flight replays in either direction, from its start or a handover (None: none). A
+    trace gives the link's delays and losses, every link axis (:data:`TRACE_EXCLUSIVE`): none can be swept or
+    searched over it."""
+    L = flight.link
+    configs = (L.up, L.down, *(c for _, u, d in L.handovers for c in (u, d)))
+    return next((c.trace.path for c in configs if c.trace is not None), None)
 
 
 def noise_problem(estimators: Sequence[str], sensors: SensorConfig) -> str | None:

@@ -46,7 +46,8 @@ from bridge.record.runlog import run_dir, write_json_atomic
 from bridge.sweep.cells import broke_policy, seeds_alike
 from bridge.sweep.classes import CLASSES, Classes, classify
 from bridge.sweep.executors import engine_for, run_batch, run_cell, run_local
-from bridge.sweep.grid import LINK_AXES, RANGES, Cell, cell_flight, mission_value, noise_problem
+from bridge.sweep.grid import LINK_AXES, RANGES, Cell, cell_flight, link_trace, mission_value, noise_problem
+from controller.law import LawError, is_builtin
 from missions import Mission
 from params import ConfigError
 
@@ -203,6 +204,11 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
         raise ConfigError(f"margin over wind_mps: the mission's [wind] already sets speed_mps = "
                           f"{mission_value(mission, over):g}; search from a mission without it")
     flight = prepare(mission)
+    trace = link_trace(flight) if over in LINK_AXES else None
+    if trace:
+        raise ConfigError(f"margin over {over}: {mission.source} replays the link trace {trace}, which gives the "
+                          f"link's {', '.join(LINK_AXES)}: {over} cannot be searched over it; search from a mission "
+                          "without the trace, or over noise or wind_mps")
     if over == "noise":
         why = noise_problem((flight.estimator,), prepare(mission, noise=1.0).sensors)  # the set's own sigmas
         if why:
@@ -213,8 +219,11 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
     for c in laws:  # each law's file, module and class before any cell flies (as a sweep's validate does)
         try:
             cell_flight(mission, probe(mission, c, over, START[over], mission.seed, base, vehicle))
-        except ConfigError as exc:
-            raise ConfigError(f"--controller {c}: {exc}") from None
+        except LawError:  # named where it was given: --controller, or the mission's controller key
+            raise
+        except ConfigError as exc:  # the probe's own values (the search's first) with the mission's
+            raise ConfigError(f"margin over {over}: its first probe ({over} = {START[over]:g}) cannot be flown: "
+                              f"{exc}") from None
     searches = [Search(c, lo_range) for c in laws]
     pending = {s.controller: START[over] for s in searches}
     cells_flown = 0
@@ -263,12 +272,13 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
 
 def fly_round(mission: Mission, probes: list[Cell], engine: str, jobs: int | None) -> list[dict[str, Any]]:
     """Fly one round's cells: as a batch where it can (even one cell: this process loads the kernels
-    once), in this process for a cell or two, in a process pool otherwise; their rows."""
+    once), in this process for a cell or two of the built-in laws, in a process pool otherwise; their rows."""
     rows: list[dict[str, Any]] = []
     used, _ = engine_for(mission, probes, "offline", engine, min_cells=1)
     if used == "batch":
         run_batch(mission, probes, rows.append, jobs=jobs)
-    elif len(probes) <= IN_PROCESS_CELLS:  # a pool's start costs more than a cell or two
+    elif len(probes) <= IN_PROCESS_CELLS and all(is_builtin(c.controller) for c in probes):  # a pool's start
+        # costs more than a cell or two; a law of the user's own flies in a worker, whose death is a failed cell
         rows += [run_cell(mission, c) for c in probes]
     else:
         run_local(mission, probes, "offline", jobs or os.cpu_count() or 1, rows.append)

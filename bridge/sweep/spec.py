@@ -17,6 +17,7 @@ from itertools import product
 from pathlib import Path
 from typing import Any
 
+from bridge.core.flight import prepare
 from bridge.record.runlog import check_trace_steps
 from bridge.swarm import check_fleet_steps, fleet_flights, fleet_mission
 from bridge.sweep.cells import COLUMNS
@@ -30,12 +31,14 @@ from bridge.sweep.grid import (
     NAME_CHOICES,
     RANGES,
     SENSING_AXES,
+    SHORT,
     WEATHER_AXES,
     Cell,
     Grid,
     cell_flight,
     cell_overrides,
     cells,
+    link_trace,
     mission_value,
     noise_problem,
 )
@@ -104,8 +107,10 @@ class Sweep:
     def validate(self) -> None:
         """Build the flight of every law, every rate, every discretization, every estimator kind, every noise scale,
         every wind and turbulence and every combination of link values once (not every cell), so that a bad value
-        fails before any cell runs; first the grid's size; then that a swept noise scale changes something."""
+        fails before any cell runs; first the grid's size and that no link axis is swept over a link trace; then that
+        a swept noise scale changes something."""
         self.check_size()
+        self.check_link_trace()
         base = self.cells()[0]
         probes = [_replace_cell(base, **{a: v}) for a in ("controller", "rate_hz", "discretization")
                   for v in getattr(self.grid, a)]
@@ -131,6 +136,22 @@ class Sweep:
         why = self.noise_problem()
         if why:
             raise ConfigError(f"grid.noise (--noise): {why}")
+
+    def check_link_trace(self) -> None:
+        """A swept link axis over the mission's link trace (its ``[link]`` trace, or its link profile's): refused,
+        since the trace gives the delays and losses (bridge.sweep.grid.link_trace)."""
+        swept = [a for a in LINK_AXES if getattr(self.grid, a)]
+        if not swept:
+            return
+        try:
+            trace = link_trace(prepare(self.mission))
+        except ConfigError:  # the mission cannot be flown as it is: the probes name why, cell by cell
+            return
+        if trace:
+            a = swept[0]
+            raise ConfigError(f"grid.{a} (--{SHORT[a]}): {self.mission.source} replays the link trace {trace}, which "
+                              f"gives the link's {', '.join(LINK_AXES)}: {a} cannot be swept over it; sweep a mission "
+                              "without the trace, or the other axes")
 
     def noise_problem(self) -> str | None:
         """Why a swept noise scale (more than one value) would change nothing, or None."""
