@@ -33,31 +33,32 @@ def read_regular_file(path: str | Path, expected: str = "file", max_bytes: int |
     refused before it is read, and opened without blocking should one be swapped in after the check).
     Every problem is a :class:`ConfigError` naming the path and saying that ``expected`` was wanted."""
     p = Path(path)
+    name = _printable(str(p))  # (a path with a newline in it stays on the message's one line)
     try:
         kind = _file_kind(os.stat(p).st_mode)
     except FileNotFoundError:
-        raise ConfigError(f"{p}: no such file") from None
+        raise ConfigError(f"{name}: no such file") from None
     except OSError as exc:
-        raise ConfigError(f"{p}: cannot read ({exc.strerror})") from None
+        raise ConfigError(f"{name}: cannot read ({exc.strerror})") from None
     if kind:
-        raise ConfigError(f"{p}: is {kind}, expected {expected}")
+        raise ConfigError(f"{name}: is {kind}, expected {expected}")
     try:
         fd = os.open(p, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
     except OSError as exc:
-        raise ConfigError(f"{p}: cannot read ({exc.strerror})") from None
+        raise ConfigError(f"{name}: cannot read ({exc.strerror})") from None
     try:
         st = os.fstat(fd)
         kind = _file_kind(st.st_mode)
         if kind:
-            raise ConfigError(f"{p}: is {kind}, expected {expected}")
+            raise ConfigError(f"{name}: is {kind}, expected {expected}")
         if max_bytes is not None and st.st_size > max_bytes:
-            raise ConfigError(f"{p}: {st.st_size} bytes, larger than {max_bytes} bytes: not {expected}")
+            raise ConfigError(f"{name}: {st.st_size} bytes, larger than {max_bytes} bytes: not {expected}")
         chunks = []
         while chunk := os.read(fd, 1 << 20):
             chunks.append(chunk)
         return b"".join(chunks)
     except OSError as exc:
-        raise ConfigError(f"{p}: cannot read ({exc.strerror})") from None
+        raise ConfigError(f"{name}: cannot read ({exc.strerror})") from None
     finally:
         os.close(fd)
 
@@ -81,7 +82,7 @@ def read_text_file(path: str | Path, expected: str, max_bytes: int = MAX_TOML_BY
     try:
         return raw.decode("utf-8")
     except UnicodeDecodeError:
-        raise ConfigError(f"{Path(path)}: not a text file (expected {expected})") from None
+        raise ConfigError(f"{_printable(str(Path(path)))}: not a text file (expected {expected})") from None
 
 
 def load_toml(path: str | Path) -> dict[str, Any]:
@@ -93,16 +94,17 @@ def load_toml(path: str | Path) -> dict[str, Any]:
 
 def toml_from_bytes(raw: bytes, p: Path) -> dict[str, Any]:
     """The table in ``raw``, the bytes of the TOML file ``p`` (:func:`load_toml`'s errors, naming ``p``)."""
+    name = _printable(str(p))
     try:
         data = tomllib.loads(raw.decode("utf-8"))
     except UnicodeDecodeError:
-        raise ConfigError(f"{p}: not a text file (expected TOML)") from None
+        raise ConfigError(f"{name}: not a text file (expected TOML)") from None
     except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{p}: not valid TOML ({exc})") from None
+        raise ConfigError(f"{name}: not valid TOML ({exc})") from None
     except ValueError as exc:  # an integer over Python's limit of digits (tomllib converts with int())
-        raise ConfigError(f"{p}: not valid TOML ({too_many_digits(raw.decode('utf-8'), exc)})") from None
+        raise ConfigError(f"{name}: not valid TOML ({too_many_digits(raw.decode('utf-8'), exc)})") from None
     except RecursionError:
-        raise ConfigError(f"{p}: nested too deeply (more than {MAX_DEPTH} levels of tables and lists)") from None
+        raise ConfigError(f"{name}: nested too deeply (more than {MAX_DEPTH} levels of tables and lists)") from None
     check_depth(data, str(p))
     return data
 
@@ -147,7 +149,7 @@ def check_depth(data: Any, source: str, limit: int = MAX_DEPTH) -> None:
             continue
         if depth >= limit:
             where = f"{_printable(top[:40])}: " if top else ""
-            raise ConfigError(f"{source}: {where}nested more than {limit} levels deep")
+            raise ConfigError(f"{_printable(source)}: {where}nested more than {limit} levels deep")
         stack.extend((v, depth + 1, name) for name, v in children)
 
 
@@ -201,9 +203,9 @@ class Table:
         return f"{self._prefix}.{name}" if self._prefix else name
 
     def error(self, name: str, why: str) -> ConfigError:
-        """The error of key ``name`` (shown escaped if it holds a newline or another unprintable character:
-        every message is one line)."""
-        return ConfigError(f"{self._source}: {_printable(self.key(name))}: {why}")
+        """The error of key ``name`` (it and the source shown escaped if either holds a newline or another
+        unprintable character: every message is one line)."""
+        return ConfigError(f"{_printable(self._source)}: {_printable(self.key(name))}: {why}")
 
     def has(self, name: str) -> bool:
         return name in self._data
@@ -339,9 +341,9 @@ def show(v: Any) -> str:
 
 
 def _printable(text: str) -> str:
-    """A key (or a dotted path of keys) in a message: as it is if printable, else as :func:`show` shows it
+    """A key, a dotted path of keys or a file's path in a message: as it is if printable, else its repr, in full
     (``'A\\nB'``), so that a newline or another control character in it never breaks the message's line."""
-    return text if text.isprintable() else show(text)
+    return text if text.isprintable() else repr(text)
 
 
 def dump_toml(data: Mapping[str, Any]) -> str:

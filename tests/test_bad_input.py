@@ -473,6 +473,7 @@ def _bad_files_of_issue_11(root: Path) -> dict[str, Path]:
         "gust": mission("gust", TINY + f"[wind]\ngusts = [[{HUGE}, 1, 1]]\n"),
         "blackout": mission("blackout", TINY + f"[link]\nblackouts = [[{HUGE}, 1]]\n"),
         "key_newline": mission("key_newline", TINY + '[params]\n"COM_OF_LOSS_T\\nX" = 1\n'),
+        "path_newline": mission("path_newline", 'name = "p"\n[trajectory]\nkind = "plan"\nfile = "a\\nb.plan"\n'),
         "plan_digits": plan("plan_digits", '"cruiseSpeed": 15', '"cruiseSpeed": ' + "1" * 5001),
         "plan_inf": plan("plan_inf", '"hoverSpeed": 5', '"hoverSpeed": Infinity'),
         "profile": profile("profile", "omega_max = 1.5", "omega_max = 1e200"),
@@ -502,6 +503,7 @@ ISSUE_11_CASES = [
     (["sim", "{gust}"], ["gust.toml: wind.gusts[0]: expected [t_s, duration_s, amplitude_mps, from_deg]"]),
     (["sim", "{blackout}"], ["blackout.toml: link.blackouts: element 0 must be a pair"]),
     (["sim", "{key_newline}"], ["key_newline.toml: 'params.COM_OF_LOSS_T\\nX': no such parameter"]),
+    (["sim", "{path_newline}"], ["a\\nb.plan': no such file"]),
     (["sim", "{plan_digits}"], ["plan_digits.plan: not a QGroundControl plan (not valid JSON: line 10: an integer "
                                 "of 5001 digits"]),
     (["sim", "{plan_inf}"], ["plan_inf.plan: mission.hoverSpeed: must be a finite number or null, got inf"]),
