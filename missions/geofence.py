@@ -16,7 +16,6 @@ a breach by GF_ACTION (Hold by default: bridge.autopilot.fencewatch); the run sa
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -24,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from missions.geodetic import Home
-from params import ConfigError, Table
+from params import ConfigError, Table, finite_float, show
 
 MAX_ZONES = 100
 MAX_POINTS = 1000  # a polygon's vertices (QGroundControl draws a handful)
@@ -133,11 +132,10 @@ def _zone(z: Table) -> Zone:
 
 
 def _point(z: Table, key: str, i: int, p: Any) -> tuple[float, float]:
-    if (not isinstance(p, (list, tuple)) or len(p) != 2
-            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in p)
-            or not all(math.isfinite(v) and abs(v) <= COORD_M for v in p)):
+    xy = [finite_float(v) for v in p] if isinstance(p, (list, tuple)) and len(p) == 2 else [None]
+    if not all(v is not None and abs(v) <= COORD_M for v in xy):
         raise z.error(key, f"point {i}: expected [x, y], finite, within {COORD_M:g} m of the home, got {str(p)[:60]}")
-    return float(p[0]), float(p[1])
+    return xy[0], xy[1]  # type: ignore[return-value]
 
 
 def geofence_from_plan(raw: Any, home: Home, source: str) -> Geofence | None:
@@ -178,8 +176,9 @@ def geofence_from_plan(raw: Any, home: Home, source: str) -> Geofence | None:
 
 def _local(home: Home, lat: Any, lon: Any) -> list[float]:
     """[x, y] m in the paper frame of a plan's latitude and longitude (deg), checked to be a place on earth."""
-    la, lo = float(lat), float(lon)
-    if not (-90.0 <= la <= 90.0 and -180.0 <= lo <= 180.0):
-        raise ValueError(f"latitude {la:g}, longitude {lo:g}: not a place on earth")
+    la, lo = finite_float(lat), finite_float(lon)
+    if la is None or lo is None or not (-90.0 <= la <= 90.0 and -180.0 <= lo <= 180.0):
+        raise ValueError(f"latitude {show(lat) if la is None else f'{la:g}'}, "
+                         f"longitude {show(lon) if lo is None else f'{lo:g}'}: not a place on earth")
     x, y, _ = home.paper(la, lo, home.alt)
     return [x, y]

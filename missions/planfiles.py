@@ -27,7 +27,7 @@ from typing import Any
 
 from missions.geodetic import Home
 from missions.geofence import geofence_from_plan
-from params import ConfigError
+from params import ConfigError, finite_float, show, too_many_digits
 
 NAV_WAYPOINT, NAV_LOITER_TIME, NAV_RETURN_TO_LAUNCH, NAV_LAND, NAV_TAKEOFF, DO_CHANGE_SPEED = 16, 19, 20, 21, 22, 178
 SUPPORTED = {NAV_WAYPOINT: "NAV_WAYPOINT", NAV_LOITER_TIME: "NAV_LOITER_TIME", NAV_RETURN_TO_LAUNCH:
@@ -45,6 +45,9 @@ MISSION_FRAME = 2  # MAV_FRAME_MISSION: no position
 RELATIVE_FRAMES = (3, 6)  # altitude above the home; the others: AMSL
 OTHER_FRAMES = {1: "LOCAL_NED", 2: "MISSION", 4: "LOCAL_ENU", 7: "LOCAL_OFFSET_NED", 8: "BODY_NED",
                 9: "BODY_OFFSET_NED", 10: "GLOBAL_TERRAIN_ALT", 11: "GLOBAL_TERRAIN_ALT_INT"}
+PARAM_NAMES = ("param1", "param2", "param3", "param4", "x/lat", "y/lon", "z/alt")  # an item's 7 numbers
+MAX_HOLD_S = 3600.0  # s: the longest hold time (param1) of NAV_WAYPOINT and NAV_LOITER_TIME flown
+MAX_COMMAND, MAX_FRAME = 65535, 255  # MISSION_ITEM_INT's command is a uint16, its frame a uint8
 MAX_ITEMS = 10_000  # PX4 keeps at most a few thousand (its dataman); a file with more is not a mission
 
 
@@ -91,20 +94,45 @@ class PlanFile:
 
 
 def _number(v: Any) -> float:
-    """A parameter as JSON holds it: a number, or null for NaN (QGroundControl's writing of NaN)."""
+    """A number as JSON holds it: a finite number, or null for NaN (QGroundControl writes NaN, a value not given,
+    as null); ValueError if it is neither (Infinity, -Infinity and NaN, which Python's json reads, included)."""
     if v is None:
         return math.nan
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise ValueError(f"expected a number or null, got {v!r}"[:80])
-    return float(v)
+    f = finite_float(v)
+    if f is None:
+        raise ValueError(f"must be a finite number or null, got {show(v)}")
+    return f
 
 
-def _check_item(source: str, item: Item, auto_continue: bool) -> Item:
-    """``item`` if we fly it, else the refusal naming file, index and command."""
+def _version(source: str, key: str, v: Any, want: int) -> None:
+    """Refuse a file format version (``version``, ``mission.version``) other than the number ``want``."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        got = "nothing" if v is None else f"the {_json_kind(v)} {json.dumps(v)[:40]}"
+        raise ConfigError(f"{source}: {key}: expected the number {want}, got {got}")
+    if v != want:
+        raise ConfigError(f"{source}: {key}: version {show(v)} not supported ({want} is)")
+
+
+def _json_kind(v: Any) -> str:
+    """What a JSON value is, in JSON's words (``string``, ``array``)."""
+    kinds = ((bool, "boolean"), (str, "string"), (list, "array"), (dict, "object"))
+    return next((name for t, name in kinds if isinstance(v, t)), type(v).__name__)
+
+
+def _check_item(source: str, item: Item, auto_continue: bool, null: str | None = None) -> Item:
+    """``item`` if we fly it, else the refusal naming file, index and command. ``null``: how the file writes NaN
+    (``null``, ``nan``), which a hold time (param1 of NAV_WAYPOINT, NAV_LOITER_TIME) must not be: QGroundControl
+    writes 0 for no hold, NaN only where a value is not used or left to the vehicle (the yaw, param4). None: an
+    item uploaded over MAVLink, where NaN is MAVLink's "the default" (no hold)."""
     where = f"{source}: {item.label} ({item.name})"
     if item.command not in SUPPORTED:
         raise ConfigError(f"{where}: not supported; supported: "
                           f"{', '.join(command_name(c) for c in SUPPORTED)}")
+    if null and item.command in (NAV_WAYPOINT, NAV_LOITER_TIME) and math.isnan(item.p1):
+        raise ConfigError(f"{where}: hold time (param1) {null}: expected a number of seconds in "
+                          f"[0, {MAX_HOLD_S:g}] (0: no hold)")
     if not auto_continue:
         raise ConfigError(f"{where}: autoContinue false (the mission would wait there for a ground station)")
     # (QGroundControl writes RTL in frame MISSION, PX4 takes it only so: it names no position)
@@ -122,25 +150,30 @@ def read_qgc_plan(text: str, source: str) -> PlanFile:
         data = json.loads(text)
     except (json.JSONDecodeError, RecursionError) as exc:
         raise ConfigError(f"{source}: not a QGroundControl plan (not valid JSON: {exc})"[:300]) from None
+    except ValueError as exc:  # an integer over Python's limit of digits (json converts with int())
+        why = too_many_digits(text, exc)
+        raise ConfigError(f"{source}: not a QGroundControl plan (not valid JSON: {why})") from None
     if not isinstance(data, dict) or data.get("fileType") != "Plan":
         raise ConfigError(f"{source}: not a QGroundControl plan (fileType must be \"Plan\")")
-    if data.get("version") != 1:
-        raise ConfigError(f"{source}: version: plan file version {data.get('version')!r} not supported (1 is)")
+    _version(source, "version", data.get("version"), 1)
     mission = data.get("mission")
     if not isinstance(mission, dict):
         raise ConfigError(f"{source}: mission: expected an object")
-    if mission.get("version") != 2:
-        raise ConfigError(f"{source}: mission.version: {mission.get('version')!r} not supported (2 is)")
+    _version(source, "mission.version", mission.get("version"), 2)
     home = mission.get("plannedHomePosition")
     try:
         lat, lon, alt = (_number(v) for v in home)  # type: ignore[union-attr]
     except (TypeError, ValueError):
-        raise ConfigError(f"{source}: mission.plannedHomePosition: expected [lat, lon, alt]") from None
+        raise ConfigError(f"{source}: mission.plannedHomePosition: expected [lat, lon, alt] of finite numbers, "
+                          f"got {show(home)}") from None
     check_home(source, lat, lon, alt, "mission.plannedHomePosition")
-    try:
-        hover = _number(mission.get("hoverSpeed"))
-    except ValueError as exc:
-        raise ConfigError(f"{source}: mission.hoverSpeed: {exc}") from None
+    speeds = {}
+    for key in ("hoverSpeed", "cruiseSpeed"):  # the multicopter's, flown; the fixed wing's, checked only
+        try:
+            speeds[key] = _number(mission.get(key))
+        except ValueError as exc:
+            raise ConfigError(f"{source}: mission.{key}: {exc}") from None
+    hover = speeds["hoverSpeed"]
     raw = mission.get("items")
     if not isinstance(raw, list) or not raw:
         raise ConfigError(f"{source}: mission.items: expected a non-empty list")
@@ -163,48 +196,74 @@ def _plan_item(source: str, index: int, x: Any) -> Item:
     if x.get("type") != "SimpleItem":
         raise ConfigError(f"{source}: {label}: type {str(x.get('type'))[:40]!r} not supported (SimpleItem is)")
     cmd, frame, params = x.get("command"), x.get("frame"), x.get("params")
-    if not isinstance(cmd, int) or isinstance(cmd, bool) or not isinstance(frame, int) or isinstance(frame, bool):
-        raise ConfigError(f"{source}: {label}: command and frame must be integers")
+    if not all(isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= top
+               for v, top in ((cmd, MAX_COMMAND), (frame, MAX_FRAME))):
+        raise ConfigError(f"{source}: {label}: command and frame must be integers in [0, {MAX_COMMAND}] and "
+                          f"[0, {MAX_FRAME}], got {show(cmd)} and {show(frame)}")
     try:
         if not isinstance(params, list) or len(params) != 7:
             raise ValueError("params: expected a list of 7")
-        p = [_number(v) for v in params]
+        p = []
+        for k, v in enumerate(params):
+            try:
+                p.append(_number(v))
+            except ValueError as exc:
+                raise ValueError(f"params[{k}] ({PARAM_NAMES[k]}): {exc}") from None
     except ValueError as exc:
         raise ConfigError(f"{source}: {label} ({command_name(cmd)}): {exc}") from None
     item = Item(label, cmd, frame, *p)
-    return _check_item(source, item, x.get("autoContinue", True) is True)
+    return _check_item(source, item, x.get("autoContinue", True) is True, "null")
 
 
 def read_wpl(text: str, source: str) -> PlanFile:
-    """A ``QGC WPL 110`` file's text: line 0 the home, then the items (refusals named)."""
-    lines = [ln for ln in text.splitlines() if ln.strip()]
-    if not lines or lines[0].split() != ["QGC", "WPL", "110"]:
+    """A ``QGC WPL 110`` file's text: line 0 the home, then the items (refusals named, by the file's own line
+    numbers: blank lines are skipped, not renumbered)."""
+    lines = [(n, ln) for n, ln in enumerate(text.splitlines(), start=1) if ln.strip()]
+    if not lines or lines[0][1].split() != ["QGC", "WPL", "110"]:
         raise ConfigError(f"{source}: not a waypoint file (the first line must be \"QGC WPL 110\")")
     if len(lines) < 3:
         raise ConfigError(f"{source}: expected the home (line 0) and at least one item")
     if len(lines) > MAX_ITEMS + 2:
         raise ConfigError(f"{source}: {len(lines) - 2} items, more than {MAX_ITEMS}")
-    rows = []
-    for n, ln in enumerate(lines[1:]):
-        f = ln.split()
-        try:
-            if len(f) != 12:
-                raise ValueError(f"expected 12 fields, got {len(f)}")
-            idx, cur, frame, cmd, auto = int(f[0]), int(f[1]), int(f[2]), int(f[3]), int(f[11])
-            vals = [float(v) for v in f[4:11]]
-        except ValueError as exc:
-            raise ConfigError(f"{source}: line {n + 2}: {exc}"[:300]) from None
-        if idx != n:
-            raise ConfigError(f"{source}: line {n + 2}: index {idx}, expected {n} (items are numbered from 0)")
-        del cur  # which item is current says nothing about the flight
-        rows.append((frame, cmd, vals, auto))
-    frame, _cmd, vals, _auto = rows[0]
+    rows = [_wpl_row(source, index, line, ln) for index, (line, ln) in enumerate(lines[1:])]
+    line, frame, cmd, vals, _auto = rows[0]
+    where = f"{source}: line {line} (the home)"
+    if cmd != NAV_WAYPOINT:  # QGroundControl, MAVProxy and ArduPilot write the home as a NAV_WAYPOINT
+        raise ConfigError(f"{where}: command {command_name(cmd)}, expected {command_name(NAV_WAYPOINT)}")
     if frame not in (0, 5):
-        raise ConfigError(f"{source}: line 2 (the home): frame {frame}, expected GLOBAL (0): altitude AMSL")
-    check_home(source, vals[4], vals[5], vals[6], "the home (line 2)")
-    items = tuple(_check_item(source, Item(f"item {i}", cmd, fr, *v), auto == 1)
-                  for i, (fr, cmd, v, auto) in enumerate(rows[1:], start=1))
+        raise ConfigError(f"{where}: frame {frame}, expected GLOBAL (0): altitude AMSL")
+    check_home(source, vals[4], vals[5], vals[6], f"the home (line {line})")
+    items = tuple(_check_item(source, Item(f"item {i}", cmd, fr, *v), auto == 1, "nan")
+                  for i, (_line, fr, cmd, v, auto) in enumerate(rows[1:], start=1))
     return PlanFile(source, (vals[4], vals[5], vals[6]), items)
+
+
+
+
+def _wpl_row(source: str, index: int, line: int, text: str) -> tuple[int, int, int, list[float], int]:
+    """(line, frame, command, [param1..4, lat, lon, alt], autocontinue) of the waypoint file's item ``index``,
+    on the file's line ``line``; a value may be nan (not given: QGroundControl's NaN), never infinite."""
+    f = text.split()
+    try:
+        if len(f) != 12:
+            raise ValueError(f"expected 12 fields, got {len(f)}")
+        idx, _cur, frame, cmd, auto = (_wpl_int(f[k]) for k in (0, 1, 2, 3, 11))  # (current: not flown)
+        vals = [float(v) for v in f[4:11]]
+    except ValueError as exc:
+        raise ConfigError(f"{source}: line {line}: {exc}"[:300]) from None
+    for name, v, word in zip(PARAM_NAMES, vals, f[4:11], strict=True):
+        if math.isinf(v):
+            raise ConfigError(f"{source}: line {line}: {name} {show(word)}: must be a finite number or nan")
+    if idx != index:
+        raise ConfigError(f"{source}: line {line}: index {idx}, expected {index} (items are numbered from 0)")
+    return line, frame, cmd, vals, auto
+
+
+def _wpl_int(word: str) -> int:
+    """A whole-number field of a waypoint file (index, current, frame, command, autocontinue)."""
+    if not (word.lstrip("+-").isdigit() and len(word) <= 10):
+        raise ValueError(f"expected an integer of at most 10 digits, got {show(word)}")
+    return int(word)
 
 
 def check_home(source: str, lat: float, lon: float, alt: float, key: str) -> None:

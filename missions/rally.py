@@ -16,7 +16,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from missions.geodetic import Home
-from params import ConfigError, Table
+from params import ConfigError, Table, finite_float, show
 
 MAX_RALLY = 100  # points; QGroundControl plans hold a handful
 Point = tuple[float, float]
@@ -32,12 +32,11 @@ def rally_from_table(t: Table, radius_m: float) -> tuple[Point, ...]:
         raise t.error("points", f"expected 1 to {MAX_RALLY} points [x, y] (m), got {str(raw)[:60]}")
     points = []
     for i, p in enumerate(raw):
-        if (not isinstance(p, (list, tuple)) or len(p) != 2
-                or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in p)
-                or math.hypot(p[0], p[1]) > radius_m):
+        xy = [finite_float(v) for v in p] if isinstance(p, (list, tuple)) and len(p) == 2 else [None]
+        if None in xy or math.hypot(*xy) > radius_m:  # type: ignore[arg-type]
             raise t.error("points", f"point {i}: expected [x, y], finite, within {radius_m:g} m of the home "
-                                    f"(the plant's envelope), got {str(p)[:60]}")
-        points.append((float(p[0]), float(p[1])))
+                                    f"(the plant's envelope), got {show(p)}")
+        points.append((xy[0], xy[1]))
     t.done()
     return tuple(points)
 
@@ -51,10 +50,10 @@ def rally_from_plan(raw: Any, home: Home, source: str, radius_m: float) -> tuple
         raise ConfigError(f"{source}: rallyPoints: expected an object with points [[lat, lon, alt], ...]")
     local = []
     for i, p in enumerate(raw.get("points", [])):
-        try:
-            lat, lon, _alt = (float(v) for v in p)
-        except (TypeError, ValueError):
-            raise ConfigError(f"{source}: rallyPoints.points[{i}]: expected [lat, lon, alt]") from None
+        lat, lon, alt = (finite_float(v) for v in p) if isinstance(p, list) and len(p) == 3 else (None,) * 3
+        if lat is None or lon is None or alt is None:
+            raise ConfigError(f"{source}: rallyPoints.points[{i}]: expected [lat, lon, alt], finite numbers, "
+                              f"got {show(p)}")
         if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
             raise ConfigError(f"{source}: rallyPoints.points[{i}]: latitude {lat:g}, longitude {lon:g}: "
                               "not a place on earth")

@@ -31,6 +31,7 @@ from missions.geodetic import Home
 from missions.minsnap import Knot, Smooth
 from missions.planfiles import (
     DO_CHANGE_SPEED,
+    MAX_HOLD_S,
     NAV_LAND,
     NAV_LOITER_TIME,
     NAV_RETURN_TO_LAUNCH,
@@ -127,8 +128,8 @@ def _yaw(plan: PlanFile, item: Item) -> float:
 
 def _hold(plan: PlanFile, item: Item) -> float:
     h = 0.0 if math.isnan(item.p1) else item.p1
-    if not (math.isfinite(h) and 0.0 <= h <= 3600.0):
-        raise plan.refuse(item, f"hold time (param1) {item.p1:g} s: must be in [0, 3600]")
+    if not (math.isfinite(h) and 0.0 <= h <= MAX_HOLD_S):
+        raise plan.refuse(item, f"hold time (param1) {item.p1:g} s: must be in [0, {MAX_HOLD_S:g}]")
     return h
 
 

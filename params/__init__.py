@@ -10,7 +10,9 @@ from __future__ import annotations
 import difflib
 import math
 import os
+import re
 import stat
+import sys
 import tomllib
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -49,31 +51,32 @@ def read_regular_file(path: str | Path, expected: str = "file", max_bytes: int |
     The path is recorded as an input (:func:`note_input`)."""
     p = Path(path)
     note_input(p)
+    name = _printable(str(p))  # (a path with a newline in it stays on the message's one line)
     try:
         kind = _file_kind(os.stat(p).st_mode)
     except FileNotFoundError:
-        raise ConfigError(f"{p}: no such file") from None
+        raise ConfigError(f"{name}: no such file") from None
     except OSError as exc:
-        raise ConfigError(f"{p}: cannot read ({exc.strerror})") from None
+        raise ConfigError(f"{name}: cannot read ({exc.strerror})") from None
     if kind:
-        raise ConfigError(f"{p}: is {kind}, expected {expected}")
+        raise ConfigError(f"{name}: is {kind}, expected {expected}")
     try:
         fd = os.open(p, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
     except OSError as exc:
-        raise ConfigError(f"{p}: cannot read ({exc.strerror})") from None
+        raise ConfigError(f"{name}: cannot read ({exc.strerror})") from None
     try:
         st = os.fstat(fd)
         kind = _file_kind(st.st_mode)
         if kind:
-            raise ConfigError(f"{p}: is {kind}, expected {expected}")
+            raise ConfigError(f"{name}: is {kind}, expected {expected}")
         if max_bytes is not None and st.st_size > max_bytes:
-            raise ConfigError(f"{p}: {st.st_size} bytes, larger than {max_bytes} bytes: not {expected}")
+            raise ConfigError(f"{name}: {st.st_size} bytes, larger than {max_bytes} bytes: not {expected}")
         chunks = []
         while chunk := os.read(fd, 1 << 20):
             chunks.append(chunk)
         return b"".join(chunks)
     except OSError as exc:
-        raise ConfigError(f"{p}: cannot read ({exc.strerror})") from None
+        raise ConfigError(f"{name}: cannot read ({exc.strerror})") from None
     finally:
         os.close(fd)
 
@@ -97,7 +100,7 @@ def read_text_file(path: str | Path, expected: str, max_bytes: int = MAX_TOML_BY
     try:
         return raw.decode("utf-8")
     except UnicodeDecodeError:
-        raise ConfigError(f"{Path(path)}: not a text file (expected {expected})") from None
+        raise ConfigError(f"{_printable(str(Path(path)))}: not a text file (expected {expected})") from None
 
 
 def load_toml(path: str | Path) -> dict[str, Any]:
@@ -109,16 +112,44 @@ def load_toml(path: str | Path) -> dict[str, Any]:
 
 def toml_from_bytes(raw: bytes, p: Path) -> dict[str, Any]:
     """The table in ``raw``, the bytes of the TOML file ``p`` (:func:`load_toml`'s errors, naming ``p``)."""
+    name = _printable(str(p))
     try:
         data = tomllib.loads(raw.decode("utf-8"))
     except UnicodeDecodeError:
-        raise ConfigError(f"{p}: not a text file (expected TOML)") from None
+        raise ConfigError(f"{name}: not a text file (expected TOML)") from None
     except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{p}: not valid TOML ({exc})") from None
+        raise ConfigError(f"{name}: not valid TOML ({exc})") from None
+    except ValueError as exc:  # an integer over Python's limit of digits (tomllib converts with int())
+        raise ConfigError(f"{name}: not valid TOML ({too_many_digits(raw.decode('utf-8'), exc)})") from None
     except RecursionError:
-        raise ConfigError(f"{p}: nested too deeply (more than {MAX_DEPTH} levels of tables and lists)") from None
+        raise ConfigError(f"{name}: nested too deeply (more than {MAX_DEPTH} levels of tables and lists)") from None
     check_depth(data, str(p))
     return data
+
+
+def too_many_digits(text: str, exc: ValueError) -> str:
+    """What is wrong when a parser's ``int()`` refused an integer of ``text`` over Python's limit of digits
+    (``sys.get_int_max_str_digits``; ``ValueError: Exceeds the limit ...``): where the longest run of digits
+    is and how long it is, in words (any other ``exc``: its text, shortened)."""
+    limit = sys.get_int_max_str_digits()
+    runs = [m for m in re.finditer(r"[0-9][0-9_]*", text) if len(m.group()) > limit]
+    if not runs or "limit" not in str(exc):
+        return str(exc)[:200]
+    m = max(runs, key=lambda r: len(r.group()))
+    line = text.count("\n", 0, m.start()) + 1
+    return f"line {line}: an integer of {len(m.group().replace('_', ''))} digits, over the {limit} Python reads"
+
+
+def finite_float(v: Any) -> float | None:
+    """``v`` as a float if it is a number (an int or a float, not a bool) that is finite as a float; else None
+    (an integer too large for a float, ~1e308, is not one: ``float()`` of it raises OverflowError)."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return None
+    try:
+        f = float(v)
+    except OverflowError:
+        return None
+    return f if math.isfinite(f) else None
 
 
 def check_depth(data: Any, source: str, limit: int = MAX_DEPTH) -> None:
@@ -135,8 +166,8 @@ def check_depth(data: Any, source: str, limit: int = MAX_DEPTH) -> None:
         else:
             continue
         if depth >= limit:
-            where = f"{top[:40]}: " if top else ""
-            raise ConfigError(f"{source}: {where}nested more than {limit} levels deep")
+            where = f"{_printable(top[:40])}: " if top else ""
+            raise ConfigError(f"{_printable(source)}: {where}nested more than {limit} levels deep")
         stack.extend((v, depth + 1, name) for name, v in children)
 
 
@@ -190,7 +221,9 @@ class Table:
         return f"{self._prefix}.{name}" if self._prefix else name
 
     def error(self, name: str, why: str) -> ConfigError:
-        return ConfigError(f"{self._source}: {self.key(name)}: {why}")
+        """The error of key ``name`` (it and the source shown escaped if either holds a newline or another
+        unprintable character: every message is one line)."""
+        return ConfigError(f"{_printable(self._source)}: {_printable(self.key(name))}: {why}")
 
     def has(self, name: str) -> bool:
         return name in self._data
@@ -220,8 +253,12 @@ class Table:
     ) -> float:
         v = self._get(name, _REQUIRED if default is ... else default)
         if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise self.error(name, f"expected a number, got {_show(v)}")
-        v = float(v)
+            raise self.error(name, f"expected a number, got {show(v)}")
+        try:
+            v = float(v)
+        except OverflowError:  # an integer past the float range (~1e308)
+            allowed = "a finite number" if lo is None and hi is None else f"in {_range(lo, hi, lo_open, hi_open)}"
+            raise self.error(name, f"must be {allowed}, got {show(v)}") from None
         if not math.isfinite(v):
             raise self.error(name, f"must be finite, got {v}")
         if (lo is not None and (v < lo or (lo_open and v == lo))) or (
@@ -233,15 +270,15 @@ class Table:
     def integer(self, name: str, default: Any = ..., *, lo: int | None = None, hi: int | None = None) -> int:
         v = self._get(name, _REQUIRED if default is ... else default)
         if isinstance(v, bool) or not isinstance(v, int):
-            raise self.error(name, f"expected an integer, got {_show(v)}")
+            raise self.error(name, f"expected an integer, got {show(v)}")
         if (lo is not None and v < lo) or (hi is not None and v > hi):
-            raise self.error(name, f"must be in {_range(lo, hi, False, False)}, got {v}")
+            raise self.error(name, f"must be in {_range(lo, hi, False, False)}, got {show(v)}")
         return v
 
     def string(self, name: str, default: Any = ..., *, choices: Iterable[str] | None = None) -> str:
         v = self._get(name, _REQUIRED if default is ... else default)
         if not isinstance(v, str):
-            raise self.error(name, f"expected a string, got {_show(v)}")
+            raise self.error(name, f"expected a string, got {show(v)}")
         if choices is not None:
             allowed = tuple(choices)
             if v not in allowed:
@@ -251,7 +288,7 @@ class Table:
     def boolean(self, name: str, default: Any = ...) -> bool:
         v = self._get(name, _REQUIRED if default is ... else default)
         if not isinstance(v, bool):
-            raise self.error(name, f"expected true or false, got {_show(v)}")
+            raise self.error(name, f"expected true or false, got {show(v)}")
         return v
 
     def vector(
@@ -259,20 +296,21 @@ class Table:
     ) -> tuple[float, ...]:
         v = self._get(name, _REQUIRED if default is ... else default)
         if not isinstance(v, (list, tuple)) or len(v) != length:
-            raise self.error(name, f"expected a list of {length} numbers, got {_show(v)}")
+            raise self.error(name, f"expected a list of {length} numbers, got {show(v)}")
         out = []
         for i, x in enumerate(v):
-            if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
-                raise self.error(name, f"element {i} must be a finite number, got {_show(x)}")
-            if (lo is not None and x < lo) or (hi is not None and x > hi):
-                raise self.error(name, f"element {i} must be in {_range(lo, hi, False, False)}, got {x:g}")
-            out.append(float(x))
+            f = finite_float(x)
+            if f is None:
+                raise self.error(name, f"element {i} must be a finite number, got {show(x)}")
+            if (lo is not None and f < lo) or (hi is not None and f > hi):
+                raise self.error(name, f"element {i} must be in {_range(lo, hi, False, False)}, got {f:g}")
+            out.append(f)
         return tuple(out)
 
     def table(self, name: str, required: bool = False) -> Table:
         v = self._get(name, _REQUIRED if required else {})
         if not isinstance(v, Mapping):
-            raise self.error(name, f"expected a table, got {_show(v)}")
+            raise self.error(name, f"expected a table, got {show(v)}")
         return Table(v, self._source, self.key(name))
 
     def raw(self, name: str, default: Any = None) -> Any:
@@ -311,9 +349,19 @@ def _bound(v: float | None, none: str) -> str:
     return str(v) if isinstance(v, int) else f"{v:g}"
 
 
-def _show(v: Any) -> str:
+def show(v: Any) -> str:
+    """A value in a message: its repr (escaped: one line), shortened to 40 characters; an integer of over 40
+    digits by its length (``an integer of 401 digits``)."""
+    if isinstance(v, int) and not isinstance(v, bool) and abs(v) >= 10**40:
+        return f"an integer of {len(str(abs(v)))} digits"
     text = repr(v)
     return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _printable(text: str) -> str:
+    """A key, a dotted path of keys or a file's path in a message: as it is if printable, else its repr, in full
+    (``'A\\nB'``), so that a newline or another control character in it never breaks the message's line."""
+    return text if text.isprintable() else repr(text)
 
 
 def dump_toml(data: Mapping[str, Any]) -> str:

@@ -24,6 +24,24 @@ from plant.sensors import CLASS_KEYS, IDEAL, SensorConfig, sensor_config_from_ta
 
 PROFILE_DIR = Path(__file__).with_name("profiles")
 ACTUATIONS = ("wrench", "motors")
+# One range per key (lo, hi, lo_open, unit), for every profile, built in or a user's file. The upper bounds are
+# physical ones far past any multirotor (the paper's b = 5, d = 2 are already large), and keep the rotor
+# envelope 4 b omega_max^2 finite: omega_max = 1e200 overflowed there.
+PROFILE_RANGES: dict[str, tuple[float, float, bool, str]] = {
+    "mass": (0.0, 1000.0, True, "kg"),
+    "arm": (0.0, 10.0, True, "m"),
+    "ixx": (0.0, 1000.0, True, "kg m^2"),
+    "iyy": (0.0, 1000.0, True, "kg m^2"),
+    "izz": (0.0, 1000.0, True, "kg m^2"),
+    "rotor_inertia": (0.0, 1000.0, False, "kg m^2"),
+    "thrust_coeff": (0.0, 100.0, True, "N s^2/rad^2"),
+    "drag_coeff": (0.0, 100.0, True, "N m s^2/rad^2"),
+    "gravity": (0.0, 100.0, True, "m/s^2"),
+    "omega_max": (0.0, 10000.0, True, "rad/s"),  # 95 000 rpm: past the fastest small-propeller motors
+    "drag": (0.0, 100.0, False, "N s/m, N m s/rad"),  # each of k1..k6
+    "motor_time_constant": (0.0, 10.0, True, "s"),
+    "rotor_drag": (0.0, 1.0, False, "s/m"),
+}
 
 
 @dataclass(frozen=True, slots=True)
@@ -112,19 +130,18 @@ def profile_from_table(data: dict, source: str) -> Profile:
     t = Table(data, source)
     name = t.string("name")
     actuation = t.string("actuation", choices=ACTUATIONS)
-    mass = t.number("mass", lo=0.0, lo_open=True, hi=1000.0)
-    arm = t.number("arm", lo=0.0, lo_open=True, hi=10.0)
-    ixx = t.number("ixx", lo=0.0, lo_open=True, hi=1000.0)
-    iyy = t.number("iyy", lo=0.0, lo_open=True, hi=1000.0)
-    izz = t.number("izz", lo=0.0, lo_open=True, hi=1000.0)
-    jr = t.number("rotor_inertia", lo=0.0, hi=1000.0)
-    b = t.number("thrust_coeff", lo=0.0, lo_open=True)
-    d = t.number("drag_coeff", lo=0.0, lo_open=True)
-    g = t.number("gravity", 9.81, lo=0.0, lo_open=True, hi=100.0)
-    omega_max = t.number("omega_max", lo=0.0, lo_open=True)
-    drag = t.vector("drag", 6, (0.0,) * 6, lo=0.0)
-    tau = t.number("motor_time_constant", 0.02, lo=0.0, lo_open=True, hi=10.0)
-    rotor_drag = t.number("rotor_drag", 0.0, lo=0.0, hi=1.0)
+
+    def num(key: str, default: Any = ...) -> float:
+        lo, hi, lo_open, _unit = PROFILE_RANGES[key]
+        return t.number(key, default, lo=lo, hi=hi, lo_open=lo_open)
+
+    mass, arm, ixx, iyy, izz = (num(k) for k in ("mass", "arm", "ixx", "iyy", "izz"))
+    jr, b, d = num("rotor_inertia"), num("thrust_coeff"), num("drag_coeff")
+    g = num("gravity", 9.81)
+    omega_max = num("omega_max")
+    drag = t.vector("drag", 6, (0.0,) * 6, lo=PROFILE_RANGES["drag"][0], hi=PROFILE_RANGES["drag"][1])
+    tau = num("motor_time_constant", 0.02)
+    rotor_drag = num("rotor_drag", 0.0)
     battery = battery_from_table(t.table("battery")) if t.has("battery") else None
     hover = math.sqrt(mass * g / (4.0 * b))
     if omega_max <= hover:

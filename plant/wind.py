@@ -42,7 +42,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from params import ConfigError, Table
+from params import ConfigError, Table, finite_float
 
 FT = 0.3048  # m per foot
 KT = 1852.0 / 3600.0  # m/s per knot
@@ -127,7 +127,7 @@ def wind_from_table(t: Table, duration_s: float) -> WindConfig:
 def gust_from_list(g: object, where: str, t: Table, duration_s: float) -> Gust:
     """One gust ``[t_s, duration_s, amplitude_mps]`` or with ``from_deg``; ConfigError naming ``where``."""
     if (not isinstance(g, (list, tuple)) or len(g) not in (3, 4)
-            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in g)):
+            or not all(isinstance(v, float) or finite_float(v) is not None for v in g)):  # (float(): no overflow)
         raise ConfigError(f"{t._source}: {where}: expected [t_s, duration_s, amplitude_mps, from_deg], got {g!r}"[:200])
     ts, dur, amp = float(g[0]), float(g[1]), float(g[2])
     frm = float(g[3]) if len(g) == 4 else 0.0

@@ -32,12 +32,13 @@ from bridge.core.flight import prepare
 from bridge.mavlink.endpoint import LINK_PORT
 from bridge.session import instance_slot
 from missions import MISSION_DIR, mission_from_table
-from params import ConfigError, Table, dump_toml, is_typo_of, load_toml
+from params import ConfigError, Table, dump_toml, is_typo_of, load_toml, show
 from tests.sitlkit import ROOT, run_bsst
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 TINY = 'name = "tiny"\nduration_s = 0.2\n[trajectory]\nkind = "sine"\n'
+HUGE = 10**400  # an integer TOML and JSON read, past the float range: float() of it raises OverflowError
 GUARD_S = 20  # s: a case that is not refused would fly or serve; it fails instead of hanging
 
 
@@ -278,7 +279,7 @@ def _keys_asked(data: dict[str, Any], source: str) -> dict[str, tuple[str, tuple
 def _bad_key_values(getter: str, args: tuple, kw: dict) -> list[Any]:
     lo, hi = kw.get("lo"), kw.get("hi")
     if getter == "number":
-        out: list[Any] = ["x", float("nan")]
+        out: list[Any] = ["x", float("nan"), HUGE]
         if lo is not None:
             out.append(lo if kw.get("lo_open") else lo - 1.0 - abs(lo))
         if hi is not None:
@@ -292,7 +293,7 @@ def _bad_key_values(getter: str, args: tuple, kw: dict) -> list[Any]:
         return ["yes", 1]
     if getter == "vector":
         n = args[0]
-        return [[1.0] * (n + 1), ["x"] * n] + ([[lo - 1.0 - abs(lo)] * n] if lo is not None else [])
+        return [[1.0] * (n + 1), ["x"] * n, [HUGE] * n] + ([[lo - 1.0 - abs(lo)] * n] if lo is not None else [])
     if getter == "table":
         return [5]
     raise AssertionError(getter)
@@ -336,7 +337,7 @@ def test_the_key_walk_covers_every_table():
     assert len(keys) > 60
 
 
-@pytest.mark.parametrize("ctl, key, bad", KEY_CASES, ids=[f"{c}-{k}={b!r}" for c, k, b in KEY_CASES])
+@pytest.mark.parametrize("ctl, key, bad", KEY_CASES, ids=[f"{c}-{k}={show(b)}" for c, k, b in KEY_CASES])
 def test_every_mission_key_refuses_a_bad_value(shared_files, capsys, ctl, key, bad):
     mission = shared_files.root / "bad.toml"
     mission.write_text(dump_toml(_set(_full_mission(ctl), key, bad)))
@@ -362,7 +363,7 @@ SWEEP = 'mission = "{m}"\nmode = "offline"\nseeds = 1\n[grid]\ndelay_ms = [0.0]\
                                       ("grid.colour", [1]), ("classes.clean_rms_m", "x"), ("extra", 1),
                                       ("grid.noise", [-1.0]), ("grid.noise", "x"), ("grid.noise", [0.0, 1e300]),
                                       ("grid.estimator", ["kalman"]), ("grid.estimator", 5),
-                                      ("grid.estimator", ["raw", "raw"])])
+                                      ("grid.estimator", ["raw", "raw"]), ("grid.delay_ms", [HUGE])])
 def test_every_sweep_key_refuses_a_bad_value(files, capsys, key, bad):
     data = load_toml_text(SWEEP.format(m=files.mission))
     sweep = files.root / "sweep.toml"
@@ -446,6 +447,16 @@ def _bad_files_of_issue_11(root: Path) -> dict[str, Path]:
         p.write_text(text)
         return p
 
+    def plan(name: str, old: str, new: str) -> Path:
+        p = root / f"{name}.plan"
+        p.write_text((ROOT / "examples" / "box.plan").read_text().replace(old, new))
+        return p
+
+    def profile(name: str, old: str, new: str) -> Path:
+        p = root / f"{name}.toml"
+        p.write_text((ROOT / "plant" / "profiles" / "paper.toml").read_text().replace(old, new))
+        return p
+
     fifo = root / "fifo.toml"
     os.mkfifo(fifo)  # nobody writes it: opening it to read would wait for ever
     return {
@@ -457,6 +468,17 @@ def _bad_files_of_issue_11(root: Path) -> dict[str, Path]:
         "far": mission("far", 'name = "far"\nduration_s = 30.0\n[trajectory]\nkind = "step"\n'
                               "setpoints = [{ t = 0.0, x = 150.0, y = 0.0, z = 2.0 }]\n"),
         "day": mission("day", 'name = "day"\nduration_s = 86400.0\n[trajectory]\nkind = "sine"\nclimb = 0.0\n'),
+        # over Python's 4300 digits (tomllib's, json's int()); past the float range; a key with a newline
+        "digits": mission("digits", "seed = " + "1" * 5001 + "\n" + TINY),
+        "huge": mission("huge", TINY.replace("duration_s = 0.2", f"duration_s = {HUGE}")),
+        "sysid": mission("sysid", TINY + f"[params]\nMAV_SYS_ID = {HUGE}\n"),
+        "gust": mission("gust", TINY + f"[wind]\ngusts = [[{HUGE}, 1, 1]]\n"),
+        "blackout": mission("blackout", TINY + f"[link]\nblackouts = [[{HUGE}, 1]]\n"),
+        "key_newline": mission("key_newline", TINY + '[params]\n"COM_OF_LOSS_T\\nX" = 1\n'),
+        "path_newline": mission("path_newline", 'name = "p"\n[trajectory]\nkind = "plan"\nfile = "a\\nb.plan"\n'),
+        "plan_digits": plan("plan_digits", '"cruiseSpeed": 15', '"cruiseSpeed": ' + "1" * 5001),
+        "plan_inf": plan("plan_inf", '"hoverSpeed": 5', '"hoverSpeed": Infinity'),
+        "profile": profile("profile", "omega_max = 1.5", "omega_max = 1e200"),
     }
 
 
@@ -476,6 +498,19 @@ ISSUE_11_CASES = [
     (["sim", str(ROOT / "missions" / "sine.toml"), "--blackout", "40:1"],
      ["--blackout/--up-blackout (link.up.blackouts): the window [40, 41) s starts after the mission's end "
       "(duration_s = 30 s)"]),
+    (["sim", "{digits}"], ["digits.toml: not valid TOML (line 1: an integer of 5001 digits, over the 4300 Python "
+                           "reads)"]),
+    (["sim", "{huge}"], ["huge.toml: duration_s: must be in (0, 86400], got an integer of 401 digits"]),
+    (["sim", "{sysid}"], ["sysid.toml: params.MAV_SYS_ID: must be in [1, 254], got an integer of 401 digits"]),
+    (["sim", "{gust}"], ["gust.toml: wind.gusts[0]: expected [t_s, duration_s, amplitude_mps, from_deg]"]),
+    (["sim", "{blackout}"], ["blackout.toml: link.blackouts: element 0 must be a pair"]),
+    (["sim", "{key_newline}"], ["key_newline.toml: 'params.COM_OF_LOSS_T\\nX': no such parameter"]),
+    (["sim", "{path_newline}"], ["a\\nb.plan': no such file"]),
+    (["sim", "{plan_digits}"], ["plan_digits.plan: not a QGroundControl plan (not valid JSON: line 10: an integer "
+                                "of 5001 digits"]),
+    (["sim", "{plan_inf}"], ["plan_inf.plan: mission.hoverSpeed: must be a finite number or null, got inf"]),
+    (["sim", str(ROOT / "missions" / "sine.toml"), "--profile", "{profile}"],
+     ["profile.toml: omega_max: must be in (0, 10000], got 1e+200"]),
 ]
 
 

@@ -116,6 +116,30 @@ def test_a_slower_cruise_is_a_longer_flight() -> None:
     (lambda d: d["mission"]["items"][2].update(autoContinue=False), ["mission.items[2]", "autoContinue"]),
     (lambda d: d.update(fileType="Fence"), ["not a QGroundControl plan"]),
     (lambda d: d["mission"].update(plannedHomePosition=[None, 8.5, 488]), ["plannedHomePosition"]),
+    # every number of a plan finite (Python's json reads Infinity and NaN; QGroundControl writes NaN as null)
+    (lambda d: d["mission"].update(hoverSpeed=math.inf), ["mission.hoverSpeed", "finite number or null, got inf"]),
+    (lambda d: d["mission"].update(cruiseSpeed=-math.inf), ["mission.cruiseSpeed", "got -inf"]),
+    (lambda d: d["mission"].update(hoverSpeed=10**400), ["mission.hoverSpeed", "an integer of 401 digits"]),
+    (lambda d: d["mission"]["items"][2]["params"].__setitem__(3, math.inf), ["mission.items[2]", "NAV_WAYPOINT (16)",
+                                                                            "params[3] (param4)", "got inf"]),
+    (lambda d: d["mission"]["items"][2]["params"].__setitem__(4, 10**400), ["mission.items[2]", "params[4] (x/lat)",
+                                                                           "an integer of 401 digits"]),
+    (lambda d: d["mission"]["items"][2].update(command=10**400), ["mission.items[2]", "[0, 65535]",
+                                                                  "an integer of 401 digits"]),
+    (lambda d: d["mission"].update(plannedHomePosition=[math.inf, 8.5, 488]), ["plannedHomePosition", "inf"]),
+    (lambda d: d.update(geoFence={"circles": [{"circle": {"center": [10**400, 8.5], "radius": 5}, "inclusion": True}],
+                                  "polygons": []}), ["geoFence.circles[0]", "latitude an integer of 401 digits"]),
+    (lambda d: d.update(rallyPoints={"points": [[47.3978, 8.5456, math.inf]]}), ["rallyPoints.points[0]", "finite"]),
+    # a hold time is flown: null (NaN) is refused as -5 is; a null yaw (param4) is QGroundControl's "not given"
+    (lambda d: d["mission"]["items"][2].update(command=19, params=[None, 0, 0, None, 47.3979219, 8.5458597, 10]),
+     ["mission.items[2]", "NAV_LOITER_TIME (19)", "hold time (param1) null", "[0, 3600]"]),
+    (lambda d: d["mission"]["items"][2]["params"].__setitem__(0, None), ["NAV_WAYPOINT (16)",
+                                                                        "hold time (param1) null"]),
+    # the format's version is the number 1 (mission: 2), not the string
+    (lambda d: d.update(version="1"), ['version: expected the number 1, got the string "1"']),
+    (lambda d: d.update(version=True), ["version: expected the number 1, got the boolean true"]),
+    (lambda d: d.update(version=2), ["version: version 2 not supported (1 is)"]),
+    (lambda d: d["mission"].update(version="2"), ['mission.version: expected the number 2, got the string "2"']),
 ])
 def test_refusals_name_the_file_the_item_and_its_command(tmp_path: Path, edit, words: list[str]) -> None:
     p = write_plan(tmp_path, edit)
@@ -135,6 +159,18 @@ def test_waypoint_file_refusals(tmp_path: Path) -> None:
     assert "QGC WPL 110" in refusal(bad)
     bad.write_text("\n".join(lines[:4] + [lines[4].replace("nan", "x")]))
     assert "line 5" in refusal(bad)  # the file's 5th line
+    bad.write_text("\n".join(lines[:1] + ["", "  "] + lines[1:4] + ["", lines[4].replace("nan", "x")]))
+    assert f"{bad}: line 8: " in refusal(bad)  # blank lines are counted: the file's 8th line
+    bad.write_text("\n".join(lines[:1] + [""] + [lines[1].replace("\t16\t", "\t999\t", 1)] + lines[2:]))
+    assert refusal(bad) == f"{bad}: line 3 (the home): command MAV_CMD (999), expected NAV_WAYPOINT (16)"
+    bad.write_text("\n".join(lines[:4] + [lines[4].replace("\t16\t0\t", "\t16\tnan\t", 1)] + lines[5:]))
+    assert refusal(bad) == (f"{bad}: item 3 (NAV_WAYPOINT (16)): hold time (param1) nan: expected a number of "
+                            "seconds in [0, 3600] (0: no hold)")
+    for word in ("inf", "-Infinity", "1" + "0" * 400):  # nan is QGroundControl's "not given"; inf is no number
+        bad.write_text("\n".join(lines[:4] + [lines[4].replace("nan", word)] + lines[5:]))
+        assert refusal(bad).startswith(f"{bad}: line 5: param4 "), word
+    bad.write_text("\n".join(lines[:4] + [lines[4].replace("\t16\t", "\t" + "1" * 5000 + "\t", 1)] + lines[5:]))
+    assert refusal(bad).startswith(f"{bad}: line 5: expected an integer of at most 10 digits, got '1111")
 
 
 def test_a_toml_mission_names_a_plan(tmp_path: Path) -> None:

@@ -99,9 +99,14 @@ def _edit(text: str, key: str, value: str | None) -> str:
         ("izz", "-0.04", "(0, 1000]"),
         ("arm", "-0.25", "(0, 10]"),
         ("rotor_inertia", "-1e-5", "[0, 1000]"),
-        ("thrust_coeff", "0.0", "(0, inf)"),
+        ("thrust_coeff", "0.0", "(0, 100]"),
+        ("thrust_coeff", "1e300", "(0, 100]"),  # (each upper bound keeps 4 b omega_max^2 finite)
+        ("drag_coeff", "1e300", "(0, 100]"),
         ("omega_max", "500.0", "hover speed"),  # hover is ~757 rad/s
-        ("omega_max", "-1.0", "(0, inf)"),
+        ("omega_max", "-1.0", "(0, 10000]"),
+        ("omega_max", "1e200", "(0, 10000], got 1e+200"),  # was OverflowError at omega_max**2
+        ("mass", "1" + "0" * 400, "(0, 1000], got an integer of 401 digits"),  # was OverflowError at float()
+        ("drag", "[0.1, 0.1, 0.1, 1e300, 0.0, 0.0]", "element 3 must be in [0, 100]"),
         ("actuation", '"jets"', "wrench, motors"),
         ("mass", '"heavy"', "expected a number"),
         ("mass", "true", "expected a number"),

@@ -33,7 +33,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from bridge.autopilot.failsafe import FAILSAFE_RANGES, RETURN_RANGES, FailsafeConfig, ReturnConfig
-from params import ConfigError, Table
+from params import ConfigError, Table, finite_float, show
 
 REAL32 = "REAL32"
 INT32 = "INT32"
@@ -192,6 +192,8 @@ def typed_value(spec: ParamSpec, value: Any) -> float:
     Python callers carry integers as floats), a REAL32's a number; :class:`ParamRefused` if it is not one."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ParamRefused(f"{spec.name}: expected a number, got {value!r}"[:200])
+    if isinstance(value, int) and finite_float(value) is None:  # past the float range: float() would raise
+        raise ParamRefused(f"{spec.name}: {_range_text(spec)}, got {show(value)}")
     if spec.kind == INT32:
         if not (math.isfinite(value) and value == int(value)):
             raise ParamRefused(f"{spec.name}: an INT32, got {value:g}")
@@ -201,6 +203,8 @@ def typed_value(spec: ParamSpec, value: Any) -> float:
 
 def value_problem(spec: ParamSpec, value: float) -> str | None:
     """Why ``value`` cannot be ``spec``'s, or None (type, range, choices; :func:`in_range`)."""
+    if isinstance(value, int) and finite_float(value) is None:  # past the float range: isfinite would raise
+        return f"{spec.name}: {_range_text(spec)}, got {show(value)}"
     if not math.isfinite(value):
         return f"{spec.name}: must be finite, got {value}"
     if spec.kind == INT32 and value != int(value):
@@ -209,9 +213,13 @@ def value_problem(spec: ParamSpec, value: float) -> str | None:
         allowed = ", ".join(f"{v} {a}" for v, a in spec.choices.items())
         return f"{spec.name}: {value:g} is not one the vehicle flies; allowed: {allowed}"
     if not in_range(value, spec.lo, spec.hi):
-        unit = f" {spec.unit}" if spec.unit else ""
-        return f"{spec.name}: must be in [{spec.lo:g}, {spec.hi:g}]{unit}, got {value:g}"
+        return f"{spec.name}: {_range_text(spec)}, got {value:g}"
     return None
+
+
+def _range_text(spec: ParamSpec) -> str:
+    """``must be in [0.01, 60] s``: the parameter's range, as every refusal of a value out of it says."""
+    return f"must be in [{spec.lo:g}, {spec.hi:g}]" + (f" {spec.unit}" if spec.unit else "")
 
 
 def change_param(p: VehicleParams, name: str, value: float, running: bool = True) -> VehicleParams:
@@ -249,7 +257,9 @@ def params_from_table(data: Mapping[str, Any], source: str, start: VehicleParams
         spec = BY_NAME.get(name)
         if spec is None:
             raise t.error(name, f"no such parameter; the vehicle has {', '.join(BY_NAME)}")
-        entries.append((name, t.number(name) if spec.kind == REAL32 else t.integer(name)))
+        v = data[name]  # an integer past the float range goes on as it is: apply_params names the range
+        huge = isinstance(v, int) and not isinstance(v, bool) and finite_float(v) is None
+        entries.append((name, t.number(name) if spec.kind == REAL32 and not huge else t.integer(name)))
     t.done()
     return apply_params(start, entries, f"{source}: ", lambda name, value: f"params.{name}")
 

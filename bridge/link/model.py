@@ -13,7 +13,6 @@ re-exported here, so ``from bridge.link.model import ...`` is the one import for
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -57,7 +56,7 @@ from bridge.link.trace import (
     records_problem,
 )
 from controller.link_guard import COMPENSATIONS, GuardConfig
-from params import ConfigError, Table
+from params import ConfigError, Table, finite_float
 
 __all__ = [  # re-exported: the link model's one import (absolute_link_paths: where a table's files are made absolute)
     "BLACKOUT_DURATION_RANGE_S", "BLACKOUT_START_RANGE_S", "COMMAND_LAG_RANGE_MS", "DIRECTION_KEYS", "DIRECTIONS",
@@ -133,7 +132,7 @@ def _blackouts(t: Table, default: tuple[tuple[float, float], ...]) -> tuple[tupl
     out = []
     for i, w in enumerate(v):
         ok = (isinstance(w, (list, tuple)) and len(w) == 2
-              and all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in w))
+              and all(finite_float(x) is not None for x in w))  # (an integer past the float range is not)
         if not ok:
             raise t.error("blackouts", f"element {i} must be a pair [start_s, duration_s] of numbers, got {w!r}"[:200])
         start, dur = float(w[0]), float(w[1])

@@ -11,7 +11,6 @@ Every law, rate and combination of link values is built once through
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import asdict, dataclass, field
 from itertools import product
 from pathlib import Path
@@ -44,7 +43,7 @@ from bridge.sweep.grid import (
 )
 from missions import Mission, load_mission
 from missions.mission import is_plan_file, law_spec_from, law_spec_problem, mission_path
-from params import ConfigError, Table, load_toml
+from params import ConfigError, Table, finite_float, load_toml, show
 
 MAX_CELLS = 10_000  # cells a sweep flies unless told more (max_cells): 48 cells of the 30 s sine take 15 s on 2
 # cores, so 10^4 take about an hour; 10^6 would take days, which is a typo far more often than a plan
@@ -237,8 +236,8 @@ def _number_list(t: Table, key: str, lo: float, hi: float) -> list[float]:
         raise t.error(key, f"expected a non-empty list of numbers, got {v!r}")
     out = []
     for i, x in enumerate(v):
-        if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
-            raise t.error(key, f"element {i} must be a finite number, got {x!r}")
+        if finite_float(x) is None:
+            raise t.error(key, f"element {i} must be a finite number, got {show(x)}")
         if not lo <= x <= hi:
             raise t.error(key, f"element {i} must be in [{lo:g}, {hi:g}], got {x:g}")
         out.append(float(x))
