@@ -67,7 +67,8 @@ def _falling(k: int, m: int) -> float:
     return _FACT[k] / _FACT[k - m] if k >= m else 0.0
 
 
-_AT_END = np.array([[_falling(k, m) for k in range(ORDER)] for m in range(ORDER - 1)])  # s = 1: k!/(k-m)!
+_FALLING = [[_falling(k, m) for k in range(ORDER)] for m in range(ORDER - 1)]  # [m][k]: k!/(k-m)!, 0 for k < m
+_AT_END = np.array(_FALLING)  # row m: derivative m at s = 1
 _AT_START = np.diag([float(f) for f in _FACT[:ORDER - 1]] + [0.0])[:ORDER - 1]  # s = 0: m! at k = m
 _M = np.arange(1, ORDER - 1)  # derivative orders of a pass-through's rows (1..6); a stop's are its first 3
 _WINDOW = 11  # rows carried (3) + a segment's positions (2) + a knot's (6)
@@ -129,9 +130,9 @@ def _derivs(c: tuple[float, ...], s: float, T: float) -> Derivs:
     """Value and derivatives 1..4 (per second) at s of the polynomial sum c_k s^k over a segment of T s."""
     out = []
     for m in range(5):
-        acc = 0.0
+        f, acc = _FALLING[m], 0.0
         for k in range(ORDER - 1, m - 1, -1):
-            acc = acc * s + c[k] * _falling(k, m)
+            acc = acc * s + c[k] * f[k]
         out.append(acc / T**m)
     return (out[0], out[1], out[2], out[3], out[4])
 
