@@ -33,7 +33,7 @@ those of the dense elimination (LAPACK's gesv), and so is its stability, at O(n)
 the runs between stops come out independent. (Hermite data at the knots as unknowns, derivatives 1 to
 3, with continuity of 4 to 6 as a 3×3 block-tridiagonal system, was tried: it cancels where a short
 segment lies between long ones, the error growing as about (T_long/T_short)^7 eps: 5e-9 of the
-coefficients at a ratio of 10, 5e-5 at 100, against 1e-12 here.)
+coefficients at a ratio of 10, 5e-5 at 100, against at most 1e-12 here.)
 """
 
 from __future__ import annotations
