@@ -55,7 +55,7 @@ def test_the_x500_below_its_critical_level_flies_com_low_bat_act(tmp_path: Path,
         assert not fs and run.trace["z"].max() > 2.9
         return
     assert fs[0]["text"].endswith(f"(BAT_CRIT_THR = 7 %): {then}") and "battery critical" in s["ended_by"]["how"]
-    if then == "land":  # (3: Return first climbs to RTL_RETURN_ALT, from 1.6 m from home here)
+    if then == "land":  # (3: Return first climbs, to 2 x 1.6 m: the cone within NAV_ACC_RAD of home)
         assert run.trace["z"][-1] == pytest.approx(0.0, abs=1e-6)  # landed, and disarmed there
         assert any(e["kind"] == "disarmed" and e["text"] == "landed: disarmed" for e in s["events"])
 

@@ -197,11 +197,12 @@ def test_land_drifts_at_most_half_a_metre_lands_and_disarms(flown) -> None:
 
 def test_return_flies_home_from_the_step_missions_second_set_point_in_lockstep_as_offline(tmp_path: Path) -> None:
     """``return`` (PX4 3, Return): the step mission's link blacked out at 12 s, at its second set-point (2.2 m from
-    home, 2 m up), RTL_RETURN_ALT 3 m, RTL_DESCEND_ALT 2.5 m: ``bsst sitl`` (lockstep, real processes) ends
+    home, 2 m up), RTL_RETURN_ALT 3 m, RTL_DESCEND_ALT 2.5 m, no cone (RTL_CONE_ANG 0: with PX4's 45 deg it would
+    return at 2 NAV_ACC_RAD = 4 m, tests/test_return_land.py): ``bsst sitl`` (lockstep, real processes) ends
     ``failsafe``, exit 1; the vehicle climbs to 3 m, flies home, comes down and lands within 0.2 m of home,
     disarmed; offline flies the same rows to 1e-9 m until touchdown, and the same events."""
     step = MISSION_DIR / "step.toml"
-    rtl = ("--param", "RTL_RETURN_ALT=3", "--param", "RTL_DESCEND_ALT=2.5")
+    rtl = ("--param", "RTL_RETURN_ALT=3", "--param", "RTL_DESCEND_ALT=2.5", "--param", "RTL_CONE_ANG=0")
     with _free_instance() as n:
         p = Bsst("sitl", str(step), "--blackout", "12:6", "--failsafe-action", "return", *rtl, "--instance", str(n),
                  "--out", str(tmp_path / "r"), "--no-plots", env=ENV)
@@ -221,7 +222,7 @@ def test_return_flies_home_from_the_step_missions_second_set_point_in_lockstep_a
     assert "failsafe: no actuator target for 0.504 s: return home (RTL), then land" in \
         (tmp_path / "r" / "events.log").read_text()
     off = simulate(step, plots=False, link={"blackouts": [[12.0, 6.0]]}, failsafe={"action": "return"},
-                   params={"RTL_RETURN_ALT": 3.0, "RTL_DESCEND_ALT": 2.5})
+                   params={"RTL_RETURN_ALT": 3.0, "RTL_DESCEND_ALT": 2.5, "RTL_CONE_ANG": 0})
     assert [(e["kind"], round(e["t"], 3)) for e in off.summary["events"] if e["kind"] in ("failsafe", "disarmed")] \
         == [("failsafe", round(t0, 3)), ("disarmed", round(v["disarmed"], 3))]
     until = tr["t"] < _touchdown(off.trace, t0)

@@ -359,13 +359,14 @@ def test_offboard_selected_disarmed_needs_a_controller_to_fly_it():
 def test_mavsdk_return_to_launch(tmp_path):
     """``Action.return_to_launch`` (MAV_CMD_NAV_RETURN_TO_LAUNCH: PX4's Return mode) while ``bsst controller`` flies
     the step mission, at its second set-point (2.2 m from home, 2 m up): MAVSDK shows RETURN_TO_LAUNCH; the
-    vehicle climbs to RTL_RETURN_ALT (3 m), flies home, comes down to RTL_DESCEND_ALT and lands at home,
-    disarmed; the controller, its vehicle taken, ends aborted (exit 1); the vehicle's events name MAVSDK."""
+    vehicle (no cone: RTL_CONE_ANG 0) climbs to RTL_RETURN_ALT (3 m), flies home, comes down to RTL_DESCEND_ALT and
+    lands at home, disarmed; the controller, its vehicle taken, ends aborted (exit 1); the vehicle's events name
+    MAVSDK."""
     mission = tmp_path / "step.toml"
     mission.write_text((MISSION_DIR / "step.toml").read_text().replace("duration_s = 30.0", "duration_s = 20.0"))
     with instance_slot() as n:
         v = _vehicle(n, tmp_path / "v", str(mission), "--speed", "4", "--param", "MPC_LAND_SPEED=1.5",
-                     "--param", "RTL_RETURN_ALT=3", "--param", "RTL_DESCEND_ALT=2.5")
+                     "--param", "RTL_RETURN_ALT=3", "--param", "RTL_DESCEND_ALT=2.5", "--param", "RTL_CONE_ANG=0")
         ctl = Proc.bsst("controller", str(mission), "--instance", str(n), "--out", str(tmp_path / "c"))
         try:
             out = _mavsdk(n, "rtl")

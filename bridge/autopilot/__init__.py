@@ -6,6 +6,7 @@ Out: the flown state, the estimate the vehicle reports, failsafe decisions and e
 - :mod:`bridge.autopilot.simvehicle`  plant + arming + offboard timeout + failsafe, for every clock
 - :mod:`bridge.autopilot.failsafe`    level-and-descend landing loop and the on-board targets
 - :mod:`bridge.autopilot.params`      PX4 parameters: names, one range table, changes
+- :mod:`bridge.autopilot.returnland`  Return's height near home (PX4's cone), the auto landing's speed by height
 - :mod:`bridge.autopilot.estimator`   truth or EKF estimate of the state
 - :mod:`bridge.autopilot.ekfkernels`  the EKF's compiled kernels: propagation, updates, the estimate
 - :mod:`bridge.autopilot.ekfstate`    the EKF's state layout, its buffer of past states, P carried in time

@@ -6,7 +6,8 @@ In:  the ``[failsafe]`` table (``timeout_s`` s, ``descent_rate`` m/s, ``resume``
 Out: a :class:`FailsafeConfig`; the on-board controller's wrench demand (u1..u4, N) and the normalised
      paper-frame command the profile's actuation makes of it, for a target (:class:`Level`,
      :class:`PositionHold`, :class:`Land`, :class:`Takeoff`, :class:`ReturnHome`); Return mode's heights
-     (:class:`ReturnConfig`, m above home)
+     (:class:`ReturnConfig`, m above home) and the auto landing's speeds (:class:`LandSlowdown`) are
+     bridge.autopilot.returnland's
 
 No valid actuator target for longer than ``timeout_s`` of vehicle time and the vehicle
 leaves offboard control; what it does then is ``action`` (PX4's offboard-loss action,
@@ -15,7 +16,8 @@ leaves offboard control; what it does then is ``action`` (PX4's offboard-loss ac
 - ``descend`` (default; the only action before there were four): level at its heading and sink
   at ``descent_rate``, no horizontal control (it drifts with the speed it had), disarm on the ground.
 - ``land``: hold the horizontal position where the failsafe began while sinking at ``descent_rate``,
-  disarm on the ground (PX4 4, Land mode: "land at the position where the mode was engaged").
+  disarm on the ground (PX4 4, Land mode: "land at the position where the mode was engaged"); as PX4's
+  auto landing, faster above MPC_LAND_ALT2 (MPC_Z_V_AUTO_DN above MPC_LAND_ALT1: bridge.autopilot.returnland).
 - ``hold``: hold the position and height where the failsafe began for ``hold_s``, then ``land``
   there (PX4 5, Hold). PX4 waits ``COM_FAIL_ACT_T`` in Hold before it takes a failsafe action
   (default 5 s, 0-25 s: "Before entering failsafe (RTL, Land, Hold), wait COM_FAIL_ACT_T seconds
@@ -25,7 +27,8 @@ leaves offboard control; what it does then is ``action`` (PX4's offboard-loss ac
   its default and range, and the landing after it is that action.
 - ``disarm``: stop the motors at once (PX4 7, Disarm); the vehicle falls.
 - ``return``: Return mode from where the failsafe began (PX4 3, Return; :class:`ReturnHome`: climb to
-  RTL_RETURN_ALT, home, down to RTL_DESCEND_ALT, land), disarm on the ground.
+  RTL_RETURN_ALT, or near home the lower height of PX4's cone, home, down to RTL_DESCEND_ALT, land as ``land``),
+  disarm on the ground.
 
 A failsafe that begins on the ground disarms at once, whatever the action. The vehicle returns
 to offboard control only when armed again.
@@ -35,7 +38,8 @@ law: a cascade on the vehicle's nominal model, run at every physics step (1 kHz 
 
 1. position P to a velocity set-point (each target makes its own, :meth:`Target.setpoint`):
    v_sp,xy = clip_|.|(k_pos,xy (p_xy,d - p_xy), v_xy,max), v_sp,z = clip(k_pos,z (z_d - z), -v_down, v_up)
-   (``Land``/``Level``: v_sp,z = -descent_rate; ``Level``: no horizontal set-point at all);
+   (``Level``: v_sp,z = -descent_rate, no horizontal set-point at all; ``Land``: v_sp,z = -descent_rate, or
+   with its ``slowdown`` PX4's landing speed at its height, bridge.autopilot.returnland.land_speed);
 2. velocity PI to an acceleration: a = k_vel (v_sp - v) + k_i ∫(v_sp - v) dt, the integral clamped
    to |k_i ∫| <= a_i,max (anti-windup; it takes up a mass mismatch or a steady push: PX4's velocity
    loop has one too, MPC_XY_VEL_I_ACC, MPC_Z_VEL_I_ACC), a_xy clipped to g tan(tilt_max);
@@ -68,6 +72,7 @@ from dataclasses import dataclass
 from math import cos, hypot, tan
 from typing import Any
 
+from bridge.autopilot.returnland import LandSlowdown, ReturnConfig, return_height
 from controller.actuation import make_actuation
 from controller.bsst import wrap_angle
 from controller.nominal import Nominal
@@ -98,10 +103,15 @@ class FailsafeConfig:
     resume: bool = False  # the controller re-arms and resumes when the link returns
     action: str = "descend"  # one of FAILSAFE_ACTIONS
     hold_s: float = 5.0  # hold: how long before it lands (PX4's COM_FAIL_ACT_T default)
+    # the auto landing's speed above MPC_LAND_ALT2 (MPC_Z_V_AUTO_DN, MPC_LAND_ALT1, MPC_LAND_ALT2): parameters
+    # only, not [failsafe] keys; LAND, Return's landing and the failsafe's land, hold and return fly it, not descend
+    slowdown: LandSlowdown = LandSlowdown()
 
     def time_to_land_s(self, height_m: float) -> float:
         """Vehicle time from the failsafe to a disarm on the ground from ``height_m`` (the
-        descent at ``descent_rate``; ``hold`` adds its hold; ``disarm``: at once)."""
+        descent at ``descent_rate``; ``hold`` adds its hold; ``disarm``: at once). For ``land``,
+        ``hold`` and the mission's end landing an upper bound: they come down faster above
+        MPC_LAND_ALT2 (:attr:`slowdown`)."""
         if self.action == "disarm":
             return 0.0
         return (self.hold_s if self.action == "hold" else 0.0) + max(height_m, 0.0) / self.descent_rate
@@ -219,21 +229,32 @@ class PositionHold(Target):
 
 @dataclass(frozen=True)
 class Land(Target):
-    """Hold (x, y) in m while sinking at ``rate`` m/s (NAV_LAND; ``land`` failsafe); heading as
+    """Hold (x, y) in m while sinking at ``rate`` m/s (NAV_LAND; ``land`` failsafe), or with a ``slowdown``
+    PX4's auto landing: faster above MPC_LAND_ALT2 by the height above ``ground_z`` (m, the home's;
+    :class:`~bridge.autopilot.returnland.LandSlowdown`), ``rate`` (MPC_LAND_SPEED) below it; heading as
     :class:`PositionHold`."""
 
     x: float
     y: float
     rate: float
     psi: float | None = None
+    slowdown: LandSlowdown | None = None
+    ground_z: float = 0.0
     lands = True
 
     @classmethod
-    def here(cls, X: tuple[float, ...], rate: float) -> Land:
-        return cls(X[0], X[2], rate)
+    def here(cls, X: tuple[float, ...], rate: float, slowdown: LandSlowdown | None = None,
+             ground_z: float = 0.0) -> Land:
+        return cls(X[0], X[2], rate, slowdown=slowdown, ground_z=ground_z)
 
     def setpoint(self, X: tuple[float, ...], g: OnboardGains) -> Setpoint:
-        return Setpoint(_xy_velocity(self.x, self.y, X, g), -self.rate, self.psi)
+        return Setpoint(_xy_velocity(self.x, self.y, X, g), -_descent(self.slowdown, self.rate, X[4] - self.ground_z),
+                        self.psi)
+
+
+def _descent(slowdown: LandSlowdown | None, rate: float, height_m: float) -> float:
+    """The landing's speed (m/s, down) at ``height_m`` above the ground: ``rate``, or ``slowdown``'s profile."""
+    return rate if slowdown is None else slowdown.speed(height_m, rate)
 
 
 @dataclass(frozen=True)
@@ -255,16 +276,6 @@ class Takeoff(Target):
         return Setpoint(_xy_velocity(self.x, self.y, X, g), _z_velocity(self.z, X, g, self.rate), self.psi)
 
 
-@dataclass(frozen=True)
-class ReturnConfig:
-    """Return mode's heights above home (m): PX4's RTL_RETURN_ALT (climb to it, if lower, before flying home) and
-    RTL_DESCEND_ALT (over home, come down to it, then land); their ranges: :data:`RETURN_RANGES`."""
-
-    return_alt_m: float = 60.0
-    descend_alt_m: float = 30.0
-
-
-RETURN_RANGES = {"return_alt_m": (0.0, 100.0), "descend_alt_m": (2.0, 100.0)}  # m: PX4's, inside the 100 m envelope
 RETURN_NEAR_M = 1.0  # m: home is reached within this horizontal distance (then the descent)
 RETURN_Z_TOL_M = 0.3  # m: the climb is done, or the descent, this close to its height
 
@@ -273,23 +284,29 @@ RETURN_Z_TOL_M = 0.3  # m: the climb is done, or the descent, this close to its 
 class ReturnHome(Target):
     """Return mode (PX4's RTL, home return type) over home (x, y) in m: below ``z_return`` and away from home,
     stop and climb to it; then fly home at that height; over home (within :data:`RETURN_NEAR_M`), come down to
-    ``z_descend`` at most ``v_down``, then land at ``rate`` m/s and disarm on the ground. Each phase follows from
-    the state alone (a dip below the return height on the way climbs again before going on)."""
+    ``z_descend`` at most ``v_down``, then land at ``rate`` m/s (with a ``slowdown``, as :class:`Land`, by the
+    height above ``ground_z``) and disarm on the ground. Each phase follows from the state alone (a dip below the
+    return height on the way climbs again before going on)."""
 
     x: float
     y: float
     z_return: float
     z_descend: float
     rate: float
+    slowdown: LandSlowdown | None = None
+    ground_z: float = 0.0
     lands = True
 
     @classmethod
     def toward(cls, X: tuple[float, ...], home: tuple[float, float, float], cfg: ReturnConfig,
-               rate: float) -> ReturnHome:
-        """From state X: the return height is RTL_RETURN_ALT above home, or the height now if higher (PX4 does
-        not come down to return); the descent's at most that."""
-        z_return = max(X[4], home[2] + cfg.return_alt_m)
-        return cls(home[0], home[1], z_return, min(home[2] + cfg.descend_alt_m, z_return), rate)
+               rate: float, slowdown: LandSlowdown | None = None) -> ReturnHome:
+        """From state X to ``home`` (x, y, z m: where it lands, on the ground): the return height is PX4's
+        (:func:`~bridge.autopilot.returnland.return_height`: RTL_RETURN_ALT above it, lower within the cone near
+        it, never below the height now: PX4 does not come down to return); the descent's at most that."""
+        above = return_height(hypot(home[0] - X[0], home[1] - X[2]), X[4] - home[2], cfg.return_alt_m, cfg.cone_deg,
+                              cfg.min_dist_m, cfg.acc_rad_m)
+        z_return = max(X[4], home[2] + above)
+        return cls(home[0], home[1], z_return, min(home[2] + cfg.descend_alt_m, z_return), rate, slowdown, home[2])
 
     def phase(self, X: tuple[float, ...]) -> str:
         """``climb``, ``return``, ``descend`` or ``land``."""
@@ -306,17 +323,19 @@ class ReturnHome(Target):
             return Setpoint(v_xy, _z_velocity(self.z_return, X, g, g.v_up), None)
         if phase == "descend":
             return Setpoint(v_xy, _z_velocity(self.z_descend, X, g, g.v_up), None)
-        return Setpoint(v_xy, -self.rate, None)
+        return Setpoint(v_xy, -_descent(self.slowdown, self.rate, X[4] - self.ground_z), None)
 
 
-def return_time_s(cfg: ReturnConfig, away_m: float, z_m: float, rate: float, g: OnboardGains = DEFAULT_GAINS) -> float:
+def return_time_s(cfg: ReturnConfig, away_m: float, z_m: float, rate: float, g: OnboardGains = DEFAULT_GAINS,
+                  slowdown: LandSlowdown | None = None) -> float:
     """Vehicle time (s) Return mode takes from ``z_m`` above home and ``away_m`` from it, at the on-board
-    controller's speed limits: the climb to RTL_RETURN_ALT, the way home, the descent to RTL_DESCEND_ALT and the
-    landing at ``rate`` m/s (each approach's tail, where the set-point's P slows it, is the caller's margin)."""
-    z_return = max(z_m, cfg.return_alt_m)
+    controller's speed limits: the climb to its return height (RTL_RETURN_ALT, or the cone's), the way home, the
+    descent to RTL_DESCEND_ALT and the landing at ``rate`` m/s, or with ``slowdown`` PX4's auto landing (each
+    approach's tail, where the set-point's P slows it, is the caller's margin)."""
+    z_return = return_height(away_m, z_m, cfg.return_alt_m, cfg.cone_deg, cfg.min_dist_m, cfg.acc_rad_m)
     z_descend = min(cfg.descend_alt_m, z_return)
-    return ((z_return - max(z_m, 0.0)) / g.v_up + away_m / g.v_xy_max + (z_return - z_descend) / g.v_down
-            + z_descend / rate)
+    landing = z_descend / rate if slowdown is None else slowdown.time_s(z_descend, rate)
+    return (z_return - max(z_m, 0.0)) / g.v_up + away_m / g.v_xy_max + (z_return - z_descend) / g.v_down + landing
 
 
 def return_point(X: tuple[float, ...], home: tuple[float, float, float],
@@ -333,15 +352,22 @@ def return_point(X: tuple[float, ...], home: tuple[float, float, float],
     return best, index
 
 
+def landing_target(cfg: FailsafeConfig, X: tuple[float, ...], home: tuple[float, float, float]) -> Land:
+    """PX4's auto landing where state X is (LAND, the ``land`` failsafe, ``hold``'s landing, the mission's end):
+    MPC_LAND_SPEED (``descent_rate``) near the ground, faster above MPC_LAND_ALT2 (``slowdown``) by the height above
+    ``home`` (x, y, z m)."""
+    return Land.here(X, cfg.descent_rate, cfg.slowdown, home[2])
+
+
 def failsafe_target(cfg: FailsafeConfig, X: tuple[float, ...], home: tuple[float, float, float],
                     rtl: ReturnConfig, rally: tuple[tuple[float, float], ...] = ()) -> Target:
     """What the failsafe flies first from state X (``disarm`` flies nothing: see SimVehicle); ``return`` flies
     to the closest of the home (``home``, m) and the ``rally`` points (:func:`return_point`) with ``rtl``'s
     heights."""
     if cfg.action == "return":
-        return ReturnHome.toward(X, return_point(X, home, rally)[0], rtl, cfg.descent_rate)
+        return ReturnHome.toward(X, return_point(X, home, rally)[0], rtl, cfg.descent_rate, cfg.slowdown)
     if cfg.action == "land":
-        return Land.here(X, cfg.descent_rate)
+        return landing_target(cfg, X, home)
     if cfg.action == "hold":
         return PositionHold.here(X)
     return Level(cfg.descent_rate)

@@ -1,14 +1,15 @@
 """The vehicle's flight modes and what a ground station's mode flies (PX4's names: bridge/mavlink/modes.py).
 
 In:  a mode a ground station selected, the vehicle's state X (paper frame: m, m/s, rad, rad/s), its home and rally
-     points (m), Return's heights, the landing speed (m/s), the start's height and a takeoff altitude (m), or a
-     point to hold (DO_REPOSITION)
+     points (m), Return's heights, the landing speed (m/s) and its slow-down near the ground, the start's height and
+     a takeoff altitude (m), or a point to hold (DO_REPOSITION)
 Out: the on-board controller's target for the mode and the ``mode`` event's text (:func:`mode_target`)
 """
 
 from __future__ import annotations
 
 from bridge.autopilot.failsafe import Land, PositionHold, ReturnConfig, ReturnHome, Takeoff, Target, return_point
+from bridge.autopilot.returnland import LandSlowdown
 
 OFFBOARD = "offboard"
 FAILSAFE = "failsafe"
@@ -16,16 +17,17 @@ LANDED = "landed"  # the failsafe landed it (or stopped its motors): disarmed
 HOLD = "hold"  # the modes a ground station selects (bridge/nodes/vehicle.py, PX4's names)
 LAND = "land"
 TAKEOFF = "takeoff"
-RTL = "rtl"  # Return: home at RTL_RETURN_ALT, down to RTL_DESCEND_ALT, land (armed only, as PX4)
+RTL = "rtl"  # Return: home at RTL_RETURN_ALT (lower in the cone), down to RTL_DESCEND_ALT, land (armed only, as PX4)
 GROUND_MODES = (HOLD, LAND, TAKEOFF, RTL)  # flown by the on-board controller, set by a ground station
 
 
 def mode_target(mode: str, X: tuple[float, ...], *, takeoff_z: float, alt: float, descent_rate: float,
                 home: tuple[float, float, float], rally: tuple[tuple[float, float], ...], rtl: ReturnConfig,
-                hold_at: PositionHold | None = None) -> tuple[Target, str]:
+                hold_at: PositionHold | None = None, slowdown: LandSlowdown | None = None) -> tuple[Target, str]:
     """What ``mode`` (HOLD, LAND, RTL, TAKEOFF) flies from state X, and its event's text: HOLD holds where it is (or
-    flies to ``hold_at`` and holds there), LAND lands where it is at ``descent_rate``, RTL returns to home or the
-    nearest rally point, TAKEOFF climbs to ``takeoff_z`` (the start's height plus ``alt``, m) over where it is."""
+    flies to ``hold_at`` and holds there), LAND lands where it is at ``descent_rate`` (with ``slowdown``, faster
+    above MPC_LAND_ALT2 by the height above home, as PX4), RTL returns to home or the nearest rally point (and lands
+    so), TAKEOFF climbs to ``takeoff_z`` (the start's height plus ``alt``, m) over where it is."""
     if mode == HOLD and hold_at is not None:
         extra = "" if hold_at.psi is None else f", heading {hold_at.psi:.3f} rad"
         extra += "" if hold_at.speed is None else f", at most {hold_at.speed:g} m/s across"
@@ -34,10 +36,13 @@ def mode_target(mode: str, X: tuple[float, ...], *, takeoff_z: float, alt: float
     if mode == HOLD:
         return PositionHold.here(X), f"HOLD at x={X[0]:.3f} y={X[2]:.3f} z={X[4]:.3f} m"
     if mode == LAND:
-        return Land.here(X, descent_rate), f"LAND at x={X[0]:.3f} y={X[2]:.3f} m, {descent_rate:g} m/s"
+        faster = "" if slowdown is None else (f" below {slowdown.alt2_m:g} m, {slowdown.auto_down_mps:g} m/s above "
+                                              f"{max(slowdown.alt1_m, slowdown.alt2_m):g} m")
+        return Land.here(X, descent_rate, slowdown, home[2]), (f"LAND at x={X[0]:.3f} y={X[2]:.3f} m, "
+                                                               f"{descent_rate:g} m/s{faster}")
     if mode == RTL:
         to, which = return_point(X, home, rally)
-        target = ReturnHome.toward(X, to, rtl, descent_rate)
+        target = ReturnHome.toward(X, to, rtl, descent_rate, slowdown)
         where = "home" if which is None else f"rally point {which}"
         return target, (f"RTL from x={X[0]:.3f} y={X[2]:.3f} z={X[4]:.3f} m: {where} x={to[0]:.3f} "
                         f"y={to[1]:.3f} m at z={target.z_return:.3f} m, down to {target.z_descend:.3f} m, land")

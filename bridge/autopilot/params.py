@@ -32,7 +32,8 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
-from bridge.autopilot.failsafe import FAILSAFE_RANGES, RETURN_RANGES, FailsafeConfig, ReturnConfig
+from bridge.autopilot.failsafe import FAILSAFE_RANGES, FailsafeConfig
+from bridge.autopilot.returnland import LAND_RANGES, RETURN_RANGES, ReturnConfig
 from params import ConfigError, Table, finite_float, show
 
 REAL32 = "REAL32"
@@ -54,7 +55,7 @@ class VehicleParams:
     takeoff_alt_m: float = 2.5  # m above home: NAV_TAKEOFF's altitude when it gives none (PX4's default)
     sysid: int = 1
     failure_injection: int = 0  # SYS_FAILURE_EN: 1 acts on MAV_CMD_INJECT_FAILURE, 0 denies it (PX4's default)
-    rtl: ReturnConfig = ReturnConfig()  # RTL_RETURN_ALT, RTL_DESCEND_ALT: Return mode's heights above home, m
+    rtl: ReturnConfig = ReturnConfig()  # RTL_*, NAV_ACC_RAD: Return mode's heights above home (m) and its cone
     preflight_disarm_s: float = 10.0  # COM_DISARM_PRFLT: armed on the ground, disarmed if not started by then (s)
     max_hor_m: float = 0.0  # GF_MAX_HOR_DIST: the farthest from home (m, horizontally) the vehicle may fly; 0: any
     max_ver_m: float = 0.0  # GF_MAX_VER_DIST: the highest above home (m) it may fly; 0: any
@@ -89,7 +90,7 @@ LOW_BATTERY_ACTIONS = {0: "warning", 2: "land", 3: "return at critical, land at 
 # PX4's offboard-loss action values, old and new, of the actions the vehicle flies
 _OBL_ACT = {-1: "descend", 0: "land", 1: "hold", 2: "return", 3: "disarm"}
 _OBL_RC_ACT = {-1: "descend", 3: "return", 4: "land", 5: "hold", 7: "disarm"}
-_fr = FAILSAFE_RANGES
+_fr, _lr = FAILSAFE_RANGES, LAND_RANGES
 PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("COM_OF_LOSS_T", REAL32, "s", *_fr["timeout_s"],
               "offboard loss timeout: no actuator target for this long and the failsafe acts "
@@ -103,8 +104,15 @@ PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("COM_FAIL_ACT_T", REAL32, "s", *_fr["hold_s"],
               "hold failsafe: how long it holds before it lands ([failsafe] hold_s)", failsafe_key="hold_s"),
     ParamSpec("MPC_LAND_SPEED", REAL32, "m/s", *_fr["descent_rate"],
-              "descent speed of the failsafe's landing and of LAND ([failsafe] descent_rate)",
-              failsafe_key="descent_rate"),
+              "descent speed of the failsafe's landing and of LAND ([failsafe] descent_rate); below MPC_LAND_ALT2 "
+              "the auto landing's (LAND, Return, the failsafe's land, hold and return)", failsafe_key="descent_rate"),
+    ParamSpec("MPC_Z_V_AUTO_DN", REAL32, "m/s", *_lr["auto_down_mps"],
+              "the auto landing's descent speed above MPC_LAND_ALT1 (blending to MPC_LAND_SPEED at MPC_LAND_ALT2)"),
+    ParamSpec("MPC_LAND_ALT1", REAL32, "m", *_lr["alt1_m"],
+              "the auto landing slows from MPC_Z_V_AUTO_DN below this height above home (taken as at least "
+              "MPC_LAND_ALT2)"),
+    ParamSpec("MPC_LAND_ALT2", REAL32, "m", *_lr["alt2_m"],
+              "the auto landing comes down at MPC_LAND_SPEED below this height above home"),
     ParamSpec("MIS_TAKEOFF_ALT", REAL32, "m", *TAKEOFF_ALT_RANGE_M,
               "takeoff altitude above home when NAV_TAKEOFF gives none, and the least it climbs to"),
     ParamSpec("MAV_SYS_ID", INT32, "", *SYSID_RANGE, "the vehicle's MAVLink system id (at start only)",
@@ -113,6 +121,14 @@ PARAMS: tuple[ParamSpec, ...] = (
               "Return mode: the height above home it climbs to (if lower) before it flies home"),
     ParamSpec("RTL_DESCEND_ALT", REAL32, "m", *RETURN_RANGES["descend_alt_m"],
               "Return mode: the height above home it comes down to over home before it lands"),
+    ParamSpec("RTL_CONE_ANG", INT32, "deg", *RETURN_RANGES["cone_deg"],
+              "Return mode: half-angle of the cone over home within RTL_MIN_DIST of which it returns lower than "
+              "RTL_RETURN_ALT (0: no cone)"),
+    ParamSpec("RTL_MIN_DIST", REAL32, "m", *RETURN_RANGES["min_dist_m"],
+              "Return mode: within this horizontal distance of home the cone sets the return height"),
+    ParamSpec("NAV_ACC_RAD", REAL32, "m", *RETURN_RANGES["acc_rad_m"],
+              "acceptance radius: Return within it of home returns at most 2 x the distance up, beyond it at least "
+              "2 x NAV_ACC_RAD (with the cone)"),
     ParamSpec("SYS_FAILURE_EN", INT32, "", 0, 1,
               "failure injection: 1 acts on a ground station's MAV_CMD_INJECT_FAILURE, 0 denies it (docs/weather.md)",
               choices={0: "disabled", 1: "enabled"}),
@@ -141,7 +157,10 @@ PARAMS: tuple[ParamSpec, ...] = (
               choices=LOW_BATTERY_ACTIONS),
 )
 BY_NAME = {p.name: p for p in PARAMS}
-_RTL_FIELDS = {"RTL_RETURN_ALT": "return_alt_m", "RTL_DESCEND_ALT": "descend_alt_m"}  # -> ReturnConfig's field
+_RTL_FIELDS = {"RTL_RETURN_ALT": "return_alt_m", "RTL_DESCEND_ALT": "descend_alt_m",  # -> ReturnConfig's field
+               "RTL_CONE_ANG": "cone_deg", "RTL_MIN_DIST": "min_dist_m", "NAV_ACC_RAD": "acc_rad_m"}
+_LAND_FIELDS = {"MPC_Z_V_AUTO_DN": "auto_down_mps", "MPC_LAND_ALT1": "alt1_m",  # -> FailsafeConfig.slowdown's field
+                "MPC_LAND_ALT2": "alt2_m"}
 # the REAL32 parameters that are one field of VehicleParams each
 _FIELDS = {"COM_DISARM_PRFLT": "preflight_disarm_s", "GF_MAX_HOR_DIST": "max_hor_m", "GF_MAX_VER_DIST": "max_ver_m",
            "MIS_TAKEOFF_ALT": "takeoff_alt_m", "BAT_LOW_THR": "battery_low", "BAT_CRIT_THR": "battery_critical",
@@ -167,6 +186,8 @@ def read_param(p: VehicleParams, name: str) -> float:
         return float(getattr(p, _FIELDS[name]))
     if name in _RTL_FIELDS:
         return float(getattr(p.rtl, _RTL_FIELDS[name]))
+    if name in _LAND_FIELDS:
+        return float(getattr(p.failsafe.slowdown, _LAND_FIELDS[name]))
     return float(p.sysid)
 
 
@@ -243,7 +264,11 @@ def change_param(p: VehicleParams, name: str, value: float, running: bool = True
     if name in _INT_FIELDS:
         return replace(p, **{_INT_FIELDS[name]: int(value)})
     if name in _RTL_FIELDS:
-        return replace(p, rtl=replace(p.rtl, **{_RTL_FIELDS[name]: float(value)}))
+        typed = int(value) if spec.kind == INT32 else float(value)
+        return replace(p, rtl=replace(p.rtl, **{_RTL_FIELDS[name]: typed}))
+    if name in _LAND_FIELDS:
+        slowdown = replace(p.failsafe.slowdown, **{_LAND_FIELDS[name]: float(value)})
+        return replace(p, failsafe=replace(p.failsafe, slowdown=slowdown))
     return replace(p, sysid=int(value))
 
 

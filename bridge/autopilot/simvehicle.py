@@ -37,13 +37,13 @@ from bridge.autopilot.estimator import Estimator, TruthEstimator, estimator_nees
 from bridge.autopilot.failsafe import (
     ACTION_TEXT,
     FailsafeConfig,
-    Land,
     OnboardController,
     PositionHold,
     ReturnConfig,
     Takeoff,
     Target,
     failsafe_target,
+    landing_target,
 )
 from bridge.autopilot.fencewatch import FENCE_ACTION_TEXT, FENCE_FAILSAFE, arming_refusal, breaches
 from bridge.autopilot.modes import (  # noqa: F401  (the modes: imported from here by the rest of the bridge)
@@ -219,7 +219,7 @@ class SimVehicle:
     def _engage(self, mode: str, alt: float, hold_at: PositionHold | None = None) -> None:
         target, text = mode_target(mode, self.published(), takeoff_z=self._start_z + alt, alt=alt, home=self.home,
                                    descent_rate=self.failsafe.descent_rate, rally=self.rally, rtl=self.rtl,
-                                   hold_at=hold_at)
+                                   hold_at=hold_at, slowdown=self.failsafe.slowdown)
         self.fly_onboard(target, mode)
         self.event("mode", text, mode=mode, armed=True)
 
@@ -236,7 +236,7 @@ class SimVehicle:
             self.fly_onboard(PositionHold.here(X), HOLD)
             self.event("end", f"mission over: HOLD at x={X[0]:.3f} y={X[2]:.3f} z={X[4]:.3f} m")
             return
-        self.fly_onboard(Land.here(X, self.failsafe.descent_rate), LAND)
+        self.fly_onboard(landing_target(self.failsafe, X, self.home), LAND)
         self.event("end", f"mission over: LAND at x={X[0]:.3f} y={X[2]:.3f} m from z={X[4]:.3f} m, "
                           f"{self.failsafe.descent_rate:g} m/s")
 
@@ -362,7 +362,7 @@ class SimVehicle:
         """``hold``: its time is up; land where it held."""
         self.land_at = None
         X = self.published()
-        self.fly_onboard(Land.here(X, self.failsafe.descent_rate), self.mode)
+        self.fly_onboard(landing_target(self.failsafe, X, self.home), self.mode)
         self.event("landing", f"held {self.failsafe.hold_s:.3f} s: landing at x={X[0]:.3f} y={X[2]:.3f} m")
 
     def schedule(self, e: TimedEvent, by: Sender) -> None:

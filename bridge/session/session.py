@@ -315,7 +315,7 @@ class Session:
         if fs.action == "return":
             x0, y0, z0 = self.flight.mission.flight_start[:3]
             away = max((math.hypot(r.x - x0, r.y - y0) for r in rows), default=0.0)
-            flying = 2.0 * return_time_s(self.flight.params.rtl, away, z - z0, fs.descent_rate)
+            flying = 2.0 * return_time_s(self.flight.params.rtl, away, z - z0, fs.descent_rate, slowdown=fs.slowdown)
         else:
             flying = fs.time_to_land_s(z)
         return 5.0 + (1.0 + fs.timeout_s + flying) / pace
