@@ -197,6 +197,20 @@ def test_cells_at_two_rates_fly_as_two_batches_in_order() -> None:
 
 
 
+def test_a_failsafe_descent_that_touches_down_hard_crashes_in_both_engines() -> None:
+    """The sine's link blacked out from 5 s on: the failsafe's descent at 4 m/s touches down at over 2 m/s, a crash
+    (docs/weather.md, "Outcomes"). Both engines end every cell ``crashed`` at the same step, whether the touchdown
+    fell on a period's last physics step or earlier, where the landing disarms on the ground before the period ends
+    (the batch then once flew on to the mission's end, ``failsafe``, as the process engine ended it ``impact``)."""
+    m = replace(_mission(), failsafe={"descent_rate": 4.0})
+    over = [{"controller": "bsst", "seed": 0, "link": {"blackouts": [[start, 3.0]]}} for start in (5.0, 5.05, 5.15)]
+    rows = fly_batch(m, over)
+    for o, got in zip(over, rows, strict=True):
+        run = fly(prepare(m, **o), plots=False)
+        assert (got["outcome"], run.summary["outcome"]) == ("crashed", "crashed"), o
+        assert got["flown_s"] == run.summary["duration_s"] < 7.0, (o, got)
+
+
 def test_delivery_checks_are_searchsorted_exactly() -> None:
     # the planner finds the physics step a packet arrives in arithmetically; it must be np.searchsorted's
     clocks = Clocks(250.0, 1000.0, 4, 7500)

@@ -36,7 +36,7 @@ from bridge.nodes.vehicle import Vehicle, VehicleConfig
 from bridge.nodes.vehicle.reposition import UNSET_INT
 from bridge.session import instance_slot
 from missions import MISSION_DIR, Mission, Sine
-from tests.sitlkit import ENV, GcsSocket, MavProxy, Proc
+from tests.sitlkit import ENV, GcsSocket, MavProxy, Proc, shown
 from tests.test_vehicle import _ack, _gcs, _vehicle
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -190,6 +190,14 @@ elif sys.argv[2] == "goto":  # take off to 3 m, then goto_location 4 m north, 3 
         out.update(modes=list(modes), at=seen["ned"], heading=seen["heading"])
     out["land"] = act.land().name
     until("disarmed_seen", lambda: seen["armed"] is False, 30)
+elif sys.argv[2] == "hard_land":  # take off to 8 m, then LAND (at the vehicle's MPC_LAND_SPEED)
+    out["hold"] = act.hold().name
+    out["arm"] = act.arm().name
+    out["set_takeoff_altitude"] = act.set_takeoff_altitude(8.0).name
+    out["takeoff"] = act.takeoff().name
+    until("at_height", lambda: modes[-2:] == ["TAKEOFF", "HOLD"] and seen["rel"] > 7.9, 20)
+    out["land"] = act.land().name
+    until("disarmed_seen", lambda: seen["armed"] is False, 20)
 elif sys.argv[2] == "flight":  # MAVSDK's own takeoff_and_land example: arm, wait, take off, land
     tel.set_rate_landed_state(10.0)  # MAVSDK asks for 1 Hz of EXTENDED_SYS_STATE: a takeoff at --speed 4 is shorter
     until("hold_seen", lambda: modes and modes[-1] == "HOLD", 10)  # the boot mode, as PX4's
@@ -306,6 +314,28 @@ def test_mavsdk_arm_takeoff_land(tmp_path):
     v.wait_event(lambda s: "disarmed: landed" in s)
     unanswered, _, _ = _answers(tmp_path / "vehicle.tlog", n + 1)
     assert not unanswered, f"commands MAVSDK sent that got no COMMAND_ACK: {unanswered}"
+
+
+def test_a_ground_stations_land_that_touches_down_hard_is_a_crash(tmp_path):
+    """MAVSDK's ``Action.land`` from 8 m with MPC_LAND_SPEED = 4 m/s: the on-board landing touches down at ~4.4 m/s,
+    over CRASH_SPEED_MPS (2 m/s), armed, so the vehicle ends it ``crashed`` (its plant's verdict: the clock halted),
+    though its landing disarmed it on the ground first (the ``disarmed`` event comes before the ``crashed`` one);
+    it was once logged as a disarmed vehicle's ``impact``, and the flight went on."""
+    with instance_slot() as n:
+        v = _vehicle(n, tmp_path, "--speed", "4", "--param", "MPC_LAND_SPEED=4")
+        try:
+            out = _mavsdk(n, "hard_land")
+            crash = v.wait_event(lambda s: s.startswith("crashed: hit the ground at "))
+        finally:
+            assert v.stop() == 0
+    assert out["found"] and [out[k] for k in ("hold", "arm", "set_takeoff_altitude", "takeoff", "land")] == \
+        ["SUCCESS"] * 5, out
+    assert out["at_height"] and out["disarmed_seen"], out
+    speed = float(crash.text.split(" at ")[1].split(" m/s")[0])
+    assert 4.0 < speed < 5.0, crash.text
+    said = v.events()
+    landed = said.index("disarmed: landed: disarmed [by vehicle]")
+    assert landed < said.index(shown(crash)) and not any(s.startswith("impact:") for s in said), said
 
 
 def test_a_sessions_vehicle_armed_by_a_ground_station_before_its_controller_holds_and_says_it_left_lockstep():
