@@ -453,8 +453,8 @@ def test_do_reposition_disarmed_takes_hold_on_the_ground_is_denied_and_other_fla
 
             assert reposition(0.0) == M.MAV_RESULT_UNSUPPORTED
             said("param2 (flags) must be 1")
-            # LAND selected first (the vehicle boots in HOLD, as PX4): the reposition selects HOLD again
-            gcs.mav.command_long_send(n + 1, 1, M.MAV_CMD_DO_SET_MODE, 0, 29, 4, 6, 0, 0, 0, 0)
+            # TAKEOFF selected first (the vehicle boots in HOLD, as PX4): the reposition selects HOLD again
+            gcs.mav.command_long_send(n + 1, 1, M.MAV_CMD_DO_SET_MODE, 0, 29, 4, 2, 0, 0, 0, 0)
             assert _ack(gcs, M.MAV_CMD_DO_SET_MODE).result == M.MAV_RESULT_ACCEPTED
             assert reposition(1.0) == M.MAV_RESULT_ACCEPTED
             v.wait_event(lambda s: "mode: HOLD (disarmed: armed in it next) [by 255:190" in s)
@@ -468,6 +468,59 @@ def test_do_reposition_disarmed_takes_hold_on_the_ground_is_denied_and_other_fla
             gcs.close()
             assert v.stop() == 0
     assert not any("repositioned" in s for s in v.events())
+
+
+def test_land_and_rtl_are_not_armed_in_selected_disarmed_nor_after_their_landing(tmp_path):
+    """PX4 does not arm in AUTO.LAND or AUTO.RTL (mode_requirements.cpp: prevent arming). Disarmed, LAND (DO_SET_MODE,
+    NAV_LAND) and RTL are DENIED with a STATUSTEXT saying so, and the next arm is HOLD's, the mode it boots in; once a
+    LAND has landed and disarmed it (still showing LAND), a ground station's arm is DENIED, saying to select HOLD or
+    TAKEOFF first (it was once ACCEPTED: armed in LAND on the ground, and at once disarmed); after HOLD it arms."""
+    with instance_slot() as n:
+        gcs = _gcs(n)
+        v = _vehicle(n, tmp_path, *FAST)
+        try:
+            assert gcs.wait_heartbeat(timeout=20) is not None
+
+            def command(cmd: int, *p: float) -> int:
+                gcs.mav.command_long_send(n + 1, 1, cmd, 0, *p)
+                return _ack(gcs, cmd).result
+
+            def said(words: str) -> None:
+                m = gcs.recv_match(type="STATUSTEXT", blocking=True, timeout=10,
+                                   condition=f"{words!r} in STATUSTEXT.text")
+                assert m is not None, f"no STATUSTEXT saying {words!r}"
+
+            nan, arm = math.nan, M.MAV_CMD_COMPONENT_ARM_DISARM
+            assert command(M.MAV_CMD_DO_SET_MODE, 29, 4, 6, 0, 0, 0, 0) == M.MAV_RESULT_DENIED
+            said("mode LAND: only armed (PX4 does not arm in Land")
+            assert command(M.MAV_CMD_NAV_LAND, 0, 0, 0, nan, nan, nan, 0) == M.MAV_RESULT_DENIED
+            said("mode LAND: only armed")
+            assert command(M.MAV_CMD_DO_SET_MODE, 29, 4, 5, 0, 0, 0, 0) == M.MAV_RESULT_DENIED
+            said("mode RTL: only armed (PX4 does not arm in Return")
+            assert command(arm, 1, 0, 0, 0, 0, 0, 0) == M.MAV_RESULT_ACCEPTED
+            v.wait_event(lambda s: s.startswith("armed: armed, HOLD [by 255:190"))
+            assert command(M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, nan, nan, nan, nan) == M.MAV_RESULT_ACCEPTED
+            v.wait_event(lambda s: s.startswith("mode: HOLD: takeoff done"))
+            assert command(M.MAV_CMD_NAV_LAND, 0, 0, 0, nan, nan, nan, 0) == M.MAV_RESULT_ACCEPTED
+            v.wait_event(lambda s: s == "disarmed: landed: disarmed [by vehicle]")
+            hb = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=5,  # (those queued before it say armed)
+                                condition=f"not HEARTBEAT.base_mode & {M.MAV_MODE_FLAG_SAFETY_ARMED}")
+            assert hb is not None and mavutil.mode_string_v10(hb) == "LAND"
+            assert command(arm, 1, 0, 0, 0, 0, 0, 0) == M.MAV_RESULT_DENIED
+            said("arming denied: mode LAND: PX4 does not arm in Land")
+            v.wait_report(Refused, lambda r: r.text == "arming denied: mode LAND: PX4 does not arm in Land mode "
+                                                       "(select HOLD or TAKEOFF first)")
+            assert command(M.MAV_CMD_DO_SET_MODE, 29, 4, 3, 0, 0, 0, 0) == M.MAV_RESULT_ACCEPTED
+            assert command(arm, 1, 0, 0, 0, 0, 0, 0) == M.MAV_RESULT_ACCEPTED
+            hb = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=5,
+                                condition=f"HEARTBEAT.base_mode & {M.MAV_MODE_FLAG_SAFETY_ARMED}")
+            assert hb is not None and mavutil.mode_string_v10(hb) == "LOITER"
+        finally:
+            gcs.close()
+            assert v.stop() == 0
+    armed = [s for s in v.events() if s.startswith("armed: ")]
+    assert [s.split(" [by")[0] for s in armed] == ["armed: armed, HOLD"] * 2, armed  # never armed in LAND
+    assert sum(s.startswith("disarmed: ") for s in v.events()) == 1
 
 
 # -- MAVProxy --------------------------------------------------------------------------------------

@@ -44,6 +44,9 @@ from bridge.nodes.vehicle.streams import HEARTBEAT_S, StatusTexts, StreamTable
 from bridge.record.metrics import plant_blocks
 
 OFFBOARD_STREAM_S = 1.0  # s of wall time: a ground station's OFFBOARD needs a target from the controller this recent
+# the modes PX4's mode_requirements.cpp marks prevent-arming that the vehicle flies, by PX4's name: selected only
+# armed (disarmed, DENIED as PX4 denies the arm in them), and a ground station's arm in one is DENIED
+NOT_ARMABLE = {LAND: "Land", RTL: "Return"}
 _STREAM_COMMANDS = (mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAV_CMD_GET_MESSAGE_INTERVAL,
                     mavlink.MAV_CMD_REQUEST_MESSAGE)
 Result = tuple[int, tuple[Any, ...]]  # (MAV_RESULT, the messages a command asked for)
@@ -325,8 +328,8 @@ class Commander:
             refused = "mode MISSION: not flown here" if missions is None else missions.select(self.sim.armed)
             return self._refuse(refused) if refused else mavlink.MAV_RESULT_ACCEPTED
         sim = self.sim
-        if mode == RTL and not sim.armed:
-            return self._refuse("mode RTL: only armed (PX4 does not arm in Return mode)")
+        if mode in NOT_ARMABLE and not sim.armed:
+            return self._refuse(f"mode {mode_name(mode)}: only armed (PX4 does not arm in {NOT_ARMABLE[mode]} mode)")
         if self.ports.missions is not None and (not sim.armed or self.pre_start.starting()):
             # AUTO.MISSION no longer selected, or the mission starting
             refused = self.ports.missions.select_other(mode_name(mode))
@@ -408,6 +411,9 @@ class Commander:
                 return mavlink.MAV_RESULT_DENIED
             was_offboard = sim.armed and sim.mode == OFFBOARD
             from_gcs = by is not None and by.link == "gcs"
+            if from_gcs and not sim.armed and sim.mode in NOT_ARMABLE:  # where its LAND or RTL landed and disarmed it
+                return self._refuse(f"arming denied: mode {mode_name(sim.mode)}: PX4 does not arm in "
+                                    f"{NOT_ARMABLE[sim.mode]} mode (select HOLD or TAKEOFF first)")
             n0 = len(sim.events)
             if from_gcs:
                 sim.arm_in_mode()  # in the mode it selected (HOLD, LAND, TAKEOFF), else offboard
