@@ -207,31 +207,41 @@ def _judged(flight: Flight, vehicle: SimVehicle, arrays: dict[str, Any], outcome
         vehicle.event("policy", violation_text(v))
         shown.append({"t": round(vehicle.t, 6), "kind": "policy", "text": violation_text(v)})
     if outcome == "completed":  # after the mission's figures: nothing of them changes
-        summary["end"] = fly_end(flight, vehicle, summary["events"])
+        summary["end"], verdict = fly_end(flight, vehicle, summary["events"])
+        if verdict is not None:  # its landing touched down hard (or the plant diverged): the plant ended the flight
+            summary["outcome"] = verdict
+            summary["ended_by"] = ended_by_outcome(verdict, [RunEvent(round(e.t, 6), e.kind, e.text, by=e.by)
+                                                             for e in vehicle.events])
+            summary.update({k: v for k, v in plant_blocks(plant).items() if k == "impact"})
     return summary
 
 
-def fly_end(flight: Flight, vehicle: SimVehicle, shown: list[dict[str, Any]]) -> dict[str, Any]:
+def fly_end(flight: Flight, vehicle: SimVehicle, shown: list[dict[str, Any]]) -> tuple[dict[str, Any], str | None]:
     """The mission's end action offline (``[end] action``, :meth:`SimVehicle.end_mission`), as the vehicle flies
     it in a session: ``land`` steps the vehicle's own landing (nothing from the controller; the mission's link
     is done with, its statistics the mission's) until it disarms on the ground, bounded by the descent at the
-    failsafe's rate plus 10 s; ``hold`` is engaged and the flight ends with the mission (no session to hold
-    through). Its events are added to ``shown``; returns ``summary.json["end"]``
-    (:func:`bridge.record.ending.end_block`)."""
+    failsafe's rate plus 10 s, the plant's verdict judged after each period as a session's vehicle judges it
+    (a touchdown faster than CRASH_SPEED_MPS is ``crashed``); ``hold`` is engaged and the flight ends with the
+    mission (no session to hold through). Its events are added to ``shown``; returns ``summary.json["end"]``
+    (:func:`bridge.record.ending.end_block`) and the plant's verdict (None: none)."""
     m, plant = flight.mission, vehicle.plant
     n0 = len(vehicle.events)
     vehicle.end_mission(m.end_action)
     rows: list[tuple[float, float, float]] = []
     k, rate = m.steps, m.rate_hz
     bound = k + math.ceil((10.0 + flight.failsafe.time_to_land_s(plant.state[4] - m.start[2])) * rate)
-    while vehicle.armed and vehicle.mode == LAND and k < bound and not plant.diverged():
+    verdict = None
+    while verdict is None and vehicle.armed and vehicle.mode == LAND and k < bound:
         X = plant.state
         vehicle.advance()  # the vehicle alone: what the up link still holds stays in flight (its statistics too)
+        verdict = vehicle.plant_verdict()
         rows.append((k / rate, X[4], X[5]))
         k += 1
+    if verdict is not None:
+        vehicle.disarm(f"{verdict}: {vehicle.events[-1].text}")  # (as a session's vehicle: its landing's came first)
     ended = vehicle.events[n0:]
     shown.extend(RunEvent(round(e.t, 6), e.kind, e.text, by=e.by, **typed_fields(e)).as_dict() for e in ended)
-    return end_block(m.end_action, rows, ended)
+    return end_block(m.end_action, rows, ended), verdict
 
 
 def stopped(vehicle: SimVehicle, exc: BaseException, k: int, rate: float) -> str:

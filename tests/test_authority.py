@@ -698,7 +698,7 @@ def test_any_message_from_anyone_changes_nothing_unless_valid_and_authorised(ben
 NOOP_MISSION = 'name = "noop-modes"\nduration_s = 4.0\n[trajectory]\nkind = "sine"\n'
 SET_MODE = M.MAV_CMD_DO_SET_MODE
 OFFBOARD_MODE = (29.0, 6.0, 0.0)  # DO_SET_MODE param1..3: custom mode enabled, PX4 main mode OFFBOARD
-LAND_MODE = (29.0, 4.0, 6.0)  # AUTO.LAND
+TAKEOFF_MODE = (29.0, 4.0, 2.0)  # AUTO.TAKEOFF (LAND and RTL: not selected disarmed)
 
 
 def _set_mode(gcs: Station, to: tuple[int, int], mode: tuple[float, float, float]) -> int:
@@ -742,13 +742,13 @@ def noop_ref(tmp_path_factory) -> tuple[Path, dict[str, Any], bytes]:
     return mission, ref, (d / "ref" / "trace.csv").read_bytes()
 
 
-@pytest.mark.parametrize(("when", "mode"), [("armed", OFFBOARD_MODE), ("disarmed", LAND_MODE),
+@pytest.mark.parametrize(("when", "mode"), [("armed", OFFBOARD_MODE), ("disarmed", TAKEOFF_MODE),
                                             ("disarmed", OFFBOARD_MODE)], ids=["offboard-in-offboard",
-                                                                               "land-before-arming",
+                                                                               "takeoff-before-arming",
                                                                                "offboard-before-arming"])
 def test_a_mode_request_that_changes_nothing_is_no_takeover(noop_ref, tmp_path, when, mode):
     """Issue 22, defect 2, with real processes: a ground station's DO_SET_MODE OFFBOARD while the vehicle
-    flies in OFFBOARD, or a mode selected while it is disarmed (LAND; OFFBOARD, the vehicle booting in HOLD),
+    flies in OFFBOARD, or a mode selected while it is disarmed (TAKEOFF; OFFBOARD, the vehicle booting in HOLD),
     before its controller arms it (which arms it in OFFBOARD), changes nothing: the trace is byte for byte the
     undisturbed run's, and the run says so (completed, ended by the mission, exit 0). Only an armed exit from
     OFFBOARD ends a flight."""
@@ -760,7 +760,7 @@ def test_a_mode_request_that_changes_nothing_is_no_takeover(noop_ref, tmp_path, 
             break
         print(f"attempt {attempt}: the controller armed before the selection (a real takeover): again")
     else:  # a loaded machine: the controller won the race each time, and the selection came in flight
-        if mode == LAND_MODE:  # then LAND took the vehicle from its controller: a takeover, named, exit 1
+        if mode == TAKEOFF_MODE:  # then TAKEOFF took the vehicle from its controller: a takeover, named, exit 1
             [change] = [c for c in run["interventions"] if c["kind"] == "mode"]
             assert change["by"].startswith("255:190 127.0.0.1:") and change["by"].endswith(" gcs"), change
             assert rc == 1 and run["ended_by"]["who"].startswith("255:190"), (rc, run["ended_by"])

@@ -178,6 +178,12 @@ def test_batch_problem_names_what_the_batch_cannot_fly(tmp_path: Path) -> None:
     assert why is not None and "link event" in why and "\n" not in why
     assert batch_problem(replace(m, effects={"battery": True}), [{"controller": "bsst", "profile": "x500"}]) is None
     assert batch_problem(m, [{"controller": "bsst"}, {"controller": "bsst", "wind": 3.0}]) is None  # still and windy
+    # an end landing that may touch down hard (CRASH_SPEED_MPS 2 m/s): the scalar loop judges it, the batch cannot
+    why = batch_problem(replace(m, failsafe={"descent_rate": 1.7}), [{"controller": "bsst"}])
+    assert why is not None and "end" in why and "process engine" in why and "\n" not in why
+    assert batch_problem(replace(m, failsafe={"descent_rate": 1.5}), [{"controller": "bsst"}]) is None
+    holds = replace(m, failsafe={"descent_rate": 1.7}, end_action="hold")
+    assert batch_problem(holds, [{"controller": "bsst"}]) is None
     law = f"{ROOT / 'examples' / 'my_law.py'}:MyLaw"
     why = batch_problem(m, [{"controller": law}])
     assert why is not None and "process engine" in why
@@ -195,6 +201,20 @@ def test_cells_at_two_rates_fly_as_two_batches_in_order() -> None:
         assert math.isclose(got["rms"], run.summary["rms_3d"], rel_tol=1e-6)
         assert got["flown_s"] == run.summary["duration_s"]
 
+
+
+def test_a_failsafe_descent_that_touches_down_hard_crashes_in_both_engines() -> None:
+    """The sine's link blacked out from 5 s on: the failsafe's descent at 4 m/s touches down at over 2 m/s, a crash
+    (docs/weather.md, "Outcomes"). Both engines end every cell ``crashed`` at the same step, whether the touchdown
+    fell on a period's last physics step or earlier, where the landing disarms on the ground before the period ends
+    (the batch then once flew on to the mission's end, ``failsafe``, as the process engine ended it ``impact``)."""
+    m = replace(_mission(), failsafe={"descent_rate": 4.0}, end_action="hold")  # (landing at 4 m/s: not batched)
+    over = [{"controller": "bsst", "seed": 0, "link": {"blackouts": [[start, 3.0]]}} for start in (5.0, 5.05, 5.15)]
+    rows = fly_batch(m, over)
+    for o, got in zip(over, rows, strict=True):
+        run = fly(prepare(m, **o), plots=False)
+        assert (got["outcome"], run.summary["outcome"]) == ("crashed", "crashed"), o
+        assert got["flown_s"] == run.summary["duration_s"] < 7.0, (o, got)
 
 
 def test_delivery_checks_are_searchsorted_exactly() -> None:

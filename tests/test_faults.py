@@ -15,6 +15,7 @@ from missions import load_mission
 from params import ConfigError
 from plant import Quadrotor, load_profile
 from plant.events import event_table_from_flag
+from tests.plans import battery_mission
 from tests.sitlkit import run_bsst
 
 pytestmark = pytest.mark.process  # runs bsst as a real process: not in make test-fast
@@ -104,6 +105,36 @@ def test_a_hard_touchdown_is_an_impact() -> None:
     for _ in range(200):
         soft.step()
     assert soft.impact is None
+
+
+@pytest.mark.parametrize("blackout_s", [12.0, 12.1, 12.2, 12.3])
+def test_a_failsafe_landing_that_touches_down_hard_is_a_crash_wherever_in_its_period(blackout_s: float) -> None:
+    """The step mission's link blacked out at ``blackout_s``: the failsafe lands from ~2 m at MPC_LAND_SPEED = 4 m/s and
+    touches down at over 4 m/s (CRASH_SPEED_MPS: 2). Armed as it touched down, that is ``crashed`` (exit 1, ended by
+    the plant), whether the touchdown fell on the last physics step of a control period (the vehicle still armed
+    after it) or earlier, where the landing disarms it on the ground before the period ends: the ``disarmed`` event
+    then comes first, and the verdict is the same (it was once an ``impact``, disarmed, and the run ``failsafe``)."""
+    run = simulate("missions/step.toml", plots=False, link={"blackouts": [[blackout_s, 10.0]]},
+                   failsafe={"action": "land"}, params={"MPC_LAND_SPEED": 4.0})
+    s = run.summary
+    assert s["outcome"] == "crashed" and s["ended_by"]["who"] == "plant", s["ended_by"]
+    assert s["impact"]["speed_mps"] > 4.0
+    kinds = [e["kind"] for e in s["events"]]
+    assert kinds[-1] == "crashed" and "impact" not in kinds, s["events"]
+    assert kinds.count("disarmed") <= 1  # the landing's own disarm on the ground, when it came first
+
+
+def test_a_battery_landing_that_touches_down_hard_is_a_crash(tmp_path) -> None:
+    """COM_LOW_BAT_ACT 2: the x500 from 8 % of its pack lands at its critical level (7.8 s). At MPC_LAND_SPEED 3 m/s
+    its sagging pack brings it down at 3.5 m/s: ``crashed``, as a hard touchdown under any landing; at 1.5 m/s it
+    lands softly and the run ends ``failsafe``, disarmed on the ground."""
+    outcomes = {}
+    for speed in (1.5, 3.0):
+        s = simulate(battery_mission(tmp_path, 8.0), plots=False,
+                     params={"COM_LOW_BAT_ACT": 2, "MPC_LAND_SPEED": speed}).summary
+        assert any(e["kind"] == "disarmed" and e["text"] == "landed: disarmed" for e in s["events"])
+        outcomes[speed] = (s["outcome"], s.get("impact") is not None)
+    assert outcomes == {1.5: ("failsafe", False), 3.0: ("crashed", True)}
 
 
 def test_gps_outage_drifts_and_is_reported() -> None:

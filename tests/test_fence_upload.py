@@ -16,7 +16,7 @@ import pytest
 from pymavlink.dialects.v20 import common as M
 
 from bridge import simulate
-from bridge.autopilot.fencewatch import limits_passed
+from bridge.autopilot.fencewatch import limits_passed, reposition_refusal
 from bridge.autopilot.simvehicle import FAILSAFE
 from bridge.core.flight import prepare
 from bridge.mavlink.fenceitems import FENCE, RALLY, fence_plan, parse_zone_item, rally_plan
@@ -27,6 +27,7 @@ from bridge.record.events import RunEvent
 from bridge.record.policies import Rules, geofence_kept
 from missions import MISSION_DIR
 from missions.geodetic import Home
+from missions.geofence import Geofence, Zone
 
 HOME = Home()  # the vehicle's default home (PX4 SITL's)
 POLY_IN, POLY_OUT = M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION, M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION
@@ -148,6 +149,23 @@ def test_gf_max_limits_are_px4s_distances_from_home() -> None:
     assert "5.00 m from home, beyond GF_MAX_HOR_DIST = 4.9 m" in limits_passed(X, home, 4.9, 0.0)[0][1]
 
 
+def test_a_reposition_is_judged_as_px4s_navigator_judges_it() -> None:
+    """``Navigator::geofence_allows_position``: with GF_ACTION 2-5 a DO_REPOSITION's point outside the fence, or
+    beyond GF_MAX_HOR_DIST / GF_MAX_VER_DIST from home, is not flown (why, each reason said); inside, or with
+    GF_ACTION 0 (none) or 1 (warning), any point is (None)."""
+    home = (0.0, 0.0, 0.0)
+    fence = Geofence((Zone(True, points=((-10.0, -10.0), (-10.0, 10.0), (10.0, 10.0), (10.0, -10.0))),
+                      Zone(False, center=(5.0, 5.0), radius_m=2.0)))
+    assert reposition_refusal((4.0, -3.0, 3.0), 0.0, home, 20.0, 5.0, fence, 2) is None
+    why = reposition_refusal((30.0, 0.0, 3.0), 0.0, home, 0.0, 0.0, fence, 2)
+    assert why == "outside its fence: at x=30.000 y=0.000 m, outside every inclusion zone of the geofence"
+    assert "inside exclusion circle 1" in str(reposition_refusal((5.0, 5.0, 3.0), 0.0, home, 0.0, 0.0, fence, 5))
+    why = reposition_refusal((8.0, 0.0, 6.0), 0.0, home, 7.0, 5.0, None, 3)
+    assert why == ("8.00 m from home, beyond GF_MAX_HOR_DIST = 7 m; 6.00 m above home, beyond GF_MAX_VER_DIST = 5 m")
+    for action in (0, 1):
+        assert reposition_refusal((30.0, 0.0, 60.0), 0.0, home, 7.0, 5.0, fence, action) is None
+
+
 def test_a_vehicle_beyond_gf_max_hor_dist_is_not_armed_again_until_gf_action_is_0() -> None:
     """PX4's pre-arm geofence check on the limits too: landed (disarmed) 6 m from home with GF_MAX_HOR_DIST = 5 m,
     an arm is denied (a ``preflight`` event saying why, :attr:`arming_refused` kept), for a ground station's arm in
@@ -224,7 +242,7 @@ def test_a_ground_station_downloads_the_missions_own_fence_and_rally_points_befo
     circle's radius), which read back as the same zones and points to degE7's resolution (1e-7 deg: 6 mm at most
     off by rounding)."""
     from missions.envelope import ENVELOPE_RADIUS_M
-    from missions.geofence import Geofence, Zone, geofence_from_plan
+    from missions.geofence import geofence_from_plan
     from missions.rally import rally_from_plan
 
     sim = prepare(MISSION_DIR / "sine.toml").make_vehicle()

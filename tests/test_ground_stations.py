@@ -36,8 +36,10 @@ from bridge.nodes.vehicle import Vehicle, VehicleConfig
 from bridge.nodes.vehicle.reposition import UNSET_INT
 from bridge.session import instance_slot
 from missions import MISSION_DIR, Mission, Sine
-from tests.sitlkit import ENV, GcsSocket, MavProxy, Proc
+from missions.geodetic import Home
+from tests.sitlkit import ENV, GcsSocket, MavProxy, Proc, shown
 from tests.test_vehicle import _ack, _gcs, _vehicle
+from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -122,9 +124,11 @@ else:  # the flight parts: what MAVSDK's telemetry shows, each callback under on
         with cond:
             seen["heading"] = h.heading_deg
             cond.notify_all()
+    neds = []  # every position, in order
     def on_ned(pv, ud=None):
         with cond:
             seen["ned"] = (pv.position.north_m, pv.position.east_m, -pv.position.down_m)
+            neds.append(seen["ned"])
             if modes and modes[-1] == "RETURN_TO_LAUNCH":
                 seen["rtl_top"] = max(seen["rtl_top"], -pv.position.down_m)
             cond.notify_all()
@@ -190,6 +194,43 @@ elif sys.argv[2] == "goto":  # take off to 3 m, then goto_location 4 m north, 3 
         out.update(modes=list(modes), at=seen["ned"], heading=seen["heading"])
     out["land"] = act.land().name
     until("disarmed_seen", lambda: seen["armed"] is False, 30)
+elif sys.argv[2] == "goto_fence":  # a fence 10 m about home; goto 4 m north (inside), then 30 m north (outside)
+    from math import cos, dist, pi
+    from mavsdk.plugins.geofence import FenceType, Geofence, GeofenceData, Point, Polygon
+    texts = []
+    tel.subscribe_status_text(lambda s, ud=None: texts.append([s.type.name, s.text]))
+    until("geo_seen", lambda: "geo" in seen, 10)
+    lat0, lon0, amsl0, _ = seen["geo"]  # on the ground at home
+    R = 6371000.0  # the vehicle's projection's sphere (PX4's)
+    at = lambda n, e: Point(lat0 + n / R * 180.0 / pi, lon0 + e / (R * cos(lat0 * pi / 180.0)) * 180.0 / pi)
+    square = [at(-10.0, -10.0), at(-10.0, 10.0), at(10.0, 10.0), at(10.0, -10.0)]
+    out["fence"] = Geofence(system).upload_geofence(GeofenceData([Polygon(square, FenceType.INCLUSION)], [])).name
+    out["hold"] = act.hold().name
+    out["arm"] = act.arm().name
+    out["set_takeoff_altitude"] = act.set_takeoff_altitude(3.0).name
+    out["takeoff"] = act.takeoff().name
+    until("at_height", lambda: modes[-2:] == ["TAKEOFF", "HOLD"] and seen["rel"] > 2.9, 15)
+    p = at(4.0, 0.0)
+    out["goto_inside"] = act.goto_location(p.latitude_deg, p.longitude_deg, amsl0 + 3.0, 0.0).name
+    until("there", lambda: dist(seen["ned"], (4.0, 0.0, 3.0)) < 0.1, 30)
+    q = at(30.0, 0.0)
+    out["goto_outside"] = act.goto_location(q.latitude_deg, q.longitude_deg, amsl0 + 3.0, 0.0).name
+    until("said", lambda: any(t.startswith("Reposition is outside geofence") for _, t in texts), 10)
+    n0 = len(neds)
+    until("watched", lambda: len(neds) >= n0 + 50, 10)  # 2 s of wall time at 25 Hz: 8 s of the vehicle's
+    with cond:
+        out["farthest"] = max(dist(p, (4.0, 0.0, 3.0)) for p in neds[n0:])
+        out["modes"], out["texts"] = list(modes), list(texts)
+    out["land"] = act.land().name
+    until("disarmed_seen", lambda: seen["armed"] is False, 30)
+elif sys.argv[2] == "hard_land":  # take off to 8 m, then LAND (at the vehicle's MPC_LAND_SPEED)
+    out["hold"] = act.hold().name
+    out["arm"] = act.arm().name
+    out["set_takeoff_altitude"] = act.set_takeoff_altitude(8.0).name
+    out["takeoff"] = act.takeoff().name
+    until("at_height", lambda: modes[-2:] == ["TAKEOFF", "HOLD"] and seen["rel"] > 7.9, 20)
+    out["land"] = act.land().name
+    until("disarmed_seen", lambda: seen["armed"] is False, 20)
 elif sys.argv[2] == "flight":  # MAVSDK's own takeoff_and_land example: arm, wait, take off, land
     tel.set_rate_landed_state(10.0)  # MAVSDK asks for 1 Hz of EXTENDED_SYS_STATE: a takeoff at --speed 4 is shorter
     until("hold_seen", lambda: modes and modes[-1] == "HOLD", 10)  # the boot mode, as PX4's
@@ -308,6 +349,28 @@ def test_mavsdk_arm_takeoff_land(tmp_path):
     assert not unanswered, f"commands MAVSDK sent that got no COMMAND_ACK: {unanswered}"
 
 
+def test_a_ground_stations_land_that_touches_down_hard_is_a_crash(tmp_path):
+    """MAVSDK's ``Action.land`` from 8 m with MPC_LAND_SPEED = 4 m/s: the on-board landing touches down at ~4.4 m/s,
+    over CRASH_SPEED_MPS (2 m/s), armed, so the vehicle ends it ``crashed`` (its plant's verdict: the clock halted),
+    though its landing disarmed it on the ground first (the ``disarmed`` event comes before the ``crashed`` one);
+    it was once logged as a disarmed vehicle's ``impact``, and the flight went on."""
+    with instance_slot() as n:
+        v = _vehicle(n, tmp_path, "--speed", "4", "--param", "MPC_LAND_SPEED=4")
+        try:
+            out = _mavsdk(n, "hard_land")
+            crash = v.wait_event(lambda s: s.startswith("crashed: hit the ground at "))
+        finally:
+            assert v.stop() == 0
+    assert out["found"] and [out[k] for k in ("hold", "arm", "set_takeoff_altitude", "takeoff", "land")] == \
+        ["SUCCESS"] * 5, out
+    assert out["at_height"] and out["disarmed_seen"], out
+    speed = float(crash.text.split(" at ")[1].split(" m/s")[0])
+    assert 4.0 < speed < 5.0, crash.text
+    said = v.events()
+    landed = said.index("disarmed: landed: disarmed [by vehicle]")
+    assert landed < said.index(shown(crash)) and not any(s.startswith("impact:") for s in said), said
+
+
 def test_a_sessions_vehicle_armed_by_a_ground_station_before_its_controller_holds_and_says_it_left_lockstep():
     """The vehicle boots in HOLD, as PX4's: in a lockstep session (its controller's address pinned) a ground
     station's arm that comes before the controller's arms it in HOLD on the ground, off the step clock, which it
@@ -402,6 +465,89 @@ def test_mavsdk_goto_location_flies_hold_to_the_point_and_faces_its_heading(tmp_
     assert not unanswered, f"commands MAVSDK sent that got no COMMAND_ACK: {unanswered}"
 
 
+def test_mavsdk_goto_location_outside_an_uploaded_fence_is_not_flown_the_vehicle_holds(tmp_path):
+    """PX4's navigator does not fly a reposition outside its geofence (``Navigator::geofence_allows_position``, with
+    GF_ACTION 2-5): MAVSDK's Geofence plugin uploads an inclusion square 10 m about home; after a takeoff to 3 m,
+    ``goto_location`` 4 m north (inside) is flown; 30 m north (outside) is ACCEPTED, as PX4's commander answers it
+    (it takes AUTO.LOITER; the navigator judges the point after), a CRITICAL STATUSTEXT "Reposition is outside
+    geofence" says why, and the vehicle holds where it was (it once flew on, out of the fence, into its failsafe)."""
+    out, v, n = _mavsdk_on_a_vehicle(tmp_path, "goto_fence")
+    keys = ("fence", "hold", "arm", "set_takeoff_altitude", "takeoff", "goto_inside", "goto_outside", "land")
+    assert [out[k] for k in keys] == ["SUCCESS"] * len(keys), out
+    assert all(out[k] for k in ("at_height", "there", "said", "watched", "disarmed_seen")), out
+    # 8 s of the vehicle's after it: still about the inside point (still settling there, within centimetres), where
+    # flown toward 30 m north at 2 m/s it would have gone 16 m
+    assert out["farthest"] < 0.3 and out["modes"][-1] == "HOLD", out
+    said = [t for t in out["texts"] if t[1].startswith("Reposition is outside geofence")]
+    assert said and said[0][0] == "CRITICAL" and "to x=30.000 y=-0.000 z=3.000 m: outside its fence" in said[0][1]
+    v.wait_report(Refused, lambda r: r.text.startswith("Reposition is outside geofence: to x=30.000") and
+                  r.text.endswith("outside every inclusion zone of the geofence: not flown, holding"))
+    v.wait_event(lambda s: s == "disarmed: landed: disarmed [by vehicle]")
+    events = v.events()
+    assert sum("repositioned" in s for s in events) == 1, events  # the inside point only
+    assert not any(s.startswith(("geofence:", "failsafe:")) for s in events), events
+
+
+def test_a_reposition_in_a_failsafe_takes_over_as_px4s_mode_change_and_outside_the_geofence_holds(tmp_path):
+    """PX4's commander takes DO_REPOSITION as a mode change (AUTO.LOITER), and a mode change during a Hold, Return,
+    Land or Descend failsafe is the user's takeover (FailsafeBase::getSelectedAction); its navigator then flies the
+    point only inside the geofence. GF_MAX_VER_DIST 2 m and GF_ACTION 5 (land): a takeoff to 3 m passes the limit,
+    the vehicle lands. A reposition to 5 m above home then is ACCEPTED, says "Reposition is outside geofence"
+    (CRITICAL), and HOLD takes over where it is: the vehicle neither climbs back nor lands (it once climbed to 5 m).
+    With the limit lowered to 1.9 m it lands again; a reposition 1 m north at 1.5 m, inside, is taken over and
+    flown."""
+    with instance_slot() as n:
+        gcs = _gcs(n)
+        v = _vehicle(n, tmp_path, "--speed", "4", "--param", "MPC_LAND_SPEED=0.3", "--param", "GF_ACTION=5",
+                     "--param", "GF_MAX_VER_DIST=2", "--param", "MIS_TAKEOFF_ALT=3")
+        try:
+            assert gcs.wait_heartbeat(timeout=20) is not None
+            nan = math.nan
+
+            def command(cmd: int, *p: float) -> int:
+                gcs.mav.command_long_send(n + 1, 1, cmd, 0, *p)
+                return _ack(gcs, cmd).result
+
+            def reposition(north: float, up: float) -> int:
+                lat, lon, _ = Home().global_of(north, 0.0, 0.0)
+                gcs.mav.command_int_send(n + 1, 1, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_CMD_DO_REPOSITION, 0,
+                                         0, -1.0, 1.0, 0.0, nan, round(lat * 1e7), round(lon * 1e7), up)
+                return _ack(gcs, M.MAV_CMD_DO_REPOSITION).result
+
+            def heights(count: int) -> list[float]:  # the next ``count`` LOCAL_POSITION_NED heights (m up)
+                got = [gcs.recv_match(type="LOCAL_POSITION_NED", blocking=True, timeout=5) for _ in range(count)]
+                assert all(got)
+                return [-m.z for m in got]
+
+            assert command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1, 0, 0, 0, 0, 0, 0) == M.MAV_RESULT_ACCEPTED
+            assert command(M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, nan, nan, nan, nan) == M.MAV_RESULT_ACCEPTED
+            v.wait_event(lambda s: s.startswith("failsafe: geofence: 2.0") and s.endswith(": land here"))
+            assert reposition(0.0, 5.0) == M.MAV_RESULT_ACCEPTED
+            said = gcs.recv_match(type="STATUSTEXT", blocking=True, timeout=10,
+                                  condition="'Reposition is outside geofence' in STATUSTEXT.text")
+            assert said is not None and said.severity == M.MAV_SEVERITY_CRITICAL
+            v.wait_event(lambda s: s.startswith("mode: HOLD at ") and "[by 255:190" in s)
+            # ~2.4 s of wall time at 25 Hz, ~10 s of the vehicle's: (its takeoff's climb carried it to ~2.4 m) it
+            # holds there, where the landing would have come down 3 m and a climb to 5 m gone up 15 m
+            held = heights(60)
+            assert 1.6 < min(held) and max(held) < 2.6 and max(held[-10:]) - min(held[-10:]) < 0.05, held
+            gcs.mav.param_set_send(n + 1, 1, b"GF_MAX_VER_DIST", 1.9, M.MAV_PARAM_TYPE_REAL32)
+            v.wait_event(lambda s: s.startswith("failsafe: geofence: ") and "GF_MAX_VER_DIST = 1.9 m" in s)
+            assert reposition(1.0, 1.5) == M.MAV_RESULT_ACCEPTED
+            v.wait_event(lambda s: s.startswith("mode: HOLD, repositioned: from ") and " to x=1.00" in s
+                         and "z=1.500 m" in s)
+            wait_for(lambda: abs(heights(1)[0] - 1.5) < 0.05, 30, "the vehicle at 1.5 m")
+            assert command(M.MAV_CMD_NAV_LAND, 0, 0, 0, nan, nan, nan, 0) == M.MAV_RESULT_ACCEPTED
+            v.wait_event(lambda s: s == "disarmed: landed: disarmed [by vehicle]", timeout=30)
+        finally:
+            gcs.close()
+            assert v.stop() == 0
+    events = v.events()
+    assert sum(s.startswith("failsafe: ") for s in events) == 2 and sum("repositioned" in s for s in events) == 1
+    v.wait_report(Refused, lambda r: r.text.startswith("Reposition is outside geofence: to x=") and
+                  r.text.endswith("z=5.000 m: 5.00 m above home, beyond GF_MAX_VER_DIST = 2 m: not flown, holding"))
+
+
 def test_do_reposition_disarmed_takes_hold_on_the_ground_is_denied_and_other_flags_are_unsupported(tmp_path):
     """DO_REPOSITION as PX4 answers it where it flies nowhere: flags other than CHANGE_MODE are UNSUPPORTED; disarmed,
     ACCEPTED as the mode alone (HOLD, armed in it next: PX4's navigator keeps no point for a vehicle not armed);
@@ -424,8 +570,8 @@ def test_do_reposition_disarmed_takes_hold_on_the_ground_is_denied_and_other_fla
 
             assert reposition(0.0) == M.MAV_RESULT_UNSUPPORTED
             said("param2 (flags) must be 1")
-            # LAND selected first (the vehicle boots in HOLD, as PX4): the reposition selects HOLD again
-            gcs.mav.command_long_send(n + 1, 1, M.MAV_CMD_DO_SET_MODE, 0, 29, 4, 6, 0, 0, 0, 0)
+            # TAKEOFF selected first (the vehicle boots in HOLD, as PX4): the reposition selects HOLD again
+            gcs.mav.command_long_send(n + 1, 1, M.MAV_CMD_DO_SET_MODE, 0, 29, 4, 2, 0, 0, 0, 0)
             assert _ack(gcs, M.MAV_CMD_DO_SET_MODE).result == M.MAV_RESULT_ACCEPTED
             assert reposition(1.0) == M.MAV_RESULT_ACCEPTED
             v.wait_event(lambda s: "mode: HOLD (disarmed: armed in it next) [by 255:190" in s)
@@ -439,6 +585,59 @@ def test_do_reposition_disarmed_takes_hold_on_the_ground_is_denied_and_other_fla
             gcs.close()
             assert v.stop() == 0
     assert not any("repositioned" in s for s in v.events())
+
+
+def test_land_and_rtl_are_not_armed_in_selected_disarmed_nor_after_their_landing(tmp_path):
+    """PX4 does not arm in AUTO.LAND or AUTO.RTL (mode_requirements.cpp: prevent arming). Disarmed, LAND (DO_SET_MODE,
+    NAV_LAND) and RTL are DENIED with a STATUSTEXT saying so, and the next arm is HOLD's, the mode it boots in; once a
+    LAND has landed and disarmed it (still showing LAND), a ground station's arm is DENIED, saying to select HOLD or
+    TAKEOFF first (it was once ACCEPTED: armed in LAND on the ground, and at once disarmed); after HOLD it arms."""
+    with instance_slot() as n:
+        gcs = _gcs(n)
+        v = _vehicle(n, tmp_path, *FAST)
+        try:
+            assert gcs.wait_heartbeat(timeout=20) is not None
+
+            def command(cmd: int, *p: float) -> int:
+                gcs.mav.command_long_send(n + 1, 1, cmd, 0, *p)
+                return _ack(gcs, cmd).result
+
+            def said(words: str) -> None:
+                m = gcs.recv_match(type="STATUSTEXT", blocking=True, timeout=10,
+                                   condition=f"{words!r} in STATUSTEXT.text")
+                assert m is not None, f"no STATUSTEXT saying {words!r}"
+
+            nan, arm = math.nan, M.MAV_CMD_COMPONENT_ARM_DISARM
+            assert command(M.MAV_CMD_DO_SET_MODE, 29, 4, 6, 0, 0, 0, 0) == M.MAV_RESULT_DENIED
+            said("mode LAND: only armed (PX4 does not arm in Land")
+            assert command(M.MAV_CMD_NAV_LAND, 0, 0, 0, nan, nan, nan, 0) == M.MAV_RESULT_DENIED
+            said("mode LAND: only armed")
+            assert command(M.MAV_CMD_DO_SET_MODE, 29, 4, 5, 0, 0, 0, 0) == M.MAV_RESULT_DENIED
+            said("mode RTL: only armed (PX4 does not arm in Return")
+            assert command(arm, 1, 0, 0, 0, 0, 0, 0) == M.MAV_RESULT_ACCEPTED
+            v.wait_event(lambda s: s.startswith("armed: armed, HOLD [by 255:190"))
+            assert command(M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, nan, nan, nan, nan) == M.MAV_RESULT_ACCEPTED
+            v.wait_event(lambda s: s.startswith("mode: HOLD: takeoff done"))
+            assert command(M.MAV_CMD_NAV_LAND, 0, 0, 0, nan, nan, nan, 0) == M.MAV_RESULT_ACCEPTED
+            v.wait_event(lambda s: s == "disarmed: landed: disarmed [by vehicle]")
+            hb = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=5,  # (those queued before it say armed)
+                                condition=f"not HEARTBEAT.base_mode & {M.MAV_MODE_FLAG_SAFETY_ARMED}")
+            assert hb is not None and mavutil.mode_string_v10(hb) == "LAND"
+            assert command(arm, 1, 0, 0, 0, 0, 0, 0) == M.MAV_RESULT_DENIED
+            said("arming denied: mode LAND: PX4 does not arm in Land")
+            v.wait_report(Refused, lambda r: r.text == "arming denied: mode LAND: PX4 does not arm in Land mode "
+                                                       "(select HOLD or TAKEOFF first)")
+            assert command(M.MAV_CMD_DO_SET_MODE, 29, 4, 3, 0, 0, 0, 0) == M.MAV_RESULT_ACCEPTED
+            assert command(arm, 1, 0, 0, 0, 0, 0, 0) == M.MAV_RESULT_ACCEPTED
+            hb = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=5,
+                                condition=f"HEARTBEAT.base_mode & {M.MAV_MODE_FLAG_SAFETY_ARMED}")
+            assert hb is not None and mavutil.mode_string_v10(hb) == "LOITER"
+        finally:
+            gcs.close()
+            assert v.stop() == 0
+    armed = [s for s in v.events() if s.startswith("armed: ")]
+    assert [s.split(" [by")[0] for s in armed] == ["armed: armed, HOLD"] * 2, armed  # never armed in LAND
+    assert sum(s.startswith("disarmed: ") for s in v.events()) == 1
 
 
 # -- MAVProxy --------------------------------------------------------------------------------------

@@ -81,6 +81,25 @@ def test_lockstep_sine_lands_as_offline_to_the_bit(sine_runs) -> None:
     assert len(disarms) == 1 and "by command" not in disarms[0]["text"]
 
 
+def test_an_end_landing_that_touches_down_hard_is_a_crash_offline_as_in_lockstep(tmp_path: Path) -> None:
+    """The step mission's first set-point (1 m up) held for 6 s, then its end landing at MPC_LAND_SPEED = 4 m/s: it
+    touches down at over 3 m/s (CRASH_SPEED_MPS: 2), a crash by the vehicle's own landing, which a session's vehicle
+    judged (``crashed``, exit 1) and the offline loop never did (``completed``, exit 0: its fly_end judged nothing).
+    Both now end it ``crashed``, ended by the plant at the same time and speed, with the same end block."""
+    mission = tmp_path / "step6.toml"
+    mission.write_text((MISSION_DIR / "step.toml").read_text().replace("duration_s = 30.0", "duration_s = 6.0")
+                       .replace("    { t = 10.0,", "#").replace("    { t = 20.0,", "#"))
+    offline = simulate(mission, plots=False, params={"MPC_LAND_SPEED": 4.0})
+    lockstep = sitl(mission, out=tmp_path / "ls", plots=False, instance=None, params={"MPC_LAND_SPEED": 4.0})
+    for run in (offline, lockstep):
+        s = run.summary
+        assert s["outcome"] == "crashed" and s["ended_by"]["who"] == "plant", s["ended_by"]
+        assert s["impact"]["speed_mps"] > 3.0 and s["end"]["disarmed"] is True, s
+    assert lockstep.summary["ended_by"] == offline.summary["ended_by"]
+    assert lockstep.summary["impact"] == offline.summary["impact"] and lockstep.summary["end"] == offline.summary["end"]
+    assert lockstep.rms == offline.rms
+
+
 def test_hold_holds_offline_and_in_lockstep(tmp_path: Path) -> None:
     mission = _mission(tmp_path, 3.0, "hold")
     offline = simulate(mission, plots=False)

@@ -4,7 +4,8 @@ In:  the state X (paper frame, m), home (x, y, z m), GF_MAX_HOR_DIST and GF_MAX_
      it holds (:class:`missions.geofence.Geofence`: the mission's, or one a ground station uploaded), GF_ACTION
 Out: the limits X is beyond, each (which, why) (:func:`limits_passed`); the failsafe action a breach asks for
      (:data:`FENCE_FAILSAFE`: a ``[failsafe] action`` name by GF_ACTION; none for 0 and 1) and its event's text;
-     why arming is denied where the vehicle stands (:func:`arming_refusal`), or None
+     why arming is denied where the vehicle stands (:func:`arming_refusal`), or None; why a point a ground station
+     repositions it to is not flown (:func:`reposition_refusal`), or None
 
 PX4's geofence (navigator's ``Geofence``, ``GeofenceResult.GF_ACTION_*``): armed, beyond a limit or outside the
 fence, the vehicle does GF_ACTION: 0 nothing (it does not watch), 1 warns, 2 holds where it is (PX4's default;
@@ -13,7 +14,9 @@ clock: PX4 holds until someone acts), 3 returns (Return mode: home or the neares
 flight (motors off), 5 lands where it is. 2 to 5 take the vehicle out of offboard control as its failsafe does,
 and it stays so until the flight ends. Before that, PX4's pre-arm geofence check (commander's
 ``HealthAndArmingChecks/checks/geofenceCheck``): with GF_ACTION > 0, a vehicle beyond a limit or outside its fence is
-not armed (COMMAND_ACK TEMPORARILY_REJECTED) and says why.
+not armed (COMMAND_ACK TEMPORARILY_REJECTED) and says why. A DO_REPOSITION's point is judged as PX4's navigator
+judges it (``Navigator::geofence_allows_position``): with GF_ACTION 2-5, a point beyond a limit or outside the fence
+is not flown ("Reposition is outside geofence"); with 0 or 1 any point is.
 """
 
 from __future__ import annotations
@@ -62,3 +65,15 @@ def arming_refusal(passed: list[tuple[str, str]], action: int) -> str | None:
     if action == 0 or not passed:
         return None
     return f"{'; '.join(why for _, why in passed)} (GF_ACTION = {action}: {FENCE_ACTIONS[action]})"
+
+
+def reposition_refusal(to: tuple[float, float, float], t: float, home: tuple[float, float, float], max_hor_m: float,
+                       max_ver_m: float, fence: Geofence | None, action: int) -> str | None:
+    """Why PX4's navigator does not fly a reposition to ``to`` (x, y, z m, paper frame) at time t (s), about ``home``
+    (x, y, z m): GF_ACTION (``action``) 2 to 5 and the point beyond GF_MAX_HOR_DIST or GF_MAX_VER_DIST (m; 0: none)
+    or outside ``fence`` (:func:`breaches`); None: it is flown (GF_ACTION 0 and 1 judge no point, as PX4's)."""
+    if action not in FENCE_FAILSAFE:
+        return None
+    X = (to[0], 0.0, to[1], 0.0, to[2], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    passed = breaches(X, t, home, max_hor_m, max_ver_m, fence)
+    return "; ".join(why for _, why in passed) if passed else None

@@ -46,6 +46,7 @@ from bridge.autopilot.failsafe import (
     landing_target,
 )
 from bridge.autopilot.fencewatch import FENCE_ACTION_TEXT, FENCE_FAILSAFE, arming_refusal, breaches
+from bridge.autopilot.impactwatch import ImpactWatch
 from bridge.autopilot.modes import (  # noqa: F401  (the modes: imported from here by the rest of the bridge)
     FAILSAFE,
     GROUND_MODES,
@@ -58,7 +59,7 @@ from bridge.autopilot.modes import (  # noqa: F401  (the modes: imported from he
     mode_target,
 )
 from bridge.autopilot.params import FENCE_ACTIONS, VehicleParams, change_param, read_param
-from bridge.autopilot.vehicleevents import Event, ParamChanged, Sender, impact_text
+from bridge.autopilot.vehicleevents import Event, ParamChanged, Sender
 from controller.nominal import Nominal
 from missions.geofence import Geofence
 from plant import Quadrotor
@@ -109,7 +110,7 @@ class SimVehicle:
         self._pending_events = list(self.timeline)
         self._mission_t0: float | None = 0.0  # plant time (s) of the mission's time 0 (None: not known yet)
         self._injected: list[tuple[TimedEvent, Sender]] = []  # a ground station's, acted on next period (schedule)
-        self._impact_noted = False  # a disarmed vehicle's hard touchdown is logged once (plant_verdict)
+        self._impact = ImpactWatch()  # the hard touchdown's verdict: armed as it touched down or not (plant_verdict)
         self._period_s = self.plant.dt * self.substeps
         self._beyond: set[str] = set()  # limits said to be passed: GF_MAX_* and the fence (once each, until changed)
         self.arming_refused: str | None = None  # why the last arm was denied (arming_denied), until it arms
@@ -242,6 +243,7 @@ class SimVehicle:
 
     def disarm(self, why: str = "disarmed") -> None:
         if self.armed:
+            self._impact.disarming(self.plant)
             self.armed = False
             self.plant.command(self._zero)
             self._onboard_off()
@@ -408,18 +410,14 @@ class SimVehicle:
 
     def plant_verdict(self) -> str | None:
         """After a control period: ``diverged`` or ``crashed`` when the plant ends the flight now (its event
-        logged), else None. A disarmed vehicle's hard touchdown is logged once as an ``impact``, and the flight
-        goes on. The same check in every clock (bridge/loop.py offline, the vehicle node's commander)."""
-        plant = self.plant
-        why = plant.diverged()
-        if why:
-            self.event("diverged", why)
-            return "diverged"
-        if plant.impact is None or self._impact_noted:
-            return None
-        self._impact_noted = True
-        self.event("crashed" if self.armed else "impact", impact_text(plant.impact, self.armed))
-        return "crashed" if self.armed else None
+        logged), else None. A hard touchdown while armed is ``crashed`` even if the vehicle's own landing disarmed it
+        on the ground since; one already disarmed is logged once as an ``impact``, and the flight goes on
+        (:mod:`bridge.autopilot.impactwatch`). The same check in every clock (bridge/loop.py offline, the vehicle
+        node's commander)."""
+        verdict, said = self._impact.judge(self.plant, self.armed)
+        if said is not None:
+            self.event(*said)
+        return verdict
 
     def command(self, c: tuple[float, float, float, float]) -> bool:
         """A valid actuator target (normalised, paper frame). Ignored unless armed offboard."""

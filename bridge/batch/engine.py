@@ -23,7 +23,9 @@ link setting but the bandwidth queue; they must share everything else (profile, 
 duration, the battery too; each cell may have its own wind, turbulence, gusts and ``motor``, ``wind`` and
 ``gust`` events, or none: bridge.batch.weather). Not flown here (:func:`batch_problem`): a user's own law, the
 bandwidth queue (``rate_bps``), a measured link ``trace``, ``[failsafe] resume``, any failsafe ``action`` but
-``descend``, parameters changed in flight (``--param-at``) and ``link`` events (a handover).
+``descend``, parameters changed in flight (``--param-at``), ``link`` events (a handover), and a mission ending in
+a landing at a descent rate (MPC_LAND_SPEED) that may touch down hard: the scalar loop then flies its end landing
+and judges it (a crash), which this engine, flying the mission's time only, cannot.
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ from bridge.link.model import link_from_table, merge_link_tables
 from bridge.link.plan import Clocks, plan_links
 from bridge.record.metrics import RMS_FROM_S
 from missions import MISSION_DIR, Mission, Sine, load_mission
+from plant.quadrotor import CRASH_SPEED_MPS
 
 # the columns of a cells.csv row this engine measures (the cell's own axes and seed come from the cell)
 MEASURES = ("rms", "max", "settling_s", "tv_u2", "ripple_u2", "outcome", "up_sent", "up_lost", "down_sent",
@@ -54,6 +57,9 @@ CELL_STEPS = 8_000_000  # cells x control steps in one batch: bounds its memory 
 # cells x physics steps of a batch that meets turbulence (its samples, 3 floats a physics step, are held for the
 # whole flight: bridge.batch.weather): 120 MiB of them (the 30 s sine at 1 kHz: 166 cells a batch)
 TURBULENCE_STEPS = 5_000_000
+# m/s: the fastest descent whose end landing cannot crash: the on-board landing touches down up to ~1.13 times
+# faster than it sinks (docs/weather.md, "Outcomes"), a margin kept
+END_LANDING_SAFE_MPS = CRASH_SPEED_MPS / 1.25
 BLOCK_CELLS = 8  # cells a thread flies in one compiled call (~0.1 s of the 30 s sine): small enough to share out evenly
 Progress = Callable[[int, int], None]  # (cells done, cells in all), now and then
 
@@ -101,6 +107,10 @@ def flights_problem(flights: Sequence[Flight]) -> str | None:
         if f.effects.battery and (f.effects.battery_start_pct < 100.0 or f.params.low_battery_action):
             return ("the battery's levels ([effects] battery_start_pct below 100, or COM_LOW_BAT_ACT > 0): the "
                     "vehicle's battery failsafe is not in the batch engine; fly it with the process engine")
+        if m.end_action == "land" and f.failsafe.descent_rate > END_LANDING_SAFE_MPS:
+            return (f"[failsafe] descent_rate (MPC_LAND_SPEED) {f.failsafe.descent_rate:g} m/s: the mission's end "
+                    f"landing may touch down faster than {CRASH_SPEED_MPS:g} m/s, a crash the process engine judges "
+                    "and the batch engine (no end action) cannot; fly it with the process engine")
         if m.steps > CELL_STEPS:
             return f"the mission has {m.steps} control steps: more than the batch engine holds ({CELL_STEPS})"
         if first is None:

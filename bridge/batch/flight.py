@@ -167,7 +167,7 @@ class Cells(NamedTuple):
     alive: np.ndarray  # [n] bool
     flown: np.ndarray  # [n] steps flown
     diverged: np.ndarray  # [n] bool
-    impact: np.ndarray  # [n] int8: 0 no hard touchdown, 1 one this step, 2 noted (bridge.loop.plant_verdict)
+    impact: np.ndarray  # [n] int8: 0 no hard touchdown; this period one armed 1, disarmed 3; 2 noted (plant_verdict)
     crashed: np.ndarray  # [n] bool: touched down hard while armed
     # the cells' air and events (bridge.batch.weather.Weather)
     windy: np.ndarray  # [n] bool: the cell flies in air (bridge.batch.plant.wind_cell)
@@ -269,17 +269,18 @@ def _fly_cell(j: int, k0: int, k1: int, c: Constants, a: Cells) -> None:  # prag
                 ptr += 1
             air = _air(steady, turb, ti, check, gusts[j], n_gusts[j], t_plant[check], c.rotor_drag) if windy else \
                 (0.0, 0.0, 0.0, 0.0)
-            x, hold, om, armed, hard, pk = _physics_step(x, hold, om, fs and armed, armed, ph, t_plant[check], air,
+            x, hold, om, after, hard, pk = _physics_step(x, hold, om, fs and armed, armed, ph, t_plant[check], air,
                                                          windy, body, eff, pk, c)
-            if hard and impact == 0:  # the first hard touchdown (Quadrotor.impact)
-                impact = 1
-        if diverged_cell(x):  # bridge.loop.plant_verdict: diverged, else a hard touchdown armed ends the flight
+            if hard and impact == 0:  # the first hard touchdown (Quadrotor.impact): armed as it touched down, or not
+                impact = 1 if armed else 3
+            armed = after  # (the landing disarms on the ground the step after its touchdown)
+        if diverged_cell(x):  # SimVehicle.plant_verdict: diverged, else a hard touchdown armed ends the flight
             a.diverged[j], a.alive[j], a.flown[j] = True, False, k + 1
             x = c.start  # a resting state: no nan downstream
             break
-        if impact == 1:
-            impact = 2  # noted: disarmed, the flight goes on
-            if armed:
+        if impact == 1 or impact == 3:  # noted: armed at it, crashed (ImpactWatch); disarmed, the flight goes on
+            crashed, impact = impact == 1, 2
+            if crashed:
                 a.crashed[j], a.alive[j], a.flown[j] = True, False, k + 1
                 break
     a.sq_sum[j], a.sq_max[j], a.tv[j] = sq_sum, sq_max, tv

@@ -26,6 +26,7 @@ from typing import Any
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.autopilot.failsafe import PositionHold
+from bridge.autopilot.fencewatch import reposition_refusal
 from bridge.autopilot.params import BY_NAME
 from bridge.autopilot.simvehicle import GROUND_MODES, HOLD, LAND, OFFBOARD, RTL, TAKEOFF, SimVehicle
 from bridge.autopilot.vehicleevents import Sender
@@ -44,6 +45,9 @@ from bridge.nodes.vehicle.streams import HEARTBEAT_S, StatusTexts, StreamTable
 from bridge.record.metrics import plant_blocks
 
 OFFBOARD_STREAM_S = 1.0  # s of wall time: a ground station's OFFBOARD needs a target from the controller this recent
+# the modes PX4's mode_requirements.cpp marks prevent-arming that the vehicle flies, by PX4's name: selected only
+# armed (disarmed, DENIED as PX4 denies the arm in them), and a ground station's arm in one is DENIED
+NOT_ARMABLE = {LAND: "Land", RTL: "Return"}
 _STREAM_COMMANDS = (mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAV_CMD_GET_MESSAGE_INTERVAL,
                     mavlink.MAV_CMD_REQUEST_MESSAGE)
 Result = tuple[int, tuple[Any, ...]]  # (MAV_RESULT, the messages a command asked for)
@@ -214,7 +218,10 @@ class Commander:
     def _reposition(self, m: Any, by: Sender) -> int:
         """DO_REPOSITION, as PX4: HOLD (AUTO.LOITER); armed in the air, HOLD flies to the point given and holds
         it (:mod:`.reposition`); disarmed, only the mode is taken (PX4's navigator keeps no point for a vehicle
-        not armed); armed on the ground, DENIED (take off first). A point not flown is refused saying why."""
+        not armed); armed on the ground, DENIED (take off first). A point not flown is refused saying why; one
+        outside the geofence (GF_ACTION 2-5: :func:`~bridge.autopilot.fencewatch.reposition_refusal`) as PX4 does:
+        ACCEPTED (HOLD), a CRITICAL STATUSTEXT, and the vehicle holds where it is (in HOLD: where it held). In a
+        failsafe, as any mode a ground station selects, HOLD takes over (PX4's user takeover)."""
         sim = self.sim
         got = reposition(m, self.cfg.home, sim.published())
         if got.to is None:
@@ -223,7 +230,17 @@ class Commander:
             return self._set_mode_or_refuse(HOLD, "", by=by)
         if sim.plant.on_ground:
             return self._refuse("DO_REPOSITION: on the ground: take off first (NAV_TAKEOFF)")
-        return self._set_mode_or_refuse(HOLD, "", by=by, hold_at=PositionHold(*got.to, psi=got.psi, speed=got.speed))
+        outside = reposition_refusal(got.to, sim.t, sim.home, sim.max_hor_m, sim.max_ver_m, sim.fence,
+                                     sim.fence_action)
+        if outside is None:
+            return self._set_mode_or_refuse(HOLD, "", by=by, hold_at=PositionHold(*got.to, psi=got.psi,
+                                                                                   speed=got.speed))
+        # PX4's commander takes AUTO.LOITER (ACCEPTED), and its navigator does not fly the point: HOLD holds
+        x, y, z = got.to
+        why = f"Reposition is outside geofence: to x={x:.3f} y={y:.3f} z={z:.3f} m: {outside}: not flown, holding"
+        self.texts += self._statustext(mavlink.MAV_SEVERITY_CRITICAL, why)
+        self.ports.refused(why)
+        return mavlink.MAV_RESULT_ACCEPTED if sim.mode == HOLD else self._set_mode_or_refuse(HOLD, "", by=by)
 
     def _through_link(self, m: Any, by: Sender) -> bool:
         """Whether a command crosses the up-link model: the controller's, on its link, in a lockstep flight."""
@@ -325,8 +342,8 @@ class Commander:
             refused = "mode MISSION: not flown here" if missions is None else missions.select(self.sim.armed)
             return self._refuse(refused) if refused else mavlink.MAV_RESULT_ACCEPTED
         sim = self.sim
-        if mode == RTL and not sim.armed:
-            return self._refuse("mode RTL: only armed (PX4 does not arm in Return mode)")
+        if mode in NOT_ARMABLE and not sim.armed:
+            return self._refuse(f"mode {mode_name(mode)}: only armed (PX4 does not arm in {NOT_ARMABLE[mode]} mode)")
         if self.ports.missions is not None and (not sim.armed or self.pre_start.starting()):
             # AUTO.MISSION no longer selected, or the mission starting
             refused = self.ports.missions.select_other(mode_name(mode))
@@ -408,6 +425,9 @@ class Commander:
                 return mavlink.MAV_RESULT_DENIED
             was_offboard = sim.armed and sim.mode == OFFBOARD
             from_gcs = by is not None and by.link == "gcs"
+            if from_gcs and not sim.armed and sim.mode in NOT_ARMABLE:  # where its LAND or RTL landed and disarmed it
+                return self._refuse(f"arming denied: mode {mode_name(sim.mode)}: PX4 does not arm in "
+                                    f"{NOT_ARMABLE[sim.mode]} mode (select HOLD or TAKEOFF first)")
             n0 = len(sim.events)
             if from_gcs:
                 sim.arm_in_mode()  # in the mode it selected (HOLD, LAND, TAKEOFF), else offboard
