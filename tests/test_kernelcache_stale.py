@@ -49,7 +49,10 @@ print(json.dumps({"ours": c.ours(1.0), "numbas": c.numbas(1.0),
 
 
 def _fly(tree: Path) -> dict:
-    env = {**os.environ, "PYTHONPATH": f"{tree}{os.pathsep}{ROOT}", "NUMBA_CACHE_DIR": str(tree / "cache")}
+    # no .pyc: a callee rewritten within the second its .pyc was written, at the same size, would load stale
+    # (Python judges a .pyc by whole-second mtime and size), and every kernel would fly the old callee
+    env = {**os.environ, "PYTHONPATH": f"{tree}{os.pathsep}{ROOT}", "NUMBA_CACHE_DIR": str(tree / "cache"),
+           "PYTHONDONTWRITEBYTECODE": "1"}
     out = subprocess.run([sys.executable, "-c", RUN], env=env, cwd=tree, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-3000:]
     return json.loads(out.stdout)
