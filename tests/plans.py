@@ -80,17 +80,20 @@ def outside_fence_plan(tmp_path: Path) -> Path:
     return fenced_l(tmp_path, fence, "outside.plan")
 
 
-def battery_mission(tmp_path: Path, start_pct: float) -> Path:
-    """The x500 with its battery from ``start_pct`` % of its charge: 5 s climbing to 3 m, then 5 m north, held; 15 s."""
-    p = tmp_path / f"battery-{start_pct:g}.toml"
-    p.write_text(f"""name = "battery"
-duration_s = 15.0
+def battery_mission(tmp_path: Path, start_pct: float, duration_s: float = 15.0, up: tuple[float, float] = (5.0, 3.0),
+                    north: tuple[float, float] = (12.0, 5.0), name: str = "battery") -> Path:
+    """The x500 with its battery from ``start_pct`` % of its charge: climbing to ``up`` = (by t s, height m), then
+    ``north`` = (by t s, x m) north at that height, held there; ``duration_s``. By default: 3 m in 5 s, 5 m north
+    by 12 s, 15 s."""
+    p = tmp_path / f"{name}-{start_pct:g}.toml"
+    p.write_text(f"""name = "{name}"
+duration_s = {duration_s}
 profile = "x500"
 
 [trajectory]
 kind = "waypoints"
-points = [{{ t = 0.0, x = 0.0, y = 0.0, z = 0.0 }}, {{ t = 5.0, x = 0.0, y = 0.0, z = 3.0 }},
-          {{ t = 12.0, x = 5.0, y = 0.0, z = 3.0 }}]
+points = [{{ t = 0.0, x = 0.0, y = 0.0, z = 0.0 }}, {{ t = {up[0]}, x = 0.0, y = 0.0, z = {up[1]} }},
+          {{ t = {north[0]}, x = {north[1]}, y = 0.0, z = {up[1]} }}]
 
 [effects]
 battery = true

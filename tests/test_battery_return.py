@@ -16,6 +16,7 @@ import pytest
 from bridge.loop import simulate
 from bridge.record.runlog import read_trace
 from bridge.session import instance_slot
+from tests.plans import battery_mission
 from tests.sitlkit import ROOT, run_bsst
 
 pytestmark = pytest.mark.process  # starts processes: not in make test-fast
@@ -26,21 +27,7 @@ FLAGS = ("--sensors", "gnss", "--estimator", "ekf", "--param", "COM_LOW_BAT_ACT=
 
 def _mission(tmp_path: Path, start_pct: float, duration_s: float) -> Path:
     """The x500 with its pack from ``start_pct`` %: up to 4 m in 6 s, 10 m north by 14 s, held there."""
-    p = tmp_path / f"battery-return-{start_pct:g}.toml"
-    p.write_text(f"""name = "battery-return"
-duration_s = {duration_s}
-profile = "x500"
-
-[trajectory]
-kind = "waypoints"
-points = [{{ t = 0.0, x = 0.0, y = 0.0, z = 0.0 }}, {{ t = 6.0, x = 0.0, y = 0.0, z = 4.0 }},
-          {{ t = 14.0, x = 10.0, y = 0.0, z = 4.0 }}]
-
-[effects]
-battery = true
-battery_start_pct = {start_pct}
-""")
-    return p
+    return battery_mission(tmp_path, start_pct, duration_s, up=(6.0, 4.0), north=(14.0, 10.0), name="battery-return")
 
 
 def _said(events: list[dict]) -> list[tuple[float, str, str]]:
