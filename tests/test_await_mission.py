@@ -12,9 +12,12 @@ lockstep one; a vehicle in this process answering MISSION_START and AUTO.MISSION
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
+import signal
+import socket
 import subprocess
 import sys
 from collections.abc import Callable
@@ -863,3 +866,32 @@ def test_plan_text_reads_back_and_the_transfer_block_is_typed():
     by = {"command": START_ARM, "by": "255:190 127.0.0.1:14550 gcs"}
     assert mission_transfer(said, by).as_dict()["started_by"] == by
     assert mission_transfer(None) is None and mission_transfer({"items": 1}) is None
+
+
+def test_a_session_stopped_while_it_awaits_a_mission_reads_the_waiting_states_as_delivered(tmp_path):
+    """Stopped before a ground station starts a mission: the vehicle, in lockstep, has sent its state again every
+    RESEND_S while the controller waited, and the controller read them all; summary.json's link.down says so
+    (none lost), where it once counted every one lost (the controller's figures were not reported)."""
+    out = tmp_path / "run"
+    with instance_slot() as n:
+        gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        gcs.bind(("127.0.0.1", GCS_PORT + n))  # where the vehicle's GCS link sends: its heartbeats, 1 a second
+        gcs.settimeout(0.5)
+        p = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--no-plots", "--out", str(out), cwd=ROOT)
+        try:
+            mav = mavlink.MAVLink(None)
+            beats: list[Any] = []
+
+            def two_heartbeats() -> bool:  # two seconds of waiting: some twenty states sent again
+                with contextlib.suppress(TimeoutError):
+                    beats.extend(m for m in mav.parse_buffer(gcs.recv(65535)) or [] if m.get_type() == "HEARTBEAT")
+                return len(beats) >= 3
+
+            wait_for(two_heartbeats, 30.0, "three vehicle heartbeats")
+            p.p.send_signal(signal.SIGINT)
+            assert p.p.wait(timeout=60) == 1
+        finally:
+            p.stop()
+            gcs.close()
+    down = json.loads((out / "summary.json").read_text())["link"]["down"]
+    assert down["sent"] >= 10 and down["lost"] == 0 and down["delivered"] + down["in_flight"] == down["sent"], down

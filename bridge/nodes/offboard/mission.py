@@ -30,7 +30,7 @@ from __future__ import annotations
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -64,6 +64,7 @@ class Fetched:
     flight: Flight | None
     transfer: TransferStats
     why: str = ""
+    states: dict[str, Any] = field(default_factory=dict)  # the vehicle's states read while waiting (Stats' keys)
 
 
 class MissionLink(OffboardLink):
@@ -227,6 +228,14 @@ def fetch_mission(flight: Flight, cfg: OffboardConfig, out: Path | None, status:
     status(Ready("controller", vehicle=cfg.vehicle.hostport, local=f"{link.ep.local[0]}:{link.ep.local[1]}",
                  clock=cfg.clock))
     empty = TransferStats()
+    got = _fetch(link, flight, out, empty)
+    # the states the vehicle sent while it waited crossed the link: read, not lost (summary.json link.down)
+    return replace(got, states={"states": link.states, "states_refused": link.states_refused,
+                                "state_window": link.state_window})
+
+
+def _fetch(link: MissionLink, flight: Flight, out: Path | None, empty: TransferStats) -> Fetched:
+    """:func:`fetch_mission`'s wait, download and build on ``link`` (closed after)."""
     try:
         link.event("mission", "waiting for a ground station to upload a mission and start it")
         if not link.await_start():
@@ -262,7 +271,7 @@ def mission_flight(flight: Flight, cfg: OffboardConfig, out: Path | None,
     got = fetch_mission(flight, cfg, out, emit)
     transfer = got.transfer.as_dict()
     if got.flight is None:
-        emit(Stats({"mission_transfer": transfer}))
+        emit(Stats({"mission_transfer": transfer, **got.states}))
         emit(Done("aborted", False, got.why))
         sys.stderr.write(f"bsst controller: aborted: {got.why}\n")
         return None, transfer
