@@ -87,9 +87,9 @@ def _vector(t: Table, key: str, lo: float, hi: float) -> tuple[float, float, flo
 
 def event_from_table(t: Table, duration_s: float) -> TimedEvent:
     """Validate one ``[[events]]`` table; errors name the file and key."""
-    t_s = t.number("t_s", lo=0.0, hi=duration_s)
-    if t_s >= duration_s:
-        raise t.error("t_s", f"must be before the mission's end ({duration_s:g} s)")
+    t_s = t.number("t_s")
+    if not 0.0 <= t_s < duration_s:  # [0, duration): an event at the end would never act
+        raise t.error("t_s", f"must be in [0, {duration_s:g}) s (before the mission's end), got {t_s:g}")
     kind = t.string("kind", choices=EVENT_KINDS)
     s: dict[str, Any] = {}
     if kind == "link":  # the keys of the [link] table handed over to: the link model checks them (prepare)

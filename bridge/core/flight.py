@@ -348,10 +348,12 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
     return flight
 
 
-def event_problem(kind: str, prof: Profile, sensors: SensorConfig | None) -> str | None:
+def event_problem(kind: str, prof: Profile, sensors: SensorConfig | None, estimator: str = "ekf") -> str | None:
     """Why an event of ``kind`` cannot act on this vehicle (``sensors`` None: the truth estimator, no sensor
     to fail), or None: a motor event needs rotors, a sensor event the vehicle's sensors, a GPS event a gnss
-    set, a compass event a heading sensor. The timeline's check, and a ground station's injection's."""
+    set, a compass event a heading sensor, and an ``estimator`` that reads that sensor (``raw`` reads no
+    barometer, nor a compass when its set measures the attitude: docs/sensors.md). The timeline's check, and a
+    ground station's injection's."""
     if kind == "motor" and prof.actuation != "motors":
         return (f"profile {prof.name!r} flies ideal wrench actuation: it has no rotors to fail (fly --profile x500, "
                 "or set the mission's actuation = \"motors\")")
@@ -362,6 +364,10 @@ def event_problem(kind: str, prof: Profile, sensors: SensorConfig | None) -> str
         return f"sensor set {sensors.name!r} has no GPS (its position is {sensors.position_class}): fly --sensors gnss"
     if kind == "mag" and sensors is not None and sensors.heading_rate_hz <= 0.0:
         return f"sensor set {sensors.name!r} has no magnetometer (heading_rate_hz = 0)"
+    if estimator == "raw" and sensors is not None and (kind == "baro" or (kind == "mag" and
+                                                                          sensors.position_class == "mocap")):
+        what = "barometer" if kind == "baro" else f"compass (set {sensors.name!r} measures the attitude)"
+        return f"the raw estimator never reads the {what}, so the fault would change nothing: fly --estimator ekf"
     return None
 
 
@@ -374,7 +380,7 @@ def weather_of(m: Mission, prof: Profile, sensors: SensorConfig, estimator: str)
     src = m.source
     timeline = timeline_from_tables(m.events, src, m.duration_s)
     for e in timeline:
-        why = event_problem(e.kind, prof, None if estimator == "truth" else sensors)
+        why = event_problem(e.kind, prof, None if estimator == "truth" else sensors, estimator)
         if why is not None:
             raise ConfigError(f"{src}: events (t_s = {e.t_s:g}, kind = {e.kind}): {why}")
     if not m.wind and not any(e.kind in ("wind", "gust") for e in timeline):
