@@ -104,7 +104,7 @@ def simulate(mission: Mission | str | Path, *, vehicles: int | Sequence[Any] | N
     over = Overrides.of(overrides, **keywords)
     flights = fleet_flights(fleet, over)
     check_fleet_steps(fleet, flights)  # before the run directory is made: a refused mission writes nothing
-    radios = shared_radios(fleet, flights)
+    radios = shared_radios(fleet, flights, over)
     path = run_dir(out, fleet.name, overwrite) if (out is not None or write) else None
     return fly_fleet(over.laid_over(fleet), flights, path, plots=plots, progress=progress, radios=radios)
 
@@ -206,15 +206,19 @@ def _num(v: float) -> float | None:
     return round(v, 9) if math.isfinite(v) else None
 
 
-def shared_radios(m: Mission, flights: list[Flight]) -> tuple[Radio, Radio] | None:
+def shared_radios(m: Mission, flights: list[Flight], over: Overrides | None = None) -> tuple[Radio, Radio] | None:
     """The fleet's one radio, (up, down) (:mod:`bridge.link.radio`: every vehicle's traffic of a direction in one
     queue behind one bandwidth budget, each vehicle a user, by id), when its ``[link]`` says ``shared``; else
-    None (each vehicle its own link). A handover (an event of kind ``link``) on a shared radio is refused."""
+    None (each vehicle its own link). A handover (an event of kind ``link``) on a shared radio is refused, named
+    where each was given: the flags (``over``: ``--shared-link``, ``--at``) or the mission's keys."""
     if not flights[0].link.shared:
         return None
     if any(f.link.handovers for f in flights):
-        raise ConfigError(f"{m.source}: link.shared: a fleet on one radio with link handovers (events of kind link) "
-                          "is not modelled yet: give one or the other")
+        given = [n for e, n in zip(over.at, over._at_named, strict=True) if e.get("kind") == "link"] if over else []
+        where = "--shared-link" if over and "shared" in (over.link or {}) else f"{m.source}: link.shared"
+        which = given[0] if given else "events of kind link"
+        raise ConfigError(f"{where}: a fleet on one radio with link handovers ({which}) is not modelled yet: give "
+                          "one or the other")
     up, down, n = flights[0].link.up, flights[0].link.down, len(flights)
     return Radio(up.rate_bps, up.queue_ms / 1000.0, n), Radio(down.rate_bps, down.queue_ms / 1000.0, n)
 
@@ -387,7 +391,7 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
         ids = [v.id for v in fm.vehicles]
         watch = _watch(fm, flights)
         if shared:
-            shared_radios(fm, flights)  # a handover on one radio is refused, as offline
+            shared_radios(fm, flights, over)  # a handover on one radio is refused, as offline
         clocked = not realtime  # lockstep: one shared step clock (bridge.nodes.vehicle.gate)
         runs = fly_sessions(flights, ids, dirs, realtime=realtime, instance=instance, gcs=gcs_text, speed=speed,
                             key=Path(key) if key is not None else None, plots=plots, keep=keep,

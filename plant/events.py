@@ -81,6 +81,18 @@ class TimedEvent:
         return f"gust {s['amplitude_mps']:g} m/s from {s['from_deg']:g} deg over {s['duration_s']:g} s"
 
 
+class EventError(ConfigError):
+    """An event that cannot be flown (bad input, one line): ``where`` it was given (the mission's ``events (t_s =
+    T, kind = K)``, or the flag ``--at T:KIND[:ARGS]``: :func:`bridge.core.flight.prepare` names it, as it names
+    a law's ``--controller``) and ``what`` is wrong with it."""
+
+    def __init__(self, event: TimedEvent, what: str, where: str) -> None:
+        self.event = event
+        self.what = what
+        self.where = where
+        super().__init__(f"{where}: {what}")
+
+
 def _vector(t: Table, key: str, lo: float, hi: float) -> tuple[float, float, float]:
     return t.vector(key, 3, lo=lo, hi=hi)  # type: ignore[return-value]
 

@@ -70,6 +70,10 @@ def test_events_that_cannot_act_on_this_flight_are_refused() -> None:
         simulate("missions/sine.toml", profile="x500", at=("10:motor:1=1.5",))
     with pytest.raises(ConfigError, match="t_s"):
         simulate("missions/sine.toml", profile="x500", at=("40:motor:1=0.5",))
+    with pytest.raises(ConfigError, match=r"^--at 10:gps:off: the truth estimator"):  # the flag named, not the file
+        simulate("missions/sine.toml", at=("10:gps:off",))
+    with pytest.raises(ConfigError, match=r"^--at 10:link:bogus: link.profile"):
+        simulate("missions/sine.toml", at=("10:link:bogus",))
     for sensors in ("gnss", "mocap"):  # the raw estimator never reads the barometer: a drift would change nothing
         with pytest.raises(ConfigError, match="raw estimator never reads the barometer"):
             simulate("missions/sine.toml", sensors={"set": sensors}, estimator="raw", at=("1:baro:drift=1",))

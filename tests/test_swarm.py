@@ -165,6 +165,24 @@ def test_a_fleet_mission_is_refused_where_one_vehicle_flies() -> None:
         prepare(TOUCH)
 
 
+@pytest.mark.parametrize("shared_by, at_by, words", [
+    ("flag", "flag", "--shared-link: a fleet on one radio with link handovers (--at 2:link:lte)"),
+    ("file", "flag", "{m}: link.shared: a fleet on one radio with link handovers (--at 2:link:lte)"),
+    ("flag", "file", "--shared-link: a fleet on one radio with link handovers (events of kind link)"),
+])
+def test_a_shared_radio_with_a_handover_names_where_each_was_given(tmp_path: Path, shared_by: str, at_by: str,
+                                                                   words: str) -> None:
+    """One radio and a handover: refused before it flies, naming the flag or the file's key that gave each."""
+    m = tmp_path / "short.toml"
+    m.write_text((MISSION_DIR / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 4.0")
+                 + ('\n[link]\nshared = true\n' if shared_by == "file" else "")
+                 + ('\n[[events]]\nt_s = 2.0\nkind = "link"\nprofile = "lte"\n' if at_by == "file" else ""))
+    with pytest.raises(ConfigError) as exc:
+        simulate(m, vehicles=2, link={"shared": True} if shared_by == "flag" else None,
+                 at=("2:link:lte",) if at_by == "flag" else ())
+    assert str(exc.value).startswith(words.format(m=m))
+
+
 def test_a_vehicle_outside_the_fence_stays_at_its_start_and_the_others_fly(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """The near miss with a fence round vehicle 1's leg only: vehicle 2 starts outside it, so PX4's pre-arm check
