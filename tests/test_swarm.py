@@ -142,6 +142,9 @@ def test_vehicles_given_from_python_and_their_bad_forms(tmp_path: Path) -> None:
     (["--vehicles", "0"], "--vehicles must be in [1, 64]"),
     (["--vehicles", "2", "--formation", "ring:2"], "--formation ring:2: expected line:SPACING"),
     (["--vehicles", "2", "--formation", "line:0"], "must be in (0, 1000] m"),
+    (["--vehicles", "2", "--formation", "circle:0.1"],  # rotor discs overlapping at the start: a contact
+     "--formation circle:0.1: vehicles 1 and 2 start touching: their rotor discs are -0.430 m apart"),
+    (["--vehicles", "3", "--formation", "line:0.63"], "line:0.63: vehicles 1 and 2 start touching"),  # 0: a contact
 ])
 def test_bad_fleet_flags_are_one_line_and_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                                  args: list[str], words: str) -> None:
@@ -149,6 +152,15 @@ def test_bad_fleet_flags_are_one_line_and_exit_2(tmp_path: Path, capsys: pytest.
     assert main(["sim", "missions/sine.toml", "--out", str(out), *args]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert words in err[-1] and "Traceback" not in "\n".join(err) and not out.exists()
+
+
+def test_vehicles_of_a_file_that_start_touching_are_refused_naming_its_key(tmp_path: Path) -> None:
+    f = tmp_path / "close.toml"
+    f.write_text(TOUCH.read_text().replace("position = [3.0, 0.4, 0.0]", "position = [-3.0, 0.5, 0.0]"))
+    with pytest.raises(ConfigError, match=r"close.toml: vehicles: vehicles 1 and 2 start touching: their rotor "
+                                          r"discs are -0.130 m apart \(centres 0.500 m"):
+        simulate(f, out=tmp_path / "r")
+    assert not (tmp_path / "r").exists()
 
 
 def test_a_bad_vehicle_is_named_with_its_id(tmp_path: Path) -> None:
