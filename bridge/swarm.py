@@ -104,7 +104,8 @@ def simulate(mission: Mission | str | Path, *, vehicles: int | Sequence[Any] | N
     over = Overrides.of(overrides, **keywords)
     flights = fleet_flights(fleet, over)
     check_fleet_steps(fleet, flights)  # before the run directory is made: a refused mission writes nothing
-    radios = shared_radios(fleet, flights)
+    check_fleet_starts(fleet, flights, vehicles, formation)
+    radios = shared_radios(fleet, flights, over)
     path = run_dir(out, fleet.name, overwrite) if (out is not None or write) else None
     return fly_fleet(over.laid_over(fleet), flights, path, plots=plots, progress=progress, radios=radios)
 
@@ -119,6 +120,25 @@ def check_fleet_steps(m: Mission, flights: list[Flight]) -> None:
         raise ConfigError(f"{m.source}: duration_s: {len(flights)} vehicles of {flights[0].mission.steps} control "
                           f"steps are {total} steps, over the {MAX_TRACE_STEPS} a run keeps in memory for its "
                           "summary: fly fewer vehicles or a shorter mission")
+
+
+def check_fleet_starts(m: Mission, flights: list[Flight], vehicles: object, layout: str | None) -> None:
+    """Refuse a fleet whose vehicles start touching (a clearance of zero or less between two rotor discs at the
+    start: a contact before anything flies), naming where the starts came from: ``--formation`` (``layout``, with
+    ``vehicles`` = N; N alone lays out ``line:2``), the given :class:`VehicleSpec` s, or the mission's
+    ``vehicles`` (their starts and offsets)."""
+    watch = _watch(m, flights)
+    starts = [f.mission.start[:3] for f in flights]
+    pairs = [(clearance(starts[a], starts[b], watch.radii[a], watch.radii[b]), a, b)
+             for a in range(len(starts)) for b in range(a + 1, len(starts))]
+    touching = [p for p in pairs if p[0][1] <= 0.0]
+    if not touching:
+        return
+    (d, c), a, b = min(touching, key=lambda p: p[0][1])
+    where = (f"{m.source}: vehicles" if vehicles is None else
+             f"--formation {layout or 'line:2'}" if isinstance(vehicles, int) else "vehicles")
+    raise ConfigError(f"{where}: vehicles {watch.ids[a]} and {watch.ids[b]} start touching: their rotor discs are "
+                      f"{c:.3f} m apart (centres {d:.3f} m; a clearance of zero or less is a contact): spread them")
 
 
 def fleet_mission(m: Mission, vehicles: int | Sequence[Any] | None, layout: str | None) -> Mission | None:
@@ -206,15 +226,19 @@ def _num(v: float) -> float | None:
     return round(v, 9) if math.isfinite(v) else None
 
 
-def shared_radios(m: Mission, flights: list[Flight]) -> tuple[Radio, Radio] | None:
+def shared_radios(m: Mission, flights: list[Flight], over: Overrides | None = None) -> tuple[Radio, Radio] | None:
     """The fleet's one radio, (up, down) (:mod:`bridge.link.radio`: every vehicle's traffic of a direction in one
     queue behind one bandwidth budget, each vehicle a user, by id), when its ``[link]`` says ``shared``; else
-    None (each vehicle its own link). A handover (an event of kind ``link``) on a shared radio is refused."""
+    None (each vehicle its own link). A handover (an event of kind ``link``) on a shared radio is refused, named
+    where each was given: the flags (``over``: ``--shared-link``, ``--at``) or the mission's keys."""
     if not flights[0].link.shared:
         return None
     if any(f.link.handovers for f in flights):
-        raise ConfigError(f"{m.source}: link.shared: a fleet on one radio with link handovers (events of kind link) "
-                          "is not modelled yet: give one or the other")
+        given = [n for e, n in zip(over.at, over._at_named, strict=True) if e.get("kind") == "link"] if over else []
+        where = "--shared-link" if over and "shared" in (over.link or {}) else f"{m.source}: link.shared"
+        which = given[0] if given else "events of kind link"
+        raise ConfigError(f"{where}: a fleet on one radio with link handovers ({which}) is not modelled yet: give "
+                          "one or the other")
     up, down, n = flights[0].link.up, flights[0].link.down, len(flights)
     return Radio(up.rate_bps, up.queue_ms / 1000.0, n), Radio(down.rate_bps, down.queue_ms / 1000.0, n)
 
@@ -375,6 +399,7 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
     over = Overrides.of(overrides, **keywords)
     flights = fleet_flights(fleet, over)
     check_fleet_steps(fleet, flights)
+    check_fleet_starts(fleet, flights, vehicles, formation)
     gcs_text = check_fleet(len(flights), realtime=realtime, instance=instance, gcs=gcs, speed=speed, key=key)
     keep = out is not None or write
     if keep:  # a refused run directory is named before a busy port (both before anything starts)
@@ -387,7 +412,7 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
         ids = [v.id for v in fm.vehicles]
         watch = _watch(fm, flights)
         if shared:
-            shared_radios(fm, flights)  # a handover on one radio is refused, as offline
+            shared_radios(fm, flights, over)  # a handover on one radio is refused, as offline
         clocked = not realtime  # lockstep: one shared step clock (bridge.nodes.vehicle.gate)
         runs = fly_sessions(flights, ids, dirs, realtime=realtime, instance=instance, gcs=gcs_text, speed=speed,
                             key=Path(key) if key is not None else None, plots=plots, keep=keep,

@@ -81,15 +81,27 @@ class TimedEvent:
         return f"gust {s['amplitude_mps']:g} m/s from {s['from_deg']:g} deg over {s['duration_s']:g} s"
 
 
+class EventError(ConfigError):
+    """An event that cannot be flown (bad input, one line): ``where`` it was given (the mission's ``events (t_s =
+    T, kind = K)``, or the flag ``--at T:KIND[:ARGS]``: :func:`bridge.core.flight.prepare` names it, as it names
+    a law's ``--controller``) and ``what`` is wrong with it."""
+
+    def __init__(self, event: TimedEvent, what: str, where: str) -> None:
+        self.event = event
+        self.what = what
+        self.where = where
+        super().__init__(f"{where}: {what}")
+
+
 def _vector(t: Table, key: str, lo: float, hi: float) -> tuple[float, float, float]:
     return t.vector(key, 3, lo=lo, hi=hi)  # type: ignore[return-value]
 
 
 def event_from_table(t: Table, duration_s: float) -> TimedEvent:
     """Validate one ``[[events]]`` table; errors name the file and key."""
-    t_s = t.number("t_s", lo=0.0, hi=duration_s)
-    if t_s >= duration_s:
-        raise t.error("t_s", f"must be before the mission's end ({duration_s:g} s)")
+    t_s = t.number("t_s")
+    if not 0.0 <= t_s < duration_s:  # [0, duration): an event at the end would never act
+        raise t.error("t_s", f"must be in [0, {duration_s:g}) s (before the mission's end), got {t_s:g}")
     kind = t.string("kind", choices=EVENT_KINDS)
     s: dict[str, Any] = {}
     if kind == "link":  # the keys of the [link] table handed over to: the link model checks them (prepare)

@@ -176,7 +176,8 @@ TEXT_BAD = {
     "--stats": lambda f: [f.regular / "x.json", f.directory],
     "--dask": lambda f: ["notanaddress"],
     "--key": lambda f: [f.missing, f.key_empty, f.key_open, f.directory],
-    "--at": lambda f: ["x", "5:bogus", "5:gps:sideways", "0.1:motor:9=0.5", "99:wind:3", "0.1:gust:0,3"],
+    "--at": lambda f: ["x", "5:bogus", "5:gps:sideways", "0.1:motor:9=0.5", "99:wind:3", "0.1:gust:0,3",
+                       "0.1:gps:off", "0.1:motor:1=0.5", "0.1:link:bogus", "0.1:link:stale_ms=5"],  # flown: named too
     "--formation": lambda f: ["line", "ring:2", "line:0", "circle:x"],
     "--gate": lambda f: [f.missing, f.directory, f.regular],
     "--radio": lambda f: [f.missing, f.directory, f.regular, f.socket_path],

@@ -70,6 +70,19 @@ def test_events_that_cannot_act_on_this_flight_are_refused() -> None:
         simulate("missions/sine.toml", profile="x500", at=("10:motor:1=1.5",))
     with pytest.raises(ConfigError, match="t_s"):
         simulate("missions/sine.toml", profile="x500", at=("40:motor:1=0.5",))
+    with pytest.raises(ConfigError, match=r"^--at 10:gps:off: the truth estimator"):  # the flag named, not the file
+        simulate("missions/sine.toml", at=("10:gps:off",))
+    with pytest.raises(ConfigError, match=r"^--at 10:link:bogus: link.profile"):
+        simulate("missions/sine.toml", at=("10:link:bogus",))
+    for sensors in ("gnss", "mocap"):  # the raw estimator never reads the barometer: a drift would change nothing
+        with pytest.raises(ConfigError, match="raw estimator never reads the barometer"):
+            simulate("missions/sine.toml", sensors={"set": sensors}, estimator="raw", at=("1:baro:drift=1",))
+    with pytest.raises(ConfigError, match="raw estimator never reads the compass"):  # its heading: the pose's
+        simulate("missions/sine.toml", sensors={"set": "ideal"}, estimator="raw", at=("1:mag:off",))
+    with pytest.raises(ConfigError, match=r"--at 30:wind:3: t_s: must be in \[0, 30\) s"):  # the range: [0, end)
+        simulate("missions/sine.toml", at=("30:wind:3",))
+    with pytest.raises(ConfigError, match=r"--at 31:wind:3: t_s: must be in \[0, 30\) s.*got 31"):
+        simulate("missions/sine.toml", at=("31:wind:3",))
 
 
 def test_a_full_rotor_changes_nothing_and_a_weak_one_is_logged_and_reproducible() -> None:

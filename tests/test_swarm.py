@@ -142,6 +142,9 @@ def test_vehicles_given_from_python_and_their_bad_forms(tmp_path: Path) -> None:
     (["--vehicles", "0"], "--vehicles must be in [1, 64]"),
     (["--vehicles", "2", "--formation", "ring:2"], "--formation ring:2: expected line:SPACING"),
     (["--vehicles", "2", "--formation", "line:0"], "must be in (0, 1000] m"),
+    (["--vehicles", "2", "--formation", "circle:0.1"],  # rotor discs overlapping at the start: a contact
+     "--formation circle:0.1: vehicles 1 and 2 start touching: their rotor discs are -0.430 m apart"),
+    (["--vehicles", "3", "--formation", "line:0.63"], "line:0.63: vehicles 1 and 2 start touching"),  # 0: a contact
 ])
 def test_bad_fleet_flags_are_one_line_and_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                                  args: list[str], words: str) -> None:
@@ -149,6 +152,15 @@ def test_bad_fleet_flags_are_one_line_and_exit_2(tmp_path: Path, capsys: pytest.
     assert main(["sim", "missions/sine.toml", "--out", str(out), *args]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert words in err[-1] and "Traceback" not in "\n".join(err) and not out.exists()
+
+
+def test_vehicles_of_a_file_that_start_touching_are_refused_naming_its_key(tmp_path: Path) -> None:
+    f = tmp_path / "close.toml"
+    f.write_text(TOUCH.read_text().replace("position = [3.0, 0.4, 0.0]", "position = [-3.0, 0.5, 0.0]"))
+    with pytest.raises(ConfigError, match=r"close.toml: vehicles: vehicles 1 and 2 start touching: their rotor "
+                                          r"discs are -0.130 m apart \(centres 0.500 m"):
+        simulate(f, out=tmp_path / "r")
+    assert not (tmp_path / "r").exists()
 
 
 def test_a_bad_vehicle_is_named_with_its_id(tmp_path: Path) -> None:
@@ -163,6 +175,24 @@ def test_a_bad_vehicle_is_named_with_its_id(tmp_path: Path) -> None:
 def test_a_fleet_mission_is_refused_where_one_vehicle_flies() -> None:
     with pytest.raises(ConfigError, match="vehicles: a mission of several vehicles is flown by bsst sim"):
         prepare(TOUCH)
+
+
+@pytest.mark.parametrize("shared_by, at_by, words", [
+    ("flag", "flag", "--shared-link: a fleet on one radio with link handovers (--at 2:link:lte)"),
+    ("file", "flag", "{m}: link.shared: a fleet on one radio with link handovers (--at 2:link:lte)"),
+    ("flag", "file", "--shared-link: a fleet on one radio with link handovers (events of kind link)"),
+])
+def test_a_shared_radio_with_a_handover_names_where_each_was_given(tmp_path: Path, shared_by: str, at_by: str,
+                                                                   words: str) -> None:
+    """One radio and a handover: refused before it flies, naming the flag or the file's key that gave each."""
+    m = tmp_path / "short.toml"
+    m.write_text((MISSION_DIR / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 4.0")
+                 + ('\n[link]\nshared = true\n' if shared_by == "file" else "")
+                 + ('\n[[events]]\nt_s = 2.0\nkind = "link"\nprofile = "lte"\n' if at_by == "file" else ""))
+    with pytest.raises(ConfigError) as exc:
+        simulate(m, vehicles=2, link={"shared": True} if shared_by == "flag" else None,
+                 at=("2:link:lte",) if at_by == "flag" else ())
+    assert str(exc.value).startswith(words.format(m=m))
 
 
 def test_a_vehicle_outside_the_fence_stays_at_its_start_and_the_others_fly(

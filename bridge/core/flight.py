@@ -50,6 +50,7 @@ from plant import Effects, Profile, Quadrotor, load_profile
 from plant.effects import effects_from_table
 from plant.events import (
     SENSOR_EVENT_KINDS,
+    EventError,
     TimedEvent,
     event_from_table,
     event_table_from_flag,
@@ -330,8 +331,13 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
                     key = f"--blackout/--{d}-blackout ({key})"
                 raise ConfigError(f"{src}: {key}: the window [{start:g}, {start + dur:g}) s starts after the "
                                   f"mission's end (duration_s = {m.duration_s:g} s), so it would never happen")
-    wind, timeline = weather_of(m, prof, sensor_config, estimator_kind)
-    link_settings = replace(link_settings, handovers=handovers_of(timeline, m))
+    try:
+        wind, timeline = weather_of(m, prof, sensor_config, estimator_kind)
+        link_settings = replace(link_settings, handovers=handovers_of(timeline, m))
+    except EventError as exc:  # named where the event was given: its flag (--at), else the mission's table
+        given = [n for e, n in zip(over.at, over._at_named, strict=True)
+                 if event_from_table(Table(e, n), m.duration_s) == exc.event]
+        raise EventError(exc.event, exc.what, given[0] if given else exc.where) from None
     try:
         law = resolve_law(m.controller)
         flight = Flight(m, prof, effects, gains, failsafe, link_settings, law, sensor_config, estimator_kind,
@@ -348,10 +354,12 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
     return flight
 
 
-def event_problem(kind: str, prof: Profile, sensors: SensorConfig | None) -> str | None:
+def event_problem(kind: str, prof: Profile, sensors: SensorConfig | None, estimator: str = "ekf") -> str | None:
     """Why an event of ``kind`` cannot act on this vehicle (``sensors`` None: the truth estimator, no sensor
     to fail), or None: a motor event needs rotors, a sensor event the vehicle's sensors, a GPS event a gnss
-    set, a compass event a heading sensor. The timeline's check, and a ground station's injection's."""
+    set, a compass event a heading sensor, and an ``estimator`` that reads that sensor (``raw`` reads no
+    barometer, nor a compass when its set measures the attitude: docs/sensors.md). The timeline's check, and a
+    ground station's injection's."""
     if kind == "motor" and prof.actuation != "motors":
         return (f"profile {prof.name!r} flies ideal wrench actuation: it has no rotors to fail (fly --profile x500, "
                 "or set the mission's actuation = \"motors\")")
@@ -362,6 +370,10 @@ def event_problem(kind: str, prof: Profile, sensors: SensorConfig | None) -> str
         return f"sensor set {sensors.name!r} has no GPS (its position is {sensors.position_class}): fly --sensors gnss"
     if kind == "mag" and sensors is not None and sensors.heading_rate_hz <= 0.0:
         return f"sensor set {sensors.name!r} has no magnetometer (heading_rate_hz = 0)"
+    if estimator == "raw" and sensors is not None and (kind == "baro" or (kind == "mag" and
+                                                                          sensors.position_class == "mocap")):
+        what = "barometer" if kind == "baro" else f"compass (set {sensors.name!r} measures the attitude)"
+        return f"the raw estimator never reads the {what}, so the fault would change nothing: fly --estimator ekf"
     return None
 
 
@@ -374,9 +386,9 @@ def weather_of(m: Mission, prof: Profile, sensors: SensorConfig, estimator: str)
     src = m.source
     timeline = timeline_from_tables(m.events, src, m.duration_s)
     for e in timeline:
-        why = event_problem(e.kind, prof, None if estimator == "truth" else sensors)
+        why = event_problem(e.kind, prof, None if estimator == "truth" else sensors, estimator)
         if why is not None:
-            raise ConfigError(f"{src}: events (t_s = {e.t_s:g}, kind = {e.kind}): {why}")
+            raise EventError(e, why, f"{src}: events (t_s = {e.t_s:g}, kind = {e.kind})")
     if not m.wind and not any(e.kind in ("wind", "gust") for e in timeline):
         return None, timeline
     wind = wind_from_table(Table(m.wind, src, "wind"), m.duration_s)
@@ -403,12 +415,12 @@ def handovers_of(timeline: tuple[TimedEvent, ...], m: Mission) -> tuple[tuple[fl
         table = dict(e.settings)
         guard = [k for k in GUARD_KEYS if k in table]
         if guard:
-            raise ConfigError(f"{where}: {guard[0]} is the controller's guard, not the link's: it stays the "
-                              f"flight's ([link] {guard[0]}); a handover changes the two directions only")
+            raise EventError(e, f"{guard[0]} is the controller's guard, not the link's: it stays the flight's "
+                             f"([link] {guard[0]}); a handover changes the two directions only", where)
         try:
             ls = link_from_table(table, m.source, seed=m.seed, duration_s=m.duration_s)
         except ConfigError as exc:
-            raise ConfigError(f"{where}: {str(exc).removeprefix(m.source + ': ')}") from None
+            raise EventError(e, str(exc).removeprefix(m.source + ": "), where) from None
         out.append((e.step(m.rate_hz) / m.rate_hz, ls.up, ls.down))
     return tuple(out)
 

@@ -206,7 +206,8 @@ class Commander:
             return self._refuse("INJECT_FAILURE: disabled, SYS_FAILURE_EN is 0")
         sensors = sim.sensors.config if sim.sensors is not None else None
         got = injection(m.param1, m.param2, m.param3, sim.t,
-                        lambda kind: event_problem(kind, sim.plant.profile, sensors))
+                        lambda kind: event_problem(kind, sim.plant.profile, sensors,
+                                                      getattr(sim.estimator, "kind", "truth")))
         if got.why is not None:
             if got.result == mavlink.MAV_RESULT_DENIED:
                 self.ports.reject("bad_number")
