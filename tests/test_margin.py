@@ -272,3 +272,83 @@ def test_the_wind_margin_is_found_inside_its_bracket(tmp_path: Path) -> None:
     windy.write_text(dump_toml({**SHORT.to_dict(), "wind": {"speed_mps": 3.0}}))
     refused = bsst("margin", str(windy), "--over", "wind_mps", "--until", "rms=0.1")
     assert refused.returncode == 2 and "already sets speed_mps = 3" in refused.stderr, refused.stderr
+
+
+# -- a plug-in law that cannot be flown is no boundary ----------------------------------------------------------------
+BAD_LAWS = '''
+import os
+
+
+class _Law:
+    def __init__(self, nominal, gains, rate_hz):
+        self.m, self.g = nominal.mass, nominal.gravity
+        self.desired = (0.0, 0.0)
+
+    def advance(self, saturated, hold=False):
+        pass
+
+    def reset(self):
+        pass
+
+
+class Dies(_Law):  # ends its worker process past any guard (docs/usage.md: a failed cell, "worker process died")
+    def update(self, t, state, ref, omega_d):
+        if t > 5.0:
+            os.abort()
+        return (self.m * self.g, 0.0, 0.0, 0.0)
+
+
+class Raises(_Law):  # fails every flight: law_failed, at every value
+    def update(self, t, state, ref, omega_d):
+        raise ZeroDivisionError("my bad")
+'''
+
+
+def test_a_law_whose_worker_dies_ends_its_own_search_not_the_others(tmp_path: Path) -> None:
+    """A plug-in law that kills its worker (``os.abort()`` at 5 s): its first probe is a failed cell (``worker
+    process died``), its search ends there with no margin and says why; bsst's search goes on to its margin,
+    margin.json is written, and the command exits 1 (not as asked), naming the law."""
+    laws = tmp_path / "bad_laws.py"
+    laws.write_text(BAD_LAWS)
+    mission = tmp_path / "short.toml"
+    mission.write_text(dump_toml(SHORT.to_dict()))
+    r = bsst("margin", str(mission), "--over", "delay_ms", "--until", "rms=0.1", "--resolution", "4",
+             "--check-below", "4", "--controller", f"bsst,{laws}:Dies", "--jobs", "2", "--out", str(tmp_path / "m"))
+    assert r.returncode == 1 and "Traceback" not in r.stderr, (r.stdout, r.stderr)
+    res = json.loads((tmp_path / "m" / "margin.json").read_text())
+    own, dies = res["controllers"]
+    assert own["controller"] == "bsst" and own["error"] is None and own["margin"] == 36.0, own
+    assert own["bracket"] == [36.0, 40.0] and own["monotone"] is True and not own["held_to_range"]
+    assert res["laws_failed"] == [f"{laws}:Dies"]
+    assert dies["margin"] is None and dies["bracket"] == [None, None] and not dies["held_to_range"]
+    assert dies["error"] == {"delay_ms": 16.0, "seed": 0, "outcome": "error", "phase": "bisection",
+                             "error": "worker process died"}, dies["error"]
+    assert [(c["delay_ms"], c["outcome"], c["error"]) for c in dies["cells"]] == [
+        (16.0, "error", "worker process died")]
+    assert res["cells_flown"] == len(own["cells"]) + 1
+    assert "margin bsst: delay_ms 36 (bracket [36, 40]" in r.stdout
+    assert (f"margin {laws}:Dies: delay_ms: none (the law failed, not the criterion: error at 16; worker process "
+            "died)") in r.stdout, r.stdout
+    assert f"bsst margin: {laws}:Dies could not be flown at delay_ms = 16 (seed 0, error): worker process died" \
+        in r.stderr, r.stderr
+
+
+def test_a_law_that_fails_every_flight_is_not_reported_as_a_boundary(tmp_path: Path) -> None:
+    """A plug-in law that raises in every flight measured nothing: not "fails at every value flown" and exit 0,
+    but the law's failure with its first message, in the line, on stderr and in margin.json, and exit 1."""
+    laws = tmp_path / "bad_laws.py"
+    laws.write_text(BAD_LAWS)
+    r = bsst("margin", "missions/sine.toml", "--over", "delay_ms", "--until", "rms=0.1", "--controller",
+             f"{laws}:Raises", "--out", str(tmp_path / "m"))
+    assert r.returncode == 1 and "Traceback" not in r.stderr, (r.stdout, r.stderr)
+    res = json.loads((tmp_path / "m" / "margin.json").read_text())
+    (law,) = res["controllers"]
+    assert res["laws_failed"] == [f"{laws}:Raises"] and law["margin"] is None and law["holds_below"] is None
+    says = "update() raised ZeroDivisionError: my bad"
+    assert law["error"]["outcome"] == "law_failed" and says in law["error"]["error"], law["error"]
+    (cell,) = law["cells"]  # its search ends at its first probe: no other value is flown for nothing
+    assert cell["outcome"] == "law_failed" and cell["class"] == "error" and cell["failed"] and says in cell["error"]
+    assert cell["policies"] == "ok"
+    assert "fails at every value flown" not in r.stdout
+    assert "none (the law failed, not the criterion: law_failed at 16; " in r.stdout and says in r.stdout, r.stdout
+    assert f"{laws}:Raises could not be flown at delay_ms = 16 (seed 0, law_failed): " in r.stderr, r.stderr
