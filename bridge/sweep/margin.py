@@ -9,7 +9,13 @@ RMS error passes X m; ``class=NAME``: the cell's class is NAME or worse, see
 :mod:`bridge.sweep.classes`), the laws, the seeds and the band checked below the margin (axis unit).
 Out: per law the margin (the largest value flown that did not fail, in the axis's unit), its bracket
 ``[margin, first failing value]``, ``monotone``, ``failed_below`` and ``holds_below`` (the check
-below it), and every cell flown; ``margin.json`` when a directory is given.
+below it), and every cell flown; ``margin.json`` when a directory is given (the search's fields, then one
+entry per law under ``controllers``, whatever their number: docs/campaigns.md, "margin.json").
+
+A law that could not be flown at a value (a cell ``law_failed``, or ``error``: e.g. its worker process died)
+measured nothing there: not a boundary. Its search ends at that cell, its ``error`` says where and why, its
+margin is None; the other laws' searches go on (``laws_failed`` names it; ``bsst margin`` exits 1). A cell
+``denied`` (the mission's vehicle is not armed) is the mission's fault, at any value: ConfigError.
 
 A value fails when any of its seeds fails. The search first doubles from ``start`` until it
 finds a failing value (or reaches the axis's range), then halves the bracket until it is no
@@ -74,7 +80,9 @@ class Until:
     def failed(self, row: dict[str, Any], classes: Classes) -> bool:
         """Whether a probe's row fails: the criterion, or a safety policy its run broke (its ``policies``
         column names one: a probe that left its geofence does not hold, whatever its RMS)."""
-        if row["outcome"] in FAILED:  # it measured nothing: the search's caller ends that law's search (Search.take)
+        if row["outcome"] == "denied":  # its vehicle is not armed, at any value, for any law: the mission's fault
+            raise ConfigError(f"margin: a cell could not be flown: {row.get('error')}")
+        if row["outcome"] in FAILED:  # the law failed, or its worker died: Search.take ends that law's search
             return True
         if broke_policy(row):
             return True
