@@ -121,7 +121,7 @@ def margin(d: str, predict: bool, scatter: bool = False) -> dict[str, Any]:
             cmd += ["--compensation", "predict"]
         subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=3600, check=False)
         f = Path(tmp) / "margin.json"
-        res = json.loads(f.read_text()) if f.exists() else {}
+        res = json.loads(f.read_text())["controllers"][0] if f.exists() else {}  # one law: its entry
         return {k: res.get(k) for k in ("margin", "holds_below", "monotone", "failed_below")}
 
 
@@ -231,7 +231,7 @@ def bisect(d: str, predict: bool) -> dict[str, Any]:
     m = mission("sine", d)
     if predict:
         m = m.with_overrides(link={"compensation": "predict"})
-    r = search(m, "delay_ms", parse_until("rms=0.1"), engine="process", below=0.0)
+    r = search(m, "delay_ms", parse_until("rms=0.1"), engine="process", below=0.0)["controllers"][0]  # one law
     return {"margin": r["margin"], "holds_below": None, "monotone": None, "failed_below": None}
 
 
@@ -259,7 +259,7 @@ def ensemble(limit_m: float = 0.1, schemes: tuple[str, ...] = DISCRETIZATIONS) -
             m = replace(m, trajectory=replace(m.trajectory, x0=x0))
             # patched: one cell a round flies here, so no check below (a round of many flies in other processes)
             r = search(m, "delay_ms", parse_until(f"rms={limit_m:g}"), engine="process" if PATCHED else "auto",
-                       below=0.0 if PATCHED else None)
+                       below=0.0 if PATCHED else None)["controllers"][0]  # one law: its entry
             for k in found:  # patched: holds_below unchecked (nan)
                 v = None if PATCHED and k == "holds_below" else r.get(k)
                 found[k].append(np.nan if v is None else v)

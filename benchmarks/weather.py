@@ -153,7 +153,7 @@ def margin_table(jobs: int | None) -> None:
         for lname, link in LINKS:
             m = prepare(MISSION, link=link).mission
             e = margin(m, "wind_mps", parse_until("rms=0.1"), controllers=(law,), jobs=jobs)
-            row = (e.get("controllers") or [e])[0]
+            row = e["controllers"][0]  # one law: its entry
             print(f"| {law} | {lname} | {row['margin']} | {row['bracket']} | {e['cells_flown']} |")
     print()
 

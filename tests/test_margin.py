@@ -52,18 +52,19 @@ def test_the_delay_margin_is_found_inside_its_bracket(tmp_path: Path, extra: lis
              *extra)
     assert r.returncode == 0, r.stderr
     res = json.loads((tmp_path / "margin.json").read_text())
-    lo, hi = res["bracket"]
-    assert res["over"] == "delay_ms" and res["until"] == "rms=0.1" and res["margin"] == lo == expected
-    assert hi - lo <= 0.25 and res["checked_below"] == [expected - 4.0, expected] and res["check_below"] == 4.0
-    assert res["cells_flown"] <= 80 and len(res["cells"]) == res["cells_flown"]
-    bisection = [c for c in res["cells"] if c["phase"] == "bisection"]
+    law = res["controllers"][0]  # margin.json: one entry per law, one law here
+    lo, hi = law["bracket"]
+    assert res["over"] == "delay_ms" and res["until"] == "rms=0.1" and law["margin"] == lo == expected
+    assert hi - lo <= 0.25 and law["checked_below"] == [expected - 4.0, expected] and res["check_below"] == 4.0
+    assert res["cells_flown"] <= 80 and len(law["cells"]) == res["cells_flown"]
+    bisection = [c for c in law["cells"] if c["phase"] == "bisection"]
     assert all(c["failed"] for c in bisection if c["delay_ms"] >= hi)
     assert not any(c["failed"] for c in bisection if c["delay_ms"] <= lo)
-    below = sorted(c["delay_ms"] for c in res["cells"] if c["phase"] == "below")
+    below = sorted(c["delay_ms"] for c in law["cells"] if c["phase"] == "below")
     flown = {c["delay_ms"] for c in bisection}  # not flown again
     assert below == [v for v in (expected - 0.25 * k for k in range(16, 0, -1)) if v not in flown]
-    assert res["holds_below"] == holds and res["monotone"] is (holds == expected)
-    assert res["failed_below"] == ([] if holds == expected else [34.25, 34.5, 34.75, 35.0])
+    assert law["holds_below"] == holds and law["monotone"] is (holds == expected)
+    assert law["failed_below"] == ([] if holds == expected else [34.25, 34.5, 34.75, 35.0])
     assert f"delay_ms {lo:g}" in r.stdout
     if holds == expected:
         assert "monotone below the margin" in r.stdout and "warning" not in r.stderr
@@ -80,10 +81,11 @@ def test_require_reads_the_value_every_smaller_one_holds_to(tmp_path: Path) -> N
     r = bsst("margin", str(mission), "--over", "delay_ms", "--until", "rms=0.1", "--resolution", "1",
              "--check-below", "2", "--require", "37", "--out", str(tmp_path / "m"))
     res = json.loads((tmp_path / "m" / "margin.json").read_text())
+    law = res["controllers"][0]  # margin.json: one entry per law, one law here
     assert r.returncode == 1 and "below --require 37 (holds_below): bsst" in r.stderr, r.stderr
-    assert res["margin"] == 38.0 and res["bracket"] == [38.0, 39.0] and res["checked_below"] == [36.0, 38.0]
-    assert res["monotone"] is False and res["failed_below"] == [37.0] and res["holds_below"] == 36.0
-    assert sorted((c["delay_ms"], c["phase"]) for c in res["cells"] if 36 <= c["delay_ms"] <= 39) == [
+    assert law["margin"] == 38.0 and law["bracket"] == [38.0, 39.0] and law["checked_below"] == [36.0, 38.0]
+    assert law["monotone"] is False and law["failed_below"] == [37.0] and law["holds_below"] == 36.0
+    assert sorted((c["delay_ms"], c["phase"]) for c in law["cells"] if 36 <= c["delay_ms"] <= 39) == [
         (36.0, "bisection"), (37.0, "below"), (38.0, "bisection"), (39.0, "bisection")]
     assert "NOT MONOTONE below the margin: fails at 37 in [36, 38); holds_below 36" in r.stdout
     assert "margin bsst: delay_ms 38 (bracket [38, 39]" in r.stdout
@@ -94,9 +96,10 @@ def test_the_check_below_can_be_turned_off(tmp_path: Path) -> None:
     from bridge.sweep.margin import Until, margin
 
     res = margin(SHORT, "delay_ms", Until(rms=0.1), resolution=1.0, below=0.0)
-    assert res["margin"] == 38.0 and res["monotone"] is None and res["checked_below"] is None
-    assert res["holds_below"] == 38.0 and res["failed_below"] == []
-    assert {c["phase"] for c in res["cells"]} == {"bisection"} and res["cells_flown"] == 8
+    law = res["controllers"][0]  # margin.json: one entry per law, one law here
+    assert law["margin"] == 38.0 and law["monotone"] is None and law["checked_below"] is None
+    assert law["holds_below"] == 38.0 and law["failed_below"] == []
+    assert {c["phase"] for c in law["cells"]} == {"bisection"} and res["cells_flown"] == 8
 
 
 def test_require_fails_a_users_ci_when_the_margin_is_short(tmp_path: Path) -> None:
@@ -161,13 +164,14 @@ def test_the_noise_margin_is_found_inside_its_bracket(tmp_path: Path) -> None:
              "raw", "--check-below", "0.5", "--out", str(tmp_path / "m"))
     assert r.returncode == 0, r.stderr
     res = json.loads((tmp_path / "m" / "margin.json").read_text())
-    lo, hi = res["bracket"]
+    law = res["controllers"][0]  # margin.json: one entry per law, one law here
+    lo, hi = law["bracket"]
     assert res["over"] == "noise" and res["estimator"] == "raw" and res["sensors"] == "mocap"
-    assert res["margin"] == lo and 1.0 <= lo < hi <= 2.0 and hi - lo <= 0.25, res
-    assert res["cells_flown"] == len(res["cells"]) <= 8 and res["checked_below"] == [lo - 0.5, lo]
-    assert res["monotone"] is True and res["holds_below"] == lo and "monotone below the margin" in r.stdout
-    assert all(c["failed"] for c in res["cells"] if c["noise"] >= hi)
-    assert not any(c["failed"] for c in res["cells"] if c["noise"] <= lo)
+    assert law["margin"] == lo and 1.0 <= lo < hi <= 2.0 and hi - lo <= 0.25, res
+    assert res["cells_flown"] == len(law["cells"]) <= 8 and law["checked_below"] == [lo - 0.5, lo]
+    assert law["monotone"] is True and law["holds_below"] == lo and "monotone below the margin" in r.stdout
+    assert all(c["failed"] for c in law["cells"] if c["noise"] >= hi)
+    assert not any(c["failed"] for c in law["cells"] if c["noise"] <= lo)
     fly = SHORT.with_overrides(sensors={"set": "mocap"}, estimator={"kind": "raw"})
     assert simulate(fly.with_overrides(sensors={"set": "mocap", "noise_scale": lo})).rms <= 0.05
     assert simulate(fly.with_overrides(sensors={"set": "mocap", "noise_scale": hi})).rms > 0.05
@@ -182,10 +186,11 @@ def test_a_law_that_fails_everywhere_has_no_margin(tmp_path: Path) -> None:
     r = bsst("margin", str(mission), "--over", "noise", "--until", "rms=0.001", "--sensors", "mocap", "--estimator",
              "raw", "--require", "0", "--out", str(tmp_path / "m"))
     res = json.loads((tmp_path / "m" / "margin.json").read_text())
+    law = res["controllers"][0]  # margin.json: one entry per law, one law here
     assert r.returncode == 1 and "below --require 0 (holds_below): bsst" in r.stderr, r.stderr
-    assert res["monotone"] is None and res["holds_below"] is None and res["checked_below"] is None
-    assert res["margin"] is None and res["bracket"] == [None, 0.0] and all(c["failed"] for c in res["cells"])
-    assert [c["noise"] for c in res["cells"]] == [1.0, 0.5, 0.25, 0.0]
+    assert law["monotone"] is None and law["holds_below"] is None and law["checked_below"] is None
+    assert law["margin"] is None and law["bracket"] == [None, 0.0] and all(c["failed"] for c in law["cells"])
+    assert [c["noise"] for c in law["cells"]] == [1.0, 0.5, 0.25, 0.0]
     assert "margin bsst: noise: none" in r.stdout
 
 
@@ -255,14 +260,95 @@ def test_the_wind_margin_is_found_inside_its_bracket(tmp_path: Path) -> None:
              "--out", str(tmp_path))
     assert r.returncode == 0, r.stderr
     res = json.loads((tmp_path / "margin.json").read_text())
-    lo, hi = res["bracket"]
-    assert res["over"] == "wind_mps" and res["margin"] == lo and 0.0 < lo < hi and hi - lo <= 0.25, res
-    assert res["cells_flown"] == len(res["cells"]) <= 80
-    assert all(c["failed"] for c in res["cells"] if c["wind_mps"] >= hi)
-    assert not any(c["failed"] for c in res["cells"] if c["wind_mps"] <= lo)
+    law = res["controllers"][0]  # margin.json: one entry per law, one law here
+    lo, hi = law["bracket"]
+    assert res["over"] == "wind_mps" and law["margin"] == lo and 0.0 < lo < hi and hi - lo <= 0.25, res
+    assert res["cells_flown"] == len(law["cells"]) <= 80
+    assert all(c["failed"] for c in law["cells"] if c["wind_mps"] >= hi)
+    assert not any(c["failed"] for c in law["cells"] if c["wind_mps"] <= lo)
     assert simulate("missions/sine.toml", wind=lo).rms <= 0.1 < simulate("missions/sine.toml", wind=hi).rms
     assert f"wind_mps {lo:g}" in r.stdout
     windy = tmp_path / "windy.toml"
     windy.write_text(dump_toml({**SHORT.to_dict(), "wind": {"speed_mps": 3.0}}))
     refused = bsst("margin", str(windy), "--over", "wind_mps", "--until", "rms=0.1")
     assert refused.returncode == 2 and "already sets speed_mps = 3" in refused.stderr, refused.stderr
+
+
+# -- a plug-in law that cannot be flown is no boundary ----------------------------------------------------------------
+BAD_LAWS = '''
+import os
+
+
+class _Law:
+    def __init__(self, nominal, gains, rate_hz):
+        self.m, self.g = nominal.mass, nominal.gravity
+        self.desired = (0.0, 0.0)
+
+    def advance(self, saturated, hold=False):
+        pass
+
+    def reset(self):
+        pass
+
+
+class Dies(_Law):  # ends its worker process past any guard (docs/usage.md: a failed cell, "worker process died")
+    def update(self, t, state, ref, omega_d):
+        if t > 5.0:
+            os.abort()
+        return (self.m * self.g, 0.0, 0.0, 0.0)
+
+
+class Raises(_Law):  # fails every flight: law_failed, at every value
+    def update(self, t, state, ref, omega_d):
+        raise ZeroDivisionError("my bad")
+'''
+
+
+def test_a_law_whose_worker_dies_ends_its_own_search_not_the_others(tmp_path: Path) -> None:
+    """A plug-in law that kills its worker (``os.abort()`` at 5 s): its first probe is a failed cell (``worker
+    process died``), its search ends there with no margin and says why; bsst's search goes on to its margin,
+    margin.json is written, and the command exits 1 (not as asked), naming the law."""
+    laws = tmp_path / "bad_laws.py"
+    laws.write_text(BAD_LAWS)
+    mission = tmp_path / "short.toml"
+    mission.write_text(dump_toml(SHORT.to_dict()))
+    r = bsst("margin", str(mission), "--over", "delay_ms", "--until", "rms=0.1", "--resolution", "4",
+             "--check-below", "4", "--controller", f"bsst,{laws}:Dies", "--jobs", "2", "--out", str(tmp_path / "m"))
+    assert r.returncode == 1 and "Traceback" not in r.stderr, (r.stdout, r.stderr)
+    res = json.loads((tmp_path / "m" / "margin.json").read_text())
+    own, dies = res["controllers"]
+    assert own["controller"] == "bsst" and own["error"] is None and own["margin"] == 36.0, own
+    assert own["bracket"] == [36.0, 40.0] and own["monotone"] is True and not own["held_to_range"]
+    assert res["laws_failed"] == [f"{laws}:Dies"]
+    assert dies["margin"] is None and dies["bracket"] == [None, None] and not dies["held_to_range"]
+    assert dies["error"] == {"delay_ms": 16.0, "seed": 0, "outcome": "error", "phase": "bisection",
+                             "error": "worker process died"}, dies["error"]
+    assert [(c["delay_ms"], c["outcome"], c["error"]) for c in dies["cells"]] == [
+        (16.0, "error", "worker process died")]
+    assert res["cells_flown"] == len(own["cells"]) + 1
+    assert "margin bsst: delay_ms 36 (bracket [36, 40]" in r.stdout
+    assert (f"margin {laws}:Dies: delay_ms: none (the law failed, not the criterion: error at 16; worker process "
+            "died)") in r.stdout, r.stdout
+    assert f"bsst margin: {laws}:Dies could not be flown at delay_ms = 16 (seed 0, error): worker process died" \
+        in r.stderr, r.stderr
+
+
+def test_a_law_that_fails_every_flight_is_not_reported_as_a_boundary(tmp_path: Path) -> None:
+    """A plug-in law that raises in every flight measured nothing: not "fails at every value flown" and exit 0,
+    but the law's failure with its first message, in the line, on stderr and in margin.json, and exit 1."""
+    laws = tmp_path / "bad_laws.py"
+    laws.write_text(BAD_LAWS)
+    r = bsst("margin", "missions/sine.toml", "--over", "delay_ms", "--until", "rms=0.1", "--controller",
+             f"{laws}:Raises", "--out", str(tmp_path / "m"))
+    assert r.returncode == 1 and "Traceback" not in r.stderr, (r.stdout, r.stderr)
+    res = json.loads((tmp_path / "m" / "margin.json").read_text())
+    (law,) = res["controllers"]
+    assert res["laws_failed"] == [f"{laws}:Raises"] and law["margin"] is None and law["holds_below"] is None
+    says = "update() raised ZeroDivisionError: my bad"
+    assert law["error"]["outcome"] == "law_failed" and says in law["error"]["error"], law["error"]
+    (cell,) = law["cells"]  # its search ends at its first probe: no other value is flown for nothing
+    assert cell["outcome"] == "law_failed" and cell["class"] == "error" and cell["failed"] and says in cell["error"]
+    assert cell["policies"] == "ok"
+    assert "fails at every value flown" not in r.stdout
+    assert "none (the law failed, not the criterion: law_failed at 16; " in r.stdout and says in r.stdout, r.stdout
+    assert f"{laws}:Raises could not be flown at delay_ms = 16 (seed 0, law_failed): " in r.stderr, r.stderr

@@ -270,5 +270,6 @@ def test_a_plan_is_swept_and_its_delay_margin_searched(tmp_path: Path, capsys) -
     assert main(["margin", str(plan), "--over", "delay_ms", "--until", "rms=0.1", "--resolution", "8",
                  "--check-below", "0", "--out", str(tmp_path / "margin")]) == 0
     found = json.loads((tmp_path / "margin" / "margin.json").read_text())
-    assert found["margin"] is not None and found["margin"] < found["bracket"][1], found
+    law = found["controllers"][0]  # margin.json: one entry per law, one law here
+    assert law["margin"] is not None and law["margin"] < law["bracket"][1], found
     capsys.readouterr()

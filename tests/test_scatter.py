@@ -103,13 +103,14 @@ def test_margin_over_scattered_starts_records_them(tmp_path: Path) -> None:
     assert r.returncode == 0, r.stderr
     assert "each value from 2 starts within 0.01 m of the mission's" in r.stdout, r.stdout
     res = json.loads((tmp_path / "m" / "margin.json").read_text())
-    assert res["start_scatter_m"] == 0.01 and res["seeds"] == [0, 1] and res["margin"] > 0
-    assert res["seeds_alike"] is False and "flew the same flight" not in r.stderr
+    law = res["controllers"][0]  # margin.json: one entry per law, one law here
+    assert res["start_scatter_m"] == 0.01 and res["seeds"] == [0, 1] and law["margin"] > 0
+    assert law["seeds_alike"] is False and "flew the same flight" not in r.stderr
     # without the scatter the two seeds fly one flight twice: margin.json and a warning say so
     same = run_bsst("margin", f, "--over", "delay_ms", "--until", "rms=0.1", "--seeds", "2", "--resolution", "1",
                     "--check-below", "0", "--out", tmp_path / "m2")
     assert same.returncode == 0, same.stderr
-    assert json.loads((tmp_path / "m2" / "margin.json").read_text())["seeds_alike"] is True
+    assert json.loads((tmp_path / "m2" / "margin.json").read_text())["controllers"][0]["seeds_alike"] is True
     assert "warning: the 2 seeds of each value flew the same flight" in same.stderr and "--scatter M" in same.stderr
     bad = run_bsst("margin", f, "--over", "delay_ms", "--until", "rms=0.1", "--scatter", "-1")
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "--scatter" in bad.stderr, bad.stderr
@@ -164,5 +165,5 @@ def test_over_sixteen_starts_the_implicit_scheme_keeps_the_explicit_laws_delay_m
     m = replace(load_mission("missions/sine.toml"), start_scatter_m=0.01)
     found = {d: margin(replace(m, discretization=d), "delay_ms", parse_until("rms=0.1"), seeds=16, below=0.0)
              for d in ("explicit", "implicit")}
-    assert {d: r["margin"] for d, r in found.items()} == {"explicit": 32.0, "implicit": 33.0}
-    assert all(r["seeds_alike"] is False and r["start_scatter_m"] == 0.01 for r in found.values())
+    assert {d: r["controllers"][0]["margin"] for d, r in found.items()} == {"explicit": 32.0, "implicit": 33.0}
+    assert all(r["controllers"][0]["seeds_alike"] is False and r["start_scatter_m"] == 0.01 for r in found.values())

@@ -263,7 +263,7 @@ def cmd_margin(args: argparse.Namespace) -> int:
     if live:
         sys.stderr.write("\n")
     path = write_margin(res, args.out, mission.name, args.overwrite)
-    entries = res.get("controllers") or [res]
+    entries = res["controllers"]
     what = f" x the sigmas of {res['sensors']}, estimator {res['estimator']}" if args.over == "noise" else ""
     for e in entries:
         for line in margin_lines(e, args.over, what, res["until"]):
@@ -279,17 +279,26 @@ def cmd_margin(args: argparse.Namespace) -> int:
     starts = (f"; each value from {len(res['seeds'])} starts within {res['start_scatter_m']:g} m of the mission's"
               if res["start_scatter_m"] else "")
     print(f"{res['cells_flown']} cells flown{starts}; margin.json: {path / 'margin.json'}")
+    for e in entries:  # a law that could not be flown is no boundary: said, and the command did not complete
+        if e["error"] is not None:
+            err = e["error"]
+            print(f"bsst margin: {e['controller']} could not be flown at {args.over} = {err[args.over]:g} (seed "
+                  f"{err['seed']}, {err['outcome']}): {err['error']}", file=sys.stderr)
     low = [e["controller"] for e in entries if args.require is not None
            and (e["holds_below"] is None or e["holds_below"] < args.require)]
     if low:
         print(f"bsst margin: below --require {args.require:g} (holds_below): {', '.join(low)}", file=sys.stderr)
-        return EXIT_FAILED
-    return EXIT_OK
+    return EXIT_FAILED if low or res["laws_failed"] else EXIT_OK
 
 
 def margin_lines(e: dict[str, Any], over: str, what: str, until: str) -> list[str]:
     """The console lines of one law's margin: the bisection's answer and its bracket, then the check below it."""
     lo, hi = e["bracket"]
+    err = e["error"]
+    if err is not None and err["phase"] == "bisection":  # the law failed, or its worker died: no boundary found
+        held = f"; every value flown below it held, up to {lo:g}" if lo is not None else ""
+        return [f"margin {e['controller']}: {over}: none{what} (the law failed, not the criterion: {err['outcome']} at "
+                f"{err[over]:g}{held}; {err['error']})"]
     if e["margin"] is None:  # no value held, the range's low end included
         return [f"margin {e['controller']}: {over}: none{what} (fails at every value flown, down to {hi:g}, "
                 f"the low end of its range; until {until})"]

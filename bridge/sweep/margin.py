@@ -9,7 +9,13 @@ RMS error passes X m; ``class=NAME``: the cell's class is NAME or worse, see
 :mod:`bridge.sweep.classes`), the laws, the seeds and the band checked below the margin (axis unit).
 Out: per law the margin (the largest value flown that did not fail, in the axis's unit), its bracket
 ``[margin, first failing value]``, ``monotone``, ``failed_below`` and ``holds_below`` (the check
-below it), and every cell flown; ``margin.json`` when a directory is given.
+below it), and every cell flown; ``margin.json`` when a directory is given (the search's fields, then one
+entry per law under ``controllers``, whatever their number: docs/campaigns.md, "margin.json").
+
+A law that could not be flown at a value (a cell ``law_failed``, or ``error``: e.g. its worker process died)
+measured nothing there: not a boundary. Its search ends at that cell, its ``error`` says where and why, its
+margin is None; the other laws' searches go on (``laws_failed`` names it; ``bsst margin`` exits 1). A cell
+``denied`` (the mission's vehicle is not armed) is the mission's fault, at any value: ConfigError.
 
 A value fails when any of its seeds fails. The search first doubles from ``start`` until it
 finds a failing value (or reaches the axis's range), then halves the bracket until it is no
@@ -43,7 +49,7 @@ from typing import Any
 
 from bridge.core.flight import prepare
 from bridge.record.runlog import run_dir, write_json_atomic
-from bridge.sweep.cells import broke_policy, seeds_alike
+from bridge.sweep.cells import FAILED, broke_policy, seeds_alike
 from bridge.sweep.classes import CLASSES, Classes, classify
 from bridge.sweep.executors import engine_for, run_batch, run_cell, run_local
 from bridge.sweep.grid import LINK_AXES, RANGES, Cell, cell_flight, link_trace, mission_value, noise_problem
@@ -74,8 +80,10 @@ class Until:
     def failed(self, row: dict[str, Any], classes: Classes) -> bool:
         """Whether a probe's row fails: the criterion, or a safety policy its run broke (its ``policies``
         column names one: a probe that left its geofence does not hold, whatever its RMS)."""
-        if row["outcome"] in ("error", "denied"):  # (denied: its vehicle was not armed, at any value)
+        if row["outcome"] == "denied":  # its vehicle is not armed, at any value, for any law: the mission's fault
             raise ConfigError(f"margin: a cell could not be flown: {row.get('error')}")
+        if row["outcome"] in FAILED:  # the law failed, or its worker died: Search.take ends that law's search
+            return True
         if broke_policy(row):
             return True
         if self.rms is not None:
@@ -116,6 +124,7 @@ class Search:
     hi: float | None = None
     cells: list[dict[str, Any]] = field(default_factory=list)
     held: bool = False
+    error: dict[str, Any] | None = None  # the first cell that could not be flown: the search ended there
 
     def next_value(self, resolution: float, top: float) -> float | None:
         if self.hi is None:
@@ -139,13 +148,19 @@ class Search:
         """Record this law's cells of ``value`` among ``rows`` (``phase``: bisection | below); whether it failed."""
         mine = [r for r in rows if r["controller"] == self.controller and r[over] == value]
         cells = [{over: value, "seed": r["seed"], "rms": r["rms"], "outcome": r["outcome"],
-                  "class": classify(r, classes), "failed": until.failed(r, classes), "phase": phase} for r in mine]
+                  "class": classify(r, classes), "failed": until.failed(r, classes), "phase": phase,
+                  "error": r.get("error") or "", "policies": r.get("policies") or ""} for r in mine]
         self.cells += cells
+        unflown = [c for c in cells if c["outcome"] in FAILED]
+        if unflown and self.error is None:  # the law failed (or its worker died): it measured nothing there
+            c = unflown[0]
+            self.error = {over: value, "seed": c["seed"], "outcome": c["outcome"], "phase": phase,
+                          "error": c["error"] or c["outcome"]}
         return any(c["failed"] for c in cells)
 
     def band(self, over: str, below: float, resolution: float, floor: float) -> list[float]:
         """The values of ``[margin - below, margin)`` at ``resolution`` steps (not under ``floor``) not flown yet."""
-        if not self.held or below <= 0:
+        if not self.held or below <= 0 or self.error is not None:
             return []
         flown = {c[over] for c in self.cells}
         steps = int(math.floor(below / resolution + 1e-9))
@@ -235,7 +250,11 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
             if s.controller not in pending:
                 continue
             v = pending[s.controller]
-            s.record(v, s.take(over, v, rows, until, classes, "bisection"))
+            failed = s.take(over, v, rows, until, classes, "bisection")
+            if s.error is not None:  # not a boundary: the law could not be flown there; its search ends
+                del pending[s.controller]
+                continue
+            s.record(v, failed)
             nxt = s.next_value(resolution, top)
             if nxt is None:  # bracketed to the resolution, or held up to the top of the axis's range
                 del pending[s.controller]
@@ -254,20 +273,22 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
         for s in searches:
             for v in bands[s.controller]:
                 s.take(over, v, rows, until, classes, "below")
-    checked = {s.controller: [max(s.lo - below, lo_range), s.lo] if s.held and below > 0 else None for s in searches}
-    entries = [{"controller": s.controller, "margin": s.lo if s.held else None,  # None: it failed at every value
-                "bracket": [s.lo if s.held else None, s.hi], **s.below(over, checked[s.controller]),
-                "seeds_alike": seeds_alike(s.cells, itemgetter(over)), "cells": s.cells,
-                "held_to_range": s.hi is None} for s in searches]
-    out: dict[str, Any] = {"over": over, "until": until.text(), "resolution": resolution, "check_below": below,
-                           "seeds": seed_list, "start_scatter_m": mission.start_scatter_m,  # 0: one start, every seed
-                           "mission": mission.name, "cells_flown": cells_flown, "estimator": flight.estimator,
-                           "sensors": flight.sensors.name}
-    if len(entries) == 1:
-        out.update({k: v for k, v in entries[0].items()})
-    else:
-        out["controllers"] = entries
-    return out
+    checked = {s.controller: [max(s.lo - below, lo_range), s.lo] if s.held and below > 0 and s.error is None
+               else None for s in searches}
+    return {"over": over, "until": until.text(), "resolution": resolution, "check_below": below,
+            "seeds": seed_list, "start_scatter_m": mission.start_scatter_m,  # 0: one start, every seed
+            "mission": mission.name, "cells_flown": cells_flown, "estimator": flight.estimator,
+            "sensors": flight.sensors.name, "laws_failed": [s.controller for s in searches if s.error is not None],
+            "controllers": [entry(s, over, checked[s.controller]) for s in searches]}
+
+
+def entry(s: Search, over: str, checked: list[float] | None) -> dict[str, Any]:
+    """One law's entry of ``margin.json``'s ``controllers`` (see docs/campaigns.md, "margin.json")."""
+    cut = s.error is not None and s.error["phase"] == "bisection"  # its search ended there: no margin
+    return {"controller": s.controller, "margin": s.lo if s.held and not cut else None,  # None: no value held
+            "bracket": [s.lo if s.held else None, s.hi], **s.below(over, checked),
+            "seeds_alike": seeds_alike(s.cells, itemgetter(over)), "error": s.error, "cells": s.cells,
+            "held_to_range": s.hi is None and s.error is None}
 
 
 def fly_round(mission: Mission, probes: list[Cell], engine: str, jobs: int | None) -> list[dict[str, Any]]:
