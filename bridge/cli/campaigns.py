@@ -5,7 +5,8 @@ In:  the parsed flags (``argparse.Namespace``): a mission or sweep TOML, swept v
      ``--loss`` %, ``--rate`` Hz, ...), flags fixed for every cell, ``--until rms=M|class=NAME``
 Out: the call of :func:`bridge.sweep.run_sweep`, :func:`bridge.sweep.report.rebuild` or
      :func:`bridge.sweep.margin.margin`; their figures on stdout (margins in the axis's unit); the exit
-     status: 0 done, 1 a failed or interrupted sweep or a margin below ``--require``, 2 bad input
+     status: 0 done, 1 a failed or interrupted sweep (``bsst report`` of an interrupted one too) or a margin below
+     ``--require``, 2 bad input
 """
 
 from __future__ import annotations
