@@ -147,7 +147,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             client.close()
     cells = f"{len(res.rows)} of {res.total} cells flown (interrupted): {res.ran} this run" if res.interrupted else \
         f"{len(res.rows)} cells, {res.ran} flown"
-    mixed = f"; MIXED engines: the rows kept from before flew on {res.engines[0]}" if len(res.engines) > 1 else ""
+    mixed = "" if len(res.engines) < 2 else f"; MIXED engines: the rows kept from before flew on {res.engines[0]}" \
+        if res.engines[0] != "unrecorded" else "; the rows kept from before: their engine not recorded (an older bsst)"
     print(f"sweep {spec.mission.name}: {cells}, {res.reused} kept from before, {res.failed} failed, "
           f"{res.wall_s:.1f} s; engine {res.engine} ({res.engine_why}){mixed}")
     if res.interrupted:

@@ -27,6 +27,7 @@ from bridge.sweep.cells import (
     INPUT_HASHES,
     MISSION_HASH,
     SWEEP_JSON,
+    UNRECORDED,
     CellsFile,
     read_cells,
     read_sweep_json,
@@ -239,7 +240,7 @@ def _open_dir(spec: Sweep, out: str | Path | None, resume: bool, overwrite: bool
                                   f"{', '.join(lacks)} columns); bsst report still reads it; fly the sweep into "
                                   "another --out")
             recorded = old.pop(MISSION_HASH, None)
-            inputs, engines = old.pop(INPUT_HASHES, {}), old.pop(ENGINES, [])
+            inputs, engines = old.pop(INPUT_HASHES, {}), old.pop(ENGINES, [UNRECORDED])  # (an older bsst's)
             if old != ident:
                 diff = sorted(k for k in ident if old.get(k) != ident[k])
                 raise ConfigError(f"--resume: {path} holds a different sweep ({', '.join(diff)} differ); "

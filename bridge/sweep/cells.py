@@ -72,6 +72,7 @@ SWEEP_JSON = "sweep.json"
 MISSION_HASH = "mission_toml_sha256"  # sweep.json: the hash of the mission.toml the sweep wrote beside it
 INPUT_HASHES = "input_files_sha256"  # sweep.json: {path: hash} of the law files, traces, profiles the cells read
 ENGINES = "engines"  # sweep.json: the engines that flew its rows (two: a resume flew some on the other one)
+UNRECORDED = "unrecorded"  # in ENGINES: rows kept from a sweep.json of before the field (which engine: not known)
 RECORDS = (MISSION_HASH, INPUT_HASHES, ENGINES)  # sweep.json's records beside the sweep's identity
 
 

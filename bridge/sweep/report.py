@@ -37,6 +37,7 @@ from bridge.sweep.cells import (
     FAILED,
     POLICIES_OK,
     SWEEP_JSON,
+    UNRECORDED,
     broke_policy,
     read_cells,
     read_sweep_json,
@@ -179,6 +180,10 @@ def incomplete(path: Path, rows: Sequence[Any], meta: Mapping[str, Any]) -> str 
 def engines_note(meta: Mapping[str, Any]) -> list[str]:
     """Which engine flew the rows (sweep.json's ``engines``; two: mixed, a resume flew some on the other)."""
     engines = meta.get("engines") or []
+    if UNRECORDED in engines:
+        flew = [f"`{e}`" for e in engines if e != UNRECORDED]
+        return [f"- engines: not recorded for the rows kept from an older bsst's sweep; {' and '.join(flew) or 'none'} "
+                "flew the others"]
     if len(engines) == 1:
         return [f"- engine: `{engines[0]}` flew every row"]
     if len(engines) > 1:
