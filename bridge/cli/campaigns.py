@@ -5,7 +5,8 @@ In:  the parsed flags (``argparse.Namespace``): a mission or sweep TOML, swept v
      ``--loss`` %, ``--rate`` Hz, ...), flags fixed for every cell, ``--until rms=M|class=NAME``
 Out: the call of :func:`bridge.sweep.run_sweep`, :func:`bridge.sweep.report.rebuild` or
      :func:`bridge.sweep.margin.margin`; their figures on stdout (margins in the axis's unit); the exit
-     status: 0 done, 1 a failed or interrupted sweep or a margin below ``--require``, 2 bad input
+     status: 0 done, 1 a failed or interrupted sweep (``bsst report`` of an interrupted one too) or a margin below
+     ``--require``, 2 bad input
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from __future__ import annotations
 import argparse
 import sys
 from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
 from bridge.cli.flags import (
@@ -143,8 +145,12 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     finally:
         if client is not None:
             client.close()
-    print(f"sweep {spec.mission.name}: {len(res.rows)} cells, {res.ran} flown, {res.reused} kept from before, "
-          f"{res.failed} failed, {res.wall_s:.1f} s; engine {res.engine} ({res.engine_why})")
+    cells = f"{len(res.rows)} of {res.total} cells flown (interrupted): {res.ran} this run" if res.interrupted else \
+        f"{len(res.rows)} cells, {res.ran} flown"
+    mixed = "" if len(res.engines) < 2 else f"; MIXED engines: the rows kept from before flew on {res.engines[0]}" \
+        if res.engines[0] != "unrecorded" else "; the rows kept from before: their engine not recorded (an older bsst)"
+    print(f"sweep {spec.mission.name}: {cells}, {res.reused} kept from before, {res.failed} failed, "
+          f"{res.wall_s:.1f} s; engine {res.engine} ({res.engine_why}){mixed}")
     if res.interrupted:
         print(f"bsst: interrupted; continue with --resume --out {res.path}", file=sys.stderr)
         return EXIT_FAILED
@@ -322,8 +328,12 @@ def margin_lines(e: dict[str, Any], over: str, what: str, until: str) -> list[st
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from bridge.sweep.report import rebuild  # lazy: start-up time
+    from bridge.sweep.report import incomplete, load_sweep_dir, rebuild  # lazy: start-up time
 
     print(f"report: {rebuild(args.dir, plots=not args.no_plots)}")
+    short = incomplete(Path(args.dir), *load_sweep_dir(args.dir))
+    if short:  # its tables are those of the cells flown so far: said, and not a finished sweep's status
+        print(f"bsst report: {short}", file=sys.stderr)
+        return EXIT_FAILED
     return EXIT_OK
 

@@ -13,7 +13,7 @@ import hashlib
 import os
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -21,10 +21,13 @@ from bridge.record.runlog import run_dir, write_json_atomic
 from bridge.sweep.cells import (
     CELLS_CSV,
     COLUMNS,
+    ENGINES,
     FAILED,
     FLEET_COLUMNS,
+    INPUT_HASHES,
     MISSION_HASH,
     SWEEP_JSON,
+    UNRECORDED,
     CellsFile,
     read_cells,
     read_sweep_json,
@@ -42,6 +45,7 @@ from bridge.sweep.executors import (
     run_local,
 )
 from bridge.sweep.grid import Grid
+from bridge.sweep.inputs import check_inputs, input_hashes
 from bridge.sweep.report import write_report
 from bridge.sweep.spec import Sweep
 from missions import Mission, load_mission
@@ -112,6 +116,8 @@ class Outcome:
     interrupted: bool = False
     engine: str = "process"  # what flew the cells: batch or process (the grid decides for "auto")
     engine_why: str = ""
+    total: int = 0  # the grid's cells (len(rows) below it: interrupted, or a sweep of no rows yet)
+    engines: list[str] = field(default_factory=list)  # what flew every row, kept ones too (two: mixed by a resume)
 
     @property
     def status(self) -> str:
@@ -160,14 +166,16 @@ def run_sweep(
     jobs = jobs or spec.jobs or os.cpu_count() or 1
     results: dict[tuple[Any, ...], dict[str, Any]] = {}
     path: Path | None = None
-    first, _ = engine_for(spec.mission, all_cells, spec.mode, engine)  # an --engine it cannot honour: before any file
-    if first == "process" and client is None:
+    # the engine is the whole grid's (an --engine it cannot honour: refused before any file), so that a resume flies
+    # the missing cells as the uninterrupted sweep would have, and its cells.csv is that sweep's byte for byte
+    used, used_why = engine_for(spec.mission, all_cells, spec.mode, engine)
+    if used == "process" and client is None:
         check_main_guard()  # a pool started from an unguarded script: refused before any file or flight
+    engines: list[str] = []  # what flew the rows kept from before (sweep.json)
     if out is not None or write:
-        path, kept = _open_dir(spec, out, resume, overwrite, root)
+        path, kept, engines = _open_dir(spec, out, resume, overwrite, root)
         results.update({row_key(r): r for r in kept if row_key(r) in order})
     todo = [c for c in all_cells if c.key() not in results]
-    used, used_why = engine_for(spec.mission, todo, spec.mode, engine)
     sink = CellsFile(path / CELLS_CSV, [results[k] for k in sorted(results, key=order.__getitem__)]) if path else None
     bar = Progress(len(all_cells), len(results), enabled=progress)
     reused = len(results)
@@ -202,18 +210,22 @@ def run_sweep(
         if sink is not None:
             sink.close()
     rows = [results[c.key()] for c in all_cells if c.key() in results]
+    if len(rows) > reused and used not in engines:
+        engines = [*engines, used]
+    if path is not None:
+        _record_engines(path / SWEEP_JSON, engines)
     if path is not None and not interrupted:
         write_cells(path / CELLS_CSV, rows)
         if report:
-            write_report(path, rows, spec.identity(), plots=plots)
+            write_report(path, rows, spec.identity() | {ENGINES: engines}, plots=plots)
     failed = sum(1 for r in rows if r["outcome"] in FAILED)
     return Outcome(rows, len(rows) - reused, reused, failed, path, time.monotonic() - t0, interrupted, used,
-                   used_why)
+                   used_why, len(all_cells), engines)
 
 
 def _open_dir(spec: Sweep, out: str | Path | None, resume: bool, overwrite: bool,
-              root: str | Path) -> tuple[Path, list[dict[str, Any]]]:
-    """The sweep directory, and the rows already in it that ``resume`` keeps."""
+              root: str | Path) -> tuple[Path, list[dict[str, Any]], list[str]]:
+    """The sweep directory, the rows already in it that ``resume`` keeps, and the engines that flew them."""
     ident = spec.identity()
     if resume:
         if out is None:
@@ -228,14 +240,16 @@ def _open_dir(spec: Sweep, out: str | Path | None, resume: bool, overwrite: bool
                                   f"{', '.join(lacks)} columns); bsst report still reads it; fly the sweep into "
                                   "another --out")
             recorded = old.pop(MISSION_HASH, None)
+            inputs, engines = old.pop(INPUT_HASHES, {}), old.pop(ENGINES, [UNRECORDED])  # (an older bsst's)
             if old != ident:
                 diff = sorted(k for k in ident if old.get(k) != ident[k])
                 raise ConfigError(f"--resume: {path} holds a different sweep ({', '.join(diff)} differ); "
                                   f"use another --out")
             _check_mission_toml(path, recorded, spec)
+            check_inputs(inputs, meta)
             kept = [r for r in read_cells(path / CELLS_CSV, classes=spec.classes) if r["outcome"] != "error"] \
                 if (path / CELLS_CSV).exists() else []
-            return path, kept
+            return path, kept, engines if kept else []
         if path.exists() and any(path.iterdir()):
             raise ConfigError(f"--resume: {path} holds no {SWEEP_JSON}; not a sweep directory")
     path = run_dir(out, spec.mission.name, overwrite, root=root)
@@ -246,8 +260,16 @@ def _open_dir(spec: Sweep, out: str | Path | None, resume: bool, overwrite: bool
         stale.unlink()
     text = dump_toml(spec.mission.to_dict())
     (path / MISSION_TOML).write_text(text)
-    write_json_atomic(path / SWEEP_JSON, ident | {MISSION_HASH: _sha256(text.encode())})
-    return path, []
+    records = {MISSION_HASH: _sha256(text.encode()), INPUT_HASHES: input_hashes(ident), ENGINES: []}
+    write_json_atomic(path / SWEEP_JSON, ident | records)
+    return path, [], []
+
+
+def _record_engines(meta: Path, engines: list[str]) -> None:
+    """Write into ``sweep.json`` the engines that flew its rows (after a run; its other fields as they were)."""
+    old = read_sweep_json(meta)
+    if old.get(ENGINES) != engines:
+        write_json_atomic(meta, old | {ENGINES: engines})
 
 
 def _sha256(data: bytes) -> str:

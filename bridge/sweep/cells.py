@@ -70,6 +70,10 @@ SWEEP_JSON = "sweep.json"
 
 
 MISSION_HASH = "mission_toml_sha256"  # sweep.json: the hash of the mission.toml the sweep wrote beside it
+INPUT_HASHES = "input_files_sha256"  # sweep.json: {path: hash} of the law files, traces, profiles the cells read
+ENGINES = "engines"  # sweep.json: the engines that flew its rows (two: a resume flew some on the other one)
+UNRECORDED = "unrecorded"  # in ENGINES: rows kept from a sweep.json of before the field (which engine: not known)
+RECORDS = (MISSION_HASH, INPUT_HASHES, ENGINES)  # sweep.json's records beside the sweep's identity
 
 
 def row_from_run(cell: Cell, run: Run) -> dict[str, Any]:
@@ -343,7 +347,8 @@ MAX_SWEEP_JSON_BYTES = 16 << 20  # a sweep.json is a few kB (its mission and gri
 
 SWEEP_JSON_FIELDS = {"mission": "an object", "grid": "an object", "classes": "an object", "mode": "a string",
                      "swept": "a list of names", "columns": "a list of names", "seeds": "a list of integers",
-                     "axes": "an object", MISSION_HASH: "a string"}
+                     "axes": "an object", MISSION_HASH: "a string", INPUT_HASHES: "an object",
+                     ENGINES: "a list of names"}
 
 
 def _is_kind(v: Any, kind: str) -> bool:

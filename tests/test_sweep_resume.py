@@ -1,0 +1,137 @@
+"""A resumed sweep is the uninterrupted one: its engine is the whole grid's (recorded in sweep.json, mixed engines
+said), the files its cells read besides mission.toml (a plug-in law's, a trace's) are checked, and an interrupted
+sweep says it is one (its summary, report.md, ``bsst report``'s exit status)."""
+
+from __future__ import annotations
+
+import json
+import os
+import selectors
+import shutil
+import signal
+import time
+from pathlib import Path
+
+import pytest
+
+from bridge.cli import main
+from bridge.sweep.cells import CELLS_CSV, read_cells
+from bridge.sweep.inputs import file_sha256, input_hashes
+from missions import Mission, Sine
+from params import dump_toml
+from tests.sitlkit import ROOT, Bsst, run_bsst
+
+# starts processes (not in make test-fast); flies the batch engine (its kernels loaded first)
+pytestmark = [pytest.mark.process, pytest.mark.usefixtures("batch_kernels")]
+
+SHORT = Mission(Sine(), duration_s=4.0, name="short")
+
+
+@pytest.fixture(scope="module")
+def mission_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    p = tmp_path_factory.mktemp("mission") / "short.toml"
+    p.write_text(dump_toml(SHORT.to_dict()))
+    return p
+
+
+def _cut(whole: Path, to: Path, keep: int) -> None:
+    """``to``: the sweep directory ``whole`` as a sweep stopped after ``keep`` rows leaves it (no report.md)."""
+    shutil.copytree(whole, to)
+    lines = (to / CELLS_CSV).read_text().splitlines(keepends=True)
+    (to / CELLS_CSV).write_text("".join(lines[:1 + keep]))
+    (to / "report.md").unlink()
+
+
+def test_a_resume_flies_on_the_whole_grids_engine(mission_file: Path, tmp_path: Path, capsys) -> None:
+    """36 cells: the batch engine. Stopped after 26 rows, ``bsst report`` says 26 of 36 (exit 1); the resume flies the
+    last 10 on the batch too (not the process engine for fewer than 32 cells), so cells.csv and report.md equal the
+    uninterrupted sweep's byte for byte; a resume on the other engine is said to mix them."""
+    args = ["sweep", str(mission_file), "--delay", "0,5,10", "--loss", "0,10,20,30", "--seeds", "3", "--no-plots"]
+    whole = tmp_path / "whole"
+    assert main([*args, "--out", str(whole)]) == 0
+    assert "engine batch (the grid allows it)" in capsys.readouterr().out
+    assert json.loads((whole / "sweep.json").read_text())["engines"] == ["batch"]
+    assert "- engine: `batch` flew every row" in (whole / "report.md").read_text()
+    cut = tmp_path / "cut"
+    _cut(whole, cut, 26)
+    r = run_bsst("report", str(cut), "--no-plots")
+    assert r.returncode == 1 and "Traceback" not in r.stderr, r.stderr
+    assert f"26 of 36 cells flown; the sweep was interrupted: `bsst sweep … --resume --out {cut}`" in r.stderr
+    assert "**Incomplete: 26 of 36 cells flown; the sweep was interrupted" in (cut / "report.md").read_text()
+    assert main([*args, "--out", str(cut), "--resume"]) == 0
+    said = capsys.readouterr().out
+    assert "36 cells, 10 flown, 26 kept from before" in said and "engine batch (the grid allows it)" in said, said
+    assert (cut / CELLS_CSV).read_bytes() == (whole / CELLS_CSV).read_bytes()
+    assert (cut / "report.md").read_text() == (whole / "report.md").read_text()
+    assert run_bsst("report", str(cut), "--no-plots").returncode == 0
+    mixed = tmp_path / "mixed"
+    _cut(whole, mixed, 26)
+    assert main([*args, "--out", str(mixed), "--resume", "--engine", "process", "--jobs", "2"]) == 0
+    said = capsys.readouterr().out
+    assert "engine process (asked for); MIXED engines: the rows kept from before flew on batch" in said, said
+    assert json.loads((mixed / "sweep.json").read_text())["engines"] == ["batch", "process"]
+    assert "- engines: MIXED, rows flown by `batch` and `process`" in (mixed / "report.md").read_text()
+
+
+def test_an_interrupted_sweep_says_how_many_cells_it_flew(mission_file: Path, tmp_path: Path) -> None:
+    """Ctrl-C after a few cells: the summary says ``N of 12 cells flown (interrupted)`` (exit 1), and ``bsst report``
+    on the directory says the sweep is incomplete and exits 1."""
+    out = tmp_path / "stopped"
+    proc = Bsst("sweep", str(mission_file), "--delay", "0,5,10", "--loss", "0,20", "--seeds", "2", "--jobs", "1",
+                "--no-plots", "--out", str(out))
+    try:
+        sel = selectors.DefaultSelector()
+        sel.register(proc.stderr, selectors.EVENT_READ)
+        deadline = time.monotonic() + 60.0
+        done = 0
+        while done < 2:  # wait on the progress line that follows the 2nd appended row
+            assert sel.select(timeout=deadline - time.monotonic()), "no progress from the sweep"
+            line = proc.stderr.readline()
+            assert line, f"sweep ended early (exit {proc.wait()})"
+            if line.startswith("sweep: "):
+                done = int(line.split()[1].split("/")[0])
+        os.killpg(proc.pid, signal.SIGINT)
+        said, _ = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+    flown = len(read_cells(out / CELLS_CSV))
+    assert proc.returncode == 1 and 2 <= flown < 12, (proc.returncode, said)
+    assert f"sweep short: {flown} of 12 cells flown (interrupted): {flown} this run, 0 kept from before" in said, said
+    r = run_bsst("report", str(out), "--no-plots")
+    assert r.returncode == 1 and f"{flown} of 12 cells flown; the sweep was interrupted" in r.stderr, r.stderr
+
+
+def test_resume_refuses_an_edited_plug_in_law(mission_file: Path, tmp_path: Path, capsys) -> None:
+    """sweep.json holds the hash of a swept plug-in law's file; the untouched file resumes, an edited one (a comment
+    added) is refused in one line naming it."""
+    law = tmp_path / "law.py"
+    shutil.copyfile(ROOT / "examples" / "my_law.py", law)
+    out = tmp_path / "sweep"
+    args = ["sweep", str(mission_file), "--controller", f"bsst,{law}:MyLaw", "--delay", "0,10", "--jobs", "2",
+            "--no-plots", "--out", str(out)]
+    assert main(args) == 0
+    assert json.loads((out / "sweep.json").read_text())["input_files_sha256"] == {str(law): file_sha256(law)}
+    assert main([*args, "--resume"]) == 0
+    law.write_text(law.read_text() + "# tuned later\n")
+    capsys.readouterr()
+    assert main([*args, "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"--resume: {law}: edited after the sweep" in err, err
+
+
+def test_the_files_hashed_are_laws_traces_and_profiles(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A law file, a link trace (either direction), a profile file and the trace it names; not a built-in law, a
+    shipped profile's name or a law module that is not there."""
+    trace = tmp_path / "t.csv"
+    shutil.copyfile(ROOT / "examples" / "link-trace.csv", trace)
+    profile = tmp_path / "p.toml"
+    profile.write_text('name = "p"\ndescription = "d"\nsources = ["s"]\n[link]\ntrace = "t.csv"\n')
+    ident = {"mission": {"controller": "smc", "link": {"up": {"trace": str(trace)}, "profile": str(profile)}},
+             "grid": {"controller": ["bsst", "examples/my_law.py:MyLaw", "no_such_module:Law"]}}
+    monkeypatch.chdir(ROOT)  # a relative law file is the working directory's, as the cells load it
+    got = input_hashes(ident)
+    assert set(got) == {str(trace), str(profile), "examples/my_law.py"}, got
+    assert got[str(trace)] == file_sha256(trace)
+    assert input_hashes({"mission": {"link": {"profile": "lte"}}, "grid": {}}) == {}
