@@ -1,6 +1,7 @@
-"""A resumed sweep is the uninterrupted one: its engine is the whole grid's (recorded in sweep.json, mixed engines
-said), the files its cells read besides mission.toml (a plug-in law's, a trace's) are checked, and an interrupted
-sweep says it is one (its summary, report.md, ``bsst report``'s exit status)."""
+"""Covers bridge.sweep.campaign, bridge.sweep.inputs and bridge.sweep.report: a resumed sweep is the
+uninterrupted one: its engine is the whole grid's (recorded in sweep.json, mixed engines said), the files its
+cells read besides mission.toml (a plug-in law's, a trace's) are checked, and an interrupted sweep says it is one
+(its summary, report.md, ``bsst report``'s exit status)."""
 
 from __future__ import annotations
 
