@@ -49,8 +49,7 @@ What each policy reads, and why it cannot be fooled by a run's own claims:
   (a missing row, a repeated step or a jump of the mission's clock breaks it), except over
   steps the vehicle flew disarmed: on the wall clock it writes no rows then (real time,
   landed by its failsafe until ``[failsafe] resume`` re-arms it).
-- ``touchdown``: no ``touchdown`` event of the vehicle: armed in OFFBOARD and airborne, it never came down onto the
-  ground with its reference up (:mod:`bridge.autopilot.touchdownwatch`): not a landing it was asked to make.
+- ``touchdown``: no ``touchdown`` event of the vehicle (armed in OFFBOARD, airborne, down with its reference up).
 """
 
 from __future__ import annotations
