@@ -289,7 +289,7 @@ def test_a_violation_or_a_lockstep_left_exits_1_and_is_named(capsys) -> None:
             "link": {}, "events": [], "ended_by": {"who": "mission", "how": "completed"}, "policies": policies,
             "lockstep": {"held": True}}
     assert run_ok(base) and report_run(Run({}, base, None), "sitl") == 0
-    assert "policies: all 6 hold" in capsys.readouterr().out
+    assert "policies: all 7 hold" in capsys.readouterr().out
     broken = [dict(p) for p in policies]
     broken[1].update(ok=False, t=15.6, why="failsafe at t=15.600 s, 0.604 s after the last valid target")
     s = {**base, "policies": broken}

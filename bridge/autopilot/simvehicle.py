@@ -59,6 +59,7 @@ from bridge.autopilot.modes import (  # noqa: F401  (the modes: imported from he
     mode_target,
 )
 from bridge.autopilot.params import FENCE_ACTIONS, VehicleParams, change_param, read_param
+from bridge.autopilot.touchdownwatch import TouchdownWatch
 from bridge.autopilot.vehicleevents import Event, ParamChanged, Sender
 from controller.nominal import Nominal
 from missions.geofence import Geofence
@@ -92,6 +93,7 @@ class SimVehicle:
     fence: Geofence | None = None  # the fence it holds (the mission's, or a ground station's upload), watched as these
     fence_action: int = 2  # GF_ACTION: at a breach 0 nothing (unwatched), 1 warn, 2 hold, 3 return, 4 terminate, 5 land
     battery_watch: BatteryWatch = field(default_factory=BatteryWatch)  # BAT_*_THR, COM_LOW_BAT_ACT
+    reference_z: Callable[[float], float] | None = None  # m at mission time s: judges touchdowns (touchdownwatch)
 
     def __post_init__(self) -> None:
         if self.estimator is None:
@@ -111,6 +113,7 @@ class SimVehicle:
         self._mission_t0: float | None = 0.0  # plant time (s) of the mission's time 0 (None: not known yet)
         self._injected: list[tuple[TimedEvent, Sender]] = []  # a ground station's, acted on next period (schedule)
         self._impact = ImpactWatch()  # the hard touchdown's verdict: armed as it touched down or not (plant_verdict)
+        self._touchdown = TouchdownWatch()  # a soft one armed in OFFBOARD, mid-mission: a touchdown (plant_verdict)
         self._period_s = self.plant.dt * self.substeps
         self._beyond: set[str] = set()  # limits said to be passed: GF_MAX_* and the fence (once each, until changed)
         self.arming_refused: str | None = None  # why the last arm was denied (arming_denied), until it arms
@@ -412,11 +415,16 @@ class SimVehicle:
         """After a control period: ``diverged`` or ``crashed`` when the plant ends the flight now (its event
         logged), else None. A hard touchdown while armed is ``crashed`` even if the vehicle's own landing disarmed it
         on the ground since; one already disarmed is logged once as an ``impact``, and the flight goes on
-        (:mod:`bridge.autopilot.impactwatch`). The same check in every clock (bridge/loop.py offline, the vehicle
-        node's commander)."""
+        (:mod:`bridge.autopilot.impactwatch`); a soft one armed in OFFBOARD, airborne, the reference up, is logged as
+        a ``touchdown`` (:mod:`bridge.autopilot.touchdownwatch`). The same check in every clock (bridge/loop.py
+        offline, the vehicle node's commander)."""
         verdict, said = self._impact.judge(self.plant, self.armed)
         if said is not None:
             self.event(*said)
+        down = None if verdict else self._touchdown.judge(self.plant, self.armed and self.mode == OFFBOARD,
+                                                          self.reference_z, self._mission_t0, self._period_s)
+        if down is not None:
+            self.event("touchdown", down)
         return verdict
 
     def command(self, c: tuple[float, float, float, float]) -> bool:

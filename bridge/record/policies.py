@@ -11,9 +11,9 @@ Out: one :class:`Verdict` per policy of :data:`POLICIES` (``ok``; when violated,
      go with them: the lockstep record
      (:func:`lockstep_record`), who ended a flight by command (:func:`ended_by_command`)
 
-The offline loop (:mod:`bridge.loop`) and the SITL session (:mod:`bridge.session`) both call
-:func:`check` on what they recorded, so every run is judged by the same properties; a violated
-policy is named on stderr and in ``summary.json`` and makes ``bsst sim`` / ``bsst sitl`` exit 1.
+The offline loop (:mod:`bridge.loop`) and the SITL session (:mod:`bridge.session`) both call :func:`check` on what
+they recorded, so every run is judged by the same properties; a violated policy is named on stderr and in
+``summary.json`` and makes ``bsst sim`` / ``bsst sitl`` exit 1.
 
 What each policy reads, and why it cannot be fooled by a run's own claims:
 
@@ -49,6 +49,7 @@ What each policy reads, and why it cannot be fooled by a run's own claims:
   (a missing row, a repeated step or a jump of the mission's clock breaks it), except over
   steps the vehicle flew disarmed: on the wall clock it writes no rows then (real time,
   landed by its failsafe until ``[failsafe] resume`` re-arms it).
+- ``touchdown``: no ``touchdown`` event of the vehicle (armed in OFFBOARD, airborne, down with its reference up).
 """
 
 from __future__ import annotations
@@ -75,6 +76,7 @@ POLICIES: dict[str, str] = {
     "geofence": "the vehicle stays inside its mission's geofence (a plan's geoFence, or [geofence]), any fence a "
                 "ground station uploaded, and GF_MAX_HOR_DIST / GF_MAX_VER_DIST (the vehicle acts on a breach by "
                 "GF_ACTION, as PX4)",
+    "touchdown": "armed and airborne, the vehicle touches the ground only in a landing it was asked to make",
 }
 EPS_S = 1e-5  # s: event times are rounded to 1 us; a physics step is at least 100 us
 ZERO_N = 1e-9  # N: a realised wrench this small is zero
@@ -182,6 +184,7 @@ def check(trace: Mapping[str, Any], events: Sequence[RunEvent], rules: Rules,
         lockstep_recorded(ev, rules, lockstep, off_clock_t),
         time_steady(t, rules, ev),
         geofence_kept(t, trace, rules, ev),
+        touchdown_kept(ev),
     ]
 
 
@@ -369,10 +372,15 @@ def geofence_kept(t: np.ndarray, trace: Mapping[str, Any], rules: Rules, events:
     return Verdict(name, False, breach[0], f"{breach[1]} (the vehicle acts by GF_ACTION)")
 
 
+def touchdown_kept(events: Sequence[RunEvent]) -> Verdict:
+    """No ``touchdown`` event of the vehicle (bridge.autopilot.touchdownwatch); its first breaks the policy."""
+    down = next((e for e in events if e.kind == "touchdown"), None)
+    return Verdict("touchdown", True) if down is None else Verdict("touchdown", False, down.t, down.text)
+
+
 def time_steady(t: np.ndarray, rules: Rules, events: Sequence[RunEvent] = ()) -> Verdict:
-    """``t`` finite and increasing by exactly one control period from row to row. The one gap
-    allowed is over steps the vehicle's events say it flew disarmed (a vehicle on the wall
-    clock writes no rows while disarmed: real time, landed by its failsafe until a re-arm)."""
+    """``t`` finite and increasing by exactly one control period from row to row. The one gap allowed is over steps
+    the vehicle's events say it flew disarmed (real time writes no rows then: landed by its failsafe until a re-arm)."""
     name = "time_steady"
     period = rules.period_s
     if len(t) and not np.all(np.isfinite(t)):
