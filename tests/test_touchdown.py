@@ -1,5 +1,5 @@
-"""An armed touchdown mid-flight under OFFBOARD is a ``touchdown`` (bridge/autopilot/touchdownwatch.py): its event and
-the ``touchdown`` policy, exit 1 (docs/weather.md "Outcomes"); a normal sine and step run have none."""
+"""Covers bridge.autopilot.touchdownwatch: an armed touchdown mid-flight under OFFBOARD is a ``touchdown``, its
+event and the ``touchdown`` policy, exit 1 (docs/weather.md "Outcomes"); a normal sine and step run have none."""
 
 from __future__ import annotations
 
@@ -10,6 +10,8 @@ import sys
 from pathlib import Path
 
 import pytest
+
+pytestmark = pytest.mark.process  # runs bsst sim as a real process (its exit status)
 
 ROOT = Path(__file__).resolve().parents[1]
 FAULTS = ["--sensors", "gnss", "--estimator", "ekf", "--at", "1:gps:off", "--at", "3:gps:on", "--at",
