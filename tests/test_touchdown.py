@@ -24,7 +24,7 @@ def _sim(tmp_path: Path, name: str, *args: str) -> tuple[int, dict]:
     m.write_text(src.replace("duration_s = 30.0", "duration_s = 4.0") if name == "sine" else src)
     out = tmp_path / "run"
     r = subprocess.run([sys.executable, "-m", "bridge", "sim", str(m), *args, "--out", str(out)],
-                       capture_output=True, text=True, env=os.environ, cwd=tmp_path)
+                       capture_output=True, text=True, env=os.environ, cwd=tmp_path, timeout=300)
     return r.returncode, json.loads((out / "summary.json").read_text())
 
 
