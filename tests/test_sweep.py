@@ -13,12 +13,10 @@ import json
 import math
 import multiprocessing as mp
 import os
-import selectors
 import shutil
 import signal
 import stat
 import subprocess
-import time
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +32,7 @@ from bridge.sweep.grid import cells as grid_cells
 from missions import Mission, Sine
 from params import ConfigError, dump_toml
 from tests.sitlkit import Bsst, run_bsst
+from tests.waiting import sweep_rows
 
 # starts processes or opens sockets (not in make test-fast); flies the batch engine (its kernels loaded first)
 pytestmark = [pytest.mark.process, pytest.mark.usefixtures("batch_kernels")]
@@ -120,16 +119,7 @@ def test_kill_then_resume_flies_only_missing_cells(mission_file: Path, tmp_path:
     killed = tmp_path / "killed"
     proc = Bsst(*args, "--jobs", "1", "--out", str(killed), stdout=False)
     try:
-        sel = selectors.DefaultSelector()
-        sel.register(proc.stderr, selectors.EVENT_READ)
-        deadline = time.monotonic() + 60.0
-        done = 0
-        while done < 4:  # wait on the progress line that follows the 4th appended row
-            assert sel.select(timeout=deadline - time.monotonic()), "no progress from the sweep"
-            line = proc.stderr.readline()
-            assert line, f"sweep ended early (exit {proc.wait()})"
-            if line.startswith("sweep: "):
-                done = int(line.split()[1].split("/")[0])
+        sweep_rows(proc, 4)  # the progress line that follows that appended row
         os.killpg(proc.pid, signal.SIGKILL)
     finally:
         if proc.poll() is None:

@@ -7,10 +7,8 @@ from __future__ import annotations
 
 import json
 import os
-import selectors
 import shutil
 import signal
-import time
 from pathlib import Path
 
 import pytest
@@ -21,6 +19,7 @@ from bridge.sweep.inputs import file_sha256, input_hashes
 from missions import Mission, Sine
 from params import dump_toml
 from tests.sitlkit import ROOT, Bsst, run_bsst
+from tests.waiting import sweep_rows
 
 # starts processes (not in make test-fast); flies the batch engine (its kernels loaded first)
 pytestmark = [pytest.mark.process, pytest.mark.usefixtures("batch_kernels")]
@@ -81,16 +80,7 @@ def test_an_interrupted_sweep_says_how_many_cells_it_flew(mission_file: Path, tm
     proc = Bsst("sweep", str(mission_file), "--delay", "0,5,10", "--loss", "0,20", "--seeds", "2", "--jobs", "1",
                 "--no-plots", "--out", str(out))
     try:
-        sel = selectors.DefaultSelector()
-        sel.register(proc.stderr, selectors.EVENT_READ)
-        deadline = time.monotonic() + 60.0
-        done = 0
-        while done < 2:  # wait on the progress line that follows the 2nd appended row
-            assert sel.select(timeout=deadline - time.monotonic()), "no progress from the sweep"
-            line = proc.stderr.readline()
-            assert line, f"sweep ended early (exit {proc.wait()})"
-            if line.startswith("sweep: "):
-                done = int(line.split()[1].split("/")[0])
+        sweep_rows(proc, 2)  # the progress line that follows that appended row
         os.killpg(proc.pid, signal.SIGINT)
         said, _ = proc.communicate(timeout=60)
     finally:

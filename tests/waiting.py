@@ -12,8 +12,10 @@ never came. Waits on a child's output lines are :meth:`tests.sitlkit.Proc.wait_l
 
 from __future__ import annotations
 
+import selectors
 import time
 from collections.abc import Callable
+from typing import Any
 
 
 def wait_for(predicate: Callable[[], object], timeout_s: float, what: str, poll_s: float = 0.01) -> None:
@@ -24,3 +26,22 @@ def wait_for(predicate: Callable[[], object], timeout_s: float, what: str, poll_
         if time.monotonic() > deadline:
             raise AssertionError(f"{what}: not within {timeout_s} s")
         time.sleep(poll_s)
+
+
+def sweep_rows(proc: Any, rows: int, timeout_s: float = 60.0) -> None:
+    """Wait until a ``bsst sweep`` child (``tests.sitlkit.Bsst``, its stderr a pipe) has said, on its progress
+    lines (``sweep: N/M cells ...``), that ``rows`` rows are appended; AssertionError if it ends first or stays
+    silent past ``timeout_s``."""
+    sel = selectors.DefaultSelector()
+    sel.register(proc.stderr, selectors.EVENT_READ)
+    deadline = time.monotonic() + timeout_s
+    done = 0
+    try:
+        while done < rows:
+            assert sel.select(timeout=deadline - time.monotonic()), "no progress from the sweep"
+            line = proc.stderr.readline()
+            assert line, f"sweep ended early (exit {proc.wait()})"
+            if line.startswith("sweep: "):
+                done = int(line.split()[1].split("/")[0])
+    finally:
+        sel.close()
