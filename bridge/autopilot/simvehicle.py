@@ -8,21 +8,20 @@ Out: what the vehicle publishes after each control period (:meth:`SimVehicle.pub
      ``truth`` estimator), the mode (offboard, failsafe, landed) and the events
      (:class:`~bridge.autopilot.vehicleevents.Event`: t s, kind, text, and who caused it)
 
-Shared by the in-process loop and the MAVLink vehicle so that both fly, time out and land
-the same way. Time advances in control periods of ``physics_hz / rate_hz`` physics steps;
-the command is held over the period (zero-order hold).
+Shared by the in-process loop and the MAVLink vehicle so that both fly, time out and land the same way. Time
+advances in control periods of ``physics_hz / rate_hz`` physics steps; the command is held over the period
+(zero-order hold).
 
-Out of offboard control and armed, the vehicle's own :class:`~bridge.autopilot.failsafe.OnboardController`
-flies its target at every physics step (:meth:`SimVehicle.fly_onboard`): the failsafe's action
-(``[failsafe] action``), and whatever a later mode hands it. Under a target that lands, the
-vehicle disarms once it rests on the ground (mode ``landed``). Mode changes happen at the start
-of a control period, the same step in every clock.
+Out of offboard control and armed, the vehicle's own :class:`~bridge.autopilot.failsafe.OnboardController` flies its
+target at every physics step (:meth:`SimVehicle.fly_onboard`): the failsafe's action (``[failsafe] action``), and
+whatever a later mode hands it. Under a target that lands, the vehicle disarms once it rests on the ground (mode
+``landed``). Mode changes happen at the start of a control period, the same step in every clock.
 
 The vehicle owns its sensors (:class:`plant.sensors.SensorSuite`) and its estimator
-(:mod:`bridge.autopilot.estimator`): the suite samples the true state once at t = 0 and after every
-physics step, the estimator takes what arrived, and both the controller (through what is published)
-and the on-board controller fly on the estimate. Under ``truth`` there is no suite: the estimate is
-the plant's state itself, read directly, so truth flights are the same to the bit and as fast.
+(:mod:`bridge.autopilot.estimator`): the suite samples the true state once at t = 0 and after every physics step,
+the estimator takes what arrived, and both the controller (through what is published) and the on-board controller
+fly on the estimate. Under ``truth`` there is no suite: the estimate is the plant's state itself, read directly, so
+truth flights are the same to the bit and as fast.
 """
 
 from __future__ import annotations
@@ -413,11 +412,8 @@ class SimVehicle:
 
     def plant_verdict(self) -> str | None:
         """After a control period: ``diverged`` or ``crashed`` when the plant ends the flight now (its event
-        logged), else None. A hard touchdown while armed is ``crashed`` even if the vehicle's own landing disarmed it
-        on the ground since; one already disarmed is logged once as an ``impact``, and the flight goes on
-        (:mod:`bridge.autopilot.impactwatch`); a soft one armed in OFFBOARD, airborne, the reference up, is logged as
-        a ``touchdown`` (:mod:`bridge.autopilot.touchdownwatch`). The same check in every clock (bridge/loop.py
-        offline, the vehicle node's commander)."""
+        logged), else None: a hard touchdown armed is ``crashed``, disarmed an ``impact`` (:mod:`.impactwatch`); a
+        soft one armed in OFFBOARD mid-mission a ``touchdown`` (:mod:`.touchdownwatch`). The same in every clock."""
         verdict, said = self._impact.judge(self.plant, self.armed)
         if said is not None:
             self.event(*said)

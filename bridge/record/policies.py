@@ -17,10 +17,9 @@ they recorded, so every run is judged by the same properties; a violated policy 
 
 What each policy reads, and why it cannot be fooled by a run's own claims:
 
-- ``no_actuation_disarmed``: the disarmed intervals from the vehicle's ``armed`` / ``disarmed``
-  events; every trace row strictly inside one must realise zero wrench (``u1_act..u4_act``).
-  With a motor lag (``Rules.spin_down``) the rotors spin down instead: the realised values may
-  only shrink.
+- ``no_actuation_disarmed``: the disarmed intervals from the vehicle's ``armed`` / ``disarmed`` events; every trace
+  row strictly inside one must realise zero wrench (``u1_act..u4_act``). With a motor lag (``Rules.spin_down``) the
+  rotors spin down instead: the realised values may only shrink.
 - ``failsafe_in_time``: armed under offboard control (from an ``armed`` event, or the start
   offline), the vehicle must leave offboard control (its ``failsafe`` event, a disarm or a
   divergence) within ``timeout_s`` plus one control period of the last valid target. The
@@ -37,18 +36,16 @@ What each policy reads, and why it cannot be fooled by a run's own claims:
   configured controller's ids have authority; on the GCS link any ground station (with a key
   only signed frames get that far: the receive path refuses the rest). An event that names
   nobody is not judged.
-- ``lockstep_recorded``: in a lockstep session, a vehicle that left lockstep (its ``lockstep``
-  event, or a vehicle row flown off the step clock) has a record saying so (``held`` false, the
-  time of the first event); a row off the step clock with no ``lockstep`` event before it is a
-  vehicle that left silently.
+- ``lockstep_recorded``: in a lockstep session, a vehicle that left lockstep (its ``lockstep`` event, or a vehicle
+  row flown off the step clock) has a record saying so (``held`` false, the time of the first event); a row off the
+  step clock with no ``lockstep`` event before it is a vehicle that left silently.
 - ``geofence``: every trace row's position is inside the mission's geofence (a ``.plan``'s ``geoFence`` or a
   mission's ``[geofence]``: inside an inclusion zone if there is one, outside every exclusion zone, as PX4's
   navigator judges it), and the vehicle never said it was outside a fence a ground station uploaded or beyond
   GF_MAX_HOR_DIST / GF_MAX_VER_DIST (its ``geofence`` event); the vehicle also acts on a breach (GF_ACTION).
-- ``time_steady``: the trace's ``t`` increases by exactly one control period from row to row
-  (a missing row, a repeated step or a jump of the mission's clock breaks it), except over
-  steps the vehicle flew disarmed: on the wall clock it writes no rows then (real time,
-  landed by its failsafe until ``[failsafe] resume`` re-arms it).
+- ``time_steady``: the trace's ``t`` increases by exactly one control period from row to row (a missing row, a
+  repeated step or a jump of the mission's clock breaks it), except over steps the vehicle flew disarmed: on the
+  wall clock it writes no rows then (real time, landed by its failsafe until ``[failsafe] resume`` re-arms it).
 - ``touchdown``: no ``touchdown`` event of the vehicle (armed in OFFBOARD, airborne, down with its reference up).
 """
 
