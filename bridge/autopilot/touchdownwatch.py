@@ -12,8 +12,9 @@ only armed in OFFBOARD (the mission's end landing, LAND, RTL, TAKEOFF, HOLD and 
 own modes: landings it was asked to make), only once it has been airborne (higher than :data:`AIRBORNE_M`
 since it last rested: a takeoff from the ground that has not yet left it is none), and only while the
 reference is above :data:`REF_GROUND_M` (a ground-hugging reference, or a trajectory that lands, asks for
-the ground). Judged at the end of each control period (a vehicle resting on the ground then), as the batch
-engine mirrors it (bridge/batch/flight.py).
+the ground). Judged at the end of each control period (a vehicle resting on the ground then); the reference is
+sampled only then, for a vehicle come to rest from the air. The batch engine does not judge it (its rows' policies
+are not judged).
 """
 
 from __future__ import annotations
@@ -28,16 +29,15 @@ AIRBORNE_M = 0.05  # m above the ground: higher, the vehicle has left it
 REF_GROUND_M = 0.05  # m: a reference this low (or lower) asks for the ground: touching it is no touchdown
 
 
-def touched(z: float, vz: float, airborne: bool, judged: bool, ref_z: float | None) -> tuple[bool, bool]:
-    """(a touchdown now, airborne after this period) from the true height ``z`` and ``vz`` (resting: z <= 0 and
-    vz <= 0, ``Quadrotor.on_ground``), whether the vehicle was ``airborne``, whether it is ``judged`` (armed in
-    OFFBOARD) and the reference height ``ref_z`` (None: unknown, no touchdown)."""
+def touched(z: float, vz: float, airborne: bool, judged: bool) -> tuple[bool, bool]:
+    """(come to rest from the air while judged, airborne after this period) from the true height ``z`` and ``vz``
+    (resting: z <= 0 and vz <= 0, ``Quadrotor.on_ground``), whether the vehicle was ``airborne`` and whether it is
+    ``judged`` (armed in OFFBOARD). A touchdown if, besides, the reference is up (:meth:`TouchdownWatch.judge`)."""
     if z > AIRBORNE_M:
         return False, True
     if z > 0.0 or vz > 0.0:
         return False, airborne
-    down = airborne and judged and ref_z is not None and ref_z > REF_GROUND_M
-    return down, False
+    return airborne and judged, False
 
 
 @dataclass
@@ -53,10 +53,12 @@ class TouchdownWatch:
         OFFBOARD; ``reference_z``: the reference height (m) at a mission time (s; None: unknown), read at the
         period's start; ``t0``: the plant time of the mission's time 0 (None: not started)."""
         t, X = plant.t, plant.state
-        ref_z = None if reference_z is None or t0 is None else reference_z(t - period_s - t0)
-        down, self.airborne = touched(X[4], X[5], self.airborne, judged, ref_z)
+        rested, self.airborne = touched(X[4], X[5], self.airborne, judged)
         before, self.speed = self.speed, math.sqrt(X[1] * X[1] + X[3] * X[3] + X[5] * X[5])
-        if not down:
+        if not rested or reference_z is None or t0 is None:
+            return None
+        ref_z = reference_z(t - period_s - t0)  # sampled only here: the controller samples it every step already
+        if ref_z <= REF_GROUND_M:
             return None
         return (f"touched down armed in OFFBOARD by t={t:.3f} s at {before:.2f} m/s (a control period before), "
                 f"x={X[0]:.3f} y={X[2]:.3f} m, the reference {ref_z:.3f} m up: not a landing it was asked to make")
