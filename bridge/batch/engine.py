@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import ThreadPoolExecutor, as_completed
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -44,6 +44,7 @@ from bridge.batch.flight import Cells, Constants, batch_arrays, fly_cells
 from bridge.batch.metrics import Metrics, measured_rows
 from bridge.batch.weather import BATCH_EVENT_KINDS, turbulent
 from bridge.core.flight import Flight, Overrides, prepare
+from bridge.core.interrupt import interrupt_future, wait_or_interrupt
 from bridge.link.model import link_from_table, merge_link_tables
 from bridge.link.plan import Clocks, plan_links
 from bridge.record.metrics import RMS_FROM_S
@@ -286,13 +287,15 @@ def _fly_blocks(c: Constants, a: Cells, steps: int, jobs: int, report: Callable[
             done += hi - lo
             report(done, n)
         return
-    with ThreadPoolExecutor(min(jobs, len(blocks))) as pool:
+    # Ctrl-C raises between waits, never inside the pool's locks (bridge.core.interrupt)
+    with interrupt_future() as interrupted, ThreadPoolExecutor(min(jobs, len(blocks))) as pool:
         running = {pool.submit(fly_cells, lo, hi, 0, steps, c, a): hi - lo for lo, hi in blocks}
         try:
-            for f in as_completed(running):
-                f.result()
-                done += running[f]
-                report(done, n)
+            while running:
+                for f in wait_or_interrupt(running, interrupted):
+                    f.result()
+                    done += running.pop(f)
+                    report(done, n)
         finally:
             for f in running:
                 f.cancel()

@@ -21,13 +21,14 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures import Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from types import FrameType
 from typing import Any
 
 from bridge.autopilot.compiling import announce_compiling
+from bridge.core.interrupt import interrupt_future, wait_or_interrupt
 from bridge.core.scalar import kernels_choice
 from bridge.loop import fly
 from bridge.nodes.process import die_with_parent
@@ -204,38 +205,46 @@ def run_local(mission: Mission, todo: Sequence[Cell], mode: str, jobs: int, repo
     check_main_guard()
     queue: deque[Cell] = deque(todo)
     suspects: deque[Cell] = deque()
-    while queue or suspects:
-        if suspects:
-            cell = suspects.popleft()
-            with _pool(1) as p:
-                try:
-                    row = p.submit(run_cell, mission, cell, mode).result()
-                except BrokenProcessPool:
-                    row = error_row(cell, "worker process died")
-            report(row)
-            continue
-        pool = _pool(jobs, len(queue), mode)
-        inflight: dict[Any, Cell] = {}
-        try:
-            while queue or inflight:
-                while queue and len(inflight) < 2 * jobs:
-                    c = queue.popleft()
-                    inflight[pool.submit(run_cell, mission, c, mode)] = c
-                done, _ = wait(inflight, return_when=FIRST_COMPLETED)
-                broken = False
-                for f in done:
-                    c = inflight.pop(f)
+    with interrupt_future() as interrupted:  # Ctrl-C raises here, not inside the pool's locks
+        while queue or suspects:
+            if suspects:
+                cell = suspects.popleft()
+                with _pool(1) as p:
                     try:
-                        report(f.result())
+                        (f,) = wait_or_interrupt([p.submit(run_cell, mission, cell, mode)], interrupted)
+                        row = f.result()
                     except BrokenProcessPool:
-                        suspects.append(c)
-                        broken = True
-                if broken:
-                    wait(inflight)
-                    suspects.extend(inflight.values())
-                    break
-        finally:
-            pool.shutdown(wait=True, cancel_futures=True)
+                        row = error_row(cell, "worker process died")
+                report(row)
+                continue
+            _fly_in_pool(mission, queue, suspects, mode, jobs, report, interrupted)
+
+
+def _fly_in_pool(mission: Mission, queue: deque[Cell], suspects: deque[Cell], mode: str, jobs: int,
+                 report: Report, interrupted: Future) -> None:
+    """Fly ``queue``'s cells in one pool of ``jobs`` workers until it is empty or the pool breaks (the cells
+    in flight then go to ``suspects``)."""
+    pool = _pool(jobs, len(queue), mode)
+    inflight: dict[Any, Cell] = {}
+    try:
+        while queue or inflight:
+            while queue and len(inflight) < 2 * jobs:
+                c = queue.popleft()
+                inflight[pool.submit(run_cell, mission, c, mode)] = c
+            broken = False
+            for f in wait_or_interrupt(inflight, interrupted):
+                c = inflight.pop(f)
+                try:
+                    report(f.result())
+                except BrokenProcessPool:
+                    suspects.append(c)
+                    broken = True
+            if broken:
+                wait(inflight)
+                suspects.extend(inflight.values())
+                return
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def run_dask(client: Any, mission: Mission, todo: Sequence[Cell], mode: str, report: Report) -> None:
