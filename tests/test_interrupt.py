@@ -55,6 +55,7 @@ TWICE = """
         except KeyboardInterrupt:
             print("first at the wait's return", flush=True)
         try:
+            print("waiting again", flush=True)
             threading.Event().wait(120)  # a second Ctrl-C: the previous handler, at once
             print("second never came", flush=True)
         except KeyboardInterrupt:
@@ -85,6 +86,7 @@ def test_a_second_ctrl_c_interrupts_at_once_and_the_handler_comes_back() -> None
     try:
         proc.p.send_signal(signal.SIGINT)
         proc.wait_line(lambda s: s == "first at the wait's return", timeout=60)
+        proc.wait_line(lambda s: s == "waiting again", timeout=60)
         proc.p.send_signal(signal.SIGINT)
         proc.wait_line(lambda s: s == "second at once", timeout=60)
         proc.wait_line(lambda s: s.startswith("restored"), timeout=60)

@@ -12,7 +12,8 @@ never came. Waits on a child's output lines are :meth:`tests.sitlkit.Proc.wait_l
 
 from __future__ import annotations
 
-import selectors
+import queue
+import threading
 import time
 from collections.abc import Callable
 from typing import Any
@@ -32,16 +33,28 @@ def sweep_rows(proc: Any, rows: int, timeout_s: float = 60.0) -> None:
     """Wait until a ``bsst sweep`` child (``tests.sitlkit.Bsst``, its stderr a pipe) has said, on its progress
     lines (``sweep: N/M cells ...``), that ``rows`` rows are appended; AssertionError if it ends first or stays
     silent past ``timeout_s``."""
-    sel = selectors.DefaultSelector()
-    sel.register(proc.stderr, selectors.EVENT_READ)
-    deadline = time.monotonic() + timeout_s
-    done = 0
+    sweep_said(proc, lambda line: line.startswith("sweep: ") and "/" in line.split()[1]
+               and int(line.split()[1].split("/")[0]) >= rows, timeout_s)
+
+
+def sweep_said(proc: Any, pred: Callable[[str], bool], timeout_s: float = 60.0) -> str:
+    """The first line of a ``bsst sweep`` child's stderr (``tests.sitlkit.Bsst``) that satisfies ``pred``, read
+    up to it and no further (the rest stays for ``communicate``); AssertionError if the child ends first or no
+    such line comes within ``timeout_s``. (A thread reads: a ``select`` on the pipe would not see lines
+    already in the file object's buffer.)"""
+    found: queue.Queue[str | None] = queue.Queue()
+
+    def read() -> None:
+        for line in iter(proc.stderr.readline, ""):
+            if pred(line):
+                found.put(line)
+                return
+        found.put(None)
+
+    threading.Thread(target=read, name="sweep-stderr", daemon=True).start()
     try:
-        while done < rows:
-            assert sel.select(timeout=deadline - time.monotonic()), "no progress from the sweep"
-            line = proc.stderr.readline()
-            assert line, f"sweep ended early (exit {proc.wait()})"
-            if line.startswith("sweep: "):
-                done = int(line.split()[1].split("/")[0])
-    finally:
-        sel.close()
+        line = found.get(timeout=timeout_s)
+    except queue.Empty:
+        raise AssertionError(f"no such line from the sweep within {timeout_s} s") from None
+    assert line is not None, f"sweep ended first (exit {proc.wait()})"
+    return line

@@ -21,7 +21,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import Future, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from types import FrameType
@@ -209,12 +209,14 @@ def run_local(mission: Mission, todo: Sequence[Cell], mode: str, jobs: int, repo
         while queue or suspects:
             if suspects:
                 cell = suspects.popleft()
-                with _pool(1) as p:
-                    try:
-                        (f,) = wait_or_interrupt([p.submit(run_cell, mission, cell, mode)], interrupted)
-                        row = f.result()
-                    except BrokenProcessPool:
-                        row = error_row(cell, "worker process died")
+                p = _pool(1)
+                try:
+                    (f,) = wait_or_interrupt([p.submit(run_cell, mission, cell, mode)], interrupted)
+                    row = f.result()
+                except BrokenProcessPool:
+                    row = error_row(cell, "worker process died")
+                finally:
+                    _shut_down(p, interrupted)
                 report(row)
                 continue
             _fly_in_pool(mission, queue, suspects, mode, jobs, report, interrupted)
@@ -240,11 +242,35 @@ def _fly_in_pool(mission: Mission, queue: deque[Cell], suspects: deque[Cell], mo
                     suspects.append(c)
                     broken = True
             if broken:
-                wait(inflight)
+                while running := [f for f in inflight if not f.done()]:
+                    wait_or_interrupt(running, interrupted)
                 suspects.extend(inflight.values())
                 return
     finally:
+        _shut_down(pool, interrupted)
+
+
+def _shut_down(pool: ProcessPoolExecutor, stopped: Future) -> None:
+    """Shut ``pool`` down once the cells in flight have ended (after a Ctrl-C, ``stopped`` done, they are not
+    recorded: their workers ignore it and finish them). A Ctrl-C meanwhile (the second) ends the workers at once
+    (SIGTERM: an offline cell dies, a lockstep cell's session stops its children) rather than wait for them."""
+    if stopped.done():
+        print("sweep: interrupted; the cells in flight end first (Ctrl-C again stops them now)", file=sys.stderr,
+              flush=True)
+    ended: Future = Future()
+
+    def shut() -> None:
         pool.shutdown(wait=True, cancel_futures=True)
+        ended.set_result(None)
+
+    with interrupt_future() as interrupted:
+        closer = threading.Thread(target=shut, name="pool-shutdown", daemon=True)
+        closer.start()
+        wait([ended, interrupted], return_when=FIRST_COMPLETED)
+        if interrupted.done():
+            for worker in mp.active_children():  # this process's only children: the pool's workers
+                worker.terminate()
+        closer.join()
 
 
 def run_dask(client: Any, mission: Mission, todo: Sequence[Cell], mode: str, report: Report) -> None:
