@@ -49,10 +49,12 @@ from controller.law import LawFailed
 from controller.link_guard import LinkGuard
 from missions import Mission
 from missions.minsnap import Smooth
+from params import reads_inputs
 
 TOUCHDOWN_M = 0.05  # m above the ground, and m/s: a landing trajectory's end finds the vehicle down, and disarms it
 
 
+@reads_inputs
 def simulate(
     mission: Mission | str | Path,
     *,

@@ -56,7 +56,7 @@ from missions.fleet import (
     link_seeds_moved,
 )
 from missions.fleet import vehicle_mission as mission_of
-from params import ConfigError, dump_toml
+from params import ConfigError, dump_toml, reads_inputs
 
 LINK_FIGURES = ("sent", "delivered", "lost", "lost_by", "delay_ms")  # each vehicle's, each way, in the fleet's summary
 # the outcomes from best to worst: the fleet's outcome is its worst vehicle's (an unknown one is worst)
@@ -87,6 +87,7 @@ class FleetRun:
                 f"path={str(self.path) if self.path else None!r})")
 
 
+@reads_inputs
 def simulate(mission: Mission | str | Path, *, vehicles: int | Sequence[Any] | None = None,
              formation: str | None = None, out: str | Path | None = None, write: bool = False,
              overwrite: bool = False, plots: bool = True, progress: Progress | None = None,
@@ -365,6 +366,7 @@ CONTINUED = ("the flights continued past the contact: in real time each vehicle 
              "vehicles share no clock, so nothing stopped them at it (docs/swarm.md)")
 
 
+@reads_inputs
 def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] | None = None,
          formation: str | None = None, out: str | Path | None = None, write: bool = False, overwrite: bool = False,
          plots: bool = True, realtime: bool = False, instance: int | None = 0, gcs: str | None = None,

@@ -120,8 +120,9 @@ def run_entries(path: Path) -> list[Path]:
 
 def check_overwrite(path: Path) -> None:
     """Refuse an ``--overwrite`` of run directory ``path`` that would lose what is not a run's, before anything
-    is removed: a file this command reads as input (:func:`params.inputs_read`: its mission, link trace,
-    profile, plan, controller plug-in, key ...) among those it replaces (:func:`run_entries`), or an entry of a
+    is removed: a file this command, or this API call, reads as input (:func:`params.inputs_read`, one command's
+    or call's: :func:`params.input_scope`; its mission, link trace, profile, plan, controller plug-in, key ...)
+    among those it replaces (:func:`run_entries`), or an entry of a
     run's name that is no run's file (a directory; a symbolic link, which a run would write through)."""
     inputs = inputs_read()
     entries = run_entries(path)

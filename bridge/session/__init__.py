@@ -66,7 +66,7 @@ from bridge.record.runlog import Run, check_trace_steps, run_dir
 from bridge.session.children import ChildError, check_port_free, instance_slot
 from bridge.session.session import Session
 from missions import Mission, Setpoint, Step
-from params import ConfigError
+from params import ConfigError, reads_inputs
 
 __all__ = ["ChildError", "Session", "check_options", "instance_slot", "sitl"]
 
@@ -100,6 +100,7 @@ def check_options(*, realtime: bool, instance: int | None, gcs: str | None, spee
     return gcs_text
 
 
+@reads_inputs
 def sitl(
     mission: Mission | str | Path | None,
     *,
