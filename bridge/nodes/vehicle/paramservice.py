@@ -15,8 +15,9 @@ A refused set is answered as ArduPilot answers one (GCS_Param.cpp, ``handle_para
 unchanged PARAM_VALUE), in one datagram with the STATUSTEXT: PARAM_ERROR first, so that MAVSDK (4.x,
 ``MavlinkParameterClient::process_param_error``) and QGroundControl end the set at once with its reason
 (VALUE_OUT_OF_RANGE, READ_ONLY, DOES_NOT_EXIST, TYPE_MISMATCH) where, on the unchanged value alone, MAVSDK resent
-the set five times and gave up with TIMEOUT. PX4 (src/modules/mavlink/mavlink_parameters.cpp, 1.14) checks no
-range and sends nothing for an unknown name or a wrong type (its console's error only).
+the set five times and gave up with TIMEOUT. PX4's src/modules/mavlink/mavlink_parameters.cpp as read here (after
+2020-11) checks no range and sends nothing for an unknown name or a wrong type (its console's error only); PX4's
+main branch has added PARAM_ERROR since (in no release up to 1.17; that source not read here).
 """
 
 from __future__ import annotations
