@@ -352,7 +352,7 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
         raise t.error("events", "expected an array of tables [[events]] (t_s, kind and its settings)")
     span = duration if not derived else MISSION_RANGES["duration_s"][1]
     vehicles, separation = fleet_from_table(t, lambda tt: _trajectory(tt, span, budget), _law)
-    fence, rally = (plan.fence, _plan_rally(plan)) if plan else (None, ())  # a plan's, unless the mission gives its own
+    fence, rally = (plan.fence, _plan_rally(plan)) if plan is not None else (None, ())  # a plan's, unless its own
     fence = geofence_from_table(t.table("geofence")) if t.has("geofence") else fence
     rally = rally_from_table(t.table("rally"), ENVELOPE_RADIUS_M) if t.has("rally") else rally
     t.done()
