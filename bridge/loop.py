@@ -44,15 +44,17 @@ from bridge.record.ending import end_block
 from bridge.record.events import RunEvent
 from bridge.record.metrics import after_faults, plant_blocks, plant_summary, summarise
 from bridge.record.policies import ended_by_outcome, judge, rules_for, violation_text
-from bridge.record.runlog import Run, RunRecord, check_trace_steps, run_dir, trace_arrays
+from bridge.record.runlog import Run, RunRecord, check_trace_steps, run_dir, trace_arrays, trace_cap
 from controller.law import LawFailed
 from controller.link_guard import LinkGuard
-from missions import Mission
+from missions import Mission, load_mission
 from missions.minsnap import Smooth
+from params import reads_inputs
 
 TOUCHDOWN_M = 0.05  # m above the ground, and m/s: a landing trajectory's end finds the vehicle down, and disarms it
 
 
+@reads_inputs
 def simulate(
     mission: Mission | str | Path,
     *,
@@ -76,7 +78,9 @@ def simulate(
     table (PX4 names, ``{"COM_OF_LOSS_T": 1.0}``); ``param_at``: parameter changes at mission times
     (``[ParamChange(10.0, "COM_OBL_ACT", 1)]``), made at the start of their control step.
     """
-    flight = prepare(mission, overrides, **keywords)
+    over = Overrides.of(overrides, **keywords)
+    m = mission if isinstance(mission, Mission) else load_mission(mission, trace_cap(over.rate_hz))  # capped early
+    flight = prepare(m, over)
     check_trace_steps(flight.mission)  # before the run directory is made: a refused mission writes nothing
     path = run_dir(out, flight.mission.name, overwrite) if (out is not None or write) else None
     return fly(flight, path, plots=plots, progress=progress)

@@ -43,6 +43,7 @@ from bridge.record.runlog import (
     Run,
     check_trace_steps,
     run_dir,
+    trace_cap,
     write_json_atomic,
     write_text_atomic,
 )
@@ -56,7 +57,7 @@ from missions.fleet import (
     link_seeds_moved,
 )
 from missions.fleet import vehicle_mission as mission_of
-from params import ConfigError, dump_toml
+from params import ConfigError, dump_toml, reads_inputs
 
 LINK_FIGURES = ("sent", "delivered", "lost", "lost_by", "delay_ms")  # each vehicle's, each way, in the fleet's summary
 # the outcomes from best to worst: the fleet's outcome is its worst vehicle's (an unknown one is worst)
@@ -87,6 +88,7 @@ class FleetRun:
                 f"path={str(self.path) if self.path else None!r})")
 
 
+@reads_inputs
 def simulate(mission: Mission | str | Path, *, vehicles: int | Sequence[Any] | None = None,
              formation: str | None = None, out: str | Path | None = None, write: bool = False,
              overwrite: bool = False, plots: bool = True, progress: Progress | None = None,
@@ -96,10 +98,11 @@ def simulate(mission: Mission | str | Path, *, vehicles: int | Sequence[Any] | N
     (``line:SPACING``, ``grid:SPACING`` or ``circle:RADIUS``, m; default ``line:2``), or ``vehicles`` = a
     sequence of :class:`~missions.fleet.VehicleSpec`. ``progress`` follows vehicle 1. Everything else as
     :func:`bridge.loop.simulate`."""
-    m = mission if isinstance(mission, Mission) else load_mission(mission)
+    rate = Overrides.of(overrides, **keywords).rate_hz  # the cap's rate: a plan too long is refused before it is timed
+    m = mission if isinstance(mission, Mission) else load_mission(mission, trace_cap(rate))  # loaded once
     fleet = fleet_mission(m, vehicles, formation)
     if fleet is None:
-        return simulate_one(mission, out=out, write=write, overwrite=overwrite, plots=plots, progress=progress,
+        return simulate_one(m, out=out, write=write, overwrite=overwrite, plots=plots, progress=progress,
                             overrides=overrides, **keywords)
     over = Overrides.of(overrides, **keywords)
     flights = fleet_flights(fleet, over)
@@ -365,6 +368,7 @@ CONTINUED = ("the flights continued past the contact: in real time each vehicle 
              "vehicles share no clock, so nothing stopped them at it (docs/swarm.md)")
 
 
+@reads_inputs
 def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] | None = None,
          formation: str | None = None, out: str | Path | None = None, write: bool = False, overwrite: bool = False,
          plots: bool = True, realtime: bool = False, instance: int | None = 0, gcs: str | None = None,
@@ -382,20 +386,24 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
     from bridge.session import sitl as sitl_one  # lazy: start-up time
     from bridge.session.fleet import check_fleet, check_fleet_ports, fly_sessions, radio_block  # lazy: start-up
 
-    given_link = Overrides.of(overrides, **keywords).link or {}
+    given = Overrides.of(overrides, **keywords)
+    given_link = given.link or {}
+    m = mission if isinstance(mission, Mission) or mission is None else None
     if await_mission or mission is None:  # a ground station's mission (bsst sitl --await-mission): one vehicle
         if vehicles is not None or formation is not None:
             raise ConfigError("--vehicles with --await-mission: a ground station's mission flies one vehicle")
         fleet = None
     else:
-        m = mission if isinstance(mission, Mission) else load_mission(mission)
+        if m is None:  # loaded once: the session flies this one
+            m = load_mission(mission, trace_cap(given.rate_hz))
         fleet = fleet_mission(m, vehicles, formation)
         given_link = merge_link_tables(m.link, given_link)
     shared = given_link.get("shared") is True and fleet is not None  # one vehicle: its own radio, the same link
     if fleet is None:
-        return sitl_one(mission, out=out, write=write, overwrite=overwrite, plots=plots, realtime=realtime,
-                        instance=instance, gcs=gcs, speed=speed, key=key, live=live, progress=progress,
-                        overrides=overrides, **({"await_mission": True} if await_mission else {}), **keywords)
+        return sitl_one(m if m is not None else mission, out=out, write=write, overwrite=overwrite, plots=plots,
+                        realtime=realtime, instance=instance, gcs=gcs, speed=speed, key=key, live=live,
+                        progress=progress, overrides=overrides, **({"await_mission": True} if await_mission else {}),
+                        **keywords)
     over = Overrides.of(overrides, **keywords)
     flights = fleet_flights(fleet, over)
     check_fleet_steps(fleet, flights)

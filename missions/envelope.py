@@ -7,6 +7,7 @@ Out: the key and the reason when either leaves :data:`ENVELOPE_RADIUS_M` (m from
 
 from __future__ import annotations
 
+import functools
 import math
 
 from missions.minsnap import Smooth
@@ -16,6 +17,27 @@ from missions.references import Reference, Sine, Step, Waypoints
 # origin lost, so no start or reference may leave it (envelope_problem; the loader's wider ranges catch typos).
 # Missions do not import the plant: tests/test_mission.py checks that the two agree.
 ENVELOPE_RADIUS_M = 100.0
+
+
+def _beyond(what: str, r: float) -> str:
+    return (f"{what} is {r:.4g} m from the origin, outside the plant's envelope of {ENVELOPE_RADIUS_M:g} m "
+            f"(plant/quadrotor.py: a vehicle farther out has diverged)")
+
+
+@functools.lru_cache(maxsize=4)
+def smooth_beyond(trajectory: Smooth) -> tuple[str, str] | None:
+    """:func:`envelope_problem` of a minimum-snap trajectory, which may swing past its knots: sampled, 64 a
+    segment. Kept for the last few: a mission is validated again each time a field of
+    it is replaced (its overrides), and its trajectory is the same one."""
+    ks = trajectory.knots
+    for j in range(len(ks) - 1):
+        for i in range(65):
+            x, y, z, _ = trajectory.sample(ks[j].t + (ks[j + 1].t - ks[j].t) * i / 64)
+            r = math.sqrt(x[0] * x[0] + y[0] * y[0] + z[0] * z[0])
+            if r > ENVELOPE_RADIUS_M:
+                return f"trajectory.points[{j}]", _beyond(f"after this knot, at ({x[0]:.4g}, {y[0]:.4g}, "
+                                                          f"{z[0]:.4g}), the trajectory", r)
+    return None
 
 
 def envelope_problem(trajectory: Reference, start: tuple[float, ...], duration_s: float,
@@ -29,39 +51,28 @@ def envelope_problem(trajectory: Reference, start: tuple[float, ...], duration_s
     horizontal radius is its amplitude and its height is linear in t, so its farthest points are
     at t = 0 and t = ``duration_s``. Other references (written in Python) are not checked here:
     the plant's own divergence check still stops them."""
-    def beyond(what: str, r: float) -> str:
-        return (f"{what} is {r:.4g} m from the origin, outside the plant's envelope of {ENVELOPE_RADIUS_M:g} m "
-                f"(plant/quadrotor.py: a vehicle farther out has diverged)")
-
     r = math.hypot(math.hypot(*start[:2]) + scatter_m, start[2])  # the farthest point of the start's disc
     if r > ENVELOPE_RADIUS_M:
-        return "start.position", beyond("the start" + (" with its scatter" if scatter_m else ""), r)
+        return "start.position", _beyond("the start" + (" with its scatter" if scatter_m else ""), r)
     if isinstance(trajectory, (Step, Waypoints)):
         key, points = (("trajectory.setpoints", trajectory.setpoints) if isinstance(trajectory, Step)
                        else ("trajectory.points", trajectory.points))
         for i, s in enumerate(points):
             r = math.sqrt(s.x * s.x + s.y * s.y + s.z * s.z)
             if r > ENVELOPE_RADIUS_M:
-                return f"{key}[{i}]", beyond(f"({s.x:g}, {s.y:g}, {s.z:g})", r)
-    elif isinstance(trajectory, Smooth):  # the polynomials may swing past their knots: sampled, 64 a segment
-        ks = trajectory.knots
-        for j in range(len(ks) - 1):
-            for i in range(65):
-                x, y, z, _ = trajectory.sample(ks[j].t + (ks[j + 1].t - ks[j].t) * i / 64)
-                r = math.sqrt(x[0] * x[0] + y[0] * y[0] + z[0] * z[0])
-                if r > ENVELOPE_RADIUS_M:
-                    return f"trajectory.points[{j}]", beyond(f"after this knot, at ({x[0]:.4g}, {y[0]:.4g}, "
-                                                              f"{z[0]:.4g}), the trajectory", r)
+                return f"{key}[{i}]", _beyond(f"({s.x:g}, {s.y:g}, {s.z:g})", r)
+    elif isinstance(trajectory, Smooth):
+        return smooth_beyond(trajectory)
     elif isinstance(trajectory, Sine):  # its horizontal reach: the circle's centre's distance plus its radius
         a, z0 = math.hypot(trajectory.x0, trajectory.y0) + abs(trajectory.amplitude), trajectory.z0
         z_end = z0 + trajectory.climb * duration_s
         if a > ENVELOPE_RADIUS_M:
-            return "trajectory.amplitude", beyond(f"amplitude {a:g} m: the circle", a)
+            return "trajectory.amplitude", _beyond(f"amplitude {a:g} m: the circle", a)
         if math.hypot(a, z0) > ENVELOPE_RADIUS_M:
-            return "trajectory.z0", beyond(f"at t = 0 (amplitude {a:g} m, z0 {z0:g} m) the reference",
+            return "trajectory.z0", _beyond(f"at t = 0 (amplitude {a:g} m, z0 {z0:g} m) the reference",
                                            math.hypot(a, z0))
         if math.hypot(a, z_end) > ENVELOPE_RADIUS_M:
-            return "trajectory.climb", beyond(
+            return "trajectory.climb", _beyond(
                 f"climbing {trajectory.climb:g} m/s from z0 {z0:g} m, at t = {duration_s:g} s (z = {z_end:g} m) "
                 f"the reference", math.hypot(a, z_end))
     return None

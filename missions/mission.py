@@ -34,8 +34,9 @@ from missions.minsnap import Knot, Smooth
 from missions.planfiles import PlanFile, read_plan_text
 from missions.rally import rally_dict, rally_from_plan, rally_from_table
 from missions.references import Reference, Setpoint, Sine, Step, Waypoints
-from missions.route import LIMIT_RANGES, Limits, smooth_from_plan
+from missions.route import LIMIT_RANGES, Limits, least_duration_s, smooth_from_plan
 from missions.scatter import scattered_start
+from missions.steps import PlanBudget, StepCap
 from params import ConfigError, Table, load_toml, read_text_file
 
 CONTROLLERS = ("bsst", "smc", "pid")
@@ -57,6 +58,7 @@ MISSION_RANGES: dict[str, tuple[float, float]] = {
 }
 TRAJECTORIES = ("step", "sine", "waypoints", "smooth", "plan")
 PLAN_SUFFIXES = (".plan", ".waypoints", ".txt")  # QGroundControl's JSON plan; QGC WPL 110 text
+DEFAULT_RATE_HZ = 250.0  # Hz: a mission's control rate unless it gives one (a plan's, always)
 PLAN_MAX_BYTES = 16 << 20  # a plan of MAX_ITEMS items is about 5 MB of JSON
 END_REST_S = 1.0  # s: a plan's mission lasts this long after its trajectory ends (at rest, or on the ground)
 MAX_STRETCH = 4.0  # the most a trajectory is slowed (``stretched_by``; missions.airframe fits a plan's with it)
@@ -78,7 +80,7 @@ class Mission:
     actuation: str | None = None  # None: the profile's own
     controller: str = "bsst"
     discretization: str = DEFAULT_DISCRETIZATION  # DISCRETIZATIONS; only ``bsst`` has a step it changes
-    rate_hz: float = 250.0
+    rate_hz: float = DEFAULT_RATE_HZ
     physics_hz: float = 1000.0
     seed: int = 0
     start: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)  # x, y, z, psi at rest
@@ -255,24 +257,22 @@ def is_plan_file(path: str | Path) -> bool:
     return Path(path).suffix.lower() in PLAN_SUFFIXES
 
 
-def load_mission(path: str | Path) -> Mission:
+def load_mission(path: str | Path, cap: StepCap | None = None) -> Mission:
     """Read and validate a mission TOML file (a shipped one by name: :func:`mission_path`), or a
-    ground station's plan (:func:`is_plan_file`: flown with every other setting at its default)."""
+    ground station's plan (:func:`is_plan_file`: flown with every other setting at its default). ``cap``: the
+    control steps the command keeps (:class:`missions.steps.StepCap`): a mission over it is refused as soon as
+    its length is known, a plan's before its trajectory is timed when even its least length is over."""
     p = mission_path(path)
     if is_plan_file(p):
-        return mission_from_plan(read_text_file(p, "a mission plan", PLAN_MAX_BYTES), str(p), p.stem)
-    return mission_from_table(load_toml(p), str(p), default_name=p.stem)
+        return mission_from_plan(read_text_file(p, "a mission plan", PLAN_MAX_BYTES), str(p), p.stem, cap)
+    return mission_from_table(load_toml(p), str(p), default_name=p.stem, cap=cap)
 
 
-def plan_trajectory(text: str, source: str, limits: Mapping[str, float] | None = None) -> Smooth:
-    """The smooth trajectory of a plan's text (``.plan`` JSON or ``QGC WPL 110``): its cruise speed is
-    MPC_XY_CRUISE unless ``limits`` (PX4 names, :class:`missions.route.Limits`) give it."""
-    return plan_smooth(read_plan_text(text, source), limits)
-
-
-def plan_smooth(plan: PlanFile, limits: Mapping[str, float] | None = None) -> Smooth:
+def plan_smooth(plan: PlanFile, limits: Mapping[str, float] | None = None, budget: PlanBudget | None = None) -> Smooth:
     """The smooth trajectory of a read plan (a file's, or one a ground station uploaded): its cruise speed is
-    MPC_XY_CRUISE unless ``limits`` give it."""
+    MPC_XY_CRUISE unless ``limits`` give it. With a ``budget`` (how long the mission it makes may last), a plan
+    whose least length (:func:`missions.route.least_duration_s`, then :data:`END_REST_S`) is over it is refused
+    before the trajectory is timed (milliseconds, where the timing takes seconds a thousand items)."""
     given = dict(limits or {})
     if plan.cruise_m_s is not None and "MPC_XY_CRUISE" not in given:
         lo, hi = LIMIT_RANGES["MPC_XY_CRUISE"]
@@ -280,22 +280,31 @@ def plan_smooth(plan: PlanFile, limits: Mapping[str, float] | None = None) -> Sm
             raise ConfigError(f"{plan.source}: mission.hoverSpeed: {plan.cruise_m_s:g} m/s, must be in "
                               f"[{lo:g}, {hi:g}]")
         given["MPC_XY_CRUISE"] = plan.cruise_m_s
-    smooth, _ = smooth_from_plan(plan, Limits(**given), ENVELOPE_RADIUS_M)
+    limited = Limits(**given)
+    if budget is not None:
+        budget.check(plan.source, len(plan.items), least_duration_s(plan, limited, ENVELOPE_RADIUS_M) + END_REST_S)
+    smooth, _ = smooth_from_plan(plan, limited, ENVELOPE_RADIUS_M)
     return smooth
+
+
+def _budget(rate_hz: float, cap: StepCap | None = None) -> PlanBudget:
+    """What a plan's mission may last: the longest ``duration_s``, and ``cap`` at ``rate_hz``."""
+    return PlanBudget(MISSION_RANGES["duration_s"][1], rate_hz, cap)
 
 
 def with_plan(base: Mission, plan: PlanFile, name: str) -> Mission:
     """``base`` (its settings: profile, law, rates, link, ...) flying ``plan``: its trajectory, then
     :data:`END_REST_S` at rest, named ``name``."""
-    smooth = plan_smooth(plan)
+    smooth = plan_smooth(plan, budget=_budget(base.rate_hz))
     return replace(base, trajectory=smooth, duration_s=smooth.end_s + END_REST_S, name=name, geofence=plan.fence,
                    rally=_plan_rally(plan))
 
 
-def mission_from_plan(text: str, source: str, name: str = "mission") -> Mission:
-    """The mission of a plan's text: its trajectory, then :data:`END_REST_S` at rest; defaults otherwise."""
+def mission_from_plan(text: str, source: str, name: str = "mission", cap: StepCap | None = None) -> Mission:
+    """The mission of a plan's text: its trajectory, then :data:`END_REST_S` at rest; defaults otherwise
+    (``cap``: :func:`load_mission`)."""
     plan = read_plan_text(text, source)
-    smooth = plan_smooth(plan)
+    smooth = plan_smooth(plan, budget=_budget(DEFAULT_RATE_HZ, cap))
     return Mission(trajectory=smooth, duration_s=smooth.end_s + END_REST_S, name=name, source=source,
                    geofence=plan.fence, rally=_plan_rally(plan))
 
@@ -305,7 +314,8 @@ def _plan_rally(plan: PlanFile) -> tuple[tuple[float, float], ...]:
     return rally_from_plan(plan.rally, GeoHome(*plan.home), plan.source, ENVELOPE_RADIUS_M)
 
 
-def mission_from_table(data: Mapping[str, Any], source: str, default_name: str = "mission") -> Mission:
+def mission_from_table(data: Mapping[str, Any], source: str, default_name: str = "mission",
+                       cap: StepCap | None = None) -> Mission:
     t = Table(data, source)
     name = t.string("name", default_name)
     trajectory_table = t.table("trajectory", required=True)
@@ -317,14 +327,20 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
     controller = _law(t, "controller") or "bsst"
     discretization = t.string("discretization", DEFAULT_DISCRETIZATION, choices=DISCRETIZATIONS)
     r = MISSION_RANGES
-    rate = t.number("rate_hz", 250.0, lo=r["rate_hz"][0], hi=r["rate_hz"][1])
+    rate = t.number("rate_hz", DEFAULT_RATE_HZ, lo=r["rate_hz"][0], hi=r["rate_hz"][1])
     physics = t.number("physics_hz", 1000.0, lo=r["physics_hz"][0], hi=r["physics_hz"][1])
     seed = t.integer("seed", 0, lo=int(r["seed"][0]), hi=int(r["seed"][1]))
     st = t.table("start")
     start = st.vector("position", 3, (0.0, 0.0, 0.0), lo=-1e4, hi=1e4) + (st.number("psi", 0.0, lo=-10, hi=10),)
     scatter = st.number("scatter_m", 0.0, lo=r["start_scatter_m"][0], hi=r["start_scatter_m"][1])
     st.done()
-    trajectory = _trajectory(trajectory_table, duration if not derived else MISSION_RANGES["duration_s"][1])
+    too_long = cap.problem(duration, rate) if cap is not None and not derived else None  # before the trajectory
+    if too_long:
+        raise ConfigError(f"{source}: {too_long}")
+    budget = _budget(rate, cap) if derived else None  # a plan's own length: checked before it is timed
+    plan = _plan_of(trajectory_table)  # its plan file, read once (None: no plan, or no file named)
+    trajectory = _trajectory(trajectory_table, duration if not derived else MISSION_RANGES["duration_s"][1], budget,
+                             plan)
     if derived:
         duration = trajectory.end_s + END_REST_S  # type: ignore[attr-defined]
     raw = {k: _table(t, k) for k in ("gains", "effects", "link", "failsafe", "sensors", "estimator", "params", "wind")}
@@ -335,8 +351,8 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
     if not isinstance(events, list) or not all(isinstance(e, Mapping) for e in events):
         raise t.error("events", "expected an array of tables [[events]] (t_s, kind and its settings)")
     span = duration if not derived else MISSION_RANGES["duration_s"][1]
-    vehicles, separation = fleet_from_table(t, lambda tt: _trajectory(tt, span), _law)
-    fence, rally = _plan_extras(trajectory_table)  # a plan's, unless the mission gives its own
+    vehicles, separation = fleet_from_table(t, lambda tt: _trajectory(tt, span, budget), _law)
+    fence, rally = (plan.fence, _plan_rally(plan)) if plan is not None else (None, ())  # a plan's, unless its own
     fence = geofence_from_table(t.table("geofence")) if t.has("geofence") else fence
     rally = rally_from_table(t.table("rally"), ENVELOPE_RADIUS_M) if t.has("rally") else rally
     t.done()
@@ -406,7 +422,9 @@ def _setpoints(t: Table, key: str, duration: float, stops: list[bool] | None = N
     return tuple(out)
 
 
-def _trajectory(t: Table, duration: float) -> Reference:
+def _trajectory(t: Table, duration: float, budget: PlanBudget | None = None, plan: PlanFile | None = None) -> Reference:
+    """The trajectory of a ``[trajectory]`` table; a plan's (``kind = "plan"``) with ``budget`` (:func:`plan_smooth`),
+    ``plan`` its file if read already."""
     kind = t.string("kind", choices=TRAJECTORIES)
     if kind == "sine":
         ref: Reference = Sine(
@@ -425,7 +443,7 @@ def _trajectory(t: Table, duration: float) -> Reference:
     elif kind == "smooth":
         ref = _smooth(t, duration)
     else:
-        ref = _plan(t)
+        ref = _plan(t, budget, plan)
     t.done()
     return ref
 
@@ -441,12 +459,14 @@ def _smooth(t: Table, duration: float) -> Smooth:
     return Smooth(tuple(Knot(p.t, p.x, p.y, p.z, p.psi, s) for p, s in zip(points, stops)), lands, factor)
 
 
-def _plan(t: Table) -> Smooth:
-    """``kind = "plan"``: ``file`` (a ``.plan`` or ``QGC WPL 110`` file, relative to the mission's folder) and
-    PX4's speed and acceleration limits by name (:class:`missions.route.Limits`)."""
+def _plan(t: Table, budget: PlanBudget | None = None, plan: PlanFile | None = None) -> Smooth:
+    """``kind = "plan"``: ``file`` (a ``.plan`` or ``QGC WPL 110`` file, relative to the mission's folder; ``plan``,
+    if read already) and PX4's speed and acceleration limits by name (:class:`missions.route.Limits`)."""
     p = _plan_path(t, t.string("file"))
     limits = {k: t.number(k, lo=lo, hi=hi) for k, (lo, hi) in LIMIT_RANGES.items() if t.has(k)}
-    return plan_trajectory(read_text_file(p, "a mission plan", PLAN_MAX_BYTES), str(p), limits)
+    if plan is None:
+        plan = read_plan_text(read_text_file(p, "a mission plan", PLAN_MAX_BYTES), str(p))
+    return plan_smooth(plan, limits, budget)
 
 
 def _plan_path(t: Table, name: str) -> Path:
@@ -455,11 +475,10 @@ def _plan_path(t: Table, name: str) -> Path:
     return p if p.is_absolute() else Path(t._source).parent / p
 
 
-def _plan_extras(t: Table) -> tuple[Any, tuple[tuple[float, float], ...]]:
-    """A ``kind = "plan"`` trajectory's plan's geofence and rally points (the file read again: the trajectory
-    parser keeps only its route), or (None, ())."""
+def _plan_of(t: Table) -> PlanFile | None:
+    """A ``kind = "plan"`` trajectory's plan file, read (its route, geofence and rally points: read once), or
+    None (another kind, or no ``file`` named: :func:`_plan` names the key)."""
     if t.raw("kind") != "plan" or not isinstance(t.raw("file"), str):
-        return None, ()
+        return None
     p = _plan_path(t, t.raw("file"))
-    plan = read_plan_text(read_text_file(p, "a mission plan", PLAN_MAX_BYTES), str(p))
-    return plan.fence, _plan_rally(plan)
+    return read_plan_text(read_text_file(p, "a mission plan", PLAN_MAX_BYTES), str(p))

@@ -4,7 +4,8 @@ In:  a :class:`~missions.planfiles.PlanFile` (home deg, deg, m AMSL; items) and 
      acceleration limits (:class:`Limits`, PX4's parameter names: m/s, m/s²; yaw rate deg/s)
 Out: a :class:`Route`: the knots (t s; x, y, z m and psi rad in the paper frame about the home; stop or
      pass through) and the waypoints the plan names there; :func:`smooth_from_plan` its
-     :class:`~missions.minsnap.Smooth` trajectory. What cannot be flown is a :class:`params.ConfigError`
+     :class:`~missions.minsnap.Smooth` trajectory; :func:`least_duration_s`, a lower bound of its length (s)
+     before it is timed. What cannot be flown is a :class:`params.ConfigError`
      naming the file, the item and its command
 
 The vehicle starts at rest on the ground at the home. NAV_TAKEOFF climbs over where it is and stops;
@@ -185,6 +186,19 @@ def stops_of(plan: PlanFile, limits: Limits, envelope_m: float) -> tuple[list[St
     last = pts[-1]
     pts[-1] = replace(last, stop=True)
     return pts, landed_by is not None
+
+
+def least_duration_s(plan: PlanFile, limits: Limits, envelope_m: float) -> float:
+    """A lower bound of the time (s) the plan's trajectory lasts, before any of it is timed (a few ms for thousands
+    of items): each leg straight at its speed limits (horizontal and vertical), plus the holds. The timed
+    trajectory keeps every leg's speeds within those limits (:func:`route_of`) along a path no shorter than the
+    leg, and fitting it to the airframe only slows it."""
+    pts, _ = stops_of(plan, limits, envelope_m)
+    t = sum(p.hold_s for p in pts)
+    for a, b in zip(pts, pts[1:]):
+        dz = b.z - a.z
+        t += max(math.hypot(b.x - a.x, b.y - a.y) / b.xy, abs(dz) / (b.up if dz > 0 else b.dn))
+    return t
 
 
 def _speed(plan: PlanFile, item: Item, xy: float, up: float, dn: float) -> tuple[float, float, float]:

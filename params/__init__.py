@@ -8,15 +8,21 @@ value always fails with one line naming the file, the key and what is allowed.
 from __future__ import annotations
 
 import difflib
+import functools
 import math
 import os
 import re
 import stat
 import sys
 import tomllib
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from contextlib import contextmanager
+from contextvars import ContextVar
 from pathlib import Path
-from typing import Any
+from typing import Any, ParamSpec, TypeVar
+
+_P = ParamSpec("_P")
+_R = TypeVar("_R")
 
 
 class ConfigError(ValueError):
@@ -28,20 +34,53 @@ MAX_DEPTH = 32  # tables and lists nested deeper are refused: ours nest 6 deep, 
 # Python's recursion limit (tomllib itself gives up at about 450 levels of arrays or inline tables)
 
 
-_INPUTS: dict[str, str] = {}  # every file this process read as input: its real path -> the path as first given
+# the files the command or API call under way has read as input (its real path -> the path as first given); None
+# outside one: a read then is recorded nowhere (no later call is refused for it)
+_INPUTS: ContextVar[dict[str, str] | None] = ContextVar("bsst_inputs_read", default=None)
+
+
+@contextmanager
+def input_scope() -> Iterator[dict[str, str]]:
+    """One command's, or one API call's, record of the files it reads (:func:`inputs_read`): ``bsst``'s
+    :func:`bridge.cli.main` opens one around its command, and each public call that may ``--overwrite`` a run
+    directory (:func:`reads_inputs`) around itself. Opened inside another, it is that one (a command's API call
+    keeps what the command read before it); the outermost ends with its call, and what it read is forgotten.
+    Per thread and per asyncio task (a context variable)."""
+    open_one = _INPUTS.get()
+    if open_one is not None:
+        yield open_one
+        return
+    fresh: dict[str, str] = {}
+    token = _INPUTS.set(fresh)
+    try:
+        yield fresh
+    finally:
+        _INPUTS.reset(token)
+
+
+def reads_inputs(func: Callable[_P, _R]) -> Callable[_P, _R]:
+    """``func`` run inside an :func:`input_scope` (its own, or the one already open)."""
+    @functools.wraps(func)
+    def scoped(*args: _P.args, **kwargs: _P.kwargs) -> _R:
+        with input_scope():
+            return func(*args, **kwargs)
+    return scoped
 
 
 def note_input(path: str | Path) -> None:
-    """Record ``path`` as a file this process reads as input (:func:`inputs_read`). Every reader of a user's
-    file calls it: :func:`read_regular_file` (missions, plans, profiles, link traces, sweeps, tlogs), a
-    controller plug-in's loader and the signing key's."""
-    _INPUTS.setdefault(os.path.realpath(path), str(path))
+    """Record ``path`` as a file the command or API call under way reads as input (:func:`inputs_read`). Every
+    reader of a user's file calls it: :func:`read_regular_file` (missions, plans, profiles, link traces, sweeps,
+    tlogs), a controller plug-in's loader and the signing key's. Outside an :func:`input_scope`, nothing."""
+    inputs = _INPUTS.get()
+    if inputs is not None:
+        inputs.setdefault(os.path.realpath(path), str(path))
 
 
 def inputs_read() -> dict[str, str]:
-    """Every file this process has read as input so far: its real path (symbolic links resolved) -> the path it
-    was first read by. ``--overwrite`` refuses to replace one (:func:`bridge.record.runlog.run_dir`)."""
-    return dict(_INPUTS)
+    """Every file the command or API call under way (:func:`input_scope`) has read as input so far: its real path
+    (symbolic links resolved) -> the path it was first read by. ``--overwrite`` refuses to replace one
+    (:func:`bridge.record.runlog.run_dir`). Outside a scope: none."""
+    return dict(_INPUTS.get() or {})
 
 
 def read_regular_file(path: str | Path, expected: str = "file", max_bytes: int | None = None) -> bytes:

@@ -48,6 +48,18 @@ def l_plan(tmp_path: Path) -> Path:
     return write_plan(tmp_path, cut, "l.plan")
 
 
+def box_repeated(tmp_path: Path, items: int, name: str = "long.plan") -> Path:
+    """The box plan with its five corners flown round and round: takeoff, speed change, corners, land; ``items``
+    items in all (3 000: 7.5 hours of flight, docs/missions.md "Loading a long plan")."""
+    def repeat(data: dict) -> None:
+        box = data["mission"]["items"]
+        laps = [copy.deepcopy(box[2 + k % 5]) for k in range(items - 3)]
+        data["mission"]["items"] = [box[0], box[1], *laps, box[7]]
+        for k, item in enumerate(data["mission"]["items"]):
+            item["doJumpId"] = k + 1
+    return write_plan(tmp_path, repeat, name)
+
+
 M_PER_DEG = 6_371_000.0 * math.pi / 180.0  # the projection's sphere: metres per degree of latitude
 L_HOME = (47.397742, 8.545594)  # the L plan's home and start
 # why a vehicle at the start of outside_fence_plan is not armed (PX4's pre-arm geofence check)

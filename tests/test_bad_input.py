@@ -28,6 +28,7 @@ from typing import Any
 import pytest
 
 from bridge.cli import build_parser, main
+from bridge.cli.flags import UsageError
 from bridge.core.flight import prepare
 from bridge.mavlink.endpoint import LINK_PORT
 from bridge.session import instance_slot
@@ -673,6 +674,39 @@ def test_every_flag_misspelled_names_itself(files: Files, capsys: Any, cmd: str)
             assert err[0].endswith(f"; did you mean {flag}?"), err[0]
             suggested += 1
     assert suggested >= 1
+
+
+@functools.cache
+def _whole_parser() -> argparse.ArgumentParser:
+    return build_parser()
+
+
+@pytest.mark.parametrize("cmd", sorted(set(BASE) - {"link", "report"}))  # (report takes no value of a flag)
+def test_a_value_that_starts_with_a_minus_and_a_digit_is_the_flags_value(files: Files, cmd: str) -> None:
+    """Every flag that takes one value takes ``-1``, ``-1:wind:3`` or ``-33.9,151.2,20`` as it (argparse alone
+    takes only a plain negative number so, and refused the rest as the flag's missing value: "expected one
+    argument"): the flag's own check accepts or names it."""
+    parser = _whole_parser()
+    flags = [a.option_strings[0] for a in _commands()[cmd]._actions if a.option_strings and a.nargs is None]
+    assert len(flags) >= 3
+    for flag in flags:
+        for value in ("-1", "-1:wind:3", "-33.9,151.2,20"):
+            try:
+                parser.parse_args([cmd, *map(str, BASE[cmd](files)), flag, value])
+            except UsageError as exc:
+                assert "expected one argument" not in str(exc) and flag in str(exc), (flag, value, str(exc))
+    with pytest.raises(UsageError, match="--at: expected one argument"):  # a flag is still a flag
+        parser.parse_args(["sim", "missions/sine.toml", "--at", "--no-plots"])
+
+
+def test_a_negative_event_time_and_a_southern_home_as_separate_words(files: Files, capsys: Any) -> None:
+    """``--at -1:wind:3`` is refused as ``--at=-1:wind:3`` is, naming the flag and the time; ``--home`` south of
+    the equator is taken."""
+    for at in (["--at", "-1:wind:3"], ["--at=-1:wind:3"]):
+        line = _refused(capsys, ["sim", *BASE["sim"](files), *at], "--at")
+        assert line == "bsst: --at -1:wind:3: t_s: must be in [0, 0.2) s (before the mission's end), got -1", line
+    home = _whole_parser().parse_args(["vehicle", "--home", "-33.86,151.21,20"]).home
+    assert home == (-33.86, 151.21, 20.0)
 
 
 def test_bsst_controller_has_no_run_directory_nor_plots(tmp_path: Path) -> None:

@@ -95,6 +95,8 @@ if sys.argv[2] == "params":
     out["get_after_set"] = par.get_param_float("COM_OF_LOSS_T")
     out["set_out_of_range"] = refused(par.set_param_float, "COM_OF_LOSS_T", 100.0)
     out["get_after_refusal"] = par.get_param_float("COM_OF_LOSS_T")
+    out["set_unknown"] = refused(par.set_param_float, "NO_SUCH_PARAM", 1.0)
+    out["get_unknown"] = refused(par.get_param_float, "NO_SUCH_PARAM")
     out["obl_act"] = par.get_param_int("COM_OBL_ACT")
     out["set_obl_act"] = par.set_param_int("COM_OBL_ACT", 1).name
     out["obl_rc_act"] = par.get_param_int("COM_OBL_RC_ACT")  # the same setting under PX4 1.14's name
@@ -286,8 +288,9 @@ def _mavsdk_on_a_vehicle(tmp_path: Path, part: str) -> tuple[dict, Proc, int]:
 
 def test_mavsdk_parameters(tmp_path):
     """``Param``: every parameter listed with its value (``--param`` included), read, set and read
-    back, an out-of-range set refused with the value unchanged, an INT32 set under PX4's old name
-    read under its new one, and the start-only MAV_SYS_ID refused."""
+    back, an out-of-range set refused at once with MAVSDK's VALUE_OUT_OF_RANGE and the value unchanged, an
+    unknown name's set and read DOES_NOT_EXIST, an INT32 set under PX4's old name read under its new one, and the
+    start-only MAV_SYS_ID refused READ_ONLY."""
     with instance_slot() as n:
         v = _vehicle(n, tmp_path, "--param", "COM_FAIL_ACT_T=7")
         try:
@@ -303,14 +306,19 @@ def test_mavsdk_parameters(tmp_path):
     for name, value in want.items():
         assert math.isclose(got[name], value, rel_tol=1e-6), (name, got[name], value)
     assert out["get"] == 0.5 and out["set"] == "SUCCESS" and out["get_after_set"] == 1.5
-    # parameter protocol v1 has no refusal: MAVSDK sees the unchanged value come back, retries, then gives up
-    assert not out["set_out_of_range"].startswith("SUCCESS") and out["get_after_refusal"] == 1.5
+    # a refusal's PARAM_ERROR ends MAVSDK's set with its reason (on the unchanged value alone it resent the set five
+    # times and said TIMEOUT; an unknown name, answered by a STATUSTEXT only, took 3 s to say TIMEOUT)
+    assert out["set_out_of_range"] == "VALUE_OUT_OF_RANGE" and out["get_after_refusal"] == 1.5
+    assert out["set_unknown"] == out["get_unknown"] == "DOES_NOT_EXIST"
     assert out["obl_act"] == -1 and out["set_obl_act"] == "SUCCESS" and out["obl_rc_act"] == 5  # hold
-    assert not out["set_sys_id"].startswith("SUCCESS")
+    assert out["set_sys_id"] == "READ_ONLY"
     v.wait_event(lambda s: "param: COM_OF_LOSS_T = 1.5 (was 0.5) [by " in s and " gcs]" in s)
     v.wait_report(Refused, lambda r: r.text.startswith("COM_OF_LOSS_T: must be in [0.01, 60] s, got 100"))
     v.wait_report(Refused, lambda r: r.text.startswith("MAV_SYS_ID: takes effect at start only"))
     assert not any("COM_OF_LOSS_T = 100" in s for s in v.events())
+    # each refused set was sent once: MAVSDK did not resend it (one refusal each in the vehicle's records)
+    assert sorted(r.text.split(":")[0] for r in v.reports() if isinstance(r, Refused)) == ["COM_OF_LOSS_T",
+                                                                                          "MAV_SYS_ID"]
 
 
 def test_mavsdk_arm_takeoff_land(tmp_path):

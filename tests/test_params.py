@@ -45,6 +45,7 @@ from bridge.mavlink.modes import (
     shown_name,
 )
 from bridge.nodes.report import Ready, Stats
+from bridge.nodes.vehicle.paramservice import MAV_PARAM_ERROR_TYPE_MISMATCH
 from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
 from missions import Mission, Sine
@@ -189,17 +190,33 @@ def test_parameter_protocol_over_udp(tmp_path):
             assert _recv(gcs, "PARAM_VALUE").param_value == pytest.approx(0.7)
             gcs.mav.param_request_read_send(*tgt, b"", BY_NAME and list(BY_NAME).index("MIS_TAKEOFF_ALT"))
             assert _recv(gcs, "PARAM_VALUE").param_id == "MIS_TAKEOFF_ALT"
-            # a set: made, answered with the new value; out of range, wrong type, start-only: refused
+            # a set: made, answered with the new value; out of range, wrong type, start-only: refused, answered
+            # with PARAM_ERROR (its code) before the unchanged value, and a STATUSTEXT saying why
             gcs.mav.param_set_send(*tgt, b"COM_OF_LOSS_T", 1.5, M.MAV_PARAM_TYPE_REAL32)
             assert _recv(gcs, "PARAM_VALUE").param_value == 1.5
-            for name, value, kind, why in (("COM_OF_LOSS_T", 100.0, M.MAV_PARAM_TYPE_REAL32, "must be in"),
-                                           ("COM_OF_LOSS_T", 1.0, M.MAV_PARAM_TYPE_INT32, "REAL32"),
-                                           ("MAV_SYS_ID", param_to_wire(42, 6), 6, "at start only")):
+            for name, value, kind, code, why in (
+                    ("COM_OF_LOSS_T", 100.0, M.MAV_PARAM_TYPE_REAL32, M.MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE,
+                     "COM_OF_LOSS_T: must be in [0.01, 60] s, got 100"),
+                    ("COM_OF_LOSS_T", 1.0, M.MAV_PARAM_TYPE_INT32, MAV_PARAM_ERROR_TYPE_MISMATCH, "REAL32"),
+                    ("MAV_SYS_ID", param_to_wire(42, 6), 6, M.MAV_PARAM_ERROR_READ_ONLY, "at start only")):
                 gcs.mav.param_set_send(*tgt, name.encode(), value, kind)
+                error = _recv(gcs, ["PARAM_ERROR", "PARAM_VALUE"])
+                assert error.get_type() == "PARAM_ERROR", error
+                assert (error.param_id, error.error, error.param_index) == (name, code, list(BY_NAME).index(name))
+                assert (error.target_system, error.target_component) == (255, 190)  # to the sender
                 m = _recv(gcs, "PARAM_VALUE")
-                text = _recv(gcs, "STATUSTEXT", f"'{why}' in STATUSTEXT.text")
-                assert m.param_id == name and text.severity == M.MAV_SEVERITY_WARNING
+                text = _recv(gcs, "STATUSTEXT", f"{why!r} in STATUSTEXT.text")
+                assert m.param_id == name
+                assert text.severity == M.MAV_SEVERITY_WARNING
                 assert param_from_wire(m.param_value, m.param_type) == (1.5 if name == "COM_OF_LOSS_T" else n + 1)
+            # an unknown name or index: PARAM_ERROR DOES_NOT_EXIST naming what was asked for, no PARAM_VALUE
+            gcs.mav.param_set_send(*tgt, b"NO_SUCH_PARAM", 1.0, M.MAV_PARAM_TYPE_REAL32)
+            gcs.mav.param_request_read_send(*tgt, b"NO_SUCH_PARAM", -1)
+            gcs.mav.param_request_read_send(*tgt, b"", len(PARAMS))
+            for asked in (("NO_SUCH_PARAM", -1), ("NO_SUCH_PARAM", -1), ("", len(PARAMS))):
+                error = _recv(gcs, ["PARAM_ERROR", "PARAM_VALUE"])
+                assert error.get_type() == "PARAM_ERROR", error
+                assert (error.param_id, error.param_index, error.error) == (*asked, M.MAV_PARAM_ERROR_DOES_NOT_EXIST)
             gcs.mav.param_set_send(*tgt, b"COM_OBL_RC_ACT", param_to_wire(5, 6), M.MAV_PARAM_TYPE_INT32)
             assert param_from_wire(_recv(gcs, "PARAM_VALUE").param_value, 6) == 5
         finally:
@@ -209,7 +226,7 @@ def test_parameter_protocol_over_udp(tmp_path):
     assert (e.param.name, e.param.new, e.by.link) == ("COM_OF_LOSS_T", 1.5, "gcs")  # typed, for the policies
     v.wait_event(lambda s: "param: COM_OBL_RC_ACT = 5 (was -1)" in s)
     stats = v.wait_report(Stats).values
-    assert stats["rejected"]["param_refused"] == 3
+    assert stats["rejected"]["param_refused"] == 3 and stats["rejected"]["param_unknown"] == 3
 
 
 def test_modes_takeoff_hold_land_over_udp(tmp_path):

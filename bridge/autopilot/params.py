@@ -6,7 +6,8 @@ In:  a parameter's name and value (a float: MAVLink's PARAM_VALUE carries every 
      ``[params]`` table (NAME = value) and ``--param NAME=VALUE`` flags
 Out: the parameter list (:data:`PARAMS`: name, type, unit, range, meaning), a value read
      (:func:`read_param`), a change checked and made (:func:`change_param`, or :class:`ParamRefused`
-     saying why), the ``[failsafe]`` keys a ``[params]`` table stands for (:func:`params_as_failsafe`)
+     saying why, and what kind of refusal it is: :class:`Refusal`), the ``[failsafe]`` keys a ``[params]``
+     table stands for (:func:`params_as_failsafe`)
 
 Each parameter is one of the vehicle's settings under PX4's name where PX4 has that setting, with
 the one range the setting has everywhere (``[failsafe]``'s :data:`~bridge.autopilot.failsafe.FAILSAFE_RANGES`
@@ -30,6 +31,7 @@ import math
 import struct
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, replace
+from enum import Enum
 from typing import Any
 
 from bridge.autopilot.failsafe import FAILSAFE_RANGES, FailsafeConfig
@@ -169,8 +171,23 @@ _INT_FIELDS = {"SYS_FAILURE_EN": "failure_injection", "GF_ACTION": "fence_action
                "COM_LOW_BAT_ACT": "low_battery_action"}
 
 
+class Refusal(Enum):
+    """Why a parameter change is not made, as a ground station is told it (PARAM_ERROR's code:
+    :mod:`bridge.nodes.vehicle.paramservice`)."""
+
+    VALUE = "value"  # out of the parameter's range, not one of its choices, not a number of its type
+    READ_ONLY = "read_only"  # acts at start only (MAV_SYS_ID)
+    UNKNOWN = "unknown"  # no such parameter
+    TYPE = "type"  # the set says another MAVLink type than the parameter's
+
+
 class ParamRefused(ValueError):
-    """A parameter change that is not made; the message says why (it goes out in a STATUSTEXT)."""
+    """A parameter change that is not made; the message says why (it goes out in a STATUSTEXT), ``why`` what kind
+    of refusal it is (:class:`Refusal`)."""
+
+    def __init__(self, message: str, why: Refusal = Refusal.VALUE) -> None:
+        super().__init__(message)
+        self.why = why
 
 
 def read_param(p: VehicleParams, name: str) -> float:
@@ -248,12 +265,12 @@ def change_param(p: VehicleParams, name: str, value: float, running: bool = True
     unknown name, a value out of range or of the wrong type, or, ``running``, one that acts only at start)."""
     spec = BY_NAME.get(name)
     if spec is None:
-        raise ParamRefused(f"{name}: no such parameter")
+        raise ParamRefused(f"{name}: no such parameter", Refusal.UNKNOWN)
     why = value_problem(spec, value)
     if why:
         raise ParamRefused(why)
     if running and spec.at_start_only:
-        raise ParamRefused(f"{name}: takes effect at start only (--param {name}=N)")
+        raise ParamRefused(f"{name}: takes effect at start only (--param {name}=N)", Refusal.READ_ONLY)
     value = min(max(value, spec.lo), spec.hi)  # one that rounds to a bound in float32 is that bound (in_range)
     if spec.failsafe_key == "action":
         return replace(p, failsafe=replace(p.failsafe, action=(spec.choices or {})[int(value)]))
@@ -301,7 +318,8 @@ def apply_params(start: VehicleParams, entries: Iterable[tuple[str, Any]], prefi
         spec = BY_NAME.get(name)
         try:
             if spec is None:
-                raise ParamRefused(f"{name}: no such parameter; the vehicle has {', '.join(BY_NAME)}")
+                raise ParamRefused(f"{name}: no such parameter; the vehicle has {', '.join(BY_NAME)}",
+                                   Refusal.UNKNOWN)
             after = change_param(p, name, typed_value(spec, value), running=False)
         except ParamRefused as exc:
             raise ConfigError(f"{prefix}{where(name, value)}: {str(exc).split(': ', 1)[1]}") from None

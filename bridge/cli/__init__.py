@@ -33,7 +33,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from bridge.cli.commands import EXIT_BAD_INPUT, EXIT_FAILED, build_parser, print_summary
 from bridge.cli.flags import UsageError, link_table_from_args
-from params import ConfigError
+from params import ConfigError, input_scope
 
 __all__ = ["build_parser", "link_table_from_args", "main", "print_summary"]
 
@@ -49,7 +49,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = _parser()
     try:
         args = parser.parse_args(argv)
-        return args.func(args)
+        with input_scope():  # the files this command reads: --overwrite never replaces one (params.inputs_read)
+            return args.func(args)
     except (UsageError, ConfigError) as exc:
         print(f"bsst: {exc}" if not str(exc).startswith("bsst") else str(exc), file=sys.stderr)
         return EXIT_BAD_INPUT

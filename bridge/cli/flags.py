@@ -15,6 +15,7 @@ The ranges are the mission loader's (:data:`bridge.link.model.NUMBER_RANGES`), o
 from __future__ import annotations
 
 import argparse
+import re
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
@@ -33,7 +34,19 @@ FLAG_CUTOFF = 0.75  # difflib's ratio from which a known flag is suggested (--de
 UNRECOGNIZED_IN = "_bsst_unrecognized_in"  # on the namespace: the (sub-)parser that met an unknown flag first
 
 
+# a word that starts with a minus and a digit is a value, never a flag (no flag of bsst's is one): argparse takes only
+# a plain negative number so, and read ``--at -1:wind:3``, ``--home -33.9,151.2,20`` or ``--blackout -1:2`` as a
+# flag with its value missing ("expected one argument") where the flag's own check names what is wrong, or takes it
+VALUE_NOT_FLAG = re.compile(r"^-\d")
+
+
 class _Parser(argparse.ArgumentParser):
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        # argparse's own test of "a negative number, so a value" (an attribute of every parser and sub-parser since
+        # Python 3.2; tests/test_cli.py pins what it does here)
+        self._negative_number_matcher = VALUE_NOT_FLAG
+
     def error(self, message: str) -> NoReturn:  # one line, no usage dump
         raise UsageError(f"{self.prog}: {message}")
 

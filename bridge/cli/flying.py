@@ -78,11 +78,14 @@ def cmd_sim(args: argparse.Namespace) -> int:
     """``bsst sim``; a law of the user's own flies in a watched child process (bridge.nodes.watched): one that
     ends the process (a signal, a C extension's exit) ends the command exit 1, said, never exit 0 and silent."""
     from bridge.nodes.watched import run_watched  # lazy: start-up time
+    from bridge.record.runlog import trace_cap  # lazy: start-up time
+    from missions import load_mission  # lazy: start-up time
 
-    laws = own_laws(args)
+    mission = load_mission(args.mission, trace_cap(args.rate))  # once: a plan too long refused before it is timed
+    laws = own_laws(args, mission)
     if not laws:
-        return _sim(args)
-    end = run_watched(lambda: _sim(args), (UsageError, ConfigError))
+        return _sim(args, mission)
+    end = run_watched(lambda: _sim(args, mission), (UsageError, ConfigError))
     if end.signalled is not None:  # this command was ended (SIGTERM, SIGHUP): its flight with it
         print(f"bsst sim: ended by signal {signal.Signals(end.signalled).name}", file=sys.stderr)
         return 128 + end.signalled
@@ -94,25 +97,23 @@ def cmd_sim(args: argparse.Namespace) -> int:
     return end.status
 
 
-def _sim(args: argparse.Namespace) -> int:
+def _sim(args: argparse.Namespace, mission: Any) -> int:
     from bridge.swarm import simulate  # lazy: start-up time
 
-    run = simulate(args.mission, out=args.out, write=True, overwrite=args.overwrite, plots=not args.no_plots,
+    run = simulate(mission, out=args.out, write=True, overwrite=args.overwrite, plots=not args.no_plots,
                    overrides=overrides_from_args(args), vehicles=args.vehicles, formation=args.formation)
     if "vehicles" in run.summary:
         return report_fleet(run, "sim")
     return report_run(run, "sim")
 
 
-def own_laws(args: argparse.Namespace) -> list[str]:
+def own_laws(args: argparse.Namespace, m: Any) -> list[str]:
     """The laws of the user's own a flying command flies (not bsst, smc, pid): ``--controller``'s, else the
-    mission's and its vehicles' (as the mission names them)."""
+    mission's (``m``, a :class:`missions.Mission`) and its vehicles' (as the mission names them)."""
     from controller.law import is_builtin  # lazy: start-up time
-    from missions import load_mission  # lazy: start-up time
 
     if args.controller is not None:
         return [] if is_builtin(args.controller) else [args.controller]
-    m = load_mission(args.mission)
     specs = {m.controller, *(v.controller for v in m.vehicles if v.controller)}
     return sorted(s for s in specs if not is_builtin(s))
 

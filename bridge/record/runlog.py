@@ -19,6 +19,7 @@ import json
 import os
 import time
 from collections.abc import Iterable, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -27,9 +28,19 @@ from bridge.link.model import link_from_table
 from bridge.record.columns import TRACE_COLUMNS
 from missions import Mission
 from missions.mission import name_problem
+from missions.steps import StepCap
 from params import ConfigError, dump_toml, inputs_read
 
 MAX_TRACE_STEPS = 500_000  # control steps a run that keeps its trace for its summary may fly (see check_trace_steps)
+TRACE_CAP = StepCap(MAX_TRACE_STEPS, "a run keeps in memory for its summary",
+                    "fly longer with bsst vehicle and bsst controller, which stream their rows to disk")
+
+
+def trace_cap(rate_hz: float | None = None) -> StepCap:
+    """The cap of :func:`check_trace_steps` for a command that flies at ``rate_hz`` (an override; None: the
+    mission's rate), to load a mission with (:func:`missions.load_mission`): a plan too long for it is refused
+    before its trajectory is timed."""
+    return replace(TRACE_CAP, rate_hz=rate_hz)
 
 
 def check_trace_steps(mission: Mission) -> None:
@@ -41,12 +52,9 @@ def check_trace_steps(mission: Mission) -> None:
     250 Hz) stay under 1 GB. A longer flight is flown by ``bsst vehicle`` and ``bsst controller``,
     which write their rows to disk and hold none (the vehicle at rest flies 24 h).
     """
-    n, cap = mission.steps, MAX_TRACE_STEPS
-    if n > cap:
-        raise ConfigError(
-            f"{mission.source}: duration_s: {mission.duration_s:g} s at {mission.rate_hz:g} Hz is {n} control steps, "
-            f"over the {cap} a run keeps in memory for its summary ({cap / mission.rate_hz:g} s at this rate); "
-            f"fly longer with bsst vehicle and bsst controller, which stream their rows to disk")
+    why = TRACE_CAP.problem(mission.duration_s, mission.rate_hz)
+    if why:
+        raise ConfigError(f"{mission.source}: {why}")
 
 
 def run_dir(
@@ -120,8 +128,9 @@ def run_entries(path: Path) -> list[Path]:
 
 def check_overwrite(path: Path) -> None:
     """Refuse an ``--overwrite`` of run directory ``path`` that would lose what is not a run's, before anything
-    is removed: a file this command reads as input (:func:`params.inputs_read`: its mission, link trace,
-    profile, plan, controller plug-in, key ...) among those it replaces (:func:`run_entries`), or an entry of a
+    is removed: a file this command, or this API call, reads as input (:func:`params.inputs_read`, one command's
+    or call's: :func:`params.input_scope`; its mission, link trace, profile, plan, controller plug-in, key ...)
+    among those it replaces (:func:`run_entries`), or an entry of a
     run's name that is no run's file (a directory; a symbolic link, which a run would write through)."""
     inputs = inputs_read()
     entries = run_entries(path)

@@ -62,11 +62,11 @@ from bridge.core.flight import Overrides, Progress, prepare
 from bridge.mavlink.endpoint import GCS_PORT, LINK_PORT, parse_address
 from bridge.mavlink.signing import key_from_file
 from bridge.nodes.forkserver import warm
-from bridge.record.runlog import Run, check_trace_steps, run_dir
+from bridge.record.runlog import Run, check_trace_steps, run_dir, trace_cap
 from bridge.session.children import ChildError, check_port_free, instance_slot
 from bridge.session.session import Session
-from missions import Mission, Setpoint, Step
-from params import ConfigError
+from missions import Mission, Setpoint, Step, load_mission
+from params import ConfigError, reads_inputs
 
 __all__ = ["ChildError", "Session", "check_options", "instance_slot", "sitl"]
 
@@ -100,6 +100,7 @@ def check_options(*, realtime: bool, instance: int | None, gcs: str | None, spee
     return gcs_text
 
 
+@reads_inputs
 def sitl(
     mission: Mission | str | Path | None,
     *,
@@ -149,7 +150,9 @@ def sitl(
         raise ConfigError("bsst sitl: give a mission file (or --await-mission)")
     if key is not None:
         key_from_file(key)  # a missing, empty or world-readable key file is bad input, before anything starts
-    flight = prepare(mission, overrides, **keywords)
+    over = Overrides.of(overrides, **keywords)
+    m = mission if isinstance(mission, Mission) else load_mission(mission, trace_cap(over.rate_hz))  # capped early
+    flight = prepare(m, over)
     check_trace_steps(flight.mission)  # the session keeps every trace row for its summary: a cap, said up front
     gcs_text = check_options(realtime=realtime, instance=instance, gcs=gcs, speed=speed)
     n = instance or 0

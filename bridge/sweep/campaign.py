@@ -49,11 +49,12 @@ from bridge.sweep.inputs import check_inputs, input_hashes
 from bridge.sweep.report import write_report
 from bridge.sweep.spec import Sweep
 from missions import Mission, load_mission
-from params import ConfigError, dump_toml, read_regular_file
+from params import ConfigError, dump_toml, read_regular_file, reads_inputs
 
 MISSION_TOML = "mission.toml"
 
 
+@reads_inputs
 def sweep(
     mission: Mission | str | Path,
     grid: Grid | Mapping[str, Any],
@@ -143,6 +144,7 @@ class SweepFailed(Exception):
         self.outcome = outcome
 
 
+@reads_inputs
 def run_sweep(
     spec: Sweep,
     *,

@@ -2,14 +2,22 @@
 
 In:  PARAM_REQUEST_LIST, PARAM_REQUEST_READ (by index, or by name with index -1), PARAM_SET (name, value,
      MAV_PARAM_TYPE) from a sender with authority, with the link they came in on
-Out: PARAM_VALUE (all, in one datagram, for a list; the new or unchanged value for a set), STATUSTEXT
-     saying why a set was refused or a name is unknown; a ``param`` event of a set that changed a setting,
-     with its sender (``by``) and the change (``param``: name, old and new value) as typed fields (a set
-     to the value in force is no change: answered, no event);
+Out: PARAM_VALUE (all, in one datagram, for a list; the new or unchanged value for a set); for a set refused
+     or a name unknown, PARAM_ERROR (its MAV_PARAM_ERROR code) first and a STATUSTEXT saying why; a ``param``
+     event of a set that changed a setting, with its sender (``by``) and the change (``param``: name, old and
+     new value) as typed fields (a set to the value in force is no change: answered, no event);
      refusals counted (``target``, ``reply_limited``, ``param_refused``, ``param_unknown``)
 
 The parameters and their checks are :mod:`bridge.autopilot.params`; a set acts from the next control
 period (:meth:`bridge.autopilot.simvehicle.SimVehicle.change_param`).
+
+A refused set is answered as ArduPilot answers one (GCS_Param.cpp, ``handle_param_set``: PARAM_ERROR, then the
+unchanged PARAM_VALUE), in one datagram with the STATUSTEXT: PARAM_ERROR first, so that MAVSDK (4.x,
+``MavlinkParameterClient::process_param_error``) and QGroundControl end the set at once with its reason
+(VALUE_OUT_OF_RANGE, READ_ONLY, DOES_NOT_EXIST, TYPE_MISMATCH) where, on the unchanged value alone, MAVSDK resent
+the set five times and gave up with TIMEOUT. PX4's src/modules/mavlink/mavlink_parameters.cpp as read here (after
+2020-11) checks no range and sends nothing for an unknown name or a wrong type (its console's error only); PX4's
+main branch has added PARAM_ERROR since (in no release up to 1.17; that source not read here).
 """
 
 from __future__ import annotations
@@ -19,7 +27,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from bridge.autopilot.params import BY_NAME, PARAMS, ParamRefused, VehicleParams, read_param
+from bridge.autopilot.params import BY_NAME, PARAMS, ParamRefused, Refusal, VehicleParams, read_param
 from bridge.autopilot.simvehicle import SimVehicle
 from bridge.mavlink.endpoint import Endpoint
 from bridge.mavlink.modes import PARAM_TYPES, param_from_wire, param_name, param_to_wire
@@ -27,6 +35,12 @@ from bridge.nodes.vehicle.authority import Authority
 from bridge.nodes.vehicle.streams import StatusTexts
 
 MESSAGES = frozenset({"PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET"})
+# MAV_PARAM_ERROR_TYPE_MISMATCH of MAVLink's common.xml, newer than the dialect of pymavlink 2.4.50 (which ends at
+# READ_ONLY, 5); MAVSDK 4 reads it as TYPE_MISMATCH
+MAV_PARAM_ERROR_TYPE_MISMATCH = 7
+PARAM_ERRORS = {Refusal.VALUE: mavlink.MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE, Refusal.READ_ONLY:
+                mavlink.MAV_PARAM_ERROR_READ_ONLY, Refusal.UNKNOWN: mavlink.MAV_PARAM_ERROR_DOES_NOT_EXIST,
+                Refusal.TYPE: MAV_PARAM_ERROR_TYPE_MISMATCH}  # PARAM_ERROR's code of each kind of refusal
 
 
 class ParamService:
@@ -56,7 +70,8 @@ class ParamService:
         """PARAM_REQUEST_LIST (every PARAM_VALUE, in one datagram), PARAM_REQUEST_READ (by index, or
         by name with index -1), PARAM_SET (checked: made and answered with the new value, or refused,
         answered with the unchanged value and a STATUSTEXT saying why). Within the sender's reply
-        budget. True when a parameter changed (its event is to be announced)."""
+        budget. A refusal and an unknown name are answered with PARAM_ERROR first (the module's docstring).
+        True when a parameter changed (its event is to be announced)."""
         if self.authority.for_others(m):
             self._reject("target")
             return False
@@ -73,7 +88,9 @@ class ParamService:
             index = m.param_index if m.param_index >= 0 else next(
                 (i for i, p in enumerate(PARAMS) if p.name == name), -1)
             if not 0 <= index < len(PARAMS):
-                self._unknown(ep, addr, name if m.param_index < 0 else f"index {m.param_index}")
+                by_name = m.param_index < 0
+                self._unknown(ep, m, addr, name if by_name else f"index {m.param_index}",
+                              name if by_name else "", m.param_index)
                 return False
             ep.reply((self.value(index),), addr)
             return False
@@ -82,25 +99,35 @@ class ParamService:
     def _set(self, ep: Endpoint, m: Any, addr: tuple[str, int], link: str, name: str) -> bool:
         spec = BY_NAME.get(name)
         if spec is None:
-            self._unknown(ep, addr, name)
+            self._unknown(ep, m, addr, name, name, -1)
             return False
         index = PARAMS.index(spec)
         want = PARAM_TYPES[spec.kind]
         try:
             if m.param_type != want:
-                raise ParamRefused(f"{name}: is {spec.kind}, the set says type {m.param_type}")
+                raise ParamRefused(f"{name}: is {spec.kind}, the set says type {m.param_type}", Refusal.TYPE)
             changed = self.sim.change_param(name, param_from_wire(m.param_value, want), self.sysid)
             if changed is not None:  # its sender, typed: the session records who changed what, and when
                 changed.by = self.authority.sender(m, addr, link)
         except ParamRefused as exc:
             self._reject("param_refused")
             self._refused(str(exc))
-            ep.reply((self.value(index), *self._texts(mavlink.MAV_SEVERITY_WARNING, str(exc))), addr)
+            error = _param_error(m, name, index, PARAM_ERRORS[exc.why])
+            ep.reply((error, self.value(index), *self._texts(mavlink.MAV_SEVERITY_WARNING, str(exc))), addr)
             return False
         ep.reply((self.value(index),), addr)
         return True
 
-    def _unknown(self, ep: Endpoint, addr: tuple[str, int], what: str) -> None:
-        """No such parameter: no PARAM_VALUE (the protocol's answer), a STATUSTEXT saying so."""
+    def _unknown(self, ep: Endpoint, m: Any, addr: tuple[str, int], what: str, name: str, index: int) -> None:
+        """No such parameter: no PARAM_VALUE (the protocol's answer), PARAM_ERROR DOES_NOT_EXIST (the name or the
+        index asked for) and a STATUSTEXT saying so."""
         self._reject("param_unknown")
-        ep.reply(tuple(self._texts(mavlink.MAV_SEVERITY_WARNING, f"param {what}: no such parameter")), addr)
+        error = _param_error(m, name, index, mavlink.MAV_PARAM_ERROR_DOES_NOT_EXIST)
+        ep.reply((error, *self._texts(mavlink.MAV_SEVERITY_WARNING, f"param {what}: no such parameter")), addr)
+
+
+def _param_error(m: Any, name: str, index: int, code: int) -> Any:
+    """PARAM_ERROR to the sender of ``m``: the parameter (``name``, ``index``; "" and -1 where not known) and
+    ``code`` (MAV_PARAM_ERROR)."""
+    return mavlink.MAVLink_param_error_message(m.get_srcSystem(), m.get_srcComponent(),
+                                               name.encode(errors="replace")[:16], index, code)
