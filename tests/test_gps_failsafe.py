@@ -3,9 +3,10 @@
 A real ``bsst vehicle`` (x500, gnss, EKF, lockstep at 4x) flown by MAVSDK over UDP on 127.0.0.1: taken off and
 holding, MAVSDK's Failure plugin turns the GPS off; MAVSDK's Telemetry sees the position health go false, then, at
 EKF2_NOAID_TOUT, PX4's Descend (flight mode LAND), the landing and the disarm; GLOBAL_POSITION_INT stops (its
-``position`` no longer updates) until the GPS is back and fused; ESTIMATOR_STATUS's flags say it. Then the product's own fault event (``--at 10:gps:off``) in a lockstep ``bsst sitl`` session: the same
-failsafe at the same step as ``bsst sim`` offline, outcome ``failsafe``, exit 1, the summary naming it. The timing
-rules themselves: tests/test_positionloss.py.
+``position`` no longer updates) until the GPS is back and fused; ESTIMATOR_STATUS's flags say it. Then the
+product's own fault event (``--at 10:gps:off``) in a lockstep ``bsst sitl`` session: the same failsafe at the same
+step as ``bsst sim`` offline, outcome ``failsafe``, exit 1, the summary naming it. The timing rules themselves:
+tests/test_positionloss.py.
 """
 
 from __future__ import annotations
@@ -103,8 +104,8 @@ def test_mavsdk_sees_the_gps_lost_the_descent_and_the_position_back(tmp_path):
     their 120 ms latency): MAVSDK's flight mode LAND, armed, until it lands and disarms. GPS OK: healthy again, and
     GLOBAL_POSITION_INT (MAVSDK's position) flows again, which it had not since the position was lost (the tlog).
     ESTIMATOR_STATUS with the horizontal position flags until the loss, without them after (its accuracy growing past
-    a metre), with them again once a fix is fused, as MAVSDK reads them (MavlinkDirect, the stream asked for at 10 Hz); the vehicle's events say each
-    step."""
+    a metre), with them again once a fix is fused, as MAVSDK reads them (MavlinkDirect, the stream asked for at
+    10 Hz); the vehicle's events say each step."""
     with instance_slot() as n:
         v = _vehicle(n, tmp_path, "missions/sine.toml", "--profile", "x500", "--sensors", "gnss", "--estimator",
                      "ekf", "--param", "SYS_FAILURE_EN=1", *FAST)

@@ -245,7 +245,7 @@ def value_problem(spec: ParamSpec, value: float) -> str | None:
 
 def _range_text(spec: ParamSpec) -> str:
     """``must be in [0.01, 60] s``: the parameter's range, as every refusal of a value out of it says."""
-    return f"must be in [{spec.lo:g}, {spec.hi:g}]" + (f" {spec.unit}" if spec.unit else "")
+    return f"must be in [{spec.lo:.12g}, {spec.hi:.12g}]" + (f" {spec.unit}" if spec.unit else "")  # (not 1e+07)
 
 
 def change_param(p: VehicleParams, name: str, value: float, running: bool = True) -> VehicleParams:
