@@ -20,6 +20,7 @@ from pymavlink.dialects.v20 import common as M
 from bridge.nodes.report import Event
 from bridge.session import instance_slot
 from tests.sitlkit import ENV, ROOT, run_bsst
+from tests.test_gps_telemetry import INJECT_GPS
 from tests.test_ground_stations import FAST, _mavsdk
 from tests.test_vehicle import _vehicle
 
@@ -64,13 +65,7 @@ direct.send_message(MavlinkMessage("COMMAND_LONG", 0, 0, int(sys.argv[2]), 1, js
 def until(what, pred, timeout):
     with cond:
         out[what] = cond.wait_for(pred, timeout)
-def inject(ftype):
-    try:
-        failure.inject(FailureUnit.SENSOR_GPS, ftype, 0)
-        return "SUCCESS"
-    except FailureError as e:
-        return e.result.name
-until("ready", lambda: seen["health"] == [True, True], 20)
+""" + INJECT_GPS + r"""until("ready", lambda: seen["health"] == [True, True], 20)
 out["arm"] = act.arm().name
 out["set_takeoff_altitude"] = act.set_takeoff_altitude(5.0).name
 out["takeoff"] = act.takeoff().name

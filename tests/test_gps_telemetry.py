@@ -119,6 +119,15 @@ def test_motion_capture_is_no_gps_and_truth_keeps_its_gps_bit():
 
 
 # -- a real vehicle and MAVSDK's Failure plugin -----------------------------------------------------------------
+# a MAVSDK script's GPS failure through the Failure plugin: SUCCESS or why not (tests/test_gps_failsafe.py too)
+INJECT_GPS = """
+def inject(ftype):
+    try:
+        failure.inject(FailureUnit.SENSOR_GPS, ftype, 0)
+        return "SUCCESS"
+    except FailureError as e:
+        return e.result.name
+"""
 MAVSDK_GPS_LOSS = r"""
 import json, sys, threading
 from mavsdk import Mavsdk, Configuration, ComponentType
@@ -147,13 +156,7 @@ def until(what, pred, timeout):
     with cond:
         out[what] = cond.wait_for(pred, timeout)
         out[what + "_saw"] = {k: seen[k] for k in ("health", "gps")}
-def inject(ftype):
-    try:
-        failure.inject(FailureUnit.SENSOR_GPS, ftype, 0)
-        return "SUCCESS"
-    except FailureError as e:
-        return e.result.name
-fixed = lambda: seen["gps"] == ["FIX_3D", 10]
+""" + INJECT_GPS + r"""fixed = lambda: seen["gps"] == ["FIX_3D", 10]
 # before the first arm (the lockstep vehicle's clock stands still): fixed, healthy and armable, all at once
 until("ready", lambda: fixed() and seen["health"] == [True, True, True, True], 20)
 out["arm"] = act.arm().name
