@@ -16,7 +16,9 @@ seconds, ``--turbulence-scaling none``): its own ``wind`` block.
 air, 5 m/s moderate and 10 m/s severe, on a perfect link and with 20 ms each way (``--delay 20``).
 ``faults``: the x500 with ``--at 10:motor:1=E`` for each law, with the default gains (``missions/sine.toml
 --profile x500``) and with attitude gains sized for the fault (``examples/x500-motor-fault.toml``); ``--sensors
-gnss --estimator ekf --at 10:gps:off --at 20:gps:on``: the drift during the outage and the NEES after.
+gnss --estimator ekf --at 10:gps:off --at 14:gps:on`` and ``--at 20:gps:on`` (past EKF2_NOAID_TOUT: a failsafe):
+the drift during the outage and the NEES after; the x500 held at 5 m by a ground station (HOLD), GPS off at 6 s,
+on again at 12 s or never: PX4's Descend and HOLD again, where it lands.
 ``margin``: ``bsst margin missions/sine.toml --over wind_mps --until rms=0.1`` per law, on a perfect link and
 with ``--delay 20`` (``bridge.sweep.margin.margin``, what the command calls).
 ``batch``: the batch engine against the process engine: ``bsst sweep missions/sine.toml --controller
@@ -40,9 +42,11 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # missions/ is the repository's, not benchmarks/
 
 from bridge import simulate  # noqa: E402
+from bridge.autopilot.modes import HOLD, TAKEOFF  # noqa: E402
 from bridge.core.flight import prepare  # noqa: E402
 from bridge.sweep.margin import margin, parse_until  # noqa: E402
-from missions import load_mission  # noqa: E402
+from missions import Mission, load_mission  # noqa: E402
+from missions.references import Setpoint, Step  # noqa: E402
 from plant.wind import WindConfig, long_run  # noqa: E402
 
 MISSION = "missions/sine.toml"
@@ -137,12 +141,36 @@ def fault_table() -> None:
             for gains, mission in (("default", MISSION), ("fault-sized", "examples/x500-motor-fault.toml")):
                 s = simulate(mission, profile="x500", controller=law, at=(f"10:motor:1={eff:g}",)).summary
                 print(f"| {law} | {gains} | {eff:g} | {s['outcome']} | {s['rms_3d']:.4g} | {s['ended_by']['how']} |")
-    print("\n## GPS loss: sine, --sensors gnss --estimator ekf --at 10:gps:off --at 20:gps:on\n")
-    s = simulate(MISSION, sensors={"set": "gnss"}, estimator="ekf", at=("10:gps:off", "20:gps:on")).summary
-    (o,) = s["gps_outages"]
-    print(f"outcome {s['outcome']}, RMS {s['rms_3d']:.3f} m; drift during the outage max {o['drift_max_m']:.3f} m, "
-          f"{o['drift_at_end_m']:.3f} m at its end; after it: NEES mean {o['nees_mean_after']:.2f} (9 dof), "
-          f"position error RMS {o['drift_rms_after_m']:.3f} m\n")
+    for on in (14, 20):  # under EKF2_NOAID_TOUT (5 s), and over it: PX4's failsafe descends at its timeout
+        print(f"\n## GPS loss: sine, --sensors gnss --estimator ekf --at 10:gps:off --at {on}:gps:on\n")
+        s = simulate(MISSION, sensors={"set": "gnss"}, estimator="ekf", at=("10:gps:off", f"{on}:gps:on")).summary
+        (o,) = s["gps_outages"]
+        print(f"outcome {s['outcome']} ({s['ended_by']['how']}), RMS {s['rms_3d']:.3f} m; drift during the outage max "
+              f"{o['drift_max_m']:.3f} m, {o['drift_at_end_m']:.3f} m at its end; after it: NEES mean "
+              f"{o['nees_mean_after']:.2f} (9 dof), position error RMS {o['drift_rms_after_m']:.3f} m\n")
+
+
+def gps_hold_table() -> None:
+    """The x500 (gnss, EKF) taken off by a ground station to 5 m and held (HOLD), GPS off at 6 s and on again at
+    12 s, or never: the vehicle core offline, as a session's vehicle flies it (SimVehicle's TAKEOFF and HOLD)."""
+    print("## x500 held at 5 m by a ground station, GPS off at 6 s\n")
+    print("| GPS on | event (s: what) | at the end: true x, y, z m | from the hold point m | estimate's error m |")
+    print("|---|---|---|---|---|")
+    ground = Mission(Step((Setpoint(0.0, 0.0, 0.0, 0.0, 0.0),)), duration_s=60.0, name="hold", profile="x500")
+    for on in ("12:gps:on", None):
+        sim = prepare(ground, at=("6:gps:off",) + ((on,) if on else ()), sensors={"set": "gnss"},
+                      estimator="ekf").make_vehicle()
+        sim.set_mode(TAKEOFF, 5.0)
+        sim.arm_in_mode()
+        held = None
+        while sim.armed and sim.t < 30.0:
+            sim.advance()
+            held = sim.plant.state if held is None and sim.mode == HOLD else held
+        X, E = sim.plant.state, sim.published()
+        said = "; ".join(f"{e.t:.3f}: {e.kind}: {e.text.split(' (')[0]}" for e in sim.events if e.t > 5.0)
+        print(f"| {on or 'never'} | {said} | {X[0]:.2f}, {X[2]:.2f}, {X[4]:.2f} | "
+              f"{math.hypot(X[0] - held[0], X[2] - held[2]):.2f} | {math.hypot(X[0] - E[0], X[2] - E[2]):.2f} |")
+    print()
 
 
 def margin_table(jobs: int | None) -> None:
@@ -215,6 +243,7 @@ def main() -> None:
         law_table()
     if a.what in ("faults", "all"):
         fault_table()
+        gps_hold_table()
     if a.what in ("margin", "all"):
         margin_table(a.jobs)
     if a.what in ("batch", "all"):

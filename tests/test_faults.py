@@ -151,17 +151,21 @@ def test_a_battery_landing_that_touches_down_hard_is_a_crash(tmp_path) -> None:
 
 
 def test_gps_outage_drifts_and_is_reported() -> None:
-    """The issue's acceptance: the sine with ``--sensors gnss --estimator ekf --at 10:gps:off --at 20:gps:on``
-    reports the estimate's drift during the outage (metres: dead reckoning on the IMU for 10 s) and, after it, the
-    mean NEES (9 dof; a consistent filter's is about 9 or below) and the position error RMS."""
-    run = simulate("missions/sine.toml", sensors={"set": "gnss"}, estimator="ekf", at=("10:gps:off", "20:gps:on"))
-    assert run.summary["outcome"] == "completed"
-    (o,) = run.summary["gps_outages"]
-    assert o["off_s"] == 10.0 and o["on_s"] == 20.0
-    assert 0.3 < o["drift_max_m"] < 5.0 and o["drift_at_end_m"] <= o["drift_max_m"]
-    assert 0.0 < o["nees_mean_after"] < 20.0 and 0.0 < o["drift_rms_after_m"] < o["drift_max_m"]
-    kinds = [(e["t"], e["text"]) for e in run.summary["events"] if e["kind"] == "fault"]
-    assert kinds == [(10.0, "gps off"), (20.0, "gps on")]
+    """The issue's acceptance: the sine with ``--sensors gnss --estimator ekf --at 10:gps:off --at 14:gps:on``
+    reports the estimate's drift during the outage (dead reckoning on the IMU for 4 s: decimetres) and, after it,
+    the mean NEES (9 dof; a consistent filter's is about 9 or below) and the position error RMS. The issue's 10 s
+    outage (``--at 20:gps:on``) outlasts EKF2_NOAID_TOUT (5 s) since then: PX4's failsafe descends at 15.124 s, and
+    the outage is reported all the same (tests/test_positionloss.py)."""
+    for on, outcome in ((14.0, "completed"), (20.0, "failsafe")):
+        run = simulate("missions/sine.toml", sensors={"set": "gnss"}, estimator="ekf",
+                       at=("10:gps:off", f"{on:g}:gps:on"))
+        assert run.summary["outcome"] == outcome
+        (o,) = run.summary["gps_outages"]
+        assert o["off_s"] == 10.0 and o["on_s"] == on
+        assert 0.2 < o["drift_max_m"] < 5.0 and o["drift_at_end_m"] <= o["drift_max_m"]
+        assert 0.0 < o["nees_mean_after"] < 20.0 and 0.0 < o["drift_rms_after_m"] < o["drift_max_m"]
+        kinds = [(e["t"], e["text"]) for e in run.summary["events"] if e["kind"] == "fault"]
+        assert kinds == [(10.0, "gps off"), (on, "gps on")]
 
 
 def test_a_rotor_at_75_percent_needs_attitude_gains_sized_for_its_torque_step() -> None:

@@ -4,10 +4,10 @@ What a ground station is told of the vehicle's GNSS receiver, as PX4 v1.14 tells
 while they come; once none has arrived for 1 s of simulation time (a ``gps off``: the fixes are dropped) it says
 NO_GPS (fix type 0, figures unknown, satellites 255), as PX4's stream does once its ``sensor_gps`` stops, and
 SYS_STATUS's GPS bit stays present and enabled but not healthy: MAVSDK's ``health.is_global_position_ok`` and
-``is_local_position_ok`` read it. Before the first fix arrives (a lockstep vehicle's clock stands still until its
-first flight), the fix its receiver took at t = 0 is shown, and the bit is healthy: GPS_RAW_INT, SYS_STATUS and
-``is_armable`` agree. Built from the real stream registry through MAVLink 2 bytes, then against a real ``bsst
-vehicle`` (x500, gnss, EKF) with MAVSDK's Failure plugin over UDP on 127.0.0.1.
+``is_local_position_ok`` read it; a motion-capture vehicle has no GPS bit. Before the first fix arrives (a lockstep
+vehicle's clock stands still until its first flight), the fix its receiver took at t = 0 is shown, and the bit is
+healthy: GPS_RAW_INT, SYS_STATUS and ``is_armable`` agree. Built from the real stream registry through MAVLink 2
+bytes, then against a real ``bsst vehicle`` (x500, gnss, EKF) with MAVSDK's Failure plugin over UDP on 127.0.0.1.
 """
 
 from __future__ import annotations
@@ -103,16 +103,31 @@ def test_a_gps_off_is_no_gps_a_second_after_its_last_fix_and_its_health_bit_clea
     assert _gps_bits(suite, 4.2) == (True, True, True, True)
 
 
-def test_a_vehicle_without_a_gnss_receiver_keeps_its_gps_bit():
-    """Under truth, and with a pose sensor (motion capture), nothing stops: no GPS_RAW_INT, the bit as before."""
+def test_motion_capture_is_no_gps_and_truth_keeps_its_gps_bit():
+    """A pose sensor (motion capture) is no GPS: no GPS_RAW_INT, and SYS_STATUS's GPS bit neither present, enabled
+    nor healthy (PX4 sets it only while EKF2 fuses a GNSS), the rest as ever; under truth (no sensors) the bit stays
+    present and healthy, as before."""
     mocap = _suite("mocap")
     _run(mocap, 0.0, 3.0)
-    for suite in (None, mocap):
+    for suite, bits in ((None, (True, True, True, True)), (mocap, (False, False, False, True))):
         assert not tm.gps_lost(suite, 3.0) and _sent(M.MAVLINK_MSG_ID_GPS_RAW_INT, suite, 3.0) == []
-        assert _gps_bits(suite, 3.0) == (True, True, True, True)
+        assert _gps_bits(suite, 3.0) == bits
+    (status,), (truth,) = (_sent(M.MAVLINK_MSG_ID_SYS_STATUS, suite, 3.0) for suite in (mocap, None))
+    for field in ("present", "enabled", "health"):  # the rest as under truth
+        name = f"onboard_control_sensors_{field}"
+        assert getattr(status, name) == getattr(truth, name) & ~GPS_BIT, field
 
 
 # -- a real vehicle and MAVSDK's Failure plugin -----------------------------------------------------------------
+# a MAVSDK script's GPS failure through the Failure plugin: SUCCESS or why not (tests/test_gps_failsafe.py too)
+INJECT_GPS = """
+def inject(ftype):
+    try:
+        failure.inject(FailureUnit.SENSOR_GPS, ftype, 0)
+        return "SUCCESS"
+    except FailureError as e:
+        return e.result.name
+"""
 MAVSDK_GPS_LOSS = r"""
 import json, sys, threading
 from mavsdk import Mavsdk, Configuration, ComponentType
@@ -141,13 +156,7 @@ def until(what, pred, timeout):
     with cond:
         out[what] = cond.wait_for(pred, timeout)
         out[what + "_saw"] = {k: seen[k] for k in ("health", "gps")}
-def inject(ftype):
-    try:
-        failure.inject(FailureUnit.SENSOR_GPS, ftype, 0)
-        return "SUCCESS"
-    except FailureError as e:
-        return e.result.name
-fixed = lambda: seen["gps"] == ["FIX_3D", 10]
+""" + INJECT_GPS + r"""fixed = lambda: seen["gps"] == ["FIX_3D", 10]
 # before the first arm (the lockstep vehicle's clock stands still): fixed, healthy and armable, all at once
 until("ready", lambda: fixed() and seen["health"] == [True, True, True, True], 20)
 out["arm"] = act.arm().name

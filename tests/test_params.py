@@ -343,7 +343,7 @@ def test_every_parameter_has_its_range_in_the_usage_and_the_ground_station_pages
     """A meta-test, as tests/test_link_keys.py for ``[link]``: docs/usage.md's row names the parameter
     and its range (or its choices), and so does docs/ground-station.md."""
     def shown(v: float) -> str:
-        return f"{v:g}".replace("-", "−")
+        return f"{v:.12g}".replace("-", "−")  # (10000000, not 1e+07)
 
     want = ([f"{shown(v)} {a}" for v, a in spec.choices.items()] if spec.choices
             else [f"{shown(spec.lo)}–{shown(spec.hi)}"])

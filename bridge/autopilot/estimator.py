@@ -4,7 +4,9 @@ In:  :class:`~plant.sensors.Measurement` s as they arrive (``step(t, measurement
      physics step), the sensor set they come from (:class:`~plant.sensors.SensorConfig`), the start
      state and gravity (m/s²)
 Out: ``estimate(t)``: the 12-state of eq. (7) (x, ẋ, y, ẏ, z, ż, φ, φ̇, θ, θ̇, ψ, ψ̇; paper frame
-     NWU, m, m/s, rad, rad/s; ψ continuous, not wrapped); ``covariance()``: a :class:`Covariance`
+     NWU, m, m/s, rad, rad/s; ψ continuous, not wrapped); ``covariance()``: a :class:`Covariance`; ``aided_t``
+     (s): when a reading that constrains the horizontal position was last taken in (a GNSS fix or a pose fused;
+     ``raw``: arrived; ``truth``: always, inf), whose age bridge.autopilot.positionloss judges
 
 Three kinds, one interface (``kind``, ``step``, ``estimate``, ``covariance``):
 
@@ -211,6 +213,7 @@ class Estimator(Protocol):
     """What the vehicle runs on board: fed every physics step, read at each control step."""
 
     kind: str
+    aided_t: float  # s: the newest horizontal aiding taken in (module docstring)
 
     def step(self, t: float, measurements: Sequence[Measurement]) -> None: ...
 
@@ -223,6 +226,7 @@ class TruthEstimator:
     """The true state, passed through (today's behaviour)."""
 
     kind = "truth"
+    aided_t = math.inf  # the true state never drifts
 
     def __init__(self, truth: Callable[[], State]) -> None:
         self._truth = truth
@@ -257,10 +261,13 @@ class RawEstimator:
         self._gyro = (0.0, 0.0, 0.0)
         self._last_fix: tuple[float, tuple[float, ...], tuple[float, ...]] | None = None  # (t_valid, values, sigma)
         self._var = [NAN] * 12  # variances in the order x, y, z, vx, vy, vz, phi, theta, psi, p, q, r
+        self.aided_t = 0.0  # s: at rest on its start, its position is known
 
     def step(self, t: float, measurements: Sequence[Measurement]) -> None:
         for m in measurements:
             k = m.kind
+            if k in (POSE, GNSS):
+                self.aided_t = t
             if k == IMU:
                 self._gyro = m.values[3:6]
                 self._var[9:12] = [s * s for s in m.sigma[3:6]]
@@ -358,6 +365,7 @@ class Ekf:
         self._kept_variances: dict[str, tuple[tuple[float, ...], tuple[float, ...]]] = {}
         self._C9 = np.empty((9, 9))
         self._P15 = np.empty((15, 15))
+        self.aided_t = 0.0  # s: the newest pose or GNSS fix fused (at rest on its start, its position is known)
 
     # -- reading the state ---------------------------------------------------------------
     @property
@@ -406,14 +414,14 @@ class Ekf:
             z = m.values
             if kind == IMU:
                 k.propagate(x, c, P, hist, hs, z[0], z[1], z[2], z[3], z[4], z[5], m.interval_s, m.t_valid)
-            elif kind == POSE:
-                v = self._variances(POSE, m.sigma)
-                k.fuse_pose(x, c, P, hist, hs, self._counts, m.t_valid, z[0], z[1], z[2], z[3], z[4], z[5],
-                            v[0], v[1], v[2], v[3], v[4], v[5])
-            elif kind == GNSS:
-                v = self._variances(GNSS, m.sigma)
-                k.fuse_gnss(x, c, P, hist, hs, self._counts, m.t_valid, z[0], z[1], z[2], z[3], z[4], z[5],
-                            v[0], v[1], v[2], v[3], v[4], v[5])
+            elif kind == POSE or kind == GNSS:
+                fused = x[k.X_FUSED]
+                v = self._variances(kind, m.sigma)
+                fuse = k.fuse_pose if kind == POSE else k.fuse_gnss
+                fuse(x, c, P, hist, hs, self._counts, m.t_valid, z[0], z[1], z[2], z[3], z[4], z[5], v[0], v[1], v[2],
+                     v[3], v[4], v[5])
+                if x[k.X_FUSED] > fused:  # taken in, not refused by the gate: horizontal aiding
+                    self.aided_t = t
             elif kind == BARO:
                 k.fuse_baro(x, c, P, hist, hs, self._counts, m.t_valid, z[0], self._variances(BARO, m.sigma)[0])
             elif kind == HEADING:

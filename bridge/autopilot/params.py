@@ -35,6 +35,7 @@ from enum import Enum
 from typing import Any
 
 from bridge.autopilot.failsafe import FAILSAFE_RANGES, FailsafeConfig
+from bridge.autopilot.positionloss import NOAID_TIMEOUT_RANGE_US, NOAID_TIMEOUT_US
 from bridge.autopilot.returnland import LAND_RANGES, RETURN_RANGES, ReturnConfig
 from params import ConfigError, Table, finite_float, show
 
@@ -66,6 +67,7 @@ class VehicleParams:
     battery_critical: float = 0.07  # BAT_CRIT_THR: critical (COM_LOW_BAT_ACT acts; arming denied below it)
     battery_emergency: float = 0.05  # BAT_EMERGEN_THR: emergency (COM_LOW_BAT_ACT 3 lands)
     low_battery_action: int = 0  # COM_LOW_BAT_ACT: 0 warning (PX4's default), 2 land, 3 return then land
+    noaid_timeout_us: int = NOAID_TIMEOUT_US  # EKF2_NOAID_TOUT: unaided this long (us), the position is invalid
 
 
 @dataclass(frozen=True)
@@ -157,6 +159,9 @@ PARAMS: tuple[ParamSpec, ...] = (
               "low battery action, PX4's values: 0 warning (PX4's default), 2 land at critical, 3 return at critical "
               "and land at emergency; 2 and 3 are the vehicle's failsafe (docs/weather.md)",
               choices=LOW_BATTERY_ACTIONS),
+    ParamSpec("EKF2_NOAID_TOUT", INT32, "us", *NOAID_TIMEOUT_RANGE_US,
+              "maximum inertial dead-reckoning time: no position fix fused for this long, the estimate's horizontal "
+              "position is invalid and the vehicle's failsafe descends (PX4's; docs/sensors.md)"),
 )
 BY_NAME = {p.name: p for p in PARAMS}
 _RTL_FIELDS = {"RTL_RETURN_ALT": "return_alt_m", "RTL_DESCEND_ALT": "descend_alt_m",  # -> ReturnConfig's field
@@ -168,7 +173,7 @@ _FIELDS = {"COM_DISARM_PRFLT": "preflight_disarm_s", "GF_MAX_HOR_DIST": "max_hor
            "MIS_TAKEOFF_ALT": "takeoff_alt_m", "BAT_LOW_THR": "battery_low", "BAT_CRIT_THR": "battery_critical",
            "BAT_EMERGEN_THR": "battery_emergency"}
 _INT_FIELDS = {"SYS_FAILURE_EN": "failure_injection", "GF_ACTION": "fence_action",  # the INT32s that are one field
-               "COM_LOW_BAT_ACT": "low_battery_action"}
+               "COM_LOW_BAT_ACT": "low_battery_action", "EKF2_NOAID_TOUT": "noaid_timeout_us"}
 
 
 class Refusal(Enum):
@@ -257,7 +262,7 @@ def value_problem(spec: ParamSpec, value: float) -> str | None:
 
 def _range_text(spec: ParamSpec) -> str:
     """``must be in [0.01, 60] s``: the parameter's range, as every refusal of a value out of it says."""
-    return f"must be in [{spec.lo:g}, {spec.hi:g}]" + (f" {spec.unit}" if spec.unit else "")
+    return f"must be in [{spec.lo:.12g}, {spec.hi:.12g}]" + (f" {spec.unit}" if spec.unit else "")  # (not 1e+07)
 
 
 def change_param(p: VehicleParams, name: str, value: float, running: bool = True) -> VehicleParams:

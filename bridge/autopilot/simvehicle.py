@@ -58,6 +58,8 @@ from bridge.autopilot.modes import (  # noqa: F401  (the modes: imported from he
     mode_target,
 )
 from bridge.autopilot.params import FENCE_ACTIONS, VehicleParams, change_param, read_param
+from bridge.autopilot.positionloss import NOAID_TIMEOUT_US, PositionWatch, fallback
+from bridge.autopilot.timeline import act_on
 from bridge.autopilot.touchdownwatch import TouchdownWatch
 from bridge.autopilot.vehicleevents import Event, ParamChanged, Sender
 from controller.nominal import Nominal
@@ -65,7 +67,6 @@ from missions.geofence import Geofence
 from plant import Quadrotor
 from plant.events import TimedEvent
 from plant.sensors import SensorSuite
-from plant.wind import Gust
 
 NEES_EVERY = 10  # control steps between NEES samples (its solve costs a fifth of an EKF flight if every step)
 TAKEOFF_DONE_M = 0.1  # m from its height: a takeoff is done and the vehicle holds there (PX4: HOLD after TAKEOFF)
@@ -93,6 +94,7 @@ class SimVehicle:
     fence_action: int = 2  # GF_ACTION: at a breach 0 nothing (unwatched), 1 warn, 2 hold, 3 return, 4 terminate, 5 land
     battery_watch: BatteryWatch = field(default_factory=BatteryWatch)  # BAT_*_THR, COM_LOW_BAT_ACT
     reference_z: Callable[[float], float] | None = None  # m at mission time s: judges touchdowns (touchdownwatch)
+    noaid_timeout_us: int = NOAID_TIMEOUT_US  # EKF2_NOAID_TOUT: unaided this long, the position is lost (positionloss)
 
     def __post_init__(self) -> None:
         if self.estimator is None:
@@ -116,6 +118,7 @@ class SimVehicle:
         self._period_s = self.plant.dt * self.substeps
         self._beyond: set[str] = set()  # limits said to be passed: GF_MAX_* and the fence (once each, until changed)
         self.arming_refused: str | None = None  # why the last arm was denied (arming_denied), until it arms
+        self.position = PositionWatch()  # the horizontal position estimate's validity (_check_position)
         if self.armed and self.arming_denied():  # offline: armed at the start, if its pre-arm check passes
             self.armed = False
 
@@ -260,7 +263,7 @@ class SimVehicle:
         b = self.battery_watch
         return VehicleParams(self.failsafe, self.takeoff_alt_m, sysid, self.failure_injection, self.rtl,
                              self.preflight_disarm_s, self.max_hor_m, self.max_ver_m, self.fence_action, b.low,
-                             b.critical, b.emergency, b.action)
+                             b.critical, b.emergency, b.action, self.noaid_timeout_us)
 
     def change_param(self, name: str, value: float, sysid: int = 1) -> Event | None:
         """Set parameter ``name`` (PX4's name, :mod:`bridge.autopilot.params`) to ``value``, checked
@@ -274,6 +277,7 @@ class SimVehicle:
         self.failsafe, self.takeoff_alt_m = after.failsafe, after.takeoff_alt_m
         self.failure_injection, self.rtl = after.failure_injection, after.rtl
         self.preflight_disarm_s, self.fence_action = after.preflight_disarm_s, after.fence_action
+        self.noaid_timeout_us = after.noaid_timeout_us
         b = self.battery_watch
         b.low, b.critical, b.emergency, b.action = (after.battery_low, after.battery_critical,
                                                     after.battery_emergency, after.low_battery_action)
@@ -313,7 +317,8 @@ class SimVehicle:
         battery's (:meth:`~bridge.autopilot.batterywatch.BatteryWatch.arming_refusal`)."""
         pack = self.plant.battery
         why = [w for w in (arming_refusal(self._breaches() if self.fence_action else [], self.fence_action),
-                           None if pack is None else self.battery_watch.arming_refusal(pack.remaining)) if w]
+                           None if pack is None else self.battery_watch.arming_refusal(pack.remaining),
+                           None if self.position.valid else "no valid horizontal position estimate") if w]
         return f"arming denied: {'; '.join(why)}" if why else None
 
     def arming_denied(self) -> bool:
@@ -359,8 +364,28 @@ class SimVehicle:
             return
         self.fly_onboard(failsafe_target(replace(self.failsafe, action=action), self.published(), self.home, self.rtl,
                                          self.rally), FAILSAFE)
-        if action == "hold":
-            self.land_at = p.t + self.failsafe.hold_s
+        self.land_at = p.t + self.failsafe.hold_s if action == "hold" else None
+
+    def _check_position(self) -> None:
+        """The horizontal position estimate's validity (bridge.autopilot.positionloss): a ``position`` event when
+        the commander's view of it changes; armed and lost, PX4's fallback (descend, or the offboard-loss action's
+        disarm) over what needs a position; valid again, what flew before it (a ground station's mode, a failsafe's
+        action) from here."""
+        w = self.position
+        said = w.update(self.plant.t, self.estimator.aided_t, self.noaid_timeout_us)
+        if said is not None:
+            self.event("position", said)
+        if not self.armed:
+            w.resume = None
+        elif not w.valid and (step := fallback(self.mode, self.onboard.target, self.failsafe.action)) is not None:
+            action, w.resume = step
+            self._fly_failsafe(action, f"position lost: {ACTION_TEXT[action]}", "position lost: motors stopped")
+        elif w.valid and w.resume is not None and self.mode == FAILSAFE:
+            r, w.resume = w.resume, None
+            if r.action is None:
+                self.set_mode(r.mode)
+            else:
+                self._fly_failsafe(r.action, f"position valid again: {ACTION_TEXT[r.action]}", "motors stopped")
 
     def _end_hold(self) -> None:
         """``hold``: its time is up; land where it held."""
@@ -376,39 +401,10 @@ class SimVehicle:
         self._injected.append((e, by))
 
     def inject(self, e: TimedEvent, by: Sender | None = None) -> None:
-        """Act on one event of the timeline now (checked against the flight when it was built:
-        :func:`bridge.core.flight.prepare`); an event says it (``fault``, or ``wind`` for the weather's),
-        naming ``by`` (a ground station's injection; None: the mission's timeline)."""
-        p, k = self.plant, e.kind
-        if k == "motor":
-            p.set_effectiveness(e.get("motor"), e.get("effectiveness"))
-        elif k in ("wind", "gust"):
-            if p.wind is None:
-                raise ValueError("a wind or gust event needs the plant built with a wind (prepare gives one)")
-            if k == "wind":
-                p.wind.set_steady(e.get("speed_mps"), e.get("from_deg"))
-            else:
-                p.wind.add_gust(Gust(p.t, e.get("duration_s"), e.get("amplitude_mps"), e.get("from_deg")))
-        elif k == "link":
-            pass  # the link models hand over themselves at this step (LinkSettings.handovers): said here, once
-        else:
-            if self.sensors is None:
-                raise ValueError(f"a {k} event needs the vehicle's sensors (an estimator other than truth)")
-            f = self.sensors.faults
-            if k == "gps":
-                if e.get("jump") is not None:
-                    f.jump(e.get("jump"))
-                else:
-                    f.gps_on = e.get("state") == "on"
-            elif k == "mag":
-                f.mag_on = e.get("state") == "on"
-            elif k == "baro":
-                f.set_drift(e.get("drift_mps"), p.t)
-            else:
-                bias = self.sensors.gyro_bias
-                for i, b in enumerate(e.get("bias")):
-                    bias[i] += b
-        self.event("wind" if k in ("wind", "gust") else "link" if k == "link" else "fault", e.text()).by = by
+        """Act on one event of the timeline now (:func:`~bridge.autopilot.timeline.act_on`); an event says it
+        (``fault``, ``wind`` for the weather's, ``link``), naming ``by`` (a ground station's injection; None: the
+        mission's timeline)."""
+        self.event(act_on(e, self.plant, self.sensors), e.text()).by = by
 
     def plant_verdict(self) -> str | None:
         """After a control period: ``diverged`` or ``crashed`` when the plant ends the flight now (its event
@@ -458,6 +454,8 @@ class SimVehicle:
             self._injected.clear()
         if deliver is not None:
             deliver(p.t)
+        if self.sensors is not None:  # (under truth the estimate is the state: never lost)
+            self._check_position()
         if self.armed and self.mode == OFFBOARD and p.t - self.last_command_t > self.failsafe.timeout_s + 1e-9:
             self._enter_failsafe(p.t - self.last_command_t)
         if self.land_at is not None and p.t >= self.land_at - 1e-9:

@@ -109,6 +109,7 @@ class Flight:
                     "timeline": self.timeline, "failure_injection": p.failure_injection, "rtl": p.rtl,
                     "preflight_disarm_s": p.preflight_disarm_s, "max_hor_m": p.max_hor_m, "max_ver_m": p.max_ver_m,
                     "rally": m.rally, "fence": m.geofence, "fence_action": p.fence_action,
+                    "noaid_timeout_us": p.noaid_timeout_us,
                     "reference_z": lambda t: m.trajectory.sample(t)[2][0],
                     "battery_watch": BatteryWatch(p.battery_low, p.battery_critical, p.battery_emergency,
                                                   p.low_battery_action)}

@@ -132,7 +132,8 @@ def param_to_wire(value: float, kind: int) -> float:
 def param_from_wire(value: float, kind: int) -> float:
     """The value a PARAM_SET's float carries for MAVLink type ``kind``: an INT32 bytewise (PX4), or,
     when the float is a whole number itself (not a denormal or NaN pattern), cast (ArduPilot's way;
-    the two never collide for the vehicle's INT32 ranges, -1..255)."""
+    the two never collide for the vehicle's INT32 ranges, -1..10 000 000: below 2^24, a value's bytes are
+    a denormal or the least normal floats, never whole)."""
     if kind != mavlink.MAV_PARAM_TYPE_INT32:
         return value
     if math.isfinite(value) and value == int(value) and (value == 0 or abs(value) >= 1):

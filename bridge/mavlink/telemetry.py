@@ -17,7 +17,8 @@ From the vehicle's sensors (:class:`plant.sensors.SensorSuite`, paper frame, SI)
 ``HIGHRES_IMU`` (FRD specific force m/s^2 and rates rad/s, barometric pressure hPa and pressure
 altitude m) and, with a GNSS position sensor, ``GPS_RAW_INT`` (degE7, mm AMSL, cm/s, cdeg; NO_GPS once its
 fixes stop: :func:`gps_lost`, which SYS_STATUS's GPS bit says too); the streams they go out on and their
-intervals: :func:`sensor_streams`.
+intervals: :func:`sensor_streams`. From the estimator's health (bridge.autopilot.positionloss.EstimateHealth):
+``ESTIMATOR_STATUS`` (its solution flags, accuracies m).
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from bridge.autopilot.positionloss import EstimateHealth
 from bridge.core.wire import paper_to_ned
 from missions.geodetic import Home  # where the local NED origin is on earth (re-exported: the vehicle's home)
 from plant.sensors import BARO, GNSS, IMU, Measurement, SensorConfig, SensorSuite
@@ -117,19 +119,39 @@ def mission_current(seq: int, total: int, state: int = mavlink.MISSION_STATE_NOT
 
 
 def sys_status(load_permille: int, healthy: bool, battery: tuple[int, int, int] = (16800, -1, 100),
-               armable: bool = True, gps: bool = True) -> Any:
+               armable: bool = True, gps: bool | None = True) -> Any:
     """``SYS_STATUS``: simulated sensors present and healthy; ``battery``: voltage mV, current cA (-1: not
     measured) and remaining % (a full 4S battery unless the plant flies one); the pre-arm check's bit healthy
     when ``armable`` (PX4's: MAVSDK's ``health.is_armable`` reads it); the GPS's bit present and enabled, healthy
     only while ``gps`` (its fixes arrive: :func:`gps_lost`; MAVSDK's ``health.is_global_position_ok`` and
-    ``is_local_position_ok`` read it)."""
+    ``is_local_position_ok`` read it), and with ``gps`` None (a vehicle without a GPS: motion capture) not
+    present at all, as PX4 sets it only while EKF2 fuses a GNSS (estimatorCheck.cpp)."""
     # the geofence bit is set healthy although there is no fence: MAVProxy reads a clear
     # health bit as "fence breach" even on a vehicle that has none
     prearm = mavlink.MAV_SYS_STATUS_PREARM_CHECK
+    sensors = _SENSORS if gps is not None else _SENSORS & ~mavlink.MAV_SYS_STATUS_SENSOR_GPS
     lost = 0 if gps else mavlink.MAV_SYS_STATUS_SENSOR_GPS
-    health = ((_SENSORS & ~lost) | mavlink.MAV_SYS_STATUS_GEOFENCE | (prearm if armable else 0)) if healthy else 0
-    return mavlink.MAVLink_sys_status_message(_SENSORS | prearm, _SENSORS | prearm, health,
+    health = ((sensors & ~lost) | mavlink.MAV_SYS_STATUS_GEOFENCE | (prearm if armable else 0)) if healthy else 0
+    return mavlink.MAVLink_sys_status_message(sensors | prearm, sensors | prearm, health,
                                               max(0, min(1000, load_permille)), *battery, 0, 0, 0, 0, 0, 0)
+
+
+def estimator_status(usec: int, health: EstimateHealth) -> Any:
+    """``ESTIMATOR_STATUS`` as PX4 v1.15's stream fills it from EKF2's solution flags (ekf_helper.cpp,
+    ``get_ekf_soln_status``): attitude, vertical velocity and absolute vertical position good (a barometer or a
+    pose always aids the height); horizontal velocity and relative and absolute horizontal position good while
+    the horizontal position is valid (EKF2_NOAID_TOUT: bridge.autopilot.positionloss); the predicted horizontal
+    position (relative; absolute: by GNSS) while a horizontal reading is fused (aiding now); no terrain, constant
+    position mode, GPS glitch or accelerometer error. ``pos_horiz_accuracy`` / ``pos_vert_accuracy``: the
+    estimate's 1-sigma (m); the innovation test ratios are not computed here (NaN)."""
+    m = mavlink
+    flags = m.ESTIMATOR_ATTITUDE | m.ESTIMATOR_VELOCITY_VERT | m.ESTIMATOR_POS_VERT_ABS
+    if health.valid:
+        flags |= m.ESTIMATOR_VELOCITY_HORIZ | m.ESTIMATOR_POS_HORIZ_REL | m.ESTIMATOR_POS_HORIZ_ABS
+    if health.aiding:
+        flags |= m.ESTIMATOR_PRED_POS_HORIZ_REL | (m.ESTIMATOR_PRED_POS_HORIZ_ABS if health.gnss else 0)
+    nan = math.nan
+    return m.MAVLink_estimator_status_message(usec, flags, nan, nan, nan, nan, nan, nan, health.eph_m, health.epv_m)
 
 
 def extended_sys_state(landed_state: int) -> Any:
@@ -289,6 +311,12 @@ def gnss_fix(sensors: SensorSuite) -> Measurement | None:
     since before its clock began; a lockstep vehicle's clock stands still until its first flight); None: none."""
     fix = sensors.latest(GNSS)
     return fix if fix is not None else sensors.first_fix
+
+
+def has_gps(sensors: SensorSuite | None) -> bool:
+    """Whether SYS_STATUS has a GPS bit: a GNSS receiver, or no sensors at all (truth: the true state, the GPS
+    bit present and healthy as ever); a pose sensor (motion capture) is no GPS."""
+    return sensors is None or sensors.config.position_class == "gnss"
 
 
 def gps_lost(sensors: SensorSuite | None, t: float) -> bool:

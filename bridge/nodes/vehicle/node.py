@@ -52,6 +52,8 @@ from bridge.nodes.vehicle.streams import (
     StreamTable,
     VehicleView,
     battery_streams,
+    estimator_streams,
+    health_of,
     heartbeat,
     message,
 )
@@ -96,8 +98,8 @@ class Vehicle:
         now = time.monotonic()
         # the GCS link's: the defaults, and with sensors (not truth) HIGHRES_IMU and, for GNSS, GPS_RAW_INT
         sensors = self.sim.sensors.config if self.sim.sensors is not None else None
-        self.streams = StreamTable({**DEFAULT_STREAMS, **tm.sensor_streams(sensors),
-                                    **battery_streams(self.plant.battery)}, now)
+        self.streams = StreamTable({**DEFAULT_STREAMS, **tm.sensor_streams(sensors), **estimator_streams(
+            self.sim.sensors), **battery_streams(self.plant.battery)}, now)
         self.ctl_streams = StreamTable(dict.fromkeys(self.streams, 0.0), now)  # the controller link's: none
         self._next_heartbeat = self._next_house = now
         self._resend_at = self._lost_at = self._idle_odo_at = now
@@ -414,7 +416,7 @@ class Vehicle:
                            plant.on_ground, plant.omega, self.flight.profile.omega_max, self.load, sim.sensors,
                            cfg.home, cfg.sysid, (mission.current, len(mission.items), self.missions.mission_state),
                            plant.battery, sim.battery_watch.level(plant.battery.remaining) if plant.battery else 0,
-                           sim.prearm_refusal)
+                           sim.prearm_refusal, sim.position.ekf_valid, lambda: health_of(sim))
 
     def _heartbeat(self) -> Any:
         return heartbeat(self._view())

@@ -24,6 +24,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.autopilot.estimator import Covariance
 from bridge.autopilot.failsafe import Land, Level, ReturnHome, Takeoff
+from bridge.autopilot.positionloss import EstimateHealth, estimate_health
 from bridge.autopilot.simvehicle import FAILSAFE, LANDED, TAKEOFF, SimVehicle
 from bridge.core.wire import odometry_fields, rotate_inverse, step_usec
 from bridge.mavlink import telemetry as tm
@@ -39,6 +40,7 @@ VFR_HUD_S = 0.25  # PX4's default rate of VFR_HUD on a normal link (mavlink_main
 ALTITUDE_S = 1.0  # PX4's default rate of ALTITUDE on a normal link (1 Hz)
 HOME_POSITION_S = 2.0  # and of HOME_POSITION (0.5 Hz)
 BATTERY_STATUS_S = 2.0  # PX4's default rate of BATTERY_STATUS on a normal link (mavlink_main.cpp: 0.5 Hz)
+ESTIMATOR_STATUS_S = 2.0  # and of ESTIMATOR_STATUS (0.5 Hz)
 
 
 @dataclass(frozen=True)
@@ -64,6 +66,8 @@ class VehicleView:
     # why PX4's pre-arm checks deny an arm now, or None (SimVehicle.prearm_refusal): asked only by SYS_STATUS, which
     # alone needs it (with a fence and an estimator it costs tens of microseconds, and a view is built per message)
     prearm_refusal: Callable[[], str | None] = lambda: None
+    position_valid: bool = True  # the estimate's horizontal position, as EKF2 says (positionloss): GLOBAL_POSITION_INT
+    health: Callable[[], EstimateHealth | None] = lambda: None  # ESTIMATOR_STATUS's (None under truth: no estimator)
 
 
 def battery_fields(b: Battery) -> tuple[int, int, int]:
@@ -101,7 +105,8 @@ def landed_state(v: VehicleView) -> int:
 def _sys_status(v: VehicleView) -> list[Any]:
     healthy = not v.halted  # (a flight over is healthy in nothing, the pre-arm bit included)
     armable = healthy and v.prearm_refusal() is None
-    gps = not tm.gps_lost(v.sensors, v.t)  # a GNSS receiver's fixes stopped: its bit unhealthy, as GPS_RAW_INT says
+    # a GNSS receiver's fixes stopped: its bit unhealthy, as GPS_RAW_INT says; motion capture: no GPS bit
+    gps = not tm.gps_lost(v.sensors, v.t) if tm.has_gps(v.sensors) else None
     if v.battery is None:
         return [tm.sys_status(v.load, healthy, armable=armable, gps=gps)]
     return [tm.sys_status(v.load, healthy, battery_fields(v.battery), armable, gps)]
@@ -125,6 +130,12 @@ def heartbeat(v: VehicleView) -> Any:
         state = mavlink.MAV_STATE_STANDBY
     return mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4, base,
                                              custom, state, 3)
+
+
+def _estimator_status(v: VehicleView) -> list[Any]:
+    """ESTIMATOR_STATUS of the vehicle's estimator ([] under truth)."""
+    health = v.health()
+    return [] if health is None else [tm.estimator_status(round(v.t * 1e6), health)]
 
 
 def _thrust(v: VehicleView) -> float:
@@ -160,8 +171,9 @@ STREAMS: dict[int, Stream] = {
     mavlink.MAVLINK_MSG_ID_ATTITUDE: Stream(_if_finite(lambda v: tm.attitude(v.X, _ms(v))[:1]), 0.04),
     mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: Stream(_if_finite(lambda v: tm.attitude(v.X, _ms(v))[1:]), 0.04),
     mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: Stream(_if_finite(lambda v: [tm.local_position(v.X, _ms(v))]), 0.04),
+    # none while the horizontal position is invalid: PX4 v1.14's EKF2 publishes no global position then
     mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: Stream(
-        _if_finite(lambda v: [tm.global_position(v.X, _ms(v), v.home)]), 0.1),
+        _if_finite(lambda v: [tm.global_position(v.X, _ms(v), v.home)] if v.position_valid else []), 0.1),
     mavlink.MAVLINK_MSG_ID_SYS_STATUS: Stream(_sys_status, 0.1),
     mavlink.MAVLINK_MSG_ID_BATTERY_STATUS: Stream(battery_status, None),  # a battery's: battery_streams
     mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: Stream(
@@ -175,11 +187,25 @@ STREAMS: dict[int, Stream] = {
     # PX4's mission manager sends it at 1 Hz (its _slow_rate_limiter), and at once on a change
     mavlink.MAVLINK_MSG_ID_MISSION_CURRENT: Stream(lambda v: tm.mission_current(*v.mission), 1.0),
     mavlink.MAVLINK_MSG_ID_HEARTBEAT: Stream(lambda v: [heartbeat(v)], None),  # its own 1 Hz clock
+    mavlink.MAVLINK_MSG_ID_ESTIMATOR_STATUS: Stream(_estimator_status, None),  # an estimator's: estimator_streams
     mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION: Stream(lambda v: [tm.autopilot_version(v.sysid)], None),
     **{mid: _sensor(mid) for mid in tm.SENSOR_MESSAGES},
 }
 # default GCS streams (message id -> interval s)
 DEFAULT_STREAMS = {mid: s.interval_s for mid, s in STREAMS.items() if s.interval_s is not None}
+
+
+def health_of(sim: SimVehicle) -> EstimateHealth | None:
+    """ESTIMATOR_STATUS's view of ``sim``'s estimate now (bridge.autopilot.positionloss; None under truth)."""
+    if sim.sensors is None or sim.estimator is None:
+        return None
+    return estimate_health(sim.estimator, sim.position, sim.t, tm.has_gps(sim.sensors))
+
+
+def estimator_streams(sensors: SensorSuite | None) -> dict[int, float]:
+    """The GCS streams of an estimator (message id -> interval s): ESTIMATOR_STATUS at PX4's 0.5 Hz on a normal
+    link (mavlink_main.cpp); none under truth (no sensors, no estimator)."""
+    return {mavlink.MAVLINK_MSG_ID_ESTIMATOR_STATUS: ESTIMATOR_STATUS_S} if sensors is not None else {}
 
 
 def battery_streams(battery: Battery | None) -> dict[int, float]:

@@ -1,0 +1,52 @@
+"""One event of a flight's timeline acted on: the plant's rotors and air, the vehicle's sensors (docs/weather.md).
+
+In:  a timeline event (:class:`plant.events.TimedEvent`: motor, wind, gust, link, gps, mag, baro, gyro; its fields
+     in SI: effectiveness 0..1, m/s, deg, s, m, m/s of drift, rad/s of bias), the plant (its time s), the vehicle's
+     sensor suite (None under truth)
+Out: the plant's and the sensors' state changed now, and the kind of event that says so (:func:`act_on`)
+"""
+
+from __future__ import annotations
+
+from plant import Quadrotor
+from plant.events import TimedEvent
+from plant.sensors import SensorSuite
+from plant.wind import Gust
+
+
+def act_on(e: TimedEvent, p: Quadrotor, sensors: SensorSuite | None) -> str:
+    """Act on ``e`` now (checked against the flight when it was built: :func:`bridge.core.flight.prepare`); the kind
+    of event that says it: ``fault``, ``wind`` for the weather's, ``link`` for a handover (which the link models
+    make themselves at this step: LinkSettings.handovers). ValueError for an event the vehicle cannot act on (a
+    sensor's under truth, wind without a plant's wind model)."""
+    k = e.kind
+    if k == "motor":
+        p.set_effectiveness(e.get("motor"), e.get("effectiveness"))
+    elif k in ("wind", "gust"):
+        if p.wind is None:
+            raise ValueError("a wind or gust event needs the plant built with a wind (prepare gives one)")
+        if k == "wind":
+            p.wind.set_steady(e.get("speed_mps"), e.get("from_deg"))
+        else:
+            p.wind.add_gust(Gust(p.t, e.get("duration_s"), e.get("amplitude_mps"), e.get("from_deg")))
+        return "wind"
+    elif k == "link":
+        return "link"
+    else:
+        if sensors is None:
+            raise ValueError(f"a {k} event needs the vehicle's sensors (an estimator other than truth)")
+        f = sensors.faults
+        if k == "gps":
+            if e.get("jump") is not None:
+                f.jump(e.get("jump"))
+            else:
+                f.gps_on = e.get("state") == "on"
+        elif k == "mag":
+            f.mag_on = e.get("state") == "on"
+        elif k == "baro":
+            f.set_drift(e.get("drift_mps"), p.t)
+        else:
+            bias = sensors.gyro_bias
+            for i, b in enumerate(e.get("bias")):
+                bias[i] += b
+    return "fault"

@@ -1,0 +1,162 @@
+"""Covers bridge.autopilot.positionloss, bridge.nodes.vehicle and bridge.session: a GPS lost, end to end.
+
+A real ``bsst vehicle`` (x500, gnss, EKF, lockstep at 4x) flown by MAVSDK over UDP on 127.0.0.1: taken off and
+holding, MAVSDK's Failure plugin turns the GPS off; MAVSDK's Telemetry sees the position health go false, then, at
+EKF2_NOAID_TOUT, PX4's Descend (flight mode LAND), the landing and the disarm; GLOBAL_POSITION_INT stops (its
+``position`` no longer updates) until the GPS is back and fused; ESTIMATOR_STATUS's flags say it. Then the
+product's own fault event (``--at 10:gps:off``) in a lockstep ``bsst sitl`` session: the same failsafe at the same
+step as ``bsst sim`` offline, outcome ``failsafe``, exit 1, the summary naming it. The timing rules themselves:
+tests/test_positionloss.py.
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import common as M
+
+from bridge.nodes.report import Event
+from bridge.session import instance_slot
+from tests.sitlkit import ENV, ROOT, run_bsst
+from tests.test_gps_telemetry import INJECT_GPS
+from tests.test_ground_stations import FAST, _mavsdk
+from tests.test_vehicle import _vehicle
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
+
+MAVSDK_GPS_FAILSAFE = r"""
+import json, sys, threading
+from mavsdk import Mavsdk, Configuration, ComponentType
+from mavsdk.plugins.action import Action
+from mavsdk.plugins.failure import Failure, FailureError, FailureType, FailureUnit
+from mavsdk.plugins.mavlink_direct import MavlinkDirect, MavlinkMessage
+from mavsdk.plugins.telemetry import Telemetry
+
+sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+sdk.add_any_connection(sys.argv[1])
+system = sdk.first_autopilot(30.0)
+out = {"found": system is not None, "modes": [], "status": []}
+tel, act, failure, direct = Telemetry(system), Action(system), Failure(system), MavlinkDirect(system)
+cond = threading.Condition()
+seen = {"health": None, "rel": None, "armed": None, "mode": None, "positions": 0}
+def put(key, value):
+    with cond:
+        if key == "mode" and value != seen["mode"]:
+            out["modes"].append(value)
+        seen[key] = value
+        seen["positions"] += key == "rel"
+        cond.notify_all()
+tel.subscribe_health(lambda h, ud=None: put("health", [h.is_global_position_ok, h.is_local_position_ok]))
+tel.subscribe_position(lambda p, ud=None: put("rel", p.relative_altitude_m))
+tel.subscribe_armed(lambda a, ud=None: put("armed", a))
+tel.subscribe_flight_mode(lambda m, ud=None: put("mode", m.name))
+def status(m, ud=None):
+    f = json.loads(m.fields_json)
+    with cond:
+        out["status"].append([f["time_usec"], f["flags"], f["pos_horiz_accuracy"]])
+direct.subscribe_message("ESTIMATOR_STATUS", status)
+# ESTIMATOR_STATUS every 0.1 s (PX4's 0.5 Hz is a few messages in this flight): SET_MESSAGE_INTERVAL, as QGC asks
+interval = {"target_system": int(sys.argv[2]), "target_component": 1, "command": 511, "confirmation": 0,
+            "param1": 230.0, "param2": 100000.0, "param3": 0.0, "param4": 0.0, "param5": 0.0, "param6": 0.0,
+            "param7": 0.0}
+direct.send_message(MavlinkMessage("COMMAND_LONG", 0, 0, int(sys.argv[2]), 1, json.dumps(interval)))
+def until(what, pred, timeout):
+    with cond:
+        out[what] = cond.wait_for(pred, timeout)
+""" + INJECT_GPS + r"""until("ready", lambda: seen["health"] == [True, True], 20)
+out["arm"] = act.arm().name
+out["set_takeoff_altitude"] = act.set_takeoff_altitude(5.0).name
+out["takeoff"] = act.takeoff().name
+until("at_height", lambda: seen["mode"] == "HOLD" and seen["rel"] is not None and seen["rel"] > 4.9, 30)
+out["off"] = inject(FailureType.OFF)
+until("unhealthy", lambda: seen["health"] == [False, False], 20)
+until("descending", lambda: seen["mode"] == "LAND" and seen["armed"], 30)
+until("disarmed", lambda: seen["armed"] is False, 30)
+with cond:
+    positions = seen["positions"]
+out["on"] = inject(FailureType.OK)
+until("healthy", lambda: seen["health"] == [True, True], 20)
+until("positions_again", lambda: seen["positions"] > positions, 20)
+print("RESULT " + json.dumps(out), flush=True)
+sdk.destroy()
+"""
+
+
+def _global_positions(tlog) -> list[float]:
+    """The times (s) of the GLOBAL_POSITION_INT the vehicle sent, from its tlog."""
+    log = mavutil.mavlink_connection(str(tlog), dialect="common")
+    out = []
+    while (m := log.recv_match(type="GLOBAL_POSITION_INT")) is not None:
+        out.append(m.time_boot_ms * 1e-3)
+    return out
+
+
+def test_mavsdk_sees_the_gps_lost_the_descent_and_the_position_back(tmp_path):
+    """x500 taken off to 5 m by MAVSDK, GPS OFF through its Failure plugin: the position health false, then PX4's
+    Descend at EKF2_NOAID_TOUT after the last fix fused (4.92-5.13 s after the fault: the 5 Hz fixes' phase and
+    their 120 ms latency): MAVSDK's flight mode LAND, armed, until it lands and disarms. GPS OK: healthy again, and
+    GLOBAL_POSITION_INT (MAVSDK's position) flows again, which it had not since the position was lost (the tlog).
+    ESTIMATOR_STATUS with the horizontal position flags until the loss, without them after (its accuracy growing past
+    a metre), with them again once a fix is fused, as MAVSDK reads them (MavlinkDirect, the stream asked for at
+    10 Hz); the vehicle's events say each step."""
+    with instance_slot() as n:
+        v = _vehicle(n, tmp_path, "missions/sine.toml", "--profile", "x500", "--sensors", "gnss", "--estimator",
+                     "ekf", "--param", "SYS_FAILURE_EN=1", *FAST)
+        try:
+            got = _mavsdk(n, str(n + 1), MAVSDK_GPS_FAILSAFE)  # (the vehicle's sysid)
+        finally:
+            assert v.stop() == 0
+    steps = ("found", "ready", "at_height", "unhealthy", "descending", "disarmed", "healthy", "positions_again")
+    assert {k: got[k] for k in steps} == dict.fromkeys(steps, True), got
+    assert (got["arm"], got["takeoff"], got["off"], got["on"]) == ("SUCCESS",) * 4, got
+    assert got["modes"][-2:] == ["HOLD", "LAND"], got["modes"]
+    ev = [(e.t, e.kind, e.text) for e in v.reports() if isinstance(e, Event)]
+    kinds = [k for _, k, _ in ev if k in ("fault", "position", "failsafe", "disarmed")]
+    assert kinds == ["fault", "position", "failsafe", "disarmed", "fault", "position"], ev
+    t_off, t_lost, t_fs, t_down, t_on, t_back = (t for t, k, _ in ev if k in ("fault", "position", "failsafe",
+                                                                               "disarmed"))
+    assert 4.9 < t_lost - t_off < 5.2 and t_fs == t_lost and t_on < t_back, ev
+    said = {k: x for _, k, x in ev if k in ("failsafe", "disarmed")}
+    assert said == {"failsafe": "position lost: level and descend", "disarmed": "landed: disarmed"}
+    # ESTIMATOR_STATUS as MAVSDK received it (its MavlinkDirect): (s, flags, horizontal accuracy m)
+    status = [(us * 1e-6, f, acc) for us, f, acc in got["status"]]
+    pos = M.ESTIMATOR_POS_HORIZ_REL | M.ESTIMATOR_POS_HORIZ_ABS | M.ESTIMATOR_VELOCITY_HORIZ
+    during = [s for s in status if t_lost + 0.01 < s[0] < t_on]
+    after = [s for s in status if s[0] > t_on]
+    assert any(t < t_off for t, _, _ in status) and during and after, status
+    assert all(f & pos == pos for t, f, _ in status if t < t_lost - 0.01) and after[-1][1] & pos == pos
+    assert all(f & pos == 0 for _, f, _ in during) and during[-1][2] > during[0][2] > 1.0  # its 1-sigma grows
+    gpos = _global_positions(tmp_path / "vehicle.tlog")
+    assert not [t for t in gpos if t_lost + 0.01 < t < t_on] and any(t > t_on for t in gpos)
+
+
+def test_the_product_fault_event_fails_safe_in_lockstep_as_offline(tmp_path):
+    """``--sensors gnss --estimator ekf --at 10:gps:off`` on the sine cut to 20 s: ``bsst sim`` and a lockstep ``bsst
+    sitl`` both end ``failsafe``, exit 1, the position lost and PX4's Descend at 15.124 s and the disarm on the ground
+    at 17.876 s in both; the summary's ``ended_by`` names the position loss and the fault; the trace the same."""
+    sine = tmp_path / "sine20.toml"
+    sine.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 20.0"))
+    summaries = []
+    for command in ("sim", "sitl"):
+        out = tmp_path / command
+        with instance_slot() as n:
+            extra = ("--instance", str(n)) if command == "sitl" else ()
+            r = run_bsst(command, sine, "--sensors", "gnss", "--estimator", "ekf", "--at", "10:gps:off", "--out",
+                         str(out), "--no-plots", *extra, env=ENV, timeout=300)
+        assert r.returncode == 1 and (out / "summary.json").exists(), f"bsst {command}: {r.stderr[-2000:]}"
+        summaries.append(json.loads((out / "summary.json").read_text()))
+    offline, sitl = summaries
+    mine = ("fault", "position", "failsafe", "disarmed")
+    events = [[(e["t"], e["kind"], e["text"].split(" [by ")[0]) for e in s["events"] if e["kind"] in mine
+               and e.get("source", "vehicle") == "vehicle"] for s in summaries]
+    assert events[0] == events[1] and [(t, k) for t, k, _ in events[0]] == [
+        (10.0, "fault"), (15.124, "position"), (15.124, "failsafe"), (17.876, "disarmed")], events
+    assert sitl["outcome"] == offline["outcome"] == "failsafe"
+    assert sitl["ended_by"] == offline["ended_by"] == {
+        "who": "vehicle", "how": "failsafe at t=15.124 s: position lost: level and descend",
+        "after_faults": ["t=10.000 s: gps off"]}
+    rows = [(tmp_path / c / "trace.csv").read_text().splitlines() for c in ("sim", "sitl")]
+    keep = rows[0][0].split(",").index("z") + 1  # t and the true state's columns up to z
+    assert [r.split(",")[:keep] for r in rows[0]] == [r.split(",")[:keep] for r in rows[1]]
