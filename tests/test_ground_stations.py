@@ -254,6 +254,7 @@ elif sys.argv[2] == "flight":  # MAVSDK's own takeoff_and_land example: arm, wai
     until("on_ground", lambda: abs(seen["rel"]) < 0.02, 5)  # positions come at 10 Hz: the next ones
     until("hud_landed", lambda: seen["hud"][0] == 0.0, 5)  # disarmed: no thrust
     until("landed_on_ground", lambda: landed[-1] == "ON_GROUND", 5)
+    until("hold_after", lambda: modes[-1] == "HOLD", 5)  # disarmed, back in the last mode it arms in (PX4's)
     with cond:
         out.update(modes=modes, rel_landed=seen["rel"], top=seen["top"], hud_landed=seen["hud"], landed=landed)
 print("RESULT " + json.dumps(out), flush=True)
@@ -316,7 +317,7 @@ def test_mavsdk_parameters(tmp_path):
 def test_mavsdk_arm_takeoff_land(tmp_path):
     """MAVSDK's own example's flow against a fresh vehicle: it boots in HOLD (PX4's), so ``Action.arm`` arms it
     in HOLD on the ground, where it waits (no controller needed); ``set_takeoff_altitude`` / ``takeoff``
-    (TAKEOFF, then HOLD at the height), ``land`` (LAND, then disarmed on the ground), with
+    (TAKEOFF, then HOLD at the height), ``land`` (LAND, then disarmed on the ground and back in HOLD), with
     ``Telemetry.flight_mode`` naming each mode, ``fixedwing_metrics`` (VFR_HUD) the climb, throttle and altitude
     and ``altitude`` (ALTITUDE) the heights; every command MAVSDK sent was answered."""
     out, v, n = _mavsdk_on_a_vehicle(tmp_path, "flight")
@@ -324,7 +325,7 @@ def test_mavsdk_arm_takeoff_land(tmp_path):
     assert all(out[k] for k in ("hold_seen", "armed_seen", "at_height", "disarmed_seen", "on_ground")), out
     assert out["after_arm"] == [True, "HOLD"], out  # armed and waiting on the ground, no failsafe
     assert out["takeoff_altitude"] == 3.0  # MIS_TAKEOFF_ALT, set and read back through the parameters
-    assert out["modes"] == ["HOLD", "TAKEOFF", "HOLD", "LAND"], out["modes"]
+    assert out["modes"] == ["HOLD", "TAKEOFF", "HOLD", "LAND", "HOLD"], out["modes"]  # HOLD again once disarmed
     # MAVSDK's landed_state (EXTENDED_SYS_STATE at 10 Hz) as PX4 tells it: taking off, in the air, landing, on the
     # ground (the climb lasts ~0.5 s of wall time: a stalled machine may show none of it; tests/test_gcs_instruments.py
     # pins the states themselves)
@@ -589,14 +590,16 @@ def test_do_reposition_disarmed_takes_hold_on_the_ground_is_denied_and_other_fla
     assert not any("repositioned" in s for s in v.events())
 
 
-def test_land_and_rtl_are_not_armed_in_selected_disarmed_nor_after_their_landing(tmp_path):
+def test_land_and_rtl_are_not_armed_in_selected_disarmed_and_after_their_landing_it_is_back_in_hold(tmp_path):
     """PX4 does not arm in AUTO.LAND or AUTO.RTL (mode_requirements.cpp: prevent arming). Disarmed, LAND (DO_SET_MODE,
-    NAV_LAND) and RTL are DENIED with a STATUSTEXT saying so, and the next arm is HOLD's, the mode it boots in; once a
-    LAND has landed and disarmed it (still showing LAND), a ground station's arm is DENIED, saying to select HOLD or
-    TAKEOFF first (it was once ACCEPTED: armed in LAND on the ground, and at once disarmed); after HOLD it arms."""
+    NAV_LAND) and RTL are DENIED with a STATUSTEXT saying so, and the next arm is HOLD's, the mode it boots in. Once a
+    LAND has landed, it stays armed COM_DISARM_LAND (here 1 s) on the ground, then disarms and, as PX4's
+    UserModeIntention::onDisarm, is back in the last mode it can arm in (HOLD, the takeoff's end): the heartbeat says
+    LOITER, and a plain arm is ACCEPTED there (it was once DENIED: the vehicle stayed in LAND). A Return's landing
+    likewise."""
     with instance_slot() as n:
         gcs = _gcs(n)
-        v = _vehicle(n, tmp_path, *FAST)
+        v = _vehicle(n, tmp_path, *FAST, "--param", "COM_DISARM_LAND=1")
         try:
             assert gcs.wait_heartbeat(timeout=20) is not None
 
@@ -609,6 +612,12 @@ def test_land_and_rtl_are_not_armed_in_selected_disarmed_nor_after_their_landing
                                    condition=f"{words!r} in STATUSTEXT.text")
                 assert m is not None, f"no STATUSTEXT saying {words!r}"
 
+            def disarmed_in_hold() -> bool:  # (those queued before say armed, or LAND in the period it disarmed)
+                hold = (4 << 16) | (3 << 24)
+                hb = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=5, condition=(
+                    f"not HEARTBEAT.base_mode & {M.MAV_MODE_FLAG_SAFETY_ARMED} and HEARTBEAT.custom_mode == {hold}"))
+                return hb is not None and mavutil.mode_string_v10(hb) == "LOITER"
+
             nan, arm = math.nan, M.MAV_CMD_COMPONENT_ARM_DISARM
             assert command(M.MAV_CMD_DO_SET_MODE, 29, 4, 6, 0, 0, 0, 0) == M.MAV_RESULT_DENIED
             said("mode LAND: only armed (PX4 does not arm in Land")
@@ -616,30 +625,26 @@ def test_land_and_rtl_are_not_armed_in_selected_disarmed_nor_after_their_landing
             said("mode LAND: only armed")
             assert command(M.MAV_CMD_DO_SET_MODE, 29, 4, 5, 0, 0, 0, 0) == M.MAV_RESULT_DENIED
             said("mode RTL: only armed (PX4 does not arm in Return")
-            assert command(arm, 1, 0, 0, 0, 0, 0, 0) == M.MAV_RESULT_ACCEPTED
-            v.wait_event(lambda s: s.startswith("armed: armed, HOLD [by 255:190"))
-            assert command(M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, nan, nan, nan, nan) == M.MAV_RESULT_ACCEPTED
-            v.wait_event(lambda s: s.startswith("mode: HOLD: takeoff done"))
-            assert command(M.MAV_CMD_NAV_LAND, 0, 0, 0, nan, nan, nan, 0) == M.MAV_RESULT_ACCEPTED
-            v.wait_event(lambda s: s == "disarmed: landed: disarmed [by vehicle]")
-            hb = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=5,  # (those queued before it say armed)
-                                condition=f"not HEARTBEAT.base_mode & {M.MAV_MODE_FLAG_SAFETY_ARMED}")
-            assert hb is not None and mavutil.mode_string_v10(hb) == "LAND"
-            assert command(arm, 1, 0, 0, 0, 0, 0, 0) == M.MAV_RESULT_DENIED
-            said("arming denied: mode LAND: PX4 does not arm in Land")
-            v.wait_report(Refused, lambda r: r.text == "arming denied: mode LAND: PX4 does not arm in Land mode "
-                                                       "(select HOLD or TAKEOFF first)")
-            assert command(M.MAV_CMD_DO_SET_MODE, 29, 4, 3, 0, 0, 0, 0) == M.MAV_RESULT_ACCEPTED
-            assert command(arm, 1, 0, 0, 0, 0, 0, 0) == M.MAV_RESULT_ACCEPTED
-            hb = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=5,
-                                condition=f"HEARTBEAT.base_mode & {M.MAV_MODE_FLAG_SAFETY_ARMED}")
-            assert hb is not None and mavutil.mode_string_v10(hb) == "LOITER"
+            for land in (M.MAV_CMD_NAV_LAND, M.MAV_CMD_NAV_RETURN_TO_LAUNCH):
+                mark = len(v.events())
+                assert command(arm, 1, 0, 0, 0, 0, 0, 0) == M.MAV_RESULT_ACCEPTED
+                v.wait_event(_from(mark, lambda s: s.startswith("armed: armed, HOLD [by 255:190")))
+                assert command(M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, nan, nan, nan, nan) == M.MAV_RESULT_ACCEPTED
+                v.wait_event(_from(mark, lambda s: s.startswith("mode: HOLD: takeoff done")))
+                assert command(land, 0, 0, 0, nan, nan, nan, 0) == M.MAV_RESULT_ACCEPTED
+                landed = v.wait_event(_from(mark, lambda s: s.startswith("landed: landing detected at ")))
+                assert landed.text.endswith("disarms in COM_DISARM_LAND = 1 s"), landed.text
+                off = v.wait_event(_from(mark, lambda s: s == "disarmed: landed: disarmed [by vehicle]"))
+                assert off.t == pytest.approx(landed.t + 1.0, abs=1e-6)  # COM_DISARM_LAND after the touchdown
+                back = v.wait_event(_from(mark, lambda s: s.startswith("mode: HOLD (disarmed after ")))
+                assert ("LAND" if land == M.MAV_CMD_NAV_LAND else "RTL") in back.text, back.text
+                assert disarmed_in_hold()
         finally:
             gcs.close()
             assert v.stop() == 0
     armed = [s for s in v.events() if s.startswith("armed: ")]
-    assert [s.split(" [by")[0] for s in armed] == ["armed: armed, HOLD"] * 2, armed  # never armed in LAND
-    assert sum(s.startswith("disarmed: ") for s in v.events()) == 1
+    assert [s.split(" [by")[0] for s in armed] == ["armed: armed, HOLD"] * 2, armed  # never armed in LAND or RTL
+    assert sum(s.startswith("disarmed: ") for s in v.events()) == 2
 
 
 # -- MAVProxy --------------------------------------------------------------------------------------

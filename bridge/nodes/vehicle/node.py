@@ -283,6 +283,7 @@ class Vehicle:
             self.sim.advance()
         else:
             vend.advance()
+        mode = self.sim.mode  # flown this period (a disarm in LAND then takes another: Commander.flight_over)
         self.k = k + 1
         if self.cfg.speed is not None:
             self._wait_until(self.pace.due(self.k * self.substeps))
@@ -294,8 +295,7 @@ class Vehicle:
             self._turns_over()
         # off the critical path: the controller is computing step k+1 meanwhile
         if self.rows is not None:
-            self.rows.lockstep(k, X, self.sim.mode, wire, real, t - vend.applied_state_t, recv - sent, sent, recv,
-                               est)
+            self.rows.lockstep(k, X, mode, wire, real, t - vend.applied_state_t, recv - sent, sent, recv, est)
 
     # -- free run: realtime clock, or lockstep lost --------------------------------------------
     def _freerun_period(self) -> None:
