@@ -201,8 +201,9 @@ sdk.destroy()
 def test_mavsdk_set_current_speed_slows_a_return_home_to_it(tmp_path: Path) -> None:
     """MAVSDK's ``Action.set_current_speed(0.5)`` (DO_CHANGE_SPEED: speed type 1, 0.5 m/s) as Return begins, 8 m
     north of home at 3 m, after a ``goto_location`` flown at the on-board controller's 2 m/s: the way home is flown at
-    0.5 m/s (its ground speed never above 0.6 m/s), it lands at home, disarms and is in HOLD again (PX4's mode after a
-    disarm). ``get_return_to_launch_altitude`` reads RTL_RETURN_ALT: 30 m, PX4's multicopter default."""
+    0.5 m/s, it lands at home, disarms and is in HOLD again (PX4's mode after a disarm). Ground speeds as MAVSDK saw
+    them: the on-board velocity loop overshoots its limit by ~15 % either way (2.31 m/s on the goto, 0.59 m/s home,
+    measured). ``get_return_to_launch_altitude`` reads RTL_RETURN_ALT: 30 m, PX4's multicopter default."""
     with instance_slot() as n:
         v = _vehicle(n, tmp_path, *FAST)
         try:
@@ -213,7 +214,7 @@ def test_mavsdk_set_current_speed_slows_a_return_home_to_it(tmp_path: Path) -> N
     assert out["found"] and [out[k] for k in keys] == ["SUCCESS"] * len(keys), out
     assert all(out[k] for k in ("at_height", "there", "rtl_seen", "disarmed", "hold_after")), out
     assert out["rtl_alt"] == 30.0
-    assert out["goto_top"] > 1.8 and 0.3 < out["return_top"] < 0.6, out  # 2 m/s, then the 0.5 asked for
+    assert out["goto_top"] > 1.8 and 0.4 < out["return_top"] < 0.7, out  # 2 m/s, then the 0.5 asked for
     north, east, up = out["landed_at"]
     assert math.hypot(north, east) < 0.3 and abs(up) < 0.05, out
     assert out["modes"][-2:] == ["RETURN_TO_LAUNCH", "HOLD"], out["modes"]
