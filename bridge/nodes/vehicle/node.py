@@ -378,9 +378,9 @@ class Vehicle:
 
     def _after_step(self) -> bool:
         """Events and divergence; False when the plant is lost (nothing more to send)."""
+        self.commander.flight_over()  # (its mode after a landing's disarm is said with the disarm)
         if len(self.sim.events) > self.announcer.sent:
             self.announcer.drain()
-        self.commander.flight_over()
         if self.missions.watch is not None:  # a ground station's mission in flight: its items reached
             self.missions.flight_step(self.t, self.plant.state, self.sim.armed)
         if self.commander.diverged():
