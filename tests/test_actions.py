@@ -130,7 +130,9 @@ def test_change_speed_on_the_ground_changes_nothing_and_an_infinite_speed_is_ref
         gcs.close()
 
 
-MAVSDK_SPEED = r"""
+# what both MAVSDK scripts share: the system, the Action and Telemetry plugins, armed and the flight mode seen, and
+# ``until`` (a wait on one condition, its result in ``out``)
+MAVSDK_HEAD = r"""
 import json, math, sys, threading
 from mavsdk import Mavsdk, Configuration, ComponentType
 from mavsdk.plugins.action import Action
@@ -142,7 +144,7 @@ system = sdk.first_autopilot(30.0)
 out = {"found": system is not None}
 tel, act = Telemetry(system), Action(system)
 cond = threading.Condition()
-seen = {"armed": None, "ned": None, "geo": None, "modes": [], "speeds": []}
+seen = {"armed": None, "modes": []}
 def on_mode(m, ud=None):
     with cond:
         if not seen["modes"] or seen["modes"][-1] != m.name:
@@ -152,6 +154,15 @@ def on_armed(a, ud=None):
     with cond:
         seen["armed"] = a
         cond.notify_all()
+tel.subscribe_flight_mode(on_mode)
+tel.subscribe_armed(on_armed)
+def until(what, pred, timeout):
+    with cond:
+        out[what] = cond.wait_for(pred, timeout)
+"""
+
+MAVSDK_SPEED = MAVSDK_HEAD + r"""
+seen.update(ned=None, geo=None, speeds=[])
 def on_geo(p, ud=None):
     with cond:
         seen["geo"] = (p.latitude_deg, p.longitude_deg, p.absolute_altitude_m, p.relative_altitude_m)
@@ -162,13 +173,8 @@ def on_ned(pv, ud=None):
         seen["speeds"].append((seen["modes"][-1] if seen["modes"] else "", math.hypot(pv.velocity.north_m_s,
                                                                                      pv.velocity.east_m_s)))
         cond.notify_all()
-tel.subscribe_flight_mode(on_mode)
-tel.subscribe_armed(on_armed)
 tel.subscribe_position(on_geo)
 tel.subscribe_position_velocity_ned(on_ned)
-def until(what, pred, timeout):
-    with cond:
-        out[what] = cond.wait_for(pred, timeout)
 out["rtl_alt"] = act.get_return_to_launch_altitude()  # RTL_RETURN_ALT: PX4's multicopter default
 out["hold"] = act.hold().name
 out["arm"] = act.arm().name
@@ -221,43 +227,18 @@ def test_mavsdk_set_current_speed_slows_a_return_home_to_it(tmp_path: Path) -> N
     v.wait_event(lambda s: s.startswith("speed: RTL flies at most 0.5 m/s across [by 245:190"))
 
 
-MAVSDK_TERMINATE = r"""
-import json, sys, threading
-from mavsdk import Mavsdk, Configuration, ComponentType
-from mavsdk.plugins.action import Action
-from mavsdk.plugins.telemetry import Telemetry
-
-sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
-sdk.add_any_connection(sys.argv[1])
-system = sdk.first_autopilot(30.0)
-out = {"found": system is not None}
-tel, act = Telemetry(system), Action(system)
-cond = threading.Condition()
-seen = {"armed": None, "rel": 0.0, "modes": [], "texts": []}
-def on_armed(a, ud=None):
-    with cond:
-        seen["armed"] = a
-        cond.notify_all()
+MAVSDK_TERMINATE = MAVSDK_HEAD + r"""
+seen.update(rel=0.0, texts=[])
 def on_position(p, ud=None):
     with cond:
         seen["rel"] = p.relative_altitude_m
-        cond.notify_all()
-def on_mode(m, ud=None):
-    with cond:
-        if not seen["modes"] or seen["modes"][-1] != m.name:
-            seen["modes"].append(m.name)
         cond.notify_all()
 def on_text(s, ud=None):
     with cond:
         seen["texts"].append([s.type.name, s.text])
         cond.notify_all()
-tel.subscribe_armed(on_armed)
 tel.subscribe_position(on_position)
-tel.subscribe_flight_mode(on_mode)
 tel.subscribe_status_text(on_text)
-def until(what, pred, timeout):
-    with cond:
-        out[what] = cond.wait_for(pred, timeout)
 until("flying", lambda: seen["armed"] is True and seen["rel"] > 0.8, 60)  # the step mission's first set-point
 out["terminate"] = act.terminate().name
 until("disarmed", lambda: seen["armed"] is False, 10)
