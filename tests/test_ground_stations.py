@@ -426,8 +426,8 @@ def test_mavsdk_return_to_launch(tmp_path):
     """``Action.return_to_launch`` (MAV_CMD_NAV_RETURN_TO_LAUNCH: PX4's Return mode) while ``bsst controller`` flies
     the step mission, at its second set-point (2.2 m from home, 2 m up): MAVSDK shows RETURN_TO_LAUNCH; the
     vehicle (no cone: RTL_CONE_ANG 0) climbs to RTL_RETURN_ALT (3 m), flies home, comes down to RTL_DESCEND_ALT and
-    lands at home, disarmed; the controller, its vehicle taken, ends aborted (exit 1); the vehicle's events name
-    MAVSDK."""
+    lands at home, disarmed, back in OFFBOARD (the last mode it arms in: PX4's); the controller, its vehicle taken,
+    ends aborted (exit 1); the vehicle's events name MAVSDK."""
     mission = tmp_path / "step.toml"
     mission.write_text((MISSION_DIR / "step.toml").read_text().replace("duration_s = 30.0", "duration_s = 20.0"))
     with instance_slot() as n:
@@ -442,12 +442,15 @@ def test_mavsdk_return_to_launch(tmp_path):
             assert v.stop() == 0
     assert out["found"] and out["away"] and out["rtl"] == "SUCCESS", out
     assert out["rtl_seen"] and out["disarmed_seen"] and out["on_ground"], out
-    assert out["modes"][-1] == "RETURN_TO_LAUNCH", out
+    # disarmed, it is back in OFFBOARD, the last mode it arms in (PX4's): MAVSDK may have seen that before it stopped
+    rtl = out["modes"].index("RETURN_TO_LAUNCH")
+    assert out["modes"][rtl:] in (["RETURN_TO_LAUNCH"], ["RETURN_TO_LAUNCH", "OFFBOARD"]), out
     assert 2.9 < out["top"] < 3.1, out  # climbed to RTL_RETURN_ALT, no higher
     north, east, up = out["landed_at"]
     assert (north ** 2 + east ** 2) ** 0.5 < 0.2 and abs(up) < 0.05, out  # at home, on the ground
     v.wait_event(lambda s: "mode: RTL from" in s and "[by 245:190" in s)
     v.wait_event(lambda s: "disarmed: landed" in s)
+    v.wait_event(lambda s: s.startswith("mode: OFFBOARD (disarmed after RTL: "))
 
 
 def test_mavsdk_goto_location_flies_hold_to_the_point_and_faces_its_heading(tmp_path):
