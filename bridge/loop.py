@@ -224,8 +224,8 @@ def fly_end(flight: Flight, vehicle: SimVehicle, shown: list[dict[str, Any]]) ->
     """The mission's end action offline (``[end] action``, :meth:`SimVehicle.end_mission`), as the vehicle flies
     it in a session: ``land`` steps the vehicle's own landing (nothing from the controller; the mission's link
     is done with, its statistics the mission's) until it disarms on the ground, bounded by the descent at the
-    failsafe's rate plus 10 s, the plant's verdict judged after each period as a session's vehicle judges it
-    (a touchdown faster than CRASH_SPEED_MPS is ``crashed``); ``hold`` is engaged and the flight ends with the
+    failsafe's rate, COM_DISARM_LAND and 10 s, the plant's verdict judged after each period as a session's vehicle
+    judges it (a touchdown faster than CRASH_SPEED_MPS is ``crashed``); ``hold`` is engaged and the flight ends with the
     mission (no session to hold through). Its events are added to ``shown``; returns ``summary.json["end"]``
     (:func:`bridge.record.ending.end_block`) and the plant's verdict (None: none)."""
     m, plant = flight.mission, vehicle.plant
@@ -233,7 +233,8 @@ def fly_end(flight: Flight, vehicle: SimVehicle, shown: list[dict[str, Any]]) ->
     vehicle.end_mission(m.end_action)
     rows: list[tuple[float, float, float]] = []
     k, rate = m.steps, m.rate_hz
-    bound = k + math.ceil((10.0 + flight.failsafe.time_to_land_s(plant.state[4] - m.start[2])) * rate)
+    bound = k + math.ceil((10.0 + flight.failsafe.time_to_land_s(plant.state[4] - m.start[2])
+                           + vehicle.land_disarm.wait_s()) * rate)
     verdict = None
     while verdict is None and vehicle.armed and vehicle.mode == LAND and k < bound:
         X = plant.state

@@ -61,7 +61,8 @@ from params import ConfigError, dump_toml, reads_inputs
 
 LINK_FIGURES = ("sent", "delivered", "lost", "lost_by", "delay_ms")  # each vehicle's, each way, in the fleet's summary
 # the outcomes from best to worst: the fleet's outcome is its worst vehicle's (an unknown one is worst)
-SEVERITY = ("completed", "failsafe", "law_failed", "denied", "diverged", "crashed", "collision", "aborted")
+SEVERITY = ("completed", "failsafe", "law_failed", "denied", "diverged", "crashed", "terminated", "collision",
+            "aborted")
 DEFINITION = ("distance between the vehicles' centres less each one's disc radius (its arm plus its rotor "
               "radius: rotor_radius_m, by default half the arm)")
 

@@ -186,6 +186,9 @@ def test_mavsdk_flies_a_plan_file_through_await_mission_as_the_file_flies(tmp_pa
     assert current[-1] == 4 and current == sorted(current), current
     modes = {(m.custom_mode, bool(m.base_mode & 128)) for m in _tlog(out / "vehicle.tlog", sysid, ["HEARTBEAT"])}
     assert ((4 << 16) | (4 << 24), True) in modes  # AUTO.MISSION, armed
+    # its end landing disarmed, it shows AUTO.MISSION again, as PX4 stays in Mission (docs/ground-station.md)
+    back = [e["text"] for e in summary["events"] if e["kind"] == "mode" and "disarmed after" in e["text"]]
+    assert back == ["MISSION (disarmed after LAND: PX4 takes the last mode it arms in; armed in it next) [by vehicle]"]
 
 
 def test_mavsdk_uploads_a_plans_fence_and_rally_points_and_the_flight_leaving_the_fence_fails(tmp_path):

@@ -33,17 +33,17 @@ def _mission(tmp_path: Path, start_pct: float, duration_s: float) -> Path:
 def _said(events: list[dict]) -> list[tuple[float, str, str]]:
     """The vehicle's battery, failsafe, disarm and crash events (a session's carry the controller's too)."""
     return [(e["t"], e["kind"], e["text"].removesuffix(" [by vehicle]")) for e in events  # (a session names it)
-            if e.get("source", "vehicle") == "vehicle" and e["kind"] in ("battery", "failsafe", "disarmed", "impact",
-                                                                         "crashed")]
+            if e.get("source", "vehicle") == "vehicle" and e["kind"] in ("battery", "failsafe", "landed", "disarmed",
+                                                                         "impact", "crashed")]
 
 
 def test_a_battery_return_10_m_from_home_at_4_m_climbs_only_to_the_cone_and_lands_intact_in_lockstep(
         tmp_path: Path) -> None:
     """From 9.5 % the critical level (7 %) comes at 19.5 s, 10 m north at 4 m (its estimate inside RTL_MIN_DIST):
-    Return climbs to the cone's height there, d / tan 45 deg (about 10 m; RTL_RETURN_ALT is 60 m), flies home and
+    Return climbs to the cone's height there, d / tan 45 deg (about 10 m; RTL_RETURN_ALT is 30 m), flies home and
     lands; the emergency level (5 %) lands it where it has got to; it touches down within a metre of home below
-    1 m/s, disarmed, nothing hit. ``bsst sitl`` (exit 1, outcome ``failsafe``) says and flies what ``bsst sim``
-    does: the same events at the same times, the trace within the float32 wire's 1e-4 m."""
+    1 m/s, disarmed COM_DISARM_LAND (2 s) later, nothing hit. ``bsst sitl`` (exit 1, outcome ``failsafe``) says and
+    flies what ``bsst sim`` does: the same events at the same times, the trace within the float32 wire's 1e-4 m."""
     mission = _mission(tmp_path, 9.5, 45.0)
     offline = simulate(mission, plots=False, params={"COM_LOW_BAT_ACT": 3}, **SENSED)
     with instance_slot() as n:
@@ -56,7 +56,8 @@ def test_a_battery_return_10_m_from_home_at_4_m_climbs_only_to_the_cone_and_land
     said = _said(summary["events"])
     assert said == _said(offline.summary["events"])
     kinds = [(k, text.rsplit(": ", 1)[-1]) for _, k, text in said if k != "battery"]
-    assert kinds == [("failsafe", "return"), ("failsafe", "land"), ("disarmed", "disarmed")], said
+    assert kinds == [("failsafe", "return"), ("failsafe", "land"), ("landed", "disarms in COM_DISARM_LAND = 2 s"),
+                     ("disarmed", "disarmed")], said
     t_return = next(t for t, k, _ in said if k == "failsafe")
     tr = read_trace(tmp_path / "s" / "trace.csv")
     k = min(len(tr["t"]), len(offline.trace["t"]))
@@ -66,11 +67,11 @@ def test_a_battery_return_10_m_from_home_at_4_m_climbs_only_to_the_cone_and_land
     assert 9.5 < away < 10.0 and abs(tr["z"][i] - 4.0) < 0.1, (away, tr["z"][i])
     after = tr["t"] >= t_return
     top = float(tr["z"][after].max())
-    assert away - 0.1 < top < away + 0.3, (top, away)  # the cone's height, d / tan 45 deg; nowhere near 60 m
-    t_down = next(t for t, k, _ in said if k == "disarmed")
+    assert away - 0.1 < top < away + 0.3, (top, away)  # the cone's height, d / tan 45 deg; nowhere near 30 m
+    t_down = next(t for t, k, _ in said if k == "landed")  # on the ground (disarmed 2 s later)
     landing = after & (tr["t"] < t_down)
     assert float(-tr["vz"][landing].min()) < 1.6  # at most MPC_Z_V_AUTO_DN (and the loop's few per cent)
-    j = int(np.searchsorted(tr["t"], t_down - 1e-9)) - 1  # the last row before the disarm
+    j = int(np.searchsorted(tr["t"], t_down - 1e-9)) - 1  # the last row before the touchdown
     assert -tr["vz"][j] < 1.0 and float(np.hypot(tr["x"][j], tr["y"][j])) < 1.0, (tr["vz"][j], tr["x"][j])
     assert tr["z"][-1] == pytest.approx(0.0, abs=1e-6)  # at rest on the ground
 
@@ -79,14 +80,14 @@ def test_the_audits_return_from_just_beyond_rtl_min_dist_lands_intact_and_at_lan
         tmp_path: Path) -> None:
     """The audit's flight offline: from 17 % the critical level comes at 78.808 s after a minute of holding, the EKF's
     estimate 10.03 m from home: beyond RTL_MIN_DIST (10 m), so Return climbs toward RTL_RETURN_ALT, as PX4 1.14 does,
-    until the emergency level (93.976 s, 26.75 m) lands it; coming down at 1.5 m/s above 10 m it disarms on the
-    ground at 117.071 s, intact. The same flight with MPC_Z_V_AUTO_DN 0.7 m/s (MPC_LAND_SPEED the whole way, the
-    landing before) runs out of pack on the way down and hits the ground hard."""
+    until the emergency level (93.976 s, 26.75 m) lands it; coming down at 1.5 m/s above 10 m it is on the ground at
+    117.071 s, intact, and disarms COM_DISARM_LAND (2 s) later. The same flight with MPC_Z_V_AUTO_DN 0.7 m/s
+    (MPC_LAND_SPEED the whole way, the landing before) runs out of pack on the way down and hits the ground hard."""
     mission = _mission(tmp_path, 17.0, 125.0)
     run = simulate(mission, plots=False, params={"COM_LOW_BAT_ACT": 3}, **SENSED)
     said = _said(run.summary["events"])
-    assert [(round(t, 3), k) for t, k, _ in said if k != "battery"] == [(78.808, "failsafe"), (93.976, "failsafe"),
-                                                                        (117.071, "disarmed")], said
+    assert [(round(t, 3), k) for t, k, _ in said if k != "battery"] == [
+        (78.808, "failsafe"), (93.976, "failsafe"), (117.071, "landed"), (119.071, "disarmed")], said
     tr = run.trace
     i = int(np.searchsorted(tr["t"], 78.808 - 1e-9))
     assert float(np.hypot(tr["x_est"][i], tr["y_est"][i])) > 10.0  # beyond RTL_MIN_DIST by its estimate

@@ -148,18 +148,20 @@ def test_each_action_ends_in_failsafe_exit_1_and_flies_as_written(flown, action:
 
 
 def test_descend_is_the_default_and_todays_figure(flown) -> None:
-    """The docs' figure (docs/design.md, "Failsafe"): disarmed at 18.283 s with the default, implicit step; the
-    paper's explicit step, asked for by name, held another last command when the state stopped and disarms at
-    18.274 s."""
+    """The docs' figure (docs/design.md, "Failsafe"): on the ground at 18.283 s with the default, implicit step, and
+    disarmed COM_DISARM_LAND (2 s) later, at 20.283 s; the paper's explicit step, asked for by name, held another last
+    command when the state stopped: down at 18.274 s, disarmed at 20.274 s."""
     v = flown["descend"]["vehicle"]
-    assert v["failsafe"] == pytest.approx(15.5) and v["disarmed"] == pytest.approx(18.283, abs=0.005)
+    assert v["failsafe"] == pytest.approx(15.5) and v["landed"] == pytest.approx(18.283, abs=0.005)
+    assert v["disarmed"] == pytest.approx(v["landed"] + 2.0, abs=1e-6)
     log = (flown["descend"]["out"] / "events.log").read_text()
     assert "failsafe: no actuator target for 0.504 s: level and descend" in log and "landed: disarmed" in log
     plain = simulate(SINE, plots=False, link=BLACKOUT)  # no action given: descend, row for row
     for c in ("x", "y", "z", "u1_act", "u2_act"):
         assert np.array_equal(plain.trace[c], flown["descend"]["offline"].trace[c])
     explicit = simulate(SINE, plots=False, link=BLACKOUT, discretization="explicit").summary["events"]
-    assert [e["t"] for e in explicit if e["kind"] == "disarmed"] == [pytest.approx(18.274, abs=0.005)]
+    assert [e["t"] for e in explicit if e["kind"] in ("landed", "disarmed")] == [pytest.approx(18.274, abs=0.005),
+                                                                                  pytest.approx(20.274, abs=0.005)]
 
 
 def test_hold_keeps_within_half_a_metre_for_3s_then_lands(flown) -> None:

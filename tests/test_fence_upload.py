@@ -220,7 +220,8 @@ def test_gf_action_return_terminate_and_land_each_fly_their_failsafe(action: int
                                                                      end_xy: tuple[float, float] | None) -> None:
     """Above GF_MAX_VER_DIST = 2 m at 20 s, GF_ACTION 3, 4 and 5 fly the vehicle's failsafe (a ``failsafe`` event
     naming the geofence, outcome ``failsafe``, ended by it): Return flies home (RTL_RETURN_ALT 0: at its height)
-    and lands, Terminate stops the motors (the fall is an ``impact``, disarmed), Land lands where it is."""
+    and lands (disarmed COM_DISARM_LAND, 2 s, after its landing), Terminate stops the motors (the fall is an
+    ``impact``, disarmed), Land lands where it is."""
     params = {"GF_MAX_VER_DIST": 2.0, "GF_ACTION": action, "RTL_RETURN_ALT": 0.0, "RTL_DESCEND_ALT": 2.0}
     run = simulate("missions/sine.toml", params=params, plots=False)
     s = run.summary
@@ -228,7 +229,9 @@ def test_gf_action_return_terminate_and_land_each_fly_their_failsafe(action: int
     (fs,) = [e for e in s["events"] if e["kind"] == "failsafe"]
     assert fs["t"] == pytest.approx(20.0, abs=0.01) and fs["text"].startswith("geofence: 2.00 m above home")
     (off,) = [e for e in s["events"] if e["kind"] == "disarmed"]
-    assert off["text"] == then and off["t"] < 24.0, off
+    down = [e["t"] for e in s["events"] if e["kind"] == "landed"]  # on the ground: COM_DISARM_LAND (2 s) to disarm
+    assert off["text"] == then and (off["t"] == pytest.approx(down[0] + 2.0, abs=1e-6) if down else True), off
+    assert (down[0] if down else off["t"]) < 24.0, (down, off)
     assert run.trace["z"][-1] == pytest.approx(0.0, abs=1e-6)  # on the ground
     if end_xy is None:
         assert any(e["kind"] == "impact" for e in s["events"]) and off["t"] == fs["t"]

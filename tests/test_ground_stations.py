@@ -256,6 +256,7 @@ elif sys.argv[2] == "flight":  # MAVSDK's own takeoff_and_land example: arm, wai
     until("on_ground", lambda: abs(seen["rel"]) < 0.02, 5)  # positions come at 10 Hz: the next ones
     until("hud_landed", lambda: seen["hud"][0] == 0.0, 5)  # disarmed: no thrust
     until("landed_on_ground", lambda: landed[-1] == "ON_GROUND", 5)
+    until("hold_after", lambda: modes[-1] == "HOLD", 5)  # disarmed, back in the last mode it arms in (PX4's)
     with cond:
         out.update(modes=modes, rel_landed=seen["rel"], top=seen["top"], hud_landed=seen["hud"], landed=landed)
 print("RESULT " + json.dumps(out), flush=True)
@@ -324,7 +325,7 @@ def test_mavsdk_parameters(tmp_path):
 def test_mavsdk_arm_takeoff_land(tmp_path):
     """MAVSDK's own example's flow against a fresh vehicle: it boots in HOLD (PX4's), so ``Action.arm`` arms it
     in HOLD on the ground, where it waits (no controller needed); ``set_takeoff_altitude`` / ``takeoff``
-    (TAKEOFF, then HOLD at the height), ``land`` (LAND, then disarmed on the ground), with
+    (TAKEOFF, then HOLD at the height), ``land`` (LAND, then disarmed on the ground and back in HOLD), with
     ``Telemetry.flight_mode`` naming each mode, ``fixedwing_metrics`` (VFR_HUD) the climb, throttle and altitude
     and ``altitude`` (ALTITUDE) the heights; every command MAVSDK sent was answered."""
     out, v, n = _mavsdk_on_a_vehicle(tmp_path, "flight")
@@ -332,7 +333,7 @@ def test_mavsdk_arm_takeoff_land(tmp_path):
     assert all(out[k] for k in ("hold_seen", "armed_seen", "at_height", "disarmed_seen", "on_ground")), out
     assert out["after_arm"] == [True, "HOLD"], out  # armed and waiting on the ground, no failsafe
     assert out["takeoff_altitude"] == 3.0  # MIS_TAKEOFF_ALT, set and read back through the parameters
-    assert out["modes"] == ["HOLD", "TAKEOFF", "HOLD", "LAND"], out["modes"]
+    assert out["modes"] == ["HOLD", "TAKEOFF", "HOLD", "LAND", "HOLD"], out["modes"]  # HOLD again once disarmed
     # MAVSDK's landed_state (EXTENDED_SYS_STATE at 10 Hz) as PX4 tells it: taking off, in the air, landing, on the
     # ground (the climb lasts ~0.5 s of wall time: a stalled machine may show none of it; tests/test_gcs_instruments.py
     # pins the states themselves)
@@ -433,8 +434,8 @@ def test_mavsdk_return_to_launch(tmp_path):
     """``Action.return_to_launch`` (MAV_CMD_NAV_RETURN_TO_LAUNCH: PX4's Return mode) while ``bsst controller`` flies
     the step mission, at its second set-point (2.2 m from home, 2 m up): MAVSDK shows RETURN_TO_LAUNCH; the
     vehicle (no cone: RTL_CONE_ANG 0) climbs to RTL_RETURN_ALT (3 m), flies home, comes down to RTL_DESCEND_ALT and
-    lands at home, disarmed; the controller, its vehicle taken, ends aborted (exit 1); the vehicle's events name
-    MAVSDK."""
+    lands at home, disarmed, back in OFFBOARD (the last mode it arms in: PX4's); the controller, its vehicle taken,
+    ends aborted (exit 1); the vehicle's events name MAVSDK."""
     mission = tmp_path / "step.toml"
     mission.write_text((MISSION_DIR / "step.toml").read_text().replace("duration_s = 30.0", "duration_s = 20.0"))
     with instance_slot() as n:
@@ -449,12 +450,15 @@ def test_mavsdk_return_to_launch(tmp_path):
             assert v.stop() == 0
     assert out["found"] and out["away"] and out["rtl"] == "SUCCESS", out
     assert out["rtl_seen"] and out["disarmed_seen"] and out["on_ground"], out
-    assert out["modes"][-1] == "RETURN_TO_LAUNCH", out
+    # disarmed, it is back in OFFBOARD, the last mode it arms in (PX4's): MAVSDK may have seen that before it stopped
+    rtl = out["modes"].index("RETURN_TO_LAUNCH")
+    assert out["modes"][rtl:] in (["RETURN_TO_LAUNCH"], ["RETURN_TO_LAUNCH", "OFFBOARD"]), out
     assert 2.9 < out["top"] < 3.1, out  # climbed to RTL_RETURN_ALT, no higher
     north, east, up = out["landed_at"]
     assert (north ** 2 + east ** 2) ** 0.5 < 0.2 and abs(up) < 0.05, out  # at home, on the ground
     v.wait_event(lambda s: "mode: RTL from" in s and "[by 245:190" in s)
     v.wait_event(lambda s: "disarmed: landed" in s)
+    v.wait_event(lambda s: s.startswith("mode: OFFBOARD (disarmed after RTL: "))
 
 
 def test_mavsdk_goto_location_flies_hold_to_the_point_and_faces_its_heading(tmp_path):
@@ -597,14 +601,16 @@ def test_do_reposition_disarmed_takes_hold_on_the_ground_is_denied_and_other_fla
     assert not any("repositioned" in s for s in v.events())
 
 
-def test_land_and_rtl_are_not_armed_in_selected_disarmed_nor_after_their_landing(tmp_path):
+def test_land_and_rtl_are_not_armed_in_selected_disarmed_and_after_their_landing_it_is_back_in_hold(tmp_path):
     """PX4 does not arm in AUTO.LAND or AUTO.RTL (mode_requirements.cpp: prevent arming). Disarmed, LAND (DO_SET_MODE,
-    NAV_LAND) and RTL are DENIED with a STATUSTEXT saying so, and the next arm is HOLD's, the mode it boots in; once a
-    LAND has landed and disarmed it (still showing LAND), a ground station's arm is DENIED, saying to select HOLD or
-    TAKEOFF first (it was once ACCEPTED: armed in LAND on the ground, and at once disarmed); after HOLD it arms."""
+    NAV_LAND) and RTL are DENIED with a STATUSTEXT saying so, and the next arm is HOLD's, the mode it boots in. Once a
+    LAND has landed, it stays armed COM_DISARM_LAND (here 1 s) on the ground, then disarms and, as PX4's
+    UserModeIntention::onDisarm, is back in the last mode it can arm in (HOLD, the takeoff's end): the heartbeat says
+    LOITER, and a plain arm is ACCEPTED there (it was once DENIED: the vehicle stayed in LAND). A Return's landing
+    likewise."""
     with instance_slot() as n:
         gcs = _gcs(n)
-        v = _vehicle(n, tmp_path, *FAST)
+        v = _vehicle(n, tmp_path, *FAST, "--param", "COM_DISARM_LAND=1")
         try:
             assert gcs.wait_heartbeat(timeout=20) is not None
 
@@ -617,6 +623,12 @@ def test_land_and_rtl_are_not_armed_in_selected_disarmed_nor_after_their_landing
                                    condition=f"{words!r} in STATUSTEXT.text")
                 assert m is not None, f"no STATUSTEXT saying {words!r}"
 
+            def disarmed_in_hold() -> bool:  # (those queued before say armed, or LAND in the period it disarmed)
+                hold = (4 << 16) | (3 << 24)
+                hb = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=5, condition=(
+                    f"not HEARTBEAT.base_mode & {M.MAV_MODE_FLAG_SAFETY_ARMED} and HEARTBEAT.custom_mode == {hold}"))
+                return hb is not None and mavutil.mode_string_v10(hb) == "LOITER"
+
             nan, arm = math.nan, M.MAV_CMD_COMPONENT_ARM_DISARM
             assert command(M.MAV_CMD_DO_SET_MODE, 29, 4, 6, 0, 0, 0, 0) == M.MAV_RESULT_DENIED
             said("mode LAND: only armed (PX4 does not arm in Land")
@@ -624,30 +636,26 @@ def test_land_and_rtl_are_not_armed_in_selected_disarmed_nor_after_their_landing
             said("mode LAND: only armed")
             assert command(M.MAV_CMD_DO_SET_MODE, 29, 4, 5, 0, 0, 0, 0) == M.MAV_RESULT_DENIED
             said("mode RTL: only armed (PX4 does not arm in Return")
-            assert command(arm, 1, 0, 0, 0, 0, 0, 0) == M.MAV_RESULT_ACCEPTED
-            v.wait_event(lambda s: s.startswith("armed: armed, HOLD [by 255:190"))
-            assert command(M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, nan, nan, nan, nan) == M.MAV_RESULT_ACCEPTED
-            v.wait_event(lambda s: s.startswith("mode: HOLD: takeoff done"))
-            assert command(M.MAV_CMD_NAV_LAND, 0, 0, 0, nan, nan, nan, 0) == M.MAV_RESULT_ACCEPTED
-            v.wait_event(lambda s: s == "disarmed: landed: disarmed [by vehicle]")
-            hb = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=5,  # (those queued before it say armed)
-                                condition=f"not HEARTBEAT.base_mode & {M.MAV_MODE_FLAG_SAFETY_ARMED}")
-            assert hb is not None and mavutil.mode_string_v10(hb) == "LAND"
-            assert command(arm, 1, 0, 0, 0, 0, 0, 0) == M.MAV_RESULT_DENIED
-            said("arming denied: mode LAND: PX4 does not arm in Land")
-            v.wait_report(Refused, lambda r: r.text == "arming denied: mode LAND: PX4 does not arm in Land mode "
-                                                       "(select HOLD or TAKEOFF first)")
-            assert command(M.MAV_CMD_DO_SET_MODE, 29, 4, 3, 0, 0, 0, 0) == M.MAV_RESULT_ACCEPTED
-            assert command(arm, 1, 0, 0, 0, 0, 0, 0) == M.MAV_RESULT_ACCEPTED
-            hb = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=5,
-                                condition=f"HEARTBEAT.base_mode & {M.MAV_MODE_FLAG_SAFETY_ARMED}")
-            assert hb is not None and mavutil.mode_string_v10(hb) == "LOITER"
+            for land in (M.MAV_CMD_NAV_LAND, M.MAV_CMD_NAV_RETURN_TO_LAUNCH):
+                mark = len(v.events())
+                assert command(arm, 1, 0, 0, 0, 0, 0, 0) == M.MAV_RESULT_ACCEPTED
+                v.wait_event(_from(mark, lambda s: s.startswith("armed: armed, HOLD [by 255:190")))
+                assert command(M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, nan, nan, nan, nan) == M.MAV_RESULT_ACCEPTED
+                v.wait_event(_from(mark, lambda s: s.startswith("mode: HOLD: takeoff done")))
+                assert command(land, 0, 0, 0, nan, nan, nan, 0) == M.MAV_RESULT_ACCEPTED
+                landed = v.wait_event(_from(mark, lambda s: s.startswith("landed: landing detected at ")))
+                assert landed.text.endswith("disarms in COM_DISARM_LAND = 1 s"), landed.text
+                off = v.wait_event(_from(mark, lambda s: s == "disarmed: landed: disarmed [by vehicle]"))
+                assert off.t == pytest.approx(landed.t + 1.0, abs=1e-6)  # COM_DISARM_LAND after the touchdown
+                back = v.wait_event(_from(mark, lambda s: s.startswith("mode: HOLD (disarmed after ")))
+                assert ("LAND" if land == M.MAV_CMD_NAV_LAND else "RTL") in back.text, back.text
+                assert disarmed_in_hold()
         finally:
             gcs.close()
             assert v.stop() == 0
     armed = [s for s in v.events() if s.startswith("armed: ")]
-    assert [s.split(" [by")[0] for s in armed] == ["armed: armed, HOLD"] * 2, armed  # never armed in LAND
-    assert sum(s.startswith("disarmed: ") for s in v.events()) == 1
+    assert [s.split(" [by")[0] for s in armed] == ["armed: armed, HOLD"] * 2, armed  # never armed in LAND or RTL
+    assert sum(s.startswith("disarmed: ") for s in v.events()) == 2
 
 
 # -- MAVProxy --------------------------------------------------------------------------------------

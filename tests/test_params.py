@@ -269,9 +269,10 @@ def test_modes_takeoff_hold_land_over_udp(tmp_path):
             gcs.mav.set_mode_send(tgt[0], 1, (4 << 16) | (6 << 24))  # SET_MODE LAND
             assert _recv(gcs, "COMMAND_ACK", "COMMAND_ACK.command==176").result == M.MAV_RESULT_ACCEPTED
             _recv(gcs, "STATUSTEXT", "'landed: disarmed' in STATUSTEXT.text", timeout=20)
-            hb = _recv(gcs, "HEARTBEAT")
-            assert mavutil.mode_string_v10(hb) == "LAND" and not hb.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED
-            assert hb.system_status == M.MAV_STATE_STANDBY  # a landing asked for, not a failsafe
+            # disarmed, back in HOLD (PX4's mode after a disarm in LAND); STANDBY: a landing asked for, not a failsafe
+            hb = _recv(gcs, "HEARTBEAT", f"not HEARTBEAT.base_mode & {M.MAV_MODE_FLAG_SAFETY_ARMED} and "
+                                         f"HEARTBEAT.custom_mode == {(4 << 16) | (3 << 24)}")
+            assert mavutil.mode_string_v10(hb) == "LOITER" and hb.system_status == M.MAV_STATE_STANDBY
         finally:
             assert v.stop() == 0
             gcs.close()

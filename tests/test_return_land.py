@@ -25,7 +25,8 @@ from bridge.autopilot.returnland import LandSlowdown, ReturnConfig, land_speed, 
 from bridge.core.flight import prepare
 from missions import Mission, Setpoint, Step
 
-PX4 = {"return_alt_m": 60.0, "cone_deg": 45, "min_dist_m": 10.0, "acc_rad_m": 2.0}  # RTL_RETURN_ALT .. NAV_ACC_RAD
+# RTL_RETURN_ALT .. NAV_ACC_RAD: PX4's multicopter defaults (rc.mc_defaults: 30 m, 2 m; RTL_CONE_ANG, RTL_MIN_DIST)
+PX4 = {"return_alt_m": 30.0, "cone_deg": 45, "min_dist_m": 10.0, "acc_rad_m": 2.0}
 
 
 def _height(d: float, h: float, **over: float) -> float:
@@ -37,9 +38,9 @@ def test_return_height_is_px4_1_14s_cone_at_chosen_points() -> None:
     """``RTL::calculate_return_alt_from_cone_half_angle`` (PX4 1.14), heights above where it lands: within
     NAV_ACC_RAD 2 d; within RTL_MIN_DIST the cone d / tan(angle) if below RTL_RETURN_ALT, at least 2 NAV_ACC_RAD;
     beyond it RTL_RETURN_ALT; never below the height it has; no cone (0): RTL_RETURN_ALT."""
-    assert _height(9.0, 4.0) == pytest.approx(9.0 / tan(radians(45)))  # the audit's case, inside: 9 m, not 60
+    assert _height(9.0, 4.0) == pytest.approx(9.0 / tan(radians(45)))  # the audit's case, inside: 9 m, not 30
     assert _height(10.0, 4.0) == pytest.approx(10.0)  # RTL_MIN_DIST itself is inside
-    assert _height(10.05, 4.0) == 60.0  # just beyond it: RTL_RETURN_ALT
+    assert _height(10.05, 4.0) == 30.0  # just beyond it: RTL_RETURN_ALT
     assert _height(9.0, 4.0, cone_deg=25) == pytest.approx(9.0 / tan(radians(25)))  # 19.3 m: a narrower cone
     assert _height(9.0, 4.0, cone_deg=25, return_alt_m=15.0) == 15.0  # the cone never above RTL_RETURN_ALT
     assert _height(6.0, 1.0, cone_deg=80) == 4.0  # 6 / tan 80 = 1.06 m: the floor 2 NAV_ACC_RAD
@@ -47,7 +48,8 @@ def test_return_height_is_px4_1_14s_cone_at_chosen_points() -> None:
     assert _height(2.2, 2.0, return_alt_m=3.0) == 4.0  # PX4 1.14's floor lies above RTL_RETURN_ALT here
     assert _height(1.5, 1.0) == 3.0 and _height(0.0, 0.0) == 0.0  # within NAV_ACC_RAD: 2 d
     assert _height(1.5, 5.0) == 5.0 and _height(9.0, 25.0) == 25.0  # it never comes down to return
-    assert _height(9.0, 4.0, cone_deg=0) == 60.0 and _height(9.0, 70.0, cone_deg=0) == 70.0  # no cone
+    assert _height(9.0, 4.0, cone_deg=0) == 30.0 and _height(9.0, 70.0, cone_deg=0) == 70.0  # no cone
+    assert _height(10.05, 4.0, return_alt_m=60.0) == 60.0  # RTL_RETURN_ALT's own default (a fixed wing's)
     assert _height(1.5, 1.0, cone_deg=0, return_alt_m=3.0) == 3.0  # no cone: not the 2 d either
     assert _height(30.0, 4.0, acc_rad_m=10.0, min_dist_m=50.0) == pytest.approx(30.0)  # NAV_ACC_RAD 10 m (PX4's own)
     assert _height(8.0, 4.0, acc_rad_m=10.0) == 16.0
@@ -97,7 +99,9 @@ def test_the_landing_time_is_the_integral_of_the_speed(h: float) -> None:
 
 def test_the_parameters_are_px4s_with_their_defaults_and_ranges() -> None:
     p = VehicleParams()
-    want = {"RTL_CONE_ANG": (45, "INT32", 0, 90), "RTL_MIN_DIST": (10.0, "REAL32", 0.5, 100.0),
+    want = {"RTL_RETURN_ALT": (30.0, "REAL32", 0.0, 100.0), "RTL_DESCEND_ALT": (10.0, "REAL32", 2.0, 100.0),
+            "COM_DISARM_LAND": (2.0, "REAL32", -1.0, 20.0),
+            "RTL_CONE_ANG": (45, "INT32", 0, 90), "RTL_MIN_DIST": (10.0, "REAL32", 0.5, 100.0),
             "NAV_ACC_RAD": (2.0, "REAL32", 0.05, 100.0), "MPC_Z_V_AUTO_DN": (1.5, "REAL32", 0.5, 4.0),
             "MPC_LAND_ALT1": (10.0, "REAL32", 0.0, 122.0), "MPC_LAND_ALT2": (5.0, "REAL32", 0.0, 122.0)}
     for name, (default, kind, lo, hi) in want.items():
@@ -115,7 +119,10 @@ def test_return_and_land_targets_carry_the_cone_and_the_slowdown() -> None:
     home = (0.0, 0.0, 0.0)
     t = failsafe_target(FailsafeConfig(action="return"), X, home, ReturnConfig())
     assert isinstance(t, ReturnHome) and t.z_return == pytest.approx(9.0) and t.z_descend == pytest.approx(9.0)
-    assert ReturnHome.toward(X, home, ReturnConfig(cone_deg=0), 0.7).z_return == 60.0  # no cone: PX4's 60 m
+    assert ReturnHome.toward(X, home, ReturnConfig(cone_deg=0), 0.7).z_return == 30.0  # no cone: the multicopter's
+    high = ReturnHome.toward((0.0,) * 4 + (25.0,) + (0.0,) * 7, home, ReturnConfig(), 0.7, LandSlowdown())
+    assert high.phase((0.0,) * 4 + (25.0,) + (0.0,) * 7) == "descend" and high.z_descend == 10.0
+    assert high.setpoint((0.0,) * 4 + (25.0,) + (0.0,) * 7, DEFAULT_GAINS).v_z == -1.5  # MPC_Z_V_AUTO_DN, not 1 m/s
     over_home = (0.0, 0.0, 0.0, 0.0, 20.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     land = landing_target(FailsafeConfig(), over_home, (0.0, 0.0, 2.0))
     assert isinstance(land, Land) and land.ground_z == 2.0
@@ -125,6 +132,8 @@ def test_return_and_land_targets_carry_the_cone_and_the_slowdown() -> None:
         over_home, DEFAULT_GAINS).v_z == -0.7  # descend (the default): 0.7 m/s at any height
     cone = return_time_s(ReturnConfig(), 9.0, 4.0, 0.7, slowdown=LandSlowdown())
     assert cone == pytest.approx(5.0 / 1.5 + 9.0 / 2.0 + land_time_s(9.0, 0.7, 1.5, 10.0, 5.0))
+    far = return_time_s(ReturnConfig(), 20.0, 4.0, 0.7, slowdown=LandSlowdown())  # up to 30 m, down to 10 at 1.5
+    assert far == pytest.approx(26.0 / 1.5 + 20.0 / 2.0 + 20.0 / 1.5 + land_time_s(10.0, 0.7, 1.5, 10.0, 5.0))
 
 
 def _hover(north: float, z: float, **params: float):
@@ -147,7 +156,8 @@ def _fly_until_disarmed(sim, limit_s: float) -> list[tuple[float, ...]]:
 def test_rtl_from_9_m_away_at_4_m_climbs_to_the_cone_and_lands_home() -> None:
     """The vehicle (the paper profile, its estimate the truth) in RTL 9 m north at 4 m: its event says 9 m, it
     climbs no higher than 9.1 m, lands within 0.2 m of home and disarms there; from 30 m over home LAND comes down
-    at 1.5 m/s above 10 m and 0.7 m/s below 5 m, in the time the speed's integral gives."""
+    at 1.5 m/s above 10 m and 0.7 m/s below 5 m, in the time the speed's integral gives, and disarms COM_DISARM_LAND
+    (2 s) after its ``landed`` event."""
     sim = _hover(9.0, 4.0)
     sim.set_mode(RTL)
     assert "at z=9.000 m, down to 9.000 m, land" in sim.events[-1].text, sim.events[-1].text
@@ -165,4 +175,7 @@ def test_rtl_from_9_m_away_at_4_m_climbs_to_the_cone_and_lands_home() -> None:
     assert min(high) == pytest.approx(1.5, abs=0.02) and max(high) == pytest.approx(1.5, abs=0.02)
     assert min(low) == pytest.approx(0.7, abs=0.01) and max(low) == pytest.approx(0.7, abs=0.01)
     took = len(states) / 250
-    assert took == pytest.approx(land_time_s(30.0, 0.7, 1.5, 10.0, 5.0), abs=1.0), took  # 25.2 s; at 0.7: 42.9 s
+    landed = next(e.t for e in sim.events if e.kind == "landed")
+    assert sim.events[-1].kind == "disarmed" and sim.events[-1].t == pytest.approx(landed + 2.0, abs=1e-9)
+    # 25.2 s to the ground, 27.2 s to the disarm; at 0.7 m/s all the way: 42.9 s to the ground
+    assert took - 2.0 == pytest.approx(land_time_s(30.0, 0.7, 1.5, 10.0, 5.0), abs=1.0), took

@@ -246,7 +246,7 @@ def _event_lines(path: Path) -> list[tuple[float, str, str]]:
 def test_events_log_lists_causes_before_their_effects(tmp_path: Path, realtime: bool) -> None:
     """The two children's events on one clock, in the order they happened: the vehicle's arming (by the
     controller's command) and its end of mission before the controller's word about them, times never going
-    back, the landing's disarm last."""
+    back, the landing's disarm last, then the mode it takes disarmed (OFFBOARD, the last one it arms in: PX4's)."""
     out = tmp_path / "run"
     run = sitl(Mission(Sine(), duration_s=2.0, name="sine2"), realtime=realtime, out=out, plots=False, instance=None)
     events = _event_lines(out)
@@ -257,7 +257,7 @@ def test_events_log_lists_causes_before_their_effects(tmp_path: Path, realtime: 
         said = [src for _, k, src in events if k == kind]
         assert said[:2] == ["vehicle", "controller"], (kind, events)
     if run.outcome == "completed":
-        assert events[-1][1:] == ("disarmed", "vehicle"), events
+        assert [e[1:] for e in events[-2:]] == [("disarmed", "vehicle"), ("mode", "vehicle")], events
     else:
         assert realtime, run.summary["ended_by"]
 

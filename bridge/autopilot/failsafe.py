@@ -68,7 +68,7 @@ NAV_LAND, NAV_TAKEOFF or RTL mode flies the same controller with :class:`Positio
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from math import cos, hypot, tan
 from typing import Any
 
@@ -181,9 +181,10 @@ def _xy_velocity(x: float, y: float, X: tuple[float, ...], g: OnboardGains,
     return (vx, vy) if n <= top else (vx * top / n, vy * top / n)
 
 
-def _z_velocity(z: float, X: tuple[float, ...], g: OnboardGains, up: float) -> float:
-    v = g.k_pos_z * (z - X[4])
-    return up if v > up else -g.v_down if v < -g.v_down else v
+def _z_velocity(z: float, X: tuple[float, ...], g: OnboardGains, up: float, down: float | None = None) -> float:
+    """Toward height z (m), P on the distance, at most ``up`` m/s up and ``down`` (None: ``g.v_down``) m/s down."""
+    v, d = g.k_pos_z * (z - X[4]), g.v_down if down is None else down
+    return up if v > up else -d if v < -d else v
 
 
 class Target:
@@ -284,7 +285,8 @@ RETURN_Z_TOL_M = 0.3  # m: the climb is done, or the descent, this close to its 
 class ReturnHome(Target):
     """Return mode (PX4's RTL, home return type) over home (x, y) in m: below ``z_return`` and away from home,
     stop and climb to it; then fly home at that height; over home (within :data:`RETURN_NEAR_M`), come down to
-    ``z_descend`` at most ``v_down``, then land at ``rate`` m/s (with a ``slowdown``, as :class:`Land`, by the
+    ``z_descend`` at most ``v_down`` (with a ``slowdown``, its MPC_Z_V_AUTO_DN, as PX4), then land at ``rate`` m/s
+    (with a ``slowdown``, as :class:`Land`, by the
     height above ``ground_z``) and disarm on the ground. Each phase follows from the state alone (a dip below the
     return height on the way climbs again before going on)."""
 
@@ -321,8 +323,9 @@ class ReturnHome(Target):
         v_xy = _xy_velocity(self.x, self.y, X, g)
         if phase == "return":
             return Setpoint(v_xy, _z_velocity(self.z_return, X, g, g.v_up), None)
-        if phase == "descend":
-            return Setpoint(v_xy, _z_velocity(self.z_descend, X, g, g.v_up), None)
+        if phase == "descend":  # PX4 comes down to RTL_DESCEND_ALT at its auto descent speed (MPC_Z_V_AUTO_DN)
+            down = None if self.slowdown is None else self.slowdown.auto_down_mps
+            return Setpoint(v_xy, _z_velocity(self.z_descend, X, g, g.v_up, down), None)
         return Setpoint(v_xy, -_descent(self.slowdown, self.rate, X[4] - self.ground_z), None)
 
 
@@ -335,7 +338,8 @@ def return_time_s(cfg: ReturnConfig, away_m: float, z_m: float, rate: float, g: 
     z_return = return_height(away_m, z_m, cfg.return_alt_m, cfg.cone_deg, cfg.min_dist_m, cfg.acc_rad_m)
     z_descend = min(cfg.descend_alt_m, z_return)
     landing = z_descend / rate if slowdown is None else slowdown.time_s(z_descend, rate)
-    return (z_return - max(z_m, 0.0)) / g.v_up + away_m / g.v_xy_max + (z_return - z_descend) / g.v_down + landing
+    down = g.v_down if slowdown is None else slowdown.auto_down_mps
+    return (z_return - max(z_m, 0.0)) / g.v_up + away_m / g.v_xy_max + (z_return - z_descend) / down + landing
 
 
 def return_point(X: tuple[float, ...], home: tuple[float, float, float],
@@ -401,6 +405,7 @@ class OnboardController:
 
     def __init__(self, nominal: Nominal, gains: OnboardGains = DEFAULT_GAINS) -> None:
         self.n = nominal
+        self.gains = gains  # as built; :attr:`g` the ones flown now (a DO_CHANGE_SPEED's horizontal speed: cruise)
         self.g = gains
         self.actuation = make_actuation(nominal)
         self.target: Target | None = None
@@ -408,10 +413,20 @@ class OnboardController:
 
     def engage(self, target: Target) -> None:
         """Fly ``target`` from now on; the integrals start from zero for a new flight (from
-        nothing), and carry over from one target to the next (hold, then land: no thrust step)."""
+        nothing), and carry over from one target to the next (hold, then land: no thrust step). A new target flies
+        at the gains' horizontal speed: a :meth:`cruise` speed holds until then (PX4's navigator resets its cruising
+        speed as each mode begins)."""
         if self.target is None:
             self.integral = (0.0, 0.0, 0.0)
         self.target = target
+        self.g = self.gains
+
+    def cruise(self, speed: float | None) -> float:
+        """DO_CHANGE_SPEED: the horizontal speed (m/s) the current target flies at, held to the gains' ``v_xy_max``
+        (None: that default again); the speed it flies at now."""
+        top = self.gains.v_xy_max if speed is None else min(speed, self.gains.v_xy_max)
+        self.g = replace(self.gains, v_xy_max=top)
+        return top
 
     def disengage(self) -> None:
         self.target = None

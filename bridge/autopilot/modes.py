@@ -3,12 +3,23 @@
 In:  a mode a ground station selected, the vehicle's state X (paper frame: m, m/s, rad, rad/s), its home and rally
      points (m), Return's heights, the landing speed (m/s) and its slow-down near the ground, the start's height and
      a takeoff altitude (m), or a point to hold (DO_REPOSITION)
-Out: the on-board controller's target for the mode and the ``mode`` event's text (:func:`mode_target`)
+Out: the on-board controller's target for the mode and the ``mode`` event's text (:func:`mode_target`); the
+     mission's end action's target, mode and ``end`` event's text (:func:`end_target`)
 """
 
 from __future__ import annotations
 
-from bridge.autopilot.failsafe import Land, PositionHold, ReturnConfig, ReturnHome, Takeoff, Target, return_point
+from bridge.autopilot.failsafe import (
+    FailsafeConfig,
+    Land,
+    PositionHold,
+    ReturnConfig,
+    ReturnHome,
+    Takeoff,
+    Target,
+    landing_target,
+    return_point,
+)
 from bridge.autopilot.returnland import LandSlowdown
 
 OFFBOARD = "offboard"
@@ -19,6 +30,7 @@ LAND = "land"
 TAKEOFF = "takeoff"
 RTL = "rtl"  # Return: home at RTL_RETURN_ALT (lower in the cone), down to RTL_DESCEND_ALT, land (armed only, as PX4)
 GROUND_MODES = (HOLD, LAND, TAKEOFF, RTL)  # flown by the on-board controller, set by a ground station
+TERMINATION = "termination"  # a ground station's flight termination: motors off, disarmed, latched (nodes/vehicle)
 
 
 def mode_target(mode: str, X: tuple[float, ...], *, takeoff_z: float, alt: float, descent_rate: float,
@@ -47,3 +59,14 @@ def mode_target(mode: str, X: tuple[float, ...], *, takeoff_z: float, alt: float
         return target, (f"RTL from x={X[0]:.3f} y={X[2]:.3f} z={X[4]:.3f} m: {where} x={to[0]:.3f} "
                         f"y={to[1]:.3f} m at z={target.z_return:.3f} m, down to {target.z_descend:.3f} m, land")
     return Takeoff.here(X, takeoff_z), f"TAKEOFF to {alt:g} m over x={X[0]:.3f} y={X[2]:.3f} m"
+
+
+def end_target(action: str, X: tuple[float, ...], cfg: FailsafeConfig,
+               home: tuple[float, float, float]) -> tuple[Target, str, str]:
+    """The mission's end action (``[end] action``, :data:`missions.mission.END_ACTIONS`) from state X: ``hold`` holds
+    the position (HOLD), ``land`` lands where it is as PX4's auto landing (LAND: ``cfg``'s speeds by the height
+    above ``home``, m) and disarms on the ground; (the target, its mode, the ``end`` event's text)."""
+    if action == "hold":
+        return PositionHold.here(X), HOLD, f"mission over: HOLD at x={X[0]:.3f} y={X[2]:.3f} z={X[4]:.3f} m"
+    return landing_target(cfg, X, home), LAND, (f"mission over: LAND at x={X[0]:.3f} y={X[2]:.3f} m from "
+                                                f"z={X[4]:.3f} m, {cfg.descent_rate:g} m/s")

@@ -42,6 +42,7 @@ from params import ConfigError, Table, finite_float, show
 REAL32 = "REAL32"
 INT32 = "INT32"
 PREFLIGHT_DISARM_RANGE_S = (-1.0, 600.0)  # COM_DISARM_PRFLT: PX4 gives no bounds; -1 (any value <= 0) is off
+LAND_DISARM_RANGE_S = (-1.0, 20.0)  # COM_DISARM_LAND: PX4 1.14 gives no bounds (<= 0 is off), earlier ones -1..20 s
 TAKEOFF_ALT_RANGE_M = (0.5, 50.0)  # MIS_TAKEOFF_ALT: inside the plant's 100 m envelope; PX4: 0..80 m
 GF_MAX_HOR_RANGE_M = (0.0, 10000.0)  # GF_MAX_HOR_DIST: PX4's range; 0 is off
 GF_MAX_VER_RANGE_M = (0.0, 1000.0)  # GF_MAX_VER_DIST: PX4's range; 0 is off
@@ -68,6 +69,7 @@ class VehicleParams:
     battery_emergency: float = 0.05  # BAT_EMERGEN_THR: emergency (COM_LOW_BAT_ACT 3 lands)
     low_battery_action: int = 0  # COM_LOW_BAT_ACT: 0 warning (PX4's default), 2 land, 3 return then land
     noaid_timeout_us: int = NOAID_TIMEOUT_US  # EKF2_NOAID_TOUT: unaided this long (us), the position is invalid
+    land_disarm_s: float = 2.0  # COM_DISARM_LAND: landed this long (s) after an auto landing, it disarms; <= 0 never
 
 
 @dataclass(frozen=True)
@@ -162,6 +164,9 @@ PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("EKF2_NOAID_TOUT", INT32, "us", *NOAID_TIMEOUT_RANGE_US,
               "maximum inertial dead-reckoning time: no position fix fused for this long, the estimate's horizontal "
               "position is invalid and the vehicle's failsafe descends (PX4's; docs/sensors.md)"),
+    ParamSpec("COM_DISARM_LAND", REAL32, "s", *LAND_DISARM_RANGE_S,
+              "auto-disarm after landing: on the ground this long after the vehicle's own landing (LAND, Return, the "
+              "mission's end, a failsafe's), motors idle, it disarms (PX4's default 2 s; 0 or less: never)"),
 )
 BY_NAME = {p.name: p for p in PARAMS}
 _RTL_FIELDS = {"RTL_RETURN_ALT": "return_alt_m", "RTL_DESCEND_ALT": "descend_alt_m",  # -> ReturnConfig's field
@@ -171,7 +176,7 @@ _LAND_FIELDS = {"MPC_Z_V_AUTO_DN": "auto_down_mps", "MPC_LAND_ALT1": "alt1_m",  
 # the REAL32 parameters that are one field of VehicleParams each
 _FIELDS = {"COM_DISARM_PRFLT": "preflight_disarm_s", "GF_MAX_HOR_DIST": "max_hor_m", "GF_MAX_VER_DIST": "max_ver_m",
            "MIS_TAKEOFF_ALT": "takeoff_alt_m", "BAT_LOW_THR": "battery_low", "BAT_CRIT_THR": "battery_critical",
-           "BAT_EMERGEN_THR": "battery_emergency"}
+           "BAT_EMERGEN_THR": "battery_emergency", "COM_DISARM_LAND": "land_disarm_s"}
 _INT_FIELDS = {"SYS_FAILURE_EN": "failure_injection", "GF_ACTION": "fence_action",  # the INT32s that are one field
                "COM_LOW_BAT_ACT": "low_battery_action", "EKF2_NOAID_TOUT": "noaid_timeout_us"}
 

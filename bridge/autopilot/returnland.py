@@ -19,8 +19,9 @@ it lands and h the height above it, in metres:
 
 The floor 2 NAV_ACC_RAD may lie above RTL_RETURN_ALT (RTL_RETURN_ALT 3 m with NAV_ACC_RAD 2 m returns at 4 m): PX4
 1.14 does that; PX4 1.15 holds the result to RTL_RETURN_ALT (PX4-Autopilot#23558, ``RTL::computeReturnAltitude``).
-NAV_ACC_RAD's default here is 2 m, the multicopter's (ROMFS rc.mc_defaults; the parameter's own default, 10 m, is a
-fixed wing's); RTL_CONE_ANG 45 deg and RTL_MIN_DIST 10 m are PX4's defaults.
+NAV_ACC_RAD's default here is 2 m, RTL_RETURN_ALT's 30 m and RTL_DESCEND_ALT's 10 m, the multicopter's (ROMFS
+rc.mc_defaults sets them for every multicopter airframe, PX4's SITL x500 included; the parameters' own defaults, 10 m,
+60 m and 30 m, are a fixed wing's); RTL_CONE_ANG 45 deg and RTL_MIN_DIST 10 m are PX4's defaults.
 
 **The landing's speed.** PX4's auto landing (Land mode, Return's last phase, a failsafe's landing) comes down at
 ``math::gradual(height, MPC_LAND_ALT2, MPC_LAND_ALT1, MPC_LAND_SPEED, MPC_Z_V_AUTO_DN)``
@@ -48,8 +49,8 @@ class ReturnConfig:
     RTL_RETURN_ALT (climb to it, if lower, before flying home) and RTL_DESCEND_ALT (over it, come down to it, then
     land); the cone near home: RTL_CONE_ANG (deg, 0: none), RTL_MIN_DIST (m) and NAV_ACC_RAD (m)."""
 
-    return_alt_m: float = 60.0
-    descend_alt_m: float = 30.0
+    return_alt_m: float = 30.0  # PX4's multicopter default (ROMFS rc.mc_defaults; rtl_params.c's own 60 m)
+    descend_alt_m: float = 10.0  # likewise (rtl_params.c's own 30 m)
     cone_deg: int = 45
     min_dist_m: float = 10.0
     acc_rad_m: float = 2.0

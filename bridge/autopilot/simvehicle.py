@@ -14,8 +14,8 @@ advances in control periods of ``physics_hz / rate_hz`` physics steps; the comma
 
 Out of offboard control and armed, the vehicle's own :class:`~bridge.autopilot.failsafe.OnboardController` flies its
 target at every physics step (:meth:`SimVehicle.fly_onboard`): the failsafe's action (``[failsafe] action``), and
-whatever a later mode hands it. Under a target that lands, the vehicle disarms once it rests on the ground (mode
-``landed``). Mode changes happen at the start of a control period, the same step in every clock.
+whatever a later mode hands it. Under a target that lands, resting on the ground, it disarms after COM_DISARM_LAND
+(mode ``landed``). Mode changes happen at the start of a control period, the same step in every clock.
 
 The vehicle owns its sensors (:class:`plant.sensors.SensorSuite`) and its estimator
 (:mod:`bridge.autopilot.estimator`): the suite samples the true state once at t = 0 and after every physics step,
@@ -46,6 +46,7 @@ from bridge.autopilot.failsafe import (
 )
 from bridge.autopilot.fencewatch import FENCE_ACTION_TEXT, FENCE_FAILSAFE, arming_refusal, breaches
 from bridge.autopilot.impactwatch import ImpactWatch
+from bridge.autopilot.landdisarm import LandDisarm
 from bridge.autopilot.modes import (  # noqa: F401  (the modes: imported from here by the rest of the bridge)
     FAILSAFE,
     GROUND_MODES,
@@ -55,6 +56,7 @@ from bridge.autopilot.modes import (  # noqa: F401  (the modes: imported from he
     OFFBOARD,
     RTL,
     TAKEOFF,
+    end_target,
     mode_target,
 )
 from bridge.autopilot.params import FENCE_ACTIONS, VehicleParams, change_param, read_param
@@ -93,6 +95,7 @@ class SimVehicle:
     fence: Geofence | None = None  # the fence it holds (the mission's, or a ground station's upload), watched as these
     fence_action: int = 2  # GF_ACTION: at a breach 0 nothing (unwatched), 1 warn, 2 hold, 3 return, 4 terminate, 5 land
     battery_watch: BatteryWatch = field(default_factory=BatteryWatch)  # BAT_*_THR, COM_LOW_BAT_ACT
+    land_disarm: LandDisarm = field(default_factory=LandDisarm)  # COM_DISARM_LAND: landed, it disarms after it
     reference_z: Callable[[float], float] | None = None  # m at mission time s: judges touchdowns (touchdownwatch)
     noaid_timeout_us: int = NOAID_TIMEOUT_US  # EKF2_NOAID_TOUT: unaided this long, the position is lost (positionloss)
 
@@ -102,7 +105,6 @@ class SimVehicle:
         if self.sensors is not None:
             self.estimator.step(self.plant.t, self.sensors.sample(self.plant.t, self.plant.state))
         self.onboard = OnboardController(Nominal.from_profile(self.plant.profile))
-        self.landing = self.onboard  # the name bridge/nodes/vehicle.py reads its failsafe rows' demand from
         self.last_command_t = 0.0
         self.land_at: float | None = None  # hold: the plant time its hold ends and it lands
         X0 = self.plant.state
@@ -193,13 +195,12 @@ class SimVehicle:
         self._engage(self.mode, self._takeoff_alt)
 
     def set_mode(self, mode: str, takeoff_alt_m: float | None = None, hold_at: PositionHold | None = None) -> None:
-        """A ground station's mode (OFFBOARD, HOLD, LAND, TAKEOFF to ``takeoff_alt_m`` above the start,
-        :attr:`takeoff_alt_m` if None), at the start of a control period. Armed, the vehicle flies it
-        from this step: HOLD holds where it is (or flies to ``hold_at`` and holds there: DO_REPOSITION), LAND
-        lands where it is, TAKEOFF climbs over where it
-        is, OFFBOARD takes the controller's targets again (its timeout counts from now). Disarmed, it
-        is the mode the next arm from a ground station arms in. A request that changes nothing (OFFBOARD in
-        OFFBOARD; disarmed, the mode already selected) is no event: the flight is the same."""
+        """A ground station's mode (OFFBOARD, HOLD, LAND, RTL, TAKEOFF to ``takeoff_alt_m`` above the start,
+        :attr:`takeoff_alt_m` if None), at the start of a control period. Armed, the vehicle flies it from this
+        step: HOLD holds where it is (or flies to ``hold_at`` and holds there: DO_REPOSITION), LAND lands where it
+        is, TAKEOFF climbs over where it is, OFFBOARD takes the controller's targets again (its timeout counts from
+        now). Disarmed, it is the mode the next arm from a ground station arms in. A request that changes nothing
+        (OFFBOARD in OFFBOARD; disarmed, the mode already selected) is no event: the flight is the same."""
         alt = self.takeoff_alt_m if takeoff_alt_m is None else takeoff_alt_m
         if self.mode == mode and (mode == OFFBOARD or (not self.armed and alt == self._takeoff_alt)):
             return
@@ -230,21 +231,13 @@ class SimVehicle:
         self.event("mode", text, mode=mode, armed=True)
 
     def end_mission(self, action: str) -> None:
-        """The mission's time is flown (``[end] action``, :data:`missions.mission.END_ACTIONS`): ``land`` lands
-        where it is with the on-board landing and disarms on the ground, ``hold`` holds its position; flown by
-        the on-board controller from this control period, in every clock. An ``end`` event says which (its
-        time: the mission's end, on the vehicle's clock). Only armed under offboard control (a failsafe that
-        already flies keeps its own action)."""
-        if not self.armed or self.mode != OFFBOARD:
-            return
-        X = self.published()
-        if action == "hold":
-            self.fly_onboard(PositionHold.here(X), HOLD)
-            self.event("end", f"mission over: HOLD at x={X[0]:.3f} y={X[2]:.3f} z={X[4]:.3f} m")
-            return
-        self.fly_onboard(landing_target(self.failsafe, X, self.home), LAND)
-        self.event("end", f"mission over: LAND at x={X[0]:.3f} y={X[2]:.3f} m from z={X[4]:.3f} m, "
-                          f"{self.failsafe.descent_rate:g} m/s")
+        """The mission's time is flown (``[end] action``): :func:`~bridge.autopilot.modes.end_target` flown by the
+        on-board controller from this control period, in every clock, an ``end`` event saying which (at the
+        mission's end, on the vehicle's clock). Only armed under offboard control (a failsafe keeps its action)."""
+        if self.armed and self.mode == OFFBOARD:
+            target, mode, text = end_target(action, self.published(), self.failsafe, self.home)
+            self.fly_onboard(target, mode)
+            self.event("end", text)
 
     def disarm(self, why: str = "disarmed") -> None:
         if self.armed:
@@ -263,7 +256,8 @@ class SimVehicle:
         b = self.battery_watch
         return VehicleParams(self.failsafe, self.takeoff_alt_m, sysid, self.failure_injection, self.rtl,
                              self.preflight_disarm_s, self.max_hor_m, self.max_ver_m, self.fence_action, b.low,
-                             b.critical, b.emergency, b.action, self.noaid_timeout_us)
+                             b.critical, b.emergency, b.action, self.noaid_timeout_us,
+                             self.land_disarm.delay_s)
 
     def change_param(self, name: str, value: float, sysid: int = 1) -> Event | None:
         """Set parameter ``name`` (PX4's name, :mod:`bridge.autopilot.params`) to ``value``, checked
@@ -278,6 +272,7 @@ class SimVehicle:
         self.failure_injection, self.rtl = after.failure_injection, after.rtl
         self.preflight_disarm_s, self.fence_action = after.preflight_disarm_s, after.fence_action
         self.noaid_timeout_us = after.noaid_timeout_us
+        self.land_disarm.delay_s = after.land_disarm_s
         b = self.battery_watch
         b.low, b.critical, b.emergency, b.action = (after.battery_low, after.battery_critical,
                                                     after.battery_emergency, after.low_battery_action)
@@ -387,6 +382,18 @@ class SimVehicle:
             else:
                 self._fly_failsafe(r.action, f"position valid again: {ACTION_TEXT[r.action]}", "motors stopped")
 
+    def _rest(self, target: Target) -> None:
+        """On the ground under ``target``, a landing: motors off, a ``landed`` event, disarmed after COM_DISARM_LAND
+        (:mod:`bridge.autopilot.landdisarm`; the failsafe's landing: mode ``landed``)."""
+        first = target is not self.land_disarm.target
+        if self.land_disarm.due(self.plant.t, target):
+            self.mode = LANDED if self.mode == FAILSAFE else self.mode
+            self.disarm("landed: disarmed")
+        else:
+            self.plant.command(self._zero)
+            if first:
+                self.event("landed", self.land_disarm.landed_text(self.published()))
+
     def _end_hold(self) -> None:
         """``hold``: its time is up; land where it held."""
         self.land_at = None
@@ -429,15 +436,11 @@ class SimVehicle:
 
     def advance(self, deliver: Callable[[float], None] | None = None,
                 next_due: Callable[[], float | None] | None = None) -> None:
-        """One control period: failsafe check, then the physics substeps.
-
-        ``deliver(t)``, if given, is called with the plant time (s) before the check and
-        before each substep, so that messages an impaired link delivers in the middle of
-        the period (see :mod:`bridge.link.model`) act at the physics step they arrive in.
-        ``next_due()``, if given, says when ``deliver`` has its next message (s; None: none in flight): with
-        none due within the period, no sensors and the offboard command in force, the substeps are one call
-        (:meth:`plant.Quadrotor.steps`, the same bits).
-        """
+        """One control period: failsafe check, then the physics substeps. ``deliver(t)``, if given, is called with the
+        plant time (s) before the check and before each substep, so that messages an impaired link delivers in the
+        middle of the period (:mod:`bridge.link.model`) act at the physics step they arrive in. ``next_due()``, if
+        given, says when ``deliver`` has its next message (s; None: none in flight): with none due within the
+        period, no sensors and the offboard command in force, the substeps are one call (the same bits)."""
         p = self.plant
         if self.armed and self.fence_action and (self.max_hor_m or self.max_ver_m or self.fence is not None):
             self._check_limits()
@@ -476,9 +479,7 @@ class SimVehicle:
                 deliver(p.t)
             if self.armed and self.mode != OFFBOARD and onboard.target is not None:
                 if onboard.target.lands and p.on_ground:
-                    if self.mode == FAILSAFE:
-                        self.mode = LANDED
-                    self.disarm("landed: disarmed")
+                    self._rest(onboard.target)
                 else:
                     p.command(onboard.step(p.state if sensors is None else estimator.estimate(p.t), p.dt))
             p.step()

@@ -26,6 +26,7 @@ from bridge.autopilot.batterywatch import BatteryWatch
 from bridge.autopilot.compiling import cold
 from bridge.autopilot.estimator import ESTIMATOR_KINDS, compile_estimator, make_estimator
 from bridge.autopilot.failsafe import FailsafeConfig, failsafe_from_table
+from bridge.autopilot.landdisarm import LandDisarm
 from bridge.autopilot.params import (
     BY_NAME,
     ParamChange,
@@ -112,7 +113,8 @@ class Flight:
                     "noaid_timeout_us": p.noaid_timeout_us,
                     "reference_z": lambda t: m.trajectory.sample(t)[2][0],
                     "battery_watch": BatteryWatch(p.battery_low, p.battery_critical, p.battery_emergency,
-                                                  p.low_battery_action)}
+                                                  p.low_battery_action),
+                    "land_disarm": LandDisarm(p.land_disarm_s)}
         if self.estimator == "truth":  # no sensors to sample: the plant's state is published as it is
             return SimVehicle(plant, self.substeps, self.failsafe, **settings)
         suite = SensorSuite(self.sensors, m.seed, m.physics_hz, self.profile.gravity)

@@ -23,8 +23,10 @@ from typing import Any
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.autopilot.failsafe import Land, Level, PositionHold, ReturnHome, Takeoff, Target
+from bridge.autopilot.modes import TERMINATION
 from bridge.autopilot.simvehicle import FAILSAFE, HOLD, LAND, LANDED, OFFBOARD, RTL, TAKEOFF
 
+MAIN_MANUAL = 1  # PX4_CUSTOM_MAIN_MODE_MANUAL: what PX4's get_px4_custom_mode gives NAVIGATION_STATE_TERMINATION
 MAIN_AUTO = 4  # PX4_CUSTOM_MAIN_MODE_AUTO
 MAIN_OFFBOARD = 6  # PX4_CUSTOM_MAIN_MODE_OFFBOARD
 SUB_TAKEOFF, SUB_LOITER, SUB_MISSION, SUB_RTL, SUB_LAND = 2, 3, 4, 5, 6  # PX4_CUSTOM_SUB_MODE_AUTO_*
@@ -73,9 +75,12 @@ def shown_mode(mode: str, target: Target | None) -> str:
 
 
 def heartbeat_mode(mode: str, target: Target | None, armed: bool) -> tuple[int, int]:
-    """HEARTBEAT's (``base_mode``, ``custom_mode``)."""
-    base = BASE_MODE | (mavlink.MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
-    return base, custom_mode(*PX4_MODES[shown_mode(mode, target)])
+    """HEARTBEAT's (``base_mode``, ``custom_mode``). In flight termination PX4 enables no controller (only
+    CUSTOM_MODE_ENABLED in ``base_mode``) and names main mode MANUAL (mavlink streams/HEARTBEAT.hpp)."""
+    armed_flag = mavlink.MAV_MODE_FLAG_SAFETY_ARMED if armed else 0
+    if mode == TERMINATION:
+        return mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | armed_flag, custom_mode(MAIN_MANUAL)
+    return BASE_MODE | armed_flag, custom_mode(*PX4_MODES[shown_mode(mode, target)])
 
 
 def mode_name(mode: str) -> str:

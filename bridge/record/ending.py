@@ -2,11 +2,12 @@
 
 In:  the action (``land`` or ``hold``); the rows the vehicle flew under it, after the mission's last step (t s on
      the vehicle's clock, z m and vz m/s of the true state at the start of each control period); its events
-     after the mission (t s, kind: ``end``, ``disarmed``)
+     after the mission (t s, kind: ``end``, ``landed``, ``disarmed``)
 Out: :func:`end_block`, ``summary.json["end"]``: ``action``; ``rows``; ``disarmed`` (the landing ended in a
-     disarm on the ground); ``landing_s`` (the ``end`` event to the disarm, s); ``disarm_z_m`` and
-     ``touchdown_vz_mps`` (the last row before the disarm); ``max_descent_mps``; ``max_drift_m`` (a hold: the
-     largest height change from its first row)
+     disarm on the ground); ``landing_s`` (the ``end`` event to the disarm, s: the touchdown and COM_DISARM_LAND
+     after it); ``disarm_z_m`` (the last row before the disarm) and ``touchdown_vz_mps`` (the last row before the
+     ``landed`` event: the touchdown; without one, before the disarm); ``max_descent_mps``; ``max_drift_m`` (a
+     hold: the largest height change from its first row)
 
 The mission's trace and figures stop at its end (``trace.csv`` holds the mission's rows only, so that every
 figure is the mission's); the end action is summarised here, from the same rows in every clock (offline: the
@@ -33,13 +34,16 @@ def end_block(action: str, rows: Sequence[tuple[float, float, float]], events: S
         (e.t for e in events if e.kind == "disarmed" and e.t is not None and e.t >= start), None)
     flown = [r for r in rows if disarm is None or r[0] <= disarm + 1e-9]
     last = flown[-1] if flown else None
+    down = None if start is None else next(
+        (e.t for e in events if e.kind == "landed" and e.t is not None and e.t >= start), None)
+    touch = next((r for r in reversed(flown) if down is None or r[0] <= down + 1e-9), None)
     out: dict[str, Any] = {
         "action": action,
         "rows": len(flown),
         "disarmed": disarm is not None,
         "landing_s": None if disarm is None or start is None else round(disarm - start, 6),
         "disarm_z_m": last[1] if last is not None and disarm is not None else None,
-        "touchdown_vz_mps": last[2] if last is not None and disarm is not None else None,
+        "touchdown_vz_mps": touch[2] if touch is not None and disarm is not None else None,
         "max_descent_mps": max((-r[2] for r in flown), default=None),
     }
     if action == "hold":

@@ -1,15 +1,14 @@
 """Safety policies as executable properties (in the manner of PGFuzz), checked over every run.
 
 In:  a run's trace arrays by column (:data:`~bridge.record.columns.TRACE_COLUMNS`: ``t`` s, ``u*_act`` N,
-     ``state_age_s`` s), its events (:class:`~bridge.record.events.RunEvent`: ``t`` s, ``kind``, ``text``,
-     in a session ``source``, and who caused it, ``by``), the
-     :class:`Rules` it flew under (control rate Hz, ``[failsafe] timeout_s`` s, clock, link delays s, the
-     controller's ids), and in a lockstep session its ``lockstep`` record and the first step its vehicle
-     flew off the step clock
-Out: one :class:`Verdict` per policy of :data:`POLICIES` (``ok``; when violated, the mission time of the
-     first violation and a one-line why), for ``summary.json["policies"]``; and the honest records that
-     go with them: the lockstep record
-     (:func:`lockstep_record`), who ended a flight by command (:func:`ended_by_command`)
+     ``state_age_s`` s), its events (:class:`~bridge.record.events.RunEvent`: ``t`` s, ``kind``, ``text``, in a
+     session ``source``, and who caused it, ``by``), the :class:`Rules` it flew under (control rate Hz, ``[failsafe]
+     timeout_s`` s, clock, link delays s, the controller's ids), and in a lockstep session its ``lockstep`` record and
+     the first step its vehicle flew off the step clock
+Out: one :class:`Verdict` per policy of :data:`POLICIES` (``ok``; when violated, the mission time of the first
+     violation and a one-line why), for ``summary.json["policies"]``; and the honest records that go with them: the
+     lockstep record (:func:`lockstep_record`), who ended a flight by command (:func:`ended_by_command`) or how
+     (:func:`ended_by_outcome`)
 
 The offline loop (:mod:`bridge.loop`) and the SITL session (:mod:`bridge.session`) both call :func:`check` on what
 they recorded, so every run is judged by the same properties; a violated policy is named on stderr and in
@@ -416,10 +415,9 @@ def rules_for(flight: Any, clock: str, link: Mapping[str, Any] | None,
 
 
 def ended_by_outcome(outcome: str, events: Sequence[RunEvent]) -> dict[str, str]:
-    """``summary.json["ended_by"]`` as the outcome and the vehicle's events tell it: the mission
-    (completed), the vehicle (its failsafe, or its pre-arm check that denied the arm, with its event), the plant
-    (diverged), or whoever interrupted it. A session knows more (a child that died, a command from someone) and
-    says so."""
+    """``summary.json["ended_by"]`` as the outcome and the vehicle's events tell it: the mission (completed), the
+    vehicle (its failsafe, or its pre-arm check that denied the arm), the plant (diverged, crashed), the ground station
+    that terminated it, or whoever interrupted it. A session knows more (a child that died, a command): it says so."""
     ev = vehicle_events(events)
 
     def first(kind: str) -> RunEvent | None:
@@ -433,6 +431,9 @@ def ended_by_outcome(outcome: str, events: Sequence[RunEvent]) -> dict[str, str]
     if outcome == "crashed":
         e = first("crashed")
         return {"who": "plant", "how": f"crashed at t={e.t:.3f} s: {e.text}" if e else "crashed"}
+    if outcome == "terminated" and (e := first("terminated")):  # a ground station's DO_FLIGHTTERMINATION: it fell
+        hit = next((f"; {x.kind} at t={x.t:.3f} s: {x.text}" for x in ev if x.kind in ("impact", "crashed")), "")
+        return {"who": str(e.by or "ground station"), "how": f"flight terminated at t={e.t:.3f} s: {e.text}{hit}"}
     if outcome == "collision":  # another vehicle touched this one (bridge.swarm)
         e = first("collision")
         return {"who": "plant", "how": f"collision at t={e.t:.3f} s: {e.text}" if e else "collision"}

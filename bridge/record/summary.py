@@ -226,14 +226,14 @@ def ended_by_change(end: dict[str, Any], outcome: str, events: Sequence[RunEvent
 
 
 def plant_outcome(outcome: str, facts: SessionFacts, events: Sequence[RunEvent]) -> str:
-    """``crashed`` when the vehicle's events say it hit the ground armed (its ``crashed`` event: the flight's
-    end, as offline), ``collision`` when another vehicle touched it (its ``collision`` event), and nothing came
-    before it (the plant diverged, the user interrupted, a child died); else
+    """``crashed`` when the vehicle's events say it hit the ground armed (its ``crashed`` event: the flight's end, as
+    offline), ``collision`` when another vehicle touched it, ``terminated`` when a ground station terminated the flight
+    (motors off, whatever the fall came to), and nothing came before (diverged, interrupted, a child died); else
     ``outcome``."""
     if outcome == "diverged" or facts.aborted or facts.died:
         return outcome
     kinds = {e.kind for e in vehicle_events(events)}  # collision: a fleet's shared clock ended it
-    return "collision" if "collision" in kinds else "crashed" if "crashed" in kinds else outcome
+    return next((k for k in ("collision", "terminated", "crashed") if k in kinds), outcome)
 
 
 def airborne(trace: Mapping[str, Any], t: float) -> bool:
@@ -262,7 +262,7 @@ def ended_by(outcome: str, trace: Mapping[str, Any], flight: Flight, facts: Sess
         return outcome, {"who": facts.died, "how": how}
     if outcome == "aborted" and arming_denied_end(events, controller_id) is not None:
         outcome = "denied"  # the controller's abort answers the vehicle's refusal to arm
-    if outcome in (*PLANT_OUTCOMES, "denied"):
+    if outcome in (*PLANT_OUTCOMES, "terminated", "denied"):
         return outcome, ended_by_outcome(outcome, events)
     if outcome == "law_failed" and ctl is not None:
         return outcome, {"who": "controller", "how": f"its law failed: {ctl.reason}"}

@@ -376,11 +376,12 @@ class Offboard(OffboardLink):
 
     def _await_landing(self) -> bool:
         """Serve the link until the vehicle has disarmed on the ground (True), or :attr:`reason` says why not:
-        silent, or not down within the descent's time at the failsafe's rate plus 10 s (of the vehicle's time:
+        silent, or not down within the descent's time at the failsafe's rate, COM_DISARM_LAND and 10 s (vehicle time:
         lockstep counts the steps it clocks, whatever the pace; real time the wall clock)."""
         lockstep = self.cfg.clock == "lockstep"
         usec = self._end_usec
-        allowed_s = 10.0 + self.flight.failsafe.time_to_land_s(self._end_height_m)
+        allowed_s = 10.0 + self.flight.failsafe.time_to_land_s(self._end_height_m) + max(
+            self.flight.params.land_disarm_s, 0.0)  # landed, the vehicle disarms after COM_DISARM_LAND
         deadline = time.monotonic() + allowed_s
         last_usec = (usec or 0) + int(allowed_s * 1e6)
         if lockstep and usec is not None:

@@ -20,7 +20,8 @@ from bridge.nodes.report import Event, Report
 from bridge.nodes.vehicle.authority import Authority, claim
 from bridge.nodes.vehicle.streams import StatusTexts
 
-CRITICAL_KINDS = ("failsafe", "diverged", "lockstep", "preflight", "battery")  # events sent as CRITICAL STATUSTEXT
+# events sent as CRITICAL STATUSTEXT
+CRITICAL_KINDS = ("failsafe", "diverged", "lockstep", "preflight", "battery", "terminated")
 MAX_TEXT_MESSAGES = 12  # STATUSTEXTs in one datagram of events (the newest texts, whole)
 
 

@@ -33,7 +33,7 @@ ADDRESSED = frozenset({"COMMAND_LONG", "COMMAND_INT", "PARAM_REQUEST_LIST", "PAR
                        "SET_MODE", *MISSION_WRITES, *MISSION_READS})  # target fields checked first
 COMMANDS = frozenset({"COMMAND_LONG", "COMMAND_INT"})
 # the events that say who caused them (``preflight``: whose arm was denied)
-ATTRIBUTED = ("armed", "disarmed", "mode", "interval", "param", "mission", "preflight")
+ATTRIBUTED = ("armed", "disarmed", "mode", "interval", "param", "mission", "preflight", "speed", "terminated")
 
 
 def claim(event: Event, by: Sender | None) -> None:

@@ -1,7 +1,8 @@
 """The vehicle's commander: arming, flight modes, commands, and the triggers that end a flight.
 
 In:  COMMAND_LONG / COMMAND_INT (COMPONENT_ARM_DISARM, DO_SET_MODE, NAV_TAKEOFF m AMSL, NAV_LAND, NAV_RETURN_TO_LAUNCH,
-     MISSION_START (with ``await_mission``: :mod:`.mission`),
+     MISSION_START (with ``await_mission``: :mod:`.mission`), DO_REPOSITION, INJECT_FAILURE, DO_CHANGE_SPEED,
+     DO_FLIGHTTERMINATION, REQUEST_PROTOCOL_VERSION (:mod:`.actions`),
      SET/GET_MESSAGE_INTERVAL us, REQUEST_MESSAGE, REQUEST_AUTOPILOT_CAPABILITIES, GET_HOME_POSITION) and
      SET_MODE from a sender with authority (:class:`~bridge.autopilot.vehicleevents.Sender`); the plant's
      divergence and the controller's silence (wall time, s)
@@ -11,8 +12,9 @@ Out: COMMAND_ACK (with what a command asked for, and a STATUSTEXT saying why it 
      refused (a :class:`~bridge.nodes.report.Refused` report)
 
 Flight modes (OFFBOARD, HOLD, LAND, TAKEOFF, RTL, in PX4's encoding: :mod:`bridge.mavlink.modes`) and what a
-ground station can do with them: docs/ground-station.md. Every command's numbers are checked before use
-(:mod:`bridge.mavlink.receive`): a bad one is DENIED and counted (``bad_number``), nothing done.
+ground station can do with them: docs/ground-station.md; the mode taken after a disarm in LAND or RTL:
+:mod:`.intention`. Every command's numbers are checked before use (:mod:`bridge.mavlink.receive`): a bad one is
+DENIED and counted (``bad_number``), nothing done.
 """
 
 from __future__ import annotations
@@ -30,14 +32,14 @@ from bridge.autopilot.fencewatch import reposition_refusal
 from bridge.autopilot.params import BY_NAME
 from bridge.autopilot.simvehicle import GROUND_MODES, HOLD, LAND, OFFBOARD, RTL, TAKEOFF, SimVehicle
 from bridge.autopilot.vehicleevents import Sender
-from bridge.core.flight import event_problem
 from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import Endpoint
 from bridge.mavlink.modes import MISSION, mode_name, requested_custom_mode, requested_mode
 from bridge.mavlink.receive import FORCE_DISARM, arm_disarm_args, interval_arg, message_id_arg
+from bridge.nodes.vehicle.actions import Actions
 from bridge.nodes.vehicle.authority import Authority, attribute
 from bridge.nodes.vehicle.clock import Clock, Trigger
-from bridge.nodes.vehicle.injection import injection
+from bridge.nodes.vehicle.intention import NOT_ARMABLE, ModeIntention
 from bridge.nodes.vehicle.mission import START_ARM, START_ARMED, START_COMMAND, MissionManager
 from bridge.nodes.vehicle.prestart import PreStart
 from bridge.nodes.vehicle.reposition import reposition
@@ -45,9 +47,6 @@ from bridge.nodes.vehicle.streams import HEARTBEAT_S, StatusTexts, StreamTable
 from bridge.record.metrics import plant_blocks
 
 OFFBOARD_STREAM_S = 1.0  # s of wall time: a ground station's OFFBOARD needs a target from the controller this recent
-# the modes PX4's mode_requirements.cpp marks prevent-arming that the vehicle flies, by PX4's name: selected only
-# armed (disarmed, DENIED as PX4 denies the arm in them), and a ground station's arm in one is DENIED
-NOT_ARMABLE = {LAND: "Land", RTL: "Return"}
 _STREAM_COMMANDS = (mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAV_CMD_GET_MESSAGE_INTERVAL,
                     mavlink.MAV_CMD_REQUEST_MESSAGE)
 Result = tuple[int, tuple[Any, ...]]  # (MAV_RESULT, the messages a command asked for)
@@ -109,6 +108,8 @@ class Commander:
         self.plant_at_end: dict[str, Any] | None = None  # the plant's summary blocks when the mission ended
         # a ground station's arm in HOLD on the ground awaiting a mission's start (--await-mission)
         self.pre_start = PreStart(sim, clock, ports.missions, self.cfg.await_mission)
+        self.intention = ModeIntention(sim, ports.missions)  # the mode taken after a disarm in LAND or RTL (as PX4)
+        self.actions = Actions(sim, clock, ports.reject, self._off_step_clock)
 
     # -- the messages ---------------------------------------------------------------------------------
     def command(self, ep: Endpoint, m: Any, addr: tuple[str, int], link: str) -> bool:
@@ -125,6 +126,7 @@ class Commander:
         n0 = len(self.sim.events)
         result, follow = self._run_command(m, by, ep, addr)
         attribute(self.sim.events, n0, by)
+        self._after_change()
         self.ports.announce()
         ack = mavlink.MAVLink_command_ack_message(m.command, result, 0, 0, m.get_srcSystem(), m.get_srcComponent())
         ep.reply((ack, *follow, *self.texts), addr)
@@ -142,6 +144,7 @@ class Commander:
             return False
         by = self.authority.sender(m, addr, link)
         result = self._set_mode_or_refuse(*requested_custom_mode(m.base_mode, m.custom_mode), by=by)
+        self._after_change()
         self.ports.announce()
         ack = mavlink.MAVLink_command_ack_message(mavlink.MAV_CMD_DO_SET_MODE, result, 0, 0, m.get_srcSystem(),
                                                   m.get_srcComponent())
@@ -193,28 +196,11 @@ class Commander:
             return mavlink.MAV_RESULT_ACCEPTED, (tm.autopilot_version(self.cfg.sysid),)
         if cmd == mavlink.MAV_CMD_GET_HOME_POSITION:
             return mavlink.MAV_RESULT_ACCEPTED, (tm.home_position(self.cfg.home),)
-        if cmd == mavlink.MAV_CMD_INJECT_FAILURE:
-            return self._inject_failure(m, by), ()
-        return mavlink.MAV_RESULT_UNSUPPORTED, ()
-
-    def _inject_failure(self, m: Any, by: Sender) -> int:
-        """MAV_CMD_INJECT_FAILURE (:mod:`.injection`): DENIED unless SYS_FAILURE_EN = 1 (PX4's receiver does
-        the same); else its events are scheduled (:meth:`SimVehicle.schedule`: acted on at the start of the next
-        control period, naming ``by``), or it is refused with a STATUSTEXT saying why."""
-        sim = self.sim
-        if not sim.failure_injection:
-            return self._refuse("INJECT_FAILURE: disabled, SYS_FAILURE_EN is 0")
-        sensors = sim.sensors.config if sim.sensors is not None else None
-        got = injection(m.param1, m.param2, m.param3, sim.t,
-                        lambda kind: event_problem(kind, sim.plant.profile, sensors,
-                                                      getattr(sim.estimator, "kind", "truth")))
-        if got.why is not None:
-            if got.result == mavlink.MAV_RESULT_DENIED:
-                self.ports.reject("bad_number")
-            return self._refuse(got.why, got.result)
-        for e in got.events:
-            sim.schedule(e, by)
-        return mavlink.MAV_RESULT_ACCEPTED
+        acted = self.actions.run(m, by)  # INJECT_FAILURE, DO_CHANGE_SPEED, DO_FLIGHTTERMINATION, PROTOCOL_VERSION
+        if acted is None:
+            return mavlink.MAV_RESULT_UNSUPPORTED, ()
+        (result, why), follow = acted
+        return (result if why is None else self._refuse(why, result)), follow
 
     def _reposition(self, m: Any, by: Sender) -> int:
         """DO_REPOSITION, as PX4: HOLD (AUTO.LOITER); armed in the air, HOLD flies to the point given and holds
@@ -336,6 +322,9 @@ class Commander:
             return self._refuse(why)
         if self.clock.halted:
             return self._refuse(f"mode {mode_name(mode)}: the plant diverged")
+        terminated = self.actions.refusal(f"mode {mode_name(mode)}")
+        if terminated:
+            return self._refuse(terminated)
         if mode == MISSION:
             if self.pre_start.awaits():  # armed in HOLD on the ground: AUTO.MISSION starts the mission
                 return self._start_mission(by, 0.0, START_ARMED)
@@ -383,9 +372,17 @@ class Commander:
 
     def flight_over(self) -> None:
         """After a control period: a lockstep flight whose vehicle disarmed itself on the ground (the end
-        action's landing) is over; time stands still until it is armed again, as after a disarm by command."""
+        action's landing) is over; time stands still until it is armed again, as after a disarm by command. Then
+        the mode a disarm in LAND or RTL leaves (:meth:`_after_change`)."""
         if self.clock.engaged and not self.sim.armed and self.sim.mode == LAND:  # (a ground station's LAND runs free)
             self.clock.fire(Trigger.DISARM)
+        self._after_change()
+
+    def _after_change(self) -> None:
+        """After a command or a control period: the mode to take after disarming noted, and, disarmed in LAND or RTL,
+        taken (:mod:`.intention`: PX4's user mode intention)."""
+        self.intention.note()
+        self.intention.fall_back()
 
     def _clock_after_mode(self, was: str) -> None:
         """The step clock after a mode change: a vehicle flown by its own controller (HOLD, LAND,
@@ -399,14 +396,19 @@ class Commander:
         elif sim.mode == OFFBOARD and was != OFFBOARD:
             self._engage_lockstep(now)
 
-    def _ground_takes_over(self, now: float) -> None:
+    def _ground_takes_over(self, now: float, how: str = "flown by the vehicle") -> None:
         """Lockstep, a ground station's mode flown by the vehicle's own controller: on the wall clock
         from now; a lockstep flight that was on, or a session's vehicle awaiting its controller (a ground
         station's arm in HOLD before the controller's), says so (its record: it left lockstep here)."""
         if self.clock.engaged or self.cfg.controller_from is not None:
-            self.sim.event("lockstep", f"{mode_name(self.sim.mode)} set by a ground station: flown by the "
-                                       "vehicle on the wall clock")
+            self.sim.event("lockstep", f"{mode_name(self.sim.mode)} set by a ground station: {how} on the wall "
+                                       "clock")
         self.clock.run_free(Trigger.GROUND, now, self.ports.step() * self.substeps)
+
+    def _off_step_clock(self) -> None:
+        """Lockstep: a flight termination leaves the step clock; the vehicle falls on the wall clock."""
+        if self.lockstep and not (self.clock.free_running or self.clock.halted):
+            self._ground_takes_over(time.monotonic(), "the vehicle falls")
 
     def _engage_lockstep(self, now: float) -> None:
         """Lockstep from now: the state of step k goes out and its target is awaited."""
@@ -424,11 +426,11 @@ class Commander:
         if p1 == 1.0:
             if self.clock.halted:
                 return mavlink.MAV_RESULT_DENIED
+            terminated = self.actions.refusal("arming denied")
+            if terminated:
+                return self._refuse(terminated)
             was_offboard = sim.armed and sim.mode == OFFBOARD
             from_gcs = by is not None and by.link == "gcs"
-            if from_gcs and not sim.armed and sim.mode in NOT_ARMABLE:  # where its LAND or RTL landed and disarmed it
-                return self._refuse(f"arming denied: mode {mode_name(sim.mode)}: PX4 does not arm in "
-                                    f"{NOT_ARMABLE[sim.mode]} mode (select HOLD or TAKEOFF first)")
             n0 = len(sim.events)
             if from_gcs:
                 sim.arm_in_mode()  # in the mode it selected (HOLD, LAND, TAKEOFF), else offboard

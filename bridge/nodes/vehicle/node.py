@@ -285,6 +285,7 @@ class Vehicle:
             self.sim.advance()
         else:
             vend.advance()
+        mode = self.sim.mode  # flown this period (a disarm in LAND then takes another: Commander.flight_over)
         self.k = k + 1
         if self.cfg.speed is not None:
             self._wait_until(self.pace.due(self.k * self.substeps))
@@ -296,8 +297,7 @@ class Vehicle:
             self._turns_over()
         # off the critical path: the controller is computing step k+1 meanwhile
         if self.rows is not None:
-            self.rows.lockstep(k, X, self.sim.mode, wire, real, t - vend.applied_state_t, recv - sent, sent, recv,
-                               est)
+            self.rows.lockstep(k, X, mode, wire, real, t - vend.applied_state_t, recv - sent, sent, recv, est)
 
     # -- free run: realtime clock, or lockstep lost --------------------------------------------
     def _freerun_period(self) -> None:
@@ -380,9 +380,9 @@ class Vehicle:
 
     def _after_step(self) -> bool:
         """Events and divergence; False when the plant is lost (nothing more to send)."""
+        self.commander.flight_over()  # (its mode after a landing's disarm is said with the disarm)
         if len(self.sim.events) > self.announcer.sent:
             self.announcer.drain()
-        self.commander.flight_over()
         if self.missions.watch is not None:  # a ground station's mission in flight: its items reached
             self.missions.flight_step(self.t, self.plant.state, self.sim.armed)
         if self.commander.diverged():

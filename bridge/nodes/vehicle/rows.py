@@ -64,8 +64,8 @@ class Rows:
         elif sim.mode == OFFBOARD:  # armed, no target yet
             self.write(k, X, sim.mode, -1, NAN4, NAN4, real, math.nan, math.nan, now, math.nan, estimate())
         else:  # failsafe: the vehicle's own landing loop is in command
-            dem = sim.landing.demand(X)
-            wire = command_to_wire(actuation, sim.landing.command(X))
+            dem = sim.onboard.demand(X)
+            wire = command_to_wire(actuation, sim.onboard.command(X))
             self.write(k, X, sim.mode, -1, wire, dem, real, sim.plant.t - sim.last_command_t, math.nan, now,
                        math.nan, estimate())
 

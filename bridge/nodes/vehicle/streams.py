@@ -24,6 +24,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.autopilot.estimator import Covariance
 from bridge.autopilot.failsafe import Land, Level, ReturnHome, Takeoff
+from bridge.autopilot.modes import TERMINATION
 from bridge.autopilot.positionloss import EstimateHealth, estimate_health
 from bridge.autopilot.simvehicle import FAILSAFE, LANDED, TAKEOFF, SimVehicle
 from bridge.core.wire import odometry_fields, rotate_inverse, step_usec
@@ -120,7 +121,9 @@ _CHARGE_STATES = (mavlink.MAV_BATTERY_CHARGE_STATE_OK, mavlink.MAV_BATTERY_CHARG
 def heartbeat(v: VehicleView) -> Any:
     """HEARTBEAT: PX4's encoding of the mode (bridge.mavlink.modes), so that ground stations name it."""
     base, custom = heartbeat_mode(v.mode, v.target, v.armed)
-    if v.halted:  # crashed, diverged or touched by another vehicle: its flight is over, its plant stepped no more
+    if v.mode == TERMINATION:  # a ground station terminated the flight: PX4's state for it, whatever came after
+        state = mavlink.MAV_STATE_FLIGHT_TERMINATION
+    elif v.halted:  # crashed, diverged or touched by another vehicle: its flight is over, its plant stepped no more
         state = mavlink.MAV_STATE_EMERGENCY
     elif v.mode in (FAILSAFE, LANDED):
         state = mavlink.MAV_STATE_CRITICAL
