@@ -135,7 +135,8 @@ def test_mavsdk_sees_the_gps_lost_the_descent_and_the_position_back(tmp_path):
 def test_the_product_fault_event_fails_safe_in_lockstep_as_offline(tmp_path):
     """``--sensors gnss --estimator ekf --at 10:gps:off`` on the sine cut to 20 s: ``bsst sim`` and a lockstep ``bsst
     sitl`` both end ``failsafe``, exit 1, the position lost and PX4's Descend at 15.124 s and the disarm on the ground
-    at 17.876 s in both; the summary's ``ended_by`` names the position loss and the fault; the trace the same."""
+    at 19.876 s (2 s after the touchdown, COM_DISARM_LAND) in both; the summary's ``ended_by`` names the position loss
+    and the fault; the trace the same."""
     sine = tmp_path / "sine20.toml"
     sine.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 20.0"))
     summaries = []
@@ -152,7 +153,7 @@ def test_the_product_fault_event_fails_safe_in_lockstep_as_offline(tmp_path):
     events = [[(e["t"], e["kind"], e["text"].split(" [by ")[0]) for e in s["events"] if e["kind"] in mine
                and e.get("source", "vehicle") == "vehicle"] for s in summaries]
     assert events[0] == events[1] and [(t, k) for t, k, _ in events[0]] == [
-        (10.0, "fault"), (15.124, "position"), (15.124, "failsafe"), (17.876, "disarmed")], events
+        (10.0, "fault"), (15.124, "position"), (15.124, "failsafe"), (19.876, "disarmed")], events
     assert sitl["outcome"] == offline["outcome"] == "failsafe"
     assert sitl["ended_by"] == offline["ended_by"] == {
         "who": "vehicle", "how": "failsafe at t=15.124 s: position lost: level and descend",

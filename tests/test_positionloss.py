@@ -106,12 +106,12 @@ def test_a_gps_back_before_the_timeout_is_no_failsafe() -> None:
 
 def test_a_gps_that_stays_off_is_px4s_descend_at_the_timeout() -> None:
     """GPS off at 10 s: the last fix (valid 10.0 s) fused on arrival at 10.12 s, the position invalid 5 s later, at
-    the control step after 15.12 s; the vehicle levels and descends at MPC_LAND_SPEED, disarms on the ground, and
-    the flight ends ``failsafe``, ``ended_by`` naming the position loss and the fault before it. EKF2_NOAID_TOUT 2 s:
-    the same 3 s earlier."""
+    the control step after 15.12 s; the vehicle levels and descends at MPC_LAND_SPEED, disarms 2 s (COM_DISARM_LAND)
+    after its touchdown, and the flight ends ``failsafe``, ``ended_by`` naming the position loss and the fault before
+    it. EKF2_NOAID_TOUT 2 s: the same 3 s earlier."""
     s = simulate("missions/sine.toml", at=("10:gps:off",), **GNSS_EKF).summary
     got = _events(s, ("position", "failsafe", "disarmed"))
-    assert [(t, k) for t, k, _ in got] == [(15.124, "position"), (15.124, "failsafe"), (17.876, "disarmed")], got
+    assert [(t, k) for t, k, _ in got] == [(15.124, "position"), (15.124, "failsafe"), (19.876, "disarmed")], got
     assert got[1][2] == "position lost: level and descend" and got[2][2] == "landed: disarmed"
     assert s["outcome"] == "failsafe" and s["ended_by"] == {
         "who": "vehicle", "how": "failsafe at t=15.124 s: position lost: level and descend",
