@@ -29,7 +29,7 @@ pytestmark = pytest.mark.process  # starts processes or opens sockets: not in ma
 MAVSDK_GPS_FAILSAFE = r"""
 import json, sys, threading
 from mavsdk import Mavsdk, Configuration, ComponentType
-from mavsdk.plugins.action import Action
+from mavsdk.plugins.action import Action, ActionError
 from mavsdk.plugins.failure import Failure, FailureError, FailureType, FailureUnit
 from mavsdk.plugins.mavlink_direct import MavlinkDirect, MavlinkMessage
 from mavsdk.plugins.telemetry import Telemetry
@@ -73,6 +73,10 @@ until("at_height", lambda: seen["mode"] == "HOLD" and seen["rel"] is not None an
 out["off"] = inject(FailureType.OFF)
 until("unhealthy", lambda: seen["health"] == [False, False], 20)
 until("descending", lambda: seen["mode"] == "LAND" and seen["armed"], 30)
+try:  # armed, no position: PX4 refuses a mode that needs one
+    out["hold"] = act.hold().name
+except ActionError as e:
+    out["hold"] = e.result.name
 until("disarmed", lambda: seen["armed"] is False, 30)
 with cond:
     positions = seen["positions"]
@@ -98,6 +102,7 @@ def test_mavsdk_sees_the_gps_lost_the_descent_and_the_position_back(tmp_path):
     Descend at EKF2_NOAID_TOUT after the last fix fused (4.92-5.13 s after the fault: the 5 Hz fixes' phase and
     their 120 ms latency): MAVSDK's flight mode LAND, armed, until it lands and disarms. GPS OK: healthy again, and
     GLOBAL_POSITION_INT (MAVSDK's position) flows again, which it had not since the position was lost (the tlog).
+    MAVSDK's hold during the descent is refused (armed, PX4 takes no mode that cannot run).
     ESTIMATOR_STATUS with the horizontal position flags until the loss, without them after (its accuracy growing past
     a metre), with them again once a fix is fused, as MAVSDK reads them (MavlinkDirect, the stream asked for at
     10 Hz); the vehicle's events say each step."""
@@ -111,6 +116,7 @@ def test_mavsdk_sees_the_gps_lost_the_descent_and_the_position_back(tmp_path):
     steps = ("found", "ready", "at_height", "unhealthy", "descending", "disarmed", "healthy", "positions_again")
     assert {k: got[k] for k in steps} == dict.fromkeys(steps, True), got
     assert (got["arm"], got["takeoff"], got["off"], got["on"]) == ("SUCCESS",) * 4, got
+    assert got["hold"] == "COMMAND_DENIED", got  # and the descent went on: LAND is the last mode seen
     assert got["modes"][-2:] == ["HOLD", "LAND"], got["modes"]
     ev = [(e.t, e.kind, e.text) for e in v.reports() if isinstance(e, Event)]
     kinds = [k for _, k, _ in ev if k in ("fault", "position", "failsafe", "disarmed")]

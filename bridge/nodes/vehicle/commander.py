@@ -325,6 +325,8 @@ class Commander:
         terminated = self.actions.refusal(f"mode {mode_name(mode)}")
         if terminated:
             return self._refuse(terminated)
+        if self.sim.armed and not self.sim.position.valid:  # PX4 (UserModeIntention::change): armed, a mode must run
+            return self._refuse(f"mode {mode_name(mode)}: no valid horizontal position estimate (it needs one)")
         if mode == MISSION:
             if self.pre_start.awaits():  # armed in HOLD on the ground: AUTO.MISSION starts the mission
                 return self._start_mission(by, 0.0, START_ARMED)
