@@ -373,7 +373,7 @@ def _damage(d: Path, name: str) -> str:
         parts[COLUMNS.index("outcome")] = "bogus"
         cells.write_text(lines[0] + ",".join(parts) + lines[2])
         return ("cells.csv: line 2: outcome: expected one of completed, failsafe, law_failed, denied, diverged, "
-                "crashed, collision, aborted, error, got 'bogus'")
+                "crashed, terminated, collision, aborted, error, got 'bogus'")
     if name == "empty-axis":
         parts = row.split(",")
         parts[COLUMNS.index("delay_ms")] = ""
