@@ -306,10 +306,14 @@ def test_the_relay_replays_a_trace_on_the_wall_clock(tmp_path: Path) -> None:
         wait_for(lambda: relay.summary()["down"]["sent"] >= 20, 5.0, "the relay sending the 20 states down",
                  poll_s=0.005)
         s = relay.summary()
-    # at most 2 ms late beyond this machine's own wake-up lateness in the same seconds (two wake-ups a datagram:
-    # the relay's at the due time and the receiver's; a loaded suite once put the median at 27.9 ms)
+    # the relay's own hold (a datagram's arrival in it to its hand-off to the kernel: one timed wake-up, as the
+    # control's) at most 2 ms late beyond this machine's wake-up lateness in the same seconds. Not the test's
+    # end-to-end delay: that adds the relay's wake on arrival and this thread's on receipt, and at load 8 on the two
+    # cores its median was 28.0 ms against a control median of 0.08 ms (a wake is late in a minority of cases; one
+    # of three is late in most)
     late_ms = control.median()
-    assert float(np.median(delays)) * 1000.0 - 25.0 <= 2.0 + 2.0 * late_ms, (np.median(delays), late_ms)
+    held_ms = s["up"]["measured_ms"]["p50"]
+    assert held_ms - 25.0 <= 2.0 + 2.0 * late_ms, (held_ms, late_ms)
     assert min(delays) >= 0.025  # never early
     assert s["up"]["delivered"] == 20 and s["up"]["trace"]["delay_ms"]["p50"] == 25.0
     assert s["down"]["lost_by"]["trace"] == 20 and s["down"]["delivered"] == 0
