@@ -215,14 +215,20 @@ def batch_table(jobs: int | None) -> None:
     print(f"\noutcomes that differ: {differ} of {len(rows['batch'])}; wall time: batch {wall['batch']:.1f} s "
           f"(its kernels compiled or loaded included), process {wall['process']:.1f} s "
           f"(--jobs {jobs or os.cpu_count()})\n")
-    print("## x500 motor faults (examples/x500-motor-fault.toml --at 10:motor:1=E): batch against bsst sim\n")
-    print("| law | E | batch outcome / RMS m | bsst sim outcome / RMS m |\n|---|---|---|---|")
+    # the batch refuses a motor fault before an end landing (a landing on a weak rotor may crash, which it cannot
+    # judge): the two engines are compared on the flight itself, the mission ending in a hold
+    print("## x500 motor faults (examples/x500-motor-fault.toml --at 10:motor:1=E, [end] action = hold): batch "
+          "against bsst sim\n")
+    print("| law | E | batch outcome / RMS m | bsst sim outcome / RMS m | bsst sim with its end landing |\n"
+          "|---|---|---|---|---|")
     fault = "examples/x500-motor-fault.toml"
+    held = replace(load_mission(fault), end_action="hold")
     cells = [{"controller": law, "at": (f"10:motor:1={e:g}",)} for law in LAWS for e in (0.9, 0.75, 0.6, 0.0)]
-    for c, got in zip(cells, fly_batch(fault, cells), strict=True):
-        s = simulate(fault, **c).summary
+    for c, got in zip(cells, fly_batch(held, cells), strict=True):
+        s = simulate(held, **c).summary
+        landed = simulate(fault, **c).summary["outcome"]
         print(f"| {c['controller']} | {c['at'][0].rsplit('=', 1)[1]} | {got['outcome']} / {got['rms']:.6g} | "
-              f"{s['outcome']} / {s['rms_3d']:.6g} |")
+              f"{s['outcome']} / {s['rms_3d']:.6g} | {landed} |")
     print()
 
 

@@ -173,7 +173,10 @@ def test_batch_problem_names_what_the_batch_cannot_fly(tmp_path: Path) -> None:
     why = batch_problem(m, [{"controller": "bsst", "param_at": at}])
     assert why is not None and "--param-at" in why and "\n" not in why
     turbulent = replace(m, wind={"speed_mps": 3.0, "from_deg": 90.0, "turbulence": "light"})  # flown: test_batch_wind
-    assert batch_problem(turbulent, [{"controller": "bsst", "at": ("2:motor:1=0.5",), "profile": "x500"}]) is None
+    faulty = [{"controller": "bsst", "at": ("2:motor:1=0.5",), "profile": "x500"}]
+    why = batch_problem(turbulent, faulty)  # a motor fault, then the end landing on the weak rotor: not judged here
+    assert why is not None and "motor fault" in why and "end landing" in why and "\n" not in why
+    assert batch_problem(replace(turbulent, end_action="hold"), faulty) is None
     why = batch_problem(m, [{"controller": "bsst", "at": ("2:link:lte",)}])  # a handover: not in the link plan
     assert why is not None and "link event" in why and "\n" not in why
     assert batch_problem(replace(m, effects={"battery": True}), [{"controller": "bsst", "profile": "x500"}]) is None

@@ -24,8 +24,9 @@ duration, the battery too; each cell may have its own wind, turbulence, gusts an
 ``gust`` events, or none: bridge.batch.weather). Not flown here (:func:`batch_problem`): a user's own law, the
 bandwidth queue (``rate_bps``), a measured link ``trace``, ``[failsafe] resume``, any failsafe ``action`` but
 ``descend``, parameters changed in flight (``--param-at``), ``link`` events (a handover), and a mission ending in
-a landing at a descent rate (MPC_LAND_SPEED) that may touch down hard: the scalar loop then flies its end landing
-and judges it (a crash), which this engine, flying the mission's time only, cannot.
+a landing at a descent rate (MPC_LAND_SPEED) that may touch down hard, or after a motor fault (a landing on a weak
+rotor: the x500 at 60 % crashed in it at 3.35 m/s): the scalar loop then flies its end landing and judges it (a
+crash), which this engine, flying the mission's time only, cannot.
 """
 
 from __future__ import annotations
@@ -112,6 +113,10 @@ def flights_problem(flights: Sequence[Flight]) -> str | None:
             return (f"[failsafe] descent_rate (MPC_LAND_SPEED) {f.failsafe.descent_rate:g} m/s: the mission's end "
                     f"landing may touch down faster than {CRASH_SPEED_MPS:g} m/s, a crash the process engine judges "
                     "and the batch engine (no end action) cannot; fly it with the process engine")
+        if m.end_action == "land" and any(e.kind == "motor" and e.get("effectiveness") < 1.0 for e in f.timeline):
+            return ("a motor fault ([[events]] or --at) before the mission's end landing: a landing on a weak rotor "
+                    "may touch down hard, a crash the process engine judges and the batch engine (no end action) "
+                    "cannot")
         if m.steps > CELL_STEPS:
             return f"the mission has {m.steps} control steps: more than the batch engine holds ({CELL_STEPS})"
         if first is None:
