@@ -391,7 +391,7 @@ class SimVehicle:
             self.disarm("landed: disarmed")
         else:
             self.plant.command(self._zero)
-            if first:
+            if first and self.plant.impact is None:  # a hard touchdown is no landing: the period's verdict is a crash
                 self.event("landed", self.land_disarm.landed_text(self.published()))
 
     def _end_hold(self) -> None:
