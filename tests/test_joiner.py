@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bridge.autopilot.modes import MODES
 from bridge.core.flight import prepare
 from bridge.nodes.vehicle import MODE_CODES
 from bridge.record.columns import CONTROLLER_COLUMNS, TRACE_COLUMNS, VEHICLE_COLUMNS, ControllerRow, VehicleRow
@@ -81,3 +82,9 @@ def test_a_half_is_read_by_its_own_header(tmp_path: Path) -> None:
     _write(tmp_path / "vehicle.bin", tuple(c for c in VEHICLE_COLUMNS if c != "cmd_k"), [{"k": 0.0}])
     with pytest.raises(ValueError, match="vehicle.bin: no column 'cmd_k'"):
         HalfReader(tmp_path / "vehicle.bin", VehicleRow).read()
+
+
+def test_every_mode_has_a_code_of_its_own_in_vehicle_bin() -> None:
+    """An RTL or a terminated flight was written 0, as offboard, and the joiner took an RTL takeover's rows for a
+    vehicle not flying yet."""
+    assert set(MODE_CODES) == set(MODES) and len(set(MODE_CODES.values())) == len(MODES)

@@ -31,6 +31,7 @@ TAKEOFF = "takeoff"
 RTL = "rtl"  # Return: home at RTL_RETURN_ALT (lower in the cone), down to RTL_DESCEND_ALT, land (armed only, as PX4)
 GROUND_MODES = (HOLD, LAND, TAKEOFF, RTL)  # flown by the on-board controller, set by a ground station
 TERMINATION = "termination"  # a ground station's flight termination: motors off, disarmed, latched (nodes/vehicle)
+MODES = (OFFBOARD, FAILSAFE, LANDED, *GROUND_MODES, TERMINATION)  # every mode the vehicle can be in
 
 
 def mode_target(mode: str, X: tuple[float, ...], *, takeoff_z: float, alt: float, descent_rate: float,

@@ -13,12 +13,14 @@ import math
 from collections.abc import Callable
 from pathlib import Path
 
+from bridge.autopilot.modes import RTL, TERMINATION
 from bridge.autopilot.simvehicle import FAILSAFE, HOLD, LAND, LANDED, OFFBOARD, TAKEOFF, SimVehicle
 from bridge.core.wire import command_to_wire
 from bridge.record.columns import VEHICLE_COLUMNS, state_columns
 from bridge.record.halves import HalfWriter
 
-MODE_CODES = {OFFBOARD: 0, FAILSAFE: 1, LANDED: 2, HOLD: 3, LAND: 4, TAKEOFF: 5}  # the half's ``mode``
+# the half's ``mode``: one code a mode (bridge.autopilot.modes.MODES; tests/test_joiner.py checks)
+MODE_CODES = {OFFBOARD: 0, FAILSAFE: 1, LANDED: 2, HOLD: 3, LAND: 4, TAKEOFF: 5, RTL: 6, TERMINATION: 7}
 NAN4 = (math.nan,) * 4
 Estimate = tuple[tuple[float, ...], float]  # (the published estimate, its NEES)
 
@@ -39,7 +41,7 @@ class Rows:
               est: Estimate) -> None:
         """One row; ``est``: (estimate, NEES) taken with ``X``."""
         E, nees = est
-        code = MODE_CODES.get(mode, 0)
+        code = MODE_CODES[mode]
         so_far = self._arrived()
         arrived, self._arrived_before = so_far - self._arrived_before, so_far
         self.out.write((k, k / self.rate, *state_columns(X), code, key, *wire, *dem, *real, age, rtt, sent, recv,
