@@ -42,6 +42,8 @@ from bridge.cli.options import (
 )
 from params import ConfigError
 
+EVENTS_SHOWN = 16  # events a run's printed summary lists (all of summary.json's beyond: its first 6 and last 10)
+
 
 def add_sim_command(sub: Any) -> None:
     """``bsst sim``: a mission flown offline, in one process (bridge.loop)."""
@@ -198,6 +200,16 @@ def report_run(run: Any, command: str) -> int:
 
 
 
+def event_lines(events: list[dict[str, Any]]) -> list[str]:
+    """A run's events as its printed summary lists them: all up to :data:`EVENTS_SHOWN`; beyond, the first 6 and
+    the last 10 (a session opens with five start-up events, and the end is what a user looks for) and a line
+    saying how many more ``summary.json`` holds."""
+    if len(events) > EVENTS_SHOWN:
+        events = [*events[:6], {"more": len(events) - EVENTS_SHOWN}, *events[6 - EVENTS_SHOWN:]]
+    return [f"event t={e['t']:.3f} {e['kind']}: {e['text']}\n" if "more" not in e else
+            f"event … {e['more']} more (summary.json)\n" for e in events]
+
+
 def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
     """The one-screen summary printed after a run."""
     out = stream or sys.stdout
@@ -244,8 +256,8 @@ def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
                            if key in L)
             w(f"link {d:4}: sent {L['sent']} delivered {L['delivered']} lost {L['lost']}{more} dup {L['duplicated']} "
               f"reordered {L['reordered']} delay p50 {ms['p50']} ms p99 {ms['p99']} ms max {ms['max']} ms\n")
-    for e in s.get("events", [])[:8]:
-        w(f"event t={e['t']:.3f} {e['kind']}: {e['text']}\n")
+    for line in event_lines(s.get("events", [])):
+        w(line)
     policies = s.get("policies") or []
     broken = [v for v in policies if not v.get("ok")]
     if policies:
