@@ -178,7 +178,8 @@ def flying(flight: Flight, path: Path | None = None, *, plots: bool = True, prog
                 outcome = "completed"  # resumed after a failsafe (the events say so)
             if progress is not None and k % int(rate) == 0:
                 progress(t, m.duration_s, sum((X[i] - ref[j][0]) ** 2 for i, j in ((0, 0), (2, 1), (4, 2))) ** 0.5)
-        if outcome == "completed" and isinstance(m.trajectory, Smooth) and m.trajectory.lands:
+        if outcome == "completed" and isinstance(m.trajectory, Smooth) and m.trajectory.lands and \
+                m.end_action == "hold":  # (with LAND the end action lands it, as a session's vehicle: fly_end)
             _disarm_landed(vehicle)
     except (KeyboardInterrupt, LawFailed) as exc:  # interrupted, or a user's law failed: the flight ends, recorded
         outcome = stopped(vehicle, exc, k, rate)

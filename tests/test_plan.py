@@ -253,6 +253,13 @@ def test_lockstep_sitl_flies_the_plan_as_offline(tmp_path: Path) -> None:
                           (lock.trace["x"][i], lock.trace["y"][i], lock.trace["z"][i])) for i in range(n))
     assert worst <= 1e-4
     assert lock.summary["events"][-1]["kind"] in ("disarmed", "ended") and abs(lock.trace["z"][-1]) <= 0.05
+    # the plan's end: its LAND from the ground, landed at once, disarmed COM_DISARM_LAND (2 s) later, in both (offline
+    # once disarmed at the touchdown)
+    ends = [[(round(e["t"], 3), e["kind"]) for e in r.summary["events"]
+             if e["kind"] == "landed" or e["text"].startswith(("mission over: LAND", "landed: disarmed"))]
+            for r in (offline, lock)]  # (the session's controller says its own "end" too)
+    assert ends[0] == ends[1] and [k for _, k in ends[0]] == ["end", "landed", "disarmed"], ends
+    assert ends[0][2][0] == pytest.approx(ends[0][1][0] + 2.0), ends
 
 
 def test_a_plan_is_swept_and_its_delay_margin_searched(tmp_path: Path, capsys) -> None:
