@@ -227,6 +227,30 @@ def test_gnss_ekf_vehicle_streams_its_sensors_to_the_ground_station(tmp_path):
     assert counts.get("COMMAND_LONG", 0) >= 3  # and what the ground station sent: both directions
 
 
+@pytest.mark.parametrize("estimator", ["truth", "raw"])
+def test_the_ground_station_sees_what_the_vehicle_knows(tmp_path, estimator):
+    """LOCAL_POSITION_NED and ATTITUDE carry the vehicle's estimate, as PX4's EKF2 publishes them: at rest on the
+    ground under truth the position is home exactly; with the GNSS read raw, it wanders with the metre-class
+    fixes (it was the true state whatever the estimator)."""
+    flags = [] if estimator == "truth" else ["--sensors", "gnss", "--estimator", estimator]
+    with instance_slot() as n:
+        gcs = _gcs(n)
+        v = Proc.bsst("vehicle", "--instance", str(n), "--out", str(tmp_path), "--realtime", *flags)
+        try:
+            v.wait_report(Ready)
+            assert gcs.wait_heartbeat(timeout=20) is not None
+            if estimator != "truth":
+                assert gcs.recv_match(type="GPS_RAW_INT", blocking=True, timeout=5,
+                                      condition="GPS_RAW_INT.fix_type==3")
+            local = _of(_listen(gcs, 1.5), "LOCAL_POSITION_NED")
+        finally:
+            assert v.stop() == 0
+            gcs.close()
+    assert len(local) >= 10, len(local)
+    spread = max(math.hypot(m.x, m.y) for m in local)
+    assert spread == 0.0 if estimator == "truth" else spread > 0.05, [(m.x, m.y) for m in local][:10]
+
+
 def test_truth_vehicle_has_no_sensor_messages(tmp_path):
     """Under truth there are no sensors: no stream, REQUEST_MESSAGE and SET_MESSAGE_INTERVAL UNSUPPORTED."""
     with instance_slot() as n:

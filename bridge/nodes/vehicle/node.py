@@ -412,7 +412,7 @@ class Vehicle:
         sim, plant, cfg = self.sim, self.plant, self.cfg
         mission = self.missions.mission
         mode = MISSION if self.missions.shows_mission(sim.armed, sim.mode == OFFBOARD) else sim.mode
-        return VehicleView(plant.state, self.t, mode, sim.onboard.target, sim.armed, self.clock.halted,
+        return VehicleView(sim.published(), self.t, mode, sim.onboard.target, sim.armed, self.clock.halted,
                            plant.on_ground, plant.omega, self.flight.profile.omega_max, self.load, sim.sensors,
                            cfg.home, cfg.sysid, (mission.current, len(mission.items), self.missions.mission_state),
                            plant.battery, sim.battery_watch.level(plant.battery.remaining) if plant.battery else 0,

@@ -48,7 +48,7 @@ ESTIMATOR_STATUS_S = 2.0  # and of ESTIMATOR_STATUS (0.5 Hz)
 class VehicleView:
     """The vehicle as its telemetry reads it, at one moment."""
 
-    X: tuple[float, ...]  # the plant's true state (paper frame, eq. 7)
+    X: tuple[float, ...]  # the state the vehicle knows (paper frame, eq. 7): its estimate, as PX4's EKF2 publishes
     t: float  # simulation time of the current step (s)
     mode: str  # the flight mode (bridge.autopilot.simvehicle)
     target: Any  # the on-board controller's target (None: not flying one)
