@@ -211,13 +211,16 @@ def _judged(flight: Flight, vehicle: SimVehicle, arrays: dict[str, Any], outcome
     for v in judge(summary, arrays, ev, rules_for(flight, "offline", link)):
         vehicle.event("policy", violation_text(v))
         shown.append({"t": round(vehicle.t, 6), "kind": "policy", "text": violation_text(v)})
+    verdict = None
     if outcome == "completed":  # after the mission's figures: nothing of them changes
         summary["end"], verdict = fly_end(flight, vehicle, summary["events"])
-        if verdict is not None:  # its landing touched down hard (or the plant diverged): the plant ended the flight
-            summary["outcome"] = verdict
-            summary["ended_by"] = ended_by_outcome(verdict, [RunEvent(round(e.t, 6), e.kind, e.text, by=e.by)
-                                                             for e in vehicle.events])
-            summary.update({k: v for k, v in plant_blocks(plant).items() if k == "impact"})
+    elif outcome == "failsafe":
+        verdict = land_failsafe(flight, vehicle, summary["events"])
+    if verdict is not None:  # its landing touched down hard (or the plant diverged): the plant ended the flight
+        summary["outcome"] = verdict
+        summary["ended_by"] = ended_by_outcome(verdict, [RunEvent(round(e.t, 6), e.kind, e.text, by=e.by)
+                                                         for e in vehicle.events])
+        summary.update({k: v for k, v in plant_blocks(plant).items() if k == "impact"})
     return summary
 
 
@@ -229,15 +232,35 @@ def fly_end(flight: Flight, vehicle: SimVehicle, shown: list[dict[str, Any]]) ->
     judges it (a touchdown faster than CRASH_SPEED_MPS is ``crashed``); ``hold`` is engaged and the flight ends with the
     mission (no session to hold through). Its events are added to ``shown``; returns ``summary.json["end"]``
     (:func:`bridge.record.ending.end_block`) and the plant's verdict (None: none)."""
-    m, plant = flight.mission, vehicle.plant
     n0 = len(vehicle.events)
-    vehicle.end_mission(m.end_action)
+    vehicle.end_mission(flight.mission.end_action)
+    rows, verdict = _fly_alone(flight, vehicle, LAND, shown, n0)
+    return end_block(flight.mission.end_action, rows, vehicle.events[n0:]), verdict
+
+
+def land_failsafe(flight: Flight, vehicle: SimVehicle, shown: list[dict[str, Any]]) -> str | None:
+    """A failsafe's landing still going at the mission's end goes on to the ground, as a session's vehicle flies it
+    (on the wall clock: it leaves lockstep for it), stepped and judged as :func:`fly_end` steps the end landing;
+    the plant's verdict (None: none). A failsafe that holds, or is done, flies nothing more here."""
+    target = vehicle.onboard.target
+    if not (vehicle.armed and vehicle.mode == FAILSAFE and target is not None and target.lands):
+        return None
+    return _fly_alone(flight, vehicle, FAILSAFE, shown, len(vehicle.events))[1]
+
+
+def _fly_alone(flight: Flight, vehicle: SimVehicle, mode: str, shown: list[dict[str, Any]],
+               n0: int) -> tuple[list[tuple[float, float, float]], str | None]:
+    """Step the vehicle alone (nothing from the controller; the mission's link is done with, its statistics the
+    mission's) while it is armed in ``mode``, until it disarms on the ground, bounded by the descent at the
+    failsafe's rate, COM_DISARM_LAND and 10 s, its plant judged after each period; the events since the
+    ``n0``-th added to ``shown``. Returns the rows (t s, z m, vz m/s) and the plant's verdict (None: none)."""
+    m, plant = flight.mission, vehicle.plant
     rows: list[tuple[float, float, float]] = []
     k, rate = m.steps, m.rate_hz
     bound = k + math.ceil((10.0 + flight.failsafe.time_to_land_s(plant.state[4] - m.start[2])
                            + vehicle.land_disarm.wait_s()) * rate)
     verdict = None
-    while verdict is None and vehicle.armed and vehicle.mode == LAND and k < bound:
+    while verdict is None and vehicle.armed and vehicle.mode == mode and k < bound:
         X = plant.state
         vehicle.advance()  # the vehicle alone: what the up link still holds stays in flight (its statistics too)
         verdict = vehicle.plant_verdict()
@@ -245,9 +268,9 @@ def fly_end(flight: Flight, vehicle: SimVehicle, shown: list[dict[str, Any]]) ->
         k += 1
     if verdict is not None:
         vehicle.disarm(f"{verdict}: {vehicle.events[-1].text}")  # (as a session's vehicle: its landing's came first)
-    ended = vehicle.events[n0:]
-    shown.extend(RunEvent(round(e.t, 6), e.kind, e.text, by=e.by, **typed_fields(e)).as_dict() for e in ended)
-    return end_block(m.end_action, rows, ended), verdict
+    shown.extend(RunEvent(round(e.t, 6), e.kind, e.text, by=e.by, **typed_fields(e)).as_dict()
+                 for e in vehicle.events[n0:])
+    return rows, verdict
 
 
 def stopped(vehicle: SimVehicle, exc: BaseException, k: int, rate: float) -> str:

@@ -1,4 +1,4 @@
-"""Covers bridge.autopilot.simvehicle: the ``landed`` event of the vehicle's own landing, and none at a crash.
+"""Covers bridge.autopilot.simvehicle and bridge.loop: the `landed` event of the vehicle's own landing; none at a crash.
 
 A landing the vehicle flies itself says ``landed`` at its touchdown and disarms COM_DISARM_LAND (2 s) later; a
 touchdown too hard to be a landing is the period's ``crashed`` verdict alone (it once said ``landed`` 17 ms before
@@ -26,3 +26,20 @@ def test_the_end_landing_says_landed_then_disarms_two_seconds_later() -> None:
     (t_landed, landed), (t_disarmed, disarmed) = _kinds(s)
     assert (landed, disarmed) == ("landed", "disarmed") and abs(t_disarmed - t_landed - 2.0) < 1e-6, _kinds(s)
     assert s["outcome"] == "completed"
+
+
+def test_a_failsafe_landing_going_at_the_missions_end_lands_and_is_judged() -> None:
+    """The link lost at 27.5 s of the 30 s sine: the failsafe's descent from 28.0 s is still going at the mission's
+    end; offline flies it on to the ground as a session's vehicle does (which leaves lockstep for it): landed at
+    32.571 s, disarmed at 34.571 s, the run ``failsafe``. It once ended armed in the air."""
+    s = simulate("missions/sine.toml", link={"blackouts": [[27.5, 3.0]]}).summary
+    assert s["outcome"] == "failsafe" and _kinds(s) == [(32.571, "landed"), (34.571, "disarmed")], _kinds(s)
+
+
+def test_a_hard_failsafe_landing_after_the_missions_end_is_a_crash() -> None:
+    """The link lost at 29 s, the failsafe's landing at MPC_LAND_SPEED 4 m/s from 29.5 s: its touchdown, after the
+    mission's end, is judged: ``crashed`` at 30.488 s (it was ``failsafe``, armed in the air)."""
+    s = simulate("missions/sine.toml", link={"blackouts": [[29.0, 3.0]]}, failsafe={"action": "land"},
+                 params={"MPC_LAND_SPEED": 4.0}).summary
+    assert s["outcome"] == "crashed" and s["impact"]["speed_mps"] > 2.0, s["events"]
+    assert _kinds(s)[0] == (30.488, "crashed") and s["ended_by"]["who"] == "plant", (s["events"], s["ended_by"])
