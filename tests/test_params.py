@@ -393,9 +393,11 @@ def test_an_integer_parameter_flag_is_parsed_as_an_integer(tmp_path, name, value
 @pytest.mark.parametrize("args, says", [
     (["--param", "COM_OBL_ACT=1.5"], "--param 'COM_OBL_ACT=1.5': COM_OBL_ACT: an INT32, expected an integer"),
     (["--param", "MAV_SYS_ID=x"], "--param 'MAV_SYS_ID=x': MAV_SYS_ID: an INT32, expected an integer"),
+    (["--param", "COM_DISARM_LAND=x"], "--param 'COM_DISARM_LAND=x': COM_DISARM_LAND: a REAL32, expected a number, "
+                                       "got 'x'"),
     (["--param", "COM_OBL_ACT=1", "--param", "COM_OBL_RC_ACT=7"],
      "--param COM_OBL_RC_ACT=7 and --param COM_OBL_ACT=1 set one setting, [failsafe] action, two ways"),
-], ids=["fraction", "word", "clash"])
+], ids=["fraction", "word", "real-word", "clash"])
 def test_a_bad_parameter_flag_is_named_as_the_flag_not_the_mission(cmd, args, says):
     mission = [] if cmd == "vehicle" else ["missions/sine.toml"]
     r = _bsst(cmd, *mission, *args)  # refused before a port is bound

@@ -363,8 +363,8 @@ def parse_assignment(text: str) -> tuple[str, float]:
     try:
         return name, (int(value) if spec.kind == INT32 else float(value))
     except ValueError:
-        what = "an integer" if spec.kind == INT32 else "a number"
-        raise ConfigError(f"{name}: an {spec.kind}, expected {what}, got {value.strip()!r}") from None
+        what = "an INT32, expected an integer" if spec.kind == INT32 else "a REAL32, expected a number"
+        raise ConfigError(f"{name}: {what}, got {value.strip()!r}") from None
 
 
 @dataclass(frozen=True, order=True)
