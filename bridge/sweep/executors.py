@@ -13,6 +13,7 @@ from __future__ import annotations
 import ast
 import inspect
 import multiprocessing as mp
+import multiprocessing.forkserver as forkserver
 import os
 import select
 import signal
@@ -202,8 +203,6 @@ def _start_fork_server() -> None:
     for a sweep's), and a Ctrl-C to the sweep's process group before that killed it with a traceback of its own
     beside the sweep's "interrupted". Its workers ignore SIGINT anyway (:func:`_worker_init`). A Ctrl-C in the
     few milliseconds this process ignores it for the start is not taken (press it again)."""
-    from multiprocessing import forkserver
-
     if threading.current_thread() is not threading.main_thread():
         forkserver.ensure_running()
         return
