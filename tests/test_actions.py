@@ -55,6 +55,9 @@ def test_flight_termination_stops_the_motors_latches_termination_and_refuses_arm
         assert _command(v, gcs, M.MAV_CMD_DO_FLIGHTTERMINATION, 0.0) == M.MAV_RESULT_ACCEPTED
         assert _command(v, gcs, M.MAV_CMD_DO_FLIGHTTERMINATION, math.nan) == M.MAV_RESULT_DENIED
         assert _command(v, gcs, M.MAV_CMD_DO_FLIGHTTERMINATION, 2.0) == M.MAV_RESULT_UNSUPPORTED
+        said = gcs.exchange(v, M.MAVLink_command_long_message(1, 1, M.MAV_CMD_DO_FLIGHTTERMINATION, 0, 3, 0, 0, 0, 0,
+                                                              0, 0), "STATUSTEXT")  # the value sent, named
+        assert said.text.startswith("DO_FLIGHTTERMINATION: param1 3 (over 1.5: lo"), said.text
         assert not any(e.kind == "terminated" for e in v.sim.events) and v.rejected["bad_number"] == 1
         assert _command(v, gcs, M.MAV_CMD_DO_FLIGHTTERMINATION, 1.0) == M.MAV_RESULT_ACCEPTED
         (t,) = [e for e in v.sim.events if e.kind == "terminated"]

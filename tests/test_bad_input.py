@@ -683,14 +683,15 @@ def _whole_parser() -> argparse.ArgumentParser:
 
 @pytest.mark.parametrize("cmd", sorted(set(BASE) - {"link", "report"}))  # (report takes no value of a flag)
 def test_a_value_that_starts_with_a_minus_and_a_digit_is_the_flags_value(files: Files, cmd: str) -> None:
-    """Every flag that takes one value takes ``-1``, ``-1:wind:3`` or ``-33.9,151.2,20`` as it (argparse alone
+    """Every flag that takes one value takes ``-1``, ``-1:wind:3``, ``-33.9,151.2,20``, ``-.5:gps:off``, ``-inf`` or
+    ``-nan:gps:off`` as it (argparse alone
     takes only a plain negative number so, and refused the rest as the flag's missing value: "expected one
     argument"): the flag's own check accepts or names it."""
     parser = _whole_parser()
     flags = [a.option_strings[0] for a in _commands()[cmd]._actions if a.option_strings and a.nargs is None]
     assert len(flags) >= 3
     for flag in flags:
-        for value in ("-1", "-1:wind:3", "-33.9,151.2,20"):
+        for value in ("-1", "-1:wind:3", "-33.9,151.2,20", "-.5:gps:off", "-inf", "-nan:gps:off"):
             try:
                 parser.parse_args([cmd, *map(str, BASE[cmd](files)), flag, value])
             except UsageError as exc:
@@ -705,6 +706,10 @@ def test_a_negative_event_time_and_a_southern_home_as_separate_words(files: File
     for at in (["--at", "-1:wind:3"], ["--at=-1:wind:3"]):
         line = _refused(capsys, ["sim", *BASE["sim"](files), *at], "--at")
         assert line == "bsst: --at -1:wind:3: t_s: must be in [0, 0.2) s (before the mission's end), got -1", line
+    line = _refused(capsys, ["sim", *BASE["sim"](files), "--at", "-.5:wind:3"], "--at")
+    assert line == "bsst: --at -.5:wind:3: t_s: must be in [0, 0.2) s (before the mission's end), got -0.5", line
+    line = _refused(capsys, ["sim", *BASE["sim"](files), "--at", "-inf:wind:3"], "--at")
+    assert line == "bsst: --at -inf:wind:3: t_s: must be finite, got -inf", line
     home = _whole_parser().parse_args(["vehicle", "--home", "-33.86,151.21,20"]).home
     assert home == (-33.86, 151.21, 20.0)
 

@@ -33,6 +33,7 @@ from bridge.autopilot.params import (
     change_param,
     parse_change,
     read_param,
+    value_problem,
 )
 from bridge.core.flight import prepare
 from bridge.loop import simulate
@@ -101,6 +102,15 @@ def test_int32_values_cross_the_wire_bytewise_and_cast_values_are_read_too():
         assert param_from_wire(wire, M.MAV_PARAM_TYPE_INT32) == v
         assert param_from_wire(float(v), M.MAV_PARAM_TYPE_INT32) == v  # a C cast (ArduPilot's way)
     assert param_to_wire(0.25, M.MAV_PARAM_TYPE_REAL32) == 0.25
+    for v in (-2**31, 2**31 - 1, 10_000_001):  # the extremes (-0.0's bytes, a NaN's) and a bound's neighbour
+        wire = param_to_wire(v, M.MAV_PARAM_TYPE_INT32)
+        assert param_from_wire(wire, M.MAV_PARAM_TYPE_INT32) == v
+        why = value_problem(BY_NAME["EKF2_NOAID_TOUT"], param_from_wire(wire, M.MAV_PARAM_TYPE_INT32))
+        assert why == f"EKF2_NOAID_TOUT: must be in [500000, 10000000] us, got {v}", why  # every digit (not 1e+07)
+    why = value_problem(BY_NAME["COM_DISARM_LAND"], 20.000001)  # (it said 'got 20' of [-1, 20])
+    assert why == "COM_DISARM_LAND: must be in [-1, 20] s, got 20.000001", why
+    assert value_problem(BY_NAME["COM_DISARM_LAND"], struct.unpack("<f", struct.pack("<f", 25.3))[0]).endswith(
+        "got 25.3")  # a float32 from the wire in its own digits
 
 
 def test_px4_modes_decode_and_others_are_named_when_refused():
@@ -393,9 +403,11 @@ def test_an_integer_parameter_flag_is_parsed_as_an_integer(tmp_path, name, value
 @pytest.mark.parametrize("args, says", [
     (["--param", "COM_OBL_ACT=1.5"], "--param 'COM_OBL_ACT=1.5': COM_OBL_ACT: an INT32, expected an integer"),
     (["--param", "MAV_SYS_ID=x"], "--param 'MAV_SYS_ID=x': MAV_SYS_ID: an INT32, expected an integer"),
+    (["--param", "COM_DISARM_LAND=x"], "--param 'COM_DISARM_LAND=x': COM_DISARM_LAND: a REAL32, expected a number, "
+                                       "got 'x'"),
     (["--param", "COM_OBL_ACT=1", "--param", "COM_OBL_RC_ACT=7"],
      "--param COM_OBL_RC_ACT=7 and --param COM_OBL_ACT=1 set one setting, [failsafe] action, two ways"),
-], ids=["fraction", "word", "clash"])
+], ids=["fraction", "word", "real-word", "clash"])
 def test_a_bad_parameter_flag_is_named_as_the_flag_not_the_mission(cmd, args, says):
     mission = [] if cmd == "vehicle" else ["missions/sine.toml"]
     r = _bsst(cmd, *mission, *args)  # refused before a port is bound

@@ -274,3 +274,31 @@ def test_the_process_pools_workers_are_forked_with_the_compiled_kernels_loaded_w
     assert r.returncode == 0, r.stderr[-3000:]
     out = json.loads(r.stdout.strip().splitlines()[-1])
     assert out == {"outcomes": ["completed"] * cells, "kernels_loaded": loaded}, out
+
+
+FORK_SERVER_SIGINT = """
+import multiprocessing as mp, os, signal, sys
+mp.get_context("forkserver").set_forkserver_preload(["sigint_probe"])
+from bridge.sweep.executors import _start_fork_server
+_start_fork_server()
+print(signal.getsignal(signal.SIGINT) is signal.default_int_handler)
+from tests.waiting import wait_for  # the fork server ends with this process: wait for its preload's word
+wait_for(lambda: os.path.exists(sys.argv[2]) and open(sys.argv[2]).read() != "", 60.0, "the fork server's preload")
+print(open(sys.argv[2]).read())
+"""
+
+
+def test_the_fork_server_ignores_ctrl_c_from_its_birth(tmp_path: Path) -> None:
+    """The sweep's fork server is started with SIGINT ignored, so a Ctrl-C while it imports its preload list (before
+    CPython's own SIG_IGN, after it) no longer kills it with a traceback of its own: a module it preloads finds
+    SIGINT ignored (its SigIgn), and the sweep's process has its own handler back."""
+    seen = tmp_path / "sigign"
+    (tmp_path / "sigint_probe.py").write_text(
+        "import os, signal\n"
+        "line = next(x for x in open('/proc/self/status') if x.startswith('SigIgn'))\n"
+        f"open({str(seen)!r}, 'w').write(str(bool(int(line.split()[1], 16) & (1 << (signal.SIGINT - 1)))))\n")
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}  # (the fork server's path too)
+    env["PYTHONPATH"] = os.pathsep.join([str(tmp_path), *filter(None, [os.environ.get("PYTHONPATH")])])
+    r = subprocess.run([sys.executable, "-c", FORK_SERVER_SIGINT, str(tmp_path), str(seen)], capture_output=True,
+                       text=True, timeout=120, env=env, cwd=Path(__file__).parent.parent)
+    assert r.returncode == 0 and r.stdout.split() == ["True", "True"], (r.stdout, r.stderr)

@@ -256,13 +256,25 @@ def value_problem(spec: ParamSpec, value: float) -> str | None:
     if not math.isfinite(value):
         return f"{spec.name}: must be finite, got {value}"
     if spec.kind == INT32 and value != int(value):
-        return f"{spec.name}: an INT32, got {value:g}"
+        return f"{spec.name}: an INT32, got {_shown(value)}"
     if spec.choices is not None and int(value) not in spec.choices:
         allowed = ", ".join(f"{v} {a}" for v, a in spec.choices.items())
-        return f"{spec.name}: {value:g} is not one the vehicle flies; allowed: {allowed}"
+        return f"{spec.name}: {_shown(value)} is not one the vehicle flies; allowed: {allowed}"
     if not in_range(value, spec.lo, spec.hi):
-        return f"{spec.name}: {_range_text(spec)}, got {value:g}"
+        return f"{spec.name}: {_range_text(spec)}, got {_shown(value)}"
     return None
+
+
+def _shown(value: float) -> str:
+    """``value`` in a refusal: an integer whole, else in as few digits as tell it apart in float32 (a bound's
+    neighbour as 10000001 or 20.000001, never 1e+07 or 20; a wire value as 25.3, not 25.2999992371)."""
+    if isinstance(value, int) or (math.isfinite(value) and value == int(value) and abs(value) < 1e16):
+        return str(int(value))
+    for digits in (6, 9):
+        text = f"{value:.{digits}g}"
+        if _float32(float(text)) == _float32(value):
+            return text
+    return f"{value:.17g}"
 
 
 def _range_text(spec: ParamSpec) -> str:
@@ -363,8 +375,8 @@ def parse_assignment(text: str) -> tuple[str, float]:
     try:
         return name, (int(value) if spec.kind == INT32 else float(value))
     except ValueError:
-        what = "an integer" if spec.kind == INT32 else "a number"
-        raise ConfigError(f"{name}: an {spec.kind}, expected {what}, got {value.strip()!r}") from None
+        what = "an INT32, expected an integer" if spec.kind == INT32 else "a REAL32, expected a number"
+        raise ConfigError(f"{name}: {what}, got {value.strip()!r}") from None
 
 
 @dataclass(frozen=True, order=True)

@@ -34,10 +34,11 @@ FLAG_CUTOFF = 0.75  # difflib's ratio from which a known flag is suggested (--de
 UNRECOGNIZED_IN = "_bsst_unrecognized_in"  # on the namespace: the (sub-)parser that met an unknown flag first
 
 
-# a word that starts with a minus and a digit is a value, never a flag (no flag of bsst's is one): argparse takes only
-# a plain negative number so, and read ``--at -1:wind:3``, ``--home -33.9,151.2,20`` or ``--blackout -1:2`` as a
-# flag with its value missing ("expected one argument") where the flag's own check names what is wrong, or takes it
-VALUE_NOT_FLAG = re.compile(r"^-\d")
+# a word that starts with a minus and a number (a digit, a point and a digit, inf or nan) is a value, never a flag (no
+# flag of bsst's is one): argparse takes only a plain negative number so, and read ``--at -1:wind:3``, ``--at
+# -.5:gps:off``, ``--home -33.9,151.2,20`` or ``--blackout -1:2`` as a flag with its value missing ("expected one
+# argument") where the flag's own check names what is wrong, or takes it
+VALUE_NOT_FLAG = re.compile(r"^-(\.?\d|(inf|nan)([:,=]|$))", re.IGNORECASE)
 
 
 class _Parser(argparse.ArgumentParser):

@@ -141,8 +141,8 @@ def param_from_wire(value: float, kind: int) -> float:
     a denormal or the least normal floats, never whole)."""
     if kind != mavlink.MAV_PARAM_TYPE_INT32:
         return value
-    if math.isfinite(value) and value == int(value) and (value == 0 or abs(value) >= 1):
-        return float(value)
+    if math.isfinite(value) and value == int(value) and (abs(value) >= 1 or math.copysign(1.0, value) > 0):
+        return float(value)  # (-0.0 is bytewise: INT32's -2147483648, 0x80000000)
     return float(struct.unpack("<i", struct.pack("<f", value))[0])
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 import ast
 import inspect
 import multiprocessing as mp
+import multiprocessing.forkserver as forkserver
 import os
 import select
 import signal
@@ -192,7 +193,24 @@ def _pool(jobs: int, cells: int = 0, mode: str = "offline") -> ProcessPoolExecut
     if mode == "offline" and cells >= WARM_CELLS and kernels_choice() == "auto":
         preload.append("bridge.core.kernelwarm")
     ctx.set_forkserver_preload(preload)  # (no effect once the fork server runs: the first pool's list stays)
+    _start_fork_server()
     return ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_worker_init, initargs=(os.getpid(),))
+
+
+def _start_fork_server() -> None:
+    """Start multiprocessing's fork server, if it is not running, with SIGINT ignored from its birth (a disposition
+    its exec keeps): CPython's ignores SIGINT itself only once it has imported its preload list (about a second
+    for a sweep's), and a Ctrl-C to the sweep's process group before that killed it with a traceback of its own
+    beside the sweep's "interrupted". Its workers ignore SIGINT anyway (:func:`_worker_init`). A Ctrl-C in the
+    few milliseconds this process ignores it for the start is not taken (press it again)."""
+    if threading.current_thread() is not threading.main_thread():
+        forkserver.ensure_running()
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        forkserver.ensure_running()
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def run_local(mission: Mission, todo: Sequence[Cell], mode: str, jobs: int, report: Report) -> None:

@@ -161,8 +161,8 @@ class Actions:
             self.reject("bad_number")
             return mavlink.MAV_RESULT_DENIED, "DO_FLIGHTTERMINATION: param1 must be 0 (cancel) or 1 (terminate)"
         if p1 > 1.5:
-            return (mavlink.MAV_RESULT_UNSUPPORTED, "DO_FLIGHTTERMINATION: param1 2 (lockdown, PX4's termination "
-                                                    "test) is not modelled; 1 terminates")
+            return (mavlink.MAV_RESULT_UNSUPPORTED, f"DO_FLIGHTTERMINATION: param1 {p1:g} (over 1.5: lockdown, PX4's "
+                                                    "termination test) is not modelled; 1 terminates")
         if p1 <= 0.5:
             return (mavlink.MAV_RESULT_DENIED, "DO_FLIGHTTERMINATION: the flight was terminated; it is not undone "
                                                "(PX4 leaves TERMINATION only by a reboot)") if self.terminated else \
