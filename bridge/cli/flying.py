@@ -204,10 +204,10 @@ def event_lines(events: list[dict[str, Any]]) -> list[str]:
     """A run's events as its printed summary lists them: all up to :data:`EVENTS_SHOWN`; beyond, the first 6 and
     the last 10 (a session opens with five start-up events, and the end is what a user looks for) and a line
     saying how many more ``summary.json`` holds."""
-    if len(events) > EVENTS_SHOWN:
-        events = [*events[:6], {"more": len(events) - EVENTS_SHOWN}, *events[6 - EVENTS_SHOWN:]]
-    return [f"event t={e['t']:.3f} {e['kind']}: {e['text']}\n" if "more" not in e else
-            f"event … {e['more']} more (summary.json)\n" for e in events]
+    lines = [f"event t={e['t']:.3f} {e['kind']}: {e['text']}\n" for e in events]
+    if len(lines) <= EVENTS_SHOWN:
+        return lines
+    return [*lines[:6], f"event … {len(lines) - EVENTS_SHOWN} more (summary.json)\n", *lines[6 - EVENTS_SHOWN:]]
 
 
 def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
