@@ -1,8 +1,9 @@
 """Covers bridge.core.interrupt: Ctrl-C while the main thread waits on a pool's futures.
 
 Each case is a real Python child sent a real SIGINT: the interrupt must come out as KeyboardInterrupt at
-the wait's return, never inside concurrent.futures' locks (where it left `bsst sweep` hanging), and a second
-Ctrl-C must interrupt at once.
+the wait's return, never inside concurrent.futures' locks (where it left `bsst sweep` hanging), even when the
+signal lands on another thread while the main thread sleeps on a lock (where it was taken only once the lock
+was released); the second Ctrl-C is counted, and a third interrupts at once.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import threading
 
 import pytest
 
-from bridge.core.interrupt import interrupt_future
+from bridge.core.interrupt import sigint_futures
 from tests.sitlkit import Proc
 
 pytestmark = pytest.mark.process
@@ -24,43 +25,77 @@ pytestmark = pytest.mark.process
 # held, and the pool's shutdown then waits for ever on its thread.
 MANY_WAITS = """
     from concurrent.futures import ThreadPoolExecutor
-    from bridge.core.interrupt import interrupt_future, wait_or_interrupt
+    from bridge.core.interrupt import sigint_futures, wait_or_interrupt
 
     def tick(i):
         return i
 
     try:
-        with interrupt_future() as interrupted, ThreadPoolExecutor(1) as pool:
+        with sigint_futures() as sigint, ThreadPoolExecutor(1) as pool:
             pending = {pool.submit(tick, i) for i in range(2000)}
             print("ready", flush=True)
             rounds = 0
             while True:
                 rounds += 1
-                done = wait_or_interrupt(pending, interrupted)
+                done = wait_or_interrupt(pending, sigint.first)
                 pending -= done
                 pending |= {pool.submit(tick, i) for i in range(len(done))}
     except KeyboardInterrupt:
         print("interrupted after", rounds, "waits", flush=True)
 """
 
-TWICE = """
+THRICE = """
     import signal, threading
     from concurrent.futures import Future
-    from bridge.core.interrupt import interrupt_future, wait_or_interrupt
+    from bridge.core.interrupt import sigint_futures, wait_or_interrupt
 
-    with interrupt_future() as interrupted:
+    with sigint_futures() as sigint:
         print("ready", flush=True)
         try:
-            wait_or_interrupt([Future()], interrupted)
+            wait_or_interrupt([Future()], sigint.first)
         except KeyboardInterrupt:
             print("first at the wait's return", flush=True)
+        print("second:", sigint.second.result(timeout=120), flush=True)
         try:
             print("waiting again", flush=True)
-            threading.Event().wait(120)  # a second Ctrl-C: the previous handler, at once
-            print("second never came", flush=True)
+            for _ in range(1200):
+                threading.Event().wait(0.1)  # a third Ctrl-C: the previous handler, at once
+            print("third never came", flush=True)
         except KeyboardInterrupt:
-            print("second at once", flush=True)
+            print("third at once", flush=True)
     print("restored", signal.getsignal(signal.SIGINT) is signal.default_int_handler, flush=True)
+"""
+
+# SIGINT sent to a thread other than the main one while the main thread sleeps on a lock: the C handler runs
+# there, and Python's handler would wait for the main thread's next bytecode, after the lock (here: never).
+# A SIGINT to the process that lands just before the main thread blocks meets the same fate.
+ELSEWHERE = """
+    import os, signal, threading, time
+    from concurrent.futures import Future
+    from bridge.core.interrupt import sigint_futures, wait_or_interrupt
+
+    def main_asleep():
+        tid = threading.main_thread().native_id
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            with open(f"/proc/self/task/{tid}/stat") as f:
+                if f.read().rpartition(")")[2].split()[0] == "S":
+                    return True
+            time.sleep(0.01)
+        return False
+
+    def kill_here():
+        print("main asleep", main_asleep(), flush=True)
+        signal.pthread_kill(threading.get_ident(), signal.SIGINT)
+        time.sleep(120)  # (a daemon: the process ends before this)
+
+    with sigint_futures() as sigint:
+        print("ready", flush=True)
+        threading.Thread(target=kill_here, daemon=True).start()
+        try:
+            wait_or_interrupt([Future()], sigint.first)
+        except KeyboardInterrupt:
+            print("interrupted at the wait's return", flush=True)
 """
 
 
@@ -81,17 +116,29 @@ def test_ctrl_c_among_thousands_of_waits_ends_the_pool(attempt: int) -> None:
         proc.stop()
 
 
-def test_a_second_ctrl_c_interrupts_at_once_and_the_handler_comes_back() -> None:
-    proc = _child(TWICE)
+def test_the_second_ctrl_c_is_counted_and_a_third_interrupts_at_once() -> None:
+    proc = _child(THRICE)
     try:
         proc.p.send_signal(signal.SIGINT)
         proc.wait_line(lambda s: s == "first at the wait's return", timeout=60)
+        proc.p.send_signal(signal.SIGINT)
+        proc.wait_line(lambda s: s == f"second: {int(signal.SIGINT)}", timeout=60)
         proc.wait_line(lambda s: s == "waiting again", timeout=60)
         proc.p.send_signal(signal.SIGINT)
-        proc.wait_line(lambda s: s == "second at once", timeout=60)
+        proc.wait_line(lambda s: s == "third at once", timeout=60)
         proc.wait_line(lambda s: s.startswith("restored"), timeout=60)
         assert proc.p.wait(timeout=60) == 0
         assert "restored True" in proc.lines
+    finally:
+        proc.stop()
+
+
+def test_a_sigint_landing_on_another_thread_wakes_the_wait() -> None:
+    proc = _child(ELSEWHERE)
+    try:
+        proc.wait_line(lambda s: s == "interrupted at the wait's return", timeout=60)
+        assert proc.p.wait(timeout=60) == 0
+        assert "main asleep True" in proc.lines
     finally:
         proc.stop()
 
@@ -101,8 +148,8 @@ def test_outside_the_main_thread_nothing_is_installed() -> None:
     seen: list[object] = []
 
     def in_a_thread() -> None:
-        with interrupt_future() as interrupted:
-            seen.extend([interrupted.done(), signal.getsignal(signal.SIGINT)])
+        with sigint_futures() as sigint:
+            seen.extend([sigint.first.done(), signal.getsignal(signal.SIGINT)])
 
     t = threading.Thread(target=in_a_thread)
     t.start()
@@ -113,15 +160,23 @@ def test_outside_the_main_thread_nothing_is_installed() -> None:
 def test_where_sigint_is_ignored_it_stays_ignored() -> None:
     before = signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
-        with interrupt_future() as interrupted:
+        with sigint_futures() as sigint:
             assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
-            assert not interrupted.done()
+            assert not sigint.first.done()
     finally:
         signal.signal(signal.SIGINT, before)
 
 
-def test_in_the_main_thread_the_handler_is_put_back() -> None:
-    before = signal.getsignal(signal.SIGINT)
-    with interrupt_future():
+def _wakeup_fd() -> int:
+    fd = signal.set_wakeup_fd(-1)
+    signal.set_wakeup_fd(fd)
+    return fd
+
+
+def test_in_the_main_thread_the_handler_and_the_wakeup_fd_are_put_back() -> None:
+    before, fd_before = signal.getsignal(signal.SIGINT), _wakeup_fd()
+    with sigint_futures():
         assert signal.getsignal(signal.SIGINT) is not before
+        assert _wakeup_fd() not in (-1, fd_before)
     assert signal.getsignal(signal.SIGINT) is before
+    assert _wakeup_fd() == fd_before

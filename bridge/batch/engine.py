@@ -45,7 +45,7 @@ from bridge.batch.flight import Cells, Constants, batch_arrays, fly_cells
 from bridge.batch.metrics import Metrics, measured_rows
 from bridge.batch.weather import BATCH_EVENT_KINDS, turbulent
 from bridge.core.flight import Flight, Overrides, prepare
-from bridge.core.interrupt import interrupt_future, wait_or_interrupt
+from bridge.core.interrupt import sigint_futures, wait_or_interrupt
 from bridge.link.model import link_from_table, merge_link_tables
 from bridge.link.plan import Clocks, plan_links
 from bridge.record.metrics import RMS_FROM_S
@@ -293,11 +293,11 @@ def _fly_blocks(c: Constants, a: Cells, steps: int, jobs: int, report: Callable[
             report(done, n)
         return
     # Ctrl-C raises between waits, never inside the pool's locks (bridge.core.interrupt)
-    with interrupt_future() as interrupted, ThreadPoolExecutor(min(jobs, len(blocks))) as pool:
+    with sigint_futures() as sigint, ThreadPoolExecutor(min(jobs, len(blocks))) as pool:
         running = {pool.submit(fly_cells, lo, hi, 0, steps, c, a): hi - lo for lo, hi in blocks}
         try:
             while running:
-                for f in wait_or_interrupt(running, interrupted):
+                for f in wait_or_interrupt(running, sigint.first):
                     f.result()
                     done += running.pop(f)
                     report(done, n)

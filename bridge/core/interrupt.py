@@ -1,20 +1,29 @@
-"""Ctrl-C at a safe point: SIGINT as a future that a wait on a pool's futures includes.
+"""Ctrl-C at a safe point: the first and second SIGINT as futures that a wait on a pool's futures includes.
 
-In:  SIGINT, while :func:`interrupt_future` is entered in the main thread
-Out: a :class:`~concurrent.futures.Future` that completes (its result: the signal number) when SIGINT arrives;
-     :func:`wait_or_interrupt`, concurrent.futures' ``wait`` that raises KeyboardInterrupt once it has returned
+In:  SIGINT, while :func:`sigint_futures` is entered in the main thread
+Out: :class:`Interrupts`: a :class:`~concurrent.futures.Future` completed (its result: the signal number) at the
+     first SIGINT, another at the second; :func:`wait_or_interrupt`, concurrent.futures' ``wait`` that raises
+     KeyboardInterrupt once it has returned
 
-Why: Python raises KeyboardInterrupt between any two bytecodes of the main thread, so also inside
-concurrent.futures' ``wait()`` and ``as_completed()`` while they take the futures' locks one by one
-(``_AcquireFutures``, not exception-safe): the locks taken so far stay held, and the pool's shutdown then
-waits for ever on a worker (or the pool's manager thread) that needs one. A `bsst sweep --jobs 1` stopped with
-Ctrl-C just after a progress line hung 3 times in 40 that way with four busy loops on the two cores (the
-manager thread in ``Future.cancel``, the main thread joining it). Here the handler only writes a byte to a
-pipe, and a thread completes the future: the waiting code wakes at once and raises where no lock is held.
+Why:
+- Python raises KeyboardInterrupt between any two bytecodes of the main thread, so also inside
+  concurrent.futures' ``wait()`` while it takes the futures' locks one by one (``_AcquireFutures``, not
+  exception-safe): the locks taken so far stay held, and the pool's shutdown then waits for ever on a worker
+  that needs one. A `bsst sweep --jobs 1` stopped with Ctrl-C just after a progress line hung 3 times in 40
+  that way under load.
+- Python runs its own handler only when the main thread next runs bytecode. A SIGINT that lands just before
+  the main thread blocks on a lock (after its last bytecode, before the futex) is handled by the C handler,
+  and the Python handler waits until the lock is released: a Ctrl-C while a sweep's first cell was starting
+  was taken only when that cell ended, 27–42 s later, 5 times in 60 under load.
+- So a thread here reads the bytes that CPython's C handler writes to the wakeup fd
+  (:func:`signal.set_wakeup_fd`) at the very signal, whichever thread it lands on, and completes the futures:
+  the waiting code wakes at once and raises where no lock is held.
+- The two futures live for the whole block, so the second Ctrl-C is counted wherever it lands (it used to raise
+  KeyboardInterrupt anywhere in the code between the first's handling and the wait for the second). From the
+  second on, the previous handler is back: a third Ctrl-C interrupts at once, as Python would.
 
-The first SIGINT puts the previous handler back, so a second Ctrl-C interrupts at once, as before (a user who
-will not wait for the cells in flight). Outside the main thread, or where SIGINT is ignored (a sweep's
-workers), the future never completes and nothing is installed.
+Outside the main thread, or where SIGINT is ignored (a sweep's workers), nothing is installed and the futures
+never complete.
 """
 
 from __future__ import annotations
@@ -25,41 +34,66 @@ import threading
 from collections.abc import Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, wait
 from contextlib import contextmanager
+from dataclasses import dataclass, field
 from typing import Any
 
-_SIGINT = bytes([signal.SIGINT])
-_STOP = b"\0"
+_STOP = b"\0"  # not a signal number: ends the reading thread
+
+
+@dataclass(frozen=True)
+class Interrupts:
+    """The first and the second SIGINT of a :func:`sigint_futures` block."""
+
+    first: Future = field(default_factory=Future)
+    second: Future = field(default_factory=Future)
 
 
 @contextmanager
-def interrupt_future() -> Iterator[Future]:
-    """Within the block, SIGINT completes the yielded future instead of raising KeyboardInterrupt."""
-    fired: Future = Future()
+def sigint_futures() -> Iterator[Interrupts]:
+    """Within the block, SIGINT completes ``first``, then ``second``, instead of raising KeyboardInterrupt; a
+    third raises it (the previous handler is back from the second on)."""
+    got = Interrupts()
     previous = signal.getsignal(signal.SIGINT)
     if threading.current_thread() is not threading.main_thread() or previous is signal.SIG_IGN:
-        yield fired
+        yield got
         return
-    if previous is None:  # installed from C: Python's own is what a second Ctrl-C should meet
+    if previous is None:  # installed from C: Python's own is what a third Ctrl-C should meet
         previous = signal.default_int_handler
     read_end, write_end = os.pipe()
+    os.set_blocking(write_end, False)  # set_wakeup_fd's condition (the C handler must never block)
+    handled = 0
 
-    def on_sigint(signum: int, frame: Any) -> None:
-        signal.signal(signal.SIGINT, previous)
-        os.write(write_end, _SIGINT)
+    def on_sigint(signum: int, frame: Any) -> None:  # runs late (see Why): the futures do not wait for it
+        nonlocal handled
+        handled += 1  # (two SIGINTs before it runs are one call: the reader's count decides too)
+        if handled >= 2 or got.second.done():
+            signal.signal(signal.SIGINT, previous)
 
-    def watch() -> None:
-        if os.read(read_end, 1) == _SIGINT:
-            fired.set_result(signal.SIGINT)
+    def read() -> None:
+        pending = [got.first, got.second]
+        while pending:
+            byte = os.read(read_end, 1)
+            if byte == _STOP or not byte:
+                return
+            if byte[0] == signal.SIGINT:
+                pending.pop(0).set_result(signal.SIGINT)
 
-    watcher = threading.Thread(target=watch, name="sigint-watch", daemon=True)
-    watcher.start()
-    signal.signal(signal.SIGINT, on_sigint)
-    try:
-        yield fired
+    reader = threading.Thread(target=read, name="sigint-watch", daemon=True)
+    reader.start()
+    previous_fd = None
+    try:  # the wakeup fd first: a SIGINT between the two is counted (and raises, as before the block)
+        previous_fd = signal.set_wakeup_fd(write_end, warn_on_full_buffer=False)
+        signal.signal(signal.SIGINT, on_sigint)
+        yield got
     finally:
+        if previous_fd is not None:
+            signal.set_wakeup_fd(previous_fd)
         signal.signal(signal.SIGINT, previous)
-        os.write(write_end, _STOP)  # ends the watcher if no SIGINT came
-        watcher.join()
+        try:
+            os.write(write_end, _STOP)  # ends the reader if it still reads
+        except BlockingIOError:  # the pipe is full: the reader has stopped reading (both futures done)
+            pass
+        reader.join()
         os.close(read_end)
         os.close(write_end)
 
@@ -73,4 +107,4 @@ def wait_or_interrupt(futures: Iterable[Future], interrupted: Future) -> set[Fut
     return done
 
 
-__all__ = ["interrupt_future", "wait_or_interrupt"]
+__all__ = ["Interrupts", "sigint_futures", "wait_or_interrupt"]

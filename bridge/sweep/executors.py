@@ -29,7 +29,7 @@ from types import FrameType
 from typing import Any
 
 from bridge.autopilot.compiling import announce_compiling
-from bridge.core.interrupt import interrupt_future, wait_or_interrupt
+from bridge.core.interrupt import Interrupts, sigint_futures, wait_or_interrupt
 from bridge.core.scalar import kernels_choice
 from bridge.loop import fly
 from bridge.nodes.process import die_with_parent
@@ -223,25 +223,25 @@ def run_local(mission: Mission, todo: Sequence[Cell], mode: str, jobs: int, repo
     check_main_guard()
     queue: deque[Cell] = deque(todo)
     suspects: deque[Cell] = deque()
-    with interrupt_future() as interrupted:  # Ctrl-C raises here, not inside the pool's locks
+    with sigint_futures() as sigint:  # Ctrl-C raises here, not inside the pool's locks
         while queue or suspects:
             if suspects:
                 cell = suspects.popleft()
                 p = _pool(1)
                 try:
-                    (f,) = wait_or_interrupt([p.submit(run_cell, mission, cell, mode)], interrupted)
+                    (f,) = wait_or_interrupt([p.submit(run_cell, mission, cell, mode)], sigint.first)
                     row = f.result()
                 except BrokenProcessPool:
                     row = error_row(cell, "worker process died")
                 finally:
-                    _shut_down(p, interrupted)
+                    _shut_down(p, sigint)
                 report(row)
                 continue
-            _fly_in_pool(mission, queue, suspects, mode, jobs, report, interrupted)
+            _fly_in_pool(mission, queue, suspects, mode, jobs, report, sigint)
 
 
 def _fly_in_pool(mission: Mission, queue: deque[Cell], suspects: deque[Cell], mode: str, jobs: int,
-                 report: Report, interrupted: Future) -> None:
+                 report: Report, sigint: Interrupts) -> None:
     """Fly ``queue``'s cells in one pool of ``jobs`` workers until it is empty or the pool breaks (the cells
     in flight then go to ``suspects``)."""
     pool = _pool(jobs, len(queue), mode)
@@ -252,7 +252,7 @@ def _fly_in_pool(mission: Mission, queue: deque[Cell], suspects: deque[Cell], mo
                 c = queue.popleft()
                 inflight[pool.submit(run_cell, mission, c, mode)] = c
             broken = False
-            for f in wait_or_interrupt(inflight, interrupted):
+            for f in wait_or_interrupt(inflight, sigint.first):
                 c = inflight.pop(f)
                 try:
                     report(f.result())
@@ -261,18 +261,19 @@ def _fly_in_pool(mission: Mission, queue: deque[Cell], suspects: deque[Cell], mo
                     broken = True
             if broken:
                 while running := [f for f in inflight if not f.done()]:
-                    wait_or_interrupt(running, interrupted)
+                    wait_or_interrupt(running, sigint.first)
                 suspects.extend(inflight.values())
                 return
     finally:
-        _shut_down(pool, interrupted)
+        _shut_down(pool, sigint)
 
 
-def _shut_down(pool: ProcessPoolExecutor, stopped: Future) -> None:
-    """Shut ``pool`` down once the cells in flight have ended (after a Ctrl-C, ``stopped`` done, they are not
-    recorded: their workers ignore it and finish them). A Ctrl-C meanwhile (the second) ends the workers at once
-    (SIGTERM: an offline cell dies, a lockstep cell's session stops its children) rather than wait for them."""
-    if stopped.done():
+def _shut_down(pool: ProcessPoolExecutor, sigint: Interrupts) -> None:
+    """Shut ``pool`` down once the cells in flight have ended (after a Ctrl-C, ``sigint.first`` done, they are not
+    recorded: their workers ignore it and finish them). The second Ctrl-C (``sigint.second``, before or during this
+    wait) ends the workers at once (SIGTERM: an offline cell dies, a lockstep cell's session stops its children)
+    rather than wait for them."""
+    if sigint.first.done():
         print("sweep: interrupted; the cells in flight end first (Ctrl-C again stops them now)", file=sys.stderr,
               flush=True)
     ended: Future = Future()
@@ -281,14 +282,13 @@ def _shut_down(pool: ProcessPoolExecutor, stopped: Future) -> None:
         pool.shutdown(wait=True, cancel_futures=True)
         ended.set_result(None)
 
-    with interrupt_future() as interrupted:
-        closer = threading.Thread(target=shut, name="pool-shutdown", daemon=True)
-        closer.start()
-        wait([ended, interrupted], return_when=FIRST_COMPLETED)
-        if interrupted.done():
-            for worker in mp.active_children():  # this process's only children: the pool's workers
-                worker.terminate()
-        closer.join()
+    closer = threading.Thread(target=shut, name="pool-shutdown", daemon=True)
+    closer.start()
+    wait([ended, sigint.second], return_when=FIRST_COMPLETED)
+    if sigint.second.done():
+        for worker in mp.active_children():  # this process's only children: the pool's workers
+            worker.terminate()
+    closer.join()
 
 
 def run_dask(client: Any, mission: Mission, todo: Sequence[Cell], mode: str, report: Report) -> None:
