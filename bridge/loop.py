@@ -251,7 +251,8 @@ def land_failsafe(flight: Flight, vehicle: SimVehicle, shown: list[dict[str, Any
 def _fly_alone(flight: Flight, vehicle: SimVehicle, mode: str, shown: list[dict[str, Any]],
                n0: int) -> tuple[list[tuple[float, float, float]], str | None]:
     """Step the vehicle alone (nothing from the controller; the mission's link is done with, its statistics the
-    mission's) while it is armed in ``mode``, until it disarms on the ground, bounded by the descent at the
+    mission's) while it is armed in ``mode`` (or a failsafe's, taken meanwhile), until it disarms on the ground,
+    bounded by the descent at the
     failsafe's rate, COM_DISARM_LAND and 10 s, its plant judged after each period; the events since the
     ``n0``-th added to ``shown``. Returns the rows (t s, z m, vz m/s) and the plant's verdict (None: none)."""
     m, plant = flight.mission, vehicle.plant
@@ -260,7 +261,7 @@ def _fly_alone(flight: Flight, vehicle: SimVehicle, mode: str, shown: list[dict[
     bound = k + math.ceil((10.0 + flight.failsafe.time_to_land_s(plant.state[4] - m.start[2])
                            + vehicle.land_disarm.wait_s()) * rate)
     verdict = None
-    while verdict is None and vehicle.armed and vehicle.mode == mode and k < bound:
+    while verdict is None and vehicle.armed and vehicle.mode in (mode, FAILSAFE) and k < bound:
         X = plant.state
         vehicle.advance()  # the vehicle alone: what the up link still holds stays in flight (its statistics too)
         verdict = vehicle.plant_verdict()

@@ -167,3 +167,48 @@ def test_the_product_fault_event_fails_safe_in_lockstep_as_offline(tmp_path):
     rows = [(tmp_path / c / "trace.csv").read_text().splitlines() for c in ("sim", "sitl")]
     keep = rows[0][0].split(",").index("z") + 1  # t and the true state's columns up to z
     assert [r.split(",")[:keep] for r in rows[0]] == [r.split(",")[:keep] for r in rows[1]]
+
+
+def _vehicle_events(summary: dict, kinds: tuple[str, ...]) -> list[tuple[float, str, str]]:
+    return [(e["t"], e["kind"], e["text"].split(" [by ")[0]) for e in summary["events"] if e["kind"] in kinds
+            and e.get("source", "vehicle") == "vehicle"]
+
+
+def test_a_gps_lost_in_the_end_landing_lands_in_descend_in_lockstep_as_offline(tmp_path):
+    """``--at 26:gps:off`` on the sine: the position is lost at 31.124 s, in the mission's end landing. Offline flies
+    PX4's Descend on to the ground (it used to stop there, armed in the air, and call it completed), and a lockstep
+    session flies the same steps on the step clock (it used to leave lockstep at the disarm, and its policies read
+    the failsafe as a late one and the descent as a jump of the mission's time): touchdown 34.544 s, disarm 2 s
+    later, the same ``end`` block, every policy held, outcome completed (the mission was), exit 0, in both."""
+    summaries = []
+    for command in ("sim", "sitl"):
+        out = tmp_path / command
+        with instance_slot() as n:
+            extra = ("--instance", str(n)) if command == "sitl" else ()
+            r = run_bsst(command, ROOT / "missions" / "sine.toml", "--sensors", "gnss", "--estimator", "ekf", "--at",
+                         "26:gps:off", "--out", str(out), "--no-plots", *extra, env=ENV, timeout=300)
+        assert r.returncode == 0 and (out / "summary.json").exists(), f"bsst {command}: {r.stderr[-2000:]}"
+        summaries.append(json.loads((out / "summary.json").read_text()))
+    offline, sitl = summaries
+    kinds = ("position", "failsafe", "landed", "disarmed")
+    assert _vehicle_events(offline, kinds) == _vehicle_events(sitl, kinds)
+    assert [(t, k) for t, k, _ in _vehicle_events(offline, kinds)] == [
+        (31.124, "position"), (31.124, "failsafe"), (34.544, "landed"), (36.544, "disarmed")]
+    assert offline["outcome"] == sitl["outcome"] == "completed"
+    assert offline["end"] == sitl["end"] and offline["end"]["disarmed"] and offline["end"]["landing_s"] == 6.544
+    assert all(v["ok"] for v in sitl["policies"]) and all(v["ok"] for v in offline["policies"]), sitl["policies"]
+    assert not [e for e in sitl["events"] if e["kind"] == "lockstep"], "the session left lockstep"
+
+
+def test_a_gps_lost_after_the_touchdown_keeps_the_auto_disarm_wait(tmp_path):
+    """``--at 29.99999:gps:off``: the end landing touches down at 34.372 s and the position is lost at 35.124 s, on
+    the ground. PX4's failsafe switches to Descend, but its auto-disarm counts from the land detector: the disarm
+    comes at 36.372 s, COM_DISARM_LAND after the touchdown (it used to come at once, with the failsafe)."""
+    out = tmp_path / "sim"
+    r = run_bsst("sim", ROOT / "missions" / "sine.toml", "--sensors", "gnss", "--estimator", "ekf", "--at",
+                 "29.99999:gps:off", "--out", str(out), "--no-plots", env=ENV, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    summary = json.loads((out / "summary.json").read_text())
+    assert [(t, k) for t, k, _ in _vehicle_events(summary, ("landed", "failsafe", "disarmed"))] == [
+        (34.372, "landed"), (35.124, "failsafe"), (36.372, "disarmed")]
+    assert summary["outcome"] == "completed" and summary["end"]["landing_s"] == 6.372

@@ -34,6 +34,11 @@ class LandDisarm:
             self.target, self.since = target, t
         return self.delay_s > 0.0 and t - self.since >= self.delay_s - 1e-9
 
+    def waits_under(self, target: Any) -> bool:
+        """Whether a landed vehicle waits out COM_DISARM_LAND under ``target``. A failsafe that lands it changes its
+        mode, not this wait (PX4's auto-disarm counts from the land detector's ``landed``, whatever the mode)."""
+        return self.since is not None and target is self.target
+
     def landed_text(self, X: tuple[float, ...]) -> str:
         """The ``landed`` event's text at state X (paper frame, m): where, and when it disarms."""
         when = f"disarms in COM_DISARM_LAND = {self.delay_s:g} s" if self.delay_s > 0 else \

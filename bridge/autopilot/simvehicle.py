@@ -353,12 +353,15 @@ class SimVehicle:
         p = self.plant
         self.mode = FAILSAFE
         self.event("failsafe", text)
-        if p.on_ground or action == "disarm":  # nothing to fly: motors off now, in this control step
+        landed = p.on_ground and action in ("descend", "land") and self.land_disarm.waits_under(self.onboard.target)
+        if (p.on_ground and not landed) or action == "disarm":  # nothing to fly: motors off now, in this control step
             self.mode = LANDED
             self.disarm("landed: disarmed" if p.on_ground else stopped)
             return
         self.fly_onboard(failsafe_target(replace(self.failsafe, action=action), self.published(), self.home, self.rtl,
                                          self.rally), FAILSAFE)
+        if landed:  # its COM_DISARM_LAND wait goes on under the failsafe's landing (LandDisarm.waits_under)
+            self.land_disarm.target = self.onboard.target
         self.land_at = p.t + self.failsafe.hold_s if action == "hold" else None
 
     def _check_position(self) -> None:

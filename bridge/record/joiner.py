@@ -159,9 +159,10 @@ class TraceJoiner:
 
     def _after_end(self, v: VehicleRow) -> bool:
         """Whether ``v`` was flown after the mission under its end action (HOLD or LAND past the mission's last
-        step): not the trace's (the mission's figures stay the mission's); kept in :attr:`after` as (t s on
-        the vehicle's clock, z m, vz m/s) for ``summary.json["end"]`` (:func:`bridge.record.ending.end_block`)."""
-        if self.k0 is None or int(v.k) - self.k0 < self.steps or int(v.mode) not in END_MODE_CODES:
+        step, and on from there: a failsafe that takes the end action over, as a position lost, flies on in it): not
+        the trace's (the mission's figures stay the mission's); kept in :attr:`after` as (t s on the vehicle's clock,
+        z m, vz m/s) for ``summary.json["end"]`` (:func:`bridge.record.ending.end_block`)."""
+        if self.k0 is None or int(v.k) - self.k0 < self.steps or (int(v.mode) not in END_MODE_CODES and not self.after):
             return False
         self.after.append((v.t, v.z, v.vz))
         return True

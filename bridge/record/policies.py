@@ -20,8 +20,8 @@ What each policy reads, and why it cannot be fooled by a run's own claims:
   row strictly inside one must realise zero wrench (``u1_act..u4_act``). With a motor lag (``Rules.spin_down``) the
   rotors spin down instead: the realised values may only shrink.
 - ``failsafe_in_time``: armed under offboard control (from an ``armed`` event, or the start
-  offline), the vehicle must leave offboard control (its ``failsafe`` event, a disarm or a
-  divergence) within ``timeout_s`` plus one control period of the last valid target. The
+  offline), the vehicle must leave offboard control (its ``failsafe`` event, a disarm, a
+  divergence, or the mission's ``end``) within ``timeout_s`` plus one control period of the last valid target. The
   targets are read from the trace: a row that answers its step (offline, lockstep) with a
   command (finite ``state_age_s``) sent one at ``t``, which acts at most the up link's largest
   delay later (``Rules.command_slack_s``); a row that shows the command in force (real time,
@@ -77,7 +77,7 @@ POLICIES: dict[str, str] = {
 EPS_S = 1e-5  # s: event times are rounded to 1 us; a physics step is at least 100 us
 ZERO_N = 1e-9  # N: a realised wrench this small is zero
 CONTROLLER_ID = (200, 191)  # the configured controller's sysid, compid (bridge.mavlink.endpoint's default)
-_ENDS_OFFBOARD = ("failsafe", "disarmed", "diverged")
+_ENDS_OFFBOARD = ("failsafe", "disarmed", "diverged", "end")  # (``end``: the vehicle flies the mission's end action)
 
 
 @dataclass(frozen=True)

@@ -106,6 +106,7 @@ class Commander:
         self.ports = ports
         self.texts: list[Any] = []  # STATUSTEXTs saying why a command was refused: sent after its COMMAND_ACK
         self.plant_at_end: dict[str, Any] | None = None  # the plant's summary blocks when the mission ended
+        self.end_landing = False  # lockstep: the mission's end landing is flown (its failsafe's too), clocked as it
         # a ground station's arm in HOLD on the ground awaiting a mission's start (--await-mission)
         self.pre_start = PreStart(sim, clock, ports.missions, self.cfg.await_mission)
         self.intention = ModeIntention(sim, ports.missions)  # the mode taken after a disarm in LAND or RTL (as PX4)
@@ -368,6 +369,7 @@ class Commander:
         # summary.json's plant blocks are the mission's, as offline (taken before the end action flies)
         self.plant_at_end = plant_blocks(self.sim.plant)
         self.sim.end_mission("land" if mode == LAND else "hold")
+        self.end_landing = self.lockstep and mode == LAND
         if self.lockstep and mode == HOLD and self.clock.engaged:
             self.clock.fire(Trigger.DISARM)  # the lockstep flight is over: time stands still
         return mavlink.MAV_RESULT_ACCEPTED
@@ -376,8 +378,9 @@ class Commander:
         """After a control period: a lockstep flight whose vehicle disarmed itself on the ground (the end
         action's landing) is over; time stands still until it is armed again, as after a disarm by command. Then
         the mode a disarm in LAND or RTL leaves (:meth:`_after_change`)."""
-        if self.clock.engaged and not self.sim.armed and self.sim.mode == LAND:  # (a ground station's LAND runs free)
+        if self.clock.engaged and not self.sim.armed and self.end_landing:  # (a ground station's LAND runs free)
             self.clock.fire(Trigger.DISARM)
+            self.end_landing = False
         self._after_change()
 
     def _after_change(self) -> None:
@@ -406,6 +409,7 @@ class Commander:
             self.sim.event("lockstep", f"{mode_name(self.sim.mode)} set by a ground station: {how} on the wall "
                                        "clock")
         self.clock.run_free(Trigger.GROUND, now, self.ports.step() * self.substeps)
+        self.end_landing = False
 
     def _off_step_clock(self) -> None:
         """Lockstep: a flight termination leaves the step clock; the vehicle falls on the wall clock."""
@@ -415,6 +419,7 @@ class Commander:
     def _engage_lockstep(self, now: float) -> None:
         """Lockstep from now: the state of step k goes out and its target is awaited."""
         self.clock.engage(now, self.ports.step() * self.substeps)
+        self.end_landing = False
         self.ports.state_out(now)
 
     # -- arming ----------------------------------------------------------------------------------------

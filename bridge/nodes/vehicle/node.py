@@ -22,7 +22,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from bridge.autopilot.simvehicle import LAND, OFFBOARD
+from bridge.autopilot.simvehicle import OFFBOARD
 from bridge.core.flight import Flight
 from bridge.core.wire import command_from_wire
 from bridge.link.ends import VehicleEnd
@@ -249,7 +249,7 @@ class Vehicle:
             self._handle(ep, m, addr)
         if self.clock.state is ClockState.ANSWERED:
             # (a fleet: the others flew k - 1; on one radio, its turn of step k came, unless the mission is over)
-            if self.gate is None or self.gate.clear(self._collided, None if self.sim.mode == LAND else self.k):
+            if self.gate is None or self.gate.clear(self._collided, None if self.commander.end_landing else self.k):
                 self._step_lockstep()
             return
         if self.clock.state is not ClockState.LOCKSTEP:
@@ -272,7 +272,7 @@ class Vehicle:
         if wire is not None:
             vend.receive_command(t, command_from_wire(self.actuation, wire), t)
             self.targets.applied = (k, wire, recv)
-        ending = self.sim.mode == LAND  # lockstep and LAND: the mission's end action (Commander.flight_over)
+        ending = self.commander.end_landing  # the mission's end landing, clocked as the mission (Commander)
         if vend.held is not None and not ending:  # a fleet's one radio: its turn of step k (Gate.clear)
             vend.release()
             self.gate.took(k)  # type: ignore[union-attr]
