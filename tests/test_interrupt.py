@@ -1,9 +1,11 @@
-"""Covers bridge.core.interrupt: Ctrl-C while the main thread waits on a pool's futures.
+"""Covers bridge.core.interrupt and bridge.__main__: Ctrl-C while the main thread waits on a pool's futures, and
+while the ``bsst`` command is still importing the CLI.
 
 Each case is a real Python child sent a real SIGINT: the interrupt must come out as KeyboardInterrupt at
 the wait's return, never inside concurrent.futures' locks (where it left `bsst sweep` hanging), even when the
 signal lands on another thread while the main thread sleeps on a lock (where it was taken only once the lock
-was released); the second Ctrl-C is counted, and a third interrupts at once.
+was released); the second Ctrl-C is counted, and a third interrupts at once. A Ctrl-C during the CLI's imports
+(a real SIGINT, sent by an import hook as ``bridge.cli`` starts to load) ends as the CLI says it, not as a traceback.
 """
 
 from __future__ import annotations
@@ -180,3 +182,31 @@ def test_in_the_main_thread_the_handler_and_the_wakeup_fd_are_put_back() -> None
         assert _wakeup_fd() not in (-1, fd_before)
     assert signal.getsignal(signal.SIGINT) is before
     assert _wakeup_fd() == fd_before
+
+
+# The ``bsst`` console script's own lines (pyproject: bridge.__main__:main), with a hook that sends this process a real
+# SIGINT as the CLI's first submodule starts to load: Python raises KeyboardInterrupt inside the import.
+DURING_IMPORTS = """
+    import os, signal, sys
+
+    class SigintOnImport:
+        def find_spec(self, name, path, target=None):
+            if name == "bridge.cli.flags":
+                os.kill(os.getpid(), signal.SIGINT)
+            return None
+
+    sys.meta_path.insert(0, SigintOnImport())
+    sys.argv = ["bsst", "--help"]
+    from bridge.__main__ import main
+    sys.exit(main())
+"""
+
+
+def test_ctrl_c_while_the_cli_imports_is_said_not_traced() -> None:
+    proc = Proc([sys.executable, "-c", textwrap.dedent(DURING_IMPORTS)])
+    try:
+        proc.wait_line(lambda s: s == "bsst: interrupted", timeout=120)
+        assert proc.p.wait(timeout=60) == 1
+        assert not any("Traceback" in line for line in proc.lines), proc.lines
+    finally:
+        proc.stop()
