@@ -22,6 +22,8 @@ link       ``profile`` and/or ``[link]``'s per-direction    ``PROFILE``, ``KEY=V
 =========  ==============================================  =========================================
 
 An event acts at the start of the control step that begins at or after ``t_s``: the same step in every clock.
+An event that could change nothing (a device set to the state it is already in, two setting one device at one
+step) is refused: :func:`check_state_changes`.
 """
 
 from __future__ import annotations
@@ -143,6 +145,70 @@ def timeline_from_tables(tables: Sequence[Mapping[str, Any]], source: str, durat
             raise ConfigError(f"{source}: events[{i}]: expected a table {{t_s, kind, ...}}, got {raw!r}"[:200])
         out.append(event_from_table(Table(raw, source, f"events[{i}]"), duration_s))
     return tuple(sorted(out, key=lambda e: e.t_s))
+
+
+def table_where(source: str, e: TimedEvent) -> str:
+    """Where a mission's event was given, as a refusal names it: ``m.toml: events (t_s = 10, kind = gps)``."""
+    return f"{source}: events (t_s = {e.t_s:g}, kind = {e.kind})"
+
+
+# the devices the timeline sets to a state, each with the state it starts every flight in: the GPS and the compass
+# on, each rotor whole (effectiveness 1), the barometer not drifting (0 m/s)
+_DEVICE_START = {"gps": "on", "mag": "on", "motor": 1.0, "baro": 0.0}
+_DEVICE_NAMES = {"gps": "the GPS", "mag": "the compass", "baro": "the barometer"}
+
+
+def _sets(e: TimedEvent) -> tuple[tuple[Any, ...], Any] | None:
+    """(the device ``e`` sets, the state it sets it to), or None for an event that adds to what is there (a GPS jump,
+    a gyro bias) or changes the air or the link."""
+    if e.kind in ("gps", "mag") and e.get("state") is not None:
+        return (e.kind,), e.get("state")
+    if e.kind == "motor":
+        return ("motor", e.get("motor")), e.get("effectiveness")
+    if e.kind == "baro":
+        return ("baro",), e.get("drift_mps")
+    return None
+
+
+def _already(device: tuple[Any, ...], state: Any) -> str:
+    """``the GPS is already on``, ``motor 2 is already at full thrust``: a device already in a state."""
+    if device[0] == "motor":
+        return f"motor {device[1]} is already " + ("off" if state == 0.0 else "at full thrust" if state == 1.0
+                                                   else f"at {state:g} of its thrust")
+    if device[0] == "baro":
+        return "the barometer is already " + (f"drifting {state:g} m/s" if state else "not drifting")
+    return f"{_DEVICE_NAMES[device[0]]} is already {state}"
+
+
+def _device_name(device: tuple[Any, ...]) -> str:
+    return f"motor {device[1]}" if device[0] == "motor" else _DEVICE_NAMES[device[0]]
+
+
+def check_state_changes(timeline: Sequence[TimedEvent], rate_hz: float, source: str) -> None:
+    """EventError (named as :func:`table_where`, which :func:`bridge.core.flight.prepare` turns into the ``--at``
+    flag that gave it) for an event of ``timeline`` (in time order) that could change nothing: one that sets a
+    device (GPS or compass on/off, a rotor's effectiveness, the barometer's drift) to the state it is already in at
+    that time, from the start or from the event before (``gps:on`` with no ``gps:off`` before it, two ``gps:off``
+    with no ``gps:on`` between), or one that sets a device another event sets at the same control step of
+    ``rate_hz`` (Hz), where only the order given would say which one holds."""
+    last: dict[tuple[Any, ...], TimedEvent] = {}  # device -> the event that last set it
+    for e in timeline:
+        sets = _sets(e)
+        if sets is None:
+            continue
+        device, state = sets
+        before = last.get(device)
+        if before is not None and before.step(rate_hz) == e.step(rate_hz):
+            raise EventError(e, f"{before.text()} at {before.t_s:g} s and {e.text()} at {e.t_s:g} s both set "
+                                f"{_device_name(device)} at the control step at {e.step(rate_hz) / rate_hz:g} s "
+                                f"({rate_hz:g} Hz), so which one holds is ambiguous: give one, or times a step "
+                                f"({1.0 / rate_hz:g} s) apart", table_where(source, e))
+        was = _DEVICE_START[device[0]] if before is None else _sets(before)[1]  # type: ignore[index]
+        if state == was:
+            since = "as every flight starts" if before is None else f"since {before.text()} at {before.t_s:g} s"
+            raise EventError(e, f"{_already(device, state)} at {e.t_s:g} s ({since}): the event would change "
+                                "nothing", table_where(source, e))
+        last[device] = e
 
 
 def _numbers(text: str, n: tuple[int, ...], what: str) -> list[float]:

@@ -7,16 +7,20 @@ from __future__ import annotations
 
 import json
 from dataclasses import replace
+from pathlib import Path
 
 import pytest
 
 from bridge import simulate
+from bridge.core.flight import prepare
 from missions import load_mission
 from params import ConfigError
 from plant import Quadrotor, load_profile
 from plant.events import event_table_from_flag
 from tests.plans import battery_mission
 from tests.sitlkit import run_bsst
+
+ROOT = Path(__file__).resolve().parents[1]
 
 pytestmark = pytest.mark.process  # runs bsst as a real process: not in make test-fast
 
@@ -85,11 +89,88 @@ def test_events_that_cannot_act_on_this_flight_are_refused() -> None:
         simulate("missions/sine.toml", at=("31:wind:3",))
 
 
+GNSS_EKF = {"sensors": {"set": "gnss"}, "estimator": "ekf"}
+ALREADY = [  # (--at flags, the one refused, why): a device set to the state it is in at that time changes nothing
+    (("14:gps:on",), "14:gps:on", "the GPS is already on at 14 s (as every flight starts)"),
+    (("10:gps:off", "12:gps:off"), "12:gps:off", "the GPS is already off at 12 s (since gps off at 10 s)"),
+    (("10:gps:off", "14:gps:on", "16:gps:on"), "16:gps:on", "the GPS is already on at 16 s (since gps on at 14 s)"),
+    (("3:mag:on",), "3:mag:on", "the compass is already on at 3 s"),
+    (("5:mag:off", "6:mag:off"), "6:mag:off", "the compass is already off at 6 s (since mag off at 5 s)"),
+    (("2:baro:drift=0",), "2:baro:drift=0", "the barometer is already not drifting at 2 s"),
+    (("2:baro:drift=0.3", "4:baro:drift=0.3"), "4:baro:drift=0.3", "the barometer is already drifting 0.3 m/s at 4 s"),
+]
+SAME_STEP = [  # (--at flags, the one refused, why): two events setting one device at one control step
+    (("10:gps:off", "10:gps:on"), "10:gps:on", "gps off at 10 s and gps on at 10 s both set the GPS at the control "
+                                               "step at 10 s (250 Hz), so which one holds is ambiguous"),
+    (("10.001:gps:off", "10.003:gps:on"), "10.003:gps:on", "both set the GPS at the control step at 10.004 s"),
+    (("10:mag:off", "10:mag:off"), "10:mag:off", "both set the compass at the control step at 10 s"),
+]
+
+
+@pytest.mark.parametrize("at, named, why", ALREADY + SAME_STEP)
+def test_an_event_that_changes_nothing_or_races_another_is_refused(at, named, why) -> None:
+    """``--at 14:gps:on`` with the GPS on (no gps:off before it), two gps:off with no gps:on between, a device set
+    twice in one control step: refused, one line naming the flag and why (plant.events.check_state_changes)."""
+    with pytest.raises(ConfigError) as got:
+        simulate("missions/sine.toml", at=at, **GNSS_EKF)
+    assert str(got.value).startswith(f"--at {named}: ") and why in str(got.value), got.value
+    assert "\n" not in str(got.value)
+
+
+def test_events_that_change_something_are_flown_as_before() -> None:
+    """Off, then on a step later or more; an event at one step on one device and one on another; a jump (added to
+    what is there) at the step the GPS goes off: each taken (the flight is built, none refused)."""
+    for at in (("10:gps:off", "10.004:gps:on"), ("10:gps:off", "10:mag:off", "10:gps:jump=1,0,0"),
+               ("2:baro:drift=0.3", "4:baro:drift=0"), ("10:gps:off", "14:gps:on", "16:gps:off")):
+        assert len(prepare("missions/sine.toml", at=at, **GNSS_EKF).timeline) == len(at)
+    rotors = prepare("missions/sine.toml", profile="x500", at=("10:motor:1=0.5", "10:motor:2=0.5", "12:motor:1=1"))
+    assert [e.text() for e in rotors.timeline] == ["motor 1: 0.5 of its thrust", "motor 2: 0.5 of its thrust",
+                                                   "motor 1: 1 of its thrust"]
+    with pytest.raises(ConfigError, match=r"^--at 12:motor:1=0: motor 1 is already off at 12 s"):
+        prepare("missions/sine.toml", profile="x500", at=("10:motor:1=0", "12:motor:1=0"))
+
+
+def _gps_mission(path: Path, *events: tuple[float, str]) -> Path:
+    """The sine on the gnss set and the EKF with ``[[events]]`` of the GPS: (t_s, state) each."""
+    tables = "".join(f'\n[[events]]\nt_s = {t}\nkind = "gps"\nstate = "{state}"\n' for t, state in events)
+    path.write_text((ROOT / "missions" / "sine.toml").read_text() + '\n[sensors]\nset = "gnss"\n\n[estimator]\n'
+                    'kind = "ekf"\n' + tables)
+    return path
+
+
+def test_a_mission_files_events_are_checked_alike(tmp_path) -> None:
+    """The same check on a mission's ``[[events]]``, naming the file and the table; with a flag over the file's
+    events, the flag (the timeline is the file's and the flags' together), as a real process too."""
+    path = _gps_mission(tmp_path / "m.toml", (10.0, "off"), (12.0, "off"))
+    with pytest.raises(ConfigError, match=r"m\.toml: events \(t_s = 12, kind = gps\): the GPS is already off at 12 s"):
+        simulate(path)
+    _gps_mission(path, (10.0, "off"), (14.0, "on"))
+    assert simulate(path).summary["gps_outages"][0]["on_s"] == 14.0
+    with pytest.raises(ConfigError, match=r"^--at 14:gps:off: gps on at 14 s and gps off at 14 s both set the GPS"):
+        simulate(path, at=("14:gps:off",))
+    r = run_bsst("sim", str(path), "--at", "16:gps:on", "--no-plots", "--out", str(tmp_path / "r"))
+    assert r.returncode == 2 and r.stderr.strip() == (
+        "bsst: --at 16:gps:on: the GPS is already on at 16 s (since gps on at 14 s): the event would change nothing"), \
+        r.stderr
+    assert not (tmp_path / "r").exists()
+
+
 def test_a_full_rotor_changes_nothing_and_a_weak_one_is_logged_and_reproducible() -> None:
+    """A rotor set to full effectiveness flies as one never touched (the plant, stepped); as a timeline event on a
+    whole rotor it is refused (it would change nothing: tests below). A weak rotor is logged and reproducible."""
+    hover = load_profile("x500").hover_omega
+    planes = [Quadrotor(load_profile("x500"), state=(0.0,) * 4 + (2.0,) + (0.0,) * 7) for _ in range(2)]
+    for k in range(400):
+        if k == 200:
+            planes[1].set_effectiveness(2, 1.0)
+        for q in planes:
+            q.command((hover / q.profile.omega_max,) * 4)
+            q.step()
+    assert planes[0].state == planes[1].state
+    with pytest.raises(ConfigError, match=r"^--at 10:motor:2=1: motor 2 is already at full thrust"):
+        simulate("missions/sine.toml", profile="x500", at=("10:motor:2=1",))
     first = replace(load_mission("missions/sine.toml"), duration_s=15.0)  # the sine's first 15 s: 5 s after it
     still = simulate(first, profile="x500")
-    same = simulate(first, profile="x500", at=("10:motor:2=1",))
-    assert same.rms == still.rms
     weak = simulate(first, profile="x500", at=("10:motor:1=0.9",))
     again = simulate(first, profile="x500", at=("10:motor:1=0.9",))
     assert weak.rms == again.rms and weak.rms != still.rms

@@ -12,6 +12,7 @@ the same vehicle: tests/test_ground_stations.py.
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import os
@@ -31,10 +32,12 @@ from bridge.autopilot.params import (
     ParamRefused,
     VehicleParams,
     change_param,
+    check_param_changes,
     parse_change,
     read_param,
     value_problem,
 )
+from bridge.cli.flags import param_assignment
 from bridge.core.flight import prepare
 from bridge.loop import simulate
 from bridge.mavlink.endpoint import GCS_PORT
@@ -71,8 +74,8 @@ def test_every_parameter_reads_back_what_was_set_and_refuses_outside_its_range()
             assert read_param(change_param(p, spec.name, v), spec.name) == pytest.approx(v)
         with pytest.raises(ParamRefused, match=spec.name):
             change_param(p, spec.name, spec.hi + 1)
-        with pytest.raises(ParamRefused, match="finite"):
-            change_param(p, spec.name, math.nan)
+        with pytest.raises(ParamRefused, match="must be finite" if spec.kind == "REAL32" else "INT32.*got nan$"):
+            change_param(p, spec.name, math.nan)  # (an INT32's refusal names what it takes: the check of 1.5)
     with pytest.raises(ParamRefused, match="no such parameter"):
         change_param(p, "FS_GCS_ENABLE", 1)
     with pytest.raises(ParamRefused, match="not one the vehicle flies"):
@@ -403,11 +406,13 @@ def test_an_integer_parameter_flag_is_parsed_as_an_integer(tmp_path, name, value
 @pytest.mark.parametrize("args, says", [
     (["--param", "COM_OBL_ACT=1.5"], "--param 'COM_OBL_ACT=1.5': COM_OBL_ACT: an INT32, expected an integer"),
     (["--param", "MAV_SYS_ID=x"], "--param 'MAV_SYS_ID=x': MAV_SYS_ID: an INT32, expected an integer"),
+    (["--param", "EKF2_NOAID_TOUT=nan"], "--param 'EKF2_NOAID_TOUT=nan': EKF2_NOAID_TOUT: an INT32, expected an "
+                                         "integer in [500000, 10000000] us, got nan"),
     (["--param", "COM_DISARM_LAND=x"], "--param 'COM_DISARM_LAND=x': COM_DISARM_LAND: a REAL32, expected a number, "
                                        "got 'x'"),
     (["--param", "COM_OBL_ACT=1", "--param", "COM_OBL_RC_ACT=7"],
      "--param COM_OBL_RC_ACT=7 and --param COM_OBL_ACT=1 set one setting, [failsafe] action, two ways"),
-], ids=["fraction", "word", "real-word", "clash"])
+], ids=["fraction", "word", "not-finite", "real-word", "clash"])
 def test_a_bad_parameter_flag_is_named_as_the_flag_not_the_mission(cmd, args, says):
     mission = [] if cmd == "vehicle" else ["missions/sine.toml"]
     r = _bsst(cmd, *mission, *args)  # refused before a port is bound
@@ -432,6 +437,104 @@ def test_two_offboard_loss_entries_of_one_file_must_agree(tmp_path):
     path.write_text(src + "\n[params]\nCOM_OBL_RC_ACT = 7\n")
     assert prepare(path, params={"COM_OBL_ACT": 1}).failsafe.action == "hold"
 
+
+
+# -- an INT32 given as a whole float (1e6, 1000000.0): in a file, on a flag, from Python -----------------------------
+def _with_params(tmp_path, lines: str):
+    path = tmp_path / "m.toml"
+    path.write_text((ROOT / "missions" / "sine.toml").read_text() + f"\n[params]\n{lines}\n")
+    return path
+
+
+def test_an_int32_given_as_a_whole_float_is_that_integer_everywhere(tmp_path):
+    """``EKF2_NOAID_TOUT = 1e6`` (or ``1000000.0``) in ``[params]``, ``--param EKF2_NOAID_TOUT=1e6``, ``--param-at
+    5:EKF2_NOAID_TOUT=1e6`` and ``params={"EKF2_NOAID_TOUT": 1e6}`` are the integer 1000000, as a PARAM_SET's whole
+    float is: the vehicle's parameters the same as with it, an ``int``; likewise a choice (COM_OBL_ACT = 1.0, hold)
+    and the system id (MAV_SYS_ID = 7.0)."""
+    want = prepare("missions/sine.toml", params={"EKF2_NOAID_TOUT": 1_000_000}).params
+    for text in ("1e6", "1000000.0", "1.0e+06", "1_000_000.0", "1000000"):
+        got = prepare(_with_params(tmp_path, f"EKF2_NOAID_TOUT = {text}")).params
+        assert got == want and type(got.noaid_timeout_us) is int, text
+    assert prepare("missions/sine.toml", params={"EKF2_NOAID_TOUT": 1e6}).params == want
+    for text in ("1e6", "1000000.0", "1E6", "+1e6"):
+        name, value = param_assignment("--param")(f"EKF2_NOAID_TOUT={text}")
+        flown = prepare("missions/sine.toml", params={name: value})
+        assert flown.params == want and flown.mission.params == {"EKF2_NOAID_TOUT": 1_000_000}, text
+        assert type(flown.mission.params["EKF2_NOAID_TOUT"]) is int  # (the run's mission.toml: 1000000)
+        (change,) = check_param_changes([param_assignment("--param-at", timed=True)(f"5:EKF2_NOAID_TOUT={text}")], 30.0)
+        assert change == ParamChange(5.0, "EKF2_NOAID_TOUT", 1_000_000) and type(change.value) is int
+    other = prepare(_with_params(tmp_path, "COM_OBL_ACT = 1.0\nMAV_SYS_ID = 7.0"))
+    assert other.failsafe.action == "hold" and other.params.sysid == 7 and type(other.params.sysid) is int
+
+
+RANGE = "[500000, 10000000] us"
+NOT_INT32 = [  # (the value as TOML writes it, and as a flag; what the refusal says after the key)
+    ("1.5", f"an INT32, expected an integer in {RANGE}, got 1.5"),
+    ("1000000.5", f"an INT32, expected an integer in {RANGE}, got 1000000.5"),
+    ("nan", f"an INT32, expected an integer in {RANGE}, got nan"),
+    ("inf", f"an INT32, expected an integer in {RANGE}, got inf"),
+    ("-inf", f"an INT32, expected an integer in {RANGE}, got -inf"),
+    ("2e7", f"must be in {RANGE}, got 20000000"),
+    ("4e5", f"must be in {RANGE}, got 400000"),
+    ("1e300", f"must be in {RANGE}, got 1e+300"),
+]
+
+
+@pytest.mark.parametrize("text, says", NOT_INT32, ids=[t for t, _ in NOT_INT32])
+def test_an_int32_that_is_not_a_whole_number_in_range_is_refused_naming_where_and_the_range(tmp_path, text, says):
+    """Not whole, not finite, or out of range: refused by the one check (:func:`value_problem`) with one line naming
+    the file and key, or the flag, and the range, whether given as a file's float or a flag's text."""
+    with pytest.raises(ConfigError) as got:
+        prepare(_with_params(tmp_path, f"EKF2_NOAID_TOUT = {text}"))
+    assert str(got.value) == f"{tmp_path / 'm.toml'}: params.EKF2_NOAID_TOUT: {says}"
+    with pytest.raises(argparse.ArgumentTypeError) as flag:
+        param_assignment("--param")(f"EKF2_NOAID_TOUT={text}")
+    assert str(flag.value) == f"--param 'EKF2_NOAID_TOUT={text}': EKF2_NOAID_TOUT: {says}"
+    with pytest.raises(ConfigError) as python:
+        prepare("missions/sine.toml", params={"EKF2_NOAID_TOUT": float(text)})
+    assert str(python.value) == f"--param EKF2_NOAID_TOUT={float(text)}: {says}"
+
+
+def test_a_boolean_or_text_is_no_integer_and_a_choice_names_its_values(tmp_path):
+    """``true`` is not 1, in a file, a flag or from Python; a text is not a number; an INT32 of choices that is not
+    whole names its values."""
+    for lines, says in (("EKF2_NOAID_TOUT = true", "params.EKF2_NOAID_TOUT: expected an integer, got True"),
+                        ("SYS_FAILURE_EN = true", "params.SYS_FAILURE_EN: expected an integer, got True"),
+                        ('EKF2_NOAID_TOUT = "1e6"', "params.EKF2_NOAID_TOUT: expected an integer, got '1e6'"),
+                        ("COM_OBL_ACT = 1.5", "params.COM_OBL_ACT: an INT32, expected an integer (-1 descend, 0 land, "
+                                              "1 hold, 2 return, 3 disarm), got 1.5")):
+        with pytest.raises(ConfigError) as got:
+            prepare(_with_params(tmp_path, lines))
+        assert str(got.value) == f"{tmp_path / 'm.toml'}: {says}"
+    for text in ("true", "True", "x", "1e6x", ""):
+        with pytest.raises(argparse.ArgumentTypeError) as flag:
+            param_assignment("--param")(f"SYS_FAILURE_EN={text}")
+        assert str(flag.value) == (f"--param 'SYS_FAILURE_EN={text}': SYS_FAILURE_EN: an INT32, expected an integer "
+                                   f"(0 disabled, 1 enabled), got {text!r}")
+    with pytest.raises(ConfigError, match=r"^--param SYS_FAILURE_EN=True: expected a number, got True$"):
+        prepare("missions/sine.toml", params={"SYS_FAILURE_EN": True})
+
+
+def test_a_whole_float_flag_and_file_fly_as_the_integer(tmp_path):
+    """``bsst sim --param EKF2_NOAID_TOUT=1e6``, the file's ``EKF2_NOAID_TOUT = 1e6`` and ``--param
+    EKF2_NOAID_TOUT=1000000``: the same flight (the GPS off at 1 s: the position lost 1 s after the last fix is fused,
+    within the 3 s flown, where the default 5 s would not), the flag's run's mission.toml holding the integer."""
+    mission = tmp_path / "short.toml"
+    text = (ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 3.0")
+    mission.write_text(text)
+    (tmp_path / "file.toml").write_text(text + "\n[params]\nEKF2_NOAID_TOUT = 1e6\n")
+    common = ("--sensors", "gnss", "--estimator", "ekf", "--at", "1:gps:off", "--no-plots")
+    runs = {"int": (str(mission), "--param", "EKF2_NOAID_TOUT=1000000"),
+            "float": (str(mission), "--param", "EKF2_NOAID_TOUT=1e6"), "file": (str(tmp_path / "file.toml"),)}
+    for name, args in runs.items():
+        r = _bsst("sim", *args, *common, "--out", str(tmp_path / name))
+        assert r.returncode == 1, r.stderr  # PX4's failsafe on the lost position
+    trace = (tmp_path / "int" / "trace.csv").read_text()
+    assert all((tmp_path / n / "trace.csv").read_text() == trace for n in ("float", "file"))
+    lost = [e["t"] for e in json.loads((tmp_path / "float" / "summary.json").read_text())["events"]
+            if e["kind"] == "position"]
+    assert lost and 2.0 < lost[0] < 2.5, lost
+    assert "EKF2_NOAID_TOUT = 1000000\n" in (tmp_path / "float" / "mission.toml").read_text()
 
 def test_two_scheduled_changes_of_one_parameter_at_one_time_the_last_given_wins(tmp_path):
     """Issue 22, defect 10: ``--param-at 15:COM_OBL_ACT=3 --param-at 15:COM_OBL_ACT=1``: hold (the last

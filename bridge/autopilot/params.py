@@ -20,6 +20,9 @@ one setting with different actions, in one ``[params]`` table or in the flags, a
 ``MAV_SYS_ID`` takes effect when the vehicle starts (``--param``, ``[params]``); a ground station's
 PARAM_SET of it is refused, as it could not act until a restart that SITL does not do.
 
+An INT32 is an integer however it is written: a finite whole float (``1e6``, ``1000000.0``, a PARAM_SET's C cast)
+is taken as it, from a file, a flag, Python or the wire alike (:func:`typed_value`, :func:`value_problem`).
+
 A value that came over MAVLink is a float32: the documented minimum COM_OF_LOSS_T, 0.01 s, arrives as
 0.0099999998. The range check (:func:`in_range`) therefore takes a value that rounds to a bound in
 float32 as that bound, and the change sets the bound itself.
@@ -236,30 +239,28 @@ def in_range(value: float, lo: float, hi: float) -> bool:
 
 
 def typed_value(spec: ParamSpec, value: Any) -> float:
-    """``value`` as ``spec``'s type: an INT32's an ``int`` (a whole float is taken as one: PARAM_VALUE and
-    Python callers carry integers as floats), a REAL32's a number; :class:`ParamRefused` if it is not one."""
+    """``value`` as ``spec``'s type, checked (:func:`value_problem`): an INT32's an ``int`` (a finite whole float is
+    taken as that integer: PARAM_VALUE, Python callers, ``1e6`` in a TOML file or a flag), a REAL32's a number;
+    :class:`ParamRefused` if it is not one, or not one the parameter takes."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ParamRefused(f"{spec.name}: expected a number, got {value!r}"[:200])
-    if isinstance(value, int) and finite_float(value) is None:  # past the float range: float() would raise
-        raise ParamRefused(f"{spec.name}: {_range_text(spec)}, got {show(value)}")
-    if spec.kind == INT32:
-        if not (math.isfinite(value) and value == int(value)):
-            raise ParamRefused(f"{spec.name}: an INT32, got {value:g}")
-        return int(value)
-    return value
+    why = value_problem(spec, value)
+    if why:
+        raise ParamRefused(why)
+    return int(value) if spec.kind == INT32 else value
 
 
 def value_problem(spec: ParamSpec, value: float) -> str | None:
-    """Why ``value`` cannot be ``spec``'s, or None (type, range, choices; :func:`in_range`)."""
+    """Why ``value`` cannot be ``spec``'s, or None (type, range, choices; :func:`in_range`): the one check of a
+    value, from a file, a flag, Python or the wire."""
     if isinstance(value, int) and finite_float(value) is None:  # past the float range: isfinite would raise
         return f"{spec.name}: {_range_text(spec)}, got {show(value)}"
+    if spec.kind == INT32 and not (math.isfinite(value) and value == int(value)):  # 1.5, nan, inf
+        return f"{spec.name}: an INT32, expected an integer {_allowed(spec)}, got {_shown(value)}"
     if not math.isfinite(value):
         return f"{spec.name}: must be finite, got {value}"
-    if spec.kind == INT32 and value != int(value):
-        return f"{spec.name}: an INT32, got {_shown(value)}"
     if spec.choices is not None and int(value) not in spec.choices:
-        allowed = ", ".join(f"{v} {a}" for v, a in spec.choices.items())
-        return f"{spec.name}: {_shown(value)} is not one the vehicle flies; allowed: {allowed}"
+        return f"{spec.name}: {_shown(value)} is not one the vehicle flies; allowed: {_choices(spec.choices)}"
     if not in_range(value, spec.lo, spec.hi):
         return f"{spec.name}: {_range_text(spec)}, got {_shown(value)}"
     return None
@@ -279,7 +280,22 @@ def _shown(value: float) -> str:
 
 def _range_text(spec: ParamSpec) -> str:
     """``must be in [0.01, 60] s``: the parameter's range, as every refusal of a value out of it says."""
-    return f"must be in [{spec.lo:.12g}, {spec.hi:.12g}]" + (f" {spec.unit}" if spec.unit else "")  # (not 1e+07)
+    return f"must be in {_bounds(spec)}"
+
+
+def _bounds(spec: ParamSpec) -> str:
+    """``[0.01, 60] s``: the parameter's range and unit."""
+    return f"[{spec.lo:.12g}, {spec.hi:.12g}]" + (f" {spec.unit}" if spec.unit else "")  # (not 1e+07)
+
+
+def _choices(choices: Mapping[int, str]) -> str:
+    """``-1 descend, 0 land, ...``: an INT32's values and what each means."""
+    return ", ".join(f"{v} {a}" for v, a in choices.items())
+
+
+def _allowed(spec: ParamSpec) -> str:
+    """What an INT32 takes, after "an integer": ``in [1, 254]``, or its choices in brackets."""
+    return f"({_choices(spec.choices)})" if spec.choices is not None else f"in {_bounds(spec)}"
 
 
 def change_param(p: VehicleParams, name: str, value: float, running: bool = True) -> VehicleParams:
@@ -323,7 +339,10 @@ def params_from_table(data: Mapping[str, Any], source: str, start: VehicleParams
             raise t.error(name, f"no such parameter; the vehicle has {', '.join(BY_NAME)}")
         v = data[name]  # an integer past the float range goes on as it is: apply_params names the range
         huge = isinstance(v, int) and not isinstance(v, bool) and finite_float(v) is None
-        entries.append((name, t.number(name) if spec.kind == REAL32 and not huge else t.integer(name)))
+        if spec.kind == INT32 and isinstance(v, float):  # 1e6 or 1000000.0: typed_value takes a finite whole one
+            entries.append((name, t.raw(name)))
+        else:
+            entries.append((name, t.number(name) if spec.kind == REAL32 and not huge else t.integer(name)))
     t.done()
     return apply_params(start, entries, f"{source}: ", lambda name, value: f"params.{name}")
 
@@ -364,7 +383,8 @@ def params_as_failsafe(data: Mapping[str, Any]) -> dict[str, str]:
 
 def parse_assignment(text: str) -> tuple[str, float]:
     """``NAME=VALUE`` (``--param``) as (name, value), the value parsed as the parameter's type (an INT32's
-    as an integer, a REAL32's as a number); ConfigError saying what is wrong."""
+    as an integer, or as a number, ``1e6``, that :func:`value_problem` then takes only if it is a finite whole one;
+    a REAL32's as a number); ConfigError saying what is wrong."""
     name, sep, value = text.partition("=")
     name = name.strip()
     if not sep or not name:
@@ -372,11 +392,13 @@ def parse_assignment(text: str) -> tuple[str, float]:
     spec = BY_NAME.get(name)
     if spec is None:
         raise ConfigError(f"{name}: no such parameter; the vehicle has {', '.join(BY_NAME)}")
-    try:
-        return name, (int(value) if spec.kind == INT32 else float(value))
-    except ValueError:
-        what = "an INT32, expected an integer" if spec.kind == INT32 else "a REAL32, expected a number"
-        raise ConfigError(f"{name}: {what}, got {value.strip()!r}") from None
+    for parse in ((int, float) if spec.kind == INT32 else (float,)):
+        try:
+            return name, parse(value)
+        except ValueError:
+            pass
+    what = f"an INT32, expected an integer {_allowed(spec)}" if spec.kind == INT32 else "a REAL32, expected a number"
+    raise ConfigError(f"{name}: {what}, got {value.strip()!r}"[:300])
 
 
 @dataclass(frozen=True, order=True)

@@ -53,8 +53,10 @@ from plant.events import (
     SENSOR_EVENT_KINDS,
     EventError,
     TimedEvent,
+    check_state_changes,
     event_from_table,
     event_table_from_flag,
+    table_where,
     timeline_from_tables,
 )
 from plant.profiles import sensors_from_table
@@ -392,7 +394,8 @@ def weather_of(m: Mission, prof: Profile, sensors: SensorConfig, estimator: str)
     for e in timeline:
         why = event_problem(e.kind, prof, None if estimator == "truth" else sensors, estimator)
         if why is not None:
-            raise EventError(e, why, f"{src}: events (t_s = {e.t_s:g}, kind = {e.kind})")
+            raise EventError(e, why, table_where(src, e))
+    check_state_changes(timeline, m.rate_hz, src)  # an event that changes nothing, or two at one step: refused
     if not m.wind and not any(e.kind in ("wind", "gust") for e in timeline):
         return None, timeline
     wind = wind_from_table(Table(m.wind, src, "wind"), m.duration_s)
@@ -415,7 +418,7 @@ def handovers_of(timeline: tuple[TimedEvent, ...], m: Mission) -> tuple[tuple[fl
     for e in timeline:
         if e.kind != "link":
             continue
-        where = f"{m.source}: events (t_s = {e.t_s:g}, kind = link)"
+        where = table_where(m.source, e)
         table = dict(e.settings)
         guard = [k for k in GUARD_KEYS if k in table]
         if guard:
