@@ -156,6 +156,9 @@ def table_where(source: str, e: TimedEvent) -> str:
 # on, each rotor whole (effectiveness 1), the barometer not drifting (0 m/s)
 _DEVICE_START = {"gps": "on", "mag": "on", "motor": 1.0, "baro": 0.0}
 _DEVICE_NAMES = {"gps": "the GPS", "mag": "the compass", "baro": "the barometer"}
+# the devices an event switches off or on: one that leaves it as it is was meant the other way (a rotor's or the
+# barometer's value is a level: its baseline, 1 or 0, is a value a scripted series of flights gives too)
+_SWITCHES = ("gps", "mag")
 
 
 def _sets(e: TimedEvent) -> tuple[tuple[Any, ...], Any] | None:
@@ -171,12 +174,7 @@ def _sets(e: TimedEvent) -> tuple[tuple[Any, ...], Any] | None:
 
 
 def _already(device: tuple[Any, ...], state: Any) -> str:
-    """``the GPS is already on``, ``motor 2 is already at full thrust``: a device already in a state."""
-    if device[0] == "motor":
-        return f"motor {device[1]} is already " + ("off" if state == 0.0 else "at full thrust" if state == 1.0
-                                                   else f"at {state:g} of its thrust")
-    if device[0] == "baro":
-        return "the barometer is already " + (f"drifting {state:g} m/s" if state else "not drifting")
+    """``the GPS is already on``: a switched device already in a state."""
     return f"{_DEVICE_NAMES[device[0]]} is already {state}"
 
 
@@ -186,11 +184,11 @@ def _device_name(device: tuple[Any, ...]) -> str:
 
 def check_state_changes(timeline: Sequence[TimedEvent], rate_hz: float, source: str) -> None:
     """EventError (named as :func:`table_where`, which :func:`bridge.core.flight.prepare` turns into the ``--at``
-    flag that gave it) for an event of ``timeline`` (in time order) that could change nothing: one that sets a
-    device (GPS or compass on/off, a rotor's effectiveness, the barometer's drift) to the state it is already in at
-    that time, from the start or from the event before (``gps:on`` with no ``gps:off`` before it, two ``gps:off``
-    with no ``gps:on`` between), or one that sets a device another event sets at the same control step of
-    ``rate_hz`` (Hz), where only the order given would say which one holds."""
+    flag that gave it) for an event of ``timeline`` (in time order) that switches the GPS or the compass to the
+    state it is already in at that time, from the start or from the event before (``gps:on`` with no ``gps:off``
+    before it, two ``gps:off`` with no ``gps:on`` between), or one that sets a device (those, a rotor's
+    effectiveness, the barometer's drift) another event sets at the same control step of ``rate_hz`` (Hz), where
+    only the order given would say which one holds."""
     last: dict[tuple[Any, ...], TimedEvent] = {}  # device -> the event that last set it
     for e in timeline:
         sets = _sets(e)
@@ -204,7 +202,7 @@ def check_state_changes(timeline: Sequence[TimedEvent], rate_hz: float, source: 
                                 f"({rate_hz:g} Hz), so which one holds is ambiguous: give one, or times a step "
                                 f"({1.0 / rate_hz:g} s) apart", table_where(source, e))
         was = _DEVICE_START[device[0]] if before is None else _sets(before)[1]  # type: ignore[index]
-        if state == was:
+        if state == was and device[0] in _SWITCHES:
             since = "as every flight starts" if before is None else f"since {before.text()} at {before.t_s:g} s"
             raise EventError(e, f"{_already(device, state)} at {e.t_s:g} s ({since}): the event would change "
                                 "nothing", table_where(source, e))
