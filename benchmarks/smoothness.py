@@ -121,7 +121,9 @@ def margin(d: str, predict: bool, scatter: bool = False) -> dict[str, Any]:
             cmd += ["--compensation", "predict"]
         subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=3600, check=False)
         f = Path(tmp) / "margin.json"
-        res = json.loads(f.read_text())["controllers"][0] if f.exists() else {}  # one law: its entry
+        found = json.loads(f.read_text()) if f.exists() else {}
+        # one law: its entry; an interrupted search's (margin.json's "interrupted") is no figure
+        res = found["controllers"][0] if found and not found["interrupted"] else {}
         return {k: res.get(k) for k in ("margin", "holds_below", "monotone", "failed_below")}
 
 

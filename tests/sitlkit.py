@@ -124,6 +124,20 @@ class Bsst:
         return self._texts.get(0, ""), self._texts.get(1, "")
 
 
+def pool_workers(group: int) -> list[int]:
+    """A ``bsst sweep``'s or ``bsst margin``'s pool workers: the processes of its process group two generations below
+    its leader (the leader starts multiprocessing's fork server, which forks the workers)."""
+    parents = {}
+    for entry in Path("/proc").iterdir():
+        try:
+            fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+        except (OSError, IndexError):
+            continue  # not a process, or gone
+        if int(fields[2]) == group:  # pgrp
+            parents[int(entry.name)] = int(fields[1])  # ppid
+    return [pid for pid, ppid in parents.items() if ppid in parents and ppid != group]
+
+
 def shown(e: Event) -> str:
     """A child's event as a person reads it: ``kind: text`` and its sender's `` [by ...]``."""
     return f"{e.kind}: {e.text}" + (e.by.suffix if e.by is not None else "")

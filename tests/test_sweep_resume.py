@@ -18,7 +18,7 @@ from bridge.sweep.cells import CELLS_CSV, read_cells
 from bridge.sweep.inputs import file_sha256, input_hashes
 from missions import Mission, Sine
 from params import dump_toml
-from tests.sitlkit import ROOT, Bsst, run_bsst
+from tests.sitlkit import ROOT, Bsst, pool_workers, run_bsst
 from tests.waiting import sweep_rows, sweep_said, wait_for
 
 # starts processes (not in make test-fast); flies the batch engine (its kernels loaded first)
@@ -94,20 +94,6 @@ def test_an_interrupted_sweep_says_how_many_cells_it_flew(mission_file: Path, tm
     assert r.returncode == 1 and f"{flown} of 12 cells flown; the sweep was interrupted" in r.stderr, r.stderr
 
 
-def _cell_workers(group: int) -> list[int]:
-    """The sweep's pool workers: the processes of its process group two generations below its leader (the
-    leader starts multiprocessing's fork server, which forks the workers)."""
-    parents = {}
-    for entry in Path("/proc").iterdir():
-        try:
-            fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
-        except (OSError, IndexError):
-            continue  # not a process, or gone
-        if int(fields[2]) == group:  # pgrp
-            parents[int(entry.name)] = int(fields[1])  # ppid
-    return [pid for pid, ppid in parents.items() if ppid in parents and ppid != group]
-
-
 def test_a_second_ctrl_c_does_not_wait_for_the_cell_in_flight(tmp_path: Path) -> None:
     """Ctrl-C lets the cells in flight finish; a second one ends their workers at once. The cell here is a
     half-hour offline flight (17 s of work on a quiet core, more under load), interrupted as its worker starts:
@@ -118,13 +104,13 @@ def test_a_second_ctrl_c_does_not_wait_for_the_cell_in_flight(tmp_path: Path) ->
     out = tmp_path / "stopped"
     proc = Bsst("sweep", str(mission), "--delay", "0,5", "--jobs", "1", "--no-plots", "--out", str(out))
     try:
-        wait_for(lambda: _cell_workers(proc.pid), 60, "a pool worker flying the first cell")
+        wait_for(lambda: pool_workers(proc.pid), 60, "a pool worker flying the first cell")
         os.killpg(proc.pid, signal.SIGINT)
         sweep_said(proc, lambda line: "Ctrl-C again stops them now" in line)  # (two at once would be one signal)
         os.killpg(proc.pid, signal.SIGINT)
         said, _ = proc.communicate(timeout=10)  # (a sweep waiting for the cell would end after it)
         assert proc.returncode == 1 and "0 of 2 cells flown (interrupted)" in said, (proc.returncode, said)
-        assert not _cell_workers(proc.pid)
+        assert not pool_workers(proc.pid)
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)

@@ -13,7 +13,9 @@ Out: the command's work and its summary on stdout; an exit status; bad input as 
 - :mod:`bridge.cli.linktools`  ``link extract | fit | show``, ``relay``
 
 Exit status: 0 the mission completed; 1 it ended in failsafe, divergence or abort; 2 bad
-input, with one line on stderr naming the file, key or flag, and no traceback.
+input, with one line on stderr naming the file, key or flag, and no traceback. A command whose result is final
+may ignore SIGINT from there on (bridge.core.interrupt.ignore_sigint: its status is the result's, even through
+the interpreter's exit); called with ``argv`` (in-process), ``main`` puts the caller's SIGINT handler back.
 Nothing imports this package: it is the top of the layers (tests/test_layers.py).
 """
 
@@ -22,7 +24,9 @@ from __future__ import annotations
 import argparse
 import functools
 import os
+import signal
 import sys
+import threading
 from collections.abc import Sequence
 
 # Every bsst process is single-threaded by design (parallel work is --jobs processes), so numpy's BLAS gets
@@ -47,6 +51,8 @@ def _parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = _parser()
+    own = threading.current_thread() is threading.main_thread() and argv is not None  # an in-process caller's
+    handler = signal.getsignal(signal.SIGINT) if own else None
     try:
         args = parser.parse_args(argv)
         with input_scope():  # the files this command reads: --overwrite never replaces one (params.inputs_read)
@@ -57,6 +63,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("bsst: interrupted", file=sys.stderr)
         return EXIT_FAILED
+    finally:
+        if handler is not None and signal.getsignal(signal.SIGINT) is not handler:  # (a command may ignore it)
+            signal.signal(signal.SIGINT, handler)
 
 
 if __name__ == "__main__":

@@ -5,8 +5,8 @@ In:  the parsed flags (``argparse.Namespace``): a mission or sweep TOML, swept v
      ``--loss`` %, ``--rate`` Hz, ...), flags fixed for every cell, ``--until rms=M|class=NAME``
 Out: the call of :func:`bridge.sweep.run_sweep`, :func:`bridge.sweep.report.rebuild` or
      :func:`bridge.sweep.margin.margin`; their figures on stdout (margins in the axis's unit); the exit
-     status: 0 done, 1 a failed or interrupted sweep (``bsst report`` of an interrupted one too) or a margin below
-     ``--require``, 2 bad input
+     status: 0 done, 1 a failed or interrupted sweep (``bsst report`` of an interrupted one too), a margin below
+     ``--require`` or an interrupted margin (its margin.json written, ``interrupted`` true), 2 bad input
 """
 
 from __future__ import annotations
@@ -234,9 +234,10 @@ def add_margin_command(sub: Any) -> None:
 
 def cmd_margin(args: argparse.Namespace) -> int:
     from bridge.core.flight import Overrides, prepare  # lazy: start-up time
+    from bridge.core.interrupt import ignore_sigint  # lazy: start-up time
     from bridge.record.runlog import run_dir  # lazy: start-up time
     from bridge.sweep.grid import LINK_AXES  # lazy: start-up time
-    from bridge.sweep.margin import margin, parse_until, write_margin  # lazy: start-up time
+    from bridge.sweep.margin import MarginInterrupted, margin, parse_until  # lazy: start-up time
     from missions import load_mission  # lazy: start-up time
 
     until = parse_until(args.until)
@@ -258,17 +259,28 @@ def cmd_margin(args: argparse.Namespace) -> int:
     run_dir(args.out, f"{mission.name}-margin", args.overwrite, create=False)  # a refused --out before any flight
     live = sys.stderr.isatty()
 
-    def show(text: str) -> None:
-        if live:
-            sys.stderr.write(f"\rmargin over {args.over}: {text}   ")
-            sys.stderr.flush()
+    def show(text: str) -> None:  # a line a round: over itself on a terminal, one after the other elsewhere
+        sys.stderr.write(f"\rmargin over {args.over}: {text}   " if live else f"margin over {args.over}: {text}\n")
+        sys.stderr.flush()
 
-    res = margin(mission, args.over, until, controllers=args.controller, seeds=args.seeds,
-                 resolution=args.resolution, jobs=args.jobs, engine=args.engine, progress=show,
-                 below=args.check_below)
+    try:
+        res = margin(mission, args.over, until, controllers=args.controller, seeds=args.seeds,
+                     resolution=args.resolution, jobs=args.jobs, engine=args.engine, progress=show,
+                     below=args.check_below)
+    except MarginInterrupted as stop:
+        res = stop.result
+    ignore_sigint()  # the result is final, complete or not: its file, its lines and the exit status are its own
     if live:
         sys.stderr.write("\n")
-    path = write_margin(res, args.out, mission.name, args.overwrite)
+    return say_margin(res, args, mission.name)
+
+
+def say_margin(res: dict[str, Any], args: argparse.Namespace, name: str) -> int:
+    """Write ``margin.json`` (``--out``) and say what it holds: each law's lines, the warnings, the cells flown;
+    the exit status (1: a law failed, one below ``--require``, or interrupted)."""
+    from bridge.sweep.margin import write_margin  # lazy: start-up time
+
+    path = write_margin(res, args.out, name, args.overwrite)
     entries = res["controllers"]
     what = f" x the sigmas of {res['sensors']}, estimator {res['estimator']}" if args.over == "noise" else ""
     for e in entries:
@@ -284,12 +296,17 @@ def cmd_margin(args: argparse.Namespace) -> int:
               file=sys.stderr)
     starts = (f"; each value from {len(res['seeds'])} starts within {res['start_scatter_m']:g} m of the mission's"
               if res["start_scatter_m"] else "")
-    print(f"{res['cells_flown']} cells flown{starts}; margin.json: {path / 'margin.json'}")
+    stop = " (interrupted)" if res["interrupted"] else ""
+    print(f"{res['cells_flown']} cells flown{stop}{starts}; margin.json: {path / 'margin.json'}")
     for e in entries:  # a law that could not be flown is no boundary: said, and the command did not complete
         if e["error"] is not None:
             err = e["error"]
             print(f"bsst margin: {e['controller']} could not be flown at {args.over} = {err[args.over]:g} (seed "
                   f"{err['seed']}, {err['outcome']}): {err['error']}", file=sys.stderr)
+    if res["interrupted"]:  # what was flown is kept, and said to be all there is (--require not judged on it)
+        print("bsst margin: interrupted: margin.json keeps the cells flown and each law's bracket so far (interrupted: "
+              "true); no margin is claimed beyond them", file=sys.stderr)
+        return EXIT_FAILED
     low = [e["controller"] for e in entries if args.require is not None
            and (e["holds_below"] is None or e["holds_below"] < args.require)]
     if low:
@@ -301,6 +318,12 @@ def margin_lines(e: dict[str, Any], over: str, what: str, until: str) -> list[st
     """The console lines of one law's margin: the bisection's answer and its bracket, then the check below it."""
     lo, hi = e["bracket"]
     err = e["error"]
+    if e["interrupted_in"] == "bisection":  # Ctrl-C: no margin, the bracket flown so far
+        ends = ("-" if lo is None else f"{lo:g}", "-" if hi is None else f"{hi:g}")
+        held = f"holds at {lo:g}" if lo is not None else "no value held yet"
+        top = f"fails at {hi:g}" if hi is not None else "no value failed yet"
+        return [f"margin {e['controller']}: {over}: interrupted{what} (bracket so far [{ends[0]}, {ends[1]}]: {held}, "
+                f"{top}; until {until})"]
     if err is not None and err["phase"] == "bisection":  # the law failed, or its worker died: no boundary found
         held = f"; every value flown below it held, up to {lo:g}" if lo is not None else ""
         return [f"margin {e['controller']}: {over}: none{what} (the law failed, not the criterion: {err['outcome']} at "
@@ -312,7 +335,12 @@ def margin_lines(e: dict[str, Any], over: str, what: str, until: str) -> list[st
     lines = [f"margin {e['controller']}: {over} {e['margin']:g}{what} (bracket [{lo:g}, "
              f"{'-' if hi is None else f'{hi:g}'}], {tail}; until {until})"]
     band = e["checked_below"]
-    if band is None:
+    if e["interrupted_in"] == "below":  # Ctrl-C during the check: what it flew of the band
+        under = e["failed_below"]
+        lines.append("  below the margin: interrupted before the check ended; " + (
+            f"NOT MONOTONE: fails at {', '.join(f'{v:g}' for v in under)}; " if under else "no value flown failed; ")
+            + f"holds_below {e['holds_below']:g} over the values flown")
+    elif band is None:
         lines.append(f"  below the margin: not checked (--check-below 0); holds_below {e['holds_below']:g} assumes "
                      "failing is monotone")
     elif e["monotone"]:

@@ -3,7 +3,9 @@
 In:  SIGINT, while :func:`sigint_futures` is entered in the main thread
 Out: :class:`Interrupts`: a :class:`~concurrent.futures.Future` completed (its result: the signal number) at the
      first SIGINT, another at the second; :func:`wait_or_interrupt`, concurrent.futures' ``wait`` that raises
-     KeyboardInterrupt once it has returned
+     KeyboardInterrupt once it has returned; :func:`sigint_deferred`: SIGINT raised only inside
+     :meth:`Deferred.raising` blocks (where a search flies), noted elsewhere (its bookkeeping); :func:`ignore_sigint`:
+     a command whose result is final ignores SIGINT from there on (its write, its summary, the interpreter's exit)
 
 Why:
 - Python raises KeyboardInterrupt between any two bytecodes of the main thread, so also inside
@@ -24,6 +26,14 @@ Why:
 
 Outside the main thread, or where SIGINT is ignored (a sweep's workers), nothing is installed and the futures
 never complete.
+
+A search of many rounds (``bsst margin``) keeps its results only if Ctrl-C never lands in its bookkeeping between
+two rounds: :func:`sigint_deferred` raises it only while a round flies (where a flight in this process takes it
+at once, and a pool's wait takes it as above), and notes one that lands elsewhere, for the next round to raise at
+its start. Once the result is final, :func:`ignore_sigint`: Python's exit restores SIGINT's default action (death
+by the signal, status 130 in a shell) before it has finished, unless SIGINT is ignored (CPython's
+``_PySignal_Fini`` keeps an ignored signal ignored); a ``bsst margin`` sent SIGINT just after it had written its
+complete margin.json died that way.
 """
 
 from __future__ import annotations
@@ -107,4 +117,56 @@ def wait_or_interrupt(futures: Iterable[Future], interrupted: Future) -> set[Fut
     return done
 
 
-__all__ = ["Interrupts", "sigint_futures", "wait_or_interrupt"]
+@dataclass
+class Deferred:
+    """SIGINT within a :func:`sigint_deferred` block: KeyboardInterrupt inside :meth:`raising`, noted elsewhere
+    (``pending``), and raised at the next :meth:`raising`'s start."""
+
+    pending: bool = False
+    _raising: bool = False
+
+    @contextmanager
+    def raising(self) -> Iterator[None]:
+        """Within the block a SIGINT raises KeyboardInterrupt (one noted before raises it at once, here)."""
+        if self.pending:
+            raise KeyboardInterrupt
+        self._raising = True
+        try:
+            yield
+        finally:
+            self._raising = False
+
+    def on_sigint(self, signum: int, frame: Any) -> None:
+        self.pending = True
+        if self._raising:
+            raise KeyboardInterrupt
+
+
+@contextmanager
+def sigint_deferred() -> Iterator[Deferred]:
+    """Within the block, SIGINT raises only inside the yielded :class:`Deferred`'s ``raising()`` blocks; the
+    previous handler is back after it. Outside the main thread, or where SIGINT is ignored, nothing is installed
+    (``pending`` stays false)."""
+    got = Deferred()
+    previous = signal.getsignal(signal.SIGINT)
+    if threading.current_thread() is not threading.main_thread() or previous is signal.SIG_IGN:
+        yield got
+        return
+    if previous is None:  # installed from C: Python's own is what comes back
+        previous = signal.default_int_handler
+    signal.signal(signal.SIGINT, got.on_sigint)
+    try:
+        yield got
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def ignore_sigint() -> None:
+    """From here on this process ignores SIGINT (in the main thread; elsewhere nothing changes): a command's result
+    is final, and neither its summary nor the interpreter's exit may be cut by a Ctrl-C (see the module's docstring).
+    ``bsst``'s ``main`` puts an in-process caller's handler back when the command returns."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+__all__ = ["Deferred", "Interrupts", "ignore_sigint", "sigint_deferred", "sigint_futures", "wait_or_interrupt"]

@@ -213,8 +213,12 @@ def _start_fork_server() -> None:
         signal.signal(signal.SIGINT, previous)
 
 
-def run_local(mission: Mission, todo: Sequence[Cell], mode: str, jobs: int, report: Report) -> None:
-    """Fly cells in a local process pool, at most 2 x jobs in flight.
+def run_local(mission: Mission, todo: Sequence[Cell], mode: str, jobs: int, report: Report,
+              name: str = "sweep", search: bool = False) -> None:
+    """Fly cells in a local process pool, at most 2 x jobs in flight; ``name``: the command, as a Ctrl-C's line
+    names it. ``search``: this call is one round of a search (``bsst margin``): after a Ctrl-C the cells in flight
+    are reported as they end (a sweep's are not: its resume flies them), and a Ctrl-C that came after the last
+    cell's wait raises KeyboardInterrupt all the same, so that the search stops there.
 
     If a worker process dies (the pool breaks), the cells that were in flight are flown
     again one at a time in a fresh one-worker pool: the one that breaks that one too is
@@ -234,16 +238,18 @@ def run_local(mission: Mission, todo: Sequence[Cell], mode: str, jobs: int, repo
                 except BrokenProcessPool:
                     row = error_row(cell, "worker process died")
                 finally:
-                    _shut_down(p, sigint)
+                    _shut_down(p, sigint, name)
                 report(row)
                 continue
-            _fly_in_pool(mission, queue, suspects, mode, jobs, report, sigint)
+            _fly_in_pool(mission, queue, suspects, mode, jobs, report, sigint, name, search)
+        if search and sigint.first.done():  # taken after the last wait: not lost
+            raise KeyboardInterrupt
 
 
 def _fly_in_pool(mission: Mission, queue: deque[Cell], suspects: deque[Cell], mode: str, jobs: int,
-                 report: Report, sigint: Interrupts) -> None:
+                 report: Report, sigint: Interrupts, name: str, search: bool) -> None:
     """Fly ``queue``'s cells in one pool of ``jobs`` workers until it is empty or the pool breaks (the cells
-    in flight then go to ``suspects``)."""
+    in flight then go to ``suspects``); ``search``: after a Ctrl-C, report those that end (:func:`run_local`)."""
     pool = _pool(jobs, len(queue), mode)
     inflight: dict[Any, Cell] = {}
     try:
@@ -263,18 +269,22 @@ def _fly_in_pool(mission: Mission, queue: deque[Cell], suspects: deque[Cell], mo
                 while running := [f for f in inflight if not f.done()]:
                     wait_or_interrupt(running, sigint.first)
                 suspects.extend(inflight.values())
+                inflight.clear()  # (they fly again one by one: none is reported here)
                 return
     finally:
-        _shut_down(pool, sigint)
+        _shut_down(pool, sigint, name)
+        if search and sigint.first.done():  # the cells in flight have ended: those that flew are results
+            for f in [f for f in inflight if f.done() and not f.cancelled() and f.exception() is None]:
+                report(f.result())
 
 
-def _shut_down(pool: ProcessPoolExecutor, sigint: Interrupts) -> None:
-    """Shut ``pool`` down once the cells in flight have ended (after a Ctrl-C, ``sigint.first`` done, they are not
-    recorded: their workers ignore it and finish them). The second Ctrl-C (``sigint.second``, before or during this
-    wait) ends the workers at once (SIGTERM: an offline cell dies, a lockstep cell's session stops its children)
-    rather than wait for them."""
+def _shut_down(pool: ProcessPoolExecutor, sigint: Interrupts, name: str) -> None:
+    """Shut ``pool`` down once the cells in flight have ended (after a Ctrl-C, ``sigint.first`` done, their workers
+    ignore it and finish them; a sweep does not record them, a search does: :func:`run_local`). The second Ctrl-C
+    (``sigint.second``, before or during this wait) ends the workers at once (SIGTERM: an offline cell dies, a
+    lockstep cell's session stops its children) rather than wait for them."""
     if sigint.first.done():
-        print("sweep: interrupted; the cells in flight end first (Ctrl-C again stops them now)", file=sys.stderr,
+        print(f"{name}: interrupted; the cells in flight end first (Ctrl-C again stops them now)", file=sys.stderr,
               flush=True)
     ended: Future = Future()
 

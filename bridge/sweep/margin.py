@@ -10,7 +10,9 @@ RMS error passes X m; ``class=NAME``: the cell's class is NAME or worse, see
 Out: per law the margin (the largest value flown that did not fail, in the axis's unit), its bracket
 ``[margin, first failing value]``, ``monotone``, ``failed_below`` and ``holds_below`` (the check
 below it), and every cell flown; ``margin.json`` when a directory is given (the search's fields, then one
-entry per law under ``controllers``, whatever their number: docs/campaigns.md, "margin.json").
+entry per law under ``controllers``, whatever their number: docs/campaigns.md, "margin.json"). Stopped by
+Ctrl-C: :class:`MarginInterrupted`, a KeyboardInterrupt that carries the same content for what was flown
+(``interrupted`` true; each law's ``interrupted_in``, its bracket so far, no margin its bisection did not reach).
 
 A law that could not be flown at a value (a cell ``law_failed``, or ``error``: e.g. its worker process died)
 measured nothing there: not a boundary. Its search ends at that cell, its ``error`` says where and why, its
@@ -30,6 +32,16 @@ every value of ``[margin - below, margin)`` at ``resolution`` steps that was not
 lists those that did not, and ``holds_below`` is the largest value flown such that every value
 flown at or below it held (the margin when monotone). ``margin`` stays the bisection's answer.
 
+Ctrl-C (SIGINT) stops the search only while a round flies (bridge.core.interrupt.sigint_deferred; one that
+lands between rounds stops it before the next): a round on the process pool lets its cells in flight finish, a
+second Ctrl-C ends them; a cell flown in this process stops at once and is not a result (its row ``aborted``);
+the batch engine stops once its compiled call returns. The rows flown before it are kept: a value a seed failed
+at is the bracket's top (a value fails when any seed fails), a value every seed held at its bottom, and a value
+some seeds held at, with others not flown, is neither. The content then says ``interrupted``, each law's
+``interrupted_in`` (``bisection``: no margin, the bracket so far; ``below``: the margin, its check not flown to
+the end, ``monotone`` false if a value failed in the part flown, else null), and :class:`MarginInterrupted`
+carries it.
+
 Over ``noise`` the batch engine cannot fly the cells (it has no sensors): every probe is a
 scalar flight on the process engine, one at a time for one law and seed (a pool costs more
 than a few cells), so keep ``seeds`` and the laws few. Noise needs an estimator that reads
@@ -48,10 +60,11 @@ from pathlib import Path
 from typing import Any
 
 from bridge.core.flight import prepare
+from bridge.core.interrupt import Deferred, sigint_deferred
 from bridge.record.runlog import run_dir, write_json_atomic
 from bridge.sweep.cells import FAILED, broke_policy, seeds_alike
 from bridge.sweep.classes import CLASSES, Classes, classify
-from bridge.sweep.executors import engine_for, run_batch, run_cell, run_local
+from bridge.sweep.executors import Report, engine_for, run_batch, run_cell, run_local
 from bridge.sweep.grid import LINK_AXES, RANGES, Cell, cell_flight, link_trace, mission_value, noise_problem
 from controller.law import LawError, is_builtin
 from missions import Mission
@@ -125,6 +138,7 @@ class Search:
     cells: list[dict[str, Any]] = field(default_factory=list)
     held: bool = False
     error: dict[str, Any] | None = None  # the first cell that could not be flown: the search ended there
+    bisecting: bool = True  # false once its bisection has ended (bracketed, at the range's top, or an error)
 
     def next_value(self, resolution: float, top: float) -> float | None:
         if self.hi is None:
@@ -180,8 +194,12 @@ class Search:
                 break
             holds = v
         under = sorted(v for v in failed if v < self.lo)
-        return {"monotone": None if checked is None else not under, "failed_below": under, "holds_below": holds,
-                "checked_below": checked}
+        monotone = False if under else None if checked is None else True  # (a failure: also in a band cut short)
+        return {"monotone": monotone, "failed_below": under, "holds_below": holds, "checked_below": checked}
+
+    def short_of(self, over: str, values: list[float], seeds: int) -> list[float]:
+        """The values of ``values`` that this law has flown with fewer than ``seeds`` seeds."""
+        return [v for v in values if sum(1 for c in self.cells if c[over] == v) < seeds]
 
 
 def resolution_range(over: str) -> tuple[float, float]:
@@ -196,7 +214,8 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
            engine: str = "auto", progress: Callable[[str], None] | None = None,
            below: float | None = None) -> dict[str, Any]:
     """Search the margin of each law, then check the band ``below`` it (default ``BELOW_STEPS`` x
-    ``resolution``, 0: no check; see the module docstring); the ``margin.json`` content."""
+    ``resolution``, 0: no check; see the module docstring); the ``margin.json`` content. Ctrl-C:
+    :class:`MarginInterrupted`, carrying the content of what was flown."""
     if over not in OVER:
         raise ConfigError(f"--over must be one of {', '.join(OVER)}, got {over!r}")
     least, most = resolution_range(over)
@@ -240,70 +259,132 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
             raise ConfigError(f"margin over {over}: its first probe ({over} = {START[over]:g}) cannot be flown: "
                               f"{exc}") from None
     searches = [Search(c, lo_range) for c in laws]
+    probes = Probes(mission, over, base, vehicle, seed_list, engine, jobs)
+    with sigint_deferred() as deferred:  # Ctrl-C taken while a round flies, never in the bookkeeping between
+        cells_flown, interrupted = bisect(searches, probes, until, classes, resolution, top, deferred, progress)
+        bands = {s.controller: s.band(over, below, resolution, lo_range) for s in searches}
+        if any(bands.values()) and not interrupted:
+            if progress is not None:
+                n = sum(map(len, bands.values())) * len(seed_list)
+                progress(f"checking {n} values below the margin{'s' if len(searches) > 1 else ''}")
+            rows, interrupted = probes.fly(bands, deferred)
+            cells_flown += len(rows)
+            for s in searches:
+                for v in bands[s.controller]:
+                    s.take(over, v, rows, until, classes, "below")
+        stopped = {s.controller: "bisection" if s.bisecting else
+                   "below" if interrupted and s.short_of(over, bands[s.controller], len(seed_list)) else None
+                   for s in searches} if interrupted else {}
+        checked = {s.controller: [max(s.lo - below, lo_range), s.lo] if s.held and below > 0 and s.error is None
+                   and not stopped.get(s.controller) else None for s in searches}
+        result = {"over": over, "until": until.text(), "resolution": resolution, "check_below": below,
+                  "seeds": seed_list, "start_scatter_m": mission.start_scatter_m,  # 0: one start, every seed
+                  "mission": mission.name, "cells_flown": cells_flown, "estimator": flight.estimator,
+                  "sensors": flight.sensors.name, "interrupted": interrupted,
+                  "laws_failed": [s.controller for s in searches if s.error is not None],
+                  "controllers": [entry(s, over, checked[s.controller], stopped.get(s.controller))
+                                  for s in searches]}
+    if interrupted:
+        raise MarginInterrupted(result)
+    return result
+
+
+class MarginInterrupted(KeyboardInterrupt):
+    """Ctrl-C stopped :func:`margin`: ``result`` is the ``margin.json`` content of what it flew (``interrupted``
+    true). A KeyboardInterrupt: a caller that does not catch it stops as before."""
+
+    def __init__(self, result: dict[str, Any]) -> None:
+        super().__init__(f"margin search interrupted after {result['cells_flown']} cells")
+        self.result = result
+
+
+@dataclass(frozen=True)
+class Probes:
+    """What every probe of one search shares (the mission, the axis, the other axes' values, the seeds) and how a
+    round of them flies (``engine``, ``jobs``)."""
+
+    mission: Mission
+    over: str
+    link: dict[str, float]
+    vehicle: dict[str, Any]
+    seeds: list[int]
+    engine: str
+    jobs: int | None
+
+    def fly(self, values: dict[str, list[float]], deferred: Deferred) -> tuple[list[dict[str, Any]], bool]:
+        """Fly each law's ``values`` with every seed, as one round; its rows, and whether Ctrl-C stopped it (the
+        rows then those flown before it)."""
+        cells = [probe(self.mission, c, self.over, v, s, self.link, self.vehicle)
+                 for c, vs in values.items() for v in vs for s in self.seeds]
+        rows: list[dict[str, Any]] = []
+        try:
+            with deferred.raising():
+                fly_round(self.mission, cells, self.engine, self.jobs, rows.append)
+        except KeyboardInterrupt:
+            return rows, True
+        return rows, False
+
+
+def bisect(searches: list[Search], probes: Probes, until: Until, classes: Classes, resolution: float, top: float,
+           deferred: Deferred, progress: Callable[[str], None] | None) -> tuple[int, bool]:
+    """The bisection's rounds, all laws' probes of a round together, until every law's search has ended (or Ctrl-C:
+    each law's bracket as far as the rows flown take it); (cells flown, interrupted)."""
+    over, seeds = probes.over, len(probes.seeds)
     pending = {s.controller: START[over] for s in searches}
     cells_flown = 0
     while pending:
-        probes = [probe(mission, c, over, v, s, base, vehicle) for c, v in pending.items() for s in seed_list]
-        rows = fly_round(mission, probes, engine, jobs)
+        rows, interrupted = probes.fly({c: [v] for c, v in pending.items()}, deferred)
         cells_flown += len(rows)
         for s in searches:
             if s.controller not in pending:
                 continue
-            v = pending[s.controller]
+            v = pending.pop(s.controller)
             failed = s.take(over, v, rows, until, classes, "bisection")
             if s.error is not None:  # not a boundary: the law could not be flown there; its search ends
-                del pending[s.controller]
+                s.bisecting = False
+                continue
+            if interrupted and not failed and s.short_of(over, [v], seeds):  # held by the seeds flown: not known
                 continue
             s.record(v, failed)
             nxt = s.next_value(resolution, top)
             if nxt is None:  # bracketed to the resolution, or held up to the top of the axis's range
-                del pending[s.controller]
-            else:
+                s.bisecting = False
+            elif not interrupted:
                 pending[s.controller] = nxt
+        if interrupted:
+            return cells_flown, True
         if progress is not None:
-            progress(", ".join(f"{s.controller} [{s.lo:g}, {'-' if s.hi is None else f'{s.hi:g}'}]"
-                               for s in searches))
-    bands = {s.controller: s.band(over, below, resolution, lo_range) for s in searches}
-    probes = [probe(mission, c, over, v, s, base, vehicle) for c, vs in bands.items() for v in vs for s in seed_list]
-    if probes:
-        if progress is not None:
-            progress(f"checking {len(probes)} values below the margin{'s' if len(searches) > 1 else ''}")
-        rows = fly_round(mission, probes, engine, jobs)
-        cells_flown += len(rows)
-        for s in searches:
-            for v in bands[s.controller]:
-                s.take(over, v, rows, until, classes, "below")
-    checked = {s.controller: [max(s.lo - below, lo_range), s.lo] if s.held and below > 0 and s.error is None
-               else None for s in searches}
-    return {"over": over, "until": until.text(), "resolution": resolution, "check_below": below,
-            "seeds": seed_list, "start_scatter_m": mission.start_scatter_m,  # 0: one start, every seed
-            "mission": mission.name, "cells_flown": cells_flown, "estimator": flight.estimator,
-            "sensors": flight.sensors.name, "laws_failed": [s.controller for s in searches if s.error is not None],
-            "controllers": [entry(s, over, checked[s.controller]) for s in searches]}
+            progress(f"{cells_flown} cell{'' if cells_flown == 1 else 's'} flown; " + ", ".join(
+                f"{s.controller} [{s.lo:g}, {'-' if s.hi is None else f'{s.hi:g}'}]" for s in searches))
+    return cells_flown, False
 
 
-def entry(s: Search, over: str, checked: list[float] | None) -> dict[str, Any]:
-    """One law's entry of ``margin.json``'s ``controllers`` (see docs/campaigns.md, "margin.json")."""
-    cut = s.error is not None and s.error["phase"] == "bisection"  # its search ended there: no margin
+def entry(s: Search, over: str, checked: list[float] | None, stopped: str | None = None) -> dict[str, Any]:
+    """One law's entry of ``margin.json``'s ``controllers`` (see docs/campaigns.md, "margin.json"); ``stopped``:
+    the phase Ctrl-C stopped its search in (``bisection``: no margin, its bracket so far; ``below``)."""
+    cut = s.error is not None and s.error["phase"] == "bisection" or stopped == "bisection"  # no margin found
     return {"controller": s.controller, "margin": s.lo if s.held and not cut else None,  # None: no value held
             "bracket": [s.lo if s.held else None, s.hi], **s.below(over, checked),
             "seeds_alike": seeds_alike(s.cells, itemgetter(over)), "error": s.error, "cells": s.cells,
-            "held_to_range": s.hi is None and s.error is None}
+            "held_to_range": s.hi is None and not cut and s.error is None, "interrupted_in": stopped}
 
 
-def fly_round(mission: Mission, probes: list[Cell], engine: str, jobs: int | None) -> list[dict[str, Any]]:
-    """Fly one round's cells: as a batch where it can (even one cell: this process loads the kernels
-    once), in this process for a cell or two of the built-in laws, in a process pool otherwise; their rows."""
-    rows: list[dict[str, Any]] = []
+def fly_round(mission: Mission, probes: list[Cell], engine: str, jobs: int | None, report: Report) -> None:
+    """Fly one round's cells, each row to ``report``: as a batch where it can (even one cell: this process loads
+    the kernels once), in this process for a cell or two of the built-in laws, in a process pool otherwise.
+    KeyboardInterrupt for a Ctrl-C (a cell in this process that it stopped, ``aborted``, is not reported)."""
     used, _ = engine_for(mission, probes, "offline", engine, min_cells=1)
     if used == "batch":
-        run_batch(mission, probes, rows.append, jobs=jobs)
+        run_batch(mission, probes, report, jobs=jobs)
     elif len(probes) <= IN_PROCESS_CELLS and all(is_builtin(c.controller) for c in probes):  # a pool's start
         # costs more than a cell or two; a law of the user's own flies in a worker, whose death is a failed cell
-        rows += [run_cell(mission, c) for c in probes]
+        for c in probes:
+            row = run_cell(mission, c)
+            if row["outcome"] == "aborted":  # the flight took the Ctrl-C (bridge.loop): interrupted, not a result
+                raise KeyboardInterrupt
+            report(row)
     else:
-        run_local(mission, probes, "offline", jobs or os.cpu_count() or 1, rows.append)
-    return rows
+        run_local(mission, probes, "offline", jobs or os.cpu_count() or 1, report, name="margin", search=True)
 
 
 def probe(mission: Mission, law: str, over: str, value: float, seed: int, link: dict[str, float],

@@ -141,6 +141,13 @@ def load_sweep_dir(path: str | Path) -> tuple[list[dict[str, Any]], dict[str, An
     if not p.is_dir():
         raise ConfigError(f"{p}: not a directory")
     meta_path = p / SWEEP_JSON
+    if not meta_path.exists() and not (p / CELLS_CSV).exists():
+        from bridge.sweep.margin import MARGIN_JSON  # lazy: only where a directory is not a sweep's
+
+        if (p / MARGIN_JSON).is_file():  # its whole record is margin.json (interrupted or not, it says)
+            raise ConfigError(f"{p}: a `bsst margin` directory ({MARGIN_JSON}, its whole record, "
+                              f"\"interrupted\" saying whether its search ended); bsst report rebuilds a sweep's "
+                              f"report from its {CELLS_CSV}")
     meta = read_sweep_json(meta_path) if meta_path.exists() else {}
     rows = read_cells(p / CELLS_CSV, legacy=legacy_values(meta))  # an older sweep's cells.csv is read too
     if not meta:
