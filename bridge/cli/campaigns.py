@@ -108,6 +108,7 @@ def fleet_sizes(text: str) -> tuple[int, ...]:
 
 def cmd_sweep(args: argparse.Namespace) -> int:
     from bridge.core.flight import Overrides, prepare  # lazy: start-up time
+    from bridge.core.interrupt import ignore_sigint  # lazy: start-up time
     from bridge.sweep import AXES, Grid, Sweep, is_sweep_file, load_sweep, run_sweep  # lazy: start-up time
     from bridge.sweep.cells import broke_policy  # lazy: start-up time
     from bridge.sweep.grid import LINK_AXES, SHORT  # lazy: start-up time
@@ -145,6 +146,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     finally:
         if client is not None:
             client.close()
+    ignore_sigint()  # the result is final (interrupted or not): its lines and exit status are its own
     cells = f"{len(res.rows)} of {res.total} cells flown (interrupted): {res.ran} this run" if res.interrupted else \
         f"{len(res.rows)} cells, {res.ran} flown"
     mixed = "" if len(res.engines) < 2 else f"; MIXED engines: the rows kept from before flew on {res.engines[0]}" \

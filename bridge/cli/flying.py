@@ -123,8 +123,10 @@ def own_laws(args: argparse.Namespace, m: Any) -> list[str]:
 def report_fleet(run: Any, command: str) -> int:
     """Print a fleet's summary (a line a vehicle, the separation), name what broke on stderr; its exit status
     (0: every vehicle completed as asked and the separation held)."""
+    from bridge.core.interrupt import ignore_sigint  # lazy: start-up time
     from bridge.record.policies import run_ok, violation_text  # lazy: numpy
 
+    ignore_sigint()  # the run is on disk: its lines and exit status are its own, through the interpreter's exit
     s = run.summary
     try:
         w = sys.stdout.write
@@ -173,9 +175,11 @@ def report_fleet(run: Any, command: str) -> int:
 
 def report_run(run: Any, command: str) -> int:
     """Print a run's summary, name each violated policy on stderr; its exit status (0: a clean completion)."""
+    from bridge.core.interrupt import ignore_sigint  # lazy: start-up time
     from bridge.record.policies import run_ok, stalls_of, violation_text  # lazy: numpy
     from bridge.record.summary import intervention_text, stalls_text, unconfirmed_text  # lazy: numpy
 
+    ignore_sigint()  # the run is on disk: its lines and exit status are its own, through the interpreter's exit
     try:
         print_summary(run.summary, run.path)
         sys.stdout.flush()
