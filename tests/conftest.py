@@ -5,8 +5,10 @@ from __future__ import annotations
 import atexit
 import fcntl
 import os
+import signal
 import sys
 from collections import Counter
+from collections.abc import Iterator
 
 # Set before numpy loads here, inherited by every child: bsst's own processes give numpy's BLAS one thread
 # (bridge/cli/__init__.py says why), and so does each test process.
@@ -58,6 +60,17 @@ def _load_kernels(kind: str, shared: Path) -> None:
     with open(shared / f"compile-{kind}.lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
         KERNELS[kind]()
+
+
+@pytest.fixture(autouse=True)
+def sigint_handler_kept() -> Iterator[None]:
+    """Every test leaves SIGINT's handler as it found it: one left ignored (a command's ``ignore_sigint`` called
+    outside ``main``) is inherited by every child the worker starts after it, and a child that needs Ctrl-C then
+    cannot get it (a test of the sweep's fork server read SIG_IGN where Python's own handler belonged)."""
+    before = signal.getsignal(signal.SIGINT)
+    yield
+    after = signal.getsignal(signal.SIGINT)
+    assert after is before, f"the test left SIGINT's handler {after!r} (it was {before!r})"
 
 
 @pytest.fixture(scope="session", autouse=True)

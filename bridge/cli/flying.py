@@ -104,9 +104,17 @@ def _sim(args: argparse.Namespace, mission: Any) -> int:
 
     run = simulate(mission, out=args.out, write=True, overwrite=args.overwrite, plots=not args.no_plots,
                    overrides=overrides_from_args(args), vehicles=args.vehicles, formation=args.formation)
-    if "vehicles" in run.summary:
-        return report_fleet(run, "sim")
-    return report_run(run, "sim")
+    return report_final(run, "sim")
+
+
+def report_final(run: Any, command: str) -> int:
+    """A flying command's run, on disk: Ctrl-C ignored from here on (its lines and exit status are the run's, through
+    the interpreter's exit: bridge.core.interrupt.ignore_sigint; ``main`` puts an in-process caller's handler back),
+    then reported (:func:`report_fleet` or :func:`report_run`); the exit status."""
+    from bridge.core.interrupt import ignore_sigint  # lazy: start-up time
+
+    ignore_sigint()
+    return report_fleet(run, command) if "vehicles" in run.summary else report_run(run, command)
 
 
 def own_laws(args: argparse.Namespace, m: Any) -> list[str]:
@@ -123,10 +131,8 @@ def own_laws(args: argparse.Namespace, m: Any) -> list[str]:
 def report_fleet(run: Any, command: str) -> int:
     """Print a fleet's summary (a line a vehicle, the separation), name what broke on stderr; its exit status
     (0: every vehicle completed as asked and the separation held)."""
-    from bridge.core.interrupt import ignore_sigint  # lazy: start-up time
     from bridge.record.policies import run_ok, violation_text  # lazy: numpy
 
-    ignore_sigint()  # the run is on disk: its lines and exit status are its own, through the interpreter's exit
     s = run.summary
     try:
         w = sys.stdout.write
@@ -175,11 +181,9 @@ def report_fleet(run: Any, command: str) -> int:
 
 def report_run(run: Any, command: str) -> int:
     """Print a run's summary, name each violated policy on stderr; its exit status (0: a clean completion)."""
-    from bridge.core.interrupt import ignore_sigint  # lazy: start-up time
     from bridge.record.policies import run_ok, stalls_of, violation_text  # lazy: numpy
     from bridge.record.summary import intervention_text, stalls_text, unconfirmed_text  # lazy: numpy
 
-    ignore_sigint()  # the run is on disk: its lines and exit status are its own, through the interpreter's exit
     try:
         print_summary(run.summary, run.path)
         sys.stdout.flush()
@@ -354,9 +358,7 @@ def cmd_sitl(args: argparse.Namespace) -> int:
                realtime=args.realtime, instance=args.instance, gcs=args.gcs, speed=args.speed, live=True,
                key=args.key, overrides=overrides_from_args(args), await_mission=args.await_mission,
                vehicles=args.vehicles, formation=args.formation)
-    if "vehicles" in run.summary:
-        return report_fleet(run, "sitl")
-    return report_run(run, "sitl")
+    return report_final(run, "sitl")
 
 
 # -- the two sides alone (bsst vehicle, bsst controller) ---------------------------------------------

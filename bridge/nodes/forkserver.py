@@ -438,7 +438,8 @@ def _fork(req: dict[str, Any], fds: list[int], run: Callable[[list[str]], int], 
     except BaseException:  # as Python would: the traceback on stderr, status 1
         traceback.print_exc()
         rc = 1
-    finally:
+    finally:  # the command is over: a Ctrl-C now must not raise out of here into a copy of the server's loop
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
         for stream in (sys.stdout, sys.stderr):
             try:
                 stream.flush()
