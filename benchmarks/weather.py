@@ -42,6 +42,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # missions/ is the repository's, not benchmarks/
 
 from bridge import simulate  # noqa: E402
+from bridge.autopilot.intention import UserModeIntention  # noqa: E402
 from bridge.autopilot.modes import HOLD, TAKEOFF  # noqa: E402
 from bridge.core.flight import prepare  # noqa: E402
 from bridge.sweep.margin import margin, parse_until  # noqa: E402
@@ -162,9 +163,11 @@ def gps_hold_table() -> None:
                       estimator="ekf").make_vehicle()
         sim.set_mode(TAKEOFF, 5.0)
         sim.arm_in_mode()
+        intention = UserModeIntention(sim)  # the mode its failsafe's disarm leaves, as a session's vehicle takes it
         held = None
         while sim.armed and sim.t < 30.0:
             sim.advance()
+            intention.after_period()
             held = sim.plant.state if held is None and sim.mode == HOLD else held
         X, E = sim.plant.state, sim.published()
         said = "; ".join(f"{e.t:.3f}: {e.kind}: {e.text.split(' (')[0]}" for e in sim.events if e.t > 5.0)

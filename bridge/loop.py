@@ -33,7 +33,8 @@ from collections.abc import Generator
 from pathlib import Path
 from typing import Any
 
-from bridge.autopilot.simvehicle import FAILSAFE, LAND, LANDED, OFFBOARD, SimVehicle
+from bridge.autopilot.intention import FAILSAFE_MODES, UserModeIntention
+from bridge.autopilot.simvehicle import FAILSAFE, LAND, OFFBOARD, SimVehicle
 from bridge.autopilot.vehicleevents import typed_fields
 from bridge.core.flight import Flight, Overrides, Progress, prepare
 from bridge.core.wire import command_over_wire, state_over_wire
@@ -106,6 +107,7 @@ def flying(flight: Flight, path: Path | None = None, *, plots: bool = True, prog
     m = flight.mission
     check_trace_steps(m)
     vehicle = flight.make_vehicle(armed=True)
+    intention = UserModeIntention(vehicle)  # the mode a disarm in LAND or the failsafe leaves, as a session's vehicle
     ctl = flight.make_controller()
     law = ctl.law
     plant = vehicle.plant
@@ -119,8 +121,7 @@ def flying(flight: Flight, path: Path | None = None, *, plots: bool = True, prog
     blackouts = flight.blackout_notes()
     rows = array("d")  # the trace, row after row, 8 bytes a value: 0.6 KB a step (a tuple of floats took 1.6 KB)
     record = RunRecord(path, m) if path is not None else None
-    trace = record.trace if record is not None else None
-    events = record.events if record is not None else None
+    trace, events = (record.trace, record.events) if record is not None else (None, None)
     outcome = "completed" if vehicle.armed else "denied"  # denied: its pre-arm check refused (a preflight event)
     failsafe_seen = False
     logged = 0
@@ -161,6 +162,7 @@ def flying(flight: Flight, path: Path | None = None, *, plots: bool = True, prog
             if trace is not None:
                 trace.row(row)
             vend.advance()
+            flown = intention.after_period()  # the period's mode (a disarm then takes the user's, as in a session)
             logged = _log_new_events(vehicle, events, logged)
             contact = yield plant.state
             if contact is not None:  # another vehicle touched this one (the caller judged the shared world)
@@ -171,7 +173,7 @@ def flying(flight: Flight, path: Path | None = None, *, plots: bool = True, prog
             if verdict:
                 outcome = verdict
                 break
-            if vehicle.mode in (FAILSAFE, LANDED):
+            if flown in FAILSAFE_MODES:
                 failsafe_seen = True
                 outcome = "failsafe"
             elif failsafe_seen and flight.failsafe.resume and vehicle.armed:
@@ -189,7 +191,7 @@ def flying(flight: Flight, path: Path | None = None, *, plots: bool = True, prog
     try:  # the record stays open for the verdicts' lines, and is closed whatever happens
         arrays = trace_arrays(rows, TRACE_COLUMNS)
         link = {"up": up.stats.summary(), "down": down.stats.summary(), "rejected": dict(vend.rejected)}
-        summary = _judged(flight, vehicle, arrays, outcome, link)
+        summary = _judged(flight, vehicle, intention, arrays, outcome, link)
     finally:
         _close_record(record, vehicle.events[logged:])
     if record is not None:
@@ -197,7 +199,7 @@ def flying(flight: Flight, path: Path | None = None, *, plots: bool = True, prog
     return Run(arrays, summary, path)
 
 
-def _judged(flight: Flight, vehicle: SimVehicle, arrays: dict[str, Any], outcome: str,
+def _judged(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention, arrays: dict[str, Any], outcome: str,
             link: dict[str, Any]) -> dict[str, Any]:
     """The flight's summary: its figures, plant blocks, who ended it, the policies' verdicts (each violation
     an event), and when it completed, its end action flown (:func:`fly_end`)."""
@@ -213,9 +215,9 @@ def _judged(flight: Flight, vehicle: SimVehicle, arrays: dict[str, Any], outcome
         shown.append({"t": round(vehicle.t, 6), "kind": "policy", "text": violation_text(v)})
     verdict = None
     if outcome == "completed":  # after the mission's figures: nothing of them changes
-        summary["end"], verdict = fly_end(flight, vehicle, summary["events"])
+        summary["end"], verdict = fly_end(flight, vehicle, intention, summary["events"])
     elif outcome == "failsafe":
-        verdict = land_failsafe(flight, vehicle, summary["events"])
+        verdict = land_failsafe(flight, vehicle, intention, summary["events"])
     if verdict is not None:  # its landing touched down hard (or the plant diverged): the plant ended the flight
         summary["outcome"] = verdict
         summary["ended_by"] = ended_by_outcome(verdict, [RunEvent(round(e.t, 6), e.kind, e.text, by=e.by)
@@ -224,7 +226,8 @@ def _judged(flight: Flight, vehicle: SimVehicle, arrays: dict[str, Any], outcome
     return summary
 
 
-def fly_end(flight: Flight, vehicle: SimVehicle, shown: list[dict[str, Any]]) -> tuple[dict[str, Any], str | None]:
+def fly_end(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention,
+            shown: list[dict[str, Any]]) -> tuple[dict[str, Any], str | None]:
     """The mission's end action offline (``[end] action``, :meth:`SimVehicle.end_mission`), as the vehicle flies
     it in a session: ``land`` steps the vehicle's own landing (nothing from the controller; the mission's link
     is done with, its statistics the mission's) until it disarms on the ground, bounded by the descent at the
@@ -234,22 +237,23 @@ def fly_end(flight: Flight, vehicle: SimVehicle, shown: list[dict[str, Any]]) ->
     (:func:`bridge.record.ending.end_block`) and the plant's verdict (None: none)."""
     n0 = len(vehicle.events)
     vehicle.end_mission(flight.mission.end_action)
-    rows, verdict = _fly_alone(flight, vehicle, LAND, shown, n0)
+    rows, verdict = _fly_alone(flight, vehicle, intention, LAND, shown, n0)
     return end_block(flight.mission.end_action, rows, vehicle.events[n0:]), verdict
 
 
-def land_failsafe(flight: Flight, vehicle: SimVehicle, shown: list[dict[str, Any]]) -> str | None:
+def land_failsafe(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention,
+                  shown: list[dict[str, Any]]) -> str | None:
     """A failsafe's landing still going at the mission's end goes on to the ground, as a session's vehicle flies it
     (on the wall clock: it leaves lockstep for it), stepped and judged as :func:`fly_end` steps the end landing;
     the plant's verdict (None: none). A failsafe that holds, or is done, flies nothing more here."""
     target = vehicle.onboard.target
     if not (vehicle.armed and vehicle.mode == FAILSAFE and target is not None and target.lands):
         return None
-    return _fly_alone(flight, vehicle, FAILSAFE, shown, len(vehicle.events))[1]
+    return _fly_alone(flight, vehicle, intention, FAILSAFE, shown, len(vehicle.events))[1]
 
 
-def _fly_alone(flight: Flight, vehicle: SimVehicle, mode: str, shown: list[dict[str, Any]],
-               n0: int) -> tuple[list[tuple[float, float, float]], str | None]:
+def _fly_alone(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention, mode: str,
+               shown: list[dict[str, Any]], n0: int) -> tuple[list[tuple[float, float, float]], str | None]:
     """Step the vehicle alone (nothing from the controller; the mission's link is done with, its statistics the
     mission's) while it is armed in ``mode`` (or a failsafe's, taken meanwhile), until it disarms on the ground,
     bounded by the descent at the
@@ -264,6 +268,7 @@ def _fly_alone(flight: Flight, vehicle: SimVehicle, mode: str, shown: list[dict[
     while verdict is None and vehicle.armed and vehicle.mode in (mode, FAILSAFE) and k < bound:
         X = plant.state
         vehicle.advance()  # the vehicle alone: what the up link still holds stays in flight (its statistics too)
+        intention.after_period()  # disarmed: the mode it takes (as a session's vehicle, before the plant's verdict)
         verdict = vehicle.plant_verdict()
         rows.append((k / rate, X[4], X[5]))
         k += 1

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pymavlink.dialects.v20 import common as M
 
 from bridge.autopilot.failsafe import (
     FAILSAFE_ACTIONS,
@@ -42,6 +43,7 @@ from bridge.cli import build_parser, main
 from bridge.core.flight import prepare
 from bridge.loop import simulate
 from bridge.mavlink.endpoint import LINK_PORT
+from bridge.mavlink.modes import MAIN_OFFBOARD, custom_mode
 from bridge.record.halves import read_half
 from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
@@ -49,6 +51,7 @@ from bridge.session.children import check_port_free
 from missions import MISSION_DIR, Mission, Setpoint, Sine, Step
 from params import ConfigError, load_toml
 from tests.sitlkit import ENV, Bsst
+from tests.test_failsafe_disarm import never_critical_disarmed, vehicle_heartbeats
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -145,6 +148,32 @@ def test_each_action_ends_in_failsafe_exit_1_and_flies_as_written(flown, action:
     tr = run["trace"]
     assert len(tr["t"]) == 7500  # the step clock ran on to the mission's end
     assert tr["z"][tr["t"] > run["vehicle"]["disarmed"] + 1.0].max() == 0.0  # at rest on the ground
+
+
+@pytest.mark.parametrize("action", SINE_ACTIONS)
+def test_its_disarm_clears_the_failsafe_offboard_standby_and_the_controller_still_says_failsafe(flown, action) -> None:
+    """PX4 clears the failsafe on disarm: at the end of the disarm's control period the vehicle is back in OFFBOARD
+    (the mode it was armed in), its HEARTBEAT STANDBY (never CRITICAL disarmed), saying why, as offline does at the
+    same time. ``disarm`` stops the motors and disarms in the failsafe's own period, so no HEARTBEAT ever says
+    CRITICAL: the controller learns it from the vehicle's CRITICAL ``failsafe:`` STATUSTEXT, and still flies the
+    mission's steps to the end and says ``failsafe`` (not "the vehicle was disarmed during the mission")."""
+    run = flown[action]
+
+    def said(events: list) -> list:
+        return [(e["t"], e["kind"], e["text"].removesuffix(" [by vehicle]")) for e in events
+                if e.get("source", "vehicle") == "vehicle" and e["kind"] in ("failsafe", "landed", "disarmed", "mode")]
+
+    mine = said(run["summary"]["events"])
+    assert mine == said(run["offline"].summary["events"])
+    (t_off, _, _), (t_mode, kind, text) = mine[-2:]
+    assert kind == "mode" and text.startswith("OFFBOARD (disarmed after its failsafe: PX4 clears the failsafe on "
+                                               "disarm") and t_off < t_mode <= t_off + STEP_S + 1e-9, mine
+    beats = vehicle_heartbeats(run["out"] / "vehicle.tlog")
+    never_critical_disarmed(beats)
+    assert beats[-1] == (False, custom_mode(MAIN_OFFBOARD), M.MAV_STATE_STANDBY)
+    how = [e["text"] for e in run["summary"]["events"] if e["source"] == "controller" and e["kind"] == "failsafe"]
+    assert how == ["the vehicle's failsafe took over (" + ('its CRITICAL STATUSTEXT "failsafe: ..."' if action ==
+                                                         "disarm" else "HEARTBEAT system_status CRITICAL") + ")"]
 
 
 def test_descend_is_the_default_and_todays_figure(flown) -> None:

@@ -100,7 +100,8 @@ def _global_positions(tlog) -> list[float]:
 def test_mavsdk_sees_the_gps_lost_the_descent_and_the_position_back(tmp_path):
     """x500 taken off to 5 m by MAVSDK, GPS OFF through its Failure plugin: the position health false, then PX4's
     Descend at EKF2_NOAID_TOUT after the last fix fused (4.92-5.13 s after the fault: the 5 Hz fixes' phase and
-    their 120 ms latency): MAVSDK's flight mode LAND, armed, until it lands and disarms. GPS OK: healthy again, and
+    their 120 ms latency): MAVSDK's flight mode LAND, armed, until it lands and disarms, then HOLD again (the disarm
+    clears PX4's failsafe: the mode before it). GPS OK: healthy again, and
     GLOBAL_POSITION_INT (MAVSDK's position) flows again, which it had not since the position was lost (the tlog).
     MAVSDK's hold during the descent is refused (armed, PX4 takes no mode that cannot run).
     ESTIMATOR_STATUS with the horizontal position flags until the loss, without them after (its accuracy growing past
@@ -116,8 +117,9 @@ def test_mavsdk_sees_the_gps_lost_the_descent_and_the_position_back(tmp_path):
     steps = ("found", "ready", "at_height", "unhealthy", "descending", "disarmed", "healthy", "positions_again")
     assert {k: got[k] for k in steps} == dict.fromkeys(steps, True), got
     assert (got["arm"], got["takeoff"], got["off"], got["on"]) == ("SUCCESS",) * 4, got
-    assert got["hold"] == "COMMAND_DENIED", got  # and the descent went on: LAND is the last mode seen
-    assert got["modes"][-2:] == ["HOLD", "LAND"], got["modes"]
+    assert got["hold"] == "COMMAND_DENIED", got  # and the descent went on in LAND, to the disarm
+    # which clears the failsafe (PX4's framework.cpp): HOLD again, the mode before it (docs/ground-station.md)
+    assert got["modes"][-3:] == ["HOLD", "LAND", "HOLD"], got["modes"]
     ev = [(e.t, e.kind, e.text) for e in v.reports() if isinstance(e, Event)]
     kinds = [k for _, k, _ in ev if k in ("fault", "position", "failsafe", "disarmed")]
     assert kinds == ["fault", "position", "failsafe", "disarmed", "fault", "position"], ev
@@ -126,6 +128,7 @@ def test_mavsdk_sees_the_gps_lost_the_descent_and_the_position_back(tmp_path):
     assert 4.9 < t_lost - t_off < 5.2 and t_fs == t_lost and t_on < t_back, ev
     said = {k: x for _, k, x in ev if k in ("failsafe", "disarmed")}
     assert said == {"failsafe": "position lost: level and descend", "disarmed": "landed: disarmed"}
+    assert any(t >= t_down and k == "mode" and x.startswith("HOLD (disarmed after its failsafe") for t, k, x in ev), ev
     # ESTIMATOR_STATUS as MAVSDK received it (its MavlinkDirect): (s, flags, horizontal accuracy m)
     status = [(us * 1e-6, f, acc) for us, f, acc in got["status"]]
     pos = M.ESTIMATOR_POS_HORIZ_REL | M.ESTIMATOR_POS_HORIZ_ABS | M.ESTIMATOR_VELOCITY_HORIZ

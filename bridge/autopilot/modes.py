@@ -24,7 +24,7 @@ from bridge.autopilot.returnland import LandSlowdown
 
 OFFBOARD = "offboard"
 FAILSAFE = "failsafe"
-LANDED = "landed"  # the failsafe landed it (or stopped its motors): disarmed
+LANDED = "landed"  # the period its failsafe disarmed it in (landed, motors stopped); then the user's (intention.py)
 HOLD = "hold"  # the modes a ground station selects (bridge/nodes/vehicle.py, PX4's names)
 LAND = "land"
 TAKEOFF = "takeoff"

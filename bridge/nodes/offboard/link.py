@@ -3,7 +3,7 @@ it sends (:mod:`bridge.nodes.offboard`).
 
 In:  the vehicle's messages: ODOMETRY (checked: sender, stamp, range; kept newest only), HEARTBEAT (armed, system
      status CRITICAL = its failsafe, PX4 ``custom_mode``: a ground station's mode), COMMAND_ACK, TIMESYNC (clock
-     offset and round trip, ns), STATUSTEXT
+     offset and round trip, ns), STATUSTEXT (a CRITICAL ``failsafe: ...``: its failsafe too)
 Out: actuator targets stamped with their state's ``time_usec`` (or the lockstep no-target acknowledgement),
      ARM_DISARM and other COMMAND_LONGs until ACKed, PARAM_SET until the vehicle's PARAM_VALUE echoes it
      (every 0.2 s of wall time), HEARTBEAT, TIMESYNC; ``controller.tlog``;
@@ -39,7 +39,7 @@ from bridge.mavlink.modes import (
 )
 from bridge.mavlink.receive import Rejections, odometry_problem
 from bridge.mavlink.signing import Signing
-from bridge.mavlink.telemetry import StatusTextJoiner
+from bridge.mavlink.telemetry import StatusTextJoiner, says_failsafe
 from bridge.nodes.offboard.config import (
     HOUSEKEEPING_S,
     SPIN_BEFORE_TICK_S,
@@ -108,7 +108,7 @@ class OffboardLink:
         self.armed_seen = False  # the vehicle's heartbeat showed it armed since we armed it
         self.vehicle_armed = False
         self.vehicle_state = mavlink.MAV_STATE_UNINIT
-        self.failsafe_seen = False  # the vehicle reported its failsafe (CRITICAL since we armed it)
+        self.failsafe_seen = ""  # how the vehicle said its failsafe since we armed it ("": it did not)
         self.left_lockstep = ""  # the vehicle's STATUSTEXT saying it left lockstep, if it did
         self.taken_over = ""  # the mode a ground station switched the armed vehicle to (PX4 custom_mode), if any
         self.ending = False  # the mission's end action handed to the vehicle: its own mode is no takeover
@@ -310,10 +310,11 @@ class OffboardLink:
             if self.vehicle_armed:
                 self.armed_seen = True
             if self.armed_seen and m.system_status in (mavlink.MAV_STATE_CRITICAL, mavlink.MAV_STATE_EMERGENCY):
-                # CRITICAL, armed: flying its failsafe; disarmed: landed by it (on a real link the armed
-                # CRITICAL heartbeat may have been lost). EMERGENCY: its plant ended the flight (crashed,
-                # diverged, touched by another vehicle) and its clock halted: no more states will come
-                self.failsafe_seen = True
+                # CRITICAL (armed): flying its failsafe. EMERGENCY: its plant ended the flight (crashed, diverged,
+                # touched by another vehicle) and its clock halted: no more states will come
+                state = "CRITICAL" if m.system_status == mavlink.MAV_STATE_CRITICAL else "EMERGENCY"
+                if not self.failsafe_seen.startswith("HEARTBEAT"):  # (its STATUSTEXT comes first: said, then shown)
+                    self.failsafe_seen = f"HEARTBEAT system_status {state}"
             elif (self.vehicle_armed and m.autopilot == mavlink.MAV_AUTOPILOT_PX4 and not self.taken_over
                   and not self.ending and main_mode(m.custom_mode) != MAIN_OFFBOARD
                   and not (self.cfg.await_mission and m.custom_mode == custom_mode(MAIN_AUTO, SUB_MISSION))):
@@ -333,6 +334,10 @@ class OffboardLink:
         elif kind == "TIMESYNC":
             self._timesync(m)
         elif kind == "STATUSTEXT":  # a chunked one is reported once, joined
+            if self.armed_seen and not self.failsafe_seen and says_failsafe(m):
+                # a failsafe that disarms the vehicle in its own control period (its disarm action, or on the
+                # ground) never shows CRITICAL: disarmed, the failsafe is cleared and HEARTBEAT says STANDBY (PX4)
+                self.failsafe_seen = "its CRITICAL STATUSTEXT \"failsafe: ...\""
             for severity, text in self._texts.add(m, time.monotonic()):
                 self._statustext(severity, text)
 

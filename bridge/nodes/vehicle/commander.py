@@ -12,9 +12,9 @@ Out: COMMAND_ACK (with what a command asked for, and a STATUSTEXT saying why it 
      refused (a :class:`~bridge.nodes.report.Refused` report)
 
 Flight modes (OFFBOARD, HOLD, LAND, TAKEOFF, RTL, in PX4's encoding: :mod:`bridge.mavlink.modes`) and what a
-ground station can do with them: docs/ground-station.md; the mode taken after a disarm in LAND or RTL:
-:mod:`.intention`. Every command's numbers are checked before use (:mod:`bridge.mavlink.receive`): a bad one is
-DENIED and counted (``bad_number``), nothing done.
+ground station can do with them: docs/ground-station.md; the mode taken after a disarm in LAND, RTL or the
+failsafe: :mod:`.intention`. Every command's numbers are checked before use (:mod:`bridge.mavlink.receive`): a bad
+one is DENIED and counted (``bad_number``), nothing done.
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.autopilot.failsafe import PositionHold
 from bridge.autopilot.fencewatch import reposition_refusal
+from bridge.autopilot.intention import NOT_ARMABLE
 from bridge.autopilot.params import BY_NAME
 from bridge.autopilot.simvehicle import GROUND_MODES, HOLD, LAND, OFFBOARD, RTL, TAKEOFF, SimVehicle
 from bridge.autopilot.vehicleevents import Sender
@@ -39,7 +40,7 @@ from bridge.mavlink.receive import FORCE_DISARM, arm_disarm_args, interval_arg, 
 from bridge.nodes.vehicle.actions import Actions
 from bridge.nodes.vehicle.authority import Authority, attribute
 from bridge.nodes.vehicle.clock import Clock, Trigger
-from bridge.nodes.vehicle.intention import NOT_ARMABLE, ModeIntention
+from bridge.nodes.vehicle.intention import ModeIntention
 from bridge.nodes.vehicle.mission import START_ARM, START_ARMED, START_COMMAND, MissionManager
 from bridge.nodes.vehicle.prestart import PreStart
 from bridge.nodes.vehicle.reposition import reposition
@@ -109,7 +110,7 @@ class Commander:
         self.end_landing = False  # lockstep: the mission's end landing is flown (its failsafe's too), clocked as it
         # a ground station's arm in HOLD on the ground awaiting a mission's start (--await-mission)
         self.pre_start = PreStart(sim, clock, ports.missions, self.cfg.await_mission)
-        self.intention = ModeIntention(sim, ports.missions)  # the mode taken after a disarm in LAND or RTL (as PX4)
+        self.intention = ModeIntention(sim, ports.missions)  # the mode a disarm in LAND, RTL or failsafe leaves
         self.actions = Actions(sim, clock, ports.reject, self._off_step_clock)
 
     # -- the messages ---------------------------------------------------------------------------------
@@ -377,17 +378,16 @@ class Commander:
     def flight_over(self) -> None:
         """After a control period: a lockstep flight whose vehicle disarmed itself on the ground (the end
         action's landing) is over; time stands still until it is armed again, as after a disarm by command. Then
-        the mode a disarm in LAND or RTL leaves (:meth:`_after_change`)."""
+        the mode a disarm in LAND, RTL or the failsafe leaves (:meth:`_after_change`)."""
         if self.clock.engaged and not self.sim.armed and self.end_landing:  # (a ground station's LAND runs free)
             self.clock.fire(Trigger.DISARM)
             self.end_landing = False
         self._after_change()
 
     def _after_change(self) -> None:
-        """After a command or a control period: the mode to take after disarming noted, and, disarmed in LAND or RTL,
-        taken (:mod:`.intention`: PX4's user mode intention)."""
-        self.intention.note()
-        self.intention.fall_back()
+        """After a command or a control period: the mode to take after disarming noted, and, disarmed in LAND, RTL or
+        the failsafe, taken (:mod:`.intention`: PX4's user mode intention, its failsafe cleared on disarm)."""
+        self.intention.after_period()
 
     def _clock_after_mode(self, was: str) -> None:
         """The step clock after a mode change: a vehicle flown by its own controller (HOLD, LAND,

@@ -285,7 +285,7 @@ class Vehicle:
             self.sim.advance()
         else:
             vend.advance()
-        mode = self.sim.mode  # flown this period (a disarm in LAND then takes another: Commander.flight_over)
+        mode = self.sim.mode  # flown this period (a disarm in LAND or failsafe then takes another: flight_over)
         self.k = k + 1
         if self.cfg.speed is not None:
             self._wait_until(self.pace.due(self.k * self.substeps))

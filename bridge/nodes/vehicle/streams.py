@@ -125,11 +125,9 @@ def heartbeat(v: VehicleView) -> Any:
         state = mavlink.MAV_STATE_FLIGHT_TERMINATION
     elif v.halted:  # crashed, diverged or touched by another vehicle: its flight is over, its plant stepped no more
         state = mavlink.MAV_STATE_EMERGENCY
-    elif v.mode in (FAILSAFE, LANDED):
-        state = mavlink.MAV_STATE_CRITICAL
-    elif v.armed:
-        state = mavlink.MAV_STATE_ACTIVE
-    else:
+    elif v.armed:  # flying its failsafe: CRITICAL (PX4's ``vehicle_status.failsafe``)
+        state = mavlink.MAV_STATE_CRITICAL if v.mode in (FAILSAFE, LANDED) else mavlink.MAV_STATE_ACTIVE
+    else:  # disarmed: STANDBY, as PX4 (streams/HEARTBEAT.hpp), whose failsafe is cleared on disarm
         state = mavlink.MAV_STATE_STANDBY
     return mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4, base,
                                              custom, state, 3)
