@@ -54,10 +54,9 @@ def figures(plan: Path) -> dict:
             a, b = ref.sample(tk - 1e-9), ref.sample(tk + 1e-9)
             jumps.append({"item": label, "speed_m_s": math.hypot(b[0][1], b[1][1], b[2][1]),
                           "jump_m_s": math.dist([v[1] for v in a[:3]], [v[1] for v in b[:3]])})
-    ev = run.summary["events"]
-    last = ev[-1] if ev else {}
+    end = run.summary.get("end") or {}  # the end action's block: disarmed on the ground, and at what height
     return {"plan": str(plan), "outcome": run.summary["outcome"], "duration_s": mission.duration_s,
-            "landed_and_disarmed": last.get("kind") == "disarmed" and last.get("text", "").startswith("landed")
+            "landed_and_disarmed": bool(end.get("disarmed")) and abs(end.get("disarm_z_m", math.inf)) <= 0.05
             and abs(float(z[-1])) <= 0.05,
             "rms_3d_all_m": math.sqrt(sum(run.summary["axes"][a]["rms_all"] ** 2 for a in "xyz")),
             "waypoints": passes, "pass_through": jumps, "trace": tr}

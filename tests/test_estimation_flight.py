@@ -205,7 +205,7 @@ def test_the_failsafe_lands_on_the_estimate(tmp_path):
     """The on-board controller flies the estimate too: a blackout hands it the vehicle, which lands and disarms."""
     run = simulate(_mission(tmp_path, "ekf"), plots=False, link={"up": {"blackouts": [[2.0, 10.0]]}})
     kinds = [e["kind"] for e in run.summary["events"]]
-    assert run.summary["outcome"] == "failsafe" and "failsafe" in kinds and kinds[-1] == "disarmed"
+    assert run.summary["outcome"] == "failsafe" and "failsafe" in kinds and kinds[-2:] == ["disarmed", "mode"]
     assert abs(run.trace["z"][-1]) < 0.01 and run.summary["estimation"]["position_rms_m"] < 0.01
 
 

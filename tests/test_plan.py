@@ -232,7 +232,8 @@ def test_bsst_sim_flies_a_plan_and_refuses_a_bad_one(tmp_path: Path) -> None:
     p = run_bsst("sim", str(BOX_WPL), "--out", str(out), "--no-plots", cwd=ROOT, env=env, timeout=300)
     assert p.returncode == 0, p.stderr
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["outcome"] == "completed" and summary["events"][-1]["kind"] == "disarmed"
+    # disarmed, then the mode PX4 takes after a LAND's disarm (the user's: bridge.autopilot.intention)
+    assert summary["outcome"] == "completed" and [e["kind"] for e in summary["events"][-2:]] == ["disarmed", "mode"]
     assert 'kind = "smooth"' in (out / "mission.toml").read_text()
     bad = write_plan(tmp_path, lambda d: d["mission"]["items"][2].update(command=177))
     p = run_bsst("sim", str(bad), "--no-plots", cwd=ROOT, env=env, timeout=120)
