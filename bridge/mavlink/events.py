@@ -1,4 +1,4 @@
-"""The vehicle's events as MAVLink's typed EVENT messages (the events interface: mavlink.io/en/services/events.html),
+"""The vehicle's events as MAVLink's typed EVENT messages (MAVLink's events interface),
 sent as PX4 sends its own (src/modules/mavlink/mavlink_events.cpp, ``SendProtocol``): one stable id per event kind,
 a log level, a sequence number per event, CURRENT_EVENT_SEQUENCE, and re-sends on REQUEST_EVENT from a short ring.
 
