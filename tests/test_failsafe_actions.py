@@ -155,7 +155,7 @@ def test_its_disarm_clears_the_failsafe_offboard_standby_and_the_controller_stil
     """PX4 clears the failsafe on disarm: at the end of the disarm's control period the vehicle is back in OFFBOARD
     (the mode it was armed in), its HEARTBEAT STANDBY (never CRITICAL disarmed), saying why, as offline does at the
     same time. ``disarm`` stops the motors and disarms in the failsafe's own period, so no HEARTBEAT ever says
-    CRITICAL: the controller learns it from the vehicle's CRITICAL ``failsafe:`` STATUSTEXT, and still flies the
+    CRITICAL: the controller learns it from the vehicle's typed EVENT (id FAILSAFE), and still flies the
     mission's steps to the end and says ``failsafe`` (not "the vehicle was disarmed during the mission")."""
     run = flown[action]
 
@@ -172,7 +172,7 @@ def test_its_disarm_clears_the_failsafe_offboard_standby_and_the_controller_stil
     never_critical_disarmed(beats)
     assert beats[-1] == (False, custom_mode(MAIN_OFFBOARD), M.MAV_STATE_STANDBY)
     how = [e["text"] for e in run["summary"]["events"] if e["source"] == "controller" and e["kind"] == "failsafe"]
-    assert how == ["the vehicle's failsafe took over (" + ('its CRITICAL STATUSTEXT "failsafe: ..."' if action ==
+    assert how == ["the vehicle's failsafe took over (" + ("its EVENT FAILSAFE" if action ==
                                                          "disarm" else "HEARTBEAT system_status CRITICAL") + ")"]
 
 

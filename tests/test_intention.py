@@ -8,13 +8,10 @@ offline loop as a session's vehicle (tests/test_failsafe_disarm.py flies both an
 
 from __future__ import annotations
 
-from pymavlink.dialects.v20 import common as mavlink
-
 from bridge.autopilot.intention import UserModeIntention
 from bridge.autopilot.simvehicle import HOLD, LAND, OFFBOARD
 from bridge.core.flight import prepare
 from bridge.loop import simulate
-from bridge.mavlink.telemetry import says_failsafe, statustext
 from missions import Mission, Setpoint, Step
 
 CLEARED = ("(disarmed after its failsafe: PX4 clears the failsafe on disarm and takes the last mode it arms in; "
@@ -113,19 +110,3 @@ def test_land_and_rtl_disarms_keep_their_text() -> None:
     assert intention.fall_back() and sim.mode == HOLD
     assert sim.events[-1].text == "HOLD (disarmed after LAND: PX4 takes the last mode it arms in; armed in it next)"
     assert not intention.fall_back()  # in a mode it arms in now: nothing more to take
-
-
-def test_says_failsafe_reads_the_vehicles_critical_failsafe_text_and_nothing_else() -> None:
-    """The offboard controller learns a failsafe that disarmed the vehicle in its own control period (never CRITICAL
-    in a HEARTBEAT, as PX4) from its CRITICAL ``failsafe: ...`` STATUSTEXT: the first chunk of the text only."""
-    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
-
-    def received(severity: int, text: str) -> list:
-        return [mav.decode(bytearray(m.pack(mav))) for m in statustext(severity, text, 7)]
-
-    crit = mavlink.MAV_SEVERITY_CRITICAL
-    said = received(crit, "failsafe: no actuator target for 0.504 s: stop the motors")
-    assert len(said) == 2 and [says_failsafe(m) for m in said] == [True, False]
-    assert not any(says_failsafe(m) for m in received(mavlink.MAV_SEVERITY_INFO, "failsafe: no actuator target"))
-    assert not any(says_failsafe(m) for m in received(crit, "battery: critical: 7.0 % left (BAT_CRIT_THR = 7 %)"))
-    assert says_failsafe(received(crit, "failsafe: short")[0])

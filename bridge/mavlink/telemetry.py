@@ -198,13 +198,6 @@ def statustext_bytes(m: Any) -> bytes:
     return (text.encode("utf-8", errors="replace") if isinstance(text, str) else bytes(text)).rstrip(b"\x00")
 
 
-def says_failsafe(m: Any) -> bool:
-    """Whether a received STATUSTEXT is the vehicle's failsafe said (its first chunk: CRITICAL or worse, beginning
-    ``failsafe: ``, as the vehicle says each event, ``kind: text``, bridge/nodes/vehicle/announcer.py)."""
-    return (m.severity <= mavlink.MAV_SEVERITY_CRITICAL and not getattr(m, "chunk_seq", 0)
-            and statustext_bytes(m).startswith(b"failsafe: "))
-
-
 class StatusTextJoiner:
     """MAVLink 2's chunked STATUSTEXTs joined again (the inverse of :func:`statustext`): a text whose
     ``id`` is 0 is whole; chunks of one (sender, ``id``) are kept by ``chunk_seq`` until one shorter than

@@ -3,7 +3,8 @@ it sends (:mod:`bridge.nodes.offboard`).
 
 In:  the vehicle's messages: ODOMETRY (checked: sender, stamp, range; kept newest only), HEARTBEAT (armed, system
      status CRITICAL = its failsafe, PX4 ``custom_mode``: a ground station's mode), COMMAND_ACK, TIMESYNC (clock
-     offset and round trip, ns), STATUSTEXT (a CRITICAL ``failsafe: ...``: its failsafe too)
+     offset and round trip, ns), EVENT (typed, bridge.mavlink.events: its id FAILSAFE is its failsafe too, LOCKSTEP
+     says it left lockstep), STATUSTEXT (reported as said, never read for a decision)
 Out: actuator targets stamped with their state's ``time_usec`` (or the lockstep no-target acknowledgement),
      ARM_DISARM and other COMMAND_LONGs until ACKed, PARAM_SET until the vehicle's PARAM_VALUE echoes it
      (every 0.2 s of wall time), HEARTBEAT, TIMESYNC; ``controller.tlog``;
@@ -27,6 +28,7 @@ from bridge.autopilot.params import BY_NAME, ParamChange
 from bridge.core.flight import Flight
 from bridge.core.wire import step_of_usec
 from bridge.mavlink.endpoint import HIL_ACTUATOR_CONTROLS, SET_ACTUATOR_CONTROL_TARGET, Endpoint, Tlog, wait
+from bridge.mavlink.events import EventId, received_id
 from bridge.mavlink.modes import (
     MAIN_AUTO,
     MAIN_OFFBOARD,
@@ -39,7 +41,7 @@ from bridge.mavlink.modes import (
 )
 from bridge.mavlink.receive import Rejections, odometry_problem
 from bridge.mavlink.signing import Signing
-from bridge.mavlink.telemetry import StatusTextJoiner, says_failsafe
+from bridge.mavlink.telemetry import StatusTextJoiner
 from bridge.nodes.offboard.config import (
     HOUSEKEEPING_S,
     SPIN_BEFORE_TICK_S,
@@ -109,7 +111,7 @@ class OffboardLink:
         self.vehicle_armed = False
         self.vehicle_state = mavlink.MAV_STATE_UNINIT
         self.failsafe_seen = ""  # how the vehicle said its failsafe since we armed it ("": it did not)
-        self.left_lockstep = ""  # the vehicle's STATUSTEXT saying it left lockstep, if it did
+        self.left_lockstep = ""  # how the vehicle said it left lockstep (its LOCKSTEP EVENT), if it did
         self.taken_over = ""  # the mode a ground station switched the armed vehicle to (PX4 custom_mode), if any
         self.ending = False  # the mission's end action handed to the vehicle: its own mode is no takeover
         self._odo: Any = None  # newest ODOMETRY not yet used
@@ -333,18 +335,24 @@ class OffboardLink:
                 self._param_echo(m)
         elif kind == "TIMESYNC":
             self._timesync(m)
+        elif kind == "EVENT":
+            self._event(m)
         elif kind == "STATUSTEXT":  # a chunked one is reported once, joined
-            if self.armed_seen and not self.failsafe_seen and says_failsafe(m):
-                # a failsafe that disarms the vehicle in its own control period (its disarm action, or on the
-                # ground) never shows CRITICAL: disarmed, the failsafe is cleared and HEARTBEAT says STANDBY (PX4)
-                self.failsafe_seen = "its CRITICAL STATUSTEXT \"failsafe: ...\""
             for severity, text in self._texts.add(m, time.monotonic()):
                 self._statustext(severity, text)
 
+    def _event(self, m: Any) -> None:
+        """A typed EVENT of the vehicle's (bridge.mavlink.events): what the controller decides by, by its id."""
+        eid = received_id(m)
+        if eid is EventId.FAILSAFE and self.armed_seen and not self.failsafe_seen:
+            # a failsafe that disarms the vehicle in its own control period (its disarm action, or on the
+            # ground) never shows CRITICAL: disarmed, the failsafe is cleared and HEARTBEAT says STANDBY (PX4)
+            self.failsafe_seen = "its EVENT FAILSAFE"
+        elif eid is EventId.LOCKSTEP and not self.left_lockstep:  # not a lockstep flight any more
+            self.left_lockstep = "its EVENT LOCKSTEP (its STATUSTEXT says why)"
+
     def _statustext(self, severity: int, text: str) -> None:
         self._status(StatusText(severity, text))
-        if text.startswith("lockstep:") and not self.left_lockstep:  # not a lockstep flight any more
-            self.left_lockstep = text
 
     def _timesync(self, m: Any) -> None:
         now = time.monotonic_ns()

@@ -53,7 +53,7 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
     if outcome != "completed":
         sys.stderr.write(f"bsst controller: {outcome}" + (f": {node.reason}" if node.reason else "") + "\n")
     elif left:
-        sys.stderr.write(f"bsst controller: completed, but not in lockstep: the vehicle said {node.left_lockstep!r}\n")
+        sys.stderr.write(f"bsst controller: completed, but not in lockstep: said by {node.left_lockstep}\n")
     for p in unconfirmed:
         sys.stderr.write(f"bsst controller: {p.change.name} = {p.change.value:g} (due at t={p.change.t_s:g} s) "
                          f"was never confirmed by the vehicle: not made\n")

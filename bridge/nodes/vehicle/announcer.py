@@ -1,9 +1,12 @@
-"""The vehicle's events said out loud: each new event of the simulated vehicle as a status line to the session
-and a STATUSTEXT on every link, with a HEARTBEAT at once.
+"""The vehicle's events said out loud: each new event of the simulated vehicle as a status line to the session,
+a STATUSTEXT (for people: ground stations show it) and a typed EVENT (for programs: its id says the kind,
+:mod:`bridge.mavlink.events`) on every link, with a HEARTBEAT at once.
 
-In:  the simulated vehicle's event list (appended by its parts); the controller link's peer (who armed)
-Out: Event reports (:mod:`bridge.nodes.report`); one datagram per link of STATUSTEXT(s) and a HEARTBEAT, to a
-     would-be controller within its trial's credit (:meth:`~bridge.nodes.vehicle.receiver.Receiver.charged`)
+In:  the simulated vehicle's event list (appended by its parts); the controller link's peer (who armed); a
+     REQUEST_EVENT (its sender's ids, the sequence range)
+Out: Event reports (:mod:`bridge.nodes.report`); one datagram per link of STATUSTEXT(s), EVENT(s) and a HEARTBEAT,
+     to a would-be controller within its trial's credit (:meth:`~bridge.nodes.vehicle.receiver.Receiver.charged`);
+     at 1 Hz the HEARTBEAT with CURRENT_EVENT_SEQUENCE (:meth:`Announcer.beat`); the EVENTs asked for again
 """
 
 from __future__ import annotations
@@ -16,13 +19,15 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.autopilot.simvehicle import SimVehicle
 from bridge.mavlink.endpoint import Endpoint
+from bridge.mavlink.events import EventRing
 from bridge.nodes.report import Event, Report
 from bridge.nodes.vehicle.authority import Authority, claim
 from bridge.nodes.vehicle.streams import StatusTexts
 
-# events sent as CRITICAL STATUSTEXT
+# events sent as CRITICAL STATUSTEXT, and as EVENTs of log level critical (else info)
 CRITICAL_KINDS = ("failsafe", "diverged", "lockstep", "preflight", "battery", "terminated")
 MAX_TEXT_MESSAGES = 12  # STATUSTEXTs in one datagram of events (the newest texts, whole)
+MAX_EVENT_MESSAGES = 24  # EVENTs in one datagram (65 bytes each); more go in datagrams of their own before it
 
 
 class Announcer:
@@ -41,6 +46,7 @@ class Announcer:
         self.charged: Callable[[], AbstractContextManager[None]] = nullcontext
         self.sent = 0  # events said on the links
         self.reported = 0  # events said as status lines (a command's before its answer: report_events)
+        self.ring = EventRing()  # the EVENTs sent: numbered, the last few kept for REQUEST_EVENT
 
     def report_events(self) -> None:
         """Each new event as a status line, at once: a command's before its COMMAND_ACK (Commander.command), so
@@ -63,18 +69,33 @@ class Announcer:
             return
         self.report_events()
         texts: list[list[Any]] = []
+        typed: list[Any] = []
         while self.sent < len(events):
             e = events[self.sent]
             self.sent += 1
             sev = mavlink.MAV_SEVERITY_CRITICAL if e.kind in CRITICAL_KINDS else mavlink.MAV_SEVERITY_INFO
             texts.append(self.statustext(sev, f"{e.kind}: {e.shown}"))
+            typed.append(self.ring.add(e.kind, e.t, sev))
         msgs: list[Any] = []
         for chunks in reversed(texts):  # the newest texts, whole, if many came at once
             if len(msgs) + len(chunks) > MAX_TEXT_MESSAGES:
                 break
             msgs[:0] = chunks
+        while len(typed) > MAX_EVENT_MESSAGES:  # every EVENT goes out (a program acts on them), the oldest first
+            self.to_links(typed[:MAX_EVENT_MESSAGES])
+            typed = typed[MAX_EVENT_MESSAGES:]
+        msgs += typed
         msgs.append(self.heartbeat())
         self.to_links(msgs)
+
+    def beat(self) -> None:
+        """The 1 Hz HEARTBEAT on every link, with CURRENT_EVENT_SEQUENCE (a receiver sees an EVENT it missed;
+        PX4 sends it every 3 s, mavlink_events.h: here it rides the heartbeat's datagram)."""
+        self.to_links([self.heartbeat(), self.ring.current()])
+
+    def resend(self, m: Any) -> list[Any]:
+        """The answer to a REQUEST_EVENT ``m``: the EVENTs asked for, or RESPONSE_EVENT_ERRORs (EventRing.resend)."""
+        return self.ring.resend(m.first_sequence, m.last_sequence, m.get_srcSystem(), m.get_srcComponent())
 
     def to_links(self, msgs: list[Any]) -> None:
         """``msgs``, one datagram per link (to a would-be controller within its trial's credit)."""

@@ -140,7 +140,7 @@ class Vehicle:
         self.receiver = Receiver(self.link, self.authority, self._reject, self.targets, self.commander, self.params,
                                  self.missions, ReceiverPorts(step=lambda: self.k, flight_on=self._flight_on,
                                                announce=self.announcer.drain, heartbeat=self._heartbeat,
-                                               clock_ns=self._clock_ns))
+                                               clock_ns=self._clock_ns, events=self.announcer.resend))
         self.announcer.charged = self.receiver.charged
         self._handle = self.receiver.handle  # (an attribute: one call less on the lockstep's hot path)
         # a lockstep fleet's shared clock (bsst sitl --vehicles): step by step with the other vehicles
@@ -436,7 +436,7 @@ class Vehicle:
         self.commander.pre_start.tick(now)  # COM_DISARM_PRFLT
         if now >= self._next_heartbeat:
             self._next_heartbeat = now + HEARTBEAT_S
-            self.announcer.to_links([self._heartbeat()])
+            self.announcer.beat()
             cpu = time.process_time()
             w0, c0 = self._load_at
             self.load = int(1000 * (cpu - c0) / max(now - w0, 1e-6))

@@ -4,8 +4,8 @@ handed to the part that acts on it.
 In:  a message (pymavlink), the :class:`Endpoint` it came in on and its source address (host, port)
 Out: calls into the parts (:class:`Targets`, :class:`Commander`, :class:`ParamService`,
      :class:`MissionManager`); answers to the requests that change nothing (TIMESYNC with the vehicle's clock
-     in ns, PING, an FTP NAK); the controller link's peer learned; refusals counted, with whether the flight's
-     controller sent them (:class:`Refusals`)
+     in ns, PING, an FTP NAK, REQUEST_EVENT's EVENTs again); the controller link's peer learned; refusals
+     counted, with whether the flight's controller sent them (:class:`Refusals`)
 
 Before a flight, a vehicle not told its controller's address (no ``controller_from``) cannot know its
 controller: whoever claims the controller's ids on the controller link is on trial, and every reply to
@@ -56,6 +56,7 @@ class ReceiverPorts:
     announce: Callable[[], None]  # the new events out now (status lines, STATUSTEXT, HEARTBEAT)
     heartbeat: Callable[[], Any]  # the HEARTBEAT now
     clock_ns: Callable[[], int]  # the vehicle's clock for TIMESYNC (ns, never 0)
+    events: Callable[[Any], list[Any]]  # the answer to a REQUEST_EVENT: its EVENTs again (or their errors)
 
 
 class Charged(AbstractContextManager[None]):
@@ -188,6 +189,12 @@ class Receiver:
         elif kind in MISSION_MESSAGES:
             if self.mission.handle(ep, m, addr, self._link_name(ep), self.refuse):
                 self.ports.announce()
+        elif kind == "REQUEST_EVENT":  # an EVENT missed (its sequence skipped): sent again to the asker
+            if self.authority.for_others(m):
+                return self.refuse("target")
+            if not ep.reply_allowed(addr):
+                return self.refuse("reply_limited")
+            ep.reply(tuple(self.ports.events(m)), addr)
         elif kind == "FILE_TRANSFER_PROTOCOL":  # no files: a NAK at once (MAVProxy then fetches parameters)
             if self.authority.for_others(m):
                 return self.refuse("target")
