@@ -2,7 +2,8 @@
 
 A real ``bsst vehicle`` says each event as STATUSTEXT (kept for ground stations) and as a typed EVENT (id per kind,
 sequence +1 per event), sends CURRENT_EVENT_SEQUENCE with its 1 Hz HEARTBEAT and answers REQUEST_EVENT. A real
-``bsst controller`` decides "failsafe" from the EVENT's id, whatever a STATUSTEXT says or does not say.
+``bsst controller`` decides "failsafe" from the EVENT's id, whatever a STATUSTEXT says or does not say, and asks for
+an EVENT it missed (REQUEST_EVENT, bridge.mavlink.eventseq) before it calls a disarm no failsafe.
 """
 
 from __future__ import annotations
@@ -14,7 +15,8 @@ import pytest
 from pymavlink.dialects.v20 import common as M
 
 from bridge.mavlink import events as ev
-from bridge.nodes.report import Done, parse_line
+from bridge.mavlink.eventseq import REQUEST_TRIES
+from bridge.nodes.report import Done, Stats, parse_line
 from bridge.session import instance_slot
 from tests.sitlkit import Proc
 from tests.test_offboard_realtime import MISSION, RATE, ScriptedVehicle
@@ -109,3 +111,89 @@ def test_the_controller_decides_failsafe_from_the_event_id_not_the_text(tmp_path
 def test_a_failsafe_text_without_its_event_is_no_failsafe_to_the_controller(tmp_path: Path) -> None:
     done = _controller_against(tmp_path, False, b"failsafe: no actuator target for 0.5 s: stop the motors")
     assert done.outcome == "aborted", done
+
+
+class _AnsweringRequests:
+    """The scripted vehicle's parser, which also answers each REQUEST_EVENT as ``answer`` says: ``event`` the
+    EVENT FAILSAFE (sequence 0) again, ``error`` RESPONSE_EVENT_ERROR (no longer kept), ``silent`` nothing
+    (every answer lost); each request's (first, last) is kept in ``asked``."""
+
+    def __init__(self, v: ScriptedVehicle, answer: str) -> None:
+        self.v, self.answer, self.rx = v, answer, v.rx
+        self.asked: list[tuple[int, int]] = []
+
+    def parse_buffer(self, data: bytes) -> list:
+        msgs = self.rx.parse_buffer(data) or []
+        for m in msgs:
+            if m.get_type() != "REQUEST_EVENT":
+                continue
+            self.asked.append((m.first_sequence, m.last_sequence))
+            if self.answer == "event":
+                self.v.send(_failsafe_event())
+            elif self.answer == "error":
+                self.v.send(ev.MAVLink_response_event_error_message(m.get_srcSystem(), m.get_srcComponent(), 0, 1,
+                                                                    ev.ERROR_UNAVAILABLE))
+        return msgs
+
+
+def _failsafe_event() -> object:
+    return ev.MAVLink_event_message(0, 0, int(ev.EventId.FAILSAFE), 200, 0, ev.log_levels(M.MAV_SEVERITY_CRITICAL),
+                                    [0] * ev.ARGUMENTS)
+
+
+def _controller_missing_the_failsafe(tmp: Path, answer: str) -> tuple[Done, list[tuple[int, int]], dict]:
+    """A real-time ``bsst controller`` against a scripted vehicle that says CURRENT_EVENT_SEQUENCE RESET (no event
+    yet), arms, and at step 10 disarms in its failsafe with the datagram of its EVENT FAILSAFE (sequence 0) lost:
+    the controller hears a disarmed HEARTBEAT and CURRENT_EVENT_SEQUENCE 0 (as the vehicle's 1 Hz beat sends
+    them); REQUEST_EVENTs are answered as ``answer`` says (:class:`_AnsweringRequests`). The controller's Done
+    report, the requests, and its ``events`` stats."""
+    (tmp / "m.toml").write_text(MISSION)
+    v = ScriptedVehicle()
+    requests = _AnsweringRequests(v, answer)
+    v.rx = requests  # type: ignore[assignment]
+    ctl = Proc.bsst("controller", str(tmp / "m.toml"), "--realtime", "--vehicle", f"127.0.0.1:{v.port}",
+                    "--timeout", "30")
+    try:
+        deadline = time.monotonic() + 60
+        while not v.armed and time.monotonic() < deadline:
+            if v.peer is None:
+                v.serve()
+            else:
+                v.heartbeat()
+                v.send(ev.MAVLink_current_event_sequence_message(65535, ev.SEQUENCE_RESET))
+            v.until(time.monotonic() + 0.05)
+        assert v.armed, "never armed"
+        k, t0 = 0, time.monotonic()
+        while ctl.p.poll() is None and time.monotonic() < deadline:
+            v.until(t0 + k / RATE)
+            v.odometry(k)
+            if k == 10:  # its EVENT's datagram lost: not sent
+                v.armed = False
+                v.heartbeat()
+                v.send(ev.MAVLink_current_event_sequence_message(0, 0))
+            k += 1
+        ctl.p.wait(timeout=30)
+    finally:
+        ctl.stop()
+        v.sock.close()
+    reports = [parse_line(line) for line in ctl.lines]
+    done = [r for r in reports if isinstance(r, Done)]
+    stats = [r.values for r in reports if isinstance(r, Stats)]
+    assert len(done) == 1 and len(stats) == 1, ctl.lines[-5:]
+    return done[0], requests.asked, stats[0]["events"]
+
+
+def test_the_controller_asks_for_a_missed_failsafe_event_and_ends_failsafe(tmp_path: Path) -> None:
+    done, asked, counts = _controller_missing_the_failsafe(tmp_path, "event")
+    assert (done.outcome, done.reason) == ("failsafe", "the vehicle's failsafe took over (its EVENT FAILSAFE)")
+    assert asked and set(asked) == {(0, 0)}, asked  # the one missed, asked for until it came
+    assert counts["recovered"] == 1 and counts["lost"] == 0, counts
+
+
+@pytest.mark.parametrize("answer", ["error", "silent"])
+def test_a_missed_event_the_vehicle_cannot_resend_is_given_up(tmp_path: Path, answer: str) -> None:
+    done, asked, counts = _controller_missing_the_failsafe(tmp_path, answer)
+    assert (done.outcome, done.reason) == ("aborted", "the vehicle was disarmed during the mission")
+    # an error ends the asking at once; no answer: asked REQUEST_TRIES times, no more
+    assert asked == [(0, 0)] * (1 if answer == "error" else REQUEST_TRIES), asked
+    assert (counts["recovered"], counts["lost"], counts["requests"]) == (0, 1, len(asked)), counts

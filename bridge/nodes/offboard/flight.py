@@ -450,6 +450,8 @@ class Offboard(OffboardLink):
         elif now - self._last_rx > timeout:
             self.reason = f"vehicle silent for {timeout:g} s"
         elif self.armed_seen and not self.vehicle_armed and not self.failsafe_seen:
+            if self.events_awaited():  # a missed EVENT, asked for again, may be the failsafe that disarmed it
+                return None
             self.reason, answers = "the vehicle was disarmed during the mission", ("disarmed",)
         elif self.armed_seen and self.vehicle_state == mavlink.MAV_STATE_EMERGENCY:
             # at once: its clock halted, so waiting out the state timeout would only delay the end

@@ -4,10 +4,11 @@ it sends (:mod:`bridge.nodes.offboard`).
 In:  the vehicle's messages: ODOMETRY (checked: sender, stamp, range; kept newest only), HEARTBEAT (armed, system
      status CRITICAL = its failsafe, PX4 ``custom_mode``: a ground station's mode), COMMAND_ACK, TIMESYNC (clock
      offset and round trip, ns), EVENT (typed, bridge.mavlink.events: its id FAILSAFE is its failsafe too, LOCKSTEP
-     says it left lockstep), STATUSTEXT (reported as said, never read for a decision)
+     says it left lockstep; each sequence handled once), CURRENT_EVENT_SEQUENCE and RESPONSE_EVENT_ERROR (the
+     events missed, bridge.mavlink.eventseq), STATUSTEXT (reported as said, never read for a decision)
 Out: actuator targets stamped with their state's ``time_usec`` (or the lockstep no-target acknowledgement),
      ARM_DISARM and other COMMAND_LONGs until ACKed, PARAM_SET until the vehicle's PARAM_VALUE echoes it
-     (every 0.2 s of wall time), HEARTBEAT, TIMESYNC; ``controller.tlog``;
+     (every 0.2 s of wall time), HEARTBEAT, TIMESYNC, REQUEST_EVENT for the EVENTs missed; ``controller.tlog``;
      reports (:mod:`bridge.nodes.report`): events at the mission's time, received STATUSTEXTs, refusals
 """
 
@@ -28,7 +29,8 @@ from bridge.autopilot.params import BY_NAME, ParamChange
 from bridge.core.flight import Flight
 from bridge.core.wire import step_of_usec
 from bridge.mavlink.endpoint import HIL_ACTUATOR_CONTROLS, SET_ACTUATOR_CONTROL_TARGET, Endpoint, Tlog, wait
-from bridge.mavlink.events import EventId, received_id
+from bridge.mavlink.events import EventId, MAVLink_request_event_message, received_id
+from bridge.mavlink.eventseq import EventSequence
 from bridge.mavlink.modes import (
     MAIN_AUTO,
     MAIN_OFFBOARD,
@@ -112,6 +114,7 @@ class OffboardLink:
         self.vehicle_state = mavlink.MAV_STATE_UNINIT
         self.failsafe_seen = ""  # how the vehicle said its failsafe since we armed it ("": it did not)
         self.left_lockstep = ""  # how the vehicle said it left lockstep (its LOCKSTEP EVENT), if it did
+        self.event_seq = EventSequence()  # the vehicle's EVENTs by sequence: the missed ones asked for again
         self.taken_over = ""  # the mode a ground station switched the armed vehicle to (PX4 custom_mode), if any
         self.ending = False  # the mission's end action handed to the vehicle: its own mode is no takeover
         self._odo: Any = None  # newest ODOMETRY not yet used
@@ -336,7 +339,15 @@ class OffboardLink:
         elif kind == "TIMESYNC":
             self._timesync(m)
         elif kind == "EVENT":
-            self._event(m)
+            if self.event_seq.event(m.sequence, self._last_rx):  # each sequence once (a re-sent one, a duplicate)
+                self._event(m)
+            self._request_events(self._last_rx)
+        elif kind == "CURRENT_EVENT_SEQUENCE":
+            self.event_seq.current(m.sequence, m.flags, self._last_rx)
+            self._request_events(self._last_rx)
+        elif kind == "RESPONSE_EVENT_ERROR":
+            if (m.target_system, m.target_component) == (self.cfg.sysid, self.cfg.compid):
+                self.event_seq.error(m.sequence, m.sequence_oldest_available)
         elif kind == "STATUSTEXT":  # a chunked one is reported once, joined
             for severity, text in self._texts.add(m, time.monotonic()):
                 self._statustext(severity, text)
@@ -350,6 +361,16 @@ class OffboardLink:
             self.failsafe_seen = "its EVENT FAILSAFE"
         elif eid is EventId.LOCKSTEP and not self.left_lockstep:  # not a lockstep flight any more
             self.left_lockstep = "its EVENT LOCKSTEP (its STATUSTEXT says why)"
+
+    def _request_events(self, now: float) -> None:
+        """REQUEST_EVENT for the vehicle's EVENTs missed and due to be asked for (again) at ``now``
+        (bridge.mavlink.eventseq: at once, again after 0.1 s unanswered, 5 times at most)."""
+        for first, last in self.event_seq.requests(now):
+            self.ep.send(MAVLink_request_event_message(self.vsys or 0, self.vcomp, first, last))
+
+    def events_awaited(self) -> bool:
+        """Whether EVENTs the vehicle sent are missed and still asked for: one of them may be its failsafe."""
+        return self.event_seq.pending()
 
     def _statustext(self, severity: int, text: str) -> None:
         self._status(StatusText(severity, text))
@@ -386,6 +407,8 @@ class OffboardLink:
             self._statustext(severity, text)
         if self._pending_params:
             self._resend_params(now)
+        if self.event_seq.pending():
+            self._request_events(now)
         refused = self.rejected.report(now)
         if refused is not None:
             self._status(Warning(refused))
@@ -393,4 +416,4 @@ class OffboardLink:
             self.tlog.flush()
         # no TIMESYNC before a vehicle is known: its due time must not hold the loop awake
         self._next_house = min(self._next_hb, self._next_ts if self.vsys is not None else math.inf,
-                               now + HOUSEKEEPING_S)
+                               now + HOUSEKEEPING_S, self.event_seq.next_due())
