@@ -424,7 +424,7 @@ class Offboard(OffboardLink):
         back = self.vehicle_armed and self.vehicle_state != mavlink.MAV_STATE_CRITICAL
         if not self.failsafe_seen or back:
             return "completed"
-        self.reason = f"the vehicle's failsafe took over ({self.failsafe_seen})"
+        self.reason = f"the vehicle's failsafe took over ({self.failsafe_seen.value})"
         self.event("failsafe", self.reason, answers=("failsafe",))
         if not self.vehicle_armed:
             self._disarm()

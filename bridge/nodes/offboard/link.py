@@ -20,6 +20,7 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
+from enum import Enum
 from pathlib import Path
 from typing import Any
 
@@ -66,6 +67,20 @@ def _f32(x: float) -> float:
 
 
 @dataclass
+class FailsafeSign(Enum):
+    """How the vehicle said its failsafe since the controller armed it (its value: the words of the controller's
+    record); false for NONE. A HEARTBEAT's word is kept once seen: the EVENT of a failsafe that disarmed in its
+    own control period is the only sign of one that never shows CRITICAL."""
+
+    NONE = ""
+    EVENT = "its EVENT FAILSAFE"
+    CRITICAL = "HEARTBEAT system_status CRITICAL"
+    EMERGENCY = "HEARTBEAT system_status EMERGENCY"
+
+    def __bool__(self) -> bool:
+        return self is not FailsafeSign.NONE
+
+
 class ScheduledSet:
     """One ``--param-at`` change as sent: its wire value (float32) and MAVLink type, the mission time it was
     first sent (s), how many PARAM_SETs went, the next resend's wall time, and the mission time the vehicle's
@@ -112,7 +127,7 @@ class OffboardLink:
         self.armed_seen = False  # the vehicle's heartbeat showed it armed since we armed it
         self.vehicle_armed = False
         self.vehicle_state = mavlink.MAV_STATE_UNINIT
-        self.failsafe_seen = ""  # how the vehicle said its failsafe since we armed it ("": it did not)
+        self.failsafe_seen = FailsafeSign.NONE  # how the vehicle said its failsafe since we armed it
         self.left_lockstep = ""  # how the vehicle said it left lockstep (its LOCKSTEP EVENT), if it did
         self.event_seq = EventSequence()  # the vehicle's EVENTs by sequence: the missed ones asked for again
         self.taken_over = ""  # the mode a ground station switched the armed vehicle to (PX4 custom_mode), if any
@@ -317,9 +332,9 @@ class OffboardLink:
             if self.armed_seen and m.system_status in (mavlink.MAV_STATE_CRITICAL, mavlink.MAV_STATE_EMERGENCY):
                 # CRITICAL (armed): flying its failsafe. EMERGENCY: its plant ended the flight (crashed, diverged,
                 # touched by another vehicle) and its clock halted: no more states will come
-                state = "CRITICAL" if m.system_status == mavlink.MAV_STATE_CRITICAL else "EMERGENCY"
-                if not self.failsafe_seen.startswith("HEARTBEAT"):  # (its STATUSTEXT comes first: said, then shown)
-                    self.failsafe_seen = f"HEARTBEAT system_status {state}"
+                if self.failsafe_seen in (FailsafeSign.NONE, FailsafeSign.EVENT):  # (its EVENT comes first)
+                    self.failsafe_seen = (FailsafeSign.CRITICAL if m.system_status == mavlink.MAV_STATE_CRITICAL
+                                          else FailsafeSign.EMERGENCY)
             elif (self.vehicle_armed and m.autopilot == mavlink.MAV_AUTOPILOT_PX4 and not self.taken_over
                   and not self.ending and main_mode(m.custom_mode) != MAIN_OFFBOARD
                   and not (self.cfg.await_mission and m.custom_mode == custom_mode(MAIN_AUTO, SUB_MISSION))):
@@ -358,7 +373,7 @@ class OffboardLink:
         if eid is EventId.FAILSAFE and self.armed_seen and not self.failsafe_seen:
             # a failsafe that disarms the vehicle in its own control period (its disarm action, or on the
             # ground) never shows CRITICAL: disarmed, the failsafe is cleared and HEARTBEAT says STANDBY (PX4)
-            self.failsafe_seen = "its EVENT FAILSAFE"
+            self.failsafe_seen = FailsafeSign.EVENT
         elif eid is EventId.LOCKSTEP and not self.left_lockstep:  # not a lockstep flight any more
             self.left_lockstep = "its EVENT LOCKSTEP (its STATUSTEXT says why)"
 
