@@ -66,7 +66,6 @@ def _f32(x: float) -> float:
     return struct.unpack("<f", struct.pack("<f", x))[0]
 
 
-@dataclass
 class FailsafeSign(Enum):
     """How the vehicle said its failsafe since the controller armed it (its value: the words of the controller's
     record); false for NONE. A HEARTBEAT's word is kept once seen: the EVENT of a failsafe that disarmed in its
@@ -81,6 +80,7 @@ class FailsafeSign(Enum):
         return self is not FailsafeSign.NONE
 
 
+@dataclass
 class ScheduledSet:
     """One ``--param-at`` change as sent: its wire value (float32) and MAVLink type, the mission time it was
     first sent (s), how many PARAM_SETs went, the next resend's wall time, and the mission time the vehicle's
