@@ -256,9 +256,9 @@ def _fly_alone(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention
                shown: list[dict[str, Any]], n0: int) -> tuple[list[tuple[float, float, float]], str | None]:
     """Step the vehicle alone (nothing from the controller; the mission's link is done with, its statistics the
     mission's) while it is armed in ``mode`` (or a failsafe's, taken meanwhile), until it disarms on the ground,
-    bounded by the descent at the
-    failsafe's rate, COM_DISARM_LAND and 10 s, its plant judged after each period; the events since the
-    ``n0``-th added to ``shown``. Returns the rows (t s, z m, vz m/s) and the plant's verdict (None: none)."""
+    bounded by the descent at the failsafe's rate, COM_DISARM_LAND and 10 s, its plant judged after each period;
+    the events since the ``n0``-th added to ``shown``. Returns the rows (t s, z m, vz m/s) and the plant's verdict
+    (None: none)."""
     m, plant = flight.mission, vehicle.plant
     rows: list[tuple[float, float, float]] = []
     k, rate = m.steps, m.rate_hz

@@ -9,6 +9,7 @@ an EVENT it missed (REQUEST_EVENT, bridge.mavlink.eventseq) before it calls a di
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -66,18 +67,17 @@ def test_a_real_vehicle_sends_each_event_as_a_numbered_event_and_resends_on_requ
             assert v.stop() == 0
 
 
-def _controller_against(tmp: Path, event: bool, text: bytes | None) -> Done:
-    """A real-time ``bsst controller`` against a scripted vehicle that arms, streams resting states, and at step 10
-    disarms in its failsafe as PX4's ``disarm`` action does (HEARTBEAT never CRITICAL), saying it with an EVENT
-    FAILSAFE (``event``) and/or a CRITICAL STATUSTEXT ``text``; then streams on. The controller's Done report."""
+def _fly_against(tmp: Path, v: ScriptedVehicle, beat: Callable[[], None], at_step_10: Callable[[], None]) -> list[str]:
+    """A real-time ``bsst controller`` against the scripted vehicle ``v``: until it arms, ``v`` serves it, then
+    ``beat`` s (its HEARTBEAT and what goes with it); armed, it streams resting states, ``at_step_10`` at step 10,
+    until the controller ends. The controller's lines."""
     (tmp / "m.toml").write_text(MISSION)
-    v = ScriptedVehicle()
     ctl = Proc.bsst("controller", str(tmp / "m.toml"), "--realtime", "--vehicle", f"127.0.0.1:{v.port}",
                     "--timeout", "30")
     try:
         deadline = time.monotonic() + 60
         while not v.armed and time.monotonic() < deadline:
-            v.serve() if v.peer is None else v.heartbeat()
+            v.serve() if v.peer is None else beat()
             v.until(time.monotonic() + 0.05)
         assert v.armed, "never armed"
         k, t0 = 0, time.monotonic()
@@ -85,20 +85,31 @@ def _controller_against(tmp: Path, event: bool, text: bytes | None) -> Done:
             v.until(t0 + k / RATE)
             v.odometry(k)
             if k == 10:
-                if text is not None:
-                    v.send(M.MAVLink_statustext_message(M.MAV_SEVERITY_CRITICAL, text))
-                if event:
-                    v.send(ev.MAVLink_event_message(0, 0, int(ev.EventId.FAILSAFE), 200, 0,
-                                                    ev.log_levels(M.MAV_SEVERITY_CRITICAL), [0] * ev.ARGUMENTS))
-                v.armed = False
-                v.heartbeat()
+                at_step_10()
             k += 1
         ctl.p.wait(timeout=30)
     finally:
         ctl.stop()
         v.sock.close()
-    done = [r for r in map(parse_line, ctl.lines) if isinstance(r, Done)]
-    assert len(done) == 1, ctl.lines[-5:]
+    return ctl.lines
+
+
+def _controller_against(tmp: Path, event: bool, text: bytes | None) -> Done:
+    """A real-time ``bsst controller`` against a scripted vehicle that arms, streams resting states, and at step 10
+    disarms in its failsafe as PX4's ``disarm`` action does (HEARTBEAT never CRITICAL), saying it with an EVENT
+    FAILSAFE (``event``) and/or a CRITICAL STATUSTEXT ``text``; then streams on. The controller's Done report."""
+    v = ScriptedVehicle()
+
+    def failsafe_disarms() -> None:
+        if text is not None:
+            v.send(M.MAVLink_statustext_message(M.MAV_SEVERITY_CRITICAL, text))
+        if event:
+            v.send(_failsafe_event())
+        v.armed = False
+        v.heartbeat()
+
+    done = [r for r in map(parse_line, _fly_against(tmp, v, v.heartbeat, failsafe_disarms)) if isinstance(r, Done)]
+    assert len(done) == 1, done
     return done[0]
 
 
@@ -147,39 +158,23 @@ def _controller_missing_the_failsafe(tmp: Path, answer: str) -> tuple[Done, list
     the controller hears a disarmed HEARTBEAT and CURRENT_EVENT_SEQUENCE 0 (as the vehicle's 1 Hz beat sends
     them); REQUEST_EVENTs are answered as ``answer`` says (:class:`_AnsweringRequests`). The controller's Done
     report, the requests, and its ``events`` stats."""
-    (tmp / "m.toml").write_text(MISSION)
     v = ScriptedVehicle()
     requests = _AnsweringRequests(v, answer)
     v.rx = requests  # type: ignore[assignment]
-    ctl = Proc.bsst("controller", str(tmp / "m.toml"), "--realtime", "--vehicle", f"127.0.0.1:{v.port}",
-                    "--timeout", "30")
-    try:
-        deadline = time.monotonic() + 60
-        while not v.armed and time.monotonic() < deadline:
-            if v.peer is None:
-                v.serve()
-            else:
-                v.heartbeat()
-                v.send(ev.MAVLink_current_event_sequence_message(65535, ev.SEQUENCE_RESET))
-            v.until(time.monotonic() + 0.05)
-        assert v.armed, "never armed"
-        k, t0 = 0, time.monotonic()
-        while ctl.p.poll() is None and time.monotonic() < deadline:
-            v.until(t0 + k / RATE)
-            v.odometry(k)
-            if k == 10:  # its EVENT's datagram lost: not sent
-                v.armed = False
-                v.heartbeat()
-                v.send(ev.MAVLink_current_event_sequence_message(0, 0))
-            k += 1
-        ctl.p.wait(timeout=30)
-    finally:
-        ctl.stop()
-        v.sock.close()
-    reports = [parse_line(line) for line in ctl.lines]
+
+    def beat() -> None:
+        v.heartbeat()
+        v.send(ev.MAVLink_current_event_sequence_message(65535, ev.SEQUENCE_RESET))
+
+    def failsafe_disarms_unheard() -> None:  # its EVENT's datagram lost: not sent
+        v.armed = False
+        v.heartbeat()
+        v.send(ev.MAVLink_current_event_sequence_message(0, 0))
+
+    reports = [parse_line(line) for line in _fly_against(tmp, v, beat, failsafe_disarms_unheard)]
     done = [r for r in reports if isinstance(r, Done)]
     stats = [r.values for r in reports if isinstance(r, Stats)]
-    assert len(done) == 1 and len(stats) == 1, ctl.lines[-5:]
+    assert len(done) == 1 and len(stats) == 1, reports[-5:]
     return done[0], requests.asked, stats[0]["events"]
 
 

@@ -50,6 +50,16 @@ from typing import Any
 _STOP = b"\0"  # not a signal number: ends the reading thread
 
 
+def _previous_handler() -> Any:
+    """SIGINT's handler, to be put back after a block that installs its own; None where nothing is to be installed:
+    outside the main thread, or where SIGINT is ignored (a sweep's workers). One installed from C comes back as
+    Python's own (what a later Ctrl-C should meet)."""
+    previous = signal.getsignal(signal.SIGINT)
+    if threading.current_thread() is not threading.main_thread() or previous is signal.SIG_IGN:
+        return None
+    return signal.default_int_handler if previous is None else previous
+
+
 @dataclass(frozen=True)
 class Interrupts:
     """The first and the second SIGINT of a :func:`sigint_futures` block."""
@@ -63,12 +73,10 @@ def sigint_futures() -> Iterator[Interrupts]:
     """Within the block, SIGINT completes ``first``, then ``second``, instead of raising KeyboardInterrupt; a
     third raises it (the previous handler is back from the second on)."""
     got = Interrupts()
-    previous = signal.getsignal(signal.SIGINT)
-    if threading.current_thread() is not threading.main_thread() or previous is signal.SIG_IGN:
+    previous = _previous_handler()
+    if previous is None:
         yield got
         return
-    if previous is None:  # installed from C: Python's own is what a third Ctrl-C should meet
-        previous = signal.default_int_handler
     read_end, write_end = os.pipe()
     os.set_blocking(write_end, False)  # set_wakeup_fd's condition (the C handler must never block)
     handled = 0
@@ -148,12 +156,10 @@ def sigint_deferred() -> Iterator[Deferred]:
     previous handler is back after it. Outside the main thread, or where SIGINT is ignored, nothing is installed
     (``pending`` stays false)."""
     got = Deferred()
-    previous = signal.getsignal(signal.SIGINT)
-    if threading.current_thread() is not threading.main_thread() or previous is signal.SIG_IGN:
+    previous = _previous_handler()
+    if previous is None:
         yield got
         return
-    if previous is None:  # installed from C: Python's own is what comes back
-        previous = signal.default_int_handler
     signal.signal(signal.SIGINT, got.on_sigint)
     try:
         yield got
