@@ -17,6 +17,7 @@ from pymavlink.dialects.v20 import common as M
 
 from bridge.mavlink import events as ev
 from bridge.mavlink.eventseq import REQUEST_TRIES
+from bridge.nodes.offboard.config import PHASE_STATES
 from bridge.nodes.report import Done, Stats, parse_line
 from bridge.session import instance_slot
 from tests.sitlkit import Proc
@@ -67,10 +68,11 @@ def test_a_real_vehicle_sends_each_event_as_a_numbered_event_and_resends_on_requ
             assert v.stop() == 0
 
 
-def _fly_against(tmp: Path, v: ScriptedVehicle, beat: Callable[[], None], at_step_10: Callable[[], None]) -> list[str]:
+def _fly_against(tmp: Path, v: ScriptedVehicle, beat: Callable[[], None], act: Callable[[], None],
+                 at_step: int = 10) -> list[str]:
     """A real-time ``bsst controller`` against the scripted vehicle ``v``: until it arms, ``v`` serves it, then
-    ``beat`` s (its HEARTBEAT and what goes with it); armed, it streams resting states, ``at_step_10`` at step 10,
-    until the controller ends. The controller's lines."""
+    ``beat`` s (its HEARTBEAT and what goes with it); armed, it streams resting states, ``act`` after the state of
+    step ``at_step``, until the controller ends. The controller's lines."""
     (tmp / "m.toml").write_text(MISSION)
     ctl = Proc.bsst("controller", str(tmp / "m.toml"), "--realtime", "--vehicle", f"127.0.0.1:{v.port}",
                     "--timeout", "30")
@@ -84,8 +86,8 @@ def _fly_against(tmp: Path, v: ScriptedVehicle, beat: Callable[[], None], at_ste
         while ctl.p.poll() is None and time.monotonic() < deadline:
             v.until(t0 + k / RATE)
             v.odometry(k)
-            if k == 10:
-                at_step_10()
+            if k == at_step:
+                act()
             k += 1
         ctl.p.wait(timeout=30)
     finally:
@@ -152,12 +154,13 @@ def _failsafe_event() -> object:
                                     [0] * ev.ARGUMENTS)
 
 
-def _controller_missing_the_failsafe(tmp: Path, answer: str) -> tuple[Done, list[tuple[int, int]], dict]:
+def _controller_missing_the_failsafe(tmp: Path, answer: str, at_step: int = 10
+                                     ) -> tuple[Done, list[tuple[int, int]], dict]:
     """A real-time ``bsst controller`` against a scripted vehicle that says CURRENT_EVENT_SEQUENCE RESET (no event
-    yet), arms, and at step 10 disarms in its failsafe with the datagram of its EVENT FAILSAFE (sequence 0) lost:
-    the controller hears a disarmed HEARTBEAT and CURRENT_EVENT_SEQUENCE 0 (as the vehicle's 1 Hz beat sends
-    them); REQUEST_EVENTs are answered as ``answer`` says (:class:`_AnsweringRequests`). The controller's Done
-    report, the requests, and its ``events`` stats."""
+    yet), arms, and after the state of step ``at_step`` disarms in its failsafe with the datagram of its EVENT
+    FAILSAFE (sequence 0) lost: the controller hears a disarmed HEARTBEAT and CURRENT_EVENT_SEQUENCE 0 (as the
+    vehicle's 1 Hz beat sends them); REQUEST_EVENTs are answered as ``answer`` says (:class:`_AnsweringRequests`).
+    The controller's Done report, the requests, and its ``events`` stats."""
     v = ScriptedVehicle()
     requests = _AnsweringRequests(v, answer)
     v.rx = requests  # type: ignore[assignment]
@@ -168,10 +171,11 @@ def _controller_missing_the_failsafe(tmp: Path, answer: str) -> tuple[Done, list
 
     def failsafe_disarms_unheard() -> None:  # its EVENT's datagram lost: not sent
         v.armed = False
-        v.heartbeat()
+        # the vehicle's beat is one datagram (Announcer.beat): the sequence first, so never the disarm without it
         v.send(ev.MAVLink_current_event_sequence_message(0, 0))
+        v.heartbeat()
 
-    reports = [parse_line(line) for line in _fly_against(tmp, v, beat, failsafe_disarms_unheard)]
+    reports = [parse_line(line) for line in _fly_against(tmp, v, beat, failsafe_disarms_unheard, at_step)]
     done = [r for r in reports if isinstance(r, Done)]
     stats = [r.values for r in reports if isinstance(r, Stats)]
     assert len(done) == 1 and len(stats) == 1, reports[-5:]
@@ -192,3 +196,16 @@ def test_a_missed_event_the_vehicle_cannot_resend_is_given_up(tmp_path: Path, an
     # an error ends the asking at once; no answer: asked REQUEST_TRIES times, no more
     assert asked == [(0, 0)] * (1 if answer == "error" else REQUEST_TRIES), asked
     assert (counts["recovered"], counts["lost"], counts["requests"]) == (0, 1, len(asked)), counts
+
+
+@pytest.mark.parametrize("answer", ["event", "silent"])
+def test_a_failsafe_missed_in_the_last_step_is_not_a_completed_mission(tmp_path: Path, answer: str) -> None:
+    # the state after it ends the mission: the controller asks for the missed EVENT before it calls the flight
+    last = PHASE_STATES + round(1.4 * RATE) - 1  # the mission's last step (its first follows the PHASE_STATES)
+    done, asked, counts = _controller_missing_the_failsafe(tmp_path, answer, at_step=last)
+    if answer == "event":
+        assert (done.outcome, done.reason) == ("failsafe", "the vehicle's failsafe took over (its EVENT FAILSAFE)")
+        assert counts["recovered"] == 1, counts
+    else:
+        assert (done.outcome, done.reason) == ("aborted", "the vehicle was disarmed during the mission")
+        assert asked == [(0, 0)] * REQUEST_TRIES and counts["lost"] == 1, (asked, counts)

@@ -21,6 +21,7 @@ from bridge.core.flight import Flight
 from bridge.core.wire import command_to_wire, step_of_usec
 from bridge.link.ends import ControllerEnd
 from bridge.mavlink.endpoint import FORCE_DISARM, Spinner, wait
+from bridge.mavlink.eventseq import REQUEST_TIMEOUT_S, REQUEST_TRIES
 from bridge.mavlink.modes import MAIN_AUTO, SUB_LOITER
 from bridge.nodes.offboard.config import (
     PHASE_S,
@@ -421,6 +422,10 @@ class Offboard(OffboardLink):
         # the way down before it came
         self.t_mission, self._end_wall = t_end, time.monotonic() - (self._way_down or 0.0)
         self._end_height_m = max(-float(odo.z), 0.0)  # m above the start (NED z): the landing's time
+        self._settle_events()
+        lost = self._check_vehicle()  # disarmed, taken over, ... in the mission's last steps: not completed
+        if lost:
+            return lost
         back = self.vehicle_armed and self.vehicle_state != mavlink.MAV_STATE_CRITICAL
         if not self.failsafe_seen or back:
             return "completed"
@@ -429,6 +434,13 @@ class Offboard(OffboardLink):
         if not self.vehicle_armed:
             self._disarm()
         return "failsafe"
+
+    def _settle_events(self) -> None:
+        """Serve the link while EVENTs the vehicle sent are missed and asked for again (each given up after
+        REQUEST_TRIES tries, eventseq): one of them may be a failsafe in the mission's last steps."""
+        deadline = time.monotonic() + (REQUEST_TRIES + 1) * REQUEST_TIMEOUT_S
+        while self.events_awaited() and not self.stopping and time.monotonic() < deadline:
+            self._serve(min(deadline, self._next_house))
 
     def _row(self, k: int, t: float, ref: Any, u: Any, wire: Any, desired: Any, recv: float, sent: float,
              s2c: float, late: float, age: float) -> None:
