@@ -199,6 +199,7 @@ def test_a_gps_lost_in_the_end_landing_lands_in_descend_in_lockstep_as_offline(t
         (31.124, "position"), (31.124, "failsafe"), (34.544, "landed"), (36.544, "disarmed")]
     assert offline["outcome"] == sitl["outcome"] == "completed"
     assert offline["end"] == sitl["end"] and offline["end"]["disarmed"] and offline["end"]["landing_s"] == 6.544
+    assert offline["end"]["failsafe"] == "position lost: level and descend"  # who finished the landing
     assert all(v["ok"] for v in sitl["policies"]) and all(v["ok"] for v in offline["policies"]), sitl["policies"]
     assert not [e for e in sitl["events"] if e["kind"] == "lockstep"], "the session left lockstep"
 
@@ -215,3 +216,4 @@ def test_a_gps_lost_after_the_touchdown_keeps_the_auto_disarm_wait(tmp_path):
     assert [(t, k) for t, k, _ in _vehicle_events(summary, ("landed", "failsafe", "disarmed"))] == [
         (34.372, "landed"), (35.124, "failsafe"), (36.372, "disarmed")]
     assert summary["outcome"] == "completed" and summary["end"]["landing_s"] == 6.372
+    assert summary["end"]["failsafe"] == "position lost: level and descend"

@@ -2,12 +2,13 @@
 
 In:  the action (``land`` or ``hold``); the rows the vehicle flew under it, after the mission's last step (t s on
      the vehicle's clock, z m and vz m/s of the true state at the start of each control period); its events
-     after the mission (t s, kind: ``end``, ``landed``, ``disarmed``)
+     after the mission (t s, kind: ``end``, ``landed``, ``disarmed``, ``failsafe``; their text)
 Out: :func:`end_block`, ``summary.json["end"]``: ``action``; ``rows``; ``disarmed`` (the landing ended in a
      disarm on the ground); ``landing_s`` (the ``end`` event to the disarm, s: the touchdown and COM_DISARM_LAND
      after it); ``disarm_z_m`` (the last row before the disarm) and ``touchdown_vz_mps`` (the last row before the
-     ``landed`` event: the touchdown; without one, before the disarm); ``max_descent_mps``; ``max_drift_m`` (a
-     hold: the largest height change from its first row)
+     ``landed`` event: the touchdown; without one, before the disarm); ``max_descent_mps``; ``failsafe`` (the
+     text of the first failsafe that took the end action over, a position lost in the landing; None: none);
+     ``max_drift_m`` (a hold: the largest height change from its first row)
 
 The mission's trace and figures stop at its end (``trace.csv`` holds the mission's rows only, so that every
 figure is the mission's); the end action is summarised here, from the same rows in every clock (offline: the
@@ -25,6 +26,7 @@ END_MODE_CODES = (3, 4)  # vehicle.bin's ``mode`` of HOLD and LAND (bridge.nodes
 class _Event(Protocol):
     t: float | None
     kind: str
+    text: str
 
 
 def end_block(action: str, rows: Sequence[tuple[float, float, float]], events: Sequence[_Event]) -> dict[str, Any]:
@@ -45,6 +47,8 @@ def end_block(action: str, rows: Sequence[tuple[float, float, float]], events: S
         "disarm_z_m": last[1] if last is not None and disarm is not None else None,
         "touchdown_vz_mps": touch[2] if touch is not None and disarm is not None else None,
         "max_descent_mps": max((-r[2] for r in flown), default=None),
+        "failsafe": None if start is None else next(
+            (e.text for e in events if e.kind == "failsafe" and e.t is not None and e.t >= start), None),
     }
     if action == "hold":
         out["max_drift_m"] = max((abs(r[1] - flown[0][1]) for r in flown), default=None)
