@@ -209,14 +209,15 @@ def check_state_changes(timeline: Sequence[TimedEvent], rate_hz: float, source: 
         last[device] = e
 
 
-def _numbers(text: str, n: tuple[int, ...], what: str) -> list[float]:
+def _numbers(text: str, n: tuple[int, ...], what: str, shown: str | None = None) -> list[float]:
+    """``text``'s comma-separated numbers, ``n`` of them, finite; ValueError naming ``shown`` (as typed: ``text``)."""
     parts = text.split(",")
     try:
         values = [float(p) for p in parts]
     except ValueError:
         values = []
     if len(values) not in n or not all(math.isfinite(v) for v in values):
-        raise ValueError(f"expected {what}, got {text!r}")
+        raise ValueError(f"expected {what}, got {text if shown is None else shown!r}")
     return values
 
 
@@ -274,7 +275,7 @@ def event_table_from_flag(text: str) -> dict[str, Any]:
     elif kind == "gyro" and key == "bias" and eq:
         out["bias"] = _numbers(value, (3,), "bias=X,Y,Z in rad/s")
     elif kind == "wind" and args:
-        v = _numbers(args.replace(":", ","), (1, 2), "wind:SPEED[:FROM_DEG]")
+        v = _numbers(args.replace(":", ","), (1, 2), "wind:SPEED[:FROM_DEG]", shown=args)
         out.update(speed_mps=v[0], from_deg=v[1] if len(v) > 1 else 0.0)
     elif kind == "gust" and args:
         v = _numbers(args, (2, 3), "gust:DURATION,AMPLITUDE[,FROM_DEG]")

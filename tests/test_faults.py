@@ -35,6 +35,8 @@ def test_flags_parse_into_event_tables() -> None:
                 "3:link:lte,wifi"):
         with pytest.raises(ValueError):
             event_table_from_flag(bad)
+    with pytest.raises(ValueError, match=r"expected wind:SPEED\[:FROM_DEG\], got '5:nan'"):  # as typed (was '5,nan')
+        event_table_from_flag("10:wind:5:nan")
 
 
 def test_a_link_handover_parses_and_is_refused_when_bad() -> None:

@@ -106,6 +106,35 @@ def test_pymavlink_acks_per_unit(tmp_path):
     assert all(e.by is not None and e.by.link == "gcs" and (e.by.sysid, e.by.compid) == (255, 190) for e in faults)
 
 
+def test_an_injection_after_the_plant_ended_the_flight_is_denied(tmp_path):
+    """Once the plant has ended the flight (every rotor off in the air: ``crashed``, the clock halted for good), an
+    INJECT_FAILURE is DENIED saying why: the plant is stepped no more, so an accepted fault would never act nor be
+    logged (it was ACCEPTED, and MAVSDK's Failure plugin said SUCCESS, for a fault that never happened)."""
+    with instance_slot() as n:
+        gcs = _gcs(n)
+        v = _vehicle(n, tmp_path, "--profile", "x500", "--param", "SYS_FAILURE_EN=1", "--speed", "4")
+        try:
+            assert gcs.wait_heartbeat(timeout=20) is not None
+            tgt = (gcs.target_system, gcs.target_component)
+            gcs.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+            assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+            nan = math.nan
+            gcs.mav.command_long_send(*tgt, M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, nan, nan, nan, nan)
+            assert _ack(gcs, M.MAV_CMD_NAV_TAKEOFF).result == M.MAV_RESULT_ACCEPTED
+            v.wait_line(lambda s: "takeoff done" in s, timeout=60)
+            assert _inject(gcs, MOTOR, OFF, 0) == M.MAV_RESULT_ACCEPTED
+            v.wait_line(lambda s: '"kind":"crashed"' in s, timeout=60)
+            assert _inject(gcs, MOTOR, OK, 0) == M.MAV_RESULT_DENIED
+            text = gcs.recv_match(type="STATUSTEXT", blocking=True, timeout=5,
+                                  condition="'INJECT_FAILURE' in STATUSTEXT.text")
+            assert text is not None and text.text == "INJECT_FAILURE: the plant ended the flight"
+            assert _inject(gcs, GPS, OFF, 0) == M.MAV_RESULT_DENIED  # (whatever the unit)
+        finally:
+            assert v.stop() == 0
+    faults = [e.text for e in _events(v) if e.kind == "fault"]
+    assert faults == [f"motor {i}: off" for i in (1, 2, 3, 4)], faults
+
+
 def test_paper_profile_has_no_rotors(tmp_path):
     """The paper profile (ideal wrench) has no rotor to fail, and the truth estimator no sensor: UNSUPPORTED."""
     with instance_slot() as n:

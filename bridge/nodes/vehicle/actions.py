@@ -10,7 +10,8 @@ Out: the MAV_RESULT and why a command was refused (the commander's STATUSTEXT); 
      controller's horizontal speed (:meth:`~bridge.autopilot.failsafe.OnboardController.cruise`); a ``terminated``
      event, the motors off (disarmed), mode TERMINATION (latched: :meth:`Actions.refusal`); PROTOCOL_VERSION (msg 300)
 
-**INJECT_FAILURE.** DENIED unless SYS_FAILURE_EN = 1 (PX4's receiver does the same); else its events are acted on at
+**INJECT_FAILURE.** DENIED unless SYS_FAILURE_EN = 1 (PX4's receiver does the same), and DENIED once the plant ended
+the flight (crashed, diverged, collided: its clock halted, nothing would act on it); else its events are acted on at
 the start of the next control period, naming the sender, or it is refused saying why (:mod:`.injection`).
 
 **DO_CHANGE_SPEED.** PX4's navigator (navigator_main.cpp) sets its cruising speed to param2 if positive, else back to
@@ -122,6 +123,8 @@ class Actions:
         sim = self.sim
         if not sim.failure_injection:
             return mavlink.MAV_RESULT_DENIED, "INJECT_FAILURE: disabled, SYS_FAILURE_EN is 0"
+        if self.clock.halted:  # its plant is stepped no more: an accepted fault would never act nor be logged
+            return mavlink.MAV_RESULT_DENIED, "INJECT_FAILURE: the plant ended the flight"
         sensors = sim.sensors.config if sim.sensors is not None else None
         got = injection(m.param1, m.param2, m.param3, sim.t,
                         lambda kind: event_problem(kind, sim.plant.profile, sensors,
