@@ -212,7 +212,11 @@ def _plan_item(source: str, index: int, x: Any) -> Item:
     except ValueError as exc:
         raise ConfigError(f"{source}: {label} ({command_name(cmd)}): {exc}") from None
     item = Item(label, cmd, frame, *p)
-    return _check_item(source, item, x.get("autoContinue", True) is True, "null")
+    auto = x.get("autoContinue", True)
+    if not isinstance(auto, bool):
+        raise ConfigError(f"{source}: {label} ({command_name(cmd)}): autoContinue: expected true or false, "
+                          f"got {show(auto)}")
+    return _check_item(source, item, auto, "null")
 
 
 def read_wpl(text: str, source: str) -> PlanFile:

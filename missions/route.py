@@ -96,6 +96,12 @@ class Route:
     lands: bool
 
 
+def _metres(v: float, decimals: int) -> str:
+    """A distance in a message: ``decimals`` decimals, or a few significant digits when huge (1e+300, not 301
+    digits)."""
+    return f"{v:.{decimals}f}" if abs(v) < 1e9 else f"{v:.4g}"
+
+
 def _finite(plan: PlanFile, item: Item, *vals: float) -> None:
     if not all(math.isfinite(v) for v in vals):
         raise plan.refuse(item, f"coordinates must be numbers, got lat {item.lat}, lon {item.lon}, alt {item.alt}")
@@ -110,10 +116,10 @@ def _local(plan: PlanFile, home: Home, item: Item, envelope_m: float) -> tuple[f
     x, y, _ = home.paper(item.lat, item.lon, home.alt)
     z = item.alt if item.frame in RELATIVE_FRAMES else item.alt - home.alt
     if z < 0.0:
-        raise plan.refuse(item, f"altitude {z:.3f} m above the home: below the ground")
-    r = math.sqrt(x * x + y * y + z * z)
+        raise plan.refuse(item, f"altitude {_metres(z, 3)} m above the home: below the ground")
+    r = math.hypot(x, y, z)
     if r > envelope_m:
-        raise plan.refuse(item, f"{r:.1f} m from the home, outside the plant's envelope of {envelope_m:g} m "
+        raise plan.refuse(item, f"{_metres(r, 1)} m from the home, outside the plant's envelope of {envelope_m:g} m "
                                 f"(plant/quadrotor.py: a vehicle farther out has diverged)")
     return x, y, z
 

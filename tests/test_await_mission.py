@@ -608,7 +608,8 @@ def test_the_vehicle_starts_a_mission_only_when_asked_to_await_one():
     """MISSION_START: UNSUPPORTED on a vehicle without --await-mission (as before), DENIED without a mission
     and ACCEPTED with one on a vehicle with it; AUTO.MISSION DENIED without it, selected with it (HEARTBEAT
     AUTO.MISSION), and a ground station's arm then starts the mission (the vehicle stays disarmed: its arm is
-    the controller's); a mission cleared in flight is no more watched (no MISSION_ITEM_REACHED for its items)."""
+    the controller's); a mission cleared under a watch is no more watched (no MISSION_ITEM_REACHED for its items;
+    armed and flying it, a clear is refused: tests/test_mission_in_flight.py)."""
     gcs = GcsSocket()
     flight = prepare(Mission(Sine(), duration_s=5.0, name="start"))
     made = []

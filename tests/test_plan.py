@@ -114,6 +114,15 @@ def test_a_slower_cruise_is_a_longer_flight() -> None:
     (lambda d: d["mission"]["items"][1]["params"].__setitem__(1, 50), ["mission.items[1]", "DO_CHANGE_SPEED (178)",
                                                                       "speed"]),
     (lambda d: d["mission"]["items"][2].update(autoContinue=False), ["mission.items[2]", "autoContinue"]),
+    # a value of the wrong type is named as such (a string "true" was once "autoContinue false"); a huge altitude is
+    # given in a few digits (it was written out in 300)
+    (lambda d: d["mission"]["items"][2].update(autoContinue="true"), ["mission.items[2]", "NAV_WAYPOINT (16)",
+                                                                     "autoContinue: expected true or false",
+                                                                     "got 'true'"]),
+    (lambda d: d["mission"]["items"][2]["params"].__setitem__(6, -1e300), ["mission.items[2]", "altitude -1e+300 m",
+                                                                          "below the ground"]),
+    (lambda d: d["mission"]["items"][2]["params"].__setitem__(6, 1e300), ["mission.items[2]", "1e+300 m from the home",
+                                                                         "envelope"]),
     (lambda d: d.update(fileType="Fence"), ["not a QGroundControl plan"]),
     (lambda d: d["mission"].update(plannedHomePosition=[None, 8.5, 488]), ["plannedHomePosition"]),
     # every number of a plan finite (Python's json reads Infinity and NaN; QGroundControl writes NaN as null)

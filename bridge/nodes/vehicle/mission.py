@@ -74,6 +74,7 @@ class MissionManager:
         self._reached_at = 0.0
         self.selected = False  # AUTO.MISSION selected (or started) by a ground station, not flown yet
         self.started: dict[str, str] | None = None  # the last start: how (``command``) and by whom (``by``)
+        self.chosen = 0  # the current item a ground station chose (MISSION_SET_CURRENT, an upload's current item)
         self.start_requested = False  # started: the controller is to download the mission and fly it
         self.watch: ItemWatch | None = None  # the mission in flight (None: none)
         self.completed = False  # the last started mission's items were all reached
@@ -133,6 +134,9 @@ class MissionManager:
     def _startable(self, what: str) -> str | None:
         if not self.mission.items:
             return f"{what}: no mission uploaded"
+        if self.chosen != 0:  # PX4 would start there; the controller flies the whole trajectory, from item 0
+            return (f"{what}: the current item is {self.chosen} (a ground station's MISSION_SET_CURRENT): a mission "
+                    "is flown here whole, from item 0; set item 0 current first")
         # an upload is about to change the mission; a download changes nothing, and the controller's own
         # download begins the moment AUTO.MISSION shows (MAVSDK's arm then comes during it, as a loaded CI showed)
         if self.upload_link is not None:
@@ -172,6 +176,14 @@ class MissionManager:
             self._broadcast(self.current_message())  # the change at once, as PX4 does, not at the next 1 Hz tick
         if not armed:
             self.watch = None
+
+    def flown(self) -> str | None:
+        """Why the mission and its current item cannot be changed now (None: they can): started, or armed and
+        flying it, the controller flies its whole trajectory, planned from item 0, which neither a new mission, a
+        clear nor a new current item can change (PX4's navigator takes each at once)."""
+        if self.start_requested or (self.watch is not None and self.sim.armed):
+            return "flying the mission (planned whole, from item 0): change it once landed"
+        return None
 
     # -- the flight's side ----------------------------------------------------------------------------
     def reached(self, seq: int) -> None:
@@ -240,6 +252,7 @@ class MissionManager:
         or rally points cannot be read (nothing held, nothing said here: the transfer refuses the upload)."""
         if mission_type == mavlink.MAV_MISSION_TYPE_MISSION:
             self.mission = mission
+            self.chosen = mission.current
         else:
             why = self.zones.accept(mission, mission_type)
             if why is not None:

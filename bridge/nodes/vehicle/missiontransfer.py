@@ -80,6 +80,8 @@ class TransferHost(Protocol):
 
     def held(self, mission_type: int) -> Mission: ...
 
+    def flown(self) -> str | None: ...
+
     def accept(self, who: Partner, mission: Mission, what: str, mission_type: int = MISSION) -> str | None: ...
 
     def refused(self, text: str) -> None: ...
@@ -137,6 +139,8 @@ class LinkTransfer:
             self._busy(who, mtype)
             return False
         if kind == "MISSION_CLEAR_ALL":
+            if self._flown(who, mtype, "IGN CLEAR CMD"):
+                return False
             types = TYPES if mtype == mavlink.MAV_MISSION_TYPE_ALL else (mtype,)
             held = [t for t in types if self.host.held(t).items]
             for t in held:  # clearing nothing changes nothing: answered, not said as a change
@@ -171,6 +175,8 @@ class LinkTransfer:
             return False
         if m.count > MAX_COUNT[mtype]:
             self._answer(who, mavlink.MAV_MISSION_NO_SPACE, mtype)
+            return False
+        if self._flown(who, mtype, "IGN MISSION_COUNT"):
             return False
         self.mtype = mtype
         if m.count == 0:  # a clear (of nothing: answered, not said as a change)
@@ -310,12 +316,29 @@ class LinkTransfer:
     def _set_current(self, who: Partner, m: Any) -> bool:
         """MISSION_SET_CURRENT: the current item, answered with MISSION_CURRENT (PX4 publishes it at once)."""
         mission = self.host.mission
+        if self._flown(who, MISSION, "WP CURR CMD", ack=False):  # PX4 answers MISSION_SET_CURRENT with no ACK
+            return False
         if not 0 <= m.seq < len(mission.items):
             who.ep.reply(tuple(self.host.texts(mavlink.MAV_SEVERITY_CRITICAL, "WPM: WP CURR CMD: Not in list")),
                          who.who.addr)
             return False
         self.host.accept(who, Mission(mission.items, m.seq), f"current item {m.seq}")
         who.ep.reply(tuple(self.host.current_message()), who.who.addr)
+        return True
+
+    def _flown(self, who: Partner, mtype: int, what: str, ack: bool = True) -> bool:
+        """Whether the mission (``mtype`` MISSION or ALL) is being flown and cannot change (the host's
+        ``flown``): then ``MAV_MISSION_ERROR`` ("not accepting mission commands right now", unless not ``ack``)
+        and a STATUSTEXT saying why, to ``who``. PX4 takes the change in flight; here the controller's trajectory
+        is planned whole (docs/ground-station.md, "Missions")."""
+        why = self.host.flown() if mtype in (MISSION, mavlink.MAV_MISSION_TYPE_ALL) else None
+        if why is None:
+            return False
+        self.host.refused(f"mission message from {who.who}: {what}: {why}")
+        if ack:
+            self._answer(who, mavlink.MAV_MISSION_ERROR, mtype, f"WPM: {what}: {why}")
+        else:
+            who.ep.reply(tuple(self.host.texts(mavlink.MAV_SEVERITY_CRITICAL, f"WPM: {what}: {why}")), who.who.addr)
         return True
 
     # -- helpers ----------------------------------------------------------------------------------------
