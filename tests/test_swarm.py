@@ -299,3 +299,18 @@ def test_a_formation_reaching_past_the_envelope_names_the_first_vehicle_outside(
     with pytest.raises(ConfigError, match=r"outside the plant's envelope of 100 m .*\(vehicle 51\)$"):
         simulate("missions/sine.toml", vehicles=60, formation="line:2", out=tmp_path / "r")
     assert not (tmp_path / "r").exists()
+
+
+def test_a_fleet_of_many_pairs_prints_its_closest_pairs_and_says_the_rest_are_in_the_summary(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Six in a line are 15 pairs: ``bsst sim`` prints the 12 closest (in id order) and says where the rest are; it
+    printed the first 12 by id, which left out two of the five neighbours (4-5 and 5-6, the closest pairs)."""
+    assert main(["sim", str(short_sine(tmp_path, 1.0)), "--vehicles", "6", "--out", str(tmp_path / "r"),
+                 "--no-plots"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    lines = [ln for ln in out if ln.startswith("  vehicles ")]
+    shown = [ln.split(":")[0].removeprefix("  vehicles ") for ln in lines]
+    assert len(shown) == 12 and {"4-5", "5-6"} <= set(shown) and not {"1-5", "1-6", "2-6"} & set(shown), lines
+    assert shown == sorted(shown, key=lambda s: tuple(map(int, s.split("-"))))
+    note = out[out.index(lines[-1]) + 1]
+    assert note == "  (the 12 closest of 15 pairs: every pair in summary.json, separation.pairs)", out
