@@ -225,7 +225,7 @@ class Watch:
         return {"name": "separation", "ok": False, "t": round(self.broken[0], 6), "why": self.broken[1]}
 
 
-def _num(v: float) -> float | None:
+def _num(v: float) -> float | None:  # (m, 9 digits; None: never judged)
     return round(v, 9) if math.isfinite(v) else None
 
 
@@ -339,14 +339,14 @@ def _fly_together(steps: list[Generator[tuple[float, ...], str | None, Run]], st
 
 
 def fleet_summary(m: Mission, flights: list[Flight], runs: list[Run], watch: Watch,
-                  clock: str = "offline") -> dict[str, Any]:
-    """The fleet's ``summary.json``: the worst outcome decides, each vehicle's own summary in ``vehicle-<id>/``."""
+                  clock: str = "offline", instance: int = 0) -> dict[str, Any]:
+    """The fleet's ``summary.json``: the worst outcome decides; vehicle i's system id ``instance`` + i (PX4's)."""
     rank = {o: i for i, o in enumerate(SEVERITY)}
     vehicles = []
     policies = [watch.verdict()]
     for v, f, r in zip(m.vehicles, flights, runs):
         s = r.summary
-        vehicles.append({"id": v.id, "sysid": v.id, "dir": f"vehicle-{v.id}", "outcome": s["outcome"],
+        vehicles.append({"id": v.id, "sysid": instance + v.id, "dir": f"vehicle-{v.id}", "outcome": s["outcome"],
                          "ok": run_ok(s), "rms_3d": s.get("rms_3d"), "profile": f.profile.name,
                          "controller": f.mission.controller, "seed": f.mission.seed, "offset": list(v.offset),
                          "trajectory": "own" if v.trajectory is not None else "the mission's",
@@ -378,8 +378,8 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
     """Fly a mission as SITL: one vehicle as :func:`bridge.session.sitl` flies it (every keyword as there), or a
     fleet (``vehicles``, ``formation`` or the mission's ``[[vehicles]]``, as :func:`simulate` takes them) as one
     vehicle process and one controller process per vehicle (:mod:`bridge.session.fleet`): vehicle i is instance
-    ``instance`` + i - 1 with system id i, every vehicle's ground-station traffic goes to ``gcs`` (default
-    127.0.0.1:14550 + ``instance``); ``live`` and ``progress`` are the single session's only. In lockstep the
+    ``instance`` + i - 1, system id ``instance`` + i (PX4's), every vehicle's ground-station traffic goes to ``gcs``
+    (default 127.0.0.1:14550 + ``instance``); ``live`` and ``progress`` are the single session's only. In lockstep the
     vehicles step on one shared clock, and a contact ends both flights at its step (``collision``), as offline;
     the world is judged on the vehicles' traces (and where each stayed) at matching steps (:func:`judge_traces`).
     In real time a contact makes both ``collision`` too, found afterwards (the flights went on: :data:`CONTINUED`)."""
@@ -429,11 +429,12 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
         contacts = judge_traces(watch, [r.trace for r in runs], fm.rate_hz, finals,
                                 [f.mission.start for f in flights] if clocked else None, [_landing(r) for r in runs])
         runs = [_touched(r, contacts.get(j)) for j, r in enumerate(runs)]
-        summary = fleet_summary(fm, flights, runs, watch, "realtime" if realtime else "lockstep")
+        summary = fleet_summary(fm, flights, runs, watch, "realtime" if realtime else "lockstep", instance or 0)
         if shared:
             summary["radio"] = radio_block(ids, flights, runs, realtime)
         summary["sitl"] = {"instances": None if instance is None else list(range(instance, instance + len(ids))),
-                           "gcs": gcs_text, "sysids": ids, "shared_clock": clocked, "signed": key is not None}
+                           "gcs": gcs_text, "sysids": [(instance or 0) + i for i in ids], "shared_clock": clocked,
+                           "signed": key is not None}
         if clocked:
             summary["sitl"]["gate"] = {str(i): (r.summary.get("sitl") or {}).get("gate") for i, r in zip(ids, runs)}
         if contacts and not clocked:
