@@ -100,10 +100,10 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
 def flying(flight: Flight, path: Path | None = None, *, plots: bool = True, progress: Progress | None = None,
            radios: tuple[Radio, Radio] | None = None, user: int = 0) -> Generator[tuple[float, ...], str | None, Run]:
     """:func:`fly` one control step at a time, for a loop that flies several vehicles in one world
-    (:mod:`bridge.swarm`): after each step it yields the plant's true state (eq. 7 order, after the step's
-    physics); sent a text, it ends the flight there with the outcome ``collision`` (that text its event).
-    Returns the :class:`Run`; thrown a KeyboardInterrupt, the flight ends ``aborted``, recorded. ``radios``:
-    the (up, down) radios the flight's links share with other vehicles', as their user ``user``."""
+    (:mod:`bridge.swarm`): after each step (the mission's, then its end landing's: :func:`fly_end`) it yields the
+    plant's true state (eq. 7 order, after the step's physics); sent a text, it ends the flight there with the
+    outcome ``collision`` (that text its event). Returns the :class:`Run`; thrown a KeyboardInterrupt, the flight
+    ends ``aborted``, recorded. ``radios``: the (up, down) radios the flight's links share, as their ``user``."""
     m = flight.mission
     check_trace_steps(m)
     vehicle = flight.make_vehicle(armed=True)
@@ -191,7 +191,7 @@ def flying(flight: Flight, path: Path | None = None, *, plots: bool = True, prog
     try:  # the record stays open for the verdicts' lines, and is closed whatever happens
         arrays = trace_arrays(rows, TRACE_COLUMNS)
         link = {"up": up.stats.summary(), "down": down.stats.summary(), "rejected": dict(vend.rejected)}
-        summary = _judged(flight, vehicle, intention, arrays, outcome, link)
+        summary = yield from _judged(flight, vehicle, intention, arrays, outcome, link)
     finally:
         _close_record(record, vehicle.events[logged:])
     if record is not None:
@@ -200,9 +200,9 @@ def flying(flight: Flight, path: Path | None = None, *, plots: bool = True, prog
 
 
 def _judged(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention, arrays: dict[str, Any], outcome: str,
-            link: dict[str, Any]) -> dict[str, Any]:
+            link: dict[str, Any]) -> Generator[tuple[float, ...], str | None, dict[str, Any]]:
     """The flight's summary: its figures, plant blocks, who ended it, the policies' verdicts (each violation
-    an event), and when it completed, its end action flown (:func:`fly_end`)."""
+    an event), and when it completed, its end action flown (:func:`fly_end`: its steps yielded, as the mission's)."""
     m, plant = flight.mission, vehicle.plant
     ev = [RunEvent(round(e.t, 6), e.kind, e.text, by=e.by, **typed_fields(e)) for e in vehicle.events]
     shown = [e.as_dict() for e in ev]
@@ -215,7 +215,7 @@ def _judged(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention, a
         shown.append({"t": round(vehicle.t, 6), "kind": "policy", "text": violation_text(v)})
     verdict = None
     if outcome == "completed":  # after the mission's figures: nothing of them changes
-        summary["end"], verdict = fly_end(flight, vehicle, intention, summary["events"])
+        summary["end"], verdict = yield from fly_end(flight, vehicle, intention, summary["events"])
     elif outcome == "failsafe":
         verdict = land_failsafe(flight, vehicle, intention, summary["events"])
     if verdict is not None:  # its landing touched down hard (or the plant diverged): the plant ended the flight
@@ -227,17 +227,19 @@ def _judged(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention, a
 
 
 def fly_end(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention,
-            shown: list[dict[str, Any]]) -> tuple[dict[str, Any], str | None]:
+            shown: list[dict[str, Any]]) -> Generator[tuple[float, ...], str | None, tuple[dict[str, Any], str | None]]:
     """The mission's end action offline (``[end] action``, :meth:`SimVehicle.end_mission`), as the vehicle flies
     it in a session: ``land`` steps the vehicle's own landing (nothing from the controller; the mission's link
     is done with, its statistics the mission's) until it disarms on the ground, bounded by the descent at the
     failsafe's rate, COM_DISARM_LAND and 10 s, the plant's verdict judged after each period as a session's vehicle
     judges it (a touchdown faster than CRASH_SPEED_MPS is ``crashed``); ``hold`` is engaged and the flight ends with the
     mission (no session to hold through). Its events are added to ``shown``; returns ``summary.json["end"]``
-    (:func:`bridge.record.ending.end_block`) and the plant's verdict (None: none)."""
+    (:func:`bridge.record.ending.end_block`) and the plant's verdict (None: none). Each landing period yields the
+    plant's state and may be sent a contact, as the mission's steps (:func:`flying`): a fleet judges its landings
+    in its shared world, as a lockstep session's gate does (docs/swarm.md)."""
     n0 = len(vehicle.events)
     vehicle.end_mission(flight.mission.end_action)
-    rows, verdict = _fly_alone(flight, vehicle, intention, LAND, shown, n0)
+    rows, verdict = yield from _fly_alone(flight, vehicle, intention, LAND, shown, n0, judged=True)
     return end_block(flight.mission.end_action, rows, vehicle.events[n0:]), verdict
 
 
@@ -249,31 +251,49 @@ def land_failsafe(flight: Flight, vehicle: SimVehicle, intention: UserModeIntent
     target = vehicle.onboard.target
     if not (vehicle.armed and vehicle.mode == FAILSAFE and target is not None and target.lands):
         return None
-    return _fly_alone(flight, vehicle, intention, FAILSAFE, shown, len(vehicle.events))[1]
+    alone = _fly_alone(flight, vehicle, intention, FAILSAFE, shown, len(vehicle.events), judged=False)
+    try:
+        next(alone)  # (not judged: it yields nothing)
+    except StopIteration as done:
+        return done.value[1]
+    raise AssertionError("an unjudged landing yielded")
 
 
 def _fly_alone(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention, mode: str,
-               shown: list[dict[str, Any]], n0: int) -> tuple[list[tuple[float, float, float]], str | None]:
+               shown: list[dict[str, Any]], n0: int, *, judged: bool
+               ) -> Generator[tuple[float, ...], str | None, tuple[list[tuple[float, float, float]], str | None]]:
     """Step the vehicle alone (nothing from the controller; the mission's link is done with, its statistics the
     mission's) while it is armed in ``mode`` (or a failsafe's, taken meanwhile), until it disarms on the ground,
     bounded by the descent at the failsafe's rate, COM_DISARM_LAND and 10 s, its plant judged after each period;
-    the events since the ``n0``-th added to ``shown``. Returns the rows (t s, z m, vz m/s) and the plant's verdict
-    (None: none)."""
+    the events since the ``n0``-th added to ``shown``. ``judged``: after each period yield the plant's state (a
+    fleet's world judged on it); a contact sent back ends it there, armed and not ended by its plant: ``collision``,
+    disarmed, as a lockstep session's vehicle (its plant's verdict comes first there too). Interrupted (Ctrl-C),
+    it ends ``aborted``, recorded. Returns the rows (t s, z m, vz m/s) and the verdict (None: none)."""
     m, plant = flight.mission, vehicle.plant
     rows: list[tuple[float, float, float]] = []
     k, rate = m.steps, m.rate_hz
     bound = k + math.ceil((10.0 + flight.failsafe.time_to_land_s(plant.state[4] - m.start[2])
                            + vehicle.land_disarm.wait_s()) * rate)
     verdict = None
-    while verdict is None and vehicle.armed and vehicle.mode in (mode, FAILSAFE) and k < bound:
-        X = plant.state
-        vehicle.advance()  # the vehicle alone: what the up link still holds stays in flight (its statistics too)
-        intention.after_period()  # disarmed: the mode it takes (as a session's vehicle, before the plant's verdict)
-        verdict = vehicle.plant_verdict()
-        rows.append((k / rate, X[4], X[5]))
-        k += 1
-    if verdict is not None:
-        vehicle.disarm(f"{verdict}: {vehicle.events[-1].text}")  # (as a session's vehicle: its landing's came first)
+    try:
+        while verdict is None and vehicle.armed and vehicle.mode in (mode, FAILSAFE) and k < bound:
+            X = plant.state
+            vehicle.advance()  # the vehicle alone: what the up link still holds stays in flight (its statistics too)
+            intention.after_period()  # disarmed: the mode it takes (as a session's vehicle, before the plant's verdict)
+            verdict = vehicle.plant_verdict()
+            rows.append((k / rate, X[4], X[5]))
+            k += 1
+            if verdict is not None:
+                vehicle.disarm(f"{verdict}: {vehicle.events[-1].text}")  # (as a session's: its landing's came first)
+            if judged:
+                contact = yield plant.state
+                if contact is not None and verdict is None and vehicle.armed:
+                    vehicle.event("collision", contact)
+                    vehicle.disarm(f"collision: {contact}")
+                    verdict = "collision"
+    except KeyboardInterrupt:
+        vehicle.event("aborted", "interrupted")
+        verdict = "aborted"
     shown.extend(RunEvent(round(e.t, 6), e.kind, e.text, by=e.by, **typed_fields(e)).as_dict()
                  for e in vehicle.events[n0:])
     return rows, verdict

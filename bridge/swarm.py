@@ -17,9 +17,8 @@ positions after that step (:class:`Watch`): clearance (centres' distance less bo
 or less the two touch and both end ``collision``. Each vehicle is its own flight
 (:func:`missions.fleet.vehicle_mission`: its own seed, so its own link's fates, effects and sensors), on
 the same clock: a vehicle flies exactly as it would alone, until something touches it (or, on one shared
-radio, :mod:`bridge.link.radio`, its packets wait behind the others'). A vehicle that
-has ended stays where it ended, an obstacle. The end action (a landing) after the mission is each
-vehicle's own, not judged against the others.
+radio, :mod:`bridge.link.radio`, its packets wait behind the others'). The end landing after the mission is
+stepped and judged as the mission's steps are; a vehicle that has ended stays where it ended, an obstacle.
 """
 
 from __future__ import annotations
@@ -226,7 +225,7 @@ class Watch:
         return {"name": "separation", "ok": False, "t": round(self.broken[0], 6), "why": self.broken[1]}
 
 
-def _num(v: float) -> float | None:
+def _num(v: float) -> float | None:  # (m, 9 digits; None: never judged)
     return round(v, 9) if math.isfinite(v) else None
 
 
@@ -340,14 +339,14 @@ def _fly_together(steps: list[Generator[tuple[float, ...], str | None, Run]], st
 
 
 def fleet_summary(m: Mission, flights: list[Flight], runs: list[Run], watch: Watch,
-                  clock: str = "offline") -> dict[str, Any]:
-    """The fleet's ``summary.json``: the worst outcome decides, each vehicle's own summary in ``vehicle-<id>/``."""
+                  clock: str = "offline", instance: int = 0) -> dict[str, Any]:
+    """The fleet's ``summary.json``: the worst outcome decides; vehicle i's system id ``instance`` + i (PX4's)."""
     rank = {o: i for i, o in enumerate(SEVERITY)}
     vehicles = []
     policies = [watch.verdict()]
     for v, f, r in zip(m.vehicles, flights, runs):
         s = r.summary
-        vehicles.append({"id": v.id, "sysid": v.id, "dir": f"vehicle-{v.id}", "outcome": s["outcome"],
+        vehicles.append({"id": v.id, "sysid": instance + v.id, "dir": f"vehicle-{v.id}", "outcome": s["outcome"],
                          "ok": run_ok(s), "rms_3d": s.get("rms_3d"), "profile": f.profile.name,
                          "controller": f.mission.controller, "seed": f.mission.seed, "offset": list(v.offset),
                          "trajectory": "own" if v.trajectory is not None else "the mission's",
@@ -379,8 +378,8 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
     """Fly a mission as SITL: one vehicle as :func:`bridge.session.sitl` flies it (every keyword as there), or a
     fleet (``vehicles``, ``formation`` or the mission's ``[[vehicles]]``, as :func:`simulate` takes them) as one
     vehicle process and one controller process per vehicle (:mod:`bridge.session.fleet`): vehicle i is instance
-    ``instance`` + i - 1 with system id i, every vehicle's ground-station traffic goes to ``gcs`` (default
-    127.0.0.1:14550 + ``instance``); ``live`` and ``progress`` are the single session's only. In lockstep the
+    ``instance`` + i - 1, system id ``instance`` + i (PX4's), every vehicle's ground-station traffic goes to ``gcs``
+    (default 127.0.0.1:14550 + ``instance``); ``live`` and ``progress`` are the single session's only. In lockstep the
     vehicles step on one shared clock, and a contact ends both flights at its step (``collision``), as offline;
     the world is judged on the vehicles' traces (and where each stayed) at matching steps (:func:`judge_traces`).
     In real time a contact makes both ``collision`` too, found afterwards (the flights went on: :data:`CONTINUED`)."""
@@ -428,13 +427,14 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
                             radii=watch.radii if clocked else None, shared_radio=shared)
         finals = [_stayed(r) for r in runs] if clocked else None
         contacts = judge_traces(watch, [r.trace for r in runs], fm.rate_hz, finals,
-                                [f.mission.start for f in flights] if clocked else None)
+                                [f.mission.start for f in flights] if clocked else None, [_landing(r) for r in runs])
         runs = [_touched(r, contacts.get(j)) for j, r in enumerate(runs)]
-        summary = fleet_summary(fm, flights, runs, watch, "realtime" if realtime else "lockstep")
+        summary = fleet_summary(fm, flights, runs, watch, "realtime" if realtime else "lockstep", instance or 0)
         if shared:
             summary["radio"] = radio_block(ids, flights, runs, realtime)
         summary["sitl"] = {"instances": None if instance is None else list(range(instance, instance + len(ids))),
-                           "gcs": gcs_text, "sysids": ids, "shared_clock": clocked, "signed": key is not None}
+                           "gcs": gcs_text, "sysids": [(instance or 0) + i for i in ids], "shared_clock": clocked,
+                           "signed": key is not None}
         if clocked:
             summary["sitl"]["gate"] = {str(i): (r.summary.get("sitl") or {}).get("gate") for i, r in zip(ids, runs)}
         if contacts and not clocked:
@@ -448,30 +448,40 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
 
 def judge_traces(watch: Watch, traces: Sequence[dict[str, Any]], rate: float,
                  finals: Sequence[tuple[float, float, float] | None] | None = None,
-                 starts: Sequence[Sequence[float]] | None = None) -> dict[int, dict[str, Any]]:
+                 starts: Sequence[Sequence[float]] | None = None,
+                 afters: Sequence[Sequence[Sequence[float]]] | None = None) -> dict[int, dict[str, Any]]:
     """Judge the shared world on finished traces, with the offline loop's :class:`Watch`: row j of every trace
-    (the true positions at t = j / rate; row 0 the start) is the world after step j - 1, as the loop judges it;
-    a trace that ended early stays at its last row, or with ``finals`` (a lockstep fleet's shared clock: where
-    each vehicle stayed, m, after its last row's step) there, as the loop keeps it; an empty one (a vehicle that
-    flew no step) is at its start with ``starts`` (m: one never armed stands there, as the loop keeps it), else
-    nowhere, and touches no one. The first contact of each vehicle (by index): its step, time,
-    the other's id and why (without ``finals``, that the flights went on: :data:`CONTINUED`)."""
+    (the true positions at t = j / rate; row 0 the start) is the world after step j - 1, as the loop judges it,
+    and after a trace's rows, its vehicle's ``afters`` (m: its end landing's, flown on after the mission, as the
+    loop flies and judges them); a path that ended early stays at its last row, or with ``finals`` (a lockstep
+    fleet's shared clock: where each vehicle stayed, m, after its last row's step) there, as the loop keeps it; an
+    empty one (a vehicle that flew no step) is at its start with ``starts`` (m: one never armed stands there, as
+    the loop keeps it), else nowhere, and touches no one. The first contact of each vehicle (by index): its step,
+    time, the other's id and why (without ``finals``, that the flights went on: :data:`CONTINUED`)."""
     last = [finals[i] if finals is not None else None for i in range(len(traces))]
-    n = max((len(tr["t"]) + (p is not None) for tr, p in zip(traces, last)), default=0)
+    paths = [[(float(x), float(y), float(z)) for x, y, z in zip(tr["x"], tr["y"], tr["z"])] for tr in traces]
+    for path, more_rows in zip(paths, afters or ()):
+        path.extend((float(p[0]), float(p[1]), float(p[2])) for p in more_rows)
+    n = max((len(path) + (p is not None) for path, p in zip(paths, last)), default=0)
     first: dict[int, dict[str, Any]] = {}
     nowhere = (math.nan, math.nan, math.nan)  # NaN distances: never closer, never touching (Watch.check)
     unflown = [tuple(s[:3]) for s in starts] if starts is not None else [nowhere] * len(traces)
     more = {} if finals is not None else {"continued": CONTINUED}
     for j in range(n):
         positions = []
-        for tr, p, home in zip(traces, last, unflown):
-            r = min(j, len(tr["t"]) - 1)
-            positions.append(p if p is not None and j > r else
-                             (float(tr["x"][r]), float(tr["y"][r]), float(tr["z"][r])) if r >= 0 else home)
+        for path, p, home in zip(paths, last, unflown):
+            r = min(j, len(path) - 1)
+            positions.append(p if p is not None and j > r else path[r] if r >= 0 else home)
         for a, b, why in watch.check(j / rate, positions):
             for i, other in ((a, b), (b, a)):
                 first.setdefault(i, {"step": j, "t": round(j / rate, 6), "with": watch.ids[other], "why": why, **more})
     return first
+
+
+def _landing(run: Run) -> Sequence[Sequence[float]]:
+    """A session's end landing after its trace's rows (m: :attr:`Run.after`); lockstep, before it left the clock."""
+    left = ((run.summary.get("sitl") or {}).get("gate") or {}).get("left")
+    return run.after if left is None else run.after[:max(int(left["step"]) - len(run.trace["t"]), 0)]
 
 
 def _stayed(run: Run) -> tuple[float, float, float] | None:

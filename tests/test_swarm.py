@@ -10,7 +10,6 @@ mission of one vehicle flies through :func:`bridge.simulate` exactly as through 
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import replace
 from pathlib import Path
 
@@ -19,15 +18,17 @@ import pytest
 import bridge
 from bridge.cli import main
 from bridge.core.flight import prepare
+from bridge.loop import flying
 from bridge.loop import simulate as simulate_one
 from bridge.swarm import FleetRun, simulate
 from missions import MISSION_DIR, Sine, load_mission
-from missions.fleet import VehicleSpec
+from missions.fleet import VehicleSpec, vehicle_mission
 from params import ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]
 NEAR_MISS = ROOT / "examples" / "swarm-near-miss.toml"
 TOUCH = ROOT / "examples" / "swarm-touch.toml"
+STACKED = ROOT / "examples" / "swarm-stacked.toml"
 
 
 def short_sine(tmp_path: Path, seconds: float = 3.0) -> Path:
@@ -209,8 +210,9 @@ def test_a_vehicle_outside_the_fence_stays_at_its_start_and_the_others_fly(
     assert (one["outcome"], two["outcome"]) == ("completed", "denied") and s["outcome"] == "denied", s["vehicles"]
     assert two["ended_by"]["who"] == "vehicle" and two["ended_by"]["how"].startswith(
         "arming denied: outside its fence: at x=3.000 y=0.900 m"), two["ended_by"]
-    (pair,) = s["separation"]["pairs"]  # vehicle 1 ends 1 m over (3, 0), 0.9 m from vehicle 2 at its start
-    assert pair["closest_m"] == pytest.approx(math.hypot(0.9, 1.0) - 2 * 0.315, abs=0.01) and pair["t"] > 10.0, pair
+    # vehicle 1 ends its mission 1 m over (3, 0), then lands there, beside vehicle 2 at its start: 0.9 m apart
+    (pair,) = s["separation"]["pairs"]  # (its landing judged as its mission: the closest approach is in it)
+    assert pair["closest_m"] == pytest.approx(0.9 - 2 * 0.315, abs=0.01) and pair["t"] > 12.0, pair
     assert "vehicle 2: denied: ended by vehicle: arming denied: outside its fence" in capsys.readouterr().err
 
 
@@ -222,6 +224,47 @@ def test_ctrl_c_in_one_vehicle_stops_every_vehicle(tmp_path: Path) -> None:
     run = simulate(short_sine(tmp_path), vehicles=3, progress=interrupt, out=tmp_path / "r", plots=False)
     assert run.outcome == "aborted" and [r.outcome for r in run.runs] == ["aborted"] * 3
     assert all(len(r.trace["t"]) < 300 for r in run.runs)
+
+
+def test_the_end_landing_is_judged_as_the_mission_one_landing_onto_another_touches_it(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """examples/swarm-stacked.toml: 1.5 m apart one over the other at the mission's end (separation held), each lands
+    where it is, vehicle 2 onto vehicle 1 landed there: their landings are judged in the shared world as the mission
+    was (they were each vehicle's own: ``completed``, separation held, exit 0), so the discs touch in the landing and
+    both end there ``collision``, disarmed; flown alone, each lands and completes."""
+    assert main(["sim", str(STACKED), "--out", str(tmp_path / "r"), "--no-plots"]) == 1
+    run = simulate(STACKED, plots=False)
+    assert run.outcome == "collision" and [r.outcome for r in run.runs] == ["collision"] * 2
+    (pair,) = run.summary["separation"]["pairs"]
+    assert pair["closest_m"] <= 0.0 and pair["t"] == 10.732, pair  # in the landing, after the mission's 8 s
+    verdict = run.summary["policies"][0]
+    assert verdict["name"] == "separation" and not verdict["ok"] and verdict["t"] > 8.0, verdict
+    for r in run.runs:
+        assert r.summary["ended_by"] == {"who": "plant", "how": "collision at t=10.732 s: vehicles 1 and 2 touched "
+                                         "at t=10.732 s (centres 0.630 m apart, rotor discs -0.000 m)"}
+        assert len(r.trace["t"]) == 2000 and r.summary["end"]["disarmed"]  # the mission's rows; its landing's end
+    assert run.runs[1].summary["end"]["disarm_z_m"] == pytest.approx(0.633, abs=1e-3)  # on top of vehicle 1
+    assert "vehicle 2: collision: ended by plant: collision at t=10.732 s" in capsys.readouterr().err
+    for v in load_mission(STACKED).vehicles:
+        alone = simulate_one(vehicle_mission(load_mission(STACKED), v), plots=False)
+        assert alone.outcome == "completed" and alone.summary["end"]["disarm_z_m"] == 0.0
+
+
+def test_ctrl_c_in_the_end_landing_ends_the_flight_aborted_with_its_summary(tmp_path: Path) -> None:
+    """The end landing is stepped as the mission (:func:`bridge.loop.flying` yields its periods): Ctrl-C in it
+    ends the flight ``aborted``, its summary written (it escaped the landing: no summary.json, and a fleet's whole
+    summary lost)."""
+    m = load_mission(short_sine(tmp_path, 1.0))
+    (tmp_path / "r").mkdir()
+    steps = flying(prepare(m), tmp_path / "r", plots=False)
+    for _ in range(m.steps + 10):  # the mission's steps, and ten of its landing's
+        next(steps)
+    with pytest.raises(StopIteration) as done:
+        steps.throw(KeyboardInterrupt)
+    run = done.value.value
+    assert run.outcome == "aborted" and run.summary["ended_by"]["who"] == "user", run.summary["ended_by"]
+    assert run.summary["end"]["rows"] == 10 and not run.summary["end"]["disarmed"]
+    assert json.loads((tmp_path / "r" / "summary.json").read_text())["outcome"] == "aborted"
 
 
 @pytest.mark.parametrize("link", [{"loss_pct": 30.0}, {"loss_pct": 30.0, "seed": 5}])
@@ -256,3 +299,18 @@ def test_a_formation_reaching_past_the_envelope_names_the_first_vehicle_outside(
     with pytest.raises(ConfigError, match=r"outside the plant's envelope of 100 m .*\(vehicle 51\)$"):
         simulate("missions/sine.toml", vehicles=60, formation="line:2", out=tmp_path / "r")
     assert not (tmp_path / "r").exists()
+
+
+def test_a_fleet_of_many_pairs_prints_its_closest_pairs_and_says_the_rest_are_in_the_summary(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Six in a line are 15 pairs: ``bsst sim`` prints the 12 closest (in id order) and says where the rest are; it
+    printed the first 12 by id, which left out two of the five neighbours (4-5 and 5-6, the closest pairs)."""
+    assert main(["sim", str(short_sine(tmp_path, 1.0)), "--vehicles", "6", "--out", str(tmp_path / "r"),
+                 "--no-plots"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    lines = [ln for ln in out if ln.startswith("  vehicles ")]
+    shown = [ln.split(":")[0].removeprefix("  vehicles ") for ln in lines]
+    assert len(shown) == 12 and {"4-5", "5-6"} <= set(shown) and not {"1-5", "1-6", "2-6"} & set(shown), lines
+    assert shown == sorted(shown, key=lambda s: tuple(map(int, s.split("-"))))
+    note = out[out.index(lines[-1]) + 1]
+    assert note == "  (the 12 closest of 15 pairs: every pair in summary.json, separation.pairs)", out

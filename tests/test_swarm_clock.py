@@ -54,7 +54,7 @@ def gates(n: int, radii: float = 0.3) -> list[tuple[Gate, Clock, list]]:
 
 def at(g: Gate, clock: Clock, k: int) -> None:
     """Step k - 1 flown: the state of step k out (the others told), and its answer come."""
-    g.after_step(k, ending=False, alive=True)
+    g.after_step(k, alive=True)
     clock.hold(ANSWER)
 
 
@@ -256,8 +256,10 @@ def test_two_flights_of_one_lockstep_fleet_write_the_same_traces(tmp_path: Path)
     for run in runs:
         assert isinstance(run, FleetRun) and run.outcome == "completed", run.summary
         assert run.summary["sitl"]["shared_clock"] is True
-        gate = run.summary["sitl"]["gate"]
-        assert all(g["steps"] == 250 and g["dropped"] == [] and g["left"]["step"] == 250 for g in gate.values())
+        gate = run.summary["sitl"]["gate"]  # the mission's 250 steps and its landing's, on the shared clock
+        for g, r in zip(gate.values(), run.runs):  # (it leaves on the ground, disarmed by its landing)
+            assert g["dropped"] == [] and g["left"]["step"] == 250 + r.summary["end"]["rows"] == g["steps"] + 1, g
+            assert len(r.after) == r.summary["end"]["rows"] > 250 and g["left"]["position"][2] == 0.0
     for i in (1, 2, 3):
         a, b = ((tmp_path / f"run{n}" / f"vehicle-{i}" / "trace.csv").read_bytes() for n in (1, 2))
         assert a == b and a.count(b"\n") == 251
@@ -287,3 +289,19 @@ def test_a_touch_ends_both_flights_at_the_offline_step_as_offline(tmp_path: Path
     assert report_fleet(run, "sitl") == 1
     assert f"vehicle 2: collision (touched vehicle 1 at step {step}, t=6.352 s; both flights ended there)" in \
         capsys.readouterr().err
+
+
+def test_a_landing_onto_another_vehicle_ends_both_at_the_offline_step_as_offline(tmp_path: Path) -> None:
+    """examples/swarm-stacked.toml in lockstep: the vehicles stay on the shared clock through their end landings
+    (they left it at the mission's end, unjudged after), so vehicle 2 landing onto vehicle 1 is the offline contact,
+    at its step: both ``collision``, their landings, separation, closest approach and verdict the offline fleet's."""
+    stacked = ROOT / "examples" / "swarm-stacked.toml"
+    run = sitl(stacked, instance=None, out=tmp_path / "stacked", plots=False)
+    off = simulate(stacked, plots=False)
+    assert isinstance(run, FleetRun) and run.outcome == "collision" == off.outcome
+    for v, other, a, b in zip(run.summary["vehicles"], (2, 1), run.runs, off.runs):
+        assert v["outcome"] == "collision" and v["contact"]["step"] == 2683 and v["contact"]["with"] == other, v
+        assert a.summary["end"] == b.summary["end"] and a.summary["ended_by"] == b.summary["ended_by"]
+        assert max(float(np.max(np.abs(a.trace[c] - b.trace[c]))) for c in ("x", "y", "z")) == 0.0
+    assert run.summary["separation"] == off.summary["separation"]
+    assert run.summary["policies"] == off.summary["policies"]

@@ -20,6 +20,7 @@ import pytest
 from bridge.cli import main
 from bridge.cli.flying import report_fleet
 from bridge.record.halves import count_records
+from bridge.session import instance_slot
 from bridge.swarm import FleetRun, Watch, judge_traces, simulate, sitl
 from missions import MISSION_DIR
 from params import ConfigError
@@ -101,6 +102,23 @@ def test_a_fleet_past_the_last_instance_is_refused_before_anything_starts(tmp_pa
     assert main(["sitl", str(short_sine(tmp_path)), "--vehicles", "4", "--instance", "7", "--out",
                  str(tmp_path / "no")]) == 2
     assert "instances are 0-9" in capsys.readouterr().err and not (tmp_path / "no").exists()
+
+
+def test_a_fleet_from_instance_n_takes_px4s_system_ids_from_n_plus_one(tmp_path: Path) -> None:
+    """Vehicle i of a fleet from ``--instance B`` is PX4's instance B + i - 1, so its MAV_SYS_ID is B + i, as
+    PX4's ``px4 -i N`` sets N + 1 and a single ``bsst sitl --instance N`` does (it was i whatever B: instance 7
+    was system 8 alone and system 1 in a fleet); the wire says so (the vehicle's tlog)."""
+    from pymavlink import mavutil
+
+    with instance_slot() as n:
+        run = sitl(short_sine(tmp_path, 0.5), vehicles=1, instance=n, out=tmp_path / "r", plots=False)
+    assert isinstance(run, FleetRun) and run.outcome == "completed"
+    assert run.summary["sitl"]["instances"] == [n] and run.summary["sitl"]["sysids"] == [n + 1]
+    assert run.summary["vehicles"][0]["sysid"] == n + 1 and run.summary["vehicles"][0]["id"] == 1
+    assert json.loads((tmp_path / "r" / "vehicle-1" / "summary.json").read_text())["sitl"]["sysid"] == n + 1
+    tlog = mavutil.mavlink_connection(str(tmp_path / "r" / "vehicle-1" / "vehicle.tlog"))
+    odometry = tlog.recv_match(type="ODOMETRY")
+    assert odometry is not None and odometry.get_srcSystem() == n + 1
 
 
 FLY = ("import sys; from bridge.swarm import sitl; from bridge.cli.flying import report_fleet; "

@@ -43,6 +43,7 @@ from bridge.cli.options import (
 from params import ConfigError
 
 EVENTS_SHOWN = 16  # events a run's printed summary lists (all of summary.json's beyond: its first 6 and last 10)
+SHOWN_PAIRS = 12  # pairs a fleet's printed summary lists, its closest (summary.json has every pair)
 
 
 def add_sim_command(sub: Any) -> None:
@@ -150,9 +151,12 @@ def report_fleet(run: Any, command: str) -> int:
         sep = s["separation"]
         least = "n/a" if sep["closest_m"] is None else f"{sep['closest_m']:.3f} m"
         w(f"separation: closest approach {least} between rotor discs (minimum {sep['min_m']:g} m)\n")
-        for p in sep["pairs"][:12]:
-            if p["closest_m"] is not None:
-                w(f"  vehicles {p['ids'][0]}-{p['ids'][1]}: {p['closest_m']:.3f} m at t={p['t']:.3f} s\n")
+        judged = [p for p in sep["pairs"] if p["closest_m"] is not None]
+        closest = sorted(judged, key=lambda p: p["closest_m"])[:SHOWN_PAIRS]  # the nearest, shown in id order
+        for p in (p for p in judged if p in closest):
+            w(f"  vehicles {p['ids'][0]}-{p['ids'][1]}: {p['closest_m']:.3f} m at t={p['t']:.3f} s\n")
+        if len(judged) > len(closest):
+            w(f"  (the {len(closest)} closest of {len(judged)} pairs: every pair in summary.json, separation.pairs)\n")
         if run.path is not None:
             w(f"run directory: {run.path}\n")
         sys.stdout.flush()

@@ -115,6 +115,7 @@ class TraceJoiner:
         self._up_seen: set[int] = set()
         self.missing = 0  # rows without their controller half (never written): demand NaN
         self.after: list[tuple[float, float, float]] = []  # rows of the end action, after the mission (_after_end)
+        self.after_at: list[tuple[float, float, float]] = []  # their true positions (m, x y z): a fleet judges them
         self._written = 0  # rows already appended to trace.csv
         self.first_sent: float | None = None  # wall time the first / last joined state was sent
         self.last_sent = math.nan
@@ -161,10 +162,12 @@ class TraceJoiner:
         """Whether ``v`` was flown after the mission under its end action (HOLD or LAND past the mission's last
         step, and on from there: a failsafe that takes the end action over, as a position lost, flies on in it): not
         the trace's (the mission's figures stay the mission's); kept in :attr:`after` as (t s on the vehicle's clock,
-        z m, vz m/s) for ``summary.json["end"]`` (:func:`bridge.record.ending.end_block`)."""
+        z m, vz m/s) for ``summary.json["end"]`` (:func:`bridge.record.ending.end_block`), and its position (x, y, z m)
+        in :attr:`after_at`, for a fleet's judgement of the world through its end landing (:mod:`bridge.swarm`)."""
         if self.k0 is None or int(v.k) - self.k0 < self.steps or (int(v.mode) not in END_MODE_CODES and not self.after):
             return False
         self.after.append((v.t, v.z, v.vz))
+        self.after_at.append((v.x, v.y, v.z))
         return True
 
     def _join(self, v: VehicleRow, key: int, c: ControllerRow | None) -> None:

@@ -308,12 +308,15 @@ def read_trace(path: str | Path) -> dict[str, Any]:
 
 
 class Run:
-    """The result of one flight, offline or networked: trace arrays, summary, directory."""
+    """The result of one flight, offline or networked: trace arrays, summary, directory; a session's ``after``: the
+    true positions (m, x y z) of its end action's control periods after the mission's (a fleet judges them)."""
 
-    def __init__(self, trace: dict[str, Any], summary: dict[str, Any], path: Path | None) -> None:
+    def __init__(self, trace: dict[str, Any], summary: dict[str, Any], path: Path | None,
+                 after: Sequence[tuple[float, float, float]] = ()) -> None:
         self.trace = trace
         self.summary = summary
         self.path = path
+        self.after = after
 
     @property
     def outcome(self) -> str:

@@ -1,23 +1,23 @@
 """Several SITL sessions at once: one vehicle process and one controller process per vehicle (``bsst sitl --vehicles``).
 
-In:  each vehicle's prepared :class:`~bridge.core.flight.Flight` with its system id (1..N) and run directory, the
+In:  each vehicle's prepared :class:`~bridge.core.flight.Flight` with its id (1..N; system id B + id), directory, the
      fleet's options: clock (lockstep or real time), first instance B (0-9, or None: free ports), the one
      ground-station address every vehicle sends to (``HOST:PORT``, or None), ``speed`` (x real time), a signing
      key file
 Out: each vehicle's :class:`~bridge.record.runlog.Run` (its own ``trace.csv``, tlogs, ``summary.json`` in its
      directory), in the order given
 
-Each vehicle is one :class:`~bridge.session.session.Session` (the single vehicle's, unchanged), run in a thread
-of this process: vehicle i is PX4's instance B + i - 1 (its controller link on 127.0.0.1:14560 + B + i - 1),
-with system id i, and every vehicle's ground-station traffic goes to the one address, so a ground station
-there sees N systems. In lockstep the vehicles step on one shared clock (given the vehicles' disc radii, m): each
-vehicle's gate file (``vehicle-<id>/gate.json``: every vehicle's id, disc radius and gate port) makes its
-vehicle wait, after each step, for every other vehicle to fly it, and end its flight ``collision`` at the step
-it touches another (:mod:`bridge.nodes.vehicle.gate`); each controller then waits up to
-:data:`~bridge.session.children.READY_TIMEOUT_S` for the mission's second state, since the first step waits for
-the slowest vehicle to start. In real time each pair keeps its own wall clock, and the shared world is judged
-afterwards on their traces (:mod:`bridge.swarm`). Ctrl-C or SIGTERM stops every pair (each session's own stop:
-SIGTERM, then SIGKILL at its deadline) and each still writes its summary.
+Each vehicle is one :class:`~bridge.session.session.Session` (the single vehicle's, unchanged), run in a thread of
+this process: vehicle i is PX4's instance B + i - 1 (its controller link on 127.0.0.1:14560 + B + i - 1), with PX4's
+system id for it, B + i (free ports: i), and every vehicle's ground-station traffic goes to the one address, so a
+ground station there sees N systems. In lockstep the vehicles step on one shared clock (given the vehicles' disc
+radii, m): each vehicle's gate file (``vehicle-<id>/gate.json``: every vehicle's id, disc radius and gate port)
+makes its vehicle wait, after each step, for every other vehicle to fly it, and end its flight ``collision`` at the
+step it touches another (:mod:`bridge.nodes.vehicle.gate`); each controller then waits up to
+:data:`~bridge.session.children.READY_TIMEOUT_S` for the mission's second state, since the first step waits for the
+slowest vehicle to start. In real time each pair keeps its own wall clock, and the shared world is judged afterwards
+on their traces (:mod:`bridge.swarm`). Ctrl-C or SIGTERM stops every pair (each session's own stop: SIGTERM, then
+SIGKILL at its deadline) and each still writes its summary.
 """
 
 from __future__ import annotations
@@ -131,7 +131,7 @@ def _fly(flights: Sequence[Flight], ids: Sequence[int], dirs: Sequence[Path], *,
             gates[j] = d / "gate.json"
             GateConfig(j, tuple(ids), tuple(radii), ports, str(radio) if radio is not None else None).dump(gates[j])
     sessions = [Session(f, d, realtime=realtime, instance=None if instance is None else instance + i - 1,
-                        gcs=gcs, speed=speed, progress=None, live=False, key=key, sysid=i, gate=g,
+                        gcs=gcs, speed=speed, progress=None, live=False, key=key, sysid=(instance or 0) + i, gate=g,
                         start_timeout=READY_TIMEOUT_S if g is not None else None,
                         radio=(radio, j) if radio is not None else None)
                 for j, (f, i, d, g) in enumerate(zip(flights, ids, dirs, gates))]

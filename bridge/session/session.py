@@ -119,7 +119,7 @@ class Session:
             record.finish(arrays, summary, title, plots and not self.aborted)
         if self.live:
             sys.stderr.write("\n")
-        return Run(arrays, summary, self.path if keep else None)
+        return Run(arrays, summary, self.path if keep else None, self.joiner.after_at)
 
     def _summary(self, wall: float) -> SessionSummary:
         """The trace arrays and ``summary.json`` (:func:`bridge.record.summary.session_summary`, from what

@@ -128,16 +128,14 @@ class Gate:
         self.contact: dict[str, Any] | None = None
 
     # -- in the vehicle's loop ----------------------------------------------------------------------
-    def after_step(self, k: int, ending: bool, alive: bool) -> None:
-        """Lockstep step k - 1 flown, the plant now at step k (``alive``: not diverged or crashed; ``ending``: it
-        was the end action's, the mission over), its state gone to the controller: tell every other vehicle. The
-        vehicle leaves the shared clock when its lockstep flight is over: where its last step at the gate left it
-        (the mission's end), or where it is now."""
+    def after_step(self, k: int, alive: bool) -> None:
+        """Lockstep step k - 1 flown (the mission's, or its end landing's: clocked as the mission, judged as it, as
+        the offline loop judges it), the plant now at step k (``alive``: not diverged or crashed), its state gone to
+        the controller: tell every other vehicle. The vehicle leaves the shared clock when its lockstep flight is
+        over (its landing disarmed it, a disarm, the wall clock, its plant ended it): where it is now."""
         if self.left is not None:
             return
-        if ending:
-            self.leave()
-        elif not alive or self.clock.state is not ClockState.LOCKSTEP:
+        if not alive or self.clock.state is not ClockState.LOCKSTEP:
             self.leave(k, self.rest())
         else:
             self.arrive(k, self.position())

@@ -293,7 +293,7 @@ class Vehicle:
         if alive:
             self._send_odometry(time.monotonic())
         if self.gate is not None:
-            self.gate.after_step(self.k, ending, alive)
+            self.gate.after_step(self.k, alive)
             self._turns_over()
         # off the critical path: the controller is computing step k+1 meanwhile
         if self.rows is not None:
