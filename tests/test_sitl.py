@@ -87,12 +87,15 @@ def test_a_lockstep_flight_shows_its_progress_from_the_halves_and_writes_its_tra
 
 
 def test_lockstep_sine_matches_offline(tmp_path):
-    """The acceptance: every trace row within 1e-4 m of ``bsst sim`` (float32 wire only)."""
+    """The acceptance: every trace row within 1e-4 m of ``bsst sim`` (float32 wire only). In fact every column
+    to the bit: offline flies the float32 wire too, and both record the targets as sent (c1..c4 in float32)."""
     off = simulate(SINE, plots=False)
     run = sitl(SINE, out=tmp_path / "run", plots=False, instance=None)
     assert run.outcome == "completed" and run.summary["clock"] == "lockstep"
     worst = _positions_close(run.trace, off.trace, 1e-4)
-    assert worst < 1e-5  # in fact a few micrometres
+    assert worst < 1e-5
+    differ = [c for c in TRACE_COLUMNS if not np.array_equal(run.trace[c], off.trace[c], equal_nan=True)]
+    assert not differ, differ
     assert np.all(run.trace["state_age_s"] == 0.0)
     link = run.summary["link"]
     assert link["up"]["sent"] == link["up"]["delivered"] == 7500 and link["rejected"] == {}

@@ -18,7 +18,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.core.clock import FixedRate, Stalls
 from bridge.core.flight import Flight
-from bridge.core.wire import command_to_wire, step_of_usec
+from bridge.core.wire import command_over_wire, step_of_usec
 from bridge.link.ends import ControllerEnd
 from bridge.mavlink.endpoint import FORCE_DISARM, Spinner, wait
 from bridge.mavlink.eventseq import REQUEST_TIMEOUT_S, REQUEST_TRIES
@@ -338,7 +338,7 @@ class Offboard(OffboardLink):
         cmd = dec.command
         wire = None
         if cmd is not None:
-            wire = command_to_wire(self.actuation, cmd.normalised)
+            wire = command_over_wire(self.actuation, cmd.normalised)[1]  # float32: the row says what was sent
             sent = time.monotonic()
             self._send_target(time_usec, wire)
             self._u, self._wire = cmd.demanded, wire
