@@ -1,8 +1,10 @@
-"""The plant's envelope: how far from the origin a mission's start and reference may go.
+"""The plant's envelope: how far from the origin a mission's start and reference may go, and the ground under them.
 
 In:  a mission's reference (:mod:`missions.references`, :class:`missions.minsnap.Smooth`), its start (x, y, z m)
      and duration (s)
-Out: the key and the reason when either leaves :data:`ENVELOPE_RADIUS_M` (m from the origin), or None
+Out: the key and the reason when either leaves :data:`ENVELOPE_RADIUS_M` (m from the origin)
+     (:func:`envelope_problem`), or goes below the ground, the plane z = 0 the plant rests on
+     (:func:`ground_problem`), or None
 """
 
 from __future__ import annotations
@@ -75,4 +77,32 @@ def envelope_problem(trajectory: Reference, start: tuple[float, ...], duration_s
             return "trajectory.climb", _beyond(
                 f"climbing {trajectory.climb:g} m/s from z0 {z0:g} m, at t = {duration_s:g} s (z = {z_end:g} m) "
                 f"the reference", math.hypot(a, z_end))
+    return None
+
+
+def _below(what: str, z: float) -> str:
+    return (f"{what} is at z = {z:.4g} m, below the ground (the plane z = 0 the vehicle starts on and rests on: "
+            f"plant/quadrotor.py), where no vehicle can follow it")
+
+
+def ground_problem(trajectory: Reference, start: tuple[float, ...], duration_s: float) -> tuple[str, str] | None:
+    """The key and the reason when the start or a point the user gave the reference (a set-point, a waypoint, a
+    knot; a sine's height at t = 0 and at ``duration_s``, linear in t between) is below the ground, or None.
+    A minimum-snap trajectory's swing between its knots and references written in Python are not checked."""
+    if start[2] < 0.0:
+        return "start.position", _below("the start", start[2])
+    if isinstance(trajectory, (Step, Waypoints, Smooth)):
+        key, points = (("trajectory.setpoints", trajectory.setpoints) if isinstance(trajectory, Step)
+                       else ("trajectory.points", trajectory.points if isinstance(trajectory, Waypoints)
+                             else trajectory.knots))
+        for i, s in enumerate(points):
+            if s.z < 0.0:
+                return f"{key}[{i}]", _below(f"({s.x:g}, {s.y:g}, {s.z:g})", s.z)
+    elif isinstance(trajectory, Sine):
+        if trajectory.z0 < 0.0:
+            return "trajectory.z0", _below("the reference at t = 0", trajectory.z0)
+        z_end = trajectory.z0 + trajectory.climb * duration_s
+        if z_end < 0.0:
+            return "trajectory.climb", _below(f"climbing {trajectory.climb:g} m/s from z0 {trajectory.z0:g} m, at "
+                                              f"t = {duration_s:g} s the reference", z_end)
     return None

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from missions.envelope import ENVELOPE_RADIUS_M, envelope_problem
+from missions.envelope import ENVELOPE_RADIUS_M, envelope_problem, ground_problem
 from missions.fleet import fleet_from_table
 from missions.geodetic import Home as GeoHome
 from missions.geofence import geofence_from_table
@@ -122,7 +122,8 @@ class Mission:
         if self.start_scatter_m and self.vehicles:
             raise ConfigError(f"{self.source}: start.scatter_m: a fleet's starts are its formation's ([[vehicles]], "
                               "--vehicles): scatter the starts of a mission of one vehicle")
-        outside = envelope_problem(self.trajectory, self.start, self.duration_s, self.start_scatter_m)
+        outside = (envelope_problem(self.trajectory, self.start, self.duration_s, self.start_scatter_m)
+                   or ground_problem(self.trajectory, self.start, self.duration_s))
         if outside:
             raise ConfigError(f"{self.source}: {outside[0]}: {outside[1]}")
 

@@ -235,7 +235,27 @@ def test_a_python_mission_outside_the_envelope_is_refused() -> None:
         Mission(Step((Setpoint(0.0, 0.0, 0.0, 150.0),)), duration_s=10.0)
     with pytest.raises(ConfigError, match=r"^<python>: start\.position: "):
         Mission(Sine(), duration_s=10.0, start=(0.0, 0.0, 200.0, 0.0))
-    Mission(Sine(amplitude=3.0, climb=-1.0, z0=90.0), duration_s=100.0)  # z from 90 m to -10 m: inside
+    Mission(Sine(amplitude=3.0, climb=-1.0, z0=90.0), duration_s=90.0)  # z from 90 m down to the ground: inside
+
+
+_WAYPOINTS = ('name = "m"\nduration_s = 6.0\n[trajectory]\nkind = "waypoints"\n'
+              'points = [{ t = 0.0, x = 0.0, y = 0.0, z = 0.0 }, ')
+
+
+@pytest.mark.parametrize("text, key, words", [
+    (_WAYPOINTS + '{ t = 2.0, x = 0.0, y = 0.0, z = -3.0 }]\n', "trajectory.points[1]", "(0, 0, -3) is at z = -3 m"),
+    ('name = "m"\nduration_s = 6.0\n[trajectory]\nkind = "step"\nsetpoints = [{ t = 0.0, x = 0.0, y = 0.0, '
+     'z = -0.5 }]\n', "trajectory.setpoints[0]", "z = -0.5 m"),
+    (SINE_BODY + "z0 = -1.0\n", "trajectory.z0", "at t = 0 is at z = -1 m"),
+    (SINE_BODY + "z0 = 1.0\nclimb = -0.01\n", "trajectory.climb", "at t = 300 s the reference is at z = -2 m"),
+    ('name = "m"\nduration_s = 6.0\n[start]\nposition = [0.0, 0.0, -0.2]\n[trajectory]\nkind = "sine"\n',
+     "start.position", "the start is at z = -0.2 m"),
+])
+def test_a_reference_or_start_below_the_ground_is_refused(tmp_path: Path, text: str, key: str, words: str) -> None:
+    """A vehicle on the ground cannot follow a reference under it: it used to fly 'completed', exit 0, with an RMS
+    of metres (the waypoints 3 m under the start: 2.38 m)."""
+    assert "below the ground" in _fails(_write(tmp_path, text), key, words)
+    Mission(Waypoints((Setpoint(0.0, 0.0, 0.0, 0.0), Setpoint(2.0, 0.0, 0.0, 0.0))), duration_s=4.0)  # on it: taken
 
 
 @pytest.mark.parametrize("name, words", [
