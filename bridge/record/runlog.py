@@ -29,7 +29,7 @@ from bridge.record.columns import TRACE_COLUMNS
 from missions import Mission
 from missions.mission import name_problem
 from missions.steps import StepCap
-from params import ConfigError, dump_toml, inputs_read
+from params import ConfigError, dump_toml, inputs_read, unreachable
 
 MAX_TRACE_STEPS = 500_000  # control steps a run that keeps its trace for its summary may fly (see check_trace_steps)
 TRACE_CAP = StepCap(MAX_TRACE_STEPS, "a run keeps in memory for its summary",
@@ -365,6 +365,9 @@ def check_writable(path: str | Path, flag: str) -> Path:
     process may write into. Raises :class:`ConfigError` naming ``flag`` otherwise, so that a
     bad output path is bad input (exit 2) before any work, not a failure after it."""
     p = Path(path)
+    why = unreachable(p)
+    if why:
+        raise ConfigError(f"{flag} {p}: cannot reach it ({why})")
     if p.is_dir():
         raise ConfigError(f"{flag} {p}: is a directory")
     parent = p.parent
