@@ -12,22 +12,20 @@ writes into it).
 from __future__ import annotations
 
 import os
-import signal
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
 
-from bridge.cli import main
 from bridge.record.runlog import run_dir, side_dir
 from params import ConfigError
+from tests.sitlkit import run_bsst
 
 pytestmark = pytest.mark.process  # a command not refused would fly (sweep workers) or serve (a vehicle's sockets)
 
 TINY = 'name = "tiny"\nduration_s = 0.2\n[trajectory]\nkind = "sine"\n'
 READ_ONLY = Path("/proc/self")  # exists, is a directory, and refuses every new entry (os.access: not writable)
-GUARD_S = 20  # s: a command that is not refused fails the test instead of serving for ever
+GUARD_S = 60  # s: a command that is not refused fails the test instead of serving for ever
 
 
 @pytest.fixture
@@ -37,52 +35,36 @@ def mission(tmp_path: Path) -> Path:
     return p
 
 
-@pytest.fixture
-def guard() -> Iterator[None]:
-    def alarm(signum: int, frame: Any) -> None:
-        raise TimeoutError(f"not refused within {GUARD_S} s")
-
-    saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM, signal.SIGALRM)}
-    signal.signal(signal.SIGALRM, alarm)
-    signal.alarm(GUARD_S)
-    try:
-        yield
-    finally:
-        signal.alarm(0)
-        for s, h in saved.items():
-            signal.signal(s, h)
-
-
-def _refused(capsys: pytest.CaptureFixture[str], argv: list[Any], names: str) -> str:
-    rc = main([str(a) for a in argv])
-    _, err = capsys.readouterr()
-    lines = err.strip().splitlines()
-    assert rc == 2, f"exit {rc}: {err!r}"
-    assert len(lines) == 1 and names in lines[0], err  # one line: nothing was flown (no progress lines) first
+def _refused(argv: list[Any], names: str) -> str:
+    """``bsst argv`` as a real process (one that is not refused flies or serves: the timeout ends it)."""
+    r = run_bsst(*[str(a) for a in argv], timeout=GUARD_S)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2, f"exit {r.returncode}: {r.stderr!r}"
+    assert len(lines) == 1 and names in lines[0], r.stderr  # one line: nothing was flown (no progress lines) first
     return lines[0]
 
 
 @pytest.mark.skipif(not os.path.isdir(READ_ONLY) or os.access(READ_ONLY, os.W_OK), reason="needs Linux's /proc")
 @pytest.mark.parametrize("command", ["sim", "sweep", "margin", "vehicle", "controller"])
 @pytest.mark.parametrize("where", ["existing", "to create"])
-def test_an_out_that_cannot_be_written_is_refused_first(command, where, mission, guard, capsys):
+def test_an_out_that_cannot_be_written_is_refused_first(command, where, mission):
     out = READ_ONLY if where == "existing" else READ_ONLY / "bsst-run"
     args = {"sim": [mission, "--no-plots"], "sweep": [mission, "--jobs", "1", "--no-plots"],
             "margin": [mission, "--over", "delay_ms", "--until", "rms=0.1"],
             "vehicle": [mission, "--listen", "127.0.0.1:0", "--gcs", "none"],
             "controller": [mission, "--vehicle", "127.0.0.1:9", "--timeout", "0.2"]}[command]
-    line = _refused(capsys, [command, *args, "--out", out, "--overwrite"], f"--out {out}")
+    line = _refused([command, *args, "--out", out, "--overwrite"], f"--out {out}")
     assert line.endswith("cannot write into it" if where == "existing" else "(cannot write into /proc/self)")
 
 
 @pytest.mark.skipif(os.geteuid() == 0, reason="root writes into a directory of mode 0555")
-def test_a_read_only_directory(mission, tmp_path, guard, capsys):
+def test_a_read_only_directory(mission, tmp_path):
     ro = tmp_path / "ro"
     ro.mkdir()
     ro.chmod(0o555)
     try:
-        _refused(capsys, ["sim", mission, "--out", ro, "--no-plots"], f"--out {ro}: cannot write into it")
-        _refused(capsys, ["sim", mission, "--out", ro / "new", "--no-plots"], f"cannot write into {ro}")
+        _refused(["sim", mission, "--out", ro, "--no-plots"], f"--out {ro}: cannot write into it")
+        _refused(["sim", mission, "--out", ro / "new", "--no-plots"], f"cannot write into {ro}")
     finally:
         ro.chmod(0o755)
 
