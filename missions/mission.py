@@ -37,7 +37,7 @@ from missions.references import Reference, Setpoint, Sine, Step, Waypoints
 from missions.route import LIMIT_RANGES, Limits, least_duration_s, smooth_from_plan
 from missions.scatter import scattered_start
 from missions.steps import PlanBudget, StepCap
-from params import ConfigError, Table, load_toml, read_text_file
+from params import ConfigError, Table, load_toml, read_text_file, unreachable
 
 CONTROLLERS = ("bsst", "smc", "pid")
 # how the super-twisting step of ``bsst`` is stepped over the control period (controller.supertwisting):
@@ -246,7 +246,7 @@ def mission_path(path: str | Path) -> Path:
     (``sine``) or ``missions/<name>.toml``, so that an installed ``bsst`` flies the paper's
     missions from any directory. A file of that name in the working directory always wins."""
     p = Path(path)
-    if p.exists():
+    if unreachable(p) or p.exists():  # (one that cannot be looked up: its reader names it)
         return p
     named = (len(p.parts) == 1 and p.suffix == "") or (len(p.parts) == 2 and p.parts[0] == "missions")
     shipped = SHIPPED_DIR / (p.name if p.suffix == ".toml" else f"{p.name}.toml")

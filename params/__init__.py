@@ -83,6 +83,19 @@ def inputs_read() -> dict[str, str]:
     return dict(_INPUTS.get() or {})
 
 
+def unreachable(path: str | Path) -> str | None:
+    """Why the system cannot look ``path`` up (a name too long, a folder this process may not search: its
+    ``strerror``), or None: it exists, or is simply not there. pathlib's ``exists``, ``is_file`` and ``is_dir``
+    raise for the former: a check asks this first, to name the path (exit 2) instead of a traceback."""
+    try:
+        os.stat(path)
+    except (FileNotFoundError, NotADirectoryError):
+        return None
+    except OSError as exc:
+        return exc.strerror or str(exc)
+    return None
+
+
 def read_regular_file(path: str | Path, expected: str = "file", max_bytes: int | None = None) -> bytes:
     """The bytes of ``path``, which must be a regular file (never blocks: a FIFO, socket or device is
     refused before it is read, and opened without blocking should one be swapped in after the check).

@@ -317,21 +317,22 @@ def say_margin(res: dict[str, Any], args: argparse.Namespace, name: str) -> int:
 
 
 def margin_lines(e: dict[str, Any], over: str, what: str, until: str) -> list[str]:
-    """The console lines of one law's margin: the bisection's answer and its bracket, then the check below it."""
+    """The console lines of one law's margin: the bisection's answer and its bracket, then the check below it;
+    ``what``, the unit's words (``noise``'s), follows a number, never ``interrupted`` or ``none``."""
     lo, hi = e["bracket"]
     err = e["error"]
     if e["interrupted_in"] == "bisection":  # Ctrl-C: no margin, the bracket flown so far
         ends = ("-" if lo is None else f"{lo:g}", "-" if hi is None else f"{hi:g}")
         held = f"holds at {lo:g}" if lo is not None else "no value held yet"
         top = f"fails at {hi:g}" if hi is not None else "no value failed yet"
-        return [f"margin {e['controller']}: {over}: interrupted{what} (bracket so far [{ends[0]}, {ends[1]}]: {held}, "
+        return [f"margin {e['controller']}: {over}: interrupted (bracket so far [{ends[0]}, {ends[1]}]{what}: {held}, "
                 f"{top}; until {until})"]
     if err is not None and err["phase"] == "bisection":  # the law failed, or its worker died: no boundary found
         held = f"; every value flown below it held, up to {lo:g}" if lo is not None else ""
-        return [f"margin {e['controller']}: {over}: none{what} (the law failed, not the criterion: {err['outcome']} at "
-                f"{err[over]:g}{held}; {err['error']})"]
+        return [f"margin {e['controller']}: {over}: none (the law failed, not the criterion: {err['outcome']} at "
+                f"{err[over]:g}{what}{held}; {err['error']})"]
     if e["margin"] is None:  # no value held, the range's low end included
-        return [f"margin {e['controller']}: {over}: none{what} (fails at every value flown, down to {hi:g}, "
+        return [f"margin {e['controller']}: {over}: none (fails at every value flown, down to {hi:g}{what}, "
                 f"the low end of its range; until {until})"]
     tail = f"fails at {hi:g}" if hi is not None else "held over the whole range"
     lines = [f"margin {e['controller']}: {over} {e['margin']:g}{what} (bracket [{lo:g}, "

@@ -20,7 +20,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
-from params import likely
+from params import likely, unreachable
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
 
@@ -349,6 +349,9 @@ TRACE_KEYS = ("trace", "trace_loop")  # per direction, read back like the number
 def existing_file(flag: str, text: str) -> str:
     """``text`` as an absolute path to a regular file (relative: to the working directory)."""
     p = Path(text).expanduser()
+    why = unreachable(p)
+    if why:
+        raise argparse.ArgumentTypeError(f"{flag} {text}: cannot read ({why})")
     if not p.is_file():
         raise argparse.ArgumentTypeError(f"{flag} {text}: {'is not a regular file' if p.exists() else 'no such file'}")
     return str(p.absolute())

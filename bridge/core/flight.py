@@ -306,8 +306,8 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
                           "controller fly one vehicle")
     try:
         prof = load_profile(m.profile)
-    except ConfigError as exc:
-        raise ConfigError(f"{src}: profile: {exc}") from None
+    except ConfigError as exc:  # an override's named as the flag (the mission may have no profile key)
+        raise ConfigError(f"{f'--profile {over.profile}' if over.profile else f'{src}: profile'}: {exc}") from None
     if m.actuation:
         prof = prof.with_actuation(m.actuation)
     effects = effects_from_table(Table(m.effects, src, "effects"))

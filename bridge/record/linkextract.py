@@ -38,7 +38,7 @@ from bridge.record.tlogmatch import (
     timesync_offset,
     u64,
 )
-from params import ConfigError, read_regular_file
+from params import ConfigError, read_regular_file, unreachable
 
 CLOCKS = ("same", "timesync")
 RUN_INPUTS = ("vehicle.tlog", "controller.tlog", "vehicle.bin", "controller.bin", "summary.json")  # what it reads
@@ -235,9 +235,12 @@ def run_clock(path: Path) -> str | None:
 def check_run_dir(path: str | Path) -> Path:
     """``path`` as a directory to extract a run's link from; a ``ConfigError`` saying what it is otherwise."""
     p = Path(path)
+    give = "give a real-time run directory, or the vehicle's tlog and the controller's tlog"
+    why = unreachable(p)
+    if why:
+        raise ConfigError(f"bsst link extract: {p}: cannot read ({why}); {give}")
     if p.is_dir():
         return p
-    give = "give a real-time run directory, or the vehicle's tlog and the controller's tlog"
     if not p.exists():
         why = "no such file or directory" if not p.is_symlink() else "a broken symbolic link"
     elif p.is_file():

@@ -21,6 +21,7 @@ import time
 from collections.abc import Iterable, Sequence
 from dataclasses import replace
 from pathlib import Path
+from stat import S_ISDIR
 from typing import Any
 
 from bridge.autopilot.vehicleevents import Sender
@@ -29,7 +30,7 @@ from bridge.record.columns import TRACE_COLUMNS
 from missions import Mission
 from missions.mission import name_problem
 from missions.steps import StepCap
-from params import ConfigError, dump_toml, inputs_read
+from params import ConfigError, dump_toml, inputs_read, unreachable
 
 MAX_TRACE_STEPS = 500_000  # control steps a run that keeps its trace for its summary may fly (see check_trace_steps)
 TRACE_CAP = StepCap(MAX_TRACE_STEPS, "a run keeps in memory for its summary",
@@ -62,7 +63,8 @@ def run_dir(
 ) -> Path:
     """Create the run directory: ``out`` exactly, or ``runs/<UTC time>-<mission>``.
 
-    Refuses a non-empty directory unless ``overwrite``. With ``create=False`` it only checks
+    Refuses a non-empty directory unless ``overwrite``, and one it cannot write into or create
+    (:func:`check_out_dir`). With ``create=False`` it only checks
     (so a command can name every bad input before it starts anything). ``out`` is the user's own
     choice and taken as given; a mission name must be one safe path component
     (:func:`missions.mission.name_problem`), so the directory it names stays inside ``root``.
@@ -79,8 +81,7 @@ def run_dir(
             path = Path(root) / f"{stamp}-{mission_name}-{n}"
     else:
         path = Path(out)
-    if path.exists() and not path.is_dir():
-        raise ConfigError(f"--out {path}: exists and is not a directory")
+    check_out_dir(path)
     if path.is_dir() and any(path.iterdir()):
         if not overwrite:
             raise ConfigError(f"--out {path}: directory is not empty (use --overwrite to replace its run)")
@@ -363,11 +364,34 @@ def blackout_windows(mission: Mission) -> list[tuple[float, float]]:
     return [*link.up.blackouts, *link.down.blackouts]
 
 
+def check_out_dir(path: Path) -> None:
+    """Refuse ``--out`` ``path`` unless it is a directory this process may write into, or one it may create (its
+    nearest existing ancestor such a directory), before any work: a run flown, or a search made, and then not
+    written would be lost (``bsst margin --out RO/new`` flew its whole search first). :class:`ConfigError`."""
+    for p in (path, *path.parents):
+        try:
+            st = p.stat()
+        except (FileNotFoundError, NotADirectoryError):
+            continue
+        except OSError as exc:  # an ancestor that may not be searched (EACCES), a loop of links ...
+            raise ConfigError(f"--out {path}: cannot reach it ({exc.strerror})") from None
+        if not S_ISDIR(st.st_mode):
+            raise ConfigError(f"--out {path}: exists and is not a directory" if p == path
+                              else f"--out {path}: cannot create ({p} is not a directory)")
+        if not os.access(p, os.W_OK | os.X_OK):
+            raise ConfigError(f"--out {path}: cannot write into it" if p == path
+                              else f"--out {path}: cannot create (cannot write into {p})")
+        return
+
+
 def check_writable(path: str | Path, flag: str) -> Path:
     """``path`` as a file that can be written: not a directory, in an existing directory this
     process may write into. Raises :class:`ConfigError` naming ``flag`` otherwise, so that a
     bad output path is bad input (exit 2) before any work, not a failure after it."""
     p = Path(path)
+    why = unreachable(p)
+    if why:
+        raise ConfigError(f"{flag} {p}: cannot reach it ({why})")
     if p.is_dir():
         raise ConfigError(f"{flag} {p}: is a directory")
     parent = p.parent
@@ -382,8 +406,7 @@ def side_dir(out: str | Path, files: Sequence[str], overwrite: bool = False) -> 
     """The directory one side of a networked run (vehicle or controller) writes ``files``
     into: created if needed; refuses to replace those files unless ``overwrite``."""
     path = Path(out)
-    if path.exists() and not path.is_dir():
-        raise ConfigError(f"--out {path}: exists and is not a directory")
+    check_out_dir(path)
     taken = [f for f in files if (path / f).exists()]
     if taken and not overwrite:
         raise ConfigError(f"--out {path}: already holds {', '.join(taken)} (use --overwrite to replace)")

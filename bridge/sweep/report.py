@@ -45,7 +45,7 @@ from bridge.sweep.cells import (
 )
 from bridge.sweep.classes import CLASSES, Classes, classify, thresholds_text
 from bridge.sweep.grid import AXES, LINK_AXES, NAME_AXES, SHORT
-from params import ConfigError
+from params import ConfigError, unreachable
 from plant.wind import TURBULENCE
 
 NUMERIC_AXES = tuple(a for a in AXES if a not in NAME_AXES)
@@ -138,6 +138,9 @@ def grid_points(rows: Sequence[Mapping[str, Any]], a: str, b: str, classes: Clas
 def load_sweep_dir(path: str | Path) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """``cells.csv`` and ``sweep.json`` of a sweep directory (the latter inferred if absent)."""
     p = Path(path)
+    why = unreachable(p)
+    if why:
+        raise ConfigError(f"{p}: cannot read ({why})")
     if not p.is_dir():
         raise ConfigError(f"{p}: not a directory")
     meta_path = p / SWEEP_JSON
