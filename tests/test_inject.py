@@ -129,6 +129,13 @@ def test_an_injection_after_the_plant_ended_the_flight_is_denied(tmp_path):
                                   condition="'INJECT_FAILURE' in STATUSTEXT.text")
             assert text is not None and text.text == "INJECT_FAILURE: the plant ended the flight"
             assert _inject(gcs, GPS, OFF, 0) == M.MAV_RESULT_DENIED  # (whatever the unit)
+            # a mode change is refused so too, in words true of a crash (it said "the plant diverged")
+            gcs.mav.command_long_send(*tgt, M.MAV_CMD_DO_SET_MODE, 0, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4, 3,
+                                      0, 0, 0, 0)
+            assert _ack(gcs, M.MAV_CMD_DO_SET_MODE).result == M.MAV_RESULT_DENIED
+            text = gcs.recv_match(type="STATUSTEXT", blocking=True, timeout=5,
+                                  condition="STATUSTEXT.text.startswith('mode ')")
+            assert text is not None and text.text.endswith(": the plant ended the flight"), text
         finally:
             assert v.stop() == 0
     faults = [e.text for e in _events(v) if e.kind == "fault"]

@@ -277,7 +277,7 @@ class Commander:
         for the offboard controller to download and fly (it arms the vehicle), or DENIED saying why. PX4 arms
         at once; here the arm is the controller's, once it has the mission."""
         if self.clock.halted:
-            return self._refuse("MISSION_START: the plant diverged")
+            return self._refuse("MISSION_START: the plant ended the flight")
         if self.sim.armed and not self.pre_start.awaits():
             return self._refuse("MISSION_START: only on the ground, disarmed or armed in HOLD (the controller flies "
                                 "it from its start)")
@@ -323,7 +323,7 @@ class Commander:
         if mode is None:
             return self._refuse(why)
         if self.clock.halted:
-            return self._refuse(f"mode {mode_name(mode)}: the plant diverged")
+            return self._refuse(f"mode {mode_name(mode)}: the plant ended the flight")
         terminated = self.actions.refusal(f"mode {mode_name(mode)}")
         if terminated:
             return self._refuse(terminated)
