@@ -165,7 +165,7 @@ CONVERTER_BAD = {
 # bad values of the flags that take text (a callable of the files: values)
 TEXT_BAD = {
     "--until": lambda f: ["rms=x", "rms=-1", "class=nope", "speed=3", "rms"],
-    "--out": lambda f: [f.regular],
+    "--out": lambda f: [f.regular, ""],  # "" would be the current folder
     "--profile": lambda f: ["nosuch", f.missing.with_suffix(".profile.toml")],
     "--listen": lambda f: ["nowhere", "udpout:127.0.0.1:9", "127.0.0.1:70000"],
     "--gcs": lambda f: ["127.0.0.1:notaport", "udpin:x"],
@@ -213,7 +213,7 @@ def _bad_values(cmd: str, action: argparse.Action, f: Files) -> list[Any]:
     flag = action.option_strings[0]
     if action.choices is not None and action.type is None:
         return ["bogus"]
-    if action.type is None:
+    if action.type is None or getattr(action.type, "__qualname__", "").startswith("path_given"):
         assert flag in TEXT_BAD, f"bsst {cmd} {flag}: give tests/test_bad_input.py a bad value for it"
         return TEXT_BAD[flag](f)
     kind = action.type.__qualname__.split(".")[0]
@@ -739,3 +739,17 @@ def test_bsst_relay_takes_no_controller_flag() -> None:
     for flag, value in CONTROLLER_ONLY.items():
         line = _one_line(_bsst("relay", "--listen", "127.0.0.1:0", "--to", "127.0.0.1:9", flag, value))
         assert line.startswith(f"bsst relay: unrecognized arguments: {flag} {value}"), line
+
+
+@pytest.mark.parametrize("cmd", ["sim", "sweep", "margin"])
+def test_an_empty_out_is_refused_not_taken_for_the_current_folder(tmp_path: Path, cmd: str) -> None:
+    """``--out "$DIR"`` with DIR unset: it flew into the current folder (and ``--overwrite`` would have replaced
+    run files there); now one line, exit 2, nothing written."""
+    (tmp_path / "m.toml").write_text(TINY)
+    work = tmp_path / "work"
+    work.mkdir()
+    extra = {"sim": [], "sweep": ["--delay", "0,1"], "margin": ["--over", "delay_ms", "--until", "rms=1"]}[cmd]
+    r = run_bsst(cmd, tmp_path / "m.toml", *extra, "--out", "", "--no-plots" if cmd == "sim" else "--jobs=1",
+                 cwd=work, timeout=120)
+    assert r.returncode == 2 and "--out: an empty path" in r.stderr and "Traceback" not in r.stderr, r.stderr
+    assert list(work.iterdir()) == []

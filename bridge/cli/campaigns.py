@@ -28,6 +28,7 @@ from bridge.cli.flags import (
     link_table_from_args,
     name_list,
     number_in,
+    path_given,
     value_list,
 )
 from bridge.cli.options import (
@@ -76,7 +77,8 @@ def add_sweep_commands(sub: Any) -> None:
     p.add_argument("--max-cells", type=int_in("--max-cells", 1, 10**9), metavar="N",
                    help="fly a grid of up to N cells (default 10000: a bigger one is refused as a likely mistake)")
     p.add_argument("--dask", metavar="ADDRESS", help="run the cells on this Dask scheduler (e.g. tcp://host:8786)")
-    p.add_argument("--out", metavar="DIR", help="sweep directory (default sweeps/<UTC time>-<mission>)")
+    p.add_argument("--out", type=path_given("--out"),
+                   metavar="DIR", help="sweep directory (default sweeps/<UTC time>-<mission>)")
     p.add_argument("--resume", action="store_true", help="fly only the cells missing from --out DIR")
     p.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out")
     p.add_argument("--no-plots", action="store_true", help="skip the heat maps")
@@ -224,7 +226,8 @@ def add_margin_command(sub: Any) -> None:
     p.add_argument("--jobs", type=int_in("--jobs", 1, 1024), metavar="N",
                    help="cores: threads of the batch engine, worker processes of the process engine "
                         "(default: all cores)")
-    p.add_argument("--out", metavar="DIR", help="write margin.json into DIR (default runs/<UTC>-<mission>-margin)")
+    p.add_argument("--out", type=path_given("--out"),
+                   metavar="DIR", help="write margin.json into DIR (default runs/<UTC>-<mission>-margin)")
     p.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out")
     add_link_options(p)
     add_sensor_options(p)  # fixed for every probe; --noise conflicts with --over noise

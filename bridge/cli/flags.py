@@ -80,6 +80,17 @@ class _Parser(argparse.ArgumentParser):
         return ""
 
 
+def path_given(name: str) -> Callable[[str], str]:
+    """An argparse type: a path that is not empty (an unset shell variable's ``--out "$DIR"`` would be the current
+    folder, with ``--overwrite`` the user's own files), named in the error."""
+    def conv(text: str) -> str:
+        if not text:
+            raise argparse.ArgumentTypeError(f"{name}: an empty path (give one, or leave the flag out)")
+        return text
+
+    return conv
+
+
 def int_in(name: str, lo: int, hi: int) -> Callable[[str], int]:
     def conv(text: str) -> int:
         try:

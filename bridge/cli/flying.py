@@ -28,6 +28,7 @@ from bridge.cli.flags import (
     mission_integer,
     mission_number,
     number_in,
+    path_given,
     system_id,
     yes_no,
 )
@@ -308,7 +309,7 @@ def add_sitl_commands(sub: Any) -> None:
     add_failsafe_options(p)
     add_param_options(p, schedule=False)  # a change at a mission time is the controller's to send (--param-at)
     add_sensor_options(p)
-    p.add_argument("--out", metavar="DIR", help="write vehicle.tlog and vehicle.bin into DIR")
+    p.add_argument("--out", type=path_given("--out"), metavar="DIR", help="write vehicle.tlog and vehicle.bin into DIR")
     p.add_argument("--overwrite", action="store_true", help="allow replacing those files")
     p.set_defaults(func=cmd_vehicle)
 

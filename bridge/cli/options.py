@@ -25,6 +25,7 @@ from bridge.cli.flags import (
     noise_scale,
     number_in,
     param_assignment,
+    path_given,
     sensor_set_name,
 )
 
@@ -122,11 +123,13 @@ def add_flight_options(p: argparse.ArgumentParser, vehicle: bool = True, optiona
     else:
         p.add_argument("mission", help="mission TOML file (see missions/)")
     if vehicle:
-        p.add_argument("--out", metavar="DIR", help="run directory (default runs/<UTC time>-<mission>)")
+        p.add_argument("--out", type=path_given("--out"),
+                       metavar="DIR", help="run directory (default runs/<UTC time>-<mission>)")
         p.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty --out")
     else:
-        p.add_argument("--out", metavar="DIR", help="write controller.tlog and controller.bin into DIR "
-                                                    "(default: nothing written)")
+        p.add_argument("--out", type=path_given("--out"),
+                       metavar="DIR", help="write controller.tlog and controller.bin into DIR "
+                                           "(default: nothing written)")
         p.add_argument("--overwrite", action="store_true", help="allow replacing those files")
     p.add_argument("--rate", type=mission_number("--rate", "rate_hz"), metavar="HZ",
                    help="control rate, 50-1000 Hz (default: the mission's, 250)")
