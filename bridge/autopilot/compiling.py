@@ -25,7 +25,7 @@ import sys
 from collections.abc import Iterator
 from typing import Any, TextIO
 
-from bridge.autopilot import kernelcache
+from bridge.autopilot import kernelcache  # (numba is imported only where a kernel is made)
 
 KERNELS = {  # package of kernels: what they are, in words, and how long compiling them takes on the 2-core VM, s
     "bridge.autopilot.ekfkernels": ("the EKF's kernels", 7.0),  # 6.6 s of CPU (docs/figures.md, eighteenth session)
@@ -77,7 +77,7 @@ def _uncached(package: str) -> bool:
 
 
 def _uncached_kernel(obj: Any) -> bool:
-    func = getattr(obj, "py_func", None)
+    func = getattr(obj, "py_func", None)  # a numba dispatcher's
     return func is not None and f"{func.__module__}.{func.__qualname__}" in kernelcache.UNCACHED
 
 
