@@ -8,7 +8,8 @@ Out: one line on stderr, ``bsst: compiling the EKF's kernels (first run after an
      disk after) ...``, once per process and only when numba's on-disk cache of those kernels is cold:
      for at least half of them, the index file (``<module>.<function>-<line>.py311.nbi`` in the source's
      ``__pycache__``, or under ``NUMBA_CACHE_DIR``) absent, of another numba version, or stale (a
-     source it compiles in changed since: bridge.autopilot.kernelcache)
+     source it compiles in changed since: bridge.autopilot.kernelcache); where numba found no writable place
+     for that cache (kernelcache.enable_cache), always: ``... (~7 s, in each process: numba's cache is off) ...``
 
 The check asks each kernel's own numba cache object where its index is and whether it is fresh (what
 numba itself will decide), so that it never disagrees with numba's naming or its cache directory rules.
@@ -23,6 +24,8 @@ import pickle
 import sys
 from collections.abc import Iterator
 from typing import Any, TextIO
+
+from bridge.autopilot import kernelcache  # (numba is imported only where a kernel is made)
 
 KERNELS = {  # package of kernels: what they are, in words, and how long compiling them takes on the 2-core VM, s
     "bridge.autopilot.ekfkernels": ("the EKF's kernels", 7.0),  # 6.6 s of CPU (docs/figures.md, eighteenth session)
@@ -44,7 +47,9 @@ def announce_compiling(package: str, stream: TextIO | None = None) -> bool:
     if not cold(package):
         return False
     out = stream or sys.stderr
-    out.write(f"bsst: compiling {what} (first run after an install, ~{seconds:g} s; cached on disk after) ...\n")
+    when = (f"~{seconds:g} s, in each process: numba's cache is off" if _uncached(package)
+            else f"first run after an install, ~{seconds:g} s; cached on disk after")
+    out.write(f"bsst: compiling {what} ({when}) ...\n")
     out.flush()
     return True
 
@@ -57,17 +62,30 @@ def cold(package: str) -> bool:
 
 
 def _kernels(package: str) -> Iterator[Any]:
-    """The numba dispatchers with an on-disk cache among the attributes of ``package``'s loaded modules."""
+    """The numba dispatchers made to cache on disk among the attributes of ``package``'s loaded modules: with
+    their cache, or without where numba found no place for it (kernelcache.UNCACHED)."""
     for name, module in list(sys.modules.items()):
         if name == package or name.startswith(package + "."):
             for obj in vars(module).values():
-                if getattr(getattr(obj, "_cache", None), "_cache_file", None) is not None:
+                if getattr(getattr(obj, "_cache", None), "_cache_file", None) is not None or _uncached_kernel(obj):
                     yield obj
+
+
+def _uncached(package: str) -> bool:
+    """Whether any of ``package``'s kernels was made to cache where numba found no place for it."""
+    return any(_uncached_kernel(d) for d in _kernels(package))
+
+
+def _uncached_kernel(obj: Any) -> bool:
+    func = getattr(obj, "py_func", None)  # a numba dispatcher's
+    return func is not None and f"{func.__module__}.{func.__qualname__}" in kernelcache.UNCACHED
 
 
 def _cold(dispatcher: Any) -> bool:
     """Whether numba will compile this kernel rather than load it: no index, or one numba will not use
     (another numba version; a source changed since: numba's own test, ``_load_index``, gives {} for both)."""
+    if _uncached_kernel(dispatcher):
+        return not dispatcher.overloads  # no cache: compiled in every process
     try:
         cache_file = dispatcher._cache._cache_file  # numba's: where its index is, and its freshness test
         return not dispatcher.overloads and not cache_file._load_index()

@@ -27,28 +27,58 @@ from __future__ import annotations
 
 import enum
 import hashlib
+import os
 import sys
 from collections.abc import Callable
 from types import FunctionType, ModuleType
 from typing import Any
 
-import numba
-
 PROJECT_PACKAGES = ("bridge", "controller", "plant", "missions", "params")
 
+CACHE_OFF_NOTE = ("bsst: note: numba kernel cache off: no writable cache location (set NUMBA_CACHE_DIR to a "
+                  "writable directory); kernels are compiled in each process")
+NOTE_SAID_ENV = "BSST_NUMBA_CACHE_OFF_SAID"  # set once the note is said: a child of the command says it no more
+UNCACHED: set[str] = set()  # kernels asked to cache that numba could not (module.qualname): compiled in memory only
 _file_digests: dict[str, bytes] = {}  # source path -> SHA-256 of its bytes, once per process
 _references: dict[tuple[str, int], frozenset[str]] = {}  # (module, size of its namespace) -> modules it names
 
 
 def njit(func: Callable[..., Any] | None = None, **options: Any) -> Any:
     """``numba.njit(**options)(func)`` (or the decorator, without ``func``); with ``cache=True`` its cache's
-    source stamp also carries :func:`closure_digest` of the function's module (module docstring)."""
+    source stamp also carries :func:`closure_digest` of the function's module (module docstring). Where numba
+    finds no writable cache location it compiles the kernel in memory only (:func:`enable_cache`)."""
     if func is None:
         return lambda f: njit(f, **options)
+    import numba  # here, not at the top: the constants below are read by processes that never compile
+
+    cache = options.pop("cache", False)
     dispatcher = numba.njit(**options)(func)
-    if options.get("cache"):
+    if cache and enable_cache(dispatcher):
         restamp(dispatcher)
     return dispatcher
+
+
+def enable_cache(dispatcher: Any) -> bool:
+    """Turn on ``dispatcher``'s on-disk cache (what ``numba.njit(cache=True)`` does) where numba finds a writable
+    place for it: ``NUMBA_CACHE_DIR``, the source's ``__pycache__``, the user's cache folder (``~/.cache/numba``).
+    Where it finds none (a read-only install run by a user without a writable home, a read-only container),
+    numba's own ``cache=True`` raises "no locator available" at import; here the kernel is compiled in memory
+    instead, the same bits, each process again (:data:`UNCACHED` names it; ``bridge.autopilot.compiling`` counts
+    it as cold), and the first such kernel says so in one line on stderr (:data:`CACHE_OFF_NOTE`), once per
+    command: a process it starts later (a fork server, a vehicle) inherits :data:`NOTE_SAID_ENV` and says no more.
+    Whether the cache is on."""
+    if not hasattr(dispatcher, "enable_caching"):
+        return False  # NUMBA_DISABLE_JIT: the plain function
+    try:
+        dispatcher.enable_caching()
+    except RuntimeError:  # numba's CacheImpl: no locator could make or write its cache directory
+        if not UNCACHED and not os.environ.get(NOTE_SAID_ENV):
+            sys.stderr.write(CACHE_OFF_NOTE + "\n")
+            sys.stderr.flush()
+            os.environ[NOTE_SAID_ENV] = "1"  # inherited by the processes this one starts: said once per command
+        UNCACHED.add(f"{dispatcher.py_func.__module__}.{dispatcher.py_func.__qualname__}")
+        return False
+    return True
 
 
 def restamp(dispatcher: Any) -> None:

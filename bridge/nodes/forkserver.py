@@ -49,6 +49,7 @@ import types
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
+from bridge.autopilot.kernelcache import NOTE_SAID_ENV
 from bridge.nodes.process import die_with_parent
 
 ENV = "BSST_FORK_SERVER"  # "0": every child exec'd (the fork server never started)
@@ -135,7 +136,7 @@ class _Server:
             proc = subprocess.Popen(
                 [sys.executable, "-m", SERVER_MODULE, str(theirs.fileno()), " " * TITLE_ROOM],
                 pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                start_new_session=True)
+                start_new_session=True, env={**os.environ, NOTE_SAID_ENV: "1"})  # its stderr is ours: we say it
         except BaseException:
             ours.close()
             raise
