@@ -379,9 +379,9 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
     fleet (``vehicles``, ``formation`` or the mission's ``[[vehicles]]``, as :func:`simulate` takes them) as one
     vehicle process and one controller process per vehicle (:mod:`bridge.session.fleet`): vehicle i is instance
     ``instance`` + i - 1, system id ``instance`` + i (PX4's), every vehicle's ground-station traffic goes to ``gcs``
-    (default 127.0.0.1:14550 + ``instance``); ``live`` and ``progress`` are the single session's only. In lockstep the
-    vehicles step on one shared clock, and a contact ends both flights at its step (``collision``), as offline;
-    the world is judged on the vehicles' traces (and where each stayed) at matching steps (:func:`judge_traces`).
+    (default 127.0.0.1:14550 + ``instance``; ``live``: each vehicle's line saying so); ``progress`` is one vehicle's.
+    In lockstep the vehicles step on one shared clock; a contact ends both flights at its step (``collision``), as
+    offline; the world is judged on the vehicles' traces (and where each stayed) at matching steps (judge_traces).
     In real time a contact makes both ``collision`` too, found afterwards (the flights went on: :data:`CONTINUED`)."""
     from bridge.session import sitl as sitl_one  # lazy: start-up time
     from bridge.session.fleet import check_fleet, check_fleet_ports, fly_sessions, radio_block  # lazy: start-up
@@ -424,7 +424,7 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
         clocked = not realtime  # lockstep: one shared step clock (bridge.nodes.vehicle.gate)
         runs = fly_sessions(flights, ids, dirs, realtime=realtime, instance=instance, gcs=gcs_text, speed=speed,
                             key=Path(key) if key is not None else None, plots=plots, keep=keep,
-                            radii=watch.radii if clocked else None, shared_radio=shared)
+                            radii=watch.radii if clocked else None, shared_radio=shared, announce=live)
         finals = [_stayed(r) for r in runs] if clocked else None
         contacts = judge_traces(watch, [r.trace for r in runs], fm.rate_hz, finals,
                                 [f.mission.start for f in flights] if clocked else None, [_landing(r) for r in runs])

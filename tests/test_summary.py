@@ -23,7 +23,7 @@ from bridge.record.columns import (
     VehicleRow,
     trace_row,
 )
-from bridge.record.events import RunEvent
+from bridge.record.events import RunEvent, in_time_order
 from bridge.record.joiner import Joined
 from bridge.record.policies import POLICIES
 from bridge.record.summary import (
@@ -97,6 +97,26 @@ def test_a_clean_lockstep_completion() -> None:
                                                           round((STEPS - 1) / RATE, 6))]
     assert s["events"][-1] == out.notes[0].as_dict()
     assert list(out.arrays) == list(TRACE_COLUMNS) and len(out.arrays["t"]) == STEPS
+
+
+def test_the_events_are_listed_in_time_order_the_closing_notes_among_them() -> None:
+    """The session's closing notes are stamped at the trace's last row but made last, after the vehicle's end landing
+    (its ``end``, ``landed``, ``disarmed``, ``mode``): summary.json lists every event in time order (a printed
+    summary showed ``ended`` at 0.996 s after the disarm at 3 s); events of one time keep the order recorded (the
+    vehicle's ``end`` before the controller's answer to it); one with no time keeps its place."""
+    vehicle, controller = ends()
+    end = RunEvent(1.0, "end", "mission over: LAND", "vehicle")
+    answer = RunEvent(1.0, "end", "mission over: the vehicle lands", "controller")
+    landed = RunEvent(1.3, "landed", "landing detected", "vehicle")
+    untimed = RunEvent(None, "warning", "refused lately", "controller")
+    disarmed = RunEvent(3.3, "disarmed", "landed: disarmed", "vehicle", ITSELF)
+    recorded = [ARMED, end, answer, landed, untimed, disarmed]
+    out = session_summary(FLIGHT, facts(), joined(), recorded, vehicle, controller)
+    last_row = round((STEPS - 1) / RATE, 6)
+    assert [(e["t"], e["kind"], e.get("source")) for e in out.summary["events"]] == [
+        (0.0, "armed", "vehicle"), (last_row, "ended", "session"), (1.0, "end", "vehicle"), (1.0, "end", "controller"),
+        (1.3, "landed", "vehicle"), (None, "warning", "controller"), (3.3, "disarmed", "vehicle")]
+    assert in_time_order([untimed, landed, ARMED]) == [untimed, ARMED, landed]  # (recorded before any time: first)
 
 
 def test_the_link_block_in_lockstep_is_the_models_with_the_socket_times() -> None:

@@ -6,7 +6,8 @@ In:  an event's time (s, the flight's clock), kind, text, who reported it (``sou
      :class:`~bridge.autopilot.vehicleevents.ParamChanged`: name, old and new value, or None)
 Out: :class:`RunEvent`; its dict for ``summary.json["events"]`` (:meth:`RunEvent.as_dict`: ``t`` s rounded
      to 1 us or null, ``kind``, ``text`` with the sender shown as `` [by ...]``, ``source`` when there is one,
-     ``param`` (``{name, old, new}``), ``mode``, ``armed`` and ``pre_start`` when the event has them)
+     ``param`` (``{name, old, new}``), ``mode``, ``armed`` and ``pre_start`` when the event has them);
+     :func:`in_time_order`: events as recorded, in the order of their times
 
 The written `` [by ...]`` is for people (events.log, summary.json); everything that judges a run reads
 ``by`` (:mod:`bridge.record.policies`), never the text.
@@ -15,7 +16,7 @@ The written `` [by ...]`` is for people (events.log, summary.json); everything t
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -65,3 +66,16 @@ class RunEvent:
                    Sender.from_dict(by) if isinstance(by, Mapping) else None,
                    ParamChanged.from_dict(param) if isinstance(param, Mapping) else None,
                    mode=d.get("mode"), armed=d.get("armed"), pre_start=d.get("pre_start"))
+
+
+def in_time_order(events: Iterable[RunEvent]) -> list[RunEvent]:
+    """``events`` (in the order recorded) sorted by their times, stably: events of one time keep the order recorded,
+    so a cause recorded before its answer stays before it (a session never stamps an answer before its cause:
+    :meth:`bridge.session.session.Session._handle`). An event with no time keeps its place after the one recorded
+    before it. A session records its closing notes (``ended``, ``policy``, ...) last, at the trace's last row, which
+    may come before the vehicle's end action (its landing, its disarm): here they take their place in time."""
+    timed, t = [], -math.inf
+    for e in events:
+        t = e.t if e.t is not None else t
+        timed.append((t, e))
+    return [e for _, e in sorted(timed, key=lambda x: x[0])]

@@ -9,7 +9,7 @@ In:  the :class:`~bridge.core.flight.Flight`; the joined trace and the per-packe
 Out: :class:`SessionSummary`: the trace arrays, ``summary.json`` (the figures of
      :func:`bridge.record.metrics.summarise`, the ``link``, ``timing`` and ``sitl`` blocks, a ground station's
      mission's download (``mission_transfer``, :class:`MissionTransfer`; ``--await-mission`` only), the lockstep
-     record, ``ended_by``, the policies' verdicts, the events) and the session's closing notes (its
+     record, ``ended_by``, the policies' verdicts, the events in time order) and the session's closing notes (its
      ``ended``, ``lockstep`` and ``policy`` events, also in ``summary["events"]``, for events.log)
 
 See docs/design.md, "Files of a run", and docs/sitl.md, "Outcomes, exit statuses and safety policies".
@@ -28,7 +28,7 @@ from bridge.autopilot.params import BY_NAME
 from bridge.core.clock import STALL_S
 from bridge.core.flight import Flight
 from bridge.record.columns import TRACE_COLUMNS
-from bridge.record.events import RunEvent
+from bridge.record.events import RunEvent, in_time_order
 from bridge.record.joiner import Joined
 from bridge.record.metrics import after_faults, percentiles, plant_summary, summarise
 from bridge.record.policies import (
@@ -125,7 +125,7 @@ def mission_transfer(said: Mapping[str, Any] | None, started: Any = None) -> Mis
 class SessionSummary:
     arrays: dict[str, Any]
     summary: dict[str, Any]
-    notes: list[RunEvent]  # the session's closing events, in order (also at the end of summary["events"])
+    notes: list[RunEvent]  # the session's closing events, in order (also in summary["events"], in time order)
 
 
 def controller_completed(controller: ChildEnd | None) -> bool:
@@ -495,5 +495,5 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
         texts.append(("stall", stalls_text(stalls)))
     t = joined.rows[-1].t if joined.rows else 0.0  # the notes' time: the trace's last row
     notes = [RunEvent.at(t, kind, text, "session") for kind, text in texts]
-    summary["events"] = [e.as_dict() for e in (*events, *notes)]
+    summary["events"] = [e.as_dict() for e in in_time_order((*events, *notes))]  # the notes in their time too
     return SessionSummary(arrays, summary, notes)

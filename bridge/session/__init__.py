@@ -126,8 +126,9 @@ def sitl(
     otherwise the session works in a temporary directory and returns only the arrays.
     ``instance`` N (0-9) picks ports 14560 + N / 14550 + N and sysid N + 1; ``None`` picks
     a free port and no GCS link. ``gcs`` (``HOST:PORT`` or ``"none"``) overrides the GCS
-    address. ``speed`` caps lockstep at that many times real time. ``live`` prints a
-    progress line on stderr (when it is a terminal). ``overrides`` (an
+    address. ``speed`` caps lockstep at that many times real time. ``live`` prints on stderr, once the
+    vehicle is up, where a ground station connects (:mod:`bridge.session.announce`), and a progress line (when
+    stderr is a terminal). ``overrides`` (an
     :class:`~bridge.core.flight.Overrides`), or its fields as keywords, are laid over the mission as for
     :func:`bridge.loop.simulate` (``param_at``: the controller sends each change as PARAM_SET before the
     answer of its step: in lockstep the same step as offline).
@@ -173,7 +174,7 @@ def sitl(
     try:
         s = Session(flight, path, realtime=realtime, instance=instance, gcs=gcs_text, speed=speed,
                     progress=progress, live=live, key=Path(key) if key is not None else None,
-                    await_mission=await_mission)
+                    await_mission=await_mission, announce=live)
         return s.run(plots=plots and keep, keep=keep)
     finally:
         if not keep:

@@ -75,16 +75,18 @@ def check_fleet_ports(count: int, instance: int | None) -> None:
 
 def fly_sessions(flights: Sequence[Flight], ids: Sequence[int], dirs: Sequence[Path], *, realtime: bool,
                  instance: int | None, gcs: str | None, speed: float | None, key: Path | None, plots: bool,
-                 keep: bool, radii: Sequence[float] | None = None, shared_radio: bool = False) -> list[Run]:
+                 keep: bool, radii: Sequence[float] | None = None, shared_radio: bool = False,
+                 announce: bool = False) -> list[Run]:
     """Fly every vehicle's session at once (the module's docstring); each vehicle's :class:`Run`, in order.
     ``radii`` (m, each vehicle's disc), in lockstep: on one shared clock. ``shared_radio``: the fleet's one radio
     (a file in the temporary directory, :func:`bridge.link.radio.make_radio_file`, removed after), vehicle j (from
     0) its user j: in real time through its relay; in lockstep its vehicle (by its gate file) and its controller
-    (``--radio``) take turns on it (:mod:`bridge.link.turns`). A session that fails to start (bad input, a child
-    dead at start) stops the others; its error is raised."""
+    (``--radio``) take turns on it (:mod:`bridge.link.turns`). ``announce``: each session says on stderr, once its
+    vehicle is up, where a ground station connects. A session that fails to start (bad input, a child dead at
+    start) stops the others; its error is raised."""
     with _radio_file(len(flights)) if shared_radio else contextlib.nullcontext() as radio:
         return _fly(flights, ids, dirs, realtime=realtime, instance=instance, gcs=gcs, speed=speed, key=key,
-                    plots=plots, keep=keep, radii=radii, radio=radio)
+                    plots=plots, keep=keep, radii=radii, radio=radio, announce=announce)
 
 
 @contextlib.contextmanager
@@ -119,7 +121,7 @@ def radio_block(ids: Sequence[int], flights: Sequence[Flight], runs: Sequence[Ru
 
 def _fly(flights: Sequence[Flight], ids: Sequence[int], dirs: Sequence[Path], *, realtime: bool,
          instance: int | None, gcs: str | None, speed: float | None, key: Path | None, plots: bool,
-         keep: bool, radii: Sequence[float] | None, radio: Path | None) -> list[Run]:
+         keep: bool, radii: Sequence[float] | None, radio: Path | None, announce: bool) -> list[Run]:
     """:func:`fly_sessions`, ``radio`` the fleet's one radio file (None: each link its own)."""
     warm()  # the fork server's imports (bridge.nodes.forkserver) overlap what follows
     for f in flights:
@@ -133,7 +135,7 @@ def _fly(flights: Sequence[Flight], ids: Sequence[int], dirs: Sequence[Path], *,
     sessions = [Session(f, d, realtime=realtime, instance=None if instance is None else instance + i - 1,
                         gcs=gcs, speed=speed, progress=None, live=False, key=key, sysid=(instance or 0) + i, gate=g,
                         start_timeout=READY_TIMEOUT_S if g is not None else None,
-                        radio=(radio, j) if radio is not None else None)
+                        radio=(radio, j) if radio is not None else None, announce=announce)
                 for j, (f, i, d, g) in enumerate(zip(flights, ids, dirs, gates))]
     runs: list[Run | None] = [None] * len(sessions)
     errors: list[BaseException] = []

@@ -4,7 +4,8 @@ In:  a prepared :class:`~bridge.core.flight.Flight`, a run directory, the sessio
      instance, GCS address, speed x real time, progress, signing key file)
 Out: :meth:`Session.run`: a :class:`~bridge.record.runlog.Run`; the run directory's files (see
      :mod:`bridge.session`); the children's reports (:mod:`bridge.nodes.report`) as events; progress on
-     stderr with ``live``
+     stderr with ``live``; with ``announce``, once the vehicle is up, where a ground station connects
+     (:func:`bridge.session.announce.vehicle_up_line`) on stderr
 
 The children's command lines are :mod:`bridge.session.launch`'s; ``summary.json`` is
 :func:`bridge.record.summary.session_summary`'s, from what the session saw.
@@ -30,6 +31,7 @@ from bridge.record.events import RunEvent
 from bridge.record.joiner import TraceJoiner, off_clock_time
 from bridge.record.runlog import EventLog, Run, RunRecord
 from bridge.record.summary import ChildEnd, SessionFacts, SessionSummary, controller_completed, session_summary
+from bridge.session.announce import vehicle_up_line
 from bridge.session.children import (
     READY_TIMEOUT_S,
     STOP_DEADLINE_S,
@@ -48,8 +50,10 @@ class Session:
     def __init__(self, flight: Flight, path: Path, *, realtime: bool, instance: int | None, gcs: str | None,
                  speed: float | None, progress: Progress | None, live: bool, key: Path | None = None,
                  await_mission: bool = False, sysid: int | None = None, gate: Path | None = None,
-                 start_timeout: float | None = None, radio: tuple[Path, int] | None = None) -> None:
+                 start_timeout: float | None = None, radio: tuple[Path, int] | None = None,
+                 announce: bool = False) -> None:
         self.flight = flight
+        self.announce = announce  # once the vehicle is up, say on stderr where a ground station connects
         self.radio = radio  # a fleet's one radio: its file, this vehicle's user (relay's or controller's --radio)
         self.gate = gate  # a lockstep fleet's shared clock: the vehicle's gate file (bridge.session.fleet)
         self.start_timeout = start_timeout  # s: the controller's --start-timeout (None: its default)
@@ -204,6 +208,9 @@ class Session:
         try:
             ready = self._wait_ready(self.vehicle)
             self._note("started", f"vehicle pid {self.vehicle.pid}: {ready.describe()}", "session")
+            if self.announce:
+                sys.stderr.write(vehicle_up_line(ready, self.await_mission) + "\n")
+                sys.stderr.flush()
             if self.relay is not None:
                 line = self._wait_ready(self.relay).describe()
                 self._note("started", f"relay pid {self.relay.pid}: {line}", "session")

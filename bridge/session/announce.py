@@ -1,0 +1,44 @@
+"""What ``bsst sitl`` tells a person on stderr once a vehicle is up: where a ground station connects.
+
+In:  the vehicle's :class:`~bridge.nodes.report.Ready` (``gcs``: the HOST:PORT its ground-station link sends to,
+     or None; ``sysid``), and whether it waits for a ground station's mission (``--await-mission``)
+Out: :func:`vehicle_up_line`: one line of text (no newline), what :class:`~bridge.session.session.Session`
+     writes on stderr with ``announce``
+
+As PX4 SITL says at its start where each MAVLink instance talks (``INFO [mavlink] mode: Normal, data rate:
+4000000 B/s on udp port 18570 remote port 14550``: ``Mavlink::task_main`` in PX4-Autopilot's
+src/modules/mavlink/mavlink_main.cpp): without it a ``bsst sitl --await-mission`` waited silently, with no word of
+the port a ground station listens on. The vehicle sends its ground-station telemetry to that address (it is
+``udpout``), so the ground station listens there (``udpin``); with no GCS link it says so.
+"""
+
+from __future__ import annotations
+
+from bridge.mavlink.address import GCS_PORT
+from bridge.nodes.report import Ready
+
+PREFIX = "bsst sitl: "
+
+
+def _listen_hints(hostport: str) -> str:
+    """How the usual ground stations listen on ``hostport`` (HOST:PORT), for the line."""
+    host, _, port = hostport.rpartition(":")
+    local = host.startswith("127.") or host == "localhost"
+    qgc = "QGroundControl listens there by default; " if local and port == str(GCS_PORT) else ""
+    return (f"{qgc}mavproxy.py --master=udpin:{host if local else '0.0.0.0'}:{port}; "
+            f"MAVSDK udpin://0.0.0.0:{port}")
+
+
+def vehicle_up_line(ready: Ready, await_mission: bool) -> str:
+    """The line (no newline) saying that the vehicle ``ready`` describes is up, where a ground station connects
+    (the address its ground-station link sends to, its system id) and, with ``await_mission``, that the session
+    waits, with no time limit, for a ground station's mission."""
+    who = f"vehicle up, sysid {ready.sysid}"
+    if ready.gcs is None:
+        return f"{PREFIX}{who}: no ground-station link"
+    line = (f"{PREFIX}{who}: a ground station connects by listening on UDP {ready.gcs}, where the vehicle sends "
+            f"its telemetry ({_listen_hints(ready.gcs)})")
+    if await_mission:
+        line += ("; waiting, with no time limit (Ctrl-C stops), for a ground station to upload a mission and "
+                 "start it: MISSION_START, or AUTO.MISSION and arm")
+    return line

@@ -1,0 +1,110 @@
+"""Covers bridge.session.announce, bridge.session and bridge.cli.flying: what ``bsst sitl`` tells a person.
+
+Found by a new user's audit: ``bsst sitl --await-mission`` said nothing while it waited for a ground station's
+mission, even on a terminal (where to connect QGroundControl, MAVSDK or MAVProxy was nowhere but the docs), and
+the printed summary listed the session's closing notes (``ended``, ``stall``, ``policy``) after the vehicle's end
+landing, out of time order. Now every ``bsst sitl`` says on stderr, as soon as its vehicle is up, where a ground
+station connects (``--await-mission``: that it waits, with no time limit), and lists its events in time order
+(stdout keeps its contract: the summary, nothing else). Real ``bsst sitl`` processes on 127.0.0.1.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import signal
+import socket
+from pathlib import Path
+from typing import Any
+
+import pytest
+from pymavlink.dialects.v20 import common as mavlink
+
+from bridge.mavlink.endpoint import GCS_PORT
+from bridge.nodes.report import Ready
+from bridge.session import instance_slot
+from bridge.session.announce import vehicle_up_line
+from tests.sitlkit import ROOT, Proc, run_bsst
+from tests.waiting import wait_for
+
+pytestmark = pytest.mark.process  # starts processes and opens sockets
+
+UP = "bsst sitl: vehicle up, sysid "
+SINE_2S = 'name = "sine2"\nduration_s = 2.0\n[trajectory]\nkind = "sine"\n'
+
+
+def said_up(n: int, sysid: int) -> str:
+    """The line of a vehicle of system ``sysid`` whose ground-station link sends to 127.0.0.1:14550 + ``n``."""
+    port = GCS_PORT + n
+    return (f"{UP}{sysid}: a ground station connects by listening on UDP 127.0.0.1:{port}, where the vehicle sends "
+            f"its telemetry ({'QGroundControl listens there by default; ' if port == GCS_PORT else ''}"
+            f"mavproxy.py --master=udpin:127.0.0.1:{port}; MAVSDK udpin://0.0.0.0:{port})")
+
+
+def test_await_mission_says_at_once_where_a_ground_station_connects_and_that_it_waits(tmp_path: Path) -> None:
+    """``bsst sitl --await-mission`` says, while it waits and before any ground station is there, the port a ground
+    station listens on and the vehicle's system id, and that it waits with no time limit for an upload and a start;
+    a ground station that listens there hears that vehicle's heartbeats. Ctrl-C ends the wait (exit 1, aborted)."""
+    out = tmp_path / "run"
+    with instance_slot() as n:
+        sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--out", str(out), "--no-plots", cwd=ROOT)
+        gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            line = sitl.wait_line(lambda s: s.startswith(UP), timeout=60)
+            assert line == said_up(n, n + 1) + ("; waiting, with no time limit (Ctrl-C stops), for a ground station to "
+                                                "upload a mission and start it: MISSION_START, or AUTO.MISSION and "
+                                                "arm"), line
+            gcs.bind(("127.0.0.1", GCS_PORT + n))  # what the line says to do
+            gcs.settimeout(0.5)
+            mav, beats = mavlink.MAVLink(None), []
+
+            def heartbeat() -> bool:
+                with contextlib.suppress(TimeoutError):
+                    beats.extend(m for m in mav.parse_buffer(gcs.recv(65535)) or []
+                                 if m.get_type() == "HEARTBEAT" and m.get_srcSystem() == n + 1)
+                return bool(beats)
+
+            wait_for(heartbeat, 30.0, f"a HEARTBEAT of system {n + 1} on 127.0.0.1:{GCS_PORT + n}")
+            sitl.p.send_signal(signal.SIGINT)
+            assert sitl.p.wait(timeout=60) == 1
+        finally:
+            sitl.stop()
+            gcs.close()
+    assert json.loads((out / "summary.json").read_text())["outcome"] == "aborted"
+    assert sum(ln.startswith(UP) for ln in sitl.lines) == 1, sitl.lines
+
+
+def _event_times(stdout: str) -> list[float]:
+    return [float(ln.split()[1].removeprefix("t=")) for ln in stdout.splitlines() if ln.startswith("event t=")]
+
+
+def test_a_mission_says_where_a_ground_station_connects_on_stderr_and_lists_its_events_in_time_order(
+        tmp_path: Path) -> None:
+    """``bsst sitl MISSION``: stderr is the one line (no wait: the controller flies the file), stdout the summary as
+    before; its events, and summary.json's, in time order: the session's ``ended`` (stamped at the trace's last row,
+    1.996 s) before the end landing's ``end``, ``landed`` and ``disarmed`` (it was printed last, after 4.566 s)."""
+    (tmp_path / "m.toml").write_text(SINE_2S)
+    with instance_slot() as n:
+        r = run_bsst("sitl", str(tmp_path / "m.toml"), "--instance", str(n), "--out", str(tmp_path / "run"),
+                     "--no-plots", timeout=120)
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    assert r.stderr.splitlines() == [said_up(n, n + 1)], r.stderr
+    assert r.stdout.startswith("mission sine2  controller bsst") and UP not in r.stdout, r.stdout
+    times = _event_times(r.stdout)
+    assert times == sorted(times) and len(times) >= 8, r.stdout
+    kinds = [ln.split()[2].rstrip(":") for ln in r.stdout.splitlines() if ln.startswith("event t=")]
+    assert kinds.index("ended") < kinds.index("end") < kinds.index("landed") < kinds.index("disarmed"), kinds
+    events: list[dict[str, Any]] = json.loads((tmp_path / "run" / "summary.json").read_text())["events"]
+    assert [round(e["t"], 3) for e in events] == times and len(events) <= 16  # the same list, printed whole
+
+
+def test_a_fleet_says_it_for_each_vehicle(tmp_path: Path) -> None:
+    """``bsst sitl --vehicles``: each vehicle's line, its own system id, the fleet's one ground-station port; with
+    no ground-station link the line says so."""
+    (tmp_path / "m.toml").write_text(SINE_2S.replace("2.0", "0.5"))
+    with instance_slot() as n:
+        r = run_bsst("sitl", str(tmp_path / "m.toml"), "--vehicles", "1", "--instance", str(n), "--out",
+                     str(tmp_path / "run"), "--no-plots", timeout=120)
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    assert r.stderr.splitlines() == [said_up(n, n + 1)], r.stderr
+    assert vehicle_up_line(Ready("vehicle", sysid=3), await_mission=True) == f"{UP}3: no ground-station link"
