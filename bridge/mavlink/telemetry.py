@@ -1,17 +1,19 @@
 """What the vehicle tells a ground station (docs/design.md, "The MAVLink contract"), built from the paper state.
 
 In:  the paper state (eq. 7, NWU: m, m/s, rad, rad/s), simulation time (``time_boot_ms`` ms,
-     ``time_usec`` us), rotor speeds and omega_max (rad/s), the home (deg, deg, m AMSL), the
+     ``time_usec`` us), rotor speeds and omega_max (rad/s), the home (deg, deg, m AMSL: the paper frame's
+     origin), the vehicle's local origin (x, y m in the paper frame: the ground under its start), the
      vehicle's sysid and status (load, health, on the ground, descending)
 Out: pymavlink messages in NED / FRD (listed below): angles rad, rates rad/s, position m, velocity
      m/s; ``GLOBAL_POSITION_INT`` in degE7, mm, cm/s and cdeg; rotor outputs as fractions of omega_max
 
 Pure functions from the plant's state (eq. 7, NWU) to pymavlink messages in MAVLink's
 frames (NED / FRD, via :mod:`bridge.core.wire`): ``ATTITUDE``, ``ATTITUDE_QUATERNION``,
-``LOCAL_POSITION_NED``, ``GLOBAL_POSITION_INT`` (PX4's reprojection about a configurable home),
-``HOME_POSITION``, ``MISSION_CURRENT``, ``SYS_STATUS``, ``EXTENDED_SYS_STATE``, ``ACTUATOR_OUTPUT_STATUS``,
-``AUTOPILOT_VERSION``. ``time_boot_ms`` is the vehicle's simulation time, as PX4 stamps it
-in lockstep.
+``LOCAL_POSITION_NED`` (about the vehicle's own local origin, as PX4's EKF2: docs/ground-station.md, "Which frame
+each position is in"), ``GLOBAL_POSITION_INT`` (PX4's reprojection about a configurable home: absolute),
+``HOME_POSITION`` (the local origin's latitude and longitude), ``MISSION_CURRENT``, ``SYS_STATUS``,
+``EXTENDED_SYS_STATE``, ``ACTUATOR_OUTPUT_STATUS``, ``AUTOPILOT_VERSION``. ``time_boot_ms`` is the vehicle's
+simulation time, as PX4 stamps it in lockstep.
 
 From the vehicle's sensors (:class:`plant.sensors.SensorSuite`, paper frame, SI), not the true state:
 ``HIGHRES_IMU`` (FRD specific force m/s^2 and rates rad/s, barometric pressure hPa and pressure
@@ -64,10 +66,14 @@ def attitude(X: tuple[float, ...], ms: int) -> list[Any]:
             mavlink.MAVLink_attitude_quaternion_message(ms, w, x, y, z, p, q, r)]
 
 
-def local_position(X: tuple[float, ...], ms: int) -> Any:
-    """``LOCAL_POSITION_NED``: position (m) and velocity (m/s) in NED."""
+def local_position(X: tuple[float, ...], ms: int, origin: tuple[float, float] = (0.0, 0.0)) -> Any:
+    """``LOCAL_POSITION_NED``: position (m) and velocity (m/s) in NED about the vehicle's local origin, ``origin``
+    (x, y m in the paper frame: the ground under its start, where PX4's EKF2 sets its origin at boot)."""
     n = paper_to_ned(X)
-    return mavlink.MAVLink_local_position_ned_message(ms, *n["pos"], *n["vel"])
+    north, east, down = n["pos"]
+    if origin != (0.0, 0.0):  # (at the world's origin the values as they are: -0.0 stays -0.0 on the wire)
+        north, east = north - origin[0], east + origin[1]  # NED's east is the paper frame's -y
+    return mavlink.MAVLink_local_position_ned_message(ms, north, east, down, *n["vel"])
 
 
 def global_position(X: tuple[float, ...], ms: int, home: Home) -> Any:
@@ -102,10 +108,13 @@ def altitude(X: tuple[float, ...], home: Home, usec: int) -> Any:
     return mavlink.MAVLink_altitude_message(usec, home.amsl(up), home.amsl(up), up, up, math.nan, math.nan)
 
 
-def home_position(home: Home) -> Any:
-    """``HOME_POSITION``: the local origin, level, facing north."""
+def home_position(home: Home, origin: tuple[float, float] = (0.0, 0.0)) -> Any:
+    """``HOME_POSITION``: the vehicle's local origin ``origin`` (x, y m in the paper frame about ``home``, on the
+    ground: :func:`local_position`'s), level, facing north: its latitude and longitude, ``home``'s altitude, and
+    x = y = z = 0 (PX4's home is where the vehicle armed on the ground, its local position there about 0)."""
+    lat, lon = (home.lat, home.lon) if origin == (0.0, 0.0) else home.global_of(origin[0], -origin[1], 0.0)[:2]
     return mavlink.MAVLink_home_position_message(
-        int(round(home.lat * 1e7)), int(round(home.lon * 1e7)), int(round(home.alt * 1000.0)),
+        int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(home.alt * 1000.0)),
         0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0)
 
 

@@ -407,8 +407,8 @@ class Vehicle:
         E = self.sim.published()
         return E, self.sim.nees(E)
 
-    def _view(self) -> VehicleView:
-        """The vehicle now, as its telemetry reads it."""
+    def _view(self, own: bool = True) -> VehicleView:
+        """The vehicle now, as its telemetry reads it; ``own``: about its local origin (VehicleView.origin)."""
         sim, plant, cfg = self.sim, self.plant, self.cfg
         mission = self.missions.mission
         mode = MISSION if self.missions.shows_mission(sim.armed, sim.mode == OFFBOARD) else sim.mode
@@ -416,14 +416,15 @@ class Vehicle:
                            plant.on_ground, plant.omega, self.flight.profile.omega_max, self.load, sim.sensors,
                            cfg.home, cfg.sysid, (mission.current, len(mission.items), self.missions.mission_state),
                            plant.battery, sim.battery_watch.level(plant.battery.remaining) if plant.battery else 0,
-                           sim.prearm_refusal, sim.position.ekf_valid, lambda: health_of(sim))
+                           sim.prearm_refusal, sim.position.ekf_valid, lambda: health_of(sim),
+                           (sim.home[0], sim.home[1]) if own else (0.0, 0.0))
 
     def _heartbeat(self) -> Any:
         return heartbeat(self._view())
 
-    def _message(self, mid: int) -> list[Any]:
-        """The message(s) with id ``mid`` for a stream or a REQUEST_MESSAGE ([] if none)."""
-        return message(mid, self._view())
+    def _message(self, mid: int, own: bool = True) -> list[Any]:
+        """The message(s) with id ``mid`` for a stream or a REQUEST_MESSAGE ([] if none; ``own``: :meth:`_view`'s)."""
+        return message(mid, self._view(own))
 
     def _housekeeping(self) -> None:
         """Wall-clock duties: GCS commands, heartbeat, streams, flushing files."""
@@ -451,7 +452,7 @@ class Vehicle:
             nxt = min(nxt, *self.streams.due.values())
         if self.link.peer is not None and self.ctl_streams.due:
             with self.receiver.charged():
-                self.ctl_streams.send_due(now, lambda mid: self.link.send_many(self._message(mid)))
+                self.ctl_streams.send_due(now, lambda mid: self.link.send_many(self._message(mid, False)))
             nxt = min(nxt, *self.ctl_streams.due.values())
         if self.rows is not None:
             self.rows.flush()

@@ -69,6 +69,9 @@ class VehicleView:
     prearm_refusal: Callable[[], str | None] = lambda: None
     position_valid: bool = True  # the estimate's horizontal position, as EKF2 says (positionloss): GLOBAL_POSITION_INT
     health: Callable[[], EstimateHealth | None] = lambda: None  # ESTIMATOR_STATUS's (None under truth: no estimator)
+    # the local origin (x, y m, paper frame): the ground under the start on the GCS link, as PX4's EKF2 sets it where
+    # the vehicle boots; (0, 0), the paper frame's own, on the controller link (its ODOMETRY's frame)
+    origin: tuple[float, float] = (0.0, 0.0)
 
 
 def battery_fields(b: Battery) -> tuple[int, int, int]:
@@ -171,7 +174,8 @@ def _sensor(mid: int) -> Stream:
 STREAMS: dict[int, Stream] = {
     mavlink.MAVLINK_MSG_ID_ATTITUDE: Stream(_if_finite(lambda v: tm.attitude(v.X, _ms(v))[:1]), 0.04),
     mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: Stream(_if_finite(lambda v: tm.attitude(v.X, _ms(v))[1:]), 0.04),
-    mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: Stream(_if_finite(lambda v: [tm.local_position(v.X, _ms(v))]), 0.04),
+    mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: Stream(_if_finite(lambda v: [tm.local_position(v.X, _ms(v), v.origin)]),
+                                                       0.04),
     # none while the horizontal position is invalid: PX4 v1.14's EKF2 publishes no global position then
     mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: Stream(
         _if_finite(lambda v: [tm.global_position(v.X, _ms(v), v.home)] if v.position_valid else []), 0.1),
@@ -184,7 +188,7 @@ STREAMS: dict[int, Stream] = {
     mavlink.MAVLINK_MSG_ID_VFR_HUD: Stream(_if_finite(lambda v: [tm.vfr_hud(v.X, v.home, _thrust(v))]), VFR_HUD_S),
     mavlink.MAVLINK_MSG_ID_ALTITUDE: Stream(_if_finite(lambda v: [tm.altitude(v.X, v.home, int(v.t * 1e6))]),
                                             ALTITUDE_S),
-    mavlink.MAVLINK_MSG_ID_HOME_POSITION: Stream(lambda v: [tm.home_position(v.home)], HOME_POSITION_S),
+    mavlink.MAVLINK_MSG_ID_HOME_POSITION: Stream(lambda v: [tm.home_position(v.home, v.origin)], HOME_POSITION_S),
     # PX4's mission manager sends it at 1 Hz (its _slow_rate_limiter), and at once on a change
     mavlink.MAVLINK_MSG_ID_MISSION_CURRENT: Stream(lambda v: tm.mission_current(*v.mission), 1.0),
     mavlink.MAVLINK_MSG_ID_HEARTBEAT: Stream(lambda v: [heartbeat(v)], None),  # its own 1 Hz clock
