@@ -115,8 +115,11 @@ def test_mavsdk_sees_the_gps_lost_the_descent_and_the_position_back(tmp_path):
         finally:
             assert v.stop() == 0
     steps = ("found", "ready", "at_height", "unhealthy", "descending", "disarmed", "healthy", "positions_again")
-    assert {k: got[k] for k in steps} == dict.fromkeys(steps, True), got
-    assert (got["arm"], got["takeoff"], got["off"], got["on"]) == ("SUCCESS",) * 4, got
+    # a failure shows what MAVSDK was told and what the vehicle did, not a dict pytest cuts short
+    shown = ({k: got.get(k) for k in (*steps, "arm", "takeoff", "off", "on", "modes")},
+             [(e.t, e.kind, e.text) for e in v.reports() if isinstance(e, Event)])
+    assert {k: got[k] for k in steps} == dict.fromkeys(steps, True), shown
+    assert (got["arm"], got["takeoff"], got["off"], got["on"]) == ("SUCCESS",) * 4, shown
     assert got["hold"] == "COMMAND_DENIED", got  # and the descent went on in LAND, to the disarm
     # which clears the failsafe (PX4's framework.cpp): HOLD again, the mode before it (docs/ground-station.md)
     assert got["modes"][-3:] == ["HOLD", "LAND", "HOLD"], got["modes"]
