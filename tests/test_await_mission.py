@@ -656,8 +656,9 @@ def test_the_vehicle_starts_a_mission_only_when_asked_to_await_one():
         v.missions.flight_armed()  # (as the controller's arm does): item 0 current, the mission ACTIVE
         assert v.missions.watch is not None and v.missions.mission_state == M.MISSION_STATE_ACTIVE
         exchange(v, M.MAVLink_mission_count_message(1, 1, 0, 0), "MISSION_ACK")  # a ground station clears it
+        assert v.missions.watch is None and "cleared" in v.sim.events[-1].text  # no reached for a gone item
         v.missions.flight_step(0.0, (0.0,) * 12, True)
-        assert v.missions.watch is None and "replaced" in v.sim.events[-1].text  # no reached for a gone item
+        assert v.missions.watch is None
     finally:
         for v in made:
             v.close()

@@ -1,10 +1,14 @@
-"""Covers bridge.nodes.vehicle.mission and bridge.nodes.vehicle.missiontransfer: the mission while it is flown.
+"""Covers bridge.nodes.vehicle.mission, bridge.nodes.vehicle.missiontransfer and bridge.nodes.vehicle.setcurrent: the
+mission while it is flown.
 
 ``bsst sitl --await-mission`` (lockstep) and a pymavlink ground station on 127.0.0.1: the controller flies the
-whole trajectory, planned from item 0, so a current item a ground station chose (MISSION_SET_CURRENT) is refused at
-the start instead of being dropped, and while the mission flies an upload, a clear and a new current item are
-refused (MAV_MISSION_ERROR and a STATUSTEXT saying why) instead of being taken and not flown; a fence may still
-change. Every wait is on a message with a deadline.
+whole trajectory, planned from item 0, so a current item a ground station chose (MISSION_SET_CURRENT, or the command
+DO_SET_MISSION_CURRENT) is refused at the start instead of being dropped, and while the mission flies an upload, a
+clear and a new current item are refused (MAV_MISSION_ERROR or DENIED, and a STATUSTEXT saying why) instead of being
+taken and not flown; a fence may still change. ``bsst vehicle`` and ``bsst controller --await-mission`` on the wall
+clock: once the mission has ended in HOLD (armed, the controller gone) a ground station's upload is taken, as on PX4.
+A start refused for an item not flown says so whole, the commands flown listed (a STATUSTEXT once cut at 200
+characters). Every wait is on a message or a process with a deadline.
 """
 
 from __future__ import annotations
@@ -19,8 +23,12 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as M
 
 from bridge.mavlink.endpoint import GCS_PORT
+from bridge.mavlink.telemetry import StatusTextJoiner
+from bridge.nodes.report import Ready
 from bridge.session import instance_slot
-from tests.sitlkit import Proc
+from missions import MISSION_DIR
+from tests.sitlkit import ROOT, Proc
+from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -72,6 +80,24 @@ class _Gcs:
     def text(self, part: str) -> str:
         return self.recv("STATUSTEXT", cond=f"{part!r} in STATUSTEXT.text").text
 
+    def command(self, cmd: int, *params: float) -> int:
+        """COMMAND_LONG ``cmd`` with ``params`` (the rest 0): its COMMAND_ACK's result."""
+        self.c.mav.command_long_send(*self.t, cmd, 0, *params, *[0.0] * (7 - len(params)))
+        return self.recv("COMMAND_ACK", cond=f"COMMAND_ACK.command=={cmd}").result
+
+    def joined_text(self, part: str, timeout: float = 5.0) -> str:
+        """The first STATUSTEXT, its chunks joined (MAVLink 2's id and chunk_seq), that contains ``part``."""
+        joiner = StatusTextJoiner()
+        found: list[str] = []
+
+        def seen() -> bool:
+            m = self.c.recv_match(type="STATUSTEXT", blocking=True, timeout=0.5)
+            found.extend(t for _, t in (joiner.add(m, 0.0) if m is not None else []) if part in t)
+            return bool(found)
+
+        wait_for(seen, timeout, f"a STATUSTEXT saying {part!r}", poll_s=0.0)
+        return found[0]
+
 
 def test_a_chosen_current_item_is_refused_at_the_start_and_the_flown_mission_cannot_change(tmp_path):
     """MISSION_SET_CURRENT 1 is taken (MISSION_CURRENT says 1, as PX4), but MISSION_START is then DENIED, saying
@@ -121,3 +147,114 @@ def test_a_chosen_current_item_is_refused_at_the_start_and_the_flown_mission_can
     assert not any("replaced by an upload" in t for t in texts), texts
     assert sum("mission: uploaded" in t for t in texts) == 1
     assert not any("mission: current item 2" in t or "mission: cleared" in t for t in texts), texts
+
+
+def test_do_set_mission_current_is_answered_as_px4_before_the_start_and_refused_while_the_mission_flies(tmp_path):
+    """MAV_CMD_DO_SET_MISSION_CURRENT (224; the vehicle once answered it UNSUPPORTED), as PX4's navigator answers it:
+    without a mission FAILED; item 1 ACCEPTED with MISSION_CURRENT 1 in its datagram; an item out of range FAILED; a
+    param1 below -1 or a param2 other than 0 / 1 DENIED (each with a STATUSTEXT saying why); -1 ACCEPTED, the
+    current item unchanged. Item 1 chosen, MISSION_START is DENIED as after MISSION_SET_CURRENT; item 0 again, the
+    start is ACCEPTED, and while the mission flies the command is DENIED (the controller cannot jump). The flight
+    completes from item 0; the choices are ``mission`` events naming the ground station."""
+    out = tmp_path / "run"
+    with instance_slot() as n:
+        sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--out", str(out), "--no-plots")
+        gcs = None
+        try:
+            gcs = _Gcs(n)
+            cmd = M.MAV_CMD_DO_SET_MISSION_CURRENT
+            assert gcs.command(cmd, 0) == M.MAV_RESULT_FAILED
+            assert "no mission held" in gcs.joined_text("DO_SET_MISSION_CURRENT")
+            assert gcs.upload(_items()) == M.MAV_MISSION_ACCEPTED
+            assert gcs.command(cmd, 1) == M.MAV_RESULT_ACCEPTED
+            gcs.recv("MISSION_CURRENT", cond="MISSION_CURRENT.seq==1")
+            assert gcs.command(cmd, 5) == M.MAV_RESULT_FAILED
+            assert "item 5 is not in the mission (items 0 to 2)" in gcs.joined_text("DO_SET_MISSION_CURRENT")
+            assert gcs.command(cmd, -2) == M.MAV_RESULT_DENIED
+            assert "param1" in gcs.joined_text("DO_SET_MISSION_CURRENT")
+            assert gcs.command(cmd, 1, 2) == M.MAV_RESULT_DENIED
+            assert "param2" in gcs.joined_text("DO_SET_MISSION_CURRENT")
+            assert gcs.command(cmd, -1) == M.MAV_RESULT_ACCEPTED
+            gcs.recv("MISSION_CURRENT", cond="MISSION_CURRENT.seq==1")
+            assert gcs.start() == M.MAV_RESULT_DENIED
+            assert "the current item is 1" in gcs.text("MISSION_START: the current")
+            assert gcs.command(cmd, 0) == M.MAV_RESULT_ACCEPTED
+            gcs.recv("MISSION_CURRENT", cond="MISSION_CURRENT.seq==0")
+            assert gcs.start() == M.MAV_RESULT_ACCEPTED
+            gcs.recv("HEARTBEAT", 30, f"HEARTBEAT.get_srcComponent()==1 and HEARTBEAT.base_mode & 128 and "
+                                      f"HEARTBEAT.custom_mode=={AUTO_MISSION}")
+            assert gcs.command(cmd, 2) == M.MAV_RESULT_DENIED
+            assert "flying the mission" in gcs.joined_text("DO_SET_MISSION_CURRENT")
+            rc = sitl.p.wait(timeout=120)
+        finally:
+            if gcs is not None:
+                gcs.c.close()
+            sitl.stop()
+    summary = json.loads((out / "summary.json").read_text())
+    assert rc == 0 and summary["outcome"] == "completed", "\n".join(sitl.lines[-20:])
+    texts = (out / "events.log").read_text().splitlines()
+    chosen = [t for t in texts if "mission: current item" in t]
+    assert len(chosen) == 3 and all("DO_SET_MISSION_CURRENT" in t and "255:190" in t for t in chosen), chosen
+    assert not any("current item 2" in t for t in texts), texts
+
+
+def test_an_upload_after_the_mission_ended_in_hold_is_taken_while_armed_as_on_px4(tmp_path):
+    """``bsst vehicle`` and ``bsst controller`` awaiting a mission on the wall clock, the mission's end action HOLD:
+    a ground station uploads a takeoff and a waypoint and starts them; the controller flies them, hands the vehicle
+    HOLD and exits. The vehicle holds, armed, its mission COMPLETE; an upload then is ACCEPTED (it was refused until
+    a disarm: the controller flies nothing any more, and PX4 takes an upload at any time), the new mission
+    NOT_STARTED, and DO_SET_MISSION_CURRENT is ACCEPTED on it; the vehicle still holds, armed. Before, a start with
+    an item this vehicle does not fly (DO_JUMP) is refused saying so whole, every command it flies listed (its
+    STATUSTEXT was once cut at 200 characters, the list with it)."""
+    settings = tmp_path / "hold.toml"
+    settings.write_text((MISSION_DIR / "sine.toml").read_text() + '\n[end]\naction = "hold"\n')
+    out = tmp_path / "run"
+    north = HOME[0] + 900
+    spec = ((M.MAV_CMD_NAV_TAKEOFF, HOME[0], 3.0), (M.MAV_CMD_NAV_WAYPOINT, north, 3.0))
+    items = [M.MAVLink_mission_item_int_message(0, 0, seq, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, c, 0, 1, 0.0, 0.0,
+                                                0.0, math.nan, lat, HOME[1], z, 0)
+             for seq, (c, lat, z) in enumerate(spec)]
+
+    def spec_of(it: Any) -> tuple[Any, ...]:  # an item's fields after target and seq
+        return (it.frame, it.command, it.current, it.autocontinue, it.param1, it.param2, it.param3, it.param4, it.x,
+                it.y, it.z, it.mission_type)
+    hold = (4 << 16) | (3 << 24)
+    with instance_slot() as n:
+        vehicle = Proc.bsst("vehicle", str(settings), "--await-mission", "--realtime", "--instance", str(n),
+                            "--out", str(out), cwd=ROOT)
+        controller = gcs = None
+        try:
+            vehicle.wait_report(Ready, timeout=60)
+            gcs = _Gcs(n)
+            controller = Proc.bsst("controller", str(settings), "--await-mission", "--realtime", "--instance", str(n),
+                                   "--out", str(out), "--overwrite", cwd=ROOT)
+            controller.wait_report(Ready, timeout=60)
+            jump = M.MAVLink_mission_item_int_message(0, 0, 1, M.MAV_FRAME_MISSION, M.MAV_CMD_DO_JUMP, 0, 1, 0.0,
+                                                      1.0, 0.0, 0.0, 0, 0, 0.0, 0)
+            last = M.MAVLink_mission_item_int_message(0, 0, 2, *spec_of(items[1]))
+            assert gcs.upload([items[0], jump, last]) == M.MAV_MISSION_ACCEPTED  # PX4 takes DO_JUMP
+            assert gcs.start() == M.MAV_RESULT_DENIED
+            said = gcs.joined_text("MISSION_START: the mission cannot be flown")
+            assert gcs.upload(items) == M.MAV_MISSION_ACCEPTED
+            assert gcs.start() == M.MAV_RESULT_ACCEPTED
+            assert controller.p.wait(timeout=120) == 0, "\n".join(controller.lines[-20:])
+            gcs.recv("HEARTBEAT", 10, f"HEARTBEAT.get_srcComponent()==1 and HEARTBEAT.base_mode & 128 and "
+                                      f"HEARTBEAT.custom_mode=={hold}")
+            gcs.recv("MISSION_CURRENT", 5, f"MISSION_CURRENT.mission_state=={M.MISSION_STATE_COMPLETE}")
+            assert gcs.upload(_items()) == M.MAV_MISSION_ACCEPTED
+            gcs.recv("MISSION_CURRENT", 5, f"MISSION_CURRENT.total==3 and "
+                                           f"MISSION_CURRENT.mission_state=={M.MISSION_STATE_NOT_STARTED}")
+            assert gcs.command(M.MAV_CMD_DO_SET_MISSION_CURRENT, 2) == M.MAV_RESULT_ACCEPTED
+            gcs.recv("MISSION_CURRENT", cond="MISSION_CURRENT.seq==2")
+            gcs.recv("HEARTBEAT", 5, f"HEARTBEAT.get_srcComponent()==1 and HEARTBEAT.base_mode & 128 and "
+                                     f"HEARTBEAT.custom_mode=={hold}")  # still holding, armed
+        finally:
+            if gcs is not None:
+                gcs.c.close()
+            if controller is not None:
+                controller.stop()
+            vehicle.stop()
+    assert "item 1 (DO_JUMP (177)): not supported" in said and said.endswith("DO_CHANGE_SPEED (178)"), said
+    assert len(said) > 200, said
+    log = "\n".join(vehicle.lines)
+    assert "uploaded 3 items" in log and "disarmed" not in log, vehicle.lines[-20:]

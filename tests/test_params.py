@@ -370,7 +370,8 @@ def test_every_parameter_has_its_range_in_the_usage_and_the_ground_station_pages
 
 def test_a_long_refusal_goes_out_whole_in_statustext_chunks():
     """MAVLink 2's chunked STATUSTEXT: one id, chunk_seq 0.., a short last chunk (an empty one after an
-    exact multiple of 50), the text whole up to 200 characters; a short text is one plain message."""
+    exact multiple of 50), the text whole up to 500 bytes (a longer one cut there, ending in "..."); a short text
+    is one plain message."""
     from bridge.mavlink.telemetry import statustext
 
     assert [(m.id, m.chunk_seq) for m in statustext(4, "short", 7)] == [(0, 0)]
@@ -379,7 +380,9 @@ def test_a_long_refusal_goes_out_whole_in_statustext_chunks():
     assert [(m.id, m.chunk_seq) for m in msgs] == [(7, 0), (7, 1)]
     assert b"".join(m.text if isinstance(m.text, bytes) else m.text.encode() for m in msgs) == why.encode()
     assert [len(m.text) for m in statustext(4, "x" * 100, 3)] == [50, 50, 0]
-    assert len(statustext(4, "y" * 1000, 3)) == 5  # 200 characters at most, then the empty end
+    long = statustext(4, "y" * 1000, 3)
+    assert len(long) == 11 and long[-2].text.endswith("...") and long[-1].text == ""  # 500 bytes, the empty end
+    assert len(statustext(4, "z" * 239, 3)) == 5  # the longest the vehicle says (a start refused), whole
 
 
 # -- issue 22: parameters as typed flags, float32 bounds, two entries for one setting ------------------

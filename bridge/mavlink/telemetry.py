@@ -175,15 +175,20 @@ def actuator_outputs(usec: int, omega: tuple[float, ...], omega_max: float) -> A
 
 
 STATUSTEXT_CHUNK = 50  # characters of one STATUSTEXT's text
-STATUSTEXT_MAX = 200  # characters of one text at most (four chunks): a reply stays one small datagram
+# bytes of one text at most (ten chunks, about 700 bytes on the wire: a reply stays one small datagram). The longest
+# the vehicle says is a start refused for an item it does not fly, with the commands it does: 239 characters
+STATUSTEXT_MAX = 500
+CUT = b"..."  # the end of a text longer than STATUSTEXT_MAX, in its place: the reader sees it was cut
 
 
 def statustext(severity: int, text: str, text_id: int) -> list[Any]:
-    """STATUSTEXT(s) saying ``text`` (at most :data:`STATUSTEXT_MAX` characters): one message if it
-    fits in 50, else MAVLink 2's chunks (the same ``id`` = ``text_id``, 1..65535, and ``chunk_seq``
-    0, 1, ...; a last chunk shorter than 50, empty if need be, ends it), which MAVSDK and
-    QGroundControl join again; a ground station that does not shows each chunk as a line."""
-    data = text[:STATUSTEXT_MAX].encode("utf-8", errors="replace")[:STATUSTEXT_MAX]
+    """STATUSTEXT(s) saying ``text`` (at most :data:`STATUSTEXT_MAX` bytes of UTF-8; a longer one is cut there and
+    ends in :data:`CUT`): one message if it fits in 50, else MAVLink 2's chunks (the same ``id`` = ``text_id``,
+    1..65535, and ``chunk_seq`` 0, 1, ...; a last chunk shorter than 50, empty if need be, ends it), which MAVSDK
+    and QGroundControl join again; a ground station that does not shows each chunk as a line."""
+    data = text.encode("utf-8", errors="replace")
+    if len(data) > STATUSTEXT_MAX:
+        data = data[:STATUSTEXT_MAX - len(CUT)] + CUT
     if len(data) <= STATUSTEXT_CHUNK:
         return [mavlink.MAVLink_statustext_message(severity, data)]
     chunks = [data[i:i + STATUSTEXT_CHUNK] for i in range(0, len(data), STATUSTEXT_CHUNK)]

@@ -1,14 +1,15 @@
 """Commands MAVSDK's Action and Failure plugins send besides arming and modes, as PX4 takes them: failure injection,
-speed, termination, protocol version.
+speed, termination, protocol version; and a ground station's DO_SET_MISSION_CURRENT (:mod:`.setcurrent`).
 
 In:  MAV_CMD_INJECT_FAILURE (:mod:`.injection`), MAV_CMD_DO_CHANGE_SPEED (param1 speed type, param2 m/s: > 0 sets,
      else the default), MAV_CMD_DO_FLIGHTTERMINATION (param1: > 1.5 lockdown, > 0.5 terminate, else cancel),
-     MAV_CMD_REQUEST_PROTOCOL_VERSION, from a sender with authority (:class:`~bridge.autopilot.vehicleevents.Sender`);
-     the simulated vehicle and its step clock
+     MAV_CMD_REQUEST_PROTOCOL_VERSION, MAV_CMD_DO_SET_MISSION_CURRENT (:mod:`.setcurrent`), from a sender with
+     authority (:class:`~bridge.autopilot.vehicleevents.Sender`); the simulated vehicle and its step clock
 Out: the MAV_RESULT and why a command was refused (the commander's STATUSTEXT); an injection's events scheduled
      (:meth:`~bridge.autopilot.simvehicle.SimVehicle.schedule`); a ``speed`` event, the vehicle's own
      controller's horizontal speed (:meth:`~bridge.autopilot.failsafe.OnboardController.cruise`); a ``terminated``
-     event, the motors off (disarmed), mode TERMINATION (latched: :meth:`Actions.refusal`); PROTOCOL_VERSION (msg 300)
+     event, the motors off (disarmed), mode TERMINATION (latched: :meth:`Actions.refusal`); PROTOCOL_VERSION (msg 300);
+     MISSION_CURRENT (:mod:`.setcurrent`)
 
 **INJECT_FAILURE.** DENIED unless SYS_FAILURE_EN = 1 (PX4's receiver does the same), and DENIED once the plant ended
 the flight (crashed, diverged, collided: its clock halted, nothing would act on it); else its events are acted on at
@@ -55,6 +56,8 @@ from bridge.mavlink.modes import mode_name
 from bridge.nodes.vehicle.authority import attribute
 from bridge.nodes.vehicle.clock import Clock
 from bridge.nodes.vehicle.injection import injection
+from bridge.nodes.vehicle.mission import MissionManager
+from bridge.nodes.vehicle.setcurrent import set_current
 
 Result = tuple[int, str | None]  # (MAV_RESULT, why it was refused: a STATUSTEXT; None: not refused)
 
@@ -86,10 +89,12 @@ PROTOCOL_VERSION = (200, 100, 200)  # PX4's answer: MAVLink 2, and it speaks 1.0
 
 
 class Actions:
-    """INJECT_FAILURE, DO_CHANGE_SPEED, DO_FLIGHTTERMINATION and REQUEST_PROTOCOL_VERSION for one vehicle."""
+    """INJECT_FAILURE, DO_CHANGE_SPEED, DO_FLIGHTTERMINATION, REQUEST_PROTOCOL_VERSION and DO_SET_MISSION_CURRENT
+    (with a mission manager) for one vehicle."""
 
     def __init__(self, sim: SimVehicle, clock: Clock, reject: Callable[[str], None],
-                 run_free: Callable[[], None]) -> None:
+                 run_free: Callable[[], None], missions: MissionManager | None = None) -> None:
+        self.missions = missions
         self.sim = sim
         self.clock = clock
         self.reject = reject  # count a refusal (bad_number)
@@ -106,6 +111,8 @@ class Actions:
             return self.terminate(m.param1, by), ()
         if cmd == mavlink.MAV_CMD_REQUEST_PROTOCOL_VERSION:
             return (mavlink.MAV_RESULT_ACCEPTED, None), (ProtocolVersion(*PROTOCOL_VERSION),)
+        if cmd == mavlink.MAV_CMD_DO_SET_MISSION_CURRENT and self.missions is not None:
+            return set_current(self.missions, m, by, self.reject)
         return None
 
     @property

@@ -2,7 +2,7 @@
 
 In:  COMMAND_LONG / COMMAND_INT (COMPONENT_ARM_DISARM, DO_SET_MODE, NAV_TAKEOFF m AMSL, NAV_LAND, NAV_RETURN_TO_LAUNCH,
      MISSION_START (with ``await_mission``: :mod:`.mission`), DO_REPOSITION, INJECT_FAILURE, DO_CHANGE_SPEED,
-     DO_FLIGHTTERMINATION, REQUEST_PROTOCOL_VERSION (:mod:`.actions`),
+     DO_FLIGHTTERMINATION, REQUEST_PROTOCOL_VERSION, DO_SET_MISSION_CURRENT (:mod:`.actions`),
      SET/GET_MESSAGE_INTERVAL us, REQUEST_MESSAGE, REQUEST_AUTOPILOT_CAPABILITIES, GET_HOME_POSITION) and
      SET_MODE from a sender with authority (:class:`~bridge.autopilot.vehicleevents.Sender`); the plant's
      divergence and the controller's silence (wall time, s)
@@ -111,7 +111,7 @@ class Commander:
         # a ground station's arm in HOLD on the ground awaiting a mission's start (--await-mission)
         self.pre_start = PreStart(sim, clock, ports.missions, self.cfg.await_mission)
         self.intention = ModeIntention(sim, ports.missions)  # the mode a disarm in LAND, RTL or failsafe leaves
-        self.actions = Actions(sim, clock, ports.reject, self._off_step_clock)
+        self.actions = Actions(sim, clock, ports.reject, self._off_step_clock, ports.missions)
 
     # -- the messages ---------------------------------------------------------------------------------
     def command(self, ep: Endpoint, m: Any, addr: tuple[str, int], link: str) -> bool:
@@ -198,7 +198,7 @@ class Commander:
             return mavlink.MAV_RESULT_ACCEPTED, (tm.autopilot_version(self.cfg.sysid),)
         if cmd == mavlink.MAV_CMD_GET_HOME_POSITION:
             return mavlink.MAV_RESULT_ACCEPTED, (tm.home_position(self.cfg.home),)
-        acted = self.actions.run(m, by)  # INJECT_FAILURE, DO_CHANGE_SPEED, DO_FLIGHTTERMINATION, PROTOCOL_VERSION
+        acted = self.actions.run(m, by)  # INJECT_FAILURE, DO_CHANGE_SPEED, TERMINATION, PROTOCOL_VERSION, SET_CURRENT
         if acted is None:
             return mavlink.MAV_RESULT_UNSUPPORTED, ()
         (result, why), follow = acted

@@ -32,11 +32,10 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from bridge.autopilot.simvehicle import SimVehicle
+from bridge.autopilot.simvehicle import OFFBOARD, SimVehicle
 from bridge.autopilot.vehicleevents import Sender
 from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import Endpoint
-from bridge.mavlink.missionitems import MissionItem
 from bridge.nodes.vehicle.authority import Authority, attribute
 from bridge.nodes.vehicle.missiontransfer import LinkTransfer, Mission, Partner
 from bridge.nodes.vehicle.missionwatch import Goal, ItemWatch, goals_of
@@ -79,7 +78,6 @@ class MissionManager:
         self.watch: ItemWatch | None = None  # the mission in flight (None: none)
         self.completed = False  # the last started mission's items were all reached
         self._goals: tuple[Goal, ...] = ()  # the started mission's items, where and how each is reached
-        self._flying: tuple[MissionItem, ...] = ()  # the items of the mission in flight
         self.home = (authority.cfg.home.lat, authority.cfg.home.lon, authority.cfg.home.alt)
         self.zones = HeldZones(sim, self.home)  # an uploaded fence and rally points
 
@@ -120,7 +118,7 @@ class MissionManager:
         try:
             goals = goals_of(self.mission.items, self.home)
         except ConfigError as exc:
-            return f"MISSION_START: the mission cannot be flown: {exc}"[:200]
+            return f"MISSION_START: the mission cannot be flown: {exc}"
         self.watch = None
         self._goals = goals
         self.selected = self.start_requested = True
@@ -155,19 +153,14 @@ class MissionManager:
             return
         self.start_requested = self.selected = self.completed = False
         self.watch = ItemWatch(self._goals)
-        self._flying = self.mission.items
         self.set_current(self.watch.current)
 
     def flight_step(self, t: float, X: tuple[float, ...], armed: bool) -> None:
         """After a control step of the mission's flight (``t`` s, the plant's state ``X``): each item reached
-        is said (MISSION_ITEM_REACHED) and the next made current; disarmed, the mission's flight is over."""
+        is said (MISSION_ITEM_REACHED) and the next made current; disarmed, the mission's flight is over (and once a
+        ground station changed the mission of a flight that is over: :meth:`_flight_over`)."""
         watch = self.watch
         if watch is None:
-            return
-        if self.mission.items is not self._flying:  # a ground station replaced or cleared it meanwhile
-            self.watch = None
-            self.sim.event("mission", "the mission flown was replaced by an upload: its items are no more watched "
-                                      "(the controller flies the one it downloaded)")
             return
         for seq in watch.step(t, X):
             self.reached(seq)
@@ -178,11 +171,13 @@ class MissionManager:
             self.watch = None
 
     def flown(self) -> str | None:
-        """Why the mission and its current item cannot be changed now (None: they can): started, or armed and
-        flying it, the controller flies its whole trajectory, planned from item 0, which neither a new mission, a
-        clear nor a new current item can change (PX4's navigator takes each at once)."""
-        if self.start_requested or (self.watch is not None and self.sim.armed):
-            return "flying the mission (planned whole, from item 0): change it once landed"
+        """Why the mission and its current item cannot be changed now (None: they can): started, or armed in
+        OFFBOARD flying it, the controller flies its whole trajectory, planned from item 0, which neither a new
+        mission, a clear nor a new current item can change (PX4's navigator takes each at once). Once the flight
+        left OFFBOARD (the mission's end action HOLD or LAND, a ground station's mode, a failsafe) the controller
+        flies it no more: they can, as on PX4, armed or not."""
+        if self.start_requested or (self.watch is not None and self.sim.armed and self.sim.mode == OFFBOARD):
+            return "flying the mission (planned whole, from item 0): change it once it has ended"
         return None
 
     # -- the flight's side ----------------------------------------------------------------------------
@@ -251,6 +246,7 @@ class MissionManager:
         """What the ground station made of ``mission_type``: held, and a ``mission`` event naming it; or why a fence
         or rally points cannot be read (nothing held, nothing said here: the transfer refuses the upload)."""
         if mission_type == mavlink.MAV_MISSION_TYPE_MISSION:
+            self._flight_over(new_items=mission.items is not self.mission.items)
             self.mission = mission
             self.chosen = mission.current
         else:
@@ -262,3 +258,21 @@ class MissionManager:
         self.sim.event("mission", what)
         attribute(self.sim.events, n0, who.who)
         return None
+
+    def choose(self, by: Sender, seq: int, reset: bool, what: str) -> None:
+        """A ground station's DO_SET_MISSION_CURRENT (:mod:`.setcurrent`): item ``seq`` current, as a chosen one
+        (MISSION_START then starts only from item 0); ``reset``: a COMPLETE mission is NOT_STARTED again."""
+        self._flight_over(new_items=reset)
+        self.mission = Mission(self.mission.items, seq)
+        self.chosen = seq
+        n0 = len(self.sim.events)
+        self.sim.event("mission", f"current item {seq} ({what}{', mission reset' if reset else ''})")
+        attribute(self.sim.events, n0, by)
+
+    def _flight_over(self, new_items: bool) -> None:
+        """A ground station changes the mission of a flight that is over (:meth:`flown` is None; it may still be
+        armed: HOLD after the end): its watch is let go (nothing of the new mission is reached by it); a new
+        mission (or a reset) is NOT_STARTED, no more COMPLETE (PX4: a new mission is not finished)."""
+        self.watch = None
+        if new_items:
+            self.completed = False
