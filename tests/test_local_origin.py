@@ -112,17 +112,19 @@ def test_pymavlink_reads_each_fleet_vehicle_about_its_own_start(tmp_path: Path, 
     local: dict[tuple[int, int], Any] = {}
     glob: dict[tuple[int, int], Any] = {}
     homes: dict[int, Any] = {}
+    every_home: list[Any] = []  # streamed, and the answers to GET_HOME_POSITION (it named the world's origin)
+    asked: dict[int, int] = {}  # sysid: GET_HOME_POSITION's result
     with instance_slot() as n:
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         sock.bind(("127.0.0.1", GCS_PORT + n))
         sock.setblocking(False)
-        mav = mavlink.MAVLink(None)
+        mav, tx = mavlink.MAVLink(None), mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
         flight, result = _fly(tmp_path, GCS_PORT + n, realtime, 6.0)
 
         def pump() -> bool:
             while True:
                 try:
-                    data = sock.recv(65536)
+                    data, addr = sock.recvfrom(65536)
                 except BlockingIOError:
                     return not flight.is_alive()
                 for m in mav.parse_buffer(data) or []:
@@ -133,6 +135,13 @@ def test_pymavlink_reads_each_fleet_vehicle_about_its_own_start(tmp_path: Path, 
                         glob[key] = m
                     elif kind == "HOME_POSITION":
                         homes[m.get_srcSystem()] = m
+                        every_home.append(m)
+                    elif kind == "HEARTBEAT" and m.get_srcSystem() not in asked:
+                        asked[m.get_srcSystem()] = -1
+                        sock.sendto(tx.command_long_encode(m.get_srcSystem(), 1, mavlink.MAV_CMD_GET_HOME_POSITION,
+                                                           0, 0, 0, 0, 0, 0, 0, 0).pack(tx), addr)
+                    elif kind == "COMMAND_ACK" and m.command == mavlink.MAV_CMD_GET_HOME_POSITION:
+                        asked[m.get_srcSystem()] = m.result
 
         try:
             wait_for(pump, 180, "the fleet's flight to end")
@@ -140,8 +149,9 @@ def test_pymavlink_reads_each_fleet_vehicle_about_its_own_start(tmp_path: Path, 
             flight.join(60)
             sock.close()
     _completed(result)
-    assert sorted(homes) == [1, 2]
-    for i, h in homes.items():
+    assert sorted(homes) == [1, 2] and asked == {1: mavlink.MAV_RESULT_ACCEPTED, 2: mavlink.MAV_RESULT_ACCEPTED}
+    for h in every_home:
+        i = h.get_srcSystem()
         assert (h.latitude, h.longitude, h.altitude, h.x, h.y, h.z) == (*_home_of(i), 488000, 0.0, 0.0, 0.0), h
     pairs = [(lp, glob[key]) for key, lp in local.items() if key in glob]
     assert {lp.get_srcSystem() for lp, _ in pairs} == {1, 2}

@@ -64,7 +64,7 @@ class CommanderPorts:
     arm_through_link: Callable[[Callable[[], None]], None]
     target_wall: Callable[[], float]  # wall time (s) of the newest actuator target from the controller
     controller_heard: Callable[[], bool]  # whether a controller has spoken on the controller link
-    message: Callable[[int], list[Any]]  # the message(s) of an id, as a stream sends them
+    message: Callable[[int, bool], list[Any]]  # the message(s) of an id as a stream sends them (own: a GCS's frame)
     reject: Callable[[str], None]  # count a refusal (bridge.mavlink.receive.Rejections)
     refused: Callable[[str], None]  # a command refused, and why (its report to the session)
     # the events a command made said on stdout now, before its COMMAND_ACK, so that whoever the answer reaches
@@ -197,7 +197,8 @@ class Commander:
         if cmd == mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
             return mavlink.MAV_RESULT_ACCEPTED, (tm.autopilot_version(self.cfg.sysid),)
         if cmd == mavlink.MAV_CMD_GET_HOME_POSITION:
-            return mavlink.MAV_RESULT_ACCEPTED, (tm.home_position(self.cfg.home),)
+            return mavlink.MAV_RESULT_ACCEPTED, tuple(self.ports.message(mavlink.MAVLINK_MSG_ID_HOME_POSITION,
+                                                                    by.link != "controller"))
         acted = self.actions.run(m, by)  # INJECT_FAILURE, DO_CHANGE_SPEED, TERMINATION, PROTOCOL_VERSION, SET_CURRENT
         if acted is None:
             return mavlink.MAV_RESULT_UNSUPPORTED, ()
@@ -252,7 +253,7 @@ class Commander:
             iv = table.get(mid, HEARTBEAT_S if mid == mavlink.MAVLINK_MSG_ID_HEARTBEAT else 0.0)
             return mavlink.MAV_RESULT_ACCEPTED, (
                 mavlink.MAVLink_message_interval_message(mid, int(iv * 1e6) if iv > 0 else -1),)
-        follow = tuple(self.ports.message(mid))
+        follow = tuple(self.ports.message(mid, by.link != "controller"))  # the controller's: the mission's frame
         return (mavlink.MAV_RESULT_ACCEPTED if follow else mavlink.MAV_RESULT_UNSUPPORTED), follow
 
     def _set_interval(self, table: StreamTable, mid: int, interval_us: float, by: Sender) -> int:
