@@ -382,3 +382,22 @@ class TimerLateness(threading.Thread):
     def median(self) -> float:
         assert self.late_ms, "the control never woke"
         return statistics.median(self.late_ms)
+
+
+# The opening of a MAVSDK script run as ``python -c SCRIPT CONNECTION`` (a ground station on CONNECTION): ``sdk``,
+# ``out`` (printed as ``RESULT <json>`` at the end by the script) and ``until(pred, timeout)``, polling ``pred``.
+MAVSDK_GROUND_STATION = r"""
+import json, sys, time
+from mavsdk import Mavsdk, Configuration, ComponentType
+
+sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+sdk.add_any_connection(sys.argv[1])
+out = {}
+def until(pred, timeout):
+    deadline = time.monotonic() + timeout
+    while not pred():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.02)
+    return True
+"""

@@ -26,7 +26,7 @@ from bridge.mavlink.endpoint import GCS_PORT
 from bridge.nodes.vehicle.streams import VehicleView, message
 from bridge.session import instance_slot
 from bridge.swarm import sitl
-from tests.sitlkit import ENV
+from tests.sitlkit import ENV, MAVSDK_GROUND_STATION
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes, opens sockets
@@ -166,21 +166,8 @@ def test_pymavlink_reads_each_fleet_vehicle_about_its_own_start(tmp_path: Path, 
         assert all(abs(lp.x) < 0.05 and abs(lp.y) < 0.05 for lp in hover), (i, hover[0])
 
 
-MAVSDK_SCRIPT = r"""
-import json, sys, time
-from mavsdk import Mavsdk, Configuration, ComponentType
+MAVSDK_SCRIPT = MAVSDK_GROUND_STATION + r"""
 from mavsdk.plugins.telemetry import Telemetry
-
-sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
-sdk.add_any_connection(sys.argv[1])
-out = {}
-def until(pred, timeout):
-    deadline = time.monotonic() + timeout
-    while not pred():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(0.02)
-    return True
 out["two_found"] = until(lambda: sum(s.has_autopilot() for s in sdk.get_systems()) >= 2, 90)
 by = {s.get_system_id(): s for s in sdk.get_systems() if s.has_autopilot()}
 tel = {i: Telemetry(s) for i, s in by.items()}

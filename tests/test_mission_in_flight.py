@@ -16,6 +16,8 @@ from __future__ import annotations
 import json
 import math
 import os
+from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -99,6 +101,25 @@ class _Gcs:
         return found[0]
 
 
+def _fly_await_mission(out: Path, script: Callable[[_Gcs], None]) -> list[str]:
+    """``bsst sitl --await-mission`` into ``out``, a ground station's ``script`` run against it; the flight must
+    then complete. Its events.log lines."""
+    with instance_slot() as n:
+        sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--out", str(out), "--no-plots")
+        gcs = None
+        try:
+            gcs = _Gcs(n)
+            script(gcs)
+            rc = sitl.p.wait(timeout=120)
+        finally:
+            if gcs is not None:
+                gcs.c.close()
+            sitl.stop()
+    summary = json.loads((out / "summary.json").read_text())
+    assert rc == 0 and summary["outcome"] == "completed", "\n".join(sitl.lines[-20:])
+    return (out / "events.log").read_text().splitlines()
+
+
 def test_a_chosen_current_item_is_refused_at_the_start_and_the_flown_mission_cannot_change(tmp_path):
     """MISSION_SET_CURRENT 1 is taken (MISSION_CURRENT says 1, as PX4), but MISSION_START is then DENIED, saying
     the current item is 1 (PX4 would start there; the flight here is the whole trajectory, and it once flew it
@@ -107,43 +128,31 @@ def test_a_chosen_current_item_is_refused_at_the_start_and_the_flown_mission_can
     nothing (each with a STATUSTEXT saying why; they were once taken: the heartbeat showed OFFBOARD and
     MISSION_CURRENT a mission not started while the old one flew on); a fence may still be cleared. The flight
     completes, its mission never replaced."""
-    out = tmp_path / "run"
-    with instance_slot() as n:
-        sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--out", str(out), "--no-plots")
-        gcs = None
-        try:
-            gcs = _Gcs(n)
-            assert gcs.upload(_items()) == M.MAV_MISSION_ACCEPTED
-            gcs.c.mav.mission_set_current_send(*gcs.t, 1)
-            gcs.recv("MISSION_CURRENT", cond="MISSION_CURRENT.seq==1")
-            assert gcs.start() == M.MAV_RESULT_DENIED
-            assert "the current item is 1" in gcs.text("MISSION_START: the current")
-            gcs.c.mav.mission_set_current_send(*gcs.t, 0)
-            gcs.recv("MISSION_CURRENT", cond="MISSION_CURRENT.seq==0")
-            assert gcs.start() == M.MAV_RESULT_ACCEPTED
-            gcs.recv("HEARTBEAT", 30, f"HEARTBEAT.get_srcComponent()==1 and HEARTBEAT.base_mode & 128 and "
-                                      f"HEARTBEAT.custom_mode=={AUTO_MISSION}")
+    def script(gcs: _Gcs) -> None:
+        assert gcs.upload(_items()) == M.MAV_MISSION_ACCEPTED
+        gcs.c.mav.mission_set_current_send(*gcs.t, 1)
+        gcs.recv("MISSION_CURRENT", cond="MISSION_CURRENT.seq==1")
+        assert gcs.start() == M.MAV_RESULT_DENIED
+        assert "the current item is 1" in gcs.text("MISSION_START: the current")
+        gcs.c.mav.mission_set_current_send(*gcs.t, 0)
+        gcs.recv("MISSION_CURRENT", cond="MISSION_CURRENT.seq==0")
+        assert gcs.start() == M.MAV_RESULT_ACCEPTED
+        gcs.recv("HEARTBEAT", 30, f"HEARTBEAT.get_srcComponent()==1 and HEARTBEAT.base_mode & 128 and "
+                                  f"HEARTBEAT.custom_mode=={AUTO_MISSION}")
 
-            gcs.c.mav.mission_count_send(*gcs.t, 2, M.MAV_MISSION_TYPE_MISSION)
-            ack = gcs.recv(["MISSION_ACK", "MISSION_REQUEST_INT", "MISSION_REQUEST"])
-            assert (ack.get_type(), ack.type) == ("MISSION_ACK", M.MAV_MISSION_ERROR)
-            assert "flying the mission" in gcs.text("IGN MISSION_COUNT")
-            gcs.c.mav.mission_clear_all_send(*gcs.t, M.MAV_MISSION_TYPE_ALL)
-            assert gcs.recv("MISSION_ACK").type == M.MAV_MISSION_ERROR
-            gcs.c.mav.mission_set_current_send(*gcs.t, 2)
-            assert "flying the mission" in gcs.text("WP CURR CMD")
-            gcs.c.mav.mission_clear_all_send(*gcs.t, M.MAV_MISSION_TYPE_FENCE)
-            assert gcs.recv("MISSION_ACK").type == M.MAV_MISSION_ACCEPTED
-            current = gcs.recv("MISSION_CURRENT", 3)
-            assert current.total == 3 and current.mission_state == M.MISSION_STATE_ACTIVE
-            rc = sitl.p.wait(timeout=120)
-        finally:
-            if gcs is not None:
-                gcs.c.close()
-            sitl.stop()
-    summary = json.loads((out / "summary.json").read_text())
-    assert rc == 0 and summary["outcome"] == "completed", "\n".join(sitl.lines[-20:])
-    texts = (out / "events.log").read_text().splitlines()
+        gcs.c.mav.mission_count_send(*gcs.t, 2, M.MAV_MISSION_TYPE_MISSION)
+        ack = gcs.recv(["MISSION_ACK", "MISSION_REQUEST_INT", "MISSION_REQUEST"])
+        assert (ack.get_type(), ack.type) == ("MISSION_ACK", M.MAV_MISSION_ERROR)
+        assert "flying the mission" in gcs.text("IGN MISSION_COUNT")
+        gcs.c.mav.mission_clear_all_send(*gcs.t, M.MAV_MISSION_TYPE_ALL)
+        assert gcs.recv("MISSION_ACK").type == M.MAV_MISSION_ERROR
+        gcs.c.mav.mission_set_current_send(*gcs.t, 2)
+        assert "flying the mission" in gcs.text("WP CURR CMD")
+        gcs.c.mav.mission_clear_all_send(*gcs.t, M.MAV_MISSION_TYPE_FENCE)
+        assert gcs.recv("MISSION_ACK").type == M.MAV_MISSION_ACCEPTED
+        current = gcs.recv("MISSION_CURRENT", 3)
+        assert current.total == 3 and current.mission_state == M.MISSION_STATE_ACTIVE
+    texts = _fly_await_mission(tmp_path / "run", script)
     assert not any("replaced by an upload" in t for t in texts), texts
     assert sum("mission: uploaded" in t for t in texts) == 1
     assert not any("mission: current item 2" in t or "mission: cleared" in t for t in texts), texts
@@ -156,43 +165,32 @@ def test_do_set_mission_current_is_answered_as_px4_before_the_start_and_refused_
     current item unchanged. Item 1 chosen, MISSION_START is DENIED as after MISSION_SET_CURRENT; item 0 again, the
     start is ACCEPTED, and while the mission flies the command is DENIED (the controller cannot jump). The flight
     completes from item 0; the choices are ``mission`` events naming the ground station."""
-    out = tmp_path / "run"
-    with instance_slot() as n:
-        sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--out", str(out), "--no-plots")
-        gcs = None
-        try:
-            gcs = _Gcs(n)
-            cmd = M.MAV_CMD_DO_SET_MISSION_CURRENT
-            assert gcs.command(cmd, 0) == M.MAV_RESULT_FAILED
-            assert "no mission held" in gcs.joined_text("DO_SET_MISSION_CURRENT")
-            assert gcs.upload(_items()) == M.MAV_MISSION_ACCEPTED
-            assert gcs.command(cmd, 1) == M.MAV_RESULT_ACCEPTED
-            gcs.recv("MISSION_CURRENT", cond="MISSION_CURRENT.seq==1")
-            assert gcs.command(cmd, 5) == M.MAV_RESULT_FAILED
-            assert "item 5 is not in the mission (items 0 to 2)" in gcs.joined_text("DO_SET_MISSION_CURRENT")
-            assert gcs.command(cmd, -2) == M.MAV_RESULT_DENIED
-            assert "param1" in gcs.joined_text("DO_SET_MISSION_CURRENT")
-            assert gcs.command(cmd, 1, 2) == M.MAV_RESULT_DENIED
-            assert "param2" in gcs.joined_text("DO_SET_MISSION_CURRENT")
-            assert gcs.command(cmd, -1) == M.MAV_RESULT_ACCEPTED
-            gcs.recv("MISSION_CURRENT", cond="MISSION_CURRENT.seq==1")
-            assert gcs.start() == M.MAV_RESULT_DENIED
-            assert "the current item is 1" in gcs.text("MISSION_START: the current")
-            assert gcs.command(cmd, 0) == M.MAV_RESULT_ACCEPTED
-            gcs.recv("MISSION_CURRENT", cond="MISSION_CURRENT.seq==0")
-            assert gcs.start() == M.MAV_RESULT_ACCEPTED
-            gcs.recv("HEARTBEAT", 30, f"HEARTBEAT.get_srcComponent()==1 and HEARTBEAT.base_mode & 128 and "
-                                      f"HEARTBEAT.custom_mode=={AUTO_MISSION}")
-            assert gcs.command(cmd, 2) == M.MAV_RESULT_DENIED
-            assert "flying the mission" in gcs.joined_text("DO_SET_MISSION_CURRENT")
-            rc = sitl.p.wait(timeout=120)
-        finally:
-            if gcs is not None:
-                gcs.c.close()
-            sitl.stop()
-    summary = json.loads((out / "summary.json").read_text())
-    assert rc == 0 and summary["outcome"] == "completed", "\n".join(sitl.lines[-20:])
-    texts = (out / "events.log").read_text().splitlines()
+    def script(gcs: _Gcs) -> None:
+        cmd = M.MAV_CMD_DO_SET_MISSION_CURRENT
+        assert gcs.command(cmd, 0) == M.MAV_RESULT_FAILED
+        assert "no mission held" in gcs.joined_text("DO_SET_MISSION_CURRENT")
+        assert gcs.upload(_items()) == M.MAV_MISSION_ACCEPTED
+        assert gcs.command(cmd, 1) == M.MAV_RESULT_ACCEPTED
+        gcs.recv("MISSION_CURRENT", cond="MISSION_CURRENT.seq==1")
+        assert gcs.command(cmd, 5) == M.MAV_RESULT_FAILED
+        assert "item 5 is not in the mission (items 0 to 2)" in gcs.joined_text("DO_SET_MISSION_CURRENT")
+        assert gcs.command(cmd, -2) == M.MAV_RESULT_DENIED
+        assert "param1" in gcs.joined_text("DO_SET_MISSION_CURRENT")
+        assert gcs.command(cmd, 1, 2) == M.MAV_RESULT_DENIED
+        assert "param2" in gcs.joined_text("DO_SET_MISSION_CURRENT")
+        assert gcs.command(cmd, -1) == M.MAV_RESULT_ACCEPTED
+        gcs.recv("MISSION_CURRENT", cond="MISSION_CURRENT.seq==1")
+        assert gcs.start() == M.MAV_RESULT_DENIED
+        assert "the current item is 1" in gcs.text("MISSION_START: the current")
+        assert gcs.command(cmd, 0) == M.MAV_RESULT_ACCEPTED
+        gcs.recv("MISSION_CURRENT", cond="MISSION_CURRENT.seq==0")
+        assert gcs.start() == M.MAV_RESULT_ACCEPTED
+        gcs.recv("HEARTBEAT", 30, f"HEARTBEAT.get_srcComponent()==1 and HEARTBEAT.base_mode & 128 and "
+                                  f"HEARTBEAT.custom_mode=={AUTO_MISSION}")
+        assert gcs.command(cmd, 2) == M.MAV_RESULT_DENIED
+        assert "flying the mission" in gcs.joined_text("DO_SET_MISSION_CURRENT")
+
+    texts = _fly_await_mission(tmp_path / "run", script)
     chosen = [t for t in texts if "mission: current item" in t]
     assert len(chosen) == 3 and all("DO_SET_MISSION_CURRENT" in t and "255:190" in t for t in chosen), chosen
     assert not any("current item 2" in t for t in texts), texts

@@ -30,7 +30,7 @@ from bridge.nodes.vehicle.config import VehicleConfig
 from bridge.session.children import free_udp_port
 from bridge.swarm import sitl
 from missions import MISSION_DIR
-from tests.sitlkit import ENV
+from tests.sitlkit import ENV, MAVSDK_GROUND_STATION
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes, opens sockets
@@ -169,23 +169,10 @@ def test_one_ground_station_sees_four_vehicles_reads_each_and_disarms_only_syste
     _only_three_disarmed(result, port)
 
 
-MAVSDK_SCRIPT = r"""
-import json, sys, time
-from mavsdk import Mavsdk, Configuration, ComponentType
+MAVSDK_SCRIPT = MAVSDK_GROUND_STATION + r"""
 from mavsdk.plugins.action import Action
 from mavsdk.plugins.param import Param
 from mavsdk.plugins.telemetry import Telemetry
-
-sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
-sdk.add_any_connection(sys.argv[1])
-out = {}
-def until(pred, timeout):
-    deadline = time.monotonic() + timeout
-    while not pred():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(0.05)
-    return True
 out["four_found"] = until(lambda: sum(s.has_autopilot() for s in sdk.get_systems()) >= 4, 90)
 by = {s.get_system_id(): s for s in sdk.get_systems() if s.has_autopilot()}
 out["ids"] = sorted(by)
