@@ -186,8 +186,9 @@ def report_fleet(run: Any, command: str) -> int:
 
 def report_run(run: Any, command: str) -> int:
     """Print a run's summary, name each violated policy on stderr; its exit status (0: a clean completion)."""
+    from bridge.record.interventions import intervention_text, unconfirmed_text  # lazy: numpy
     from bridge.record.policies import run_ok, stalls_of, violation_text  # lazy: numpy
-    from bridge.record.summary import intervention_text, stalls_text, unconfirmed_text  # lazy: numpy
+    from bridge.record.summary import stalls_text  # lazy: numpy
 
     try:
         print_summary(run.summary, run.path)

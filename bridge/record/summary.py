@@ -24,11 +24,17 @@ from typing import Any
 
 import numpy as np
 
-from bridge.autopilot.params import BY_NAME
 from bridge.core.clock import STALL_S
 from bridge.core.flight import Flight
 from bridge.record.columns import TRACE_COLUMNS
 from bridge.record.events import RunEvent, in_time_order
+from bridge.record.interventions import (
+    ended_by_change,
+    intervention_text,
+    interventions,
+    reproducibility,
+    unconfirmed_text,
+)
 from bridge.record.joiner import Joined
 from bridge.record.metrics import after_faults, percentiles, plant_summary, summarise
 from bridge.record.policies import (
@@ -47,8 +53,6 @@ from bridge.record.runlog import trace_arrays
 
 FAILED_OUTCOMES = ("failsafe", "diverged", "aborted", "law_failed", "denied")
 PLANT_OUTCOMES = ("diverged", "crashed", "collision")  # the plant ended it (SimVehicle.plant_verdict, a contact)
-# the vehicle's events that a sender other than the flight's controller may cause and that change the flight
-INTERVENING = ("param", "mode", "armed", "disarmed", "fault")  # fault: a ground station's injected failure
 
 
 @dataclass(frozen=True)
@@ -152,77 +156,6 @@ def outcome_of(facts: SessionFacts, controller: ChildEnd | None) -> str:
     if controller is not None and controller.outcome is not None:
         return controller.outcome if controller.outcome in FAILED_OUTCOMES else "aborted"
     return "aborted"
-
-
-def interventions(events: Sequence[RunEvent], rate_hz: float,
-                  controller_id: tuple[int, int] = CONTROLLER_ID) -> list[dict[str, Any]]:
-    """``summary.json["interventions"]``: every change to the flight made by a sender other than the flight's
-    controller (a ground station), in order: each one's ``t`` (s, the events' clock), ``step`` (the control
-    step it acted from: round(t * rate_hz); lockstep, the vehicle's step), ``by`` (the sender), ``kind`` and
-    ``what``, and for a parameter its ``name``, ``old`` and ``new`` value. Read from the vehicle's events'
-    typed fields (``by``, ``param``): a parameter change (a set to the value in force makes no event), and
-    while the vehicle is armed a mode, an arm or a disarm; a ground station's arm is one too, except its arm in
-    HOLD on the ground awaiting a mission's start (``pre_start``: nothing flies until the start, which the
-    flight's controller flies from its own arm; docs/missions.md)."""
-    out: list[dict[str, Any]] = []
-    armed = False
-    for e in vehicle_events(events):
-        by = e.by
-        was_armed, armed = armed, (e.kind == "armed") or (armed and e.kind != "disarmed")
-        if e.kind not in INTERVENING or by is None or by.is_vehicle or e.pre_start:
-            continue
-        if by.link == "controller" and (by.sysid, by.compid) == controller_id:
-            continue
-        if e.kind == "mode" and not was_armed:  # the mode a later arm of the controller's leaves: no change
-            continue
-        assert e.t is not None  # vehicle_events have a time
-        d: dict[str, Any] = {"t": e.t, "step": round(e.t * rate_hz), "by": str(by), "kind": e.kind, "what": e.text}
-        if e.param is not None:
-            d.update(e.param.as_dict())
-        out.append(d)
-    return out
-
-
-def intervention_text(i: Mapping[str, Any]) -> str:
-    """One intervention as a person reads it: who, what, when (t and step)."""
-    what = (f"changed {i['name']} from {i['old']:g} to {i['new']:g}" if "name" in i
-            else f"{'set the mode' if i['kind'] == 'mode' else i['kind']}: {i['what']}")
-    return f"a ground station ({i['by']}) {what} at t={i['t']:.3f} s (step {i['step']})"
-
-
-def unconfirmed_text(p: Mapping[str, Any]) -> str:
-    """A scheduled change (``summary.json["param_at"]``'s entry) the vehicle never confirmed, for a person."""
-    return (f"--param-at {p['t_s']:g}:{p['name']}={p['value']:g} was never confirmed by the vehicle "
-            f"({p['sends']} PARAM_SETs): not made")
-
-
-def reproducibility(lockstep: dict[str, Any], changes: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
-    """The lockstep record with whether the run can be flown again to the bit: as it was without a change
-    (``held`` says it), or ``reproducible`` false with ``reproducible_until_step`` (the first intervention's
-    step: the steps before it are the mission's, the ones from it on depend on when the change arrived on
-    the wall clock) and ``because`` (that change)."""
-    if not changes:  # held: reproducible (the record stays as it was); not held: its own why
-        return lockstep
-    first = changes[0]
-    return {**lockstep, "reproducible": False, "reproducible_until_step": first["step"],
-            "because": intervention_text(first)}
-
-
-def ended_by_change(end: dict[str, Any], outcome: str, events: Sequence[RunEvent],
-                    changes: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
-    """``ended_by`` naming the ground station whose parameter change made the vehicle's failsafe act as it
-    did (its action, timeout, hold time or descent: a failsafe parameter set before the failsafe began),
-    else ``end`` as it was."""
-    if outcome != "failsafe" or end.get("who") != "vehicle":
-        return end
-    fs = next((e for e in vehicle_events(events) if e.kind == "failsafe"), None)
-    cause = [c for c in changes if "name" in c and BY_NAME[c["name"]].failsafe_key is not None
-             and (fs is None or c["t"] <= (fs.t or 0.0))]
-    if not cause:
-        return end
-    c = cause[-1]
-    return {"who": c["by"], "how": f"{end['how']}, under {c['name']} = {c['new']:g} (was {c['old']:g}) set by a "
-                                   f"ground station at t={c['t']:.3f} s (step {c['step']})"}
 
 
 def plant_outcome(outcome: str, facts: SessionFacts, events: Sequence[RunEvent]) -> str:
