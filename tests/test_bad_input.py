@@ -158,7 +158,8 @@ CONVERTER_BAD = {
     "sensor_set_name": ["", "mo.cap", "bogus"],
     "noise_scale": ["x", "-1", "nan", "1e300"],
     "param_assignment": ["x", "NOPE=1", "COM_OF_LOSS_T=99", "COM_OBL_RC_ACT=2", "COM_OF_LOSS_T=nan",
-                         "5:COM_OF_LOSS_T=99", "x:COM_OBL_ACT=1"],
+                         "5:COM_OF_LOSS_T=99", "x:COM_OBL_ACT=1",
+                         "EKF2_NOAID_TOUT=" + "1" * 50, "5:EKF2_NOAID_TOUT=" + "1" * 50],  # (a traceback once)
     "system_id": ["x", "0", "255", "1.5"],
     "fleet_size": ["x", "0", "65", "1.5"],
 }

@@ -223,8 +223,8 @@ def read_param(p: VehicleParams, name: str) -> float:
 
 def _float32(x: float) -> float | None:
     """``x`` rounded to float32 (what a MAVLink float carries), or None if it is beyond float32's range."""
-    try:
-        return struct.unpack("<f", struct.pack("<f", x))[0]
+    try:  # (an int is made a float first: struct refuses a big int with its own error, not OverflowError)
+        return struct.unpack("<f", struct.pack("<f", float(x)))[0]
     except OverflowError:
         return None
 
