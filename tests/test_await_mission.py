@@ -39,9 +39,9 @@ from bridge.nodes.vehicle import Vehicle, VehicleConfig
 from bridge.nodes.vehicle.clock import ClockState
 from bridge.nodes.vehicle.mission import START_ARM, START_ARMED, START_COMMAND
 from bridge.nodes.vehicle.missionwatch import ItemWatch, goals_of
+from bridge.record.endedby import ended_by_command
 from bridge.record.events import RunEvent
 from bridge.record.interventions import interventions
-from bridge.record.policies import ended_by_command
 from bridge.record.summary import mission_transfer
 from bridge.session import instance_slot
 from missions import Mission, Sine
