@@ -63,6 +63,7 @@ Its parts, as PX4 splits an autopilot:
                         halted), its transitions in one table
 - :mod:`.authority`     who may command what on which link; who caused an event (its ``by``)
 - :mod:`.commander`     arming, flight modes, commands, the triggers that end a flight
+- :mod:`.requests`      requests for messages and their rates (SET/GET_MESSAGE_INTERVAL, REQUEST_MESSAGE, ...)
 - :mod:`.paramservice`  PX4's parameters over MAVLink
 - :mod:`.mission`       PX4's mission protocol (upload, download, clear, set current) and the mission held
 - :mod:`.targets`       the controller's answers: actuator targets, the no-target acknowledgement
