@@ -69,6 +69,7 @@ Its parts, as PX4 splits an autopilot:
 - :mod:`.targets`       the controller's answers: actuator targets, the no-target acknowledgement
 - :mod:`.receiver`      the receive path: each message, its sender's authority checked, to its part
 - :mod:`.streams`       the telemetry streams (message id -> builder and rate), HEARTBEAT, ODOMETRY
+- :mod:`.streaming`     the vehicle's view for its messages, each link's streams sent when due, its load
 - :mod:`.rows`          ``vehicle.bin``
 - :mod:`.config`        :class:`VehicleConfig`
 - :mod:`.node`          :class:`Vehicle`, which wires the parts to the links, and :func:`run_vehicle`
