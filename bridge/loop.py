@@ -41,10 +41,11 @@ from bridge.core.wire import command_over_wire, state_over_wire
 from bridge.link.ends import ControllerEnd, VehicleEnd
 from bridge.link.radio import Radio
 from bridge.record.columns import TRACE_COLUMNS, state_columns, trace_row
+from bridge.record.endedby import ended_by_outcome
 from bridge.record.ending import end_block
 from bridge.record.events import RunEvent
 from bridge.record.metrics import after_faults, plant_blocks, plant_summary, summarise
-from bridge.record.policies import ended_by_outcome, judge, rules_for, violation_text
+from bridge.record.policies import judge, rules_for, violation_text
 from bridge.record.runlog import Run, RunRecord, check_trace_steps, run_dir, trace_arrays, trace_cap
 from controller.law import LawFailed
 from controller.link_guard import LinkGuard

@@ -12,7 +12,7 @@ Out: a :class:`FleetRun`: each vehicle's :class:`~bridge.record.runlog.Run` (sys
 
 A mission without vehicles is flown by :func:`bridge.loop.simulate` as it always was, byte for byte.
 A fleet's vehicles fly one control step each, in turn (:data:`TURNS`), then the shared world is judged on their true
-positions after that step (:class:`Watch`): clearance (centres' distance less both disc radii,
+positions after that step (:class:`~bridge.record.separation.Watch`): clearance (centres' distance less both disc radii,
 :class:`missions.fleet.Separation`) below ``min_m`` breaks the ``separation`` policy (exit 1); at zero
 or less the two touch and both end ``collision``. Each vehicle is its own flight
 (:func:`missions.fleet.vehicle_mission`: its own seed, so its own link's fates, effects and sensors), on
@@ -23,7 +23,6 @@ stepped and judged as the mission's steps are; a vehicle that has ended stays wh
 
 from __future__ import annotations
 
-import math
 import shutil
 import tempfile
 from collections.abc import Generator, Sequence
@@ -46,6 +45,7 @@ from bridge.record.runlog import (
     write_json_atomic,
     write_text_atomic,
 )
+from bridge.record.separation import CONTINUED, Watch, judge_traces
 from missions import Mission, load_mission
 from missions.fleet import (
     DEFAULT_MIN_SEPARATION_M,
@@ -62,8 +62,6 @@ LINK_FIGURES = ("sent", "delivered", "lost", "lost_by", "delay_ms")  # each vehi
 # the outcomes from best to worst: the fleet's outcome is its worst vehicle's (an unknown one is worst)
 SEVERITY = ("completed", "failsafe", "law_failed", "denied", "diverged", "crashed", "terminated", "collision",
             "aborted")
-DEFINITION = ("distance between the vehicles' centres less each one's disc radius (its arm plus its rotor "
-              "radius: rotor_radius_m, by default half the arm)")
 
 
 class FleetRun:
@@ -183,50 +181,6 @@ def fleet_flights(m: Mission, over: Overrides) -> list[Flight]:
             raise ConfigError(f"{exc} (vehicle {v.id})"[:400]) from None
     return flights
 
-
-class Watch:
-    """The shared world's separation policy over a flight: every pair's closest approach (clearance m, at t s),
-    the first time the policy broke, and the pairs in contact now."""
-
-    def __init__(self, ids: Sequence[int], radii: Sequence[float], min_m: float) -> None:
-        self.ids, self.radii, self.min_m = list(ids), list(radii), min_m
-        n = len(ids)
-        self.pairs = [(a, b) for a in range(n) for b in range(a + 1, n)]
-        self.closest = {p: (math.inf, 0.0) for p in self.pairs}  # (clearance m, t s)
-        self.broken: tuple[float, str] | None = None
-
-    def check(self, t: float, positions: Sequence[Sequence[float]]) -> list[tuple[int, int, str]]:
-        """Judge the world at time ``t`` (s) with these centres (m): the pairs (indices) that touch, and why."""
-        touching = []
-        for a, b in self.pairs:
-            d, c = clearance(positions[a], positions[b], self.radii[a], self.radii[b])
-            if c < self.closest[(a, b)][0]:
-                self.closest[(a, b)] = (c, t)
-            if c < self.min_m and self.broken is None:
-                self.broken = (t, f"vehicles {self.ids[a]} and {self.ids[b]} {c:.3f} m apart (rotor discs), "
-                                  f"under the minimum of {self.min_m:g} m")
-            if c <= 0.0:
-                touching.append((a, b, f"vehicles {self.ids[a]} and {self.ids[b]} touched at t={t:.3f} s "
-                                       f"(centres {d:.3f} m apart, rotor discs {c:.3f} m)"))
-        return touching
-
-    def summary(self) -> dict[str, Any]:
-        """``summary.json["separation"]``: the policy, and every pair's closest approach."""
-        pairs = [{"ids": [self.ids[a], self.ids[b]], "closest_m": _num(c), "t": round(t, 6),
-                  "ok": c >= self.min_m} for (a, b), (c, t) in self.closest.items()]
-        least = min((p["closest_m"] for p in pairs if p["closest_m"] is not None), default=None)
-        return {"min_m": self.min_m, "definition": DEFINITION, "disc_radius_m": dict(zip(map(str, self.ids),
-                self.radii)), "closest_m": least, "pairs": pairs}
-
-    def verdict(self) -> dict[str, Any]:
-        """The ``separation`` policy's verdict, as the other policies' (:class:`bridge.record.policies.Verdict`)."""
-        if self.broken is None:
-            return {"name": "separation", "ok": True}
-        return {"name": "separation", "ok": False, "t": round(self.broken[0], 6), "why": self.broken[1]}
-
-
-def _num(v: float) -> float | None:  # (m, 9 digits; None: never judged)
-    return round(v, 9) if math.isfinite(v) else None
 
 
 def shared_radios(m: Mission, flights: list[Flight], over: Overrides | None = None) -> tuple[Radio, Radio] | None:
@@ -364,10 +318,6 @@ def fleet_summary(m: Mission, flights: list[Flight], runs: list[Run], watch: Wat
 
 
 # -- the same fleet as SITL sessions (bsst sitl --vehicles) ---------------------------------------------------
-CONTINUED = ("the flights continued past the contact: in real time each vehicle keeps its own wall clock, the "
-             "vehicles share no clock, so nothing stopped them at it (docs/swarm.md)")
-
-
 @reads_inputs
 def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] | None = None,
          formation: str | None = None, out: str | Path | None = None, write: bool = False, overwrite: bool = False,
@@ -381,8 +331,9 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
     ``instance`` + i - 1, system id ``instance`` + i (PX4's), every vehicle's ground-station traffic goes to ``gcs``
     (default 127.0.0.1:14550 + ``instance``; ``live``: each vehicle's line saying so); ``progress`` is one vehicle's.
     In lockstep the vehicles step on one shared clock; a contact ends both flights at its step (``collision``), as
-    offline; the world is judged on the vehicles' traces (and where each stayed) at matching steps (judge_traces).
-    In real time a contact makes both ``collision`` too, found afterwards (the flights went on: :data:`CONTINUED`)."""
+    offline; the world is judged on the vehicles' traces (and where each stayed) at matching steps
+    (:func:`~bridge.record.separation.judge_traces`). In real time a contact makes both ``collision`` too, found
+    afterwards (the flights went on: :data:`~bridge.record.separation.CONTINUED`)."""
     from bridge.session import sitl as sitl_one  # lazy: start-up time
     from bridge.session.fleet import check_fleet, check_fleet_ports, fly_sessions, radio_block  # lazy: start-up
 
@@ -444,38 +395,6 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
     finally:
         if not keep:
             shutil.rmtree(path, ignore_errors=True)
-
-
-def judge_traces(watch: Watch, traces: Sequence[dict[str, Any]], rate: float,
-                 finals: Sequence[tuple[float, float, float] | None] | None = None,
-                 starts: Sequence[Sequence[float]] | None = None,
-                 afters: Sequence[Sequence[Sequence[float]]] | None = None) -> dict[int, dict[str, Any]]:
-    """Judge the shared world on finished traces, with the offline loop's :class:`Watch`: row j of every trace
-    (the true positions at t = j / rate; row 0 the start) is the world after step j - 1, as the loop judges it,
-    and after a trace's rows, its vehicle's ``afters`` (m: its end landing's, flown on after the mission, as the
-    loop flies and judges them); a path that ended early stays at its last row, or with ``finals`` (a lockstep
-    fleet's shared clock: where each vehicle stayed, m, after its last row's step) there, as the loop keeps it; an
-    empty one (a vehicle that flew no step) is at its start with ``starts`` (m: one never armed stands there, as
-    the loop keeps it), else nowhere, and touches no one. The first contact of each vehicle (by index): its step,
-    time, the other's id and why (without ``finals``, that the flights went on: :data:`CONTINUED`)."""
-    last = [finals[i] if finals is not None else None for i in range(len(traces))]
-    paths = [[(float(x), float(y), float(z)) for x, y, z in zip(tr["x"], tr["y"], tr["z"])] for tr in traces]
-    for path, more_rows in zip(paths, afters or ()):
-        path.extend((float(p[0]), float(p[1]), float(p[2])) for p in more_rows)
-    n = max((len(path) + (p is not None) for path, p in zip(paths, last)), default=0)
-    first: dict[int, dict[str, Any]] = {}
-    nowhere = (math.nan, math.nan, math.nan)  # NaN distances: never closer, never touching (Watch.check)
-    unflown = [tuple(s[:3]) for s in starts] if starts is not None else [nowhere] * len(traces)
-    more = {} if finals is not None else {"continued": CONTINUED}
-    for j in range(n):
-        positions = []
-        for path, p, home in zip(paths, last, unflown):
-            r = min(j, len(path) - 1)
-            positions.append(p if p is not None and j > r else path[r] if r >= 0 else home)
-        for a, b, why in watch.check(j / rate, positions):
-            for i, other in ((a, b), (b, a)):
-                first.setdefault(i, {"step": j, "t": round(j / rate, 6), "with": watch.ids[other], "why": why, **more})
-    return first
 
 
 def _landing(run: Run) -> Sequence[Sequence[float]]:

@@ -74,7 +74,7 @@ def vehicle_state(v: Any) -> tuple:
     address, the up link's newest send (a refused datagram must change none of it)."""
     s, clock = v.sim, v.clock
     return (v.plant.state, s.armed, s.mode, v.k, clock.answer, v.targets.applied, clock.state, clock.on_wall_clock,
-            tuple(sorted(v.streams.items())), tuple(sorted(v.ctl_streams.items())), v.link.peer,
+            tuple(sorted(v.streaming.streams.items())), tuple(sorted(v.streaming.ctl_streams.items())), v.link.peer,
             v.vend.newest_sent_t, v.vend.up.stats.sent)
 
 

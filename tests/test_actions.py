@@ -65,7 +65,7 @@ def test_flight_termination_stops_the_motors_latches_termination_and_refuses_arm
         assert (t.by.sysid, t.by.compid, t.by.link) == (255, 190, "gcs") and not v.sim.armed
         assert any(e.kind == "lockstep" and "the vehicle falls on the wall clock" in e.text for e in v.sim.events)
         assert v.clock.free_running
-        hb = v._heartbeat()
+        hb = v.streaming.heartbeat()
         assert (hb.base_mode, hb.custom_mode, hb.system_status) == (M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 1 << 16,
                                                                      M.MAV_STATE_FLIGHT_TERMINATION)
         assert _command(v, gcs, M.MAV_CMD_DO_FLIGHTTERMINATION, 1.0) == M.MAV_RESULT_ACCEPTED  # again: nothing more

@@ -39,9 +39,9 @@ from bridge.nodes.vehicle import Vehicle, VehicleConfig
 from bridge.nodes.vehicle.clock import ClockState
 from bridge.nodes.vehicle.mission import START_ARM, START_ARMED, START_COMMAND
 from bridge.nodes.vehicle.missionwatch import ItemWatch, goals_of
+from bridge.record.endedby import ended_by_command
 from bridge.record.events import RunEvent
 from bridge.record.interventions import interventions
-from bridge.record.policies import ended_by_command
 from bridge.record.summary import mission_transfer
 from bridge.session import instance_slot
 from missions import Mission, Sine
@@ -639,7 +639,7 @@ def test_the_vehicle_starts_a_mission_only_when_asked_to_await_one():
         legacy = M.MAVLink_set_mode_message(1, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, (4 << 16) | (4 << 24))
         assert exchange(v, legacy, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED  # SET_MODE: selects it too
         assert exchange(v, mode, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
-        assert v._heartbeat().custom_mode == (4 << 16) | (4 << 24) and v.missions.selected
+        assert v.streaming.heartbeat().custom_mode == (4 << 16) | (4 << 24) and v.missions.selected
         ask = M.MAVLink_command_long_message(1, 1, M.MAV_CMD_REQUEST_MESSAGE, 0, M.MAVLINK_MSG_ID_MISSION_CURRENT,
                                              0, 0, 0, 0, 0, 0)
         assert exchange(v, ask, "MISSION_CURRENT").mission_state == M.MISSION_STATE_NOT_STARTED  # selected alone
@@ -696,17 +696,17 @@ def test_another_mode_selected_after_auto_mission_wins_until_the_mission_starts(
             v = _vehicle_holding_the_small_plan(gcs, flight)
             made.append(v)
             assert exchange(v, mode(4, 4), "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
-            assert v._heartbeat().custom_mode == (4 << 16) | (4 << 24)
+            assert v.streaming.heartbeat().custom_mode == (4 << 16) | (4 << 24)
             if then_hold:
                 assert exchange(v, mode(4, 3), "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
-                assert v._heartbeat().custom_mode == (4 << 16) | (3 << 24) and not v.missions.selected
+                assert v.streaming.heartbeat().custom_mode == (4 << 16) | (3 << 24) and not v.missions.selected
                 assert exchange(v, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
                 assert v.sim.armed and v.sim.mode == "hold" and not v.missions.start_requested
             else:
                 assert exchange(v, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
                 assert v.missions.start_requested and not v.sim.armed
                 assert exchange(v, mode(4, 3), "COMMAND_ACK").result == M.MAV_RESULT_DENIED
-                assert v.missions.start_requested and v._heartbeat().custom_mode == (4 << 16) | (4 << 24)
+                assert v.missions.start_requested and v.streaming.heartbeat().custom_mode == (4 << 16) | (4 << 24)
     finally:
         for v in made:
             v.close()
@@ -764,16 +764,16 @@ def test_an_arm_in_hold_on_the_ground_then_auto_mission_starts_the_mission_and_t
     arm = command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
     try:
         v = vehicle_with_mission()
-        assert v._heartbeat().custom_mode == hold and not v.sim.armed  # waits in HOLD, disarmed
+        assert v.streaming.heartbeat().custom_mode == hold and not v.sim.armed  # waits in HOLD, disarmed
         assert exchange(v, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
         assert v.sim.armed and v.sim.mode == "hold" and v.clock.state is idle
-        assert v._heartbeat().custom_mode == hold and v.commander.pre_start.at is not None
+        assert v.streaming.heartbeat().custom_mode == hold and v.commander.pre_start.at is not None
         at = v.commander.pre_start.at
         assert exchange(v, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED  # again (a resend): nothing changes
         assert v.clock.state is idle and v.commander.pre_start.at == at
         assert exchange(v, command(M.MAV_CMD_DO_SET_MODE, 1, 4, 4), "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
         assert v.missions.started is not None and v.missions.started["command"] == START_ARMED
-        beat = v._heartbeat()
+        beat = v.streaming.heartbeat()
         assert beat.custom_mode == mission and beat.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED
         ask = command(M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_MISSION_CURRENT)
         assert exchange(v, ask, "MISSION_CURRENT").mission_state == M.MISSION_STATE_ACTIVE
@@ -783,7 +783,7 @@ def test_an_arm_in_hold_on_the_ground_then_auto_mission_starts_the_mission_and_t
         controller = Sender(200, 191, "127.0.0.1", 1, "controller")
         assert v.commander.arm_disarm(1.0, 0.0, controller) == M.MAV_RESULT_ACCEPTED  # the controller's arm
         assert v.sim.mode == "offboard" and v.clock.engaged is (clock == "lockstep") and v.missions.watch is not None
-        assert v.missions.mission.current == 0 and v._heartbeat().custom_mode == mission
+        assert v.missions.mission.current == 0 and v.streaming.heartbeat().custom_mode == mission
         events = [RunEvent.at(e.t, e.kind, e.text, "vehicle", e.by, **typed_fields(e)) for e in v.sim.events]
         assert [e.kind for e in events if e.pre_start] == ["armed", "mode"]  # the arm in HOLD, its HOLD
         assert interventions(events, 250.0) == [] and ended_by_command(events) is None

@@ -392,7 +392,7 @@ def test_a_sessions_vehicle_armed_by_a_ground_station_before_its_controller_hold
     v = Vehicle(flight, VehicleConfig(parse_address("udpin:127.0.0.1:0"), parse_address(gcs.url), clock="lockstep",
                                       controller_from=("127.0.0.1", 9)))
     try:
-        assert v._heartbeat().custom_mode == (4 << 16) | (3 << 24)  # HOLD (AUTO.LOITER)
+        assert v.streaming.heartbeat().custom_mode == (4 << 16) | (3 << 24)  # HOLD (AUTO.LOITER)
         arm = M.MAVLink_command_long_message(1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
         assert gcs.exchange(v, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
         assert v.sim.armed and v.sim.mode == "hold" and v.clock.free_running

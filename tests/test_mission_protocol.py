@@ -736,9 +736,9 @@ def test_reached_and_current_from_the_flight():
         for it in items[:2]:
             exchange(it, "MISSION_REQUEST_INT")
         assert exchange(items[2], "MISSION_ACK").type == M.MAV_MISSION_ACCEPTED
-        assert v._message(M.MAVLINK_MSG_ID_MISSION_CURRENT)[0].total == 3
+        assert v.streaming.message(M.MAVLINK_MSG_ID_MISSION_CURRENT)[0].total == 3
         v.missions.set_current(2)
-        assert v._message(M.MAVLINK_MSG_ID_MISSION_CURRENT)[0].seq == 2
+        assert v.streaming.message(M.MAVLINK_MSG_ID_MISSION_CURRENT)[0].seq == 2
         with pytest.raises(ValueError):
             v.missions.set_current(3)
         v.missions.reached(1)

@@ -1,4 +1,4 @@
-"""Covers bridge.record.policies.
+"""Covers bridge.record.policies and bridge.record.endedby.
 
 The safety policies of :mod:`bridge.record.policies`, each on a synthetic trace and events that
 break it and on ones that keep it; the honest records (sender, lockstep, who ended a flight);
@@ -18,15 +18,14 @@ import pytest
 
 from bridge.autopilot.vehicleevents import ITSELF, Sender
 from bridge.cli.commands import report_run
+from bridge.record.endedby import arming_denied_end, ended_by_command
 from bridge.record.events import RunEvent
 from bridge.record.policies import (
     CONTROLLER_ID,
     POLICIES,
     Rules,
     arm_authority,
-    arming_denied_end,
     check,
-    ended_by_command,
     failsafe_in_time,
     lockstep_record,
     lockstep_recorded,

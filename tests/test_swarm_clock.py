@@ -26,8 +26,9 @@ from bridge.link.turns import TurnRadio
 from bridge.nodes.vehicle import gate as gatemod
 from bridge.nodes.vehicle.clock import Answer, Clock, ClockState, Trigger
 from bridge.nodes.vehicle.gate import Gate, GateConfig, resting
+from bridge.record.separation import CONTINUED, Watch, judge_traces
 from bridge.session.children import free_udp_port
-from bridge.swarm import CONTINUED, FleetRun, Watch, judge_traces, simulate, sitl
+from bridge.swarm import FleetRun, simulate, sitl
 from params import ConfigError
 from tests.test_swarm_sitl import short_sine
 from tests.waiting import wait_for

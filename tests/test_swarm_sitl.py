@@ -1,4 +1,4 @@
-"""Covers bridge.session.fleet, bridge.swarm and bridge.cli: several vehicles as SITL sessions (bsst sitl).
+"""Covers bridge.session.fleet, bridge.swarm, bridge.record.separation and bridge.cli: fleets as SITL (bsst sitl).
 
 Real processes: one ``bsst vehicle`` and one ``bsst controller`` per vehicle, over UDP on 127.0.0.1 (free ports,
 ``instance=None``, so the tests run beside other sessions). In lockstep the vehicles share one step clock
@@ -20,8 +20,9 @@ import pytest
 from bridge.cli import main
 from bridge.cli.flying import report_fleet
 from bridge.record.halves import count_records
+from bridge.record.separation import Watch, judge_traces
 from bridge.session import instance_slot
-from bridge.swarm import FleetRun, Watch, judge_traces, simulate, sitl
+from bridge.swarm import FleetRun, simulate, sitl
 from missions import MISSION_DIR
 from params import ConfigError
 from tests.sitlkit import Proc, csv_rows

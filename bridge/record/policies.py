@@ -6,9 +6,8 @@ In:  a run's trace arrays by column (:data:`~bridge.record.columns.TRACE_COLUMNS
      timeout_s`` s, clock, link delays s, the controller's ids), and in a lockstep session its ``lockstep`` record and
      the first step its vehicle flew off the step clock
 Out: one :class:`Verdict` per policy of :data:`POLICIES` (``ok``; when violated, the mission time of the first
-     violation and a one-line why), for ``summary.json["policies"]``; and the honest records that go with them: the
-     lockstep record (:func:`lockstep_record`), who ended a flight by command (:func:`ended_by_command`) or how
-     (:func:`ended_by_outcome`)
+     violation and a one-line why), for ``summary.json["policies"]``; and the lockstep record that goes with them
+     (:func:`lockstep_record`; who ended a flight, by command or how: :mod:`bridge.record.endedby`)
 
 The offline loop (:mod:`bridge.loop`) and the SITL session (:mod:`bridge.session`) both call :func:`check` on what
 they recorded, so every run is judged by the same properties; a violated policy is named on stderr and in
@@ -58,7 +57,6 @@ from typing import Any
 import numpy as np
 
 from bridge.autopilot.simvehicle import OFFBOARD
-from bridge.autopilot.vehicleevents import Sender
 from bridge.record.events import RunEvent
 
 POLICIES: dict[str, str] = {
@@ -140,31 +138,6 @@ def lockstep_record(events: Sequence[RunEvent], off_clock_t: float | None = None
         return {"held": False, "left_at_s": round(off_clock_t, 6),
                 "why": "the vehicle flew off the step clock without saying so", "times": 1}
     return {"held": True}
-
-
-def ended_by_command(events: Sequence[RunEvent], controller_id: tuple[int, int] = CONTROLLER_ID,
-                     before_s: float = math.inf) -> tuple[RunEvent, Sender | None] | None:
-    """The vehicle's first disarm by command before ``before_s`` (or a takeover: a mode change of the
-    armed vehicle out of OFFBOARD, not the vehicle's own) that the configured controller on its own link
-    did not send: the event and its sender (None when the event names none), or None. A mode selected
-    while disarmed, for the next arm, ends nothing: the controller's arm flies OFFBOARD; nor does a ground
-    station's arm in HOLD on the ground awaiting a mission's start, or its timeout's disarm (``pre_start``)."""
-    for e in vehicle_events(events):
-        if e.t >= before_s - EPS_S:
-            break
-        if e.pre_start:
-            continue
-        # a disarm not of the vehicle's own (landed, stopped by its failsafe, diverged: ``by`` ITSELF)
-        own = e.by is not None and e.by.is_vehicle
-        commanded = ((e.kind == "disarmed" and not own)
-                     or (e.kind == "mode" and bool(e.armed) and e.mode != OFFBOARD and not own))
-        if not commanded:
-            continue
-        who = e.by
-        if who is not None and who.link == "controller" and (who.sysid, who.compid) == controller_id:
-            continue
-        return e, who
-    return None
 
 
 # -- the policies ----------------------------------------------------------------------------------------
@@ -412,57 +385,6 @@ def rules_for(flight: Any, clock: str, link: Mapping[str, Any] | None,
                  armed_at_start=clock == "offline", command_slack_s=up + physics,
                  hold_slack_s=flight.guard.stop_s + up + down + 1.0 / m.rate_hz, controller_id=controller_id,
                  spin_down=lag, geofence=m.geofence)
-
-
-def ended_by_outcome(outcome: str, events: Sequence[RunEvent]) -> dict[str, str]:
-    """``summary.json["ended_by"]`` as the outcome and the vehicle's events tell it: the mission (completed), the
-    vehicle (its failsafe, or its pre-arm check that denied the arm), the plant (diverged, crashed), the ground station
-    that terminated it, or whoever interrupted it. A session knows more (a child that died, a command): it says so."""
-    ev = vehicle_events(events)
-
-    def first(kind: str) -> RunEvent | None:
-        return next((e for e in ev if e.kind == kind), None)
-
-    if outcome == "completed":
-        return {"who": "mission", "how": "completed"}
-    if outcome == "diverged":
-        e = first("diverged")
-        return {"who": "plant", "how": f"diverged at t={e.t:.3f} s: {e.text}" if e else "diverged"}
-    if outcome == "crashed":
-        e = first("crashed")
-        return {"who": "plant", "how": f"crashed at t={e.t:.3f} s: {e.text}" if e else "crashed"}
-    if outcome == "terminated" and (e := first("terminated")):  # a ground station's DO_FLIGHTTERMINATION: it fell
-        hit = next((f"; {x.kind} at t={x.t:.3f} s: {x.text}" for x in ev if x.kind in ("impact", "crashed")), "")
-        return {"who": str(e.by or "ground station"), "how": f"flight terminated at t={e.t:.3f} s: {e.text}{hit}"}
-    if outcome == "collision":  # another vehicle touched this one (bridge.swarm)
-        e = first("collision")
-        return {"who": "plant", "how": f"collision at t={e.t:.3f} s: {e.text}" if e else "collision"}
-    if outcome == "failsafe":
-        e = first("failsafe")
-        return {"who": "vehicle", "how": f"failsafe at t={e.t:.3f} s: {e.text}" if e else "failsafe"}
-    if outcome == "law_failed":  # a user's law raised, exited or gave no four finite inputs (controller.law)
-        e = first("law_failed")
-        return {"who": "controller", "how": f"its law failed at t={e.t:.3f} s: {e.text}" if e else "its law failed"}
-    if outcome == "denied":  # PX4's pre-arm check denied the flight's arm: nothing flew
-        return arming_denied_end(events) or {"who": "vehicle", "how": "arming denied"}
-    return {"who": "user", "how": "interrupted (Ctrl-C or SIGTERM)"}
-
-
-def arming_denied_end(events: Sequence[RunEvent], controller_id: tuple[int, int] | None = None
-                      ) -> dict[str, str] | None:
-    """``ended_by`` of a flight that never armed because the vehicle's pre-arm check denied it (outcome ``denied``:
-    a ``preflight`` event, and no ``armed`` one): the vehicle, with why (its last denial); None for any other
-    flight. With ``controller_id`` (a session), only if that last denial answered the configured controller's arm
-    on its link (a ground station's denied arm does not explain why the controller gave up)."""
-    ev = vehicle_events(events)
-    denied = next((e for e in reversed(ev) if e.kind == "preflight"), None)
-    if denied is None or any(e.kind == "armed" for e in ev):
-        return None
-    who = denied.by
-    if controller_id is not None and who is not None and (who.link, (who.sysid, who.compid)) != (
-            "controller", controller_id):
-        return None
-    return {"who": "vehicle", "how": f"{denied.text} (t={denied.t:.3f} s)"}
 
 
 def judge(summary: dict[str, Any], trace: Mapping[str, Any], events: Sequence[RunEvent], rules: Rules,

@@ -27,6 +27,7 @@ import numpy as np
 from bridge.core.clock import STALL_S
 from bridge.core.flight import Flight
 from bridge.record.columns import TRACE_COLUMNS
+from bridge.record.endedby import arming_denied_end, ended_by_command, ended_by_outcome
 from bridge.record.events import RunEvent, in_time_order
 from bridge.record.interventions import (
     ended_by_change,
@@ -39,9 +40,6 @@ from bridge.record.joiner import Joined
 from bridge.record.metrics import after_faults, percentiles, plant_summary, summarise
 from bridge.record.policies import (
     CONTROLLER_ID,
-    arming_denied_end,
-    ended_by_command,
-    ended_by_outcome,
     judge,
     lockstep_record,
     rules_for,

@@ -63,11 +63,13 @@ Its parts, as PX4 splits an autopilot:
                         halted), its transitions in one table
 - :mod:`.authority`     who may command what on which link; who caused an event (its ``by``)
 - :mod:`.commander`     arming, flight modes, commands, the triggers that end a flight
+- :mod:`.requests`      requests for messages and their rates (SET/GET_MESSAGE_INTERVAL, REQUEST_MESSAGE, ...)
 - :mod:`.paramservice`  PX4's parameters over MAVLink
 - :mod:`.mission`       PX4's mission protocol (upload, download, clear, set current) and the mission held
 - :mod:`.targets`       the controller's answers: actuator targets, the no-target acknowledgement
 - :mod:`.receiver`      the receive path: each message, its sender's authority checked, to its part
 - :mod:`.streams`       the telemetry streams (message id -> builder and rate), HEARTBEAT, ODOMETRY
+- :mod:`.streaming`     the vehicle's view for its messages, each link's streams sent when due, its load
 - :mod:`.rows`          ``vehicle.bin``
 - :mod:`.config`        :class:`VehicleConfig`
 - :mod:`.node`          :class:`Vehicle`, which wires the parts to the links, and :func:`run_vehicle`

@@ -2,10 +2,10 @@
 
 In:  COMMAND_LONG / COMMAND_INT (COMPONENT_ARM_DISARM, DO_SET_MODE, NAV_TAKEOFF m AMSL, NAV_LAND, NAV_RETURN_TO_LAUNCH,
      MISSION_START (with ``await_mission``: :mod:`.mission`), DO_REPOSITION, INJECT_FAILURE, DO_CHANGE_SPEED,
-     DO_FLIGHTTERMINATION, REQUEST_PROTOCOL_VERSION, DO_SET_MISSION_CURRENT (:mod:`.actions`),
-     SET/GET_MESSAGE_INTERVAL us, REQUEST_MESSAGE, REQUEST_AUTOPILOT_CAPABILITIES, GET_HOME_POSITION) and
-     SET_MODE from a sender with authority (:class:`~bridge.autopilot.vehicleevents.Sender`); the plant's
-     divergence and the controller's silence (wall time, s)
+     DO_FLIGHTTERMINATION, REQUEST_PROTOCOL_VERSION, DO_SET_MISSION_CURRENT (:mod:`.actions`), the requests for
+     messages and their rates (:mod:`.requests`)) and SET_MODE from a sender with authority
+     (:class:`~bridge.autopilot.vehicleevents.Sender`); the plant's divergence and the controller's silence (wall
+     time, s)
 Out: COMMAND_ACK (with what a command asked for, and a STATUSTEXT saying why it was refused) in one
      datagram; the flight's changes (arm, disarm, mode) on the :class:`SimVehicle` as events naming their
      sender; the step clock's transitions (:class:`~bridge.nodes.vehicle.clock.Clock`); why a command was
@@ -33,10 +33,9 @@ from bridge.autopilot.intention import NOT_ARMABLE
 from bridge.autopilot.params import BY_NAME
 from bridge.autopilot.simvehicle import GROUND_MODES, HOLD, LAND, OFFBOARD, RTL, TAKEOFF, SimVehicle
 from bridge.autopilot.vehicleevents import Sender
-from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import Endpoint
 from bridge.mavlink.modes import MISSION, mode_name, requested_custom_mode, requested_mode
-from bridge.mavlink.receive import FORCE_DISARM, arm_disarm_args, interval_arg, message_id_arg
+from bridge.mavlink.receive import FORCE_DISARM, arm_disarm_args
 from bridge.nodes.vehicle.actions import Actions
 from bridge.nodes.vehicle.authority import Authority, attribute
 from bridge.nodes.vehicle.clock import Clock, Trigger
@@ -44,13 +43,11 @@ from bridge.nodes.vehicle.intention import ModeIntention
 from bridge.nodes.vehicle.mission import START_ARM, START_ARMED, START_COMMAND, MissionManager
 from bridge.nodes.vehicle.prestart import PreStart
 from bridge.nodes.vehicle.reposition import reposition
-from bridge.nodes.vehicle.streams import HEARTBEAT_S, StatusTexts, StreamTable
+from bridge.nodes.vehicle.requests import MessageRequests, Result
+from bridge.nodes.vehicle.streams import StatusTexts, StreamTable
 from bridge.record.metrics import plant_blocks
 
 OFFBOARD_STREAM_S = 1.0  # s of wall time: a ground station's OFFBOARD needs a target from the controller this recent
-_STREAM_COMMANDS = (mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAV_CMD_GET_MESSAGE_INTERVAL,
-                    mavlink.MAV_CMD_REQUEST_MESSAGE)
-Result = tuple[int, tuple[Any, ...]]  # (MAV_RESULT, the messages a command asked for)
 
 
 @dataclass(frozen=True)
@@ -102,7 +99,6 @@ class Commander:
         self.cfg = authority.cfg
         self.lockstep = self.cfg.clock == "lockstep"
         self._statustext = texts
-        self.streams = streams  # link (controller, gcs) -> its stream table: a link's requests change its own
         self.substeps = substeps
         self.ports = ports
         self.texts: list[Any] = []  # STATUSTEXTs saying why a command was refused: sent after its COMMAND_ACK
@@ -112,6 +108,8 @@ class Commander:
         self.pre_start = PreStart(sim, clock, ports.missions, self.cfg.await_mission)
         self.intention = ModeIntention(sim, ports.missions)  # the mode a disarm in LAND, RTL or failsafe leaves
         self.actions = Actions(sim, clock, ports.reject, self._off_step_clock, ports.missions)
+        # link (controller, gcs) -> its stream table: a link's requests change its own
+        self.requests = MessageRequests(sim, streams, self.cfg.sysid, ports.message, ports.reject)
 
     # -- the messages ---------------------------------------------------------------------------------
     def command(self, ep: Endpoint, m: Any, addr: tuple[str, int], link: str) -> bool:
@@ -177,8 +175,9 @@ class Commander:
                 self.ports.arm_through_link(FinalAck(m, ep, addr, self.sim))
                 return mavlink.MAV_RESULT_IN_PROGRESS, ()
             return self.arm_disarm(m.param1, m.param2, by), ()
-        if cmd in _STREAM_COMMANDS:
-            return self._stream_command(m, by)
+        asked = self.requests.run(m, by)  # SET/GET_MESSAGE_INTERVAL, REQUEST_MESSAGE, CAPABILITIES, HOME_POSITION
+        if asked is not None:
+            return asked
         if cmd == mavlink.MAV_CMD_DO_SET_MODE:
             return self._set_mode_or_refuse(*requested_mode(m.param1, m.param2, m.param3), by=by), ()
         if cmd == mavlink.MAV_CMD_NAV_TAKEOFF:
@@ -194,11 +193,6 @@ class Commander:
             return self._reposition(m, by), ()
         if cmd == mavlink.MAV_CMD_MISSION_START and self.cfg.await_mission:
             return self._start_mission(by, m.param1), ()
-        if cmd == mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
-            return mavlink.MAV_RESULT_ACCEPTED, (tm.autopilot_version(self.cfg.sysid),)
-        if cmd == mavlink.MAV_CMD_GET_HOME_POSITION:
-            return mavlink.MAV_RESULT_ACCEPTED, tuple(self.ports.message(mavlink.MAVLINK_MSG_ID_HOME_POSITION,
-                                                                    by.link != "controller"))
         acted = self.actions.run(m, by)  # INJECT_FAILURE, DO_CHANGE_SPEED, TERMINATION, PROTOCOL_VERSION, SET_CURRENT
         if acted is None:
             return mavlink.MAV_RESULT_UNSUPPORTED, ()
@@ -235,39 +229,6 @@ class Commander:
     def _through_link(self, m: Any, by: Sender) -> bool:
         """Whether a command crosses the up-link model: the controller's, on its link, in a lockstep flight."""
         return by.link == "controller" and self.clock.engaged and self.authority.from_controller(m)
-
-    def _stream_command(self, m: Any, by: Sender) -> Result:
-        """SET_MESSAGE_INTERVAL, GET_MESSAGE_INTERVAL, REQUEST_MESSAGE on the sender's link's streams."""
-        cmd = m.command
-        mid = message_id_arg(m.param1)
-        interval = interval_arg(m.param2) if cmd == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL else 0.0
-        if mid is None or interval is None:
-            self.ports.reject("bad_number")
-            return mavlink.MAV_RESULT_DENIED, ()
-        table = self.streams[by.link]
-        if cmd == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
-            return self._set_interval(table, mid, interval, by), ()
-        if cmd == mavlink.MAV_CMD_GET_MESSAGE_INTERVAL:
-            if mid > 0xFFFF:  # MESSAGE_INTERVAL's message_id has 16 bits
-                return mavlink.MAV_RESULT_UNSUPPORTED, ()
-            iv = table.get(mid, HEARTBEAT_S if mid == mavlink.MAVLINK_MSG_ID_HEARTBEAT else 0.0)
-            return mavlink.MAV_RESULT_ACCEPTED, (
-                mavlink.MAVLink_message_interval_message(mid, int(iv * 1e6) if iv > 0 else -1),)
-        follow = tuple(self.ports.message(mid, by.link != "controller"))  # the controller's: the mission's frame
-        return (mavlink.MAV_RESULT_ACCEPTED if follow else mavlink.MAV_RESULT_UNSUPPORTED), follow
-
-    def _set_interval(self, table: StreamTable, mid: int, interval_us: float, by: Sender) -> int:
-        """A checked SET_MESSAGE_INTERVAL on one link's streams; a change is an event."""
-        if mid == mavlink.MAVLINK_MSG_ID_HEARTBEAT:
-            return mavlink.MAV_RESULT_ACCEPTED if interval_us in (0, HEARTBEAT_S * 1e6) else mavlink.MAV_RESULT_DENIED
-        if mid not in table:
-            return mavlink.MAV_RESULT_UNSUPPORTED
-        iv = table.set(mid, interval_us, time.monotonic())
-        if iv is not None:
-            name = mavlink.mavlink_map[mid].msgname
-            self.sim.event("interval", f"{name} every {iv:g} s on the {by.link} link" if iv > 0
-                           else f"{name} off on the {by.link} link")
-        return mavlink.MAV_RESULT_ACCEPTED
 
     # -- flight modes (docs/ground-station.md) -------------------------------------------------------
     def _mission_selected(self) -> bool:

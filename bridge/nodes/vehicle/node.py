@@ -9,8 +9,9 @@ Out: ODOMETRY of step k (``time_usec`` = k / rate_hz, us) to the controller; HEA
      through :meth:`Vehicle._report`
 
 Parts: step clock (:mod:`.clock`), who is heard (:mod:`.authority`), commands (:mod:`.commander`), events said
-(:mod:`.announcer`), parameters (:mod:`.paramservice`), missions (:mod:`.mission`), telemetry (:mod:`.streams`),
-trace rows (:mod:`.rows`). Here: the loops of the clock's states, the receive dispatch, wall-clock housekeeping.
+(:mod:`.announcer`), parameters (:mod:`.paramservice`), missions (:mod:`.mission`), telemetry (:mod:`.streams`,
+sent by :mod:`.streaming`), trace rows (:mod:`.rows`). Here: the loops of the clock's states, the receive dispatch,
+wall-clock housekeeping.
 """
 
 from __future__ import annotations
@@ -22,14 +23,11 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from bridge.autopilot.simvehicle import OFFBOARD
 from bridge.core.flight import Flight
 from bridge.core.wire import command_from_wire
 from bridge.link.ends import VehicleEnd
 from bridge.link.turns import TurnRadio
-from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import Spinner, Tlog, wait
-from bridge.mavlink.modes import MISSION
 from bridge.mavlink.receive import Rejections
 from bridge.nodes.process import on_stop_signals, report_printer
 from bridge.nodes.report import Ready, Refused, Report, Stats
@@ -44,19 +42,8 @@ from bridge.nodes.vehicle.mission import MissionManager
 from bridge.nodes.vehicle.paramservice import ParamService
 from bridge.nodes.vehicle.receiver import Receiver, ReceiverPorts, Refusals
 from bridge.nodes.vehicle.rows import Rows
-from bridge.nodes.vehicle.streams import (
-    DEFAULT_STREAMS,
-    HEARTBEAT_S,
-    OdometryOut,
-    StatusTexts,
-    StreamTable,
-    VehicleView,
-    battery_streams,
-    estimator_streams,
-    health_of,
-    heartbeat,
-    message,
-)
+from bridge.nodes.vehicle.streaming import Streaming
+from bridge.nodes.vehicle.streams import HEARTBEAT_S, OdometryOut, StatusTexts
 from bridge.nodes.vehicle.targets import Targets
 from bridge.record.metrics import plant_blocks
 from bridge.record.runlog import side_dir
@@ -96,18 +83,13 @@ class Vehicle:
         self.k = 0  # control step of the plant's state: t_k = k / rate_hz
         self.stopping = False
         now = time.monotonic()
-        # the GCS link's: the defaults, and with sensors (not truth) HIGHRES_IMU and, for GNSS, GPS_RAW_INT
-        sensors = self.sim.sensors.config if self.sim.sensors is not None else None
-        self.streams = StreamTable({**DEFAULT_STREAMS, **tm.sensor_streams(sensors), **estimator_streams(
-            self.sim.sensors), **battery_streams(self.plant.battery)}, now)
-        self.ctl_streams = StreamTable(dict.fromkeys(self.streams, 0.0), now)  # the controller link's: none
         self._next_heartbeat = self._next_house = now
         self._resend_at = self._lost_at = self._idle_odo_at = now
         self.clock = Clock(cfg.clock == "realtime", m.physics_hz, cfg.speed or 1.0, now)
         self.pace = self.clock.pace  # the wall clock of physics steps
         self.catchup = CatchUp(self.pace)  # real time: the machine's stalls, and what they held back
         self._n = 0  # physics steps taken (realtime: for the wall-clock schedule)
-        self._load_at, self.load = (now, time.process_time()), 0
+        load_at = (now, time.process_time())
         # lockstep: the controller's targets and re-arms cross the mission's up-link model here; a lockstep fleet's
         # one radio (its gate file's) takes them at this vehicle's turn (bridge.link.turns)
         gate = cfg.gate if cfg.clock == "lockstep" else None
@@ -127,19 +109,21 @@ class Vehicle:
         self.params = ParamService(self.sim, self.authority, self._statustext, self._reject, self._refused)
         self.missions = MissionManager(self.sim, self.authority, self._statustext, self._to_ground_stations,
                                        self._refused)
+        self.streaming = Streaming(self.sim, flight, cfg, self.missions, self.clock, lambda: self.t, now, load_at)
         self.announcer = Announcer(self.sim, self.authority, self.link, self.endpoints, self._report,
-                                   self._statustext, self._heartbeat)
+                                   self._statustext, self.streaming.heartbeat)
         ports = CommanderPorts(step=lambda: self.k, state_out=self._send_odometry, new_flight=self._new_flight,
                                arm_through_link=lambda acted: self.vend.receive_arm(self.t, acted),
                                target_wall=lambda: self.targets.wall,
-                               controller_heard=lambda: self.link.peer is not None, message=self._message,
+                               controller_heard=lambda: self.link.peer is not None, message=self.streaming.message,
                                reject=self._reject, refused=self._refused, announce=self.announcer.report_events,
                                missions=self.missions)
-        self.commander = Commander(self.sim, self.clock, self.authority, self._statustext,
-                                   {"controller": self.ctl_streams, "gcs": self.streams}, self.substeps, ports)
+        tables = {"controller": self.streaming.ctl_streams, "gcs": self.streaming.streams}
+        self.commander = Commander(self.sim, self.clock, self.authority, self._statustext, tables, self.substeps,
+                                   ports)
         self.receiver = Receiver(self.link, self.authority, self._reject, self.targets, self.commander, self.params,
                                  self.missions, ReceiverPorts(step=lambda: self.k, flight_on=self._flight_on,
-                                               announce=self.announcer.drain, heartbeat=self._heartbeat,
+                                               announce=self.announcer.drain, heartbeat=self.streaming.heartbeat,
                                                clock_ns=self._clock_ns, events=self.announcer.resend))
         self.announcer.charged = self.receiver.charged
         self._handle = self.receiver.handle  # (an attribute: one call less on the lockstep's hot path)
@@ -407,25 +391,6 @@ class Vehicle:
         E = self.sim.published()
         return E, self.sim.nees(E)
 
-    def _view(self, own: bool = True) -> VehicleView:
-        """The vehicle now, as its telemetry reads it; ``own``: about its local origin (VehicleView.origin)."""
-        sim, plant, cfg = self.sim, self.plant, self.cfg
-        mission = self.missions.mission
-        mode = MISSION if self.missions.shows_mission(sim.armed, sim.mode == OFFBOARD) else sim.mode
-        return VehicleView(sim.published(), self.t, mode, sim.onboard.target, sim.armed, self.clock.halted,
-                           plant.on_ground, plant.omega, self.flight.profile.omega_max, self.load, sim.sensors,
-                           cfg.home, cfg.sysid, (mission.current, len(mission.items), self.missions.mission_state),
-                           plant.battery, sim.battery_watch.level(plant.battery.remaining) if plant.battery else 0,
-                           sim.prearm_refusal, sim.position.ekf_valid, lambda: health_of(sim),
-                           (sim.home[0], sim.home[1]) if own else (0.0, 0.0))
-
-    def _heartbeat(self) -> Any:
-        return heartbeat(self._view())
-
-    def _message(self, mid: int, own: bool = True) -> list[Any]:
-        """The message(s) with id ``mid`` for a stream or a REQUEST_MESSAGE ([] if none; ``own``: :meth:`_view`'s)."""
-        return message(mid, self._view(own))
-
     def _housekeeping(self) -> None:
         """Wall-clock duties: GCS commands, heartbeat, streams, flushing files."""
         now = time.monotonic()
@@ -438,22 +403,13 @@ class Vehicle:
         if now >= self._next_heartbeat:
             self._next_heartbeat = now + HEARTBEAT_S
             self.announcer.beat()
-            cpu = time.process_time()
-            w0, c0 = self._load_at
-            self.load = int(1000 * (cpu - c0) / max(now - w0, 1e-6))
-            self._load_at = (now, cpu)
+            self.streaming.measure_load(now)
         refused = self.rejected.report(now)  # once per second while the receive path refuses anything
         if refused is not None:
             warning = mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_WARNING, refused.encode())
             self.announcer.to_links([warning])
-        nxt = min(self._next_heartbeat, now + HOUSEKEEPING_S)
-        if self.gcs is not None and self.gcs.peer is not None:
-            self.streams.send_due(now, lambda mid: self.gcs.send_many(self._message(mid)))
-            nxt = min(nxt, *self.streams.due.values())
-        if self.link.peer is not None and self.ctl_streams.due:
-            with self.receiver.charged():
-                self.ctl_streams.send_due(now, lambda mid: self.link.send_many(self._message(mid, False)))
-            nxt = min(nxt, *self.ctl_streams.due.values())
+        nxt = self.streaming.send_due(now, min(self._next_heartbeat, now + HOUSEKEEPING_S), self.gcs, self.link,
+                                      self.receiver.charged)
         if self.rows is not None:
             self.rows.flush()
         if self.tlog is not None:

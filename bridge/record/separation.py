@@ -1,0 +1,102 @@
+"""A fleet's separation policy: every pair's closest approach, and the contacts, judged on the vehicles' positions.
+
+In:  the vehicles' ids, their rotor discs' radii (m), the policy's minimum clearance (m); each step, the mission time
+     (s) and the vehicles' true centres (m, NWU x, y, z); for SITL, the finished traces (rows at t = j / rate s,
+     columns ``x``, ``y``, ``z`` m), where each stayed after its last row and each one's start (m)
+Out: :class:`Watch`: the pairs that touch at a step (indices, why), ``summary.json["separation"]`` (every pair's
+     closest approach: clearance m, at t s) and the ``separation`` policy's verdict (ok, or t s and why);
+     :func:`judge_traces`: each vehicle's first contact on finished traces (step, t s, the other's id, why)
+
+The offline fleet (:mod:`bridge.swarm`) judges its world after every step with a :class:`Watch`; a SITL fleet's
+is judged on its sessions' traces afterwards, by the same :class:`Watch` (:func:`judge_traces`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+from missions.fleet import clearance
+
+DEFINITION = ("distance between the vehicles' centres less each one's disc radius (its arm plus its rotor "
+              "radius: rotor_radius_m, by default half the arm)")
+CONTINUED = ("the flights continued past the contact: in real time each vehicle keeps its own wall clock, the "
+             "vehicles share no clock, so nothing stopped them at it (docs/swarm.md)")
+
+
+class Watch:
+    """The shared world's separation policy over a flight: every pair's closest approach (clearance m, at t s),
+    the first time the policy broke, and the pairs in contact now."""
+
+    def __init__(self, ids: Sequence[int], radii: Sequence[float], min_m: float) -> None:
+        self.ids, self.radii, self.min_m = list(ids), list(radii), min_m
+        n = len(ids)
+        self.pairs = [(a, b) for a in range(n) for b in range(a + 1, n)]
+        self.closest = {p: (math.inf, 0.0) for p in self.pairs}  # (clearance m, t s)
+        self.broken: tuple[float, str] | None = None
+
+    def check(self, t: float, positions: Sequence[Sequence[float]]) -> list[tuple[int, int, str]]:
+        """Judge the world at time ``t`` (s) with these centres (m): the pairs (indices) that touch, and why."""
+        touching = []
+        for a, b in self.pairs:
+            d, c = clearance(positions[a], positions[b], self.radii[a], self.radii[b])
+            if c < self.closest[(a, b)][0]:
+                self.closest[(a, b)] = (c, t)
+            if c < self.min_m and self.broken is None:
+                self.broken = (t, f"vehicles {self.ids[a]} and {self.ids[b]} {c:.3f} m apart (rotor discs), "
+                                  f"under the minimum of {self.min_m:g} m")
+            if c <= 0.0:
+                touching.append((a, b, f"vehicles {self.ids[a]} and {self.ids[b]} touched at t={t:.3f} s "
+                                       f"(centres {d:.3f} m apart, rotor discs {c:.3f} m)"))
+        return touching
+
+    def summary(self) -> dict[str, Any]:
+        """``summary.json["separation"]``: the policy, and every pair's closest approach."""
+        pairs = [{"ids": [self.ids[a], self.ids[b]], "closest_m": _num(c), "t": round(t, 6),
+                  "ok": c >= self.min_m} for (a, b), (c, t) in self.closest.items()]
+        least = min((p["closest_m"] for p in pairs if p["closest_m"] is not None), default=None)
+        return {"min_m": self.min_m, "definition": DEFINITION, "disc_radius_m": dict(zip(map(str, self.ids),
+                self.radii)), "closest_m": least, "pairs": pairs}
+
+    def verdict(self) -> dict[str, Any]:
+        """The ``separation`` policy's verdict, as the other policies' (:class:`bridge.record.policies.Verdict`)."""
+        if self.broken is None:
+            return {"name": "separation", "ok": True}
+        return {"name": "separation", "ok": False, "t": round(self.broken[0], 6), "why": self.broken[1]}
+
+
+def _num(v: float) -> float | None:  # (m, 9 digits; None: never judged)
+    return round(v, 9) if math.isfinite(v) else None
+
+
+def judge_traces(watch: Watch, traces: Sequence[dict[str, Any]], rate: float,
+                 finals: Sequence[tuple[float, float, float] | None] | None = None,
+                 starts: Sequence[Sequence[float]] | None = None,
+                 afters: Sequence[Sequence[Sequence[float]]] | None = None) -> dict[int, dict[str, Any]]:
+    """Judge the shared world on finished traces, with the offline loop's :class:`Watch`: row j of every trace
+    (the true positions at t = j / rate; row 0 the start) is the world after step j - 1, as the loop judges it,
+    and after a trace's rows, its vehicle's ``afters`` (m: its end landing's, flown on after the mission, as the
+    loop flies and judges them); a path that ended early stays at its last row, or with ``finals`` (a lockstep
+    fleet's shared clock: where each vehicle stayed, m, after its last row's step) there, as the loop keeps it; an
+    empty one (a vehicle that flew no step) is at its start with ``starts`` (m: one never armed stands there, as
+    the loop keeps it), else nowhere, and touches no one. The first contact of each vehicle (by index): its step,
+    time, the other's id and why (without ``finals``, that the flights went on: :data:`CONTINUED`)."""
+    last = [finals[i] if finals is not None else None for i in range(len(traces))]
+    paths = [[(float(x), float(y), float(z)) for x, y, z in zip(tr["x"], tr["y"], tr["z"])] for tr in traces]
+    for path, more_rows in zip(paths, afters or ()):
+        path.extend((float(p[0]), float(p[1]), float(p[2])) for p in more_rows)
+    n = max((len(path) + (p is not None) for path, p in zip(paths, last)), default=0)
+    first: dict[int, dict[str, Any]] = {}
+    nowhere = (math.nan, math.nan, math.nan)  # NaN distances: never closer, never touching (Watch.check)
+    unflown = [tuple(s[:3]) for s in starts] if starts is not None else [nowhere] * len(traces)
+    more = {} if finals is not None else {"continued": CONTINUED}
+    for j in range(n):
+        positions = []
+        for path, p, home in zip(paths, last, unflown):
+            r = min(j, len(path) - 1)
+            positions.append(p if p is not None and j > r else path[r] if r >= 0 else home)
+        for a, b, why in watch.check(j / rate, positions):
+            for i, other in ((a, b), (b, a)):
+                first.setdefault(i, {"step": j, "t": round(j / rate, 6), "with": watch.ids[other], "why": why, **more})
+    return first
