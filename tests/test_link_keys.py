@@ -26,6 +26,7 @@ from bridge.link.model import (
     BLACKOUT_DURATION_RANGE_S,
     DIRECTION_KEYS,
     GUARD_RANGES,
+    HI_OPEN,
     LINK_KEYS,
     LO_OPEN,
     NUMBER_RANGES,
@@ -117,7 +118,7 @@ def test_every_number_has_one_range(key: str) -> None:
     for v in outside:
         assert not accepted({key: v, **extra}), (key, v)
         assert not flag_accepts(flag, v), (flag, v)
-    for v, ok in ((hi, True), (lo, key not in LO_OPEN), (math.nan, False), (math.inf, False)):
+    for v, ok in ((hi, key not in HI_OPEN), (lo, key not in LO_OPEN), (math.nan, False), (math.inf, False)):
         if key == "burst_len" and v == hi:
             extra_b = {"loss_pct": 50.0}
             assert accepted({key: v, **extra_b})

@@ -157,6 +157,9 @@ def test_bsst_relay_process_stops_on_sigterm_and_writes_stats(tmp_path: Path) ->
     (["--listen", "127.0.0.1:0", "--to", "127.0.0.1:0"], "--to '127.0.0.1:0': port must be in [1, 65535]"),
     (["--listen", "127.0.0.1:0", "--to", "no.such.host.invalid:1"], "unknown host"),
     (["--listen", "127.0.0.1:0", "--to", "127.0.0.1:1", "--loss", "-3"], "--loss must be in [0, 100]"),
+    # every packet held back behind a successor held back too: nothing would ever be forwarded
+    (["--listen", "127.0.0.1:0", "--to", "127.0.0.1:1", "--reorder", "100", "--duration", "0.1"],
+     "--reorder must be in [0, 100)"),
     (["--listen", "127.0.0.1:0", "--to", "127.0.0.1:1", "--mission", "nope.toml"], "nope.toml: no such file"),
     (["--listen", "127.0.0.1:0", "--to", "127.0.0.1:1", "--client", "127.0.0.1:0"],
      "--client '127.0.0.1:0': port must be in [1, 65535]"),

@@ -104,17 +104,19 @@ def int_in(name: str, lo: int, hi: int) -> Callable[[str], int]:
     return conv
 
 
-def number_in(name: str, lo: float, hi: float, *, lo_open: bool = False) -> Callable[[str], float]:
-    """An argparse type: a finite number in [lo, hi] (or (lo, hi] with ``lo_open``), named in the error."""
-    left = "(" if lo_open else "["
+def number_in(name: str, lo: float, hi: float, *, lo_open: bool = False,
+              hi_open: bool = False) -> Callable[[str], float]:
+    """An argparse type: a finite number in [lo, hi] (either end open with ``lo_open`` / ``hi_open``), named in
+    the error."""
+    left, right = "(" if lo_open else "[", ")" if hi_open else "]"
 
     def conv(text: str) -> float:
         try:
             v = float(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{name} must be a number, got {text!r}") from None
-        if not (lo < v if lo_open else lo <= v) or not v <= hi:  # also refuses nan
-            raise argparse.ArgumentTypeError(f"{name} must be in {left}{lo:g}, {hi:g}], got {text}")
+        if not (lo < v if lo_open else lo <= v) or not (v < hi if hi_open else v <= hi):  # also refuses nan
+            raise argparse.ArgumentTypeError(f"{name} must be in {left}{lo:g}, {hi:g}{right}, got {text}")
         return v
 
     return conv
@@ -241,10 +243,10 @@ def link_number(flag: str, key: str | None = None) -> Callable[[str], float]:
     ``key`` (bridge.link.model, looked up when a flag is given, so that building the parser does
     not load the link model; ``None``: the command lag)."""
     def conv(text: str) -> float:
-        from bridge.link.model import GUARD_RANGES, LO_OPEN, NUMBER_RANGES  # lazy: start-up time
+        from bridge.link.model import GUARD_RANGES, HI_OPEN, LO_OPEN, NUMBER_RANGES  # lazy: start-up time
 
         k = key or "command_lag_ms"
-        return number_in(flag, *{**NUMBER_RANGES, **GUARD_RANGES}[k], lo_open=k in LO_OPEN)(text)
+        return number_in(flag, *{**NUMBER_RANGES, **GUARD_RANGES}[k], lo_open=k in LO_OPEN, hi_open=k in HI_OPEN)(text)
 
     return conv
 

@@ -4,7 +4,8 @@ mission's tables, the CLI's flags and a sweep's axes all check against them).
 In:  one direction's impairment: delays ms, loss %, burst length packets, ``rate_bps`` bytes/s,
      blackouts (start s, duration s), a seed, a measured trace
 Out: :class:`LinkConfig` (checked on construction), the range tables (:data:`NUMBER_RANGES`,
-     :data:`GUARD_RANGES`, the blackout and seed ranges), :func:`burst_problem`, :func:`trace_clash`
+     :data:`GUARD_RANGES`, :data:`LO_OPEN` / :data:`HI_OPEN`, the blackout and seed ranges), :func:`burst_problem`,
+     :func:`trace_clash`
 
 What the model does with them: :mod:`bridge.link.impairment`; reading a mission's ``[link]`` table
 into them: :mod:`bridge.link.model`, which re-exports every name here.
@@ -121,6 +122,9 @@ GUARD_RANGES: dict[str, tuple[float, float]] = {
     "stop_ms": (0.0, 60_000.0),
 }
 LO_OPEN = frozenset({"stale_ms", "stop_ms"})
+# and the ones that exclude their top: at reorder_pct = 100 every packet waits for a successor that waits too,
+# so nothing is ever delivered (docs/links.md)
+HI_OPEN = frozenset({"reorder_pct"})
 COMMAND_LAG_RANGE_MS = GUARD_RANGES["command_lag_ms"]
 SEED_RANGE = (0, 2**31 - 1)
 # every key a direction's table takes, and every key [link] itself takes (besides [link.up] and [link.down])

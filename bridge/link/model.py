@@ -24,6 +24,7 @@ from bridge.link.config import (
     DIRECTION_KEYS,
     DIRECTIONS,
     GUARD_RANGES,
+    HI_OPEN,
     JITTER_KINDS,
     LINK_KEYS,
     LO_OPEN,
@@ -60,7 +61,7 @@ from params import ConfigError, Table, finite_float
 
 __all__ = [  # re-exported: the link model's one import (absolute_link_paths: where a table's files are made absolute)
     "BLACKOUT_DURATION_RANGE_S", "BLACKOUT_START_RANGE_S", "COMMAND_LAG_RANGE_MS", "DIRECTION_KEYS", "DIRECTIONS",
-    "FRAME_BYTES", "GUARD_RANGES", "JITTER_KINDS", "LINK_KEYS", "LO_OPEN", "NUMBER_RANGES", "SEED_RANGE",
+    "FRAME_BYTES", "GUARD_RANGES", "HI_OPEN", "JITTER_KINDS", "LINK_KEYS", "LO_OPEN", "NUMBER_RANGES", "SEED_RANGE",
     "TRACE_EXCLUSIVE", "Delivery", "Fate", "FateStream", "LinkConfig", "LinkImpairment", "LinkSettings",
     "LinkStats", "Radio", "absolute_link_paths", "burst_problem", "fates", "link_from_table", "merge_link_tables",
     "stream_key", "trace_clash", "uniform",
@@ -79,7 +80,7 @@ def _direction(t: Table, base: Mapping[str, Any]) -> dict[str, Any]:
     """Read the per-direction keys of one table, defaults from ``base`` (the same keys)."""
     kw: dict[str, Any] = {}
     for name, (lo, hi) in NUMBER_RANGES.items():
-        kw[name] = t.number(name, base[name], lo=lo, hi=hi)
+        kw[name] = t.number(name, base[name], lo=lo, hi=hi, hi_open=name in HI_OPEN)
     kw["jitter"] = t.string("jitter", base["jitter"], choices=JITTER_KINDS)
     why = burst_problem(kw["loss_pct"], kw["burst_len"])
     if why:
