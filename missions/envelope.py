@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import functools
 import math
+from typing import Any
 
 from missions.minsnap import Smooth
 from missions.references import Reference, Sine, Step, Waypoints
@@ -57,8 +58,7 @@ def envelope_problem(trajectory: Reference, start: tuple[float, ...], duration_s
     if r > ENVELOPE_RADIUS_M:
         return "start.position", _beyond("the start" + (" with its scatter" if scatter_m else ""), r)
     if isinstance(trajectory, (Step, Waypoints)):
-        key, points = (("trajectory.setpoints", trajectory.setpoints) if isinstance(trajectory, Step)
-                       else ("trajectory.points", trajectory.points))
+        key, points = _given_points(trajectory)
         for i, s in enumerate(points):
             r = math.sqrt(s.x * s.x + s.y * s.y + s.z * s.z)
             if r > ENVELOPE_RADIUS_M:
@@ -80,6 +80,13 @@ def envelope_problem(trajectory: Reference, start: tuple[float, ...], duration_s
     return None
 
 
+def _given_points(trajectory: Step | Waypoints | Smooth) -> tuple[str, tuple[Any, ...]]:
+    """The mission key and the points the user gave a reference (set-points, waypoints, a smooth one's knots)."""
+    if isinstance(trajectory, Step):
+        return "trajectory.setpoints", trajectory.setpoints
+    return "trajectory.points", trajectory.points if isinstance(trajectory, Waypoints) else trajectory.knots
+
+
 def _below(what: str, z: float) -> str:
     return (f"{what} is at z = {z:.4g} m, below the ground (the plane z = 0 the vehicle starts on and rests on: "
             f"plant/quadrotor.py), where no vehicle can follow it")
@@ -92,9 +99,7 @@ def ground_problem(trajectory: Reference, start: tuple[float, ...], duration_s: 
     if start[2] < 0.0:
         return "start.position", _below("the start", start[2])
     if isinstance(trajectory, (Step, Waypoints, Smooth)):
-        key, points = (("trajectory.setpoints", trajectory.setpoints) if isinstance(trajectory, Step)
-                       else ("trajectory.points", trajectory.points if isinstance(trajectory, Waypoints)
-                             else trajectory.knots))
+        key, points = _given_points(trajectory)
         for i, s in enumerate(points):
             if s.z < 0.0:
                 return f"{key}[{i}]", _below(f"({s.x:g}, {s.y:g}, {s.z:g})", s.z)
