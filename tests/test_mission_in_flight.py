@@ -201,9 +201,11 @@ def test_an_upload_after_the_mission_ended_in_hold_is_taken_while_armed_as_on_px
     a ground station uploads a takeoff and a waypoint and starts them; the controller flies them, hands the vehicle
     HOLD and exits. The vehicle holds, armed, its mission COMPLETE; an upload then is ACCEPTED (it was refused until
     a disarm: the controller flies nothing any more, and PX4 takes an upload at any time), the new mission
-    NOT_STARTED, and DO_SET_MISSION_CURRENT is ACCEPTED on it; the vehicle still holds, armed. Before, a start with
-    an item this vehicle does not fly (DO_JUMP) is refused saying so whole, every command it flies listed (its
-    STATUSTEXT was once cut at 200 characters, the list with it)."""
+    NOT_STARTED, and DO_SET_MISSION_CURRENT is ACCEPTED on it; the vehicle still holds, armed. MISSION_START and
+    AUTO.MISSION there are DENIED, saying why (PX4 would fly the mission on; AUTO.MISSION was ACCEPTED and did nothing).
+    A MISSION_START whose param1 is NaN is DENIED, as PX4's commander denies it (it was taken as item 0). Before, a
+    start with an item this vehicle does not fly (DO_JUMP) is refused saying so whole, every command it flies listed
+    (its STATUSTEXT was once cut at 200 characters, the list with it)."""
     settings = tmp_path / "hold.toml"
     settings.write_text((MISSION_DIR / "sine.toml").read_text() + '\n[end]\naction = "hold"\n')
     out = tmp_path / "run"
@@ -234,11 +236,17 @@ def test_an_upload_after_the_mission_ended_in_hold_is_taken_while_armed_as_on_px
             assert gcs.start() == M.MAV_RESULT_DENIED
             said = gcs.joined_text("MISSION_START: the mission cannot be flown")
             assert gcs.upload(items) == M.MAV_MISSION_ACCEPTED
+            assert gcs.command(M.MAV_CMD_MISSION_START, math.nan) == M.MAV_RESULT_DENIED  # PX4: not finite
+            assert "got first item nan" in gcs.joined_text("MISSION_START: only from item 0")
             assert gcs.start() == M.MAV_RESULT_ACCEPTED
             assert controller.p.wait(timeout=120) == 0, "\n".join(controller.lines[-20:])
             gcs.recv("HEARTBEAT", 10, f"HEARTBEAT.get_srcComponent()==1 and HEARTBEAT.base_mode & 128 and "
                                       f"HEARTBEAT.custom_mode=={hold}")
             gcs.recv("MISSION_CURRENT", 5, f"MISSION_CURRENT.mission_state=={M.MISSION_STATE_COMPLETE}")
+            assert gcs.start() == M.MAV_RESULT_DENIED  # PX4 flies it on; the controller is gone
+            assert "land and disarm" in gcs.joined_text("MISSION_START: armed in the air (HOLD)")
+            assert gcs.command(M.MAV_CMD_DO_SET_MODE, 1, 4, 4) == M.MAV_RESULT_DENIED  # AUTO.MISSION: once ACCEPTED,
+            assert "land and disarm" in gcs.joined_text("mode MISSION: armed in the air (HOLD)")  # nothing done
             assert gcs.upload(_items()) == M.MAV_MISSION_ACCEPTED
             gcs.recv("MISSION_CURRENT", 5, f"MISSION_CURRENT.total==3 and "
                                            f"MISSION_CURRENT.mission_state=={M.MISSION_STATE_NOT_STARTED}")

@@ -429,6 +429,10 @@ def test_a_fence_and_rally_points_are_held_apart_from_the_mission(tmp_path):
                 assert [_fields(m) for m in got] == [_fields(m) for m in items]
                 assert {(m.mission_type, m.current) for m in got} == {(kind, 0)}
             assert len(_download(gcs)) == 3  # the mission as it was
+            for kind, most in ((M.MAV_MISSION_TYPE_FENCE, 64), (M.MAV_MISSION_TYPE_RALLY, 32)):  # PX4's MAX_COUNT
+                gcs.mav.mission_count_send(*_tgt(gcs), most + 1, kind)
+                ack = _ack(gcs)
+                assert (ack.type, ack.mission_type) == (M.MAV_MISSION_NO_SPACE, kind)
             short = [copy.copy(m) for m in fence[:3] + fence[4:]]  # a polygon of 4 with 3 vertices: refused at
             for seq, m in enumerate(short):  # its end
                 m.seq = seq
@@ -540,6 +544,25 @@ elif part == "raw-json":  # items given as JSON lists of FIELDS: upload, timed, 
             break
         except MissionRawError as e:
             out["download_attempts"].append(e.result.name)
+elif part == "caps":  # arg "F,R": a fence of F items and R rally points, then one more of each; read back
+    mr = MissionRaw(system)
+    def sent(upload, items):
+        try:
+            return upload(items).name
+        except MissionRawError as e:
+            return e.result.name
+    def vertex(k, n):  # of a polygon of n vertices on a circle of 10 m about the home (frame GLOBAL_INT)
+        a = 2 * math.pi * k / n
+        return RawItem(k, 5, 5001, 0, 1, float(n), 0.0, 0.0, 0.0, 473977420 + round(898 * math.cos(a)),
+                       85455940 + round(1325 * math.sin(a)), 0.0, 1)
+    def rally(k):  # 1 m apart, 10 m up (frame GLOBAL_RELATIVE_ALT_INT)
+        return RawItem(k, 6, 5100, 0, 1, 0.0, 0.0, 0.0, 0.0, 473977420 + 9 * k, 85455940, 10.0, 2)
+    n_fence, n_rally = (int(v) for v in arg.split(","))
+    out["fence"] = sent(mr.upload_geofence, [vertex(k, n_fence) for k in range(n_fence)])
+    out["fence_over"] = sent(mr.upload_geofence, [vertex(k, n_fence + 1) for k in range(n_fence + 1)])
+    out["rally"] = sent(mr.upload_rally_points, [rally(k) for k in range(n_rally)])
+    out["rally_over"] = sent(mr.upload_rally_points, [rally(k) for k in range(n_rally + 1)])
+    out["fence_got"], out["rally_got"] = len(mr.download_geofence()), len(mr.download_rallypoints())
 else:
     mission = Mission(system)
     plan = MissionPlan([
@@ -608,6 +631,26 @@ def test_mavsdk_mission_raw_and_mission(tmp_path):
     for got, sent in zip(mission["got"], mission["sent"], strict=True):
         assert got == pytest.approx(sent, abs=1e-6), (got, sent)
     assert sum("mission: uploaded 6 items" in s for s in v.events()) == 1
+
+
+def test_mavsdk_fence_and_rally_points_are_held_to_px4s_counts(tmp_path):
+    """MAVSDK MissionRaw, a user's ground station: a fence of 64 items (a polygon of 64 vertices) and 32 rally
+    points, PX4's most (MavlinkMissionManager::MAX_COUNT: DM_KEY_FENCE_POINTS_MAX, DM_KEY_SAFE_POINTS_MAX), are
+    uploaded and read back; one more of either is MAV_MISSION_NO_SPACE (MAVSDK's TOO_MANY_MISSION_ITEMS), as PX4
+    answers a MISSION_COUNT over its count, and what was held stays (the vehicle once took 1000 and 100)."""
+    with instance_slot() as n:
+        v = _vehicle(n, tmp_path / "v")
+        try:
+            got = _mavsdk(f"udpin://127.0.0.1:{GCS_PORT + n}", "caps", "64,32")
+        finally:
+            assert v.stop() == 0
+    assert got["found"], got
+    assert (got["fence"], got["rally"]) == ("SUCCESS", "SUCCESS"), got
+    assert (got["fence_over"], got["rally_over"]) == ("TOO_MANY_MISSION_ITEMS", "TOO_MANY_MISSION_ITEMS"), got
+    assert (got["fence_got"], got["rally_got"]) == (64, 32), got
+    events = v.events()
+    assert sum("mission: fence uploaded 64 items" in s for s in events) == 1, events
+    assert sum("mission: rally points uploaded 32 items" in s for s in events) == 1, events
 
 
 # -- MAVProxy -------------------------------------------------------------------------------------------

@@ -40,7 +40,7 @@ from bridge.nodes.vehicle.actions import Actions
 from bridge.nodes.vehicle.authority import Authority, attribute
 from bridge.nodes.vehicle.clock import Clock, Trigger
 from bridge.nodes.vehicle.intention import ModeIntention
-from bridge.nodes.vehicle.mission import START_ARM, START_ARMED, START_COMMAND, MissionManager
+from bridge.nodes.vehicle.mission import START_ARM, START_ARMED, START_COMMAND, MissionManager, in_air_refusal
 from bridge.nodes.vehicle.prestart import PreStart
 from bridge.nodes.vehicle.reposition import reposition
 from bridge.nodes.vehicle.requests import MessageRequests, Result
@@ -241,14 +241,20 @@ class Commander:
         if self.clock.halted:
             return self._refuse("MISSION_START: the plant ended the flight")
         if self.sim.armed and not self.pre_start.awaits():
-            return self._refuse("MISSION_START: only on the ground, disarmed or armed in HOLD (the controller flies "
-                                "it from its start)")
+            return self._refuse(self._armed_start_refusal())
         missions = self.ports.missions
         why = "MISSION_START: no mission manager" if missions is None else missions.start(by, first, how)
         if why:
             return self._refuse(why)
         self.pre_start.at = None  # started: no pre-takeoff timeout while the controller downloads it
         return mavlink.MAV_RESULT_ACCEPTED
+
+    def _armed_start_refusal(self) -> str:
+        """Why MISSION_START is refused armed (but in HOLD on the ground awaiting the start): in the air,
+        :func:`~bridge.nodes.vehicle.mission.in_air_refusal`."""
+        if not self.sim.plant.on_ground:
+            return in_air_refusal("MISSION_START", self.sim.mode)
+        return "MISSION_START: only on the ground, disarmed or armed in HOLD (the controller flies it from its start)"
 
     def _takeoff_altitude(self, param7: float) -> float | str:
         """NAV_TAKEOFF's altitude above home (m) from its param7 (m AMSL, as PX4 reads it; NaN:

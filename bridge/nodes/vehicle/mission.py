@@ -25,7 +25,6 @@ across the links); this manager holds what they share: the mission, the one uplo
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable
 from typing import Any
@@ -36,6 +35,7 @@ from bridge.autopilot.simvehicle import OFFBOARD, SimVehicle
 from bridge.autopilot.vehicleevents import Sender
 from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import Endpoint
+from bridge.mavlink.modes import mode_name
 from bridge.nodes.vehicle.authority import Authority, attribute
 from bridge.nodes.vehicle.missiontransfer import LinkTransfer, Mission, Partner
 from bridge.nodes.vehicle.missionwatch import Goal, ItemWatch, goals_of
@@ -52,6 +52,15 @@ START_COMMAND = "MISSION_START"  # how a ground station started the mission (sum
 START_ARM = "AUTO.MISSION, then arm"
 _ZONES = {mavlink.MAV_MISSION_TYPE_FENCE: "fence", mavlink.MAV_MISSION_TYPE_RALLY: "rally points"}
 START_ARMED = "arm, then AUTO.MISSION"  # armed in HOLD on the ground first (MAVSDK's arm(), then start_mission())
+
+
+def in_air_refusal(what: str, mode: str) -> str:
+    """Why ``what`` (MISSION_START, AUTO.MISSION) does not start the mission armed in the air, in ``mode``. PX4 takes
+    it (Commander::arm is NOT_CHANGED armed; its navigator flies the mission on from its current item, or from
+    MISSION_START's param1); here the controller flies a mission whole from its takeoff on the ground, and is gone
+    once that flight is over."""
+    return (f"{what}: armed in the air ({mode_name(mode)}): PX4 would fly the mission on from there; here the "
+            "controller flies a mission whole from its takeoff: land and disarm, then start it")
 
 
 class MissionManager:
@@ -84,12 +93,17 @@ class MissionManager:
     # -- a ground station's start (await_mission) --------------------------------------------------------
     def select(self, armed: bool) -> str | None:
         """AUTO.MISSION asked for (DO_SET_MODE, SET_MODE): selected, disarmed, with a mission (None), or why
-        not. Armed and flying the mission already: nothing to do."""
+        not. Armed and flying the mission already: nothing to do; armed otherwise, why not (in the air:
+        :func:`in_air_refusal`)."""
         if not self.authority.cfg.await_mission:
             return ("mode MISSION: not flown here; OFFBOARD, HOLD, LAND, TAKEOFF, RTL are (and MISSION with "
                     "--await-mission)")
         if armed:
-            return None if self.watch is not None else "mode MISSION: only selected on the ground, disarmed"
+            if self.flown() is not None:
+                return None  # flying the mission already: nothing to do
+            if not self.sim.plant.on_ground:  # its flight over (HOLD after the end, say): not flown again
+                return in_air_refusal("mode MISSION", self.sim.mode)
+            return "mode MISSION: only selected on the ground, disarmed"
         why = self._startable("mode MISSION")
         if why is None:
             self.selected = True
@@ -110,8 +124,8 @@ class MissionManager:
         first item ``first``, or :data:`START_ARM`, an arm with AUTO.MISSION selected): a ``mission`` event, the
         vehicle shows AUTO.MISSION, and the controller is to fly it from item 0 (None), or why not (the mission
         is checked as the controller will fly it). :attr:`started` says how and by whom (summary.json)."""
-        if not (math.isnan(first) or first in (0.0, -1.0)):
-            return f"MISSION_START: only from item 0 (the whole mission), got first item {first:g}"
+        if first not in (0.0, -1.0):  # PX4's commander: DENIED unless finite, -1 or more, and an item
+            return f"MISSION_START: only from item 0 (the whole mission; -1: the current one), got first item {first:g}"
         why = self._startable("MISSION_START")
         if why is not None:
             return why

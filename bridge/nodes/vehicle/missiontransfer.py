@@ -41,8 +41,11 @@ PROTOCOL_TIMEOUT_S = 5.0  # PX4's MAVLINK_MISSION_PROTOCOL_TIMEOUT_DEFAULT: a si
 MAX_ITEMS = 65534  # PX4 SITL's NUM_MISSIONS_SUPPORTED (UINT16_MAX - 1): a larger count is MAV_MISSION_NO_SPACE
 MISSION = mavlink.MAV_MISSION_TYPE_MISSION
 TYPES = (MISSION, mavlink.MAV_MISSION_TYPE_FENCE, mavlink.MAV_MISSION_TYPE_RALLY)
-# the most items of an upload of each type: PX4 SITL's missions; a fence's and rally points' as a plan file's
-MAX_COUNT = {MISSION: MAX_ITEMS, mavlink.MAV_MISSION_TYPE_FENCE: 1000, mavlink.MAV_MISSION_TYPE_RALLY: 100}
+# the most items of an upload of each type, PX4's MavlinkMissionManager::MAX_COUNT (mavlink_mission.h): its SITL's
+# missions, DM_KEY_FENCE_POINTS_MAX and DM_KEY_SAFE_POINTS_MAX (src/lib/dataman/dataman.h); more is NO_SPACE
+MAX_FENCE_ITEMS, MAX_RALLY_POINTS = 64, 32
+MAX_COUNT = {MISSION: MAX_ITEMS, mavlink.MAV_MISSION_TYPE_FENCE: MAX_FENCE_ITEMS,
+             mavlink.MAV_MISSION_TYPE_RALLY: MAX_RALLY_POINTS}
 BUSY = "WPM: REJ. CMD: Busy"
 _NOUN = {MISSION: "mission", mavlink.MAV_MISSION_TYPE_FENCE: "fence", mavlink.MAV_MISSION_TYPE_RALLY: "rally point"}
 

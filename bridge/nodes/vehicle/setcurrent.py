@@ -1,5 +1,6 @@
-"""MAV_CMD_DO_SET_MISSION_CURRENT (224), the command form of the deprecated MISSION_SET_CURRENT message, as PX4's
-navigator answers it (src/modules/navigator/navigator_main.cpp, ``VEHICLE_CMD_DO_SET_MISSION_CURRENT``), for what
+"""MAV_CMD_DO_SET_MISSION_CURRENT (224), the command form of the deprecated MISSION_SET_CURRENT message, as PX4
+answers it since its pull request 28105 (its navigator's ``VEHICLE_CMD_DO_SET_MISSION_CURRENT``, with
+``Mission::set_current_mission_index``: docs/ground-station.md, "Missions", says which copies were read), for what
 this vehicle flies.
 
 In:  the command's param1 (the item's seq; -1: the current one) and param2 (MAV_BOOL: 1 resets the mission), from a
