@@ -109,6 +109,7 @@ def test_missing_files_oversized_requests_and_replies() -> None:
     (big,) = _ops(s.handle(_req(2, ftp.READ_FILE, size=240), ME))
     assert big.data == bytes([ftp.ERR_INVALID_DATA_SIZE])
     assert s.handle(_req(4, ftp.ACK), ME) == [] and s.handle(_req(4, ftp.NAK), ME) == [] and s.handle(b"\x01", ME) == []
+    assert ftp.is_request(_req(4, 42)) and not ftp.is_request(_req(4, ftp.ACK)) and not ftp.is_request(b"\x01")
 
 
 def test_sessions_are_bounded_the_oldest_closed_first() -> None:

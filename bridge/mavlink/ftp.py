@@ -75,6 +75,12 @@ def decode(payload: bytes) -> Op | None:
     return Op(seq, session, opcode, size, req_opcode, burst, offset, bytes(payload[HEADER.size:HEADER.size + size]))
 
 
+def is_request(payload: bytes) -> bool:
+    """Whether an FTP payload is a request the server answers (a header, an opcode below 128: not a reply)."""
+    op = decode(payload)
+    return op is not None and op.opcode < ACK
+
+
 def reply(request: Op, opcode: int, data: bytes, seq: int, offset: int = 0, burst_complete: int = 0) -> Op:
     """A reply (ACK or NAK) to ``request`` carrying ``data``."""
     return Op(seq, request.session, opcode, len(data), request.opcode, burst_complete, offset, data)
