@@ -45,9 +45,9 @@ from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
 from bridge.autopilot.params import BY_NAME, ParamRefused, VehicleParams, change_param  # noqa: E402
 from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, GCS_PORT, LINK_PORT  # noqa: E402
+from bridge.mavlink.ftp import is_request as ftp_request  # noqa: E402
 from bridge.mavlink.modes import (  # noqa: E402
     PARAM_TYPES,
-    ftp_nak,
     param_from_wire,
     param_name,
     requested_custom_mode,
@@ -199,7 +199,7 @@ class CommandFuzzer:
         kind = m.get_type()
         if gcs and (kind in GCS_HANDLED or (kind == "TIMESYNC" and m.tc1 == 0) or (
                 kind == "FILE_TRANSFER_PROTOCOL" and (addressed_elsewhere(m, self.sysid, 1)
-                                                      or ftp_nak(bytes(m.payload)) is not None))):
+                                                      or ftp_request(bytes(m.payload))))):
             self.handled += 1
         self.sent[kind] += 1
         mav = self.mav

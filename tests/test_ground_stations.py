@@ -30,7 +30,6 @@ from pymavlink.dialects.v20 import common as M
 from bridge.autopilot.params import PARAMS, VehicleParams, read_param
 from bridge.core.flight import prepare
 from bridge.mavlink.endpoint import GCS_PORT, parse_address
-from bridge.mavlink.modes import FTP_ERR_UNKNOWN_COMMAND, FTP_HEADER, FTP_NAK, FTP_PAYLOAD_LEN, ftp_nak
 from bridge.nodes.report import Refused
 from bridge.nodes.vehicle import Vehicle, VehicleConfig
 from bridge.nodes.vehicle.reposition import UNSET_INT
@@ -753,19 +752,5 @@ def test_mavproxy_params_and_modes(tmp_path):
     assert not any("COM_OF_LOSS_T = 100" in s for s in v.events())
     unanswered, ftp_requests, ftp_replies = _answers(tmp_path / "v" / "vehicle.tlog", n + 1)
     assert not unanswered, f"commands MAVProxy sent that got no COMMAND_ACK: {unanswered}"
-    assert ftp_requests >= 1 and ftp_replies == ftp_requests  # every FTP request answered (a NAK)
+    assert ftp_requests >= 1 and ftp_replies == ftp_requests  # every FTP request answered (its parameter file: a NAK)
 
-
-def test_ftp_nak_bytes():
-    """The NAK of an FTP request: seq + 1 (wrapping), the request's session and opcode, ERR_UnknownCommand;
-    a reply (ACK, NAK) or a payload shorter than a header is not answered."""
-    open_ro = FTP_HEADER.pack(7, 3, 4, 5, 0, 0, 0, 0) + b"@PARA"  # OpenFileRO, 5 bytes of its path
-    nak = ftp_nak(open_ro.ljust(FTP_PAYLOAD_LEN, b"\x00"))
-    assert nak is not None and len(nak) == FTP_PAYLOAD_LEN
-    assert FTP_HEADER.unpack_from(nak) == (8, 3, FTP_NAK, 1, 4, 0, 0, 0)
-    assert nak[FTP_HEADER.size] == FTP_ERR_UNKNOWN_COMMAND and not any(nak[FTP_HEADER.size + 1:])
-    wrap = ftp_nak(FTP_HEADER.pack(0xFFFF, 0, 1, 0, 0, 0, 0, 0))  # TerminateSession at the last seq
-    assert wrap is not None and FTP_HEADER.unpack_from(wrap)[0] == 0
-    assert ftp_nak(FTP_HEADER.pack(1, 0, 128, 0, 4, 0, 0, 0)) is None  # an ACK
-    assert ftp_nak(FTP_HEADER.pack(1, 0, FTP_NAK, 1, 4, 0, 0, 0) + b"\x07") is None
-    assert ftp_nak(b"\x00" * (FTP_HEADER.size - 1)) is None

@@ -2,6 +2,8 @@
 
 - :mod:`bridge.mavlink.endpoint`   an endpoint owning its socket, and waiting on several
 - :mod:`bridge.mavlink.events`     the vehicle's events as typed EVENT messages (added to pymavlink's common here)
+- :mod:`bridge.mavlink.compmeta`   the component metadata: the events' libevents JSON, COMPONENT_METADATA (added here)
+- :mod:`bridge.mavlink.ftp`        MAVLink FTP, read-only: the payload codec and the sessions of a file server
 - :mod:`bridge.mavlink.frames`     the frame stage of the receive path; the hot-path codec
 - :mod:`bridge.mavlink.tlog`       the telemetry log of every frame sent or received
 - :mod:`bridge.mavlink.receive`    the one receive path: what is refused, and how it is counted
@@ -9,6 +11,7 @@
 - :mod:`bridge.mavlink.telemetry`  what the vehicle tells a ground station, from the paper state
 """
 
-from bridge.mavlink.events import register
+from bridge.mavlink import compmeta, events
 
-register()
+events.register()
+compmeta.register()

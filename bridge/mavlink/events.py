@@ -32,35 +32,45 @@ NAMESPACE = 0xB5 << 24  # an id's upper 8 bits: whose event (libevents: 0 MAVLin
 
 
 class EventId(IntEnum):
-    """One stable EVENT id per kind of the vehicle's events: NAMESPACE | its number. Never renumbered: a new kind
-    takes a new number, and OTHER stands for a kind not in the table yet (its STATUSTEXT still says it)."""
+    """One stable EVENT id per kind of the vehicle's events: NAMESPACE | its number, and the short message a ground
+    station shows for it (the libevents metadata the vehicle publishes, :mod:`bridge.mavlink.compmeta`; the details
+    are in the STATUSTEXT sent with it). Never renumbered: a new kind takes a new number, and OTHER stands for a kind
+    not in the table yet (its STATUSTEXT still says it). The one table of kinds: every list of them is made from it."""
 
-    ARMED = NAMESPACE | 1
-    DISARMED = NAMESPACE | 2
-    MODE = NAMESPACE | 3
-    FAILSAFE = NAMESPACE | 4
-    LOCKSTEP = NAMESPACE | 5  # the vehicle left lockstep (its controller silent, or a ground station took it)
-    DIVERGED = NAMESPACE | 6
-    CRASHED = NAMESPACE | 7
-    IMPACT = NAMESPACE | 8
-    TERMINATED = NAMESPACE | 9
-    PREFLIGHT = NAMESPACE | 10
-    BATTERY = NAMESPACE | 11
-    GEOFENCE = NAMESPACE | 12
-    POSITION = NAMESPACE | 13
-    LANDING = NAMESPACE | 14
-    LANDED = NAMESPACE | 15
-    TOUCHDOWN = NAMESPACE | 16
-    COLLISION = NAMESPACE | 17
-    END = NAMESPACE | 18
-    PARAM = NAMESPACE | 19
-    MISSION = NAMESPACE | 20
-    SPEED = NAMESPACE | 21
-    INTERVAL = NAMESPACE | 22
-    FAULT = NAMESPACE | 23
-    WIND = NAMESPACE | 24
-    LINK = NAMESPACE | 25
-    OTHER = NAMESPACE | 0xFFFFFF
+    message: str
+
+    def __new__(cls, number: int, message: str) -> EventId:
+        member = int.__new__(cls, NAMESPACE | number)
+        member._value_ = NAMESPACE | number
+        member.message = message
+        return member
+
+    ARMED = 1, "Armed"
+    DISARMED = 2, "Disarmed"
+    MODE = 3, "Flight mode changed"
+    FAILSAFE = 4, "Failsafe: the vehicle took over"
+    LOCKSTEP = 5, "Left lockstep"  # its controller silent, or a ground station took it
+    DIVERGED = 6, "The flight diverged"
+    CRASHED = 7, "Crashed"
+    IMPACT = 8, "Hard touchdown"
+    TERMINATED = 9, "Flight termination: motors off"
+    PREFLIGHT = 10, "Arming refused by a preflight check"
+    BATTERY = 11, "Battery warning"
+    GEOFENCE = 12, "Geofence breached"
+    POSITION = 13, "Position estimate changed"
+    LANDING = 14, "Landing"
+    LANDED = 15, "Landed"
+    TOUCHDOWN = 16, "Touchdown"
+    COLLISION = 17, "Collision"
+    END = 18, "Mission over"
+    PARAM = 19, "Parameter changed"
+    MISSION = 20, "Mission changed"
+    SPEED = 21, "Speed changed"
+    INTERVAL = 22, "Message interval changed"
+    FAULT = 23, "Fault injected"
+    WIND = 24, "Wind changed"
+    LINK = 25, "Link changed"
+    OTHER = 0xFFFFFF, "Vehicle event"
 
 
 # the one table: event kind -> id (each kind's id is its name's member)
@@ -130,15 +140,17 @@ class EventRing:
 
 
 # -- the messages, as mavgen would generate them from common.xml ---------------------------------------------------
-_FORMATS = {"uint8_t": "B", "uint16_t": "H", "uint32_t": "I"}
-_SIZES = {"uint8_t": 1, "uint16_t": 2, "uint32_t": 4}
+_FORMATS = {"uint8_t": "B", "uint16_t": "H", "uint32_t": "I", "char": "s"}
+_SIZES = {"uint8_t": 1, "uint16_t": 2, "uint32_t": 4, "char": 1}
 
 
-def _message_class(name: str, msgid: int, crc_extra: int, fields: tuple[tuple[str, str, int], ...]) -> type:
+def message_class(name: str, msgid: int, crc_extra: int, fields: tuple[tuple[str, str, int], ...]) -> type:
     """A pymavlink message class of ``fields`` (name, type, array length; 0: a scalar) in common.xml's order; on
-    the wire sorted by type size, largest first (MAVLink 2's rule, stable)."""
+    the wire sorted by type size, largest first (MAVLink 2's rule, stable). A ``char`` array is a string: given as
+    bytes or str, read back as str up to its first NUL (as pymavlink's own classes)."""
     wire = sorted(range(len(fields)), key=lambda i: -_SIZES[fields[i][1]])
     names = [f[0] for f in fields]
+    chars = {f[0] for f in fields if f[1] == "char"}
     fmt = "<" + "".join(f"{fields[i][2]}{_FORMATS[fields[i][1]]}" if fields[i][2] else _FORMATS[fields[i][1]]
                         for i in wire)
 
@@ -148,12 +160,20 @@ def _message_class(name: str, msgid: int, crc_extra: int, fields: tuple[tuple[st
         self._instance_field = None
         self._instance_offset = -1
         for n, v in zip(names, values, strict=True):
+            if n in chars:
+                raw = v.encode() if isinstance(v, str) else bytes(v)
+                setattr(self, f"_{n}_raw", raw)
+                v = raw.split(b"\x00", 1)[0].decode("ascii", errors="replace")
             setattr(self, n, v)
 
     def pack(self: Any, mav: Any, force_mavlink1: bool = False) -> bytes:
         flat: list[Any] = []
         for i in wire:
-            v = getattr(self, names[i])
+            n = names[i]
+            if n in chars:
+                flat.append(getattr(self, f"_{n}_raw"))
+                continue
+            v = getattr(self, n)
             flat.extend(v) if fields[i][2] else flat.append(v)
         return self._pack(mav, crc_extra, struct.pack(fmt, *flat), force_mavlink1=force_mavlink1)
 
@@ -161,22 +181,23 @@ def _message_class(name: str, msgid: int, crc_extra: int, fields: tuple[tuple[st
              "fieldtypes": [f[1] for f in fields], "fielddisplays_by_name": {}, "fieldenums_by_name": {},
              "fieldunits_by_name": {}, "native_format": bytearray(fmt.encode()),
              "orders": [wire.index(i) for i in range(len(fields))],
-             "lengths": [fields[i][2] or 1 for i in wire], "array_lengths": [fields[i][2] for i in wire],
+             "lengths": [1 if fields[i][1] == "char" else fields[i][2] or 1 for i in wire],
+             "array_lengths": [fields[i][2] for i in wire],
              "crc_extra": crc_extra, "unpacker": struct.Struct(fmt), "instance_field": None, "instance_offset": -1,
              "__init__": __init__, "pack": pack}
     return type(f"MAVLink_{name.lower()}_message", (mavlink.MAVLink_message,), attrs)
 
 
-MAVLink_event_message = _message_class("EVENT", EVENT, 160, (
+MAVLink_event_message = message_class("EVENT", EVENT, 160, (
     ("destination_component", "uint8_t", 0), ("destination_system", "uint8_t", 0), ("id", "uint32_t", 0),
     ("event_time_boot_ms", "uint32_t", 0), ("sequence", "uint16_t", 0), ("log_levels", "uint8_t", 0),
     ("arguments", "uint8_t", ARGUMENTS)))
-MAVLink_current_event_sequence_message = _message_class("CURRENT_EVENT_SEQUENCE", CURRENT_EVENT_SEQUENCE, 106, (
+MAVLink_current_event_sequence_message = message_class("CURRENT_EVENT_SEQUENCE", CURRENT_EVENT_SEQUENCE, 106, (
     ("sequence", "uint16_t", 0), ("flags", "uint8_t", 0)))
-MAVLink_request_event_message = _message_class("REQUEST_EVENT", REQUEST_EVENT, 33, (
+MAVLink_request_event_message = message_class("REQUEST_EVENT", REQUEST_EVENT, 33, (
     ("target_system", "uint8_t", 0), ("target_component", "uint8_t", 0), ("first_sequence", "uint16_t", 0),
     ("last_sequence", "uint16_t", 0)))
-MAVLink_response_event_error_message = _message_class("RESPONSE_EVENT_ERROR", RESPONSE_EVENT_ERROR, 77, (
+MAVLink_response_event_error_message = message_class("RESPONSE_EVENT_ERROR", RESPONSE_EVENT_ERROR, 77, (
     ("target_system", "uint8_t", 0), ("target_component", "uint8_t", 0), ("sequence", "uint16_t", 0),
     ("sequence_oldest_available", "uint16_t", 0), ("reason", "uint8_t", 0)))
 MESSAGES = (MAVLink_event_message, MAVLink_current_event_sequence_message, MAVLink_request_event_message,

@@ -2,11 +2,10 @@
 
 In:  the vehicle's mode (:mod:`bridge.autopilot.simvehicle`: offboard, hold, land, takeoff, failsafe, landed) and
      the target its on-board controller flies; DO_SET_MODE's parameters and SET_MODE's ``custom_mode``;
-     a parameter's value and MAVLink type; a MAVLink FTP request (FILE_TRANSFER_PROTOCOL's payload)
+     a parameter's value and MAVLink type
 Out: HEARTBEAT's ``base_mode`` and ``custom_mode`` (PX4's: main mode in bits 16-23, sub mode in
      bits 24-31, px4_custom_mode.h), the mode a ground station asked for (or why not), PARAM_VALUE's
-     ``param_value`` float for a value and the value a PARAM_SET's float carries; the FTP request's NAK
-     (no file is served: :func:`ftp_nak`)
+     ``param_value`` float for a value and the value a PARAM_SET's float carries
 
 With ``MAV_AUTOPILOT_PX4`` in the heartbeat, MAVProxy, MAVSDK and QGroundControl read
 ``custom_mode`` as PX4's and name the modes (OFFBOARD, HOLD — pymavlink calls it LOITER —, LAND,
@@ -144,26 +143,3 @@ def param_from_wire(value: float, kind: int) -> float:
     if math.isfinite(value) and value == int(value) and (abs(value) >= 1 or math.copysign(1.0, value) > 0):
         return float(value)  # (-0.0 is bytewise: INT32's -2147483648, 0x80000000)
     return float(struct.unpack("<i", struct.pack("<f", value))[0])
-
-
-# MAVLink FTP (FILE_TRANSFER_PROTOCOL's payload: seq u16, session, opcode, size, req_opcode, burst_complete,
-# padding, offset u32, then data): the vehicle has no file system to serve, and says so at once
-FTP_HEADER = struct.Struct("<HBBBBBBI")
-FTP_PAYLOAD_LEN = 251
-FTP_NAK = 129  # OpcodeId Nack (Ack is 128: opcodes from 128 on are replies, never answered)
-FTP_ERR_UNKNOWN_COMMAND = 7  # ERR_UnknownCommand: no FTP operation is supported here
-
-
-def ftp_nak(request: bytes) -> bytes | None:
-    """FILE_TRANSFER_PROTOCOL's payload answering an FTP ``request`` payload: a NAK with
-    ERR_UnknownCommand (seq + 1, the request's session and opcode), so that a ground station that
-    tries FTP first (MAVProxy fetches parameters as ``@PARAM/param.pck``) falls back to the parameter
-    protocol at once instead of after its retries time out; None for a reply (opcode >= 128) or a
-    payload too short to hold a header."""
-    if len(request) < FTP_HEADER.size:
-        return None
-    seq, session, opcode, *_ = FTP_HEADER.unpack_from(request)
-    if opcode >= 128:
-        return None
-    head = FTP_HEADER.pack((seq + 1) & 0xFFFF, session, FTP_NAK, 1, opcode, 0, 0, 0)
-    return (head + bytes((FTP_ERR_UNKNOWN_COMMAND,))).ljust(FTP_PAYLOAD_LEN, b"\x00")

@@ -4,7 +4,8 @@ handed to the part that acts on it.
 In:  a message (pymavlink), the :class:`Endpoint` it came in on and its source address (host, port)
 Out: calls into the parts (:class:`Targets`, :class:`Commander`, :class:`ParamService`,
      :class:`MissionManager`); answers to the requests that change nothing (TIMESYNC with the vehicle's clock
-     in ns, PING, an FTP NAK, REQUEST_EVENT's EVENTs again); the controller link's peer learned; refusals
+     in ns, PING, MAVLink FTP's replies (the component metadata files, read-only: :mod:`bridge.mavlink.ftp`),
+     REQUEST_EVENT's EVENTs again); the controller link's peer learned; refusals
      counted, with whether the flight's controller sent them (:class:`Refusals`)
 
 Before a flight, a vehicle not told its controller's address (no ``controller_from``) cannot know its
@@ -24,8 +25,9 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from bridge.mavlink.compmeta import FILES as METADATA_FILES
 from bridge.mavlink.endpoint import Endpoint
-from bridge.mavlink.modes import ftp_nak
+from bridge.mavlink.ftp import FtpServer
 from bridge.mavlink.receive import Rejections, ReplyCredit
 from bridge.nodes.vehicle.authority import COMMANDS, TARGETS, Authority
 from bridge.nodes.vehicle.commander import Commander
@@ -93,6 +95,7 @@ class Receiver:
         self.params = params
         self.mission = mission
         self.ports = ports
+        self.ftp = FtpServer(METADATA_FILES)  # the component metadata files, to every link's senders
         self.trial = ReplyCredit()  # what the would-be controllers may get back (the module docstring)
         self._flown: tuple[str, int] | None = None  # the address that flew the last flight (:meth:`on_trial`)
 
@@ -195,13 +198,14 @@ class Receiver:
             if not ep.reply_allowed(addr):
                 return self.refuse("reply_limited")
             ep.reply(tuple(self.ports.events(m)), addr)
-        elif kind == "FILE_TRANSFER_PROTOCOL":  # no files: a NAK at once (MAVProxy then fetches parameters)
-            if self.authority.for_others(m):
+        elif kind == "FILE_TRANSFER_PROTOCOL":  # the metadata files; anything else NAKed at once (MAVProxy's
+            if self.authority.for_others(m):  # parameter file too: it then fetches them by the parameter protocol)
                 return self.refuse("target")
-            nak = ftp_nak(bytes(m.payload))
-            if nak is not None:
-                self._request(ep, addr, mavlink.MAVLink_file_transfer_protocol_message(
-                    0, m.get_srcSystem(), m.get_srcComponent(), list(nak)))
+            if not ep.reply_allowed(addr):
+                return self.refuse("reply_limited")
+            replies = self.ftp.handle(bytes(m.payload), addr)
+            ep.reply(tuple(mavlink.MAVLink_file_transfer_protocol_message(0, m.get_srcSystem(), m.get_srcComponent(),
+                                                                           list(p)) for p in replies), addr)
         return None
 
     def on_trial(self) -> bool:

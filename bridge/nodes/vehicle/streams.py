@@ -28,6 +28,7 @@ from bridge.autopilot.modes import TERMINATION
 from bridge.autopilot.positionloss import EstimateHealth, estimate_health
 from bridge.autopilot.simvehicle import FAILSAFE, LANDED, TAKEOFF, SimVehicle
 from bridge.core.wire import odometry_fields, rotate_inverse, step_usec
+from bridge.mavlink import compmeta
 from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import ODOMETRY, Endpoint
 from bridge.mavlink.modes import heartbeat_mode
@@ -194,6 +195,9 @@ STREAMS: dict[int, Stream] = {
     mavlink.MAVLINK_MSG_ID_HEARTBEAT: Stream(lambda v: [heartbeat(v)], None),  # its own 1 Hz clock
     mavlink.MAVLINK_MSG_ID_ESTIMATOR_STATUS: Stream(_estimator_status, None),  # an estimator's: estimator_streams
     mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION: Stream(lambda v: [tm.autopilot_version(v.sysid)], None),
+    # where the component metadata is (its files over MAVLink FTP): on request only, as PX4's
+    compmeta.COMPONENT_METADATA: Stream(lambda v: [compmeta.component_metadata(_ms(v))], None),
+    compmeta.COMPONENT_INFORMATION: Stream(lambda v: [compmeta.component_information(_ms(v))], None),
     **{mid: _sensor(mid) for mid in tm.SENSOR_MESSAGES},
 }
 # default GCS streams (message id -> interval s)
