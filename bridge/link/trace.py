@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from params import ConfigError, read_regular_file
+from params import ConfigError, read_regular_file, utf8_text
 
 COLUMNS = ("t_s", "delay_ms", "direction")
 REQUIRED = ("t_s", "delay_ms")
@@ -131,11 +131,9 @@ def _lines(data: bytes, name: str) -> Iterator[tuple[int, str]]:
     number = 0
     for raw in io.BytesIO(data):  # shares the bytes; splits after each b"\n"
         try:
-            text = raw.decode("utf-8")
+            text = utf8_text(raw) if number == 0 else raw.decode("utf-8")
         except UnicodeDecodeError:
             raise ConfigError(f"{name} line {number + 1}: not UTF-8 text (expected a CSV link trace)") from None
-        if number == 0:
-            text = text.removeprefix("\ufeff")
         for ln in text.splitlines():
             number += 1
             if ln.strip() and not ln.lstrip().startswith("#"):
