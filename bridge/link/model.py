@@ -50,6 +50,7 @@ from bridge.link.profile import load_link_profile
 from bridge.link.radio import Radio
 from bridge.link.trace import (
     LENGTH_SLACK_S,
+    MIN_TRACE_RECORDS,
     DirectionTrace,
     TraceFile,
     absolute_link_paths,
@@ -118,6 +119,11 @@ def _config(kw: Mapping[str, Any], direction: str, source: str, duration_s: floa
         raise ConfigError(f"{where}.trace: {path} {why}")
     rec = tf.records(direction)
     assert rec is not None
+    if rec.n < MIN_TRACE_RECORDS:  # no spacing, so no length: it would replay its one record for ever
+        rows = "record" if tf.both is not None else f"{direction} record"
+        raise ConfigError(f"{where}.trace: {path} has 1 {rows}; a trace needs at least {MIN_TRACE_RECORDS} (it lasts "
+                          f"its last t_s plus its records' median spacing, and replays each record until the next): "
+                          f"for a constant link give delay_ms (or loss_pct = 100) instead")
     if duration_s is not None and not loop and rec.length_s < duration_s - LENGTH_SLACK_S:
         raise ConfigError(f"{where}.trace: {path} lasts {rec.length_s:g} s ({rec.n} {direction} records), "
                           f"shorter than the mission ({duration_s:g} s); loop it with trace_loop = true "

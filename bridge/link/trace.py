@@ -42,6 +42,7 @@ DELAY_RANGE_MS = (0.0, 60_000.0)  # the one-way delay a record may give, as the 
 T_RANGE_S = (0.0, 1e7)  # a record's time from the trace's start
 MAX_TRACE_BYTES = 512 << 20  # about 2.5e7 records: anything bigger is not a link trace of a flight
 LENGTH_SLACK_S = 1e-6  # a trace "as long as" the mission may fall short of it by rounding
+MIN_TRACE_RECORDS = 2  # per direction replayed: one record has no spacing, so no length (bridge.link.model refuses it)
 MAX_ROW_CHARS = 1000  # a record is two numbers and a direction: a longer line is not one
 
 
