@@ -83,17 +83,24 @@ def inputs_read() -> dict[str, str]:
     return dict(_INPUTS.get() or {})
 
 
-def unreachable(path: str | Path) -> str | None:
-    """Why the system cannot look ``path`` up (a name too long, a folder this process may not search: its
-    ``strerror``), or None: it exists, or is simply not there. pathlib's ``exists``, ``is_file`` and ``is_dir``
-    raise for the former: a check asks this first, to name the path (exit 2) instead of a traceback."""
+def look_up(path: str | Path) -> tuple[os.stat_result | None, str | None]:
+    """``path`` looked up, symbolic links followed: (its ``stat``, None); (None, None) if it is simply not there (or
+    a folder on its way is a file); (None, why) if the system cannot look it up (a name too long, a folder this
+    process may not search, a loop of links: the ``strerror``). The one way every reader and writer of a user's
+    path asks whether it can reach it (:func:`unreachable`, ``bridge.record.runlog``'s output checks)."""
     try:
-        os.stat(path)
+        return os.stat(path), None
     except (FileNotFoundError, NotADirectoryError):
-        return None
+        return None, None
     except OSError as exc:
-        return exc.strerror or str(exc)
-    return None
+        return None, exc.strerror or str(exc)
+
+
+def unreachable(path: str | Path) -> str | None:
+    """Why the system cannot look ``path`` up (:func:`look_up`), or None: it exists, or is simply not there.
+    pathlib's ``exists``, ``is_file`` and ``is_dir`` raise for the former: a check asks this first, to name the
+    path (exit 2) instead of a traceback."""
+    return look_up(path)[1]
 
 
 def read_regular_file(path: str | Path, expected: str = "file", max_bytes: int | None = None) -> bytes:
