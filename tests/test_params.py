@@ -33,6 +33,7 @@ from bridge.autopilot.params import (
     VehicleParams,
     change_param,
     check_param_changes,
+    float32,
     parse_change,
     read_param,
     value_problem,
@@ -496,6 +497,15 @@ def test_an_int32_that_is_not_a_whole_number_in_range_is_refused_naming_where_an
     with pytest.raises(ConfigError) as python:
         prepare("missions/sine.toml", params={"EKF2_NOAID_TOUT": float(text)})
     assert str(python.value) == f"--param EKF2_NOAID_TOUT={float(text)}: {says}"
+
+
+def test_float32_is_the_wires_rounding():
+    """The one float32 rounding of the scalar code (``bridge.autopilot.params.float32``; the offboard controller's
+    PARAM_SET and its echo used a twin, ``_f32``): as struct's ``<f`` round trip, None past float32's range."""
+    for x in (0.01, 25.3, -1e-45, 3.4028234663852886e38, 0.0):
+        assert float32(x) == _f32(x)
+    assert float32(10**400) is None and float32(1e39) is None and float32(-1e39) is None
+    assert math.isnan(float32(math.nan)) and float32(math.inf) == math.inf
 
 
 def test_a_boolean_or_text_is_no_integer_and_a_choice_names_its_values(tmp_path):
