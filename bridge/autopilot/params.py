@@ -396,11 +396,22 @@ def parse_assignment(text: str) -> tuple[str, float]:
         raise ConfigError(f"{name}: no such parameter; the vehicle has {', '.join(BY_NAME)}")
     for parse in ((int, float) if spec.kind == INT32 else (float,)):
         try:
-            return name, parse(value)
+            got = parse(value)
         except ValueError:
-            pass
+            continue
+        if isinstance(got, float) and math.isinf(got) and value.strip().lstrip("+-").lower() not in ("inf", "infinity"):
+            raise ConfigError(f"{name}: {_range_text(spec)}, got {_past_float(value)}")  # so past float32's too
+        return name, got
     what = f"an INT32, expected an integer {_allowed(spec)}" if spec.kind == INT32 else "a REAL32, expected a number"
     raise ConfigError(f"{name}: {what}, got {value.strip()!r}"[:300])
+
+
+def _past_float(text: str) -> str:
+    """A number's text that ``float()`` took past its range (``inf``): ``an integer of 4400 digits`` (over Python's
+    limit of digits for ``int()``, or an INT32 no float holds: as :func:`params.show` says a shorter one), or the text
+    as given (``1e400``: a number ``float()`` read), cut to 40 characters."""
+    digits = text.strip().lstrip("+-").replace("_", "")
+    return f"an integer of {len(digits)} digits" if digits.isdigit() else text.strip()[:40]
 
 
 @dataclass(frozen=True, order=True)
