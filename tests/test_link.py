@@ -11,6 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from bridge.cli import main
+from bridge.link import impairment
+from bridge.link.config import NORMAL_BOUND_SIGMAS
 from bridge.link.model import (
     FRAME_BYTES,
     LinkConfig,
@@ -348,6 +350,7 @@ def test_the_described_jitter_is_the_jitter_flown(cfg: LinkConfig, text: str, bo
     bound is the one the model draws within (the largest jitter of 10 000 packets)."""
     assert cfg.describe() == text
     assert cfg.jitter_bound_ms == bound
+    assert NORMAL_BOUND_SIGMAS == impairment._NORMAL_BOUND_SIGMAS  # the model's truncation, said as it flies
     assert cfg.jitter_capped == (cfg.delay_ms < (cfg.jitter_ms if cfg.jitter == "uniform" else 5.0 * cfg.jitter_ms))
     _, out = stream(cfg)
     worst = max(abs((d.due_t - d.sent_t) * 1e3 - cfg.delay_ms) for d in out)

@@ -22,7 +22,10 @@ from params import ConfigError
 
 DIRECTIONS = ("up", "down")
 JITTER_KINDS = ("uniform", "normal")
-NORMAL_BOUND_SIGMAS = 5.0  # normal jitter is truncated at ±5 sigma (and at ±delay): bridge.link.impairment
+# normal jitter is truncated at ±5 sigma (and at ±delay): bridge.link.impairment's own _NORMAL_BOUND_SIGMAS, which
+# the compiled kernels read (a constant imported by name would leave their cache blind to this module's edits);
+# tests/test_link.py holds the two equal
+NORMAL_BOUND_SIGMAS = 5.0
 
 
 

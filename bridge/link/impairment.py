@@ -61,7 +61,7 @@ from dataclasses import dataclass
 from statistics import NormalDist
 from typing import Any, NamedTuple
 
-from bridge.link.config import DIRECTIONS, NORMAL_BOUND_SIGMAS, LinkConfig
+from bridge.link.config import DIRECTIONS, LinkConfig
 from bridge.link.radio import Radio
 from bridge.link.trace import DirectionTrace, Replay, own_figures
 
@@ -76,7 +76,7 @@ FRAME_BYTES = {
 
 _DIRECTION_SALT = {"up": 0x5550, "down": 0x444F574E}
 _M64 = (1 << 64) - 1
-_NORMAL_BOUND_SIGMAS = NORMAL_BOUND_SIGMAS  # (bridge.link.fates reads it here)
+_NORMAL_BOUND_SIGMAS = 5.0
 
 
 # -- the random part of a packet's fate ------------------------------------------------
