@@ -205,6 +205,8 @@ def _judged(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention, a
     """The flight's summary: its figures, plant blocks, who ended it, the policies' verdicts (each violation
     an event), and when it completed, its end action flown (:func:`fly_end`: its steps yielded, as the mission's)."""
     m, plant = flight.mission, vehicle.plant
+    if caps := flight.link.jitter_capped():  # the delay capped a jitter (docs/links.md): said
+        link["jitter_capped"] = caps
     ev = [RunEvent(round(e.t, 6), e.kind, e.text, by=e.by, **typed_fields(e)) for e in vehicle.events]
     shown = [e.as_dict() for e in ev]
     summary = summarise(arrays, m, flight.gains, clock="offline", outcome=outcome, events=shown, link=link,

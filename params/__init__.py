@@ -83,17 +83,24 @@ def inputs_read() -> dict[str, str]:
     return dict(_INPUTS.get() or {})
 
 
-def unreachable(path: str | Path) -> str | None:
-    """Why the system cannot look ``path`` up (a name too long, a folder this process may not search: its
-    ``strerror``), or None: it exists, or is simply not there. pathlib's ``exists``, ``is_file`` and ``is_dir``
-    raise for the former: a check asks this first, to name the path (exit 2) instead of a traceback."""
+def look_up(path: str | Path) -> tuple[os.stat_result | None, str | None]:
+    """``path`` looked up, symbolic links followed: (its ``stat``, None); (None, None) if it is simply not there (or
+    a folder on its way is a file); (None, why) if the system cannot look it up (a name too long, a folder this
+    process may not search, a loop of links: the ``strerror``). The one way every reader and writer of a user's
+    path asks whether it can reach it (:func:`unreachable`, ``bridge.record.runlog``'s output checks)."""
     try:
-        os.stat(path)
+        return os.stat(path), None
     except (FileNotFoundError, NotADirectoryError):
-        return None
+        return None, None
     except OSError as exc:
-        return exc.strerror or str(exc)
-    return None
+        return None, exc.strerror or str(exc)
+
+
+def unreachable(path: str | Path) -> str | None:
+    """Why the system cannot look ``path`` up (:func:`look_up`), or None: it exists, or is simply not there.
+    pathlib's ``exists``, ``is_file`` and ``is_dir`` raise for the former: a check asks this first, to name the
+    path (exit 2) instead of a traceback."""
+    return look_up(path)[1]
 
 
 def read_regular_file(path: str | Path, expected: str = "file", max_bytes: int | None = None) -> bytes:
@@ -145,19 +152,26 @@ def _file_kind(mode: int) -> str | None:
     return "not a regular file"
 
 
+def utf8_text(raw: bytes) -> str:
+    """``raw`` decoded as UTF-8, a leading byte-order mark (U+FEFF, which Windows editors write) dropped: the
+    one way every text file of ours is decoded (TOML files, plans, link traces). Raises UnicodeDecodeError."""
+    return raw.decode("utf-8").removeprefix("\ufeff")
+
+
 def read_text_file(path: str | Path, expected: str, max_bytes: int = MAX_TOML_BYTES) -> str:
-    """The UTF-8 text of a regular file of at most ``max_bytes`` (:func:`read_regular_file`); every
-    problem a :class:`ConfigError` naming the path and ``expected`` (a mission plan, a waypoint file)."""
+    """The UTF-8 text of a regular file of at most ``max_bytes`` (:func:`read_regular_file`, :func:`utf8_text`);
+    every problem a :class:`ConfigError` naming the path and ``expected`` (a mission plan, a waypoint file)."""
     raw = read_regular_file(path, expected, max_bytes)
     try:
-        return raw.decode("utf-8")
+        return utf8_text(raw)
     except UnicodeDecodeError:
         raise ConfigError(f"{_printable(str(Path(path)))}: not a text file (expected {expected})") from None
 
 
 def load_toml(path: str | Path) -> dict[str, Any]:
-    """Read a TOML file, turning every I/O or syntax problem into a :class:`ConfigError`:
-    not a regular file, over :data:`MAX_TOML_BYTES`, not UTF-8, not TOML, nested over :data:`MAX_DEPTH`."""
+    """Read a TOML file (UTF-8, with or without a byte-order mark: :func:`utf8_text`), turning every I/O or
+    syntax problem into a :class:`ConfigError`: not a regular file, over :data:`MAX_TOML_BYTES`, not UTF-8,
+    not TOML, nested over :data:`MAX_DEPTH`."""
     p = Path(path)
     return toml_from_bytes(read_regular_file(p, "a TOML file", MAX_TOML_BYTES), p)
 
@@ -166,13 +180,13 @@ def toml_from_bytes(raw: bytes, p: Path) -> dict[str, Any]:
     """The table in ``raw``, the bytes of the TOML file ``p`` (:func:`load_toml`'s errors, naming ``p``)."""
     name = _printable(str(p))
     try:
-        data = tomllib.loads(raw.decode("utf-8"))
+        data = tomllib.loads(utf8_text(raw))
     except UnicodeDecodeError:
         raise ConfigError(f"{name}: not a text file (expected TOML)") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{name}: not valid TOML ({exc})") from None
     except ValueError as exc:  # an integer over Python's limit of digits (tomllib converts with int())
-        raise ConfigError(f"{name}: not valid TOML ({too_many_digits(raw.decode('utf-8'), exc)})") from None
+        raise ConfigError(f"{name}: not valid TOML ({too_many_digits(utf8_text(raw), exc)})") from None
     except RecursionError:
         raise ConfigError(f"{name}: nested too deeply (more than {MAX_DEPTH} levels of tables and lists)") from None
     check_depth(data, str(p))

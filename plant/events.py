@@ -36,6 +36,21 @@ from typing import Any
 from params import ConfigError, Table
 
 EVENT_KINDS = ("motor", "gps", "baro", "mag", "gyro", "wind", "gust", "link")
+# the allowed range [lo, hi] of each number of an event's table (and of its --at flag), one per key, and its unit;
+# a vector key's range is each element's. ``duration_s`` excludes 0; a fault vector (FAULT_VECTORS) is not all 0
+EVENT_RANGES: dict[str, tuple[float, float, str]] = {
+    "motor": (1, 4, ""),
+    "effectiveness": (0.0, 1.0, ""),
+    "jump": (-1e4, 1e4, "m"),
+    "drift_mps": (-100.0, 100.0, "m/s"),
+    "bias": (-10.0, 10.0, "rad/s"),
+    "speed_mps": (0.0, 50.0, "m/s"),
+    "from_deg": (-360.0, 360.0, "deg"),
+    "duration_s": (0.0, 600.0, "s"),
+    "amplitude_mps": (0.0, 50.0, "m/s"),
+}
+# the faults given as a vector that adds to what is there: (0, 0, 0) would inject nothing (a user's slip)
+FAULT_VECTORS = {"jump": "a GPS jump", "bias": "a gyro bias"}
 SENSOR_EVENT_KINDS = ("gps", "baro", "mag", "gyro")
 LINK_SCALARS = (str, int, float)  # a handover's keys: a profile name and [link]'s per-direction scalars
 
@@ -95,8 +110,20 @@ class EventError(ConfigError):
         super().__init__(f"{where}: {what}")
 
 
-def _vector(t: Table, key: str, lo: float, hi: float) -> tuple[float, float, float]:
-    return t.vector(key, 3, lo=lo, hi=hi)  # type: ignore[return-value]
+def _number(t: Table, key: str, default: Any = ..., lo_open: bool = False) -> float:
+    lo, hi, _ = EVENT_RANGES[key]
+    return t.number(key, default, lo=lo, hi=hi, lo_open=lo_open)
+
+
+def _fault_vector(t: Table, key: str) -> tuple[float, float, float]:
+    """A fault's [x, y, z] (:data:`FAULT_VECTORS`), each element in its range, not all 0: a fault that injects
+    nothing is refused, naming the key, its range and its unit."""
+    lo, hi, unit = EVENT_RANGES[key]
+    v = t.vector(key, 3, lo=lo, hi=hi)
+    if not any(v):
+        raise t.error(key, f"{FAULT_VECTORS[key]} of (0, 0, 0) {unit} injects nothing: x, y, z each "
+                           f"in [{lo:g}, {hi:g}] {unit}, at least one not 0")
+    return v  # type: ignore[return-value]
 
 
 def event_from_table(t: Table, duration_s: float) -> TimedEvent:
@@ -115,24 +142,25 @@ def event_from_table(t: Table, duration_s: float) -> TimedEvent:
         if not s:
             raise t.error("kind", "a link handover needs a profile or [link] keys (delay_ms, loss_pct, ...)")
     elif kind == "motor":
-        s["motor"] = t.integer("motor", lo=1, hi=4)
-        s["effectiveness"] = t.number("effectiveness", lo=0.0, hi=1.0)
+        lo, hi, _ = EVENT_RANGES["motor"]
+        s["motor"] = t.integer("motor", lo=int(lo), hi=int(hi))
+        s["effectiveness"] = _number(t, "effectiveness")
     elif kind in ("gps", "mag"):
         if kind == "gps" and t.has("jump"):
-            s["jump"] = _vector(t, "jump", -1e4, 1e4)
+            s["jump"] = _fault_vector(t, "jump")
         else:
             s["state"] = t.string("state", choices=("off", "on"))
     elif kind == "baro":
-        s["drift_mps"] = t.number("drift_mps", lo=-100.0, hi=100.0)
+        s["drift_mps"] = _number(t, "drift_mps")
     elif kind == "gyro":
-        s["bias"] = _vector(t, "bias", -10.0, 10.0)
+        s["bias"] = _fault_vector(t, "bias")
     elif kind == "wind":
-        s["speed_mps"] = t.number("speed_mps", lo=0.0, hi=50.0)
-        s["from_deg"] = t.number("from_deg", 0.0, lo=-360.0, hi=360.0)
+        s["speed_mps"] = _number(t, "speed_mps")
+        s["from_deg"] = _number(t, "from_deg", 0.0)
     else:
-        s["duration_s"] = t.number("duration_s", lo=0.0, lo_open=True, hi=600.0)
-        s["amplitude_mps"] = t.number("amplitude_mps", lo=0.0, hi=50.0)
-        s["from_deg"] = t.number("from_deg", 0.0, lo=-360.0, hi=360.0)
+        s["duration_s"] = _number(t, "duration_s", lo_open=True)
+        s["amplitude_mps"] = _number(t, "amplitude_mps")
+        s["from_deg"] = _number(t, "from_deg", 0.0)
     t.done()
     return TimedEvent(t_s, kind, tuple(s.items()))
 

@@ -149,6 +149,22 @@ def test_bad_input_exits_2_with_one_line(tmp_path: Path, case: str) -> None:
     assert not out.exists() or not any(out.iterdir())  # nothing flown, nothing written
 
 
+def test_files_saved_with_a_byte_order_mark_fly(tmp_path: Path) -> None:
+    """A mission, a vehicle profile and a link profile each starting with UTF-8's byte-order mark (EF BB BF, as a
+    Windows editor saves them) fly as without it: a link profile so was ``not valid TOML (Invalid statement (at
+    line 1, column 1))``, exit 2 (tests/test_text_files.py: every kind of file)."""
+    bom = b"\xef\xbb\xbf"
+    mission = tmp_path / "m.toml"
+    mission.write_bytes(bom + b'name = "m"\nduration_s = 1.0\n[trajectory]\nkind = "sine"\n')
+    profile = tmp_path / "v.toml"
+    profile.write_bytes(bom + (ROOT / "plant" / "profiles" / "paper.toml").read_bytes())
+    link = tmp_path / "l.toml"
+    link.write_bytes(bom + (ROOT / "bridge" / "link" / "profiles" / "wifi.toml").read_bytes())
+    res = bsst(mission, "--profile", profile, "--link-profile", link, "--out", tmp_path / "run", "--no-plots")
+    assert res.returncode == 0, res.stderr
+    assert json.loads((tmp_path / "run" / "summary.json").read_text())["outcome"] == "completed"
+
+
 def test_divergence_exits_1_and_is_recorded(tmp_path: Path) -> None:
     """A constant 20 N push the law cannot hold against takes the vehicle past |position| = 100 m
     (a set-point out there is refused up front: tests/test_mission.py): the run stops there,

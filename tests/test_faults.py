@@ -6,6 +6,7 @@ Motor faults, sensor faults, weather changes; honest outcomes (crashed, diverged
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import replace
 from pathlib import Path
 
@@ -132,6 +133,27 @@ def test_events_that_change_something_are_flown_as_before() -> None:
     assert len(prepare("missions/sine.toml", at=("2:baro:drift=0",), **GNSS_EKF).timeline) == 1
     with pytest.raises(ConfigError, match=r"^--at 10:motor:1=0.5: .* both set motor 1 at the control step at 10 s"):
         prepare("missions/sine.toml", profile="x500", at=("10:motor:1=1", "10:motor:1=0.5"))
+
+
+@pytest.mark.parametrize("flag, key, says", [
+    ("10:gps:jump=0,0,0", "jump", "a GPS jump of (0, 0, 0) m injects nothing: x, y, z each in [-10000, 10000] m"),
+    ("10:gyro:bias=0,-0,0", "bias", "a gyro bias of (0, 0, 0) rad/s injects nothing: x, y, z each in [-10, 10] rad/s"),
+])
+def test_a_fault_that_injects_nothing_is_refused(tmp_path, flag, key, says) -> None:
+    """A GPS jump or a gyro bias of (0, 0, 0) was taken as a fault (``fault: gps jump by (0, 0, 0) m`` in the
+    events, nothing injected): a user's slip, refused with the flag or the mission's key and the range, one line,
+    exit 2, as a real process too (plant.events.EVENT_RANGES, one range per key). One element not 0 is a fault."""
+    with pytest.raises(ConfigError, match=rf"^--at {flag}: {key}: {re.escape(says)}, at least one not 0$"):
+        prepare("missions/sine.toml", at=(flag,), **GNSS_EKF)
+    kind = flag.split(":")[1]
+    path = tmp_path / "m.toml"
+    path.write_text((ROOT / "missions" / "sine.toml").read_text() + '\n[sensors]\nset = "gnss"\n\n[estimator]\n'
+                    f'kind = "ekf"\n\n[[events]]\nt_s = 10.0\nkind = "{kind}"\n{key} = [0, 0.0, -0.0]\n')
+    r = run_bsst("sim", str(path), "--no-plots", "--out", str(tmp_path / "r"))
+    assert r.returncode == 2 and r.stderr == f"bsst: {path}: events[0].{key}: {says}, at least one not 0\n", r.stderr
+    assert not (tmp_path / "r").exists()
+    taken = prepare("missions/sine.toml", at=(flag.replace("=0,", "=0.001,"),), **GNSS_EKF).timeline
+    assert [e.get(key) for e in taken] == [(0.001, 0.0, 0.0)]
 
 
 def _gps_mission(path: Path, *events: tuple[float, str]) -> Path:

@@ -11,6 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from bridge.cli import main
+from bridge.link import impairment
+from bridge.link.config import NORMAL_BOUND_SIGMAS
 from bridge.link.model import (
     FRAME_BYTES,
     LinkConfig,
@@ -332,3 +334,50 @@ def test_flags_become_the_link_table(tmp_path, missions_dir) -> None:
     s = link_from_table(table, "flags")
     assert s.up.delay_ms == 3.0 and s.down.loss_pct == 5.0 and s.guard.compensation == "predict"
     assert math.isclose(s.down.blackouts[0][1], 0.3)
+
+
+@pytest.mark.parametrize("cfg, text, bound", [
+    (LinkConfig(delay_ms=20.0, jitter_ms=5.0), "delay 20 ms ± 5 ms uniform", 5.0),
+    (LinkConfig(delay_ms=20.0, jitter_ms=2.0, jitter="normal"), "delay 20 ms ± 2 ms normal", 10.0),
+    (LinkConfig(delay_ms=0.0, jitter_ms=10.0), "delay 0 ms, no jitter (jitter 10 ms uniform capped at the delay)", 0.0),
+    (LinkConfig(delay_ms=5.0, jitter_ms=10.0), "delay 5 ms ± 5 ms uniform (jitter 10 ms capped at the delay)", 5.0),
+    (LinkConfig(delay_ms=5.0, jitter_ms=2.0, jitter="normal"),
+     "delay 5 ms ± 2 ms normal truncated at ± 5 ms (the delay)", 5.0),
+])
+def test_the_described_jitter_is_the_jitter_flown(cfg: LinkConfig, text: str, bound: float) -> None:
+    """``--jitter 10 --delay 0`` flies no jitter (it is capped at the delay: no delay is negative), yet the relay's
+    and the session's ready line said ``delay 0 ms ± 10 ms uniform``: the line says what is flown now, and the
+    bound is the one the model draws within (the largest jitter of 10 000 packets)."""
+    assert cfg.describe() == text
+    assert cfg.jitter_bound_ms == bound
+    assert NORMAL_BOUND_SIGMAS == impairment._NORMAL_BOUND_SIGMAS  # the model's truncation, said as it flies
+    assert cfg.jitter_capped == (cfg.delay_ms < (cfg.jitter_ms if cfg.jitter == "uniform" else 5.0 * cfg.jitter_ms))
+    _, out = stream(cfg)
+    worst = max(abs((d.due_t - d.sent_t) * 1e3 - cfg.delay_ms) for d in out)
+    assert worst <= bound + 1e-9 and (bound == 0.0 or worst > 0.8 * bound)
+
+
+def test_a_capped_jitter_is_in_the_summary_and_the_printed_one(tmp_path, capsys) -> None:
+    """``bsst sim --jitter 10 --delay 0``: summary.json's ``link.jitter_capped`` names each direction's cap (a
+    handover's too, from its time), and the printed summary says the flight flew without jitter."""
+    from bridge import simulate
+
+    mission = tmp_path / "m.toml"
+    mission.write_text('name = "m"\nduration_s = 1.0\n[trajectory]\nkind = "sine"\n'
+                       '[[events]]\nt_s = 0.5\nkind = "link"\ndelay_ms = 4.0\njitter_ms = 6.0\n')
+    run = simulate(mission, plots=False, link={"delay_ms": 0.0, "jitter_ms": 10.0})
+    caps = run.summary["link"]["jitter_capped"]
+    assert caps == [
+        {"direction": "up", "from_s": 0.0, "jitter_ms": 10.0, "jitter": "uniform", "delay_ms": 0.0, "bound_ms": 0.0},
+        {"direction": "down", "from_s": 0.0, "jitter_ms": 10.0, "jitter": "uniform", "delay_ms": 0.0, "bound_ms": 0.0},
+        {"direction": "up", "from_s": 0.5, "jitter_ms": 6.0, "jitter": "uniform", "delay_ms": 4.0, "bound_ms": 4.0},
+        {"direction": "down", "from_s": 0.5, "jitter_ms": 6.0, "jitter": "uniform", "delay_ms": 4.0, "bound_ms": 4.0}]
+    plain = tmp_path / "plain.toml"
+    plain.write_text('name = "m"\nduration_s = 1.0\n[trajectory]\nkind = "sine"\n')
+    uncapped = simulate(plain, plots=False, link={"delay_ms": 20.0, "jitter_ms": 5.0})
+    assert "jitter_capped" not in uncapped.summary["link"]
+    argv = ["sim", str(mission), "--delay", "0", "--jitter", "10", "--no-plots", "--out", str(tmp_path / "r")]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "link up  : jitter 10 ms uniform capped at the delay, 0 ms: flown without jitter\n" in out
+    assert "link down: jitter 6 ms uniform from t=0.5 s capped at the delay, 4 ms: drawn within ± 4 ms\n" in out

@@ -157,13 +157,38 @@ def test_direction_rows_serve_their_own_direction_and_plain_rows_serve_both(tmp_
     assert [d.due_t for d in up.drain()] == [pytest.approx(0.0015)] and up.stats.lost_by["trace"] == 1
     assert [d.due_t for d in down.drain()] == [pytest.approx(0.007)]
     only_up = tmp_path / "up.csv"
-    only_up.write_text("t_s,delay_ms,direction\n0,1,up\n")
+    only_up.write_text("t_s,delay_ms,direction\n0,1,up\n0.1,1,up\n")
     with pytest.raises(ConfigError, match="has no down rows"):
         link_from_table({"trace": str(only_up), "trace_loop": True}, "m.toml")
     assert link_from_table({"up": {"trace": str(only_up), "trace_loop": True}}, "m.toml").up.trace is not None
-    f.write_text("t_s,delay_ms\n0,2\n")
+    f.write_text("t_s,delay_ms\n0,2\n0.1,2\n")
     s = link_from_table({"trace": str(f), "trace_loop": True}, "m.toml", duration_s=100.0)
     assert s.up.trace.records is s.down.trace.records and s.impaired
+
+
+@pytest.mark.parametrize("text, loop, rows", [
+    ("t_s,delay_ms\n0,25\n", True, "1 record"),  # a loop of no length: record 0 for ever
+    ("t_s,delay_ms\n0,25\n", False, "1 record"),  # was "lasts 0 s ...: loop it with trace_loop = true"
+    ("t_s,delay_ms\n3,\n", False, "1 record"),  # "lasts 3 s": a lost record replayed over the whole mission
+    ("t_s,delay_ms,direction\n0,25,up\n0,3,down\n1,3,down\n", True, "1 up record"),
+])
+def test_a_trace_of_one_record_is_refused_naming_the_file(tmp_path: Path, capsys, text: str, loop: bool,
+                                                          rows: str) -> None:
+    """A trace of one record (in a direction it serves) has no spacing, so no length: looped, it replayed that
+    record for ever (a constant delay, or every packet lost), and unlooped it was refused with the advice to loop
+    it. A measured link of one record is a mistake (a cut file, the wrong direction): refused, exit 2, one line
+    naming the file, whatever ``trace_loop`` says; a constant link is ``delay_ms`` or ``loss_pct = 100``."""
+    f = tmp_path / "one.csv"
+    f.write_text(text)
+    argv = ["sim", str(ROOT / "missions" / "step.toml"), "--link-trace", str(f), "--no-plots",
+            "--out", str(tmp_path / "run"), *(["--link-trace-loop"] if loop else [])]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"link.up.trace: {f} has {rows}; a trace needs at least 2" in err[0], err
+    assert not (tmp_path / "run").exists()
+    f.write_text(text.replace("0,25\n", "0,25\n0.1,25\n").replace("3,\n", "3,\n3.1,\n")
+                 .replace("0,25,up\n", "0,25,up\n1,25,up\n"))
+    assert link_from_table({"trace": str(f), "trace_loop": True}, "m.toml", duration_s=30.0).up.trace.records.n == 2
 
 
 def test_a_trace_shorter_than_the_mission_is_refused_unless_it_loops(tmp_path: Path) -> None:
@@ -292,7 +317,7 @@ def udp() -> socket.socket:
 
 def test_the_relay_replays_a_trace_on_the_wall_clock(tmp_path: Path) -> None:
     f = tmp_path / "t.csv"
-    f.write_text("t_s,delay_ms,direction\n0,25,up\n0,,down\n")  # up: 25 ms always; down: every packet lost
+    f.write_text("t_s,delay_ms,direction\n0,25,up\n0,,down\n1,25,up\n1,,down\n")  # up: 25 ms always; down: all lost
     settings = link_from_table({"trace": str(f), "trace_loop": True}, "m.toml")
     target, client = udp(), udp()
     with TimerLateness() as control, Relay(("127.0.0.1", 0), target.getsockname(), settings) as relay:

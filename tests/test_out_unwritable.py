@@ -80,3 +80,22 @@ def test_the_checks_name_the_path(tmp_path):
             check(a_file / "sub")
         assert check(tmp_path / "new" / "deeper") == tmp_path / "new" / "deeper"
     assert a_file.read_text() == "mine\n"
+
+
+def test_an_output_file_names_what_is_wrong_with_its_folder(tmp_path):
+    """``bsst link fit --out missing/f.toml`` said ``missing is not a directory`` of a folder that does not exist;
+    it says so now. Output files (``check_writable``: ``bsst link fit|extract|show --out``, ``relay --stats``) and
+    ``--out`` directories (``check_out_dir``) look their path up one way (``params.look_up``)."""
+    a_file = tmp_path / "notes.txt"
+    a_file.write_text("mine\n")
+    missing = tmp_path / "missing"
+    for out, says in ((missing / "f.toml", f"{missing} does not exist"),
+                      (missing / "deeper" / "f.toml", f"{missing / 'deeper'} does not exist"),
+                      (a_file / "f.toml", f"{a_file} is not a directory"),
+                      (a_file / "sub" / "f.toml", f"{a_file} is not a directory"),
+                      (tmp_path, "is a directory")):
+        r = run_bsst("link", "fit", "examples/link-trace.csv", "--out", out, timeout=GUARD_S)
+        assert r.returncode == 2 and r.stderr == f"bsst: --out {out}: {says}\n", r.stderr
+    assert not missing.exists() and a_file.read_text() == "mine\n"
+    r = run_bsst("link", "fit", "examples/link-trace.csv", "--out", tmp_path / "f.toml", timeout=GUARD_S)
+    assert r.returncode == 0 and (tmp_path / "f.toml").is_file(), r.stderr

@@ -33,6 +33,7 @@ from bridge.autopilot.params import (
     VehicleParams,
     change_param,
     check_param_changes,
+    float32,
     parse_change,
     read_param,
     value_problem,
@@ -496,6 +497,38 @@ def test_an_int32_that_is_not_a_whole_number_in_range_is_refused_naming_where_an
     with pytest.raises(ConfigError) as python:
         prepare("missions/sine.toml", params={"EKF2_NOAID_TOUT": float(text)})
     assert str(python.value) == f"--param EKF2_NOAID_TOUT={float(text)}: {says}"
+
+
+PAST_FLOAT = [("9" * 4400, "an integer of 4400 digits"), ("-" + "9" * 400, "an integer of 400 digits"),
+              ("1e400", "1e400")]
+
+
+@pytest.mark.parametrize("name, says", [("COM_OF_LOSS_T", "must be in [0.01, 60] s"),
+                                        ("EKF2_NOAID_TOUT", f"must be in {RANGE}")])
+def test_a_flags_number_past_the_float_range_is_out_of_range_not_inf(name, says):
+    """``--param NAME=<an integer of over 4300 digits>`` (past Python's ``int()``) said ``got inf`` (``must be
+    finite``, or an INT32 ``expected an integer``), as did a REAL32's integer past the float range and ``1e400``:
+    ``float()`` took each to inf. Each is out of the parameter's range (so of float32's), as a shorter integer is
+    (``got an integer of 400 digits``); ``inf`` itself still says inf."""
+    for text, got in PAST_FLOAT:
+        for flag, given in (("--param", f"{name}={text}"), ("--param-at", f"5:{name}={text}")):
+            with pytest.raises(argparse.ArgumentTypeError) as err:
+                param_assignment(flag, timed=flag == "--param-at")(given)
+            assert str(err.value) == f"{flag} {given!r}: {name}: {says}, got {got}"
+    with pytest.raises(argparse.ArgumentTypeError, match=r": (must be finite|an INT32, .*), got inf$"):
+        param_assignment("--param")(f"{name}=inf")
+    r = _bsst("sim", "missions/sine.toml", "--param", f"{name}={PAST_FLOAT[0][0]}")
+    assert r.returncode == 2 and r.stderr.strip().endswith(f"{name}: {says}, got an integer of 4400 digits"), \
+        r.stderr[-300:]
+
+
+def test_float32_is_the_wires_rounding():
+    """The one float32 rounding of the scalar code (``bridge.autopilot.params.float32``; the offboard controller's
+    PARAM_SET and its echo used a twin, ``_f32``): as struct's ``<f`` round trip, None past float32's range."""
+    for x in (0.01, 25.3, -1e-45, 3.4028234663852886e38, 0.0):
+        assert float32(x) == _f32(x)
+    assert float32(10**400) is None and float32(1e39) is None and float32(-1e39) is None
+    assert math.isnan(float32(math.nan)) and float32(math.inf) == math.inf
 
 
 def test_a_boolean_or_text_is_no_integer_and_a_choice_names_its_values(tmp_path):

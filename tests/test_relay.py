@@ -20,7 +20,7 @@ import pytest
 from bridge.link.model import LinkConfig, LinkSettings
 from bridge.nodes.relay import Relay, parse_address
 from bridge.nodes.report import Ready, parse_line
-from tests.sitlkit import Bsst, TimerLateness
+from tests.sitlkit import Bsst, TimerLateness, run_bsst
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -149,6 +149,21 @@ def test_bsst_relay_process_stops_on_sigterm_and_writes_stats(tmp_path: Path) ->
     assert s["cpu_us_per_packet"] > 0
     target.close()
     client.close()
+
+
+def test_bsst_relay_says_the_jitter_it_flies(tmp_path: Path) -> None:
+    """``bsst relay --delay 0 --jitter 10``: the jitter is capped at the delay (no delay is negative), so none is
+    flown; the ready line said ``delay 0 ms ± 10 ms uniform``, and says what is flown now, as its summary does."""
+    res = run_bsst("relay", "--listen", "127.0.0.1:0", "--to", "127.0.0.1:1", "--delay", "0", "--jitter", "10",
+                   "--up-delay", "4", "--duration", "0.1")
+    assert res.returncode == 0, res.stderr
+    lines = res.stdout.splitlines()
+    ready = parse_line(lines[0])
+    assert isinstance(ready, Ready), lines[0]
+    assert ready.up == "delay 4 ms ± 4 ms uniform (jitter 10 ms capped at the delay)"
+    assert ready.down == "delay 0 ms, no jitter (jitter 10 ms uniform capped at the delay)"
+    assert "up  : jitter 10 ms uniform capped at the delay, 4 ms: drawn within ± 4 ms" in lines
+    assert "down: jitter 10 ms uniform capped at the delay, 0 ms: flown without jitter" in lines
 
 
 @pytest.mark.parametrize(("args", "message"), [

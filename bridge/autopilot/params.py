@@ -7,7 +7,7 @@ In:  a parameter's name and value (a float: MAVLink's PARAM_VALUE carries every 
 Out: the parameter list (:data:`PARAMS`: name, type, unit, range, meaning), a value read
      (:func:`read_param`), a change checked and made (:func:`change_param`, or :class:`ParamRefused`
      saying why, and what kind of refusal it is: :class:`Refusal`), the ``[failsafe]`` keys a ``[params]``
-     table stands for (:func:`params_as_failsafe`)
+     table stands for (:func:`params_as_failsafe`), a value as MAVLink's float32 carries it (:func:`float32`)
 
 Each parameter is one of the vehicle's settings under PX4's name where PX4 has that setting, with
 the one range the setting has everywhere (``[failsafe]``'s :data:`~bridge.autopilot.failsafe.FAILSAFE_RANGES`
@@ -221,8 +221,10 @@ def read_param(p: VehicleParams, name: str) -> float:
     return float(p.sysid)
 
 
-def _float32(x: float) -> float | None:
-    """``x`` rounded to float32 (what a MAVLink float carries), or None if it is beyond float32's range."""
+def float32(x: float) -> float | None:
+    """``x`` rounded to float32 (what a MAVLink float carries: PARAM_SET's and PARAM_VALUE's ``param_value``), or
+    None if it is beyond float32's range. The one such rounding of the scalar code (the batch engine's compiled
+    twin: ``bridge.batch.wire``)."""
     try:  # (an int is made a float first: struct refuses a big int with its own error, not OverflowError)
         return struct.unpack("<f", struct.pack("<f", float(x)))[0]
     except OverflowError:
@@ -234,8 +236,8 @@ def in_range(value: float, lo: float, hi: float) -> bool:
     value that crossed MAVLink: 0.01 arrives as 0.0099999998)."""
     if lo <= value <= hi:
         return True
-    f = _float32(value)
-    return f is not None and f in (_float32(lo), _float32(hi))
+    f = float32(value)
+    return f is not None and f in (float32(lo), float32(hi))
 
 
 def typed_value(spec: ParamSpec, value: Any) -> float:
@@ -273,7 +275,7 @@ def _shown(value: float) -> str:
         return str(int(value))
     for digits in (6, 9):
         text = f"{value:.{digits}g}"
-        if _float32(float(text)) == _float32(value):
+        if float32(float(text)) == float32(value):
             return text
     return f"{value:.17g}"
 
@@ -394,11 +396,22 @@ def parse_assignment(text: str) -> tuple[str, float]:
         raise ConfigError(f"{name}: no such parameter; the vehicle has {', '.join(BY_NAME)}")
     for parse in ((int, float) if spec.kind == INT32 else (float,)):
         try:
-            return name, parse(value)
+            got = parse(value)
         except ValueError:
-            pass
+            continue
+        if isinstance(got, float) and math.isinf(got) and value.strip().lstrip("+-").lower() not in ("inf", "infinity"):
+            raise ConfigError(f"{name}: {_range_text(spec)}, got {_past_float(value)}")  # so past float32's too
+        return name, got
     what = f"an INT32, expected an integer {_allowed(spec)}" if spec.kind == INT32 else "a REAL32, expected a number"
     raise ConfigError(f"{name}: {what}, got {value.strip()!r}"[:300])
+
+
+def _past_float(text: str) -> str:
+    """A number's text that ``float()`` took past its range (``inf``): ``an integer of 4400 digits`` (over Python's
+    limit of digits for ``int()``, or an INT32 no float holds: as :func:`params.show` says a shorter one), or the text
+    as given (``1e400``: a number ``float()`` read), cut to 40 characters."""
+    digits = text.strip().lstrip("+-").replace("_", "")
+    return f"an integer of {len(digits)} digits" if digits.isdigit() else text.strip()[:40]
 
 
 @dataclass(frozen=True, order=True)

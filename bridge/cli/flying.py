@@ -270,6 +270,10 @@ def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
                            if key in L)
             w(f"link {d:4}: sent {L['sent']} delivered {L['delivered']} lost {L['lost']}{more} dup {L['duplicated']} "
               f"reordered {L['reordered']} delay p50 {ms['p50']} ms p99 {ms['p99']} ms max {ms['max']} ms\n")
+    for c in link.get("jitter_capped") or []:
+        from bridge.link.model import jitter_capped_text  # lazy: start-up time
+
+        w(f"link {jitter_capped_text(c)}\n")
     for line in event_lines(s.get("events", [])):
         w(line)
     policies = s.get("policies") or []

@@ -204,6 +204,7 @@ def add_relay_command(sub: Any) -> None:
 def cmd_relay(args: argparse.Namespace) -> int:
     """``bsst relay``: relay until SIGINT/SIGTERM or ``--duration``; print (and ``--stats``) the figures."""
     from bridge.core.flight import at_rest, prepare  # lazy: start-up time
+    from bridge.link.model import jitter_capped_text  # lazy: start-up time
     from bridge.nodes.relay import Relay, client_event, parse_address  # lazy: start-up time
     from bridge.nodes.report import to_line  # lazy: start-up time
     from bridge.record.runlog import check_writable, write_json_atomic  # lazy: start-up time
@@ -254,6 +255,8 @@ def cmd_relay(args: argparse.Namespace) -> int:
         print(f"{d:4}: sent {s['sent']} delivered {s['delivered']} lost {s['lost']} in flight {s['in_flight']} "
               f"dropped by kernel {'n/a' if drops is None else drops} dup {s['duplicated']} "
               f"reordered {s['reordered']}; added delay p50 {fmt['p50']} ms p99 {fmt['p99']} ms max {fmt['max']} ms")
+    for c in settings.jitter_capped():
+        print(jitter_capped_text(c))
     refused = summary["refused"]
     print(f"refused {sum(refused.values())}: " + ", ".join(f"{r} {n}" for r, n in refused.items())
           + f" (client {summary['client'] or 'none'}, target {summary['target']})")

@@ -22,6 +22,10 @@ from params import ConfigError
 
 DIRECTIONS = ("up", "down")
 JITTER_KINDS = ("uniform", "normal")
+# normal jitter is truncated at ±5 sigma (and at ±delay): bridge.link.impairment's own _NORMAL_BOUND_SIGMAS, which
+# the compiled kernels read (a constant imported by name would leave their cache blind to this module's edits);
+# tests/test_link.py holds the two equal
+NORMAL_BOUND_SIGMAS = 5.0
 
 
 
@@ -58,12 +62,40 @@ class LinkConfig:
         return bool(self.delay_ms or self.jitter_ms or self.loss_pct or self.blackouts or self.dup_pct
                     or self.reorder_pct or self.rate_bps or self.trace is not None)
 
+    @property
+    def jitter_bound_ms(self) -> float:
+        """The half-width the jitter is drawn within (ms), as :mod:`bridge.link.impairment` flies it: ±jitter_ms
+        (uniform) or ±5 sigma (normal), capped at the delay so that no delay is negative; 0: no jitter flown."""
+        if not (self.jitter_ms > 0.0 and self.delay_ms > 0.0):
+            return 0.0
+        return min(self.delay_ms, self.jitter_ms if self.jitter == "uniform" else NORMAL_BOUND_SIGMAS * self.jitter_ms)
+
+    @property
+    def jitter_capped(self) -> bool:
+        """Whether the delay capped the jitter asked for: uniform's half-width, or normal's ±5 sigma, is cut (at a
+        delay of 0, to nothing)."""
+        nominal = self.jitter_ms if self.jitter == "uniform" else NORMAL_BOUND_SIGMAS * self.jitter_ms
+        return self.jitter_ms > 0.0 and self.jitter_bound_ms < nominal
+
+    def _delay_text(self) -> str:
+        """The delay and jitter as flown: ``delay 20 ms ± 5 ms uniform``; a capped jitter says so."""
+        text = f"delay {self.delay_ms:g} ms"
+        if not self.jitter_ms:
+            return text
+        b = self.jitter_bound_ms
+        if not b:
+            return f"{text}, no jitter (jitter {self.jitter_ms:g} ms {self.jitter} capped at the delay)"
+        if self.jitter == "uniform":
+            return text + (f" ± {b:g} ms uniform (jitter {self.jitter_ms:g} ms capped at the delay)"
+                           if self.jitter_capped else f" ± {b:g} ms uniform")
+        return text + f" ± {self.jitter_ms:g} ms normal" + (f" truncated at ± {b:g} ms (the delay)"
+                                                            if self.jitter_capped else "")
+
     def describe(self) -> str:
-        """One line for logs: only what is switched on."""
+        """One line for logs: only what is switched on, as it is flown (a jitter the delay caps, as capped)."""
         parts = [self.trace.describe()] if self.trace is not None else []
         if self.delay_ms or self.jitter_ms:
-            parts.append(f"delay {self.delay_ms:g} ms" + (f" ± {self.jitter_ms:g} ms {self.jitter}"
-                                                         if self.jitter_ms else ""))
+            parts.append(self._delay_text())
         if self.loss_pct:
             parts.append(f"loss {self.loss_pct:g} %" + (f" in bursts of {self.burst_len:g}" if self.burst_len else ""))
         if self.blackouts:

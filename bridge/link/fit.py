@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from bridge.link.config import NORMAL_BOUND_SIGMAS as _NORMAL_BOUND_SIGMAS  # the model's truncation of normal jitter
 from bridge.link.model import (
     BLACKOUT_DURATION_RANGE_S,
     BLACKOUT_START_RANGE_S,
@@ -39,7 +40,6 @@ from bridge.link.trace import Records, TraceFile, make_records
 from params import ConfigError
 
 BLACKOUT_AFTER_S = 1.0  # a loss run at least this long is an outage, listed as a blackout, not a burst
-_NORMAL_BOUND_SIGMAS = 5.0  # the model's truncation of normal jitter (bridge.link.model)
 
 
 @dataclass(frozen=True)

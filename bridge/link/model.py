@@ -50,6 +50,7 @@ from bridge.link.profile import load_link_profile
 from bridge.link.radio import Radio
 from bridge.link.trace import (
     LENGTH_SLACK_S,
+    MIN_TRACE_RECORDS,
     DirectionTrace,
     TraceFile,
     absolute_link_paths,
@@ -63,7 +64,8 @@ __all__ = [  # re-exported: the link model's one import (absolute_link_paths: wh
     "BLACKOUT_DURATION_RANGE_S", "BLACKOUT_START_RANGE_S", "COMMAND_LAG_RANGE_MS", "DIRECTION_KEYS", "DIRECTIONS",
     "FRAME_BYTES", "GUARD_RANGES", "HI_OPEN", "JITTER_KINDS", "LINK_KEYS", "LO_OPEN", "NUMBER_RANGES", "SEED_RANGE",
     "TRACE_EXCLUSIVE", "Delivery", "Fate", "FateStream", "LinkConfig", "LinkImpairment", "LinkSettings",
-    "LinkStats", "Radio", "absolute_link_paths", "burst_problem", "fates", "link_from_table", "merge_link_tables",
+    "LinkStats", "Radio", "absolute_link_paths", "burst_problem", "fates", "jitter_capped_text", "link_from_table",
+    "merge_link_tables",
     "stream_key", "trace_clash", "uniform",
 ]
 
@@ -117,6 +119,11 @@ def _config(kw: Mapping[str, Any], direction: str, source: str, duration_s: floa
         raise ConfigError(f"{where}.trace: {path} {why}")
     rec = tf.records(direction)
     assert rec is not None
+    if rec.n < MIN_TRACE_RECORDS:  # no spacing, so no length: it would replay its one record for ever
+        rows = "record" if tf.both is not None else f"{direction} record"
+        raise ConfigError(f"{where}.trace: {path} has 1 {rows}; a trace needs at least {MIN_TRACE_RECORDS} (it lasts "
+                          f"its last t_s plus its records' median spacing, and replays each record until the next): "
+                          f"for a constant link give delay_ms (or loss_pct = 100) instead")
     if duration_s is not None and not loop and rec.length_s < duration_s - LENGTH_SLACK_S:
         raise ConfigError(f"{where}.trace: {path} lasts {rec.length_s:g} s ({rec.n} {direction} records), "
                           f"shorter than the mission ({duration_s:g} s); loop it with trace_loop = true "
@@ -161,6 +168,15 @@ class LinkSettings:
     def impaired(self) -> bool:
         return self.up.impaired or self.down.impaired or any(u.impaired or d.impaired for _, u, d in self.handovers)
 
+    def jitter_capped(self) -> list[dict[str, Any]]:
+        """Each jitter the delay capped (``summary.json["link"]["jitter_capped"]``; docs/links.md): its direction,
+        from when (s of mission time: 0, or a handover's), what was asked (``jitter_ms``, ``jitter``,
+        ``delay_ms``) and the half-width flown (``bound_ms``; 0: no jitter at all). Empty: flown as asked."""
+        spans = ((0.0, self.up, self.down), *self.handovers)
+        return [{"direction": d, "from_s": t, "jitter_ms": c.jitter_ms, "jitter": c.jitter, "delay_ms": c.delay_ms,
+                 "bound_ms": c.jitter_bound_ms}
+                for t, up, down in spans for d, c in (("up", up), ("down", down)) if c.jitter_capped]
+
     def make(self, radios: tuple[Radio, Radio] | None = None, user: int = 0) -> tuple[LinkImpairment, LinkImpairment]:
         """Fresh (up, down) models, each with its handovers; with ``radios``, on those (up, down) radios shared
         with other links, as their user ``user`` (a fleet on one radio: no handovers, ValueError)."""
@@ -169,6 +185,15 @@ class LinkSettings:
         return (LinkImpairment(self.up, "up", tuple((t, u) for t, u, _ in self.handovers), radio=up, user=user),
                 LinkImpairment(self.down, "down", tuple((t, d) for t, _, d in self.handovers), radio=down, user=user))
 
+
+
+def jitter_capped_text(cap: Mapping[str, Any]) -> str:
+    """One of :meth:`LinkSettings.jitter_capped`'s entries for a person (``bsst sim``'s, ``sitl``'s and ``relay``'s
+    printed summary): ``up  : jitter 10 ms uniform capped at the delay, 0 ms: flown without jitter``."""
+    since = f" from t={cap['from_s']:g} s" if cap["from_s"] else ""
+    flown = f"drawn within ± {cap['bound_ms']:g} ms" if cap["bound_ms"] else "flown without jitter"
+    return (f"{cap['direction']:4}: jitter {cap['jitter_ms']:g} ms {cap['jitter']}{since} capped at the delay, "
+            f"{cap['delay_ms']:g} ms: {flown}")
 
 def link_from_table(data: Mapping[str, Any], source: str, seed: int = 0,
                     duration_s: float | None = None) -> LinkSettings:

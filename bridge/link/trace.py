@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from params import ConfigError, read_regular_file
+from params import ConfigError, read_regular_file, utf8_text
 
 COLUMNS = ("t_s", "delay_ms", "direction")
 REQUIRED = ("t_s", "delay_ms")
@@ -42,6 +42,7 @@ DELAY_RANGE_MS = (0.0, 60_000.0)  # the one-way delay a record may give, as the 
 T_RANGE_S = (0.0, 1e7)  # a record's time from the trace's start
 MAX_TRACE_BYTES = 512 << 20  # about 2.5e7 records: anything bigger is not a link trace of a flight
 LENGTH_SLACK_S = 1e-6  # a trace "as long as" the mission may fall short of it by rounding
+MIN_TRACE_RECORDS = 2  # per direction replayed: one record has no spacing, so no length (bridge.link.model refuses it)
 MAX_ROW_CHARS = 1000  # a record is two numbers and a direction: a longer line is not one
 
 
@@ -131,11 +132,9 @@ def _lines(data: bytes, name: str) -> Iterator[tuple[int, str]]:
     number = 0
     for raw in io.BytesIO(data):  # shares the bytes; splits after each b"\n"
         try:
-            text = raw.decode("utf-8")
+            text = utf8_text(raw) if number == 0 else raw.decode("utf-8")
         except UnicodeDecodeError:
             raise ConfigError(f"{name} line {number + 1}: not UTF-8 text (expected a CSV link trace)") from None
-        if number == 0:
-            text = text.removeprefix("\ufeff")
         for ln in text.splitlines():
             number += 1
             if ln.strip() and not ln.lstrip().startswith("#"):

@@ -30,7 +30,7 @@ from bridge.record.columns import TRACE_COLUMNS
 from missions import Mission
 from missions.mission import name_problem
 from missions.steps import StepCap
-from params import ConfigError, dump_toml, inputs_read, unreachable
+from params import ConfigError, dump_toml, inputs_read, look_up
 
 MAX_TRACE_STEPS = 500_000  # control steps a run that keeps its trace for its summary may fly (see check_trace_steps)
 TRACE_CAP = StepCap(MAX_TRACE_STEPS, "a run keeps in memory for its summary",
@@ -364,39 +364,45 @@ def blackout_windows(mission: Mission) -> list[tuple[float, float]]:
     return [*link.up.blackouts, *link.down.blackouts]
 
 
+def _nearest_existing(path: Path, flag: str) -> tuple[Path, os.stat_result]:
+    """``path`` or its nearest ancestor that exists, and its ``stat`` (:func:`params.look_up`); a
+    :class:`ConfigError` naming ``flag`` if one on the way cannot be looked up."""
+    for p in (path, *path.parents):
+        st, why = look_up(p)
+        if why:
+            raise ConfigError(f"{flag} {path}: cannot reach it ({why})")
+        if st is not None:
+            return p, st
+    raise ConfigError(f"{flag} {path}: no folder of it exists (not even {path.anchor or '.'})")
+
+
 def check_out_dir(path: Path) -> None:
     """Refuse ``--out`` ``path`` unless it is a directory this process may write into, or one it may create (its
     nearest existing ancestor such a directory), before any work: a run flown, or a search made, and then not
     written would be lost (``bsst margin --out RO/new`` flew its whole search first). :class:`ConfigError`."""
-    for p in (path, *path.parents):
-        try:
-            st = p.stat()
-        except (FileNotFoundError, NotADirectoryError):
-            continue
-        except OSError as exc:  # an ancestor that may not be searched (EACCES), a loop of links ...
-            raise ConfigError(f"--out {path}: cannot reach it ({exc.strerror})") from None
-        if not S_ISDIR(st.st_mode):
-            raise ConfigError(f"--out {path}: exists and is not a directory" if p == path
-                              else f"--out {path}: cannot create ({p} is not a directory)")
-        if not os.access(p, os.W_OK | os.X_OK):
-            raise ConfigError(f"--out {path}: cannot write into it" if p == path
-                              else f"--out {path}: cannot create (cannot write into {p})")
-        return
+    p, st = _nearest_existing(path, "--out")
+    if not S_ISDIR(st.st_mode):
+        raise ConfigError(f"--out {path}: exists and is not a directory" if p == path
+                          else f"--out {path}: cannot create ({p} is not a directory)")
+    if not os.access(p, os.W_OK | os.X_OK):
+        raise ConfigError(f"--out {path}: cannot write into it" if p == path
+                          else f"--out {path}: cannot create (cannot write into {p})")
 
 
 def check_writable(path: str | Path, flag: str) -> Path:
     """``path`` as a file that can be written: not a directory, in an existing directory this
-    process may write into. Raises :class:`ConfigError` naming ``flag`` otherwise, so that a
-    bad output path is bad input (exit 2) before any work, not a failure after it."""
+    process may write into. Raises :class:`ConfigError` naming ``flag`` otherwise (a folder that does not exist,
+    or is a file), so that a bad output path is bad input (exit 2) before any work, not a failure after it."""
     p = Path(path)
-    why = unreachable(p)
-    if why:
-        raise ConfigError(f"{flag} {p}: cannot reach it ({why})")
-    if p.is_dir():
-        raise ConfigError(f"{flag} {p}: is a directory")
+    found, st = _nearest_existing(p, flag)
     parent = p.parent
-    if not parent.is_dir():
-        raise ConfigError(f"{flag} {p}: {parent} is not a directory")
+    if found == p:
+        if S_ISDIR(st.st_mode):
+            raise ConfigError(f"{flag} {p}: is a directory")
+    elif not S_ISDIR(st.st_mode):
+        raise ConfigError(f"{flag} {p}: {found} is not a directory")
+    elif found != parent:
+        raise ConfigError(f"{flag} {p}: {parent} does not exist")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise ConfigError(f"{flag} {p}: cannot write into {parent}")
     return p

@@ -376,6 +376,8 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
     cs = controller.stats if controller is not None else {}
     arrays = trace_arrays(joined.rows, TRACE_COLUMNS)
     link = link_block(joined, vs, cs, relay_stats if relay is not None else None)
+    if caps := flight.link.jitter_capped():  # the delay capped a jitter: not flown as asked (docs/links.md)
+        link["jitter_capped"] = caps
     outcome = plant_outcome(outcome_of(facts, controller), facts, events)
     summary = summarise(arrays, m, flight.gains, clock=facts.clock, outcome=outcome,
                         events=[], link=link, estimator=flight.estimator, sensors=flight.sensors.name)

@@ -15,7 +15,6 @@ Out: actuator targets stamped with their state's ``time_usec`` (or the lockstep 
 from __future__ import annotations
 
 import math
-import struct
 import time
 from collections import deque
 from collections.abc import Callable
@@ -26,7 +25,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from bridge.autopilot.params import BY_NAME, ParamChange
+from bridge.autopilot.params import BY_NAME, ParamChange, float32
 from bridge.core.flight import Flight
 from bridge.core.wire import step_of_usec
 from bridge.mavlink.endpoint import HIL_ACTUATOR_CONTROLS, SET_ACTUATOR_CONTROL_TARGET, Endpoint, Tlog, wait
@@ -59,11 +58,6 @@ _ZERO16 = (0.0,) * 16
 PARAM_RETRY_S = 0.2  # s of wall time between PARAM_SETs of one scheduled change the vehicle has not echoed
 TIMESYNC_WINDOW = 8  # the clock offset is the best (shortest round trip) of this many latest TIMESYNC answers
 TIMESYNC_BURST_S = 0.01  # s of wall time between TIMESYNC requests until that many answers are in (then timesync_s)
-
-
-def _f32(x: float) -> float:
-    """``x`` as a float32 carries it (PARAM_SET's and PARAM_VALUE's ``param_value``)."""
-    return struct.unpack("<f", struct.pack("<f", x))[0]
 
 
 class FailsafeSign(Enum):
@@ -235,7 +229,9 @@ class OffboardLink:
         link, in a blackout); a newer change of the same name replaces it. The vehicle makes a set to the
         value in force no change, so a resend never alters a flight."""
         kind = PARAM_TYPES[BY_NAME[change.name].kind]
-        sent = ScheduledSet(change, _f32(param_to_wire(change.value, kind)), kind, self.t_mission)
+        wire = float32(param_to_wire(change.value, kind))
+        assert wire is not None  # a checked value (its parameter's range) is within float32's
+        sent = ScheduledSet(change, wire, kind, self.t_mission)
         self.param_sets.append(sent)
         self._pending_params[change.name] = sent
         self._send_set(sent)
@@ -257,7 +253,7 @@ class OffboardLink:
         """A PARAM_VALUE of the vehicle: the pending scheduled set of that name and value is confirmed."""
         name = m.param_id.rstrip("\x00") if isinstance(m.param_id, str) else m.param_id.decode(errors="replace")
         s = self._pending_params.get(name)
-        if s is None or _f32(m.param_value) != s.wire:
+        if s is None or float32(m.param_value) != s.wire:
             return
         del self._pending_params[name]
         s.confirmed_t = self.t_mission
