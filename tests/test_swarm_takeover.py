@@ -30,34 +30,12 @@ from tests.sitlkit import ENV, MAVSDK_GROUND_STATION
 
 pytestmark = pytest.mark.process  # starts processes, opens sockets
 
-# vehicle 1 hovers at 2.6 m over (0, 0) from 2 s to 12 s, then leaves along x; vehicle 2 hovers at 1.0 m under it
-# from 4 s on (rotor discs 0.97 m apart: the separation holds, offline and in lockstep)
-UNDER = """name = "under"
-duration_s = 14.0
-
-[trajectory]
-kind = "waypoints"
-points = [{ t = 0.0, x = 0.0, y = 0.0, z = 0.0 }, { t = 2.0, x = 0.0, y = 0.0, z = 2.6 },
-          { t = 12.0, x = 0.0, y = 0.0, z = 2.6 }, { t = 14.0, x = 3.0, y = 0.0, z = 2.6 }]
-
-[[vehicles]]
-id = 1
-
-[[vehicles]]
-id = 2
-start = { position = [0.0, 2.0, 0.0] }
-
-[vehicles.trajectory]
-kind = "waypoints"
-points = [{ t = 0.0, x = 0.0, y = 2.0, z = 0.0 }, { t = 2.0, x = 0.0, y = 2.0, z = 1.0 },
-          { t = 4.0, x = 0.0, y = 0.0, z = 1.0 }, { t = 14.0, x = 0.0, y = 0.0, z = 1.0 }]
-"""
+TAKEOVER = Path(__file__).resolve().parents[1] / "examples" / "swarm-takeover.toml"  # vehicle 2 under vehicle 1
 
 
 def _fly(tmp_path: Path, port: int, **kw: Any) -> tuple[threading.Thread, dict[str, Any], Path]:
     """The fleet in lockstep at real time's pace, its ground-station links to ``port``, in a thread."""
-    mission = tmp_path / "under.toml"
-    mission.write_text(UNDER)
+    mission = TAKEOVER
     result: dict[str, Any] = {}
 
     def fly() -> None:
@@ -139,9 +117,7 @@ def test_a_failsafe_landing_going_at_the_missions_end_is_judged_on_its_record(tm
     """Both links black from 12 s: each vehicle's failsafe descends from 12.5 s, vehicle 1 from 2.6 m onto vehicle 2,
     landed under it, after the mission's end (14 s), on the wall clock: the contact is found on the records, after
     the mission, and said as found afterwards (before: "both flights ended there", which they had not)."""
-    mission = tmp_path / "under.toml"
-    mission.write_text(UNDER)
-    run = sitl(mission, instance=None, out=tmp_path / "run", plots=False, link={"blackouts": [[12.0, 10.0]]})
+    run = sitl(TAKEOVER, instance=None, out=tmp_path / "run", plots=False, link={"blackouts": [[12.0, 10.0]]})
     assert isinstance(run, FleetRun)
     s = run.summary
     for v in s["vehicles"]:
