@@ -45,7 +45,8 @@ from bridge.record.runlog import (
     write_json_atomic,
     write_text_atomic,
 )
-from bridge.record.separation import CONTINUED, Watch, judge_traces
+from bridge.record.separation import CONTINUED, WALL_CLOCK, Watch, judge_traces
+from bridge.record.wallclock import clocked_records, judged_on_wall_clock
 from missions import Mission, load_mission
 from missions.fleet import (
     DEFAULT_MIN_SEPARATION_M,
@@ -332,7 +333,9 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
     (default 127.0.0.1:14550 + ``instance``; ``live``: each vehicle's line saying so); ``progress`` is one vehicle's.
     In lockstep the vehicles step on one shared clock; a contact ends both flights at its step (``collision``), as
     offline; the world is judged on the vehicles' traces (and where each stayed) at matching steps
-    (:func:`~bridge.record.separation.judge_traces`). In real time a contact makes both ``collision`` too, found
+    (:func:`~bridge.record.separation.judge_traces`), and on the rows a vehicle flew on the wall clock after it left
+    the shared clock (a ground station's mode, its controller lost), said in the summary
+    (:mod:`bridge.record.wallclock`). In real time a contact makes both ``collision`` too, found
     afterwards (the flights went on: :data:`~bridge.record.separation.CONTINUED`)."""
     from bridge.session import sitl as sitl_one  # lazy: start-up time
     from bridge.session.fleet import check_fleet, check_fleet_ports, fly_sessions, radio_block  # lazy: start-up
@@ -376,11 +379,14 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
         runs = fly_sessions(flights, ids, dirs, realtime=realtime, instance=instance, gcs=gcs_text, speed=speed,
                             key=Path(key) if key is not None else None, plots=plots, keep=keep,
                             radii=watch.radii if clocked else None, shared_radio=shared, announce=live)
-        finals = [_stayed(r) for r in runs] if clocked else None
-        contacts = judge_traces(watch, [r.trace for r in runs], fm.rate_hz, finals,
-                                [f.mission.start for f in flights] if clocked else None, [_landing(r) for r in runs])
+        rec = clocked_records(runs, ids, fm.rate_hz) if clocked else None
+        contacts = judge_traces(watch, [r.trace for r in runs], fm.rate_hz, rec.finals if rec else None,
+                                [f.mission.start for f in flights] if clocked else None,
+                                rec.afters if rec else [r.after for r in runs], rec.walls if rec else None)
         runs = [_touched(r, contacts.get(j)) for j, r in enumerate(runs)]
         summary = fleet_summary(fm, flights, runs, watch, "realtime" if realtime else "lockstep", instance or 0)
+        if rec is not None and rec.flown:
+            judged_on_wall_clock(summary, rec)
         if shared:
             summary["radio"] = radio_block(ids, flights, runs, realtime)
         summary["sitl"] = {"instances": None if instance is None else list(range(instance, instance + len(ids))),
@@ -390,23 +396,13 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
             summary["sitl"]["gate"] = {str(i): (r.summary.get("sitl") or {}).get("gate") for i, r in zip(ids, runs)}
         if contacts and not clocked:
             summary["sitl"]["note"] = CONTINUED
+        elif any(c.get("continued") for c in contacts.values()):
+            summary["sitl"]["note"] = WALL_CLOCK
         _finish(fm, path if keep else None, runs, watch, summary, plots)
         return FleetRun(runs, summary, path if keep else None)
     finally:
         if not keep:
             shutil.rmtree(path, ignore_errors=True)
-
-
-def _landing(run: Run) -> Sequence[Sequence[float]]:
-    """A session's end landing after its trace's rows (m: :attr:`Run.after`); lockstep, before it left the clock."""
-    left = ((run.summary.get("sitl") or {}).get("gate") or {}).get("left")
-    return run.after if left is None else run.after[:max(int(left["step"]) - len(run.trace["t"]), 0)]
-
-
-def _stayed(run: Run) -> tuple[float, float, float] | None:
-    """Where a vehicle of a lockstep fleet stayed when it left the shared clock (its gate's word; None: unknown)."""
-    left = ((run.summary.get("sitl") or {}).get("gate") or {}).get("left")
-    return tuple(left["position"]) if left else None  # type: ignore[return-value]
 
 
 def _touched(run: Run, contact: dict[str, Any] | None) -> Run:

@@ -178,6 +178,6 @@ def test_the_disc_radius_is_the_arm_and_a_rotor_half_the_arm_by_default() -> Non
 
 
 def test_the_shipped_fleet_examples_load(tmp_path: Path) -> None:
-    for name in ("swarm-near-miss", "swarm-touch", "swarm-stacked"):
+    for name in ("swarm-near-miss", "swarm-touch", "swarm-stacked", "swarm-takeover"):
         m = load_mission(Path(__file__).parents[1] / "examples" / f"{name}.toml")
         assert [v.id for v in m.vehicles] == [1, 2] and m.vehicles[1].trajectory is not None

@@ -2,8 +2,9 @@
 
 The gate alone (real UDP sockets on 127.0.0.1, in this process): no vehicle flies step k before every other one has
 flown step k - 1 (its answer held meanwhile), a contact is judged as the offline loop judges it (its text, its
-pair), a vehicle that left stays an obstacle where it said, one silent too long is taken as gone, one waiting for
-its turn on the fleet's one radio says its word again; the trace judge with where each vehicle stayed.
+pair), a vehicle that left stays an obstacle where it said (one flying on, on the wall clock, is nowhere), one silent
+too long is taken as gone, one waiting for its turn on the fleet's one radio says its word again; the trace judge
+with where each vehicle stayed.
 Whole fleets (real ``bsst vehicle`` and ``bsst controller`` processes, free ports): two runs of one fleet write
 the same ``trace.csv`` bytes, and two vehicles that touch both end ``collision`` at the offline loop's step, their
 traces the offline ones (≤ 1e-4 m), the separation and its closest approaches the offline fleet's.
@@ -12,6 +13,7 @@ traces the offline ones (≤ 1e-4 m), the separation and its closest approaches 
 from __future__ import annotations
 
 import json
+import math
 import socket
 import time
 from pathlib import Path
@@ -144,6 +146,29 @@ def test_a_vehicle_disarmed_in_the_air_stays_on_the_ground_below_not_in_the_air(
         assert cleared(b) is None
     finally:
         for g, _, _, _ in fleet:
+            g.close()
+
+
+def test_a_vehicle_flying_on_on_the_wall_clock_is_no_obstacle_where_it_left() -> None:
+    """A ground station's mode (HOLD, TAKEOFF, ...) takes a vehicle off the shared clock, flying on on the wall clock:
+    it is not where it left for long, so the others' gates take it as nowhere (the fleet judges its record after,
+    bridge.record.wallclock), where before it stood there, an obstacle: a neighbour flying through the place it left
+    ended ``collision`` with a vehicle no longer there. Its own word on where it left stays in its stats."""
+    (a, ca, wa), (b, cb, wb) = fleet = gates(2)
+    try:
+        for g, clock, _ in fleet:
+            at(g, clock, 3)
+        assert [cleared(g) for g, _, _ in fleet] == [None, None]
+        ca.fire(Trigger.GROUND)  # HOLD set by a ground station: flown by the vehicle on the wall clock
+        a.over(3)
+        assert a.stats()["left"] == {"step": 3, "position": [0.0, 0.0, 1.0]}
+        cb.take()
+        wb[0] = wa[0]  # through where 1 left the shared clock
+        at(b, cb, 4)
+        assert cleared(b) is None
+        assert all(math.isnan(v) for v in b.gone[0][1]), b.gone
+    finally:
+        for g, _, _ in fleet:
             g.close()
 
 

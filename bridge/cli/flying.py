@@ -158,6 +158,11 @@ def report_fleet(run: Any, command: str) -> int:
             w(f"  vehicles {p['ids'][0]}-{p['ids'][1]}: {p['closest_m']:.3f} m at t={p['t']:.3f} s\n")
         if len(judged) > len(closest):
             w(f"  (the {len(closest)} closest of {len(judged)} pairs: every pair in summary.json, separation.pairs)\n")
+        for f in sep.get("wall_clock") or ():  # a lockstep fleet's vehicle that flew on, on the wall clock
+            until = ("" if f["judged_until_t"] is None else
+                     f"; judged only until t={f['judged_until_t']:.3f} s: still flying when its record ended")
+            w(f"  vehicle {f['id']} flew on the wall clock from t={f['from_t']:.3f} s to t={f['to_t']:.3f} s "
+              f"({f['why']}): judged on its record, matched by mission time (approximate){until}\n")
         if run.path is not None:
             w(f"run directory: {run.path}\n")
         sys.stdout.flush()
@@ -166,14 +171,17 @@ def report_fleet(run: Any, command: str) -> int:
     for v in s["vehicles"]:
         if v["outcome"] != "completed":
             c = v.get("contact")  # SITL: lockstep, both flights ended there; real time, they went on past it
-            went = ("; the flights went on: in real time the vehicles share no clock" if c and c.get("continued")
-                    else "; both flights ended there")
+            went = ("; both flights ended there" if not c or not c.get("continued") else
+                    "; the flights went on: in real time the vehicles share no clock" if s["clock"] == "realtime" else
+                    "; the flights went on: found afterwards, one of them flying on the wall clock")
             eb = v.get("ended_by") or {}
             said = (f" (touched vehicle {c['with']} at step {c['step']}, t={c['t']:.3f} s{went})" if c
                     else f": ended by {eb['who']}: {eb['how']}" if eb else "")
             print(f"bsst {command}: vehicle {v['id']}: {v['outcome']}{said}", file=sys.stderr)
     for p in s.get("policies") or []:
-        if not p.get("ok"):
+        if p.get("not_judged") is not None and p.get("why") == p["not_judged"]:  # held while judged, not throughout
+            print(f"bsst {command}: policy {p['name']} {p['not_judged']}", file=sys.stderr)
+        elif not p.get("ok"):
             print(f"bsst {command}: policy {violation_text(p)}", file=sys.stderr)
     # a lockstep fleet on one radio whose states entered out of turn (a controller waited too long for another)
     late = {i: ks for i, ks in ((s.get("radio") or {}).get("late_turns") or {}).items() if ks}

@@ -2,10 +2,12 @@
 
 In:  the vehicles' ids, their rotor discs' radii (m), the policy's minimum clearance (m); each step, the mission time
      (s) and the vehicles' true centres (m, NWU x, y, z); for SITL, the finished traces (rows at t = j / rate s,
-     columns ``x``, ``y``, ``z`` m), where each stayed after its last row and each one's start (m)
+     columns ``x``, ``y``, ``z`` m), where each stayed after its last row, each one's start (m) and the step after
+     which each one's rows were flown on the wall clock
 Out: :class:`Watch`: the pairs that touch at a step (indices, why), ``summary.json["separation"]`` (every pair's
      closest approach: clearance m, at t s) and the ``separation`` policy's verdict (ok, or t s and why);
-     :func:`judge_traces`: each vehicle's first contact on finished traces (step, t s, the other's id, why)
+     :func:`judge_traces`: each vehicle's first contact on finished traces (step, t s, the other's id, why, and
+     ``continued`` when nothing stopped the flights at it)
 
 The offline fleet (:mod:`bridge.swarm`) judges its world after every step with a :class:`Watch`; a SITL fleet's
 is judged on its sessions' traces afterwards, by the same :class:`Watch` (:func:`judge_traces`).
@@ -23,6 +25,10 @@ DEFINITION = ("distance between the vehicles' centres less each one's disc radiu
               "radius: rotor_radius_m, by default half the arm)")
 CONTINUED = ("the flights continued past the contact: in real time each vehicle keeps its own wall clock, the "
              "vehicles share no clock, so nothing stopped them at it (docs/swarm.md)")
+WALL_CLOCK = ("the flights continued past the contact: found afterwards on the records, at a step one of the two flew "
+              "on the wall clock after it left the fleet's shared step clock, matched to the other's by mission time "
+              "(approximate); nothing stopped them at it (docs/swarm.md)")
+NOWHERE = (math.nan, math.nan, math.nan)  # a vehicle whose place is not known: never closer, never touching
 
 
 class Watch:
@@ -73,30 +79,35 @@ def _num(v: float) -> float | None:  # (m, 9 digits; None: never judged)
 def judge_traces(watch: Watch, traces: Sequence[dict[str, Any]], rate: float,
                  finals: Sequence[tuple[float, float, float] | None] | None = None,
                  starts: Sequence[Sequence[float]] | None = None,
-                 afters: Sequence[Sequence[Sequence[float]]] | None = None) -> dict[int, dict[str, Any]]:
+                 afters: Sequence[Sequence[Sequence[float]]] | None = None,
+                 walls: Sequence[int | None] | None = None) -> dict[int, dict[str, Any]]:
     """Judge the shared world on finished traces, with the offline loop's :class:`Watch`: row j of every trace
     (the true positions at t = j / rate; row 0 the start) is the world after step j - 1, as the loop judges it,
     and after a trace's rows, its vehicle's ``afters`` (m: its end landing's, flown on after the mission, as the
     loop flies and judges them); a path that ended early stays at its last row, or with ``finals`` (a lockstep
     fleet's shared clock: where each vehicle stayed, m, after its last row's step) there, as the loop keeps it; an
     empty one (a vehicle that flew no step) is at its start with ``starts`` (m: one never armed stands there, as
-    the loop keeps it), else nowhere, and touches no one. The first contact of each vehicle (by index): its step,
-    time, the other's id and why (without ``finals``, that the flights went on: :data:`CONTINUED`)."""
+    the loop keeps it), else nowhere, and touches no one (a final :data:`NOWHERE`: not known after its rows).
+    ``walls``: the step after which each vehicle's rows were flown on the wall clock (None: none), judged by their
+    index as the rest. The first contact of each vehicle (by index): its step, time, the other's id and why (without
+    ``finals``, that the flights went on: :data:`CONTINUED`; at a step one of the two flew on the wall clock:
+    :data:`WALL_CLOCK`)."""
     last = [finals[i] if finals is not None else None for i in range(len(traces))]
     paths = [[(float(x), float(y), float(z)) for x, y, z in zip(tr["x"], tr["y"], tr["z"])] for tr in traces]
     for path, more_rows in zip(paths, afters or ()):
         path.extend((float(p[0]), float(p[1]), float(p[2])) for p in more_rows)
     n = max((len(path) + (p is not None) for path, p in zip(paths, last)), default=0)
     first: dict[int, dict[str, Any]] = {}
-    nowhere = (math.nan, math.nan, math.nan)  # NaN distances: never closer, never touching (Watch.check)
-    unflown = [tuple(s[:3]) for s in starts] if starts is not None else [nowhere] * len(traces)
-    more = {} if finals is not None else {"continued": CONTINUED}
+    unflown = [tuple(s[:3]) for s in starts] if starts is not None else [NOWHERE] * len(traces)
+    wall = list(walls) if walls is not None else [None] * len(traces)
     for j in range(n):
         positions = []
         for path, p, home in zip(paths, last, unflown):
             r = min(j, len(path) - 1)
             positions.append(p if p is not None and j > r else path[r] if r >= 0 else home)
         for a, b, why in watch.check(j / rate, positions):
+            off = any(w is not None and j > w for w in (wall[a], wall[b]))
+            more = {"continued": CONTINUED} if finals is None else {"continued": WALL_CLOCK} if off else {}
             for i, other in ((a, b), (b, a)):
                 first.setdefault(i, {"step": j, "t": round(j / rate, 6), "with": watch.ids[other], "why": why, **more})
     return first

@@ -15,14 +15,18 @@ radii, m): each vehicle's gate file (``vehicle-<id>/gate.json``: every vehicle's
 makes its vehicle wait, after each step, for every other vehicle to fly it, and end its flight ``collision`` at the
 step it touches another (:mod:`bridge.nodes.vehicle.gate`); each controller then waits up to
 :data:`~bridge.session.children.READY_TIMEOUT_S` for the mission's second state, since the first step waits for the
-slowest vehicle to start. In real time each pair keeps its own wall clock, and the shared world is judged afterwards
-on their traces (:mod:`bridge.swarm`). Ctrl-C or SIGTERM stops every pair (each session's own stop: SIGTERM, then
-SIGKILL at its deadline) and each still writes its summary.
+slowest vehicle to start. A vehicle a ground station takes over (HOLD, TAKEOFF, ...) leaves the shared clock and flies
+on under it, on the wall clock, recorded, while a vehicle not taken over still flies and until its record holds
+as many steps as theirs (a single vehicle's session stops it at once); the fleet judges that record afterwards
+(:mod:`bridge.record.wallclock`). In real time each pair keeps its own wall clock, and the shared world is judged
+afterwards on their traces (:mod:`bridge.swarm`). Ctrl-C or SIGTERM stops every pair (each session's own stop:
+SIGTERM, then SIGKILL at its deadline) and each still writes its summary.
 """
 
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import tempfile
 import threading
@@ -139,6 +143,9 @@ def _fly(flights: Sequence[Flight], ids: Sequence[int], dirs: Sequence[Path], *,
                 for j, (f, i, d, g) in enumerate(zip(flights, ids, dirs, gates))]
     runs: list[Run | None] = [None] * len(sessions)
     errors: list[BaseException] = []
+    if gates[0] is not None:  # lockstep: a vehicle taken over by a ground station flies on while the others fly
+        for j, s in enumerate(sessions):
+            s.flies_on = functools.partial(_flies_on, sessions, runs, j)
 
     def fly(j: int) -> None:
         try:
@@ -169,3 +176,21 @@ def _fly(flights: Sequence[Flight], ids: Sequence[int], dirs: Sequence[Path], *,
                 title = f"{m.name} ({m.controller}, {f.profile.name}, SITL {r.summary['clock']})"
                 finish_run(r.path, r.trace, r.summary, title, True, blackout_windows(m))
     return done
+
+
+def _recorded(s: Session) -> int:
+    """The steps a session's record holds so far (its trace's rows and its end action's)."""
+    joiner = getattr(s, "joiner", None)
+    return 0 if joiner is None else len(joiner.rows) + len(joiner.after_at)
+
+
+def _flies_on(sessions: Sequence[Session], runs: Sequence[Run | None], j: int) -> bool:
+    """Whether vehicle j (index), taken over by a ground station, flies on under it: while a vehicle not taken over
+    still flies, and until its record holds as many steps as the longest of theirs (the judge matches rows by
+    step: bridge.record.wallclock). Else its session stops it, as a single vehicle's does."""
+    others = [i for i in range(len(sessions)) if i != j and not sessions[i].flying_on]
+    if sessions[j].diverged:  # (its plant halted: nothing more to record)
+        return False
+    if any(runs[i] is None for i in others):
+        return True
+    return _recorded(sessions[j]) < max((_recorded(sessions[i]) for i in others), default=0)

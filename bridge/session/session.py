@@ -18,6 +18,7 @@ import math
 import selectors
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -31,6 +32,7 @@ from bridge.record.events import RunEvent
 from bridge.record.joiner import TraceJoiner, off_clock_time
 from bridge.record.runlog import EventLog, Run, RunRecord
 from bridge.record.summary import ChildEnd, SessionFacts, SessionSummary, controller_completed, session_summary
+from bridge.record.wallclock import FLYING_ON
 from bridge.session.announce import vehicle_up_line
 from bridge.session.children import (
     READY_TIMEOUT_S,
@@ -87,6 +89,8 @@ class Session:
         self._event_log: EventLog | None = None
         self._vehicle_said: dict[str, float] = {}  # the vehicle's latest event of each kind in earlier reads (s)
         self._early: list[tuple[Child, Report]] = []  # reports read while starting, handled once all are up
+        self.flies_on: Callable[[], bool] | None = None  # a fleet's: a vehicle taken over flies on under it now?
+        self.flying_on = False
 
     # -- the whole session ---------------------------------------------------------------------
     def run(self, plots: bool, keep: bool) -> Run:
@@ -295,18 +299,21 @@ class Session:
                     if ctl.done is not None and ctl.done.reason:  # a controller that gave up says why
                         sys.stderr.write(("\n" if self.live else "") + f"bsst sitl: controller: {ctl.done.reason}\n")
                     taken = ctl.done is not None and ctl.done.taken_over is not None
-                    if self._controller_completed() or not self.vehicle_armed or taken:
-                        # taken: a ground station flies it now (HOLD, LAND, ...): nothing of the mission to wait for
+                    # taken: a ground station flies it now (HOLD, LAND, ...): nothing of the mission to wait for; in a
+                    # fleet it flies on under it, recorded, until the rest of the fleet is done (bridge.session.fleet)
+                    self.flying_on = taken and self.vehicle_armed and self.flies_on is not None and self.flies_on()
+                    if (self._controller_completed() or not self.vehicle_armed or taken) and not self.flying_on:
                         if ctl.proc.returncode not in (0, 1):
                             self._died(ctl)
                         return
                     if ctl.done is None:  # killed or crashed: a death, not an outcome
                         self._died(ctl)
-                    # the vehicle is on its own: let it finish its failsafe (land and disarm)
-                    landing_deadline = time.monotonic() + self._landing_time()
-                    self._note("waiting", f"vehicle on its own: waiting up to {self._landing_time():.0f} s "
-                                          "for it to land and disarm", "session")
-                if landing_deadline is not None and (not self.vehicle_armed or time.monotonic() > landing_deadline):
+                    # the vehicle is on its own: let it finish its failsafe (land and disarm), or fly on
+                    landing_deadline = math.inf if self.flying_on else time.monotonic() + self._landing_time()
+                    self._note("waiting", FLYING_ON if self.flying_on else "vehicle on its own: waiting up to "
+                               f"{self._landing_time():.0f} s for it to land and disarm", "session")
+                if landing_deadline is not None and (not self.vehicle_armed or time.monotonic() > landing_deadline
+                                                     or self.flying_on and not self.flies_on()):  # type: ignore[misc]
                     return
         finally:
             sel.close()

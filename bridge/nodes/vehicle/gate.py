@@ -4,9 +4,10 @@ In:  the fleet's gate file (JSON, written by :mod:`bridge.session.fleet`: this v
      system id, disc radius (m) and gate port on 127.0.0.1); the plant's true position (m, x y z, the paper's
      frame) after each lockstep step k; the other vehicles' gate datagrams; wall time (s, ``time.monotonic``)
 Out: datagrams to the other vehicles' gates (this vehicle at step k and where, or gone from step k and where it
-     stays); :meth:`Gate.clear`: whether step k may be flown (every other vehicle has flown step k - 1), else the
-     clock ``gated``, or the contact's text to end the flight with (``collision``); :meth:`Gate.stats` (steps,
-     seconds gated, the step and place it left, its contact, any vehicle taken as gone)
+     stays: NaN, nowhere known, when it flies on, on the wall clock); :meth:`Gate.clear`: whether step k may be
+     flown (every other vehicle has flown step k - 1), else the clock ``gated``, or the contact's text to end the
+     flight with (``collision``); :meth:`Gate.stats` (steps, seconds gated, the step and place it left, its
+     contact, any vehicle taken as gone)
 
 The offline fleet (:mod:`bridge.swarm`) flies every vehicle one step, then judges the world on their positions.
 Here each vehicle, its step k - 1 flown, sends the state of step k to its controller and its position to every
@@ -224,8 +225,11 @@ class Gate:
         self.left = (k, pos)
         if self.turns is not None:  # in the radio's file before any vehicle hears of it (bridge.link.turns)
             self.turns.leave(k)
+        # flying on, on the wall clock (a ground station's mode, its controller lost): not there for long, so no
+        # obstacle there (the fleet judges its record afterwards, bridge.swarm); else it stays there
+        there = (math.nan,) * 3 if self.clock.state is ClockState.FREE_RUNNING else pos
         for _ in range(2):  # (a copy: nothing waits for an answer to this one)
-            self._send(GONE, k, pos, pos)
+            self._send(GONE, k, there, there)
 
     def _send(self, kind: int, k: int, pos: Sequence[float], prev: Sequence[float]) -> None:
         self._last = _WIRE.pack(_MAGIC, kind, self.me, k, *pos, *prev)

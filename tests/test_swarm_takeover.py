@@ -1,0 +1,131 @@
+"""Covers bridge.record.wallclock, bridge.session.fleet and bridge.swarm: a lockstep fleet's vehicle that flies on.
+
+Real processes: ``bridge.swarm.sitl`` flies two vehicles in lockstep at real time's pace (a vehicle and a controller
+process each, free ports), their ground-station links to one UDP port. Vehicle 2 hovers 1.6 m under vehicle 1. A
+ground station (MAVSDK's native binding, or MAVProxy typed to) takes vehicle 2 over with a takeoff to 2.5 m: it
+leaves the shared step clock and climbs, on the wall clock, into vehicle 1. Its session keeps it flying under the
+ground station until the rest of the fleet is done, and the fleet judges its record: the contact is found (both
+``collision``, ``continued``), the separation does not hold, exit 1. Before, its session stopped it 40 ms after
+the takeover and the fleet took it as standing where it left the shared clock: separation held.
+A failsafe landing still going at the mission's end (a blackout of both links), flown on the wall clock onto the
+vehicle below: judged on its record, the contact said as found afterwards, not as ending both flights there.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import threading
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from bridge.cli.flying import report_fleet
+from bridge.record.separation import WALL_CLOCK
+from bridge.session.children import free_udp_port
+from bridge.swarm import FleetRun, simulate, sitl
+from tests.sitlkit import ENV, MAVSDK_GROUND_STATION
+
+pytestmark = pytest.mark.process  # starts processes, opens sockets
+
+TAKEOVER = Path(__file__).resolve().parents[1] / "examples" / "swarm-takeover.toml"  # vehicle 2 under vehicle 1
+
+
+def _fly(tmp_path: Path, port: int, **kw: Any) -> tuple[threading.Thread, dict[str, Any], Path]:
+    """The fleet in lockstep at real time's pace, its ground-station links to ``port``, in a thread."""
+    mission = TAKEOVER
+    result: dict[str, Any] = {}
+
+    def fly() -> None:
+        try:
+            result["run"] = sitl(mission, instance=None, gcs=f"127.0.0.1:{port}", speed=1.0, out=tmp_path / "run",
+                                 plots=False, **kw)
+        except BaseException as exc:  # noqa: BLE001  (named by the caller's assertion)
+            result["error"] = exc
+
+    flight = threading.Thread(target=fly, daemon=True)
+    flight.start()
+    return flight, result, mission
+
+
+def _judged_into_its_neighbour(result: dict[str, Any], mission: Path, capsys: Any) -> None:
+    """The fleet judged vehicle 2's climb on its record: the contact found, the separation broken, exit 1."""
+    assert "error" not in result, result.get("error")
+    run = result["run"]
+    assert isinstance(run, FleetRun)
+    s = run.summary
+    v1, v2 = s["vehicles"]
+    assert "TAKEOFF" in v2["ended_by"]["how"] and "gcs" in v2["ended_by"]["who"], v2["ended_by"]
+    taken = next(e["t"] for e in run.runs[1].summary["events"] if e["kind"] == "mode" and "TAKEOFF" in e["text"])
+    for v, other in ((v1, 2), (v2, 1)):  # found afterwards on the records: the flights went on
+        assert v["outcome"] == "collision" and v["contact"]["with"] == other, v
+        assert v["contact"]["continued"] == WALL_CLOCK and v["contact"]["t"] > taken, (v, taken)
+    policy = s["policies"][0]
+    assert policy["name"] == "separation" and not policy["ok"] and policy["t"] > taken, policy
+    flown = s["separation"]["wall_clock"]
+    assert [f["id"] for f in flown] == [2] and flown[0]["from_t"] == pytest.approx(taken, abs=0.01), flown
+    assert flown[0]["to_t"] >= 14.0 and s["separation"]["whole_flight"] is True, flown  # flown on to the end
+    assert s["sitl"]["note"] == WALL_CLOCK
+    assert max(run.runs[1].trace["z"]) > 1.9  # its record holds the climb
+    off = simulate(mission, plots=False)  # as planned, the separation holds
+    assert off.outcome == "completed" and off.summary["policies"][0]["ok"]
+    capsys.readouterr()
+    assert report_fleet(run, "sitl") == 1
+    out, err = capsys.readouterr()
+    assert "vehicle 2 flew on the wall clock from t=" in out and "judged only until" not in out, out
+    assert "the flights went on: found afterwards" in err and "both flights ended there" not in err, err
+
+
+MAVSDK_TAKEOFF = MAVSDK_GROUND_STATION + r"""
+from mavsdk.plugins.action import Action
+from mavsdk.plugins.telemetry import Telemetry
+out["two_found"] = until(lambda: sum(s.has_autopilot() for s in sdk.get_systems()) >= 2, 90)
+by = {s.get_system_id(): s for s in sdk.get_systems() if s.has_autopilot()}
+tel = {i: Telemetry(s) for i, s in by.items()}
+def under():  # vehicle 2 (about its own start, 2 m west of vehicle 1's) under vehicle 1
+    a, b = (tel[i].position_velocity_ned().position for i in (1, 2))
+    return a.down_m < -2.5 and b.east_m > 1.95 and b.down_m < -0.95
+out["under"] = until(under, 90)
+out["takeoff"] = Action(by[2]).takeoff().name
+out["climbed"] = until(lambda: tel[2].position_velocity_ned().position.down_m < -1.9, 30)
+print("RESULT " + json.dumps(out), flush=True)
+sdk.destroy()
+"""
+
+
+def test_mavsdk_takes_a_fleet_vehicle_off_into_its_neighbour_and_the_fleet_judges_its_climb(
+        tmp_path: Path, capsys: Any) -> None:
+    port = free_udp_port()
+    flight, result, mission = _fly(tmp_path, port)
+    try:
+        r = subprocess.run([sys.executable, "-c", MAVSDK_TAKEOFF, f"udpin://127.0.0.1:{port}"], capture_output=True,
+                           text=True, timeout=240, env=ENV)
+    finally:
+        flight.join(240)
+    lines = [ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")]
+    assert lines, f"MAVSDK script failed (exit {r.returncode}):\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
+    out = json.loads(lines[0][len("RESULT "):])
+    assert out["two_found"] and out["under"] and out["takeoff"] == "SUCCESS" and out["climbed"], out
+    _judged_into_its_neighbour(result, mission, capsys)
+    events = (tmp_path / "run" / "vehicle-2" / "events.log").read_text()
+    assert "flies on under it, on the wall clock" in events, events
+
+
+def test_a_failsafe_landing_going_at_the_missions_end_is_judged_on_its_record(tmp_path: Path, capsys: Any) -> None:
+    """Both links black from 12 s: each vehicle's failsafe descends from 12.5 s, vehicle 1 from 2.6 m onto vehicle 2,
+    landed under it, after the mission's end (14 s), on the wall clock: the contact is found on the records, after
+    the mission, and said as found afterwards (before: "both flights ended there", which they had not)."""
+    run = sitl(TAKEOVER, instance=None, out=tmp_path / "run", plots=False, link={"blackouts": [[12.0, 10.0]]})
+    assert isinstance(run, FleetRun)
+    s = run.summary
+    for v in s["vehicles"]:
+        assert v["outcome"] == "collision" and v["contact"]["continued"] == WALL_CLOCK and v["contact"]["t"] > 14.0, v
+    flown = s["separation"]["wall_clock"]
+    assert [f["id"] for f in flown] == [1, 2] and all(f["at_rest"] and f["from_t"] == 14.0 for f in flown), flown
+    assert s["separation"]["whole_flight"] is True and not s["policies"][0]["ok"]
+    capsys.readouterr()
+    assert report_fleet(run, "sitl") == 1
+    err = capsys.readouterr().err
+    assert "the flights went on: found afterwards" in err and "both flights ended there" not in err, err
