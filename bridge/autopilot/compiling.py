@@ -40,18 +40,24 @@ def announce_compiling(package: str, stream: TextIO | None = None) -> bool:
     """Print the compiling line for the kernels of ``package`` (a key of :data:`KERNELS`: that module, or
     that package and its loaded submodules) if numba's cache of them is cold; once per process (later calls
     return at once). Whether it printed."""
-    what, seconds = KERNELS[package]
     if package in _checked:
         return False
     _checked.add(package)
     if not cold(package):
         return False
     out = stream or sys.stderr
-    when = (f"~{seconds:g} s, in each process: numba's cache is off" if _uncached(package)
-            else f"first run after an install, ~{seconds:g} s; cached on disk after")
-    out.write(f"bsst: compiling {what} ({when}) ...\n")
+    out.write(compiling_line(package, _uncached(package)) + "\n")
     out.flush()
     return True
+
+
+def compiling_line(package: str, uncached: bool = False) -> str:
+    """The line :func:`announce_compiling` says for ``package`` (a key of :data:`KERNELS`): with numba's cache on disk
+    (``uncached`` False), or without one (each process compiles)."""
+    what, seconds = KERNELS[package]
+    when = (f"~{seconds:g} s, in each process: numba's cache is off" if uncached
+            else f"first run after an install, ~{seconds:g} s; cached on disk after")
+    return f"bsst: compiling {what} ({when}) ..."
 
 
 def cold(package: str) -> bool:
@@ -69,6 +75,13 @@ def _kernels(package: str) -> Iterator[Any]:
             for obj in vars(module).values():
                 if getattr(getattr(obj, "_cache", None), "_cache_file", None) is not None or _uncached_kernel(obj):
                     yield obj
+
+
+def cache_off(package: str) -> bool:
+    """Whether numba found no writable place to cache ``package``'s kernels (a key of :data:`KERNELS`, imported: any
+    of them made to cache without one, kernelcache.UNCACHED): each process that flies them compiles them, so a
+    launcher compiling them ahead of its children would only compile them once more (bridge.session.sitl)."""
+    return _uncached(package)
 
 
 def _uncached(package: str) -> bool:

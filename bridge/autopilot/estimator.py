@@ -89,12 +89,13 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from types import ModuleType
 from typing import Protocol
 
 import numpy as np
 
 from bridge.autopilot.cholesky import weighted_square
-from bridge.autopilot.compiling import announce_compiling
+from bridge.autopilot.compiling import announce_compiling, cache_off
 from plant.sensors import (
     BARO,
     GNSS,
@@ -324,11 +325,7 @@ class Ekf:
     kind = "ekf"
 
     def __init__(self, config: SensorConfig, start: State, gravity: float = 9.81) -> None:
-        from bridge.autopilot import ekfkernels as kernels  # numba's import costs ~0.3 s: only an EKF flight pays it
-
-        announce_compiling(kernels.__name__)  # a cold cache: say so before ~7 s of silence
-        kernels.ready()
-        k = self._k = kernels
+        k = self._k = load_ekf_kernels()
         c = config
         self.config = c
         self.gravity = gravity
@@ -440,14 +437,27 @@ class Ekf:
 
 
 def compile_estimator(kind: str) -> None:
-    """Compile, or load from the on-disk cache, what an estimator of ``kind`` runs on (the EKF's kernels;
-    nothing for the others), in this process: a launcher calls it before it starts a vehicle, so that a
-    first EKF on a machine compiles once, here, not in the vehicle's start-up time."""
+    """Compile, or load from numba's cache on disk, what an estimator of ``kind`` runs on (the EKF's kernels;
+    nothing for the others): a launcher calls it before it starts a vehicle, so that a first EKF on a machine
+    compiles once, here, and the vehicle loads it from the cache instead of compiling it in its start-up time.
+    Where numba has no cache (no writable place for it: kernelcache.enable_cache) nothing is compiled here: the
+    vehicle would compile it again (~7 s); the process that flies it compiles it, once (the vehicle, or the fork
+    server it is forked from: bridge.core.kernelpreload)."""
     if kind == "ekf":
         from bridge.autopilot import ekfkernels  # numba's import costs ~0.3 s: only an EKF flight pays it
 
-        announce_compiling(ekfkernels.__name__)  # a cold cache: say so before ~7 s of silence
-        ekfkernels.ready()
+        if not cache_off(ekfkernels.__name__):
+            load_ekf_kernels()
+
+
+def load_ekf_kernels() -> ModuleType:
+    """The EKF's kernels (:mod:`bridge.autopilot.ekfkernels`), compiled or loaded from numba's cache in this
+    process, once (said first where it compiles: bridge.autopilot.compiling)."""
+    from bridge.autopilot import ekfkernels  # numba's import costs ~0.3 s: only an EKF flight pays it
+
+    announce_compiling(ekfkernels.__name__)  # a cold cache: say so before ~7 s of silence
+    ekfkernels.ready()
+    return ekfkernels
 
 
 def make_estimator(kind: str, config: SensorConfig, start: State, gravity: float,

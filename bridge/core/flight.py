@@ -24,7 +24,7 @@ from typing import Any
 
 from bridge.autopilot.batterywatch import BatteryWatch
 from bridge.autopilot.compiling import cold
-from bridge.autopilot.estimator import ESTIMATOR_KINDS, compile_estimator, make_estimator
+from bridge.autopilot.estimator import ESTIMATOR_KINDS, load_ekf_kernels, make_estimator
 from bridge.autopilot.failsafe import FailsafeConfig, failsafe_from_table
 from bridge.autopilot.landdisarm import LandDisarm
 from bridge.autopilot.params import (
@@ -493,4 +493,4 @@ def load_compiled_kernels(ekf: bool = True) -> None:
     compile_for(ctl=flight.make_controller(), plant=flight.make_plant())
     wire_for(True)
     if ekf:
-        compile_estimator("ekf")
+        load_ekf_kernels()

@@ -24,6 +24,7 @@ import os
 import sys
 from collections.abc import Callable, Mapping
 
+from bridge.autopilot.compiling import cache_off
 from bridge.core.wire import odometry_fields, state_from_odometry_fields
 from controller import Controller
 from params import ConfigError
@@ -62,6 +63,15 @@ def compile_for(ctl: Controller | None = None, plant: Quadrotor | None = None) -
     from bridge.core.scalarkernels import compile_scalar  # numba's import (~1 s): only where compiled kernels fly
 
     compile_scalar(ctl, plant)
+
+
+def kernel_cache_on() -> bool:
+    """Whether numba caches the compiled kernels on disk here (imports them, and numba: ~1 s). Where it found no
+    writable place (bridge.autopilot.kernelcache.enable_cache) each process compiles what it flies (~4 s), and a
+    launcher compiling them ahead of its children would compile them once more (bridge.session.sitl)."""
+    from bridge.core import scalarkernels  # numba's import (~1 s): only where compiled kernels fly
+
+    return not cache_off(scalarkernels.__name__)
 
 
 def wire_for(compiled: bool) -> tuple[Callable[..., tuple[float, ...]], Callable[..., tuple[float, ...]]]:

@@ -55,6 +55,10 @@ from bridge.nodes.process import die_with_parent
 ENV = "BSST_FORK_SERVER"  # "0": every child exec'd (the fork server never started)
 SERVER_MODULE = "bridge.cli.forkserver"
 ANSWER_TIMEOUT_S = 30.0  # s for the server to answer a request: its start-up (imports) included, on a loaded machine
+# CPU s a server must have spent in ANSWER_TIMEOUT_S for its client to wait that long again: it is working (compiling
+# kernels with numba's cache off, ~4-11 s of CPU that a loaded machine stretches past 30 s: bridge.core.kernelpreload)
+BUSY_CPU_S = 1.0
+BUSY_WAIT_MAX_S = 300.0  # s: the longest a client waits for a server that keeps working (one spinning is hung too)
 _MAX_MESSAGE = 1 << 20
 TITLE_ROOM = 4096  # bytes the server's padding argument reserves for its children's command lines
 
@@ -121,6 +125,7 @@ class _Server:
         self.sock = sock
         self.proc = proc  # None: the server this process was forked by (we are one of its clients)
         self.owner = os.getpid()
+        self.pid = proc.pid if proc is not None else os.getppid()  # the server's (it forked us)
         self.lock = threading.Lock()
         self.next_id = 0
         self.answers: dict[int, dict[str, Any]] = {}
@@ -150,16 +155,18 @@ class _Server:
     def cpu_s(self) -> float:
         """CPU seconds (user + system) of the server itself (its imports; not counted for a server this process
         shares with the one that forked it) and of the children it forked for us heard to have ended."""
-        own = 0.0
-        try:
-            if self.proc is not None:
-                with open(f"/proc/{self.proc.pid}/stat") as f:
-                    fields = f.read().rpartition(")")[2].split()
-                own = (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime, stime (proc(5))
-        except (OSError, IndexError, ValueError):
-            pass
+        own = self._own_cpu_s() if self.proc is not None else 0.0
         with self.lock:
             return own + self.children_cpu_s
+
+    def _own_cpu_s(self) -> float:
+        """CPU seconds (user + system) the server process itself has spent so far (0 where /proc cannot say)."""
+        try:
+            with open(f"/proc/{self.pid}/stat") as f:
+                fields = f.read().rpartition(")")[2].split()
+            return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime, stime (proc(5))
+        except (OSError, IndexError, ValueError):
+            return 0.0
 
     def spawn(self, argv: Sequence[str], fds: Sequence[int], cwd: str, env: dict[str, str]) -> ForkedChild:
         with self.lock:
@@ -188,10 +195,17 @@ class _Server:
                 return -signal.SIGTERM
 
     def _until(self, found: Callable[[], Any], timeout_s: float) -> Any:
-        """Read the server's messages (holding the lock) until ``found()`` gives something, and give it."""
+        """Read the server's messages (holding the lock) until ``found()`` gives something, and give it. A server
+        silent for ``timeout_s`` is given as long again while it spends CPU (:data:`BUSY_CPU_S`): it is working, not
+        hung (a compile before it forks, on a loaded machine), up to :data:`BUSY_WAIT_MAX_S` in all."""
         deadline = time.monotonic() + timeout_s
+        last = deadline - timeout_s + max(BUSY_WAIT_MAX_S, timeout_s)
+        busy = self._own_cpu_s()
         while (got := found()) is None:
             left = deadline - time.monotonic()
+            if left <= 0 and not self.gone and deadline < last and (spent := self._own_cpu_s()) >= busy + BUSY_CPU_S:
+                deadline = min(time.monotonic() + timeout_s, last)
+                busy, left = spent, deadline - time.monotonic()
             if self.gone or left <= 0:
                 self.gone = True
                 raise ServerGone("fork server: no answer")

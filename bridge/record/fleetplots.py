@@ -15,6 +15,8 @@ from typing import Any
 
 import numpy as np
 
+from bridge.record.mplsetup import pyplot
+
 DPI = 90
 
 
@@ -38,11 +40,7 @@ def nearest_clearance(traces: Sequence[Mapping[str, Any]], radii: Sequence[float
 def fleet_plots(traces: Sequence[Mapping[str, Any]], ids: Sequence[int], radii: Sequence[float], min_m: float,
                 folder: Path, title: str) -> list[Path]:
     """Write the fleet's two figures into ``folder``; their paths."""
-    import matplotlib  # lazy: matplotlib costs start-up time and is needed only for figures
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # lazy: as matplotlib
-
+    plt = pyplot()
     folder.mkdir(parents=True, exist_ok=True)
     written = []
     fig, ax = plt.subplots(figsize=(7, 6))

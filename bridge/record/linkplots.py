@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from bridge.link.trace import Records, TraceFile
+from bridge.record.mplsetup import pyplot
 from bridge.record.plots import DPI, legend_above
 
 COLOURS = {"both": "C0", "up": "C0", "down": "C1"}
@@ -31,8 +32,7 @@ def _loss_runs(rec: Records) -> tuple[np.ndarray, np.ndarray]:
 
 def trace_figure(trace: TraceFile, out: str | Path, title: str = "") -> Path:
     """Write the three-panel figure of ``trace`` to ``out`` (PNG); returns its path."""
-    import matplotlib.pyplot as plt  # lazy: matplotlib costs start-up time and is needed only for figures
-
+    plt = pyplot()
     fig = link_trace_figure(trace, title)
     out = Path(out)
     fig.savefig(out, dpi="figure")
@@ -42,11 +42,7 @@ def trace_figure(trace: TraceFile, out: str | Path, title: str = "") -> Path:
 
 def link_trace_figure(trace: TraceFile, title: str = "") -> Any:
     """The three-panel figure of ``trace`` (matplotlib, Agg, :data:`~bridge.record.plots.DPI`); the caller closes it."""
-    import matplotlib  # lazy: matplotlib costs start-up time and is needed only for figures
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # lazy: as matplotlib
-
+    plt = pyplot()
     parts = [("both", trace.both)] if trace.both is not None else [(d, r) for d, r in (("up", trace.up),
                                                                                       ("down", trace.down)) if r]
     fig, (ax_d, ax_l, ax_h) = plt.subplots(3, 1, figsize=(9, 9), dpi=DPI)

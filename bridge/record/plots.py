@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from bridge.record.metrics import errors
+from bridge.record.mplsetup import pyplot
 
 ESTIMATED = (("x", "m"), ("y", "m"), ("z", "m"), ("phi", "rad"), ("theta", "rad"), ("psi", "rad"))
 TRACKED = (("x", "m"), ("y", "m"), ("z", "m"), ("psi", "rad"))
@@ -112,8 +113,7 @@ def mark_spans(ax: Any, spans: Sequence[Span], label: bool = False) -> None:
 def make_plots(trace: dict[str, np.ndarray], out: str | Path, title: str = "",
                spans: Sequence[Span] = ()) -> list[Path]:
     """Write ``positions.png, errors.png, angles.png, inputs.png, path3d.png`` (and ``estimate.png``) into ``out``."""
-    import matplotlib.pyplot as plt  # lazy: matplotlib costs start-up time and is needed only for figures
-
+    plt = pyplot()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     written: list[Path] = []
@@ -127,11 +127,7 @@ def make_plots(trace: dict[str, np.ndarray], out: str | Path, title: str = "",
 
 def figures(trace: dict[str, np.ndarray], title: str = "", spans: Sequence[Span] = ()) -> dict[str, Any]:
     """The run's figures by name (matplotlib figures, Agg, :data:`DPI`); the caller closes them."""
-    import matplotlib  # lazy: matplotlib costs start-up time and is needed only for figures
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # lazy: as matplotlib
-
+    plt = pyplot()
     figs = {"positions": _positions(plt, trace, spans), "errors": _errors(plt, trace, spans),
             "angles": _angles(plt, trace, spans), "inputs": _inputs(plt, trace, spans), "path3d": _path3d(plt, trace)}
     if has_estimate(trace):

@@ -58,7 +58,8 @@ from pathlib import Path
 from typing import Any
 
 from bridge.autopilot.estimator import compile_estimator
-from bridge.core.flight import Overrides, Progress, prepare
+from bridge.core.flight import Flight, Overrides, Progress, prepare
+from bridge.core.scalar import kernel_cache_on
 from bridge.mavlink.endpoint import GCS_PORT, LINK_PORT, parse_address
 from bridge.mavlink.signing import key_from_file
 from bridge.nodes.forkserver import warm
@@ -98,6 +99,19 @@ def check_options(*, realtime: bool, instance: int | None, gcs: str | None, spee
     if gcs_text is not None:
         parse_address(gcs_text, "udpout", "--gcs")  # bad input fails here, before anything starts
     return gcs_text
+
+
+def fill_kernel_cache(flight: Flight) -> None:
+    """Compile the kernels a session's children will fly into numba's cache on disk (or find them there), before
+    they start: a first EKF (~7 s) or a first compiled law and plant (~4 s) on a machine compiles once, here, and
+    the two children load them instead of compiling them at once in their start-up. Where numba has no cache (no
+    writable place: bridge.autopilot.kernelcache) nothing: each process that flies a kernel compiles it itself, or
+    inherits it from the fork server it is forked from (bridge.core.kernelpreload), and a compile here would
+    only be one more (docs/sitl.md, "Without a writable home")."""
+    compile_estimator(flight.estimator)  # nothing where numba has no cache (bridge.autopilot.estimator)
+    if flight.compiled and kernel_cache_on():
+        flight.make_controller()
+        flight.make_plant()
 
 
 @reads_inputs
@@ -166,10 +180,7 @@ def sitl(
     if instance is not None:
         check_port_free(LINK_PORT + n, f"--instance {n}")
     warm()  # the fork server's imports (bridge.nodes.forkserver) overlap what follows
-    compile_estimator(flight.estimator)  # a first EKF on this machine compiles here, not in the vehicle's start-up
-    if flight.compiled:  # the compiled law and plant (bridge.core.scalar) likewise: not in both children at once
-        flight.make_controller()
-        flight.make_plant()
+    fill_kernel_cache(flight)
     path = run_dir(out, flight.mission.name, overwrite) if keep else Path(tempfile.mkdtemp(prefix="bsst-sitl-"))
     try:
         s = Session(flight, path, realtime=realtime, instance=instance, gcs=gcs_text, speed=speed,

@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from bridge.autopilot.estimator import ESTIMATOR_KINDS
+from bridge.record.mplsetup import pyplot
 from bridge.sweep.cells import (
     CELLS_CSV,
     FAILED,
@@ -365,8 +366,7 @@ def heat_maps(path: Path, rows: Sequence[Mapping[str, Any]], a: str, b: str, con
     """``map_<a>_<b>.png`` (one panel per controller) and, with several controllers,
     ``map_<a>_<b>_<controller>.png`` for each (:func:`controller_files`): median 3-D RMS on a log colour
     scale of each panel's own (a law's 0.021..0.027 m is not one colour beside another's 1 m), class in each cell."""
-    import matplotlib.pyplot as plt  # lazy: matplotlib costs start-up time and is needed only for figures
-
+    plt = pyplot()
     name = f"map_{SHORT[a]}_{SHORT[b]}"
     files = controller_files(controllers)
     written: list[Path] = []
@@ -387,10 +387,8 @@ def heat_maps(path: Path, rows: Sequence[Mapping[str, Any]], a: str, b: str, con
 def heat_map_figure(rows: Sequence[Mapping[str, Any]], a: str, b: str, controllers: Sequence[str],
                     classes: Classes) -> Any:
     """The heat map of ``a`` x ``b``, a panel (and colour bar, m) per controller; the caller closes it."""
-    import matplotlib  # lazy: matplotlib costs start-up time and is needed only for figures
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # lazy: as matplotlib
+    plt = pyplot()
+    import matplotlib  # lazy: imported by pyplot() (its colour maps)
     import numpy as np  # lazy: only the heat maps need arrays
     from matplotlib.colors import LogNorm  # lazy: as matplotlib
 

@@ -1,0 +1,146 @@
+"""Covers bridge.session, bridge.core.kernelpreload, bridge.nodes.forkserver and bridge.record.mplsetup: without a
+writable home and numba cache (a container, a CI runner) ``bsst`` compiles each kernel once a session, quietly.
+
+Each ``bsst`` here is a real ``python -m bridge`` process, exec'd (not forked by the suite's fork server, whose
+kernels come from a cache), starting its own fork server as a user's does. ``HOME`` is a path no process may create
+(under ``/proc/self``), a regular file, or a read-only folder (not for root, who may write in it); numba's cache is
+taken away as tests/test_kernelcache_off.py does (its locators narrowed to ``NUMBA_CACHE_DIR``, under ``/proc/self``).
+
+Before the fix, ``BSST_KERNELS=compiled bsst sitl`` compiled the law's and the plant's kernels in the launcher and
+again in its fork server (two compiling lines), and the fork server the EKF's too whether a vehicle flew one or not;
+with ``--estimator ekf`` the launcher compiled the EKF's as well (four lines); and a run that drew its figures printed
+matplotlib's own two lines ("mkdir -p failed for path ...", "Matplotlib created a temporary cache directory ...").
+A compile in the fork server before it answers can outlast its client's 30 s wait on a loaded machine: the client
+waits on while the server works (the last tests).
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+from collections import Counter
+from pathlib import Path
+
+import pytest
+
+from bridge.autopilot.compiling import KERNELS, compiling_line
+from bridge.autopilot.kernelcache import CACHE_OFF_NOTE
+from bridge.nodes import forkserver
+from bridge.record.mplsetup import PREFIX
+from bridge.session import instance_slot
+
+pytestmark = pytest.mark.process  # real bsst processes, a session's children, UDP
+
+ROOT = Path(__file__).resolve().parent.parent
+NO_HOME = "/proc/self/no-home"  # no process, root included, may create it
+NO_CACHE = {"NUMBA_CACHE_LOCATOR_CLASSES": "UserProvidedCacheLocator", "NUMBA_CACHE_DIR": "/proc/self/no-cache"}
+SHORT = 'name = "short"\nduration_s = 2.0\n[trajectory]\nkind = "sine"\n'
+TIMEOUT_S = 600.0  # s: the kernels' compile is ~4-11 s of CPU; a loaded machine stretches it
+SCALAR, EKF = "bridge.core.scalarkernels", "bridge.autopilot.ekfkernels"
+
+
+def _env(home: str, **extra: str) -> dict[str, str]:
+    """This environment without what would give matplotlib or numba a folder, and without the suite's fork server
+    switch (the launcher starts one of its own, as a user's does)."""
+    mine = {k: v for k, v in os.environ.items()
+            if not k.startswith(("NUMBA_CACHE", "XDG_", "MPLCONFIGDIR", "BSST_KERNELS", "BSST_FORK_SERVER"))}
+    paths = [str(ROOT), *filter(None, os.environ.get("PYTHONPATH", "").split(os.pathsep))]
+    return {**mine, "PYTHONPATH": os.pathsep.join(paths), "HOME": home, **extra}
+
+
+def _bsst(tmp_path: Path, env: dict[str, str], *argv: str) -> subprocess.CompletedProcess:
+    (tmp_path / "short.toml").write_text(SHORT)
+    return subprocess.run([sys.executable, "-m", "bridge", *argv], cwd=tmp_path, env=env, capture_output=True,
+                          text=True, timeout=TIMEOUT_S, stdin=subprocess.DEVNULL)
+
+
+def _sitl(tmp_path: Path, *flags: str) -> subprocess.CompletedProcess:
+    with instance_slot() as n:
+        return _bsst(tmp_path, _env(NO_HOME, BSST_KERNELS="compiled", **NO_CACHE), "sitl", "short.toml",
+                     "--instance", str(n), "--out", "run", *flags)
+
+
+def _said(r: subprocess.CompletedProcess) -> Counter[str]:
+    """The lines of ``bsst sitl``'s stderr but its own ``bsst sitl:`` line (where a ground station connects)."""
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr[-3000:]
+    return Counter(ln for ln in r.stderr.splitlines() if not ln.startswith("bsst sitl: "))
+
+
+def _children_compiled_nothing(run: Path) -> None:
+    for log in ("vehicle.log", "controller.log"):
+        text = (run / log).read_text()
+        assert not any(compiling_line(p, True) in text for p in KERNELS), (log, text)
+
+
+def test_a_compiled_session_compiles_the_law_and_plant_once_and_draws_quietly(tmp_path: Path) -> None:
+    """The fork server compiles them (its children inherit them); the launcher, which does not fly, does not; the EKF
+    is compiled by no one (the sine flies the true state); matplotlib finds a folder without a word."""
+    r = _sitl(tmp_path)
+    assert _said(r) == Counter([CACHE_OFF_NOTE, compiling_line(SCALAR, True)]), r.stderr
+    _children_compiled_nothing(tmp_path / "run")
+    assert (tmp_path / "run" / "plots" / "positions.png").stat().st_size > 0
+
+
+def test_a_compiled_session_with_an_ekf_compiles_it_once(tmp_path: Path) -> None:
+    """The EKF's kernels are compiled in the fork server before it forks the vehicle that flies them, once."""
+    r = _sitl(tmp_path, "--estimator", "ekf", "--no-plots")
+    assert _said(r) == Counter([CACHE_OFF_NOTE, compiling_line(SCALAR, True), compiling_line(EKF, True)]), r.stderr
+    _children_compiled_nothing(tmp_path / "run")
+
+
+def _homes(tmp_path: Path) -> dict[str, str]:
+    (tmp_path / "home-file").write_text("")
+    (tmp_path / "read-only").mkdir(mode=0o555)
+    (tmp_path / "writable").mkdir()
+    return {"none": NO_HOME, "file": str(tmp_path / "home-file"), "read-only": str(tmp_path / "read-only"),
+            "writable": str(tmp_path / "writable")}
+
+
+@pytest.mark.parametrize("home", ["none", "file", "read-only", "writable"])
+def test_figures_without_a_writable_home_are_drawn_quietly(tmp_path: Path, home: str) -> None:
+    """``bsst sim`` draws its figures and says nothing on stderr; the temporary folder it gave matplotlib is gone once
+    it has ended. A writable home is matplotlib's own, as before."""
+    if home == "read-only" and os.geteuid() == 0:
+        pytest.skip("root writes in a read-only folder")
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    r = _bsst(tmp_path, _env(_homes(tmp_path)[home], TMPDIR=str(tmp)), "sim", "short.toml", "--out", "run")
+    assert r.returncode == 0 and r.stderr == "", r.stderr[-3000:]
+    assert (tmp_path / "run" / "plots" / "positions.png").stat().st_size > 0
+    assert not [p.name for p in tmp.iterdir() if p.name.startswith((PREFIX, "matplotlib-"))]
+    assert (tmp_path / "writable" / ".config" / "matplotlib").is_dir() == (home == "writable")
+
+
+SERVER = """
+import socket, sys, time
+s = socket.socket(fileno=int(sys.argv[1]))
+if sys.argv[2] == "busy":
+    end = time.process_time() + 1.0
+    while time.process_time() < end:
+        pass
+    s.send(b'{"id": 1, "pid": 0}')
+time.sleep(600)
+"""
+
+
+@pytest.mark.parametrize("server", ["busy", "idle"])
+def test_a_client_waits_on_a_server_that_works(monkeypatch: pytest.MonkeyPatch, server: str) -> None:
+    """A server that spends CPU (1 s of it, then answers) is waited for past the client's timeout; an idle one that
+    never answers is given up at it."""
+    monkeypatch.setattr(forkserver, "BUSY_CPU_S", 0.05)  # CPU s in each 2 s window: met by a process at 1/40 of a core
+    ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+    proc = subprocess.Popen([sys.executable, "-c", SERVER, str(theirs.fileno()), server], pass_fds=(theirs.fileno(),))
+    theirs.close()
+    try:
+        client = forkserver._Server(ours, proc)
+        if server == "busy":
+            assert client._until(lambda: client.answers.pop(1, None), 2.0)["pid"] == 0
+        else:
+            with pytest.raises(forkserver.ServerGone):
+                client._until(lambda: client.answers.pop(1, None), 2.0)
+    finally:
+        proc.kill()
+        proc.wait()
+        ours.close()
