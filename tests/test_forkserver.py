@@ -14,6 +14,7 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import textwrap
 from pathlib import Path
 
@@ -94,6 +95,25 @@ def test_a_forked_child_runs_its_command_with_its_own_files_environment_and_dire
                                 "auto\n"
     assert s.stdout() == b""
     s.close()
+
+
+@pytest.mark.parametrize("length", ["short", "long"])
+def test_a_forked_sweep_uses_its_own_tmpdir_and_leaves_nothing_in_it(tmp_path, length):
+    """A sweep's pool starts multiprocessing's fork server, whose socket lives in a ``pymp-*`` folder of the
+    temporary directory: a forked ``bsst sweep`` left one behind each time (its ``os._exit`` skipped
+    multiprocessing's exit finalizers), made in the server's temporary directory, not its own TMPDIR; and a TMPDIR
+    too long for the socket's path ended it in a traceback (it now puts that one folder in /tmp)."""
+    forkserver.warm()  # the server has chosen its own temporary directory before the child's is given
+    with tempfile.TemporaryDirectory(prefix="bsst-t-", dir="/tmp") as short:
+        tmp = Path(short) if length == "short" else tmp_path / ("t" * 90)
+        tmp.mkdir(exist_ok=True)
+        (tmp_path / "m.toml").write_text('name = "m"\nduration_s = 0.2\n[trajectory]\nkind = "sine"\n')
+        p = Bsst("sweep", "m.toml", "--delay", "0,5", "--jobs", "2", "--engine", "process", "--out", "out",
+                 cwd=tmp_path, env={**os.environ, "TMPDIR": str(tmp)})
+        out, err = p.communicate(120)
+        assert p.returncode == 0, err
+        assert (tmp_path / "out" / "cells.csv").is_file()
+        assert [f.name for f in tmp.iterdir()] == [], err
 
 
 def test_a_forked_child_shows_its_command_line_runs_in_its_own_session_and_obeys_signals(tmp_path):

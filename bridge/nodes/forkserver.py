@@ -42,6 +42,7 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 import traceback
@@ -374,6 +375,16 @@ def _drop(client: socket.socket, live: dict[int, tuple[int, socket.socket | None
     client.close()
 
 
+def _multiprocessing_exit() -> None:
+    """What multiprocessing's own children run before their ``os._exit`` (``BaseProcess._bootstrap``): its exit
+    finalizers, registered in this process only (each runs in the process that made it). Among them the removal of
+    the folder its fork server's socket lives in (``<tmp>/pymp-*``): a sweep or margin run as a forked child left
+    one behind each time. Nothing where the command never imported multiprocessing."""
+    util = sys.modules.get("multiprocessing.util")
+    if util is not None:
+        util._exit_function()
+
+
 def _as_python_m_bridge() -> None:
     """Make ``__main__`` the module ``python -m bridge`` runs (not the server's), as a cold child has it: what
     looks at it (multiprocessing's start of a sweep's workers) sees the same thing either way."""
@@ -433,6 +444,7 @@ def _fork(req: dict[str, Any], fds: list[int], run: Callable[[list[str]], int], 
         os.chdir(req["cwd"])
         os.environ.clear()
         os.environ.update(req["env"])
+        tempfile.tempdir = None  # the server's choice is cached: the child's own TMPDIR, as in a process exec'd
         for sig in (signal.SIGTERM, signal.SIGCHLD, signal.SIGHUP):
             signal.signal(sig, signal.SIG_DFL)
         signal.signal(signal.SIGINT, signal.default_int_handler)
@@ -455,6 +467,7 @@ def _fork(req: dict[str, Any], fds: list[int], run: Callable[[list[str]], int], 
         rc = 1
     finally:  # the command is over: a Ctrl-C now must not raise out of here into a copy of the server's loop
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+        _multiprocessing_exit()
         for stream in (sys.stdout, sys.stderr):
             try:
                 stream.flush()

@@ -11,6 +11,7 @@ A cell that raises, or whose worker dies, becomes an ``error`` row.
 from __future__ import annotations
 
 import ast
+import contextlib
 import inspect
 import multiprocessing as mp
 import multiprocessing.forkserver as forkserver
@@ -18,10 +19,11 @@ import os
 import select
 import signal
 import sys
+import tempfile
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
@@ -208,9 +210,36 @@ def _start_fork_server() -> None:
         return
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
-        forkserver.ensure_running()
+        with _socket_tempdir():
+            forkserver.ensure_running()
     finally:
         signal.signal(signal.SIGINT, previous)
+
+
+SOCKET_PATH_MAX = 107  # bytes of an AF_UNIX socket's path (sun_path's 108, less its NUL)
+_LISTENER_TAIL = len("/pymp-12345678/listener-12345678")  # what multiprocessing adds to the temporary directory
+
+
+@contextlib.contextmanager
+def _socket_tempdir() -> Iterator[None]:
+    """The temporary directory while multiprocessing's fork server starts: it listens on a socket in a new folder
+    there (``pymp-*``), and a TMPDIR too long for that socket's path made ``bsst sweep`` end in a traceback
+    ("AF_UNIX path too long"). Then the first of /tmp, /var/tmp, /dev/shm this process may write in; none: a
+    ConfigError naming TMPDIR."""
+    base = tempfile.gettempdir()
+    if len(os.fsencode(base)) + _LISTENER_TAIL <= SOCKET_PATH_MAX:
+        yield
+        return
+    for short in ("/tmp", "/var/tmp", "/dev/shm"):
+        if os.path.isdir(short) and os.access(short, os.W_OK | os.X_OK):
+            kept, tempfile.tempdir = tempfile.tempdir, short
+            try:
+                yield
+            finally:
+                tempfile.tempdir = kept
+            return
+    raise ConfigError(f"TMPDIR {base}: too long for the socket of the sweep's worker pool (at most "
+                      f"{SOCKET_PATH_MAX - _LISTENER_TAIL} bytes), and no /tmp, /var/tmp or /dev/shm to write in")
 
 
 def run_local(mission: Mission, todo: Sequence[Cell], mode: str, jobs: int, report: Report,
