@@ -163,6 +163,9 @@ def report_fleet(run: Any, command: str) -> int:
                      f"; judged only until t={f['judged_until_t']:.3f} s: still flying when its record ended")
             w(f"  vehicle {f['id']} flew on the wall clock from t={f['from_t']:.3f} s to t={f['to_t']:.3f} s "
               f"({f['why']}): judged on its record, matched by mission time (approximate){until}\n")
+        for f in sep.get("alone") or ():  # an offline fleet's vehicle landing alone after the mission (its failsafe)
+            w(f"  vehicle {f['id']} flew alone from t={f['from_t']:.3f} s to t={f['to_t']:.3f} s ({f['why']}): judged "
+              "at every step, told nothing (a contact there found, not prevented)\n")
         if run.path is not None:
             w(f"run directory: {run.path}\n")
         sys.stdout.flush()
@@ -173,6 +176,8 @@ def report_fleet(run: Any, command: str) -> int:
             c = v.get("contact")  # SITL: lockstep, both flights ended there; real time, they went on past it
             went = ("; both flights ended there" if not c or not c.get("continued") else
                     "; the flights went on: in real time the vehicles share no clock" if s["clock"] == "realtime" else
+                    "; the flights went on: found afterwards, one of them in its failsafe's landing, flown alone"
+                    if s["clock"] == "offline" else
                     "; the flights went on: found afterwards, one of them flying on the wall clock")
             eb = v.get("ended_by") or {}
             said = (f" (touched vehicle {c['with']} at step {c['step']}, t={c['t']:.3f} s{went})" if c
