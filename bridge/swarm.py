@@ -49,7 +49,7 @@ from bridge.record.runlog import (
     write_text_atomic,
 )
 from bridge.record.separation import CONTINUED, WALL_CLOCK, Untold, Watch, judge_traces
-from bridge.record.wallclock import clocked_records, judged_on_wall_clock
+from bridge.record.wallclock import REALTIME, clocked_records, judged_on_wall_clock, taken_over_records
 from missions import Mission, load_mission
 from missions.fleet import (
     DEFAULT_MIN_SEPARATION_M,
@@ -347,7 +347,8 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
     (:func:`~bridge.record.separation.judge_traces`), and on the rows a vehicle flew on the wall clock after it left
     the shared clock (a ground station's mode, its controller lost), said in the summary
     (:mod:`bridge.record.wallclock`). In real time a contact makes both ``collision`` too, found
-    afterwards (the flights went on: :data:`~bridge.record.separation.CONTINUED`)."""
+    afterwards (the flights went on: :data:`~bridge.record.separation.CONTINUED`); a vehicle a ground station takes
+    over flies on under it, recorded, judged on its record, said (``separation.taken_over``)."""
     from bridge.session import sitl as sitl_one  # lazy: start-up time
     from bridge.session.fleet import check_fleet, check_fleet_ports, fly_sessions, radio_block  # lazy: start-up
 
@@ -390,14 +391,14 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
         runs = fly_sessions(flights, ids, dirs, realtime=realtime, instance=instance, gcs=gcs_text, speed=speed,
                             key=Path(key) if key is not None else None, plots=plots, keep=keep,
                             radii=watch.radii if clocked else None, shared_radio=shared, announce=live)
-        rec = clocked_records(runs, ids, fm.rate_hz) if clocked else None
-        contacts = judge_traces(watch, [r.trace for r in runs], fm.rate_hz, rec.finals if rec else None,
-                                [f.mission.start for f in flights] if clocked else None,
-                                rec.afters if rec else [r.after for r in runs], rec.walls if rec else None)
+        rec = clocked_records(runs, ids, fm.rate_hz) if clocked else taken_over_records(runs, ids, fm.rate_hz)
+        contacts = judge_traces(watch, [r.trace for r in runs], fm.rate_hz, rec.finals,
+                                [f.mission.start for f in flights] if clocked else None, rec.afters, rec.walls,
+                                own_clocks=not clocked)
         runs = [_touched(r, contacts.get(j)) for j, r in enumerate(runs)]
         summary = fleet_summary(fm, flights, runs, watch, "realtime" if realtime else "lockstep", instance or 0)
-        if rec is not None and rec.flown:
-            judged_on_wall_clock(summary, rec)
+        if rec.flown:  # a vehicle flew on: lockstep, on the wall clock; real time, under a ground station
+            judged_on_wall_clock(summary, rec, *(() if clocked else ("taken_over", REALTIME)))
         if shared:
             summary["radio"] = radio_block(ids, flights, runs, realtime)
         summary["sitl"] = {"instances": None if instance is None else list(range(instance, instance + len(ids))),
@@ -421,4 +422,4 @@ def _touched(run: Run, contact: dict[str, Any] | None) -> Run:
     ``summary.json`` in ``vehicle-<id>/`` stays as its session wrote it: the flight as flown, on past the contact)."""
     if contact is None:
         return run
-    return Run(run.trace, {**run.summary, "outcome": "collision", "contact": contact}, run.path)
+    return Run(run.trace, {**run.summary, "outcome": "collision", "contact": contact}, run.path, run.after)

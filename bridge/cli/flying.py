@@ -163,6 +163,11 @@ def report_fleet(run: Any, command: str) -> int:
                      f"; judged only until t={f['judged_until_t']:.3f} s: still flying when its record ended")
             w(f"  vehicle {f['id']} flew on the wall clock from t={f['from_t']:.3f} s to t={f['to_t']:.3f} s "
               f"({f['why']}): judged on its record, matched by mission time (approximate){until}\n")
+        for f in sep.get("taken_over") or ():  # a real-time fleet's vehicle that flew on under a ground station
+            until = ("" if f["judged_until_t"] is None else
+                     f"; judged only until t={f['judged_until_t']:.3f} s: still flying when its record ended")
+            w(f"  vehicle {f['id']} {f['why']} at t={f['from_t']:.3f} s flew on under it to t={f['to_t']:.3f} s: "
+              f"judged on its record, matched by step (approximate){until}\n")
         for f in sep.get("alone") or ():  # an offline fleet's vehicle landing alone after the mission (its failsafe)
             w(f"  vehicle {f['id']} flew alone from t={f['from_t']:.3f} s to t={f['to_t']:.3f} s ({f['why']}): judged "
               "at every step, told nothing (a contact there found, not prevented)\n")

@@ -123,7 +123,7 @@ def judge_traces(watch: Watch, traces: Sequence[dict[str, Any]], rate: float,
                  finals: Sequence[tuple[float, float, float] | None] | None = None,
                  starts: Sequence[Sequence[float]] | None = None,
                  afters: Sequence[Sequence[Sequence[float]]] | None = None,
-                 walls: Sequence[int | None] | None = None) -> dict[int, dict[str, Any]]:
+                 walls: Sequence[int | None] | None = None, own_clocks: bool = False) -> dict[int, dict[str, Any]]:
     """Judge the shared world on finished traces, with the offline loop's :class:`Watch`: row j of every trace
     (the true positions at t = j / rate; row 0 the start) is the world after step j - 1, as the loop judges it,
     and after a trace's rows, its vehicle's ``afters`` (m: its end landing's, flown on after the mission, as the
@@ -133,8 +133,8 @@ def judge_traces(watch: Watch, traces: Sequence[dict[str, Any]], rate: float,
     the loop keeps it), else nowhere, and touches no one (a final :data:`NOWHERE`: not known after its rows).
     ``walls``: the step after which each vehicle's rows were flown on the wall clock (None: none), judged by their
     index as the rest. The first contact of each vehicle (by index): its step, time, the other's id and why (without
-    ``finals``, that the flights went on: :data:`CONTINUED`; at a step one of the two flew on the wall clock:
-    :data:`WALL_CLOCK`)."""
+    ``finals``, or with ``own_clocks`` (a real-time fleet's: each vehicle on its own clock), that the flights went
+    on: :data:`CONTINUED`; at a step one of the two flew on the wall clock: :data:`WALL_CLOCK`)."""
     last = [finals[i] if finals is not None else None for i in range(len(traces))]
     paths = [[(float(x), float(y), float(z)) for x, y, z in zip(tr["x"], tr["y"], tr["z"])] for tr in traces]
     for path, more_rows in zip(paths, afters or ()):
@@ -150,7 +150,8 @@ def judge_traces(watch: Watch, traces: Sequence[dict[str, Any]], rate: float,
             positions.append(p if p is not None and j > r else path[r] if r >= 0 else home)
         for a, b, why in watch.check(j / rate, positions):
             off = any(w is not None and j > w for w in (wall[a], wall[b]))
-            more = {"continued": CONTINUED} if finals is None else {"continued": WALL_CLOCK} if off else {}
+            more = ({"continued": CONTINUED} if finals is None or own_clocks else
+                    {"continued": WALL_CLOCK} if off else {})
             for i, other in ((a, b), (b, a)):
                 first.setdefault(i, {"step": j, "t": round(j / rate, 6), "with": watch.ids[other], "why": why, **more})
     return first
