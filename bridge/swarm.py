@@ -318,8 +318,9 @@ def fleet_summary(m: Mission, flights: list[Flight], runs: list[Run], watch: Wat
                          "trajectory": "own" if v.trajectory is not None else "the mission's",
                          "start": list(f.mission.start), "ended_by": s.get("ended_by"),
                          **({"contact": s["contact"]} if "contact" in s else {}),
-                         "link": {d: {k: (s.get("link") or {}).get(d, {}).get(k) for k in LINK_FIGURES}
-                                  for d in ("up", "down")}})
+                         "link": {**{d: {k: (s.get("link") or {}).get(d, {}).get(k) for k in LINK_FIGURES}
+                                     for d in ("up", "down")},
+                                  **{k: v for k, v in (s.get("link") or {}).items() if k == "jitter_capped"}}})
         policies += [{**p, "name": f"{p['name']} (vehicle {v.id})"} for p in s.get("policies") or ()
                      if not p.get("ok")]
     worst = max((x["outcome"] for x in vehicles), key=lambda o: rank.get(o, len(SEVERITY)))

@@ -345,3 +345,17 @@ def test_a_fleet_of_many_pairs_prints_its_closest_pairs_and_says_the_rest_are_in
     assert shown == sorted(shown, key=lambda s: tuple(map(int, s.split("-"))))
     note = out[out.index(lines[-1]) + 1]
     assert note == "  (the 12 closest of 15 pairs: every pair in summary.json, separation.pairs)", out
+
+
+def test_a_fleet_summary_says_each_vehicles_capped_jitter(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``bsst sim --vehicles 2 --delay 4 --jitter 10``: each vehicle's ``link`` in the fleet's summary.json says the
+    cap its own summary says, and the printed summary says it under each vehicle (it said nothing)."""
+    mission = short_sine(tmp_path, 1.0)
+    assert main(["sim", str(mission), "--vehicles", "2", "--delay", "4", "--jitter", "10", "--no-plots", "--out",
+                 str(tmp_path / "r")]) == 0
+    s = json.loads((tmp_path / "r" / "summary.json").read_text())
+    for v in s["vehicles"]:
+        own = json.loads((tmp_path / "r" / v["dir"] / "summary.json").read_text())["link"]["jitter_capped"]
+        assert v["link"]["jitter_capped"] == own and [c["bound_ms"] for c in own] == [4.0, 4.0], v["link"]
+    printed = capsys.readouterr().out
+    assert printed.count("  link up  : jitter 10 ms uniform capped at the delay, 4 ms: drawn within ± 4 ms") == 2

@@ -145,6 +145,10 @@ def report_fleet(run: Any, command: str) -> int:
             where = "its own trajectory" if v["trajectory"] == "own" else f"offset {v['offset']} m"
             w(f"vehicle {v['id']} (sysid {v['sysid']}, {v['profile']}, {where}): {v['outcome']}, "
               f"3-D RMS {rms}\n")
+            for c in (v.get("link") or {}).get("jitter_capped") or ():  # flown, not as asked (docs/links.md)
+                from bridge.link.model import jitter_capped_text  # lazy: start-up time
+
+                w(f"  link {jitter_capped_text(c)}\n")
         for d, r in ((d, s["radio"][d]) for d in ("up", "down") if "radio" in s):
             cap = f"of {r['rate_bps']:g} B/s (occupancy {r['occupancy']:.2f})" if r["rate_bps"] else "(no rate cap)"
             w(f"one radio, {d}: {r['share_bps']:.0f} B/s {cap}, {r['lost_queue']} queue drops; by vehicle "
