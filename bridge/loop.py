@@ -113,13 +113,11 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
 
 def flying(flight: Flight, path: Path | None = None, *, plots: bool = True, progress: Progress | None = None,
            radios: tuple[Radio, Radio] | None = None, user: int = 0) -> Generator[Step, str | None, Run]:
-    """:func:`fly` one control step at a time, for a loop that flies several vehicles in one world
-    (:mod:`bridge.swarm`): after each step (the mission's, then its end landing's: :func:`fly_end`) it yields the
-    plant's true state (eq. 7 order, after the step's physics); sent a text, it ends the flight there with the
-    outcome ``collision`` (that text its event). A failsafe's landing after the mission yields :class:`Alone`
-    periods (its state, sent texts not heeded: :func:`land_failsafe`). Returns the :class:`Run`; thrown a
-    KeyboardInterrupt, the flight ends ``aborted``, recorded. ``radios``: the (up, down) radios the flight's links
-    share, as their ``user``."""
+    """:func:`fly` one step at a time, for a loop that flies several vehicles in one world (:mod:`bridge.swarm`):
+    after each step (the mission's, its end landing's: :func:`fly_end`) it yields the plant's true state (eq. 7
+    order); sent a text, it ends the flight there ``collision`` (that text its event); a failsafe's landing after the
+    mission yields :class:`Alone` (:func:`land_failsafe`). Returns the :class:`Run`; thrown a KeyboardInterrupt, it
+    ends ``aborted``, recorded. ``radios``: the (up, down) radios the flight's links share, as their ``user``."""
     m = flight.mission
     check_trace_steps(m)
     vehicle = flight.make_vehicle(armed=True)
