@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 from array import array
 from collections.abc import Generator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -54,6 +55,18 @@ from missions.minsnap import Smooth
 from params import reads_inputs
 
 TOUCHDOWN_M = 0.05  # m above the ground, and m/s: a landing trajectory's end finds the vehicle down, and disarms it
+
+
+@dataclass(frozen=True)
+class Alone:
+    """A period the vehicle flew alone, told nothing: a failsafe's landing still going at the mission's end
+    (:func:`land_failsafe`). ``state``: the plant's true state after it (eq. 7 order), for a fleet to judge its
+    world on, without telling anyone (a contact sent back is not heeded)."""
+
+    state: tuple[float, ...]
+
+
+Step = tuple[float, ...] | Alone  # what :func:`flying` yields a control period
 
 
 @reads_inputs
@@ -99,11 +112,11 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
 
 
 def flying(flight: Flight, path: Path | None = None, *, plots: bool = True, progress: Progress | None = None,
-           radios: tuple[Radio, Radio] | None = None, user: int = 0) -> Generator[tuple[float, ...], str | None, Run]:
-    """:func:`fly` one control step at a time, for a loop that flies several vehicles in one world
-    (:mod:`bridge.swarm`): after each step (the mission's, then its end landing's: :func:`fly_end`) it yields the
-    plant's true state (eq. 7 order, after the step's physics); sent a text, it ends the flight there with the
-    outcome ``collision`` (that text its event). Returns the :class:`Run`; thrown a KeyboardInterrupt, the flight
+           radios: tuple[Radio, Radio] | None = None, user: int = 0) -> Generator[Step, str | None, Run]:
+    """:func:`fly` one step at a time, for a loop that flies several vehicles in one world (:mod:`bridge.swarm`):
+    after each step (the mission's, its end landing's: :func:`fly_end`) it yields the plant's true state (eq. 7
+    order); sent a text, it ends the flight there ``collision`` (that text its event); a failsafe's landing after the
+    mission yields :class:`Alone` (:func:`land_failsafe`). Returns the :class:`Run`; thrown a KeyboardInterrupt, it
     ends ``aborted``, recorded. ``radios``: the (up, down) radios the flight's links share, as their ``user``."""
     m = flight.mission
     check_trace_steps(m)
@@ -201,7 +214,7 @@ def flying(flight: Flight, path: Path | None = None, *, plots: bool = True, prog
 
 
 def _judged(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention, arrays: dict[str, Any], outcome: str,
-            link: dict[str, Any]) -> Generator[tuple[float, ...], str | None, dict[str, Any]]:
+            link: dict[str, Any]) -> Generator[Step, str | None, dict[str, Any]]:
     """The flight's summary: its figures, plant blocks, who ended it, the policies' verdicts (each violation
     an event), and when it completed, its end action flown (:func:`fly_end`: its steps yielded, as the mission's)."""
     m, plant = flight.mission, vehicle.plant
@@ -220,7 +233,7 @@ def _judged(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention, a
     if outcome == "completed":  # after the mission's figures: nothing of them changes
         summary["end"], verdict = yield from fly_end(flight, vehicle, intention, summary["events"])
     elif outcome == "failsafe":
-        verdict = land_failsafe(flight, vehicle, intention, summary["events"])
+        verdict = yield from land_failsafe(flight, vehicle, intention, summary["events"])
     if verdict is not None:  # its landing touched down hard (or the plant diverged): the plant ended the flight
         summary["outcome"] = verdict
         summary["ended_by"] = ended_by_outcome(verdict, [RunEvent(round(e.t, 6), e.kind, e.text, by=e.by)
@@ -230,7 +243,7 @@ def _judged(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention, a
 
 
 def fly_end(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention,
-            shown: list[dict[str, Any]]) -> Generator[tuple[float, ...], str | None, tuple[dict[str, Any], str | None]]:
+            shown: list[dict[str, Any]]) -> Generator[Step, str | None, tuple[dict[str, Any], str | None]]:
     """The mission's end action offline (``[end] action``, :meth:`SimVehicle.end_mission`), as the vehicle flies
     it in a session: ``land`` steps the vehicle's own landing (nothing from the controller; the mission's link
     is done with, its statistics the mission's) until it disarms on the ground, bounded by the descent at the
@@ -242,35 +255,34 @@ def fly_end(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention,
     in its shared world, as a lockstep session's gate does (docs/swarm.md)."""
     n0 = len(vehicle.events)
     vehicle.end_mission(flight.mission.end_action)
-    rows, verdict = yield from _fly_alone(flight, vehicle, intention, LAND, shown, n0, judged=True)
+    rows, verdict = yield from _fly_alone(flight, vehicle, intention, LAND, shown, n0, heeds=True)
     return end_block(flight.mission.end_action, rows, vehicle.events[n0:]), verdict
 
 
 def land_failsafe(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention,
-                  shown: list[dict[str, Any]]) -> str | None:
+                  shown: list[dict[str, Any]]) -> Generator[Step, str | None, str | None]:
     """A failsafe's landing still going at the mission's end goes on to the ground, as a session's vehicle flies it
-    (on the wall clock: it leaves lockstep for it), stepped and judged as :func:`fly_end` steps the end landing;
-    the plant's verdict (None: none). A failsafe that holds, or is done, flies nothing more here."""
+    (on the wall clock: it leaves lockstep for it), stepped as :func:`fly_end` steps the end landing; the plant's
+    verdict (None: none). Each period yields :class:`Alone`: a fleet judges its world on it but tells it nothing, as
+    a lockstep fleet judges such a landing on its record (docs/swarm.md), so every flight stays as flown alone. A
+    failsafe that holds, or is done, flies nothing more here."""
     target = vehicle.onboard.target
     if not (vehicle.armed and vehicle.mode == FAILSAFE and target is not None and target.lands):
         return None
-    alone = _fly_alone(flight, vehicle, intention, FAILSAFE, shown, len(vehicle.events), judged=False)
-    try:
-        next(alone)  # (not judged: it yields nothing)
-    except StopIteration as done:
-        return done.value[1]
-    raise AssertionError("an unjudged landing yielded")
+    _, verdict = yield from _fly_alone(flight, vehicle, intention, FAILSAFE, shown, len(vehicle.events), heeds=False)
+    return verdict
 
 
 def _fly_alone(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention, mode: str,
-               shown: list[dict[str, Any]], n0: int, *, judged: bool
-               ) -> Generator[tuple[float, ...], str | None, tuple[list[tuple[float, float, float]], str | None]]:
+               shown: list[dict[str, Any]], n0: int, *, heeds: bool
+               ) -> Generator[Step, str | None, tuple[list[tuple[float, float, float]], str | None]]:
     """Step the vehicle alone (nothing from the controller; the mission's link is done with, its statistics the
     mission's) while it is armed in ``mode`` (or a failsafe's, taken meanwhile), until it disarms on the ground,
     bounded by the descent at the failsafe's rate, COM_DISARM_LAND and 10 s, its plant judged after each period;
-    the events since the ``n0``-th added to ``shown``. ``judged``: after each period yield the plant's state (a
-    fleet's world judged on it); a contact sent back ends it there, armed and not ended by its plant: ``collision``,
-    disarmed, as a lockstep session's vehicle (its plant's verdict comes first there too). Interrupted (Ctrl-C),
+    the events since the ``n0``-th added to ``shown``. After each period it yields the plant's state (a fleet's world
+    judged on it). ``heeds``: a contact sent back ends it there, armed and not ended by its plant: ``collision``,
+    disarmed, as a lockstep session's vehicle (its plant's verdict comes first there too); else the state is yielded
+    as :class:`Alone` and what is sent back is not heeded. Interrupted (Ctrl-C),
     it ends ``aborted``, recorded. Returns the rows (t s, z m, vz m/s) and the verdict (None: none)."""
     m, plant = flight.mission, vehicle.plant
     rows: list[tuple[float, float, float]] = []
@@ -288,7 +300,9 @@ def _fly_alone(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention
             k += 1
             if verdict is not None:
                 vehicle.disarm(f"{verdict}: {vehicle.events[-1].text}")  # (as a session's: its landing's came first)
-            if judged:
+            if not heeds:
+                yield Alone(plant.state)
+            else:
                 contact = yield plant.state
                 if contact is not None and verdict is None and vehicle.armed:
                     vehicle.event("collision", contact)

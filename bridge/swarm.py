@@ -18,7 +18,10 @@ or less the two touch and both end ``collision``. Each vehicle is its own flight
 (:func:`missions.fleet.vehicle_mission`: its own seed, so its own link's fates, effects and sensors), on
 the same clock: a vehicle flies exactly as it would alone, until something touches it (or, on one shared
 radio, :mod:`bridge.link.radio`, its packets wait behind the others'). The end landing after the mission is
-stepped and judged as the mission's steps are; a vehicle that has ended stays where it ended, an obstacle.
+stepped and judged as the mission's steps are; a vehicle that has ended stays where it ended, an obstacle. A
+failsafe's landing still going at the mission's end is flown alone, as by itself, judged but told nothing (as a
+lockstep fleet judges it on its record): a contact there is found, not prevented (both ``collision`` in the fleet's
+summary, their flights as flown), and ``separation.alone`` says who flew so, from when to when.
 """
 
 from __future__ import annotations
@@ -33,7 +36,7 @@ from bridge.core.flight import Flight, Overrides, Progress, prepare
 from bridge.link.model import merge_link_tables
 from bridge.link.radio import Radio
 from bridge.link.turns import TURNS, turn_order
-from bridge.loop import flying
+from bridge.loop import Alone, Step, flying
 from bridge.loop import simulate as simulate_one
 from bridge.record.policies import run_ok
 from bridge.record.runlog import (
@@ -45,8 +48,8 @@ from bridge.record.runlog import (
     write_json_atomic,
     write_text_atomic,
 )
-from bridge.record.separation import CONTINUED, WALL_CLOCK, Watch, judge_traces
-from bridge.record.wallclock import clocked_records, judged_on_wall_clock
+from bridge.record.separation import CONTINUED, WALL_CLOCK, Untold, Watch, judge_traces
+from bridge.record.wallclock import REALTIME, clocked_records, judged_on_wall_clock, taken_over_records
 from missions import Mission, load_mission
 from missions.fleet import (
     DEFAULT_MIN_SEPARATION_M,
@@ -209,8 +212,11 @@ def fly_fleet(m: Mission, flights: list[Flight], path: Path | None, *, plots: bo
     dirs = _vehicle_dirs(m, path)
     steps = [flying(f, d, plots=plots, progress=progress if i == 0 else None, radios=radios, user=i)
              for i, (f, d) in enumerate(zip(flights, dirs))]
-    runs = _fly_together(steps, [f.mission.start[:3] for f in flights], flights[0].mission.rate_hz, watch)
+    runs, untold = _fly_together(steps, [f.mission.start[:3] for f in flights], flights[0].mission.rate_hz, watch)
+    runs = [r if r.outcome == "collision" else _touched(r, untold.found.get(j)) for j, r in enumerate(runs)]
     summary = fleet_summary(m, flights, runs, watch)
+    if untold.first:  # a failsafe's landing after the mission, flown alone: judged, said
+        summary["separation"]["alone"] = untold.summary()
     if radios is not None:
         ids = [v.id for v in m.vehicles]
         until = max(len(r.trace["t"]) for r in runs) / flights[0].mission.rate_hz  # the steps flown, s
@@ -249,13 +255,15 @@ def _finish(m: Mission, path: Path | None, runs: list[Run], watch: Watch, summar
         fleet_plots([r.trace for r in runs], watch.ids, watch.radii, watch.min_m, path / "plots", m.name)
 
 
-def _fly_together(steps: list[Generator[tuple[float, ...], str | None, Run]], starts: list[Sequence[float]],
-                  rate: float, watch: Watch) -> list[Run]:
-    """Step every vehicle's flight once a control step until all have ended; judge the world after each step."""
+def _fly_together(steps: list[Generator[Step, str | None, Run]], starts: list[Sequence[float]],
+                  rate: float, watch: Watch) -> tuple[list[Run], Untold]:
+    """Step every vehicle's flight once a control step until all have ended; judge the world after each step (a
+    vehicle flying alone, :class:`~bridge.loop.Alone`, judged but told nothing: :class:`Untold`)."""
     n = len(steps)
     runs: list[Run | None] = [None] * n
     positions: list[Sequence[float]] = list(starts)
     told: list[str | None] = [None] * n  # a contact to tell each vehicle at its next step
+    untold = Untold(watch.ids, rate)
     for a, b, why in watch.check(0.0, positions):
         told[a] = told[b] = why
     live = list(range(n))
@@ -265,6 +273,9 @@ def _fly_together(steps: list[Generator[tuple[float, ...], str | None, Run]], st
             for i in turn_order(live, k):  # who goes first this step (TURNS): on one radio, the first in its queue
                 try:
                     X = steps[i].send(told[i]) if k else next(steps[i])
+                    if isinstance(X, Alone):
+                        untold.flew(i, k)
+                        X = X.state
                     positions[i] = (X[0], X[2], X[4])
                 except StopIteration as done:
                     runs[i] = done.value
@@ -272,7 +283,7 @@ def _fly_together(steps: list[Generator[tuple[float, ...], str | None, Run]], st
                     if done.value.outcome == "aborted":  # Ctrl-C in one vehicle's step: every vehicle stops
                         raise KeyboardInterrupt from None
             k += 1
-            for a, b, why in watch.check(k / rate, positions):
+            for a, b, why in untold.told(k, watch.check(k / rate, positions)):
                 for i in (a, b):
                     if i in live:
                         told[i] = why
@@ -290,7 +301,7 @@ def _fly_together(steps: list[Generator[tuple[float, ...], str | None, Run]], st
         for s in steps:
             s.close()  # each closes its record
         raise
-    return runs  # type: ignore[return-value]
+    return runs, untold  # type: ignore[return-value]
 
 
 def fleet_summary(m: Mission, flights: list[Flight], runs: list[Run], watch: Watch,
@@ -307,8 +318,9 @@ def fleet_summary(m: Mission, flights: list[Flight], runs: list[Run], watch: Wat
                          "trajectory": "own" if v.trajectory is not None else "the mission's",
                          "start": list(f.mission.start), "ended_by": s.get("ended_by"),
                          **({"contact": s["contact"]} if "contact" in s else {}),
-                         "link": {d: {k: (s.get("link") or {}).get(d, {}).get(k) for k in LINK_FIGURES}
-                                  for d in ("up", "down")}})
+                         "link": {**{d: {k: (s.get("link") or {}).get(d, {}).get(k) for k in LINK_FIGURES}
+                                     for d in ("up", "down")},
+                                  **{k: v for k, v in (s.get("link") or {}).items() if k == "jitter_capped"}}})
         policies += [{**p, "name": f"{p['name']} (vehicle {v.id})"} for p in s.get("policies") or ()
                      if not p.get("ok")]
     worst = max((x["outcome"] for x in vehicles), key=lambda o: rank.get(o, len(SEVERITY)))
@@ -336,7 +348,8 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
     (:func:`~bridge.record.separation.judge_traces`), and on the rows a vehicle flew on the wall clock after it left
     the shared clock (a ground station's mode, its controller lost), said in the summary
     (:mod:`bridge.record.wallclock`). In real time a contact makes both ``collision`` too, found
-    afterwards (the flights went on: :data:`~bridge.record.separation.CONTINUED`)."""
+    afterwards (the flights went on: :data:`~bridge.record.separation.CONTINUED`); a vehicle a ground station takes
+    over flies on under it, recorded, judged on its record, said (``separation.taken_over``)."""
     from bridge.session import sitl as sitl_one  # lazy: start-up time
     from bridge.session.fleet import check_fleet, check_fleet_ports, fly_sessions, radio_block  # lazy: start-up
 
@@ -379,14 +392,14 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
         runs = fly_sessions(flights, ids, dirs, realtime=realtime, instance=instance, gcs=gcs_text, speed=speed,
                             key=Path(key) if key is not None else None, plots=plots, keep=keep,
                             radii=watch.radii if clocked else None, shared_radio=shared, announce=live)
-        rec = clocked_records(runs, ids, fm.rate_hz) if clocked else None
-        contacts = judge_traces(watch, [r.trace for r in runs], fm.rate_hz, rec.finals if rec else None,
-                                [f.mission.start for f in flights] if clocked else None,
-                                rec.afters if rec else [r.after for r in runs], rec.walls if rec else None)
+        rec = clocked_records(runs, ids, fm.rate_hz) if clocked else taken_over_records(runs, ids, fm.rate_hz)
+        contacts = judge_traces(watch, [r.trace for r in runs], fm.rate_hz, rec.finals,
+                                [f.mission.start for f in flights] if clocked else None, rec.afters, rec.walls,
+                                own_clocks=not clocked)
         runs = [_touched(r, contacts.get(j)) for j, r in enumerate(runs)]
         summary = fleet_summary(fm, flights, runs, watch, "realtime" if realtime else "lockstep", instance or 0)
-        if rec is not None and rec.flown:
-            judged_on_wall_clock(summary, rec)
+        if rec.flown:  # a vehicle flew on: lockstep, on the wall clock; real time, under a ground station
+            judged_on_wall_clock(summary, rec, *(() if clocked else ("taken_over", REALTIME)))
         if shared:
             summary["radio"] = radio_block(ids, flights, runs, realtime)
         summary["sitl"] = {"instances": None if instance is None else list(range(instance, instance + len(ids))),
@@ -410,4 +423,4 @@ def _touched(run: Run, contact: dict[str, Any] | None) -> Run:
     ``summary.json`` in ``vehicle-<id>/`` stays as its session wrote it: the flight as flown, on past the contact)."""
     if contact is None:
         return run
-    return Run(run.trace, {**run.summary, "outcome": "collision", "contact": contact}, run.path)
+    return Run(run.trace, {**run.summary, "outcome": "collision", "contact": contact}, run.path, run.after)

@@ -36,8 +36,9 @@ from typing import Any
 from params import ConfigError, Table
 
 EVENT_KINDS = ("motor", "gps", "baro", "mag", "gyro", "wind", "gust", "link")
-# the allowed range [lo, hi] of each number of an event's table (and of its --at flag), one per key, and its unit;
-# a vector key's range is each element's. ``duration_s`` excludes 0; a fault vector (FAULT_VECTORS) is not all 0
+# the allowed range [lo, hi] of each number of an event's table (and of its --at flag, and of a [wind] gust), one per
+# key, and its unit; a vector key's range is each element's. A gust's key (GUST_AT_NOTHING) excludes its low end; a
+# fault vector (FAULT_VECTORS) is not all 0
 EVENT_RANGES: dict[str, tuple[float, float, str]] = {
     "motor": (1, 4, ""),
     "effectiveness": (0.0, 1.0, ""),
@@ -51,6 +52,8 @@ EVENT_RANGES: dict[str, tuple[float, float, str]] = {
 }
 # the faults given as a vector that adds to what is there: (0, 0, 0) would inject nothing (a user's slip)
 FAULT_VECTORS = {"jump": "a GPS jump", "bias": "a gyro bias"}
+# a gust's keys whose low end (0) would inject nothing (a user's slip): what the key is, for the refusal
+GUST_AT_NOTHING = {"duration_s": "duration", "amplitude_mps": "amplitude"}
 SENSOR_EVENT_KINDS = ("gps", "baro", "mag", "gyro")
 LINK_SCALARS = (str, int, float)  # a handover's keys: a profile name and [link]'s per-direction scalars
 
@@ -110,9 +113,25 @@ class EventError(ConfigError):
         super().__init__(f"{where}: {what}")
 
 
-def _number(t: Table, key: str, default: Any = ..., lo_open: bool = False) -> float:
+def _number(t: Table, key: str, default: Any = ...) -> float:
     lo, hi, _ = EVENT_RANGES[key]
-    return t.number(key, default, lo=lo, hi=hi, lo_open=lo_open)
+    v = t.number(key, default, lo=lo, hi=hi)
+    if key in GUST_AT_NOTHING and v == lo:
+        raise t.error(key, gust_problem(key, v))
+    return v
+
+
+def gust_problem(key: str, v: float) -> str | None:
+    """Why ``v`` is no value of a gust's ``key`` (``duration_s``, ``amplitude_mps``, ``from_deg``: its
+    :data:`EVENT_RANGES` entry, the low end of :data:`GUST_AT_NOTHING`'s excluded: a gust of no length or no
+    amplitude injects nothing), or None: one text for an event's table, a flag and a ``[wind]`` gust."""
+    lo, hi, unit = EVENT_RANGES[key]
+    if key in GUST_AT_NOTHING:
+        if v == lo:
+            return (f"a gust of {GUST_AT_NOTHING[key]} {lo:g} {unit} injects nothing: {key} in ({lo:g}, {hi:g}] "
+                    f"{unit}")
+        return None if lo < v <= hi else f"{key} must be in ({lo:g}, {hi:g}] {unit}, got {v:g}"
+    return None if lo <= v <= hi else f"{key} must be in [{lo:g}, {hi:g}] {unit}, got {v:g}"
 
 
 def _fault_vector(t: Table, key: str) -> tuple[float, float, float]:
@@ -158,7 +177,7 @@ def event_from_table(t: Table, duration_s: float) -> TimedEvent:
         s["speed_mps"] = _number(t, "speed_mps")
         s["from_deg"] = _number(t, "from_deg", 0.0)
     else:
-        s["duration_s"] = _number(t, "duration_s", lo_open=True)
+        s["duration_s"] = _number(t, "duration_s")
         s["amplitude_mps"] = _number(t, "amplitude_mps")
         s["from_deg"] = _number(t, "from_deg", 0.0)
     t.done()

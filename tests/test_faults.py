@@ -156,6 +156,32 @@ def test_a_fault_that_injects_nothing_is_refused(tmp_path, flag, key, says) -> N
     assert [e.get(key) for e in taken] == [(0.001, 0.0, 0.0)]
 
 
+@pytest.mark.parametrize("flag, key, says", [
+    ("10:gust:2,0", "amplitude_mps", "a gust of amplitude 0 m/s injects nothing: amplitude_mps in (0, 50] m/s"),
+    ("10:gust:2,-0,90", "amplitude_mps", "a gust of amplitude 0 m/s injects nothing: amplitude_mps in (0, 50] m/s"),
+    ("10:gust:0,3", "duration_s", "a gust of duration 0 s injects nothing: duration_s in (0, 600] s"),
+])
+def test_a_gust_that_injects_nothing_is_refused_by_the_flag_the_event_and_the_wind(tmp_path, flag, key,
+                                                                                  says) -> None:
+    """A gust of amplitude 0 was taken, by ``--at T:gust:D,0``, an ``[[events]]`` gust and a ``[wind]`` gust, and
+    flew nothing (``wind: gust ... 0 m/s`` in the events): refused as a fault of (0, 0, 0) is, with the flag or the
+    mission's key and its range, one line, exit 2; the ``[wind]`` gust by the same range table
+    (plant.events.EVENT_RANGES; its own copy said [0, 50]). Any amplitude above 0 is a gust."""
+    with pytest.raises(ConfigError, match=rf"^--at {flag}: {key}: {re.escape(says)}$"):
+        prepare("missions/sine.toml", at=(flag,))
+    d, a, *frm = flag.split(":")[2].split(",")
+    path = tmp_path / "m.toml"
+    path.write_text((ROOT / "missions" / "sine.toml").read_text() + f'\n[[events]]\nt_s = 10.0\nkind = "gust"\n'
+                    f'duration_s = {d}\namplitude_mps = {a}\n')
+    r = run_bsst("sim", str(path), "--no-plots", "--out", str(tmp_path / "r"))
+    assert r.returncode == 2 and r.stderr == f"bsst: {path}: events[0].{key}: {says}\n", r.stderr
+    assert not (tmp_path / "r").exists()
+    path.write_text((ROOT / "missions" / "sine.toml").read_text() + f"\n[wind]\ngusts = [[10.0, {d}, {a}]]\n")
+    with pytest.raises(ConfigError, match=rf"^{re.escape(str(path))}: wind\.gusts\[0\]: {re.escape(says)}$"):
+        prepare(path)
+    assert len(prepare("missions/sine.toml", at=("10:gust:2,0.001",)).timeline) == 1
+
+
 def _gps_mission(path: Path, *events: tuple[float, str]) -> Path:
     """The sine on the gnss set and the EKF with ``[[events]]`` of the GPS: (t_s, state) each."""
     tables = "".join(f'\n[[events]]\nt_s = {t}\nkind = "gps"\nstate = "{state}"\n' for t, state in events)

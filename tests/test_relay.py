@@ -153,9 +153,10 @@ def test_bsst_relay_process_stops_on_sigterm_and_writes_stats(tmp_path: Path) ->
 
 def test_bsst_relay_says_the_jitter_it_flies(tmp_path: Path) -> None:
     """``bsst relay --delay 0 --jitter 10``: the jitter is capped at the delay (no delay is negative), so none is
-    flown; the ready line said ``delay 0 ms ± 10 ms uniform``, and says what is flown now, as its summary does."""
+    flown; the ready line said ``delay 0 ms ± 10 ms uniform``, and says what is flown now, as its summary does, and
+    its ``--stats`` file (``jitter_capped``, as a run's ``summary.json["link"]``; it said nothing of the cap)."""
     res = run_bsst("relay", "--listen", "127.0.0.1:0", "--to", "127.0.0.1:1", "--delay", "0", "--jitter", "10",
-                   "--up-delay", "4", "--duration", "0.1")
+                   "--up-delay", "4", "--duration", "0.1", "--stats", str(tmp_path / "relay.json"))
     assert res.returncode == 0, res.stderr
     lines = res.stdout.splitlines()
     ready = parse_line(lines[0])
@@ -164,6 +165,9 @@ def test_bsst_relay_says_the_jitter_it_flies(tmp_path: Path) -> None:
     assert ready.down == "delay 0 ms, no jitter (jitter 10 ms uniform capped at the delay)"
     assert "up  : jitter 10 ms uniform capped at the delay, 4 ms: drawn within ± 4 ms" in lines
     assert "down: jitter 10 ms uniform capped at the delay, 0 ms: flown without jitter" in lines
+    caps = json.loads((tmp_path / "relay.json").read_text())["jitter_capped"]
+    assert [(c["direction"], c["jitter_ms"], c["delay_ms"], c["bound_ms"]) for c in caps] == [
+        ("up", 10.0, 4.0, 4.0), ("down", 10.0, 0.0, 0.0)]
 
 
 @pytest.mark.parametrize(("args", "message"), [

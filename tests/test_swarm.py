@@ -29,6 +29,7 @@ ROOT = Path(__file__).resolve().parents[1]
 NEAR_MISS = ROOT / "examples" / "swarm-near-miss.toml"
 TOUCH = ROOT / "examples" / "swarm-touch.toml"
 STACKED = ROOT / "examples" / "swarm-stacked.toml"
+TAKEOVER = ROOT / "examples" / "swarm-takeover.toml"
 
 
 def short_sine(tmp_path: Path, seconds: float = 3.0) -> Path:
@@ -250,6 +251,36 @@ def test_the_end_landing_is_judged_as_the_mission_one_landing_onto_another_touch
         assert alone.outcome == "completed" and alone.summary["end"]["disarm_z_m"] == 0.0
 
 
+def test_a_failsafe_landing_after_the_mission_is_judged_untold_and_a_landing_onto_another_found(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """examples/swarm-takeover.toml with both links black from 12 s: each vehicle's failsafe lands it after the
+    mission, vehicle 1 onto vehicle 2 landed under it. Each landing is flown alone, as by itself (every vehicle's own
+    record the bytes it flies alone), but judged at every step, told nothing, as the lockstep fleet judges it on its
+    record: contact at step 3954 (t=15.816 s, the lockstep fleet's), found, not prevented, both ``collision``,
+    separation broken, said, exit 1 (it said separation held, closest 0.970 m, the landings unjudged and unsaid)."""
+    out = tmp_path / "r"
+    assert main(["sim", str(TAKEOVER), "--blackout", "12:10", "--out", str(out), "--no-plots"]) == 1
+    printed = capsys.readouterr()
+    s = json.loads((out / "summary.json").read_text())
+    assert s["outcome"] == "collision" and [v["outcome"] for v in s["vehicles"]] == ["collision"] * 2
+    for v, other in zip(s["vehicles"], (2, 1)):
+        c = v["contact"]
+        assert (c["step"], c["t"], c["with"]) == (3954, 15.816, other) and "failsafe's landing alone" in c["continued"]
+    assert [(a["id"], a["from_t"]) for a in s["separation"]["alone"]] == [(1, 14.0), (2, 14.0)]
+    assert s["separation"]["alone"][0]["to_t"] == 18.716  # vehicle 1 disarmed on top of vehicle 2
+    assert s["separation"]["closest_m"] < 0.0 and s["separation"]["pairs"][0]["t"] > 14.0
+    assert s["policies"][0]["name"] == "separation" and not s["policies"][0]["ok"] and s["policies"][0]["t"] > 14.0
+    assert "vehicle 1 flew alone from t=14.000 s to t=18.716 s (its failsafe's landing" in printed.out
+    assert ("bsst sim: vehicle 1: collision (touched vehicle 2 at step 3954, t=15.816 s; the flights went on: found "
+            "afterwards, one of them in its failsafe's landing, flown alone)") in printed.err
+    m = load_mission(TAKEOVER)
+    for v in m.vehicles:  # every flight as flown by itself: the record, its summary and events, byte for byte
+        simulate_one(vehicle_mission(m, v), link={"blackouts": [[12.0, 10.0]]}, out=tmp_path / f"alone-{v.id}",
+                     plots=False)
+        for f in ("trace.csv", "summary.json", "events.log"):
+            assert (out / f"vehicle-{v.id}" / f).read_bytes() == (tmp_path / f"alone-{v.id}" / f).read_bytes(), f
+
+
 def test_ctrl_c_in_the_end_landing_ends_the_flight_aborted_with_its_summary(tmp_path: Path) -> None:
     """The end landing is stepped as the mission (:func:`bridge.loop.flying` yields its periods): Ctrl-C in it
     ends the flight ``aborted``, its summary written (it escaped the landing: no summary.json, and a fleet's whole
@@ -314,3 +345,17 @@ def test_a_fleet_of_many_pairs_prints_its_closest_pairs_and_says_the_rest_are_in
     assert shown == sorted(shown, key=lambda s: tuple(map(int, s.split("-"))))
     note = out[out.index(lines[-1]) + 1]
     assert note == "  (the 12 closest of 15 pairs: every pair in summary.json, separation.pairs)", out
+
+
+def test_a_fleet_summary_says_each_vehicles_capped_jitter(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``bsst sim --vehicles 2 --delay 4 --jitter 10``: each vehicle's ``link`` in the fleet's summary.json says the
+    cap its own summary says, and the printed summary says it under each vehicle (it said nothing)."""
+    mission = short_sine(tmp_path, 1.0)
+    assert main(["sim", str(mission), "--vehicles", "2", "--delay", "4", "--jitter", "10", "--no-plots", "--out",
+                 str(tmp_path / "r")]) == 0
+    s = json.loads((tmp_path / "r" / "summary.json").read_text())
+    for v in s["vehicles"]:
+        own = json.loads((tmp_path / "r" / v["dir"] / "summary.json").read_text())["link"]["jitter_capped"]
+        assert v["link"]["jitter_capped"] == own and [c["bound_ms"] for c in own] == [4.0, 4.0], v["link"]
+    printed = capsys.readouterr().out
+    assert printed.count("  link up  : jitter 10 ms uniform capped at the delay, 4 ms: drawn within ± 4 ms") == 2

@@ -1,4 +1,4 @@
-"""Covers bridge.record.wallclock, bridge.session.fleet and bridge.swarm: a lockstep fleet's vehicle that flies on.
+"""Covers bridge.record.wallclock, bridge.session.fleet and bridge.swarm: a SITL fleet's vehicle that flies on.
 
 Real processes: ``bridge.swarm.sitl`` flies two vehicles in lockstep at real time's pace (a vehicle and a controller
 process each, free ports), their ground-station links to one UDP port. Vehicle 2 hovers 1.6 m under vehicle 1. A
@@ -9,6 +9,9 @@ ground station until the rest of the fleet is done, and the fleet judges its rec
 the takeover and the fleet took it as standing where it left the shared clock: separation held.
 A failsafe landing still going at the mission's end (a blackout of both links), flown on the wall clock onto the
 vehicle below: judged on its record, the contact said as found afterwards, not as ending both flights there.
+In real time (``--realtime``) the same takeover: vehicle 2 flies on under the ground station too, recorded, judged on
+its record, said in ``separation.taken_over`` (before, its session stopped it at once and the fleet took it as
+standing where it was stopped: separation held, nothing said).
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ from typing import Any
 import pytest
 
 from bridge.cli.flying import report_fleet
-from bridge.record.separation import WALL_CLOCK
+from bridge.record.separation import CONTINUED, WALL_CLOCK
 from bridge.session.children import free_udp_port
 from bridge.swarm import FleetRun, simulate, sitl
 from tests.sitlkit import ENV, MAVSDK_GROUND_STATION
@@ -111,6 +114,39 @@ def test_mavsdk_takes_a_fleet_vehicle_off_into_its_neighbour_and_the_fleet_judge
     _judged_into_its_neighbour(result, mission, capsys)
     events = (tmp_path / "run" / "vehicle-2" / "events.log").read_text()
     assert "flies on under it, on the wall clock" in events, events
+
+
+def test_in_real_time_a_vehicle_taken_over_flies_on_under_its_ground_station_and_is_judged(
+        tmp_path: Path, capsys: Any) -> None:
+    port = free_udp_port()
+    flight, result, mission = _fly(tmp_path, port, realtime=True)
+    try:
+        r = subprocess.run([sys.executable, "-c", MAVSDK_TAKEOFF, f"udpin://127.0.0.1:{port}"], capture_output=True,
+                           text=True, timeout=240, env=ENV)
+    finally:
+        flight.join(240)
+    lines = [ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")]
+    assert lines, f"MAVSDK script failed (exit {r.returncode}):\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
+    out = json.loads(lines[0][len("RESULT "):])
+    assert out["two_found"] and out["under"] and out["takeoff"] == "SUCCESS" and out["climbed"], out
+    assert "error" not in result, result.get("error")
+    run = result["run"]
+    s = run.summary
+    assert s["clock"] == "realtime" and "TAKEOFF" in s["vehicles"][1]["ended_by"]["how"]
+    taken = next(e["t"] for e in run.runs[1].summary["events"] if e["kind"] == "mode" and "TAKEOFF" in e["text"])
+    for v, other in zip(s["vehicles"], (2, 1)):  # its climb into vehicle 1, on its record
+        assert v["outcome"] == "collision" and v["contact"]["with"] == other, v
+        assert v["contact"]["continued"] == CONTINUED and v["contact"]["t"] > taken, (v, taken)
+    policy = s["policies"][0]
+    assert policy["name"] == "separation" and not policy["ok"] and policy["t"] > taken, policy
+    (flown,) = s["separation"]["taken_over"]
+    assert flown["id"] == 2 and flown["from_t"] == pytest.approx(taken, abs=0.01) and flown["to_t"] >= 14.0, flown
+    assert flown["judged_until_t"] is None and s["separation"]["whole_flight"] is True
+    assert run.runs[1].summary["sitl"]["flew_on"] is True and max(run.runs[1].trace["z"]) > 1.9
+    capsys.readouterr()
+    assert report_fleet(run, "sitl") == 1
+    printed = capsys.readouterr().out
+    assert "vehicle 2 taken over by a ground station (" in printed and "flew on under it to t=" in printed, printed
 
 
 def test_a_failsafe_landing_going_at_the_missions_end_is_judged_on_its_record(tmp_path: Path, capsys: Any) -> None:

@@ -494,13 +494,15 @@ def test_a_noise_by_estimator_grid(mission_file: Path, tmp_path: Path, capsys) -
     assert ident["swept"] == ["estimator", "noise"] and ident["mission"]["sensors"] == {"set": "mocap"}
 
 
-@pytest.mark.parametrize("dropped", [("estimator", "noise", "discretization", *FLEET_COLUMNS, "policies"),
-                                     ("policies",)], ids=["before-the-vehicle-axes", "before-policies"])
+@pytest.mark.parametrize("dropped", [("estimator", "noise", "discretization", *FLEET_COLUMNS, "policies",
+                                      "jitter_capped"), ("policies", "jitter_capped"), ("jitter_capped",)],
+                         ids=["before-the-vehicle-axes", "before-policies", "before-jitter-capped"])
 def test_a_sweep_of_an_older_bsst_is_reported_not_resumed(small_sweep: tuple[Path, list[str]], tmp_path: Path,
                                                           capsys, dropped: tuple[str, ...]) -> None:
-    """A cells.csv without the estimator, noise and discretization columns, or only without the policies column
-    (an older bsst's): ``bsst report`` reads it with the values its mission flew (policies not judged: ""); ``--resume``
-    is refused in one line naming the file, and nothing is lost."""
+    """A cells.csv without the estimator, noise and discretization columns, or only without the policies column, or
+    only without the jitter_capped one (an older bsst's): ``bsst report`` reads it with the values its mission flew
+    (policies not judged, jitter caps not said: ""); ``--resume`` is refused in one line naming the file, and nothing
+    is lost."""
     d = tmp_path / "old"
     shutil.copytree(small_sweep[0], d)
     keep = [i for i, c in enumerate(COLUMNS) if c not in dropped]
@@ -518,9 +520,11 @@ def test_a_sweep_of_an_older_bsst_is_reported_not_resumed(small_sweep: tuple[Pat
     assert main(["report", str(d), "--no-plots"]) == 0
     assert "- `estimator`: truth" in (d / "report.md").read_text()
     rows = read_cells(d / CELLS_CSV, legacy={"estimator": "truth", "noise": 1.0, "discretization": "explicit",
-                                             "vehicles": 1, "worst_vehicle": None, "closest_m": None, "policies": ""})
+                                             "vehicles": 1, "worst_vehicle": None, "closest_m": None, "policies": "",
+                                             "jitter_capped": ""})
     assert [r["delay_ms"] for r in rows] == [0.0, 10.0] and {r["estimator"] for r in rows} == {"truth"}
-    assert {r["policies"] for r in rows} == {""}  # not judged: the column was not there
+    assert {r["policies"] for r in rows} == ({""} if "policies" in dropped else {"ok"})  # "": the column was not there
+    assert {r["jitter_capped"] for r in rows} == {""}
     with pytest.raises(ConfigError, match="cells.csv: line 1: a cells.csv of an older bsst"):
         read_cells(d / CELLS_CSV)  # where a sweep would add to it
 

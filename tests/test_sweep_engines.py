@@ -223,7 +223,8 @@ def test_an_older_sweep_without_the_discretization_column_is_reported(tmp_path: 
     """A cells.csv written before the axis (issue 24) reads with its mission's scheme (explicit before it)."""
     out = tmp_path / "old"
     sweep(SHORT, Grid(delay_ms=(0.0,)), out=out, jobs=1, report=False)
-    keep = [i for i, c in enumerate(COLUMNS) if c not in ("discretization", *FLEET_COLUMNS, "policies")]
+    keep = [i for i, c in enumerate(COLUMNS) if c not in ("discretization", *FLEET_COLUMNS, "policies",
+                                                          "jitter_capped")]
     lines = (out / CELLS_CSV).read_text().splitlines()
     (out / CELLS_CSV).write_text("".join(",".join(line.split(",")[i] for i in keep) + "\n" for line in lines))
     meta = json.loads((out / "sweep.json").read_text())
@@ -231,7 +232,7 @@ def test_an_older_sweep_without_the_discretization_column_is_reported(tmp_path: 
     (out / "sweep.json").write_text(json.dumps(meta))
     assert main(["report", str(out), "--no-plots"]) == 0
     assert "- `discretization`: explicit" in (out / "report.md").read_text()
-    lacks = "no discretization, vehicles, worst_vehicle, closest_m, policies columns"
+    lacks = "no discretization, vehicles, worst_vehicle, closest_m, policies, jitter_capped columns"
     with pytest.raises(ConfigError, match=f"a cells.csv of an older bsst \\({lacks}\\)"):
         read_cells(out / CELLS_CSV)
     shutil.rmtree(out)

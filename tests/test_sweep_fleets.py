@@ -57,7 +57,7 @@ def test_a_sweep_over_vehicles_writes_one_row_per_fleet_with_its_worst_vehicle(
     meta = json.loads((out / "sweep.json").read_text())
     assert meta["grid"]["vehicles"] == [1, 2] and "vehicles" in meta["swept"]
     # a cells.csv of before the axis (no fleet columns) reads as one vehicle each
-    keep = [i for i, c in enumerate(COLUMNS) if c not in (*FLEET_COLUMNS, "policies")]  # before fleets
+    keep = [i for i, c in enumerate(COLUMNS) if c not in (*FLEET_COLUMNS, "policies", "jitter_capped")]  # before fleets
     lines = (out / CELLS_CSV).read_text().splitlines()
     old = tmp_path / "old.csv"
     old.write_text("".join(",".join(ln.split(",")[i] for i in keep) + "\n" for ln in lines))

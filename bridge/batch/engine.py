@@ -46,7 +46,7 @@ from bridge.batch.metrics import Metrics, measured_rows
 from bridge.batch.weather import BATCH_EVENT_KINDS, turbulent
 from bridge.core.flight import Flight, Overrides, prepare
 from bridge.core.interrupt import sigint_futures, wait_or_interrupt
-from bridge.link.model import link_from_table, merge_link_tables
+from bridge.link.model import jitter_cell, link_from_table, merge_link_tables
 from bridge.link.plan import Clocks, plan_links
 from bridge.record.metrics import RMS_FROM_S
 from missions import MISSION_DIR, Mission, Sine, load_mission
@@ -54,7 +54,7 @@ from plant.quadrotor import CRASH_SPEED_MPS
 
 # the columns of a cells.csv row this engine measures (the cell's own axes and seed come from the cell)
 MEASURES = ("rms", "max", "settling_s", "tv_u2", "ripple_u2", "outcome", "up_sent", "up_lost", "down_sent",
-            "down_lost", "flown_s", "error", "policies")
+            "down_lost", "flown_s", "error", "policies", "jitter_capped")
 CELL_STEPS = 8_000_000  # cells x control steps in one batch: bounds its memory (1000 x 7500: 457 MiB peak RSS)
 # cells x physics steps of a batch that meets turbulence (its samples, 3 floats a physics step, are held for the
 # whole flight: bridge.batch.weather): 120 MiB of them (the 30 s sine at 1 kHz: 166 cells a batch)
@@ -193,7 +193,8 @@ def fly_batch(mission: Mission | str | Path, cells: Sequence[Overrides | Mapping
     built = _prepare_all(m, cells)
     flights = [f for f in built if isinstance(f, Flight)]
     results = iter(fly_flights(flights, progress=progress, total=len(built), jobs=jobs))
-    return [next(results) if isinstance(f, Flight) else error_measures(f) for f in built]
+    return [{**next(results), "jitter_capped": jitter_cell(f.link.jitter_capped())} if isinstance(f, Flight)
+            else error_measures(f) for f in built]
 
 
 def compile_batch() -> None:
@@ -211,7 +212,7 @@ def compile_batch() -> None:
 def error_measures(why: str) -> dict[str, Any]:
     """The measured columns of a cell that could not be flown (outcome ``error``)."""
     out: dict[str, Any] = {c: None for c in MEASURES}
-    out.update(outcome="error", error=" ".join(why.split())[:300], policies="")
+    out.update(outcome="error", error=" ".join(why.split())[:300], policies="", jitter_capped="")
     return out
 
 

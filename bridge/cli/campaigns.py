@@ -170,6 +170,12 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         print(f"bsst sweep: {len(broken)} of {len(res.rows)} cells broke a safety policy (cells.csv's policies "
               f"column, report.md's Policies); the first: {broken[0]['controller']}, seed {broken[0]['seed']}: "
               f"{broken[0]['policies']}", file=sys.stderr)
+    capped = [r for r in res.rows if r.get("jitter_capped")]
+    if capped:  # flown as documented (exit status unchanged), but not the jitter its jitter_ms asked for
+        print(f"bsst sweep: {len(capped)} of {len(res.rows)} cells flew a jitter capped at the delay (cells.csv's "
+              f"jitter_capped column, report.md's Jitter capped at the delay; docs/links.md); the first: delay "
+              f"{capped[0]['delay_ms']:g} ms, jitter {capped[0]['jitter_ms']:g} ms: {capped[0]['jitter_capped']}",
+              file=sys.stderr)
     return EXIT_FAILED if res.failed else EXIT_OK
 
 
@@ -299,6 +305,11 @@ def say_margin(res: dict[str, Any], args: argparse.Namespace, name: str) -> int:
         print(f"bsst margin: warning: the {len(res['seeds'])} seeds of each value flew the same flight (the mission "
               "draws nothing at random): --seeds added nothing; --scatter M starts each seed at its own point",
               file=sys.stderr)
+    capped = [c for e in entries for c in e["cells"] if c.get("jitter_capped")]
+    if capped:  # the jitter flown is not the value probed (docs/links.md)
+        print(f"bsst margin: warning: {len(capped)} of {sum(len(e['cells']) for e in entries)} cells flew a jitter "
+              f"capped at the delay (margin.json's cells, jitter_capped; docs/links.md); the first, at {args.over} = "
+              f"{capped[0][args.over]:g}: {capped[0]['jitter_capped']}", file=sys.stderr)
     starts = (f"; each value from {len(res['seeds'])} starts within {res['start_scatter_m']:g} m of the mission's"
               if res["start_scatter_m"] else "")
     stop = " (interrupted)" if res["interrupted"] else ""

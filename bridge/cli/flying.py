@@ -145,6 +145,10 @@ def report_fleet(run: Any, command: str) -> int:
             where = "its own trajectory" if v["trajectory"] == "own" else f"offset {v['offset']} m"
             w(f"vehicle {v['id']} (sysid {v['sysid']}, {v['profile']}, {where}): {v['outcome']}, "
               f"3-D RMS {rms}\n")
+            for c in (v.get("link") or {}).get("jitter_capped") or ():  # flown, not as asked (docs/links.md)
+                from bridge.link.model import jitter_capped_text  # lazy: start-up time
+
+                w(f"  link {jitter_capped_text(c)}\n")
         for d, r in ((d, s["radio"][d]) for d in ("up", "down") if "radio" in s):
             cap = f"of {r['rate_bps']:g} B/s (occupancy {r['occupancy']:.2f})" if r["rate_bps"] else "(no rate cap)"
             w(f"one radio, {d}: {r['share_bps']:.0f} B/s {cap}, {r['lost_queue']} queue drops; by vehicle "
@@ -163,6 +167,14 @@ def report_fleet(run: Any, command: str) -> int:
                      f"; judged only until t={f['judged_until_t']:.3f} s: still flying when its record ended")
             w(f"  vehicle {f['id']} flew on the wall clock from t={f['from_t']:.3f} s to t={f['to_t']:.3f} s "
               f"({f['why']}): judged on its record, matched by mission time (approximate){until}\n")
+        for f in sep.get("taken_over") or ():  # a real-time fleet's vehicle that flew on under a ground station
+            until = ("" if f["judged_until_t"] is None else
+                     f"; judged only until t={f['judged_until_t']:.3f} s: still flying when its record ended")
+            w(f"  vehicle {f['id']} {f['why']} at t={f['from_t']:.3f} s flew on under it to t={f['to_t']:.3f} s: "
+              f"judged on its record, matched by step (approximate){until}\n")
+        for f in sep.get("alone") or ():  # an offline fleet's vehicle landing alone after the mission (its failsafe)
+            w(f"  vehicle {f['id']} flew alone from t={f['from_t']:.3f} s to t={f['to_t']:.3f} s ({f['why']}): judged "
+              "at every step, told nothing (a contact there found, not prevented)\n")
         if run.path is not None:
             w(f"run directory: {run.path}\n")
         sys.stdout.flush()
@@ -173,6 +185,8 @@ def report_fleet(run: Any, command: str) -> int:
             c = v.get("contact")  # SITL: lockstep, both flights ended there; real time, they went on past it
             went = ("; both flights ended there" if not c or not c.get("continued") else
                     "; the flights went on: in real time the vehicles share no clock" if s["clock"] == "realtime" else
+                    "; the flights went on: found afterwards, one of them in its failsafe's landing, flown alone"
+                    if s["clock"] == "offline" else
                     "; the flights went on: found afterwards, one of them flying on the wall clock")
             eb = v.get("ended_by") or {}
             said = (f" (touched vehicle {c['with']} at step {c['step']}, t={c['t']:.3f} s{went})" if c

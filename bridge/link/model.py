@@ -13,7 +13,7 @@ re-exported here, so ``from bridge.link.model import ...`` is the one import for
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -64,7 +64,8 @@ __all__ = [  # re-exported: the link model's one import (absolute_link_paths: wh
     "BLACKOUT_DURATION_RANGE_S", "BLACKOUT_START_RANGE_S", "COMMAND_LAG_RANGE_MS", "DIRECTION_KEYS", "DIRECTIONS",
     "FRAME_BYTES", "GUARD_RANGES", "HI_OPEN", "JITTER_KINDS", "LINK_KEYS", "LO_OPEN", "NUMBER_RANGES", "SEED_RANGE",
     "TRACE_EXCLUSIVE", "Delivery", "Fate", "FateStream", "LinkConfig", "LinkImpairment", "LinkSettings",
-    "LinkStats", "Radio", "absolute_link_paths", "burst_problem", "fates", "jitter_capped_text", "link_from_table",
+    "LinkStats", "Radio", "absolute_link_paths", "burst_problem", "fates", "jitter_capped_text", "jitter_cell",
+    "link_from_table",
     "merge_link_tables",
     "stream_key", "trace_clash", "uniform",
 ]
@@ -194,6 +195,19 @@ def jitter_capped_text(cap: Mapping[str, Any]) -> str:
     flown = f"drawn within ± {cap['bound_ms']:g} ms" if cap["bound_ms"] else "flown without jitter"
     return (f"{cap['direction']:4}: jitter {cap['jitter_ms']:g} ms {cap['jitter']}{since} capped at the delay, "
             f"{cap['delay_ms']:g} ms: {flown}")
+
+
+def jitter_cell(caps: Iterable[Mapping[str, Any]]) -> str:
+    """The ``jitter_capped`` column (``bsst sweep``'s ``cells.csv``) of a run's ``summary["link"]["jitter_capped"]``
+    (:meth:`LinkSettings.jitter_capped`): ``""`` when every jitter flew as asked, else each capped direction and the
+    half-width of the jitter it flew, ms (``up:4 down:0``: up within ±4 ms, down none), from a handover at T s
+    ``@T`` (``up@12:0``)."""
+    out = []
+    for c in caps:
+        since = f"@{c['from_s']:g}" if c["from_s"] else ""
+        out.append(f"{c['direction']}{since}:{c['bound_ms']:g}")
+    return " ".join(out)
+
 
 def link_from_table(data: Mapping[str, Any], source: str, seed: int = 0,
                     duration_s: float | None = None) -> LinkSettings:

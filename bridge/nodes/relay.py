@@ -7,7 +7,8 @@ In:  UDP datagrams, whatever they hold: from the client on the listen port, from
 Out: the same datagrams, unchanged, forwarded when the link model (on the wall clock, s) says they
      are due; :meth:`Relay.summary` (``relay.json``): per direction the model's statistics and
      ``measured_ms``, the delay really added (ms), plus counts, the client, what was refused by
-     reason, and CPU time (s, us per packet), on a shared radio this vehicle's part of it (``radio``); with
+     reason, and CPU time (s, us per packet), on a shared radio this vehicle's part of it (``radio``), each
+     jitter the delay capped (``jitter_capped``, as ``summary.json["link"]``'s); with
      ``stats_path`` that summary kept on disk while serving (a snapshot at most every :data:`STATS_EVERY_S` s,
      ``"final": false``), written atomically
 
@@ -127,6 +128,7 @@ class Relay:
                  on_client: Callable[[Address], None] | None = None, back_port: int = 0,
                  stats_path: str | Path | None = None, radio: tuple[str | Path, int] | None = None) -> None:
         link = link or LinkSettings()
+        self.jitter_capped = link.jitter_capped()  # each jitter the delay capped: in its summary (docs/links.md)
         self.mission_clock = mission_clock
         self.origin_s: float | None = None  # relay time (s) of the flight's time 0 (mission_clock)
         self.stalls = Stalls()  # packets handed on more than STALL_S after they were due, from time 0
@@ -364,7 +366,7 @@ class Relay:
                  "client_from": "given" if self.client_given else "first sender", "target": hostport(self.target),
                  "refused": dict(self.refused), "forwarded": self.forwarded,
                  "dropped_no_client": self.dropped_no_client, "send_errors": self.send_errors,
-                 "stalls": self.stalls.report()}
+                 "stalls": self.stalls.report(), **({"jitter_capped": cap} if (cap := self.jitter_capped) else {})}
         if self.radios:  # this vehicle's part of the fleet's one radio, by direction
             fixed["radio"] = {d: r.part() for d, r in self.radios.items()}
         return _Counters(stats, {d: array("d", a) for d, a in self.added.items()}, fixed, user, system)

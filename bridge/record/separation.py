@@ -6,6 +6,8 @@ In:  the vehicles' ids, their rotor discs' radii (m), the policy's minimum clear
      which each one's rows were flown on the wall clock
 Out: :class:`Watch`: the pairs that touch at a step (indices, why), ``summary.json["separation"]`` (every pair's
      closest approach: clearance m, at t s) and the ``separation`` policy's verdict (ok, or t s and why);
+     :class:`Untold`: the offline fleet's vehicles judged but told nothing (a failsafe's landing after the
+     mission: from, to s) and their contacts (step, t s, the other's id, why, ``continued``);
      :func:`judge_traces`: each vehicle's first contact on finished traces (step, t s, the other's id, why, and
      ``continued`` when nothing stopped the flights at it)
 
@@ -28,6 +30,9 @@ CONTINUED = ("the flights continued past the contact: in real time each vehicle 
 WALL_CLOCK = ("the flights continued past the contact: found afterwards on the records, at a step one of the two flew "
               "on the wall clock after it left the fleet's shared step clock, matched to the other's by mission time "
               "(approximate); nothing stopped them at it (docs/swarm.md)")
+ALONE = ("the flights continued past the contact: found at a step one of the two flew its failsafe's landing alone "
+         "after the mission (offline it is flown alone, told nothing, as a lockstep fleet flies it on the wall clock "
+         "and judges it on its record), so nothing stopped them at it (docs/swarm.md)")
 NOWHERE = (math.nan, math.nan, math.nan)  # a vehicle whose place is not known: never closer, never touching
 
 
@@ -72,6 +77,44 @@ class Watch:
         return {"name": "separation", "ok": False, "t": round(self.broken[0], 6), "why": self.broken[1]}
 
 
+class Untold:
+    """The vehicles an offline fleet judges without telling them anything: each flies its failsafe's landing after the
+    mission alone (:class:`bridge.loop.Alone`), as flown by itself, and stays untold where it ends. When each flew so
+    (steps), and each vehicle's first contact with one of them, found, not prevented (``continued``: :data:`ALONE`)."""
+
+    def __init__(self, ids: Sequence[int], rate: float) -> None:
+        self.ids, self.rate = list(ids), rate
+        self.first: dict[int, int] = {}  # vehicle index -> the first period it flew alone (0: the fleet's first step)
+        self.last: dict[int, int] = {}
+        self.found: dict[int, dict[str, Any]] = {}
+
+    def flew(self, i: int, k: int) -> None:
+        """Vehicle ``i`` (index) flew period ``k`` alone."""
+        self.first.setdefault(i, k)
+        self.last[i] = k
+
+    def told(self, k: int, touching: list[tuple[int, int, str]]) -> list[tuple[int, int, str]]:
+        """Of the pairs touching in the world after period ``k - 1`` (step ``k``), those to tell (neither untold);
+        the others' contacts are kept as found (each vehicle's first)."""
+        tell = []
+        for a, b, why in touching:
+            if a not in self.first and b not in self.first:
+                tell.append((a, b, why))
+                continue
+            for i, other in ((a, b), (b, a)):
+                self.found.setdefault(i, {"step": k, "t": round(k / self.rate, 6), "with": self.ids[other],
+                                          "why": why, "continued": ALONE})
+        return tell
+
+    def summary(self) -> list[dict[str, Any]]:
+        """``summary.json["separation"]["alone"]``: who flew alone after the mission, from when to when (s)."""
+        return [{"id": self.ids[i], "from_t": round(self.first[i] / self.rate, 6),
+                 "to_t": round((self.last[i] + 1) / self.rate, 6),
+                 "why": "its failsafe's landing, still going at the mission's end",
+                 "judged": "at every step, as the mission's; told nothing: a contact found, not prevented"}
+                for i in sorted(self.first)]
+
+
 def _num(v: float) -> float | None:  # (m, 9 digits; None: never judged)
     return round(v, 9) if math.isfinite(v) else None
 
@@ -80,7 +123,7 @@ def judge_traces(watch: Watch, traces: Sequence[dict[str, Any]], rate: float,
                  finals: Sequence[tuple[float, float, float] | None] | None = None,
                  starts: Sequence[Sequence[float]] | None = None,
                  afters: Sequence[Sequence[Sequence[float]]] | None = None,
-                 walls: Sequence[int | None] | None = None) -> dict[int, dict[str, Any]]:
+                 walls: Sequence[int | None] | None = None, own_clocks: bool = False) -> dict[int, dict[str, Any]]:
     """Judge the shared world on finished traces, with the offline loop's :class:`Watch`: row j of every trace
     (the true positions at t = j / rate; row 0 the start) is the world after step j - 1, as the loop judges it,
     and after a trace's rows, its vehicle's ``afters`` (m: its end landing's, flown on after the mission, as the
@@ -90,8 +133,8 @@ def judge_traces(watch: Watch, traces: Sequence[dict[str, Any]], rate: float,
     the loop keeps it), else nowhere, and touches no one (a final :data:`NOWHERE`: not known after its rows).
     ``walls``: the step after which each vehicle's rows were flown on the wall clock (None: none), judged by their
     index as the rest. The first contact of each vehicle (by index): its step, time, the other's id and why (without
-    ``finals``, that the flights went on: :data:`CONTINUED`; at a step one of the two flew on the wall clock:
-    :data:`WALL_CLOCK`)."""
+    ``finals``, or with ``own_clocks`` (a real-time fleet's: each vehicle on its own clock), that the flights went
+    on: :data:`CONTINUED`; at a step one of the two flew on the wall clock: :data:`WALL_CLOCK`)."""
     last = [finals[i] if finals is not None else None for i in range(len(traces))]
     paths = [[(float(x), float(y), float(z)) for x, y, z in zip(tr["x"], tr["y"], tr["z"])] for tr in traces]
     for path, more_rows in zip(paths, afters or ()):
@@ -107,7 +150,8 @@ def judge_traces(watch: Watch, traces: Sequence[dict[str, Any]], rate: float,
             positions.append(p if p is not None and j > r else path[r] if r >= 0 else home)
         for a, b, why in watch.check(j / rate, positions):
             off = any(w is not None and j > w for w in (wall[a], wall[b]))
-            more = {"continued": CONTINUED} if finals is None else {"continued": WALL_CLOCK} if off else {}
+            more = ({"continued": CONTINUED} if finals is None or own_clocks else
+                    {"continued": WALL_CLOCK} if off else {})
             for i, other in ((a, b), (b, a)):
                 first.setdefault(i, {"step": j, "t": round(j / rate, 6), "with": watch.ids[other], "why": why, **more})
     return first

@@ -7,7 +7,9 @@ Out: :class:`FleetRecords`: each vehicle's end-landing rows to judge, where it s
      :data:`~bridge.record.separation.NOWHERE`), the step after which its rows were flown on the wall clock;
      :func:`judged_on_wall_clock`: the fleet summary's ``separation.wall_clock`` (who flew on, from when to when,
      s, why, judged until when) and ``whole_flight``, and the ``separation`` policy not held when a vehicle was
-     not judged over the whole flight
+     not judged over the whole flight; :func:`taken_over_records`: a real-time fleet's records, each vehicle a
+     ground station took over and that flew on under it listed (its first intervention's step), for
+     ``separation.taken_over``
 
 A vehicle leaves the shared clock when its flight is over (its landing disarmed it, a disarm, a crash, a contact):
 it stays where it left, as offline. It also leaves to fly on, on the wall clock: a ground station's mode (HOLD,
@@ -109,18 +111,44 @@ def clocked_records(runs: Sequence[Run], ids: Sequence[int], rate: float) -> Fle
     return FleetRecords(afters, finals, walls, ends, flown, rate)
 
 
-def judged_on_wall_clock(summary: dict[str, Any], rec: FleetRecords) -> None:
-    """Say in the fleet's ``summary`` who flew on, on the wall clock, and how it was judged
-    (``separation.wall_clock``, ``separation.whole_flight``); a vehicle not judged over the whole flight makes the
-    ``separation`` policy not hold (``judged`` false, ``why``), unless it broke already (then ``judged`` false)."""
+def taken_over_records(runs: Sequence[Run], ids: Sequence[int], rate: float) -> FleetRecords:
+    """A real-time fleet's records as the trace judge takes them: each on its own clock, to its end (its end
+    action's rows after its trace's), staying at its last row after it; a vehicle a ground station took over that
+    flew on under it (its session's ``sitl.flew_on``: :mod:`bridge.session.fleet`) is listed from its takeover (its
+    first intervention's step) and, its record ended in flight, is :data:`~bridge.record.separation.NOWHERE` after
+    it (its place not known)."""
+    finals: list[tuple[float, float, float] | None] = []
+    ends: list[int] = []
+    flown: list[Flown] = []
+    for j, (r, i) in enumerate(zip(runs, ids)):
+        last = len(r.trace["t"]) + len(r.after) - 1
+        ends.append(last)
+        on = bool((r.summary.get("sitl") or {}).get("flew_on"))
+        rest = at_rest(r.summary)
+        if on:
+            first = (r.summary.get("interventions") or [{}])[0]
+            flown.append(Flown(j, i, int(first.get("step", last)), last,
+                               f"taken over by a ground station ({first.get('by', 'unknown')})", rest))
+        finals.append(NOWHERE if on and not rest else None)
+    return FleetRecords([r.after for r in runs], finals, [None] * len(runs), ends, flown, rate)
+
+
+REALTIME = "approximately, as every vehicle of a real-time fleet: its rows matched to the others' by step"
+
+
+def judged_on_wall_clock(summary: dict[str, Any], rec: FleetRecords, key: str = "wall_clock",
+                         judged: str = "approximately: its rows matched to the others' by step (mission time)") -> None:
+    """Say in the fleet's ``summary`` who flew on, on the wall clock (``key``: a lockstep fleet's ``wall_clock``, a
+    real-time fleet's ``taken_over``), and how it was judged (``judged``; ``separation.whole_flight``); a vehicle not
+    judged over the whole flight makes the ``separation`` policy not hold (``judged`` false, ``why``), unless it
+    broke already (then ``judged`` false)."""
     rate = rec.rate
     short = dict((f.id, s) for f, s in rec.unjudged())
     sep = summary["separation"]
-    sep["wall_clock"] = [{"id": f.id, "from_step": f.from_step, "from_t": round(f.from_step / rate, 6),
-                          "to_t": round(f.last_step / rate, 6), "why": f.why, "at_rest": f.at_rest,
-                          "judged": "approximately: its rows matched to the others' by step (mission time)",
-                          "judged_until_t": round(short[f.id] / rate, 6) if f.id in short else None}
-                         for f in rec.flown]
+    sep[key] = [{"id": f.id, "from_step": f.from_step, "from_t": round(f.from_step / rate, 6),
+                 "to_t": round(f.last_step / rate, 6), "why": f.why, "at_rest": f.at_rest, "judged": judged,
+                 "judged_until_t": round(short[f.id] / rate, 6) if f.id in short else None}
+                for f in rec.flown]
     sep["whole_flight"] = not short
     if not short:
         return

@@ -18,8 +18,9 @@ step it touches another (:mod:`bridge.nodes.vehicle.gate`); each controller then
 slowest vehicle to start. A vehicle a ground station takes over (HOLD, TAKEOFF, ...) leaves the shared clock and flies
 on under it, on the wall clock, recorded, while a vehicle not taken over still flies and until its record holds
 as many steps as theirs (a single vehicle's session stops it at once); the fleet judges that record afterwards
-(:mod:`bridge.record.wallclock`). In real time each pair keeps its own wall clock, and the shared world is judged
-afterwards on their traces (:mod:`bridge.swarm`). Ctrl-C or SIGTERM stops every pair (each session's own stop:
+(:mod:`bridge.record.wallclock`). In real time each pair keeps its own wall clock, a vehicle taken over flies on
+under its ground station the same way (its session's ``sitl.flew_on``), and the shared world is judged afterwards on
+their traces (:mod:`bridge.swarm`). Ctrl-C or SIGTERM stops every pair (each session's own stop:
 SIGTERM, then SIGKILL at its deadline) and each still writes its summary.
 """
 
@@ -143,7 +144,7 @@ def _fly(flights: Sequence[Flight], ids: Sequence[int], dirs: Sequence[Path], *,
                 for j, (f, i, d, g) in enumerate(zip(flights, ids, dirs, gates))]
     runs: list[Run | None] = [None] * len(sessions)
     errors: list[BaseException] = []
-    if gates[0] is not None:  # lockstep: a vehicle taken over by a ground station flies on while the others fly
+    if len(sessions) > 1:  # a vehicle taken over by a ground station flies on while the others fly
         for j, s in enumerate(sessions):
             s.flies_on = functools.partial(_flies_on, sessions, runs, j)
 

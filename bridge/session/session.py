@@ -139,6 +139,7 @@ class Session:
                                                                    self.flight.mission.rate_hz),
             sitl={"instance": self.instance, "listen": self.listen, "gcs": self.gcs, "sysid": self.sysid,
                   "speed": self.speed, "died": self.died, "signed": self.key is not None,
+                  **({"flew_on": True} if self.flying_on else {}),  # taken over, it flew on (a fleet's: fleet.py)
                   **({"gate": self.vehicle.stats.get("gate") if self.vehicle else None} if self.gate else {})},
             mission_transfer=self.transfer)
         joined = self.joiner.joined()

@@ -4,7 +4,8 @@ the file written a whole line at a time (so a killed sweep resumes with what it 
 In:  a :class:`~bridge.sweep.grid.Cell` and its :class:`~bridge.record.runlog.Run`; a ``cells.csv`` or
      ``sweep.json`` to read back
 Out: rows of :data:`COLUMNS` (units: ``rms``/``max`` m, ``settling_s``/``flown_s`` s, ``tv_u2`` N/s,
-     ``ripple_u2`` N, packet counts; ``policies``: ``ok``, the broken policies' names, ``""`` not judged),
+     ``ripple_u2`` N, packet counts; ``policies``: ``ok``, the broken policies' names, ``""`` not judged;
+     ``jitter_capped``: each jitter the delay capped, the half-width flown ms, ``""`` none),
      appended to ``cells.csv`` one whole line each
 """
 
@@ -21,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from bridge.link.model import jitter_cell
 from bridge.record.metrics import errors, ripple_rms  # ripple_rms lives with the other metrics
 from bridge.record.runlog import LineWriter, Run
 from bridge.swarm import SEVERITY, FleetRun
@@ -33,28 +35,32 @@ COLUMNS = (
     "turbulence", "discretization", "vehicles", "seed",
     "rms", "max", "settling_s", "tv_u2", "ripple_u2", "outcome", "class",
     "up_sent", "up_lost", "down_sent", "down_lost", "flown_s", "worst_vehicle", "closest_m", "error", "policies",
+    "jitter_capped",
 )
 FLEET_COLUMNS = ("vehicles", "worst_vehicle", "closest_m")  # since issue 28: a cell of several vehicles (a fleet)
 POLICIES_OK = "ok"  # the policies column: every policy held; else the broken ones' names; "" not judged
 
 
 # cells.csv before the vehicle's axes (issue 12), before the air's (issue 27), before the discretization's (issue
-# 24), before fleets (issue 28) and before the policies column: read (bsst report) with the values its sweep.json's
-# mission flew (one vehicle; policies not judged), never resumed (bridge.sweep.campaign refuses it, naming the file)
-_BEFORE_POLICIES = tuple(c for c in COLUMNS if c != "policies")
+# 24), before fleets (issue 28), before the policies column and before the jitter_capped one: read (bsst report)
+# with the values its sweep.json's mission flew (one vehicle; policies not judged; jitter_capped "": not said), never
+# resumed (bridge.sweep.campaign refuses it, naming the file)
+_BEFORE_JITTER_CAP = tuple(c for c in COLUMNS if c != "jitter_capped")  # before the jitter_capped column
+_BEFORE_POLICIES = tuple(c for c in _BEFORE_JITTER_CAP if c != "policies")
 _SINGLE = tuple(c for c in _BEFORE_POLICIES if c not in FLEET_COLUMNS)
 LEGACY_COLUMNS = tuple(c for c in _SINGLE
                        if c not in ("estimator", "noise", "wind_mps", "turbulence", "discretization"))
 WEATHERLESS_COLUMNS = tuple(c for c in _SINGLE if c not in ("wind_mps", "turbulence", "discretization"))
 LEGACY_LAYOUTS = (LEGACY_COLUMNS, WEATHERLESS_COLUMNS,
                   tuple(c for c in _SINGLE if c not in ("estimator", "noise", "discretization")),
-                  tuple(c for c in _SINGLE if c != "discretization"), _SINGLE, _BEFORE_POLICIES)
+                  tuple(c for c in _SINGLE if c != "discretization"), _SINGLE, _BEFORE_POLICIES, _BEFORE_JITTER_CAP)
 
 
 INT_COLUMNS = ("vehicles", "seed", "up_sent", "up_lost", "down_sent", "down_lost", "worst_vehicle")
 
 
-STR_COLUMNS = ("controller", "estimator", "turbulence", "discretization", "outcome", "class", "error", "policies")
+STR_COLUMNS = ("controller", "estimator", "turbulence", "discretization", "outcome", "class", "error", "policies",
+               "jitter_capped")
 # outcomes of a cell that measured nothing: it could not be flown, its law failed, or its vehicle denied the arm
 FAILED = ("error", "law_failed", "denied")
 OUTCOMES = (*SEVERITY, "error")  # a row's outcome: a run's (a fleet's worst vehicle's), or error (not flown)
@@ -109,6 +115,7 @@ def row_from_run(cell: Cell, run: Run) -> dict[str, Any]:
         # a law that failed in flight measured nothing: the row says why, as a cell that could not be flown does
         "error": " ".join(str(s.get("ended_by", {}).get("how", "")).split())[:300] if s["outcome"] in FAILED else "",
         "policies": policies_cell([s.get("policies")]),
+        "jitter_capped": jitter_cell(link.get("jitter_capped") or ()),
     }
 
 
@@ -169,7 +176,8 @@ def row_from_fleet(cell: Cell, run: FleetRun) -> dict[str, Any]:
     errors = [f"vehicle {i}: {r['error']}" for i, r in zip(ids, rows) if r["error"]]
     out.update(outcome=run.summary["outcome"], worst_vehicle=ids[worst],
                closest_m=run.summary["separation"]["closest_m"], error=" ".join(errors)[:300],
-               policies=policies_cell([r.summary.get("policies") for r in run.runs]))
+               policies=policies_cell([r.summary.get("policies") for r in run.runs]),
+               jitter_capped=" ".join(dict.fromkeys(r["jitter_capped"] for r in rows if r["jitter_capped"])))
     return out
 
 
@@ -177,7 +185,7 @@ def error_row(cell: Cell, why: str) -> dict[str, Any]:
     """The row of a cell that could not be flown (outcome ``error``)."""
     row: dict[str, Any] = {c: None for c in COLUMNS}
     row.update({a: getattr(cell, a) for a in AXES})
-    row.update(seed=cell.seed, outcome="error", error=" ".join(why.split())[:300], policies="")
+    row.update(seed=cell.seed, outcome="error", error=" ".join(why.split())[:300], policies="", jitter_capped="")
     return row
 
 

@@ -163,7 +163,8 @@ class Search:
         mine = [r for r in rows if r["controller"] == self.controller and r[over] == value]
         cells = [{over: value, "seed": r["seed"], "rms": r["rms"], "outcome": r["outcome"],
                   "class": classify(r, classes), "failed": until.failed(r, classes), "phase": phase,
-                  "error": r.get("error") or "", "policies": r.get("policies") or ""} for r in mine]
+                  "error": r.get("error") or "", "policies": r.get("policies") or "",
+                  "jitter_capped": r.get("jitter_capped") or ""} for r in mine]
         self.cells += cells
         unflown = [c for c in cells if c["outcome"] in FAILED]
         if unflown and self.error is None:  # the law failed (or its worker died): it measured nothing there

@@ -112,7 +112,7 @@ def legacy_values(meta: Mapping[str, Any]) -> dict[str, Any]:
     ``cells.csv`` has no such columns): its mission's ``[estimator] kind``, ``[sensors] noise_scale``, ``[wind]
     speed_mps`` and ``turbulence``, ``discretization``, else their defaults (:data:`LEGACY_DISCRETIZATION`, the
     only scheme before issue 24); one vehicle (before issue 28), so no worst vehicle and no closest approach; its
-    policies not judged (``""``: before the column)."""
+    policies not judged and its jitter caps not said (``""``: before the columns)."""
     mission = meta.get("mission") if isinstance(meta.get("mission"), Mapping) else {}
     est, sensors, wind = (t if isinstance(t := mission.get(k), Mapping) else {}
                           for k in ("estimator", "sensors", "wind"))
@@ -122,7 +122,7 @@ def legacy_values(meta: Mapping[str, Any]) -> dict[str, Any]:
     return {"estimator": kind if isinstance(kind, str) else "truth", "noise": _number(scale, 1.0),
             "wind_mps": _number(speed, 0.0), "turbulence": level if isinstance(level, str) else "none",
             "discretization": d if isinstance(d, str) else LEGACY_DISCRETIZATION, "vehicles": 1, "worst_vehicle": None,
-            "closest_m": None, "policies": ""}
+            "closest_m": None, "policies": "", "jitter_capped": ""}
 
 
 def _number(v: Any, default: float) -> float:
@@ -288,6 +288,7 @@ def write_report(path: Path, rows: Sequence[Mapping[str, Any]], meta: Mapping[st
             lines.append(f"| {r['controller']} | " + " | ".join(_fmt(r[a]) for a in MAP_AXES)
                          + f" | {r['seed']} | {r['error']} |")
     lines += policies_section(rows)
+    lines += jitter_section(rows)
     if rows:  # (none: a sweep of no cells, or a report of an empty cells.csv)
         lines += ["", "## Reproducing a row", "",
                   "Each row of `cells.csv` is one offline flight of `mission.toml` (in this directory); for example "
@@ -314,6 +315,25 @@ def policies_section(rows: Sequence[Mapping[str, Any]]) -> list[str]:
         for r in broken[:50]:
             lines.append(f"| {r['controller']} | " + " | ".join(_fmt(r[a]) for a in MAP_AXES)
                          + f" | {r['seed']} | {r['outcome']} | {r['policies']} |")
+    return lines
+
+
+def jitter_section(rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    """``report.md``'s cells whose jitter the delay capped (``cells.csv``'s ``jitter_capped``: each capped direction
+    and the half-width flown, ms; docs/links.md): how many, and each (up to 50) with its cell. None: nothing."""
+    capped = [r for r in rows if r.get("jitter_capped")]
+    if not capped:
+        return []
+    lines = ["", "## Jitter capped at the delay", "", f"{len(capped)} runs flew less jitter than their `jitter_ms` "
+             "asked: the jitter is drawn within ±min(delay, jitter) (uniform) or ±min(delay, 5 sigma) (normal), so "
+             "that no delay is negative (docs/links.md). `flown` is each capped direction and the half-width it flew "
+             "(ms; 0: no jitter at all).", "", "| controller | " + " | ".join(MAP_AXES) + " | seed | flown |",
+             "|---" * (len(MAP_AXES) + 3) + "|"]
+    for r in capped[:50]:
+        lines.append(f"| {r['controller']} | " + " | ".join(_fmt(r[a]) for a in MAP_AXES)
+                     + f" | {r['seed']} | {r['jitter_capped']} |")
+    if len(capped) > 50:
+        lines.append(f"\n(the first 50 of {len(capped)}: every row in `cells.csv`, column `jitter_capped`)")
     return lines
 
 
