@@ -46,12 +46,15 @@ def test_a_sweeps_capped_jitter_is_in_its_rows_its_report_and_on_stderr(
 def test_a_margin_over_the_jitter_says_its_probes_flew_it_capped(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """``bsst margin --over jitter_ms --delay 2``: every probe above 2 ms flies ±2 ms, so a jitter margin there is
-    the delay's: ``margin.json``'s cells say what each flew, and stderr warns (it claimed 60000 ms, unsaid)."""
+    the delay's: ``margin.json``'s cells say what each flew, stderr warns (it claimed 60000 ms, unsaid), and a margin
+    claimed at a capped value was not flown as probed: said, exit 1."""
     mission = tmp_path / "short.toml"
     mission.write_text((MISSION_DIR / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 1.0"))
     assert main(["margin", str(mission), "--over", "jitter_ms", "--until", "rms=2", "--delay", "2", "--resolution",
-                 "20000", "--check-below", "0", "--out", str(tmp_path / "m")]) == 0
+                 "20000", "--check-below", "0", "--out", str(tmp_path / "m")]) == 1
     cells = json.loads((tmp_path / "m" / "margin.json").read_text())["controllers"][0]["cells"]
     assert cells and all(c["jitter_capped"] == ("up:2 down:2" if c["jitter_ms"] > 2 else "") for c in cells), cells
     err = capsys.readouterr().err
     assert f"bsst margin: warning: {len(cells)} of {len(cells)} cells flew a jitter capped at the delay" in err, err
+    assert ("bsst margin: bsst's margin 60000 over jitter_ms was flown with its jitter capped at the delay "
+            "(up:2 down:2): not the value claimed") in err, err

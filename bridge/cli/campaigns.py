@@ -323,11 +323,26 @@ def say_margin(res: dict[str, Any], args: argparse.Namespace, name: str) -> int:
         print("bsst margin: interrupted: margin.json keeps the cells flown and each law's bracket so far (interrupted: "
               "true); no margin is claimed beyond them", file=sys.stderr)
         return EXIT_FAILED
+    overstated = [e for e in entries if _capped_margin(e, args.over) is not None]
+    for e in overstated:  # a margin claimed at a jitter the delay capped: that value was never flown
+        print(f"bsst margin: {e['controller']}'s margin {e['margin']:g} over {args.over} was flown with its jitter "
+              f"capped at the delay ({_capped_margin(e, args.over)}): not the value claimed; raise --delay or search "
+              "--over delay_ms", file=sys.stderr)
     low = [e["controller"] for e in entries if args.require is not None
            and (e["holds_below"] is None or e["holds_below"] < args.require)]
     if low:
         print(f"bsst margin: below --require {args.require:g} (holds_below): {', '.join(low)}", file=sys.stderr)
-    return EXIT_FAILED if low or res["laws_failed"] else EXIT_OK
+    return EXIT_FAILED if low or overstated or res["laws_failed"] else EXIT_OK
+
+
+def _capped_margin(entry: dict[str, Any], over: str) -> str | None:
+    """What the delay capped the jitter of a held cell at the law's claimed margin to (its ``jitter_capped``), or
+    None: the margin was flown as probed (or there is none)."""
+    m = entry["margin"]
+    if m is None:
+        return None
+    return next((c["jitter_capped"] for c in entry["cells"]
+                 if c.get("jitter_capped") and c[over] == m and not c["failed"]), None)
 
 
 def margin_lines(e: dict[str, Any], over: str, what: str, until: str) -> list[str]:
