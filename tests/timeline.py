@@ -2,7 +2,8 @@
 
 In:  (plug-in) each test's start and end as pytest-xdist's workers run it: the wall clock, s; the CPU time the
      worker and the processes it has reaped have used, s; the whole machine's CPU time so far (its root cgroup's
-     count), s; ``BSST_TIMELINE_DIR``, the directory to write to; (report) that directory
+     count, or that of the cgroup v1 ``cpuacct`` folder ``BSST_TIMELINE_CGROUP`` names: the suite run inside it), s;
+     ``BSST_TIMELINE_DIR``, the directory to write to; (report) that directory
 Out: (plug-in) one file per worker, ``<worker>.txt``, a line per test start (``S <t> <cpu> <machine> <test id>``)
      and end (``E ...``); (report) each worker's span and busy time, whether they ended together (a tail that
      ordering could cut), the worker-seconds and CPU-seconds by file and the slowest and costliest tests.
@@ -36,7 +37,8 @@ def _machine_busy() -> float:
     v2's cpu.stat; 0 where neither is). Not /proc/stat: its tick samples miss a process that runs in short bursts
     between ticks, as a lockstep vehicle does (a four-vehicle test read 1.1 CPU-s there, 6.4 here: docs/testing.md)."""
     try:
-        return int(Path("/sys/fs/cgroup/cpuacct/cpuacct.usage").read_text()) / 1e9
+        return int(Path(os.environ.get("BSST_TIMELINE_CGROUP", "/sys/fs/cgroup/cpuacct"), "cpuacct.usage")
+                   .read_text()) / 1e9
     except (OSError, ValueError):
         pass
     try:
