@@ -81,6 +81,7 @@ class Offboard(OffboardLink):
         self._changes = list(flight.param_changes)  # scheduled PARAM_SETs not sent yet, by mission time
         self._end_wall: float | None = None  # wall time the mission's last state came (the events' clock after it)
         self._way_down: float | None = None  # real time: the states' way down (s), the vehicle's clock ahead of ours
+        self.way_down: dict[str, float] | None = None  # real time: that in ms and how far off it may be (stats)
         self._end_usec: int | None = None  # lockstep: the stamp of the state that ended the mission, unanswered
         self._end_height_m = 0.0
 
@@ -294,9 +295,11 @@ class Offboard(OffboardLink):
 
     def _way_down_s(self, phase: float) -> float | None:
         """Real time: the one-way trip of the earliest-arriving states (s, >= 0), from the phase of their arrivals
-        and the vehicle's clock offset by TIMESYNC; None until a TIMESYNC answer is in. The offset takes the two
-        ways as equal, so an asymmetric link (a delay on the way down only) is credited with half of the difference."""
-        if self.offset_ns is None:
+        and the vehicle's clock offset by TIMESYNC; None until a TIMESYNC answer is in. The offset is the middle of
+        its bounds (config.offset_bounds), which takes the two ways' fastest trips as equal: an asymmetric link (a
+        delay on the way down only) is credited with half of the difference, and the trip is right within half
+        the bounds' width (:attr:`way_down`), plus how late the earliest arrival was read (never early)."""
+        if self.offset_range_ns is None or self.offset_ns is None:
             return None
         trip = phase + self.offset_ns * 1e-9
         if not -WAY_DOWN_SLACK_S <= trip <= WAY_DOWN_MAX_S:
@@ -304,6 +307,8 @@ class Offboard(OffboardLink):
             self.event("timesync", f"the states' way down comes out at {trip * 1e3:.1f} ms: "
                                    "not counted in their age (stamps and TIMESYNC on different clocks?)")
             return 0.0
+        lo, hi = self.offset_range_ns
+        self.way_down = {"ms": round(max(trip, 0.0) * 1e3, 3), "within_ms": round((hi - lo) * 0.5e-6, 3)}
         return max(trip, 0.0)
 
     def _observe(self, odo: Any, t_state: float, recv: float) -> None:
