@@ -197,6 +197,7 @@ def fly(tmp: Path, timesync_skew_s: float = 0.0, spoofs: dict[int, int] | None =
                 v.odometry(k, spoofs[i])
             if bunched and i == min(DROPPED):
                 v.odometry(k + 1)
+                sent_late[i + 1] = time.monotonic() - due  # step 6's, sent at step 5's time
             if k % 5 == 0:
                 v.heartbeat()
             k += 1
@@ -318,12 +319,24 @@ def test_a_later_state_in_the_first_tick_starts_the_mission_answered_at_once(tmp
     """The mission's first state lost and the next one come within the first tick (states bunched, as on a busy
     machine): the mission starts with that state and its first row answers it at once. (It once kept the lost
     state's time 0, so the state that came was a step in the future: its first row sent no target, and the
-    vehicle's timeline, whose time 0 is the state its first target answers, ran a step behind the trace's.)"""
+    vehicle's timeline, whose time 0 is the state its first target answers, ran a step behind the trace's.)
+    The controller phase-locks on the first five states however many of them one read brings (it counted reads:
+    under load two of the five came in one, step 6's state was the fifth read and the mission started with step
+    7's: 3 of 180 flights at load 5-13), and one after the five that comes with the fifth is the mission's first.
+    Left to the premise: this process sending step 6's state as meant, and the controller's first tick waking in
+    time to read it before step 7's comes (its stall there is listed at t = 0): else the first tick answers the
+    newest state it has, at once all the same. The schedule moved a period on is no stall (it was listed as one)."""
     f = fly(tmp_path, bunched=True)
     first = first_record(f.run / "controller.bin")
     assert math.isfinite(first["state_age_s"]), first  # a target sent: the row has its state's age
     assert first["t"] == pytest.approx(first["state_age_s"], abs=1e-9), first  # at the mission's time 0
-    assert min(f.targets) == min(DROPPED) + 1, sorted(f.targets)[:3]  # the state that came, answered
+    stalls = stats(f)["stalls"]["at"]
+    # the premise: step 6's state left this process as meant, and the controller's first tick woke in time to read
+    # it before step 7's came (a tick answers the newest state it has, and a stall of it is listed, at t = 0)
+    premise = f.sent_late[min(DROPPED) + 1] <= HICCUP_S and not any(t == 0.0 for t, _ in stalls)
+    assert min(f.targets) == min(DROPPED) + 1 or not premise, (sorted(f.targets)[:3], stalls)  # answered at once
+    # the schedule moved a period on to that state: no stall of a period at the next tick (one was listed)
+    assert not any(t == round(PERIOD, 3) and abs(ms - 1e3 * PERIOD) < 1.0 for t, ms in stalls), stalls
 
 
 def test_an_arm_whose_answers_are_lost_is_repeated_before_the_failsafe(flown: Flown) -> None:

@@ -220,31 +220,14 @@ class Offboard(OffboardLink):
         period = 1.0 / rate
         steps = self.steps
         mono = time.monotonic
-        # phase-lock to the vehicle: ticks just after its states arrive. The phase is the
-        # earliest arrival (recv - k / rate) over a few states, so one state that waited in
-        # the socket while we were busy does not shift the schedule.
-        self._odo = None
-        self._last_state = mono()
-        phase: float | None = None
-        seen = 0
-        while seen < PHASE_STATES and not self.stopping:
-            outcome = self._check_vehicle()
-            if outcome:
-                return outcome
-            self._serve(min(self._next_house, self._last_rx + self.cfg.vehicle_timeout_s))
-            if self._odo is not None:
-                k = step_of_usec(self._odo.time_usec, rate)
-                p = self._odo_recv - k * period
-                phase = p if phase is None else min(phase, p)
-                seen += 1
-                self._odo = None
-        if self.stopping or phase is None:
-            return "aborted"
-        k0 = k + 1  # the mission starts with the next state
+        locked = self._phase_lock(period)
+        if isinstance(locked, str):
+            return locked
+        phase, k0 = locked
         self.schedule = clock = FixedRate(phase + k0 * period + PHASE_S, rate)
         last_k = k0 - 1
         usec, recv = 0, math.nan  # the newest state's stamp and arrival
-        woke = math.inf  # when the last tick woke (s, time.monotonic)
+        woke = max(mono(), clock.due(0) - period)  # when the last tick woke (s): the first tick's is judged too
         way_down: float | None = None  # the states' one-way trip (s), once TIMESYNC tells it
         j = 0
         while not self.stopping:
@@ -280,6 +263,7 @@ class Offboard(OffboardLink):
                     # with it, as the trace and the vehicle's timeline do (their time 0 is the state the
                     # first target answers), its tick where its state was due (phase + k / rate)
                     self.schedule = clock = FixedRate(due + (k - k0 - j) * period, rate, clock.skipped)
+                    woke += (k - k0 - j) * period  # the schedule moved, not the process: no stall at the next tick
                     k0, j = k, 0
                 if k - k0 >= steps:
                     return self._end_of_mission((k - k0) / rate, odo)
@@ -291,6 +275,34 @@ class Offboard(OffboardLink):
             t = j / rate + (way_down + PHASE_S if way_down is not None else 0.0)
             j += 1
             self._decide(t, last_k, usec, recv, late)
+        return "aborted"
+
+    def _phase_lock(self, period: float) -> tuple[float, int] | str:
+        """Real time: the phase of the vehicle's states (the ticks come just after they arrive): their earliest arrival
+        (recv - k / rate) over the first PHASE_STATES states (states read together count each, the newest the read's
+        sample), and the mission's first step: the next state's, or the newest's if it came after the five with the
+        fifth (kept for the first tick, which answers it at once). Or the outcome if the vehicle is lost."""
+        self._odo = None
+        self._last_state = time.monotonic()
+        phase: float | None = None
+        seen = 0  # states taken
+        while not self.stopping:
+            outcome = self._check_vehicle()
+            if outcome:
+                return outcome
+            before = self.states
+            self._serve(min(self._next_house, self._last_rx + self.cfg.vehicle_timeout_s))
+            if self._odo is None:
+                continue
+            k = step_of_usec(self._odo.time_usec, self.rate)
+            seen += self.states - before
+            if seen > PHASE_STATES and phase is not None:  # the newest came after the five: the mission's first
+                return phase, k
+            p = self._odo_recv - k * period
+            phase = p if phase is None else min(phase, p)
+            self._odo = None
+            if seen >= PHASE_STATES:
+                return phase, k + 1  # the mission starts with the next state
         return "aborted"
 
     def _way_down_s(self, phase: float) -> float | None:
