@@ -20,6 +20,7 @@ import time
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -54,8 +55,13 @@ class ScriptedVehicle:
     """A vehicle that arms on command and streams ODOMETRY of a resting state at ``RATE`` on
     its own schedule; it records the time_usec of every actuator target it receives."""
 
-    def __init__(self, timesync_skew_s: float = 0.0, in_progress_after: bool = False) -> None:
+    def __init__(self, timesync_skew_s: float = 0.0, in_progress_after: bool = False,
+                 timesync_hold_s: tuple[float, float] | None = None) -> None:
         self.skew_ns = int(timesync_skew_s * 1e9)  # TIMESYNC answers this far off the stamps' clock
+        # every other TIMESYNC answer sent this long (s) after the clock was read, the others' clock read this long
+        # after the request came: each exchange held up one way, as a busy machine's scheduling does
+        self.hold = timesync_hold_s
+        self.held: list[tuple[float, int, int | None]] = []  # (when, ts1, tc1: None to read the clock then)
         self.in_progress_after = in_progress_after  # an IN_PROGRESS right behind the ARM's ACCEPTED
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind(("127.0.0.1", 0))
@@ -82,8 +88,15 @@ class ScriptedVehicle:
         self.send(mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_GENERIC,
                                                     mode, 0, mavlink.MAV_STATE_ACTIVE, 3))
 
+    def clock_ns(self) -> int:
+        """The vehicle's clock as its TIMESYNC answers give it (ns)."""
+        return int((time.monotonic() - self.v0) * 1e9) + self.skew_ns
+
     def serve(self) -> None:
-        """Everything the controller sent so far (never blocks)."""
+        """Everything the controller sent so far (never blocks), and the held TIMESYNC answers now due."""
+        for h in [h for h in self.held if h[0] <= time.monotonic()]:
+            self.held.remove(h)
+            self.send(mavlink.MAVLink_timesync_message(self.clock_ns() if h[2] is None else h[2], h[1]))
         while True:
             try:
                 data, addr = self.sock.recvfrom(65536)
@@ -95,10 +108,14 @@ class ScriptedVehicle:
                 if kind == "SET_ACTUATOR_CONTROL_TARGET":
                     self.targets[m.time_usec] += 1
                     self.first_target = self.first_target or time.monotonic()
-                elif kind == "TIMESYNC" and m.tc1 == 0:  # a request: our clock, at once
+                elif kind == "TIMESYNC" and m.tc1 == 0:  # a request: our clock, at once (or held up one way)
                     self.timesync_asked.append(time.monotonic())
-                    now_ns = int((time.monotonic() - self.v0) * 1e9) + self.skew_ns
-                    self.send(mavlink.MAVLink_timesync_message(now_ns, m.ts1))
+                    if self.hold is None:
+                        self.send(mavlink.MAVLink_timesync_message(self.clock_ns(), m.ts1))
+                    elif len(self.timesync_asked) % 2:  # the clock read now, the answer held
+                        self.held.append((time.monotonic() + self.hold[0], m.ts1, self.clock_ns()))
+                    else:  # the request held, then the clock read and the answer sent
+                        self.held.append((time.monotonic() + self.hold[1], m.ts1, None))
                 elif kind == "COMMAND_LONG" and m.command == mavlink.MAV_CMD_NAV_LAND:  # the mission's end
                     self.armed, self.disarmed = False, True  # landed and disarmed at once
                     self.send(mavlink.MAVLink_command_ack_message(m.command, mavlink.MAV_RESULT_ACCEPTED))
@@ -116,6 +133,7 @@ class ScriptedVehicle:
     def until(self, due: float) -> None:
         """Serve until wall time ``due``: sleep on the socket until shortly before, then spin."""
         while (left := due - time.monotonic()) > 0:
+            left = min([left] + [h[0] - time.monotonic() for h in self.held])  # a held answer's time
             if left > 0.0005:  # select wakes late by up to a few hundred microseconds
                 select.select([self.sock], [], [], left - 0.0005)
             self.serve()
@@ -144,15 +162,16 @@ class Flown:
 
 
 def fly(tmp: Path, timesync_skew_s: float = 0.0, spoofs: dict[int, int] | None = None, bunched: bool = False,
-        in_progress_after: bool = False) -> Flown:
+        in_progress_after: bool = False, timesync_hold_s: tuple[float, float] | None = None) -> Flown:
     """One real-time flight of ``bsst controller`` against the scripted vehicle: state k
     carries time k / RATE on the vehicle's clock and leaves WAY_DOWN_S after it (LATE_S
     later still for the steps in LATE, never for those in DROPPED). ``spoofs``: after the
     state of step i, another one stamped ``spoofs[i]`` us, from the vehicle's own socket.
     ``bunched``: the state of step 6 leaves at step 5's time (step 5's lost), so that it comes within the
-    mission's first tick, as states bunched by a busy machine's scheduling do."""
+    mission's first tick, as states bunched by a busy machine's scheduling do. ``timesync_hold_s``: the vehicle's
+    TIMESYNC answers held up one way each (:class:`ScriptedVehicle`)."""
     (tmp / "late.toml").write_text(MISSION)
-    v = ScriptedVehicle(timesync_skew_s, in_progress_after)
+    v = ScriptedVehicle(timesync_skew_s, in_progress_after, timesync_hold_s)
     sent_late: dict[int, float] = {}
     ctl = Proc.bsst("controller", str(tmp / "late.toml"), "--realtime", "--vehicle", f"127.0.0.1:{v.port}",
                     "--out", str(tmp / "run"), "--timeout", "20")
@@ -178,6 +197,7 @@ def fly(tmp: Path, timesync_skew_s: float = 0.0, spoofs: dict[int, int] | None =
                 v.odometry(k, spoofs[i])
             if bunched and i == min(DROPPED):
                 v.odometry(k + 1)
+                sent_late[i + 1] = time.monotonic() - due  # step 6's, sent at step 5's time
             if k % 5 == 0:
                 v.heartbeat()
             k += 1
@@ -208,6 +228,11 @@ def first_record(path: Path) -> dict[str, float]:
     return {c: float(v[0]) for c, v in read_half(path).items()}
 
 
+def stats(f: Flown) -> dict[str, Any]:
+    """The controller's ``stats`` report."""
+    return next(r for r in map(parse_line, f.lines) if isinstance(r, Stats)).values
+
+
 def test_a_late_state_is_waited_for_and_a_lost_one_costs_one_tick(flown: Flown) -> None:
     """Judged on the states this process sent when it meant to (within :data:`HICCUP_S`): on a loaded
     machine it sends some later, and the controller cannot answer a state that comes after its tick gave up."""
@@ -225,21 +250,41 @@ def test_a_late_state_is_waited_for_and_a_lost_one_costs_one_tick(flown: Flown) 
     assert len(on_time) >= 20, f"{len(steps) - len(meant)} of {len(steps)} states left this process late: too few"
     # two lost to hiccups, and the ticks the machine's stalls of the controller skipped (its timing.stalls: a
     # stall of d ms skips up to d / period of them, and the tick it woke in may miss its state too)
-    stalls = next(r for r in map(parse_line, flown.lines) if isinstance(r, Stats)).values["stalls"]
+    stalls = stats(flown)["stalls"]
     allowed = 2 + sum(math.ceil(ms / 1e3 / PERIOD) + 1 for _, ms in stalls["at"])
     assert sum(s in answered for s in on_time) >= len(on_time) - allowed, (sorted(set(on_time) - answered), stalls)
 
 
 def test_the_state_age_counts_its_way_down(flown: Flown) -> None:
-    """The controller's age of each state it controlled on (controller.bin ``state_age_s``)
-    includes the WAY_DOWN_S the states spent on the way, learnt from TIMESYNC (answered at
-    once here: a symmetric link), plus the tick's 0.3 ms after the arrival."""
+    """The controller's age of each state it controlled on (controller.bin ``state_age_s``) includes the WAY_DOWN_S
+    the states spent on the way, learnt from TIMESYNC (answered at once here: a symmetric link), plus the tick's
+    0.3 ms after the arrival. TIMESYNC tells the vehicle's clock only within bounds (the vehicle read it between our
+    request and its answer's arrival), so the way down the controller counts is the true one within half their
+    width, which it reports (``stats`` ``way_down.within_ms``; docs/design.md, "TIMESYNC"): the median age is
+    asserted to be at least WAY_DOWN_S less that, not WAY_DOWN_S itself, which no estimate can promise. (A loaded
+    suite once saw 29.64 ms: the offset was then the middle of one exchange, off by up to half its round trip;
+    now it is the middle of where the latest answers' bounds agree: the held test below.)"""
     age = controller_ages(flown.run)
     assert len(age) > 50
-    # the way down counted once: at least it, and well short of twice it (10 ms of slack: the median tick
-    # comes 0.3 ms after its state on an idle machine, but a busy one delays the tick, not the stamps)
-    assert WAY_DOWN_S <= np.median(age) <= WAY_DOWN_S + 0.010, np.median(age)
+    way_down = stats(flown)["way_down"]
+    # the way down counted once: at least it (less what TIMESYNC cannot tell), and well short of twice it (10 ms
+    # of slack: the median tick comes 0.3 ms after its state on an idle machine, a busy one delays the tick)
+    assert WAY_DOWN_S - 1e-3 * way_down["within_ms"] <= np.median(age) <= WAY_DOWN_S + 0.010, (np.median(age), way_down)
     assert not any("timesync" in line for line in flown.lines)
+
+
+def test_timesync_answers_each_held_up_one_way_still_give_the_way_down(tmp_path: Path) -> None:
+    """On a busy machine a TIMESYNC exchange is often held up on one of its two ways (one side waiting for a core
+    while the datagram waits in its socket). Here every other answer leaves 2 ms after the vehicle read its clock
+    and every other request waits 3 ms before it does: no exchange is symmetric. The offset from the middle of the
+    shortest round trip's exchange was 1 ms off (every state's age 1 ms short of its way down); the middle of where
+    the latest answers' bounds agree is not (the fastest request and the fastest answer, of different exchanges).
+    How narrow the bounds come out is the machine's (0.04-0.08 ms quiet, 1-2.8 ms at load 20): not asserted here,
+    the bounds themselves are in tests/test_timesync_bounds.py."""
+    f = fly(tmp_path, timesync_hold_s=(0.002, 0.003))
+    way_down = stats(f)["way_down"]
+    age = np.median(controller_ages(f.run))
+    assert WAY_DOWN_S - 1e-3 * way_down["within_ms"] <= age <= WAY_DOWN_S + 0.010, (age, way_down)
 
 
 def test_the_clock_offset_comes_from_a_burst_of_timesyncs_before_the_first_tick(flown: Flown) -> None:
@@ -274,12 +319,24 @@ def test_a_later_state_in_the_first_tick_starts_the_mission_answered_at_once(tmp
     """The mission's first state lost and the next one come within the first tick (states bunched, as on a busy
     machine): the mission starts with that state and its first row answers it at once. (It once kept the lost
     state's time 0, so the state that came was a step in the future: its first row sent no target, and the
-    vehicle's timeline, whose time 0 is the state its first target answers, ran a step behind the trace's.)"""
+    vehicle's timeline, whose time 0 is the state its first target answers, ran a step behind the trace's.)
+    The controller phase-locks on the first five states however many of them one read brings (it counted reads:
+    under load two of the five came in one, step 6's state was the fifth read and the mission started with step
+    7's: 3 of 180 flights at load 5-13), and one after the five that comes with the fifth is the mission's first.
+    Left to the premise: this process sending step 6's state as meant, and the controller's first tick waking in
+    time to read it before step 7's comes (its stall there is listed at t = 0): else the first tick answers the
+    newest state it has, at once all the same. The schedule moved a period on is no stall (it was listed as one)."""
     f = fly(tmp_path, bunched=True)
     first = first_record(f.run / "controller.bin")
     assert math.isfinite(first["state_age_s"]), first  # a target sent: the row has its state's age
     assert first["t"] == pytest.approx(first["state_age_s"], abs=1e-9), first  # at the mission's time 0
-    assert min(f.targets) == min(DROPPED) + 1, sorted(f.targets)[:3]  # the state that came, answered
+    stalls = stats(f)["stalls"]["at"]
+    # the premise: step 6's state left this process as meant, and the controller's first tick woke in time to read
+    # it before step 7's came (a tick answers the newest state it has, and a stall of it is listed, at t = 0)
+    premise = f.sent_late[min(DROPPED) + 1] <= HICCUP_S and not any(t == 0.0 for t, _ in stalls)
+    assert min(f.targets) == min(DROPPED) + 1 or not premise, (sorted(f.targets)[:3], stalls)  # answered at once
+    # the schedule moved a period on to that state: no stall of a period at the next tick (one was listed)
+    assert not any(t == round(PERIOD, 3) and abs(ms - 1e3 * PERIOD) < 1.0 for t, ms in stalls), stalls
 
 
 def test_an_arm_whose_answers_are_lost_is_repeated_before_the_failsafe(flown: Flown) -> None:

@@ -151,6 +151,10 @@ def test_the_timing_block() -> None:
     assert t["lockstep_resends"] == 3 and t["answered_again"] == 1 and t["missing_rows"] == 0
     assert t["spin_skipped"] == {"vehicle": 4, "controller": 0}
     assert t["state_to_command_ms"]["max"] == 0.3
+    assert t["way_down"] is None  # lockstep: no way down counted
+    realtime = timing_block(joined(), RATE, 3.0, VEHICLE_STATS,
+                            {**CONTROLLER_STATS, "way_down": {"ms": 20.104, "within_ms": 0.061}})
+    assert realtime["way_down"] == {"ms": 20.104, "within_ms": 0.061}  # the controller's, as it said it
     empty = timing_block(Joined(), RATE, 1.0, {}, {})
     assert empty["flight_wall_s"] is None and empty["step_rate_hz"] is None and empty["sim_s"] == 0.0
 

@@ -324,6 +324,8 @@ def timing_block(joined: Joined, rate_hz: float, wall_s: float, vehicle: Mapping
         "state_to_command_timesync_ms": percentiles(joined.s2c_ms),
         "period_error_ms": percentiles(joined.late_ms),
         "stale_ticks": int(controller.get("stale_ticks", 0)),
+        # real time: the states' way down each age counts (TIMESYNC), and within how much it is right (ms; else None)
+        "way_down": controller.get("way_down"),
         "overruns": int(controller.get("overruns", 0)),
         # lockstep: states resent after RESEND_S of wall time unanswered, and the second answers to them
         "lockstep_resends": int(vehicle.get("resends", 0)),

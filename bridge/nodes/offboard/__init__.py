@@ -26,13 +26,14 @@ returns its outcome: ``completed``, ``failsafe``, ``diverged`` or ``aborted``.
   acknowledgement (HIL_ACTUATOR_CONTROLS, SAFETY_ARMED clear in ``mode``), so that the
   vehicle's step clock, and its failsafe timeout, run on as offline.
 - **realtime**: a drift-free fixed-rate schedule (tick j at T0 + j / rate_hz, never
-  re-based on a late tick), phase-locked just after the first state's arrival; each tick
+  re-based on a late tick), phase-locked just after the earliest arrival of five states; each tick
   controls on the newest state (the link model, if any, is on the wire: ``bsst relay``).
   A tick whose state (k0 + j) is not in yet waits for it at most half a period, as a flight
   stack's rate loop polls for its estimate with a timeout, then controls on what it has
   (counted in ``stale_ticks``). The mission time of tick j is the vehicle's: j / rate_hz
   plus the states' way down (their arrival phase less the vehicle's clock offset from
-  TIMESYNC) plus the tick's PHASE_S after the arrival, so the reference is sampled at
+  TIMESYNC: the middle of its bounds, right within half their width, in ``stats`` ``way_down``)
+  plus the tick's PHASE_S after the arrival, so the reference is sampled at
   the vehicle's now and each state's age includes its trip, as in lockstep: the guard and
   ``compensation = "predict"`` see the whole delay.
   Each row records the tick's lateness (the period error) and the state-to-command round
@@ -80,6 +81,7 @@ from bridge.nodes.offboard.config import (
     WAY_DOWN_MAX_S,
     WAY_DOWN_SLACK_S,
     OffboardConfig,
+    offset_bounds,
     stamp_problem,
     stamp_slack_s,
 )
@@ -90,5 +92,5 @@ from bridge.nodes.offboard.run import run_controller
 __all__ = [
     "HOUSEKEEPING_S", "OUTCOMES", "PHASE_S", "PHASE_STATES", "SPIN_BEFORE_TICK_S", "STAMP_PACE", "STAMP_SLACK_S",
     "STATE_WAIT_PERIODS", "WAY_DOWN_MAX_S", "WAY_DOWN_SLACK_S", "Offboard", "OffboardConfig", "OffboardLink",
-    "run_controller", "stamp_problem", "stamp_slack_s",
+    "offset_bounds", "run_controller", "stamp_problem", "stamp_slack_s",
 ]

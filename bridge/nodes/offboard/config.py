@@ -1,13 +1,17 @@
-"""The offboard controller's settings and its check of a state's stamp (:mod:`bridge.nodes.offboard`).
+"""The offboard controller's settings, its check of a state's stamp and the bounds TIMESYNC puts on the vehicle's clock
+(:mod:`bridge.nodes.offboard`).
 
 In:  a state's stamp (us), the newest accepted one's (us), the wall time between their arrivals (s), the
-     control period (s); a :class:`~bridge.core.flight.Flight` and its clock (for the slack)
+     control period (s); a :class:`~bridge.core.flight.Flight` and its clock (for the slack); TIMESYNC answers
+     (round trip, the least and the greatest clock offset each allows, ns)
 Out: :func:`stamp_problem`: why a stamp cannot follow (``stale``, ``stamp_jump``) or None; the slack (s);
+     :func:`offset_bounds`: the vehicle's clock offset as the answers bound it (ns);
      :class:`OffboardConfig`, where the vehicle is and how to fly it; the timing constants (s) of the flight
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from bridge.core.flight import Flight
@@ -60,6 +64,19 @@ def stamp_slack_s(flight: Flight, clock: str) -> float:
         return STAMP_SLACK_S
     d = flight.link.down
     return STAMP_SLACK_S + 2e-3 * d.jitter_ms + (1e-3 * d.queue_ms if d.rate_bps else 0.0)
+
+
+def offset_bounds(answers: Sequence[tuple[int, int, int]]) -> tuple[int, int]:
+    """The vehicle's clock offset (its clock less ours, ns) as TIMESYNC ``answers`` bound it, each (round trip,
+    least offset, greatest offset): the vehicle read its clock (tc1) between our request's send (ts1) and its
+    answer's arrival (now), so the offset lies within [tc1 - now, tc1 - ts1] whatever the two ways took. Where all
+    of them agree (their intersection: the least way over and the least way back, which on a busy machine are
+    seldom one exchange's); if they do not (the vehicle's clock stepped), the shortest round trip's. One at least."""
+    lo, hi = max(a[1] for a in answers), min(a[2] for a in answers)
+    if lo <= hi:
+        return lo, hi
+    best = min(answers)
+    return best[1], best[2]
 
 
 @dataclass(frozen=True)

@@ -81,6 +81,7 @@ class Offboard(OffboardLink):
         self._changes = list(flight.param_changes)  # scheduled PARAM_SETs not sent yet, by mission time
         self._end_wall: float | None = None  # wall time the mission's last state came (the events' clock after it)
         self._way_down: float | None = None  # real time: the states' way down (s), the vehicle's clock ahead of ours
+        self.way_down: dict[str, float] | None = None  # real time: that in ms and how far off it may be (stats)
         self._end_usec: int | None = None  # lockstep: the stamp of the state that ended the mission, unanswered
         self._end_height_m = 0.0
 
@@ -219,31 +220,14 @@ class Offboard(OffboardLink):
         period = 1.0 / rate
         steps = self.steps
         mono = time.monotonic
-        # phase-lock to the vehicle: ticks just after its states arrive. The phase is the
-        # earliest arrival (recv - k / rate) over a few states, so one state that waited in
-        # the socket while we were busy does not shift the schedule.
-        self._odo = None
-        self._last_state = mono()
-        phase: float | None = None
-        seen = 0
-        while seen < PHASE_STATES and not self.stopping:
-            outcome = self._check_vehicle()
-            if outcome:
-                return outcome
-            self._serve(min(self._next_house, self._last_rx + self.cfg.vehicle_timeout_s))
-            if self._odo is not None:
-                k = step_of_usec(self._odo.time_usec, rate)
-                p = self._odo_recv - k * period
-                phase = p if phase is None else min(phase, p)
-                seen += 1
-                self._odo = None
-        if self.stopping or phase is None:
-            return "aborted"
-        k0 = k + 1  # the mission starts with the next state
+        locked = self._phase_lock(period)
+        if isinstance(locked, str):
+            return locked
+        phase, k0 = locked
         self.schedule = clock = FixedRate(phase + k0 * period + PHASE_S, rate)
         last_k = k0 - 1
         usec, recv = 0, math.nan  # the newest state's stamp and arrival
-        woke = math.inf  # when the last tick woke (s, time.monotonic)
+        woke = max(mono(), clock.due(0) - period)  # when the last tick woke (s): the first tick's is judged too
         way_down: float | None = None  # the states' one-way trip (s), once TIMESYNC tells it
         j = 0
         while not self.stopping:
@@ -279,6 +263,7 @@ class Offboard(OffboardLink):
                     # with it, as the trace and the vehicle's timeline do (their time 0 is the state the
                     # first target answers), its tick where its state was due (phase + k / rate)
                     self.schedule = clock = FixedRate(due + (k - k0 - j) * period, rate, clock.skipped)
+                    woke += (k - k0 - j) * period  # the schedule moved, not the process: no stall at the next tick
                     k0, j = k, 0
                 if k - k0 >= steps:
                     return self._end_of_mission((k - k0) / rate, odo)
@@ -292,11 +277,41 @@ class Offboard(OffboardLink):
             self._decide(t, last_k, usec, recv, late)
         return "aborted"
 
+    def _phase_lock(self, period: float) -> tuple[float, int] | str:
+        """Real time: the phase of the vehicle's states (the ticks come just after they arrive): their earliest arrival
+        (recv - k / rate) over the first PHASE_STATES states (states read together count each, the newest the read's
+        sample), and the mission's first step: the next state's, or the newest's if it came after the five with the
+        fifth (kept for the first tick, which answers it at once). Or the outcome if the vehicle is lost."""
+        self._odo = None
+        self._last_state = time.monotonic()
+        phase: float | None = None
+        seen = 0  # states taken
+        while not self.stopping:
+            outcome = self._check_vehicle()
+            if outcome:
+                return outcome
+            before = self.states
+            self._serve(min(self._next_house, self._last_rx + self.cfg.vehicle_timeout_s))
+            if self._odo is None:
+                continue
+            k = step_of_usec(self._odo.time_usec, self.rate)
+            seen += self.states - before
+            if seen > PHASE_STATES and phase is not None:  # the newest came after the five: the mission's first
+                return phase, k
+            p = self._odo_recv - k * period
+            phase = p if phase is None else min(phase, p)
+            self._odo = None
+            if seen >= PHASE_STATES:
+                return phase, k + 1  # the mission starts with the next state
+        return "aborted"
+
     def _way_down_s(self, phase: float) -> float | None:
         """Real time: the one-way trip of the earliest-arriving states (s, >= 0), from the phase of their arrivals
-        and the vehicle's clock offset by TIMESYNC; None until a TIMESYNC answer is in. The offset takes the two
-        ways as equal, so an asymmetric link (a delay on the way down only) is credited with half of the difference."""
-        if self.offset_ns is None:
+        and the vehicle's clock offset by TIMESYNC; None until a TIMESYNC answer is in. The offset is the middle of
+        its bounds (config.offset_bounds), which takes the two ways' fastest trips as equal: an asymmetric link (a
+        delay on the way down only) is credited with half of the difference, and the trip is right within half
+        the bounds' width (:attr:`way_down`), plus how late the earliest arrival was read (never early)."""
+        if self.offset_range_ns is None or self.offset_ns is None:
             return None
         trip = phase + self.offset_ns * 1e-9
         if not -WAY_DOWN_SLACK_S <= trip <= WAY_DOWN_MAX_S:
@@ -304,6 +319,8 @@ class Offboard(OffboardLink):
             self.event("timesync", f"the states' way down comes out at {trip * 1e3:.1f} ms: "
                                    "not counted in their age (stamps and TIMESYNC on different clocks?)")
             return 0.0
+        lo, hi = self.offset_range_ns
+        self.way_down = {"ms": round(max(trip, 0.0) * 1e3, 3), "within_ms": round((hi - lo) * 0.5e-6, 3)}
         return max(trip, 0.0)
 
     def _observe(self, odo: Any, t_state: float, recv: float) -> None:

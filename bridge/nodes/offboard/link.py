@@ -3,9 +3,10 @@ it sends (:mod:`bridge.nodes.offboard`).
 
 In:  the vehicle's messages: ODOMETRY (checked: sender, stamp, range; kept newest only), HEARTBEAT (armed, system
      status CRITICAL = its failsafe, PX4 ``custom_mode``: a ground station's mode), COMMAND_ACK, TIMESYNC (clock
-     offset and round trip, ns), EVENT (typed, bridge.mavlink.events: its id FAILSAFE is its failsafe too, LOCKSTEP
-     says it left lockstep; each sequence handled once), CURRENT_EVENT_SEQUENCE and RESPONSE_EVENT_ERROR (the
-     events missed, bridge.mavlink.eventseq), STATUSTEXT (reported as said, never read for a decision)
+     offset, its bounds, round trip, ns), EVENT (typed, bridge.mavlink.events: its id FAILSAFE is its failsafe
+     too, LOCKSTEP says it left lockstep; each sequence handled once), CURRENT_EVENT_SEQUENCE and
+     RESPONSE_EVENT_ERROR (the events missed, bridge.mavlink.eventseq), STATUSTEXT (reported as said, never read
+     for a decision)
 Out: actuator targets stamped with their state's ``time_usec`` (or the lockstep no-target acknowledgement),
      ARM_DISARM and other COMMAND_LONGs until ACKed, PARAM_SET until the vehicle's PARAM_VALUE echoes it
      (every 0.2 s of wall time), HEARTBEAT, TIMESYNC, REQUEST_EVENT for the EVENTs missed; ``controller.tlog``;
@@ -48,6 +49,7 @@ from bridge.nodes.offboard.config import (
     HOUSEKEEPING_S,
     SPIN_BEFORE_TICK_S,
     OffboardConfig,
+    offset_bounds,
     stamp_problem,
     stamp_slack_s,
 )
@@ -134,9 +136,11 @@ class OffboardLink:
         self._next_hb = now
         self._next_ts = now
         self._next_house = now
-        self._ts_recent: deque[tuple[int, int]] = deque(maxlen=TIMESYNC_WINDOW)  # (rtt ns, offset ns) answers
-        self.offset_ns: int | None = None  # vehicle clock - our clock
-        self.rtt_ns: int | None = None
+        # the latest answers: (round trip, the least and the greatest clock offset it allows), ns
+        self._ts_recent: deque[tuple[int, int, int]] = deque(maxlen=TIMESYNC_WINDOW)
+        self.offset_range_ns: tuple[int, int] | None = None  # vehicle clock - our clock: its bounds (_timesync)
+        self.offset_ns: int | None = None  # their middle
+        self.rtt_ns: int | None = None  # the shortest round trip of the latest answers
         self.commands = 0
         self.states = 0
         self.states_refused = 0  # the vehicle's states refused (stamp or numbers)
@@ -394,11 +398,14 @@ class OffboardLink:
         rtt = now - m.ts1
         if rtt < 0 or rtt > 1_000_000_000:
             return
-        offset = m.tc1 - (m.ts1 + now) // 2
-        # the answer with the smallest round trip among the last few: its offset is the least
-        # disturbed by queueing on either side (a busy machine delays some answers by milliseconds)
-        self._ts_recent.append((rtt, offset))
-        self.rtt_ns, self.offset_ns = min(self._ts_recent)
+        # the vehicle read its clock (tc1) between our request (ts1) and its answer's arrival (now): the offset
+        # lies within [tc1 - now, tc1 - ts1], the round trip wide, however the trip split between the two ways;
+        # a busy machine (either side descheduled) holds up one way of many exchanges, so the offset is taken
+        # where the latest answers' bounds agree, not from one exchange (config.offset_bounds)
+        self._ts_recent.append((rtt, m.tc1 - now, m.tc1 - m.ts1))
+        self.rtt_ns = min(self._ts_recent)[0]
+        self.offset_range_ns = offset_bounds(self._ts_recent)
+        self.offset_ns = sum(self.offset_range_ns) // 2  # the middle: both ways equal at their fastest
 
     def _housekeeping(self) -> None:
         now = time.monotonic()

@@ -42,6 +42,7 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
                 "commands": node.commands, "states": node.states, "received": node.ep.received,
                 "sent": node.ep.sent, "stale_ticks": node.stale_ticks, "overruns": node.overruns,
                 "stalls": node.stalls.report(),
+                "way_down": node.way_down,  # real time: the states' way down counted in their ages, ms (or None)
                 "spin_skipped": node.spinner.skipped,
                 "down": node.cend.down.stats.summary() if cfg.clock == "lockstep" else None,
                 **({"radio": node.turns.stats()} if node.turns is not None else {}),  # its part of the fleet's radio
