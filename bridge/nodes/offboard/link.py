@@ -141,6 +141,7 @@ class OffboardLink:
         self.states = 0
         self.states_refused = 0  # the vehicle's states refused (stamp or numbers)
         self.state_window: list[int] | None = None  # [first, last] step of the vehicle's states read
+        self.read_until: float | None = None  # s, time.monotonic: when it stopped reading the vehicle (stop_reading)
         self.t_mission = 0.0  # the mission time the events are reported at (s)
         self.param_sets: list[ScheduledSet] = []  # the scheduled PARAM_SETs sent, in order
         self._pending_params: dict[str, ScheduledSet] = {}  # by name: sent, not echoed by the vehicle yet
@@ -208,6 +209,23 @@ class OffboardLink:
             self._send_no_target(time_usec)
         else:
             self._send_target(time_usec, wire)
+
+    def stop_reading(self, batches: int = 64) -> None:
+        """Before the socket closes: read what already waits on it (its states delivered, not lost), then say when
+        reading stopped (:attr:`read_until`, s of ``time.monotonic``, taken before the look that found the socket
+        empty: a datagram queued before it was read, one sent after it never was; on one host the vehicle's clock
+        too, so ``summary.json`` counts a state it sent after that in flight, docs/sitl.md). Bounded (a flood still
+        queued after ``batches`` polls is left); once only."""
+        if self.read_until is not None or self.ep.fileno < 0:
+            return
+        t = time.monotonic()
+        for _ in range(batches):
+            t = time.monotonic()
+            if not self.ep.queued():
+                break
+            for m, _addr in self.ep.poll():
+                self._on(m)
+        self.read_until = t
 
     def _send_no_target(self, time_usec: int) -> None:
         """Lockstep: acknowledge the step of the state stamped ``time_usec`` without a valid

@@ -46,7 +46,7 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
                 "down": node.cend.down.stats.summary() if cfg.clock == "lockstep" else None,
                 **({"radio": node.turns.stats()} if node.turns is not None else {}),  # its part of the fleet's radio
                 "rejected": dict(node.rejected), "rejected_from_vehicle": node.rejected.from_peer,
-                "states_refused": node.states_refused, "state_window": node.state_window,
+                "states_refused": node.states_refused, "state_window": node.state_window, "read_until": node.read_until,
                 "kernel_drops": node.ep.kernel_drops(), "mission_transfer": transfer,
                 "events": node.event_seq.counts.as_dict()}))  # the vehicle's EVENTs missed, asked for, recovered
     left = bool(node.left_lockstep)

@@ -186,7 +186,7 @@ class Vehicle:
             **({"radio": self.turns.part()} if self.turns is not None else {}),  # its part of the fleet's one radio
             "rejected_from_controller": self.rejected.from_peer, "resends": self.odometry.resends,
             "answered_again": self.targets.answered_again, "spin_skipped": self.spinner.skipped,
-            "odometry_steps": self.odometry.steps.ranges,
+            **self.odometry.sends.stats(),  # odometry_steps, _again, _again_unlisted, _resent
             "kernel_drops": self.link.kernel_drops(),
             "up": self.vend.up.stats.summary() if self.cfg.clock == "lockstep" else None,
             "plant": self.commander.plant_at_end or plant_blocks(self.plant),  # wind, battery, impact, as offline
