@@ -392,10 +392,9 @@ class StepSends:
 
     def add(self, k: int, before: float, after: float) -> None:
         """One send of step ``k`` that left between ``before`` and ``after`` (s, ``time.monotonic``)."""
-        again = k == self._newest or (k < self._newest and self.steps.holds(k))
-        self.steps.add(k)
-        self._newest = max(self._newest, k)
-        if not again:
+        if not (k == self._newest or (k < self._newest and self.steps.holds(k))):  # its first send
+            self.steps.add(k)
+            self._newest = max(self._newest, k)
             return
         self.resends += 1
         self.timed.append((k, before, after))

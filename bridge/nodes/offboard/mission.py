@@ -231,7 +231,8 @@ def fetch_mission(flight: Flight, cfg: OffboardConfig, out: Path | None, status:
     got = _fetch(link, flight, out, empty)
     # the states the vehicle sent while it waited crossed the link: read, not lost (summary.json link.down)
     return replace(got, states={"states": link.states, "states_refused": link.states_refused,
-                                "state_window": link.state_window, "read_until": link.read_until})
+                                "state_window": link.state_window, "read_until": link.read_until,
+                                "kernel_drops": link.ep.kernel_drops()})
 
 
 def _fetch(link: MissionLink, flight: Flight, out: Path | None, empty: TransferStats) -> Fetched:
