@@ -340,3 +340,24 @@ def test_the_sender_counts_every_send_and_keeps_only_a_bounded_record() -> None:
         big.add(k, 0.0, 0.0)
     assert len(big.again) == StepSends.MAX_AGAIN and big.again_unlisted == 10
     assert len(big.timed) == StepSends.MAX_TIMED and big.resends == StepSends.MAX_AGAIN + 10
+
+
+def test_a_target_sent_after_the_vehicle_stopped_reading_is_in_flight_not_lost() -> None:
+    """Real time stopped by Ctrl-C: both children get SIGTERM at once, and the controller's last targets may leave
+    after the vehicle's last look at its socket (its ``read_until``); the controller times its latest targets'
+    sends, so such a target is in flight, not lost (a real-time Ctrl-C counted ``lost 1`` up, 4 runs of 4)."""
+    vehicle = {"accepted": 98, "odometry_sent": 0, "rejected": {}, "read_until": 10.0}
+    timed = ([[9.0 + 0.004 * i, 9.0 + 0.004 * i + 1e-5] for i in range(98)]  # before it: read
+             + [[10.0 - 1e-6, 10.0 + 1e-6], [10.001, 10.00101], [10.005, 10.00501]])  # leaving, then two after
+    controller = {"commands": 101, "targets_left": timed, "states": 0, "state_window": None}
+    up = link_block(joined(10), vehicle, controller, None)["up"]
+    assert (up["delivered"], up["in_flight"], up["lost"]) == (98, 2 + 1, 0), up
+    up = link_block(joined(10), {**vehicle, "accepted": 99}, controller, None)["up"]  # the one leaving was read
+    assert (up["delivered"], up["in_flight"], up["lost"]) == (99, 2, 0), up
+    # a vehicle that did not say when it stopped: nothing is taken from lost
+    up = link_block(joined(10), {k: v for k, v in vehicle.items() if k != "read_until"}, controller, None)["up"]
+    assert (up["in_flight"], up["lost"]) == (0, 3), up
+    # 400 sent, the last 256 timed, all after the stop: the 144 older were read or not (100 were read)
+    many = {"commands": 400, "targets_left": [[10.5 + i * 1e-3, 10.5 + i * 1e-3 + 1e-5] for i in range(256)]}
+    up = link_block(joined(10), {**vehicle, "accepted": 100}, many, None)["up"]
+    assert (up["delivered"], up["in_flight"], up["lost"]) == (100, 300, 0), up

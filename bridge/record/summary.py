@@ -241,8 +241,8 @@ def link_block(joined: Joined, vehicle: Mapping[str, Any], controller: Mapping[s
     own = int(vs.get("rejected_from_controller", sum(by["vehicle"].values())))  # of the controller's datagrams
     measured = {"up": percentiles(joined.up_ms), "down": percentiles(joined.down_ms)}
     model = {"up": vs.get("up"), "down": cs.get("down")}
-    sides = {"up": socket_counts(int(cs.get("commands", joined.commands)), int(vs.get("accepted", 0)), own, 0,
-                                 kernel=vs.get("kernel_drops")),
+    sides = {"up": socket_counts(int(cs.get("commands", joined.commands)), int(vs.get("accepted", 0)), own,
+                                 *targets_outside(vs, cs), kernel=vs.get("kernel_drops")),
              # a killed controller left no stats: its rows, the steps they answer, and no time it stopped reading
              "down": socket_counts(int(vs.get("odometry_sent", 0)), int(cs.get("states", joined.commands)),
                                    int(cs.get("states_refused", 0)),
@@ -319,11 +319,30 @@ def sends_outside(vehicle: Mapping[str, Any], controller: Mapping[str, Any]) -> 
         return surely, unlisted + inside
     resent = vehicle.get("odometry_resent") or []  # the latest resends, oldest first: [step, before, after]
     timed = [(a, b) for k, a, b in resent if lo <= k <= hi]
-    after = sum(a > until for a, _ in timed)
-    leaving = sum(a <= until <= b for a, b in timed)
+    after, leaving = left_after(timed, until)
     untimed = sum(n for _, n in again) + unlisted - len(resent)  # older than those timed
     unsure = max(0, min(untimed, inside - len(timed))) if untimed > 0 and resent and resent[0][1] > until else 0
     return surely + after, unlisted + leaving + unsure
+
+
+def targets_outside(vehicle: Mapping[str, Any], controller: Mapping[str, Any]) -> tuple[int, int]:
+    """Of the controller's targets, how many surely left after the vehicle stopped reading (its ``read_until``; the
+    controller's latest targets timed, ``targets_left``), and how many may have (leaving just then; older than those
+    timed when even the oldest timed left after): (surely, maybe). (0, 0) where either side did not say."""
+    until = vehicle.get("read_until")
+    timed = [(a, b) for a, b in controller.get("targets_left") or []]
+    if until is None or not timed:
+        return 0, 0
+    after, leaving = left_after(timed, until)
+    older = int(controller.get("commands", 0)) - len(timed)
+    return after, leaving + (older if older > 0 and timed[0][0] > until else 0)
+
+
+def left_after(timed: Sequence[tuple[float, float]], until: float) -> tuple[int, int]:
+    """Of sends timed ``(before, after)`` (s, ``time.monotonic``), how many surely left after ``until`` (the
+    receiver's last look found its socket empty then: queued before it, read; after it, never) and how many were
+    leaving at that very time (read or not)."""
+    return sum(a > until for a, _ in timed), sum(a <= until <= b for a, b in timed)
 
 
 def steps_outside(sent: Sequence[Sequence[int]], window: Sequence[int] | None) -> int:

@@ -57,6 +57,7 @@ _ZERO12 = (0.0,) * 12
 _ZERO16 = (0.0,) * 16
 PARAM_RETRY_S = 0.2  # s of wall time between PARAM_SETs of one scheduled change the vehicle has not echoed
 TIMESYNC_WINDOW = 8  # the clock offset is the best (shortest round trip) of this many latest TIMESYNC answers
+TARGETS_TIMED = 256  # the latest targets' sends timed (just before, just after): which left after the vehicle stopped
 TIMESYNC_BURST_S = 0.01  # s of wall time between TIMESYNC requests until that many answers are in (then timesync_s)
 
 
@@ -138,6 +139,7 @@ class OffboardLink:
         self.offset_ns: int | None = None  # vehicle clock - our clock
         self.rtt_ns: int | None = None
         self.commands = 0
+        self.targets_left: deque[tuple[float, float]] = deque(maxlen=TARGETS_TIMED)  # the latest, time.monotonic
         self.states = 0
         self.states_refused = 0  # the vehicle's states refused (stamp or numbers)
         self.state_window: list[int] | None = None  # [first, last] step of the vehicle's states read
@@ -289,6 +291,7 @@ class OffboardLink:
     def _send_target(self, time_usec: int, wire: tuple[float, ...]) -> None:
         """The actuator target answering the state stamped ``time_usec`` (hot path)."""
         self.commands += 1
+        before = time.monotonic()
         if self.actuation == "motors":
             flags = 1 if self.cfg.clock == "lockstep" else 0  # bit 0: lockstep
             self.ep.send_hot(HIL_ACTUATOR_CONTROLS, (time_usec, flags, *wire, *_ZERO12,
@@ -296,6 +299,7 @@ class OffboardLink:
         else:  # control group 0
             self.ep.send_hot(SET_ACTUATOR_CONTROL_TARGET, (time_usec, *wire, 0.0, 0.0, 0.0, 0.0, 0,
                                                            self.vsys or 0, self.vcomp))
+        self.targets_left.append((before, time.monotonic()))
 
     def _serve(self, deadline: float) -> None:
         for _, m, _addr in wait((self.ep,), deadline):

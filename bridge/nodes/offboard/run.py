@@ -39,7 +39,8 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
     outcome = node.run()
     unconfirmed = node.unconfirmed_params()
     emit(Stats({"param_at": [p.as_dict() for p in node.param_sets],
-                "commands": node.commands, "states": node.states, "received": node.ep.received,
+                "commands": node.commands, "targets_left": [list(t) for t in node.targets_left],  # their sends' times
+                "states": node.states, "received": node.ep.received,
                 "sent": node.ep.sent, "stale_ticks": node.stale_ticks, "overruns": node.overruns,
                 "stalls": node.stalls.report(),
                 "spin_skipped": node.spinner.skipped,
