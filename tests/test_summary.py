@@ -1,5 +1,5 @@
-"""Covers bridge.record.summary, bridge.record.events and bridge.record.columns: a session's summary.json built
-from hand-made inputs, without processes.
+"""Covers bridge.record.summary, bridge.record.events, bridge.record.columns and bridge.mavlink.receive: a session's
+summary.json built from hand-made inputs (and the sender's count of its states, StepSends), without processes.
 
 Each case is what a session could see (the joined trace, each child's end, the events); the summary's
 outcome, ``ended_by``, ``link``, ``timing``, ``lockstep`` and policy blocks are checked against it.
@@ -9,11 +9,13 @@ Real sessions, whose summaries these functions build, are in test_sitl.py and te
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import pytest
 
 from bridge.autopilot.vehicleevents import ITSELF, Sender
 from bridge.core.flight import prepare
+from bridge.mavlink.receive import StepSends
 from bridge.record.columns import (
     CONTROLLER_COLUMNS,
     TRACE_COLUMNS,
@@ -34,6 +36,7 @@ from bridge.record.summary import (
     outcome_of,
     session_summary,
     stalls_block,
+    steps_outside,
     timing_block,
 )
 from missions import Mission, Sine
@@ -279,3 +282,86 @@ def test_a_real_time_run_the_machine_stalled_lists_each_stall_on_the_flights_clo
     assert calm.summary["timing"]["stalls"]["count"] == 0 and [n.kind for n in calm.notes] == ["ended"]
     lockstep = session_summary(FLIGHT, facts(), joined(), [ARMED], *ends())
     assert "stalls" not in lockstep.summary["timing"]  # lockstep waits for its answers: nothing to stall
+
+
+def test_a_resend_after_the_receiver_stopped_reading_is_in_flight_not_lost() -> None:
+    """Lockstep resends its newest state while it waits: the sends of a step the controller read that left after it
+    stopped reading (its ``read_until``, one monotonic clock) never came, and are in flight; a send that was
+    leaving just then was read or not, never lost; every send of a step outside its window is in flight, resends
+    too. Once a step is counted per send, a perfect link loses nothing."""
+    sends = StepSends()
+    for k in range(10, 20):
+        sends.add(k, float(k), k + 0.001)
+    for j in range(1, 6):  # step 19 (the newest) sent again five times, at 19.05 .. 19.25 s
+        sends.add(19, 19 + 0.05 * j, 19 + 0.05 * j + 0.001)
+    sends.add(20, 20.0, 20.001)
+    sends.add(20, 20.05, 20.051)  # step 20, never read, sent twice
+    stats = sends.stats()
+    assert stats["odometry_steps"] == [[10, 20]] and stats["odometry_again"] == [[19, 5], [20, 1]]
+    assert sends.resends == 6 and [r[0] for r in stats["odometry_resent"]] == [19] * 5 + [20]
+    vehicle = {"accepted": 10, "odometry_sent": 17, "rejected": {}, **stats}
+    # it read steps 10-19 and the first two resends (12 states), and stopped reading at 19.12 s
+    controller = {"commands": 10, "states": 12, "states_refused": 0, "state_window": [10, 19], "read_until": 19.12}
+    down = link_block(joined(10), vehicle, controller, None)["down"]
+    assert (down["delivered"], down["in_flight"], down["lost"]) == (12, 3 + 2, 0), down  # 19's last three; 20 x2
+    # one resend was leaving as it stopped (19.1505 within 19.15 .. 19.151), and was read: nothing left for it
+    at = {**controller, "states": 13, "read_until": 19.1505}
+    down = link_block(joined(10), vehicle, at, None)["down"]
+    assert (down["delivered"], down["in_flight"], down["lost"]) == (13, 2 + 2, 0), down
+    # the same one not read: in flight
+    down = link_block(joined(10), vehicle, {**at, "states": 12}, None)["down"]
+    assert (down["delivered"], down["in_flight"], down["lost"]) == (12, 2 + 2 + 1, 0), down
+    # counted per step, as before, the resends of step 19 after the stop were "lost"
+    assert steps_outside(stats["odometry_steps"], [10, 19]) == 1
+
+
+def test_a_killed_controllers_window_is_the_steps_its_rows_answer() -> None:
+    """A controller killed leaves no stats: what it read is its rows (the states it answered), the steps they answer
+    its window, and no time it stopped; what the vehicle sent after is in flight (it counted -300 lost before)."""
+    sends = StepSends()
+    for k in range(5, 105):
+        sends.add(k, float(k), k + 0.001)
+    sends.add(104, 104.05, 104.051)  # its last answered step, sent again: read or not, nobody can say; never lost
+    vehicle = {"accepted": 50, "odometry_sent": 101, "rejected": {}, **sends.stats()}
+    down = link_block(replace(joined(50), controller_steps=(5, 54)), vehicle, {}, None)["down"]
+    assert (down["delivered"], down["in_flight"], down["lost"]) == (50, 50 + 1, 0), down  # steps 55-104, 104 again
+    down = link_block(replace(joined(100), controller_steps=(5, 104)), vehicle, {}, None)["down"]
+    assert (down["delivered"], down["in_flight"], down["lost"]) == (100, 1, 0), down  # killed after its last row
+
+
+def test_the_sender_counts_every_send_and_keeps_only_a_bounded_record() -> None:
+    """A step's first send is in its ranges; a send of a step already sent is a resend, counted for its step (at most
+    MAX_AGAIN steps listed, the rest unlisted) and timed (the latest MAX_TIMED): a long flight's record stays small."""
+    s = StepSends()
+    s.add(3, 0.0, 0.0)
+    s.add(5, 1.0, 1.0)
+    s.add(3, 2.0, 2.0)  # an older step sent again
+    s.add(4, 3.0, 3.0)  # an older step never sent: a first send (its range folded into the last)
+    assert s.resends == 1 and s.again == {3: 1}
+    big = StepSends()
+    for k in range(StepSends.MAX_AGAIN + 10):
+        big.add(k, 0.0, 0.0)
+        big.add(k, 0.0, 0.0)
+    assert len(big.again) == StepSends.MAX_AGAIN and big.again_unlisted == 10
+    assert len(big.timed) == StepSends.MAX_TIMED and big.resends == StepSends.MAX_AGAIN + 10
+
+
+def test_a_target_sent_after_the_vehicle_stopped_reading_is_in_flight_not_lost() -> None:
+    """Real time stopped by Ctrl-C: both children get SIGTERM at once, and the controller's last targets may leave
+    after the vehicle's last look at its socket (its ``read_until``); the controller times its latest targets'
+    sends, so such a target is in flight, not lost (a real-time Ctrl-C counted ``lost 1`` up, 4 runs of 4)."""
+    vehicle = {"accepted": 98, "odometry_sent": 0, "rejected": {}, "read_until": 10.0}
+    timed = ([[9.0 + 0.004 * i, 9.0 + 0.004 * i + 1e-5] for i in range(98)]  # before it: read
+             + [[10.0 - 1e-6, 10.0 + 1e-6], [10.001, 10.00101], [10.005, 10.00501]])  # leaving, then two after
+    controller = {"commands": 101, "targets_left": timed, "states": 0, "state_window": None}
+    up = link_block(joined(10), vehicle, controller, None)["up"]
+    assert (up["delivered"], up["in_flight"], up["lost"]) == (98, 2 + 1, 0), up
+    up = link_block(joined(10), {**vehicle, "accepted": 99}, controller, None)["up"]  # the one leaving was read
+    assert (up["delivered"], up["in_flight"], up["lost"]) == (99, 2, 0), up
+    # a vehicle that did not say when it stopped: nothing is taken from lost
+    up = link_block(joined(10), {k: v for k, v in vehicle.items() if k != "read_until"}, controller, None)["up"]
+    assert (up["in_flight"], up["lost"]) == (0, 3), up
+    # 400 sent, the last 256 timed, all after the stop: the 144 older were read or not (100 were read)
+    many = {"commands": 400, "targets_left": [[10.5 + i * 1e-3, 10.5 + i * 1e-3 + 1e-5] for i in range(256)]}
+    up = link_block(joined(10), {**vehicle, "accepted": 100}, many, None)["up"]
+    assert (up["delivered"], up["in_flight"], up["lost"]) == (100, 300, 0), up

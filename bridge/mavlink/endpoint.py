@@ -395,6 +395,13 @@ class Endpoint:
                 self.peer = addr
         return True
 
+    def queued(self) -> bool:
+        """Whether a datagram waits to be read on any of its sockets now (never blocks; False once closed)."""
+        if self.fileno < 0:
+            return False
+        socks = [self.sock] if self.prio is None else [self.sock, self.prio]
+        return bool(self._early) or bool(select.select(socks, [], [], 0)[0])
+
     def kernel_drops(self) -> int | None:
         """Datagrams the kernel dropped before this endpoint could read them (its receive buffer full), all its
         sockets so far (:func:`socket_drops`; kept at :meth:`close`); None where the kernel does not say."""

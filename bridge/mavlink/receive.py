@@ -38,8 +38,10 @@ STATUSTEXT once per second while refusals go on (:meth:`Rejections.report`).
 
 from __future__ import annotations
 
+import bisect
 import math
 import time
+from collections import deque
 from typing import Any
 
 MAX_DATAGRAM = 2048  # bytes: a MAVLink 2 frame is at most 280; a few may share a datagram
@@ -360,3 +362,50 @@ class StepRanges:
             r.append([k, k])
         else:  # out of order, or out of room: the last range covers it
             r[-1][0], r[-1][1] = min(r[-1][0], k), max(r[-1][1], k)
+
+    def holds(self, k: int) -> bool:
+        """Whether step ``k`` lies in a range (was sent, or lies in one a later step was folded into)."""
+        r = self.ranges
+        i = bisect.bisect_right(r, k, key=lambda pair: pair[0]) - 1
+        return i >= 0 and r[i][0] <= k <= r[i][1]
+
+
+class StepSends:
+    """Every send of a per-step message, counted per send: the steps (:class:`StepRanges`, each once), how many
+    times each step sent again went again (``again``: {step: sends after its first}, at most :data:`MAX_AGAIN`
+    steps; more in ``again_unlisted``), and when the latest :data:`MAX_TIMED` of those resends left (step, and
+    ``time.monotonic`` just before and just after the send: on one host the receiver's clock too). A step's first
+    send goes before any later step's, so only a resend can leave after the receiver stopped reading steps it had
+    read: the summary tells those apart from a loss (:func:`bridge.record.summary.sends_outside`). Bounded: a long
+    flight keeps its ranges, its resent steps and the last resends' times, not one entry a send."""
+
+    MAX_AGAIN = 4096
+    MAX_TIMED = 128
+
+    def __init__(self) -> None:
+        self.steps = StepRanges()
+        self.again: dict[int, int] = {}
+        self.again_unlisted = 0
+        self.resends = 0
+        self.timed: deque[tuple[int, float, float]] = deque(maxlen=self.MAX_TIMED)
+        self._newest = -1
+
+    def add(self, k: int, before: float, after: float) -> None:
+        """One send of step ``k`` that left between ``before`` and ``after`` (s, ``time.monotonic``)."""
+        if not (k == self._newest or (k < self._newest and self.steps.holds(k))):  # its first send
+            self.steps.add(k)
+            self._newest = max(self._newest, k)
+            return
+        self.resends += 1
+        self.timed.append((k, before, after))
+        if k in self.again or len(self.again) < self.MAX_AGAIN:
+            self.again[k] = self.again.get(k, 0) + 1
+        else:
+            self.again_unlisted += 1
+
+    def stats(self) -> dict[str, Any]:
+        """The sender's ``stats`` keys: ``odometry_steps`` (ranges), ``odometry_again`` ([step, sends again]
+        pairs), ``odometry_again_unlisted``, ``odometry_resent`` ([step, before, after] of the latest resends)."""
+        return {"odometry_steps": self.steps.ranges, "odometry_again": [[k, n] for k, n in self.again.items()],
+                "odometry_again_unlisted": self.again_unlisted,
+                "odometry_resent": [[k, a, b] for k, a, b in self.timed]}

@@ -51,9 +51,10 @@ _DESIRED = attrgetter(*DESIRED_COLUMNS)
 class Joined:
     """The trace as the session joined it, and what the join measured (:class:`bridge.record.joiner.TraceJoiner`):
     per-packet ``up_ms``, ``down_ms`` (one-way, ms), ``rtt_ms`` (vehicle's round trip), ``s2c_ms`` (state to
-    command by TIMESYNC), ``late_ms`` (tick lateness); ``commands``: controller rows read; ``k0``: the
-    vehicle's step of the trace's t = 0; ``first_sent``/``last_sent``: wall s of the first and last joined
-    state's send; ``missing``: rows without their controller half."""
+    command by TIMESYNC), ``late_ms`` (tick lateness); ``commands``: controller rows read (``controller_steps``:
+    the first and last step they answer); ``k0``: the vehicle's step of the trace's t = 0;
+    ``first_sent``/``last_sent``: wall s of the first and last joined state's send; ``missing``: rows without their
+    controller half."""
 
     rows: Sequence[TraceRow] = ()
     k0: int | None = None
@@ -66,6 +67,7 @@ class Joined:
     rtt_ms: Sequence[float] = ()
     s2c_ms: Sequence[float] = ()
     late_ms: Sequence[float] = ()
+    controller_steps: tuple[int, int] | None = None  # [first, last] step of the controller's rows (None: none)
 
 
 class TraceJoiner:
@@ -223,7 +225,8 @@ class TraceJoiner:
     def joined(self) -> Joined:
         """The rows joined so far and what the join measured."""
         return Joined(self.rows, self.k0, self.missing, self.first_sent, self.last_sent, len(self.ctl), self.up_ms,
-                      self.down_ms, self.rtt_ms, self.s2c_ms, self.late_ms)
+                      self.down_ms, self.rtt_ms, self.s2c_ms, self.late_ms,
+                      (min(self.ctl), max(self.ctl)) if self.ctl else None)
 
     def close(self) -> None:
         self.v.close()

@@ -241,13 +241,14 @@ def link_block(joined: Joined, vehicle: Mapping[str, Any], controller: Mapping[s
     own = int(vs.get("rejected_from_controller", sum(by["vehicle"].values())))  # of the controller's datagrams
     measured = {"up": percentiles(joined.up_ms), "down": percentiles(joined.down_ms)}
     model = {"up": vs.get("up"), "down": cs.get("down")}
-    sides = {"up": socket_counts(int(cs.get("commands", joined.commands)), int(vs.get("accepted", 0)), own, 0,
-                                 vs.get("kernel_drops")),
-             # a killed controller left no stats: its rows
+    sides = {"up": socket_counts(int(cs.get("commands", joined.commands)), int(vs.get("accepted", 0)), own,
+                                 *targets_outside(vs, cs), kernel=vs.get("kernel_drops")),
+             # a killed controller left no stats: its rows, the steps they answer, and no time it stopped reading
              "down": socket_counts(int(vs.get("odometry_sent", 0)), int(cs.get("states", joined.commands)),
                                    int(cs.get("states_refused", 0)),
-                                   steps_outside(vs.get("odometry_steps") or [], cs.get("state_window")),
-                                   cs.get("kernel_drops"))}
+                                   *sends_outside(vs, cs if "state_window" in cs
+                                                  else {"state_window": joined.controller_steps}),
+                                   kernel=cs.get("kernel_drops"))}
     sides["up"]["reordered"] = int(rejected.get("reordered", 0))
     out: dict[str, Any] = {}
     for d in ("up", "down"):
@@ -281,17 +282,67 @@ def link_block(joined: Joined, vehicle: Mapping[str, Any], controller: Mapping[s
     return out
 
 
-def socket_counts(sent: int, delivered: int, refused: int, in_flight: int, kernel: int | None) -> dict[str, Any]:
+def socket_counts(sent: int, delivered: int, refused: int, in_flight: int, maybe: int = 0, *,
+                  kernel: int | None) -> dict[str, Any]:
     """One direction of a link with no model between the two sockets (real time, perfect link), every datagram
     sent accounted for under its own name: ``delivered``; ``refused`` by the receiver; ``in_flight``, sent
-    outside the steps the receiver read (before it listened, after it stopped); ``shed`` by the receive
-    budgets (none: the peer is exempt, docs/hostile-input.md); ``dropped_by_kernel`` (the receiving socket's
-    counter, :func:`bridge.mavlink.endpoint.socket_drops`; 0 where unknown); ``lost`` on the link, the rest
-    (sent = delivered + refused + lost + in_flight + shed + dropped_by_kernel)."""
+    where the receiver was not reading (outside the steps it read, after it stopped: :func:`sends_outside`),
+    plus of the ``maybe`` sends it cannot tell (read, or sent after it stopped) as many as were not read;
+    ``shed`` by the receive budgets (none: the peer is exempt, docs/hostile-input.md); ``dropped_by_kernel`` (the
+    receiving socket's counter, :func:`bridge.mavlink.endpoint.socket_drops`; 0 where unknown); ``lost`` on the
+    link, the rest (sent = delivered + refused + lost + in_flight + shed + dropped_by_kernel)."""
     dropped = int(kernel or 0)
+    in_flight += min(maybe, max(0, sent - delivered - refused - in_flight - dropped))
     return {"sent": sent, "delivered": delivered, "lost": sent - delivered - refused - in_flight - dropped,
             "duplicated": 0, "reordered": 0, "refused": refused, "in_flight": in_flight, "shed": 0,
             "dropped_by_kernel": dropped, "kernel_counts": kernel is not None}
+
+
+def sends_outside(vehicle: Mapping[str, Any], controller: Mapping[str, Any]) -> tuple[int, int]:
+    """Of the vehicle's state sends (its ``stats``: :class:`bridge.mavlink.receive.StepSends`), how many the
+    controller surely never read, and how many it may not have: (surely, maybe). Surely: every send of a step
+    outside the controller's window of steps read (``state_window``; each resend of one too), and a resend of a
+    step inside it that left after the controller stopped reading (``read_until``; the resend's time before it
+    left later: one host, one monotonic clock). Maybe: a resend that was leaving just then, one of steps past
+    the vehicle's list, and the resends older than those it timed when even its oldest timed one left after."""
+    window = controller.get("state_window")
+    again = [(int(k), int(n)) for k, n in vehicle.get("odometry_again") or []]
+    unlisted = int(vehicle.get("odometry_again_unlisted", 0))
+    surely = steps_outside(vehicle.get("odometry_steps") or [], window)
+    if window is None:  # it read none: every send
+        return surely + sum(n for _, n in again) + unlisted, 0
+    lo, hi = window
+    surely += sum(n for k, n in again if not lo <= k <= hi)
+    inside = sum(n for k, n in again if lo <= k <= hi)  # resends of steps it read: before it stopped, or after
+    until = controller.get("read_until")
+    if until is None:  # it did not say when it stopped reading
+        return surely, unlisted + inside
+    resent = vehicle.get("odometry_resent") or []  # the latest resends, oldest first: [step, before, after]
+    timed = [(a, b) for k, a, b in resent if lo <= k <= hi]
+    after, leaving = left_after(timed, until)
+    untimed = sum(n for _, n in again) + unlisted - len(resent)  # older than those timed
+    unsure = max(0, min(untimed, inside - len(timed))) if untimed > 0 and resent and resent[0][1] > until else 0
+    return surely + after, unlisted + leaving + unsure
+
+
+def targets_outside(vehicle: Mapping[str, Any], controller: Mapping[str, Any]) -> tuple[int, int]:
+    """Of the controller's targets, how many surely left after the vehicle stopped reading (its ``read_until``; the
+    controller's latest targets timed, ``targets_left``), and how many may have (leaving just then; older than those
+    timed when even the oldest timed left after): (surely, maybe). (0, 0) where either side did not say."""
+    until = vehicle.get("read_until")
+    timed = [(a, b) for a, b in controller.get("targets_left") or []]
+    if until is None or not timed:
+        return 0, 0
+    after, leaving = left_after(timed, until)
+    older = int(controller.get("commands", 0)) - len(timed)
+    return after, leaving + (older if older > 0 and timed[0][0] > until else 0)
+
+
+def left_after(timed: Sequence[tuple[float, float]], until: float) -> tuple[int, int]:
+    """Of sends timed ``(before, after)`` (s, ``time.monotonic``), how many surely left after ``until`` (the
+    receiver's last look found its socket empty then: queued before it, read; after it, never) and how many were
+    leaving at that very time (read or not)."""
+    return sum(a > until for a, _ in timed), sum(a <= until <= b for a, b in timed)
 
 
 def steps_outside(sent: Sequence[Sequence[int]], window: Sequence[int] | None) -> int:

@@ -118,6 +118,7 @@ class Offboard(OffboardLink):
     def close(self) -> None:
         if self.rows is not None:
             self.rows.close()
+        self.stop_reading()  # what the vehicle sent before now is read: summary.json's link.down, exact
         if self.tlog is not None:
             self.tlog.close()
         self.ep.close()

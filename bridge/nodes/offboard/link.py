@@ -59,6 +59,7 @@ _ZERO12 = (0.0,) * 12
 _ZERO16 = (0.0,) * 16
 PARAM_RETRY_S = 0.2  # s of wall time between PARAM_SETs of one scheduled change the vehicle has not echoed
 TIMESYNC_WINDOW = 8  # the clock offset is the best (shortest round trip) of this many latest TIMESYNC answers
+TARGETS_TIMED = 256  # the latest targets' sends timed (just before, just after): which left after the vehicle stopped
 TIMESYNC_BURST_S = 0.01  # s of wall time between TIMESYNC requests until that many answers are in (then timesync_s)
 
 
@@ -142,9 +143,11 @@ class OffboardLink:
         self.offset_ns: int | None = None  # their middle
         self.rtt_ns: int | None = None  # the shortest round trip of the latest answers
         self.commands = 0
+        self.targets_left: deque[tuple[float, float]] = deque(maxlen=TARGETS_TIMED)  # the latest, time.monotonic
         self.states = 0
         self.states_refused = 0  # the vehicle's states refused (stamp or numbers)
         self.state_window: list[int] | None = None  # [first, last] step of the vehicle's states read
+        self.read_until: float | None = None  # s, time.monotonic: when it stopped reading the vehicle (stop_reading)
         self.t_mission = 0.0  # the mission time the events are reported at (s)
         self.param_sets: list[ScheduledSet] = []  # the scheduled PARAM_SETs sent, in order
         self._pending_params: dict[str, ScheduledSet] = {}  # by name: sent, not echoed by the vehicle yet
@@ -213,6 +216,23 @@ class OffboardLink:
         else:
             self._send_target(time_usec, wire)
 
+    def stop_reading(self, batches: int = 64) -> None:
+        """Before the socket closes: read what already waits on it (its states delivered, not lost), then say when
+        reading stopped (:attr:`read_until`, s of ``time.monotonic``, taken before the look that found the socket
+        empty: a datagram queued before it was read, one sent after it never was; on one host the vehicle's clock
+        too, so ``summary.json`` counts a state it sent after that in flight, docs/sitl.md). Bounded (a flood still
+        queued after ``batches`` polls is left); once only."""
+        if self.read_until is not None or self.ep.fileno < 0:
+            return
+        t = time.monotonic()
+        for _ in range(batches):
+            t = time.monotonic()
+            if not self.ep.queued():
+                break
+            for m, _addr in self.ep.poll():
+                self._on(m)
+        self.read_until = t
+
     def _send_no_target(self, time_usec: int) -> None:
         """Lockstep: acknowledge the step of the state stamped ``time_usec`` without a valid
         target (HIL_ACTUATOR_CONTROLS, flags bit 0 lockstep, ``mode`` without SAFETY_ARMED, as
@@ -275,6 +295,7 @@ class OffboardLink:
     def _send_target(self, time_usec: int, wire: tuple[float, ...]) -> None:
         """The actuator target answering the state stamped ``time_usec`` (hot path)."""
         self.commands += 1
+        before = time.monotonic()
         if self.actuation == "motors":
             flags = 1 if self.cfg.clock == "lockstep" else 0  # bit 0: lockstep
             self.ep.send_hot(HIL_ACTUATOR_CONTROLS, (time_usec, flags, *wire, *_ZERO12,
@@ -282,6 +303,7 @@ class OffboardLink:
         else:  # control group 0
             self.ep.send_hot(SET_ACTUATOR_CONTROL_TARGET, (time_usec, *wire, 0.0, 0.0, 0.0, 0.0, 0,
                                                            self.vsys or 0, self.vcomp))
+        self.targets_left.append((before, time.monotonic()))
 
     def _serve(self, deadline: float) -> None:
         for _, m, _addr in wait((self.ep,), deadline):

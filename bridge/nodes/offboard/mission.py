@@ -231,7 +231,8 @@ def fetch_mission(flight: Flight, cfg: OffboardConfig, out: Path | None, status:
     got = _fetch(link, flight, out, empty)
     # the states the vehicle sent while it waited crossed the link: read, not lost (summary.json link.down)
     return replace(got, states={"states": link.states, "states_refused": link.states_refused,
-                                "state_window": link.state_window})
+                                "state_window": link.state_window, "read_until": link.read_until,
+                                "kernel_drops": link.ep.kernel_drops()})
 
 
 def _fetch(link: MissionLink, flight: Flight, out: Path | None, empty: TransferStats) -> Fetched:
@@ -259,6 +260,7 @@ def _fetch(link: MissionLink, flight: Flight, out: Path | None, empty: TransferS
                               f"{st.re_requests} again): {new.mission.duration_s:.2f} s to fly")
         return Fetched(new, st)
     finally:
+        link.stop_reading()  # the states already on the socket are read (delivered); the time it stopped said
         link.ep.close()
 
 

@@ -39,7 +39,8 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
     outcome = node.run()
     unconfirmed = node.unconfirmed_params()
     emit(Stats({"param_at": [p.as_dict() for p in node.param_sets],
-                "commands": node.commands, "states": node.states, "received": node.ep.received,
+                "commands": node.commands, "targets_left": [list(t) for t in node.targets_left],  # their sends' times
+                "states": node.states, "received": node.ep.received,
                 "sent": node.ep.sent, "stale_ticks": node.stale_ticks, "overruns": node.overruns,
                 "stalls": node.stalls.report(),
                 "way_down": node.way_down,  # real time: the states' way down counted in their ages, ms (or None)
@@ -47,7 +48,7 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
                 "down": node.cend.down.stats.summary() if cfg.clock == "lockstep" else None,
                 **({"radio": node.turns.stats()} if node.turns is not None else {}),  # its part of the fleet's radio
                 "rejected": dict(node.rejected), "rejected_from_vehicle": node.rejected.from_peer,
-                "states_refused": node.states_refused, "state_window": node.state_window,
+                "states_refused": node.states_refused, "state_window": node.state_window, "read_until": node.read_until,
                 "kernel_drops": node.ep.kernel_drops(), "mission_transfer": transfer,
                 "events": node.event_seq.counts.as_dict()}))  # the vehicle's EVENTs missed, asked for, recovered
     left = bool(node.left_lockstep)

@@ -78,6 +78,7 @@ class Vehicle:
         self.authority = Authority(cfg)
         self.link, self.gcs = open_links(cfg, self.tlog, self.rejected)
         self.endpoints = [self.link] + ([self.gcs] if self.gcs is not None else [])
+        self.read_until: float | None = None  # s, time.monotonic: when it stopped reading the controller link
         self.spinner = Spinner(self.link, cfg.spin_s)  # a lockstep answer is polled for before sleeping
         self.rows = Rows(out / "vehicle.bin", self.rate, lambda: self.targets.new_steps) if out is not None else None
         self.k = 0  # control step of the plant's state: t_k = k / rate_hz
@@ -186,8 +187,8 @@ class Vehicle:
             **({"radio": self.turns.part()} if self.turns is not None else {}),  # its part of the fleet's one radio
             "rejected_from_controller": self.rejected.from_peer, "resends": self.odometry.resends,
             "answered_again": self.targets.answered_again, "spin_skipped": self.spinner.skipped,
-            "odometry_steps": self.odometry.steps.ranges,
-            "kernel_drops": self.link.kernel_drops(),
+            **self.odometry.sends.stats(),  # odometry_steps, _again, _again_unlisted, _resent
+            "kernel_drops": self.link.kernel_drops(), "read_until": self.read_until,
             "up": self.vend.up.stats.summary() if self.cfg.clock == "lockstep" else None,
             "plant": self.commander.plant_at_end or plant_blocks(self.plant),  # wind, battery, impact, as offline
             "mission_start": self.missions.started}))
@@ -203,16 +204,19 @@ class Vehicle:
     def _drain_sockets(self, batches: int = 64) -> None:
         """Take in what is already queued on every socket before closing, so that the final
         counts include every datagram that arrived before the stop (the others' socket is read
-        lazily while the controller's is busy: see Endpoint.poll); bounded, never blocks."""
+        lazily while the controller's is busy: see Endpoint.poll); bounded, never blocks. The controller link's
+        :attr:`read_until` (``time.monotonic`` before the look that found it empty): a target the controller sent
+        after it never came (``summary.json`` link.up.in_flight, docs/sitl.md)."""
         for ep in self.endpoints:
-            if ep.fileno < 0:
-                continue
+            t = time.monotonic()
             for _ in range(batches):
-                got = ep.poll()
-                for m, addr in got:
-                    self._handle(ep, m, addr)
-                if not got and not ep.backlog:
+                t = time.monotonic()
+                if not ep.queued():
                     break
+                for m, addr in ep.poll():
+                    self._handle(ep, m, addr)
+            if ep is self.link and self.read_until is None and ep.fileno >= 0:
+                self.read_until = t
 
     @property
     def t(self) -> float:

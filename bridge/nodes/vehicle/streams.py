@@ -16,6 +16,7 @@ request; None: never streamed, sent on request, or, for the sensor messages, at 
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -32,7 +33,7 @@ from bridge.mavlink import compmeta
 from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import ODOMETRY, Endpoint
 from bridge.mavlink.modes import heartbeat_mode
-from bridge.mavlink.receive import StepRanges
+from bridge.mavlink.receive import StepSends
 from plant.battery import Battery
 from plant.sensors import SensorSuite
 
@@ -332,7 +333,7 @@ class OdometryOut:
         self.sent_at: dict[int, float] = {}  # step -> wall time its state was first sent
         self.count = 0  # ODOMETRY messages sent
         self.resends = 0  # states sent again (nobody answered them)
-        self.steps = StepRanges()  # the steps whose states went out (the summary's link.down.in_flight)
+        self.sends = StepSends()  # every state sent: its step, resends, when (the summary's link.down.in_flight)
 
     def send(self, k: int, now: float, fresh: bool) -> bool:
         """Send the state of step k at wall time ``now`` (s); ``fresh``: not a resend. False when the
@@ -347,9 +348,10 @@ class OdometryOut:
         else:
             assert sim.estimator is not None
             tail = estimate_tail((f[3], f[4], f[5], f[6]), sim.estimator.covariance(), self.estimator)
+        before = time.monotonic()  # the send left between these two (a receiver that stopped reading: docs/sitl.md)
         if self.link.send_hot(ODOMETRY, (step_usec(k, self.rate), *f, *tail)):
             self.count += 1
-            self.steps.add(k)
+            self.sends.add(k, before, time.monotonic())
         sent_at = self.sent_at
         if fresh or k not in sent_at:  # a resent state's round trip counts from its first sending
             sent_at[k] = now
