@@ -7,6 +7,7 @@ process exit) with a deadline, and fails with what was seen so far.
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import select
 import selectors
@@ -382,6 +383,14 @@ class TimerLateness(threading.Thread):
     def median(self) -> float:
         assert self.late_ms, "the control never woke"
         return statistics.median(self.late_ms)
+
+
+def script_result(r: subprocess.CompletedProcess[str]) -> dict[str, Any]:
+    """The ``out`` a ground-station script run to its end printed as ``RESULT <json>`` (:data:`MAVSDK_GROUND_STATION`);
+    a script that printed none fails the test with its exit status and the tails of its output."""
+    lines = [ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")]
+    assert lines, f"MAVSDK script failed (exit {r.returncode}):\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
+    return json.loads(lines[0][len("RESULT "):])
 
 
 # The opening of a MAVSDK script run as ``python -c SCRIPT CONNECTION`` (a ground station on CONNECTION): ``sdk``,

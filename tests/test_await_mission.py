@@ -49,7 +49,7 @@ from missions.geodetic import Home
 from missions.geofence import Geofence, Zone
 from missions.planfiles import plan_text, read_plan_text
 from tests.plans import l_plan
-from tests.sitlkit import ENV, ROOT, GcsSocket, MavProxy, Proc, clean_exit, run_bsst
+from tests.sitlkit import ENV, ROOT, GcsSocket, MavProxy, Proc, clean_exit, run_bsst, script_result
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes and opens sockets
@@ -138,10 +138,9 @@ def _mavsdk_flies(n: int, plan: Path, out: Path, status: int, *extra: str, sitl_
     try:
         r = subprocess.run([sys.executable, "-c", MAVSDK_SCRIPT, f"udpin://127.0.0.1:{GCS_PORT + n}", str(plan),
                             "240", *extra], capture_output=True, text=True, timeout=300, env=ENV)
-        lines = [ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")]
-        assert lines, f"MAVSDK script failed:\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
+        said = script_result(r)
         assert sitl.p.wait(timeout=120) == status, "\n".join(sitl.lines[-30:])
-        return json.loads(lines[0][len("RESULT "):])
+        return said
     finally:
         sitl.stop()
 
@@ -264,9 +263,7 @@ def _mavsdk_against_await_mission(script: str, out: Path) -> dict[str, Any]:
                                capture_output=True, text=True, timeout=120, env=ENV)
         finally:
             sitl.stop()
-    lines = [ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")]
-    assert lines, f"MAVSDK script failed:\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
-    return json.loads(lines[0][len("RESULT "):])
+    return script_result(r)
 
 
 def test_mavsdks_geofence_plugin_uploads_reads_back_and_clears_a_polygon_and_a_circle(tmp_path):

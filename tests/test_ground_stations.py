@@ -13,7 +13,6 @@ event (a line, a callback) with a deadline.
 
 from __future__ import annotations
 
-import json
 import math
 import re
 import subprocess
@@ -36,7 +35,7 @@ from bridge.nodes.vehicle.reposition import UNSET_INT
 from bridge.session import instance_slot
 from missions import MISSION_DIR, Mission, Sine
 from missions.geodetic import Home
-from tests.sitlkit import ENV, GcsSocket, MavProxy, Proc, shown
+from tests.sitlkit import ENV, GcsSocket, MavProxy, Proc, script_result, shown
 from tests.test_vehicle import _ack, _gcs, _vehicle
 from tests.waiting import wait_for
 
@@ -268,9 +267,7 @@ def _mavsdk(n: int, part: str, script: str = MAVSDK_SCRIPT) -> dict:
     own) against the vehicle of instance ``n``; its RESULT."""
     r = subprocess.run([sys.executable, "-c", script, f"udpin://127.0.0.1:{GCS_PORT + n}", part],
                        capture_output=True, text=True, timeout=120, env=ENV)
-    lines = [ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")]
-    assert lines, f"MAVSDK script failed (exit {r.returncode}):\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
-    return json.loads(lines[0][len("RESULT "):])
+    return script_result(r)
 
 
 def _mavsdk_on_a_vehicle(tmp_path: Path, part: str) -> tuple[dict, Proc, int]:

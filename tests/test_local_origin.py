@@ -10,7 +10,6 @@ real time) with pymavlink and with MAVSDK (one ``System`` per vehicle) over UDP 
 
 from __future__ import annotations
 
-import json
 import socket
 import subprocess
 import sys
@@ -26,7 +25,7 @@ from bridge.mavlink.endpoint import GCS_PORT
 from bridge.nodes.vehicle.streams import VehicleView, message
 from bridge.session import instance_slot
 from bridge.swarm import sitl
-from tests.sitlkit import ENV, MAVSDK_GROUND_STATION
+from tests.sitlkit import ENV, MAVSDK_GROUND_STATION, script_result
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes, opens sockets
@@ -196,9 +195,7 @@ def test_mavsdk_reads_each_fleet_vehicle_about_its_own_start(tmp_path: Path) -> 
                                capture_output=True, text=True, timeout=240, env=ENV)
         finally:
             flight.join(240)
-    lines = [ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")]
-    assert lines, f"MAVSDK script failed (exit {r.returncode}):\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
-    out = json.loads(lines[0][len("RESULT "):])
+    out = script_result(r)
     assert out["two_found"] and out["hovered"], out
     _completed(result)
     for i in (1, 2):

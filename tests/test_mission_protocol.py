@@ -38,7 +38,7 @@ from bridge.nodes.vehicle.mission import REACHED_REPEATS, REACHED_S
 from bridge.nodes.vehicle.missiontransfer import PROTOCOL_TIMEOUT_S, RETRY_S
 from bridge.session import instance_slot
 from missions import Mission, Sine
-from tests.sitlkit import ENV, GcsSocket, MavProxy, Proc
+from tests.sitlkit import ENV, GcsSocket, MavProxy, Proc, script_result
 from tests.test_vehicle import _vehicle
 from tests.waiting import wait_for
 
@@ -585,9 +585,7 @@ def _mavsdk(url: str, part: str, arg: str, timeout: float = 120.0) -> dict:
     """The MAVSDK script's ``part`` in its own process (the native library keeps threads of its own)."""
     r = subprocess.run([sys.executable, "-c", MAVSDK_SCRIPT, url, part, arg], capture_output=True, text=True,
                        timeout=timeout, env=ENV)
-    lines = [ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")]
-    assert lines, f"MAVSDK script failed (exit {r.returncode}):\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
-    return json.loads(lines[0][len("RESULT "):])
+    return script_result(r)
 
 
 def _plan(path: Path) -> Path:

@@ -12,7 +12,6 @@ broadcasts.
 
 from __future__ import annotations
 
-import json
 import socket
 import subprocess
 import sys
@@ -30,7 +29,7 @@ from bridge.nodes.vehicle.config import VehicleConfig
 from bridge.session.children import free_udp_port
 from bridge.swarm import sitl
 from missions import MISSION_DIR
-from tests.sitlkit import ENV, MAVSDK_GROUND_STATION
+from tests.sitlkit import ENV, MAVSDK_GROUND_STATION, script_result
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes, opens sockets
@@ -197,9 +196,7 @@ def test_mavsdk_sees_four_systems_on_one_port_reads_each_and_kills_only_system_3
                            text=True, timeout=240, env=ENV)
     finally:
         flight.join(240)
-    lines = [ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")]
-    assert lines, f"MAVSDK script failed (exit {r.returncode}):\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
-    out = json.loads(lines[0][len("RESULT "):])
+    out = script_result(r)
     assert out["four_found"] and out["ids"] == [1, 2, 3, 4], out
     assert out["MAV_SYS_ID"] == {"1": 1, "2": 2, "3": 3, "4": 4}, out
     assert out["all_armed"] and out["kill_3"] == "SUCCESS" and out["three_disarmed"], out

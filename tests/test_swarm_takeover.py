@@ -16,7 +16,6 @@ standing where it was stopped: separation held, nothing said).
 
 from __future__ import annotations
 
-import json
 import subprocess
 import sys
 import threading
@@ -29,7 +28,7 @@ from bridge.cli.flying import report_fleet
 from bridge.record.separation import CONTINUED, WALL_CLOCK
 from bridge.session.children import free_udp_port
 from bridge.swarm import FleetRun, simulate, sitl
-from tests.sitlkit import ENV, MAVSDK_GROUND_STATION
+from tests.sitlkit import ENV, MAVSDK_GROUND_STATION, script_result
 
 pytestmark = pytest.mark.process  # starts processes, opens sockets
 
@@ -98,19 +97,25 @@ sdk.destroy()
 """
 
 
-def test_mavsdk_takes_a_fleet_vehicle_off_into_its_neighbour_and_the_fleet_judges_its_climb(
-        tmp_path: Path, capsys: Any) -> None:
+def _taken_off(tmp_path: Path, realtime: bool) -> tuple[dict[str, Any], Path]:
+    """The fleet flown (:func:`_fly`) while MAVSDK takes vehicle 2 off into vehicle 1 (:data:`MAVSDK_TAKEOFF`, which
+    must have found both, seen 2 under 1, had its takeoff accepted and seen it climb): the flight's result, the
+    mission."""
     port = free_udp_port()
-    flight, result, mission = _fly(tmp_path, port)
+    flight, result, mission = _fly(tmp_path, port, realtime=realtime)
     try:
         r = subprocess.run([sys.executable, "-c", MAVSDK_TAKEOFF, f"udpin://127.0.0.1:{port}"], capture_output=True,
                            text=True, timeout=240, env=ENV)
     finally:
         flight.join(240)
-    lines = [ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")]
-    assert lines, f"MAVSDK script failed (exit {r.returncode}):\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
-    out = json.loads(lines[0][len("RESULT "):])
+    out = script_result(r)
     assert out["two_found"] and out["under"] and out["takeoff"] == "SUCCESS" and out["climbed"], out
+    return result, mission
+
+
+def test_mavsdk_takes_a_fleet_vehicle_off_into_its_neighbour_and_the_fleet_judges_its_climb(
+        tmp_path: Path, capsys: Any) -> None:
+    result, mission = _taken_off(tmp_path, realtime=False)
     _judged_into_its_neighbour(result, mission, capsys)
     events = (tmp_path / "run" / "vehicle-2" / "events.log").read_text()
     assert "flies on under it, on the wall clock" in events, events
@@ -118,17 +123,7 @@ def test_mavsdk_takes_a_fleet_vehicle_off_into_its_neighbour_and_the_fleet_judge
 
 def test_in_real_time_a_vehicle_taken_over_flies_on_under_its_ground_station_and_is_judged(
         tmp_path: Path, capsys: Any) -> None:
-    port = free_udp_port()
-    flight, result, mission = _fly(tmp_path, port, realtime=True)
-    try:
-        r = subprocess.run([sys.executable, "-c", MAVSDK_TAKEOFF, f"udpin://127.0.0.1:{port}"], capture_output=True,
-                           text=True, timeout=240, env=ENV)
-    finally:
-        flight.join(240)
-    lines = [ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")]
-    assert lines, f"MAVSDK script failed (exit {r.returncode}):\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
-    out = json.loads(lines[0][len("RESULT "):])
-    assert out["two_found"] and out["under"] and out["takeoff"] == "SUCCESS" and out["climbed"], out
+    result, mission = _taken_off(tmp_path, realtime=True)
     assert "error" not in result, result.get("error")
     run = result["run"]
     s = run.summary

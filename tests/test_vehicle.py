@@ -9,7 +9,6 @@ Each test holds an instance slot (bridge.session.instance_slot), so the ports 14
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import subprocess
@@ -25,7 +24,7 @@ from bridge.mavlink.receive import MAX_FRAME
 from bridge.nodes.report import Ready, Stats
 from bridge.record.halves import read_half
 from bridge.session import instance_slot
-from tests.sitlkit import ENV, ROOT, MavProxy, Proc, run_bsst
+from tests.sitlkit import ENV, ROOT, MavProxy, Proc, run_bsst, script_result
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -329,9 +328,7 @@ def test_mavsdk_finds_reads_arms_disarms(tmp_path):
                                capture_output=True, text=True, timeout=120, env=ENV)
         finally:
             assert v.stop() == 0
-    lines = [ln for ln in r.stdout.splitlines() if ln.startswith("RESULT ")]
-    assert lines, f"MAVSDK script failed (exit {r.returncode}):\n{r.stdout[-2000:]}\n{r.stderr[-2000:]}"
-    out = json.loads(lines[0][len("RESULT "):])
+    out = script_result(r)
     assert out["found"]
     assert out["attitude"] == [0.0, 0.0, 0.0]
     lat, lon, alt = out["position"]
