@@ -7,8 +7,9 @@ Out: :meth:`Session.run`: a :class:`~bridge.record.runlog.Run`; the run director
      stderr with ``live``; with ``announce``, once the vehicle is up, where a ground station connects
      (:func:`bridge.session.announce.vehicle_up_line`) on stderr
 
-The children's command lines are :mod:`bridge.session.launch`'s; ``summary.json`` is
-:func:`bridge.record.summary.session_summary`'s, from what the session saw.
+The children's command lines are :meth:`Session._start`'s; the order their reports are acted on,
+:mod:`bridge.session.eventorder`'s; ``summary.json`` is :func:`bridge.record.summary.session_summary`'s, from what
+the session saw.
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ from bridge.session.children import (
     free_udp_port,
     stop_children,
 )
+from bridge.session.eventorder import in_cause_order
 from params import ConfigError
 
 
@@ -352,30 +354,11 @@ class Session:
         return [(c, r) for c in children if c is not None for r in c.reports()]
 
     def _handle(self, reports: list[tuple[Child, Report]]) -> None:
-        """Reports read together from several children, their events in the order of their times on the flight's
-        clock (the vehicle's first on a tie: the controller's events about the vehicle are its answers): each
-        child's pipe is read in turn, so the order read is not the order things happened. A controller's event
-        said in answer to the vehicle's own (its ``answers``: it armed it, took the end action, saw it crash) is
-        never put before its cause, the latest of them read before it or the earliest read with it: the
-        controller stamps its word at the last state it answered, and in real time the two clocks are mapped onto
-        the flight's only to within a few ms."""
+        """Reports read together from several children, acted on in the order things happened
+        (:func:`~bridge.session.eventorder.in_cause_order`)."""
         times = [self._event_time(c, r.t) if isinstance(r, Event) and math.isfinite(r.t) else -math.inf
                  for c, r in reports]
-        # the vehicle's events of this read, each kind's earliest and latest: the controller's pipe is read first
-        # (_read_all), so an answer's cause is read with it or before it
-        first: dict[str, float] = {}
-        last: dict[str, float] = {}
-        for (child, r), t in zip(reports, times):
-            if isinstance(r, Event) and child.name == "vehicle":
-                first[r.kind], last[r.kind] = min(t, first.get(r.kind, math.inf)), max(t, last.get(r.kind, -math.inf))
-        timed = []
-        for (child, r), t in zip(reports, times):
-            if isinstance(r, Event) and child.name != "vehicle" and r.answers:
-                t = max(t, *(max(self._vehicle_said.get(k, -math.inf), first.get(k, -math.inf)) for k in r.answers))
-            timed.append((t, child.name != "vehicle", child, r))
-        for kind, t in last.items():
-            self._vehicle_said[kind] = max(t, self._vehicle_said.get(kind, -math.inf))
-        for t, _, child, report in sorted(timed, key=lambda x: x[:2]):
+        for child, report, t in in_cause_order(reports, times, self._vehicle_said):
             self._status(child, report, t)
 
     # -- status lines, events, progress -------------------------------------------------------------
