@@ -41,16 +41,17 @@ def _run(suite: SensorSuite, t0: float, t1: float) -> None:
         suite.sample(k / HZ, REST)
 
 
-def _sent(mid: int, suite: SensorSuite | None, t: float) -> list:
+def _sent(mid: int, suite: SensorSuite | None, t: float, position_valid: bool = True) -> list:
     """Message ``mid`` of a vehicle at rest with ``suite`` at simulation time ``t``, through MAVLink 2 bytes."""
-    view = VehicleView(REST, t, "hold", None, False, False, True, (0.0,) * 4, 1000.0, 0, suite, HOME, 1)
+    view = VehicleView(REST, t, "hold", None, False, False, True, (0.0,) * 4, 1000.0, 0, suite, HOME, 1,
+                       position_valid=position_valid)
     mav = M.MAVLink(None, srcSystem=1, srcComponent=1)
     return [mav.parse_char(m.pack(mav)) for m in message(mid, view)]
 
 
-def _gps_bits(suite: SensorSuite | None, t: float) -> tuple[bool, bool, bool, bool]:
+def _gps_bits(suite: SensorSuite | None, t: float, position_valid: bool = True) -> tuple[bool, bool, bool, bool]:
     """SYS_STATUS's GPS bit (present, enabled, healthy) and its pre-arm bit (healthy)."""
-    (s,) = _sent(M.MAVLINK_MSG_ID_SYS_STATUS, suite, t)
+    (s,) = _sent(M.MAVLINK_MSG_ID_SYS_STATUS, suite, t, position_valid)
     return (bool(s.onboard_control_sensors_present & GPS_BIT), bool(s.onboard_control_sensors_enabled & GPS_BIT),
             bool(s.onboard_control_sensors_health & GPS_BIT),
             bool(s.onboard_control_sensors_health & M.MAV_SYS_STATUS_PREARM_CHECK))
@@ -101,6 +102,19 @@ def test_a_gps_off_is_no_gps_a_second_after_its_last_fix_and_its_health_bit_clea
     (back,) = _sent(M.MAVLINK_MSG_ID_GPS_RAW_INT, suite, 4.2)
     assert back.fix_type == M.GPS_FIX_TYPE_3D_FIX and back.time_usec == 4_000_000
     assert _gps_bits(suite, 4.2) == (True, True, True, True)
+
+
+def test_a_fix_back_is_no_healthy_gps_until_the_estimate_has_a_position_again():
+    """A fix shown (GPS_RAW_INT) while the estimate's horizontal position is still invalid (a GPS back after
+    EKF2_NOAID_TOUT, before EKF2 fuses it): the GPS bit is not healthy, as PX4 sets it only while EKF2 fuses a
+    GNSS. It was, so MAVSDK read global and local position ok while the commander refused LAND for want of one
+    (tests/test_gps_telemetry.py's MAVSDK flight, under load)."""
+    suite = _suite()
+    _run(suite, 0.0, 0.2)
+    (fix,) = _sent(M.MAVLINK_MSG_ID_GPS_RAW_INT, suite, 0.2, position_valid=False)
+    assert fix.fix_type == M.GPS_FIX_TYPE_3D_FIX
+    assert _gps_bits(suite, 0.2, position_valid=False) == (True, True, False, True)
+    assert _gps_bits(suite, 0.2) == (True, True, True, True)
 
 
 def test_motion_capture_is_no_gps_and_truth_keeps_its_gps_bit():

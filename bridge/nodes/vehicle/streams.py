@@ -111,8 +111,10 @@ def landed_state(v: VehicleView) -> int:
 def _sys_status(v: VehicleView) -> list[Any]:
     healthy = not v.halted  # (a flight over is healthy in nothing, the pre-arm bit included)
     armable = healthy and v.prearm_refusal() is None
-    # a GNSS receiver's fixes stopped: its bit unhealthy, as GPS_RAW_INT says; motion capture: no GPS bit
-    gps = not tm.gps_lost(v.sensors, v.t) if tm.has_gps(v.sensors) else None
+    # healthy while the estimate fuses a GNSS, as PX4's estimatorCheck.cpp: the receiver has fixes (GPS_RAW_INT) and
+    # the horizontal position is valid (a fix back after EKF2_NOAID_TOUT is not yet a position: the commander refused
+    # LAND while MAVSDK read the bit healthy); motion capture: no GPS bit
+    gps = not tm.gps_lost(v.sensors, v.t) and v.position_valid if tm.has_gps(v.sensors) else None
     if v.battery is None:
         return [tm.sys_status(v.load, healthy, armable=armable, gps=gps)]
     return [tm.sys_status(v.load, healthy, battery_fields(v.battery), armable, gps)]
