@@ -402,6 +402,20 @@ class Endpoint:
         socks = [self.sock] if self.prio is None else [self.sock, self.prio]
         return bool(self._early) or bool(select.select(socks, [], [], 0)[0])
 
+    def drain(self, handle: Callable[[Any, tuple[str, int]], None], batches: int = 64) -> float:
+        """Read what is already queued (each message and its source address to ``handle``), bounded by ``batches``
+        polls (a flood still queued is left), never blocking; the ``time.monotonic`` just before the look that found
+        the socket empty: a datagram queued before it was read, one sent after it never was (on one host the
+        sender's clock too: ``summary.json``'s link counts, docs/sitl.md)."""
+        t = time.monotonic()
+        for _ in range(batches):
+            t = time.monotonic()
+            if not self.queued():
+                break
+            for m, addr in self.poll():
+                handle(m, addr)
+        return t
+
     def kernel_drops(self) -> int | None:
         """Datagrams the kernel dropped before this endpoint could read them (its receive buffer full), all its
         sockets so far (:func:`socket_drops`; kept at :meth:`close`); None where the kernel does not say."""

@@ -386,7 +386,6 @@ class StepSends:
         self.steps = StepRanges()
         self.again: dict[int, int] = {}
         self.again_unlisted = 0
-        self.resends = 0
         self.timed: deque[tuple[int, float, float]] = deque(maxlen=self.MAX_TIMED)
         self._newest = -1
 
@@ -396,12 +395,16 @@ class StepSends:
             self.steps.add(k)
             self._newest = max(self._newest, k)
             return
-        self.resends += 1
         self.timed.append((k, before, after))
         if k in self.again or len(self.again) < self.MAX_AGAIN:
             self.again[k] = self.again.get(k, 0) + 1
         else:
             self.again_unlisted += 1
+
+    @property
+    def resends(self) -> int:
+        """Sends of a step after its first."""
+        return sum(self.again.values()) + self.again_unlisted
 
     def stats(self) -> dict[str, Any]:
         """The sender's ``stats`` keys: ``odometry_steps`` (ranges), ``odometry_again`` ([step, sends again]

@@ -58,7 +58,7 @@ from bridge.nodes.report import Event, Report, StatusText, Warning
 _ZERO12 = (0.0,) * 12
 _ZERO16 = (0.0,) * 16
 PARAM_RETRY_S = 0.2  # s of wall time between PARAM_SETs of one scheduled change the vehicle has not echoed
-TIMESYNC_WINDOW = 8  # the clock offset is the best (shortest round trip) of this many latest TIMESYNC answers
+TIMESYNC_WINDOW = 8  # the clock offset is where this many latest TIMESYNC answers' bounds agree (offset_bounds)
 TARGETS_TIMED = 256  # the latest targets' sends timed (just before, just after): which left after the vehicle stopped
 TIMESYNC_BURST_S = 0.01  # s of wall time between TIMESYNC requests until that many answers are in (then timesync_s)
 
@@ -224,14 +224,7 @@ class OffboardLink:
         queued after ``batches`` polls is left); once only."""
         if self.read_until is not None or self.ep.fileno < 0:
             return
-        t = time.monotonic()
-        for _ in range(batches):
-            t = time.monotonic()
-            if not self.ep.queued():
-                break
-            for m, _addr in self.ep.poll():
-                self._on(m)
-        self.read_until = t
+        self.read_until = self.ep.drain(lambda m, _addr: self._on(m), batches)
 
     def _send_no_target(self, time_usec: int) -> None:
         """Lockstep: acknowledge the step of the state stamped ``time_usec`` without a valid

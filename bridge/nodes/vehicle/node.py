@@ -208,13 +208,7 @@ class Vehicle:
         :attr:`read_until` (``time.monotonic`` before the look that found it empty): a target the controller sent
         after it never came (``summary.json`` link.up.in_flight, docs/sitl.md)."""
         for ep in self.endpoints:
-            t = time.monotonic()
-            for _ in range(batches):
-                t = time.monotonic()
-                if not ep.queued():
-                    break
-                for m, addr in ep.poll():
-                    self._handle(ep, m, addr)
+            t = ep.drain(lambda m, addr, ep=ep: self._handle(ep, m, addr), batches)
             if ep is self.link and self.read_until is None and ep.fileno >= 0:
                 self.read_until = t
 
