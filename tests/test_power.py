@@ -15,7 +15,6 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from scipy.integrate import solve_ivp
 
 from bridge.record.metrics import finite_time_bound
 from controller.power import SignedPower
@@ -107,6 +106,8 @@ def time_to_band(e0: float, c: float, alpha: float, eps: float) -> float:
         return abs(float(y[0])) - eps
 
     reached.terminal = True  # type: ignore[attr-defined]
+    from scipy.integrate import solve_ivp  # lazy: ~0.45 s of every worker's collection otherwise
+
     horizon = 10.0 * finite_time_bound(e0, c, alpha) + 1.0
     sol = solve_ivp(rhs, (0.0, horizon), [e0], events=reached, rtol=1e-10, atol=1e-13, method="DOP853")
     assert sol.status == 1, "the band was never reached"
@@ -127,6 +128,8 @@ def test_finite_time_bound_holds_outside_the_band(e0: float, c: float, alpha: fl
 
 def test_inside_the_band_the_error_still_goes_to_zero() -> None:
     """The regularised law keeps driving e to 0 inside the band (exponentially)."""
+    from scipy.integrate import solve_ivp  # lazy: as in time_to_band
+
     sig = SignedPower(0.6, 0.05)
     gain = 1.5 * 2.0**-0.8
     sol = solve_ivp(lambda _t, y: [-gain * sig(float(y[0]))], (0.0, 20.0), [0.05], rtol=1e-10, atol=1e-14)
