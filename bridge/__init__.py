@@ -85,7 +85,7 @@ def __getattr__(name: str) -> Any:
 
         return sitl
     if name == "Overrides":
-        from bridge.core.flight import Overrides  # lazy: start-up time
+        from bridge.core.overrides import Overrides  # lazy: start-up time
 
         return Overrides
     if name == "Run":

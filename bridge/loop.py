@@ -1,7 +1,7 @@
 """The in-process closed loop (``bsst sim``): the truth every networked run is checked against.
 
 In:  a mission (a :class:`~missions.Mission` or a TOML path) and its overrides (an
-     :class:`~bridge.core.flight.Overrides`, or its fields as keywords: profile, controller, ``rate_hz``
+     :class:`~bridge.core.overrides.Overrides`, or its fields as keywords: profile, controller, ``rate_hz``
      Hz, seed, a ``[link]`` table, ...), or a prepared :class:`~bridge.core.flight.Flight`
 Out: a :class:`~bridge.record.runlog.Run`: trace arrays (:data:`~bridge.record.columns.TRACE_COLUMNS`,
      SI units) and ``summary.json`` as a dict (``clock = "offline"``); with a directory also
@@ -37,7 +37,8 @@ from typing import Any
 from bridge.autopilot.intention import FAILSAFE_MODES, UserModeIntention
 from bridge.autopilot.simvehicle import FAILSAFE, LAND, OFFBOARD, SimVehicle
 from bridge.autopilot.vehicleevents import typed_fields
-from bridge.core.flight import Flight, Overrides, Progress, prepare
+from bridge.core.flight import Flight, Progress, prepare
+from bridge.core.overrides import Overrides
 from bridge.core.wire import command_over_wire, state_over_wire
 from bridge.link.ends import ControllerEnd, VehicleEnd
 from bridge.link.radio import Radio
@@ -84,7 +85,7 @@ def simulate(
     """Fly a mission offline. Returns a :class:`Run` (trace as arrays, summary as a dict).
 
     The run directory is written only when ``out`` is given or ``write`` is true (then under
-    ``runs/``). ``overrides`` (an :class:`~bridge.core.flight.Overrides`), or its fields as keywords,
+    ``runs/``). ``overrides`` (an :class:`~bridge.core.overrides.Overrides`), or its fields as keywords,
     replace the mission's own values, as the CLI flags do: ``profile``, ``controller``, ``rate_hz``,
     ``seed``; ``link`` is laid over the mission's ``[link]`` table (e.g. ``{"up": {"loss_pct": 20}}``),
     ``failsafe`` over its ``[failsafe]`` table (e.g. ``{"action": "hold"}``), ``sensors`` over its

@@ -32,7 +32,8 @@ from collections.abc import Generator, Sequence
 from pathlib import Path
 from typing import Any
 
-from bridge.core.flight import Flight, Overrides, Progress, prepare
+from bridge.core.flight import Flight, Progress, prepare
+from bridge.core.overrides import Overrides
 from bridge.link.model import merge_link_tables
 from bridge.link.radio import Radio
 from bridge.link.turns import TURNS, turn_order

@@ -1,7 +1,7 @@
 """The batch engine's flight: many cells of one mission flown at once, over a cell axis (numpy and numba).
 
 In:  a mission (a :class:`~missions.Mission` or a TOML path) and, per cell, its
-     :class:`~bridge.core.flight.Overrides` (``controller``, ``discretization``, ``rate_hz`` Hz, ``seed``, a
+     :class:`~bridge.core.overrides.Overrides` (``controller``, ``discretization``, ``rate_hz`` Hz, ``seed``, a
      ``link`` table: what :func:`bridge.sweep.grid.cell_overrides` gives; or those fields as a mapping), or prepared
      :class:`~bridge.core.flight.Flight` s
 Out: per cell the measured columns of a ``cells.csv`` row (:data:`MEASURES`: ``rms``/``max`` m,
@@ -44,8 +44,9 @@ from bridge.batch.control import BATCH_LAWS
 from bridge.batch.flight import Cells, Constants, batch_arrays, fly_cells
 from bridge.batch.metrics import Metrics, measured_rows
 from bridge.batch.weather import BATCH_EVENT_KINDS, turbulent
-from bridge.core.flight import Flight, Overrides, prepare
+from bridge.core.flight import Flight, prepare
 from bridge.core.interrupt import sigint_futures, wait_or_interrupt
+from bridge.core.overrides import Overrides
 from bridge.link.model import jitter_cell, link_from_table, merge_link_tables
 from bridge.link.plan import Clocks, plan_links
 from bridge.record.metrics import RMS_FROM_S

@@ -5,7 +5,7 @@ Out: the command's work and its summary on stdout; an exit status; bad input as 
      ``bsst: ...`` on stderr
 
 - :mod:`bridge.cli.flags`      flag types with their ranges, the link flags and their ``[link]`` overrides
-- :mod:`bridge.cli.options`    the options the flying commands share, and the :class:`~bridge.core.flight.Overrides`
+- :mod:`bridge.cli.options`    the options the flying commands share, and the :class:`~bridge.core.overrides.Overrides`
   their flags make
 - :mod:`bridge.cli.commands`   the parser: one sub-command each, from the modules of their families
 - :mod:`bridge.cli.flying`     ``sim``, ``sitl``, ``vehicle``, ``controller``, and the summary printed after a run

@@ -109,8 +109,9 @@ def fleet_sizes(text: str) -> tuple[int, ...]:
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
-    from bridge.core.flight import Overrides, prepare  # lazy: start-up time
+    from bridge.core.flight import prepare  # lazy: start-up time
     from bridge.core.interrupt import ignore_sigint  # lazy: start-up time
+    from bridge.core.overrides import Overrides  # lazy: start-up time
     from bridge.sweep import AXES, Grid, Sweep, is_sweep_file, load_sweep, run_sweep  # lazy: start-up time
     from bridge.sweep.cells import broke_policy  # lazy: start-up time
     from bridge.sweep.grid import LINK_AXES, SHORT  # lazy: start-up time
@@ -244,8 +245,9 @@ def add_margin_command(sub: Any) -> None:
 
 
 def cmd_margin(args: argparse.Namespace) -> int:
-    from bridge.core.flight import Overrides, prepare  # lazy: start-up time
+    from bridge.core.flight import prepare  # lazy: start-up time
     from bridge.core.interrupt import ignore_sigint  # lazy: start-up time
+    from bridge.core.overrides import Overrides  # lazy: start-up time
     from bridge.record.runlog import run_dir  # lazy: start-up time
     from bridge.sweep.grid import LINK_AXES  # lazy: start-up time
     from bridge.sweep.margin import MarginInterrupted, margin, parse_until  # lazy: start-up time

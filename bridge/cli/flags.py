@@ -6,7 +6,7 @@ In:  command-line text (link values in ms, %, packets, bytes/s; ``--blackout STA
      in the parameter's unit, an INT32's value an integer)
 Out: parsed values, each checked against its range (a bad one is a ``UsageError`` naming the flag:
      exit 2), and :func:`link_table_from_args`'s ``[link]`` override table, which goes to
-     :func:`bridge.core.flight.prepare` in an :class:`~bridge.core.flight.Overrides` like every other
+     :func:`bridge.core.flight.prepare` in an :class:`~bridge.core.overrides.Overrides` like every other
      override (:func:`bridge.cli.options.overrides_from_args`); the exit statuses
 
 The ranges are the mission loader's (:data:`bridge.link.model.NUMBER_RANGES`), one per key.

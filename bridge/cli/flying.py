@@ -2,7 +2,7 @@
 summary printed after a run.
 
 In:  the parsed flags (``argparse.Namespace``) of those commands; their overrides go to the layer that
-     flies as one :class:`~bridge.core.flight.Overrides` (:func:`bridge.cli.options.overrides_from_args`)
+     flies as one :class:`~bridge.core.overrides.Overrides` (:func:`bridge.cli.options.overrides_from_args`)
 Out: the call of :func:`bridge.loop.simulate`, :func:`bridge.session.sitl`,
      :func:`bridge.nodes.vehicle.run_vehicle` or :func:`bridge.nodes.offboard.run_controller`; the run's
      summary on stdout (m, s, N, ms), violated policies on stderr; the exit status: 0 completed,

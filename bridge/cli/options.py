@@ -1,11 +1,11 @@
 """The options the flying commands share (the flight's overrides, the failsafe, parameters, sensors,
-ports, signing key) and the one way from their flags to an :class:`~bridge.core.flight.Overrides`.
+ports, signing key) and the one way from their flags to an :class:`~bridge.core.overrides.Overrides`.
 
 In:  an ``argparse`` parser to add options to; the parsed ``argparse.Namespace`` (``--rate`` Hz,
      ``--seed``, ``--param NAME=VALUE`` in the parameter's unit, ``--param-at T:NAME=VALUE`` T in s,
      ``--noise`` a scale, the link flags of :mod:`bridge.cli.flags`)
 Out: the options on the parser; :func:`overrides_from_args`, the frozen
-     :class:`~bridge.core.flight.Overrides` those flags ask for (a flag a command does not have: the
+     :class:`~bridge.core.overrides.Overrides` those flags ask for (a flag a command does not have: the
      mission's own), which :func:`bridge.core.flight.prepare` lays over the mission
 """
 
@@ -30,7 +30,7 @@ from bridge.cli.flags import (
 )
 
 if TYPE_CHECKING:  # annotations only: building the parser loads no flight code
-    from bridge.core.flight import Overrides
+    from bridge.core.overrides import Overrides
 
 
 def add_failsafe_options(p: argparse.ArgumentParser) -> None:
@@ -58,7 +58,7 @@ def add_param_options(p: argparse.ArgumentParser, start: bool = True, schedule: 
 
 
 def param_overrides_from_args(args: argparse.Namespace) -> dict[str, Any]:
-    """The :class:`~bridge.core.flight.Overrides` fields the flags of :func:`add_param_options` ask for
+    """The :class:`~bridge.core.overrides.Overrides` fields the flags of :func:`add_param_options` ask for
     (``params``, ``param_at``; {} if none)."""
     out: dict[str, Any] = {}
     given = getattr(args, "param", None)
@@ -104,7 +104,7 @@ def add_sensor_axes(p: argparse.ArgumentParser) -> None:
 
 
 def sensor_overrides_from_args(args: argparse.Namespace) -> dict[str, Any]:
-    """The :class:`~bridge.core.flight.Overrides` fields ``sensors``, ``estimator`` and ``noise`` from
+    """The :class:`~bridge.core.overrides.Overrides` fields ``sensors``, ``estimator`` and ``noise`` from
     :func:`add_sensor_options`' flags."""
     name = getattr(args, "sensors", None)
     return {"sensors": {"set": name} if name is not None else None,
@@ -195,9 +195,9 @@ def add_discretization_option(p: argparse.ArgumentParser) -> None:
 
 
 def overrides_from_args(args: argparse.Namespace) -> Overrides:
-    """The :class:`~bridge.core.flight.Overrides` a flying command's flags ask for (a flag the command does
+    """The :class:`~bridge.core.overrides.Overrides` a flying command's flags ask for (a flag the command does
     not have keeps the mission's own): the one way from ``bsst``'s flags to :func:`~bridge.core.flight.prepare`."""
-    from bridge.core.flight import Overrides  # lazy: building the parser loads no flight code
+    from bridge.core.overrides import Overrides  # lazy: building the parser loads no flight code
 
     return Overrides(profile=getattr(args, "profile", None), controller=getattr(args, "controller", None),
                      discretization=getattr(args, "discretization", None), rate_hz=getattr(args, "rate", None),

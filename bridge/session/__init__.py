@@ -59,7 +59,8 @@ from pathlib import Path
 from typing import Any
 
 from bridge.autopilot.estimator import compile_estimator
-from bridge.core.flight import Flight, Overrides, Progress, prepare
+from bridge.core.flight import Flight, Progress, prepare
+from bridge.core.overrides import Overrides
 from bridge.core.scalar import kernel_cache_on
 from bridge.mavlink.endpoint import GCS_PORT, LINK_PORT, parse_address
 from bridge.mavlink.signing import key_from_file
@@ -144,7 +145,7 @@ def sitl(
     address. ``speed`` caps lockstep at that many times real time. ``live`` prints on stderr, once the
     vehicle is up, where a ground station connects (:mod:`bridge.session.announce`), and a progress line (when
     stderr is a terminal). ``overrides`` (an
-    :class:`~bridge.core.flight.Overrides`), or its fields as keywords, are laid over the mission as for
+    :class:`~bridge.core.overrides.Overrides`), or its fields as keywords, are laid over the mission as for
     :func:`bridge.loop.simulate` (``param_at``: the controller sends each change as PARAM_SET before the
     answer of its step: in lockstep the same step as offline).
     ``key`` is a MAVLink 2 signing key file (:func:`bridge.mavlink.signing.key_from_file`): both

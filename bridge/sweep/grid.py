@@ -23,7 +23,8 @@ from itertools import product
 from typing import Any
 
 from bridge.autopilot.estimator import ESTIMATOR_KINDS
-from bridge.core.flight import Flight, Overrides, prepare
+from bridge.core.flight import Flight, prepare
+from bridge.core.overrides import Overrides
 from bridge.link.model import DIRECTIONS, NUMBER_RANGES, TRACE_EXCLUSIVE
 from missions import MISSION_RANGES, Mission
 from missions.fleet import FLEET_RANGES

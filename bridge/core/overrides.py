@@ -1,0 +1,185 @@
+"""What a caller lays over a mission: one frozen :class:`Overrides`, checked for its types, laid over a mission.
+
+In:  ``bsst``'s flags or Python's keywords (:meth:`Overrides.of`): profile, controller, discretization, ``rate_hz``
+     Hz, seed, ``scatter_m`` m, actuation, tables laid over ``[link]``, ``[failsafe]``, ``[sensors]``, an estimator
+     kind, a noise scale, ``[params]`` entries by PX4 name, parameter changes at mission times s, ``[wind]``
+     (m/s, compass degrees), events (tables or ``T:KIND[:ARGS]``)
+Out: an :class:`Overrides` (a type that is wrong raises ``ConfigError`` naming the field, or the flag for
+     ``--param`` and ``--at``); :meth:`Overrides.laid_over` the mission with them laid over it, validated again by
+     the mission; :func:`merged_failsafe_params`, :func:`merged_tables`, how two tables are laid one over the other
+
+Every other value is checked by the part that owns it when :func:`bridge.core.flight.prepare` builds the flight.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
+from numbers import Integral, Real
+from pathlib import Path
+from typing import Any
+
+from bridge.autopilot.params import BY_NAME, ParamChange, VehicleParams, apply_params, params_as_failsafe, typed_value
+from bridge.link.model import absolute_link_paths, merge_link_tables
+from missions import Mission
+from missions.mission import law_spec_from
+from params import ConfigError, Table
+from plant.events import event_from_table, event_table_from_flag
+
+
+@dataclass(frozen=True)
+class Overrides:
+    """What a caller lays over a mission: ``bsst``'s flags, or Python's keywords. None (and an empty
+    table) keeps the mission's own. Each field is checked for its type here, ``params`` for its
+    parameters' types, ranges and clashes (ConfigError naming ``--param``); every other value by the
+    part that owns it when :func:`prepare` builds the flight (the mission's ranges, the link model's)."""
+
+    profile: str | None = None  # vehicle profile: paper, x500, or a profile TOML path
+    controller: str | None = None  # law: bsst, smc, pid, file.py:Class or module:Class (from the working dir)
+    discretization: str | None = None  # how bsst steps its super-twisting step: explicit or implicit (docs/law.md)
+    rate_hz: float | None = None  # control rate, Hz
+    seed: int | None = None  # seed of the random effects (and of the link's fates, unless [link] seed)
+    scatter_m: float | None = None  # [start] scatter_m, m: each seed starts in a disc this wide (missions.scatter)
+    actuation: str | None = None  # the profile's actuation: wrench or motors
+    link: Mapping[str, Any] | None = None  # over [link] (merge_link_tables): delay_ms ms, loss_pct %, blackouts s, ...
+    failsafe: Mapping[str, Any] | None = None  # over [failsafe], key by key: timeout_s s, descent_rate m/s, action
+    sensors: Mapping[str, Any] | None = None  # over [sensors], key by key: {"set": "mocap"}
+    estimator: str | None = None  # [estimator] kind: truth, raw or ekf
+    noise: float | None = None  # [sensors] noise_scale: every sigma of the set times it (no unit)
+    params: Mapping[str, float] | None = None  # over [params], PX4 names: COM_OF_LOSS_T s, COM_OBL_ACT (an integer)
+    param_at: tuple[ParamChange, ...] = ()  # parameter changes at mission times (s), at the start of their step
+    wind: Mapping[str, Any] | float | tuple[float, float] | None = None  # over [wind]: a table, SPEED m/s, or
+    #   (SPEED m/s, FROM_DEG compass direction it blows from)
+    turbulence: str | None = None  # [wind] turbulence: none, light, moderate or severe
+    turbulence_scaling: str | None = None  # [wind] turbulence_scaling: exact (the flight's record at σ) or none
+    at: tuple[Mapping[str, Any] | str, ...] = ()  # events after the mission's [[events]]: tables or "T:KIND[:ARGS]"
+
+    def __post_init__(self) -> None:
+        _check_type("turbulence", self.turbulence, str, "a string")
+        _check_type("scatter_m", self.scatter_m, (int, float), "a number (m)")
+        _check_type("turbulence_scaling", self.turbulence_scaling, str, "a string")
+        w = self.wind
+        if isinstance(w, (int, float)) and not isinstance(w, bool):
+            object.__setattr__(self, "wind", {"speed_mps": float(w)})
+        elif isinstance(w, tuple) and len(w) == 2 and all(isinstance(v, (int, float)) for v in w):
+            object.__setattr__(self, "wind", {"speed_mps": float(w[0]), "from_deg": float(w[1])})
+        else:
+            _check_type("wind", w, Mapping, "a table, a speed (m/s) or (speed m/s, from deg)")
+            if w is not None:
+                object.__setattr__(self, "wind", dict(w))
+        events, named = [], []
+        for i, e in enumerate(tuple(self.at)):
+            if isinstance(e, str):
+                named.append(f"--at {e}")
+                try:
+                    e = event_table_from_flag(e)
+                except ValueError as exc:
+                    raise ConfigError(f"--at {e}: {exc}"[:300]) from None
+            else:
+                named.append(f"at[{i}]")
+            if not isinstance(e, Mapping):
+                raise ConfigError(f"at: expected event tables or 'T:KIND[:ARGS]' strings, got {e!r}"[:200])
+            events.append(dict(e))
+        object.__setattr__(self, "at", tuple(events))
+        object.__setattr__(self, "_at_named", tuple(named))  # (not a field) each event as its caller gave it
+        for f in ("profile", "controller", "discretization", "actuation", "estimator"):
+            _check_type(f, getattr(self, f), str, "a string")
+        for f in ("rate_hz", "noise"):
+            _check_type(f, getattr(self, f), Real, "a number")
+        _check_type("seed", self.seed, Integral, "an integer")
+        for f in ("link", "failsafe", "sensors", "params"):
+            v = getattr(self, f)
+            _check_type(f, v, Mapping, "a table (a mapping)")
+            if v is not None:  # a copy: a caller's later change to its dict changes nothing here
+                object.__setattr__(self, f, dict(v))
+        if self.params:  # each as its parameter's type (an INT32 an int), checked, named as the flag
+            apply_params(VehicleParams(), self.params.items(), "", lambda name, value: f"--param {name}={value}")
+            object.__setattr__(self, "params", {n: typed_value(BY_NAME[n], v) for n, v in self.params.items()})
+        changes = tuple(self.param_at)
+        for c in changes:
+            if not isinstance(c, ParamChange):
+                raise ConfigError(f"param_at: expected ParamChange(t_s, name, value) entries, got {c!r}"[:200])
+        object.__setattr__(self, "param_at", changes)
+
+    @classmethod
+    def of(cls, given: Overrides | Mapping[str, Any] | None = None, /, **keywords: Any) -> Overrides:
+        """``given`` (an :class:`Overrides`, a mapping of its fields, or None) with ``keywords`` (its
+        fields by name) laid over it: how :func:`prepare`, :func:`bridge.loop.simulate` and
+        :func:`bridge.session.sitl` take ``overrides=`` and keywords alike. A name that is no field is
+        a TypeError, as an unknown keyword argument is."""
+        base = given.given() if isinstance(given, Overrides) else dict(given or {})
+        unknown = sorted(set(base) - OVERRIDE_FIELDS) + sorted(set(keywords) - OVERRIDE_FIELDS)
+        if unknown:
+            raise TypeError(f"unknown override {', '.join(map(repr, unknown))}; the overrides are "
+                            f"{', '.join(f.name for f in fields(cls))}")
+        if isinstance(given, Overrides) and not keywords:
+            return given
+        return cls(**{**base, **keywords})
+
+    def given(self) -> dict[str, Any]:
+        """The fields that lay something over the mission (not None, not empty), by name."""
+        return {f.name: v for f in fields(self)
+                if (v := getattr(self, f.name)) is not None and not (isinstance(v, (dict, tuple)) and not v)}
+
+    def laid_over(self, m: Mission) -> Mission:
+        """The mission with these overrides laid over it (validated again by the mission)."""
+        # trace and profile files: a mission's from its folder, an override's from the working directory
+        own_link = absolute_link_paths(m.link, Path(m.source).parent)
+        link = merge_link_tables(own_link, absolute_link_paths(self.link, Path("."))) if self.link else own_link
+        failsafe, params = merged_failsafe_params(m, self.failsafe, self.params)
+        sensors = merged_tables(m.sensors, self.sensors, {} if self.noise is None else {"noise_scale": self.noise})
+        estimator = merged_tables(m.estimator, {} if self.estimator is None else {"kind": self.estimator})
+        # a law file given on the command line or from Python: from the working directory
+        law = law_spec_from(self.controller, Path(".")) if self.controller is not None else None
+        wind = merged_tables(m.wind, self.wind, {} if self.turbulence is None else {"turbulence": self.turbulence},
+                             {} if self.turbulence_scaling is None else {"turbulence_scaling": self.turbulence_scaling})
+        for e, named in zip(self.at, self._at_named, strict=True):  # each checked alone first: errors name its flag
+            event_from_table(Table(e, named), m.duration_s)
+        events = (*m.events, *self.at) if self.at else None
+        return m.with_overrides(profile=self.profile, controller=law, discretization=self.discretization,
+                                rate_hz=self.rate_hz, seed=self.seed, start_scatter_m=self.scatter_m,
+                                actuation=self.actuation, link=link, failsafe=failsafe, sensors=sensors,
+                                estimator=estimator, params=params, wind=wind, events=events)
+
+
+OVERRIDE_FIELDS = frozenset(f.name for f in fields(Overrides))
+
+
+def _check_type(name: str, value: Any, kind: type | tuple[type, ...], what: str) -> None:
+    """ConfigError unless ``value`` is None or a ``kind`` (never a bool)."""
+    if value is not None and (isinstance(value, bool) or not isinstance(value, kind)):
+        raise ConfigError(f"overrides: {name}: expected {what}, got {value!r}"[:200])
+
+
+def merged_failsafe_params(m: Mission, failsafe: Mapping[str, Any] | None,
+                           params: Mapping[str, float] | None) -> tuple[Mapping[str, Any] | None,
+                                                                        Mapping[str, Any] | None]:
+    """The mission's ``[failsafe]`` and ``[params]`` tables with the overrides laid over them, so that
+    an override wins over whichever of the file's two tables holds the same setting (and the result
+    holds each setting in one of them only): None for a table nothing was laid over."""
+    if not failsafe and not params:
+        return None, None
+    over_fs = dict(failsafe or {})
+    over_params = dict(params or {})
+    by_params = params_as_failsafe(over_params)  # failsafe key -> the parameter override setting it
+    for key, name in by_params.items():
+        if key in over_fs:
+            raise ConfigError(f"--param {name} and the failsafe override of {key} (--failsafe-action) set the same "
+                              "thing: give one")
+    fs = {k: v for k, v in m.failsafe.items() if k not in by_params}
+    fs.update(over_fs)
+    taken = set(over_fs) | set(by_params)  # the settings an override sets: the file's entries for them go
+    ps = {n: v for n, v in m.params.items() if params_as_failsafe({n: v}).keys().isdisjoint(taken)}
+    ps.update(over_params)
+    return fs, ps
+
+
+def merged_tables(own: Mapping[str, Any], *over: Mapping[str, Any] | None) -> Mapping[str, Any] | None:
+    """``own`` with each of ``over`` laid over it key by key; None (keep the mission's) when nothing is laid."""
+    given = [o for o in over if o]
+    if not given:
+        return None
+    out = dict(own)
+    for o in given:
+        out.update(o)
+    return out
