@@ -1,9 +1,9 @@
 """From a mission to the parts that fly it: every table validated by the part that owns it.
 
 In:  a mission (a :class:`~missions.Mission` or a TOML path) and its
-     :class:`~bridge.core.overrides.Overrides` (one frozen value: profile, controller, ``rate_hz`` Hz, seed, actuation, tables laid over ``[link]``, ``[failsafe]``,
-     ``[sensors]``, an estimator kind, a noise scale, ``[params]`` entries by PX4 name, parameter changes
-     at mission times s), or the same as keywords
+     :class:`~bridge.core.overrides.Overrides` (one frozen value: profile, controller, ``rate_hz`` Hz, seed,
+     actuation, tables laid over ``[link]``, ``[failsafe]``, ``[sensors]``, an estimator kind, a noise scale,
+     ``[params]`` entries by PX4 name, parameter changes at mission times s), or the same as keywords
 Out: a frozen :class:`Flight`, which builds the plant, the :class:`~bridge.autopilot.simvehicle.SimVehicle`,
      the law and the guard's configuration, and lists the blackouts (mission time s); a bad value
      raises ``ConfigError`` naming file and key (or the flag, for an override)
