@@ -67,9 +67,10 @@ from pymavlink.dialects.v20 import common as mavlink
 from bridge.core.clock import Stalls
 from bridge.link.impairment import LinkStats
 from bridge.link.model import LinkImpairment, LinkSettings
-from bridge.link.radio import ProcessRadio, finished_part
+from bridge.link.radio import ProcessRadio
 from bridge.mavlink.endpoint import parse_address as endpoint_address
 from bridge.mavlink.endpoint import socket_drops
+from bridge.nodes.relaystats import RelayCounters, SnapshotWriter
 from bridge.nodes.report import Event, Ready
 
 Address = tuple[str, int]
@@ -179,7 +180,7 @@ class Relay:
         self.cpu_sys_s = 0.0
         self.forwarded = 0
         self._thread: threading.Thread | None = None
-        self._snapshots = _SnapshotWriter(Path(stats_path)) if stats_path is not None else None
+        self._snapshots = SnapshotWriter(Path(stats_path)) if stats_path is not None else None
         self._drops: dict[str, int | None] | None = None  # the kernel's drops on each socket, kept at close
 
     @property
@@ -348,7 +349,7 @@ class Relay:
                 snapshots.put(self._counters(None))  # whatever is killed from now on, this much is kept
                 snapshots.close()
 
-    def _counters(self, cpu0: Any) -> _Counters:
+    def _counters(self, cpu0: Any) -> RelayCounters:
         """A copy of everything :meth:`summary` reads (microseconds: the delay arrays are copied whole), with
         the CPU time since ``cpu0`` added when serving (None: the totals kept)."""
         user, system = self.cpu_user_s, self.cpu_sys_s
@@ -369,7 +370,7 @@ class Relay:
                  "stalls": self.stalls.report(), **({"jitter_capped": cap} if (cap := self.jitter_capped) else {})}
         if self.radios:  # this vehicle's part of the fleet's one radio, by direction
             fixed["radio"] = {d: r.part() for d, r in self.radios.items()}
-        return _Counters(stats, {d: array("d", a) for d, a in self.added.items()}, fixed, user, system)
+        return RelayCounters(stats, {d: array("d", a) for d, a in self.added.items()}, fixed, user, system)
 
     def summary(self) -> dict[str, Any]:
         """Per direction: the model's statistics (``delay_ms`` = scheduled one-way delay) and
@@ -407,78 +408,6 @@ class Relay:
         if self._thread is not None:
             self._thread.join(timeout=5.0)
         self.close()
-
-
-class _Counters:
-    """A copy of a relay's counters at one moment, turned into its summary away from the serving loop."""
-
-    def __init__(self, stats: dict[str, LinkStats], added: dict[str, array], fixed: dict[str, Any],
-                 cpu_user_s: float, cpu_sys_s: float) -> None:
-        self.stats, self.added, self.fixed = stats, added, fixed
-        self.cpu_user_s, self.cpu_sys_s = cpu_user_s, cpu_sys_s
-
-    def summary(self, final: bool) -> dict[str, Any]:
-        from bridge.record.metrics import percentiles  # loads numpy: not needed while relaying
-
-        out: dict[str, Any] = {}
-        for d, st in self.stats.items():
-            s = st.summary()
-            s["measured_ms"] = percentiles(self.added[d], 1000.0, empty=None)
-            out[d] = s
-        out.update(self.fixed)
-        if "radio" in out:
-            out["radio"] = {d: finished_part(p) for d, p in out["radio"].items()}
-        cpu = self.cpu_user_s + self.cpu_sys_s
-        forwarded = self.fixed["forwarded"]
-        out["cpu_s"] = cpu
-        out["cpu_user_s"] = self.cpu_user_s
-        out["cpu_sys_s"] = self.cpu_sys_s
-        out["cpu_us_per_packet"] = 1e6 * cpu / forwarded if forwarded else None
-        out["final"] = final
-        return out
-
-
-class _SnapshotWriter:
-    """Writes the newest :class:`_Counters` handed to it to ``path`` atomically, from its own thread (the
-    summary's percentiles and the file's write stay out of the serving loop)."""
-
-    def __init__(self, path: Path) -> None:
-        from bridge.record.runlog import write_json_atomic  # lazy: start-up time, and only a relay with --stats writes
-
-        self._write = write_json_atomic
-        self.path = path
-        self._cond = threading.Condition()
-        self._pending: _Counters | None = None
-        self._closing = False
-        self._thread = threading.Thread(target=self._run, name="bsst-relay-stats", daemon=True)
-        self._thread.start()
-
-    def put(self, counters: _Counters) -> None:
-        with self._cond:
-            self._pending = counters
-            self._cond.notify()
-
-    def close(self) -> None:
-        """Write what is pending, then stop the thread (the final record is the owner's, after this)."""
-        with self._cond:
-            self._closing = True
-            self._cond.notify()
-        self._thread.join()
-
-    def _run(self) -> None:
-        while True:
-            with self._cond:
-                while self._pending is None and not self._closing:
-                    self._cond.wait()
-                counters, self._pending = self._pending, None
-                closing = self._closing
-            if counters is not None:
-                try:
-                    self._write(self.path, counters.summary(final=False))
-                except OSError:
-                    pass  # the owner's final write says so, by name
-            if closing and self._pending is None:
-                return
 
 
 def client_event(addr: Address) -> Event:
