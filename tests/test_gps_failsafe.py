@@ -77,6 +77,10 @@ try:  # armed, no position: PX4 refuses a mode that needs one
     out["hold"] = act.hold().name
 except ActionError as e:
     out["hold"] = e.result.name
+try:  # but always takes LAND (PX4 pull request 23580): Descend flies on
+    out["land"] = act.land().name
+except ActionError as e:
+    out["land"] = e.result.name
 until("disarmed", lambda: seen["armed"] is False, 30)
 with cond:
     positions = seen["positions"]
@@ -103,7 +107,8 @@ def test_mavsdk_sees_the_gps_lost_the_descent_and_the_position_back(tmp_path):
     their 120 ms latency): MAVSDK's flight mode LAND, armed, until it lands and disarms, then HOLD again (the disarm
     clears PX4's failsafe: the mode before it). GPS OK: healthy again, and
     GLOBAL_POSITION_INT (MAVSDK's position) flows again, which it had not since the position was lost (the tlog).
-    MAVSDK's hold during the descent is refused (armed, PX4 takes no mode that cannot run).
+    MAVSDK's hold during the descent is refused (armed, PX4 takes no mode that cannot run), its land taken (PX4
+    always takes LAND) and the descent flies on.
     ESTIMATOR_STATUS with the horizontal position flags until the loss, without them after (its accuracy growing past
     a metre), with them again once a fix is fused, as MAVSDK reads them (MavlinkDirect, the stream asked for at
     10 Hz); the vehicle's events say each step."""
@@ -120,7 +125,8 @@ def test_mavsdk_sees_the_gps_lost_the_descent_and_the_position_back(tmp_path):
              [(e.t, e.kind, e.text) for e in v.reports() if isinstance(e, Event)])
     assert {k: got[k] for k in steps} == dict.fromkeys(steps, True), shown
     assert (got["arm"], got["takeoff"], got["off"], got["on"]) == ("SUCCESS",) * 4, shown
-    assert got["hold"] == "COMMAND_DENIED", got  # and the descent went on in LAND, to the disarm
+    assert got["hold"] == "COMMAND_DENIED", got  # TEMPORARILY_REJECTED, as PX4's; the descent went on
+    assert got["land"] == "SUCCESS", got  # taken: the descent went on in LAND, to the disarm
     # which clears the failsafe (PX4's framework.cpp): HOLD again, the mode before it (docs/ground-station.md)
     assert got["modes"][-3:] == ["HOLD", "LAND", "HOLD"], got["modes"]
     ev = [(e.t, e.kind, e.text) for e in v.reports() if isinstance(e, Event)]
@@ -132,6 +138,8 @@ def test_mavsdk_sees_the_gps_lost_the_descent_and_the_position_back(tmp_path):
     said = {k: x for _, k, x in ev if k in ("failsafe", "disarmed")}
     assert said == {"failsafe": "position lost: level and descend", "disarmed": "landed: disarmed"}
     assert any(t >= t_down and k == "mode" and x.startswith("HOLD (disarmed after its failsafe") for t, k, x in ev), ev
+    (land,) = [(t, x) for t, k, x in ev if k == "mode" and t_fs <= t < t_down]
+    assert land[1].startswith("LAND without a valid horizontal position estimate"), ev
     # ESTIMATOR_STATUS as MAVSDK received it (its MavlinkDirect): (s, flags, horizontal accuracy m)
     status = [(us * 1e-6, f, acc) for us, f, acc in got["status"]]
     pos = M.ESTIMATOR_POS_HORIZ_REL | M.ESTIMATOR_POS_HORIZ_ABS | M.ESTIMATOR_VELOCITY_HORIZ
@@ -142,6 +150,14 @@ def test_mavsdk_sees_the_gps_lost_the_descent_and_the_position_back(tmp_path):
     assert all(f & pos == 0 for _, f, _ in during) and during[-1][2] > during[0][2] > 1.0  # its 1-sigma grows
     gpos = _global_positions(tmp_path / "vehicle.tlog")
     assert not [t for t in gpos if t_lost + 0.01 < t < t_on] and any(t > t_on for t in gpos)
+    # the answers the vehicle sent during the descent: PX4's TEMPORARILY_REJECTED for HOLD, LAND ACCEPTED
+    log = mavutil.mavlink_connection(str(tmp_path / "vehicle.tlog"), dialect="common")
+    acks = []
+    while (m := log.recv_match(type="COMMAND_ACK")) is not None:
+        if m.command in (M.MAV_CMD_DO_SET_MODE, M.MAV_CMD_NAV_LAND):
+            acks.append((m.command, m.result))
+    assert acks[-2:] == [(M.MAV_CMD_DO_SET_MODE, M.MAV_RESULT_TEMPORARILY_REJECTED),
+                         (M.MAV_CMD_NAV_LAND, M.MAV_RESULT_ACCEPTED)], acks
 
 
 def test_the_product_fault_event_fails_safe_in_lockstep_as_offline(tmp_path):

@@ -412,7 +412,9 @@ def test_a_fence_and_rally_points_are_held_apart_from_the_mission(tmp_path):
     """Fence and rally points as PX4 holds them: each uploaded, downloaded back item for item (of its type, none
     current), apart from the mission; a fence that cannot be read (a polygon short of its vertices) and a bad item
     are refused and leave the fence held; a clear of one type clears it alone, of MAV_MISSION_TYPE_ALL all three;
-    an unknown mission type is MAV_MISSION_UNSUPPORTED. AUTOPILOT_VERSION says MISSION_FENCE and MISSION_RALLY.
+    a mission type PX4 does not know is answered as PX4 answers it (an upload NO_SPACE, or of 0 items ACCEPTED; a
+    download of 0 items; a clear ACCEPTED), nothing held changed. AUTOPILOT_VERSION says MISSION_FENCE and
+    MISSION_RALLY.
     Each accepted upload a ``mission`` event naming the ground station."""
     fence, rally = _zone_items(M.MAV_MISSION_TYPE_FENCE), _zone_items(M.MAV_MISSION_TYPE_RALLY)
     with instance_slot() as n:
@@ -443,8 +445,20 @@ def test_a_fence_and_rally_points_are_held_apart_from_the_mission(tmp_path):
             ack = _upload(gcs, bad, mission_type=M.MAV_MISSION_TYPE_FENCE)[0]
             assert ack.type == M.MAV_MISSION_ERROR
             assert [_fields(m) for m in _download_type(gcs, M.MAV_MISSION_TYPE_FENCE)] == [_fields(m) for m in fence]
-            gcs.mav.mission_count_send(*_tgt(gcs), 1, 7)  # no such mission type
-            assert _ack(gcs).type == M.MAV_MISSION_UNSUPPORTED
+            # a mission type PX4 does not know, as its MavlinkMissionManager answers it (room for no item, none
+            # held): an upload of 1 NO_SPACE, of 0 ACCEPTED, a download of 0 items, a clear ACCEPTED; of ALL alike
+            for kind in (7, M.MAV_MISSION_TYPE_ALL):
+                gcs.mav.mission_count_send(*_tgt(gcs), 1, kind)
+                ack = _ack(gcs)
+                assert (ack.type, ack.mission_type) == (M.MAV_MISSION_NO_SPACE, kind)
+                gcs.mav.mission_count_send(*_tgt(gcs), 0, kind)
+                ack = _ack(gcs)
+                assert (ack.type, ack.mission_type) == (M.MAV_MISSION_ACCEPTED, kind)
+                assert _download_type(gcs, kind) == []
+            gcs.mav.mission_clear_all_send(*_tgt(gcs), 7)
+            ack = _ack(gcs)
+            assert (ack.type, ack.mission_type) == (M.MAV_MISSION_ACCEPTED, 7)
+            assert len(_download(gcs)) == 3 and len(_download_type(gcs, M.MAV_MISSION_TYPE_RALLY)) == 2
             gcs.mav.mission_clear_all_send(*_tgt(gcs), M.MAV_MISSION_TYPE_RALLY)
             assert _ack(gcs).type == M.MAV_MISSION_ACCEPTED
             assert _download_type(gcs, M.MAV_MISSION_TYPE_RALLY) == []

@@ -29,6 +29,7 @@ from bridge.autopilot.positionloss import (
     Resume,
     ekf_valid,
     fallback,
+    taken_without_position,
 )
 from bridge.core.flight import prepare
 from bridge.mavlink.telemetry import Home
@@ -162,6 +163,28 @@ def test_a_ground_stations_hold_descends_while_lost_and_holds_again_once_valid()
     z = sim.plant.state[4]
     _fly(sim, 3.0)
     assert 0.5 < z < 2.5 and abs(sim.plant.state[4] - z) < 0.3 and sim.armed
+
+
+def test_a_land_asked_while_lost_is_taken_descends_on_and_lands_once_valid() -> None:
+    """PX4's commander, armed without a position (UserModeIntention::change; LAND forced since PX4 pull request
+    23580): HOLD, RTL, TAKEOFF and OFFBOARD need the position and are refused, nothing changed; LAND is taken, the
+    Descend flies on, and once the position is valid again (11.32 s) LAND flies, not the HOLD from before the loss,
+    lands where it is, and disarms. (It was refused like the others: the vehicle held again.)"""
+    sim = _gcs_vehicle("4:gps:off", "10:gps:on")
+    _fly(sim, 9.5)
+    assert sim.mode == FAILSAFE and sim.position.resume == Resume(HOLD)  # lost at 9.124 s, descending
+    for mode in (HOLD, RTL, TAKEOFF, OFFBOARD):
+        assert not taken_without_position(mode, sim.position) and sim.position.resume == Resume(HOLD)
+    assert taken_without_position(LAND, sim.position) and sim.position.resume == Resume(LAND)
+    assert sim.mode == FAILSAFE and isinstance(sim.onboard.target, Level)  # the descent flies on
+    _fly(sim, 2.0)
+    (back,) = [e for e in sim.events if e.kind == "mode" and e.t > 9.5]
+    assert round(back.t, 3) == 11.32 and back.mode == LAND and back.text.startswith("LAND at x=")
+    assert sim.mode == LAND and isinstance(sim.onboard.target, Land) and sim.armed
+    xy = (sim.plant.state[0], sim.plant.state[2])
+    _fly(sim, 6.0)
+    assert not sim.armed and [e.text for e in sim.events if e.kind == "disarmed"] == ["landed: disarmed"]
+    assert math.dist(xy, (sim.plant.state[0], sim.plant.state[2])) < 0.3  # landed where LAND began
 
 
 def _sent(mid: int, view: VehicleView) -> list:

@@ -90,7 +90,14 @@ def test_pymavlink_ground_station(tmp_path):
                                       0, 0, 0, 0, 0, 0)
             assert _ack(gcs, M.MAV_CMD_REQUEST_MESSAGE).result == M.MAV_RESULT_ACCEPTED
             ver = gcs.recv_match(type="AUTOPILOT_VERSION", blocking=True, timeout=5)
-            assert ver is not None and ver.capabilities & M.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+            # PX4's capabilities that this vehicle serves (FTP: the metadata, read-only; flight termination), not
+            # the offboard set-points it does not take (docs/ground-station.md)
+            served = (M.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | M.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+                      | M.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT | M.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
+                      | M.MAV_PROTOCOL_CAPABILITY_MISSION_INT | M.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT
+                      | M.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE | M.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY
+                      | M.MAV_PROTOCOL_CAPABILITY_FTP | M.MAV_PROTOCOL_CAPABILITY_FLIGHT_TERMINATION)
+            assert ver is not None and ver.capabilities == served, hex(ver.capabilities if ver else 0)
             gcs.mav.command_long_send(*tgt, M.MAV_CMD_SET_MESSAGE_INTERVAL, 0, M.MAVLINK_MSG_ID_ATTITUDE, 20000,
                                       0, 0, 0, 0, 0)
             assert _ack(gcs, M.MAV_CMD_SET_MESSAGE_INTERVAL).result == M.MAV_RESULT_ACCEPTED

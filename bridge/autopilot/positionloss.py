@@ -2,14 +2,16 @@
 
 In:  simulation time (s), when the vehicle's estimator last took in a reading that constrains the horizontal
      position (``aided_t`` s: a GNSS fix or a motion-capture pose fused; bridge.autopilot.estimator), EKF2_NOAID_TOUT
-     (us), and, armed, the vehicle's mode, its on-board controller's target and its offboard-loss action
+     (us), and, armed, the vehicle's mode, its on-board controller's target and its offboard-loss action; a ground
+     station's mode asked for while the position is invalid
 Out: whether the horizontal position is valid, as EKF2 says it (:func:`ekf_valid`: the telemetry) and as the
      commander judges it (:class:`PositionWatch`, after its probation: the failsafe), the ``position`` event's words,
      and what the vehicle flies while it is lost (:func:`fallback`: the failsafe's action, and what flies again once
-     it is valid, a :class:`Resume`); the estimate's health as ESTIMATOR_STATUS tells it (:func:`estimate_health`:
+     it is valid, a :class:`Resume`), whether a mode asked for meanwhile is taken (:func:`taken_without_position`);
+     the estimate's health as ESTIMATOR_STATUS tells it (:func:`estimate_health`:
      valid, aided now, by GNSS, horizontal and vertical accuracy m)
 
-As PX4 v1.14 and v1.15 do it (docs/sensors.md, "When the GPS is lost"):
+As PX4 v1.14 and v1.15 do it, the LAND below as PX4 main does since 2024 (docs/sensors.md, "When the GPS is lost"):
 
 - **EKF2** (src/modules/ekf2/EKF/ekf_helper.cpp, ``updateHorizontalDeadReckoningstatus``): while no measurement
   that constrains the horizontal position or velocity is fused, the filter dead-reckons on the IMU (the estimate
@@ -28,10 +30,17 @@ As PX4 v1.14 and v1.15 do it (docs/sensors.md, "When the GPS is lost"):
   (``ClearCondition::WhenConditionClears``): once the position is valid again, the mode the user chose flies again
   (a failsafe its own action). Here, out of OFFBOARD as every failsafe of this vehicle (docs/design.md, "Failsafe"),
   the vehicle returns to offboard control only when armed again: the descent goes on to the ground.
+- **A mode asked for meanwhile** (:func:`taken_without_position`; Commander.cpp, UserModeIntention.cpp
+  ``change``): armed, PX4 takes a mode only if it can run (``canRun``). Every mode this vehicle flies needs the
+  horizontal position (mode_requirements.cpp, a multicopter: Hold, Return and Mission a global and a local one,
+  Takeoff a local one, Land the relaxed local one, valid at any accuracy, which EKF2's ``xy_valid`` false takes
+  away as well; Offboard its offboard signal, lost with the position for position set-points), so each is
+  TEMPORARILY_REJECTED, but LAND: since PX4 pull request 23580 (UserModeIntention::change's ``force``) a LAND
+  (DO_SET_MODE AUTO.LAND, NAV_LAND) is always taken, "if that means to switch to DESCEND it is fine": it cannot run,
+  so the failsafe's Descend flies on, and LAND flies, from where the vehicle is, once the position is valid again.
 
 Not modelled: the accuracy test (COM_POS_FS_EPH: PX4 also calls the position invalid once its eph passes 2.5 times
-it), EKF2's stop of GNSS fusion after 10 s without data, and PX4's refusal of a mode switch that cannot run (a
-ground station's HOLD meanwhile is flown, and falls back at once).
+it), EKF2's stop of GNSS fusion after 10 s without data.
 """
 
 from __future__ import annotations
@@ -41,7 +50,7 @@ from dataclasses import dataclass
 
 from bridge.autopilot.estimator import Estimator
 from bridge.autopilot.failsafe import Land, PositionHold, ReturnHome, Target
-from bridge.autopilot.modes import FAILSAFE, GROUND_MODES, OFFBOARD
+from bridge.autopilot.modes import FAILSAFE, GROUND_MODES, LAND, OFFBOARD
 
 NOAID_TIMEOUT_US = 5_000_000  # EKF2_NOAID_TOUT's default (us)
 NOAID_TIMEOUT_RANGE_US = (500_000, 10_000_000)  # and its range
@@ -106,6 +115,17 @@ def fallback(mode: str, target: Target | None, offboard_action: str) -> tuple[st
         if isinstance(target, kind):
             return "descend", Resume(FAILSAFE, action)
     return None
+
+
+def taken_without_position(mode: str, watch: PositionWatch) -> bool:
+    """Whether PX4's commander takes a ground station's ``mode`` asked for while the vehicle is armed and ``watch``
+    says the position is invalid: LAND only (forced, PX4 pull request 23580), which then flies once the position is
+    valid (``watch.resume``; the failsafe's Descend flies until then); any other mode needs the position and is
+    refused (False), as a mode that cannot run is."""
+    if mode != LAND:
+        return False
+    watch.resume = Resume(LAND)
+    return True
 
 
 @dataclass(frozen=True)

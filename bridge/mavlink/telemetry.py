@@ -40,12 +40,15 @@ _SENSORS = (mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSO
             | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG | mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
             | mavlink.MAV_SYS_STATUS_SENSOR_GPS | mavlink.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
             | mavlink.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION)
-# the mission protocol in both forms (MISSION_ITEM_INT and the legacy MISSION_ITEM), as PX4 says: MAVSDK
-# uploads nothing to an autopilot without MISSION_INT
+# AUTOPILOT_VERSION's capabilities: PX4's (mavlink_main.cpp, ``send_autopilot_capabilities``) that this vehicle
+# serves: the mission protocol in both forms (MAVSDK uploads nothing to an autopilot without MISSION_INT), fence and
+# rally points, MAVLink FTP (read-only: bridge.mavlink.ftp), DO_FLIGHTTERMINATION; not PX4's offboard set-points
+# (SET_ATTITUDE_TARGET, SET_POSITION_TARGET_LOCAL_NED, bit 256): the controller sends actuator targets only
 CAPABILITIES = (mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
                 | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
                 | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT
-                | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY)
+                | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY
+                | mavlink.MAV_PROTOCOL_CAPABILITY_FTP | mavlink.MAV_PROTOCOL_CAPABILITY_FLIGHT_TERMINATION)
 VERSION = (0 << 24) | (1 << 16) | (0 << 8) | 255  # 0.1.0, FIRMWARE_VERSION_TYPE_OFFICIAL
 
 

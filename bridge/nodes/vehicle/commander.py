@@ -31,6 +31,7 @@ from bridge.autopilot.failsafe import PositionHold
 from bridge.autopilot.fencewatch import reposition_refusal
 from bridge.autopilot.intention import NOT_ARMABLE
 from bridge.autopilot.params import BY_NAME
+from bridge.autopilot.positionloss import taken_without_position
 from bridge.autopilot.simvehicle import GROUND_MODES, HOLD, LAND, OFFBOARD, RTL, TAKEOFF, SimVehicle
 from bridge.autopilot.vehicleevents import Sender
 from bridge.mavlink.endpoint import Endpoint
@@ -296,7 +297,7 @@ class Commander:
         if terminated:
             return self._refuse(terminated)
         if self.sim.armed and not self.sim.position.valid:  # PX4 (UserModeIntention::change): armed, a mode must run
-            return self._refuse(f"mode {mode_name(mode)}: no valid horizontal position estimate (it needs one)")
+            return self._without_position(mode, by)
         if mode == MISSION:
             if self.pre_start.awaits():  # armed in HOLD on the ground: AUTO.MISSION starts the mission
                 return self._start_mission(by, 0.0, START_ARMED)
@@ -327,6 +328,21 @@ class Commander:
         sim.set_mode(mode, takeoff_alt_m, hold_at)
         attribute(sim.events, n0, by)
         self._clock_after_mode(was)
+        return mavlink.MAV_RESULT_ACCEPTED
+
+    def _without_position(self, mode: str, by: Sender) -> int:
+        """A mode asked for armed while the horizontal position is invalid, as PX4's commander answers it
+        (:func:`~bridge.autopilot.positionloss.taken_without_position`): LAND is taken (a ``mode`` event naming the
+        sender; the failsafe's descent flies on, LAND once the position is valid), any other is TEMPORARILY_REJECTED
+        (PX4's answer to a mode that cannot run) with a STATUSTEXT saying why."""
+        sim = self.sim
+        if not taken_without_position(mode, sim.position):
+            return self._refuse(f"mode {mode_name(mode)}: no valid horizontal position estimate (it needs one)",
+                                mavlink.MAV_RESULT_TEMPORARILY_REJECTED)
+        n0 = len(sim.events)
+        sim.event("mode", "LAND without a valid horizontal position estimate: descending without horizontal control "
+                  "until it is valid again, then LAND from there (PX4 always takes LAND)", mode=LAND, armed=True)
+        attribute(sim.events, n0, by)
         return mavlink.MAV_RESULT_ACCEPTED
 
     def _end_mission(self, mode: str) -> int:

@@ -18,7 +18,10 @@ failed, refused or abandoned upload leaves the mission as it was, and the vehicl
 than the one it acknowledged; a download sends the mission as it was when it began. While it waits for an item
 the vehicle requests it again every :data:`RETRY_S`; a transfer nobody spoke in for :data:`PROTOCOL_TIMEOUT_S`
 ends ("Operation timeout"). Three mission types, each held apart, as PX4 holds them: the mission, the fence and
-the rally points (a transfer is of one type; MISSION_CLEAR_ALL of MAV_MISSION_TYPE_ALL clears the three). The
+the rally points (a transfer is of one type; MISSION_CLEAR_ALL of MAV_MISSION_TYPE_ALL clears the three). A type
+PX4 does not know (any other) is answered as PX4 answers it, its MAX_COUNT and _count read as 0 for it: MISSION_COUNT
+of one item or more MAV_MISSION_NO_SPACE, of none ACCEPTED; MISSION_REQUEST_LIST a MISSION_COUNT of 0;
+MISSION_CLEAR_ALL ACCEPTED; nothing held changes (it was MAV_MISSION_UNSUPPORTED until 2026-12-06). The
 items' checks: :mod:`bridge.mavlink.missionitems` (a mission's), :mod:`bridge.mavlink.fenceitems` (a fence's and
 rally points').
 """
@@ -129,9 +132,6 @@ class LinkTransfer:
             self._ack(who, m, now)
             return False
         mtype = MISSION if kind == "MISSION_SET_CURRENT" else m.mission_type
-        if mtype not in TYPES and not (kind == "MISSION_CLEAR_ALL" and mtype == mavlink.MAV_MISSION_TYPE_ALL):
-            self._answer(who, mavlink.MAV_MISSION_UNSUPPORTED, mtype)
-            return False
         self._idle_if_sent()
         if kind == "MISSION_COUNT":
             return self._count(who, m, now)
@@ -144,7 +144,8 @@ class LinkTransfer:
         if kind == "MISSION_CLEAR_ALL":
             if self._flown(who, mtype, "IGN CLEAR CMD"):
                 return False
-            types = TYPES if mtype == mavlink.MAV_MISSION_TYPE_ALL else (mtype,)
+            # (a type PX4 does not know: nothing to clear, ACCEPTED as PX4 answers it)
+            types = TYPES if mtype == mavlink.MAV_MISSION_TYPE_ALL else tuple(t for t in (mtype,) if t in TYPES)
             held = [t for t in types if self.host.held(t).items]
             for t in held:  # clearing nothing changes nothing: answered, not said as a change
                 self.host.accept(who, Mission(), "cleared", t)
@@ -176,8 +177,11 @@ class LinkTransfer:
         if self.state is not State.IDLE or self.host.upload_link is not None:
             self._busy(who, mtype)
             return False
-        if m.count > MAX_COUNT[mtype]:
+        if m.count > MAX_COUNT.get(mtype, 0):  # a type PX4 does not know: room for none
             self._answer(who, mavlink.MAV_MISSION_NO_SPACE, mtype)
+            return False
+        if mtype not in TYPES:  # and none of it to clear: ACCEPTED, nothing held changes
+            self._answer(who, mavlink.MAV_MISSION_ACCEPTED, mtype)
             return False
         if self._flown(who, mtype, "IGN MISSION_COUNT"):
             return False
@@ -263,7 +267,7 @@ class LinkTransfer:
         if not (self.state is State.IDLE or (self.state is State.SENDLIST and self._is_partner(who))):
             self._busy(who, mtype, "Mission download request ignored, already active")
             return
-        mission = self.host.held(mtype)
+        mission = self.host.held(mtype) if mtype in TYPES else Mission()  # a type PX4 does not know: no items
         self.state, self.partner, self.sending, self.mtype = State.SENDLIST, who, mission, mtype
         self.seq, self.count, self.sent = 0, len(mission.items), set()
         self.last_recv = self.last_sent = now
