@@ -80,7 +80,7 @@ def test_the_emergency_level_lands_over_the_batterys_own_return_only(tmp_path: P
         sim.plant.state = (3.0, 0.0, 0.0, 0.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # 3 m from home, 2 m up
         pack = sim.plant.battery
         if not own:
-            sim._fly_failsafe("hold", "link lost", "")
+            sim.fly_failsafe("hold", "link lost", "")
         pack.used_mah = 0.94 * pack.config.capacity_mah
         sim.advance()
         assert sim.mode == FAILSAFE and (sim.events[-1].text.endswith(": return")) is own, sim.events[-1]

@@ -44,7 +44,6 @@ from bridge.autopilot.failsafe import (
     failsafe_target,
     landing_target,
 )
-from bridge.autopilot.fencewatch import FENCE_ACTION_TEXT, FENCE_FAILSAFE, arming_refusal, breaches
 from bridge.autopilot.impactwatch import ImpactWatch
 from bridge.autopilot.landdisarm import LandDisarm
 from bridge.autopilot.modes import (  # noqa: F401  (the modes: imported from here by the rest of the bridge)
@@ -59,10 +58,11 @@ from bridge.autopilot.modes import (  # noqa: F401  (the modes: imported from he
     end_target,
     mode_target,
 )
-from bridge.autopilot.params import FENCE_ACTIONS, VehicleParams, change_param, read_param
-from bridge.autopilot.positionloss import NOAID_TIMEOUT_US, PositionWatch, fallback
+from bridge.autopilot.params import VehicleParams, change_param, read_param
+from bridge.autopilot.positionloss import NOAID_TIMEOUT_US, PositionWatch
 from bridge.autopilot.timeline import act_on
 from bridge.autopilot.touchdownwatch import TouchdownWatch
+from bridge.autopilot.vehiclechecks import check_battery, check_limits, check_position, prearm_refusal
 from bridge.autopilot.vehicleevents import Event, ParamChanged, Sender
 from controller.nominal import Nominal
 from missions.geofence import Geofence
@@ -118,9 +118,9 @@ class SimVehicle:
         self._impact = ImpactWatch()  # the hard touchdown's verdict: armed as it touched down or not (plant_verdict)
         self._touchdown = TouchdownWatch()  # a soft one armed in OFFBOARD, mid-mission: a touchdown (plant_verdict)
         self._period_s = self.plant.dt * self.substeps
-        self._beyond: set[str] = set()  # limits said to be passed: GF_MAX_* and the fence (once each, until changed)
+        self.beyond: set[str] = set()  # limits said to be passed: GF_MAX_* and the fence (once each, until changed)
         self.arming_refused: str | None = None  # why the last arm was denied (arming_denied), until it arms
-        self.position = PositionWatch()  # the horizontal position estimate's validity (_check_position)
+        self.position = PositionWatch()  # the horizontal position estimate's validity (vehiclechecks.check_position)
         if self.armed and self.arming_denied():  # offline: armed at the start, if its pre-arm check passes
             self.armed = False
 
@@ -278,43 +278,18 @@ class SimVehicle:
                                                     after.battery_emergency, after.low_battery_action)
         if (self.max_hor_m, self.max_ver_m) != (after.max_hor_m, after.max_ver_m):
             self.max_hor_m, self.max_ver_m = after.max_hor_m, after.max_ver_m
-            self._beyond.clear()  # a new limit is watched afresh
+            self.beyond.clear()  # a new limit is watched afresh
         old, new = read_param(before, name), read_param(after, name)
         return self.event("param", f"{name} = {new:g} (was {old:g})", param=ParamChanged(name, float(old), float(new)))
 
     def watch_fence(self, fence: Geofence | None) -> None:
         """Watch ``fence`` (a ground station's; None: none) from now on, afresh."""
         self.fence = fence
-        self._beyond.discard("fence")
-
-    def _check_limits(self) -> None:
-        """The first time the vehicle is beyond GF_MAX_HOR_DIST or GF_MAX_VER_DIST, or outside the fence it holds, a
-        ``geofence`` event says so (the run's geofence policy then fails), and GF_ACTION 2-5 fly the failsafe it
-        names (:mod:`bridge.autopilot.fencewatch`), unless a failsafe already flies."""
-        known = "" if self.sensors is None else " (by its estimate)"  # PX4's geofence reads the estimate too
-        new = [(w, why + known) for w, why in self._breaches("fence" in self._beyond) if w not in self._beyond]
-        for which, why in new:
-            self._beyond.add(which)
-            self.event("geofence", f"{why} (GF_ACTION = {self.fence_action}: {FENCE_ACTIONS[self.fence_action]})")
-        action = FENCE_FAILSAFE.get(self.fence_action)  # None: 0 none, 1 warning (it flies on)
-        if new and action is not None and self.mode not in (FAILSAFE, LANDED):
-            self._fly_failsafe(action, f"geofence: {new[0][1]}: {FENCE_ACTION_TEXT[action]}",
-                               "geofence: flight terminated, motors stopped")
-
-    def _breaches(self, fence_known: bool = False) -> list[tuple[str, str]]:
-        """:func:`~bridge.autopilot.fencewatch.breaches` of the state the vehicle knows (its estimate, as PX4's
-        geofence reads it; the true state under truth) now, not the fence if ``fence_known``."""
-        fence = None if fence_known else self.fence
-        return breaches(self.published(), self.plant.t, self.home, self.max_hor_m, self.max_ver_m, fence)
+        self.beyond.discard("fence")
 
     def prearm_refusal(self) -> str | None:
-        """Why PX4's pre-arm checks deny arming now, or None: the geofence's (fencewatch.arming_refusal) and the
-        battery's (:meth:`~bridge.autopilot.batterywatch.BatteryWatch.arming_refusal`)."""
-        pack = self.plant.battery
-        why = [w for w in (arming_refusal(self._breaches() if self.fence_action else [], self.fence_action),
-                           None if pack is None else self.battery_watch.arming_refusal(pack.remaining),
-                           None if self.position.valid else "no valid horizontal position estimate") if w]
-        return f"arming denied: {'; '.join(why)}" if why else None
+        """Why PX4's pre-arm checks deny arming now, or None (:func:`bridge.autopilot.vehiclechecks.prearm_refusal`)."""
+        return prearm_refusal(self)
 
     def arming_denied(self) -> bool:
         """Whether arming is denied now (:meth:`prearm_refusal`); if so a ``preflight`` event says why, and
@@ -323,16 +298,6 @@ class SimVehicle:
         if self.arming_refused is not None:
             self.event("preflight", self.arming_refused)
         return self.arming_refused is not None
-
-    def _check_battery(self, remaining: float) -> None:
-        """Each battery level the charge left (0..1) passes, said once (a ``battery`` event), and COM_LOW_BAT_ACT's
-        action flown (:mod:`bridge.autopilot.batterywatch`): over any mode but a failsafe, or over its own Return."""
-        b = self.battery_watch
-        for _, text, act in b.passed(remaining):
-            self.event("battery", text)
-            if act is not None and (self.mode not in (FAILSAFE, LANDED) or (b.returning and self.mode == FAILSAFE)):
-                b.returning = act == "return"
-                self._fly_failsafe(act, f"battery {text}: {act}", "battery: motors stopped")
 
     def fly_onboard(self, target: Target, mode: str) -> None:
         """Hand the motors to the on-board controller flying ``target`` under ``mode`` (not
@@ -343,10 +308,10 @@ class SimVehicle:
     def _enter_failsafe(self, silent_s: float) -> None:
         """No target for ``silent_s``: the failsafe's action, from the state it began in."""
         action = self.failsafe.action
-        self._fly_failsafe(action, f"no actuator target for {silent_s:.3f} s: {ACTION_TEXT[action]}",
+        self.fly_failsafe(action, f"no actuator target for {silent_s:.3f} s: {ACTION_TEXT[action]}",
                            "failsafe: motors stopped")
 
-    def _fly_failsafe(self, action: str, text: str, stopped: str) -> None:
+    def fly_failsafe(self, action: str, text: str, stopped: str) -> None:
         """Mode failsafe, a ``failsafe`` event saying ``text``, and ``action`` (a ``[failsafe] action``) flown from
         here (``hold``: for COM_FAIL_ACT_T, then it lands); on the ground, or ``disarm``, the motors stop now
         (``stopped``: why)."""
@@ -363,27 +328,6 @@ class SimVehicle:
         if landed:  # its COM_DISARM_LAND wait goes on under the failsafe's landing (LandDisarm.waits_under)
             self.land_disarm.target = self.onboard.target
         self.land_at = p.t + self.failsafe.hold_s if action == "hold" else None
-
-    def _check_position(self) -> None:
-        """The horizontal position estimate's validity (bridge.autopilot.positionloss): a ``position`` event when
-        the commander's view of it changes; armed and lost, PX4's fallback (descend, or the offboard-loss action's
-        disarm) over what needs a position; valid again, what flew before it (a ground station's mode, a failsafe's
-        action) from here."""
-        w = self.position
-        said = w.update(self.plant.t, self.estimator.aided_t, self.noaid_timeout_us)
-        if said is not None:
-            self.event("position", said)
-        if not self.armed:
-            w.resume = None
-        elif not w.valid and (step := fallback(self.mode, self.onboard.target, self.failsafe.action)) is not None:
-            action, w.resume = step
-            self._fly_failsafe(action, f"position lost: {ACTION_TEXT[action]}", "position lost: motors stopped")
-        elif w.valid and w.resume is not None and self.mode == FAILSAFE:
-            r, w.resume = w.resume, None
-            if r.action is None:
-                self.set_mode(r.mode)
-            else:
-                self._fly_failsafe(r.action, f"position valid again: {ACTION_TEXT[r.action]}", "motors stopped")
 
     def _rest(self, target: Target) -> None:
         """On the ground under ``target``, a landing: motors off, a ``landed`` event, disarmed after COM_DISARM_LAND
@@ -446,9 +390,9 @@ class SimVehicle:
         period, no sensors and the offboard command in force, the substeps are one call (the same bits)."""
         p = self.plant
         if self.armed and self.fence_action and (self.max_hor_m or self.max_ver_m or self.fence is not None):
-            self._check_limits()
+            check_limits(self)
         if self.armed and p.battery is not None:
-            self._check_battery(p.battery.remaining)
+            check_battery(self, p.battery.remaining)
         pending = self._pending_events
         t0 = self._mission_t0  # (0.0 offline and in lockstep: the same bits as plant time)
         while (pending and t0 is not None
@@ -461,7 +405,7 @@ class SimVehicle:
         if deliver is not None:
             deliver(p.t)
         if self.sensors is not None:  # (under truth the estimate is the state: never lost)
-            self._check_position()
+            check_position(self)
         if self.armed and self.mode == OFFBOARD and p.t - self.last_command_t > self.failsafe.timeout_s + 1e-9:
             self._enter_failsafe(p.t - self.last_command_t)
         if self.land_at is not None and p.t >= self.land_at - 1e-9:
