@@ -108,8 +108,9 @@ def test_a_forked_sweep_uses_its_own_tmpdir_and_leaves_nothing_in_it(tmp_path, l
         tmp = Path(short) if length == "short" else tmp_path / ("t" * 90)
         tmp.mkdir(exist_ok=True)
         (tmp_path / "m.toml").write_text('name = "m"\nduration_s = 0.2\n[trajectory]\nkind = "sine"\n')
+        # (no heat map: matplotlib keeps to the home's cache folder here, bridge.record.mplsetup, not TMPDIR)
         p = Bsst("sweep", "m.toml", "--delay", "0,5", "--jobs", "2", "--engine", "process", "--out", "out",
-                 cwd=tmp_path, env={**os.environ, "TMPDIR": str(tmp)})
+                 "--no-plots", cwd=tmp_path, env={**os.environ, "TMPDIR": str(tmp)})
         out, err = p.communicate(120)
         assert p.returncode == 0, err
         assert (tmp_path / "out" / "cells.csv").is_file()

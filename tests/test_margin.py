@@ -16,11 +16,13 @@ from __future__ import annotations
 
 import json
 import subprocess
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 
 from bridge import simulate
+from bridge.cli import main
 from missions import Mission, Sine
 from params import dump_toml
 from tests.sitlkit import run_bsst
@@ -32,10 +34,28 @@ ROOT = Path(__file__).resolve().parents[1]
 # the raw estimator's RMS: 2.9 cm at noise 1, 8.1 cm at 2 (explicit: the figures here are the paper's law's)
 SHORT = Mission(Sine(), duration_s=6.0, name="short", discretization="explicit")
 # SHORT's 3-D RMS over t >= 3 s with an equal delay both ways (cm): 9.3 at 36 ms, 12.7 at 37, 4.9 at 38, 18.1 at 39
+Completed = subprocess.CompletedProcess[str]
 
 
 def bsst(*argv: str) -> subprocess.CompletedProcess[str]:
     return run_bsst(*argv, cwd=ROOT, timeout=600)
+
+
+@pytest.fixture
+def here(capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> Callable[..., Completed]:
+    """``bsst ARGS`` run by the command line's ``main`` in this process, in the repository's folder: its exit status,
+    stdout and stderr as :func:`bsst` gives a forked one's, without a process that imports numba and loads the
+    batch's kernels again (~0.35 CPU-s a search). The searches' results and lines are the point of the tests that
+    use it; the refusals below, and tests/test_margin_interrupt.py, run ``bsst margin`` as a real process."""
+    monkeypatch.chdir(ROOT)
+
+    def run(*argv: str | Path) -> Completed:
+        capsys.readouterr()
+        code = main([str(a) for a in argv])
+        out, err = capsys.readouterr()
+        return subprocess.CompletedProcess(["bsst", *map(str, argv)], code, out, err)
+
+    return run
 
 
 @pytest.mark.parametrize("extra, expected, holds", [
@@ -43,12 +63,12 @@ def bsst(*argv: str) -> subprocess.CompletedProcess[str]:
     (["--discretization", "explicit", "--compensation", "predict"], 57.0, 57.0),
     ([], 35.0, 35.0),  # the default, implicit: the README's example
 ])
-def test_the_delay_margin_is_found_inside_its_bracket(tmp_path: Path, extra: list[str], expected: float,
+def test_the_delay_margin_is_found_inside_its_bracket(tmp_path: Path, here, extra: list[str], expected: float,
                                                      holds: float) -> None:
     """The bisection's margin (explicit: 36 and 57 ms, issue 21's figures; implicit, the default: 35 ms), then
     the 4 ms below it flown at 0.25 ms: the explicit step without prediction fails at 34.25-35 ms (every
     delay flown holds up to 34 ms); with prediction, and the implicit step, every one holds."""
-    r = bsst("margin", "missions/sine.toml", "--over", "delay_ms", "--until", "rms=0.1", "--out", str(tmp_path),
+    r = here("margin", "missions/sine.toml", "--over", "delay_ms", "--until", "rms=0.1", "--out", str(tmp_path),
              *extra)
     assert r.returncode == 0, r.stderr
     res = json.loads((tmp_path / "margin.json").read_text())
@@ -73,12 +93,12 @@ def test_the_delay_margin_is_found_inside_its_bracket(tmp_path: Path, extra: lis
         assert "warning: bsst is not monotone over delay_ms" in r.stderr
 
 
-def test_require_reads_the_value_every_smaller_one_holds_to(tmp_path: Path) -> None:
+def test_require_reads_the_value_every_smaller_one_holds_to(tmp_path: Path, here) -> None:
     """SHORT at 1 ms: the bisection holds at 38 ms (fails at 39) but 37 ms, the one value it skipped in the
     2 ms below, fails: --require 37 fails a user's CI although the margin is 38, and says why."""
     mission = tmp_path / "short.toml"
     mission.write_text(dump_toml(SHORT.to_dict()))
-    r = bsst("margin", str(mission), "--over", "delay_ms", "--until", "rms=0.1", "--resolution", "1",
+    r = here("margin", str(mission), "--over", "delay_ms", "--until", "rms=0.1", "--resolution", "1",
              "--check-below", "2", "--require", "37", "--out", str(tmp_path / "m"))
     res = json.loads((tmp_path / "m" / "margin.json").read_text())
     law = res["controllers"][0]  # margin.json: one entry per law, one law here
@@ -102,8 +122,8 @@ def test_the_check_below_can_be_turned_off(tmp_path: Path) -> None:
     assert {c["phase"] for c in law["cells"]} == {"bisection"} and res["cells_flown"] == 8
 
 
-def test_require_fails_a_users_ci_when_the_margin_is_short(tmp_path: Path) -> None:
-    r = bsst("margin", "missions/sine.toml", "--over", "delay_ms", "--until", "rms=0.1", "--resolution", "4",
+def test_require_fails_a_users_ci_when_the_margin_is_short(tmp_path: Path, here) -> None:
+    r = here("margin", "missions/sine.toml", "--over", "delay_ms", "--until", "rms=0.1", "--resolution", "4",
              "--check-below", "4", "--require", "50", "--out", str(tmp_path))
     assert r.returncode == 1 and "below --require 50" in r.stderr, r.stderr
 
@@ -155,12 +175,12 @@ def test_a_link_axis_is_not_searched_over_the_missions_own_link_trace(tmp_path: 
     assert not (tmp_path / "out").exists()
 
 
-def test_the_noise_margin_is_found_inside_its_bracket(tmp_path: Path) -> None:
+def test_the_noise_margin_is_found_inside_its_bracket(tmp_path: Path, here) -> None:
     """``--over noise``: the scale of every sigma of the motion-capture set, flown with the raw measurements
     on the process engine; each end of the bracket flown again on its own lands on its side of the bound."""
     mission = tmp_path / "short.toml"
     mission.write_text(dump_toml(SHORT.to_dict()))
-    r = bsst("margin", str(mission), "--over", "noise", "--until", "rms=0.05", "--sensors", "mocap", "--estimator",
+    r = here("margin", str(mission), "--over", "noise", "--until", "rms=0.05", "--sensors", "mocap", "--estimator",
              "raw", "--check-below", "0.5", "--out", str(tmp_path / "m"))
     assert r.returncode == 0, r.stderr
     res = json.loads((tmp_path / "m" / "margin.json").read_text())
@@ -178,12 +198,12 @@ def test_the_noise_margin_is_found_inside_its_bracket(tmp_path: Path) -> None:
     assert f"noise {lo:g} x the sigmas of mocap, estimator raw" in r.stdout
 
 
-def test_a_law_that_fails_everywhere_has_no_margin(tmp_path: Path) -> None:
+def test_a_law_that_fails_everywhere_has_no_margin(tmp_path: Path, here) -> None:
     """The raw measurements never hold 1 mm on the short mission: the search flies down to the range's
     low end (noise 0) itself, rather than claim it holds, and reports no margin; --require then fails."""
     mission = tmp_path / "short.toml"
     mission.write_text(dump_toml(SHORT.to_dict()))
-    r = bsst("margin", str(mission), "--over", "noise", "--until", "rms=0.001", "--sensors", "mocap", "--estimator",
+    r = here("margin", str(mission), "--over", "noise", "--until", "rms=0.001", "--sensors", "mocap", "--estimator",
              "raw", "--require", "0", "--out", str(tmp_path / "m"))
     res = json.loads((tmp_path / "m" / "margin.json").read_text())
     law = res["controllers"][0]  # margin.json: one entry per law, one law here
@@ -252,11 +272,11 @@ def test_the_finest_resolution_taken_ends_within_its_rounds(over: str) -> None:
                 assert s.hi - s.lo <= resolution or math.nextafter(s.lo, math.inf) >= s.hi, (resolution, s)
 
 
-def test_the_wind_margin_is_found_inside_its_bracket(tmp_path: Path) -> None:
+def test_the_wind_margin_is_found_inside_its_bracket(tmp_path: Path, here) -> None:
     """``--over wind_mps`` (issue 27): the steady wind the BS-ST law takes on the sine before its RMS passes
     10 cm, its probes on the batch engine (steady wind), in at most 80 cells; each end of the
     bracket flown again on its own lands on its side of the bound."""
-    r = bsst("margin", "missions/sine.toml", "--over", "wind_mps", "--until", "rms=0.1", "--controller", "bsst",
+    r = here("margin", "missions/sine.toml", "--over", "wind_mps", "--until", "rms=0.1", "--controller", "bsst",
              "--out", str(tmp_path))
     assert r.returncode == 0, r.stderr
     res = json.loads((tmp_path / "margin.json").read_text())
@@ -304,7 +324,7 @@ class Raises(_Law):  # fails every flight: law_failed, at every value
 '''
 
 
-def test_a_law_whose_worker_dies_ends_its_own_search_not_the_others(tmp_path: Path) -> None:
+def test_a_law_whose_worker_dies_ends_its_own_search_not_the_others(tmp_path: Path, here) -> None:
     """A plug-in law that kills its worker (``os.abort()`` at 5 s): its first probe is a failed cell (``worker
     process died``), its search ends there with no margin and says why; bsst's search goes on to its margin,
     margin.json is written, and the command exits 1 (not as asked), naming the law."""
@@ -312,7 +332,7 @@ def test_a_law_whose_worker_dies_ends_its_own_search_not_the_others(tmp_path: Pa
     laws.write_text(BAD_LAWS)
     mission = tmp_path / "short.toml"
     mission.write_text(dump_toml(SHORT.to_dict()))
-    r = bsst("margin", str(mission), "--over", "delay_ms", "--until", "rms=0.1", "--resolution", "4",
+    r = here("margin", str(mission), "--over", "delay_ms", "--until", "rms=0.1", "--resolution", "4",
              "--check-below", "4", "--controller", f"bsst,{laws}:Dies", "--jobs", "2", "--out", str(tmp_path / "m"))
     assert r.returncode == 1 and "Traceback" not in r.stderr, (r.stdout, r.stderr)
     res = json.loads((tmp_path / "m" / "margin.json").read_text())
@@ -333,12 +353,12 @@ def test_a_law_whose_worker_dies_ends_its_own_search_not_the_others(tmp_path: Pa
         in r.stderr, r.stderr
 
 
-def test_a_law_that_fails_every_flight_is_not_reported_as_a_boundary(tmp_path: Path) -> None:
+def test_a_law_that_fails_every_flight_is_not_reported_as_a_boundary(tmp_path: Path, here) -> None:
     """A plug-in law that raises in every flight measured nothing: not "fails at every value flown" and exit 0,
     but the law's failure with its first message, in the line, on stderr and in margin.json, and exit 1."""
     laws = tmp_path / "bad_laws.py"
     laws.write_text(BAD_LAWS)
-    r = bsst("margin", "missions/sine.toml", "--over", "delay_ms", "--until", "rms=0.1", "--controller",
+    r = here("margin", "missions/sine.toml", "--over", "delay_ms", "--until", "rms=0.1", "--controller",
              f"{laws}:Raises", "--out", str(tmp_path / "m"))
     assert r.returncode == 1 and "Traceback" not in r.stderr, (r.stdout, r.stderr)
     res = json.loads((tmp_path / "m" / "margin.json").read_text())

@@ -4,6 +4,7 @@ around the mission's, in both engines, in lockstep, in the run's records, and fr
 from __future__ import annotations
 
 import json
+import subprocess
 from dataclasses import replace
 from pathlib import Path
 
@@ -12,6 +13,7 @@ import pytest
 
 from bridge import simulate
 from bridge.batch.engine import fly_batch
+from bridge.cli import main
 from bridge.core.flight import prepare
 from missions import Mission, Sine, load_mission, mission_from_table
 from missions.scatter import scattered_start
@@ -42,7 +44,20 @@ def test_each_seed_draws_its_start_uniformly_in_the_horizontal_disc() -> None:
 
 
 def _sine(seconds: float = 12.0) -> Mission:
+    """The sine cut to ``seconds``: 4 s where two engines' or two seeds' flights are compared, 6 s for a delay margin
+    (the sine's RMS over its second half under 10 cm at no delay: 18 cm at 3 s), 3 s where a start and a report's
+    words are the point, 1 s for a mission file written."""
     return replace(load_mission("missions/sine.toml"), duration_s=seconds)
+
+
+def _here(capsys: pytest.CaptureFixture[str], *argv: str | Path) -> subprocess.CompletedProcess[str]:
+    """``bsst ARGV`` run by the command line's ``main`` in this process: its exit status, stdout and stderr, as
+    :func:`tests.sitlkit.run_bsst` gives a forked one's (without a process that imports numba and starts its own
+    pool)."""
+    capsys.readouterr()
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return subprocess.CompletedProcess(["bsst", *map(str, argv)], code, out, err)
 
 
 def test_the_mission_file_takes_scatter_m_and_refuses_it_out_of_range(tmp_path: Path) -> None:
@@ -78,14 +93,14 @@ def test_the_vehicle_rests_at_its_seeds_start_and_calls_it_home() -> None:
 def test_seeds_fly_one_flight_without_scatter_and_several_with_it() -> None:
     """The sine draws nothing at random: every seed flies the same flight. Scattered, each its own."""
     link = {"up": {"delay_ms": 20.0}, "down": {"delay_ms": 20.0}}
-    same = {simulate(_sine(), seed=s, link=link, plots=False).summary["rms_3d"] for s in (0, 1)}
+    same = {simulate(_sine(4.0), seed=s, link=link, plots=False).summary["rms_3d"] for s in (0, 1)}
     assert len(same) == 1
-    own = {simulate(_sine(), seed=s, scatter_m=0.01, link=link, plots=False).summary["rms_3d"] for s in (0, 1)}
+    own = {simulate(_sine(4.0), seed=s, scatter_m=0.01, link=link, plots=False).summary["rms_3d"] for s in (0, 1)}
     assert len(own) == 2
 
 
 def test_the_batch_engine_flies_each_seeds_start_as_the_scalar_loop_does() -> None:
-    m = replace(_sine(), start_scatter_m=0.01)
+    m = replace(_sine(4.0), start_scatter_m=0.01)
     cells = [{"controller": law, "seed": s, "link": {"delay_ms": d}}
              for law in ("bsst", "pid") for s in (0, 3) for d in (0.0, 10.0)]
     rows = fly_batch(m, cells)
@@ -95,11 +110,13 @@ def test_the_batch_engine_flies_each_seeds_start_as_the_scalar_loop_does() -> No
         assert got["rms"] == pytest.approx(want["rms_3d"], rel=1e-6), (cell, got["rms"], want["rms_3d"])
 
 
-def test_margin_over_scattered_starts_records_them(tmp_path: Path) -> None:
-    f = tmp_path / "sine12.toml"
-    f.write_text(dump_toml(_sine().to_dict()))
-    r = run_bsst("margin", f, "--over", "delay_ms", "--until", "rms=0.1", "--seeds", "2", "--scatter", "0.01",
-                 "--resolution", "1", "--check-below", "0", "--out", tmp_path / "m")
+def test_margin_over_scattered_starts_records_them(tmp_path: Path, capsys) -> None:
+    """``bsst margin --scatter`` run by the command line's ``main`` in this process (its lines and margin.json are the
+    point: tests/test_margin_interrupt.py runs ``bsst margin`` as a real process)."""
+    f = tmp_path / "sine6.toml"
+    f.write_text(dump_toml(_sine(6.0).to_dict()))
+    r = _here(capsys, "margin", f, "--over", "delay_ms", "--until", "rms=0.1", "--seeds", "2", "--scatter", "0.01",
+              "--resolution", "1", "--check-below", "0", "--out", tmp_path / "m")
     assert r.returncode == 0, r.stderr
     assert "each value from 2 starts within 0.01 m of the mission's" in r.stdout, r.stdout
     res = json.loads((tmp_path / "m" / "margin.json").read_text())
@@ -107,19 +124,19 @@ def test_margin_over_scattered_starts_records_them(tmp_path: Path) -> None:
     assert res["start_scatter_m"] == 0.01 and res["seeds"] == [0, 1] and law["margin"] > 0
     assert law["seeds_alike"] is False and "flew the same flight" not in r.stderr
     # without the scatter the two seeds fly one flight twice: margin.json and a warning say so
-    same = run_bsst("margin", f, "--over", "delay_ms", "--until", "rms=0.1", "--seeds", "2", "--resolution", "1",
-                    "--check-below", "0", "--out", tmp_path / "m2")
+    same = _here(capsys, "margin", f, "--over", "delay_ms", "--until", "rms=0.1", "--seeds", "2", "--resolution", "1",
+                 "--check-below", "0", "--out", tmp_path / "m2")
     assert same.returncode == 0, same.stderr
     assert json.loads((tmp_path / "m2" / "margin.json").read_text())["controllers"][0]["seeds_alike"] is True
     assert "warning: the 2 seeds of each value flew the same flight" in same.stderr and "--scatter M" in same.stderr
-    bad = run_bsst("margin", f, "--over", "delay_ms", "--until", "rms=0.1", "--scatter", "-1")
+    bad = run_bsst("margin", f, "--over", "delay_ms", "--until", "rms=0.1", "--scatter", "-1")  # a real process
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "--scatter" in bad.stderr, bad.stderr
     assert "[0, 100]" in bad.stderr and "Traceback" not in bad.stderr
 
 
 def test_a_scattered_sim_writes_its_scatter_into_the_runs_mission(tmp_path: Path) -> None:
-    f = tmp_path / "sine12.toml"
-    f.write_text(dump_toml(_sine().to_dict()))
+    f = tmp_path / "sine1.toml"
+    f.write_text(dump_toml(_sine(1.0).to_dict()))
     r = run_bsst("sim", f, "--seed", "4", "--scatter", "0.01", "--no-plots", "--out", tmp_path / "run")
     assert r.returncode == 0, r.stderr
     again = load_mission(tmp_path / "run" / "mission.toml")
@@ -129,8 +146,8 @@ def test_a_scattered_sim_writes_its_scatter_into_the_runs_mission(tmp_path: Path
 
 def test_lockstep_flies_the_scattered_start_as_offline_does(tmp_path: Path) -> None:
     """The vehicle process draws its start from the run's mission and seed: the same flight, bit for bit."""
-    f = tmp_path / "sine12.toml"
-    f.write_text(dump_toml(_sine().to_dict()))
+    f = tmp_path / "sine3.toml"
+    f.write_text(dump_toml(_sine(3.0).to_dict()))
     for cmd in ("sitl", "sim"):
         r = run_bsst(cmd, f, "--seed", "2", "--scatter", "0.01", "--no-plots", "--out", tmp_path / cmd)
         assert r.returncode == 0, r.stderr
@@ -141,14 +158,15 @@ def test_lockstep_flies_the_scattered_start_as_offline_does(tmp_path: Path) -> N
         assert np.array_equal(traces[0][col], traces[1][col]), col
 
 
-def test_a_sweeps_report_says_what_its_seeds_drew(tmp_path: Path) -> None:
+def test_a_sweeps_report_says_what_its_seeds_drew(tmp_path: Path, capsys) -> None:
     """Scattered, each seed its own start (and the sweep's mission.toml keeps it); not, the sine's seeds fly one
-    flight: the report says they added nothing."""
-    f = tmp_path / "sine12.toml"
-    f.write_text(dump_toml(_sine().to_dict()))
+    flight: the report says they added nothing. (``bsst sweep`` by ``main`` in this process: its report is the
+    point.)"""
+    f = tmp_path / "sine3.toml"
+    f.write_text(dump_toml(_sine(3.0).to_dict()))
     lines = {}
     for name, extra in (("scattered", ["--scatter", "0.01"]), ("plain", [])):
-        r = run_bsst("sweep", f, "--delay", "0,20", "--seeds", "2", *extra, "--no-plots", "--out", tmp_path / name)
+        r = _here(capsys, "sweep", f, "--delay", "0,20", "--seeds", "2", *extra, "--no-plots", "--out", tmp_path / name)
         assert r.returncode == 0, r.stderr
         lines[name] = (tmp_path / name / "report.md").read_text().splitlines()
     assert "- start: each seed's own, within 0.01 m of the mission's (`[start] scatter_m`)" in lines["scattered"]

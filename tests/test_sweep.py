@@ -3,7 +3,7 @@
 ``bsst sweep`` / ``bsst report``: real process pools, a real SIGKILL, a real Dask cluster.
 
 Most tests fly a 6 s sine mission (RMS window t >= 3 s) so the whole file stays well under
-a minute on two cores.
+a minute on two cores; those that check a count, a refusal or a file, a 2 s one.
 """
 
 from __future__ import annotations
@@ -39,6 +39,7 @@ pytestmark = [pytest.mark.process, pytest.mark.usefixtures("batch_kernels")]
 
 ROOT = Path(__file__).resolve().parent.parent
 SHORT = Mission(Sine(), duration_s=6.0, name="short")
+BRIEF = Mission(Sine(), duration_s=2.0, name="brief")  # where a count, a refusal or a file is the point, not a figure
 GRID = Grid(delay_ms=(0.0, 10.0), loss_pct=(0.0, 20.0), seeds=2)
 LOOSE = Classes(clean_rms_m=0.01)  # the 6 s mission is still settling (RMS ~2 mm) in its RMS window
 
@@ -52,6 +53,14 @@ def both_ways(**kw: float) -> dict:
 def mission_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
     p = tmp_path_factory.mktemp("mission") / "short.toml"
     p.write_text(dump_toml(SHORT.to_dict()))
+    return p
+
+
+def brief_file(folder: Path) -> Path:
+    """BRIEF's mission file in ``folder`` (a file per test: a module-scoped one would hold its tests together on one
+    worker, tests/scheduling.py)."""
+    p = folder / "brief.toml"
+    p.write_text(dump_toml(BRIEF.to_dict()))
     return p
 
 
@@ -115,7 +124,7 @@ def test_fixed_link_flags_apply_to_every_cell(mission_file: Path, tmp_path: Path
 
 
 def test_kill_then_resume_flies_only_missing_cells(mission_file: Path, tmp_path: Path, capsys) -> None:
-    args = ["sweep", str(mission_file), "--delay", "0,5,10", "--loss", "0,20", "--seeds", "2"]
+    args = ["sweep", str(mission_file), "--delay", "0,5,10", "--loss", "0,20", "--seeds", "2", "--no-plots"]
     killed = tmp_path / "killed"
     proc = Bsst(*args, "--jobs", "1", "--out", str(killed), stdout=False)
     try:
@@ -146,7 +155,7 @@ def test_dask_local_cluster_gives_the_same_rows(mission_file: Path, local: tuple
                                   protocol="tcp://", dashboard_address=None) as cluster:
         assert cluster.scheduler_address.startswith("tcp://127.0.0.1:")
         assert main(["sweep", str(mission_file), "--delay", "0,10", "--loss", "0,20", "--seeds", "2",
-                     "--dask", cluster.scheduler_address, "--out", str(tmp_path / "dask")]) == 0
+                     "--dask", cluster.scheduler_address, "--out", str(tmp_path / "dask"), "--no-plots"]) == 0
     dask_rows = read_cells(tmp_path / "dask" / CELLS_CSV)
     strip = [{k: v for k, v in r.items() if k != "class"} for r in local[1]]  # the local run used LOOSE classes
     assert [{k: v for k, v in r.items() if k != "class"} for r in dask_rows] == strip
@@ -176,9 +185,10 @@ def test_three_controllers_in_one_report(mission_file: Path, tmp_path: Path) -> 
     assert (out / "map_delay_loss_pid.png").exists()
 
 
-def test_sweep_file(tmp_path: Path, mission_file: Path) -> None:
+def test_sweep_file(tmp_path: Path) -> None:
+    brief = brief_file(tmp_path)
     f = tmp_path / "campaign.toml"
-    f.write_text(f'mission = "{mission_file}"\nseeds = [3, 5]\njobs = 2\n[grid]\nloss_pct = [0, 30]\n'
+    f.write_text(f'mission = "{brief}"\nseeds = [3, 5]\njobs = 2\n[grid]\nloss_pct = [0, 30]\n'
                  "burst_len = [0, 4]\n[classes]\nclean_rms_m = 0.05\n")
     spec = load_sweep(f)
     assert spec.grid.seed_list(spec.mission) == (3, 5) and spec.classes.clean_rms_m == 0.05 and spec.jobs == 2
@@ -187,10 +197,10 @@ def test_sweep_file(tmp_path: Path, mission_file: Path) -> None:
     assert len(rows) == 8 and {r["seed"] for r in rows} == {3, 5} and {r["burst_len"] for r in rows} == {0.0, 4.0}
     lossy = [r for r in rows if r["loss_pct"] == 30.0]
     assert all(r["up_lost"] > 0 and r["down_lost"] > 0 for r in lossy)
-    f.write_text(f'mission = "{mission_file}"\n[grid]\nloss_pct = [0, "x"]\n')
+    f.write_text(f'mission = "{brief}"\n[grid]\nloss_pct = [0, "x"]\n')
     with pytest.raises(ConfigError, match=r"campaign\.toml: grid\.loss_pct: element 1"):
         load_sweep(f)
-    f.write_text(f'mission = "{mission_file}"\n[grid]\nlatency = [0]\n')
+    f.write_text(f'mission = "{brief}"\n[grid]\nlatency = [0]\n')
     with pytest.raises(ConfigError, match=r"campaign\.toml: grid\.latency: unknown key"):
         load_sweep(f)
 
@@ -256,7 +266,7 @@ def test_failed_cells_are_recorded_never_abort(tmp_path: Path, how: str, why: st
 def test_lockstep_cells(tmp_path: Path) -> None:
     m = SHORT.with_overrides(duration_s=3.0)
     grid = Grid(loss_pct=(0.0, 20.0))
-    rows = sweep(m, grid, jobs=2, mode="lockstep", out=tmp_path / "l")
+    rows = sweep(m, grid, jobs=2, mode="lockstep", out=tmp_path / "l", plots=False)
     assert [r["outcome"] for r in rows] == ["completed", "completed"], rows
     offline = sweep(m, grid, jobs=1)
     for lock, off in zip(rows, offline, strict=True):  # DESIGN: lockstep and offline agree, impaired too
@@ -300,7 +310,7 @@ def test_a_grid_over_the_cell_cap_is_refused_unless_raised(mission_file: Path, t
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "Traceback" not in r.stderr, r.stderr
     assert "grid: 1000000 cells (100 delay_ms x 100 loss_pct x 100 seeds), over the cap of 10000" in r.stderr
     assert "--max-cells 1000000" in r.stderr and not (tmp_path / "big").exists()
-    small = ["sweep", str(mission_file), "--delay", "0,10", "--seeds", "2", "--jobs", "2", "--no-plots"]
+    small = ["sweep", str(brief_file(tmp_path)), "--delay", "0,10", "--seeds", "2", "--jobs", "2", "--no-plots"]
     assert main([*small, "--max-cells", "3", "--out", str(tmp_path / "s3")]) == 2
     assert "grid: 4 cells (2 delay_ms x 2 seeds), over the cap of 3" in capsys.readouterr().err
     assert main([*small, "--max-cells", "4", "--out", str(tmp_path / "s4")]) == 0
@@ -324,10 +334,13 @@ def test_a_mission_too_long_to_hold_is_refused_before_any_cell(mission_file: Pat
 
 
 @pytest.fixture(scope="module")
-def small_sweep(mission_file: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[str]]:
-    """A finished 2-cell sweep directory, and the arguments that made it (what --resume is given)."""
-    out = tmp_path_factory.mktemp("small") / "sweep"
-    args = ["sweep", str(mission_file), "--delay", "0,10", "--jobs", "1", "--no-plots"]
+def small_sweep(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[str]]:
+    """A finished 2-cell sweep directory, and the arguments that made it (what --resume is given). The engine is
+    named (the one ``auto`` takes for two cells): a resume refused for a damaged file then ends without importing
+    numba to weigh the batch (~0.16 CPU-s in each forked ``bsst sweep --resume`` below)."""
+    folder = tmp_path_factory.mktemp("small")
+    out = folder / "sweep"
+    args = ["sweep", str(brief_file(folder)), "--delay", "0,10", "--jobs", "1", "--engine", "process", "--no-plots"]
     assert main([*args, "--out", str(out)]) == 0
     return out, args
 
