@@ -256,6 +256,9 @@ import json, sys
 from multiprocessing import forkserver
 from bridge.sweep import Grid, sweep
 from missions import Mission, Sine
+if sys.argv[2] == "held":  # this process flies compiled already (a script's earlier flights, a test worker)
+    from bridge.core.flight import load_compiled_kernels
+    load_compiled_kernels(ekf=False)
 delays = tuple(float(d) for d in range(int(sys.argv[1])))
 rows = sweep(Mission(Sine(), duration_s=0.2, name="k"), Grid(delay_ms=delays), jobs=2, engine="process")
 pid = forkserver._forkserver._forkserver_pid  # the pool's fork server: every worker is forked from it
@@ -264,18 +267,22 @@ with open(f"/proc/{pid}/maps") as f:
 """
 
 
-@pytest.mark.parametrize("kernels, cells, loaded", [("compiled", 2, True), ("plain", 4, False), ("auto", 2, False),
-                                                    ("auto", 4, True)])
+@pytest.mark.parametrize("kernels, cells, held, loaded", [("compiled", 2, "", True), ("plain", 4, "", False),
+                                                          ("auto", 2, "", False), ("auto", 4, "", True),
+                                                          ("auto", 2, "held", True)])
 def test_the_process_pools_workers_are_forked_with_the_compiled_kernels_loaded_when_asked(kernels: str, cells: int,
+                                                                                         held: str,
                                                                                          loaded: bool) -> None:
     """``BSST_KERNELS=compiled``: the process engine's pool loads the kernels once, in the fork server its workers
     are forked from (bridge.core.kernelpreload), not in each worker (~1 s of CPU each: the suite's sweep files
     took 113 CPU-s with the kernels loaded per worker, 83 so); under ``auto`` it does so for a grid of at least
-    WARM_CELLS offline cells (bridge.core.kernelwarm: ``auto`` then flies them), and for a smaller one, or with
+    WARM_CELLS offline cells (bridge.core.kernelwarm: ``auto`` then flies them), or for any grid of a process that
+    holds them already (the first pool's preload stays for the process's later pools: a test worker's first pool of
+    two cells left every later grid of that worker flying plain, ~2.5x the CPU), and for a smaller one, or with
     ``plain``, it does not load numba at all."""
     assert WARM_CELLS == 4
-    r = subprocess.run([sys.executable, "-c", POOL_SCRIPT, str(cells)], capture_output=True, text=True, timeout=300,
-                       cwd=ROOT, env={**os.environ, "BSST_KERNELS": kernels})
+    r = subprocess.run([sys.executable, "-c", POOL_SCRIPT, str(cells), held], capture_output=True, text=True,
+                       timeout=300, cwd=ROOT, env={**os.environ, "BSST_KERNELS": kernels})
     assert r.returncode == 0, r.stderr[-3000:]
     out = json.loads(r.stdout.strip().splitlines()[-1])
     assert out == {"outcomes": ["completed"] * cells, "kernels_loaded": loaded}, out

@@ -32,7 +32,7 @@ from typing import Any
 
 from bridge.autopilot.compiling import announce_compiling
 from bridge.core.interrupt import Interrupts, sigint_futures, wait_or_interrupt
-from bridge.core.scalar import kernels_choice
+from bridge.core.scalar import compiled_loaded, kernels_choice
 from bridge.loop import fly
 from bridge.nodes.process import die_with_parent
 from bridge.record.runlog import Run
@@ -189,10 +189,14 @@ def _pool(jobs: int, cells: int = 0, mode: str = "offline") -> ProcessPoolExecut
     """A pool of ``jobs`` workers forked from multiprocessing's fork server, which imports the sweep's modules once
     when it starts (the first pool of this process): with ``BSST_KERNELS=compiled`` the kernels too
     (bridge.core.kernelpreload), and under ``auto`` too when this first pool flies at least :data:`WARM_CELLS`
-    ``cells`` offline (bridge.core.kernelwarm): once, not in each worker, and ``auto`` flies what is loaded."""
+    ``cells`` offline, or this process already holds them (bridge.core.kernelwarm): once, not in each worker, and
+    ``auto`` flies what is loaded. The first pool's list stays for every later pool of the process, so a process
+    that flies compiled (a script's earlier flights, a test worker) preloads them even for a first pool of one
+    cell: its later grids would otherwise fly plain, at ~2.5x the CPU (docs/testing.md)."""
     ctx = mp.get_context("forkserver")
     preload = ["bridge.sweep", "bridge.loop", "bridge.core.kernelpreload"]
-    if mode == "offline" and cells >= WARM_CELLS and kernels_choice() == "auto":
+    warm = cells >= WARM_CELLS or compiled_loaded()
+    if mode == "offline" and warm and kernels_choice() == "auto":
         preload.append("bridge.core.kernelwarm")
     ctx.set_forkserver_preload(preload)  # (no effect once the fork server runs: the first pool's list stays)
     _start_fork_server()
