@@ -30,6 +30,7 @@ from bridge.autopilot.kernelcache import CACHE_OFF_NOTE
 from bridge.nodes import forkserver
 from bridge.record.mplsetup import PREFIX
 from bridge.session import instance_slot
+from tests.sitlkit import run_bsst
 
 pytestmark = pytest.mark.process  # real bsst processes, a session's children, UDP
 
@@ -111,6 +112,20 @@ def test_figures_without_a_writable_home_are_drawn_quietly(tmp_path: Path, home:
     assert (tmp_path / "run" / "plots" / "positions.png").stat().st_size > 0
     assert not [p.name for p in tmp.iterdir() if p.name.startswith((PREFIX, "matplotlib-"))]
     assert (tmp_path / "writable" / ".config" / "matplotlib").is_dir() == (home == "writable")
+
+
+def test_a_forked_bsst_sim_without_a_home_removes_matplotlibs_folder_too(tmp_path: Path) -> None:
+    """Forked warm (the suite's fork server, as a ``bsst sitl``'s children and a script's runs are), ``bsst sim`` runs
+    its own exit handlers before the child's ``os._exit`` (bridge.nodes.forkserver): the temporary folder it gave
+    matplotlib is removed as in an exec'd one (it was left behind in TMPDIR each time)."""
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    (tmp_path / "short.toml").write_text(SHORT)
+    r = run_bsst("sim", "short.toml", "--out", "run", cwd=tmp_path, env=_env(NO_HOME, TMPDIR=str(tmp)),
+                 timeout=TIMEOUT_S)
+    assert r.returncode == 0 and r.stderr == "", r.stderr[-3000:]
+    assert (tmp_path / "run" / "plots" / "positions.png").stat().st_size > 0
+    assert not [p.name for p in tmp.iterdir() if p.name.startswith((PREFIX, "matplotlib-"))]
 
 
 SERVER = """

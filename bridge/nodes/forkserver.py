@@ -31,6 +31,7 @@ start theirs from a ready binary.
 
 from __future__ import annotations
 
+import atexit
 import ctypes
 import gc
 import importlib.util
@@ -375,6 +376,16 @@ def _drop(client: socket.socket, live: dict[int, tuple[int, socket.socket | None
     client.close()
 
 
+def _child_exit() -> None:
+    """What an exec'd ``python -m bridge`` runs at its end and ``os._exit`` skips: the exit handlers the command
+    registered (``atexit``, last first; the server's own were cleared at the fork), such as the removal of the
+    temporary folder matplotlib was given where the home is unwritable (bridge.record.mplsetup: a forked ``bsst
+    sim`` left one behind each time), then multiprocessing's (:func:`_multiprocessing_exit`), registered first in a
+    cold process and so run last."""
+    atexit._run_exitfuncs()  # (CPython's own call at shutdown: errors are printed, and the next handler runs)
+    _multiprocessing_exit()
+
+
 def _multiprocessing_exit() -> None:
     """What multiprocessing's own children run before their ``os._exit`` (``BaseProcess._bootstrap``): its exit
     finalizers, registered in this process only (each runs in the process that made it). Among them the removal of
@@ -434,6 +445,7 @@ def _fork(req: dict[str, Any], fds: list[int], run: Callable[[list[str]], int], 
     rc = 1
     try:  # the child: as `python -m bridge ARGV` would start, without the imports
         os.setsid()
+        atexit._clear()  # the server's exit handlers are the server's; the child runs its own at its end (_child_exit)
         die_with_parent()
         for f in close:
             os.close(f)
@@ -467,7 +479,7 @@ def _fork(req: dict[str, Any], fds: list[int], run: Callable[[list[str]], int], 
         rc = 1
     finally:  # the command is over: a Ctrl-C now must not raise out of here into a copy of the server's loop
         signal.signal(signal.SIGINT, signal.SIG_IGN)
-        _multiprocessing_exit()
+        _child_exit()
         for stream in (sys.stdout, sys.stderr):
             try:
                 stream.flush()
