@@ -97,10 +97,12 @@ class Station:
 
 
 def _fly_fleet(tmp_path: Path, port: int, seconds: float) -> tuple[threading.Thread, dict[str, Any]]:
-    """Four vehicles of the sine in lockstep at real time's pace, their GCS links to ``port``, in a thread."""
+    """Four vehicles of the sine in lockstep at real time's pace, their GCS links to ``port``, in a thread. The
+    mission's end holds (``[end] action = "hold"``): its landing (to the ground and COM_DISARM_LAND after) added
+    ~4 s of four paced pairs that no assertion reads (tests/test_mission_end.py flies the end landing)."""
     mission = tmp_path / "sine.toml"
-    mission.write_text((MISSION_DIR / "sine.toml").read_text().replace("duration_s = 30.0",
-                                                                      f"duration_s = {seconds}"))
+    mission.write_text((MISSION_DIR / "sine.toml").read_text().replace("duration_s = 30.0", f"duration_s = {seconds}")
+                       + '\n[end]\naction = "hold"\n')
     result: dict[str, Any] = {}
 
     def fly() -> None:
