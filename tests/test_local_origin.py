@@ -31,13 +31,17 @@ from tests.waiting import wait_for
 pytestmark = pytest.mark.process  # starts processes, opens sockets
 
 HOME = tm.Home()
-# a hover: up 1 m over the start in 2 s, held there; vehicle 2 of line:2 starts 2 m along +y (west), so 2 m east
+# a hover: up 1 m over the start in 2 s, held there; vehicle 2 of line:2 starts 2 m along +y (west), so 2 m east.
+# Its end holds: the end landing (down from 1 m, then COM_DISARM_LAND) flew ~3.5 s more of each pair on the wall
+# clock, which no assertion reads (tests/test_mission_end.py flies the end landing)
 HOVER = """name = "hover"
 duration_s = {T}
 [trajectory]
 kind = "waypoints"
 points = [{{ t = 0.0, x = 0.0, y = 0.0, z = 0.0 }}, {{ t = 2.0, x = 0.0, y = 0.0, z = 1.0 }},
           {{ t = {T}, x = 0.0, y = 0.0, z = 1.0 }}]
+[end]
+action = "hold"
 """
 STARTS = {1: (0.0, 0.0), 2: (0.0, 2.0)}  # paper x, y of each vehicle's start (line:2)
 
