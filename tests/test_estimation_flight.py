@@ -34,6 +34,9 @@ SINE = MISSION_DIR / "sine.toml"
 EKF_MOCAP = {"sensors": {"set": "mocap"}, "estimator": "ekf"}
 SINE_EKF = 'name = "sine6"\nduration_s = {seconds}\nseed = {seed}\n[trajectory]\nkind = "sine"\n' \
           '[sensors]\nset = "mocap"\n[estimator]\nkind = "ekf"\n'
+# a short session's end: held (its end landing, 2.6 s after a 2 s sine with COM_DISARM_LAND, more than doubled what
+# was flown, and the tests that fly it read the mission's rows or its first message only)
+HOLD_AT_END = '[end]\naction = "hold"\n'
 
 
 def _bsst(*argv: object, timeout: float = 300.0) -> subprocess.CompletedProcess:
@@ -93,12 +96,12 @@ def test_raw_passes_noise_on_and_the_ekf_removes_it(ekf_sim):
 
 
 def test_a_seed_gives_the_same_lockstep_trace_twice_and_another_seed_another(tmp_path):
-    """Three lockstep sessions of 2 s (the sensors' noise differs from the first sample: 6 s flew 4 s more of
-    each for nothing the test reads)."""
+    """Three lockstep sessions of 2 s, the mission's end held (the sensors' noise differs from the first sample:
+    the 6 s and end landing flown before added 6.6 s to each that the test does not read)."""
     runs = {}
     for name, seed in (("a", 1), ("b", 1), ("c", 2)):
         m = tmp_path / f"{name}.toml"
-        m.write_text(SINE_EKF.format(seed=seed, seconds=2.0))
+        m.write_text(SINE_EKF.format(seed=seed, seconds=2.0) + HOLD_AT_END)
         run = sitl(m, out=tmp_path / name, plots=False, instance=None)
         assert run.outcome == "completed" and "estimation" in run.summary
         runs[name] = (tmp_path / name / "trace.csv").read_bytes()
@@ -141,8 +144,10 @@ def test_lockstep_matches_offline_and_odometry_carries_the_covariance(tmp_path):
 
 def test_truth_odometry_keeps_its_unknown_covariance(tmp_path):
     """Under truth the wire is as it was: covariance unknown (NaN first), estimator type naive. (The first ODOMETRY
-    is read: a 1 s session.)"""
-    run = sitl(_mission(tmp_path, "truth", seconds=1.0), out=tmp_path / "t", plots=False, instance=None)
+    is read: a 1 s session, its end held.)"""
+    mission = _mission(tmp_path, "truth", seconds=1.0)
+    mission.write_text(mission.read_text() + HOLD_AT_END)
+    run = sitl(mission, out=tmp_path / "t", plots=False, instance=None)
     assert run.outcome == "completed"
     log = mavutil.mavlink_connection(str(tmp_path / "t" / "vehicle.tlog"), dialect="common")
     m = log.recv_match(type="ODOMETRY")
