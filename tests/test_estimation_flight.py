@@ -32,8 +32,11 @@ pytestmark = [pytest.mark.process, pytest.mark.usefixtures("batch_kernels")]
 
 SINE = MISSION_DIR / "sine.toml"
 EKF_MOCAP = {"sensors": {"set": "mocap"}, "estimator": "ekf"}
-SINE_6S = 'name = "sine6"\nduration_s = 6.0\nseed = {seed}\n[trajectory]\nkind = "sine"\n' \
+SINE_EKF = 'name = "sine6"\nduration_s = {seconds}\nseed = {seed}\n[trajectory]\nkind = "sine"\n' \
           '[sensors]\nset = "mocap"\n[estimator]\nkind = "ekf"\n'
+# a short session's end: held (its end landing, 2.6 s after a 2 s sine with COM_DISARM_LAND, more than doubled what
+# was flown, and the tests that fly it read the mission's rows or its first message only)
+HOLD_AT_END = '[end]\naction = "hold"\n'
 
 
 def _bsst(*argv: object, timeout: float = 300.0) -> subprocess.CompletedProcess:
@@ -54,9 +57,16 @@ def test_truth_and_ideal_sensors_leave_the_sine_unchanged():
     assert np.all(base.trace["nees"] == 0.0)
 
 
-def test_sim_with_mocap_and_ekf_flies_and_reports_its_estimation(tmp_path):
-    out = tmp_path / "run"
-    r = _bsst("sim", SINE, "--sensors", "mocap", "--estimator", "ekf", "--out", out, "--no-plots")
+@pytest.fixture(scope="module")
+def ekf_sim(tmp_path_factory: pytest.TempPathFactory) -> tuple[subprocess.CompletedProcess, Path]:
+    """``bsst sim missions/sine.toml --sensors mocap --estimator ekf``: the process and its run directory (the
+    EKF's flight of both tests below, flown once)."""
+    out = tmp_path_factory.mktemp("ekf_sim") / "run"
+    return _bsst("sim", SINE, "--sensors", "mocap", "--estimator", "ekf", "--out", out, "--no-plots"), out
+
+
+def test_sim_with_mocap_and_ekf_flies_and_reports_its_estimation(ekf_sim):
+    r, out = ekf_sim
     assert r.returncode == 0, r.stderr
     s = json.loads((out / "summary.json").read_text())
     assert s["outcome"] == "completed" and s["rms_3d"] < 5e-3
@@ -74,19 +84,24 @@ def test_sim_with_mocap_and_ekf_flies_and_reports_its_estimation(tmp_path):
     assert "[sensors]" in mission and "[estimator]" in mission  # as flown: a rerun of it flies the same
 
 
-def test_raw_passes_noise_on_and_the_ekf_removes_it():
-    raw = simulate(SINE, plots=False, sensors={"set": "mocap"}, estimator="raw")
-    ekf = simulate(SINE, plots=False, **EKF_MOCAP)
-    ripple = {k: r.summary["inputs"]["u2"]["ripple"] for k, r in (("raw", raw), ("ekf", ekf))}
+def test_raw_passes_noise_on_and_the_ekf_removes_it(ekf_sim):
+    """The same sine, sensors and seed flown with ``raw`` (offline) against the EKF's flight (``bsst sim``'s)."""
+    raw = simulate(SINE, plots=False, sensors={"set": "mocap"}, estimator="raw").summary
+    r, out = ekf_sim
+    assert r.returncode == 0, r.stderr
+    ekf = json.loads((out / "summary.json").read_text())
+    ripple = {k: s["inputs"]["u2"]["ripple"] for k, s in (("raw", raw), ("ekf", ekf))}
     assert ripple["ekf"] * 5 < ripple["raw"], ripple
-    assert ekf.summary["rms_3d"] < raw.summary["rms_3d"]
+    assert ekf["rms_3d"] < raw["rms_3d"]
 
 
 def test_a_seed_gives_the_same_lockstep_trace_twice_and_another_seed_another(tmp_path):
+    """Three lockstep sessions of 2 s, the mission's end held (the sensors' noise differs from the first sample:
+    the 6 s and end landing flown before added 6.6 s to each that the test does not read)."""
     runs = {}
     for name, seed in (("a", 1), ("b", 1), ("c", 2)):
         m = tmp_path / f"{name}.toml"
-        m.write_text(SINE_6S.format(seed=seed))
+        m.write_text(SINE_EKF.format(seed=seed, seconds=2.0) + HOLD_AT_END)
         run = sitl(m, out=tmp_path / name, plots=False, instance=None)
         assert run.outcome == "completed" and "estimation" in run.summary
         runs[name] = (tmp_path / name / "trace.csv").read_bytes()
@@ -128,17 +143,20 @@ def test_lockstep_matches_offline_and_odometry_carries_the_covariance(tmp_path):
 
 
 def test_truth_odometry_keeps_its_unknown_covariance(tmp_path):
-    """Under truth the wire is as it was: covariance unknown (NaN first), estimator type naive."""
-    run = sitl(_mission(tmp_path, "truth"), out=tmp_path / "t", plots=False, instance=None)
+    """Under truth the wire is as it was: covariance unknown (NaN first), estimator type naive. (The first ODOMETRY
+    is read: a 1 s session, its end held.)"""
+    mission = _mission(tmp_path, "truth", seconds=1.0)
+    mission.write_text(mission.read_text() + HOLD_AT_END)
+    run = sitl(mission, out=tmp_path / "t", plots=False, instance=None)
     assert run.outcome == "completed"
     log = mavutil.mavlink_connection(str(tmp_path / "t" / "vehicle.tlog"), dialect="common")
     m = log.recv_match(type="ODOMETRY")
     assert m is not None and math.isnan(m.pose_covariance[0]) and m.estimator_type == mavlink.MAV_ESTIMATOR_TYPE_NAIVE
 
 
-def _mission(tmp_path: Path, kind: str) -> Path:
+def _mission(tmp_path: Path, kind: str, seconds: float = 6.0) -> Path:
     p = tmp_path / f"{kind}.toml"
-    p.write_text(SINE_6S.replace('kind = "ekf"', f'kind = "{kind}"').format(seed=0))
+    p.write_text(SINE_EKF.replace('kind = "ekf"', f'kind = "{kind}"').format(seed=0, seconds=seconds))
     return p
 
 

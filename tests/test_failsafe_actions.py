@@ -2,13 +2,13 @@
 
 The vehicle's failsafe actions (issue 14): ``[failsafe] action = descend | land | hold | disarm``.
 
-``bsst sitl missions/sine.toml --blackout 15:2 --failsafe-action A`` is flown for each action as
-a real ``bsst sitl`` process (lockstep, its vehicle and controller real processes over UDP on
-127.0.0.1), each on an instance of its own; the same flights offline with
-``simulate``. Both clocks fly the same vehicle core, so they must agree on every event and, up
-to touchdown, on every row (the float32 wire aside). Then the on-board controller alone: the
-earlier landing loop is ``Level`` exactly, and ``Takeoff`` / ``PositionHold`` fly as a later
-NAV_TAKEOFF / HOLD mode needs.
+``bsst sitl missions/sine.toml --blackout 15:2 --failsafe-action A`` (the sine cut to a second after
+the action's disarm, at 26 s for hold's at 24.802 s) is flown for each action as a real ``bsst sitl`` process
+(lockstep, its vehicle and controller real processes over UDP on 127.0.0.1), each on an instance of
+its own; the same flights offline with ``simulate``. Both clocks fly the same vehicle core, so they
+must agree on every event and, up to touchdown, on every row (the float32 wire aside). Then the
+on-board controller alone: the earlier landing loop is ``Level`` exactly, and ``Takeoff`` /
+``PositionHold`` fly as a later NAV_TAKEOFF / HOLD mode needs.
 """
 
 from __future__ import annotations
@@ -60,6 +60,10 @@ BLACKOUT = {"blackouts": [[15.0, 2.0]]}
 # the sine's failsafe at 15.5 s begins 1.0 m from home, where Return lands at once (as land): return has its own test
 SINE_ACTIONS = tuple(a for a in FAILSAFE_ACTIONS if a != "return")
 STEP_S = 1 / 250  # one control step of the sine mission
+# the sine each action flies, s: cut from 30 s to a second on the ground after its disarm (descend's at 20.283 s,
+# land's 19.816, hold's 24.802, disarm's 15.5 and its fall's impact 16.076), which holds every event the tests read;
+# the rest flew four sessions and their twins on the ground, disarmed (32.5 s of the 120)
+SINE_S = {"descend": 22.0, "land": 21.5, "hold": 26.0, "disarm": 18.0}
 FLIGHT_TIMEOUT_S = 180  # a lockstep sine flies in seconds; this only stops a hang
 
 
@@ -80,11 +84,18 @@ def _free_instance() -> Iterator[int]:
     raise AssertionError("no SITL instance with a free port")
 
 
-def _bsst_sitl(out: Path, action: str) -> subprocess.CompletedProcess:
-    """``bsst sitl missions/sine.toml --blackout 15:2 --failsafe-action ACTION`` as a real process on
+def _sine(folder: Path, action: str) -> Path:
+    """The sine cut to ``action``'s :data:`SINE_S`, written in ``folder``."""
+    path = folder / f"sine-{action}.toml"
+    path.write_text(SINE.read_text().replace("duration_s = 30.0", f"duration_s = {SINE_S[action]}"))
+    return path
+
+
+def _bsst_sitl(sine: Path, out: Path, action: str) -> subprocess.CompletedProcess:
+    """``bsst sitl SINE --blackout 15:2 --failsafe-action ACTION`` as a real process on
     an instance of its own; on a hang its whole process group (vehicle, controller) is killed."""
     with _free_instance() as n:
-        p = Bsst("sitl", str(SINE), "--blackout", "15:2", "--failsafe-action", action, "--instance", str(n),
+        p = Bsst("sitl", str(sine), "--blackout", "15:2", "--failsafe-action", action, "--instance", str(n),
                  "--out", str(out), "--no-plots", env=ENV)
         try:
             stdout, stderr = p.communicate(timeout=FLIGHT_TIMEOUT_S)
@@ -104,12 +115,13 @@ def flown(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict]:
     runs: dict[str, dict] = {}
     for a in SINE_ACTIONS:
         out = root / a
-        p = _bsst_sitl(out, a)
+        sine = _sine(root, a)
+        p = _bsst_sitl(sine, out, a)
         summary = json.loads((out / "summary.json").read_text())
         runs[a] = {"rc": p.returncode, "stdout": p.stdout, "stderr": p.stderr, "out": out, "summary": summary,
                    "trace": read_trace(out / "trace.csv"),
                    "vehicle": {e["kind"]: e["t"] for e in summary["events"] if e["source"] == "vehicle"},
-                   "offline": simulate(SINE, plots=False, link=BLACKOUT, failsafe={"action": a})}
+                   "offline": simulate(sine, plots=False, link=BLACKOUT, failsafe={"action": a}), "sine": sine}
     return runs
 
 
@@ -146,7 +158,7 @@ def test_each_action_ends_in_failsafe_exit_1_and_flies_as_written(flown, action:
     for log in ("vehicle.log", "controller.log"):
         assert "Traceback" not in (run["out"] / log).read_text()
     tr = run["trace"]
-    assert len(tr["t"]) == 7500  # the step clock ran on to the mission's end
+    assert len(tr["t"]) == round(SINE_S[action] / STEP_S)  # the step clock ran on to the mission's end
     assert tr["z"][tr["t"] > run["vehicle"]["disarmed"] + 1.0].max() == 0.0  # at rest on the ground
 
 
@@ -185,10 +197,11 @@ def test_descend_is_the_default_and_todays_figure(flown) -> None:
     assert v["disarmed"] == pytest.approx(v["landed"] + 2.0, abs=1e-6)
     log = (flown["descend"]["out"] / "events.log").read_text()
     assert "failsafe: no actuator target for 0.504 s: level and descend" in log and "landed: disarmed" in log
-    plain = simulate(SINE, plots=False, link=BLACKOUT)  # no action given: descend, row for row
+    sine = flown["descend"]["sine"]
+    plain = simulate(sine, plots=False, link=BLACKOUT)  # no action given: descend, row for row
     for c in ("x", "y", "z", "u1_act", "u2_act"):
         assert np.array_equal(plain.trace[c], flown["descend"]["offline"].trace[c])
-    explicit = simulate(SINE, plots=False, link=BLACKOUT, discretization="explicit").summary["events"]
+    explicit = simulate(sine, plots=False, link=BLACKOUT, discretization="explicit").summary["events"]
     assert [e["t"] for e in explicit if e["kind"] in ("landed", "disarmed")] == [pytest.approx(18.274, abs=0.005),
                                                                                   pytest.approx(20.274, abs=0.005)]
 
@@ -231,8 +244,10 @@ def test_return_flies_home_from_the_step_missions_second_set_point_in_lockstep_a
     home, 2 m up), RTL_RETURN_ALT 3 m, RTL_DESCEND_ALT 2.5 m, no cone (RTL_CONE_ANG 0: with PX4's 45 deg it would
     return at 2 NAV_ACC_RAD = 4 m, tests/test_return_land.py): ``bsst sitl`` (lockstep, real processes) ends
     ``failsafe``, exit 1; the vehicle climbs to 3 m, flies home, comes down and lands within 0.2 m of home,
-    disarmed; offline flies the same rows to 1e-9 m until touchdown, and the same events."""
-    step = MISSION_DIR / "step.toml"
+    disarmed; offline flies the same rows to 1e-9 m until touchdown, and the same events. The step mission cut to
+    22 s: disarmed at 20.624 s, the rest of its 30 s flew nothing the test reads."""
+    step = tmp_path / "step22.toml"
+    step.write_text((MISSION_DIR / "step.toml").read_text().replace("duration_s = 30.0", "duration_s = 22.0"))
     rtl = ("--param", "RTL_RETURN_ALT=3", "--param", "RTL_DESCEND_ALT=2.5", "--param", "RTL_CONE_ANG=0")
     with _free_instance() as n:
         p = Bsst("sitl", str(step), "--blackout", "12:6", "--failsafe-action", "return", *rtl, "--instance", str(n),
@@ -297,10 +312,12 @@ def test_hold_on_the_wall_clock_brakes_and_returns_to_where_it_began(tmp_path: P
     for 0.5 s, then ``hold`` brakes it and brings it back. Flown by PID, settled by 3 s (its torques
     below 0.3 N·m): the held target is a small push whatever the wall clock's timing. (The BS-ST law's
     torques alternate by several N·m, and early in the flight the one held decides: a run at load 2
-    drifted 1.64 m before it braked, as tests/test_params.py's blackout once crashed.)"""
+    drifted 1.64 m before it braked, as tests/test_params.py's blackout once crashed.) It holds 2.5 s (``hold_s``),
+    not the default 5 s (the lockstep test's): what is read here is its first 2 s of holding and that it then lands,
+    and the session waited out every second of the hold on the wall clock."""
     run = sitl(Mission(Sine(), duration_s=6.0, name="rt-hold", controller="pid"), realtime=True,
                out=tmp_path / "rt", plots=False, instance=None, link={"delay_ms": 5.0, "blackouts": [[3.0, 1.5]]},
-               failsafe={"action": "hold"})
+               failsafe={"action": "hold", "hold_s": 2.5})
     assert run.outcome == "failsafe"
     fs = [e for e in run.summary["events"] if e["kind"] == "failsafe" and e["source"] == "vehicle"]
     assert len(fs) == 1 and "hold here" in fs[0]["text"]

@@ -31,13 +31,17 @@ from tests.waiting import wait_for
 pytestmark = pytest.mark.process  # starts processes, opens sockets
 
 HOME = tm.Home()
-# a hover: up 1 m over the start in 2 s, held there; vehicle 2 of line:2 starts 2 m along +y (west), so 2 m east
+# a hover: up 1 m over the start in 2 s, held there; vehicle 2 of line:2 starts 2 m along +y (west), so 2 m east.
+# Its end holds: the end landing (down from 1 m, then COM_DISARM_LAND) flew ~3.5 s more of each pair on the wall
+# clock, which no assertion reads (tests/test_mission_end.py flies the end landing)
 HOVER = """name = "hover"
 duration_s = {T}
 [trajectory]
 kind = "waypoints"
 points = [{{ t = 0.0, x = 0.0, y = 0.0, z = 0.0 }}, {{ t = 2.0, x = 0.0, y = 0.0, z = 1.0 }},
           {{ t = {T}, x = 0.0, y = 0.0, z = 1.0 }}]
+[end]
+action = "hold"
 """
 STARTS = {1: (0.0, 0.0), 2: (0.0, 2.0)}  # paper x, y of each vehicle's start (line:2)
 
@@ -107,7 +111,8 @@ def _home_of(i: int) -> tuple[int, int]:
 def test_pymavlink_reads_each_fleet_vehicle_about_its_own_start(tmp_path: Path, realtime: bool) -> None:
     """Each vehicle's HOME_POSITION is its own start; hovering 1 m over it, its LOCAL_POSITION_NED reads (0, 0, -1)
     (vehicle 2 read (0, -2, -1), the fleet's shared frame, before); every LOCAL_POSITION_NED agrees with the
-    GLOBAL_POSITION_INT of the same instant projected about the HOME_POSITION (PX4's projection)."""
+    GLOBAL_POSITION_INT of the same instant projected about the HOME_POSITION (PX4's projection). A 4 s hover
+    flight: at 1 m from 2 s on, asked for HOME_POSITION at the first HEARTBEAT (6 s flew 2 s more of the hover)."""
     local: dict[tuple[int, int], Any] = {}
     glob: dict[tuple[int, int], Any] = {}
     homes: dict[int, Any] = {}
@@ -118,7 +123,7 @@ def test_pymavlink_reads_each_fleet_vehicle_about_its_own_start(tmp_path: Path, 
         sock.bind(("127.0.0.1", GCS_PORT + n))
         sock.setblocking(False)
         mav, tx = mavlink.MAVLink(None), mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
-        flight, result = _fly(tmp_path, GCS_PORT + n, realtime, 6.0)
+        flight, result = _fly(tmp_path, GCS_PORT + n, realtime, 4.0)
 
         def pump() -> bool:
             while True:
@@ -187,9 +192,11 @@ sdk.destroy()
 
 def test_mavsdk_reads_each_fleet_vehicle_about_its_own_start(tmp_path: Path) -> None:
     """MAVSDK, a ``System`` per vehicle: hovering 1 m over its start each vehicle's ``position_velocity_ned`` reads
-    (0, 0, -1), its ``home`` is its start's latitude and longitude, its ``position`` over that home."""
+    (0, 0, -1), its ``home`` is its start's latitude and longitude, its ``position`` over that home. A 6 s flight,
+    at 1 m from 2 s on: MAVSDK finds the two while they start (tests/test_swarm_gcs.py: four found and one killed
+    0.96 s into the flight with two busy loops); 10 s flew 4 s more of the hover."""
     with instance_slot() as n:
-        flight, result = _fly(tmp_path, GCS_PORT + n, False, 10.0)
+        flight, result = _fly(tmp_path, GCS_PORT + n, False, 6.0)
         try:
             r = subprocess.run([sys.executable, "-c", MAVSDK_SCRIPT, f"udpin://127.0.0.1:{GCS_PORT + n}"],
                                capture_output=True, text=True, timeout=240, env=ENV)

@@ -5,11 +5,11 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
+
+from tests.sitlkit import run_bsst
 
 pytestmark = pytest.mark.process  # runs bsst sim as a real process (its exit status)
 
@@ -23,8 +23,9 @@ def _sim(tmp_path: Path, name: str, *args: str) -> tuple[int, dict]:
     m = tmp_path / f"{name}4.toml"
     m.write_text(src.replace("duration_s = 30.0", "duration_s = 4.0") if name == "sine" else src)
     out = tmp_path / "run"
-    r = subprocess.run([sys.executable, "-m", "bridge", "sim", str(m), *args, "--out", str(out)],
-                       capture_output=True, text=True, env=os.environ, cwd=tmp_path, timeout=300)
+    # forked warm by the fork server (a cold ``python -m bridge sim`` loaded numpy, numba and the EKF's kernels
+    # afresh: 1.1-2.1 CPU-s a run, most of this file's cost)
+    r = run_bsst("sim", m, *args, "--out", out, "--no-plots", cwd=tmp_path, env=dict(os.environ), timeout=300)
     return r.returncode, json.loads((out / "summary.json").read_text())
 
 
