@@ -297,6 +297,7 @@ class Session:
                 if ctl.proc.poll() is not None and landing_deadline is None:
                     # its last words, and the vehicle's about the same moments, in the order they happened
                     self._handle(self._read_all(ctl, veh))
+                    sel.unregister(ctl.fd)  # read to its end: a pipe at its end is always readable (select spun)
                     self.joiner.controller_done = True
                     self._join()  # all the controller wrote (the landing time below reads the rows)
                     if ctl.done is not None and ctl.done.reason:  # a controller that gave up says why
