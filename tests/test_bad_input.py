@@ -319,13 +319,17 @@ def _set(data: dict[str, Any], dotted: str, value: Any) -> dict[str, Any]:
 
 
 def _key_cases() -> list[tuple[str, str, Any]]:
+    """Each key any law's mission asks for, with each of its bad values, once: under the first law that asks it.
+    A key every law asks is refused by the same validator whichever law the mission names (the same frames, the
+    same line, checked for every case when this walk was cut from three laws to one: 1 824 cases to 608); a key
+    only one law asks is walked under that law."""
     src = "<walk>"
     cases, seen = [], set()
     for ctl in ("bsst", "smc", "pid"):
         for key, (getter, a, kw) in _keys_asked(_full_mission(ctl), src).items():
             for bad in _bad_key_values(getter, a, kw):
-                if (ctl, key, repr(bad)) not in seen:
-                    seen.add((ctl, key, repr(bad)))
+                if (key, repr(bad)) not in seen:
+                    seen.add((key, repr(bad)))
                     cases.append((ctl, key, bad))
     return cases
 
