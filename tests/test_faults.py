@@ -51,19 +51,20 @@ def test_a_link_handover_parses_and_is_refused_when_bad() -> None:
 
 
 def test_a_link_handover_acts_from_its_step_in_the_offline_loop() -> None:
-    """Before 20 s the flight is the still link's to the bit; from the control step at 20 s every packet takes the
+    """Before 8 s the flight is the still link's to the bit; from the control step at 8 s every packet takes the
     new link (40 ms each way): the delays after it, the event in the summary (kind ``link``), as a flag or a
-    ``[[events]]`` table."""
-    still = simulate("missions/sine.toml")
-    flag = simulate("missions/sine.toml", at=("20:link:delay_ms=40",))
-    table = simulate("missions/sine.toml", at=({"t_s": 20.0, "kind": "link", "delay_ms": 40},))
-    n = int(20.0 * 250)  # control steps before the handover (the sine flies 250 Hz)
+    ``[[events]]`` table. The sine's first 12 s (the handover a third of the flight from its end, as at 20 s of 30)."""
+    first = replace(load_mission("missions/sine.toml"), duration_s=12.0)
+    still = simulate(first)
+    flag = simulate(first, at=("8:link:delay_ms=40",))
+    table = simulate(first, at=({"t_s": 8.0, "kind": "link", "delay_ms": 40},))
+    n = int(8.0 * 250)  # control steps before the handover (the sine flies 250 Hz)
     assert (flag.trace["x"][:n] == still.trace["x"][:n]).all() and flag.trace["x"][n + 20] != still.trace["x"][n + 20]
     assert flag.summary["rms_3d"] == table.summary["rms_3d"] != still.summary["rms_3d"]
     up = flag.summary["link"]["up"]["delay_ms"]
     assert up["p50"] == pytest.approx(0.0) and up["p95"] == pytest.approx(40.0)  # a third of the flight at 40 ms
     assert [e for e in flag.summary["events"] if e["kind"] == "link"] == [
-        {"t": 20.0, "kind": "link", "text": "link handover to delay_ms=40"}]
+        {"t": 8.0, "kind": "link", "text": "link handover to delay_ms=40"}]
 
 
 def test_events_that_cannot_act_on_this_flight_are_refused() -> None:
