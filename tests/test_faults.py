@@ -184,10 +184,13 @@ def test_a_gust_that_injects_nothing_is_refused_by_the_flag_the_event_and_the_wi
 
 
 def _gps_mission(path: Path, *events: tuple[float, str]) -> Path:
-    """The sine on the gnss set and the EKF with ``[[events]]`` of the GPS: (t_s, state) each."""
+    """The sine's first 17 s (past the events asked of it: up to 16 s) on the gnss set and the EKF with ``[[events]]``
+    of the GPS: (t_s, state) each."""
     tables = "".join(f'\n[[events]]\nt_s = {t}\nkind = "gps"\nstate = "{state}"\n' for t, state in events)
-    path.write_text((ROOT / "missions" / "sine.toml").read_text() + '\n[sensors]\nset = "gnss"\n\n[estimator]\n'
-                    'kind = "ekf"\n' + tables)
+    sine = (ROOT / "missions" / "sine.toml").read_text()
+    assert "\nduration_s = 30.0\n" in sine
+    path.write_text(sine.replace("\nduration_s = 30.0\n", "\nduration_s = 17.0\n") + '\n[sensors]\nset = "gnss"\n\n'
+                    '[estimator]\nkind = "ekf"\n' + tables)
     return path
 
 
