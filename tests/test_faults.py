@@ -311,6 +311,7 @@ def test_a_rotor_at_75_percent_needs_attitude_gains_sized_for_its_torque_step() 
 
 
 def test_wind_and_gust_events_change_the_air() -> None:
-    run = simulate("missions/sine.toml", at=("5:wind:4:0", "10:gust:2,6,90"))
+    first = replace(load_mission("missions/sine.toml"), duration_s=13.0)  # the sine's first 13 s: the gust ends at 12
+    run = simulate(first, at=("5:wind:4:0", "10:gust:2,6,90"))
     assert run.summary["wind"]["peak_mps"] > 4.0 and run.summary["outcome"] == "completed"
     assert [e["kind"] for e in run.summary["events"] if e["t"] in (5.0, 10.0)] == ["wind", "wind"]
