@@ -51,19 +51,20 @@ def test_a_link_handover_parses_and_is_refused_when_bad() -> None:
 
 
 def test_a_link_handover_acts_from_its_step_in_the_offline_loop() -> None:
-    """Before 20 s the flight is the still link's to the bit; from the control step at 20 s every packet takes the
+    """Before 8 s the flight is the still link's to the bit; from the control step at 8 s every packet takes the
     new link (40 ms each way): the delays after it, the event in the summary (kind ``link``), as a flag or a
-    ``[[events]]`` table."""
-    still = simulate("missions/sine.toml")
-    flag = simulate("missions/sine.toml", at=("20:link:delay_ms=40",))
-    table = simulate("missions/sine.toml", at=({"t_s": 20.0, "kind": "link", "delay_ms": 40},))
-    n = int(20.0 * 250)  # control steps before the handover (the sine flies 250 Hz)
+    ``[[events]]`` table. The sine's first 12 s (the handover a third of the flight from its end, as at 20 s of 30)."""
+    first = replace(load_mission("missions/sine.toml"), duration_s=12.0)
+    still = simulate(first)
+    flag = simulate(first, at=("8:link:delay_ms=40",))
+    table = simulate(first, at=({"t_s": 8.0, "kind": "link", "delay_ms": 40},))
+    n = int(8.0 * 250)  # control steps before the handover (the sine flies 250 Hz)
     assert (flag.trace["x"][:n] == still.trace["x"][:n]).all() and flag.trace["x"][n + 20] != still.trace["x"][n + 20]
     assert flag.summary["rms_3d"] == table.summary["rms_3d"] != still.summary["rms_3d"]
     up = flag.summary["link"]["up"]["delay_ms"]
     assert up["p50"] == pytest.approx(0.0) and up["p95"] == pytest.approx(40.0)  # a third of the flight at 40 ms
     assert [e for e in flag.summary["events"] if e["kind"] == "link"] == [
-        {"t": 20.0, "kind": "link", "text": "link handover to delay_ms=40"}]
+        {"t": 8.0, "kind": "link", "text": "link handover to delay_ms=40"}]
 
 
 def test_events_that_cannot_act_on_this_flight_are_refused() -> None:
@@ -183,10 +184,13 @@ def test_a_gust_that_injects_nothing_is_refused_by_the_flag_the_event_and_the_wi
 
 
 def _gps_mission(path: Path, *events: tuple[float, str]) -> Path:
-    """The sine on the gnss set and the EKF with ``[[events]]`` of the GPS: (t_s, state) each."""
+    """The sine's first 17 s (past the events asked of it: up to 16 s) on the gnss set and the EKF with ``[[events]]``
+    of the GPS: (t_s, state) each."""
     tables = "".join(f'\n[[events]]\nt_s = {t}\nkind = "gps"\nstate = "{state}"\n' for t, state in events)
-    path.write_text((ROOT / "missions" / "sine.toml").read_text() + '\n[sensors]\nset = "gnss"\n\n[estimator]\n'
-                    'kind = "ekf"\n' + tables)
+    sine = (ROOT / "missions" / "sine.toml").read_text()
+    assert "\nduration_s = 30.0\n" in sine
+    path.write_text(sine.replace("\nduration_s = 30.0\n", "\nduration_s = 17.0\n") + '\n[sensors]\nset = "gnss"\n\n'
+                    '[estimator]\nkind = "ekf"\n' + tables)
     return path
 
 
@@ -307,6 +311,7 @@ def test_a_rotor_at_75_percent_needs_attitude_gains_sized_for_its_torque_step() 
 
 
 def test_wind_and_gust_events_change_the_air() -> None:
-    run = simulate("missions/sine.toml", at=("5:wind:4:0", "10:gust:2,6,90"))
+    first = replace(load_mission("missions/sine.toml"), duration_s=13.0)  # the sine's first 13 s: the gust ends at 12
+    run = simulate(first, at=("5:wind:4:0", "10:gust:2,6,90"))
     assert run.summary["wind"]["peak_mps"] > 4.0 and run.summary["outcome"] == "completed"
     assert [e["kind"] for e in run.summary["events"] if e["t"] in (5.0, 10.0)] == ["wind", "wind"]

@@ -93,7 +93,9 @@ def test_a_plan_longer_than_a_mission_may_last_is_refused_before_it_is_timed(tmp
 @pytest.mark.parametrize("kind", ["plan", "toml"])
 def test_bsst_sim_reads_its_plan_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, kind: str) -> None:
     """The plan is read and timed once a command: it was three times (the laws looked for, the fleet looked
-    for, the flight), and a mission file's plan twice each (its trajectory, then its fence and rally points)."""
+    for, the flight), and a mission file's plan twice each (its trajectory, then its fence and rally points).
+    The box cut to an L (every kind of item the box has, and its fence and rally tables: 20 s of flight, not 90)."""
+    plan = l_plan(tmp_path)
     read: list[str] = []
 
     def counted(text: str, source: str) -> Any:
@@ -101,12 +103,12 @@ def test_bsst_sim_reads_its_plan_once(tmp_path: Path, monkeypatch: pytest.Monkey
         return read_plan_text(text, source)
 
     monkeypatch.setattr(mission_module, "read_plan_text", counted)
-    mission = BOX_PLAN
+    mission = plan
     if kind == "toml":
         mission = tmp_path / "boxed.toml"
-        mission.write_text(f'name = "boxed"\n[trajectory]\nkind = "plan"\nfile = "{BOX_PLAN}"\n')
+        mission.write_text(f'name = "boxed"\n[trajectory]\nkind = "plan"\nfile = "{plan}"\n')
     assert main(["sim", str(mission), "--out", str(tmp_path / "run"), "--no-plots"]) == 0
-    assert read == [str(BOX_PLAN)]
+    assert read == [str(plan)]
 
 
 @pytest.mark.parametrize("kind", ["smooth", "waypoints", "step"])

@@ -1,10 +1,10 @@
 """Covers bridge.sweep, bridge.cli and bridge.autopilot.compiling: what a new user meets first (issue 23).
 
 - the README's Python example, verbatim, saved as a script (``python example.py``) and typed into
-  ``python -i``: it flies, its sweep's cells are measured, nothing errors (both read a 3-second
+  ``python -i``: it flies, its sweep's cells are measured, nothing errors (both read a 1-second
   ``missions/sine.toml``, every other key as shipped: what the tests cover is how the code arrives, a
   script's ``__main__`` the sweep's workers import again and an interactive one they cannot, not the
-  30 seconds of the real-time flight);
+  30 seconds of the real-time flight, nor its twelve cells' 30 seconds each);
 - a script that starts a sweep's pool without the ``if __name__ == "__main__":`` guard fails at
   once, naming the guard (its workers used to re-run the script and come back as 'error' rows, exit 0);
 - a sweep whose every cell failed never passes for a result: ``bsst sweep`` exits 1 with a line
@@ -42,7 +42,7 @@ pytestmark = pytest.mark.process  # starts processes (scripts, pools, SITL sessi
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
-SHORT = Mission(Sine(), duration_s=3.0, name="short")
+SHORT = Mission(Sine(), duration_s=1.0, name="short")
 BAD_LAW = '''
 class BadLaw:
     """Fits the Law interface and is built; fails at its first update, so every cell of a sweep fails."""
@@ -83,11 +83,11 @@ def user_dir(tmp_path: Path) -> Path:
 
 
 def short_sine(cwd: Path) -> None:
-    """The user directory's ``missions/sine.toml`` flown for 3 s, not 30 (every other key as shipped)."""
+    """The user directory's ``missions/sine.toml`` flown for 1 s, not 30 (every other key as shipped)."""
     sine = cwd / "missions" / "sine.toml"
     text = sine.read_text(encoding="utf-8")
     assert "\nduration_s = 30.0\n" in text, "missions/sine.toml no longer says duration_s = 30.0"
-    sine.write_text(text.replace("\nduration_s = 30.0\n", "\nduration_s = 3.0\n"), encoding="utf-8")
+    sine.write_text(text.replace("\nduration_s = 30.0\n", "\nduration_s = 1.0\n"), encoding="utf-8")
 
 
 def run_python(args: list[str], cwd: Path, stdin: str | None = None, timeout: float = 600.0,
@@ -126,7 +126,7 @@ def assert_clean(proc: subprocess.CompletedProcess[str]) -> None:
 
 def test_the_readmes_python_example_runs_verbatim_as_a_script(tmp_path: Path) -> None:
     cwd = user_dir(tmp_path)
-    short_sine(cwd)  # the script is verbatim; the mission it reads flies 3 s, not 30 (its real-time flight)
+    short_sine(cwd)  # the script is verbatim; the mission it reads flies 1 s, not 30 (its real-time flight)
     (cwd / "example.py").write_text(readme_python())
     with instance(1):
         proc = run_python(["example.py"], cwd)
@@ -147,7 +147,7 @@ def test_the_readmes_python_example_runs_as_typed_into_python_i(tmp_path: Path) 
     assert "ERRORS [] 12" in proc.stdout, proc.stdout[-2000:] + proc.stderr[-2000:]
     assert (cwd / "runs" / "rt" / "summary.json").is_file()
     flown = tomllib.loads((cwd / "runs" / "rt" / "mission.toml").read_text(encoding="utf-8"))
-    assert flown["duration_s"] == 3.0, flown
+    assert flown["duration_s"] == 1.0, flown
 
 
 # -- a script without the main guard ---------------------------------------------------------------------

@@ -235,10 +235,27 @@ def test_box_plan_flown_offline_meets_the_figures() -> None:
                                                  for j in fig["pass_through"])
 
 
+# examples/box.waypoints cut to an L, as tests.plans.l_plan cuts box.plan: home, takeoff to 3 m, the speed change,
+# 10 m north, 10 m east (passed through the corner), land: 20 s of flight where the box has 90
+L_WAYPOINTS = """QGC WPL 110
+0\t1\t0\t16\t0\t0\t0\t0\t47.397742\t8.545594\t488.0\t1
+1\t0\t3\t22\t0\t0\t0\tnan\t47.397742\t8.545594\t3\t1
+2\t0\t2\t178\t1\t5\t-1\t0\t0\t0\t0\t1
+3\t0\t3\t16\t0\t0\t0\tnan\t47.397832\t8.545594\t3\t1
+4\t0\t3\t16\t0\t0\t0\tnan\t47.397832\t8.545727\t3\t1
+5\t0\t3\t21\t0\t0\t0\tnan\t47.397832\t8.545727\t0\t1
+"""
+
+
 def test_bsst_sim_flies_a_plan_and_refuses_a_bad_one(tmp_path: Path) -> None:
+    """A QGC WPL 110 file flown by the command line to its landing (the L: the shipped box.waypoints is the box.plan
+    flown to its figures offline, test_the_two_shipped_files_are_the_same_flight); a bad .plan refused."""
+    wpl = tmp_path / "l.waypoints"
+    wpl.write_text(L_WAYPOINTS)
+    assert load_mission(wpl).trajectory == load_mission(l_plan(tmp_path)).trajectory  # the L, to the bit
     env = dict(os.environ, MPLBACKEND="Agg")
     out = tmp_path / "run"
-    p = run_bsst("sim", str(BOX_WPL), "--out", str(out), "--no-plots", cwd=ROOT, env=env, timeout=300)
+    p = run_bsst("sim", str(wpl), "--out", str(out), "--no-plots", cwd=ROOT, env=env, timeout=300)
     assert p.returncode == 0, p.stderr
     summary = json.loads((out / "summary.json").read_text())
     # disarmed, then the mode PX4 takes after a LAND's disarm (the user's: bridge.autopilot.intention)

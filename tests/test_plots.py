@@ -70,23 +70,41 @@ def estimated() -> dict:
     return simulate(SHORT, plots=False, sensors={"set": "mocap"}, estimator="ekf").trace
 
 
-def _open(figs: dict) -> Iterator[tuple[str, object]]:
+def _drawn(figs: dict) -> Iterator[dict]:
+    """``figs``, each drawn once (the legends laid out, the 3-D projection made: extents are final), for the module's
+    tests to read (none changes a figure); closed after the module's last test. Each set was built and drawn by
+    every test that read it (the clean flight's five times, the estimate's three: half of the module's 6.5 CPU-s)."""
     try:
-        for name, fig in figs.items():
-            fig.canvas.draw()  # lays out the legends and the 3-D projection: extents are final
-            yield name, fig
+        for fig in figs.values():
+            fig.canvas.draw()
+        yield figs
     finally:
         for fig in figs.values():
             _close(fig)
 
 
-def _only(trace: dict, name: str) -> object:
-    """One of a trace's figures (the others closed at once)."""
-    figs = figures(trace)
-    keep = figs.pop(name)
+@pytest.fixture(scope="module")
+def clean_figs(clean: dict) -> Iterator[dict]:
+    """The clean flight's figures, by name, drawn."""
+    yield from _drawn(figures(clean))
+
+
+@pytest.fixture(scope="module")
+def cut_figs(cut: tuple) -> Iterator[dict]:
+    """The figures of the flight through the blackout, its spans marked, by name, drawn."""
+    trace, spans = cut
+    yield from _drawn(figures(trace, "cut", spans))
+
+
+@pytest.fixture(scope="module")
+def estimate_fig(estimated: dict) -> Iterator[object]:
+    """The estimated flight's ``estimate`` figure, drawn (its other figures closed at once)."""
+    figs = figures(estimated)
+    keep = figs.pop("estimate")
     for fig in figs.values():
         _close(fig)
-    return keep
+    for drawn in _drawn({"estimate": keep}):
+        yield drawn["estimate"]
 
 
 def _data_axes(fig) -> list:
@@ -136,8 +154,8 @@ def _check_legends(name: str, fig) -> int:
     return len(legends)
 
 
-def test_every_axis_label_carries_its_unit(clean: dict, estimated: dict) -> None:
-    for name, fig in _open(figures(clean, "short") | {"estimate": _only(estimated, "estimate")}):  # 7 at once
+def test_every_axis_label_carries_its_unit(clean_figs: dict, estimate_fig: object) -> None:
+    for name, fig in (clean_figs | {"estimate": estimate_fig}).items():  # 6 at once
         for ax in _data_axes(fig):
             assert any(u in ax.get_ylabel() for u in UNIT), (name, ax.get_ylabel())
             if ax.name != "3d" and any(t.get_visible() and t.get_text() for t in ax.get_xticklabels()):
@@ -154,22 +172,18 @@ def test_every_axis_label_carries_its_unit(clean: dict, estimated: dict) -> None
             assert (ax.get_xlabel(), ax.get_ylabel(), ax.get_zlabel()) == ("x [m]", "y [m]", "z [m]")
 
 
-def test_legends_are_inside_the_figure_and_off_the_data(clean: dict, cut: tuple, estimated: dict) -> None:
-    trace, spans = cut
+def test_legends_are_inside_the_figure_and_off_the_data(clean_figs: dict, cut_figs: dict,
+                                                       estimate_fig: object) -> None:
     n = 0
-    for build in (lambda: figures(clean), lambda: {f"{k} (cut)": f for k, f in figures(trace, "cut", spans).items()},
-                  lambda: {"estimate": _only(estimated, "estimate")}):
-        for name, fig in _open(build()):
+    for figs in (clean_figs, {f"{k} (cut)": f for k, f in cut_figs.items()}, {"estimate": estimate_fig}):
+        for name, fig in figs.items():
             n += _check_legends(name, fig)
     assert n >= 20  # positions, errors (cut), angles x3, inputs, path3d, estimate x7, ...
 
 
-def test_the_figures_are_written_at_their_dpi(clean: dict, tmp_path: Path) -> None:
-    figs = figures(clean)
-    sizes = {name: fig.get_size_inches() for name, fig in figs.items()}
-    assert all(fig.dpi == DPI for fig in figs.values())
-    for fig in figs.values():
-        _close(fig)
+def test_the_figures_are_written_at_their_dpi(clean: dict, clean_figs: dict, tmp_path: Path) -> None:
+    sizes = {name: fig.get_size_inches() for name, fig in clean_figs.items()}
+    assert all(fig.dpi == DPI for fig in clean_figs.values())
     for p in make_plots(clean, tmp_path, "short"):
         head = p.read_bytes()[:24]
         assert head[:8] == b"\x89PNG\r\n\x1a\n"
@@ -178,46 +192,46 @@ def test_the_figures_are_written_at_their_dpi(clean: dict, tmp_path: Path) -> No
         assert (w, h) == (round(want[0]), round(want[1])), p.name
 
 
-def test_inputs_show_each_step_of_the_last_tenth_of_a_second(clean: dict) -> None:
+def test_inputs_show_each_step_of_the_last_tenth_of_a_second(clean: dict, clean_figs: dict) -> None:
     """A sign that alternates every step fills the whole-flight panel; the close-up has one demanded point per
     control step, and the realised input held (a step line) in another style."""
     t = clean["t"]
     last = t >= t[-1] - ZOOM_S
-    for _, fig in _open({"inputs": _only(clean, "inputs")}):
-        zooms = fig.axes[1::2]
-        assert len(zooms) == 4
-        for ax, u in zip(zooms, ("u1", "u2", "u3", "u4"), strict=True):
-            demanded, realised = ax.lines
-            assert np.array_equal(demanded.get_ydata(), clean[u][last])  # every step's value, none skipped
-            assert demanded.get_linestyle() == "None" and demanded.get_marker() == "o"
-            assert realised.get_drawstyle() == "steps-post" and np.array_equal(realised.get_ydata(),
-                                                                               clean[u + "_act"][last])
-            lo, hi = ax.get_xlim()
-            assert hi - lo < 1.5 * ZOOM_S
-        # the law's u4 does alternate here: the close-up shows it as it is
-        assert np.all(np.diff(np.sign(clean["u4"][last])) != 0)
+    fig = clean_figs["inputs"]
+    zooms = fig.axes[1::2]
+    assert len(zooms) == 4
+    for ax, u in zip(zooms, ("u1", "u2", "u3", "u4"), strict=True):
+        demanded, realised = ax.lines
+        assert np.array_equal(demanded.get_ydata(), clean[u][last])  # every step's value, none skipped
+        assert demanded.get_linestyle() == "None" and demanded.get_marker() == "o"
+        assert realised.get_drawstyle() == "steps-post" and np.array_equal(realised.get_ydata(),
+                                                                           clean[u + "_act"][last])
+        lo, hi = ax.get_xlim()
+        assert hi - lo < 1.5 * ZOOM_S
+    # the law's u4 does alternate here: the close-up shows it as it is
+    assert np.all(np.diff(np.sign(clean["u4"][last])) != 0)
 
 
-def test_path3d_tick_labels_do_not_overlap(clean: dict) -> None:
-    for _, fig in _open({"path3d": _only(clean, "path3d")}):
-        r = fig.canvas.get_renderer()
-        ax = fig.axes[0]
-        for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
-            boxes = [t.label1.get_window_extent(r) for t in axis.get_major_ticks()
-                     if t.label1.get_visible() and t.label1.get_text()]
-            assert len(boxes) >= 3
-            for i, b in enumerate(boxes):
-                assert not any(b.overlaps(c) for c in boxes[i + 1:]), axis.get_label_text()
+def test_path3d_tick_labels_do_not_overlap(clean_figs: dict) -> None:
+    fig = clean_figs["path3d"]
+    r = fig.canvas.get_renderer()
+    ax = fig.axes[0]
+    for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
+        boxes = [t.label1.get_window_extent(r) for t in axis.get_major_ticks()
+                 if t.label1.get_visible() and t.label1.get_text()]
+        assert len(boxes) >= 3
+        for i, b in enumerate(boxes):
+            assert not any(b.overlaps(c) for c in boxes[i + 1:]), axis.get_label_text()
 
 
-def test_blackout_and_failsafe_are_marked(cut: tuple) -> None:
+def test_blackout_and_failsafe_are_marked(cut: tuple, cut_figs: dict) -> None:
     trace, spans = cut
     kinds = [s.kind for s in spans]
     assert kinds == ["blackout", "failsafe"]
     blackout, failsafe = spans
     assert (blackout.start_s, blackout.end_s) == (BLACKOUT[0], BLACKOUT[0] + BLACKOUT[1])
     assert BLACKOUT[0] < failsafe.start_s < BLACKOUT[0] + 1.0 and failsafe.end_s > failsafe.start_s
-    for name, fig in _open({k: f for k, f in figures(trace, "cut", spans).items() if k != "path3d"}):
+    for name, fig in ((k, f) for k, f in cut_figs.items() if k != "path3d"):
         time_axes = [ax for ax in fig.axes if ax.get_xlabel() == "t [s]" or ax.get_shared_x_axes().joined(
             ax, fig.axes[0])]
         for ax in time_axes:
@@ -235,17 +249,17 @@ def test_run_spans_end_a_failsafe_where_the_vehicle_leaves_it() -> None:
         Span("blackout", 4.0, 5.0), Span("failsafe", 5.0, 7.5), Span("failsafe", 9.0, 10.0)]
 
 
-def test_estimate_error_panels_have_time_and_nees_skips_t0(estimated: dict) -> None:
-    for _, fig in _open({"estimate": _only(estimated, "estimate")}):
-        errors = [ax for ax in fig.axes if ax.get_ylabel().startswith("error ")]
-        assert len(errors) == 6 and errors[-1].get_xlabel() == "t [s]"
-        assert all(ax.get_shared_x_axes().joined(ax, errors[-1]) for ax in errors)
-        nees = next(ax for ax in fig.axes if ax.get_ylabel() == "NEES [-]")
-        assert nees.get_xlabel() == "t [s]"
-        points = nees.lines[0]
-        assert np.all(points.get_xdata() > 0.0)
-        lo, hi = nees.get_ylim()
-        assert lo > 0.5 and hi < 200.0  # the t = 0 sample (~0.005) no longer sets the axis
+def test_estimate_error_panels_have_time_and_nees_skips_t0(estimate_fig: object) -> None:
+    fig = estimate_fig
+    errors = [ax for ax in fig.axes if ax.get_ylabel().startswith("error ")]
+    assert len(errors) == 6 and errors[-1].get_xlabel() == "t [s]"
+    assert all(ax.get_shared_x_axes().joined(ax, errors[-1]) for ax in errors)
+    nees = next(ax for ax in fig.axes if ax.get_ylabel() == "NEES [-]")
+    assert nees.get_xlabel() == "t [s]"
+    points = nees.lines[0]
+    assert np.all(points.get_xdata() > 0.0)
+    lo, hi = nees.get_ylim()
+    assert lo > 0.5 and hi < 200.0  # the t = 0 sample (~0.005) no longer sets the axis
 
 
 def test_a_lossless_trace_says_it_lost_nothing(tmp_path: Path) -> None:

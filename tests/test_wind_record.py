@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +15,7 @@ import pytest
 
 from bridge import simulate
 from bridge.cli import main
+from missions import load_mission
 from plant.wind import Turbulence, TurbulenceRecord
 
 SINE = "missions/sine.toml"
@@ -85,8 +87,11 @@ def test_the_sine_in_moderate_turbulence_has_the_asked_mean_wind_and_milhdbks_si
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_every_seed_flies_the_asked_turbulence(seed: int) -> None:
-    """Whatever the seed, the flight's turbulence is the level's: the seed sets its phases, not its strength."""
-    w = simulate(SINE, wind=(5.0, 270.0), turbulence="moderate", seed=seed).summary["wind"]
+    """Whatever the seed, the flight's turbulence is the level's: the seed sets its phases, not its strength. The
+    record is scaled to the flight whatever its length (the 30 s flight: the test above): the sine's first 5 s."""
+    first = replace(load_mission(SINE), duration_s=5.0)
+    w = simulate(first, wind=(5.0, 270.0), turbulence="moderate", seed=seed).summary["wind"]
+    assert w["record"]["length_s"] == pytest.approx(5.0) and w["record"]["free_after_s"] == 0.0
     assert w["mean_mps"]["along"] == pytest.approx(5.0, abs=1e-9)
     assert [w["turbulence_std_mps"][k] for k in "uvw"] == pytest.approx([w["dryden"]["sigma_mps"][k]
                                                                          for k in "uvw"], rel=1e-9)
