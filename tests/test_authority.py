@@ -31,6 +31,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.autopilot.simvehicle import OFFBOARD
 from bridge.core.flight import prepare
+from bridge.loop import simulate
 from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, GCS_PORT, LINK_PORT, Endpoint, parse_address
 from bridge.mavlink.receive import REPLY_RATE_HZ, RateLimiter, ReplyBudget
 from bridge.nodes.report import Ready, Stats
@@ -299,12 +300,13 @@ def test_strangers_and_bad_numbers_during_a_lockstep_session_change_nothing(tmp_
     arms, force-disarms and switches every GCS stream off on the controller link, a stranger
     with the controller's ids spoofs its HEARTBEAT at 200 Hz for a second and sends a forced
     DISARM, and the ground station sends commands with NaN and infinite numbers: the trace is
-    the undisturbed run's byte for byte, the mission completes, every refusal is counted,
+    the undisturbed flight's byte for byte (flown offline: a lockstep session's trace.csv is its offline twin's to
+    the byte, tests/test_sitl.py), the mission completes, every refusal is counted,
     the GCS streams flow on, the states go to the controller only, and events.log names the
     controller as the only one who armed the vehicle (it disarms itself, landed after the mission)."""
     mission = tmp_path / "m.toml"
     mission.write_text(STRANGE_MISSION)
-    ref = _fly(mission, tmp_path / "ref", None)
+    ref = simulate(mission, out=tmp_path / "ref", plots=False).summary
     seen: dict[str, Any] = {}
     run = _fly(mission, tmp_path / "run", seen)
     assert ref["outcome"] == run["outcome"] == "completed"
@@ -324,20 +326,18 @@ def test_strangers_and_bad_numbers_during_a_lockstep_session_change_nothing(tmp_
         ln for ln in log if ln.endswith("disarmed: landed: disarmed [by vehicle] [vehicle]")], log
 
 
-def _fly(mission: Path, out: Path, seen: dict[str, Any] | None) -> dict[str, Any]:
-    """``bsst sitl`` lockstep at 3x real time; with ``seen``, attacked (:func:`_attack`) once the
-    vehicle is past step 10, what the attackers saw put into ``seen``. The summary."""
+def _fly(mission: Path, out: Path, seen: dict[str, Any]) -> dict[str, Any]:
+    """``bsst sitl`` lockstep at 3x real time, attacked (:func:`_attack`) once the vehicle is past step 10,
+    what the attackers saw put into ``seen``. The summary."""
     with instance_slot() as n:
-        gcs = Station((255, 190), port=GCS_PORT + n) if seen is not None else None
+        gcs = Station((255, 190), port=GCS_PORT + n)
         p = Proc.bsst("sitl", str(mission), "--out", str(out), "--instance", str(n), "--speed", "3", "--no-plots")
         try:
-            if gcs is not None and seen is not None:
-                _attack(n, out, gcs, p, seen)
+            _attack(n, out, gcs, p, seen)
             p.p.wait(timeout=120)
         finally:
             p.stop()
-            if gcs is not None:
-                gcs.close()
+            gcs.close()
     return json.loads((out / "summary.json").read_text())
 
 
@@ -731,15 +731,15 @@ def _fly_noop(mission: Path, out: Path, when: str, mode: tuple[float, float, flo
     return rc, json.loads((out / "summary.json").read_text())
 
 
-@pytest.fixture(scope="module")
-def noop_ref(tmp_path_factory) -> tuple[Path, dict[str, Any], bytes]:
-    """NOOP_MISSION's file, and the summary and trace.csv of its flight with no ground station speaking:
-    the one reference of the three cases below."""
-    d = tmp_path_factory.mktemp("noop-ref")
-    mission = d / "m.toml"
+@pytest.fixture
+def noop_ref(tmp_path) -> tuple[Path, dict[str, Any], bytes]:
+    """NOOP_MISSION's file, and the summary and trace.csv of its flight with no ground station speaking, flown
+    offline (a lockstep session's trace.csv is its offline twin's to the byte, tests/test_sitl.py; a session of
+    its own once, shared by the three cases below, which it then kept on one worker)."""
+    mission = tmp_path / "m.toml"
     mission.write_text(NOOP_MISSION)
-    ref = _fly(mission, d / "ref", None)
-    return mission, ref, (d / "ref" / "trace.csv").read_bytes()
+    ref = simulate(mission, out=tmp_path / "ref", plots=False)
+    return mission, ref.summary, (tmp_path / "ref" / "trace.csv").read_bytes()
 
 
 @pytest.mark.parametrize(("when", "mode"), [("armed", OFFBOARD_MODE), ("disarmed", TAKEOFF_MODE),

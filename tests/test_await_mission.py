@@ -350,21 +350,27 @@ def test_mavsdks_arm_outside_an_uploaded_fence_is_denied_saying_why_and_arms_onc
     assert kinds.index("preflight") < kinds.index("armed") and kinds.count("armed") == 1, kinds
 
 
-# a takeoff to 1.5 m, a waypoint 2 m away held 0.5 s, a landing: 9.1 s of flight (12.1 s at 3 m), flown on the wall
-# clock by several tests
+# a takeoff to 1.5 m, a waypoint 2 m away held 0.5 s, a landing: 9.1 s of flight (12.1 s at 3 m)
 SMALL_PLAN = """QGC WPL 110
 0\t1\t0\t16\t0\t0\t0\t0\t47.397742\t8.545594\t488.0\t1
 1\t0\t3\t22\t0\t0\t0\tnan\t47.397742\t8.545594\t1.5\t1
 2\t0\t3\t16\t0\t0.5\t0\tnan\t47.3977600\t8.5456000\t1.5\t1
 3\t0\t3\t21\t0\t0\t0\tnan\t47.3977600\t8.5456000\t0\t1
 """
+# the same at 1 m, its waypoint 1 m north: 7.6 s of flight, for the tests that fly it on the wall clock
+HOP_PLAN = """QGC WPL 110
+0\t1\t0\t16\t0\t0\t0\t0\t47.397742\t8.545594\t488.0\t1
+1\t0\t3\t22\t0\t0\t0\tnan\t47.397742\t8.545594\t1.0\t1
+2\t0\t3\t16\t0\t0.5\t0\tnan\t47.3977510\t8.5455940\t1.0\t1
+3\t0\t3\t21\t0\t0\t0\tnan\t47.3977510\t8.5455940\t0\t1
+"""
 
 
-def _small_plan_items(target: tuple[int, int] = (0, 0)) -> list[Any]:
-    """SMALL_PLAN's items as MISSION_ITEM_INT messages for ``target`` (system, component)."""
+def _small_plan_items(target: tuple[int, int] = (0, 0), plan: str = SMALL_PLAN) -> list[Any]:
+    """``plan``'s items (SMALL_PLAN's) as MISSION_ITEM_INT messages for ``target`` (system, component)."""
     return [M.MAVLink_mission_item_int_message(*target, k, it.frame, it.command, 0, 1, it.p1, it.p2, it.p3, it.p4,
                                                round(it.lat * 1e7), round(it.lon * 1e7), it.alt, 0)
-            for k, it in enumerate(read_plan_text(SMALL_PLAN, "small").items)]
+            for k, it in enumerate(read_plan_text(plan, "small").items)]
 
 
 def _ground_station(n: int) -> Any:
@@ -403,8 +409,8 @@ def test_mission_start_flies_a_small_plan_in_real_time(tmp_path, link, how):
     the start, and the vehicle is armed only after it. The controller downloads the three items and flies them
     on the wall clock; each is reached (MISSION_ITEM_REACHED), the flight completes landed and disarmed, and
     summary.json's ``mission_transfer.started_by`` says how and by whom. With ``--loss 10`` the download crosses
-    ``bsst relay`` (the session's, on the wire) and still arrives."""
-    items = _small_plan_items()
+    ``bsst relay`` (the session's, on the wire) and still arrives. (HOP_PLAN: 7.6 s on the wall clock.)"""
+    items = _small_plan_items(plan=HOP_PLAN)
     out = tmp_path / "rt"
     with instance_slot() as n:
         gcs = _ground_station(n)

@@ -20,7 +20,6 @@ from bridge.mavlink.endpoint import parse_address, parse_datagram
 from bridge.mavlink.receive import MAX_POSITION_M, Rejections, odometry_problem, wire_problem
 from bridge.mavlink.signing import Signing
 from bridge.nodes.vehicle import Vehicle, VehicleConfig
-from bridge.session import sitl
 from missions import MISSION_DIR, Mission, Sine, load_mission
 from tests.hostile import Fuzzer, drop_held_answer, fly_flooded, fly_fuzzed, vehicle_state
 from tests.sitlkit import stall_blackouts, unexplained_outages
@@ -174,11 +173,13 @@ def test_any_datagram_leaves_the_vehicle_as_it_was_unless_valid(armed_vehicle, d
 FUZZED = Mission(Sine(), duration_s=8.0, name="fuzz")  # the lockstep mission both fuzzers fly
 
 
-@pytest.fixture(scope="module")
-def undisturbed(tmp_path_factory):
-    """:data:`FUZZED` flown in lockstep with nobody else speaking: the run, and its directory (trace.csv)."""
-    out = tmp_path_factory.mktemp("undisturbed") / "ref"
-    return sitl(FUZZED, out=out, plots=False, instance=None), out
+@pytest.fixture
+def undisturbed(tmp_path):
+    """:data:`FUZZED` flown with nobody else speaking: the run, and its directory (trace.csv). Flown offline: a
+    lockstep session's trace.csv is its offline twin's to the byte (tests/test_sitl.py); a session of its own
+    once, shared by the two tests below, which it then kept on one worker."""
+    out = tmp_path / "ref"
+    return simulate(FUZZED, out=out, plots=False), out
 
 
 def test_fuzz_during_a_lockstep_mission(undisturbed, tmp_path):

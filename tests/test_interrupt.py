@@ -214,6 +214,7 @@ def test_ctrl_c_while_the_cli_imports_is_said_not_traced() -> None:
 
 
 # ``bsst sim`` whose summary printing first sends this process a real SIGINT: a Ctrl-C once the run is on disk
+# (of a 2 s sine: how long it flew before does not matter; missions/sine.toml's 30 s cost 1.0 CPU-s, this 0.26)
 SUMMARY_SIGINT = """
     import os, signal, sys
     import bridge.cli.flying as flying
@@ -224,7 +225,7 @@ SUMMARY_SIGINT = """
         return printing(*args, **kwargs)
 
     flying.print_summary = sigint_then_print
-    sys.argv = ["bsst", "sim", "missions/sine.toml", "--no-plots", "--out", sys.argv[1]]
+    sys.argv = ["bsst", "sim", sys.argv[2], "--no-plots", "--out", sys.argv[1]]
     from bridge.__main__ import main
     sys.exit(main())
 """
@@ -234,7 +235,9 @@ def test_ctrl_c_while_the_summary_is_printed_changes_nothing(tmp_path) -> None:
     """``bsst sim`` sent SIGINT as its summary starts to print (the run on disk): it ends as the run did (0), its
     summary whole, no traceback. Before, such a signal (sent by hand as the ``outcome:`` line came out, 12 times)
     killed it 6 times, gave a traceback 4 times, and let it exit 0 twice."""
-    proc = Proc([sys.executable, "-c", textwrap.dedent(SUMMARY_SIGINT), str(tmp_path / "run")])
+    mission = tmp_path / "sine2.toml"
+    mission.write_text('name = "sine2"\nduration_s = 2.0\n[trajectory]\nkind = "sine"\n')
+    proc = Proc([sys.executable, "-c", textwrap.dedent(SUMMARY_SIGINT), str(tmp_path / "run"), str(mission)])
     try:
         proc.wait_line(lambda s: s.startswith("run directory:"), timeout=120)
         assert proc.p.wait(timeout=60) == 0, proc.lines

@@ -20,6 +20,7 @@ import struct
 import subprocess
 import time
 import tomllib
+from array import array
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
@@ -584,6 +585,14 @@ def test_fit_of_outages_past_the_blackout_ranges_writes_a_profile_bsst_loads(tmp
     assert "# clamped to the model's ranges: " in (tmp_path / "long.toml").read_text()
 
 
+def _doubles(x: np.ndarray) -> array:
+    """``x`` as the ``array("d")`` that :func:`make_records` keeps as it is: from a numpy array it copies element by
+    element (the 9 million below: 1.2 CPU-s)."""
+    out = array("d")
+    out.frombytes(np.ascontiguousarray(x, dtype=float).tobytes())
+    return out
+
+
 def test_fit_of_bursts_longer_than_the_model_takes_is_clamped_and_loads() -> None:
     """Loss runs of 2.5e6 packets (burst_len over the model's 1e6) and a loss fraction that rounds to 100 %:
     the table keeps burst_len and loss_pct within what the loader takes, and the loader takes it."""
@@ -594,7 +603,7 @@ def test_fit_of_bursts_longer_than_the_model_takes_is_clamped_and_loads() -> Non
     lost[1000:2_501_000] = True
     lost[3_000_000:5_500_000] = True
     t = np.arange(n) * 1e-3
-    rec = make_records(t, np.where(lost, np.nan, 0.02))
+    rec = make_records(_doubles(t), _doubles(np.where(lost, np.nan, 0.02)))
     fit = fit_records(rec, blackout_after_s=1e6)  # no run is an outage: every loss is a burst
     assert fit.loss.burst_len > 1e6 and fit.loss.model == "gilbert-elliott"
     table = fit.table()
@@ -602,7 +611,7 @@ def test_fit_of_bursts_longer_than_the_model_takes_is_clamped_and_loads() -> Non
     link_from_table(loadable({"both": fit}, "t"), "t")  # what bsst link fit checks before it writes
     nearly_all = np.ones(3_000_000, dtype=bool)
     nearly_all[[5, 6, 2_000_000]] = False  # 99.9999 % lost, in two runs: rounds to 100.0 at 4 decimals
-    rec = make_records(np.arange(len(nearly_all)) * 1e-3, np.where(nearly_all, np.nan, 0.02))
+    rec = make_records(_doubles(np.arange(len(nearly_all)) * 1e-3), _doubles(np.where(nearly_all, np.nan, 0.02)))
     fit = fit_records(rec, blackout_after_s=1e6)
     table = fit.table()
     assert table["loss_pct"] < 100.0 and table.get("burst_len", 0.0) <= 1e6

@@ -299,7 +299,9 @@ def test_modes_takeoff_hold_land_over_udp(tmp_path):
 # -- whole flights --------------------------------------------------------------------------------
 CHANGES = [ParamChange(2.0, "COM_OF_LOSS_T", 0.3), ParamChange(4.0, "COM_OBL_ACT", 1),
            ParamChange(4.0, "COM_FAIL_ACT_T", 1.0), ParamChange(4.0, "MPC_LAND_SPEED", 2.0)]
-SHORT = Mission(Sine(), duration_s=9.0, name="short")
+# the failsafe at 6.3 s holds 1 s, lands, and disarms at 9.86 s (COM_DISARM_LAND): the mission outlasts it, so the
+# whole flight is lockstep (at 9 s the vehicle left lockstep, the session waiting on the wall clock for its disarm)
+SHORT = Mission(Sine(), duration_s=10.5, name="short")
 EARLY_BLACKOUT = {"blackouts": [[6.0, 2.0]]}
 
 
@@ -642,9 +644,11 @@ def test_the_documented_minimum_loss_timeout_is_set_over_mavlink(tmp_path):
 def test_integer_flags_and_the_minimum_timeout_fly_in_lockstep_as_offline(tmp_path):
     """``bsst sitl`` with ``--param COM_OBL_ACT=1`` (hold) and ``--param-at 2:COM_OF_LOSS_T=0.01``: the
     controller's PARAM_SET (float32) is made by the vehicle process, and the lockstep trace is the offline
-    one: the failsafe holds 0.01 s into the blackout in both."""
+    one: the failsafe holds 0.01 s into the blackout in both, for COM_FAIL_ACT_T (5 s), then lands and disarms.
+    The mission outlasts that disarm (14.1 s), so the whole failsafe is flown in lockstep; 9 s left the vehicle
+    holding on the wall clock once the controller was done, the session waiting 5 s for its landing."""
     mission = tmp_path / "short.toml"
-    mission.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 9.0"))
+    mission.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 15.0"))
     flags = ["--param", "COM_OBL_ACT=1", "--param-at", "2:COM_OF_LOSS_T=0.01", "--blackout", "6:2", "--no-plots"]
     with instance_slot() as n:
         r = _bsst("sitl", str(mission), *flags, "--instance", str(n), "--out", str(tmp_path / "lock"))

@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
+from bridge.loop import simulate
 from bridge.mavlink.endpoint import (
     GCS_PORT,
     HIL_ACTUATOR_CONTROLS,
@@ -340,10 +341,11 @@ def _assert_key_nowhere(run: Path) -> None:
 
 
 def test_signed_session_flies_and_never_writes_the_key(tmp_path):
-    """bsst sitl --key: both sides sign, the flight is the unsigned one, and the key is in no file."""
+    """bsst sitl --key: both sides sign, the flight is the unsigned one (its offline twin's trace.csv, which an
+    unsigned lockstep session's is to the byte: tests/test_sitl.py), and the key is in no file."""
     key = _key_file(tmp_path, KEY)
     mission = Mission(Sine(), duration_s=2.0, name="signed")
-    sitl(mission, out=tmp_path / "plain", plots=False, instance=None)
+    simulate(mission, out=tmp_path / "plain", plots=False)
     run = sitl(mission, out=tmp_path / "signed", plots=True, instance=None, key=key)
     assert run.outcome == "completed" and run.summary["sitl"]["signed"] is True
     assert run.summary["link"]["rejected"] == {}

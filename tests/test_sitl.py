@@ -40,6 +40,7 @@ pytestmark = pytest.mark.process  # starts processes or opens sockets: not in ma
 SINE = MISSION_DIR / "sine.toml"
 SHORT = Mission(Sine(), duration_s=6.0, name="sine6")
 SINE_6S = 'name = "sine6"\nduration_s = 6.0\n[trajectory]\nkind = "sine"\n'
+SINE_3S = 'name = "sine3"\nduration_s = 3.0\n[trajectory]\nkind = "sine"\n'
 
 
 def _positions_close(a: dict, b: dict, tol: float) -> float:
@@ -117,11 +118,21 @@ def test_lockstep_sine_matches_offline(tmp_path):
     assert v["ODOMETRY"] >= 7501 and v["SET_ACTUATOR_CONTROL_TARGET"] == 7500 + again
 
 
-def test_lockstep_is_deterministic(tmp_path):
-    a = sitl(SHORT, out=tmp_path / "a", plots=False, instance=None)
+@pytest.fixture(scope="module")
+def short_runs(tmp_path_factory) -> dict:
+    """SHORT flown once in lockstep and once in real time (``bsst sitl`` defaults, no plots): the runs that
+    test_lockstep_is_deterministic, test_realtime_tracks_and_records_its_timing and
+    test_a_clean_session_passes_every_policy each read (each flew its own copy before: two sessions more)."""
+    d = tmp_path_factory.mktemp("short")
+    return {"lockstep": sitl(SHORT, out=d / "l", plots=False, instance=None),
+            "realtime": sitl(SHORT, realtime=True, out=d / "r", plots=False, instance=None)}
+
+
+def test_lockstep_is_deterministic(short_runs, tmp_path):
+    a = short_runs["lockstep"]
     b = sitl(SHORT, out=tmp_path / "b", plots=False, instance=None)
     assert a.outcome == b.outcome == "completed"
-    assert (tmp_path / "a" / "trace.csv").read_bytes() == (tmp_path / "b" / "trace.csv").read_bytes()
+    assert (a.path / "trace.csv").read_bytes() == (tmp_path / "b" / "trace.csv").read_bytes()
 
 
 def test_lockstep_with_compiled_kernels_is_the_plain_lockstep(tmp_path, monkeypatch):
@@ -147,9 +158,9 @@ def test_lockstep_x500_motors_match_offline(tmp_path):
     assert m is not None and m.flags & 1 and 0.0 <= min(m.controls[:4]) and max(m.controls[:4]) <= 1.0
 
 
-def test_realtime_tracks_and_records_its_timing(tmp_path):
+def test_realtime_tracks_and_records_its_timing(short_runs):
     off = simulate(SHORT, plots=False)
-    run = sitl(SHORT, realtime=True, out=tmp_path / "rt", plots=False, instance=None)
+    run = short_runs["realtime"]
     assert run.outcome == "completed" and run.summary["clock"] == "realtime"
     stalls = run.summary["timing"]["stalls"]
     # every outage the trace shows is a stall the processes measured, and every long stall shows in the trace
@@ -367,11 +378,10 @@ def _policies_hold(summary: dict) -> None:
     assert all(p["ok"] for p in summary["policies"]), summary["policies"]
 
 
-def test_a_clean_session_passes_every_policy(tmp_path):
+def test_a_clean_session_passes_every_policy(short_runs):
     """Both clocks: every policy holds, lockstep held, the mission ended the flight, and the
     controller's refused frames and everyone else's are counted apart (none of either here)."""
-    lock = sitl(SHORT, out=tmp_path / "l", plots=False, instance=None)
-    real = sitl(SHORT, realtime=True, out=tmp_path / "r", plots=False, instance=None)
+    lock, real = short_runs["lockstep"], short_runs["realtime"]
     for run in (lock, real):
         s = run.summary
         assert s["outcome"] == "completed" and s["ended_by"] == {"who": "mission", "how": "completed"}
@@ -390,9 +400,9 @@ def test_a_lockstep_run_that_leaves_lockstep_says_so_and_exits_1(tmp_path):
     lockstep, then goes on (SIGCONT): the rest is flown on the wall clock. The run says when and
     why (summary.json, events.log, the printed summary), and it is no lockstep completion: exit 1,
     whatever the outcome (the controller back in time completes the mission; too late, the
-    vehicle's failsafe took over)."""
-    mission = tmp_path / "sine6.toml"
-    mission.write_text(SINE_6S)
+    vehicle's failsafe took over). A 3 s mission: what follows the stall (~1.1 s) is all on the wall clock."""
+    mission = tmp_path / "sine3.toml"
+    mission.write_text(SINE_3S)
     run = tmp_path / "run"
     with instance_slot() as n:
         p = _bsst_sitl(n, mission, run)
@@ -415,7 +425,7 @@ def test_a_lockstep_run_that_leaves_lockstep_says_so_and_exits_1(tmp_path):
     left = next(e for e in s["events"] if e["kind"] == "lockstep" and e["source"] == "vehicle")
     assert s["clock"] == "lockstep" and s["outcome"] in ("completed", "failsafe")
     assert s["lockstep"] == {"held": False, "left_at_s": left["t"], "why": left["text"], "times": 1}
-    assert 1.0 <= left["t"] < 6.0 and "controller silent for 0.5 s" in left["text"]
+    assert 1.0 <= left["t"] < 3.0 and "controller silent for 0.5 s" in left["text"]
     assert f"left lockstep at t={left['t']:.3f} s: controller silent" in out
     assert f"bsst sitl: not a lockstep run: the vehicle left lockstep at t={left['t']:.3f} s" in err
     assert "not a lockstep run: the vehicle left lockstep" in (run / "events.log").read_text()
