@@ -20,7 +20,7 @@ from bridge.nodes.vehicle.streams import VehicleView, message
 from bridge.session import instance_slot
 from plant import load_profile
 from plant.sensors import GNSS, SensorSuite
-from tests.test_ground_stations import FAST, _mavsdk
+from tests.test_ground_stations import _mavsdk
 from tests.test_vehicle import _vehicle
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -174,9 +174,9 @@ def until(what, pred, timeout):
 # before the first arm (the lockstep vehicle's clock stands still): fixed, healthy and armable, all at once
 until("ready", lambda: fixed() and seen["health"] == [True, True, True, True], 20)
 out["arm"] = act.arm().name
-out["set_takeoff_altitude"] = act.set_takeoff_altitude(3.0).name
+out["set_takeoff_altitude"] = act.set_takeoff_altitude(8.0).name
 out["takeoff"] = act.takeoff().name
-until("at_height", lambda: seen["mode"] == "HOLD" and seen["rel"] is not None and seen["rel"] > 2.9, 20)
+until("at_height", lambda: seen["mode"] == "HOLD" and seen["rel"] is not None and seen["rel"] > 7.9, 30)
 out["off"] = inject(FailureType.OFF)
 until("lost", lambda: seen["gps"] == ["NO_GPS", 255] and seen["health"][:3] == [False, False, True], 10)
 out["on"] = inject(FailureType.OK)
@@ -188,15 +188,21 @@ sdk.destroy()
 """
 
 
+# 4x as FAST, but the failsafe's descent from 8 m at 0.7 m/s (11 s of flight, ~3 s of wall) outlasts the script's
+# turn from "lost" to land(): from 3 m at 1.5 m/s (~0.5 s of wall) a loaded machine saw it land and disarm first, and
+# its land() was then rightly DENIED (a disarmed vehicle is not armed in LAND)
+SLOW_DESCENT = ("--speed", "4", "--param", "MPC_LAND_SPEED=0.7")
+
+
 def test_mavsdk_sees_a_gps_off_and_on_on_a_gnss_ekf_x500(tmp_path):
     """A lockstep ``bsst vehicle --profile x500 --sensors gnss --estimator ekf`` at 4x, SYS_FAILURE_EN = 1: before
     the first arm MAVSDK sees a 3-D fix with 10 satellites, global and local position ok and armable; taken off
-    to 3 m and holding, ``Failure.inject(SENSOR_GPS, OFF, 0)``: its GPS info turns NO_GPS with 255 satellites and
+    to 8 m and holding, ``Failure.inject(SENSOR_GPS, OFF, 0)``: its GPS info turns NO_GPS with 255 satellites and
     its global and local position health false (home stays ok); OK again: a 3-D fix and both ok; it lands. The
     vehicle's events name MAVSDK's injections."""
     with instance_slot() as n:
         v = _vehicle(n, tmp_path, "missions/sine.toml", "--profile", "x500", "--sensors", "gnss", "--estimator",
-                     "ekf", "--param", "SYS_FAILURE_EN=1", *FAST)
+                     "ekf", "--param", "SYS_FAILURE_EN=1", *SLOW_DESCENT)
         try:
             got = _mavsdk(n, "gps", MAVSDK_GPS_LOSS)
         finally:
