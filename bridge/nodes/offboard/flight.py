@@ -24,16 +24,10 @@ from bridge.mavlink.endpoint import FORCE_DISARM, Spinner, wait
 from bridge.mavlink.eventseq import REQUEST_TIMEOUT_S, REQUEST_TRIES
 from bridge.mavlink.modes import MAIN_AUTO, SUB_LOITER
 from bridge.nodes.offboard.config import (
-    PHASE_S,
-    PHASE_STATES,
-    STATE_WAIT_PERIODS,
-    WAY_DOWN_MAX_S,
-    WAY_DOWN_SLACK_S,
     OffboardConfig,
 )
-from bridge.nodes.offboard.link import OffboardLink
 from bridge.nodes.offboard.radioturn import down_link
-from bridge.nodes.process import tight_timer_slack
+from bridge.nodes.offboard.realtime import RealtimeFlying
 from bridge.nodes.report import Ready, Report
 from bridge.record.columns import CONTROLLER_COLUMNS
 from bridge.record.halves import HalfWriter
@@ -45,7 +39,7 @@ OUTCOMES = ("completed", "failsafe", "diverged", "aborted", "law_failed")
 PARAM_SETTLE_S = 1.0  # s of wall time after the flight for the echoes of the last scheduled PARAM_SETs
 
 
-class Offboard(OffboardLink):
+class Offboard(RealtimeFlying):
     """One offboard controller flying one mission; :meth:`run` returns the outcome."""
 
     def __init__(self, flight: Flight, cfg: OffboardConfig, out: Path | None = None,
@@ -214,115 +208,6 @@ class Offboard(OffboardLink):
             if mono() >= self._next_house:
                 self._housekeeping()
         return "aborted"
-
-    def _fly_realtime(self) -> str:
-        tight_timer_slack()  # it sleeps to just before each tick (SPIN_BEFORE_TICK_S), then polls
-        rate = self.rate
-        period = 1.0 / rate
-        steps = self.steps
-        mono = time.monotonic
-        locked = self._phase_lock(period)
-        if isinstance(locked, str):
-            return locked
-        phase, k0 = locked
-        self.schedule = clock = FixedRate(phase + k0 * period + PHASE_S, rate)
-        last_k = k0 - 1
-        usec, recv = 0, math.nan  # the newest state's stamp and arrival
-        woke = max(mono(), clock.due(0) - period)  # when the last tick woke (s): the first tick's is judged too
-        way_down: float | None = None  # the states' one-way trip (s), once TIMESYNC tells it
-        j = 0
-        while not self.stopping:
-            self._sleep_until(clock.due(j))
-            now = mono()
-            # a stall: more than a period since the last tick woke (lateness against the schedule would count
-            # a schedule re-phased into the past on the first state, below, which is arithmetic, not a stall)
-            self.stalls.note(j / rate, now - woke - period)
-            woke = now
-            j = clock.catch_up(j, now)  # missed ticks are skipped, the schedule kept (no drift)
-            due = clock.due(j)
-            late = now - due
-            for m, _addr in self.ep.poll():
-                self._on(m)
-            self._await_state(k0 + j, due + STATE_WAIT_PERIODS * period)  # at once if it is in
-            if way_down is None:
-                way_down = self._way_down = self._way_down_s(phase)
-            outcome = self._check_vehicle()
-            if outcome:
-                return outcome
-            odo = self._odo
-            if odo is None or step_of_usec(odo.time_usec, rate) <= last_k:
-                self.stale_ticks += 1
-                if last_k < k0:
-                    j += 1
-                    continue  # no state of the mission yet
-            else:
-                self._odo = None
-                k = step_of_usec(odo.time_usec, rate)
-                if last_k < k0 and (j or k != k0):
-                    # the first state of the mission is not the first tick's (the earlier ones were lost, or
-                    # a later one came with it, as states bunched on a busy machine do): the mission starts
-                    # with it, as the trace and the vehicle's timeline do (their time 0 is the state the
-                    # first target answers), its tick where its state was due (phase + k / rate)
-                    self.schedule = clock = FixedRate(due + (k - k0 - j) * period, rate, clock.skipped)
-                    woke += (k - k0 - j) * period  # the schedule moved, not the process: no stall at the next tick
-                    k0, j = k, 0
-                if k - k0 >= steps:
-                    return self._end_of_mission((k - k0) / rate, odo)
-                usec, recv = odo.time_usec, self._odo_recv
-                self._observe(odo, (k - k0) / rate, recv)
-                last_k = k
-            # mission time of this tick on the vehicle's clock: state k0 + j was measured at
-            # j / rate, arrived the way down later, and the tick is PHASE_S after its arrival
-            t = j / rate + (way_down + PHASE_S if way_down is not None else 0.0)
-            j += 1
-            self._decide(t, last_k, usec, recv, late)
-        return "aborted"
-
-    def _phase_lock(self, period: float) -> tuple[float, int] | str:
-        """Real time: the phase of the vehicle's states (the ticks come just after they arrive): their earliest arrival
-        (recv - k / rate) over the first PHASE_STATES states (states read together count each, the newest the read's
-        sample), and the mission's first step: the next state's, or the newest's if it came after the five with the
-        fifth (kept for the first tick, which answers it at once). Or the outcome if the vehicle is lost."""
-        self._odo = None
-        self._last_state = time.monotonic()
-        phase: float | None = None
-        seen = 0  # states taken
-        while not self.stopping:
-            outcome = self._check_vehicle()
-            if outcome:
-                return outcome
-            before = self.states
-            self._serve(min(self._next_house, self._last_rx + self.cfg.vehicle_timeout_s))
-            if self._odo is None:
-                continue
-            k = step_of_usec(self._odo.time_usec, self.rate)
-            seen += self.states - before
-            if seen > PHASE_STATES and phase is not None:  # the newest came after the five: the mission's first
-                return phase, k
-            p = self._odo_recv - k * period
-            phase = p if phase is None else min(phase, p)
-            self._odo = None
-            if seen >= PHASE_STATES:
-                return phase, k + 1  # the mission starts with the next state
-        return "aborted"
-
-    def _way_down_s(self, phase: float) -> float | None:
-        """Real time: the one-way trip of the earliest-arriving states (s, >= 0), from the phase of their arrivals
-        and the vehicle's clock offset by TIMESYNC; None until a TIMESYNC answer is in. The offset is the middle of
-        its bounds (config.offset_bounds), which takes the two ways' fastest trips as equal: an asymmetric link (a
-        delay on the way down only) is credited with half of the difference, and the trip is right within half
-        the bounds' width (:attr:`way_down`), plus how late the earliest arrival was read (never early)."""
-        if self.offset_range_ns is None or self.offset_ns is None:
-            return None
-        trip = phase + self.offset_ns * 1e-9
-        if not -WAY_DOWN_SLACK_S <= trip <= WAY_DOWN_MAX_S:
-            # the stamps and TIMESYNC are not on one clock: count ages from the arrivals
-            self.event("timesync", f"the states' way down comes out at {trip * 1e3:.1f} ms: "
-                                   "not counted in their age (stamps and TIMESYNC on different clocks?)")
-            return 0.0
-        lo, hi = self.offset_range_ns
-        self.way_down = {"ms": round(max(trip, 0.0) * 1e3, 3), "within_ms": round((hi - lo) * 0.5e-6, 3)}
-        return max(trip, 0.0)
 
     def _observe(self, odo: Any, t_state: float, recv: float) -> None:
         """A new state of the vehicle, measured at mission time ``t_state`` (s), crossed the socket: into the
