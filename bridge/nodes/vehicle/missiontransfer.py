@@ -145,7 +145,7 @@ class LinkTransfer:
             if self._flown(who, mtype, "IGN CLEAR CMD"):
                 return False
             # (a type PX4 does not know: nothing to clear, ACCEPTED as PX4 answers it)
-            types = TYPES if mtype == mavlink.MAV_MISSION_TYPE_ALL else tuple(t for t in (mtype,) if t in TYPES)
+            types = TYPES if mtype == mavlink.MAV_MISSION_TYPE_ALL else (mtype,) if mtype in TYPES else ()
             held = [t for t in types if self.host.held(t).items]
             for t in held:  # clearing nothing changes nothing: answered, not said as a change
                 self.host.accept(who, Mission(), "cleared", t)
