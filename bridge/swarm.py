@@ -351,6 +351,7 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
     (:mod:`bridge.record.wallclock`). In real time a contact makes both ``collision`` too, found
     afterwards (the flights went on: :data:`~bridge.record.separation.CONTINUED`); a vehicle a ground station takes
     over flies on under it, recorded, judged on its record, said (``separation.taken_over``)."""
+    from bridge.core.clock import lockstep_pace  # lazy: start-up time
     from bridge.session import sitl as sitl_one  # lazy: start-up time
     from bridge.session.fleet import check_fleet, check_fleet_ports, fly_sessions, radio_block  # lazy: start-up
 
@@ -377,6 +378,7 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
     check_fleet_steps(fleet, flights)
     check_fleet_starts(fleet, flights, vehicles, formation)
     gcs_text = check_fleet(len(flights), realtime=realtime, instance=instance, gcs=gcs, speed=speed, key=key)
+    speed = lockstep_pace(speed, realtime=realtime, await_mission=False)
     keep = out is not None or write
     if keep:  # a refused run directory is named before a busy port (both before anything starts)
         run_dir(out, fleet.name, overwrite, create=False)

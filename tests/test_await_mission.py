@@ -134,7 +134,8 @@ def _mavsdk_flies(n: int, plan: Path, out: Path, status: int, *extra: str, sitl_
     """``bsst sitl --await-mission`` (instance ``n``, into ``out``, with ``sitl_args``) and the MAVSDK script flying
     ``plan`` through it (``extra``: the script's further arguments); the session's exit status asserted; what MAVSDK
     reported."""
-    sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--out", str(out), "--no-plots", *sitl_args)
+    sitl = Proc.bsst("sitl", "--await-mission", "--speed", "0", "--instance", str(n), "--out", str(out), "--no-plots",
+                     *sitl_args)
     try:
         r = subprocess.run([sys.executable, "-c", MAVSDK_SCRIPT, f"udpin://127.0.0.1:{GCS_PORT + n}", str(plan),
                             "240", *extra], capture_output=True, text=True, timeout=300, env=ENV)
@@ -167,6 +168,7 @@ def test_mavsdk_flies_a_plan_file_through_await_mission_as_the_file_flies(tmp_pa
     assert (t["items"], t["result"]) == (5, "accepted") and t["attempts"] == 6 + t["re_requests"], t
     assert t["started_by"]["command"] == START_ARMED and t["started_by"]["by"].endswith(" gcs"), t  # MAVSDK's ids
     assert summary["interventions"] == [] and summary["lockstep"]["held"], summary["lockstep"]  # the arm: the start's
+    assert summary["sitl"]["speed"] is None, summary["sitl"]  # --speed 0: as fast as it goes
     offline = simulate(plan, plots=False)
     flown = _trace(out / "trace.csv")
     assert len(flown) == len(offline.trace["t"])
@@ -468,8 +470,8 @@ def test_the_link_model_acts_on_the_transfer_in_lockstep_and_the_flight_is_offli
     out = tmp_path / "lossy"
     with instance_slot() as n:
         gcs = _ground_station(n)
-        sitl = Proc.bsst("sitl", "--await-mission", "--loss", "30", "--param-at", "3:COM_OF_LOSS_T=1", "--instance",
-                         str(n), "--out", str(out), "--no-plots")
+        sitl = Proc.bsst("sitl", "--await-mission", "--speed", "0", "--loss", "30", "--param-at", "3:COM_OF_LOSS_T=1",
+                         "--instance", str(n), "--out", str(out), "--no-plots")
         try:
             target = _vehicle_of(gcs)
             _upload(gcs, target, items)
@@ -498,8 +500,10 @@ def test_mavproxy_loads_and_starts_a_waypoint_file(tmp_path):
     """MAVProxy, unmodified, through stdin: ``wp load`` of a QGC WPL 110 file into ``bsst sitl --await-mission``
     (lockstep), then ``long MISSION_START``: ACCEPTED, flown to the end, landed and disarmed, every item reached;
     the run's mission.plan holds what MAVProxy sent: the file's lines, its line 0 (the home) as item 0, a
-    waypoint on the ground at the home (MAVProxy sends it so to PX4 too)."""
-    (tmp_path / "small.txt").write_text(SMALL_PLAN)
+    waypoint on the ground at the home (MAVProxy sends it so to PX4 too). With no ``--speed`` a ground station's
+    mission flies in lockstep at 1x real time, as PX4's and ArduPilot's SITL run (summary.json's ``sitl.speed``
+    and ``timing.real_time_factor``; it flew some 20 times faster before): HOP_PLAN, 7.6 s."""
+    (tmp_path / "small.txt").write_text(HOP_PLAN)
     out = tmp_path / "mp"
     with instance_slot() as n:
         sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--out", str(out), "--no-plots")
@@ -517,13 +521,15 @@ def test_mavproxy_loads_and_starts_a_waypoint_file(tmp_path):
             sitl.stop()
     summary = json.loads((out / "summary.json").read_text())
     assert summary["outcome"] == "completed" and summary["end"]["disarmed"]
+    assert summary["sitl"]["speed"] == 1.0 and summary["clock"] == "lockstep", summary["sitl"]
+    assert summary["timing"]["sim_s"] > 5.0 and summary["timing"]["real_time_factor"] <= 1.01, summary["timing"]
     assert summary["mission_transfer"]["items"] == 4  # MAVProxy sends the file's line 0 (the home) as item 0
     reached = [m.seq for m in _tlog(out / "vehicle.tlog", n + 1, ["MISSION_ITEM_REACHED"])]
     assert list(dict.fromkeys(reached)) == [0, 1, 2, 3]
     kept = read_plan_text((out / "mission.plan").read_text(), "kept")
     home = (16, 47.397742, 8.545594, 488.0)  # a waypoint at the home, on the ground (GLOBAL: m AMSL)
     assert [(i.command, round(i.lat, 7), round(i.lon, 7), i.alt) for i in kept.items] == \
-        [home] + [(i.command, i.lat, i.lon, i.alt) for i in read_plan_text(SMALL_PLAN, "small").items]
+        [home] + [(i.command, i.lat, i.lon, i.alt) for i in read_plan_text(HOP_PLAN, "small").items]
 
 
 def _retype(mp: MavProxy, cmd: str, done: Callable[[str], bool], each_s: float, tries: int) -> str:
@@ -565,8 +571,8 @@ def test_mavproxy_through_a_lossy_slow_link(tmp_path):
                           "--listen-direction", "down", "--loss", "20", "--delay", "100",
                           "--stats", str(tmp_path / "relay.json"))
         ready = parse_line(relay.wait_line(lambda s: isinstance(parse_line(s), Ready)))
-        sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--gcs", ready.listen, "--out", str(out),
-                         "--no-plots")
+        sitl = Proc.bsst("sitl", "--await-mission", "--speed", "0", "--instance", str(n), "--gcs", ready.listen,
+                         "--out", str(out), "--no-plots")
         mp = MavProxy(f"udpin:127.0.0.1:{GCS_PORT + n}", tmp_path)
         try:
             mp.wait_online()

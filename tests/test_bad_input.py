@@ -421,6 +421,7 @@ def test_a_real_time_flight_is_not_sped_up(files, capsys):
                              "--gcs", "none"], "--speed")
     assert "--realtime" in line and not files.out.exists()
     _refused(capsys, ["sitl", files.mission, "--realtime", "--speed", "0.5", "--out", files.out], "--speed")
+    _refused(capsys, ["sitl", files.mission, "--realtime", "--speed", "0", "--out", files.out], "--speed")  # 0: unpaced
 
 
 @pytest.mark.skipif(os.geteuid() == 0, reason="root reads a file of mode 000 (the socket-path cases cover it)")

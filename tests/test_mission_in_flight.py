@@ -105,7 +105,8 @@ def _fly_await_mission(out: Path, script: Callable[[_Gcs], None]) -> list[str]:
     """``bsst sitl --await-mission`` into ``out``, a ground station's ``script`` run against it; the flight must
     then complete. Its events.log lines."""
     with instance_slot() as n:
-        sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--out", str(out), "--no-plots")
+        sitl = Proc.bsst("sitl", "--await-mission", "--speed", "0", "--instance", str(n), "--out", str(out),
+                         "--no-plots")
         gcs = None
         try:
             gcs = _Gcs(n)

@@ -20,10 +20,11 @@ from typing import Any
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
+from bridge.core.clock import lockstep_pace
 from bridge.mavlink.endpoint import GCS_PORT
 from bridge.nodes.report import Ready
 from bridge.session import instance_slot
-from bridge.session.announce import vehicle_up_line
+from bridge.session.announce import pace_words, vehicle_up_line
 from tests.sitlkit import ROOT, Proc, run_bsst
 from tests.waiting import wait_for
 
@@ -53,7 +54,8 @@ def test_await_mission_says_at_once_where_a_ground_station_connects_and_that_it_
             line = sitl.wait_line(lambda s: s.startswith(UP), timeout=60)
             assert line == said_up(n, n + 1) + ("; waiting, with no time limit (Ctrl-C stops), for a ground station to "
                                                 "upload a mission and start it: MISSION_START, or AUTO.MISSION and "
-                                                "arm"), line
+                                                "arm; it flies in lockstep at 1x real time (--speed X: X times; 0: as "
+                                                "fast as it goes)"), line
             gcs.bind(("127.0.0.1", GCS_PORT + n))  # what the line says to do
             gcs.settimeout(0.5)
             mav, beats = mavlink.MAVLink(None), []
@@ -70,7 +72,8 @@ def test_await_mission_says_at_once_where_a_ground_station_connects_and_that_it_
         finally:
             sitl.stop()
             gcs.close()
-    assert json.loads((out / "summary.json").read_text())["outcome"] == "aborted"
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["outcome"] == "aborted" and summary["sitl"]["speed"] == 1.0, summary["sitl"]  # as said
     assert sum(ln.startswith(UP) for ln in sitl.lines) == 1, sitl.lines
 
 
@@ -108,3 +111,20 @@ def test_a_fleet_says_it_for_each_vehicle(tmp_path: Path) -> None:
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
     assert r.stderr.splitlines() == [said_up(n, n + 1)], r.stderr
     assert vehicle_up_line(Ready("vehicle", sysid=3), await_mission=True) == f"{UP}3: no ground-station link"
+
+
+def test_the_pace_a_started_mission_flies_at_is_said_and_chosen_once() -> None:
+    """``lockstep_pace``: 0 is as fast as it goes (None), a ground station's mission with no ``--speed`` flies at 1x
+    real time (as PX4's and ArduPilot's SITL), a mission file as fast as it goes, a given pace as given, real time
+    as given; ``pace_words`` says each with the flag that changes it."""
+    assert [lockstep_pace(s, realtime=False, await_mission=a) for s, a in
+            [(None, True), (None, False), (0.0, True), (0.0, False), (4.0, True), (0.5, False)]] == \
+        [1.0, None, None, None, 4.0, 0.5]
+    assert [lockstep_pace(s, realtime=True, await_mission=True) for s in (None, 1.0, 0.0)] == [None, 1.0, None]
+    assert pace_words(False, 1.0) == "in lockstep at 1x real time (--speed X: X times; 0: as fast as it goes)"
+    assert pace_words(False, 2.5).startswith("in lockstep at 2.5x real time")
+    assert pace_words(False, None) == "as fast as it goes (--speed 0; --speed X: at most X times real time)"
+    assert pace_words(True, None) == pace_words(True, 1.0) == "on the wall clock (--realtime)"
+    line = vehicle_up_line(Ready("vehicle", sysid=2, gcs="127.0.0.1:14551"), True, False, None)
+    assert line.endswith("AUTO.MISSION and arm; it flies as fast as it goes (--speed 0; --speed X: at most X times "
+                         "real time)"), line

@@ -396,6 +396,7 @@ def cmd_sitl(args: argparse.Namespace) -> int:
 # -- the two sides alone (bsst vehicle, bsst controller) ---------------------------------------------
 def cmd_vehicle(args: argparse.Namespace) -> int:
     """``bsst vehicle``: the simulated vehicle alone."""
+    from bridge.core.clock import lockstep_pace  # lazy: start-up time
     from bridge.core.flight import at_rest, prepare  # lazy: start-up time
     from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, GCS_PORT, LINK_PORT, parse_address  # lazy
     from bridge.mavlink.telemetry import Home  # lazy: start-up time
@@ -423,7 +424,8 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
             raise ConfigError(f"--controller-from {args.controller_from!r}: give the controller's HOST:PORT")
         pin = (a.host, a.port)
     cfg = VehicleConfig(listen, gcs, sysid=args.sysid or own or n + 1, controller_sysid=sysid, controller_compid=compid,
-                        clock="realtime" if args.realtime else "lockstep", speed=args.speed,
+                        clock="realtime" if args.realtime else "lockstep",
+                        speed=lockstep_pace(args.speed, realtime=args.realtime, await_mission=args.await_mission),
                         home=Home(*args.home) if args.home else Home(), key=_key(args), controller_from=pin,
                         await_mission=args.await_mission,
                         gate=GateConfig.load(args.gate) if args.gate else None,

@@ -16,6 +16,8 @@ Out: the wall time (s) each step or tick is due, the paced clock's time (s), the
 - :class:`Stalls` — the stretches a real-time process woke more than :data:`STALL_S` late: the
   machine, not the link model, held the loop (a virtual machine whose host takes its cores back
   stops every process in it, whatever its priority, for up to 100 ms).
+- :func:`lockstep_pace` — the pace a lockstep vehicle keeps for the options given (``--speed``, a ground
+  station's mission).
 - :class:`FixedRate` — the controller's: tick j is due at t0 + j / rate_hz, drift-free; a
   tick woken more than a period late skips the ticks it missed, keeping the schedule (a
   fixed-rate law keeps its phase to the vehicle's states).
@@ -33,6 +35,20 @@ REBASE_S = 0.25  # a pace this far behind the wall clock is re-based, not caught
 # a wake-up this late is the machine's stall: Linux's own wake-up jitter stays under 9 ms with both cores busy
 STALL_S = 0.010
 STALLS_KEPT = 1000  # stalls listed one by one (an hour at one a second, 20 kB); the rest only counted
+
+
+AWAIT_MISSION_SPEED = 1.0  # x real time: a ground station's mission, unless --speed says otherwise
+
+
+def lockstep_pace(speed: float | None, *, realtime: bool, await_mission: bool) -> float | None:
+    """The pace a lockstep vehicle keeps, x real time; None: as fast as the two sides go. ``speed`` as given (None:
+    not given; 0: as fast as they go). Not given, a ground station's mission (``await_mission``) flies at
+    :data:`AWAIT_MISSION_SPEED`, as PX4's and ArduPilot's SITL run at real time: its pilot watches it there (it flew
+    as fast as it went until the third wave's thirty-third session: a 20 s mission was over in a second); a mission
+    file flies as fast as it goes. Real time: ``speed`` unchanged (the wall clock is its pace)."""
+    if speed == 0.0:
+        return None
+    return AWAIT_MISSION_SPEED if speed is None and await_mission and not realtime else speed
 
 
 @dataclass

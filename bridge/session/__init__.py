@@ -59,6 +59,7 @@ from pathlib import Path
 from typing import Any
 
 from bridge.autopilot.estimator import compile_estimator
+from bridge.core.clock import lockstep_pace
 from bridge.core.flight import Flight, Progress, prepare
 from bridge.core.overrides import Overrides
 from bridge.core.scalar import kernel_cache_on
@@ -72,7 +73,6 @@ from missions import Mission, Setpoint, Step, load_mission
 from params import ConfigError, reads_inputs
 
 __all__ = ["ChildError", "Session", "check_options", "instance_slot", "sitl"]
-
 
 
 AWAIT_DURATION_S = 600.0  # s: --await-mission's settings' duration (the ground station's mission has its own)
@@ -90,8 +90,8 @@ def check_options(*, realtime: bool, instance: int | None, gcs: str | None, spee
     ground-station address its vehicles send to: ``gcs``, else 127.0.0.1:14550 + instance (None: no GCS link)."""
     if instance is not None and not (isinstance(instance, int) and 0 <= instance <= 9):
         raise ConfigError(f"--instance must be in [0, 9], got {instance!r}")
-    if speed is not None and not (math.isfinite(speed) and speed > 0):
-        raise ConfigError(f"--speed must be a positive number, got {speed!r}")
+    if speed is not None and not (math.isfinite(speed) and speed >= 0):
+        raise ConfigError(f"--speed must be a number >= 0 (0: as fast as it goes), got {speed!r}")
     if realtime and speed is not None and speed != 1.0:  # the controller's schedule is the wall clock's
         raise ConfigError(f"--speed {speed:g} with --realtime: a real-time flight runs at the wall clock's pace "
                           "(the controller keeps its rate on it, the plant would outrun it); --speed paces lockstep")
@@ -142,7 +142,8 @@ def sitl(
     otherwise the session works in a temporary directory and returns only the arrays.
     ``instance`` N (0-9) picks ports 14560 + N / 14550 + N and sysid N + 1; ``None`` picks
     a free port and no GCS link. ``gcs`` (``HOST:PORT`` or ``"none"``) overrides the GCS
-    address. ``speed`` caps lockstep at that many times real time. ``live`` prints on stderr, once the
+    address. ``speed`` caps lockstep at that many times real time (0: as fast as it goes; not given, as fast as it
+    goes, and 1 with ``await_mission``: :func:`lockstep_pace`). ``live`` prints on stderr, once the
     vehicle is up, where a ground station connects (:mod:`bridge.session.announce`), and a progress line (when
     stderr is a terminal). ``overrides`` (an
     :class:`~bridge.core.overrides.Overrides`), or its fields as keywords, are laid over the mission as for
@@ -172,6 +173,7 @@ def sitl(
     flight = prepare(m, over)
     check_trace_steps(flight.mission)  # the session keeps every trace row for its summary: a cap, said up front
     gcs_text = check_options(realtime=realtime, instance=instance, gcs=gcs, speed=speed)
+    speed = lockstep_pace(speed, realtime=realtime, await_mission=await_mission)
     n = instance or 0
     if gcs_text is None and await_mission:
         raise ConfigError("--await-mission: the vehicle needs a GCS link for the ground station's mission "

@@ -1,7 +1,8 @@
 """What ``bsst sitl`` tells a person on stderr once a vehicle is up: where a ground station connects.
 
 In:  the vehicle's :class:`~bridge.nodes.report.Ready` (``gcs``: the HOST:PORT its ground-station link sends to,
-     or None; ``sysid``), and whether it waits for a ground station's mission (``--await-mission``)
+     or None; ``sysid``), whether it waits for a ground station's mission (``--await-mission``), and the pace it
+     will fly that at (real time, or lockstep at X times real time, or as fast as it goes)
 Out: :func:`vehicle_up_line`: one line of text (no newline), what :class:`~bridge.session.session.Session`
      writes on stderr with ``announce``
 
@@ -29,10 +30,21 @@ def _listen_hints(hostport: str) -> str:
             f"MAVSDK udpin://0.0.0.0:{port}")
 
 
-def vehicle_up_line(ready: Ready, await_mission: bool) -> str:
+def pace_words(realtime: bool, speed: float | None) -> str:
+    """How a started mission flies: on the wall clock, or lockstep at ``speed`` (x real time; None: as fast as it
+    goes), with the flag that changes it."""
+    if realtime:
+        return "on the wall clock (--realtime)"
+    if speed is None:
+        return "as fast as it goes (--speed 0; --speed X: at most X times real time)"
+    return f"in lockstep at {speed:g}x real time (--speed X: X times; 0: as fast as it goes)"
+
+
+def vehicle_up_line(ready: Ready, await_mission: bool, realtime: bool = False, speed: float | None = None) -> str:
     """The line (no newline) saying that the vehicle ``ready`` describes is up, where a ground station connects
     (the address its ground-station link sends to, its system id) and, with ``await_mission``, that the session
-    waits, with no time limit, for a ground station's mission."""
+    waits, with no time limit, for a ground station's mission, and the pace it will fly it at
+    (:func:`pace_words`)."""
     who = f"vehicle up, sysid {ready.sysid}"
     if ready.gcs is None:
         return f"{PREFIX}{who}: no ground-station link"
@@ -40,5 +52,5 @@ def vehicle_up_line(ready: Ready, await_mission: bool) -> str:
             f"its telemetry ({_listen_hints(ready.gcs)})")
     if await_mission:
         line += ("; waiting, with no time limit (Ctrl-C stops), for a ground station to upload a mission and "
-                 "start it: MISSION_START, or AUTO.MISSION and arm")
+                 f"start it: MISSION_START, or AUTO.MISSION and arm; it flies {pace_words(realtime, speed)}")
     return line

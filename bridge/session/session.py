@@ -183,6 +183,8 @@ class Session:
                 "--controller-from", f"127.0.0.1:{back}", "--out", str(self.path), "--overwrite"]
         if self.speed is not None:
             argv += ["--speed", repr(self.speed)]
+        elif not self.realtime:  # as fast as it goes, said: the vehicle's own default paces a ground station's mission
+            argv += ["--speed", "0"]
         if self.await_mission:
             argv.append("--await-mission")
         if self.gate is not None:  # a fleet: its processes outnumber the cores, so none polls before it sleeps
@@ -216,7 +218,7 @@ class Session:
             ready = self._wait_ready(self.vehicle)
             self._note("started", f"vehicle pid {self.vehicle.pid}: {ready.describe()}", "session")
             if self.announce:
-                sys.stderr.write(vehicle_up_line(ready, self.await_mission) + "\n")
+                sys.stderr.write(vehicle_up_line(ready, self.await_mission, self.realtime, self.speed) + "\n")
                 sys.stderr.flush()
             if self.relay is not None:
                 line = self._wait_ready(self.relay).describe()
