@@ -72,7 +72,10 @@ LIMIT_RANGES = {"MPC_XY_CRUISE": (0.1, MAX_SPEED_M_S), "MPC_ACC_HOR": (0.1, 20.0
 class Stop:
     """A point of the route before times are given: position (m), yaw (rad, NaN: along the path),
     whether the vehicle stops, how long it holds (s), the speeds of the leg that ends here (m/s) and
-    the plan item it comes from (its label; '' for the start)."""
+    the plan items it comes from (their labels, in order; none for the start). Two items at one point share
+    it: a waypoint and the "land here" after it both name the waypoint's point (the land named it alone until
+    the third wave's thirty-third session, so the waypoint had no point and a ground station heard it reached at
+    takeoff)."""
 
     x: float
     y: float
@@ -83,7 +86,7 @@ class Stop:
     xy: float
     up: float
     dn: float
-    item: str
+    items: tuple[str, ...]
 
 
 @dataclass(frozen=True)
@@ -144,16 +147,17 @@ def stops_of(plan: PlanFile, limits: Limits, envelope_m: float) -> tuple[list[St
     """The plan's points in order (the start first), and whether it lands."""
     home = Home(*plan.home)
     xy, up, dn = limits.MPC_XY_CRUISE, limits.MPC_Z_V_AUTO_UP, limits.MPC_Z_V_AUTO_DN
-    pts = [Stop(0.0, 0.0, 0.0, 0.0, True, 0.0, xy, up, dn, "")]
+    pts = [Stop(0.0, 0.0, 0.0, 0.0, True, 0.0, xy, up, dn, ())]
     landed_by: Item | None = None
 
     def add(x: float, y: float, z: float, psi: float, stop: bool, hold: float, label: str) -> None:
         last = pts[-1]
         if math.dist((x, y, z), (last.x, last.y, last.z)) < SAME_POINT_M:  # the same point: one stop
             pts[-1] = replace(last, psi=last.psi if math.isnan(psi) else psi, stop=last.stop or stop,
-                              hold_s=last.hold_s + hold, item=label)
+                              hold_s=last.hold_s + hold,
+                              items=last.items if label in last.items else (*last.items, label))
         else:
-            pts.append(Stop(x, y, z, psi, stop, hold, xy, up, dn, label))
+            pts.append(Stop(x, y, z, psi, stop, hold, xy, up, dn, (label,)))
 
     for item in plan.items:
         if landed_by is not None:
@@ -270,7 +274,7 @@ def with_guides(pts: list[Stop], psi: list[float], lim: Limits) -> tuple[list[St
             for d in (g, length - g):
                 s = d / length
                 out.append(replace(b, x=a.x + s * (b.x - a.x), y=a.y + s * (b.y - a.y), z=a.z + s * (b.z - a.z),
-                                   psi=math.nan, stop=False, hold_s=0.0, item=""))
+                                   psi=math.nan, stop=False, hold_s=0.0, items=()))
                 yaw.append(_near(h, yaw[-1]) if math.isnan(b.psi) else _near(b.psi, yaw[-1]))
         out.append(b)
         yaw.append(_near(psi[i], yaw[-1]))
@@ -335,7 +339,7 @@ def route_of(plan: PlanFile, limits: Limits, envelope_m: float) -> Route:
                 legs[j] = math.ceil(legs[j] * factor * 1000.0) / 1000.0  # whole ms, up: never over the limits
             first = i + 1
     knots, at = _knots(pts, psi, legs)
-    waypoints = tuple((p.item, at[i], p.stop) for i, p in enumerate(pts) if p.item)
+    waypoints = tuple((label, at[i], p.stop) for i, p in enumerate(pts) for label in p.items)
     return Route(knots, waypoints, lands)
 
 

@@ -870,6 +870,28 @@ def test_the_watch_reaches_the_box_items_in_order_along_its_flight():
     assert tr["z"][[round(t * 250) for _, t in got][-1]] <= 0.1  # the landing: within 0.1 m of the ground
 
 
+def test_a_waypoint_before_a_land_here_is_reached_at_its_point_not_at_the_takeoff():
+    """A takeoff here to 2 m, a waypoint 5 m north, a land here (latitude and longitude 0): the land's first
+    point is the waypoint's, and the two share it. The waypoint's goal is its point (it had none, the land having
+    taken the point's name: a ground station heard it reached with the takeoff, 5 m short of it), the land's
+    the ground below it; the watch reaches each there, in order."""
+    lat, lon = 473977420, 85455940  # the default home (degE7)
+    north = lat + 450  # 450e-7 deg of latitude: 5.0 m
+    rel = M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+    items = (MissionItem(0, rel, M.MAV_CMD_NAV_TAKEOFF, 0.0, 0.0, 0.0, math.nan, 0, 0, 2.0, 1),
+             MissionItem(1, rel, M.MAV_CMD_NAV_WAYPOINT, 0.0, 0.0, 0.0, math.nan, north, lon, 2.0, 1),
+             MissionItem(2, rel, M.MAV_CMD_NAV_LAND, 0.0, 0.0, 0.0, math.nan, 0, 0, 0.0, 1))
+    goals = goals_of(items, (lat * 1e-7, lon * 1e-7, 488.0))
+    assert [g.seq for g in goals] == [0, 1, 2] and all(g.point is not None for g in goals), goals
+    (x0, y0, z0), (x1, y1, z1), (x2, y2, z2) = (g.point for g in goals)  # type: ignore[misc]
+    assert (x0, y0, z0) == (0.0, 0.0, 2.0) and abs(x1 - 5.0) < 0.01 and abs(y1) < 1e-6 and z1 == 2.0, goals
+    assert (x2, y2, z2) == (x1, y1, 0.0), goals
+    watch = ItemWatch(goals)
+    assert watch.step(1.0, (0.0, 0.0, 0.0, 0.0, 2.0)) == [0]  # up at the start: the takeoff only
+    assert watch.step(2.0, (2.5, 0.0, 0.0, 0.0, 2.0)) == [] and watch.step(3.0, (5.0, 0.0, 0.0, 0.0, 2.0)) == [1]
+    assert watch.step(4.0, (5.0, 0.0, 0.0, 0.0, 1.0)) == [] and watch.step(5.0, (5.0, 0.0, 0.0, 0.0, 0.0)) == [2]
+
+
 def test_plan_text_reads_back_and_the_transfer_block_is_typed():
     plan = read_plan_text(BOX_PLAN.read_text(), "box")
     again = read_plan_text(plan_text(plan), "again")

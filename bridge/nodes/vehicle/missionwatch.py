@@ -42,7 +42,7 @@ def goals_of(items: tuple[MissionItem, ...], home: tuple[float, float, float]) -
     """Each item's goal, from the route flown (ConfigError when the mission cannot be flown)."""
     plan = plan_of(items, home, "the vehicle's mission")
     stops, _ = stops_of(plan, Limits(), ENVELOPE_RADIUS_M)
-    last = {s.item: s for s in stops if s.item}
+    last = {label: s for s in stops for label in s.items}  # each item's last point
     goals = []
     for it in items:
         s = last.get(f"item {it.seq}")
