@@ -44,12 +44,14 @@ from params import ConfigError
 def add_sweep_commands(sub: Any) -> None:
     """``bsst sweep`` (latency/dropout campaigns) and ``bsst report`` (rebuild a sweep's report)."""
     p = sub.add_parser("sweep", help="fly a grid of link impairments, laws and rates; report stability maps")
-    p.add_argument("mission", help="mission TOML, or a sweep TOML (with mission = ... and [grid])")
+    p.add_argument("mission", help="mission (a TOML file, or a ground station's .plan or .waypoints), or a sweep "
+                                   "TOML (with mission = ... and [grid])")
     for flag, axis, unit in (("--delay", "delay_ms", "MS"), ("--jitter", "jitter_ms", "MS"),
                              ("--loss", "loss_pct", "PCT"), ("--burst", "burst_len", "LEN"),
                              ("--rate", "rate_hz", "HZ")):
         p.add_argument(flag, dest=axis, type=axis_values(flag, axis), metavar=f"{unit},...",
-                       help=f"values of {axis} (link values apply to both directions)")
+                       help="control rates (Hz) to fly" if axis == "rate_hz" else
+                       f"values of the link's {axis} (each applies to both directions)")
     p.add_argument("--controller", type=law_list("--controller"), metavar="LAW,...",
                    help="control laws to compare (bsst, smc, pid, or your own file.py:ClassName)")
     # the schemes are missions.DISCRETIZATIONS, written out so that building the parser loads no mission code
@@ -207,7 +209,7 @@ def add_margin_command(sub: Any) -> None:
     """``bsst margin``: the boundary of one link impairment by bisection (bridge.sweep.margin)."""
     p = sub.add_parser("margin", help="find how much delay, loss, jitter, burst, sensor noise or wind a law "
                                       "takes (bisection)")
-    p.add_argument("mission", help="mission TOML file")
+    p.add_argument("mission", help="mission: a TOML file or a ground station's .plan or .waypoints")
     p.add_argument("--over", required=True,
                    choices=("delay_ms", "loss_pct", "jitter_ms", "burst_len", "noise", "wind_mps"),
                    help="the impairment searched (link values: both directions, as a sweep's axes; noise: the scale "

@@ -173,8 +173,8 @@ def blackout_window(name: str) -> Callable[[str], tuple[float, float]]:
         except ValueError:
             start = dur = float("nan")
         if not sep or not (s_lo <= start <= s_hi and d_lo < dur <= d_hi):
-            raise argparse.ArgumentTypeError(f"{name} must be START:DURATION in seconds (start >= 0, "
-                                             f"duration > 0), got {text!r}")
+            raise argparse.ArgumentTypeError(f"{name} must be START:DURATION in seconds (start in [{s_lo:g}, "
+                                             f"{s_hi:g}], duration in ({d_lo:g}, {d_hi:g}]), got {text!r}")
         return start, dur
 
     return conv
@@ -446,10 +446,10 @@ def link_table_from_args(args: argparse.Namespace) -> dict[str, Any]:
                 side[key] = v
         if side:
             out[d] = side
-        if "burst_len" in side and "loss_pct" in side:
+        if "burst_len" in side:  # (without --loss: what needs no loss; the file's loss is checked with the file)
             from bridge.link.model import burst_problem  # lazy: start-up time
 
-            why = burst_problem(side["loss_pct"], side["burst_len"])
+            why = burst_problem(side.get("loss_pct", 0.0), side["burst_len"])
             if why:
                 raise UsageError(f"bsst: --burst / --{d}-burst: {why}")
         if side.get("trace"):

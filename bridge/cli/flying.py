@@ -67,7 +67,7 @@ def add_fleet_options(p: argparse.ArgumentParser) -> None:
                         "(default line:2)")
     g.add_argument("--shared-link", dest="link_shared", nargs="?", const=True, type=yes_no("--shared-link"),
                    metavar="true|false", help="every vehicle behind one radio: one bandwidth budget and queue each "
-                   "way ([link] shared; bsst sim, and bsst sitl in real time; bare: true)")
+                   "way ([link] shared; bsst sim, and bsst sitl on either clock; bare: true)")
 
 
 def fleet_size(text: str) -> int:

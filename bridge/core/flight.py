@@ -154,6 +154,13 @@ class Flight:
                 for (s, dur), ds in sorted(windows.items())]
 
 
+def table_settings(table: Mapping[str, Any], prefix: str = "link") -> str:
+    """An override table as ``PREFIX.KEY = VALUE`` settings, nested tables flattened (``link.up.burst_len =
+    0.5``), for a message."""
+    return ", ".join(table_settings(v, f"{prefix}.{k}") if isinstance(v, Mapping) else f"{prefix}.{k} = {v!r}"[:120]
+                     for k, v in table.items())
+
+
 def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, **keywords: Any) -> Flight:
     """Validate a mission (object or file) with its :class:`Overrides` into a :class:`Flight`.
 
@@ -190,7 +197,14 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
     vehicle_params = params_from_table(m.params, src, VehicleParams(failsafe_from_table(m.failsafe, src)))
     failsafe = vehicle_params.failsafe
     changes = check_param_changes(over.param_at, m.duration_s)
-    link_settings = link_from_table(m.link, src, seed=m.seed, duration_s=m.duration_s)
+    try:
+        link_settings = link_from_table(m.link, src, seed=m.seed, duration_s=m.duration_s)
+    except ConfigError as exc:
+        if not over.link:
+            raise
+        # the file's [link] with the overrides over it: say them, or a user who gave --stop-after 40 reads that the
+        # file has a stop_ms it does not have
+        raise ConfigError(f"{exc} (the file's [link] with these laid over it: {table_settings(over.link)})") from None
     given_set = (over.sensors or {}).get("set")
     if given_set is not None and given_set not in [n for n, _ in prof.sensors]:  # an override: named as the flag
         raise ConfigError(f"{src}: --sensors {given_set!r} (sensors.set): profile {prof.name!r} has no such sensor "

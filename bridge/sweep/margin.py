@@ -266,8 +266,9 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
         bands = {s.controller: s.band(over, below, resolution, lo_range) for s in searches}
         if any(bands.values()) and not interrupted:
             if progress is not None:
-                n = sum(map(len, bands.values())) * len(seed_list)
-                progress(f"checking {n} values below the margin{'s' if len(searches) > 1 else ''}")
+                n = sum(map(len, bands.values()))
+                each = f" ({n * len(seed_list)} cells: {len(seed_list)} seeds each)" if len(seed_list) > 1 else ""
+                progress(f"checking {n} values below the margin{'s' if len(searches) > 1 else ''}{each}")
             rows, interrupted = probes.fly(bands, deferred)
             cells_flown += len(rows)
             for s in searches:

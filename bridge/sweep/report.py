@@ -143,7 +143,8 @@ def load_sweep_dir(path: str | Path) -> tuple[list[dict[str, Any]], dict[str, An
     if why:
         raise ConfigError(f"{p}: cannot read ({why})")
     if not p.is_dir():
-        raise ConfigError(f"{p}: not a directory")
+        raise ConfigError(f"{p}: {'not a directory' if p.exists() else 'no such directory'} (give a sweep's "
+                          "directory: bsst sweep ... --out DIR)")
     meta_path = p / SWEEP_JSON
     if not meta_path.exists() and not (p / CELLS_CSV).exists():
         from bridge.sweep.margin import MARGIN_JSON  # lazy: only where a directory is not a sweep's
