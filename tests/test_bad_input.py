@@ -137,6 +137,7 @@ BASE = {
 # bad values by the converter a flag's argparse type comes from
 CONVERTER_BAD = {
     "number_in": ["x", "-1e300", "nan", "inf"],
+    "pace_speed": ["x", "-1", "nan", "0.001"],  # 0.001: between 0 (as fast as it goes) and the slowest pace
     "link_number": ["x", "-1e300", "nan", "1e300"],
     "int_in": ["x", "-99999999999", "99999999999", "1.5"],
     "value_list": ["x", "-1e300", "1,1", ""],

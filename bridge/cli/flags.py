@@ -122,6 +122,24 @@ def number_in(name: str, lo: float, hi: float, *, lo_open: bool = False,
     return conv
 
 
+def pace_speed(flag: str) -> Callable[[str], float]:
+    """An argparse type for a lockstep pace, x real time: 0 (as fast as it goes) or within
+    :data:`bridge.core.clock.SPEED_RANGE` (:func:`~bridge.core.clock.speed_problem`)."""
+    def conv(text: str) -> float:
+        from bridge.core.clock import speed_problem  # lazy: building the parser loads no clock code
+
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{flag} must be a number, got {text!r}") from None
+        why = speed_problem(v)
+        if why:
+            raise argparse.ArgumentTypeError(f"{flag} {why}")
+        return v
+
+    return conv
+
+
 def value_list(name: str, lo: float, hi: float) -> Callable[[str], tuple[float, ...]]:
     """``--delay 0,5,10``: comma-separated numbers in [lo, hi], no repeats."""
     def conv(text: str) -> tuple[float, ...]:

@@ -23,7 +23,7 @@ from bridge.cli.flags import (
     mission_number,
     name_list,
     noise_scale,
-    number_in,
+    pace_speed,
     param_assignment,
     path_given,
     sensor_set_name,
@@ -234,7 +234,7 @@ def add_port_options(p: argparse.ArgumentParser, vehicle: bool) -> None:
         clock.add_argument("--lockstep", dest="realtime", action="store_false", help="lockstep clock (default)")
     clock.add_argument("--realtime", action="store_true", help="run on the wall clock (default lockstep)")
     p.set_defaults(realtime=False)
-    p.add_argument("--speed", type=number_in("--speed", 0.0, 1000.0), metavar="X",
+    p.add_argument("--speed", type=pace_speed("--speed"), metavar="X",
                    help="lockstep: at most X times real time, 0 as fast as it goes (default: as fast as it goes; 1 "
                         "with --await-mission, as PX4's and ArduPilot's SITL); also the pace after the controller "
                         "is lost (X, else 1)")

@@ -38,6 +38,18 @@ STALLS_KEPT = 1000  # stalls listed one by one (an hour at one a second, 20 kB);
 
 
 AWAIT_MISSION_SPEED = 1.0  # x real time: a ground station's mission, unless --speed says otherwise
+# x real time, a paced lockstep's (0: as fast as it goes). Slower than 0.1x a control period of the slowest rate
+# (50 Hz) lasts more than 0.2 s of wall time; at 0.001x the controller, 2 s without a new state, gave up
+SPEED_RANGE = (0.1, 1000.0)
+
+
+def speed_problem(speed: float) -> str | None:
+    """Why ``speed`` (x real time) cannot pace a lockstep flight, or None: 0 (as fast as it goes) or within
+    :data:`SPEED_RANGE`."""
+    lo, hi = SPEED_RANGE
+    if speed == 0.0 or lo <= speed <= hi:  # (NaN fails both)
+        return None
+    return f"must be 0 (as fast as it goes) or in [{lo:g}, {hi:g}] times real time, got {speed:g}"
 
 
 def lockstep_pace(speed: float | None, *, realtime: bool, await_mission: bool) -> float | None:

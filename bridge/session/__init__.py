@@ -59,7 +59,7 @@ from pathlib import Path
 from typing import Any
 
 from bridge.autopilot.estimator import compile_estimator
-from bridge.core.clock import lockstep_pace
+from bridge.core.clock import lockstep_pace, speed_problem
 from bridge.core.flight import Flight, Progress, prepare
 from bridge.core.overrides import Overrides
 from bridge.core.scalar import kernel_cache_on
@@ -90,8 +90,10 @@ def check_options(*, realtime: bool, instance: int | None, gcs: str | None, spee
     ground-station address its vehicles send to: ``gcs``, else 127.0.0.1:14550 + instance (None: no GCS link)."""
     if instance is not None and not (isinstance(instance, int) and 0 <= instance <= 9):
         raise ConfigError(f"--instance must be in [0, 9], got {instance!r}")
-    if speed is not None and not (math.isfinite(speed) and speed >= 0):
-        raise ConfigError(f"--speed must be a number >= 0 (0: as fast as it goes), got {speed!r}")
+    why = speed_problem(speed) if isinstance(speed, (int, float)) and not isinstance(speed, bool) else (
+        None if speed is None else f"expected a number, got {speed!r}"[:200])
+    if why:
+        raise ConfigError(f"--speed {why}")
     if realtime and speed is not None and speed != 1.0:  # the controller's schedule is the wall clock's
         raise ConfigError(f"--speed {speed:g} with --realtime: a real-time flight runs at the wall clock's pace "
                           "(the controller keeps its rate on it, the plant would outrun it); --speed paces lockstep")
