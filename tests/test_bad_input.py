@@ -427,13 +427,17 @@ def test_a_real_time_flight_is_not_sped_up(files, capsys):
 
 def test_a_flags_value_is_named_as_given_not_as_the_files(files, capsys):
     """A link value from a flag that breaks a rule of the [link] table is named as the flag (``--burst 0.5``), or,
-    where the rule needs the file's other keys (``--stop-after`` below the file's ``stale_ms``), the message says
-    what was laid over the file; until the thirty-third session both read as the file's own keys, which the file
-    did not have. ``--blackout`` says its ranges; ``bsst report`` of a folder that is not there says so."""
+    where the rule needs the file's other keys (``--stop-after`` below the file's ``stale_ms``, ``--rate`` not
+    dividing the physics rate), the message says what was laid over the mission; until the thirty-third session
+    each read as the file's own key, which the file did not have (``--profile ''`` too).
+    ``--blackout`` says its ranges; ``bsst report`` of a folder that is not there says so."""
     line = _refused(capsys, ["sim", files.mission, "--burst", "0.5", "--out", files.out], "--burst")
     assert line.endswith("must be 0 (Bernoulli loss) or >= 1 packet, got 0.5"), line
     line = _refused(capsys, ["sim", files.mission, "--stop-after", "40", "--out", files.out], "link.stop_ms")
-    assert line.endswith("got 40 (the file's [link] with these laid over it: link.stop_ms = 40.0)"), line
+    assert line.endswith("got 40 (with these laid over the mission's [link]: link.stop_ms = 40.0)"), line
+    line = _refused(capsys, ["sim", files.mission, "--rate", "333", "--out", files.out], "rate_hz")
+    assert line.endswith("got 333 (with these laid over the mission: rate_hz = 333.0)"), line
+    _refused(capsys, ["sim", files.mission, "--profile", "", "--out", files.out], "--profile ")  # not the file's
     line = _refused(capsys, ["sim", files.mission, "--blackout", "1000001:1"], "--blackout")
     assert "start in [0, 1e+06], duration in (0, 1e+06]" in line, line
     line = _refused(capsys, ["report", files.root / "gone"], "gone")

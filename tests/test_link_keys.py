@@ -1,4 +1,4 @@
-"""Covers bridge.link.model and bridge.cli.flags.
+"""Covers bridge.link.model and bridge.cli.linkflags.
 
 Every ``[link]`` key has its flag, one range, and a line in the README (a meta-test, as
 python-control's kwargs_test walks its functions' keywords).
@@ -20,7 +20,8 @@ from typing import Any
 import pytest
 
 from bridge.cli import build_parser, link_table_from_args
-from bridge.cli.flags import GUARD_FLAGS, LINK_FLAGS, UsageError
+from bridge.cli.flags import UsageError
+from bridge.cli.linkflags import GUARD_FLAGS, LINK_FLAGS
 from bridge.link import model as link_model
 from bridge.link.model import (
     BLACKOUT_DURATION_RANGE_S,

@@ -4,7 +4,8 @@ In:  argv (``sys.argv[1:]`` by default), and the mission, sweep and key files it
 Out: the command's work and its summary on stdout; an exit status; bad input as one line
      ``bsst: ...`` on stderr
 
-- :mod:`bridge.cli.flags`      flag types with their ranges, the link flags and their ``[link]`` overrides
+- :mod:`bridge.cli.flags`      flag types with their ranges
+- :mod:`bridge.cli.linkflags`  the link flags and their ``[link]`` overrides
 - :mod:`bridge.cli.options`    the options the flying commands share, and the :class:`~bridge.core.overrides.Overrides`
   their flags make
 - :mod:`bridge.cli.commands`   the parser: one sub-command each, from the modules of their families
@@ -36,7 +37,8 @@ from collections.abc import Sequence
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from bridge.cli.commands import EXIT_BAD_INPUT, EXIT_FAILED, build_parser, print_summary
-from bridge.cli.flags import UsageError, link_table_from_args
+from bridge.cli.flags import UsageError
+from bridge.cli.linkflags import link_table_from_args
 from params import ConfigError, input_scope
 
 __all__ = ["build_parser", "link_table_from_args", "main", "print_summary"]

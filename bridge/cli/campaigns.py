@@ -21,16 +21,15 @@ from bridge.cli.flags import (
     EXIT_FAILED,
     EXIT_OK,
     UsageError,
-    add_link_options,
     axis_values,
     int_in,
     law_list,
-    link_table_from_args,
     name_list,
     number_in,
     path_given,
     value_list,
 )
+from bridge.cli.linkflags import add_link_options, link_table_from_args
 from bridge.cli.options import (
     add_discretization_option,
     add_scatter_option,

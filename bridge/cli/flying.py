@@ -23,7 +23,6 @@ from bridge.cli.flags import (
     UsageError,
     _home,
     _ids,
-    add_link_options,
     int_in,
     mission_integer,
     mission_number,
@@ -32,6 +31,7 @@ from bridge.cli.flags import (
     system_id,
     yes_no,
 )
+from bridge.cli.linkflags import add_link_options
 from bridge.cli.options import (
     add_failsafe_options,
     add_flight_options,

@@ -20,11 +20,11 @@ from bridge.cli.flags import (
     EXIT_OK,
     UsageError,
     _Parser,
-    add_link_options,
     int_in,
     number_in,
     path_given,
 )
+from bridge.cli.linkflags import add_link_options
 from bridge.cli.options import overrides_from_args
 from params import ConfigError
 

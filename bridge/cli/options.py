@@ -18,7 +18,6 @@ from bridge.cli.flags import (
     axis_values,
     int_in,
     law_spec,
-    link_table_from_args,
     mission_integer,
     mission_number,
     name_list,
@@ -28,6 +27,7 @@ from bridge.cli.flags import (
     path_given,
     sensor_set_name,
 )
+from bridge.cli.linkflags import link_table_from_args
 
 if TYPE_CHECKING:  # annotations only: building the parser loads no flight code
     from bridge.core.overrides import Overrides

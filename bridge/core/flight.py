@@ -34,7 +34,7 @@ from bridge.autopilot.params import (
     params_from_table,
 )
 from bridge.autopilot.simvehicle import HOLD, OFFBOARD, SimVehicle
-from bridge.core.overrides import Overrides
+from bridge.core.overrides import Overrides, table_settings
 from bridge.core.scalar import checked_choice, compile_for, compiled_wanted, wire_for
 from bridge.link.model import LinkConfig, LinkSettings, link_from_table
 from controller import Controller, Gains, Nominal, gains_from_table
@@ -154,13 +154,6 @@ class Flight:
                 for (s, dur), ds in sorted(windows.items())]
 
 
-def table_settings(table: Mapping[str, Any], prefix: str = "link") -> str:
-    """An override table as ``PREFIX.KEY = VALUE`` settings, nested tables flattened (``link.up.burst_len =
-    0.5``), for a message."""
-    return ", ".join(table_settings(v, f"{prefix}.{k}") if isinstance(v, Mapping) else f"{prefix}.{k} = {v!r}"[:120]
-                     for k, v in table.items())
-
-
 def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, **keywords: Any) -> Flight:
     """Validate a mission (object or file) with its :class:`Overrides` into a :class:`Flight`.
 
@@ -185,7 +178,8 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
     try:
         prof = load_profile(m.profile)
     except ConfigError as exc:  # an override's named as the flag (the mission may have no profile key)
-        raise ConfigError(f"{f'--profile {over.profile}' if over.profile else f'{src}: profile'}: {exc}") from None
+        raise ConfigError(f"{f'--profile {over.profile}' if over.profile is not None else f'{src}: profile'}: {exc}"
+                          ) from None
     if m.actuation:
         prof = prof.with_actuation(m.actuation)
     effects = effects_from_table(Table(m.effects, src, "effects"))
@@ -204,7 +198,8 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
             raise
         # the file's [link] with the overrides over it: say them, or a user who gave --stop-after 40 reads that the
         # file has a stop_ms it does not have
-        raise ConfigError(f"{exc} (the file's [link] with these laid over it: {table_settings(over.link)})") from None
+        laid = table_settings(over.link, "link")
+        raise ConfigError(f"{exc} (with these laid over the mission's [link]: {laid})") from None
     given_set = (over.sensors or {}).get("set")
     if given_set is not None and given_set not in [n for n, _ in prof.sensors]:  # an override: named as the flag
         raise ConfigError(f"{src}: --sensors {given_set!r} (sensors.set): profile {prof.name!r} has no such sensor "

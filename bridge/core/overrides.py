@@ -136,10 +136,23 @@ class Overrides:
         for e, named in zip(self.at, self._at_named, strict=True):  # each checked alone first: errors name its flag
             event_from_table(Table(e, named), m.duration_s)
         events = (*m.events, *self.at) if self.at else None
-        return m.with_overrides(profile=self.profile, controller=law, discretization=self.discretization,
-                                rate_hz=self.rate_hz, seed=self.seed, start_scatter_m=self.scatter_m,
-                                actuation=self.actuation, link=link, failsafe=failsafe, sensors=sensors,
-                                estimator=estimator, params=params, wind=wind, events=events)
+        try:
+            return m.with_overrides(profile=self.profile, controller=law, discretization=self.discretization,
+                                    rate_hz=self.rate_hz, seed=self.seed, start_scatter_m=self.scatter_m,
+                                    actuation=self.actuation, link=link, failsafe=failsafe, sensors=sensors,
+                                    estimator=estimator, params=params, wind=wind, events=events)
+        except ConfigError as exc:  # the file alone was valid: what was laid over it made this, so say what that was
+            raise ConfigError(f"{exc} (with these laid over the mission: {table_settings(self.given())})") from None
+
+
+def table_settings(table: Mapping[str, Any], prefix: str = "") -> str:
+    """Settings as ``KEY = VALUE`` text for a message, nested tables flattened under their key
+    (``link.up.burst_len = 0.5``; ``prefix``: the table's own key), each cut at 120 characters."""
+    def one(k: str, v: Any) -> str:
+        key = f"{prefix}.{k}" if prefix else k
+        return table_settings(v, key) if isinstance(v, Mapping) else f"{key} = {v!r}"[:120]
+
+    return ", ".join(one(k, v) for k, v in table.items())
 
 
 OVERRIDE_FIELDS = frozenset(f.name for f in fields(Overrides))

@@ -1,0 +1,157 @@
+"""The link-impairment flags (``--delay MS`` ... for both directions, ``--up-delay``, ``--down-loss`` ... for one,
+traces, profiles, the controller's guards), and the ``[link]`` override table read back from them.
+
+In:  the parsed flags (link values in ms, %, packets, bytes/s; ``--blackout START:DURATION`` s; trace and profile
+     files)
+Out: :func:`link_table_from_args`'s ``[link]`` override table, which goes to :func:`bridge.core.flight.prepare` in
+     an :class:`~bridge.core.overrides.Overrides` like every other override
+     (:func:`bridge.cli.options.overrides_from_args`); a combination no direction can fly is a ``UsageError``
+     naming the flags (exit 2)
+
+The ranges are the mission loader's (:data:`bridge.link.model.NUMBER_RANGES`), one per key.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from bridge.cli.flags import UsageError, blackout_window, existing_file, link_number, link_seed, yes_no
+
+# -- link impairment flags (bridge.link.model): both directions, or one with --up-/--down- -----------
+
+
+LINK_FLAGS = (  # flag stem, [link] key, metavar, help; the ranges are bridge.link.model.NUMBER_RANGES
+    ("delay", "delay_ms", "MS", "one-way delay"),
+    ("jitter", "jitter_ms", "MS", "delay jitter (uniform half-width or normal sigma)"),
+    ("loss", "loss_pct", "PCT", "packet loss"),
+    ("burst", "burst_len", "LEN", "mean loss burst length in packets (Gilbert-Elliott; 0 Bernoulli)"),
+    ("dup", "dup_pct", "PCT", "duplicated packets"),
+    ("reorder", "reorder_pct", "PCT", "packets held back past their successor"),
+    ("bandwidth", "rate_bps", "BYTES_PER_S", "bandwidth cap in bytes/s (0: none)"),
+    ("queue", "queue_ms", "MS", "with --bandwidth: longest wait in the queue before a packet is dropped"),
+)
+GUARD_FLAGS = (  # flag, [link] key, metavar, help: the controller's guard and prediction (not per direction)
+    ("--command-lag", "command_lag_ms", "MS", "with --compensation predict: assumed command delay it also covers"),
+    ("--stale-after", "stale_ms", "MS", "a state older than this is stale: the law holds its integrators"),
+    ("--stop-after", "stop_ms", "MS", "a state older than this stops the targets (the vehicle's timeout takes over)"),
+)
+
+
+def add_link_options(p: argparse.ArgumentParser, skip: Sequence[str] = (), controller: bool = True) -> None:
+    """The link-impairment flags (``--delay MS`` … for both directions, ``--up-delay``,
+    ``--down-loss`` … for one) and (``controller``: for a command that flies the controller) the
+    controller's compensation and guards; ``skip`` omits flag stems a command defines otherwise.
+    :func:`link_table_from_args` reads them back."""
+    g = p.add_argument_group("link impairment", "override the mission's [link] tables; every flag for both "
+                             "directions also exists as --up-FLAG (controller -> vehicle) and --down-FLAG")
+    for stem, key, meta, text in LINK_FLAGS:
+        for pre in ("", "up-", "down-"):
+            if stem in skip and not pre:
+                continue
+            flag = f"--{pre}{stem}"
+            g.add_argument(flag, dest=f"link_{pre.replace('-', '_')}{key}", type=link_number(flag, key),
+                           metavar=meta, help=argparse.SUPPRESS if pre else text)
+    for pre in ("", "up-", "down-"):
+        flag = f"--{pre}blackout"
+        g.add_argument(flag, dest=f"link_{pre.replace('-', '_')}blackouts", action="append",
+                       type=blackout_window(flag), metavar="START:DURATION",
+                       help=argparse.SUPPRESS if pre else "no packets from START for DURATION s (repeatable)")
+    add_trace_options(g)
+    g.add_argument("--jitter-dist", dest="link_jitter", choices=("uniform", "normal"), help="jitter distribution")
+    g.add_argument("--link-seed", dest="link_seed", type=link_seed("--link-seed"), metavar="N",
+                   help="seed of the link's fates (default: the mission's seed)")
+    if not controller:  # bsst relay: the link alone; what the controller does with its states is not its to set
+        return
+    g.add_argument("--compensation", dest="link_compensation", choices=("none", "predict"),
+                   help="predict: control on the state carried forward over its age (nominal model)")
+    for flag, key, meta, text in GUARD_FLAGS:
+        g.add_argument(flag, dest=f"link_{key}", type=link_number(flag, key), metavar=meta, help=text)
+
+
+TRACE_KEYS = ("trace", "trace_loop")  # per direction, read back like the numbers
+
+
+def trace_file(flag: str) -> Callable[[str], str]:
+    """An argparse type for a link trace: an existing file, made absolute (relative to the working
+    directory, so that every process of a session finds it); ``none`` for no trace. The file's
+    content is checked when the flight is built (bridge.link.trace), naming its bad lines."""
+    def conv(text: str) -> str:
+        if text.strip().lower() == "none":
+            return ""
+        return existing_file(flag, text)
+
+    return conv
+
+
+def link_profile(flag: str) -> Callable[[str], str]:
+    """An argparse type for a link profile: a shipped name or a profile TOML (made absolute)."""
+    def conv(text: str) -> str:
+        from bridge.link.profile import profile_names  # lazy: building the parser loads no link code
+        from bridge.link.trace import is_profile_path  # lazy: as above
+
+        if not is_profile_path(text):
+            if text not in profile_names():
+                raise argparse.ArgumentTypeError(f"{flag}: unknown link profile {text!r}; shipped profiles: "
+                                                 f"{', '.join(profile_names())} (or a profile TOML path)")
+            return text
+        return existing_file(flag, text)
+
+    return conv
+
+
+def add_trace_options(g: Any) -> None:
+    """``--link-trace FILE`` (``--up-link-trace``, ``--down-link-trace``), ``--link-trace-loop [true|false]``
+    and ``--link-profile NAME``: a measured trace, looped or not, and a named link profile."""
+    for pre in ("", "up-", "down-"):
+        dest = f"link_{pre.replace('-', '_')}"
+        g.add_argument(f"--{pre}link-trace", dest=f"{dest}trace", type=trace_file(f"--{pre}link-trace"),
+                       metavar="FILE", help=argparse.SUPPRESS if pre else
+                       "replay this measured link trace (CSV: t_s, delay_ms, optional direction; 'none': no trace)")
+        g.add_argument(f"--{pre}link-trace-loop", dest=f"{dest}trace_loop", nargs="?", const=True,
+                       type=yes_no(f"--{pre}link-trace-loop"), metavar="true|false",
+                       help=argparse.SUPPRESS if pre else "loop a trace shorter than the mission (bare: true)")
+    g.add_argument("--link-profile", dest="link_profile", type=link_profile("--link-profile"), metavar="NAME",
+                   help="a named link profile the mission's [link] is laid over: wifi, lte, sik-57600, "
+                        "satellite-geo, satellite-leo, or a profile TOML (bsst link fit writes one)")
+
+
+def link_table_from_args(args: argparse.Namespace) -> dict[str, Any]:
+    """The ``[link]`` overrides the flags of :func:`add_link_options` ask for ({} if none).
+
+    Flags for both directions write both ``up`` and ``down``; ``--up-*`` / ``--down-*`` win."""
+    out: dict[str, Any] = {}
+    keys = [key for _, key, *_ in LINK_FLAGS] + ["blackouts", *TRACE_KEYS]
+    for d in ("up", "down"):
+        side: dict[str, Any] = {}
+        for key in keys:
+            for dest in (f"link_{key}", f"link_{d}_{key}"):
+                v = getattr(args, dest, None)
+                if v is not None:
+                    side[key] = [list(w) for w in v] if key == "blackouts" else v
+        for key in ("jitter", "seed"):
+            v = getattr(args, f"link_{key}", None)
+            if v is not None:
+                side[key] = v
+        if side:
+            out[d] = side
+        if "burst_len" in side:  # (without --loss: what needs no loss; the file's loss is checked with the file)
+            from bridge.link.model import burst_problem  # lazy: start-up time
+
+            why = burst_problem(side.get("loss_pct", 0.0), side["burst_len"])
+            if why:
+                raise UsageError(f"bsst: --burst / --{d}-burst: {why}")
+        if side.get("trace"):
+            from bridge.link.model import trace_clash  # lazy: start-up time
+
+            clash = trace_clash(side)
+            if clash:
+                raise UsageError(f"bsst: --link-trace / --{d}-link-trace cannot be combined with {clash} (--delay, "
+                                 f"--jitter, --loss, --burst) in the {d} direction: the trace gives the delays and "
+                                 f"the losses")
+    for key in ("compensation", "profile", "shared", *(k for _, k, *_ in GUARD_FLAGS)):
+        v = getattr(args, f"link_{key}", None)
+        if v is not None:
+            out[key] = v
+    return out
