@@ -186,6 +186,10 @@ def test_bsst_relay_says_the_jitter_it_flies(tmp_path: Path) -> None:
      "--client 'nowhere': expected [udpin:|udpout:]HOST:PORT"),
     (["--listen", "127.0.0.1:0", "--to", "127.0.0.1:1", "--client", "udpin:127.0.0.1:5"],
      "--client 'udpin:127.0.0.1:5': the relay sends to it"),
+    # an unset "$DIR" (the current folder): until the thirty-third session it relayed, its writer thread's
+    # traceback on stderr, and exited 0 with no statistics
+    (["--listen", "127.0.0.1:0", "--to", "127.0.0.1:1", "--duration", "0.5", "--stats", ""],
+     "--stats: an empty path (give one, or leave the flag out)"),
 ])
 def test_bad_relay_input_exits_2_with_one_line(args: list[str], message: str, capsys) -> None:
     from bridge.cli import main

@@ -186,8 +186,9 @@ def add_relay_command(sub: Any) -> None:
     p.add_argument("--mission", metavar="FILE", help="take the [link] tables (and seed) from this mission")
     p.add_argument("--duration", type=number_in("--duration", 0.0, 1e7, lo_open=True), metavar="S",
                    help="stop after S seconds (default: until SIGINT/SIGTERM)")
-    p.add_argument("--stats", metavar="FILE", help="write the statistics to FILE as JSON on exit (and every 0.5 s "
-                                                   "while relaying, so that a kill leaves them)")
+    p.add_argument("--stats", type=path_given("--stats"), metavar="FILE",
+                   help="write the statistics to FILE as JSON on exit (and every 0.5 s while relaying, so that a "
+                        "kill leaves them)")
     p.add_argument("--mission-clock", action="store_true",
                    help="blackout times count from the flight's time 0 (when the state the first actuator target "
                         "up answers came from the vehicle) instead of the relay's start")
