@@ -175,7 +175,7 @@ TEXT_BAD = {
     "--client": lambda f: ["nowhere", "127.0.0.1:0", "udpin:127.0.0.1:5"],
     "--controller-from": lambda f: ["nowhere", "127.0.0.1:0", "udpin:127.0.0.1:5", "127.0.0.1:x"],
     "--mission": lambda f: [getattr(f, b) for b in BAD_FILES],
-    "--stats": lambda f: [f.regular / "x.json", f.directory, ""],  # "": the current folder
+    "--stats": lambda f: [f.regular / "x.json", f.directory, "", f.regular],  # "": the current folder; one that exists
     "--dask": lambda f: ["notanaddress"],
     "--key": lambda f: [f.missing, f.key_empty, f.key_open, f.directory],
     "--at": lambda f: ["x", "5:bogus", "5:gps:sideways", "0.1:motor:9=0.5", "99:wind:3", "0.1:gust:0,3",
