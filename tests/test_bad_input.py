@@ -439,6 +439,16 @@ def test_a_flags_value_is_named_as_given_not_as_the_files(files, capsys):
     assert "no such directory" in line and not files.out.exists(), line
 
 
+def test_a_link_refused_without_a_file_names_no_file(files, capsys):
+    """A link refused where no file was given (``bsst relay`` without ``--mission``): every value is the command
+    line's, and the message says so; until the third wave's thirty-third session it went on "(the file's [link]
+    with these laid over it: ...)", of a file there was not."""
+    trace = files.root / "short.csv"
+    trace.write_text("t_s,delay_ms\n0,10\n0.1,10\n")
+    line = _refused(capsys, ["relay", *BASE["relay"](files), "--link-trace", trace], "link.up.trace")
+    assert line.startswith("bsst: command line: ") and "file's" not in line and "laid over" not in line, line
+
+
 @pytest.mark.skipif(os.geteuid() == 0, reason="root reads a file of mode 000 (the socket-path cases cover it)")
 def test_a_file_without_read_permission(files, capsys):
     files.regular.write_text(TINY)
