@@ -176,7 +176,7 @@ TEXT_BAD = {
     "--client": lambda f: ["nowhere", "127.0.0.1:0", "udpin:127.0.0.1:5"],
     "--controller-from": lambda f: ["nowhere", "127.0.0.1:0", "udpin:127.0.0.1:5", "127.0.0.1:x"],
     "--mission": lambda f: [getattr(f, b) for b in BAD_FILES],
-    "--stats": lambda f: [f.regular / "x.json", f.directory],
+    "--stats": lambda f: [f.regular / "x.json", f.directory, "", f.regular],  # "": the current folder; one that exists
     "--dask": lambda f: ["notanaddress"],
     "--key": lambda f: [f.missing, f.key_empty, f.key_open, f.directory],
     "--at": lambda f: ["x", "5:bogus", "5:gps:sideways", "0.1:motor:9=0.5", "99:wind:3", "0.1:gust:0,3",
@@ -442,6 +442,16 @@ def test_a_flags_value_is_named_as_given_not_as_the_files(files, capsys):
     assert "start in [0, 1e+06], duration in (0, 1e+06]" in line, line
     line = _refused(capsys, ["report", files.root / "gone"], "gone")
     assert "no such directory" in line and not files.out.exists(), line
+
+
+def test_a_link_refused_without_a_file_names_no_file(files, capsys):
+    """A link refused where no file was given (``bsst relay`` without ``--mission``): every value is the command
+    line's, and the message says so; until the third wave's thirty-third session it went on "(the file's [link]
+    with these laid over it: ...)", of a file there was not."""
+    trace = files.root / "short.csv"
+    trace.write_text("t_s,delay_ms\n0,10\n0.1,10\n")
+    line = _refused(capsys, ["relay", *BASE["relay"](files), "--link-trace", trace], "link.up.trace")
+    assert line.startswith("bsst: command line: ") and "file's" not in line and "laid over" not in line, line
 
 
 @pytest.mark.skipif(os.geteuid() == 0, reason="root reads a file of mode 000 (the socket-path cases cover it)")

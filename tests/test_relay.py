@@ -186,6 +186,10 @@ def test_bsst_relay_says_the_jitter_it_flies(tmp_path: Path) -> None:
      "--client 'nowhere': expected [udpin:|udpout:]HOST:PORT"),
     (["--listen", "127.0.0.1:0", "--to", "127.0.0.1:1", "--client", "udpin:127.0.0.1:5"],
      "--client 'udpin:127.0.0.1:5': the relay sends to it"),
+    # an unset "$DIR" (the current folder): until the thirty-third session it relayed, its writer thread's
+    # traceback on stderr, and exited 0 with no statistics
+    (["--listen", "127.0.0.1:0", "--to", "127.0.0.1:1", "--duration", "0.5", "--stats", ""],
+     "--stats: an empty path (give one, or leave the flag out)"),
 ])
 def test_bad_relay_input_exits_2_with_one_line(args: list[str], message: str, capsys) -> None:
     from bridge.cli import main
@@ -193,6 +197,32 @@ def test_bad_relay_input_exits_2_with_one_line(args: list[str], message: str, ca
     assert main(["relay", *args]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0]
+
+
+def test_stats_never_replaces_a_file_unasked_nor_one_the_relay_reads(tmp_path: Path, capsys) -> None:
+    """``--stats`` an existing file is refused unless ``--overwrite``; a file the relay reads (its mission, its
+    trace) even with it, as ``bsst link fit --out`` (exit 2, one line, before it binds, the file kept). Until the
+    third wave's thirty-third session both were replaced by the JSON, exit 0 (``--stats o/relm.toml`` over the
+    mission it had read). With ``--overwrite`` a file of its own is replaced."""
+    from bridge.cli import main
+
+    notes, mission, trace = tmp_path / "notes.txt", tmp_path / "relm.toml", tmp_path / "tr.csv"
+    notes.write_text("mine\n")
+    mission.write_text((ROOT / "missions" / "sine.toml").read_text())
+    trace.write_text("t_s,delay_ms\n0,10\n0.1,10\n")
+    kept = {f: f.read_text() for f in (notes, mission, trace)}
+    relay = ["relay", "--listen", "127.0.0.1:0", "--to", "127.0.0.1:1", "--duration", "0.5"]
+    read = "an input of this command, which writing would destroy"
+    for extra, message in ((["--stats", notes], f"--stats {notes}: exists; --overwrite to replace it"),
+                           (["--mission", mission, "--stats", mission, "--overwrite"], f"is {mission}, {read}"),
+                           (["--link-trace", trace, "--link-trace-loop", "--stats", trace, "--overwrite"], read)):
+        assert main([*relay, *map(str, extra)]) == 2, extra
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and message in err[0], err
+    assert {f: f.read_text() for f in kept} == kept
+    res = run_bsst(*relay, "--stats", notes, "--overwrite")
+    assert res.returncode == 0, res.stderr
+    assert json.loads(notes.read_text())["final"] is True
 
 
 def test_busy_port_is_a_clear_error(capsys) -> None:

@@ -26,7 +26,7 @@ from bridge.cli.flags import (
 )
 from bridge.cli.linkflags import add_link_options
 from bridge.cli.options import overrides_from_args
-from params import ConfigError
+from params import ConfigError, inputs_read
 
 
 def add_link_commands(sub: Any) -> None:
@@ -186,8 +186,10 @@ def add_relay_command(sub: Any) -> None:
     p.add_argument("--mission", metavar="FILE", help="take the [link] tables (and seed) from this mission")
     p.add_argument("--duration", type=number_in("--duration", 0.0, 1e7, lo_open=True), metavar="S",
                    help="stop after S seconds (default: until SIGINT/SIGTERM)")
-    p.add_argument("--stats", metavar="FILE", help="write the statistics to FILE as JSON on exit (and every 0.5 s "
-                                                   "while relaying, so that a kill leaves them)")
+    p.add_argument("--stats", type=path_given("--stats"), metavar="FILE",
+                   help="write the statistics to FILE as JSON on exit (and every 0.5 s while relaying, so that a "
+                        "kill leaves them); a new file, never one the relay reads")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --stats")
     p.add_argument("--mission-clock", action="store_true",
                    help="blackout times count from the flight's time 0 (when the state the first actuator target "
                         "up answers came from the vehicle) instead of the relay's start")
@@ -207,7 +209,7 @@ def cmd_relay(args: argparse.Namespace) -> int:
     from bridge.link.model import jitter_capped_text  # lazy: start-up time
     from bridge.nodes.relay import Relay, client_event, parse_address  # lazy: start-up time
     from bridge.nodes.report import to_line  # lazy: start-up time
-    from bridge.record.runlog import check_writable, write_json_atomic  # lazy: start-up time
+    from bridge.record.runlog import write_json_atomic  # lazy: start-up time
     from missions import load_mission  # lazy: start-up time
 
     try:
@@ -216,11 +218,13 @@ def cmd_relay(args: argparse.Namespace) -> int:
         client = parse_address(args.client, "--client") if args.client else None
     except ValueError as exc:
         raise UsageError(f"bsst relay: {exc}") from None
-    if args.stats:
-        check_writable(args.stats, "--stats")  # bad input now, not a failure after relaying
     # the one path from a mission and its overrides to the parts: the whole mission is checked,
     # and the relay flies the link it gives
     settings = prepare(load_mission(args.mission) if args.mission else at_rest(), overrides_from_args(args)).link
+    if args.stats is not None:  # bad input now, not a failure after relaying; and never a file it reads (its
+        # mission, trace, profile: params.inputs_read; the fleet's radio it writes in place)
+        read = [*inputs_read().values(), *([args.radio] if args.radio else [])]
+        _new_output(args.stats, "--stats", args.overwrite, read)
 
     if args.radio and settings.handovers:  # (as bsst sim refuses a fleet on one radio with handovers)
         raise ConfigError(f"--radio {args.radio}: the link has handovers (events of kind link); a shared radio "

@@ -194,8 +194,8 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
     try:
         link_settings = link_from_table(m.link, src, seed=m.seed, duration_s=m.duration_s)
     except ConfigError as exc:
-        if not over.link:
-            raise
+        if not over.link or not Path(src).is_file():  # no file (bsst relay or vehicle without one, --await-mission,
+            raise  # a Mission made in Python): no file's [link] to tell the overrides from
         # the file's [link] with the overrides over it: say them, or a user who gave --stop-after 40 reads that the
         # file has a stop_ms it does not have
         laid = table_settings(over.link, "link")

@@ -194,6 +194,8 @@ class Session:
         to = port
         if relayed:  # the link model on the wall clock, between the two
             to = str(free_udp_port())
+            # no --overwrite: relay.json is a run file, so the run directory is new (or a fresh temporary one) or
+            # was cleared (runlog.run_dir, clear_run); one there now is not this run's: refused, not replaced
             self.relay = Child("relay", ["relay", "--listen", f"127.0.0.1:{to}", "--to", f"127.0.0.1:{port}",
                                          "--back-port", str(back), "--client", f"127.0.0.1:{source}",
                                          "--mission", mission, "--mission-clock",
