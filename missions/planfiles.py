@@ -252,7 +252,7 @@ def _wpl_row(source: str, index: int, line: int, text: str) -> tuple[int, int, i
         if len(f) != 12:
             raise ValueError(f"expected 12 fields, got {len(f)}")
         idx, _cur, frame, cmd, auto = (_wpl_int(f[k]) for k in (0, 1, 2, 3, 11))  # (current: not flown)
-        vals = [float(v) for v in f[4:11]]
+        vals = [_wpl_number(name, word) for name, word in zip(PARAM_NAMES, f[4:11], strict=True)]
     except ValueError as exc:
         raise ConfigError(f"{source}: line {line}: {exc}"[:300]) from None
     for name, v, word in zip(PARAM_NAMES, vals, f[4:11], strict=True):
@@ -261,6 +261,14 @@ def _wpl_row(source: str, index: int, line: int, text: str) -> tuple[int, int, i
     if idx != index:
         raise ConfigError(f"{source}: line {line}: index {idx}, expected {index} (items are numbered from 0)")
     return line, frame, cmd, vals, auto
+
+
+def _wpl_number(name: str, word: str) -> float:
+    """A number field of a waypoint file (param1..4, latitude, longitude, altitude), its name in the error."""
+    try:
+        return float(word)
+    except ValueError:
+        raise ValueError(f"{name} {show(word)}: expected a number (or nan: not given)") from None
 
 
 def _wpl_int(word: str) -> int:
@@ -321,5 +329,10 @@ def plan_text(plan: PlanFile) -> str:
 
 
 def read_plan_text(text: str, source: str) -> PlanFile:
-    """A ``.plan`` or ``QGC WPL 110`` file's text, told apart by its content."""
-    return read_wpl(text, source) if text.lstrip().startswith("QGC WPL") else read_qgc_plan(text, source)
+    """A ``.plan`` or ``QGC WPL 110`` file's text, told apart by its content; a ``.waypoints`` or ``.txt`` file that
+    is not JSON is read as a waypoint file (so one without its header line is told that, not that it is bad JSON)."""
+    head = text.lstrip()
+    if not head:
+        raise ConfigError(f"{source}: empty (a QGroundControl .plan or a QGC WPL 110 waypoint file)")
+    wpl = head.startswith("QGC WPL") or (source.lower().endswith((".waypoints", ".txt")) and not head.startswith("{"))
+    return read_wpl(text, source) if wpl else read_qgc_plan(text, source)

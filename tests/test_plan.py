@@ -167,7 +167,12 @@ def test_waypoint_file_refusals(tmp_path: Path) -> None:
     bad.write_text("QGC WPL 120\n" + "\n".join(lines[1:]))
     assert "QGC WPL 110" in refusal(bad)
     bad.write_text("\n".join(lines[:4] + [lines[4].replace("nan", "x")]))
-    assert "line 5" in refusal(bad)  # the file's 5th line
+    assert refusal(bad) == f"{bad}: line 5: param4 'x': expected a number (or nan: not given)"  # its field named
+    bad.write_text("\n".join(lines[1:]))  # no header: read as a waypoint file (it was "not valid JSON")
+    assert refusal(bad) == f'{bad}: not a waypoint file (the first line must be "QGC WPL 110")'
+    for empty in ("", " \n\n"):
+        bad.write_text(empty)
+        assert refusal(bad) == f"{bad}: empty (a QGroundControl .plan or a QGC WPL 110 waypoint file)"
     bad.write_text("\n".join(lines[:1] + ["", "  "] + lines[1:4] + ["", lines[4].replace("nan", "x")]))
     assert f"{bad}: line 8: " in refusal(bad)  # blank lines are counted: the file's 8th line
     bad.write_text("\n".join(lines[:1] + [""] + [lines[1].replace("\t16\t", "\t999\t", 1)] + lines[2:]))
