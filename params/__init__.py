@@ -347,8 +347,9 @@ class Table:
             raise self.error(name, f"expected a string, got {show(v)}")
         if choices is not None:
             allowed = tuple(choices)
-            if v not in allowed:
-                raise self.error(name, f"must be one of {', '.join(allowed)}; got {v!r}")
+            if v not in allowed:  # "" (the default's own choice, where allowed) shown as such, not as nothing
+                shown = ", ".join(repr(a) if a == "" else a for a in allowed)
+                raise self.error(name, f"must be one of {shown}; got {show(v)}")
         return v
 
     def boolean(self, name: str, default: Any = ...) -> bool:
@@ -426,8 +427,15 @@ def show(v: Any) -> str:
 
 def _printable(text: str) -> str:
     """A key, a dotted path of keys or a file's path in a message: as it is if printable, else its repr, in full
-    (``'A\\nB'``), so that a newline or another control character in it never breaks the message's line."""
-    return text if text.isprintable() else repr(text)
+    (``'A\\nB'``), so that a newline or another control character in it never breaks the message's line; one of over
+    :data:`PRINTED_MAX` characters by its start and end and its length (a 100 000-character key was echoed whole)."""
+    shown = text if text.isprintable() else repr(text)
+    if len(shown) <= PRINTED_MAX:
+        return shown
+    return f"{shown[:PRINTED_MAX // 2]}...{shown[-PRINTED_MAX // 4:]} ({len(text)} characters)"
+
+
+PRINTED_MAX = 300  # characters of a key or a path a message shows whole
 
 
 def dump_toml(data: Mapping[str, Any]) -> str:

@@ -178,6 +178,17 @@ def test_missing_file_and_non_toml(tmp_path: Path) -> None:
         load_mission(tmp_path)
 
 
+def test_a_choice_and_a_long_key_read_plainly_in_the_message(tmp_path: Path) -> None:
+    """The default's own choice "" is shown as '' (it read "must be one of , wrench, motors"); a key of 100 000
+    characters is shown by its start, end and length, not echoed whole (a 100 kB line)."""
+    body = 'name = "m"\nduration_s = 2.0\n[trajectory]\nkind = "sine"\n'
+    with pytest.raises(ConfigError, match=r"actuation: must be one of '', wrench, motors; got 'jets'$"):
+        load_mission(_write(tmp_path, 'actuation = "jets"\n' + body))
+    with pytest.raises(ConfigError) as err:
+        load_mission(_write(tmp_path, "k" * 100_000 + " = 1\n" + body))
+    assert len(str(err.value)) < 500 and "(100000 characters): unknown key" in str(err.value), str(err.value)[:200]
+
+
 def test_scripted_missions_are_validated_too() -> None:
     with pytest.raises(ConfigError, match=r"^<python>: duration_s:"):
         Mission(Sine(), duration_s=-1.0)
