@@ -289,7 +289,7 @@ class Table:
     def error(self, name: str, why: str) -> ConfigError:
         """The error of key ``name`` (it and the source shown escaped if either holds a newline or another
         unprintable character: every message is one line)."""
-        return ConfigError(f"{_printable(self._source)}: {_printable(self.key(name))}: {why}")
+        return ConfigError(f"{_printable(self._source)}: {_printable(self.key(name), KEY_SHOWN_MAX)}: {why}")
 
     def has(self, name: str) -> bool:
         return name in self._data
@@ -425,17 +425,18 @@ def show(v: Any) -> str:
     return text if len(text) <= 40 else text[:37] + "..."
 
 
-def _printable(text: str) -> str:
+def _printable(text: str, cap: int | None = None) -> str:
     """A key, a dotted path of keys or a file's path in a message: as it is if printable, else its repr, in full
-    (``'A\\nB'``), so that a newline or another control character in it never breaks the message's line; one of over
-    :data:`PRINTED_MAX` characters by its start and end and its length (a 100 000-character key was echoed whole)."""
+    (``'A\\nB'``), so that a newline or another control character in it never breaks the message's line. With
+    ``cap``, one of over ``cap`` characters by its start and end and its length (a key: a 100 000-character one was
+    echoed whole; a file's path is shown whole, as the system names it)."""
     shown = text if text.isprintable() else repr(text)
-    if len(shown) <= PRINTED_MAX:
+    if cap is None or len(shown) <= cap:
         return shown
-    return f"{shown[:PRINTED_MAX // 2]}...{shown[-PRINTED_MAX // 4:]} ({len(text)} characters)"
+    return f"{shown[:cap // 2]}...{shown[-cap // 4:]} ({len(text)} characters)"
 
 
-PRINTED_MAX = 300  # characters of a key or a path a message shows whole
+KEY_SHOWN_MAX = 300  # characters of a key a message shows whole
 
 
 def dump_toml(data: Mapping[str, Any]) -> str:

@@ -444,6 +444,19 @@ def test_a_flags_value_is_named_as_given_not_as_the_files(files, capsys):
     assert "no such directory" in line and not files.out.exists(), line
 
 
+@pytest.mark.parametrize("argv, names", [
+    (["sim", ""], "the mission: an empty path"), (["sitl", ""], "the mission: an empty path"),
+    (["vehicle", ""], "the mission: an empty path"), (["sweep", ""], "the mission: an empty path"),
+    (["margin", "", "--over", "delay_ms"], "the mission: an empty path"), (["report", ""], "the sweep directory"),
+    (["link", "fit", ""], "the trace: an empty path"), (["link", "extract", ""], "a source: an empty path"),
+    (["vehicle", "--listen", ""], "--listen ''"), (["vehicle", "--gcs", ""], "--gcs ''"),
+    (["controller", "missions/sine.toml", "--vehicle", ""], "--vehicle ''")])
+def test_an_empty_path_or_address_is_refused_as_given(capsys, argv, names):
+    """An empty positional path (an unset shell variable) is named as empty; it read as the current folder (".: is
+    a directory"). An empty address is refused; it was taken for the default one, and the vehicle started."""
+    _refused(capsys, argv, names)
+
+
 def test_a_link_refused_without_a_file_names_no_file(files, capsys):
     """A link refused where no file was given (``bsst relay`` without ``--mission``): every value is the command
     line's, and the message says so; until the third wave's thirty-third session it went on "(the file's [link]

@@ -43,8 +43,9 @@ from params import ConfigError
 def add_sweep_commands(sub: Any) -> None:
     """``bsst sweep`` (latency/dropout campaigns) and ``bsst report`` (rebuild a sweep's report)."""
     p = sub.add_parser("sweep", help="fly a grid of link impairments, laws and rates; report stability maps")
-    p.add_argument("mission", help="mission (a TOML file, or a ground station's .plan or .waypoints), or a sweep "
-                                   "TOML (with mission = ... and [grid])")
+    p.add_argument("mission", type=path_given("the mission"),
+                   help="mission (a TOML file, or a ground station's .plan or .waypoints), or a sweep TOML (with "
+                        "mission = ... and [grid])")
     for flag, axis, unit in (("--delay", "delay_ms", "MS"), ("--jitter", "jitter_ms", "MS"),
                              ("--loss", "loss_pct", "PCT"), ("--burst", "burst_len", "LEN"),
                              ("--rate", "rate_hz", "HZ")):
@@ -92,7 +93,7 @@ def add_sweep_commands(sub: Any) -> None:
                    metavar="LEVEL,...", help="Dryden turbulence levels: none, light, moderate, severe")
     p.set_defaults(func=cmd_sweep)
     p = sub.add_parser("report", help="rebuild a sweep's report.md and heat maps from its cells.csv")
-    p.add_argument("dir", metavar="DIR", help="sweep directory")
+    p.add_argument("dir", metavar="DIR", type=path_given("the sweep directory"), help="sweep directory")
     p.add_argument("--no-plots", action="store_true", help="skip the heat maps")
     p.set_defaults(func=cmd_report)
 
@@ -208,7 +209,8 @@ def add_margin_command(sub: Any) -> None:
     """``bsst margin``: the boundary of one link impairment by bisection (bridge.sweep.margin)."""
     p = sub.add_parser("margin", help="find how much delay, loss, jitter, burst, sensor noise or wind a law "
                                       "takes (bisection)")
-    p.add_argument("mission", help="mission: a TOML file or a ground station's .plan or .waypoints")
+    p.add_argument("mission", type=path_given("the mission"),
+                   help="mission: a TOML file or a ground station's .plan or .waypoints")
     p.add_argument("--over", required=True,
                    choices=("delay_ms", "loss_pct", "jitter_ms", "burst_len", "noise", "wind_mps"),
                    help="the impairment searched (link values: both directions, as a sweep's axes; noise: the scale "

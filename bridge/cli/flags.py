@@ -83,7 +83,8 @@ def path_given(name: str) -> Callable[[str], str]:
     folder, with ``--overwrite`` the user's own files), named in the error."""
     def conv(text: str) -> str:
         if not text:
-            raise argparse.ArgumentTypeError(f"{name}: an empty path (give one, or leave the flag out)")
+            raise argparse.ArgumentTypeError(f"{name}: an empty path (give one" + (
+                ")" if not name.startswith("-") else ", or leave the flag out)"))
         return text
 
     return conv

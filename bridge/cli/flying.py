@@ -313,8 +313,9 @@ def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
 def add_sitl_commands(sub: Any) -> None:
     """``bsst vehicle``, ``bsst controller`` and ``bsst sitl``: the MAVLink SITL over UDP (bridge.session)."""
     p = sub.add_parser("vehicle", help="the simulated vehicle alone: a MAVLink 2 endpoint over UDP")
-    p.add_argument("mission", nargs="?", help="mission TOML for the start, effects, failsafe and rates "
-                                              "(default: at rest at the origin, 250 Hz)")
+    p.add_argument("mission", nargs="?", type=path_given("the mission"),
+                   help="mission TOML for the start, effects, failsafe and rates (default: at rest at the origin, "
+                        "250 Hz)")
     p.add_argument("--profile", metavar="NAME", help="vehicle profile: paper, x500 or a profile TOML path")
     p.add_argument("--rate", type=mission_number("--rate", "rate_hz"), metavar="HZ",
                    help="control rate, 50-1000 Hz: one lockstep step per period")
@@ -411,10 +412,11 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
     own = flight.params.sysid if "MAV_SYS_ID" in flight.mission.params else None  # [params] or --param
     if args.sysid is not None and own is not None and args.sysid != own:
         raise ConfigError(f"--sysid {args.sysid} and MAV_SYS_ID {own} set the vehicle's system id twice: give one")
-    listen = parse_address(args.listen or f"127.0.0.1:{LINK_PORT + n}", "udpin", "--listen")
+    # (an empty value is refused by parse_address, not taken for the default)
+    listen = parse_address(f"127.0.0.1:{LINK_PORT + n}" if args.listen is None else args.listen, "udpin", "--listen")
     if listen.mode != "udpin":
         raise ConfigError(f"--listen {args.listen!r}: the controller link is bound (udpin), not udpout")
-    gcs_text = args.gcs or f"127.0.0.1:{GCS_PORT + n}"
+    gcs_text = f"127.0.0.1:{GCS_PORT + n}" if args.gcs is None else args.gcs
     gcs = None if gcs_text.strip().lower() == "none" else parse_address(gcs_text, "udpout", "--gcs")
     sysid, compid = args.controller_id or (CONTROLLER_SYSID, CONTROLLER_COMPID)
     pin = None
@@ -440,7 +442,8 @@ def cmd_controller(args: argparse.Namespace) -> int:
     from bridge.nodes.offboard import OffboardConfig, run_controller  # lazy: start-up time
 
     flight = prepare(args.mission, overrides_from_args(args))
-    vehicle = parse_address(args.vehicle or f"127.0.0.1:{LINK_PORT + args.instance}", "udpout", "--vehicle")
+    vehicle = parse_address(f"127.0.0.1:{LINK_PORT + args.instance}" if args.vehicle is None else args.vehicle,
+                            "udpout", "--vehicle")
     if vehicle.mode != "udpout":
         raise ConfigError(f"--vehicle {args.vehicle!r}: the controller sends to the vehicle (udpout)")
     if args.radio and args.realtime:

@@ -35,7 +35,7 @@ def add_link_commands(sub: Any) -> None:
     acts = p.add_subparsers(dest="link_command", metavar="ACTION", parser_class=_Parser)
     acts.required = True
     e = acts.add_parser("extract", help="per-packet delays and losses of both directions, as a trace file")
-    e.add_argument("source", nargs="+", metavar="RUN_DIR | VEHICLE.tlog CONTROLLER.tlog",
+    e.add_argument("source", nargs="+", type=path_given("a source"), metavar="RUN_DIR | VEHICLE.tlog CONTROLLER.tlog",
                    help="a real-time run directory, or the tlogs of the vehicle's end and the controller's end")
     e.add_argument("--out", type=path_given("--out"),
                    metavar="FILE", help="the trace (default RUN_DIR/link-trace.csv, or ./link-trace.csv)")
@@ -45,14 +45,16 @@ def add_link_commands(sub: Any) -> None:
     e.add_argument("--overwrite", action="store_true", help="replace an existing --out")
     e.set_defaults(func=cmd_link_extract)
     f = acts.add_parser("fit", help="the [link] table that fits a trace best, as a link profile (TOML)")
-    f.add_argument("trace", metavar="TRACE", help="trace CSV (t_s, delay_ms, optional direction)")
+    f.add_argument("trace", metavar="TRACE", type=path_given("the trace"),
+                   help="trace CSV (t_s, delay_ms, optional direction)")
     f.add_argument("--out", type=path_given("--out"), metavar="FILE", help="write the profile here (default: print it)")
     f.add_argument("--blackout-after", type=number_in("--blackout-after", 0.0, 1e6, lo_open=True), default=1.0,
                    metavar="S", help="a loss run this long or longer is a blackout, listed apart (default 1 s)")
     f.add_argument("--overwrite", action="store_true", help="replace an existing --out")
     f.set_defaults(func=cmd_link_fit)
     s = acts.add_parser("show", help="plot a trace: delay over time, loss bursts, delay histogram (PNG)")
-    s.add_argument("trace", metavar="TRACE", help="trace CSV (t_s, delay_ms, optional direction)")
+    s.add_argument("trace", metavar="TRACE", type=path_given("the trace"),
+                   help="trace CSV (t_s, delay_ms, optional direction)")
     s.add_argument("--out", type=path_given("--out"), metavar="FILE.png", help="the figure (default: TRACE with .png)")
     s.add_argument("--overwrite", action="store_true", help="replace an existing --out")
     s.set_defaults(func=cmd_link_show)

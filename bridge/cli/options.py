@@ -118,11 +118,12 @@ def add_flight_options(p: argparse.ArgumentParser, vehicle: bool = True, optiona
     files only when given ``--out``, and plots nothing). ``optional_mission``: ``bsst sitl``, whose
     ``--await-mission`` takes none."""
     if optional_mission:
-        p.add_argument("mission", nargs="?", help="mission: a TOML file (see missions/) or a ground station's "
-                                                  ".plan or .waypoints; none with --await-mission")
+        p.add_argument("mission", nargs="?", type=path_given("the mission"),
+                       help="mission: a TOML file (see missions/) or a ground station's .plan or .waypoints; "
+                            "none with --await-mission")
     else:
-        p.add_argument("mission", help="mission: a TOML file (see missions/) or a ground station's .plan or "
-                                       ".waypoints")
+        p.add_argument("mission", type=path_given("the mission"),
+                       help="mission: a TOML file (see missions/) or a ground station's .plan or .waypoints")
     if vehicle:
         p.add_argument("--out", type=path_given("--out"),
                        metavar="DIR", help="run directory (default runs/<UTC time>-<mission>)")
