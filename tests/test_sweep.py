@@ -455,6 +455,36 @@ def test_malformed_sweep_files_exit_2_with_one_line(small_sweep: tuple[Path, lis
     assert {p.name: p.read_bytes() for p in d.iterdir() if p.name in kept} == kept  # nothing recorded is lost
 
 
+@pytest.mark.parametrize("overwrite", [[], ["--overwrite"]], ids=["plain", "overwrite"])
+@pytest.mark.parametrize("kind", ["file", "devnull", "fifo"])
+def test_a_resume_into_what_is_not_a_directory_is_refused(small_sweep: tuple[Path, list[str]], tmp_path: Path,
+                                                          capsys, kind: str, overwrite: list[str]) -> None:
+    """``--resume --out X`` where X is a regular file, /dev/null or a FIFO: refused in one line as without
+    ``--resume`` (exit 2, no NotADirectoryError), X untouched."""
+    out = Path(os.devnull) if kind == "devnull" else tmp_path / "notes.txt"
+    if kind == "file":
+        out.write_text("mine\n")
+    elif kind == "fifo":
+        os.mkfifo(out)
+    capsys.readouterr()
+    assert main([*small_sweep[1], "--out", str(out), "--resume", *overwrite]) == 2
+    err = capsys.readouterr().err
+    assert err == f"bsst: --out {out}: exists and is not a directory\n", err
+    assert kind != "file" or out.read_text() == "mine\n"
+
+
+def test_a_resume_of_no_directory_is_refused_not_started(small_sweep: tuple[Path, list[str]], tmp_path: Path,
+                                                         capsys) -> None:
+    """``--resume --out nosuchdir`` (most likely a typo of the sweep's directory): refused naming it and how to
+    start a new sweep there; nothing created, nothing flown."""
+    out = tmp_path / "nosuchdir"
+    capsys.readouterr()
+    assert main([*small_sweep[1], "--out", str(out), "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"--resume: --out {out}: no such directory" in err and "drop --resume" in err, err
+    assert not out.exists()
+
+
 def test_a_resume_of_a_partial_sweep_json_is_another_sweep(small_sweep: tuple[Path, list[str]], tmp_path: Path,
                                                            capsys) -> None:
     d = tmp_path / "d"

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from bridge.record.runlog import run_dir, write_json_atomic
+from bridge.record.runlog import check_out_dir, run_dir, write_json_atomic
 from bridge.sweep.cells import (
     CELLS_CSV,
     COLUMNS,
@@ -49,7 +49,7 @@ from bridge.sweep.inputs import check_inputs, input_hashes
 from bridge.sweep.report import write_report
 from bridge.sweep.spec import Sweep
 from missions import Mission, load_mission
-from params import ConfigError, dump_toml, read_regular_file, reads_inputs
+from params import ConfigError, dump_toml, look_up, read_regular_file, reads_inputs
 
 MISSION_TOML = "mission.toml"
 
@@ -233,6 +233,10 @@ def _open_dir(spec: Sweep, out: str | Path | None, resume: bool, overwrite: bool
         if out is None:
             raise ConfigError("--resume: needs --out DIR, the directory of the sweep to resume")
         path = Path(out)
+        check_out_dir(path)  # a file, a FIFO, /dev/null: refused as without --resume
+        if look_up(path)[0] is None:  # nothing to resume: a typo in the name far more often than a plan
+            raise ConfigError(f"--resume: --out {path}: no such directory, so no sweep to resume (to start a new "
+                              "sweep there, drop --resume)")
         meta = path / SWEEP_JSON
         if meta.exists():
             old = read_sweep_json(meta)
