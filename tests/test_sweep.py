@@ -485,6 +485,28 @@ def test_a_resume_of_no_directory_is_refused_not_started(small_sweep: tuple[Path
     assert not out.exists()
 
 
+@pytest.mark.parametrize("taken, how", [("report.md", "report"), ("map_delay_loss.png", "report-plots"),
+                                        ("report.md", "resume"), (".report.md.tmp", "report")])
+def test_a_report_file_taken_by_a_directory_is_refused_before_any_write(small_sweep: tuple[Path, list[str]],
+                                                                        tmp_path: Path, capsys, taken: str,
+                                                                        how: str) -> None:
+    """``report.md``, its temporary name or a heat map's name in a sweep directory taken by a directory: ``bsst
+    report`` and ``--resume`` refuse it in one line as ``--overwrite`` does (exit 2, no IsADirectoryError), before
+    anything is flown or written: every file as it was, no temporary file left."""
+    d = tmp_path / "d"
+    shutil.copytree(small_sweep[0], d)
+    (d / taken).unlink(missing_ok=True)
+    (d / taken).mkdir()
+    kept = {p.name: p.read_bytes() for p in d.iterdir() if p.is_file()}
+    argv = {"report": ["report", str(d), "--no-plots"], "report-plots": ["report", str(d)],
+            "resume": [*small_sweep[1], "--out", str(d), "--resume"]}[how]
+    capsys.readouterr()
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"cannot replace {taken}: it is a directory" in err and str(d) in err, err
+    assert {p.name: p.read_bytes() for p in d.iterdir() if p.is_file()} == kept
+
+
 def test_a_resume_of_a_partial_sweep_json_is_another_sweep(small_sweep: tuple[Path, list[str]], tmp_path: Path,
                                                            capsys) -> None:
     d = tmp_path / "d"

@@ -46,7 +46,7 @@ from bridge.sweep.executors import (
 )
 from bridge.sweep.grid import Grid
 from bridge.sweep.inputs import check_inputs, input_hashes
-from bridge.sweep.report import write_report
+from bridge.sweep.report import check_report_files, write_report
 from bridge.sweep.spec import Sweep
 from missions import Mission, load_mission
 from params import ConfigError, dump_toml, look_up, read_regular_file, reads_inputs
@@ -176,6 +176,8 @@ def run_sweep(
     engines: list[str] = []  # what flew the rows kept from before (sweep.json)
     if out is not None or write:
         path, kept, engines = _open_dir(spec, out, resume, overwrite, root)
+        if resume and report:  # a report.md or map a directory: refused before any cell flies, as --overwrite does
+            check_report_files(path, plots)
         results.update({row_key(r): r for r in kept if row_key(r) in order})
     todo = [c for c in all_cells if c.key() not in results]
     sink = CellsFile(path / CELLS_CSV, [results[k] for k in sorted(results, key=order.__getitem__)]) if path else None

@@ -33,6 +33,7 @@ from typing import Any
 
 from bridge.autopilot.estimator import ESTIMATOR_KINDS
 from bridge.record.mplsetup import pyplot
+from bridge.record.runlog import check_replaceable
 from bridge.sweep.cells import (
     CELLS_CSV,
     FAILED,
@@ -166,7 +167,19 @@ def rebuild(path: str | Path, plots: bool = True) -> Path:
     rows, meta = load_sweep_dir(path)
     if not rows:
         raise ConfigError(f"{Path(path) / CELLS_CSV}: no rows")
+    check_report_files(Path(path), plots, said=str(path), fix="move it away")
     return write_report(Path(path), rows, meta, plots=plots)
+
+
+REPORT_MD, REPORT_TMP = "report.md", ".report.md.tmp"
+
+
+def check_report_files(path: Path, plots: bool, said: str | None = None, fix: str | None = None) -> None:
+    """Refuse, before anything is written, a report in sweep directory ``path`` whose ``report.md`` (or its temporary
+    name, or with ``plots`` a heat map's ``map_*.png``) is taken by what no report wrote, a directory say: the check
+    of ``--overwrite`` (:func:`~bridge.record.runlog.check_replaceable`; ``said`` and ``fix`` its words)."""
+    taken = [p for p in sorted(path.iterdir()) if p.name in (REPORT_MD, REPORT_TMP) or (plots and p.match("map_*.png"))]
+    check_replaceable(path, taken, said, fix)
 
 
 def grid_size(meta: Mapping[str, Any]) -> int | None:
@@ -294,8 +307,8 @@ def write_report(path: Path, rows: Sequence[Mapping[str, Any]], meta: Mapping[st
         lines += ["", "## Reproducing a row", "",
                   "Each row of `cells.csv` is one offline flight of `mission.toml` (in this directory); for example "
                   "the first one:", "", "```sh", reproduce(rows[0], swept), "```", ""]
-    out = path / "report.md"
-    tmp = path / ".report.md.tmp"
+    out = path / REPORT_MD
+    tmp = path / REPORT_TMP
     tmp.write_text("\n".join(lines))
     tmp.replace(out)
     return out
