@@ -205,6 +205,25 @@ def test_sweep_file(tmp_path: Path) -> None:
         load_sweep(f)
 
 
+@pytest.mark.parametrize("classes, said", [
+    ("clean_rms_m = 5.0\ndiverged_rms_m = 1.0", "classes.diverged_rms_m: must be larger than classes.clean_rms_m "
+                                                "(5 m), got 1 m"),
+    ("clean_rms_m = 5.0", "classes.clean_rms_m: must be smaller than classes.diverged_rms_m (1 m, its default), "
+                          "got 5 m"),
+    ("diverged_rms_m = 0.0005", "classes.diverged_rms_m: must be larger than classes.clean_rms_m (0.001 m, its "
+                                "default), got 0.0005 m")])
+def test_classes_out_of_order_name_the_file_the_key_and_the_values(tmp_path: Path, capsys, classes: str,
+                                                                   said: str) -> None:
+    """A sweep file whose diverged threshold is not above its clean one: one line naming the file, the key the file
+    gave and both values (and which is the default), exit 2, nothing written."""
+    f = tmp_path / "campaign.toml"
+    f.write_text(f'mission = "{brief_file(tmp_path)}"\n[grid]\ndelay_ms = [0, 20]\n[classes]\n{classes}\n')
+    capsys.readouterr()
+    assert main(["sweep", str(f), "--out", str(tmp_path / "s"), "--no-plots", "--jobs", "1"]) == 2
+    assert capsys.readouterr().err == f"bsst: {f}: {said}\n"
+    assert not (tmp_path / "s").exists()
+
+
 @pytest.mark.parametrize("argv, needle", [
     (["--delay", "0,abc"], "--delay"),
     (["--loss", "0,150"], "--loss"),
