@@ -411,6 +411,14 @@ def _damage(d: Path, name: str) -> str:
         parts[COLUMNS.index("delay_ms")] = ""
         cells.write_text(lines[0] + ",".join(parts) + lines[2])
         return "cells.csv: line 2: delay_ms: is empty"
+    if name == "foreign-row":  # a cell of no grid point of this sweep's (delay 0, 10): never counted as one
+        parts = row.split(",")
+        parts[COLUMNS.index("delay_ms")] = "55.0"
+        cells.write_text(lines[0] + ",".join(parts) + lines[2])
+        return "cells.csv: line 2: delay_ms 55 is not in the sweep's grid (its sweep.json: 0, 10)"
+    if name == "duplicate-row":  # one cell twice: never two runs of it
+        cells.write_text("".join(lines) + row)
+        return "cells.csv: line 4: the same cell as line 2"
     if name == "bad-quote":
         cells.write_text(lines[0] + row.replace("bsst,", '"bs"st,', 1) + lines[2])
         return "cells.csv: line 2:"
@@ -428,7 +436,8 @@ def _damage(d: Path, name: str) -> str:
                    "json-swept-number": ('{"swept": 5}', "swept: expected a list of names"),
                    "json-swept-unknown": ('{"swept": ["colour"]}', "swept: 'colour' is not an axis"),
                    "json-mission-string": ('{"mission": "x"}', "mission: expected an object"),
-                   "json-classes-list": ('{"classes": [1]}', "classes: expected an object")}
+                   "json-classes-list": ('{"classes": [1]}', "classes: expected an object"),
+                   "json-axes-number": ('{"axes": {"delay_ms": 5}}', "axes: 'delay_ms': expected a list of values")}
     text, words = json_damage[name]
     if text is None:
         meta.write_bytes(b'{"mode": "\xff"}')
@@ -438,9 +447,9 @@ def _damage(d: Path, name: str) -> str:
 
 
 DAMAGES = ["non-utf8", "cells-dir", "cells-fifo", "truncated-row", "extra-column", "text-in-number",
-           "text-in-integer", "infinite", "unknown-outcome", "empty-axis", "bad-quote", "other-header", "nul",
-           "json-null", "json-list", "json-truncated", "json-non-utf8", "json-deep", "json-swept-number",
-           "json-swept-unknown", "json-mission-string", "json-classes-list"]
+           "text-in-integer", "infinite", "unknown-outcome", "empty-axis", "foreign-row", "duplicate-row", "bad-quote",
+           "other-header", "nul", "json-null", "json-list", "json-truncated", "json-non-utf8", "json-deep",
+           "json-swept-number", "json-swept-unknown", "json-mission-string", "json-classes-list", "json-axes-number"]
 
 
 @pytest.mark.parametrize("damage", DAMAGES)

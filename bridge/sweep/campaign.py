@@ -255,8 +255,8 @@ def _open_dir(spec: Sweep, out: str | Path | None, resume: bool, overwrite: bool
                                   f"use another --out")
             _check_mission_toml(path, recorded, spec)
             check_inputs(inputs, meta)
-            kept = [r for r in read_cells(path / CELLS_CSV, classes=spec.classes) if r["outcome"] != "error"] \
-                if (path / CELLS_CSV).exists() else []
+            rows = read_cells(path / CELLS_CSV, classes=spec.classes, meta=old) if (path / CELLS_CSV).exists() else []
+            kept = [r for r in rows if r["outcome"] != "error"]
             return path, kept, engines if kept else []
         if path.exists() and any(path.iterdir()):
             raise ConfigError(f"--resume: {path} holds no {SWEEP_JSON}; not a sweep directory")

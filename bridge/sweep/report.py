@@ -41,6 +41,7 @@ from bridge.sweep.cells import (
     SWEEP_JSON,
     UNRECORDED,
     broke_policy,
+    grid_values,
     read_cells,
     read_sweep_json,
     seeds_alike,
@@ -155,7 +156,7 @@ def load_sweep_dir(path: str | Path) -> tuple[list[dict[str, Any]], dict[str, An
                               f"\"interrupted\" saying whether its search ended); bsst report rebuilds a sweep's "
                               f"report from its {CELLS_CSV}")
     meta = read_sweep_json(meta_path) if meta_path.exists() else {}
-    rows = read_cells(p / CELLS_CSV, legacy=legacy_values(meta))  # an older sweep's cells.csv is read too
+    rows = read_cells(p / CELLS_CSV, legacy=legacy_values(meta), meta=meta)  # an older sweep's cells.csv is read too
     if not meta:
         meta = {"mission": {"name": p.name}, "mode": "?", "swept": [a for a in AXES if len(_values(rows, a)) > 1],
                 "classes": {}}
@@ -184,13 +185,8 @@ def check_report_files(path: Path, plots: bool, said: str | None = None, fix: st
 
 def grid_size(meta: Mapping[str, Any]) -> int | None:
     """How many cells the sweep's grid has (its ``sweep.json``'s axes and seeds; None where it does not say)."""
-    axes, seeds = meta.get("axes"), meta.get("seeds")
-    if not isinstance(axes, Mapping) or not isinstance(seeds, list) or not seeds:
-        return None
-    n = len(seeds)
-    for a in AXES:
-        n *= len(axes.get(a) or ()) or 1
-    return n
+    grid = grid_values(meta)
+    return None if grid is None else math.prod(len(v) for v in grid.values())
 
 
 def incomplete(path: Path, rows: Sequence[Any], meta: Mapping[str, Any]) -> str | None:
