@@ -147,6 +147,7 @@ CONVERTER_BAD = {
     "link_seed": ["x", "-1", "99999999999", "1.5"],
     "axis_values": ["x", "-1e300", "1,1", ""],
     "fleet_sizes": ["x", "0", "1.5", "1,1", "1e300"],
+    "jobs_count": ["x", "0", "1025", "1.5"],
     "law_spec": ["x", "nofile.py:Law", "no_such_module:Law", "json:JSONDecoder", "bsst:"],
     "law_list": ["x", "bsst,bsst", "bsst,nofile.py:Law"],
     "blackout_window": ["x", "-1:1", "1:0"],
@@ -367,6 +368,7 @@ SWEEP = 'mission = "{m}"\nmode = "offline"\nseeds = 1\n[grid]\ndelay_ms = [0.0]\
 
 
 @pytest.mark.parametrize("key, bad", [("mission", 5), ("mission", "nowhere.toml"), ("mode", "fast"), ("jobs", -1),
+                                      ("jobs", 0), ("jobs", 1025), ("classes.diverged_rms_m", 1e-4),
                                       ("seeds", 0), ("seeds", "x"), ("grid.delay_ms", "x"), ("grid.delay_ms", [-1.0]),
                                       ("grid.colour", [1]), ("classes.clean_rms_m", "x"), ("extra", 1),
                                       ("grid.noise", [-1.0]), ("grid.noise", "x"), ("grid.noise", [0.0, 1e300]),
@@ -377,6 +379,26 @@ def test_every_sweep_key_refuses_a_bad_value(files, capsys, key, bad):
     sweep = files.root / "sweep.toml"
     sweep.write_text(dump_toml(_set(data, key, bad)))
     _refused(capsys, ["sweep", sweep, "--out", files.out, "--jobs", "1", "--no-plots"], key.split(".")[-1])
+
+
+@pytest.mark.parametrize("jobs", [0, 1, 1024, 1025])
+def test_jobs_has_one_range_in_a_sweep_file_and_on_the_command_line(files, jobs):
+    """``jobs = N`` in a sweep file and ``--jobs N`` (sweep, margin): each takes N, or each refuses it naming the one
+    range (``jobs = 0`` was taken as all cores where ``--jobs 0`` was refused)."""
+    from bridge.sweep.spec import load_sweep
+
+    sweep = files.root / "sweep.toml"
+    sweep.write_text(dump_toml(_set(load_toml_text(SWEEP.format(m=files.mission)), "jobs", jobs)))
+    said = []
+    for read in (lambda: load_sweep(sweep).jobs,
+                 lambda: _commands()["sweep"].parse_args([str(sweep), "--jobs", str(jobs)]).jobs,
+                 lambda: _commands()["margin"].parse_args([str(files.mission), "--over", "delay_ms", "--until", "rms=1",
+                                                           "--jobs", str(jobs)]).jobs):
+        try:
+            said.append(read())
+        except (ConfigError, UsageError) as exc:
+            said.append(str(exc).replace("--jobs must", "must").split(": ")[-1])
+    assert said == [jobs] * 3 if 1 <= jobs <= 1024 else said == [f"must be in [1, 1024], got {jobs}"] * 3, said
 
 
 def load_toml_text(text: str) -> dict[str, Any]:

@@ -205,6 +205,25 @@ def test_sweep_file(tmp_path: Path) -> None:
         load_sweep(f)
 
 
+@pytest.mark.parametrize("classes, said", [
+    ("clean_rms_m = 5.0\ndiverged_rms_m = 1.0", "classes.diverged_rms_m: must be larger than classes.clean_rms_m "
+                                                "(5 m), got 1 m"),
+    ("clean_rms_m = 5.0", "classes.clean_rms_m: must be smaller than classes.diverged_rms_m (1 m, its default), "
+                          "got 5 m"),
+    ("diverged_rms_m = 0.0005", "classes.diverged_rms_m: must be larger than classes.clean_rms_m (0.001 m, its "
+                                "default), got 0.0005 m")])
+def test_classes_out_of_order_name_the_file_the_key_and_the_values(tmp_path: Path, capsys, classes: str,
+                                                                   said: str) -> None:
+    """A sweep file whose diverged threshold is not above its clean one: one line naming the file, the key the file
+    gave and both values (and which is the default), exit 2, nothing written."""
+    f = tmp_path / "campaign.toml"
+    f.write_text(f'mission = "{brief_file(tmp_path)}"\n[grid]\ndelay_ms = [0, 20]\n[classes]\n{classes}\n')
+    capsys.readouterr()
+    assert main(["sweep", str(f), "--out", str(tmp_path / "s"), "--no-plots", "--jobs", "1"]) == 2
+    assert capsys.readouterr().err == f"bsst: {f}: {said}\n"
+    assert not (tmp_path / "s").exists()
+
+
 @pytest.mark.parametrize("argv, needle", [
     (["--delay", "0,abc"], "--delay"),
     (["--loss", "0,150"], "--loss"),
@@ -392,6 +411,14 @@ def _damage(d: Path, name: str) -> str:
         parts[COLUMNS.index("delay_ms")] = ""
         cells.write_text(lines[0] + ",".join(parts) + lines[2])
         return "cells.csv: line 2: delay_ms: is empty"
+    if name == "foreign-row":  # a cell of no grid point of this sweep's (delay 0, 10): never counted as one
+        parts = row.split(",")
+        parts[COLUMNS.index("delay_ms")] = "55.0"
+        cells.write_text(lines[0] + ",".join(parts) + lines[2])
+        return "cells.csv: line 2: delay_ms 55 is not in the sweep's grid (its sweep.json: 0, 10)"
+    if name == "duplicate-row":  # one cell twice: never two runs of it
+        cells.write_text("".join(lines) + row)
+        return "cells.csv: line 4: the same cell as line 2"
     if name == "bad-quote":
         cells.write_text(lines[0] + row.replace("bsst,", '"bs"st,', 1) + lines[2])
         return "cells.csv: line 2:"
@@ -409,7 +436,8 @@ def _damage(d: Path, name: str) -> str:
                    "json-swept-number": ('{"swept": 5}', "swept: expected a list of names"),
                    "json-swept-unknown": ('{"swept": ["colour"]}', "swept: 'colour' is not an axis"),
                    "json-mission-string": ('{"mission": "x"}', "mission: expected an object"),
-                   "json-classes-list": ('{"classes": [1]}', "classes: expected an object")}
+                   "json-classes-list": ('{"classes": [1]}', "classes: expected an object"),
+                   "json-axes-number": ('{"axes": {"delay_ms": 5}}', "axes: 'delay_ms': expected a list of values")}
     text, words = json_damage[name]
     if text is None:
         meta.write_bytes(b'{"mode": "\xff"}')
@@ -419,9 +447,9 @@ def _damage(d: Path, name: str) -> str:
 
 
 DAMAGES = ["non-utf8", "cells-dir", "cells-fifo", "truncated-row", "extra-column", "text-in-number",
-           "text-in-integer", "infinite", "unknown-outcome", "empty-axis", "bad-quote", "other-header", "nul",
-           "json-null", "json-list", "json-truncated", "json-non-utf8", "json-deep", "json-swept-number",
-           "json-swept-unknown", "json-mission-string", "json-classes-list"]
+           "text-in-integer", "infinite", "unknown-outcome", "empty-axis", "foreign-row", "duplicate-row", "bad-quote",
+           "other-header", "nul", "json-null", "json-list", "json-truncated", "json-non-utf8", "json-deep",
+           "json-swept-number", "json-swept-unknown", "json-mission-string", "json-classes-list", "json-axes-number"]
 
 
 @pytest.mark.parametrize("damage", DAMAGES)
@@ -453,6 +481,58 @@ def test_malformed_sweep_files_exit_2_with_one_line(small_sweep: tuple[Path, lis
                 p.kill()
                 p.wait()
     assert {p.name: p.read_bytes() for p in d.iterdir() if p.name in kept} == kept  # nothing recorded is lost
+
+
+@pytest.mark.parametrize("overwrite", [[], ["--overwrite"]], ids=["plain", "overwrite"])
+@pytest.mark.parametrize("kind", ["file", "devnull", "fifo"])
+def test_a_resume_into_what_is_not_a_directory_is_refused(small_sweep: tuple[Path, list[str]], tmp_path: Path,
+                                                          capsys, kind: str, overwrite: list[str]) -> None:
+    """``--resume --out X`` where X is a regular file, /dev/null or a FIFO: refused in one line as without
+    ``--resume`` (exit 2, no NotADirectoryError), X untouched."""
+    out = Path(os.devnull) if kind == "devnull" else tmp_path / "notes.txt"
+    if kind == "file":
+        out.write_text("mine\n")
+    elif kind == "fifo":
+        os.mkfifo(out)
+    capsys.readouterr()
+    assert main([*small_sweep[1], "--out", str(out), "--resume", *overwrite]) == 2
+    err = capsys.readouterr().err
+    assert err == f"bsst: --out {out}: exists and is not a directory\n", err
+    assert kind != "file" or out.read_text() == "mine\n"
+
+
+def test_a_resume_of_no_directory_is_refused_not_started(small_sweep: tuple[Path, list[str]], tmp_path: Path,
+                                                         capsys) -> None:
+    """``--resume --out nosuchdir`` (most likely a typo of the sweep's directory): refused naming it and how to
+    start a new sweep there; nothing created, nothing flown."""
+    out = tmp_path / "nosuchdir"
+    capsys.readouterr()
+    assert main([*small_sweep[1], "--out", str(out), "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"--resume: --out {out}: no such directory" in err and "drop --resume" in err, err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("taken, how", [("report.md", "report"), ("map_delay_loss.png", "report-plots"),
+                                        ("report.md", "resume"), (".report.md.tmp", "report")])
+def test_a_report_file_taken_by_a_directory_is_refused_before_any_write(small_sweep: tuple[Path, list[str]],
+                                                                        tmp_path: Path, capsys, taken: str,
+                                                                        how: str) -> None:
+    """``report.md``, its temporary name or a heat map's name in a sweep directory taken by a directory: ``bsst
+    report`` and ``--resume`` refuse it in one line as ``--overwrite`` does (exit 2, no IsADirectoryError), before
+    anything is flown or written: every file as it was, no temporary file left."""
+    d = tmp_path / "d"
+    shutil.copytree(small_sweep[0], d)
+    (d / taken).unlink(missing_ok=True)
+    (d / taken).mkdir()
+    kept = {p.name: p.read_bytes() for p in d.iterdir() if p.is_file()}
+    argv = {"report": ["report", str(d), "--no-plots"], "report-plots": ["report", str(d)],
+            "resume": [*small_sweep[1], "--out", str(d), "--resume"]}[how]
+    capsys.readouterr()
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"cannot replace {taken}: it is a directory" in err and str(d) in err, err
+    assert {p.name: p.read_bytes() for p in d.iterdir() if p.is_file()} == kept
 
 
 def test_a_resume_of_a_partial_sweep_json_is_another_sweep(small_sweep: tuple[Path, list[str]], tmp_path: Path,

@@ -73,7 +73,7 @@ def add_sweep_commands(sub: Any) -> None:
     p.add_argument("--engine", choices=("auto", "batch", "process"), default="auto",
                    help="batch: fly the cells together in one numpy loop; process: one by one in worker processes; "
                         "auto (default): batch where the grid allows it")
-    p.add_argument("--jobs", type=int_in("--jobs", 1, 1024), metavar="N",
+    p.add_argument("--jobs", type=jobs_count, metavar="N",
                    help="cores: threads of the batch engine, worker processes of the process engine "
                         "(default: all cores)")
     p.add_argument("--max-cells", type=int_in("--max-cells", 1, 10**9), metavar="N",
@@ -108,6 +108,13 @@ def fleet_sizes(text: str) -> tuple[int, ...]:
     if not all(v.is_integer() for v in values):
         raise argparse.ArgumentTypeError(f"--vehicles: expected whole numbers of vehicles, got {text!r}")
     return tuple(int(v) for v in values)
+
+
+def jobs_count(text: str) -> int:
+    """``--jobs N`` (sweep, margin): in the range a sweep file's ``jobs`` has (:data:`bridge.sweep.spec.JOBS_RANGE`)."""
+    from bridge.sweep.spec import JOBS_RANGE  # lazy: only a sweep loads the sweep
+
+    return int_in("--jobs", *JOBS_RANGE)(text)
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
@@ -233,7 +240,7 @@ def add_margin_command(sub: Any) -> None:
                         "is below X (for a user's CI)")
     p.add_argument("--engine", choices=("auto", "batch", "process"), default="auto",
                    help="batch: each round's cells together in one numpy loop (default where it can)")
-    p.add_argument("--jobs", type=int_in("--jobs", 1, 1024), metavar="N",
+    p.add_argument("--jobs", type=jobs_count, metavar="N",
                    help="cores: threads of the batch engine, worker processes of the process engine "
                         "(default: all cores)")
     p.add_argument("--out", type=path_given("--out"),

@@ -140,12 +140,20 @@ def check_overwrite(path: Path) -> None:
         if given is not None:
             raise ConfigError(f"{given}: an input of this command, which --overwrite would overwrite (--out {path}: "
                               f"{p.relative_to(path)}); move it out of {path}, or write the run elsewhere")
+    check_replaceable(path, entries)
+
+
+def check_replaceable(path: Path, entries: Iterable[Path], said: str | None = None, fix: str | None = None) -> None:
+    """Refuse, before anything is written, an entry of ``path`` that a run would replace but that is no file a run
+    wrote: a directory, a symbolic link (a run would write through it), anything not a regular file. ``said``
+    names ``path`` in the message (default ``--out PATH``), ``fix`` what the user can do (default: move it away, or
+    write the run elsewhere)."""
     for p in entries:
         kind = ("a symbolic link" if p.is_symlink() else "a directory" if p.is_dir()
                 else None if p.is_file() else "not a regular file")
         if kind:
-            raise ConfigError(f"--out {path}: cannot replace {p.relative_to(path)}: it is {kind}, not a file a run "
-                              "wrote (move it away, or write the run elsewhere)")
+            raise ConfigError(f"{said or f'--out {path}'}: cannot replace {p.relative_to(path)}: it is {kind}, not a "
+                              f"file a run wrote ({fix or 'move it away, or write the run elsewhere'})")
 
 
 def foreign_files(path: Path) -> list[str]:

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from bridge.record.runlog import run_dir, write_json_atomic
+from bridge.record.runlog import check_out_dir, run_dir, write_json_atomic
 from bridge.sweep.cells import (
     CELLS_CSV,
     COLUMNS,
@@ -46,10 +46,10 @@ from bridge.sweep.executors import (
 )
 from bridge.sweep.grid import Grid
 from bridge.sweep.inputs import check_inputs, input_hashes
-from bridge.sweep.report import write_report
+from bridge.sweep.report import check_report_files, write_report
 from bridge.sweep.spec import Sweep
 from missions import Mission, load_mission
-from params import ConfigError, dump_toml, read_regular_file, reads_inputs
+from params import ConfigError, dump_toml, look_up, read_regular_file, reads_inputs
 
 MISSION_TOML = "mission.toml"
 
@@ -176,6 +176,8 @@ def run_sweep(
     engines: list[str] = []  # what flew the rows kept from before (sweep.json)
     if out is not None or write:
         path, kept, engines = _open_dir(spec, out, resume, overwrite, root)
+        if resume and report:  # a report.md or map a directory: refused before any cell flies, as --overwrite does
+            check_report_files(path, plots)
         results.update({row_key(r): r for r in kept if row_key(r) in order})
     todo = [c for c in all_cells if c.key() not in results]
     sink = CellsFile(path / CELLS_CSV, [results[k] for k in sorted(results, key=order.__getitem__)]) if path else None
@@ -233,6 +235,10 @@ def _open_dir(spec: Sweep, out: str | Path | None, resume: bool, overwrite: bool
         if out is None:
             raise ConfigError("--resume: needs --out DIR, the directory of the sweep to resume")
         path = Path(out)
+        check_out_dir(path)  # a file, a FIFO, /dev/null: refused as without --resume
+        if look_up(path)[0] is None:  # nothing to resume: a typo in the name far more often than a plan
+            raise ConfigError(f"--resume: --out {path}: no such directory, so no sweep to resume (to start a new "
+                              "sweep there, drop --resume)")
         meta = path / SWEEP_JSON
         if meta.exists():
             old = read_sweep_json(meta)
@@ -249,8 +255,8 @@ def _open_dir(spec: Sweep, out: str | Path | None, resume: bool, overwrite: bool
                                   f"use another --out")
             _check_mission_toml(path, recorded, spec)
             check_inputs(inputs, meta)
-            kept = [r for r in read_cells(path / CELLS_CSV, classes=spec.classes) if r["outcome"] != "error"] \
-                if (path / CELLS_CSV).exists() else []
+            rows = read_cells(path / CELLS_CSV, classes=spec.classes, meta=old) if (path / CELLS_CSV).exists() else []
+            kept = [r for r in rows if r["outcome"] != "error"]
             return path, kept, engines if kept else []
         if path.exists() and any(path.iterdir()):
             raise ConfigError(f"--resume: {path} holds no {SWEEP_JSON}; not a sweep directory")

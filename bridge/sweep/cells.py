@@ -238,12 +238,14 @@ def parse_row(values: Sequence[str], columns: Sequence[str] = COLUMNS) -> dict[s
     return row
 
 
-def read_cells(path: str | Path, legacy: Mapping[str, Any] | None = None,
-               classes: Classes | None = None) -> list[dict[str, Any]]:
+def read_cells(path: str | Path, legacy: Mapping[str, Any] | None = None, classes: Classes | None = None,
+               meta: Mapping[str, Any] | None = None) -> list[dict[str, Any]]:
     """Read ``cells.csv``: every whole line a well-formed row, or a :class:`ConfigError` naming the
     file, the line and what is wrong there. Only an unfinished last line (no newline yet: where a
     killed sweep stopped writing) is left out; a blank line is skipped. With ``classes`` (what a resume
-    keeps) each row's ``class`` must be the one its outcome, RMS and ripple give by them.
+    keeps) each row's ``class`` must be the one its outcome, RMS and ripple give by them. No two rows are
+    one cell; with ``meta`` (the sweep's ``sweep.json``, ``bsst report``'s and a resume's) every row's values are
+    among its grid's (:func:`grid_values`): both judged on the columns the file has.
 
     A file of an older sweep (:data:`LEGACY_LAYOUTS`: no ``estimator``, ``noise``, or no ``wind_mps``,
     ``turbulence``, or no ``discretization``, or no ``policies``) is read when ``legacy`` gives the values its
@@ -271,6 +273,8 @@ def read_cells(path: str | Path, legacy: Mapping[str, Any] | None = None,
     elif tuple(header) != COLUMNS:
         raise ConfigError(f"{p}: line 1: not a sweep's {CELLS_CSV} header (expected {','.join(COLUMNS[:4])},..., "
                           f"got {','.join(header[:4])[:60]!r}...)")
+    grid = {a: v for a, v in (grid_values(meta) or {}).items() if a in columns} if meta is not None else {}
+    seen: dict[tuple[Any, ...], int] = {}  # each cell's line
     for n, line in enumerate(lines[1:], start=2):
         if not line.strip():
             continue
@@ -280,10 +284,34 @@ def read_cells(path: str | Path, legacy: Mapping[str, Any] | None = None,
                 raise ValueError(f"class {row['class']!r} contradicts the row (outcome {row['outcome']}, rms "
                                  f"{row['rms']} m, ripple_u2 {row['ripple_u2']} N: {classify(row, classes)!r} by "
                                  f"the sweep's classes)")
-            rows.append({c: row[c] if c in row else legacy[c] for c in COLUMNS} if legacy is not None else row)
+            row = {c: row[c] if c in row else legacy[c] for c in COLUMNS} if legacy is not None else row
+            outside = next((a for a in grid if row[a] not in grid[a]), None)
+            if outside is not None:  # hand-edited, or another sweep's: never counted as one of this grid's cells
+                raise ValueError(f"{outside} {_shown(row[outside])} is not in the sweep's grid (its {SWEEP_JSON}: "
+                                 f"{', '.join(_shown(v) for v in grid[outside][:10])}"
+                                 f"{', ...' if len(grid[outside]) > 10 else ''})")
+            key = tuple(row[c] for c in KEY_COLUMNS if c in columns)  # (an older file's: what it records)
+            if key in seen:
+                raise ValueError(f"the same cell as line {seen[key]} (a sweep writes one row per cell)")
+            seen[key] = n
+            rows.append(row)
         except ValueError as exc:
             raise ConfigError(f"{p}: line {n}: {exc} (a damaged row: mend or delete that line)") from None
     return rows
+
+
+def _shown(v: Any) -> str:
+    return f"{v:g}" if isinstance(v, float) else str(v)[:40]
+
+
+def grid_values(meta: Mapping[str, Any]) -> dict[str, list[Any]] | None:
+    """The values of each axis and the seeds (``seed``) of a sweep's grid, as its ``sweep.json`` (``meta``) says
+    them, or None where it does not (no ``axes`` or ``seeds``: an older bsst's, or none): the rows that belong to
+    the sweep (:func:`read_cells`) and how many there are (:func:`bridge.sweep.report.grid_size`)."""
+    axes, seeds = meta.get("axes"), meta.get("seeds")
+    if not isinstance(axes, Mapping) or not isinstance(seeds, list) or not seeds:
+        return None
+    return {**{a: axes[a] for a in AXES if axes.get(a)}, "seed": seeds}  # (an axis it does not list: not said)
 
 
 def _record(p: Path, n: int, line: str) -> list[str]:
@@ -344,6 +372,9 @@ def read_sweep_json(path: Path) -> dict[str, Any]:
     name = meta.get("mission", {}).get("name", "")
     if not isinstance(name, str):
         raise ConfigError(f"{path}: mission.name: expected a string, got {str(name)[:40]!r}")
+    lists = [a for a, v in meta.get("axes", {}).items() if not isinstance(v, list)]
+    if lists:
+        raise ConfigError(f"{path}: axes: {lists[0][:40]!r}: expected a list of values")
     unknown = [a for a in meta.get("swept", ()) if a not in AXES]
     if unknown:
         raise ConfigError(f"{path}: swept: {unknown[0][:40]!r} is not an axis ({', '.join(AXES)})")

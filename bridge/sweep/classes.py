@@ -40,15 +40,32 @@ class Classes:
             v = getattr(self, f.name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not (0.0 < v < math.inf):
                 raise ConfigError(f"classes.{f.name}: must be a positive number, got {v!r}")
-        if self.diverged_rms_m <= self.clean_rms_m:
-            raise ConfigError("classes.diverged_rms_m: must be larger than classes.clean_rms_m")
+        why = _order_problem(self.clean_rms_m, self.diverged_rms_m)
+        if why:
+            raise ConfigError(f"classes.diverged_rms_m: {why}")
 
     @classmethod
     def from_table(cls, t: Table) -> Classes:
         d = cls()
-        c = cls(**{f.name: t.number(f.name, getattr(d, f.name), lo=0.0, lo_open=True, hi=1e9) for f in fields(cls)})
+        values = {f.name: t.number(f.name, getattr(d, f.name), lo=0.0, lo_open=True, hi=1e9) for f in fields(cls)}
+        # the key the file gave (clean_rms_m given alone can clash with diverged_rms_m's default), the file named
+        key = "clean_rms_m" if t.has("clean_rms_m") and not t.has("diverged_rms_m") else "diverged_rms_m"
+        why = _order_problem(values["clean_rms_m"], values["diverged_rms_m"], key,
+                             not t.has("clean_rms_m" if key == "diverged_rms_m" else "diverged_rms_m"))
+        if why:
+            raise t.error(key, why)
         t.done()
-        return c
+        return cls(**values)
+
+
+def _order_problem(clean: float, diverged: float, key: str = "diverged_rms_m", default: bool = False) -> str | None:
+    """Why these thresholds cannot class a cell (a diverged RMS at or below the clean one), said of ``key``; None if
+    they can. ``default``: the other threshold is its default, not given."""
+    if diverged > clean:
+        return None
+    than, other, v, got = (("larger", "clean_rms_m", clean, diverged) if key == "diverged_rms_m"
+                           else ("smaller", "diverged_rms_m", diverged, clean))
+    return f"must be {than} than classes.{other} ({v:g} m{', its default' if default else ''}), got {got:g} m"
 
 
 def classify(row: Mapping[str, Any], classes: Classes) -> str:

@@ -33,6 +33,7 @@ from typing import Any
 
 from bridge.autopilot.estimator import ESTIMATOR_KINDS
 from bridge.record.mplsetup import pyplot
+from bridge.record.runlog import check_replaceable
 from bridge.sweep.cells import (
     CELLS_CSV,
     FAILED,
@@ -40,6 +41,7 @@ from bridge.sweep.cells import (
     SWEEP_JSON,
     UNRECORDED,
     broke_policy,
+    grid_values,
     read_cells,
     read_sweep_json,
     seeds_alike,
@@ -154,7 +156,7 @@ def load_sweep_dir(path: str | Path) -> tuple[list[dict[str, Any]], dict[str, An
                               f"\"interrupted\" saying whether its search ended); bsst report rebuilds a sweep's "
                               f"report from its {CELLS_CSV}")
     meta = read_sweep_json(meta_path) if meta_path.exists() else {}
-    rows = read_cells(p / CELLS_CSV, legacy=legacy_values(meta))  # an older sweep's cells.csv is read too
+    rows = read_cells(p / CELLS_CSV, legacy=legacy_values(meta), meta=meta)  # an older sweep's cells.csv is read too
     if not meta:
         meta = {"mission": {"name": p.name}, "mode": "?", "swept": [a for a in AXES if len(_values(rows, a)) > 1],
                 "classes": {}}
@@ -166,18 +168,25 @@ def rebuild(path: str | Path, plots: bool = True) -> Path:
     rows, meta = load_sweep_dir(path)
     if not rows:
         raise ConfigError(f"{Path(path) / CELLS_CSV}: no rows")
+    check_report_files(Path(path), plots, said=str(path), fix="move it away")
     return write_report(Path(path), rows, meta, plots=plots)
+
+
+REPORT_MD, REPORT_TMP = "report.md", ".report.md.tmp"
+
+
+def check_report_files(path: Path, plots: bool, said: str | None = None, fix: str | None = None) -> None:
+    """Refuse, before anything is written, a report in sweep directory ``path`` whose ``report.md`` (or its temporary
+    name, or with ``plots`` a heat map's ``map_*.png``) is taken by what no report wrote, a directory say: the check
+    of ``--overwrite`` (:func:`~bridge.record.runlog.check_replaceable`; ``said`` and ``fix`` its words)."""
+    taken = [p for p in sorted(path.iterdir()) if p.name in (REPORT_MD, REPORT_TMP) or (plots and p.match("map_*.png"))]
+    check_replaceable(path, taken, said, fix)
 
 
 def grid_size(meta: Mapping[str, Any]) -> int | None:
     """How many cells the sweep's grid has (its ``sweep.json``'s axes and seeds; None where it does not say)."""
-    axes, seeds = meta.get("axes"), meta.get("seeds")
-    if not isinstance(axes, Mapping) or not isinstance(seeds, list) or not seeds:
-        return None
-    n = len(seeds)
-    for a in AXES:
-        n *= len(axes.get(a) or ()) or 1
-    return n
+    grid = grid_values(meta)
+    return None if grid is None else math.prod(len(v) for v in grid.values())
 
 
 def incomplete(path: Path, rows: Sequence[Any], meta: Mapping[str, Any]) -> str | None:
@@ -294,8 +303,8 @@ def write_report(path: Path, rows: Sequence[Mapping[str, Any]], meta: Mapping[st
         lines += ["", "## Reproducing a row", "",
                   "Each row of `cells.csv` is one offline flight of `mission.toml` (in this directory); for example "
                   "the first one:", "", "```sh", reproduce(rows[0], swept), "```", ""]
-    out = path / "report.md"
-    tmp = path / ".report.md.tmp"
+    out = path / REPORT_MD
+    tmp = path / REPORT_TMP
     tmp.write_text("\n".join(lines))
     tmp.replace(out)
     return out

@@ -45,6 +45,7 @@ from missions import Mission, load_mission
 from missions.mission import is_plan_file, law_spec_from, law_spec_problem, mission_path
 from params import ConfigError, Table, finite_float, load_toml, show
 
+JOBS_RANGE = (1, 1024)  # cores a sweep or a margin flies on: a sweep file's jobs and the --jobs flag alike
 MAX_CELLS = 10_000  # cells a sweep flies unless told more (max_cells): 48 cells of the 30 s sine take 15 s on 2
 # cores, so 10^4 take about an hour; 10^6 would take days, which is a typo far more often than a plan
 
@@ -188,7 +189,7 @@ def load_sweep(path: str | Path) -> Sweep:
         raise t.error("mission", f"no such file {mpath}")
     mission = load_mission(mpath)
     mode = t.string("mode", "offline", choices=MODES)
-    jobs = t.integer("jobs", 0, lo=0, hi=1024) or None
+    jobs = t.integer("jobs", lo=JOBS_RANGE[0], hi=JOBS_RANGE[1]) if t.has("jobs") else None  # absent: all cores
     max_cells = t.integer("max_cells", MAX_CELLS, lo=1, hi=10**9)
     seeds_raw = t.raw("seeds", 1)
     if isinstance(seeds_raw, list):
