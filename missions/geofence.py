@@ -16,6 +16,7 @@ a breach by GF_ACTION (Hold by default: bridge.autopilot.fencewatch); the run sa
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -181,4 +182,7 @@ def _local(home: Home, lat: Any, lon: Any) -> list[float]:
         raise ValueError(f"latitude {show(lat) if la is None else f'{la:g}'}, "
                          f"longitude {show(lon) if lo is None else f'{lo:g}'}: not a place on earth")
     x, y, _ = home.paper(la, lo, home.alt)
+    if max(abs(x), abs(y)) > COORD_M:  # said in the plan's own terms (it was the metres it became)
+        raise ValueError(f"latitude {la:g}, longitude {lo:g}: {math.hypot(x, y) / 1000.0:.0f} km from the plan's "
+                         f"home; a fence lies within {COORD_M / 1000.0:g} km of it")
     return [x, y]

@@ -139,6 +139,12 @@ def test_a_malformed_plan_fence_is_one_error_naming_the_file_and_key(tmp_path: P
         load_mission(bad)
     assert str(e.value) == (f"{bad}: geoFence.polygons[0]: polygon: expected 3 to 1000 points [lat, lon], "
                             "got [[47.4, 8.5], [47.4, 8.6]]")
+    far = [[48.397, 8.545], [48.398, 8.545], [48.398, 8.546]]  # a degree north of the L's home: 111 km
+    bad = fenced_l(tmp_path, {"polygons": [{"inclusion": True, "polygon": far}]}, "far.plan")
+    with pytest.raises(ConfigError) as e:  # said in the plan's terms: it quoted the metres, under a key "points"
+        load_mission(bad)
+    assert str(e.value) == (f"{bad}: geoFence.polygons[0]: latitude 48.397, longitude 8.545: 111 km from the plan's "
+                            "home; a fence lies within 100 km of it")
     for table, typo, key in (("geofence", "zone", "zones"), ("rally", "point", "points")):
         with pytest.raises(ConfigError) as e:
             mission_from_table({"duration_s": 1.0, "trajectory": {"kind": "sine"}, table: {typo: []}}, "m.toml")
@@ -161,7 +167,9 @@ def test_a_plans_rally_points_are_read_about_its_home_and_kept_in_mission_toml(t
     plan.write_text(json.dumps(data))
     with pytest.raises(ConfigError) as e:
         load_mission(plan)
-    assert f"{plan}: rallyPoints.points: point 1: expected [x, y], finite, within 100 m of the home" in str(e.value)
+    assert str(e.value) == (f"{plan}: rallyPoints.points[1]: latitude {l_latlon(150.0, 0.0)[0]:g}, longitude "
+                            f"{l_latlon(150.0, 0.0)[1]:g}: 150 m from the plan's home; rally points lie within 100 m "
+                            "of it")  # the plan's own terms (it said "expected [x, y]" of the metres it became)
     with pytest.raises(ConfigError) as e:
         mission_from_table({"duration_s": 1.0, "trajectory": {"kind": "sine"}, "rally": {"points": [[1.0]]}}, "m.toml")
     assert str(e.value).startswith("m.toml: rally.points: point 0: expected [x, y]"), str(e.value)

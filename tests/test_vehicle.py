@@ -354,6 +354,7 @@ def test_mavsdk_finds_reads_arms_disarms(tmp_path):
     (["vehicle", "--listen", "nowhere"], "--listen"),
     (["vehicle", "--gcs", "127.0.0.1:notaport"], "--gcs"),
     (["vehicle", "--speed", "-1"], "--speed"),
+    (["vehicle", "--realtime", "--speed", "3"], "--speed"),  # as bsst sitl refuses it (it was taken)
     (["vehicle", "--instance", "10"], "--instance"),
     (["vehicle", "--home", "47,8"], "--home"),
     (["vehicle", "--controller-id", "200"], "--controller-id"),

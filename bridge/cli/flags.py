@@ -340,7 +340,7 @@ def yes_no(flag: str) -> Callable[[str], bool]:
     def conv(text: str) -> bool:
         v = words.get(text.strip().lower())
         if v is None:
-            raise argparse.ArgumentTypeError(f"{flag} takes true or false, got {text!r}")
+            raise argparse.ArgumentTypeError(f"{flag} takes true or false (or yes/no, on/off, 1/0), got {text!r}")
         return v
 
     return conv

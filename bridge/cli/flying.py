@@ -397,13 +397,15 @@ def cmd_sitl(args: argparse.Namespace) -> int:
 # -- the two sides alone (bsst vehicle, bsst controller) ---------------------------------------------
 def cmd_vehicle(args: argparse.Namespace) -> int:
     """``bsst vehicle``: the simulated vehicle alone."""
-    from bridge.core.clock import lockstep_pace  # lazy: start-up time
+    from bridge.core.clock import lockstep_pace, realtime_speed_problem  # lazy: start-up time
     from bridge.core.flight import at_rest, prepare  # lazy: start-up time
     from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, GCS_PORT, LINK_PORT, parse_address  # lazy
     from bridge.mavlink.telemetry import Home  # lazy: start-up time
     from bridge.nodes.vehicle import VehicleConfig, run_vehicle  # lazy: start-up time
     from bridge.nodes.vehicle.gate import GateConfig  # lazy: start-up time
 
+    if args.realtime and (why := realtime_speed_problem(args.speed)):  # as bsst sitl refuses it
+        raise ConfigError(why)
     if args.gate and args.realtime:
         raise ConfigError("--gate with --realtime: a fleet's shared step clock is lockstep's (real time keeps the "
                           "wall clock)")

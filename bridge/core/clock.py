@@ -43,6 +43,15 @@ AWAIT_MISSION_SPEED = 1.0  # x real time: a ground station's mission, unless --s
 SPEED_RANGE = (0.1, 1000.0)
 
 
+def realtime_speed_problem(speed: float | None) -> str | None:
+    """Why ``--speed`` cannot go with ``--realtime``, or None: a real-time flight runs at the wall clock's pace (the
+    controller keeps its rate on it; a plant paced faster would outrun it)."""
+    if speed is None or speed == 1.0:
+        return None
+    return (f"--speed {speed:g} with --realtime: a real-time flight runs at the wall clock's pace (the controller "
+            "keeps its rate on it, the plant would outrun it); --speed paces lockstep")
+
+
 def speed_problem(speed: float) -> str | None:
     """Why ``speed`` (x real time) cannot pace a lockstep flight, or None: 0 (as fast as it goes) or within
     :data:`SPEED_RANGE`."""

@@ -59,7 +59,7 @@ from pathlib import Path
 from typing import Any
 
 from bridge.autopilot.estimator import compile_estimator
-from bridge.core.clock import lockstep_pace, speed_problem
+from bridge.core.clock import lockstep_pace, realtime_speed_problem, speed_problem
 from bridge.core.flight import Flight, Progress, prepare
 from bridge.core.overrides import Overrides
 from bridge.core.scalar import kernel_cache_on
@@ -94,9 +94,8 @@ def check_options(*, realtime: bool, instance: int | None, gcs: str | None, spee
         None if speed is None else f"expected a number, got {speed!r}"[:200])
     if why:
         raise ConfigError(f"--speed {why}")
-    if realtime and speed is not None and speed != 1.0:  # the controller's schedule is the wall clock's
-        raise ConfigError(f"--speed {speed:g} with --realtime: a real-time flight runs at the wall clock's pace "
-                          "(the controller keeps its rate on it, the plant would outrun it); --speed paces lockstep")
+    if realtime and (why := realtime_speed_problem(speed)):
+        raise ConfigError(why)
     gcs_text = gcs if gcs is not None else (None if instance is None else f"127.0.0.1:{GCS_PORT + instance}")
     if gcs_text is not None and gcs_text.strip().lower() == "none":
         gcs_text = None
