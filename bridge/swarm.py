@@ -157,7 +157,7 @@ def fleet_mission(m: Mission, vehicles: int | Sequence[Any] | None, layout: str 
         raise ConfigError(f"{m.source}: vehicles: the mission has its own [[vehicles]]; --vehicles would replace "
                           "them: give one or the other")
     if isinstance(vehicles, int) and not isinstance(vehicles, bool):
-        specs = formation(vehicles, layout or "line:2")
+        specs = formation(vehicles, "line:2" if layout is None else layout)  # "" refused, not the default
     else:
         specs = tuple(vehicles) if isinstance(vehicles, Sequence) and not isinstance(vehicles, str) else ()
         if not specs or not all(isinstance(v, VehicleSpec) for v in specs) or \

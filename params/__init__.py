@@ -304,6 +304,12 @@ class Table:
             typo = [str(k) for k in self._data if k not in self._used and is_typo_of(str(k), name)]
             if typo:
                 raise self.unknown(typo[0], [name])
+            # the key without its unit (``t`` for ``t_s``): too short for a typing slip, but what was meant
+            stem = name.rsplit("_", 1)[0] if "_" in name else None
+            bare = [str(k) for k in self._data if k not in self._used and str(k) == stem]
+            if bare:
+                where = f"in [{self._prefix}]" if self._prefix else "at the top level"
+                raise self.error(bare[0], f"unknown key {where}; did you mean {name!r} (the unit is in the name)?")
             raise self.error(name, "is required")
         return default
 

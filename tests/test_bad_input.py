@@ -464,6 +464,11 @@ def test_a_flags_value_is_named_as_given_not_as_the_files(files, capsys):
     assert "start in [0, 1e+06], duration in (0, 1e+06]" in line, line
     line = _refused(capsys, ["report", files.root / "gone"], "gone")
     assert "no such directory" in line and not files.out.exists(), line
+    run = files.root / "run"  # a run's directory, not a sweep's (it said "cells.csv: no such file")
+    run.mkdir()
+    (run / "summary.json").write_text("{}")
+    line = _refused(capsys, ["report", run], "summary.json")
+    assert "a run's directory" in line, line
 
 
 @pytest.mark.parametrize("argv, names", [
@@ -472,10 +477,13 @@ def test_a_flags_value_is_named_as_given_not_as_the_files(files, capsys):
     (["margin", "", "--over", "delay_ms"], "the mission: an empty path"), (["report", ""], "the sweep directory"),
     (["link", "fit", ""], "the trace: an empty path"), (["link", "extract", ""], "a source: an empty path"),
     (["vehicle", "--listen", ""], "--listen ''"), (["vehicle", "--gcs", ""], "--gcs ''"),
-    (["controller", "missions/sine.toml", "--vehicle", ""], "--vehicle ''")])
-def test_an_empty_path_or_address_is_refused_as_given(capsys, argv, names):
+    (["controller", "missions/sine.toml", "--vehicle", ""], "--vehicle ''"),
+    (["sim", "missions/sine.toml", "--vehicles", "2", "--formation", ""], "--formation"),
+    (["sim", "missions/sine.toml", "--wind", "5:"], "--wind")])
+def test_an_empty_path_address_or_value_is_refused_as_given(capsys, argv, names):
     """An empty positional path (an unset shell variable) is named as empty; it read as the current folder (".: is
-    a directory"). An empty address is refused; it was taken for the default one, and the vehicle started."""
+    a directory"). An empty address is refused; it was taken for the default one, and the vehicle started. So are
+    an empty ``--formation`` (it flew line:2) and ``--wind 5:``'s empty FROM (it flew from 0 deg)."""
     _refused(capsys, argv, names)
 
 

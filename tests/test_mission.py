@@ -189,6 +189,18 @@ def test_a_choice_and_a_long_key_read_plainly_in_the_message(tmp_path: Path) -> 
     assert len(str(err.value)) < 500 and "(100000 characters): unknown key" in str(err.value), str(err.value)[:200]
 
 
+def test_a_required_key_given_without_its_unit_is_named_as_given(tmp_path: Path) -> None:
+    """``t = 1.0`` in an event, ``duration = 2`` at the top: the key as written, and the one meant (it said the
+    meant key "is required", with no word of the one given)."""
+    body = '[trajectory]\nkind = "sine"\n'
+    with pytest.raises(ConfigError, match=r"events\[0\]\.t: unknown key in \[events\[0\]\]; did you mean 't_s' \(the "
+                                          r"unit is in the name\)\?$"):
+        prepare(_write(tmp_path, 'duration_s = 2.0\n' + body + '[[events]]\nt = 1.0\nkind = "wind"\n'
+                                                                'speed_mps = 3.0\n'))  # (events: read by prepare)
+    with pytest.raises(ConfigError, match=r": duration: unknown key at the top level; did you mean 'duration_s'"):
+        load_mission(_write(tmp_path, "duration = 2.0\n" + body))
+
+
 def test_scripted_missions_are_validated_too() -> None:
     with pytest.raises(ConfigError, match=r"^<python>: duration_s:"):
         Mission(Sine(), duration_s=-1.0)

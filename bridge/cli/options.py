@@ -150,9 +150,9 @@ def add_flight_options(p: argparse.ArgumentParser, vehicle: bool = True, optiona
 
 def wind_flag(text: str) -> tuple[float, float]:
     """``--wind SPEED[:FROM_DEG]``: (m/s, compass degrees it blows from); ranges checked by plant/wind.py."""
-    speed, _, frm = text.partition(":")
+    speed, sep, frm = text.partition(":")
     try:
-        values = (float(speed), float(frm) if frm else 0.0)
+        values = (float(speed), float(frm) if sep else 0.0)  # "5:" is a FROM left out, refused
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected SPEED[:FROM_DEG] (m/s, compass degrees), got {text!r}") from None
     if not (0.0 <= values[0] <= 50.0 and -360.0 <= values[1] <= 360.0):

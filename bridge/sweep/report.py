@@ -155,6 +155,9 @@ def load_sweep_dir(path: str | Path) -> tuple[list[dict[str, Any]], dict[str, An
             raise ConfigError(f"{p}: a `bsst margin` directory ({MARGIN_JSON}, its whole record, "
                               f"\"interrupted\" saying whether its search ended); bsst report rebuilds a sweep's "
                               f"report from its {CELLS_CSV}")
+        if (p / "summary.json").is_file():  # a run's directory (bsst sim / sitl --out): said, not "no cells.csv"
+            raise ConfigError(f"{p}: a run's directory (its summary.json), not a sweep's: bsst report rebuilds a "
+                              f"sweep's report from its {CELLS_CSV}; a run's summary is printed by the run")
     meta = read_sweep_json(meta_path) if meta_path.exists() else {}
     rows = read_cells(p / CELLS_CSV, legacy=legacy_values(meta), meta=meta)  # an older sweep's cells.csv is read too
     if not meta:
