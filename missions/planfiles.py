@@ -144,10 +144,27 @@ def _check_item(source: str, item: Item, auto_continue: bool, null: str | None =
     return item
 
 
+class _DuplicateKey(Exception):
+    """A JSON object that names a key twice (json keeps the last one, silently)."""
+
+
+def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """A JSON object's pairs as a dict, refusing a key given twice (a hand edit: QGroundControl writes each once)."""
+    out: dict[str, Any] = {}
+    for k, v in pairs:
+        if k in out:
+            raise _DuplicateKey(k)
+        out[k] = v
+    return out
+
+
 def read_qgc_plan(text: str, source: str) -> PlanFile:
     """A QGroundControl ``.plan`` file's text: its home, cruise speed and items (refusals named)."""
     try:
-        data = json.loads(text)
+        data = json.loads(text, object_pairs_hook=_unique_keys)
+    except _DuplicateKey as exc:
+        raise ConfigError(f"{source}: not a QGroundControl plan (key {show(exc.args[0])} given twice in one object; "
+                          "JSON would keep the last)"[:300]) from None
     except (json.JSONDecodeError, RecursionError) as exc:
         raise ConfigError(f"{source}: not a QGroundControl plan (not valid JSON: {exc})"[:300]) from None
     except ValueError as exc:  # an integer over Python's limit of digits (json converts with int())

@@ -158,6 +158,17 @@ def test_refusals_name_the_file_the_item_and_its_command(tmp_path: Path, edit, w
         assert w in why
 
 
+def test_a_plan_naming_a_key_twice_is_refused(tmp_path: Path) -> None:
+    """A hand-edited plan with ``"version": 1`` and then ``"version": 2`` in one object: refused, naming the key
+    (JSON keeps the last, so it was refused as "version 2", of a file that also said 1)."""
+    text = BOX_PLAN.read_text()
+    bad = tmp_path / "dup.plan"
+    bad.write_text(text.replace('"fileType": "Plan",', '"fileType": "Plan", "fileType": "Plan",', 1))
+    assert bad.read_text() != text
+    assert refusal(bad) == (f"{bad}: not a QGroundControl plan (key 'fileType' given twice in one object; JSON would "
+                            "keep the last)")
+
+
 def test_waypoint_file_refusals(tmp_path: Path) -> None:
     lines = BOX_WPL.read_text().splitlines()
     bad = tmp_path / "bad.waypoints"

@@ -31,7 +31,7 @@ from bridge.cli.flags import (
     system_id,
     yes_no,
 )
-from bridge.cli.linkflags import add_link_options
+from bridge.cli.linkflags import add_link_options, radio_of
 from bridge.cli.options import (
     add_failsafe_options,
     add_flight_options,
@@ -363,7 +363,7 @@ def add_sitl_commands(sub: Any) -> None:
     p.add_argument("--radio", metavar="FILE", help="lockstep: the down link's states queue on a fleet's one radio "
                                                    "FILE with the other controllers' (bsst sitl --vehicles N "
                                                    "--shared-link makes it)")
-    p.add_argument("--radio-user", type=int_in("--radio-user", 0, 255), default=0, metavar="N",
+    p.add_argument("--radio-user", type=int_in("--radio-user", 0, 255), metavar="N",
                    help="this controller's user number on --radio (its vehicle's place in the fleet, from 0)")
     p.add_argument("--await-mission", action="store_true",
                    help="the MISSION file gives the settings only: wait for a ground station to start the vehicle's "
@@ -455,7 +455,7 @@ def cmd_controller(args: argparse.Namespace) -> int:
                          target_sysid=args.target_sysid, connect_timeout_s=args.timeout, key=_key(args),
                          source_port=args.source_port or 0, await_mission=args.await_mission,
                          start_timeout_s=args.start_timeout,
-                         radio=(args.radio, args.radio_user) if args.radio else None,
+                         radio=radio_of(args),
                          **({"spin_s": args.spin} if args.spin is not None else {}))
     return run_controller(flight, cfg, args.out, args.overwrite)
 

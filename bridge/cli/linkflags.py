@@ -155,3 +155,14 @@ def link_table_from_args(args: argparse.Namespace) -> dict[str, Any]:
         if v is not None:
             out[key] = v
     return out
+
+
+def radio_of(args: argparse.Namespace) -> tuple[str, int] | None:
+    """``--radio FILE`` and ``--radio-user N`` (default 0) as the (file, user) a controller or relay queues on, None
+    without ``--radio``; a ``--radio-user`` without it is refused (it was taken, and did nothing)."""
+    if args.radio:
+        return args.radio, args.radio_user or 0
+    if args.radio_user is not None:
+        raise UsageError("bsst: --radio-user without --radio: it numbers this side among a fleet's one radio's "
+                         "users (bsst sitl --vehicles N --shared-link gives both)")
+    return None

@@ -24,7 +24,7 @@ from bridge.cli.flags import (
     number_in,
     path_given,
 )
-from bridge.cli.linkflags import add_link_options
+from bridge.cli.linkflags import add_link_options, radio_of
 from bridge.cli.options import overrides_from_args
 from params import ConfigError, inputs_read
 
@@ -198,7 +198,7 @@ def add_relay_command(sub: Any) -> None:
     p.add_argument("--radio", metavar="FILE", help="share each direction's bandwidth and queue with other relays "
                                                    "through this radio file (a fleet's one radio in real time: "
                                                    "bsst sitl --vehicles N --shared-link --realtime makes it)")
-    p.add_argument("--radio-user", type=int_in("--radio-user", 0, 255), default=0, metavar="N",
+    p.add_argument("--radio-user", type=int_in("--radio-user", 0, 255), metavar="N",
                    help="this relay's user number on --radio (its vehicle's place in the fleet, from 0)")
     add_link_options(p, controller=False)  # the relay models the link; compensation and guards are the controller's
     p.set_defaults(func=cmd_relay)
@@ -239,7 +239,7 @@ def cmd_relay(args: argparse.Namespace) -> int:
         relay = Relay(listen, target, settings, listen_direction=args.listen_direction,
                       mission_clock=args.mission_clock, client=client, on_client=learned,
                       back_port=args.back_port or 0, stats_path=args.stats,
-                      radio=(args.radio, args.radio_user) if args.radio else None)
+                      radio=radio_of(args))
     except OSError as exc:
         where = f"--listen {args.listen}" + (f" or --back-port {args.back_port}" if args.back_port else "")
         raise ConfigError(f"{where}: cannot bind ({exc.strerror or exc})") from None
