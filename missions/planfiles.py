@@ -27,7 +27,7 @@ from typing import Any
 
 from missions.geodetic import Home
 from missions.geofence import geofence_from_plan
-from params import ConfigError, finite_float, show, too_many_digits
+from params import ConfigError, finite_float, json_show, show, too_many_digits
 
 NAV_WAYPOINT, NAV_LOITER_TIME, NAV_RETURN_TO_LAUNCH, NAV_LAND, NAV_TAKEOFF, DO_CHANGE_SPEED = 16, 19, 20, 21, 22, 178
 SUPPORTED = {NAV_WAYPOINT: "NAV_WAYPOINT", NAV_LOITER_TIME: "NAV_LOITER_TIME", NAV_RETURN_TO_LAUNCH:
@@ -102,7 +102,7 @@ def _number(v: Any) -> float:
         raise ValueError(f"expected a number or null, got {v!r}"[:80])
     f = finite_float(v)
     if f is None:
-        raise ValueError(f"must be a finite number or null, got {show(v)}")
+        raise ValueError(f"must be a finite number or null, got {json_show(v)}")
     return f
 
 
@@ -182,7 +182,7 @@ def read_qgc_plan(text: str, source: str) -> PlanFile:
         lat, lon, alt = (_number(v) for v in home)  # type: ignore[union-attr]
     except (TypeError, ValueError):
         raise ConfigError(f"{source}: mission.plannedHomePosition: expected [lat, lon, alt] of finite numbers, "
-                          f"got {show(home)}") from None
+                          f"got {json_show(home)}") from None
     check_home(source, lat, lon, alt, "mission.plannedHomePosition")
     speeds = {}
     for key in ("hoverSpeed", "cruiseSpeed"):  # the multicopter's, flown; the fixed wing's, checked only
@@ -216,7 +216,7 @@ def _plan_item(source: str, index: int, x: Any) -> Item:
     if not all(isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= top
                for v, top in ((cmd, MAX_COMMAND), (frame, MAX_FRAME))):
         raise ConfigError(f"{source}: {label}: command and frame must be integers in [0, {MAX_COMMAND}] and "
-                          f"[0, {MAX_FRAME}], got {show(cmd)} and {show(frame)}")
+                          f"[0, {MAX_FRAME}], got {json_show(cmd)} and {json_show(frame)}")
     try:
         if not isinstance(params, list) or len(params) != 7:
             raise ValueError("params: expected a list of 7")
@@ -232,7 +232,7 @@ def _plan_item(source: str, index: int, x: Any) -> Item:
     auto = x.get("autoContinue", True)
     if not isinstance(auto, bool):
         raise ConfigError(f"{source}: {label} ({command_name(cmd)}): autoContinue: expected true or false, "
-                          f"got {show(auto)}")
+                          f"got {json_show(auto)}")
     return _check_item(source, item, auto, "null")
 
 

@@ -16,7 +16,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from missions.geodetic import Home
-from params import ConfigError, Table, finite_float, show
+from params import ConfigError, Table, finite_float, json_show, show
 
 MAX_RALLY = 100  # points; QGroundControl plans hold a handful
 Point = tuple[float, float]
@@ -53,7 +53,7 @@ def rally_from_plan(raw: Any, home: Home, source: str, radius_m: float) -> tuple
         lat, lon, alt = (finite_float(v) for v in p) if isinstance(p, list) and len(p) == 3 else (None,) * 3
         if lat is None or lon is None or alt is None:
             raise ConfigError(f"{source}: rallyPoints.points[{i}]: expected [lat, lon, alt], finite numbers, "
-                              f"got {show(p)}")
+                              f"got {json_show(p)}")
         if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
             raise ConfigError(f"{source}: rallyPoints.points[{i}]: latitude {lat:g}, longitude {lon:g}: "
                               "not a place on earth")

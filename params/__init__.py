@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import difflib
 import functools
+import json
 import math
 import os
 import re
@@ -429,6 +430,14 @@ def show(v: Any) -> str:
         return f"an integer of {len(str(abs(v)))} digits"
     text = repr(v)
     return text if len(text) <= 40 else text[:37] + "..."
+
+
+def json_show(v: Any) -> str:
+    """A value read from a JSON file (a QGroundControl plan) in a message: JSON's own words for its constants
+    (``null``, ``true``, ``false``: it read ``None``), anything else as :func:`show` shows it."""
+    if v is None or isinstance(v, bool):
+        return json.dumps(v)
+    return show(v)
 
 
 def _printable(text: str, cap: int | None = None) -> str:

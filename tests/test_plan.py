@@ -148,6 +148,8 @@ def test_a_slower_cruise_is_a_longer_flight() -> None:
     (lambda d: d.update(version="1"), ['version: expected the number 1, got the string "1"']),
     (lambda d: d.update(version=True), ["version: expected the number 1, got the boolean true"]),
     (lambda d: d.update(version=2), ["version: version 2 not supported (1 is)"]),
+    (lambda d: d["mission"]["items"][1].update(command=None), ["got null and"]),  # JSON's word (it said None)
+    (lambda d: d["mission"].update(plannedHomePosition=None), ["plannedHomePosition", "got null"]),
     (lambda d: d["mission"].update(version="2"), ['mission.version: expected the number 2, got the string "2"']),
 ])
 def test_refusals_name_the_file_the_item_and_its_command(tmp_path: Path, edit, words: list[str]) -> None:
