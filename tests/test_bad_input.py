@@ -399,6 +399,16 @@ def test_jobs_has_one_range_in_a_sweep_file_and_on_the_command_line(files, jobs)
         except (ConfigError, UsageError) as exc:
             said.append(str(exc).replace("--jobs must", "must").split(": ")[-1])
     assert said == [jobs] * 3 if 1 <= jobs <= 1024 else said == [f"must be in [1, 1024], got {jobs}"] * 3, said
+    if not 1 <= jobs <= 1024:  # a Python call's jobs= too (0 flew on every core, -1 was the pool's ValueError)
+        from bridge.sweep import Grid
+        from bridge.sweep import sweep as sweep_call
+        from bridge.sweep.margin import margin, parse_until
+        from missions import load_mission
+
+        for call in (lambda: sweep_call(files.mission, Grid(delay_ms=(0.0,)), jobs=jobs),
+                     lambda: margin(load_mission(files.mission), "delay_ms", parse_until("rms=1"), jobs=jobs)):
+            with pytest.raises(ConfigError, match=rf"^jobs: must be a whole number in \[1, 1024\].*got {jobs}$"):
+                call()
 
 
 def load_toml_text(text: str) -> dict[str, Any]:

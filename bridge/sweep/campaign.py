@@ -47,7 +47,7 @@ from bridge.sweep.executors import (
 from bridge.sweep.grid import Grid
 from bridge.sweep.inputs import check_inputs, input_hashes
 from bridge.sweep.report import check_report_files, write_report
-from bridge.sweep.spec import Sweep
+from bridge.sweep.spec import Sweep, check_jobs
 from missions import Mission, load_mission
 from params import ConfigError, dump_toml, look_up, read_regular_file, reads_inputs
 
@@ -165,6 +165,7 @@ def run_sweep(
     spec.validate()
     all_cells = spec.cells()
     order = {c.key(): i for i, c in enumerate(all_cells)}
+    check_jobs(jobs)
     jobs = jobs or spec.jobs or os.cpu_count() or 1
     results: dict[tuple[Any, ...], dict[str, Any]] = {}
     path: Path | None = None

@@ -66,6 +66,7 @@ from bridge.sweep.cells import FAILED, broke_policy, seeds_alike
 from bridge.sweep.classes import CLASSES, Classes, classify
 from bridge.sweep.executors import Report, engine_for, run_batch, run_cell, run_local
 from bridge.sweep.grid import LINK_AXES, RANGES, Cell, cell_flight, link_trace, mission_value, noise_problem
+from bridge.sweep.spec import check_jobs
 from controller.law import LawError, is_builtin
 from missions import Mission
 from params import ConfigError
@@ -219,6 +220,7 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
     :class:`MarginInterrupted`, carrying the content of what was flown."""
     if over not in OVER:
         raise ConfigError(f"--over must be one of {', '.join(OVER)}, got {over!r}")
+    check_jobs(jobs)
     least, most = resolution_range(over)
     if not least <= resolution <= most:  # also refuses nan
         raise ConfigError(f"--resolution must be in [{least:.3g}, {most:g}] for --over {over} (its range "

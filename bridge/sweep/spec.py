@@ -46,6 +46,15 @@ from missions.mission import is_plan_file, law_spec_from, law_spec_problem, miss
 from params import ConfigError, Table, finite_float, load_toml, show
 
 JOBS_RANGE = (1, 1024)  # cores a sweep or a margin flies on: a sweep file's jobs and the --jobs flag alike
+
+
+def check_jobs(jobs: object) -> None:
+    """ConfigError unless ``jobs`` (a Python call's ``jobs=``) is None (every core) or a whole number in
+    :data:`JOBS_RANGE`, as the sweep file's key and ``--jobs`` are (0 meant every core, -1 a ValueError of the
+    process pool's)."""
+    lo, hi = JOBS_RANGE
+    if jobs is not None and (isinstance(jobs, bool) or not isinstance(jobs, int) or not lo <= jobs <= hi):
+        raise ConfigError(f"jobs: must be a whole number in [{lo}, {hi}] (None: every core), got {jobs!r}"[:200])
 MAX_CELLS = 10_000  # cells a sweep flies unless told more (max_cells): 48 cells of the 30 s sine take 15 s on 2
 # cores, so 10^4 take about an hour; 10^6 would take days, which is a typo far more often than a plan
 
