@@ -272,20 +272,21 @@ def _wpl_row(source: str, index: int, line: int, text: str) -> tuple[int, int, i
         vals = [_wpl_number(name, word) for name, word in zip(PARAM_NAMES, f[4:11], strict=True)]
     except ValueError as exc:
         raise ConfigError(f"{source}: line {line}: {exc}"[:300]) from None
-    for name, v, word in zip(PARAM_NAMES, vals, f[4:11], strict=True):
-        if math.isinf(v):
-            raise ConfigError(f"{source}: line {line}: {name} {show(word)}: must be a finite number or nan")
     if idx != index:
         raise ConfigError(f"{source}: line {line}: index {idx}, expected {index} (items are numbered from 0)")
     return line, frame, cmd, vals, auto
 
 
 def _wpl_number(name: str, word: str) -> float:
-    """A number field of a waypoint file (param1..4, latitude, longitude, altitude), its name in the error."""
+    """A number field of a waypoint file (param1..4, latitude, longitude, altitude): a number or nan (not given:
+    QGroundControl's NaN), never infinite; its name in the error."""
     try:
-        return float(word)
+        v = float(word)
     except ValueError:
         raise ValueError(f"{name} {show(word)}: expected a number (or nan: not given)") from None
+    if math.isinf(v):
+        raise ValueError(f"{name} {show(word)}: must be a finite number or nan")
+    return v
 
 
 def _wpl_int(word: str) -> int:

@@ -58,10 +58,10 @@ def rally_from_plan(raw: Any, home: Home, source: str, radius_m: float) -> tuple
             raise ConfigError(f"{source}: rallyPoints.points[{i}]: latitude {lat:g}, longitude {lon:g}: "
                               "not a place on earth")
         x, y, _ = home.paper(lat, lon, home.alt)
-        if math.hypot(x, y) > radius_m:  # said in the plan's own terms (it was the metres it became)
+        away = math.hypot(x, y)
+        if away > radius_m:  # said in the plan's own terms (it was the metres it became)
             raise ConfigError(f"{source}: rallyPoints.points[{i}]: latitude {lat:g}, longitude {lon:g}: "
-                              f"{math.hypot(x, y):.0f} m from the plan's home; rally points lie within {radius_m:g} m "
-                              "of it")
+                              f"{away:.0f} m from the plan's home; rally points lie within {radius_m:g} m of it")
         local.append([x, y])
     if not local:
         return ()

@@ -90,10 +90,11 @@ def check_options(*, realtime: bool, instance: int | None, gcs: str | None, spee
     ground-station address its vehicles send to: ``gcs``, else 127.0.0.1:14550 + instance (None: no GCS link)."""
     if instance is not None and not (isinstance(instance, int) and 0 <= instance <= 9):
         raise ConfigError(f"--instance must be in [0, 9], got {instance!r}")
-    why = speed_problem(speed) if isinstance(speed, (int, float)) and not isinstance(speed, bool) else (
-        None if speed is None else f"expected a number, got {speed!r}"[:200])
-    if why:
-        raise ConfigError(f"--speed {why}")
+    if speed is not None:
+        number = isinstance(speed, (int, float)) and not isinstance(speed, bool)
+        why = speed_problem(speed) if number else f"expected a number, got {speed!r}"[:200]
+        if why:
+            raise ConfigError(f"--speed {why}")
     if realtime and (why := realtime_speed_problem(speed)):
         raise ConfigError(why)
     gcs_text = gcs if gcs is not None else (None if instance is None else f"127.0.0.1:{GCS_PORT + instance}")

@@ -55,6 +55,8 @@ def check_jobs(jobs: object) -> None:
     lo, hi = JOBS_RANGE
     if jobs is not None and (isinstance(jobs, bool) or not isinstance(jobs, int) or not lo <= jobs <= hi):
         raise ConfigError(f"jobs: must be a whole number in [{lo}, {hi}] (None: every core), got {jobs!r}"[:200])
+
+
 MAX_CELLS = 10_000  # cells a sweep flies unless told more (max_cells): 48 cells of the 30 s sine take 15 s on 2
 # cores, so 10^4 take about an hour; 10^6 would take days, which is a typo far more often than a plan
 
