@@ -87,6 +87,11 @@ class PlanFile:
     cruise_m_s: float | None = None
     fence: Any = None  # missions.geofence.Geofence of a .plan's geoFence (None: none drawn)
     rally: Any = None  # a .plan's rallyPoints object, as read (missions.rally.rally_from_plan reads it)
+    nan_word: str = "nan"  # how the file writes a value not given: a .plan's JSON null, a waypoint file's nan
+
+    def shown(self, v: float) -> str:
+        """A value of an item as its file writes it (NaN as ``nan_word``)."""
+        return self.nan_word if math.isnan(v) else f"{v:g}"
 
     def refuse(self, item: Item, why: str) -> ConfigError:
         """The refusal of ``item``: file, index, command, why."""
@@ -199,7 +204,7 @@ def read_qgc_plan(text: str, source: str) -> PlanFile:
     items = tuple(_plan_item(source, i, x) for i, x in enumerate(raw))
     fence = geofence_from_plan(data.get("geoFence"), Home(lat, lon, alt), source)
     return PlanFile(source, (lat, lon, alt), items, hover if math.isfinite(hover) else None, fence,
-                    data.get("rallyPoints"))
+                    data.get("rallyPoints"), "null")
 
 
 def _plan_item(source: str, index: int, x: Any) -> Item:

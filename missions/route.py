@@ -107,7 +107,8 @@ def _metres(v: float, decimals: int) -> str:
 
 def _finite(plan: PlanFile, item: Item, *vals: float) -> None:
     if not all(math.isfinite(v) for v in vals):
-        raise plan.refuse(item, f"coordinates must be numbers, got lat {item.lat}, lon {item.lon}, alt {item.alt}")
+        raise plan.refuse(item, "coordinates must be numbers, got "
+                                 f"lat {plan.shown(item.lat)}, lon {plan.shown(item.lon)}, alt {plan.shown(item.alt)}")
 
 
 def _local(plan: PlanFile, home: Home, item: Item, envelope_m: float) -> tuple[float, float, float]:

@@ -104,7 +104,7 @@ def test_a_slower_cruise_is_a_longer_flight() -> None:
     (lambda d: d["mission"]["items"][2].update(command=177), ["mission.items[2]", "DO_JUMP (177)", "not supported"]),
     (lambda d: d["mission"]["items"][3].update(command=17), ["mission.items[3]", "NAV_LOITER_UNLIM (17)"]),
     (lambda d: d["mission"]["items"][2]["params"].__setitem__(4, None), ["mission.items[2]", "NAV_WAYPOINT (16)",
-                                                                        "coordinates"]),
+                                                                        "coordinates", "got lat null, lon "]),
     (lambda d: d["mission"]["items"][2]["params"].__setitem__(4, 47.5), ["mission.items[2]", "NAV_WAYPOINT (16)",
                                                                         "envelope"]),
     (lambda d: d["mission"]["items"][2].update(frame=10), ["mission.items[2]", "GLOBAL_TERRAIN_ALT (10)"]),

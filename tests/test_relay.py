@@ -225,6 +225,14 @@ def test_stats_never_replaces_a_file_unasked_nor_one_the_relay_reads(tmp_path: P
     assert json.loads(notes.read_text())["final"] is True
 
 
+def test_the_python_relay_refuses_a_stats_path_that_names_no_file(tmp_path: Path) -> None:
+    """``Relay(stats_path="")`` or a directory: a ValueError naming it, before a socket is bound (the snapshot
+    relay was made, and every snapshot's write failed silently)."""
+    for bad in ("", tmp_path):
+        with pytest.raises(ValueError, match="stats_path .*: expected a file to write, not a directory"):
+            Relay(("127.0.0.1", 0), ("127.0.0.1", 1), stats_path=bad)
+
+
 def test_busy_port_is_a_clear_error(capsys) -> None:
     from bridge.cli import main
 

@@ -128,6 +128,8 @@ class Relay:
                  mission_clock: bool = False, client: Address | None = None,
                  on_client: Callable[[Address], None] | None = None, back_port: int = 0,
                  stats_path: str | Path | None = None, radio: tuple[str | Path, int] | None = None) -> None:
+        if stats_path is not None and (not str(stats_path) or Path(stats_path).is_dir()):  # checked before a socket
+            raise ValueError(f"stats_path {str(stats_path)!r}: expected a file to write, not a directory")
         link = link or LinkSettings()
         self.jitter_capped = link.jitter_capped()  # each jitter the delay capped: in its summary (docs/links.md)
         self.mission_clock = mission_clock
