@@ -184,8 +184,12 @@ def test_mavsdk_flies_a_plan_file_through_await_mission_as_the_file_flies(tmp_pa
     sysid = n + 1
     reached = [m.seq for m in _tlog(out / "vehicle.tlog", sysid, ["MISSION_ITEM_REACHED"])]
     assert list(dict.fromkeys(reached)) == list(range(5)), reached  # each in order (then PX4's repeats)
-    current = [m.seq for m in _tlog(out / "vehicle.tlog", sysid, ["MISSION_CURRENT"])]
+    currents = _tlog(out / "vehicle.tlog", sysid, ["MISSION_CURRENT"])
+    current = [m.seq for m in currents]
     assert current[-1] == 4 and current == sorted(current), current
+    # the mission flown in AUTO.MISSION: PX4's mission_mode "in mission" whenever it was ACTIVE; COMPLETE at the end
+    assert {m.mission_mode for m in currents if m.mission_state == mavlink.MISSION_STATE_ACTIVE} == {1}, currents
+    assert currents[-1].mission_state == mavlink.MISSION_STATE_COMPLETE
     modes = {(m.custom_mode, bool(m.base_mode & 128)) for m in _tlog(out / "vehicle.tlog", sysid, ["HEARTBEAT"])}
     assert ((4 << 16) | (4 << 24), True) in modes  # AUTO.MISSION, armed
     # its end landing disarmed, it shows AUTO.MISSION again, as PX4 stays in Mission (docs/ground-station.md)

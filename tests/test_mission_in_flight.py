@@ -267,3 +267,65 @@ def test_an_upload_after_the_mission_ended_in_hold_is_taken_while_armed_as_on_px
     assert len(said) > 200, said
     log = "\n".join(vehicle.lines)
     assert "uploaded 3 items" in log and "disarmed" not in log, vehicle.lines[-20:]
+
+
+def test_mission_current_says_no_mission_the_mission_mode_and_a_pause_as_px4_main():
+    """MISSION_CURRENT as PX4 main sends it (mavlink_mission.cpp ``send_mission_current``), on a vehicle in this
+    process awaiting a mission: without a mission it is sent too, total UINT16_MAX and NO_MISSION (it was not sent:
+    PX4 1.14's silence); mission_mode is 1 while a mode that flies items shows (AUTO.MISSION, LAND: PX4's AUTO_LAND
+    too), 2 otherwise (it was 0, unknown); once the mission's flight has left AUTO.MISSION after reaching an item
+    (a ground station's HOLD) it is PAUSED, as PX4's (it said ACTIVE); cleared, NO_MISSION again."""
+    from bridge.core.flight import prepare
+    from bridge.mavlink.endpoint import parse_address
+    from bridge.mavlink.telemetry import MISSION_MODE_IN_MISSION, MISSION_MODE_SUSPENDED, NO_MISSION_TOTAL
+    from bridge.nodes.vehicle import Vehicle, VehicleConfig
+    from missions import Mission, Sine
+    from tests.sitlkit import GcsSocket
+
+    gcs = GcsSocket()
+    v = Vehicle(prepare(Mission(Sine(), duration_s=5.0, name="current")),
+                VehicleConfig(parse_address("udpin:127.0.0.1:0"), parse_address(gcs.url), await_mission=True))
+
+    def current() -> tuple[int, int, int, int]:
+        m = v.streaming.message(M.MAVLINK_MSG_ID_MISSION_CURRENT)[0]
+        return m.seq, m.total, m.mission_state, m.mission_mode
+
+    def command(cmd: int, *params: float) -> int:
+        msg = M.MAVLink_command_long_message(1, 1, cmd, 0, *params, *[0.0] * (7 - len(params)))
+        return gcs.exchange(v, msg, "COMMAND_ACK").result
+
+    suspended, in_mission = MISSION_MODE_SUSPENDED, MISSION_MODE_IN_MISSION
+    try:
+        assert current() == (0, NO_MISSION_TOTAL, M.MISSION_STATE_NO_MISSION, suspended)
+        items = [M.MAVLink_mission_item_int_message(1, 1, *_fields(it)) for it in _items()]
+        gcs.exchange(v, M.MAVLink_mission_count_message(1, 1, 3, 0), "MISSION_REQUEST_INT")
+        for it in items[:2]:
+            gcs.exchange(v, it, "MISSION_REQUEST_INT")
+        assert gcs.exchange(v, items[2], "MISSION_ACK").type == M.MAV_MISSION_ACCEPTED
+        assert current() == (0, 3, M.MISSION_STATE_NOT_STARTED, suspended)
+        assert command(M.MAV_CMD_DO_SET_MODE, 1, 4, 4) == M.MAV_RESULT_ACCEPTED  # AUTO.MISSION, disarmed
+        assert current() == (0, 3, M.MISSION_STATE_NOT_STARTED, in_mission)
+        assert command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1) == M.MAV_RESULT_ACCEPTED  # the start
+        assert current() == (0, 3, M.MISSION_STATE_ACTIVE, in_mission)
+        v.sim.arm()  # the controller's arm, and its flight's first steps: the takeoff's point reached
+        v.missions.flight_armed()
+        goal = v.missions.watch.goals[0]
+        at = (goal.point[0], 0.0, goal.point[1], 0.0, goal.point[2]) + (0.0,) * 7
+        for t in (1.0, 1.0 + goal.hold_s + 0.1):
+            v.missions.flight_step(t, at, True)
+        assert current() == (1, 3, M.MISSION_STATE_ACTIVE, in_mission)
+        assert command(M.MAV_CMD_DO_SET_MODE, 1, 4, 3) == M.MAV_RESULT_ACCEPTED  # HOLD, mid-mission
+        assert current() == (1, 3, M.MISSION_STATE_PAUSED, suspended)
+        assert command(M.MAV_CMD_NAV_LAND) == M.MAV_RESULT_ACCEPTED
+        assert current() == (1, 3, M.MISSION_STATE_ACTIVE, in_mission)
+        gcs.exchange(v, M.MAVLink_mission_clear_all_message(1, 1, M.MAV_MISSION_TYPE_MISSION), "MISSION_ACK")
+        assert current()[1:3] == (NO_MISSION_TOTAL, M.MISSION_STATE_NO_MISSION)
+    finally:
+        v.close()
+        gcs.close()
+
+
+def _fields(it: Any) -> tuple[Any, ...]:
+    """A MISSION_ITEM_INT's fields after its target."""
+    return (it.seq, it.frame, it.command, it.current, it.autocontinue, it.param1, it.param2, it.param3, it.param4,
+            it.x, it.y, it.z, it.mission_type)

@@ -31,7 +31,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from bridge.autopilot.simvehicle import OFFBOARD, SimVehicle
+from bridge.autopilot.simvehicle import LAND, OFFBOARD, TAKEOFF, SimVehicle
 from bridge.autopilot.vehicleevents import Sender
 from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import Endpoint
@@ -212,17 +212,37 @@ class MissionManager:
         self.mission = Mission(self.mission.items, seq)
 
     def current_message(self) -> list[Any]:
-        """MISSION_CURRENT ([] without a mission: PX4 does not broadcast one then)."""
-        return tm.mission_current(self.mission.current, len(self.mission.items), self.mission_state)
+        """MISSION_CURRENT (:meth:`current_fields`)."""
+        return tm.mission_current(*self.current_fields())
+
+    def current_fields(self) -> tuple[int, int, int, int]:
+        """MISSION_CURRENT's seq, total (0: no mission), mission_state and mission_mode."""
+        return self.mission.current, len(self.mission.items), self.mission_state, self.mission_mode
 
     @property
     def mission_state(self) -> int:
-        """MISSION_STATE: ACTIVE once a ground station started the mission (the controller's cue to fly it: AUTO.MISSION
-        selected alone is NOT_STARTED, and the vehicle stays on the ground, as PX4's does) and while it flies,
-        COMPLETE once its last item was reached."""
-        if self.start_requested or (self.watch is not None and not self.watch.done):
+        """MISSION_STATE: NO_MISSION without one; ACTIVE once a ground station started the mission (the controller's
+        cue to fly it: AUTO.MISSION selected alone is NOT_STARTED, and the vehicle stays on the ground) and while it
+        flies; PAUSED once its flight left the modes that fly items (:attr:`mission_mode`) after reaching one, as
+        PX4's (a ground station's HOLD; a failsafe's or a ground station's LAND stays ACTIVE); COMPLETE once its last item was reached. PX4 main says ACTIVE from the mode alone, even disarmed
+        on the ground: docs/ground-station.md."""
+        if not self.mission.items:
+            return mavlink.MISSION_STATE_NO_MISSION
+        watch = self.watch
+        if self.start_requested or (watch is not None and not watch.done):
+            if watch is not None and watch.i > 0 and self.mission_mode == tm.MISSION_MODE_SUSPENDED:
+                return mavlink.MISSION_STATE_PAUSED
             return mavlink.MISSION_STATE_ACTIVE
         return mavlink.MISSION_STATE_COMPLETE if self.completed else mavlink.MISSION_STATE_NOT_STARTED
+
+    @property
+    def mission_mode(self) -> int:
+        """MISSION_CURRENT's mission_mode as PX4 sets it: in mission (AUTO.MISSION shown, or TAKEOFF or LAND:
+        PX4's AUTO_TAKEOFF and AUTO_LAND also fly mission items), else suspended."""
+        sim = self.sim
+        if self.shows_mission(sim.armed, sim.mode == OFFBOARD) or sim.mode in (TAKEOFF, LAND):
+            return tm.MISSION_MODE_IN_MISSION
+        return tm.MISSION_MODE_SUSPENDED
 
     # -- the wall clock ---------------------------------------------------------------------------------
     def tick(self, now: float) -> None:

@@ -53,11 +53,10 @@ class Streaming:
     def view(self, own: bool = True) -> VehicleView:
         """The vehicle now, as its telemetry reads it; ``own``: about its local origin (VehicleView.origin)."""
         sim, plant, cfg = self.sim, self.sim.plant, self.cfg
-        mission = self.missions.mission
         mode = MISSION if self.missions.shows_mission(sim.armed, sim.mode == OFFBOARD) else sim.mode
         return VehicleView(sim.published(), self.t(), mode, sim.onboard.target, sim.armed, self.clock.halted,
                            plant.on_ground, plant.omega, self.flight.profile.omega_max, self.load, sim.sensors,
-                           cfg.home, cfg.sysid, (mission.current, len(mission.items), self.missions.mission_state),
+                           cfg.home, cfg.sysid, self.missions.current_fields(),
                            plant.battery, sim.battery_watch.level(plant.battery.remaining) if plant.battery else 0,
                            sim.prearm_refusal, sim.position.ekf_valid, lambda: health_of(sim),
                            (sim.home[0], sim.home[1]) if own else (0.0, 0.0))

@@ -63,7 +63,7 @@ class VehicleView:
     sensors: SensorSuite | None  # None: truth
     home: tm.Home
     sysid: int
-    mission: tuple[int, int, int] = (0, 0, 2)  # the mission's current item, its items, its MISSION_STATE
+    mission: tuple[int, int, int, int] = (0, 0, 1, 0)  # current item, items, MISSION_STATE, mission_mode
     battery: Battery | None = None  # the plant's flight battery ([effects] battery), None: it flies none
     battery_level: int = 0  # its level by the vehicle's BAT_*_THR: 0 none, 1 low, 2 critical, 3 emergency
     # why PX4's pre-arm checks deny an arm now, or None (SimVehicle.prearm_refusal): asked only by SYS_STATUS, which
