@@ -224,8 +224,9 @@ class MissionManager:
         """MISSION_STATE: NO_MISSION without one; ACTIVE once a ground station started the mission (the controller's
         cue to fly it: AUTO.MISSION selected alone is NOT_STARTED, and the vehicle stays on the ground) and while it
         flies; PAUSED once its flight left the modes that fly items (:attr:`mission_mode`) after reaching one, as
-        PX4's (a ground station's HOLD; a failsafe's or a ground station's LAND stays ACTIVE); COMPLETE once its last item was reached. PX4 main says ACTIVE from the mode alone, even disarmed
-        on the ground: docs/ground-station.md."""
+        PX4's (a ground station's HOLD; a failsafe's or a ground station's LAND stays ACTIVE); COMPLETE once its
+        last item was reached. PX4 main says ACTIVE from the mode alone, even disarmed on the ground:
+        docs/ground-station.md."""
         if not self.mission.items:
             return mavlink.MISSION_STATE_NO_MISSION
         watch = self.watch
