@@ -3,8 +3,8 @@
 PX4's ``MavlinkMissionManager::parse_mavlink_mission_item`` (src/modules/mavlink/mavlink_mission.cpp, PX4-Autopilot
 main at 001bb4d7) answers MAV_MISSION_UNSUPPORTED for a command it does not list in the item's frame; the vehicle's
 parser answers the same (it once refused DO_WINCH, DO_GRIPPER, DO_SET_ACTUATOR, SET_CAMERA_SOURCE,
-DO_AUTOTUNE_ENABLE and COMPONENT_ARM_DISARM, which PX4 takes, and took SET_CAMERA_ZOOM, which it refuses). Such an
-item is held as uploaded; whether it can be flown is the start's question (docs/missions.md).
+DO_AUTOTUNE_ENABLE and COMPONENT_ARM_DISARM, which PX4 takes, and took SET_CAMERA_ZOOM and DO_SET_SERVO, which it
+refuses). Such an item is held as uploaded; whether it can be flown is the start's question (docs/missions.md).
 """
 
 from __future__ import annotations
@@ -39,6 +39,7 @@ def test_px4s_global_frame_commands_are_taken(command: str) -> None:
 
 
 @pytest.mark.parametrize("command, frame", [("SET_CAMERA_ZOOM", M.MAV_FRAME_MISSION),
+                                            ("DO_SET_SERVO", M.MAV_FRAME_MISSION),  # taken until 2026-12-06
                                             ("DO_WINCH", M.MAV_FRAME_GLOBAL_INT),
                                             ("NAV_SPLINE_WAYPOINT", M.MAV_FRAME_GLOBAL_INT)])
 def test_what_px4s_parser_does_not_list_is_unsupported(command: str, frame: int) -> None:
