@@ -663,13 +663,15 @@ def test_the_vehicle_starts_a_mission_only_when_asked_to_await_one():
         assert exchange(v, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
         assert v.missions.start_requested and not v.sim.armed
         assert exchange(v, ask, "MISSION_CURRENT").mission_state == M.MISSION_STATE_ACTIVE  # the controller's cue
-        for seq in (1, 2):  # the download ends (every item out: the next transfer may begin)
+        for seq in (1, 2):  # the download ends: every item out, and the ground station's final ACK
             exchange(v, M.MAVLink_mission_request_int_message(1, 1, seq, 0), "MISSION_ITEM_INT")
+        gcs.sock.sendto(M.MAVLink_mission_ack_message(1, 1, M.MAV_MISSION_ACCEPTED, 0).pack(gcs.mav), v.gcs.local)
         assert any(e.kind == "mission" and "start requested by AUTO.MISSION, then arm" in e.text for e in v.sim.events)
         assert v.missions.started == {"command": START_ARM, "by": str(v.sim.events[-1].by)}
         v.missions.flight_armed()  # (as the controller's arm does): item 0 current, the mission ACTIVE
         assert v.missions.watch is not None and v.missions.mission_state == M.MISSION_STATE_ACTIVE
-        exchange(v, M.MAVLink_mission_count_message(1, 1, 0, 0), "MISSION_ACK")  # a ground station clears it
+        clear = exchange(v, M.MAVLink_mission_count_message(1, 1, 0, 0), "MISSION_ACK")  # a ground station clears it
+        assert clear.type == M.MAV_MISSION_ACCEPTED
         assert v.missions.watch is None and "cleared" in v.sim.events[-1].text  # no reached for a gone item
         v.missions.flight_step(0.0, (0.0,) * 12, True)
         assert v.missions.watch is None

@@ -337,9 +337,11 @@ def test_bad_items_get_px4s_results_and_leave_the_mission(tmp_path):
 
 def test_one_transfer_at_a_time(tmp_path):
     """While one ground station uploads, another (other ids from the same address, other ids from another
-    address, or the same ids from another address) is answered MAV_MISSION_ERROR with PX4's "Busy" text
-    for an upload, a download, a clear and an item; the first one's upload goes on and completes;
-    afterwards another may download it. (A GCS link of ``udpin`` hears every address.)"""
+    address, or the same ids from another address) is answered as PX4 main answers it: an upload's MISSION_COUNT
+    MAV_MISSION_ERROR with PX4's "Busy" text; a download, a clear and an item PX4's text alone, no ACK (each
+    was MAV_MISSION_ERROR until 2026-12-06, which ended a MAVSDK clear at once as a protocol error, where PX4's
+    silence lets it time out); the first one's upload goes on and completes; afterwards another may download it.
+    (A GCS link of ``udpin`` hears every address.)"""
     items = _items(4)
     with instance_slot() as n:
         v = _vehicle(n, tmp_path, "--gcs", f"udpin:127.0.0.1:{GCS_PORT + n}")
@@ -354,15 +356,15 @@ def test_one_transfer_at_a_time(tmp_path):
             assert _recv(gcs, "MISSION_REQUEST_INT", cond="MISSION_REQUEST_INT.seq==1").seq == 1
             gcs.mav.srcSystem = 253  # another ground station behind the same address (a router)
             others = ((gcs, 253), (other, 254), (twin, 255))
+            answers = ((lambda c: c.mav.mission_count_send(*_tgt(c), 2, 0), "WPM: REJ. CMD: Busy",
+                        [M.MAV_MISSION_ERROR]),
+                       (lambda c: c.mav.mission_request_list_send(*_tgt(c), 0), "already active", []),
+                       (lambda c: c.mav.mission_clear_all_send(*_tgt(c), 0), "WPM: IGN CLEAR CMD: Busy", []),
+                       (lambda c: _send(c, items[1]), "REJ. MIS ITEM: partner id mismatch", []))
             for conn, sysid in others:
-                for ask in (lambda c: c.mav.mission_count_send(*_tgt(c), 2, 0),
-                            lambda c: c.mav.mission_request_list_send(*_tgt(c), 0),
-                            lambda c: c.mav.mission_clear_all_send(*_tgt(c), 0),
-                            lambda c: _send(c, items[1])):
+                for ask, text, acks in answers:
                     ask(conn)
-                    ack = _recv(conn, "MISSION_ACK", cond=f"MISSION_ACK.target_system=={sysid}")
-                    assert ack.type == M.MAV_MISSION_ERROR
-                    _recv(conn, "STATUSTEXT", cond="'Busy' in STATUSTEXT.text or 'already active' in STATUSTEXT.text")
+                    assert _acks_before(conn, sysid, text) == acks, (sysid, text)
             gcs.mav.srcSystem = 255
             for seq in (1, 2, 3):
                 if seq > 1:
@@ -377,6 +379,19 @@ def test_one_transfer_at_a_time(tmp_path):
             assert v.stop() == 0
     assert sum(isinstance(r, Refused) and "busy (getlist)" in r.text for r in v.reports()) == 12
     assert sum("mission: uploaded 4 items" in s and "[by 255:190 " in s for s in v.events()) == 1
+
+
+def _acks_before(conn: Any, sysid: int, text: str) -> list[int]:
+    """The results of the MISSION_ACKs to ``sysid`` that came before the STATUSTEXT holding ``text`` (the vehicle
+    sends an ACK and its text in one datagram, the ACK first: none before the text is none at all)."""
+    acks = []
+    deadline = time.monotonic() + 5.0
+    while True:
+        m = _recv(conn, ["MISSION_ACK", "STATUSTEXT"], max(deadline - time.monotonic(), 0.01))
+        if m.get_type() == "MISSION_ACK" and m.target_system == sysid:
+            acks.append(m.type)
+        elif m.get_type() == "STATUSTEXT" and text in m.text:
+            return acks
 
 
 def _zone_items(mission_type: int) -> list[Any]:
@@ -867,3 +882,74 @@ def test_a_ground_stations_unfinished_download_does_not_hold_up_the_controllers(
         v.close()
         gcs.close()
         ctl.close()
+
+
+def test_a_download_left_without_its_final_ack_holds_its_link_as_on_px4():
+    """A download whose every item went out but whose final ACK never came (MAVProxy's ``wp list`` sends none)
+    ends only as PX4 main ends it (``maybe_completed`` in ``handle_mission_request_list``): a new
+    MISSION_REQUEST_LIST of the same station is served, but until then, or the 5 s timeout, an upload is "Busy"
+    (MAV_MISSION_ERROR) and a clear and a new current item get PX4's text alone (all three were taken until
+    2026-12-06, so a ``wp list`` then ``wp load`` passed here and failed on PX4); and a list of another mission type
+    during a download is "already active", PX4's text alone (it began a fence download)."""
+    gcs = GcsSocket()
+    v = Vehicle(prepare(Mission(Sine(), duration_s=5.0, name="unacked")),
+                VehicleConfig(parse_address("udpin:127.0.0.1:0"), parse_address(gcs.url)))
+
+    def answers(msg: Any, text: str) -> list[str]:
+        """The kinds of message back, up to the STATUSTEXT holding ``text`` (an ACK comes first, in its datagram)."""
+        gcs.sock.sendto(msg.pack(gcs.mav), v.gcs.local)
+        seen: list[Any] = []
+
+        def said() -> bool:
+            for m, addr in v.gcs.poll():
+                v._handle(v.gcs, m, addr)
+            seen.extend(gcs.received())
+            return any(m.get_type() == "STATUSTEXT" and text in m.text for m in seen)
+
+        wait_for(said, 5.0, f"the vehicle's {text!r}", poll_s=0.001)
+        return [m.get_type() for m in seen if m.get_type() in ("MISSION_ACK", "STATUSTEXT")]
+
+    try:
+        items = _items(3)
+        gcs.exchange(v, M.MAVLink_mission_count_message(1, 1, 3, 0), "MISSION_REQUEST_INT")
+        for it in items[:2]:
+            gcs.exchange(v, it, "MISSION_REQUEST_INT")
+        assert gcs.exchange(v, items[2], "MISSION_ACK").type == M.MAV_MISSION_ACCEPTED
+        assert gcs.exchange(v, M.MAVLink_mission_request_list_message(1, 1, 0), "MISSION_COUNT").count == 3
+        for seq in range(3):  # every item out; no final ACK
+            assert gcs.exchange(v, M.MAVLink_mission_request_int_message(1, 1, seq, 0), "MISSION_ITEM_INT").seq == seq
+        assert answers(M.MAVLink_mission_count_message(1, 1, 2, 0), "IGN MISSION_COUNT: Busy")[0] == "MISSION_ACK"
+        assert answers(M.MAVLink_mission_clear_all_message(1, 1, 0), "WPM: IGN CLEAR CMD: Busy") == ["STATUSTEXT"]
+        assert answers(M.MAVLink_mission_set_current_message(1, 1, 2), "WPM: IGN WP CURR CMD: Busy") == ["STATUSTEXT"]
+        assert len(v.missions.mission.items) == 3 and v.missions.mission.current == 0  # nothing taken
+        # the same station's new list is served (PX4's maybe_completed) ...
+        assert gcs.exchange(v, M.MAVLink_mission_request_list_message(1, 1, 0), "MISSION_COUNT").count == 3
+        # ... and its list of the fence mid-download is not begun
+        fence = M.MAVLink_mission_request_list_message(1, 1, M.MAV_MISSION_TYPE_FENCE)
+        assert answers(fence, "already active") == ["STATUSTEXT"]
+        assert v.missions.transfers["gcs"].mtype == M.MAV_MISSION_TYPE_MISSION
+    finally:
+        v.close()
+        gcs.close()
+
+
+def test_an_item_of_another_type_mid_upload_is_an_error_of_the_uploads_type_and_the_upload_goes_on():
+    """An item of another mission type during an upload: MAV_MISSION_ERROR of the upload's type, as PX4's
+    ``send_mission_ack`` gives it (it said the item's type, which a ground station filtering ACKs by type, as
+    QGroundControl does, ignores); the upload goes on and completes."""
+    gcs = GcsSocket()
+    v = Vehicle(prepare(Mission(Sine(), duration_s=5.0, name="types")),
+                VehicleConfig(parse_address("udpin:127.0.0.1:0"), parse_address(gcs.url)))
+    try:
+        items = _items(2)
+        assert gcs.exchange(v, M.MAVLink_mission_count_message(1, 1, 2, 0), "MISSION_REQUEST_INT").seq == 0
+        stray = copy.copy(_zone_items(M.MAV_MISSION_TYPE_FENCE)[0])
+        stray.seq = 0
+        ack = gcs.exchange(v, stray, "MISSION_ACK")
+        assert (ack.type, ack.mission_type) == (M.MAV_MISSION_ERROR, M.MAV_MISSION_TYPE_MISSION)
+        assert gcs.exchange(v, items[0], "MISSION_REQUEST_INT").seq == 1
+        assert gcs.exchange(v, items[1], "MISSION_ACK").type == M.MAV_MISSION_ACCEPTED
+        assert len(v.missions.mission.items) == 2
+    finally:
+        v.close()
+        gcs.close()

@@ -10,7 +10,8 @@ Out: MISSION_REQUEST_INT / MISSION_REQUEST, MISSION_COUNT, MISSION_ITEM_INT / MI
 
 PX4's states: IDLE, GETLIST (an upload: the vehicle requests item after item), SENDLIST (a download: the ground
 station requests them). One transfer at a time on a link, with one partner (sysid, compid, address): anyone else
-who starts or joins one there is answered ``MAV_MISSION_ERROR`` with PX4's "Busy" STATUSTEXT. Each link has its
+who starts or joins one there is answered as PX4 main answers (:meth:`LinkTransfer._busy`: an upload
+``MAV_MISSION_ERROR`` and "Busy", the rest PX4's text alone). Each link has its
 own (the offboard controller's and the ground stations'), as each PX4 MAVLink instance has its own: a ground
 station's download does not hold up the controller's. Uploads are one at a time across the links (PX4's static
 ``_transfer_in_progress``): the host's ``upload_link``. An upload is staged and swapped in at its last item, so a
@@ -132,14 +133,16 @@ class LinkTransfer:
             self._ack(who, m, now)
             return False
         mtype = MISSION if kind == "MISSION_SET_CURRENT" else m.mission_type
-        self._idle_if_sent()
         if kind == "MISSION_COUNT":
             return self._count(who, m, now)
         if kind == "MISSION_REQUEST_LIST":
+            self._idle_if_sent()
             self._request_list(who, mtype, now)
             return False
-        if self.state is not State.IDLE:  # this link's transfer only, as PX4's instance checks its own
-            self._busy(who, mtype)
+        if self.state is not State.IDLE:  # this link's transfer only, as PX4's instance checks its own; PX4
+            # answers a clear or a new current item then with its text alone, no ACK
+            self._busy(who, mtype, "WPM: IGN CLEAR CMD: Busy" if kind == "MISSION_CLEAR_ALL"
+                       else "WPM: IGN WP CURR CMD: Busy", ack=False)
             return False
         if kind == "MISSION_CLEAR_ALL":
             if self._flown(who, mtype, "IGN CLEAR CMD"):
@@ -175,7 +178,7 @@ class LinkTransfer:
             return False
         mtype = m.mission_type
         if self.state is not State.IDLE or self.host.upload_link is not None:
-            self._busy(who, mtype)
+            self._busy(who, mtype, "WPM: IGN MISSION_COUNT: Busy" if self.state is State.SENDLIST else BUSY)
             return False
         if m.count > MAX_COUNT.get(mtype, 0):  # a type PX4 does not know: room for none
             self._answer(who, mavlink.MAV_MISSION_NO_SPACE, mtype)
@@ -208,11 +211,14 @@ class LinkTransfer:
             else:
                 self._answer(who, mavlink.MAV_MISSION_ERROR, text="IGN MISSION_ITEM: No transfer")
             return False
-        if self.state is State.SENDLIST or not self._is_partner(who):
-            self._busy(who, self.mtype)
+        if not self._is_partner(who):  # PX4: its text alone (an ERROR would end the stranger's own transfer)
+            self._busy(who, self.mtype, "REJ. MIS ITEM: partner id mismatch", ack=False)
+            return False
+        if self.state is State.SENDLIST:
+            self._busy(who, self.mtype, "IGN MISSION_ITEM: Busy")
             return False
         if m.mission_type != self.mtype:
-            self._answer(who, mavlink.MAV_MISSION_ERROR, m.mission_type)  # PX4: answered, the upload goes on
+            self._answer(who, mavlink.MAV_MISSION_ERROR)  # PX4: of the transfer's type; the upload goes on
             return False
         self.last_recv = now
         if m.seq != self.seq:
@@ -264,8 +270,10 @@ class LinkTransfer:
     # -- download ---------------------------------------------------------------------------------------
     def _request_list(self, who: Partner, mtype: int, now: float) -> None:
         """MISSION_REQUEST_LIST: a download of ``mtype``'s items begins (again, for its partner)."""
-        if not (self.state is State.IDLE or (self.state is State.SENDLIST and self._is_partner(who))):
-            self._busy(who, mtype, "Mission download request ignored, already active")
+        if not (self.state is State.IDLE or (self.state is State.SENDLIST and self._is_partner(who)
+                                             and mtype == self.mtype)):
+            self._busy(who, mtype, "Mission download request ignored, already active", ack=False,
+                       severity=mavlink.MAV_SEVERITY_INFO)  # PX4's text alone, as information
             return
         mission = self.host.held(mtype) if mtype in TYPES else Mission()  # a type PX4 does not know: no items
         self.state, self.partner, self.sending, self.mtype = State.SENDLIST, who, mission, mtype
@@ -281,8 +289,8 @@ class LinkTransfer:
         at once and each lost one again 2 s later, so over a lossy link PX4's rule ends every download
         whose requests were not all delivered in order (docs/ground-station.md, "Missions")."""
         if not self._is_partner(who):
-            if self.state is not State.IDLE:
-                self._busy(who, m.mission_type)
+            if self.state is not State.IDLE:  # PX4: its text alone
+                self._busy(who, m.mission_type, "WPM: REJ. CMD: partner id mismatch", ack=False)
             return  # no transfer: ignored, as PX4 does (some on-screen displays ask anyway)
         if self.state is State.GETLIST:
             who.ep.reply(tuple(self.host.texts(mavlink.MAV_SEVERITY_CRITICAL, BUSY)), who.who.addr)
@@ -354,8 +362,9 @@ class LinkTransfer:
         return p is not None and p.who == who.who
 
     def _idle_if_sent(self) -> None:
-        """A download whose every item went out ends here (its final ACK lost, or never sent), as PX4 ends it
-        on a new MISSION_REQUEST_LIST, so that it holds up no new transfer on its link."""
+        """A download whose every item went out (its final ACK lost, or never sent) ends here, on a new
+        MISSION_REQUEST_LIST, as PX4's ``maybe_completed`` ends it (on nothing else: until the 5 s timeout an
+        upload, a clear and a new current item on its link are "Busy", as on PX4)."""
         if self.state is State.SENDLIST and len(self.sent) == self.count:
             self._idle()
 
@@ -375,8 +384,14 @@ class LinkTransfer:
         texts = self.host.texts(mavlink.MAV_SEVERITY_CRITICAL, text) if text is not None else []
         who.ep.reply((ack, *texts), who.who.addr)
 
-    def _busy(self, who: Partner, mission_type: int, text: str = BUSY) -> None:
-        """Another transfer is on: ``MAV_MISSION_ERROR`` and PX4's STATUSTEXT, to the one who asked."""
+    def _busy(self, who: Partner, mission_type: int, text: str = BUSY, ack: bool = True,
+              severity: int = mavlink.MAV_SEVERITY_CRITICAL) -> None:
+        """Another transfer is on: PX4's STATUSTEXT to the one who asked, with ``MAV_MISSION_ERROR`` where PX4
+        sends one (``ack``: an upload's MISSION_COUNT, an item from the partner of a download); a request list,
+        a clear, a new current item or a stranger's request or item get the text alone, as on PX4."""
         why = self.state.value if self.state is not State.IDLE else f"an upload on the {self.host.upload_link} link"
         self.host.refused(f"mission message from {who.who}: busy ({why})")
-        self._answer(who, mavlink.MAV_MISSION_ERROR, mission_type, text)
+        if ack:
+            self._answer(who, mavlink.MAV_MISSION_ERROR, mission_type, text)
+        else:
+            who.ep.reply(tuple(self.host.texts(severity, text)), who.who.addr)
