@@ -208,7 +208,7 @@ _DEVICE_NAMES = {"gps": "the GPS", "mag": "the compass", "baro": "the barometer"
 _SWITCHES = ("gps", "mag")
 
 
-def _sets(e: TimedEvent) -> tuple[tuple[Any, ...], Any] | None:
+def device_set(e: TimedEvent) -> tuple[tuple[Any, ...], Any] | None:
     """(the device ``e`` sets, the state it sets it to), or None for an event that adds to what is there (a GPS jump,
     a gyro bias) or changes the air or the link."""
     if e.kind in ("gps", "mag") and e.get("state") is not None:
@@ -238,7 +238,7 @@ def check_state_changes(timeline: Sequence[TimedEvent], rate_hz: float, source: 
     only the order given would say which one holds."""
     last: dict[tuple[Any, ...], TimedEvent] = {}  # device -> the event that last set it
     for e in timeline:
-        sets = _sets(e)
+        sets = device_set(e)
         if sets is None:
             continue
         device, state = sets
@@ -248,7 +248,7 @@ def check_state_changes(timeline: Sequence[TimedEvent], rate_hz: float, source: 
                                 f"{_device_name(device)} at the control step at {e.step(rate_hz) / rate_hz:g} s "
                                 f"({rate_hz:g} Hz), so which one holds is ambiguous: give one, or times a step "
                                 f"({1.0 / rate_hz:g} s) apart", table_where(source, e))
-        was = _DEVICE_START[device[0]] if before is None else _sets(before)[1]  # type: ignore[index]
+        was = _DEVICE_START[device[0]] if before is None else device_set(before)[1]  # type: ignore[index]
         if state == was and device[0] in _SWITCHES:
             since = "as every flight starts" if before is None else f"since {before.text()} at {before.t_s:g} s"
             raise EventError(e, f"{_already(device, state)} at {e.t_s:g} s ({since}): the event would change "

@@ -65,6 +65,10 @@ def test_mapping_pure():
                          ((MOTOR, OFF, 1.5), M.MAV_RESULT_DENIED), ((math.nan, OFF, 0), M.MAV_RESULT_DENIED)):
         got = injection(*args, 0.0, can)
         assert got.result == result and not got.events and got.why, (args, got)
+    # the barometer's: where its fault can be given (it named --at, a flag bsst vehicle does not have)
+    assert injection(BARO, OFF, 0, 0.0, can).why == (
+        "INJECT_FAILURE FAILURE_UNIT_SENSOR_BARO FAILURE_TYPE_OFF: its fault here has a size this command has no "
+        "field for: give it in the mission's [[events]] (bsst sim/sitl: --at T:baro:drift=M_PER_S)")
     no_rotors = injection(MOTOR, OFF, 1, 0.0, lambda kind: "no rotors to fail")
     assert no_rotors.result == M.MAV_RESULT_UNSUPPORTED and "no rotors to fail" in no_rotors.why
 
@@ -73,7 +77,9 @@ def test_pymavlink_acks_per_unit(tmp_path):
     """SYS_FAILURE_EN = 0: every injection DENIED, nothing done. = 1 (a PARAM_SET): the x500 with a GNSS set
     and the EKF acts on motor, GPS and compass OFF/OK (ACCEPTED; COMMAND_INT too), and answers every other
     type and unit as PX4 does: UNSUPPORTED (a STATUSTEXT saying why), DENIED for a motor it does not have.
-    Each accepted one is a ``fault`` event naming the ground station, acted on when the vehicle next steps."""
+    Each accepted one is a ``fault`` event naming the ground station, acted on when the vehicle next steps; an OK
+    of a unit that works is ACCEPTED and no event, as a PARAM_SET to the value in force (it was a ``fault``
+    event, so a flight whose ground station sent one said "not flown as asked", exit 1, its trace unchanged)."""
     with instance_slot() as n:
         gcs = _gcs(n)
         v = _vehicle(n, tmp_path, "--profile", "x500", "--sensors", "gnss", "--estimator", "ekf", "--realtime")
@@ -85,6 +91,7 @@ def test_pymavlink_acks_per_unit(tmp_path):
             gcs.mav.param_set_send(gcs.target_system, gcs.target_component, b"SYS_FAILURE_EN", 1,
                                    M.MAV_PARAM_TYPE_INT32)
             v.wait_line(lambda s: "SYS_FAILURE_EN = 1 (was 0)" in s)
+            assert _inject(gcs, GPS, OK, 0) == M.MAV_RESULT_ACCEPTED  # a working GPS: no change, so no event
             answers = {(MOTOR, OFF, 1): M.MAV_RESULT_ACCEPTED, (MOTOR, OK, 1): M.MAV_RESULT_ACCEPTED,
                        (GPS, OFF, 0): M.MAV_RESULT_ACCEPTED, (GPS, OK, 0): M.MAV_RESULT_ACCEPTED,
                        (MAG, OFF, 0): M.MAV_RESULT_ACCEPTED, (MAG, OK, 0): M.MAV_RESULT_ACCEPTED,

@@ -60,7 +60,7 @@ from bridge.autopilot.modes import (  # noqa: F401  (the modes: imported from he
 )
 from bridge.autopilot.params import VehicleParams, change_param, read_param
 from bridge.autopilot.positionloss import NOAID_TIMEOUT_US, PositionWatch
-from bridge.autopilot.timeline import act_on
+from bridge.autopilot.timeline import act_on, changes_nothing
 from bridge.autopilot.touchdownwatch import TouchdownWatch
 from bridge.autopilot.vehiclechecks import check_battery, check_limits, check_position, prearm_refusal
 from bridge.autopilot.vehicleevents import Event, ParamChanged, Sender
@@ -400,7 +400,8 @@ class SimVehicle:
             self.inject(pending.pop(0))
         if self._injected:
             for e, by in self._injected:
-                self.inject(e, by)
+                if not changes_nothing(e, p, self.sensors):  # an OK of a working unit: no change, no event
+                    self.inject(e, by)
             self._injected.clear()
         if deliver is not None:
             deliver(p.t)

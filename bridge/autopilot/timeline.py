@@ -3,15 +3,33 @@
 In:  a timeline event (:class:`plant.events.TimedEvent`: motor, wind, gust, link, gps, mag, baro, gyro; its fields
      in SI: effectiveness 0..1, m/s, deg, s, m, m/s of drift, rad/s of bias), the plant (its time s), the vehicle's
      sensor suite (None under truth)
-Out: the plant's and the sensors' state changed now, and the kind of event that says so (:func:`act_on`)
+Out: the plant's and the sensors' state changed now, and the kind of event that says so (:func:`act_on`); whether
+     an event would change nothing (:func:`changes_nothing`)
 """
 
 from __future__ import annotations
 
 from plant import Quadrotor
-from plant.events import TimedEvent
+from plant.events import TimedEvent, device_set
 from plant.sensors import SensorSuite
 from plant.wind import Gust
+
+
+def changes_nothing(e: TimedEvent, p: Quadrotor, sensors: SensorSuite | None) -> bool:
+    """Whether acting on ``e`` now would leave the vehicle as it is: a GPS or compass switched to the state it is
+    in, a rotor set to the effectiveness it has (:func:`plant.events.device_set`). A ground station's such
+    injection (FAILURE_TYPE_OK of a working unit) is then no change to the flight, as a PARAM_SET to the value in
+    force is none."""
+    sets = device_set(e)
+    if sets is None:
+        return False
+    device, state = sets
+    if device[0] == "motor":
+        return p.effectiveness[device[1] - 1] == state
+    if sensors is None or device[0] not in ("gps", "mag"):
+        return False
+    on = sensors.faults.gps_on if device[0] == "gps" else sensors.faults.mag_on
+    return on == (state == "on")
 
 
 def act_on(e: TimedEvent, p: Quadrotor, sensors: SensorSuite | None) -> str:

@@ -6,11 +6,13 @@ In:  the command's param1 (failure unit, MAVLink's FAILURE_UNIT), param2 (FAILUR
 Out: :class:`Injection`: the MAV_RESULT PX4 answers, the :class:`~plant.events.TimedEvent` s to act on
      (ACCEPTED), and why it was not (a STATUSTEXT's text; None when accepted)
 
-What maps, as PX4's handlers answer (``FailureInjector`` for motors, the simulator's sensor handlers): a motor
-OFF is ``motor:N=0``, OK ``motor:N=1``; GPS and compass OFF/OK are ``gps:off``/``gps:on``, ``mag:off``/``mag:on``.
-Any other type of those units is UNSUPPORTED, as in PX4. The barometer's and gyro's faults here are a drift and
-a bias whose size the command has no field for (``--at T:baro:drift=R``, ``gyro:bias=X,Y,Z``): UNSUPPORTED, as
-is every other unit. A number that is not a whole one in range (a motor the vehicle does not have) is DENIED.
+What maps: a motor OFF is ``motor:N=0``, OK ``motor:N=1``; GPS and compass OFF/OK are ``gps:off``/``gps:on``,
+``mag:off``/``mag:on``. Any other type of those units is UNSUPPORTED (PX4 takes some of them, which change only
+telemetry not simulated here: docs/weather.md). The barometer's and gyro's faults here are a drift and a bias
+whose size the command has no field for (the mission's events, ``--at T:baro:drift=R``, ``gyro:bias=X,Y,Z``):
+UNSUPPORTED, as is every other unit. An OK of a unit that works is acted on as nothing
+(bridge.autopilot.timeline.changes_nothing). A number that is not a whole one in range (a motor the vehicle does
+not have) is DENIED.
 SYS_FAILURE_EN = 0 (the default) is the handler's own DENIED, before any of this.
 """
 
@@ -57,8 +59,9 @@ def injection(p1: float, p2: float, p3: float, t_s: float, problem: Callable[[st
     elif unit in _SENSORS:
         kind, lo_hi = _SENSORS[unit], (0, 1)
     elif unit in _SIZED:
-        return Injection(mavlink.MAV_RESULT_UNSUPPORTED, why=f"{what}: this fault has a size the command cannot "
-                                                             f"give: schedule it (--at T:{_SIZED[unit]})")
+        return Injection(mavlink.MAV_RESULT_UNSUPPORTED, why=f"{what}: its fault here has a size this command has "
+                                                             f"no field for: give it in the mission's [[events]] "
+                                                             f"(bsst sim/sitl: --at T:{_SIZED[unit]})")
     else:
         return Injection(mavlink.MAV_RESULT_UNSUPPORTED, why=f"{what}: not a unit the vehicle simulates")
     if ftype not in _TYPES:
