@@ -3,7 +3,8 @@
 In:  a profile's ``[battery]`` table (cells, capacity mAh, cell volts full and empty, internal resistance
      ohm per cell, motor and ESC efficiency), then per physics step the rotor speeds (rad/s), the rotors'
      drag-torque factor (N m s^2) and the step (s); the pack's charge at the start (% of capacity; 100 by default)
-Out: the terminal voltage (V), the current (A), the charge used (mAh) and left (0..1), the rotors' speed cap (rad/s)
+Out: the terminal voltage (V), the current (A), the charge used (mAh) and left (0..1), the rotors' speed cap (rad/s);
+     the voltage and the charge left as measured (a battery event may make them read empty: plant.events)
 
 The model (docs/weather.md "Battery"): the open-circuit voltage follows a LiPo cell's rest voltage by the charge
 left (:data:`LIPO_SHAPE`: flat through the middle, steep at both ends), E = n (v_empty + (v_full − v_empty) s(charge
@@ -81,6 +82,7 @@ class Battery:
         self.min_voltage = self.voltage
         self.max_current = 0.0
         self._charge_as = self.used_mah * 3.6  # A s drawn (pack_step: used mAh = A s / 3.6)
+        self.reads_empty = False  # a battery event: it reads empty (its measured voltage and charge), drawn as it is
 
     def step(self, omega: tuple[float, ...], torque_factor: float, h: float) -> float:
         """Draw the rotors' power over h (s); returns the rotors' speed cap (rad/s) as a fraction of ω_max."""
@@ -94,8 +96,18 @@ class Battery:
 
     @property
     def remaining(self) -> float:
-        """The charge left, a fraction of the capacity (0..1): what SYS_STATUS reports and the vehicle watches."""
+        """The charge left as measured, a fraction of the capacity (0..1): what SYS_STATUS reports and the vehicle
+        watches; 0 while it :attr:`reads_empty`."""
+        if self.reads_empty:
+            return 0.0
         return min(max(1.0 - self.used_mah / self.config.capacity_mah, 0.0), 1.0)
+
+    @property
+    def measured_v(self) -> float:
+        """The terminal voltage as measured (V): what SYS_STATUS and BATTERY_STATUS report; the pack's empty voltage
+        at rest while it :attr:`reads_empty`, as PX4's simulated battery reads on an injected failure
+        (BatterySimulator.cpp: its empty cell voltage)."""
+        return self.config.cells * self.config.cell_empty_v if self.reads_empty else self.voltage
 
     def summary(self) -> dict:
         return {"voltage_v": self.voltage, "min_voltage_v": self.min_voltage, "current_a": self.current,

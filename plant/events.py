@@ -13,6 +13,9 @@ motor      ``motor`` 1-4, ``effectiveness`` 0..1 (0: off)  ``N=EFFECTIVENESS``
 gps        ``state`` off|on, or ``jump`` [dx, dy, dz] m    ``off``, ``on``, ``jump=DX,DY,DZ``
 baro       ``drift_mps`` (m/s of altitude error)           ``drift=M_PER_S``
 mag        ``state`` off|on                                ``off``, ``on``
+battery    ``state`` empty|ok: the pack reads empty (its       ``empty``, ``ok``
+           voltage and charge as measured; the rotors still
+           draw its real power), or as it is
 gyro       ``bias`` [x, y, z] rad/s (added)                ``bias=X,Y,Z``
 wind       ``speed_mps``, ``from_deg``                     ``SPEED[:FROM_DEG]``
 gust       ``duration_s``, ``amplitude_mps``, ``from_deg``  ``DURATION,AMPLITUDE[,FROM_DEG]``
@@ -35,7 +38,7 @@ from typing import Any
 
 from params import ConfigError, Table
 
-EVENT_KINDS = ("motor", "gps", "baro", "mag", "gyro", "wind", "gust", "link")
+EVENT_KINDS = ("motor", "gps", "baro", "mag", "gyro", "battery", "wind", "gust", "link")
 # the allowed range [lo, hi] of each number of an event's table (and of its --at flag, and of a [wind] gust), one per
 # key, and its unit; a vector key's range is each element's. A gust's key (GUST_AT_NOTHING) excludes its low end; a
 # fault vector (FAULT_VECTORS) is not all 0
@@ -55,6 +58,7 @@ FAULT_VECTORS = {"jump": "a GPS jump", "bias": "a gyro bias"}
 # a gust's keys whose low end (0) would inject nothing (a user's slip): what the key is, for the refusal
 GUST_AT_NOTHING = {"duration_s": "duration", "amplitude_mps": "amplitude"}
 SENSOR_EVENT_KINDS = ("gps", "baro", "mag", "gyro")
+BATTERY_STATES = ("empty", "ok")  # a battery event's: the pack reads empty (PX4's injected failure), or as it is
 LINK_SCALARS = (str, int, float)  # a handover's keys: a profile name and [link]'s per-direction scalars
 
 
@@ -85,7 +89,7 @@ class TimedEvent:
         if k == "motor":
             e = s["effectiveness"]
             return f"motor {s['motor']}: {'off' if e == 0.0 else f'{e:g} of its thrust'}"
-        if k in ("gps", "mag") and "state" in s:
+        if k in ("gps", "mag", "battery") and "state" in s:
             return f"{k} {s['state']}"
         if k == "gps":
             return "gps jump by ({:g}, {:g}, {:g}) m".format(*s["jump"])
@@ -169,6 +173,8 @@ def event_from_table(t: Table, duration_s: float) -> TimedEvent:
             s["jump"] = _fault_vector(t, "jump")
         else:
             s["state"] = t.string("state", choices=("off", "on"))
+    elif kind == "battery":
+        s["state"] = t.string("state", choices=BATTERY_STATES)
     elif kind == "baro":
         s["drift_mps"] = _number(t, "drift_mps")
     elif kind == "gyro":
@@ -201,17 +207,17 @@ def table_where(source: str, e: TimedEvent) -> str:
 
 # the devices the timeline sets to a state, each with the state it starts every flight in: the GPS and the compass
 # on, each rotor whole (effectiveness 1), the barometer not drifting (0 m/s)
-_DEVICE_START = {"gps": "on", "mag": "on", "motor": 1.0, "baro": 0.0}
-_DEVICE_NAMES = {"gps": "the GPS", "mag": "the compass", "baro": "the barometer"}
+_DEVICE_START = {"gps": "on", "mag": "on", "battery": "ok", "motor": 1.0, "baro": 0.0}
+_DEVICE_NAMES = {"gps": "the GPS", "mag": "the compass", "battery": "the battery", "baro": "the barometer"}
 # the devices an event switches off or on: one that leaves it as it is was meant the other way (a rotor's or the
 # barometer's value is a level: its baseline, 1 or 0, is a value a scripted series of flights gives too)
-_SWITCHES = ("gps", "mag")
+_SWITCHES = ("gps", "mag", "battery")
 
 
 def device_set(e: TimedEvent) -> tuple[tuple[Any, ...], Any] | None:
     """(the device ``e`` sets, the state it sets it to), or None for an event that adds to what is there (a GPS jump,
     a gyro bias) or changes the air or the link."""
-    if e.kind in ("gps", "mag") and e.get("state") is not None:
+    if e.kind in ("gps", "mag", "battery") and e.get("state") is not None:
         return (e.kind,), e.get("state")
     if e.kind == "motor":
         return ("motor", e.get("motor")), e.get("effectiveness")
@@ -231,9 +237,9 @@ def _device_name(device: tuple[Any, ...]) -> str:
 
 def check_state_changes(timeline: Sequence[TimedEvent], rate_hz: float, source: str) -> None:
     """EventError (named as :func:`table_where`, which :func:`bridge.core.flight.prepare` turns into the ``--at``
-    flag that gave it) for an event of ``timeline`` (in time order) that switches the GPS or the compass to the
-    state it is already in at that time, from the start or from the event before (``gps:on`` with no ``gps:off``
-    before it, two ``gps:off`` with no ``gps:on`` between), or one that sets a device (those, a rotor's
+    flag that gave it) for an event of ``timeline`` (in time order) that switches the GPS, the compass or the
+    battery to the state it is already in at that time, from the start or from the event before (``gps:on`` with
+    no ``gps:off`` before it, two ``gps:off`` with no ``gps:on`` between), or one that sets a device (those, a rotor's
     effectiveness, the barometer's drift) another event sets at the same control step of ``rate_hz`` (Hz), where
     only the order given would say which one holds."""
     last: dict[tuple[Any, ...], TimedEvent] = {}  # device -> the event that last set it
@@ -315,6 +321,8 @@ def event_table_from_flag(text: str) -> dict[str, Any]:
         out.update(motor=int(key), effectiveness=_numbers(value, (1,), "an effectiveness 0..1")[0])
     elif kind in ("gps", "mag") and args in ("off", "on"):
         out["state"] = args
+    elif kind == "battery" and args in BATTERY_STATES:
+        out["state"] = args
     elif kind == "gps" and key == "jump" and eq:
         out["jump"] = _numbers(value, (3,), "jump=DX,DY,DZ in m")
     elif kind == "baro" and key == "drift" and eq:
@@ -329,6 +337,7 @@ def event_table_from_flag(text: str) -> dict[str, Any]:
         out.update(duration_s=v[0], amplitude_mps=v[1], from_deg=v[2] if len(v) > 2 else 0.0)
     else:
         forms = {"gps": "gps:off|on|jump=DX,DY,DZ", "baro": "baro:drift=M_PER_S", "mag": "mag:off|on",
+                 "battery": "battery:empty|ok",
                  "gyro": "gyro:bias=X,Y,Z", "wind": "wind:SPEED[:FROM_DEG]",
                  "gust": "gust:DURATION,AMPLITUDE[,FROM_DEG]"}
         raise ValueError(f"expected {forms[kind]}, got {text!r}")

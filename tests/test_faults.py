@@ -315,3 +315,30 @@ def test_wind_and_gust_events_change_the_air() -> None:
     run = simulate(first, at=("5:wind:4:0", "10:gust:2,6,90"))
     assert run.summary["wind"]["peak_mps"] > 4.0 and run.summary["outcome"] == "completed"
     assert [e["kind"] for e in run.summary["events"] if e["t"] in (5.0, 10.0)] == ["wind", "wind"]
+
+
+def test_a_battery_event_reads_the_pack_empty_and_is_checked_as_the_others(tmp_path) -> None:
+    """``battery:empty`` / ``battery:ok`` (what a ground station's INJECT_FAILURE of the battery acts as, as PX4's
+    BatterySimulator takes it): parsed from the flag and the table; refused on a profile without a pack, on an x500
+    flying none, and when it changes nothing; flown, the pack reads empty from its step (0 % left: the battery's
+    levels said at once), its real charge drawn as before, and reads as it is again after ``battery:ok``."""
+    assert event_table_from_flag("3:battery:empty") == {"t_s": 3.0, "kind": "battery", "state": "empty"}
+    with pytest.raises(ValueError, match=r"expected battery:empty\|ok, got '3:battery:off'"):
+        event_table_from_flag("3:battery:off")
+    with pytest.raises(ConfigError, match=r"^--at 3:battery:empty: profile 'paper' has no battery"):
+        simulate("missions/sine.toml", at=("3:battery:empty",))
+    with pytest.raises(ConfigError, match=r"^--at 3:battery:empty: the vehicle flies no battery: set the mission's "
+                                          r"\[effects\] battery = true$"):
+        simulate("missions/sine.toml", profile="x500", at=("3:battery:empty",))
+    path = tmp_path / "battery.toml"
+    path.write_text('name = "battery"\nduration_s = 8.0\nprofile = "x500"\n\n[trajectory]\nkind = "sine"\n\n'
+                    "[effects]\nbattery = true\n")
+    with pytest.raises(ConfigError, match=r"^--at 3:battery:ok: the battery is already ok at 3 s \(as every flight "
+                                          r"starts\): the event would change nothing$"):
+        simulate(path, at=("3:battery:ok",))
+    run = simulate(path, at=("3:battery:empty", "5:battery:ok"), plots=False)
+    said = [(e["t"], e["text"]) for e in run.summary["events"] if e["kind"] in ("fault", "battery")]
+    assert said[:3] == [(3.0, "battery empty"), (3.004, "low: 0.0 % left (BAT_LOW_THR = 15 %)"),
+                        (3.004, "critical: 0.0 % left (BAT_CRIT_THR = 7 %)")], said
+    assert (5.0, "battery ok") in said and run.summary["outcome"] == "completed"  # COM_LOW_BAT_ACT 0: warnings only
+    assert 0.0 < run.summary["battery"]["used_mah"] < 0.5 * run.summary["battery"]["capacity_mah"]  # drawn as before

@@ -33,6 +33,7 @@ M = mavlink
 MOTOR, GPS, MAG, BARO, GYRO = (M.FAILURE_UNIT_SYSTEM_MOTOR, M.FAILURE_UNIT_SENSOR_GPS, M.FAILURE_UNIT_SENSOR_MAG,
                                M.FAILURE_UNIT_SENSOR_BARO, M.FAILURE_UNIT_SENSOR_GYRO)
 OK, OFF, STUCK = M.FAILURE_TYPE_OK, M.FAILURE_TYPE_OFF, M.FAILURE_TYPE_STUCK
+BATTERY = M.FAILURE_UNIT_SYSTEM_BATTERY
 
 
 def _events(v: Proc) -> list[Event]:
@@ -58,10 +59,13 @@ def test_mapping_pure():
                                                                              for n in range(1, 5)]
     assert [e.text() for e in injection(GPS, OFF, 0, 0.0, can).events] == ["gps off"]
     assert [e.text() for e in injection(MAG, OK, 1, 0.0, can).events] == ["mag on"]
+    # the battery's, as PX4's BatterySimulator: OFF reads the pack empty, OK as it is; instance 0 only
+    assert [e.text() for e in injection(BATTERY, OFF, 0, 0.0, can).events] == ["battery empty"]
+    assert [e.text() for e in injection(BATTERY, OK, 0, 0.0, can).events] == ["battery ok"]
     for args, result in (((MOTOR, STUCK, 1), M.MAV_RESULT_UNSUPPORTED), ((MOTOR, OFF, 5), M.MAV_RESULT_DENIED),
                          ((GPS, OFF, 2), M.MAV_RESULT_DENIED), ((BARO, OFF, 0), M.MAV_RESULT_UNSUPPORTED),
-                         ((GYRO, OFF, 0), M.MAV_RESULT_UNSUPPORTED), ((M.FAILURE_UNIT_SYSTEM_BATTERY, OFF, 0),
-                                                                     M.MAV_RESULT_UNSUPPORTED),
+                         ((GYRO, OFF, 0), M.MAV_RESULT_UNSUPPORTED), ((BATTERY, OFF, 1), M.MAV_RESULT_UNSUPPORTED),
+                         ((BATTERY, STUCK, 0), M.MAV_RESULT_UNSUPPORTED),
                          ((MOTOR, OFF, 1.5), M.MAV_RESULT_DENIED), ((math.nan, OFF, 0), M.MAV_RESULT_DENIED)):
         got = injection(*args, 0.0, can)
         assert got.result == result and not got.events and got.why, (args, got)
@@ -277,21 +281,25 @@ def _heartbeats_and_last(tlog: Path) -> tuple[list[tuple[float, int]], float]:
     return beats, last
 
 
-@pytest.mark.parametrize("case", ["wind-battery", "crash", "flags", "handover"])
+@pytest.mark.parametrize("case", ["wind-battery", "crash", "flags", "handover", "battery-empty"])
 def test_sitl_plant_blocks_equal_offline(tmp_path, case):
     """``bsst sitl`` (lockstep) reports the plant's blocks as ``bsst sim`` does, to the bit: ``wind`` and
     ``battery`` (a windy x500 with its battery), and a hard touchdown's ``crashed`` outcome (every rotor off:
     it falls from 0.5 m), its ``impact``, ``rotor_effectiveness`` and ``ended_by`` (with ``after_faults``),
     exit 1. ``flags``: the issue's ``--wind 5:270 --turbulence moderate`` (and a gust event) as flags on the
     sine: the same trace.csv state and inputs too. ``handover``: ``--at 10:link:lte``, a handover from the perfect
-    link to the LTE profile's at 10 s: the same trace, the model's link statistics and the ``link`` event."""
+    link to the LTE profile's at 10 s: the same trace, the model's link statistics and the ``link`` event.
+    ``battery-empty``: the windy x500's pack reads empty at 6 s (``--at 6:battery:empty``, what a ground station's
+    INJECT_FAILURE of the battery acts as) with COM_LOW_BAT_ACT = 2: the battery failsafe lands it, at the same
+    step, the same trace."""
     mission = tmp_path / "windy.toml"
     mission.write_text(WINDY_X500)
     sine = tmp_path / "sine15.toml"  # the paper's sine cut to 15 s: past the gust at 12 s and the handover at 10 s
     sine.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 15.0"))
     args = {"wind-battery": (str(mission),), "crash": (str(sine), "--profile", "x500", *ALL_OFF),
             "flags": (str(sine), "--wind", "5:270", "--turbulence", "moderate", "--at", "12:gust:2,3,90"),
-            "handover": (str(sine), "--at", "10:link:lte")}[case]
+            "handover": (str(sine), "--at", "10:link:lte"),
+            "battery-empty": (str(mission), "--at", "6:battery:empty", "--param", "COM_LOW_BAT_ACT=2")}[case]
     codes, summaries = [], []
     for command in ("sim", "sitl"):
         out = tmp_path / command
@@ -317,6 +325,11 @@ def test_sitl_plant_blocks_equal_offline(tmp_path, case):
         crash = next(i for i, e in enumerate(said) if e[2] == "crashed")
         answer = next(i for i, e in enumerate(said) if e[1] == "controller" and e[0] >= 5.0)
         assert answer > crash and said[answer][0] >= said[crash][0], said
+    elif case == "battery-empty":
+        assert codes == [1, 1] and sitl["outcome"] == "failsafe", (codes, sitl["outcome"])
+        assert "battery critical: 0.0 % left" in sitl["ended_by"]["how"], sitl["ended_by"]
+        assert sitl["ended_by"]["after_faults"] == ["t=6.000 s: battery empty"]
+        assert _trace(tmp_path / "sitl" / "trace.csv") == _trace(tmp_path / "sim" / "trace.csv")
     elif case in ("flags", "handover"):
         assert codes == [0, 0] and _trace(tmp_path / "sitl" / "trace.csv") == _trace(tmp_path / "sim" / "trace.csv")
         if case == "flags":
@@ -369,6 +382,33 @@ def _x500_on_battery(tmp_path: Path, effects: str, *args: str) -> Iterator[Any]:
             yield gcs
         finally:
             assert v.stop() == 0
+
+
+def test_a_ground_stations_battery_failure_reads_the_pack_empty_as_px4s(tmp_path):
+    """MAV_CMD_INJECT_FAILURE of the battery, as PX4's BatterySimulator takes it (it was UNSUPPORTED): instance 1
+    UNSUPPORTED; OFF ACCEPTED, and the x500's pack reads empty, its measured voltage the pack's empty one and 0 %
+    left (BATTERY_STATUS EMERGENCY, SYS_STATUS), so an arm is refused as PX4's pre-arm check refuses it; OK, and
+    it reads full again and arms. (The rotors still draw the pack's real power, as PX4's simulated battery is no
+    part of its physics; offline and lockstep fly it alike: test_sitl_plant_blocks_equal_offline.)"""
+    with _x500_on_battery(tmp_path, "", "--realtime", "--param", "SYS_FAILURE_EN=1") as gcs:
+        tgt = (gcs.target_system, gcs.target_component)
+        assert _inject(gcs, BATTERY, OFF, 1) == M.MAV_RESULT_UNSUPPORTED
+        assert _inject(gcs, BATTERY, OFF, 0) == M.MAV_RESULT_ACCEPTED
+        empty = gcs.recv_match(type="BATTERY_STATUS", blocking=True, timeout=10,
+                               condition="BATTERY_STATUS.battery_remaining == 0")
+        assert empty is not None and empty.charge_state == M.MAV_BATTERY_CHARGE_STATE_EMERGENCY
+        assert empty.voltages[0] == 4 * 3300  # the pack's empty voltage: the x500's 4 cells at cell_empty_v 3.3 V
+        status = gcs.recv_match(type="SYS_STATUS", blocking=True, timeout=5,
+                                condition="SYS_STATUS.battery_remaining == 0")
+        assert status is not None and status.voltage_battery == empty.voltages[0]
+        gcs.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+        assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_TEMPORARILY_REJECTED
+        assert _inject(gcs, BATTERY, OK, 0) == M.MAV_RESULT_ACCEPTED
+        full = gcs.recv_match(type="BATTERY_STATUS", blocking=True, timeout=10,
+                              condition="BATTERY_STATUS.battery_remaining == 100")
+        assert full is not None and full.voltages[0] == 16800
+        gcs.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+        assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
 
 
 def test_battery_on_the_ground_station_link(tmp_path):

@@ -1,8 +1,9 @@
-"""One event of a flight's timeline acted on: the plant's rotors and air, the vehicle's sensors (docs/weather.md).
+"""One event of a flight's timeline acted on: the plant's rotors, air and battery, the vehicle's sensors
+(docs/weather.md).
 
-In:  a timeline event (:class:`plant.events.TimedEvent`: motor, wind, gust, link, gps, mag, baro, gyro; its fields
-     in SI: effectiveness 0..1, m/s, deg, s, m, m/s of drift, rad/s of bias), the plant (its time s), the vehicle's
-     sensor suite (None under truth)
+In:  a timeline event (:class:`plant.events.TimedEvent`: motor, wind, gust, link, gps, mag, baro, gyro, battery;
+     its fields in SI: effectiveness 0..1, m/s, deg, s, m, m/s of drift, rad/s of bias), the plant (its time s),
+     the vehicle's sensor suite (None under truth)
 Out: the plant's and the sensors' state changed now, and the kind of event that says so (:func:`act_on`); whether
      an event would change nothing (:func:`changes_nothing`)
 """
@@ -26,6 +27,8 @@ def changes_nothing(e: TimedEvent, p: Quadrotor, sensors: SensorSuite | None) ->
     device, state = sets
     if device[0] == "motor":
         return p.effectiveness[device[1] - 1] == state
+    if device[0] == "battery":
+        return p.battery is not None and p.battery.reads_empty == (state == "empty")
     if sensors is None or device[0] not in ("gps", "mag"):
         return False
     on = sensors.faults.gps_on if device[0] == "gps" else sensors.faults.mag_on
@@ -50,6 +53,10 @@ def act_on(e: TimedEvent, p: Quadrotor, sensors: SensorSuite | None) -> str:
         return "wind"
     elif k == "link":
         return "link"
+    elif k == "battery":
+        if p.battery is None:
+            raise ValueError("a battery event needs the plant built with its battery ([effects] battery)")
+        p.battery.reads_empty = e.get("state") == "empty"
     else:
         if sensors is None:
             raise ValueError(f"a {k} event needs the vehicle's sensors (an estimator other than truth)")

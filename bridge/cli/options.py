@@ -174,8 +174,8 @@ def add_weather_options(p: argparse.ArgumentParser) -> None:
                         "flight's sample strays from both)")
     p.add_argument("--at", action="append", metavar="T:KIND[:ARGS]",
                    help="an event at mission time T s: motor:N=EFF, gps:off|on|jump=DX,DY,DZ, baro:drift=M_PER_S, "
-                        "mag:off|on, gyro:bias=X,Y,Z, wind:SPEED[:FROM], gust:DURATION,AMPLITUDE[,FROM], "
-                        "link:PROFILE[,KEY=VALUE,...] (a handover); repeatable")
+                        "mag:off|on, gyro:bias=X,Y,Z, battery:empty|ok, wind:SPEED[:FROM], "
+                        "gust:DURATION,AMPLITUDE[,FROM], link:PROFILE[,KEY=VALUE,...] (a handover); repeatable")
 
 
 

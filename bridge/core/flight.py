@@ -218,7 +218,7 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
                 raise ConfigError(f"{src}: {key}: the window [{start:g}, {start + dur:g}) s starts after the "
                                   f"mission's end (duration_s = {m.duration_s:g} s), so it would never happen")
     try:
-        wind, timeline = weather_of(m, prof, sensor_config, estimator_kind)
+        wind, timeline = weather_of(m, prof, sensor_config, estimator_kind, effects.battery)
         link_settings = replace(link_settings, handovers=handovers_of(timeline, m))
     except EventError as exc:  # named where the event was given: its flag (--at), else the mission's table
         given = [n for e, n in zip(over.at, over._at_named, strict=True)
@@ -240,12 +240,18 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
     return flight
 
 
-def event_problem(kind: str, prof: Profile, sensors: SensorConfig | None, estimator: str = "ekf") -> str | None:
+def event_problem(kind: str, prof: Profile, sensors: SensorConfig | None, estimator: str = "ekf",
+                  battery: bool = False) -> str | None:
     """Why an event of ``kind`` cannot act on this vehicle (``sensors`` None: the truth estimator, no sensor
-    to fail), or None: a motor event needs rotors, a sensor event the vehicle's sensors, a GPS event a gnss
-    set, a compass event a heading sensor, and an ``estimator`` that reads that sensor (``raw`` reads no
-    barometer, nor a compass when its set measures the attitude: docs/sensors.md). The timeline's check, and a
-    ground station's injection's."""
+    to fail; ``battery``: it flies the profile's pack, ``[effects] battery``), or None: a motor event needs rotors,
+    a sensor event the vehicle's sensors, a GPS event a gnss set, a compass event a heading sensor, and an
+    ``estimator`` that reads that sensor (``raw`` reads no barometer, nor a compass when its set measures the
+    attitude: docs/sensors.md), a battery event a battery. The timeline's check, and a ground station's
+    injection's."""
+    if kind == "battery" and not (battery and prof.battery is not None):
+        if prof.battery is None:
+            return f"profile {prof.name!r} has no battery ([battery] table): fly --profile x500, [effects] battery"
+        return "the vehicle flies no battery: set the mission's [effects] battery = true"
     if kind == "motor" and prof.actuation != "motors":
         return (f"profile {prof.name!r} flies ideal wrench actuation: it has no rotors to fail (fly --profile x500, "
                 "or set the mission's actuation = \"motors\")")
@@ -263,16 +269,17 @@ def event_problem(kind: str, prof: Profile, sensors: SensorConfig | None, estima
     return None
 
 
-def weather_of(m: Mission, prof: Profile, sensors: SensorConfig, estimator: str) -> tuple[WindConfig | None,
-                                                                                          tuple[TimedEvent, ...]]:
+def weather_of(m: Mission, prof: Profile, sensors: SensorConfig, estimator: str,
+               battery: bool = False) -> tuple[WindConfig | None, tuple[TimedEvent, ...]]:
     """The mission's ``[wind]`` (its turbulence at the reference's mean height unless ``altitude_m``; None: still
-    air) and ``[[events]]``, validated and checked against the flight: a motor event needs rotors, a sensor
-    event the vehicle's sensors (an estimator other than truth), a GPS event a gnss set, a compass event a
-    heading sensor; a wind or gust event with no ``[wind]`` flies the plant in (still) air."""
+    air) and ``[[events]]``, validated and checked against the flight (``battery``: it flies the profile's pack,
+    ``[effects] battery``): a motor event needs rotors, a sensor event the vehicle's sensors (an estimator other
+    than truth), a GPS event a gnss set, a compass event a heading sensor, a battery event a battery; a wind or
+    gust event with no ``[wind]`` flies the plant in (still) air."""
     src = m.source
     timeline = timeline_from_tables(m.events, src, m.duration_s)
     for e in timeline:
-        why = event_problem(e.kind, prof, None if estimator == "truth" else sensors, estimator)
+        why = event_problem(e.kind, prof, None if estimator == "truth" else sensors, estimator, battery)
         if why is not None:
             raise EventError(e, why, table_where(src, e))
     check_state_changes(timeline, m.rate_hz, src)  # an event that changes nothing, or two at one step: refused

@@ -135,7 +135,8 @@ class Actions:
         sensors = sim.sensors.config if sim.sensors is not None else None
         got = injection(m.param1, m.param2, m.param3, sim.t,
                         lambda kind: event_problem(kind, sim.plant.profile, sensors,
-                                                   getattr(sim.estimator, "kind", "truth")))
+                                                   getattr(sim.estimator, "kind", "truth"),
+                                                   sim.plant.battery is not None))
         if got.why is not None:
             if got.result == mavlink.MAV_RESULT_DENIED:
                 self.reject("bad_number")

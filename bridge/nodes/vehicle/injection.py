@@ -7,7 +7,8 @@ Out: :class:`Injection`: the MAV_RESULT PX4 answers, the :class:`~plant.events.T
      (ACCEPTED), and why it was not (a STATUSTEXT's text; None when accepted)
 
 What maps: a motor OFF is ``motor:N=0``, OK ``motor:N=1``; GPS and compass OFF/OK are ``gps:off``/``gps:on``,
-``mag:off``/``mag:on``. Any other type of those units is UNSUPPORTED (PX4 takes some of them, which change only
+``mag:off``/``mag:on``; the battery's (instance 0) ``battery:empty``/``battery:ok``, as PX4's BatterySimulator
+reads its pack empty. Any other type of those units is UNSUPPORTED (PX4 takes some of them, which change only
 telemetry not simulated here: docs/weather.md). The barometer's and gyro's faults here are a drift and a bias
 whose size the command has no field for (the mission's events, ``--at T:baro:drift=R``, ``gyro:bias=X,Y,Z``):
 UNSUPPORTED, as is every other unit. An OK of a unit that works is acted on as nothing
@@ -58,6 +59,8 @@ def injection(p1: float, p2: float, p3: float, t_s: float, problem: Callable[[st
         kind, lo_hi = "motor", (0, MOTORS)
     elif unit in _SENSORS:
         kind, lo_hi = _SENSORS[unit], (0, 1)
+    elif unit == mavlink.FAILURE_UNIT_SYSTEM_BATTERY:
+        kind, lo_hi = "battery", (0, 0)
     elif unit in _SIZED:
         return Injection(mavlink.MAV_RESULT_UNSUPPORTED, why=f"{what}: its fault here has a size this command has "
                                                              f"no field for: give it in the mission's [[events]] "
@@ -66,6 +69,9 @@ def injection(p1: float, p2: float, p3: float, t_s: float, problem: Callable[[st
         return Injection(mavlink.MAV_RESULT_UNSUPPORTED, why=f"{what}: not a unit the vehicle simulates")
     if ftype not in _TYPES:
         return Injection(mavlink.MAV_RESULT_UNSUPPORTED, why=f"{what}: only OK and OFF are supported")
+    if kind == "battery" and instance != 0:  # PX4's BatterySimulator: UNSUPPORTED
+        return Injection(mavlink.MAV_RESULT_UNSUPPORTED, why=f"{what}: instance {instance}: the vehicle has one "
+                                                             "pack, instance 0")
     if not lo_hi[0] <= instance <= lo_hi[1]:
         has = "motors 1-4 (0: all)" if kind == "motor" else "one (0 or 1)"
         return Injection(mavlink.MAV_RESULT_DENIED, why=f"{what}: instance {instance}: the vehicle has {has}")
@@ -77,6 +83,8 @@ def injection(p1: float, p2: float, p3: float, t_s: float, problem: Callable[[st
         motors = range(1, MOTORS + 1) if instance == 0 else (instance,)
         events = tuple(TimedEvent(t_s, "motor", (("motor", n), ("effectiveness", 0.0 if off else 1.0)))
                        for n in motors)
+    elif kind == "battery":  # PX4's BatterySimulator: OFF reads the pack empty, OK as it is
+        events = (TimedEvent(t_s, kind, (("state", "empty" if off else "ok"),)),)
     else:
         events = (TimedEvent(t_s, kind, (("state", "off" if off else "on"),)),)
     return Injection(mavlink.MAV_RESULT_ACCEPTED, events)

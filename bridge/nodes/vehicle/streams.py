@@ -78,7 +78,7 @@ class VehicleView:
 
 def battery_fields(b: Battery) -> tuple[int, int, int]:
     """SYS_STATUS's battery fields of the plant's battery: terminal voltage mV, current cA, remaining %."""
-    return int(round(b.voltage * 1000.0)), int(round(b.current * 100.0)), int(round(100.0 * b.remaining))
+    return int(round(b.measured_v * 1000.0)), int(round(b.current * 100.0)), int(round(100.0 * b.remaining))
 
 
 def battery_status(v: VehicleView) -> list[Any]:
