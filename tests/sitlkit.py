@@ -290,6 +290,12 @@ class GcsSocket:
     def exchange(self, vehicle: Any, msg: Any | None, want: str) -> Any:
         """Send ``msg`` (if any) to ``vehicle``'s GCS link and let it take in what came, until a ``want`` message
         is back (5 s deadline): the first one; what came with it is dropped."""
+        seen = self.exchange_until(vehicle, msg, lambda m: m.get_type() == want, f"the vehicle's {want}")
+        return next(m for m in seen if m.get_type() == want)
+
+    def exchange_until(self, vehicle: Any, msg: Any | None, last: Callable[[Any], bool], what: str) -> list[Any]:
+        """Send ``msg`` (if any) to ``vehicle``'s GCS link and let it take in what came, until a message for which
+        ``last`` is true is back (5 s deadline, ``what`` named if it is missed): every message back so far."""
         if msg is not None:
             self.sock.sendto(msg.pack(self.mav), vehicle.gcs.local)
         seen: list[Any] = []
@@ -298,10 +304,10 @@ class GcsSocket:
             for m, addr in vehicle.gcs.poll():
                 vehicle._handle(vehicle.gcs, m, addr)
             seen.extend(self.received())
-            return any(m.get_type() == want for m in seen)
+            return any(last(m) for m in seen)
 
-        wait_for(answered, 5.0, f"the vehicle's {want}", poll_s=0.001)
-        return next(m for m in seen if m.get_type() == want)
+        wait_for(answered, 5.0, what, poll_s=0.001)
+        return seen
 
     def close(self) -> None:
         self.sock.close()

@@ -824,6 +824,14 @@ def test_reached_and_current_from_the_flight():
         gcs.close()
 
 
+def _uploaded_in_process(gcs: GcsSocket, v: Vehicle, items: list[Any]) -> Any:
+    """``items`` uploaded by ``gcs`` to a vehicle in this process, each as it is requested: the final MISSION_ACK."""
+    gcs.exchange(v, M.MAVLink_mission_count_message(1, 1, len(items), 0), "MISSION_REQUEST_INT")
+    for it in items[:-1]:
+        gcs.exchange(v, it, "MISSION_REQUEST_INT")
+    return gcs.exchange(v, items[-1], "MISSION_ACK")
+
+
 def test_a_ground_stations_unfinished_download_does_not_hold_up_the_controllers():
     """Each link has its own transfers, as each PX4 MAVLink instance has its own mission manager: a ground
     station's download left unfinished on the GCS link (MAVProxy's ``wp list`` over a lossy link leaves one so,
@@ -856,10 +864,7 @@ def test_a_ground_stations_unfinished_download_does_not_hold_up_the_controllers(
 
     try:
         items = _items(3)
-        gcs.exchange(v, M.MAVLink_mission_count_message(1, 1, 3, 0), "MISSION_REQUEST_INT")
-        for it in items[:2]:
-            gcs.exchange(v, it, "MISSION_REQUEST_INT")
-        assert gcs.exchange(v, items[2], "MISSION_ACK").type == M.MAV_MISSION_ACCEPTED
+        assert _uploaded_in_process(gcs, v, items).type == M.MAV_MISSION_ACCEPTED
         assert gcs.exchange(v, M.MAVLink_mission_request_list_message(1, 1, 0), "MISSION_COUNT").count == 3
         assert gcs.exchange(v, M.MAVLink_mission_request_int_message(1, 1, 0, 0), "MISSION_ITEM_INT").seq == 0
         # the controller's download, beside it
@@ -897,24 +902,12 @@ def test_a_download_left_without_its_final_ack_holds_its_link_as_on_px4():
 
     def answers(msg: Any, text: str) -> list[str]:
         """The kinds of message back, up to the STATUSTEXT holding ``text`` (an ACK comes first, in its datagram)."""
-        gcs.sock.sendto(msg.pack(gcs.mav), v.gcs.local)
-        seen: list[Any] = []
-
-        def said() -> bool:
-            for m, addr in v.gcs.poll():
-                v._handle(v.gcs, m, addr)
-            seen.extend(gcs.received())
-            return any(m.get_type() == "STATUSTEXT" and text in m.text for m in seen)
-
-        wait_for(said, 5.0, f"the vehicle's {text!r}", poll_s=0.001)
+        seen = gcs.exchange_until(v, msg, lambda m: m.get_type() == "STATUSTEXT" and text in m.text,
+                                  f"the vehicle's {text!r}")
         return [m.get_type() for m in seen if m.get_type() in ("MISSION_ACK", "STATUSTEXT")]
 
     try:
-        items = _items(3)
-        gcs.exchange(v, M.MAVLink_mission_count_message(1, 1, 3, 0), "MISSION_REQUEST_INT")
-        for it in items[:2]:
-            gcs.exchange(v, it, "MISSION_REQUEST_INT")
-        assert gcs.exchange(v, items[2], "MISSION_ACK").type == M.MAV_MISSION_ACCEPTED
+        assert _uploaded_in_process(gcs, v, _items(3)).type == M.MAV_MISSION_ACCEPTED
         assert gcs.exchange(v, M.MAVLink_mission_request_list_message(1, 1, 0), "MISSION_COUNT").count == 3
         for seq in range(3):  # every item out; no final ACK
             assert gcs.exchange(v, M.MAVLink_mission_request_int_message(1, 1, seq, 0), "MISSION_ITEM_INT").seq == seq
