@@ -50,7 +50,7 @@ from bridge.mavlink.modes import (
     shown_name,
 )
 from bridge.nodes.report import Ready, Stats
-from bridge.nodes.vehicle.paramservice import MAV_PARAM_ERROR_TYPE_MISMATCH
+from bridge.nodes.vehicle.paramservice import MAV_PARAM_ERROR_TYPE_MISMATCH, MAV_PARAM_ERROR_TYPE_UNSUPPORTED
 from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
 from missions import Mission, Sine
@@ -83,6 +83,15 @@ def test_every_parameter_reads_back_what_was_set_and_refuses_outside_its_range()
         change_param(p, "COM_OBL_RC_ACT", 0)  # PX4's Position mode: not flown here
     with pytest.raises(ParamRefused, match="INT32"):
         change_param(p, "COM_OBL_ACT", 0.5)
+
+
+def test_a_param_event_says_the_values_in_their_own_digits():
+    """A change's ``param`` event (and so its intervention's text): an INT32 whole, a REAL32 as float32 tells it
+    apart (``:g`` said EKF2_NOAID_TOUT = 1.23457e+06 and GF_MAX_HOR_DIST 1234.57)."""
+    sim = prepare("missions/sine.toml").make_vehicle()
+    assert sim.change_param("EKF2_NOAID_TOUT", 1234567.0).text == "EKF2_NOAID_TOUT = 1234567 (was 5000000)"
+    wire = struct.unpack("<f", struct.pack("<f", 1234.5678))[0]  # as a PARAM_SET carries it
+    assert sim.change_param("GF_MAX_HOR_DIST", wire).text == "GF_MAX_HOR_DIST = 1234.56775 (was 0)"
 
 
 def test_the_failsafe_parameters_share_the_failsafe_tables_ranges():
@@ -212,11 +221,15 @@ def test_parameter_protocol_over_udp(tmp_path):
                     ("COM_OF_LOSS_T", 100.0, M.MAV_PARAM_TYPE_REAL32, M.MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE,
                      "COM_OF_LOSS_T: must be in [0.01, 60] s, got 100"),
                     ("COM_OF_LOSS_T", 1.0, M.MAV_PARAM_TYPE_INT32, MAV_PARAM_ERROR_TYPE_MISMATCH, "REAL32"),
+                    # a type no parameter here has: PX4 main's TYPE_UNSUPPORTED (it was TYPE_MISMATCH)
+                    ("COM_OF_LOSS_T", 1.0, M.MAV_PARAM_TYPE_REAL64, MAV_PARAM_ERROR_TYPE_UNSUPPORTED,
+                     "INT32 or REAL32"),
                     ("MAV_SYS_ID", param_to_wire(42, 6), 6, M.MAV_PARAM_ERROR_READ_ONLY, "at start only")):
                 gcs.mav.param_set_send(*tgt, name.encode(), value, kind)
                 error = _recv(gcs, ["PARAM_ERROR", "PARAM_VALUE"])
                 assert error.get_type() == "PARAM_ERROR", error
-                assert (error.param_id, error.error, error.param_index) == (name, code, list(BY_NAME).index(name))
+                # by name, as the set named it (PX4 main's -1; it was the parameter's index)
+                assert (error.param_id, error.error, error.param_index) == (name, code, -1)
                 assert (error.target_system, error.target_component) == (255, 190)  # to the sender
                 m = _recv(gcs, "PARAM_VALUE")
                 text = _recv(gcs, "STATUSTEXT", f"{why!r} in STATUSTEXT.text")
@@ -240,7 +253,7 @@ def test_parameter_protocol_over_udp(tmp_path):
     assert (e.param.name, e.param.new, e.by.link) == ("COM_OF_LOSS_T", 1.5, "gcs")  # typed, for the policies
     v.wait_event(lambda s: "param: COM_OBL_RC_ACT = 5 (was -1)" in s)
     stats = v.wait_report(Stats).values
-    assert stats["rejected"]["param_refused"] == 3 and stats["rejected"]["param_unknown"] == 3
+    assert stats["rejected"]["param_refused"] == 4 and stats["rejected"]["param_unknown"] == 3
 
 
 def test_modes_takeoff_hold_land_over_udp(tmp_path):

@@ -192,6 +192,7 @@ class Refusal(Enum):
     READ_ONLY = "read_only"  # acts at start only (MAV_SYS_ID)
     UNKNOWN = "unknown"  # no such parameter
     TYPE = "type"  # the set says another MAVLink type than the parameter's
+    TYPE_UNSUPPORTED = "type_unsupported"  # the set says a MAVLink type no parameter here has (not INT32, REAL32)
 
 
 class ParamRefused(ValueError):
@@ -258,19 +259,19 @@ def value_problem(spec: ParamSpec, value: float) -> str | None:
     if isinstance(value, int) and finite_float(value) is None:  # past the float range: isfinite would raise
         return f"{spec.name}: {_range_text(spec)}, got {show(value)}"
     if spec.kind == INT32 and not (math.isfinite(value) and value == int(value)):  # 1.5, nan, inf
-        return f"{spec.name}: an INT32, expected an integer {_allowed(spec)}, got {_shown(value)}"
+        return f"{spec.name}: an INT32, expected an integer {_allowed(spec)}, got {shown_value(value)}"
     if not math.isfinite(value):
         return f"{spec.name}: must be finite, got {value}"
     if spec.choices is not None and int(value) not in spec.choices:
-        return f"{spec.name}: {_shown(value)} is not one the vehicle flies; allowed: {_choices(spec.choices)}"
+        return f"{spec.name}: {shown_value(value)} is not one the vehicle flies; allowed: {_choices(spec.choices)}"
     if not in_range(value, spec.lo, spec.hi):
-        return f"{spec.name}: {_range_text(spec)}, got {_shown(value)}"
+        return f"{spec.name}: {_range_text(spec)}, got {shown_value(value)}"
     return None
 
 
-def _shown(value: float) -> str:
-    """``value`` in a refusal: an integer whole, else in as few digits as tell it apart in float32 (a bound's
-    neighbour as 10000001 or 20.000001, never 1e+07 or 20; a wire value as 25.3, not 25.2999992371)."""
+def shown_value(value: float) -> str:
+    """``value`` in a refusal or a ``param`` event: an integer whole, else in as few digits as tell it apart in float32
+    (a bound's neighbour as 10000001 or 20.000001, never 1e+07 or 20; a wire value as 25.3, not 25.2999992371)."""
     if isinstance(value, int) or (math.isfinite(value) and value == int(value) and abs(value) < 1e16):
         return str(int(value))
     for digits in (6, 9):

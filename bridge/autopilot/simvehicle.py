@@ -58,7 +58,7 @@ from bridge.autopilot.modes import (  # noqa: F401  (the modes: imported from he
     end_target,
     mode_target,
 )
-from bridge.autopilot.params import VehicleParams, change_param, read_param
+from bridge.autopilot.params import VehicleParams, change_param, read_param, shown_value
 from bridge.autopilot.positionloss import NOAID_TIMEOUT_US, PositionWatch
 from bridge.autopilot.timeline import act_on, changes_nothing
 from bridge.autopilot.touchdownwatch import TouchdownWatch
@@ -280,7 +280,8 @@ class SimVehicle:
             self.max_hor_m, self.max_ver_m = after.max_hor_m, after.max_ver_m
             self.beyond.clear()  # a new limit is watched afresh
         old, new = read_param(before, name), read_param(after, name)
-        return self.event("param", f"{name} = {new:g} (was {old:g})", param=ParamChanged(name, float(old), float(new)))
+        return self.event("param", f"{name} = {shown_value(new)} (was {shown_value(old)})",
+                          param=ParamChanged(name, float(old), float(new)))
 
     def watch_fence(self, fence: Geofence | None) -> None:
         """Watch ``fence`` (a ground station's; None: none) from now on, afresh."""

@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from bridge.autopilot.params import BY_NAME
+from bridge.autopilot.params import BY_NAME, shown_value
 from bridge.record.events import RunEvent
 from bridge.record.policies import CONTROLLER_ID, vehicle_events
 
@@ -53,7 +53,7 @@ def interventions(events: Sequence[RunEvent], rate_hz: float,
 
 def intervention_text(i: Mapping[str, Any]) -> str:
     """One intervention as a person reads it: who, what, when (t and step)."""
-    what = (f"changed {i['name']} from {i['old']:g} to {i['new']:g}" if "name" in i
+    what = (f"changed {i['name']} from {shown_value(i['old'])} to {shown_value(i['new'])}" if "name" in i
             else f"{'set the mode' if i['kind'] == 'mode' else i['kind']}: {i['what']}")
     return f"a ground station ({i['by']}) {what} at t={i['t']:.3f} s (step {i['step']})"
 

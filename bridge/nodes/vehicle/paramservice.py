@@ -14,10 +14,11 @@ period (:meth:`bridge.autopilot.simvehicle.SimVehicle.change_param`).
 A refused set is answered as ArduPilot answers one (GCS_Param.cpp, ``handle_param_set``: PARAM_ERROR, then the
 unchanged PARAM_VALUE), in one datagram with the STATUSTEXT: PARAM_ERROR first, so that MAVSDK (4.x,
 ``MavlinkParameterClient::process_param_error``) and QGroundControl end the set at once with its reason
-(VALUE_OUT_OF_RANGE, READ_ONLY, DOES_NOT_EXIST, TYPE_MISMATCH) where, on the unchanged value alone, MAVSDK resent
-the set five times and gave up with TIMEOUT. PX4's src/modules/mavlink/mavlink_parameters.cpp as read here (after
-2020-11) checks no range and sends nothing for an unknown name or a wrong type (its console's error only); PX4's
-main branch has added PARAM_ERROR since (in no release up to 1.17; that source not read here).
+(VALUE_OUT_OF_RANGE, READ_ONLY, DOES_NOT_EXIST, TYPE_MISMATCH, TYPE_UNSUPPORTED) where, on the unchanged value
+alone, MAVSDK resent the set five times and gave up with TIMEOUT. PX4's src/modules/mavlink/mavlink_parameters.cpp
+as read here (after 2020-11) checks no range and sends nothing for an unknown name or a wrong type (its console's
+error only); PX4's main branch has added PARAM_ERROR since (in no release up to 1.17): by name (index -1), and
+TYPE_UNSUPPORTED for a type other than INT32 and REAL32, as here.
 """
 
 from __future__ import annotations
@@ -38,9 +39,11 @@ MESSAGES = frozenset({"PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET"})
 # MAV_PARAM_ERROR_TYPE_MISMATCH of MAVLink's common.xml, newer than the dialect of pymavlink 2.4.50 (which ends at
 # READ_ONLY, 5); MAVSDK 4 reads it as TYPE_MISMATCH
 MAV_PARAM_ERROR_TYPE_MISMATCH = 7
+MAV_PARAM_ERROR_TYPE_UNSUPPORTED = 6  # (the same: common.xml's, after the dialect's READ_ONLY)
 PARAM_ERRORS = {Refusal.VALUE: mavlink.MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE, Refusal.READ_ONLY:
                 mavlink.MAV_PARAM_ERROR_READ_ONLY, Refusal.UNKNOWN: mavlink.MAV_PARAM_ERROR_DOES_NOT_EXIST,
-                Refusal.TYPE: MAV_PARAM_ERROR_TYPE_MISMATCH}  # PARAM_ERROR's code of each kind of refusal
+                Refusal.TYPE: MAV_PARAM_ERROR_TYPE_MISMATCH,
+                Refusal.TYPE_UNSUPPORTED: MAV_PARAM_ERROR_TYPE_UNSUPPORTED}  # PARAM_ERROR's code of each refusal
 
 
 class ParamService:
@@ -104,6 +107,9 @@ class ParamService:
         index = PARAMS.index(spec)
         want = PARAM_TYPES[spec.kind]
         try:
+            if m.param_type not in PARAM_TYPES.values():  # PX4 main: TYPE_UNSUPPORTED for any but INT32, REAL32
+                raise ParamRefused(f"{name}: the set says type {m.param_type}: the parameters here are INT32 or "
+                                   "REAL32", Refusal.TYPE_UNSUPPORTED)
             if m.param_type != want:
                 raise ParamRefused(f"{name}: is {spec.kind}, the set says type {m.param_type}", Refusal.TYPE)
             changed = self.sim.change_param(name, param_from_wire(m.param_value, want), self.sysid)
@@ -112,7 +118,7 @@ class ParamService:
         except ParamRefused as exc:
             self._reject("param_refused")
             self._refused(str(exc))
-            error = _param_error(m, name, index, PARAM_ERRORS[exc.why])
+            error = _param_error(m, name, -1, PARAM_ERRORS[exc.why])  # as the set named it: by name (PX4 main)
             ep.reply((error, self.value(index), *self._texts(mavlink.MAV_SEVERITY_WARNING, str(exc))), addr)
             return False
         ep.reply((self.value(index),), addr)
