@@ -420,3 +420,37 @@ def test_would_be_controllers_get_back_no_more_bytes_than_they_sent(tmp_path):
     assert sent == 200 * 14
     assert back <= sent + MAX_FRAME, (back, sent)  # before: 56 266 bytes back
     assert stats["rejected"].get("reply_limited", 0) >= 180, stats["rejected"]
+
+
+def test_a_disarm_in_the_air_is_refused_as_px4s_saying_why_and_a_forced_one_is_taken():
+    """A ground station's disarm in the air without PX4's force (param2 21196): TEMPORARILY_REJECTED with PX4's
+    commander's "Disarming denied: not landed" (it was DENIED with no reason given); forced, ACCEPTED. (A vehicle in
+    this process, put 2 m up.)"""
+    from bridge.core.flight import prepare
+    from bridge.mavlink.endpoint import parse_address
+    from bridge.nodes.vehicle import Vehicle, VehicleConfig
+    from missions import Mission, Sine
+    from tests.sitlkit import GcsSocket
+
+    gcs = GcsSocket()
+    v = Vehicle(prepare(Mission(Sine(), duration_s=5.0, name="air")),
+                VehicleConfig(parse_address("udpin:127.0.0.1:0"), parse_address(gcs.url)))
+
+    def disarm(p2: float) -> object:
+        return mavlink.MAVLink_command_long_message(1, 1, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, p2, 0, 0, 0, 0, 0)
+
+    try:
+        v.sim.arm()
+        v.sim.plant.state = (0.0, 0.0, 0.0, 0.0, 2.0, 0.0) + (0.0,) * 6
+        assert v.sim.armed and not v.sim.plant.on_ground
+        seen = gcs.exchange_until(v, disarm(0.0), lambda m: m.get_type() == "STATUSTEXT" and "Disarming" in m.text,
+                                  "the refusal's text")
+        assert [m.result for m in seen if m.get_type() == "COMMAND_ACK"] == [mavlink.MAV_RESULT_TEMPORARILY_REJECTED]
+        assert [m.text for m in seen if m.get_type() == "STATUSTEXT" and "Disarming" in m.text] == [
+            "Disarming denied: not landed"]
+        assert v.sim.armed
+        assert gcs.exchange(v, disarm(21196.0), "COMMAND_ACK").result == mavlink.MAV_RESULT_ACCEPTED
+        assert not v.sim.armed
+    finally:
+        v.close()
+        gcs.close()

@@ -445,8 +445,8 @@ class Commander:
                     self._engage_lockstep(now)  # back to lockstep
             return mavlink.MAV_RESULT_ACCEPTED
         forced = p2 == FORCE_DISARM
-        if sim.armed and not sim.plant.on_ground and not forced:
-            return mavlink.MAV_RESULT_DENIED  # in the air: only a forced disarm (PX4 does the same)
+        if sim.armed and not sim.plant.on_ground and not forced:  # in the air: only a forced disarm, as PX4's
+            return self._refuse("Disarming denied: not landed", mavlink.MAV_RESULT_TEMPORARILY_REJECTED)
         held, n0 = self.pre_start.held(), len(sim.events)
         sim.disarm("disarmed by command (forced)" if forced else "disarmed by command")
         if held:  # armed in HOLD before the mission's flight: nothing flew, nothing ends
