@@ -8,6 +8,7 @@ offline loop as a session's vehicle (tests/test_failsafe_disarm.py flies both an
 
 from __future__ import annotations
 
+from bridge.autopilot.failsafe import PositionHold
 from bridge.autopilot.intention import UserModeIntention
 from bridge.autopilot.simvehicle import HOLD, LAND, OFFBOARD
 from bridge.core.flight import prepare
@@ -110,3 +111,20 @@ def test_land_and_rtl_disarms_keep_their_text() -> None:
     assert intention.fall_back() and sim.mode == HOLD
     assert sim.events[-1].text == "HOLD (disarmed after LAND: PX4 takes the last mode it arms in; armed in it next)"
     assert not intention.fall_back()  # in a mode it arms in now: nothing more to take
+
+
+def test_hold_asked_again_while_holding_changes_nothing_and_a_reposition_goes_on() -> None:
+    """HOLD selected while in HOLD, armed, is no change, as PX4's navigation state stays Loiter: a reposition under
+    way (DO_REPOSITION: HOLD flown to a point) goes on to its point; it stopped where the vehicle was, re-held
+    there (a HOLD event, and MAVSDK's hold() during a goto_location stopped short)."""
+    sim = prepare(_ground_mission()).make_vehicle(armed=True)
+    intention = UserModeIntention(sim)
+    sim.plant.state = (0.0, 0.0, 0.0, 0.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    sim.set_mode(HOLD, hold_at=PositionHold(6.0, 0.0, 2.0))
+    _fly(sim, intention, 1.0)
+    n, target = len(sim.events), sim.onboard.target
+    assert 0.5 < sim.published()[0] < 5.0  # on its way
+    sim.set_mode(HOLD)
+    assert len(sim.events) == n and sim.onboard.target is target  # no event, the same point
+    _fly(sim, intention, 8.0)
+    assert abs(sim.published()[0] - 6.0) < 0.1 and sim.mode == HOLD

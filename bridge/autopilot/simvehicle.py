@@ -200,9 +200,11 @@ class SimVehicle:
         step: HOLD holds where it is (or flies to ``hold_at`` and holds there: DO_REPOSITION), LAND lands where it
         is, TAKEOFF climbs over where it is, OFFBOARD takes the controller's targets again (its timeout counts from
         now). Disarmed, it is the mode the next arm from a ground station arms in. A request that changes nothing
-        (OFFBOARD in OFFBOARD; disarmed, the mode already selected) is no event: the flight is the same."""
+        (OFFBOARD in OFFBOARD; disarmed, the mode already selected; HOLD in HOLD, armed, as PX4's navigation state
+        stays: a reposition under way goes on) is no event: the flight is the same."""
         alt = self.takeoff_alt_m if takeoff_alt_m is None else takeoff_alt_m
-        if self.mode == mode and (mode == OFFBOARD or (not self.armed and alt == self._takeoff_alt)):
+        if self.mode == mode and (mode == OFFBOARD or (not self.armed and alt == self._takeoff_alt)
+                                  or (mode == HOLD and hold_at is None)):
             return
         if mode == OFFBOARD:
             if self.armed and self.mode != OFFBOARD:
