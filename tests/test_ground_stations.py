@@ -560,7 +560,8 @@ def test_a_reposition_in_a_failsafe_takes_over_as_px4s_mode_change_and_outside_t
 
 def test_do_reposition_disarmed_takes_hold_on_the_ground_is_denied_and_other_flags_are_unsupported(tmp_path):
     """DO_REPOSITION as PX4 answers it where it flies nowhere: flags other than CHANGE_MODE are UNSUPPORTED; disarmed,
-    ACCEPTED as the mode alone (HOLD, armed in it next: PX4's navigator keeps no point for a vehicle not armed);
+    ACCEPTED as the mode alone (HOLD, armed in it next: PX4's navigator keeps no point for a vehicle not armed), its
+    point unchecked;
     armed on the ground, DENIED ("take off first"); each refusal with its STATUSTEXT and the vehicle's report."""
     with instance_slot() as n:
         gcs = _gcs(n)
@@ -585,6 +586,12 @@ def test_do_reposition_disarmed_takes_hold_on_the_ground_is_denied_and_other_fla
             assert _ack(gcs, M.MAV_CMD_DO_SET_MODE).result == M.MAV_RESULT_ACCEPTED
             assert reposition(1.0) == M.MAV_RESULT_ACCEPTED
             v.wait_event(lambda s: "mode: HOLD (disarmed: armed in it next) [by 255:190" in s)
+            # disarmed, no point is kept, so none is checked: every field NaN (the height now: 0 m) and one 200 m
+            # away are ACCEPTED too (both were DENIED, "0.00 m above home", "200.x m from home")
+            for lat in (math.nan, 47.3977420 + 0.0018):
+                gcs.mav.command_long_send(n + 1, 1, M.MAV_CMD_DO_REPOSITION, 0, -1.0, 1.0, 0.0, math.nan, lat,
+                                          math.nan if math.isnan(lat) else 8.5455940, math.nan)
+                assert _ack(gcs, M.MAV_CMD_DO_REPOSITION).result == M.MAV_RESULT_ACCEPTED, lat
             gcs.mav.command_long_send(n + 1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
             assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
             v.wait_event(lambda s: "armed, HOLD" in s)

@@ -209,10 +209,10 @@ class Commander:
         failsafe, as any mode a ground station selects, HOLD takes over (PX4's user takeover)."""
         sim = self.sim
         got = reposition(m, self.cfg.home, sim.published())
+        if not sim.armed and got.result != mavlink.MAV_RESULT_UNSUPPORTED:  # no point kept, so none checked
+            return self._set_mode_or_refuse(HOLD, "", by=by)
         if got.to is None:
             return self._refuse(got.why or "DO_REPOSITION", got.result)
-        if not sim.armed:
-            return self._set_mode_or_refuse(HOLD, "", by=by)
         if sim.plant.on_ground:
             return self._refuse("DO_REPOSITION: on the ground: take off first (NAV_TAKEOFF)")
         outside = reposition_refusal(got.to, sim.t, sim.home, sim.max_hor_m, sim.max_ver_m, sim.fence,
