@@ -82,12 +82,14 @@ def test_flight_termination_stops_the_motors_latches_termination_and_refuses_arm
         gcs.close()
 
 
-def test_protocol_version_is_answered_as_px4_does() -> None:
-    """REQUEST_PROTOCOL_VERSION: ACCEPTED and PROTOCOL_VERSION (message 300: version 200, min 100, max 200, as PX4's
-    receiver sends it), a MAVLink 2 frame whose checksum holds with the message's CRC extra (217)."""
+@pytest.mark.parametrize("cmd, p1", [(M.MAV_CMD_REQUEST_PROTOCOL_VERSION, 1), (M.MAV_CMD_REQUEST_MESSAGE, 300)])
+def test_protocol_version_is_answered_as_px4_does(cmd: int, p1: float) -> None:
+    """REQUEST_PROTOCOL_VERSION, or REQUEST_MESSAGE of message 300 (it was UNSUPPORTED): ACCEPTED and PROTOCOL_VERSION
+    (version 200, min 100, max 200, as PX4's receiver sends it), a MAVLink 2 frame whose checksum holds with the
+    message's CRC extra (217)."""
     v, gcs = _in_process()
     try:
-        req = M.MAVLink_command_long_message(1, 1, M.MAV_CMD_REQUEST_PROTOCOL_VERSION, 0, 1, 0, 0, 0, 0, 0, 0)
+        req = M.MAVLink_command_long_message(1, 1, cmd, 0, p1, 0, 0, 0, 0, 0, 0)
         gcs.sock.sendto(req.pack(gcs.mav), v.gcs.local)
         frames: list[bytes] = []
 
@@ -112,7 +114,7 @@ def test_protocol_version_is_answered_as_px4_does() -> None:
         assert struct.unpack("<H", f[10 + f[1]:12 + f[1]])[0] == crc.crc
         assert struct.unpack("<HHH8s8s", payload)[:3] == (200, 100, 200)
         acks = [m for m in M.MAVLink(None).parse_buffer(b"".join(frames)) or [] if m.get_type() == "COMMAND_ACK"]
-        assert [(a.command, a.result) for a in acks] == [(M.MAV_CMD_REQUEST_PROTOCOL_VERSION, M.MAV_RESULT_ACCEPTED)]
+        assert [(a.command, a.result) for a in acks] == [(cmd, M.MAV_RESULT_ACCEPTED)]
     finally:
         v.close()
         gcs.close()

@@ -22,6 +22,7 @@ from bridge.autopilot.simvehicle import SimVehicle
 from bridge.autopilot.vehicleevents import Sender
 from bridge.mavlink import telemetry as tm
 from bridge.mavlink.receive import interval_arg, message_id_arg
+from bridge.nodes.vehicle.actions import PROTOCOL_VERSION, ProtocolVersion
 from bridge.nodes.vehicle.streams import HEARTBEAT_S, StreamTable
 
 _STREAM_COMMANDS = (mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAV_CMD_GET_MESSAGE_INTERVAL,
@@ -69,6 +70,8 @@ class MessageRequests:
             iv = table.get(mid, HEARTBEAT_S if mid == mavlink.MAVLINK_MSG_ID_HEARTBEAT else 0.0)
             return mavlink.MAV_RESULT_ACCEPTED, (
                 mavlink.MAVLink_message_interval_message(mid, int(iv * 1e6) if iv > 0 else -1),)
+        if mid == ProtocolVersion.id:  # no stream: answered as REQUEST_PROTOCOL_VERSION is (PX4's receiver)
+            return mavlink.MAV_RESULT_ACCEPTED, (ProtocolVersion(*PROTOCOL_VERSION),)
         follow = tuple(self.message(mid, by.link != "controller"))  # the controller's: the mission's frame
         return (mavlink.MAV_RESULT_ACCEPTED if follow else mavlink.MAV_RESULT_UNSUPPORTED), follow
 
