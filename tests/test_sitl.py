@@ -348,10 +348,49 @@ def test_an_automatic_instance_is_the_highest_free_one(tmp_path, monkeypatch):
     """``instance_slot`` takes the highest free instance first, so that the low ones stay for the sessions a
     person starts by number (0 is ``bsst sitl``'s default; the README's example takes 1). Its lock files here
     in a directory of this test's own, so that no other test's slots count; a slot whose ports another process
-    holds is passed over, as ever."""
+    holds is passed over, as ever: instance 9's ground-station port held here, and any other instance's that
+    the suite's sessions hold meanwhile (each pick is checked against what the real port check said, observed as
+    it ran: the test once asserted 9 > 8 > 7-like order and failed when a loaded suite's sessions held 1-5)."""
+    from bridge.session import children
+
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
-    with instance_slot() as a, instance_slot() as b, instance_slot() as c:
-        assert a > b > c, (a, b, c)
+    checked: list[tuple[int, bool]] = []
+    real = children._ports_free
+
+    def observed(n: int) -> bool:
+        free = real(n)
+        checked.append((n, free))
+        return free
+
+    monkeypatch.setattr(children, "_ports_free", observed)
+    held = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+
+    def bound() -> bool:  # (a session of the suite's may hold it a while: then bound once it lets go)
+        try:
+            held.bind(("127.0.0.1", GCS_PORT + 9))
+        except OSError:
+            return False
+        return True
+
+    wait_for(bound, 120.0, f"UDP 127.0.0.1:{GCS_PORT + 9} free to hold")
+    calls = []
+    try:
+        with instance_slot() as a:
+            calls.append(checked[:])
+            checked.clear()
+            with instance_slot() as b:
+                calls.append(checked[:])
+                checked.clear()
+                with instance_slot() as c:
+                    calls.append(checked[:])
+    finally:
+        held.close()
+    assert calls[0][0] == (9, False), calls  # its port held: passed over
+    for pick, seen in zip((a, b, c), calls, strict=True):
+        # the highest first: every instance checked before the pick (higher, not locked here) had its ports held
+        assert seen[-1] == (pick, True) and not any(free for _, free in seen[:-1]), (pick, seen)
+        assert [n for n, _ in seen] == sorted((n for n, _ in seen), reverse=True), seen
+    assert a not in [n for n, _ in calls[1] + calls[2]] and b not in [n for n, _ in calls[2]]  # locked: not checked
     assert {f"bsst-instance-{n}.lock" for n in (a, b, c)} <= {p.name for p in tmp_path.iterdir()}
 
 
