@@ -5,6 +5,7 @@ checked against the offline loop (the truth), and under SIGKILL and Ctrl-C."""
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import random
@@ -353,6 +354,18 @@ def test_an_automatic_instance_is_the_highest_free_one(tmp_path, monkeypatch):
     it ran: the test once asserted 9 > 8 > 7-like order and failed when a loaded suite's sessions held 1-5)."""
     from bridge.session import children
 
+    # the suite's own instance 9 held first (its lock in the real temp directory), so that no session of another
+    # test binds instance 9's ground-station port while this test holds it
+    suite_lock = os.open(os.path.join(tempfile.gettempdir(), "bsst-instance-9.lock"), os.O_RDWR | os.O_CREAT, 0o644)
+
+    def locked() -> bool:
+        try:
+            fcntl.flock(suite_lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return False
+        return True
+
+    wait_for(locked, 300.0, "the suite's instance 9")
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     checked: list[tuple[int, bool]] = []
     real = children._ports_free
@@ -385,6 +398,7 @@ def test_an_automatic_instance_is_the_highest_free_one(tmp_path, monkeypatch):
                     calls.append(checked[:])
     finally:
         held.close()
+        os.close(suite_lock)  # (closing releases the lock)
     assert calls[0][0] == (9, False), calls  # its port held: passed over
     for pick, seen in zip((a, b, c), calls, strict=True):
         # the highest first: every instance checked before the pick (higher, not locked here) had its ports held
