@@ -91,7 +91,7 @@ class PlanFile:
 
     def shown(self, v: float) -> str:
         """A value of an item as its file writes it (NaN as ``nan_word``)."""
-        return self.nan_word if math.isnan(v) else f"{v:g}"
+        return self.nan_word if math.isnan(v) else str(v)
 
     def refuse(self, item: Item, why: str) -> ConfigError:
         """The refusal of ``item``: file, index, command, why."""
