@@ -38,12 +38,12 @@ HOME = (473977420, 85455940)  # degE7: the vehicle's default home (PX4 SITL's)
 AUTO_MISSION = (4 << 16) | (4 << 24)  # PX4's custom_mode: main AUTO, sub MISSION
 
 
-def _items() -> list[Any]:
-    """A takeoff to 5 m, a waypoint 20 m north, a landing there."""
+def _items(target: tuple[int, int] = (0, 0)) -> list[Any]:
+    """A takeoff to 5 m, a waypoint 20 m north, a landing there, addressed to ``target`` (system, component)."""
     north = HOME[0] + 1800
     spec = ((M.MAV_CMD_NAV_TAKEOFF, HOME[0], 5.0), (M.MAV_CMD_NAV_WAYPOINT, north, 5.0),
             (M.MAV_CMD_NAV_LAND, north, 0.0))
-    return [M.MAVLink_mission_item_int_message(0, 0, seq, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, cmd, 0, 1, 0.0, 0.0,
+    return [M.MAVLink_mission_item_int_message(*target, seq, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, cmd, 0, 1, 0.0, 0.0,
                                                0.0, math.nan, lat, HOME[1], z, 0)
             for seq, (cmd, lat, z) in enumerate(spec)]
 
@@ -281,6 +281,7 @@ def test_mission_current_says_no_mission_the_mission_mode_and_a_pause_as_px4_mai
     from bridge.nodes.vehicle import Vehicle, VehicleConfig
     from missions import Mission, Sine
     from tests.sitlkit import GcsSocket
+    from tests.test_mission_protocol import _uploaded_in_process
 
     gcs = GcsSocket()
     v = Vehicle(prepare(Mission(Sine(), duration_s=5.0, name="current")),
@@ -297,11 +298,7 @@ def test_mission_current_says_no_mission_the_mission_mode_and_a_pause_as_px4_mai
     suspended, in_mission = MISSION_MODE_SUSPENDED, MISSION_MODE_IN_MISSION
     try:
         assert current() == (0, NO_MISSION_TOTAL, M.MISSION_STATE_NO_MISSION, suspended)
-        items = [M.MAVLink_mission_item_int_message(1, 1, *_fields(it)) for it in _items()]
-        gcs.exchange(v, M.MAVLink_mission_count_message(1, 1, 3, 0), "MISSION_REQUEST_INT")
-        for it in items[:2]:
-            gcs.exchange(v, it, "MISSION_REQUEST_INT")
-        assert gcs.exchange(v, items[2], "MISSION_ACK").type == M.MAV_MISSION_ACCEPTED
+        assert _uploaded_in_process(gcs, v, _items((1, 1))).type == M.MAV_MISSION_ACCEPTED
         assert current() == (0, 3, M.MISSION_STATE_NOT_STARTED, suspended)
         assert command(M.MAV_CMD_DO_SET_MODE, 1, 4, 4) == M.MAV_RESULT_ACCEPTED  # AUTO.MISSION, disarmed
         assert current() == (0, 3, M.MISSION_STATE_NOT_STARTED, in_mission)
@@ -324,8 +321,3 @@ def test_mission_current_says_no_mission_the_mission_mode_and_a_pause_as_px4_mai
         v.close()
         gcs.close()
 
-
-def _fields(it: Any) -> tuple[Any, ...]:
-    """A MISSION_ITEM_INT's fields after its target."""
-    return (it.seq, it.frame, it.command, it.current, it.autocontinue, it.param1, it.param2, it.param3, it.param4,
-            it.x, it.y, it.z, it.mission_type)

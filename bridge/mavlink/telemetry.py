@@ -126,15 +126,12 @@ NO_MISSION_TOTAL = 0xFFFF  # MISSION_CURRENT.total of a vehicle without a missio
 MISSION_MODE_UNKNOWN, MISSION_MODE_IN_MISSION, MISSION_MODE_SUSPENDED = 0, 1, 2
 
 
-def mission_current(seq: int, total: int, state: int = mavlink.MISSION_STATE_NOT_STARTED,
-                    mode: int = MISSION_MODE_UNKNOWN) -> list[Any]:
+def mission_current(seq: int, total: int, state: int, mode: int = MISSION_MODE_UNKNOWN) -> list[Any]:
     """``MISSION_CURRENT`` as PX4 sends it (mavlink_mission.cpp ``send_mission_current``): the current item of a
-    mission of ``total`` items, its MISSION_STATE and ``mode`` (mission_mode: :data:`MISSION_MODE_IN_MISSION` in a
-    mode that flies mission items, :data:`MISSION_MODE_SUSPENDED` in another); without a mission (``total`` 0) total
-    UINT16_MAX and NO_MISSION, as common.xml asks and PX4 sends, not silence."""
-    if total == 0:
-        return [mavlink.MAVLink_mission_current_message(seq, NO_MISSION_TOTAL, mavlink.MISSION_STATE_NO_MISSION, mode)]
-    return [mavlink.MAVLink_mission_current_message(seq, total, state, mode)]
+    mission of ``total`` items, its MISSION_STATE (NO_MISSION without one: the mission manager's) and ``mode``
+    (mission_mode: :data:`MISSION_MODE_IN_MISSION` in a mode that flies mission items, :data:`MISSION_MODE_SUSPENDED`
+    in another); without a mission (``total`` 0) total UINT16_MAX, as common.xml asks and PX4 sends, not silence."""
+    return [mavlink.MAVLink_mission_current_message(seq, total or NO_MISSION_TOTAL, state, mode)]
 
 
 def sys_status(load_permille: int, healthy: bool, battery: tuple[int, int, int] = (16800, -1, 100),

@@ -293,7 +293,7 @@ class LinkTransfer:
                 self._busy(who, m.mission_type, "WPM: REJ. CMD: partner id mismatch", ack=False)
             return  # no transfer: ignored, as PX4 does (some on-screen displays ask anyway)
         if self.state is State.GETLIST:
-            who.ep.reply(tuple(self.host.texts(mavlink.MAV_SEVERITY_CRITICAL, BUSY)), who.who.addr)
+            self._say(who, BUSY)
             return
         if self.state is not State.SENDLIST or m.mission_type != self.mtype:
             return
@@ -334,8 +334,7 @@ class LinkTransfer:
         if self._flown(who, MISSION, "WP CURR CMD", ack=False):  # PX4 answers MISSION_SET_CURRENT with no ACK
             return False
         if not 0 <= m.seq < len(mission.items):
-            who.ep.reply(tuple(self.host.texts(mavlink.MAV_SEVERITY_CRITICAL, "WPM: WP CURR CMD: Not in list")),
-                         who.who.addr)
+            self._say(who, "WPM: WP CURR CMD: Not in list")
             return False
         self.host.accept(who, Mission(mission.items, m.seq), f"current item {m.seq}")
         who.ep.reply(tuple(self.host.current_message()), who.who.addr)
@@ -353,7 +352,7 @@ class LinkTransfer:
         if ack:
             self._answer(who, mavlink.MAV_MISSION_ERROR, mtype, f"WPM: {what}: {why}")
         else:
-            who.ep.reply(tuple(self.host.texts(mavlink.MAV_SEVERITY_CRITICAL, f"WPM: {what}: {why}")), who.who.addr)
+            self._say(who, f"WPM: {what}: {why}")
         return True
 
     # -- helpers ----------------------------------------------------------------------------------------
@@ -394,4 +393,8 @@ class LinkTransfer:
         if ack:
             self._answer(who, mavlink.MAV_MISSION_ERROR, mission_type, text)
         else:
-            who.ep.reply(tuple(self.host.texts(severity, text)), who.who.addr)
+            self._say(who, text, severity)
+
+    def _say(self, who: Partner, text: str, severity: int = mavlink.MAV_SEVERITY_CRITICAL) -> None:
+        """PX4's STATUSTEXT alone (no ACK) to ``who``."""
+        who.ep.reply(tuple(self.host.texts(severity, text)), who.who.addr)
