@@ -73,7 +73,9 @@ def test_two_vehicles_on_one_radio_in_real_time_share_its_rate_and_overflow_it_w
             for i in (1, 2)]
     idle_s += abs(ends[0]["first_s"] - ends[1]["first_s"]) + abs(ends[0]["last_end_s"] - ends[1]["last_end_s"])
     assert down["occupancy"] > 0.9 - idle_s / down["span_s"] and down["lost_queue"] > 0, (down, idle_s)
-    assert all(v["queue_wait_ms"]["p50"] > 0 for v in down["vehicles"])
+    # each vehicle's states waited behind the other's while both sent; not at the median, for a vehicle that flies
+    # on alone for more than half its flight (the other crashed: one alone fits the radio), but above it
+    assert all(v["queue_wait_ms"]["p95"] > 0 for v in down["vehicles"]), down["vehicles"]
     assert s["sitl"]["shared_clock"] is False and s["clock"] == "realtime"
     # the radio file is gone with the fleet (the port lock file stays, as the instances' lock files do)
     assert {f.name for f in private.iterdir()} <= {PORT_LOCKS}
