@@ -256,6 +256,34 @@ def test_parameter_protocol_over_udp(tmp_path):
     assert stats["rejected"]["param_refused"] == 4 and stats["rejected"]["param_unknown"] == 3
 
 
+def test_the_controllers_change_reaches_the_ground_station_as_px4_sends_it(tmp_path):
+    """A lockstep session whose controller sets COM_OF_LOSS_T at 1 s (``--param-at``): the ground station, which
+    asked nothing, gets the new PARAM_VALUE (PX4's ``MavlinkParametersManager::send_untransmitted``: each changed
+    parameter on every link), so its copy follows; the ground station's own set is answered once, not echoed
+    again by that broadcast."""
+    mission = tmp_path / "short.toml"
+    mission.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 3.0"))
+    with instance_slot() as n:
+        gcs = _gcs(n)
+        s = Bsst("sitl", str(mission), "--instance", str(n), "--param-at", "1:COM_OF_LOSS_T=2.5", "--out",
+                 str(tmp_path / "run"), "--no-plots", "--speed", "1", env=ENV)
+        try:
+            gcs.wait_heartbeat(timeout=30)
+            tgt = (gcs.target_system, gcs.target_component)
+            m = _recv(gcs, "PARAM_VALUE", timeout=30)  # the first it hears, unasked
+            assert (m.param_id, m.param_value, m.param_count) == ("COM_OF_LOSS_T", 2.5, len(PARAMS))
+            assert m.param_index == list(BY_NAME).index("COM_OF_LOSS_T")
+            gcs.mav.param_set_send(*tgt, b"COM_OF_LOSS_T", 1.5, M.MAV_PARAM_TYPE_REAL32)
+            assert _recv(gcs, "PARAM_VALUE").param_value == 1.5  # its answer
+            gcs.mav.param_request_read_send(*tgt, b"MPC_LAND_SPEED", -1)  # the next PARAM_VALUE is this one's
+            assert _recv(gcs, "PARAM_VALUE").param_id == "MPC_LAND_SPEED"
+            s.communicate(timeout=90)
+        finally:
+            if s.poll() is None:
+                s.kill()
+            gcs.close()
+
+
 def test_modes_takeoff_hold_land_over_udp(tmp_path):
     """HOLD (the boot mode, as PX4's) selected again on the ground, which changes nothing, armed in it; NAV_TAKEOFF
     above the envelope is refused, below MIS_TAKEOFF_ALT (below home) raised to it, which it climbs to and then

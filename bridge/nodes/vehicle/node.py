@@ -112,7 +112,7 @@ class Vehicle:
                                        self._refused)
         self.streaming = Streaming(self.sim, flight, cfg, self.missions, self.clock, lambda: self.t, now, load_at)
         self.announcer = Announcer(self.sim, self.authority, self.link, self.endpoints, self._report,
-                                   self._statustext, self.streaming.heartbeat)
+                                   self._statustext, self.streaming.heartbeat, self.params.value_of)
         ports = CommanderPorts(step=lambda: self.k, state_out=self._send_odometry, new_flight=self._new_flight,
                                arm_through_link=lambda acted: self.vend.receive_arm(self.t, acted),
                                target_wall=lambda: self.targets.wall,

@@ -69,6 +69,10 @@ class ParamService:
         return mavlink.MAVLink_param_value_message(spec.name.encode(), param_to_wire(value, kind), kind,
                                                    len(PARAMS), index)
 
+    def value_of(self, name: str) -> Any:
+        """PARAM_VALUE of the parameter ``name`` (PX4's name)."""
+        return self.value(PARAMS.index(BY_NAME[name]))
+
     def handle(self, ep: Endpoint, m: Any, addr: tuple[str, int], link: str) -> bool:
         """PARAM_REQUEST_LIST (every PARAM_VALUE, in one datagram), PARAM_REQUEST_READ (by index, or
         by name with index -1), PARAM_SET (checked: made and answered with the new value, or refused,
