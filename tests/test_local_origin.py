@@ -176,15 +176,16 @@ def test_pymavlink_reads_each_fleet_vehicle_about_its_own_start(tmp_path: Path, 
 
 
 MAVSDK_SCRIPT = MAVSDK_GROUND_STATION + r"""
+import math
 from mavsdk.plugins.telemetry import Telemetry
 out["two_found"] = until(lambda: sum(s.has_autopilot() for s in sdk.get_systems()) >= 2, 90)
 by = {s.get_system_id(): s for s in sdk.get_systems() if s.has_autopilot()}
 tel = {i: Telemetry(s) for i, s in by.items()}
 seen = {}
-def hovering(i):
+def hovering(i):  # and its home heard (MAVSDK's NaN until the first HOME_POSITION, 0.5 Hz, or its request's answer)
     ned = tel[i].position_velocity_ned().position
-    if ned.down_m < -0.95 and i not in seen:
-        pos, home = tel[i].position(), tel[i].home()
+    pos, home = tel[i].position(), tel[i].home()
+    if ned.down_m < -0.95 and i not in seen and not math.isnan(home.latitude_deg):
         seen[i] = {"ned": [ned.north_m, ned.east_m, ned.down_m], "pos": [pos.latitude_deg, pos.longitude_deg],
                    "home": [home.latitude_deg, home.longitude_deg, home.local_north_m, home.local_east_m]}
     return i in seen
