@@ -642,7 +642,7 @@ def test_the_vehicle_starts_a_mission_only_when_asked_to_await_one():
     try:
         plain = vehicle(False)
         assert exchange(plain, start, "COMMAND_ACK").result == M.MAV_RESULT_UNSUPPORTED
-        assert exchange(plain, mode, "COMMAND_ACK").result == M.MAV_RESULT_DENIED
+        assert exchange(plain, mode, "COMMAND_ACK").result == M.MAV_RESULT_DENIED  # never flown here
         v = vehicle(True)
         assert exchange(v, start, "COMMAND_ACK").result == M.MAV_RESULT_DENIED  # no mission
         exchange(v, M.MAVLink_mission_count_message(1, 1, 3, 0), "MISSION_REQUEST_INT")
@@ -720,7 +720,7 @@ def test_another_mode_selected_after_auto_mission_wins_until_the_mission_starts(
             else:
                 assert exchange(v, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
                 assert v.missions.start_requested and not v.sim.armed
-                assert exchange(v, mode(4, 3), "COMMAND_ACK").result == M.MAV_RESULT_DENIED
+                assert exchange(v, mode(4, 3), "COMMAND_ACK").result == M.MAV_RESULT_TEMPORARILY_REJECTED
                 assert v.missions.start_requested and v.streaming.heartbeat().custom_mode == (4 << 16) | (4 << 24)
     finally:
         for v in made:
@@ -792,7 +792,7 @@ def test_an_arm_in_hold_on_the_ground_then_auto_mission_starts_the_mission_and_t
         assert beat.custom_mode == mission and beat.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED
         ask = command(M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_MISSION_CURRENT)
         assert exchange(v, ask, "MISSION_CURRENT").mission_state == M.MISSION_STATE_ACTIVE
-        assert exchange(v, command(M.MAV_CMD_NAV_LAND), "COMMAND_ACK").result == M.MAV_RESULT_DENIED  # starting
+        assert exchange(v, command(M.MAV_CMD_NAV_LAND), "COMMAND_ACK").result == M.MAV_RESULT_TEMPORARILY_REJECTED
         assert exchange(v, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED  # an arm now starts no timeout
         assert v.commander.pre_start.at is None and v.clock.state is idle
         controller = Sender(200, 191, "127.0.0.1", 1, "controller")

@@ -406,7 +406,7 @@ def test_offboard_selected_disarmed_needs_a_controller_to_fly_it():
     controller pinned) takes it."""
     select = M.MAVLink_command_long_message(1, 1, M.MAV_CMD_DO_SET_MODE, 0, 29, 6, 0, 0, 0, 0, 0)
     flight = prepare(Mission(Sine(), duration_s=5.0, name="offboard"))
-    for pinned, want in ((None, M.MAV_RESULT_DENIED), (("127.0.0.1", 9), M.MAV_RESULT_ACCEPTED)):
+    for pinned, want in ((None, M.MAV_RESULT_TEMPORARILY_REJECTED), (("127.0.0.1", 9), M.MAV_RESULT_ACCEPTED)):
         gcs = GcsSocket()
         v = Vehicle(flight, VehicleConfig(parse_address("udpin:127.0.0.1:0"), parse_address(gcs.url),
                                           controller_from=pinned))
@@ -633,11 +633,12 @@ def test_land_and_rtl_are_not_armed_in_selected_disarmed_and_after_their_landing
                 return hb is not None and mavutil.mode_string_v10(hb) == "LOITER"
 
             nan, arm = math.nan, M.MAV_CMD_COMPONENT_ARM_DISARM
-            assert command(M.MAV_CMD_DO_SET_MODE, 29, 4, 6, 0, 0, 0, 0) == M.MAV_RESULT_DENIED
+            rejected = M.MAV_RESULT_TEMPORARILY_REJECTED  # PX4's answer to a mode that cannot run now
+            assert command(M.MAV_CMD_DO_SET_MODE, 29, 4, 6, 0, 0, 0, 0) == rejected
             said("mode LAND: only armed (PX4 does not arm in Land")
-            assert command(M.MAV_CMD_NAV_LAND, 0, 0, 0, nan, nan, nan, 0) == M.MAV_RESULT_DENIED
+            assert command(M.MAV_CMD_NAV_LAND, 0, 0, 0, nan, nan, nan, 0) == rejected
             said("mode LAND: only armed")
-            assert command(M.MAV_CMD_DO_SET_MODE, 29, 4, 5, 0, 0, 0, 0) == M.MAV_RESULT_DENIED
+            assert command(M.MAV_CMD_DO_SET_MODE, 29, 4, 5, 0, 0, 0, 0) == rejected
             said("mode RTL: only armed (PX4 does not arm in Return")
             for land in (M.MAV_CMD_NAV_LAND, M.MAV_CMD_NAV_RETURN_TO_LAUNCH):
                 mark = len(v.events())

@@ -302,7 +302,8 @@ def test_modes_takeoff_hold_land_over_udp(tmp_path):
                 gcs.mav.command_long_send(*tgt, cmd, 0, *p)
                 return _recv(gcs, "COMMAND_ACK", f"COMMAND_ACK.command=={cmd}").result
 
-            assert command(M.MAV_CMD_DO_SET_MODE, 29, 4, 5, 0, 0, 0, 0) == M.MAV_RESULT_DENIED  # RTL
+            # RTL disarmed: PX4's answer to a mode that cannot run now
+            assert command(M.MAV_CMD_DO_SET_MODE, 29, 4, 5, 0, 0, 0, 0) == M.MAV_RESULT_TEMPORARILY_REJECTED
             assert "RTL" in _recv(gcs, "STATUSTEXT").text
             assert command(M.MAV_CMD_DO_SET_MODE, 29, 4, 3, 0, 0, 0, 0) == M.MAV_RESULT_ACCEPTED
             _recv(gcs, "HEARTBEAT", f"HEARTBEAT.custom_mode=={(4 << 16) | (3 << 24)}")
@@ -318,8 +319,8 @@ def test_modes_takeoff_hold_land_over_udp(tmp_path):
             assert abs(-pos.z - 1.5) < 0.15 and math.hypot(pos.x, pos.y) < 0.1
             hb = _recv(gcs, "HEARTBEAT")
             assert mavutil.mode_string_v10(hb) == "LOITER" and hb.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED
-            # armed, OFFBOARD needs a controller sending targets (PX4's rule too)
-            assert command(M.MAV_CMD_DO_SET_MODE, 29, 6, 0, 0, 0, 0, 0) == M.MAV_RESULT_DENIED
+            # armed, OFFBOARD needs a controller sending targets (PX4's rule too, and its answer)
+            assert command(M.MAV_CMD_DO_SET_MODE, 29, 6, 0, 0, 0, 0, 0) == M.MAV_RESULT_TEMPORARILY_REJECTED
             assert "no controller" in _recv(gcs, "STATUSTEXT").text
             gcs.mav.set_mode_send(tgt[0], 1, (4 << 16) | (6 << 24))  # SET_MODE LAND
             assert _recv(gcs, "COMMAND_ACK", "COMMAND_ACK.command==176").result == M.MAV_RESULT_ACCEPTED

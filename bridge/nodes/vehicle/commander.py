@@ -288,7 +288,9 @@ class Commander:
     def _set_mode_or_refuse(self, mode: str | None, why: str, *, by: Sender,
                             takeoff_alt_m: float | None = None, hold_at: PositionHold | None = None) -> int:
         """A ground station's (or the controller's) mode change: made at the start of the next
-        control period, or DENIED with a STATUSTEXT saying why."""
+        control period, or refused with a STATUSTEXT saying why: DENIED for a mode that is none of ours or a
+        flight that is over for good (the plant ended it, or a termination), else TEMPORARILY_REJECTED, PX4's
+        answer to a mode that cannot run now (Commander.cpp, DO_SET_MODE and the mode commands)."""
         if mode is None:
             return self._refuse(why)
         if self.clock.halted:
@@ -296,6 +298,23 @@ class Commander:
         terminated = self.actions.refusal(f"mode {mode_name(mode)}")
         if terminated:
             return self._refuse(terminated)
+        refused = self._mode_refusal(mode, by, hold_at)
+        if refused is not None:
+            return refused
+        n0 = len(self.sim.events)
+        was = self.sim.mode
+        self.sim.set_mode(mode, takeoff_alt_m, hold_at)
+        attribute(self.sim.events, n0, by)
+        self._clock_after_mode(was)
+        return mavlink.MAV_RESULT_ACCEPTED
+
+    def _not_now(self, why: str) -> int:
+        """A mode that cannot run now: TEMPORARILY_REJECTED (PX4's answer), a STATUSTEXT saying why."""
+        return self._refuse(why, mavlink.MAV_RESULT_TEMPORARILY_REJECTED)
+
+    def _mode_refusal(self, mode: str, by: Sender, hold_at: PositionHold | None) -> int | None:
+        """The answer to a mode change that is not made as asked (:meth:`_set_mode_or_refuse`): taken
+        otherwise (LAND without a position, the mission's start or end), or refused; None: to be made."""
         if self.sim.armed and not self.sim.position.valid:  # PX4 (UserModeIntention::change): armed, a mode must run
             return self._without_position(mode, by)
         if mode == MISSION:
@@ -303,32 +322,29 @@ class Commander:
                 return self._start_mission(by, 0.0, START_ARMED)
             missions = self.ports.missions
             refused = "mode MISSION: not flown here" if missions is None else missions.select(self.sim.armed)
-            return self._refuse(refused) if refused else mavlink.MAV_RESULT_ACCEPTED
+            if refused and not self.cfg.await_mission:  # never flown by this vehicle: as a mode none of ours
+                return self._refuse(refused)
+            return self._not_now(refused) if refused else mavlink.MAV_RESULT_ACCEPTED
         sim = self.sim
         if mode in NOT_ARMABLE and not sim.armed:
-            return self._refuse(f"mode {mode_name(mode)}: only armed (PX4 does not arm in {NOT_ARMABLE[mode]} mode)")
+            return self._not_now(f"mode {mode_name(mode)}: only armed (PX4 does not arm in {NOT_ARMABLE[mode]} mode)")
         if self.ports.missions is not None and (not sim.armed or self.pre_start.starting()):
             # AUTO.MISSION no longer selected, or the mission starting
             refused = self.ports.missions.select_other(mode_name(mode))
             if refused:
-                return self._refuse(refused)
+                return self._not_now(refused)
         if (mode == OFFBOARD and sim.armed and sim.mode != OFFBOARD
                 and time.monotonic() - self.ports.target_wall() > OFFBOARD_STREAM_S):
             # PX4 too: OFFBOARD only while a controller streams targets (its failsafe would act at once)
-            return self._refuse("OFFBOARD: no controller is sending targets")
+            return self._not_now("OFFBOARD: no controller is sending targets")
         if (mode == OFFBOARD and not sim.armed and self.cfg.controller_from is None
                 and not self.ports.controller_heard()):
             # disarmed, for the next arm: refused while no controller is there to fly it (armed, its failsafe would
             # disarm it at once); a session's controller, pinned, is on its way
-            return self._refuse("OFFBOARD: no controller has spoken on the controller link")
+            return self._not_now("OFFBOARD: no controller has spoken on the controller link")
         if by.link == "controller" and mode in (LAND, HOLD) and hold_at is None and sim.armed and sim.mode == OFFBOARD:
             return self._end_mission(mode)
-        n0 = len(sim.events)
-        was = sim.mode
-        sim.set_mode(mode, takeoff_alt_m, hold_at)
-        attribute(sim.events, n0, by)
-        self._clock_after_mode(was)
-        return mavlink.MAV_RESULT_ACCEPTED
+        return None
 
     def _without_position(self, mode: str, by: Sender) -> int:
         """A mode asked for armed while the horizontal position is invalid, as PX4's commander answers it
