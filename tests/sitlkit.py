@@ -359,32 +359,40 @@ def child_pids(run: Path) -> dict[str, int]:
     return pids
 
 
-class TimerLateness(threading.Thread):
-    """The control: how late this machine wakes a thread from a 20 ms timed sleep, measured in this process
-    while the test runs (ms). A relay's hold ends in such a wake-up and each datagram's arrival in another; on
-    an oversubscribed machine the scheduler makes both late, whatever the relay does."""
+class ControlThread(threading.Thread):
+    """A daemon thread a test runs beside what it measures, as a context manager: started on entry, told to stop
+    on exit through a pipe its :meth:`run` watches (:attr:`stop_r`, readable once it is to stop)."""
 
     def __init__(self) -> None:
         super().__init__(daemon=True)
-        self.late_ms: list[float] = []
-        self._stop_r, self._stop_w = os.pipe()
+        self.stop_r, self._stop_w = os.pipe()
 
-    def run(self) -> None:
-        while True:
-            t0 = time.perf_counter()
-            if select.select([self._stop_r], [], [], 0.020)[0]:
-                return
-            self.late_ms.append((time.perf_counter() - t0 - 0.020) * 1000.0)
-
-    def __enter__(self) -> TimerLateness:
+    def __enter__(self) -> Any:
         self.start()
         return self
 
     def __exit__(self, *exc: object) -> None:
         os.write(self._stop_w, b"x")
         self.join(5.0)
-        os.close(self._stop_r)
+        os.close(self.stop_r)
         os.close(self._stop_w)
+
+
+class TimerLateness(ControlThread):
+    """The control: how late this machine wakes a thread from a 20 ms timed sleep, measured in this process
+    while the test runs (ms). A relay's hold ends in such a wake-up and each datagram's arrival in another; on
+    an oversubscribed machine the scheduler makes both late, whatever the relay does."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.late_ms: list[float] = []
+
+    def run(self) -> None:
+        while True:
+            t0 = time.perf_counter()
+            if select.select([self.stop_r], [], [], 0.020)[0]:
+                return
+            self.late_ms.append((time.perf_counter() - t0 - 0.020) * 1000.0)
 
     def median(self) -> float:
         assert self.late_ms, "the control never woke"

@@ -12,7 +12,6 @@ import socket
 import struct
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
@@ -22,7 +21,7 @@ import pytest
 from bridge.link.model import LinkConfig, LinkSettings
 from bridge.nodes.relay import Relay, parse_address
 from bridge.nodes.report import Ready, parse_line
-from tests.sitlkit import Bsst, run_bsst
+from tests.sitlkit import Bsst, ControlThread, run_bsst
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -71,7 +70,7 @@ def ping_pong(client: socket.socket, target: socket.socket, relay_addr, rounds: 
     return up, down
 
 
-class HeldEcho(threading.Thread):
+class HeldEcho(ControlThread):
     """The control: a datagram held 20 ms by a timed sleep and sent back, in this process, by a thread of its own.
     A relayed datagram wakes three threads on its way (the relay's on its arrival, the relay's again at its due
     time, the receiver's); so does one sent here. On an oversubscribed machine the scheduler makes each wake-up
@@ -79,28 +78,20 @@ class HeldEcho(threading.Thread):
     timer's), and this measures how late, in the same seconds."""
 
     def __init__(self) -> None:
-        super().__init__(daemon=True)
+        super().__init__()
         self.sock = udp()
-        self._stop_r, self._stop_w = os.pipe()
 
     def run(self) -> None:
         while True:
-            ready = select.select([self.sock, self._stop_r], [], [])[0]
-            if self._stop_r in ready:
+            ready = select.select([self.sock, self.stop_r], [], [])[0]
+            if self.stop_r in ready:
                 return
             data, back = self.sock.recvfrom(2048)
-            select.select([self._stop_r], [], [], 0.020)
+            select.select([self.stop_r], [], [], 0.020)
             self.sock.sendto(data, back)
 
-    def __enter__(self) -> HeldEcho:
-        self.start()
-        return self
-
     def __exit__(self, *exc: object) -> None:
-        os.write(self._stop_w, b"x")
-        self.join(5.0)
-        for fd in (self._stop_r, self._stop_w):
-            os.close(fd)
+        super().__exit__(*exc)
         self.sock.close()
 
     def round(self, client: socket.socket, size: int) -> float:
