@@ -252,7 +252,8 @@ def test_the_ground_station_sees_what_the_vehicle_knows(tmp_path, estimator):
 
 
 def test_truth_vehicle_has_no_sensor_messages(tmp_path):
-    """Under truth there are no sensors: no stream, REQUEST_MESSAGE and SET_MESSAGE_INTERVAL UNSUPPORTED."""
+    """Under truth there are no sensors: no stream; REQUEST_MESSAGE DENIED and SET_MESSAGE_INTERVAL FAILED, as PX4's
+    receiver answers a message it cannot send and a stream it cannot make (they were UNSUPPORTED)."""
     with instance_slot() as n:
         gcs = _gcs(n)
         v = Proc.bsst("vehicle", "--instance", str(n), "--out", str(tmp_path))
@@ -260,8 +261,8 @@ def test_truth_vehicle_has_no_sensor_messages(tmp_path):
             v.wait_report(Ready)
             assert gcs.wait_heartbeat(timeout=20) is not None
             for mid in (HIGHRES, GPS):
-                assert _command(gcs, M.MAV_CMD_REQUEST_MESSAGE, mid) == M.MAV_RESULT_UNSUPPORTED
-                assert _command(gcs, M.MAV_CMD_SET_MESSAGE_INTERVAL, mid, 20_000) == M.MAV_RESULT_UNSUPPORTED
+                assert _command(gcs, M.MAV_CMD_REQUEST_MESSAGE, mid) == M.MAV_RESULT_DENIED
+                assert _command(gcs, M.MAV_CMD_SET_MESSAGE_INTERVAL, mid, 20_000) == M.MAV_RESULT_FAILED
             heard = _listen(gcs, 0.6)
             assert len(_of(heard, "ATTITUDE")) >= 5  # the other streams flow meanwhile
             assert not _of(heard, "HIGHRES_IMU") and not _of(heard, "GPS_RAW_INT")

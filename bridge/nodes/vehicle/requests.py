@@ -6,8 +6,10 @@ In:  COMMAND_LONG / COMMAND_INT from a sender with authority (:class:`~bridge.au
      table (:class:`~bridge.nodes.vehicle.streams.StreamTable`, intervals s)
 Out: the MAV_RESULT and the messages asked for (MESSAGE_INTERVAL us, the message requested, AUTOPILOT_VERSION,
      HOME_POSITION), sent after the COMMAND_ACK by the commander (:mod:`.commander`); an ``interval`` event when a
-     link's rate changes; a bad number counted (``bad_number``), DENIED, nothing done. A link's requests change its
-     own streams; the controller's messages are in the mission's frame, a ground station's in its own.
+     link's rate changes; a bad number counted (``bad_number``), DENIED, nothing done; a message the vehicle cannot
+     send, DENIED (REQUEST_MESSAGE), or stream, FAILED (SET_MESSAGE_INTERVAL), as PX4's receiver answers them. A
+     link's requests change its own streams; the controller's messages are in the mission's frame, a ground
+     station's in its own.
 """
 
 from __future__ import annotations
@@ -73,14 +75,15 @@ class MessageRequests:
         if mid == ProtocolVersion.id:  # no stream: answered as REQUEST_PROTOCOL_VERSION is (PX4's receiver)
             return mavlink.MAV_RESULT_ACCEPTED, (ProtocolVersion(*PROTOCOL_VERSION),)
         follow = tuple(self.message(mid, by.link != "controller"))  # the controller's: the mission's frame
-        return (mavlink.MAV_RESULT_ACCEPTED if follow else mavlink.MAV_RESULT_UNSUPPORTED), follow
+        # none to send: DENIED, as PX4's handle_request_message_command answers a message it cannot send
+        return (mavlink.MAV_RESULT_ACCEPTED if follow else mavlink.MAV_RESULT_DENIED), follow
 
     def _set_interval(self, table: StreamTable, mid: int, interval_us: float, by: Sender) -> int:
         """A checked SET_MESSAGE_INTERVAL on one link's streams; a change is an event."""
         if mid == mavlink.MAVLINK_MSG_ID_HEARTBEAT:
             return mavlink.MAV_RESULT_ACCEPTED if interval_us in (0, HEARTBEAT_S * 1e6) else mavlink.MAV_RESULT_DENIED
-        if mid not in table:
-            return mavlink.MAV_RESULT_UNSUPPORTED
+        if mid not in table:  # no such stream: FAILED, as PX4's set_message_interval answers one it cannot make
+            return mavlink.MAV_RESULT_FAILED
         iv = table.set(mid, interval_us, time.monotonic())
         if iv is not None:
             name = mavlink.mavlink_map[mid].msgname
