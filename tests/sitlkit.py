@@ -13,7 +13,6 @@ import select
 import selectors
 import signal
 import socket
-import statistics
 import subprocess
 import sys
 import tempfile
@@ -378,25 +377,39 @@ class ControlThread(threading.Thread):
         os.close(self._stop_w)
 
 
-class TimerLateness(ControlThread):
-    """The control: how late this machine wakes a thread from a 20 ms timed sleep, measured in this process
-    while the test runs (ms). A relay's hold ends in such a wake-up and each datagram's arrival in another; on
-    an oversubscribed machine the scheduler makes both late, whatever the relay does."""
+class HeldEcho(ControlThread):
+    """The control of a relay's hold: a datagram held ``hold_s`` by a timed sleep and sent back, in this process, by
+    a thread of its own. A relayed datagram wakes three threads on its way (the relay's on its arrival, the relay's
+    again at its due time, the receiver's); so does one sent here. On an oversubscribed machine the scheduler makes
+    each wake-up late whatever the relay does (a full suite beside two busy loops: ~1 ms each, against 0.1 ms for a
+    lone timer's), and this measures how late, in the same seconds (:meth:`round`)."""
 
-    def __init__(self) -> None:
+    def __init__(self, hold_s: float) -> None:
         super().__init__()
-        self.late_ms: list[float] = []
+        self.hold_s = hold_s
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
 
     def run(self) -> None:
         while True:
-            t0 = time.perf_counter()
-            if select.select([self.stop_r], [], [], 0.020)[0]:
+            ready = select.select([self.sock, self.stop_r], [], [])[0]
+            if self.stop_r in ready:
                 return
-            self.late_ms.append((time.perf_counter() - t0 - 0.020) * 1000.0)
+            data, back = self.sock.recvfrom(2048)
+            select.select([self.stop_r], [], [], self.hold_s)
+            self.sock.sendto(data, back)
 
-    def median(self) -> float:
-        assert self.late_ms, "the control never woke"
-        return statistics.median(self.late_ms)
+    def __exit__(self, *exc: object) -> None:
+        super().__exit__(*exc)
+        self.sock.close()
+
+    def round(self, client: socket.socket, size: int) -> float:
+        """How late (ms) a datagram of ``size`` bytes from ``client`` (a socket with a timeout) came back: its time
+        out and back less the hold."""
+        t0 = time.perf_counter()
+        client.sendto(bytes(size), self.sock.getsockname())
+        client.recvfrom(2048)
+        return (time.perf_counter() - t0 - self.hold_s) * 1000.0
 
 
 def script_result(r: subprocess.CompletedProcess[str]) -> dict[str, Any]:

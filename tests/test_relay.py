@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import os
-import select
 import signal
 import socket
 import struct
@@ -21,7 +20,7 @@ import pytest
 from bridge.link.model import LinkConfig, LinkSettings
 from bridge.nodes.relay import Relay, parse_address
 from bridge.nodes.report import Ready, parse_line
-from tests.sitlkit import Bsst, ControlThread, run_bsst
+from tests.sitlkit import Bsst, HeldEcho, run_bsst
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -70,37 +69,6 @@ def ping_pong(client: socket.socket, target: socket.socket, relay_addr, rounds: 
     return up, down
 
 
-class HeldEcho(ControlThread):
-    """The control: a datagram held 20 ms by a timed sleep and sent back, in this process, by a thread of its own.
-    A relayed datagram wakes three threads on its way (the relay's on its arrival, the relay's again at its due
-    time, the receiver's); so does one sent here. On an oversubscribed machine the scheduler makes each wake-up
-    late whatever the relay does (a full suite beside two busy loops: ~1 ms each, against 0.1 ms for a lone
-    timer's), and this measures how late, in the same seconds."""
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.sock = udp()
-
-    def run(self) -> None:
-        while True:
-            ready = select.select([self.sock, self.stop_r], [], [])[0]
-            if self.stop_r in ready:
-                return
-            data, back = self.sock.recvfrom(2048)
-            select.select([self.stop_r], [], [], 0.020)
-            self.sock.sendto(data, back)
-
-    def __exit__(self, *exc: object) -> None:
-        super().__exit__(*exc)
-        self.sock.close()
-
-    def round(self, client: socket.socket, size: int) -> float:
-        """One datagram of ``size`` bytes from ``client`` held and back: its time out and back (s)."""
-        client.sendto(stamped(0, size), self.sock.getsockname())
-        data, _ = client.recvfrom(2048)
-        return time.perf_counter() - STAMP.unpack_from(data)[0]
-
-
 def test_twenty_ms_each_way_measured_within_two_ms() -> None:
     """20 ms each way, never early, and at most 2 ms late beyond this machine's own lateness for the same
     wake-ups, measured in the same seconds: each datagram relayed is followed by one through a plain thread that
@@ -110,14 +78,14 @@ def test_twenty_ms_each_way_measured_within_two_ms() -> None:
     target, client, echo_client = udp(), udp(), udp()
     cfg = LinkConfig(delay_ms=20.0)
     up, down, held = [], [], []
-    with HeldEcho() as echo, Relay(("127.0.0.1", 0), target.getsockname(), LinkSettings(cfg, cfg)) as relay:
+    with HeldEcho(0.020) as echo, Relay(("127.0.0.1", 0), target.getsockname(), LinkSettings(cfg, cfg)) as relay:
         relay.start()
         for _ in range(40):
             u, d = ping_pong(client, target, relay.address, 1)
             up += u
             down += d
             held += [echo.round(echo_client, FRAME), echo.round(echo_client, 242)]
-    machine_late_ms = max(0.0, float(np.median(held)) * 1000.0 - 20.0)
+    machine_late_ms = max(0.0, float(np.median(held)))
     s = relay.summary()
     for d, way in ((up, "up"), (down, "down")):
         # a failure names the relay's own measure too (its receive stamp to its sendto): which side was late
