@@ -69,7 +69,7 @@ class VehicleView:
     # why PX4's pre-arm checks deny an arm now, or None (SimVehicle.prearm_refusal): asked only by SYS_STATUS, which
     # alone needs it (with a fence and an estimator it costs tens of microseconds, and a view is built per message)
     prearm_refusal: Callable[[], str | None] = lambda: None
-    position_valid: bool = True  # the estimate's horizontal position, as EKF2 says (positionloss): GLOBAL_POSITION_INT
+    position_valid: bool = True  # the estimate's horizontal position, as EKF2 says (positionloss): positions sent
     health: Callable[[], EstimateHealth | None] = lambda: None  # ESTIMATOR_STATUS's (None under truth: no estimator)
     # the local origin (x, y m, paper frame): the ground under the start on the GCS link, as PX4's EKF2 sets it where
     # the vehicle boots; (0, 0), the paper frame's own, on the controller link (its ODOMETRY's frame)
@@ -178,9 +178,10 @@ def _sensor(mid: int) -> Stream:
 STREAMS: dict[int, Stream] = {
     mavlink.MAVLINK_MSG_ID_ATTITUDE: Stream(_if_finite(lambda v: tm.attitude(v.X, _ms(v))[:1]), 0.04),
     mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: Stream(_if_finite(lambda v: tm.attitude(v.X, _ms(v))[1:]), 0.04),
-    mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: Stream(_if_finite(lambda v: [tm.local_position(v.X, _ms(v), v.origin)]),
-                                                       0.04),
-    # none while the horizontal position is invalid: PX4 v1.14's EKF2 publishes no global position then
+    # none while the horizontal position is invalid, as PX4's LOCAL_POSITION_NED.hpp (only with xy_valid and
+    # v_xy_valid) and GLOBAL_POSITION_INT (v1.14's EKF2 publishes no global position then)
+    mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: Stream(
+        _if_finite(lambda v: [tm.local_position(v.X, _ms(v), v.origin)] if v.position_valid else []), 0.04),
     mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: Stream(
         _if_finite(lambda v: [tm.global_position(v.X, _ms(v), v.home)] if v.position_valid else []), 0.1),
     mavlink.MAVLINK_MSG_ID_SYS_STATUS: Stream(_sys_status, 0.1),
