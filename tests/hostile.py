@@ -31,6 +31,7 @@ run must give the undisturbed run's ``trace.csv``.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import json
 import math
 import os
@@ -546,11 +547,13 @@ class Fuzzed:
 
 
 def fly_fuzzed(mission: Any, out: Path, datagrams: int, seed: int = 7, sources: int = 64,
-               speed: float = 2.0, rate_hz: float | None = None) -> Fuzzed:
+               speed: float = 2.0, rate_hz: float | None = None, until_step: int | None = None) -> Fuzzed:
     """Fly ``mission`` lockstep (at most ``speed`` x real time) into ``out`` while
     ``datagrams`` hostile ones from :class:`Fuzzer` go, paced by :class:`Sender` from
     ``sources`` addresses (at most ``rate_hz`` per second), to the vehicle's controller link once it is past step
-    :data:`MIN_STEP`; a socket on the GCS port collects the vehicle's STATUSTEXTs."""
+    :data:`MIN_STEP`, and (``until_step``) no more once it has flown that step: a burst a loaded machine slows ends
+    inside the flight, fewer sent (:attr:`Fuzzed.sent`); a socket on the GCS port collects the vehicle's
+    STATUSTEXTs."""
     from bridge.mavlink.endpoint import GCS_PORT, LINK_PORT
 
     gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -566,7 +569,9 @@ def fly_fuzzed(mission: Any, out: Path, datagrams: int, seed: int = 7, sources: 
             sender = Sender(LINK_PORT + n, sources=sources, rate_hz=rate_hz)
             cpu0, t0 = _cpu_s(pid), time.monotonic()
             try:
-                sender.send(fuzz.next(i) for i in range(datagrams))
+                indices = range(datagrams) if until_step is None else itertools.takewhile(
+                    lambda i: i % 1000 or count_records(vhalf) < until_step, range(datagrams))
+                sender.send(fuzz.next(i) for i in indices)
                 drops = sender.drained(timeout=120)
             finally:
                 sender.close()
@@ -587,9 +592,13 @@ def fly_fuzzed(mission: Any, out: Path, datagrams: int, seed: int = 7, sources: 
 
 
 def _cpu_s(pid: int) -> float:
-    """User + system CPU time of process ``pid`` so far (s)."""
-    with open(f"/proc/{pid}/stat") as f:
-        fields = f.read().rsplit(")", 1)[1].split()
+    """User + system CPU time of process ``pid`` so far (s); NaN once it has ended (the caller's own checks say why
+    it ended too soon, not a missing file)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+    except FileNotFoundError:
+        return math.nan
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
