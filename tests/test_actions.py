@@ -45,20 +45,27 @@ def _command(v: Vehicle, gcs: GcsSocket, cmd: int, *p: float) -> int:
 
 
 def test_flight_termination_stops_the_motors_latches_termination_and_refuses_arming_and_modes() -> None:
-    """DO_FLIGHTTERMINATION as PX4's commander takes it: param1 0 with nothing to cancel is ACCEPTED (nothing done),
-    NaN DENIED (a bad number), 2 (PX4's lockdown test) UNSUPPORTED; 1 ACCEPTED: a ``terminated`` event naming the
+    """DO_FLIGHTTERMINATION as PX4 main's commander takes it: param1 0 DENIED (it cancels nothing), NaN DENIED (a bad
+    number), 2 (PX4's lockdown test) UNSUPPORTED, 1 DENIED while disarmed (it was ACCEPTED, and latched the vehicle
+    unarmable); armed, 1 ACCEPTED: a ``terminated`` event naming the
     ground station, the vehicle disarmed (motors off), its HEARTBEAT as PX4's in termination (base mode
     CUSTOM_MODE_ENABLED only, main mode MANUAL, MAV_STATE_FLIGHT_TERMINATION), its lockstep clock left for the wall
     clock (it falls on its own, said); from then on an arm, a mode and a cancel are DENIED, each saying why."""
     v, gcs = _in_process()
     try:
-        assert _command(v, gcs, M.MAV_CMD_DO_FLIGHTTERMINATION, 0.0) == M.MAV_RESULT_ACCEPTED
+        assert _command(v, gcs, M.MAV_CMD_DO_FLIGHTTERMINATION, 0.0) == M.MAV_RESULT_DENIED
         assert _command(v, gcs, M.MAV_CMD_DO_FLIGHTTERMINATION, math.nan) == M.MAV_RESULT_DENIED
         assert _command(v, gcs, M.MAV_CMD_DO_FLIGHTTERMINATION, 2.0) == M.MAV_RESULT_UNSUPPORTED
         said = gcs.exchange(v, M.MAVLink_command_long_message(1, 1, M.MAV_CMD_DO_FLIGHTTERMINATION, 0, 3, 0, 0, 0, 0,
                                                               0, 0), "STATUSTEXT")  # the value sent, named
         assert said.text.startswith("DO_FLIGHTTERMINATION: param1 3 (over 1.5: lo"), said.text
         assert not any(e.kind == "terminated" for e in v.sim.events) and v.rejected["bad_number"] == 1
+        said = gcs.exchange(v, M.MAVLink_command_long_message(1, 1, M.MAV_CMD_DO_FLIGHTTERMINATION, 0, 1, 0, 0, 0, 0,
+                                                              0, 0), "STATUSTEXT")
+        assert said.text.startswith("DO_FLIGHTTERMINATION: not armed (PX4 terminates"), said.text  # (50 a chunk)
+        assert not any(e.kind == "terminated" for e in v.sim.events) and v.sim.mode == "hold"
+        v.commander.arm_disarm(1.0, 0.0)  # the controller's arm: OFFBOARD, in lockstep
+        assert v.sim.armed and not v.clock.free_running
         assert _command(v, gcs, M.MAV_CMD_DO_FLIGHTTERMINATION, 1.0) == M.MAV_RESULT_ACCEPTED
         (t,) = [e for e in v.sim.events if e.kind == "terminated"]
         assert t.text.startswith("flight termination: motors off at x=0.000 y=0.000 z=0.000 m") and t.by is not None

@@ -24,15 +24,17 @@ failsafe); in OFFBOARD (the offboard controller's targets, an awaited mission's 
 PX4, and the event says so.
 
 **DO_FLIGHTTERMINATION.** PX4's commander (Commander.cpp, ``VEHICLE_CMD_DO_FLIGHTTERMINATION``): param1 > 0.5
-forces its outputs to their failsafe values (the motors off) and triggers a parachute; the vehicle falls; its mode is
-Termination from then on (UserModeIntention.cpp: it never changes out of it, not after a disarm either), HEARTBEAT's
-``system_status`` FLIGHT_TERMINATION (streams/HEARTBEAT.hpp); ACCEPTED. Here the motors stop in the same control
+of an armed vehicle forces its outputs to their failsafe values (the motors off) and triggers a parachute; the vehicle
+falls; its mode is Termination from then on (UserModeIntention.cpp: it never changes out of it, not after a disarm
+either), HEARTBEAT's ``system_status`` FLIGHT_TERMINATION (streams/HEARTBEAT.hpp); ACCEPTED. A vehicle not armed:
+DENIED; param1 0 (no cancel in PX4 main): DENIED. Here the motors stop in the same control
 period (the vehicle is disarmed, where PX4 keeps it armed with its outputs forced off: the same thrust, none), the
 vehicle falls on its own (a lockstep flight leaves the step clock: the vehicle's time runs on the wall clock), every
 later arm and mode change is DENIED, and the flight's outcome is ``terminated`` (exit 1; summary.json's ``ended_by``
 names who terminated it and how it came down). Not modelled: param1 > 1.5 (PX4's lockdown, a test that cuts the
-motors without terminating: UNSUPPORTED) and a cancel (param1 0) of a termination (DENIED: this one is latched;
-ACCEPTED with nothing to cancel, as PX4), the parachute.
+motors without terminating: UNSUPPORTED), the parachute. Until 2026-12-06 a termination of a vehicle on the ground,
+disarmed, was ACCEPTED and latched (it could not be armed again), and a cancel with nothing to cancel ACCEPTED, as
+PX4 before its UserModeIntention.
 
 **REQUEST_PROTOCOL_VERSION.** PX4's MAVLink receiver answers with PROTOCOL_VERSION: version 200, min 100, max 200
 (MAVLink 2), the hashes of its MAVLink library; here zero hashes. pymavlink's dialect has no PROTOCOL_VERSION, so its
@@ -174,19 +176,21 @@ class Actions:
         if p1 > 1.5:
             return (mavlink.MAV_RESULT_UNSUPPORTED, f"DO_FLIGHTTERMINATION: param1 {p1:g} (over 1.5: lockdown, PX4's "
                                                     "termination test) is not modelled; 1 terminates")
-        if p1 <= 0.5:
-            return (mavlink.MAV_RESULT_DENIED, "DO_FLIGHTTERMINATION: the flight was terminated; it is not undone "
-                                               "(PX4 leaves TERMINATION only by a reboot)") if self.terminated else \
-                (mavlink.MAV_RESULT_ACCEPTED, None)
+        if p1 <= 0.5:  # PX4 main has no cancel: DENIED
+            return mavlink.MAV_RESULT_DENIED, ("DO_FLIGHTTERMINATION: the flight was terminated; it is not undone "
+                                               "(PX4 leaves TERMINATION only by a reboot)" if self.terminated else
+                                               "DO_FLIGHTTERMINATION: param1 0: nothing to cancel (PX4 cancels none)")
         if self.clock.halted:
             return mavlink.MAV_RESULT_DENIED, "DO_FLIGHTTERMINATION: the flight is over (the plant ended it)"
         if self.terminated:
             return mavlink.MAV_RESULT_ACCEPTED, None
         sim = self.sim
+        if not sim.armed:  # PX4 main's commander: `if (!isArmed())` DENIED
+            return mavlink.MAV_RESULT_DENIED, "DO_FLIGHTTERMINATION: not armed (PX4 terminates only an armed vehicle)"
         X = sim.published()
         n0 = len(sim.events)
         sim.event("terminated", f"flight termination: motors off at x={X[0]:.3f} y={X[2]:.3f} z={X[4]:.3f} m, "
-                                f"{X[5]:+.2f} m/s up, {mode_name(sim.mode)}{'' if sim.armed else ' (disarmed)'}"
+                                f"{X[5]:+.2f} m/s up, {mode_name(sim.mode)}"
                                 f"{'' if sim.plant.on_ground else ': it falls'}")
         sim.disarm("terminated: motors off")
         sim.mode = TERMINATION
