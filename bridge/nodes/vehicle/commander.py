@@ -19,7 +19,6 @@ one is DENIED and counted (``bad_number``), nothing done.
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -46,6 +45,7 @@ from bridge.nodes.vehicle.prestart import PreStart
 from bridge.nodes.vehicle.reposition import reposition
 from bridge.nodes.vehicle.requests import MessageRequests, Result
 from bridge.nodes.vehicle.streams import StatusTexts, StreamTable
+from bridge.nodes.vehicle.takeoff import takeoff_altitude
 from bridge.record.metrics import plant_blocks
 
 OFFBOARD_STREAM_S = 1.0  # s of wall time: a ground station's OFFBOARD needs a target from the controller this recent
@@ -182,10 +182,13 @@ class Commander:
         if cmd == mavlink.MAV_CMD_DO_SET_MODE:
             return self._set_mode_or_refuse(*requested_mode(m.param1, m.param2, m.param3), by=by), ()
         if cmd == mavlink.MAV_CMD_NAV_TAKEOFF:
-            alt = self._takeoff_altitude(m.param7 if m._type == "COMMAND_LONG" else m.z)  # COMMAND_INT: z, m AMSL
-            if isinstance(alt, str):
-                return self._refuse(alt), ()
-            return self._set_mode_or_refuse(TAKEOFF, "", by=by, takeoff_alt_m=alt), ()
+            got = takeoff_altitude(m.param7 if m._type == "COMMAND_LONG" else m.z,  # COMMAND_INT: z, m AMSL
+                                   self.sim.takeoff_alt_m, BY_NAME["MIS_TAKEOFF_ALT"].hi, self.cfg.home.alt)
+            if got.alt_m is None:
+                return self._refuse(got.why or "NAV_TAKEOFF"), ()
+            if got.warning is not None:
+                self.texts += self._statustext(mavlink.MAV_SEVERITY_WARNING, got.warning)
+            return self._set_mode_or_refuse(TAKEOFF, "", by=by, takeoff_alt_m=got.alt_m), ()
         if cmd == mavlink.MAV_CMD_NAV_LAND:  # lands where it is (PX4 with NaN lat/lon); a position is not flown to
             return self._set_mode_or_refuse(LAND, "", by=by), ()
         if cmd == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:  # Return mode, as PX4's commander takes it
@@ -256,27 +259,6 @@ class Commander:
         if not self.sim.plant.on_ground:
             return in_air_refusal("MISSION_START", self.sim.mode)
         return "MISSION_START: only on the ground, disarmed or armed in HOLD (the controller flies it from its start)"
-
-    def _takeoff_altitude(self, param7: float) -> float | str:
-        """NAV_TAKEOFF's altitude above home (m) from its param7 (m AMSL, as PX4 reads it; NaN:
-        MIS_TAKEOFF_ALT), or why it cannot be flown. MIS_TAKEOFF_ALT is also the least it climbs to: a
-        lower altitude (below home too) is raised to it with a STATUSTEXT, as PX4 does; one above the
-        plant's envelope (MIS_TAKEOFF_ALT's upper bound) is refused."""
-        least = self.sim.takeoff_alt_m
-        if math.isnan(param7):
-            return least
-        hi = BY_NAME["MIS_TAKEOFF_ALT"].hi
-        home = self.cfg.home.alt
-        rel = param7 - home
-        if not (math.isfinite(param7) and rel <= hi):
-            return (f"NAV_TAKEOFF: altitude {param7:g} m AMSL is {rel:g} m above home; "
-                    f"must be at most {hi:g} m above (home {home:g} m)")
-        if rel < least:
-            if rel < least - 0.1:  # PX4 says nothing for less than 10 cm
-                self.texts += self._statustext(mavlink.MAV_SEVERITY_WARNING, "Using minimum takeoff altitude: "
-                                               f"{home + least:.2f} m")
-            return least
-        return rel
 
     def _refuse(self, why: str, result: int = mavlink.MAV_RESULT_DENIED) -> int:
         """``result`` (DENIED, or UNSUPPORTED); a STATUSTEXT saying why follows the COMMAND_ACK to the sender
