@@ -385,7 +385,16 @@ def test_an_automatic_instance_is_the_highest_free_one(tmp_path, monkeypatch):
             return False
         return True
 
-    wait_for(bound, 120.0, f"UDP 127.0.0.1:{GCS_PORT + 9} free to hold")
+    try:
+        wait_for(bound, 120.0, f"UDP 127.0.0.1:{GCS_PORT + 9} free to hold")
+    except AssertionError as exc:  # (once, in an eight-worker run: say who held it, for the next time)
+        held.close()
+        try:
+            ss = subprocess.run(["ss", "-uanpH", f"sport = :{GCS_PORT + 9}"], capture_output=True, text=True)
+            who = ss.stdout.strip() or ss.stderr.strip() or "nobody ss can see"
+        except OSError as why:
+            who = f"unknown ({why})"
+        raise AssertionError(f"{exc}; held by: {who}") from None
     calls = []
     try:
         with instance_slot() as a:
