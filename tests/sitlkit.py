@@ -13,6 +13,7 @@ import select
 import selectors
 import signal
 import socket
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -358,58 +359,54 @@ def child_pids(run: Path) -> dict[str, int]:
     return pids
 
 
-class ControlThread(threading.Thread):
-    """A daemon thread a test runs beside what it measures, as a context manager: started on entry, told to stop
-    on exit through a pipe its :meth:`run` watches (:attr:`stop_r`, readable once it is to stop)."""
+class HeldEcho(threading.Thread):
+    """The control of a relay's hold: a datagram held ``hold_s`` by a timed sleep and sent back, in this process, by
+    a thread of its own (a context manager: started on entry, stopped on exit). A relayed datagram wakes three
+    threads on its way (the relay's on its arrival, the relay's again at its due time, the receiver's); so does one
+    sent here. On an oversubscribed machine the scheduler makes each wake-up late whatever the relay does (a full
+    suite beside two busy loops: ~1 ms each, against 0.1 ms for a lone timer's), and this measures how late, in the
+    same seconds (:meth:`round`, :meth:`median_late_ms`)."""
 
-    def __init__(self) -> None:
+    def __init__(self, hold_s: float) -> None:
         super().__init__(daemon=True)
-        self.stop_r, self._stop_w = os.pipe()
+        self.hold_s = hold_s
+        self.late_ms: list[float] = []  # each round's
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self._stop_r, self._stop_w = os.pipe()
 
-    def __enter__(self) -> Any:
+    def run(self) -> None:
+        while True:
+            ready = select.select([self.sock, self._stop_r], [], [])[0]
+            if self._stop_r in ready:
+                return
+            data, back = self.sock.recvfrom(2048)
+            select.select([self._stop_r], [], [], self.hold_s)
+            self.sock.sendto(data, back)
+
+    def __enter__(self) -> HeldEcho:
         self.start()
         return self
 
     def __exit__(self, *exc: object) -> None:
         os.write(self._stop_w, b"x")
         self.join(5.0)
-        os.close(self.stop_r)
-        os.close(self._stop_w)
-
-
-class HeldEcho(ControlThread):
-    """The control of a relay's hold: a datagram held ``hold_s`` by a timed sleep and sent back, in this process, by
-    a thread of its own. A relayed datagram wakes three threads on its way (the relay's on its arrival, the relay's
-    again at its due time, the receiver's); so does one sent here. On an oversubscribed machine the scheduler makes
-    each wake-up late whatever the relay does (a full suite beside two busy loops: ~1 ms each, against 0.1 ms for a
-    lone timer's), and this measures how late, in the same seconds (:meth:`round`)."""
-
-    def __init__(self, hold_s: float) -> None:
-        super().__init__()
-        self.hold_s = hold_s
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind(("127.0.0.1", 0))
-
-    def run(self) -> None:
-        while True:
-            ready = select.select([self.sock, self.stop_r], [], [])[0]
-            if self.stop_r in ready:
-                return
-            data, back = self.sock.recvfrom(2048)
-            select.select([self.stop_r], [], [], self.hold_s)
-            self.sock.sendto(data, back)
-
-    def __exit__(self, *exc: object) -> None:
-        super().__exit__(*exc)
+        for fd in (self._stop_r, self._stop_w):
+            os.close(fd)
         self.sock.close()
 
-    def round(self, client: socket.socket, size: int) -> float:
-        """How late (ms) a datagram of ``size`` bytes from ``client`` (a socket with a timeout) came back: its time
-        out and back less the hold."""
+    def round(self, client: socket.socket, size: int) -> None:
+        """A datagram of ``size`` bytes from ``client`` (a socket with a timeout) held and back: how late (ms),
+        its time out and back less the hold, kept."""
         t0 = time.perf_counter()
         client.sendto(bytes(size), self.sock.getsockname())
         client.recvfrom(2048)
-        return (time.perf_counter() - t0 - self.hold_s) * 1000.0
+        self.late_ms.append((time.perf_counter() - t0 - self.hold_s) * 1000.0)
+
+    def median_late_ms(self) -> float:
+        """The rounds' median lateness (ms), never below 0."""
+        assert self.late_ms, "no round of the control was sent"
+        return max(0.0, statistics.median(self.late_ms))
 
 
 def script_result(r: subprocess.CompletedProcess[str]) -> dict[str, Any]:
