@@ -377,6 +377,8 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
     flights = fleet_flights(fleet, over)
     check_fleet_steps(fleet, flights)
     check_fleet_starts(fleet, flights, vehicles, formation)
+    if shared:  # a handover on one radio is refused, as offline (before a port is checked or a directory touched)
+        shared_radios(fleet, flights, over)
     gcs_text = check_fleet(len(flights), realtime=realtime, instance=instance, gcs=gcs, speed=speed, key=key)
     speed = lockstep_pace(speed, realtime=realtime, await_mission=False)
     keep = out is not None or write
@@ -389,8 +391,6 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
         dirs = [d for d in _vehicle_dirs(fm, path) if d is not None]
         ids = [v.id for v in fm.vehicles]
         watch = _watch(fm, flights)
-        if shared:
-            shared_radios(fm, flights, over)  # a handover on one radio is refused, as offline
         clocked = not realtime  # lockstep: one shared step clock (bridge.nodes.vehicle.gate)
         runs = fly_sessions(flights, ids, dirs, realtime=realtime, instance=instance, gcs=gcs_text, speed=speed,
                             key=Path(key) if key is not None else None, plots=plots, keep=keep,

@@ -135,9 +135,17 @@ def test_a_bad_radio_file_is_named(tmp_path: Path, what: str, says: str) -> None
 
 
 def test_shared_link_is_refused_where_it_means_nothing(tmp_path: Path) -> None:
-    for fly_it in (simulate, swarm_sitl):  # a handover on one radio: not modelled, in any clock (before any process)
+    """A handover on one radio is not modelled, in any clock: refused before anything starts. A SITL fleet refused
+    it only once its run directory was made, so ``--overwrite`` had already removed the run recorded there; and
+    after its ports were checked, so a busy instance was said instead (free ports here: no socket is touched)."""
+    kept = tmp_path / "kept"
+    kept.mkdir()
+    (kept / "summary.json").write_text('{"outcome": "completed"}')
+    for fly_it, where in ((simulate, {}), (swarm_sitl, {"instance": None})):
         with pytest.raises(ConfigError, match=r"link handovers \(--at 1:link:wifi\) is not modelled"):
-            fly_it(short_sine(tmp_path), vehicles=2, link={"shared": True}, at=("1:link:wifi",))
+            fly_it(short_sine(tmp_path), vehicles=2, link={"shared": True}, at=("1:link:wifi",), out=kept,
+                   overwrite=True, **where)
+        assert [p.name for p in kept.iterdir()] == ["summary.json"], fly_it
     with pytest.raises(ConfigError, match="shared: a link handover takes a profile"):  # the flight's, not an event's
         simulate(short_sine(tmp_path), vehicles=2, at=({"t_s": 1.0, "kind": "link", "shared": True},))
     with pytest.raises(ConfigError, match="link.shared: expected true or false"):
