@@ -61,7 +61,8 @@ def _close(a: float | None, b: float | None, rel: float) -> bool:
     ]),
 ])
 def test_wind_turbulence_and_gusts_fly_as_in_the_scalar_loop(name: str, cells: list[dict]) -> None:
-    _agree(replace(load_mission(ROOT / "missions" / name), duration_s=6.0), cells)
+    # (ending in a hold: the batch flies no end action, and refuses a landing in wind, which it cannot judge)
+    _agree(replace(load_mission(ROOT / "missions" / name), duration_s=6.0, end_action="hold"), cells)
 
 
 @pytest.mark.parametrize("effects", [{}, {"battery": True}, {"battery": True, "motor_lag": True}])
@@ -139,7 +140,7 @@ def _agree(m, cells: list[dict]) -> list[dict]:
 def test_still_and_windy_cells_fly_in_one_batch_as_alone() -> None:
     # a sweep's wind axis (0, 5 m/s: no [wind], a [wind]) in one batch: each cell as it flies alone (to the
     # bit but the ripple's summation), and the wind is flown, not ignored
-    m = replace(load_mission(ROOT / "missions" / "sine.toml"), duration_s=6.0)
+    m = replace(load_mission(ROOT / "missions" / "sine.toml"), duration_s=6.0, end_action="hold")
     windy = {"controller": "pid", "wind": {"speed_mps": 6.0, "from_deg": 90.0, "gusts": GUSTS}}
     both = fly_batch(m, [{"controller": "pid"}, windy])
     alone = fly_batch(m, [{"controller": "pid"}]) + fly_batch(m, [windy])

@@ -17,6 +17,7 @@ import shutil
 import signal
 import stat
 import subprocess
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -722,13 +723,14 @@ def test_resume_refuses_a_mission_toml_edited_after_the_sweep(small_sweep: tuple
 def test_a_wind_by_turbulence_grid(mission_file: Path, tmp_path: Path, capsys) -> None:
     """``--wind 0,5 --turbulence none,moderate``: two axes of ``cells.csv``; each row is the one ``bsst sim``
     with those flags (a still-air cell of a still-air mission is that mission, untouched); ``auto`` flies these
-    four on the process engine (fewer than 32 cells) and ``--engine batch`` flies the same grid, turbulence too,
-    within 1e-6 of the process engine's rows."""
+    four on the process engine (the mission ends in a landing, which the batch does not fly, in wind) and
+    ``--engine batch`` flies the same grid ending in a hold, turbulence too, within 1e-6 of the process engine's
+    rows."""
     out = tmp_path / "wind"
     assert main(["sweep", str(mission_file), "--wind", "0,5", "--turbulence", "none,moderate", "--out", str(out),
                  "--no-plots", "--jobs", "2"]) == 0
     printed = capsys.readouterr().out
-    assert "engine process (fewer than 32 cells to fly)" in printed, printed
+    assert "engine process (the batch engine cannot fly this grid: moderate turbulence at the mission's end" in printed
     rows = read_cells(out / CELLS_CSV)
     assert [(r["wind_mps"], r["turbulence"]) for r in rows] == [(0.0, "none"), (0.0, "moderate"), (5.0, "none"),
                                                                 (5.0, "moderate")]
@@ -744,7 +746,9 @@ def test_a_wind_by_turbulence_grid(mission_file: Path, tmp_path: Path, capsys) -
                  "--out", str(one)]) == 0
     assert json.loads((one / "summary.json").read_text())["rms_3d"] == rows[3]["rms"]
     capsys.readouterr()
-    assert main(["sweep", str(mission_file), "--wind", "0,5", "--turbulence", "none,moderate", "--engine", "batch",
+    held = tmp_path / "held.toml"
+    held.write_text(dump_toml(replace(SHORT, end_action="hold").to_dict()))
+    assert main(["sweep", str(held), "--wind", "0,5", "--turbulence", "none,moderate", "--engine", "batch",
                  "--out", str(tmp_path / "b"), "--no-plots"]) == 0
     assert "engine batch (asked for)" in capsys.readouterr().out
     batch = read_cells(tmp_path / "b" / CELLS_CSV)

@@ -18,12 +18,14 @@ import os
 import shutil
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
 
 from bridge import simulate
 from bridge.cli import main
+from bridge.core.flight import prepare
 from bridge.sweep import CELLS_CSV, COLUMNS, Grid, load_sweep, read_cells, sweep
 from bridge.sweep.cells import FLEET_COLUMNS
 from bridge.sweep.executors import BATCH_MIN_CELLS, WARM_CELLS, engine_for
@@ -70,7 +72,7 @@ def test_a_wind_turbulence_and_law_grid_gives_the_same_rows_with_either_engine(t
     """Issue 27's batch agreement: steady wind (0, 6 m/s) x turbulence (none, moderate) x the three laws; the
     batch flies each cell's own turbulence samples (its seed's: bridge.batch.weather), so its cells.csv rows are
     the process engine's within what the batch keeps (bsst, pid 1e-6; smc 1 %)."""
-    short = Mission(Sine(), duration_s=3.0, name="short3")
+    short = Mission(Sine(), duration_s=3.0, name="short3", end_action="hold")  # (a landing in wind: not batched)
     grid = Grid(controller=("bsst", "pid", "smc"), wind_mps=(0.0, 6.0), turbulence=("none", "moderate"))
     batch = sweep(short, grid, engine="batch", out=tmp_path / "b", report=False)
     process = sweep(short, grid, engine="process", jobs=2, out=tmp_path / "p", report=False)
@@ -81,6 +83,31 @@ def test_a_wind_turbulence_and_law_grid_gives_the_same_rows_with_either_engine(t
     rms = {(r["controller"], r["wind_mps"], r["turbulence"]): r["rms"] for r in batch}
     for law in grid.controller:  # the turbulence is flown, not ignored
         assert rms[law, 6.0, "moderate"] != rms[law, 6.0, "none"] and rms[law, 0.0, "moderate"] != rms[law, 0.0, "none"]
+
+
+def test_a_mission_that_lands_in_wind_flies_on_the_process_engine_which_judges_its_landing(tmp_path: Path) -> None:
+    """The batch flies no end action: a windy grid whose mission ends in a landing read ``completed`` there where
+    the process engine, which flies the landing, said ``crashed`` (the sine at 40 m/s in severe turbulence; the x500
+    at 25 m/s). ``auto`` flies it on the process engine and says why; ``--engine batch`` is refused; ending in a
+    hold, or in still air at the end (a wind event back to 0, a gust over), it is batched."""
+    from bridge.batch.engine import air_at_end
+
+    sine = Mission(Sine(), duration_s=3.0, name="short3")
+    windy = cells(sine, Grid(wind_mps=tuple(float(w) for w in range(BATCH_MIN_CELLS))))
+    engine, why = engine_for(sine, windy, "offline", "auto")
+    said = "the batch engine cannot fly this grid: a steady wind of 1 m/s at the mission's end: its end landing"
+    assert engine == "process" and why.startswith(said), why
+    with pytest.raises(ConfigError, match=r"^--engine batch: a steady wind of 1 m/s at the mission's end: .*"
+                                          r"flies in the batch\); fly it with --engine process$"):
+        engine_for(sine, windy, "offline", "batch")
+    assert engine_for(replace(sine, end_action="hold"), windy, "offline", "auto")[0] == "batch"
+    calm = {"at": ("1:wind:5:90", "2:wind:0", "0.5:gust:1,2")}  # blown, then still before the end
+    assert air_at_end(prepare(sine, **calm)) is None
+    for over, says in (({"wind": {"speed_mps": 0.0, "turbulence": "light"}}, "light turbulence"),
+                       ({"at": ("1:wind:5:90",)}, "a steady wind of 5 m/s"),
+                       ({"at": ("2.5:gust:2,1",)}, "a gust from t = 2.5 s not over"),
+                       ({"wind": {"speed_mps": 0.0, "gusts": [[2.0, 2.0, 3.0, 0.0]]}}, "a gust from t = 2 s not over")):
+        assert air_at_end(prepare(sine, **over)) == says, over
 
 
 def test_resume_with_the_batch_engine_flies_only_the_missing_cells(tmp_path: Path) -> None:

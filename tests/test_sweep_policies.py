@@ -55,7 +55,7 @@ def test_the_batch_engine_judges_no_policy_and_refuses_a_geofence(tmp_path: Path
     rows = sweep(fenced_sine(tmp_path, None), Grid(delay_ms=(0.0, 10.0)), engine="batch", report=False)
     assert {r["policies"] for r in rows} == {""}  # not judged, never "ok"
     fenced = fenced_sine(tmp_path, 0.2)
-    with pytest.raises(ConfigError, match="geofence .*GF_MAX_HOR_DIST.*fly it with the process engine"):
+    with pytest.raises(ConfigError, match="geofence .*GF_MAX_HOR_DIST.*read as flown; fly it with --engine process$"):
         sweep(fenced, Grid(delay_ms=(0.0, 10.0)), engine="batch", report=False)
     delays = ",".join(str(d) for d in range(40))  # enough cells for auto to want the batch
     assert main(["sweep", str(fenced), "--delay", delays, "--no-plots", "--out", str(tmp_path / "auto")]) == 0

@@ -93,31 +93,34 @@ def flights_problem(flights: Sequence[Flight]) -> str | None:
             return (f"[estimator] kind = {f.estimator!r}: sensors and the on-board estimator are not in the batch "
                     f"engine; it flies only 'truth'")
         if f.param_changes:
-            return ("--param-at: parameters changed during the flight are not in the batch engine; "
-                    "fly it with the process engine")
+            return ("--param-at: parameters changed during the flight are not in the batch engine")
         other = [e.kind for e in f.timeline if e.kind not in BATCH_EVENT_KINDS]
         if other:
             return (f"a {other[0]} event ([[events]] or --at): the batch engine flies the timeline's "
-                    f"{', '.join(BATCH_EVENT_KINDS)} events only; fly it with the process engine")
+                    f"{', '.join(BATCH_EVENT_KINDS)} events only")
         if f.failsafe.resume:
             return "[failsafe] resume = true: re-arming after a failsafe is not in the batch engine"
         if f.failsafe.action != "descend":
             return f"[failsafe] action = {f.failsafe.action!r}: the batch engine flies only the default, 'descend'"
         if m.geofence is not None or f.params.max_hor_m > 0.0 or f.params.max_ver_m > 0.0:
             return ("a geofence ([geofence], a plan's geoFence, GF_MAX_HOR_DIST or GF_MAX_VER_DIST): the batch engine "
-                    "keeps no trace to judge a cell's policies by, so a cell that left it would read as flown; fly it "
-                    "with the process engine")
+                    "keeps no trace to judge a cell's policies by, so a cell that left it would read as flown")
         if f.effects.battery and (f.effects.battery_start_pct < 100.0 or f.params.low_battery_action):
             return ("the battery's levels ([effects] battery_start_pct below 100, or COM_LOW_BAT_ACT > 0): the "
-                    "vehicle's battery failsafe is not in the batch engine; fly it with the process engine")
+                    "vehicle's battery failsafe is not in the batch engine")
         if m.end_action == "land" and f.failsafe.descent_rate > END_LANDING_SAFE_MPS:
             return (f"[failsafe] descent_rate (MPC_LAND_SPEED) {f.failsafe.descent_rate:g} m/s: the mission's end "
                     f"landing may touch down faster than {CRASH_SPEED_MPS:g} m/s, a crash the process engine judges "
-                    "and the batch engine (no end action) cannot; fly it with the process engine")
+                    "and the batch engine (no end action) cannot")
         if m.end_action == "land" and any(e.kind == "motor" and e.get("effectiveness") < 1.0 for e in f.timeline):
             return ("a motor fault ([[events]] or --at) before the mission's end landing: a landing on a weak rotor "
                     "may touch down hard, a crash the process engine judges and the batch engine (no end action) "
                     "cannot")
+        air = air_at_end(f) if m.end_action == "land" else None
+        if air:
+            return (f"{air} at the mission's end: its end landing in wind may touch down hard or tilted, a crash the "
+                    "process engine judges and the batch engine (no end action) cannot (a mission that ends "
+                    "in a hold, [end] action = \"hold\", flies in the batch)")
         if m.steps > CELL_STEPS:
             return f"the mission has {m.steps} control steps: more than the batch engine holds ({CELL_STEPS})"
         if first is None:
@@ -127,6 +130,26 @@ def flights_problem(flights: Sequence[Flight]) -> str | None:
         if why:
             return f"the cells differ in {why}: a batch flies one mission with per-cell law, seed, rate and link"
     return None
+
+
+def air_at_end(f: Flight) -> str | None:
+    """What of the air still blows as the flight's mission time ends (its end landing flies in it): turbulence, a
+    steady wind (the ``[wind]`` speed or the last ``wind`` event's, m/s), or a gust not over by then (of ``[wind]``
+    or an event); None in still air there."""
+    w, end = f.wind, f.mission.duration_s
+    if w is not None and w.turbulence != "none":
+        return f"{w.turbulence} turbulence"
+    steady = w.speed_mps if w is not None else 0.0
+    gusts = [(g.t_s, g.duration_s) for g in w.gusts] if w is not None else []
+    for e in f.timeline:  # (in time order)
+        if e.kind == "wind":
+            steady = e.get("speed_mps")
+        elif e.kind == "gust":
+            gusts.append((e.t_s, e.get("duration_s")))
+    if steady > 0.0:
+        return f"a steady wind of {steady:g} m/s"
+    late = sorted(t for t, d in gusts if t + d > end)
+    return f"a gust from t = {late[0]:g} s not over" if late else None
 
 
 def _differs(a: Flight, b: Flight) -> str | None:
