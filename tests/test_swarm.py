@@ -117,6 +117,7 @@ def test_the_fleets_plots_show_every_vehicle(tmp_path: Path) -> None:
 def test_a_fleet_overwrites_a_fleet_and_one_vehicle_overwrites_both(tmp_path: Path) -> None:
     mission, out = short_sine(tmp_path, 0.5), tmp_path / "r"
     simulate(mission, vehicles=3, out=out, plots=False)
+    (out / "vehicle-3" / "gate.json").write_text("{}")  # a lockstep SITL fleet's gate file is its run's too
     simulate(mission, vehicles=2, out=out, overwrite=True, plots=False)
     assert sorted(p.name for p in out.iterdir()) == ["mission.toml", "summary.json", "vehicle-1", "vehicle-2"]
     simulate(mission, out=out, overwrite=True, plots=False)

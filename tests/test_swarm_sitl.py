@@ -67,6 +67,8 @@ def test_four_in_a_line_fly_in_sitl_as_offline_vehicle_by_vehicle(tmp_path: Path
         d = root / f"vehicle-{i}"
         assert all((d / f).is_file() for f in ("trace.csv", "vehicle.tlog", "controller.tlog", "summary.json"))
         assert json.loads((d / "summary.json").read_text())["sitl"]["sysid"] == i
+        # its gate file is the run's own (each events.log said it was "kept, not written by a run")
+        assert (d / "gate.json").is_file() and "not written by a run" not in (d / "events.log").read_text()
     assert report_fleet(run, "sitl") == 0
 
 

@@ -100,11 +100,11 @@ def run_dir(
 # Every file (and the one directory) a run of ours writes into its directory, as glob patterns: the one
 # table overwriting reads, so that an overwritten directory holds exactly one run and nothing of a user's is
 # touched. The run itself (sim, sitl), its children, bsst link extract/show, a sweep, a margin, and the
-# temporary names of write_text_atomic.
+# temporary names of write_text_atomic; a lockstep fleet's vehicle's gate file (bridge.session.fleet).
 RUN_FILES = ("summary.json", "mission.toml", "trace.csv", "events.log", "vehicle.bin", "controller.bin",
              "vehicle.tlog", "controller.tlog", "vehicle.log", "controller.log", "relay.log", "relay.json",
              "link-trace.csv", "link-trace.png", "cells.csv", "sweep.json", "report.md", "map_*.png",
-             "margin.json", ".*.tmp*")
+             "margin.json", "gate.json", ".*.tmp*")
 PLOTS_DIR, PLOT_FILES = "plots", ("*.png", ".*.tmp*")  # plots/ and the figures in it
 VEHICLE_DIRS = "vehicle-[0-9]*"  # a fleet's vehicles' own runs (bridge.swarm): each a run directory of its own
 
