@@ -102,6 +102,11 @@ REASONS: dict[str, str] = {
 }
 
 
+# refusals counted but never said in the STATUSTEXT report: a ground station's port carries a fleet's traffic for
+# every vehicle, so a message for another system is routine there (PX4 drops it without a word)
+UNREPORTED = frozenset({"target"})
+
+
 class Rejections(dict[str, int]):
     """Refusals by reason (a plain dict of counts, so it serialises as one), plus how many
     came from the link's own peer (``from_peer``: the controller's, at the vehicle) and the
@@ -126,12 +131,15 @@ class Rejections(dict[str, int]):
     def report(self, now: float | None = None) -> str | None:
         """A line on the refusals since the last report (most frequent first, at most
         :data:`STATUSTEXT_CHARS` characters), at most once per :data:`REPORT_S` of wall
-        time; None when there is nothing new or it is too soon."""
+        time; None when there is nothing new or it is too soon. :data:`UNREPORTED` reasons are left out."""
         now = time.monotonic() if now is None else now
         if now < self._next_report or self.total == sum(self._reported.values()):
             return None
-        new = {r: c - self._reported.get(r, 0) for r, c in self.items() if c > self._reported.get(r, 0)}
+        new = {r: c - self._reported.get(r, 0) for r, c in self.items()
+               if c > self._reported.get(r, 0) and r not in UNREPORTED}
         self._reported = dict(self)
+        if not new:
+            return None
         self._next_report = now + REPORT_S
         text = f"rejected {sum(new.values())}: " + ", ".join(
             f"{r} {c}" for r, c in sorted(new.items(), key=lambda rc: -rc[1]))
