@@ -377,6 +377,10 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
     flights = fleet_flights(fleet, over)
     check_fleet_steps(fleet, flights)
     check_fleet_starts(fleet, flights, vehicles, formation)
+    if any("MAV_SYS_ID" in f.mission.params for f in flights):  # (its vehicle process refused it, files written)
+        where = "--param MAV_SYS_ID" if "MAV_SYS_ID" in (given.params or {}) else f"{fleet.source}: params.MAV_SYS_ID"
+        raise ConfigError(f"{where}: a fleet's vehicles take PX4's system ids from their instances (vehicle i of "
+                          "--instance B is system B + i): give --instance, not MAV_SYS_ID")
     if shared:  # a handover on one radio is refused, as offline (before a port is checked or a directory touched)
         shared_radios(fleet, flights, over)
     gcs_text = check_fleet(len(flights), realtime=realtime, instance=instance, gcs=gcs, speed=speed, key=key)

@@ -99,8 +99,12 @@ def test_a_vehicle_that_flew_no_step_touches_no_one_in_the_trace_judge() -> None
 
 
 def test_a_fleet_past_the_last_instance_is_refused_before_anything_starts(tmp_path: Path, capsys) -> None:
-    with pytest.raises(ConfigError, match="instances are 0-9"):
+    with pytest.raises(ConfigError, match="up to instance 10; instances are 0-9"):
         sitl(short_sine(tmp_path), vehicles=3, instance=8, out=tmp_path / "no")
+    assert not (tmp_path / "no").exists()
+    # a system id of its own: each vehicle's process refused it (naming a --sysid never given), files written
+    with pytest.raises(ConfigError, match=r"^--param MAV_SYS_ID: a fleet's vehicles take PX4's system ids from"):
+        sitl(short_sine(tmp_path), vehicles=2, instance=0, params={"MAV_SYS_ID": 5}, out=tmp_path / "no")
     assert not (tmp_path / "no").exists()
     assert main(["sitl", str(short_sine(tmp_path)), "--vehicles", "4", "--instance", "7", "--out",
                  str(tmp_path / "no")]) == 2

@@ -67,8 +67,8 @@ def check_fleet(count: int, *, realtime: bool, instance: int | None, gcs: str | 
     last = instance + count - 1
     if last > MAX_INSTANCE:
         raise ConfigError(f"--vehicles {count} from --instance {instance}: vehicle i is instance {instance} + i - 1, "
-                          f"up to {last}; instances are 0-{MAX_INSTANCE}: fly at most {MAX_INSTANCE + 1 - instance} "
-                          "vehicles from this instance")
+                          f"up to instance {last}; instances are 0-{MAX_INSTANCE}: fly at most "
+                          f"{MAX_INSTANCE + 1 - instance} vehicles from this instance")
     return gcs_text
 
 
