@@ -149,6 +149,37 @@ def test_a_vehicle_disarmed_in_the_air_stays_on_the_ground_below_not_in_the_air(
             g.close()
 
 
+def test_a_vehicle_its_plant_ended_in_the_air_stays_there_as_offline() -> None:
+    """Diverged 2 m up (its plant's verdict, which disarms it): the offline fleet's vehicle stays where it ended, an
+    obstacle there, so the lockstep fleet's does too (it was put on the ground below like a disarmed one, and a
+    neighbour that flew through where it hung passed: a collision offline, none in SITL)."""
+    ports = (free_udp_port(), free_udp_port())
+    fleet = []
+    for i in range(2):
+        clock = Clock(False, 1000.0, 1.0, 0.0)
+        clock.fire(Trigger.ENGAGE)
+        where = [(0.0, 0.8 * i, 2.0)]
+        cfg = GateConfig(i, (1, 2), (0.3, 0.3), ports)
+        fleet.append((Gate(cfg, clock, lambda w=where: w[0], RATE, None,
+                           lambda w=where: resting((w[0][0], 0.0, w[0][1], 0.0, w[0][2], *[0.0] * 7), False)),
+                      clock, where))
+    (a, ca, wa), (b, cb, wb) = fleet
+    try:
+        for g, clock, _ in fleet:
+            at(g, clock, 3)
+        assert [cleared(g) for g, _, _ in fleet] == [None, None]
+        ca.take()
+        a.after_step(4, alive=False)  # step 3 flown: its plant ended the flight there (disarmed by it)
+        assert a.stats()["left"] == {"step": 4, "position": [0.0, 0.0, 2.0]}
+        cb.take()
+        wb[0] = (0.0, 0.3, 2.0)  # through where 1 hangs
+        at(b, cb, 4)
+        assert "vehicles 1 and 2 touched" in cleared(b)
+    finally:
+        for g, _, _ in fleet:
+            g.close()
+
+
 def test_a_vehicle_flying_on_on_the_wall_clock_is_no_obstacle_where_it_left() -> None:
     """A ground station's mode (HOLD, TAKEOFF, ...) takes a vehicle off the shared clock, flying on on the wall clock:
     it is not where it left for long, so the others' gates take it as nowhere (the fleet judges its record after,
@@ -272,6 +303,12 @@ def test_the_trace_judge_keeps_each_vehicle_where_it_stayed() -> None:
     assert found[0]["step"] == 2 and found[1]["with"] == 1 and "continued" not in found[0]
     far = {**one, "y": np.array([1.0, 0.5])}
     assert judge_traces(Watch([1, 2], [0.3, 0.3], 0.5), [one, far], RATE)[0]["continued"] == CONTINUED
+    # a flight over (diverged 1 m up at step 1, staying there) touched at step 4 by one flying on: an obstacle only,
+    # its own outcome kept, as the offline loop tells a contact to live flights only (SITL made both collision)
+    ended = {"t": np.array([0.0]), "x": np.zeros(1), "y": np.zeros(1), "z": np.ones(1)}
+    on = {"t": np.arange(5) / RATE, "x": np.zeros(5), "y": np.array([2.0, 1.5, 1.0, 0.5, 0.0]), "z": np.ones(5)}
+    found = judge_traces(Watch([1, 2], [0.3, 0.3], 0.5), [ended, on], RATE, [(0.0, 0.0, 1.0), (0.0, 0.0, 1.0)])
+    assert list(found) == [1] and found[1]["with"] == 1 and found[1]["step"] == 3, found
 
 
 # -- whole fleets ------------------------------------------------------------------------------------------

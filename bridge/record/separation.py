@@ -132,7 +132,9 @@ def judge_traces(watch: Watch, traces: Sequence[dict[str, Any]], rate: float,
     empty one (a vehicle that flew no step) is at its start with ``starts`` (m: one never armed stands there, as
     the loop keeps it), else nowhere, and touches no one (a final :data:`NOWHERE`: not known after its rows).
     ``walls``: the step after which each vehicle's rows were flown on the wall clock (None: none), judged by their
-    index as the rest. The first contact of each vehicle (by index): its step, time, the other's id and why (without
+    index as the rest. On a shared clock (``finals``, not ``own_clocks``) a vehicle whose flight was over (past its
+    rows) is an obstacle only, its outcome its own, as the offline loop tells a contact to live flights only.
+    The first contact of each vehicle (by index): its step, time, the other's id and why (without
     ``finals``, or with ``own_clocks`` (a real-time fleet's: each vehicle on its own clock), that the flights went
     on: :data:`CONTINUED`; at a step one of the two flew on the wall clock: :data:`WALL_CLOCK`)."""
     last = [finals[i] if finals is not None else None for i in range(len(traces))]
@@ -143,6 +145,7 @@ def judge_traces(watch: Watch, traces: Sequence[dict[str, Any]], rate: float,
     first: dict[int, dict[str, Any]] = {}
     unflown = [tuple(s[:3]) for s in starts] if starts is not None else [NOWHERE] * len(traces)
     wall = list(walls) if walls is not None else [None] * len(traces)
+    shared = finals is not None and not own_clocks  # a lockstep fleet's shared clock
     for j in range(n):
         positions = []
         for path, p, home in zip(paths, last, unflown):
@@ -153,5 +156,7 @@ def judge_traces(watch: Watch, traces: Sequence[dict[str, Any]], rate: float,
             more = ({"continued": CONTINUED} if finals is None or own_clocks else
                     {"continued": WALL_CLOCK} if off else {})
             for i, other in ((a, b), (b, a)):
+                if shared and j > len(paths[i]):  # its flight was over (row len: where it stayed): an obstacle only
+                    continue
                 first.setdefault(i, {"step": j, "t": round(j / rate, 6), "with": watch.ids[other], "why": why, **more})
     return first

@@ -133,10 +133,14 @@ class Gate:
         """Lockstep step k - 1 flown (the mission's, or its end landing's: clocked as the mission, judged as it, as
         the offline loop judges it), the plant now at step k (``alive``: not diverged or crashed), its state gone to
         the controller: tell every other vehicle. The vehicle leaves the shared clock when its lockstep flight is
-        over (its landing disarmed it, a disarm, the wall clock, its plant ended it): where it is now."""
+        over: where its plant ended it (diverged, crashed: there, as the offline fleet's vehicle stays where it
+        ended, in the air too), or where it comes to rest (:attr:`rest`: its landing disarmed it, a disarm, the wall
+        clock)."""
         if self.left is not None:
             return
-        if not alive or self.clock.state is not ClockState.LOCKSTEP:
+        if not alive:
+            self.leave(k, self.position())
+        elif self.clock.state is not ClockState.LOCKSTEP:
             self.leave(k, self.rest())
         else:
             self.arrive(k, self.position())
