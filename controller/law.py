@@ -29,6 +29,8 @@ Out: a built law that fits :class:`Law` (units in the list above), or a one-line
 
 A user's law that cannot be loaded (its import or its constructor raises, ``SystemExit`` included) is bad input:
 nothing is flown (exit 2). One that fails in flight ends the flight ``law_failed`` (docs/law.md, "Your own law").
+What the law's code says (its exception's message, a repr of what it returned) is quoted on one line
+(:func:`params.text.one_line`): the error and the ``events.log`` event stay one line each.
 """
 
 from __future__ import annotations
@@ -54,6 +56,7 @@ from controller.pid import CascadedPid
 from missions import CONTROLLERS, DEFAULT_DISCRETIZATION
 from missions.references import Sample
 from params import ConfigError, note_input
+from params.text import one_line
 
 Quad = tuple[float, float, float, float]
 
@@ -108,7 +111,7 @@ def law_problem(law: object) -> str | None:
             return f"has no method {name}()"
     desired = getattr(law, "desired", None)
     if not (isinstance(desired, tuple) and len(desired) == 2 and all(is_number(v) for v in desired)):
-        return f"its 'desired' must be a tuple (phi_d, theta_d) of two finite numbers, got {desired!r}"
+        return f"its 'desired' must be a tuple (phi_d, theta_d) of two finite numbers, got {_shown(desired)}"
     return None
 
 
@@ -263,7 +266,8 @@ def did(exc: BaseException) -> str:
     """What a user's code did, for the one line: ``called os._exit(0)`` or ``raised Kind: message``."""
     if isinstance(exc, ExitCalled):
         return f"called os._exit({exc.code!r})"
-    return f"raised {type(exc).__name__}: {exc}"
+    said = one_line(str(exc))  # (a message of several lines, a matrix printed in it: one line all the same)
+    return f"raised {type(exc).__name__}: {said}" if said else f"raised {type(exc).__name__}"
 
 
 class LawFailed(Exception):
@@ -327,9 +331,8 @@ class CheckedLaw:
         u = self._call("update", t, state, ref, omega_d)
         values, why = _inputs(u)
         if values is None:
-            shown = repr(u)
             raise LawFailed(self.label, "update() must return four finite numbers (u1, u2, u3, u4) in N, "
-                                        f"got {shown[:80] + '...' if len(shown) > 80 else shown} ({why})")
+                                        f"got {_shown(u)} ({why})")
         why = law_problem(self.law)
         if why:
             raise LawFailed(self.label, f"after update(): {why}")
@@ -340,6 +343,12 @@ class CheckedLaw:
 
     def reset(self) -> None:
         self._call("reset")
+
+
+def _shown(value: object) -> str:
+    """What a law gave, in its message: its repr on one line of at most 80 characters (a numpy column spans
+    several)."""
+    return one_line(repr(value), 80)
 
 
 def _label(factory: LawFactory) -> str:

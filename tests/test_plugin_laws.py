@@ -72,6 +72,8 @@ LOAD_FAILS = {  # case: (the line at import or in __init__, what the one line sa
     "raises": ("raise RuntimeError('no gains for me')", "raised RuntimeError: no gains for me"),
     "exits0": ("raise SystemExit(0)", "raised SystemExit"),
     "os_exit0": ("__import__('os')._exit(0)", "called os._exit(0)"),
+    # a message of several lines is one line all the same (it gave two lines on stderr)
+    "raises_lines": ("raise ValueError('bad gains:\\nline two')", "raised ValueError: bad gains: line two"),
 }
 
 
@@ -102,6 +104,11 @@ IN_FLIGHT = {  # case: (the method that fails, its first line, what the line say
                     "(u1 is a bool, not a number)"),  # (numpy's bool_ is named bool too)
     "complex": ("update", f"{FAIL_AT} return (self.m * self.g, 0j, 0.0, 0.0)", "(u2 is a complex, not a number)"),
     "numeric_strings": ("update", f"{FAIL_AT} return ('9.81', '0', '0', '0')", "(u1 is a str, not a number)"),
+    # a message or a repr of several lines stays on the record's one line (events.log had the matrix on 4 lines)
+    "raises_lines": ("update", f"{FAIL_AT} raise ValueError(f'matrix singular:\\n{{__import__(\"numpy\").eye(3)}}')",
+                     "raised ValueError: matrix singular: [[1. 0. 0.] [0. 1. 0.] [0. 0. 1.]] at step"),
+    "column": ("update", f"{FAIL_AT} return __import__('numpy').ones((4, 1))",
+               "got array([[1.], [1.], [1.], [1.]]) (u1 is a ndarray, not a number)"),
     # a law that ends the process: os._exit raises in its calls, so the flight ends recorded, not at exit 0
     "os_exit0": ("advance", "if self.t >= 0.5: os._exit(0)", "advance() called os._exit(0)"),
     "os_exit3_update": ("update", f"{FAIL_AT} os._exit(3)", "update() called os._exit(3)"),
@@ -121,9 +128,12 @@ def test_a_law_that_fails_in_flight_ends_law_failed_with_its_record(tmp_path, ca
     assert s["outcome"] == "law_failed"
     end = s["ended_by"]
     assert end["who"] == "controller" and says in end["how"] and "at step 125 (t=0.500 s)" in end["how"], end
+    assert "\n" not in end["how"], end
     rows = (run / "trace.csv").read_text().splitlines()
     assert len(rows) == 1 + 125  # the header, and every step flown before the failing one
-    assert "law_failed" in (run / "events.log").read_text()
+    events = (run / "events.log").read_text().splitlines()
+    assert any(" law_failed: " in e for e in events) and all(e.startswith("t=") for e in events), events
+    assert any(ln.startswith("ended by controller") and says in ln for ln in r.stdout.splitlines()), r.stdout
 
 
 PROCESS_ENDS = {  # case: (advance's line: a law that ends bsst sim's process past any guard in it, how it is said)

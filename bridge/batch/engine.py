@@ -51,6 +51,7 @@ from bridge.link.model import jitter_cell, link_from_table, merge_link_tables
 from bridge.link.plan import Clocks, plan_links
 from bridge.record.metrics import RMS_FROM_S
 from missions import MISSION_DIR, Mission, Sine, load_mission
+from params.text import one_line
 from plant.quadrotor import CRASH_SPEED_MPS
 
 # the columns of a cells.csv row this engine measures (the cell's own axes and seed come from the cell)
@@ -236,7 +237,7 @@ def compile_batch() -> None:
 def error_measures(why: str) -> dict[str, Any]:
     """The measured columns of a cell that could not be flown (outcome ``error``)."""
     out: dict[str, Any] = {c: None for c in MEASURES}
-    out.update(outcome="error", error=" ".join(why.split())[:300], policies="", jitter_capped="")
+    out.update(outcome="error", error=one_line(why), policies="", jitter_capped="")
     return out
 
 

@@ -29,6 +29,7 @@ from bridge.swarm import SEVERITY, FleetRun
 from bridge.sweep.classes import Classes, classify
 from bridge.sweep.grid import AXES, Cell
 from params import ConfigError, check_depth, read_regular_file
+from params.text import one_line
 
 COLUMNS = (
     "controller", "rate_hz", "delay_ms", "jitter_ms", "loss_pct", "burst_len", "estimator", "noise", "wind_mps",
@@ -113,7 +114,7 @@ def row_from_run(cell: Cell, run: Run) -> dict[str, Any]:
         "down_lost": int(down.get("lost", 0)),
         "flown_s": s.get("duration_s"),
         # a law that failed in flight measured nothing: the row says why, as a cell that could not be flown does
-        "error": " ".join(str(s.get("ended_by", {}).get("how", "")).split())[:300] if s["outcome"] in FAILED else "",
+        "error": one_line(str(s.get("ended_by", {}).get("how", ""))) if s["outcome"] in FAILED else "",
         "policies": policies_cell([s.get("policies")]),
         "jitter_capped": jitter_cell(link.get("jitter_capped") or ()),
     }
@@ -185,7 +186,7 @@ def error_row(cell: Cell, why: str) -> dict[str, Any]:
     """The row of a cell that could not be flown (outcome ``error``)."""
     row: dict[str, Any] = {c: None for c in COLUMNS}
     row.update({a: getattr(cell, a) for a in AXES})
-    row.update(seed=cell.seed, outcome="error", error=" ".join(why.split())[:300], policies="", jitter_capped="")
+    row.update(seed=cell.seed, outcome="error", error=one_line(why), policies="", jitter_capped="")
     return row
 
 
