@@ -42,7 +42,8 @@ import math
 import os
 import stat
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from collections.abc import Set as AbstractSet
 from functools import partial
 from numbers import Real
 from pathlib import Path
@@ -284,6 +285,9 @@ def _inputs(u: object) -> tuple[Quad | None, str]:
     or a value that is no finite real number (inf, nan, a bool, a complex, a string: :func:`is_number`)."""
     if isinstance(u, (str, bytes)) or u is None:
         return None, "not a sequence of four numbers"
+    if isinstance(u, (Mapping, AbstractSet)):  # its keys, or its items in no set order: never flown as u1..u4
+        kind = "a mapping" if isinstance(u, Mapping) else "unordered"
+        return None, f"a {type(u).__name__}: {kind}, not a sequence of four numbers"
     try:
         given = tuple(u)  # type: ignore[call-overload]
     except Exception:  # not iterable, or its own iteration raised

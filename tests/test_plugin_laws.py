@@ -109,6 +109,11 @@ IN_FLIGHT = {  # case: (the method that fails, its first line, what the line say
                      "raised ValueError: matrix singular: [[1. 0. 0.] [0. 1. 0.] [0. 0. 1.]] at step"),
     "column": ("update", f"{FAIL_AT} return __import__('numpy').ones((4, 1))",
                "got array([[1.], [1.], [1.], [1.]]) (u1 is a ndarray, not a number)"),
+    # an unordered container is refused as any wrong return (a dict had its keys flown, a set flew in any order)
+    "dict": ("update", f"{FAIL_AT} return {{0: self.m * self.g, 1: 0.0, 2: 0.0, 3: 0.0}}",
+             "(a dict: a mapping, not a sequence of four numbers)"),
+    "set": ("update", f"{FAIL_AT} return {{self.m * self.g, 0.0, 1.0, 2.0}}",
+            "(a set: unordered, not a sequence of four numbers)"),
     # a law that ends the process: os._exit raises in its calls, so the flight ends recorded, not at exit 0
     "os_exit0": ("advance", "if self.t >= 0.5: os._exit(0)", "advance() called os._exit(0)"),
     "os_exit3_update": ("update", f"{FAIL_AT} os._exit(3)", "update() called os._exit(3)"),
