@@ -35,6 +35,7 @@ What the law's code says (its exception's message, a repr of what it returned) i
 
 from __future__ import annotations
 
+import hashlib
 import importlib
 import importlib.util
 import inspect
@@ -42,12 +43,13 @@ import math
 import os
 import stat
 import sys
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from collections.abc import Set as AbstractSet
+from contextlib import contextmanager
 from functools import partial
 from numbers import Real
 from pathlib import Path
-from types import TracebackType
+from types import ModuleType, TracebackType
 from typing import NoReturn, Protocol, runtime_checkable
 
 from controller.bsst import BacksteppingSuperTwisting
@@ -56,7 +58,7 @@ from controller.nominal import Nominal
 from controller.pid import CascadedPid
 from missions import CONTROLLERS, DEFAULT_DISCRETIZATION
 from missions.references import Sample
-from params import ConfigError, note_input
+from params import ConfigError, read_regular_file
 from params.text import one_line
 
 Quad = tuple[float, float, float, float]
@@ -144,9 +146,12 @@ def resolve_law(spec: str) -> LawFactory:
                           "or path/to/file.py:ClassName, or package.module:ClassName")
     if where.endswith(".py") or "/" in where or "\\" in where:
         module = _load_file(Path(where), spec)
+    elif os.path.isfile(where):  # probe.txt:Probe, a file here that an import would not take for a module
+        raise LawError(spec, f"{where} is not a .py file (a law is path/to/file.py:ClassName "
+                          "or package.module:ClassName)")
     else:
         try:
-            with RefusedExit():
+            with RefusedExit(), from_working_dir():
                 module = importlib.import_module(where)
         except ModuleNotFoundError as exc:
             raise LawError(spec, f"no module named {exc.name!r}") from None
@@ -164,7 +169,25 @@ def resolve_law(spec: str) -> LawFactory:
     return cls
 
 
-def _load_file(path: Path, spec: str):  # -> module
+@contextmanager
+def from_working_dir() -> Iterator[None]:
+    """Imports inside look in the working directory first, as documented for ``module:Class`` (docs/usage.md):
+    ``python -m bridge`` has it first on ``sys.path``, the ``bsst`` console script its own folder, a script using
+    the API its script's folder. Only for the import: the process's ``sys.path`` is left as it was."""
+    here = os.getcwd()
+    sys.path.insert(0, here)
+    try:
+        yield
+    finally:
+        if here in sys.path:  # (the import may have taken it out itself)
+            sys.path.remove(here)  # its first entry: ours, unless the import put the very same folder before it
+
+
+def _load_file(path: Path, spec: str) -> ModuleType:
+    """The module of the law file ``path``, executed once for each content the file has had in this process: a
+    sweep's hundreds of flights of one law load it once, and an edited file is flown at its next flight (keyed
+    on the path and the bytes, as ``plant.profiles`` keys a profile; an edit that keeps the file's time and
+    size is seen too). The bytes hashed are the bytes run."""
     try:
         mode = path.stat().st_mode
     except FileNotFoundError:
@@ -175,18 +198,24 @@ def _load_file(path: Path, spec: str):  # -> module
         raise LawError(spec, f"{path} is a directory, not a Python file")
     if not stat.S_ISREG(mode):  # (a FIFO would block the import for ever)
         raise LawError(spec, f"{path} is not a regular file, not a Python file")
-    note_input(path)  # a user's file this process reads (an --overwrite never replaces it)
-    name = f"bsst_user_law_{abs(hash(str(path.resolve())))}"
-    if name in sys.modules:  # one module per file per process, as an import would
+    if path.suffix != ".py":
+        raise LawError(spec, f"{path} is not a .py file")
+    try:
+        source = read_regular_file(path, "a Python file")  # (records it as an input: never replaced by --overwrite)
+    except ConfigError as exc:  # swapped for a FIFO, unreadable: said as read_regular_file says it
+        raise LawError(spec, str(exc)) from None
+    digest = hashlib.sha256(str(path.resolve()).encode() + b"\0" + source).hexdigest()
+    name = f"bsst_user_law_{digest[:20]}"
+    if name in sys.modules:
         return sys.modules[name]
     mod_spec = importlib.util.spec_from_file_location(name, path)
-    if mod_spec is None or mod_spec.loader is None:
+    if mod_spec is None:
         raise LawError(spec, f"{path} is not a Python file")
     module = importlib.util.module_from_spec(mod_spec)
-    sys.modules[name] = module
+    sys.modules[name] = module  # (a dataclass, a pickle look their module up while it runs)
     try:
         with RefusedExit():
-            mod_spec.loader.exec_module(module)
+            exec(compile(source, str(path), "exec", dont_inherit=True), module.__dict__)
     except (Exception, SystemExit, ExitCalled) as exc:  # a syntax error, a raise or an exit in the file: one line
         del sys.modules[name]
         raise LawError(spec, f"loading {path} {did(exc)}") from None

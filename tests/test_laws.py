@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import math
+import subprocess
 import sys
 from pathlib import Path
 
@@ -27,7 +28,7 @@ from controller.law import BUILTIN, Law, law_problem, make_law, resolve_law
 from missions import Mission, Sine, load_mission
 from params import ConfigError
 from plant import load_profile
-from tests.sitlkit import run_bsst
+from tests.sitlkit import ENV, run_bsst
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -125,6 +126,60 @@ def test_a_module_law_is_found_by_import(nominal: Nominal) -> None:
         sys.path.remove(str(ROOT / "examples"))
 
 
+def test_a_module_law_is_imported_from_the_working_directory(tmp_path: Path, monkeypatch) -> None:
+    """``module:Class`` is looked for in the working directory first (docs/usage.md), in a script using the API
+    too (its own folder, not the working directory, is first on its ``sys.path``): it was ``no module named``;
+    and the process's ``sys.path`` is left as it was."""
+    name = f"here_{tmp_path.name}"  # (one name a test: a module imported stays imported in this process)
+    (tmp_path / f"{name}.py").write_text((ROOT / "examples" / "my_law.py").read_text())
+    monkeypatch.chdir(tmp_path)
+    before = list(sys.path)
+    assert resolve_law(f"{name}:MyLaw").__name__ == "MyLaw"
+    assert sys.path == before
+
+
+def test_the_bsst_script_flies_a_module_law_from_the_working_directory(tmp_path: Path) -> None:
+    """The ``bsst`` console script has its own folder first on ``sys.path``, not the working directory as
+    ``python -m bridge`` has: ``bsst sim ... --controller here:MyLaw`` said ``no module named 'here'``."""
+    (tmp_path / "here.py").write_text((ROOT / "examples" / "my_law.py").read_text())
+    script = tmp_path / "bin" / "bsst"  # as pip writes the console script (.venv/bin/bsst), in a folder of its own
+    script.parent.mkdir()
+    script.write_text("import sys\nfrom bridge.__main__ import main\nsys.exit(main())\n")
+    r = subprocess.run([sys.executable, str(script), "sim", str(_sine(tmp_path, 2.0)), "--controller", "here:MyLaw",
+                        "--out", str(tmp_path / "run"), "--no-plots"], cwd=tmp_path, capture_output=True, text=True,
+                       env={**ENV, "PYTHONPATH": str(ROOT)}, stdin=subprocess.DEVNULL, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert json.loads((tmp_path / "run" / "summary.json").read_text())["outcome"] == "completed"
+
+
+EDITED = """
+import sys
+sys.path.insert(0, {examples!r})
+from my_law import MyLaw
+
+
+class L(MyLaw):
+    def update(self, t, state, ref, omega_d):
+        if t >= 0.1:
+            raise RuntimeError("version {n}")
+        return super().update(t, state, ref, omega_d)
+"""
+
+
+def test_an_edited_law_file_is_flown_at_its_next_flight(tmp_path: Path) -> None:
+    """One process (a script, a notebook) flies a law file, the user edits it, and flies it again: the edit flies
+    (it was the first version, silently: one module per file per process). Same bytes, same class (a sweep's
+    hundreds of flights load the file once)."""
+    law = tmp_path / "edit_me.py"
+    spec = f"{law}:L"
+    mission = Mission(Sine(), duration_s=0.5, name="short")
+    for n in (1, 2):
+        law.write_text(EDITED.format(examples=str(ROOT / "examples"), n=n))
+        run = simulate(mission, controller=spec, plots=False)
+        assert run.outcome == "law_failed" and f"version {n}" in run.summary["ended_by"]["how"], run.summary
+    assert resolve_law(spec) is resolve_law(spec)
+
+
 BAD_LAWS = {  # file name -> source of a law file that does not fit, and what the one line must name
     "no_update.py": ("class L:\n    desired = (0.0, 0.0)\n    def advance(self, s, h=False): pass\n"
                      "    def reset(self): pass\n    def __init__(self, n, g, r): pass\n", "update"),
@@ -142,6 +197,7 @@ BAD_LAWS = {  # file name -> source of a law file that does not fit, and what th
     ("examples/my_law.py:NoSuchLaw", "NoSuchLaw"),
     ("no_such_package.laws:MyLaw", "no_such_package"),
     ("json:JSONDecoder", "JSONDecoder"),
+    ("README.md:MyLaw", "README.md is not a .py file"),  # a file, not a module: it said no module named 'README'
 ])
 def test_a_law_that_cannot_be_flown_is_refused_in_one_line(command: str, spec: str, names: str) -> None:
     r = run_bsst(command, "missions/sine.toml", "--controller", spec, cwd=ROOT, timeout=60)
