@@ -28,8 +28,8 @@ Out: a built law that fits :class:`Law` (units in the list above), or a one-line
      that are not four finite numbers; a ``desired`` gone bad) into :class:`LawFailed`
 
 A user's law that cannot be loaded (its import or its constructor raises, ``SystemExit`` included) is bad input:
-nothing is flown (exit 2). One that fails in flight ends the flight ``law_failed`` (docs/law.md, "Your own law").
-What the law's code says (its exception's message, a repr of what it returned) is quoted on one line
+nothing is flown (exit 2). One that fails in flight ends the flight ``law_failed`` (docs/usage.md, "Plug in your own
+law"). What the law's code says (its exception's message, a repr of what it returned) is quoted on one line
 (:func:`params.text.one_line`): the error and the ``events.log`` event stay one line each.
 """
 

@@ -332,8 +332,9 @@ class Run:
         return self.summary["outcome"]
 
     @property
-    def rms(self) -> float:
-        """3-D position RMS error over t >= summary['rms_from_s']."""
+    def rms(self) -> float | None:
+        """3-D position RMS error (m) over t >= summary['rms_from_s']; None when it measured nothing (no row
+        flown from then on, or not a finite number: a law that failed before, a flight that diverged)."""
         return self.summary["rms_3d"]
 
     def __repr__(self) -> str:
