@@ -11,15 +11,19 @@ one once the run is on disk and its summary printing changes nothing.
 
 from __future__ import annotations
 
+import json
+import os
 import signal
 import sys
 import textwrap
 import threading
+from pathlib import Path
 
 import pytest
 
 from bridge.core.interrupt import sigint_futures
-from tests.sitlkit import Proc
+from tests.sitlkit import Proc, csv_rows
+from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process
 
@@ -244,3 +248,55 @@ def test_ctrl_c_while_the_summary_is_printed_changes_nothing(tmp_path) -> None:
         assert not any("Traceback" in line or "interrupted" in line for line in proc.lines), proc.lines
     finally:
         proc.stop()
+
+
+LONG_SINE = 'name = "sine300"\nduration_s = 300.0\n[trajectory]\nkind = "sine"\n'  # never over before the signal
+
+
+@pytest.mark.parametrize("controller", ["bsst", "examples/my_law.py:MyLaw"])  # in this process; in a watched child
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_stop_sent_to_bsst_sim_alone_ends_it_aborted_recorded(tmp_path, sig: signal.Signals, controller: str) -> None:
+    """SIGINT or SIGTERM sent to ``bsst sim``'s process alone (``kill -INT PID``, a script's ``send_signal``), as
+    its trace grows: the flight ends ``aborted``, summary.json, trace and events written, exit 1, with a law of
+    the user's own (flown in a watched child, bridge.nodes.watched) as with a built-in one. Before, SIGINT with a
+    user's law was never answered (the parent ignored it, the child never had it), SIGTERM killed the run with no
+    summary.json (exit 143 said, or -15 silent)."""
+    mission = tmp_path / "sine300.toml"
+    mission.write_text(LONG_SINE)
+    out = tmp_path / "run"
+    proc = Proc.bsst("sim", str(mission), "--no-plots", "--out", str(out), "--controller", controller)
+    try:
+        wait_for(lambda: csv_rows(out / "trace.csv") >= 250 or proc.p.poll() is not None, 120, "a second flown")
+        proc.p.send_signal(sig)
+        _assert_aborted_recorded(out, proc)
+    finally:
+        proc.stop()
+
+
+def test_a_ctrl_c_to_the_group_is_one_stop_for_a_watched_flight(tmp_path) -> None:
+    """A terminal's Ctrl-C (SIGINT to the process group) reaches ``bsst sim`` and its watched child both: the parent
+    passes it on, and the child takes the two as one stop, its record whole (a second KeyboardInterrupt, raised
+    while the first was recorded, would cut it)."""
+    mission = tmp_path / "sine300.toml"
+    mission.write_text(LONG_SINE)
+    out = tmp_path / "run"
+    proc = Proc.bsst("sim", str(mission), "--no-plots", "--out", str(out), "--controller", "examples/my_law.py:MyLaw")
+    try:
+        wait_for(lambda: csv_rows(out / "trace.csv") >= 250 or proc.p.poll() is not None, 120, "a second flown")
+        os.killpg(proc.p.pid, signal.SIGINT)
+        _assert_aborted_recorded(out, proc)
+    finally:
+        proc.stop()
+
+
+def _assert_aborted_recorded(out: Path, proc: Proc) -> None:
+    """The run ended ``aborted`` by the user, exit 1, said and on disk whole (summary.json, the trace, the event)."""
+    assert proc.p.wait(timeout=60) == 1
+    proc.stop()  # (ended: reads what is left)
+    assert "outcome: aborted" in proc.lines and "ended by user: interrupted (Ctrl-C or SIGTERM)" in proc.lines, \
+        proc.lines
+    assert not any("Traceback" in s or s.startswith("bsst") for s in proc.lines), proc.lines
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["outcome"] == "aborted" and summary["ended_by"]["who"] == "user", summary["ended_by"]
+    assert csv_rows(out / "trace.csv") >= 250
+    assert "aborted: interrupted" in (out / "events.log").read_text()

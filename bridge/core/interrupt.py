@@ -1,11 +1,12 @@
 """Ctrl-C at a safe point: the first and second SIGINT as futures that a wait on a pool's futures includes.
 
-In:  SIGINT, while :func:`sigint_futures` is entered in the main thread
+In:  SIGINT, while :func:`sigint_futures` is entered in the main thread; SIGTERM, within :func:`sigterm_as_sigint`
 Out: :class:`Interrupts`: a :class:`~concurrent.futures.Future` completed (its result: the signal number) at the
      first SIGINT, another at the second; :func:`wait_or_interrupt`, concurrent.futures' ``wait`` that raises
      KeyboardInterrupt once it has returned; :func:`sigint_deferred`: SIGINT raised only inside
      :meth:`Deferred.raising` blocks (where a search flies), noted elsewhere (its bookkeeping); :func:`ignore_sigint`:
-     a command whose result is final ignores SIGINT from there on (its write, its summary, the interpreter's exit)
+     a command whose result is final ignores SIGINT from there on (its write, its summary, the interpreter's exit);
+     :func:`sigterm_as_sigint`: SIGTERM taken as a Ctrl-C (:func:`as_sigint`, the handler)
 
 Why:
 - Python raises KeyboardInterrupt between any two bytecodes of the main thread, so also inside
@@ -34,6 +35,11 @@ its start. Once the result is final, :func:`ignore_sigint`: Python's exit restor
 by the signal, status 130 in a shell) before it has finished, unless SIGINT is ignored (CPython's
 ``_PySignal_Fini`` keeps an ignored signal ignored); a ``bsst margin`` sent SIGINT just after it had written its
 complete margin.json died that way.
+
+A SIGTERM (a scheduler's, a script's ``Popen.terminate``) asks what a Ctrl-C asks, so :func:`sigterm_as_sigint`
+makes it one: its handler raises SIGINT in this process, which then meets whatever SIGINT meets there (Python's
+KeyboardInterrupt, the futures above, nothing once :func:`ignore_sigint` has run). Before, a ``bsst sim`` sent
+SIGTERM died at once, with no summary.json.
 """
 
 from __future__ import annotations
@@ -175,4 +181,25 @@ def ignore_sigint() -> None:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-__all__ = ["Deferred", "Interrupts", "ignore_sigint", "sigint_deferred", "sigint_futures", "wait_or_interrupt"]
+def as_sigint(signum: int, frame: Any) -> None:
+    """A signal handler: the signal is taken as a Ctrl-C (SIGINT raised in this process, handled as SIGINT is)."""
+    signal.raise_signal(signal.SIGINT)
+
+
+@contextmanager
+def sigterm_as_sigint() -> Iterator[None]:
+    """Within the block SIGTERM is a Ctrl-C (:func:`as_sigint`); the previous handler is back after it. Outside the
+    main thread, or where SIGTERM is ignored, nothing is installed."""
+    previous = signal.getsignal(signal.SIGTERM)
+    if threading.current_thread() is not threading.main_thread() or previous is signal.SIG_IGN:
+        yield
+        return
+    signal.signal(signal.SIGTERM, as_sigint)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)
+
+
+__all__ = ["Deferred", "Interrupts", "as_sigint", "ignore_sigint", "sigint_deferred", "sigint_futures",
+           "sigterm_as_sigint", "wait_or_interrupt"]
