@@ -102,3 +102,15 @@ def test_a_start_charge_out_of_range_is_named() -> None:
     with pytest.raises(ConfigError) as e:
         effects_from_table(Table({"battery": True, "battery_start_pct": 0.5}, "m.toml", "effects"))
     assert str(e.value).startswith("m.toml: effects.battery_start_pct: must be in [1, 100]"), str(e.value)
+
+
+def test_a_failsafe_that_took_over_at_once_is_named_with_the_one_that_ended_the_mission(tmp_path: Path) -> None:
+    """An empty pack under COM_LOW_BAT_ACT 3: the critical level's Return ends the mission, and the emergency level's
+    landing takes over in the same step, so Return never flew: ``ended_by`` says both, in order (it named the Return
+    alone, and the vehicle landed where it was)."""
+    run = simulate(battery_mission(tmp_path, 100.0), plots=False, params={"COM_LOW_BAT_ACT": 3},
+                   at=("1:battery:empty",))
+    fs = [e for e in run.summary["events"] if e["kind"] == "failsafe"]
+    assert [e["text"].rsplit(": ", 1)[1] for e in fs] == ["return", "land"] and fs[0]["t"] == fs[1]["t"], fs
+    assert run.summary["ended_by"]["how"] == (f"failsafe at t={fs[0]['t']:.3f} s: {fs[0]['text']}; "
+                                              f"then at t={fs[1]['t']:.3f} s: {fs[1]['text']}")

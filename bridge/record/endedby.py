@@ -67,9 +67,10 @@ def ended_by_outcome(outcome: str, events: Sequence[RunEvent]) -> dict[str, str]
     if outcome == "collision":  # another vehicle touched this one (bridge.swarm)
         e = first("collision")
         return {"who": "plant", "how": f"collision at t={e.t:.3f} s: {e.text}" if e else "collision"}
-    if outcome == "failsafe":
-        e = first("failsafe")
-        return {"who": "vehicle", "how": f"failsafe at t={e.t:.3f} s: {e.text}" if e else "failsafe"}
+    if outcome == "failsafe":  # the first one ended the mission; one that took over after it (a battery's
+        fs = [e for e in ev if e.kind == "failsafe"]  # emergency after its critical) is what flew: both said
+        then = "".join(f"; then at t={e.t:.3f} s: {e.text}" for e in fs[1:])
+        return {"who": "vehicle", "how": f"failsafe at t={fs[0].t:.3f} s: {fs[0].text}{then}" if fs else "failsafe"}
     if outcome == "law_failed":  # a user's law raised, exited or gave no four finite inputs (controller.law)
         e = first("law_failed")
         return {"who": "controller", "how": f"its law failed at t={e.t:.3f} s: {e.text}" if e else "its law failed"}
