@@ -757,3 +757,25 @@ def test_a_wind_by_turbulence_grid(mission_file: Path, tmp_path: Path, capsys) -
         assert got["outcome"] == want["outcome"] and math.isclose(got["rms"], want["rms"], rel_tol=1e-6), (got, want)
     assert main(["sweep", str(mission_file), "--turbulence", "gale", "--out", str(tmp_path / "c")]) == 2
     assert "--turbulence" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("given, said", [
+    ({"seeds": (1.5, 2.7)}, "grid.seeds: must be whole numbers in [0, 2^31-1], got [1.5, 2.7]"),  # was (1, 2)
+    ({"seeds": [0, 0.5]}, "grid.seeds: must be whole numbers in [0, 2^31-1], got [0, 0.5]"),  # was quoted [0, 0]
+    ({"seeds": ["1"]}, "grid.seeds: must be whole numbers in [0, 2^31-1], got ['1']"),
+    ({"delay_ms": ("a",)}, "grid.delay_ms: must be numbers in [0, 60000], got ['a']"),  # was a bare ValueError
+    ({"delay_ms": None}, "grid.delay_ms: expected a list of numbers, got None"),  # was a TypeError
+    ({"loss_pct": {"a": 1}}, "grid.loss_pct: expected a list of numbers, got {'a': 1}"),
+    ({"rate_hz": (True,)}, "grid.rate_hz: must be numbers in [50, 1000], got [True]"),
+    ({"estimator": (1,)}, "grid.estimator: must be names among truth, ekf, raw, got [1]"),
+    ({"vehicles": ("2",)}, "grid.vehicles: must be whole numbers in [1, 64], got ['2']"),
+    ({"delay_ms": (0, 0.0)}, "grid.delay_ms: repeated value in [0, 0.0]")])
+def test_every_grid_axis_refuses_what_it_cannot_take_naming_it(given: dict, said: str) -> None:
+    with pytest.raises(ConfigError) as exc:
+        Grid(**given)
+    assert str(exc.value) == said
+
+
+def test_whole_seeds_and_fleet_sizes_are_taken_as_given() -> None:
+    g = Grid(seeds=[3, 4.0], vehicles=(2.0,), noise=range(3))
+    assert g.seeds == (3, 4) and g.vehicles == (2,) and g.noise == (0.0, 1.0, 2.0)

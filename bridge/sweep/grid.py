@@ -17,9 +17,10 @@ so a value a mission accepts is accepted here and the other way round. The wind 
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, fields
 from itertools import product
+from numbers import Real
 from typing import Any
 
 from bridge.autopilot.estimator import ESTIMATOR_KINDS
@@ -103,41 +104,8 @@ class Grid:
 
     def __post_init__(self) -> None:
         for name in AXES:
-            values = getattr(self, name)
-            if isinstance(values, (str, int, float)):
-                values = (values,)
-            values = tuple(values) if name in NAME_AXES else tuple(float(v) for v in values)
-            if name in INT_AXES:
-                if not all(float(v).is_integer() for v in values):
-                    raise ConfigError(f"grid.{name}: must be whole numbers, got {list(values)}")
-                values = tuple(int(v) for v in values)
-            object.__setattr__(self, name, values)
-            if len(set(values)) != len(values):
-                raise ConfigError(f"grid.{name}: repeated value in {list(values)}")
-            for v in values:
-                if name == "controller":
-                    why = law_spec_problem(v)
-                    if why:
-                        raise ConfigError(f"grid.controller: {why}")
-                elif name in NAME_AXES:
-                    kinds = NAME_CHOICES[name]
-                    if v not in kinds:
-                        raise ConfigError(f"grid.{name}: must be among {', '.join(kinds)}, got {v!r}")
-                else:
-                    lo, hi = RANGES[name]
-                    if not (lo <= v <= hi):  # also rejects nan
-                        raise ConfigError(f"grid.{name}: must be in [{lo:g}, {hi:g}], got {v:g}")
-        s = self.seeds
-        if isinstance(s, bool) or not isinstance(s, (int, tuple, list)):
-            raise ConfigError(f"grid.seeds: expected a count or a list of seeds, got {s!r}")
-        if isinstance(s, int):
-            if not 1 <= s <= 10000:
-                raise ConfigError(f"grid.seeds: must be in [1, 10000], got {s}")
-        else:
-            s = tuple(int(v) for v in s)
-            object.__setattr__(self, "seeds", s)
-            if not s or len(set(s)) != len(s) or not all(0 <= v <= 2**31 - 1 for v in s):
-                raise ConfigError(f"grid.seeds: expected distinct seeds in [0, 2^31-1], got {list(s)}")
+            object.__setattr__(self, name, axis_values(name, getattr(self, name)))
+        object.__setattr__(self, "seeds", seed_values(self.seeds))
 
     @classmethod
     def of(cls, grid: Grid | Mapping[str, Any]) -> Grid:
@@ -163,6 +131,62 @@ class Grid:
         d: dict[str, Any] = {a: list(getattr(self, a)) for a in AXES if getattr(self, a)}
         d["seeds"] = self.seeds if isinstance(self.seeds, int) else list(self.seeds)
         return d
+
+
+def _whole(v: Any) -> bool:
+    """A number with no fraction (2 and 2.0; not 1.5, nan, inf, True or '2'): a fleet's size, a seed."""
+    return isinstance(v, Real) and not isinstance(v, bool) and float(v).is_integer()
+
+
+def axis_values(name: str, given: Any) -> tuple[Any, ...]:
+    """An axis's values as its :class:`Grid` field holds them, or a ConfigError naming the axis and quoting what
+    was given (never one value silently changed into another): names among the axis's choices, numbers in its range
+    (:data:`RANGES`), whole numbers on :data:`INT_AXES`, none repeated."""
+    values = (given,) if isinstance(given, (str, Real)) else given
+    if isinstance(values, Mapping) or not isinstance(values, Iterable):
+        raise ConfigError(f"grid.{name}: expected a list of {'names' if name in NAME_AXES else 'numbers'}, "
+                          f"got {given!r}")
+    values = tuple(values)
+    kind, ok = (("names", lambda v: isinstance(v, str)) if name in NAME_AXES else
+                ("whole numbers", _whole) if name in INT_AXES else
+                ("numbers", lambda v: isinstance(v, Real) and not isinstance(v, bool)))
+    if not all(ok(v) for v in values):
+        allowed = (f" among {', '.join(NAME_CHOICES[name])}" if name in NAME_CHOICES else "" if name in NAME_AXES
+                   else " in [{:g}, {:g}]".format(*RANGES[name]))
+        raise ConfigError(f"grid.{name}: must be {kind}{allowed}, got {list(values)!r}")
+    kept = values if name in NAME_AXES else tuple((int if name in INT_AXES else float)(v) for v in values)
+    if len(set(kept)) != len(kept):
+        raise ConfigError(f"grid.{name}: repeated value in {list(values)!r}")
+    for v in kept:
+        if name == "controller":
+            why = law_spec_problem(v)
+            if why:
+                raise ConfigError(f"grid.controller: {why}")
+        elif name in NAME_AXES:
+            if v not in NAME_CHOICES[name]:
+                raise ConfigError(f"grid.{name}: must be among {', '.join(NAME_CHOICES[name])}, got {v!r}")
+        else:
+            lo, hi = RANGES[name]
+            if not (lo <= v <= hi):  # also rejects nan
+                raise ConfigError(f"grid.{name}: must be in [{lo:g}, {hi:g}], got {v:g}")
+    return kept
+
+
+def seed_values(given: Any) -> int | tuple[int, ...]:
+    """A grid's seeds: a count, or distinct whole numbers in the seed range (2.0 is 2; 1.5 is refused, as a
+    fleet's size is, never truncated); a ConfigError quoting what was given otherwise."""
+    if isinstance(given, int) and not isinstance(given, bool):
+        if not 1 <= given <= 10000:
+            raise ConfigError(f"grid.seeds: must be in [1, 10000], got {given}")
+        return given
+    if not isinstance(given, (tuple, list)):
+        raise ConfigError(f"grid.seeds: expected a count or a list of seeds, got {given!r}")
+    if not all(_whole(v) for v in given):
+        raise ConfigError(f"grid.seeds: must be whole numbers in [0, 2^31-1], got {list(given)!r}")
+    s = tuple(int(v) for v in given)
+    if not s or len(set(s)) != len(s) or not all(0 <= v <= 2**31 - 1 for v in s):
+        raise ConfigError(f"grid.seeds: expected distinct seeds in [0, 2^31-1], got {list(given)!r}")
+    return s
 
 
 @dataclass(frozen=True)
