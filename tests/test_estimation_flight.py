@@ -193,6 +193,32 @@ def test_bad_sensor_flags_exit_2_with_one_line(capsys, tmp_path, cmd, flags, nam
     _refused(capsys, [cmd, str(SINE), *flags, "--out", str(tmp_path / "out")], (name, flags[1]), tmp_path / "out")
 
 
+@pytest.mark.parametrize("cmd", ["sim", "sitl", "vehicle"])
+@pytest.mark.parametrize("flags, said", [
+    (["--noise", "5"], "--noise 5: the estimator is 'truth' (the true state: the sensors are not read), so noise "
+                       "changes nothing; give --estimator raw or ekf"),
+    (["--noise", "0", "--estimator", "raw"], "--noise 0: the sensor set 'ideal' has no noise (every sigma is 0), so "
+                                             "its scale changes nothing; choose one with --sensors mocap or gnss"),
+    (["--noise", "5", "--vehicles", "2"], "--noise 5: the estimator is 'truth'"),  # every vehicle of a fleet
+])
+def test_a_noise_that_changes_nothing_is_refused_as_the_sweep_refuses_it(capsys, tmp_path, cmd, flags, said):
+    """Under truth the vehicle has no sensors (none sampled, none streamed: no HIGHRES_IMU, no GPS_RAW_INT), and
+    the ideal set has no noise: --noise changed nothing there and said nothing, exit 0 (a sweep refused it)."""
+    if cmd == "vehicle" and "--vehicles" in flags:
+        flags = flags[:-2]  # bsst vehicle is one vehicle
+    _refused(capsys, [cmd, str(SINE), *flags, "--out", str(tmp_path / "out")], (said,), tmp_path / "out")
+
+
+def test_a_noise_that_changes_something_flies(tmp_path):
+    """--noise 0 on a noisy set: exact sensors, a different flight (the set's own sigmas are what is judged)."""
+    m = _mission(tmp_path, "raw", seconds=2.0)
+    rms = []
+    for noise in ("0", "1"):
+        assert main(["sim", str(m), "--noise", noise, "--no-plots", "--out", str(tmp_path / noise)]) == 0
+        rms.append(json.loads((tmp_path / noise / "summary.json").read_text())["rms_3d"])
+    assert rms[0] != rms[1], rms
+
+
 @pytest.mark.parametrize("table, name", BAD_TABLES)
 def test_bad_sensors_and_estimator_tables_exit_2_with_one_line(capsys, tmp_path, table, name):
     m = tmp_path / "bad.toml"

@@ -137,6 +137,8 @@ def test_require_fails_a_users_ci_when_the_margin_is_short(tmp_path: Path, here)
     (["--over", "noise", "--until", "rms=0.1", "--estimator", "ekf"], "sensor set 'ideal' has no noise"),
     (["--over", "noise", "--until", "rms=0.1", "--sensors", "mocap", "--estimator", "ekf", "--noise", "2"],
      "--noise conflicts with --over noise"),
+    (["--over", "delay_ms", "--until", "rms=0.1", "--noise", "2"],  # fixed for every probe: as bsst sim's
+     "bsst: --noise 2: the estimator is 'truth' (the true state: the sensors are not read), so noise changes nothing"),
     (["--over", "noise", "--until", "rms=0.1", "--sensors", "mocap", "--estimator", "ekf", "--engine", "batch"],
      "--engine batch: [estimator] kind = 'ekf'"),
     (["--over", "delay_ms", "--until", "rms=0.1", "--check-below", "300"], "--check-below must be in [0, 1024 x"),

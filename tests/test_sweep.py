@@ -30,6 +30,7 @@ from bridge.sweep.cells import FLEET_COLUMNS, ripple_rms
 from bridge.sweep.classes import CLASSES, classify
 from bridge.sweep.executors import run_cell
 from bridge.sweep.grid import cells as grid_cells
+from bridge.sweep.report import reproduce
 from missions import Mission, Sine
 from params import ConfigError, dump_toml
 from tests.sitlkit import Bsst, run_bsst
@@ -244,6 +245,7 @@ def test_classes_out_of_order_name_the_file_the_key_and_the_values(tmp_path: Pat
     (["--sensors", "nosuch", "--estimator", "raw"], "--sensors"),
     (["--noise", "0,1"], "estimator is 'truth'"),  # noise alone changes nothing: the law flies the true state
     (["--noise", "0,1", "--estimator", "raw"], "sensor set 'ideal' has no noise"),  # the mission's set is exact
+    (["--noise", "2"], "grid.noise (--noise): the estimator is 'truth'"),  # one value too, as bsst sim --noise 2
 ])
 def test_bad_flags_one_line_exit_2(mission_file: Path, tmp_path: Path, capsys, argv: list[str], needle: str) -> None:
     capsys.readouterr()
@@ -779,3 +781,10 @@ def test_every_grid_axis_refuses_what_it_cannot_take_naming_it(given: dict, said
 def test_whole_seeds_and_fleet_sizes_are_taken_as_given() -> None:
     g = Grid(seeds=[3, 4.0], vehicles=(2.0,), noise=range(3))
     assert g.seeds == (3, 4) and g.vehicles == (2,) and g.noise == (0.0, 1.0, 2.0)
+
+
+def test_a_truth_rows_command_has_no_noise_bsst_sim_would_refuse() -> None:
+    row = {"controller": "bsst", "rate_hz": 250.0, "estimator": "truth", "noise": 2.0, "seed": 0}
+    assert reproduce(row, ("estimator", "noise")) == "bsst sim mission.toml --controller bsst --rate 250 " \
+                                                    "--estimator truth --seed 0"
+    assert "--estimator raw --noise 2 --seed 0" in reproduce({**row, "estimator": "raw"}, ("estimator", "noise"))

@@ -40,6 +40,7 @@ from bridge.cli.options import (
     add_port_options,
     add_sensor_options,
     overrides_from_args,
+    refuse_idle_noise,
 )
 from params import ConfigError
 
@@ -109,6 +110,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
 def _sim(args: argparse.Namespace, mission: Any) -> int:
     from bridge.swarm import simulate  # lazy: start-up time
 
+    refuse_idle_noise(args, mission)  # (here: a law of the user's own is loaded in its watched process)
     run = simulate(mission, out=args.out, write=True, overwrite=args.overwrite, plots=not args.no_plots,
                    overrides=overrides_from_args(args), vehicles=args.vehicles, formation=args.formation)
     return report_final(run, "sim")
@@ -392,6 +394,7 @@ def add_sitl_commands(sub: Any) -> None:
 def cmd_sitl(args: argparse.Namespace) -> int:
     from bridge.swarm import sitl  # lazy: start-up time
 
+    refuse_idle_noise(args, args.mission)
     run = sitl(args.mission, out=args.out, write=True, overwrite=args.overwrite, plots=not args.no_plots,
                realtime=args.realtime, instance=args.instance, gcs=args.gcs, speed=args.speed, live=True,
                key=args.key, overrides=overrides_from_args(args), await_mission=args.await_mission,
@@ -414,6 +417,7 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
     if args.gate and args.realtime:
         raise ConfigError("--gate with --realtime: a fleet's shared step clock is lockstep's (real time keeps the "
                           "wall clock)")
+    refuse_idle_noise(args, args.mission)
     flight = prepare(args.mission or at_rest(), overrides_from_args(args))
     n = args.instance
     own = flight.params.sysid if "MAV_SYS_ID" in flight.mission.params else None  # [params] or --param

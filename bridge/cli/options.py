@@ -12,6 +12,7 @@ Out: the options on the parser; :func:`overrides_from_args`, the frozen
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 from bridge.cli.flags import (
@@ -28,6 +29,7 @@ from bridge.cli.flags import (
     sensor_set_name,
 )
 from bridge.cli.linkflags import link_table_from_args
+from params import ConfigError
 
 if TYPE_CHECKING:  # annotations only: building the parser loads no flight code
     from bridge.core.overrides import Overrides
@@ -109,6 +111,29 @@ def sensor_overrides_from_args(args: argparse.Namespace) -> dict[str, Any]:
     name = getattr(args, "sensors", None)
     return {"sensors": {"set": name} if name is not None else None,
             "estimator": getattr(args, "estimator", None), "noise": getattr(args, "noise", None)}
+
+
+def refuse_idle_noise(args: argparse.Namespace, mission: Any) -> None:
+    """``--noise X`` where it changes nothing, refused as a sweep refuses such a noise axis (its one check and
+    message, :func:`bridge.sweep.grid.noise_problem`): every vehicle flies the true state (``truth``: it has no
+    sensors, so none are streamed either, HIGHRES_IMU and GPS_RAW_INT included), or a sensor set with no noise.
+    ``mission``: a :class:`missions.Mission`, a path, or None (a bare ``bsst vehicle``, ``--await-mission``)."""
+    if getattr(args, "noise", None) is None:
+        return
+    from bridge.core.flight import at_rest, prepare  # lazy: start-up time
+    from bridge.record.runlog import trace_cap  # lazy: start-up time
+    from bridge.swarm import fleet_flights, fleet_mission  # lazy: start-up time
+    from bridge.sweep.grid import noise_problem  # lazy: start-up time
+    from missions import Mission, load_mission  # lazy: start-up time
+
+    m = mission if isinstance(mission, Mission) else (load_mission(mission, trace_cap(getattr(args, "rate", None)))
+                                                       if mission is not None else at_rest())
+    over = replace(overrides_from_args(args), noise=1.0)  # the set's own sigmas: a scale of 0 changes a noisy set
+    fleet = fleet_mission(m, getattr(args, "vehicles", None), getattr(args, "formation", None))
+    flights = fleet_flights(fleet, over) if fleet is not None else [prepare(m, over)]
+    whys = [noise_problem((f.estimator,), f.sensors) for f in flights]
+    if all(whys):
+        raise ConfigError(f"--noise {args.noise:g}: {whys[0]}")
 
 
 def add_flight_options(p: argparse.ArgumentParser, vehicle: bool = True, optional_mission: bool = False) -> None:

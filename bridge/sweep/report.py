@@ -351,11 +351,12 @@ def jitter_section(rows: Sequence[Mapping[str, Any]]) -> list[str]:
 
 
 def reproduce(row: Mapping[str, Any], swept: Sequence[str]) -> str:
-    """The ``bsst sim`` command that flies one row again."""
+    """The ``bsst sim`` command that flies one row again (a ``truth`` row without ``--noise``: it flies the same
+    at any scale, and ``bsst sim`` refuses a noise that changes nothing)."""
     flags = [f"--controller {row['controller']}", f"--rate {row['rate_hz']:g}"]
     flags += [f"--{SHORT[a]} {row[a]:g}" for a in LINK_AXES if a in swept]
     flags += [f"--estimator {row['estimator']}"] if "estimator" in swept else []
-    flags += [f"--noise {row['noise']:g}"] if "noise" in swept else []
+    flags += [f"--noise {row['noise']:g}"] if "noise" in swept and row["estimator"] != "truth" else []
     flags += [f"--discretization {row['discretization']}"] if "discretization" in swept else []
     return f"bsst sim mission.toml {' '.join(flags)} --seed {row['seed']}"
 

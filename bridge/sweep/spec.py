@@ -165,8 +165,9 @@ class Sweep:
                               "without the trace, or the other axes")
 
     def noise_problem(self) -> str | None:
-        """Why a swept noise scale (more than one value) would change nothing, or None."""
-        if len(self.grid.noise) < 2:
+        """Why the noise axis (one value or more: one is every cell's, as ``bsst sim --noise``) would change
+        nothing, or None."""
+        if not self.grid.noise:
             return None
         kinds = self.grid.estimator or (mission_value(self.mission, "estimator"),)
         first = self.cells()[0]
