@@ -36,12 +36,12 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from params import ConfigError, Table
+from params import ConfigError, Table, finite_float, show
 
 EVENT_KINDS = ("motor", "gps", "baro", "mag", "gyro", "battery", "wind", "gust", "link")
 # the allowed range [lo, hi] of each number of an event's table (and of its --at flag, and of a [wind] gust), one per
-# key, and its unit; a vector key's range is each element's. A gust's key (GUST_AT_NOTHING) excludes its low end; a
-# fault vector (FAULT_VECTORS) is not all 0
+# key, and its unit (said with the range: range_problem); a vector key's range is each element's. A gust's key
+# (GUST_AT_NOTHING) excludes its low end; a fault vector (FAULT_VECTORS) is not all 0
 EVENT_RANGES: dict[str, tuple[float, float, str]] = {
     "motor": (1, 4, ""),
     "effectiveness": (0.0, 1.0, ""),
@@ -118,31 +118,46 @@ class EventError(ConfigError):
 
 
 def _number(t: Table, key: str, default: Any = ...) -> float:
-    lo, hi, _ = EVENT_RANGES[key]
-    v = t.number(key, default, lo=lo, hi=hi)
-    if key in GUST_AT_NOTHING and v == lo:
-        raise t.error(key, gust_problem(key, v))
+    big = t.raw(key) if t.has(key) else None
+    if isinstance(big, int) and finite_float(big) is None and not isinstance(big, bool):  # past the float range
+        raise t.error(key, range_problem(key, big) or "")  # (~1e308): out of the key's range, said as such
+    v = t.number(key, default)  # a finite number; its range, with its unit, from the one table
+    why = range_problem(key, v)
+    if why:
+        raise t.error(key, why)
     return v
 
 
-def gust_problem(key: str, v: float) -> str | None:
-    """Why ``v`` is no value of a gust's ``key`` (``duration_s``, ``amplitude_mps``, ``from_deg``: its
-    :data:`EVENT_RANGES` entry, the low end of :data:`GUST_AT_NOTHING`'s excluded: a gust of no length or no
-    amplitude injects nothing), or None: one text for an event's table, a flag and a ``[wind]`` gust."""
+def range_problem(key: str, v: float) -> str | None:
+    """Why ``v`` is no value of ``key`` (its :data:`EVENT_RANGES` entry and unit; the low end of
+    :data:`GUST_AT_NOTHING`'s excluded: a gust of no length or no amplitude injects nothing), or None: one text for
+    an event's table, its ``--at`` flag and a ``[wind]`` gust, each naming the key before it."""
     lo, hi, unit = EVENT_RANGES[key]
+    u = f" {unit}" if unit else ""
+    got = f"{v:g}" if finite_float(v) is not None or isinstance(v, float) else show(v)  # an int past ~1e308: digits
     if key in GUST_AT_NOTHING:
         if v == lo:
-            return (f"a gust of {GUST_AT_NOTHING[key]} {lo:g} {unit} injects nothing: {key} in ({lo:g}, {hi:g}] "
-                    f"{unit}")
-        return None if lo < v <= hi else f"{key} must be in ({lo:g}, {hi:g}] {unit}, got {v:g}"
-    return None if lo <= v <= hi else f"{key} must be in [{lo:g}, {hi:g}] {unit}, got {v:g}"
+            return f"a gust of {GUST_AT_NOTHING[key]} {lo:g}{u} injects nothing: {key} in ({lo:g}, {hi:g}]{u}"
+        return None if lo < v <= hi else f"must be in ({lo:g}, {hi:g}]{u}, got {got}"
+    return None if lo <= v <= hi else f"must be in [{lo:g}, {hi:g}]{u}, got {got}"
+
+
+def start_problem(t_s: float, duration_s: float) -> str | None:
+    """Why an event (or a ``[wind]`` gust) cannot start at ``t_s`` (s): [0, the mission's end), since one at the end
+    would never act; or None."""
+    return None if 0.0 <= t_s < duration_s else f"must be in [0, {duration_s:g}) s (before the mission's end), " \
+                                                 f"got {t_s:g}"
 
 
 def _fault_vector(t: Table, key: str) -> tuple[float, float, float]:
     """A fault's [x, y, z] (:data:`FAULT_VECTORS`), each element in its range, not all 0: a fault that injects
     nothing is refused, naming the key, its range and its unit."""
     lo, hi, unit = EVENT_RANGES[key]
-    v = t.vector(key, 3, lo=lo, hi=hi)
+    v = t.vector(key, 3)
+    for i, x in enumerate(v):
+        why = range_problem(key, x)
+        if why:
+            raise t.error(key, f"element {i} {why}")
     if not any(v):
         raise t.error(key, f"{FAULT_VECTORS[key]} of (0, 0, 0) {unit} injects nothing: x, y, z each "
                            f"in [{lo:g}, {hi:g}] {unit}, at least one not 0")
@@ -152,8 +167,9 @@ def _fault_vector(t: Table, key: str) -> tuple[float, float, float]:
 def event_from_table(t: Table, duration_s: float) -> TimedEvent:
     """Validate one ``[[events]]`` table; errors name the file and key."""
     t_s = t.number("t_s")
-    if not 0.0 <= t_s < duration_s:  # [0, duration): an event at the end would never act
-        raise t.error("t_s", f"must be in [0, {duration_s:g}) s (before the mission's end), got {t_s:g}")
+    why = start_problem(t_s, duration_s)
+    if why:
+        raise t.error("t_s", why)
     kind = t.string("kind", choices=EVENT_KINDS)
     s: dict[str, Any] = {}
     if kind == "link":  # the keys of the [link] table handed over to: the link model checks them (prepare)

@@ -43,7 +43,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from params import ConfigError, Table, finite_float
-from plant.events import gust_problem
+from plant.events import range_problem, start_problem
 
 FT = 0.3048  # m per foot
 KT = 1852.0 / 3600.0  # m/s per knot
@@ -132,12 +132,12 @@ def gust_from_list(g: object, where: str, t: Table, duration_s: float) -> Gust:
         raise ConfigError(f"{t._source}: {where}: expected [t_s, duration_s, amplitude_mps, from_deg], got {g!r}"[:200])
     ts, dur, amp = float(g[0]), float(g[1]), float(g[2])
     frm = float(g[3]) if len(g) == 4 else 0.0
-    problems = [f"t_s must be in [0, {duration_s:g}) s (the mission), got {ts:g}" if not 0.0 <= ts < duration_s
-                else None, *(gust_problem(k, v) for k, v in (("duration_s", dur), ("amplitude_mps", amp),
-                                                             ("from_deg", frm)))]  # the events' ranges
-    for why in problems:
+    problems = [("t_s", start_problem(ts, duration_s)),
+                *((k, range_problem(k, v)) for k, v in (("duration_s", dur), ("amplitude_mps", amp),
+                                                        ("from_deg", frm)))]  # the events' ranges and texts
+    for key, why in problems:
         if why is not None:
-            raise ConfigError(f"{t._source}: {where}: {why}")
+            raise ConfigError(f"{t._source}: {where}: {key}: {why}")
     return Gust(ts, dur, amp, frm)
 
 

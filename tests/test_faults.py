@@ -178,9 +178,43 @@ def test_a_gust_that_injects_nothing_is_refused_by_the_flag_the_event_and_the_wi
     assert r.returncode == 2 and r.stderr == f"bsst: {path}: events[0].{key}: {says}\n", r.stderr
     assert not (tmp_path / "r").exists()
     path.write_text((ROOT / "missions" / "sine.toml").read_text() + f"\n[wind]\ngusts = [[10.0, {d}, {a}]]\n")
-    with pytest.raises(ConfigError, match=rf"^{re.escape(str(path))}: wind\.gusts\[0\]: {re.escape(says)}$"):
+    with pytest.raises(ConfigError, match=rf"^{re.escape(str(path))}: wind\.gusts\[0\]: {key}: {re.escape(says)}$"):
         prepare(path)
     assert len(prepare("missions/sine.toml", at=("10:gust:2,0.001",)).timeline) == 1
+
+
+@pytest.mark.parametrize("gust, key, says", [
+    ((700, 5, 0), "duration_s", "must be in (0, 600] s, got 700"),
+    ((2, 60, 0), "amplitude_mps", "must be in (0, 50] m/s, got 60"),
+    ((2, 5, 400), "from_deg", "must be in [-360, 360] deg, got 400"),
+])
+def test_a_gusts_numbers_have_one_range_and_one_text_wherever_given(tmp_path, gust, key, says) -> None:
+    """The flag and an ``[[events]]`` gust said ``duration_s: must be in [0, 600], got 700`` (0 is refused; no
+    unit), a ``[wind]`` gust ``duration_s must be in (0, 600] s``: now one range, its unit and one text from
+    plant.events.EVENT_RANGES, each naming the key."""
+    d, a, frm = gust
+    with pytest.raises(ConfigError, match=rf"^--at 10:gust:{d},{a},{frm}: {key}: {re.escape(says)}$"):
+        prepare("missions/sine.toml", at=(f"10:gust:{d},{a},{frm}",))
+    sine = (ROOT / "missions" / "sine.toml").read_text()
+    path = tmp_path / "m.toml"
+    path.write_text(sine + f'\n[[events]]\nt_s = 10.0\nkind = "gust"\nduration_s = {d}\namplitude_mps = {a}\n'
+                           f"from_deg = {frm}\n")
+    with pytest.raises(ConfigError, match=rf"^{re.escape(str(path))}: events\[0\]\.{key}: {re.escape(says)}$"):
+        prepare(path)
+    path.write_text(sine + f"\n[wind]\ngusts = [[10.0, {d}, {a}, {frm}]]\n")
+    with pytest.raises(ConfigError, match=rf"^{re.escape(str(path))}: wind\.gusts\[0\]: {key}: {re.escape(says)}$"):
+        prepare(path)
+
+
+@pytest.mark.parametrize("flag, says", [
+    ("10:baro:drift=200", "drift_mps: must be in [-100, 100] m/s, got 200"),
+    ("10:gps:jump=0,2e4,0", "jump: element 1 must be in [-10000, 10000] m, got 20000"),
+    ("10:wind:60", "speed_mps: must be in [0, 50] m/s, got 60"),
+    ("10:motor:1=2", "effectiveness: must be in [0, 1], got 2"),
+])
+def test_every_event_number_says_its_range_with_its_unit(flag, says) -> None:
+    with pytest.raises(ConfigError, match=rf"^--at {flag}: {re.escape(says)}$"):
+        prepare("missions/sine.toml", at=(flag,), profile="x500", **GNSS_EKF)
 
 
 def _gps_mission(path: Path, *events: tuple[float, str]) -> Path:
