@@ -81,14 +81,19 @@ def _interrupted(out: Path, said: str, err: str) -> dict[str, Any]:
     return res
 
 
-def test_an_interrupted_search_keeps_its_bracket(tmp_path: Path) -> None:
+@pytest.mark.parametrize("stop", ["ctrl-c", "sigterm"])
+def test_an_interrupted_search_keeps_its_bracket(tmp_path: Path, stop: str) -> None:
     """Ctrl-C after three rounds of the batch engine (a cell ~1 s): margin.json holds every cell flown, the bracket
-    they give (the largest value held, the smallest failed), no margin, and the command exits 1."""
+    they give (the largest value held, the smallest failed), no margin, and the command exits 1. A SIGTERM to the
+    command's process alone (a scheduler's) is a Ctrl-C (it died at once, no margin.json)."""
     out = tmp_path / "m"
     proc = Bsst("margin", _file(tmp_path, WIDE), *UNTIL, "--out", out)
     try:
         sweep_said(proc, _after_round(3), timeout_s=300)
-        os.killpg(proc.pid, signal.SIGINT)
+        if stop == "ctrl-c":
+            os.killpg(proc.pid, signal.SIGINT)
+        else:
+            os.kill(proc.pid, signal.SIGTERM)
     finally:
         said, err = _stopped(proc)
     assert proc.returncode == 1, (said, err)

@@ -73,15 +73,20 @@ def test_a_resume_flies_on_the_whole_grids_engine(mission_file: Path, tmp_path: 
     assert "- engines: MIXED, rows flown by `batch` and `process`" in (mixed / "report.md").read_text()
 
 
-def test_an_interrupted_sweep_says_how_many_cells_it_flew(mission_file: Path, tmp_path: Path) -> None:
+@pytest.mark.parametrize("stop", ["ctrl-c", "sigterm"])
+def test_an_interrupted_sweep_says_how_many_cells_it_flew(mission_file: Path, tmp_path: Path, stop: str) -> None:
     """Ctrl-C after a few cells: the summary says ``N of 12 cells flown (interrupted)`` (exit 1), and ``bsst report``
-    on the directory says the sweep is incomplete and exits 1."""
+    on the directory says the sweep is incomplete and exits 1. A SIGTERM to the sweep's process alone (a scheduler's)
+    is a Ctrl-C: it died at once, silent (-15)."""
     out = tmp_path / "stopped"
     proc = Bsst("sweep", str(mission_file), "--delay", "0,5,10", "--loss", "0,20", "--seeds", "2", "--jobs", "1",
                 "--no-plots", "--out", str(out))
     try:
         sweep_rows(proc, 2)  # the progress line that follows that appended row
-        os.killpg(proc.pid, signal.SIGINT)
+        if stop == "ctrl-c":
+            os.killpg(proc.pid, signal.SIGINT)
+        else:
+            os.kill(proc.pid, signal.SIGTERM)
         said, _ = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:

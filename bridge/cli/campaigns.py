@@ -119,6 +119,15 @@ def jobs_count(text: str) -> int:
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
+    """``bsst sweep``; SIGTERM is a Ctrl-C (bridge.core.interrupt.sigterm_as_sigint): sent to this process alone (a
+    scheduler's, a script's terminate), it stops as a Ctrl-C does, its record kept, exit 1."""
+    from bridge.core.interrupt import sigterm_as_sigint  # lazy: start-up time
+
+    with sigterm_as_sigint():
+        return _sweep(args)
+
+
+def _sweep(args: argparse.Namespace) -> int:
     from bridge.core.flight import prepare  # lazy: start-up time
     from bridge.core.interrupt import ignore_sigint  # lazy: start-up time
     from bridge.core.overrides import Overrides  # lazy: start-up time
@@ -256,6 +265,15 @@ def add_margin_command(sub: Any) -> None:
 
 
 def cmd_margin(args: argparse.Namespace) -> int:
+    """``bsst margin``; SIGTERM is a Ctrl-C (bridge.core.interrupt.sigterm_as_sigint): sent to this process alone (a
+    scheduler's, a script's terminate), it stops as a Ctrl-C does, its record kept, exit 1."""
+    from bridge.core.interrupt import sigterm_as_sigint  # lazy: start-up time
+
+    with sigterm_as_sigint():
+        return _margin(args)
+
+
+def _margin(args: argparse.Namespace) -> int:
     from bridge.core.flight import prepare  # lazy: start-up time
     from bridge.core.interrupt import ignore_sigint  # lazy: start-up time
     from bridge.core.overrides import Overrides  # lazy: start-up time
