@@ -43,6 +43,7 @@ import math
 import os
 import stat
 import sys
+import traceback
 from collections.abc import Callable, Iterator, Mapping
 from collections.abc import Set as AbstractSet
 from contextlib import contextmanager
@@ -293,11 +294,25 @@ class RefusedExit:
 
 
 def did(exc: BaseException) -> str:
-    """What a user's code did, for the one line: ``called os._exit(0)`` or ``raised Kind: message``."""
+    """What a user's code did, for the one line: ``called os._exit(0)`` or ``raised Kind: message (in file.py:N)``,
+    the line the innermost frame outside Python's own installation was at (:func:`where_raised`)."""
     if isinstance(exc, ExitCalled):
         return f"called os._exit({exc.code!r})"
     said = one_line(str(exc))  # (a message of several lines, a matrix printed in it: one line all the same)
-    return f"raised {type(exc).__name__}: {said}" if said else f"raised {type(exc).__name__}"
+    at = where_raised(exc)
+    return (f"raised {type(exc).__name__}: {said}" if said else f"raised {type(exc).__name__}") + \
+        (f" (in {at})" if at else "")
+
+
+def where_raised(exc: BaseException) -> str | None:
+    """``file.py:N`` of the innermost frame of ``exc``'s traceback that is not Python's own or an installed
+    package's (under ``sys.prefix`` or ``sys.base_prefix``): the user's line that raised, or that called numpy
+    when numpy raised; None when there is none (a SyntaxError at load names its own line)."""
+    if isinstance(exc, SyntaxError):
+        return None
+    frames = traceback.extract_tb(exc.__traceback__)
+    mine = [f for f in frames if not f.filename.startswith((sys.prefix, sys.base_prefix))]
+    return f"{os.path.basename(mine[-1].filename)}:{mine[-1].lineno}" if mine else None
 
 
 class LawFailed(Exception):

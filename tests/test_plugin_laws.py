@@ -106,7 +106,7 @@ IN_FLIGHT = {  # case: (the method that fails, its first line, what the line say
     "numeric_strings": ("update", f"{FAIL_AT} return ('9.81', '0', '0', '0')", "(u1 is a str, not a number)"),
     # a message or a repr of several lines stays on the record's one line (events.log had the matrix on 4 lines)
     "raises_lines": ("update", f"{FAIL_AT} raise ValueError(f'matrix singular:\\n{{__import__(\"numpy\").eye(3)}}')",
-                     "raised ValueError: matrix singular: [[1. 0. 0.] [0. 1. 0.] [0. 0. 1.]] at step"),
+                     "raised ValueError: matrix singular: [[1. 0. 0.] [0. 1. 0.] [0. 0. 1.]] (in bad_law.py:"),
     "column": ("update", f"{FAIL_AT} return __import__('numpy').ones((4, 1))",
                "got array([[1.], [1.], [1.], [1.]]) (u1 is a ndarray, not a number)"),
     # an unordered container is refused as any wrong return (a dict had its keys flown, a set flew in any order)
@@ -139,6 +139,10 @@ def test_a_law_that_fails_in_flight_ends_law_failed_with_its_record(tmp_path, ca
     events = (run / "events.log").read_text().splitlines()
     assert any(" law_failed: " in e for e in events) and all(e.startswith("t=") for e in events), events
     assert any(ln.startswith("ended by controller") and says in ln for ln in r.stdout.splitlines()), r.stdout
+    if case.startswith("raises"):  # where in the law's file: the line that raised (it was not said)
+        text = (tmp_path / "bad_law.py").read_text().splitlines()
+        line = 1 + next(i for i, ln in enumerate(text) if " raise " in ln)
+        assert f" (in bad_law.py:{line}) at step 125" in end["how"], end
 
 
 PROCESS_ENDS = {  # case: (advance's line: a law that ends bsst sim's process past any guard in it, how it is said)
