@@ -293,6 +293,9 @@ class Table:
         return ConfigError(f"{_printable(self._source)}: {_printable(self.key(name), KEY_SHOWN_MAX)}: {why}")
 
     def has(self, name: str) -> bool:
+        """Whether the table holds key ``name``; if not, a key it knows all the same (a misspelling suggests it)."""
+        if name not in self._data:
+            self._used.add(name)
         return name in self._data
 
     def _get(self, name: str, default: Any) -> Any:

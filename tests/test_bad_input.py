@@ -695,6 +695,9 @@ def test_a_misspelled_required_key_is_an_unknown_key_with_the_likely_one(tmp_pat
     mission.write_text(TINY + "[link.up]\ndelya_ms = 10\n")
     line = _one_line(_bsst("sim", mission, "--out", tmp_path / "out", "--no-plots"))
     assert line == f"bsst: {mission}: link.up.delya_ms: unknown key in [link.up]; did you mean 'delay_ms'?"
+    mission.write_text(TINY + "[seperation]\nminimum_m = 1\n")  # an optional table the mission does not hold
+    line = _one_line(_bsst("sim", mission, "--out", tmp_path / "out", "--no-plots"))
+    assert line == f"bsst: {mission}: seperation: unknown key at the top level; did you mean 'separation'?"
 
 
 def _renamed(data: dict[str, Any], dotted: str, slip: Any) -> dict[str, Any] | None:
