@@ -112,6 +112,9 @@ def fleet_from_table(t: Table, trajectory: Callable[[Table], Reference],
                                   "profile, controller)")
     if len(items) > MAX_VEHICLES:
         raise t.error("vehicles", f"at most {MAX_VEHICLES} vehicles, got {len(items)}")
+    if t.has("vehicles") and not items:  # (it flew one vehicle, as if the key were not there)
+        raise t.error("vehicles", "an empty array: give one [[vehicles]] table per vehicle, or leave the key out "
+                                  "for one vehicle")
     specs = tuple(_vehicle(Table(v, t._source, f"{t.key('vehicles')}[{i}]"), i, trajectory, law)
                   for i, v in enumerate(items))
     ids = sorted(v.id for v in specs)

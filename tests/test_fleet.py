@@ -69,6 +69,7 @@ def test_vehicles_tables_are_read_with_ids_offsets_starts_trajectories_profiles_
     ([{"id": 1, "controller": "nonsense"}], "vehicles[0].controller", "must be one of"),
     ([{"id": 1, "trajectory": {"kind": "circle"}}], "vehicles[0].trajectory.kind", "must be one of"),
     ("one", "vehicles", "expected an array of tables"),
+    ([], "vehicles", "an empty array"),  # (it flew one vehicle, as if the key were not there)
 ])
 def test_a_bad_vehicle_is_named_by_file_key_and_range(vehicles: object, key: str, words: str) -> None:
     with pytest.raises(ConfigError) as exc:
