@@ -23,6 +23,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Literal, TypeVar
 
+from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.nodes.forkserver import ForkedChild, start_child
@@ -407,6 +408,16 @@ class HeldEcho(threading.Thread):
         """The rounds' median lateness (ms), never below 0."""
         assert self.late_ms, "no round of the control was sent"
         return max(0.0, statistics.median(self.late_ms))
+
+
+def tlog_messages(path: Path, sysid: int, kinds: str | list[str]) -> list[Any]:
+    """The messages of ``kinds`` that system ``sysid`` sent, in the order a tlog (``vehicle.tlog``) holds them."""
+    log = mavutil.mavlink_connection(str(path), dialect="common")
+    out = []
+    while (m := log.recv_match(type=kinds)) is not None:
+        if m.get_srcSystem() == sysid:
+            out.append(m)
+    return out
 
 
 def script_result(r: subprocess.CompletedProcess[str]) -> dict[str, Any]:

@@ -49,7 +49,7 @@ from missions.geodetic import Home
 from missions.geofence import Geofence, Zone
 from missions.planfiles import plan_text, read_plan_text
 from tests.plans import l_plan
-from tests.sitlkit import ENV, ROOT, GcsSocket, MavProxy, Proc, clean_exit, run_bsst, script_result
+from tests.sitlkit import ENV, ROOT, GcsSocket, MavProxy, Proc, clean_exit, run_bsst, script_result, tlog_messages
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes and opens sockets
@@ -113,15 +113,6 @@ sdk.destroy()
 """
 
 
-def _tlog(path: Path, sysid: int, kinds: list[str]) -> list[Any]:
-    log = mavutil.mavlink_connection(str(path), dialect="common")
-    out = []
-    while (m := log.recv_match(type=kinds)) is not None:
-        if m.get_srcSystem() == sysid:
-            out.append(m)
-    return out
-
-
 def _trace(path: Path) -> list[tuple[float, float, float, float]]:
     rows = path.read_text().splitlines()
     head = rows[0].split(",")
@@ -182,15 +173,16 @@ def test_mavsdk_flies_a_plan_file_through_await_mission_as_the_file_flies(tmp_pa
                for a, b in zip(kept.items, want.items, strict=True))
     assert 'kind = "smooth"' in (out / "mission.toml").read_text()
     sysid = n + 1
-    reached = [m.seq for m in _tlog(out / "vehicle.tlog", sysid, ["MISSION_ITEM_REACHED"])]
+    reached = [m.seq for m in tlog_messages(out / "vehicle.tlog", sysid, ["MISSION_ITEM_REACHED"])]
     assert list(dict.fromkeys(reached)) == list(range(5)), reached  # each in order (then PX4's repeats)
-    currents = _tlog(out / "vehicle.tlog", sysid, ["MISSION_CURRENT"])
+    currents = tlog_messages(out / "vehicle.tlog", sysid, ["MISSION_CURRENT"])
     current = [m.seq for m in currents]
     assert current[-1] == 4 and current == sorted(current), current
     # the mission flown in AUTO.MISSION: PX4's mission_mode "in mission" whenever it was ACTIVE; COMPLETE at the end
     assert {m.mission_mode for m in currents if m.mission_state == mavlink.MISSION_STATE_ACTIVE} == {1}, currents
     assert currents[-1].mission_state == mavlink.MISSION_STATE_COMPLETE
-    modes = {(m.custom_mode, bool(m.base_mode & 128)) for m in _tlog(out / "vehicle.tlog", sysid, ["HEARTBEAT"])}
+    beats = tlog_messages(out / "vehicle.tlog", sysid, ["HEARTBEAT"])
+    modes = {(m.custom_mode, bool(m.base_mode & 128)) for m in beats}
     assert ((4 << 16) | (4 << 24), True) in modes  # AUTO.MISSION, armed
     # its end landing disarmed, it shows AUTO.MISSION again, as PX4 stays in Mission (docs/ground-station.md)
     back = [e["text"] for e in summary["events"] if e["kind"] == "mode" and "disarmed after" in e["text"]]
@@ -528,7 +520,7 @@ def test_mavproxy_loads_and_starts_a_waypoint_file(tmp_path):
     assert summary["sitl"]["speed"] == 1.0 and summary["clock"] == "lockstep", summary["sitl"]
     assert summary["timing"]["sim_s"] > 5.0 and summary["timing"]["real_time_factor"] <= 1.01, summary["timing"]
     assert summary["mission_transfer"]["items"] == 4  # MAVProxy sends the file's line 0 (the home) as item 0
-    reached = [m.seq for m in _tlog(out / "vehicle.tlog", n + 1, ["MISSION_ITEM_REACHED"])]
+    reached = [m.seq for m in tlog_messages(out / "vehicle.tlog", n + 1, ["MISSION_ITEM_REACHED"])]
     assert list(dict.fromkeys(reached)) == [0, 1, 2, 3]
     kept = read_plan_text((out / "mission.plan").read_text(), "kept")
     home = (16, 47.397742, 8.545594, 488.0)  # a waypoint at the home, on the ground (GLOBAL: m AMSL)
@@ -600,7 +592,7 @@ def test_mavproxy_through_a_lossy_slow_link(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["outcome"] == "completed" and summary["end"]["disarmed"]
     assert summary["mission_transfer"]["items"] == 4
-    reached = [m.seq for m in _tlog(out / "vehicle.tlog", n + 1, ["MISSION_ITEM_REACHED"])]
+    reached = [m.seq for m in tlog_messages(out / "vehicle.tlog", n + 1, ["MISSION_ITEM_REACHED"])]
     assert list(dict.fromkeys(reached)) == [0, 1, 2, 3]
     relay_stats = json.loads((tmp_path / "relay.json").read_text())
     assert relay_stats["up"]["lost"] > 0 and relay_stats["down"]["lost"] > 0, relay_stats
