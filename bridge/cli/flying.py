@@ -364,8 +364,11 @@ def add_sitl_commands(sub: Any) -> None:
     p.add_argument("--timeout", type=number_in("--timeout", 0.0, 3600.0, lo_open=True), default=10.0, metavar="S",
                    help="wait this long for the vehicle's heartbeat (default 10 s)")
     p.add_argument("--start-timeout", type=number_in("--start-timeout", 0.0, 3600.0, lo_open=True), metavar="S",
-                   help="wait this long for the mission's second and third states (default 2 s, as for any state; a "
+                   help="wait this long for the mission's second and third states (default: as --state-timeout; a "
                         "lockstep fleet's first steps wait for its slowest vehicle to start)")
+    p.add_argument("--state-timeout", type=number_in("--state-timeout", 0.0, 3600.0, lo_open=True), metavar="S",
+                   help="wait this long for each later state while the vehicle is heard (default 2 s; a lockstep "
+                        "fleet's vehicle waits at its gate for a silent one)")
     _spin_option(p)
     p.add_argument("--radio", metavar="FILE", help="lockstep: the down link's states queue on a fleet's one radio "
                                                    "FILE with the other controllers' (bsst sitl --vehicles N "
@@ -463,7 +466,7 @@ def cmd_controller(args: argparse.Namespace) -> int:
     cfg = OffboardConfig(vehicle, sysid=args.sysid, clock="realtime" if args.realtime else "lockstep",
                          target_sysid=args.target_sysid, connect_timeout_s=args.timeout, key=_key(args),
                          source_port=args.source_port or 0, await_mission=args.await_mission,
-                         start_timeout_s=args.start_timeout,
+                         start_timeout_s=args.start_timeout, state_timeout_s=args.state_timeout,
                          radio=radio_of(args),
                          **({"spin_s": args.spin} if args.spin is not None else {}))
     return run_controller(flight, cfg, args.out, args.overwrite)

@@ -93,6 +93,9 @@ class OffboardConfig:
     # s of wall time for the mission's second and third states (a lockstep fleet's first steps wait for its slowest
     # vehicle to start: bridge.nodes.vehicle.gate); None: vehicle_timeout_s
     start_timeout_s: float | None = None
+    # s of wall time for each later state, the vehicle still heard (a lockstep fleet's vehicle waits at its gate for
+    # a silent one: bridge.nodes.vehicle.gate.STATE_WAIT_S); None: vehicle_timeout_s
+    state_timeout_s: float | None = None
     spin_s: float = 0.0002  # as the vehicle's (bridge.nodes.vehicle.VehicleConfig.spin_s)
     timesync_s: float = 0.5
     key: bytes | None = field(default=None, repr=False)  # MAVLink 2 signing key (never shown)

@@ -58,8 +58,9 @@ class Offboard(RealtimeFlying):
         self._noted = 0  # guard events already reported
         self._u = self._wire = (0.0, 0.0, 0.0, 0.0)  # the last command sent: demanded, on the wire (as offline)
         # a scheduled blackout of the real wire (the relay) silences the vehicle: wait that much longer
-        self._silence_s = cfg.vehicle_timeout_s + max(
-            (d for _, d in flight.link.up.blackouts + flight.link.down.blackouts), default=0.0)
+        black = max((d for _, d in flight.link.up.blackouts + flight.link.down.blackouts), default=0.0)
+        self._silence_s = cfg.vehicle_timeout_s + black
+        self._state_wait_s = (cfg.state_timeout_s or cfg.vehicle_timeout_s) + black  # for a new state, heard
         self._sample = Prefetched(m.trajectory.sample)  # the next step's sampled once its command is out
         super().__init__(flight, cfg, out, status)
         self.spinner = Spinner(self.ep, cfg.spin_s)  # a lockstep state is polled for before sleeping
@@ -373,8 +374,9 @@ class Offboard(RealtimeFlying):
             self.reason = ("the vehicle's flight ended: it crashed, diverged or was touched "
                            "(HEARTBEAT system_status EMERGENCY)")
             answers = ("crashed", "diverged", "collision")
-        elif now - self._last_state > (timeout if self._started else self.cfg.start_timeout_s or timeout):
-            self.reason = f"no new state from the vehicle for {timeout:g} s"
+        elif now - self._last_state > (wait := self._state_wait_s if self._started else
+                                       self.cfg.start_timeout_s or self._state_wait_s):
+            self.reason = f"no new state from the vehicle for {wait:g} s"
         else:
             return None
         outcome = "failsafe" if self.failsafe_seen else "aborted"
