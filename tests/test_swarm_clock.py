@@ -27,7 +27,7 @@ from bridge.link.radio import make_radio_file
 from bridge.link.turns import TurnRadio
 from bridge.nodes.vehicle import gate as gatemod
 from bridge.nodes.vehicle.clock import Answer, Clock, ClockState, Trigger
-from bridge.nodes.vehicle.gate import Gate, GateConfig, resting
+from bridge.nodes.vehicle.gate import Gate, GateConfig, resting, say_lost
 from bridge.record.separation import CONTINUED, Watch, judge_traces
 from bridge.session.children import free_udp_port
 from bridge.swarm import FleetRun, simulate, sitl
@@ -265,6 +265,48 @@ def test_a_vehicle_silent_too_long_is_taken_as_gone_and_said(monkeypatch: pytest
         assert a.stats()["dropped"] and "vehicle 2 silent" in a.stats()["dropped"][0]
     finally:
         a.close()
+
+
+def test_a_vehicle_whose_process_ended_is_taken_as_gone_at_once_where_it_was_last(tmp_path: Path) -> None:
+    """Its fleet's word from its gate port (say_lost) drops it at once, where it was last heard, said why; one
+    that left stays where it said; the fleet then holds its port; on the fleet's one radio it takes no turn after
+    the ones it took (nobody waits for it there)."""
+    (a, ca, _), (b, cb, wb), (c, cc, _) = fleet = gates(3)
+    held = []
+    try:
+        for k in (1, 2):
+            for g, clock, _ in fleet:
+                at(g, clock, k)
+            assert [cleared(g) for g, _, _ in fleet] == [None] * 3
+            for _, clock, _ in fleet:
+                clock.take()  # (the step flown)
+        at(a, ca, 3)
+        at(c, cc, 3)
+        b.close()  # vehicle 2's process ends at step 2, having flown step 1: it was at wb there
+        held.append(say_lost(b.cfg))
+        assert held[-1] is not None and cleared(a) is None and a._where(1, 3) == wb[0]
+        assert a.stats()["dropped"] == ["vehicle 2 ended (its process gone, said by the fleet) at step 3: taken as "
+                                        "gone where it was last"]
+        with pytest.raises(OSError):  # (nobody else speaks for vehicle 2 now)
+            socket.socket(socket.AF_INET, socket.SOCK_DGRAM).bind(("127.0.0.1", b.cfg.ports[1]))
+        c.leave()  # vehicle 3 leaves where it is, then its process ends: where it said, nothing dropped
+        c.close()
+        held.append(say_lost(c.cfg))
+        wait_for(lambda: a.poll() or 2 in a.gone, 10, "vehicle 3's word")
+        assert len(a.stats()["dropped"]) == 1 and a._where(2, 9) == c.pos
+    finally:
+        for g, _, _ in fleet:
+            g.close()
+        for sock in held:
+            sock.close()
+    radio = tmp_path / "radio"
+    make_radio_file(radio, 2)
+    for direction, k in (("up", 7), ("down", 6)):  # user 1: its vehicle took step 7's turn, its controller 6's
+        TurnRadio(radio, direction, 1000.0, 0.1, 1).took(k)
+    sock = say_lost(GateConfig(1, (1, 2), (0.3, 0.3), (free_udp_port(), free_udp_port()), str(radio)))
+    assert sock is not None
+    sock.close()
+    assert TurnRadio(radio, "up", 1000.0, 0.1, 0).rows()[1][2] == 7  # it leaves from step 7
 
 
 def test_a_bad_gate_file_is_named(tmp_path: Path) -> None:

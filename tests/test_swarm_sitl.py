@@ -10,9 +10,12 @@ uses it) is the offline loop's too. The records have the offline fleet's layout.
 from __future__ import annotations
 
 import json
+import os
 import signal
 import sys
+import threading
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -151,6 +154,64 @@ def test_ctrl_c_stops_every_pair_and_each_summary_says_aborted(tmp_path: Path) -
         own = json.loads((run / f"vehicle-{i}" / "summary.json").read_text())
         assert own["ended_by"]["who"] == "user"
         assert csv_rows(run / f"vehicle-{i}" / "trace.csv") < 30 * 250
+
+
+def _pid_naming(path: Path) -> int | None:
+    """The process whose command line names ``path`` (a vehicle forked by the fork server shows its own, the words
+    joined by spaces), if any."""
+    for d in Path("/proc").iterdir():
+        try:
+            if d.name.isdigit() and str(path).encode() in (d / "cmdline").read_bytes().replace(b"\0", b" ").split():
+                return int(d.name)
+        except OSError:
+            continue  # (a process gone meanwhile)
+    return None
+
+
+@pytest.mark.parametrize(("sig", "how", "said"), [
+    (signal.SIGKILL, "died (killed by SIGKILL)", "vehicle (pid {pid}) killed by SIGKILL"),
+    # frozen: its own controller gives up on it after 2 s, its session kills it after the landing it waits for
+    (signal.SIGSTOP, "vehicle silent for 2 s", "vehicle (pid {pid}) did not stop within 8 s: SIGKILL")],
+    ids=["killed", "frozen"])
+def test_a_vehicle_killed_or_frozen_in_flight_is_dropped_and_the_other_flies_on(tmp_path: Path, capsys, sig: int,
+                                                                                how: str, said: str) -> None:
+    """A lockstep pair at real time's pace, vehicle 2's process killed (or frozen) after a second of flight: once its
+    process is gone its fleet tells vehicle 1's gate at once (no 30 s of silence), and vehicle 1 flies its mission to
+    the end, its controller not giving up on its vehicle waiting at the gate meanwhile (until the third wave's
+    thirty-sixth session it aborted 2 s after: "no new state from the vehicle for 2 s"); vehicle 2 is aborted,
+    said by name, and the fleet with it."""
+    mission = short_sine(tmp_path, 4.0)
+    mission.write_text(mission.read_text() + '\n[end]\naction = "hold"\n')  # (no landing to fly: cheaper)
+    out, result = tmp_path / "run", {}
+
+    def fly(result: dict[str, Any] = result) -> None:
+        try:
+            result["run"] = sitl(mission, vehicles=2, instance=None, speed=1.0, out=out, plots=False)
+        except BaseException as exc:  # noqa: BLE001  (named by the assertion below)
+            result["error"] = exc
+
+    flight = threading.Thread(target=fly, daemon=True)
+    flight.start()
+    try:
+        wait_for(lambda: count_records(out / "vehicle-2" / "vehicle.bin") > 250, 90, "a second of vehicle 2's flight")
+        pid = _pid_naming(out / "vehicle-2" / "gate.json")
+        assert pid is not None, "vehicle 2's process"
+        os.kill(pid, sig)
+    finally:
+        flight.join(120)
+    assert not flight.is_alive() and "error" not in result, result
+    run = result["run"]
+    one, two = run.summary["vehicles"]
+    assert one["outcome"] == "completed" and one["ok"], one
+    assert len(run.runs[0].trace["t"]) == 4 * 250  # its whole mission
+    assert two["outcome"] == "aborted" and not two["ok"] and two["ended_by"]["how"] == how, two
+    gate = run.summary["sitl"]["gate"]
+    assert gate["2"] is None and len(gate["1"]["dropped"]) == 1, gate  # (its process said nothing more)
+    assert gate["1"]["dropped"][0].startswith("vehicle 2 ended (its process gone, said by the fleet) at step ")
+    assert run.outcome == "aborted" and report_fleet(run, "sitl") == 1
+    err = capsys.readouterr().err
+    assert "bsst sitl: vehicle 2: " + said.format(pid=pid) in err, err
+    assert "vehicle 1: aborted" not in err and "no new state" not in err, err
 
 
 def test_a_fleet_awaiting_a_ground_stations_mission_is_refused() -> None:

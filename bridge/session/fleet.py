@@ -15,7 +15,11 @@ radii, m): each vehicle's gate file (``vehicle-<id>/gate.json``: every vehicle's
 makes its vehicle wait, after each step, for every other vehicle to fly it, and end its flight ``collision`` at the
 step it touches another (:mod:`bridge.nodes.vehicle.gate`); each controller then waits up to
 :data:`~bridge.session.children.READY_TIMEOUT_S` for the mission's second state, since the first step waits for the
-slowest vehicle to start. A vehicle a ground station takes over (HOLD, TAKEOFF, ...) leaves the shared clock and flies
+slowest vehicle to start, and up to :data:`~bridge.nodes.vehicle.gate.STATE_WAIT_S` for each state after, since
+its vehicle waits at its gate up to :data:`~bridge.nodes.vehicle.gate.SILENT_S` for a silent one. A vehicle whose
+process ends (killed, crashed, stopped by its session) is said gone to the others' gates at once, from its gate port
+(:func:`~bridge.nodes.vehicle.gate.say_lost`), and they fly on. A vehicle a ground station takes over (HOLD,
+TAKEOFF, ...) leaves the shared clock and flies
 on under it, on the wall clock, recorded, while a vehicle not taken over still flies and until its record holds
 as many steps as theirs (a single vehicle's session stops it at once); the fleet judges that record afterwards
 (:mod:`bridge.record.wallclock`). In real time each pair keeps its own wall clock, a vehicle taken over flies on
@@ -29,6 +33,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import os
+import socket
 import tempfile
 import threading
 from collections.abc import Iterator, Sequence
@@ -42,7 +47,7 @@ from bridge.link.turns import TURNS
 from bridge.mavlink.endpoint import LINK_PORT
 from bridge.mavlink.signing import key_from_file
 from bridge.nodes.forkserver import warm
-from bridge.nodes.vehicle.gate import GateConfig
+from bridge.nodes.vehicle.gate import STATE_WAIT_S, GateConfig, say_lost
 from bridge.record.runlog import Run, blackout_windows, finish_run
 from bridge.session import check_options
 from bridge.session.children import READY_TIMEOUT_S, catch_stop_signals, check_port_free, free_udp_port
@@ -132,21 +137,28 @@ def _fly(flights: Sequence[Flight], ids: Sequence[int], dirs: Sequence[Path], *,
     for f in flights:
         compile_estimator(f.estimator)  # a first EKF on this machine compiles here, once, before any child starts
     gates: list[Path | None] = [None] * len(flights)
+    cfgs: list[GateConfig] = []
     if radii is not None and not realtime and len(flights) > 1:
         ports = tuple(free_udp_port() for _ in flights)
         for j, d in enumerate(dirs):
             gates[j] = d / "gate.json"
-            GateConfig(j, tuple(ids), tuple(radii), ports, str(radio) if radio is not None else None).dump(gates[j])
+            cfgs.append(GateConfig(j, tuple(ids), tuple(radii), ports, str(radio) if radio is not None else None))
+            cfgs[j].dump(gates[j])
     sessions = [Session(f, d, realtime=realtime, instance=None if instance is None else instance + i - 1,
                         gcs=gcs, speed=speed, progress=None, live=False, key=key, sysid=(instance or 0) + i, gate=g,
                         start_timeout=READY_TIMEOUT_S if g is not None else None,
-                        radio=(radio, j) if radio is not None else None, announce=announce)
+                        state_timeout=STATE_WAIT_S if g is not None else None,
+                        radio=(radio, j) if radio is not None else None, announce=announce,
+                        label=f"vehicle {i}" if len(flights) > 1 else None)
                 for j, (f, i, d, g) in enumerate(zip(flights, ids, dirs, gates))]
     runs: list[Run | None] = [None] * len(sessions)
     errors: list[BaseException] = []
     if len(sessions) > 1:  # a vehicle taken over by a ground station flies on while the others fly
         for j, s in enumerate(sessions):
             s.flies_on = functools.partial(_flies_on, sessions, runs, j)
+    held: list[socket.socket] = []  # the gate ports of vehicles gone, held until the fleet is over
+    for s, cfg in zip(sessions, cfgs):  # its process ended: the others fly on without waiting for it
+        s.vehicle_ended = functools.partial(_lost, cfg, held)
 
     def fly(j: int) -> None:
         try:
@@ -167,6 +179,8 @@ def _fly(flights: Sequence[Flight], ids: Sequence[int], dirs: Sequence[Path], *,
                 t.join(0.2)
     finally:
         restore()
+        for sock in held:
+            sock.close()
     if errors:
         raise errors[0]
     done: list[Run] = [r for r in runs if r is not None]
@@ -177,6 +191,13 @@ def _fly(flights: Sequence[Flight], ids: Sequence[int], dirs: Sequence[Path], *,
                 title = f"{m.name} ({m.controller}, {f.profile.name}, SITL {r.summary['clock']})"
                 finish_run(r.path, r.trace, r.summary, title, True, blackout_windows(m))
     return done
+
+
+def _lost(cfg: GateConfig, held: list[socket.socket]) -> None:
+    """Vehicle ``cfg.index``'s process has ended: the other gates are told (:func:`say_lost`); its port held."""
+    sock = say_lost(cfg)
+    if sock is not None:
+        held.append(sock)
 
 
 def _recorded(s: Session) -> int:

@@ -55,12 +55,14 @@ class Session:
                  speed: float | None, progress: Progress | None, live: bool, key: Path | None = None,
                  await_mission: bool = False, sysid: int | None = None, gate: Path | None = None,
                  start_timeout: float | None = None, radio: tuple[Path, int] | None = None,
-                 announce: bool = False) -> None:
+                 announce: bool = False, state_timeout: float | None = None, label: str | None = None) -> None:
         self.flight = flight
         self.announce = announce  # once the vehicle is up, say on stderr where a ground station connects
         self.radio = radio  # a fleet's one radio: its file, this vehicle's user (relay's or controller's --radio)
         self.gate = gate  # a lockstep fleet's shared clock: the vehicle's gate file (bridge.session.fleet)
         self.start_timeout = start_timeout  # s: the controller's --start-timeout (None: its default)
+        self.state_timeout = state_timeout  # s: the controller's --state-timeout (None: its default)
+        self.who = f"{label}: " if label else ""  # a fleet's "vehicle <id>": which one its lines on stderr are about
         # --await-mission: ``flight`` holds the settings only; the mission is the controller's, once a ground
         # station has started one (its ``mission`` report: :meth:`_mission_loaded`); no trace is joined before
         self.await_mission = await_mission
@@ -92,6 +94,7 @@ class Session:
         self._vehicle_said: dict[str, float] = {}  # the vehicle's latest event of each kind in earlier reads (s)
         self._early: list[tuple[Child, Report]] = []  # reports read while starting, handled once all are up
         self.flies_on: Callable[[], bool] | None = None  # a fleet's: a vehicle taken over flies on under it now?
+        self.vehicle_ended: Callable[[], None] | None = None  # a fleet's: told once the vehicle process has ended
         self.flying_on = False
 
     # -- the whole session ---------------------------------------------------------------------
@@ -114,6 +117,7 @@ class Session:
             finally:
                 try:
                     self._stop_children()
+                    self._vehicle_gone()
                 finally:
                     restore()
                     self.joiner.controller_done = True
@@ -209,6 +213,8 @@ class Session:
             argv.append("--realtime")
         if self.start_timeout is not None:
             argv += ["--start-timeout", repr(self.start_timeout), "--spin", "0"]
+        if self.state_timeout is not None:
+            argv += ["--state-timeout", repr(self.state_timeout)]
         if not self.realtime:  # a lockstep fleet's one radio: the controllers' states queue on it (the vehicles':
             argv += self._radio_args()  # their commands, by their gate file)
         if self.await_mission:
@@ -292,6 +298,7 @@ class Session:
                 self._join_in_flight()
                 self._show_progress()
                 if veh.proc.poll() is not None:
+                    self._vehicle_gone()  # (a fleet's other vehicles wait for it at their gates: told first)
                     self._handle([(veh, r) for r in veh.reports()])  # its last words: events it said before it went
                     self._died(veh)
                     return
@@ -305,7 +312,8 @@ class Session:
                     self.joiner.controller_done = True
                     self._join()  # all the controller wrote (the landing time below reads the rows)
                     if ctl.done is not None and ctl.done.reason:  # a controller that gave up says why
-                        sys.stderr.write(("\n" if self.live else "") + f"bsst sitl: controller: {ctl.done.reason}\n")
+                        sys.stderr.write(("\n" if self.live else "") + f"bsst sitl: {self.who}controller: "
+                                         f"{ctl.done.reason}\n")
                     taken = ctl.done is not None and ctl.done.taken_over is not None
                     # taken: a ground station flies it now (HOLD, LAND, ...): nothing of the mission to wait for; in a
                     # fleet it flies on under it, recorded, until the rest of the fleet is done (bridge.session.fleet)
@@ -447,7 +455,13 @@ class Session:
         if self._event_log is not None:
             self._event_log.event(t if math.isfinite(t) else 0.0, kind, text, by, source)
         if source == "session" and kind in ("died", "killed"):
-            sys.stderr.write(("\n" if self.live else "") + f"bsst sitl: {text}\n")
+            sys.stderr.write(("\n" if self.live else "") + f"bsst sitl: {self.who}{text}\n")
+
+    def _vehicle_gone(self) -> None:
+        """The vehicle process has ended: a fleet is told, once (:attr:`vehicle_ended`)."""
+        told, self.vehicle_ended = self.vehicle_ended, None
+        if told is not None:
+            told()
 
     def _show_progress(self) -> None:
         now = self.joiner.newest() if self.live or self.progress else None

@@ -2,12 +2,13 @@
 
 In:  the fleet's gate file (JSON, written by :mod:`bridge.session.fleet`: this vehicle's index, every vehicle's
      system id, disc radius (m) and gate port on 127.0.0.1); the plant's true position (m, x y z, the paper's
-     frame) after each lockstep step k; the other vehicles' gate datagrams; wall time (s, ``time.monotonic``)
+     frame) after each lockstep step k; the other vehicles' gate datagrams, and the fleet's word that one's
+     process ended (:func:`say_lost`); wall time (s, ``time.monotonic``)
 Out: datagrams to the other vehicles' gates (this vehicle at step k and where, or gone from step k and where it
      stays: NaN, nowhere known, when it flies on, on the wall clock); :meth:`Gate.clear`: whether step k may be
      flown (every other vehicle has flown step k - 1), else the clock ``gated``, or the contact's text to end the
      flight with (``collision``); :meth:`Gate.stats` (steps, seconds gated, the step and place it left, its
-     contact, any vehicle taken as gone)
+     contact, any vehicle taken as gone and why)
 
 The offline fleet (:mod:`bridge.swarm`) flies every vehicle one step, then judges the world on their positions.
 Here each vehicle, its step k - 1 flown, sends the state of step k to its controller and its position to every
@@ -17,9 +18,12 @@ position at step k (or that vehicle is gone, an obstacle where it stays), then j
 knows alone, at the same step, whether it touched, and whom. So the controllers compute while the vehicles
 wait for each other, and no vehicle flies step k before every other has flown step k - 1. No vehicle is more than one
 step ahead of another, so a datagram carries the last two positions, and one lost is made good by the next or
-by the resend every :data:`RESEND_S`. A vehicle silent for :data:`SILENT_S` (its process stopped) is taken as
-gone where it was last, and said so (:attr:`Gate.dropped`). A vehicle is heard from its own gate port only
-(which no other process can bind while it runs); the gate has no signing, as the links without ``--key``.
+by the resend every :data:`RESEND_S`. A vehicle whose process ended without leaving (killed, crashed, stopped by
+its session) is taken as gone where it was last heard, at once: its fleet, which sees the process end, binds the
+gate port it no longer holds and says so in its name (:func:`say_lost`, a ``LOST`` word). One silent for
+:data:`SILENT_S` (its process frozen, or the fleet's word lost) is taken as gone the same way. Either is said
+(:attr:`Gate.dropped`). A vehicle is heard from its own gate port only (which no other process can bind while it
+runs, and its fleet holds once it is gone); the gate has no signing, as the links without ``--key``.
 """
 
 from __future__ import annotations
@@ -35,7 +39,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from bridge.link.turns import TurnRadio
+from bridge.link.radio import NEVER, RadioFile
+from bridge.link.turns import LEFT, TurnRadio
 from bridge.mavlink.endpoint import Endpoint
 from bridge.nodes.vehicle.clock import Clock, ClockState, Trigger
 from missions.fleet import clearance
@@ -43,9 +48,15 @@ from params import ConfigError
 
 RESEND_S = 0.1  # s of wall time waiting at the gate before this vehicle's last word is sent again
 SILENT_S = 30.0  # s of wall time without a word from a vehicle that has not flown step k: taken as gone
+# s of wall time a fleet's controller waits for its vehicle's next state (bsst controller --state-timeout): its
+# vehicle may wait at the gate SILENT_S after a silent vehicle's last word, which may come a step after this
+# vehicle's state went out; the margin is for a loaded machine's steps (a controller alone waits 2 s)
+STATE_WAIT_S = SILENT_S + 5.0
 # s of wall time between two looks at the radio's turns while waiting for one (a lost TURN word's cost)
 TURN_LOOK_S = 0.005
-AT, GONE, TURN = 0, 1, 2  # TURN: a turn on the fleet's one radio taken (only wakes the others up)
+# TURN: a turn on the fleet's one radio taken (only wakes the others up); LOST: the fleet's word that the vehicle's
+# process ended without leaving (:func:`say_lost`: no step, no position)
+AT, GONE, TURN, LOST = 0, 1, 2, 3
 _WIRE = struct.Struct("<4sBBqdddddd")  # magic, kind, index, step, position at step, position at step - 1
 _MAGIC = b"BSSG"
 
@@ -115,7 +126,7 @@ class Gate:
         self.at: dict[int, dict[int, tuple[float, float, float]]] = {j: {} for j in self.others}
         self.gone: dict[int, tuple[int, tuple[float, float, float]]] = {}  # index: (from step, where it stays)
         self.heard = {j: time.monotonic() for j in self.others}
-        self.dropped: list[str] = []  # the vehicles taken as gone for their silence, and when
+        self.dropped: list[str] = []  # the vehicles taken as gone where last heard (process ended, silent): when, why
         self.flying = False  # arrived at a step once: a member of the shared clock until it leaves
         self.left: tuple[int, tuple[float, float, float]] | None = None
         self.step = -1  # the step it waits at
@@ -263,6 +274,8 @@ class Gate:
             self.heard[j] = now
             if kind == GONE:
                 self.gone.setdefault(j, (k, (xs[0], xs[1], xs[2])))
+            elif kind == LOST:
+                self._drop(j, "ended (its process gone, said by the fleet)")
             elif kind == AT and j not in self.gone:
                 seen = self.at[j]
                 seen[k] = (xs[0], xs[1], xs[2])
@@ -313,11 +326,18 @@ class Gate:
         taken as gone where it was last heard of."""
         now = self._resend()
         if now - self.heard[j] >= SILENT_S:
-            seen = self.at[j]
-            last = seen[max(seen)] if seen else (math.nan, math.nan, math.nan)
-            self.gone[j] = (self.step, last)
-            self.dropped.append(f"vehicle {self.cfg.ids[j]} silent for {SILENT_S:g} s at step {self.step}: "
-                                "taken as gone where it was last")
+            self._drop(j, f"silent for {SILENT_S:g} s")
+
+    def _drop(self, j: int, why: str) -> None:
+        """Vehicle j did not leave but is gone (``why``): from the step waited at, where it was last heard of (its
+        words of later steps, one ahead, still count); said in :attr:`dropped`. One that left already stays where
+        it said."""
+        if j in self.gone:
+            return
+        seen = self.at[j]
+        last = seen[max(seen)] if seen else (math.nan, math.nan, math.nan)
+        self.gone[j] = (self.step, last)
+        self.dropped.append(f"vehicle {self.cfg.ids[j]} {why} at step {self.step}: taken as gone where it was last")
 
     def _resend(self) -> float:
         """Waiting at the gate (for the others, or for a turn on the radio): this vehicle's last word again once
@@ -361,3 +381,45 @@ class Gate:
 
     def close(self) -> None:
         self.sock.close()
+
+
+def say_lost(cfg: GateConfig) -> socket.socket | None:
+    """Vehicle ``cfg.index``'s process has ended (its fleet saw it): every other gate is told at once that it is
+    gone where it was last heard (a ``LOST`` word, twice, from its own gate port, which the process no longer holds;
+    a gate that heard it leave keeps where it said it stays), and on the fleet's one radio it takes no turn after
+    the ones it took. The port's socket is returned for the caller to hold until the fleet is over, so that no other
+    process speaks for the vehicle; None if the port is taken (the others' :data:`SILENT_S` then acts)."""
+    j = cfg.index
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        sock.bind(("127.0.0.1", cfg.ports[j]))
+    except OSError:
+        sock.close()
+        return None
+    if cfg.radio is not None:  # in the radio's file before any gate hears of it, as a vehicle that leaves
+        _left_radio(cfg.radio, j)
+    word = _WIRE.pack(_MAGIC, LOST, j, -1, *(math.nan,) * 6)
+    for _ in range(2):  # (a copy: nothing answers it; the silence rule is the last resort)
+        for i, port in enumerate(cfg.ports):
+            if i != j:
+                try:
+                    sock.sendto(word, ("127.0.0.1", port))
+                except OSError:
+                    pass  # (a vehicle gone too)
+    return sock
+
+
+def _left_radio(path: str, j: int) -> None:
+    """User j of the fleet's one radio takes no turn from the first step it has not taken both turns of (up, its
+    vehicle's; down, its controller's), unless it left already: nobody waits for a turn it never takes."""
+    f = RadioFile(path, j, "--gate's radio")
+    try:
+        f.lock()
+        try:
+            row = f.turns()[j]
+            if row[LEFT] == NEVER:
+                f.set_turn(LEFT, min(row[0], row[1]) + 1)
+        finally:
+            f.unlock()
+    finally:
+        f.close()
