@@ -152,7 +152,7 @@ def resolve_law(spec: str) -> LawFactory:
                           "or package.module:ClassName)")
     else:
         try:
-            with RefusedExit(), from_working_dir():
+            with RefusedExit(), imports_from():
                 module = importlib.import_module(where)
         except ModuleNotFoundError as exc:
             raise LawError(spec, f"no module named {exc.name!r}") from None
@@ -171,11 +171,12 @@ def resolve_law(spec: str) -> LawFactory:
 
 
 @contextmanager
-def from_working_dir() -> Iterator[None]:
-    """Imports inside look in the working directory first, as documented for ``module:Class`` (docs/usage.md):
-    ``python -m bridge`` has it first on ``sys.path``, the ``bsst`` console script its own folder, a script using
-    the API its script's folder. Only for the import: the process's ``sys.path`` is left as it was."""
-    here = os.getcwd()
+def imports_from(folder: str | None = None) -> Iterator[None]:
+    """Imports inside look in ``folder`` first (default: the working directory, as documented for ``module:Class``,
+    docs/usage.md: ``python -m bridge`` has it first on ``sys.path``, the ``bsst`` console script its own folder, a
+    script using the API its script's folder; a law file's own folder while it loads, as Python runs a script).
+    Only for the import: the process's ``sys.path`` is left as it was."""
+    here = os.getcwd() if folder is None else folder
     sys.path.insert(0, here)
     try:
         yield
@@ -215,7 +216,7 @@ def _load_file(path: Path, spec: str) -> ModuleType:
     module = importlib.util.module_from_spec(mod_spec)
     sys.modules[name] = module  # (a dataclass, a pickle look their module up while it runs)
     try:
-        with RefusedExit():
+        with RefusedExit(), imports_from(str(path.resolve().parent)):  # (a module beside it: imported as a script's)
             exec(compile(source, str(path), "exec", dont_inherit=True), module.__dict__)
     except (Exception, SystemExit, ExitCalled) as exc:  # a syntax error, a raise or an exit in the file: one line
         del sys.modules[name]

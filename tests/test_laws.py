@@ -138,6 +138,21 @@ def test_a_module_law_is_imported_from_the_working_directory(tmp_path: Path, mon
     assert sys.path == before
 
 
+def test_a_law_file_imports_a_module_beside_it_as_a_script_would(tmp_path: Path, monkeypatch) -> None:
+    """A law file's own folder is first on ``sys.path`` while it loads, as Python runs a script: its helper module
+    beside it is found from any working directory (it was ``no module named``); ``sys.path`` is left as it was."""
+    folder = tmp_path / "laws"
+    folder.mkdir()
+    helper = f"gains_{tmp_path.name}"  # (one name a test: a module imported stays imported in this process)
+    (folder / f"{helper}.py").write_text("SCALE = 1.0\n")
+    (folder / "law.py").write_text((ROOT / "examples" / "my_law.py").read_text()
+                                   + f"\nfrom {helper} import SCALE  # noqa: E402\n")
+    monkeypatch.chdir(tmp_path)  # (not the law's folder)
+    before = list(sys.path)
+    assert resolve_law(f"{folder / 'law.py'}:MyLaw").__name__ == "MyLaw"
+    assert sys.path == before
+
+
 def test_the_bsst_script_flies_a_module_law_from_the_working_directory(tmp_path: Path) -> None:
     """The ``bsst`` console script has its own folder first on ``sys.path``, not the working directory as
     ``python -m bridge`` has: ``bsst sim ... --controller here:MyLaw`` said ``no module named 'here'``."""

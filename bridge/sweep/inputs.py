@@ -83,10 +83,10 @@ def _law_file(spec: str) -> Iterator[str]:
         if Path(where).is_file():
             yield where
         return
-    from controller.law import from_working_dir  # lazy: only for a sweep over a module's law
+    from controller.law import imports_from  # lazy: only for a sweep over a module's law
 
     try:
-        with from_working_dir():  # found where the cell's resolve_law finds it
+        with imports_from():  # found where the cell's resolve_law finds it
             found = importlib.util.find_spec(where)
     except (ImportError, ValueError, AttributeError):  # the cell's own resolve_law says what is wrong
         return
