@@ -46,7 +46,7 @@ from bridge.record.columns import TRACE_COLUMNS, state_columns, trace_row
 from bridge.record.endedby import ended_by_outcome
 from bridge.record.ending import end_block
 from bridge.record.events import RunEvent
-from bridge.record.metrics import after_faults, plant_blocks, plant_summary, summarise
+from bridge.record.metrics import after_faults, not_reached, plant_blocks, plant_summary, summarise
 from bridge.record.policies import judge, rules_for, violation_text
 from bridge.record.runlog import Run, RunRecord, check_trace_steps, run_dir, trace_arrays, trace_cap
 from controller.law import LawFailed
@@ -226,7 +226,8 @@ def _judged(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention, a
     summary = summarise(arrays, m, flight.gains, clock="offline", outcome=outcome, events=shown, link=link,
                         estimator=flight.estimator, sensors=flight.sensors.name)
     summary.update(plant_summary(plant_blocks(plant), arrays, shown))
-    summary["ended_by"] = {**ended_by_outcome(outcome, ev), **after_faults(outcome, shown)}
+    summary["ended_by"] = {**ended_by_outcome(outcome, ev), **after_faults(outcome, shown),
+                           **not_reached(outcome, flight.timeline, arrays["t"])}
     for v in judge(summary, arrays, ev, rules_for(flight, "offline", link)):
         vehicle.event("policy", violation_text(v))
         shown.append({"t": round(vehicle.t, 6), "kind": "policy", "text": violation_text(v)})

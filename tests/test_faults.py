@@ -268,6 +268,25 @@ def test_one_motor_off_on_the_x500_ends_not_completed_and_says_why(tmp_path) -> 
     assert "fault" in (out / "events.log").read_text()
 
 
+def test_an_event_scheduled_after_the_flight_ended_is_said_not_reached(tmp_path) -> None:
+    """The x500 loses rotor 1 at 1 s and ends before its 3 s event: ``ended_by.not_reached`` names what was never
+    flown, offline and in a lockstep session alike, and the summary's lines say it (nothing recorded it but the
+    mission.toml's events)."""
+    from bridge.session import sitl
+
+    m = replace(load_mission("missions/sine.toml"), duration_s=4.0)
+    at = ("1:motor:1=0", "3:motor:2=0.5")
+    for fly in (simulate, sitl):
+        kw = {"instance": None, "out": tmp_path / "sitl"} if fly is sitl else {}
+        s = fly(m, profile="x500", at=at, plots=False, **kw).summary
+        assert s["outcome"] in ("diverged", "crashed") and s["ended_by"]["after_faults"] == ["t=1.000 s: motor 1: off"]
+        assert s["ended_by"]["not_reached"] == ["t=3.000 s: motor 2: 0.5 of its thrust"], (fly, s["ended_by"])
+    assert s["clock"] == "lockstep"
+    proc = run_bsst("sim", "missions/sine.toml", "--profile", "x500", "--at", "10:motor:1=0", "--at", "20:motor:2=0.5",
+                    "--no-plots", timeout=300)
+    assert proc.returncode == 1 and "\nnot reached: t=20.000 s: motor 2: 0.5 of its thrust\n" in proc.stdout
+
+
 def test_a_hard_touchdown_is_an_impact() -> None:
     """Dropped from 2 m with the rotors stopped: the plant records the impact speed (about sqrt(2 g h))."""
     plant = Quadrotor(load_profile("x500"), state=(0.0, 0.0, 0.0, 0.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))

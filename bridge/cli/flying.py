@@ -263,6 +263,8 @@ def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
     end = s.get("ended_by")
     if end and (end.get("who"), end.get("how")) != ("mission", "completed"):
         w(f"ended by {end['who']}: {end['how']}\n")
+    for late in (end or {}).get("not_reached", ()):  # scheduled, never flown: the flight had ended
+        w(f"not reached: {late}\n")
     lock = s.get("lockstep")
     if lock and not lock.get("held", True):
         w(f"left lockstep at t={lock['left_at_s']:.3f} s: {lock['why']} (flown on from there on the wall clock: "

@@ -21,7 +21,7 @@ always be rebuilt from the trace.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -39,6 +39,16 @@ def after_faults(outcome: str, events: list[dict[str, Any]]) -> dict[str, Any]:
     """``ended_by``'s ``after_faults``: the timeline's faults before a flight that did not complete (why it ended)."""
     faults = [f"t={e['t']:.3f} s: {e['text']}" for e in events if e["kind"] == "fault"]
     return {"after_faults": faults} if outcome != "completed" and faults else {}
+
+
+def not_reached(outcome: str, timeline: Sequence[Any], trace_t: np.ndarray) -> dict[str, Any]:
+    """``ended_by``'s ``not_reached``: the timeline's events (``[[events]]``, ``--at``) scheduled after a flight that
+    did not complete had ended (its last row's time, s), so never flown: said, as the run did not fly as asked."""
+    if outcome == "completed" or not timeline:
+        return {}
+    end = float(trace_t[-1]) if len(trace_t) else 0.0
+    late = [f"t={e.t_s:.3f} s: {e.text()}" for e in timeline if e.t_s > end]
+    return {"not_reached": late} if late else {}
 
 
 def plant_summary(blocks: Mapping[str, Any], trace: Mapping[str, np.ndarray],

@@ -37,7 +37,7 @@ from bridge.record.interventions import (
     unconfirmed_text,
 )
 from bridge.record.joiner import Joined
-from bridge.record.metrics import after_faults, percentiles, plant_summary, summarise
+from bridge.record.metrics import after_faults, not_reached, percentiles, plant_summary, summarise
 from bridge.record.policies import (
     CONTROLLER_ID,
     judge,
@@ -462,6 +462,7 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
         summary["param_at"] = list(cs["param_at"])
     summary["ended_by"] = ended_by_change(summary["ended_by"], summary["outcome"], events, changes)
     summary["ended_by"].update(after_faults(summary["outcome"], [e.as_dict() for e in ev]))
+    summary["ended_by"].update(not_reached(summary["outcome"], flight.timeline, judged["t"]))
     if lockstep is not None:
         summary["lockstep"] = reproducibility(lockstep, changes)
     rules = rules_for(flight, facts.clock, link, controller_id)
