@@ -381,3 +381,13 @@ def test_a_capped_jitter_is_in_the_summary_and_the_printed_one(tmp_path, capsys)
     out = capsys.readouterr().out
     assert "link up  : jitter 10 ms uniform capped at the delay, 0 ms: flown without jitter\n" in out
     assert "link down: jitter 6 ms uniform from t=0.5 s capped at the delay, 4 ms: drawn within ± 4 ms\n" in out
+
+
+def test_a_link_that_delivered_nothing_yet_is_shown(tmp_path, capsys) -> None:
+    """Every state still in flight at the end (a delay past the flight): the summary's link lines show it (they were
+    left out, as if the link were perfect, since nothing was lost, duplicated or reordered and no delay measured)."""
+    mission = tmp_path / "m.toml"
+    mission.write_text('name = "m"\nduration_s = 1.0\n[trajectory]\nkind = "sine"\n')
+    assert main(["sim", str(mission), "--down-delay", "40000", "--no-plots", "--out", str(tmp_path / "r")]) == 1
+    out = capsys.readouterr().out
+    assert "\nlink down: sent 250 delivered 0 lost 0 in flight 250 dup 0 reordered 0 delay p50 n/a ms" in out, out

@@ -291,8 +291,8 @@ def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
               for u, v in s["inputs"].items() if v["min"] is not None]
     w("input  " + ("  ".join(inputs) or "n/a (nothing flew)") + "\n")
     link = s.get("link", {})
-    if any(L.get("lost") or L.get("duplicated") or L.get("reordered") or (L.get("delay_ms") or {}).get("max")
-           for L in (link.get("up", {}), link.get("down", {}))):
+    if any(L.get("lost") or L.get("duplicated") or L.get("reordered") or L.get("in_flight")  # (held: a delay)
+           or (L.get("delay_ms") or {}).get("max") for L in (link.get("up", {}), link.get("down", {}))):
         for d in ("up", "down"):
             L = link[d]
             ms = {k: "n/a" if v is None else f"{v:.2f}" for k, v in L["delay_ms"].items()}
