@@ -306,6 +306,11 @@ def test_a_blackout_after_the_end_is_refused(tmp_path: Path) -> None:
     _fails(_write(tmp_path, body + "[link.down]\nblackouts = [[7.5, 1.0]]\n"), "link.down.blackouts", "[7.5, 8.5)")
     with pytest.raises(ConfigError, match=r"--blackout/--up-blackout \(link\.up\.blackouts\): the window \[40, 41\) s"):
         prepare(MISSION_DIR / "sine.toml", link={"up": {"blackouts": [[40.0, 1.0]]}})  # as --up-blackout 40:1
+    profile = tmp_path / "late.toml"  # a profile's (a fitted trace's outage): its file and key, not the mission's
+    profile.write_text("[link]\ndelay_ms = 3\n[link.up]\nblackouts = [[40.0, 1.0]]\n")
+    with pytest.raises(ConfigError, match=rf"^{profile}: link\.up\.blackouts \(the flight's link profile\): the "
+                                          r"window \[40, 41\) s starts after the mission's end"):
+        prepare(MISSION_DIR / "sine.toml", link={"profile": str(profile)})  # as --link-profile FILE
     assert "never happen" in msg
     ends_late = prepare(_write(tmp_path, body + "[link]\nblackouts = [[4.0, 100.0]]\n"))  # running past the end: fine
     assert ends_late.link.up.blackouts == ((4.0, 100.0),)

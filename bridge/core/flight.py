@@ -37,6 +37,7 @@ from bridge.autopilot.simvehicle import HOLD, OFFBOARD, SimVehicle
 from bridge.core.overrides import Overrides, table_settings
 from bridge.core.scalar import checked_choice, compile_for, compiled_wanted, wire_for
 from bridge.link.model import LinkConfig, LinkSettings, link_from_table
+from bridge.link.profile import load_link_profile
 from controller import Controller, Gains, Nominal, gains_from_table
 from controller.law import LawError, LawFactory, resolve_law
 from controller.link_guard import GuardConfig
@@ -154,6 +155,23 @@ class Flight:
                 for (s, dur), ds in sorted(windows.items())]
 
 
+def _blackouts_given(m: Mission, over: Overrides, d: str) -> str:
+    """Where direction ``d``'s blackouts were given, as a refusal names them: the flags (``--blackout``), the
+    mission's direction table or its ``[link]``, else its link profile's file (``--link-profile``, ``link.profile``)."""
+    def key_in(link: Mapping[str, Any]) -> str | None:
+        own = link.get(d)
+        return (f"link.{d}.blackouts" if isinstance(own, Mapping) and "blackouts" in own
+                else "link.blackouts" if "blackouts" in link else None)
+
+    given = (over.link or {}).get(d)
+    if isinstance(given, Mapping) and "blackouts" in given:  # an override: the flags' table
+        return f"{m.source}: --blackout/--{d}-blackout ({key_in(m.link) or f'link.{d}.blackouts'})"
+    if (mine := key_in(m.link)) is not None or not m.link.get("profile"):
+        return f"{m.source}: {mine or 'link.blackouts'}"
+    prof = load_link_profile(m.link["profile"])  # (loaded already: the settings came from it)
+    return f"{prof.path}: {key_in(prof.link) or 'link.blackouts'} (the flight's link profile)"
+
+
 def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, **keywords: Any) -> Flight:
     """Validate a mission (object or file) with its :class:`Overrides` into a :class:`Flight`.
 
@@ -210,13 +228,10 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
     est_table.done()
     for d in ("up", "down"):  # a blackout that would never happen is a mistake in the file, not a plan
         for start, dur in getattr(link_settings, d).blackouts:
-            if start >= m.duration_s:  # named where it came from: the direction's own table, or both's
-                own, given = m.link.get(d), (over.link or {}).get(d)
-                key = f"link.{d}.blackouts" if isinstance(own, Mapping) and "blackouts" in own else "link.blackouts"
-                if isinstance(given, Mapping) and "blackouts" in given:  # an override: the flags' table
-                    key = f"--blackout/--{d}-blackout ({key})"
-                raise ConfigError(f"{src}: {key}: the window [{start:g}, {start + dur:g}) s starts after the "
-                                  f"mission's end (duration_s = {m.duration_s:g} s), so it would never happen")
+            if start >= m.duration_s:
+                raise ConfigError(f"{_blackouts_given(m, over, d)}: the window [{start:g}, {start + dur:g}) s starts "
+                                  f"after the mission's end (duration_s = {m.duration_s:g} s), so it would never "
+                                  "happen")
     try:
         wind, timeline = weather_of(m, prof, sensor_config, estimator_kind, effects.battery)
         link_settings = replace(link_settings, handovers=handovers_of(timeline, m))
