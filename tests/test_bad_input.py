@@ -492,7 +492,9 @@ def test_a_flags_value_is_named_as_given_not_as_the_files(files, capsys):
     (["sim", "missions/sine.toml", "--wind", "5:"], "--wind"),
     (["controller", "missions/sine.toml", "--radio-user", "2"], "--radio-user without --radio"),  # (it was taken)
     (["relay", "--listen", "127.0.0.1:0", "--to", "127.0.0.1:9", "--radio-user", "1", "--duration", "0.2"],
-     "--radio-user without")])  # (a --duration: taken, as it once was, it relays briefly and exits 0, failing here)
+     "--radio-user without"),  # (a --duration: taken, as it once was, it relays briefly and exits 0, failing here)
+    (["relay", "--listen", "0.0.0.0:31032", "--to", "localhost:31032", "--duration", "0.2"],  # (it relayed, exit 0)
+     "--to localhost:31032 is the relay's own --listen 0.0.0.0:31032: it would forward into itself")])
 def test_an_empty_path_address_or_value_is_refused_as_given(capsys, argv, names):
     """An empty positional path (an unset shell variable) is named as empty; it read as the current folder (".: is
     a directory"). An empty address is refused; it was taken for the default one, and the vehicle started. So are

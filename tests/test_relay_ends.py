@@ -190,3 +190,14 @@ def test_a_strangers_far_future_state_does_not_end_a_relayed_flight(tmp_path: Pa
     assert f"controller_from={back}" in vehicle_start, vehicle_start
     assert not [e for e in s["events"] if e["source"] == "relay" and e["kind"] == "client"], s["events"]
 
+
+
+def test_the_client_is_named_by_the_side_its_datagrams_come_from() -> None:
+    """With ``--listen-direction down`` the first sender to --listen is the vehicle's side (it was called the
+    controller's whatever the direction)."""
+    from bridge.nodes.relay import client_event
+
+    assert client_event(("127.0.0.1", 5)).text == ("127.0.0.1:5 is the controller side (the first sender to --listen, "
+                                                   "its datagrams travel up); any other sender is refused")
+    assert client_event(("127.0.0.1", 5), "down").text.startswith("127.0.0.1:5 is the vehicle side (the first sender "
+                                                                  "to --listen, its datagrams travel down)")

@@ -412,10 +412,12 @@ class Relay:
         self.close()
 
 
-def client_event(addr: Address) -> Event:
-    """The event report of a client learned: the first sender to the listen port is the controller side."""
-    return Event(0.0, "client", f"{addr[0]}:{addr[1]} is the controller side (the first sender to --listen); "
-                                "any other sender is refused")
+def client_event(addr: Address, listen_direction: str = "up") -> Event:
+    """The event report of a client learned: the first sender to the listen port, the controller side (its
+    datagrams travel up), or with ``listen_direction`` down the vehicle side (its datagrams travel down)."""
+    side = "controller" if listen_direction == "up" else "vehicle"
+    return Event(0.0, "client", f"{addr[0]}:{addr[1]} is the {side} side (the first sender to --listen, its "
+                                f"datagrams travel {listen_direction}); any other sender is refused")
 
 
 def _stamp(data: bytes, ids: frozenset[int]) -> int | None:
