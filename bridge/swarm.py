@@ -63,7 +63,9 @@ from missions.fleet import (
 from missions.fleet import vehicle_mission as mission_of
 from params import ConfigError, dump_toml, reads_inputs
 
-LINK_FIGURES = ("sent", "delivered", "lost", "lost_by", "delay_ms")  # each vehicle's, each way, in the fleet's summary
+# each vehicle's, each way, in the fleet's summary: enough that sent = delivered + lost + in flight (a duplicate and a
+# reordered packet are delivered ones, counted again)
+LINK_FIGURES = ("sent", "delivered", "lost", "lost_by", "in_flight", "duplicated", "reordered", "delay_ms")
 # the outcomes from best to worst: the fleet's outcome is its worst vehicle's (an unknown one is worst)
 SEVERITY = ("completed", "failsafe", "law_failed", "denied", "diverged", "crashed", "terminated", "collision",
             "aborted")

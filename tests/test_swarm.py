@@ -361,3 +361,15 @@ def test_a_fleet_summary_says_each_vehicles_capped_jitter(tmp_path: Path, capsys
         assert v["link"]["jitter_capped"] == own and [c["bound_ms"] for c in own] == [4.0, 4.0], v["link"]
     printed = capsys.readouterr().out
     assert printed.count("  link up  : jitter 10 ms uniform capped at the delay, 4 ms: drawn within ± 4 ms") == 2
+
+
+def test_each_vehicles_link_in_the_fleets_summary_adds_up(tmp_path: Path) -> None:
+    """sent = delivered + lost + in flight for each vehicle's link in the fleet's own summary, as in its run's (the
+    fleet's left out what was in flight, duplicated and reordered: its counts did not add up)."""
+    run = simulate(short_sine(tmp_path, 1.0), vehicles=2, plots=False,
+                   link={"loss_pct": 10.0, "delay_ms": 30.0, "dup_pct": 5.0, "reorder_pct": 5.0, "jitter_ms": 5.0})
+    for v, alone in zip(run.summary["vehicles"], run.runs, strict=True):
+        for d in ("up", "down"):
+            L, own = v["link"][d], alone.summary["link"][d]
+            assert L["sent"] == L["delivered"] + L["lost"] + L["in_flight"] and L["in_flight"] > 0, L
+            assert {k: L[k] for k in ("duplicated", "reordered")} == {k: own[k] for k in ("duplicated", "reordered")}
