@@ -28,6 +28,7 @@ from typing import Any
 from missions.geodetic import Home
 from missions.geofence import geofence_from_plan
 from params import ConfigError, finite_float, json_show, show, too_many_digits
+from params.text import number
 
 NAV_WAYPOINT, NAV_LOITER_TIME, NAV_RETURN_TO_LAUNCH, NAV_LAND, NAV_TAKEOFF, DO_CHANGE_SPEED = 16, 19, 20, 21, 22, 178
 SUPPORTED = {NAV_WAYPOINT: "NAV_WAYPOINT", NAV_LOITER_TIME: "NAV_LOITER_TIME", NAV_RETURN_TO_LAUNCH:
@@ -286,7 +287,7 @@ def _wpl_number(name: str, word: str) -> float:
     """A number field of a waypoint file (param1..4, latitude, longitude, altitude): a number or nan (not given:
     QGroundControl's NaN), never infinite; its name in the error."""
     try:
-        v = float(word)
+        v = number(word)
     except ValueError:
         raise ValueError(f"{name} {show(word)}: expected a number (or nan: not given)") from None
     if math.isinf(v):

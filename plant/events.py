@@ -37,6 +37,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from params import ConfigError, Table, finite_float, show
+from params.text import number
 
 EVENT_KINDS = ("motor", "gps", "baro", "mag", "gyro", "battery", "wind", "gust", "link")
 # the allowed range [lo, hi] of each number of an event's table (and of its --at flag, and of a [wind] gust), one per
@@ -282,7 +283,7 @@ def _numbers(text: str, n: tuple[int, ...], what: str, shown: str | None = None)
     """``text``'s comma-separated numbers, ``n`` of them, finite; ValueError naming ``shown`` (as typed: ``text``)."""
     parts = text.split(",")
     try:
-        values = [float(p) for p in parts]
+        values = [number(p) for p in parts]
     except ValueError:
         values = []
     if len(values) not in n or not all(math.isfinite(v) for v in values):
@@ -322,7 +323,7 @@ def event_table_from_flag(text: str) -> dict[str, Any]:
     t_text, _, rest = text.partition(":")
     kind, _, args = rest.partition(":")
     try:
-        t_s = float(t_text)
+        t_s = number(t_text)
     except ValueError:
         raise ValueError(f"expected T:KIND[:ARGS] with T in seconds, got {text!r}") from None
     if kind not in EVENT_KINDS:

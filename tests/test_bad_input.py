@@ -850,3 +850,24 @@ def test_an_empty_out_is_refused_not_taken_for_the_current_folder(tmp_path: Path
                  cwd=work, timeout=120)
     assert r.returncode == 2 and "--out: an empty path" in r.stderr and "Traceback" not in r.stderr, r.stderr
     assert list(work.iterdir()) == []
+
+
+@pytest.mark.parametrize("argv, names", [
+    (["sim", "missions/sine.toml", "--delay", "1_0"], "--delay must be a number, got '1_0'"),
+    (["sim", "missions/sine.toml", "--seed", "1_0"], "--seed must be an integer, got '1_0'"),
+    (["sim", "missions/sine.toml", "--wind", "1_0"], "--wind"),
+    (["sim", "missions/sine.toml", "--blackout", "1_0:1"], "--blackout"),
+    (["sim", "missions/sine.toml", "--at", "1_0:gps:off"], "--at 1_0:gps:off"),
+    (["sim", "missions/sine.toml", "--param", "COM_OBL_ACT=1_0"], "COM_OBL_ACT: an INT32, expected an integer"),
+])
+def test_a_number_with_digit_separators_is_refused(capsys, argv, names) -> None:
+    """``1_0`` is 10 to Python's ``float()`` and ``int()``, and a slip to a person: refused, as any text that is
+    not a number (it flew 10). (A TOML file's ``1_000`` is TOML's own number syntax, and stays.)"""
+    _refused(capsys, [*argv, "--no-plots", "--out", "/nonexistent-never-written"], names)
+
+
+def test_a_trace_field_with_digit_separators_is_refused(tmp_path, capsys) -> None:
+    trace = tmp_path / "t.csv"
+    trace.write_text("t_s,delay_ms\n0,1_0\n0.1,10\n")
+    _refused(capsys, ["sim", "missions/sine.toml", "--link-trace", trace, "--no-plots"],
+             f"{trace} line 2: delay_ms is not a number: '1_0'")

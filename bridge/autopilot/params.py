@@ -41,6 +41,7 @@ from bridge.autopilot.failsafe import FAILSAFE_RANGES, FailsafeConfig
 from bridge.autopilot.positionloss import NOAID_TIMEOUT_RANGE_US, NOAID_TIMEOUT_US
 from bridge.autopilot.returnland import LAND_RANGES, RETURN_RANGES, ReturnConfig
 from params import ConfigError, Table, finite_float, show
+from params.text import number, whole
 
 REAL32 = "REAL32"
 INT32 = "INT32"
@@ -395,7 +396,7 @@ def parse_assignment(text: str) -> tuple[str, float]:
     spec = BY_NAME.get(name)
     if spec is None:
         raise ConfigError(f"{name}: no such parameter; the vehicle has {', '.join(BY_NAME)}")
-    for parse in ((int, float) if spec.kind == INT32 else (float,)):
+    for parse in ((whole, number) if spec.kind == INT32 else (number,)):
         try:
             got = parse(value)
         except ValueError:

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from params import likely, unreachable
+from params.text import number, whole
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
 
@@ -93,7 +94,7 @@ def path_given(name: str) -> Callable[[str], str]:
 def int_in(name: str, lo: int, hi: int) -> Callable[[str], int]:
     def conv(text: str) -> int:
         try:
-            v = int(text)
+            v = whole(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{name} must be an integer, got {text!r}") from None
         if not lo <= v <= hi:
@@ -111,7 +112,7 @@ def number_in(name: str, lo: float, hi: float, *, lo_open: bool = False,
 
     def conv(text: str) -> float:
         try:
-            v = float(text)
+            v = number(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{name} must be a number, got {text!r}") from None
         if not (lo < v if lo_open else lo <= v) or not (v < hi if hi_open else v <= hi):  # also refuses nan
@@ -128,7 +129,7 @@ def pace_speed(flag: str) -> Callable[[str], float]:
         from bridge.core.clock import speed_problem  # lazy: building the parser loads no clock code
 
         try:
-            v = float(text)
+            v = number(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{flag} must be a number, got {text!r}") from None
         why = speed_problem(v)
@@ -186,7 +187,7 @@ def blackout_window(name: str) -> Callable[[str], tuple[float, float]]:
         (s_lo, s_hi), (d_lo, d_hi) = BLACKOUT_START_RANGE_S, BLACKOUT_DURATION_RANGE_S
         a, sep, b = text.partition(":")
         try:
-            start, dur = float(a), float(b)
+            start, dur = number(a), number(b)
         except ValueError:
             start = dur = float("nan")
         if not sep or not (s_lo <= start <= s_hi and d_lo < dur <= d_hi):

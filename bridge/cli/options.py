@@ -30,6 +30,7 @@ from bridge.cli.flags import (
 )
 from bridge.cli.linkflags import link_table_from_args
 from params import ConfigError
+from params.text import number
 
 if TYPE_CHECKING:  # annotations only: building the parser loads no flight code
     from bridge.core.overrides import Overrides
@@ -177,7 +178,7 @@ def wind_flag(text: str) -> tuple[float, float]:
     """``--wind SPEED[:FROM_DEG]``: (m/s, compass degrees it blows from); ranges checked by plant/wind.py."""
     speed, sep, frm = text.partition(":")
     try:
-        values = (float(speed), float(frm) if sep else 0.0)  # "5:" is a FROM left out, refused
+        values = (number(speed), number(frm) if sep else 0.0)  # "5:" is a FROM left out, refused
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected SPEED[:FROM_DEG] (m/s, compass degrees), got {text!r}") from None
     if not (0.0 <= values[0] <= 50.0 and -360.0 <= values[1] <= 360.0):

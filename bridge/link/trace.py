@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from params import ConfigError, read_regular_file, utf8_text
+from params.text import number
 
 COLUMNS = ("t_s", "delay_ms", "direction")
 REQUIRED = ("t_s", "delay_ms")
@@ -170,7 +171,7 @@ def parse_trace(data: bytes, name: str) -> TraceFile:
     rows: dict[str, tuple[array[float], array[float]]] = {}
     first_bad, bad = "", 0
     last: dict[str, float] = {}
-    for number, ln in lines:
+    for line_no, ln in lines:
         fields, why = _fields(ln)
         direction, t, d = "", math.nan, math.nan
         if not why:
@@ -179,7 +180,7 @@ def parse_trace(data: bytes, name: str) -> TraceFile:
             last[direction] = t
         if why:
             bad += 1
-            first_bad = first_bad or f"{name} line {number}: {why}"
+            first_bad = first_bad or f"{name} line {line_no}: {why}"
             continue
         ts, ds = rows.setdefault(direction, (array("d"), array("d")))
         ts.append(t)
@@ -233,7 +234,7 @@ def _row(fields: list[str], cols: tuple[str, ...], last: Mapping[str, float]) ->
 
 def _number(text: str, key: str, bounds: tuple[float, float]) -> tuple[float, str | None]:
     try:
-        x = float(text)
+        x = number(text)
     except ValueError:
         return 0.0, f"{key} is not a number: {text[:40]!r}"
     if math.isnan(x):
