@@ -293,10 +293,11 @@ def _budget(rate_hz: float, cap: StepCap | None = None) -> PlanBudget:
     return PlanBudget(MISSION_RANGES["duration_s"][1], rate_hz, cap)
 
 
-def with_plan(base: Mission, plan: PlanFile, name: str) -> Mission:
+def with_plan(base: Mission, plan: PlanFile, name: str, cap: StepCap | None = None) -> Mission:
     """``base`` (its settings: profile, law, rates, link, ...) flying ``plan``: its trajectory, then
-    :data:`END_REST_S` at rest, named ``name``."""
-    smooth = plan_smooth(plan, budget=_budget(base.rate_hz))
+    :data:`END_REST_S` at rest, named ``name`` (``cap``: as :func:`load_mission`'s, a plan too long for it
+    refused before it is timed)."""
+    smooth = plan_smooth(plan, budget=_budget(base.rate_hz, cap))
     return replace(base, trajectory=smooth, duration_s=smooth.end_s + END_REST_S, name=name, geofence=plan.fence,
                    rally=_plan_rally(plan))
 

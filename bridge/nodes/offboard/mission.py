@@ -17,7 +17,8 @@ nothing unasked): MISSION_REQUEST_LIST until MISSION_COUNT comes, then MISSION_R
 turn, each sent again after PX4's retry time while its item does not come; a transfer the vehicle is silent in
 for PX4's protocol timeout fails. Each item is checked by the vehicle's own parser
 (:func:`~bridge.mavlink.missionitems.parse_item`) and the mission by the plan files' rules
-(:func:`~bridge.mavlink.missionitems.plan_of`), about the vehicle's home (its HOME_POSITION).
+(:func:`~bridge.mavlink.missionitems.plan_of`), about the vehicle's home (its HOME_POSITION), and built and
+checked as the vehicle checked it at its start (:func:`~bridge.nodes.uploaded.uploaded_flight`).
 
 The link model: in lockstep the mission's ``[link]`` acts on the transfer here, both directions (up: what the
 controller sends, down: what the vehicle sends), on the transfer's own clock (s of wall time from its first
@@ -36,17 +37,17 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from bridge.core.flight import Flight, prepare
+from bridge.core.flight import Flight
 from bridge.link.model import LinkImpairment
-from bridge.mavlink.missionitems import ItemRefused, MissionItem, TransferStats, parse_item, plan_of
+from bridge.mavlink.missionitems import ItemRefused, MissionItem, TransferStats, parse_item
 from bridge.mavlink.modes import MAIN_AUTO, SUB_MISSION, custom_mode
 from bridge.nodes.offboard.config import OffboardConfig
 from bridge.nodes.offboard.link import OffboardLink
 from bridge.nodes.process import on_stop_signals
 from bridge.nodes.report import Done, MissionLoaded, Ready, Report, Stats
+from bridge.nodes.uploaded import uploaded_flight
 from bridge.nodes.vehicle.missiontransfer import PROTOCOL_TIMEOUT_S, RETRY_S
 from bridge.record.runlog import write_text_atomic
-from missions.mission import with_plan
 from missions.planfiles import plan_text
 from params import ConfigError, dump_toml
 
@@ -247,10 +248,8 @@ def _fetch(link: MissionLink, flight: Flight, out: Path | None, empty: TransferS
         if not link.ask_home():
             return Fetched(None, st, "the vehicle did not say its home (GET_HOME_POSITION)")
         assert link.home is not None
-        try:
-            plan = plan_of(tuple(items), link.home, "the mission from the vehicle")
-            mission = with_plan(flight.mission, plan, flight.mission.name)
-            new = prepare(mission, param_at=flight.param_changes)  # --param-at: in this mission's time
+        try:  # the check the vehicle's start made (bsst sitl's step cap aside: the vehicle's, bsst vehicle --trace-cap)
+            plan, new = uploaded_flight(flight, items, link.home)
         except ConfigError as exc:
             return Fetched(None, st, f"the mission cannot be flown: {exc}")
         if out is not None:
