@@ -42,6 +42,7 @@ from bridge.nodes.vehicle.missionwatch import ItemWatch, goals_of
 from bridge.record.endedby import ended_by_command
 from bridge.record.events import RunEvent
 from bridge.record.interventions import interventions
+from bridge.record.runlog import trace_cap
 from bridge.record.summary import mission_transfer
 from bridge.session import instance_slot
 from missions import Mission, Sine
@@ -456,6 +457,53 @@ def test_mission_start_flies_a_small_plan_in_real_time(tmp_path, link, how):
     assert (out / "relay.json").exists() == bool(link)
 
 
+def test_a_session_denies_the_start_of_missions_its_controller_or_trace_would_refuse_and_flies_the_next(tmp_path):
+    """``bsst sitl --await-mission``: MISSION_START of a mission over the day a mission may last (30 holds of an
+    hour) and of one over the session's trace (three holds of 1000 s: 3000 s, over 2000 s at 250 Hz) is DENIED at
+    once, a STATUSTEXT saying why, and the session waits on; the small plan uploaded next is ACCEPTED and flown,
+    exit 0. Until the third wave's thirty-sixth session both were ACCEPTED: the first ended the session with the
+    controller's refusal (exit 1), the second was flown whole past the cap (630 731 rows for 2523 s)."""
+    hours = [M.MAVLink_mission_item_int_message(0, 0, 0, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_CMD_NAV_TAKEOFF, 0,
+                                                1, 0, 0, 0, math.nan, 473977420, 85455940, 10.0, 0)]
+    hours += [M.MAVLink_mission_item_int_message(0, 0, k, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                                                 M.MAV_CMD_NAV_LOITER_TIME, 0, 1, 3600, 0, 0, math.nan, 473977420,
+                                                 85455940, 10.0, 0) for k in range(1, 31)]
+    hours += [M.MAVLink_mission_item_int_message(0, 0, 31, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_CMD_NAV_LAND,
+                                                 0, 1, 0, 0, 0, math.nan, 473977420, 85455940, 0.0, 0)]
+    out = tmp_path / "denied"
+    with instance_slot() as n:
+        gcs = _ground_station(n)
+        sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--speed", "0", "--out", str(out),
+                         "--no-plots")
+        try:
+            target = _vehicle_of(gcs)
+            said = []
+            for items in (hours, _small_plan_items(plan=LONG_PLAN), _small_plan_items()):
+                _upload(gcs, target, items)
+                gcs.mav.command_long_send(*target, M.MAV_CMD_MISSION_START, 0, 0, 0, 0, 0, 0, 0, 0)
+                ack = gcs.recv_match(type="COMMAND_ACK", blocking=True, timeout=5,
+                                     condition=f"COMMAND_ACK.command=={M.MAV_CMD_MISSION_START}")
+                assert ack is not None, "no COMMAND_ACK for MISSION_START"
+                text, more = "", ack.result != M.MAV_RESULT_ACCEPTED
+                while more:  # its 50-character chunks, the last one shorter
+                    m = gcs.recv_match(type="STATUSTEXT", blocking=True, timeout=5)
+                    assert m is not None, text
+                    text, more = text + m.text, len(m.text) == 50
+                said.append((ack.result, text))
+            rc = sitl.p.wait(timeout=120)
+        finally:
+            gcs.close()
+            sitl.stop()
+    (hours_result, hours_text), (long_result, long_text), (small_result, _) = said
+    assert hours_result == M.MAV_RESULT_DENIED and hours_text.startswith("MISSION_START: the mission cannot be flown")
+    assert "32 items fly at least 108" in hours_text and "over the 86400 s a mission may last" in hours_text
+    assert long_result == M.MAV_RESULT_DENIED and "over the 500000 a run keeps in memory" in long_text, long_text
+    assert small_result == M.MAV_RESULT_ACCEPTED
+    summary = json.loads((out / "summary.json").read_text())
+    assert rc == clean_exit(summary) == 0, "\n".join(sitl.lines[-30:])
+    assert summary["outcome"] == "completed" and summary["mission_transfer"]["items"] == 3
+
+
 def test_the_link_model_acts_on_the_transfer_in_lockstep_and_the_flight_is_offlines(tmp_path):
     """``bsst sitl --await-mission --loss 30 --param-at 3:COM_OF_LOSS_T=1`` in lockstep, a pymavlink ground
     station's MISSION_START: the download crosses the mission's link model (seeded: requests are lost and asked
@@ -743,6 +791,86 @@ def test_an_arm_with_auto_mission_selected_outside_the_fence_starts_nothing_unti
         assert v.missions.start_requested and v.sim.arming_refused is None
     finally:
         v.close()
+        gcs.close()
+
+
+# a takeoff, three holds of 1000 s and a landing: 3000 s, within a mission's day, over bsst sitl's trace (2000 s)
+LONG_PLAN = """QGC WPL 110
+0\t1\t0\t16\t0\t0\t0\t0\t47.397742\t8.545594\t488.0\t1
+1\t0\t3\t22\t0\t0\t0\tnan\t47.397742\t8.545594\t1.5\t1
+""" + "".join(f"{k}\t0\t3\t19\t1000\t0\t0\tnan\t47.397742\t8.545594\t1.5\t1\n" for k in (2, 3, 4)) + \
+    "5\t0\t3\t21\t0\t0\t0\tnan\t47.397742\t8.545594\t0\t1\n"
+
+
+def _jump_items() -> list[Any]:
+    """SMALL_PLAN's items with a DO_JUMP for item 2 (held, as PX4 holds it; not flown here)."""
+    items = _small_plan_items(target=(1, 1))
+    items[2] = M.MAVLink_mission_item_int_message(1, 1, 2, M.MAV_FRAME_MISSION, M.MAV_CMD_DO_JUMP, 0, 1, 1, 2, 0, 0,
+                                                  0, 0, 0, 0)
+    return items
+
+
+def _upload_in_process(gcs: GcsSocket, v: Vehicle, plan: str | list[Any]) -> None:
+    items = _small_plan_items(target=(1, 1), plan=plan) if isinstance(plan, str) else plan
+    gcs.exchange(v, M.MAVLink_mission_count_message(1, 1, len(items), 0), "MISSION_REQUEST_INT")
+    for it in items[:-1]:
+        gcs.exchange(v, it, "MISSION_REQUEST_INT")
+    assert gcs.exchange(v, items[-1], "MISSION_ACK").type == M.MAV_MISSION_ACCEPTED
+
+
+def _refusal(gcs: GcsSocket, v: Vehicle, msg: Any) -> tuple[int, str]:
+    """``msg``'s COMMAND_ACK result and the STATUSTEXT that came with it (its 50-character chunks joined)."""
+    seen = gcs.exchange_until(v, msg, lambda m: m.get_type() == "STATUSTEXT" and len(m.text) < 50,
+                              "a STATUSTEXT saying why")
+    ack = next(m for m in seen if m.get_type() == "COMMAND_ACK")
+    return ack.result, "".join(m.text for m in seen if m.get_type() == "STATUSTEXT")
+
+
+def test_a_mission_that_cannot_be_flown_is_refused_by_name_at_auto_mission_mission_start_and_the_arm():
+    """As PX4's commander refuses MISSION_START and Mission mode without a valid mission (its navigator's check,
+    ``mission_result.valid``): a held mission the controller would refuse (a DO_JUMP) is refused at AUTO.MISSION
+    (TEMPORARILY_REJECTED, the mode not shown), at MISSION_START (DENIED), each STATUSTEXT naming what was asked and
+    the item; AUTO.MISSION selected with a good mission and then a bad one uploaded, the ground station's arm is
+    refused naming the arm. Until the third wave's thirty-sixth session AUTO.MISSION was ACCEPTED and the arm's
+    refusal said MISSION_START. A mission over bsst sitl's trace (``trace_cap``) is refused likewise, at once (its
+    least length, before it is timed); a vehicle without the cap (bsst vehicle alone) starts it."""
+    gcs = GcsSocket()
+    flight = prepare(Mission(Sine(), duration_s=5.0, name="start"))
+    mode = M.MAVLink_command_long_message(1, 1, M.MAV_CMD_DO_SET_MODE, 0, 1, 4, 4, 0, 0, 0, 0)
+    start = M.MAVLink_command_long_message(1, 1, M.MAV_CMD_MISSION_START, 0, 0, 0, 0, 0, 0, 0, 0)
+    arm = M.MAVLink_command_long_message(1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+    made = []
+
+    def vehicle(cap: bool) -> Vehicle:
+        made.append(Vehicle(flight, VehicleConfig(parse_address("udpin:127.0.0.1:0"), parse_address(gcs.url),
+                                                  await_mission=True, trace_cap=trace_cap() if cap else None)))
+        return made[-1]
+
+    try:
+        v = vehicle(True)
+        _upload_in_process(gcs, v, _jump_items())
+        result, text = _refusal(gcs, v, mode)
+        assert result == M.MAV_RESULT_TEMPORARILY_REJECTED, text
+        assert text.startswith("mode MISSION: the mission cannot be flown: the vehicle's mission: item 2 (DO_JUMP")
+        assert not v.missions.selected and v.streaming.heartbeat().custom_mode != (4 << 16) | (4 << 24)
+        result, text = _refusal(gcs, v, start)
+        assert result == M.MAV_RESULT_DENIED and text.startswith("MISSION_START: the mission cannot be flown: "), text
+        _upload_in_process(gcs, v, SMALL_PLAN)
+        assert gcs.exchange(v, mode, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED and v.missions.selected
+        _upload_in_process(gcs, v, _jump_items())  # (selected, disarmed: a new mission is taken, as on PX4)
+        result, text = _refusal(gcs, v, arm)
+        assert text.startswith("arm (mode MISSION): the mission cannot be flown: the vehicle's mission: item 2"), text
+        assert result == M.MAV_RESULT_DENIED and not v.missions.start_requested and not v.sim.armed
+        _upload_in_process(gcs, v, LONG_PLAN)
+        result, text = _refusal(gcs, v, start)
+        assert result == M.MAV_RESULT_DENIED and "duration_s: at least 300" in text, text
+        assert "over the 500000 a run keeps in memory for its summary" in text, text
+        plain = vehicle(False)
+        _upload_in_process(gcs, plain, LONG_PLAN)
+        assert gcs.exchange(plain, start, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
+    finally:
+        for v in made:
+            v.close()
         gcs.close()
 
 

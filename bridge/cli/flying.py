@@ -340,6 +340,9 @@ def add_sitl_commands(sub: Any) -> None:
     p.add_argument("--home", type=_home, metavar="LAT,LON,ALT", help="home: degrees, degrees, m AMSL")
     p.add_argument("--await-mission", action="store_true",
                    help="take MISSION_START and AUTO.MISSION: a ground station's mission, flown by the controller")
+    p.add_argument("--trace-cap", action="store_true",
+                   help="with --await-mission: refuse at its start a mission longer than bsst sitl keeps in memory "
+                        "(500 000 control steps; bsst sitl passes it)")
     p.add_argument("--gate", metavar="FILE", help="lockstep: step on a fleet's shared clock with the vehicles FILE "
                                                   "names (bsst sitl --vehicles writes it; docs/swarm.md)")
     _spin_option(p)
@@ -416,12 +419,15 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
     from bridge.mavlink.telemetry import Home  # lazy: start-up time
     from bridge.nodes.vehicle import VehicleConfig, run_vehicle  # lazy: start-up time
     from bridge.nodes.vehicle.gate import GateConfig  # lazy: start-up time
+    from bridge.record.runlog import trace_cap  # lazy: start-up time
 
     if args.realtime and (why := realtime_speed_problem(args.speed)):  # as bsst sitl refuses it
         raise ConfigError(why)
     if args.gate and args.realtime:
         raise ConfigError("--gate with --realtime: a fleet's shared step clock is lockstep's (real time keeps the "
                           "wall clock)")
+    if args.trace_cap and not args.await_mission:
+        raise ConfigError("--trace-cap: only with --await-mission (it caps the mission a ground station starts)")
     refuse_idle_noise(args, args.mission)
     flight = prepare(args.mission or at_rest(), overrides_from_args(args))
     n = args.instance
@@ -445,7 +451,7 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
                         clock="realtime" if args.realtime else "lockstep",
                         speed=lockstep_pace(args.speed, realtime=args.realtime, await_mission=args.await_mission),
                         home=Home(*args.home) if args.home else Home(), key=_key(args), controller_from=pin,
-                        await_mission=args.await_mission,
+                        await_mission=args.await_mission, trace_cap=trace_cap() if args.trace_cap else None,
                         gate=GateConfig.load(args.gate) if args.gate else None,
                         **({"spin_s": args.spin} if args.spin is not None else {}))
     return run_vehicle(flight, cfg, args.out, args.overwrite)

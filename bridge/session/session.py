@@ -189,8 +189,8 @@ class Session:
             argv += ["--speed", repr(self.speed)]
         elif not self.realtime:  # as fast as it goes, said: the vehicle's own default paces a ground station's mission
             argv += ["--speed", "0"]
-        if self.await_mission:
-            argv.append("--await-mission")
+        if self.await_mission:  # the session keeps the trace in memory: a mission too long for it refused at its start
+            argv += ["--await-mission", "--trace-cap"]
         if self.gate is not None:  # a fleet: its processes outnumber the cores, so none polls before it sleeps
             argv += ["--gate", str(self.gate), "--spin", "0"]
         keyarg = ["--key", str(self.key)] if self.key is not None else []

@@ -14,6 +14,7 @@ from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, VEHICLE
 from bridge.mavlink.receive import Rejections
 from bridge.mavlink.signing import Signing
 from bridge.nodes.vehicle.gate import GateConfig
+from missions.steps import StepCap
 
 CLOCKS = ("lockstep", "realtime")
 
@@ -41,6 +42,9 @@ class VehicleConfig:
     # a ground station's mission is flown (bsst sitl --await-mission): MISSION_START and AUTO.MISSION are taken,
     # and the offboard controller, which downloads the mission, flies it (docs/missions.md, "From a ground station")
     await_mission: bool = False
+    # the step cap of a session that keeps the mission's trace in memory (bsst sitl's: bsst vehicle --trace-cap):
+    # a ground station's mission over it is refused at its start (None: none, the rows stream to disk)
+    trace_cap: StepCap | None = None
     # a lockstep fleet's shared step clock (bsst sitl --vehicles, :mod:`bridge.nodes.vehicle.gate`); None: alone
     gate: GateConfig | None = None
 

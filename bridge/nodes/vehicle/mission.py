@@ -33,15 +33,16 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.autopilot.simvehicle import LAND, OFFBOARD, TAKEOFF, SimVehicle
 from bridge.autopilot.vehicleevents import Sender
+from bridge.core.flight import Flight
 from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import Endpoint
 from bridge.mavlink.modes import mode_name
 from bridge.nodes.vehicle.authority import Authority, attribute
 from bridge.nodes.vehicle.missiontransfer import LinkTransfer, Mission, Partner
-from bridge.nodes.vehicle.missionwatch import Goal, ItemWatch, goals_of
+from bridge.nodes.vehicle.missionwatch import Goal, ItemWatch
+from bridge.nodes.vehicle.startcheck import WAIT_S, StartCheck
 from bridge.nodes.vehicle.streams import StatusTexts
 from bridge.nodes.vehicle.zones import HeldZones
-from params import ConfigError
 
 REACHED_REPEATS = 10  # PX4 sends MISSION_ITEM_REACHED once more at each of its next 10 1 Hz ticks
 REACHED_S = 1.0
@@ -52,6 +53,8 @@ START_COMMAND = "MISSION_START"  # how a ground station started the mission (sum
 START_ARM = "AUTO.MISSION, then arm"
 _ZONES = {mavlink.MAV_MISSION_TYPE_FENCE: "fence", mavlink.MAV_MISSION_TYPE_RALLY: "rally points"}
 START_ARMED = "arm, then AUTO.MISSION"  # armed in HOLD on the ground first (MAVSDK's arm(), then start_mission())
+# what each start is called in its refusal: the command or mode the ground station sent
+_ASKED = {START_COMMAND: "MISSION_START", START_ARM: "arm (mode MISSION)", START_ARMED: "mode MISSION (armed in HOLD)"}
 
 
 def in_air_refusal(what: str, mode: str) -> str:
@@ -67,8 +70,9 @@ class MissionManager:
     """Answers the mission protocol for one vehicle and holds its mission (:attr:`mission`)."""
 
     def __init__(self, sim: SimVehicle, authority: Authority, texts: StatusTexts,
-                 broadcast: Callable[[list[Any]], None], refused: Callable[[str], None]) -> None:
+                 broadcast: Callable[[list[Any]], None], refused: Callable[[str], None], flight: Flight) -> None:
         self.sim = sim
+        self.flight = flight  # the settings a ground station's mission is flown with (its start check's)
         self.authority = authority
         self.sysid = authority.cfg.sysid
         self.texts = texts
@@ -89,6 +93,7 @@ class MissionManager:
         self._goals: tuple[Goal, ...] = ()  # the started mission's items, where and how each is reached
         self.home = (authority.cfg.home.lat, authority.cfg.home.lon, authority.cfg.home.alt)
         self.zones = HeldZones(sim, self.home)  # an uploaded fence and rally points
+        self._check: StartCheck | None = None  # the last check begun (.startcheck): one runs at a time
 
     # -- a ground station's start (await_mission) --------------------------------------------------------
     def select(self, armed: bool) -> str | None:
@@ -121,18 +126,17 @@ class MissionManager:
 
     def start(self, by: Sender, first: float, how: str = START_COMMAND) -> str | None:
         """A ground station starts the mission (``how``: :data:`START_COMMAND`, MAV_CMD_MISSION_START with its
-        first item ``first``, or :data:`START_ARM`, an arm with AUTO.MISSION selected): a ``mission`` event, the
-        vehicle shows AUTO.MISSION, and the controller is to fly it from item 0 (None), or why not (the mission
-        is checked as the controller will fly it). :attr:`started` says how and by whom (summary.json)."""
+        first item ``first``, :data:`START_ARM`, an arm with AUTO.MISSION selected, or :data:`START_ARMED`): a
+        ``mission`` event, the vehicle shows AUTO.MISSION, and the controller is to fly it from item 0 (None), or
+        why not, naming what was asked (the mission is checked as the controller will fly it: :mod:`.startcheck`).
+        :attr:`started` says how and by whom (summary.json)."""
         if first not in (0.0, -1.0):  # PX4's commander: DENIED unless finite, -1 or more, and an item
             return f"MISSION_START: only from item 0 (the whole mission; -1: the current one), got first item {first:g}"
-        why = self._startable("MISSION_START")
+        why = self._startable(_ASKED[how])
         if why is not None:
             return why
-        try:
-            goals = goals_of(self.mission.items, self.home)
-        except ConfigError as exc:
-            return f"MISSION_START: the mission cannot be flown: {exc}"
+        goals = self._goals_checked()
+        assert goals is not None  # (_startable said it is done)
         self.watch = None
         self._goals = goals
         self.selected = self.start_requested = True
@@ -153,7 +157,38 @@ class MissionManager:
         # download begins the moment AUTO.MISSION shows (MAVSDK's arm then comes during it, as a loaded CI showed)
         if self.upload_link is not None:
             return f"{what}: a mission upload is on"
+        if not self.authority.cfg.await_mission:
+            return None  # (never started here: MISSION_START is UNSUPPORTED, AUTO.MISSION refused before)
+        got = self._goals_checked(WAIT_S)
+        if got is None:
+            assert self._check is not None
+            return (f"{what}: the mission ({len(self.mission.items)} items) is still being checked as the controller "
+                    f"will fly it ({time.monotonic() - self._check.began:.0f} s so far): ask again once it is done")
+        if isinstance(got, str):  # PX4: mission_result.valid false, MISSION_START and Mission mode refused
+            return f"{what}: the mission cannot be flown: {got}"
         return None
+
+    def _goals_checked(self, wait_s: float = 0.0) -> tuple[Goal, ...] | str | None:
+        """The held mission's check (:mod:`.startcheck`): its goals, why it cannot be flown, or None while it
+        runs (waited for ``wait_s`` at most)."""
+        deadline = time.monotonic() + wait_s
+        if self._check is not None and self._check.items is not self.mission.items:
+            self._check.wait(wait_s)  # an earlier mission's check holds the thread: this one's begins after it
+        self.check_held()
+        check = self._check
+        if check is None or check.items is not self.mission.items:
+            return None
+        return check.result(max(0.0, deadline - time.monotonic()))
+
+    def check_held(self) -> None:
+        """Begin the held mission's check unless it has begun or another runs (then at a later tick): the one
+        thread it takes stays on the newest mission (an upload while one is checked waits for it)."""
+        check = self._check
+        if not self.authority.cfg.await_mission or not self.mission.items:
+            return
+        if check is not None and (check.items is self.mission.items or check.running()):
+            return
+        self._check = StartCheck(self.mission.items, self.home, self.flight, self.authority.cfg.trace_cap)
 
     def shows_mission(self, armed: bool, offboard: bool) -> bool:
         """Whether the vehicle shows AUTO.MISSION: selected or started and disarmed, started armed in HOLD on the
@@ -250,6 +285,7 @@ class MissionManager:
         """Each link's transfers (items requested again, silent ones ended); MISSION_ITEM_REACHED repeated."""
         for transfer in self.transfers.values():
             transfer.tick(now)
+        self.check_held()
         if self._reached_left > 0 and now >= self._reached_at:
             self._reached_left -= 1
             self._reached_at = now + REACHED_S
@@ -284,6 +320,7 @@ class MissionManager:
             self._flight_over(new_items=mission.items is not self.mission.items)
             self.mission = mission
             self.chosen = mission.current
+            self.check_held()  # as PX4's navigator checks a mission once it is stored
         else:
             why = self.zones.accept(mission, mission_type)
             if why is not None:

@@ -109,7 +109,7 @@ class Vehicle:
         self._statustext = StatusTexts()
         self.params = ParamService(self.sim, self.authority, self._statustext, self._reject, self._refused)
         self.missions = MissionManager(self.sim, self.authority, self._statustext, self._to_ground_stations,
-                                       self._refused)
+                                       self._refused, flight)
         self.streaming = Streaming(self.sim, flight, cfg, self.missions, self.clock, lambda: self.t, now, load_at)
         self.announcer = Announcer(self.sim, self.authority, self.link, self.endpoints, self._report,
                                    self._statustext, self.streaming.heartbeat, self.params.value_of)
