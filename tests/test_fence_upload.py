@@ -140,6 +140,35 @@ def test_the_geofence_policy_fails_on_the_vehicles_geofence_event() -> None:
     assert (v.ok, v.t, v.why) == (False, 0.5, "outside the uploaded fence: x")
 
 
+def test_a_fence_changed_in_flight_ends_the_trace_check_against_the_starts_fence_and_the_verdict_says_so() -> None:
+    """The mission's fence is the one at the start (a ground station's, as the controller downloaded it): a fence
+    uploaded in flight replaces it in the vehicle, so the rows after its ``mission`` event are judged by the
+    vehicle's watch (its ``geofence`` event), not against the start's fence, and the verdict that holds says so
+    (until the third wave's thirty-sixth session the whole trace was judged against the start's fence). Before
+    the change the start's fence still judges; an upload before the flight's arm changes nothing here."""
+    t = np.arange(0.0, 1.0, 0.004)
+    trace = {"x": np.where(t >= 0.6, 5.0, 0.0), "y": np.zeros_like(t)}  # out of the start's square at 0.6 s
+    rules = Rules(rate_hz=250.0, timeout_s=0.5, clock="lockstep", geofence=Geofence((Zone(True, points=(
+        (-1.0, 1.0), (1.0, 1.0), (1.0, -1.0), (-1.0, -1.0))),)))
+    upload = "fence uploaded 4 items in 0.01 s, 0 requested again"
+    gcs_arm = RunEvent.at(0.0, "armed", "armed, HOLD", "vehicle", pre_start=True)  # awaiting the start: not flying
+    arm = RunEvent.at(0.0, "armed", "armed, offboard control", "vehicle")
+    bigger = RunEvent.at(0.5, "mission", upload, "vehicle")
+    assert geofence_kept(t, trace, rules).t == pytest.approx(0.6)
+    v = geofence_kept(t, trace, rules, [arm, bigger])
+    assert v.ok and v.as_dict()["note"].startswith("the fence changed in flight at t=0.500 s (fence uploaded 4"), v
+    at_arm = RunEvent.at(0.0, "mission", upload, "vehicle")  # (right after the arm: still t = 0)
+    assert geofence_kept(t, trace, rules, [arm, at_arm]).ok
+    early = [RunEvent.at(0.0, "mission", upload, "vehicle"), gcs_arm, RunEvent.at(0.0, "mission", upload, "vehicle"),
+             arm]  # (before the flight's arm: the fence it started with)
+    assert not geofence_kept(t, trace, rules, early).ok
+    late = RunEvent.at(0.7, "mission", "fence cleared", "vehicle")
+    assert geofence_kept(t, trace, rules, [arm, late]).t == pytest.approx(0.6)  # left the start's fence before it
+    left = RunEvent.at(0.8, "geofence", "outside its fence: x")
+    assert (geofence_kept(t, trace, rules, [arm, bigger, left]).t,
+            geofence_kept(t, trace, rules).as_dict().get("note")) == (0.8, None)
+
+
 def test_gf_max_limits_are_px4s_distances_from_home() -> None:
     """Horizontal distance from home and height above it, each against its limit; 0 is no limit."""
     home = (1.0, 2.0, 0.5)

@@ -75,6 +75,9 @@ POLICIES: dict[str, str] = {
 EPS_S = 1e-5  # s: event times are rounded to 1 us; a physics step is at least 100 us
 ZERO_N = 1e-9  # N: a realised wrench this small is zero
 CONTROLLER_ID = (200, 191)  # the configured controller's sysid, compid (bridge.mavlink.endpoint's default)
+# how the vehicle's ``mission`` event of a fence uploaded or cleared over the mission protocol begins
+# (bridge.nodes.vehicle.mission ``accept``)
+FENCE_CHANGED = "fence "
 _ENDS_OFFBOARD = ("failsafe", "disarmed", "diverged", "end")  # (``end``: the vehicle flies the mission's end action)
 
 
@@ -110,12 +113,15 @@ class Verdict:
     ok: bool
     t: float | None = None
     why: str | None = None
+    note: str | None = None  # what a verdict that holds rests on, when it is not the whole run (geofence_kept)
 
     def as_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"name": self.name, "ok": self.ok}
         if not self.ok:
             out["t"] = None if self.t is None or not math.isfinite(self.t) else round(self.t, 6)
             out["why"] = self.why
+        elif self.note is not None:
+            out["note"] = self.note
         return out
 
 
@@ -330,15 +336,36 @@ def lockstep_recorded(events: Sequence[RunEvent], rules: Rules, record: Mapping[
 def geofence_kept(t: np.ndarray, trace: Mapping[str, Any], rules: Rules, events: Sequence[RunEvent] = ()) -> Verdict:
     """Every row's position (``x``, ``y``) inside the mission's geofence (:mod:`missions.geofence`), and no
     ``geofence`` event of the vehicle (outside a fence a ground station uploaded: bridge.nodes.vehicle.zones); ok
-    without either."""
+    without either. The mission's fence is the one at the start: a fence a ground station uploads (or clears) in
+    flight replaces it in the vehicle (its ``mission`` event), so rows from then on are the vehicle's watch's to
+    judge (its ``geofence`` event), and the verdict says so (``note``)."""
     name = "geofence"
     left = next((e for e in events if e.kind == "geofence"), None)
-    breach = rules.geofence.first_breach(t, trace["x"], trace["y"]) if rules.geofence is not None and len(t) else None
+    changed = _fence_changed_in_flight(events)
+    n = len(t) if changed is None else int(np.searchsorted(t, changed.t))  # the rows before it (in time order)
+    breach = rules.geofence.first_breach(t[:n], np.asarray(trace["x"])[:n], np.asarray(trace["y"])[:n]) \
+        if rules.geofence is not None and n else None
     if left is not None and (breach is None or (left.t is not None and left.t < breach[0])):
         return Verdict(name, False, left.t, left.text)
-    if breach is None:
-        return Verdict(name, True)
-    return Verdict(name, False, breach[0], f"{breach[1]} (the vehicle acts by GF_ACTION)")
+    if breach is not None:
+        return Verdict(name, False, breach[0], f"{breach[1]} (the vehicle acts by GF_ACTION)")
+    note = None if changed is None else (
+        f"the fence changed in flight at t={changed.t:.3f} s ({changed.shown}): the trace is judged against the "
+        "mission's fence (the one at the start) until then, by the vehicle's watch of the new one after")
+    return Verdict(name, True, note=note)
+
+
+def _fence_changed_in_flight(events: Sequence[RunEvent]) -> RunEvent | None:
+    """The vehicle's first event of a fence uploaded or cleared after its flight's arm (its first ``armed`` event
+    that is not a ground station's arm awaiting a mission's start): the fence before it is the one the flight
+    started with (``--await-mission``: the one the controller downloaded before that arm)."""
+    flying = False
+    for e in events:
+        if e.kind == "armed" and not e.pre_start:
+            flying = True
+        elif flying and e.kind == "mission" and e.text.startswith(FENCE_CHANGED):
+            return e
+    return None
 
 
 def touchdown_kept(events: Sequence[RunEvent]) -> Verdict:
