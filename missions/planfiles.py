@@ -89,6 +89,7 @@ class PlanFile:
     fence: Any = None  # missions.geofence.Geofence of a .plan's geoFence (None: none drawn)
     rally: Any = None  # a .plan's rallyPoints object, as read (missions.rally.rally_from_plan reads it)
     nan_word: str = "nan"  # how the file writes a value not given: a .plan's JSON null, a waypoint file's nan
+    geo_fence: Any = None  # the geoFence object ``fence`` was read from (plan_text writes it back; None: none)
 
     def shown(self, v: float) -> str:
         """A value of an item as its file writes it (NaN as ``nan_word``)."""
@@ -205,7 +206,7 @@ def read_qgc_plan(text: str, source: str) -> PlanFile:
     items = tuple(_plan_item(source, i, x) for i, x in enumerate(raw))
     fence = geofence_from_plan(data.get("geoFence"), Home(lat, lon, alt), source)
     return PlanFile(source, (lat, lon, alt), items, hover if math.isfinite(hover) else None, fence,
-                    data.get("rallyPoints"), "null")
+                    data.get("rallyPoints"), "null", data.get("geoFence"))
 
 
 def _plan_item(source: str, index: int, x: Any) -> Item:
@@ -312,15 +313,19 @@ def check_home(source: str, lat: float, lon: float, alt: float, key: str) -> Non
 
 
 def plan_from_items(source: str, home: tuple[float, float, float],
-                    items: list[tuple[int, int, int, tuple[float, ...], int]]) -> PlanFile:
+                    items: list[tuple[int, int, int, tuple[float, ...], int]], geo_fence: Any = None,
+                    rally: Any = None) -> PlanFile:
     """A mission that came over MAVLink as a plan: ``home`` (deg, deg, m AMSL) and per item (seq, MAV_CMD,
     MAV_FRAME, (param1..4, lat deg, lon deg, alt m), autocontinue); checked as a file's items are (the
-    refusal names ``item SEQ`` and its command)."""
+    refusal names ``item SEQ`` and its command); with the fence and rally points that came with it, as a
+    ``.plan``'s ``geoFence`` and ``rallyPoints`` objects (read as a file's are)."""
     check_home(source, *home, "the vehicle's home")
     if not items:
         raise ConfigError(f"{source}: the mission has no items")
+    fence = geofence_from_plan(geo_fence, Home(*home), source)
     return PlanFile(source, home, tuple(_check_item(source, Item(f"item {seq}", cmd, frame, *vals), auto == 1)
-                                        for seq, cmd, frame, vals, auto in items))
+                                        for seq, cmd, frame, vals, auto in items), fence=fence, rally=rally,
+                    geo_fence=geo_fence)
 
 
 def _json_number(v: float) -> float | int | None:
@@ -332,7 +337,8 @@ def _json_number(v: float) -> float | int | None:
 
 def plan_text(plan: PlanFile) -> str:
     """``plan`` as a QGroundControl ``.plan`` file's text (its documented schema; read back by
-    :func:`read_qgc_plan` to the same items): every item a SimpleItem, altitude mode by its frame."""
+    :func:`read_qgc_plan` to the same items, fence and rally points): every item a SimpleItem, altitude mode by
+    its frame."""
     def item(n: int, it: Item) -> dict[str, Any]:
         params = [_json_number(v) for v in (it.p1, it.p2, it.p3, it.p4, it.lat, it.lon, it.alt)]
         out: dict[str, Any] = {"autoContinue": True, "command": it.command, "doJumpId": n + 1, "frame": it.frame,
@@ -346,8 +352,12 @@ def plan_text(plan: PlanFile) -> str:
                "hoverSpeed": _json_number(plan.cruise_m_s) if plan.cruise_m_s is not None else 5,
                "items": [item(n, it) for n, it in enumerate(plan.items)],
                "plannedHomePosition": [_json_number(v) for v in plan.home], "vehicleType": 2, "version": 2}
-    data = {"fileType": "Plan", "geoFence": {"circles": [], "polygons": [], "version": 2},
-            "groundStation": "bsst", "mission": mission, "rallyPoints": {"points": [], "version": 2},
+    zones = plan.geo_fence if isinstance(plan.geo_fence, dict) else {}  # (read: checked by geofence_from_plan)
+    fence = {key: [{**{k: z[k] for k in ("inclusion", shape)}, "version": 1} for z in zones.get(key, [])]
+             for key, shape in (("circles", "circle"), ("polygons", "polygon"))}
+    points = plan.rally.get("points", []) if isinstance(plan.rally, dict) else []
+    data = {"fileType": "Plan", "geoFence": {**fence, "version": 2},
+            "groundStation": "bsst", "mission": mission, "rallyPoints": {"points": points, "version": 2},
             "version": 1}
     return json.dumps(data, indent=4, sort_keys=True) + "\n"
 

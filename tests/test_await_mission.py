@@ -24,6 +24,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
@@ -190,13 +191,18 @@ def test_mavsdk_flies_a_plan_file_through_await_mission_as_the_file_flies(tmp_pa
     assert back == ["MISSION (disarmed after LAND: PX4 takes the last mode it arms in; armed in it next) [by vehicle]"]
 
 
-def test_mavsdk_uploads_a_plans_fence_and_rally_points_and_the_flight_leaving_the_fence_fails(tmp_path):
+@pytest.mark.parametrize("action", [5, 0], ids=["gf-action-5-land", "gf-action-0-not-watched"])
+def test_mavsdk_uploads_a_plans_fence_and_rally_points_and_the_flight_leaving_the_fence_fails(tmp_path, action):
     """MAVSDK MissionRaw uploads the L plan's mission, and its geoFence (an inclusion rectangle about the north
     leg only) and rallyPoints as the fence's and rally points' mission types, reads both back item for item, and
-    flies the mission: the east leg leaves the fence, so the vehicle says so (its ``geofence`` event, once), lands
-    there (``--param GF_ACTION=5``; 2, PX4's default, would hold until the session gives up: its failsafe, outcome
-    ``failsafe``) and ``bsst sitl`` exits 1 with the geofence policy failing at that time. Each upload a
-    ``mission`` event naming MAVSDK."""
+    flies the mission: the east leg leaves the fence, so the geofence policy fails at the first row outside and
+    ``bsst sitl`` exits 1. With ``--param GF_ACTION=5`` the vehicle says so (its ``geofence`` event, once) and
+    lands there (2, PX4's default, would hold until the session gives up: its failsafe, outcome ``failsafe``);
+    with 0 it does not watch and flies on to the mission's end, and the run still says where it left the fence
+    (it said nothing until the third wave's thirty-sixth session: the run's record left the uploaded fence out).
+    Each upload a ``mission`` event naming MAVSDK. The controller downloads the fence and rally points with the
+    mission, so the run's mission.plan and mission.toml hold them as flown, and ``bsst sim`` of that mission.toml
+    flies the session's flight to its outcome and the same breach."""
     def fenced(data: dict) -> None:
         data["geoFence"]["polygons"] = [{"inclusion": True, "version": 1, "polygon": [
             [47.39770, 8.54555], [47.39770, 8.54564], [47.39790, 8.54564], [47.39790, 8.54555]]}]
@@ -207,24 +213,39 @@ def test_mavsdk_uploads_a_plans_fence_and_rally_points_and_the_flight_leaving_th
     plan.write_text(json.dumps(data))
     out = tmp_path / "run"
     with instance_slot() as n:
-        gs = _mavsdk_flies(n, plan, out, 1, "zones", sitl_args=("--param", "GF_ACTION=5"))
+        gs = _mavsdk_flies(n, plan, out, 1, "zones", sitl_args=("--param", f"GF_ACTION={action}"))
     assert gs["fence_upload"] == gs["rally_upload"] == gs["upload"] == "SUCCESS", gs
-    assert gs["landed_early"] and not gs["finished"], gs  # MAVSDK saw it land, the mission unfinished
+    assert gs["landed_early"] != gs["finished"] == (action == 0), gs  # MAVSDK saw it land early, or finish
     assert len(gs["fence_sent"]) == 4 and gs["fence_got"] == gs["fence_sent"], gs
     assert len(gs["rally_sent"]) == 1 and gs["rally_got"] == gs["rally_sent"], gs
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["outcome"] == "failsafe", summary["ended_by"]
+    assert summary["outcome"] == ("completed" if action == 0 else "failsafe"), summary["ended_by"]
     fence = next(p for p in summary["policies"] if p["name"] == "geofence")
-    assert not fence["ok"] and "outside its fence" in fence["why"] and "GF_ACTION = 5: land" in fence["why"], fence
+    assert not fence["ok"] and "outside every inclusion zone of the geofence" in fence["why"], fence
     events = (out / "events.log").read_text()
     kinds = [ln.split(" ", 2)[1] for ln in events.splitlines() if ln.startswith("t=")]
-    assert kinds.count("geofence:") == 1 and "fence uploaded 4 items" in events, events
-    assert "geofence: outside its fence" in events and ": land here [vehicle]" in events, events
-    assert "disarmed: landed: disarmed" in events, events
-    assert "rally points uploaded 1 items" in events
+    assert kinds.count("geofence:") == (action != 0) and "fence uploaded 4 items" in events, events
+    if action:
+        assert "geofence: outside its fence" in events and ": land here [vehicle]" in events, events
+        assert "GF_ACTION = 5: land" in events and "disarmed: landed: disarmed" in events, events
+    assert "rally points uploaded 1 items" in events and "a fence of 4 items and 1 rally points" in events, events
     edge = Home().paper(47.39780, 8.54564, 488.0)[1]  # the fence's east side (y west, m)
     east = next(t for t, x, y, z in _trace(out / "trace.csv") if y < edge)
     assert abs(fence["t"] - east) <= 0.005, (fence["t"], east)  # (the event: after the step, at its end)
+    kept = json.loads((out / "mission.plan").read_text())  # the fence and rally points as uploaded
+    assert [(z["inclusion"], z["polygon"]) for z in kept["geoFence"]["polygons"]] == [
+        (True, data["geoFence"]["polygons"][0]["polygon"])] and kept["geoFence"]["circles"] == []
+    assert kept["rallyPoints"]["points"] == data["rallyPoints"]["points"], kept["rallyPoints"]
+    flown = prepare(out / "mission.toml").mission
+    want = prepare(plan).mission
+    assert flown.geofence is not None and len(flown.geofence.zones) == 1 and len(flown.rally) == 1
+    assert np.allclose(flown.geofence.zones[0].points, want.geofence.zones[0].points, atol=1e-6)
+    assert np.allclose(flown.rally, want.rally, atol=1e-6)
+    again = run_bsst("sim", out / "mission.toml", "--out", tmp_path / "again", "--no-plots")
+    assert again.returncode == 1, again.stderr
+    offline = json.loads((tmp_path / "again" / "summary.json").read_text())
+    assert offline["outcome"] == summary["outcome"], offline["ended_by"]
+    assert next(p for p in offline["policies"] if p["name"] == "geofence")["t"] == fence["t"], offline["policies"]
 
 
 MAVSDK_GEOFENCE_SCRIPT = r"""

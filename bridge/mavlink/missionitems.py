@@ -198,12 +198,14 @@ class TransferStats:
         return asdict(self)
 
 
-def plan_of(items: tuple[MissionItem, ...], home: tuple[float, float, float], source: str) -> PlanFile:
+def plan_of(items: tuple[MissionItem, ...], home: tuple[float, float, float], source: str, geo_fence: Any = None,
+            rally: Any = None) -> PlanFile:
     """A held mission as a plan to fly, about ``home`` (deg, deg, m AMSL): checked as a plan file's items
-    are (:func:`missions.planfiles.plan_from_items`: a :class:`params.ConfigError` naming the item)."""
+    are (:func:`missions.planfiles.plan_from_items`: a :class:`params.ConfigError` naming the item); with the
+    held fence and rally points as a plan's ``geoFence`` and ``rallyPoints`` (bridge.mavlink.fenceitems)."""
     rows = []
     for it in items:
         scale = DEG_E7 if it.global_frame else 1.0
         rows.append((it.seq, it.command, it.frame, (it.param1, it.param2, it.param3, it.param4, it.x / scale,
                                                     it.y / scale, it.z), it.autocontinue))
-    return plan_from_items(source, home, rows)
+    return plan_from_items(source, home, rows, geo_fence, rally)

@@ -19,6 +19,7 @@ even at its speed limits is refused in milliseconds, before it is timed.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 from bridge.core.flight import Flight, prepare
 from bridge.mavlink.missionitems import MissionItem, plan_of
@@ -29,11 +30,12 @@ from params import ConfigError
 
 
 def uploaded_flight(flight: Flight, items: Sequence[MissionItem], home: tuple[float, float, float],
-                    cap: StepCap | None = None, source: str = "the mission from the vehicle"
-                    ) -> tuple[PlanFile, Flight]:
-    """``items``' plan about ``home``, and ``flight``'s settings flying it (see the module docstring); ConfigError
-    naming ``source`` when they cannot be flown."""
-    plan = plan_of(tuple(items), home, source)
+                    cap: StepCap | None = None, source: str = "the mission from the vehicle", geo_fence: Any = None,
+                    rally: Any = None) -> tuple[PlanFile, Flight]:
+    """``items``' plan about ``home`` (with the held fence and rally points as its ``geoFence`` and ``rallyPoints``,
+    :func:`~bridge.mavlink.missionitems.plan_of`), and ``flight``'s settings flying it (see the module docstring);
+    ConfigError naming ``source`` when they cannot be flown."""
+    plan = plan_of(tuple(items), home, source, geo_fence, rally)
     mission = with_plan(flight.mission, plan, flight.mission.name, cap)
     new = prepare(mission, param_at=flight.param_changes)  # --param-at: in this mission's time
     points = len(getattr(new.mission.trajectory, "knots", ()))

@@ -8,8 +8,9 @@ In:  the vehicle's messages before the flight: HEARTBEAT (``custom_mode`` AUTO.M
 Out: REQUEST_MESSAGE (MISSION_CURRENT), MISSION_REQUEST_LIST, MISSION_REQUEST_INT (again after
      :data:`~bridge.nodes.vehicle.mission.RETRY_S` unanswered), the final MISSION_ACK, GET_HOME_POSITION; the
      mission's :class:`~bridge.core.flight.Flight` (the settings flying the plan's smooth trajectory); in the
-     controller's directory ``mission.plan`` (the items as a QGroundControl plan) and ``mission.toml`` (the
-     mission as flown, resolved: ``kind = "smooth"``); the download's
+     controller's directory ``mission.plan`` (the items, fence and rally points as a QGroundControl plan) and
+     ``mission.toml`` (the mission as flown, resolved: ``kind = "smooth"``, its ``[geofence]`` and ``[rally]``
+     those the vehicle held at the start); the mission download's
      :class:`~bridge.mavlink.missionitems.TransferStats` (items, requests, requests again, wall time s, result)
 
 The download is a ground station's (the vehicle is PX4's server, :mod:`bridge.nodes.vehicle.mission`: it sends
@@ -18,7 +19,11 @@ turn, each sent again after PX4's retry time while its item does not come; a tra
 for PX4's protocol timeout fails. Each item is checked by the vehicle's own parser
 (:func:`~bridge.mavlink.missionitems.parse_item`) and the mission by the plan files' rules
 (:func:`~bridge.mavlink.missionitems.plan_of`), about the vehicle's home (its HOME_POSITION), and built and
-checked as the vehicle checked it at its start (:func:`~bridge.nodes.uploaded.uploaded_flight`).
+checked as the vehicle checked it at its start (:func:`~bridge.nodes.uploaded.uploaded_flight`). Then the fence and
+the rally points (MAV_MISSION_TYPE_FENCE, _RALLY), as a ground station downloads them, through the vehicle's
+parser of each (:mod:`bridge.mavlink.fenceitems`), read as a plan's ``geoFence`` and ``rallyPoints``: the
+mission as flown holds them, so replaying it flies the same flight and the run's ``geofence`` policy judges the
+trace against that fence (one uploaded in flight is the vehicle's event, not this record's).
 
 The link model: in lockstep the mission's ``[link]`` acts on the transfer here, both directions (up: what the
 controller sends, down: what the vehicle sends), on the transfer's own clock (s of wall time from its first
@@ -39,6 +44,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.core.flight import Flight
 from bridge.link.model import LinkImpairment
+from bridge.mavlink.fenceitems import FENCE, RALLY, fence_plan, parse_zone_item, rally_plan
 from bridge.mavlink.missionitems import ItemRefused, MissionItem, TransferStats, parse_item
 from bridge.mavlink.modes import MAIN_AUTO, SUB_MISSION, custom_mode
 from bridge.nodes.offboard.config import OffboardConfig
@@ -134,10 +140,13 @@ class MissionLink(OffboardLink):
         due = [d for d in (self._models[0].next_due(), self._models[1].next_due()) if d is not None]
         return self._t0 + min(due) if due else float("inf")
 
-    def download(self) -> tuple[list[MissionItem], TransferStats]:
-        """The vehicle's mission, item by item (see the module docstring), and the transfer's figures."""
+    def download(self, mission_type: int = MISSION) -> tuple[list[MissionItem], TransferStats]:
+        """The vehicle's items of ``mission_type`` (the mission, its fence or its rally points), item by item
+        (see the module docstring), each read by the vehicle's own parser of that type, and the transfer's
+        figures."""
         st = TransferStats()
-        self._t0 = start = time.monotonic()
+        start = time.monotonic()
+        self._t0 = self._t0 or start  # the link models' clock: from the first transfer's first request
         target = (self.vsys or 0, self.vcomp)
         items: list[MissionItem] = []
         count: int | None = None
@@ -145,8 +154,8 @@ class MissionLink(OffboardLink):
         def ask() -> Any:
             st.requests += 1
             if count is None:
-                return mavlink.MAVLink_mission_request_list_message(*target, MISSION)
-            return mavlink.MAVLink_mission_request_int_message(*target, len(items), MISSION)
+                return mavlink.MAVLink_mission_request_list_message(*target, mission_type)
+            return mavlink.MAVLink_mission_request_int_message(*target, len(items), mission_type)
 
         self._up(ask())
         sent = heard = time.monotonic()
@@ -157,20 +166,24 @@ class MissionLink(OffboardLink):
                 heard = now
                 if m._type == "MISSION_ACK":
                     st.result = f"the vehicle ended it: MAV_MISSION_RESULT {m.type}"
-                elif count is None and m._type == "MISSION_COUNT" and m.mission_type == MISSION:
+                elif m.mission_type != mission_type:
+                    continue
+                elif count is None and m._type == "MISSION_COUNT":
                     count = st.items = m.count
-                    st.result = "" if count else "the vehicle holds no mission"
+                    st.result = "" if count or mission_type != MISSION else "the vehicle holds no mission"
                 elif count is not None and m._type == "MISSION_ITEM_INT" and m.seq == len(items):
                     try:
-                        items.append(parse_item(m, True))
+                        items.append(parse_item(m, True) if mission_type == MISSION
+                                     else parse_zone_item(m, True, mission_type))
                     except ItemRefused as exc:
                         st.result = f"item {m.seq} refused: {exc}"
                 else:
                     continue
                 if st.result:
                     break
-                if len(items) == count:
-                    self._up(mavlink.MAVLink_mission_ack_message(*target, mavlink.MAV_MISSION_ACCEPTED, MISSION))
+                if len(items) == count:  # (a fence or rally points of none: ended as a ground station ends it)
+                    self._up(mavlink.MAVLink_mission_ack_message(*target, mavlink.MAV_MISSION_ACCEPTED,
+                                                                 mission_type))
                     self._flush()
                     st.result = "accepted"
                     break
@@ -245,18 +258,25 @@ def _fetch(link: MissionLink, flight: Flight, out: Path | None, empty: TransferS
         items, st = link.download()
         if st.result != "accepted":
             return Fetched(None, st, f"mission download failed: {st.result}")
+        zones: dict[int, list[MissionItem]] = {}
+        for mtype, noun in ((FENCE, "fence"), (RALLY, "rally points")):  # held as flown from the start, as PX4's
+            zones[mtype], zst = link.download(mtype)  # navigator holds them with the mission (a GCS reads all three)
+            if zst.result != "accepted":
+                return Fetched(None, st, f"{noun} download failed: {zst.result}")
         if not link.ask_home():
             return Fetched(None, st, "the vehicle did not say its home (GET_HOME_POSITION)")
         assert link.home is not None
         try:  # the check the vehicle's start made (bsst sitl's step cap aside: the vehicle's, bsst vehicle --trace-cap)
-            plan, new = uploaded_flight(flight, items, link.home)
-        except ConfigError as exc:
+            plan, new = uploaded_flight(flight, items, link.home, geo_fence=fence_plan(tuple(zones[FENCE])),
+                                        rally=rally_plan(tuple(zones[RALLY])))
+        except (ConfigError, ValueError) as exc:  # (ValueError: a fence's polygon not in a row, fence_plan)
             return Fetched(None, st, f"the mission cannot be flown: {exc}")
         if out is not None:
             write_text_atomic(out / "mission.plan", plan_text(plan))
             write_text_atomic(out / "mission.toml", dump_toml(new.mission.to_dict()))
         link.event("mission", f"downloaded {st.items} items in {st.duration_s:.2f} s ({st.requests} requests, "
-                              f"{st.re_requests} again): {new.mission.duration_s:.2f} s to fly")
+                              f"{st.re_requests} again), a fence of {len(zones[FENCE])} items and "
+                              f"{len(zones[RALLY])} rally points: {new.mission.duration_s:.2f} s to fly")
         return Fetched(new, st)
     finally:
         link.stop_reading()  # the states already on the socket are read (delivered); the time it stopped said
