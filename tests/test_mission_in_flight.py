@@ -242,6 +242,9 @@ def test_an_upload_after_the_mission_ended_in_hold_is_taken_while_armed_as_on_px
             assert gcs.command(M.MAV_CMD_MISSION_START, math.nan) == M.MAV_RESULT_DENIED  # PX4: not finite
             assert "got first item nan" in gcs.joined_text("MISSION_START: only from item 0")
             assert gcs.start() == M.MAV_RESULT_ACCEPTED
+            gcs.recv("GLOBAL_POSITION_INT", 60, "GLOBAL_POSITION_INT.relative_alt > 500")  # its own mission, up
+            assert gcs.start() == M.MAV_RESULT_DENIED  # (it told the ground station to land and start it)
+            assert "flies whole, once" in gcs.joined_text("MISSION_START: the mission is flying")
             assert controller.p.wait(timeout=120) == 0, "\n".join(controller.lines[-20:])
             gcs.recv("HEARTBEAT", 10, f"HEARTBEAT.get_srcComponent()==1 and HEARTBEAT.base_mode & 128 and "
                                       f"HEARTBEAT.custom_mode=={hold}")
