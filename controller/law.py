@@ -215,13 +215,26 @@ def _load_file(path: Path, spec: str) -> ModuleType:
         raise LawError(spec, f"{path} is not a Python file")
     module = importlib.util.module_from_spec(mod_spec)
     sys.modules[name] = module  # (a dataclass, a pickle look their module up while it runs)
+    folder, before = path.resolve().parent, set(sys.modules)
     try:
-        with RefusedExit(), imports_from(str(path.resolve().parent)):  # (a module beside it: imported as a script's)
+        with RefusedExit(), imports_from(str(folder)):  # (a module beside it: imported as a script's)
             exec(compile(source, str(path), "exec", dont_inherit=True), module.__dict__)
     except (Exception, SystemExit, ExitCalled) as exc:  # a syntax error, a raise or an exit in the file: one line
         del sys.modules[name]
         raise LawError(spec, f"loading {path} {did(exc)}") from None
+    finally:
+        _forget_beside(set(sys.modules) - before - {name}, folder)
     return module
+
+
+def _forget_beside(imported: set[str], folder: Path) -> None:
+    """The modules a law file imported from its own folder (``imported``: the names new in ``sys.modules``) are its
+    own: forgotten once it has loaded (it keeps them), so that another law file's module of the same name beside
+    it, or this one's edited, is imported afresh (one folder's ``helpers`` was another's)."""
+    for mod_name in imported:
+        where = getattr(sys.modules.get(mod_name), "__file__", None)
+        if where and Path(where).resolve().is_relative_to(folder):
+            del sys.modules[mod_name]
 
 
 def make_law(spec: str | LawFactory, nominal: Nominal, gains: Gains, rate_hz: float,

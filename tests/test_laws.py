@@ -153,6 +153,25 @@ def test_a_law_file_imports_a_module_beside_it_as_a_script_would(tmp_path: Path,
     assert sys.path == before
 
 
+def test_two_law_files_each_import_their_own_module_of_one_name(tmp_path: Path) -> None:
+    """Two folders, each a law file beside its own ``helpers`` module: each law gets its own (the second got the
+    first's, left in ``sys.modules`` under its plain name), and an edited helper is read at its law's next load."""
+    name = f"helpers_{tmp_path.name}"
+    laws = {}
+    for folder in ("a", "b"):
+        d = tmp_path / folder
+        d.mkdir()
+        (d / f"{name}.py").write_text(f"WHO = {folder!r}\n")
+        (d / "law.py").write_text((ROOT / "examples" / "my_law.py").read_text()
+                                  + f"\nimport {name}  # noqa: E402\nMyLaw.who = {name}.WHO\n")
+        laws[folder] = d / "law.py"
+    assert [resolve_law(f"{laws[f]}:MyLaw").who for f in ("a", "b")] == ["a", "b"]
+    assert name not in sys.modules
+    (tmp_path / "a" / f"{name}.py").write_text("WHO = 'a, edited'\n")
+    laws["a"].write_text(laws["a"].read_text() + "\n")  # (the law's own bytes change: its next load)
+    assert resolve_law(f"{laws['a']}:MyLaw").who == "a, edited"
+
+
 def test_the_bsst_script_flies_a_module_law_from_the_working_directory(tmp_path: Path) -> None:
     """The ``bsst`` console script has its own folder first on ``sys.path``, not the working directory as
     ``python -m bridge`` has: ``bsst sim ... --controller here:MyLaw`` said ``no module named 'here'``."""
