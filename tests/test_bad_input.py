@@ -860,11 +860,15 @@ def test_an_empty_out_is_refused_not_taken_for_the_current_folder(tmp_path: Path
     (["sim", "missions/sine.toml", "--blackout", "1_0:1"], "--blackout"),
     (["sim", "missions/sine.toml", "--at", "1_0:gps:off"], "--at 1_0:gps:off"),
     (["sim", "missions/sine.toml", "--param", "COM_OBL_ACT=1_0"], "COM_OBL_ACT: an INT32, expected an integer"),
+    (["sweep", "missions/sine.toml", "--delay", "0,1_0"], "--delay takes numbers separated by commas, got '0,1_0'"),
+    (["vehicle", "--home", "4_7,8,400"], "--home must be LAT,LON,ALT"),
+    (["vehicle", "--controller-id", "2_00:19"], "--controller-id must be SYSID:COMPID"),
+    (["margin", "missions/sine.toml", "--over", "delay_ms", "--until", "rms=0.1_0"], "--until rms=X"),
 ])
 def test_a_number_with_digit_separators_is_refused(capsys, argv, names) -> None:
     """``1_0`` is 10 to Python's ``float()`` and ``int()``, and a slip to a person: refused, as any text that is
     not a number (it flew 10). (A TOML file's ``1_000`` is TOML's own number syntax, and stays.)"""
-    _refused(capsys, [*argv, "--no-plots", "--out", "/nonexistent-never-written"], names)
+    _refused(capsys, [*argv, "--out", "/nonexistent-never-written"], names)
 
 
 def test_a_trace_field_with_digit_separators_is_refused(tmp_path, capsys) -> None:

@@ -145,7 +145,7 @@ def value_list(name: str, lo: float, hi: float) -> Callable[[str], tuple[float, 
     def conv(text: str) -> tuple[float, ...]:
         parts = [x.strip() for x in text.split(",")]
         try:
-            vals = tuple(float(x) for x in parts)
+            vals = tuple(number(x) for x in parts)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{name} takes numbers separated by commas, got {text!r}") from None
         bad = [v for v in vals if not lo <= v <= hi]  # also catches nan
@@ -350,7 +350,7 @@ def yes_no(flag: str) -> Callable[[str], bool]:
 def _ids(text: str) -> tuple[int, int]:
     a, sep, b = text.partition(":")
     try:
-        ids = (int(a), int(b))
+        ids = (whole(a), whole(b))
     except ValueError:
         ids = (-1, -1)
     if not sep or not (1 <= ids[0] <= 255 and 0 <= ids[1] <= 255):
@@ -360,7 +360,7 @@ def _ids(text: str) -> tuple[int, int]:
 
 def _home(text: str) -> tuple[float, float, float]:
     try:
-        lat, lon, alt = (float(x) for x in text.split(","))
+        lat, lon, alt = (number(x) for x in text.split(","))
     except ValueError:
         raise argparse.ArgumentTypeError(f"--home must be LAT,LON,ALT in degrees and metres, got {text!r}") from None
     if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0 and -1000.0 <= alt <= 10000.0):

@@ -46,7 +46,9 @@ Over ``noise`` the batch engine cannot fly the cells (it has no sensors): every 
 scalar flight on the process engine, one at a time for one law and seed (a pool costs more
 than a few cells), so keep ``seeds`` and the laws few. Noise needs an estimator that reads
 the sensors (``raw`` or ``ekf``; ``truth`` ignores them) and a set with noise to scale. Over
-``wind_mps`` the batch engine flies the probes (steady wind, and the mission's turbulence if it has one).
+``wind_mps`` the batch engine flies the probes (steady wind, and the mission's turbulence if it has one) of a
+mission that ends in a hold; one that ends in a landing flies them on the process engine, which judges a landing
+in wind (:func:`bridge.batch.engine.air_at_end`).
 """
 
 from __future__ import annotations
@@ -70,6 +72,7 @@ from bridge.sweep.spec import check_jobs
 from controller.law import LawError, is_builtin
 from missions import Mission
 from params import ConfigError
+from params.text import number
 
 OVER = (*LINK_AXES, "noise", "wind_mps")  # the axes a margin is searched over
 # first value tried; noise: the set's own sigmas (1), so a set that holds them takes 1, 2, 4, ... up to the
@@ -114,7 +117,7 @@ def parse_until(text: str) -> Until:
     key, sep, value = text.partition("=")
     if sep and key.strip() == "rms":
         try:
-            v = float(value)
+            v = number(value)
         except ValueError:
             v = math.nan
         if not (math.isfinite(v) and v > 0):
