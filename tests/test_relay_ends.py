@@ -201,3 +201,14 @@ def test_the_client_is_named_by_the_side_its_datagrams_come_from() -> None:
                                                    "its datagrams travel up); any other sender is refused")
     assert client_event(("127.0.0.1", 5), "down").text.startswith("127.0.0.1:5 is the vehicle side (the first sender "
                                                                   "to --listen, its datagrams travel down)")
+
+
+def test_a_relay_forwarding_to_its_own_listen_socket_is_told_from_one_to_another_host() -> None:
+    """(``bsst relay --to`` its own ``--listen`` is refused, tests/test_bad_input.py; the first version also refused
+    another machine at the port when listening on 0.0.0.0.)"""
+    from bridge.nodes.relay import forwards_to_itself
+
+    assert forwards_to_itself(("127.0.0.1", 5), ("localhost", 5))
+    assert forwards_to_itself(("0.0.0.0", 5), ("127.0.0.1", 5))
+    assert not forwards_to_itself(("0.0.0.0", 5), ("192.168.1.20", 5))
+    assert not forwards_to_itself(("127.0.0.1", 5), ("127.0.0.1", 6))

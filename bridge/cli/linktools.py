@@ -209,7 +209,7 @@ def cmd_relay(args: argparse.Namespace) -> int:
     """``bsst relay``: relay until SIGINT/SIGTERM or ``--duration``; print (and ``--stats``) the figures."""
     from bridge.core.flight import at_rest, prepare  # lazy: start-up time
     from bridge.link.model import jitter_capped_text  # lazy: start-up time
-    from bridge.nodes.relay import Relay, client_event, numeric, parse_address  # lazy: start-up time
+    from bridge.nodes.relay import Relay, client_event, forwards_to_itself, parse_address  # lazy: start-up time
     from bridge.nodes.report import to_line  # lazy: start-up time
     from bridge.record.runlog import write_json_atomic  # lazy: start-up time
     from missions import load_mission  # lazy: start-up time
@@ -220,7 +220,7 @@ def cmd_relay(args: argparse.Namespace) -> int:
         client = parse_address(args.client, "--client") if args.client else None
     except ValueError as exc:
         raise UsageError(f"bsst relay: {exc}") from None
-    if target[1] == listen[1] and (numeric(target)[0] == numeric(listen)[0] or numeric(listen)[0] == "0.0.0.0"):
+    if forwards_to_itself(listen, target):
         raise UsageError(f"bsst relay: --to {args.to} is the relay's own --listen {args.listen}: it would forward "
                          "into itself")
     # the one path from a mission and its overrides to the parts: the whole mission is checked,

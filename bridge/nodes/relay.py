@@ -101,6 +101,13 @@ def parse_address(text: str, flag: str, bind: bool = False) -> Address:
     return a.host, a.port
 
 
+def forwards_to_itself(listen: Address, target: Address) -> bool:
+    """Whether ``--to`` ``target`` is the relay's own ``--listen`` socket: the same port on the same host, or on a
+    loopback address when it listens on every address (0.0.0.0); another machine's host at that port is not."""
+    at, to = numeric(listen)[0], numeric(target)[0]
+    return target[1] == listen[1] and (to == at or at == "0.0.0.0" and to.startswith("127."))
+
+
 def numeric(addr: Address) -> Address:
     """(host, port) with the host as its IPv4 dotted quad, the form ``recvfrom`` reports a
     sender in (so that ``localhost:14560`` is the address datagrams from 127.0.0.1:14560 come from)."""
