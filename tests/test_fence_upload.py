@@ -9,6 +9,7 @@ tests/test_await_mission.py's."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -157,6 +158,10 @@ def test_a_fence_changed_in_flight_ends_the_trace_check_against_the_starts_fence
     assert geofence_kept(t, trace, rules).t == pytest.approx(0.6)
     v = geofence_kept(t, trace, rules, [arm, bigger])
     assert v.ok and v.as_dict()["note"].startswith("the fence changed in flight at t=0.500 s (fence uploaded 4"), v
+    assert v.as_dict()["note"].endswith("by the vehicle's watch of the new one after")
+    unwatched = geofence_kept(t, trace, replace(rules, fence_watched=False), [arm, bigger])  # GF_ACTION = 0
+    assert unwatched.as_dict()["note"].endswith("and not after: GF_ACTION = 0, the vehicle does not watch the new "
+                                                "one, and nothing here holds its shape"), unwatched
     at_arm = RunEvent.at(0.0, "mission", upload, "vehicle")  # (right after the arm: still t = 0)
     assert geofence_kept(t, trace, rules, [arm, at_arm]).ok
     early = [RunEvent.at(0.0, "mission", upload, "vehicle"), gcs_arm, RunEvent.at(0.0, "mission", upload, "vehicle"),

@@ -99,6 +99,7 @@ class Rules:
     controller_id: tuple[int, int] = CONTROLLER_ID
     spin_down: bool = False
     geofence: Any = None  # the mission's missions.geofence.Geofence (None: none)
+    fence_watched: bool = True  # GF_ACTION is not 0: the vehicle watches a fence uploaded in flight (its events)
 
     @property
     def period_s(self) -> float:
@@ -349,9 +350,11 @@ def geofence_kept(t: np.ndarray, trace: Mapping[str, Any], rules: Rules, events:
         return Verdict(name, False, left.t, left.text)
     if breach is not None:
         return Verdict(name, False, breach[0], f"{breach[1]} (the vehicle acts by GF_ACTION)")
+    after = ("by the vehicle's watch of the new one after" if rules.fence_watched else
+             "and not after: GF_ACTION = 0, the vehicle does not watch the new one, and nothing here holds its shape")
     note = None if changed is None else (
         f"the fence changed in flight at t={changed.t:.3f} s ({changed.shown}): the trace is judged against the "
-        "mission's fence (the one at the start) until then, by the vehicle's watch of the new one after")
+        f"mission's fence (the one at the start) until then, {after}")
     return Verdict(name, True, note=note)
 
 
@@ -411,7 +414,7 @@ def rules_for(flight: Any, clock: str, link: Mapping[str, Any] | None,
     return Rules(rate_hz=m.rate_hz, timeout_s=flight.failsafe.timeout_s, clock=clock,
                  armed_at_start=clock == "offline", command_slack_s=up + physics,
                  hold_slack_s=flight.guard.stop_s + up + down + 1.0 / m.rate_hz, controller_id=controller_id,
-                 spin_down=lag, geofence=m.geofence)
+                 spin_down=lag, geofence=m.geofence, fence_watched=flight.params.fence_action != 0)
 
 
 def judge(summary: dict[str, Any], trace: Mapping[str, Any], events: Sequence[RunEvent], rules: Rules,
