@@ -224,11 +224,11 @@ def test_mavsdk_uploads_a_plans_fence_and_rally_points_and_the_flight_leaving_th
     assert not fence["ok"] and "outside every inclusion zone of the geofence" in fence["why"], fence
     events = (out / "events.log").read_text()
     kinds = [ln.split(" ", 2)[1] for ln in events.splitlines() if ln.startswith("t=")]
-    assert kinds.count("geofence:") == (action != 0) and "fence uploaded 4 items" in events, events
+    assert kinds.count("geofence:") == (action != 0) and "fence: uploaded 4 items" in events, events
     if action:
         assert "geofence: outside its fence" in events and ": land here [vehicle]" in events, events
         assert "GF_ACTION = 5: land" in events and "disarmed: landed: disarmed" in events, events
-    assert "rally points uploaded 1 items" in events and "a fence of 4 items and 1 rally points" in events, events
+    assert "rally: uploaded 1 items" in events and "a fence of 4 items and 1 rally points" in events, events
     edge = Home().paper(47.39780, 8.54564, 488.0)[1]  # the fence's east side (y west, m)
     east = next(t for t, x, y, z in _trace(out / "trace.csv") if y < edge)
     assert abs(fence["t"] - east) <= 0.005, (fence["t"], east)  # (the event: after the step, at its end)
@@ -302,7 +302,7 @@ def test_mavsdks_geofence_plugin_uploads_reads_back_and_clears_a_polygon_and_a_c
     assert got_circle[0] == sent_circle[0] == "EXCLUSION" and got_circle[3] == sent_circle[3] == 3.0, gs
     assert math.dist(got_circle[1:3], sent_circle[1:3]) < 1.5e-7, gs
     events = (out / "events.log").read_text()
-    assert "fence uploaded 5 items" in events and "fence cleared" in events, events
+    assert "fence: uploaded 5 items" in events and "fence: cleared" in events, events
 
 
 MAVSDK_ARM_OUTSIDE_SCRIPT = r"""

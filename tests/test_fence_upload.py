@@ -151,23 +151,23 @@ def test_a_fence_changed_in_flight_ends_the_trace_check_against_the_starts_fence
     trace = {"x": np.where(t >= 0.6, 5.0, 0.0), "y": np.zeros_like(t)}  # out of the start's square at 0.6 s
     rules = Rules(rate_hz=250.0, timeout_s=0.5, clock="lockstep", geofence=Geofence((Zone(True, points=(
         (-1.0, 1.0), (1.0, 1.0), (1.0, -1.0), (-1.0, -1.0))),)))
-    upload = "fence uploaded 4 items in 0.01 s, 0 requested again"
+    upload = "uploaded 4 items in 0.01 s, 0 requested again"
     gcs_arm = RunEvent.at(0.0, "armed", "armed, HOLD", "vehicle", pre_start=True)  # awaiting the start: not flying
     arm = RunEvent.at(0.0, "armed", "armed, offboard control", "vehicle")
-    bigger = RunEvent.at(0.5, "mission", upload, "vehicle")
+    bigger = RunEvent.at(0.5, "fence", upload, "vehicle")
     assert geofence_kept(t, trace, rules).t == pytest.approx(0.6)
     v = geofence_kept(t, trace, rules, [arm, bigger])
-    assert v.ok and v.as_dict()["note"].startswith("the fence changed in flight at t=0.500 s (fence uploaded 4"), v
+    assert v.ok and v.as_dict()["note"].startswith("the fence changed in flight at t=0.500 s (uploaded 4"), v
     assert v.as_dict()["note"].endswith("by the vehicle's watch of the new one after")
     unwatched = geofence_kept(t, trace, replace(rules, fence_watched=False), [arm, bigger])  # GF_ACTION = 0
     assert unwatched.as_dict()["note"].endswith("and not after: GF_ACTION = 0, the vehicle does not watch the new "
                                                 "one, and nothing here holds its shape"), unwatched
-    at_arm = RunEvent.at(0.0, "mission", upload, "vehicle")  # (right after the arm: still t = 0)
+    at_arm = RunEvent.at(0.0, "fence", upload, "vehicle")  # (right after the arm: still t = 0)
     assert geofence_kept(t, trace, rules, [arm, at_arm]).ok
-    early = [RunEvent.at(0.0, "mission", upload, "vehicle"), gcs_arm, RunEvent.at(0.0, "mission", upload, "vehicle"),
+    early = [RunEvent.at(0.0, "fence", upload, "vehicle"), gcs_arm, RunEvent.at(0.0, "fence", upload, "vehicle"),
              arm]  # (before the flight's arm: the fence it started with)
     assert not geofence_kept(t, trace, rules, early).ok
-    late = RunEvent.at(0.7, "mission", "fence cleared", "vehicle")
+    late = RunEvent.at(0.7, "fence", "cleared", "vehicle")
     assert geofence_kept(t, trace, rules, [arm, late]).t == pytest.approx(0.6)  # left the start's fence before it
     left = RunEvent.at(0.8, "geofence", "outside its fence: x")
     assert (geofence_kept(t, trace, rules, [arm, bigger, left]).t,

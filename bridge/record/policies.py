@@ -75,9 +75,6 @@ POLICIES: dict[str, str] = {
 EPS_S = 1e-5  # s: event times are rounded to 1 us; a physics step is at least 100 us
 ZERO_N = 1e-9  # N: a realised wrench this small is zero
 CONTROLLER_ID = (200, 191)  # the configured controller's sysid, compid (bridge.mavlink.endpoint's default)
-# how the vehicle's ``mission`` event of a fence uploaded or cleared over the mission protocol begins
-# (bridge.nodes.vehicle.mission ``accept``)
-FENCE_CHANGED = "fence "
 _ENDS_OFFBOARD = ("failsafe", "disarmed", "diverged", "end")  # (``end``: the vehicle flies the mission's end action)
 
 
@@ -338,7 +335,7 @@ def geofence_kept(t: np.ndarray, trace: Mapping[str, Any], rules: Rules, events:
     """Every row's position (``x``, ``y``) inside the mission's geofence (:mod:`missions.geofence`), and no
     ``geofence`` event of the vehicle (outside a fence a ground station uploaded: bridge.nodes.vehicle.zones); ok
     without either. The mission's fence is the one at the start: a fence a ground station uploads (or clears) in
-    flight replaces it in the vehicle (its ``mission`` event), so rows from then on are the vehicle's watch's to
+    flight replaces it in the vehicle (its ``fence`` event), so rows from then on are the vehicle's watch's to
     judge (its ``geofence`` event), and the verdict says so (``note``)."""
     name = "geofence"
     left = next((e for e in events if e.kind == "geofence"), None)
@@ -366,7 +363,7 @@ def _fence_changed_in_flight(events: Sequence[RunEvent]) -> RunEvent | None:
     for e in events:
         if e.kind == "armed" and not e.pre_start:
             flying = True
-        elif flying and e.kind == "mission" and e.text.startswith(FENCE_CHANGED):
+        elif flying and e.kind == "fence":  # (uploaded or cleared: bridge.nodes.vehicle.mission.EVENT_OF)
             return e
     return None
 

@@ -33,7 +33,8 @@ ADDRESSED = frozenset({"COMMAND_LONG", "COMMAND_INT", "PARAM_REQUEST_LIST", "PAR
                        "SET_MODE", *MISSION_WRITES, *MISSION_READS})  # target fields checked first
 COMMANDS = frozenset({"COMMAND_LONG", "COMMAND_INT"})
 # the events that say who caused them (``preflight``: whose arm was denied)
-ATTRIBUTED = ("armed", "disarmed", "mode", "interval", "param", "mission", "preflight", "speed", "terminated")
+ATTRIBUTED = ("armed", "disarmed", "mode", "interval", "param", "mission", "fence", "rally", "preflight", "speed",
+              "terminated")
 
 
 def claim(event: Event, by: Sender | None) -> None:

@@ -51,7 +51,9 @@ MESSAGES = frozenset({"MISSION_COUNT", "MISSION_ITEM", "MISSION_ITEM_INT", "MISS
                       "MISSION_REQUEST_INT", "MISSION_ACK", "MISSION_CLEAR_ALL", "MISSION_SET_CURRENT"})
 START_COMMAND = "MISSION_START"  # how a ground station started the mission (summary.json mission_transfer)
 START_ARM = "AUTO.MISSION, then arm"
-_ZONES = {mavlink.MAV_MISSION_TYPE_FENCE: "fence", mavlink.MAV_MISSION_TYPE_RALLY: "rally points"}
+# the event kind of what a ground station uploaded or cleared, by its mission type: read by kind, never by text
+EVENT_OF = {mavlink.MAV_MISSION_TYPE_MISSION: "mission", mavlink.MAV_MISSION_TYPE_FENCE: "fence",
+            mavlink.MAV_MISSION_TYPE_RALLY: "rally"}
 START_ARMED = "arm, then AUTO.MISSION"  # armed in HOLD on the ground first (MAVSDK's arm(), then start_mission())
 # what each start is called in its refusal: the command or mode the ground station sent
 _ASKED = {START_COMMAND: "MISSION_START", START_ARM: "arm (mode MISSION)", START_ARMED: "mode MISSION (armed in HOLD)"}
@@ -314,7 +316,8 @@ class MissionManager:
 
     def accept(self, who: Partner, mission: Mission, what: str,
                mission_type: int = mavlink.MAV_MISSION_TYPE_MISSION) -> str | None:
-        """What the ground station made of ``mission_type``: held, and a ``mission`` event naming it; or why a fence
+        """What the ground station made of ``mission_type``: held, and an event of its kind (:data:`EVENT_OF`:
+        ``mission``, ``fence``, ``rally``) saying it; or why a fence
         or rally points cannot be read (nothing held, nothing said here: the transfer refuses the upload)."""
         if mission_type == mavlink.MAV_MISSION_TYPE_MISSION:
             self._flight_over(new_items=mission.items is not self.mission.items)
@@ -325,9 +328,8 @@ class MissionManager:
             why = self.zones.accept(mission, mission_type)
             if why is not None:
                 return why
-            what = f"{_ZONES[mission_type]} {what}"
         n0 = len(self.sim.events)
-        self.sim.event("mission", what)
+        self.sim.event(EVENT_OF[mission_type], what)
         attribute(self.sim.events, n0, who.who)
         return None
 
