@@ -325,7 +325,8 @@ def where_raised(exc: BaseException) -> str | None:
     if isinstance(exc, SyntaxError):
         return None
     frames = traceback.extract_tb(exc.__traceback__)
-    mine = [f for f in frames if not f.filename.startswith((sys.prefix, sys.base_prefix))]
+    ours = tuple(os.path.join(p, "") for p in (sys.prefix, sys.base_prefix))  # (with the separator: not .venv2/)
+    mine = [f for f in frames if not f.filename.startswith(ours)]
     return f"{os.path.basename(mine[-1].filename)}:{mine[-1].lineno}" if mine else None
 
 

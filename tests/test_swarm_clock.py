@@ -287,8 +287,8 @@ def test_a_vehicle_whose_process_ended_is_taken_as_gone_at_once_where_it_was_las
         assert held[-1] is not None and cleared(a) is None and a._where(1, 3) == wb[0]
         assert a.stats()["dropped"] == ["vehicle 2 ended (its process gone, said by the fleet) at step 3: taken as "
                                         "gone where it was last"]
-        with pytest.raises(OSError):  # (nobody else speaks for vehicle 2 now)
-            socket.socket(socket.AF_INET, socket.SOCK_DGRAM).bind(("127.0.0.1", b.cfg.ports[1]))
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as other, pytest.raises(OSError):
+            other.bind(("127.0.0.1", b.cfg.ports[1]))  # (nobody else speaks for vehicle 2 now)
         c.leave()  # vehicle 3 leaves where it is, then its process ends: where it said, nothing dropped
         c.close()
         held.append(say_lost(c.cfg))

@@ -46,7 +46,7 @@ class StartCheck:
         try:
             uploaded_flight(flight, self.items, home, cap, SOURCE)
             self._out = goals_of(self.items, home)
-        except ConfigError as exc:
+        except (ConfigError, ValueError) as exc:  # (as the controller's download takes them: a refusal)
             self._out = str(exc)
         except BaseException as exc:  # a fault, not a refusal: raised on the vehicle's own thread (result)
             self._out = exc
