@@ -73,6 +73,44 @@ def sigint_handler_kept() -> Iterator[None]:
     assert after is before, f"the test left SIGINT's handler {after!r} (it was {before!r})"
 
 
+INSTANCE_PORTS = range(14550, 14570)  # instances 0-9: their ground-station and vehicle ports (bridge.mavlink.address)
+
+
+def _instance_sockets() -> dict[int, int]:
+    """This process's UDP sockets bound to an instance's port: socket inode -> port (/proc/self/fd, /proc/net/udp)."""
+    mine = set()
+    for fd in os.listdir("/proc/self/fd"):
+        try:
+            link = os.readlink(f"/proc/self/fd/{fd}")
+        except OSError:
+            continue
+        if link.startswith("socket:["):
+            mine.add(int(link[8:-1]))
+    out: dict[int, int] = {}
+    for table in ("/proc/net/udp", "/proc/net/udp6"):
+        try:
+            rows = Path(table).read_text().splitlines()[1:]
+        except OSError:
+            continue
+        for row in rows:
+            f = row.split()
+            port, inode = int(f[1].rsplit(":", 1)[1], 16), int(f[9])
+            if port in INSTANCE_PORTS and inode in mine:
+                out[inode] = port
+    return out
+
+
+@pytest.fixture(autouse=True)
+def instance_ports_released() -> Iterator[None]:
+    """Every test closes the sockets it bound on an instance's port: one left open (a ground station's connection
+    never closed) holds that port past the test's instance slot, and the next session that takes the slot, or
+    test_an_automatic_instance_is_the_highest_free_one, finds it bound by a worker (twice, for 120 s, 14559)."""
+    before = _instance_sockets()
+    yield
+    left = sorted(p for i, p in _instance_sockets().items() if i not in before)
+    assert not left, f"the test left UDP 127.0.0.1:{left} bound in this worker (close its ground station)"
+
+
 @pytest.fixture(scope="session", autouse=True)
 def _kernels_compiled(tmp_path_factory: pytest.TempPathFactory, worker_id: str) -> None:
     """Compile numba's kernels (the EKF's, the scalar engine's), or load them from their on-disk cache, once per

@@ -110,6 +110,7 @@ def test_pymavlink_acks_per_unit(tmp_path):
             # acted on at the vehicle's next control period (realtime: the clock runs), each naming the sender
             v.wait_line(lambda s: '"kind":"fault"' in s and "motor 3: off" in s)
         finally:
+            gcs.close()  # (left open it held the instance's GCS port past its slot)
             assert v.stop() == 0
     faults = [e for e in _events(v) if e.kind == "fault"]
     assert [e.text for e in faults] == ["motor 1: off", "motor 1: 1 of its thrust", "gps off", "gps on", "mag off",
@@ -148,6 +149,7 @@ def test_an_injection_after_the_plant_ended_the_flight_is_denied(tmp_path):
                                   condition="STATUSTEXT.text.startswith('mode ')")
             assert text is not None and text.text.endswith(": the plant ended the flight"), text
         finally:
+            gcs.close()  # (left open it held the instance's GCS port past its slot)
             assert v.stop() == 0
     faults = [e.text for e in _events(v) if e.kind == "fault"]
     assert faults == [f"motor {i}: off" for i in (1, 2, 3, 4)], faults
@@ -165,6 +167,7 @@ def test_paper_profile_has_no_rotors(tmp_path):
             assert _inject(gcs, GPS, OFF, 0) == M.MAV_RESULT_UNSUPPORTED
             v.wait_line(lambda s: isinstance(r := parse_line(s), Refused) and "no sensor to fail" in r.text)
         finally:
+            gcs.close()  # (left open it held the instance's GCS port past its slot)
             assert v.stop() == 0
 
 
@@ -381,6 +384,7 @@ def _x500_on_battery(tmp_path: Path, effects: str, *args: str) -> Iterator[Any]:
             assert gcs.wait_heartbeat(timeout=20) is not None
             yield gcs
         finally:
+            gcs.close()  # (left open it held the instance's GCS port past its slot)
             assert v.stop() == 0
 
 
@@ -446,4 +450,5 @@ def test_battery_on_the_ground_station_link(tmp_path):
             assert _ack(gcs, M.MAV_CMD_SET_MESSAGE_INTERVAL).result == M.MAV_RESULT_FAILED  # no such stream
             assert gcs.recv_match(type="BATTERY_STATUS", blocking=True, timeout=3) is None
         finally:
+            gcs.close()  # (left open it held the instance's GCS port past its slot)
             assert v.stop() == 0
