@@ -7,7 +7,6 @@ value always fails with one line naming the file, the key and what is allowed.
 
 from __future__ import annotations
 
-import difflib
 import functools
 import json
 import math
@@ -21,6 +20,8 @@ from contextlib import contextmanager
 from contextvars import ContextVar
 from pathlib import Path
 from typing import Any, ParamSpec, TypeVar
+
+from params.text import is_typo_of, likely  # noqa: F401  (a misspelt key's: params' own names for them)
 
 _P = ParamSpec("_P")
 _R = TypeVar("_R")
@@ -236,35 +237,6 @@ def check_depth(data: Any, source: str, limit: int = MAX_DEPTH) -> None:
             where = f"{_printable(top[:40])}: " if top else ""
             raise ConfigError(f"{_printable(source)}: {where}nested more than {limit} levels deep")
         stack.extend((v, depth + 1, name) for name, v in children)
-
-
-TYPO_MIN_LENGTH = 4  # shorter keys of one table are one slip apart (u1 u2, c_p c_v, k1 k2): never taken for typos
-
-
-def is_typo_of(text: str, name: str) -> bool:
-    """Whether ``text`` is ``name`` (of at least :data:`TYPO_MIN_LENGTH` characters) with one typing slip: a
-    character left out, added, changed, or two neighbours swapped (``duraton_s``, ``durattion_s``,
-    ``duratoin_s``); two keys of one table are never that close (``velocity_noise_mps``,
-    ``velocity_noise_z_mps`` are two apart)."""
-    if len(name) < TYPO_MIN_LENGTH or text == name or abs(len(text) - len(name)) > 1:
-        return False
-    i = 0
-    while i < min(len(text), len(name)) and text[i] == name[i]:
-        i += 1
-    a, b = text[i:], name[i:]  # from the first difference on
-    return (a[1:] == b[1:] or a == b[1:] or a[1:] == b
-            or (len(a) == len(b) >= 2 and a[0] == b[1] and a[1] == b[0] and a[2:] == b[2:]))
-
-
-def likely(text: str, known: Iterable[str], cutoff: float = 0.6) -> str | None:
-    """The word of ``known`` that ``text`` most likely misspells: one a single slip away (:func:`is_typo_of`: a
-    swap of neighbours, which difflib ranks low), else difflib's closest from ``cutoff`` on; None if none is."""
-    words = [str(k) for k in known]
-    slips = [w for w in words if is_typo_of(text, w)]
-    if slips:
-        return slips[0]
-    close = difflib.get_close_matches(text, words, n=1, cutoff=cutoff)
-    return close[0] if close else None
 
 
 class Table:

@@ -1,15 +1,20 @@
-"""Text from elsewhere made one line: the one way a message that quotes a user's code (its exception, a repr of
-what it returned) or a failed cell's reason is kept to the one line its record allows.
+"""Text from elsewhere, read: a message that quotes a user's code (its exception, a repr of what it returned) or a
+failed cell's reason kept to the one line its record allows; a number a person typed; the word a slip misspelt.
 
 In:  any text (an exception's message, a ``repr``), the most characters it may keep; a number's text as a person
-     types it (a flag's value, a field of a trace or a waypoint file)
+     types it (a flag's value, a field of a trace or a waypoint file); a word and the words it may mean (a table's
+     keys, a flag's choices)
 Out: the text on one line: every run of whitespace (line breaks, tabs) one space; one over ``cap`` characters cut
-     to ``cap``, ending ``...``; the number (:func:`number`, :func:`whole`), ValueError if it is none
+     to ``cap``, ending ``...``; the number (:func:`number`, :func:`whole`), ValueError if it is none; the word it
+     likely misspells (:func:`likely`, :func:`is_typo_of`), or None
 
-(A module of its own: ``params/__init__.py`` is at its 500 lines.)
+(Apart from ``params/__init__.py``, which re-exports the misspelling's two, and was at its 500 lines.)
 """
 
 from __future__ import annotations
+
+import difflib
+from collections.abc import Iterable
 
 ONE_LINE_MAX = 300  # characters of a quoted message a line keeps (a sweep's error cell, a law's raise)
 
@@ -36,3 +41,32 @@ def whole(text: str) -> int:
     if "_" in text:
         raise ValueError(f"invalid literal for int() with base 10: {text!r}")
     return int(text)
+
+
+TYPO_MIN_LENGTH = 4  # shorter keys of one table are one slip apart (u1 u2, c_p c_v, k1 k2): never taken for typos
+
+
+def is_typo_of(text: str, name: str) -> bool:
+    """Whether ``text`` is ``name`` (of at least :data:`TYPO_MIN_LENGTH` characters) with one typing slip: a
+    character left out, added, changed, or two neighbours swapped (``duraton_s``, ``durattion_s``,
+    ``duratoin_s``); two keys of one table are never that close (``velocity_noise_mps``,
+    ``velocity_noise_z_mps`` are two apart)."""
+    if len(name) < TYPO_MIN_LENGTH or text == name or abs(len(text) - len(name)) > 1:
+        return False
+    i = 0
+    while i < min(len(text), len(name)) and text[i] == name[i]:
+        i += 1
+    a, b = text[i:], name[i:]  # from the first difference on
+    return (a[1:] == b[1:] or a == b[1:] or a[1:] == b
+            or (len(a) == len(b) >= 2 and a[0] == b[1] and a[1] == b[0] and a[2:] == b[2:]))
+
+
+def likely(text: str, known: Iterable[str], cutoff: float = 0.6) -> str | None:
+    """The word of ``known`` that ``text`` most likely misspells: one a single slip away (:func:`is_typo_of`: a
+    swap of neighbours, which difflib ranks low), else difflib's closest from ``cutoff`` on; None if none is."""
+    words = [str(k) for k in known]
+    slips = [w for w in words if is_typo_of(text, w)]
+    if slips:
+        return slips[0]
+    close = difflib.get_close_matches(text, words, n=1, cutoff=cutoff)
+    return close[0] if close else None

@@ -47,7 +47,7 @@ from bridge.link.turns import TURNS
 from bridge.mavlink.endpoint import LINK_PORT
 from bridge.mavlink.signing import key_from_file
 from bridge.nodes.forkserver import warm
-from bridge.nodes.vehicle.gate import STATE_WAIT_S, GateConfig, say_lost
+from bridge.nodes.vehicle.gate import GateConfig, say_lost
 from bridge.record.runlog import Run, blackout_windows, finish_run
 from bridge.session import check_options
 from bridge.session.children import READY_TIMEOUT_S, catch_stop_signals, check_port_free, free_udp_port
@@ -147,7 +147,6 @@ def _fly(flights: Sequence[Flight], ids: Sequence[int], dirs: Sequence[Path], *,
     sessions = [Session(f, d, realtime=realtime, instance=None if instance is None else instance + i - 1,
                         gcs=gcs, speed=speed, progress=None, live=False, key=key, sysid=(instance or 0) + i, gate=g,
                         start_timeout=READY_TIMEOUT_S if g is not None else None,
-                        state_timeout=STATE_WAIT_S if g is not None else None,
                         radio=(radio, j) if radio is not None else None, announce=announce,
                         label=f"vehicle {i}" if len(flights) > 1 else None)
                 for j, (f, i, d, g) in enumerate(zip(flights, ids, dirs, gates))]

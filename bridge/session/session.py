@@ -28,6 +28,7 @@ from bridge.autopilot.vehicleevents import Sender, typed_fields
 from bridge.core.flight import Flight, Progress, prepare
 from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, LINK_PORT
 from bridge.nodes.report import Event, MissionLoaded, Ready, Report
+from bridge.nodes.vehicle.gate import STATE_WAIT_S
 from bridge.record.ending import end_block
 from bridge.record.events import RunEvent
 from bridge.record.joiner import TraceJoiner, off_clock_time
@@ -55,13 +56,12 @@ class Session:
                  speed: float | None, progress: Progress | None, live: bool, key: Path | None = None,
                  await_mission: bool = False, sysid: int | None = None, gate: Path | None = None,
                  start_timeout: float | None = None, radio: tuple[Path, int] | None = None,
-                 announce: bool = False, state_timeout: float | None = None, label: str | None = None) -> None:
+                 announce: bool = False, label: str | None = None) -> None:
         self.flight = flight
         self.announce = announce  # once the vehicle is up, say on stderr where a ground station connects
         self.radio = radio  # a fleet's one radio: its file, this vehicle's user (relay's or controller's --radio)
         self.gate = gate  # a lockstep fleet's shared clock: the vehicle's gate file (bridge.session.fleet)
         self.start_timeout = start_timeout  # s: the controller's --start-timeout (None: its default)
-        self.state_timeout = state_timeout  # s: the controller's --state-timeout (None: its default)
         self.who = f"{label}: " if label else ""  # a fleet's "vehicle <id>": which one its lines on stderr are about
         # --await-mission: ``flight`` holds the settings only; the mission is the controller's, once a ground
         # station has started one (its ``mission`` report: :meth:`_mission_loaded`); no trace is joined before
@@ -94,7 +94,7 @@ class Session:
         self._vehicle_said: dict[str, float] = {}  # the vehicle's latest event of each kind in earlier reads (s)
         self._early: list[tuple[Child, Report]] = []  # reports read while starting, handled once all are up
         self.flies_on: Callable[[], bool] | None = None  # a fleet's: a vehicle taken over flies on under it now?
-        self.vehicle_ended: Callable[[], None] | None = None  # a fleet's: told once the vehicle process has ended
+        self.vehicle_ended: Callable[[], None] = lambda: None  # a fleet's: told once the vehicle process has ended
         self.flying_on = False
 
     # -- the whole session ---------------------------------------------------------------------
@@ -213,8 +213,8 @@ class Session:
             argv.append("--realtime")
         if self.start_timeout is not None:
             argv += ["--start-timeout", repr(self.start_timeout), "--spin", "0"]
-        if self.state_timeout is not None:
-            argv += ["--state-timeout", repr(self.state_timeout)]
+        if self.gate is not None:  # its vehicle may wait at its gate for a silent one (bridge.nodes.vehicle.gate)
+            argv += ["--state-timeout", repr(STATE_WAIT_S)]
         if not self.realtime:  # a lockstep fleet's one radio: the controllers' states queue on it (the vehicles':
             argv += self._radio_args()  # their commands, by their gate file)
         if self.await_mission:
@@ -459,9 +459,8 @@ class Session:
 
     def _vehicle_gone(self) -> None:
         """The vehicle process has ended: a fleet is told, once (:attr:`vehicle_ended`)."""
-        told, self.vehicle_ended = self.vehicle_ended, None
-        if told is not None:
-            told()
+        told, self.vehicle_ended = self.vehicle_ended, lambda: None
+        told()
 
     def _show_progress(self) -> None:
         now = self.joiner.newest() if self.live or self.progress else None
