@@ -377,6 +377,8 @@ SMALL_PLAN = """QGC WPL 110
 2\t0\t3\t16\t0\t0.5\t0\tnan\t47.3977600\t8.5456000\t1.5\t1
 3\t0\t3\t21\t0\t0\t0\tnan\t47.3977600\t8.5456000\t0\t1
 """
+# the same with a loiter of 20 s at its waypoint (LOITER_TIME): 29.1 s of flight
+LOITER_PLAN = SMALL_PLAN.replace("2\t0\t3\t16\t0\t0.5", "2\t0\t3\t19\t20\t0.5")
 # the same at 1 m, its waypoint 1 m north: 7.6 s of flight, for the tests that fly it on the wall clock
 HOP_PLAN = """QGC WPL 110
 0\t1\t0\t16\t0\t0\t0\t0\t47.397742\t8.545594\t488.0\t1
@@ -418,6 +420,21 @@ def _upload(gcs: Any, target: tuple[int, int], items: list[Any]) -> None:
         item = items[m.seq]
         item.target_system, item.target_component = target
         gcs.mav.send(item)
+
+
+def _mission_start(gcs: Any, target: tuple[int, int]) -> tuple[int, str]:
+    """MAV_CMD_MISSION_START to ``target``: its COMMAND_ACK's result and, refused, the STATUSTEXT saying why (its
+    50-character chunks joined, the last one shorter)."""
+    gcs.mav.command_long_send(*target, M.MAV_CMD_MISSION_START, 0, 0, 0, 0, 0, 0, 0, 0)
+    ack = gcs.recv_match(type="COMMAND_ACK", blocking=True, timeout=5,
+                         condition=f"COMMAND_ACK.command=={M.MAV_CMD_MISSION_START}")
+    assert ack is not None, "no COMMAND_ACK for MISSION_START"
+    text, more = "", ack.result != M.MAV_RESULT_ACCEPTED
+    while more:
+        m = gcs.recv_match(type="STATUSTEXT", blocking=True, timeout=5)
+        assert m is not None, text
+        text, more = text + m.text, len(m.text) == 50
+    return ack.result, text
 
 
 @pytest.mark.parametrize("link, how", [([], START_ARM), (["--loss", "10"], START_COMMAND)],
@@ -501,16 +518,7 @@ def test_a_session_denies_the_start_of_missions_its_controller_or_trace_would_re
             said = []
             for items in (hours, _small_plan_items(plan=LONG_PLAN), _small_plan_items()):
                 _upload(gcs, target, items)
-                gcs.mav.command_long_send(*target, M.MAV_CMD_MISSION_START, 0, 0, 0, 0, 0, 0, 0, 0)
-                ack = gcs.recv_match(type="COMMAND_ACK", blocking=True, timeout=5,
-                                     condition=f"COMMAND_ACK.command=={M.MAV_CMD_MISSION_START}")
-                assert ack is not None, "no COMMAND_ACK for MISSION_START"
-                text, more = "", ack.result != M.MAV_RESULT_ACCEPTED
-                while more:  # its 50-character chunks, the last one shorter
-                    m = gcs.recv_match(type="STATUSTEXT", blocking=True, timeout=5)
-                    assert m is not None, text
-                    text, more = text + m.text, len(m.text) == 50
-                said.append((ack.result, text))
+                said.append(_mission_start(gcs, target))
             rc = sitl.p.wait(timeout=120)
         finally:
             gcs.close()
@@ -523,6 +531,38 @@ def test_a_session_denies_the_start_of_missions_its_controller_or_trace_would_re
     summary = json.loads((out / "summary.json").read_text())
     assert rc == clean_exit(summary) == 0, "\n".join(sitl.lines[-30:])
     assert summary["outcome"] == "completed" and summary["mission_transfer"]["items"] == 3
+
+
+def test_a_session_denies_the_start_of_a_mission_over_before_its_param_at_and_flies_the_next(tmp_path):
+    """``bsst sitl --await-mission --param-at 15:COM_OF_LOSS_T=1``: MISSION_START of the small plan (9.1 s to fly:
+    over before mission time 15 s) is DENIED at once, a STATUSTEXT naming the --param-at and the mission's length,
+    and the session waits on; the plan with a 20 s loiter (29.1 s) uploaded next is ACCEPTED and flown, the change
+    sent at 15 s and confirmed, exit 0. Until the third wave's thirty-seventh session the vehicle's start check did
+    not know the controller's --param-at: the first was ACCEPTED and the controller's refusal ended the session
+    (exit 1)."""
+    out = tmp_path / "param-at"
+    with instance_slot() as n:
+        gcs = _ground_station(n)
+        sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--speed", "0", "--out", str(out),
+                         "--no-plots", "--param-at", "15:COM_OF_LOSS_T=1")
+        try:
+            target = _vehicle_of(gcs)
+            _upload(gcs, target, _small_plan_items())
+            result, text = _mission_start(gcs, target)
+            assert result == M.MAV_RESULT_DENIED, "\n".join(sitl.lines[-30:])
+            assert text.startswith("MISSION_START: the mission cannot be flown: --param-at 15:COM_OF_LOSS_T=1"), text
+            assert "must be in [0, 9.101) s (the mission's duration)" in text, text
+            _upload(gcs, target, _small_plan_items(plan=LOITER_PLAN))
+            assert _mission_start(gcs, target)[0] == M.MAV_RESULT_ACCEPTED
+            rc = sitl.p.wait(timeout=120)
+        finally:
+            gcs.close()
+            sitl.stop()
+    summary = json.loads((out / "summary.json").read_text())
+    assert rc == clean_exit(summary) == 0, "\n".join(sitl.lines[-30:])
+    assert summary["outcome"] == "completed" and summary["mission_transfer"]["items"] == 3
+    [change] = summary["param_at"]
+    assert change["sent_t"] == change["t_s"] == 15.0 and change["confirmed"], change
 
 
 def test_the_link_model_acts_on_the_transfer_in_lockstep_and_the_flight_is_offlines(tmp_path):

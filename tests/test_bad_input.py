@@ -492,6 +492,7 @@ def test_a_flags_value_is_named_as_given_not_as_the_files(files, capsys):
     (["sim", "missions/sine.toml", "--wind", "5:"], "--wind"),
     (["controller", "missions/sine.toml", "--radio-user", "2"], "--radio-user without --radio"),  # (it was taken)
     (["vehicle", "--trace-cap"], "--trace-cap: only with --await-mission"),  # (it would cap nothing)
+    (["vehicle", "--param-at", "5:COM_OF_LOSS_T=1"], "--param-at: only with --await-mission"),  # (checks nothing)
     (["relay", "--listen", "127.0.0.1:0", "--to", "127.0.0.1:9", "--radio-user", "1", "--duration", "0.2"],
      "--radio-user without"),  # (a --duration: taken, as it once was, it relays briefly and exits 0, failing here)
     (["relay", "--listen", "0.0.0.0:31032", "--to", "localhost:31032", "--duration", "0.2"],  # (it relayed, exit 0)

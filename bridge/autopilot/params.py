@@ -7,7 +7,8 @@ In:  a parameter's name and value (a float: MAVLink's PARAM_VALUE carries every 
 Out: the parameter list (:data:`PARAMS`: name, type, unit, range, meaning), a value read
      (:func:`read_param`), a change checked and made (:func:`change_param`, or :class:`ParamRefused`
      saying why, and what kind of refusal it is: :class:`Refusal`), the ``[failsafe]`` keys a ``[params]``
-     table stands for (:func:`params_as_failsafe`), a value as MAVLink's float32 carries it (:func:`float32`)
+     table stands for (:func:`params_as_failsafe`), a value as MAVLink's float32 carries it (:func:`float32`),
+     scheduled changes as the ``--param-at`` flags that give them to a child process (:func:`param_at_args`)
 
 Each parameter is one of the vehicle's settings under PX4's name where PX4 has that setting, with
 the one range the setting has everywhere (``[failsafe]``'s :data:`~bridge.autopilot.failsafe.FAILSAFE_RANGES`
@@ -460,3 +461,9 @@ def parse_change(text: str) -> ParamChange:
         raise ConfigError(f"expected T:NAME=VALUE, T a number of seconds, got {t.strip()!r}") from None
     name, value = parse_assignment(rest)
     return ParamChange(t_s, name, value)
+
+
+def param_at_args(changes: tuple[ParamChange, ...]) -> list[str]:
+    """``changes`` as ``--param-at T:NAME=VALUE`` flags, each read back by :func:`parse_change` to itself (repr:
+    exact)."""
+    return [a for c in changes for a in ("--param-at", f"{c.t_s!r}:{c.name}={c.value!r}")]

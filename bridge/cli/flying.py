@@ -347,7 +347,8 @@ def add_sitl_commands(sub: Any) -> None:
                                                   "names (bsst sitl --vehicles writes it; docs/swarm.md)")
     _spin_option(p)
     add_failsafe_options(p)
-    add_param_options(p, schedule=False)  # a change at a mission time is the controller's to send (--param-at)
+    add_param_options(p, schedule_help="with --await-mission: refuse at its start a mission over before T s (the "
+                                       "controller's --param-at, which sends the change; bsst sitl passes it)")
     add_sensor_options(p)
     p.add_argument("--out", type=path_given("--out"), metavar="DIR", help="write vehicle.tlog and vehicle.bin into DIR")
     p.add_argument("--overwrite", action="store_true", help="allow replacing those files")
@@ -428,6 +429,9 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
                           "wall clock)")
     if args.trace_cap and not args.await_mission:
         raise ConfigError("--trace-cap: only with --await-mission (it caps the mission a ground station starts)")
+    if args.param_at and not args.await_mission:  # (a change at a mission time is the controller's to send)
+        raise ConfigError("--param-at: only with --await-mission (the vehicle refuses at its start a ground station's "
+                          "mission over before T; give the change to the controller, which sends it)")
     refuse_idle_noise(args, args.mission)
     flight = prepare(args.mission or at_rest(), overrides_from_args(args))
     n = args.instance

@@ -47,17 +47,18 @@ def add_failsafe_options(p: argparse.ArgumentParser) -> None:
                         "(motors off at once) or return (Return mode: home at RTL_RETURN_ALT, then land)")
 
 
-def add_param_options(p: argparse.ArgumentParser, start: bool = True, schedule: bool = True) -> None:
+def add_param_options(p: argparse.ArgumentParser, start: bool = True, schedule: bool = True,
+                      schedule_help: str = "set a vehicle parameter at mission time T s (e.g. 10:COM_OBL_ACT=1), the "
+                                           "same step in every clock; repeatable") -> None:
     """``--param NAME=VALUE`` (``start``: the vehicle's parameters at start, over the mission's ``[params]``)
-    and ``--param-at T:NAME=VALUE`` (``schedule``: a change at mission time T s), each repeatable;
-    :func:`param_overrides_from_args` reads them back."""
+    and ``--param-at T:NAME=VALUE`` (``schedule``: a change at mission time T s, what it does ``schedule_help``),
+    each repeatable; :func:`param_overrides_from_args` reads them back."""
     if start:
         p.add_argument("--param", type=param_assignment("--param"), action="append", metavar="NAME=VALUE",
                        help="a vehicle parameter at start, PX4's name (e.g. COM_OF_LOSS_T=1.0); repeatable")
     if schedule:
         p.add_argument("--param-at", type=param_assignment("--param-at", timed=True), action="append",
-                       metavar="T:NAME=VALUE", help="set a vehicle parameter at mission time T s (e.g. "
-                                                    "10:COM_OBL_ACT=1), the same step in every clock; repeatable")
+                       metavar="T:NAME=VALUE", help=schedule_help)
 
 
 def param_overrides_from_args(args: argparse.Namespace) -> dict[str, Any]:

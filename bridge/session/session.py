@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from bridge.autopilot.failsafe import return_time_s
+from bridge.autopilot.params import param_at_args
 from bridge.autopilot.vehicleevents import Sender, typed_fields
 from bridge.core.flight import Flight, Progress, prepare
 from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, LINK_PORT
@@ -189,8 +190,8 @@ class Session:
             argv += ["--speed", repr(self.speed)]
         elif not self.realtime:  # as fast as it goes, said: the vehicle's own default paces a ground station's mission
             argv += ["--speed", "0"]
-        if self.await_mission:  # the session keeps the trace in memory: a mission too long for it refused at its start
-            argv += ["--await-mission", "--trace-cap"]
+        if self.await_mission:  # its start refuses what the controller would: past the trace kept, over before a change
+            argv += ["--await-mission", "--trace-cap", *param_at_args(self.flight.param_changes)]
         if self.gate is not None:  # a fleet: its processes outnumber the cores, so none polls before it sleeps
             argv += ["--gate", str(self.gate), "--spin", "0"]
         keyarg = ["--key", str(self.key)] if self.key is not None else []
@@ -219,8 +220,7 @@ class Session:
             argv += self._radio_args()  # their commands, by their gate file)
         if self.await_mission:
             argv.append("--await-mission")
-        for c in self.flight.param_changes:
-            argv += ["--param-at", f"{c.t_s!r}:{c.name}={c.value!r}"]
+        argv += param_at_args(self.flight.param_changes)
         self.controller = Child("controller", argv + keyarg, self.path / "controller.log")
         try:
             ready = self._wait_ready(self.vehicle)

@@ -3,15 +3,16 @@ as PX4's navigator checks a mission once it is stored (its MissionFeasibilityChe
 which Commander asks of MISSION_START and of Mission mode).
 
 In:  the mission's items (:class:`~bridge.mavlink.missionitems.MissionItem`), the vehicle's home (deg, deg,
-     m AMSL), its settings' :class:`~bridge.core.flight.Flight` and the step cap of its session (or None)
+     m AMSL), its settings' :class:`~bridge.core.flight.Flight` (with the controller's ``--param-at``) and the
+     step cap of its session (or None)
 Out: :meth:`StartCheck.result`: the items' goals (:class:`~bridge.nodes.vehicle.missionwatch.Goal`), why the
      mission cannot be flown (str), or None while the check runs
 
 The check is the controller's own (:func:`bridge.nodes.uploaded.uploaded_flight`: the route, its timing, the
-longest a mission may last, the session's step cap, the points its ``mission.toml`` may hold): a mission the
-vehicle starts is one the controller flies. Timing a plan takes seconds (about 7 s for 1000 items), so it runs off
-the vehicle's loop, which goes on answering meanwhile; a start asked for before it is done waits for it at most
-:data:`WAIT_S` (a few items' check is done by then), else is refused saying so.
+longest a mission may last, a ``--param-at`` after its end, the session's step cap, the points its ``mission.toml``
+may hold): a mission the vehicle starts is one the controller flies. Timing a plan takes seconds (about 7 s for
+1000 items), so it runs off the vehicle's loop, which goes on answering meanwhile; a start asked for before it is
+done waits for it at most :data:`WAIT_S` (a few items' check is done by then), else is refused saying so.
 """
 
 from __future__ import annotations
