@@ -18,12 +18,13 @@ nothing unasked): MISSION_REQUEST_LIST until MISSION_COUNT comes, then MISSION_R
 turn, each sent again after PX4's retry time while its item does not come; a transfer the vehicle is silent in
 for PX4's protocol timeout fails. Each item is checked by the vehicle's own parser
 (:func:`~bridge.mavlink.missionitems.parse_item`) and the mission by the plan files' rules
-(:func:`~bridge.mavlink.missionitems.plan_of`), about the vehicle's home (its HOME_POSITION), and built and
-checked as the vehicle checked it at its start (:func:`~bridge.nodes.uploaded.uploaded_flight`). Then the fence and
+(:func:`~bridge.mavlink.missionitems.plan_of`), about the vehicle's home (its HOME_POSITION). Then the fence and
 the rally points (MAV_MISSION_TYPE_FENCE, _RALLY), as a ground station downloads them, through the vehicle's
-parser of each (:mod:`bridge.mavlink.fenceitems`), read as a plan's ``geoFence`` and ``rallyPoints``: the
-mission as flown holds them, so replaying it flies the same flight and the run's ``geofence`` policy judges the
-trace against that fence (one uploaded in flight is the vehicle's event, not this record's).
+parser of each (:mod:`bridge.mavlink.fenceitems`); all three are built and checked as the vehicle checked them at
+its start (:func:`~bridge.nodes.uploaded.uploaded_flight`), the fence and rally points read as a plan's
+``geoFence`` and ``rallyPoints``: the mission as flown holds them, so replaying it flies the same flight and the
+run's ``geofence`` policy judges the trace against that fence (one uploaded in flight is the vehicle's event, not
+this record's).
 
 The link model: in lockstep the mission's ``[link]`` acts on the transfer here, both directions (up: what the
 controller sends, down: what the vehicle sends), on the transfer's own clock (s of wall time from its first
@@ -44,7 +45,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.core.flight import Flight
 from bridge.link.model import LinkImpairment
-from bridge.mavlink.fenceitems import FENCE, RALLY, fence_plan, parse_zone_item, rally_plan
+from bridge.mavlink.fenceitems import FENCE, RALLY, parse_zone_item
 from bridge.mavlink.missionitems import ItemRefused, MissionItem, TransferStats, parse_item
 from bridge.mavlink.modes import MAIN_AUTO, SUB_MISSION, custom_mode
 from bridge.nodes.offboard.config import OffboardConfig
@@ -267,9 +268,8 @@ def _fetch(link: MissionLink, flight: Flight, out: Path | None, empty: TransferS
             return Fetched(None, st, "the vehicle did not say its home (GET_HOME_POSITION)")
         assert link.home is not None
         try:  # the check the vehicle's start made (bsst sitl's step cap aside: the vehicle's, bsst vehicle --trace-cap)
-            plan, new = uploaded_flight(flight, items, link.home, geo_fence=fence_plan(tuple(zones[FENCE])),
-                                        rally=rally_plan(tuple(zones[RALLY])))
-        except (ConfigError, ValueError) as exc:  # (ValueError: a fence's polygon not in a row, fence_plan)
+            plan, new = uploaded_flight(flight, items, link.home, fence=zones[FENCE], rally=zones[RALLY])
+        except (ConfigError, ValueError) as exc:  # (a refusal, as the vehicle's start check takes either)
             return Fetched(None, st, f"the mission cannot be flown: {exc}")
         if out is not None:
             write_text_atomic(out / "mission.plan", plan_text(plan))

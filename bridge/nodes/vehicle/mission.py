@@ -36,11 +36,12 @@ from bridge.autopilot.vehicleevents import Sender
 from bridge.core.flight import Flight
 from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import Endpoint
+from bridge.mavlink.fenceitems import FENCE, RALLY
 from bridge.mavlink.modes import mode_name
 from bridge.nodes.vehicle.authority import Authority, attribute
 from bridge.nodes.vehicle.missiontransfer import LinkTransfer, Mission, Partner
 from bridge.nodes.vehicle.missionwatch import Goal, ItemWatch
-from bridge.nodes.vehicle.startcheck import WAIT_S, StartCheck
+from bridge.nodes.vehicle.startcheck import WAIT_S, Held, StartCheck
 from bridge.nodes.vehicle.streams import StatusTexts
 from bridge.nodes.vehicle.zones import HeldZones
 
@@ -174,23 +175,31 @@ class MissionManager:
         """The held mission's check (:mod:`.startcheck`): its goals, why it cannot be flown, or None while it
         runs (waited for ``wait_s`` at most)."""
         deadline = time.monotonic() + wait_s
-        if self._check is not None and self._check.items is not self.mission.items:
+        held = self._held()
+        if self._check is not None and not self._check.of(held):
             self._check.wait(wait_s)  # an earlier mission's check holds the thread: this one's begins after it
         self.check_held()
         check = self._check
-        if check is None or check.items is not self.mission.items:
+        if check is None or not check.of(held):
             return None
         return check.result(max(0.0, deadline - time.monotonic()))
 
     def check_held(self) -> None:
-        """Begin the held mission's check unless it has begun or another runs (then at a later tick): the one
-        thread it takes stays on the newest mission (an upload while one is checked waits for it)."""
+        """Begin the held mission's check (with the fence and rally points held) unless it has begun or another
+        runs (then at a later tick): the one thread it takes stays on the newest (an upload while one is checked
+        waits for it)."""
         check = self._check
         if not self.authority.cfg.await_mission or not self.mission.items:
             return
-        if check is not None and (check.items is self.mission.items or check.running()):
+        held = self._held()
+        if check is not None and (check.of(held) or check.running()):
             return
-        self._check = StartCheck(self.mission.items, self.home, self.flight, self.authority.cfg.trace_cap)
+        self._check = StartCheck(held, self.home, self.flight, self.authority.cfg.trace_cap)
+
+    def _held(self) -> Held:
+        """The items the controller downloads at a start: the mission's, the fence's, the rally points'."""
+        zones = self.zones.items
+        return self.mission.items, zones[FENCE].items, zones[RALLY].items
 
     def shows_mission(self, armed: bool, offboard: bool) -> bool:
         """Whether the vehicle shows AUTO.MISSION: selected or started and disarmed, started armed in HOLD on the
@@ -323,11 +332,11 @@ class MissionManager:
             self._flight_over(new_items=mission.items is not self.mission.items)
             self.mission = mission
             self.chosen = mission.current
-            self.check_held()  # as PX4's navigator checks a mission once it is stored
         else:
             why = self.zones.accept(mission, mission_type)
             if why is not None:
                 return why
+        self.check_held()  # as PX4's navigator checks a mission once it is stored (here its fence and rally points too)
         n0 = len(self.sim.events)
         self.sim.event(EVENT_OF[mission_type], what)
         attribute(self.sim.events, n0, who.who)
