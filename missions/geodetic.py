@@ -19,6 +19,18 @@ import math
 from dataclasses import dataclass
 
 EARTH_RADIUS_M = 6_371_000.0  # PX4's CONSTANTS_RADIUS_OF_EARTH (src/lib/geo/geo.h)
+# m: one 1e-7 degree of latitude on that sphere, the wire's step (MISSION_ITEM_INT x, y in degE7): a point on a
+# bound comes back from the wire up to half of it outside, on each axis, so bounds read from the wire allow one
+WIRE_STEP_M = math.radians(1e-7) * EARTH_RADIUS_M
+
+
+def onto_bound(x: float, y: float, over: float, bound: float) -> tuple[float, float] | None:
+    """(x, y) m as read from the wire, whose size ``over`` (its distance, or its largest coordinate) may be at most
+    ``bound`` m: itself within the bound, scaled back onto it when over by no more than :data:`WIRE_STEP_M` (the
+    wire's rounding of a point on the bound), None when farther out."""
+    if over <= bound:
+        return x, y
+    return (x * bound / over, y * bound / over) if over <= bound + WIRE_STEP_M else None
 
 
 @dataclass(frozen=True)

@@ -16,14 +16,13 @@ a breach by GF_ACTION (Hold by default: bridge.autopilot.fencewatch); the run sa
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from missions.geodetic import Home
+from missions.geodetic import Home, onto_bound
 from params import ConfigError, Table, finite_float, show
 
 MAX_ZONES = 100
@@ -182,7 +181,9 @@ def _local(home: Home, lat: Any, lon: Any) -> list[float]:
         raise ValueError(f"latitude {show(lat) if la is None else f'{la:g}'}, "
                          f"longitude {show(lon) if lo is None else f'{lo:g}'}: not a place on earth")
     x, y, _ = home.paper(la, lo, home.alt)
-    if max(abs(x), abs(y)) > COORD_M:  # said in the plan's own terms (it was the metres it became)
-        raise ValueError(f"latitude {la:g}, longitude {lo:g}: {math.hypot(x, y) / 1000.0:.0f} km from the plan's "
-                         f"home; a fence lies within {COORD_M / 1000.0:g} km of it")
-    return [x, y]
+    kept = onto_bound(x, y, max(abs(x), abs(y)), COORD_M)  # a point on the bound comes back from the wire over it
+    if kept is None:  # said in the plan's own terms (it was the metres it became)
+        raise ValueError(f"latitude {la:g}, longitude {lo:g}: {abs(x) / 1000.0:.3f} km {'north' if x >= 0 else 'south'}"
+                         f", {abs(y) / 1000.0:.3f} km {'west' if y >= 0 else 'east'} of the plan's home; a fence's "
+                         f"points lie within {COORD_M / 1000.0:g} km of it each way")
+    return list(kept)

@@ -15,7 +15,7 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
-from missions.geodetic import Home
+from missions.geodetic import Home, onto_bound
 from params import ConfigError, Table, finite_float, json_show, show
 
 MAX_RALLY = 100  # points; QGroundControl plans hold a handful
@@ -59,10 +59,11 @@ def rally_from_plan(raw: Any, home: Home, source: str, radius_m: float) -> tuple
                               "not a place on earth")
         x, y, _ = home.paper(lat, lon, home.alt)
         away = math.hypot(x, y)
-        if away > radius_m:  # said in the plan's own terms (it was the metres it became)
+        kept = onto_bound(x, y, away, radius_m)  # a point on the bound comes back from the wire a little over it
+        if kept is None:  # said in the plan's own terms (it was the metres it became)
             raise ConfigError(f"{source}: rallyPoints.points[{i}]: latitude {lat:g}, longitude {lon:g}: "
                               f"{away:.0f} m from the plan's home; rally points lie within {radius_m:g} m of it")
-        local.append([x, y])
+        local.append(list(kept))
     if not local:
         return ()
     return rally_from_table(Table({"points": local}, source, "rallyPoints"), radius_m)

@@ -299,3 +299,37 @@ def test_a_ground_station_downloads_the_missions_own_fence_and_rally_points_befo
     assert np.allclose(points, sim.rally, atol=6e-3) and {it.command for it in rally} == {M.MAV_CMD_NAV_RALLY_POINT}
     bare = HeldZones(prepare(MISSION_DIR / "sine.toml").make_vehicle(), (HOME.lat, HOME.lon, HOME.alt))
     assert bare.items[FENCE].items == () and bare.items[RALLY].items == ()  # the sine has neither
+
+
+def test_a_fence_and_rally_points_on_their_bounds_read_back_from_the_wire() -> None:
+    """A mission's fence square on its 100 km bound (each corner at ±1e5 m) and a rally point on the 100 m
+    envelope come back from the wire (degE7) up to half a step (~6 mm) outside: read back, each is put back on its
+    bound, within the step, and a point a step and more outside is still refused, naming it. Until the third
+    wave's thirty-seventh session they were refused as read back: the vehicle offered a fence and rally points
+    it held that its controller and a ground station's plan could not read (``geoFence.polygons[0]: ... 141 km
+    from the plan's home``)."""
+    from bridge.mavlink.fenceitems import fence_items, rally_items
+    from missions.envelope import ENVELOPE_RADIUS_M
+    from missions.geodetic import WIRE_STEP_M
+    from missions.geofence import COORD_M, geofence_from_plan
+    from missions.rally import rally_from_plan
+    from params import ConfigError
+
+    square = ((COORD_M, COORD_M), (COORD_M, -COORD_M), (-COORD_M, -COORD_M), (-COORD_M, COORD_M))
+    fence = Geofence((Zone(True, points=square),))
+    sent = fence_items(fence, HOME)
+    back = geofence_from_plan(fence_plan(sent), HOME, "downloaded")
+    assert back is not None and np.allclose(back.zones[0].points, square, atol=WIRE_STEP_M, rtol=0.0)
+    assert max(abs(v) for p in back.zones[0].points for v in p) <= COORD_M
+    rally = ((0.0, ENVELOPE_RADIUS_M), (ENVELOPE_RADIUS_M / math.sqrt(2.0), -ENVELOPE_RADIUS_M / math.sqrt(2.0)))
+    points = rally_from_plan(rally_plan(rally_items(rally, HOME)), HOME, "downloaded", ENVELOPE_RADIUS_M)
+    assert np.allclose(points, rally, atol=WIRE_STEP_M, rtol=0.0)
+    assert max(math.hypot(*p) for p in points) <= ENVELOPE_RADIUS_M
+    far = rally_items(((0.0, ENVELOPE_RADIUS_M + 2.0 * WIRE_STEP_M),), HOME)
+    with pytest.raises(ConfigError, match=r"downloaded: rallyPoints.points\[0\]: latitude .*: 100 m from the plan's "
+                                          "home; rally points lie within 100 m of it"):
+        rally_from_plan(rally_plan(far), HOME, "downloaded", ENVELOPE_RADIUS_M)
+    beyond = fence_items(Geofence((Zone(True, points=((COORD_M + 1.0, 0.0), (0.0, 1.0), (0.0, -1.0))),)), HOME)
+    with pytest.raises(ConfigError, match=r"downloaded: geoFence.polygons\[0\]: latitude .*: 100.001 km north, "
+                                          r"0.000 km west of the plan's home; a fence's points lie within 100 km"):
+        geofence_from_plan(fence_plan(beyond), HOME, "downloaded")

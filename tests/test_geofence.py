@@ -143,8 +143,8 @@ def test_a_malformed_plan_fence_is_one_error_naming_the_file_and_key(tmp_path: P
     bad = fenced_l(tmp_path, {"polygons": [{"inclusion": True, "polygon": far}]}, "far.plan")
     with pytest.raises(ConfigError) as e:  # said in the plan's terms: it quoted the metres, under a key "points"
         load_mission(bad)
-    assert str(e.value) == (f"{bad}: geoFence.polygons[0]: latitude 48.397, longitude 8.545: 111 km from the plan's "
-                            "home; a fence lies within 100 km of it")
+    assert str(e.value) == (f"{bad}: geoFence.polygons[0]: latitude 48.397, longitude 8.545: 111.112 km north, "
+                            "0.044 km west of the plan's home; a fence's points lie within 100 km of it each way")
     for table, typo, key in (("geofence", "zone", "zones"), ("rally", "point", "points")):
         with pytest.raises(ConfigError) as e:
             mission_from_table({"duration_s": 1.0, "trajectory": {"kind": "sine"}, table: {typo: []}}, "m.toml")
