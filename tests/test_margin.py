@@ -316,7 +316,7 @@ class _Law:
         pass
 
 
-class Dies(_Law):  # ends its worker process past any guard (docs/usage.md: a failed cell, "worker process died")
+class Dies(_Law):  # ends its worker process past any guard (docs/usage.md: a failed cell, "worker process died: ...")
     def update(self, t, state, ref, omega_d):
         if t > 5.0:
             os.abort()
@@ -331,8 +331,8 @@ class Raises(_Law):  # fails every flight: law_failed, at every value
 
 def test_a_law_whose_worker_dies_ends_its_own_search_not_the_others(tmp_path: Path, here) -> None:
     """A plug-in law that kills its worker (``os.abort()`` at 5 s): its first probe is a failed cell (``worker
-    process died``), its search ends there with no margin and says why; bsst's search goes on to its margin,
-    margin.json is written, and the command exits 1 (not as asked), naming the law."""
+    process died: killed by SIGABRT``), its search ends there with no margin and says why; bsst's search goes on to
+    its margin, margin.json is written, and the command exits 1 (not as asked), naming the law."""
     laws = tmp_path / "bad_laws.py"
     laws.write_text(BAD_LAWS)
     mission = tmp_path / "short.toml"
@@ -347,15 +347,15 @@ def test_a_law_whose_worker_dies_ends_its_own_search_not_the_others(tmp_path: Pa
     assert res["laws_failed"] == [f"{laws}:Dies"]
     assert dies["margin"] is None and dies["bracket"] == [None, None] and not dies["held_to_range"]
     assert dies["error"] == {"delay_ms": 16.0, "seed": 0, "outcome": "error", "phase": "bisection",
-                             "error": "worker process died"}, dies["error"]
+                             "error": "worker process died: killed by SIGABRT"}, dies["error"]
     assert [(c["delay_ms"], c["outcome"], c["error"]) for c in dies["cells"]] == [
-        (16.0, "error", "worker process died")]
+        (16.0, "error", "worker process died: killed by SIGABRT")]
     assert res["cells_flown"] == len(own["cells"]) + 1
     assert "margin bsst: delay_ms 36 (bracket [36, 40]" in r.stdout
     assert (f"margin {laws}:Dies: delay_ms: none (the law failed, not the criterion: error at 16; worker process "
-            "died)") in r.stdout, r.stdout
-    assert f"bsst margin: {laws}:Dies could not be flown at delay_ms = 16 (seed 0, error): worker process died" \
-        in r.stderr, r.stderr
+            "died: killed by SIGABRT)") in r.stdout, r.stdout
+    assert (f"bsst margin: {laws}:Dies could not be flown at delay_ms = 16 (seed 0, error): worker process died: "
+            "killed by SIGABRT") in r.stderr, r.stderr
 
 
 def test_a_law_that_fails_every_flight_is_not_reported_as_a_boundary(tmp_path: Path, here) -> None:

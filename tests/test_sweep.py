@@ -274,7 +274,8 @@ class Exploding(Sine):
         return super().sample(t)
 
 
-@pytest.mark.parametrize("how, why", [("raise", "RuntimeError: reference exploded"), ("die", "worker process died")])
+@pytest.mark.parametrize("how, why", [("raise", "RuntimeError: reference exploded"),
+                                      ("die", "worker process died: exited with status 3")])
 def test_failed_cells_are_recorded_never_abort(tmp_path: Path, how: str, why: str) -> None:
     m = Mission(Exploding(how), duration_s=3.0, name="boom")
     with pytest.raises(SweepFailed, match="every cell of the sweep failed") as caught:  # issue 23: never a result
@@ -283,6 +284,60 @@ def test_failed_cells_are_recorded_never_abort(tmp_path: Path, how: str, why: st
     assert [r["outcome"] for r in rows] == ["error", "error"]
     assert all(r["error"] == why and r["class"] == "error" for r in rows)
     assert "Cells that could not be flown" in (tmp_path / how / "report.md").read_text()
+
+
+DYING_LAWS = """
+import ctypes
+import os
+import signal
+
+
+class _Dies:  # hovers, then ends its worker process past any guard at 1 s
+    def __init__(self, nominal, gains, rate_hz):
+        self.m, self.g = nominal.mass, nominal.gravity
+        self.desired = (0.0, 0.0)
+
+    def advance(self, saturated, hold=False):
+        pass
+
+    def reset(self):
+        pass
+
+    def update(self, t, state, ref, omega_d):
+        if t > 1.0:
+            self.die()
+        return (self.m * self.g, 0.0, 0.0, 0.0)
+
+
+class Killed(_Dies):  # as the OOM killer ends a process
+    def die(self):
+        os.kill(os.getpid(), signal.SIGKILL)
+
+
+class Exits(_Dies):  # the C library's _exit: past Python's os._exit, which a law's guard takes
+    def die(self):
+        ctypes.CDLL(None)._exit(3)
+"""
+
+
+def test_a_cell_whose_worker_dies_says_how_it_died(tmp_path: Path) -> None:
+    """``bsst sweep`` of three laws, two of which end their worker: one by SIGKILL, one by exit(3). Each such cell
+    breaks its pool, flies again alone, breaks that pool too, and is an ``error`` row naming how its worker ended;
+    the summary names the first, report.md lists both, and the exit status is 1 (not every cell flew). Until the
+    third wave's thirty-seventh session each said only "worker process died"."""
+    laws = tmp_path / "dying.py"
+    laws.write_text(DYING_LAWS)
+    out = tmp_path / "s"
+    r = run_bsst("sweep", brief_file(tmp_path), "--controller", f"bsst,{laws}:Killed,{laws}:Exits", "--jobs", "2",
+                 "--no-plots", "--out", out)
+    assert r.returncode == 1 and "Traceback" not in r.stderr, (r.stdout, r.stderr)
+    died = {"Killed": "worker process died: killed by SIGKILL", "Exits": "worker process died: exited with status 3"}
+    rows = read_cells(out / CELLS_CSV)
+    assert [(row["outcome"], row["error"]) for row in rows[1:]] == [("error", died["Killed"]), ("error", died["Exits"])]
+    assert rows[0]["outcome"] == "completed", rows[0]
+    assert "sweep brief: 3 cells, 3 flown, 0 kept from before, 2 failed" in r.stdout, r.stdout
+    assert f"bsst sweep: 2 of 3 cells failed (cells.csv's error column); the first: {died['Killed']}\n" in r.stderr
+    assert all(text in (out / "report.md").read_text() for text in died.values())
 
 
 def test_lockstep_cells(tmp_path: Path) -> None:

@@ -1,8 +1,9 @@
 """Plumbing shared by the session launcher and its two child processes.
 
-In:  reports (:mod:`bridge.nodes.report`) or status lines to write, SIGTERM / SIGINT, the death of the parent
+In:  reports (:mod:`bridge.nodes.report`) or status lines to write, SIGTERM / SIGINT, the death of the parent;
+     a child's return code
 Out: one line on stdout per report, flushed at once; ``stop()`` called on a stop signal; SIGTERM to a
-     child whose parent died
+     child whose parent died; how a child ended, in words (:func:`exit_text`)
 
 - Children report on stdout, one JSON line each, flushed at once (:func:`report_printer`; the
   kinds and their fields are :mod:`bridge.nodes.report`'s). The launcher reads them live
@@ -71,3 +72,17 @@ def die_with_parent() -> None:
     except (OSError, AttributeError):
         pass
 
+
+
+def exit_text(returncode: int | None) -> str:
+    """How a child process ended, from its return code as ``Popen.returncode`` and ``Process.exitcode`` give it
+    (negative: the signal that killed it): ``killed by SIGKILL``, ``exited with status 3``; ``still running``
+    for None."""
+    if returncode is None:
+        return "still running"
+    if returncode < 0:
+        try:
+            return f"killed by {signal.Signals(-returncode).name}"
+        except ValueError:
+            return f"killed by signal {-returncode}"
+    return f"exited with status {returncode}"

@@ -28,6 +28,7 @@ from typing import Any
 
 from bridge.mavlink.address import GCS_PORT, LINK_PORT
 from bridge.nodes.forkserver import ForkedChild, start_child
+from bridge.nodes.process import exit_text
 from bridge.nodes.report import Done, Report, Stats, parse_line
 from params import ConfigError
 
@@ -201,15 +202,7 @@ class Child:
         return out
 
     def exit_text(self) -> str:
-        rc = self.proc.returncode
-        if rc is None:
-            return "still running"
-        if rc < 0:
-            try:
-                return f"killed by {signal.Signals(-rc).name}"
-            except ValueError:
-                return f"killed by signal {-rc}"
-        return f"exited with status {rc}"
+        return exit_text(self.proc.returncode)
 
     def last_error(self) -> str:
         """The last line of the child's stderr (its one-line error, or a traceback's end)."""

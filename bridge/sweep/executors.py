@@ -5,7 +5,8 @@ In:  a mission, the cells to fly, a mode (``offline`` or ``lockstep``), ``jobs``
 Out: each finished ``cells.csv`` row, handed to ``report`` in the main process as it comes; progress
      on stderr
 
-A cell that raises, or whose worker dies, becomes an ``error`` row.
+A cell that raises, or whose worker dies, becomes an ``error`` row (a death names how: ``worker process died:
+killed by SIGKILL``).
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ from bridge.autopilot.compiling import announce_compiling
 from bridge.core.interrupt import Interrupts, sigint_futures, wait_or_interrupt
 from bridge.core.scalar import compiled_loaded, kernels_choice
 from bridge.loop import fly
-from bridge.nodes.process import die_with_parent
+from bridge.nodes.process import die_with_parent, exit_text
 from bridge.record.runlog import Run
 from bridge.session import instance_slot, sitl
 from bridge.swarm import simulate as simulate_fleet
@@ -249,13 +250,12 @@ def _socket_tempdir() -> Iterator[None]:
 def run_local(mission: Mission, todo: Sequence[Cell], mode: str, jobs: int, report: Report,
               name: str = "sweep", search: bool = False) -> None:
     """Fly cells in a local process pool, at most 2 x jobs in flight; ``name``: the command, as a Ctrl-C's line
-    names it. ``search``: this call is one round of a search (``bsst margin``): after a Ctrl-C the cells in flight
-    are reported as they end (a sweep's are not: its resume flies them), and a Ctrl-C that came after the last
-    cell's wait raises KeyboardInterrupt all the same, so that the search stops there.
+    names it. ``search``: one round of a search (``bsst margin``): after a Ctrl-C the cells in flight are reported
+    as they end (a sweep's are not: its resume flies them), and a Ctrl-C that came after the last cell's wait
+    raises KeyboardInterrupt all the same, so that the search stops there.
 
-    If a worker process dies (the pool breaks), the cells that were in flight are flown
-    again one at a time in a fresh one-worker pool: the one that breaks that one too is
-    recorded as an error, the others get their real result.
+    If a worker process dies (the pool breaks), the cells that were in flight are flown again one at a time in a
+    fresh one-worker pool: the one that breaks that one too is an error row, the others get their real result.
     """
     check_main_guard()
     queue: deque[Cell] = deque(todo)
@@ -263,20 +263,32 @@ def run_local(mission: Mission, todo: Sequence[Cell], mode: str, jobs: int, repo
     with sigint_futures() as sigint:  # Ctrl-C raises here, not inside the pool's locks
         while queue or suspects:
             if suspects:
-                cell = suspects.popleft()
-                p = _pool(1)
-                try:
-                    (f,) = wait_or_interrupt([p.submit(run_cell, mission, cell, mode)], sigint.first)
-                    row = f.result()
-                except BrokenProcessPool:
-                    row = error_row(cell, "worker process died")
-                finally:
-                    _shut_down(p, sigint, name)
-                report(row)
+                _fly_alone(mission, suspects.popleft(), mode, report, sigint, name)
                 continue
             _fly_in_pool(mission, queue, suspects, mode, jobs, report, sigint, name, search)
         if search and sigint.first.done():  # taken after the last wait: not lost
             raise KeyboardInterrupt
+
+
+def _fly_alone(mission: Mission, cell: Cell, mode: str, report: Report, sigint: Interrupts, name: str) -> None:
+    """Fly a cell that was in flight when its pool broke, alone in a pool of one worker, and report its row: if it
+    breaks this pool too, an ``error`` row naming how the worker ended (``worker process died: killed by SIGKILL``;
+    concurrent.futures says only "terminated abruptly"). Not after a Ctrl-C."""
+    pool = _pool(1)
+    # private, but the only holder of the worker's exit status (its parent, the fork server, sends it to the
+    # Process); shutdown drops the attribute, not the dict
+    workers: Mapping[int, Any] = pool._processes  # type: ignore[attr-defined]
+    future = pool.submit(run_cell, mission, cell, mode)
+    try:
+        wait_or_interrupt([future], sigint.first)
+    finally:
+        _shut_down(pool, sigint, name)  # (joins the worker: its exit status is known from here)
+    try:
+        row = future.result()
+    except BrokenProcessPool:
+        ended = [p.exitcode for p in workers.values() if p.exitcode]
+        row = error_row(cell, "worker process died" + (f": {exit_text(ended[0])}" if ended else ""))
+    report(row)
 
 
 def _fly_in_pool(mission: Mission, queue: deque[Cell], suspects: deque[Cell], mode: str, jobs: int,
