@@ -99,6 +99,49 @@ def test_an_interrupted_sweep_says_how_many_cells_it_flew(mission_file: Path, tm
     assert r.returncode == 1 and f"{flown} of 12 cells flown; the sweep was interrupted" in r.stderr, r.stderr
 
 
+def _rows_written(out: Path) -> int:
+    """The whole rows in ``out``'s cells.csv so far (a torn last line is not one; the header is not)."""
+    try:
+        return max(0, (out / CELLS_CSV).read_bytes().count(b"\n") - 1)
+    except FileNotFoundError:
+        return 0
+
+
+@pytest.mark.parametrize("stop", ["ctrl-c", "sigterm"])
+def test_the_cells_in_flight_at_a_ctrl_c_are_kept_and_the_resume_flies_the_rest(mission_file: Path, tmp_path: Path,
+                                                                                 capsys, stop: str) -> None:
+    """``--jobs 2``, stopped once cells.csv has its first row: the cells then in flight (both workers', and those
+    already handed to them) end first, as the sweep says, and are kept. Until the third wave's thirty-seventh session
+    they flew to their end and were dropped: in no row, and flown again by the resume. The summary counts what
+    was not flown, exit 1; the resume flies exactly those, and its cells.csv is the uninterrupted sweep's."""
+    args = ["sweep", str(mission_file), "--delay", "0,5,10", "--loss", "0,20", "--seeds", "2", "--no-plots"]
+    out = tmp_path / "stopped"
+    proc = Bsst(*args, "--jobs", "2", "--out", str(out))
+    try:
+        wait_for(lambda: _rows_written(out) >= 1, 60, "cells.csv's first row")
+        seen = _rows_written(out)
+        if stop == "ctrl-c":
+            os.killpg(proc.pid, signal.SIGINT)
+        else:
+            os.kill(proc.pid, signal.SIGTERM)
+        said, told = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+    kept = len(read_cells(out / CELLS_CSV))
+    assert proc.returncode == 1, (said, told)
+    assert "sweep: interrupted; the cells in flight end first" in told, told
+    assert seen + 2 <= kept < 12, (seen, kept, told)  # (the second worker's cell, and the one queued for the first)
+    assert f"sweep short: {kept} of 12 cells flown (interrupted): {kept} this run" in said, said
+    assert f"bsst: interrupted: {12 - kept} of 12 cells not flown; continue with --resume --out {out}" in told, told
+    assert main([*args, "--jobs", "2", "--out", str(out), "--resume"]) == 0
+    assert f"12 cells, {12 - kept} flown, {kept} kept from before" in capsys.readouterr().out
+    whole = tmp_path / "whole"
+    assert main([*args, "--jobs", "2", "--out", str(whole)]) == 0
+    assert (out / CELLS_CSV).read_bytes() == (whole / CELLS_CSV).read_bytes()
+
+
 def test_a_second_ctrl_c_does_not_wait_for_the_cell_in_flight(tmp_path: Path) -> None:
     """Ctrl-C lets the cells in flight finish; a second one ends their workers at once. The cell here is a
     half-hour offline flight (17 s of work on a quiet core, more under load), interrupted as its worker starts:

@@ -176,7 +176,8 @@ def _sweep(args: argparse.Namespace) -> int:
     print(f"sweep {spec.mission.name}: {cells}, {res.reused} kept from before, {res.failed} failed, "
           f"{res.wall_s:.1f} s; engine {res.engine} ({res.engine_why}){mixed}")
     if res.interrupted:
-        print(f"bsst: interrupted; continue with --resume --out {res.path}", file=sys.stderr)
+        print(f"bsst: interrupted: {res.total - len(res.rows)} of {res.total} cells not flown; continue with --resume "
+              f"--out {res.path} (it flies them)", file=sys.stderr)
         return EXIT_FAILED
     print(f"sweep directory: {res.path}")
     if res.status == "all failed":

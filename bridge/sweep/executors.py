@@ -24,7 +24,7 @@ import tempfile
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
@@ -250,9 +250,9 @@ def _socket_tempdir() -> Iterator[None]:
 def run_local(mission: Mission, todo: Sequence[Cell], mode: str, jobs: int, report: Report,
               name: str = "sweep", search: bool = False) -> None:
     """Fly cells in a local process pool, at most 2 x jobs in flight; ``name``: the command, as a Ctrl-C's line
-    names it. ``search``: one round of a search (``bsst margin``): after a Ctrl-C the cells in flight are reported
-    as they end (a sweep's are not: its resume flies them), and a Ctrl-C that came after the last cell's wait
-    raises KeyboardInterrupt all the same, so that the search stops there.
+    names it. After a Ctrl-C the cells in flight end first and are reported (not those a second Ctrl-C stops: a
+    resume flies them). ``search``: one round of a search (``bsst margin``): a Ctrl-C that came after the last
+    cell's wait raises KeyboardInterrupt all the same, so that the search stops there.
 
     If a worker process dies (the pool breaks), the cells that were in flight are flown again one at a time in a
     fresh one-worker pool: the one that breaks that one too is an error row, the others get their real result.
@@ -265,7 +265,7 @@ def run_local(mission: Mission, todo: Sequence[Cell], mode: str, jobs: int, repo
             if suspects:
                 _fly_alone(mission, suspects.popleft(), mode, report, sigint, name)
                 continue
-            _fly_in_pool(mission, queue, suspects, mode, jobs, report, sigint, name, search)
+            _fly_in_pool(mission, queue, suspects, mode, jobs, report, sigint, name)
         if search and sigint.first.done():  # taken after the last wait: not lost
             raise KeyboardInterrupt
 
@@ -273,16 +273,19 @@ def run_local(mission: Mission, todo: Sequence[Cell], mode: str, jobs: int, repo
 def _fly_alone(mission: Mission, cell: Cell, mode: str, report: Report, sigint: Interrupts, name: str) -> None:
     """Fly a cell that was in flight when its pool broke, alone in a pool of one worker, and report its row: if it
     breaks this pool too, an ``error`` row naming how the worker ended (``worker process died: killed by SIGKILL``;
-    concurrent.futures says only "terminated abruptly"). Not after a Ctrl-C."""
+    concurrent.futures says only "terminated abruptly"). After a Ctrl-C, its row only if it flew to its end."""
     pool = _pool(1)
     # private, but the only holder of the worker's exit status (its parent, the fork server, sends it to the
     # Process); shutdown drops the attribute, not the dict
     workers: Mapping[int, Any] = pool._processes  # type: ignore[attr-defined]
-    future = pool.submit(run_cell, mission, cell, mode)
+    future, waited = pool.submit(run_cell, mission, cell, mode), False
     try:
         wait_or_interrupt([future], sigint.first)
+        waited = True
     finally:
         _shut_down(pool, sigint, name)  # (joins the worker: its exit status is known from here)
+        if not waited:
+            _report_flown([future], report)
     try:
         row = future.result()
     except BrokenProcessPool:
@@ -291,10 +294,18 @@ def _fly_alone(mission: Mission, cell: Cell, mode: str, report: Report, sigint: 
     report(row)
 
 
+def _report_flown(futures: Iterable[Future], report: Report) -> None:
+    """Report the rows of the cells of ``futures`` that flew to their end (after a Ctrl-C; the others are not
+    results: a resume flies them)."""
+    for f in futures:
+        if f.done() and not f.cancelled() and f.exception() is None:
+            report(f.result())
+
+
 def _fly_in_pool(mission: Mission, queue: deque[Cell], suspects: deque[Cell], mode: str, jobs: int,
-                 report: Report, sigint: Interrupts, name: str, search: bool) -> None:
+                 report: Report, sigint: Interrupts, name: str) -> None:
     """Fly ``queue``'s cells in one pool of ``jobs`` workers until it is empty or the pool breaks (the cells
-    in flight then go to ``suspects``); ``search``: after a Ctrl-C, report those that end (:func:`run_local`)."""
+    in flight then go to ``suspects``); after a Ctrl-C, report those that end (:func:`run_local`)."""
     pool = _pool(jobs, len(queue), mode)
     inflight: dict[Any, Cell] = {}
     try:
@@ -318,14 +329,13 @@ def _fly_in_pool(mission: Mission, queue: deque[Cell], suspects: deque[Cell], mo
                 return
     finally:
         _shut_down(pool, sigint, name)
-        if search and sigint.first.done():  # the cells in flight have ended: those that flew are results
-            for f in [f for f in inflight if f.done() and not f.cancelled() and f.exception() is None]:
-                report(f.result())
+        if sigint.first.done():  # the cells in flight have ended: those that flew are results
+            _report_flown(inflight, report)
 
 
 def _shut_down(pool: ProcessPoolExecutor, sigint: Interrupts, name: str) -> None:
     """Shut ``pool`` down once the cells in flight have ended (after a Ctrl-C, ``sigint.first`` done, their workers
-    ignore it and finish them; a sweep does not record them, a search does: :func:`run_local`). The second Ctrl-C
+    ignore it and finish them, and their rows are reported: :func:`run_local`). The second Ctrl-C
     (``sigint.second``, before or during this wait) ends the workers at once (SIGTERM: an offline cell dies, a
     lockstep cell's session stops its children) rather than wait for them."""
     if sigint.first.done():
