@@ -146,8 +146,8 @@ def test_a_law_that_fails_in_flight_ends_law_failed_with_its_record(tmp_path, ca
 
 
 PROCESS_ENDS = {  # case: (advance's line: a law that ends bsst sim's process past any guard in it, how it is said)
-    "sigkill": ("if self.t >= 0.5: os.kill(os.getpid(), 9)", "killed by signal SIGKILL"),
-    "posix_exit0": ("if self.t >= 0.5: __import__('posix')._exit(0)", "exit status 0"),  # as a C extension's exit(0)
+    "sigkill": ("if self.t >= 0.5: os.kill(os.getpid(), 9)", "killed by SIGKILL"),
+    "posix_exit0": ("if self.t >= 0.5: __import__('posix')._exit(0)", "exited with status 0"),  # a C exit(0)
 }
 
 

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from typing import NoReturn
 
 from bridge.core.interrupt import as_sigint
+from bridge.nodes.process import exit_text
 from params import ConfigError
 
 STOPS = (signal.SIGINT, signal.SIGTERM)  # passed on to the child as a Ctrl-C: its flight ends aborted, recorded
@@ -43,7 +44,8 @@ FORWARDED = (signal.SIGHUP,)  # passed on to the child as it is: it ends as this
 @dataclass(frozen=True)
 class Watched:
     """How watched work ended: ``status`` its exit status (None: the child ended before its work did, ``how``:
-    ``exit status N`` or ``killed by signal NAME``), ``signalled`` a signal this process was sent and passed on."""
+    ``exited with status N`` or ``killed by NAME``: :func:`bridge.nodes.process.exit_text`), ``signalled`` a signal
+    this process was sent and passed on."""
 
     status: int | None
     how: str = ""
@@ -106,8 +108,7 @@ def run_watched(work: Callable[[], int], bad_input: tuple[type[BaseException], .
     if report:
         return Watched(int(report))
     code = os.waitstatus_to_exitcode(status)
-    how = f"killed by signal {_signal_name(-code)}" if code < 0 else f"exit status {code}"
-    return Watched(None, how, signalled[0] if signalled else None)
+    return Watched(None, exit_text(code), signalled[0] if signalled else None)
 
 
 def _take_passed_stops(asked: int, mask: set[signal.Signals]) -> None:
@@ -153,9 +154,3 @@ def _child(work: Callable[[], int], bad_input: tuple[type[BaseException], ...], 
         os.write(fd, report.encode())
         os._exit(0)
 
-
-def _signal_name(signum: int) -> str:
-    try:
-        return signal.Signals(signum).name
-    except ValueError:
-        return str(signum)
