@@ -41,7 +41,7 @@ EVERY_KIND = [
     Refused("PARAM_SET MPC_XY_VEL_MAX: out of range"),
     Stats({"commands": 10, "rejected": {"stale": 1}, "down": None}),
     Done("completed"),
-    Done("aborted", True, "vehicle silent for 2 s"),
+    Done("aborted", True, "vehicle silent for 2 s", silent=True),
     Done("aborted", False, "the vehicle was switched to HOLD: no more targets sent", "HOLD"),
 ]
 
@@ -77,6 +77,7 @@ def test_event_times_are_reported_to_the_millisecond():
     '{"report": "event", "t": 1.0, "kind": "end", "text": "x", "by": null, "answers": [1]}',
     '{"report": "event", "t": 1.0, "kind": "end", "text": "x", "by": null, "answers": "end"}',
     '{"report": "warning", "text": 5}',
+    '{"report": "done", "outcome": "aborted", "silent": 1}',  # a frozen vehicle is killed on it: a bool only
     "relay: listening on 127.0.0.1:5",  # a person's line, not a report
 ])
 def test_a_line_that_is_not_a_report_is_none_not_a_traceback(line):

@@ -168,18 +168,31 @@ def _pid_naming(path: Path) -> int | None:
     return None
 
 
-@pytest.mark.parametrize(("sig", "how", "said"), [
-    (signal.SIGKILL, "died (killed by SIGKILL)", "vehicle (pid {pid}) killed by SIGKILL"),
-    # frozen: its own controller gives up on it after 2 s, its session kills it after the landing it waits for
-    (signal.SIGSTOP, "vehicle silent for 2 s", "vehicle (pid {pid}) did not stop within 8 s: SIGKILL")],
+def _started(pid: int) -> str | None:
+    """Process ``pid``'s start time (clock ticks since boot, /proc/PID/stat), None once it is gone (reaped)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rpartition(")")[2].split()[19]
+    except OSError:
+        return None
+
+
+@pytest.mark.parametrize(("sig", "how", "said", "dropped"), [
+    (signal.SIGKILL, "died (killed by SIGKILL)", "vehicle (pid {pid}) killed by SIGKILL", "ended (its process gone"),
+    # frozen: its own controller gives up on it after 2 s, and its session kills it at once
+    (signal.SIGSTOP, "vehicle silent for 2 s", "vehicle (pid {pid}) frozen, its controller hearing nothing from it: "
+     "SIGKILL; the other vehicles fly on without it", "frozen (its controller heard nothing from it: killed")],
     ids=["killed", "frozen"])
 def test_a_vehicle_killed_or_frozen_in_flight_is_dropped_and_the_other_flies_on(tmp_path: Path, capsys, sig: int,
-                                                                                how: str, said: str) -> None:
+                                                                                how: str, said: str,
+                                                                                dropped: str) -> None:
     """A lockstep pair at real time's pace, vehicle 2's process killed (or frozen) after a second of flight: once its
     process is gone its fleet tells vehicle 1's gate at once (no 30 s of silence), and vehicle 1 flies its mission to
     the end, its controller not giving up on its vehicle waiting at the gate meanwhile (until the third wave's
     thirty-sixth session it aborted 2 s after: "no new state from the vehicle for 2 s"); vehicle 2 is aborted,
-    said by name, and the fleet with it."""
+    said by name, and the fleet with it. Frozen (SIGSTOP), its controller hears nothing from it for 2 s and its
+    session kills and reaps it then, and vehicle 1 flies on within seconds (until the third wave's thirty-sixth
+    session its session waited for a landing that never came, then 8 s for a SIGTERM it never took: vehicle 1 flew
+    on 17 s after the freeze)."""
     mission = short_sine(tmp_path, 4.0)
     mission.write_text(mission.read_text() + '\n[end]\naction = "hold"\n')  # (no landing to fly: cheaper)
     out, result = tmp_path / "run", {}
@@ -196,7 +209,10 @@ def test_a_vehicle_killed_or_frozen_in_flight_is_dropped_and_the_other_flies_on(
         wait_for(lambda: count_records(out / "vehicle-2" / "vehicle.bin") > 250, 90, "a second of vehicle 2's flight")
         pid = _pid_naming(out / "vehicle-2" / "gate.json")
         assert pid is not None, "vehicle 2's process"
+        born, one = _started(pid), out / "vehicle-1" / "vehicle.bin"
         os.kill(pid, sig)
+        waited = count_records(one)  # vehicle 1 at its gate, waiting for vehicle 2's step
+        wait_for(lambda: count_records(one) > waited + 50, 10, "vehicle 1 flying on after vehicle 2's end")
     finally:
         flight.join(120)
     assert not flight.is_alive() and "error" not in result, result
@@ -207,7 +223,8 @@ def test_a_vehicle_killed_or_frozen_in_flight_is_dropped_and_the_other_flies_on(
     assert two["outcome"] == "aborted" and not two["ok"] and two["ended_by"]["how"] == how, two
     gate = run.summary["sitl"]["gate"]
     assert gate["2"] is None and len(gate["1"]["dropped"]) == 1, gate  # (its process said nothing more)
-    assert gate["1"]["dropped"][0].startswith("vehicle 2 ended (its process gone, said by the fleet) at step ")
+    assert gate["1"]["dropped"][0].startswith(f"vehicle 2 {dropped}"), gate
+    assert _started(pid) != born  # killed and reaped, never left stopped (a pid taken again starts later)
     assert run.outcome == "aborted" and report_fleet(run, "sitl") == 1
     err = capsys.readouterr().err
     assert "bsst sitl: vehicle 2: " + said.format(pid=pid) in err, err

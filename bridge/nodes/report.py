@@ -20,7 +20,8 @@ The kinds, and their fields (times in s of the flight's clock, to the millisecon
 - ``mission``: the controller has a ground station's mission (``bsst controller --await-mission``) and wrote it
   as flown into its directory (:class:`MissionLoaded`: its name, items, the download's figures);
 - ``done``: the controller's outcome (:class:`Done`: ``completed``, ``failsafe``, ``diverged`` or
-  ``aborted``; whether the vehicle left lockstep; why it gave up; the mode a ground station took it into).
+  ``aborted``; whether the vehicle left lockstep; why it gave up; the mode a ground station took it into; whether
+  it heard nothing from the vehicle at the end).
 
 This module is the one place that reads them: the session never looks inside a report's text.
 """
@@ -148,12 +149,15 @@ class Stats:
 class Done:
     """The controller's outcome; ``left_lockstep``: the vehicle left lockstep during the flight;
     ``reason``: why it ended other than completed (None: it completed, or said nothing); ``taken_over``:
-    the mode a ground station switched the armed vehicle to, when that ended the flight (else None)."""
+    the mode a ground station switched the armed vehicle to, when that ended the flight (else None); ``silent``: it
+    ended hearing nothing from the vehicle for its vehicle timeout (a lockstep fleet's vehicle is then frozen:
+    :mod:`bridge.session.alone`)."""
 
     outcome: str
     left_lockstep: bool = False
     reason: str | None = None
     taken_over: str | None = None
+    silent: bool = False
 
 
 @dataclass(frozen=True)
@@ -216,7 +220,8 @@ def _well_typed(report: Report) -> bool:
     if isinstance(report, Stats):
         return isinstance(report.values, dict)
     if isinstance(report, Done):
-        return isinstance(report.outcome, str) and (report.reason is None or isinstance(report.reason, str))
+        return (isinstance(report.outcome, str) and (report.reason is None or isinstance(report.reason, str))
+                and isinstance(report.silent, bool))
     if isinstance(report, StatusText):
         return isinstance(report.severity, int) and isinstance(report.text, str)
     if isinstance(report, Ready):

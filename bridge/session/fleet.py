@@ -18,14 +18,14 @@ step it touches another (:mod:`bridge.nodes.vehicle.gate`); each controller then
 slowest vehicle to start, and up to :data:`~bridge.nodes.vehicle.gate.STATE_WAIT_S` for each state after, since
 its vehicle waits at its gate up to :data:`~bridge.nodes.vehicle.gate.SILENT_S` for a silent one. A vehicle whose
 process ends (killed, crashed, stopped by its session) is said gone to the others' gates at once, from its gate port
-(:func:`~bridge.nodes.vehicle.gate.say_lost`), and they fly on. A vehicle a ground station takes over (HOLD,
-TAKEOFF, ...) leaves the shared clock and flies
-on under it, on the wall clock, recorded, while a vehicle not taken over still flies and until its record holds
-as many steps as theirs (a single vehicle's session stops it at once); the fleet judges that record afterwards
-(:mod:`bridge.record.wallclock`). In real time each pair keeps its own wall clock, a vehicle taken over flies on
-under its ground station the same way (its session's ``sitl.flew_on``), and the shared world is judged afterwards on
-their traces (:mod:`bridge.swarm`). Ctrl-C or SIGTERM stops every pair (each session's own stop:
-SIGTERM, then SIGKILL at its deadline) and each still writes its summary.
+(:func:`~bridge.nodes.vehicle.gate.say_lost`), and they fly on; one frozen (its controller hears nothing from it)
+is killed by its session at once and said gone so (:mod:`bridge.session.alone`). A vehicle a ground station
+takes over (HOLD, TAKEOFF, ...) leaves the shared clock and flies on under it, on the wall clock, recorded, while a
+vehicle not taken over still flies and until its record holds as many steps as theirs (a single vehicle's session
+stops it at once); the fleet judges that record afterwards (:mod:`bridge.record.wallclock`). In real time each pair
+keeps its own wall clock, a vehicle taken over flies on under its ground station the same way (its session's
+``sitl.flew_on``), and the shared world is judged afterwards on their traces (:mod:`bridge.swarm`). Ctrl-C or SIGTERM
+stops every pair (each session's own stop: SIGTERM, then SIGKILL at its deadline) and each still writes its summary.
 """
 
 from __future__ import annotations
@@ -192,9 +192,10 @@ def _fly(flights: Sequence[Flight], ids: Sequence[int], dirs: Sequence[Path], *,
     return done
 
 
-def _lost(cfg: GateConfig, held: list[socket.socket]) -> None:
-    """Vehicle ``cfg.index``'s process has ended: the other gates are told (:func:`say_lost`); its port held."""
-    sock = say_lost(cfg)
+def _lost(cfg: GateConfig, held: list[socket.socket], frozen: bool) -> None:
+    """Vehicle ``cfg.index``'s process has ended (``frozen``: its session killed it so): the other gates are told
+    (:func:`say_lost`); its port held."""
+    sock = say_lost(cfg, frozen)
     if sock is not None:
         held.append(sock)
 

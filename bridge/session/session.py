@@ -23,7 +23,6 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from bridge.autopilot.failsafe import return_time_s
 from bridge.autopilot.params import param_at_args
 from bridge.autopilot.vehicleevents import Sender, typed_fields
 from bridge.core.flight import Flight, Progress, prepare
@@ -36,6 +35,7 @@ from bridge.record.joiner import TraceJoiner, off_clock_time
 from bridge.record.runlog import EventLog, Run, RunRecord
 from bridge.record.summary import ChildEnd, SessionFacts, SessionSummary, controller_completed, session_summary
 from bridge.record.wallclock import FLYING_ON
+from bridge.session.alone import is_frozen, landing_wait_s
 from bridge.session.announce import vehicle_up_line
 from bridge.session.children import (
     READY_TIMEOUT_S,
@@ -95,7 +95,8 @@ class Session:
         self._vehicle_said: dict[str, float] = {}  # the vehicle's latest event of each kind in earlier reads (s)
         self._early: list[tuple[Child, Report]] = []  # reports read while starting, handled once all are up
         self.flies_on: Callable[[], bool] | None = None  # a fleet's: a vehicle taken over flies on under it now?
-        self.vehicle_ended: Callable[[], None] = lambda: None  # a fleet's: told once the vehicle process has ended
+        # a fleet's: told once the vehicle process has ended (frozen: killed by the session, bridge.session.alone)
+        self.vehicle_ended: Callable[[bool], None] = lambda frozen: None
         self.flying_on = False
 
     # -- the whole session ---------------------------------------------------------------------
@@ -315,6 +316,9 @@ class Session:
                         sys.stderr.write(("\n" if self.live else "") + f"bsst sitl: {self.who}controller: "
                                          f"{ctl.done.reason}\n")
                     taken = ctl.done is not None and ctl.done.taken_over is not None
+                    if is_frozen(ctl.done, self.gate is not None):  # no landing of its own: the others wait for it
+                        self._kill_frozen(veh)
+                        return
                     # taken: a ground station flies it now (HOLD, LAND, ...): nothing of the mission to wait for; in a
                     # fleet it flies on under it, recorded, until the rest of the fleet is done (bridge.session.fleet)
                     self.flying_on = taken and self.vehicle_armed and self.flies_on is not None and self.flies_on()
@@ -325,30 +329,15 @@ class Session:
                     if ctl.done is None:  # killed or crashed: a death, not an outcome
                         self._died(ctl)
                     # the vehicle is on its own: let it finish its failsafe (land and disarm), or fly on
-                    landing_deadline = math.inf if self.flying_on else time.monotonic() + self._landing_time()
+                    wait = landing_wait_s(self.flight, self.joiner.rows[-2000:], self.speed)
+                    landing_deadline = math.inf if self.flying_on else time.monotonic() + wait
                     self._note("waiting", FLYING_ON if self.flying_on else "vehicle on its own: waiting up to "
-                               f"{self._landing_time():.0f} s for it to land and disarm", "session")
+                               f"{wait:.0f} s for it to land and disarm", "session")
                 if landing_deadline is not None and (not self.vehicle_armed or time.monotonic() > landing_deadline
                                                      or self.flying_on and not self.flies_on()):  # type: ignore[misc]
                     return
         finally:
             sel.close()
-
-    def _landing_time(self) -> float:
-        """Wall time allowed to a vehicle flying its failsafe alone: lockstep loss, timeout,
-        descent from the highest point the trace reached (``return``: the way home from the farthest, at half
-        the on-board controller's speeds), with a margin."""
-        rows = self.joiner.rows[-2000:]
-        z = max((r.z for r in rows), default=0.0)
-        fs = self.flight.failsafe
-        pace = self.speed or 1.0
-        if fs.action == "return":
-            x0, y0, z0 = self.flight.mission.flight_start[:3]
-            away = max((math.hypot(r.x - x0, r.y - y0) for r in rows), default=0.0)
-            flying = 2.0 * return_time_s(self.flight.params.rtl, away, z - z0, fs.descent_rate, slowdown=fs.slowdown)
-        else:
-            flying = fs.time_to_land_s(z)
-        return 5.0 + (1.0 + fs.timeout_s + flying) / pace
 
     def _stop_children(self) -> None:
         """Stop the controller, the relay, the vehicle (:func:`~bridge.session.children.stop_children`): what they
@@ -457,10 +446,19 @@ class Session:
         if source == "session" and kind in ("died", "killed"):
             sys.stderr.write(("\n" if self.live else "") + f"bsst sitl: {self.who}{text}\n")
 
-    def _vehicle_gone(self) -> None:
-        """The vehicle process has ended: a fleet is told, once (:attr:`vehicle_ended`)."""
-        told, self.vehicle_ended = self.vehicle_ended, lambda: None
-        told()
+    def _vehicle_gone(self, frozen: bool = False) -> None:
+        """The vehicle process has ended (``frozen``: killed so): a fleet is told, once (:attr:`vehicle_ended`)."""
+        told, self.vehicle_ended = self.vehicle_ended, lambda frozen: None
+        told(frozen)
+
+    def _kill_frozen(self, veh: Child) -> None:
+        """A lockstep fleet's vehicle frozen (:func:`~bridge.session.alone.is_frozen`): killed and reaped now (SIGKILL:
+        a stopped process holds a SIGTERM until continued), said, and the other vehicles told at once."""
+        veh.proc.kill()
+        veh.proc.wait()
+        self._note("killed", f"vehicle (pid {veh.pid}) frozen, its controller hearing nothing from it: SIGKILL; "
+                   "the other vehicles fly on without it", "session")
+        self._vehicle_gone(frozen=True)
 
     def _show_progress(self) -> None:
         now = self.joiner.newest() if self.live or self.progress else None

@@ -73,6 +73,7 @@ class Offboard(RealtimeFlying):
         self.schedule: FixedRate | None = None  # realtime: the tick schedule, once phase-locked
         self.reason = ""
         self.ended_taken_over = False  # the flight ended for a ground station's mode (no more targets sent)
+        self.vehicle_silent = False  # the flight ended hearing nothing from the vehicle (Done.silent)
         self._changes = list(flight.param_changes)  # scheduled PARAM_SETs not sent yet, by mission time
         self._end_wall: float | None = None  # wall time the mission's last state came (the events' clock after it)
         self._way_down: float | None = None  # real time: the states' way down (s), the vehicle's clock ahead of ours
@@ -295,6 +296,7 @@ class Offboard(RealtimeFlying):
             now = time.monotonic()
             late = usec is not None and usec > last_usec if lockstep else now > deadline
             if late or now - self._last_rx > self.cfg.vehicle_timeout_s:
+                self.vehicle_silent = not late
                 self.reason = "the vehicle did not land and disarm after the mission" if late else \
                     f"vehicle silent for {self.cfg.vehicle_timeout_s:g} s while landing"
                 return False
@@ -364,7 +366,7 @@ class Offboard(RealtimeFlying):
             self.reason = f"the vehicle was switched to {self.taken_over}: no more targets sent"
             self.ended_taken_over = True
         elif now - self._last_rx > timeout:
-            self.reason = f"vehicle silent for {timeout:g} s"
+            self.reason, self.vehicle_silent = f"vehicle silent for {timeout:g} s", True
         elif self.armed_seen and not self.vehicle_armed and not self.failsafe_seen:
             if self.events_awaited():  # a missed EVENT, asked for again, may be the failsafe that disarmed it
                 return None

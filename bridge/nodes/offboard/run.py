@@ -52,7 +52,8 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
                 "kernel_drops": node.ep.kernel_drops(), "mission_transfer": transfer,
                 "events": node.event_seq.counts.as_dict()}))  # the vehicle's EVENTs missed, asked for, recovered
     left = bool(node.left_lockstep)
-    emit(Done(outcome, left, node.reason or None, node.taken_over if node.ended_taken_over else None))
+    emit(Done(outcome, left, node.reason or None, node.taken_over if node.ended_taken_over else None,
+              node.vehicle_silent))
     if outcome != "completed":
         sys.stderr.write(f"bsst controller: {outcome}" + (f": {node.reason}" if node.reason else "") + "\n")
     elif left:

@@ -19,9 +19,9 @@ knows alone, at the same step, whether it touched, and whom. So the controllers 
 wait for each other, and no vehicle flies step k before every other has flown step k - 1. No vehicle is more than one
 step ahead of another, so a datagram carries the last two positions, and one lost is made good by the next or
 by the resend every :data:`RESEND_S`. A vehicle whose process ended without leaving (killed, crashed, stopped by
-its session) is taken as gone where it was last heard, at once: its fleet, which sees the process end, binds the
-gate port it no longer holds and says so in its name (:func:`say_lost`, a ``LOST`` word). One silent for
-:data:`SILENT_S` (its process frozen, or the fleet's word lost) is taken as gone the same way. Either is said
+its session, or killed by it frozen) is taken as gone where it was last heard, at once: its fleet, which sees the
+process end, binds the gate port it no longer holds and says so in its name (:func:`say_lost`, a ``LOST`` or
+``FROZEN`` word). One silent for :data:`SILENT_S` (the fleet's word lost) is taken as gone the same way. Either is said
 (:attr:`Gate.dropped`). A vehicle is heard from its own gate port only (which no other process can bind while it
 runs, and its fleet holds once it is gone); the gate has no signing, as the links without ``--key``.
 """
@@ -55,8 +55,9 @@ STATE_WAIT_S = SILENT_S + 5.0
 # s of wall time between two looks at the radio's turns while waiting for one (a lost TURN word's cost)
 TURN_LOOK_S = 0.005
 # TURN: a turn on the fleet's one radio taken (only wakes the others up); LOST: the fleet's word that the vehicle's
-# process ended without leaving (:func:`say_lost`: no step, no position)
-AT, GONE, TURN, LOST = 0, 1, 2, 3
+# process ended without leaving (:func:`say_lost`: no step, no position); FROZEN: the same of one its session
+# killed, frozen (its controller heard nothing from it: bridge.session.alone)
+AT, GONE, TURN, LOST, FROZEN = 0, 1, 2, 3, 4
 _WIRE = struct.Struct("<4sBBqdddddd")  # magic, kind, index, step, position at step, position at step - 1
 _MAGIC = b"BSSG"
 
@@ -276,6 +277,8 @@ class Gate:
                 self.gone.setdefault(j, (k, (xs[0], xs[1], xs[2])))
             elif kind == LOST:
                 self._drop(j, "ended (its process gone, said by the fleet)")
+            elif kind == FROZEN:
+                self._drop(j, "frozen (its controller heard nothing from it: killed, said by the fleet)")
             elif kind == AT and j not in self.gone:
                 seen = self.at[j]
                 seen[k] = (xs[0], xs[1], xs[2])
@@ -383,9 +386,10 @@ class Gate:
         self.sock.close()
 
 
-def say_lost(cfg: GateConfig) -> socket.socket | None:
+def say_lost(cfg: GateConfig, frozen: bool = False) -> socket.socket | None:
     """Vehicle ``cfg.index``'s process has ended (its fleet saw it): every other gate is told at once that it is
-    gone where it was last heard (a ``LOST`` word, twice, from its own gate port, which the process no longer holds;
+    gone where it was last heard (a ``LOST`` word, ``FROZEN`` for one its session killed ``frozen``, twice, from its
+    own gate port, which the process no longer holds;
     a gate that heard it leave keeps where it said it stays), and on the fleet's one radio it takes no turn after
     the ones it took. The port's socket is returned for the caller to hold until the fleet is over, so that no other
     process speaks for the vehicle; None if the port is taken (the others' :data:`SILENT_S` then acts)."""
@@ -398,7 +402,7 @@ def say_lost(cfg: GateConfig) -> socket.socket | None:
         return None
     if cfg.radio is not None:  # in the radio's file before any gate hears of it, as a vehicle that leaves
         _left_radio(cfg.radio, j)
-    word = _WIRE.pack(_MAGIC, LOST, j, -1, *(math.nan,) * 6)
+    word = _WIRE.pack(_MAGIC, FROZEN if frozen else LOST, j, -1, *(math.nan,) * 6)
     for _ in range(2):  # (a copy: nothing answers it; the silence rule is the last resort)
         for i, port in enumerate(cfg.ports):
             if i != j:
