@@ -22,3 +22,9 @@ def test_a_long_list_keeps_its_first_six_and_last_ten_and_says_how_many_more() -
     assert lines[:6] == [f"event t={i:.3f} k: e{i}\n" for i in range(6)]
     assert lines[6] == f"event … {40 - EVENTS_SHOWN} more (summary.json)\n"
     assert lines[7:] == [f"event t={i:.3f} k: e{i}\n" for i in range(30, 40)]
+
+
+def test_an_event_with_no_time_is_printed_without_one() -> None:
+    """A controller's failsafe judgement with no EVENT's time is ``null`` in summary.json (a TypeError, before)."""
+    said = {"t": None, "kind": "failsafe", "text": "the vehicle's failsafe took over (its HEARTBEAT)"}
+    assert event_lines([said]) == ["event t=n/a failsafe: the vehicle's failsafe took over (its HEARTBEAT)\n"]

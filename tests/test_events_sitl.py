@@ -8,6 +8,7 @@ an EVENT it missed (REQUEST_EVENT, bridge.mavlink.eventseq) before it calls a di
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -18,7 +19,7 @@ from pymavlink.dialects.v20 import common as M
 from bridge.mavlink import events as ev
 from bridge.mavlink.eventseq import REQUEST_TRIES
 from bridge.nodes.offboard.config import PHASE_STATES
-from bridge.nodes.report import Done, Stats, parse_line
+from bridge.nodes.report import Done, Event, Stats, parse_line
 from bridge.session import instance_slot
 from tests.sitlkit import Proc
 from tests.test_offboard_realtime import MISSION, RATE, ScriptedVehicle
@@ -126,6 +127,26 @@ def test_a_failsafe_text_without_its_event_is_no_failsafe_to_the_controller(tmp_
     assert done.outcome == "aborted", done
 
 
+def test_a_failsafe_said_by_heartbeat_alone_is_judged_with_no_time(tmp_path: Path) -> None:
+    """A vehicle that says its failsafe by its HEARTBEAT alone (armed, CRITICAL, no EVENT: as one without the events
+    interface) at step 10: the controller ends ``failsafe`` at the mission's end, its word stamped with no time (NaN:
+    it does not know when the failsafe took over), not the mission's end (t=1.400 until the third wave's
+    thirty-sixth session)."""
+    v = ScriptedVehicle()
+
+    def critical() -> None:
+        v.send(M.MAVLink_heartbeat_message(M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_GENERIC,
+                                           M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | M.MAV_MODE_FLAG_SAFETY_ARMED, 0,
+                                           M.MAV_STATE_CRITICAL, 3))
+
+    reports = [parse_line(line) for line in _fly_against(tmp_path, v, v.heartbeat, critical)]
+    done = [r for r in reports if isinstance(r, Done)]
+    assert [(d.outcome, d.reason) for d in done] == [
+        ("failsafe", "the vehicle's failsafe took over (HEARTBEAT system_status CRITICAL)")], reports[-5:]
+    said = [r.t for r in reports if isinstance(r, Event) and r.kind == "failsafe"]
+    assert len(said) == 1 and math.isnan(said[0]), said
+
+
 class _AnsweringRequests:
     """The scripted vehicle's parser, which also answers each REQUEST_EVENT as ``answer`` says: ``event`` the
     EVENT FAILSAFE (sequence 0) again, ``error`` RESPONSE_EVENT_ERROR (no longer kept), ``silent`` nothing
@@ -155,12 +176,12 @@ def _failsafe_event() -> object:
 
 
 def _controller_missing_the_failsafe(tmp: Path, answer: str, at_step: int = 10
-                                     ) -> tuple[Done, list[tuple[int, int]], dict]:
+                                     ) -> tuple[Done, list[tuple[int, int]], dict, list[float]]:
     """A real-time ``bsst controller`` against a scripted vehicle that says CURRENT_EVENT_SEQUENCE RESET (no event
     yet), arms, and after the state of step ``at_step`` disarms in its failsafe with the datagram of its EVENT
     FAILSAFE (sequence 0) lost: the controller hears a disarmed HEARTBEAT and CURRENT_EVENT_SEQUENCE 0 (as the
     vehicle's 1 Hz beat sends them); REQUEST_EVENTs are answered as ``answer`` says (:class:`_AnsweringRequests`).
-    The controller's Done report, the requests, and its ``events`` stats."""
+    The controller's Done report, the requests, its ``events`` stats and the times of its ``failsafe`` events."""
     v = ScriptedVehicle()
     requests = _AnsweringRequests(v, answer)
     v.rx = requests  # type: ignore[assignment]
@@ -179,19 +200,24 @@ def _controller_missing_the_failsafe(tmp: Path, answer: str, at_step: int = 10
     done = [r for r in reports if isinstance(r, Done)]
     stats = [r.values for r in reports if isinstance(r, Stats)]
     assert len(done) == 1 and len(stats) == 1, reports[-5:]
-    return done[0], requests.asked, stats[0]["events"]
+    said = [r.t for r in reports if isinstance(r, Event) and r.kind == "failsafe"]
+    return done[0], requests.asked, stats[0]["events"], said
 
 
 def test_the_controller_asks_for_a_missed_failsafe_event_and_ends_failsafe(tmp_path: Path) -> None:
-    done, asked, counts = _controller_missing_the_failsafe(tmp_path, "event")
+    """... and says so at the mission's end (1.4 s), stamped when the failsafe took over: the EVENT's time (step 10,
+    200 ms on the vehicle's clock) on the flight's, whose 0 is the first state answered, after the PHASE_STATES
+    (until the third wave's thirty-sixth session it was stamped at the mission's end, t=1.400)."""
+    done, asked, counts, said = _controller_missing_the_failsafe(tmp_path, "event")
     assert (done.outcome, done.reason) == ("failsafe", "the vehicle's failsafe took over (its EVENT FAILSAFE)")
     assert asked and set(asked) == {(0, 0)}, asked  # the one missed, asked for until it came
     assert counts["recovered"] == 1 and counts["lost"] == 0, counts
+    assert len(said) == 1 and abs(said[0] - (10 - PHASE_STATES) / RATE) <= 1 / RATE + 1e-9, said
 
 
 @pytest.mark.parametrize("answer", ["error", "silent"])
 def test_a_missed_event_the_vehicle_cannot_resend_is_given_up(tmp_path: Path, answer: str) -> None:
-    done, asked, counts = _controller_missing_the_failsafe(tmp_path, answer)
+    done, asked, counts, _ = _controller_missing_the_failsafe(tmp_path, answer)
     assert (done.outcome, done.reason) == ("aborted", "the vehicle was disarmed during the mission")
     # an error ends the asking at once; no answer: asked REQUEST_TRIES times, no more
     assert asked == [(0, 0)] * (1 if answer == "error" else REQUEST_TRIES), asked
@@ -202,7 +228,7 @@ def test_a_missed_event_the_vehicle_cannot_resend_is_given_up(tmp_path: Path, an
 def test_a_failsafe_missed_in_the_last_step_is_not_a_completed_mission(tmp_path: Path, answer: str) -> None:
     # the state after it ends the mission: the controller asks for the missed EVENT before it calls the flight
     last = PHASE_STATES + round(1.4 * RATE) - 1  # the mission's last step (its first follows the PHASE_STATES)
-    done, asked, counts = _controller_missing_the_failsafe(tmp_path, answer, at_step=last)
+    done, asked, counts, _ = _controller_missing_the_failsafe(tmp_path, answer, at_step=last)
     if answer == "event":
         assert (done.outcome, done.reason) == ("failsafe", "the vehicle's failsafe took over (its EVENT FAILSAFE)")
         assert counts["recovered"] == 1, counts

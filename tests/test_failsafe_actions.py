@@ -190,6 +190,20 @@ def test_its_disarm_clears_the_failsafe_offboard_standby_and_the_controller_stil
                                                          "disarm" else "HEARTBEAT system_status CRITICAL") + ")"]
 
 
+@pytest.mark.parametrize("action", SINE_ACTIONS)
+def test_the_controllers_failsafe_judgement_is_stamped_when_the_failsafe_took_over(flown, action: str) -> None:
+    """The controller judges the flight ``failsafe`` at the mission's end (its failsafe alone does not end it: it may
+    hand the vehicle back), but stamps that word when the failsafe took over, the vehicle's EVENT's time: 15.5 s, as
+    the vehicle's own event, in summary.json and events.log (where it is written when said, after later lines). Until
+    the third wave's thirty-sixth session it was stamped at the mission's end (t=22.000 for descend)."""
+    run = flown[action]
+    t0 = run["vehicle"]["failsafe"]
+    said = [e for e in run["summary"]["events"] if e["source"] == "controller" and e["kind"] == "failsafe"]
+    assert [e["t"] for e in said] == [t0], said
+    log = (run["out"] / "events.log").read_text()
+    assert f"t={t0:.3f} failsafe: the vehicle's failsafe took over (" in log, log
+
+
 def test_descend_is_the_default_and_todays_figure(flown) -> None:
     """The docs' figure (docs/design.md, "Failsafe"): on the ground at 18.283 s with the default, implicit step, and
     disarmed COM_DISARM_LAND (2 s) later, at 20.283 s; the paper's explicit step, asked for by name, held another last

@@ -247,7 +247,7 @@ def event_lines(events: list[dict[str, Any]]) -> list[str]:
     """A run's events as its printed summary lists them: all up to :data:`EVENTS_SHOWN`; beyond, the first 6 and
     the last 10 (a session opens with five start-up events, and the end is what a user looks for) and a line
     saying how many more ``summary.json`` holds."""
-    lines = [f"event t={e['t']:.3f} {e['kind']}: {e['text']}\n" for e in events]
+    lines = [f"event t={'n/a' if e['t'] is None else format(e['t'], '.3f')} {e['kind']}: {e['text']}\n" for e in events]
     if len(lines) <= EVENTS_SHOWN:
         return lines
     return [*lines[:6], f"event … {len(lines) - EVENTS_SHOWN} more (summary.json)\n", *lines[6 - EVENTS_SHOWN:]]

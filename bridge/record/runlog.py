@@ -16,6 +16,7 @@ row), and ``summary.json`` is written to a temporary name and renamed.
 from __future__ import annotations
 
 import json
+import math
 import os
 import time
 from collections.abc import Iterable, Sequence
@@ -240,15 +241,15 @@ class TraceWriter(LineWriter):
 
 
 class EventLog(LineWriter):
-    """``events.log``: one line per event, ``t=<s> <kind>: <text>[ [by SENDER]][ [SOURCE]]``, flushed at
-    once: for people (the sender is the event's field, :attr:`bridge.record.events.RunEvent.by`)."""
+    """``events.log``: one line per event, ``t=<s> <kind>: <text>[ [by SENDER]][ [SOURCE]]`` (``t=n/a``: no time
+    known), flushed at once: for people (the sender is the event's field, :attr:`bridge.record.events.RunEvent.by`)."""
 
     def __init__(self, path: str | Path) -> None:
         super().__init__(path, None, batch=1)
 
     def event(self, t: float, kind: str, text: str, by: Sender | None = None, source: str | None = None) -> None:
         shown = text + (by.suffix if by is not None else "") + (f" [{source}]" if source is not None else "")
-        self.write(f"t={t:.3f} {kind}: {shown}")
+        self.write(f"t={t:.3f} {kind}: {shown}" if math.isfinite(t) else f"t=n/a {kind}: {shown}")
 
 
 class RunRecord:

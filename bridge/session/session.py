@@ -442,7 +442,7 @@ class Session:
             t = self.joiner.rows[-1].t if getattr(self, "joiner", None) and self.joiner.rows else 0.0
         self.events.append(RunEvent.at(t, kind, text, source, by, **fields))
         if self._event_log is not None:
-            self._event_log.event(t if math.isfinite(t) else 0.0, kind, text, by, source)
+            self._event_log.event(t, kind, text, by, source)
         if source == "session" and kind in ("died", "killed"):
             sys.stderr.write(("\n" if self.live else "") + f"bsst sitl: {self.who}{text}\n")
 

@@ -336,7 +336,11 @@ class Offboard(RealtimeFlying):
         if not self.failsafe_seen or back:
             return "completed"
         self.reason = f"the vehicle's failsafe took over ({self.failsafe_seen.value})"
-        self.event("failsafe", self.reason, answers=("failsafe",))
+        # stamped when it took over, its EVENT's time on the flight's clock (that state's step less the mission's
+        # time is the first state's), not at the mission's end when it is judged; NaN without one
+        took = math.nan if self.failsafe_at is None else \
+            self.failsafe_at - (step_of_usec(odo.time_usec, self.rate) / self.rate - t_end)
+        self.event("failsafe", self.reason, answers=("failsafe",), t=took)
         if not self.vehicle_armed:
             self._disarm()
         return "failsafe"

@@ -125,6 +125,7 @@ class OffboardLink:
         self.vehicle_armed = False
         self.vehicle_state = mavlink.MAV_STATE_UNINIT
         self.failsafe_seen = FailsafeSign.NONE  # how the vehicle said its failsafe since we armed it
+        self.failsafe_at: float | None = None  # s, the vehicle's clock: its latest EVENT FAILSAFE's time
         self.left_lockstep = ""  # how the vehicle said it left lockstep (its LOCKSTEP EVENT), if it did
         self.event_seq = EventSequence()  # the vehicle's EVENTs by sequence: the missed ones asked for again
         self.taken_over = ""  # the mode a ground station switched the armed vehicle to (PX4 custom_mode), if any
@@ -152,10 +153,10 @@ class OffboardLink:
         self.param_sets: list[ScheduledSet] = []  # the scheduled PARAM_SETs sent, in order
         self._pending_params: dict[str, ScheduledSet] = {}  # by name: sent, not echoed by the vehicle yet
 
-    def event(self, kind: str, text: str, answers: tuple[str, ...] | None = None) -> None:
-        """Report an event at the mission time; ``answers``: the vehicle's own event kinds it answers
-        (:class:`bridge.nodes.report.Event`)."""
-        self._status(Event.at(self.t_mission, kind, text, answers=answers))
+    def event(self, kind: str, text: str, answers: tuple[str, ...] | None = None, t: float | None = None) -> None:
+        """Report an event at the mission time (``t``: at that one instead, s; NaN: not known); ``answers``: the
+        vehicle's own event kinds it answers (:class:`bridge.nodes.report.Event`)."""
+        self._status(Event.at(self.t_mission if t is None else t, kind, text, answers=answers))
 
     def _command(self, cmd: int, p1: float, p2: float, tries: int = 30, every_s: float = 0.1,
                  p3: float = 0.0) -> int | None:
@@ -385,10 +386,13 @@ class OffboardLink:
     def _event(self, m: Any) -> None:
         """A typed EVENT of the vehicle's (bridge.mavlink.events): what the controller decides by, by its id."""
         eid = received_id(m)
-        if eid is EventId.FAILSAFE and self.armed_seen and not self.failsafe_seen:
+        if eid is EventId.FAILSAFE and self.armed_seen:
+            # when it took over, on the vehicle's clock (an EVENT asked for again keeps its time)
+            self.failsafe_at = max(self.failsafe_at or 0.0, m.event_time_boot_ms / 1000.0)
             # a failsafe that disarms the vehicle in its own control period (its disarm action, or on the
             # ground) never shows CRITICAL: disarmed, the failsafe is cleared and HEARTBEAT says STANDBY (PX4)
-            self.failsafe_seen = FailsafeSign.EVENT
+            if not self.failsafe_seen:
+                self.failsafe_seen = FailsafeSign.EVENT
         elif eid is EventId.LOCKSTEP and not self.left_lockstep:  # not a lockstep flight any more
             self.left_lockstep = "its EVENT LOCKSTEP (its STATUSTEXT says why)"
 
