@@ -131,7 +131,7 @@ def test_a_failsafe_said_by_heartbeat_alone_is_judged_with_no_time(tmp_path: Pat
     """A vehicle that says its failsafe by its HEARTBEAT alone (armed, CRITICAL, no EVENT: as one without the events
     interface) at step 10: the controller ends ``failsafe`` at the mission's end, its word stamped with no time (NaN:
     it does not know when the failsafe took over), not the mission's end (t=1.400 until the third wave's
-    thirty-sixth session)."""
+    thirty-seventh session)."""
     v = ScriptedVehicle()
 
     def critical() -> None:
@@ -207,7 +207,7 @@ def _controller_missing_the_failsafe(tmp: Path, answer: str, at_step: int = 10
 def test_the_controller_asks_for_a_missed_failsafe_event_and_ends_failsafe(tmp_path: Path) -> None:
     """... and says so at the mission's end (1.4 s), stamped when the failsafe took over: the EVENT's time (step 10,
     200 ms on the vehicle's clock) on the flight's, whose 0 is the first state answered, after the PHASE_STATES
-    (until the third wave's thirty-sixth session it was stamped at the mission's end, t=1.400)."""
+    (until the third wave's thirty-seventh session it was stamped at the mission's end, t=1.400)."""
     done, asked, counts, said = _controller_missing_the_failsafe(tmp_path, "event")
     assert (done.outcome, done.reason) == ("failsafe", "the vehicle's failsafe took over (its EVENT FAILSAFE)")
     assert asked and set(asked) == {(0, 0)}, asked  # the one missed, asked for until it came

@@ -195,7 +195,7 @@ def test_the_controllers_failsafe_judgement_is_stamped_when_the_failsafe_took_ov
     """The controller judges the flight ``failsafe`` at the mission's end (its failsafe alone does not end it: it may
     hand the vehicle back), but stamps that word when the failsafe took over, the vehicle's EVENT's time: 15.5 s, as
     the vehicle's own event, in summary.json and events.log (where it is written when said, after later lines). Until
-    the third wave's thirty-sixth session it was stamped at the mission's end (t=22.000 for descend)."""
+    the third wave's thirty-seventh session it was stamped at the mission's end (t=22.000 for descend)."""
     run = flown[action]
     t0 = run["vehicle"]["failsafe"]
     said = [e for e in run["summary"]["events"] if e["source"] == "controller" and e["kind"] == "failsafe"]

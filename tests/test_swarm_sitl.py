@@ -190,7 +190,7 @@ def test_a_vehicle_killed_or_frozen_in_flight_is_dropped_and_the_other_flies_on(
     the end, its controller not giving up on its vehicle waiting at the gate meanwhile (until the third wave's
     thirty-sixth session it aborted 2 s after: "no new state from the vehicle for 2 s"); vehicle 2 is aborted,
     said by name, and the fleet with it. Frozen (SIGSTOP), its controller hears nothing from it for 2 s and its
-    session kills and reaps it then, and vehicle 1 flies on within seconds (until the third wave's thirty-sixth
+    session kills and reaps it then, and vehicle 1 flies on within seconds (until the third wave's thirty-seventh
     session its session waited for a landing that never came, then 8 s for a SIGTERM it never took: vehicle 1 flew
     on 17 s after the freeze)."""
     mission = short_sine(tmp_path, 4.0)

@@ -11,7 +11,7 @@ A lockstep fleet's vehicle sends its controller a HEARTBEAT every second, also w
 others (bridge.nodes.vehicle.gate), and a state unanswered again every 50 ms; so one its controller heard nothing
 from for its vehicle timeout (2 s, ``Done.silent``) is not flying its failsafe: it is frozen (stopped, hung), and
 the other vehicles wait for it at their gates. Waiting for its landing only held them up (until the third wave's
-thirty-sixth session: the landing's wait and the 8 s SIGTERM deadline a stopped process never meets).
+thirty-seventh session: the landing's wait and the 8 s SIGTERM deadline a stopped process never meets).
 """
 
 from __future__ import annotations
