@@ -236,7 +236,10 @@ def _plan_item(source: str, index: int, x: Any) -> Item:
     except ValueError as exc:
         raise ConfigError(f"{source}: {label} ({command_name(cmd)}): {exc}") from None
     item = Item(label, cmd, frame, *p)
-    auto = x.get("autoContinue", True)
+    if "autoContinue" not in x:  # QGroundControl's own loader requires it (MissionItem::load): never taken as true
+        raise ConfigError(f"{source}: {label} ({command_name(cmd)}): autoContinue: missing; expected true or false "
+                          "(QGroundControl writes it in every SimpleItem, and its loader refuses an item without it)")
+    auto = x["autoContinue"]
     if not isinstance(auto, bool):
         raise ConfigError(f"{source}: {label} ({command_name(cmd)}): autoContinue: expected true or false, "
                           f"got {json_show(auto)}")

@@ -114,6 +114,10 @@ def test_a_slower_cruise_is_a_longer_flight() -> None:
     (lambda d: d["mission"]["items"][1]["params"].__setitem__(1, 50), ["mission.items[1]", "DO_CHANGE_SPEED (178)",
                                                                       "speed"]),
     (lambda d: d["mission"]["items"][2].update(autoContinue=False), ["mission.items[2]", "autoContinue"]),
+    # a missing autoContinue is refused as QGroundControl's loader refuses it (it flew as if true until the third
+    # wave's thirty-seventh session)
+    (lambda d: d["mission"]["items"][3].pop("autoContinue"), ["mission.items[3]", "NAV_WAYPOINT (16)",
+                                                             "autoContinue: missing; expected true or false"]),
     # a value of the wrong type is named as such (a string "true" was once "autoContinue false"); a huge altitude is
     # given in a few digits (it was written out in 300)
     (lambda d: d["mission"]["items"][2].update(autoContinue="true"), ["mission.items[2]", "NAV_WAYPOINT (16)",
