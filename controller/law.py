@@ -44,7 +44,7 @@ import os
 import stat
 import sys
 import traceback
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from collections.abc import Set as AbstractSet
 from contextlib import contextmanager
 from functools import partial
@@ -133,6 +133,20 @@ class LawError(ConfigError):
 
 def is_builtin(spec: str) -> bool:
     return spec in BUILTIN
+
+
+DISCRETIZED = ("bsst",)  # the laws with a super-twisting step for a discretization to step (docs/law.md)
+
+
+def discretization_problem(laws: Iterable[str]) -> str | None:
+    """Why a discretization changes nothing in a flight (or a campaign's cells) of these law specs: none of them
+    is ``bsst``, the one law with a super-twisting step (``smc``'s sign, ``pid`` and a user's law have none).
+    None when one of them is."""
+    names = sorted(set(laws))
+    if any(law in DISCRETIZED for law in names):
+        return None
+    flown = f"{names[0]} flies" if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]} fly"
+    return f"only bsst has a super-twisting step to discretize: {flown} the same under both (docs/law.md)"
 
 
 def resolve_law(spec: str) -> LawFactory:

@@ -113,6 +113,18 @@ def test_the_default_is_implicit_wherever_a_law_is_built() -> None:
     assert build_parser().parse_args(["sim", str(SINE)]).discretization is None  # no flag: the mission's
 
 
+def test_only_bsst_records_a_discretization() -> None:
+    """Only ``bsst`` has a super-twisting step to discretize (docs/law.md): ``summary.json``'s ``discretization`` is
+    its scheme, and null for ``smc``, ``pid`` and a law of one's own, which have none (until the third wave's
+    thirty-seventh session it said ``implicit`` for every law). The flag that would change nothing is refused:
+    tests/test_bad_input.py."""
+    short = Mission(Sine(), duration_s=1.0, name="short")
+    own = f"{ROOT / 'examples' / 'my_law.py'}:MyLaw"
+    for law, want in (("bsst", "implicit"), ("smc", None), ("pid", None), (own, None)):
+        assert simulate(short, controller=law, plots=False).summary["discretization"] == want, law
+    assert simulate(short, discretization="explicit", plots=False).summary["discretization"] == "explicit"
+
+
 @pytest.fixture(scope="module")
 def implicit_sine() -> dict[float, dict]:
     m = load_mission(SINE).with_overrides(discretization="implicit")

@@ -35,7 +35,7 @@ from bridge.cli.options import (
     add_scatter_option,
     add_sensor_axes,
     add_sensor_options,
-    refuse_idle_noise,
+    refuse_idle_inputs,
     sensor_overrides_from_args,
 )
 from params import ConfigError
@@ -296,7 +296,7 @@ def _margin(args: argparse.Namespace) -> int:
     sensing = sensor_overrides_from_args(args)
     if args.over == "noise" and sensing["noise"] is not None:
         raise UsageError("bsst margin: --noise conflicts with --over noise (the noise scale is what is searched)")
-    refuse_idle_noise(args, args.mission)  # a fixed --noise, as bsst sim's
+    refuse_idle_inputs(args, args.mission, args.controller)  # a fixed --noise, --discretization, as bsst sim's
     mission = prepare(load_mission(args.mission), Overrides(link=fixed or None, discretization=args.discretization,
                                                             turbulence=args.turbulence, scatter_m=args.scatter,
                                                             **sensing)).mission

@@ -40,7 +40,7 @@ from bridge.cli.options import (
     add_port_options,
     add_sensor_options,
     overrides_from_args,
-    refuse_idle_noise,
+    refuse_idle_inputs,
 )
 from params import ConfigError
 
@@ -110,7 +110,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
 def _sim(args: argparse.Namespace, mission: Any) -> int:
     from bridge.swarm import simulate  # lazy: start-up time
 
-    refuse_idle_noise(args, mission)  # (here: a law of the user's own is loaded in its watched process)
+    refuse_idle_inputs(args, mission)  # (here: a law of the user's own is loaded in its watched process)
     run = simulate(mission, out=args.out, write=True, overwrite=args.overwrite, plots=not args.no_plots,
                    overrides=overrides_from_args(args), vehicles=args.vehicles, formation=args.formation)
     return report_final(run, "sim")
@@ -403,7 +403,7 @@ def add_sitl_commands(sub: Any) -> None:
 def cmd_sitl(args: argparse.Namespace) -> int:
     from bridge.swarm import sitl  # lazy: start-up time
 
-    refuse_idle_noise(args, args.mission)
+    refuse_idle_inputs(args, args.mission)
     run = sitl(args.mission, out=args.out, write=True, overwrite=args.overwrite, plots=not args.no_plots,
                realtime=args.realtime, instance=args.instance, gcs=args.gcs, speed=args.speed, live=True,
                key=args.key, overrides=overrides_from_args(args), await_mission=args.await_mission,
@@ -432,7 +432,7 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
     if args.param_at and not args.await_mission:  # (a change at a mission time is the controller's to send)
         raise ConfigError("--param-at: only with --await-mission (the vehicle refuses at its start a ground station's "
                           "mission over before T; give the change to the controller, which sends it)")
-    refuse_idle_noise(args, args.mission)
+    refuse_idle_inputs(args, args.mission)
     flight = prepare(args.mission or at_rest(), overrides_from_args(args))
     n = args.instance
     own = flight.params.sysid if "MAV_SYS_ID" in flight.mission.params else None  # [params] or --param
@@ -467,6 +467,7 @@ def cmd_controller(args: argparse.Namespace) -> int:
     from bridge.mavlink.endpoint import LINK_PORT, parse_address  # lazy: start-up time
     from bridge.nodes.offboard import OffboardConfig, run_controller  # lazy: start-up time
 
+    refuse_idle_inputs(args, args.mission)  # a --discretization for a law without a super-twisting step
     flight = prepare(args.mission, overrides_from_args(args))
     vehicle = parse_address(f"127.0.0.1:{LINK_PORT + args.instance}" if args.vehicle is None else args.vehicle,
                             "udpout", "--vehicle")

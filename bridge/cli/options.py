@@ -115,27 +115,37 @@ def sensor_overrides_from_args(args: argparse.Namespace) -> dict[str, Any]:
             "estimator": getattr(args, "estimator", None), "noise": getattr(args, "noise", None)}
 
 
-def refuse_idle_noise(args: argparse.Namespace, mission: Any) -> None:
-    """``--noise X`` where it changes nothing, refused as a sweep refuses such a noise axis (its one check and
-    message, :func:`bridge.sweep.grid.noise_problem`): every vehicle flies the true state (``truth``: it has no
-    sensors, so none are streamed either, HIGHRES_IMU and GPS_RAW_INT included), or a sensor set with no noise.
-    ``mission``: a :class:`missions.Mission`, a path, or None (a bare ``bsst vehicle``, ``--await-mission``)."""
-    if getattr(args, "noise", None) is None:
+def refuse_idle_inputs(args: argparse.Namespace, mission: Any, laws: tuple[str, ...] | None = None) -> None:
+    """Flags that would change nothing in this flight, refused, each by the rule a sweep refuses its axis with:
+    ``--noise X`` where every vehicle flies the true state (``truth``: it has no sensors, so none are streamed
+    either, HIGHRES_IMU and GPS_RAW_INT included) or a sensor set with no noise
+    (:func:`bridge.sweep.grid.noise_problem`); ``--discretization`` where no law flown is ``bsst``
+    (:func:`controller.law.discretization_problem`). ``mission``: a :class:`missions.Mission`, a path, or None (a
+    bare ``bsst vehicle``, ``--await-mission``); ``laws``: the laws ``bsst margin`` searches (its ``--controller``),
+    flown in place of the mission's."""
+    noise, scheme = getattr(args, "noise", None), getattr(args, "discretization", None)
+    if noise is None and scheme is None:
         return
     from bridge.core.flight import at_rest, prepare  # lazy: start-up time
     from bridge.record.runlog import trace_cap  # lazy: start-up time
     from bridge.swarm import fleet_flights, fleet_mission  # lazy: start-up time
     from bridge.sweep.grid import noise_problem  # lazy: start-up time
+    from controller.law import discretization_problem  # lazy: start-up time
     from missions import Mission, load_mission  # lazy: start-up time
 
     m = mission if isinstance(mission, Mission) else (load_mission(mission, trace_cap(getattr(args, "rate", None)))
                                                        if mission is not None else at_rest())
+    if laws is not None:  # bsst margin: its --controller is the list of laws it searches, not one to lay over
+        args = argparse.Namespace(**{**vars(args), "controller": None})
     over = replace(overrides_from_args(args), noise=1.0)  # the set's own sigmas: a scale of 0 changes a noisy set
     fleet = fleet_mission(m, getattr(args, "vehicles", None), getattr(args, "formation", None))
     flights = fleet_flights(fleet, over) if fleet is not None else [prepare(m, over)]
     whys = [noise_problem((f.estimator,), f.sensors) for f in flights]
-    if all(whys):
-        raise ConfigError(f"--noise {args.noise:g}: {whys[0]}")
+    if noise is not None and all(whys):
+        raise ConfigError(f"--noise {noise:g}: {whys[0]}")
+    why = discretization_problem(laws or [f.mission.controller for f in flights])
+    if scheme is not None and why:
+        raise ConfigError(f"--discretization {scheme}: {why}; drop the flag, or fly --controller bsst")
 
 
 def add_flight_options(p: argparse.ArgumentParser, vehicle: bool = True, optional_mission: bool = False) -> None:

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from controller.gains import Gains
+from controller.law import DISCRETIZED
 from missions import Mission
 
 AXES = ("x", "y", "z", "psi")
@@ -240,7 +241,7 @@ def summarise(
         "mission": mission.name,
         "clock": clock,
         "controller": mission.controller,
-        "discretization": mission.discretization,
+        "discretization": mission.discretization if mission.controller in DISCRETIZED else None,  # bsst's alone
         "profile": mission.profile,
         "seed": mission.seed,
         "rate_hz": mission.rate_hz,

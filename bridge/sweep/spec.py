@@ -41,6 +41,7 @@ from bridge.sweep.grid import (
     mission_value,
     noise_problem,
 )
+from controller.law import discretization_problem
 from missions import Mission, load_mission
 from missions.mission import is_plan_file, law_spec_from, law_spec_problem, mission_path
 from params import ConfigError, Table, finite_float, load_toml, show
@@ -119,7 +120,7 @@ class Sweep:
         """Build the flight of every law, every rate, every discretization, every estimator kind, every noise scale,
         every wind and turbulence and every combination of link values once (not every cell), so that a bad value
         fails before any cell runs; first the grid's size and that no link axis is swept over a link trace; then that
-        a swept noise scale changes something."""
+        a swept noise scale and a discretization axis change something."""
         self.check_size()
         self.check_link_trace()
         base = self.cells()[0]
@@ -147,6 +148,10 @@ class Sweep:
         why = self.noise_problem()
         if why:
             raise ConfigError(f"grid.noise (--noise): {why}")
+        why = discretization_problem(self.grid.controller or (self.mission.controller,))
+        if self.grid.discretization and why:  # (a cell of each scheme would fly one flight twice)
+            raise ConfigError(f"grid.discretization (--discretization): {why}; add bsst to the laws (--controller), "
+                              "or drop the axis")
 
     def check_link_trace(self) -> None:
         """A swept link axis over the mission's link trace (its ``[link]`` trace, or its link profile's): refused,
