@@ -505,6 +505,73 @@ def test_a_flag_that_would_change_nothing_is_refused(files, capsys, argv, names)
     assert not files.out.exists()
 
 
+IDLE_LINK = [  # (argv, {m} the mission and {out} the run directory; what the one line names): a link flag that acts
+    # only with another, given where nothing gives that (until the third wave's thirty-seventh session each was taken
+    # and flew nothing different); a sweep's only where no cell has it, a margin's in the search's probes
+    (["sim", "{m}", "--burst", "3"], "--burst 3: changes nothing: it sets the mean length of the loss bursts, and no "
+                                     "packet is lost (loss_pct 0); give --loss PCT too, or drop --burst"),
+    (["sim", "{m}", "--burst", "3", "--loss", "0"], "--burst 3: changes nothing"),
+    (["sitl", "{m}", "--down-burst", "3", "--up-loss", "2"], "--down-burst 3: changes nothing: it sets the mean "
+                                                             "length of the loss bursts, and no packet is lost"),
+    (["sim", "{m}", "--queue", "200"], "--queue 200: changes nothing: it bounds the wait in the bandwidth cap's queue, "
+                                       "and there is no bandwidth cap (rate_bps 0); give --bandwidth BYTES_PER_S too"),
+    (["sim", "{m}", "--link-trace-loop"], "--link-trace-loop true: changes nothing: it loops the link trace, and no "
+                                          "trace is replayed (trace none); give --link-trace FILE too"),
+    (["sim", "{m}", "--vehicles", "2", "--up-queue", "50"], "--up-queue 50: changes nothing"),
+    (["relay", "--listen", "127.0.0.1:0", "--to", "127.0.0.1:9", "--mission", "{m}", "--queue", "300", "--duration",
+      "0.2"], "--queue 300: changes nothing"),
+    (["sweep", "{m}", "--burst", "3"], "grid.burst_len (--burst): changes nothing in any cell: it sets the mean length "
+                                       "of the loss bursts, and no packet is lost (loss_pct 0); sweep --loss too"),
+    (["sweep", "{m}", "--burst", "0,3", "--loss", "0"], "grid.burst_len (--burst): changes nothing in any cell"),
+    (["sweep", "{m}", "--delay", "0,5", "--up-burst", "3"], "bsst sweep: --up-burst 3: changes nothing in any cell"),
+    (["sweep", "{m}", "--queue", "300"], "bsst sweep: --queue 300: changes nothing in any cell"),
+    (["margin", "{m}", "--over", "delay_ms", "--until", "rms=0.1", "--burst", "3"], "--burst 3: changes nothing"),
+    (["margin", "{m}", "--over", "burst_len", "--until", "rms=0.1"], "margin over burst_len: changes nothing: it sets"),
+]
+
+
+@pytest.mark.parametrize("argv, names", IDLE_LINK, ids=[" ".join(a[:1] + a[-2:]) for a, _ in IDLE_LINK])
+def test_a_link_flag_that_would_change_nothing_is_refused(files, capsys, argv, names):
+    """Exit 2, one line naming the flag and what it needs, before anything is written."""
+    out = ["--out", files.out] if argv[0] != "relay" else []
+    _refused(capsys, [a.replace("{m}", str(files.mission)) for a in argv] + out, names)
+    assert not files.out.exists()
+
+
+def test_a_link_key_that_needs_what_nobody_gives_is_refused(files, capsys):
+    """A key of a mission's ``[link]``, a profile's or a handover's that acts only with another the table never
+    gives (burst_len without loss_pct, queue_ms without rate_bps, trace_loop without trace; the same rule as the
+    flags'), refused naming the file and the key; given as 0 (the loss switched off, the burst kept: a run's
+    mission.toml after ``--loss 0``), or given by a flag or a swept axis, it is taken."""
+    def mission(name: str, text: str) -> Path:
+        p = files.root / name
+        p.write_text(TINY + text)
+        return p
+
+    out = ["--out", files.out, "--no-plots"]
+    burst = mission("burst.toml", "[link]\nburst_len = 3\n")
+    line = _refused(capsys, ["sim", burst, *out], f"{burst}: link.burst_len")
+    assert line.endswith("changes nothing: it sets the mean length of the loss bursts, and no loss_pct is given; give "
+                         "loss_pct too, or remove burst_len"), line
+    _refused(capsys, ["sitl", mission("q.toml", "[link.up]\nqueue_ms = 300\n"), *out], "q.toml: link.up.queue_ms")
+    _refused(capsys, ["sim", mission("l.toml", "[link]\ntrace_loop = true\n"), *out], "l.toml: link.trace_loop")
+    profile = files.root / "p.toml"
+    profile.write_text('name = "p"\n[link]\ndelay_ms = 5\nburst_len = 2\n')
+    _refused(capsys, ["sim", mission("pm.toml", '[link]\nprofile = "p.toml"\nloss_pct = 3\n'), *out],
+             f"{profile}: link.burst_len: changes nothing")  # a profile describes one link: alone
+    _refused(capsys, ["sim", mission("e.toml", '[[events]]\nt_s = 0.1\nkind = "link"\nburst_len = 3\n'), *out],
+             "events (t_s = 0.1, kind = link): link.burst_len: changes nothing")
+    _refused(capsys, ["sweep", burst, "--delay", "0,5", *out], f"{burst}: link.burst_len")
+    assert not files.out.exists()
+    for argv in (["sim", mission("b0.toml", "[link]\nburst_len = 3\nloss_pct = 0\n")], ["sim", burst, "--loss", "2"],
+                 ["sim", burst, "--up-loss", "2"], ["sweep", burst, "--loss", "0,10"],
+                 ["sim", files.mission, "--burst", "3", "--up-loss", "2"],
+                 ["sweep", files.mission, "--loss", "0,10", "--burst", "3"]):
+        with _guard():
+            assert main([str(a) for a in [*argv, "--out", files.root / "ok", "--no-plots", "--overwrite"]]) == 0, argv
+    capsys.readouterr()
+
+
 @pytest.mark.parametrize("argv, names", [
     (["sim", ""], "the mission: an empty path"), (["sitl", ""], "the mission: an empty path"),
     (["vehicle", ""], "the mission: an empty path"), (["sweep", ""], "the mission: an empty path"),

@@ -30,9 +30,13 @@ from bridge.link.model import (
     HI_OPEN,
     LINK_KEYS,
     LO_OPEN,
+    NEEDS,
     NUMBER_RANGES,
     SEED_RANGE,
+    LinkConfig,
+    idle_problem,
     link_from_table,
+    unmet_key,
 )
 from params import ConfigError
 
@@ -152,3 +156,22 @@ def test_every_key_has_a_line_in_the_usage_page(key: str) -> None:
     flag = flag_of(key)
     lines = [ln for ln in (ROOT / "docs/usage.md").read_text().splitlines() if f"`{key}`" in ln and flag in ln]
     assert lines, f"docs/usage.md has no line naming [link] key `{key}` with its flag {flag}"
+
+
+@pytest.mark.parametrize("key", list(NEEDS))
+def test_a_key_that_needs_another_has_one_rule_for_its_flag_and_its_table(key: str) -> None:
+    """``NEEDS`` (bridge.link.config), the one table of a key that acts only with another: both are a direction's keys
+    with a flag; a table giving the key and never its need is unmet (in ``[link]`` for both directions, in
+    ``[link.up]`` for that one), given the need (as 0 too) or given it by a flag or a swept axis it is not; its flag
+    where no link has the need is idle, where one has it not (docs/links.md, "A key that needs another")."""
+    need = NEEDS[key][0]
+    assert {key, need} <= set(DIRECTION_KEYS) and flag_of(key) and flag_of(need)
+    value = {"burst_len": 3.0, "queue_ms": 300.0, "trace_loop": True}[key]
+    on = {"loss_pct": 2.0, "rate_bps": 9000.0, "trace": "t.csv"}[need]
+    assert unmet_key({key: value}) is not None and unmet_key({key: value}, given=[need]) is None
+    assert unmet_key({"up": {key: value}, "down": {need: on}})[0] == f"up.{key}"
+    assert unmet_key({key: value, "down": {need: on}}) is None  # ([link]'s acts on both: the down link uses it)
+    assert unmet_key({key: value, need: 0.0 if need != "trace" else ""}) is None  # given as 0: a choice
+    assert idle_problem(key, [{need: 0.0 if need != "trace" else None}]) is not None
+    assert idle_problem(key, [{need: 0.0 if need != "trace" else None}, {need: on}]) is None
+    assert idle_problem(key, [LinkConfig()]) is not None

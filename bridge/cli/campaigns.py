@@ -29,7 +29,7 @@ from bridge.cli.flags import (
     path_given,
     value_list,
 )
-from bridge.cli.linkflags import add_link_options, link_table_from_args
+from bridge.cli.linkflags import add_link_options, idle_link_flag, link_table_from_args, unmet_mission_key
 from bridge.cli.options import (
     add_discretization_option,
     add_scatter_option,
@@ -131,6 +131,7 @@ def _sweep(args: argparse.Namespace) -> int:
     from bridge.core.flight import prepare  # lazy: start-up time
     from bridge.core.interrupt import ignore_sigint  # lazy: start-up time
     from bridge.core.overrides import Overrides  # lazy: start-up time
+    from bridge.link.model import absolute_link_paths, swept_links  # lazy: start-up time
     from bridge.sweep import AXES, Grid, Sweep, is_sweep_file, load_sweep, run_sweep  # lazy: start-up time
     from bridge.sweep.cells import broke_policy  # lazy: start-up time
     from bridge.sweep.grid import LINK_AXES, SHORT  # lazy: start-up time
@@ -156,9 +157,16 @@ def _sweep(args: argparse.Namespace) -> int:
         raise UsageError(f"bsst sweep: {given} with {trace}: the trace gives the link's {', '.join(LINK_AXES)}, so "
                          f"{a} cannot be swept over it; drop one of them")
     sensors = {"set": args.sensors} if args.sensors is not None else None
-    if fixed or sensors or args.scatter is not None:  # fixed for every cell, laid over by the one path to its parts
-        spec = replace(spec, mission=prepare(spec.mission, Overrides(link=fixed or None, sensors=sensors,
-                                                                     scatter_m=args.scatter)).mission)
+    laid = fixed or sensors or args.scatter is not None
+    unmet = unmet_mission_key(args, absolute_link_paths(spec.mission.link, Path(spec.mission.source).parent),
+                              spec.mission.source, link_swept)  # (a swept --loss gives a burst_len its loss)
+    if laid or unmet:  # fixed for every cell, laid over by the one path to its parts (a bad mission named there)
+        flight = prepare(spec.mission, Overrides(link=fixed or None, sensors=sensors, scatter_m=args.scatter))
+        swept = {a: getattr(spec.grid, a) for a in link_swept}
+        idle = idle_link_flag(args, swept_links([flight.link], swept), cells=True)  # (None: no such flag given)
+        if idle or unmet:
+            raise UsageError(f"bsst sweep: {idle}") if idle else ConfigError(unmet)
+        spec = replace(spec, mission=flight.mission)
     if args.resume and args.out is None:
         raise UsageError("bsst sweep: --resume needs --out DIR (the sweep to resume)")
     client = connect_dask(args.dask) if args.dask else None
@@ -280,7 +288,7 @@ def _margin(args: argparse.Namespace) -> int:
     from bridge.core.overrides import Overrides  # lazy: start-up time
     from bridge.record.runlog import run_dir  # lazy: start-up time
     from bridge.sweep.grid import LINK_AXES  # lazy: start-up time
-    from bridge.sweep.margin import MarginInterrupted, margin, parse_until  # lazy: start-up time
+    from bridge.sweep.margin import START, MarginInterrupted, margin, parse_until  # lazy: start-up time
     from missions import load_mission  # lazy: start-up time
 
     until = parse_until(args.until)
@@ -296,7 +304,10 @@ def _margin(args: argparse.Namespace) -> int:
     sensing = sensor_overrides_from_args(args)
     if args.over == "noise" and sensing["noise"] is not None:
         raise UsageError("bsst margin: --noise conflicts with --over noise (the noise scale is what is searched)")
-    refuse_idle_inputs(args, args.mission, args.controller)  # a fixed --noise, --discretization, as bsst sim's
+    # a fixed --noise, --discretization or link flag that would change nothing, as bsst sim's: the link flags in a
+    # probe of the searched value (--burst with --over loss_pct is used)
+    probe = {args.over: [START[args.over]]} if args.over in LINK_AXES else None
+    refuse_idle_inputs(args, args.mission, args.controller, probe)
     mission = prepare(load_mission(args.mission), Overrides(link=fixed or None, discretization=args.discretization,
                                                             turbulence=args.turbulence, scatter_m=args.scatter,
                                                             **sensing)).mission

@@ -6,7 +6,7 @@ In:  the parsed flags (link values in ms, %, packets, bytes/s; ``--blackout STAR
 Out: :func:`link_table_from_args`'s ``[link]`` override table, which goes to :func:`bridge.core.flight.prepare` in
      an :class:`~bridge.core.overrides.Overrides` like every other override
      (:func:`bridge.cli.options.overrides_from_args`); a combination no direction can fly is a ``UsageError``
-     naming the flags (exit 2)
+     naming the flags (exit 2); :func:`idle_link_flag`, a flag that would change nothing, as its refusal's line
 
 The ranges are the mission loader's (:data:`bridge.link.model.NUMBER_RANGES`), one per key.
 """
@@ -14,7 +14,7 @@ The ranges are the mission loader's (:data:`bridge.link.model.NUMBER_RANGES`), o
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import Any
 
 from bridge.cli.flags import UsageError, blackout_window, existing_file, link_number, link_seed, yes_no
@@ -155,6 +155,51 @@ def link_table_from_args(args: argparse.Namespace) -> dict[str, Any]:
         if v is not None:
             out[key] = v
     return out
+
+
+NEED_FLAGS = {"loss_pct": ("loss", "PCT"), "rate_bps": ("bandwidth", "BYTES_PER_S"), "trace": ("link-trace", "FILE")}
+
+
+def idle_link_flag(args: argparse.Namespace, links: Sequence[tuple[Any, Any]], cells: bool = False) -> str | None:
+    """The first link flag given (``--burst``, ``--up-queue``, ``--link-trace-loop`` ...: a key of
+    :data:`bridge.link.model.NEEDS`) that changes nothing on every one of ``links`` (each vehicle's (up, down), or
+    each cell's: :func:`bridge.link.model.swept_links`), as the line that refuses it (``cells``: a sweep's); None."""
+    from bridge.link.model import DIRECTIONS, NEEDS, idle_problem  # lazy: start-up time
+
+    stems = {key: stem for stem, key, *_ in LINK_FLAGS} | {"trace_loop": "link-trace-loop"}
+    for key, (need, *_) in NEEDS.items():
+        for pre in ("", "up-", "down-"):
+            v = getattr(args, f"link_{pre.replace('-', '_')}{key}", None)
+            dirs = [DIRECTIONS.index(pre[:-1])] if pre else [0, 1]
+            why = None if v is None else idle_problem(key, [pair[i] for pair in links for i in dirs])
+            if why:
+                flag = f"--{pre}{stems[key]}"
+                shown = str(v).lower() if isinstance(v, bool) else f"{v:g}"
+                stem, meta = NEED_FLAGS[need]
+                return (f"{flag} {shown}: changes nothing{' in any cell' if cells else ''}: {why}; give "
+                        f"--{pre}{stem} {meta} too, or drop {flag}")
+    return None
+
+
+def idle_flags_given(args: argparse.Namespace) -> bool:
+    """Whether a link flag that acts only with another (:data:`bridge.link.model.NEEDS`) was given."""
+    from bridge.link.model import NEEDS  # lazy: start-up time
+
+    return any(getattr(args, f"link_{pre}{key}", None) is not None for key in NEEDS for pre in ("", "up_", "down_"))
+
+
+def unmet_mission_key(args: argparse.Namespace, own: Mapping[str, Any], source: str,
+                      axes: Iterable[str] = ()) -> str | None:
+    """The line refusing a key of the mission's own ``[link]`` table (``own``, its paths absolute) whose need nobody
+    gives: not the table, its profile (or ``--link-profile``'s), the flags, nor a campaign's swept link ``axes``
+    (:func:`bridge.link.model.unmet_key`); None."""
+    from bridge.link.model import DIRECTIONS, unmet_key  # lazy: start-up time
+
+    fixed = link_table_from_args(args)
+    table = {**own, "profile": fixed["profile"]} if "profile" in fixed else own
+    given = {k for t in (fixed, *(fixed.get(d, {}) for d in DIRECTIONS)) for k in t} | set(axes)
+    unmet = unmet_key(table, given)
+    return None if unmet is None else f"{source}: link.{unmet[0]}: {unmet[1]}"
 
 
 def radio_of(args: argparse.Namespace) -> tuple[str, int] | None:

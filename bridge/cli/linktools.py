@@ -25,7 +25,7 @@ from bridge.cli.flags import (
     path_given,
 )
 from bridge.cli.linkflags import add_link_options, radio_of
-from bridge.cli.options import overrides_from_args
+from bridge.cli.options import overrides_from_args, refuse_idle_inputs
 from params import ConfigError, inputs_read
 
 
@@ -223,6 +223,7 @@ def cmd_relay(args: argparse.Namespace) -> int:
     if forwards_to_itself(listen, target):
         raise UsageError(f"bsst relay: --to {args.to} is the relay's own --listen {args.listen}: it would forward "
                          "into itself")
+    refuse_idle_inputs(args, args.mission)  # a link flag or key that would change nothing: as bsst sim refuses it
     # the one path from a mission and its overrides to the parts: the whole mission is checked,
     # and the relay flies the link it gives
     settings = prepare(load_mission(args.mission) if args.mission else at_rest(), overrides_from_args(args)).link

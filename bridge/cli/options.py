@@ -12,7 +12,9 @@ Out: the options on the parser; :func:`overrides_from_args`, the frozen
 from __future__ import annotations
 
 import argparse
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from bridge.cli.flags import (
@@ -28,8 +30,8 @@ from bridge.cli.flags import (
     path_given,
     sensor_set_name,
 )
-from bridge.cli.linkflags import link_table_from_args
-from params import ConfigError
+from bridge.cli.linkflags import idle_flags_given, idle_link_flag, link_table_from_args, unmet_mission_key
+from params import ConfigError, load_toml
 from params.text import number
 
 if TYPE_CHECKING:  # annotations only: building the parser loads no flight code
@@ -115,16 +117,24 @@ def sensor_overrides_from_args(args: argparse.Namespace) -> dict[str, Any]:
             "estimator": getattr(args, "estimator", None), "noise": getattr(args, "noise", None)}
 
 
-def refuse_idle_inputs(args: argparse.Namespace, mission: Any, laws: tuple[str, ...] | None = None) -> None:
+def refuse_idle_inputs(args: argparse.Namespace, mission: Any, laws: tuple[str, ...] | None = None,
+                       axes: Mapping[str, Sequence[float]] | None = None) -> None:
     """Flags that would change nothing in this flight, refused, each by the rule a sweep refuses its axis with:
     ``--noise X`` where every vehicle flies the true state (``truth``: it has no sensors, so none are streamed
     either, HIGHRES_IMU and GPS_RAW_INT included) or a sensor set with no noise
     (:func:`bridge.sweep.grid.noise_problem`); ``--discretization`` where no law flown is ``bsst``
-    (:func:`controller.law.discretization_problem`). ``mission``: a :class:`missions.Mission`, a path, or None (a
+    (:func:`controller.law.discretization_problem`); a link flag that acts only with another (``--burst`` without
+    loss, ``--queue`` without a bandwidth cap, ``--link-trace-loop`` without a trace) where nothing gives that
+    (:func:`bridge.cli.linkflags.idle_link_flag`), and a key of the mission's ``[link]`` whose need nobody gives
+    (:func:`bridge.cli.linkflags.unmet_mission_key`). ``mission``: a :class:`missions.Mission`, a path, or None (a
     bare ``bsst vehicle``, ``--await-mission``); ``laws``: the laws ``bsst margin`` searches (its ``--controller``),
-    flown in place of the mission's."""
+    flown in place of the mission's; ``axes``: the link values it searches, laid over both directions."""
+    from bridge.link.model import swept_links  # lazy: start-up time
+
     noise, scheme = getattr(args, "noise", None), getattr(args, "discretization", None)
-    if noise is None and scheme is None:
+    own, source = _own_link(mission)
+    unmet = unmet_mission_key(args, own, source, axes or {})
+    if noise is None and scheme is None and unmet is None and not idle_flags_given(args):
         return
     from bridge.core.flight import at_rest, prepare  # lazy: start-up time
     from bridge.record.runlog import trace_cap  # lazy: start-up time
@@ -139,13 +149,35 @@ def refuse_idle_inputs(args: argparse.Namespace, mission: Any, laws: tuple[str, 
         args = argparse.Namespace(**{**vars(args), "controller": None})
     over = replace(overrides_from_args(args), noise=1.0)  # the set's own sigmas: a scale of 0 changes a noisy set
     fleet = fleet_mission(m, getattr(args, "vehicles", None), getattr(args, "formation", None))
-    flights = fleet_flights(fleet, over) if fleet is not None else [prepare(m, over)]
+    flights = fleet_flights(fleet, over) if fleet is not None else [prepare(m, over)]  # (bad input: named here)
     whys = [noise_problem((f.estimator,), f.sensors) for f in flights]
     if noise is not None and all(whys):
         raise ConfigError(f"--noise {noise:g}: {whys[0]}")
     why = discretization_problem(laws or [f.mission.controller for f in flights])
     if scheme is not None and why:
         raise ConfigError(f"--discretization {scheme}: {why}; drop the flag, or fly --controller bsst")
+    idle = idle_link_flag(args, swept_links([f.link for f in flights], axes))
+    if idle or unmet:
+        raise ConfigError(idle or unmet)
+
+
+def _own_link(mission: Any) -> tuple[Mapping[str, Any], str]:
+    """A mission's own ``[link]`` table (its files' paths made absolute) and its source, read without flying it: {}
+    for none (a bare vehicle), a plan file, or a file its loader will refuse (and name)."""
+    from bridge.link.model import absolute_link_paths  # lazy: start-up time
+    from missions import Mission  # lazy: start-up time
+    from missions.mission import is_plan_file, mission_path  # lazy: start-up time
+
+    if isinstance(mission, Mission):
+        return absolute_link_paths(mission.link, Path(mission.source).parent), mission.source
+    if mission is None or is_plan_file(mission):
+        return {}, ""
+    path = mission_path(mission)  # (a shipped mission by name too)
+    try:
+        link = load_toml(path).get("link", {})
+    except ConfigError:
+        return {}, ""
+    return (absolute_link_paths(link, path.parent) if isinstance(link, Mapping) else {}), str(path)
 
 
 def add_flight_options(p: argparse.ArgumentParser, vehicle: bool = True, optional_mission: bool = False) -> None:

@@ -36,7 +36,7 @@ from bridge.autopilot.params import (
 from bridge.autopilot.simvehicle import HOLD, OFFBOARD, SimVehicle
 from bridge.core.overrides import Overrides, table_settings
 from bridge.core.scalar import checked_choice, compile_for, compiled_wanted, wire_for
-from bridge.link.model import LinkConfig, LinkSettings, link_from_table
+from bridge.link.model import LinkConfig, LinkSettings, link_from_table, unmet_key
 from bridge.link.profile import load_link_profile
 from controller import Controller, Gains, Nominal, gains_from_table
 from controller.law import LawError, LawFactory, resolve_law
@@ -330,6 +330,9 @@ def handovers_of(timeline: tuple[TimedEvent, ...], m: Mission) -> tuple[tuple[fl
             ls = link_from_table(table, m.source, seed=m.seed, duration_s=m.duration_s)
         except ConfigError as exc:
             raise EventError(e, str(exc).removeprefix(m.source + ": "), where) from None
+        unmet = unmet_key(table)  # a handover's table is its own: a key of it that needs what it never gives
+        if unmet:
+            raise EventError(e, f"link.{unmet[0]}: {unmet[1]}", where)
         out.append((e.step(m.rate_hz) / m.rate_hz, ls.up, ls.down))
     return tuple(out)
 

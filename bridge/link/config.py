@@ -5,7 +5,7 @@ In:  one direction's impairment: delays ms, loss %, burst length packets, ``rate
      blackouts (start s, duration s), a seed, a measured trace
 Out: :class:`LinkConfig` (checked on construction), the range tables (:data:`NUMBER_RANGES`,
      :data:`GUARD_RANGES`, :data:`LO_OPEN` / :data:`HI_OPEN`, the blackout and seed ranges), :func:`burst_problem`,
-     :func:`trace_clash`
+     :func:`trace_clash`, :data:`NEEDS` and :func:`idle_problem` (a key that acts only with another)
 
 What the model does with them: :mod:`bridge.link.impairment`; reading a mission's ``[link]`` table
 into them: :mod:`bridge.link.model`, which re-exports every name here.
@@ -13,7 +13,7 @@ into them: :mod:`bridge.link.model`, which re-exports every name here.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -134,6 +134,26 @@ def burst_problem(loss_pct: float, burst_len: float) -> str | None:
     if L > 0.0 and burst_len < L / (1.0 - L) - 1e-12:
         return f"with loss_pct = {loss_pct:g} the mean burst must be >= {L / (1.0 - L):.4g} packets, got {burst_len:g}"
     return None
+
+
+# a direction's key that acts only where another is set (non-zero, or a trace): that key, what the first does, and
+# what is missing without it; a key that would change nothing is refused, flag or table alike (docs/links.md)
+NEEDS: dict[str, tuple[str, str, str]] = {
+    "burst_len": ("loss_pct", "it sets the mean length of the loss bursts", "no packet is lost"),
+    "queue_ms": ("rate_bps", "it bounds the wait in the bandwidth cap's queue", "there is no bandwidth cap"),
+    "trace_loop": ("trace", "it loops the link trace", "no trace is replayed"),
+}
+
+
+def idle_problem(key: str, links: Iterable[Any]) -> str | None:
+    """Why the direction key ``key`` (of :data:`NEEDS`) changes nothing on every one of ``links`` (directions: each a
+    :class:`LinkConfig` or a mapping of its values, as :func:`trace_clash` takes), or None when one of them uses it.
+    The text follows "changes nothing: " (its caller's, which names the flag or the axis)."""
+    need, does, missing = NEEDS[key]
+    for v in links:
+        if v.get(need) if isinstance(v, Mapping) else getattr(v, need):
+            return None
+    return f"{does}, and {missing} ({need} {'none' if need == 'trace' else '0'})"
 
 
 # the allowed range [lo, hi] of each number of a direction's table (and of its CLI flag)

@@ -4,7 +4,8 @@ guard (docs/design.md, "Link model"; docs/links.md).
 In:  a ``[link]`` table (its keys, ``[link.up]`` / ``[link.down]``, a named ``profile`` laid under it, a
      ``trace`` file per direction), the mission's seed and duration (s)
 Out: :class:`LinkSettings` (each direction's :class:`LinkConfig` and the guard's thresholds), or a
-     ``ConfigError`` naming the table, the key and the allowed range
+     ``ConfigError`` naming the table, the key and the allowed range; :func:`unmet_key`, a table's key that needs
+     what nobody gives (a profile's is refused here); :func:`swept_links`, the values :func:`idle_problem` reads
 
 The model itself (what happens to each packet, its statistics) is :mod:`bridge.link.impairment`; one
 direction's settings and the range tables are :mod:`bridge.link.config`. Every public name of both is
@@ -13,8 +14,9 @@ re-exported here, so ``from bridge.link.model import ...`` is the one import for
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from itertools import product
 from typing import Any
 
 from bridge.link.config import (
@@ -28,11 +30,13 @@ from bridge.link.config import (
     JITTER_KINDS,
     LINK_KEYS,
     LO_OPEN,
+    NEEDS,
     NUMBER_RANGES,
     SEED_RANGE,
     TRACE_EXCLUSIVE,
     LinkConfig,
     burst_problem,
+    idle_problem,
     trace_clash,
 )
 from bridge.link.impairment import (
@@ -62,12 +66,11 @@ from params import ConfigError, Table, finite_float
 
 __all__ = [  # re-exported: the link model's one import (absolute_link_paths: where a table's files are made absolute)
     "BLACKOUT_DURATION_RANGE_S", "BLACKOUT_START_RANGE_S", "COMMAND_LAG_RANGE_MS", "DIRECTION_KEYS", "DIRECTIONS",
-    "FRAME_BYTES", "GUARD_RANGES", "HI_OPEN", "JITTER_KINDS", "LINK_KEYS", "LO_OPEN", "NUMBER_RANGES", "SEED_RANGE",
-    "TRACE_EXCLUSIVE", "Delivery", "Fate", "FateStream", "LinkConfig", "LinkImpairment", "LinkSettings",
-    "LinkStats", "Radio", "absolute_link_paths", "burst_problem", "fates", "jitter_capped_text", "jitter_cell",
-    "link_from_table",
-    "merge_link_tables",
-    "stream_key", "trace_clash", "uniform",
+    "FRAME_BYTES", "GUARD_RANGES", "HI_OPEN", "JITTER_KINDS", "LINK_KEYS", "LO_OPEN", "NEEDS", "NUMBER_RANGES",
+    "SEED_RANGE", "TRACE_EXCLUSIVE", "Delivery", "Fate", "FateStream", "LinkConfig", "LinkImpairment", "LinkSettings",
+    "LinkStats", "Radio", "absolute_link_paths", "burst_problem", "fates", "idle_problem", "jitter_capped_text",
+    "jitter_cell", "link_from_table", "merge_link_tables", "stream_key", "swept_links", "trace_clash", "uniform",
+    "unmet_key",
 ]
 
 
@@ -263,6 +266,9 @@ def _with_profile(name: str, data: Mapping[str, Any], source: str, seed: int,
         raise ConfigError(f"{prof.path}: link.shared: a profile describes one radio; whether a fleet shares it is "
                           f"the mission's ([link] shared) or --shared-link's")
     link_from_table(prof.link, str(prof.path), seed)
+    unmet = unmet_key(prof.link)  # a profile describes one link: a key of it that needs what it never gives
+    if unmet:
+        raise ConfigError(f"{prof.path}: link.{unmet[0]}: {unmet[1]}")
     over = {k: v for k, v in data.items() if k != "profile"}
     return link_from_table(merge_link_tables(prof.link, over), source, seed, duration_s)
 
@@ -277,3 +283,46 @@ def merge_link_tables(base: Mapping[str, Any], over: Mapping[str, Any]) -> dict[
             out[k] = dict(v) if isinstance(v, Mapping) else v
     return out
 
+
+
+def unmet_key(table: Mapping[str, Any], given: Iterable[str] = ()) -> tuple[str, str] | None:
+    """The first key of :data:`NEEDS` a ``[link]`` table gives (``burst_len`` in ``[link]``, for both directions, or
+    ``up.burst_len``) whose need no one gives for a direction it acts on: not the table (``[link]`` or that direction's
+    table), not its profile, nor ``given`` (the needs the flags or a campaign's axes give), as (the key, why it changes
+    nothing); None. A need given as 0 (``loss_pct = 0``) is given: the loss switched off, the burst kept, as a run's
+    ``mission.toml`` holds it after ``--loss 0``. A profile that cannot be read is the loader's to name (None here)."""
+    prof: Mapping[str, Any] = {}
+    if isinstance(table.get("profile"), str) and table["profile"]:
+        try:
+            prof = load_link_profile(table["profile"]).link
+        except ConfigError:
+            return None
+    given = set(given)
+
+    def has(t: Mapping[str, Any], key: str, d: str) -> bool:
+        own = t.get(d)
+        return key in t or (isinstance(own, Mapping) and key in own)
+
+    for key, (need, does, _) in NEEDS.items():
+        places = [(key, DIRECTIONS)] if key in table else []
+        places += [(f"{d}.{key}", (d,)) for d in DIRECTIONS if isinstance(table.get(d), Mapping) and key in table[d]]
+        for where, dirs in places:
+            if need not in given and not any(has(t, need, d) for t in (table, prof) for d in dirs):
+                return where, f"changes nothing: {does}, and no {need} is given; give {need} too, or remove {key}"
+    return None
+
+
+def swept_links(links: Iterable[LinkSettings], axes: Mapping[str, Sequence[float]] | None = None
+                ) -> list[tuple[dict[str, Any], dict[str, Any]]]:
+    """Each (up, down) of ``links`` as the values a key's need reads (:data:`NEEDS`), once for every combination of
+    ``axes``' values laid over both directions (a sweep's or a margin's link axes: each a value of a cell), for
+    :func:`idle_problem`: a key is idle when no link nor cell uses it."""
+    needs = sorted({need for need, *_ in NEEDS.values()})
+    names = [a for a in (axes or {}) if a in needs]
+    out = []
+    for s in links:
+        for combo in product(*((axes or {})[a] for a in names)):
+            lay = dict(zip(names, combo, strict=True))
+            up, down = ({**{n: getattr(c, n) for n in needs}, **lay} for c in (s.up, s.down))
+            out.append((up, down))
+    return out

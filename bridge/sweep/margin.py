@@ -63,6 +63,7 @@ from typing import Any
 
 from bridge.core.flight import prepare
 from bridge.core.interrupt import Deferred, sigint_deferred
+from bridge.link.model import NEEDS, idle_problem
 from bridge.record.runlog import run_dir, write_json_atomic
 from bridge.sweep.cells import FAILED, broke_policy, seeds_alike
 from bridge.sweep.classes import CLASSES, Classes, classify
@@ -253,6 +254,10 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
         why = noise_problem((flight.estimator,), prepare(mission, noise=1.0).sensors)  # the set's own sigmas
         if why:
             raise ConfigError(f"margin over noise: {why}")
+    why = idle_problem(over, (flight.link.up, flight.link.down)) if over in NEEDS else None
+    if why:  # every probe would fly the same flight: a margin of the whole range, measured of nothing
+        raise ConfigError(f"margin over {over}: changes nothing: {why}; give the mission a {NEEDS[over][0]} (or "
+                          f"--loss PCT)")
     vehicle = {"estimator": flight.estimator, "noise": mission_value(mission, "noise"),
                "turbulence": mission_value(mission, "turbulence")}
     seed_list = [mission.seed + i for i in range(seeds)]

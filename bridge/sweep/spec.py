@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from bridge.core.flight import prepare
+from bridge.link.model import NEEDS, idle_problem, swept_links
 from bridge.record.runlog import check_trace_steps
 from bridge.swarm import check_fleet_steps, fleet_flights, fleet_mission
 from bridge.sweep.cells import COLUMNS
@@ -120,7 +121,7 @@ class Sweep:
         """Build the flight of every law, every rate, every discretization, every estimator kind, every noise scale,
         every wind and turbulence and every combination of link values once (not every cell), so that a bad value
         fails before any cell runs; first the grid's size and that no link axis is swept over a link trace; then that
-        a swept noise scale and a discretization axis change something."""
+        a swept burst length, noise scale and discretization axis change something."""
         self.check_size()
         self.check_link_trace()
         base = self.cells()[0]
@@ -148,6 +149,14 @@ class Sweep:
         why = self.noise_problem()
         if why:
             raise ConfigError(f"grid.noise (--noise): {why}")
+        swept = {a: getattr(self.grid, a) for a in LINK_AXES if getattr(self.grid, a)}
+        for a in (a for a in swept if a in NEEDS):  # burst_len: its cells need a loss, swept or the mission's
+            why = idle_problem(a, [v for pair in swept_links([cell_flight(self.mission, base).link], swept)
+                                   for v in pair])
+            if why:
+                need = NEEDS[a][0]
+                raise ConfigError(f"grid.{a} (--{SHORT[a]}): changes nothing in any cell: {why}; sweep --{SHORT[need]} "
+                                  f"too, or give the mission's [link] {need}")
         why = discretization_problem(self.grid.controller or (self.mission.controller,))
         if self.grid.discretization and why:  # (a cell of each scheme would fly one flight twice)
             raise ConfigError(f"grid.discretization (--discretization): {why}; add bsst to the laws (--controller), "
