@@ -25,7 +25,8 @@ In:  a law spec (built-in name, ``file.py:Class``, ``module:Class``) or factory;
      control rate (Hz)
 Out: a built law that fits :class:`Law` (units in the list above), or a one-line ConfigError; a user's law is
      flown inside :class:`CheckedLaw`, which turns its failures in flight (a raise, ``SystemExit`` too; inputs
-     that are not four finite numbers; a ``desired`` gone bad) into :class:`LawFailed`
+     that are not four finite numbers; a ``desired`` gone bad) into :class:`LawFailed`; which laws a discretization
+     steps (:data:`DISCRETIZED`: ``bsst`` alone) and :func:`discretization_problem`
 
 A user's law that cannot be loaded (its import or its constructor raises, ``SystemExit`` included) is bad input:
 nothing is flown (exit 2). One that fails in flight ends the flight ``law_failed`` (docs/usage.md, "Plug in your own

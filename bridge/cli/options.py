@@ -6,7 +6,8 @@ In:  an ``argparse`` parser to add options to; the parsed ``argparse.Namespace``
      ``--noise`` a scale, the link flags of :mod:`bridge.cli.flags`)
 Out: the options on the parser; :func:`overrides_from_args`, the frozen
      :class:`~bridge.core.overrides.Overrides` those flags ask for (a flag a command does not have: the
-     mission's own), which :func:`bridge.core.flight.prepare` lays over the mission
+     mission's own), which :func:`bridge.core.flight.prepare` lays over the mission; :func:`refuse_idle_inputs`,
+     a flag (or a mission's link key) that would change nothing, refused as a ``ConfigError`` naming it
 """
 
 from __future__ import annotations
