@@ -41,6 +41,7 @@ from bridge.cli.options import (
     add_sensor_options,
     overrides_from_args,
     refuse_idle_inputs,
+    refuse_vehicle_flags,
 )
 from params import ConfigError
 
@@ -414,7 +415,7 @@ def cmd_sitl(args: argparse.Namespace) -> int:
 # -- the two sides alone (bsst vehicle, bsst controller) ---------------------------------------------
 def cmd_vehicle(args: argparse.Namespace) -> int:
     """``bsst vehicle``: the simulated vehicle alone."""
-    from bridge.core.clock import lockstep_pace, realtime_speed_problem  # lazy: start-up time
+    from bridge.core.clock import lockstep_pace  # lazy: start-up time
     from bridge.core.flight import at_rest, prepare  # lazy: start-up time
     from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, GCS_PORT, LINK_PORT, parse_address  # lazy
     from bridge.mavlink.telemetry import Home  # lazy: start-up time
@@ -422,16 +423,7 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
     from bridge.nodes.vehicle.gate import GateConfig  # lazy: start-up time
     from bridge.record.runlog import trace_cap  # lazy: start-up time
 
-    if args.realtime and (why := realtime_speed_problem(args.speed)):  # as bsst sitl refuses it
-        raise ConfigError(why)
-    if args.gate and args.realtime:
-        raise ConfigError("--gate with --realtime: a fleet's shared step clock is lockstep's (real time keeps the "
-                          "wall clock)")
-    if args.trace_cap and not args.await_mission:
-        raise ConfigError("--trace-cap: only with --await-mission (it caps the mission a ground station starts)")
-    if args.param_at and not args.await_mission:  # (a change at a mission time is the controller's to send)
-        raise ConfigError("--param-at: only with --await-mission (the vehicle refuses at its start a ground station's "
-                          "mission over before T; give the change to the controller, which sends it)")
+    refuse_vehicle_flags(args)
     refuse_idle_inputs(args, args.mission)
     flight = prepare(args.mission or at_rest(), overrides_from_args(args))
     n = args.instance

@@ -7,7 +7,8 @@ In:  an ``argparse`` parser to add options to; the parsed ``argparse.Namespace``
 Out: the options on the parser; :func:`overrides_from_args`, the frozen
      :class:`~bridge.core.overrides.Overrides` those flags ask for (a flag a command does not have: the
      mission's own), which :func:`bridge.core.flight.prepare` lays over the mission; :func:`refuse_idle_inputs`,
-     a flag (or a mission's link key) that would change nothing, refused as a ``ConfigError`` naming it
+     a flag (or a mission's link key) that would change nothing, refused as a ``ConfigError`` naming it;
+     :func:`refuse_vehicle_flags`, ``bsst vehicle``'s flags that need another
 """
 
 from __future__ import annotations
@@ -311,3 +312,19 @@ def add_port_options(p: argparse.ArgumentParser, vehicle: bool) -> None:
                         "is lost (X, else 1)")
     add_key_option(p)
 
+
+
+def refuse_vehicle_flags(args: argparse.Namespace) -> None:
+    """``bsst vehicle``'s flags that need another it was not given (a ``ConfigError`` naming both)."""
+    from bridge.core.clock import realtime_speed_problem  # lazy: start-up time
+
+    if args.realtime and (why := realtime_speed_problem(args.speed)):  # as bsst sitl refuses it
+        raise ConfigError(why)
+    if args.gate and args.realtime:
+        raise ConfigError("--gate with --realtime: a fleet's shared step clock is lockstep's (real time keeps the "
+                          "wall clock)")
+    if args.trace_cap and not args.await_mission:
+        raise ConfigError("--trace-cap: only with --await-mission (it caps the mission a ground station starts)")
+    if args.param_at and not args.await_mission:  # (a change at a mission time is the controller's to send)
+        raise ConfigError("--param-at: only with --await-mission (the vehicle refuses at its start a ground station's "
+                          "mission over before T; give the change to the controller, which sends it)")
