@@ -202,7 +202,8 @@ def test_mavsdk_uploads_a_plans_fence_and_rally_points_and_the_flight_leaving_th
     (it said nothing until the third wave's thirty-sixth session: the run's record left the uploaded fence out).
     Each upload a ``mission`` event naming MAVSDK. The controller downloads the fence and rally points with the
     mission, so the run's mission.plan and mission.toml hold them as flown, and ``bsst sim`` of that mission.toml
-    flies the session's flight to its outcome and the same breach."""
+    flies the session's flight to its outcome and the same breach; summary.json's ``mission_transfer`` has the three
+    downloads."""
     def fenced(data: dict) -> None:
         data["geoFence"]["polygons"] = [{"inclusion": True, "version": 1, "polygon": [
             [47.39770, 8.54555], [47.39770, 8.54564], [47.39790, 8.54564], [47.39790, 8.54555]]}]
@@ -229,6 +230,9 @@ def test_mavsdk_uploads_a_plans_fence_and_rally_points_and_the_flight_leaving_th
         assert "geofence: outside its fence" in events and ": land here [vehicle]" in events, events
         assert "GF_ACTION = 5: land" in events and "disarmed: landed: disarmed" in events, events
     assert "rally: uploaded 1 items" in events and "a fence of 4 items and 1 rally points" in events, events
+    got = summary["mission_transfer"]  # each download's figures (the mission's alone until the thirty-seventh session)
+    assert (got["items"], got["fence"]["items"], got["rally"]["items"]) == (5, 4, 1), got
+    assert got["fence"]["result"] == got["rally"]["result"] == "accepted" and got["fence"]["attempts"] >= 5, got
     edge = Home().paper(47.39780, 8.54564, 488.0)[1]  # the fence's east side (y west, m)
     east = next(t for t, x, y, z in _trace(out / "trace.csv") if y < edge)
     assert abs(fence["t"] - east) <= 0.005, (fence["t"], east)  # (the event: after the step, at its end)
@@ -1129,16 +1133,27 @@ def test_a_waypoint_before_a_land_here_is_reached_at_its_point_not_at_the_takeof
 
 
 def test_plan_text_reads_back_and_the_transfer_block_is_typed():
+    """The mission's download at the record's top level, as before; the fence's and the rally points' each a record
+    of the same keys under ``fence`` and ``rally`` (None: not begun; until the third wave's thirty-seventh session
+    the record held the mission's alone)."""
     plan = read_plan_text(BOX_PLAN.read_text(), "box")
     again = read_plan_text(plan_text(plan), "again")
     assert again.items == plan.items  # (QGroundControl's null is math.nan, the same object both times)
     assert again.home == plan.home and again.cruise_m_s == plan.cruise_m_s
     said = {"items": 8, "requests": 11, "re_requests": 3, "duration_s": 0.5, "result": "accepted"}
     assert mission_transfer(said).as_dict() == {"items": 8, "attempts": 11, "re_requests": 3, "duration_s": 0.5,
-                                                "result": "accepted", "started_by": None}
+                                                "result": "accepted", "started_by": None, "fence": None,
+                                                "rally": None}
     by = {"command": START_ARM, "by": "255:190 127.0.0.1:14550 gcs"}
     assert mission_transfer(said, by).as_dict()["started_by"] == by
     assert mission_transfer(None) is None and mission_transfer({"items": 1}) is None
+    fence = {"items": 4, "requests": 6, "re_requests": 1, "duration_s": 0.25, "result": "accepted"}
+    rally = {"items": 0, "requests": 1, "re_requests": 0, "duration_s": 0.01, "result": "timeout"}
+    both = mission_transfer({**said, "fence": fence, "rally": rally}).as_dict()
+    assert both["items"] == 8 and both["fence"] == {"items": 4, "attempts": 6, "re_requests": 1, "duration_s": 0.25,
+                                                    "result": "accepted"}
+    assert both["rally"]["result"] == "timeout" and both["rally"]["attempts"] == 1
+    assert mission_transfer({**said, "fence": {"items": 4}}).as_dict()["fence"] is None  # (not all said)
 
 
 def test_a_session_stopped_while_it_awaits_a_mission_reads_the_waiting_states_as_delivered(tmp_path):

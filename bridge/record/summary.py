@@ -7,10 +7,11 @@ In:  the :class:`~bridge.core.flight.Flight`; the joined trace and the per-packe
      failsafe and divergence, the first step flown off the step clock s, the ``sitl`` block); the relay's
      statistics (``relay.json``'s dict, or None); the events (:class:`~bridge.record.events.RunEvent`)
 Out: :class:`SessionSummary`: the trace arrays, ``summary.json`` (the figures of
-     :func:`bridge.record.metrics.summarise`, the ``link``, ``timing`` and ``sitl`` blocks, a ground station's
-     mission's download (``mission_transfer``, :class:`MissionTransfer`; ``--await-mission`` only), the lockstep
-     record, ``ended_by``, the policies' verdicts, the events in time order) and the session's closing notes (its
-     ``ended``, ``lockstep`` and ``policy`` events, also in ``summary["events"]``, for events.log)
+     :func:`bridge.record.metrics.summarise`, the ``link``, ``timing`` and ``sitl`` blocks, the downloads of a
+     ground station's mission, fence and rally points (``mission_transfer``: :mod:`bridge.record.transfers`;
+     ``--await-mission`` only), the lockstep record, ``ended_by``, the policies' verdicts, the events in time
+     order) and the session's closing notes (its ``ended``, ``lockstep`` and ``policy`` events, also in
+     ``summary["events"]``, for events.log)
 
 See docs/design.md, "Files of a run", and docs/sitl.md, "Outcomes, exit statuses and safety policies".
 """
@@ -48,6 +49,7 @@ from bridge.record.policies import (
     violation_text,
 )
 from bridge.record.runlog import trace_arrays
+from bridge.record.transfers import mission_transfer
 
 FAILED_OUTCOMES = ("failsafe", "diverged", "aborted", "law_failed", "denied")
 PLANT_OUTCOMES = ("diverged", "crashed", "collision")  # the plant ended it (SimVehicle.plant_verdict, a contact)
@@ -83,44 +85,7 @@ class SessionFacts:
     diverged: bool = False
     off_clock_t: float | None = None
     sitl: Mapping[str, Any] = field(default_factory=dict)
-    mission_transfer: Mapping[str, Any] | None = None  # --await-mission: the download, as the controller said it
-
-
-@dataclass(frozen=True)
-class MissionTransfer:
-    """``summary.json["mission_transfer"]`` (``bsst sitl --await-mission``): the controller's download of a
-    ground station's mission from the vehicle: its items, the requests sent (``attempts``: the first of each
-    message and every one again), those sent again (``re_requests``), its wall time (s) and ``result``
-    (``accepted``, or why not); ``started_by``, as the vehicle said it: how the ground station started the
-    mission (``command``: ``MISSION_START``, ``AUTO.MISSION, then arm`` or ``arm, then AUTO.MISSION``) and
-    who (``by``: ``SYSID:COMPID HOST:PORT LINK``), None if the vehicle said no start."""
-
-    items: int
-    attempts: int
-    re_requests: int
-    duration_s: float
-    result: str
-    started_by: Mapping[str, str] | None = None
-
-    def as_dict(self) -> dict[str, Any]:
-        return {"items": self.items, "attempts": self.attempts, "re_requests": self.re_requests,
-                "duration_s": self.duration_s, "result": self.result,
-                "started_by": dict(self.started_by) if self.started_by is not None else None}
-
-
-def mission_transfer(said: Mapping[str, Any] | None, started: Any = None) -> MissionTransfer | None:
-    """The :class:`MissionTransfer` of what the controller said (its ``stats``' or ``mission`` report's
-    ``TransferStats`` fields) and of the vehicle's start (its ``stats``' ``mission_start``), or None when the
-    controller said none or not all of it."""
-    if not isinstance(said, Mapping):
-        return None
-    start = ({"command": str(started["command"]), "by": str(started["by"])}
-             if isinstance(started, Mapping) and {"command", "by"} <= started.keys() else None)
-    try:
-        return MissionTransfer(int(said["items"]), int(said["requests"]), int(said["re_requests"]),
-                               float(said["duration_s"]), str(said["result"]), start)
-    except (KeyError, TypeError, ValueError):
-        return None
+    mission_transfer: Mapping[str, Any] | None = None  # --await-mission: the downloads, as the controller said them
 
 
 @dataclass(frozen=True)

@@ -10,8 +10,9 @@ Out: REQUEST_MESSAGE (MISSION_CURRENT), MISSION_REQUEST_LIST, MISSION_REQUEST_IN
      mission's :class:`~bridge.core.flight.Flight` (the settings flying the plan's smooth trajectory); in the
      controller's directory ``mission.plan`` (the items, fence and rally points as a QGroundControl plan) and
      ``mission.toml`` (the mission as flown, resolved: ``kind = "smooth"``, its ``[geofence]`` and ``[rally]``
-     those the vehicle held at the start); the mission download's
-     :class:`~bridge.mavlink.missionitems.TransferStats` (items, requests, requests again, wall time s, result)
+     those the vehicle held at the start); each download's
+     :class:`~bridge.mavlink.missionitems.TransferStats` (items, requests, requests again, wall time s, result):
+     the mission's, and the fence's and the rally points' under ``fence`` and ``rally``
 
 The download is a ground station's (the vehicle is PX4's server, :mod:`bridge.nodes.vehicle.mission`: it sends
 nothing unasked): MISSION_REQUEST_LIST until MISSION_COUNT comes, then MISSION_REQUEST_INT for each item in
@@ -73,6 +74,12 @@ class Fetched:
     transfer: TransferStats
     why: str = ""
     states: dict[str, Any] = field(default_factory=dict)  # the vehicle's states read while waiting (Stats' keys)
+    zone_figures: dict[str, TransferStats] = field(default_factory=dict)  # the fence's and rally points' (begun)
+
+    def figures(self) -> dict[str, Any]:
+        """The downloads' figures as the controller says them (summary.json ``mission_transfer``,
+        bridge.record.transfers): the mission's, with the fence's and the rally points' under their keys."""
+        return {**self.transfer.as_dict(), **{k: st.as_dict() for k, st in self.zone_figures.items()}}
 
 
 class MissionLink(OffboardLink):
@@ -260,24 +267,26 @@ def _fetch(link: MissionLink, flight: Flight, out: Path | None, empty: TransferS
         if st.result != "accepted":
             return Fetched(None, st, f"mission download failed: {st.result}")
         zones: dict[int, list[MissionItem]] = {}
-        for mtype, noun in ((FENCE, "fence"), (RALLY, "rally points")):  # held as flown from the start, as PX4's
-            zones[mtype], zst = link.download(mtype)  # navigator holds them with the mission (a GCS reads all three)
-            if zst.result != "accepted":
-                return Fetched(None, st, f"{noun} download failed: {zst.result}")
+        figures: dict[str, TransferStats] = {}  # each download's, by its key in summary.json's mission_transfer
+        # held as flown from the start, as PX4's navigator holds them with the mission (a GCS reads all three)
+        for mtype, key, noun in ((FENCE, "fence", "fence"), (RALLY, "rally", "rally points")):
+            zones[mtype], figures[key] = link.download(mtype)
+            if figures[key].result != "accepted":
+                return Fetched(None, st, f"{noun} download failed: {figures[key].result}", zone_figures=figures)
         if not link.ask_home():
-            return Fetched(None, st, "the vehicle did not say its home (GET_HOME_POSITION)")
+            return Fetched(None, st, "the vehicle did not say its home (GET_HOME_POSITION)", zone_figures=figures)
         assert link.home is not None
         try:  # the check the vehicle's start made (bsst sitl's step cap aside: the vehicle's, bsst vehicle --trace-cap)
             plan, new = uploaded_flight(flight, items, link.home, fence=zones[FENCE], rally=zones[RALLY])
         except (ConfigError, ValueError) as exc:  # (a refusal, as the vehicle's start check takes either)
-            return Fetched(None, st, f"the mission cannot be flown: {exc}")
+            return Fetched(None, st, f"the mission cannot be flown: {exc}", zone_figures=figures)
         if out is not None:
             write_text_atomic(out / "mission.plan", plan_text(plan))
             write_text_atomic(out / "mission.toml", dump_toml(new.mission.to_dict()))
         link.event("mission", f"downloaded {st.items} items in {st.duration_s:.2f} s ({st.requests} requests, "
                               f"{st.re_requests} again), a fence of {len(zones[FENCE])} items and "
                               f"{len(zones[RALLY])} rally points: {new.mission.duration_s:.2f} s to fly")
-        return Fetched(new, st)
+        return Fetched(new, st, zone_figures=figures)
     finally:
         link.stop_reading()  # the states already on the socket are read (delivered); the time it stopped said
         link.ep.close()
@@ -290,7 +299,7 @@ def mission_flight(flight: Flight, cfg: OffboardConfig, out: Path | None,
     said) and the download's figures; None when there is none to fly (its ``stats`` and ``done`` said, why on
     stderr: the controller then exits 1)."""
     got = fetch_mission(flight, cfg, out, emit)
-    transfer = got.transfer.as_dict()
+    transfer = got.figures()
     if got.flight is None:
         emit(Stats({"mission_transfer": transfer, **got.states}))
         emit(Done("aborted", False, got.why))
