@@ -908,6 +908,98 @@ def test_an_arm_with_auto_mission_selected_outside_the_fence_starts_nothing_unti
         gcs.close()
 
 
+def _fence_square(half: float, target: tuple[int, int] = (1, 1)) -> list[Any]:
+    """An inclusion square ``half`` m each way about the vehicle's default home, as a ground station uploads it."""
+    home = Home()
+    corners = ((-half, -half), (-half, half), (half, half), (half, -half))
+    return [M.MAVLink_mission_item_int_message(*target, k, M.MAV_FRAME_GLOBAL_INT,
+                                               M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION, 0, 1, 4.0, 0, 0, 0,
+                                               *(round(d * 1e7) for d in home.global_of(x, -y, 0.0)[:2]), 0.0,
+                                               M.MAV_MISSION_TYPE_FENCE)
+            for k, (x, y) in enumerate(corners)]
+
+
+def test_a_fence_uploaded_between_the_controllers_download_and_its_arm_is_said_at_the_arm():
+    """The controller's download of the fence (on its own link) is what mission.toml holds; a ground station's fence
+    uploaded after it, before the controller's arm, is flown all the same (the vehicle watches it), so the vehicle
+    says so at that arm: a ``fence`` event after the ``armed`` one, which the geofence policy reads as a change at the
+    flight's start (tests/test_fence_upload.py). Until the third wave's thirty-seventh session nothing said it: the
+    run read as flown against the downloaded fence (or none). With GF_ACTION 0 that fence is still judged for the
+    record (``fence_recorded`` false); one uploaded before the controller's download is the record's: nothing said."""
+    gcs = GcsSocket()
+    flight = prepare(Mission(Sine(), duration_s=5.0, name="fenced-late"), params={"GF_ACTION": 0})
+    ctl = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    ctl.bind(("127.0.0.1", 0))
+    ctl.setblocking(False)
+    ctl_mav = M.MAVLink(None, srcSystem=200, srcComponent=191)
+    made: list[Vehicle] = []
+
+    def from_controller(v: Vehicle, msg: Any, want: str | None) -> None:
+        ctl.sendto(msg.pack(ctl_mav), v.link.local)
+        seen: list[Any] = []
+
+        def answered() -> bool:
+            for m, addr in v.link.poll():
+                v._handle(v.link, m, addr)
+            with contextlib.suppress(BlockingIOError):
+                while True:
+                    seen.extend(ctl_mav.parse_buffer(ctl.recv(65535)) or [])
+            if want is None:  # (the download's final ACK: nothing comes back)
+                return v.missions.transfers["controller"].state.value == "idle"
+            return any(m.get_type() == want for m in seen)
+
+        wait_for(answered, 5.0, f"the vehicle's {want or 'idle transfer'} on the controller link", poll_s=0.001)
+
+    def upload_fence(v: Vehicle) -> None:
+        items = _fence_square(1.0)
+        gcs.exchange(v, M.MAVLink_mission_count_message(1, 1, len(items), M.MAV_MISSION_TYPE_FENCE),
+                     "MISSION_REQUEST_INT")
+        for it in items[:-1]:
+            gcs.exchange(v, it, "MISSION_REQUEST_INT")
+        assert gcs.exchange(v, items[-1], "MISSION_ACK").type == M.MAV_MISSION_ACCEPTED
+
+    def started_and_downloaded(late: bool) -> Vehicle:
+        v = _vehicle_holding_the_small_plan(gcs, flight)
+        made.append(v)
+        if not late:
+            upload_fence(v)
+        start = M.MAVLink_command_long_message(1, 1, M.MAV_CMD_MISSION_START, 0, 0, 0, 0, 0, 0, 0, 0)
+        assert gcs.exchange(v, start, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
+        fence = M.MAV_MISSION_TYPE_FENCE
+        from_controller(v, M.MAVLink_mission_request_list_message(1, 1, fence), "MISSION_COUNT")
+        for k in range(0 if late else 4):
+            from_controller(v, M.MAVLink_mission_request_int_message(1, 1, k, fence), "MISSION_ITEM_INT")
+        from_controller(v, M.MAVLink_mission_ack_message(1, 1, M.MAV_MISSION_ACCEPTED, fence), None)
+        assert v.sim.fence_recorded
+        if late:
+            upload_fence(v)  # after the controller's download, before its arm
+        controller = Sender(200, 191, "127.0.0.1", ctl.getsockname()[1], "controller")
+        assert v.commander.arm_disarm(1.0, 0.0, controller) == M.MAV_RESULT_ACCEPTED
+        return v
+
+    try:
+        v = started_and_downloaded(late=True)
+        assert not v.sim.fence_recorded and v.sim.fence is not None
+        armed, said = v.sim.events[-2:]
+        assert (armed.kind, said.kind) == ("armed", "fence"), v.sim.events[-3:]
+        assert said.text == ("flown with a fence of 4 items uploaded or cleared after the controller's download, not "
+                             "the one mission.toml holds") and said.by is not None and said.by.is_vehicle, said
+        v.sim.plant.state = (3.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # 3 m north: outside it
+        v.sim.advance()
+        left = [e for e in v.sim.events if e.kind == "geofence"]
+        assert len(left) == 1 and "GF_ACTION = 0: not acted on" in left[0].text and v.sim.mode == "offboard", left
+        early = started_and_downloaded(late=False)  # the fence downloaded is the one flown
+        assert early.sim.fence_recorded and early.sim.events[-1].kind == "armed", early.sim.events[-2:]
+        early.sim.plant.state = (3.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        early.sim.advance()  # (GF_ACTION 0: the record's own fence is its trace check's, not the vehicle's)
+        assert not [e for e in early.sim.events if e.kind == "geofence"]
+    finally:
+        for v in made:
+            v.close()
+        gcs.close()
+        ctl.close()
+
+
 # a takeoff, three holds of 1000 s and a landing: 3000 s, within a mission's day, over bsst sitl's trace (2000 s)
 LONG_PLAN = """QGC WPL 110
 0\t1\t0\t16\t0\t0\t0\t0\t47.397742\t8.545594\t488.0\t1

@@ -129,6 +129,30 @@ def test_held_zones_give_return_its_rally_points_and_watch_the_fence() -> None:
     assert zones.accept(Mission(), RALLY) is None and sim.rally == ()  # a clear: Return goes home
 
 
+def test_with_gf_action_0_only_a_fence_the_record_does_not_hold_is_watched_and_its_breach_said_not_acted_on() -> None:
+    """GF_ACTION 0 (none) watches nothing, as PX4's: outside the mission's own fence (the record's: its trace check
+    judges it) and beyond GF_MAX_HOR_DIST no event. An uploaded fence, which the record does not hold
+    (``fence_recorded`` false), is still judged: its first breach a ``geofence`` event saying it is not acted on, the
+    vehicle flying on in offboard control (until the third wave's thirty-seventh session nothing was said, and the
+    run's record passed a breach of a fence uploaded in flight)."""
+    sim = prepare(MISSION_DIR / "sine.toml", params={"GF_ACTION": 0, "GF_MAX_HOR_DIST": 3.0}).make_vehicle()
+    sim.fence = Geofence((Zone(True, points=((-2.0, -2.0), (-2.0, 2.0), (2.0, 2.0), (2.0, -2.0))),))
+    assert sim.fence_recorded  # (the mission's own)
+    sim.arm()
+    _period_at(sim, 6.0, 0.0)  # out of both, and beyond GF_MAX_HOR_DIST
+    assert not [e for e in sim.events if e.kind == "geofence"]
+    zones = HeldZones(sim, (HOME.lat, HOME.lon, HOME.alt))
+    assert zones.accept(_held(_square(5.0)), FENCE) is None and not sim.fence_recorded
+    _period_at(sim, 4.0, 0.0)
+    assert not [e for e in sim.events if e.kind == "geofence"]  # (inside the new one)
+    _period_at(sim, 6.0, 0.0)
+    _period_at(sim, 7.0, 0.0)
+    left = [e for e in sim.events if e.kind == "geofence"]
+    assert len(left) == 1 and left[0].text.startswith("outside its fence: at x=6.000"), left
+    assert left[0].text.endswith("(GF_ACTION = 0: not acted on; said for the run's record, which does not hold this "
+                                 "fence)") and sim.mode == "offboard" and sim.armed, left
+
+
 def test_the_geofence_policy_fails_on_the_vehicles_geofence_event() -> None:
     """No mission fence, but the vehicle said it left an uploaded one: the policy fails at that time, with its
     words; without the event it holds."""
@@ -159,11 +183,14 @@ def test_a_fence_changed_in_flight_ends_the_trace_check_against_the_starts_fence
     v = geofence_kept(t, trace, rules, [arm, bigger])
     assert v.ok and v.as_dict()["note"].startswith("the fence changed in flight at t=0.500 s (uploaded 4"), v
     assert v.as_dict()["note"].endswith("by the vehicle's watch of the new one after")
-    unwatched = geofence_kept(t, trace, replace(rules, fence_watched=False), [arm, bigger])  # GF_ACTION = 0
-    assert unwatched.as_dict()["note"].endswith("and not after: GF_ACTION = 0, the vehicle does not watch the new "
-                                                "one, and nothing here holds its shape"), unwatched
-    at_arm = RunEvent.at(0.0, "fence", upload, "vehicle")  # (right after the arm: still t = 0)
-    assert geofence_kept(t, trace, rules, [arm, at_arm]).ok
+    unacted = geofence_kept(t, trace, replace(rules, fence_acted=False), [arm, bigger])  # GF_ACTION = 0
+    assert unacted.as_dict()["note"].endswith("by the vehicle's watch of the new one (GF_ACTION = 0: it acts on no "
+                                              "breach, but says the first, for this record) after"), unacted
+    at_arm = RunEvent.at(0.0, "fence", "flown with a fence of 4 items uploaded or cleared after the controller's "
+                                       "download, not the one mission.toml holds", "vehicle")  # (after the arm: t = 0)
+    v = geofence_kept(t, trace, rules, [arm, at_arm])  # (no row judged against the start's fence)
+    assert v.ok and v.as_dict()["note"] == (f"{at_arm.text}: the trace is judged by the vehicle's watch of it, not "
+                                            "against mission.toml's fence"), v
     early = [RunEvent.at(0.0, "fence", upload, "vehicle"), gcs_arm, RunEvent.at(0.0, "fence", upload, "vehicle"),
              arm]  # (before the flight's arm: the fence it started with)
     assert not geofence_kept(t, trace, rules, early).ok

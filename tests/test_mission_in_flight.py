@@ -63,9 +63,9 @@ class _Gcs:
         assert m is not None, f"no {kinds} ({cond}) within {timeout} s"
         return m
 
-    def upload(self, items: list[Any]) -> int:
-        """MISSION_COUNT, each item requested, the MISSION_ACK's result."""
-        self.c.mav.mission_count_send(*self.t, len(items), M.MAV_MISSION_TYPE_MISSION)
+    def upload(self, items: list[Any], mission_type: int = M.MAV_MISSION_TYPE_MISSION) -> int:
+        """MISSION_COUNT (of ``mission_type``), each item requested, the MISSION_ACK's result."""
+        self.c.mav.mission_count_send(*self.t, len(items), mission_type)
         while True:
             m = self.recv(["MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"])
             if m.get_type() == "MISSION_ACK":
@@ -157,6 +157,65 @@ def test_a_chosen_current_item_is_refused_at_the_start_and_the_flown_mission_can
     assert not any("replaced by an upload" in t for t in texts), texts
     assert sum("mission: uploaded" in t for t in texts) == 1
     assert not any("mission: current item 2" in t or "mission: cleared" in t for t in texts), texts
+
+
+def _fence_items(half_m: float) -> list[Any]:
+    """An inclusion square ``half_m`` m each way about the home (degE7, 1e-5 deg of latitude is 1.11 m), as a ground
+    station uploads it (MAV_MISSION_TYPE_FENCE: four vertices, each with the polygon's count)."""
+    dlat, dlon = round(half_m / 1.11 * 100), round(half_m / (1.11 * math.cos(math.radians(47.4))) * 100)
+    corners = ((-dlat, -dlon), (-dlat, dlon), (dlat, dlon), (dlat, -dlon))
+    return [M.MAVLink_mission_item_int_message(0, 0, seq, M.MAV_FRAME_GLOBAL_INT,
+                                               M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION, 0, 1, 4.0, 0.0, 0.0, 0.0,
+                                               HOME[0] + a, HOME[1] + b, 0.0, M.MAV_MISSION_TYPE_FENCE)
+            for seq, (a, b) in enumerate(corners)]
+
+
+def test_with_gf_action_0_a_fence_uploaded_in_flight_and_left_fails_the_geofence_policy(tmp_path):
+    """``--param GF_ACTION=0``: a ground station uploads a fence 5 m about home once the mission flies (armed,
+    AUTO.MISSION) and the flight, 20 m north, leaves it. The vehicle acts on nothing (the flight flies on to its end),
+    but it says where it left the fence, for the record (a ``geofence`` event: nothing else holds that fence's
+    shape), so the geofence policy fails there and ``bsst sitl`` exits 1. Until the third wave's thirty-seventh
+    session the vehicle said nothing, the policy held with a note that the new fence was not judged, and the run
+    exited 0. summary.json's ``mission_transfer`` has the fence's and the rally points' downloads (none then) beside
+    the mission's."""
+    out = tmp_path / "run"
+    with instance_slot() as n:
+        sitl = Proc.bsst("sitl", "--await-mission", "--speed", "2", "--instance", str(n), "--out", str(out),
+                         "--no-plots", "--param", "GF_ACTION=0")
+        gcs = None
+        try:
+            gcs = _Gcs(n)
+            assert gcs.upload(_items()) == M.MAV_MISSION_ACCEPTED
+            assert gcs.start() == M.MAV_RESULT_ACCEPTED
+            gcs.recv("HEARTBEAT", 30, f"HEARTBEAT.get_srcComponent()==1 and HEARTBEAT.base_mode & 128 and "
+                                      f"HEARTBEAT.custom_mode=={AUTO_MISSION}")
+            assert gcs.upload(_fence_items(5.0), M.MAV_MISSION_TYPE_FENCE) == M.MAV_MISSION_ACCEPTED
+            rc = sitl.p.wait(timeout=120)
+        finally:
+            if gcs is not None:
+                gcs.c.close()
+            sitl.stop()
+    summary = json.loads((out / "summary.json").read_text())
+    assert rc == 1 and summary["outcome"] == "completed", "\n".join(sitl.lines[-20:])
+    fence = next(p for p in summary["policies"] if p["name"] == "geofence")
+    assert not fence["ok"] and "outside its fence" in fence["why"], fence
+    assert "GF_ACTION = 0: not acted on; said for the run's record" in fence["why"], fence
+    north = next(t for t, x in zip(*_trace_tx(out / "trace.csv")) if x > 5.0)  # the square's north side, 5 m
+    assert 0.0 < fence["t"] - north <= 0.05, (fence["t"], north)
+    kinds = [e["kind"] for e in summary["events"]]
+    assert kinds.index("armed") < kinds.index("fence") < kinds.index("geofence"), kinds
+    t = summary["mission_transfer"]
+    assert t["items"] == 3 and (t["fence"]["items"], t["fence"]["result"]) == (0, "accepted"), t
+    assert (t["rally"]["items"], t["rally"]["result"]) == (0, "accepted"), t
+
+
+def _trace_tx(path: Path) -> tuple[list[float], list[float]]:
+    """trace.csv's ``t`` and ``x`` columns (s, m north of the start)."""
+    rows = path.read_text().splitlines()
+    head = rows[0].split(",")
+    it, ix = head.index("t"), head.index("x")
+    cells = [r.split(",") for r in rows[1:]]
+    return [float(c[it]) for c in cells], [float(c[ix]) for c in cells]
 
 
 def test_do_set_mission_current_is_answered_as_px4_before_the_start_and_refused_while_the_mission_flies(tmp_path):

@@ -8,7 +8,8 @@ Out: the limits X is beyond, each (which, why) (:func:`limits_passed`); the fail
      repositions it to is not flown (:func:`reposition_refusal`), or None
 
 PX4's geofence (navigator's ``Geofence``, ``GeofenceResult.GF_ACTION_*``): armed, beyond a limit or outside the
-fence, the vehicle does GF_ACTION: 0 nothing (it does not watch), 1 warns, 2 holds where it is (PX4's default;
+fence, the vehicle does GF_ACTION: 0 nothing (it does not watch, but for an uploaded fence the run's record does
+not hold: :func:`bridge.autopilot.vehiclechecks.check_limits`), 1 warns, 2 holds where it is (PX4's default;
 here for COM_FAIL_ACT_T, then it lands, as the link-loss hold does, so that a flight ends on the ground in every
 clock: PX4 holds until someone acts), 3 returns (Return mode: home or the nearest rally point), 4 terminates the
 flight (motors off), 5 lands where it is. 2 to 5 take the vehicle out of offboard control as its failsafe does,

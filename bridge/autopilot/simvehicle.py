@@ -94,6 +94,10 @@ class SimVehicle:
     max_ver_m: float = 0.0  # GF_MAX_VER_DIST (m): the highest above home it may fly; 0: any
     fence: Geofence | None = None  # the fence it holds (the mission's, or a ground station's upload), watched as these
     fence_action: int = 2  # GF_ACTION: at a breach 0 nothing (unwatched), 1 warn, 2 hold, 3 return, 4 terminate, 5 land
+    # the run's record (its mission.toml) holds the fence, so its trace check judges it; an upload's is not, unless
+    # the controller downloads it before the flight (bridge.nodes.vehicle.mission): with GF_ACTION 0 that one's first
+    # breach is still said, for the record alone (vehiclechecks.check_limits)
+    fence_recorded: bool = True
     battery_watch: BatteryWatch = field(default_factory=BatteryWatch)  # BAT_*_THR, COM_LOW_BAT_ACT
     land_disarm: LandDisarm = field(default_factory=LandDisarm)  # COM_DISARM_LAND: landed, it disarms after it
     reference_z: Callable[[float], float] | None = None  # m at mission time s: judges touchdowns (touchdownwatch)
@@ -286,8 +290,10 @@ class SimVehicle:
                           param=ParamChanged(name, float(old), float(new)))
 
     def watch_fence(self, fence: Geofence | None) -> None:
-        """Watch ``fence`` (a ground station's; None: none) from now on, afresh."""
+        """Watch ``fence`` (a ground station's; None: none) from now on, afresh: not the record's
+        (:attr:`fence_recorded`) until the controller's download says it is."""
         self.fence = fence
+        self.fence_recorded = False
         self.beyond.discard("fence")
 
     def prearm_refusal(self) -> str | None:
@@ -392,7 +398,8 @@ class SimVehicle:
         given, says when ``deliver`` has its next message (s; None: none in flight): with none due within the
         period, no sensors and the offboard command in force, the substeps are one call (the same bits)."""
         p = self.plant
-        if self.armed and self.fence_action and (self.max_hor_m or self.max_ver_m or self.fence is not None):
+        if self.armed and (self.max_hor_m or self.max_ver_m or self.fence is not None) and (
+                self.fence_action or not self.fence_recorded):
             check_limits(self)
         if self.armed and p.battery is not None:
             check_battery(self, p.battery.remaining)

@@ -41,6 +41,7 @@ class CheckedVehicle(Protocol):
     home: tuple[float, float, float]  # m
     fence: Geofence | None
     fence_action: int
+    fence_recorded: bool  # the run's record holds the fence (its trace check judges it)
     max_hor_m: float  # m
     max_ver_m: float  # m
     beyond: set[str]
@@ -61,12 +62,21 @@ class CheckedVehicle(Protocol):
 def check_limits(v: CheckedVehicle) -> None:
     """The first time the vehicle is beyond GF_MAX_HOR_DIST or GF_MAX_VER_DIST, or outside the fence it holds, a
     ``geofence`` event says so (the run's geofence policy then fails), and GF_ACTION 2-5 fly the failsafe it
-    names (:mod:`bridge.autopilot.fencewatch`), unless a failsafe already flies."""
+    names (:mod:`bridge.autopilot.fencewatch`), unless a failsafe already flies. GF_ACTION 0 watches nothing, as
+    PX4's, but a fence the run's record does not hold (``fence_recorded`` false: uploaded after the controller's
+    download) is still judged, its first breach said and not acted on: nothing else can judge it for the record."""
     known = "" if v.sensors is None else " (by its estimate)"  # PX4's geofence reads the estimate too
-    new = [(w, why + known) for w, why in breaches_now(v, "fence" in v.beyond) if w not in v.beyond]
+    if v.fence_action:
+        passed = breaches_now(v, "fence" in v.beyond)
+        said = f"GF_ACTION = {v.fence_action}: {FENCE_ACTIONS[v.fence_action]}"
+    else:
+        passed = [] if v.fence_recorded or "fence" in v.beyond else breaches(v.published(), v.plant.t, v.home,
+                                                                             0.0, 0.0, v.fence)
+        said = "GF_ACTION = 0: not acted on; said for the run's record, which does not hold this fence"
+    new = [(w, why + known) for w, why in passed if w not in v.beyond]
     for which, why in new:
         v.beyond.add(which)
-        v.event("geofence", f"{why} (GF_ACTION = {v.fence_action}: {FENCE_ACTIONS[v.fence_action]})")
+        v.event("geofence", f"{why} ({said})")
     action = FENCE_FAILSAFE.get(v.fence_action)  # None: 0 none, 1 warning (it flies on)
     if new and action is not None and v.mode not in (FAILSAFE, LANDED):
         v.fly_failsafe(action, f"geofence: {new[0][1]}: {FENCE_ACTION_TEXT[action]}",

@@ -96,7 +96,8 @@ class Rules:
     controller_id: tuple[int, int] = CONTROLLER_ID
     spin_down: bool = False
     geofence: Any = None  # the mission's missions.geofence.Geofence (None: none)
-    fence_watched: bool = True  # GF_ACTION is not 0: the vehicle watches a fence uploaded in flight (its events)
+    fence_acted: bool = True  # GF_ACTION is not 0: the vehicle acts on a breach (with 0 it only says one, of a fence
+    # the record does not hold: bridge.autopilot.vehiclechecks.check_limits)
 
     @property
     def period_s(self) -> float:
@@ -336,7 +337,8 @@ def geofence_kept(t: np.ndarray, trace: Mapping[str, Any], rules: Rules, events:
     ``geofence`` event of the vehicle (outside a fence a ground station uploaded: bridge.nodes.vehicle.zones); ok
     without either. The mission's fence is the one at the start: a fence a ground station uploads (or clears) in
     flight replaces it in the vehicle (its ``fence`` event), so rows from then on are the vehicle's watch's to
-    judge (its ``geofence`` event), and the verdict says so (``note``)."""
+    judge (its ``geofence`` event, said with GF_ACTION 0 too), and the verdict says so (``note``); so are all rows
+    when the flight started with a fence uploaded after the record's (the vehicle's ``fence`` event at its arm)."""
     name = "geofence"
     left = next((e for e in events if e.kind == "geofence"), None)
     changed = _fence_changed_in_flight(events)
@@ -347,18 +349,24 @@ def geofence_kept(t: np.ndarray, trace: Mapping[str, Any], rules: Rules, events:
         return Verdict(name, False, left.t, left.text)
     if breach is not None:
         return Verdict(name, False, breach[0], f"{breach[1]} (the vehicle acts by GF_ACTION)")
-    after = ("by the vehicle's watch of the new one after" if rules.fence_watched else
-             "and not after: GF_ACTION = 0, the vehicle does not watch the new one, and nothing here holds its shape")
-    note = None if changed is None else (
-        f"the fence changed in flight at t={changed.t:.3f} s ({changed.shown}): the trace is judged against the "
-        f"mission's fence (the one at the start) until then, {after}")
-    return Verdict(name, True, note=note)
+    return Verdict(name, True, note=None if changed is None else _fence_note(changed, n, rules.fence_acted))
+
+
+def _fence_note(changed: RunEvent, before: int, acted: bool) -> str:
+    """The verdict's note on a fence the record does not hold: when it came, and what judged the trace."""
+    watch = f"the vehicle's watch of {'the new one' if before else 'it'}" + (
+        "" if acted else " (GF_ACTION = 0: it acts on no breach, but says the first, for this record)")
+    if not before:  # (its arm's event: uploaded after the controller's download, or before a plain session's arm)
+        return f"{changed.shown}: the trace is judged by {watch}, not against mission.toml's fence"
+    return (f"the fence changed in flight at t={changed.t:.3f} s ({changed.shown}): the trace is judged against the "
+            f"mission's fence (the one at the start) until then, by {watch} after")
 
 
 def _fence_changed_in_flight(events: Sequence[RunEvent]) -> RunEvent | None:
     """The vehicle's first event of a fence uploaded or cleared after its flight's arm (its first ``armed`` event
-    that is not a ground station's arm awaiting a mission's start): the fence before it is the one the flight
-    started with (``--await-mission``: the one the controller downloaded before that arm)."""
+    that is not a ground station's arm awaiting a mission's start), or the one it says at that arm when the fence it
+    holds is not the record's (uploaded after the controller's download: bridge.nodes.vehicle.mission): the fence
+    before it is the one the record holds (``--await-mission``: the one the controller downloaded)."""
     flying = False
     for e in events:
         if e.kind == "armed" and not e.pre_start:
@@ -411,7 +419,7 @@ def rules_for(flight: Any, clock: str, link: Mapping[str, Any] | None,
     return Rules(rate_hz=m.rate_hz, timeout_s=flight.failsafe.timeout_s, clock=clock,
                  armed_at_start=clock == "offline", command_slack_s=up + physics,
                  hold_slack_s=flight.guard.stop_s + up + down + 1.0 / m.rate_hz, controller_id=controller_id,
-                 spin_down=lag, geofence=m.geofence, fence_watched=flight.params.fence_action != 0)
+                 spin_down=lag, geofence=m.geofence, fence_acted=flight.params.fence_action != 0)
 
 
 def judge(summary: dict[str, Any], trace: Mapping[str, Any], events: Sequence[RunEvent], rules: Rules,

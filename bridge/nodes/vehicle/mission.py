@@ -9,7 +9,9 @@ Out: MISSION_REQUEST_INT / MISSION_REQUEST, MISSION_COUNT, MISSION_ITEM_INT / MI
      (MAV_MISSION_RESULT), MISSION_CURRENT, MISSION_ITEM_REACHED, STATUSTEXT (PX4's texts); the accepted
      mission as typed items (:class:`Mission` of :class:`~bridge.mavlink.missionitems.MissionItem`); a
      ``mission`` event naming its sender for each accepted upload, clear, set-current and start; ``refused ...``
-     and ``mission ...`` status lines
+     and ``mission ...`` status lines; at a started mission's arm (or the first flight's), a ``fence`` event when
+     the fence held is not the one the run's mission.toml holds (the controller's download of it, or the mission's
+     own), which the vehicle then watches for the record even with GF_ACTION 0 (``SimVehicle.fence_recorded``)
 
 With ``await_mission`` (``bsst sitl --await-mission``) a ground station starts the held mission
 (:meth:`MissionManager.start`: MAV_CMD_MISSION_START, or AUTO.MISSION selected and then an arm): the vehicle
@@ -32,18 +34,18 @@ from typing import Any
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.autopilot.simvehicle import LAND, OFFBOARD, TAKEOFF, SimVehicle
-from bridge.autopilot.vehicleevents import Sender
+from bridge.autopilot.vehicleevents import ITSELF, Sender
 from bridge.core.flight import Flight
 from bridge.mavlink import telemetry as tm
 from bridge.mavlink.endpoint import Endpoint
 from bridge.mavlink.fenceitems import FENCE, RALLY
 from bridge.mavlink.modes import mode_name
 from bridge.nodes.vehicle.authority import Authority, attribute
-from bridge.nodes.vehicle.missiontransfer import LinkTransfer, Mission, Partner
+from bridge.nodes.vehicle.missiontransfer import LinkTransfer, Mission, Partner, State
 from bridge.nodes.vehicle.missionwatch import Goal, ItemWatch
 from bridge.nodes.vehicle.startcheck import WAIT_S, Held, StartCheck
 from bridge.nodes.vehicle.streams import StatusTexts
-from bridge.nodes.vehicle.zones import HeldZones
+from bridge.nodes.vehicle.zones import FENCE, HeldZones
 
 REACHED_REPEATS = 10  # PX4 sends MISSION_ITEM_REACHED once more at each of its next 10 1 Hz ticks
 REACHED_S = 1.0
@@ -96,6 +98,9 @@ class MissionManager:
         self._goals: tuple[Goal, ...] = ()  # the started mission's items, where and how each is reached
         self.home = (authority.cfg.home.lat, authority.cfg.home.lon, authority.cfg.home.alt)
         self.zones = HeldZones(sim, self.home)  # an uploaded fence and rally points
+        self.recorded_fence = self.zones.items[FENCE]  # the one the run's record holds: the mission's, or the
+        # controller's download's (--await-mission); the fence flown is said at a flight's arm if not it
+        self._first_flight = True
         self._check: StartCheck | None = None  # the last check begun (.startcheck): one runs at a time
 
     # -- a ground station's start (await_mission) --------------------------------------------------------
@@ -208,7 +213,19 @@ class MissionManager:
                                                                           and offboard)
 
     def flight_armed(self) -> None:
-        """The controller armed a new flight: the started mission is flown from now (item 0 current)."""
+        """The controller armed a new flight: the started mission is flown from now (item 0 current). A started
+        mission's arm (or the first flight's, without --await-mission) with a fence the run's record does not hold
+        (uploaded after the controller's download, or before that first arm) says so: a ``fence`` event, after the
+        arm, so that the run judges that fence by the vehicle's watch, as one uploaded in flight
+        (bridge.record.policies)."""
+        if self._first_flight or self.start_requested:  # (a record begins: the controller's mission.toml)
+            self._first_flight = False
+            held = self.zones.items[FENCE]
+            if held is not self.recorded_fence:
+                when = "after the controller's download" if self.authority.cfg.await_mission else "before the arm"
+                said = self.sim.event("fence", f"flown with a fence of {len(held.items)} items uploaded or cleared "
+                                               f"{when}, not the one mission.toml holds")
+                said.by = ITSELF  # (the vehicle's word, not the arm's sender's)
         if not self.start_requested:
             return
         self.start_requested = self.selected = self.completed = False
@@ -316,7 +333,17 @@ class MissionManager:
         transfer = self.transfers.get(link)
         if transfer is None:
             transfer = self.transfers[link] = LinkTransfer(link, self)
-        return transfer.handle(Partner(self.authority.sender(m, addr, link), ep), m, time.monotonic())
+        changed = transfer.handle(Partner(self.authority.sender(m, addr, link), ep), m, time.monotonic())
+        if link == "controller" and m._type == "MISSION_REQUEST_LIST" and m.mission_type == FENCE:
+            self._fence_downloaded(transfer)
+        return changed
+
+    def _fence_downloaded(self, transfer: LinkTransfer) -> None:
+        """The controller asked for the fence: the one its download sends (begun, or begun again) is the one its
+        mission.toml holds, the record's; the fence held is the record's while it is that one."""
+        if transfer.state is State.SENDLIST and transfer.mtype == FENCE:
+            self.recorded_fence = transfer.sending
+            self.sim.fence_recorded = transfer.sending is self.zones.items[FENCE]
 
     # -- what the links' transfers share (.missiontransfer.TransferHost) ------------------------------------
     def held(self, mission_type: int) -> Mission:
