@@ -45,7 +45,7 @@ from bridge.nodes.vehicle.missiontransfer import LinkTransfer, Mission, Partner,
 from bridge.nodes.vehicle.missionwatch import Goal, ItemWatch
 from bridge.nodes.vehicle.startcheck import WAIT_S, Held, StartCheck
 from bridge.nodes.vehicle.streams import StatusTexts
-from bridge.nodes.vehicle.zones import FENCE, HeldZones
+from bridge.nodes.vehicle.zones import HeldZones
 
 REACHED_REPEATS = 10  # PX4 sends MISSION_ITEM_REACHED once more at each of its next 10 1 Hz ticks
 REACHED_S = 1.0
