@@ -71,6 +71,19 @@ def test_lockstep_agrees_with_offline_under_impairment(bad_link) -> None:
     assert list(trace) == list(TRACE_COLUMNS) and "state_age_s" in trace
 
 
+def test_lockstep_counts_the_models_refusals_of_the_controllers_commands_as_the_controllers(bad_link) -> None:
+    """The up-link model's refusals (``duplicate``, ``out_of_order``) are of the controller's own commands: in
+    lockstep, as in real time, they count under ``rejected_from_peer``, none under ``rejected_from_others`` (until
+    the third wave's thirty-seventh session every one was counted as someone else's). Offline, every refusal is of
+    the controller's commands: the same count."""
+    run, off = bad_link
+    link, refused = run.summary["link"], off.summary["link"]["rejected"]
+    assert refused["out_of_order"] > 0 and refused["duplicate"] > 0
+    assert sum(link["rejected_by"]["vehicle"].values()) == sum(refused.values())
+    assert link["rejected_from_peer"]["vehicle"] == sum(refused.values())
+    assert link["rejected_from_others"] == {"vehicle": 0, "controller": 0}
+
+
 def test_same_seed_same_trace_different_seed_different(bad_link, tmp_path: Path) -> None:
     """The fixture's 12 s flight through the bad link, flown again for its first 8 s: on the same seed the same
     rows, byte for byte (a row does not depend on how long the flight goes on); on another seed, others."""

@@ -69,15 +69,16 @@ class VehicleEnd:
     """The vehicle's side: commands through the ``up`` model into a :class:`SimVehicle`."""
 
     def __init__(self, vehicle: SimVehicle, up: LinkImpairment, actuation: str,
-                 rejected: dict[str, int] | None = None) -> None:
+                 refuse: Callable[[str], None] | None = None) -> None:
         self.vehicle = vehicle
         self.up = up
         self.frame_bytes = command_frame_bytes(actuation)
         self.newest_sent_t = float("-inf")  # send time of the newest command applied
         self.applied_state_t = float("nan")  # state time stamp of the command in force
-        # refusals by reason; the MAVLink vehicle passes its own dict, so that its socket-level
-        # reasons and these (duplicate, out_of_order, not_offboard) are counted in one place
-        self.rejected: dict[str, int] = rejected if rejected is not None else {}
+        # refusals (duplicate, out_of_order, not_offboard) by reason; the MAVLink vehicle counts them with its
+        # socket-level reasons instead (``refuse``), as its controller's: every command here is the controller's
+        self.rejected: dict[str, int] = {}
+        self._refuse = refuse if refuse is not None else self._count
         self._deliver = self.deliver  # bound once, handed to SimVehicle.advance
         self._next_due = up.next_due
         # a fleet's one radio in lockstep (bridge.link.turns): what crossed the socket waits for the vehicle's turn
@@ -114,13 +115,15 @@ class VehicleEnd:
                 if msg.acted is not None:
                     msg.acted()
             elif d.sent_t <= self.newest_sent_t:
-                why = "duplicate" if d.sent_t == self.newest_sent_t else "out_of_order"
-                self.rejected[why] = self.rejected.get(why, 0) + 1
+                self._refuse("duplicate" if d.sent_t == self.newest_sent_t else "out_of_order")
             elif self.vehicle.command(msg.c):
                 self.newest_sent_t = d.sent_t
                 self.applied_state_t = msg.state_t
             else:
-                self.rejected["not_offboard"] = self.rejected.get("not_offboard", 0) + 1
+                self._refuse("not_offboard")
+
+    def _count(self, why: str) -> None:
+        self.rejected[why] = self.rejected.get(why, 0) + 1
 
     def advance(self) -> None:
         """One control period of the vehicle, delivering commands as they arrive."""

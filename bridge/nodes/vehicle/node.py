@@ -97,7 +97,8 @@ class Vehicle:
         self.turns = (TurnRadio(gate.radio, "up", flight.link.up.rate_bps, flight.link.up.queue_ms / 1000.0,
                                 gate.index, "--gate's radio") if gate is not None and gate.radio is not None else None)
         up = flight.link.make((self.turns, None), gate.index)[0] if self.turns else flight.link.make()[0]
-        self.vend = VehicleEnd(self.sim, up, self.actuation, rejected=self.rejected)
+        # what the up-link model refuses is the controller's (Targets lets no one else's in), as on the wall clock
+        self.vend = VehicleEnd(self.sim, up, self.actuation, refuse=lambda why: self.rejected.add(why, True))
         # its controller's first turns on one radio wait for the slowest vehicle and controller to start, as the
         # gate waits for a silent vehicle: the answers of steps 0 and 1 may take that long (bridge.link.turns)
         self._first_answers_s = cfg.lost_after_s
