@@ -5,7 +5,8 @@ the wrong way round are refused (each end is known by what its MAVLink sources s
 different points (a truncated copy, a logger stopped early) still give each source to the end that sent it,
 so no delay comes out negative, and what they give is a trace ``bsst link fit`` takes; a frame stamped received
 a little before it was sent (the stamps' resolution) is written with delay 0 and said so; a bad argument is
-named as given, not as the ``--out`` it would have made; an ``--out`` that is the command's own input is refused.
+named as given, not as the ``--out`` it would have made; an ``--out`` that is the command's own input is refused;
+a session's per-step delays come from its run's tlogs.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.link.trace import read_trace
+from bridge.record.linkextract import step_delays
 from tests.sitlkit import ENV, ROOT, run_bsst
 from tests.test_link_trace import _frame, _tlog
 
@@ -175,3 +177,16 @@ def test_an_out_that_is_the_commands_own_input_is_refused_even_with_overwrite(tm
         assert err == f"bsst: --out {out}: is {trace}, an input of this command, which writing would destroy; write " \
                       "the output elsewhere", err
     assert trace.read_text() == text
+
+
+def test_a_sessions_step_delays_are_its_per_step_messages_from_its_tlogs(tmp_path: Path) -> None:
+    """What a real-time session through a relay reports as ``delay_ms`` (:func:`step_delays`): one delay per target
+    up and per ODOMETRY down delivered (the HEARTBEATs beside them left out); no tlogs, no figures (None)."""
+    assert step_delays(tmp_path) is None
+    v, c = our_link(100)
+    (tmp_path / "vehicle.tlog").write_bytes(v)
+    assert step_delays(tmp_path) is None
+    (tmp_path / "controller.tlog").write_bytes(c)
+    got = step_delays(tmp_path)
+    assert got is not None and len(got[0]) == len(got[1]) == 100
+    assert np.allclose(got[0], UP_S * 1e3, atol=2e-3) and np.allclose(got[1], DOWN_S * 1e3, atol=2e-3)

@@ -4,7 +4,8 @@ In:  ``vehicle.bin`` (:data:`~bridge.record.columns.VEHICLE_COLUMNS`) and ``cont
      (:data:`~bridge.record.columns.CONTROLLER_COLUMNS`), appended by the two processes as they fly
 Out: rows (:class:`~bridge.record.columns.TraceRow`, units as there), also appended to ``trace.csv``, and
      the per-packet times (ms: up, down, round trip, state to command, tick lateness) the session's
-     ``link`` and ``timing`` blocks are made of, together as :class:`Joined`; the first step (s) a lockstep
+     ``link`` and ``timing`` blocks are made of, together as :class:`Joined` (up and down through a relay: from
+     the run's tlogs, :func:`~bridge.record.linkextract.step_delays`); the first step (s) a lockstep
      vehicle flew off the step clock (:func:`off_clock_time`)
 
 Each file's rows are read into named rows (:class:`~bridge.record.columns.VehicleRow`,
@@ -36,6 +37,7 @@ from bridge.record.columns import (
 )
 from bridge.record.ending import END_MODE_CODES
 from bridge.record.halves import HalfReader, read_half
+from bridge.record.linkextract import step_delays
 from bridge.record.runlog import TraceWriter
 
 # groups of columns of a half, by name
@@ -50,7 +52,8 @@ _DESIRED = attrgetter(*DESIRED_COLUMNS)
 @dataclass(frozen=True)
 class Joined:
     """The trace as the session joined it, and what the join measured (:class:`bridge.record.joiner.TraceJoiner`):
-    per-packet ``up_ms``, ``down_ms`` (one-way, ms), ``rtt_ms`` (vehicle's round trip), ``s2c_ms`` (state to
+    per-packet ``up_ms``, ``down_ms`` (one-way, ms: of the message each step used; through a relay, of every one
+    delivered, :meth:`TraceJoiner.joined`), ``rtt_ms`` (vehicle's round trip), ``s2c_ms`` (state to
     command by TIMESYNC), ``late_ms`` (tick lateness); ``commands``: controller rows read (``controller_steps``:
     the first and last step they answer); ``k0``: the vehicle's step of the trace's t = 0;
     ``first_sent``/``last_sent``: wall s of the first and last joined state's send; ``missing``: rows without their
@@ -96,6 +99,7 @@ class TraceJoiner:
 
     def __init__(self, path: Path, flight: Flight, trace: TraceWriter | None, lockstep: bool = False,
                  live: bool | None = None) -> None:
+        self.path = path
         self.v = HalfReader(path / "vehicle.bin", VehicleRow)
         self.c = HalfReader(path / "controller.bin", ControllerRow)
         self.lockstep = lockstep
@@ -222,10 +226,14 @@ class TraceJoiner:
         r = self.rows[-1]
         return r.t, math.sqrt((r.x - r.x_ref) ** 2 + (r.y - r.y_ref) ** 2 + (r.z - r.z_ref) ** 2)
 
-    def joined(self) -> Joined:
-        """The rows joined so far and what the join measured."""
-        return Joined(self.rows, self.k0, self.missing, self.first_sent, self.last_sent, len(self.ctl), self.up_ms,
-                      self.down_ms, self.rtt_ms, self.s2c_ms, self.late_ms,
+    def joined(self, delivered: bool = False) -> Joined:
+        """The rows joined so far and what the join measured. ``delivered`` (real time through a relay, which may
+        reorder): the one-way delays are every per-step message's that arrived, from the tlogs (the halves time
+        only the one each step used, and leave out the late ones it refused: 8 ms low on an LTE link, until the
+        third wave's thirty-seventh session); without the tlogs, the halves'."""
+        up, down = (step_delays(self.path) if delivered else None) or (self.up_ms, self.down_ms)
+        return Joined(self.rows, self.k0, self.missing, self.first_sent, self.last_sent, len(self.ctl), up,
+                      down, self.rtt_ms, self.s2c_ms, self.late_ms,
                       (min(self.ctl), max(self.ctl)) if self.ctl else None)
 
     def close(self) -> None:

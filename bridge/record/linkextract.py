@@ -33,6 +33,7 @@ from bridge.record.tlogmatch import (
     by_source,
     direction_records,
     merge_directions,
+    parse_tlog,
     read_tlog,
     sender_ends,
     timesync_offset,
@@ -281,6 +282,23 @@ def extract_run_dir(path: str | Path, clock: str = "same") -> Extraction:
         return extract_halves(vh, ch)
     raise ConfigError(f"{p}: neither vehicle.tlog and controller.tlog nor vehicle.bin and controller.bin: "
                       f"no record of a link to extract")
+
+
+def step_delays(path: Path) -> tuple[list[float], list[float]] | None:
+    """A real-time run's per-step messages delivered, each way (the actuator targets up, ODOMETRY down): the
+    one-way delay (ms) of every one that arrived, whether a step used it or not (a late one, refused as older than
+    the newest, was delivered all the same), matched by its bytes in the run's two tlogs (both ends' stamps, one
+    host's clock: what ``bsst link extract`` reads, of these messages only). None without two readable tlogs."""
+    try:  # the run's own files, not a user's input (read_tlog would note them as one)
+        v, c = (parse_tlog((path / f"{side}.tlog").read_bytes(), side) for side in ("vehicle", "controller"))
+    except (OSError, ConfigError):
+        return None
+    out = []
+    for ids, sender, receiver in ((_TARGETS, c, v), ((_ODOMETRY,), v, c)):
+        sent, recv = (by_source([f for f in log if f.msgid in ids]) for log in (sender, receiver))
+        out.append([1e3 * x for s in sent.keys() & recv.keys()
+                    for _, x in direction_records(sent[s], recv[s], 0.0).records if x is not None])
+    return out[0], out[1]
 
 
 def _half_rows(path: Path, names: Sequence[str], optional: str) -> list[dict[str, float]]:

@@ -192,8 +192,8 @@ def link_block(joined: Joined, vehicle: Mapping[str, Any], controller: Mapping[s
       vehicle: ``up``, the controller: ``down``), ``delay_ms`` in simulation time; plus
       ``socket_ms``, the wall-clock one-way time of the per-step messages over the socket;
     - real time through the relay: the relay's counts (every datagram), ``delay_ms``
-      measured end to end on the per-step messages (ODOMETRY down, the target up) from
-      both sides' stamps (one host: one monotonic clock, no offset to estimate), the
+      measured end to end on every per-step message delivered (ODOMETRY down, the targets up)
+      from both ends' tlogs (one host: one clock, no offset to estimate), the
       model's schedule (``model_delay_ms``) and the delay the relay added (``relay_added_ms``);
     - otherwise (real time, perfect link; a side that left no statistics): counts from
       both sides, ``delay_ms`` from their stamps.

@@ -150,7 +150,7 @@ class Session:
                   **({"flew_on": True} if self.flying_on else {}),  # taken over, it flew on (a fleet's: fleet.py)
                   **({"gate": self.vehicle.stats.get("gate") if self.vehicle else None} if self.gate else {})},
             mission_transfer=self.transfer)
-        joined = self.joiner.joined()
+        joined = self.joiner.joined(delivered=self.relay is not None)  # a relay may reorder: every packet's delay
         out = session_summary(self.flight, facts, joined, self.events, _end(self.vehicle), _end(self.controller),
                               _end(self.relay), self._relay_stats(), (CONTROLLER_SYSID, CONTROLLER_COMPID))
         ended = [e for e in self.events if e.source == "vehicle" and e.t is not None]
