@@ -7,7 +7,8 @@ In:  a real-time run directory (``vehicle.tlog`` and ``controller.tlog``; withou
      ends' stamps are on (``same``, or ``timesync``: the offset estimated from TIMESYNC exchanges)
 Out: :class:`Extraction`: per direction the records (send time s from the trace's start, one-way delay
      s or None for lost) and its counts, the clock offset used, notes; :func:`extraction_text`, the
-     trace file (``t_s, delay_ms, direction``) that ``[link] trace`` replays
+     trace file (``t_s, delay_ms, direction``) that ``[link] trace`` replays; :func:`step_delays`, a real-time
+     session's per-step messages' one-way delays (ms), for its ``summary.json``
 
 How (tlogs): the frames of the two ends matched per source (:mod:`bridge.record.tlogmatch`), checked to be
 the two ends of one link, on one clock (``timesync``: the controller's stamps shifted by the offset).
