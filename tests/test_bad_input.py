@@ -458,15 +458,15 @@ def test_a_real_time_flight_is_not_sped_up(files, capsys):
 
 
 def test_a_flags_value_is_named_as_given_not_as_the_files(files, capsys):
-    """A link value from a flag that breaks a rule of the [link] table is named as the flag (``--burst 0.5``), or,
-    where the rule needs the file's other keys (``--stop-after`` below the file's ``stale_ms``, ``--rate`` not
-    dividing the physics rate), the message says what was laid over the mission; until the thirty-third session
-    each read as the file's own key, which the file did not have (``--profile ''`` too).
-    ``--blackout`` says its ranges; ``bsst report`` of a folder that is not there says so."""
+    """A link value from a flag that breaks a rule of the [link] table is named as the flag (``--burst 0.5``,
+    ``--stop-after`` below the stale age: test_a_guard_flag_that_clashes_is_named_as_the_flag), or, where the rule
+    needs the file's other keys (``--rate`` not dividing the physics rate), the message says what was laid over the
+    mission; until the thirty-third session each read as the file's own key, which the file did not have
+    (``--profile ''`` too). ``--blackout`` says its ranges; ``bsst report`` of a folder that is not there says so."""
     line = _refused(capsys, ["sim", files.mission, "--burst", "0.5", "--out", files.out], "--burst")
     assert line.endswith("must be 0 (Bernoulli loss) or >= 1 packet, got 0.5"), line
-    line = _refused(capsys, ["sim", files.mission, "--stop-after", "40", "--out", files.out], "link.stop_ms")
-    assert line.endswith("got 40 (with these laid over the mission's [link]: link.stop_ms = 40.0)"), line
+    line = _refused(capsys, ["sim", files.mission, "--stop-after", "40", "--out", files.out], "--stop-after 40")
+    assert line == "bsst: --stop-after 40: must be >= stale_ms = 50, got 40 (--stale-after sets stale_ms)", line
     line = _refused(capsys, ["sim", files.mission, "--rate", "333", "--out", files.out], "rate_hz")
     assert line.endswith("got 333 (with these laid over the mission: rate_hz = 333.0)"), line
     _refused(capsys, ["sim", files.mission, "--profile", "", "--out", files.out], "--profile ")  # not the file's
@@ -479,6 +479,54 @@ def test_a_flags_value_is_named_as_given_not_as_the_files(files, capsys):
     (run / "summary.json").write_text("{}")
     line = _refused(capsys, ["report", run], "summary.json")
     assert "a run's directory" in line, line
+
+
+GUARD_CLASHES = [  # (the mission's [link], argv after the command's mission, the one line after "bsst: ")
+    ("", ["sim", "--command-lag", "20"], '--command-lag 20: needs compensation = "predict" (--compensation sets '
+                                         "compensation)"),
+    ("", ["sitl", "--stop-after", "10", "--gcs", "none"], "--stop-after 10: must be >= stale_ms = 50, got 10 "
+                                                          "(--stale-after sets stale_ms)"),
+    ("", ["sim", "--stale-after", "300"], "--stale-after 300: must be <= stop_ms = 250, got 300 (--stop-after sets "
+                                          "stop_ms)"),
+    ("", ["sweep", "--delay", "0,5", "--command-lag", "20"], 'sweep: --command-lag 20: needs compensation = '
+                                                             '"predict" (--compensation sets compensation)'),
+    ("", ["margin", "--over", "delay_ms", "--until", "rms=0.1", "--stop-after", "10"],
+     "--stop-after 10: must be >= stale_ms = 50, got 10 (--stale-after sets stale_ms)"),
+    # the other key of the pair is the file's: still the flag's value is named
+    ("stale_ms = 100\n", ["sim", "--stop-after", "60"], "--stop-after 60: must be >= stale_ms = 100, got 60 "
+                                                        "(--stale-after sets stale_ms)"),
+    ('compensation = "predict"\ncommand_lag_ms = 10\n', ["sim", "--compensation", "none"],
+     "--compensation none: must be \"predict\" where command_lag_ms = 10 (the lag prediction covers), got 'none' "
+     "(--command-lag sets command_lag_ms)"),
+]
+
+
+@pytest.mark.parametrize(("link", "argv", "said"), GUARD_CLASHES)
+def test_a_guard_flag_that_clashes_is_named_as_the_flag(tmp_path, capsys, link, argv, said):
+    """A guard flag whose value breaks the guard's rule with the flight's other guard keys (a command lag without
+    prediction, a stop age below the stale age: bridge.link.model.guard_problem) is refused naming the flag and the
+    value given (docs/links.md); until the ``fix-blackoutcrash`` branch the line named the mission file's key
+    (``tiny.toml: link.command_lag_ms: ...``), which the file did not have, with the keys laid over it. Nothing
+    is written; a flag that mends the clash flies."""
+    mission = tmp_path / "m.toml"
+    mission.write_text(TINY + (f"[link]\n{link}" if link else ""))
+    out = tmp_path / "out"
+    extra = {"sim": ["--no-plots"], "sitl": ["--no-plots"], "sweep": ["--jobs", "1", "--no-plots"]}.get(argv[0], [])
+    line = _refused(capsys, [argv[0], mission, *argv[1:], *extra, "--out", out], said)
+    assert line == f"bsst{' ' if argv[0] == 'sweep' else ': '}{said}", line
+    assert not out.exists()
+
+
+def test_a_mission_files_own_guard_clash_names_its_key(tmp_path, capsys):
+    """The file's own clash is the file's to name (its key, and what was laid over it), whatever guard flag is
+    given beside it; a flag that mends it flies."""
+    mission = tmp_path / "m.toml"
+    mission.write_text(TINY + "[link]\ncommand_lag_ms = 10\n")
+    line = _refused(capsys, ["sim", mission, "--stop-after", "300", "--out", tmp_path / "out"], "link.command_lag_ms")
+    assert f'{mission}: link.command_lag_ms: needs compensation = "predict" (with these laid over' in line, line
+    with _guard():
+        assert main(["sim", str(mission), "--compensation", "predict", "--out", str(tmp_path / "ok"),
+                     "--no-plots"]) == 0
 
 
 IDLE_FLAGS = [  # (argv after the command's mission, what the one line names): a flag that would change nothing

@@ -29,7 +29,13 @@ from bridge.cli.flags import (
     path_given,
     value_list,
 )
-from bridge.cli.linkflags import add_link_options, idle_link_flag, link_table_from_args, unmet_mission_key
+from bridge.cli.linkflags import (
+    add_link_options,
+    guard_flag_refusal,
+    idle_link_flag,
+    link_table_from_args,
+    unmet_mission_key,
+)
 from bridge.cli.options import (
     add_discretization_option,
     add_scatter_option,
@@ -158,8 +164,11 @@ def _sweep(args: argparse.Namespace) -> int:
                          f"{a} cannot be swept over it; drop one of them")
     sensors = {"set": args.sensors} if args.sensors is not None else None
     laid = fixed or sensors or args.scatter is not None
-    unmet = unmet_mission_key(args, absolute_link_paths(spec.mission.link, Path(spec.mission.source).parent),
-                              spec.mission.source, link_swept)  # (a swept --loss gives a burst_len its loss)
+    own = absolute_link_paths(spec.mission.link, Path(spec.mission.source).parent)
+    clash = guard_flag_refusal(args, own, spec.mission.source)  # (named as the flag, not as the file's key)
+    if clash:
+        raise UsageError(f"bsst sweep: {clash}")
+    unmet = unmet_mission_key(args, own, spec.mission.source, link_swept)  # (a swept --loss gives a burst_len its loss)
     if laid or unmet:  # fixed for every cell, laid over by the one path to its parts (a bad mission named there)
         flight = prepare(spec.mission, Overrides(link=fixed or None, sensors=sensors, scatter_m=args.scatter))
         swept = {a: getattr(spec.grid, a) for a in link_swept}

@@ -6,7 +6,8 @@ In:  the parsed flags (link values in ms, %, packets, bytes/s; ``--blackout STAR
 Out: :func:`link_table_from_args`'s ``[link]`` override table, which goes to :func:`bridge.core.flight.prepare` in
      an :class:`~bridge.core.overrides.Overrides` like every other override
      (:func:`bridge.cli.options.overrides_from_args`); a combination no direction can fly is a ``UsageError``
-     naming the flags (exit 2); :func:`idle_link_flag`, a flag that would change nothing, as its refusal's line
+     naming the flags (exit 2); :func:`idle_link_flag`, a flag that would change nothing, as its refusal's line;
+     :func:`guard_flag_refusal`, a guard flag that clashes with the flight's other guard keys, as its line
 
 The ranges are the mission loader's (:data:`bridge.link.model.NUMBER_RANGES`), one per key.
 """
@@ -18,6 +19,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import Any
 
 from bridge.cli.flags import UsageError, blackout_window, existing_file, link_number, link_seed, yes_no
+from params import ConfigError
 
 # -- link impairment flags (bridge.link.model): both directions, or one with --up-/--down- -----------
 
@@ -200,6 +202,33 @@ def unmet_mission_key(args: argparse.Namespace, own: Mapping[str, Any], source: 
     given = {k for t in (fixed, *(fixed.get(d, {}) for d in DIRECTIONS)) for k in t} | set(axes)
     unmet = unmet_key(table, given)
     return None if unmet is None else f"{source}: link.{unmet[0]}: {unmet[1]}"
+
+
+def guard_flag_refusal(args: argparse.Namespace, own: Mapping[str, Any], source: str) -> str | None:
+    """The line refusing a guard flag (``--command-lag``, ``--stale-after``, ``--stop-after``, ``--compensation``)
+    whose value breaks a rule of the guard's keys (:func:`bridge.link.model.guard_problem`: a command lag without
+    prediction, a stop age below the stale age) with the rest of the flight's link (the mission's own ``[link]``,
+    ``own``, from ``source``, its profile, the other link flags), named as the flag; None, and None for a clash of
+    the file's own keys (the loader names those)."""
+    from bridge.link.model import guard_problem, link_from_table, merge_link_tables  # lazy: start-up time
+
+    flags = {key: flag for flag, key, *_ in GUARD_FLAGS} | {"compensation": "--compensation"}
+    given = {k: v for k in flags if (v := getattr(args, f"link_{k}", None)) is not None}
+    if not given:
+        return None
+    rest = {k: v for k, v in link_table_from_args(args).items() if k not in flags}  # (--link-profile: its keys)
+    try:
+        g = link_from_table(merge_link_tables(own, rest), source or "link").guard
+    except ConfigError:
+        return None  # a bad table or another flag: named where the flight is prepared
+    values = {"compensation": g.compensation, "stale_ms": round(g.stale_s * 1e3, 9),
+              "stop_ms": round(g.stop_s * 1e3, 9), "command_lag_ms": round(g.lag_s * 1e3, 9), **given}
+    clash = guard_problem(values, given)
+    if clash is None or clash[0] not in given:
+        return None
+    key, why, other = clash
+    shown = given[key] if isinstance(given[key], str) else f"{given[key]:g}"
+    return f"{flags[key]} {shown}: {why} ({flags[other]} sets {other})"
 
 
 def radio_of(args: argparse.Namespace) -> tuple[str, int] | None:

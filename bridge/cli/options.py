@@ -32,7 +32,13 @@ from bridge.cli.flags import (
     path_given,
     sensor_set_name,
 )
-from bridge.cli.linkflags import idle_flags_given, idle_link_flag, link_table_from_args, unmet_mission_key
+from bridge.cli.linkflags import (
+    guard_flag_refusal,
+    idle_flags_given,
+    idle_link_flag,
+    link_table_from_args,
+    unmet_mission_key,
+)
 from params import ConfigError, load_toml
 from params.text import number
 
@@ -128,13 +134,18 @@ def refuse_idle_inputs(args: argparse.Namespace, mission: Any, laws: tuple[str, 
     (:func:`controller.law.discretization_problem`); a link flag that acts only with another (``--burst`` without
     loss, ``--queue`` without a bandwidth cap, ``--link-trace-loop`` without a trace) where nothing gives that
     (:func:`bridge.cli.linkflags.idle_link_flag`), and a key of the mission's ``[link]`` whose need nobody gives
-    (:func:`bridge.cli.linkflags.unmet_mission_key`). ``mission``: a :class:`missions.Mission`, a path, or None (a
-    bare ``bsst vehicle``, ``--await-mission``); ``laws``: the laws ``bsst margin`` searches (its ``--controller``),
-    flown in place of the mission's; ``axes``: the link values it searches, laid over both directions."""
+    (:func:`bridge.cli.linkflags.unmet_mission_key`); a guard flag that clashes with the flight's other guard keys
+    (``--command-lag`` without prediction: :func:`bridge.cli.linkflags.guard_flag_refusal`). ``mission``: a
+    :class:`missions.Mission`, a path, or None (a bare ``bsst vehicle``, ``--await-mission``); ``laws``: the laws
+    ``bsst margin`` searches (its ``--controller``), flown in place of the mission's; ``axes``: the link values it
+    searches, laid over both directions."""
     from bridge.link.model import swept_links  # lazy: start-up time
 
     noise, scheme = getattr(args, "noise", None), getattr(args, "discretization", None)
     own, source = _own_link(mission)
+    clash = guard_flag_refusal(args, own, source)  # (before the flight is prepared: it would name the file's key)
+    if clash:
+        raise ConfigError(clash)
     unmet = unmet_mission_key(args, own, source, axes or {})
     if noise is None and scheme is None and unmet is None and not idle_flags_given(args):
         return

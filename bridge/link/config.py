@@ -5,7 +5,8 @@ In:  one direction's impairment: delays ms, loss %, burst length packets, ``rate
      blackouts (start s, duration s), a seed, a measured trace
 Out: :class:`LinkConfig` (checked on construction), the range tables (:data:`NUMBER_RANGES`,
      :data:`GUARD_RANGES`, :data:`LO_OPEN` / :data:`HI_OPEN`, the blackout and seed ranges), :func:`burst_problem`,
-     :func:`trace_clash`, :data:`NEEDS` and :func:`idle_problem` (a key that acts only with another)
+     :func:`trace_clash`, :data:`NEEDS` and :func:`idle_problem` (a key that acts only with another),
+     :func:`guard_problem` (the guard's keys that clash)
 
 What the model does with them: :mod:`bridge.link.impairment`; reading a mission's ``[link]`` table
 into them: :mod:`bridge.link.model`, which re-exports every name here.
@@ -178,6 +179,26 @@ LO_OPEN = frozenset({"stale_ms", "stop_ms"})
 # so nothing is ever delivered (docs/links.md)
 HI_OPEN = frozenset({"reorder_pct"})
 COMMAND_LAG_RANGE_MS = GUARD_RANGES["command_lag_ms"]
+
+
+def guard_problem(values: Mapping[str, Any], prefer: Iterable[str] = ()) -> tuple[str, str, str] | None:
+    """The guard's keys that clash (``values``: ``compensation``, ``stale_ms``, ``stop_ms``, ``command_lag_ms``, in
+    ms): a stop age below the stale age, a command lag without prediction, as (the key to name, why, the key it
+    clashes with); None. The key named is the one of the pair in ``prefer`` (what a flag gave: the refusal names
+    that flag, :func:`bridge.cli.linkflags.guard_flag_refusal`), else the table's own wording's."""
+    prefer = set(prefer)
+    stale, stop = values["stale_ms"], values["stop_ms"]
+    if stop < stale:
+        if "stale_ms" in prefer and "stop_ms" not in prefer:
+            return "stale_ms", f"must be <= stop_ms = {stop:g}, got {stale:g}", "stop_ms"
+        return "stop_ms", f"must be >= stale_ms = {stale:g}, got {stop:g}", "stale_ms"
+    lag, comp = values["command_lag_ms"], values["compensation"]
+    if lag and comp != "predict":
+        if "compensation" in prefer and "command_lag_ms" not in prefer:
+            return ("compensation", f'must be "predict" where command_lag_ms = {lag:g} (the lag prediction covers), '
+                    f"got {comp!r}", "command_lag_ms")
+        return "command_lag_ms", 'needs compensation = "predict"', "compensation"
+    return None
 SEED_RANGE = (0, 2**31 - 1)
 # every key a direction's table takes, and every key [link] itself takes (besides [link.up] and [link.down])
 DIRECTION_KEYS = (*NUMBER_RANGES, "jitter", "seed", "blackouts", "trace", "trace_loop")

@@ -36,6 +36,7 @@ from bridge.link.config import (
     TRACE_EXCLUSIVE,
     LinkConfig,
     burst_problem,
+    guard_problem,
     idle_problem,
     trace_clash,
 )
@@ -68,9 +69,9 @@ __all__ = [  # re-exported: the link model's one import (absolute_link_paths: wh
     "BLACKOUT_DURATION_RANGE_S", "BLACKOUT_START_RANGE_S", "COMMAND_LAG_RANGE_MS", "DIRECTION_KEYS", "DIRECTIONS",
     "FRAME_BYTES", "GUARD_RANGES", "HI_OPEN", "JITTER_KINDS", "LINK_KEYS", "LO_OPEN", "NEEDS", "NUMBER_RANGES",
     "SEED_RANGE", "TRACE_EXCLUSIVE", "Delivery", "Fate", "FateStream", "LinkConfig", "LinkImpairment", "LinkSettings",
-    "LinkStats", "Radio", "absolute_link_paths", "burst_problem", "fates", "idle_problem", "jitter_capped_text",
-    "jitter_cell", "link_from_table", "merge_link_tables", "stream_key", "swept_links", "trace_clash", "uniform",
-    "unmet_key",
+    "LinkStats", "Radio", "absolute_link_paths", "burst_problem", "fates", "guard_problem", "idle_problem",
+    "jitter_capped_text", "jitter_cell", "link_from_table", "merge_link_tables", "stream_key", "swept_links",
+    "trace_clash", "uniform", "unmet_key",
 ]
 
 
@@ -236,11 +237,11 @@ def link_from_table(data: Mapping[str, Any], source: str, seed: int = 0,
     r = GUARD_RANGES
     stale_ms = t.number("stale_ms", g.stale_s * 1000.0, lo=r["stale_ms"][0], lo_open=True, hi=r["stale_ms"][1])
     stop_ms = t.number("stop_ms", g.stop_s * 1000.0, lo=r["stop_ms"][0], lo_open=True, hi=r["stop_ms"][1])
-    if stop_ms < stale_ms:
-        raise t.error("stop_ms", f"must be >= stale_ms = {stale_ms:g}, got {stop_ms:g}")
     lag_ms = t.number("command_lag_ms", g.lag_s * 1000.0, lo=COMMAND_LAG_RANGE_MS[0], hi=COMMAND_LAG_RANGE_MS[1])
-    if lag_ms and compensation != "predict":
-        raise t.error("command_lag_ms", 'needs compensation = "predict"')
+    clash = guard_problem({"compensation": compensation, "stale_ms": stale_ms, "stop_ms": stop_ms,
+                           "command_lag_ms": lag_ms})
+    if clash:
+        raise t.error(clash[0], clash[1])
     dirs = {}
     files: dict[str, TraceFile] = {}
     for d in DIRECTIONS:
