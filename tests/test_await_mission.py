@@ -43,6 +43,7 @@ from bridge.nodes.vehicle.missionwatch import ItemWatch, goals_of
 from bridge.record.endedby import ended_by_command
 from bridge.record.events import RunEvent
 from bridge.record.interventions import interventions
+from bridge.record.joiner import read_half
 from bridge.record.runlog import trace_cap
 from bridge.record.summary import mission_transfer
 from bridge.session import instance_slot
@@ -51,7 +52,18 @@ from missions.geodetic import Home
 from missions.geofence import Geofence, Zone
 from missions.planfiles import plan_text, read_plan_text
 from tests.plans import l_plan
-from tests.sitlkit import ENV, ROOT, GcsSocket, MavProxy, Proc, clean_exit, run_bsst, script_result, tlog_messages
+from tests.sitlkit import (
+    ENV,
+    MAVSDK_GROUND_STATION,
+    ROOT,
+    GcsSocket,
+    MavProxy,
+    Proc,
+    clean_exit,
+    run_bsst,
+    script_result,
+    tlog_messages,
+)
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes and opens sockets
@@ -1275,3 +1287,83 @@ def test_a_session_stopped_while_it_awaits_a_mission_reads_the_waiting_states_as
             gcs.close()
     down = json.loads((out / "summary.json").read_text())["link"]["down"]
     assert down["sent"] >= 10 and down["lost"] == 0 and down["delivered"] + down["in_flight"] == down["sent"], down
+
+
+# -- a ground station's own flight before the mission it then starts ------------------------------------------------
+# MAVSDK flies the vehicle itself first (arm, takeoff, land: the vehicle disarms itself once down, as the vehicle
+# asks before a MISSION_START in the air: "land and disarm, then start it"), then uploads a mission (takeoff,
+# waypoint 6 m north, back, land), arms and starts it, and lets it fly to its end (argv[2] "fly") or pauses it once
+# it climbs ("pause": MissionRaw.pause_mission, HOLD, a takeover). The hop flies on the wall clock, so the vehicle's
+# clock is ahead of the mission's by then.
+MAVSDK_HOP_THEN_MISSION = MAVSDK_GROUND_STATION + r"""
+import math
+from mavsdk.plugins.action import Action
+from mavsdk.plugins.mission_raw import MissionItem, MissionRaw
+from mavsdk.plugins.telemetry import Telemetry
+
+system = sdk.first_autopilot(30.0)
+action, mr, telemetry = Action(system), MissionRaw(system), Telemetry(system)
+out["arm"], out["takeoff"] = action.arm().name, action.takeoff().name
+# up, and its takeoff done (HOLD): landed in TAKEOFF it would arm in TAKEOFF again, and the start be DENIED
+out["up"] = until(lambda: telemetry.position().relative_altitude_m > 2.0 and telemetry.flight_mode().name == "HOLD",
+                  30)
+out["land"] = action.land().name
+out["down"] = until(lambda: not telemetry.armed(), 60)
+lat, lon = 47.397742, 8.545594  # the vehicle's home (PX4 SITL's)
+
+def item(seq, command, north_m, z):
+    return MissionItem(seq, 6, command, int(seq == 0), 1, 0.0, 0.0, 0.0, math.nan,
+                       int(round((lat + north_m / 111320.0) * 1e7)), int(round(lon * 1e7)), z, 0)
+
+out["upload"] = mr.upload_mission([item(0, 22, 0.0, 3.0), item(1, 16, 6.0, 3.0), item(2, 16, 0.0, 3.0),
+                                   item(3, 21, 0.0, 0.0)]).name
+out["arm_again"], out["start"] = action.arm().name, mr.start_mission().name
+if sys.argv[2] == "pause":
+    out["climbing"] = until(lambda: telemetry.position().relative_altitude_m > 1.5, 60)
+    out["pause"] = mr.pause_mission().name
+else:
+    out["finished"] = until(mr.is_mission_finished, 240)
+print("RESULT " + json.dumps(out), flush=True)
+sdk.destroy()
+"""
+
+
+def _hop_then_mission(out: Path, then: str, *sitl_args: str) -> tuple[int, dict[str, Any]]:
+    """``bsst sitl --await-mission`` (``sitl_args``: its clock) into ``out`` and :data:`MAVSDK_HOP_THEN_MISSION`
+    against it (``then``: "fly" or "pause"): the session's exit status and summary.json."""
+    with instance_slot() as n:
+        sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--out", str(out), "--no-plots", *sitl_args)
+        try:
+            r = subprocess.run([sys.executable, "-c", MAVSDK_HOP_THEN_MISSION, f"udpin://127.0.0.1:{GCS_PORT + n}",
+                                then], capture_output=True, text=True, timeout=300, env=ENV)
+            gs = script_result(r)
+            assert gs["up"] and gs["down"] and {gs["arm"], gs["land"], gs["upload"], gs["start"]} == {"SUCCESS"}, gs
+            assert gs.get("finished") or gs.get("pause") == "SUCCESS", gs
+            status = sitl.p.wait(timeout=120)
+        finally:
+            sitl.stop()
+    return status, json.loads((out / "summary.json").read_text())
+
+
+@pytest.fixture(scope="module")
+def hop_then_mission(tmp_path_factory):
+    """The lockstep session of :data:`MAVSDK_HOP_THEN_MISSION` flying its mission to the end: (exit status,
+    summary.json, run directory)."""
+    out = tmp_path_factory.mktemp("hop") / "run"
+    status, summary = _hop_then_mission(out, "fly", "--speed", "0")
+    return status, summary, out
+
+
+def test_the_controllers_arm_after_a_ground_stations_hop_flies_every_mission_step_on_the_step_clock(hop_then_mission):
+    """After the ground station's hop the lockstep vehicle runs on the wall clock, armed in HOLD on the ground; the
+    controller's arm engages lockstep at a control period's start, its state sent then, so the controller's first
+    state is the one the vehicle flies with its answer: every mission row on the step clock, no answer refused as
+    stale. (Taken mid-period, the arm sent the state of a step the vehicle then flew on without its answer: the
+    mission's first row was never the controller's, its answer refused as stale, the next state waited a resend.)"""
+    _, summary, out = hop_then_mission
+    k0 = int(read_half(out / "controller.bin")["k"][0])
+    rows = read_half(out / "vehicle.bin")
+    flown = rows["k"] >= k0
+    assert k0 > 0 and flown.any()  # the vehicle's clock ran before the mission: the hop
+    assert (rows["cmd_k"][flown] == rows["k"][flown]).all(), rows["cmd_k"][flown][:3]
+    assert "stale" not in summary["link"]["rejected"], summary["link"]["rejected"]

@@ -90,6 +90,7 @@ class Vehicle:
         self.pace = self.clock.pace  # the wall clock of physics steps
         self.catchup = CatchUp(self.pace)  # real time: the machine's stalls, and what they held back
         self._n = 0  # physics steps taken (realtime: for the wall-clock schedule)
+        self._held_arms: list[tuple[Any, Any, tuple[str, int]]] = []  # the controller's, to a period's start
         load_at = (now, time.process_time())
         # lockstep: the controller's targets and re-arms cross the mission's up-link model here; a lockstep fleet's
         # one radio (its gate file's) takes them at this vehicle's turn (bridge.link.turns)
@@ -292,6 +293,11 @@ class Vehicle:
         n0 = k * self.substeps
         if not self._wait_until(self.pace.due(n0)):
             return
+        held, self._held_arms = self._held_arms, []
+        for ep, m, addr in held:  # the controller's arm that came mid-period (_wait_until): acted on from here
+            self._handle(ep, m, addr)
+        if not self.clock.free_running:  # armed into lockstep: step k's state is out, its answer flies it
+            return
         now = time.monotonic()
         if self.sim.armed or self.cfg.clock == "realtime":
             self._send_odometry(now)
@@ -304,16 +310,19 @@ class Vehicle:
         def deliver(_t: float) -> None:
             # called before each physics step: wait for its wall time, taking targets meanwhile
             if self._n > n0:
-                self._wait_until(self.pace.due(self._n))
+                self._wait_until(self.pace.due(self._n), hold_arms=self.cfg.clock == "lockstep")
             self._n += 1
 
         self.sim.advance(deliver)
         self.k = k + 1
         self._after_step()
 
-    def _wait_until(self, due: float) -> bool:
+    def _wait_until(self, due: float, hold_arms: bool = False) -> bool:
         """Serve the links until wall time ``due`` of the pace; False if stopping. Real time catches every stall
-        up (the controller's schedule is the wall's); a paced lockstep far behind is re-based, not caught up."""
+        up (the controller's schedule is the wall's); a paced lockstep far behind is re-based, not caught up.
+        ``hold_arms`` (lockstep, running free mid-period): the controller's arm waits for the next period's start,
+        where lockstep engages with that step's state (engaged mid-period, the state sent was one the period then
+        flew on without its answer: the controller's first row was never flown, and the vehicle waited a resend)."""
         now = time.monotonic()
         realtime = self.cfg.clock == "realtime"
         if realtime:  # the machine may have stalled us; what a stall held back is taken when its time comes
@@ -329,7 +338,10 @@ class Vehicle:
             now = time.monotonic()
             if not (realtime and self.catchup.overslept(due, now, got)):
                 for ep, m, addr in got:
-                    self._handle(ep, m, addr)
+                    if hold_arms and ep is self.link and _arms(m):
+                        self._held_arms.append((ep, m, addr))
+                    else:
+                        self._handle(ep, m, addr)
             if now >= self._next_house:
                 self._housekeeping()
         return False
@@ -451,3 +463,9 @@ def run_vehicle(flight: Flight, cfg: VehicleConfig, out: str | Path | None = Non
     v.run()
     v.report_stats()
     return 0
+
+
+def _arms(m: Any) -> bool:
+    """Whether ``m`` is an arm command (COMPONENT_ARM_DISARM, param1 1)."""
+    return (m.get_type() in ("COMMAND_LONG", "COMMAND_INT") and m.command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM
+            and m.param1 == 1.0)
