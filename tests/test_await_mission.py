@@ -1367,3 +1367,57 @@ def test_the_controllers_arm_after_a_ground_stations_hop_flies_every_mission_ste
     assert k0 > 0 and flown.any()  # the vehicle's clock ran before the mission: the hop
     assert (rows["cmd_k"][flown] == rows["k"][flown]).all(), rows["cmd_k"][flown][:3]
     assert "stale" not in summary["link"]["rejected"], summary["link"]["rejected"]
+
+
+def _before_the_start(summary: dict[str, Any]) -> list[dict[str, Any]]:
+    """The ground station's hop, as summary.json's interventions keep it: before the mission's start, on the
+    mission's clock (negative t, step round(t x rate)); the TAKEOFF and the LAND among them."""
+    early = [i for i in summary["interventions"] if i.get("before_start")]
+    assert all(i["t"] < 0 and i["step"] == round(i["t"] * 250) for i in early), early
+    assert {"TAKEOFF", "LAND"} <= {i["what"].split()[0] for i in early if i["kind"] == "mode"}, early
+    return early
+
+
+def test_a_ground_stations_flight_before_an_awaited_mission_is_recorded_before_its_start(hop_then_mission):
+    """The ground station's hop before the mission is recorded as what it was, interventions before the mission's
+    start (exit 1: a ground station flew the vehicle), and the mission as flown: completed, ended by the mission,
+    held in lockstep (reproducible from no step: its start followed a flight on the wall clock). Every event is on
+    the mission's clock (the trace's): the vehicle's end action at the mission's end, the hop and the download
+    before 0, in time order; events.log wrote what came before on the vehicle's clock and says where the mission's
+    time 0 fell on it. (It said ``aborted``, ended by the pre-start TAKEOFF "at t=0.000 s", left lockstep at 0, and
+    put the end action 13 s after the trace's end, on the vehicle's clock.)"""
+    status, summary, out = hop_then_mission
+    assert status == 1
+    assert summary["outcome"] == "completed" and summary["ended_by"] == {"who": "mission", "how": "completed"}, \
+        summary["ended_by"]
+    early = _before_the_start(summary)
+    assert early == summary["interventions"], summary["interventions"]  # none in the mission
+    lock = summary["lockstep"]
+    assert lock["held"] and not lock["reproducible"] and lock["reproducible_until_step"] == 0, lock
+    assert "before the mission's start" in lock["because"], lock
+    events = summary["events"]
+    times = [e["t"] for e in events if e["t"] is not None]
+    assert times == sorted(times)
+    end = next(e for e in events if e["kind"] == "end" and e["source"] == "vehicle")
+    assert abs(end["t"] - summary["duration_s"]) <= 0.01, (end, summary["duration_s"])
+    download = next(e for e in events if e["kind"] == "mission" and e["source"] == "controller")
+    assert download["t"] < 0, download
+    logged = (out / "events.log").read_text()
+    assert "clock: the mission's time 0 (the trace's first row) is the vehicle's t=" in logged, logged
+    assert f"t={end['t']:.3f} end: mission over" in logged
+
+
+def test_a_pause_after_a_ground_stations_hop_ends_the_flight_at_its_trace_row_in_real_time(tmp_path):
+    """In real time, the same hop, then MAVSDK pauses the mission it started (HOLD): the pause ended the flight
+    (``aborted``, ended by it), at its time on the mission's clock, where its step is the trace's row; the hop is
+    before the start, at the vehicle's time of it (it was all at t=0, and ended the flight by its TAKEOFF)."""
+    out = tmp_path / "run"
+    status, summary = _hop_then_mission(out, "pause", "--realtime")
+    assert status == 1 and summary["outcome"] == "aborted", summary["outcome"]
+    early = _before_the_start(summary)
+    assert early[0]["t"] < -5.0, early  # the hop took seconds of the vehicle's wall clock
+    pause, = (i for i in summary["interventions"] if not i.get("before_start"))
+    assert pause["kind"] == "mode" and pause["what"].startswith("HOLD") and pause["t"] > 0, pause
+    assert summary["ended_by"]["how"] == f"mode changed at t={pause['t']:.3f} s: {pause['what']}", summary["ended_by"]
+    t = [row[0] for row in _trace(out / "trace.csv")]
+    assert any(abs(ti - pause["step"] / 250) < 1e-6 for ti in t), (pause, t[0], t[-1])  # its row in the trace

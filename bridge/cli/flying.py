@@ -273,7 +273,8 @@ def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
     elif lock and lock.get("reproducible") is False:
         w(f"lockstep held, reproducible until step {lock['reproducible_until_step']}: {lock['because']}\n")
     for i in s.get("interventions") or []:
-        w(f"not flown as asked: a ground station ({i['by']}) at t={i['t']:.3f} s (step {i['step']}): "
+        w(f"not flown as asked: a ground station ({i['by']}) at t={i['t']:.3f} s (step {i['step']})"
+          f"{', before the start' if i.get('before_start') else ''}: "
           + (f"{i['name']} = {i['new']:g} (was {i['old']:g})\n" if "name" in i else f"{i['kind']} {i['what']}\n"))
     if (s.get("timing") or {}).get("stalls", {}).get("count"):  # a real-time run the machine stalled
         from bridge.record.summary import stalls_text  # lazy: numpy

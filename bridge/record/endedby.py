@@ -25,11 +25,12 @@ def ended_by_command(events: Sequence[RunEvent], controller_id: tuple[int, int] 
     armed vehicle out of OFFBOARD, not the vehicle's own) that the configured controller on its own link
     did not send: the event and its sender (None when the event names none), or None. A mode selected
     while disarmed, for the next arm, ends nothing: the controller's arm flies OFFBOARD; nor does a ground
-    station's arm in HOLD on the ground awaiting a mission's start, or its timeout's disarm (``pre_start``)."""
+    station's arm in HOLD on the ground awaiting a mission's start, or its timeout's disarm (``pre_start``), nor
+    anything before the mission's time 0 (a ground station's own flight before an awaited mission's start)."""
     for e in vehicle_events(events):
         if e.t >= before_s - EPS_S:
             break
-        if e.pre_start:
+        if e.pre_start or e.before_start:  # (before the mission's time 0: no flight of its to end)
             continue
         # a disarm not of the vehicle's own (landed, stopped by its failsafe, diverged: ``by`` ITSELF)
         own = e.by is not None and e.by.is_vehicle

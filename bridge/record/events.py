@@ -1,13 +1,14 @@
 """A run's events as the record keeps them: typed, with their sender as a field.
 
-In:  an event's time (s, the flight's clock), kind, text, who reported it (``source``: in a session the
-     vehicle, the controller, the relay or the session; offline none), who caused it (``by``, a
-     :class:`~bridge.autopilot.vehicleevents.Sender`, or None) and a parameter event's change (``param``, a
-     :class:`~bridge.autopilot.vehicleevents.ParamChanged`: name, old and new value, or None)
+In:  an event's time (s, the flight's clock: negative before its time 0), kind, text, who reported it
+     (``source``: in a session the vehicle, the controller, the relay or the session; offline none), who caused
+     it (``by``, a :class:`~bridge.autopilot.vehicleevents.Sender`, or None) and a parameter event's change
+     (``param``, a :class:`~bridge.autopilot.vehicleevents.ParamChanged`: name, old and new value, or None)
 Out: :class:`RunEvent`; its dict for ``summary.json["events"]`` (:meth:`RunEvent.as_dict`: ``t`` s rounded
      to 1 us or null, ``kind``, ``text`` with the sender shown as `` [by ...]``, ``source`` when there is one,
      ``param`` (``{name, old, new}``), ``mode``, ``armed`` and ``pre_start`` when the event has them);
-     :func:`in_time_order`: events as recorded, in the order of their times
+     whether it came before the mission's time 0 (:attr:`RunEvent.before_start`); :func:`in_time_order`: events as
+     recorded, in the order of their times
 
 The written `` [by ...]`` is for people (events.log, summary.json); everything that judges a run reads
 ``by`` (:mod:`bridge.record.policies`), never the text.
@@ -42,6 +43,12 @@ class RunEvent:
            **fields: Any) -> RunEvent:
         """The event at ``t`` (s): rounded to 1 us, None if not finite; ``fields``: its typed fields."""
         return cls(round(t, 6) if math.isfinite(t) else None, kind, text, source, by, **fields)
+
+    @property
+    def before_start(self) -> bool:
+        """At a negative time: before the mission's time 0 (a session's events before an awaited mission's start,
+        a ground station's flight among them: :mod:`bridge.record.missionclock`); not the mission's to judge."""
+        return self.t is not None and self.t < 0.0
 
     @property
     def shown(self) -> str:

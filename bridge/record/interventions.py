@@ -25,13 +25,14 @@ INTERVENING = ("param", "mode", "armed", "disarmed", "fault")  # fault: a ground
 def interventions(events: Sequence[RunEvent], rate_hz: float,
                   controller_id: tuple[int, int] = CONTROLLER_ID) -> list[dict[str, Any]]:
     """``summary.json["interventions"]``: every change to the flight made by a sender other than the flight's
-    controller (a ground station), in order: each one's ``t`` (s, the events' clock), ``step`` (the control
-    step it acted from: round(t * rate_hz); lockstep, the vehicle's step), ``by`` (the sender), ``kind`` and
-    ``what``, and for a parameter its ``name``, ``old`` and ``new`` value. Read from the vehicle's events'
-    typed fields (``by``, ``param``): a parameter change (a set to the value in force makes no event), and
-    while the vehicle is armed a mode, an arm or a disarm; a ground station's arm is one too, except its arm in
-    HOLD on the ground awaiting a mission's start (``pre_start``: nothing flies until the start, which the
-    flight's controller flies from its own arm; docs/missions.md)."""
+    controller (a ground station), in order: each one's ``t`` (s, the mission's clock), ``step`` (the control
+    step it acted from: round(t * rate_hz), the trace's row), ``by`` (the sender), ``kind`` and ``what``, and for a
+    parameter its ``name``, ``old`` and ``new`` value; ``before_start`` (true) for one before the mission's time 0
+    (negative t and step: a ground station's doings before an awaited mission's start, its own flight among
+    them). Read from the vehicle's events' typed fields (``by``, ``param``): a parameter change (a set to the value
+    in force makes no event), and while the vehicle is armed a mode, an arm or a disarm; a ground station's arm is
+    one too, except its arm in HOLD on the ground awaiting a mission's start (``pre_start``: nothing flies until the
+    start, which the flight's controller flies from its own arm; docs/missions.md)."""
     out: list[dict[str, Any]] = []
     armed = False
     for e in vehicle_events(events):
@@ -45,6 +46,8 @@ def interventions(events: Sequence[RunEvent], rate_hz: float,
             continue
         assert e.t is not None  # vehicle_events have a time
         d: dict[str, Any] = {"t": e.t, "step": round(e.t * rate_hz), "by": str(by), "kind": e.kind, "what": e.text}
+        if e.before_start:
+            d["before_start"] = True
         if e.param is not None:
             d.update(e.param.as_dict())
         out.append(d)
@@ -55,7 +58,8 @@ def intervention_text(i: Mapping[str, Any]) -> str:
     """One intervention as a person reads it: who, what, when (t and step)."""
     what = (f"changed {i['name']} from {shown_value(i['old'])} to {shown_value(i['new'])}" if "name" in i
             else f"{'set the mode' if i['kind'] == 'mode' else i['kind']}: {i['what']}")
-    return f"a ground station ({i['by']}) {what} at t={i['t']:.3f} s (step {i['step']})"
+    before = ", before the mission's start" if i.get("before_start") else ""
+    return f"a ground station ({i['by']}) {what} at t={i['t']:.3f} s (step {i['step']}){before}"
 
 
 def unconfirmed_text(p: Mapping[str, Any]) -> str:
@@ -68,11 +72,11 @@ def reproducibility(lockstep: dict[str, Any], changes: Sequence[Mapping[str, Any
     """The lockstep record with whether the run can be flown again to the bit: as it was without a change
     (``held`` says it), or ``reproducible`` false with ``reproducible_until_step`` (the first intervention's
     step: the steps before it are the mission's, the ones from it on depend on when the change arrived on
-    the wall clock) and ``because`` (that change)."""
+    the wall clock; 0 for a change before the mission's time 0) and ``because`` (that change)."""
     if not changes:  # held: reproducible (the record stays as it was); not held: its own why
         return lockstep
     first = changes[0]
-    return {**lockstep, "reproducible": False, "reproducible_until_step": first["step"],
+    return {**lockstep, "reproducible": False, "reproducible_until_step": max(0, first["step"]),
             "because": intervention_text(first)}
 
 

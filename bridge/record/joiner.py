@@ -5,8 +5,8 @@ In:  ``vehicle.bin`` (:data:`~bridge.record.columns.VEHICLE_COLUMNS`) and ``cont
 Out: rows (:class:`~bridge.record.columns.TraceRow`, units as there), also appended to ``trace.csv``, and
      the per-packet times (ms: up, down, round trip, state to command, tick lateness) the session's
      ``link`` and ``timing`` blocks are made of, together as :class:`Joined` (up and down through a relay: from
-     the run's tlogs, :func:`~bridge.record.linkextract.step_delays`); the first step (s) a lockstep
-     vehicle flew off the step clock (:func:`off_clock_time`)
+     the run's tlogs, :func:`~bridge.record.linkextract.step_delays`); the first step of the mission (its time, s)
+     a lockstep vehicle flew off the step clock (:func:`off_clock_time`)
 
 Each file's rows are read into named rows (:class:`~bridge.record.columns.VehicleRow`,
 :class:`~bridge.record.columns.ControllerRow`) by the file's own header, so a file without a column is an
@@ -241,12 +241,15 @@ class TraceJoiner:
         self.c.close()
 
 
-def off_clock_time(path: Path, rate_hz: float) -> float | None:
-    """Lockstep: the vehicle's time (s) of its first record of ``vehicle.bin`` (at ``path``) not flown on the
-    step clock (the command in force answers another step, or none), or None (also for a file that cannot be read)."""
+def off_clock_time(path: Path, rate_hz: float, k0: int = 0) -> float | None:
+    """Lockstep: the mission's time (s; its time 0 the vehicle's step ``k0``) of the first record of ``vehicle.bin``
+    (at ``path``) from step k0 on not flown on the step clock (the command in force answers another step, or none),
+    or None (also for a file that cannot be read). Before k0 a ground station may have flown the vehicle on the wall
+    clock before an awaited mission's start: not the mission's steps."""
     try:
         half = read_half(path)
     except (OSError, ValueError):
         return None
-    off = (half["k"] != half["cmd_k"]).nonzero()[0]
-    return float(half["k"][off[0]]) / rate_hz if len(off) else None
+    k = half["k"]
+    off = ((k != half["cmd_k"]) & (k >= k0)).nonzero()[0]
+    return float(k[off[0]] - k0) / rate_hz if len(off) else None

@@ -36,7 +36,8 @@ What each policy reads, and why it cannot be fooled by a run's own claims:
   nobody is not judged.
 - ``lockstep_recorded``: in a lockstep session, a vehicle that left lockstep (its ``lockstep`` event, or a vehicle
   row flown off the step clock) has a record saying so (``held`` false, the time of the first event); a row off the
-  step clock with no ``lockstep`` event before it is a vehicle that left silently.
+  step clock with no ``lockstep`` event before it is a vehicle that left silently. The mission's steps only: what a
+  ground station flew before an awaited mission's start (events before its time 0) is not the mission's.
 - ``geofence``: every trace row's position is inside the mission's geofence (a ``.plan``'s ``geoFence`` or a
   mission's ``[geofence]``: inside an inclusion zone if there is one, outside every exclusion zone, as PX4's
   navigator judges it), and the vehicle never said it was outside a fence a ground station uploaded or beyond
@@ -134,8 +135,9 @@ def lockstep_record(events: Sequence[RunEvent], off_clock_t: float | None = None
     """``summary.json["lockstep"]`` of a lockstep session: ``{"held": true}``, or ``held`` false with
     the time and text of the vehicle's first ``lockstep`` event (``left_at_s``, ``why``) and how many
     times it left (``times``); a vehicle row flown off the step clock (from ``off_clock_t`` s) with
-    no such event is recorded too, as having left without saying so."""
-    left = [e for e in vehicle_events(events) if e.kind == "lockstep"]
+    no such event is recorded too, as having left without saying so. The mission's: a ground station's flight
+    before an awaited mission's start (its events before the mission's time 0) is its interventions'."""
+    left = [e for e in vehicle_events(events) if e.kind == "lockstep" and not e.before_start]  # the mission's
     if left:
         first = left[0]
         return {"held": False, "left_at_s": first.t, "why": first.text, "times": len(left)}
@@ -240,7 +242,7 @@ def failsafe_in_time(t: np.ndarray, age: np.ndarray, events: Sequence[RunEvent],
     name = "failsafe_in_time"
     period = rules.period_s
     changes = timeout_changes(events)
-    left = next((e.t for e in events if e.kind == "lockstep"), math.inf)
+    left = next((e.t for e in events if e.kind == "lockstep" and not e.before_start), math.inf)
     answers_until = left if rules.clock in ("offline", "lockstep") else -math.inf  # rows answering their step
     for start, end, kind in offboard_intervals(events, rules.armed_at_start):
         last = start if math.isfinite(start) else (float(t[0]) if len(t) else 0.0)  # arming restarts the timeout
@@ -314,7 +316,7 @@ def lockstep_recorded(events: Sequence[RunEvent], rules: Rules, record: Mapping[
     name = "lockstep_recorded"
     if rules.clock != "lockstep":
         return Verdict(name, True)
-    left = next((e for e in events if e.kind == "lockstep"), None)
+    left = next((e for e in events if e.kind == "lockstep" and not e.before_start), None)
     if off_clock_t is not None and (left is None or left.t > off_clock_t + rules.period_s + EPS_S):
         return Verdict(name, False, off_clock_t, f"the vehicle flew off the step clock from t={off_clock_t:.3f} s "
                                                  "without a lockstep event")

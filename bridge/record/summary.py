@@ -73,8 +73,8 @@ class ChildEnd:
 class SessionFacts:
     """What the session itself saw. ``clock``: ``lockstep`` or ``realtime``; ``wall_s``: the whole session
     (s); ``aborted``: interrupted by the user; ``died``: the name of a child that died (or None);
-    ``failsafe_seen``/``diverged``: the vehicle's events said so; ``off_clock_t``: lockstep, the vehicle's
-    time (s) of its first row flown off the step clock (or None); ``sitl``: ``summary.json["sitl"]``
+    ``failsafe_seen``/``diverged``: the vehicle's events said so; ``off_clock_t``: lockstep, the mission's
+    time (s) of the vehicle's first row of it flown off the step clock (or None); ``sitl``: ``summary.json["sitl"]``
     but for the children's exits (added here)."""
 
     clock: str
@@ -139,7 +139,7 @@ def airborne(trace: Mapping[str, Any], t: float) -> bool:
     return i >= 0 and (trace["z"][i] > 1e-6 or abs(trace["vz"][i]) > 1e-6)
 
 
-def ended_by(outcome: str, trace: Mapping[str, Any], flight: Flight, facts: SessionFacts, k0: int | None,
+def ended_by(outcome: str, trace: Mapping[str, Any], flight: Flight, facts: SessionFacts,
              events: Sequence[RunEvent], children: Sequence[ChildEnd],
              controller_id: tuple[int, int] = CONTROLLER_ID) -> tuple[str, dict[str, Any]]:
     """The outcome and ``summary.json["ended_by"]``: who ended the flight, and how. A disarm or takeover (an armed
@@ -169,8 +169,7 @@ def ended_by(outcome: str, trace: Mapping[str, Any], flight: Flight, facts: Sess
         if e.kind == "mode":
             how = f"mode changed at t={e.t:.3f} s: {e.text}"
         else:
-            at = e.t - (k0 or 0) / m.rate_hz if facts.clock == "lockstep" else e.t
-            how = f"disarmed {'in flight' if airborne(trace, at) else 'on the ground'} by command at t={e.t:.3f} s"
+            how = f"disarmed {'in flight' if airborne(trace, e.t) else 'on the ground'} by command at t={e.t:.3f} s"
         named = str(who) if who is not None else "someone (the vehicle's event names no sender)"
         return ("aborted" if outcome == "completed" else outcome), {"who": named, "how": how}
     t = trace["t"]
@@ -388,7 +387,8 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
                     controller_id: tuple[int, int] = CONTROLLER_ID) -> SessionSummary:
     """The trace arrays and ``summary.json`` of a session: the figures, the ``link``, ``timing`` and ``sitl``
     blocks, the lockstep record (lockstep), who ended the flight (``ended_by``, which may turn a completion
-    into ``aborted``), the policies' verdicts, and the events with the session's closing notes."""
+    into ``aborted``), the policies' verdicts, and the events with the session's closing notes. The events are on the
+    trace's clock, the mission's (negative before its time 0: :mod:`bridge.record.missionclock`)."""
     m = flight.mission
     vs = vehicle.stats if vehicle is not None else {}
     cs = controller.stats if controller is not None else {}
@@ -399,13 +399,10 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
     outcome = plant_outcome(outcome_of(facts, controller), facts, events)
     summary = summarise(arrays, m, flight.gains, clock=facts.clock, outcome=outcome,
                         events=[], link=link, estimator=flight.estimator, sensors=flight.sensors.name)
-    # lockstep events keep the vehicle's clock (step k at k / rate_hz); the trace counts from the
-    # controller's first answered step k0: the policies (and the GPS outages) see both on the vehicle's clock
-    judged = {**arrays, "t": arrays["t"] + (joined.k0 or 0) / m.rate_hz} if facts.clock == "lockstep" else arrays
     ev = vehicle_events(events)
     # the plant's own blocks as the vehicle reported them in its stats; the GPS outages from the trace and the
     # events' own texts (an injected fault's shown text names its sender)
-    summary.update(plant_summary(vs.get("plant") or {}, judged, [{**e.as_dict(), "text": e.text} for e in ev]))
+    summary.update(plant_summary(vs.get("plant") or {}, arrays, [{**e.as_dict(), "text": e.text} for e in ev]))
     summary["timing"] = timing_block(joined, m.rate_hz, facts.wall_s, vs, cs)
     if facts.clock == "realtime":
         summary["timing"]["stalls"] = stalls_block(vs, cs, joined.k0, m.rate_hz, m.duration_s,
@@ -417,8 +414,8 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
         off_clock = facts.off_clock_t
         summary["lockstep"] = lockstep = lockstep_record(events, off_clock)
     children = [c for c in (vehicle, controller, relay) if c is not None]
-    summary["outcome"], summary["ended_by"] = ended_by(summary["outcome"], arrays, flight, facts, joined.k0,
-                                                       events, children, controller_id)
+    summary["outcome"], summary["ended_by"] = ended_by(summary["outcome"], arrays, flight, facts, events, children,
+                                                       controller_id)
     summary["interventions"] = changes = interventions(events, m.rate_hz, controller_id)
     transfer = mission_transfer(cs.get("mission_transfer") or facts.mission_transfer, vs.get("mission_start"))
     if transfer is not None:
@@ -427,11 +424,11 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
         summary["param_at"] = list(cs["param_at"])
     summary["ended_by"] = ended_by_change(summary["ended_by"], summary["outcome"], events, changes)
     summary["ended_by"].update(after_faults(summary["outcome"], [e.as_dict() for e in ev]))
-    summary["ended_by"].update(not_reached(summary["outcome"], flight.timeline, judged["t"]))
+    summary["ended_by"].update(not_reached(summary["outcome"], flight.timeline, arrays["t"]))
     if lockstep is not None:
         summary["lockstep"] = reproducibility(lockstep, changes)
     rules = rules_for(flight, facts.clock, link, controller_id)
-    violated = judge(summary, judged, events, rules, lockstep, off_clock)
+    violated = judge(summary, arrays, events, rules, lockstep, off_clock)
     end = summary["ended_by"]
     texts = [("ended", f"{summary['outcome']}: by {end['who']}: {end['how']}")]
     if lockstep is not None and not lockstep["held"]:

@@ -42,8 +42,8 @@ and the safety policies of :mod:`bridge.record.policies` are checked over its tr
 
 The parts: :class:`~bridge.session.session.Session` starts, supervises and stops the children
 (:mod:`bridge.session.children`) and reads their reports (:mod:`bridge.nodes.report`), acted on in the order things
-happened (:mod:`bridge.session.eventorder`); the summary is
-:func:`bridge.record.summary.session_summary`'s, a pure function of what the session saw.
+happened (:mod:`bridge.session.eventorder`) and recorded on the mission's clock (:mod:`bridge.record.missionclock`);
+the summary is :func:`bridge.record.summary.session_summary`'s, a pure function of what the session saw.
 
 Ports, as PX4 numbers its instances: the vehicle binds 14560 + N for the controller link
 and sends GCS telemetry to 14550 + N, with sysid N + 1. ``instance=None`` (for campaigns

@@ -32,6 +32,7 @@ from bridge.nodes.vehicle.gate import STATE_WAIT_S
 from bridge.record.ending import end_block
 from bridge.record.events import RunEvent
 from bridge.record.joiner import TraceJoiner, off_clock_time
+from bridge.record.missionclock import MissionClock
 from bridge.record.runlog import EventLog, Run, RunRecord
 from bridge.record.summary import ChildEnd, SessionFacts, SessionSummary, controller_completed, session_summary
 from bridge.record.wallclock import FLYING_ON
@@ -93,6 +94,7 @@ class Session:
         self.interrupted = False  # set by Ctrl-C / SIGTERM (see catch_stop_signals)
         self._event_log: EventLog | None = None
         self._vehicle_said: dict[str, float] = {}  # the vehicle's latest event of each kind in earlier reads (s)
+        self.clock = MissionClock(vehicle_first=await_mission or not realtime)  # the events' against the vehicle's
         self._early: list[tuple[Child, Report]] = []  # reports read while starting, handled once all are up
         self.flies_on: Callable[[], bool] | None = None  # a fleet's: a vehicle taken over flies on under it now?
         # a fleet's: told once the vehicle process has ended (frozen: killed by the session, bridge.session.alone)
@@ -140,22 +142,23 @@ class Session:
     def _summary(self, wall: float) -> SessionSummary:
         """The trace arrays and ``summary.json`` (:func:`bridge.record.summary.session_summary`, from what
         the session saw); its closing notes also go to ``events.log``."""
+        joined = self.joiner.joined(delivered=self.relay is not None)  # a relay may reorder: every packet's delay
+        rate = self.flight.mission.rate_hz
         facts = SessionFacts(
             clock="realtime" if self.realtime else "lockstep", wall_s=wall, aborted=self.aborted, died=self.died,
             failsafe_seen=self.failsafe_seen, diverged=self.diverged,
-            off_clock_t=None if self.realtime else off_clock_time(self.path / "vehicle.bin",
-                                                                   self.flight.mission.rate_hz),
+            off_clock_t=None if self.realtime else off_clock_time(self.path / "vehicle.bin", rate, joined.k0 or 0),
             sitl={"instance": self.instance, "listen": self.listen, "gcs": self.gcs, "sysid": self.sysid,
                   "speed": self.speed, "died": self.died, "signed": self.key is not None,
                   **({"flew_on": True} if self.flying_on else {}),  # taken over, it flew on (a fleet's: fleet.py)
                   **({"gate": self.vehicle.stats.get("gate") if self.vehicle else None} if self.gate else {})},
             mission_transfer=self.transfer)
-        joined = self.joiner.joined(delivered=self.relay is not None)  # a relay may reorder: every packet's delay
-        out = session_summary(self.flight, facts, joined, self.events, _end(self.vehicle), _end(self.controller),
+        events = self.clock.on_mission_clock(self.events)
+        out = session_summary(self.flight, facts, joined, events, _end(self.vehicle), _end(self.controller),
                               _end(self.relay), self._relay_stats(), (CONTROLLER_SYSID, CONTROLLER_COMPID))
-        ended = [e for e in self.events if e.source == "vehicle" and e.t is not None]
+        ended = [e for e in events if e.source == "vehicle" and e.t is not None]
         if any(e.kind == "end" for e in ended):  # the mission's end action, flown after its figures' rows
-            shift = (joined.k0 or 0) / self.flight.mission.rate_hz if self.realtime else 0.0  # events' clock
+            shift = (joined.k0 or 0) / rate  # its rows are on the vehicle's clock, the events on the mission's
             rows = [(t - shift, z, vz) for t, z, vz in self.joiner.after]
             out.summary["end"] = end_block(self.flight.mission.end_action, rows, ended)
         t = joined.rows[-1].t if joined.rows else 0.0
@@ -358,8 +361,9 @@ class Session:
     def _handle(self, reports: list[tuple[Child, Report]]) -> None:
         """Reports read together from several children, acted on in the order things happened
         (:func:`~bridge.session.eventorder.in_cause_order`)."""
-        times = [self._event_time(c, r.t) if isinstance(r, Event) and math.isfinite(r.t) else -math.inf
-                 for c, r in reports]
+        self._learn_origin()
+        times = self.clock.stamps([(c.name == "vehicle", r.t if isinstance(r, Event) else -math.inf)
+                                   for c, r in reports])
         for child, report, t in in_cause_order(reports, times, self._vehicle_said):
             self._status(child, report, t)
 
@@ -417,29 +421,23 @@ class Session:
                 self.diverged = True
         self._note(kind, report.text, child.name, t, report.by, **typed_fields(report))
 
-    def _event_time(self, child: Child, t: float) -> float:
-        """An event's time on the clock events.log keeps: real time, the flight's (the vehicle's converted);
-        lockstep, each child's as it said it."""
-        return self._flight_time(t) if self.realtime and child.name == "vehicle" else t
-
-    def _flight_time(self, t_vehicle: float) -> float:
-        """Real time: the vehicle's clock runs from its start; the flight's (the trace's and
-        the controller's) time 0 is the vehicle's step k0, the first state the controller
-        answered. Events before it is known (arming) are at 0."""
-        joiner = getattr(self, "joiner", None)
-        if joiner is not None:
+    def _learn_origin(self) -> None:
+        """The mission's clock (the trace's, the controller's) once its time 0, the vehicle's step k0, is known
+        (:mod:`bridge.record.missionclock`: what came before it is on the vehicle's clock until then)."""
+        if self.clock.origin_s is None and self.mission_known and getattr(self, "joiner", None) is not None:
             self._join()  # k0 may be in a row not joined yet
-        if joiner is None or joiner.k0 is None:
-            return 0.0
-        return t_vehicle - joiner.k0 / self.flight.mission.rate_hz
+            if self.joiner.k0 is not None and (note := self.clock.learn(
+                    self.joiner.k0, self.flight.mission.rate_hz, len(self.events), self._vehicle_said)):
+                self._note("clock", note, "session", 0.0)
 
     def _note(self, kind: str, text: str, source: str, t: float | None = None, by: Sender | None = None,
               **fields: Any) -> None:
         """Record an event (``fields``: its typed fields, :func:`~bridge.autopilot.simvehicle.typed_fields`)."""
         if t is None and getattr(self, "joiner", None):
             self._join()  # lockstep joins only on demand during the flight (_join_in_flight)
-        if t is None:
-            t = self.joiner.rows[-1].t if getattr(self, "joiner", None) and self.joiner.rows else 0.0
+        if t is None:  # (before the mission's time 0: at the vehicle's latest event)
+            t = self.clock.stamps([(False, self.joiner.rows[-1].t if getattr(self, "joiner", None) and self.joiner.rows
+                                    else 0.0)])[0]
         self.events.append(RunEvent.at(t, kind, text, source, by, **fields))
         if self._event_log is not None:
             self._event_log.event(t, kind, text, by, source)
