@@ -198,9 +198,11 @@ def test_mavsdk_flies_a_plan_file_through_await_mission_as_the_file_flies(tmp_pa
     beats = tlog_messages(out / "vehicle.tlog", sysid, ["HEARTBEAT"])
     modes = {(m.custom_mode, bool(m.base_mode & 128)) for m in beats}
     assert ((4 << 16) | (4 << 24), True) in modes  # AUTO.MISSION, armed
-    # its end landing disarmed, it shows AUTO.MISSION again, as PX4 stays in Mission (docs/ground-station.md)
-    back = [e["text"] for e in summary["events"] if e["kind"] == "mode" and "disarmed after" in e["text"]]
-    assert back == ["MISSION (disarmed after LAND: PX4 takes the last mode it arms in; armed in it next) [by vehicle]"]
+    # its end landing disarmed, it shows AUTO.MISSION again, as PX4 stays in Mission (docs/ground-station.md): the
+    # event's typed mode says so too (it said "offboard", the vehicle's mode under the controller)
+    back = [(e["text"], e["mode"]) for e in summary["events"] if e["kind"] == "mode" and "disarmed after" in e["text"]]
+    assert back == [("MISSION (disarmed after LAND: PX4 takes the last mode it arms in; armed in it next) [by vehicle]",
+                     "mission")]
 
 
 @pytest.mark.parametrize("action", [5, 0], ids=["gf-action-5-land", "gf-action-0-not-watched"])

@@ -54,8 +54,8 @@ class UserModeIntention:
         shown, sim.mode = self.take(self.after)
         why = ("its failsafe: PX4 clears the failsafe on disarm and takes" if was in FAILSAFE_MODES
                else f"{was.upper()}: PX4 takes")
-        sim.event("mode", f"{shown} (disarmed after {why} the last mode it arms in; armed in it next)", mode=sim.mode,
-                  armed=False)
+        sim.event("mode", f"{shown.upper()} (disarmed after {why} the last mode it arms in; armed in it next)",
+                  mode=shown, armed=False)
         return True
 
     def after_period(self) -> str:
@@ -67,5 +67,6 @@ class UserModeIntention:
         return flown
 
     def take(self, mode: str) -> tuple[str, str]:
-        """The mode taken for :attr:`after` = ``mode``: (the name a ground station shows, the vehicle's mode)."""
-        return mode.upper(), mode
+        """The mode taken for :attr:`after` = ``mode``: (the mode a ground station sees, the event's typed ``mode``;
+        the vehicle's mode)."""
+        return mode, mode

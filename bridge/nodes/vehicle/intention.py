@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from bridge.autopilot.intention import UserModeIntention
 from bridge.autopilot.simvehicle import OFFBOARD, SimVehicle
-from bridge.mavlink.modes import MISSION, mode_name
+from bridge.mavlink.modes import MISSION
 from bridge.nodes.vehicle.mission import MissionManager
 
 
@@ -41,7 +41,8 @@ class ModeIntention(UserModeIntention):
 
     def take(self, mode: str) -> tuple[str, str]:
         """AUTO.MISSION is taken as a ground station's selection of it is (an arm then starts the held mission, from
-        its first item); if it cannot be (no mission held, an upload on), OFFBOARD."""
+        its first item; the vehicle flies it in OFFBOARD, the event's typed ``mode`` says MISSION, as its text);
+        if it cannot be (no mission held, an upload on), OFFBOARD."""
         if mode == MISSION and (self.missions is None or self.missions.select(False) is not None):
             mode = OFFBOARD
-        return mode_name(mode), OFFBOARD if mode == MISSION else mode
+        return mode, OFFBOARD if mode == MISSION else mode
