@@ -99,7 +99,7 @@ def requested_mode(base: float, main: float, sub: float) -> tuple[str | None, st
     mode = _BY_CODE.get(code)
     if mode is None:
         name = _PX4_NAMES.get(code, f"main {code[0]} sub {code[1]}")
-        return None, f"mode {name}: not flown here; {', '.join(map(mode_name, PX4_MODES))} are"
+        return None, f"mode {name}: not flown here; {', '.join(map(mode_name, PX4_MODES))} are flown here"
     return mode, ""
 
 

@@ -109,8 +109,8 @@ class MissionManager:
         not. Armed and flying the mission already: nothing to do; armed otherwise, why not (in the air:
         :func:`in_air_refusal`)."""
         if not self.authority.cfg.await_mission:
-            return ("mode MISSION: not flown here; OFFBOARD, HOLD, LAND, TAKEOFF, RTL are (and MISSION with "
-                    "--await-mission)")
+            return ("mode MISSION: not flown here; OFFBOARD, HOLD, LAND, TAKEOFF, RTL are flown here (and MISSION "
+                    "with --await-mission)")
         if armed:
             if self.flown() is not None:
                 return None  # flying the mission already: nothing to do

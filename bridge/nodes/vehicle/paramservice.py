@@ -95,9 +95,9 @@ class ParamService:
             index = m.param_index if m.param_index >= 0 else next(
                 (i for i, p in enumerate(PARAMS) if p.name == name), -1)
             if not 0 <= index < len(PARAMS):
-                by_name = m.param_index < 0
-                self._unknown(ep, m, addr, name if by_name else f"index {m.param_index}",
-                              name if by_name else "", m.param_index)
+                by_name = m.param_index < 0  # (by a name it did not give: what it asked is the index it gave)
+                what = (name or f"index {m.param_index} (no name)") if by_name else f"index {m.param_index}"
+                self._unknown(ep, m, addr, what, name if by_name else "", m.param_index)
                 return False
             ep.reply((self.value(index),), addr)
             return False
