@@ -63,6 +63,41 @@ def test_steps_flown_on_a_command_whose_row_was_never_written_are_kept_with_the_
     assert j.missing == 4
 
 
+
+def test_a_real_time_step_flown_re_armed_before_its_first_target_is_a_row(tmp_path: Path) -> None:
+    """Real time, ``[failsafe] resume``: the controller's ARM and the target it sends with it are two datagrams,
+    and the vehicle may fly a step between them (the target lost, or read after the step began): armed in OFFBOARD,
+    no target in force. That step is the trace's, demand unknown; it was dropped as a step before the flight's
+    first target, and ``time_steady`` broke on the gap (``t goes from 12.600000 s to 12.608000 s``). The steps
+    before the flight's first target are still not the trace's."""
+    flight = prepare(MISSION_DIR / "sine.toml")
+    offboard, failsafe = MODE_CODES["offboard"], MODE_CODES["failsafe"]
+    vehicle, controller = [], []
+    for k in range(14):
+        # 0, 1: armed, the first target not in; 2..5 on targets 0..3; 6..8 the failsafe's landing loop;
+        # 9 re-armed, its target not in yet; 10..13 on targets 8..11
+        key = -1 if k < 2 or 6 <= k <= 9 else k - 2
+        mode = failsafe if 6 <= k <= 8 else offboard
+        free = key < 0 and mode == offboard  # no target in force: the vehicle writes NaN
+        vehicle.append({"k": k, "t": k / RATE, "x": 0.001 * k, "mode": mode, "cmd_k": key,
+                        "c1": math.nan if free else 0.5, "u1": math.nan if free else 3.0, "u1_act": 3.0,
+                        "odo_sent_wall": 100.0 + k / RATE, "cmd_recv_wall": math.nan if key < 0 else 100.0 + k / RATE,
+                        "rtt_s": 1e-4, "state_age_s": math.nan if key < 0 else 0.008, "nees": 0.0})
+        controller.append({"k": k, "t": k / RATE, "u1": 4.0 + k, "phi_d": 0.01, "theta_d": 0.02,
+                           "odo_recv_wall": 100.0 + k / RATE, "cmd_sent_wall": 100.0 + k / RATE})
+    _write(tmp_path / "vehicle.bin", VEHICLE_COLUMNS, vehicle)
+    _write(tmp_path / "controller.bin", CONTROLLER_COLUMNS, controller)
+    j = TraceJoiner(tmp_path, flight, None)
+    j.update()
+    j.close()
+    col = {c: np.array([getattr(r, c) for r in j.rows]) for c in TRACE_COLUMNS}
+    assert np.allclose(col["t"], np.arange(2, 14) / RATE) and np.allclose(col["x"], 0.001 * np.arange(2, 14))
+    rearmed = 9 - 2  # its row
+    assert all(math.isnan(col[c][rearmed]) for c in ("u1", "c1", "phi_d", "theta_d", "state_age_s"))
+    assert col["u1_act"][rearmed] == 3.0 and col["u1"][rearmed + 1] == 4.0 + 8  # then the law's demand again
+    assert j.missing == 0
+
+
 def test_ripple_ignores_an_unknown_stretch_of_demand() -> None:
     t = np.arange(2000) / RATE
     u = np.sin(2 * np.pi * 20 * t)

@@ -84,7 +84,10 @@ class TraceJoiner:
     every step the vehicle held it before its failsafe) is kept, with the law's demand and
     desired attitude unknown (NaN), and counted (``missing``): the trace never skips a step.
     Rows flown by the vehicle's own failsafe (no controller command) take the landing
-    loop's demand, and its desired attitude (level). ``t`` counts from the first state the
+    loop's demand, and its desired attitude (level); a step flown re-armed (``[failsafe] resume``) before
+    the re-arm's first target came (real time: the ARM and that target are two datagrams) is kept with no demand
+    (NaN), where it was once dropped as a step before the flight's first target (a gap the ``time_steady`` policy
+    broke on). ``t`` counts from the first state the
     controller answered. In ``lockstep`` a step the controller answered (``cmd_k`` = k) takes
     ``c1..c4`` and ``state_age_s`` from the controller's row, as the offline loop writes them:
     the last command sent, and the age of the state this step's command was computed from
@@ -179,8 +182,8 @@ class TraceJoiner:
     def _join(self, v: VehicleRow, key: int, c: ControllerRow | None) -> None:
         k = int(v.k)
         mode = int(v.mode)
-        if self.k0 is None or k < self.k0 or (key < 0 and mode == 0):
-            return  # not flying the mission yet (armed, no target)
+        if self.k0 is None or k < self.k0 or (key < 0 and mode == 0 and not self.rows):
+            return  # not flying the mission yet (armed, its first target not in)
         if mode == 0 and k - self.k0 >= self.steps:
             return  # realtime: the state that ended the mission, flown while the disarm was on its way
         t = (k - self.k0) / self.rate
@@ -196,6 +199,8 @@ class TraceJoiner:
         elif key >= 0:  # a controller killed between sending this command and writing its row
             self.missing += 1
             u, desired = (math.nan,) * 4, (math.nan, math.nan)  # what the law demanded was never recorded
+        elif mode == 0:  # re-armed (``resume``), its first target not in yet: no demand in force, a step flown
+            u, desired = _INPUT(v), (math.nan, math.nan)  # (the vehicle's NaN)
         else:
             u = _INPUT(v)
             desired = (0.0, 0.0)  # the landing loop holds the vehicle level
