@@ -69,6 +69,28 @@ def test_a_real_vehicle_sends_each_event_as_a_numbered_event_and_resends_on_requ
             assert v.stop() == 0
 
 
+
+def test_a_requested_heartbeat_comes_with_the_event_sequence(tmp_path: Path) -> None:
+    """REQUEST_MESSAGE HEARTBEAT is answered as the 1 Hz HEARTBEAT goes (Announcer.beat): CURRENT_EVENT_SEQUENCE in
+    its datagram. The real-time controller asks for one when its link is back after an outage; a vehicle its failsafe
+    landed and disarmed meanwhile, its EVENTs lost with the outage, read as disarmed by someone else without it
+    (``bsst sitl --realtime --blackout 5:6`` with ``[failsafe] resume``: ``aborted``, not re-armed)."""
+    with instance_slot() as n:
+        gcs = _gcs(n)
+        v = _vehicle(n, tmp_path)
+        try:
+            assert gcs.wait_heartbeat(timeout=20) is not None
+            ask = M.MAV_CMD_REQUEST_MESSAGE
+            gcs.mav.command_long_send(n + 1, 1, ask, 0, M.MAVLINK_MSG_ID_HEARTBEAT, 0, 0, 0, 0, 0, 0)
+            ack = gcs.recv_match(type="COMMAND_ACK", blocking=True, timeout=10, condition=f"COMMAND_ACK.command=={ask}")
+            assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
+            after = [gcs.recv_match(blocking=True, timeout=10) for _ in range(2)]  # the rest of the ACK's datagram
+            assert [m.get_type() for m in after if m is not None] == ["HEARTBEAT", "CURRENT_EVENT_SEQUENCE"], after
+        finally:
+            gcs.close()
+            assert v.stop() == 0
+
+
 def _fly_against(tmp: Path, v: ScriptedVehicle, beat: Callable[[], None], act: Callable[[], None],
                  at_step: int = 10) -> list[str]:
     """A real-time ``bsst controller`` against the scripted vehicle ``v``: until it arms, ``v`` serves it, then

@@ -50,7 +50,8 @@ The law runs under a :class:`controller.link_guard.LinkGuard` (the mission's ``[
 the super-twisting integrators, older state stops the commands, and when the vehicle has
 left offboard control (its HEARTBEAT: not armed, or system_status CRITICAL) it sends
 nothing but, with ``resume``, asks it to arm again (ARM_DISARM, through the link model in
-lockstep) once the state is fresh. A failsafe does not end the flight: the controller keeps
+lockstep) once the state is fresh (in real time, where the HEARTBEAT saying so may have gone in the outage, it asks
+for one, REQUEST_MESSAGE, when fresh state comes back). A failsafe does not end the flight: the controller keeps
 answering steps to the mission's end, whose outcome is then ``failsafe`` unless the vehicle
 was back under offboard control. A vehicle that a ground station switches out of OFFBOARD while
 armed (its PX4 HEARTBEAT's ``custom_mode``: HOLD, LAND, TAKEOFF, RTL, not in its failsafe) is the ground

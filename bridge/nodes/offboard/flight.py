@@ -238,6 +238,8 @@ class Offboard(RealtimeFlying):
             _, kind, text = events[self._noted]
             self._noted += 1
             self.event(kind, text)
+            if kind == "link_restored" and self.cfg.clock == "realtime":  # (lockstep's model never loses one)
+                self.ask_heartbeat()  # is it still under offboard control? (the HEARTBEAT saying not was lost)
         if dec.arm:
             self._send_arm()
         cmd = dec.command

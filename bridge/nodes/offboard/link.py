@@ -9,7 +9,8 @@ In:  the vehicle's messages: ODOMETRY (checked: sender, stamp, range; kept newes
      for a decision)
 Out: actuator targets stamped with their state's ``time_usec`` (or the lockstep no-target acknowledgement),
      ARM_DISARM and other COMMAND_LONGs until ACKed, PARAM_SET until the vehicle's PARAM_VALUE echoes it
-     (every 0.2 s of wall time), HEARTBEAT, TIMESYNC, REQUEST_EVENT for the EVENTs missed; ``controller.tlog``;
+     (every 0.2 s of wall time), HEARTBEAT, TIMESYNC, REQUEST_EVENT for the EVENTs missed, REQUEST_MESSAGE
+     HEARTBEAT when the link is back (:meth:`OffboardLink.ask_heartbeat`); ``controller.tlog``;
      reports (:mod:`bridge.nodes.report`): events at the mission's time, received STATUSTEXTs, refusals
 """
 
@@ -61,6 +62,8 @@ PARAM_RETRY_S = 0.2  # s of wall time between PARAM_SETs of one scheduled change
 TIMESYNC_WINDOW = 8  # the clock offset is where this many latest TIMESYNC answers' bounds agree (offset_bounds)
 TARGETS_TIMED = 256  # the latest targets' sends timed (just before, just after): which left after the vehicle stopped
 TIMESYNC_BURST_S = 0.01  # s of wall time between TIMESYNC requests until that many answers are in (then timesync_s)
+HEARTBEAT_ASK_S = 0.1  # s of wall time between REQUEST_MESSAGE HEARTBEATs unanswered (ask_heartbeat)
+HEARTBEAT_ASKS = 10  # ... and at most this many (the vehicle's own 1 Hz heartbeat comes anyway)
 
 
 class FailsafeSign(Enum):
@@ -138,6 +141,8 @@ class OffboardLink:
         self._next_hb = now
         self._next_ts = now
         self._next_house = now
+        self._hb_asks = 0  # REQUEST_MESSAGE HEARTBEATs still to send while none comes (ask_heartbeat)
+        self._next_hb_ask = math.inf
         # the latest answers: (round trip, the least and the greatest clock offset it allows), ns
         self._ts_recent: deque[tuple[int, int, int]] = deque(maxlen=TIMESYNC_WINDOW)
         self.offset_range_ns: tuple[int, int] | None = None  # vehicle clock - our clock: its bounds (_timesync)
@@ -238,6 +243,21 @@ class OffboardLink:
         self.ep.send(mavlink.MAVLink_command_long_message(self.vsys or 0, self.vcomp,
                                                           mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1.0, 0.0,
                                                           0, 0, 0, 0, 0))
+
+    def ask_heartbeat(self) -> None:
+        """The link is back after an outage (real time): what the vehicle did meanwhile (its failsafe took over, it
+        landed) is in its HEARTBEAT, and the one it sent on the change was lost with the outage, its next due up to
+        1 s later (the sine re-armed 0.6 s after its link came back: docs/sitl.md, "Failsafe"). Ask for one
+        (REQUEST_MESSAGE, as PX4's receiver answers it), again every HEARTBEAT_ASK_S until one comes."""
+        self._hb_asks = HEARTBEAT_ASKS
+        self._ask_heartbeat(time.monotonic())
+
+    def _ask_heartbeat(self, now: float) -> None:
+        self._hb_asks -= 1
+        self._next_hb_ask = now + HEARTBEAT_ASK_S if self._hb_asks else math.inf
+        self._next_house = min(self._next_house, self._next_hb_ask)
+        self.ep.send(mavlink.MAVLink_command_long_message(self.vsys or 0, self.vcomp, mavlink.MAV_CMD_REQUEST_MESSAGE,
+                                                          0, float(mavlink.MAVLINK_MSG_ID_HEARTBEAT), 0, 0, 0, 0, 0, 0))
 
     def _send_param(self, change: ParamChange) -> None:
         """A scheduled parameter change (``--param-at``): PARAM_SET before this step's answer, so
@@ -340,6 +360,7 @@ class OffboardLink:
             if src != self.vsys:
                 return
             self._heard = True
+            self._hb_asks, self._next_hb_ask = 0, math.inf  # (ask_heartbeat: answered)
             self._last_rx = time.monotonic()
             self.vehicle_armed = bool(m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
             self.vehicle_state = m.system_status
@@ -446,6 +467,8 @@ class OffboardLink:
             self._resend_params(now)
         if self.event_seq.pending():
             self._request_events(now)
+        if now >= self._next_hb_ask:
+            self._ask_heartbeat(now)
         refused = self.rejected.report(now)
         if refused is not None:
             self._status(Warning(refused))
@@ -453,4 +476,4 @@ class OffboardLink:
             self.tlog.flush()
         # no TIMESYNC before a vehicle is known: its due time must not hold the loop awake
         self._next_house = min(self._next_hb, self._next_ts if self.vsys is not None else math.inf,
-                               now + HOUSEKEEPING_S, self.event_seq.next_due())
+                               now + HOUSEKEEPING_S, self.event_seq.next_due(), self._next_hb_ask)

@@ -118,7 +118,7 @@ class Vehicle:
         ports = CommanderPorts(step=lambda: self.k, state_out=self._send_odometry, new_flight=self._new_flight,
                                arm_through_link=lambda acted: self.vend.receive_arm(self.t, acted),
                                target_wall=lambda: self.targets.wall,
-                               controller_heard=lambda: self.link.peer is not None, message=self.streaming.message,
+                               controller_heard=lambda: self.link.peer is not None, message=self._requested,
                                reject=self._reject, refused=self._refused, announce=self.announcer.report_events,
                                missions=self.missions)
         tables = {"controller": self.streaming.ctl_streams, "gcs": self.streaming.streams}
@@ -447,6 +447,15 @@ class Vehicle:
         self.targets.applied = None
         if not from_gcs:
             self.missions.flight_armed()  # a ground station's started mission: flown from now
+
+    def _requested(self, mid: int, own: bool = True) -> list[Any]:
+        """What a REQUEST_MESSAGE (or GET_HOME_POSITION) of ``mid`` is answered with; a HEARTBEAT with
+        CURRENT_EVENT_SEQUENCE, as the 1 Hz one (Announcer.beat): a controller that asks for it when its link is back
+        learns the EVENTs it missed (a failsafe's) before it judges the vehicle by the HEARTBEAT."""
+        msgs = self.streaming.message(mid, own)
+        if mid == mavlink.MAVLINK_MSG_ID_HEARTBEAT:
+            msgs.append(self.announcer.ring.current())
+        return msgs
 
     def _clock_ns(self) -> int:
         """The vehicle's clock for TIMESYNC: simulation time (ns), as PX4 uses its own clock in
