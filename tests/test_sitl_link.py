@@ -324,10 +324,11 @@ def test_realtime_resume_rearms_as_the_link_returns_and_keeps_every_row(tmp_path
                link={"delay_ms": 3.0, "loss_pct": 2.0, "blackouts": [[1.5, 1.0], [3.5, 1.0], [5.5, 1.0]]})
     assert run.outcome == "completed", run.summary["ended_by"]
     ctl = [(e["t"], e["kind"]) for e in run.summary["events"] if e["source"] == "controller"]
-    back = [t for t, kind in ctl if kind == "link_restored" and t > 1.5]
     rearm = [t for t, kind in ctl if kind == "rearm"]
-    assert len(back) == len(rearm) == 3 and [k for _, k in ctl].count("resumed") == 3, ctl
-    assert all(0.0 < r - b < 0.25 for b, r in zip(back, rearm)), (back, rearm)  # it was 0.6 s, up to 1 s
+    assert len(rearm) == 3 and [k for _, k in ctl].count("resumed") == 3, ctl
+    # each after the link's return (a stall of the loaded machine may say one more: the latest before it)
+    back = [max(t for t, kind in ctl if kind == "link_restored" and t <= r) for r in rearm]
+    assert all(r - b < 0.25 for b, r in zip(back, rearm)), (back, rearm)  # it was 0.6 s, up to 1 s
     assert all(p["ok"] for p in run.summary["policies"]), run.summary["policies"]
     t = run.trace["t"]
     assert np.allclose(np.diff(t), 1.0 / mission.rate_hz) and t[-1] > 7.99  # never disarmed: no gap at all
