@@ -267,13 +267,15 @@ def csv_rows(path: Path) -> int:
 class GcsSocket:
     """A ground station's UDP socket on 127.0.0.1 (system 255, component 190) for a vehicle built in this process
     (``bridge.nodes.vehicle.Vehicle`` with ``gcs=`` :attr:`url`): it sends a frame to the vehicle's GCS link, lets
-    the vehicle take in what came, and reads the answers; no processes, no sleeps."""
+    the vehicle take in what came, and reads the answers; no processes, no sleeps. ``link="link"`` with the
+    controller's ids is the controller on the vehicle's own link (its ``--listen``) instead."""
 
-    def __init__(self) -> None:
+    def __init__(self, sysid: int = 255, compid: int = 190, link: str = "gcs") -> None:
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind(("127.0.0.1", 0))
         self.sock.setblocking(False)
-        self.mav = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+        self.mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
+        self.link = link  # the vehicle's attribute of the link it sends to
 
     @property
     def url(self) -> str:
@@ -289,21 +291,22 @@ class GcsSocket:
         return got
 
     def exchange(self, vehicle: Any, msg: Any | None, want: str) -> Any:
-        """Send ``msg`` (if any) to ``vehicle``'s GCS link and let it take in what came, until a ``want`` message
+        """Send ``msg`` (if any) to ``vehicle``'s link and let it take in what came, until a ``want`` message
         is back (5 s deadline): the first one; what came with it is dropped."""
         seen = self.exchange_until(vehicle, msg, lambda m: m.get_type() == want, f"the vehicle's {want}")
         return next(m for m in seen if m.get_type() == want)
 
     def exchange_until(self, vehicle: Any, msg: Any | None, last: Callable[[Any], bool], what: str) -> list[Any]:
-        """Send ``msg`` (if any) to ``vehicle``'s GCS link and let it take in what came, until a message for which
+        """Send ``msg`` (if any) to ``vehicle``'s link and let it take in what came, until a message for which
         ``last`` is true is back (5 s deadline, ``what`` named if it is missed): every message back so far."""
+        link = getattr(vehicle, self.link)
         if msg is not None:
-            self.sock.sendto(msg.pack(self.mav), vehicle.gcs.local)
+            self.sock.sendto(msg.pack(self.mav), link.local)
         seen: list[Any] = []
 
         def answered() -> bool:
-            for m, addr in vehicle.gcs.poll():
-                vehicle._handle(vehicle.gcs, m, addr)
+            for m, addr in link.poll():
+                vehicle._handle(link, m, addr)
             seen.extend(self.received())
             return any(last(m) for m in seen)
 

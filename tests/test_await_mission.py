@@ -942,27 +942,21 @@ def test_a_fence_uploaded_between_the_controllers_download_and_its_arm_is_said_a
     record (``fence_recorded`` false); one uploaded before the controller's download is the record's: nothing said."""
     gcs = GcsSocket()
     flight = prepare(Mission(Sine(), duration_s=5.0, name="fenced-late"), params={"GF_ACTION": 0})
-    ctl = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    ctl.bind(("127.0.0.1", 0))
-    ctl.setblocking(False)
-    ctl_mav = M.MAVLink(None, srcSystem=200, srcComponent=191)
+    ctl = GcsSocket(200, 191, link="link")  # the controller, on the vehicle's own link
     made: list[Vehicle] = []
 
     def from_controller(v: Vehicle, msg: Any, want: str | None) -> None:
-        ctl.sendto(msg.pack(ctl_mav), v.link.local)
-        seen: list[Any] = []
+        if want is not None:
+            ctl.exchange(v, msg, want)
+            return
+        ctl.sock.sendto(msg.pack(ctl.mav), v.link.local)  # the download's final ACK: nothing comes back
 
-        def answered() -> bool:
+        def idle() -> bool:
             for m, addr in v.link.poll():
                 v._handle(v.link, m, addr)
-            with contextlib.suppress(BlockingIOError):
-                while True:
-                    seen.extend(ctl_mav.parse_buffer(ctl.recv(65535)) or [])
-            if want is None:  # (the download's final ACK: nothing comes back)
-                return v.missions.transfers["controller"].state.value == "idle"
-            return any(m.get_type() == want for m in seen)
+            return v.missions.transfers["controller"].state.value == "idle"
 
-        wait_for(answered, 5.0, f"the vehicle's {want or 'idle transfer'} on the controller link", poll_s=0.001)
+        wait_for(idle, 5.0, "the controller link's transfer idle", poll_s=0.001)
 
     def upload_fence(v: Vehicle) -> None:
         items = _fence_square(1.0)
@@ -987,7 +981,7 @@ def test_a_fence_uploaded_between_the_controllers_download_and_its_arm_is_said_a
         assert v.sim.fence_recorded
         if late:
             upload_fence(v)  # after the controller's download, before its arm
-        controller = Sender(200, 191, "127.0.0.1", ctl.getsockname()[1], "controller")
+        controller = Sender(200, 191, "127.0.0.1", ctl.sock.getsockname()[1], "controller")
         assert v.commander.arm_disarm(1.0, 0.0, controller) == M.MAV_RESULT_ACCEPTED
         return v
 

@@ -25,6 +25,7 @@ from bridge import simulate
 from bridge.cli import main
 from missions import MISSION_DIR, Mission, Sine
 from params import dump_toml
+from tests.lawfiles import HOVERING
 from tests.sitlkit import run_bsst
 
 # starts processes or opens sockets (not in make test-fast); flies the batch engine (its kernels loaded first)
@@ -302,28 +303,16 @@ def test_the_wind_margin_is_found_inside_its_bracket(tmp_path: Path, here) -> No
 # -- a plug-in law that cannot be flown is no boundary ----------------------------------------------------------------
 BAD_LAWS = '''
 import os
+''' + HOVERING + '''
 
-
-class _Law:
-    def __init__(self, nominal, gains, rate_hz):
-        self.m, self.g = nominal.mass, nominal.gravity
-        self.desired = (0.0, 0.0)
-
-    def advance(self, saturated, hold=False):
-        pass
-
-    def reset(self):
-        pass
-
-
-class Dies(_Law):  # ends its worker process past any guard (docs/usage.md: a failed cell, "worker process died: ...")
+class Dies(_Hovering):  # ends its worker past any guard (docs/usage.md: a failed cell, "worker process died: ...")
     def update(self, t, state, ref, omega_d):
         if t > 5.0:
             os.abort()
         return (self.m * self.g, 0.0, 0.0, 0.0)
 
 
-class Raises(_Law):  # fails every flight: law_failed, at every value
+class Raises(_Hovering):  # fails every flight: law_failed, at every value
     def update(self, t, state, ref, omega_d):
         raise ZeroDivisionError("my bad")
 '''

@@ -101,12 +101,13 @@ class _Gcs:
         return found[0]
 
 
-def _fly_await_mission(out: Path, script: Callable[[_Gcs], None]) -> list[str]:
-    """``bsst sitl --await-mission`` into ``out``, a ground station's ``script`` run against it; the flight must
-    then complete. Its events.log lines."""
+def _fly_await_mission(out: Path, script: Callable[[_Gcs], None], *flags: str, speed: str = "0",
+                       status: int = 0) -> list[str]:
+    """``bsst sitl --await-mission --speed SPEED FLAGS`` into ``out``, a ground station's ``script`` run against it;
+    the flight must then complete, exit ``status``. Its events.log lines."""
     with instance_slot() as n:
-        sitl = Proc.bsst("sitl", "--await-mission", "--speed", "0", "--instance", str(n), "--out", str(out),
-                         "--no-plots")
+        sitl = Proc.bsst("sitl", "--await-mission", "--speed", speed, "--instance", str(n), "--out", str(out),
+                         "--no-plots", *flags)
         gcs = None
         try:
             gcs = _Gcs(n)
@@ -117,7 +118,7 @@ def _fly_await_mission(out: Path, script: Callable[[_Gcs], None]) -> list[str]:
                 gcs.c.close()
             sitl.stop()
     summary = json.loads((out / "summary.json").read_text())
-    assert rc == 0 and summary["outcome"] == "completed", "\n".join(sitl.lines[-20:])
+    assert rc == status and summary["outcome"] == "completed", "\n".join(sitl.lines[-20:])
     return (out / "events.log").read_text().splitlines()
 
 
@@ -178,25 +179,16 @@ def test_with_gf_action_0_a_fence_uploaded_in_flight_and_left_fails_the_geofence
     session the vehicle said nothing, the policy held with a note that the new fence was not judged, and the run
     exited 0. summary.json's ``mission_transfer`` has the fence's and the rally points' downloads (none then) beside
     the mission's."""
+    def fence_in_flight(gcs: _Gcs) -> None:
+        assert gcs.upload(_items()) == M.MAV_MISSION_ACCEPTED
+        assert gcs.start() == M.MAV_RESULT_ACCEPTED
+        gcs.recv("HEARTBEAT", 30, f"HEARTBEAT.get_srcComponent()==1 and HEARTBEAT.base_mode & 128 and "
+                                  f"HEARTBEAT.custom_mode=={AUTO_MISSION}")
+        assert gcs.upload(_fence_items(5.0), M.MAV_MISSION_TYPE_FENCE) == M.MAV_MISSION_ACCEPTED
+
     out = tmp_path / "run"
-    with instance_slot() as n:
-        sitl = Proc.bsst("sitl", "--await-mission", "--speed", "2", "--instance", str(n), "--out", str(out),
-                         "--no-plots", "--param", "GF_ACTION=0")
-        gcs = None
-        try:
-            gcs = _Gcs(n)
-            assert gcs.upload(_items()) == M.MAV_MISSION_ACCEPTED
-            assert gcs.start() == M.MAV_RESULT_ACCEPTED
-            gcs.recv("HEARTBEAT", 30, f"HEARTBEAT.get_srcComponent()==1 and HEARTBEAT.base_mode & 128 and "
-                                      f"HEARTBEAT.custom_mode=={AUTO_MISSION}")
-            assert gcs.upload(_fence_items(5.0), M.MAV_MISSION_TYPE_FENCE) == M.MAV_MISSION_ACCEPTED
-            rc = sitl.p.wait(timeout=120)
-        finally:
-            if gcs is not None:
-                gcs.c.close()
-            sitl.stop()
+    _fly_await_mission(out, fence_in_flight, "--param", "GF_ACTION=0", speed="2", status=1)
     summary = json.loads((out / "summary.json").read_text())
-    assert rc == 1 and summary["outcome"] == "completed", "\n".join(sitl.lines[-20:])
     fence = next(p for p in summary["policies"] if p["name"] == "geofence")
     assert not fence["ok"] and "outside its fence" in fence["why"], fence
     assert "GF_ACTION = 0: not acted on; said for the run's record" in fence["why"], fence

@@ -17,7 +17,6 @@ import copy
 import json
 import math
 import os
-import socket
 import subprocess
 import sys
 import time
@@ -843,25 +842,10 @@ def test_a_ground_stations_unfinished_download_does_not_hold_up_the_controllers(
     gcs = GcsSocket()
     flight = prepare(Mission(Sine(), duration_s=5.0, name="two-links"))
     v = Vehicle(flight, VehicleConfig(parse_address("udpin:127.0.0.1:0"), parse_address(gcs.url)))
-    ctl = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    ctl.bind(("127.0.0.1", 0))
-    ctl.setblocking(False)
-    ctl_mav = M.MAVLink(None, srcSystem=CONTROLLER_SYSID, srcComponent=CONTROLLER_COMPID)
+    ctl = GcsSocket(CONTROLLER_SYSID, CONTROLLER_COMPID, link="link")  # the controller, on the vehicle's own link
 
     def from_controller(msg: Any, want: str) -> Any:
-        ctl.sendto(msg.pack(ctl_mav), v.link.local)
-        seen: list[Any] = []
-
-        def answered() -> bool:
-            for m, addr in v.link.poll():
-                v._handle(v.link, m, addr)
-            with contextlib.suppress(BlockingIOError):
-                while True:
-                    seen.extend(ctl_mav.parse_buffer(ctl.recv(65535)) or [])
-            return any(m.get_type() == want for m in seen)
-
-        wait_for(answered, 5.0, f"the vehicle's {want} on the controller link", poll_s=0.001)
-        return next(m for m in seen if m.get_type() == want)
+        return ctl.exchange(v, msg, want)
 
     try:
         items = _items(3)
@@ -873,7 +857,7 @@ def test_a_ground_stations_unfinished_download_does_not_hold_up_the_controllers(
         for seq in range(3):
             got = from_controller(M.MAVLink_mission_request_int_message(1, 1, seq, 0), "MISSION_ITEM_INT")
             assert (got.seq, got.x, got.y) == (seq, items[seq].x, items[seq].y)
-        ctl.sendto(M.MAVLink_mission_ack_message(1, 1, M.MAV_MISSION_ACCEPTED, 0).pack(ctl_mav), v.link.local)
+        ctl.sock.sendto(M.MAVLink_mission_ack_message(1, 1, M.MAV_MISSION_ACCEPTED, 0).pack(ctl.mav), v.link.local)
 
         def controller_done() -> bool:
             for m, addr in v.link.poll():

@@ -33,6 +33,7 @@ from bridge.sweep.grid import cells as grid_cells
 from bridge.sweep.report import reproduce
 from missions import Mission, Sine
 from params import ConfigError, dump_toml
+from tests.lawfiles import HOVERING
 from tests.sitlkit import Bsst, run_bsst
 from tests.waiting import sweep_rows
 
@@ -290,19 +291,9 @@ DYING_LAWS = """
 import ctypes
 import os
 import signal
+""" + HOVERING + """
 
-
-class _Dies:  # hovers, then ends its worker process past any guard at 1 s
-    def __init__(self, nominal, gains, rate_hz):
-        self.m, self.g = nominal.mass, nominal.gravity
-        self.desired = (0.0, 0.0)
-
-    def advance(self, saturated, hold=False):
-        pass
-
-    def reset(self):
-        pass
-
+class _Dies(_Hovering):  # hovers, then ends its worker process past any guard at 1 s
     def update(self, t, state, ref, omega_d):
         if t > 1.0:
             self.die()

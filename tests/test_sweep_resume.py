@@ -9,7 +9,9 @@ import json
 import os
 import shutil
 import signal
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -81,22 +83,30 @@ def test_an_interrupted_sweep_says_how_many_cells_it_flew(mission_file: Path, tm
     out = tmp_path / "stopped"
     proc = Bsst("sweep", str(mission_file), "--delay", "0,5,10", "--loss", "0,20", "--seeds", "2", "--jobs", "1",
                 "--no-plots", "--out", str(out))
-    try:
-        sweep_rows(proc, 2)  # the progress line that follows that appended row
-        if stop == "ctrl-c":
-            os.killpg(proc.pid, signal.SIGINT)
-        else:
-            os.kill(proc.pid, signal.SIGTERM)
-        said, _ = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait()
+    _, said, _ = _stopped(proc, stop, lambda: sweep_rows(proc, 2))  # the progress line that follows that appended row
     flown = len(read_cells(out / CELLS_CSV))
     assert proc.returncode == 1 and 2 <= flown < 12, (proc.returncode, said)
     assert f"sweep short: {flown} of 12 cells flown (interrupted): {flown} this run, 0 kept from before" in said, said
     r = run_bsst("report", str(out), "--no-plots")
     assert r.returncode == 1 and f"{flown} of 12 cells flown; the sweep was interrupted" in r.stderr, r.stderr
+
+
+def _stopped(proc: Any, stop: str, first: Callable[[], Any]) -> tuple[Any, str, str]:
+    """``first()``'s value once it returns, then ``proc`` stopped as ``stop`` says (``ctrl-c``: SIGINT to its
+    group, as a terminal's; ``sigterm``: to it alone) and its stdout and stderr to its end (killed if the test
+    fails first)."""
+    try:
+        value = first()
+        if stop == "ctrl-c":
+            os.killpg(proc.pid, signal.SIGINT)
+        else:
+            os.kill(proc.pid, signal.SIGTERM)
+        said, told = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+    return value, said, told
 
 
 def _rows_written(out: Path) -> int:
@@ -117,18 +127,11 @@ def test_the_cells_in_flight_at_a_ctrl_c_are_kept_and_the_resume_flies_the_rest(
     args = ["sweep", str(mission_file), "--delay", "0,5,10", "--loss", "0,20", "--seeds", "2", "--no-plots"]
     out = tmp_path / "stopped"
     proc = Bsst(*args, "--jobs", "2", "--out", str(out))
-    try:
+    def first_row() -> int:
         wait_for(lambda: _rows_written(out) >= 1, 60, "cells.csv's first row")
-        seen = _rows_written(out)
-        if stop == "ctrl-c":
-            os.killpg(proc.pid, signal.SIGINT)
-        else:
-            os.kill(proc.pid, signal.SIGTERM)
-        said, told = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait()
+        return _rows_written(out)
+
+    seen, said, told = _stopped(proc, stop, first_row)
     kept = len(read_cells(out / CELLS_CSV))
     assert proc.returncode == 1, (said, told)
     assert "sweep: interrupted; the cells in flight end first" in told, told
