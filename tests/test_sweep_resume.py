@@ -127,6 +127,7 @@ def test_the_cells_in_flight_at_a_ctrl_c_are_kept_and_the_resume_flies_the_rest(
     args = ["sweep", str(mission_file), "--delay", "0,5,10", "--loss", "0,20", "--seeds", "2", "--no-plots"]
     out = tmp_path / "stopped"
     proc = Bsst(*args, "--jobs", "2", "--out", str(out))
+
     def first_row() -> int:
         wait_for(lambda: _rows_written(out) >= 1, 60, "cells.csv's first row")
         return _rows_written(out)
@@ -143,6 +144,21 @@ def test_the_cells_in_flight_at_a_ctrl_c_are_kept_and_the_resume_flies_the_rest(
     whole = tmp_path / "whole"
     assert main([*args, "--jobs", "2", "--out", str(whole)]) == 0
     assert (out / CELLS_CSV).read_bytes() == (whole / CELLS_CSV).read_bytes()
+
+
+def test_a_ctrl_c_after_the_last_cell_was_handed_out_leaves_a_whole_sweep(mission_file: Path, tmp_path: Path) -> None:
+    """Three cells on two workers, Ctrl-C at the first row: the other two are already in flight (the third handed
+    out as the first ended), fly to their end and are kept, so nothing is missing: the sweep is whole, its
+    report.md written, exit 0, and no "cells not flown" line. Until the third wave's thirty-seventh session it was
+    still called interrupted (exit 1, no report.md until a --resume that flew nothing)."""
+    out = tmp_path / "whole"
+    proc = Bsst("sweep", str(mission_file), "--delay", "0,5,10", "--engine", "process", "--jobs", "2", "--no-plots",
+                "--out", str(out))
+    _, said, told = _stopped(proc, "ctrl-c", lambda: wait_for(lambda: _rows_written(out) >= 1, 60,
+                                                              "cells.csv's first row"))
+    assert "sweep: interrupted; the cells in flight end first" in told, told
+    assert proc.returncode == 0 and "cells not flown" not in told, (said, told)
+    assert len(read_cells(out / CELLS_CSV)) == 3 and (out / "report.md").is_file(), said
 
 
 def test_a_second_ctrl_c_does_not_wait_for_the_cell_in_flight(tmp_path: Path) -> None:

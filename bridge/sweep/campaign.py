@@ -215,6 +215,7 @@ def run_sweep(
         if sink is not None:
             sink.close()
     rows = [results[c.key()] for c in all_cells if c.key() in results]
+    interrupted = interrupted and len(rows) < len(all_cells)  # a stop after the last cell was handed out: whole
     if len(rows) > reused and used not in engines:
         engines = [*engines, used]
     if path is not None:
