@@ -360,3 +360,25 @@ def test_a_fence_and_rally_points_on_their_bounds_read_back_from_the_wire() -> N
     with pytest.raises(ConfigError, match=r"downloaded: geoFence.polygons\[0\]: latitude .*: 100.001 km north, "
                                           r"0.000 km west of the plan's home; a fence's points lie within 100 km"):
         geofence_from_plan(fence_plan(beyond), HOME, "downloaded")
+
+
+def test_a_fence_uploaded_between_a_ground_stations_hop_and_the_mission_is_not_changed_in_flight() -> None:
+    """A ground station's own flight before an awaited mission's start is at negative times (its arm and its landed
+    disarm): a fence uploaded after it and before the mission's arm is in the controller's download, the mission's
+    fence from its start, judged against; only the mission's arm starts the flight (the real-time controller's may
+    come just before its time 0). Until the third wave's thirty-seventh session the hop's arm was the flight's, and such
+    a fence was "changed in flight" at its negative time: no row judged against the mission's fence."""
+    t = np.arange(0.0, 1.0, 0.004)
+    trace = {"x": np.where(t >= 0.6, 5.0, 0.0), "y": np.zeros_like(t)}  # out of the start's square at 0.6 s
+    rules = Rules(rate_hz=250.0, timeout_s=0.5, clock="lockstep", geofence=Geofence((Zone(True, points=(
+        (-1.0, 1.0), (1.0, 1.0), (1.0, -1.0), (-1.0, -1.0))),)))
+    hop = [RunEvent.at(-9.0, "armed", "armed, HOLD", "vehicle"), RunEvent.at(-4.0, "disarmed", "landed: disarmed",
+                                                                             "vehicle"),
+           RunEvent.at(-2.0, "fence", "uploaded 4 items in 0.01 s, 0 requested again", "vehicle")]
+    for arm_t in (0.0, -0.003):  # lockstep's arm at the mission's time 0; real time's a little before it
+        v = geofence_kept(t, trace, rules, [*hop, RunEvent.at(arm_t, "armed", "armed, offboard control", "vehicle")])
+        assert (v.ok, v.t) == (False, pytest.approx(0.6)), v
+    bigger = RunEvent.at(0.5, "fence", "uploaded 4 items in 0.01 s, 0 requested again", "vehicle")
+    v = geofence_kept(t, trace, rules, [*hop, RunEvent.at(-0.003, "armed", "armed, offboard control", "vehicle"),
+                                        bigger])  # one in the mission's flight still is
+    assert v.ok and v.as_dict()["note"].startswith("the fence changed in flight at t=0.500 s"), v

@@ -366,16 +366,19 @@ def _fence_note(changed: RunEvent, before: int, acted: bool) -> str:
 
 def _fence_changed_in_flight(events: Sequence[RunEvent]) -> RunEvent | None:
     """The vehicle's first event of a fence uploaded or cleared after its flight's arm (its first ``armed`` event
-    that is not a ground station's arm awaiting a mission's start), or the one it says at that arm when the fence it
-    holds is not the record's (uploaded after the controller's download: bridge.nodes.vehicle.mission): the fence
-    before it is the one the record holds (``--await-mission``: the one the controller downloaded)."""
-    flying = False
+    that is not a ground station's arm awaiting a mission's start, nor of a ground station's own flight that a disarm
+    before the mission's time 0 ended), or the one it says at that arm when the fence it holds is not the record's
+    (uploaded after the controller's download: bridge.nodes.vehicle.mission): the fence before it is the one the
+    record holds (``--await-mission``: the one the controller downloaded, after any such flight)."""
+    flying, changed = False, None
     for e in events:
         if e.kind == "armed" and not e.pre_start:
             flying = True
-        elif flying and e.kind == "fence":  # (uploaded or cleared: bridge.nodes.vehicle.mission.EVENT_OF)
-            return e
-    return None
+        elif e.kind == "disarmed" and e.before_start:  # (the mission's own arm may come just before its 0: real time)
+            flying, changed = False, None
+        elif flying and changed is None and e.kind == "fence":  # (uploaded or cleared: ...vehicle.mission.EVENT_OF)
+            changed = e
+    return changed
 
 
 def touchdown_kept(events: Sequence[RunEvent]) -> Verdict:
