@@ -1299,12 +1299,19 @@ from mavsdk.plugins.telemetry import Telemetry
 
 system = sdk.first_autopilot(30.0)
 action, mr, telemetry = Action(system), MissionRaw(system), Telemetry(system)
+fence = len(sys.argv) > 3 and sys.argv[3] == "fence"  # the hop breaches GF_MAX_VER_DIST: its failsafe lands it
+if fence:
+    from mavsdk.plugins.param import Param
+    par = Param(system)
+    out["limit"] = [par.set_param_int("GF_ACTION", 5).name, par.set_param_float("GF_MAX_VER_DIST", 1.5).name]
 out["arm"], out["takeoff"] = action.arm().name, action.takeoff().name
 # up, and its takeoff done (HOLD): landed in TAKEOFF it would arm in TAKEOFF again, and the start be DENIED
-out["up"] = until(lambda: telemetry.position().relative_altitude_m > 2.0 and telemetry.flight_mode().name == "HOLD",
-                  30)
-out["land"] = action.land().name
+out["up"] = until(lambda: telemetry.position().relative_altitude_m > (1.0 if fence else 2.0) and (
+    fence or telemetry.flight_mode().name == "HOLD"), 30)
+out["land"] = "SUCCESS" if fence else action.land().name  # (the failsafe's landing)
 out["down"] = until(lambda: not telemetry.armed(), 60)
+if fence:  # no limit for the mission; HOLD for its arm (disarmed by its failsafe, it would arm in TAKEOFF again)
+    out["limit"] += [par.set_param_float("GF_MAX_VER_DIST", 0.0).name, action.hold().name]
 lat, lon = 47.397742, 8.545594  # the vehicle's home (PX4 SITL's)
 
 def item(seq, command, north_m, z):
@@ -1324,17 +1331,19 @@ sdk.destroy()
 """
 
 
-def _hop_then_mission(out: Path, then: str, *sitl_args: str) -> tuple[int, dict[str, Any]]:
+def _hop_then_mission(out: Path, then: str, *sitl_args: str, hop: str = "land") -> tuple[int, dict[str, Any]]:
     """``bsst sitl --await-mission`` (``sitl_args``: its clock) into ``out`` and :data:`MAVSDK_HOP_THEN_MISSION`
-    against it (``then``: "fly" or "pause"): the session's exit status and summary.json."""
+    against it (``then``: "fly" or "pause"; ``hop``: "land" or "fence", landed by its failsafe): the session's exit
+    status and summary.json."""
     with instance_slot() as n:
         sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--out", str(out), "--no-plots", *sitl_args)
         try:
             r = subprocess.run([sys.executable, "-c", MAVSDK_HOP_THEN_MISSION, f"udpin://127.0.0.1:{GCS_PORT + n}",
-                                then], capture_output=True, text=True, timeout=300, env=ENV)
+                                then, hop], capture_output=True, text=True, timeout=300, env=ENV)
             gs = script_result(r)
             assert gs["up"] and gs["down"] and {gs["arm"], gs["land"], gs["upload"], gs["start"]} == {"SUCCESS"}, gs
             assert gs.get("finished") or gs.get("pause") == "SUCCESS", gs
+            assert set(gs.get("limit", ["SUCCESS"])) == {"SUCCESS"}, gs
             status = sitl.p.wait(timeout=120)
         finally:
             sitl.stop()
@@ -1417,3 +1426,24 @@ def test_a_pause_after_a_ground_stations_hop_ends_the_flight_at_its_trace_row_in
     assert summary["ended_by"]["how"] == f"mode changed at t={pause['t']:.3f} s: {pause['what']}", summary["ended_by"]
     t = [row[0] for row in _trace(out / "trace.csv")]
     assert any(abs(ti - pause["step"] / 250) < 1e-6 for ti in t), (pause, t[0], t[-1])  # its row in the trace
+
+
+def test_a_failsafe_of_a_ground_stations_flight_before_an_awaited_mission_is_recorded_not_the_missions_outcome(
+        tmp_path):
+    """The hop breaches GF_MAX_VER_DIST (1.5 m, GF_ACTION 5): the vehicle's failsafe lands and disarms it; the ground
+    station lifts the limit, then starts the mission and pauses it. The vehicle flies the mission after its failsafe;
+    that failsafe and breach are the hop's, before the mission's start (negative t, said in events.log's closing
+    notes), not the mission's: it is ``aborted`` by the pause, its geofence kept (exit 1: a ground station flew the
+    vehicle, and paused it). (Until the third wave's thirty-seventh session it read ``failsafe``, and the hop's
+    breach broke the mission's geofence policy.)"""
+    out = tmp_path / "run"
+    status, summary = _hop_then_mission(out, "pause", "--speed", "0", hop="fence")
+    assert status == 1 and summary["outcome"] == "aborted", (summary["outcome"], summary["ended_by"])
+    assert summary["ended_by"]["how"].startswith("mode changed at t="), summary["ended_by"]
+    fs = [e for e in summary["events"] if e["kind"] in ("failsafe", "geofence") and e.get("source") == "vehicle"]
+    assert fs and all(e["t"] < 0 for e in fs), fs
+    assert next(p for p in summary["policies"] if p["name"] == "geofence")["ok"], summary["policies"]
+    notes = [e for e in summary["events"] if e["kind"] == "before_start"]
+    assert {e["text"].split(": ")[1].split()[0] for e in notes} == {"failsafe", "geofence"}, notes
+    assert "before_start: before the mission's start, not its outcome: failsafe at t=-" in (
+        out / "events.log").read_text()

@@ -365,3 +365,32 @@ def test_a_target_sent_after_the_vehicle_stopped_reading_is_in_flight_not_lost()
     many = {"commands": 400, "targets_left": [[10.5 + i * 1e-3, 10.5 + i * 1e-3 + 1e-5] for i in range(256)]}
     up = link_block(joined(10), {**vehicle, "accepted": 100}, many, None)["up"]
     assert (up["delivered"], up["in_flight"], up["lost"]) == (100, 300, 0), up
+
+
+def test_a_failsafe_or_a_breach_of_a_ground_stations_flight_before_the_mission_is_said_not_its_outcome() -> None:
+    """A ground station's own flight before an awaited mission's start is at negative times: its failsafe (a geofence
+    breach landing it) is recorded, said in a closing note, and not the mission's outcome, end or geofence verdict;
+    the mission's own failsafe still is. (Until the third wave's thirty-seventh session the session's failsafe flag
+    made a mission a ground station then paused ``failsafe``, and the hop's breach broke the mission's geofence.)"""
+    vehicle, controller = ends(rc=1, outcome="aborted", reason="a ground station took over: HOLD")
+    hop = [RunEvent(-9.0, "armed", "armed, TAKEOFF", "vehicle", GCS),
+           RunEvent(-8.0, "geofence", "beyond GF_MAX_VER_DIST", "vehicle"),
+           RunEvent(-8.0, "failsafe", "geofence: beyond GF_MAX_VER_DIST: land here", "vehicle"),
+           RunEvent(-5.0, "disarmed", "landed: disarmed", "vehicle", ITSELF)]
+    pause = RunEvent(0.5, "mode", "HOLD", "vehicle", GCS, mode="HOLD", armed=True)
+    out = session_summary(FLIGHT, facts(failsafe_seen=True), joined(int(0.5 * RATE)), [*hop, ARMED, pause], vehicle,
+                          controller)
+    s = out.summary
+    assert s["outcome"] == "aborted" and s["ended_by"]["how"] == "mode changed at t=0.500 s: HOLD", s["ended_by"]
+    assert next(p for p in s["policies"] if p["name"] == "geofence")["ok"]
+    assert [(n.kind, n.text) for n in out.notes if n.kind == "before_start"] == [
+        ("before_start", "before the mission's start, not its outcome: geofence at t=-8.000 s: beyond GF_MAX_VER_DIST"),
+        ("before_start", "before the mission's start, not its outcome: failsafe at t=-8.000 s: geofence: beyond "
+                         "GF_MAX_VER_DIST: land here")]
+    assert s["interventions"][0]["before_start"]  # exit 1: a ground station flew the vehicle
+    own = RunEvent(0.8, "failsafe", "no actuator target for 0.504 s: land", "vehicle")
+    vehicle, controller = ends(rc=1, outcome="failsafe", reason="the vehicle's failsafe took over")
+    s = session_summary(FLIGHT, facts(failsafe_seen=True), joined(int(0.8 * RATE)), [*hop, ARMED, own], vehicle,
+                        controller).summary
+    assert s["outcome"] == "failsafe"
+    assert s["ended_by"] == {"who": "vehicle", "how": f"failsafe at t=0.800 s: {own.text}"}, s["ended_by"]

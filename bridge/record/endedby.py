@@ -48,8 +48,10 @@ def ended_by_command(events: Sequence[RunEvent], controller_id: tuple[int, int] 
 def ended_by_outcome(outcome: str, events: Sequence[RunEvent]) -> dict[str, str]:
     """``summary.json["ended_by"]`` as the outcome and the vehicle's events tell it: the mission (completed), the
     vehicle (its failsafe, or its pre-arm check that denied the arm), the plant (diverged, crashed), the ground station
-    that terminated it, or whoever interrupted it. A session knows more (a child that died, a command): it says so."""
-    ev = vehicle_events(events)
+    that terminated it, or whoever interrupted it. A session knows more (a child that died, a command): it says so.
+    What came before the mission's time 0 (a ground station's own flight before an awaited mission's start) is not
+    its end."""
+    ev = [e for e in vehicle_events(events) if not e.before_start]  # (before the mission's time 0: not its end)
 
     def first(kind: str) -> RunEvent | None:
         return next((e for e in ev if e.kind == kind), None)

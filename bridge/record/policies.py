@@ -41,7 +41,8 @@ What each policy reads, and why it cannot be fooled by a run's own claims:
 - ``geofence``: every trace row's position is inside the mission's geofence (a ``.plan``'s ``geoFence`` or a
   mission's ``[geofence]``: inside an inclusion zone if there is one, outside every exclusion zone, as PX4's
   navigator judges it), and the vehicle never said it was outside a fence a ground station uploaded or beyond
-  GF_MAX_HOR_DIST / GF_MAX_VER_DIST (its ``geofence`` event); the vehicle also acts on a breach (GF_ACTION).
+  GF_MAX_HOR_DIST / GF_MAX_VER_DIST (its ``geofence`` event); the vehicle also acts on a breach (GF_ACTION). The
+  mission's: a ground station's own flight before an awaited mission's start is its notes' (bridge.record.summary).
 - ``time_steady``: the trace's ``t`` increases by exactly one control period from row to row (a missing row, a
   repeated step or a jump of the mission's clock breaks it), except over steps the vehicle flew disarmed: on the
   wall clock it writes no rows then (real time, landed by its failsafe until ``[failsafe] resume`` re-arms it).
@@ -342,7 +343,7 @@ def geofence_kept(t: np.ndarray, trace: Mapping[str, Any], rules: Rules, events:
     judge (its ``geofence`` event, said with GF_ACTION 0 too), and the verdict says so (``note``); so are all rows
     when the flight started with a fence uploaded after the record's (the vehicle's ``fence`` event at its arm)."""
     name = "geofence"
-    left = next((e for e in events if e.kind == "geofence"), None)
+    left = next((e for e in events if e.kind == "geofence" and not e.before_start), None)  # (the mission's)
     changed = _fence_changed_in_flight(events)
     n = len(t) if changed is None else int(np.searchsorted(t, changed.t))  # the rows before it (in time order)
     breach = rules.geofence.first_breach(t[:n], np.asarray(trace["x"])[:n], np.asarray(trace["y"])[:n]) \

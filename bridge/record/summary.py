@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -130,6 +130,24 @@ def plant_outcome(outcome: str, facts: SessionFacts, events: Sequence[RunEvent])
         return outcome
     kinds = {e.kind for e in vehicle_events(events)}  # collision: a fleet's shared clock ended it
     return next((k for k in ("collision", "terminated", "crashed") if k in kinds), outcome)
+
+
+def mission_outcome(facts: SessionFacts, controller: ChildEnd | None, events: Sequence[RunEvent]) -> str:
+    """The mission's outcome (:func:`outcome_of`, then :func:`plant_outcome`) from what came at or after its time 0:
+    a failsafe the vehicle said before it (a ground station's own flight before an awaited mission's start, at a
+    negative time) is that flight's, recorded (its event, :func:`before_start_notes`), not the mission's."""
+    said = [e for e in vehicle_events(events) if e.kind == "failsafe"]
+    if said and all(e.before_start for e in said):
+        facts = replace(facts, failsafe_seen=False)
+    return plant_outcome(outcome_of(facts, controller), facts, [e for e in events if not e.before_start])
+
+
+def before_start_notes(events: Sequence[RunEvent]) -> list[tuple[str, str]]:
+    """The closing notes on what ended or breached nothing of the mission's because it came before its time 0 (a
+    ground station's own flight: a failsafe, a geofence breach, a plant's end), each said as what it was."""
+    kinds = ("failsafe", "geofence", *PLANT_OUTCOMES, "terminated")
+    return [("before_start", f"before the mission's start, not its outcome: {e.kind} at t={e.t:.3f} s: {e.shown}")
+            for e in vehicle_events(events) if e.before_start and e.kind in kinds]
 
 
 def airborne(trace: Mapping[str, Any], t: float) -> bool:
@@ -396,7 +414,7 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
     link = link_block(joined, vs, cs, relay_stats if relay is not None else None)
     if caps := flight.link.jitter_capped():  # the delay capped a jitter: not flown as asked (docs/links.md)
         link["jitter_capped"] = caps
-    outcome = plant_outcome(outcome_of(facts, controller), facts, events)
+    outcome = mission_outcome(facts, controller, events)
     summary = summarise(arrays, m, flight.gains, clock=facts.clock, outcome=outcome,
                         events=[], link=link, estimator=flight.estimator, sensors=flight.sensors.name)
     ev = vehicle_events(events)
@@ -439,6 +457,7 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
     texts += [("intervention", f"not flown as asked: {intervention_text(i)}") for i in changes]
     texts += [("param", f"not flown as asked: {unconfirmed_text(p)}") for p in summary.get("param_at", ())
               if not p["confirmed"]]
+    texts += before_start_notes(events)
     texts += [("policy", violation_text(v)) for v in violated]
     if (stalls := stalls_of(summary)) is not None:
         texts.append(("stall", stalls_text(stalls)))
