@@ -933,6 +933,62 @@ def _fence_square(half: float, target: tuple[int, int] = (1, 1)) -> list[Any]:
             for k, (x, y) in enumerate(corners)]
 
 
+def _rally_points(*points: tuple[float, float]) -> list[Any]:
+    """Rally points at ``points`` (m north, m east of the vehicle's default home), as a ground station uploads them."""
+    home = Home()
+    return [M.MAVLink_mission_item_int_message(1, 1, k, M.MAV_FRAME_GLOBAL_INT, M.MAV_CMD_NAV_RALLY_POINT, 0, 1,
+                                               0, 0, 0, 0, *(round(d * 1e7) for d in home.global_of(x, -y, 0.0)[:2]),
+                                               0.0, M.MAV_MISSION_TYPE_RALLY)
+            for k, (x, y) in enumerate(points)]
+
+
+def _upload(gcs: GcsSocket, v: Vehicle, items: list[Any]) -> None:
+    """A ground station's upload of ``items`` (a fence's or rally points': their own mission type), accepted."""
+    gcs.exchange(v, M.MAVLink_mission_count_message(1, 1, len(items), items[0].mission_type), "MISSION_REQUEST_INT")
+    for it in items[:-1]:
+        gcs.exchange(v, it, "MISSION_REQUEST_INT")
+    assert gcs.exchange(v, items[-1], "MISSION_ACK").type == M.MAV_MISSION_ACCEPTED
+
+
+def _controller_downloads(ctl: GcsSocket, v: Vehicle, mission_type: int, n: int) -> None:
+    """The controller's download (on its own link) of the ``n`` items of ``mission_type`` the vehicle holds."""
+    ctl.exchange(v, M.MAVLink_mission_request_list_message(1, 1, mission_type), "MISSION_COUNT")
+    for k in range(n):
+        ctl.exchange(v, M.MAVLink_mission_request_int_message(1, 1, k, mission_type), "MISSION_ITEM_INT")
+    ack = M.MAVLink_mission_ack_message(1, 1, M.MAV_MISSION_ACCEPTED, mission_type)
+    ctl.sock.sendto(ack.pack(ctl.mav), v.link.local)  # the download's final ACK: nothing comes back
+
+    def idle() -> bool:
+        for m, addr in v.link.poll():
+            v._handle(v.link, m, addr)
+        return v.missions.transfers["controller"].state.value == "idle"
+
+    wait_for(idle, 5.0, "the controller link's transfer idle", poll_s=0.001)
+
+
+def _started_downloaded_armed(gcs: GcsSocket, ctl: GcsSocket, flight: Any, before: list[Any],
+                              after: list[Any]) -> Vehicle:
+    """A vehicle holding the small plan, ``before`` uploaded (a fence's or rally points' items), the mission
+    started, the fence and rally points downloaded by the controller, ``after`` uploaded, and the controller's arm."""
+    v = _vehicle_holding_the_small_plan(gcs, flight)
+    try:
+        for items in before:
+            _upload(gcs, v, items)
+        start = M.MAVLink_command_long_message(1, 1, M.MAV_CMD_MISSION_START, 0, 0, 0, 0, 0, 0, 0, 0)
+        assert gcs.exchange(v, start, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
+        for mtype in (M.MAV_MISSION_TYPE_FENCE, M.MAV_MISSION_TYPE_RALLY):
+            _controller_downloads(ctl, v, mtype, sum(len(i) for i in before if i[0].mission_type == mtype))
+        assert v.sim.fence_recorded
+        for items in after:  # after the controller's download, before its arm
+            _upload(gcs, v, items)
+        controller = Sender(200, 191, "127.0.0.1", ctl.sock.getsockname()[1], "controller")
+        assert v.commander.arm_disarm(1.0, 0.0, controller) == M.MAV_RESULT_ACCEPTED
+    except BaseException:
+        v.close()
+        raise
+    return v
+
+
 def test_a_fence_uploaded_between_the_controllers_download_and_its_arm_is_said_at_the_arm():
     """The controller's download of the fence (on its own link) is what mission.toml holds; a ground station's fence
     uploaded after it, before the controller's arm, is flown all the same (the vehicle watches it), so the vehicle
@@ -944,49 +1000,9 @@ def test_a_fence_uploaded_between_the_controllers_download_and_its_arm_is_said_a
     flight = prepare(Mission(Sine(), duration_s=5.0, name="fenced-late"), params={"GF_ACTION": 0})
     ctl = GcsSocket(200, 191, link="link")  # the controller, on the vehicle's own link
     made: list[Vehicle] = []
-
-    def from_controller(v: Vehicle, msg: Any, want: str | None) -> None:
-        if want is not None:
-            ctl.exchange(v, msg, want)
-            return
-        ctl.sock.sendto(msg.pack(ctl.mav), v.link.local)  # the download's final ACK: nothing comes back
-
-        def idle() -> bool:
-            for m, addr in v.link.poll():
-                v._handle(v.link, m, addr)
-            return v.missions.transfers["controller"].state.value == "idle"
-
-        wait_for(idle, 5.0, "the controller link's transfer idle", poll_s=0.001)
-
-    def upload_fence(v: Vehicle) -> None:
-        items = _fence_square(1.0)
-        gcs.exchange(v, M.MAVLink_mission_count_message(1, 1, len(items), M.MAV_MISSION_TYPE_FENCE),
-                     "MISSION_REQUEST_INT")
-        for it in items[:-1]:
-            gcs.exchange(v, it, "MISSION_REQUEST_INT")
-        assert gcs.exchange(v, items[-1], "MISSION_ACK").type == M.MAV_MISSION_ACCEPTED
-
-    def started_and_downloaded(late: bool) -> Vehicle:
-        v = _vehicle_holding_the_small_plan(gcs, flight)
-        made.append(v)
-        if not late:
-            upload_fence(v)
-        start = M.MAVLink_command_long_message(1, 1, M.MAV_CMD_MISSION_START, 0, 0, 0, 0, 0, 0, 0, 0)
-        assert gcs.exchange(v, start, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
-        fence = M.MAV_MISSION_TYPE_FENCE
-        from_controller(v, M.MAVLink_mission_request_list_message(1, 1, fence), "MISSION_COUNT")
-        for k in range(0 if late else 4):
-            from_controller(v, M.MAVLink_mission_request_int_message(1, 1, k, fence), "MISSION_ITEM_INT")
-        from_controller(v, M.MAVLink_mission_ack_message(1, 1, M.MAV_MISSION_ACCEPTED, fence), None)
-        assert v.sim.fence_recorded
-        if late:
-            upload_fence(v)  # after the controller's download, before its arm
-        controller = Sender(200, 191, "127.0.0.1", ctl.sock.getsockname()[1], "controller")
-        assert v.commander.arm_disarm(1.0, 0.0, controller) == M.MAV_RESULT_ACCEPTED
-        return v
-
     try:
-        v = started_and_downloaded(late=True)
+        v = _started_downloaded_armed(gcs, ctl, flight, [], [_fence_square(1.0)])
+        made.append(v)
         assert not v.sim.fence_recorded and v.sim.fence is not None
         armed, said = v.sim.events[-2:]
         assert (armed.kind, said.kind) == ("armed", "fence"), v.sim.events[-3:]
@@ -996,11 +1012,40 @@ def test_a_fence_uploaded_between_the_controllers_download_and_its_arm_is_said_a
         v.sim.advance()
         left = [e for e in v.sim.events if e.kind == "geofence"]
         assert len(left) == 1 and "GF_ACTION = 0: not acted on" in left[0].text and v.sim.mode == "offboard", left
-        early = started_and_downloaded(late=False)  # the fence downloaded is the one flown
+        early = _started_downloaded_armed(gcs, ctl, flight, [_fence_square(1.0)], [])  # downloaded: the one flown
+        made.append(early)
         assert early.sim.fence_recorded and early.sim.events[-1].kind == "armed", early.sim.events[-2:]
         early.sim.plant.state = (3.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         early.sim.advance()  # (GF_ACTION 0: the record's own fence is its trace check's, not the vehicle's)
         assert not [e for e in early.sim.events if e.kind == "geofence"]
+    finally:
+        for v in made:
+            v.close()
+        gcs.close()
+        ctl.close()
+
+
+def test_rally_points_uploaded_between_the_controllers_download_and_its_arm_are_said_at_the_arm():
+    """As a fence (above): rally points a ground station uploads after the controller's download of them (none),
+    before its arm, are the ones Return flies to, but mission.toml holds the download's, so the vehicle says so at
+    that arm: a ``rally`` event after the ``armed`` one, its own word (the fence, the record's, unsaid). Until the
+    third wave's thirty-seventh session nothing said it: a Return to a rally point read as flown to one the record
+    did not hold. Rally points uploaded before the controller's download are the record's: nothing said."""
+    gcs = GcsSocket()
+    flight = prepare(Mission(Sine(), duration_s=5.0, name="rallied-late"))
+    ctl = GcsSocket(200, 191, link="link")  # the controller, on the vehicle's own link
+    made: list[Vehicle] = []
+    try:
+        v = _started_downloaded_armed(gcs, ctl, flight, [], [_rally_points((4.0, 0.0), (0.0, 6.0))])
+        made.append(v)
+        assert len(v.sim.rally) == 2 and v.sim.fence_recorded, v.sim.rally
+        armed, said = v.sim.events[-2:]
+        assert (armed.kind, said.kind) == ("armed", "rally"), v.sim.events[-3:]
+        assert said.text == ("flown with rally points of 2 items uploaded or cleared after the controller's download, "
+                             "not the ones mission.toml holds") and said.by is not None and said.by.is_vehicle, said
+        early = _started_downloaded_armed(gcs, ctl, flight, [_rally_points((4.0, 0.0))], [])
+        made.append(early)
+        assert len(early.sim.rally) == 1 and early.sim.events[-1].kind == "armed", early.sim.events[-2:]
     finally:
         for v in made:
             v.close()

@@ -9,9 +9,10 @@ Out: MISSION_REQUEST_INT / MISSION_REQUEST, MISSION_COUNT, MISSION_ITEM_INT / MI
      (MAV_MISSION_RESULT), MISSION_CURRENT, MISSION_ITEM_REACHED, STATUSTEXT (PX4's texts); the accepted
      mission as typed items (:class:`Mission` of :class:`~bridge.mavlink.missionitems.MissionItem`); a
      ``mission`` event naming its sender for each accepted upload, clear, set-current and start; ``refused ...``
-     and ``mission ...`` status lines; at a started mission's arm (or the first flight's), a ``fence`` event when
-     the fence held is not the one the run's mission.toml holds (the controller's download of it, or the mission's
-     own), which the vehicle then watches for the record even with GF_ACTION 0 (``SimVehicle.fence_recorded``)
+     and ``mission ...`` status lines; at a started mission's arm (or the first flight's), a ``fence`` or ``rally``
+     event when the fence or rally points held are not those the run's mission.toml holds (the controller's
+     download of them, or the mission's own); such a fence the vehicle then watches for the record even with
+     GF_ACTION 0 (``SimVehicle.fence_recorded``)
 
 With ``await_mission`` (``bsst sitl --await-mission``) a ground station starts the held mission
 (:meth:`MissionManager.start`: MAV_CMD_MISSION_START, or AUTO.MISSION selected and then an arm): the vehicle
@@ -57,6 +58,8 @@ START_ARM = "AUTO.MISSION, then arm"
 # the event kind of what a ground station uploaded or cleared, by its mission type: read by kind, never by text
 EVENT_OF = {mavlink.MAV_MISSION_TYPE_MISSION: "mission", mavlink.MAV_MISSION_TYPE_FENCE: "fence",
             mavlink.MAV_MISSION_TYPE_RALLY: "rally"}
+# a fence's and rally points' words when those flown are not the record's (MissionManager.flight_armed)
+UNRECORDED = {FENCE: ("a fence", "the one"), RALLY: ("rally points", "the ones")}
 START_ARMED = "arm, then AUTO.MISSION"  # armed in HOLD on the ground first (MAVSDK's arm(), then start_mission())
 # what each start is called in its refusal: the command or mode the ground station sent
 _ASKED = {START_COMMAND: "MISSION_START", START_ARM: "arm (mode MISSION)", START_ARMED: "mode MISSION (armed in HOLD)"}
@@ -98,8 +101,8 @@ class MissionManager:
         self._goals: tuple[Goal, ...] = ()  # the started mission's items, where and how each is reached
         self.home = (authority.cfg.home.lat, authority.cfg.home.lon, authority.cfg.home.alt)
         self.zones = HeldZones(sim, self.home)  # an uploaded fence and rally points
-        self.recorded_fence = self.zones.items[FENCE]  # the one the run's record holds: the mission's, or the
-        # controller's download's (--await-mission); the fence flown is said at a flight's arm if not it
+        self.recorded = dict(self.zones.items)  # the fence and rally points the run's record holds: the mission's,
+        # or the controller's download's (--await-mission); those flown are said at a flight's arm if not these
         self._first_flight = True
         self._check: StartCheck | None = None  # the last check begun (.startcheck): one runs at a time
 
@@ -214,18 +217,19 @@ class MissionManager:
 
     def flight_armed(self) -> None:
         """The controller armed a new flight: the started mission is flown from now (item 0 current). A started
-        mission's arm (or the first flight's, without --await-mission) with a fence the run's record does not hold
-        (uploaded after the controller's download, or before that first arm) says so: a ``fence`` event, after the
-        arm, so that the run judges that fence by the vehicle's watch, as one uploaded in flight
-        (bridge.record.policies)."""
+        mission's arm (or the first flight's, without --await-mission) with a fence or rally points the run's record
+        does not hold (uploaded after the controller's download, or before that first arm) says so: a ``fence`` or
+        ``rally`` event, after the arm, so that the run judges that fence by the vehicle's watch, as one uploaded in
+        flight (bridge.record.policies), and a Return's rally point is not read as mission.toml's."""
         if self._first_flight or self.start_requested:  # (a record begins: the controller's mission.toml)
             self._first_flight = False
-            held = self.zones.items[FENCE]
-            if held is not self.recorded_fence:
-                when = "after the controller's download" if self.authority.cfg.await_mission else "before the arm"
-                said = self.sim.event("fence", f"flown with a fence of {len(held.items)} items uploaded or cleared "
-                                               f"{when}, not the one mission.toml holds")
-                said.by = ITSELF  # (the vehicle's word, not the arm's sender's)
+            when = "after the controller's download" if self.authority.cfg.await_mission else "before the arm"
+            for mtype, (noun, which) in UNRECORDED.items():
+                held = self.zones.items[mtype]
+                if held is not self.recorded[mtype]:
+                    said = self.sim.event(EVENT_OF[mtype], f"flown with {noun} of {len(held.items)} items uploaded "
+                                                           f"or cleared {when}, not {which} mission.toml holds")
+                    said.by = ITSELF  # (the vehicle's word, not the arm's sender's)
         if not self.start_requested:
             return
         self.start_requested = self.selected = self.completed = False
@@ -334,16 +338,16 @@ class MissionManager:
         if transfer is None:
             transfer = self.transfers[link] = LinkTransfer(link, self)
         changed = transfer.handle(Partner(self.authority.sender(m, addr, link), ep), m, time.monotonic())
-        if link == "controller" and m._type == "MISSION_REQUEST_LIST" and m.mission_type == FENCE:
-            self._fence_downloaded(transfer)
+        if link == "controller" and m._type == "MISSION_REQUEST_LIST" and m.mission_type in self.recorded:
+            self._zone_downloaded(transfer)
         return changed
 
-    def _fence_downloaded(self, transfer: LinkTransfer) -> None:
-        """The controller asked for the fence: the one its download sends (begun, or begun again) is the one its
-        mission.toml holds, the record's; the fence held is the record's while it is that one."""
-        if transfer.state is State.SENDLIST and transfer.mtype == FENCE:
-            self.recorded_fence = transfer.sending
-            self.sim.fence_recorded = transfer.sending is self.zones.items[FENCE]
+    def _zone_downloaded(self, transfer: LinkTransfer) -> None:
+        """The controller asked for the fence or the rally points: what its download sends (begun, or begun again)
+        is what its mission.toml holds, the record's; the fence held is the record's while it is that one."""
+        if transfer.state is State.SENDLIST and transfer.mtype in self.recorded:
+            self.recorded[transfer.mtype] = transfer.sending
+            self.sim.fence_recorded = self.recorded[FENCE] is self.zones.items[FENCE]
 
     # -- what the links' transfers share (.missiontransfer.TransferHost) ------------------------------------
     def held(self, mission_type: int) -> Mission:
