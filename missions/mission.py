@@ -231,11 +231,22 @@ def check_timing(duration_s: float, rate_hz: float, physics_hz: float, source: s
         lo, hi = MISSION_RANGES[key]
         if not lo <= v <= hi:
             raise ConfigError(f"{source}: {key}: must be in [{lo:g}, {hi:g}], got {v:g}")
+    why = rate_problem(rate_hz, physics_hz)
+    if why is not None:
+        raise ConfigError(f"{source}: rate_hz: {why}, got {rate_hz:g}")
+
+
+def rate_problem(rate_hz: float, physics_hz: float, physics_from: str = "") -> str | None:
+    """Why ``rate_hz`` (Hz) cannot be flown at ``physics_hz`` (Hz; set where ``physics_from`` says), or None: the one
+    rule, for the loader (``rate_hz``) and ``--rate`` (named as the flag: bridge.cli.options.refuse_idle_inputs)."""
     ratio = physics_hz / rate_hz
-    if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
-        raise ConfigError(
-            f"{source}: rate_hz: the physics rate {physics_hz:g} Hz must be a whole multiple of it, got {rate_hz:g}"
-        )
+    if abs(ratio - round(ratio)) <= 1e-9 and round(ratio) >= 1:
+        return None
+    lo, hi = MISSION_RANGES["rate_hz"]
+    whole = [r for k in range(1, int(physics_hz // lo) + 1) if lo <= (r := physics_hz / k) <= hi and r == int(r)]
+    shown = f"; the whole ones {', '.join(f'{r:g}' for r in sorted(whole))}" if whole else ""
+    return (f"the physics rate {physics_hz:g} Hz{physics_from} must be a whole multiple of it (allowed: "
+            f"{physics_hz:g} Hz divided by a whole number, {lo:g}-{hi:g} Hz{shown})")
 
 
 SHIPPED_DIR = Path(__file__).parent  # the missions that come with the package

@@ -459,16 +459,16 @@ def test_a_real_time_flight_is_not_sped_up(files, capsys):
 
 def test_a_flags_value_is_named_as_given_not_as_the_files(files, capsys):
     """A link value from a flag that breaks a rule of the [link] table is named as the flag (``--burst 0.5``,
-    ``--stop-after`` below the stale age: test_a_guard_flag_that_clashes_is_named_as_the_flag), or, where the rule
-    needs the file's other keys (``--rate`` not dividing the physics rate), the message says what was laid over the
-    mission; until the thirty-third session each read as the file's own key, which the file did not have
-    (``--profile ''`` too). ``--blackout`` says its ranges; ``bsst report`` of a folder that is not there says so."""
+    ``--stop-after`` below the stale age: test_a_guard_flag_that_clashes_is_named_as_the_flag; ``--rate`` not
+    dividing the physics rate: test_a_rate_the_physics_rate_is_no_multiple_of_is_named_as_the_flag); until the
+    thirty-third session each read as the file's own key, which the file did not have (``--profile ''`` too).
+    ``--blackout`` says its ranges; ``bsst report`` of a folder that is not there says so."""
     line = _refused(capsys, ["sim", files.mission, "--burst", "0.5", "--out", files.out], "--burst")
     assert line.endswith("must be 0 (Bernoulli loss) or >= 1 packet, got 0.5"), line
     line = _refused(capsys, ["sim", files.mission, "--stop-after", "40", "--out", files.out], "--stop-after 40")
     assert line == "bsst: --stop-after 40: must be >= stale_ms = 50, got 40 (--stale-after sets stale_ms)", line
-    line = _refused(capsys, ["sim", files.mission, "--rate", "333", "--out", files.out], "rate_hz")
-    assert line.endswith("got 333 (with these laid over the mission: rate_hz = 333.0)"), line
+    line = _refused(capsys, ["sim", files.mission, "--rate", "333", "--out", files.out], "--rate 333")
+    assert line.startswith("bsst: --rate 333: the physics rate 1000 Hz must be a whole multiple of it"), line
     _refused(capsys, ["sim", files.mission, "--profile", "", "--out", files.out], "--profile ")  # not the file's
     line = _refused(capsys, ["sim", files.mission, "--blackout", "1000001:1"], "--blackout")
     assert "start in [0, 1e+06], duration in (0, 1e+06]" in line, line
@@ -527,6 +527,40 @@ def test_a_mission_files_own_guard_clash_names_its_key(tmp_path, capsys):
     with _guard():
         assert main(["sim", str(mission), "--compensation", "predict", "--out", str(tmp_path / "ok"),
                      "--no-plots"]) == 0
+
+
+RATE_CLASHES = [  # (the mission's own top-level keys, argv after the command's mission, what the line says after it)
+    ("", ["sim", "--rate", "333"], "the physics rate 1000 Hz must be a whole multiple of it (allowed: 1000 Hz divided "
+                                   "by a whole number, 50-1000 Hz; the whole ones 50, 100, 125, 200, 250, 500, 1000)"),
+    ("physics_hz = 1200\n", ["sitl", "--rate", "333", "--gcs", "none"],
+     "the physics rate 1200 Hz (M's physics_hz) must be a whole multiple of it (allowed: 1200 Hz divided by a whole "
+     "number, 50-1000 Hz; the whole ones 50, 60, 75, 80, 100, 120, 150, 200, 240, 300, 400, 600)"),
+    ("", ["vehicle", "--rate", "333"], "the physics rate 1000 Hz must be"),
+]
+
+
+@pytest.mark.parametrize(("own", "argv", "said"), RATE_CLASHES)
+def test_a_rate_the_physics_rate_is_no_multiple_of_is_named_as_the_flag(tmp_path, capsys, own, argv, said):
+    """``--rate 333`` where the physics rate (1000 Hz, or the file's physics_hz) is no whole multiple of it is
+    refused naming the flag, its value and the rates allowed (missions.mission.rate_problem, the loader's rule);
+    until the third wave's thirty-seventh session the line named the mission file's key ``rate_hz``, which the user
+    did not type, with the keys laid over it. Nothing is written; a rate that divides it flies, and the file's own
+    rate_hz is still the file's to name."""
+    mission = tmp_path / "m.toml"
+    mission.write_text(own + TINY)
+    out = tmp_path / "out"
+    extra = ["--no-plots", "--out", out] if argv[0] in ("sim", "sitl") else []
+    said = said.replace("(M's", f"({mission}'s")
+    line = _refused(capsys, [argv[0], mission, *argv[1:], *extra], said)
+    assert line.startswith(f"bsst: --rate 333: {said}"), line
+    assert "rate_hz" not in line and "laid over" not in line, line
+    assert not out.exists()
+    if argv[0] == "sim":
+        with _guard():
+            assert main(["sim", str(mission), "--rate", "250", "--no-plots", "--out", str(out)]) == 0
+        (tmp_path / "own.toml").write_text("rate_hz = 333\n" + TINY)
+        line = _refused(capsys, ["sim", tmp_path / "own.toml", "--out", tmp_path / "o2"], "rate_hz")
+        assert line.startswith(f"bsst: {tmp_path / 'own.toml'}: rate_hz: the physics rate 1000 Hz must"), line
 
 
 IDLE_FLAGS = [  # (argv after the command's mission, what the one line names): a flag that would change nothing

@@ -143,8 +143,8 @@ def refuse_idle_inputs(args: argparse.Namespace, mission: Any, laws: tuple[str, 
 
     noise, scheme = getattr(args, "noise", None), getattr(args, "discretization", None)
     own, source = _own_link(mission)
-    clash = guard_flag_refusal(args, own, source)  # (before the flight is prepared: it would name the file's key)
-    if clash:
+    clash = guard_flag_refusal(args, own, source) or _rate_flag_refusal(args, mission)  # (before the flight is
+    if clash:  # prepared: it would name the file's key)
         raise ConfigError(clash)
     unmet = unmet_mission_key(args, own, source, axes or {})
     if noise is None and scheme is None and unmet is None and not idle_flags_given(args):
@@ -174,23 +174,50 @@ def refuse_idle_inputs(args: argparse.Namespace, mission: Any, laws: tuple[str, 
         raise ConfigError(idle or unmet)
 
 
-def _own_link(mission: Any) -> tuple[Mapping[str, Any], str]:
-    """A mission's own ``[link]`` table (its files' paths made absolute) and its source, read without flying it: {}
-    for none (a bare vehicle), a plan file, or a file its loader will refuse (and name)."""
-    from bridge.link.model import absolute_link_paths  # lazy: start-up time
+def _rate_flag_refusal(args: argparse.Namespace, mission: Any) -> str | None:
+    """The line refusing ``--rate HZ`` that the mission's physics rate is no whole multiple of
+    (:func:`missions.mission.rate_problem`, the loader's rule), named as the flag; None, and None for a physics
+    rate the loader will refuse (and name)."""
+    from missions import Mission  # lazy: start-up time
+    from missions.mission import rate_problem  # lazy: start-up time
+
+    rate = getattr(args, "rate", None)
+    if rate is None:
+        return None
+    table, source = _own(mission)
+    physics = table.get("physics_hz", Mission.physics_hz)  # (the loader's default, a plan's and a bare vehicle's)
+    if isinstance(physics, bool) or not isinstance(physics, (int, float)) or not physics > 0:
+        return None
+    set_by = f" ({source}'s physics_hz)" if source and physics != Mission.physics_hz else ""  # (not the default)
+    why = rate_problem(rate, physics, set_by)
+    return None if why is None else f"--rate {rate:g}: {why}"
+
+
+def _own(mission: Any) -> tuple[Mapping[str, Any], str]:
+    """A mission's own top-level table as its file holds it (``link`` and ``physics_hz`` of a
+    :class:`missions.Mission`) and its source, read without flying it: {} for none (a bare vehicle), a plan file,
+    or a file its loader will refuse (and name)."""
     from missions import Mission  # lazy: start-up time
     from missions.mission import is_plan_file, mission_path  # lazy: start-up time
 
     if isinstance(mission, Mission):
-        return absolute_link_paths(mission.link, Path(mission.source).parent), mission.source
+        return {"link": mission.link, "physics_hz": mission.physics_hz}, mission.source
     if mission is None or is_plan_file(mission):
         return {}, ""
     path = mission_path(mission)  # (a shipped mission by name too)
     try:
-        link = load_toml(path).get("link", {})
+        return load_toml(path), str(path)
     except ConfigError:
         return {}, ""
-    return (absolute_link_paths(link, path.parent) if isinstance(link, Mapping) else {}), str(path)
+
+
+def _own_link(mission: Any) -> tuple[Mapping[str, Any], str]:
+    """A mission's own ``[link]`` table (its files' paths made absolute) and its source (:func:`_own`)."""
+    from bridge.link.model import absolute_link_paths  # lazy: start-up time
+
+    table, source = _own(mission)
+    link = table.get("link", {})
+    return (absolute_link_paths(link, Path(source).parent) if isinstance(link, Mapping) else {}), source
 
 
 def add_flight_options(p: argparse.ArgumentParser, vehicle: bool = True, optional_mission: bool = False) -> None:
