@@ -35,7 +35,7 @@ from missions.planfiles import MAX_ITEMS, PlanFile, read_plan_text
 from missions.rally import rally_dict, rally_from_plan, rally_from_table
 from missions.references import Reference, Setpoint, Sine, Step, Waypoints
 from missions.route import LIMIT_RANGES, Limits, least_duration_s, smooth_from_plan
-from missions.scatter import scattered_start
+from missions.scatter import fleet_scatter_problem, scattered_start
 from missions.steps import PlanBudget, StepCap
 from params import ConfigError, Table, load_toml, read_text_file, unreachable
 
@@ -119,9 +119,9 @@ class Mission:
         if not lo <= self.start_scatter_m <= hi:  # also refuses nan
             raise ConfigError(f"{self.source}: start.scatter_m: must be in [{lo:g}, {hi:g}] m; "
                               f"got {self.start_scatter_m!r}"[:300])
-        if self.start_scatter_m and self.vehicles:
-            raise ConfigError(f"{self.source}: start.scatter_m: a fleet's starts are its formation's ([[vehicles]], "
-                              "--vehicles): scatter the starts of a mission of one vehicle")
+        why = fleet_scatter_problem(self.start_scatter_m, "[[vehicles]], --vehicles" if self.vehicles else "")
+        if why is not None:
+            raise ConfigError(f"{self.source}: start.scatter_m: {why}")
         outside = (envelope_problem(self.trajectory, self.start, self.duration_s, self.start_scatter_m)
                    or ground_problem(self.trajectory, self.start, self.duration_s))
         if outside:

@@ -563,6 +563,28 @@ def test_a_rate_the_physics_rate_is_no_multiple_of_is_named_as_the_flag(tmp_path
         assert line.startswith(f"bsst: {tmp_path / 'own.toml'}: rate_hz: the physics rate 1000 Hz must"), line
 
 
+def test_a_scatter_for_a_fleet_is_named_as_the_flag(tmp_path, capsys):
+    """``--scatter M`` for a fleet (``--vehicles N``, or the mission's own ``[[vehicles]]``) is refused naming the
+    flag and what made the fleet (missions.scatter.fleet_scatter_problem, the mission's rule); until the third
+    wave's thirty-seventh session the line named the file's ``start.scatter_m``, with what was laid over it.
+    Nothing is written; the file's own scatter is still the file's to name."""
+    mission, out = tmp_path / "m.toml", tmp_path / "out"
+    mission.write_text(TINY)
+    line = _refused(capsys, ["sim", mission, "--scatter", "5", "--vehicles", "3", "--no-plots", "--out", out],
+                    "--scatter 5")
+    assert line == ("bsst: --scatter 5: a fleet's starts are its formation's (--vehicles 3): scatter the starts of "
+                    "a mission of one vehicle"), line
+    fleet = tmp_path / "fleet.toml"
+    fleet.write_text(TINY + "[[vehicles]]\nid = 1\n[[vehicles]]\nid = 2\nstart = [2.0, 0.0, 0.0, 0.0]\n")
+    line = _refused(capsys, ["sitl", fleet, "--scatter", "0.5", "--gcs", "none", "--out", out], "--scatter 0.5")
+    assert line.startswith(f"bsst: --scatter 0.5: a fleet's starts are its formation's ({fleet}'s [[vehicles]])")
+    assert not out.exists()
+    scattered = tmp_path / "scattered.toml"
+    scattered.write_text(TINY + "[start]\nscatter_m = 1.0\n")
+    line = _refused(capsys, ["sim", scattered, "--vehicles", "2", "--out", out], "start.scatter_m")
+    assert line.startswith(f"bsst: {scattered}: start.scatter_m: a fleet's starts are its formation's"), line
+
+
 IDLE_FLAGS = [  # (argv after the command's mission, what the one line names): a flag that would change nothing
     # --discretization where no law flown has a super-twisting step (docs/law.md; until the third wave's
     # thirty-seventh session it was taken, and summary.json said the scheme of a law that has none)

@@ -143,8 +143,9 @@ def refuse_idle_inputs(args: argparse.Namespace, mission: Any, laws: tuple[str, 
 
     noise, scheme = getattr(args, "noise", None), getattr(args, "discretization", None)
     own, source = _own_link(mission)
-    clash = guard_flag_refusal(args, own, source) or _rate_flag_refusal(args, mission)  # (before the flight is
-    if clash:  # prepared: it would name the file's key)
+    clash = (guard_flag_refusal(args, own, source) or _rate_flag_refusal(args, mission)
+             or _scatter_flag_refusal(args, mission))  # (before the flight is prepared: it would name the file's key)
+    if clash:
         raise ConfigError(clash)
     unmet = unmet_mission_key(args, own, source, axes or {})
     if noise is None and scheme is None and unmet is None and not idle_flags_given(args):
@@ -193,15 +194,29 @@ def _rate_flag_refusal(args: argparse.Namespace, mission: Any) -> str | None:
     return None if why is None else f"--rate {rate:g}: {why}"
 
 
+def _scatter_flag_refusal(args: argparse.Namespace, mission: Any) -> str | None:
+    """The line refusing ``--scatter M`` for a fleet (``--vehicles N``, or the mission's own ``[[vehicles]]``:
+    :func:`missions.scatter.fleet_scatter_problem`, the mission's rule), named as the flag; None."""
+    from missions.scatter import fleet_scatter_problem  # lazy: start-up time
+
+    scatter, n = getattr(args, "scatter", None), getattr(args, "vehicles", None)
+    if scatter is None:
+        return None
+    table, source = _own(mission)
+    fleet = f"--vehicles {n}" if isinstance(n, int) else f"{source}'s [[vehicles]]" if table.get("vehicles") else ""
+    why = fleet_scatter_problem(scatter, fleet)
+    return None if why is None else f"--scatter {scatter:g}: {why}"
+
+
 def _own(mission: Any) -> tuple[Mapping[str, Any], str]:
-    """A mission's own top-level table as its file holds it (``link`` and ``physics_hz`` of a
+    """A mission's own top-level table as its file holds it (``link``, ``physics_hz`` and ``vehicles`` of a
     :class:`missions.Mission`) and its source, read without flying it: {} for none (a bare vehicle), a plan file,
     or a file its loader will refuse (and name)."""
     from missions import Mission  # lazy: start-up time
     from missions.mission import is_plan_file, mission_path  # lazy: start-up time
 
     if isinstance(mission, Mission):
-        return {"link": mission.link, "physics_hz": mission.physics_hz}, mission.source
+        return {"link": mission.link, "physics_hz": mission.physics_hz, "vehicles": mission.vehicles}, mission.source
     if mission is None or is_plan_file(mission):
         return {}, ""
     path = mission_path(mission)  # (a shipped mission by name too)
