@@ -942,14 +942,6 @@ def _rally_points(*points: tuple[float, float]) -> list[Any]:
             for k, (x, y) in enumerate(points)]
 
 
-def _upload(gcs: GcsSocket, v: Vehicle, items: list[Any]) -> None:
-    """A ground station's upload of ``items`` (a fence's or rally points': their own mission type), accepted."""
-    gcs.exchange(v, M.MAVLink_mission_count_message(1, 1, len(items), items[0].mission_type), "MISSION_REQUEST_INT")
-    for it in items[:-1]:
-        gcs.exchange(v, it, "MISSION_REQUEST_INT")
-    assert gcs.exchange(v, items[-1], "MISSION_ACK").type == M.MAV_MISSION_ACCEPTED
-
-
 def _controller_downloads(ctl: GcsSocket, v: Vehicle, mission_type: int, n: int) -> None:
     """The controller's download (on its own link) of the ``n`` items of ``mission_type`` the vehicle holds."""
     ctl.exchange(v, M.MAVLink_mission_request_list_message(1, 1, mission_type), "MISSION_COUNT")
@@ -973,14 +965,14 @@ def _started_downloaded_armed(gcs: GcsSocket, ctl: GcsSocket, flight: Any, befor
     v = _vehicle_holding_the_small_plan(gcs, flight)
     try:
         for items in before:
-            _upload(gcs, v, items)
+            _upload_in_process(gcs, v, items)
         start = M.MAVLink_command_long_message(1, 1, M.MAV_CMD_MISSION_START, 0, 0, 0, 0, 0, 0, 0, 0)
         assert gcs.exchange(v, start, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
         for mtype in (M.MAV_MISSION_TYPE_FENCE, M.MAV_MISSION_TYPE_RALLY):
             _controller_downloads(ctl, v, mtype, sum(len(i) for i in before if i[0].mission_type == mtype))
         assert v.sim.fence_recorded
         for items in after:  # after the controller's download, before its arm
-            _upload(gcs, v, items)
+            _upload_in_process(gcs, v, items)
         controller = Sender(200, 191, "127.0.0.1", ctl.sock.getsockname()[1], "controller")
         assert v.commander.arm_disarm(1.0, 0.0, controller) == M.MAV_RESULT_ACCEPTED
     except BaseException:
@@ -1070,8 +1062,10 @@ def _jump_items() -> list[Any]:
 
 
 def _upload_in_process(gcs: GcsSocket, v: Vehicle, plan: str | list[Any]) -> None:
+    """A ground station's upload of a plan's items, or of ``plan``'s (a mission's, a fence's or rally points': their
+    own mission type), accepted."""
     items = _small_plan_items(target=(1, 1), plan=plan) if isinstance(plan, str) else plan
-    gcs.exchange(v, M.MAVLink_mission_count_message(1, 1, len(items), 0), "MISSION_REQUEST_INT")
+    gcs.exchange(v, M.MAVLink_mission_count_message(1, 1, len(items), items[0].mission_type), "MISSION_REQUEST_INT")
     for it in items[:-1]:
         gcs.exchange(v, it, "MISSION_REQUEST_INT")
     assert gcs.exchange(v, items[-1], "MISSION_ACK").type == M.MAV_MISSION_ACCEPTED
