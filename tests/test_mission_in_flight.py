@@ -324,6 +324,46 @@ def test_an_upload_after_the_mission_ended_in_hold_is_taken_while_armed_as_on_px
     assert "uploaded 3 items" in log and "disarmed" not in log, vehicle.lines[-20:]
 
 
+def test_a_start_in_the_air_after_the_mission_was_taken_over_is_told_to_land_not_that_it_flies(tmp_path):
+    """``bsst vehicle`` and ``bsst controller`` awaiting a mission on the wall clock: a ground station starts a
+    takeoff and a waypoint, then, up, switches the vehicle to HOLD (the controller's flight ends, taken over).
+    A MISSION_START then, armed in the air, is DENIED telling it to land and disarm (the mission flies no more:
+    ``MissionManager.flown``). Until the third wave's thirty-seventh session it said "the mission is flying" (its
+    start was remembered, and it had not completed)."""
+    settings = tmp_path / "sine.toml"
+    settings.write_text((MISSION_DIR / "sine.toml").read_text())
+    out = tmp_path / "run"
+    spec = ((M.MAV_CMD_NAV_TAKEOFF, HOME[0], 1.0), (M.MAV_CMD_NAV_WAYPOINT, HOME[0] + 180, 1.0))
+    items = [M.MAVLink_mission_item_int_message(0, 0, seq, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, c, 0, 1, 0.0, 0.0,
+                                                0.0, math.nan, lat, HOME[1], z, 0)
+             for seq, (c, lat, z) in enumerate(spec)]
+    hold = (4 << 16) | (3 << 24)
+    with instance_slot() as n:
+        vehicle = Proc.bsst("vehicle", str(settings), "--await-mission", "--realtime", "--instance", str(n),
+                            "--out", str(out), cwd=ROOT)
+        controller = gcs = None
+        try:
+            vehicle.wait_report(Ready, timeout=60)
+            gcs = _Gcs(n)
+            controller = Proc.bsst("controller", str(settings), "--await-mission", "--realtime", "--instance", str(n),
+                                   "--out", str(out), "--overwrite", cwd=ROOT)
+            controller.wait_report(Ready, timeout=60)
+            assert gcs.upload(items) == M.MAV_MISSION_ACCEPTED
+            assert gcs.start() == M.MAV_RESULT_ACCEPTED
+            gcs.recv("GLOBAL_POSITION_INT", 60, "GLOBAL_POSITION_INT.relative_alt > 500")  # its own mission, up
+            assert gcs.command(M.MAV_CMD_DO_SET_MODE, 1, 4, 3) == M.MAV_RESULT_ACCEPTED  # AUTO.LOITER: HOLD
+            gcs.recv("HEARTBEAT", 10, f"HEARTBEAT.get_srcComponent()==1 and HEARTBEAT.base_mode & 128 and "
+                                      f"HEARTBEAT.custom_mode=={hold}")
+            assert gcs.start() == M.MAV_RESULT_DENIED
+            assert "land and disarm" in gcs.joined_text("MISSION_START: armed in the air (HOLD)")
+        finally:
+            if gcs is not None:
+                gcs.c.close()
+            if controller is not None:
+                controller.stop()
+            vehicle.stop()
+
+
 def test_mission_current_says_no_mission_the_mission_mode_and_a_pause_as_px4_main():
     """MISSION_CURRENT as PX4 main sends it (mavlink_mission.cpp ``send_mission_current``), on a vehicle in this
     process awaiting a mission: without a mission it is sent too, total UINT16_MAX and NO_MISSION (it was not sent:

@@ -285,7 +285,6 @@ def merge_link_tables(base: Mapping[str, Any], over: Mapping[str, Any]) -> dict[
     return out
 
 
-
 def unmet_key(table: Mapping[str, Any], given: Iterable[str] = ()) -> tuple[str, str] | None:
     """The first key of :data:`NEEDS` a ``[link]`` table gives (``burst_len`` in ``[link]``, for both directions, or
     ``up.burst_len``) whose need no one gives for a direction it acts on: not the table (``[link]`` or that direction's

@@ -361,7 +361,8 @@ class Session:
     def _handle(self, reports: list[tuple[Child, Report]]) -> None:
         """Reports read together from several children, acted on in the order things happened
         (:func:`~bridge.session.eventorder.in_cause_order`)."""
-        self._learn_origin()
+        if self.clock.origin_s is None and getattr(self, "joiner", None) is not None:
+            self._join()  # k0 may be in a row not joined yet: the mission's clock before these are stamped
         times = self.clock.stamps([(c.name == "vehicle", r.t if isinstance(r, Event) else -math.inf)
                                    for c, r in reports])
         for child, report, t in in_cause_order(reports, times, self._vehicle_said):
@@ -372,6 +373,7 @@ class Session:
         """Join the rows both halves have written (none before a ground station's mission is known)."""
         if self.mission_known:
             self.joiner.update()
+            self._learn_origin()
 
     def _joiner(self, flight: Flight) -> TraceJoiner:
         """The join of ``flight``'s halves, live (``trace.csv`` written as the flight goes) in real time and in a
@@ -422,13 +424,12 @@ class Session:
         self._note(kind, report.text, child.name, t, report.by, **typed_fields(report))
 
     def _learn_origin(self) -> None:
-        """The mission's clock (the trace's, the controller's) once its time 0, the vehicle's step k0, is known
-        (:mod:`bridge.record.missionclock`: what came before it is on the vehicle's clock until then)."""
-        if self.clock.origin_s is None and self.mission_known and getattr(self, "joiner", None) is not None:
-            self._join()  # k0 may be in a row not joined yet
-            if self.joiner.k0 is not None and (note := self.clock.learn(
-                    self.joiner.k0, self.flight.mission.rate_hz, len(self.events), self._vehicle_said)):
-                self._note("clock", note, "session", 0.0)
+        """The mission's clock (the trace's, the controller's) as soon as a join finds its time 0, the vehicle's step
+        k0 (:mod:`bridge.record.missionclock`: what came before it is on the vehicle's clock until then), so that no
+        event is stamped between the two clocks."""
+        if self.clock.origin_s is None and self.joiner.k0 is not None and (note := self.clock.learn(
+                self.joiner.k0, self.flight.mission.rate_hz, len(self.events), self._vehicle_said)):
+            self._note("clock", note, "session", 0.0)
 
     def _note(self, kind: str, text: str, source: str, t: float | None = None, by: Sender | None = None,
               **fields: Any) -> None:

@@ -256,8 +256,7 @@ class Commander:
     def _armed_start_refusal(self) -> str:
         """Why MISSION_START is refused armed (but in HOLD on the ground awaiting the start): in the air,
         :func:`~bridge.nodes.vehicle.mission.in_air_refusal`."""
-        flying = self.ports.missions is not None and self.ports.missions.started is not None \
-            and not self.ports.missions.completed
+        flying = self.ports.missions is not None and self.ports.missions.flown() is not None
         if not self.sim.plant.on_ground:  # (its own mission in flight: said so, not told to land and start it)
             return ("MISSION_START: the mission is flying (it flies whole, once, from its start)" if flying
                     else in_air_refusal("MISSION_START", self.sim.mode))

@@ -197,8 +197,8 @@ class MissionManager:
         runs (then at a later tick): the one thread it takes stays on the newest (an upload while one is checked
         waits for it)."""
         check = self._check
-        if not self.authority.cfg.await_mission or not self.mission.items:
-            return
+        if not self.authority.cfg.await_mission or not self.mission.items or self.flown() is not None:
+            return  # (flying it: no start to check, and a plan's timing takes the step loop's core; a later tick)
         held = self._held()
         if check is not None and (check.of(held) or check.running()):
             return

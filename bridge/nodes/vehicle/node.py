@@ -306,11 +306,12 @@ class Vehicle:
             self.rows.free_running(k, X, self.sim, self.actuation, self.targets.applied, self.odometry.sent_at, now,
                                    self._estimate)
         self._n = n0
+        hold_arms = self.cfg.clock == "lockstep"
 
         def deliver(_t: float) -> None:
             # called before each physics step: wait for its wall time, taking targets meanwhile
             if self._n > n0:
-                self._wait_until(self.pace.due(self._n), hold_arms=self.cfg.clock == "lockstep")
+                self._wait_until(self.pace.due(self._n), hold_arms=hold_arms)
             self._n += 1
 
         self.sim.advance(deliver)
