@@ -13,10 +13,11 @@ characters). Every wait is on a message or a process with a deadline.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -248,6 +249,38 @@ def test_do_set_mission_current_is_answered_as_px4_before_the_start_and_refused_
     assert not any("current item 2" in t for t in texts), texts
 
 
+def _short_hop() -> list[Any]:
+    """A takeoff to 1 m and a waypoint 2 m north (MISSION_ITEM_INT): 6.5 s on the wall clock (10 m at 3 m took
+    9.2 s); what the tests flying it check is what the vehicle does after, not the flight."""
+    spec = ((M.MAV_CMD_NAV_TAKEOFF, HOME[0], 1.0), (M.MAV_CMD_NAV_WAYPOINT, HOME[0] + 180, 1.0))
+    return [M.MAVLink_mission_item_int_message(0, 0, seq, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, c, 0, 1, 0.0, 0.0,
+                                               0.0, math.nan, lat, HOME[1], z, 0)
+            for seq, (c, lat, z) in enumerate(spec)]
+
+
+@contextlib.contextmanager
+def _awaiting_on_the_wall_clock(settings: Path, out: Path) -> Iterator[tuple[_Gcs, Any, Any]]:
+    """``bsst vehicle`` and ``bsst controller`` of ``settings`` awaiting a mission in real time, and a ground
+    station on the vehicle's instance: (the ground station, the controller, the vehicle), all stopped after."""
+    with instance_slot() as n:
+        vehicle = Proc.bsst("vehicle", str(settings), "--await-mission", "--realtime", "--instance", str(n),
+                            "--out", str(out), cwd=ROOT)
+        controller = gcs = None
+        try:
+            vehicle.wait_report(Ready, timeout=60)
+            gcs = _Gcs(n)
+            controller = Proc.bsst("controller", str(settings), "--await-mission", "--realtime", "--instance", str(n),
+                                   "--out", str(out), "--overwrite", cwd=ROOT)
+            controller.wait_report(Ready, timeout=60)
+            yield gcs, controller, vehicle
+        finally:
+            if gcs is not None:
+                gcs.c.close()
+            if controller is not None:
+                controller.stop()
+            vehicle.stop()
+
+
 def test_an_upload_after_the_mission_ended_in_hold_is_taken_while_armed_as_on_px4(tmp_path):
     """``bsst vehicle`` and ``bsst controller`` awaiting a mission on the wall clock, the mission's end action HOLD:
     a ground station uploads a takeoff and a waypoint and starts them; the controller flies them, hands the vehicle
@@ -261,63 +294,42 @@ def test_an_upload_after_the_mission_ended_in_hold_is_taken_while_armed_as_on_px
     settings = tmp_path / "hold.toml"
     settings.write_text((MISSION_DIR / "sine.toml").read_text() + '\n[end]\naction = "hold"\n')
     out = tmp_path / "run"
-    # a takeoff to 1 m and a waypoint 2 m north: 6.5 s on the wall clock (10 m at 3 m took 9.2 s); what is checked
-    # is what the vehicle does once the mission has ended, not the flight
-    north = HOME[0] + 180
-    spec = ((M.MAV_CMD_NAV_TAKEOFF, HOME[0], 1.0), (M.MAV_CMD_NAV_WAYPOINT, north, 1.0))
-    items = [M.MAVLink_mission_item_int_message(0, 0, seq, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, c, 0, 1, 0.0, 0.0,
-                                                0.0, math.nan, lat, HOME[1], z, 0)
-             for seq, (c, lat, z) in enumerate(spec)]
+    items = _short_hop()
 
     def spec_of(it: Any) -> tuple[Any, ...]:  # an item's fields after target and seq
         return (it.frame, it.command, it.current, it.autocontinue, it.param1, it.param2, it.param3, it.param4, it.x,
                 it.y, it.z, it.mission_type)
     hold = (4 << 16) | (3 << 24)
-    with instance_slot() as n:
-        vehicle = Proc.bsst("vehicle", str(settings), "--await-mission", "--realtime", "--instance", str(n),
-                            "--out", str(out), cwd=ROOT)
-        controller = gcs = None
-        try:
-            vehicle.wait_report(Ready, timeout=60)
-            gcs = _Gcs(n)
-            controller = Proc.bsst("controller", str(settings), "--await-mission", "--realtime", "--instance", str(n),
-                                   "--out", str(out), "--overwrite", cwd=ROOT)
-            controller.wait_report(Ready, timeout=60)
-            jump = M.MAVLink_mission_item_int_message(0, 0, 1, M.MAV_FRAME_MISSION, M.MAV_CMD_DO_JUMP, 0, 1, 0.0,
-                                                      1.0, 0.0, 0.0, 0, 0, 0.0, 0)
-            last = M.MAVLink_mission_item_int_message(0, 0, 2, *spec_of(items[1]))
-            assert gcs.upload([items[0], jump, last]) == M.MAV_MISSION_ACCEPTED  # PX4 takes DO_JUMP
-            assert gcs.start() == M.MAV_RESULT_DENIED
-            said = gcs.joined_text("MISSION_START: the mission cannot be flown")
-            assert gcs.upload(items) == M.MAV_MISSION_ACCEPTED
-            assert gcs.command(M.MAV_CMD_MISSION_START, math.nan) == M.MAV_RESULT_DENIED  # PX4: not finite
-            assert "got first item nan" in gcs.joined_text("MISSION_START: only from item 0")
-            assert gcs.start() == M.MAV_RESULT_ACCEPTED
-            gcs.recv("GLOBAL_POSITION_INT", 60, "GLOBAL_POSITION_INT.relative_alt > 500")  # its own mission, up
-            assert gcs.start() == M.MAV_RESULT_DENIED  # (it told the ground station to land and start it)
-            assert "flies whole, once" in gcs.joined_text("MISSION_START: the mission is flying")
-            assert controller.p.wait(timeout=120) == 0, "\n".join(controller.lines[-20:])
-            gcs.recv("HEARTBEAT", 10, f"HEARTBEAT.get_srcComponent()==1 and HEARTBEAT.base_mode & 128 and "
-                                      f"HEARTBEAT.custom_mode=={hold}")
-            gcs.recv("MISSION_CURRENT", 5, f"MISSION_CURRENT.mission_state=={M.MISSION_STATE_COMPLETE}")
-            assert gcs.start() == M.MAV_RESULT_DENIED  # PX4 flies it on; the controller is gone
-            assert "land and disarm" in gcs.joined_text("MISSION_START: armed in the air (HOLD)")
-            # AUTO.MISSION: once ACCEPTED, nothing done; a mode that cannot run now is PX4's TEMPORARILY_REJECTED
-            assert gcs.command(M.MAV_CMD_DO_SET_MODE, 1, 4, 4) == M.MAV_RESULT_TEMPORARILY_REJECTED
-            assert "land and disarm" in gcs.joined_text("mode MISSION: armed in the air (HOLD)")  # nothing done
-            assert gcs.upload(_items()) == M.MAV_MISSION_ACCEPTED
-            gcs.recv("MISSION_CURRENT", 5, f"MISSION_CURRENT.total==3 and "
-                                           f"MISSION_CURRENT.mission_state=={M.MISSION_STATE_NOT_STARTED}")
-            assert gcs.command(M.MAV_CMD_DO_SET_MISSION_CURRENT, 2) == M.MAV_RESULT_ACCEPTED
-            gcs.recv("MISSION_CURRENT", cond="MISSION_CURRENT.seq==2")
-            gcs.recv("HEARTBEAT", 5, f"HEARTBEAT.get_srcComponent()==1 and HEARTBEAT.base_mode & 128 and "
-                                     f"HEARTBEAT.custom_mode=={hold}")  # still holding, armed
-        finally:
-            if gcs is not None:
-                gcs.c.close()
-            if controller is not None:
-                controller.stop()
-            vehicle.stop()
+    with _awaiting_on_the_wall_clock(settings, out) as (gcs, controller, vehicle):
+        jump = M.MAVLink_mission_item_int_message(0, 0, 1, M.MAV_FRAME_MISSION, M.MAV_CMD_DO_JUMP, 0, 1, 0.0,
+                                                  1.0, 0.0, 0.0, 0, 0, 0.0, 0)
+        last = M.MAVLink_mission_item_int_message(0, 0, 2, *spec_of(items[1]))
+        assert gcs.upload([items[0], jump, last]) == M.MAV_MISSION_ACCEPTED  # PX4 takes DO_JUMP
+        assert gcs.start() == M.MAV_RESULT_DENIED
+        said = gcs.joined_text("MISSION_START: the mission cannot be flown")
+        assert gcs.upload(items) == M.MAV_MISSION_ACCEPTED
+        assert gcs.command(M.MAV_CMD_MISSION_START, math.nan) == M.MAV_RESULT_DENIED  # PX4: not finite
+        assert "got first item nan" in gcs.joined_text("MISSION_START: only from item 0")
+        assert gcs.start() == M.MAV_RESULT_ACCEPTED
+        gcs.recv("GLOBAL_POSITION_INT", 60, "GLOBAL_POSITION_INT.relative_alt > 500")  # its own mission, up
+        assert gcs.start() == M.MAV_RESULT_DENIED  # (it told the ground station to land and start it)
+        assert "flies whole, once" in gcs.joined_text("MISSION_START: the mission is flying")
+        assert controller.p.wait(timeout=120) == 0, "\n".join(controller.lines[-20:])
+        gcs.recv("HEARTBEAT", 10, f"HEARTBEAT.get_srcComponent()==1 and HEARTBEAT.base_mode & 128 and "
+                                  f"HEARTBEAT.custom_mode=={hold}")
+        gcs.recv("MISSION_CURRENT", 5, f"MISSION_CURRENT.mission_state=={M.MISSION_STATE_COMPLETE}")
+        assert gcs.start() == M.MAV_RESULT_DENIED  # PX4 flies it on; the controller is gone
+        assert "land and disarm" in gcs.joined_text("MISSION_START: armed in the air (HOLD)")
+        # AUTO.MISSION: once ACCEPTED, nothing done; a mode that cannot run now is PX4's TEMPORARILY_REJECTED
+        assert gcs.command(M.MAV_CMD_DO_SET_MODE, 1, 4, 4) == M.MAV_RESULT_TEMPORARILY_REJECTED
+        assert "land and disarm" in gcs.joined_text("mode MISSION: armed in the air (HOLD)")  # nothing done
+        assert gcs.upload(_items()) == M.MAV_MISSION_ACCEPTED
+        gcs.recv("MISSION_CURRENT", 5, f"MISSION_CURRENT.total==3 and "
+                                       f"MISSION_CURRENT.mission_state=={M.MISSION_STATE_NOT_STARTED}")
+        assert gcs.command(M.MAV_CMD_DO_SET_MISSION_CURRENT, 2) == M.MAV_RESULT_ACCEPTED
+        gcs.recv("MISSION_CURRENT", cond="MISSION_CURRENT.seq==2")
+        gcs.recv("HEARTBEAT", 5, f"HEARTBEAT.get_srcComponent()==1 and HEARTBEAT.base_mode & 128 and "
+                                 f"HEARTBEAT.custom_mode=={hold}")  # still holding, armed
     assert "item 1 (DO_JUMP (177)): not supported" in said and said.endswith("DO_CHANGE_SPEED (178)"), said
     assert len(said) > 200, said
     log = "\n".join(vehicle.lines)
@@ -333,35 +345,16 @@ def test_a_start_in_the_air_after_the_mission_was_taken_over_is_told_to_land_not
     settings = tmp_path / "sine.toml"
     settings.write_text((MISSION_DIR / "sine.toml").read_text())
     out = tmp_path / "run"
-    spec = ((M.MAV_CMD_NAV_TAKEOFF, HOME[0], 1.0), (M.MAV_CMD_NAV_WAYPOINT, HOME[0] + 180, 1.0))
-    items = [M.MAVLink_mission_item_int_message(0, 0, seq, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, c, 0, 1, 0.0, 0.0,
-                                                0.0, math.nan, lat, HOME[1], z, 0)
-             for seq, (c, lat, z) in enumerate(spec)]
     hold = (4 << 16) | (3 << 24)
-    with instance_slot() as n:
-        vehicle = Proc.bsst("vehicle", str(settings), "--await-mission", "--realtime", "--instance", str(n),
-                            "--out", str(out), cwd=ROOT)
-        controller = gcs = None
-        try:
-            vehicle.wait_report(Ready, timeout=60)
-            gcs = _Gcs(n)
-            controller = Proc.bsst("controller", str(settings), "--await-mission", "--realtime", "--instance", str(n),
-                                   "--out", str(out), "--overwrite", cwd=ROOT)
-            controller.wait_report(Ready, timeout=60)
-            assert gcs.upload(items) == M.MAV_MISSION_ACCEPTED
-            assert gcs.start() == M.MAV_RESULT_ACCEPTED
-            gcs.recv("GLOBAL_POSITION_INT", 60, "GLOBAL_POSITION_INT.relative_alt > 500")  # its own mission, up
-            assert gcs.command(M.MAV_CMD_DO_SET_MODE, 1, 4, 3) == M.MAV_RESULT_ACCEPTED  # AUTO.LOITER: HOLD
-            gcs.recv("HEARTBEAT", 10, f"HEARTBEAT.get_srcComponent()==1 and HEARTBEAT.base_mode & 128 and "
-                                      f"HEARTBEAT.custom_mode=={hold}")
-            assert gcs.start() == M.MAV_RESULT_DENIED
-            assert "land and disarm" in gcs.joined_text("MISSION_START: armed in the air (HOLD)")
-        finally:
-            if gcs is not None:
-                gcs.c.close()
-            if controller is not None:
-                controller.stop()
-            vehicle.stop()
+    with _awaiting_on_the_wall_clock(settings, out) as (gcs, controller, vehicle):
+        assert gcs.upload(_short_hop()) == M.MAV_MISSION_ACCEPTED
+        assert gcs.start() == M.MAV_RESULT_ACCEPTED
+        gcs.recv("GLOBAL_POSITION_INT", 60, "GLOBAL_POSITION_INT.relative_alt > 500")  # its own mission, up
+        assert gcs.command(M.MAV_CMD_DO_SET_MODE, 1, 4, 3) == M.MAV_RESULT_ACCEPTED  # AUTO.LOITER: HOLD
+        gcs.recv("HEARTBEAT", 10, f"HEARTBEAT.get_srcComponent()==1 and HEARTBEAT.base_mode & 128 and "
+                                  f"HEARTBEAT.custom_mode=={hold}")
+        assert gcs.start() == M.MAV_RESULT_DENIED
+        assert "land and disarm" in gcs.joined_text("MISSION_START: armed in the air (HOLD)")
 
 
 def test_mission_current_says_no_mission_the_mission_mode_and_a_pause_as_px4_main():
