@@ -13,11 +13,14 @@ the same vehicle: tests/test_ground_stations.py.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
 import struct
 import subprocess
+from collections.abc import Callable, Iterator
+from typing import Any
 
 import numpy as np
 import pytest
@@ -56,6 +59,7 @@ from bridge.session import instance_slot, sitl
 from missions import Mission, Sine
 from params import ConfigError
 from tests.sitlkit import ENV, ROOT, Bsst, Proc, clean_exit, run_bsst
+from tests.test_await_mission import _small_plan_items, _upload
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -134,6 +138,7 @@ def test_px4_modes_decode_and_others_are_named_when_refused():
     mode, why = requested_mode(29, 4, 7)
     assert mode is None and why == ("mode RTGS: not flown here; OFFBOARD, HOLD, LAND, TAKEOFF, MISSION, RTL are "
                                     "flown here")  # (it ended "... RTL are")
+    assert requested_mode(1, 4, 0) == ("mission", "")  # AUTO without a sub mode, as PX4's commander reads it
     assert requested_mode(0, 4, 3)[0] is None  # no CUSTOM_MODE_ENABLED
     assert requested_mode(29, math.nan, 3)[0] is None
     assert shown_name((4 << 16) | (2 << 24)) == "TAKEOFF"
@@ -345,6 +350,49 @@ def test_modes_takeoff_hold_land_over_udp(tmp_path):
     assert not any("disarmed: armed in it next" in s for s in v.events())  # HOLD in HOLD: no event
 
 
+HOLD_MODE, MISSION_MODE = (4 << 16) | (3 << 24), (4 << 16) | (4 << 24)  # custom_mode: AUTO.LOITER, AUTO.MISSION
+
+
+@contextlib.contextmanager
+def _awaiting_vehicle(tmp_path) -> Iterator[tuple[Any, Callable[..., tuple[int, str]]]]:
+    """``bsst vehicle --await-mission`` holding the small plan a pymavlink ground station uploaded, disarmed in HOLD:
+    the ground station and its ``command(cmd, *params)``: (COMMAND_ACK's result, the STATUSTEXT after a refusal)."""
+    with instance_slot() as n:
+        gcs = _gcs(n)
+        v = Proc.bsst("vehicle", "--await-mission", "--instance", str(n), "--out", str(tmp_path))
+        try:
+            v.wait_report(Ready)
+            gcs.wait_heartbeat(timeout=20)
+            tgt = (gcs.target_system, gcs.target_component)
+            _upload(gcs, tgt, _small_plan_items())
+
+            def command(cmd: int, *p: float) -> tuple[int, str]:
+                gcs.mav.command_long_send(*tgt, cmd, 0, *p, *[0.0] * (7 - len(p)))
+                result = _recv(gcs, "COMMAND_ACK", f"COMMAND_ACK.command=={cmd}").result
+                return result, "" if result == M.MAV_RESULT_ACCEPTED else _recv(gcs, "STATUSTEXT").text
+
+            yield gcs, command
+        finally:
+            assert v.stop() == 0
+            gcs.close()
+
+
+def test_auto_with_sub_mode_0_is_auto_mission_as_px4s(tmp_path):
+    """PX4's commander takes main mode AUTO with sub mode 0 as AUTO.MISSION (Commander.cpp, handle_command,
+    VEHICLE_CMD_DO_SET_MODE; SET_MODE is the same command there, mavlink_receiver.cpp handle_message_set_mode): a
+    vehicle awaiting a mission, holding one, selects MISSION on DO_SET_MODE 1/4/0 and on SET_MODE AUTO sub 0, each
+    ACCEPTED and shown in its HEARTBEAT (HOLD between). Until the third wave's thirty-eighth session both were DENIED
+    (`mode main 4 sub 0: not flown here`)."""
+    with _awaiting_vehicle(tmp_path) as (gcs, command):
+        assert command(M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4, 0) == (M.MAV_RESULT_ACCEPTED, "")
+        _recv(gcs, "HEARTBEAT", f"HEARTBEAT.custom_mode=={MISSION_MODE}")
+        assert command(M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4, 3) == (M.MAV_RESULT_ACCEPTED, "")
+        _recv(gcs, "HEARTBEAT", f"HEARTBEAT.custom_mode=={HOLD_MODE}")
+        gcs.mav.set_mode_send(gcs.target_system, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4 << 16)  # AUTO, sub mode 0
+        assert _recv(gcs, "COMMAND_ACK", "COMMAND_ACK.command==176").result == M.MAV_RESULT_ACCEPTED
+        _recv(gcs, "HEARTBEAT", f"HEARTBEAT.custom_mode=={MISSION_MODE}")
+
+
 # -- whole flights --------------------------------------------------------------------------------
 CHANGES = [ParamChange(2.0, "COM_OF_LOSS_T", 0.3), ParamChange(4.0, "COM_OBL_ACT", 1),
            ParamChange(4.0, "COM_FAIL_ACT_T", 1.0), ParamChange(4.0, "MPC_LAND_SPEED", 2.0)]
@@ -352,6 +400,7 @@ CHANGES = [ParamChange(2.0, "COM_OF_LOSS_T", 0.3), ParamChange(4.0, "COM_OBL_ACT
 # whole flight is lockstep (at 9 s the vehicle left lockstep, the session waiting on the wall clock for its disarm)
 SHORT = Mission(Sine(), duration_s=10.5, name="short")
 EARLY_BLACKOUT = {"blackouts": [[6.0, 2.0]]}
+
 
 
 def test_a_parameter_set_at_a_mission_time_is_reproducible_in_lockstep_and_matches_offline(tmp_path):

@@ -89,13 +89,16 @@ def mode_name(mode: str) -> str:
 
 def requested_mode(base: float, main: float, sub: float) -> tuple[str | None, str]:
     """The mode DO_SET_MODE asks for (param1 base mode with MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
-    param2 PX4 main mode, param3 sub mode; whole numbers): (mode, "") or (None, why not)."""
+    param2 PX4 main mode, param3 sub mode, AUTO with sub mode 0 MISSION as PX4's commander reads it; whole numbers):
+    (mode, "") or (None, why not)."""
     nums = (base, main, sub)
     if not all(math.isfinite(v) and v == int(v) and 0 <= v <= 255 for v in nums):
         return None, "DO_SET_MODE: base, main and sub mode must be whole numbers in [0, 255]"
     if not int(base) & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
         return None, "DO_SET_MODE: only PX4 custom modes (base mode with CUSTOM_MODE_ENABLED)"
     code = (int(main), int(sub) if int(main) == MAIN_AUTO else 0)
+    if code == (MAIN_AUTO, 0):  # PX4: AUTO without a sub mode is Mission
+        code = (MAIN_AUTO, SUB_MISSION)
     mode = _BY_CODE.get(code)
     if mode is None:
         name = _PX4_NAMES.get(code, f"main {code[0]} sub {code[1]}")
