@@ -138,8 +138,9 @@ def test_px4_modes_decode_and_others_are_named_when_refused():
     mode, why = requested_mode(29, 4, 7)
     assert mode is None and why == ("mode RTGS: not flown here; OFFBOARD, HOLD, LAND, TAKEOFF, MISSION, RTL are "
                                     "flown here")  # (it ended "... RTL are")
-    assert requested_mode(1, 4, 0) == ("mission", "")  # AUTO without a sub mode, as PX4's commander reads it
-    assert requested_mode(0, 4, 3)[0] is None  # no CUSTOM_MODE_ENABLED
+    assert requested_mode(1, 4, 0) == requested_mode(4, 0, 0) == ("mission", "")  # AUTO, no sub mode; base AUTO
+    assert requested_mode(0, 4, 3) == (None, "")  # no CUSTOM_MODE_ENABLED, no AUTO or MANUAL_INPUT: no mode asked
+    assert requested_mode(64 | 8, 0, 0)[1].startswith("mode POSCTL: not flown here")  # base MANUAL_INPUT, GUIDED
     assert requested_mode(29, math.nan, 3)[0] is None
     assert shown_name((4 << 16) | (2 << 24)) == "TAKEOFF"
 
@@ -392,6 +393,33 @@ def test_auto_with_sub_mode_0_is_auto_mission_as_px4s(tmp_path):
         assert _recv(gcs, "COMMAND_ACK", "COMMAND_ACK.command==176").result == M.MAV_RESULT_ACCEPTED
         _recv(gcs, "HEARTBEAT", f"HEARTBEAT.custom_mode=={MISSION_MODE}")
 
+
+def test_a_base_mode_without_custom_mode_is_read_as_px4s_commander_reads_it(tmp_path):
+    """DO_SET_MODE and SET_MODE with CUSTOM_MODE_ENABLED clear, as PX4's commander's "use base mode" branch reads them
+    (Commander.cpp, handle_command, VEHICLE_CMD_DO_SET_MODE): AUTO_ENABLED is AUTO.MISSION, ACCEPTED on a vehicle
+    awaiting a mission and holding one; MANUAL_INPUT_ENABLED is POSCTL (with GUIDED), STABILIZED (with STABILIZE) or
+    MANUAL, none flown here, so DENIED naming it, as DO_SET_MODE of that mode is; neither flag asks for no mode:
+    ACCEPTED, nothing changes (AUTO.MISSION stays selected). Until the third wave's thirty-eighth session every one
+    was DENIED (`only PX4 custom modes`)."""
+    manual = M.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
+    with _awaiting_vehicle(tmp_path) as (gcs, command):
+        for base, name in ((manual | M.MAV_MODE_FLAG_GUIDED_ENABLED, "POSCTL"),
+                           (manual | M.MAV_MODE_FLAG_STABILIZE_ENABLED, "STABILIZED"), (manual, "MANUAL")):
+            result, said = command(M.MAV_CMD_DO_SET_MODE, base)
+            assert result == M.MAV_RESULT_DENIED and said.startswith(f"mode {name}: not flown here"), (base, said)
+        auto = M.MAV_MODE_FLAG_AUTO_ENABLED | M.MAV_MODE_FLAG_GUIDED_ENABLED | M.MAV_MODE_FLAG_STABILIZE_ENABLED
+        assert command(M.MAV_CMD_DO_SET_MODE, auto) == (M.MAV_RESULT_ACCEPTED, "")
+        _recv(gcs, "HEARTBEAT", f"HEARTBEAT.custom_mode=={MISSION_MODE}")
+        assert command(M.MAV_CMD_DO_SET_MODE, 0, 4, 3) == (M.MAV_RESULT_ACCEPTED, "")  # no mode asked: MISSION stays
+        assert _recv(gcs, "HEARTBEAT").custom_mode == MISSION_MODE  # (sent after that answer)
+        gcs.mav.set_mode_send(gcs.target_system, 0, HOLD_MODE)  # the same as SET_MODE
+        assert _recv(gcs, "COMMAND_ACK", "COMMAND_ACK.command==176").result == M.MAV_RESULT_ACCEPTED
+        assert _recv(gcs, "HEARTBEAT").custom_mode == MISSION_MODE
+        assert command(M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4, 3) == (M.MAV_RESULT_ACCEPTED, "")
+        _recv(gcs, "HEARTBEAT", f"HEARTBEAT.custom_mode=={HOLD_MODE}")
+        gcs.mav.set_mode_send(gcs.target_system, M.MAV_MODE_FLAG_AUTO_ENABLED, 0)
+        assert _recv(gcs, "COMMAND_ACK", "COMMAND_ACK.command==176").result == M.MAV_RESULT_ACCEPTED
+        _recv(gcs, "HEARTBEAT", f"HEARTBEAT.custom_mode=={MISSION_MODE}")
 
 # -- whole flights --------------------------------------------------------------------------------
 CHANGES = [ParamChange(2.0, "COM_OF_LOSS_T", 0.3), ParamChange(4.0, "COM_OBL_ACT", 1),

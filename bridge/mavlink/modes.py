@@ -1,10 +1,10 @@
 """Flight modes and parameter values in PX4's encoding (docs/ground-station.md): bytes, no sockets.
 
 In:  the vehicle's mode (:mod:`bridge.autopilot.simvehicle`: offboard, hold, land, takeoff, failsafe, landed) and
-     the target its on-board controller flies; DO_SET_MODE's parameters and SET_MODE's ``custom_mode``;
-     a parameter's value and MAVLink type
+     the target its on-board controller flies; DO_SET_MODE's parameters and SET_MODE's ``base_mode`` and
+     ``custom_mode``; a parameter's value and MAVLink type
 Out: HEARTBEAT's ``base_mode`` and ``custom_mode`` (PX4's: main mode in bits 16-23, sub mode in
-     bits 24-31, px4_custom_mode.h), the mode a ground station asked for (or why not), PARAM_VALUE's
+     bits 24-31, px4_custom_mode.h), the mode a ground station asked for (or why not, or none), PARAM_VALUE's
      ``param_value`` float for a value and the value a PARAM_SET's float carries
 
 With ``MAV_AUTOPILOT_PX4`` in the heartbeat, MAVProxy, MAVSDK and QGroundControl read
@@ -26,8 +26,10 @@ from bridge.autopilot.modes import TERMINATION
 from bridge.autopilot.simvehicle import FAILSAFE, HOLD, LAND, LANDED, OFFBOARD, RTL, TAKEOFF
 
 MAIN_MANUAL = 1  # PX4_CUSTOM_MAIN_MODE_MANUAL: what PX4's get_px4_custom_mode gives NAVIGATION_STATE_TERMINATION
+MAIN_POSCTL = 3  # PX4_CUSTOM_MAIN_MODE_POSCTL (not flown here: named when refused)
 MAIN_AUTO = 4  # PX4_CUSTOM_MAIN_MODE_AUTO
 MAIN_OFFBOARD = 6  # PX4_CUSTOM_MAIN_MODE_OFFBOARD
+MAIN_STABILIZED = 7  # PX4_CUSTOM_MAIN_MODE_STABILIZED (not flown here: named when refused)
 SUB_TAKEOFF, SUB_LOITER, SUB_MISSION, SUB_RTL, SUB_LAND = 2, 3, 4, 5, 6  # PX4_CUSTOM_SUB_MODE_AUTO_*
 # AUTO.MISSION: a ground station's mission, flown by the offboard controller (bsst sitl --await-mission); shown,
 # selected and started here, never a SimVehicle mode (bridge/nodes/vehicle/mission.py)
@@ -88,15 +90,20 @@ def mode_name(mode: str) -> str:
 
 
 def requested_mode(base: float, main: float, sub: float) -> tuple[str | None, str]:
-    """The mode DO_SET_MODE asks for (param1 base mode with MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
-    param2 PX4 main mode, param3 sub mode, AUTO with sub mode 0 MISSION as PX4's commander reads it; whole numbers):
-    (mode, "") or (None, why not)."""
+    """The mode DO_SET_MODE asks for, read as PX4's commander reads it (Commander.cpp, handle_command's
+    VEHICLE_CMD_DO_SET_MODE): with MAV_MODE_FLAG_CUSTOM_MODE_ENABLED in param1 (the base mode), param2 PX4's main mode
+    and param3 its sub mode (AUTO with sub mode 0 is MISSION); without it, the base mode's flags
+    (:func:`_base_mode_code`). Whole numbers. (mode, ""), (None, why not), or (None, ""): no mode asked (PX4
+    answers ACCEPTED and changes nothing)."""
     nums = (base, main, sub)
     if not all(math.isfinite(v) and v == int(v) and 0 <= v <= 255 for v in nums):
         return None, "DO_SET_MODE: base, main and sub mode must be whole numbers in [0, 255]"
-    if not int(base) & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-        return None, "DO_SET_MODE: only PX4 custom modes (base mode with CUSTOM_MODE_ENABLED)"
-    code = (int(main), int(sub) if int(main) == MAIN_AUTO else 0)
+    if int(base) & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+        code: tuple[int, int] | None = (int(main), int(sub) if int(main) == MAIN_AUTO else 0)
+    else:
+        code = _base_mode_code(int(base))
+    if code is None:
+        return None, ""
     if code == (MAIN_AUTO, 0):  # PX4: AUTO without a sub mode is Mission
         code = (MAIN_AUTO, SUB_MISSION)
     mode = _BY_CODE.get(code)
@@ -104,6 +111,19 @@ def requested_mode(base: float, main: float, sub: float) -> tuple[str | None, st
         name = _PX4_NAMES.get(code, f"main {code[0]} sub {code[1]}")
         return None, f"mode {name}: not flown here; {', '.join(map(mode_name, PX4_MODES))} are flown here"
     return mode, ""
+
+
+def _base_mode_code(base: int) -> tuple[int, int] | None:
+    """The (main, sub) mode PX4 takes for a base mode without CUSTOM_MODE_ENABLED (its "use base mode" branch):
+    AUTO_ENABLED, MISSION; else MANUAL_INPUT_ENABLED, POSCTL with GUIDED_ENABLED, STABILIZED with STABILIZE_ENABLED,
+    else MANUAL; neither flag, None (no mode)."""
+    if base & mavlink.MAV_MODE_FLAG_AUTO_ENABLED:
+        return MAIN_AUTO, SUB_MISSION
+    if not base & mavlink.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED:
+        return None
+    if base & mavlink.MAV_MODE_FLAG_GUIDED_ENABLED:
+        return MAIN_POSCTL, 0
+    return (MAIN_STABILIZED, 0) if base & mavlink.MAV_MODE_FLAG_STABILIZE_ENABLED else (MAIN_MANUAL, 0)
 
 
 def requested_custom_mode(base: int, custom: int) -> tuple[str | None, str]:

@@ -274,9 +274,10 @@ class Commander:
         """A ground station's (or the controller's) mode change: made at the start of the next
         control period, or refused with a STATUSTEXT saying why: DENIED for a mode that is none of ours or a
         flight that is over for good (the plant ended it, or a termination), else TEMPORARILY_REJECTED, PX4's
-        answer to a mode that cannot run now (Commander.cpp, DO_SET_MODE and the mode commands)."""
+        answer to a mode that cannot run now (Commander.cpp, DO_SET_MODE and the mode commands). No mode asked
+        (``mode`` None, no ``why``: a base mode PX4 picks none for) is ACCEPTED and changes nothing, as PX4's."""
         if mode is None:
-            return self._refuse(why)
+            return self._refuse(why) if why else mavlink.MAV_RESULT_ACCEPTED
         if self.clock.halted:
             return self._refuse(f"mode {mode_name(mode)}: the plant ended the flight")
         terminated = self.actions.refusal(f"mode {mode_name(mode)}")
