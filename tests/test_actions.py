@@ -22,7 +22,7 @@ from bridge.session import instance_slot
 from missions import MISSION_DIR, Mission, Sine
 from tests.sitlkit import GcsSocket, Proc
 from tests.test_ground_stations import FAST, _mavsdk
-from tests.test_vehicle import _vehicle
+from tests.test_vehicle import _ack, _gcs, _vehicle
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -46,8 +46,8 @@ def _command(v: Vehicle, gcs: GcsSocket, cmd: int, *p: float) -> int:
 
 def test_flight_termination_stops_the_motors_latches_termination_and_refuses_arming_and_modes() -> None:
     """DO_FLIGHTTERMINATION as PX4 main's commander takes it: param1 0 DENIED (it cancels nothing), NaN DENIED (a bad
-    number), 2 (PX4's lockdown test) UNSUPPORTED, 1 DENIED while disarmed (it was ACCEPTED, and latched the vehicle
-    unarmable); armed, 1 ACCEPTED: a ``terminated`` event naming the
+    number), 1 or 2 DENIED while disarmed (1 was ACCEPTED, and latched the vehicle unarmable; 2 UNSUPPORTED, as PX4's
+    old lockdown test); armed, 1 ACCEPTED: a ``terminated`` event naming the
     ground station, the vehicle disarmed (motors off), its HEARTBEAT as PX4's in termination (base mode
     CUSTOM_MODE_ENABLED only, main mode MANUAL, MAV_STATE_FLIGHT_TERMINATION), its lockstep clock left for the wall
     clock (it falls on its own, said); from then on an arm, a mode and a cancel are DENIED, each saying why."""
@@ -55,10 +55,7 @@ def test_flight_termination_stops_the_motors_latches_termination_and_refuses_arm
     try:
         assert _command(v, gcs, M.MAV_CMD_DO_FLIGHTTERMINATION, 0.0) == M.MAV_RESULT_DENIED
         assert _command(v, gcs, M.MAV_CMD_DO_FLIGHTTERMINATION, math.nan) == M.MAV_RESULT_DENIED
-        assert _command(v, gcs, M.MAV_CMD_DO_FLIGHTTERMINATION, 2.0) == M.MAV_RESULT_UNSUPPORTED
-        said = gcs.exchange(v, M.MAVLink_command_long_message(1, 1, M.MAV_CMD_DO_FLIGHTTERMINATION, 0, 3, 0, 0, 0, 0,
-                                                              0, 0), "STATUSTEXT")  # the value sent, named
-        assert said.text.startswith("DO_FLIGHTTERMINATION: param1 3 (over 1.5: lo"), said.text
+        assert _command(v, gcs, M.MAV_CMD_DO_FLIGHTTERMINATION, 2.0) == M.MAV_RESULT_DENIED  # not armed, as 1
         assert not any(e.kind == "terminated" for e in v.sim.events) and v.rejected["bad_number"] == 1
         said = gcs.exchange(v, M.MAVLink_command_long_message(1, 1, M.MAV_CMD_DO_FLIGHTTERMINATION, 0, 1, 0, 0, 0, 0,
                                                               0, 0), "STATUSTEXT")
@@ -87,6 +84,31 @@ def test_flight_termination_stops_the_motors_latches_termination_and_refuses_arm
     finally:
         v.close()
         gcs.close()
+
+
+def test_flight_termination_over_1_5_terminates_as_px4_mains(tmp_path: Path) -> None:
+    """PX4 main's commander terminates on any param1 over 0.5 (Commander.cpp, handle_command,
+    VEHICLE_CMD_DO_FLIGHTTERMINATION: no lockdown test over 1.5 any more; its ``commander lockdown on`` sends 2):
+    ``bsst vehicle`` armed by a pymavlink ground station, param1 2 is ACCEPTED, the vehicle is disarmed and shows
+    PX4's termination (MANUAL, MAV_STATE_FLIGHT_TERMINATION), a ``terminated`` event naming the ground station. Until
+    the third wave's thirty-eighth session it was UNSUPPORTED and nothing happened."""
+    with instance_slot() as n:
+        gcs = _gcs(n)
+        v = _vehicle(n, tmp_path)
+        try:
+            gcs.wait_heartbeat(timeout=20)
+            tgt = (gcs.target_system, gcs.target_component)
+            gcs.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+            assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED  # armed in HOLD
+            gcs.mav.command_long_send(*tgt, M.MAV_CMD_DO_FLIGHTTERMINATION, 0, 2, 0, 0, 0, 0, 0, 0)
+            assert _ack(gcs, M.MAV_CMD_DO_FLIGHTTERMINATION).result == M.MAV_RESULT_ACCEPTED
+            hb = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=10,
+                                condition=f"HEARTBEAT.system_status=={M.MAV_STATE_FLIGHT_TERMINATION}")
+            assert hb is not None and (hb.base_mode, hb.custom_mode) == (M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 1 << 16)
+            v.wait_event(lambda s: s.startswith("terminated: flight termination: motors off") and "[by 255:190 " in s)
+        finally:
+            v.stop()
+            gcs.close()
 
 
 @pytest.mark.parametrize("cmd, p1", [(M.MAV_CMD_REQUEST_PROTOCOL_VERSION, 1), (M.MAV_CMD_REQUEST_MESSAGE, 300)])

@@ -2,7 +2,7 @@
 speed, termination, protocol version; and a ground station's DO_SET_MISSION_CURRENT (:mod:`.setcurrent`).
 
 In:  MAV_CMD_INJECT_FAILURE (:mod:`.injection`), MAV_CMD_DO_CHANGE_SPEED (param1 speed type, param2 m/s: > 0 sets,
-     else the default), MAV_CMD_DO_FLIGHTTERMINATION (param1: > 1.5 lockdown, > 0.5 terminate, else cancel),
+     else the default), MAV_CMD_DO_FLIGHTTERMINATION (param1: > 0.5 terminate, else DENIED),
      MAV_CMD_REQUEST_PROTOCOL_VERSION, MAV_CMD_DO_SET_MISSION_CURRENT (:mod:`.setcurrent`), from a sender with
      authority (:class:`~bridge.autopilot.vehicleevents.Sender`); the simulated vehicle and its step clock
 Out: the MAV_RESULT and why a command was refused (the commander's STATUSTEXT); an injection's events scheduled
@@ -31,8 +31,9 @@ DENIED; param1 0 (no cancel in PX4 main): DENIED. Here the motors stop in the sa
 period (the vehicle is disarmed, where PX4 keeps it armed with its outputs forced off: the same thrust, none), the
 vehicle falls on its own (a lockstep flight leaves the step clock: the vehicle's time runs on the wall clock), every
 later arm and mode change is DENIED, and the flight's outcome is ``terminated`` (exit 1; summary.json's ``ended_by``
-names who terminated it and how it came down). Not modelled: param1 > 1.5 (PX4's lockdown, a test that cuts the
-motors without terminating: UNSUPPORTED), the parachute. Until 2026-12-06 a termination of a vehicle on the ground,
+names who terminated it and how it came down). Any param1 over 0.5 terminates, 2 (PX4's ``commander lockdown on``)
+too: PX4 main's commander has no lockdown test over 1.5 any more (UNSUPPORTED here until the third wave's
+thirty-eighth session). Not modelled: the parachute. Until 2026-12-06 a termination of a vehicle on the ground,
 disarmed, was ACCEPTED and latched (it could not be armed again), and a cancel with nothing to cancel ACCEPTED, as
 PX4 before its UserModeIntention.
 
@@ -173,10 +174,7 @@ class Actions:
         if not math.isfinite(p1):
             self.reject("bad_number")
             return mavlink.MAV_RESULT_DENIED, "DO_FLIGHTTERMINATION: param1 must be 0 (cancel) or 1 (terminate)"
-        if p1 > 1.5:
-            return (mavlink.MAV_RESULT_UNSUPPORTED, f"DO_FLIGHTTERMINATION: param1 {p1:g} (over 1.5: lockdown, PX4's "
-                                                    "termination test) is not modelled; 1 terminates")
-        if p1 <= 0.5:  # PX4 main has no cancel: DENIED
+        if p1 <= 0.5:  # PX4 main has no cancel: DENIED (and, over 0.5, no lockdown test: every value terminates)
             return mavlink.MAV_RESULT_DENIED, ("DO_FLIGHTTERMINATION: the flight was terminated; it is not undone "
                                                "(PX4 leaves TERMINATION only by a reboot)" if self.terminated else
                                                "DO_FLIGHTTERMINATION: param1 0: nothing to cancel (PX4 cancels none)")
