@@ -13,6 +13,7 @@ import math
 import os
 import subprocess
 import sys
+import threading
 import time
 
 import pytest
@@ -21,10 +22,11 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.mavlink.endpoint import GCS_PORT, LINK_PORT
 from bridge.mavlink.receive import MAX_FRAME
-from bridge.nodes.report import Ready, Stats
+from bridge.nodes.report import Event, Ready, Stats
 from bridge.record.halves import read_half
 from bridge.session import instance_slot
-from tests.sitlkit import ENV, ROOT, MavProxy, Proc, run_bsst, script_result
+from tests.sitlkit import ENV, ROOT, MavProxy, Proc, run_bsst, script_result, shown
+from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -260,6 +262,100 @@ def test_answers_to_the_idle_and_the_armed_state_of_one_step_refuse_nothing(tmp_
     s = _two_answers_to_step_0(tmp_path, idle_copy=True)
     assert s["steps"] == 1 and s["accepted"] == 1
     assert s["answered_again"] == 1 and s["rejected"] == {}
+
+
+class _Answering(threading.Thread):
+    """A scripted controller on its own thread (a context manager: started on entry, stopped on exit): it answers
+    every state with :data:`HOVER_WIRE` stamped with that state's time (``answered``: their steps, at ``rate_hz``),
+    says a HEARTBEAT whenever no state came for 50 ms (a ground station's arm makes the vehicle learn its controller
+    afresh: the flight's is the first to speak) and keeps the results of the COMMAND_ACKs it gets (``acks``)."""
+
+    def __init__(self, ctl, sysid: int, rate_hz: float) -> None:
+        super().__init__(daemon=True)
+        self.ctl, self.sysid, self.period_us = ctl, sysid, round(1e6 / rate_hz)
+        self.answered: list[int] = []
+        self.acks: list[int] = []
+        self._done = threading.Event()
+
+    def run(self) -> None:
+        ctl = self.ctl
+        while not self._done.is_set():
+            m = ctl.recv_match(type=["ODOMETRY", "COMMAND_ACK"], blocking=True, timeout=0.05)
+            if m is None:
+                ctl.mav.heartbeat_send(M.MAV_TYPE_ONBOARD_CONTROLLER, M.MAV_AUTOPILOT_INVALID, 0, 0, 4)
+            elif m.get_type() == "COMMAND_ACK":
+                self.acks.append(m.result)
+            else:
+                ctl.mav.set_actuator_control_target_send(m.time_usec, 0, self.sysid, 1, HOVER_WIRE)
+                self.answered.append(m.time_usec // self.period_us)
+
+    def __enter__(self) -> _Answering:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._done.set()
+        self.join(5.0)
+
+    def more(self, n: int, what: str) -> None:
+        """Until ``n`` more states have been answered."""
+        seen = len(self.answered)
+        wait_for(lambda: len(self.answered) >= seen + n, 20.0, what)
+
+
+def test_a_ground_stations_offboard_or_arm_on_the_wall_clock_engages_lockstep_at_a_control_periods_start(tmp_path):
+    """A lockstep vehicle a ground station put in HOLD runs on the wall clock, its controller still answering its
+    states; the ground station's OFFBOARD again, or its arm in OFFBOARD after a disarm there, is taken at the next
+    control period's start, where lockstep engages with that step's state: every step vehicle.bin records as flown
+    with its own answer is one whose state the controller answered, and the mode and arm are at a step's time.
+    Taken mid-period (20 physics steps to a 50 Hz period: 19 times in 20), OFFBOARD sent the state of a step the
+    vehicle then went on flying on the wall clock, and the answer to it flew the next step, recorded as that step's
+    own answer (its state never sent); the mode and arm were between two steps."""
+    rate = 50.0
+    hold, offboard = (1, 4, 3), (1, 6, 0)  # DO_SET_MODE's base, main and sub mode (PX4's AUTO.LOITER, OFFBOARD)
+    with instance_slot() as n:
+        v = _vehicle(n, tmp_path, "--rate", f"{rate:g}")
+        gcs, ctl = _gcs(n), _controller_link(n)
+        sysid = n + 1
+
+        def gcs_says(cmd: int, *params: float) -> None:
+            gcs.mav.command_long_send(sysid, 1, cmd, 0, *params, *[0.0] * (7 - len(params)))
+            assert _ack(gcs, cmd).result == M.MAV_RESULT_ACCEPTED, (cmd, params)
+
+        try:
+            ctl.mav.heartbeat_send(M.MAV_TYPE_ONBOARD_CONTROLLER, M.MAV_AUTOPILOT_INVALID, 0, 0, 4)
+            assert ctl.recv_match(type="HEARTBEAT", blocking=True, timeout=20) is not None
+            assert gcs.wait_heartbeat(timeout=20) is not None
+            with _Answering(ctl, sysid, rate) as controller:
+                ctl.mav.command_long_send(sysid, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+                controller.more(10, "the controller's flight")
+                for _ in range(3):
+                    gcs_says(M.MAV_CMD_DO_SET_MODE, *hold)
+                    controller.more(10, "the states of the wall clock, answered")
+                    gcs_says(M.MAV_CMD_DO_SET_MODE, *offboard)  # armed: back to lockstep
+                    controller.more(10, "the lockstep flight again")
+                    gcs_says(M.MAV_CMD_DO_SET_MODE, *hold)
+                    gcs_says(M.MAV_CMD_COMPONENT_ARM_DISARM, 0)  # on the ground: on the wall clock, disarmed
+                    gcs_says(M.MAV_CMD_DO_SET_MODE, *offboard)  # disarmed: armed in it next
+                    gcs_says(M.MAV_CMD_COMPONENT_ARM_DISARM, 1)  # back to lockstep
+                    controller.more(10, "the lockstep flight after the ground station's arm")
+                ctl.mav.command_long_send(sysid, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 21196, 0, 0, 0, 0, 0)
+                wait_for(lambda: M.MAV_RESULT_ACCEPTED in controller.acks[1:], 10.0, "the controller's disarm")
+        finally:
+            assert v.stop() == 0
+            gcs.close()
+            ctl.close()
+    answered = set(controller.answered)
+    rows = read_half(tmp_path / "vehicle.bin")
+    k, lockstep = rows["k"].astype(int), rows["k"] == rows["cmd_k"]
+    again = lockstep[1:] & ~(lockstep[:-1] & (k[1:] == k[:-1] + 1))  # (a HOLD and disarm within a period: no row)
+    assert again.sum() == 6, k[1:][again]  # each OFFBOARD and each arm engaged lockstep again
+    assert set(k[lockstep]) <= answered, sorted(set(k[lockstep]) - answered)  # before: each step after a switch
+    by_gcs = [e for e in v.reports() if isinstance(e, Event) and e.by is not None and e.by.link == "gcs"
+              and e.kind in ("armed", "mode") and (e.mode == "offboard" or e.kind == "armed")]
+    assert len(by_gcs) == 9, [shown(e) for e in by_gcs]  # (an OFFBOARD armed, one disarmed, an arm: 3 times)
+    between = [shown(e) + f" at t={e.t}" for e in by_gcs if abs(e.t * rate - round(e.t * rate)) > 1e-6]
+    assert not between, between
 
 
 def test_mavproxy_arms_through_stdin(tmp_path):

@@ -402,7 +402,8 @@ class Commander:
             self._ground_takes_over(time.monotonic(), "the vehicle falls")
 
     def _engage_lockstep(self, now: float) -> None:
-        """Lockstep from now: the state of step k goes out and its target is awaited."""
+        """Lockstep from now: the state of step k goes out and its target is awaited. Only ever at a control
+        period's start: on the wall clock the vehicle holds what may lead here (:func:`engages_lockstep`) until then."""
         self.clock.engage(now, self.ports.step() * self.substeps)
         self.end_landing = False
         self.ports.state_out(now)
@@ -480,3 +481,15 @@ class Commander:
         self.clock.fire(Trigger.DIVERGE)
         return True
 
+
+def engages_lockstep(m: Any) -> bool:
+    """Whether ``m`` may engage lockstep (:meth:`Commander._engage_lockstep`), from either link: an arm
+    (COMPONENT_ARM_DISARM param1 1), or OFFBOARD asked for (DO_SET_MODE, SET_MODE)."""
+    kind = m.get_type()
+    if kind == "SET_MODE":
+        return requested_custom_mode(m.base_mode, m.custom_mode)[0] == OFFBOARD
+    if kind not in ("COMMAND_LONG", "COMMAND_INT"):
+        return False
+    if m.command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
+        return m.param1 == 1.0
+    return m.command == mavlink.MAV_CMD_DO_SET_MODE and requested_mode(m.param1, m.param2, m.param3)[0] == OFFBOARD

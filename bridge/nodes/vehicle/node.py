@@ -32,10 +32,10 @@ from bridge.mavlink.receive import Rejections
 from bridge.nodes.process import on_stop_signals, report_printer
 from bridge.nodes.report import Ready, Refused, Report, Stats
 from bridge.nodes.vehicle.announcer import Announcer
-from bridge.nodes.vehicle.authority import Authority
+from bridge.nodes.vehicle.authority import COMMANDS, Authority
 from bridge.nodes.vehicle.catchup import CatchUp
 from bridge.nodes.vehicle.clock import Clock, ClockState
-from bridge.nodes.vehicle.commander import Commander, CommanderPorts
+from bridge.nodes.vehicle.commander import Commander, CommanderPorts, engages_lockstep
 from bridge.nodes.vehicle.config import CLOCKS, VehicleConfig, open_links
 from bridge.nodes.vehicle.gate import SILENT_S, Gate, resting
 from bridge.nodes.vehicle.mission import MissionManager
@@ -90,7 +90,7 @@ class Vehicle:
         self.pace = self.clock.pace  # the wall clock of physics steps
         self.catchup = CatchUp(self.pace)  # real time: the machine's stalls, and what they held back
         self._n = 0  # physics steps taken (realtime: for the wall-clock schedule)
-        self._held_arms: list[tuple[Any, Any, tuple[str, int]]] = []  # the controller's, to a period's start
+        self._held: list[tuple[Any, Any, tuple[str, int]]] = []  # lockstep on the wall clock: to a period's start
         load_at = (now, time.process_time())
         # lockstep: the controller's targets and re-arms cross the mission's up-link model here; a lockstep fleet's
         # one radio (its gate file's) takes them at this vehicle's turn (bridge.link.turns)
@@ -293,9 +293,7 @@ class Vehicle:
         n0 = k * self.substeps
         if not self._wait_until(self.pace.due(n0)):
             return
-        held, self._held_arms = self._held_arms, []
-        for ep, m, addr in held:  # the controller's arm that came mid-period (_wait_until): acted on from here
-            self._handle(ep, m, addr)
+        self._take_held()
         if not self.clock.free_running:  # armed into lockstep: step k's state is out, its answer flies it
             return
         now = time.monotonic()
@@ -306,26 +304,43 @@ class Vehicle:
             self.rows.free_running(k, X, self.sim, self.actuation, self.targets.applied, self.odometry.sent_at, now,
                                    self._estimate)
         self._n = n0
-        hold_arms = self.cfg.clock == "lockstep"
+        hold = self.cfg.clock == "lockstep"
 
         def deliver(_t: float) -> None:
             # called before each physics step: wait for its wall time, taking targets meanwhile
             if self._n > n0:
-                self._wait_until(self.pace.due(self._n), hold_arms=hold_arms)
+                self._wait_until(self.pace.due(self._n), hold=hold)
             self._n += 1
 
         self.sim.advance(deliver)
         self.k = k + 1
         self._after_step()
+        if not self.clock.free_running:  # (halted: what it held is answered now, not never)
+            self._take_held()
 
-    def _wait_until(self, due: float, hold_arms: bool = False) -> bool:
+    def _take_mid_period(self, ep: Any, m: Any, addr: tuple[str, int]) -> None:
+        """Lockstep, on the wall clock mid-period: what may engage lockstep (an arm, OFFBOARD, from either link:
+        :func:`engages_lockstep`), and every command after it (in their order), waits for the next period's start,
+        where lockstep engages with that step's state; the rest is taken at once. (Engaged mid-period, the state sent
+        was one the period then flew on without its answer, and that answer flew the next step, recorded as its own.)"""
+        if engages_lockstep(m) or (self._held and (m.get_type() in COMMANDS or m.get_type() == "SET_MODE")):
+            self._held.append((ep, m, addr))
+        else:
+            self._handle(ep, m, addr)
+
+    def _take_held(self) -> None:
+        """What :meth:`_take_mid_period` held, acted on now (a period's start), in the order it came."""
+        held, self._held = self._held, []
+        for ep, m, addr in held:
+            self._handle(ep, m, addr)
+
+    def _wait_until(self, due: float, hold: bool = False) -> bool:
         """Serve the links until wall time ``due`` of the pace; False if stopping. Real time catches every stall
         up (the controller's schedule is the wall's); a paced lockstep far behind is re-based, not caught up.
-        ``hold_arms`` (lockstep, running free mid-period): the controller's arm waits for the next period's start,
-        where lockstep engages with that step's state (engaged mid-period, the state sent was one the period then
-        flew on without its answer: the controller's first row was never flown, and the vehicle waited a resend)."""
+        ``hold`` (lockstep, running free mid-period): the links' messages are taken by :meth:`_take_mid_period`."""
         now = time.monotonic()
         realtime = self.cfg.clock == "realtime"
+        take = self._take_mid_period if hold else self._handle
         if realtime:  # the machine may have stalled us; what a stall held back is taken when its time comes
             self.catchup.woke(due, now)
             for ep, m, addr in self.catchup.release(due):
@@ -339,12 +354,9 @@ class Vehicle:
             now = time.monotonic()
             if not (realtime and self.catchup.overslept(due, now, got)):
                 for ep, m, addr in got:
-                    if hold_arms and ep is self.link and _arms(m):
-                        self._held_arms.append((ep, m, addr))
-                    else:
-                        self._handle(ep, m, addr)
+                    take(ep, m, addr)
             if now >= self._next_house:
-                self._housekeeping()
+                self._housekeeping(take)
         return False
 
     # -- idle -----------------------------------------------------------------------------------
@@ -403,12 +415,12 @@ class Vehicle:
         E = self.sim.published()
         return E, self.sim.nees(E)
 
-    def _housekeeping(self) -> None:
-        """Wall-clock duties: GCS commands, heartbeat, streams, flushing files."""
+    def _housekeeping(self, take: Callable[[Any, Any, tuple[str, int]], None] | None = None) -> None:
+        """Wall-clock duties: GCS commands (to ``take``, else :meth:`_handle`), heartbeat, streams, flushing files."""
         now = time.monotonic()
         if self.gcs is not None:
             for m, addr in self.gcs.poll():
-                self._handle(self.gcs, m, addr)
+                (take or self._handle)(self.gcs, m, addr)
         with self.receiver.charged():  # a re-request to a would-be controller: within its trial's credit
             self.missions.tick(now)
         self.commander.pre_start.tick(now)  # COM_DISARM_PRFLT
@@ -474,8 +486,3 @@ def run_vehicle(flight: Flight, cfg: VehicleConfig, out: str | Path | None = Non
     v.report_stats()
     return 0
 
-
-def _arms(m: Any) -> bool:
-    """Whether ``m`` is an arm command (COMPONENT_ARM_DISARM, param1 1)."""
-    return (m.get_type() in ("COMMAND_LONG", "COMMAND_INT") and m.command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM
-            and m.param1 == 1.0)
