@@ -22,10 +22,16 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
 
 from bridge.autopilot.estimator import compile_estimator
 from bridge.batch import compile_batch
 from bridge.core.flight import load_compiled_kernels
+
+# No deadline on a Hypothesis example: its default (200 ms) is a timing assertion, and with both cores busy an
+# example of tests/test_power.py's took longer (the thirty-eighth session, load ~14). Speed is for benchmarks/.
+settings.register_profile("bsst", deadline=None)
+settings.load_profile("bsst")
 
 
 def _leave_without_teardown() -> None:

@@ -233,3 +233,15 @@ def test_the_timeline_sums_wall_and_cpu_by_file_and_ranks_by_the_machines_cpu_wi
     two = report(tmp_path).splitlines()  # two workers: the machine's time is theirs together, not ranked
     assert "machine CPU-seconds by file:" not in two
     assert two[two.index("costliest tests (CPU s, wall s):") + 1].split() == ["0.5", "2.0", "tests/test_a.py::test_one"]
+
+
+def test_no_hypothesis_example_has_a_deadline() -> None:
+    """Speed is measured in benchmarks/, never asserted in a test: the suite's Hypothesis profile has no deadline
+    (tests/conftest.py), and no test sets one of its own."""
+    from hypothesis import settings
+
+    assert settings.default.deadline is None
+    set_here = [f.name for f in Path(__file__).parent.glob("test_*.py")
+                if re.search(r"settings\([^)]*deadline\s*=\s*(?!None)", f.read_text())]
+    assert set_here == []
+
