@@ -24,7 +24,7 @@ from bridge.mavlink.fenceitems import FENCE, RALLY, fence_plan, parse_zone_item,
 from bridge.mavlink.missionitems import ItemRefused
 from bridge.nodes.vehicle.missiontransfer import Mission
 from bridge.nodes.vehicle.zones import HeldZones
-from bridge.record.events import RunEvent
+from bridge.record.events import RunEvent, split_at_start
 from bridge.record.policies import Rules, geofence_kept
 from missions import MISSION_DIR
 from missions.geodetic import Home
@@ -376,9 +376,10 @@ def test_a_fence_uploaded_between_a_ground_stations_hop_and_the_mission_is_not_c
                                                                              "vehicle"),
            RunEvent.at(-2.0, "fence", "uploaded 4 items in 0.01 s, 0 requested again", "vehicle")]
     for arm_t in (0.0, -0.003):  # lockstep's arm at the mission's time 0; real time's a little before it
-        v = geofence_kept(t, trace, rules, [*hop, RunEvent.at(arm_t, "armed", "armed, offboard control", "vehicle")])
+        events = [*hop, RunEvent.at(arm_t, "armed", "armed, offboard control", "vehicle")]
+        v = geofence_kept(t, trace, rules, events, *split_at_start(events))
         assert (v.ok, v.t) == (False, pytest.approx(0.6)), v
     bigger = RunEvent.at(0.5, "fence", "uploaded 4 items in 0.01 s, 0 requested again", "vehicle")
-    v = geofence_kept(t, trace, rules, [*hop, RunEvent.at(-0.003, "armed", "armed, offboard control", "vehicle"),
-                                        bigger])  # one in the mission's flight still is
+    events = [*hop, RunEvent.at(-0.003, "armed", "armed, offboard control", "vehicle"), bigger]
+    v = geofence_kept(t, trace, rules, events, *split_at_start(events))  # one in the mission's flight still is
     assert v.ok and v.as_dict()["note"].startswith("the fence changed in flight at t=0.500 s"), v

@@ -186,8 +186,7 @@ def test_the_controllers_own_reason_and_a_short_completion() -> None:
 def test_a_controller_that_died_leaves_the_vehicles_failsafe() -> None:
     vehicle, controller = ends(rc=-9, outcome=None, exit_text="killed by SIGKILL")
     events = [ARMED, RunEvent(0.8, "failsafe", "no actuator target for 0.504 s: land", "vehicle")]
-    s = session_summary(FLIGHT, facts(died="controller", failsafe_seen=True), joined(), events, vehicle,
-                        controller).summary
+    s = session_summary(FLIGHT, facts(died="controller"), joined(), events, vehicle, controller).summary
     assert s["outcome"] == "failsafe"
     assert s["ended_by"] == {"who": "controller", "how": "died (killed by SIGKILL); the vehicle's failsafe took over"}
 
@@ -214,21 +213,22 @@ def test_a_violation_is_in_the_policies_and_noted() -> None:
     assert [p["name"] for p in s["policies"] if not p["ok"]] == ["arm_authority"]
 
 
-@pytest.mark.parametrize(("rc", "said", "seen", "expect"), [
-    (0, "completed", {}, "completed"),
-    (1, "completed", {}, "completed"),  # lockstep left: completed, exit 1
-    (1, "failsafe", {}, "failsafe"),
-    (1, "diverged", {"diverged": True}, "diverged"),
-    (1, "nonsense", {}, "aborted"),
-    (None, None, {}, "aborted"),
-    (0, "completed", {"aborted": True}, "aborted"),
-    (0, "completed", {"failsafe_seen": True}, "completed"),  # resumed after its failsafe
-    (1, "aborted", {"failsafe_seen": True}, "failsafe"),
-    (-9, None, {"died": "controller"}, "aborted"),
+@pytest.mark.parametrize(("rc", "said", "seen", "vehicle", "expect"), [
+    (0, "completed", {}, (), "completed"),
+    (1, "completed", {}, (), "completed"),  # lockstep left: completed, exit 1
+    (1, "failsafe", {}, (), "failsafe"),
+    (1, "diverged", {}, ("diverged",), "diverged"),
+    (1, "nonsense", {}, (), "aborted"),
+    (None, None, {}, (), "aborted"),
+    (0, "completed", {"aborted": True}, (), "aborted"),
+    (0, "completed", {}, ("failsafe",), "completed"),  # resumed after its failsafe
+    (1, "aborted", {}, ("failsafe",), "failsafe"),
+    (-9, None, {"died": "controller"}, (), "aborted"),
 ])
-def test_the_outcome_from_what_the_session_saw(rc, said, seen, expect) -> None:
+def test_the_outcome_from_what_the_session_saw(rc, said, seen, vehicle, expect) -> None:
     controller = ChildEnd("controller", rc, "", {}, said)
-    assert outcome_of(facts(**seen), controller) == expect
+    events = [RunEvent(0.5, kind, kind, "vehicle") for kind in vehicle]  # (the vehicle's events of the mission)
+    assert outcome_of(facts(**seen), controller, events) == expect
     assert controller_completed(controller) == (rc in (0, 1) and (rc == 0 or said == "completed"))
 
 
@@ -378,8 +378,7 @@ def test_a_failsafe_or_a_breach_of_a_ground_stations_flight_before_the_mission_i
            RunEvent(-8.0, "failsafe", "geofence: beyond GF_MAX_VER_DIST: land here", "vehicle"),
            RunEvent(-5.0, "disarmed", "landed: disarmed", "vehicle", ITSELF)]
     pause = RunEvent(0.5, "mode", "HOLD", "vehicle", GCS, mode="HOLD", armed=True)
-    out = session_summary(FLIGHT, facts(failsafe_seen=True), joined(int(0.5 * RATE)), [*hop, ARMED, pause], vehicle,
-                          controller)
+    out = session_summary(FLIGHT, facts(), joined(int(0.5 * RATE)), [*hop, ARMED, pause], vehicle, controller)
     s = out.summary
     assert s["outcome"] == "aborted" and s["ended_by"]["how"] == "mode changed at t=0.500 s: HOLD", s["ended_by"]
     assert next(p for p in s["policies"] if p["name"] == "geofence")["ok"]
@@ -390,7 +389,6 @@ def test_a_failsafe_or_a_breach_of_a_ground_stations_flight_before_the_mission_i
     assert s["interventions"][0]["before_start"]  # exit 1: a ground station flew the vehicle
     own = RunEvent(0.8, "failsafe", "no actuator target for 0.504 s: land", "vehicle")
     vehicle, controller = ends(rc=1, outcome="failsafe", reason="the vehicle's failsafe took over")
-    s = session_summary(FLIGHT, facts(failsafe_seen=True), joined(int(0.8 * RATE)), [*hop, ARMED, own], vehicle,
-                        controller).summary
+    s = session_summary(FLIGHT, facts(), joined(int(0.8 * RATE)), [*hop, ARMED, own], vehicle, controller).summary
     assert s["outcome"] == "failsafe"
     assert s["ended_by"] == {"who": "vehicle", "how": f"failsafe at t=0.800 s: {own.text}"}, s["ended_by"]

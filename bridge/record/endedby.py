@@ -1,8 +1,9 @@
 """Who or what ended a flight, as its events tell it: ``summary.json["ended_by"]``.
 
 In:  a run's events (:class:`~bridge.record.events.RunEvent`: ``t`` s, ``kind``, ``text``, in a session ``source``,
-     and who caused it, ``by``), its outcome (``completed``, ``failsafe``, ``diverged``, ...), the configured
-     controller's ids (sysid, compid) and the mission's end (s)
+     and who caused it, ``by``; who ended it and how, from the mission's: from its time 0,
+     :func:`~bridge.record.events.split_at_start`), its outcome (``completed``, ``failsafe``, ``diverged``, ...),
+     the configured controller's ids (sysid, compid) and the mission's end (s)
 Out: who ended it and how (:func:`ended_by_outcome`: ``{"who", "how"}``), the first disarm or takeover by command
      the controller did not send (:func:`ended_by_command`: the event and its sender), and the end of a flight whose
      arm the vehicle's pre-arm check denied (:func:`arming_denied_end`)
@@ -25,12 +26,13 @@ def ended_by_command(events: Sequence[RunEvent], controller_id: tuple[int, int] 
     armed vehicle out of OFFBOARD, not the vehicle's own) that the configured controller on its own link
     did not send: the event and its sender (None when the event names none), or None. A mode selected
     while disarmed, for the next arm, ends nothing: the controller's arm flies OFFBOARD; nor does a ground
-    station's arm in HOLD on the ground awaiting a mission's start, or its timeout's disarm (``pre_start``), nor
-    anything before the mission's time 0 (a ground station's own flight before an awaited mission's start)."""
+    station's arm in HOLD on the ground awaiting a mission's start, or its timeout's disarm (``pre_start``).
+    ``events``: the mission's (before its time 0, a ground station's own flight before an awaited mission's start,
+    there is no flight of its to end)."""
     for e in vehicle_events(events):
         if e.t >= before_s - EPS_S:
             break
-        if e.pre_start or e.before_start:  # (before the mission's time 0: no flight of its to end)
+        if e.pre_start:
             continue
         # a disarm not of the vehicle's own (landed, stopped by its failsafe, diverged: ``by`` ITSELF)
         own = e.by is not None and e.by.is_vehicle
@@ -49,9 +51,9 @@ def ended_by_outcome(outcome: str, events: Sequence[RunEvent]) -> dict[str, str]
     """``summary.json["ended_by"]`` as the outcome and the vehicle's events tell it: the mission (completed), the
     vehicle (its failsafe, or its pre-arm check that denied the arm), the plant (diverged, crashed), the ground station
     that terminated it, or whoever interrupted it. A session knows more (a child that died, a command): it says so.
-    What came before the mission's time 0 (a ground station's own flight before an awaited mission's start) is not
-    its end."""
-    ev = [e for e in vehicle_events(events) if not e.before_start]  # (before the mission's time 0: not its end)
+    ``events``: the mission's (what came before its time 0, a ground station's own flight before an awaited mission's
+    start, is not its end; a denied arm flies no row: no time 0 is found, nothing comes before it)."""
+    ev = vehicle_events(events)
 
     def first(kind: str) -> RunEvent | None:
         return next((e for e in ev if e.kind == kind), None)

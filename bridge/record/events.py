@@ -7,8 +7,9 @@ In:  an event's time (s, the flight's clock: negative before its time 0), kind, 
 Out: :class:`RunEvent`; its dict for ``summary.json["events"]`` (:meth:`RunEvent.as_dict`: ``t`` s rounded
      to 1 us or null, ``kind``, ``text`` with the sender shown as `` [by ...]``, ``source`` when there is one,
      ``param`` (``{name, old, new}``), ``mode``, ``armed`` and ``pre_start`` when the event has them);
-     whether it came before the mission's time 0 (:attr:`RunEvent.before_start`); :func:`in_time_order`: events as
-     recorded, in the order of their times
+     whether it came before the mission's time 0 (:attr:`RunEvent.before_start`); a run's events split there, into
+     the mission's and those before it (:func:`split_at_start`: the one place a run's readers are told which is
+     which); :func:`in_time_order`: events as recorded, in the order of their times
 
 The written `` [by ...]`` is for people (events.log, summary.json); everything that judges a run reads
 ``by`` (:mod:`bridge.record.policies`), never the text.
@@ -73,6 +74,17 @@ class RunEvent:
                    Sender.from_dict(by) if isinstance(by, Mapping) else None,
                    ParamChanged.from_dict(param) if isinstance(param, Mapping) else None,
                    mode=d.get("mode"), armed=d.get("armed"), pre_start=d.get("pre_start"))
+
+
+def split_at_start(events: Iterable[RunEvent]) -> tuple[list[RunEvent], list[RunEvent]]:
+    """``events`` (in the order recorded) split at the mission's time 0: (the mission's: at or after it, or with no
+    time; the hop's: before it, :attr:`RunEvent.before_start`: a ground station's own flight before an awaited
+    mission's start, and in real time the mission's own arm, which may come just before its 0)."""
+    mission: list[RunEvent] = []
+    hop: list[RunEvent] = []
+    for e in events:
+        (hop if e.before_start else mission).append(e)
+    return mission, hop
 
 
 def in_time_order(events: Iterable[RunEvent]) -> list[RunEvent]:

@@ -4,7 +4,8 @@ In:  a run's trace arrays by column (:data:`~bridge.record.columns.TRACE_COLUMNS
      ``state_age_s`` s), its events (:class:`~bridge.record.events.RunEvent`: ``t`` s, ``kind``, ``text``, in a
      session ``source``, and who caused it, ``by``), the :class:`Rules` it flew under (control rate Hz, ``[failsafe]
      timeout_s`` s, clock, link delays s, the controller's ids), and in a lockstep session its ``lockstep`` record and
-     the first step its vehicle flew off the step clock
+     the first step its vehicle flew off the step clock; in a session, its events split at the mission's time 0 (the
+     mission's and the hop's: :func:`~bridge.record.events.split_at_start`)
 Out: one :class:`Verdict` per policy of :data:`POLICIES` (``ok``; when violated, the mission time of the first
      violation and a one-line why), for ``summary.json["policies"]``; and the lockstep record that goes with them
      (:func:`lockstep_record`; who ended a flight, by command or how: :mod:`bridge.record.endedby`)
@@ -136,9 +137,9 @@ def lockstep_record(events: Sequence[RunEvent], off_clock_t: float | None = None
     """``summary.json["lockstep"]`` of a lockstep session: ``{"held": true}``, or ``held`` false with
     the time and text of the vehicle's first ``lockstep`` event (``left_at_s``, ``why``) and how many
     times it left (``times``); a vehicle row flown off the step clock (from ``off_clock_t`` s) with
-    no such event is recorded too, as having left without saying so. The mission's: a ground station's flight
-    before an awaited mission's start (its events before the mission's time 0) is its interventions'."""
-    left = [e for e in vehicle_events(events) if e.kind == "lockstep" and not e.before_start]  # the mission's
+    no such event is recorded too, as having left without saying so. ``events``: the mission's (a ground station's
+    flight before an awaited mission's start, before its time 0, is its interventions')."""
+    left = [e for e in vehicle_events(events) if e.kind == "lockstep"]
     if left:
         first = left[0]
         return {"held": False, "left_at_s": first.t, "why": first.text, "times": len(left)}
@@ -150,17 +151,21 @@ def lockstep_record(events: Sequence[RunEvent], off_clock_t: float | None = None
 
 # -- the policies ----------------------------------------------------------------------------------------
 def check(trace: Mapping[str, Any], events: Sequence[RunEvent], rules: Rules,
-          lockstep: Mapping[str, Any] | None = None, off_clock_t: float | None = None) -> list[Verdict]:
-    """Every policy of :data:`POLICIES` over one run, in that order (see the module docstring)."""
+          lockstep: Mapping[str, Any] | None = None, off_clock_t: float | None = None,
+          mission: Sequence[RunEvent] | None = None, hop: Sequence[RunEvent] = ()) -> list[Verdict]:
+    """Every policy of :data:`POLICIES` over one run, in that order (see the module docstring). ``events``: all of
+    the run's; ``mission``, those from the mission's time 0 (None: all: offline), ``hop``, those before it
+    (:func:`~bridge.record.events.split_at_start`)."""
     ev = vehicle_events(events)
+    ours = ev if mission is None else vehicle_events(mission)  # the mission's
     t = np.asarray(trace["t"], dtype=float)
     return [
         no_actuation_disarmed(t, [np.asarray(trace[f"u{i}_act"], dtype=float) for i in range(1, 5)], ev, rules),
-        failsafe_in_time(t, np.asarray(trace["state_age_s"], dtype=float), ev, rules),
+        failsafe_in_time(t, np.asarray(trace["state_age_s"], dtype=float), ev, rules, ours),
         arm_authority(ev, rules),
-        lockstep_recorded(ev, rules, lockstep, off_clock_t),
+        lockstep_recorded(ours, rules, lockstep, off_clock_t),
         time_steady(t, rules, ev),
-        geofence_kept(t, trace, rules, ev),
+        geofence_kept(t, trace, rules, ev, ours, vehicle_events(hop)),
         touchdown_kept(ev),
     ]
 
@@ -237,13 +242,15 @@ def offboard_intervals(events: Sequence[RunEvent], armed_at_start: bool
     return out
 
 
-def failsafe_in_time(t: np.ndarray, age: np.ndarray, events: Sequence[RunEvent], rules: Rules) -> Verdict:
+def failsafe_in_time(t: np.ndarray, age: np.ndarray, events: Sequence[RunEvent], rules: Rules,
+                     mission: Sequence[RunEvent] | None = None) -> Verdict:
     """Armed offboard, no stretch longer than ``timeout_s`` + one period since the last valid target
-    without a failsafe (see the module docstring for how the targets are read from the trace)."""
+    without a failsafe (see the module docstring for how the targets are read from the trace). ``mission``: the
+    events from the mission's time 0 (None: all), where a departure from lockstep is the mission's."""
     name = "failsafe_in_time"
     period = rules.period_s
     changes = timeout_changes(events)
-    left = next((e.t for e in events if e.kind == "lockstep" and not e.before_start), math.inf)
+    left = next((e.t for e in (events if mission is None else mission) if e.kind == "lockstep"), math.inf)
     answers_until = left if rules.clock in ("offline", "lockstep") else -math.inf  # rows answering their step
     for start, end, kind in offboard_intervals(events, rules.armed_at_start):
         last = start if math.isfinite(start) else (float(t[0]) if len(t) else 0.0)  # arming restarts the timeout
@@ -313,11 +320,12 @@ def arm_authority(events: Sequence[RunEvent], rules: Rules) -> Verdict:
 
 def lockstep_recorded(events: Sequence[RunEvent], rules: Rules, record: Mapping[str, Any] | None,
                       off_clock_t: float | None) -> Verdict:
-    """A lockstep session that left lockstep says so: the vehicle's event, and a record that agrees."""
+    """A lockstep session that left lockstep says so: the vehicle's event (of ``events``, the mission's), and a record
+    that agrees."""
     name = "lockstep_recorded"
     if rules.clock != "lockstep":
         return Verdict(name, True)
-    left = next((e for e in events if e.kind == "lockstep" and not e.before_start), None)
+    left = next((e for e in events if e.kind == "lockstep"), None)
     if off_clock_t is not None and (left is None or left.t > off_clock_t + rules.period_s + EPS_S):
         return Verdict(name, False, off_clock_t, f"the vehicle flew off the step clock from t={off_clock_t:.3f} s "
                                                  "without a lockstep event")
@@ -335,16 +343,19 @@ def lockstep_recorded(events: Sequence[RunEvent], rules: Rules, record: Mapping[
     return Verdict(name, True)
 
 
-def geofence_kept(t: np.ndarray, trace: Mapping[str, Any], rules: Rules, events: Sequence[RunEvent] = ()) -> Verdict:
+def geofence_kept(t: np.ndarray, trace: Mapping[str, Any], rules: Rules, events: Sequence[RunEvent] = (),
+                  mission: Sequence[RunEvent] | None = None, hop: Sequence[RunEvent] = ()) -> Verdict:
     """Every row's position (``x``, ``y``) inside the mission's geofence (:mod:`missions.geofence`), and no
     ``geofence`` event of the vehicle (outside a fence a ground station uploaded: bridge.nodes.vehicle.zones); ok
     without either. The mission's fence is the one at the start: a fence a ground station uploads (or clears) in
     flight replaces it in the vehicle (its ``fence`` event), so rows from then on are the vehicle's watch's to
     judge (its ``geofence`` event, said with GF_ACTION 0 too), and the verdict says so (``note``); so are all rows
-    when the flight started with a fence uploaded after the record's (the vehicle's ``fence`` event at its arm)."""
+    when the flight started with a fence uploaded after the record's (the vehicle's ``fence`` event at its arm).
+    ``mission``: the events from the mission's time 0 (None: all), whose breach is the mission's; ``hop``: those
+    before it (a ground station's own flight)."""
     name = "geofence"
-    left = next((e for e in events if e.kind == "geofence" and not e.before_start), None)  # (the mission's)
-    changed = _fence_changed_in_flight(events)
+    left = next((e for e in (events if mission is None else mission) if e.kind == "geofence"), None)
+    changed = _fence_changed_in_flight(events, hop)
     n = len(t) if changed is None else int(np.searchsorted(t, changed.t))  # the rows before it (in time order)
     breach = rules.geofence.first_breach(t[:n], np.asarray(trace["x"])[:n], np.asarray(trace["y"])[:n]) \
         if rules.geofence is not None and n else None
@@ -365,17 +376,18 @@ def _fence_note(changed: RunEvent, before: int, acted: bool) -> str:
             f"mission's fence (the one at the start) until then, by {watch} after")
 
 
-def _fence_changed_in_flight(events: Sequence[RunEvent]) -> RunEvent | None:
+def _fence_changed_in_flight(events: Sequence[RunEvent], hop: Sequence[RunEvent] = ()) -> RunEvent | None:
     """The vehicle's first event of a fence uploaded or cleared after its flight's arm (its first ``armed`` event
     that is not a ground station's arm awaiting a mission's start, nor of a ground station's own flight that a disarm
-    before the mission's time 0 ended), or the one it says at that arm when the fence it holds is not the record's
-    (uploaded after the controller's download: bridge.nodes.vehicle.mission): the fence before it is the one the
-    record holds (``--await-mission``: the one the controller downloaded, after any such flight)."""
+    of ``hop``, before the mission's time 0, ended), or the one it says at that arm when the fence it holds is not
+    the record's (uploaded after the controller's download: bridge.nodes.vehicle.mission): the fence before it is
+    the one the record holds (``--await-mission``: the one the controller downloaded, after any such flight)."""
+    landed = {e for e in hop if e.kind == "disarmed"}
     flying, changed = False, None
     for e in events:
         if e.kind == "armed" and not e.pre_start:
             flying = True
-        elif e.kind == "disarmed" and e.before_start:  # (the mission's own arm may come just before its 0: real time)
+        elif e in landed:  # (only its landing: the mission's own arm may come just before its 0, in real time)
             flying, changed = False, None
         elif flying and changed is None and e.kind == "fence":  # (uploaded or cleared: ...vehicle.mission.EVENT_OF)
             changed = e
@@ -429,9 +441,10 @@ def rules_for(flight: Any, clock: str, link: Mapping[str, Any] | None,
 
 
 def judge(summary: dict[str, Any], trace: Mapping[str, Any], events: Sequence[RunEvent], rules: Rules,
-          lockstep: Mapping[str, Any] | None = None, off_clock_t: float | None = None) -> list[Verdict]:
+          lockstep: Mapping[str, Any] | None = None, off_clock_t: float | None = None,
+          mission: Sequence[RunEvent] | None = None, hop: Sequence[RunEvent] = ()) -> list[Verdict]:
     """:func:`check` a run and put the verdicts into its ``summary["policies"]``; the violated ones."""
-    verdicts = check(trace, events, rules, lockstep, off_clock_t)
+    verdicts = check(trace, events, rules, lockstep, off_clock_t, mission, hop)
     summary["policies"] = [v.as_dict() for v in verdicts]
     return [v for v in verdicts if not v.ok]
 

@@ -3,9 +3,9 @@
 In:  the :class:`~bridge.core.flight.Flight`; the joined trace and the per-packet times measured while
      joining (:class:`Joined`: rows of :class:`~bridge.record.columns.TraceRow`, times ms); each child's end
      (:class:`ChildEnd`: exit, its ``stats`` report's values, the controller's outcome and reason); what the
-     session itself saw (:class:`SessionFacts`: clock, wall time s, interrupted, who died, the vehicle's
-     failsafe and divergence, the first step flown off the step clock s, the ``sitl`` block); the relay's
-     statistics (``relay.json``'s dict, or None); the events (:class:`~bridge.record.events.RunEvent`)
+     session itself saw (:class:`SessionFacts`: clock, wall time s, interrupted, who died, the first step flown off
+     the step clock s, the ``sitl`` block); the relay's statistics (``relay.json``'s dict, or None); the events
+     (:class:`~bridge.record.events.RunEvent`: the vehicle's failsafe and divergence among them)
 Out: :class:`SessionSummary`: the trace arrays, ``summary.json`` (the figures of
      :func:`bridge.record.metrics.summarise`, the ``link``, ``timing`` and ``sitl`` blocks, the downloads of a
      ground station's mission, fence and rally points (``mission_transfer``: :mod:`bridge.record.transfers`;
@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -29,7 +29,7 @@ from bridge.core.clock import STALL_S
 from bridge.core.flight import Flight
 from bridge.record.columns import TRACE_COLUMNS
 from bridge.record.endedby import arming_denied_end, ended_by_command, ended_by_outcome
-from bridge.record.events import RunEvent, in_time_order
+from bridge.record.events import RunEvent, in_time_order, split_at_start
 from bridge.record.interventions import (
     ended_by_change,
     intervention_text,
@@ -72,8 +72,8 @@ class ChildEnd:
 @dataclass(frozen=True)
 class SessionFacts:
     """What the session itself saw. ``clock``: ``lockstep`` or ``realtime``; ``wall_s``: the whole session
-    (s); ``aborted``: interrupted by the user; ``died``: the name of a child that died (or None);
-    ``failsafe_seen``/``diverged``: the vehicle's events said so; ``off_clock_t``: lockstep, the mission's
+    (s); ``aborted``: interrupted by the user; ``died``: the name of a child that died (or None); ``off_clock_t``:
+    lockstep, the mission's
     time (s) of the vehicle's first row of it flown off the step clock (or None); ``sitl``: ``summary.json["sitl"]``
     but for the children's exits (added here)."""
 
@@ -81,8 +81,6 @@ class SessionFacts:
     wall_s: float
     aborted: bool = False
     died: str | None = None
-    failsafe_seen: bool = False
-    diverged: bool = False
     off_clock_t: float | None = None
     sitl: Mapping[str, Any] = field(default_factory=dict)
     mission_transfer: Mapping[str, Any] | None = None  # --await-mission: the downloads, as the controller said them
@@ -103,14 +101,19 @@ def controller_completed(controller: ChildEnd | None) -> bool:
     return controller.returncode == 0 or controller.outcome == "completed"
 
 
-def outcome_of(facts: SessionFacts, controller: ChildEnd | None) -> str:
-    """The flight's outcome before who ended it is weighed (:func:`ended_by`)."""
+def outcome_of(facts: SessionFacts, controller: ChildEnd | None, events: Sequence[RunEvent] = ()) -> str:
+    """The flight's outcome before who ended it is weighed (:func:`ended_by`), the vehicle's failsafe and divergence
+    from ``events``, the mission's (from its time 0: :func:`~bridge.record.events.split_at_start`). A failsafe before
+    it is a ground station's own flight's, before an awaited mission's start, recorded (its event,
+    :func:`before_start_notes`), not the mission's; a divergence never comes before it (the plant halts for good:
+    no mission's first row, no time 0, follows)."""
+    said = {e.kind for e in vehicle_events(events)}
     completed = controller_completed(controller) and not (facts.aborted or facts.died)
-    if facts.diverged:
+    if "diverged" in said:
         return "diverged"
     if controller is not None and controller.outcome == "law_failed" and not facts.died:
         return "law_failed"  # the failsafe that followed is the vehicle's answer to it, not the cause
-    if facts.failsafe_seen and not completed:  # completed after a failsafe: resumed ([failsafe] resume)
+    if "failsafe" in said and not completed:  # completed after a failsafe: resumed ([failsafe] resume)
         return "failsafe"
     if facts.aborted or facts.died:
         return "aborted"
@@ -122,32 +125,23 @@ def outcome_of(facts: SessionFacts, controller: ChildEnd | None) -> str:
 
 
 def plant_outcome(outcome: str, facts: SessionFacts, events: Sequence[RunEvent]) -> str:
-    """``crashed`` when the vehicle's events say it hit the ground armed (its ``crashed`` event: the flight's end, as
-    offline), ``collision`` when another vehicle touched it, ``terminated`` when a ground station terminated the flight
-    (motors off, whatever the fall came to), and nothing came before (diverged, interrupted, a child died); else
-    ``outcome``."""
+    """``crashed`` when the vehicle's events (the mission's) say it hit the ground armed (its ``crashed`` event: the
+    flight's end, as offline), ``collision`` when another vehicle touched it, ``terminated`` when a ground station
+    terminated the flight (motors off, whatever the fall came to), and nothing came before (diverged, interrupted, a
+    child died); else ``outcome``."""
     if outcome == "diverged" or facts.aborted or facts.died:
         return outcome
     kinds = {e.kind for e in vehicle_events(events)}  # collision: a fleet's shared clock ended it
     return next((k for k in ("collision", "terminated", "crashed") if k in kinds), outcome)
 
 
-def mission_outcome(facts: SessionFacts, controller: ChildEnd | None, events: Sequence[RunEvent]) -> str:
-    """The mission's outcome (:func:`outcome_of`, then :func:`plant_outcome`) from what came at or after its time 0:
-    a failsafe the vehicle said before it (a ground station's own flight before an awaited mission's start, at a
-    negative time) is that flight's, recorded (its event, :func:`before_start_notes`), not the mission's."""
-    said = [e for e in vehicle_events(events) if e.kind == "failsafe"]
-    if said and all(e.before_start for e in said):
-        facts = replace(facts, failsafe_seen=False)
-    return plant_outcome(outcome_of(facts, controller), facts, [e for e in events if not e.before_start])
-
-
-def before_start_notes(events: Sequence[RunEvent]) -> list[tuple[str, str]]:
-    """The closing notes on what ended or breached nothing of the mission's because it came before its time 0 (a
-    ground station's own flight: a failsafe, a geofence breach, a plant's end), each said as what it was."""
+def before_start_notes(hop: Sequence[RunEvent]) -> list[tuple[str, str]]:
+    """The closing notes on what ended or breached nothing of the mission's because it came before its time 0
+    (``hop``: those events, a ground station's own flight: a failsafe, a geofence breach, a plant's end), each said
+    as what it was."""
     kinds = ("failsafe", "geofence", *PLANT_OUTCOMES, "terminated")
     return [("before_start", f"before the mission's start, not its outcome: {e.kind} at t={e.t:.3f} s: {e.shown}")
-            for e in vehicle_events(events) if e.before_start and e.kind in kinds]
+            for e in vehicle_events(hop) if e.kind in kinds]
 
 
 def airborne(trace: Mapping[str, Any], t: float) -> bool:
@@ -158,12 +152,13 @@ def airborne(trace: Mapping[str, Any], t: float) -> bool:
 
 
 def ended_by(outcome: str, trace: Mapping[str, Any], flight: Flight, facts: SessionFacts,
-             events: Sequence[RunEvent], children: Sequence[ChildEnd],
+             events: Sequence[RunEvent], mission: Sequence[RunEvent], children: Sequence[ChildEnd],
              controller_id: tuple[int, int] = CONTROLLER_ID) -> tuple[str, dict[str, Any]]:
     """The outcome and ``summary.json["ended_by"]``: who ended the flight, and how. A disarm or takeover (an armed
     exit from OFFBOARD) from anyone but the configured controller, before the mission's end, ended it (named by the
     vehicle's event's sender), as does a controller that reports a completed mission whose trace stops short of the
-    mission's end: both are ``aborted``, never ``completed``. A refused arm is ``denied``, as offline."""
+    mission's end: both are ``aborted``, never ``completed``. A refused arm is ``denied``, as offline. ``events``:
+    all of the run's; ``mission``: those from the mission's time 0, which alone can end it."""
     m = flight.mission
     ctl = next((c for c in children if c.name == "controller"), None)
     if facts.aborted:
@@ -177,10 +172,10 @@ def ended_by(outcome: str, trace: Mapping[str, Any], flight: Flight, facts: Sess
     if outcome == "aborted" and arming_denied_end(events, controller_id) is not None:
         outcome = "denied"  # the controller's abort answers the vehicle's refusal to arm
     if outcome in (*PLANT_OUTCOMES, "terminated", "denied"):
-        return outcome, ended_by_outcome(outcome, events)
+        return outcome, ended_by_outcome(outcome, mission)
     if outcome == "law_failed" and ctl is not None:
         return outcome, {"who": "controller", "how": f"its law failed: {ctl.reason}"}
-    hit = ended_by_command(events, controller_id, before_s=m.duration_s)
+    hit = ended_by_command(mission, controller_id, before_s=m.duration_s)
     if hit is not None and not (controller_completed(ctl) and hit[1] is None):  # unattributed: the controller's own
         e, who = hit
         assert e.t is not None  # the policies' events have a time
@@ -197,7 +192,7 @@ def ended_by(outcome: str, trace: Mapping[str, Any], flight: Flight, facts: Sess
                                                        f"{m.duration_s:g} s"}
     if outcome == "aborted" and ctl is not None and ctl.reason:
         return outcome, {"who": "controller", "how": ctl.reason}
-    return outcome, ended_by_outcome(outcome, events)
+    return outcome, ended_by_outcome(outcome, mission)
 
 
 def link_block(joined: Joined, vehicle: Mapping[str, Any], controller: Mapping[str, Any],
@@ -414,7 +409,8 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
     link = link_block(joined, vs, cs, relay_stats if relay is not None else None)
     if caps := flight.link.jitter_capped():  # the delay capped a jitter: not flown as asked (docs/links.md)
         link["jitter_capped"] = caps
-    outcome = mission_outcome(facts, controller, events)
+    mission, hop = split_at_start(events)  # (the hop: a ground station's own flight before an awaited mission's start)
+    outcome = plant_outcome(outcome_of(facts, controller, mission), facts, mission)
     summary = summarise(arrays, m, flight.gains, clock=facts.clock, outcome=outcome,
                         events=[], link=link, estimator=flight.estimator, sensors=flight.sensors.name)
     ev = vehicle_events(events)
@@ -430,10 +426,10 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
     lockstep, off_clock = None, None
     if facts.clock == "lockstep":
         off_clock = facts.off_clock_t
-        summary["lockstep"] = lockstep = lockstep_record(events, off_clock)
+        summary["lockstep"] = lockstep = lockstep_record(mission, off_clock)
     children = [c for c in (vehicle, controller, relay) if c is not None]
-    summary["outcome"], summary["ended_by"] = ended_by(summary["outcome"], arrays, flight, facts, events, children,
-                                                       controller_id)
+    summary["outcome"], summary["ended_by"] = ended_by(summary["outcome"], arrays, flight, facts, events, mission,
+                                                       children, controller_id)
     summary["interventions"] = changes = interventions(events, m.rate_hz, controller_id)
     transfer = mission_transfer(cs.get("mission_transfer") or facts.mission_transfer, vs.get("mission_start"))
     if transfer is not None:
@@ -446,7 +442,7 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
     if lockstep is not None:
         summary["lockstep"] = reproducibility(lockstep, changes)
     rules = rules_for(flight, facts.clock, link, controller_id)
-    violated = judge(summary, arrays, events, rules, lockstep, off_clock)
+    violated = judge(summary, arrays, events, rules, lockstep, off_clock, mission, hop)
     end = summary["ended_by"]
     texts = [("ended", f"{summary['outcome']}: by {end['who']}: {end['how']}")]
     if lockstep is not None and not lockstep["held"]:
@@ -457,7 +453,7 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
     texts += [("intervention", f"not flown as asked: {intervention_text(i)}") for i in changes]
     texts += [("param", f"not flown as asked: {unconfirmed_text(p)}") for p in summary.get("param_at", ())
               if not p["confirmed"]]
-    texts += before_start_notes(events)
+    texts += before_start_notes(hop)
     texts += [("policy", violation_text(v)) for v in violated]
     if (stalls := stalls_of(summary)) is not None:
         texts.append(("stall", stalls_text(stalls)))

@@ -87,8 +87,7 @@ class Session:
         self.controller: Child | None = None
         self.relay: Child | None = None  # real time with an impaired link: bsst relay between the two
         self.vehicle_armed = False
-        self.failsafe_seen = False
-        self.diverged = False
+        self.diverged = False  # (a fleet's vehicle whose plant halted flies on no more: bridge.session.fleet)
         self.died: str | None = None
         self.aborted = False
         self.interrupted = False  # set by Ctrl-C / SIGTERM (see catch_stop_signals)
@@ -146,7 +145,6 @@ class Session:
         rate = self.flight.mission.rate_hz
         facts = SessionFacts(
             clock="realtime" if self.realtime else "lockstep", wall_s=wall, aborted=self.aborted, died=self.died,
-            failsafe_seen=self.failsafe_seen, diverged=self.diverged,
             off_clock_t=None if self.realtime else off_clock_time(self.path / "vehicle.bin", rate, joined.k0 or 0),
             sitl={"instance": self.instance, "listen": self.listen, "gcs": self.gcs, "sysid": self.sysid,
                   "speed": self.speed, "died": self.died, "signed": self.key is not None,
@@ -417,8 +415,6 @@ class Session:
                 self.vehicle_armed = True
             elif kind == "disarmed":
                 self.vehicle_armed = False
-            elif kind == "failsafe":
-                self.failsafe_seen = True
             elif kind == "diverged":
                 self.diverged = True
         self._note(kind, report.text, child.name, t, report.by, **typed_fields(report))
