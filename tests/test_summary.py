@@ -13,7 +13,7 @@ from dataclasses import replace
 
 import pytest
 
-from bridge.autopilot.vehicleevents import ITSELF, Sender
+from bridge.autopilot.vehicleevents import ITSELF, ParamChanged, Sender
 from bridge.core.flight import prepare
 from bridge.mavlink.receive import StepSends
 from bridge.record.columns import (
@@ -392,3 +392,19 @@ def test_a_failsafe_or_a_breach_of_a_ground_stations_flight_before_the_mission_i
     s = session_summary(FLIGHT, facts(), joined(int(0.8 * RATE)), [*hop, ARMED, own], vehicle, controller).summary
     assert s["outcome"] == "failsafe"
     assert s["ended_by"] == {"who": "vehicle", "how": f"failsafe at t=0.800 s: {own.text}"}, s["ended_by"]
+
+
+def test_a_failsafe_parameter_a_ground_station_set_after_its_hops_failsafe_is_named_in_the_missions_end() -> None:
+    """A failsafe parameter a ground station sets after its own flight's failsafe, before the awaited mission's start,
+    shapes the mission's failsafe: ``ended_by`` names it. (Until the third wave's thirty-eighth session the failsafe
+    it weighed was the hop's, the first of the run: only a change before that one counted, and this was unnamed.)"""
+    vehicle, controller = ends(rc=1, outcome="failsafe", reason="the vehicle's failsafe took over")
+    hop = [RunEvent(-9.0, "armed", "armed, TAKEOFF", "vehicle", GCS),
+           RunEvent(-8.0, "failsafe", "geofence: beyond GF_MAX_VER_DIST: land here", "vehicle"),
+           RunEvent(-5.0, "disarmed", "landed: disarmed", "vehicle", ITSELF),
+           RunEvent(-3.0, "param", "COM_OBL_ACT = 3", "vehicle", GCS, ParamChanged("COM_OBL_ACT", 1.0, 3.0))]
+    own = RunEvent(0.8, "failsafe", "no actuator target for 0.504 s: disarm", "vehicle")
+    s = session_summary(FLIGHT, facts(), joined(int(0.8 * RATE)), [*hop, ARMED, own], vehicle, controller).summary
+    assert s["outcome"] == "failsafe" and s["ended_by"] == {
+        "who": str(GCS), "how": f"failsafe at t=0.800 s: {own.text}, under COM_OBL_ACT = 3 (was 1) set by a ground "
+                                "station at t=-3.000 s (step -750)"}, s["ended_by"]

@@ -84,7 +84,8 @@ def ended_by_change(end: dict[str, Any], outcome: str, events: Sequence[RunEvent
                     changes: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     """``ended_by`` naming the ground station whose parameter change made the vehicle's failsafe act as it
     did (its action, timeout, hold time or descent: a failsafe parameter set before the failsafe began),
-    else ``end`` as it was."""
+    else ``end`` as it was. ``events``: the mission's (a ground station's own flight's failsafe, before an awaited
+    mission's start, is not the one that ended it)."""
     if outcome != "failsafe" or end.get("who") != "vehicle":
         return end
     fs = next((e for e in vehicle_events(events) if e.kind == "failsafe"), None)

@@ -436,7 +436,7 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
         summary["mission_transfer"] = transfer.as_dict()
     if cs.get("param_at"):  # the scheduled changes (--param-at) as sent, each confirmed by the vehicle's echo or not
         summary["param_at"] = list(cs["param_at"])
-    summary["ended_by"] = ended_by_change(summary["ended_by"], summary["outcome"], events, changes)
+    summary["ended_by"] = ended_by_change(summary["ended_by"], summary["outcome"], mission, changes)
     summary["ended_by"].update(after_faults(summary["outcome"], [e.as_dict() for e in ev]))
     summary["ended_by"].update(not_reached(summary["outcome"], flight.timeline, arrays["t"]))
     if lockstep is not None:
