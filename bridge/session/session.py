@@ -92,7 +92,6 @@ class Session:
         self.aborted = False
         self.interrupted = False  # set by Ctrl-C / SIGTERM (see catch_stop_signals)
         self._event_log: EventLog | None = None
-        self._vehicle_said: dict[str, float] = {}  # the vehicle's latest event of each kind in earlier reads (s)
         self.clock = MissionClock(vehicle_first=await_mission or not realtime)  # the events' against the vehicle's
         self._early: list[tuple[Child, Report]] = []  # reports read while starting, handled once all are up
         self.flies_on: Callable[[], bool] | None = None  # a fleet's: a vehicle taken over flies on under it now?
@@ -363,7 +362,7 @@ class Session:
             self._join()  # k0 may be in a row not joined yet: the mission's clock before these are stamped
         times = self.clock.stamps([(c.name == "vehicle", r.t if isinstance(r, Event) else -math.inf)
                                    for c, r in reports])
-        for child, report, t in in_cause_order(reports, times, self._vehicle_said):
+        for child, report, t in in_cause_order(reports, times, self.clock.vehicle_said):
             self._status(child, report, t)
 
     # -- status lines, events, progress -------------------------------------------------------------
@@ -424,7 +423,7 @@ class Session:
         k0 (:mod:`bridge.record.missionclock`: what came before it is on the vehicle's clock until then), so that no
         event is stamped between the two clocks."""
         if self.clock.origin_s is None and self.joiner.k0 is not None and (note := self.clock.learn(
-                self.joiner.k0, self.flight.mission.rate_hz, len(self.events), self._vehicle_said)):
+                self.joiner.k0, self.flight.mission.rate_hz, len(self.events))):
             self._note("clock", note, "session", 0.0)
 
     def _note(self, kind: str, text: str, source: str, t: float | None = None, by: Sender | None = None,
