@@ -278,14 +278,15 @@ def _fly_alone(mission: Mission, cell: Cell, mode: str, report: Report, sigint: 
     # private, but the only holder of the worker's exit status (its parent, the fork server, sends it to the
     # Process); shutdown drops the attribute, not the dict
     workers: Mapping[int, Any] = pool._processes  # type: ignore[attr-defined]
-    future, waited = pool.submit(run_cell, mission, cell, mode), False
+    future = pool.submit(run_cell, mission, cell, mode)
     try:
         wait_or_interrupt([future], sigint.first)
-        waited = True
-    finally:
-        _shut_down(pool, sigint, name)  # (joins the worker: its exit status is known from here)
-        if not waited:
-            _report_flown([future], report)
+    except BaseException:  # a Ctrl-C in the wait: the row if the cell flew to its end
+        _shut_down(pool, sigint, name)
+        _report_flown([future], report)
+        raise
+    # a Ctrl-C from here on came after the wait (sigint.first.done() is no test of one in it): the row, once, below
+    _shut_down(pool, sigint, name)  # (joins the worker: its exit status is known from here)
     try:
         row = future.result()
     except BrokenProcessPool:

@@ -133,11 +133,15 @@ class Sweep:
                    for v in getattr(self.grid, a)]
         lists = [getattr(self.grid, a) or (getattr(base, a),) for a in LINK_AXES]
         probes += [_replace_cell(base, **dict(zip(LINK_AXES, vs, strict=True))) for vs in product(*lists)]
+        own = None  # the base cell's flight: the first link probe is the base cell itself
         for c in probes:
             try:
-                check_trace_steps(cell_flight(self.mission, c).mission)  # each rate: its steps within the cap
+                flight = cell_flight(self.mission, c)
+                check_trace_steps(flight.mission)  # each rate: its steps within the cap
             except ConfigError as exc:
                 raise ConfigError(f"sweep cell ({c.label()}): {exc}") from None
+            if c == base:
+                own = flight
         if any(n > 1 for n in self.grid.vehicles):  # the largest fleet laid out: each vehicle inside the envelope
             n = max(self.grid.vehicles)
             try:
@@ -151,8 +155,8 @@ class Sweep:
             raise ConfigError(f"grid.noise (--noise): {why}")
         swept = {a: getattr(self.grid, a) for a in LINK_AXES if getattr(self.grid, a)}
         for a in (a for a in swept if a in NEEDS):  # burst_len: its cells need a loss, swept or the mission's
-            why = idle_problem(a, [v for pair in swept_links([cell_flight(self.mission, base).link], swept)
-                                   for v in pair])
+            assert own is not None
+            why = idle_problem(a, [v for pair in swept_links([own.link], swept) for v in pair])
             if why:
                 need = NEEDS[a][0]
                 raise ConfigError(f"grid.{a} (--{SHORT[a]}): changes nothing in any cell: {why}; sweep --{SHORT[need]} "
