@@ -238,7 +238,7 @@ def check_timing(duration_s: float, rate_hz: float, physics_hz: float, source: s
 
 def rate_problem(rate_hz: float, physics_hz: float, physics_from: str = "") -> str | None:
     """Why ``rate_hz`` (Hz) cannot be flown at ``physics_hz`` (Hz; set where ``physics_from`` says), or None: the one
-    rule, for the loader (``rate_hz``) and ``--rate`` (named as the flag: bridge.cli.options.refuse_idle_inputs)."""
+    rule, for the loader (``rate_hz``) and ``--rate`` (named as the flag: bridge.cli.options.checked_mission)."""
     ratio = physics_hz / rate_hz
     if abs(ratio - round(ratio)) <= 1e-9 and round(ratio) >= 1:
         return None
@@ -269,15 +269,15 @@ def is_plan_file(path: str | Path) -> bool:
     return Path(path).suffix.lower() in PLAN_SUFFIXES
 
 
-def load_mission(path: str | Path, cap: StepCap | None = None) -> Mission:
-    """Read and validate a mission TOML file (a shipped one by name: :func:`mission_path`), or a
-    ground station's plan (:func:`is_plan_file`: flown with every other setting at its default). ``cap``: the
-    control steps the command keeps (:class:`missions.steps.StepCap`): a mission over it is refused as soon as
+def load_mission(path: str | Path, cap: StepCap | None = None, table: Mapping[str, Any] | None = None) -> Mission:
+    """Read and validate a mission TOML file (a shipped one by name: :func:`mission_path`; ``table``: its TOML, read
+    already), or a ground station's plan (:func:`is_plan_file`: flown with every other setting at its default). ``cap``:
+    the control steps the command keeps (:class:`missions.steps.StepCap`): a mission over it is refused as soon as
     its length is known, a plan's before its trajectory is timed when even its least length is over."""
     p = mission_path(path)
     if is_plan_file(p):
         return mission_from_plan(read_text_file(p, "a mission plan", PLAN_MAX_BYTES), str(p), p.stem, cap)
-    return mission_from_table(load_toml(p), str(p), default_name=p.stem, cap=cap)
+    return mission_from_table(load_toml(p) if table is None else table, str(p), default_name=p.stem, cap=cap)
 
 
 def plan_smooth(plan: PlanFile, limits: Mapping[str, float] | None = None, budget: PlanBudget | None = None) -> Smooth:

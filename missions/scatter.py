@@ -34,7 +34,7 @@ def scattered_start(start: tuple[float, float, float, float], radius_m: float,
 def fleet_scatter_problem(radius_m: float, fleet: str) -> str | None:
     """Why a scatter of ``radius_m`` (m) cannot be flown by a fleet (``fleet``: what gave it; "" none), or None: the
     one rule, for the mission (``start.scatter_m``) and ``--scatter`` (named as the flag:
-    bridge.cli.options.refuse_idle_inputs)."""
+    bridge.cli.options.checked_mission)."""
     if not radius_m or not fleet:
         return None
     return f"a fleet's starts are its formation's ({fleet}): scatter the starts of a mission of one vehicle"

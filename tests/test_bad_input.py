@@ -609,6 +609,18 @@ def test_a_flag_that_would_change_nothing_is_refused(files, capsys, argv, names)
     assert not files.out.exists()
 
 
+def test_a_flag_that_would_change_nothing_in_a_long_mission_of_one_side_is_named_as_the_flag(tmp_path, capsys):
+    """``bsst vehicle`` and ``bsst controller`` stream their rows to disk and fly a mission longer than a run keeps in
+    memory (bridge.record.runlog.check_trace_steps): a flag that would change nothing in one is refused as that flag.
+    Until the third wave's thirty-eighth session the check read the mission again with ``bsst sim``'s cap, and the
+    line said it was too long, to be flown with bsst vehicle and bsst controller: the very commands refusing it."""
+    mission = tmp_path / "long.toml"
+    mission.write_text('name = "long"\nduration_s = 3000.0\n[trajectory]\nkind = "sine"\nclimb = 0.0\n')
+    _refused(capsys, ["controller", mission, "--controller", "smc", "--discretization", "explicit"],
+             "--discretization explicit: only bsst has")
+    _refused(capsys, ["vehicle", mission, "--noise", "2"], "--noise 2: the estimator is 'truth'")
+
+
 IDLE_LINK = [  # (argv, {m} the mission and {out} the run directory; what the one line names): a link flag that acts
     # only with another, given where nothing gives that (until the third wave's thirty-seventh session each was taken
     # and flew nothing different); a sweep's only where no cell has it, a margin's in the search's probes

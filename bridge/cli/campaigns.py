@@ -41,7 +41,7 @@ from bridge.cli.options import (
     add_scatter_option,
     add_sensor_axes,
     add_sensor_options,
-    refuse_idle_inputs,
+    checked_mission,
     sensor_overrides_from_args,
 )
 from params import ConfigError
@@ -298,7 +298,6 @@ def _margin(args: argparse.Namespace) -> int:
     from bridge.record.runlog import run_dir  # lazy: start-up time
     from bridge.sweep.grid import LINK_AXES  # lazy: start-up time
     from bridge.sweep.margin import START, MarginInterrupted, margin, parse_until  # lazy: start-up time
-    from missions import load_mission  # lazy: start-up time
 
     until = parse_until(args.until)
     fixed = link_table_from_args(args)
@@ -316,10 +315,9 @@ def _margin(args: argparse.Namespace) -> int:
     # a fixed --noise, --discretization or link flag that would change nothing, as bsst sim's: the link flags in a
     # probe of the searched value (--burst with --over loss_pct is used)
     probe = {args.over: [START[args.over]]} if args.over in LINK_AXES else None
-    refuse_idle_inputs(args, args.mission, args.controller, probe)
-    mission = prepare(load_mission(args.mission), Overrides(link=fixed or None, discretization=args.discretization,
-                                                            turbulence=args.turbulence, scatter_m=args.scatter,
-                                                            **sensing)).mission
+    m = checked_mission(args, args.mission, None, args.controller, probe)  # (read once)
+    mission = prepare(m, Overrides(link=fixed or None, discretization=args.discretization, turbulence=args.turbulence,
+                                   scatter_m=args.scatter, **sensing)).mission
     run_dir(args.out, f"{mission.name}-margin", args.overwrite, create=False)  # a refused --out before any flight
     live = sys.stderr.isatty()
 

@@ -39,8 +39,8 @@ from bridge.cli.options import (
     add_param_options,
     add_port_options,
     add_sensor_options,
+    checked_mission,
     overrides_from_args,
-    refuse_idle_inputs,
     refuse_vehicle_flags,
 )
 from params import ConfigError
@@ -111,7 +111,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
 def _sim(args: argparse.Namespace, mission: Any) -> int:
     from bridge.swarm import simulate  # lazy: start-up time
 
-    refuse_idle_inputs(args, mission)  # (here: a law of the user's own is loaded in its watched process)
+    checked_mission(args, mission)  # (here: a law of the user's own is loaded in its watched process)
     run = simulate(mission, out=args.out, write=True, overwrite=args.overwrite, plots=not args.no_plots,
                    overrides=overrides_from_args(args), vehicles=args.vehicles, formation=args.formation)
     return report_final(run, "sim")
@@ -403,12 +403,14 @@ def add_sitl_commands(sub: Any) -> None:
 
 
 def cmd_sitl(args: argparse.Namespace) -> int:
+    from bridge.record.runlog import trace_cap  # lazy: start-up time
     from bridge.swarm import sitl  # lazy: start-up time
 
-    refuse_idle_inputs(args, args.mission)
-    run = sitl(args.mission, out=args.out, write=True, overwrite=args.overwrite, plots=not args.no_plots,
-               realtime=args.realtime, instance=args.instance, gcs=args.gcs, speed=args.speed, live=True,
-               key=args.key, overrides=overrides_from_args(args), await_mission=args.await_mission,
+    own = args.mission is not None and not args.await_mission  # (a file with --await-mission: sitl refuses it)
+    mission = checked_mission(args, args.mission if own else None, trace_cap(args.rate))  # once, capped as sim's
+    run = sitl(mission if own else args.mission, out=args.out, write=True, overwrite=args.overwrite,
+               plots=not args.no_plots, realtime=args.realtime, instance=args.instance, gcs=args.gcs, speed=args.speed,
+               live=True, key=args.key, overrides=overrides_from_args(args), await_mission=args.await_mission,
                vehicles=args.vehicles, formation=args.formation)
     return report_final(run, "sitl")
 
@@ -425,8 +427,8 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
     from bridge.record.runlog import trace_cap  # lazy: start-up time
 
     refuse_vehicle_flags(args)
-    refuse_idle_inputs(args, args.mission)
-    flight = prepare(args.mission or at_rest(), overrides_from_args(args))
+    mission = checked_mission(args, args.mission)  # read once (not capped: the vehicle streams its rows to disk)
+    flight = prepare(mission if mission is not None else at_rest(), overrides_from_args(args))
     n = args.instance
     own = flight.params.sysid if "MAV_SYS_ID" in flight.mission.params else None  # [params] or --param
     if args.sysid is not None and own is not None and args.sysid != own:
@@ -460,8 +462,8 @@ def cmd_controller(args: argparse.Namespace) -> int:
     from bridge.mavlink.endpoint import LINK_PORT, parse_address  # lazy: start-up time
     from bridge.nodes.offboard import OffboardConfig, run_controller  # lazy: start-up time
 
-    refuse_idle_inputs(args, args.mission)  # a --discretization for a law without a super-twisting step
-    flight = prepare(args.mission, overrides_from_args(args))
+    mission = checked_mission(args, args.mission)  # read once (not capped: it streams its rows, as the vehicle)
+    flight = prepare(mission, overrides_from_args(args))
     vehicle = parse_address(f"127.0.0.1:{LINK_PORT + args.instance}" if args.vehicle is None else args.vehicle,
                             "udpout", "--vehicle")
     if vehicle.mode != "udpout":

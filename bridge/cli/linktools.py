@@ -25,7 +25,7 @@ from bridge.cli.flags import (
     path_given,
 )
 from bridge.cli.linkflags import add_link_options, radio_of
-from bridge.cli.options import overrides_from_args, refuse_idle_inputs
+from bridge.cli.options import checked_mission, overrides_from_args
 from params import ConfigError, inputs_read
 
 
@@ -212,7 +212,6 @@ def cmd_relay(args: argparse.Namespace) -> int:
     from bridge.nodes.relay import Relay, client_event, forwards_to_itself, parse_address  # lazy: start-up time
     from bridge.nodes.report import to_line  # lazy: start-up time
     from bridge.record.runlog import write_json_atomic  # lazy: start-up time
-    from missions import load_mission  # lazy: start-up time
 
     try:
         listen = parse_address(args.listen, "--listen", bind=True)
@@ -223,10 +222,10 @@ def cmd_relay(args: argparse.Namespace) -> int:
     if forwards_to_itself(listen, target):
         raise UsageError(f"bsst relay: --to {args.to} is the relay's own --listen {args.listen}: it would forward "
                          "into itself")
-    refuse_idle_inputs(args, args.mission)  # a link flag or key that would change nothing: as bsst sim refuses it
-    # the one path from a mission and its overrides to the parts: the whole mission is checked,
-    # and the relay flies the link it gives
-    settings = prepare(load_mission(args.mission) if args.mission else at_rest(), overrides_from_args(args)).link
+    mission = checked_mission(args, args.mission or None)  # read once; a link flag or key that would change
+    # nothing: as bsst sim refuses it. The one path from a mission and its overrides to the parts: the whole mission
+    # is checked, and the relay flies the link it gives
+    settings = prepare(mission if mission is not None else at_rest(), overrides_from_args(args)).link
     if args.stats is not None:  # bad input now, not a failure after relaying; and never a file it reads (its
         # mission, trace, profile: params.inputs_read; the fleet's radio it writes in place)
         read = [*inputs_read().values(), *([args.radio] if args.radio else [])]

@@ -6,8 +6,9 @@ In:  an ``argparse`` parser to add options to; the parsed ``argparse.Namespace``
      ``--noise`` a scale, the link flags of :mod:`bridge.cli.flags`)
 Out: the options on the parser; :func:`overrides_from_args`, the frozen
      :class:`~bridge.core.overrides.Overrides` those flags ask for (a flag a command does not have: the
-     mission's own), which :func:`bridge.core.flight.prepare` lays over the mission; :func:`refuse_idle_inputs`,
-     a flag (or a mission's link key) that would change nothing, refused as a ``ConfigError`` naming it;
+     mission's own), which :func:`bridge.core.flight.prepare` lays over the mission; :func:`checked_mission`, the
+     mission a flying command flies, read once, a flag (or a mission's link key) that would change nothing in it (or
+     a flag its own keys make wrong) refused as a ``ConfigError`` naming it;
      :func:`refuse_vehicle_flags`, ``bsst vehicle``'s flags that need another
 """
 
@@ -44,6 +45,8 @@ from params.text import number
 
 if TYPE_CHECKING:  # annotations only: building the parser loads no flight code
     from bridge.core.overrides import Overrides
+    from missions import Mission
+    from missions.steps import StepCap
 
 
 def add_failsafe_options(p: argparse.ArgumentParser) -> None:
@@ -125,40 +128,43 @@ def sensor_overrides_from_args(args: argparse.Namespace) -> dict[str, Any]:
             "estimator": getattr(args, "estimator", None), "noise": getattr(args, "noise", None)}
 
 
-def refuse_idle_inputs(args: argparse.Namespace, mission: Any, laws: tuple[str, ...] | None = None,
-                       axes: Mapping[str, Sequence[float]] | None = None) -> None:
-    """Flags that would change nothing in this flight, refused, each by the rule a sweep refuses its axis with:
+def checked_mission(args: argparse.Namespace, mission: Mission | str | Path | None, cap: StepCap | None = None,
+                    laws: tuple[str, ...] | None = None, axes: Mapping[str, Sequence[float]] | None = None
+                    ) -> Mission | None:
+    """The mission a flying command flies, read once (``mission``: a path, loaded with ``cap``; a
+    :class:`missions.Mission` it loaded already; None: a bare ``bsst vehicle``, ``--await-mission``, flown at rest
+    here), with the flags that would change nothing in it refused, each by the rule a sweep refuses its axis with:
     ``--noise X`` where every vehicle flies the true state (``truth``: it has no sensors, so none are streamed
     either, HIGHRES_IMU and GPS_RAW_INT included) or a sensor set with no noise
     (:func:`bridge.sweep.grid.noise_problem`); ``--discretization`` where no law flown is ``bsst``
     (:func:`controller.law.discretization_problem`); a link flag that acts only with another (``--burst`` without
     loss, ``--queue`` without a bandwidth cap, ``--link-trace-loop`` without a trace) where nothing gives that
     (:func:`bridge.cli.linkflags.idle_link_flag`), and a key of the mission's ``[link]`` whose need nobody gives
-    (:func:`bridge.cli.linkflags.unmet_mission_key`); a guard flag that clashes with the flight's other guard keys
-    (``--command-lag`` without prediction: :func:`bridge.cli.linkflags.guard_flag_refusal`). ``mission``: a
-    :class:`missions.Mission`, a path, or None (a bare ``bsst vehicle``, ``--await-mission``); ``laws``: the laws
-    ``bsst margin`` searches (its ``--controller``), flown in place of the mission's; ``axes``: the link values it
-    searches, laid over both directions."""
-    from bridge.link.model import swept_links  # lazy: start-up time
-
-    noise, scheme = getattr(args, "noise", None), getattr(args, "discretization", None)
-    own, source = _own_link(mission)
-    clash = (guard_flag_refusal(args, own, source) or _rate_flag_refusal(args, mission)
-             or _scatter_flag_refusal(args, mission))  # (before the flight is prepared: it would name the file's key)
-    if clash:
-        raise ConfigError(clash)
-    unmet = unmet_mission_key(args, own, source, axes or {})
-    if noise is None and scheme is None and unmet is None and not idle_flags_given(args):
-        return
+    (:func:`bridge.cli.linkflags.unmet_mission_key`). Before the file is validated, the flags its own keys make
+    wrong, named as the flags: a guard flag that clashes with its other guard keys (``--command-lag`` without
+    prediction: :func:`bridge.cli.linkflags.guard_flag_refusal`), ``--rate`` and ``--scatter`` where it cannot take
+    them. ``laws``: the laws ``bsst margin`` searches (its ``--controller``), flown in place of the mission's;
+    ``axes``: the link values it searches, laid over both directions."""
     from bridge.core.flight import at_rest, prepare  # lazy: start-up time
-    from bridge.record.runlog import trace_cap  # lazy: start-up time
+    from bridge.link.model import absolute_link_paths, swept_links  # lazy: start-up time
     from bridge.swarm import fleet_flights, fleet_mission  # lazy: start-up time
     from bridge.sweep.grid import noise_problem  # lazy: start-up time
     from controller.law import discretization_problem  # lazy: start-up time
     from missions import Mission, load_mission  # lazy: start-up time
 
-    m = mission if isinstance(mission, Mission) else (load_mission(mission, trace_cap(getattr(args, "rate", None)))
-                                                       if mission is not None else at_rest())
+    table, source = _own(mission)
+    link = table.get("link", {}) if table is not None else {}
+    own = absolute_link_paths(link, Path(source).parent) if isinstance(link, Mapping) else {}
+    clash = (guard_flag_refusal(args, own, source) or _rate_flag_refusal(args, table or {}, source)
+             or _scatter_flag_refusal(args, table or {}, source))  # (before the loader or prepare names the key)
+    if clash:
+        raise ConfigError(clash)
+    flown = mission if isinstance(mission, Mission) or mission is None else load_mission(mission, cap, table)
+    noise, scheme = getattr(args, "noise", None), getattr(args, "discretization", None)
+    unmet = unmet_mission_key(args, own, source, axes or {})
+    if noise is None and scheme is None and unmet is None and not idle_flags_given(args):
+        return flown
+    m = flown if flown is not None else at_rest()
     if laws is not None:  # bsst margin: its --controller is the list of laws it searches, not one to lay over
         args = argparse.Namespace(**{**vars(args), "controller": None})
     over = replace(overrides_from_args(args), noise=1.0)  # the set's own sigmas: a scale of 0 changes a noisy set
@@ -173,20 +179,20 @@ def refuse_idle_inputs(args: argparse.Namespace, mission: Any, laws: tuple[str, 
     idle = idle_link_flag(args, swept_links([f.link for f in flights], axes))
     if idle or unmet:
         raise ConfigError(idle or unmet)
+    return flown
 
 
-def _rate_flag_refusal(args: argparse.Namespace, mission: Any) -> str | None:
-    """The line refusing ``--rate HZ`` that the mission's physics rate is no whole multiple of
-    (:func:`missions.mission.rate_problem`, the loader's rule), named as the flag; None, and None for a physics
-    rate the loader will refuse (and name)."""
+def _rate_flag_refusal(args: argparse.Namespace, own: Mapping[str, Any], source: str) -> str | None:
+    """The line refusing ``--rate HZ`` that the mission's physics rate (``own``: its top-level table, from
+    ``source``) is no whole multiple of (:func:`missions.mission.rate_problem`, the loader's rule), named as the
+    flag; None, and None for a physics rate the loader will refuse (and name)."""
     from missions import Mission  # lazy: start-up time
     from missions.mission import rate_problem  # lazy: start-up time
 
     rate = getattr(args, "rate", None)
     if rate is None:
         return None
-    table, source = _own(mission)
-    physics = table.get("physics_hz", Mission.physics_hz)  # (the loader's default, a plan's and a bare vehicle's)
+    physics = own.get("physics_hz", Mission.physics_hz)  # (the loader's default, a plan's and a bare vehicle's)
     if isinstance(physics, bool) or not isinstance(physics, (int, float)) or not physics > 0:
         return None
     set_by = f" ({source}'s physics_hz)" if source and physics != Mission.physics_hz else ""  # (not the default)
@@ -194,24 +200,24 @@ def _rate_flag_refusal(args: argparse.Namespace, mission: Any) -> str | None:
     return None if why is None else f"--rate {rate:g}: {why}"
 
 
-def _scatter_flag_refusal(args: argparse.Namespace, mission: Any) -> str | None:
-    """The line refusing ``--scatter M`` for a fleet (``--vehicles N``, or the mission's own ``[[vehicles]]``:
-    :func:`missions.scatter.fleet_scatter_problem`, the mission's rule), named as the flag; None."""
+def _scatter_flag_refusal(args: argparse.Namespace, own: Mapping[str, Any], source: str) -> str | None:
+    """The line refusing ``--scatter M`` for a fleet (``--vehicles N``, or the mission's own ``[[vehicles]]``, in
+    ``own`` from ``source``: :func:`missions.scatter.fleet_scatter_problem`, the mission's rule), named as the flag;
+    None."""
     from missions.scatter import fleet_scatter_problem  # lazy: start-up time
 
     scatter, n = getattr(args, "scatter", None), getattr(args, "vehicles", None)
     if scatter is None:
         return None
-    table, source = _own(mission)
-    fleet = f"--vehicles {n}" if isinstance(n, int) else f"{source}'s [[vehicles]]" if table.get("vehicles") else ""
+    fleet = f"--vehicles {n}" if isinstance(n, int) else f"{source}'s [[vehicles]]" if own.get("vehicles") else ""
     why = fleet_scatter_problem(scatter, fleet)
     return None if why is None else f"--scatter {scatter:g}: {why}"
 
 
-def _own(mission: Any) -> tuple[Mapping[str, Any], str]:
+def _own(mission: Mission | str | Path | None) -> tuple[dict[str, Any] | None, str]:
     """A mission's own top-level table as its file holds it (``link``, ``physics_hz`` and ``vehicles`` of a
-    :class:`missions.Mission`) and its source, read without flying it: {} for none (a bare vehicle), a plan file,
-    or a file its loader will refuse (and name)."""
+    :class:`missions.Mission`) and its source, read once, without validating it: ({}, "") for none (a bare
+    vehicle) and a plan file, (None, "") for a file its loader will refuse (and name)."""
     from missions import Mission  # lazy: start-up time
     from missions.mission import is_plan_file, mission_path  # lazy: start-up time
 
@@ -223,16 +229,7 @@ def _own(mission: Any) -> tuple[Mapping[str, Any], str]:
     try:
         return load_toml(path), str(path)
     except ConfigError:
-        return {}, ""
-
-
-def _own_link(mission: Any) -> tuple[Mapping[str, Any], str]:
-    """A mission's own ``[link]`` table (its files' paths made absolute) and its source (:func:`_own`)."""
-    from bridge.link.model import absolute_link_paths  # lazy: start-up time
-
-    table, source = _own(mission)
-    link = table.get("link", {})
-    return (absolute_link_paths(link, Path(source).parent) if isinstance(link, Mapping) else {}), source
+        return None, ""
 
 
 def add_flight_options(p: argparse.ArgumentParser, vehicle: bool = True, optional_mission: bool = False) -> None:
