@@ -32,7 +32,7 @@ from collections.abc import Generator, Sequence
 from pathlib import Path
 from typing import Any
 
-from bridge.core.flight import Flight, Progress, prepare
+from bridge.core.flight import Flight, Progress, discretization_refusal, prepare
 from bridge.core.overrides import Overrides
 from bridge.link.model import merge_link_tables
 from bridge.link.radio import Radio
@@ -51,6 +51,7 @@ from bridge.record.runlog import (
 )
 from bridge.record.separation import CONTINUED, WALL_CLOCK, Untold, Watch, judge_traces
 from bridge.record.wallclock import REALTIME, clocked_records, judged_on_wall_clock, taken_over_records
+from controller.law import DISCRETIZED
 from missions import Mission, load_mission
 from missions.fleet import (
     DEFAULT_MIN_SEPARATION_M,
@@ -174,10 +175,17 @@ def fleet_mission(m: Mission, vehicles: int | Sequence[Any] | None, layout: str 
 
 def fleet_flights(m: Mission, over: Overrides) -> list[Flight]:
     """Each vehicle's :class:`Flight`, by id: its own mission with the overrides laid over it (a ``seed``
-    override, and the seeds a ``[link]`` override names, moved by the vehicle's id less one, as its own)."""
+    override, and the seeds a ``[link]`` override names, moved by the vehicle's id less one, as its own; a
+    ``discretization`` override on the vehicles that fly ``bsst``, refused where none does)."""
+    laws = [over.controller or v.controller or m.controller for v in m.vehicles]  # (each as mission_of gives it)
+    idle = discretization_refusal(over.discretization, laws)
+    if idle:
+        raise ConfigError(idle)
     flights = []
-    for v in m.vehicles:
+    for v, law in zip(m.vehicles, laws, strict=True):
         given = over.given()
+        if law not in DISCRETIZED:  # (a law without a super-twisting step: the scheme is the others')
+            given.pop("discretization", None)
         if "seed" in given:
             given["seed"] = (given["seed"] + v.id - 1) % 2**31
         if "link" in given:

@@ -36,6 +36,7 @@ from bridge.sweep.grid import AXES, Cell, Grid, cell_overrides, cells
 from controller.nominal import Nominal
 from controller.predict import Predictor
 from missions import load_mission
+from params import ConfigError
 from plant.profiles import load_profile
 
 pytestmark = pytest.mark.usefixtures("batch_kernels")  # flies the batch engine: its kernels loaded first
@@ -128,6 +129,20 @@ def test_cells_of_a_sweep_grid_are_prepared_as_prepare_does() -> None:
     assert fast == [prepare(m, o) for o in over]  # an Overrides (a cell's) or a mapping of its fields
     bad = _prepare_all(m, [{"controller": "bsst", "link": {"loss_pct": 150.0}}])
     assert len(bad) == 1 and isinstance(bad[0], str) and "loss_pct" in bad[0]
+
+
+def test_a_missions_idle_link_key_is_refused_cell_by_cell_as_prepare_refuses_it() -> None:
+    """A key of the mission's own ``[link]`` that needs what the cell does not give (burst_len without a loss) makes
+    that cell an error row with prepare()'s own line, and a cell that gives it (a loss in either direction) is built,
+    though the batch prepares one flight per law without the cells' link tables."""
+    m = replace(_mission(1.0), link={"burst_len": 3.0})
+    over = [{"link": {"loss_pct": 5.0}}, {"link": {"delay_ms": 5.0}},
+            {"controller": "pid", "link": {"up": {"loss_pct": 1.0}}}]
+    built = _prepare_all(m, over)
+    assert built[0] == prepare(m, over[0]) and built[2] == prepare(m, over[2])
+    with pytest.raises(ConfigError) as refused:
+        prepare(m, over[1])
+    assert built[1] == f"ConfigError: {refused.value}" and "link.burst_len: changes nothing" in built[1]
 
 
 def test_a_cell_that_cannot_be_built_is_an_error_row() -> None:

@@ -19,9 +19,11 @@ import numpy as np
 import pytest
 
 from bridge.cli import build_parser, main
+from bridge.core.overrides import Overrides
 from bridge.loop import simulate
 from bridge.record.metrics import period2
-from bridge.sweep.grid import Cell
+from bridge.swarm import fleet_flights
+from bridge.sweep.grid import Cell, cell_overrides
 from controller import Controller, Gains, Nominal
 from controller.bsst import BacksteppingSuperTwisting
 from controller.law import make_law
@@ -123,6 +125,31 @@ def test_only_bsst_records_a_discretization() -> None:
     for law, want in (("bsst", "implicit"), ("smc", None), ("pid", None), (own, None)):
         assert simulate(short, controller=law, plots=False).summary["discretization"] == want, law
     assert simulate(short, discretization="explicit", plots=False).summary["discretization"] == "explicit"
+
+
+def test_a_discretization_for_a_law_without_a_super_twisting_step_is_refused_by_the_api_too(tmp_path: Path) -> None:
+    """``discretization=`` laid over a flight whose law has no super-twisting step is refused by ``bridge.simulate``
+    as ``bsst sim --discretization`` is, by ``prepare``, the one path every way to fly takes (until the third wave's
+    thirty-eighth session only the command refused it: the API flew it, summary.json's discretization null). A
+    fleet's is refused where no vehicle flies bsst; where one does, the vehicles that fly bsst take it. A sweep's
+    cell of such a law lays none (the axis is the bsst cells')."""
+    short = Mission(Sine(), duration_s=1.0, name="short")
+    for law in ("smc", "pid"):
+        with pytest.raises(ConfigError) as refused:
+            simulate(short, controller=law, discretization="explicit", plots=False)
+        assert str(refused.value) == (f"--discretization explicit: only bsst has a super-twisting step to discretize: "
+                                      f"{law} flies the same under both (docs/law.md); drop the flag, or fly "
+                                      "--controller bsst")
+    fleet = tmp_path / "fleet.toml"
+    fleet.write_text('duration_s = 1.0\n[trajectory]\nkind = "sine"\n[[vehicles]]\nid = 1\ncontroller = "smc"\n'
+                     "[[vehicles]]\nid = 2\noffset = [0.0, 3.0, 0.0]\n")
+    m = load_mission(fleet)
+    flights = fleet_flights(m, Overrides(discretization="explicit"))
+    assert [(f.mission.controller, f.mission.discretization) for f in flights] == [("smc", DEFAULT_DISCRETIZATION),
+                                                                                   ("bsst", "explicit")]
+    with pytest.raises(ConfigError, match="^--discretization explicit: only bsst has .*: smc flies the same"):
+        fleet_flights(m, Overrides(controller="smc", discretization="explicit"))
+    assert cell_overrides(Cell("smc", 250.0, 0.0, 0.0, 0.0, 0.0, 0, discretization="explicit")).discretization is None
 
 
 @pytest.fixture(scope="module")

@@ -22,6 +22,7 @@ import pytest
 from bridge.cli import build_parser, link_table_from_args
 from bridge.cli.flags import UsageError
 from bridge.cli.linkflags import GUARD_FLAGS, LINK_FLAGS
+from bridge.core.flight import prepare
 from bridge.link import model as link_model
 from bridge.link.model import (
     BLACKOUT_DURATION_RANGE_S,
@@ -38,6 +39,8 @@ from bridge.link.model import (
     link_from_table,
     unmet_key,
 )
+from bridge.loop import simulate
+from missions import load_mission
 from params import ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -175,3 +178,26 @@ def test_a_key_that_needs_another_has_one_rule_for_its_flag_and_its_table(key: s
     assert idle_problem(key, [{need: 0.0 if need != "trace" else None}]) is not None
     assert idle_problem(key, [{need: 0.0 if need != "trace" else None}, {need: on}]) is None
     assert idle_problem(key, [LinkConfig()]) is not None
+
+
+@pytest.mark.parametrize("key", list(NEEDS))
+def test_a_mission_files_idle_link_key_is_refused_by_the_python_api_too(tmp_path: Path, key: str) -> None:
+    """A key of a mission file's own ``[link]`` whose need nobody gives is refused by ``bridge.simulate`` as ``bsst
+    sim`` refuses it, naming the file and the key: by ``prepare``, the one path every way to fly takes (until the
+    third wave's thirty-eighth session only the command refused it, and the API flew it: the same flight as without
+    it). Given its need by what is laid over it (in one direction, or as 0), or by a campaign's swept axis, it flies;
+    laid over with another key only, it is refused still."""
+    need, does, _ = NEEDS[key]
+    value = {"burst_len": "3", "queue_ms": "300", "trace_loop": "true"}[key]
+    on = {"loss_pct": 2.0, "rate_bps": 9000.0, "trace": SAMPLE["trace"]}[need]
+    mission = tmp_path / "m.toml"
+    mission.write_text(f'name = "m"\nduration_s = 0.2\n[trajectory]\nkind = "sine"\n[link]\n{key} = {value}\n')
+    with pytest.raises(ConfigError) as refused:
+        simulate(mission, plots=False)
+    assert str(refused.value) == (f"{mission}: link.{key}: changes nothing: {does}, and no {need} is given; give "
+                                  f"{need} too, or remove {key}")
+    with pytest.raises(ConfigError, match=f"^{mission}: link.{key}: changes nothing"):
+        prepare(load_mission(mission), link={"delay_ms": 5.0})
+    for given in ({need: on}, {"down": {need: on}}, {need: 0.0 if need != "trace" else ""}):
+        assert prepare(mission, link=given).mission.link[key] is not None, given
+    assert prepare(mission, axes=(need,)).mission.link[key] is not None  # (a sweep's or a margin's axis gives it)

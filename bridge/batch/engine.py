@@ -44,13 +44,14 @@ from bridge.batch.control import BATCH_LAWS
 from bridge.batch.flight import Cells, Constants, batch_arrays, fly_cells
 from bridge.batch.metrics import Metrics, measured_rows
 from bridge.batch.weather import BATCH_EVENT_KINDS, turbulent
-from bridge.core.flight import Flight, prepare
+from bridge.core.flight import Flight, idle_link_key, prepare
 from bridge.core.interrupt import sigint_futures, wait_or_interrupt
 from bridge.core.overrides import Overrides
-from bridge.link.model import jitter_cell, link_from_table, merge_link_tables
+from bridge.link.model import NEEDS, jitter_cell, link_from_table, merge_link_tables
 from bridge.link.plan import Clocks, plan_links
 from bridge.record.metrics import RMS_FROM_S
 from missions import MISSION_DIR, Mission, Sine, load_mission
+from params import ConfigError
 from params.text import one_line
 from plant.quadrotor import CRASH_SPEED_MPS
 
@@ -166,6 +167,9 @@ def _differs(a: Flight, b: Flight) -> str | None:
 
 
 _PER_CELL = frozenset({"seed", "link"})  # what a cell may change without its own prepare()
+# a base is prepared as if every need of a mission's [link] key were met: each cell's is checked on its own, as
+# prepare() checks it (idle_link_key), since the cells' link tables give them
+_ALL_NEEDS = tuple(need for need, *_ in NEEDS.values())
 
 
 def _prepare_all(mission: Mission, cells: Sequence[Overrides | Mapping[str, Any]]) -> list[Flight | str]:
@@ -186,13 +190,17 @@ def _prepare_all(mission: Mission, cells: Sequence[Overrides | Mapping[str, Any]
             key = (over.controller, over.rate_hz, over.discretization)
             if key not in bases:
                 try:
-                    bases[key] = prepare(mission, Overrides(controller=key[0], rate_hz=key[1], discretization=key[2]))
+                    bases[key] = prepare(mission, Overrides(controller=key[0], rate_hz=key[1], discretization=key[2]),
+                                         axes=_ALL_NEEDS)
                 except Exception as exc:  # the cell's law or rate is bad input: every such cell says so
                     bases[key] = f"{type(exc).__name__}: {exc}"
             base = bases[key]
             if isinstance(base, str):
                 out.append(base)
                 continue
+            unmet = idle_link_key(mission, over.link)
+            if unmet:
+                raise ConfigError(unmet)
             out.append(_with_seed_and_link(base, mission, over.seed, over.link))
         except Exception as exc:  # a cell that cannot be built is an error row, never the end of the batch
             out.append(f"{type(exc).__name__}: {exc}")

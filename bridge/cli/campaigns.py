@@ -34,7 +34,6 @@ from bridge.cli.linkflags import (
     guard_flag_refusal,
     idle_link_flag,
     link_table_from_args,
-    unmet_mission_key,
 )
 from bridge.cli.options import (
     add_discretization_option,
@@ -134,7 +133,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    from bridge.core.flight import prepare  # lazy: start-up time
+    from bridge.core.flight import idle_link_key, prepare  # lazy: start-up time
     from bridge.core.interrupt import ignore_sigint  # lazy: start-up time
     from bridge.core.overrides import Overrides  # lazy: start-up time
     from bridge.link.model import absolute_link_paths, swept_links  # lazy: start-up time
@@ -168,13 +167,15 @@ def _sweep(args: argparse.Namespace) -> int:
     clash = guard_flag_refusal(args, own, spec.mission.source)  # (named as the flag, not as the file's key)
     if clash:
         raise UsageError(f"bsst sweep: {clash}")
-    unmet = unmet_mission_key(args, own, spec.mission.source, link_swept)  # (a swept --loss gives a burst_len its loss)
-    if laid or unmet:  # fixed for every cell, laid over by the one path to its parts (a bad mission named there)
-        flight = prepare(spec.mission, Overrides(link=fixed or None, sensors=sensors, scatter_m=args.scatter))
+    # fixed for every cell, laid over by the one path to its parts, which names a bad mission, and a key of its
+    # [link] that would change nothing (a swept --loss gives a burst_len its loss)
+    if laid or idle_link_key(spec.mission, fixed, link_swept):
+        flight = prepare(spec.mission, Overrides(link=fixed or None, sensors=sensors, scatter_m=args.scatter),
+                         axes=link_swept)
         swept = {a: getattr(spec.grid, a) for a in link_swept}
         idle = idle_link_flag(args, swept_links([flight.link], swept), cells=True)  # (None: no such flag given)
-        if idle or unmet:
-            raise UsageError(f"bsst sweep: {idle}") if idle else ConfigError(unmet)
+        if idle:
+            raise UsageError(f"bsst sweep: {idle}")
         spec = replace(spec, mission=flight.mission)
     if args.resume and args.out is None:
         raise UsageError("bsst sweep: --resume needs --out DIR (the sweep to resume)")
@@ -315,9 +316,9 @@ def _margin(args: argparse.Namespace) -> int:
     # a fixed --noise, --discretization or link flag that would change nothing, as bsst sim's: the link flags in a
     # probe of the searched value (--burst with --over loss_pct is used)
     probe = {args.over: [START[args.over]]} if args.over in LINK_AXES else None
-    m = checked_mission(args, args.mission, None, args.controller, probe)  # (read once)
-    mission = prepare(m, Overrides(link=fixed or None, discretization=args.discretization, turbulence=args.turbulence,
-                                   scatter_m=args.scatter, **sensing)).mission
+    m = checked_mission(args, args.mission, None, args.controller or (), probe)  # (a discretization: every law's)
+    mission = prepare(m.with_overrides(discretization=args.discretization), Overrides(
+        link=fixed or None, turbulence=args.turbulence, scatter_m=args.scatter, **sensing), axes=probe or ()).mission
     run_dir(args.out, f"{mission.name}-margin", args.overwrite, create=False)  # a refused --out before any flight
     live = sys.stderr.isatty()
 

@@ -15,7 +15,7 @@ The ranges are the mission loader's (:data:`bridge.link.model.NUMBER_RANGES`), o
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from bridge.cli.flags import UsageError, blackout_window, existing_file, link_number, link_seed, yes_no
@@ -188,20 +188,6 @@ def idle_flags_given(args: argparse.Namespace) -> bool:
     from bridge.link.model import NEEDS  # lazy: start-up time
 
     return any(getattr(args, f"link_{pre}{key}", None) is not None for key in NEEDS for pre in ("", "up_", "down_"))
-
-
-def unmet_mission_key(args: argparse.Namespace, own: Mapping[str, Any], source: str,
-                      axes: Iterable[str] = ()) -> str | None:
-    """The line refusing a key of the mission's own ``[link]`` table (``own``, its paths absolute) whose need nobody
-    gives: not the table, its profile (or ``--link-profile``'s), the flags, nor a campaign's swept link ``axes``
-    (:func:`bridge.link.model.unmet_key`); None."""
-    from bridge.link.model import DIRECTIONS, unmet_key  # lazy: start-up time
-
-    fixed = link_table_from_args(args)
-    table = {**own, "profile": fixed["profile"]} if "profile" in fixed else own
-    given = {k for t in (fixed, *(fixed.get(d, {}) for d in DIRECTIONS)) for k in t} | set(axes)
-    unmet = unmet_key(table, given)
-    return None if unmet is None else f"{source}: link.{unmet[0]}: {unmet[1]}"
 
 
 def guard_flag_refusal(args: argparse.Namespace, own: Mapping[str, Any], source: str) -> str | None:

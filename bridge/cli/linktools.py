@@ -222,9 +222,9 @@ def cmd_relay(args: argparse.Namespace) -> int:
     if forwards_to_itself(listen, target):
         raise UsageError(f"bsst relay: --to {args.to} is the relay's own --listen {args.listen}: it would forward "
                          "into itself")
-    mission = checked_mission(args, args.mission or None)  # read once; a link flag or key that would change
-    # nothing: as bsst sim refuses it. The one path from a mission and its overrides to the parts: the whole mission
-    # is checked, and the relay flies the link it gives
+    mission = checked_mission(args, args.mission or None)  # read once; a link flag that would change nothing: as
+    # bsst sim refuses it. The one path from a mission and its overrides to the parts: the whole mission is checked
+    # (a key of its [link] that would change nothing too), and the relay flies the link it gives
     settings = prepare(mission if mission is not None else at_rest(), overrides_from_args(args)).link
     if args.stats is not None:  # bad input now, not a failure after relaying; and never a file it reads (its
         # mission, trace, profile: params.inputs_read; the fleet's radio it writes in place)

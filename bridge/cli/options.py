@@ -7,8 +7,8 @@ In:  an ``argparse`` parser to add options to; the parsed ``argparse.Namespace``
 Out: the options on the parser; :func:`overrides_from_args`, the frozen
      :class:`~bridge.core.overrides.Overrides` those flags ask for (a flag a command does not have: the
      mission's own), which :func:`bridge.core.flight.prepare` lays over the mission; :func:`checked_mission`, the
-     mission a flying command flies, read once, a flag (or a mission's link key) that would change nothing in it (or
-     a flag its own keys make wrong) refused as a ``ConfigError`` naming it;
+     mission a flying command flies, read once, a flag that would change nothing in it (or that its own keys make
+     wrong) refused as a ``ConfigError`` naming it;
      :func:`refuse_vehicle_flags`, ``bsst vehicle``'s flags that need another
 """
 
@@ -33,13 +33,7 @@ from bridge.cli.flags import (
     path_given,
     sensor_set_name,
 )
-from bridge.cli.linkflags import (
-    guard_flag_refusal,
-    idle_flags_given,
-    idle_link_flag,
-    link_table_from_args,
-    unmet_mission_key,
-)
+from bridge.cli.linkflags import guard_flag_refusal, idle_flags_given, idle_link_flag, link_table_from_args
 from params import ConfigError, load_toml
 from params.text import number
 
@@ -129,27 +123,27 @@ def sensor_overrides_from_args(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def checked_mission(args: argparse.Namespace, mission: Mission | str | Path | None, cap: StepCap | None = None,
-                    laws: tuple[str, ...] | None = None, axes: Mapping[str, Sequence[float]] | None = None
+                    laws: Sequence[str] | None = None, axes: Mapping[str, Sequence[float]] | None = None
                     ) -> Mission | None:
     """The mission a flying command flies, read once (``mission``: a path, loaded with ``cap``; a
     :class:`missions.Mission` it loaded already; None: a bare ``bsst vehicle``, ``--await-mission``, flown at rest
     here), with the flags that would change nothing in it refused, each by the rule a sweep refuses its axis with:
     ``--noise X`` where every vehicle flies the true state (``truth``: it has no sensors, so none are streamed
     either, HIGHRES_IMU and GPS_RAW_INT included) or a sensor set with no noise
-    (:func:`bridge.sweep.grid.noise_problem`); ``--discretization`` where no law flown is ``bsst``
-    (:func:`controller.law.discretization_problem`); a link flag that acts only with another (``--burst`` without
-    loss, ``--queue`` without a bandwidth cap, ``--link-trace-loop`` without a trace) where nothing gives that
-    (:func:`bridge.cli.linkflags.idle_link_flag`), and a key of the mission's ``[link]`` whose need nobody gives
-    (:func:`bridge.cli.linkflags.unmet_mission_key`). Before the file is validated, the flags its own keys make
-    wrong, named as the flags: a guard flag that clashes with its other guard keys (``--command-lag`` without
-    prediction: :func:`bridge.cli.linkflags.guard_flag_refusal`), ``--rate`` and ``--scatter`` where it cannot take
-    them. ``laws``: the laws ``bsst margin`` searches (its ``--controller``), flown in place of the mission's;
-    ``axes``: the link values it searches, laid over both directions."""
-    from bridge.core.flight import at_rest, prepare  # lazy: start-up time
+    (:func:`bridge.sweep.grid.noise_problem`); a link flag that acts only with another (``--burst`` without loss,
+    ``--queue`` without a bandwidth cap, ``--link-trace-loop`` without a trace) where nothing gives that
+    (:func:`bridge.cli.linkflags.idle_link_flag`). Before the file is validated, the flags its own keys make wrong,
+    named as the flags: a guard flag that clashes with its other guard keys (``--command-lag`` without prediction:
+    :func:`bridge.cli.linkflags.guard_flag_refusal`), ``--rate`` and ``--scatter`` where it cannot take them.
+    ``laws``: the laws ``bsst margin`` searches (its ``--controller``; none given: the mission's), flown in place of
+    the mission's, each with ``--discretization``; ``axes``: the link values it searches, laid over both
+    directions. A key of the mission's ``[link]`` that would change nothing and a ``--discretization`` for a law
+    without a super-twisting step are :func:`bridge.core.flight.prepare`'s to refuse, the command's and the Python
+    API's alike (:func:`bridge.core.flight.idle_link_key`, :func:`bridge.core.flight.discretization_refusal`)."""
+    from bridge.core.flight import at_rest, discretization_refusal, prepare  # lazy: start-up time
     from bridge.link.model import absolute_link_paths, swept_links  # lazy: start-up time
     from bridge.swarm import fleet_flights, fleet_mission  # lazy: start-up time
     from bridge.sweep.grid import noise_problem  # lazy: start-up time
-    from controller.law import discretization_problem  # lazy: start-up time
     from missions import Mission, load_mission  # lazy: start-up time
 
     table, source = _own(mission)
@@ -160,25 +154,24 @@ def checked_mission(args: argparse.Namespace, mission: Mission | str | Path | No
     if clash:
         raise ConfigError(clash)
     flown = mission if isinstance(mission, Mission) or mission is None else load_mission(mission, cap, table)
-    noise, scheme = getattr(args, "noise", None), getattr(args, "discretization", None)
-    unmet = unmet_mission_key(args, own, source, axes or {})
-    if noise is None and scheme is None and unmet is None and not idle_flags_given(args):
-        return flown
     m = flown if flown is not None else at_rest()
     if laws is not None:  # bsst margin: its --controller is the list of laws it searches, not one to lay over
-        args = argparse.Namespace(**{**vars(args), "controller": None})
+        idle = discretization_refusal(getattr(args, "discretization", None), laws or (m.controller,))
+        if idle:
+            raise ConfigError(idle)
+        args = argparse.Namespace(**{**vars(args), "controller": None, "discretization": None})
+    noise = getattr(args, "noise", None)
+    if noise is None and not idle_flags_given(args):
+        return flown
     over = replace(overrides_from_args(args), noise=1.0)  # the set's own sigmas: a scale of 0 changes a noisy set
     fleet = fleet_mission(m, getattr(args, "vehicles", None), getattr(args, "formation", None))
-    flights = fleet_flights(fleet, over) if fleet is not None else [prepare(m, over)]  # (bad input: named here)
+    flights = fleet_flights(fleet, over) if fleet is not None else [prepare(m, over, axes=axes or ())]  # (bad input)
     whys = [noise_problem((f.estimator,), f.sensors) for f in flights]
     if noise is not None and all(whys):
         raise ConfigError(f"--noise {noise:g}: {whys[0]}")
-    why = discretization_problem(laws or [f.mission.controller for f in flights])
-    if scheme is not None and why:
-        raise ConfigError(f"--discretization {scheme}: {why}; drop the flag, or fly --controller bsst")
     idle = idle_link_flag(args, swept_links([f.link for f in flights], axes))
-    if idle or unmet:
-        raise ConfigError(idle or unmet)
+    if idle:
+        raise ConfigError(idle)
     return flown
 
 

@@ -16,7 +16,7 @@ bad value fails before anything starts, with the file and key named. ``Overrides
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -36,10 +36,17 @@ from bridge.autopilot.params import (
 from bridge.autopilot.simvehicle import HOLD, OFFBOARD, SimVehicle
 from bridge.core.overrides import Overrides, table_settings
 from bridge.core.scalar import checked_choice, compile_for, compiled_wanted, wire_for
-from bridge.link.model import LinkConfig, LinkSettings, link_from_table, unmet_key
+from bridge.link.model import (
+    DIRECTIONS,
+    LinkConfig,
+    LinkSettings,
+    absolute_link_paths,
+    link_from_table,
+    unmet_key,
+)
 from bridge.link.profile import load_link_profile
 from controller import Controller, Gains, Nominal, gains_from_table
-from controller.law import LawError, LawFactory, resolve_law
+from controller.law import LawError, LawFactory, discretization_problem, resolve_law
 from controller.link_guard import GuardConfig
 from missions import Mission, Setpoint, Sine, Step, load_mission
 from missions.airframe import fitted_to_airframe
@@ -172,7 +179,8 @@ def _blackouts_given(m: Mission, over: Overrides, d: str) -> str:
     return f"{prof.path}: {key_in(prof.link) or 'link.blackouts'} (the flight's link profile)"
 
 
-def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, **keywords: Any) -> Flight:
+def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *, axes: Iterable[str] = (),
+            **keywords: Any) -> Flight:
     """Validate a mission (object or file) with its :class:`Overrides` into a :class:`Flight`.
 
     The overrides are ``overrides``, or the same fields as keywords (:meth:`Overrides.of`: ``rate_hz=500``).
@@ -182,11 +190,14 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
     ``noise`` replaces ``[sensors] noise_scale`` (every σ of the set times it); ``params`` over its
     ``[params]`` table (``{"COM_OF_LOSS_T": 1.0}``; a parameter standing for a ``[failsafe]`` key wins
     over it, and a ``failsafe`` override over a ``[params]`` entry of the file). ``param_at``: parameter
-    changes at mission times (:class:`bridge.autopilot.params.ParamChange`), checked here.
+    changes at mission times (:class:`bridge.autopilot.params.ParamChange`), checked here. What would change
+    nothing is refused, last: a key of the mission's own ``[link]`` whose need nobody gives (:func:`idle_link_key`;
+    ``axes``: the link keys a campaign's cells lay over this flight, a sweep's swept ones, a margin's searched one), a
+    ``discretization`` override for a law without a super-twisting step (:func:`discretization_refusal`).
     """
     over = Overrides.of(overrides, **keywords)
     m = mission if isinstance(mission, Mission) else load_mission(mission)
-    own_law = m.controller
+    own = m  # (as given: its own law, and its own [link] keys to tell from what is laid over them)
     m = over.laid_over(m)
     src = m.source
     if m.vehicles:  # each vehicle's flight is prepared from its own mission (missions.fleet.vehicle_mission)
@@ -247,12 +258,38 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
         flight._controller()  # a user's law is built once here, so that one that does not fit is bad input (not
         # compiled: a process that only prepares, a relay or a planner, never loads numba for it)
     except LawError as exc:  # named where the law was given: the override (--controller), else the mission's key
-        given = over.controller is not None and m.controller != own_law
+        given = over.controller is not None and m.controller != own.controller
         raise LawError(exc.spec, exc.what, f"--controller {over.controller}" if given else f"{src}: {exc.where}") \
             from None
     except ConfigError as exc:
         raise ConfigError(f"{src}: {exc}") from None
+    # last: a flight that cannot be flown is named for that first
+    idle = idle_link_key(own, over.link, axes) or discretization_refusal(over.discretization, (m.controller,))
+    if idle:
+        raise ConfigError(idle)
     return flight
+
+
+def idle_link_key(m: Mission, link: Mapping[str, Any] | None, axes: Iterable[str] = ()) -> str | None:
+    """The line refusing a key of ``m``'s own ``[link]`` (:data:`bridge.link.model.NEEDS`: ``burst_len`` without
+    ``loss_pct``, ``queue_ms`` without ``rate_bps``, ``trace_loop`` without ``trace``) whose need nobody gives: not the
+    table, its profile (or the one ``link`` names), ``link`` (what is laid over it: any key of it or of its
+    directions, a flag's or a caller's) nor ``axes`` (:func:`bridge.link.model.unmet_key`), naming the file and the
+    key; None."""
+    own = absolute_link_paths(m.link, Path(m.source).parent)
+    over = absolute_link_paths(link, Path(".")) if link else {}
+    table = {**own, "profile": over["profile"]} if "profile" in over else own
+    given = {k for t in (over, *(over.get(d) for d in DIRECTIONS)) if isinstance(t, Mapping) for k in t} | set(axes)
+    unmet = unmet_key(table, given)
+    return None if unmet is None else f"{m.source}: link.{unmet[0]}: {unmet[1]}"
+
+
+def discretization_refusal(scheme: str | None, laws: Iterable[str]) -> str | None:
+    """The line refusing a discretization ``scheme`` laid over a flight (``--discretization``, or Python's
+    ``discretization=``) where no law of ``laws`` (a flight's, a fleet's vehicles', a margin's) is ``bsst``: it would
+    change nothing (:func:`controller.law.discretization_problem`); None, and None for no scheme."""
+    why = None if scheme is None else discretization_problem(laws)
+    return None if why is None else f"--discretization {scheme}: {why}; drop the flag, or fly --controller bsst"
 
 
 def event_problem(kind: str, prof: Profile, sensors: SensorConfig | None, estimator: str = "ekf",

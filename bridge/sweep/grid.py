@@ -27,6 +27,7 @@ from bridge.autopilot.estimator import ESTIMATOR_KINDS
 from bridge.core.flight import Flight, prepare
 from bridge.core.overrides import Overrides
 from bridge.link.model import DIRECTIONS, NUMBER_RANGES, TRACE_EXCLUSIVE
+from controller.law import DISCRETIZED
 from missions import MISSION_RANGES, Mission
 from missions.fleet import FLEET_RANGES
 from missions.mission import DEFAULT_DISCRETIZATION, DISCRETIZATIONS, law_spec_problem
@@ -276,16 +277,16 @@ def cells(mission: Mission, grid: Grid) -> list[Cell]:
 
 def cell_overrides(cell: Cell) -> Overrides:
     """What a cell changes in its mission, as :func:`bridge.core.flight.prepare`'s overrides:
-    law, discretization, rate and seed, the swept link axes in both directions, the vehicle's swept axes and the
-    air's."""
+    law, discretization (a law without a super-twisting step has none to lay: prepare refuses one), rate and seed,
+    the swept link axes in both directions, the vehicle's swept axes and the air's."""
     link = {d: {a: getattr(cell, a) for a in cell.link} for d in DIRECTIONS} if cell.link else None
     weather: dict[str, Any] = {}
     if "wind_mps" in cell.weather:
         weather["wind"] = {"speed_mps": cell.wind_mps}  # over [wind]: its direction (from_deg) stays
     if "turbulence" in cell.weather:
         weather["turbulence"] = cell.turbulence
-    return Overrides(controller=cell.controller, discretization=cell.discretization, rate_hz=cell.rate_hz,
-                     seed=cell.seed, link=link,
+    scheme = cell.discretization if cell.controller in DISCRETIZED else None
+    return Overrides(controller=cell.controller, discretization=scheme, rate_hz=cell.rate_hz, seed=cell.seed, link=link,
                      **{a: getattr(cell, a) for a in cell.sensing}, **weather)  # estimator, noise; wind, turbulence
 
 

@@ -244,7 +244,7 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
     if over == "wind_mps" and mission_value(mission, over):
         raise ConfigError(f"margin over wind_mps: the mission's [wind] already sets speed_mps = "
                           f"{mission_value(mission, over):g}; search from a mission without it")
-    flight = prepare(mission)
+    flight = prepare(mission, axes=(over,))  # (a [link] key the searched value gives its need is not idle)
     trace = link_trace(flight) if over in LINK_AXES else None
     if trace:
         raise ConfigError(f"margin over {over}: {mission.source} replays the link trace {trace}, which gives the "
