@@ -834,3 +834,13 @@ def test_a_truth_rows_command_has_no_noise_bsst_sim_would_refuse() -> None:
     assert reproduce(row, ("estimator", "noise")) == "bsst sim mission.toml --controller bsst --rate 250 " \
                                                     "--estimator truth --seed 0"
     assert "--estimator raw --noise 2 --seed 0" in reproduce({**row, "estimator": "raw"}, ("estimator", "noise"))
+
+
+def test_a_row_of_a_law_without_a_super_twisting_step_is_flown_again_without_a_discretization() -> None:
+    """A sweep over bsst and smc and both schemes has smc rows of each scheme (the grid's product); ``bsst sim``
+    refuses ``--discretization`` for smc, so its row's command has none, and bsst's keeps its own."""
+    row = {"controller": "smc", "rate_hz": 250.0, "discretization": "implicit", "seed": 1}
+    assert reproduce(row, ("controller", "discretization")) == "bsst sim mission.toml --controller smc --rate 250 " \
+                                                                "--seed 1"
+    bsst = {**row, "controller": "bsst", "discretization": "explicit"}
+    assert "--discretization explicit --seed 1" in reproduce(bsst, ("controller", "discretization"))

@@ -48,6 +48,7 @@ from bridge.sweep.cells import (
 )
 from bridge.sweep.classes import CLASSES, Classes, classify, thresholds_text
 from bridge.sweep.grid import AXES, LINK_AXES, NAME_AXES, SHORT
+from controller.law import discretization_problem
 from params import ConfigError, unreachable
 from plant.wind import TURBULENCE
 
@@ -352,12 +353,14 @@ def jitter_section(rows: Sequence[Mapping[str, Any]]) -> list[str]:
 
 def reproduce(row: Mapping[str, Any], swept: Sequence[str]) -> str:
     """The ``bsst sim`` command that flies one row again (a ``truth`` row without ``--noise``: it flies the same
-    at any scale, and ``bsst sim`` refuses a noise that changes nothing)."""
+    at any scale, and ``bsst sim`` refuses a noise that changes nothing; a row of a law without a super-twisting
+    step without ``--discretization``, refused for the same reason)."""
     flags = [f"--controller {row['controller']}", f"--rate {row['rate_hz']:g}"]
     flags += [f"--{SHORT[a]} {row[a]:g}" for a in LINK_AXES if a in swept]
     flags += [f"--estimator {row['estimator']}"] if "estimator" in swept else []
     flags += [f"--noise {row['noise']:g}"] if "noise" in swept and row["estimator"] != "truth" else []
-    flags += [f"--discretization {row['discretization']}"] if "discretization" in swept else []
+    flags += [f"--discretization {row['discretization']}"] if "discretization" in swept \
+        and discretization_problem((row["controller"],)) is None else []  # bsst sim refuses it for smc, pid
     return f"bsst sim mission.toml {' '.join(flags)} --seed {row['seed']}"
 
 
