@@ -173,10 +173,11 @@ def fleet_mission(m: Mission, vehicles: int | Sequence[Any] | None, layout: str 
     return m.with_overrides(vehicles=specs)
 
 
-def fleet_flights(m: Mission, over: Overrides) -> list[Flight]:
+def fleet_flights(m: Mission, over: Overrides, laid_named: bool = False) -> list[Flight]:
     """Each vehicle's :class:`Flight`, by id: its own mission with the overrides laid over it (a ``seed``
     override, and the seeds a ``[link]`` override names, moved by the vehicle's id less one, as its own; a
-    ``discretization`` override on the vehicles that fly ``bsst``, refused where none does)."""
+    ``discretization`` override on the vehicles that fly ``bsst``, refused where none does); ``laid_named``:
+    as :func:`bridge.core.flight.prepare`'s."""
     laws = [over.controller or v.controller or m.controller for v in m.vehicles]  # (each as mission_of gives it)
     idle = discretization_refusal(over.discretization, laws)
     if idle:
@@ -191,7 +192,7 @@ def fleet_flights(m: Mission, over: Overrides) -> list[Flight]:
         if "link" in given:
             given["link"] = link_seeds_moved(given["link"], v.id - 1)
         try:
-            flights.append(prepare(mission_of(m, v), Overrides.of(given)))
+            flights.append(prepare(mission_of(m, v), Overrides.of(given), laid_named=laid_named))
         except ConfigError as exc:
             raise ConfigError(f"{exc} (vehicle {v.id})"[:400]) from None
     return flights

@@ -201,3 +201,30 @@ def test_a_mission_files_idle_link_key_is_refused_by_the_python_api_too(tmp_path
     for given in ({need: on}, {"down": {need: on}}, {need: 0.0 if need != "trace" else ""}):
         assert prepare(mission, link=given).mission.link[key] is not None, given
     assert prepare(mission, axes=(need,)).mission.link[key] is not None  # (a sweep's or a margin's axis gives it)
+
+
+@pytest.mark.parametrize("key", list(NEEDS))
+def test_a_key_a_python_caller_lays_over_a_mission_without_its_need_is_refused_as_laid_over(tmp_path: Path,
+                                                                                         key: str) -> None:
+    """``bridge.simulate(mission, link={key: ...})`` whose key changes nothing on every direction it is given for is
+    refused by the rule ``bsst sim --burst 3`` is (bridge.link.config.idle_problem), named as what the caller laid
+    over (until the third wave's thirty-eighth session it flew, the same flight as without it); given for both
+    directions it flies where one direction has its need, as ``--burst 3 --up-loss 2`` does."""
+    need, does, missing = NEEDS[key]
+    value = {"burst_len": 3.0, "queue_ms": 300.0, "trace_loop": True}[key]
+    on = {"loss_pct": 2.0, "rate_bps": 9000.0, "trace": SAMPLE["trace"]}[need]
+    mission = tmp_path / "m.toml"
+    mission.write_text('name = "m"\nduration_s = 0.2\n[trajectory]\nkind = "sine"\n')
+    shown = {"burst_len": "3.0", "queue_ms": "300.0", "trace_loop": "True"}[key]
+    for laid, where in (({key: value}, key), ({"up": {key: value}, "down": {need: on}}, f"up.{key}")):
+        with pytest.raises(ConfigError) as refused:
+            simulate(mission, plots=False, link=laid)
+        zero = "none" if need == "trace" else "0"
+        assert str(refused.value).startswith(
+            f"{mission}: link.{where}: changes nothing: {does}, and {missing} ({need} {zero}); "
+            f"give {need} too, or remove {key} (with these laid over the mission's [link]: link.{where} = {shown}")
+    assert prepare(mission, link={key: value, "up": {need: on}}).mission.link[key] is not None
+    assert prepare(mission, link={key: value}, laid_named=True).mission.link[key] is not None  # (named by its caller)
+    with_need = tmp_path / "n.toml"
+    with_need.write_text(mission.read_text() + f"[link]\n{need} = {on!r}\n".replace("'", '"'))
+    assert prepare(with_need, link={key: value}).mission.link[key] is not None

@@ -171,7 +171,7 @@ def _sweep(args: argparse.Namespace) -> int:
     # [link] that would change nothing (a swept --loss gives a burst_len its loss)
     if laid or idle_link_key(spec.mission, fixed, link_swept):
         flight = prepare(spec.mission, Overrides(link=fixed or None, sensors=sensors, scatter_m=args.scatter),
-                         axes=link_swept)
+                         axes=link_swept, laid_named=True)
         swept = {a: getattr(spec.grid, a) for a in link_swept}
         idle = idle_link_flag(args, swept_links([flight.link], swept), cells=True)  # (None: no such flag given)
         if idle:

@@ -165,7 +165,8 @@ def checked_mission(args: argparse.Namespace, mission: Mission | str | Path | No
         return flown
     over = replace(overrides_from_args(args), noise=1.0)  # the set's own sigmas: a scale of 0 changes a noisy set
     fleet = fleet_mission(m, getattr(args, "vehicles", None), getattr(args, "formation", None))
-    flights = fleet_flights(fleet, over) if fleet is not None else [prepare(m, over, axes=axes or ())]  # (bad input)
+    flights = (fleet_flights(fleet, over, laid_named=True) if fleet is not None  # (bad input)
+               else [prepare(m, over, axes=axes or (), laid_named=True)])
     whys = [noise_problem((f.estimator,), f.sensors) for f in flights]
     if noise is not None and all(whys):
         raise ConfigError(f"--noise {noise:g}: {whys[0]}")

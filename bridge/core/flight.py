@@ -36,6 +36,7 @@ from bridge.autopilot.params import (
 from bridge.autopilot.simvehicle import HOLD, OFFBOARD, SimVehicle
 from bridge.core.overrides import Overrides, table_settings
 from bridge.core.scalar import checked_choice, compile_for, compiled_wanted, wire_for
+from bridge.link.config import NEEDS, idle_problem
 from bridge.link.model import (
     DIRECTIONS,
     LinkConfig,
@@ -180,7 +181,7 @@ def _blackouts_given(m: Mission, over: Overrides, d: str) -> str:
 
 
 def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *, axes: Iterable[str] = (),
-            **keywords: Any) -> Flight:
+            laid_named: bool = False, **keywords: Any) -> Flight:
     """Validate a mission (object or file) with its :class:`Overrides` into a :class:`Flight`.
 
     The overrides are ``overrides``, or the same fields as keywords (:meth:`Overrides.of`: ``rate_hz=500``).
@@ -192,7 +193,9 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
     over it, and a ``failsafe`` override over a ``[params]`` entry of the file). ``param_at``: parameter
     changes at mission times (:class:`bridge.autopilot.params.ParamChange`), checked here. What would change
     nothing is refused, last: a key of the mission's own ``[link]`` whose need nobody gives (:func:`idle_link_key`;
-    ``axes``: the link keys a campaign's cells lay over this flight, a sweep's swept ones, a margin's searched one), a
+    ``axes``: the link keys a campaign's cells lay over this flight, a sweep's swept ones, a margin's searched one),
+    then one ``link`` lays over it (unless ``laid_named``: the caller names what it lays over itself, a command
+    its flags, bridge.cli.linkflags.idle_link_flag, a campaign its cells' axes, bridge.sweep.spec), a
     ``discretization`` override for a law without a super-twisting step (:func:`discretization_refusal`).
     """
     over = Overrides.of(overrides, **keywords)
@@ -264,7 +267,9 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
     except ConfigError as exc:
         raise ConfigError(f"{src}: {exc}") from None
     # last: a flight that cannot be flown is named for that first
-    idle = idle_link_key(own, over.link, axes) or discretization_refusal(over.discretization, (m.controller,))
+    idle = (idle_link_key(own, over.link, axes)
+            or (None if laid_named else idle_laid_key(src, over.link, flight.link, axes))
+            or discretization_refusal(over.discretization, (m.controller,)))
     if idle:
         raise ConfigError(idle)
     return flight
@@ -282,6 +287,23 @@ def idle_link_key(m: Mission, link: Mapping[str, Any] | None, axes: Iterable[str
     given = {k for t in (over, *(over.get(d) for d in DIRECTIONS)) if isinstance(t, Mapping) for k in t} | set(axes)
     unmet = unmet_key(table, given)
     return None if unmet is None else f"{m.source}: link.{unmet[0]}: {unmet[1]}"
+
+
+def idle_laid_key(source: str, link: Mapping[str, Any] | None, flown: LinkSettings, axes: Iterable[str] = ()
+                  ) -> str | None:
+    """The line refusing a key of :data:`bridge.link.model.NEEDS` that ``link`` (what a Python caller lays over
+    ``source``'s ``[link]``) gives and that changes nothing on every direction it is given for, as the ``flown``
+    links have it (the rule a command's flag is refused by: bridge.cli.linkflags.idle_link_flag; ``burst_len``
+    for both directions acts where one loses packets), unless ``axes`` (a campaign's) give its need; None."""
+    given = set(axes)
+    for key, (need, *_) in NEEDS.items():
+        dirs = [d for d in DIRECTIONS if key in (link or {}) or key in ((link or {}).get(d) or {})]
+        why = None if not dirs or need in given else idle_problem(key, [getattr(flown, d) for d in dirs])
+        if why:
+            where = key if key in (link or {}) else f"{dirs[0]}.{key}"
+            return (f"{source}: link.{where}: changes nothing: {why}; give {need} too, or remove {key} (with these "
+                    f"laid over the mission's [link]: {table_settings(link or {}, 'link')})")
+    return None
 
 
 def discretization_refusal(scheme: str | None, laws: Iterable[str]) -> str | None:

@@ -296,8 +296,9 @@ def noiseless(sensors: SensorConfig) -> bool:
 
 
 def cell_flight(mission: Mission, cell: Cell) -> Flight:
-    """The parts a cell flies, by the one path from a mission and its overrides."""
-    return prepare(mission, cell_overrides(cell))
+    """The parts a cell flies, by the one path from a mission and its overrides (its link values named as the
+    grid's axes where one changes nothing: bridge.sweep.spec)."""
+    return prepare(mission, cell_overrides(cell), laid_named=True)
 
 
 def link_trace(flight: Flight) -> str | None:
