@@ -16,7 +16,6 @@ import os
 import shutil
 import signal
 import stat
-import subprocess
 from dataclasses import replace
 from pathlib import Path
 
@@ -126,8 +125,8 @@ def test_fixed_link_flags_apply_to_every_cell(mission_file: Path, tmp_path: Path
     assert "--up-delay conflicts with the swept delay_ms" in capsys.readouterr().err
 
 
-def test_kill_then_resume_flies_only_missing_cells(mission_file: Path, tmp_path: Path, capsys) -> None:
-    args = ["sweep", str(mission_file), "--delay", "0,5,10", "--loss", "0,20", "--seeds", "2", "--no-plots"]
+def test_kill_then_resume_flies_only_missing_cells(tmp_path: Path, capsys) -> None:
+    args = ["sweep", str(brief_file(tmp_path)), "--delay", "0,5,10", "--loss", "0,20", "--seeds", "2", "--no-plots"]
     killed = tmp_path / "killed"
     proc = Bsst(*args, "--jobs", "1", "--out", str(killed), stdout=False)
     try:
@@ -311,7 +310,7 @@ class Exits(_Dies):  # the C library's _exit: past Python's os._exit, which a la
 """
 
 
-def test_a_cell_whose_worker_dies_says_how_it_died(tmp_path: Path) -> None:
+def test_a_cell_whose_worker_dies_says_how_it_died(tmp_path: Path, capsys) -> None:
     """``bsst sweep`` of three laws, two of which end their worker: one by SIGKILL, one by exit(3). Each such cell
     breaks its pool, flies again alone, breaks that pool too, and is an ``error`` row naming how its worker ended;
     the summary names the first, report.md lists both, and the exit status is 1 (not every cell flew). Until the
@@ -319,20 +318,22 @@ def test_a_cell_whose_worker_dies_says_how_it_died(tmp_path: Path) -> None:
     laws = tmp_path / "dying.py"
     laws.write_text(DYING_LAWS)
     out = tmp_path / "s"
-    r = run_bsst("sweep", brief_file(tmp_path), "--controller", f"bsst,{laws}:Killed,{laws}:Exits", "--jobs", "2",
-                 "--no-plots", "--out", out)
-    assert r.returncode == 1 and "Traceback" not in r.stderr, (r.stdout, r.stderr)
+    capsys.readouterr()
+    code = main(["sweep", str(brief_file(tmp_path)), "--controller", f"bsst,{laws}:Killed,{laws}:Exits", "--jobs", "2",
+                 "--no-plots", "--out", str(out)])
+    said, err = capsys.readouterr()
+    assert code == 1 and "Traceback" not in err, (said, err)
     died = {"Killed": "worker process died: killed by SIGKILL", "Exits": "worker process died: exited with status 3"}
     rows = read_cells(out / CELLS_CSV)
     assert [(row["outcome"], row["error"]) for row in rows[1:]] == [("error", died["Killed"]), ("error", died["Exits"])]
     assert rows[0]["outcome"] == "completed", rows[0]
-    assert "sweep brief: 3 cells, 3 flown, 0 kept from before, 2 failed" in r.stdout, r.stdout
-    assert f"bsst sweep: 2 of 3 cells failed (cells.csv's error column); the first: {died['Killed']}\n" in r.stderr
+    assert "sweep brief: 3 cells, 3 flown, 0 kept from before, 2 failed" in said, said
+    assert f"bsst sweep: 2 of 3 cells failed (cells.csv's error column); the first: {died['Killed']}\n" in err
     assert all(text in (out / "report.md").read_text() for text in died.values())
 
 
 def test_lockstep_cells(tmp_path: Path) -> None:
-    m = SHORT.with_overrides(duration_s=3.0)
+    m = BRIEF
     grid = Grid(loss_pct=(0.0, 20.0))
     rows = sweep(m, grid, jobs=2, mode="lockstep", out=tmp_path / "l", plots=False)
     assert [r["outcome"] for r in rows] == ["completed", "completed"], rows
@@ -502,11 +503,12 @@ DAMAGES = ["non-utf8", "cells-dir", "cells-fifo", "truncated-row", "extra-column
 
 
 @pytest.mark.parametrize("damage", DAMAGES)
-def test_malformed_sweep_files_exit_2_with_one_line(small_sweep: tuple[Path, list[str]], tmp_path: Path,
+def test_malformed_sweep_files_exit_2_with_one_line(small_sweep: tuple[Path, list[str]], tmp_path: Path, capsys,
                                                     damage: str) -> None:
-    """``bsst report DIR`` and ``bsst sweep --resume --out DIR``, as real processes, on a damaged sweep
-    directory: exit 2, one line naming the file (and line, column or field), no traceback, no hang,
-    and the damaged file left as it was."""
+    """``bsst report DIR`` and ``bsst sweep --resume --out DIR`` on a damaged sweep directory: exit 2, one line naming
+    the file (and line, column or field), no traceback, no hang, and the damaged file left as it was. By ``main`` in
+    this process (the refusal is the point), but for the FIFO: real processes, each with a deadline (a regression
+    that opened it here would block this worker for good)."""
     d = tmp_path / "d"
     shutil.copytree(small_sweep[0], d)
     words = _damage(d, damage)
@@ -517,19 +519,34 @@ def test_malformed_sweep_files_exit_2_with_one_line(small_sweep: tuple[Path, lis
         pass  # a resume refuses these as another sweep's (its identity differs), tested below
     else:
         commands.append([*small_sweep[1], "--out", str(d), "--resume"])
-    procs = [Bsst(*argv, stdout=False) for argv in commands]  # side by side: half the wait
+    for argv, (code, err) in zip(commands, _refused(commands, capsys, forked=damage == "cells-fifo"), strict=True):
+        assert code == 2, (argv, code, err)
+        assert err.count("\n") == 1 and "Traceback" not in err, err
+        assert words in err and str(d) in err, (words, err)
+    assert {p.name: p.read_bytes() for p in d.iterdir() if p.name in kept} == kept  # nothing recorded is lost
+
+
+def _refused(commands: list[list[str]], capsys: pytest.CaptureFixture[str], forked: bool) -> list[tuple[int, str]]:
+    """Each command's exit status and stderr: by ``main`` in this process, or (``forked``) as real processes side by
+    side (half the wait), each ended if it has not within 60 s."""
+    said = []
+    if not forked:
+        for argv in commands:
+            capsys.readouterr()
+            code = main(argv)
+            said.append((code, capsys.readouterr().err))
+        return said
+    procs = [Bsst(*argv, stdout=False) for argv in commands]
     try:
-        for argv, p in zip(commands, procs, strict=True):
+        for p in procs:
             err = p.communicate(timeout=60)[1]
-            assert p.returncode == 2, (argv, p.returncode, err)
-            assert err.count("\n") == 1 and "Traceback" not in err, err
-            assert words in err and str(d) in err, (words, err)
+            said.append((p.returncode, err))
+        return said
     finally:
         for p in procs:
             if p.poll() is None:
                 p.kill()
                 p.wait()
-    assert {p.name: p.read_bytes() for p in d.iterdir() if p.name in kept} == kept  # nothing recorded is lost
 
 
 @pytest.mark.parametrize("overwrite", [[], ["--overwrite"]], ids=["plain", "overwrite"])
@@ -683,19 +700,22 @@ def test_a_sweep_file_declares_the_vehicle_axes(tmp_path: Path, mission_file: Pa
     assert [c.sensing for c in grid_cells(SHORT, kept)] == [(), ("estimator",)]
 
 
-def test_a_sweep_with_a_plug_in_law_writes_its_maps(tmp_path: Path) -> None:
-    """``bsst sweep ... --controller bsst,examples/my_law.py:MyLaw`` and ``bsst report`` on it, as real processes."""
+def test_a_sweep_with_a_plug_in_law_writes_its_maps(tmp_path: Path, capsys, monkeypatch) -> None:
+    """``bsst sweep ... --controller bsst,examples/my_law.py:MyLaw`` and ``bsst report`` on it, in the repository's
+    folder (by ``main`` in this process: the maps and the report are the point, not the command's start)."""
     mission = tmp_path / "short.toml"
     mission.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 3.0"))
     out = tmp_path / "sweep"
-    env = dict(os.environ, MPLBACKEND="Agg")
+    monkeypatch.chdir(ROOT)
 
-    def bsst(*args: str) -> subprocess.CompletedProcess[str]:
-        return run_bsst(*args, cwd=ROOT, env=env, timeout=300)
+    def bsst(*args: str) -> tuple[int, str]:
+        capsys.readouterr()
+        code = main(list(args))
+        return code, capsys.readouterr().err
 
-    r = bsst("sweep", str(mission), "--controller", "bsst,examples/my_law.py:MyLaw", "--delay", "0,10",
-             "--jobs", "2", "--out", str(out))
-    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
+    code, err = bsst("sweep", str(mission), "--controller", "bsst,examples/my_law.py:MyLaw", "--delay", "0,10",
+                     "--jobs", "2", "--out", str(out))
+    assert code == 0 and "Traceback" not in err, err
     maps = {"map_delay_loss.png", "map_delay_loss_bsst.png", "map_delay_loss_examples-my_law-py-MyLaw.png"}
     assert maps <= {p.name for p in out.iterdir()}
     report = (out / "report.md").read_text()
@@ -703,8 +723,8 @@ def test_a_sweep_with_a_plug_in_law_writes_its_maps(tmp_path: Path) -> None:
     assert " x " not in "".join(line for line in report.splitlines() if line.startswith("## "))
     for m in maps:
         (out / m).unlink()
-    r = bsst("report", str(out))
-    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
+    code, err = bsst("report", str(out))
+    assert code == 0 and "Traceback" not in err, err
     assert maps <= {p.name for p in out.iterdir()} and (out / "report.md").read_text() == report
     assert {r["controller"] for r in read_cells(out / "cells.csv")} == {"bsst", "examples/my_law.py:MyLaw"}
 
