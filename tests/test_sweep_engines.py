@@ -7,7 +7,8 @@ grid of wind, turbulence and laws: issue 27),
 
 The cell-by-cell agreement of the batch with the scalar loop over every link feature is
 tests/test_batch.py's; here the sweep's own path is checked end to end: grid -> engine ->
-rows -> cells.csv, with real subprocesses for the command line.
+rows -> cells.csv, the command line run by its ``main`` in this process (its lines, files and refusals are the
+point, not a process's start: a forked ``bsst sweep`` imports numba and loads the batch's kernels again).
 """
 
 from __future__ import annotations
@@ -33,7 +34,6 @@ from bridge.sweep.grid import LINK_AXES, cells, mission_value
 from bridge.sweep.margin import margin, parse_until, probe
 from missions import Mission, Sine
 from params import ConfigError, dump_toml
-from tests.sitlkit import run_bsst
 
 # starts processes or opens sockets (not in make test-fast); flies the batch engine (its kernels loaded first)
 pytestmark = [pytest.mark.process, pytest.mark.usefixtures("batch_kernels")]
@@ -137,22 +137,24 @@ def test_auto_takes_the_batch_for_a_large_offline_grid_and_says_why_not_otherwis
     (["--sensors", "mocap", "--estimator", "ekf"], "--engine batch: [estimator] kind = 'ekf'"),
     (["--sensors", "mocap", "--estimator", "truth,raw"], "--engine batch: [estimator] kind = 'raw'"),
 ])
-def test_an_engine_that_cannot_be_honoured_is_refused_in_one_line(tmp_path: Path, extra: list[str],
-                                                                   names: str) -> None:
-    r = run_bsst("sweep", "missions/sine.toml", "--delay", "0,5", "--engine", "batch", "--out", str(tmp_path / "s"),
-                 *extra, cwd=ROOT, timeout=120)
-    lines = r.stderr.strip().splitlines()
-    assert r.returncode == 2 and len(lines) == 1 and names in lines[0], r.stderr
+def test_an_engine_that_cannot_be_honoured_is_refused_in_one_line(tmp_path: Path, capsys, monkeypatch,
+                                                                   extra: list[str], names: str) -> None:
+    monkeypatch.chdir(ROOT)  # (the mission and the law file named from the repository's folder)
+    capsys.readouterr()
+    assert main(["sweep", "missions/sine.toml", "--delay", "0,5", "--engine", "batch", "--out", str(tmp_path / "s"),
+                 *extra]) == 2
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and names in lines[0], err
     assert not (tmp_path / "s").exists()
 
 
-def test_the_command_line_says_which_engine_flew(tmp_path: Path) -> None:
+def test_the_command_line_says_which_engine_flew(tmp_path: Path, capsys) -> None:
     short = tmp_path / "short.toml"  # the sine cut to 3 s: the engine and its reason do not depend on the length
     short.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 3.0"))
-    r = run_bsst("sweep", str(short), "--delay", "0,5", "--out", str(tmp_path / "s"), "--no-plots",
-                 cwd=ROOT, timeout=120)
-    assert r.returncode == 0, r.stderr
-    assert f"engine process (fewer than {BATCH_MIN_CELLS} cells to fly)" in r.stdout
+    capsys.readouterr()
+    assert main(["sweep", str(short), "--delay", "0,5", "--out", str(tmp_path / "s"), "--no-plots"]) == 0
+    assert f"engine process (fewer than {BATCH_MIN_CELLS} cells to fly)" in capsys.readouterr().out
 
 
 def test_cells_with_sensors_fly_on_the_process_engine_and_say_so() -> None:
@@ -169,7 +171,7 @@ def test_cells_with_sensors_fly_on_the_process_engine_and_say_so() -> None:
     assert engine_for(mocap, truth, "offline", "auto") == ("batch", "the grid allows it")
 
 
-def test_jobs_changes_no_row_of_a_batch_sweep_or_margin(tmp_path: Path) -> None:
+def test_jobs_changes_no_row_of_a_batch_sweep_or_margin(tmp_path: Path, capsys) -> None:
     """``--jobs N``: the batch engine's threads (bridge.batch.engine) fly blocks of cells in whatever order
     they come free; ``bsst sweep --engine batch`` writes the same cells.csv, byte for byte, with 1 and 2,
     and ``bsst margin`` finds the same margin from the same cells."""
@@ -177,11 +179,12 @@ def test_jobs_changes_no_row_of_a_batch_sweep_or_margin(tmp_path: Path) -> None:
     short.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 3.0"))
     outs = {}
     for jobs in (1, 2):
-        r = run_bsst("sweep", str(short), "--delay", "0,6,12", "--loss", "0,20", "--controller", "bsst,pid",
+        capsys.readouterr()
+        assert main(["sweep", str(short), "--delay", "0,6,12", "--loss", "0,20", "--controller", "bsst,pid",
                      "--seeds", "3", "--engine", "batch", "--jobs", str(jobs), "--out", str(tmp_path / f"s{jobs}"),
-                     "--no-plots", cwd=ROOT, timeout=300)
-        assert r.returncode == 0, r.stderr
-        assert "engine batch" in r.stdout, r.stdout
+                     "--no-plots"]) == 0
+        said = capsys.readouterr().out
+        assert "engine batch" in said, said
         outs[jobs] = (tmp_path / f"s{jobs}" / CELLS_CSV).read_text()
     assert len(outs[1].splitlines()) == 1 + 36
     assert outs[1] == outs[2]
