@@ -20,8 +20,8 @@ from bridge.sweep.cells import CELLS_CSV, read_cells
 from bridge.sweep.inputs import file_sha256, input_hashes
 from missions import Mission, Sine
 from params import dump_toml
-from tests.sitlkit import ROOT, Bsst, pool_workers, run_bsst
-from tests.waiting import sweep_rows, sweep_said, wait_for
+from tests.sitlkit import ROOT, Bsst, pool_workers
+from tests.waiting import sweep_said, wait_for
 
 # starts processes (not in make test-fast); flies the batch engine (its kernels loaded first)
 pytestmark = [pytest.mark.process, pytest.mark.usefixtures("batch_kernels")]
@@ -56,16 +56,17 @@ def test_a_resume_flies_on_the_whole_grids_engine(mission_file: Path, tmp_path: 
     assert "- engine: `batch` flew every row" in (whole / "report.md").read_text()
     cut = tmp_path / "cut"
     _cut(whole, cut, 26)
-    r = run_bsst("report", str(cut), "--no-plots")
-    assert r.returncode == 1 and "Traceback" not in r.stderr, r.stderr
-    assert f"26 of 36 cells flown; the sweep was interrupted: `bsst sweep … --resume --out {cut}`" in r.stderr
+    assert main(["report", str(cut), "--no-plots"]) == 1
+    err = capsys.readouterr().err
+    assert "Traceback" not in err, err
+    assert f"26 of 36 cells flown; the sweep was interrupted: `bsst sweep … --resume --out {cut}`" in err, err
     assert "**Incomplete: 26 of 36 cells flown; the sweep was interrupted" in (cut / "report.md").read_text()
     assert main([*args, "--out", str(cut), "--resume"]) == 0
     said = capsys.readouterr().out
     assert "36 cells, 10 flown, 26 kept from before" in said and "engine batch (the grid allows it)" in said, said
     assert (cut / CELLS_CSV).read_bytes() == (whole / CELLS_CSV).read_bytes()
     assert (cut / "report.md").read_text() == (whole / "report.md").read_text()
-    assert run_bsst("report", str(cut), "--no-plots").returncode == 0
+    assert main(["report", str(cut), "--no-plots"]) == 0
     mixed = tmp_path / "mixed"
     _cut(whole, mixed, 26)
     assert main([*args, "--out", str(mixed), "--resume", "--engine", "process", "--jobs", "2"]) == 0
@@ -73,22 +74,6 @@ def test_a_resume_flies_on_the_whole_grids_engine(mission_file: Path, tmp_path: 
     assert "engine process (asked for); MIXED engines: the rows kept from before flew on batch" in said, said
     assert json.loads((mixed / "sweep.json").read_text())["engines"] == ["batch", "process"]
     assert "- engines: MIXED, rows flown by `batch` and `process`" in (mixed / "report.md").read_text()
-
-
-@pytest.mark.parametrize("stop", ["ctrl-c", "sigterm"])
-def test_an_interrupted_sweep_says_how_many_cells_it_flew(mission_file: Path, tmp_path: Path, stop: str) -> None:
-    """Ctrl-C after a few cells: the summary says ``N of 12 cells flown (interrupted)`` (exit 1), and ``bsst report``
-    on the directory says the sweep is incomplete and exits 1. A SIGTERM to the sweep's process alone (a scheduler's)
-    is a Ctrl-C: it died at once, silent (-15)."""
-    out = tmp_path / "stopped"
-    proc = Bsst("sweep", str(mission_file), "--delay", "0,5,10", "--loss", "0,20", "--seeds", "2", "--jobs", "1",
-                "--no-plots", "--out", str(out))
-    _, said, _ = _stopped(proc, stop, lambda: sweep_rows(proc, 2))  # the progress line that follows that appended row
-    flown = len(read_cells(out / CELLS_CSV))
-    assert proc.returncode == 1 and 2 <= flown < 12, (proc.returncode, said)
-    assert f"sweep short: {flown} of 12 cells flown (interrupted): {flown} this run, 0 kept from before" in said, said
-    r = run_bsst("report", str(out), "--no-plots")
-    assert r.returncode == 1 and f"{flown} of 12 cells flown; the sweep was interrupted" in r.stderr, r.stderr
 
 
 def _stopped(proc: Any, stop: str, first: Callable[[], Any]) -> tuple[Any, str, str]:
@@ -117,14 +102,28 @@ def _rows_written(out: Path) -> int:
         return 0
 
 
+GRID = ["--delay", "0,5,10", "--loss", "0,20", "--seeds", "2", "--no-plots"]
+
+
+@pytest.fixture(scope="module")
+def whole(mission_file: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The cells.csv of GRID's sweep flown uninterrupted (``--jobs 2``): what a stopped and resumed one must equal."""
+    out = tmp_path_factory.mktemp("whole") / "whole"
+    assert main(["sweep", str(mission_file), *GRID, "--jobs", "2", "--out", str(out)]) == 0
+    return out / CELLS_CSV
+
+
 @pytest.mark.parametrize("stop", ["ctrl-c", "sigterm"])
-def test_the_cells_in_flight_at_a_ctrl_c_are_kept_and_the_resume_flies_the_rest(mission_file: Path, tmp_path: Path,
-                                                                                 capsys, stop: str) -> None:
+def test_the_cells_in_flight_at_a_ctrl_c_are_kept_and_the_resume_flies_the_rest(mission_file: Path, whole: Path,
+                                                                                 tmp_path: Path, capsys,
+                                                                                 stop: str) -> None:
     """``--jobs 2``, stopped once cells.csv has its first row: the cells then in flight (both workers', and those
     already handed to them) end first, as the sweep says, and are kept. Until the third wave's thirty-seventh session
-    they flew to their end and were dropped: in no row, and flown again by the resume. The summary counts what
-    was not flown, exit 1; the resume flies exactly those, and its cells.csv is the uninterrupted sweep's."""
-    args = ["sweep", str(mission_file), "--delay", "0,5,10", "--loss", "0,20", "--seeds", "2", "--no-plots"]
+    they flew to their end and were dropped: in no row, and flown again by the resume. The summary says ``N of 12
+    cells flown (interrupted)`` and counts what was not flown, exit 1; ``bsst report`` on the directory says the sweep
+    is incomplete and exits 1. A SIGTERM to the sweep's process alone (a scheduler's) is a Ctrl-C: it died at once,
+    silent (-15). The resume flies exactly the cells not flown, and its cells.csv is the uninterrupted sweep's."""
+    args = ["sweep", str(mission_file), *GRID]
     out = tmp_path / "stopped"
     proc = Bsst(*args, "--jobs", "2", "--out", str(out))
 
@@ -137,13 +136,14 @@ def test_the_cells_in_flight_at_a_ctrl_c_are_kept_and_the_resume_flies_the_rest(
     assert proc.returncode == 1, (said, told)
     assert "sweep: interrupted; the cells in flight end first" in told, told
     assert seen + 2 <= kept < 12, (seen, kept, told)  # (the second worker's cell, and the one queued for the first)
-    assert f"sweep short: {kept} of 12 cells flown (interrupted): {kept} this run" in said, said
+    assert f"sweep short: {kept} of 12 cells flown (interrupted): {kept} this run, 0 kept from before" in said, said
     assert f"bsst: interrupted: {12 - kept} of 12 cells not flown; continue with --resume --out {out}" in told, told
+    capsys.readouterr()
+    assert main(["report", str(out), "--no-plots"]) == 1
+    assert f"{kept} of 12 cells flown; the sweep was interrupted" in capsys.readouterr().err
     assert main([*args, "--jobs", "2", "--out", str(out), "--resume"]) == 0
     assert f"12 cells, {12 - kept} flown, {kept} kept from before" in capsys.readouterr().out
-    whole = tmp_path / "whole"
-    assert main([*args, "--jobs", "2", "--out", str(whole)]) == 0
-    assert (out / CELLS_CSV).read_bytes() == (whole / CELLS_CSV).read_bytes()
+    assert (out / CELLS_CSV).read_bytes() == whole.read_bytes()
 
 
 def test_a_ctrl_c_after_the_last_cell_was_handed_out_leaves_a_whole_sweep(mission_file: Path, tmp_path: Path) -> None:
