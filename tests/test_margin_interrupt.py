@@ -33,7 +33,10 @@ pytestmark = [pytest.mark.process, pytest.mark.usefixtures("batch_kernels")]
 UNTIL = ["--over", "delay_ms", "--until", "rms=0.1"]
 SHORT = Mission(Sine(), duration_s=6.0, name="short")  # its search: ~24 cells of ~10 ms each on the batch
 MID = Mission(Sine(), duration_s=60.0, name="mid")  # ~2.5 s of work a cell on the process engine
-WIDE = Mission(Sine(climb=0.0), duration_s=600.0, name="wide")  # a cell: ~1 s on the batch
+HALF = Mission(Sine(), duration_s=30.0, name="half")  # ~1 s of work a cell flown plain in the command's process
+# a cell: ~0.3 s on the batch; its search fails at every value (8 rounds, 16 ms down to 0): a Ctrl-C after the
+# third round lands with five still to fly
+WIDE = Mission(Sine(climb=0.0), duration_s=200.0, name="wide")
 LONG = Mission(Sine(climb=0.0), duration_s=1800.0, name="long")  # a cell: ~17 s of work on the process engine
 
 
@@ -83,7 +86,7 @@ def _interrupted(out: Path, said: str, err: str) -> dict[str, Any]:
 
 @pytest.mark.parametrize("stop", ["ctrl-c", "sigterm"])
 def test_an_interrupted_search_keeps_its_bracket(tmp_path: Path, stop: str) -> None:
-    """Ctrl-C after three rounds of the batch engine (a cell ~1 s): margin.json holds every cell flown, the bracket
+    """Ctrl-C after three rounds of the batch engine (a cell ~0.3 s): margin.json holds every cell flown, the bracket
     they give (the largest value held, the smallest failed), no margin, and the command exits 1. A SIGTERM to the
     command's process alone (a scheduler's) is a Ctrl-C (it died at once, no margin.json)."""
     out = tmp_path / "m"
@@ -114,9 +117,9 @@ def test_a_cell_flown_in_this_process_stops_at_once_and_is_not_a_result(tmp_path
     second probe ends that flight, which is not recorded (it was recorded as a failed value, ``aborted``, and the
     search went on to its end, exit 0)."""
     out = tmp_path / "m"
-    proc = Bsst("margin", _file(tmp_path, MID), *UNTIL, "--engine", "process", "--out", out)
+    proc = Bsst("margin", _file(tmp_path, HALF), *UNTIL, "--engine", "process", "--out", out)
     try:
-        sweep_said(proc, _after_round(1), timeout_s=300)  # the second probe (32 ms) flies from here, ~2.5 s
+        sweep_said(proc, _after_round(1), timeout_s=300)  # the second probe (32 ms) flies from here, ~1 s
         os.killpg(proc.pid, signal.SIGINT)
     finally:
         said, err = _stopped(proc)
