@@ -38,16 +38,13 @@ SHORT = Mission(Sine(), duration_s=6.0, name="short", discretization="explicit")
 Completed = subprocess.CompletedProcess[str]
 
 
-def bsst(*argv: str) -> subprocess.CompletedProcess[str]:
-    return run_bsst(*argv, cwd=ROOT, timeout=600)
-
-
 @pytest.fixture
 def here(capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> Callable[..., Completed]:
     """``bsst ARGS`` run by the command line's ``main`` in this process, in the repository's folder: its exit status,
-    stdout and stderr as :func:`bsst` gives a forked one's, without a process that imports numba and loads the
-    batch's kernels again (~0.35 CPU-s a search). The searches' results and lines are the point of the tests that
-    use it; the refusals below, and tests/test_margin_interrupt.py, run ``bsst margin`` as a real process."""
+    stdout and stderr as :func:`tests.sitlkit.run_bsst` gives a forked one's, without a process that imports numba
+    and loads the batch's kernels again (~0.35 CPU-s a search). The searches' results and lines, and the refusals'
+    lines, are the point of the tests that use it; the refusals whose deadline is the point (a search that flew
+    first would pass it) and tests/test_margin_interrupt.py run ``bsst margin`` as a real process."""
     monkeypatch.chdir(ROOT)
 
     def run(*argv: str | Path) -> Completed:
@@ -151,8 +148,8 @@ def test_require_fails_a_users_ci_when_the_margin_is_short(tmp_path: Path, here)
     (["--over", "burst_len", "--until", "rms=0.1", "--down-link-trace", "examples/link-trace.csv"],
      "bsst margin: --over burst_len with --down-link-trace"),
 ])
-def test_bad_margin_input_is_one_line(argv: list[str], names: str) -> None:
-    r = bsst("margin", "missions/sine.toml", *argv)
+def test_bad_margin_input_is_one_line(here, argv: list[str], names: str) -> None:
+    r = here("margin", "missions/sine.toml", *argv)
     lines = r.stderr.strip().splitlines()
     assert r.returncode == 2 and len(lines) == 1 and names in lines[0], r.stderr
 
@@ -240,9 +237,8 @@ def test_a_law_that_cannot_be_built_is_named_before_any_flight(tmp_path: Path) -
 
 # -- issue 22, defect 8: every --resolution the search takes ends ------------------------------------------------------
 @pytest.mark.parametrize("over", ["delay_ms", "loss_pct", "jitter_ms", "burst_len", "noise", "wind_mps"])
-def test_a_resolution_too_fine_to_end_is_refused_naming_the_flag_and_its_range(over: str) -> None:
-    r = run_bsst("margin", "missions/sine.toml", "--over", over, "--until", "rms=0.1", "--resolution", "1e-300",
-                 cwd=ROOT, timeout=60)
+def test_a_resolution_too_fine_to_end_is_refused_naming_the_flag_and_its_range(here, over: str) -> None:
+    r = here("margin", "missions/sine.toml", "--over", over, "--until", "rms=0.1", "--resolution", "1e-300")
     lines = r.stderr.strip().splitlines()
     assert r.returncode == 2 and len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
     assert "--resolution must be in [" in lines[0] and f"for --over {over}" in lines[0] and "1e-300" in lines[0]
@@ -276,12 +272,14 @@ def test_the_finest_resolution_taken_ends_within_its_rounds(over: str) -> None:
 
 
 def test_the_wind_margin_is_found_inside_its_bracket(tmp_path: Path, here) -> None:
-    """``--over wind_mps`` (issue 27): the steady wind the BS-ST law takes on the sine before its RMS passes
-    10 cm, its probes on the batch engine (steady wind; the sine ending in a hold: a landing in wind is the process
-    engine's, 20 probes of the 30 s sine ~4x the time), in at most 80 cells; each end of the bracket flown again
-    on its own lands on its side of the bound."""
-    held = tmp_path / "sine-hold.toml"
-    held.write_text((MISSION_DIR / "sine.toml").read_text() + '\n[end]\naction = "hold"\n')
+    """``--over wind_mps`` (issue 27): the steady wind the BS-ST law takes on the sine (cut to 6 s, as SHORT) before
+    its RMS passes 10 cm, its probes on the batch engine (steady wind; the sine ending in a hold: a landing in wind is
+    the process engine's), in at most 80 cells; each end of the bracket flown again on its own, ending in its landing,
+    lands on its side of the bound."""
+    sine = tmp_path / "sine6.toml"
+    sine.write_text((MISSION_DIR / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 6.0"))
+    held = tmp_path / "sine6-hold.toml"
+    held.write_text(sine.read_text() + '\n[end]\naction = "hold"\n')
     r = here("margin", str(held), "--over", "wind_mps", "--until", "rms=0.1", "--controller", "bsst",
              "--out", str(tmp_path / "m"))
     assert r.returncode == 0, r.stderr
@@ -292,11 +290,11 @@ def test_the_wind_margin_is_found_inside_its_bracket(tmp_path: Path, here) -> No
     assert res["cells_flown"] == len(law["cells"]) <= 80
     assert all(c["failed"] for c in law["cells"] if c["wind_mps"] >= hi)
     assert not any(c["failed"] for c in law["cells"] if c["wind_mps"] <= lo)
-    assert simulate("missions/sine.toml", wind=lo).rms <= 0.1 < simulate("missions/sine.toml", wind=hi).rms
+    assert simulate(sine, wind=lo).rms <= 0.1 < simulate(sine, wind=hi).rms
     assert f"wind_mps {lo:g}" in r.stdout
     windy = tmp_path / "windy.toml"
     windy.write_text(dump_toml({**SHORT.to_dict(), "wind": {"speed_mps": 3.0}}))
-    refused = bsst("margin", str(windy), "--over", "wind_mps", "--until", "rms=0.1")
+    refused = here("margin", str(windy), "--over", "wind_mps", "--until", "rms=0.1")
     assert refused.returncode == 2 and "already sets speed_mps = 3" in refused.stderr, refused.stderr
 
 
