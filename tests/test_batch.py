@@ -363,7 +363,7 @@ def test_both_discretizations_fly_in_one_batch_as_in_the_scalar_loop() -> None:
     with and without a delay and the prediction, each equal to its scalar flight (1e-10 relative)."""
     from bridge.batch import fly_flights
 
-    m = _mission(6.0)  # implicit's TV of u2 under a tenth of explicit's: 15x at 6 s, 12x at 5 s, 9x at 4 s (takeoff)
+    m = _mission()  # 5 s: implicit's TV of u2 under a tenth of explicit's (15x at 6 s, 12x at 5 s, 9x at 4 s: takeoff)
     flights = [prepare(m.with_overrides(discretization=d), controller=law, link=link)
                for d in ("explicit", "implicit") for law in ("bsst", "smc", "pid")
                for link in (None, {"delay_ms": 8.0, "compensation": "predict"}, {"delay_ms": 4.0, "loss_pct": 10.0})]
