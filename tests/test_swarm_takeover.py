@@ -33,11 +33,32 @@ from tests.sitlkit import ENV, MAVSDK_GROUND_STATION, script_result
 pytestmark = pytest.mark.process  # starts processes, opens sockets
 
 TAKEOVER = Path(__file__).resolve().parents[1] / "examples" / "swarm-takeover.toml"  # vehicle 2 under vehicle 1
+CUT_S = 4.0  # s of vehicle 1's hover over vehicle 2 cut (8-12 s): the takeover and the contact are over by 5 s
+END_S = 14.0 - CUT_S  # the cut mission's end
+
+
+def _cut(tmp_path: Path, hold: bool) -> Path:
+    """The example with vehicle 1's hover over vehicle 2 cut to 2-8 s, its leg along x and the mission's end
+    :data:`CUT_S` earlier (vehicle 2 under it from 4 s, as in the example): taken over at ~3.8 s, in contact by
+    ~4.7 s, the example's four seconds more of hover checked nothing. ``hold``: its end holds (``[end] action =
+    "hold"``): vehicle 1's end landing (down from 2.6 m and COM_DISARM_LAND after), beside which vehicle 2, taken
+    over, flew on on the wall clock, ~6 s of both paced pairs, checked nothing either."""
+    text = TAKEOVER.read_text()
+    later = {"duration_s = 14.0": f"duration_s = {END_S}", "t = 12.0, x = 0.0, y = 0.0, z = 2.6":
+             f"t = {12.0 - CUT_S}, x = 0.0, y = 0.0, z = 2.6", "t = 14.0, x = 3.0": f"t = {END_S}, x = 3.0",
+             "t = 14.0, x = 0.0, y = 0.0, z = 1.0": f"t = {END_S}, x = 0.0, y = 0.0, z = 1.0"}
+    for was, now in later.items():
+        assert text.count(was) == 1, was  # (the example as these tests know it)
+        text = text.replace(was, now)
+    mission = tmp_path / "swarm-takeover.toml"
+    mission.write_text(text + ('\n[end]\naction = "hold"\n' if hold else ""))
+    return mission
 
 
 def _fly(tmp_path: Path, port: int, **kw: Any) -> tuple[threading.Thread, dict[str, Any], Path]:
-    """The fleet in lockstep at real time's pace, its ground-station links to ``port``, in a thread."""
-    mission = TAKEOVER
+    """The fleet (:func:`_cut`, its end held) in lockstep at real time's pace, its ground-station links to
+    ``port``, in a thread."""
+    mission = _cut(tmp_path, hold=True)
     result: dict[str, Any] = {}
 
     def fly() -> None:
@@ -68,7 +89,7 @@ def _judged_into_its_neighbour(result: dict[str, Any], mission: Path, capsys: An
     assert policy["name"] == "separation" and not policy["ok"] and policy["t"] > taken, policy
     flown = s["separation"]["wall_clock"]
     assert [f["id"] for f in flown] == [2] and flown[0]["from_t"] == pytest.approx(taken, abs=0.01), flown
-    assert flown[0]["to_t"] >= 14.0 and s["separation"]["whole_flight"] is True, flown  # flown on to the end
+    assert flown[0]["to_t"] >= END_S and s["separation"]["whole_flight"] is True, flown  # flown on to the end
     assert s["sitl"]["note"] == WALL_CLOCK
     assert max(run.runs[1].trace["z"]) > 1.9  # its record holds the climb
     off = simulate(mission, plots=False)  # as planned, the separation holds
@@ -135,7 +156,7 @@ def test_in_real_time_a_vehicle_taken_over_flies_on_under_its_ground_station_and
     policy = s["policies"][0]
     assert policy["name"] == "separation" and not policy["ok"] and policy["t"] > taken, policy
     (flown,) = s["separation"]["taken_over"]
-    assert flown["id"] == 2 and flown["from_t"] == pytest.approx(taken, abs=0.01) and flown["to_t"] >= 14.0, flown
+    assert flown["id"] == 2 and flown["from_t"] == pytest.approx(taken, abs=0.01) and flown["to_t"] >= END_S, flown
     assert flown["judged_until_t"] is None and s["separation"]["whole_flight"] is True
     assert run.runs[1].summary["sitl"]["flew_on"] is True and max(run.runs[1].trace["z"]) > 1.9
     capsys.readouterr()
@@ -145,16 +166,18 @@ def test_in_real_time_a_vehicle_taken_over_flies_on_under_its_ground_station_and
 
 
 def test_a_failsafe_landing_going_at_the_missions_end_is_judged_on_its_record(tmp_path: Path, capsys: Any) -> None:
-    """Both links black from 12 s: each vehicle's failsafe descends from 12.5 s, vehicle 1 from 2.6 m onto vehicle 2,
-    landed under it, after the mission's end (14 s), on the wall clock: the contact is found on the records, after
-    the mission, and said as found afterwards (before: "both flights ended there", which they had not)."""
-    run = sitl(TAKEOVER, instance=None, out=tmp_path / "run", plots=False, link={"blackouts": [[12.0, 10.0]]})
+    """Both links black from 8 s (the example's 12 s, :func:`_cut`): each vehicle's failsafe descends from 8.5 s,
+    vehicle 1 from 2.6 m onto vehicle 2, landed under it, after the mission's end (10 s), on the wall clock: the
+    contact is found on the records, after the mission, and said as found afterwards (before: "both flights ended
+    there", which they had not)."""
+    run = sitl(_cut(tmp_path, hold=False), instance=None, out=tmp_path / "run", plots=False,
+               link={"blackouts": [[12.0 - CUT_S, 10.0]]})
     assert isinstance(run, FleetRun)
     s = run.summary
     for v in s["vehicles"]:
-        assert v["outcome"] == "collision" and v["contact"]["continued"] == WALL_CLOCK and v["contact"]["t"] > 14.0, v
+        assert v["outcome"] == "collision" and v["contact"]["continued"] == WALL_CLOCK and v["contact"]["t"] > END_S, v
     flown = s["separation"]["wall_clock"]
-    assert [f["id"] for f in flown] == [1, 2] and all(f["at_rest"] and f["from_t"] == 14.0 for f in flown), flown
+    assert [f["id"] for f in flown] == [1, 2] and all(f["at_rest"] and f["from_t"] == END_S for f in flown), flown
     assert s["separation"]["whole_flight"] is True and not s["policies"][0]["ok"]
     capsys.readouterr()
     assert report_fleet(run, "sitl") == 1
