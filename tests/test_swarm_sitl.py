@@ -9,11 +9,12 @@ uses it) is the offline loop's too. The records have the offline fleet's layout.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
-import sys
 import threading
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -49,7 +50,10 @@ def worst_gap(a: dict, b: dict) -> float:
 
 
 def test_four_in_a_line_fly_in_sitl_as_offline_vehicle_by_vehicle(tmp_path: Path) -> None:
+    """The sine cut to 2 s, its end held: the end landing (~2.3 s, more than the mission's 500 rows, of four lockstep
+    pairs) is flown and judged as offline's by tests/test_swarm_clock.py's landing onto another vehicle."""
     mission = short_sine(tmp_path)
+    mission.write_text(mission.read_text() + '\n[end]\naction = "hold"\n')
     run = sitl(mission, vehicles=4, formation="line:2", instance=None, out=tmp_path / "sitl", plots=False)
     off = simulate(mission, vehicles=4, formation="line:2", plots=False)
     assert isinstance(run, FleetRun) and run.outcome == "completed", run.summary
@@ -131,22 +135,37 @@ def test_a_fleet_from_instance_n_takes_px4s_system_ids_from_n_plus_one(tmp_path:
     assert odometry is not None and odometry.get_srcSystem() == n + 1
 
 
-FLY = ("import sys; from bridge.swarm import sitl; from bridge.cli.flying import report_fleet; "
-       "r = sitl(sys.argv[1], vehicles=2, instance=None, out=sys.argv[2], plots=False); "
-       "sys.exit(report_fleet(r, 'sitl'))")
+@contextlib.contextmanager
+def _two_instances() -> Iterator[int]:
+    """Instances B and B + 1 both held (:func:`instance_slot`, each taken the highest free first), for a fleet of
+    two flown by ``bsst sitl --vehicles 2 --instance B``."""
+    with contextlib.ExitStack() as held:
+        taken: set[int] = set()
+        for _ in range(10):
+            n = held.enter_context(instance_slot())
+            taken.add(n)
+            if n + 1 in taken or n - 1 in taken:
+                yield n if n + 1 in taken else n - 1
+                return
+    raise AssertionError("no two adjacent SITL instances free")
 
 
 def test_ctrl_c_stops_every_pair_and_each_summary_says_aborted(tmp_path: Path) -> None:
+    """``bsst sitl --vehicles 2`` forked warm by the fork server (a cold ``python -c`` flying ``bridge.swarm.sitl``
+    started its own fork server too: ~1.9 CPU-s of imports for a second of flight), SIGINT after a second of flight
+    of both vehicles."""
     run = tmp_path / "run"
-    p = Proc([sys.executable, "-c", FLY, str(short_sine(tmp_path, 30.0)), str(run)], cwd=ROOT)
-    try:
-        # in lockstep the halves are the live record (trace.csv is written once the flight is over)
-        wait_for(lambda: all(count_records(run / f"vehicle-{i}" / "vehicle.bin") > 250 for i in (1, 2)), 90,
-                 "a second of flight of both vehicles")
-        p.p.send_signal(signal.SIGINT)
-        p.p.wait(timeout=30)
-    finally:
-        p.stop()
+    with _two_instances() as b:
+        p = Proc.bsst("sitl", str(short_sine(tmp_path, 30.0)), "--vehicles", "2", "--instance", str(b), "--out",
+                      str(run), "--no-plots", cwd=ROOT)
+        try:
+            # in lockstep the halves are the live record (trace.csv is written once the flight is over)
+            wait_for(lambda: all(count_records(run / f"vehicle-{i}" / "vehicle.bin") > 250 for i in (1, 2)), 90,
+                     "a second of flight of both vehicles")
+            p.p.send_signal(signal.SIGINT)
+            p.p.wait(timeout=30)
+        finally:
+            p.stop()
     assert p.p.returncode == 1, p.lines[-20:]
     s = json.loads((run / "summary.json").read_text())
     assert s["outcome"] == "aborted" and [v["outcome"] for v in s["vehicles"]] == ["aborted", "aborted"]
