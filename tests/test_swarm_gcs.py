@@ -129,9 +129,13 @@ def _only_three_disarmed(result: dict[str, Any], port: int) -> None:
 
 
 def test_one_ground_station_sees_four_vehicles_reads_each_and_disarms_only_system_3(tmp_path: Path) -> None:
+    """The fleet flies 8 s, as MAVSDK's below: this station (parsing only the frames it keeps) disarmed system 3 at
+    t = 1.26 s of the fleet's flight quiet, 1.12 s with two busy loops on the cores; the 12 s it flew were 4 s more
+    of four paced pairs for nothing. (Before it parsed only those, a starved test process once fell seconds behind
+    four vehicles' streams: its request to system 3 went out at +4.1 s, docs/figures.md.)"""
     port = free_udp_port()
     gcs = Station(port)
-    flight, result = _fly_fleet(tmp_path, port, 12.0)
+    flight, result = _fly_fleet(tmp_path, port, 8.0)
     try:
         def all_armed() -> bool:
             gcs.pump()
@@ -198,9 +202,7 @@ def test_mavsdk_sees_four_systems_on_one_port_reads_each_and_kills_only_system_3
     through its own System, and ``Action.kill`` (a forced disarm) on system 3 disarms only 3. The fleet flies 8 s:
     MAVSDK's script (its native binding: its own threads, not this process's) found the four while they started and
     killed system 3 at t = 0.97 s of the fleet's flight quiet, 0.96 s with two busy loops on the cores; the 20 s it
-    flew before were 12 s more of four paced pairs for nothing. (The pymavlink station above, in this process and
-    reading four parameters with 0.3 s of listening after each, keeps 12 s: a starved test process once fell
-    seconds behind.)"""
+    flew before were 12 s more of four paced pairs for nothing."""
     port = free_udp_port()
     flight, result = _fly_fleet(tmp_path, port, 8.0)
     try:
