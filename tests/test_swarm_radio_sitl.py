@@ -36,8 +36,12 @@ RADIO = {"rate_bps": 32000.0, "queue_ms": 100.0, "loss_pct": 5.0}
 
 
 def fly(tmp_path: Path, name: str, shared: bool, radio: dict | None = None, seconds: float = 3.0) -> dict:
+    """Two vehicles of the sine cut to ``seconds`` in real time, each behind its relay, on one radio or on their
+    own: the fleet's summary. Its end holds: the end landing (down from 0.3 m, then COM_DISARM_LAND) added ~2.4 s of
+    both pairs and relays on the wall clock that no assertion reads (tests/test_mission_end.py flies the end
+    landing)."""
     text = (MISSION_DIR / "sine.toml").read_text().replace("duration_s = 30.0", f"duration_s = {seconds}")
-    (tmp_path / "short.toml").write_text(text)
+    (tmp_path / "short.toml").write_text(text + '\n[end]\naction = "hold"\n')
     run = sitl(tmp_path / "short.toml", vehicles=2, realtime=True, instance=None, out=tmp_path / name,
                plots=False, rate_hz=100.0, link={**(RADIO if radio is None else radio), "shared": shared})
     assert json.loads((tmp_path / name / "summary.json").read_text()) == run.summary  # what was written
@@ -68,7 +72,7 @@ def test_two_vehicles_on_one_radio_in_real_time_share_its_rate_and_overflow_it_w
               json.loads((tmp_path / "shared" / f"vehicle-{i}" / "summary.json").read_text())["timing"]["stalls"]["at"]]
     idle_s = sum(d for _, d in stall_blackouts({"at": stalls}, math.inf))  # their union
     # and while only one vehicle sends (one alone fits the radio): before the later first packet and after the earlier
-    # last one, as when a vehicle's flight ends first (a hard touchdown of its end landing is a crash: it stops)
+    # last one, as when a vehicle's flight ends first (a crash: it stops)
     ends = [json.loads((tmp_path / "shared" / f"vehicle-{i}" / "relay.json").read_text())["radio"]["down"]
             for i in (1, 2)]
     idle_s += abs(ends[0]["first_s"] - ends[1]["first_s"]) + abs(ends[0]["last_end_s"] - ends[1]["last_end_s"])
