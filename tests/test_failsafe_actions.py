@@ -328,15 +328,16 @@ def test_hold_on_the_wall_clock_brakes_and_returns_to_where_it_began(tmp_path: P
     for 0.5 s, then ``hold`` brakes it and brings it back. Flown by PID, settled by 3 s (its torques
     below 0.3 N·m): the held target is a small push whatever the wall clock's timing. (The BS-ST law's
     torques alternate by several N·m, and early in the flight the one held decides: a run at load 2
-    drifted 1.64 m before it braked, as tests/test_params.py's blackout once crashed.) It holds 2.5 s (``hold_s``),
-    not the default 5 s (the lockstep test's): what is read here is its first 2 s of holding and that it then lands,
+    drifted 1.64 m before it braked, as tests/test_params.py's blackout once crashed.) It holds 2.1 s (``hold_s``),
+    not the default 5 s (the lockstep test's): what is read here is its first 2 s of holding and that it then lands
+    (COM_DISARM_LAND 0.5 s, not 2: its wait on the ground after the touchdown, on the wall clock, reads nothing),
     and the session waited out every second of the hold on the wall clock, asleep between its children's words: a
     controller that ended first left its pipe at its end, always readable, and the session's wait spun on it until the
     vehicle disarmed (2.8 CPU-s of the launcher's thread in 9.0 s; 0.09 since)."""
     wall, cpu = time.monotonic(), resource.getrusage(resource.RUSAGE_THREAD)
     run = sitl(Mission(Sine(), duration_s=6.0, name="rt-hold", controller="pid"), realtime=True,
                out=tmp_path / "rt", plots=False, instance=None, link={"delay_ms": 5.0, "blackouts": [[3.0, 1.5]]},
-               failsafe={"action": "hold", "hold_s": 2.5})
+               failsafe={"action": "hold", "hold_s": 2.1}, params={"COM_DISARM_LAND": 0.5})
     after = resource.getrusage(resource.RUSAGE_THREAD)
     used = after.ru_utime + after.ru_stime - cpu.ru_utime - cpu.ru_stime
     assert used < 0.15 * (time.monotonic() - wall), (used, time.monotonic() - wall)  # a spin takes all it can get
