@@ -77,7 +77,10 @@ def test_the_streams_read_about_the_vehicles_own_origin_and_the_paper_frames_on_
 
 
 def _fly(tmp_path: Path, gcs_port: int, realtime: bool, seconds: float) -> tuple[threading.Thread, dict[str, Any]]:
-    """Two vehicles (line:2) hovering over their starts, their GCS links to ``gcs_port``, in a thread."""
+    """Two vehicles (line:2) hovering over their starts, their GCS links to ``gcs_port``, in a thread. Their control
+    steps at 100 Hz, not 250: each message a ground station reads is the same at any rate (where the vehicle is,
+    said in its frames), and the paced steps (state, target, each process woken) cost each pair ~0.08 CPU-s a second
+    more at 250 Hz (tests/test_swarm_gcs.py)."""
     mission = tmp_path / "hover.toml"
     mission.write_text(HOVER.format(T=seconds))
     result: dict[str, Any] = {}
@@ -86,7 +89,7 @@ def _fly(tmp_path: Path, gcs_port: int, realtime: bool, seconds: float) -> tuple
         try:
             result["run"] = sitl(mission, vehicles=2, formation="line:2", instance=None, gcs=f"127.0.0.1:{gcs_port}",
                                  realtime=realtime, speed=None if realtime else 1.0, out=tmp_path / "run",
-                                 plots=False)
+                                 plots=False, rate_hz=100.0)
         except BaseException as exc:  # noqa: BLE001  (named by the caller's assertion)
             result["error"] = exc
 
