@@ -25,6 +25,7 @@ from pathlib import Path
 
 import pytest
 
+from bridge.cli import main
 from bridge.record.runlog import EventLog
 from bridge.session import instance_slot, sitl
 from missions import Mission, Sine
@@ -36,6 +37,9 @@ from tests.waiting import wait_for
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 PLOTS = {"positions.png", "errors.png", "angles.png", "inputs.png", "path3d.png"}
+# a relay run's flight where what is read is its records, not its landing: a second of the sine, held at its end
+# (a 2 s sine and its landing were 4.6 s of real time, under the busy loops' load for the relay's test)
+HOP = Mission(Sine(), duration_s=1.0, name="sine1", end_action="hold")
 
 
 @pytest.fixture
@@ -103,10 +107,11 @@ def test_overwrite_refuses_a_run_files_name_that_is_no_run_file_and_loses_nothin
     assert _whole(out) == before and target.read_text() == "mine\n"  # the old run whole, the link's file too
 
 
-def test_overwrite_refuses_to_replace_the_commands_own_inputs(tmp_path: Path) -> None:
+def test_overwrite_refuses_to_replace_the_commands_own_inputs(tmp_path: Path,
+                                                              capsys: pytest.CaptureFixture[str]) -> None:
     """A mission, a link trace, a profile read from the run directory under a run file's name: ``--overwrite``
-    would replace them, so sim, a fleet, sitl, sweep and margin refuse (one line naming the input), and nothing
-    is removed; a file of the same names elsewhere, or one the run keeps, flies."""
+    would replace them, so sim, a fleet, sitl, sweep and margin refuse (one line naming the input, bsst's ``main``
+    in this process), and nothing is removed; a file of the same names elsewhere, or one the run keeps, flies."""
     out = tmp_path / "ow"
     out.mkdir()
     mission = out / "mission.toml"
@@ -121,13 +126,14 @@ def test_overwrite_refuses_to_replace_the_commands_own_inputs(tmp_path: Path) ->
              ("margin", str(mission), "--over", "wind_mps", "--until", "rms=0.1"),
              ("sim", str(short_sine(tmp_path, 1.0)), *link), ("sweep", str(short_sine(tmp_path, 1.0)), *link),
              ("sim", str(short_sine(tmp_path, 1.0)), "--profile", str(out / "relay.json"))]
+    capsys.readouterr()
     for args in cases:
-        res = run_bsst(*args, "--out", str(out), "--overwrite", *(("--no-plots",) if args[0] != "margin" else ()),
-                       cwd=ROOT, env=ENV, timeout=120)
+        rc = main([*args, "--out", str(out), "--overwrite", *(("--no-plots",) if args[0] != "margin" else ())])
+        err = capsys.readouterr().err
         given = next(a for a in args[1:] if Path(a).parent == out)
-        assert res.returncode == 2 and len(res.stderr.splitlines()) == 1, (args, res.stderr)
-        assert res.stderr.startswith(f"bsst: {given}: an input of this command, which --overwrite would overwrite "
-                                     f"(--out {out}: {Path(given).name})"), (args, res.stderr)
+        assert rc == 2 and len(err.splitlines()) == 1, (args, err)
+        assert err.startswith(f"bsst: {given}: an input of this command, which --overwrite would overwrite "
+                              f"(--out {out}: {Path(given).name})"), (args, err)
         assert _whole(out) == before, args
     # the same trace outside the run directory: the old run is replaced, and a kept file of the user's named
     (tmp_path / "measured.csv").write_text(trace.read_text())
@@ -141,8 +147,7 @@ def test_overwrite_refuses_to_replace_the_commands_own_inputs(tmp_path: Path) ->
 
 def test_a_sim_overwriting_a_relay_run_leaves_none_of_its_files(tmp_path: Path) -> None:
     out = tmp_path / "rt"
-    run = sitl(Mission(Sine(), duration_s=1.0, name="sine1"), realtime=True, out=out, plots=False, instance=None,
-               link={"delay_ms": 5.0})
+    run = sitl(HOP, realtime=True, out=out, plots=False, instance=None, link={"delay_ms": 5.0})
     assert run.outcome == "completed", run.summary["ended_by"]
     had = {p.name for p in out.iterdir()}
     assert {"relay.json", "relay.log", "vehicle.tlog", "controller.tlog", "vehicle.bin", "controller.bin"} <= had
@@ -194,8 +199,7 @@ def test_a_relay_killed_right_after_stop_under_load_leaves_a_whole_relay_json(tm
 
 def test_a_relay_run_under_load_keeps_relay_json(tmp_path: Path, busy_cores: None) -> None:
     out = tmp_path / "rt"
-    run = sitl(Mission(Sine(), duration_s=2.0, name="sine2"), realtime=True, out=out, plots=False, instance=None,
-               link={"delay_ms": 5.0})
+    run = sitl(HOP, realtime=True, out=out, plots=False, instance=None, link={"delay_ms": 5.0})
     relay = json.loads((out / "relay.json").read_text())
     assert relay["final"] is True  # the relay's own last word, not a snapshot: the session waited for it
     assert not any(e["kind"] == "killed" for e in run.summary["events"]), run.summary["events"]
