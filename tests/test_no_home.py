@@ -23,6 +23,7 @@ import os
 import socket
 import subprocess
 import sys
+import time
 from collections import Counter
 from pathlib import Path
 
@@ -172,13 +173,19 @@ def test_a_forked_bsst_sim_without_a_home_removes_matplotlibs_folder_too(tmp_pat
     assert not [p.name for p in tmp.iterdir() if p.name.startswith((PREFIX, "matplotlib-"))]
 
 
+# the busy server works as a compile starved by a loaded machine does: a tenth of a core (10 ms of CPU in each 100 ms)
+# for 3 s of the wall clock, past the client's 2 s, then answers (it spun 1 s of CPU, answering within the 2 s on
+# an idle machine, so that only a loaded one waited past them)
 SERVER = """
 import socket, sys, time
 s = socket.socket(fileno=int(sys.argv[1]))
 if sys.argv[2] == "busy":
-    end = time.process_time() + 1.0
-    while time.process_time() < end:
-        pass
+    end = time.monotonic() + 3.0
+    while time.monotonic() < end:
+        spun = time.process_time() + 0.01
+        while time.process_time() < spun:
+            pass
+        time.sleep(0.09)
     s.send(b'{"id": 1, "pid": 0}')
 time.sleep(600)
 """
@@ -186,8 +193,8 @@ time.sleep(600)
 
 @pytest.mark.parametrize("server", ["busy", "idle"])
 def test_a_client_waits_on_a_server_that_works(monkeypatch: pytest.MonkeyPatch, server: str) -> None:
-    """A server that spends CPU (1 s of it, then answers) is waited for past the client's timeout; an idle one that
-    never answers is given up at it."""
+    """A server that spends CPU (a tenth of a core for 3 s, then answers) is waited for past the client's timeout;
+    an idle one that never answers is given up at it."""
     monkeypatch.setattr(forkserver, "BUSY_CPU_S", 0.05)  # CPU s in each 2 s window: met by a process at 1/40 of a core
     ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
     proc = subprocess.Popen([sys.executable, "-c", SERVER, str(theirs.fileno()), server], pass_fds=(theirs.fileno(),))
@@ -195,7 +202,9 @@ def test_a_client_waits_on_a_server_that_works(monkeypatch: pytest.MonkeyPatch, 
     try:
         client = forkserver._Server(ours, proc)
         if server == "busy":
+            asked = time.monotonic()
             assert client._until(lambda: client.answers.pop(1, None), 2.0)["pid"] == 0
+            assert time.monotonic() - asked > 2.0  # the answer came after the timeout: it was waited for
         else:
             with pytest.raises(forkserver.ServerGone):
                 client._until(lambda: client.answers.pop(1, None), 2.0)
