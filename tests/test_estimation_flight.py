@@ -241,7 +241,9 @@ def test_plots_show_the_estimate_against_truth_only_when_flown_on_an_estimate(tm
         assert (tmp_path / kind / "plots" / "positions.png").stat().st_size > 10_000
     assert (tmp_path / "ekf" / "plots" / "estimate.png").stat().st_size > 10_000
     assert not (tmp_path / "truth" / "plots" / "estimate.png").exists()
-    run = sitl(_mission(tmp_path, "ekf"), out=tmp_path / "sitl", instance=None)
+    mission = _mission(tmp_path, "ekf", seconds=2.0)  # the figure read, not the flight: 2 s, its end held
+    mission.write_text(mission.read_text() + HOLD_AT_END)
+    run = sitl(mission, out=tmp_path / "sitl", instance=None)
     assert run.outcome == "completed"
     assert (tmp_path / "sitl" / "plots" / "estimate.png").stat().st_size > 10_000
 
