@@ -1,6 +1,6 @@
-"""Covers bridge.session, bridge.core.kernelpreload, bridge.nodes.forkserver, bridge.autopilot.kernelcache and
-bridge.record.mplsetup: without a writable home and numba cache (a container, a CI runner) ``bsst`` compiles each
-kernel once a session, quietly, and its kernels fly the cached ones' bits.
+"""Covers bridge.session, bridge.core.kernelpreload, bridge.nodes.forkserver and bridge.record.mplsetup: without a
+writable home and numba cache (a container, a CI runner) ``bsst`` compiles each kernel once a session, quietly; and
+bridge.autopilot.kernelcache: the kernels it compiled fly the cached ones' bits.
 
 Each ``bsst`` here is a real exec'd process (not forked by the suite's fork server, whose kernels come from a cache),
 starting its own fork server as a user's does: ``python -m bridge``, or for the two compiled sessions one ``python``
