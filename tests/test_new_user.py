@@ -33,6 +33,7 @@ from pathlib import Path
 
 import pytest
 
+from bridge.cli import main
 from bridge.sweep import Grid, SweepFailed, sweep
 from missions import Mission, Sine
 from params import dump_toml
@@ -185,19 +186,24 @@ def test_the_same_script_under_the_guard_flies(tmp_path: Path) -> None:
 # -- a sweep whose every cell failed -----------------------------------------------------------------------
 
 
-def test_a_sweep_whose_every_cell_failed_exits_1_saying_so(tmp_path: Path) -> None:
+def test_a_sweep_whose_every_cell_failed_exits_1_saying_so(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                           monkeypatch: pytest.MonkeyPatch) -> None:
+    """``bsst sweep`` (bsst's ``main`` in this process, in the user's directory: its exit status and stderr)."""
     cwd = user_dir(tmp_path)
     (cwd / "bad_law.py").write_text(BAD_LAW)
     (cwd / "short.toml").write_text(dump_toml(SHORT.to_dict()))
-    proc = run_python(["-m", "bridge", "sweep", "short.toml", "--controller", "bad_law.py:BadLaw", "--delay", "0,10",
-                       "--out", "sw", "--no-plots", "--jobs", "2"], cwd, timeout=300.0)
-    assert proc.returncode == 1, proc.stderr[-3000:]
-    lines = [ln for ln in proc.stderr.splitlines() if ln.startswith("bsst sweep: every cell failed")]
+    monkeypatch.chdir(cwd)
+    capsys.readouterr()
+    rc = main(["sweep", "short.toml", "--controller", "bad_law.py:BadLaw", "--delay", "0,10", "--out", "sw",
+               "--no-plots", "--jobs", "2"])
+    err = capsys.readouterr().err
+    assert rc == 1, err[-3000:]
+    lines = [ln for ln in err.splitlines() if ln.startswith("bsst sweep: every cell failed")]
     head = ("bsst sweep: every cell failed (2 of 2): nothing was measured; the first error: its law failed "
             "at t=0.000 s: ")
-    assert len(lines) == 1 and lines[0].startswith(head), proc.stderr[-3000:]
+    assert len(lines) == 1 and lines[0].startswith(head), err[-3000:]
     assert "update() raised ValueError: this law fails in flight" in lines[0], lines
-    assert "Traceback" not in proc.stderr
+    assert "Traceback" not in err
 
 
 def test_a_sweep_whose_every_cell_failed_raises_from_python(tmp_path: Path) -> None:
