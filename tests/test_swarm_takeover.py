@@ -37,6 +37,10 @@ TAKEOVER = Path(__file__).resolve().parents[1] / "examples" / "swarm-takeover.to
 # and 6.24 s in real time with the file's three tests on two workers; vehicle 1 leaves it from 10 s
 CUT_S = 2.0
 END_S = 14.0 - CUT_S  # the cut mission's end
+# the takeovers' control rate, Hz: the example's 250 stepped each paced pair ~0.08 CPU-s a second more
+# (tests/test_swarm_gcs.py); a step of 8 ms is within the 10 ms to which where vehicle 2 left the shared clock
+# (``from_t``, a step's time) must match the takeover's time
+TAKEOVER_HZ = 125.0
 
 
 def _cut(tmp_path: Path, hold: bool) -> Path:
@@ -58,15 +62,15 @@ def _cut(tmp_path: Path, hold: bool) -> Path:
 
 
 def _fly(tmp_path: Path, port: int, **kw: Any) -> tuple[threading.Thread, dict[str, Any], Path]:
-    """The fleet (:func:`_cut`, its end held) in lockstep at real time's pace, its ground-station links to
-    ``port``, in a thread."""
+    """The fleet (:func:`_cut`, its end held) in lockstep at real time's pace, its control at :data:`TAKEOVER_HZ`,
+    its ground-station links to ``port``, in a thread."""
     mission = _cut(tmp_path, hold=True)
     result: dict[str, Any] = {}
 
     def fly() -> None:
         try:
             result["run"] = sitl(mission, instance=None, gcs=f"127.0.0.1:{port}", speed=1.0, out=tmp_path / "run",
-                                 plots=False, **kw)
+                                 plots=False, rate_hz=TAKEOVER_HZ, **kw)
         except BaseException as exc:  # noqa: BLE001  (named by the caller's assertion)
             result["error"] = exc
 
@@ -94,7 +98,7 @@ def _judged_into_its_neighbour(result: dict[str, Any], mission: Path, capsys: An
     assert flown[0]["to_t"] >= END_S and s["separation"]["whole_flight"] is True, flown  # flown on to the end
     assert s["sitl"]["note"] == WALL_CLOCK
     assert max(run.runs[1].trace["z"]) > 1.9  # its record holds the climb
-    off = simulate(mission, plots=False)  # as planned, the separation holds
+    off = simulate(mission, plots=False, rate_hz=TAKEOVER_HZ)  # as planned, the separation holds
     assert off.outcome == "completed" and off.summary["policies"][0]["ok"]
     capsys.readouterr()
     assert report_fleet(run, "sitl") == 1
