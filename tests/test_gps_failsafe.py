@@ -148,7 +148,9 @@ def test_mavsdk_sees_the_gps_lost_the_descent_and_the_position_back(tmp_path):
     after = [s for s in status if s[0] > t_on]
     assert any(t < t_off for t, _, _ in status) and during and after, status
     assert all(f & pos == pos for t, f, _ in status if t < t_lost - 0.01) and after[-1][1] & pos == pos
-    assert all(f & pos == 0 for _, f, _ in during) and during[-1][2] > during[0][2] > 1.0  # its 1-sigma grows
+    # its 1-sigma grows, past a metre; the first status after the loss may still be under one (0.995 in the
+    # thirty-eighth session's suite: the loss is EKF2_NOAID_TOUT after the last fix fused, not an accuracy)
+    assert all(f & pos == 0 for _, f, _ in during) and during[-1][2] > during[0][2] and during[-1][2] > 1.0
     # neither position goes out while it is invalid (PX4's streams: LOCAL_POSITION_NED only with xy_valid; a local
     # one sent then made MAVSDK's local position health true at a loaded machine's heartbeats), and both come back
     for kind in ("GLOBAL_POSITION_INT", "LOCAL_POSITION_NED"):
