@@ -32,6 +32,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from bridge import simulate
 from bridge.autopilot.params import parse_change
 from bridge.autopilot.vehicleevents import Sender, typed_fields
+from bridge.cli import main
 from bridge.core.flight import prepare
 from bridge.mavlink.endpoint import GCS_PORT, parse_address
 from bridge.mavlink.missionitems import MissionItem
@@ -206,7 +207,8 @@ def test_mavsdk_flies_a_plan_file_through_await_mission_as_the_file_flies(tmp_pa
 
 
 @pytest.mark.parametrize("action", [5, 0], ids=["gf-action-5-land", "gf-action-0-not-watched"])
-def test_mavsdk_uploads_a_plans_fence_and_rally_points_and_the_flight_leaving_the_fence_fails(tmp_path, action):
+def test_mavsdk_uploads_a_plans_fence_and_rally_points_and_the_flight_leaving_the_fence_fails(tmp_path, action,
+                                                                                               capsys):
     """MAVSDK MissionRaw uploads the L plan's mission, and its geoFence (an inclusion rectangle about the north
     leg only) and rallyPoints as the fence's and rally points' mission types, reads both back item for item, and
     flies the mission: the east leg leaves the fence, so the geofence policy fails at the first row outside and
@@ -259,8 +261,9 @@ def test_mavsdk_uploads_a_plans_fence_and_rally_points_and_the_flight_leaving_th
     assert flown.geofence is not None and len(flown.geofence.zones) == 1 and len(flown.rally) == 1
     assert np.allclose(flown.geofence.zones[0].points, want.geofence.zones[0].points, atol=1e-6)
     assert np.allclose(flown.rally, want.rally, atol=1e-6)
-    again = run_bsst("sim", out / "mission.toml", "--out", tmp_path / "again", "--no-plots")
-    assert again.returncode == 1, again.stderr
+    # (bsst sim in this process: its flight is what is read, not the command's start)
+    assert main(["sim", str(out / "mission.toml"), "--out", str(tmp_path / "again"), "--no-plots"]) == 1, \
+        capsys.readouterr().err
     offline = json.loads((tmp_path / "again" / "summary.json").read_text())
     assert offline["outcome"] == summary["outcome"], offline["ended_by"]
     assert next(p for p in offline["policies"] if p["name"] == "geofence")["t"] == fence["t"], offline["policies"]
@@ -388,21 +391,23 @@ def test_mavsdks_arm_outside_an_uploaded_fence_is_denied_saying_why_and_arms_onc
     assert kinds.index("preflight") < kinds.index("armed") and kinds.count("armed") == 1, kinds
 
 
-# a takeoff to 1.5 m, a waypoint 2 m away held 0.5 s, a landing: 9.1 s of flight (12.1 s at 3 m)
+# a takeoff to 0.5 m, a waypoint there, a landing: 3.2 s of flight (a waypoint 2 m away at 1.5 m: 9.1 s), as
+# long as a test of the transfer, the start or a refusal needs
 SMALL_PLAN = """QGC WPL 110
 0\t1\t0\t16\t0\t0\t0\t0\t47.397742\t8.545594\t488.0\t1
-1\t0\t3\t22\t0\t0\t0\tnan\t47.397742\t8.545594\t1.5\t1
-2\t0\t3\t16\t0\t0.5\t0\tnan\t47.3977600\t8.5456000\t1.5\t1
-3\t0\t3\t21\t0\t0\t0\tnan\t47.3977600\t8.5456000\t0\t1
+1\t0\t3\t22\t0\t0\t0\tnan\t47.397742\t8.545594\t0.5\t1
+2\t0\t3\t16\t0\t0.5\t0\tnan\t47.3977420\t8.5455940\t0.5\t1
+3\t0\t3\t21\t0\t0\t0\tnan\t47.3977420\t8.5455940\t0\t1
 """
-# the same with a loiter of 20 s at its waypoint (LOITER_TIME): 29.1 s of flight
-LOITER_PLAN = SMALL_PLAN.replace("2\t0\t3\t16\t0\t0.5", "2\t0\t3\t19\t20\t0.5")
-# the same at 1 m, its waypoint 1 m north: 7.6 s of flight, for the tests that fly it on the wall clock
+# the same with a loiter of 2 s at its waypoint (LOITER_TIME): 5.2 s of flight
+LOITER_PLAN = SMALL_PLAN.replace("2\t0\t3\t16\t0\t0.5", "2\t0\t3\t19\t2\t0.5")
+# the same at 1.5 m: 5.1 s of flight, for MAVProxy's lockstep flight paced at 1x, which is to last over 5 s (a
+# waypoint 1 m north at 1 m: 7.6 s)
 HOP_PLAN = """QGC WPL 110
 0\t1\t0\t16\t0\t0\t0\t0\t47.397742\t8.545594\t488.0\t1
-1\t0\t3\t22\t0\t0\t0\tnan\t47.397742\t8.545594\t1.0\t1
-2\t0\t3\t16\t0\t0.5\t0\tnan\t47.3977510\t8.5455940\t1.0\t1
-3\t0\t3\t21\t0\t0\t0\tnan\t47.3977510\t8.5455940\t0\t1
+1\t0\t3\t22\t0\t0\t0\tnan\t47.397742\t8.545594\t1.5\t1
+2\t0\t3\t16\t0\t0.5\t0\tnan\t47.3977420\t8.5455940\t1.5\t1
+3\t0\t3\t21\t0\t0\t0\tnan\t47.3977420\t8.5455940\t0\t1
 """
 
 
@@ -464,13 +469,14 @@ def test_mission_start_flies_a_small_plan_in_real_time(tmp_path, link, how):
     the start, and the vehicle is armed only after it. The controller downloads the three items and flies them
     on the wall clock; each is reached (MISSION_ITEM_REACHED), the flight completes landed and disarmed, and
     summary.json's ``mission_transfer.started_by`` says how and by whom. With ``--loss 10`` the download crosses
-    ``bsst relay`` (the session's, on the wire) and still arrives. (HOP_PLAN: 7.6 s on the wall clock.)"""
-    items = _small_plan_items(plan=HOP_PLAN)
+    ``bsst relay`` (the session's, on the wire) and still arrives. (SMALL_PLAN: 3.2 s on the wall clock; landed,
+    the vehicle disarms 0.5 s later, not PX4's 2 s: the session's wall clock is the test's CPU.)"""
+    items = _small_plan_items()
     out = tmp_path / "rt"
     with instance_slot() as n:
         gcs = _ground_station(n)
         sitl = Proc.bsst("sitl", "--await-mission", "--realtime", "--instance", str(n), "--out", str(out),
-                         "--no-plots", *link)
+                         "--no-plots", "--param", "COM_DISARM_LAND=0.5", *link)
         try:
             target = _vehicle_of(gcs)
             _upload(gcs, target, items)
@@ -513,12 +519,13 @@ def test_mission_start_flies_a_small_plan_in_real_time(tmp_path, link, how):
     assert (out / "relay.json").exists() == bool(link)
 
 
-def test_a_session_denies_the_start_of_missions_its_controller_or_trace_would_refuse_and_flies_the_next(tmp_path):
-    """``bsst sitl --await-mission``: MISSION_START of a mission over the day a mission may last (30 holds of an
-    hour) and of one over the session's trace (three holds of 1000 s: 3000 s, over 2000 s at 250 Hz) is DENIED at
-    once, a STATUSTEXT saying why, and the session waits on; the small plan uploaded next is ACCEPTED and flown,
-    exit 0. Until the third wave's thirty-sixth session both were ACCEPTED: the first ended the session with the
-    controller's refusal (exit 1), the second was flown whole past the cap (630 731 rows for 2523 s)."""
+@pytest.fixture(scope="module")
+def denied_then_flown(tmp_path_factory):
+    """One ``bsst sitl --await-mission --param-at 4:COM_OF_LOSS_T=1`` (lockstep) and a pymavlink ground station's
+    MISSION_START after each of its uploads: a mission over the day a mission may last (30 holds of an hour), one
+    over the session's trace (three holds of 1000 s: 3000 s, over 2000 s at 250 Hz), the small plan (3.2 s: over
+    before the --param-at's 4 s), then the plan with a 2 s loiter (5.2 s), which is flown. The (result, STATUSTEXT)
+    of each start, the exit status, summary.json and the session's last lines: the two tests below read it."""
     hours = [M.MAVLink_mission_item_int_message(0, 0, 0, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_CMD_NAV_TAKEOFF, 0,
                                                 1, 0, 0, 0, math.nan, 473977420, 85455940, 10.0, 0)]
     hours += [M.MAVLink_mission_item_int_message(0, 0, k, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
@@ -526,61 +533,60 @@ def test_a_session_denies_the_start_of_missions_its_controller_or_trace_would_re
                                                  85455940, 10.0, 0) for k in range(1, 31)]
     hours += [M.MAVLink_mission_item_int_message(0, 0, 31, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_CMD_NAV_LAND,
                                                  0, 1, 0, 0, 0, math.nan, 473977420, 85455940, 0.0, 0)]
-    out = tmp_path / "denied"
+    out = tmp_path_factory.mktemp("denied") / "run"
     with instance_slot() as n:
         gcs = _ground_station(n)
         sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--speed", "0", "--out", str(out),
-                         "--no-plots")
+                         "--no-plots", "--param-at", "4:COM_OF_LOSS_T=1")
         try:
             target = _vehicle_of(gcs)
             said = []
-            for items in (hours, _small_plan_items(plan=LONG_PLAN), _small_plan_items()):
+            for items in (hours, _small_plan_items(plan=LONG_PLAN), _small_plan_items(),
+                          _small_plan_items(plan=LOITER_PLAN)):
                 _upload(gcs, target, items)
                 said.append(_mission_start(gcs, target))
             rc = sitl.p.wait(timeout=120)
         finally:
             gcs.close()
             sitl.stop()
-    (hours_result, hours_text), (long_result, long_text), (small_result, _) = said
+    return said, rc, json.loads((out / "summary.json").read_text()), "\n".join(sitl.lines[-30:])
+
+
+def test_a_session_denies_the_start_of_missions_its_controller_or_trace_would_refuse_and_flies_the_next(
+        denied_then_flown):
+    """``bsst sitl --await-mission``: MISSION_START of a mission over the day a mission may last (30 holds of an
+    hour) and of one over the session's trace (three holds of 1000 s: 3000 s, over 2000 s at 250 Hz) is DENIED at
+    once, a STATUSTEXT saying why, and the session waits on; the next one it can fly (after the small plan, over
+    before the session's --param-at: the test below) is ACCEPTED and flown, exit 0. Until the third wave's
+    thirty-sixth session both were ACCEPTED: the first ended the session with the controller's refusal (exit 1), the
+    second was flown whole past the cap (630 731 rows for 2523 s)."""
+    said, rc, summary, last = denied_then_flown
+    (hours_result, hours_text), (long_result, long_text), _, (loiter_result, _) = said
     assert hours_result == M.MAV_RESULT_DENIED and hours_text.startswith("MISSION_START: the mission cannot be flown")
     assert "32 items fly at least 108" in hours_text and "over the 86400 s a mission may last" in hours_text
     assert long_result == M.MAV_RESULT_DENIED and "over the 500000 a run keeps in memory" in long_text, long_text
-    assert small_result == M.MAV_RESULT_ACCEPTED
-    summary = json.loads((out / "summary.json").read_text())
-    assert rc == clean_exit(summary) == 0, "\n".join(sitl.lines[-30:])
+    assert loiter_result == M.MAV_RESULT_ACCEPTED
+    assert rc == clean_exit(summary) == 0, last
     assert summary["outcome"] == "completed" and summary["mission_transfer"]["items"] == 3
 
 
-def test_a_session_denies_the_start_of_a_mission_over_before_its_param_at_and_flies_the_next(tmp_path):
-    """``bsst sitl --await-mission --param-at 15:COM_OF_LOSS_T=1``: MISSION_START of the small plan (9.1 s to fly:
-    over before mission time 15 s) is DENIED at once, a STATUSTEXT naming the --param-at and the mission's length,
-    and the session waits on; the plan with a 20 s loiter (29.1 s) uploaded next is ACCEPTED and flown, the change
-    sent at 15 s and confirmed, exit 0. Until the third wave's thirty-seventh session the vehicle's start check did
+def test_a_session_denies_the_start_of_a_mission_over_before_its_param_at_and_flies_the_next(denied_then_flown):
+    """``bsst sitl --await-mission --param-at 4:COM_OF_LOSS_T=1``: MISSION_START of the small plan (3.2 s to fly:
+    over before mission time 4 s) is DENIED at once, a STATUSTEXT naming the --param-at and the mission's length,
+    and the session waits on; the plan with a 2 s loiter (5.2 s) uploaded next is ACCEPTED and flown, the change
+    sent at 4 s and confirmed, exit 0. Until the third wave's thirty-seventh session the vehicle's start check did
     not know the controller's --param-at: the first was ACCEPTED and the controller's refusal ended the session
-    (exit 1)."""
-    out = tmp_path / "param-at"
-    with instance_slot() as n:
-        gcs = _ground_station(n)
-        sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--speed", "0", "--out", str(out),
-                         "--no-plots", "--param-at", "15:COM_OF_LOSS_T=1")
-        try:
-            target = _vehicle_of(gcs)
-            _upload(gcs, target, _small_plan_items())
-            result, text = _mission_start(gcs, target)
-            assert result == M.MAV_RESULT_DENIED, "\n".join(sitl.lines[-30:])
-            assert text.startswith("MISSION_START: the mission cannot be flown: --param-at 15:COM_OF_LOSS_T=1"), text
-            assert "must be in [0, 9.101) s (the mission's duration)" in text, text
-            _upload(gcs, target, _small_plan_items(plan=LOITER_PLAN))
-            assert _mission_start(gcs, target)[0] == M.MAV_RESULT_ACCEPTED
-            rc = sitl.p.wait(timeout=120)
-        finally:
-            gcs.close()
-            sitl.stop()
-    summary = json.loads((out / "summary.json").read_text())
-    assert rc == clean_exit(summary) == 0, "\n".join(sitl.lines[-30:])
+    (exit 1). (The session of the test above: the two missions it denies first fly nothing.)"""
+    said, rc, summary, last = denied_then_flown
+    (result, text), (loiter_result, _) = said[2:]
+    assert result == M.MAV_RESULT_DENIED, last
+    assert text.startswith("MISSION_START: the mission cannot be flown: --param-at 4:COM_OF_LOSS_T=1"), text
+    assert "must be in [0, 3.242) s (the mission's duration)" in text, text
+    assert loiter_result == M.MAV_RESULT_ACCEPTED
+    assert rc == clean_exit(summary) == 0, last
     assert summary["outcome"] == "completed" and summary["mission_transfer"]["items"] == 3
     [change] = summary["param_at"]
-    assert change["sent_t"] == change["t_s"] == 15.0 and change["confirmed"], change
+    assert change["sent_t"] == change["t_s"] == 4.0 and change["confirmed"], change
 
 
 # settings whose own fence and rally points the vehicle holds from its start (a ground station downloads them), on
@@ -633,16 +639,16 @@ def test_a_vehicle_holding_a_fence_and_rally_points_on_their_bounds_flies_a_grou
 
 
 def test_the_link_model_acts_on_the_transfer_in_lockstep_and_the_flight_is_offlines(tmp_path):
-    """``bsst sitl --await-mission --loss 30 --param-at 3:COM_OF_LOSS_T=1`` in lockstep, a pymavlink ground
+    """``bsst sitl --await-mission --loss 30 --param-at 1:COM_OF_LOSS_T=1`` in lockstep, a pymavlink ground
     station's MISSION_START: the download crosses the mission's link model (seeded: requests are lost and asked
     again), and the flight that follows is offline's with the same link (its model starts fresh at the arm) and
-    the same scheduled change, ≤ 1e-4 m, as many rows; the change was sent at mission time 3 s (time 0: the
+    the same scheduled change, ≤ 1e-4 m, as many rows; the change was sent at mission time 1 s (time 0: the
     flight's first step, the controller's arm once it has the mission) and confirmed."""
     items = _small_plan_items()
     out = tmp_path / "lossy"
     with instance_slot() as n:
         gcs = _ground_station(n)
-        sitl = Proc.bsst("sitl", "--await-mission", "--speed", "0", "--loss", "30", "--param-at", "3:COM_OF_LOSS_T=1",
+        sitl = Proc.bsst("sitl", "--await-mission", "--speed", "0", "--loss", "30", "--param-at", "1:COM_OF_LOSS_T=1",
                          "--instance", str(n), "--out", str(out), "--no-plots")
         try:
             target = _vehicle_of(gcs)
@@ -657,10 +663,10 @@ def test_the_link_model_acts_on_the_transfer_in_lockstep_and_the_flight_is_offli
     assert summary["outcome"] == "completed" and t["result"] == "accepted" and t["re_requests"] >= 1, t
     assert t["started_by"] == {"command": START_COMMAND, "by": f"255:190 127.0.0.1:{GCS_PORT + n} gcs"}, t
     [change] = summary["param_at"]
-    assert change["sent_t"] == change["t_s"] == 3.0 and change["confirmed"], change
+    assert change["sent_t"] == change["t_s"] == 1.0 and change["confirmed"], change
     (tmp_path / "small.waypoints").write_text(SMALL_PLAN)
     offline = simulate(tmp_path / "small.waypoints", plots=False, link={"loss_pct": 30},
-                       param_at=[parse_change("3:COM_OF_LOSS_T=1")])
+                       param_at=[parse_change("1:COM_OF_LOSS_T=1")])
     flown = _trace(out / "trace.csv")
     assert len(flown) == len(offline.trace["t"])
     worst = max(math.dist(row[1:], (offline.trace["x"][i], offline.trace["y"][i], offline.trace["z"][i]))
@@ -674,11 +680,13 @@ def test_mavproxy_loads_and_starts_a_waypoint_file(tmp_path):
     the run's mission.plan holds what MAVProxy sent: the file's lines, its line 0 (the home) as item 0, a
     waypoint on the ground at the home (MAVProxy sends it so to PX4 too). With no ``--speed`` a ground station's
     mission flies in lockstep at 1x real time, as PX4's and ArduPilot's SITL run (summary.json's ``sitl.speed``
-    and ``timing.real_time_factor``; it flew some 20 times faster before): HOP_PLAN, 7.6 s."""
+    and ``timing.real_time_factor``; it flew some 20 times faster before): HOP_PLAN, 5.1 s (landed, disarmed 0.5 s
+    later, not PX4's 2 s: each second at 1x is the test's CPU)."""
     (tmp_path / "small.txt").write_text(HOP_PLAN)
     out = tmp_path / "mp"
     with instance_slot() as n:
-        sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--out", str(out), "--no-plots")
+        sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--out", str(out), "--no-plots",
+                         "--param", "COM_DISARM_LAND=0.5")
         mp = MavProxy(f"udpin:127.0.0.1:{GCS_PORT + n}", tmp_path)
         try:
             mp.wait_online()
@@ -1326,10 +1334,11 @@ def test_a_session_stopped_while_it_awaits_a_mission_reads_the_waiting_states_as
 
 # -- a ground station's own flight before the mission it then starts ------------------------------------------------
 # MAVSDK flies the vehicle itself first (arm, takeoff, land: the vehicle disarms itself once down, as the vehicle
-# asks before a MISSION_START in the air: "land and disarm, then start it"), then uploads a mission (takeoff,
-# waypoint 6 m north, back, land), arms and starts it, and lets it fly to its end (argv[2] "fly") or pauses it once
-# it climbs ("pause": MissionRaw.pause_mission, HOLD, a takeover). The hop flies on the wall clock, so the vehicle's
-# clock is ahead of the mission's by then.
+# asks before a MISSION_START in the air: "land and disarm, then start it"), then uploads a mission (takeoff to
+# 3 m, waypoint 1 m north, land: 11.5 s of flight; 6 m north and back took 35 s, which no test reads), arms and
+# starts it, and lets it fly to its end (argv[2] "fly") or pauses it once it climbs ("pause":
+# MissionRaw.pause_mission, HOLD, a takeover). The hop flies on the wall clock, so the vehicle's clock is ahead of
+# the mission's by then.
 MAVSDK_HOP_THEN_MISSION = MAVSDK_GROUND_STATION + r"""
 import math
 from mavsdk.plugins.action import Action
@@ -1357,8 +1366,7 @@ def item(seq, command, north_m, z):
     return MissionItem(seq, 6, command, int(seq == 0), 1, 0.0, 0.0, 0.0, math.nan,
                        int(round((lat + north_m / 111320.0) * 1e7)), int(round(lon * 1e7)), z, 0)
 
-out["upload"] = mr.upload_mission([item(0, 22, 0.0, 3.0), item(1, 16, 6.0, 3.0), item(2, 16, 0.0, 3.0),
-                                   item(3, 21, 0.0, 0.0)]).name
+out["upload"] = mr.upload_mission([item(0, 22, 0.0, 3.0), item(1, 16, 1.0, 3.0), item(2, 21, 1.0, 0.0)]).name
 out["arm_again"], out["start"] = action.arm().name, mr.start_mission().name
 if sys.argv[2] == "pause":
     out["climbing"] = until(lambda: telemetry.position().relative_altitude_m > 1.5, 60)
@@ -1389,12 +1397,17 @@ def _hop_then_mission(out: Path, then: str, *sitl_args: str, hop: str = "land") 
     return status, json.loads((out / "summary.json").read_text())
 
 
+# the lockstep sessions' hop on the wall clock landed at 1.5 m/s and disarmed 0.5 s after (PX4's 0.7 m/s, 2 s)
+HOP_FAST = ("--param", "MPC_LAND_SPEED=1.5", "--param", "COM_DISARM_LAND=0.5")
+
+
 @pytest.fixture(scope="module")
 def hop_then_mission(tmp_path_factory):
     """The lockstep session of :data:`MAVSDK_HOP_THEN_MISSION` flying its mission to the end: (exit status,
-    summary.json, run directory)."""
+    summary.json, run directory). The hop, on the wall clock, lands at 1.5 m/s (PX4's 0.7) and disarms 0.5 s later
+    (PX4's 2 s): each of its seconds is the test's CPU."""
     out = tmp_path_factory.mktemp("hop") / "run"
-    status, summary = _hop_then_mission(out, "fly", "--speed", "0")
+    status, summary = _hop_then_mission(out, "fly", "--speed", "0", *HOP_FAST)
     return status, summary, out
 
 
@@ -1476,7 +1489,7 @@ def test_a_failsafe_of_a_ground_stations_flight_before_an_awaited_mission_is_rec
     vehicle, and paused it). (Until the third wave's thirty-seventh session it read ``failsafe``, and the hop's
     breach broke the mission's geofence policy.)"""
     out = tmp_path / "run"
-    status, summary = _hop_then_mission(out, "pause", "--speed", "0", hop="fence")
+    status, summary = _hop_then_mission(out, "pause", "--speed", "0", *HOP_FAST, hop="fence")
     assert status == 1 and summary["outcome"] == "aborted", (summary["outcome"], summary["ended_by"])
     assert summary["ended_by"]["how"].startswith("mode changed at t="), summary["ended_by"]
     fs = [e for e in summary["events"] if e["kind"] in ("failsafe", "geofence") and e.get("source") == "vehicle"]
