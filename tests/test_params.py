@@ -63,8 +63,6 @@ from tests.test_await_mission import _small_plan_items, _upload
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
-BLACKOUT = {"blackouts": [[15.0, 2.0]]}
-
 
 # -- the pure parts -------------------------------------------------------------------------------
 def test_every_parameter_reads_back_what_was_set_and_refuses_outside_its_range():
@@ -179,9 +177,10 @@ def test_bad_parameter_flags_are_one_line_exit_2(args, says):
 
 
 def test_the_offboard_loss_parameter_flies_the_failsafe_action_it_names():
-    """``--param COM_OBL_ACT=1`` is ``--failsafe-action hold``, row for row (offline)."""
-    a = simulate("missions/sine.toml", link=BLACKOUT, params={"COM_OBL_ACT": 1}, plots=False)
-    b = simulate("missions/sine.toml", link=BLACKOUT, failsafe={"action": "hold"}, plots=False)
+    """``--param COM_OBL_ACT=1`` is ``--failsafe-action hold``, row for row (offline): 10.5 s of sine, a blackout at
+    6 s (the 30 s sine's at 15 s flew 20 s more than its failsafe needs)."""
+    a = simulate(SHORT, link=EARLY_BLACKOUT, params={"COM_OBL_ACT": 1}, plots=False)
+    b = simulate(SHORT, link=EARLY_BLACKOUT, failsafe={"action": "hold"}, plots=False)
     assert np.array_equal(a.trace["x"], b.trace["x"]) and a.summary["outcome"] == "failsafe"
 
 
@@ -273,13 +272,14 @@ def test_the_controllers_change_reaches_the_ground_station_as_px4_sends_it(tmp_p
     """A lockstep session whose controller sets COM_OF_LOSS_T at 1 s (``--param-at``): the ground station, which
     asked nothing, gets the new PARAM_VALUE (PX4's ``MavlinkParametersManager::send_untransmitted``: each changed
     parameter on every link), so its copy follows; the ground station's own set is answered once, not echoed
-    again by that broadcast."""
+    again by that broadcast. (At 2x real time, landed and disarmed 0.5 s later: the session's wall clock is the
+    test's CPU.)"""
     mission = tmp_path / "short.toml"
     mission.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 3.0"))
     with instance_slot() as n:
         gcs = _gcs(n)
         s = Bsst("sitl", str(mission), "--instance", str(n), "--param-at", "1:COM_OF_LOSS_T=2.5", "--out",
-                 str(tmp_path / "run"), "--no-plots", "--speed", "1", env=ENV)
+                 str(tmp_path / "run"), "--no-plots", "--speed", "2", "--param", "COM_DISARM_LAND=0.5", env=ENV)
         try:
             gcs.wait_heartbeat(timeout=30)
             tgt = (gcs.target_system, gcs.target_component)
@@ -701,11 +701,14 @@ def test_a_whole_float_flag_and_file_fly_as_the_integer(tmp_path):
     assert "EKF2_NOAID_TOUT = 1000000\n" in (tmp_path / "float" / "mission.toml").read_text()
 
 def test_two_scheduled_changes_of_one_parameter_at_one_time_the_last_given_wins(tmp_path):
-    """Issue 22, defect 10: ``--param-at 15:COM_OBL_ACT=3 --param-at 15:COM_OBL_ACT=1``: hold (the last
-    given), not disarm (the larger value, as it was)."""
+    """Issue 22, defect 10: ``--param-at 3:COM_OBL_ACT=3 --param-at 3:COM_OBL_ACT=1``: hold (the last
+    given), not disarm (the larger value, as it was), in the blackout at 6 s of 10 s of sine (the 30 s sine's at
+    15 s flew 15 s more than its failsafe needs)."""
+    mission = tmp_path / "short.toml"
+    mission.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 10.0"))
     out = tmp_path / "r"
-    r = _bsst("sim", "missions/sine.toml", "--param-at", "10:COM_OBL_ACT=3", "--param-at", "10:COM_OBL_ACT=1",
-              "--blackout", "15:2", "--out", str(out), "--no-plots")
+    r = _bsst("sim", str(mission), "--param-at", "3:COM_OBL_ACT=3", "--param-at", "3:COM_OBL_ACT=1",
+              "--blackout", "6:2", "--out", str(out), "--no-plots")
     assert r.returncode == 1, r.stderr  # the failsafe
     log = (out / "events.log").read_text()
     assert "COM_OBL_ACT = 1 (was 3)" in log and "hold here" in json.loads((out / "summary.json").read_text())[
@@ -770,12 +773,14 @@ def test_the_documented_minimum_loss_timeout_is_set_over_mavlink(tmp_path):
 def test_integer_flags_and_the_minimum_timeout_fly_in_lockstep_as_offline(tmp_path):
     """``bsst sitl`` with ``--param COM_OBL_ACT=1`` (hold) and ``--param-at 2:COM_OF_LOSS_T=0.01``: the
     controller's PARAM_SET (float32) is made by the vehicle process, and the lockstep trace is the offline
-    one: the failsafe holds 0.01 s into the blackout in both, for COM_FAIL_ACT_T (5 s), then lands and disarms.
-    The mission outlasts that disarm (14.1 s), so the whole failsafe is flown in lockstep; 9 s left the vehicle
-    holding on the wall clock once the controller was done, the session waiting 5 s for its landing."""
+    one: the failsafe holds 0.01 s into the blackout (at 3 s) in both, for COM_FAIL_ACT_T (1 s), then lands and
+    disarms. The mission outlasts that disarm (6.7 s), so the whole failsafe is flown in lockstep; a shorter one left
+    the vehicle holding on the wall clock once the controller was done, the session waiting for its landing. (A
+    blackout at 6 s and PX4's 5 s hold flew 15 s for the same.)"""
     mission = tmp_path / "short.toml"
-    mission.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 15.0"))
-    flags = ["--param", "COM_OBL_ACT=1", "--param-at", "2:COM_OF_LOSS_T=0.01", "--blackout", "6:2", "--no-plots"]
+    mission.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 8.0"))
+    flags = ["--param", "COM_OBL_ACT=1", "--param", "COM_FAIL_ACT_T=1", "--param-at", "2:COM_OF_LOSS_T=0.01",
+             "--blackout", "3:2", "--no-plots"]
     with instance_slot() as n:
         r = _bsst("sitl", str(mission), *flags, "--instance", str(n), "--out", str(tmp_path / "lock"))
     assert r.returncode == 1, r.stderr  # the failsafe
@@ -795,14 +800,15 @@ def test_a_ground_stations_parameter_change_is_recorded_who_what_when_and_ends_r
     the value in force (no change: not recorded), then COM_OBL_ACT = 3 (terminate) at t >= 2 s. The failsafe
     stops the motors in the blackout: ``ended_by`` names that ground station and its change, not the vehicle;
     ``interventions`` has the one change (sender, name, old -> new, t and step), the lockstep record says the run
-    is reproducible only until that step, the printout says it was not flown as asked, exit 1."""
+    is reproducible only until that step, the printout says it was not flown as asked, exit 1. (At 2x real time:
+    the ground station's change has 1.5 s of wall clock before the blackout.)"""
     mission = tmp_path / "short.toml"
     mission.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 7.0"))
     out = tmp_path / "run"
     with instance_slot() as n:
         gcs = _gcs(n)
         s = Bsst("sitl", str(mission), "--instance", str(n), "--blackout", "5:2", "--out", str(out), "--no-plots",
-                 "--speed", "1", env=ENV)
+                 "--speed", "2", env=ENV)
         try:
             gcs.wait_heartbeat(timeout=30)
             tgt = (gcs.target_system, gcs.target_component)
@@ -851,12 +857,14 @@ def test_a_scheduled_change_in_a_realtime_blackout_is_resent_until_confirmed_or_
     timeout 5 s: the blackout alone is no failsafe). Rides through: the PARAM_SET lost in the blackout is sent
     again every 0.2 s until the vehicle's PARAM_VALUE echoes it after the blackout; the vehicle made the change,
     ``param_at`` says confirmed (more than one send), exit 0. Lost (the blackout outlasts the flight and the
-    controller's end): never confirmed, the summary and stderr say it was not made, exit 1."""
+    controller's end): never confirmed, the summary and stderr say it was not made, exit 1. (Landed, the vehicle
+    disarms 0.5 s later, not PX4's 2 s: each second on the wall clock is the test's CPU.)"""
     mission = tmp_path / "short.toml"
     mission.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 5.0"))
     with instance_slot() as n:
         r = _bsst("sitl", str(mission), "--realtime", "--instance", str(n), "--out", str(tmp_path / "run"),
                   "--no-plots", "--controller", law, "--delay", "2", "--param", "COM_OF_LOSS_T=5",
+                  "--param", "COM_DISARM_LAND=0.5",
                   "--up-blackout", blackout, "--param-at", f"{at}:MIS_TAKEOFF_ALT=5")
     s = json.loads((tmp_path / "run" / "summary.json").read_text())
     [sent] = s["param_at"]
