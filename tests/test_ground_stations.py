@@ -682,7 +682,8 @@ def test_mavproxy_params_and_modes(tmp_path):
     STATUSTEXT shown, the value unchanged); HOLD (MAVProxy's LOITER), arm, TAKEOFF, LAND, with
     MAVProxy naming each mode in its prompt."""
     with instance_slot() as n:
-        v = _vehicle(n, tmp_path / "v", "--param", "MPC_LAND_SPEED=1.5")  # real time: TAKEOFF lasts ~2 s
+        # real time: TAKEOFF lasts ~2 s; landed, disarmed 0.5 s later (PX4's 2 s: each second is the test's CPU)
+        v = _vehicle(n, tmp_path / "v", "--param", "MPC_LAND_SPEED=1.5", "--param", "COM_DISARM_LAND=0.5")
         mp = MavProxy(f"udpin:127.0.0.1:{GCS_PORT + n}", tmp_path)
         say = mp.say
 
