@@ -39,10 +39,11 @@ HOME = (473977420, 85455940)  # degE7: the vehicle's default home (PX4 SITL's)
 AUTO_MISSION = (4 << 16) | (4 << 24)  # PX4's custom_mode: main AUTO, sub MISSION
 
 
-def _items(target: tuple[int, int] = (0, 0)) -> list[Any]:
-    """A takeoff to 5 m, a waypoint 20 m north, a landing there, addressed to ``target`` (system, component)."""
+def _items(target: tuple[int, int] = (0, 0), up_m: float = 5.0) -> list[Any]:
+    """A takeoff to ``up_m``, a waypoint 20 m north, a landing there, addressed to ``target`` (system, component):
+    19.8 s of flight at 5 m, 15.9 s at 3 m (its landing the shorter)."""
     north = HOME[0] + 1800
-    spec = ((M.MAV_CMD_NAV_TAKEOFF, HOME[0], 5.0), (M.MAV_CMD_NAV_WAYPOINT, north, 5.0),
+    spec = ((M.MAV_CMD_NAV_TAKEOFF, HOME[0], up_m), (M.MAV_CMD_NAV_WAYPOINT, north, up_m),
             (M.MAV_CMD_NAV_LAND, north, 0.0))
     return [M.MAVLink_mission_item_int_message(*target, seq, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, cmd, 0, 1, 0.0, 0.0,
                                                0.0, math.nan, lat, HOME[1], z, 0)
@@ -123,17 +124,34 @@ def _fly_await_mission(out: Path, script: Callable[[_Gcs], None], *flags: str, s
     return (out / "events.log").read_text().splitlines()
 
 
-def test_a_chosen_current_item_is_refused_at_the_start_and_the_flown_mission_cannot_change(tmp_path):
-    """MISSION_SET_CURRENT 1 is taken (MISSION_CURRENT says 1, as PX4), but MISSION_START is then DENIED, saying
-    the current item is 1 (PX4 would start there; the flight here is the whole trajectory, and it once flew it
-    from item 0 while the ground station had been told 1). Item 0 current again, the start is ACCEPTED. While the
-    mission flies (AUTO.MISSION, armed): an upload and a clear are MAV_MISSION_ERROR, MISSION_SET_CURRENT changes
-    nothing (each with a STATUSTEXT saying why; they were once taken: the heartbeat showed OFFBOARD and
-    MISSION_CURRENT a mission not started while the old one flew on); a fence may still be cleared. The flight
-    completes, its mission never replaced."""
+@pytest.fixture(scope="module")
+def current_item_chosen(tmp_path_factory: pytest.TempPathFactory) -> list[str]:
+    """One ``bsst sitl --await-mission`` (lockstep) whose ground station chooses the current item both ways, before
+    the start and while the mission flies, each answer checked as it comes: DO_SET_MISSION_CURRENT (the second test
+    below) before any upload, then with the mission held, item 0 again; then MISSION_SET_CURRENT (the first test),
+    whose start flies; in flight, DO_SET_MISSION_CURRENT, then an upload, clears and MISSION_SET_CURRENT. The flight
+    completes. Its events.log lines, which the two tests read (each flew a session of its own: the same flight)."""
     def script(gcs: _Gcs) -> None:
+        cmd = M.MAV_CMD_DO_SET_MISSION_CURRENT  # (test_do_set_mission_current_..., before the start)
+        assert gcs.command(cmd, 0) == M.MAV_RESULT_FAILED
+        assert "no mission held" in gcs.joined_text("DO_SET_MISSION_CURRENT")
         assert gcs.upload(_items()) == M.MAV_MISSION_ACCEPTED
-        gcs.c.mav.mission_set_current_send(*gcs.t, 1)
+        assert gcs.command(cmd, 1) == M.MAV_RESULT_ACCEPTED
+        gcs.recv("MISSION_CURRENT", cond="MISSION_CURRENT.seq==1")
+        assert gcs.command(cmd, 5) == M.MAV_RESULT_FAILED
+        assert "item 5 is not in the mission (items 0 to 2)" in gcs.joined_text("DO_SET_MISSION_CURRENT")
+        assert gcs.command(cmd, -2) == M.MAV_RESULT_DENIED
+        assert "param1" in gcs.joined_text("DO_SET_MISSION_CURRENT")
+        assert gcs.command(cmd, 1, 2) == M.MAV_RESULT_DENIED
+        assert "param2" in gcs.joined_text("DO_SET_MISSION_CURRENT")
+        assert gcs.command(cmd, -1) == M.MAV_RESULT_ACCEPTED
+        gcs.recv("MISSION_CURRENT", cond="MISSION_CURRENT.seq==1")
+        assert gcs.start() == M.MAV_RESULT_DENIED
+        assert "the current item is 1" in gcs.text("MISSION_START: the current")
+        assert gcs.command(cmd, 0) == M.MAV_RESULT_ACCEPTED
+        gcs.recv("MISSION_CURRENT", cond="MISSION_CURRENT.seq==0")
+
+        gcs.c.mav.mission_set_current_send(*gcs.t, 1)  # (test_a_chosen_current_item_..., before the start)
         gcs.recv("MISSION_CURRENT", cond="MISSION_CURRENT.seq==1")
         assert gcs.start() == M.MAV_RESULT_DENIED
         assert "the current item is 1" in gcs.text("MISSION_START: the current")
@@ -143,7 +161,10 @@ def test_a_chosen_current_item_is_refused_at_the_start_and_the_flown_mission_can
         gcs.recv("HEARTBEAT", 30, f"HEARTBEAT.get_srcComponent()==1 and HEARTBEAT.base_mode & 128 and "
                                   f"HEARTBEAT.custom_mode=={AUTO_MISSION}")
 
-        gcs.c.mav.mission_count_send(*gcs.t, 2, M.MAV_MISSION_TYPE_MISSION)
+        assert gcs.command(cmd, 2) == M.MAV_RESULT_DENIED  # (test_do_set_mission_current_..., in flight)
+        assert "flying the mission" in gcs.joined_text("DO_SET_MISSION_CURRENT")
+
+        gcs.c.mav.mission_count_send(*gcs.t, 2, M.MAV_MISSION_TYPE_MISSION)  # (test_a_chosen_current_..., in flight)
         ack = gcs.recv(["MISSION_ACK", "MISSION_REQUEST_INT", "MISSION_REQUEST"])
         assert (ack.get_type(), ack.type) == ("MISSION_ACK", M.MAV_MISSION_ERROR)
         assert "flying the mission" in gcs.text("IGN MISSION_COUNT")
@@ -155,10 +176,24 @@ def test_a_chosen_current_item_is_refused_at_the_start_and_the_flown_mission_can
         assert gcs.recv("MISSION_ACK").type == M.MAV_MISSION_ACCEPTED
         current = gcs.recv("MISSION_CURRENT", 3)
         assert current.total == 3 and current.mission_state == M.MISSION_STATE_ACTIVE
-    texts = _fly_await_mission(tmp_path / "run", script)
+    return _fly_await_mission(tmp_path_factory.mktemp("current") / "run", script)
+
+
+def test_a_chosen_current_item_is_refused_at_the_start_and_the_flown_mission_cannot_change(current_item_chosen):
+    """MISSION_SET_CURRENT 1 is taken (MISSION_CURRENT says 1, as PX4), but MISSION_START is then DENIED, saying
+    the current item is 1 (PX4 would start there; the flight here is the whole trajectory, and it once flew it
+    from item 0 while the ground station had been told 1). Item 0 current again, the start is ACCEPTED. While the
+    mission flies (AUTO.MISSION, armed): an upload and a clear are MAV_MISSION_ERROR, MISSION_SET_CURRENT changes
+    nothing (each with a STATUSTEXT saying why; they were once taken: the heartbeat showed OFFBOARD and
+    MISSION_CURRENT a mission not started while the old one flew on); a fence may still be cleared. The flight
+    completes, its mission never replaced. (The session's ground station checks each answer as it comes:
+    :func:`current_item_chosen`.)"""
+    texts = current_item_chosen
     assert not any("replaced by an upload" in t for t in texts), texts
     assert sum("mission: uploaded" in t for t in texts) == 1
     assert not any("mission: current item 2" in t or "mission: cleared" in t for t in texts), texts
+    by_message = [t for t in texts if "mission: current item" in t and "DO_SET_MISSION_CURRENT" not in t]
+    assert [t.split("mission: ")[1].split(" [")[0] for t in by_message] == ["current item 1", "current item 0"], texts
 
 
 def _fence_items(half_m: float) -> list[Any]:
@@ -180,15 +215,17 @@ def test_with_gf_action_0_a_fence_uploaded_in_flight_and_left_fails_the_geofence
     session the vehicle said nothing, the policy held with a note that the new fence was not judged, and the run
     exited 0. summary.json's ``mission_transfer`` has the fence's and the rally points' downloads (none then) beside
     the mission's."""
-    def fence_in_flight(gcs: _Gcs) -> None:
-        assert gcs.upload(_items()) == M.MAV_MISSION_ACCEPTED
+    def fence_in_flight(gcs: _Gcs) -> None:  # (at 3 m: a flight at 2x real time shorter by 2 s, 5 m north at 5.6 s)
+        assert gcs.upload(_items(up_m=3.0)) == M.MAV_MISSION_ACCEPTED
         assert gcs.start() == M.MAV_RESULT_ACCEPTED
         gcs.recv("HEARTBEAT", 30, f"HEARTBEAT.get_srcComponent()==1 and HEARTBEAT.base_mode & 128 and "
                                   f"HEARTBEAT.custom_mode=={AUTO_MISSION}")
         assert gcs.upload(_fence_items(5.0), M.MAV_MISSION_TYPE_FENCE) == M.MAV_MISSION_ACCEPTED
 
     out = tmp_path / "run"
-    _fly_await_mission(out, fence_in_flight, "--param", "GF_ACTION=0", speed="2", status=1)
+    # (landed, the vehicle disarms 0.5 s later, not PX4's 2 s: at 2x real time, each second is the test's CPU)
+    _fly_await_mission(out, fence_in_flight, "--param", "GF_ACTION=0", "--param", "COM_DISARM_LAND=0.5", speed="2",
+                       status=1)
     summary = json.loads((out / "summary.json").read_text())
     fence = next(p for p in summary["policies"] if p["name"] == "geofence")
     assert not fence["ok"] and "outside its fence" in fence["why"], fence
@@ -211,48 +248,27 @@ def _trace_tx(path: Path) -> tuple[list[float], list[float]]:
     return [float(c[it]) for c in cells], [float(c[ix]) for c in cells]
 
 
-def test_do_set_mission_current_is_answered_as_px4_before_the_start_and_refused_while_the_mission_flies(tmp_path):
+def test_do_set_mission_current_is_answered_as_px4_before_the_start_and_refused_while_the_mission_flies(
+        current_item_chosen):
     """MAV_CMD_DO_SET_MISSION_CURRENT (224; the vehicle once answered it UNSUPPORTED), as PX4's navigator answers it:
     without a mission FAILED; item 1 ACCEPTED with MISSION_CURRENT 1 in its datagram; an item out of range FAILED; a
     param1 below -1 or a param2 other than 0 / 1 DENIED (each with a STATUSTEXT saying why); -1 ACCEPTED, the
     current item unchanged. Item 1 chosen, MISSION_START is DENIED as after MISSION_SET_CURRENT; item 0 again, the
-    start is ACCEPTED, and while the mission flies the command is DENIED (the controller cannot jump). The flight
-    completes from item 0; the choices are ``mission`` events naming the ground station."""
-    def script(gcs: _Gcs) -> None:
-        cmd = M.MAV_CMD_DO_SET_MISSION_CURRENT
-        assert gcs.command(cmd, 0) == M.MAV_RESULT_FAILED
-        assert "no mission held" in gcs.joined_text("DO_SET_MISSION_CURRENT")
-        assert gcs.upload(_items()) == M.MAV_MISSION_ACCEPTED
-        assert gcs.command(cmd, 1) == M.MAV_RESULT_ACCEPTED
-        gcs.recv("MISSION_CURRENT", cond="MISSION_CURRENT.seq==1")
-        assert gcs.command(cmd, 5) == M.MAV_RESULT_FAILED
-        assert "item 5 is not in the mission (items 0 to 2)" in gcs.joined_text("DO_SET_MISSION_CURRENT")
-        assert gcs.command(cmd, -2) == M.MAV_RESULT_DENIED
-        assert "param1" in gcs.joined_text("DO_SET_MISSION_CURRENT")
-        assert gcs.command(cmd, 1, 2) == M.MAV_RESULT_DENIED
-        assert "param2" in gcs.joined_text("DO_SET_MISSION_CURRENT")
-        assert gcs.command(cmd, -1) == M.MAV_RESULT_ACCEPTED
-        gcs.recv("MISSION_CURRENT", cond="MISSION_CURRENT.seq==1")
-        assert gcs.start() == M.MAV_RESULT_DENIED
-        assert "the current item is 1" in gcs.text("MISSION_START: the current")
-        assert gcs.command(cmd, 0) == M.MAV_RESULT_ACCEPTED
-        gcs.recv("MISSION_CURRENT", cond="MISSION_CURRENT.seq==0")
-        assert gcs.start() == M.MAV_RESULT_ACCEPTED
-        gcs.recv("HEARTBEAT", 30, f"HEARTBEAT.get_srcComponent()==1 and HEARTBEAT.base_mode & 128 and "
-                                  f"HEARTBEAT.custom_mode=={AUTO_MISSION}")
-        assert gcs.command(cmd, 2) == M.MAV_RESULT_DENIED
-        assert "flying the mission" in gcs.joined_text("DO_SET_MISSION_CURRENT")
-
-    texts = _fly_await_mission(tmp_path / "run", script)
-    chosen = [t for t in texts if "mission: current item" in t]
-    assert len(chosen) == 3 and all("DO_SET_MISSION_CURRENT" in t and "255:190" in t for t in chosen), chosen
+    start is ACCEPTED (here after the test above's MISSION_SET_CURRENT 1 and 0: :func:`current_item_chosen`), and
+    while the mission flies the command is DENIED (the controller cannot jump). The flight completes from item 0;
+    the choices are ``mission`` events naming the ground station."""
+    texts = current_item_chosen
+    chosen = [t for t in texts if "mission: current item" in t and "DO_SET_MISSION_CURRENT" in t]
+    assert len(chosen) == 3 and all("255:190" in t for t in chosen), chosen
+    assert sum("mission: current item" in t for t in texts) == 5, texts  # and the test above's two
     assert not any("current item 2" in t for t in texts), texts
 
 
 def _short_hop() -> list[Any]:
-    """A takeoff to 1 m and a waypoint 2 m north (MISSION_ITEM_INT): 6.5 s on the wall clock (10 m at 3 m took
-    9.2 s); what the tests flying it check is what the vehicle does after, not the flight."""
-    spec = ((M.MAV_CMD_NAV_TAKEOFF, HOME[0], 1.0), (M.MAV_CMD_NAV_WAYPOINT, HOME[0] + 180, 1.0))
+    """A takeoff to 1 m and a waypoint 0.5 m north (MISSION_ITEM_INT): 5.5 s on the wall clock, up 0.5 m after
+    0.8 s (2 m north: 6.5 s; 10 m at 3 m took 9.2 s); what the tests flying it check is what the vehicle does after,
+    not the flight."""
+    spec = ((M.MAV_CMD_NAV_TAKEOFF, HOME[0], 1.0), (M.MAV_CMD_NAV_WAYPOINT, HOME[0] + 45, 1.0))
     return [M.MAVLink_mission_item_int_message(0, 0, seq, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, c, 0, 1, 0.0, 0.0,
                                                0.0, math.nan, lat, HOME[1], z, 0)
             for seq, (c, lat, z) in enumerate(spec)]
