@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import tomllib
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -59,20 +60,35 @@ def test_a_malformed_zone_is_refused_naming_its_key(zone: dict, words: str) -> N
     assert str(e.value).startswith("m.toml: geofence.zones[0].") and words in str(e.value), str(e.value)
 
 
-def test_a_plans_fence_is_read_about_its_home_and_kept_in_mission_toml(tmp_path: Path) -> None:
+RALLY = [(5.0, 5.0, 500.0), (-2.0, 0.0, 490.0)]  # m north, m east of the L's home; m AMSL
+
+
+@pytest.fixture(scope="module")
+def fenced_and_rallied(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Any]:
+    """The L with a polygon 3 m round it, an exclusion circle off its east leg and two rally points (:data:`RALLY`),
+    flown offline once (its run directory next to the plan): the plan, and the run. The fence's test and the rally
+    points' read the one flight (each flew its own: the rally points change nothing the fence's test reads)."""
+    where = tmp_path_factory.mktemp("fenced")
+    plan = fenced_l(where, {"polygons": [{"inclusion": True, "version": 1, "polygon": l_rectangle(-3, 13, 3, 13)}],
+                            "circles": [{"inclusion": False, "version": 1,
+                                         "circle": {"center": l_latlon(5.0, 20.0), "radius": 2.0}}]}, "fenced.plan")
+    data = json.loads(plan.read_text())
+    data["rallyPoints"] = {"version": 2, "points": [[*l_latlon(north, east), alt] for north, east, alt in RALLY]}
+    plan.write_text(json.dumps(data))
+    return plan, simulate(plan, out=where / "run", plots=False)
+
+
+def test_a_plans_fence_is_read_about_its_home_and_kept_in_mission_toml(fenced_and_rallied) -> None:
     """A polygon 3 m round the L and an exclusion circle: in the paper frame (x north, y west), to the
     projection's millimetre; ``mission.toml`` of the run holds the fence, and flying it again judges the same."""
-    plan = fenced_l(tmp_path, {"polygons": [{"inclusion": True, "version": 1, "polygon": l_rectangle(-3, 13, 3, 13)}],
-                               "circles": [{"inclusion": False, "version": 1,
-                                            "circle": {"center": l_latlon(5.0, 20.0), "radius": 2.0}}]}, "fenced.plan")
+    plan, run = fenced_and_rallied
     fence = load_mission(plan).geofence
     poly, circle = fence.zones
     assert poly.inclusion and not circle.inclusion and circle.radius_m == 2.0
     assert np.allclose(poly.points, [(-3, 3), (13, 3), (13, -13), (-3, -13)], atol=2e-3), poly.points
     assert np.allclose(circle.center, (5.0, -20.0), atol=2e-3)
-    run = simulate(plan, out=tmp_path / "run", plots=False)
     assert run.summary["outcome"] == "completed" and all(p["ok"] for p in run.summary["policies"])
-    again = mission_from_table(tomllib.loads((tmp_path / "run" / "mission.toml").read_text()), "m.toml")
+    again = mission_from_table(tomllib.loads((plan.parent / "run" / "mission.toml").read_text()), "m.toml")
     assert again.geofence == fence
 
 
@@ -151,18 +167,17 @@ def test_a_malformed_plan_fence_is_one_error_naming_the_file_and_key(tmp_path: P
         assert str(e.value) == f"m.toml: {table}.{typo}: unknown key in [{table}]; did you mean '{key}'?"
 
 
-def test_a_plans_rally_points_are_read_about_its_home_and_kept_in_mission_toml(tmp_path: Path) -> None:
+def test_a_plans_rally_points_are_read_about_its_home_and_kept_in_mission_toml(tmp_path: Path,
+                                                                               fenced_and_rallied) -> None:
     """``rallyPoints`` [[lat, lon, alt], ...]: each point's x, y in the paper frame (its height not used: Return
     lands on the flat ground there); mission.toml holds ``[rally]``, which reads back the same."""
-    plan = fenced_l(tmp_path, {}, "rally.plan")
-    data = json.loads(plan.read_text())
-    data["rallyPoints"] = {"version": 2, "points": [[*l_latlon(5.0, 5.0), 500.0], [*l_latlon(-2.0, 0.0), 490.0]]}
-    plan.write_text(json.dumps(data))
-    m = load_mission(plan)
+    flown, run = fenced_and_rallied
+    m = load_mission(flown)
     assert np.allclose(m.rally, [(5.0, -5.0), (-2.0, 0.0)], atol=2e-3), m.rally
-    run = simulate(plan, out=tmp_path / "run", plots=False)
-    again = mission_from_table(tomllib.loads((tmp_path / "run" / "mission.toml").read_text()), "m.toml")
+    again = mission_from_table(tomllib.loads((flown.parent / "run" / "mission.toml").read_text()), "m.toml")
     assert again.rally == m.rally and run.summary["outcome"] == "completed"
+    data = json.loads(flown.read_text())
+    plan = tmp_path / "rally.plan"
     data["rallyPoints"]["points"][1] = [*l_latlon(150.0, 0.0), 490.0]
     plan.write_text(json.dumps(data))
     with pytest.raises(ConfigError) as e:
