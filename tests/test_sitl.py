@@ -15,6 +15,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +23,7 @@ import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
+from bridge.cli import main
 from bridge.loop import simulate
 from bridge.mavlink.endpoint import GCS_PORT, LINK_PORT
 from bridge.mavlink.telemetry import StatusTextJoiner
@@ -31,7 +33,7 @@ from bridge.record.policies import POLICIES
 from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
 from bridge.session.children import CHOSEN_PORTS_LOW, PORT_LOCKS, RECENT_PORTS, ephemeral_low, free_udp_port
-from missions import MISSION_DIR, Mission, Sine
+from missions import MISSION_DIR, Mission, Sine, load_mission
 from tests.plans import OUTSIDE_WHY, battery_mission, outside_fence_plan
 from tests.sitlkit import ENV, ROOT, Bsst, child_pids, run_bsst, stall_blackouts, unexplained_outages
 from tests.waiting import wait_for
@@ -39,9 +41,13 @@ from tests.waiting import wait_for
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 SINE = MISSION_DIR / "sine.toml"
-SHORT = Mission(Sine(), duration_s=6.0, name="sine6")
-SINE_6S = 'name = "sine6"\nduration_s = 6.0\n[trajectory]\nkind = "sine"\n'
-SINE_3S = 'name = "sine3"\nduration_s = 3.0\n[trajectory]\nkind = "sine"\n'
+# the flights below end in hold where no test reads the end landing (a land and COM_DISARM_LAND fly ~3.5 s more: 6 s
+# of sine took 9.5 s in lockstep; trace.csv, the mission's steps, is the same byte for byte either way), and SHORT is
+# 3 s, 750 steps (it was 6 s: a real-time session costs its length, 1.6-2.1 CPU-s for 6 s, 0.8-0.9 for 3 s)
+HOLD = '[end]\naction = "hold"\n'
+SHORT = Mission(Sine(), duration_s=3.0, name="sine3", end_action="hold")
+SINE_6S = 'name = "sine6"\nduration_s = 6.0\n[trajectory]\nkind = "sine"\n' + HOLD
+SINE_3S = 'name = "sine3"\nduration_s = 3.0\n[trajectory]\nkind = "sine"\n' + HOLD
 
 
 def _positions_close(a: dict, b: dict, tol: float) -> float:
@@ -90,9 +96,12 @@ def test_a_lockstep_flight_shows_its_progress_from_the_halves_and_writes_its_tra
 
 def test_lockstep_sine_matches_offline(tmp_path):
     """The acceptance: every trace row within 1e-4 m of ``bsst sim`` (float32 wire only). In fact every column
-    to the bit: offline flies the float32 wire too, and both record the targets as sent (c1..c4 in float32)."""
-    off = simulate(SINE, plots=False)
-    run = sitl(SINE, out=tmp_path / "run", plots=False, instance=None)
+    to the bit: offline flies the float32 wire too, and both record the targets as sent (c1..c4 in float32).
+    Ended in hold: the rows are the mission's 7500 whatever the end action, the landing after them is read by
+    nobody here (tests/test_mission_end.py flies the landing, lockstep as offline to the bit)."""
+    sine = replace(load_mission(SINE), end_action="hold")
+    off = simulate(sine, plots=False)
+    run = sitl(sine, out=tmp_path / "run", plots=False, instance=None)
     assert run.outcome == "completed" and run.summary["clock"] == "lockstep"
     worst = _positions_close(run.trace, off.trace, 1e-4)
     assert worst < 1e-5
@@ -121,30 +130,35 @@ def test_lockstep_sine_matches_offline(tmp_path):
 
 @pytest.fixture(scope="module")
 def short_runs(tmp_path_factory) -> dict:
-    """SHORT flown once in lockstep and once in real time (``bsst sitl`` defaults, no plots): the runs that
-    test_lockstep_is_deterministic, test_realtime_tracks_and_records_its_timing and
-    test_a_clean_session_passes_every_policy each read (each flew its own copy before: two sessions more)."""
+    """SHORT flown once in lockstep with the compiled kernels (``BSST_KERNELS=compiled``, as a warm worker's
+    sessions fly under ``auto``) and once in real time (``bsst sitl`` defaults otherwise, no plots): the
+    runs that test_lockstep_is_deterministic, test_lockstep_with_compiled_kernels_is_the_plain_lockstep,
+    test_realtime_tracks_and_records_its_timing and test_a_clean_session_passes_every_policy each read (each flew
+    its own copy before: three sessions more)."""
     d = tmp_path_factory.mktemp("short")
-    return {"lockstep": sitl(SHORT, out=d / "l", plots=False, instance=None),
-            "realtime": sitl(SHORT, realtime=True, out=d / "r", plots=False, instance=None)}
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("BSST_KERNELS", "compiled")
+        lockstep = sitl(SHORT, out=d / "l", plots=False, instance=None)
+    return {"lockstep": lockstep, "realtime": sitl(SHORT, realtime=True, out=d / "r", plots=False, instance=None)}
 
 
-def test_lockstep_is_deterministic(short_runs, tmp_path):
+def test_lockstep_is_deterministic(short_runs, tmp_path, monkeypatch):
+    """The same flight twice, the same kernels (the fixture's): the same trace, byte for byte."""
     a = short_runs["lockstep"]
+    monkeypatch.setenv("BSST_KERNELS", "compiled")
     b = sitl(SHORT, out=tmp_path / "b", plots=False, instance=None)
     assert a.outcome == b.outcome == "completed"
     assert (a.path / "trace.csv").read_bytes() == (tmp_path / "b" / "trace.csv").read_bytes()
 
 
-def test_lockstep_with_compiled_kernels_is_the_plain_lockstep(tmp_path, monkeypatch):
-    """BSST_KERNELS=compiled (bridge.core.scalar, inherited by both children): the controller's law and the
-    vehicle's plant compiled, the trace byte for byte the plain one's."""
+def test_lockstep_with_compiled_kernels_is_the_plain_lockstep(short_runs, tmp_path, monkeypatch):
+    """BSST_KERNELS=compiled (bridge.core.scalar, inherited by both children; the fixture's flight): the
+    controller's law and the vehicle's plant compiled, the trace byte for byte the plain one's."""
     monkeypatch.setenv("BSST_KERNELS", "plain")
     a = sitl(SHORT, out=tmp_path / "a", plots=False, instance=None)
-    monkeypatch.setenv("BSST_KERNELS", "compiled")
-    b = sitl(SHORT, out=tmp_path / "b", plots=False, instance=None)
+    b = short_runs["lockstep"]
     assert a.outcome == b.outcome == "completed"
-    assert (tmp_path / "a" / "trace.csv").read_bytes() == (tmp_path / "b" / "trace.csv").read_bytes()
+    assert (tmp_path / "a" / "trace.csv").read_bytes() == (b.path / "trace.csv").read_bytes()
 
 
 def test_lockstep_x500_motors_match_offline(tmp_path):
@@ -186,14 +200,16 @@ def test_a_real_time_run_the_machine_stalls_lists_each_stall_by_side_and_exits_1
     """The vehicle (0.3 s: past the 0.25 s a paced lockstep re-bases at), the controller and the relay (a 2 ms
     link; 0.2 s each) stopped (SIGSTOP, SIGCONT) mid-flight, as a host that takes its cores back stops them:
     ``timing.stalls`` lists the three, each on its side, the run completes (the vehicle caught its physics up:
-    its clock is still the controller's), and its summary, stderr and exit status say it was not flown as asked."""
-    (tmp_path / "m.toml").write_text(SINE_6S)
+    its clock is still the controller's), and its summary, stderr and exit status say it was not flown as asked.
+    4.5 s of sine (a real-time run costs its length: it was 6 s), the stops 1.1 s apart, the last 1.1 s before
+    the end."""
+    (tmp_path / "m.toml").write_text('name = "stalls"\nduration_s = 4.5\n[trajectory]\nkind = "sine"\n' + HOLD)
     run = tmp_path / "run"
     with instance_slot() as n:
         p = Bsst("sitl", str(tmp_path / "m.toml"), "--realtime", "--instance", str(n), "--out", str(run),
                  "--no-plots", "--delay", "2", env=ENV)
         try:
-            for rows, side, stop_s in ((250, "vehicle", 0.3), (700, "controller", 0.2), (1150, "relay", 0.2)):
+            for rows, side, stop_s in ((250, "vehicle", 0.3), (525, "controller", 0.2), (800, "relay", 0.2)):
                 wait_for(lambda rows=rows: count_records(run / "controller.bin") > rows, 60, f"{rows} rows flown")
                 pid = child_pids(run)[side]
                 os.kill(pid, signal.SIGSTOP)
@@ -208,7 +224,7 @@ def test_a_real_time_run_the_machine_stalls_lists_each_stall_by_side_and_exits_1
     assert summary["outcome"] == "completed" and p.returncode == 1, err
     long = [s for s in stalls["at"] if s["ms"] >= 180.0]  # the machine's own are ~100 ms (docs/sitl.md)
     assert [s["side"] for s in long] == ["vehicle", "controller", "relay"], stalls
-    assert 1.0 <= long[0]["t"] < long[1]["t"] < long[2]["t"] < 6.0 and long[0]["ms"] >= 290.0, stalls
+    assert 1.0 <= long[0]["t"] < long[1]["t"] < long[2]["t"] < 4.5 and long[0]["ms"] >= 290.0, stalls
     assert stalls["count"] == len(stalls["at"]) >= 3
     assert "not flown as asked: the machine stalled the real-time loop" in err
     assert f"worst {stalls['worst_ms']:g} ms" in out
@@ -418,8 +434,8 @@ def test_an_automatic_instance_is_the_highest_free_one(tmp_path, monkeypatch):
 
 
 def test_two_instances_fly_side_by_side(tmp_path):
-    mission = tmp_path / "sine6.toml"
-    mission.write_text(SINE_6S)
+    mission = tmp_path / "sine3.toml"
+    mission.write_text(SINE_3S)
     with instance_slot() as a, instance_slot() as b:
         pa = _start_session(tmp_path / "a", a, mission)
         pb = _start_session(tmp_path / "b", b, mission)
@@ -429,7 +445,7 @@ def test_two_instances_fly_side_by_side(tmp_path):
     sb = json.loads((tmp_path / "b" / "run" / "summary.json").read_text())
     assert (sa["sitl"]["sysid"], sb["sitl"]["sysid"]) == (a + 1, b + 1)
     assert sa["link"]["rejected"] == sb["link"]["rejected"] == {}
-    assert sa["link"]["up"]["delivered"] == sb["link"]["up"]["delivered"] == 1500
+    assert sa["link"]["up"]["delivered"] == sb["link"]["up"]["delivered"] == 750
     # nothing crossed: the same mission flown twice, side by side, gives the same trace
     assert (tmp_path / "a" / "run" / "trace.csv").read_bytes() == (tmp_path / "b" / "run" / "trace.csv").read_bytes()
 
@@ -600,7 +616,7 @@ def test_an_instance_whose_port_another_program_holds_is_passed_over() -> None:
             holder.close()
 
 
-def test_a_mission_that_starts_outside_its_fence_ends_as_offline(tmp_path: Path) -> None:
+def test_a_mission_that_starts_outside_its_fence_ends_as_offline(tmp_path: Path, capsys) -> None:
     """PX4's pre-arm geofence check in a session: the controller's arm of a vehicle standing outside its fence is
     answered TEMPORARILY_REJECTED, as PX4's commander answers it (its event names whose arm); the session ends as
     ``bsst sim`` does (tests/test_geofence.py): ``denied``, ended by the vehicle saying why, nothing flown, exit 1.
@@ -621,16 +637,20 @@ def test_a_mission_that_starts_outside_its_fence_ends_as_offline(tmp_path: Path)
     assert " [by 200:191 127.0.0.1:" in said["preflight"] and said["preflight"].endswith(" controller]"), said  # whose
     assert len(read_trace(tmp_path / "sitl" / "trace.csv")["t"]) == 0
     # a campaign of it measures nothing: a sweep's cells say why (exit 1), a margin search refuses it (exit 2)
-    r = run_bsst("sweep", str(plan), "--delay", "0,20", "--out", str(tmp_path / "sweep"), "--no-plots", cwd=ROOT)
-    assert r.returncode == 1 and "every cell failed (2 of 2)" in r.stderr, r.stderr
+    # (run by their main in this process, as the suite runs the campaigns whose results it reads: a forked sweep
+    # starts a pool server of its own, ~1 CPU-s; this process's serves all its sweeps)
+    capsys.readouterr()
+    rc = main(["sweep", str(plan), "--delay", "0,20", "--out", str(tmp_path / "sweep"), "--no-plots", "--jobs", "1"])
+    err = capsys.readouterr().err
+    assert rc == 1 and "every cell failed (2 of 2)" in err, err
     cells = (tmp_path / "sweep" / "cells.csv").read_text().splitlines()
     assert len(cells) == 3 and all(",denied,error," in c and OUTSIDE_WHY in c for c in cells[1:]), cells
     report = (tmp_path / "sweep" / "report.md").read_text()
     assert report.count(f"| {OUTSIDE_WHY}") == 2 and "## Cells that could not be flown" in report, report
-    r = run_bsst("margin", str(plan), "--over", "delay_ms", "--until", "rms=0.1", "--out", str(tmp_path / "m"),
-                 cwd=ROOT)
-    assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
-    assert r.stderr.startswith("bsst: margin: a cell could not be flown: arming denied: outside its fence"), r.stderr
+    rc = main(["margin", str(plan), "--over", "delay_ms", "--until", "rms=0.1", "--out", str(tmp_path / "m")])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1, err
+    assert err.startswith("bsst: margin: a cell could not be flown: arming denied: outside its fence"), err
 
 
 def test_the_battery_failsafe_flies_in_lockstep_as_offline_and_the_ground_station_sees_it(tmp_path: Path) -> None:
