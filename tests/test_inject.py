@@ -262,6 +262,7 @@ turbulence = "moderate"
 gusts = [[11.0, 2.0, 3.0, 90.0]]
 """
 ALL_OFF = tuple(a for i in (1, 2, 3, 4) for a in ("--at", f"5:motor:{i}=0"))  # it falls from 0.5 m: crashed
+HOLD_AT_END = '\n[end]\naction = "hold"\n'
 
 
 def _trace(path) -> list[list[str]]:
@@ -290,19 +291,23 @@ def test_sitl_plant_blocks_equal_offline(tmp_path, case):
     ``battery`` (a windy x500 with its battery), and a hard touchdown's ``crashed`` outcome (every rotor off:
     it falls from 0.5 m), its ``impact``, ``rotor_effectiveness`` and ``ended_by`` (with ``after_faults``),
     exit 1. ``flags``: the issue's ``--wind 5:270 --turbulence moderate`` (and a gust event) as flags on the
-    sine: the same trace.csv state and inputs too. ``handover``: ``--at 10:link:lte``, a handover from the perfect
-    link to the LTE profile's at 10 s: the same trace, the model's link statistics and the ``link`` event.
-    ``battery-empty``: the windy x500's pack reads empty at 6 s (``--at 6:battery:empty``, what a ground station's
+    sine: the same trace.csv state and inputs too. ``handover``: ``--at 3:link:lte``, a handover from the perfect
+    link to the LTE profile's at 3 s: the same trace, the model's link statistics and the ``link`` event.
+    ``battery-empty``: the windy x500's pack reads empty at 2 s (``--at 2:battery:empty``, what a ground station's
     INJECT_FAILURE of the battery acts as) with COM_LOW_BAT_ACT = 2: the battery failsafe lands it, at the same
-    step, the same trace."""
+    step, the same trace. Each mission is 6 s, ending in hold: its gust (3 to 5 s), handover (3 s), crash (5 s) and
+    failsafe landing (from 2 s) are in it, and a land and COM_DISARM_LAND after it (the windy x500's 14 s took 18.2 s
+    with them) are read by no case."""
     mission = tmp_path / "windy.toml"
-    mission.write_text(WINDY_X500)
-    sine = tmp_path / "sine15.toml"  # the paper's sine cut to 15 s: past the gust at 12 s and the handover at 10 s
-    sine.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 15.0"))
+    mission.write_text(WINDY_X500.replace("duration_s = 14.0", "duration_s = 6.0").replace(
+        "gusts = [[11.0,", "gusts = [[3.0,") + HOLD_AT_END)
+    sine = tmp_path / "sine6.toml"  # the paper's sine cut to 6 s
+    sine.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 6.0")
+                    + HOLD_AT_END)
     args = {"wind-battery": (str(mission),), "crash": (str(sine), "--profile", "x500", *ALL_OFF),
-            "flags": (str(sine), "--wind", "5:270", "--turbulence", "moderate", "--at", "12:gust:2,3,90"),
-            "handover": (str(sine), "--at", "10:link:lte"),
-            "battery-empty": (str(mission), "--at", "6:battery:empty", "--param", "COM_LOW_BAT_ACT=2")}[case]
+            "flags": (str(sine), "--wind", "5:270", "--turbulence", "moderate", "--at", "3:gust:2,3,90"),
+            "handover": (str(sine), "--at", "3:link:lte"),
+            "battery-empty": (str(mission), "--at", "2:battery:empty", "--param", "COM_LOW_BAT_ACT=2")}[case]
     codes, summaries = [], []
     for command in ("sim", "sitl"):
         out = tmp_path / command
@@ -331,7 +336,7 @@ def test_sitl_plant_blocks_equal_offline(tmp_path, case):
     elif case == "battery-empty":
         assert codes == [1, 1] and sitl["outcome"] == "failsafe", (codes, sitl["outcome"])
         assert "battery critical: 0.0 % left" in sitl["ended_by"]["how"], sitl["ended_by"]
-        assert sitl["ended_by"]["after_faults"] == ["t=6.000 s: battery empty"]
+        assert sitl["ended_by"]["after_faults"] == ["t=2.000 s: battery empty"]
         assert _trace(tmp_path / "sitl" / "trace.csv") == _trace(tmp_path / "sim" / "trace.csv")
     elif case in ("flags", "handover"):
         assert codes == [0, 0] and _trace(tmp_path / "sitl" / "trace.csv") == _trace(tmp_path / "sim" / "trace.csv")
@@ -340,7 +345,7 @@ def test_sitl_plant_blocks_equal_offline(tmp_path, case):
         else:
             link = [(e["t"], e["text"]) for e in sitl["events"] if e["kind"] == "link"]
             assert link == [(e["t"], e["text"]) for e in offline["events"] if e["kind"] == "link"] == [
-                (10.0, "link handover to lte")]
+                (3.0, "link handover to lte")]
             assert "link handover to lte" in (tmp_path / "sitl" / "events.log").read_text()
             for d in ("up", "down"):
                 assert sitl["link"][d]["delay_ms"] == offline["link"][d]["delay_ms"]
