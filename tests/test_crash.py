@@ -100,14 +100,16 @@ def test_sigkill_of_a_sweep_ends_its_workers_and_their_children(tmp_path, mode):
             cells = [cmd for _, cmd in tree.values() if " -m bridge vehicle " in cmd or " -m bridge controller " in cmd]
             return len(workers) >= 3 and (mode == "offline" or len(cells) >= 4)  # the forkserver and 2 workers
 
-        wait_for(lambda: flying() or p.p.poll() is not None, 120, "two cells in flight")
+        # (each look reads every process of the machine, ~3 ms with 80 of them: looked at every 10 ms, the wait
+        # took a quarter of a core)
+        wait_for(lambda: flying() or p.p.poll() is not None, 120, "two cells in flight", poll_s=0.05)
         assert p.p.poll() is None, p.lines
         temp = {cmd.split("/mission.toml")[0].rsplit(" ", 1)[1] for _, cmd in seen.values() if "bsst-sitl-" in cmd}
         assert len(temp) == (2 if mode == "lockstep" else 0), temp
         os.kill(p.p.pid, signal.SIGKILL)
         p.p.wait(timeout=10)
         try:
-            wait_for(lambda: not _left(seen, p.p.pid), 30, "every process of the killed sweep gone")
+            wait_for(lambda: not _left(seen, p.p.pid), 30, "every process of the killed sweep gone", poll_s=0.05)
         except AssertionError as exc:
             raise AssertionError(f"{exc}; still running: {_left(seen, p.p.pid)}") from None
         assert not [d for d in temp if os.path.exists(d)], temp  # each session stopped and removed its directory
