@@ -36,12 +36,13 @@ from bridge.autopilot.params import (
 from bridge.autopilot.simvehicle import HOLD, OFFBOARD, SimVehicle
 from bridge.core.overrides import Overrides, table_settings
 from bridge.core.scalar import checked_choice, compile_for, compiled_wanted, wire_for
-from bridge.link.config import NEEDS, idle_problem
 from bridge.link.model import (
     DIRECTIONS,
+    NEEDS,
     LinkConfig,
     LinkSettings,
     absolute_link_paths,
+    idle_problem,
     link_from_table,
     unmet_key,
 )
@@ -295,14 +296,14 @@ def idle_laid_key(source: str, link: Mapping[str, Any] | None, flown: LinkSettin
     ``source``'s ``[link]``) gives and that changes nothing on every direction it is given for, as the ``flown``
     links have it (the rule a command's flag is refused by: bridge.cli.linkflags.idle_link_flag; ``burst_len``
     for both directions acts where one loses packets), unless ``axes`` (a campaign's) give its need; None."""
-    given = set(axes)
+    laid, given = link or {}, set(axes)
     for key, (need, *_) in NEEDS.items():
-        dirs = [d for d in DIRECTIONS if key in (link or {}) or key in ((link or {}).get(d) or {})]
+        dirs = [d for d in DIRECTIONS if key in laid or key in (laid.get(d) or {})]
         why = None if not dirs or need in given else idle_problem(key, [getattr(flown, d) for d in dirs])
         if why:
-            where = key if key in (link or {}) else f"{dirs[0]}.{key}"
+            where = key if key in laid else f"{dirs[0]}.{key}"
             return (f"{source}: link.{where}: changes nothing: {why}; give {need} too, or remove {key} (with these "
-                    f"laid over the mission's [link]: {table_settings(link or {}, 'link')})")
+                    f"laid over the mission's [link]: {table_settings(laid, 'link')})")
     return None
 
 
