@@ -118,6 +118,9 @@ def test_mavsdk_sees_the_gps_lost_the_descent_and_the_position_back(tmp_path):
                      "ekf", "--param", "SYS_FAILURE_EN=1", *FAST)
         try:
             got = _mavsdk(n, str(n + 1), MAVSDK_GPS_FAILSAFE)  # (the vehicle's sysid)
+            if got.get("positions_again"):  # the commander's view follows EKF2's after its 1 s probation (sim time)
+                t_on = max(e.t for e in v.reports() if isinstance(e, Event) and e.kind == "fault")
+                v.wait_report(Event, lambda e: e.kind == "position" and e.t > t_on)
         finally:
             assert v.stop() == 0
     steps = ("found", "ready", "at_height", "unhealthy", "descending", "disarmed", "healthy", "positions_again")
