@@ -1500,3 +1500,52 @@ def test_a_failsafe_of_a_ground_stations_flight_before_an_awaited_mission_is_rec
     assert {e["text"].split(": ")[1].split()[0] for e in notes} == {"failsafe", "geofence"}, notes
     assert "before_start: before the mission's start, not its outcome: failsafe at t=-" in (
         out / "events.log").read_text()
+
+
+# the hop lands at 3 m/s: over the 2 m/s a touchdown may take, it crashes (docs/sitl.md), and waits for the disarm
+MAVSDK_HOP_CRASH = MAVSDK_GROUND_STATION + r"""
+from mavsdk.plugins.action import Action
+from mavsdk.plugins.telemetry import Telemetry
+
+system = sdk.first_autopilot(30.0)
+action, telemetry = Action(system), Telemetry(system)
+out["arm"], out["takeoff"] = action.arm().name, action.takeoff().name
+out["up"] = until(lambda: telemetry.position().relative_altitude_m > 2.0 and telemetry.flight_mode().name == "HOLD",
+                  30)
+out["land"] = action.land().name
+out["down"] = until(lambda: not telemetry.armed(), 30)
+print("RESULT " + json.dumps(out), flush=True)
+sdk.destroy()
+"""
+
+
+def test_a_crash_of_a_ground_stations_flight_before_an_awaited_mission_ends_the_session_crashed(tmp_path):
+    """The ground station's hop lands at 3 m/s (MPC_LAND_SPEED) and crashes: the vehicle's plant is halted for good
+    and refuses every later arm and start, so the controller stops waiting for a mission and the session ends by
+    itself, its outcome the crash (ended by the plant), exit 1, every record kept: the crash in events.log, the
+    hop's rows in vehicle.bin, its tlog. (Until the third wave's thirty-ninth session the session waited on, with no
+    time limit, for a start the vehicle refused; a Ctrl-C then ended it ``aborted``, by the user.)"""
+    out = tmp_path / "run"
+    with instance_slot() as n:
+        sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--out", str(out), "--no-plots",
+                         "--speed", "0", "--param", "MPC_LAND_SPEED=3")
+        try:
+            r = subprocess.run([sys.executable, "-c", MAVSDK_HOP_CRASH, f"udpin://127.0.0.1:{GCS_PORT + n}"],
+                               capture_output=True, text=True, timeout=120, env=ENV)
+            gs = script_result(r)
+            assert gs["up"] and gs["down"] and {gs["arm"], gs["takeoff"], gs["land"]} == {"SUCCESS"}, gs
+            status = sitl.p.wait(timeout=60)  # by itself: nothing stops it
+        finally:
+            sitl.stop()
+    assert status == 1
+    summary = json.loads((out / "summary.json").read_text())
+    crash = next(e for e in summary["events"] if e["kind"] == "crashed" and e["source"] == "vehicle")
+    assert summary["outcome"] == "crashed", (summary["outcome"], summary["ended_by"])
+    assert summary["ended_by"] == {"who": "plant", "how": f"crashed at t={crash['t']:.3f} s: {crash['text']}"}, \
+        summary["ended_by"]
+    gave_up = next(e for e in summary["events"] if e["kind"] == "aborted" and e["source"] == "controller")
+    assert gave_up["text"].startswith("no mission can fly: its plant ended the flight") and gave_up["t"] >= crash["t"]
+    assert {"TAKEOFF", "LAND"} <= {i["what"].split()[0] for i in summary["interventions"] if i["kind"] == "mode"}
+    assert f"t={crash['t']:.3f} crashed: hit the ground at " in (out / "events.log").read_text()
+    rows = read_half(out / "vehicle.bin")
+    assert len(rows["k"]) > 250 and (out / "vehicle.tlog").stat().st_size > 0  # the hop's seconds, kept

@@ -1,6 +1,7 @@
 """The offboard controller's wait for a ground station's mission: ``bsst controller --await-mission``.
 
-In:  the vehicle's messages before the flight: HEARTBEAT (``custom_mode`` AUTO.MISSION, disarmed) and
+In:  the vehicle's messages before the flight: HEARTBEAT (``custom_mode`` AUTO.MISSION, disarmed; ``system_status``
+     EMERGENCY or FLIGHT_TERMINATION: its flight over for good, no mission to wait for) and
      MISSION_CURRENT (``mission_state`` ACTIVE: a ground station started the held mission; asked for with
      REQUEST_MESSAGE while AUTO.MISSION shows), MISSION_COUNT,
      MISSION_ITEM_INT, MISSION_ACK, HOME_POSITION (degE7,
@@ -64,6 +65,13 @@ MISSION = mavlink.MAV_MISSION_TYPE_MISSION
 TRANSFER_BYTES = 60  # a mission message's MAVLink 2 frame, about (the link model's bandwidth only)
 MISSION_CURRENT_S = 0.1  # s: how often the waiting controller asks for the vehicle's MISSION_CURRENT (the start's cue)
 _WANTED = ("MISSION_COUNT", "MISSION_ITEM_INT", "MISSION_ACK")
+# the vehicle's HEARTBEAT system_status of a flight over for good, before any mission's start (a ground station's own
+# flight ended so): no mission can fly after it, so the wait ends (its words: the controller's reason)
+OVER = {mavlink.MAV_STATE_EMERGENCY: "its plant ended the flight: it crashed, diverged or was touched "
+                                     "(HEARTBEAT system_status EMERGENCY)",
+        mavlink.MAV_STATE_FLIGHT_TERMINATION: "a ground station terminated the flight (HEARTBEAT system_status "
+                                              "FLIGHT_TERMINATION: PX4 leaves it only by a reboot)"}
+PLANT_ENDS = ("crashed", "diverged", "collision", "terminated")  # the vehicle's events a flight over for good follows
 
 
 @dataclass(frozen=True)
@@ -90,6 +98,7 @@ class MissionLink(OffboardLink):
         self.vehicle_mode: int | None = None  # the vehicle's HEARTBEAT custom_mode
         self.mission_state: int | None = None  # its MISSION_CURRENT's: ACTIVE once a ground station started it
         self.home: tuple[float, float, float] | None = None
+        self.over = ""  # why no mission can fly: the vehicle's flight over for good before its start (:data:`OVER`)
         self._inbox: list[Any] = []  # mission messages from the vehicle, not through the down model yet
         model = cfg.clock == "lockstep" and flight.link.impaired
         self._models: tuple[LinkImpairment, LinkImpairment] | None = flight.link.make() if model else None
@@ -215,9 +224,15 @@ class MissionLink(OffboardLink):
         """Serve the link until a ground station has started the mission (True): the vehicle shows AUTO.MISSION,
         disarmed, and its MISSION_CURRENT says ACTIVE (asked for with REQUEST_MESSAGE every
         :data:`MISSION_CURRENT_S` while AUTO.MISSION shows). AUTO.MISSION selected alone is not a start: PX4 stays
-        on the ground until it is armed or sent MISSION_START. False: the controller was stopped."""
+        on the ground until it is armed or sent MISSION_START. False: the controller was stopped, or the vehicle's
+        flight is over for good before the start (:attr:`over` says why: a ground station's own flight crashed,
+        diverged or was terminated; the vehicle refuses every later arm and start)."""
         said = False
         while not self.stopping:
+            if self._heard and self.vehicle_state in OVER:
+                self.over = f"no mission can fly: {OVER[self.vehicle_state]}"
+                self.event("aborted", self.over, PLANT_ENDS)
+                return False
             if self._heard and self.vehicle_mode == MISSION_MODE:  # (armed: armed in HOLD, then AUTO.MISSION)
                 if self.mission_state == mavlink.MISSION_STATE_ACTIVE:
                     return True
@@ -262,7 +277,7 @@ def _fetch(link: MissionLink, flight: Flight, out: Path | None, empty: TransferS
     try:
         link.event("mission", "waiting for a ground station to upload a mission and start it")
         if not link.await_start():
-            return Fetched(None, empty, "stopped before a mission was started")
+            return Fetched(None, empty, link.over or "stopped before a mission was started")
         items, st = link.download()
         if st.result != "accepted":
             return Fetched(None, st, f"mission download failed: {st.result}")
