@@ -309,6 +309,31 @@ def test_a_vehicle_whose_process_ended_is_taken_as_gone_at_once_where_it_was_las
     assert TurnRadio(radio, "up", 1000.0, 0.1, 0).rows()[1][2] == 7  # it leaves from step 7
 
 
+def test_a_frozen_vehicle_is_taken_as_gone_as_an_ended_one_and_said_frozen() -> None:
+    """The fleet's FROZEN word (say_lost frozen: its session killed it, its controller hearing nothing from it) drops
+    it as the LOST word does, at once, where it was last heard; the record says it froze, not that it ended
+    (summary.json's sitl.gate dropped: docs/swarm.md). The two words are read in one place, alike but for that."""
+    (a, ca, _), (b, cb, wb) = fleet = gates(2)
+    held = []
+    try:
+        for g, clock, _ in fleet:
+            at(g, clock, 1)
+        assert [cleared(g) for g, _, _ in fleet] == [None, None]
+        for _, clock, _ in fleet:
+            clock.take()
+        at(a, ca, 2)
+        b.close()  # vehicle 2 killed frozen at step 2, having flown step 1: it was at wb there
+        held.append(say_lost(b.cfg, frozen=True))
+        assert held[-1] is not None and cleared(a) is None and a._where(1, 2) == wb[0]
+        assert a.stats()["dropped"] == ["vehicle 2 frozen (its controller heard nothing from it: killed, said by the "
+                                        "fleet) at step 2: taken as gone where it was last"]
+    finally:
+        for g, _, _ in fleet:
+            g.close()
+        for sock in held:
+            sock.close()
+
+
 def test_a_bad_gate_file_is_named(tmp_path: Path) -> None:
     f = tmp_path / "gate.json"
     f.write_text('{"index": 3, "ids": [1, 2], "radii": [0.3, 0.3], "ports": [5000, 5001]}')

@@ -21,9 +21,10 @@ step ahead of another, so a datagram carries the last two positions, and one los
 by the resend every :data:`RESEND_S`. A vehicle whose process ended without leaving (killed, crashed, stopped by
 its session, or killed by it frozen) is taken as gone where it was last heard, at once: its fleet, which sees the
 process end, binds the gate port it no longer holds and says so in its name (:func:`say_lost`, a ``LOST`` or
-``FROZEN`` word). One silent for :data:`SILENT_S` (the fleet's word lost) is taken as gone the same way. Either is said
-(:attr:`Gate.dropped`). A vehicle is heard from its own gate port only (which no other process can bind while it
-runs, and its fleet holds once it is gone); the gate has no signing, as the links without ``--key``.
+``FROZEN`` word: handled alike, said apart, :data:`SAID`). One silent for :data:`SILENT_S` (the fleet's word lost) is
+taken as gone the same way. Each is said (:attr:`Gate.dropped`). A vehicle is heard from its own gate port only
+(which no other process can bind while it runs, and its fleet holds once it is gone); the gate has no signing, as
+the links without ``--key``.
 """
 
 from __future__ import annotations
@@ -58,6 +59,10 @@ TURN_LOOK_S = 0.005
 # process ended without leaving (:func:`say_lost`: no step, no position); FROZEN: the same of one its session
 # killed, frozen (its controller heard nothing from it: bridge.session.alone)
 AT, GONE, TURN, LOST, FROZEN = 0, 1, 2, 3, 4
+# the fleet's two words, each said as what happened (Gate.dropped, summary.json's sitl.gate: docs/swarm.md): a
+# frozen vehicle is taken as gone as a lost one is, where it was last heard; the record says which it was
+SAID = {LOST: "ended (its process gone, said by the fleet)",
+        FROZEN: "frozen (its controller heard nothing from it: killed, said by the fleet)"}
 _WIRE = struct.Struct("<4sBBqdddddd")  # magic, kind, index, step, position at step, position at step - 1
 _MAGIC = b"BSSG"
 
@@ -275,10 +280,8 @@ class Gate:
             self.heard[j] = now
             if kind == GONE:
                 self.gone.setdefault(j, (k, (xs[0], xs[1], xs[2])))
-            elif kind == LOST:
-                self._drop(j, "ended (its process gone, said by the fleet)")
-            elif kind == FROZEN:
-                self._drop(j, "frozen (its controller heard nothing from it: killed, said by the fleet)")
+            elif kind in SAID:
+                self._drop(j, SAID[kind])
             elif kind == AT and j not in self.gone:
                 seen = self.at[j]
                 seen[k] = (xs[0], xs[1], xs[2])
