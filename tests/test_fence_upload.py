@@ -153,6 +153,21 @@ def test_with_gf_action_0_only_a_fence_the_record_does_not_hold_is_watched_and_i
                                  "fence)") and sim.mode == "offboard" and sim.armed, left
 
 
+def test_the_held_zones_alone_say_whether_the_record_holds_the_fence_watched() -> None:
+    """``fence_recorded`` follows what the record holds (:class:`HeldZones`, its one writer): the mission's own fence
+    is; an upload is not; the controller's download of it makes it the record's; a later upload is not again, and a
+    download of the rally points leaves it so."""
+    sim = prepare(MISSION_DIR / "sine.toml").make_vehicle()
+    zones = HeldZones(sim, (HOME.lat, HOME.lon, HOME.alt))
+    assert sim.fence_recorded and zones.recorded == zones.items
+    assert zones.accept(_held(_square(5.0)), FENCE) is None and not sim.fence_recorded
+    zones.downloaded(FENCE, zones.items[FENCE])
+    assert sim.fence_recorded and zones.recorded[FENCE] is zones.items[FENCE]
+    assert zones.accept(_held(_square(50.0)), FENCE) is None and not sim.fence_recorded
+    zones.downloaded(RALLY, zones.items[RALLY])
+    assert not sim.fence_recorded
+
+
 def test_the_geofence_policy_fails_on_the_vehicles_geofence_event() -> None:
     """No mission fence, but the vehicle said it left an uploaded one: the policy fails at that time, with its
     words; without the event it holds."""

@@ -95,8 +95,9 @@ class SimVehicle:
     fence: Geofence | None = None  # the fence it holds (the mission's, or a ground station's upload), watched as these
     fence_action: int = 2  # GF_ACTION: at a breach 0 nothing (unwatched), 1 warn, 2 hold, 3 return, 4 terminate, 5 land
     # the run's record (its mission.toml) holds the fence, so its trace check judges it; an upload's is not, unless
-    # the controller downloads it before the flight (bridge.nodes.vehicle.mission): with GF_ACTION 0 that one's first
-    # breach is still said, for the record alone (vehiclechecks.check_limits)
+    # the controller downloads it before the flight: with GF_ACTION 0 that one's first breach is still said, for the
+    # record alone (vehiclechecks.check_limits). Decided by bridge.nodes.vehicle.zones.HeldZones alone (the uploads
+    # and the downloads are there); the mission's own fence, the start's, is the record's
     fence_recorded: bool = True
     battery_watch: BatteryWatch = field(default_factory=BatteryWatch)  # BAT_*_THR, COM_LOW_BAT_ACT
     land_disarm: LandDisarm = field(default_factory=LandDisarm)  # COM_DISARM_LAND: landed, it disarms after it
@@ -290,10 +291,9 @@ class SimVehicle:
                           param=ParamChanged(name, float(old), float(new)))
 
     def watch_fence(self, fence: Geofence | None) -> None:
-        """Watch ``fence`` (a ground station's; None: none) from now on, afresh: not the record's
-        (:attr:`fence_recorded`) until the controller's download says it is."""
+        """Watch ``fence`` (a ground station's; None: none) from now on, afresh (whether the run's record holds it,
+        :attr:`fence_recorded`, is its uploader's to say)."""
         self.fence = fence
-        self.fence_recorded = False
         self.beyond.discard("fence")
 
     def prearm_refusal(self) -> str | None:

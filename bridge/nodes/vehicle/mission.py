@@ -100,9 +100,7 @@ class MissionManager:
         self.completed = False  # the last started mission's items were all reached
         self._goals: tuple[Goal, ...] = ()  # the started mission's items, where and how each is reached
         self.home = (authority.cfg.home.lat, authority.cfg.home.lon, authority.cfg.home.alt)
-        self.zones = HeldZones(sim, self.home)  # an uploaded fence and rally points
-        self.recorded = dict(self.zones.items)  # the fence and rally points the run's record holds: the mission's,
-        # or the controller's download's (--await-mission); those flown are said at a flight's arm if not these
+        self.zones = HeldZones(sim, self.home)  # an uploaded fence and rally points, and those the record holds
         self._first_flight = True
         self._check: StartCheck | None = None  # the last check begun (.startcheck): one runs at a time
 
@@ -226,7 +224,7 @@ class MissionManager:
             when = "after the controller's download" if self.authority.cfg.await_mission else "before the arm"
             for mtype, (noun, which) in UNRECORDED.items():
                 held = self.zones.items[mtype]
-                if held is not self.recorded[mtype]:
+                if held is not self.zones.recorded[mtype]:
                     said = self.sim.event(EVENT_OF[mtype], f"flown with {noun} of {len(held.items)} items uploaded "
                                                            f"or cleared {when}, not {which} mission.toml holds")
                     said.by = ITSELF  # (the vehicle's word, not the arm's sender's)
@@ -338,16 +336,12 @@ class MissionManager:
         if transfer is None:
             transfer = self.transfers[link] = LinkTransfer(link, self)
         changed = transfer.handle(Partner(self.authority.sender(m, addr, link), ep), m, time.monotonic())
-        if link == "controller" and m._type == "MISSION_REQUEST_LIST" and m.mission_type in self.recorded:
-            self._zone_downloaded(transfer)
+        # the controller asked for the fence or the rally points: what its download sends (begun, or begun again) is
+        # what its mission.toml holds, the record's
+        if (link == "controller" and m._type == "MISSION_REQUEST_LIST" and m.mission_type in self.zones.recorded
+                and transfer.state is State.SENDLIST and transfer.mtype in self.zones.recorded):
+            self.zones.downloaded(transfer.mtype, transfer.sending)
         return changed
-
-    def _zone_downloaded(self, transfer: LinkTransfer) -> None:
-        """The controller asked for the fence or the rally points: what its download sends (begun, or begun again)
-        is what its mission.toml holds, the record's; the fence held is the record's while it is that one."""
-        if transfer.state is State.SENDLIST and transfer.mtype in self.recorded:
-            self.recorded[transfer.mtype] = transfer.sending
-            self.sim.fence_recorded = self.recorded[FENCE] is self.zones.items[FENCE]
 
     # -- what the links' transfers share (.missiontransfer.TransferHost) ------------------------------------
     def held(self, mission_type: int) -> Mission:
