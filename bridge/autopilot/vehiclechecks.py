@@ -70,8 +70,7 @@ def check_limits(v: CheckedVehicle) -> None:
         passed = breaches_now(v, "fence" in v.beyond)
         said = f"GF_ACTION = {v.fence_action}: {FENCE_ACTIONS[v.fence_action]}"
     else:
-        passed = [] if v.fence_recorded or "fence" in v.beyond else breaches(v.published(), v.plant.t, v.home,
-                                                                             0.0, 0.0, v.fence)
+        passed = [] if v.fence_recorded or "fence" in v.beyond else breaches_now(v, limits=False)
         said = "GF_ACTION = 0: not acted on; said for the run's record, which does not hold this fence"
     new = [(w, why + known) for w, why in passed if w not in v.beyond]
     for which, why in new:
@@ -83,11 +82,13 @@ def check_limits(v: CheckedVehicle) -> None:
                    "geofence: flight terminated, motors stopped")
 
 
-def breaches_now(v: CheckedVehicle, fence_known: bool = False) -> list[tuple[str, str]]:
+def breaches_now(v: CheckedVehicle, fence_known: bool = False, limits: bool = True) -> list[tuple[str, str]]:
     """:func:`~bridge.autopilot.fencewatch.breaches` of the state the vehicle knows (its estimate, as PX4's
-    geofence reads it; the true state under truth) now, not the fence if ``fence_known``."""
+    geofence reads it; the true state under truth) now: not the fence if ``fence_known``, nor GF_MAX_HOR_DIST and
+    GF_MAX_VER_DIST unless ``limits``."""
     fence = None if fence_known else v.fence
-    return breaches(v.published(), v.plant.t, v.home, v.max_hor_m, v.max_ver_m, fence)
+    hor, ver = (v.max_hor_m, v.max_ver_m) if limits else (0.0, 0.0)
+    return breaches(v.published(), v.plant.t, v.home, hor, ver, fence)
 
 
 def prearm_refusal(v: CheckedVehicle) -> str | None:
