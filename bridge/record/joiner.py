@@ -235,7 +235,9 @@ class TraceJoiner:
         """The rows joined so far and what the join measured. ``delivered`` (real time through a relay, which may
         reorder): the one-way delays are every per-step message's that arrived, from the tlogs (the halves time
         only the one each step used, and leave out the late ones it refused: 8 ms low on an LTE link, until the
-        third wave's thirty-seventh session); without the tlogs, the halves'."""
+        third wave's thirty-seventh session); without the tlogs, the halves'. The tlogs are their one source: the
+        relay's own figure (relay.json's ``measured_ms``, the link block's ``relay_added_ms``) is what it added,
+        arrival to forward, to every datagram, not the two sockets' hops, nor only the per-step messages."""
         up, down = (step_delays(self.path) if delivered else None) or (self.up_ms, self.down_ms)
         return Joined(self.rows, self.k0, self.missing, self.first_sent, self.last_sent, len(self.ctl), up,
                       down, self.rtt_ms, self.s2c_ms, self.late_ms,
