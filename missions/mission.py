@@ -139,16 +139,9 @@ class Mission:
 
     def to_dict(self) -> dict[str, Any]:
         """The mission as a TOML-ready table (what ``mission.toml`` of a run holds)."""
-        d: dict[str, Any] = {
-            "name": self.name,
-            "duration_s": self.duration_s,
-            "profile": self.profile,
-            "controller": self.controller,
-            "discretization": self.discretization,
-            "rate_hz": self.rate_hz,
-            "physics_hz": self.physics_hz,
-            "seed": self.seed,
-        }
+        d: dict[str, Any] = {"name": self.name, "duration_s": self.duration_s, "profile": self.profile,
+                             "controller": self.controller, "discretization": self.discretization,
+                             "rate_hz": self.rate_hz, "physics_hz": self.physics_hz, "seed": self.seed}
         if self.actuation:
             d["actuation"] = self.actuation
         d["start"] = {"position": list(self.start[:3]), "psi": self.start[3]}
@@ -342,6 +335,9 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
     r = MISSION_RANGES
     rate = t.number("rate_hz", DEFAULT_RATE_HZ, lo=r["rate_hz"][0], hi=r["rate_hz"][1])
     physics = t.number("physics_hz", 1000.0, lo=r["physics_hz"][0], hi=r["physics_hz"][1])
+    if not t.has("rate_hz") and (why := rate_problem(rate, physics, " (physics_hz)")):  # the default's, not the file's
+        raise ConfigError(f"{source}: rate_hz: not given, so {rate:g} Hz (the default), and {why}; give rate_hz "
+                          f"(in the file: --rate lays a rate over it, but the file's own must fit too)")
     seed = t.integer("seed", 0, lo=int(r["seed"][0]), hi=int(r["seed"][1]))
     st = t.table("start")
     start = st.vector("position", 3, (0.0, 0.0, 0.0), lo=-1e4, hi=1e4) + (st.number("psi", 0.0, lo=-10, hi=10),)

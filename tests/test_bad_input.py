@@ -27,6 +27,7 @@ from typing import Any
 
 import pytest
 
+from bridge import simulate
 from bridge.cli import build_parser, main
 from bridge.cli.flags import UsageError
 from bridge.core.flight import prepare
@@ -532,10 +533,12 @@ def test_a_mission_files_own_guard_clash_names_its_key(tmp_path, capsys):
 RATE_CLASHES = [  # (the mission's own top-level keys, argv after the command's mission, what the line says after it)
     ("", ["sim", "--rate", "333"], "the physics rate 1000 Hz must be a whole multiple of it (allowed: 1000 Hz divided "
                                    "by a whole number, 50-1000 Hz; the whole ones 50, 100, 125, 200, 250, 500, 1000)"),
-    ("physics_hz = 1200\n", ["sitl", "--rate", "333", "--gcs", "none"],
+    ("physics_hz = 1200\nrate_hz = 300\n", ["sitl", "--rate", "333", "--gcs", "none"],
      "the physics rate 1200 Hz (M's physics_hz) must be a whole multiple of it (allowed: 1200 Hz divided by a whole "
      "number, 50-1000 Hz; the whole ones 50, 60, 75, 80, 100, 120, 150, 200, 240, 300, 400, 600)"),
     ("", ["vehicle", "--rate", "333"], "the physics rate 1000 Hz must be"),
+    ("physics_hz = 1200\nrate_hz = 300\n", ["sim", "--rate", "333"],
+     "the physics rate 1200 Hz (M's physics_hz) must be"),
 ]
 
 
@@ -557,7 +560,34 @@ def test_a_rate_the_physics_rate_is_no_multiple_of_is_named_as_the_flag(tmp_path
     assert not out.exists()
     if argv[0] == "sim":
         with _guard():
-            assert main(["sim", str(mission), "--rate", "250", "--no-plots", "--out", str(out)]) == 0
+            assert main(["sim", str(mission), "--rate", "300" if "1200" in own else "250", "--no-plots", "--out",
+                         str(out)]) == 0
+
+
+def test_a_physics_rate_the_default_rate_does_not_fit_names_the_files_rate_hz(tmp_path, capsys):
+    """A file with ``physics_hz = 1200`` and no ``rate_hz`` (so the default 250 Hz, which 1200 Hz is no whole
+    multiple of) is refused naming the file's ``rate_hz``: that it was not given, the default it took, the physics
+    rate it must divide and the rates allowed; ``bsst sim``, ``bsst sitl`` with or without ``--rate`` and the Python
+    API alike. Until the third wave's thirty-ninth session ``bsst sitl --rate 333`` named the flag and offered
+    ``--rate 300``, which the file's default still refused (``rate_hz: ..., got 250``, a key the file did not
+    have). Nothing is written; the file flies once it gives a rate_hz that fits."""
+    mission = tmp_path / "m.toml"
+    mission.write_text("physics_hz = 1200\n" + TINY)
+    out = tmp_path / "out"
+    said = (f"bsst: {mission}: rate_hz: not given, so 250 Hz (the default), and the physics rate 1200 Hz (physics_hz) "
+            "must be a whole multiple of it (allowed: 1200 Hz divided by a whole number, 50-1000 Hz; the whole ones "
+            "50, 60, 75, 80, 100, 120, 150, 200, 240, 300, 400, 600); give rate_hz")
+    for argv in (["sim"], ["sitl", "--gcs", "none"], ["sitl", "--gcs", "none", "--rate", "333"],
+                 ["sitl", "--gcs", "none", "--rate", "300"], ["sim", "--rate", "300"]):
+        line = _refused(capsys, [argv[0], mission, *argv[1:], "--no-plots", "--out", out], "rate_hz")
+        assert line.startswith(said) and "--rate 333:" not in line, (argv, line)
+        assert not out.exists()
+    with pytest.raises(ConfigError) as e:
+        simulate(mission, rate_hz=300.0)
+    assert f"bsst: {e.value}".startswith(said), e.value
+    mission.write_text("physics_hz = 1200\nrate_hz = 300\n" + TINY)
+    with _guard():
+        assert main(["sim", str(mission), "--no-plots", "--out", str(out)]) == 0
         (tmp_path / "own.toml").write_text("rate_hz = 333\n" + TINY)
         line = _refused(capsys, ["sim", tmp_path / "own.toml", "--out", tmp_path / "o2"], "rate_hz")
         assert line.startswith(f"bsst: {tmp_path / 'own.toml'}: rate_hz: the physics rate 1000 Hz must"), line

@@ -179,7 +179,8 @@ def checked_mission(args: argparse.Namespace, mission: Mission | str | Path | No
 def _rate_flag_refusal(args: argparse.Namespace, own: Mapping[str, Any], source: str) -> str | None:
     """The line refusing ``--rate HZ`` that the mission's physics rate (``own``: its top-level table, from
     ``source``) is no whole multiple of (:func:`missions.mission.rate_problem`, the loader's rule), named as the
-    flag; None, and None for a physics rate the loader will refuse (and name)."""
+    flag; None, and None for a physics rate or a file's own rate_hz (given or the default) the loader will refuse
+    (and name: the file must fit on its own, whatever --rate lays over it)."""
     from missions import Mission  # lazy: start-up time
     from missions.mission import rate_problem  # lazy: start-up time
 
@@ -188,6 +189,9 @@ def _rate_flag_refusal(args: argparse.Namespace, own: Mapping[str, Any], source:
         return None
     physics = own.get("physics_hz", Mission.physics_hz)  # (the loader's default, a plan's and a bare vehicle's)
     if isinstance(physics, bool) or not isinstance(physics, (int, float)) or not physics > 0:
+        return None
+    own_rate = own.get("rate_hz", Mission.rate_hz)  # the file's own (or the default) first: no use naming a flag
+    if not isinstance(own_rate, (int, float)) or not own_rate > 0 or rate_problem(own_rate, physics):  # it won't fix
         return None
     set_by = f" ({source}'s physics_hz)" if source and physics != Mission.physics_hz else ""  # (not the default)
     why = rate_problem(rate, physics, set_by)
@@ -209,14 +213,15 @@ def _scatter_flag_refusal(args: argparse.Namespace, own: Mapping[str, Any], sour
 
 
 def _own(mission: Mission | str | Path | None) -> tuple[dict[str, Any] | None, str]:
-    """A mission's own top-level table as its file holds it (``link``, ``physics_hz`` and ``vehicles`` of a
+    """A mission's own top-level table as its file holds it (``link``, ``physics_hz``, ``rate_hz`` and ``vehicles`` of a
     :class:`missions.Mission`) and its source, read once, without validating it: ({}, "") for none (a bare
     vehicle) and a plan file, (None, "") for a file its loader will refuse (and name)."""
     from missions import Mission  # lazy: start-up time
     from missions.mission import is_plan_file, mission_path  # lazy: start-up time
 
     if isinstance(mission, Mission):
-        return {"link": mission.link, "physics_hz": mission.physics_hz, "vehicles": mission.vehicles}, mission.source
+        return ({"link": mission.link, "physics_hz": mission.physics_hz, "rate_hz": mission.rate_hz,
+                 "vehicles": mission.vehicles}, mission.source)
     if mission is None or is_plan_file(mission):
         return {}, ""
     path = mission_path(mission)  # (a shipped mission by name too)
