@@ -358,6 +358,67 @@ def test_a_ground_stations_offboard_or_arm_on_the_wall_clock_engages_lockstep_at
     assert not between, between
 
 
+def test_an_answer_to_a_wall_clock_state_after_lockstep_engages_again_is_counted_apart_not_stale(tmp_path):
+    """A ground station's HOLD takes a lockstep flight onto the wall clock, where the vehicle sends a state each period
+    that a controller answers as any other; its OFFBOARD again engages lockstep at the next period's start, so the
+    answer to the last state sent on the wall clock can come after it. That answer is too late to fly but nobody's
+    fault: it is counted in ``answered_wall_clock``, not refused as ``stale`` (docs/hostile-input.md: a target for a
+    lockstep step already flown, a late or repeated datagram), which it was until the third wave's thirty-ninth
+    session. An answer to a lockstep step long flown is still ``stale``."""
+    rate = 50.0
+    period = round(1e6 / rate)  # us
+    hold, offboard = (1, 4, 3), (1, 6, 0)  # DO_SET_MODE's base, main and sub mode (PX4's AUTO.LOITER, OFFBOARD)
+    with instance_slot() as n:
+        v = _vehicle(n, tmp_path, "--rate", f"{rate:g}")
+        gcs, ctl = _gcs(n), _controller_link(n)
+        sysid = n + 1
+
+        def gcs_says(cmd: int, *params: float) -> None:
+            gcs.mav.command_long_send(sysid, 1, cmd, 0, *params, *[0.0] * (7 - len(params)))
+            assert _ack(gcs, cmd).result == M.MAV_RESULT_ACCEPTED, (cmd, params)
+
+        def answer(usec: int) -> None:
+            ctl.mav.set_actuator_control_target_send(usec, 0, sysid, 1, HOVER_WIRE)
+
+        def state_after(usec: int) -> int:
+            """The stamp of the first state sent after the one stamped ``usec``."""
+            while True:
+                m = ctl.recv_match(type="ODOMETRY", blocking=True, timeout=5)
+                assert m is not None
+                if m.time_usec > usec:
+                    return m.time_usec
+
+        try:
+            ctl.mav.heartbeat_send(M.MAV_TYPE_ONBOARD_CONTROLLER, M.MAV_AUTOPILOT_INVALID, 0, 0, 4)
+            assert ctl.recv_match(type="HEARTBEAT", blocking=True, timeout=20) is not None
+            assert gcs.wait_heartbeat(timeout=20) is not None
+            ctl.mav.command_long_send(sysid, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+            assert _ack(ctl, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+            t = -1
+            while t < 3 * period:  # lockstep: steps 0-3 flown on their answers
+                t = state_after(t)
+                answer(t)
+            gcs_says(M.MAV_CMD_DO_SET_MODE, *hold)  # on the wall clock from the next step
+            wall = state_after(t)  # a state sent on the wall clock: left unanswered for now
+            gcs_says(M.MAV_CMD_DO_SET_MODE, *offboard)  # lockstep again (ACKed at the period's start it engages at)
+            answer(wall)  # its answer, late
+            answer(period)  # an answer to step 1, flown in lockstep long ago
+            k = state_after(wall)
+            for _ in range(3):  # every newer state answered, as the controller does (the wall clock's too, if any)
+                answer(k)
+                k = state_after(k)
+            ctl.mav.command_long_send(sysid, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 21196, 0, 0, 0, 0, 0)
+            assert _ack(ctl, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+        finally:
+            assert v.stop() == 0
+            gcs.close()
+            ctl.close()
+    s = _stats(v)
+    # step 1's answer is stale, or, had step 1's state been resent (unanswered 50 ms on a loaded machine), expected
+    assert s["rejected"] == {"stale": 1} or (s["rejected"] == {} and s["answered_again"] >= 1), s
+    assert s["answered_wall_clock"] >= 1 and s["accepted"] >= 4 + 1, s
+
+
 def test_mavproxy_arms_through_stdin(tmp_path):
     """MAVProxy, unmodified, as the issue runs it: heartbeat and attitude seen, and
     ``arm throttle`` typed into it is ACKed and arms the vehicle."""

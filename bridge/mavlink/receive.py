@@ -91,7 +91,9 @@ REASONS: dict[str, str] = {
     "out_of_range": "motors outside [0, 1], roll/pitch/yaw outside [-1, 1], thrust outside [0, 1], "
                     "|position| > 10 km or a quaternion not of unit norm",
     "not_offboard": "actuator target while disarmed or not under offboard control",
-    "stale": "time_usec older than the step awaited (lockstep), or than the newest state (controller)",
+    "stale": "time_usec older than the step awaited (lockstep; an answer to a state sent on the wall clock before "
+             "lockstep engaged again is counted in timing.answered_wall_clock, not here), or than the newest state "
+             "(controller)",
     "future": "lockstep: target for a step not reached yet",
     "repeated": "lockstep: a second answer to the step awaited, whose state was sent once (an answer to a "
                 "resent state's copy is expected: counted in timing.answered_again, not here)",

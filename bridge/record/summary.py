@@ -358,6 +358,8 @@ def timing_block(joined: Joined, rate_hz: float, wall_s: float, vehicle: Mapping
         # lockstep: states resent after RESEND_S of wall time unanswered, and the second answers to them
         "lockstep_resends": int(vehicle.get("resends", 0)),
         "answered_again": int(vehicle.get("answered_again", 0)),
+        # lockstep engaged again: answers to a state sent on the wall clock before it, come after (not flown)
+        "answered_wall_clock": int(vehicle.get("answered_wall_clock", 0)),
         # lockstep waits that slept at once, without polling for the answer first, because the machine had more
         # runnable tasks than cores (bridge.mavlink.endpoint.Spinner), by side
         "spin_skipped": {"vehicle": int(vehicle.get("spin_skipped", 0)),

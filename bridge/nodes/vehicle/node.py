@@ -188,7 +188,8 @@ class Vehicle:
             **({"gate": self.gate.stats()} if self.gate is not None else {}),  # a fleet's shared clock
             **({"radio": self.turns.part()} if self.turns is not None else {}),  # its part of the fleet's one radio
             "rejected_from_controller": self.rejected.from_peer, "resends": self.odometry.resends,
-            "answered_again": self.targets.answered_again, "spin_skipped": self.spinner.skipped,
+            "answered_again": self.targets.answered_again, "answered_wall_clock": self.targets.answered_wall_clock,
+            "spin_skipped": self.spinner.skipped,
             **self.odometry.sends.stats(),  # odometry_steps, _again, _again_unlisted, _resent
             "kernel_drops": self.link.kernel_drops(), "read_until": self.read_until,
             "up": self.vend.up.stats.summary() if self.cfg.clock == "lockstep" else None,
@@ -299,6 +300,7 @@ class Vehicle:
         now = time.monotonic()
         if self.sim.armed or self.cfg.clock == "realtime":
             self._send_odometry(now)
+            self.targets.sent_on_wall_clock(k)  # (lockstep engaged again later: its answer may come after)
         X = self.plant.state
         if self.sim.armed and self.rows is not None:
             self.rows.free_running(k, X, self.sim, self.actuation, self.targets.applied, self.odometry.sent_at, now,

@@ -7,7 +7,8 @@ In:  HIL_ACTUATOR_CONTROLS (``motors``: c1..c4 = omega / omega_max in [0, 1]; SA
 Out: in a lockstep flight the answer of step k held by the :class:`~bridge.nodes.vehicle.clock.Clock`
      (:class:`~bridge.nodes.vehicle.clock.Answer`); on the wall clock the target applied to the
      :class:`SimVehicle` at once; refusals counted (``sender``, ``message``, ``group``, ``target``,
-     ``not_offboard``, a wire problem, ``reordered``, ``repeated``, ``stale``, ``future``)
+     ``not_offboard``, a wire problem, ``reordered``, ``repeated``, ``stale``, ``future``); in lockstep the answers
+     that are expected but not flown, counted apart (``answered_again``, ``answered_wall_clock``)
 """
 
 from __future__ import annotations
@@ -48,12 +49,22 @@ class Targets:
         # answer (not a lost one) comes twice; the second is expected, not a refusal of anyone's datagram
         self.resent_steps: set[int] = set()
         self.answered_again = 0
+        # lockstep: the last run of steps whose state went out on the wall clock (a ground station's mode, lockstep
+        # lost), first and last; the controller answers those as any state, and one answered once lockstep has
+        # engaged again is too late to fly but nobody's fault: counted in answered_wall_clock, not refused as stale
+        self.wall_steps = (0, -1)
+        self.answered_wall_clock = 0
 
     def resent(self, k: int) -> None:
         """The state of step k was sent again."""
         self.resent_steps.add(k)
         if len(self.resent_steps) > 256:
             self.resent_steps = {s for s in self.resent_steps if s >= k - 128}
+
+    def sent_on_wall_clock(self, k: int) -> None:
+        """The state of step k went out on the wall clock."""
+        first, last = self.wall_steps
+        self.wall_steps = (first if k == last + 1 else k, k)
 
     def receive(self, m: Any, kind: str, k: int, on_controller_link: bool) -> None:
         """An actuator target: checked, then held for lockstep or applied at once (realtime)."""
@@ -116,10 +127,14 @@ class Targets:
     def _behind(self, key: int, k: int) -> None:
         """Lockstep: the controller's answer for a step other than k. For a step whose state was
         resent it is the answer to a copy, its first answer already taken (``answered_again``);
-        otherwise a second answer to step k (its state sent once) is ``repeated``, an older one ``stale``,
-        a newer one ``future``."""
+        for a step whose state went out on the wall clock before lockstep engaged again it is a late answer to
+        that (``answered_wall_clock``); otherwise a second answer to step k (its state sent once) is ``repeated``,
+        an older one ``stale``, a newer one ``future``."""
         if key in self.resent_steps:  # (k itself: both answers to its copies came before it was stepped)
             self.answered_again += 1
+            return None
+        if self.wall_steps[0] <= key <= self.wall_steps[1] < k:  # (until the third wave's 39th session: stale)
+            self.answered_wall_clock += 1
             return None
         if key == k:
             return self._reject("repeated")
