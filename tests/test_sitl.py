@@ -188,6 +188,10 @@ def test_realtime_tracks_and_records_its_timing(short_runs):
     assert run.rms <= 2.0 * off.rms + 1e-3, stalls
     timing = run.summary["timing"]
     assert 0.9 < timing["real_time_factor"] < 1.1
+    # the mission's time flown, from its time 0 (the printed header's duration): the trace's first row is step 1's,
+    # step 0 flown on a target that came mid-period; until the third wave's thirty-ninth session both said rows x
+    # period, one period short of the mission it completed
+    assert run.summary["duration_s"] == pytest.approx(SHORT.duration_s) == timing["sim_s"], (timing, run.trace["t"][0])
     period = timing["period_error_ms"]
     assert period["p50"] < 1.0 and period["max"] >= period["p99"] >= period["p50"] >= 0.0
     for key in ("state_to_command_ms", "state_to_command_timesync_ms"):

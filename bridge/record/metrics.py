@@ -199,7 +199,10 @@ def summarise(
     :mod:`bridge.record.policies`); a session also ``timing``, ``sitl`` and, in lockstep, ``lockstep``."""
     t = trace["t"]
     n = len(t)
-    dur = float(t[-1] - t[0] + 1.0 / mission.rate_hz) if n else 0.0
+    dur = float(t[-1] - t[0] + 1.0 / mission.rate_hz) if n else 0.0  # s: the rows' span (per second figures)
+    # s: the mission's time flown, from its time 0 to its last recorded step's end; a real-time trace's first row is
+    # step 1's (step 0 flew on a target that came mid-period), so rows x period said one period short
+    flown = float(t[-1] + 1.0 / mission.rate_hz) if n else 0.0
     err = errors(trace) if n else {a: np.zeros(0) for a in AXES}
     changes = [c for c in mission.trajectory.change_times() if n and c <= t[-1]]
     ends = changes[1:] + [float("inf")] if changes else []  # each change's segment end
@@ -245,7 +248,7 @@ def summarise(
         "profile": mission.profile,
         "seed": mission.seed,
         "rate_hz": mission.rate_hz,
-        "duration_s": _num(dur),
+        "duration_s": _num(flown),
         "rms_from_s": float(rms_from),
         "rms_3d": _num(rms_3d(trace, rms_from)) if n else None,
         "axes": axes,
