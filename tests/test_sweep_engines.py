@@ -27,11 +27,12 @@ import pytest
 from bridge import simulate
 from bridge.cli import main
 from bridge.core.flight import prepare
-from bridge.sweep import CELLS_CSV, COLUMNS, Grid, load_sweep, read_cells, sweep
+from bridge.sweep import CELLS_CSV, COLUMNS, Grid, Sweep, load_sweep, read_cells, sweep
 from bridge.sweep.cells import FLEET_COLUMNS
 from bridge.sweep.executors import BATCH_MIN_CELLS, WARM_CELLS, engine_for
 from bridge.sweep.grid import LINK_AXES, cells, mission_value
 from bridge.sweep.margin import margin, parse_until, probe
+from bridge.sweep.report import grid_size
 from missions import Mission, Sine
 from params import ConfigError, dump_toml
 
@@ -199,24 +200,26 @@ SCHEMES = Grid(controller=("bsst", "smc"), discretization=("explicit", "implicit
 def test_a_discretization_axis_flies_each_scheme_in_both_engines(tmp_path: Path) -> None:
     """Issue 24: ``discretization`` is an axis: each row names its scheme and is the one ``simulate`` of that
     law, scheme and delay (the process engine's to the bit, the batch's as for every law); bsst flies each
-    scheme its own way, smc (no super-twisting step) the same under both: its rows are the one ``simulate`` without a
-    scheme, which refuses one for smc (as ``bsst sim`` does)."""
+    scheme its own way; smc (no super-twisting step) one cell per delay, its discretization empty: the one
+    ``simulate`` without a scheme, which refuses one for smc (as ``bsst sim`` does). Until the third wave's
+    thirty-ninth session smc was flown once per scheme, the same flight under two labels."""
+    assert Sweep(SHORT, SCHEMES).cell_count() == len(Sweep(SHORT, SCHEMES).cells()) == 6  # (announced, and capped)
     rows = {e: sweep(SHORT, SCHEMES, engine=e, jobs=2, out=tmp_path / e, report=False) for e in ("batch", "process")}
     for a, b in zip(rows["batch"], rows["process"], strict=True):
         assert a["discretization"] == b["discretization"]
         _same(a, b)
     got = rows["process"]
     assert [(r["controller"], r["delay_ms"], r["discretization"]) for r in got] == [
-        (c, d, s) for c in ("bsst", "smc") for d in (0.0, 8.0) for s in ("explicit", "implicit")]
+        ("bsst", d, s) for d in (0.0, 8.0) for s in ("explicit", "implicit")] + [("smc", 0.0, ""), ("smc", 8.0, "")]
     for r in got:
-        scheme = r["discretization"] if r["controller"] == "bsst" else None
-        run = simulate(SHORT, controller=r["controller"], discretization=scheme,
+        run = simulate(SHORT, controller=r["controller"], discretization=r["discretization"] or None,
                        link={"up": {"delay_ms": r["delay_ms"]}, "down": {"delay_ms": r["delay_ms"]}})
         assert (run.rms, run.summary["inputs"]["u2"]["tv_per_s"]) == (r["rms"], r["tv_u2"]), r
     by = {(r["controller"], r["delay_ms"], r["discretization"]): r for r in got}
     for d in (0.0, 8.0):
         assert by[("bsst", d, "implicit")]["rms"] != by[("bsst", d, "explicit")]["rms"]
-        assert by[("smc", d, "implicit")]["rms"] == by[("smc", d, "explicit")]["rms"]
+    assert [r["discretization"] for r in read_cells(tmp_path / "batch" / CELLS_CSV)] == ["explicit", "implicit"] * 2 \
+        + ["", ""]  # (the empty field reads back)
     assert "discretization" in (tmp_path / "batch" / CELLS_CSV).read_text().splitlines()[0].split(",")
     ident = json.loads((tmp_path / "batch" / "sweep.json").read_text())
     assert ident["axes"]["discretization"] == ["explicit", "implicit"] and "discretization" in ident["swept"]
@@ -253,6 +256,37 @@ def test_the_discretization_axis_on_the_command_line_and_in_a_sweep_file(tmp_pat
     f.write_text(f'mission = "{mission}"\n[grid]\ndiscretization = ["semi"]\n')
     with pytest.raises(ConfigError, match="discretization: element 0 must be one of explicit, implicit"):
         load_sweep(f)
+
+
+def test_a_law_without_a_scheme_is_one_cell_announced_reported_and_resumed(tmp_path: Path, capsys) -> None:
+    """``bsst sweep --controller bsst,smc --discretization explicit,implicit``: 3 cells, not 4 (smc has no
+    super-twisting step: one cell, its discretization empty), as the command's count, cells.csv and report.md say;
+    ``--resume`` of an older sweep's cells.csv, whose smc cell is two rows labelled explicit and implicit (the same
+    flight), keeps one of them as that cell, flies only what is missing, and ends with the file a new sweep writes."""
+    mission = tmp_path / "short.toml"
+    mission.write_text(dump_toml(replace(SHORT, duration_s=1.0).to_dict()))
+    out = tmp_path / "s"
+    args = ["sweep", str(mission), "--controller", "bsst,smc", "--discretization", "explicit,implicit", "--jobs", "1",
+            "--out", str(out), "--no-plots"]
+    capsys.readouterr()
+    assert main(args) == 0
+    assert ": 3 cells, 3 flown" in capsys.readouterr().out
+    text = (out / CELLS_CSV).read_text()
+    rows = read_cells(out / CELLS_CSV)
+    assert [(r["controller"], r["discretization"]) for r in rows] == [("bsst", "explicit"), ("bsst", "implicit"),
+                                                                      ("smc", "")]
+    report = (out / "report.md").read_text()
+    assert "| smc | 1 |" in report and "| bsst (implicit) | 1 |" in report, report
+    assert "- `discretization`: explicit, implicit (swept); none for smc (no super-twisting step" in report, report
+    header, bsst_explicit, bsst_implicit, smc = text.splitlines()
+    older = [header, bsst_explicit, smc.replace(",,1,0,", ",explicit,1,0,"), smc.replace(",,1,0,", ",implicit,1,0,")]
+    assert older[2] != smc and older[3] != smc  # (the empty discretization field, labelled as before)
+    (out / CELLS_CSV).write_text("\n".join(older) + "\n")  # bsst's implicit cell not flown yet
+    capsys.readouterr()
+    assert main([*args, "--resume"]) == 0
+    assert ": 3 cells, 1 flown, 2 kept from before" in capsys.readouterr().out
+    assert (out / CELLS_CSV).read_text() == text
+    assert grid_size(json.loads((out / "sweep.json").read_text())) == 3  # (a report of it: complete)
 
 
 def test_an_older_sweep_without_the_discretization_column_is_reported(tmp_path: Path) -> None:

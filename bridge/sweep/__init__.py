@@ -19,7 +19,9 @@ Out: one ``cells.csv`` row per cell, in grid order (3-D RMS and max error m, set
 A sweep flies one mission over the product of a few lists (the *grid*): control law, control
 rate, link delay, jitter, loss and mean loss-burst length, the vehicle's estimator kind and
 the noise scale of its sensor set, each grid point with several seeds. One grid point flown
-with one seed is a *cell*: one run, one row of ``cells.csv``.
+with one seed is a *cell*: one run, one row of ``cells.csv``. A law without a super-twisting step (``smc``,
+``pid``, one's own) has no discretization to step: its points of each scheme are one cell, its discretization
+empty (:data:`~bridge.sweep.grid.NO_SCHEME`).
 
 Delay, jitter, loss and burst length apply to **both** link directions (``[link.up]``,
 controller -> vehicle, and ``[link.down]``, vehicle -> controller) with the same values; the

@@ -29,6 +29,7 @@ from bridge.sweep.cells import (
     SWEEP_JSON,
     UNRECORDED,
     CellsFile,
+    one_per_cell,
     read_cells,
     read_sweep_json,
     row_key,
@@ -258,7 +259,7 @@ def _open_dir(spec: Sweep, out: str | Path | None, resume: bool, overwrite: bool
             _check_mission_toml(path, recorded, spec)
             check_inputs(inputs, meta)
             rows = read_cells(path / CELLS_CSV, classes=spec.classes, meta=old) if (path / CELLS_CSV).exists() else []
-            kept = [r for r in rows if r["outcome"] != "error"]
+            kept = one_per_cell(r for r in rows if r["outcome"] != "error")  # (an older sweep's smc: once per scheme)
             return path, kept, engines if kept else []
         if path.exists() and any(path.iterdir()):
             raise ConfigError(f"--resume: {path} holds no {SWEEP_JSON}; not a sweep directory")

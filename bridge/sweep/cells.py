@@ -27,7 +27,8 @@ from bridge.record.metrics import errors, ripple_rms  # ripple_rms lives with th
 from bridge.record.runlog import LineWriter, Run
 from bridge.swarm import SEVERITY, FleetRun
 from bridge.sweep.classes import Classes, classify
-from bridge.sweep.grid import AXES, Cell
+from bridge.sweep.grid import AXES, NO_SCHEME, Cell
+from controller.law import DISCRETIZED
 from params import ConfigError, check_depth, read_regular_file
 from params.text import one_line
 
@@ -286,7 +287,7 @@ def read_cells(path: str | Path, legacy: Mapping[str, Any] | None = None, classe
                                  f"{row['rms']} m, ripple_u2 {row['ripple_u2']} N: {classify(row, classes)!r} by "
                                  f"the sweep's classes)")
             row = {c: row[c] if c in row else legacy[c] for c in COLUMNS} if legacy is not None else row
-            outside = next((a for a in grid if row[a] not in grid[a]), None)
+            outside = next((a for a in grid if not _in_grid(row, a, grid[a])), None)
             if outside is not None:  # hand-edited, or another sweep's: never counted as one of this grid's cells
                 raise ValueError(f"{outside} {_shown(row[outside])} is not in the sweep's grid (its {SWEEP_JSON}: "
                                  f"{', '.join(_shown(v) for v in grid[outside][:10])}"
@@ -302,7 +303,27 @@ def read_cells(path: str | Path, legacy: Mapping[str, Any] | None = None, classe
 
 
 def _shown(v: Any) -> str:
-    return f"{v:g}" if isinstance(v, float) else str(v)[:40]
+    return f"{v:g}" if isinstance(v, float) else str(v)[:40] or "(empty)"
+
+
+def _in_grid(row: Mapping[str, Any], axis: str, values: Sequence[Any]) -> bool:
+    """Whether a row's value of ``axis`` is one of its grid's ``values``; a law without a super-twisting step's
+    discretization also where empty (:data:`NO_SCHEME`: what its cells carry), and never so for ``bsst``'s."""
+    if axis == "discretization" and row.get("controller") not in DISCRETIZED and row[axis] == NO_SCHEME:
+        return True
+    return row[axis] in values
+
+
+def one_per_cell(rows: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """``rows`` as the cells a sweep flies now: a row of a law without a super-twisting step that names a
+    discretization (an older sweep's: it flew such a law once per scheme, the same flight under each label, until the
+    third wave's thirty-ninth session) relabelled :data:`NO_SCHEME`, and only the first row of each cell kept."""
+    out: dict[tuple[Any, ...], dict[str, Any]] = {}
+    for r in rows:
+        if r["controller"] not in DISCRETIZED and r["discretization"] != NO_SCHEME:
+            r = {**r, "discretization": NO_SCHEME}
+        out.setdefault(row_key(r), dict(r))
+    return list(out.values())
 
 
 def grid_values(meta: Mapping[str, Any]) -> dict[str, list[Any]] | None:

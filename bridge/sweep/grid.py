@@ -72,6 +72,9 @@ NAME_CHOICES = {"estimator": ESTIMATOR_KINDS, "turbulence": TURBULENCE, "discret
 MODES = ("offline", "lockstep")
 
 
+NO_SCHEME = ""  # the discretization of a cell whose law has no super-twisting step (cells.csv: an empty field)
+
+
 @dataclass(frozen=True)
 class Grid:
     """The axes of a sweep. An empty axis is not swept: the mission's own value is flown.
@@ -83,7 +86,8 @@ class Grid:
     of the mission's sensor set (every sigma times it; 0 = exact sensors, still sampled and late).
     ``wind_mps``: steady wind speeds (m/s, from the mission's ``[wind] from_deg``); ``turbulence``: Dryden
     levels (``none``, ``light``, ``moderate``, ``severe``). ``discretization``: how ``bsst`` steps its
-    super-twisting step (``explicit``, ``implicit``; docs/law.md; the other laws fly the same under both).
+    super-twisting step (``explicit``, ``implicit``; docs/law.md; a law without one flies one cell per point, its
+    discretization :data:`NO_SCHEME`).
     ``vehicles``: fleet sizes (whole numbers, 1-64), each flown offline in a ``line:2`` formation
     (:data:`FLEET_FORMATION`; 1: the mission as it flies alone).
     ``seeds``: how many seeds per grid point (mission seed, +1, ...) or the seeds themselves.
@@ -214,8 +218,13 @@ class Cell:
     wind_mps: float = 0.0
     turbulence: str = "none"
     weather: tuple[str, ...] = ()
-    discretization: str = DEFAULT_DISCRETIZATION  # always laid over the mission, as the law and the rate are
+    discretization: str = DEFAULT_DISCRETIZATION  # laid over the mission, as the law and the rate are; NO_SCHEME for
+    # a law without a super-twisting step (set so below, whatever was given: it has none to step)
     vehicles: int = 1  # how many vehicles fly the cell together (more than 1: a fleet, FLEET_FORMATION)
+
+    def __post_init__(self) -> None:
+        if self.controller not in DISCRETIZED:  # (smc, pid, a law of one's own: one cell, not one per scheme)
+            object.__setattr__(self, "discretization", NO_SCHEME)
 
     def key(self) -> tuple[Any, ...]:
         """What identifies the cell's row in ``cells.csv``."""
@@ -258,21 +267,35 @@ def mission_value(mission: Mission, axis: str) -> Any:
 
 
 def cells(mission: Mission, grid: Grid) -> list[Cell]:
-    """Every cell of the sweep, in grid order (axes in :data:`AXES` order, seed fastest)."""
+    """Every cell of the sweep, in grid order (axes in :data:`AXES` order, seed fastest); a law without a
+    super-twisting step once per point of the other axes, not once per discretization (its cells' :data:`NO_SCHEME`)."""
     given = set(grid.swept())
     own = {a: mission_value(mission, a) for a in AXES}
     lists = [getattr(grid, a) or (own[a],) for a in AXES]
     link = tuple(a for a in LINK_AXES if a in given)
     seeds = grid.seed_list(mission)
-    out = []
+    out: dict[tuple[Any, ...], Cell] = {}  # by key: smc's explicit and implicit points are one cell
     for values in product(*lists):
         v = dict(zip(AXES, values, strict=True))
         # a vehicle axis overrides only where it differs from the mission's own value: the same flight, and
         # a grid of 'truth' cells stays one the batch engine builds from one prepare() per law and rate
         sensing = tuple(a for a in SENSING_AXES if a in given and v[a] != own[a])
         weather = tuple(a for a in WEATHER_AXES if a in given and v[a] != own[a])
-        out += [Cell(**v, seed=s, link=link, sensing=sensing, weather=weather) for s in seeds]
-    return out
+        for s in seeds:
+            c = Cell(**v, seed=s, link=link, sensing=sensing, weather=weather)
+            out.setdefault(c.key(), c)
+    return list(out.values())
+
+
+def grid_size(values: Mapping[str, Sequence[Any]]) -> int:
+    """How many cells a grid of these values per axis (and ``seed``: the seeds) makes, without making them (a
+    ``Sweep``'s, or its ``sweep.json``'s ``axes``): the product of their lengths, where a law without a super-twisting
+    step counts once whatever the discretizations (:func:`cells`)."""
+    n = 1
+    for a, v in values.items():
+        n *= len(v) if a not in ("controller", "discretization") else 1
+    laws, schemes = values.get("controller") or ("bsst",), len(values.get("discretization") or ()) or 1
+    return n * sum(schemes if law in DISCRETIZED else 1 for law in laws)
 
 
 def cell_overrides(cell: Cell) -> Overrides:
@@ -285,7 +308,7 @@ def cell_overrides(cell: Cell) -> Overrides:
         weather["wind"] = {"speed_mps": cell.wind_mps}  # over [wind]: its direction (from_deg) stays
     if "turbulence" in cell.weather:
         weather["turbulence"] = cell.turbulence
-    scheme = cell.discretization if cell.controller in DISCRETIZED else None
+    scheme = cell.discretization or None  # (NO_SCHEME: a law without a super-twisting step)
     return Overrides(controller=cell.controller, discretization=scheme, rate_hz=cell.rate_hz, seed=cell.seed, link=link,
                      **{a: getattr(cell, a) for a in cell.sensing}, **weather)  # estimator, noise; wind, turbulence
 

@@ -47,7 +47,8 @@ from bridge.sweep.cells import (
     seeds_alike,
 )
 from bridge.sweep.classes import CLASSES, Classes, classify, thresholds_text
-from bridge.sweep.grid import AXES, LINK_AXES, NAME_AXES, SHORT
+from bridge.sweep.grid import AXES, LINK_AXES, NAME_AXES, NO_SCHEME, SHORT
+from bridge.sweep.grid import grid_size as cell_count
 from controller.law import discretization_problem
 from params import ConfigError, unreachable
 from plant.wind import TURBULENCE
@@ -103,6 +104,13 @@ def pairs(rows: Sequence[Mapping[str, Any]], swept: Sequence[str]) -> list[tuple
         other = next(a for a in ("loss_pct", "delay_ms", *NUMERIC_AXES) if a != varied[0])
         return [(varied[0], other)]
     return []
+
+
+def _schemeless(rows: Sequence[Mapping[str, Any]]) -> str:
+    """What the ``discretization`` line adds for the laws flown without a scheme (an empty ``discretization``:
+    no super-twisting step, one cell per point): their names; nothing when there are none."""
+    laws = _values([r for r in rows if r["discretization"] == NO_SCHEME], "controller")
+    return f"none for {', '.join(laws)} (no super-twisting step: one cell per point)" if laws else ""
 
 
 def _label(axis: str) -> str:
@@ -190,7 +198,7 @@ def check_report_files(path: Path, plots: bool, said: str | None = None, fix: st
 def grid_size(meta: Mapping[str, Any]) -> int | None:
     """How many cells the sweep's grid has (its ``sweep.json``'s axes and seeds; None where it does not say)."""
     grid = grid_values(meta)
-    return None if grid is None else math.prod(len(v) for v in grid.values())
+    return None if grid is None else cell_count(grid)
 
 
 def incomplete(path: Path, rows: Sequence[Any], meta: Mapping[str, Any]) -> str | None:
@@ -249,9 +257,10 @@ def write_report(path: Path, rows: Sequence[Mapping[str, Any]], meta: Mapping[st
     lines += engines_note(meta)
     lines += _seeds_note(rows, meta)
     for a in MAP_AXES:
-        vals = _values(rows, a)
+        vals = [v for v in _values(rows, a) if a != "discretization" or v != NO_SCHEME]
         unit = f" {UNITS[a]}" if a in UNITS else ""
-        lines.append(f"- `{a}`: {', '.join(_fmt(v) for v in vals)}{unit}" + (" (swept)" if a in swept else ""))
+        said = ", ".join(_fmt(v) for v in vals) + unit + (" (swept)" if a in swept and vals else "")
+        lines.append(f"- `{a}`: " + "; ".join(filter(None, (said, _schemeless(rows) if a == "discretization" else ""))))
     if any(r["estimator"] != "truth" for r in rows):
         lines += [f"- sensor set: `{sensor_set(meta)}` (the noise scale multiplies each of its sigmas; the "
                   "estimator `truth` flies the true state and ignores them)"]
@@ -271,7 +280,8 @@ def write_report(path: Path, rows: Sequence[Mapping[str, Any]], meta: Mapping[st
         p = Point(mine, classes)
         counts = [sum(1 for r in mine if classify(r, classes) == k) for k in CLASSES]
         med = f"{p.rms:.3g}" if p.rms is not None else "n/a"
-        name = f"{c} ({d})" if len(schemes) > 1 else c
+        named = len(schemes) - (NO_SCHEME in schemes) > 1  # (a law without a scheme: its name alone)
+        name = f"{c} ({d})" if named and d != NO_SCHEME else c
         lines.append(f"| {name} | {len(mine)} | " + " | ".join(map(str, counts)) + f" | {med} |")
     maps: list[Path] = []
     files = controller_files(controllers)
@@ -429,7 +439,8 @@ def heat_map_figure(rows: Sequence[Mapping[str, Any]], a: str, b: str, controlle
     import numpy as np  # lazy: only the heat maps need arrays
     from matplotlib.colors import LogNorm  # lazy: as matplotlib
 
-    av, bv = _values(rows, a), _values(rows, b)
+    shown = [r for r in rows if r["controller"] in controllers]  # (a law's own map: its own values, e.g. smc's one
+    av, bv = _values(shown, a), _values(shown, b)  # empty discretization, not bsst's schemes too)
     cmap = matplotlib.colormaps["viridis"].with_extremes(bad="#bbbbbb")
     w, h = 2.4 + 1.5 * len(bv), 1.9 + 0.8 * len(av)
     fig, axs = plt.subplots(1, len(controllers), figsize=(w * len(controllers), h), squeeze=False,

@@ -38,6 +38,7 @@ from bridge.sweep.grid import (
     cell_flight,
     cell_overrides,
     cells,
+    grid_size,
     link_trace,
     mission_value,
     noise_problem,
@@ -85,11 +86,9 @@ class Sweep:
             raise ConfigError(f"max_cells: must be a positive integer, got {self.max_cells!r}")
 
     def cell_count(self) -> int:
-        """How many cells the grid makes (without making them): the product of the axes' lengths and the seeds."""
-        n = len(self.grid.seed_list(self.mission))
-        for a in AXES:
-            n *= len(getattr(self.grid, a)) or 1
-        return n
+        """How many cells the grid makes (without making them): the product of the axes' lengths and the seeds, a
+        law without a super-twisting step once whatever the discretizations (bridge.sweep.grid.grid_size)."""
+        return grid_size({**{a: _axis_values(self, a) for a in AXES}, "seed": self.grid.seed_list(self.mission)})
 
     def check_size(self) -> None:
         """Refuse a grid of more than ``max_cells`` (default :data:`MAX_CELLS`) cells, saying how many and why."""
