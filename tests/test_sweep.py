@@ -13,6 +13,7 @@ import json
 import math
 import multiprocessing as mp
 import os
+import re
 import shutil
 import signal
 import stat
@@ -161,6 +162,40 @@ def test_dask_local_cluster_gives_the_same_rows(mission_file: Path, local: tuple
     dask_rows = read_cells(tmp_path / "dask" / CELLS_CSV)
     strip = [{k: v for k, v in r.items() if k != "class"} for r in local[1]]  # the local run used LOOSE classes
     assert [{k: v for k, v in r.items() if k != "class"} for r in dask_rows] == strip
+
+
+def test_a_relative_law_file_is_the_callers_working_directorys_at_each_sweep(tmp_path: Path,
+                                                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    """A relative law file given to a sweep from Python is the one in the caller's working directory at the call,
+    made absolute in the sweep's process before any cell leaves it: a second sweep from another directory flies that
+    directory's file (its own gains), never the first's, and one from a directory without it is refused naming it.
+    Until the third wave's thirty-ninth session a worker resolved it against its own directory: a process-based Dask
+    cluster's (where it was started; a local pool's worker starts in the caller's), so the second sweep flew the
+    first directory's law."""
+    distributed = pytest.importorskip("distributed")
+    source = (ROOT / "examples" / "my_law.py").read_text()
+    for name, gains in (("a", "4.0, 4.0"), ("b", "1.0, 2.0")):
+        (tmp_path / name).mkdir()
+        law = source.replace("KP_POS, KD_POS = 4.0, 4.0", f"KP_POS, KD_POS = {gains}")  # (b: a slower position loop)
+        (tmp_path / name / "law.py").write_text(law)
+    (tmp_path / "c").mkdir()
+    grid = Grid(controller=("law.py:MyLaw",))
+    rms = {}
+    monkeypatch.chdir(tmp_path / "a")  # the cluster's workers start here
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                  protocol="tcp://", dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        for name in ("a", "b"):
+            monkeypatch.chdir(tmp_path / name)
+            row = sweep(BRIEF, grid, client=client, report=False)[0]
+            assert row["controller"] == "law.py:MyLaw" and row["outcome"] == "completed", row  # (as given)
+            rms[name] = row["rms"]
+            assert rms[name] == simulate(BRIEF, controller="law.py:MyLaw", plots=False).rms, name
+        monkeypatch.chdir(tmp_path / "c")
+        missing = f"--controller law.py:MyLaw: no file {tmp_path / 'c' / 'law.py'}"  # (named as given)
+        with pytest.raises(ConfigError, match=re.escape(missing)):
+            sweep(BRIEF, grid, client=client, report=False)
+    assert rms["a"] != rms["b"]
 
 
 def test_three_controllers_in_one_report(mission_file: Path, tmp_path: Path) -> None:

@@ -18,19 +18,20 @@ so a value a mission accepts is accepted here and the other way round. The wind 
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from itertools import product
 from numbers import Real
+from pathlib import Path
 from typing import Any
 
 from bridge.autopilot.estimator import ESTIMATOR_KINDS
 from bridge.core.flight import Flight, prepare
 from bridge.core.overrides import Overrides
 from bridge.link.model import DIRECTIONS, NUMBER_RANGES, TRACE_EXCLUSIVE
-from controller.law import DISCRETIZED
+from controller.law import DISCRETIZED, LawError
 from missions import MISSION_RANGES, Mission
 from missions.fleet import FLEET_RANGES
-from missions.mission import DEFAULT_DISCRETIZATION, DISCRETIZATIONS, law_spec_problem
+from missions.mission import DEFAULT_DISCRETIZATION, DISCRETIZATIONS, law_spec_from, law_spec_problem
 from params import ConfigError
 from plant.profiles import NOISE_SCALE_RANGE
 from plant.sensors import SIGMA_KEYS, SensorConfig
@@ -221,10 +222,19 @@ class Cell:
     discretization: str = DEFAULT_DISCRETIZATION  # laid over the mission, as the law and the rate are; NO_SCHEME for
     # a law without a super-twisting step (set so below, whatever was given: it has none to step)
     vehicles: int = 1  # how many vehicles fly the cell together (more than 1: a fleet, FLEET_FORMATION)
+    # the law as the cell flies it: a relative law file made absolute against the working directory where the cell is
+    # made (the caller's, in the sweep's own process), never a worker's (a Dask cluster's started elsewhere); the
+    # rows and the key keep ``controller`` as given
+    law: str = field(init=False, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         if self.controller not in DISCRETIZED:  # (smc, pid, a law of one's own: one cell, not one per scheme)
             object.__setattr__(self, "discretization", NO_SCHEME)
+        try:
+            law = law_spec_from(self.controller, Path("."))
+        except OSError:  # no working directory (removed): a relative file is no one's; the flight names it missing
+            law = self.controller
+        object.__setattr__(self, "law", law)
 
     def key(self) -> tuple[Any, ...]:
         """What identifies the cell's row in ``cells.csv``."""
@@ -309,7 +319,7 @@ def cell_overrides(cell: Cell) -> Overrides:
     if "turbulence" in cell.weather:
         weather["turbulence"] = cell.turbulence
     scheme = cell.discretization or None  # (NO_SCHEME: a law without a super-twisting step)
-    return Overrides(controller=cell.controller, discretization=scheme, rate_hz=cell.rate_hz, seed=cell.seed, link=link,
+    return Overrides(controller=cell.law, discretization=scheme, rate_hz=cell.rate_hz, seed=cell.seed, link=link,
                      **{a: getattr(cell, a) for a in cell.sensing}, **weather)  # estimator, noise; wind, turbulence
 
 
@@ -320,8 +330,13 @@ def noiseless(sensors: SensorConfig) -> bool:
 
 def cell_flight(mission: Mission, cell: Cell) -> Flight:
     """The parts a cell flies, by the one path from a mission and its overrides (its link values named as the
-    grid's axes where one changes nothing: bridge.sweep.spec)."""
-    return prepare(mission, cell_overrides(cell), laid_named=True)
+    grid's axes where one changes nothing: bridge.sweep.spec); a law that cannot be built named as it was given."""
+    try:
+        return prepare(mission, cell_overrides(cell), laid_named=True)
+    except LawError as exc:  # prepare names the override it was handed: the law made absolute (Cell.law)
+        if exc.where != f"--controller {cell.law}" or cell.law == cell.controller:
+            raise
+        raise LawError(exc.spec, exc.what, f"--controller {cell.controller}") from None
 
 
 def link_trace(flight: Flight) -> str | None:

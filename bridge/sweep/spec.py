@@ -198,6 +198,7 @@ def _axis_values(s: Sweep, axis: str) -> list[Any]:
 
 def _replace_cell(c: Cell, **kw: Any) -> Cell:
     d = asdict(c)
+    d.pop("law")  # (made again from the controller: Cell.__post_init__)
     d.update(kw)
     d["link"] = tuple(d["link"])
     d["sensing"] = tuple(d["sensing"])
