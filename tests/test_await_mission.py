@@ -643,7 +643,10 @@ def test_the_link_model_acts_on_the_transfer_in_lockstep_and_the_flight_is_offli
     station's MISSION_START: the download crosses the mission's link model (seeded: requests are lost and asked
     again), and the flight that follows is offline's with the same link (its model starts fresh at the arm) and
     the same scheduled change, ≤ 1e-4 m, as many rows; the change was sent at mission time 1 s (time 0: the
-    flight's first step, the controller's arm once it has the mission) and confirmed."""
+    flight's first step, the controller's arm once it has the mission) and confirmed. The arm follows the download
+    at once: the flight's link (controller.tlog) opens with it, no HEARTBEAT of the vehicle's read before it. Until
+    the third wave's thirty-ninth session the flight waited for one, the vehicle's next at 1 Hz (the download's
+    link had heard it already; on the same source port the vehicle sends none at once): up to 1 s a session."""
     items = _small_plan_items()
     out = tmp_path / "lossy"
     with instance_slot() as n:
@@ -664,6 +667,12 @@ def test_the_link_model_acts_on_the_transfer_in_lockstep_and_the_flight_is_offli
     assert t["started_by"] == {"command": START_COMMAND, "by": f"255:190 127.0.0.1:{GCS_PORT + n} gcs"}, t
     [change] = summary["param_at"]
     assert change["sent_t"] == change["t_s"] == 1.0 and change["confirmed"], change
+    log = mavutil.mavlink_connection(str(out / "controller.tlog"), dialect="common")
+    before_arm = []
+    while (m := log.recv_match()) is not None and not (m.get_type() == "COMMAND_LONG"
+                                                       and m.command == M.MAV_CMD_COMPONENT_ARM_DISARM):
+        before_arm.append((m.get_srcSystem(), m.get_type()))
+    assert m is not None and (target[0], "HEARTBEAT") not in before_arm, before_arm
     (tmp_path / "small.waypoints").write_text(SMALL_PLAN)
     offline = simulate(tmp_path / "small.waypoints", plots=False, link={"loss_pct": 30},
                        param_at=[parse_change("1:COM_OF_LOSS_T=1")])

@@ -10,9 +10,10 @@ Out: one actuator target per state answered, stamped with its ``time_usec``: HIL
      ``controller.tlog``, ``controller.bin`` rows; reports on stdout (:mod:`bridge.nodes.report`); the outcome
 
 It flies a mission against any vehicle that keeps the contract of docs/design.md, "The MAVLink contract": it
-sends its own HEARTBEAT, waits for the vehicle's, arms it (COMMAND_LONG ARM_DISARM, until
-ACKed), answers each ODOMETRY with the law's actuator target stamped with the state's
-time_usec, and at the end of the mission disarms it (forced: it may be in the air) and
+sends its own HEARTBEAT, waits for the vehicle's (after an awaited mission's download: none, the vehicle
+it came from is armed at once), arms it (COMMAND_LONG ARM_DISARM, until ACKed), answers each ODOMETRY with
+the law's actuator target stamped with the state's time_usec, and at the end of the mission disarms it
+(forced: it may be in the air) and
 returns its outcome: ``completed``, ``failsafe``, ``diverged`` or ``aborted``.
 
 - **lockstep** (default): event-driven. The state of step k (t_k = k / rate_hz, k from

@@ -43,8 +43,9 @@ class Offboard(RealtimeFlying):
     """One offboard controller flying one mission; :meth:`run` returns the outcome."""
 
     def __init__(self, flight: Flight, cfg: OffboardConfig, out: Path | None = None,
-                 status: Callable[[Report], None] | None = None) -> None:
+                 status: Callable[[Report], None] | None = None, vehicle: tuple[int, int] | None = None) -> None:
         self.flight = flight
+        self._known = vehicle  # (sysid, compid) heard on the mission's download link (--await-mission), or None
         m = flight.mission
         self.steps = m.steps
         self.ctl = flight.make_controller()
@@ -129,6 +130,11 @@ class Offboard(RealtimeFlying):
             self._serve(min(deadline, self._next_house))
 
     def _connect(self) -> bool:
+        if self._known is not None:
+            # the vehicle the mission came from, heard a moment ago: its arm's ACK says it is still there. On the
+            # same source port (bsst sitl pins it) the vehicle sees no new controller, so no HEARTBEAT comes at once
+            # (bridge.nodes.vehicle.receiver): waiting for one cost up to its 1 Hz period before every arm
+            (self.vsys, self.vcomp), self._heard = self._known, True
         deadline = time.monotonic() + self.cfg.connect_timeout_s
         while self.vsys is None or not self._heard:
             if self.stopping:

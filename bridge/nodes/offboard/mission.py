@@ -13,7 +13,8 @@ Out: REQUEST_MESSAGE (MISSION_CURRENT), MISSION_REQUEST_LIST, MISSION_REQUEST_IN
      ``mission.toml`` (the mission as flown, resolved: ``kind = "smooth"``, its ``[geofence]`` and ``[rally]``
      those the vehicle held at the start); each download's
      :class:`~bridge.mavlink.missionitems.TransferStats` (items, requests, requests again, wall time s, result):
-     the mission's, and the fence's and the rally points' under ``fence`` and ``rally``
+     the mission's, and the fence's and the rally points' under ``fence`` and ``rally``; the vehicle's (sysid,
+     compid) it came from, which the flight arms without waiting for another HEARTBEAT
 
 The download is a ground station's (the vehicle is PX4's server, :mod:`bridge.nodes.vehicle.mission`: it sends
 nothing unasked): MISSION_REQUEST_LIST until MISSION_COUNT comes, then MISSION_REQUEST_INT for each item in
@@ -83,6 +84,7 @@ class Fetched:
     why: str = ""
     states: dict[str, Any] = field(default_factory=dict)  # the vehicle's states read while waiting (Stats' keys)
     zone_figures: dict[str, TransferStats] = field(default_factory=dict)  # the fence's and rally points' (begun)
+    vehicle: tuple[int, int] | None = None  # the vehicle's (sysid, compid) heard on this link: the flight arms it
 
     def figures(self) -> dict[str, Any]:
         """The downloads' figures as the controller says them (summary.json ``mission_transfer``,
@@ -301,7 +303,8 @@ def _fetch(link: MissionLink, flight: Flight, out: Path | None, empty: TransferS
         link.event("mission", f"downloaded {st.items} items in {st.duration_s:.2f} s ({st.requests} requests, "
                               f"{st.re_requests} again), a fence of {len(zones[FENCE])} items and "
                               f"{len(zones[RALLY])} rally points: {new.mission.duration_s:.2f} s to fly")
-        return Fetched(new, st, zone_figures=figures)
+        assert link.vsys is not None  # (await_start returns once the vehicle's HEARTBEAT is heard)
+        return Fetched(new, st, zone_figures=figures, vehicle=(link.vsys, link.vcomp))
     finally:
         link.stop_reading()  # the states already on the socket are read (delivered); the time it stopped said
         link.ep.close()
@@ -309,16 +312,16 @@ def _fetch(link: MissionLink, flight: Flight, out: Path | None, empty: TransferS
 
 
 def mission_flight(flight: Flight, cfg: OffboardConfig, out: Path | None,
-                   emit: Callable[[Report], None]) -> tuple[Flight | None, dict[str, Any]]:
+                   emit: Callable[[Report], None]) -> tuple[Flight | None, dict[str, Any], tuple[int, int] | None]:
     """``bsst controller --await-mission`` before its flight: the mission's flight (its ``mission`` report
-    said) and the download's figures; None when there is none to fly (its ``stats`` and ``done`` said, why on
-    stderr: the controller then exits 1)."""
+    said), the download's figures and the vehicle's (sysid, compid) it came from; None when there is none to fly
+    (its ``stats`` and ``done`` said, why on stderr: the controller then exits 1)."""
     got = fetch_mission(flight, cfg, out, emit)
     transfer = got.figures()
     if got.flight is None:
         emit(Stats({"mission_transfer": transfer, **got.states}))
         emit(Done("aborted", False, got.why))
         sys.stderr.write(f"bsst controller: aborted: {got.why}\n")
-        return None, transfer
+        return None, transfer, None
     emit(MissionLoaded(got.flight.mission.name, got.transfer.items, transfer))
-    return got.flight, transfer
+    return got.flight, transfer, got.vehicle

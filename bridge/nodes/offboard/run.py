@@ -26,15 +26,15 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
     leaving it), else 1 (failsafe, diverged, aborted, or lockstep left)."""
     path = side_dir(out, ("controller.tlog", "controller.bin"), overwrite) if out is not None else None
     emit = report_printer()
-    transfer = None
+    transfer = vehicle = None
     if cfg.await_mission:  # a ground station's mission: waited for, downloaded, flown (bridge.nodes.offboard.mission)
         from bridge.nodes.offboard.mission import mission_flight  # lazy: only for --await-mission
 
-        got, transfer = mission_flight(flight, cfg, path, emit)
+        got, transfer, vehicle = mission_flight(flight, cfg, path, emit)
         if got is None:
             return 1
         flight = got
-    node = Offboard(flight, cfg, path, emit)
+    node = Offboard(flight, cfg, path, emit, vehicle)
     on_stop_signals(node.stop)
     outcome = node.run()
     unconfirmed = node.unconfirmed_params()
