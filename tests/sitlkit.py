@@ -286,6 +286,18 @@ class MavProxy(Proc):
         """MAVProxy has heard the vehicle (its ``online system`` line, or ``Detected vehicle``)."""
         return self.wait_line(lambda s: "online system" in s or "Detected vehicle" in s, timeout)
 
+    def stop(self, timeout: float = 5.0) -> int:
+        """End MAVProxy as a user at its prompt does, Ctrl-D: its stdin closed, its input loop reads EOF, unloads
+        its modules and exits 1 (MAVProxy 1.8's end, whatever ended it); else (not within ``timeout``) as
+        :meth:`Proc.stop`. ``exit`` is not a command unless ``set requireexit True``, and then, as SIGTERM, only
+        sets the flag its main thread reads between lines of stdin: blocked reading the next, it never looked (a
+        SIGTERM within ~50 ms of a typed line, before the line was read, ended it; one later, 5 s to the SIGKILL)."""
+        with contextlib.suppress(OSError):  # (BrokenPipeError: it has ended already)
+            self.p.stdin.close()  # type: ignore[union-attr]
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            self.p.wait(timeout=timeout)
+        return super().stop(timeout)
+
 
 def csv_rows(path: Path) -> int:
     """Complete data rows of a CSV (``trace.csv``) so far (0 if it does not exist yet)."""

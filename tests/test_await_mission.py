@@ -704,7 +704,6 @@ def test_mavproxy_loads_and_starts_a_waypoint_file(tmp_path):
             mp.say("long MISSION_START 0 0")
             mp.wait_line(lambda s: "Got COMMAND_ACK: MISSION_START: ACCEPTED" in s, timeout=15)
             assert sitl.p.wait(timeout=120) == 0, "\n".join(sitl.lines[-30:])
-            mp.say("exit")
         finally:
             mp.stop()
             sitl.stop()
@@ -771,7 +770,6 @@ def test_mavproxy_through_a_lossy_slow_link(tmp_path):
             _retype(mp, "long MISSION_START 0 0", lambda s: "MISSION_START: ACCEPTED" in s or "Mode MISSION" in s
                     or "mission: start requested" in s, 3.0, 6)
             assert sitl.p.wait(timeout=120) == 0, "\n".join(sitl.lines[-30:])
-            mp.say("exit")
         finally:
             mp.stop()
             sitl.stop()

@@ -143,7 +143,6 @@ def test_mavproxys_ftp_module_lists_and_gets_the_events_file(tmp_path: Path) -> 
             mp.wait_line(lambda s: "all_events.json" in s, start=mark)
             mark = mp.say("ftp get /etc/extras/all_events.json events.json")
             mp.wait_line(lambda s: "Wrote" in s and "events.json" in s, start=mark, timeout=30)
-            mp.say("exit")
         finally:
             mp.stop()
             sitl.stop()

@@ -751,7 +751,6 @@ def test_mavproxy_params_and_modes(tmp_path):
             set_mode("LAND")
             v.wait_event(lambda s: "disarmed: landed" in s, timeout=15)
             mp.wait_line(_from(mark, lambda s: s.strip().endswith("DISARMED")), timeout=10)
-            say("exit")
         finally:
             mp.stop()
             assert v.stop() == 0

@@ -708,7 +708,6 @@ def test_mavproxy_wp_load_and_list(tmp_path):
             mp.wait_line(lambda s: "Got MISSION_ACK: TYPE_MISSION: ACCEPTED" in s, timeout=15)
             mp.say("wp list")
             saved = mp.wait_line(lambda s: s.startswith("Saved 6 waypoints to "), timeout=15)
-            mp.say("exit")
         finally:
             mp.stop()
             assert v.stop() == 0

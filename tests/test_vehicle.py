@@ -421,7 +421,10 @@ def test_an_answer_to_a_wall_clock_state_after_lockstep_engages_again_is_counted
 
 def test_mavproxy_arms_through_stdin(tmp_path):
     """MAVProxy, unmodified, as the issue runs it: heartbeat and attitude seen, and
-    ``arm throttle`` typed into it is ACKed and arms the vehicle."""
+    ``arm throttle`` typed into it is ACKed and arms the vehicle. Stopped, it ends itself (exit 1, its modules
+    unloaded: its stdin closed, tests/sitlkit.py ``MavProxy.stop``); until the third wave's thirty-ninth session
+    the kit typed ``exit`` (no command to it) and sent SIGTERM (a flag it reads between lines of stdin), and a
+    MAVProxy that had read the line first was SIGKILLed 5 s later."""
     with instance_slot() as n:
         v = _vehicle(n, tmp_path / "v")
         mp = MavProxy(f"udpin:127.0.0.1:{GCS_PORT + n}", tmp_path)
@@ -440,10 +443,10 @@ def test_mavproxy_arms_through_stdin(tmp_path):
             say("arm throttle")
             mp.wait_line(lambda s: "COMPONENT_ARM_DISARM: ACCEPTED" in s, timeout=15)
             mp.wait_line(lambda s: s.strip().endswith("ARMED") and "DISARMED" not in s, timeout=15)
-            say("exit")
         finally:
-            mp.stop()
+            stopped = mp.stop()
             assert v.stop() == 0
+    assert stopped == 1, "\n".join(mp.lines[-20:])  # (-9: killed)
     v.wait_event(lambda s: s.startswith("armed: armed"))
 
 
