@@ -1531,7 +1531,10 @@ def test_a_crash_of_a_ground_stations_flight_before_an_awaited_mission_ends_the_
     and refuses every later arm and start, so the controller stops waiting for a mission and the session ends by
     itself, its outcome the crash (ended by the plant), exit 1, every record kept: the crash in events.log, the
     hop's rows in vehicle.bin, its tlog. (Until the third wave's thirty-ninth session the session waited on, with no
-    time limit, for a start the vehicle refused; a Ctrl-C then ended it ``aborted``, by the user.)"""
+    time limit, for a start the vehicle refused; a Ctrl-C then ended it ``aborted``, by the user.) With no trace row
+    the events stay on the vehicle's clock, in time order, the session's closing notes last, at the latest of them, in
+    summary.json and events.log alike (until the third wave's thirty-ninth session the notes were at t=0, before the
+    hop they summed up)."""
     out = tmp_path / "run"
     with instance_slot() as n:
         sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--out", str(out), "--no-plots",
@@ -1553,6 +1556,14 @@ def test_a_crash_of_a_ground_stations_flight_before_an_awaited_mission_ends_the_
     gave_up = next(e for e in summary["events"] if e["kind"] == "aborted" and e["source"] == "controller")
     assert gave_up["text"].startswith("no mission can fly: its plant ended the flight") and gave_up["t"] >= crash["t"]
     assert {"TAKEOFF", "LAND"} <= {i["what"].split()[0] for i in summary["interventions"] if i["kind"] == "mode"}
-    assert f"t={crash['t']:.3f} crashed: hit the ground at " in (out / "events.log").read_text()
+    logged = (out / "events.log").read_text()
+    assert f"t={crash['t']:.3f} crashed: hit the ground at " in logged
+    events = summary["events"]  # the closing notes last ("ended" the first), at the latest event's time
+    notes = events[next(i for i, e in enumerate(events) if e["kind"] == "ended"):]
+    assert {e["source"] for e in notes} == {"session"} and {e["t"] for e in notes} == {events[-1]["t"]}, events
+    assert events[-1]["t"] >= gave_up["t"] >= crash["t"] > 0.0  # on the vehicle's clock: no mission's time 0
+    said = [line.split(" ", 1) for line in logged.splitlines()]
+    times = [float(t.removeprefix("t=")) for t, _ in said]
+    assert times == sorted(times) and said[-len(notes)][1].startswith("ended: crashed"), logged
     rows = read_half(out / "vehicle.bin")
     assert len(rows["k"]) > 250 and (out / "vehicle.tlog").stat().st_size > 0  # the hop's seconds, kept

@@ -394,6 +394,22 @@ def test_a_failsafe_or_a_breach_of_a_ground_stations_flight_before_the_mission_i
     assert s["ended_by"] == {"who": "vehicle", "how": f"failsafe at t=0.800 s: {own.text}"}, s["ended_by"]
 
 
+def test_the_closing_notes_of_a_session_with_no_trace_row_come_after_its_events() -> None:
+    """No trace row (no mission's time 0: a session stopped before the start, a ground station's own flight before
+    it): the events are on the vehicle's clock, and the session's closing notes are at the latest of them, last.
+    (Until the third wave's thirty-ninth session they were at t=0, before the flight they summed up.)"""
+    vehicle, controller = ends(rc=1, outcome="aborted", reason="interrupted")
+    hop = [RunEvent(0.0, "started", "vehicle pid 1", "session"),
+           RunEvent(1.9, "armed", "armed, TAKEOFF", "vehicle", GCS, mode="TAKEOFF", armed=True),
+           RunEvent(3.0, "disarmed", "landed: disarmed", "vehicle", ITSELF, armed=False)]
+    out = session_summary(FLIGHT, facts(aborted=True), Joined(), hop, vehicle, controller)
+    assert out.notes and {n.t for n in out.notes} == {3.0}, out.notes
+    events = out.summary["events"]
+    assert [e["t"] for e in events] == sorted(e["t"] for e in events), events
+    assert events[len(hop):] == [n.as_dict() for n in out.notes] and events[len(hop)]["kind"] == "ended", events
+    assert session_summary(FLIGHT, facts(aborted=True), Joined(), [], vehicle, controller).notes[0].t == 0.0
+
+
 def test_a_failsafe_parameter_a_ground_station_set_after_its_hops_failsafe_is_named_in_the_missions_end() -> None:
     """A failsafe parameter a ground station sets after its own flight's failsafe, before the awaited mission's start,
     shapes the mission's failsafe: ``ended_by`` names it. (Until the third wave's thirty-eighth session the failsafe

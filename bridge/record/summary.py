@@ -11,7 +11,8 @@ Out: :class:`SessionSummary`: the trace arrays, ``summary.json`` (the figures of
      ground station's mission, fence and rally points (``mission_transfer``: :mod:`bridge.record.transfers`;
      ``--await-mission`` only), the lockstep record, ``ended_by``, the policies' verdicts, the events in time
      order) and the session's closing notes (its ``ended``, ``lockstep`` and ``policy`` events, also in
-     ``summary["events"]``, for events.log)
+     ``summary["events"]``, for events.log; at the trace's last row, with none at the latest event's:
+     :func:`notes_time`)
 
 See docs/design.md, "Files of a run", and docs/sitl.md, "Outcomes, exit statuses and safety policies".
 """
@@ -396,6 +397,15 @@ def stalls_text(stalls: Mapping[str, Any]) -> str:
             f"{stalls['worst_ms']:g} ms ({first}{more}): outages no link model asked for")
 
 
+def notes_time(joined: Joined, events: Sequence[RunEvent]) -> float:
+    """The time (s) of a session's closing notes: the trace's last row; with none (no mission's time 0: a session
+    stopped, or a ground station's flight ended, before the start) the latest event's, on the clock the events are on
+    then (the vehicle's: :mod:`bridge.record.missionclock`), so that the notes come after what they sum up."""
+    if joined.rows:
+        return joined.rows[-1].t
+    return max((e.t for e in events if e.t is not None), default=0.0)
+
+
 def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events: Sequence[RunEvent],
                     vehicle: ChildEnd | None, controller: ChildEnd | None, relay: ChildEnd | None = None,
                     relay_stats: Mapping[str, Any] | None = None,
@@ -459,7 +469,7 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
     texts += [("policy", violation_text(v)) for v in violated]
     if (stalls := stalls_of(summary)) is not None:
         texts.append(("stall", stalls_text(stalls)))
-    t = joined.rows[-1].t if joined.rows else 0.0  # the notes' time: the trace's last row
+    t = notes_time(joined, events)
     notes = [RunEvent.at(t, kind, text, "session") for kind, text in texts]
     summary["events"] = [e.as_dict() for e in in_time_order((*events, *notes))]  # the notes in their time too
     return SessionSummary(arrays, summary, notes)

@@ -158,11 +158,10 @@ class Session:
             shift = (joined.k0 or 0) / rate  # its rows are on the vehicle's clock, the events on the mission's
             rows = [(t - shift, z, vz) for t, z, vz in self.joiner.after]
             out.summary["end"] = end_block(self.flight.mission.end_action, rows, ended)
-        t = joined.rows[-1].t if joined.rows else 0.0
-        for e in out.notes:
+        for e in out.notes:  # (each at its time: bridge.record.summary.notes_time)
             self.events.append(e)
             if self._event_log is not None:
-                self._event_log.event(t, e.kind, e.text, e.by, e.source)
+                self._event_log.event(math.nan if e.t is None else e.t, e.kind, e.text, e.by, e.source)
         return out
 
     def _controller_completed(self) -> bool:
