@@ -340,3 +340,39 @@ def test_the_warmer_loads_from_numbas_cache_and_never_compiles_on_the_childrens_
     out = json.loads(r.stdout.strip().splitlines()[-1])
     assert (out["cached"], out["loaded"]) == ((True, True) if cache == "warm" else (False, False)), out
     assert "compiling" not in r.stderr, r.stderr  # nothing compiled, so nothing announced
+
+
+
+# ``bsst sitl`` as a user starts it (its own fork server), in a process that says after the session which numba modules
+# it imported, and whether its fork server (alive until the process ends) has the compiled kernels loaded
+LAUNCHER_SCRIPT = """
+import json, sys
+from bridge.cli import main
+from bridge.nodes import forkserver
+rc = main(json.loads(sys.argv[1]))
+held = [m for m in ("numba", "bridge.autopilot.ekfkernels", "bridge.core.scalarkernels") if m in sys.modules]
+with open(f"/proc/{forkserver._the_server().pid}/maps") as f:
+    print(json.dumps({"rc": rc, "held": held, "server": "llvmlite" in f.read()}))
+"""
+
+
+@pytest.mark.parametrize("kernels", ["auto", "compiled"])
+def test_a_launcher_loads_no_kernels_its_fork_server_loads_them_for_its_children(tmp_path, kernels) -> None:
+    """``bsst sitl --estimator ekf`` with a fork server: the launcher, which flies nothing, imports neither numba nor
+    a kernel module (it loaded the EKF's kernels, and under ``compiled`` the law's and the plant's, ~0.5-0.7 s of
+    CPU with a warm cache, while its server loaded them again for the children); the server loads what the
+    session flies before it forks the children, the EKF's under ``auto`` too (one session's pair alone would not
+    make it load anything: KernelWarmer)."""
+    (tmp_path / "short.toml").write_text('name = "short"\nduration_s = 1.0\n[trajectory]\nkind = "sine"\n')
+    env = {k: v for k, v in os.environ.items() if k not in (ENV, "BSST_KERNELS")}
+    root = str(Path(__file__).resolve().parent.parent)
+    env.update(BSST_KERNELS=kernels, PYTHONPATH=os.pathsep.join(filter(None, [root, env.get("PYTHONPATH")])))
+    with instance_slot() as n:
+        argv = ["sitl", "short.toml", "--sensors", "gnss", "--estimator", "ekf", "--no-plots", "--instance", str(n),
+                "--out", "run"]
+        r = subprocess.run([sys.executable, "-c", LAUNCHER_SCRIPT, json.dumps(argv)], capture_output=True,
+                           text=True, timeout=300, cwd=tmp_path, env=env)
+    assert r.returncode == 0, r.stderr[-3000:]
+    out = json.loads(r.stdout.strip().splitlines()[-1])
+    assert out == {"rc": 0, "held": [], "server": True}, (out, r.stderr[-3000:])
+    assert "compiling" not in (tmp_path / "run" / "vehicle.log").read_text()  # it inherited them

@@ -438,8 +438,9 @@ class Ekf:
 
 def compile_estimator(kind: str) -> None:
     """Compile, or load from numba's cache on disk, what an estimator of ``kind`` runs on (the EKF's kernels;
-    nothing for the others): a launcher calls it before it starts a vehicle, so that a first EKF on a machine
-    compiles once, here, and the vehicle loads it from the cache instead of compiling it in its start-up time.
+    nothing for the others): a launcher whose children are exec'd calls it before it starts a vehicle (a fork server
+    loads them itself before it forks one: bridge.core.kernelpreload), so that a first EKF on a machine compiles
+    once, here, and the vehicle loads it from the cache instead of compiling it in its start-up time.
     Where numba has no cache (no writable place for it: kernelcache.enable_cache) nothing is compiled here: the
     vehicle would compile it again (~7 s); the process that flies it compiles it, once (the vehicle, or the fork
     server it is forked from: bridge.core.kernelpreload)."""

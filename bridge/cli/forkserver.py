@@ -5,19 +5,16 @@ In:  FD, this process's end of the socket its owner made (passed to it open); PA
 Out: children forked on request, each running the CLI's ``main`` on its argv; nothing on stdout
 
 It imports, once, what the session's children (``bsst vehicle``, ``bsst controller``, ``bsst relay``) import
-when they start, then serves until its owner closes the socket; under ``BSST_KERNELS=auto`` it loads the compiled
-kernels before the third child that flies (bridge.core.kernelpreload.KernelWarmer); under ``compiled`` where numba
-has no cache on disk, the EKF's before the first vehicle that flies one (:func:`flies_ekf`).
+when they start, then serves until its owner closes the socket; before it forks a session's child it loads the
+compiled kernels the session flies, as its launcher says, and under ``BSST_KERNELS=auto`` the compiled kernels
+before the third child that flies (bridge.core.kernelpreload.KernelWarmer).
 """
 
 from __future__ import annotations
 
 import sys
-from collections.abc import Sequence
 
 from bridge.cli import _parser, main
-from bridge.cli.options import overrides_from_args
-from bridge.core.flight import at_rest, prepare
 from bridge.core.kernelpreload import KernelWarmer
 from bridge.nodes.forkserver import serve, show_command_line
 
@@ -37,17 +34,6 @@ def preload() -> None:
     _parser()
 
 
-def flies_ekf(argv: Sequence[str]) -> bool:
-    """Whether the ``bsst vehicle`` of command line ``argv`` flies an EKF: its flight prepared as the child will
-    prepare it (bridge.cli.flying.cmd_vehicle); False for a command line it would refuse (the child says why).
-    For :class:`~bridge.core.kernelpreload.KernelWarmer`, where numba has no cache on disk."""
-    try:
-        args = _parser().parse_args(list(argv))
-        return prepare(args.mission or at_rest(), overrides_from_args(args)).estimator == "ekf"
-    except (Exception, SystemExit):  # noqa: BLE001  (bad input, --help: the child's to say)
-        return False
-
-
 if __name__ == "__main__":
     if len(sys.argv) not in (2, 3) or not sys.argv[1].isdigit():
         print("usage: python -m bridge.cli.forkserver FD [PADDING] (started by bridge.nodes.forkserver)",
@@ -55,4 +41,4 @@ if __name__ == "__main__":
         sys.exit(2)
     show_command_line([sys.executable, "-m", "bridge.cli.forkserver", sys.argv[1]])  # not the padding
     preload()
-    serve(int(sys.argv[1]), main, KernelWarmer(flies_ekf=flies_ekf))
+    serve(int(sys.argv[1]), main, KernelWarmer())

@@ -35,7 +35,7 @@ from bridge.autopilot.params import (
 )
 from bridge.autopilot.simvehicle import HOLD, OFFBOARD, SimVehicle
 from bridge.core.overrides import Overrides, table_settings
-from bridge.core.scalar import checked_choice, compile_for, compiled_wanted, wire_for
+from bridge.core.scalar import checked_choice, compile_for, compiled_needed, compiled_wanted, wire_for
 from bridge.link.model import (
     DIRECTIONS,
     NEEDS,
@@ -143,6 +143,14 @@ class Flight:
     def compiled(self) -> bool:
         """Whether this flight's controller and plant fly compiled kernels (bridge.core.scalar)."""
         return compiled_wanted(self.mission.duration_s * self.mission.rate_hz)
+
+    def kernels_flown(self) -> str:
+        """The compiled kernels this flight flies in any process, for its children's fork server to load before it
+        forks them (bridge.core.scalar.FLIES_ENV): ``ekf`` for its EKF, ``scalar`` for its law and plant
+        (bridge.core.scalar.compiled_needed), comma-separated; "" for neither."""
+        kinds = (("ekf", self.estimator == "ekf"),
+                 ("scalar", compiled_needed(self.mission.duration_s * self.mission.rate_hz)))
+        return ",".join(kind for kind, flown in kinds if flown)
 
     def wire(self) -> tuple[Callable[..., tuple[float, ...]], Callable[..., tuple[float, ...]]]:
         """The state's wire conversion as this flight calls it, out (a state's ODOMETRY fields) and in (the state

@@ -1,12 +1,13 @@
 """Imported to preload: the compiled kernels loaded into a process whose children are forked from it.
 
 In:  ``BSST_KERNELS`` (bridge.core.scalar): ``compiled`` asks for the compiled kernels in every flight; for our
-     fork server under ``auto``, each child's command line and environment as it is asked for (KernelWarmer)
+     fork server, each child's command line and environment as it is asked for (KernelWarmer): the kernels its
+     session's launcher says it flies (bridge.core.scalar.FLIES_ENV), and ``auto``
 Out: with ``compiled``, the importing process holds the scalar engine's and the EKF's compiled kernels
      (:func:`bridge.core.flight.load_compiled_kernels`, ~1 s of CPU: numba's import and the cache's load; where
-     numba has no cache on disk, the scalar engine's only, compiled, ~4 s, and the EKF's before the first vehicle
-     that flies one: :class:`KernelWarmer`); otherwise nothing (numba is not imported) until :class:`KernelWarmer`
-     loads them before a third child that flies
+     numba has no cache on disk, the scalar engine's only, compiled, ~4 s, and the EKF's before the first session's
+     child that flies one: :class:`KernelWarmer`); otherwise nothing (numba is not imported) until
+     :class:`KernelWarmer` loads them before a session's child that flies them, or a third child that flies
 
 Two fork servers import it: ours, which forks the sessions' children (bridge.cli.forkserver), and
 multiprocessing's, which forks a sweep's workers (bridge.sweep.executors). Each child then starts with the
@@ -23,12 +24,12 @@ from __future__ import annotations
 
 import gc
 import sys
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 
 from bridge.autopilot.compiling import cache_off
 from bridge.autopilot.estimator import load_ekf_kernels
 from bridge.core.flight import compiled_kernels_cached, load_compiled_kernels
-from bridge.core.scalar import compiled_everywhere, compiled_loaded, kernels_choice
+from bridge.core.scalar import FLIES_ENV, compiled_everywhere, compiled_loaded, kernels_choice
 
 
 def ekf_cache_on() -> bool:
@@ -52,26 +53,27 @@ WARM_AFTER = 2  # children that fly, forked plain, before a server under ``auto`
 
 
 class KernelWarmer:
-    """The fork server's rule under ``auto``: the compiled kernels are loaded into the server, once, before the
-    third child that flies (a vehicle or a controller) is forked, so that it and every later one flies them (the
-    same bits, bridge.core.scalar) without paying numba's load (~1 s of CPU) itself. One session (a vehicle and
-    its controller, a relay between them or not) never pays it; a fleet, or a process flying session after
-    session (a script, the test suite), pays it once and saves ~36 us of CPU per control step thereafter. Only
-    from numba's cache on disk: with it cold (a first run after an install) nothing is compiled on the children's
-    behalf, and they fly plain."""
+    """The fork server's rules. A session's child is forked with the compiled kernels its launcher says the session
+    flies (:data:`~bridge.core.scalar.FLIES_ENV`: the EKF's, the law's and the plant's) loaded into the server first,
+    from numba's cache on disk or compiled where it is cold or off (the child would compile them in its start-up
+    otherwise), once: it and every later child inherit them, and the launcher, which flies nothing, loads none.
+    Under ``auto`` the compiled kernels are loaded into the server, once, before the third child that flies (a
+    vehicle or a controller) is forked, so that it and every later one flies them (the same bits,
+    bridge.core.scalar) without paying numba's load (~1 s of CPU) itself. One session (a vehicle and its controller,
+    a relay between them or not) never pays it; a fleet, or a process flying session after session (a script, the
+    test suite), pays it once and saves ~36 us of CPU per control step thereafter. Only from numba's cache on disk:
+    with it cold (a first run after an install) nothing is compiled on the children's behalf, and they fly plain."""
 
-    def __init__(self, warm_after: int = WARM_AFTER, flies_ekf: Callable[[Sequence[str]], bool] | None = None) -> None:
+    def __init__(self, warm_after: int = WARM_AFTER) -> None:
         self.warm_after = warm_after
         self.flying = 0  # children that fly, forked so far
-        self.flies_ekf = flies_ekf  # whether a vehicle's command line flies an EKF (bridge.cli.forkserver's)
 
     def __call__(self, argv: Sequence[str], env: Mapping[str, str]) -> None:
         """Called before the server forks the child ``argv`` (the CLI's arguments) in ``env``."""
         if not argv or argv[0] not in FLYING:
             return
         self.flying += 1
-        if kernels_choice(env) == "compiled" and argv[0] == "vehicle":
-            self._ekf_for(argv)
+        load_flown(env.get(FLIES_ENV, ""))
         if self.flying <= self.warm_after or compiled_loaded():
             return
         if kernels_choice(env) != "auto":
@@ -81,20 +83,25 @@ class KernelWarmer:
             gc.freeze()  # numba's objects too: shared with every later child, never copied into one
 
 
-    def _ekf_for(self, argv: Sequence[str]) -> None:
-        """``compiled`` where numba has no cache: the server's start compiled the law's and the plant's kernels but
-        not the EKF's (~7 s, for flights that may not fly one); before the first vehicle that flies one, they are
-        compiled here, once, and it and every later vehicle inherit them. A failure is left to the vehicle."""
-        ekf = sys.modules.get("bridge.autopilot.ekfkernels")
-        if self.flies_ekf is None or ekf is None or getattr(ekf.propagate, "signatures", True):
-            return  # no way to tell; numba not imported (the server's start under ``auto``); compiled or loaded
-        try:
-            if self.flies_ekf(argv):
-                load_ekf_kernels()
-                gc.collect()
-                gc.freeze()
-        except Exception:  # noqa: BLE001  (see the docstring)
-            return
+def load_flown(kinds: str) -> None:
+    """Load the compiled kernels ``kinds`` names (:data:`~bridge.core.scalar.FLIES_ENV`'s value: ``ekf``, ``scalar``,
+    comma-separated) that this process holds not yet; a failure is left to the child (it loads them itself and says
+    what went wrong; a fork server must not die of it)."""
+    wanted = set(kinds.split(","))
+    ekf = sys.modules.get("bridge.autopilot.ekfkernels")
+    try:
+        loaded = False
+        if "ekf" in wanted and (ekf is None or not getattr(ekf.propagate, "signatures", True)):
+            load_ekf_kernels()  # (no signatures attribute: NUMBA_DISABLE_JIT, plain Python, nothing to load)
+            loaded = True
+        if "scalar" in wanted and not compiled_loaded():
+            load_compiled_kernels(ekf=False)
+            loaded = True
+    except Exception:  # noqa: BLE001  (see the docstring)
+        return
+    if loaded:
+        gc.collect()
+        gc.freeze()
 
 
 def load_cached_kernels() -> bool:

@@ -3,8 +3,9 @@
 In:  the number of control steps a flight has (its mission's duration s times its rate Hz); the environment
      variable ``BSST_KERNELS``: ``plain``, ``compiled`` or ``auto`` (unset: ``auto``); whether this process
      holds the compiled kernels already
-Out: whether to compile (:func:`compiled_wanted`), and a controller and a plant given their compiled twins
-     (:func:`compile_for`: bridge.core.scalarkernels, imported only then, numba with it); whether every flight
+Out: whether to compile (:func:`compiled_wanted`; :func:`compiled_needed`: whatever the process holds), and a
+     controller and a plant given their compiled twins (:func:`compile_for`: bridge.core.scalarkernels, imported
+     only then, numba with it); whether every flight
      asks for them (:func:`compiled_everywhere`: the fork server then loads them once for all its children)
 
 Both give the same bits (tests/test_kernels.py). A compiled call is faster (the BS-ST controller step ~2.8 us
@@ -33,13 +34,23 @@ from plant import Quadrotor
 KERNELS_ENV = "BSST_KERNELS"
 CHOICES = ("plain", "compiled", "auto")
 AUTO_STEPS = 60_000  # control steps from which ``auto`` compiles: 240 s at 250 Hz
+# set by a session's launcher on the children it starts: the compiled kernels they fly ("ekf", "scalar": the law's
+# and the plant's), comma-separated, which their fork server loads before it forks them (bridge.core.kernelpreload)
+FLIES_ENV = "BSST_SESSION_KERNELS"
 
 
 def compiled_wanted(steps: float) -> bool:
     """Whether a flight of ``steps`` control steps flies the compiled kernels (module docstring); a
     ``BSST_KERNELS`` that is none of :data:`CHOICES` is a ConfigError naming it."""
+    return compiled_needed(steps) or (checked_choice() == "auto" and compiled_loaded())
+
+
+def compiled_needed(steps: float) -> bool:
+    """Whether a flight of ``steps`` control steps flies the compiled kernels in any process, whether it holds them
+    or not (``compiled``, or ``auto``'s long flight): what a session's fork server loads before it forks the
+    session's children (bridge.core.kernelpreload, :data:`FLIES_ENV`)."""
     choice = checked_choice()
-    return choice == "compiled" or (choice == "auto" and (steps >= AUTO_STEPS or compiled_loaded()))
+    return choice == "compiled" or (choice == "auto" and steps >= AUTO_STEPS)
 
 
 def checked_choice() -> str:

@@ -51,7 +51,6 @@ import types
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
-from bridge.autopilot.kernelcache import NOTE_SAID_ENV
 from bridge.nodes.process import die_with_parent
 
 ENV = "BSST_FORK_SERVER"  # "0": every child exec'd (the fork server never started)
@@ -143,7 +142,7 @@ class _Server:
             proc = subprocess.Popen(
                 [sys.executable, "-m", SERVER_MODULE, str(theirs.fileno()), " " * TITLE_ROOM],
                 pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                start_new_session=True, env={**os.environ, NOTE_SAID_ENV: "1"})  # its stderr is ours: we say it
+                start_new_session=True)  # its stderr is ours: it says numba's cache-off note where it compiles first
         except BaseException:
             ours.close()
             raise
@@ -263,14 +262,15 @@ def _forking(env: Mapping[str, str]) -> bool:
     return env.get(ENV, "1") != "0" and hasattr(os, "pidfd_open")
 
 
-def warm() -> None:
+def warm() -> bool:
     """Start this process's fork server now, so that its imports overlap the caller's own preparation (a
-    no-op when children are exec'd)."""
+    no-op when children are exec'd). Whether a server runs, to fork the caller's children."""
     if _forking(os.environ):
         try:
-            _the_server()
+            return _the_server().alive()
         except OSError:
             pass
+    return False
 
 
 def start_child(argv: Sequence[str], stdout: int, stderr: int, *, stdin: int | None = None, cwd: str | None = None,

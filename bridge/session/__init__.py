@@ -105,13 +105,17 @@ def check_options(*, realtime: bool, instance: int | None, gcs: str | None, spee
     return gcs_text
 
 
-def fill_kernel_cache(flight: Flight) -> None:
+def fill_kernel_cache(flight: Flight, forked: bool) -> None:
     """Compile the kernels a session's children will fly into numba's cache on disk (or find them there), before
     they start: a first EKF (~7 s) or a first compiled law and plant (~4 s) on a machine compiles once, here, and
-    the two children load them instead of compiling them at once in their start-up. Where numba has no cache (no
-    writable place: bridge.autopilot.kernelcache) nothing: each process that flies a kernel compiles it itself, or
-    inherits it from the fork server it is forked from (bridge.core.kernelpreload), and a compile here would
-    only be one more (docs/sitl.md, "Without a writable home")."""
+    the two children load them instead of compiling them at once in their start-up. Nothing where the children are
+    ``forked`` by a fork server: it loads them before it forks them, from the cache or compiled (the session tells
+    it what they fly: bridge.core.kernelpreload), and the launcher, which flies nothing, need not (it loaded them,
+    ~0.5-0.7 s of CPU, with a warm cache too). Where numba has no cache (no writable place:
+    bridge.autopilot.kernelcache) nothing: each process that flies a kernel compiles it itself, and a compile here
+    would only be one more (docs/sitl.md, "Without a writable home")."""
+    if forked:
+        return
     compile_estimator(flight.estimator)  # nothing where numba has no cache (bridge.autopilot.estimator)
     if flight.compiled and kernel_cache_on():
         flight.make_controller()
@@ -185,8 +189,8 @@ def sitl(
         run_dir(out, flight.mission.name, overwrite, create=False)
     if instance is not None:
         check_port_free(LINK_PORT + n, f"--instance {n}")
-    warm()  # the fork server's imports (bridge.nodes.forkserver) overlap what follows
-    fill_kernel_cache(flight)
+    forked = warm()  # the fork server's imports (bridge.nodes.forkserver) overlap what follows
+    fill_kernel_cache(flight, forked)
     path = run_dir(out, flight.mission.name, overwrite) if keep else Path(tempfile.mkdtemp(prefix="bsst-sitl-"))
     try:
         s = Session(flight, path, realtime=realtime, instance=instance, gcs=gcs_text, speed=speed,

@@ -150,12 +150,12 @@ def free_udp_port() -> int:
 class Child:
     """One child process: its reports (stdout, read without blocking) and its exit."""
 
-    def __init__(self, name: str, argv: list[str], log: Path) -> None:
+    def __init__(self, name: str, argv: list[str], log: Path, env: dict[str, str] | None = None) -> None:
         self.name = name
         read, write = os.pipe()
         try:
             with open(log, "wb") as err:
-                self.proc: ForkedChild | subprocess.Popen[bytes] = start_child(argv, write, err.fileno())
+                self.proc: ForkedChild | subprocess.Popen[bytes] = start_child(argv, write, err.fileno(), env=env)
         except BaseException:
             os.close(read)
             raise

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import selectors
 import sys
 import time
@@ -26,6 +27,7 @@ from typing import Any
 from bridge.autopilot.params import param_at_args
 from bridge.autopilot.vehicleevents import Sender, typed_fields
 from bridge.core.flight import Flight, Progress, prepare
+from bridge.core.scalar import FLIES_ENV
 from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, LINK_PORT
 from bridge.nodes.report import Event, MissionLoaded, Ready, Report
 from bridge.nodes.vehicle.gate import STATE_WAIT_S
@@ -195,7 +197,8 @@ class Session:
         if self.gate is not None:  # a fleet: its processes outnumber the cores, so none polls before it sleeps
             argv += ["--gate", str(self.gate), "--spin", "0"]
         keyarg = ["--key", str(self.key)] if self.key is not None else []
-        self.vehicle = Child("vehicle", argv + keyarg, self.path / "vehicle.log")
+        env = {**os.environ, FLIES_ENV: self.flight.kernels_flown()}  # loaded by their fork server, before the fork
+        self.vehicle = Child("vehicle", argv + keyarg, self.path / "vehicle.log", env)
         to = port
         if relayed:  # the link model on the wall clock, between the two
             to = str(free_udp_port())
@@ -221,7 +224,7 @@ class Session:
         if self.await_mission:
             argv.append("--await-mission")
         argv += param_at_args(self.flight.param_changes)
-        self.controller = Child("controller", argv + keyarg, self.path / "controller.log")
+        self.controller = Child("controller", argv + keyarg, self.path / "controller.log", env)
         try:
             ready = self._wait_ready(self.vehicle)
             self._note("started", f"vehicle pid {self.vehicle.pid}: {ready.describe()}", "session")
