@@ -136,7 +136,6 @@ def _sweep(args: argparse.Namespace) -> int:
     from bridge.core.flight import idle_link_key, prepare  # lazy: start-up time
     from bridge.core.interrupt import ignore_sigint  # lazy: start-up time
     from bridge.core.overrides import Overrides  # lazy: start-up time
-    from bridge.link.model import absolute_link_paths, swept_links  # lazy: start-up time
     from bridge.sweep import AXES, Grid, Sweep, is_sweep_file, load_sweep, run_sweep  # lazy: start-up time
     from bridge.sweep.cells import broke_policy  # lazy: start-up time
     from bridge.sweep.grid import LINK_AXES, SHORT  # lazy: start-up time
@@ -154,26 +153,24 @@ def _sweep(args: argparse.Namespace) -> int:
         if clash:
             raise UsageError(f"bsst sweep: --{d}-{clash[0].split('_')[0]} conflicts with the swept {clash[0]} "
                              f"(a swept value applies to both directions)")
-    link_swept = [a for a in LINK_AXES if getattr(spec.grid, a)]
+    swept = {a: getattr(spec.grid, a) for a in LINK_AXES if getattr(spec.grid, a)}  # the link axes: each cell's
     trace = trace_flag(args)
-    if link_swept and trace:
-        a = link_swept[0]
+    if swept and trace:
+        a = next(iter(swept))
         given = f"--{SHORT[a]}" if a in axes else f"grid.{a}"
         raise UsageError(f"bsst sweep: {given} with {trace}: the trace gives the link's {', '.join(LINK_AXES)}, so "
                          f"{a} cannot be swept over it; drop one of them")
     sensors = {"set": args.sensors} if args.sensors is not None else None
     laid = fixed or sensors or args.scatter is not None
-    own = absolute_link_paths(spec.mission.link, Path(spec.mission.source).parent)
-    clash = guard_flag_refusal(args, own, spec.mission.source)  # (named as the flag, not as the file's key)
+    clash = guard_flag_refusal(args, spec.mission.link, spec.mission.source)  # (named as the flag, not the key)
     if clash:
         raise UsageError(f"bsst sweep: {clash}")
     # fixed for every cell, laid over by the one path to its parts, which names a bad mission, and a key of its
     # [link] that would change nothing (a swept --loss gives a burst_len its loss)
-    if laid or idle_link_key(spec.mission, fixed, link_swept):
+    if laid or idle_link_key(spec.mission, fixed, swept):
         flight = prepare(spec.mission, Overrides(link=fixed or None, sensors=sensors, scatter_m=args.scatter),
-                         axes=link_swept, laid_named=True)
-        swept = {a: getattr(spec.grid, a) for a in link_swept}
-        idle = idle_link_flag(args, swept_links([flight.link], swept), cells=True)  # (None: no such flag given)
+                         axes=swept, laid_named=True)
+        idle = idle_link_flag(args, [flight.link], swept, cells=True)  # (None: no such flag given)
         if idle:
             raise UsageError(f"bsst sweep: {idle}")
         spec = replace(spec, mission=flight.mission)

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 from bridge.cli.flags import UsageError, blackout_window, existing_file, link_number, link_seed, yes_no
@@ -162,12 +163,15 @@ def link_table_from_args(args: argparse.Namespace) -> dict[str, Any]:
 NEED_FLAGS = {"loss_pct": ("loss", "PCT"), "rate_bps": ("bandwidth", "BYTES_PER_S"), "trace": ("link-trace", "FILE")}
 
 
-def idle_link_flag(args: argparse.Namespace, links: Sequence[tuple[Any, Any]], cells: bool = False) -> str | None:
+def idle_link_flag(args: argparse.Namespace, links: Sequence[Any], axes: Mapping[str, Sequence[float]] | None = None,
+                   cells: bool = False) -> str | None:
     """The first link flag given (``--burst``, ``--up-queue``, ``--link-trace-loop`` ...: a key of
-    :data:`bridge.link.model.NEEDS`) that changes nothing on every one of ``links`` (each vehicle's (up, down), or
-    each cell's: :func:`bridge.link.model.swept_links`), as the line that refuses it (``cells``: a sweep's); None."""
-    from bridge.link.model import DIRECTIONS, NEEDS, idle_problem  # lazy: start-up time
+    :data:`bridge.link.model.NEEDS`) that changes nothing on every one of ``links`` (the flights' link settings, each
+    vehicle's) in every combination of ``axes`` (a sweep's or a margin's link values, laid over both directions:
+    :func:`bridge.link.model.swept_links`), as the line that refuses it (``cells``: a sweep's); None."""
+    from bridge.link.model import DIRECTIONS, NEEDS, idle_problem, swept_links  # lazy: start-up time
 
+    links = swept_links(links, axes)
     stems = {key: stem for stem, key, *_ in LINK_FLAGS} | {"trace_loop": "link-trace-loop"}
     for key, (need, *_) in NEEDS.items():
         for pre in ("", "up-", "down-"):
@@ -190,18 +194,25 @@ def idle_flags_given(args: argparse.Namespace) -> bool:
     return any(getattr(args, f"link_{pre}{key}", None) is not None for key in NEEDS for pre in ("", "up_", "down_"))
 
 
-def guard_flag_refusal(args: argparse.Namespace, own: Mapping[str, Any], source: str) -> str | None:
+def guard_flag_refusal(args: argparse.Namespace, own: Any, source: str) -> str | None:
     """The line refusing a guard flag (``--command-lag``, ``--stale-after``, ``--stop-after``, ``--compensation``)
     whose value breaks a rule of the guard's keys (:func:`bridge.link.model.guard_problem`: a command lag without
     prediction, a stop age below the stale age) with the rest of the flight's link (the mission's own ``[link]``,
-    ``own``, from ``source``, its profile, the other link flags), named as the flag; None, and None for a clash of
-    the file's own keys (the loader names those)."""
-    from bridge.link.model import guard_problem, link_from_table, merge_link_tables  # lazy: start-up time
+    ``own``, as ``source`` has it: its files relative to its folder; its profile; the other link flags), named as the
+    flag; None, and None for a clash of the file's own keys or a ``[link]`` that is no table (the loader names
+    those)."""
+    from bridge.link.model import (  # lazy: start-up time
+        absolute_link_paths,
+        guard_problem,
+        link_from_table,
+        merge_link_tables,
+    )
 
     flags = {key: flag for flag, key, *_ in GUARD_FLAGS} | {"compensation": "--compensation"}
     given = {k: v for k in flags if (v := getattr(args, f"link_{k}", None)) is not None}
     if not given:
         return None
+    own = absolute_link_paths(own, Path(source).parent) if isinstance(own, Mapping) else {}
     rest = {k: v for k, v in link_table_from_args(args).items() if k not in flags}  # (--link-profile: its keys)
     try:
         g = link_from_table(merge_link_tables(own, rest), source or "link").guard

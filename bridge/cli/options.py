@@ -141,14 +141,12 @@ def checked_mission(args: argparse.Namespace, mission: Mission | str | Path | No
     without a super-twisting step are :func:`bridge.core.flight.prepare`'s to refuse, the command's and the Python
     API's alike (:func:`bridge.core.flight.idle_link_key`, :func:`bridge.core.flight.discretization_refusal`)."""
     from bridge.core.flight import at_rest, discretization_refusal, prepare  # lazy: start-up time
-    from bridge.link.model import absolute_link_paths, swept_links  # lazy: start-up time
     from bridge.swarm import fleet_flights, fleet_mission  # lazy: start-up time
     from bridge.sweep.grid import noise_problem  # lazy: start-up time
     from missions import Mission, load_mission  # lazy: start-up time
 
     table, source = _own(mission)
-    link = table.get("link", {}) if table is not None else {}
-    own = absolute_link_paths(link, Path(source).parent) if isinstance(link, Mapping) else {}
+    own = table.get("link", {}) if table is not None else {}
     clash = (guard_flag_refusal(args, own, source) or _rate_flag_refusal(args, table or {}, source)
              or _scatter_flag_refusal(args, table or {}, source))  # (before the loader or prepare names the key)
     if clash:
@@ -170,7 +168,7 @@ def checked_mission(args: argparse.Namespace, mission: Mission | str | Path | No
     whys = [noise_problem((f.estimator,), f.sensors) for f in flights]
     if noise is not None and all(whys):
         raise ConfigError(f"--noise {noise:g}: {whys[0]}")
-    idle = idle_link_flag(args, swept_links([f.link for f in flights], axes))
+    idle = idle_link_flag(args, [f.link for f in flights], axes)
     if idle:
         raise ConfigError(idle)
     return flown
