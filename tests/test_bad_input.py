@@ -382,6 +382,22 @@ def test_every_sweep_key_refuses_a_bad_value(files, capsys, key, bad):
     _refused(capsys, ["sweep", sweep, "--out", files.out, "--jobs", "1", "--no-plots"], key.split(".")[-1])
 
 
+def test_a_grid_over_the_cap_counts_its_cells_as_they_are_made(files, capsys):
+    """The refusal of a grid over ``--max-cells`` names factors that multiply to its count: a law without a
+    super-twisting step (smc, pid) is one cell per point, so 3 laws x 2 discretizations x 2 delays is 8 cells, not
+    12 (it said '3 controller x 2 delay_ms x 2 discretization x 1 seeds' for 8); a grid whose plain product is its
+    count is said as before."""
+    base = ["sweep", files.mission, "--delay", "0,5", "--max-cells", "1", "--out", files.out, "--no-plots"]
+    line = _refused(capsys, [*base, "--controller", "bsst,smc,pid", "--discretization", "explicit,implicit"],
+                    "grid: 8 cells")
+    assert ("grid: 8 cells (4 law-schemes x 2 delay_ms x 1 seeds; the 4 law-schemes: bsst x 2 discretization + smc + "
+            "pid, a law without a super-twisting step being one cell whatever the discretization), over the cap of 1"
+            in line), line
+    line = _refused(capsys, [*base, "--controller", "bsst,smc"], "grid: 4 cells")
+    assert "grid: 4 cells (2 controller x 2 delay_ms x 1 seeds), over the cap of 1" in line, line
+    assert not files.out.exists() or not any(files.out.iterdir())
+
+
 @pytest.mark.parametrize("jobs", [0, 1, 1024, 1025])
 def test_jobs_has_one_range_in_a_sweep_file_and_on_the_command_line(files, jobs):
     """``jobs = N`` in a sweep file and ``--jobs N`` (sweep, margin): each takes N, or each refuses it naming the one

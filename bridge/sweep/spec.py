@@ -94,11 +94,26 @@ class Sweep:
         """Refuse a grid of more than ``max_cells`` (default :data:`MAX_CELLS`) cells, saying how many and why."""
         n, cap = self.cell_count(), self.max_cells or MAX_CELLS
         if n > cap:
-            sizes = [f"{len(getattr(self.grid, a))} {a}" for a in AXES if len(getattr(self.grid, a)) > 1]
-            sizes.append(f"{len(self.grid.seed_list(self.mission))} seeds")
-            raise ConfigError(f"grid: {n} cells ({' x '.join(sizes)}), over the cap of {cap} a sweep flies "
+            raise ConfigError(f"grid: {n} cells ({self._sizes()}), over the cap of {cap} a sweep flies "
                               f"(about {n * self.mission.duration_s / 3600:.3g} h of flight time); "
                               f"raise it with --max-cells {n} (max_cells in a sweep file) if that is meant")
+
+    def _sizes(self) -> str:
+        """:meth:`cell_count`'s factors in words, which multiply to it: each swept axis's length and the seeds; the
+        laws and the discretizations as one factor, spelt out, where a law without a super-twisting step makes
+        their plain product overcount (it is one cell per point)."""
+        laws, schemes = _axis_values(self, "controller"), _axis_values(self, "discretization")
+        pairs = grid_size({"controller": laws, "discretization": schemes})  # (the one counting rule)
+        plain = pairs == len(laws) * len(schemes)
+        sizes = [f"{len(getattr(self.grid, a))} {a}" for a in AXES if len(getattr(self.grid, a)) > 1
+                 and (plain or a not in ("controller", "discretization"))]
+        seeds = f"{len(self.grid.seed_list(self.mission))} seeds"
+        if plain:
+            return " x ".join([*sizes, seeds])
+        each = [f"{law} x {len(schemes)} discretization"
+                if grid_size({"controller": [law], "discretization": schemes}) > 1 else law for law in laws]
+        return (f"{' x '.join([f'{pairs} law-schemes', *sizes, seeds])}; the {pairs} law-schemes: "
+                f"{' + '.join(each)}, a law without a super-twisting step being one cell whatever the discretization")
 
     def cells(self) -> list[Cell]:
         return cells(self.mission, self.grid)
