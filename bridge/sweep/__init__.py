@@ -11,7 +11,8 @@ Out: one ``cells.csv`` row per cell, in grid order (3-D RMS and max error m, set
 - :mod:`bridge.sweep.spec`       :class:`Sweep` and the sweep TOML file
 - :mod:`bridge.sweep.cells`      ``cells.csv``: columns, rows, the file
 - :mod:`bridge.sweep.classes`    :class:`Classes` and :func:`classify`
-- :mod:`bridge.sweep.executors`  process pool, Dask, progress bar
+- :mod:`bridge.sweep.executors`  process pool, Dask, the batch engine
+- :mod:`bridge.sweep.progress`   the progress bar and its ETA
 - :mod:`bridge.sweep.campaign`   :func:`sweep` and :func:`run_sweep`
 - :mod:`bridge.sweep.report`     ``report.md`` and the heat maps (``bsst report``)
 - :mod:`bridge.sweep.margin`     ``bsst margin``: one axis's boundary by bisection

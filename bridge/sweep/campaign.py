@@ -37,7 +37,7 @@ from bridge.sweep.cells import (
 )
 from bridge.sweep.classes import Classes, classify
 from bridge.sweep.executors import (
-    Progress,
+    BATCH_CHUNK,
     check_main_guard,
     engine_for,
     run_batch,
@@ -47,6 +47,7 @@ from bridge.sweep.executors import (
 )
 from bridge.sweep.grid import Grid
 from bridge.sweep.inputs import check_inputs, input_hashes
+from bridge.sweep.progress import Progress
 from bridge.sweep.report import check_report_files, write_report
 from bridge.sweep.spec import Sweep, check_jobs
 from missions import Mission, load_mission
@@ -183,7 +184,11 @@ def run_sweep(
         results.update({row_key(r): r for r in kept if row_key(r) in order})
     todo = [c for c in all_cells if c.key() not in results]
     sink = CellsFile(path / CELLS_CSV, [results[k] for k in sorted(results, key=order.__getitem__)]) if path else None
-    bar = Progress(len(all_cells), len(results), enabled=progress)
+    # cells that fly at once, each round's first carrying the start-up: a batch chunk's rows come together, and a
+    # Dask cluster's threads each fly a task
+    lanes = (BATCH_CHUNK if used == "batch" else 1) * (
+        (sum(client.nthreads().values()) or 1) if client is not None else 1 if used == "batch" else jobs)
+    bar = Progress(len(all_cells), len(results), enabled=progress, lanes=lanes)
     reused = len(results)
 
     def record(row: dict[str, Any]) -> None:

@@ -1,9 +1,8 @@
-"""Where the cells fly: one cell in a worker, a local process pool, a Dask cluster, and the
-progress bar.
+"""Where the cells fly: one cell in a worker, a local process pool, a Dask cluster, the batch engine.
 
 In:  a mission, the cells to fly, a mode (``offline`` or ``lockstep``), ``jobs`` workers or a Dask client
-Out: each finished ``cells.csv`` row, handed to ``report`` in the main process as it comes; progress
-     on stderr
+Out: each finished ``cells.csv`` row, handed to ``report`` in the main process as it comes (the progress it makes:
+     bridge.sweep.progress)
 
 A cell that raises, or whose worker dies, becomes an ``error`` row (a death names how: ``worker process died:
 killed by SIGKILL``).
@@ -39,7 +38,7 @@ from bridge.nodes.process import die_with_parent, exit_text
 from bridge.record.runlog import Run
 from bridge.session import instance_slot, sitl
 from bridge.swarm import simulate as simulate_fleet
-from bridge.sweep.cells import FAILED, error_row, row_from_fleet, row_from_run
+from bridge.sweep.cells import error_row, row_from_fleet, row_from_run
 from bridge.sweep.grid import AXES, FLEET_FORMATION, Cell, cell_flight, cell_overrides
 from missions import Mission
 from params import ConfigError
@@ -372,49 +371,6 @@ def run_dask(client: Any, mission: Mission, todo: Sequence[Cell], mode: str, rep
                 report(error_row(c, f"{type(exc).__name__}: {exc}"))
     finally:
         client.cancel(list(futures))
-
-
-class Progress:
-    """Cells done / total, ETA and failures: a tqdm bar on a terminal, plain lines otherwise.
-
-    Plain lines (about 20 per sweep, and at most one a second besides) go to stderr as
-    ``sweep: 12/48 cells, 0 failed, ETA 3 s``; a test waits on them.
-    """
-
-    def __init__(self, total: int, done: int, stream: Any = None, enabled: bool = True) -> None:
-        self.total, self.done, self.failed, self.ran = total, done, 0, 0
-        self.stream = stream if stream is not None else sys.stderr
-        self.enabled = enabled
-        self._bar = None
-        self._t0 = time.monotonic()
-        self._last = 0.0
-        self._every = max(1, (total - done) // 20)
-        if enabled and getattr(self.stream, "isatty", lambda: False)():
-            from tqdm import tqdm  # lazy: only on a terminal
-
-            self._bar = tqdm(total=total, initial=done, unit="cell", desc="sweep", file=self.stream,
-                             dynamic_ncols=True, postfix={"failed": 0})
-
-    def update(self, row: Mapping[str, Any]) -> None:
-        self.done += 1
-        self.ran += 1
-        if row["outcome"] in FAILED:  # (as the sweep's summary counts them)
-            self.failed += 1
-        if self._bar is not None:
-            self._bar.set_postfix(failed=self.failed, refresh=False)
-            self._bar.update(1)
-            return
-        now = time.monotonic()
-        if self.enabled and (self.ran % self._every == 0 or now - self._last >= 1.0 or self.done == self.total):
-            self._last = now
-            rate = (now - self._t0) / self.ran
-            self.stream.write(f"sweep: {self.done}/{self.total} cells, {self.failed} failed, "
-                              f"ETA {rate * (self.total - self.done):.0f} s\n")
-            self.stream.flush()
-
-    def close(self) -> None:
-        if self._bar is not None:
-            self._bar.close()
 
 
 # -- the batch engine: many cells of one mission in one numpy loop (bridge.batch) ---------------------
