@@ -64,6 +64,33 @@ def test_steps_flown_on_a_command_whose_row_was_never_written_are_kept_with_the_
 
 
 
+def test_a_step_the_controller_answered_takes_the_reference_its_row_recorded(tmp_path: Path) -> None:
+    """Lockstep: the reference columns of a step whose state the controller answered at the step's time are its
+    row's (the mission's reference, sampled by the same code: not sampled again in the session's process, 0.1-0.4
+    CPU-s of a 20 s session); a step it never answered (its failsafe after it died), or whose row is at another
+    time (a real-time tick's), is sampled from the mission. The rows' recorded values here are marks no sine has."""
+    flight = prepare(MISSION_DIR / "sine.toml")
+    sample = flight.mission.trajectory.sample
+    vehicle, controller = [], []
+    for k in range(8):
+        key = k if k <= 4 else -1
+        vehicle.append({"k": k, "t": k / RATE, "mode": MODE_CODES["offboard" if key >= 0 else "failsafe"],
+                        "cmd_k": key, "odo_sent_wall": 100.0, "cmd_recv_wall": 100.0, "rtt_s": 1e-4})
+        if k <= 4:
+            controller.append({"k": k, "t": k / RATE + (0.001 if k == 2 else 0.0), "x_ref": 100.0 + k,
+                               "y_ref": 200.0 + k, "z_ref": 300.0 + k, "psi_ref": 400.0 + k,
+                               "odo_recv_wall": 100.0, "cmd_sent_wall": 100.0})
+    _write(tmp_path / "vehicle.bin", VEHICLE_COLUMNS, vehicle)
+    _write(tmp_path / "controller.bin", CONTROLLER_COLUMNS, controller)
+    j = TraceJoiner(tmp_path, flight, None, lockstep=True)
+    j.controller_done = True
+    assert j.update() == 8
+    j.close()
+    refs = [(r.x_ref, r.y_ref, r.z_ref, r.psi_ref) for r in j.rows]
+    sampled = [tuple(a[0] for a in sample(k / RATE)) for k in range(8)]
+    assert refs == [(100.0 + k, 200.0 + k, 300.0 + k, 400.0 + k) if k in (0, 1, 3, 4) else sampled[k] for k in range(8)]
+
+
 def test_a_real_time_step_flown_re_armed_before_its_first_target_is_a_row(tmp_path: Path) -> None:
     """Real time, ``[failsafe] resume``: the controller's ARM and the target it sends with it are two datagrams,
     and the vehicle may fly a step between them (the target lost, or read after the step began): armed in OFFBOARD,

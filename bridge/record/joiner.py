@@ -49,6 +49,11 @@ _REALISED = attrgetter(*REALISED_COLUMNS)
 _DESIRED = attrgetter(*DESIRED_COLUMNS)
 
 
+def _recorded_ref(c: ControllerRow) -> tuple[tuple[float], ...]:
+    """The reference a controller's row recorded, shaped as a sample's values (x, y, z, psi; each (value,))."""
+    return ((c.x_ref,), (c.y_ref,), (c.z_ref,), (c.psi_ref,))
+
+
 @dataclass(frozen=True)
 class Joined:
     """The trace as the session joined it, and what the join measured (:class:`bridge.record.joiner.TraceJoiner`):
@@ -91,7 +96,11 @@ class TraceJoiner:
     controller answered. In ``lockstep`` a step the controller answered (``cmd_k`` = k) takes
     ``c1..c4`` and ``state_age_s`` from the controller's row, as the offline loop writes them:
     the last command sent, and the age of the state this step's command was computed from
-    (nan when the guard sent none).
+    (nan when the guard sent none). A step's reference columns are those of the controller's row of its state
+    when that row is at the step's time t (lockstep: every step it answered): the reference it recorded for that t,
+    sampled by the mission's code as offline samples it; else (real time's ticks, a step it never answered) the
+    mission's reference is sampled here (until the third wave's thirty-ninth session every row's was: 0.1-0.4 CPU-s
+    of a 20 s lockstep session's parent, docs/figures.md).
 
     ``trace.csv`` is appended as rows are joined when ``live`` (real time, and a lockstep fleet's sessions, whose
     processes share the cores anyway); else (a lockstep session) once the controller is done: writing a row's 45 floats
@@ -187,7 +196,9 @@ class TraceJoiner:
         if mode == 0 and k - self.k0 >= self.steps:
             return  # realtime: the state that ended the mission, flown while the disarm was on its way
         t = (k - self.k0) / self.rate
-        ref = self.sample(t)
+        own = self.ctl.get(k)  # the controller's row of this step's state, if it answered it
+        # at this t its recorded reference is the mission's, sampled by the same code: taken, not sampled again
+        ref = _recorded_ref(own) if own is not None and own.t == t else self.sample(t)
         if c is not None:
             u = _INPUT(c)
             desired = _DESIRED(c)
@@ -204,7 +215,6 @@ class TraceJoiner:
         else:
             u = _INPUT(v)
             desired = (0.0, 0.0)  # the landing loop holds the vehicle level
-        own = self.ctl.get(k)
         if own is not None:
             self.down_ms.append(1e3 * (own.odo_recv_wall - v.odo_sent_wall))
         if self.first_sent is None:
