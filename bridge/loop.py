@@ -53,6 +53,7 @@ from controller.law import LawFailed
 from controller.link_guard import LinkGuard
 from missions import Mission, load_mission
 from missions.minsnap import Smooth
+from missions.references import Prefetched
 from params import reads_inputs
 
 TOUCHDOWN_M = 0.05  # m above the ground, and m/s: a landing trajectory's end finds the vehicle down, and disarms it
@@ -127,7 +128,7 @@ def flying(flight: Flight, path: Path | None = None, *, plots: bool = True, prog
     law = ctl.law
     plant = vehicle.plant
     actuation = flight.profile.actuation
-    sample = m.trajectory.sample
+    sample = Prefetched(m.trajectory.sample)  # the row's sample at t is the law's (aim = t): sampled once a step
     rate = m.rate_hz
     up, down = flight.link.make(radios, user)
     guard = LinkGuard(ctl, flight.guard)
