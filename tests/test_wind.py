@@ -5,11 +5,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from bridge import simulate
+from bridge.cli import main
+from bridge.sweep.grid import Grid, cell_flight, cells
 from missions import load_mission
 from params import ConfigError
 from plant.wind import (
@@ -139,6 +142,38 @@ def test_bad_wind_is_refused_with_the_key_named() -> None:
         simulate("missions/sine.toml", wind={"turbulence": "light", "turbulence_scaling": "ieC"})
     with pytest.raises(ConfigError, match=r"wind.gusts\[0\]"):
         simulate("missions/sine.toml", wind={"gusts": [[50.0, 1.0, 2.0]]})
+
+
+def test_a_turbulence_scaling_without_turbulence_is_refused(tmp_path, capsys) -> None:
+    """``--turbulence-scaling`` alone scaled no turbulence, yet its ``[wind]`` table switched the air model on (the
+    still sine's 3-D RMS 3.8e-05 m became 1.4e-03 m): refused, one line, exit 2, nothing written; so is a mission's
+    ``[wind] turbulence_scaling`` with no turbulence given, and Python's keyword and table alike. With a turbulence
+    (laid over, or the file's own ``turbulence = "none"``: a run's mission.toml after ``--turbulence none``) it
+    flies, and a sweep's turbulence axis gives it in every cell."""
+    sine = tmp_path / "sine1.toml"
+    sine.write_text(Path("missions/sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 1.0"))
+    own = tmp_path / "own.toml"
+    own.write_text(sine.read_text() + '\n[wind]\nturbulence_scaling = "none"\n')
+    cases = ((sine, ("--turbulence-scaling", "none"), "--turbulence-scaling none: changes nothing"),
+             (sine, ("--turbulence", "none", "--turbulence-scaling", "exact"), "--turbulence-scaling exact: changes"),
+             (own, (), f"{own}: wind.turbulence_scaling: changes nothing"))
+    for mission, flags, said in cases:
+        rc = main(["sim", str(mission), *flags, "--no-plots", "--out", str(tmp_path / "run")])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert rc == 2 and len(err) == 1 and err[0].startswith(f"bsst: {said}"), (rc, err)
+        assert "give --turbulence LEVEL too" in err[0] or "give turbulence too" in err[0], err
+        assert not (tmp_path / "run").exists()
+    with pytest.raises(ConfigError, match="^--turbulence-scaling none: changes nothing"):
+        simulate(sine, turbulence_scaling="none")
+    with pytest.raises(ConfigError, match=r"wind.turbulence_scaling: changes nothing.*laid over.*= 'none'\)$"):
+        simulate(sine, wind={"turbulence_scaling": "none"})
+    assert simulate(own, turbulence="light").summary["wind"]["turbulence_scaling"] == "none"
+    stated = tmp_path / "stated.toml"
+    stated.write_text(own.read_text().replace("[wind]\n", '[wind]\nturbulence = "none"\n'))
+    assert simulate(stated).summary["outcome"] == "completed"
+    levels = [cell_flight(load_mission(own), c).wind.turbulence for c in cells(load_mission(own),
+                                                                             Grid(turbulence=("none", "light")))]
+    assert levels == ["none", "light"]
 
 
 def test_the_sines_wind_over_a_long_series_has_milhdbks_mean_and_sigma() -> None:

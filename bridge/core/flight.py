@@ -205,7 +205,8 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
     ``axes``: the link keys a campaign's cells lay over this flight, a sweep's swept ones, a margin's searched one),
     then one ``link`` lays over it (unless ``laid_named``: the caller names what it lays over itself, a command
     its flags, bridge.cli.linkflags.idle_link_flag, a campaign its cells' axes, bridge.sweep.spec), a
-    ``discretization`` override for a law without a super-twisting step (:func:`discretization_refusal`).
+    ``discretization`` override for a law without a super-twisting step (:func:`discretization_refusal`), a
+    turbulence scaling with no turbulence (:func:`scaling_refusal`).
     """
     over = Overrides.of(overrides, **keywords)
     m = mission if isinstance(mission, Mission) else load_mission(mission)
@@ -278,7 +279,8 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
     # last: a flight that cannot be flown is named for that first
     idle = (idle_link_key(own, over.link, axes)
             or (None if laid_named else idle_laid_key(src, over.link, flight.link, axes))
-            or discretization_refusal(over.discretization, (m.controller,)))
+            or discretization_refusal(over.discretization, (m.controller,))
+            or scaling_refusal(m, over, flight.wind))
     if idle:
         raise ConfigError(idle)
     return flight
@@ -313,6 +315,25 @@ def idle_laid_key(source: str, link: Mapping[str, Any] | None, flown: LinkSettin
             return (f"{source}: link.{where}: changes nothing: {why}; give {need} too, or remove {key} (with these "
                     f"laid over the mission's [link]: {table_settings(laid, 'link')})")
     return None
+
+
+def scaling_refusal(m: Mission, over: Overrides, wind: WindConfig | None) -> str | None:
+    """The line refusing a turbulence scaling with no turbulence to scale (it would change nothing, yet its
+    ``[wind]`` table switched the air model on): ``--turbulence-scaling`` (Python's ``turbulence_scaling=``) where
+    the flight flies none, named as the flag as ``--discretization`` is; a ``[wind] turbulence_scaling`` key of
+    ``m`` (the mission with the overrides laid over it) where no ``turbulence`` is given at all (not the table,
+    nor laid over it), as a ``[link]`` key whose need nobody gives; ``turbulence = "none"`` beside it is taken,
+    what a run's mission.toml holds after ``--turbulence none``. None."""
+    does = "it sets how the turbulence is scaled"
+    if over.turbulence_scaling is not None and (wind is None or wind.turbulence == "none"):
+        return (f"--turbulence-scaling {over.turbulence_scaling}: changes nothing: {does}, and the flight flies no "
+                "turbulence (turbulence none); give --turbulence LEVEL too, or drop --turbulence-scaling")
+    if "turbulence_scaling" not in m.wind or "turbulence" in m.wind:
+        return None
+    laid = (f" (with these laid over the mission: {table_settings(over.wind, 'wind')})"
+            if "turbulence_scaling" in (over.wind or {}) else "")
+    return (f"{m.source}: wind.turbulence_scaling: changes nothing: {does}, and no turbulence is given; give "
+            f"turbulence too, or remove turbulence_scaling{laid}")
 
 
 def discretization_refusal(scheme: str | None, laws: Iterable[str]) -> str | None:

@@ -284,13 +284,16 @@ def cells(mission: Mission, grid: Grid) -> list[Cell]:
     lists = [getattr(grid, a) or (own[a],) for a in AXES]
     link = tuple(a for a in LINK_AXES if a in given)
     seeds = grid.seed_list(mission)
+    # a [wind] turbulence_scaling with no turbulence of its own: every cell lays its turbulence (none too: the same
+    # air), so the scaling's need is given where the grid sweeps one (bridge.core.flight.scaling_refusal)
+    stated = {"turbulence"} if "turbulence_scaling" in mission.wind and "turbulence" not in mission.wind else set()
     out: dict[tuple[Any, ...], Cell] = {}  # by key: smc's explicit and implicit points are one cell
     for values in product(*lists):
         v = dict(zip(AXES, values, strict=True))
         # a vehicle axis overrides only where it differs from the mission's own value: the same flight, and
         # a grid of 'truth' cells stays one the batch engine builds from one prepare() per law and rate
         sensing = tuple(a for a in SENSING_AXES if a in given and v[a] != own[a])
-        weather = tuple(a for a in WEATHER_AXES if a in given and v[a] != own[a])
+        weather = tuple(a for a in WEATHER_AXES if a in given and (v[a] != own[a] or a in stated))
         for s in seeds:
             c = Cell(**v, seed=s, link=link, sensing=sensing, weather=weather)
             out.setdefault(c.key(), c)
