@@ -228,7 +228,7 @@ def _judged(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention, a
                         estimator=flight.estimator, sensors=flight.sensors.name)
     summary.update(plant_summary(plant_blocks(plant), arrays, shown))
     summary["ended_by"] = {**ended_by_outcome(outcome, ev), **after_faults(outcome, shown),
-                           **not_reached(outcome, flight.timeline, arrays["t"])}
+                           **not_reached(outcome, flight.timeline, arrays["t"], flight.wind)}
     for v in judge(summary, arrays, ev, rules_for(flight, "offline", link)):
         vehicle.event("policy", violation_text(v))
         shown.append({"t": round(vehicle.t, 6), "kind": "policy", "text": violation_text(v)})

@@ -43,7 +43,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from params import ConfigError, Table, finite_float
-from plant.events import range_problem, start_problem
+from plant.events import TimedEvent, range_problem, start_problem
 
 FT = 0.3048  # m per foot
 KT = 1852.0 / 3600.0  # m/s per knot
@@ -101,6 +101,15 @@ class WindConfig:
         if self.gusts:
             d["gusts"] = [[g.t_s, g.duration_s, g.amplitude_mps, g.from_deg] for g in self.gusts]
         return d
+
+    def gust_notes(self) -> tuple[tuple[float, str], ...]:
+        """Its gusts as the lines that say them (mission time s, the text of an ``--at`` gust's event and where it
+        was given), in time order: the vehicle's ``wind`` event and a flight's ``not_reached`` line, as an ``--at``
+        gust has (the gust itself is flown from its exact t_s by :class:`Wind`)."""
+        said = [(g.t_s, TimedEvent(g.t_s, "gust", (("duration_s", g.duration_s), ("amplitude_mps", g.amplitude_mps),
+                                                   ("from_deg", g.from_deg))).text() + f" ([wind] gusts[{i}])")
+                for i, g in enumerate(self.gusts)]
+        return tuple(sorted(said, key=lambda n: n[0]))
 
 
 def blowing(speed: float, from_deg: float) -> Vec3:

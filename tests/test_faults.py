@@ -287,6 +287,25 @@ def test_an_event_scheduled_after_the_flight_ended_is_said_not_reached(tmp_path)
     assert proc.returncode == 1 and "\nnot reached: t=20.000 s: motor 2: 0.5 of its thrust\n" in proc.stdout
 
 
+def test_wind_gusts_are_said_as_an_at_gust_is_flown_or_not_reached(tmp_path) -> None:
+    """A ``[wind]`` gust is said as an ``--at`` gust is: a ``wind`` event at its control step (events.log, the
+    summary's lines), and one after a flight that ended early is ``not_reached``; before, neither was said, and
+    ``summary.json``'s ``wind.gusts`` listed the gust never flown as if flown. Offline and lockstep alike."""
+    from bridge.session import sitl
+
+    m = replace(load_mission("missions/sine.toml"), duration_s=4.0)
+    wind = {"gusts": [[3.5, 1.0, 3.0], [0.5, 0.4, 2.0, 90.0]]}
+    said = []
+    for fly in (simulate, sitl):
+        kw = {"instance": None, "out": tmp_path / "sitl"} if fly is sitl else {}
+        s = fly(m, profile="x500", wind=wind, at=("1:motor:1=0",), plots=False, **kw).summary
+        assert s["outcome"] in ("diverged", "crashed"), s["outcome"]
+        assert s["ended_by"]["not_reached"] == ["t=3.500 s: gust 3 m/s from 0 deg over 1 s ([wind] gusts[0])"]
+        said.append([(e["t"], e["text"]) for e in s["events"] if e["kind"] == "wind"])
+    assert said[0] == said[1] == [(0.5, "gust 2 m/s from 90 deg over 0.4 s ([wind] gusts[1])")], said
+    assert s["clock"] == "lockstep"
+
+
 def test_a_hard_touchdown_is_an_impact() -> None:
     """Dropped from 2 m with the rotors stopped: the plant records the impact speed (about sqrt(2 g h))."""
     plant = Quadrotor(load_profile("x500"), state=(0.0, 0.0, 0.0, 0.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))

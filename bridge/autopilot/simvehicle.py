@@ -86,6 +86,9 @@ class SimVehicle:
     estimator: Estimator | None = None  # None: truth, reading the plant
     takeoff_alt_m: float = 2.5  # m above the start: NAV_TAKEOFF's altitude when it gives none (MIS_TAKEOFF_ALT)
     timeline: tuple[TimedEvent, ...] = ()  # faults and weather changes (plant/events.py), in time order
+    # the [wind] gusts' (mission time s, text), in time order (WindConfig.gust_notes): the plant flies them, the
+    # vehicle says each at its control step as it says an --at gust (a wind event)
+    gust_notes: tuple[tuple[float, str], ...] = ()
     failure_injection: int = 0  # SYS_FAILURE_EN: a ground station's MAV_CMD_INJECT_FAILURE is acted on (1) or not
     rtl: ReturnConfig = field(default_factory=ReturnConfig)  # Return mode's heights (RTL_RETURN_ALT, RTL_DESCEND_ALT)
     preflight_disarm_s: float = 10.0  # COM_DISARM_PRFLT (s): a ground station's arm on the ground times out
@@ -118,6 +121,7 @@ class SimVehicle:
         self._takeoff_alt = self.takeoff_alt_m  # m: the altitude the selected TAKEOFF climbs to
         self._zero = (0.0, 0.0, 0.0, 0.0)
         self._pending_events = list(self.timeline)
+        self._pending_notes = list(self.gust_notes)
         self._mission_t0: float | None = 0.0  # plant time (s) of the mission's time 0 (None: not known yet)
         self._injected: list[tuple[TimedEvent, Sender]] = []  # a ground station's, acted on next period (schedule)
         self._impact = ImpactWatch()  # the hard touchdown's verdict: armed as it touched down or not (plant_verdict)
@@ -382,6 +386,12 @@ class SimVehicle:
             self.event("touchdown", down)
         return verdict
 
+    def _due(self, t_s: float, t0: float) -> bool:
+        """Whether mission time ``t_s`` (s; mission time 0 at plant time ``t0``) is due: its control step, the first
+        that begins at or after it, has begun."""
+        p = self.plant
+        return math.ceil(t_s / self._period_s - 1e-9) * self._period_s + t0 <= p.t + 0.25 * p.dt
+
     def command(self, c: tuple[float, float, float, float]) -> bool:
         """A valid actuator target (normalised, paper frame). Ignored unless armed offboard."""
         if not self.armed or self.mode != OFFBOARD:
@@ -403,11 +413,12 @@ class SimVehicle:
             check_limits(self)
         if self.armed and p.battery is not None:
             check_battery(self, p.battery.remaining)
-        pending = self._pending_events
+        pending, notes = self._pending_events, self._pending_notes
         t0 = self._mission_t0  # (0.0 offline and in lockstep: the same bits as plant time)
-        while (pending and t0 is not None
-               and math.ceil(pending[0].t_s / self._period_s - 1e-9) * self._period_s + t0 <= p.t + 0.25 * p.dt):
+        while pending and t0 is not None and self._due(pending[0].t_s, t0):
             self.inject(pending.pop(0))
+        while notes and t0 is not None and self._due(notes[0][0], t0):
+            self.event("wind", notes.pop(0)[1])
         if self._injected:
             for e, by in self._injected:
                 if not changes_nothing(e, p, self.sensors):  # an OK of a working unit: no change, no event

@@ -114,7 +114,8 @@ class Flight:
         # disarmed, it boots in HOLD, as PX4 does: a ground station's arm holds it on the ground until a takeoff;
         # the controller's arm takes offboard control
         settings = {"armed": armed, "mode": OFFBOARD if armed else HOLD, "takeoff_alt_m": p.takeoff_alt_m,
-                    "timeline": self.timeline, "failure_injection": p.failure_injection, "rtl": p.rtl,
+                    "timeline": self.timeline, "gust_notes": self.wind.gust_notes() if self.wind else (),
+                    "failure_injection": p.failure_injection, "rtl": p.rtl,
                     "preflight_disarm_s": p.preflight_disarm_s, "max_hor_m": p.max_hor_m, "max_ver_m": p.max_ver_m,
                     "rally": m.rally, "fence": m.geofence, "fence_action": p.fence_action,
                     "noaid_timeout_us": p.noaid_timeout_us,

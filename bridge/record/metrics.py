@@ -42,13 +42,16 @@ def after_faults(outcome: str, events: list[dict[str, Any]]) -> dict[str, Any]:
     return {"after_faults": faults} if outcome != "completed" and faults else {}
 
 
-def not_reached(outcome: str, timeline: Sequence[Any], trace_t: np.ndarray) -> dict[str, Any]:
-    """``ended_by``'s ``not_reached``: the timeline's events (``[[events]]``, ``--at``) scheduled after a flight that
-    did not complete had ended (its last row's time, s), so never flown: said, as the run did not fly as asked."""
-    if outcome == "completed" or not timeline:
+def not_reached(outcome: str, timeline: Sequence[Any], trace_t: np.ndarray, wind: Any = None) -> dict[str, Any]:
+    """``ended_by``'s ``not_reached``: the timeline's events (``[[events]]``, ``--at``) and the ``[wind]`` gusts
+    (``wind``, a :class:`plant.wind.WindConfig`, or None) scheduled after a flight that did not complete had ended
+    (its last row's time, s), so never flown: said, as the run did not fly as asked."""
+    said = sorted([*((e.t_s, e.text()) for e in timeline), *(wind.gust_notes() if wind else ())],
+                  key=lambda n: n[0])
+    if outcome == "completed" or not said:
         return {}
     end = float(trace_t[-1]) if len(trace_t) else 0.0
-    late = [f"t={e.t_s:.3f} s: {e.text()}" for e in timeline if e.t_s > end]
+    late = [f"t={t:.3f} s: {text}" for t, text in said if t > end]
     return {"not_reached": late} if late else {}
 
 

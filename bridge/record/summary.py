@@ -450,7 +450,7 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
         summary["param_at"] = list(cs["param_at"])
     summary["ended_by"] = ended_by_change(summary["ended_by"], summary["outcome"], mission, changes)
     summary["ended_by"].update(after_faults(summary["outcome"], [e.as_dict() for e in ev]))
-    summary["ended_by"].update(not_reached(summary["outcome"], flight.timeline, arrays["t"]))
+    summary["ended_by"].update(not_reached(summary["outcome"], flight.timeline, arrays["t"], flight.wind))
     if lockstep is not None:
         summary["lockstep"] = reproducibility(lockstep, changes)
     rules = rules_for(flight, facts.clock, link, controller_id)
