@@ -3,6 +3,7 @@ the plant flying through the air, and ``--wind`` / ``--turbulence`` / ``[wind]``
 
 from __future__ import annotations
 
+import io
 import math
 from dataclasses import replace
 from pathlib import Path
@@ -12,6 +13,7 @@ import pytest
 
 from bridge import simulate
 from bridge.cli import main
+from bridge.cli.flying import print_summary
 from bridge.sweep.grid import Grid, cell_flight, cells
 from missions import load_mission
 from params import ConfigError
@@ -174,6 +176,21 @@ def test_a_turbulence_scaling_without_turbulence_is_refused(tmp_path, capsys) ->
     levels = [cell_flight(load_mission(own), c).wind.turbulence for c in cells(load_mission(own),
                                                                              Grid(turbulence=("none", "light")))]
     assert levels == ["none", "light"]
+
+
+def test_the_printed_summary_names_the_air_flown(tmp_path) -> None:
+    """The summary printed after a run names the air (it named the link, never the wind): one ``air:`` line where
+    there is a ``wind`` block, none in still air."""
+    sine = replace(load_mission("missions/sine.toml"), duration_s=1.0)
+    lines = {}
+    for name, kw in (("still", {}), ("windy", {"wind": (5.0, 270.0), "turbulence": "light"}),
+                     ("gusts", {"wind": {"speed_mps": 2.0, "gusts": [[0.2, 0.5, 3.0], [0.5, 0.2, 1.0, 90.0]]}})):
+        out = io.StringIO()
+        print_summary(simulate(sine, plots=False, **kw).summary, None, out)
+        lines[name] = [line for line in out.getvalue().splitlines() if line.startswith("air")]
+    assert lines == {"still": [],
+                     "windy": ["air: wind 5 m/s from 270 deg, turbulence light (scaling exact); drag on the airspeed"],
+                     "gusts": ["air: wind 2 m/s from 0 deg, turbulence none, 2 [wind] gusts; drag on the airspeed"]}
 
 
 def test_the_sines_wind_over_a_long_series_has_milhdbks_mean_and_sigma() -> None:

@@ -292,6 +292,10 @@ def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
               + (f" p2 {v['period2']:.3g}" if v.get("period2") is not None else "")
               for u, v in s["inputs"].items() if v["min"] is not None]
     w("input  " + ("  ".join(inputs) or "n/a (nothing flew)") + "\n")
+    if s.get("wind"):  # the air flown (its events are the event lines)
+        from bridge.record.metrics import air_text  # lazy: numpy
+
+        w(air_text(s["wind"]) + "\n")
     link = s.get("link", {})
     if any(L.get("lost") or L.get("duplicated") or L.get("reordered") or L.get("in_flight")  # (held: a delay)
            or (L.get("delay_ms") or {}).get("max") for L in (link.get("up", {}), link.get("down", {}))):

@@ -55,6 +55,18 @@ def not_reached(outcome: str, timeline: Sequence[Any], trace_t: np.ndarray, wind
     return {"not_reached": late} if late else {}
 
 
+def air_text(wind: Mapping[str, Any]) -> str:
+    """The summary's line naming the air flown (``summary.json``'s ``wind`` block: the ``[wind]`` table with
+    ``--wind``/``--turbulence`` laid over it): the steady wind at the start, the turbulence and its scaling, how many
+    ``[wind]`` gusts; the wind and gust events, ``[wind]``'s too, are the summary's event lines."""
+    level = wind.get("turbulence", "none")
+    turbulence = f"turbulence {level}" + (f" (scaling {wind.get('turbulence_scaling')})" if level != "none" else "")
+    n = len(wind.get("gusts") or ())
+    gusts = f", {n} [wind] gust{'' if n == 1 else 's'}" if n else ""
+    return (f"air: wind {wind.get('speed_mps', 0.0):g} m/s from {wind.get('from_deg', 0.0):g} deg, {turbulence}"
+            f"{gusts}; drag on the airspeed")
+
+
 def plant_summary(blocks: Mapping[str, Any], trace: Mapping[str, np.ndarray],
                   events: list[dict[str, Any]]) -> dict[str, Any]:
     """``summary.json``'s plant blocks: ``gps_outages`` (:func:`gps_outages`, from the trace and the events on
