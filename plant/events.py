@@ -40,9 +40,9 @@ from params import ConfigError, Table, finite_float, show
 from params.text import number
 
 EVENT_KINDS = ("motor", "gps", "baro", "mag", "gyro", "battery", "wind", "gust", "link")
-# the allowed range [lo, hi] of each number of an event's table (and of its --at flag, and of a [wind] gust), one per
-# key, and its unit (said with the range: range_problem); a vector key's range is each element's. A gust's key
-# (GUST_AT_NOTHING) excludes its low end; a fault vector (FAULT_VECTORS) is not all 0
+# the allowed range [lo, hi] of each number of an event's table (and of its --at flag, of [wind] and of a [wind]
+# gust), one per key, and its unit (said with the range: range_problem); a vector key's range is each element's. A
+# gust's key (GUST_AT_NOTHING) excludes its low end; a fault vector (FAULT_VECTORS) is not all 0
 EVENT_RANGES: dict[str, tuple[float, float, str]] = {
     "motor": (1, 4, ""),
     "effectiveness": (0.0, 1.0, ""),
@@ -53,6 +53,7 @@ EVENT_RANGES: dict[str, tuple[float, float, str]] = {
     "from_deg": (-360.0, 360.0, "deg"),
     "duration_s": (0.0, 600.0, "s"),
     "amplitude_mps": (0.0, 50.0, "m/s"),
+    "altitude_m": (0.0, 1000.0, "m"),  # [wind]'s own (the height its turbulence is taken at; plant.wind.WIND_RANGES)
 }
 # the faults given as a vector that adds to what is there: (0, 0, 0) would inject nothing (a user's slip)
 FAULT_VECTORS = {"jump": "a GPS jump", "bias": "a gyro bias"}
@@ -118,7 +119,9 @@ class EventError(ConfigError):
         super().__init__(f"{where}: {what}")
 
 
-def _number(t: Table, key: str, default: Any = ...) -> float:
+def ranged_number(t: Table, key: str, default: Any = ...) -> float:
+    """``t``'s number ``key`` in its :data:`EVENT_RANGES` range, refused naming its unit (:func:`range_problem`): the
+    one way an event's number, and ``[wind]``'s, is read."""
     big = t.raw(key) if t.has(key) else None
     if isinstance(big, int) and finite_float(big) is None and not isinstance(big, bool):  # past the float range
         raise t.error(key, range_problem(key, big) or "")  # (~1e308): out of the key's range, said as such
@@ -184,7 +187,7 @@ def event_from_table(t: Table, duration_s: float) -> TimedEvent:
     elif kind == "motor":
         lo, hi, _ = EVENT_RANGES["motor"]
         s["motor"] = t.integer("motor", lo=int(lo), hi=int(hi))
-        s["effectiveness"] = _number(t, "effectiveness")
+        s["effectiveness"] = ranged_number(t, "effectiveness")
     elif kind in ("gps", "mag"):
         if kind == "gps" and t.has("jump"):
             s["jump"] = _fault_vector(t, "jump")
@@ -193,16 +196,16 @@ def event_from_table(t: Table, duration_s: float) -> TimedEvent:
     elif kind == "battery":
         s["state"] = t.string("state", choices=BATTERY_STATES)
     elif kind == "baro":
-        s["drift_mps"] = _number(t, "drift_mps")
+        s["drift_mps"] = ranged_number(t, "drift_mps")
     elif kind == "gyro":
         s["bias"] = _fault_vector(t, "bias")
     elif kind == "wind":
-        s["speed_mps"] = _number(t, "speed_mps")
-        s["from_deg"] = _number(t, "from_deg", 0.0)
+        s["speed_mps"] = ranged_number(t, "speed_mps")
+        s["from_deg"] = ranged_number(t, "from_deg", 0.0)
     else:
-        s["duration_s"] = _number(t, "duration_s")
-        s["amplitude_mps"] = _number(t, "amplitude_mps")
-        s["from_deg"] = _number(t, "from_deg", 0.0)
+        s["duration_s"] = ranged_number(t, "duration_s")
+        s["amplitude_mps"] = ranged_number(t, "amplitude_mps")
+        s["from_deg"] = ranged_number(t, "from_deg", 0.0)
     t.done()
     return TimedEvent(t_s, kind, tuple(s.items()))
 

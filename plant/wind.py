@@ -43,7 +43,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from params import ConfigError, Table, finite_float
-from plant.events import TimedEvent, range_problem, start_problem
+from plant.events import EVENT_RANGES, TimedEvent, range_problem, ranged_number, start_problem
 
 FT = 0.3048  # m per foot
 KT = 1852.0 / 3600.0  # m/s per knot
@@ -53,7 +53,9 @@ W20_KT = {"light": 15.0, "moderate": 30.0, "severe": 45.0}  # MIL-F-8785C fig. 1
 LOW_ALTITUDE_FT = (10.0, 1000.0)  # the low-altitude model's range of h
 MIN_PASS_SPEED_MPS = 1.0  # the frozen field passes the vehicle at least this fast (no mean wind: still defined)
 _DOMAIN = 0x3D1D  # keeps the turbulence's stream apart from any other use of the seed
-WIND_RANGES = {"speed_mps": (0.0, 50.0), "from_deg": (-360.0, 360.0), "altitude_m": (0.0, 1000.0)}
+# [wind]'s numbers' [lo, hi]: the events' table's (plant.events.EVENT_RANGES: one range and unit per key, said alike)
+WIND_RANGES = {k: EVENT_RANGES[k][:2] for k in ("speed_mps", "from_deg", "altitude_m")}
+GUST_SHAPE = "[t_s, duration_s, amplitude_mps] or [t_s, duration_s, amplitude_mps, from_deg] (from_deg 0 if left out)"
 
 Vec3 = tuple[float, float, float]
 
@@ -120,15 +122,14 @@ def blowing(speed: float, from_deg: float) -> Vec3:
 
 def wind_from_table(t: Table, duration_s: float) -> WindConfig:
     """Validate a mission's ``[wind]`` table (errors name the file and key)."""
-    r = WIND_RANGES
-    speed = t.number("speed_mps", 0.0, lo=r["speed_mps"][0], hi=r["speed_mps"][1])
-    from_deg = t.number("from_deg", 0.0, lo=r["from_deg"][0], hi=r["from_deg"][1])
+    speed = ranged_number(t, "speed_mps", 0.0)  # (its range and unit: the wind event's)
+    from_deg = ranged_number(t, "from_deg", 0.0)
     level = t.string("turbulence", "none", choices=TURBULENCE)
     scaling = t.string("turbulence_scaling", "exact", choices=SCALING)
-    altitude = t.number("altitude_m", lo=r["altitude_m"][0], hi=r["altitude_m"][1]) if t.has("altitude_m") else None
+    altitude = ranged_number(t, "altitude_m") if t.has("altitude_m") else None
     raw = t.raw("gusts", [])
     if not isinstance(raw, list):
-        raise t.error("gusts", "expected a list of [t_s, duration_s, amplitude_mps, from_deg]")
+        raise t.error("gusts", f"expected a list of gusts, each {GUST_SHAPE}")
     gusts = tuple(gust_from_list(g, f"{t.key('gusts')}[{i}]", t, duration_s) for i, g in enumerate(raw))
     t.done()
     return WindConfig(speed, from_deg, level, altitude, gusts, scaling, duration_s)
@@ -138,7 +139,7 @@ def gust_from_list(g: object, where: str, t: Table, duration_s: float) -> Gust:
     """One gust ``[t_s, duration_s, amplitude_mps]`` or with ``from_deg``; ConfigError naming ``where``."""
     if (not isinstance(g, (list, tuple)) or len(g) not in (3, 4)
             or not all(isinstance(v, float) or finite_float(v) is not None for v in g)):  # (float(): no overflow)
-        raise ConfigError(f"{t._source}: {where}: expected [t_s, duration_s, amplitude_mps, from_deg], got {g!r}"[:200])
+        raise ConfigError(f"{t._source}: {where}: expected {GUST_SHAPE}, got {g!r}"[:300])
     ts, dur, amp = float(g[0]), float(g[1]), float(g[2])
     frm = float(g[3]) if len(g) == 4 else 0.0
     problems = [("t_s", start_problem(ts, duration_s)),

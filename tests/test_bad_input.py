@@ -853,7 +853,8 @@ ISSUE_11_CASES = [
                            "reads)"]),
     (["sim", "{huge}"], ["huge.toml: duration_s: must be in (0, 86400], got an integer of 401 digits"]),
     (["sim", "{sysid}"], ["sysid.toml: params.MAV_SYS_ID: must be in [1, 254], got an integer of 401 digits"]),
-    (["sim", "{gust}"], ["gust.toml: wind.gusts[0]: expected [t_s, duration_s, amplitude_mps, from_deg]"]),
+    (["sim", "{gust}"], ["gust.toml: wind.gusts[0]: expected [t_s, duration_s, amplitude_mps] or [t_s, duration_s, "
+                        "amplitude_mps, from_deg]"]),
     (["sim", "{blackout}"], ["blackout.toml: link.blackouts: element 0 must be a pair"]),
     (["sim", "{key_newline}"], ["key_newline.toml: 'params.COM_OF_LOSS_T\\nX': no such parameter"]),
     (["sim", "{path_newline}"], ["a\\nb.plan': no such file"]),

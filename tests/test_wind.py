@@ -178,6 +178,23 @@ def test_a_turbulence_scaling_without_turbulence_is_refused(tmp_path, capsys) ->
     assert levels == ["none", "light"]
 
 
+def test_wind_refusals_say_the_unit_and_the_gust_shapes(tmp_path) -> None:
+    """``[wind]``'s numbers are refused with the unit of their one range (plant.events.EVENT_RANGES, the wind
+    event's: ``wind:60`` said m/s, ``[wind] speed_mps = 60`` did not), and a gust of the wrong length names both
+    shapes taken (three numbers are: from_deg 0)."""
+    sine = tmp_path / "sine.toml"
+    sine.write_text(Path("missions/sine.toml").read_text())
+    for wind, said in (({"speed_mps": 60}, "wind.speed_mps: must be in [0, 50] m/s, got 60"),
+                       ({"from_deg": 400}, "wind.from_deg: must be in [-360, 360] deg, got 400"),
+                       ({"altitude_m": 2000}, "wind.altitude_m: must be in [0, 1000] m, got 2000"),
+                       ({"gusts": [[3, 2]]}, "wind.gusts[0]: expected [t_s, duration_s, amplitude_mps] or "
+                                             "[t_s, duration_s, amplitude_mps, from_deg] (from_deg 0 if left out), "
+                                             "got [3, 2]")):
+        with pytest.raises(ConfigError) as refused:
+            simulate(sine, wind=wind)
+        assert str(refused.value).startswith(f"{sine}: {said}"), str(refused.value)
+
+
 def test_the_printed_summary_names_the_air_flown(tmp_path) -> None:
     """The summary printed after a run names the air (it named the link, never the wind): one ``air:`` line where
     there is a ``wind`` block, none in still air."""

@@ -267,14 +267,19 @@ def add_flight_options(p: argparse.ArgumentParser, vehicle: bool = True, optiona
 
 
 def wind_flag(text: str) -> tuple[float, float]:
-    """``--wind SPEED[:FROM_DEG]``: (m/s, compass degrees it blows from); ranges checked by plant/wind.py."""
+    """``--wind SPEED[:FROM_DEG]``: (m/s, compass degrees it blows from), each in ``[wind]``'s range (the one table:
+    plant.events.EVENT_RANGES, with its unit)."""
+    from plant.events import EVENT_RANGES  # lazy: only where --wind is given
+
     speed, sep, frm = text.partition(":")
     try:
         values = (number(speed), number(frm) if sep else 0.0)  # "5:" is a FROM left out, refused
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected SPEED[:FROM_DEG] (m/s, compass degrees), got {text!r}") from None
-    if not (0.0 <= values[0] <= 50.0 and -360.0 <= values[1] <= 360.0):
-        raise argparse.ArgumentTypeError(f"SPEED must be in [0, 50] m/s and FROM_DEG in [-360, 360], got {text!r}")
+    (slo, shi, su), (flo, fhi, fu) = EVENT_RANGES["speed_mps"], EVENT_RANGES["from_deg"]
+    if not (slo <= values[0] <= shi and flo <= values[1] <= fhi):
+        raise argparse.ArgumentTypeError(f"SPEED must be in [{slo:g}, {shi:g}] {su} and FROM_DEG in [{flo:g}, {fhi:g}] "
+                                         f"{fu}, got {text!r}")
     return values
 
 
