@@ -33,10 +33,11 @@ from bridge import simulate
 from bridge.autopilot.params import parse_change
 from bridge.autopilot.vehicleevents import Sender, typed_fields
 from bridge.cli import main
-from bridge.core.flight import prepare
+from bridge.core.flight import at_rest, prepare
 from bridge.mavlink.endpoint import GCS_PORT, parse_address
 from bridge.mavlink.missionitems import MissionItem
 from bridge.nodes.report import Ready, parse_line
+from bridge.nodes.uploaded import uploaded_flight
 from bridge.nodes.vehicle import Vehicle, VehicleConfig
 from bridge.nodes.vehicle.clock import ClockState
 from bridge.nodes.vehicle.mission import START_ARM, START_ARMED, START_COMMAND
@@ -52,6 +53,7 @@ from missions import Mission, Sine
 from missions.geodetic import Home
 from missions.geofence import Geofence, Zone
 from missions.planfiles import plan_text, read_plan_text
+from params import ConfigError
 from tests.plans import l_plan
 from tests.sitlkit import (
     ENV,
@@ -1284,6 +1286,28 @@ def test_a_waypoint_before_a_land_here_is_reached_at_its_point_not_at_the_takeof
     assert watch.step(1.0, (0.0, 0.0, 0.0, 0.0, 2.0)) == [0]  # up at the start: the takeoff only
     assert watch.step(2.0, (2.5, 0.0, 0.0, 0.0, 2.0)) == [] and watch.step(3.0, (5.0, 0.0, 0.0, 0.0, 2.0)) == [1]
     assert watch.step(4.0, (5.0, 0.0, 0.0, 0.0, 1.0)) == [] and watch.step(5.0, (5.0, 0.0, 0.0, 0.0, 0.0)) == [2]
+
+
+def test_an_at_event_after_an_uploaded_missions_end_is_refused_naming_the_flag():
+    """``bsst vehicle --await-mission --at 20:gust:2,3`` and a ground station's mission of 10.9 s: the start check
+    (and the controller's download, :func:`bridge.nodes.uploaded.uploaded_flight`) refuse the event as a flight
+    would, naming the flag (docs/weather.md); it named the mission's table (``command line: events[0].t_s: ...``,
+    a settings file's ``.../mission.toml: events[0].t_s``), which holds no such event. A table laid from Python is
+    named as laid (``at[0]``); an event inside the mission flies."""
+    lat, lon = 473977420, 85455940  # the default home (degE7)
+    rel = M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+    items = (MissionItem(0, rel, M.MAV_CMD_NAV_TAKEOFF, 0.0, 0.0, 0.0, math.nan, 0, 0, 2.0, 1),
+             MissionItem(1, rel, M.MAV_CMD_NAV_WAYPOINT, 0.0, 0.0, 0.0, math.nan, lat + 450, lon, 2.0, 1),
+             MissionItem(2, rel, M.MAV_CMD_NAV_LAND, 0.0, 0.0, 0.0, math.nan, 0, 0, 0.0, 1))
+    home = (lat * 1e-7, lon * 1e-7, 488.0)
+    late = {"t_s": 100.0, "kind": "gust", "duration_s": 1.0, "amplitude_mps": 2.0}
+    for at, said in ((("20:gust:2,3",), "--at 20:gust:2,3: t_s: must be in [0, 10.919) s (before the mission's end)"),
+                     ((late,), "at[0]: t_s: must be in [0, 10.919) s")):
+        with pytest.raises(ConfigError) as refused:
+            uploaded_flight(prepare(at_rest(), at=at), items, home, source="the vehicle's mission")
+        assert str(refused.value).startswith(said), str(refused.value)
+    _, new = uploaded_flight(prepare(at_rest(), at=("1:gust:2,3",)), items, home)
+    assert [e.t_s for e in new.timeline] == [1.0] and new.mission.duration_s == pytest.approx(10.919)
 
 
 def test_plan_text_reads_back_and_the_transfer_block_is_typed():

@@ -88,6 +88,9 @@ class Flight:
     param_changes: tuple[ParamChange, ...] = ()  # scheduled PARAM_SETs (--param-at), by mission time
     wind: WindConfig | None = None  # the air it flies through ([wind]); None: still air, the paper's model
     timeline: tuple[TimedEvent, ...] = ()  # faults and weather changes ([[events]], --at), by mission time
+    # the events laid over the mission as the caller gave them ("T:KIND[:ARGS]" of --at, or tables), the last of
+    # mission.events: a mission flown in its place (a ground station's upload) lays them again, named as given
+    at: tuple[Mapping[str, Any] | str, ...] = ()
 
     @property
     def nominal(self) -> Nominal:
@@ -267,7 +270,7 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
     try:
         law = resolve_law(m.controller)
         flight = Flight(m, prof, effects, gains, failsafe, link_settings, law, sensor_config, estimator_kind,
-                        vehicle_params, changes, wind, timeline)
+                        vehicle_params, changes, wind, timeline, over.as_given_at())
         checked_choice()  # BSST_KERNELS: bad input before anything flies
         flight._controller()  # a user's law is built once here, so that one that does not fit is bad input (not
         # compiled: a process that only prepares, a relay or a planner, never loads numba for it)

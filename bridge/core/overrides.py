@@ -116,6 +116,12 @@ class Overrides:
             return given
         return cls(**{**base, **keywords})
 
+    def as_given_at(self) -> tuple[Mapping[str, Any] | str, ...]:
+        """``at`` as its caller gave it: an ``--at`` flag's text ("T:KIND[:ARGS]", so that laid again it is named
+        as the flag), else the table."""
+        return tuple(n.removeprefix("--at ") if n.startswith("--at ") else e
+                     for e, n in zip(self.at, self._at_named, strict=True))
+
     def given(self) -> dict[str, Any]:
         """The fields that lay something over the mission (not None, not empty), by name."""
         return {f.name: v for f in fields(self)
