@@ -5,7 +5,8 @@ In:  a mission's ``[wind]`` table (``speed_mps`` m/s, ``from_deg`` the compass d
      [[t_s, duration_s, amplitude_mps, from_deg]]), the mission's duration (s), a seed, the physics step (s)
 Out: the wind velocity (m/s, paper frame NWU: x north, y west, z up) held over each physics step, and its
      statistics over the flight (the ``wind`` block of ``summary.json``); the turbulence's samples of a whole
-     flight (:func:`turbulence_series`, m/s NWU per physics step: what the batch engine flies)
+     flight (:func:`turbulence_series`, m/s NWU per physics step: what the batch engine flies); the ``[wind]``
+     gusts as the lines that say them (:meth:`WindConfig.gust_notes`: mission time s, text)
 
 Every formula and number, with its source: docs/weather.md.
 

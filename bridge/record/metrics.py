@@ -3,7 +3,7 @@
 In:  trace arrays by column (:data:`~bridge.record.columns.TRACE_COLUMNS`: s, m, m/s, rad, N), the
      mission, the law's gains, and the run's clock, outcome, events and link statistics
 Out: ``summary.json`` as a dict (errors m or rad, times s, inputs N and N/s); p50 / p95 / p99 / max
-     of a sample
+     of a sample; the printed summary's ``air:`` line (:func:`air_text`, m/s, deg)
 
 Each of u1..u4 has its total variation per second ``tv_per_s`` (N/s, the whole flight) and its
 ``period2`` component (N, :func:`period2`, over t >= ``rms_from_s``: the alternation at half the
