@@ -8,6 +8,7 @@ command and writing its row.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +21,7 @@ from bridge.record.columns import CONTROLLER_COLUMNS, TRACE_COLUMNS, VEHICLE_COL
 from bridge.record.halves import HalfReader, HalfWriter
 from bridge.record.joiner import TraceJoiner
 from bridge.record.metrics import ripple_rms
-from missions import MISSION_DIR
+from missions import MISSION_DIR, load_mission
 
 RATE = 250.0
 
@@ -89,6 +90,31 @@ def test_a_step_the_controller_answered_takes_the_reference_its_row_recorded(tmp
     refs = [(r.x_ref, r.y_ref, r.z_ref, r.psi_ref) for r in j.rows]
     sampled = [tuple(a[0] for a in sample(k / RATE)) for k in range(8)]
     assert refs == [(100.0 + k, 200.0 + k, 300.0 + k, 400.0 + k) if k in (0, 1, 3, 4) else sampled[k] for k in range(8)]
+
+
+def test_a_failsafes_rows_after_the_missions_last_step_are_not_the_traces(tmp_path: Path) -> None:
+    """A 10-step mission, its failsafe from step 6 still landing (and waiting out its disarm) at steps 10..15: the
+    trace is steps 0..9, as offline's, which ends at the mission's last step whatever flies after it; the rest is
+    kept after it (its heights and positions, for a fleet's judgement). They were the trace's, its RMS and duration
+    too (the sine's ``--blackout 27.5:3`` in lockstep: 34.57 s and 8643 rows against offline's 30 s and 7500)."""
+    flight = prepare(replace(load_mission(MISSION_DIR / "sine.toml"), duration_s=10 / RATE))
+    vehicle, controller = [], []
+    for k in range(16):
+        key = k if k < 6 else -1
+        mode = MODE_CODES["offboard"] if key >= 0 else MODE_CODES["failsafe"]
+        vehicle.append({"k": k, "t": k / RATE, "x": 0.001 * k, "z": 0.3 - 0.01 * k, "mode": mode, "cmd_k": key,
+                        "odo_sent_wall": 100.0 + k / RATE, "cmd_recv_wall": 100.0 + k / RATE})
+        controller.append({"k": k, "t": k / RATE, "odo_recv_wall": 100.0 + k / RATE,
+                           "cmd_sent_wall": 100.0 + k / RATE})
+    _write(tmp_path / "vehicle.bin", VEHICLE_COLUMNS, vehicle)
+    _write(tmp_path / "controller.bin", CONTROLLER_COLUMNS, controller)
+    j = TraceJoiner(tmp_path, flight, None, lockstep=True)
+    j.controller_done = True
+    j.update()
+    j.close()
+    assert [r.t for r in j.rows] == [k / RATE for k in range(10)]
+    assert [a[0] for a in j.after] == [k / RATE for k in range(10, 16)]
+    assert j.after_at[0] == (0.010, 0.0, 0.3 - 0.1) and len(j.after_at) == 6
 
 
 def test_a_real_time_step_flown_re_armed_before_its_first_target_is_a_row(tmp_path: Path) -> None:

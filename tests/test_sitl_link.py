@@ -148,6 +148,39 @@ def test_long_blackout_failsafe_descends_disarms_exit_1(tmp_path: Path) -> None:
     assert "blackout" in log and "failsafe: no actuator target" in log and "landed: disarmed" in log
 
 
+# ``missions/sine.toml`` cut to 4 s: a failsafe around its end (the review's sine with ``--blackout 27.5:3``, its
+# landing to 34.571 s, and an x500 landed by its battery at 6 s of 8 s, cut short)
+SINE_4S = replace(load_mission(SINE), duration_s=4.0)
+# the summary's blocks of one clock only (the rest, figures and verdicts, is the same in every clock)
+CLOCK_ONLY = ("events", "clock", "timing", "sitl", "lockstep", "interventions", "link")
+
+
+@pytest.mark.parametrize("over", [
+    {"link": {"blackouts": [[2.5, 3.0]]}},  # failsafe at 3.0 s, landed 3.908 s, disarmed after the end
+    {"link": {"blackouts": [[3.3, 3.0]]}},  # failsafe at 3.8 s, still descending at the end: lands 4.844 s
+    {"params": {"GF_MAX_HOR_DIST": 0.3, "GF_ACTION": 3}},  # a geofence Return, disarmed at 3.327 s
+], ids=["landed-by-the-end", "landing-past-the-end", "disarmed-by-the-end"])
+def test_a_failsafe_at_the_missions_end_leaves_the_trace_and_figures_as_offline(tmp_path: Path, over: dict) -> None:
+    """A failsafe that landed the vehicle before the mission's end (its disarm after it), one still landing at it,
+    one that disarmed it before it: ``trace.csv`` is offline's byte for byte (its rows end at the mission's last
+    step: a failsafe's rows after it were the trace's, its RMS and duration too), every figure of ``summary.json``
+    the same, and the vehicle's events (the landing and the disarm after the end kept) offline's."""
+    run = sitl(SINE_4S, out=tmp_path / "s", plots=False, instance=None, **over)
+    off = simulate(SINE_4S, out=tmp_path / "o", plots=False, **over)
+    assert (tmp_path / "s" / "trace.csv").read_bytes() == (tmp_path / "o" / "trace.csv").read_bytes()
+    assert {k: v for k, v in run.summary.items() if k not in CLOCK_ONLY} == \
+        {k: v for k, v in off.summary.items() if k not in CLOCK_ONLY}
+    assert run.summary["outcome"] == "failsafe" and run.summary["duration_s"] == 4.0
+
+    def said(events: list) -> list:
+        return [(e["t"], e["kind"], e["text"].removesuffix(" [by vehicle]")) for e in events
+                if e.get("source", "vehicle") == "vehicle"
+                and e["kind"] in ("failsafe", "landed", "disarmed", "mode")]
+
+    assert said(run.summary["events"]) == said(off.summary["events"])
+    assert said(off.summary["events"])[-2][1] == "disarmed"
+
+
 def test_realtime_through_the_relay_measures_20ms_each_way(tmp_path: Path) -> None:
     run = sitl(Mission(Sine(), duration_s=3.0, name="sine3", end_action="hold"), realtime=True, out=tmp_path / "rt",
                plots=False, instance=None, link={"delay_ms": 20.0})

@@ -20,8 +20,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any, Protocol
 
-END_MODE_CODES = (3, 4)  # vehicle.bin's ``mode`` of HOLD and LAND (bridge.nodes.vehicle.rows.MODE_CODES)
-
 
 class _Event(Protocol):
     t: float | None

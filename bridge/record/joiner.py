@@ -35,7 +35,6 @@ from bridge.record.columns import (
     VehicleRow,
     trace_row,
 )
-from bridge.record.ending import END_MODE_CODES
 from bridge.record.halves import HalfReader, read_half
 from bridge.record.linkextract import step_delays
 from bridge.record.runlog import TraceWriter
@@ -177,12 +176,17 @@ class TraceJoiner:
             self.trace.flush()
 
     def _after_end(self, v: VehicleRow) -> bool:
-        """Whether ``v`` was flown after the mission under its end action (HOLD or LAND past the mission's last
-        step, and on from there: a failsafe that takes the end action over, as a position lost, flies on in it): not
-        the trace's (the mission's figures stay the mission's); kept in :attr:`after` as (t s on the vehicle's clock,
-        z m, vz m/s) for ``summary.json["end"]`` (:func:`bridge.record.ending.end_block`), and its position (x, y, z m)
-        in :attr:`after_at`, for a fleet's judgement of the world through its end landing (:mod:`bridge.swarm`)."""
-        if self.k0 is None or int(v.k) - self.k0 < self.steps or (int(v.mode) not in END_MODE_CODES and not self.after):
+        """Whether ``v`` was flown after the mission's last step by the vehicle itself (its end action, HOLD or LAND,
+        and on from there: a failsafe that takes the end action over, as a position lost, flies on in it; a failsafe's
+        landing still going at the mission's end, or its wait to disarm; a ground station's mode): not the trace's,
+        as offline's trace ends at that step for every outcome (the mission's figures stay the mission's; until the
+        third wave's thirty-ninth session a failsafe's rows past it were the trace's, its RMS and duration too).
+        Kept in :attr:`after` as (t s on the vehicle's clock, z m, vz m/s) for ``summary.json["end"]``
+        (:func:`bridge.record.ending.end_block`, which reads them from the end action's ``end`` event), and its
+        position (x, y, z m) in :attr:`after_at`, for a fleet's judgement of the world through its landing
+        (:mod:`bridge.swarm`). An OFFBOARD row past it before any of those is the state that ended the mission in
+        real time (:meth:`_join` drops it)."""
+        if self.k0 is None or int(v.k) - self.k0 < self.steps or (int(v.mode) == 0 and not self.after):
             return False
         self.after.append((v.t, v.z, v.vz))
         self.after_at.append((v.x, v.y, v.z))
