@@ -164,7 +164,9 @@ def test_a_failsafe_at_the_missions_end_leaves_the_trace_and_figures_as_offline(
     """A failsafe that landed the vehicle before the mission's end (its disarm after it), one still landing at it,
     one that disarmed it before it: ``trace.csv`` is offline's byte for byte (its rows end at the mission's last
     step: a failsafe's rows after it were the trace's, its RMS and duration too), every figure of ``summary.json``
-    the same, and the vehicle's events (the landing and the disarm after the end kept) offline's."""
+    the same, and the vehicle's events (the landing and the disarm after the end kept) offline's. No disarm is said
+    but the vehicle's (the controller once said ``disarmed: vehicle disarmed`` at the end, after the geofence
+    Return's disarm at 3.327 s)."""
     run = sitl(SINE_4S, out=tmp_path / "s", plots=False, instance=None, **over)
     off = simulate(SINE_4S, out=tmp_path / "o", plots=False, **over)
     assert (tmp_path / "s" / "trace.csv").read_bytes() == (tmp_path / "o" / "trace.csv").read_bytes()
@@ -179,6 +181,7 @@ def test_a_failsafe_at_the_missions_end_leaves_the_trace_and_figures_as_offline(
 
     assert said(run.summary["events"]) == said(off.summary["events"])
     assert said(off.summary["events"])[-2][1] == "disarmed"
+    assert [e["source"] for e in run.summary["events"] if e["kind"] == "disarmed"] == ["vehicle"]
 
 
 def test_realtime_through_the_relay_measures_20ms_each_way(tmp_path: Path) -> None:

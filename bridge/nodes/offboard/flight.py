@@ -163,12 +163,16 @@ class Offboard(RealtimeFlying):
         self.event("armed", "vehicle armed, offboard control", answers=("armed",))
         return True
 
-    def _disarm(self) -> bool:
+    def _end_lockstep_flight(self) -> None:
+        """A vehicle its failsafe disarmed, the mission's steps flown: a disarm by command, which ends its lockstep
+        flight (time stands still, as after the end landing's disarm; else, unanswered, it would leave lockstep for
+        the wall clock). Not an event when accepted: the vehicle disarmed itself, and said so at its time (until
+        the third wave's thirty-ninth session a ``disarmed: vehicle disarmed`` event of the controller's at the
+        mission's end said it again, after a geofence Return's disarm long before: offline has none)."""
         result = self._command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0.0, float(FORCE_DISARM))
-        ok = result == mavlink.MAV_RESULT_ACCEPTED
-        self._at_end_now()
-        self.event("disarmed" if ok else "disarm", "vehicle disarmed" if ok else "disarm not acknowledged")
-        return ok
+        if result != mavlink.MAV_RESULT_ACCEPTED:
+            self._at_end_now()
+            self.event("disarm", "disarm not acknowledged")
 
     def _fly_lockstep(self) -> str:
         ep = self.ep
@@ -350,7 +354,7 @@ class Offboard(RealtimeFlying):
             self.failsafe_at - (step_of_usec(odo.time_usec, self.rate) / self.rate - t_end)
         self.event("failsafe", self.reason, answers=("failsafe",), t=took)
         if not self.vehicle_armed:
-            self._disarm()
+            self._end_lockstep_flight()
         return "failsafe"
 
     def _settle_events(self) -> None:
