@@ -155,18 +155,20 @@ SINE_4S = replace(load_mission(SINE), duration_s=4.0)
 CLOCK_ONLY = ("events", "clock", "timing", "sitl", "lockstep", "interventions", "link")
 
 
-@pytest.mark.parametrize("over", [
-    {"link": {"blackouts": [[2.5, 3.0]]}},  # failsafe at 3.0 s, landed 3.908 s, disarmed after the end
-    {"link": {"blackouts": [[3.3, 3.0]]}},  # failsafe at 3.8 s, still descending at the end: lands 4.844 s
-    {"params": {"GF_MAX_HOR_DIST": 0.3, "GF_ACTION": 3}},  # a geofence Return, disarmed at 3.327 s
+@pytest.mark.parametrize(("over", "held"), [
+    ({"link": {"blackouts": [[2.5, 3.0]]}}, True),  # failsafe at 3.0 s, landed 3.908 s, disarmed after the end
+    ({"link": {"blackouts": [[3.3, 3.0]]}}, False),  # failsafe at 3.8 s, still descending at the end: lands 4.844 s
+    ({"params": {"GF_MAX_HOR_DIST": 0.3, "GF_ACTION": 3}}, True),  # a geofence Return, disarmed at 3.327 s
 ], ids=["landed-by-the-end", "landing-past-the-end", "disarmed-by-the-end"])
-def test_a_failsafe_at_the_missions_end_leaves_the_trace_and_figures_as_offline(tmp_path: Path, over: dict) -> None:
+def test_a_failsafe_at_the_missions_end_leaves_the_trace_and_figures_as_offline(tmp_path: Path, over: dict,
+                                                                                 held: bool) -> None:
     """A failsafe that landed the vehicle before the mission's end (its disarm after it), one still landing at it,
     one that disarmed it before it: ``trace.csv`` is offline's byte for byte (its rows end at the mission's last
     step: a failsafe's rows after it were the trace's, its RMS and duration too), every figure of ``summary.json``
-    the same, and the vehicle's events (the landing and the disarm after the end kept) offline's. No disarm is said
-    but the vehicle's (the controller once said ``disarmed: vehicle disarmed`` at the end, after the geofence
-    Return's disarm at 3.327 s)."""
+    the same, and the vehicle's events (the landing and the disarm after the end kept) offline's. A vehicle that only
+    waits out its disarm on the ground stays in lockstep (it left it for the wall clock, said so, and the run said it
+    was not a lockstep run); one still landing leaves it, and says so. No disarm is said but the vehicle's (the
+    controller once said ``disarmed: vehicle disarmed`` at the end, after the geofence Return's disarm at 3.327 s)."""
     run = sitl(SINE_4S, out=tmp_path / "s", plots=False, instance=None, **over)
     off = simulate(SINE_4S, out=tmp_path / "o", plots=False, **over)
     assert (tmp_path / "s" / "trace.csv").read_bytes() == (tmp_path / "o" / "trace.csv").read_bytes()
@@ -182,6 +184,8 @@ def test_a_failsafe_at_the_missions_end_leaves_the_trace_and_figures_as_offline(
     assert said(run.summary["events"]) == said(off.summary["events"])
     assert said(off.summary["events"])[-2][1] == "disarmed"
     assert [e["source"] for e in run.summary["events"] if e["kind"] == "disarmed"] == ["vehicle"]
+    left = [e["t"] for e in run.summary["events"] if e["kind"] == "lockstep" and e["source"] == "vehicle"]
+    assert run.summary["lockstep"]["held"] is held and left == ([] if held else [4.0]), run.summary["lockstep"]
 
 
 def test_realtime_through_the_relay_measures_20ms_each_way(tmp_path: Path) -> None:

@@ -335,7 +335,8 @@ class Offboard(RealtimeFlying):
     def _end_of_mission(self, t_end: float, odo: Any) -> str:
         """The mission's steps are flown (the state of mission time ``t_end``, s, came): ``failsafe`` if the
         vehicle's failsafe took over and it is not back under offboard control, else ``completed``. A vehicle
-        its failsafe landed and disarmed is disarmed by command too, which ends its lockstep flight."""
+        its failsafe landed (lockstep) waits out its disarm on the step clock (:meth:`_clock_disarm`); one it
+        disarmed is disarmed by command too, which ends its lockstep flight."""
         # on the vehicle's clock (the session orders both children's events by time): it measured that state
         # the way down before it came
         self.t_mission, self._end_wall = t_end, time.monotonic() - (self._way_down or 0.0)
@@ -353,9 +354,30 @@ class Offboard(RealtimeFlying):
         took = math.nan if self.failsafe_at is None else \
             self.failsafe_at - (step_of_usec(odo.time_usec, self.rate) / self.rate - t_end)
         self.event("failsafe", self.reason, answers=("failsafe",), t=took)
+        if self.vehicle_armed and self._resting():
+            self._clock_disarm()
         if not self.vehicle_armed:
             self._end_lockstep_flight()
         return "failsafe"
+
+    def _resting(self) -> bool:
+        """Lockstep: whether the vehicle's failsafe has landed it (its EVENT LANDED since its latest FAILSAFE's), on
+        the step clock still: on the ground, motors off, it only waits out COM_DISARM_LAND (> 0). Not in a fleet (its
+        vehicle gated, given ``--state-timeout``): there a failsafe's landing after the mission leaves the shared
+        clock, as offline flies it alone, told nothing (docs/swarm.md)."""
+        return (self.cfg.clock == "lockstep" and self.cfg.state_timeout_s is None and not self.left_lockstep
+                and self.flight.params.land_disarm_s > 0.0 and self.landed_at is not None
+                and self.failsafe_at is not None and self.landed_at >= self.failsafe_at)
+
+    def _clock_disarm(self) -> None:
+        """A vehicle its failsafe landed before the mission's end waits out COM_DISARM_LAND on the step clock, each
+        state answered with the no-target acknowledgement as the end landing's (:meth:`_await_landing`), so that it
+        disarms where offline's does without leaving lockstep (until the third wave's thirty-ninth session it left
+        lockstep for the wall clock, unanswered, and the run said it was not a lockstep run). The failsafe stays
+        the reason the flight ended."""
+        reason = self.reason
+        self._await_landing()
+        self.reason = reason
 
     def _settle_events(self) -> None:
         """Serve the link while EVENTs the vehicle sent are missed and asked for again (each given up after

@@ -129,6 +129,7 @@ class OffboardLink:
         self.vehicle_state = mavlink.MAV_STATE_UNINIT
         self.failsafe_seen = FailsafeSign.NONE  # how the vehicle said its failsafe since we armed it
         self.failsafe_at: float | None = None  # s, the vehicle's clock: its latest EVENT FAILSAFE's time
+        self.landed_at: float | None = None  # s, the vehicle's clock: its latest EVENT LANDED's (land detected)
         self.left_lockstep = ""  # how the vehicle said it left lockstep (its LOCKSTEP EVENT), if it did
         self.event_seq = EventSequence()  # the vehicle's EVENTs by sequence: the missed ones asked for again
         self.taken_over = ""  # the mode a ground station switched the armed vehicle to (PX4 custom_mode), if any
@@ -414,6 +415,8 @@ class OffboardLink:
             # ground) never shows CRITICAL: disarmed, the failsafe is cleared and HEARTBEAT says STANDBY (PX4)
             if not self.failsafe_seen:
                 self.failsafe_seen = FailsafeSign.EVENT
+        elif eid is EventId.LANDED and self.armed_seen:  # on the ground, waiting out COM_DISARM_LAND
+            self.landed_at = max(self.landed_at or 0.0, m.event_time_boot_ms / 1000.0)
         elif eid is EventId.LOCKSTEP and not self.left_lockstep:  # not a lockstep flight any more
             self.left_lockstep = "its EVENT LOCKSTEP (its STATUSTEXT says why)"
 
