@@ -27,7 +27,7 @@ from bridge.record.columns import (
 )
 from bridge.record.events import RunEvent, in_time_order
 from bridge.record.joiner import Joined
-from bridge.record.policies import POLICIES
+from bridge.record.policies import POLICIES, run_ok
 from bridge.record.summary import (
     ChildEnd,
     SessionFacts,
@@ -424,3 +424,29 @@ def test_a_failsafe_parameter_a_ground_station_set_after_its_hops_failsafe_is_na
     assert s["outcome"] == "failsafe" and s["ended_by"] == {
         "who": str(GCS), "how": f"failsafe at t=0.800 s: {own.text}, under COM_OBL_ACT = 3 (was 1) set by a ground "
                                 "station at t=-3.000 s (step -750)"}, s["ended_by"]
+
+
+def test_a_scheduled_change_confirmed_after_the_flights_end_is_not_made_and_never_before_the_vehicles_change() -> None:
+    """``summary.json["param_at"]``: an echo stamped by the controller 1 ms before the vehicle's own event of the
+    change is put at that event (the controller maps its clock onto the vehicle's only to within a few ms); one
+    confirmed after the flight's end (its time flown: a crash in a real-time blackout the controller heard of only
+    after it) is not made (``confirmed`` false, ``late_t``), said so, and the run is no clean one. (Until the third
+    wave's thirty-ninth session both were copied as the controller said: confirmed, the first before its change.)"""
+    sent = {"sends": 1, "confirmed": True}
+    stats = {**CONTROLLER_STATS, "param_at": [
+        {"t_s": 0.3, "name": "MPC_LAND_SPEED", "value": 0.8, "sent_t": 0.3, "confirmed_t": 0.301, **sent},
+        {"t_s": 0.6, "name": "MIS_TAKEOFF_ALT", "value": 5, "sent_t": 0.6, "confirmed_t": 1.2, **sent}]}
+    vehicle, _ = ends()
+    controller = ChildEnd("controller", 0, "exited with status 0", stats, "completed", None)
+    made = [RunEvent(0.302, "param", "MPC_LAND_SPEED = 0.8 (was 0.7)", "vehicle", CONTROLLER,
+                     ParamChanged("MPC_LAND_SPEED", 0.7, 0.800000011920929)),
+            RunEvent(1.19, "param", "MIS_TAKEOFF_ALT = 5 (was 2.5)", "vehicle", CONTROLLER,
+                     ParamChanged("MIS_TAKEOFF_ALT", 2.5, 5.0))]
+    out = session_summary(FLIGHT, facts(), joined(), [ARMED, *made], vehicle, controller)
+    early, late = out.summary["param_at"]
+    assert out.summary["duration_s"] == 1.0
+    assert early["confirmed"] is True and early["confirmed_t"] == 0.302, early
+    assert late["confirmed"] is False and late["confirmed_t"] is None and late["late_t"] == 1.2, late
+    assert not run_ok(out.summary)
+    [note] = [n.text for n in out.notes if n.kind == "param"]
+    assert "MIS_TAKEOFF_ALT=5 was confirmed by the vehicle only at t=1.200 s, after" in note

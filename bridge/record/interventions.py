@@ -2,11 +2,12 @@
 
 In:  the run's events (:class:`~bridge.record.events.RunEvent`: the vehicle's, with their typed ``by`` and ``param``
      fields), the control rate (Hz), the flight's controller's (sysid, compid); the lockstep record and ``ended_by``
-     of ``summary.json``; a scheduled change's entry (``summary.json["param_at"]``)
+     of ``summary.json``; a scheduled change's entry (``summary.json["param_at"]``), the flight's end (s)
 Out: ``summary.json["interventions"]`` (:func:`interventions`: t s, step, by, kind, what, a parameter's name, old,
      new), the lockstep record with whether the run can be flown again to the bit (:func:`reproducibility`),
      ``ended_by`` naming a ground station's failsafe parameter (:func:`ended_by_change`), and the lines a person
-     reads (:func:`intervention_text`, :func:`unconfirmed_text`)
+     reads (:func:`intervention_text`, :func:`unconfirmed_text`); a change confirmed after the flight's end as not
+     made in flight (:func:`made_in_flight`)
 """
 
 from __future__ import annotations
@@ -14,9 +15,11 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from bridge.autopilot.params import BY_NAME, shown_value
+from bridge.autopilot.params import BY_NAME, float32, shown_value
 from bridge.record.events import RunEvent
 from bridge.record.policies import CONTROLLER_ID, vehicle_events
+
+SENT_SLACK_S = 0.01  # s: a change's first PARAM_SET is stamped on the controller's clock, mapped to the vehicle's
 
 # the vehicle's events that a sender other than the flight's controller may cause and that change the flight
 INTERVENING = ("param", "mode", "armed", "disarmed", "fault")  # fault: a ground station's injected failure
@@ -63,9 +66,29 @@ def intervention_text(i: Mapping[str, Any]) -> str:
 
 
 def unconfirmed_text(p: Mapping[str, Any]) -> str:
-    """A scheduled change (``summary.json["param_at"]``'s entry) the vehicle never confirmed, for a person."""
-    return (f"--param-at {p['t_s']:g}:{p['name']}={p['value']:g} was never confirmed by the vehicle "
-            f"({p['sends']} PARAM_SETs): not made")
+    """A scheduled change (``summary.json["param_at"]``'s entry) the vehicle never confirmed in flight, for a
+    person."""
+    never = "never confirmed by the vehicle" if p.get("late_t") is None else \
+        f"confirmed by the vehicle only at t={p['late_t']:.3f} s, after the flight's end"
+    return f"--param-at {p['t_s']:g}:{p['name']}={p['value']:g} was {never} ({p['sends']} PARAM_SETs): not made"
+
+
+def made_in_flight(p: Mapping[str, Any], end_s: float, events: Sequence[RunEvent],
+                   controller_id: tuple[int, int] = CONTROLLER_ID) -> dict[str, Any]:
+    """A scheduled change's entry (``summary.json["param_at"]``) judged against the flight's end (s, the time flown):
+    its ``confirmed_t`` no earlier than the vehicle's own event of the change (the controller maps the echo's
+    arrival onto the vehicle's clock only to within the way down's few ms); confirmed after the end (the vehicle
+    crashed in a real-time blackout the controller heard of only after it) is no change made in flight:
+    ``confirmed`` false, its time kept as ``late_t`` (the controller judges by the mission's end as it knew it)."""
+    if not p.get("confirmed"):
+        return dict(p)
+    made = [e.t for e in vehicle_events(events) if e.kind == "param" and e.param is not None and e.by is not None
+            and e.by.link == "controller" and (e.by.sysid, e.by.compid) == controller_id and e.param.name == p["name"]
+            and float32(e.param.new) == float32(p["value"]) and e.t >= p["sent_t"] - SENT_SLACK_S]
+    t = max(p["confirmed_t"], *made[:1])
+    if t > end_s + 1e-9:
+        return {**p, "confirmed": False, "confirmed_t": None, "late_t": t}
+    return {**p, "confirmed_t": t}
 
 
 def reproducibility(lockstep: dict[str, Any], changes: Sequence[Mapping[str, Any]]) -> dict[str, Any]:

@@ -35,6 +35,7 @@ from bridge.record.interventions import (
     ended_by_change,
     intervention_text,
     interventions,
+    made_in_flight,
     reproducibility,
     unconfirmed_text,
 )
@@ -447,7 +448,8 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
     if transfer is not None:
         summary["mission_transfer"] = transfer.as_dict()
     if cs.get("param_at"):  # the scheduled changes (--param-at) as sent, each confirmed by the vehicle's echo or not
-        summary["param_at"] = list(cs["param_at"])
+        summary["param_at"] = [made_in_flight(p, summary["duration_s"], events, controller_id)
+                              for p in cs["param_at"]]
     summary["ended_by"] = ended_by_change(summary["ended_by"], summary["outcome"], mission, changes)
     summary["ended_by"].update(after_faults(summary["outcome"], [e.as_dict() for e in ev]))
     summary["ended_by"].update(not_reached(summary["outcome"], flight.timeline, arrays["t"], flight.wind))

@@ -76,7 +76,6 @@ class Offboard(RealtimeFlying):
         self.ended_taken_over = False  # the flight ended for a ground station's mode (no more targets sent)
         self.vehicle_silent = False  # the flight ended hearing nothing from the vehicle (Done.silent)
         self._changes = list(flight.param_changes)  # scheduled PARAM_SETs not sent yet, by mission time
-        self._end_wall: float | None = None  # wall time the mission's last state came (the events' clock after it)
         self._way_down: float | None = None  # real time: the states' way down (s), the vehicle's clock ahead of ours
         self.way_down: dict[str, float] | None = None  # real time: that in ms and how far off it may be (stats)
         self._end_usec: int | None = None  # lockstep: the stamp of the state that ended the mission, unanswered
@@ -104,6 +103,7 @@ class Offboard(RealtimeFlying):
                 self.reason = f"{exc} at step {round(self.t_mission * self.rate)} (t={self.t_mission:.3f} s)"
                 self.event("law_failed", self.reason)
                 return "law_failed"
+            self.end_t = min(self.end_t, self.vehicle_t())  # the mission's end, or where the flight stopped before it
             self._await_param_echoes()
             self._pending_params.clear()  # given up (said not made): not resent while the vehicle lands
             if outcome == "completed":
@@ -123,8 +123,8 @@ class Offboard(RealtimeFlying):
             self.turns.close()
 
     def _await_param_echoes(self) -> None:
-        """The flight is over: serve the link (resending) for up to PARAM_SETTLE_S of wall time more while a
-        scheduled PARAM_SET is not echoed yet (one sent at the last steps: its echo is on its way)."""
+        """The flight is over: serve the link for up to PARAM_SETTLE_S of wall time more while a scheduled PARAM_SET
+        is not echoed yet (one sent at the last steps: its echo is on its way; one after the end: not made)."""
         deadline = time.monotonic() + PARAM_SETTLE_S
         while self._pending_params and not self.stopping and time.monotonic() < deadline:
             self._serve(min(deadline, self._next_house))
@@ -327,10 +327,8 @@ class Offboard(RealtimeFlying):
         """After the mission's steps, events are at the time they happen, not at the last step's: in lockstep
         the vehicle waits at the state that ended the mission, in real time the wall clock has gone on since it
         came (the session orders the two children's events by time: an answer never comes before its cause)."""
-        if self._end_wall is not None and self.cfg.clock == "realtime":
-            now = time.monotonic()
-            self.t_mission += now - self._end_wall
-            self._end_wall = now
+        if self._t_wall is not None and self.cfg.clock == "realtime":
+            self.t_mission, self._t_wall = self.vehicle_t(), time.monotonic()
 
     def _end_of_mission(self, t_end: float, odo: Any) -> str:
         """The mission's steps are flown (the state of mission time ``t_end``, s, came): ``failsafe`` if the
@@ -339,7 +337,7 @@ class Offboard(RealtimeFlying):
         disarmed is disarmed by command too, which ends its lockstep flight."""
         # on the vehicle's clock (the session orders both children's events by time): it measured that state
         # the way down before it came
-        self.t_mission, self._end_wall = t_end, time.monotonic() - (self._way_down or 0.0)
+        self.t_mission, self._t_wall = t_end, self._odo_recv - (self._way_down or 0.0)  # (its arrival: not when read)
         self._end_height_m = max(-float(odo.z), 0.0)  # m above the start (NED z): the landing's time
         self._settle_events()
         lost = self._check_vehicle()  # disarmed, taken over, ... in the mission's last steps: not completed

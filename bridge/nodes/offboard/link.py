@@ -8,9 +8,9 @@ In:  the vehicle's messages: ODOMETRY (checked: sender, stamp, range; kept newes
      RESPONSE_EVENT_ERROR (the events missed, bridge.mavlink.eventseq), STATUSTEXT (reported as said, never read
      for a decision)
 Out: actuator targets stamped with their state's ``time_usec`` (or the lockstep no-target acknowledgement),
-     ARM_DISARM and other COMMAND_LONGs until ACKed, PARAM_SET until the vehicle's PARAM_VALUE echoes it
-     (every 0.2 s of wall time), HEARTBEAT, TIMESYNC, REQUEST_EVENT for the EVENTs missed, REQUEST_MESSAGE
-     HEARTBEAT when the link is back (:meth:`OffboardLink.ask_heartbeat`); ``controller.tlog``;
+     ARM_DISARM and other COMMAND_LONGs until ACKed, PARAM_SET until the vehicle's PARAM_VALUE echoes it (every
+     0.2 s of wall time, until the flight's end), HEARTBEAT, TIMESYNC, REQUEST_EVENT for the EVENTs missed,
+     REQUEST_MESSAGE HEARTBEAT when the link is back (:meth:`OffboardLink.ask_heartbeat`); ``controller.tlog``;
      reports (:mod:`bridge.nodes.report`): events at the mission's time, received STATUSTEXTs, refusals
 """
 
@@ -84,7 +84,7 @@ class FailsafeSign(Enum):
 class ScheduledSet:
     """One ``--param-at`` change as sent: its wire value (float32) and MAVLink type, the mission time it was
     first sent (s), how many PARAM_SETs went, the next resend's wall time, and the mission time the vehicle's
-    PARAM_VALUE echoed it (None: not yet)."""
+    PARAM_VALUE echoed it (None: not yet), or ``late_t`` if that came after the flight's end (not made in flight)."""
 
     change: ParamChange
     wire: float
@@ -93,13 +93,14 @@ class ScheduledSet:
     sends: int = 0
     next_send: float = 0.0
     confirmed_t: float | None = None
+    late_t: float | None = None
 
     def as_dict(self) -> dict[str, Any]:
         """Its entry in the controller's ``stats`` (``param_at``) and ``summary.json["param_at"]``."""
-        c = self.change
+        c, late = self.change, {} if self.late_t is None else {"late_t": round(self.late_t, 6)}
         return {"t_s": c.t_s, "name": c.name, "value": c.value, "sent_t": round(self.sent_t, 6), "sends": self.sends,
                 "confirmed": self.confirmed_t is not None,
-                "confirmed_t": None if self.confirmed_t is None else round(self.confirmed_t, 6)}
+                "confirmed_t": None if self.confirmed_t is None else round(self.confirmed_t, 6), **late}
 
 
 class OffboardLink:
@@ -156,6 +157,8 @@ class OffboardLink:
         self.state_window: list[int] | None = None  # [first, last] step of the vehicle's states read
         self.read_until: float | None = None  # s, time.monotonic: when it stopped reading the vehicle (stop_reading)
         self.t_mission = 0.0  # the mission time the events are reported at (s)
+        self._t_wall: float | None = None  # real time: the time.monotonic the vehicle's clock read t_mission at
+        self.end_t = flight.mission.steps / self.rate  # the flight's end (s; Offboard.run: where it stopped)
         self.param_sets: list[ScheduledSet] = []  # the scheduled PARAM_SETs sent, in order
         self._pending_params: dict[str, ScheduledSet] = {}  # by name: sent, not echoed by the vehicle yet
 
@@ -282,27 +285,44 @@ class OffboardLink:
         self.ep.send(mavlink.MAVLink_param_set_message(self.vsys or 0, self.vcomp, s.change.name.encode(),
                                                        s.wire, s.kind))
 
+    def vehicle_t(self) -> float:
+        """Now on the vehicle's clock, mission time (s): lockstep, the step it waits at; real time, t_mission and the
+        wall time since (a message read between two ticks came after the earlier one's time)."""
+        if self._t_wall is None or self.cfg.clock != "realtime":
+            return self.t_mission
+        return self.t_mission + max(time.monotonic() - self._t_wall, 0.0)
+
     def _resend_params(self, now: float) -> None:
-        """Each scheduled PARAM_SET the vehicle has not echoed yet, again once its PARAM_RETRY_S is up."""
+        """Each scheduled PARAM_SET the vehicle has not echoed yet, again once its PARAM_RETRY_S is up; none after
+        the flight's end (a real-time blackout that outlasts it): it would change the vehicle's landing, unflown."""
+        if self.vehicle_t() > self.end_t:
+            return
         for s in self._pending_params.values():
             if now >= s.next_send:
                 self._send_set(s)
 
     def _param_echo(self, m: Any) -> None:
-        """A PARAM_VALUE of the vehicle: the pending scheduled set of that name and value is confirmed."""
+        """A PARAM_VALUE of the vehicle: the pending scheduled set of that name and value is confirmed, at the echo's
+        arrival on the vehicle's clock (at or after its change), or, after the flight's end, not made in flight."""
         name = m.param_id.rstrip("\x00") if isinstance(m.param_id, str) else m.param_id.decode(errors="replace")
         s = self._pending_params.get(name)
         if s is None or float32(m.param_value) != s.wire:
             return
         del self._pending_params[name]
-        s.confirmed_t = self.t_mission
-        self.event("param", f"{name} = {s.change.value:g} confirmed by the vehicle (after {s.sends} "
-                            f"PARAM_SET{'s' if s.sends > 1 else ''})")
+        t, sets = self.vehicle_t(), f"{s.sends} PARAM_SET{'s' if s.sends > 1 else ''}"
+        if t > self.end_t + 1e-9:
+            s.late_t = t
+            self.event("param", f"{name} = {s.change.value:g} confirmed by the vehicle only after the flight's end "
+                                f"(t={self.end_t:.3f} s; after {sets}): not made", ("param",), t)
+            return
+        s.confirmed_t = t
+        self.event("param", f"{name} = {s.change.value:g} confirmed by the vehicle (after {sets})", ("param",), t)
 
     def unconfirmed_params(self) -> list[ScheduledSet]:
-        """The scheduled sets the vehicle never echoed (each said as an event here: not made)."""
+        """The scheduled sets the vehicle never echoed in flight (each never echoed said as an event here: not made;
+        one echoed after the flight's end was said then)."""
         out = [s for s in self.param_sets if s.confirmed_t is None]
-        for s in out:
+        for s in (s for s in out if s.late_t is None):
             self.event("param", f"{s.change.name} = {s.change.value:g} (due at t={s.change.t_s:g} s) never "
                                 f"confirmed by the vehicle after {s.sends} PARAM_SETs: not made")
         return out

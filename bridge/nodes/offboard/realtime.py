@@ -113,6 +113,7 @@ class RealtimeFlying(OffboardLink):
             # j / rate, arrived the way down later, and the tick is PHASE_S after its arrival
             t = j / rate + (way_down + PHASE_S if way_down is not None else 0.0)
             j += 1
+            self._t_wall = due  # the vehicle's clock reads t at the tick's due (OffboardLink.vehicle_t)
             self._decide(t, last_k, usec, recv, late)
         return "aborted"
 

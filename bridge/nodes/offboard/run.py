@@ -17,6 +17,7 @@ from bridge.nodes.offboard.config import OffboardConfig
 from bridge.nodes.offboard.flight import Offboard
 from bridge.nodes.process import on_stop_signals, report_printer
 from bridge.nodes.report import Done, Stats
+from bridge.record.interventions import unconfirmed_text
 from bridge.record.runlog import side_dir
 
 
@@ -59,6 +60,5 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
     elif left:
         sys.stderr.write(f"bsst controller: completed, but not in lockstep: said by {node.left_lockstep}\n")
     for p in unconfirmed:
-        sys.stderr.write(f"bsst controller: {p.change.name} = {p.change.value:g} (due at t={p.change.t_s:g} s) "
-                         f"was never confirmed by the vehicle: not made\n")
+        sys.stderr.write(f"bsst controller: {unconfirmed_text(p.as_dict())}\n")
     return 0 if outcome == "completed" and not left and not unconfirmed else 1
