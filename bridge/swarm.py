@@ -4,7 +4,8 @@ In:  a mission (a :class:`~missions.Mission` or a TOML path) with ``[[vehicles]]
      ``vehicles=N`` and ``formation="line:SPACING"`` (m; :mod:`missions.fleet`), and its overrides (as
      :func:`bridge.loop.simulate` takes them)
 Out: a :class:`FleetRun`: each vehicle's :class:`~bridge.record.runlog.Run` (system ids 1..N) and the
-     fleet's ``summary.json`` as a dict: ``vehicles`` (id, outcome, RMS m, ...), ``separation`` (the
+     fleet's ``summary.json`` as a dict: ``duration_s`` (the time flown: to its last vehicle's end, as one
+     vehicle's), ``vehicles`` (id, outcome, RMS m, ...), ``separation`` (the
      closest approach of every pair, m, and when, s), ``policies``, the worst ``outcome``; with a directory,
      ``vehicle-<id>/`` (each vehicle's own run: ``trace.csv``, ``summary.json``, ``plots/``), ``mission.toml``
      (the fleet as flown), ``summary.json`` and ``plots/`` (every vehicle); on one shared radio
@@ -318,7 +319,8 @@ def _fly_together(steps: list[Generator[Step, str | None, Run]], starts: list[Se
 
 def fleet_summary(m: Mission, flights: list[Flight], runs: list[Run], watch: Watch,
                   clock: str = "offline", instance: int = 0) -> dict[str, Any]:
-    """The fleet's ``summary.json``: the worst outcome decides; vehicle i's system id ``instance`` + i (PX4's)."""
+    """The fleet's ``summary.json``: the worst outcome decides; vehicle i's system id ``instance`` + i (PX4's);
+    ``duration_s`` the longest any vehicle flew (each one's time flown: bridge.record.metrics), not the mission's."""
     rank = {o: i for i, o in enumerate(SEVERITY)}
     vehicles = []
     policies = [watch.verdict()]
@@ -337,7 +339,9 @@ def fleet_summary(m: Mission, flights: list[Flight], runs: list[Run], watch: Wat
                      if not p.get("ok")]
     worst = max((x["outcome"] for x in vehicles), key=lambda o: rank.get(o, len(SEVERITY)))
     rms = [x["rms_3d"] for x in vehicles if x["rms_3d"] is not None]
-    return {"mission": m.name, "clock": clock, "rate_hz": m.rate_hz, "duration_s": m.duration_s,
+    flown = [r.summary.get("duration_s") for r in runs]
+    return {"mission": m.name, "clock": clock, "rate_hz": m.rate_hz,
+            "duration_s": max((d for d in flown if d is not None), default=0.0),
             "controller": m.controller, "profile": m.profile, "outcome": worst, "rms_3d": max(rms) if rms else None,
             "vehicles": vehicles, "separation": watch.summary(), "policies": policies}
 

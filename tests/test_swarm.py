@@ -373,3 +373,23 @@ def test_each_vehicles_link_in_the_fleets_summary_adds_up(tmp_path: Path) -> Non
             L, own = v["link"][d], alone.summary["link"][d]
             assert L["sent"] == L["delivered"] + L["lost"] + L["in_flight"] and L["in_flight"] > 0, L
             assert {k: L[k] for k in ("duplicated", "reordered")} == {k: own[k] for k in ("duplicated", "reordered")}
+
+
+def test_a_fleets_duration_is_its_time_flown_and_its_summary_lists_each_vehicles_events(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``bsst sim --vehicles 2 --profile x500 --at 1.5:motor:1=0 --at 0.5:gust:2,1,90`` of 3 s: both vehicles
+    diverge before 2 s, and the fleet's ``duration_s`` (summary.json and the printed header) is the time they flew,
+    as one vehicle's is; the printed summary lists each vehicle's events (the gust, the fault, the divergence) under
+    it, as one vehicle's does. Until the third wave's thirty-ninth session the fleet said the mission's 3.00 s and
+    listed no event."""
+    assert main(["sim", str(short_sine(tmp_path)), "--vehicles", "2", "--profile", "x500", "--at", "1.5:motor:1=0",
+                 "--at", "0.5:gust:2,1,90", "--out", str(tmp_path / "r"), "--no-plots"]) == 1
+    s = json.loads((tmp_path / "r" / "summary.json").read_text())
+    flown = [json.loads((tmp_path / "r" / v["dir"] / "summary.json").read_text())["duration_s"] for v in s["vehicles"]]
+    assert [v["outcome"] for v in s["vehicles"]] == ["diverged", "diverged"] and max(flown) < 2.0, flown
+    assert s["duration_s"] == max(flown)
+    out = capsys.readouterr().out
+    assert f"duration {max(flown):.2f} s" in out.splitlines()[0], out
+    for said in ("  event t=0.500 wind: gust 1 m/s from 90 deg over 2 s", "  event t=1.500 fault: motor 1: off",
+                 "diverged: tilt beyond 90 degrees"):
+        assert out.count(said) == 2, out

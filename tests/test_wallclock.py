@@ -95,8 +95,9 @@ def test_a_fleet_that_held_while_judged_is_not_said_to_hold_when_one_was_not_jud
     assert "vehicle 2 only until t=0.400 s, still flying when its record ended (HOLD set by a ground station), " \
            "while the fleet's record goes on to t=0.900 s" in policy["why"]
 
-    class Fleet:
+    class Fleet:  # a FleetRun's parts the report reads: its vehicles' runs (their events printed), no directory
         path = None
+        runs = [one, two]
 
     Fleet.summary = summary  # type: ignore[attr-defined]
     assert report_fleet(Fleet, "sitl") == 1

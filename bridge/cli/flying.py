@@ -148,11 +148,12 @@ def report_fleet(run: Any, command: str) -> int:
         w = sys.stdout.write
         w(f"mission {s['mission']}  {len(s['vehicles'])} vehicles  clock {s['clock']}  rate {s['rate_hz']:g} Hz  "
           f"duration {s['duration_s']:.2f} s\noutcome: {s['outcome']}\n")
-        for v in s["vehicles"]:
+        for v, r in zip(s["vehicles"], run.runs, strict=True):
             rms = "n/a" if v["rms_3d"] is None else f"{v['rms_3d']:.3e} m"
             where = "its own trajectory" if v["trajectory"] == "own" else f"offset {v['offset']} m"
             w(f"vehicle {v['id']} (sysid {v['sysid']}, {v['profile']}, {where}): {v['outcome']}, "
               f"3-D RMS {rms}\n")
+            w("".join("  " + line for line in event_lines(r.summary.get("events") or [])))  # its faults, gusts, end
             for c in (v.get("link") or {}).get("jitter_capped") or ():  # flown, not as asked (docs/links.md)
                 from bridge.link.model import jitter_capped_text  # lazy: start-up time
 
