@@ -12,7 +12,7 @@ The vehicle starts at rest on the ground at the home. NAV_TAKEOFF climbs over wh
 NAV_WAYPOINT passes through (stops when it holds: param1 s); NAV_LOITER_TIME stops and holds param1 s;
 NAV_LAND flies over its point (here if its latitude and longitude are 0), stops, and descends to the
 ground; NAV_RETURN_TO_LAUNCH flies over the home at its altitude, stops and lands; nothing may follow a
-landing. DO_CHANGE_SPEED (param1 0/1 horizontal, 2 up, 3 down; param2 m/s, -1 no change) changes the
+landing. DO_CHANGE_SPEED (param1 0/1 horizontal, 2 up, 3 down; param2 m/s, -1 or -2 no change) changes the
 limit of the legs after it. Yaw (param4 deg, clockwise from north; NaN or none) is as given, else
 along the path: the heading of the leg (the bisector of the two at a pass-through corner).
 
@@ -220,10 +220,11 @@ def _speed(plan: PlanFile, item: Item, xy: float, up: float, dn: float) -> tuple
                                 f"3 descent")
     if v == -1.0 or v == -2.0:  # no change; -2: back to the default (PX4: the cruise it had)
         return xy, up, dn
-    lo, hi = LIMIT_RANGES["MPC_XY_CRUISE"] if kind < 2 else LIMIT_RANGES["MPC_Z_V_AUTO_UP" if kind == 2
-                                                                           else "MPC_Z_V_AUTO_DN"]
-    if not (math.isfinite(v) and lo <= v <= hi):
-        raise plan.refuse(item, f"speed (param2) {v:g} m/s: must be in [{lo:g}, {hi:g}] or -1 (no change)")
+    sets = "MPC_XY_CRUISE" if kind < 2 else "MPC_Z_V_AUTO_UP" if kind == 2 else "MPC_Z_V_AUTO_DN"
+    lo, hi = LIMIT_RANGES[sets]
+    if not (math.isfinite(v) and lo <= v <= hi):  # (the ranges: docs/missions.md, "Supported and refused")
+        raise plan.refuse(item, f"speed (param2) {v:g} m/s: must be in [{lo:g}, {hi:g}] (the range of {sets}, "
+                                f"which param1 {kind:g} sets), or -1 or -2 (no change)")
     return (v, up, dn) if kind < 2 else ((xy, v, dn) if kind == 2 else (xy, up, v))
 
 

@@ -113,6 +113,13 @@ def test_a_slower_cruise_is_a_longer_flight() -> None:
                                                                               "after NAV_LAND (21)"]),
     (lambda d: d["mission"]["items"][1]["params"].__setitem__(1, 50), ["mission.items[1]", "DO_CHANGE_SPEED (178)",
                                                                       "speed"]),
+    # the message gives the range of the speed param1 names, and both values meaning no change (-2 flies too); until
+    # the third wave's thirty-ninth session it left -2 out, and docs/missions.md said (0, 12] for every kind
+    (lambda d: d["mission"]["items"][1]["params"].__setitem__(1, 0.05),
+     ["DO_CHANGE_SPEED (178)", "speed (param2) 0.05 m/s: must be in [0.1, 12] (the range of MPC_XY_CRUISE, which "
+      "param1 1 sets), or -1 or -2 (no change)"]),
+    (lambda d: d["mission"]["items"][1]["params"].__setitem__(slice(0, 2), [3, 5]),
+     ["DO_CHANGE_SPEED (178)", "speed (param2) 5 m/s: must be in [0.1, 4] (the range of MPC_Z_V_AUTO_DN"]),
     (lambda d: d["mission"]["items"][2].update(autoContinue=False), ["mission.items[2]", "autoContinue"]),
     # a missing autoContinue is refused as QGroundControl's loader refuses it (it flew as if true until the third
     # wave's thirty-seventh session)
