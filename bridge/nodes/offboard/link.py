@@ -20,7 +20,6 @@ import math
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
 from typing import Any
@@ -54,11 +53,11 @@ from bridge.nodes.offboard.config import (
     stamp_problem,
     stamp_slack_s,
 )
+from bridge.nodes.offboard.paramschedule import PARAM_RETRY_S, ScheduledSet
 from bridge.nodes.report import Event, Report, StatusText, Warning
 
 _ZERO12 = (0.0,) * 12
 _ZERO16 = (0.0,) * 16
-PARAM_RETRY_S = 0.2  # s of wall time between PARAM_SETs of one scheduled change the vehicle has not echoed
 TIMESYNC_WINDOW = 8  # the clock offset is where this many latest TIMESYNC answers' bounds agree (offset_bounds)
 TARGETS_TIMED = 256  # the latest targets' sends timed (just before, just after): which left after the vehicle stopped
 TIMESYNC_BURST_S = 0.01  # s of wall time between TIMESYNC requests until that many answers are in (then timesync_s)
@@ -78,29 +77,6 @@ class FailsafeSign(Enum):
 
     def __bool__(self) -> bool:
         return self is not FailsafeSign.NONE
-
-
-@dataclass
-class ScheduledSet:
-    """One ``--param-at`` change as sent: its wire value (float32) and MAVLink type, the mission time it was
-    first sent (s), how many PARAM_SETs went, the next resend's wall time, and the mission time the vehicle's
-    PARAM_VALUE echoed it (None: not yet), or ``late_t`` if that came after the flight's end (not made in flight)."""
-
-    change: ParamChange
-    wire: float
-    kind: int
-    sent_t: float
-    sends: int = 0
-    next_send: float = 0.0
-    confirmed_t: float | None = None
-    late_t: float | None = None
-
-    def as_dict(self) -> dict[str, Any]:
-        """Its entry in the controller's ``stats`` (``param_at``) and ``summary.json["param_at"]``."""
-        c, late = self.change, {} if self.late_t is None else {"late_t": round(self.late_t, 6)}
-        return {"t_s": c.t_s, "name": c.name, "value": c.value, "sent_t": round(self.sent_t, 6), "sends": self.sends,
-                "confirmed": self.confirmed_t is not None,
-                "confirmed_t": None if self.confirmed_t is None else round(self.confirmed_t, 6), **late}
 
 
 class OffboardLink:
