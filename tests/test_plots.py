@@ -212,6 +212,40 @@ def test_inputs_show_each_step_of_the_last_tenth_of_a_second(clean: dict, clean_
     assert np.all(np.diff(np.sign(clean["u4"][last])) != 0)
 
 
+def _columns(ax, x: np.ndarray) -> np.ndarray:
+    """The pixel column each time ``x`` falls in, on ``ax`` as drawn."""
+    x0, x1 = ax.get_xlim()
+    return np.floor(ax.bbox.x0 + (x - x0) * (ax.bbox.width / (x1 - x0))).astype(np.int64)
+
+
+def test_long_lines_are_thinned_to_what_each_pixel_column_shows(clean: dict, clean_figs: dict) -> None:
+    """A time axis's solid line keeps, of each pixel column's samples, the first, lowest, highest and last: the same
+    extent in every column (the law's u4, alternating every step, still fills its band), the same ends, fewer
+    points than rows where the columns hold several samples. A dashed line keeps every row (cut, its dash gaps
+    would show the line under it where it fills a band)."""
+    t = clean["t"]
+    shown = {"positions": [(a, a + "_ref") for a in ("x", "y", "z", "psi")],
+             "angles": [("phi", "phi_d"), ("theta", "theta_d"), ("psi", "psi_ref")],
+             "inputs": [(u, u + "_act") for u in ("u1", "u2", "u3", "u4")]}
+    thinned = 0
+    for name, columns in shown.items():
+        axes = clean_figs[name].axes[::2] if name == "inputs" else clean_figs[name].axes
+        for ax, keys in zip(axes, columns, strict=True):
+            for line, key in zip(ax.lines, keys, strict=True):
+                x, y = np.asarray(line.get_xdata()), np.asarray(line.get_ydata())
+                assert x[0] == t[0] and x[-1] == t[-1] and y[0] == clean[key][0] and y[-1] == clean[key][-1]
+                full, drawn = _columns(ax, t), _columns(ax, x)
+                for agg in (np.minimum, np.maximum):
+                    cut = np.flatnonzero(np.r_[True, drawn[1:] != drawn[:-1]])
+                    whole = np.flatnonzero(np.r_[True, full[1:] != full[:-1]])
+                    assert np.array_equal(drawn[cut], full[whole]), (name, key)  # no column lost
+                    assert np.array_equal(agg.reduceat(y, cut), agg.reduceat(clean[key], whole)), (name, key)
+                if line.get_linestyle() != "-":
+                    assert len(x) == len(t), (name, key)
+                thinned += len(x) < len(t)
+    assert thinned >= 7  # positions' and angles' flown lines at least: two samples a column where they held ~3.5
+
+
 def test_path3d_tick_labels_do_not_overlap(clean_figs: dict) -> None:
     fig = clean_figs["path3d"]
     r = fig.canvas.get_renderer()
