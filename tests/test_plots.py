@@ -10,6 +10,7 @@ real processes, is in test_sweep.py).
 
 from __future__ import annotations
 
+import gc
 import os
 import struct
 from collections.abc import Iterator
@@ -190,6 +191,32 @@ def test_the_figures_are_written_at_their_dpi(clean: dict, clean_figs: dict, tmp
         w, h = struct.unpack(">II", head[16:24])
         want = sizes[p.stem] * DPI
         assert (w, h) == (round(want[0]), round(want[1])), p.name
+
+
+def test_figures_are_drawn_with_the_heap_before_them_frozen(clean: dict, tmp_path: Path) -> None:
+    """The collections matplotlib sets off while drawing skip the heap that was there before (frozen, then given
+    back); a heap frozen already, as a fork server's child has it, stays frozen."""
+    seen: list[int] = []
+
+    def note(phase: str, info: dict) -> None:
+        if phase == "start":
+            seen.append(gc.get_freeze_count())
+
+    assert gc.get_freeze_count() == 0  # a test worker freezes nothing
+    gc.callbacks.append(note)
+    try:
+        make_plots(clean, tmp_path / "cold", "short")
+    finally:
+        gc.callbacks.remove(note)
+    assert seen and min(seen) > 0
+    assert gc.get_freeze_count() == 0
+    gc.freeze()  # as bridge.nodes.forkserver before it forks a child
+    frozen = gc.get_freeze_count()
+    try:
+        make_plots(clean, tmp_path / "forked", "short")
+        assert gc.get_freeze_count() > frozen // 2  # not thawed (a thaw empties it; a few frozen objects die meanwhile)
+    finally:
+        gc.unfreeze()
 
 
 def test_inputs_show_each_step_of_the_last_tenth_of_a_second(clean: dict, clean_figs: dict) -> None:
