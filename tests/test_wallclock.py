@@ -5,7 +5,8 @@ end landing up to the step it left, then where its gate said it stayed); one tha
 judged on every row it recorded, matched by step, a contact there said as found afterwards; after its last row it
 stays there when at rest (disarmed, its mission completed, crashed), and is nowhere known when its record ended in
 flight while another's went on: the fleet summary then says who was judged only until when and why, the
-``separation`` policy does not hold, the printed summary says so and the exit status is 1.
+``separation`` policy does not hold, the printed summary says so and the exit status is 1. A real-time fleet's
+vehicle disarmed in the air stays on the ground below its last row, as a lockstep one does.
 """
 
 from __future__ import annotations
@@ -17,8 +18,8 @@ import pytest
 
 from bridge.cli.flying import report_fleet
 from bridge.record.runlog import Run
-from bridge.record.separation import NOWHERE, WALL_CLOCK, Watch, judge_traces
-from bridge.record.wallclock import at_rest, clocked_records, judged_on_wall_clock
+from bridge.record.separation import CONTINUED, NOWHERE, WALL_CLOCK, Watch, judge_traces
+from bridge.record.wallclock import at_rest, clocked_records, judged_on_wall_clock, taken_over_records
 
 RATE = 10.0
 
@@ -113,3 +114,27 @@ def test_a_fleet_on_the_shared_clock_throughout_is_judged_as_before() -> None:
     two = _run([0.0] * 4, 1.0, (3, [0.0, 1.0, 0.0]), [("armed", "vehicle"), ("disarmed", "vehicle")], "aborted")
     rec = clocked_records([one, two], [1, 2], RATE)
     assert rec.flown == [] and rec.walls == [None, None] and rec.finals == [(0.0, 0.0, 1.0), (0.0, 1.0, 0.0)]
+
+
+@pytest.mark.parametrize(("outcome", "said", "touched"), [
+    ("aborted", [("armed", "vehicle"), ("disarmed", "vehicle")], False),  # a ground station's disarm: below
+    ("diverged", [("armed", "vehicle"), ("disarmed", "vehicle")], True),  # its plant ended it: where it ended
+    ("aborted", [("armed", "vehicle")], True)])  # still armed when its record ended: at its last row
+def test_a_real_time_vehicle_disarmed_in_the_air_stays_on_the_ground_below(outcome: str, said: list[tuple[str, str]],
+                                                                           touched: bool) -> None:
+    # 1 hovers at (0, 0, 1 m) for 3 s and its record ends; 2 flies along y=0 at 1 m through x=0 at 4 s. Until the
+    # third wave's thirty-ninth session a disarmed 1 hung at its last row: a collision for both, found afterwards
+    one = _run([0.0] * 30, 0.0, None, said, outcome)
+    two = _run([4.0 - 0.1 * j for j in range(81)], 0.0, None, [("armed", "vehicle")], "completed")
+    rec = taken_over_records([one, two], [1, 2], RATE)
+    assert rec.finals[1] is None and rec.flown == []
+    assert rec.finals[0] == ((0.0, 0.0, 0.0) if not touched else None)
+    watch = Watch([1, 2], [0.3, 0.3], 0.5)
+    contacts = judge_traces(watch, [one.trace, two.trace], RATE, rec.finals, None, rec.afters, rec.walls,
+                            own_clocks=True)
+    if touched:
+        assert contacts[0]["step"] == contacts[1]["step"] == 34 and contacts[0]["continued"] == CONTINUED
+        return
+    assert contacts == {}
+    pair = watch.summary()["pairs"][0]
+    assert pair["closest_m"] == pytest.approx(0.4) and pair["t"] == pytest.approx(4.0)  # 1 m below 2's path

@@ -9,7 +9,7 @@ Out: :class:`FleetRecords`: each vehicle's end-landing rows to judge, where it s
      s, why, judged until when) and ``whole_flight``, and the ``separation`` policy not held when a vehicle was
      not judged over the whole flight; :func:`taken_over_records`: a real-time fleet's records, each vehicle a
      ground station took over and that flew on under it listed (its first intervention's step), for
-     ``separation.taken_over``
+     ``separation.taken_over``, and one disarmed in the air on the ground below its last row after it
 
 A vehicle leaves the shared clock when its flight is over (its landing disarmed it, a disarm, a crash, a contact):
 it stays where it left, as offline. It also leaves to fly on, on the wall clock: a ground station's mode (HOLD,
@@ -33,6 +33,7 @@ from bridge.record.separation import NOWHERE
 FLYING_ON = ("taken over by a ground station: the vehicle flies on under it, on the wall clock, recorded, until "
              "the rest of the fleet is done (docs/swarm.md)")  # (a fleet's session's event: bridge.session.fleet)
 AT_REST = ("completed", "crashed", "diverged", "collision")  # outcomes after which the vehicle stays where it is
+PLANT_ENDED = ("crashed", "diverged")  # its plant ended the flight (and disarmed it): it stays where it ended
 
 
 @dataclass(frozen=True)
@@ -76,11 +77,26 @@ def _gate_left(run: Run) -> dict[str, Any] | None:
 def at_rest(summary: dict[str, Any]) -> bool:
     """Whether a session's vehicle was at rest when its record ended: its outcome one of :data:`AT_REST`, or its
     last word on arming ``disarmed``."""
-    if summary.get("outcome") in AT_REST:
-        return True
+    return summary.get("outcome") in AT_REST or _disarmed_last(summary)
+
+
+def _disarmed_last(summary: dict[str, Any]) -> bool:
     said = [e["kind"] for e in summary.get("events") or () if e.get("source") == "vehicle"
             and e.get("kind") in ("armed", "disarmed")]
     return bool(said) and said[-1] == "disarmed"
+
+
+def _disarmed_below(run: Run) -> tuple[float, float, float] | None:
+    """Where a real-time vehicle disarmed in the air stays after its record's last row (its last word on arming
+    ``disarmed``, its plant not the one that ended it): on the ground below that row, as a lockstep one stays
+    (:func:`bridge.nodes.vehicle.gate.resting`; its rows end at the disarm, its fall is not recorded). None: at its
+    last row (still armed, or ended by its plant: where it ended, in the air too, as offline)."""
+    rows = [(float(x), float(y), float(z)) for x, y, z in zip(run.trace["x"], run.trace["y"], run.trace["z"])]
+    rows += [(float(p[0]), float(p[1]), float(p[2])) for p in run.after]
+    if not rows or run.summary.get("outcome") in PLANT_ENDED or not _disarmed_last(run.summary):
+        return None
+    x, y, z = rows[-1]
+    return x, y, min(z, 0.0)
 
 
 def clocked_records(runs: Sequence[Run], ids: Sequence[int], rate: float) -> FleetRecords:
@@ -116,7 +132,7 @@ def taken_over_records(runs: Sequence[Run], ids: Sequence[int], rate: float) -> 
     action's rows after its trace's), staying at its last row after it; a vehicle a ground station took over that
     flew on under it (its session's ``sitl.flew_on``: :mod:`bridge.session.fleet`) is listed from its takeover (its
     first intervention's step) and, its record ended in flight, is :data:`~bridge.record.separation.NOWHERE` after
-    it (its place not known)."""
+    it (its place not known); one disarmed in the air stays on the ground below its last row, as in lockstep."""
     finals: list[tuple[float, float, float] | None] = []
     ends: list[int] = []
     flown: list[Flown] = []
@@ -129,7 +145,7 @@ def taken_over_records(runs: Sequence[Run], ids: Sequence[int], rate: float) -> 
             first = (r.summary.get("interventions") or [{}])[0]
             flown.append(Flown(j, i, int(first.get("step", last)), last,
                                f"taken over by a ground station ({first.get('by', 'unknown')})", rest))
-        finals.append(NOWHERE if on and not rest else None)
+        finals.append(NOWHERE if on and not rest else _disarmed_below(r))
     return FleetRecords([r.after for r in runs], finals, [None] * len(runs), ends, flown, rate)
 
 
