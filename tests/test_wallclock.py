@@ -64,7 +64,8 @@ def test_a_record_flown_on_is_judged_row_by_row_and_its_end_in_flight_is_said_no
     runs = [one, two, three]
     rec = clocked_records(runs, [1, 2, 3], RATE)
     assert rec.walls == [None, 3, 2] and rec.ends == [9, 7, 8]
-    assert rec.finals[0] == (0.0, 0.0, 1.0) and rec.finals[1] == NOWHERE and rec.finals[2] is None
+    # 3 disarmed 1 m up after it flew on: on the ground below its last row from then, as a vehicle on the clock
+    assert rec.finals[0] == (0.0, 0.0, 1.0) and rec.finals[1] == NOWHERE and rec.finals[2] == (0.4, 0.0, 0.0)
     assert len(rec.afters[0]) == 3  # the end landing up to the step it left, where its gate's word takes over
     watch = Watch([1, 2, 3], [0.3, 0.3, 0.3], 0.5)
     contacts = judge_traces(watch, [r.trace for r in runs], RATE, rec.finals, None, rec.afters, rec.walls)

@@ -87,8 +87,9 @@ def _disarmed_last(summary: dict[str, Any]) -> bool:
 
 
 def _disarmed_below(run: Run) -> tuple[float, float, float] | None:
-    """Where a real-time vehicle disarmed in the air stays after its record's last row (its last word on arming
-    ``disarmed``, its plant not the one that ended it): on the ground below that row, as a lockstep one stays
+    """Where a vehicle flown on the wall clock (real time, or a lockstep one that left the shared clock) and disarmed
+    in the air stays after its record's last row (its last word on arming ``disarmed``, its plant not the one that
+    ended it): on the ground below that row, as one on the shared clock stays
     (:func:`bridge.nodes.vehicle.gate.resting`; its rows end at the disarm, its fall is not recorded). None: at its
     last row (still armed, or ended by its plant: where it ended, in the air too, as offline)."""
     rows = [(float(x), float(y), float(z)) for x, y, z in zip(run.trace["x"], run.trace["y"], run.trace["z"])]
@@ -102,7 +103,8 @@ def _disarmed_below(run: Run) -> tuple[float, float, float] | None:
 def clocked_records(runs: Sequence[Run], ids: Sequence[int], rate: float) -> FleetRecords:
     """Each vehicle's record as the trace judge takes it (the module's docstring): on the shared clock to its end,
     its end landing up to the step it left and where it stayed (its gate's word), as offline; flown on after it,
-    every row, and after them its last row (at rest) or :data:`~bridge.record.separation.NOWHERE`."""
+    every row, and after them its last row (at rest; disarmed in the air, the ground below it: :func:`_disarmed_below`)
+    or :data:`~bridge.record.separation.NOWHERE`."""
     afters: list[Sequence[Sequence[float]]] = []
     finals: list[tuple[float, float, float] | None] = []
     walls: list[int | None] = []
@@ -122,7 +124,7 @@ def clocked_records(runs: Sequence[Run], ids: Sequence[int], rate: float) -> Fle
         why = (r.summary.get("lockstep") or {}).get("why") or "it left the shared clock"
         flown.append(Flown(j, i, int(left["step"]), rows - 1, why, rest))
         afters.append(r.after)
-        finals.append(None if rest else NOWHERE)
+        finals.append(_disarmed_below(r) if rest else NOWHERE)
         walls.append(int(left["step"]))
     return FleetRecords(afters, finals, walls, ends, flown, rate)
 
