@@ -15,6 +15,10 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import Any
 
 import pytest
 from pymavlink import mavutil
@@ -303,6 +307,41 @@ class _Answering(threading.Thread):
         wait_for(lambda: len(self.answered) >= seen + n, 20.0, what)
 
 
+HOLD, OFFBOARD = (1, 4, 3), (1, 6, 0)  # DO_SET_MODE's base, main and sub mode (PX4's AUTO.LOITER, OFFBOARD)
+
+
+@dataclass
+class _Links:
+    """A lockstep vehicle (:class:`Proc`), a ground station's link to it and a scripted controller's (pymavlink)."""
+
+    v: Proc
+    gcs: Any
+    ctl: Any
+    sysid: int
+
+    def gcs_says(self, cmd: int, *params: float) -> None:
+        """The ground station's COMMAND_LONG ``cmd``, ACCEPTED."""
+        self.gcs.mav.command_long_send(self.sysid, 1, cmd, 0, *params, *[0.0] * (7 - len(params)))
+        assert _ack(self.gcs, cmd).result == M.MAV_RESULT_ACCEPTED, (cmd, params)
+
+
+@contextmanager
+def _gcs_and_controller(tmp_path, rate: float) -> Iterator[_Links]:
+    """A vehicle stepped at ``rate`` Hz, its ground station's and its controller's links, each heard by it; the
+    vehicle stopped (exit 0) and the links closed after."""
+    with instance_slot() as n:
+        links = _Links(_vehicle(n, tmp_path, "--rate", f"{rate:g}"), _gcs(n), _controller_link(n), n + 1)
+        try:
+            links.ctl.mav.heartbeat_send(M.MAV_TYPE_ONBOARD_CONTROLLER, M.MAV_AUTOPILOT_INVALID, 0, 0, 4)
+            assert links.ctl.recv_match(type="HEARTBEAT", blocking=True, timeout=20) is not None
+            assert links.gcs.wait_heartbeat(timeout=20) is not None
+            yield links
+        finally:
+            assert links.v.stop() == 0
+            links.gcs.close()
+            links.ctl.close()
+
+
 def test_a_ground_stations_offboard_or_arm_on_the_wall_clock_engages_lockstep_at_a_control_periods_start(tmp_path):
     """A lockstep vehicle a ground station put in HOLD runs on the wall clock, its controller still answering its
     states; the ground station's OFFBOARD again, or its arm in OFFBOARD after a disarm there, is taken at the next
@@ -312,39 +351,23 @@ def test_a_ground_stations_offboard_or_arm_on_the_wall_clock_engages_lockstep_at
     vehicle then went on flying on the wall clock, and the answer to it flew the next step, recorded as that step's
     own answer (its state never sent); the mode and arm were between two steps."""
     rate = 50.0
-    hold, offboard = (1, 4, 3), (1, 6, 0)  # DO_SET_MODE's base, main and sub mode (PX4's AUTO.LOITER, OFFBOARD)
-    with instance_slot() as n:
-        v = _vehicle(n, tmp_path, "--rate", f"{rate:g}")
-        gcs, ctl = _gcs(n), _controller_link(n)
-        sysid = n + 1
-
-        def gcs_says(cmd: int, *params: float) -> None:
-            gcs.mav.command_long_send(sysid, 1, cmd, 0, *params, *[0.0] * (7 - len(params)))
-            assert _ack(gcs, cmd).result == M.MAV_RESULT_ACCEPTED, (cmd, params)
-
-        try:
-            ctl.mav.heartbeat_send(M.MAV_TYPE_ONBOARD_CONTROLLER, M.MAV_AUTOPILOT_INVALID, 0, 0, 4)
-            assert ctl.recv_match(type="HEARTBEAT", blocking=True, timeout=20) is not None
-            assert gcs.wait_heartbeat(timeout=20) is not None
-            with _Answering(ctl, sysid, rate) as controller:
-                ctl.mav.command_long_send(sysid, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
-                controller.more(10, "the controller's flight")
-                for _ in range(3):
-                    gcs_says(M.MAV_CMD_DO_SET_MODE, *hold)
-                    controller.more(10, "the states of the wall clock, answered")
-                    gcs_says(M.MAV_CMD_DO_SET_MODE, *offboard)  # armed: back to lockstep
-                    controller.more(10, "the lockstep flight again")
-                    gcs_says(M.MAV_CMD_DO_SET_MODE, *hold)
-                    gcs_says(M.MAV_CMD_COMPONENT_ARM_DISARM, 0)  # on the ground: on the wall clock, disarmed
-                    gcs_says(M.MAV_CMD_DO_SET_MODE, *offboard)  # disarmed: armed in it next
-                    gcs_says(M.MAV_CMD_COMPONENT_ARM_DISARM, 1)  # back to lockstep
-                    controller.more(10, "the lockstep flight after the ground station's arm")
-                ctl.mav.command_long_send(sysid, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 21196, 0, 0, 0, 0, 0)
-                wait_for(lambda: M.MAV_RESULT_ACCEPTED in controller.acks[1:], 10.0, "the controller's disarm")
-        finally:
-            assert v.stop() == 0
-            gcs.close()
-            ctl.close()
+    with _gcs_and_controller(tmp_path, rate) as links:
+        v, ctl, sysid, gcs_says, hold, offboard = links.v, links.ctl, links.sysid, links.gcs_says, HOLD, OFFBOARD
+        with _Answering(ctl, sysid, rate) as controller:
+            ctl.mav.command_long_send(sysid, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+            controller.more(10, "the controller's flight")
+            for _ in range(3):
+                gcs_says(M.MAV_CMD_DO_SET_MODE, *hold)
+                controller.more(10, "the states of the wall clock, answered")
+                gcs_says(M.MAV_CMD_DO_SET_MODE, *offboard)  # armed: back to lockstep
+                controller.more(10, "the lockstep flight again")
+                gcs_says(M.MAV_CMD_DO_SET_MODE, *hold)
+                gcs_says(M.MAV_CMD_COMPONENT_ARM_DISARM, 0)  # on the ground: on the wall clock, disarmed
+                gcs_says(M.MAV_CMD_DO_SET_MODE, *offboard)  # disarmed: armed in it next
+                gcs_says(M.MAV_CMD_COMPONENT_ARM_DISARM, 1)  # back to lockstep
+                controller.more(10, "the lockstep flight after the ground station's arm")
+            ctl.mav.command_long_send(sysid, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 21196, 0, 0, 0, 0, 0)
+            wait_for(lambda: M.MAV_RESULT_ACCEPTED in controller.acks[1:], 10.0, "the controller's disarm")
     answered = set(controller.answered)
     rows = read_half(tmp_path / "vehicle.bin")
     k, lockstep = rows["k"].astype(int), rows["k"] == rows["cmd_k"]
@@ -367,15 +390,8 @@ def test_an_answer_to_a_wall_clock_state_after_lockstep_engages_again_is_counted
     session. An answer to a lockstep step long flown is still ``stale``."""
     rate = 50.0
     period = round(1e6 / rate)  # us
-    hold, offboard = (1, 4, 3), (1, 6, 0)  # DO_SET_MODE's base, main and sub mode (PX4's AUTO.LOITER, OFFBOARD)
-    with instance_slot() as n:
-        v = _vehicle(n, tmp_path, "--rate", f"{rate:g}")
-        gcs, ctl = _gcs(n), _controller_link(n)
-        sysid = n + 1
-
-        def gcs_says(cmd: int, *params: float) -> None:
-            gcs.mav.command_long_send(sysid, 1, cmd, 0, *params, *[0.0] * (7 - len(params)))
-            assert _ack(gcs, cmd).result == M.MAV_RESULT_ACCEPTED, (cmd, params)
+    with _gcs_and_controller(tmp_path, rate) as links:
+        v, ctl, sysid, gcs_says, hold, offboard = links.v, links.ctl, links.sysid, links.gcs_says, HOLD, OFFBOARD
 
         def answer(usec: int) -> None:
             ctl.mav.set_actuator_control_target_send(usec, 0, sysid, 1, HOVER_WIRE)
@@ -388,31 +404,23 @@ def test_an_answer_to_a_wall_clock_state_after_lockstep_engages_again_is_counted
                 if m.time_usec > usec:
                     return m.time_usec
 
-        try:
-            ctl.mav.heartbeat_send(M.MAV_TYPE_ONBOARD_CONTROLLER, M.MAV_AUTOPILOT_INVALID, 0, 0, 4)
-            assert ctl.recv_match(type="HEARTBEAT", blocking=True, timeout=20) is not None
-            assert gcs.wait_heartbeat(timeout=20) is not None
-            ctl.mav.command_long_send(sysid, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
-            assert _ack(ctl, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
-            t = -1
-            while t < 3 * period:  # lockstep: steps 0-3 flown on their answers
-                t = state_after(t)
-                answer(t)
-            gcs_says(M.MAV_CMD_DO_SET_MODE, *hold)  # on the wall clock from the next step
-            wall = state_after(t)  # a state sent on the wall clock: left unanswered for now
-            gcs_says(M.MAV_CMD_DO_SET_MODE, *offboard)  # lockstep again (ACKed at the period's start it engages at)
-            answer(wall)  # its answer, late
-            answer(period)  # an answer to step 1, flown in lockstep long ago
-            k = state_after(wall)
-            for _ in range(3):  # every newer state answered, as the controller does (the wall clock's too, if any)
-                answer(k)
-                k = state_after(k)
-            ctl.mav.command_long_send(sysid, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 21196, 0, 0, 0, 0, 0)
-            assert _ack(ctl, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
-        finally:
-            assert v.stop() == 0
-            gcs.close()
-            ctl.close()
+        ctl.mav.command_long_send(sysid, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+        assert _ack(ctl, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+        t = -1
+        while t < 3 * period:  # lockstep: steps 0-3 flown on their answers
+            t = state_after(t)
+            answer(t)
+        gcs_says(M.MAV_CMD_DO_SET_MODE, *hold)  # on the wall clock from the next step
+        wall = state_after(t)  # a state sent on the wall clock: left unanswered for now
+        gcs_says(M.MAV_CMD_DO_SET_MODE, *offboard)  # lockstep again (ACKed at the period's start it engages at)
+        answer(wall)  # its answer, late
+        answer(period)  # an answer to step 1, flown in lockstep long ago
+        k = state_after(wall)
+        for _ in range(3):  # every newer state answered, as the controller does (the wall clock's too, if any)
+            answer(k)
+            k = state_after(k)
+        ctl.mav.command_long_send(sysid, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 21196, 0, 0, 0, 0, 0)
+        assert _ack(ctl, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
     s = _stats(v)
     # step 1's answer is stale, or, had step 1's state been resent (unanswered 50 ms on a loaded machine), expected
     assert s["rejected"] == {"stale": 1} or (s["rejected"] == {} and s["answered_again"] >= 1), s
