@@ -910,7 +910,7 @@ def test_a_scheduled_change_confirmed_only_after_the_flights_end_is_not_made(tmp
     made = [i for i, line in enumerate(log) if "MIS_TAKEOFF_ALT = 5 (was 2.5)" in line]
     if link == "late":
         assert sent["late_t"] > s["duration_s"] == 5.0, sent
-        [said] = [i for i, line in enumerate(log) if "confirmed by the vehicle only after the flight's end" in line]
+        [said] = [i for i, line in enumerate(log) if "echoed by the vehicle only after the flight's end" in line]
         assert made and made[0] < said, log  # the vehicle's change, then the controller's word of it
         assert "4.9:MIS_TAKEOFF_ALT=5 was confirmed by the vehicle only at t=5." in r.stderr
     else:

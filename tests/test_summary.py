@@ -450,3 +450,25 @@ def test_a_scheduled_change_confirmed_after_the_flights_end_is_not_made_and_neve
     assert not run_ok(out.summary)
     [note] = [n.text for n in out.notes if n.kind == "param"]
     assert "MIS_TAKEOFF_ALT=5 was confirmed by the vehicle only at t=1.200 s, after" in note
+
+
+def test_a_scheduled_change_made_in_flight_is_judged_by_the_vehicles_event_not_its_echos_arrival() -> None:
+    """A change the vehicle made at 0.95 s whose echo reached the controller only after the 1 s flight's end (a
+    real-time link's delay: the controller said it late) was made in flight: ``confirmed`` at the vehicle's event,
+    a clean run. A set to the value in force has no event of the vehicle's (nothing changed): its echo's time is
+    judged, and the summary is written. (Until the third wave's thirty-ninth session the first was said not made,
+    exit 1, and the second raised a TypeError in the session's summary.)"""
+    stats = {**CONTROLLER_STATS, "param_at": [
+        {"t_s": 0.9, "name": "MPC_LAND_SPEED", "value": 0.8, "sent_t": 0.9, "sends": 1, "confirmed": False,
+         "confirmed_t": None, "late_t": 1.05},
+        {"t_s": 0.5, "name": "COM_OF_LOSS_T", "value": 1.0, "sent_t": 0.5, "sends": 1, "confirmed": True,
+         "confirmed_t": 0.51}]}
+    vehicle, _ = ends()
+    controller = ChildEnd("controller", 0, "exited with status 0", stats, "completed", None)
+    made = RunEvent(0.95, "param", "MPC_LAND_SPEED = 0.8 (was 0.7)", "vehicle", CONTROLLER,
+                    ParamChanged("MPC_LAND_SPEED", 0.7, 0.800000011920929))
+    out = session_summary(FLIGHT, facts(), joined(), [ARMED, made], vehicle, controller)
+    late_echo, same = out.summary["param_at"]
+    assert late_echo["confirmed"] is True and late_echo["confirmed_t"] == 0.95 and "late_t" not in late_echo
+    assert same["confirmed"] is True and same["confirmed_t"] == 0.51
+    assert not [n for n in out.notes if n.kind == "param"] and run_ok(out.summary)

@@ -75,20 +75,24 @@ def unconfirmed_text(p: Mapping[str, Any]) -> str:
 
 def made_in_flight(p: Mapping[str, Any], end_s: float, events: Sequence[RunEvent],
                    controller_id: tuple[int, int] = CONTROLLER_ID) -> dict[str, Any]:
-    """A scheduled change's entry (``summary.json["param_at"]``) judged against the flight's end (s, the time flown):
-    its ``confirmed_t`` no earlier than the vehicle's own event of the change (the controller maps the echo's
-    arrival onto the vehicle's clock only to within the way down's few ms); confirmed after the end (the vehicle
-    crashed in a real-time blackout the controller heard of only after it) is no change made in flight:
-    ``confirmed`` false, its time kept as ``late_t`` (the controller judges by the mission's end as it knew it)."""
-    if not p.get("confirmed"):
-        return dict(p)
+    """A scheduled change's entry (``summary.json["param_at"]``) judged against the flight's end (s, the time flown)
+    by the vehicle's own event of the change where it has one, whenever its echo reached the controller: made by the
+    end, it was made in flight (``confirmed``, at that event or the echo's arrival if later, when that came in
+    flight: the controller maps it onto the vehicle's clock only to within the way down's few ms), even if the echo
+    came after it (a real-time link's delay); made after the end (the vehicle crashed in a real-time blackout the
+    controller heard of only after it), it was not (``confirmed`` false, its time as ``late_t``). A set to the value
+    in force has no event of the vehicle's (no change): its echo's time is judged."""
     made = [e.t for e in vehicle_events(events) if e.kind == "param" and e.param is not None and e.by is not None
             and e.by.link == "controller" and (e.by.sysid, e.by.compid) == controller_id and e.param.name == p["name"]
             and float32(e.param.new) == float32(p["value"]) and e.t >= p["sent_t"] - SENT_SLACK_S]
-    t = max(p["confirmed_t"], *made[:1])
+    echoed = p.get("confirmed_t") if p.get("confirmed") else p.get("late_t")
+    if not made and echoed is None:  # never echoed, never made
+        return dict(p)
+    t = made[0] if made else echoed
     if t > end_s + 1e-9:
-        return {**p, "confirmed": False, "confirmed_t": None, "late_t": t}
-    return {**p, "confirmed_t": t}
+        return {**p, "confirmed": False, "confirmed_t": None, "late_t": max(t, echoed or t)}
+    in_flight = {k: v for k, v in p.items() if k != "late_t"}
+    return {**in_flight, "confirmed": True, "confirmed_t": t if echoed is None or echoed > end_s else max(t, echoed)}
 
 
 def reproducibility(lockstep: dict[str, Any], changes: Sequence[Mapping[str, Any]]) -> dict[str, Any]:

@@ -288,8 +288,8 @@ class OffboardLink:
         t, sets = self.vehicle_t(), f"{s.sends} PARAM_SET{'s' if s.sends > 1 else ''}"
         if t > self.end_t + 1e-9:
             s.late_t = t
-            self.event("param", f"{name} = {s.change.value:g} confirmed by the vehicle only after the flight's end "
-                                f"(t={self.end_t:.3f} s; after {sets}): not made", ("param",), t)
+            self.event("param", f"{name} = {s.change.value:g} echoed by the vehicle only after the flight's end "
+                                f"(t={self.end_t:.3f} s; after {sets})", ("param",), t)  # the session judges it
             return
         s.confirmed_t = t
         self.event("param", f"{name} = {s.change.value:g} confirmed by the vehicle (after {sets})", ("param",), t)
