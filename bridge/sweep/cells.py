@@ -68,7 +68,8 @@ FAILED = ("error", "law_failed", "denied")
 OUTCOMES = (*SEVERITY, "error")  # a row's outcome: a run's (a fleet's worst vehicle's), or error (not flown)
 
 
-KEY_COLUMNS = (*AXES, "seed")  # what names a row's cell: never empty
+KEY_COLUMNS = (*AXES, "seed")  # what names a row's cell: never empty but discretization, empty for a law without a
+# super-twisting step (smc, pid, one's own), whose cell is one whatever the scheme (bridge.sweep.grid)
 
 
 CELLS_CSV = "cells.csv"
@@ -209,8 +210,8 @@ def _cell_text(v: Any) -> str:
 def parse_row(values: Sequence[str], columns: Sequence[str] = COLUMNS) -> dict[str, Any]:
     """A ``cells.csv`` record (strings, in ``columns`` order) back to typed values; a
     ``ValueError`` names the column and what it holds when a value is not of its column's kind
-    (numbers finite, the axes and the seed never empty, the outcome one of :data:`OUTCOMES`: what a sweep
-    writes)."""
+    (numbers finite, the axes and the seed never empty but a law's without a scheme's ``discretization``, the outcome
+    one of :data:`OUTCOMES`: what a sweep writes)."""
     if len(values) != len(columns):
         n = len(values)
         raise ValueError(f"{n} field{'s' if n != 1 else ''}, expected {len(columns)} ({','.join(columns[:3])},...)")
