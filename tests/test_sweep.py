@@ -126,6 +126,26 @@ def test_fixed_link_flags_apply_to_every_cell(mission_file: Path, tmp_path: Path
     assert "--up-delay conflicts with the swept delay_ms" in capsys.readouterr().err
 
 
+def test_a_swept_turbulence_gives_a_turbulence_scaling_its_need_beside_a_fixed_flag(tmp_path: Path, capsys) -> None:
+    """A mission's ``[wind] turbulence_scaling`` with no turbulence of its own, swept over ``--turbulence``: flown in
+    every cell with a fixed flag too (``--scatter``, a link flag; bsst sweep prepares the mission with them laid
+    over, told of every axis given, as of a swept ``--loss``): it was refused there as if no cell flew turbulence
+    (docs/weather.md). Without the axis it stays refused, one line, exit 2, nothing written."""
+    own = tmp_path / "own.toml"
+    own.write_text(dump_toml(replace(BRIEF, wind={"turbulence_scaling": "none"}).to_dict()))
+    for i, flags in enumerate((("--scatter", "0.1"), ("--up-delay", "5"))):
+        out = tmp_path / f"s{i}"
+        rc = main(["sweep", str(own), "--turbulence", "none,light", *flags, "--jobs", "1", "--no-plots",
+                   "--out", str(out)])
+        assert rc == 0, (flags, capsys.readouterr().err)
+        assert [r["turbulence"] for r in read_cells(out / CELLS_CSV)] == ["none", "light"]
+    capsys.readouterr()
+    rc = main(["sweep", str(own), "--wind", "0,1", "--scatter", "0.1", "--no-plots", "--out", str(tmp_path / "w")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and err[0].startswith(f"bsst: {own}: wind.turbulence_scaling: changes nothing")
+    assert not (tmp_path / "w").exists()
+
+
 def test_kill_then_resume_flies_only_missing_cells(tmp_path: Path, capsys) -> None:
     args = ["sweep", str(brief_file(tmp_path)), "--delay", "0,5,10", "--loss", "0,20", "--seeds", "2", "--no-plots"]
     killed = tmp_path / "killed"

@@ -166,10 +166,11 @@ def _sweep(args: argparse.Namespace) -> int:
     if clash:
         raise UsageError(f"bsst sweep: {clash}")
     # fixed for every cell, laid over by the one path to its parts, which names a bad mission, and a key of its
-    # [link] that would change nothing (a swept --loss gives a burst_len its loss)
+    # [link] or [wind] that would change nothing (a swept --loss gives a burst_len its loss, a swept --turbulence a
+    # turbulence_scaling its turbulence: every axis given, as each cell lays it)
     if laid or idle_link_key(spec.mission, fixed, swept):
         flight = prepare(spec.mission, Overrides(link=fixed or None, sensors=sensors, scatter_m=args.scatter),
-                         axes=swept, laid_named=True)
+                         axes=spec.grid.swept(), laid_named=True)
         idle = idle_link_flag(args, [flight.link], swept, cells=True)  # (None: no such flag given)
         if idle:
             raise UsageError(f"bsst sweep: {idle}")

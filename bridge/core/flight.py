@@ -206,13 +206,14 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
     over it, and a ``failsafe`` override over a ``[params]`` entry of the file). ``param_at``: parameter
     changes at mission times (:class:`bridge.autopilot.params.ParamChange`), checked here. What would change
     nothing is refused, last: a key of the mission's own ``[link]`` whose need nobody gives (:func:`idle_link_key`;
-    ``axes``: the link keys a campaign's cells lay over this flight, a sweep's swept ones, a margin's searched one),
+    ``axes``: the keys a campaign's cells lay over this flight, a sweep's swept axes, a margin's searched one),
     then one ``link`` lays over it (unless ``laid_named``: the caller names what it lays over itself, a command
     its flags, bridge.cli.linkflags.idle_link_flag, a campaign its cells' axes, bridge.sweep.spec), a
     ``discretization`` override for a law without a super-twisting step (:func:`discretization_refusal`), a
     turbulence scaling with no turbulence (:func:`scaling_refusal`).
     """
     over = Overrides.of(overrides, **keywords)
+    axes = tuple(axes)  # (read by each refusal below)
     m = mission if isinstance(mission, Mission) else load_mission(mission)
     own = m  # (as given: its own law, and its own [link] keys to tell from what is laid over them)
     m = over.laid_over(m)
@@ -284,7 +285,7 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
     idle = (idle_link_key(own, over.link, axes)
             or (None if laid_named else idle_laid_key(src, over.link, flight.link, axes))
             or discretization_refusal(over.discretization, (m.controller,))
-            or scaling_refusal(m, over, flight.wind))
+            or scaling_refusal(m, over, flight.wind, axes))
     if idle:
         raise ConfigError(idle)
     return flight
@@ -321,18 +322,19 @@ def idle_laid_key(source: str, link: Mapping[str, Any] | None, flown: LinkSettin
     return None
 
 
-def scaling_refusal(m: Mission, over: Overrides, wind: WindConfig | None) -> str | None:
+def scaling_refusal(m: Mission, over: Overrides, wind: WindConfig | None, axes: Iterable[str] = ()) -> str | None:
     """The line refusing a turbulence scaling with no turbulence to scale (it would change nothing, yet its
     ``[wind]`` table switched the air model on): ``--turbulence-scaling`` (Python's ``turbulence_scaling=``) where
     the flight flies none, named as the flag as ``--discretization`` is; a ``[wind] turbulence_scaling`` key of
     ``m`` (the mission with the overrides laid over it) where no ``turbulence`` is given at all (not the table,
-    nor laid over it), as a ``[link]`` key whose need nobody gives; ``turbulence = "none"`` beside it is taken,
-    what a run's mission.toml holds after ``--turbulence none``. None."""
+    nor laid over it, nor ``axes``: a sweep's turbulence axis, whose cells each lay theirs), as a ``[link]`` key
+    whose need nobody gives; ``turbulence = "none"`` beside it is taken, what a run's mission.toml holds after
+    ``--turbulence none``. None."""
     does = "it sets how the turbulence is scaled"
     if over.turbulence_scaling is not None and (wind is None or wind.turbulence == "none"):
         return (f"--turbulence-scaling {over.turbulence_scaling}: changes nothing: {does}, and the flight flies no "
                 "turbulence (turbulence none); give --turbulence LEVEL too, or drop --turbulence-scaling")
-    if "turbulence_scaling" not in m.wind or "turbulence" in m.wind:
+    if "turbulence_scaling" not in m.wind or "turbulence" in m.wind or "turbulence" in axes:
         return None
     laid = (f" (with these laid over the mission: {table_settings(over.wind, 'wind')})"
             if "turbulence_scaling" in (over.wind or {}) else "")
