@@ -336,8 +336,8 @@ def cell_flight(mission: Mission, cell: Cell) -> Flight:
     grid's axes where one changes nothing: bridge.sweep.spec); a law that cannot be built named as it was given."""
     try:
         return prepare(mission, cell_overrides(cell), laid_named=True)
-    except LawError as exc:  # prepare names the override it was handed: the law made absolute (Cell.law)
-        if exc.where != f"--controller {cell.law}" or cell.law == cell.controller:
+    except LawError as exc:  # prepare names the override it was handed (the cell's law overrides the mission's key):
+        if exc.spec != cell.law or cell.law == cell.controller:  # the law made absolute (Cell.law)
             raise
         raise LawError(exc.spec, exc.what, f"--controller {cell.controller}") from None
 
