@@ -32,7 +32,7 @@ from bridge.sweep.cells import FLEET_COLUMNS
 from bridge.sweep.executors import BATCH_MIN_CELLS, WARM_CELLS, engine_for
 from bridge.sweep.grid import LINK_AXES, cells, mission_value
 from bridge.sweep.margin import margin, parse_until, probe
-from bridge.sweep.report import grid_size
+from bridge.sweep.report import recorded_cell_count
 from missions import Mission, Sine
 from params import ConfigError, dump_toml
 
@@ -286,7 +286,7 @@ def test_a_law_without_a_scheme_is_one_cell_announced_reported_and_resumed(tmp_p
     assert main([*args, "--resume"]) == 0
     assert ": 3 cells, 1 flown, 2 kept from before" in capsys.readouterr().out
     assert (out / CELLS_CSV).read_text() == text
-    assert grid_size(json.loads((out / "sweep.json").read_text())) == 3  # (a report of it: complete)
+    assert recorded_cell_count(json.loads((out / "sweep.json").read_text())) == 3  # (a report of it: complete)
 
 
 def test_an_older_sweep_without_the_discretization_column_is_reported(tmp_path: Path) -> None:

@@ -330,7 +330,7 @@ def one_per_cell(rows: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
 def grid_values(meta: Mapping[str, Any]) -> dict[str, list[Any]] | None:
     """The values of each axis and the seeds (``seed``) of a sweep's grid, as its ``sweep.json`` (``meta``) says
     them, or None where it does not (no ``axes`` or ``seeds``: an older bsst's, or none): the rows that belong to
-    the sweep (:func:`read_cells`) and how many there are (:func:`bridge.sweep.report.grid_size`)."""
+    the sweep (:func:`read_cells`) and how many there are (:func:`bridge.sweep.report.recorded_cell_count`)."""
     axes, seeds = meta.get("axes"), meta.get("seeds")
     if not isinstance(axes, Mapping) or not isinstance(seeds, list) or not seeds:
         return None

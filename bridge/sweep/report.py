@@ -47,8 +47,7 @@ from bridge.sweep.cells import (
     seeds_alike,
 )
 from bridge.sweep.classes import CLASSES, Classes, classify, thresholds_text
-from bridge.sweep.grid import AXES, LINK_AXES, NAME_AXES, NO_SCHEME, SHORT
-from bridge.sweep.grid import grid_size as cell_count
+from bridge.sweep.grid import AXES, LINK_AXES, NAME_AXES, NO_SCHEME, SHORT, grid_size
 from controller.law import discretization_problem
 from params import ConfigError, unreachable
 from plant.wind import TURBULENCE
@@ -195,15 +194,16 @@ def check_report_files(path: Path, plots: bool, said: str | None = None, fix: st
     check_replaceable(path, taken, said, fix)
 
 
-def grid_size(meta: Mapping[str, Any]) -> int | None:
-    """How many cells the sweep's grid has (its ``sweep.json``'s axes and seeds; None where it does not say)."""
+def recorded_cell_count(meta: Mapping[str, Any]) -> int | None:
+    """How many cells the sweep's grid has, as its ``sweep.json`` records the axes and seeds (None where it does not
+    say), by the one counting rule (:func:`bridge.sweep.grid.grid_size`)."""
     grid = grid_values(meta)
-    return None if grid is None else cell_count(grid)
+    return None if grid is None else grid_size(grid)
 
 
 def incomplete(path: Path, rows: Sequence[Any], meta: Mapping[str, Any]) -> str | None:
     """Why a sweep directory's rows are not its whole grid (``N of M cells flown; ...``), or None."""
-    total = grid_size(meta)
+    total = recorded_cell_count(meta)
     if total is None or len(rows) >= total:
         return None
     return (f"{len(rows)} of {total} cells flown; the sweep was interrupted: `bsst sweep … --resume --out {path}` "
