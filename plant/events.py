@@ -1,8 +1,9 @@
 """A flight's timeline of events: faults and weather changes at mission times (pure; validated here).
 
-In:  a mission's ``[[events]]`` tables (``t_s`` s, ``kind`` and its settings) or ``--at T:KIND[:ARGS]`` flags
-Out: frozen :class:`TimedEvent` s in time order, each with its TOML table (what ``mission.toml`` holds) and
-     the one-line text its ``events.log`` line carries
+In:  a mission's ``[[events]]`` tables (``t_s`` s, ``kind`` and its settings; a flag's also ``at``, the flag as
+     typed) or ``--at T:KIND[:ARGS]`` flags
+Out: frozen :class:`TimedEvent` s in time order, each with its TOML table (what ``mission.toml`` holds), the
+     one-line text its ``events.log`` line carries and the ``--at`` flag that laid it (None: a table's)
 
 The kinds, as a table and as a flag (units: s, m, m/s, rad/s; rotors numbered as eq. 4):
 
@@ -33,7 +34,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from params import ConfigError, Table, finite_float, show
@@ -62,6 +63,9 @@ GUST_AT_NOTHING = {"duration_s": "duration", "amplitude_mps": "amplitude"}
 SENSOR_EVENT_KINDS = ("gps", "baro", "mag", "gyro")
 BATTERY_STATES = ("empty", "ok")  # a battery event's: the pack reads empty (PX4's injected failure), or as it is
 LINK_SCALARS = (str, int, float)  # a handover's keys: a profile name and [link]'s per-direction scalars
+# an event table's key for the --at flag that laid it ("T:KIND[:ARGS]", as typed): a run's mission.toml keeps it, so
+# that the flight flown from that file (bsst sitl's children, a ground station's mission in its place) names the flag
+AT_KEY = "at"
 
 
 @dataclass(frozen=True, slots=True)
@@ -71,6 +75,7 @@ class TimedEvent:
     t_s: float
     kind: str
     settings: tuple[tuple[str, Any], ...]
+    at: str | None = field(default=None, compare=False)  # the --at flag's T:KIND[:ARGS] that laid it; None: a table's
 
     def get(self, key: str, default: Any = None) -> Any:
         return dict(self.settings).get(key, default)
@@ -82,7 +87,8 @@ class TimedEvent:
     def table(self) -> dict[str, Any]:
         """As a ``[[events]]`` table."""
         return {"t_s": self.t_s, "kind": self.kind, **{k: list(v) if isinstance(v, tuple) else v
-                                                       for k, v in self.settings}}
+                                                       for k, v in self.settings},
+                **({AT_KEY: self.at} if self.at is not None else {})}
 
     def text(self) -> str:
         """What it does, for ``events.log``."""
@@ -216,12 +222,35 @@ def timeline_from_tables(tables: Sequence[Mapping[str, Any]], source: str, durat
     for i, raw in enumerate(tables):
         if not isinstance(raw, Mapping):
             raise ConfigError(f"{source}: events[{i}]: expected a table {{t_s, kind, ...}}, got {raw!r}"[:200])
-        out.append(event_from_table(Table(raw, source, f"events[{i}]"), duration_s))
+        out.append(event_given(raw, source, f"events[{i}]", duration_s))
     return tuple(sorted(out, key=lambda e: e.t_s))
 
 
+def event_given(raw: Mapping[str, Any], source: str, prefix: str, duration_s: float) -> TimedEvent:
+    """One event's table validated (:func:`event_from_table`), its errors named where it was given: the ``--at``
+    flag that laid it when it holds one (:data:`AT_KEY`, refused unless the table is that flag's event), else
+    ``source: prefix``."""
+    if AT_KEY not in raw:
+        return event_from_table(Table(raw, source, prefix), duration_s)
+    t = Table(raw, source, prefix)
+    text = t.string(AT_KEY)
+    try:
+        flagged = event_table_from_flag(text)
+    except ValueError as exc:
+        raise t.error(AT_KEY, f"not an --at flag's T:KIND[:ARGS]: {exc}"[:300]) from None
+    own = {k: v for k, v in raw.items() if k != AT_KEY}
+    if own != flagged:  # (a hand-edited table: what it flies is not what the flag it names would)
+        raise t.error(AT_KEY, f"the table is not the event --at {text} lays "
+                              f"({', '.join(f'{k} = {v!r}' for k, v in flagged.items())}): give the flag's "
+                              f"values, or drop {AT_KEY} (the table is then the mission's own)"[:300])
+    return replace(event_from_table(Table(own, f"--at {text}"), duration_s), at=text)
+
+
 def table_where(source: str, e: TimedEvent) -> str:
-    """Where a mission's event was given, as a refusal names it: ``m.toml: events (t_s = 10, kind = gps)``."""
+    """Where a mission's event was given, as a refusal names it: the flag that laid it (``--at 10:gps:off``), else
+    its table (``m.toml: events (t_s = 10, kind = gps)``)."""
+    if e.at is not None:
+        return f"--at {e.at}"
     return f"{source}: events (t_s = {e.t_s:g}, kind = {e.kind})"
 
 

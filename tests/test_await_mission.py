@@ -21,6 +21,7 @@ import socket
 import subprocess
 import sys
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -33,7 +34,7 @@ from bridge import simulate
 from bridge.autopilot.params import parse_change
 from bridge.autopilot.vehicleevents import Sender, typed_fields
 from bridge.cli import main
-from bridge.core.flight import at_rest, prepare
+from bridge.core.flight import Flight, at_rest, prepare
 from bridge.mavlink.endpoint import GCS_PORT, parse_address
 from bridge.mavlink.missionitems import MissionItem
 from bridge.nodes.report import Ready, parse_line
@@ -46,7 +47,7 @@ from bridge.record.endedby import ended_by_command
 from bridge.record.events import RunEvent
 from bridge.record.interventions import interventions
 from bridge.record.joiner import read_half
-from bridge.record.runlog import trace_cap
+from bridge.record.runlog import RunRecord, trace_cap
 from bridge.record.summary import mission_transfer
 from bridge.session import instance_slot
 from missions import Mission, Sine
@@ -1288,26 +1289,39 @@ def test_a_waypoint_before_a_land_here_is_reached_at_its_point_not_at_the_takeof
     assert watch.step(4.0, (5.0, 0.0, 0.0, 0.0, 1.0)) == [] and watch.step(5.0, (5.0, 0.0, 0.0, 0.0, 0.0)) == [2]
 
 
-def test_an_at_event_after_an_uploaded_missions_end_is_refused_naming_the_flag():
-    """``bsst vehicle --await-mission --at 20:gust:2,3`` and a ground station's mission of 10.9 s: the start check
-    (and the controller's download, :func:`bridge.nodes.uploaded.uploaded_flight`) refuse the event as a flight
-    would, naming the flag (docs/weather.md); it named the mission's table (``command line: events[0].t_s: ...``,
-    a settings file's ``.../mission.toml: events[0].t_s``), which holds no such event. A table laid from Python is
-    named as laid (``at[0]``); an event inside the mission flies."""
+def test_an_at_event_after_an_uploaded_missions_end_is_refused_naming_the_flag(tmp_path):
+    """``bsst sitl --await-mission --at 20:gust:2,3`` and a ground station's mission of 10.9 s: the session writes
+    the run's mission.toml (:class:`~bridge.record.runlog.RunRecord`), its children read it (no ``--at`` of their
+    own), and their start check and download (:func:`bridge.nodes.uploaded.uploaded_flight`) refuse the event naming
+    the flag (docs/weather.md), kept in its table as typed (``at``); it named the file's table
+    (``.../mission.toml: events[0].t_s: ...``), which the user never wrote. A table whose ``at`` is not its event
+    is refused naming the key; an event inside the mission flies, named as its flag again."""
     lat, lon = 473977420, 85455940  # the default home (degE7)
     rel = M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
     items = (MissionItem(0, rel, M.MAV_CMD_NAV_TAKEOFF, 0.0, 0.0, 0.0, math.nan, 0, 0, 2.0, 1),
              MissionItem(1, rel, M.MAV_CMD_NAV_WAYPOINT, 0.0, 0.0, 0.0, math.nan, lat + 450, lon, 2.0, 1),
              MissionItem(2, rel, M.MAV_CMD_NAV_LAND, 0.0, 0.0, 0.0, math.nan, 0, 0, 0.0, 1))
     home = (lat * 1e-7, lon * 1e-7, 488.0)
-    late = {"t_s": 100.0, "kind": "gust", "duration_s": 1.0, "amplitude_mps": 2.0}
-    for at, said in ((("20:gust:2,3",), "--at 20:gust:2,3: t_s: must be in [0, 10.919) s (before the mission's end)"),
-                     ((late,), "at[0]: t_s: must be in [0, 10.919) s")):
-        with pytest.raises(ConfigError) as refused:
-            uploaded_flight(prepare(at_rest(), at=at), items, home, source="the vehicle's mission")
-        assert str(refused.value).startswith(said), str(refused.value)
-    _, new = uploaded_flight(prepare(at_rest(), at=("1:gust:2,3",)), items, home)
-    assert [e.t_s for e in new.timeline] == [1.0] and new.mission.duration_s == pytest.approx(10.919)
+
+    def child(at: str) -> Flight:  # the run directory as the session writes it, read as its children read it
+        run = tmp_path / at.replace(":", "_")
+        run.mkdir()
+        RunRecord(run, prepare(at_rest(), at=(at,)).mission).close()
+        return prepare(run / "mission.toml")
+
+    flight = child("20:gust:2,3")
+    assert flight.mission.events == ({"t_s": 20.0, "kind": "gust", "duration_s": 2.0, "amplitude_mps": 3.0,
+                                      "from_deg": 0.0, "at": "20:gust:2,3"},)
+    with pytest.raises(ConfigError) as refused:
+        uploaded_flight(flight, items, home, source="the vehicle's mission")
+    assert str(refused.value) == "--at 20:gust:2,3: t_s: must be in [0, 10.919) s (before the mission's end), got 20"
+    _, new = uploaded_flight(child("1:gust:2,3"), items, home)
+    assert [(e.t_s, e.at) for e in new.timeline] == [(1.0, "1:gust:2,3")]
+    assert new.mission.duration_s == pytest.approx(10.919)
+    edited = replace(flight.mission, events=({**flight.mission.events[0], "amplitude_mps": 4.0},))
+    with pytest.raises(ConfigError, match=r"mission\.toml: events\[0\]\.at: the table is not the event --at "
+                                          r"20:gust:2,3 lays \(t_s = 20\.0, .*amplitude_mps = 3\.0"):
+        prepare(edited)
 
 
 def test_plan_text_reads_back_and_the_transfer_block_is_typed():

@@ -60,7 +60,7 @@ from plant.events import (
     EventError,
     TimedEvent,
     check_state_changes,
-    event_from_table,
+    event_given,
     table_where,
     timeline_from_tables,
 )
@@ -88,9 +88,6 @@ class Flight:
     param_changes: tuple[ParamChange, ...] = ()  # scheduled PARAM_SETs (--param-at), by mission time
     wind: WindConfig | None = None  # the air it flies through ([wind]); None: still air, the paper's model
     timeline: tuple[TimedEvent, ...] = ()  # faults and weather changes ([[events]], --at), by mission time
-    # the events laid over the mission as the caller gave them ("T:KIND[:ARGS]" of --at, or tables), the last of
-    # mission.events: a mission flown in its place (a ground station's upload) lays them again, named as given
-    at: tuple[Mapping[str, Any] | str, ...] = ()
 
     @property
     def nominal(self) -> Nominal:
@@ -264,14 +261,15 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
     try:
         wind, timeline = weather_of(m, prof, sensor_config, estimator_kind, effects.battery)
         link_settings = replace(link_settings, handovers=handovers_of(timeline, m))
-    except EventError as exc:  # named where the event was given: its flag (--at), else the mission's table
+    except EventError as exc:  # named where the event was given: a flag's names itself (TimedEvent.at), a table
+        # laid from Python by its place in at (at[0]), else the mission's table
         given = [n for e, n in zip(over.at, over._at_named, strict=True)
-                 if event_from_table(Table(e, n), m.duration_s) == exc.event]
+                 if exc.event.at is None and event_given(e, n, "", m.duration_s) == exc.event]
         raise EventError(exc.event, exc.what, given[0] if given else exc.where) from None
     try:
         law = resolve_law(m.controller)
         flight = Flight(m, prof, effects, gains, failsafe, link_settings, law, sensor_config, estimator_kind,
-                        vehicle_params, changes, wind, timeline, over.as_given_at())
+                        vehicle_params, changes, wind, timeline)
         checked_choice()  # BSST_KERNELS: bad input before anything flies
         flight._controller()  # a user's law is built once here, so that one that does not fit is bad input (not
         # compiled: a process that only prepares, a relay or a planner, never loads numba for it)

@@ -23,8 +23,8 @@ from bridge.autopilot.params import BY_NAME, ParamChange, VehicleParams, apply_p
 from bridge.link.model import absolute_link_paths, merge_link_tables
 from missions import Mission
 from missions.mission import law_spec_from
-from params import ConfigError, Table
-from plant.events import event_from_table, event_table_from_flag
+from params import ConfigError
+from plant.events import AT_KEY, event_given, event_table_from_flag
 
 
 @dataclass(frozen=True)
@@ -53,6 +53,7 @@ class Overrides:
     turbulence: str | None = None  # [wind] turbulence: none, light, moderate or severe
     turbulence_scaling: str | None = None  # [wind] turbulence_scaling: exact (the flight's record at σ) or none
     at: tuple[Mapping[str, Any] | str, ...] = ()  # events after the mission's [[events]]: tables or "T:KIND[:ARGS]"
+    #   (kept as tables, a flag's with its text under plant.events.AT_KEY)
 
     def __post_init__(self) -> None:
         _check_type("turbulence", self.turbulence, str, "a string")
@@ -71,8 +72,8 @@ class Overrides:
         for i, e in enumerate(tuple(self.at)):
             if isinstance(e, str):
                 named.append(f"--at {e}")
-                try:
-                    e = event_table_from_flag(e)
+                try:  # the flag kept in its table (AT_KEY): a run's mission.toml flown again names it
+                    e = {**event_table_from_flag(e), AT_KEY: e}
                 except ValueError as exc:
                     raise ConfigError(f"--at {e}: {exc}"[:300]) from None
             else:
@@ -116,12 +117,6 @@ class Overrides:
             return given
         return cls(**{**base, **keywords})
 
-    def as_given_at(self) -> tuple[Mapping[str, Any] | str, ...]:
-        """``at`` as its caller gave it: an ``--at`` flag's text ("T:KIND[:ARGS]", so that laid again it is named
-        as the flag), else the table."""
-        return tuple(n.removeprefix("--at ") if n.startswith("--at ") else e
-                     for e, n in zip(self.at, self._at_named, strict=True))
-
     def given(self) -> dict[str, Any]:
         """The fields that lay something over the mission (not None, not empty), by name."""
         return {f.name: v for f in fields(self)
@@ -140,7 +135,7 @@ class Overrides:
         wind = merged_tables(m.wind, self.wind, {} if self.turbulence is None else {"turbulence": self.turbulence},
                              {} if self.turbulence_scaling is None else {"turbulence_scaling": self.turbulence_scaling})
         for e, named in zip(self.at, self._at_named, strict=True):  # each checked alone first: errors name its flag
-            event_from_table(Table(e, named), m.duration_s)
+            event_given(e, named, "", m.duration_s)
         events = (*m.events, *self.at) if self.at else None
         try:
             return m.with_overrides(profile=self.profile, controller=law, discretization=self.discretization,

@@ -21,7 +21,6 @@ even at its speed limits is refused in milliseconds, before it is timed.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import replace
 
 from bridge.core.flight import Flight, prepare
 from bridge.mavlink.fenceitems import fence_plan, rally_plan
@@ -44,8 +43,7 @@ def uploaded_flight(flight: Flight, items: Sequence[MissionItem], home: tuple[fl
         raise ConfigError(f"{source}: {exc}") from None
     plan = plan_of(tuple(items), home, source, geo_fence, rally_plan(tuple(rally)))
     mission = with_plan(flight.mission, plan, flight.mission.name, cap)
-    own = mission.events[:len(mission.events) - len(flight.at)]  # --at laid again: a refusal names the flag
-    new = prepare(replace(mission, events=own), param_at=flight.param_changes, at=flight.at)  # in this mission's time
+    new = prepare(mission, param_at=flight.param_changes)  # --param-at: in this mission's time
     points = len(getattr(new.mission.trajectory, "knots", ()))
     if points > MAX_ITEMS:  # its mission.toml (kind = "smooth") is read back by the session and the children
         raise ConfigError(f"{source}: its trajectory has {points} points, more than the {MAX_ITEMS} a mission file "
