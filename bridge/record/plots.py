@@ -21,7 +21,8 @@ sign that alternates every step still filling its band, in less time and memory 
 from __future__ import annotations
 
 import gc
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -116,17 +117,9 @@ def mark_spans(ax: Any, spans: Sequence[Span], label: bool = False) -> None:
 def make_plots(trace: dict[str, np.ndarray], out: str | Path, title: str = "",
                spans: Sequence[Span] = ()) -> list[Path]:
     """Write ``positions.png, errors.png, angles.png, inputs.png, path3d.png`` (and ``estimate.png``) into ``out``."""
-    # matplotlib's import and figures make tens of thousands of objects: the full collections they set off would
-    # each walk the process's whole heap (the flight's, numpy's, matplotlib's modules) again, none of it garbage
-    # (~6 % of the figures' CPU). A heap frozen already (a fork server's child: bridge.nodes.forkserver) is left as
-    # it is: thawing it would thaw the server's too
-    ours = gc.get_freeze_count() == 0
-    if ours:
-        gc.freeze()
-    try:
+    with heap_frozen() as freeze_more:
         plt = pyplot()
-        if ours:
-            gc.freeze()  # matplotlib's modules too, imported just now
+        freeze_more()  # matplotlib's modules too, imported just now
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
         written: list[Path] = []
@@ -135,10 +128,24 @@ def make_plots(trace: dict[str, np.ndarray], out: str | Path, title: str = "",
             fig.savefig(p, dpi="figure", pil_kwargs={"compress_level": 1})
             plt.close(fig)
             written.append(p)
+    return written
+
+
+@contextmanager
+def heap_frozen() -> Iterator[Callable[[], None]]:
+    """The process's heap frozen (``gc.freeze``) while the block runs, given back after; the block may freeze what it
+    made since (the callable it gets). Why: matplotlib's import and figures make tens of thousands of objects, and the
+    full collections they set off would each walk the process's whole heap (the flight's, numpy's, matplotlib's
+    modules) again, none of it garbage (~6 % of the figures' CPU). A heap frozen already (a fork server's child:
+    bridge.nodes.forkserver) is left as it is, the callable doing nothing: thawing it would thaw the server's too."""
+    ours = gc.get_freeze_count() == 0
+    if ours:
+        gc.freeze()
+    try:
+        yield gc.freeze if ours else lambda: None
     finally:
         if ours:
             gc.unfreeze()
-    return written
 
 
 def figures(trace: dict[str, np.ndarray], title: str = "", spans: Sequence[Span] = ()) -> dict[str, Any]:
