@@ -257,6 +257,11 @@ def event_lines(events: list[dict[str, Any]]) -> list[str]:
 
 def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
     """The one-screen summary printed after a run."""
+    from bridge.link.model import jitter_capped_text  # lazy: start-up time
+    from bridge.record.metrics import air_text  # lazy: numpy (loaded by the run this sums up)
+    from bridge.record.policies import violation_text
+    from bridge.record.summary import stalls_text
+
     out = stream or sys.stdout
     w = out.write
     w(f"mission {s['mission']}  controller {s['controller']}  profile {s['profile']}  "
@@ -278,8 +283,6 @@ def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
           f"{', before the start' if i.get('before_start') else ''}: "
           + (f"{i['name']} = {i['new']:g} (was {i['old']:g})\n" if "name" in i else f"{i['kind']} {i['what']}\n"))
     if (s.get("timing") or {}).get("stalls", {}).get("count"):  # a real-time run the machine stalled
-        from bridge.record.summary import stalls_text  # lazy: numpy
-
         w(stalls_text(s["timing"]["stalls"]) + "\n")
     rms = s.get("rms_3d")
     w(f"3-D RMS error over t >= {s['rms_from_s']:g} s: {rms:.3e} m\n" if rms is not None else "3-D RMS: n/a\n")
@@ -294,8 +297,6 @@ def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
               for u, v in s["inputs"].items() if v["min"] is not None]
     w("input  " + ("  ".join(inputs) or "n/a (nothing flew)") + "\n")
     if s.get("wind"):  # the air flown (its events are the event lines)
-        from bridge.record.metrics import air_text  # lazy: numpy
-
         w(air_text(s["wind"]) + "\n")
     link = s.get("link", {})
     if any(L.get("lost") or L.get("duplicated") or L.get("reordered") or L.get("in_flight")  # (held: a delay)
@@ -309,16 +310,12 @@ def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
             w(f"link {d:4}: sent {L['sent']} delivered {L['delivered']} lost {L['lost']}{more} dup {L['duplicated']} "
               f"reordered {L['reordered']} delay p50 {ms['p50']} ms p99 {ms['p99']} ms max {ms['max']} ms\n")
     for c in link.get("jitter_capped") or []:
-        from bridge.link.model import jitter_capped_text  # lazy: start-up time
-
         w(f"link {jitter_capped_text(c)}\n")
     for line in event_lines(s.get("events", [])):
         w(line)
     policies = s.get("policies") or []
     broken = [v for v in policies if not v.get("ok")]
     if policies:
-        from bridge.record.policies import violation_text  # lazy: numpy
-
         w(f"policies: all {len(policies)} hold\n" if not broken else
           "".join(f"policy {violation_text(v)}\n" for v in broken))
     if path is not None:
@@ -497,4 +494,3 @@ def _key(args: argparse.Namespace) -> bytes | None:
     from bridge.mavlink.signing import key_from_file  # lazy: start-up time
 
     return key_from_file(args.key) if getattr(args, "key", None) else None
-
