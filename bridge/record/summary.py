@@ -345,7 +345,7 @@ def timing_block(joined: Joined, rate_hz: float, wall_s: float, vehicle: Mapping
     rate = (n - 1) / flight_s if flight_s > 0 else None
     return {
         "wall_s": wall_s,  # the whole session: start, fly, stop
-        "sim_s": joined.rows[-1][0] + 1.0 / rate_hz if n else 0.0,  # mission time flown (as duration_s), not n periods
+        "sim_s": joined.rows[-1].t + 1.0 / rate_hz if n else 0.0,  # mission time flown (as duration_s), not n periods
         "flight_wall_s": flight_s if math.isfinite(flight_s) else None,
         "step_rate_hz": rate,  # control steps per wall second while flying
         "real_time_factor": rate / rate_hz if rate else None,

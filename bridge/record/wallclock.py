@@ -92,12 +92,15 @@ def _disarmed_below(run: Run) -> tuple[float, float, float] | None:
     ended it): on the ground below that row, as one on the shared clock stays
     (:func:`bridge.nodes.vehicle.gate.resting`; its rows end at the disarm, its fall is not recorded). None: at its
     last row (still armed, or ended by its plant: where it ended, in the air too, as offline)."""
-    rows = [(float(x), float(y), float(z)) for x, y, z in zip(run.trace["x"], run.trace["y"], run.trace["z"])]
-    rows += [(float(p[0]), float(p[1]), float(p[2])) for p in run.after]
-    if not rows or run.summary.get("outcome") in PLANT_ENDED or not _disarmed_last(run.summary):
+    if run.summary.get("outcome") in PLANT_ENDED or not _disarmed_last(run.summary):
         return None
-    x, y, z = rows[-1]
-    return x, y, min(z, 0.0)
+    if len(run.after):  # (its last row: the end action's after the trace's)
+        x, y, z = run.after[-1]
+    elif len(run.trace["t"]):
+        x, y, z = run.trace["x"][-1], run.trace["y"][-1], run.trace["z"][-1]
+    else:
+        return None
+    return float(x), float(y), min(float(z), 0.0)
 
 
 def clocked_records(runs: Sequence[Run], ids: Sequence[int], rate: float) -> FleetRecords:

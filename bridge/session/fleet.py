@@ -134,8 +134,9 @@ def _fly(flights: Sequence[Flight], ids: Sequence[int], dirs: Sequence[Path], *,
          keep: bool, radii: Sequence[float] | None, radio: Path | None, announce: bool) -> list[Run]:
     """:func:`fly_sessions`, ``radio`` the fleet's one radio file (None: each link its own)."""
     forked = warm()  # the fork server's imports (bridge.nodes.forkserver) overlap what follows
-    for f in flights if not forked else ():  # (forked: the server loads them before it forks a child that flies them)
-        compile_estimator(f.estimator)  # a first EKF on this machine compiles here, once, before any child starts
+    if not forked:  # (forked: the server loads them before it forks a child that flies them)
+        for f in flights:
+            compile_estimator(f.estimator)  # a first EKF on this machine compiles here, once, before any child starts
     gates: list[Path | None] = [None] * len(flights)
     cfgs: list[GateConfig] = []
     if radii is not None and not realtime and len(flights) > 1:

@@ -186,8 +186,11 @@ def run_sweep(
     sink = CellsFile(path / CELLS_CSV, [results[k] for k in sorted(results, key=order.__getitem__)]) if path else None
     # cells that fly at once, each round's first carrying the start-up: a batch chunk's rows come together, and a
     # Dask cluster's threads each fly a task
-    lanes = (BATCH_CHUNK if used == "batch" else 1) * (
-        (sum(client.nthreads().values()) or 1) if client is not None else 1 if used == "batch" else jobs)
+    if client is not None:
+        at_once = sum(client.nthreads().values()) or 1
+    else:
+        at_once = 1 if used == "batch" else jobs  # (the batch engine: one chunk at a time)
+    lanes = (BATCH_CHUNK if used == "batch" else 1) * at_once
     bar = Progress(len(all_cells), len(results), enabled=progress, lanes=lanes)
     reused = len(results)
 
