@@ -259,8 +259,8 @@ def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
     """The one-screen summary printed after a run."""
     from bridge.link.model import jitter_capped_text  # lazy: start-up time
     from bridge.record.metrics import air_text  # lazy: numpy (loaded by the run this sums up)
-    from bridge.record.policies import violation_text
-    from bridge.record.summary import stalls_text
+    from bridge.record.policies import violation_text  # lazy: numpy
+    from bridge.record.summary import stalls_text  # lazy: numpy
 
     out = stream or sys.stdout
     w = out.write
