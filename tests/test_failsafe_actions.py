@@ -194,8 +194,9 @@ def test_its_disarm_clears_the_failsafe_offboard_standby_and_the_controller_stil
 def test_the_controllers_failsafe_judgement_is_stamped_when_the_failsafe_took_over(flown, action: str) -> None:
     """The controller judges the flight ``failsafe`` at the mission's end (its failsafe alone does not end it: it may
     hand the vehicle back), but stamps that word when the failsafe took over, the vehicle's EVENT's time: 15.5 s, as
-    the vehicle's own event, in summary.json and events.log (where it is written when said, after later lines). Until
-    the third wave's thirty-seventh session it was stamped at the mission's end (t=22.000 for descend)."""
+    the vehicle's own event, in summary.json and events.log (written when said, after later lines; in its place in
+    time once the session closes the log). Until the third wave's thirty-seventh session it was stamped at the
+    mission's end (t=22.000 for descend)."""
     run = flown[action]
     t0 = run["vehicle"]["failsafe"]
     said = [e for e in run["summary"]["events"] if e["source"] == "controller" and e["kind"] == "failsafe"]

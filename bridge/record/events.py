@@ -93,7 +93,8 @@ def in_time_order(events: Iterable[RunEvent]) -> list[RunEvent]:
     :meth:`bridge.session.session.Session._handle`). An event with no time keeps its place after the one recorded
     before it. A session records its closing notes (``ended``, ``policy``, ...) last, at the trace's last row (with no
     row, at the latest event's: :func:`bridge.record.summary.notes_time`), which may come before the vehicle's end
-    action (its landing, its disarm): here they take their place in time."""
+    action (its landing, its disarm): here they take their place in time, as in events.log
+    (:class:`bridge.record.runlog.EventLog`)."""
     timed, t = [], -math.inf
     for e in events:
         t = e.t if e.t is not None else t

@@ -242,14 +242,47 @@ class TraceWriter(LineWriter):
 
 class EventLog(LineWriter):
     """``events.log``: one line per event, ``t=<s> <kind>: <text>[ [by SENDER]][ [SOURCE]]`` (``t=n/a``: no time
-    known), flushed at once: for people (the sender is the event's field, :attr:`bridge.record.events.RunEvent.by`)."""
+    known), flushed at once: for people (the sender is the event's field, :attr:`bridge.record.events.RunEvent.by`).
+
+    Lines are appended as they are recorded, which in a session is as its children report (a controller's judgement
+    stamped at its cause, the closing notes at the trace's last row, after the end action's lines): a run stopped
+    mid-way keeps them so. :meth:`close` rewrites the file in time order (atomically: the appended file, or the
+    sorted one), as :func:`bridge.record.events.in_time_order` orders ``summary.json``'s events: stably, a line with
+    no time after the one before it. Lines on a clock ahead of the mission's (:meth:`clock_moved`) are ordered on
+    the mission's and keep their written times."""
 
     def __init__(self, path: str | Path) -> None:
         super().__init__(path, None, batch=1)
+        self._order: list[tuple[float, str]] = []  # (the time ordered at, s on the mission's clock; the line)
 
     def event(self, t: float, kind: str, text: str, by: Sender | None = None, source: str | None = None) -> None:
         shown = text + (by.suffix if by is not None else "") + (f" [{source}]" if source is not None else "")
-        self.write(f"t={t:.3f} {kind}: {shown}" if math.isfinite(t) else f"t=n/a {kind}: {shown}")
+        if math.isfinite(t):  # (rounded to 1 us first, as summary.json's times: the same ms shown, the same ties)
+            at = round(t, 6)
+            line = f"t={at:.3f} {kind}: {shown}"
+        else:  # (ordered after the line before it)
+            at = self._order[-1][0] if self._order else -math.inf
+            line = f"t=n/a {kind}: {shown}"
+        self._order.append((at, line))
+        self.write(line)
+
+    def clock_moved(self, ahead_s: float) -> None:
+        """The lines written so far are on a clock ``ahead_s`` s ahead of the mission's (the vehicle's, before the
+        mission's time 0 was known: :mod:`bridge.record.missionclock`): ordered at their time less it."""
+        self._order = [(round(at - ahead_s, 6), line) for at, line in self._order]
+
+    def close(self) -> None:
+        """Close the file, then put its lines in time order (unchanged if they are; left as appended if it cannot
+        be rewritten: whole, in the order recorded)."""
+        if self._fd < 0:
+            return
+        super().close()
+        ordered = sorted(self._order, key=lambda x: x[0])  # (stable: a tie keeps the order recorded)
+        if ordered != self._order:
+            try:
+                write_text_atomic(self.path, "".join(line + "\n" for _, line in ordered))
+            except OSError:
+                pass  # (the file as appended stays, whole)
 
 
 class RunRecord:

@@ -426,6 +426,8 @@ class Session:
         event is stamped between the two clocks."""
         if self.clock.origin_s is None and self.joiner.k0 is not None and (note := self.clock.learn(
                 self.joiner.k0, self.flight.mission.rate_hz, len(self.events))):
+            if self._event_log is not None:  # (its lines so far on the vehicle's clock: ordered on the mission's)
+                self._event_log.clock_moved(self.clock.origin_s)
             self._note("clock", note, "session", 0.0)
 
     def _note(self, kind: str, text: str, source: str, t: float | None = None, by: Sender | None = None,
