@@ -296,6 +296,25 @@ def test_events_log_is_in_time_order_and_holds_every_event_of_the_summary(tmp_pa
     assert kinds.index("ended") < kinds.index("landed") < kinds.index("disarmed"), log
 
 
+def test_a_realtime_sessions_notes_are_not_before_the_disarm_that_ended_it(tmp_path: Path) -> None:
+    """Real time, both ways blacked out from 1 s to 4 s: the vehicle fails safe, descends, lands and disarms (2.6 s),
+    and its trace ends there. That last row is stamped at its control period's start, the disarm at the physics step
+    it happened in, within that period: the closing notes, at the last row, came up to a period before the disarm
+    they follow (``ended`` at 2.704 s, the disarm at 2.705 s) until the third wave's fortieth session. They are at
+    the disarm now, in summary.json and events.log."""
+    out = tmp_path / "rt"
+    run = sitl(Mission(Sine(), duration_s=5.0, name="rtfs", params={"COM_DISARM_LAND": 0.5}), realtime=True, out=out,
+               plots=False, instance=None, link={"blackouts": [[1.0, 3.0]]})
+    events = run.summary["events"]
+    disarm = next(e for e in events if e["kind"] == "disarmed" and e["source"] == "vehicle")
+    ended = next(e for e in events if e["kind"] == "ended")
+    assert run.outcome == "failsafe" and ended["t"] >= disarm["t"], events
+    assert events.index(ended) > events.index(disarm)
+    log = (out / "events.log").read_text().splitlines()
+    assert log.index(_as_logged(ended)) > log.index(_as_logged(disarm)), log
+    assert log == [_as_logged(e) for e in events]
+
+
 def test_an_event_with_no_time_known_is_written_with_none(tmp_path: Path) -> None:
     """A controller's failsafe judgement with no EVENT's time (bridge.nodes.offboard.flight) and no cause the session
     read: ``t=n/a``, not a time it did not happen at (it was written t=0.000)."""

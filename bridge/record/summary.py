@@ -11,8 +11,8 @@ Out: :class:`SessionSummary`: the trace arrays, ``summary.json`` (the figures of
      ground station's mission, fence and rally points (``mission_transfer``: :mod:`bridge.record.transfers`;
      ``--await-mission`` only), the lockstep record, ``ended_by``, the policies' verdicts, the events in time
      order) and the session's closing notes (its ``ended``, ``lockstep`` and ``policy`` events, also in
-     ``summary["events"]``, for events.log; at the trace's last row, with none at the latest event's:
-     :func:`notes_time`)
+     ``summary["events"]``, for events.log; at the trace's last row or an event in its period, with none at the
+     latest event's: :func:`notes_time`)
 
 See docs/design.md, "Files of a run", and docs/sitl.md, "Outcomes, exit statuses and safety policies".
 """
@@ -398,13 +398,17 @@ def stalls_text(stalls: Mapping[str, Any]) -> str:
             f"{stalls['worst_ms']:g} ms ({first}{more}): outages no link model asked for")
 
 
-def notes_time(joined: Joined, events: Sequence[RunEvent]) -> float:
-    """The time (s) of a session's closing notes: the trace's last row; with none (no mission's time 0: a session
-    stopped, or a ground station's flight ended, before the start) the latest event's, on the clock the events are on
-    then (the vehicle's: :mod:`bridge.record.missionclock`), so that the notes come after what they sum up."""
-    if joined.rows:
-        return joined.rows[-1].t
-    return max((e.t for e in events if e.t is not None), default=0.0)
+def notes_time(joined: Joined, events: Sequence[RunEvent], rate_hz: float) -> float:
+    """The time (s) of a session's closing notes: the trace's last row, or the latest event in its control period
+    (``rate_hz``) if later; with no row (no mission's time 0: a session stopped, or a ground station's flight ended,
+    before the start) the latest event's, on the clock the events are on then (the vehicle's:
+    :mod:`bridge.record.missionclock`), so that the notes come after what they sum up. A row is stamped at its
+    period's start, the vehicle's events at the physics step they happen in: in real time the disarm that ends the
+    session's wait falls in the last row's period, and the notes were stamped up to a period before it."""
+    if not joined.rows:
+        return max((e.t for e in events if e.t is not None), default=0.0)
+    last = joined.rows[-1].t
+    return max((last, *(e.t for e in events if e.t is not None and e.t < last + 1.0 / rate_hz)))
 
 
 def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events: Sequence[RunEvent],
@@ -471,7 +475,7 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
     texts += [("policy", violation_text(v)) for v in violated]
     if (stalls := stalls_of(summary)) is not None:
         texts.append(("stall", stalls_text(stalls)))
-    t = notes_time(joined, events)
+    t = notes_time(joined, events, m.rate_hz)
     notes = [RunEvent.at(t, kind, text, "session") for kind, text in texts]
     summary["events"] = [e.as_dict() for e in in_time_order((*events, *notes))]  # the notes in their time too
     return SessionSummary(arrays, summary, notes)
