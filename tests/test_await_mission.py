@@ -207,6 +207,12 @@ def test_mavsdk_flies_a_plan_file_through_await_mission_as_the_file_flies(tmp_pa
     back = [(e["text"], e["mode"]) for e in summary["events"] if e["kind"] == "mode" and "disarmed after" in e["text"]]
     assert back == [("MISSION (disarmed after LAND: PX4 takes the last mode it arms in; armed in it next) [by vehicle]",
                      "mission")]
+    # the session's note of the download at the controller's word, before the flight's time 0; until the third wave's
+    # fortieth session at the newest row joined when the session read it (the smooth path prepared, the flight had
+    # flown on at --speed 0: t=0.468 and 0.860 for examples/box.plan)
+    note = next(e for e in summary["events"] if e["source"] == "session" and e["kind"] == "mission")
+    said = next(e for e in summary["events"] if e["source"] == "controller" and e["text"].startswith("downloaded 5"))
+    assert note["t"] == said["t"] <= 0.0, summary["events"]
 
 
 @pytest.mark.parametrize("action", [5, 0], ids=["gf-action-5-land", "gf-action-0-not-watched"])

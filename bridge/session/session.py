@@ -394,13 +394,14 @@ class Session:
         (``mission.toml``): the session's flight, record and join are that mission's from now."""
         self.flight = flight = prepare(self.path / "mission.toml")
         self.record.mission = flight.mission
-        self.joiner = self._joiner(flight)
-        self.mission_known = True
-        self.transfer = report.transfer
-        t = report.transfer
+        self.transfer = t = report.transfer
+        # noted before its rows are joined: the download came before the flight's time 0, which may be long flown
+        # by the time this is read (it was stamped at the newest row joined: t=0.648 at --speed 0)
         self._note("mission", f"the controller downloaded {report.items} items in {t.get('duration_s', 0):.2f} s "
                               f"({t.get('re_requests')} requests again): {flight.mission.duration_s:.2f} s to fly",
                    "session")
+        self.joiner = self._joiner(flight)
+        self.mission_known = True
 
     def _status(self, child: Child, report: Report, t: float) -> None:
         """Act on one report (an event at ``t``, s on the events' clock: :meth:`_handle`)."""
