@@ -1513,6 +1513,10 @@ def test_a_ground_stations_flight_before_an_awaited_mission_is_recorded_before_i
     logged = (out / "events.log").read_text()
     assert "clock: the mission's time 0 (the trace's first row) is the vehicle's t=" in logged, logged
     assert f"t={end['t']:.3f} end: mission over" in logged
+    # and in summary.json's order, the hop's lines (on the vehicle's clock) first: sorted on the mission's clock once
+    # the session closed it (until the third wave's fortieth session in the order said: the notes after the landing)
+    said = [f"{e['kind']}: {e['text']}" + (f" [{e['source']}]" if "source" in e else "") for e in events]
+    assert [line.partition(" ")[2] for line in logged.splitlines()] == said, logged
 
 
 def test_a_pause_after_a_ground_stations_hop_ends_the_flight_at_its_trace_row_in_real_time(tmp_path):
