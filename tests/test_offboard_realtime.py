@@ -8,7 +8,8 @@ A tick whose state is late waits for it (at most half a period) instead of answe
 state before: the target answering a late state still reaches the vehicle before its next
 step. A state that never comes costs its tick that wait, and the next state is answered on time.
 The vehicle's clock (TIMESYNC) tells the controller how long its states travel, which the
-arrival schedule alone cannot: that way down is part of every state's age.
+arrival schedule alone cannot: that way down is part of every state's age. One lockstep flight too (the vehicle
+stepping on each answer): a scheduled change never echoed is not sent again at the flight's end.
 """
 
 from __future__ import annotations
@@ -73,6 +74,9 @@ class ScriptedVehicle:
         self.armed = False
         self.disarmed = False
         self.targets: Counter[int] = Counter()
+        self.answered: set[int] = set()  # the time_usec of every answer, a target or lockstep's no-target one
+        self.states_sent = 0
+        self.param_sets: list[int] = []  # per PARAM_SET received (never echoed): how many states were sent by then
         self.first_arm: float | None = None  # wall time of the first ARM received (its answers are lost)
         self.first_target: float | None = None  # wall time of the first actuator target
         self.timesync_asked: list[float] = []  # wall time of each TIMESYNC request received
@@ -105,9 +109,13 @@ class ScriptedVehicle:
             self.peer = addr
             for m in self.rx.parse_buffer(data) or []:
                 kind = m.get_type()
+                if kind in ("SET_ACTUATOR_CONTROL_TARGET", "HIL_ACTUATOR_CONTROLS"):
+                    self.answered.add(m.time_usec)
                 if kind == "SET_ACTUATOR_CONTROL_TARGET":
                     self.targets[m.time_usec] += 1
                     self.first_target = self.first_target or time.monotonic()
+                elif kind == "PARAM_SET":
+                    self.param_sets.append(self.states_sent)
                 elif kind == "TIMESYNC" and m.tc1 == 0:  # a request: our clock, at once (or held up one way)
                     self.timesync_asked.append(time.monotonic())
                     if self.hold is None:
@@ -143,6 +151,7 @@ class ScriptedVehicle:
         pos, q, vel, rates = state_to_odometry(HOVER)
         cov = [float("nan")] + [0.0] * 20  # unknown
         stamp = step_usec(k, RATE) if usec is None else usec
+        self.states_sent += 1
         self.send(mavlink.MAVLink_odometry_message(stamp, mavlink.MAV_FRAME_LOCAL_NED,
                                                    mavlink.MAV_FRAME_BODY_FRD, *pos, list(q), *vel, *rates, cov, cov,
                                                    0, mavlink.MAV_ESTIMATOR_TYPE_NAIVE, 100))
@@ -230,7 +239,12 @@ def first_record(path: Path) -> dict[str, float]:
 
 def stats(f: Flown) -> dict[str, Any]:
     """The controller's ``stats`` report."""
-    return next(r for r in map(parse_line, f.lines) if isinstance(r, Stats)).values
+    return stats_of(f.lines)
+
+
+def stats_of(lines: list[str]) -> dict[str, Any]:
+    """A controller's ``stats`` report, from its status lines."""
+    return next(r for r in map(parse_line, lines) if isinstance(r, Stats)).values
 
 
 def test_a_late_state_is_waited_for_and_a_lost_one_costs_one_tick(flown: Flown) -> None:
@@ -367,3 +381,39 @@ def test_a_state_stamped_far_ahead_or_back_is_refused_and_the_mission_flies_on(t
     assert len(f.steps) >= steps, f"disarmed after {len(f.steps)} of the mission's {steps} steps"
     assert all(0 <= s < len(f.steps) for s in f.targets), sorted(f.targets)[-3:]
     assert any(isinstance(r, Done) and r.outcome == "completed" for r in reports), f.lines[-5:]
+
+
+def test_a_scheduled_change_pending_at_a_lockstep_flights_end_is_not_resent(tmp_path: Path) -> None:
+    """Lockstep ``bsst controller --param-at`` at the mission's last step, against the scripted vehicle stepping on
+    each answer and never echoing a PARAM_SET: the change goes out once, before the last step's answer, and never
+    again once the state of the flight's end is sent (the controller's clock held there while it waits for the
+    echo, then lands). Until the third wave's fortieth session it was resent every 0.2 s of that 1 s wait
+    (``vehicle_t() > end_t``, the held clock equal to the end): into the landing, in a flight that had ended."""
+    steps = 10
+    (tmp_path / "end.toml").write_text(MISSION.replace("duration_s = 1.4", f"duration_s = {steps / RATE:g}"))
+    v = ScriptedVehicle()
+    ctl = Proc.bsst("controller", str(tmp_path / "end.toml"), "--vehicle", f"127.0.0.1:{v.port}",
+                    "--out", str(tmp_path / "run"), "--timeout", "20",
+                    "--param-at", f"{(steps - 1) / RATE:g}:MIS_TAKEOFF_ALT=5")  # the last step's
+    try:
+        deadline = time.monotonic() + 30
+        while not v.armed:  # heartbeats at 10 Hz until the controller arms us
+            assert time.monotonic() < deadline and ctl.p.poll() is None, "the controller never armed the vehicle"
+            v.heartbeat()
+            v.until(time.monotonic() + 0.1)
+        k0 = 1000
+        while not v.disarmed:  # a state, then the next once it is answered; the mission's end lands us
+            assert time.monotonic() < deadline and ctl.p.poll() is None, ctl.lines[-10:]
+            k = k0 + v.states_sent
+            if v.states_sent <= steps and (k == k0 or step_usec(k - 1, RATE) in v.answered):
+                v.heartbeat()
+                v.odometry(k)
+            v.until(time.monotonic() + 0.002)
+        ctl.p.wait(timeout=20)
+    finally:
+        ctl.stop()
+        v.sock.close()
+    assert v.states_sent == steps + 1  # the mission's steps and the state that ended it
+    assert v.param_sets == [steps], v.param_sets  # one, with the last step's state: none after the end's state
+    [sent] = stats_of(ctl.lines)["param_at"]
+    assert sent["sends"] == 1 and sent["confirmed"] is False, sent

@@ -269,9 +269,10 @@ class OffboardLink:
         return self.t_mission + max(time.monotonic() - self._t_wall, 0.0)
 
     def _resend_params(self, now: float) -> None:
-        """Each scheduled PARAM_SET the vehicle has not echoed yet, again once its PARAM_RETRY_S is up; none after
-        the flight's end (a real-time blackout that outlasts it): it would change the vehicle's landing, unflown."""
-        if self.vehicle_t() > self.end_t:
+        """Each scheduled PARAM_SET the vehicle has not echoed yet, again once its PARAM_RETRY_S is up; none at or
+        after the flight's end (a real-time blackout that outlasts it; lockstep's waits for the last echoes, its clock
+        held at the end): it would change the vehicle's landing, unflown."""
+        if self.vehicle_t() >= self.end_t:
             return
         for s in self._pending_params.values():
             if now >= s.next_send:
