@@ -42,6 +42,7 @@ VALUE_NOT_FLAG = re.compile(r"^-(\.?\d|(inf|nan)([:,=]|$))", re.IGNORECASE)
 
 class _Parser(argparse.ArgumentParser):
     def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("exit_on_error", False)  # a bad value raises here, to be said in the house's words (refusal)
         super().__init__(*args, **kwargs)
         # argparse's own test of "a negative number, so a value" (an attribute of every parser and sub-parser since
         # Python 3.2; tests/test_cli.py pins what it does here)
@@ -54,7 +55,10 @@ class _Parser(argparse.ArgumentParser):
                          namespace: argparse.Namespace | None = None) -> tuple[argparse.Namespace, list[str]]:
         """As argparse's; a sub-command's parser that is left with an unknown flag records itself on the
         namespace (the innermost first), so that the error names that command and suggests its flags."""
-        ns, extras = super().parse_known_args(args, namespace)
+        try:
+            ns, extras = super().parse_known_args(args, namespace)
+        except argparse.ArgumentError as exc:
+            raise UsageError(self.refusal(exc)) from None
         if any(a.startswith("-") for a in extras) and not hasattr(ns, UNRECOGNIZED_IN):
             setattr(ns, UNRECOGNIZED_IN, self)
         return ns, extras
@@ -67,6 +71,18 @@ class _Parser(argparse.ArgumentParser):
         if extras:
             raise UsageError(f"{where.prog}: unrecognized arguments: {' '.join(extras)}{where.flag_hint(extras)}")
         return ns
+
+    def refusal(self, exc: argparse.ArgumentError) -> str:
+        """A bad value's line as bsst's own refusals read: a flag type's words alone (they name the flag: ``bsst:
+        --vehicles must be in [1, 64], got 0``), argparse's own after the flag (``bsst: --at: expected one
+        argument``), or a positional's after its command (``bsst link: ACTION: invalid choice: ...``). Argparse said
+        ``bsst sim: argument --vehicles: --vehicles must be ...`` (until the third wave's fortieth session)."""
+        if isinstance(exc.__context__, argparse.ArgumentTypeError):  # (raised by a type of flags.py, which names it)
+            return f"bsst: {exc.message}"
+        name = exc.argument_name
+        if name is None:
+            return f"{self.prog}: {exc.message}"
+        return f"{'bsst' if name.startswith('-') else self.prog}: {name}: {exc.message}"
 
     def flag_hint(self, extras: Sequence[str]) -> str:
         """``; did you mean --delay?`` for the first unknown flag of ``extras`` close to one of this parser's
