@@ -1,9 +1,10 @@
 """A flight's timeline of events: faults and weather changes at mission times (pure; validated here).
 
 In:  a mission's ``[[events]]`` tables (``t_s`` s, ``kind`` and its settings; a flag's also ``at``, the flag as
-     typed) or ``--at T:KIND[:ARGS]`` flags
+     typed, and a Python caller's ``at=`` table its place there, ``at[0]``) or ``--at T:KIND[:ARGS]`` flags
 Out: frozen :class:`TimedEvent` s in time order, each with its TOML table (what ``mission.toml`` holds), the
-     one-line text its ``events.log`` line carries and the ``--at`` flag that laid it (None: a table's)
+     one-line text its ``events.log`` line carries and the ``--at`` flag or the ``at[i]`` that laid it (None: the
+     mission's own)
 
 The kinds, as a table and as a flag (units: s, m, m/s, rad/s; rotors numbered as eq. 4):
 
@@ -33,6 +34,7 @@ step) is refused: :func:`check_state_changes`.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -66,6 +68,9 @@ LINK_SCALARS = (str, int, float)  # a handover's keys: a profile name and [link]
 # an event table's key for the --at flag that laid it ("T:KIND[:ARGS]", as typed): a run's mission.toml keeps it, so
 # that the flight flown from that file (bsst sitl's children, a ground station's mission in its place) names the flag
 AT_KEY = "at"
+# ... or, for a table a Python caller laid (``at=({...},)``: bridge.core.overrides), its place there, as its refusals
+# name it: ``at[0]`` (never a flag's text, which begins with a time)
+CALLER_AT = re.compile(r"at\[\d+\]")
 
 
 @dataclass(frozen=True, slots=True)
@@ -75,7 +80,9 @@ class TimedEvent:
     t_s: float
     kind: str
     settings: tuple[tuple[str, Any], ...]
-    at: str | None = field(default=None, compare=False)  # the --at flag's T:KIND[:ARGS] that laid it; None: a table's
+    # the --at flag's T:KIND[:ARGS] that laid it, or a Python caller's table's place in at= (CALLER_AT); None: the
+    # mission's own table
+    at: str | None = field(default=None, compare=False)
 
     def get(self, key: str, default: Any = None) -> Any:
         return dict(self.settings).get(key, default)
@@ -228,17 +235,19 @@ def timeline_from_tables(tables: Sequence[Mapping[str, Any]], source: str, durat
 
 def event_given(raw: Mapping[str, Any], source: str, prefix: str, duration_s: float) -> TimedEvent:
     """One event's table validated (:func:`event_from_table`), its errors named where it was given: the ``--at``
-    flag that laid it when it holds one (:data:`AT_KEY`, refused unless the table is that flag's event), else
-    ``source: prefix``."""
+    flag that laid it when it holds one (:data:`AT_KEY`, refused unless the table is that flag's event), or a Python
+    caller's place in ``at=`` (:data:`CALLER_AT`), else ``source: prefix``."""
     if AT_KEY not in raw:
         return event_from_table(Table(raw, source, prefix), duration_s)
     t = Table(raw, source, prefix)
     text = t.string(AT_KEY)
+    own = {k: v for k, v in raw.items() if k != AT_KEY}
+    if CALLER_AT.fullmatch(text):  # a Python caller's table: named by its place in at=, as in its own process
+        return replace(event_from_table(Table(own, text), duration_s), at=text)
     try:
         flagged = event_table_from_flag(text)
     except ValueError as exc:
-        raise t.error(AT_KEY, f"not an --at flag's T:KIND[:ARGS]: {exc}"[:300]) from None
-    own = {k: v for k, v in raw.items() if k != AT_KEY}
+        raise t.error(AT_KEY, f"not an --at flag's T:KIND[:ARGS] nor a place in at= (at[0]): {exc}"[:300]) from None
     if own != flagged:  # (a hand-edited table: what it flies is not what the flag it names would)
         raise t.error(AT_KEY, f"the table is not the event --at {text} lays "
                               f"({', '.join(f'{k} = {v!r}' for k, v in flagged.items())}): give the flag's "
@@ -250,7 +259,7 @@ def table_where(source: str, e: TimedEvent) -> str:
     """Where a mission's event was given, as a refusal names it: the flag that laid it (``--at 10:gps:off``), else
     its table (``m.toml: events (t_s = 10, kind = gps)``)."""
     if e.at is not None:
-        return f"--at {e.at}"
+        return e.at if CALLER_AT.fullmatch(e.at) else f"--at {e.at}"
     return f"{source}: events (t_s = {e.t_s:g}, kind = {e.kind})"
 
 

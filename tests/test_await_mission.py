@@ -1295,6 +1295,15 @@ def test_a_waypoint_before_a_land_here_is_reached_at_its_point_not_at_the_takeof
     assert watch.step(4.0, (5.0, 0.0, 0.0, 0.0, 1.0)) == [] and watch.step(5.0, (5.0, 0.0, 0.0, 0.0, 0.0)) == [2]
 
 
+# a ground station's mission of 10.919 s: up 2 m, 5 m north (450 degE7 of latitude), land (about the default home)
+SHORT_ITEMS = (
+    MissionItem(0, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_CMD_NAV_TAKEOFF, 0.0, 0.0, 0.0, math.nan, 0, 0, 2.0, 1),
+    MissionItem(1, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_CMD_NAV_WAYPOINT, 0.0, 0.0, 0.0, math.nan,
+                473977420 + 450, 85455940, 2.0, 1),
+    MissionItem(2, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_CMD_NAV_LAND, 0.0, 0.0, 0.0, math.nan, 0, 0, 0.0, 1))
+SHORT_HOME = (473977420 * 1e-7, 85455940 * 1e-7, 488.0)
+
+
 def test_an_at_event_after_an_uploaded_missions_end_is_refused_naming_the_flag(tmp_path):
     """``bsst sitl --await-mission --at 20:gust:2,3`` and a ground station's mission of 10.9 s: the session writes
     the run's mission.toml (:class:`~bridge.record.runlog.RunRecord`), its children read it (no ``--at`` of their
@@ -1302,12 +1311,7 @@ def test_an_at_event_after_an_uploaded_missions_end_is_refused_naming_the_flag(t
     the flag (docs/weather.md), kept in its table as typed (``at``); it named the file's table
     (``.../mission.toml: events[0].t_s: ...``), which the user never wrote. A table whose ``at`` is not its event
     is refused naming the key; an event inside the mission flies, named as its flag again."""
-    lat, lon = 473977420, 85455940  # the default home (degE7)
-    rel = M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
-    items = (MissionItem(0, rel, M.MAV_CMD_NAV_TAKEOFF, 0.0, 0.0, 0.0, math.nan, 0, 0, 2.0, 1),
-             MissionItem(1, rel, M.MAV_CMD_NAV_WAYPOINT, 0.0, 0.0, 0.0, math.nan, lat + 450, lon, 2.0, 1),
-             MissionItem(2, rel, M.MAV_CMD_NAV_LAND, 0.0, 0.0, 0.0, math.nan, 0, 0, 0.0, 1))
-    home = (lat * 1e-7, lon * 1e-7, 488.0)
+    items, home = SHORT_ITEMS, SHORT_HOME
 
     def child(at: str) -> Flight:  # the run directory as the session writes it, read as its children read it
         run = tmp_path / at.replace(":", "_")
@@ -1328,6 +1332,27 @@ def test_an_at_event_after_an_uploaded_missions_end_is_refused_naming_the_flag(t
     with pytest.raises(ConfigError, match=r"mission\.toml: events\[0\]\.at: the table is not the event --at "
                                           r"20:gust:2,3 lays \(t_s = 20\.0, .*amplitude_mps = 3\.0"):
         prepare(edited)
+
+
+def test_an_at_table_from_python_after_an_uploaded_missions_end_is_refused_naming_its_place(tmp_path):
+    """``sitl(..., await_mission=True, at=({...},))`` and a ground station's mission of 10.9 s: a table laid from
+    Python keeps its place in ``at`` in the run's mission.toml (its ``at`` key, as a flag's keeps the flag), so the
+    children's start check and download refuse its event after the mission's end as the caller's own process does,
+    ``at[0]``. Until the third wave's fortieth session the children named ``.../mission.toml: events[1]`` (after the
+    mission's own event), and the caller's process ``command line: events[1]``: neither what the user wrote."""
+    own = {"t_s": 1.0, "kind": "gust", "duration_s": 2.0, "amplitude_mps": 3.0}
+    table = {**own, "t_s": 20.0}
+    laid = prepare(replace(at_rest(), events=(own,)), at=(table,))
+    RunRecord(tmp_path, laid.mission).close()  # the run directory as the session writes it, read as its children do
+    child = prepare(tmp_path / "mission.toml")
+    for flight in (laid, child):
+        with pytest.raises(ConfigError) as refused:
+            uploaded_flight(flight, SHORT_ITEMS, SHORT_HOME, source="the vehicle's mission")
+        assert str(refused.value) == "at[0]: t_s: must be in [0, 10.919) s (before the mission's end), got 20"
+    assert [e.get("at") for e in child.mission.events] == [None, "at[0]"]
+    _, new = uploaded_flight(prepare(replace(at_rest(), events=(own,)), at=({**own, "t_s": 2.0},)), SHORT_ITEMS,
+                             SHORT_HOME)
+    assert [(e.t_s, e.at) for e in new.timeline] == [(1.0, None), (2.0, "at[0]")]
 
 
 def test_plan_text_reads_back_and_the_transfer_block_is_typed():

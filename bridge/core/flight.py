@@ -60,7 +60,6 @@ from plant.events import (
     EventError,
     TimedEvent,
     check_state_changes,
-    event_given,
     table_where,
     timeline_from_tables,
 )
@@ -258,14 +257,10 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
                 raise ConfigError(f"{_blackouts_given(m, over, d)}: the window [{start:g}, {start + dur:g}) s starts "
                                   f"after the mission's end (duration_s = {m.duration_s:g} s), so it would never "
                                   "happen")
-    try:
-        wind, timeline = weather_of(m, prof, sensor_config, estimator_kind, effects.battery)
-        link_settings = replace(link_settings, handovers=handovers_of(timeline, m))
-    except EventError as exc:  # named where the event was given: a flag's names itself (TimedEvent.at), a table
-        # laid from Python by its place in at (at[0]), else the mission's table
-        given = [n for e, n in zip(over.at, over._at_named, strict=True)
-                 if exc.event.at is None and event_given(e, n, "", m.duration_s) == exc.event]
-        raise EventError(exc.event, exc.what, given[0] if given else exc.where) from None
+    # an event's refusal is named where it was given (plant.events.table_where): a flag's and a table laid from
+    # Python each by its TimedEvent.at (--at 10:gps:off, at[0]), else the mission's table
+    wind, timeline = weather_of(m, prof, sensor_config, estimator_kind, effects.battery)
+    link_settings = replace(link_settings, handovers=handovers_of(timeline, m))
     try:
         law = resolve_law(m.controller)
         flight = Flight(m, prof, effects, gains, failsafe, link_settings, law, sensor_config, estimator_kind,

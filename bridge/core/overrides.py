@@ -53,7 +53,7 @@ class Overrides:
     turbulence: str | None = None  # [wind] turbulence: none, light, moderate or severe
     turbulence_scaling: str | None = None  # [wind] turbulence_scaling: exact (the flight's record at σ) or none
     at: tuple[Mapping[str, Any] | str, ...] = ()  # events after the mission's [[events]]: tables or "T:KIND[:ARGS]"
-    #   (kept as tables, a flag's with its text under plant.events.AT_KEY)
+    #   (kept as tables, a flag's with its text under plant.events.AT_KEY, a table with its place there: "at[0]")
 
     def __post_init__(self) -> None:
         _check_type("turbulence", self.turbulence, str, "a string")
@@ -76,11 +76,12 @@ class Overrides:
                     e = {**event_table_from_flag(e), AT_KEY: e}
                 except ValueError as exc:
                     raise ConfigError(f"--at {e}: {exc}"[:300]) from None
-            else:
+            elif isinstance(e, Mapping):
                 named.append(f"at[{i}]")
-            if not isinstance(e, Mapping):
+                e = {**e, AT_KEY: e.get(AT_KEY, f"at[{i}]")}  # its place kept too: named so in a run's children
+            else:
                 raise ConfigError(f"at: expected event tables or 'T:KIND[:ARGS]' strings, got {e!r}"[:200])
-            events.append(dict(e))
+            events.append(e)
         object.__setattr__(self, "at", tuple(events))
         object.__setattr__(self, "_at_named", tuple(named))  # (not a field) each event as its caller gave it
         for f in ("profile", "controller", "discretization", "actuation", "estimator"):
