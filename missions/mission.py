@@ -20,9 +20,9 @@ errors still name the file and the key.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
+from numbers import Real
 from pathlib import Path
 from typing import Any
 
@@ -59,6 +59,7 @@ MISSION_RANGES: dict[str, tuple[float, float]] = {
 TRAJECTORIES = ("step", "sine", "waypoints", "smooth", "plan")
 PLAN_SUFFIXES = (".plan", ".waypoints", ".txt")  # QGroundControl's JSON plan; QGC WPL 110 text
 DEFAULT_RATE_HZ = 250.0  # Hz: a mission's control rate unless it gives one (a plan's, always)
+DEFAULT_PHYSICS_HZ = 1000.0  # Hz: a mission's physics rate unless it gives one
 PLAN_MAX_BYTES = 16 << 20  # a plan of MAX_ITEMS items is about 5 MB of JSON
 END_REST_S = 1.0  # s: a plan's mission lasts this long after its trajectory ends (at rest, or on the ground)
 MAX_STRETCH = 4.0  # the most a trajectory is slowed (``stretched_by``; missions.airframe fits a plan's with it)
@@ -81,7 +82,7 @@ class Mission:
     controller: str = "bsst"
     discretization: str = DEFAULT_DISCRETIZATION  # DISCRETIZATIONS; only ``bsst`` has a step it changes
     rate_hz: float = DEFAULT_RATE_HZ
-    physics_hz: float = 1000.0
+    physics_hz: float = DEFAULT_PHYSICS_HZ
     seed: int = 0
     start: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)  # x, y, z, psi at rest
     start_scatter_m: float = 0.0  # [start] scatter_m: each seed starts in a disc this wide around it (flight_start)
@@ -216,15 +217,16 @@ def law_spec_from(spec: str, base: Path) -> str:
 
 
 def check_timing(duration_s: float, rate_hz: float, physics_hz: float, source: str = "<python>") -> None:
-    """Rates and duration must be positive and the physics rate a multiple of the control rate."""
-    lo, hi = MISSION_RANGES["duration_s"]
-    if not (math.isfinite(duration_s) and lo < duration_s <= hi):
-        raise ConfigError(f"{source}: duration_s: must be in ({lo:g}, {hi:g}], got {duration_s:g}")
-    for key, v in (("rate_hz", rate_hz), ("physics_hz", physics_hz)):
-        lo, hi = MISSION_RANGES[key]
-        if not lo <= v <= hi:
-            raise ConfigError(f"{source}: {key}: must be in [{lo:g}, {hi:g}], got {v:g}")
-    why = rate_problem(rate_hz, physics_hz)
+    """Rates and duration must be numbers (a Python caller's text or bool is named) in their ranges, and the physics
+    rate a multiple of the control rate (named where not the default: it, not the rate, may be what was set)."""
+    for key, v in (("duration_s", duration_s), ("rate_hz", rate_hz), ("physics_hz", physics_hz)):
+        if isinstance(v, bool) or not isinstance(v, Real):
+            raise ConfigError(f"{source}: {key}: expected a number ({'s' if key == 'duration_s' else 'Hz'}), got {v!r}"
+                              [:300])
+        (lo, hi), left = MISSION_RANGES[key], "(" if key == "duration_s" else "["  # (a duration of 0 s is none)
+        if not (lo < v if left == "(" else lo <= v) or not v <= hi:  # also refuses nan
+            raise ConfigError(f"{source}: {key}: must be in {left}{lo:g}, {hi:g}], got {v:g}")
+    why = rate_problem(rate_hz, physics_hz, " (physics_hz)" if physics_hz != DEFAULT_PHYSICS_HZ else "")
     if why is not None:
         raise ConfigError(f"{source}: rate_hz: {why}, got {rate_hz:g}")
 
@@ -334,7 +336,7 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
     discretization = t.string("discretization", DEFAULT_DISCRETIZATION, choices=DISCRETIZATIONS)
     r = MISSION_RANGES
     rate = t.number("rate_hz", DEFAULT_RATE_HZ, lo=r["rate_hz"][0], hi=r["rate_hz"][1])
-    physics = t.number("physics_hz", 1000.0, lo=r["physics_hz"][0], hi=r["physics_hz"][1])
+    physics = t.number("physics_hz", DEFAULT_PHYSICS_HZ, lo=r["physics_hz"][0], hi=r["physics_hz"][1])
     if not t.has("rate_hz") and (why := rate_problem(rate, physics, " (physics_hz)")):  # the default's, not the file's
         raise ConfigError(f"{source}: rate_hz: not given, so {rate:g} Hz (the default), and {why}; give rate_hz "
                           f"(in the file: --rate lays a rate over it, but the file's own must fit too)")

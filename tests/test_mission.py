@@ -214,6 +214,29 @@ def test_scripted_missions_are_validated_too() -> None:
     assert m.with_overrides(rate_hz=500.0, seed=None).rate_hz == 500.0
 
 
+def test_a_python_missions_physics_hz_is_named_as_its_field() -> None:
+    """``Mission(..., physics_hz=...)`` from Python: a physics rate the control rate (here the default 250 Hz) is
+    no whole divisor of names the field that set it, ``(physics_hz)``, in a Mission and with a ``rate_hz`` laid over
+    one; a value that is no number names its field too. Until the third wave's fortieth session the first read
+    ``<python>: rate_hz: the physics rate 1001 Hz must be ..., got 250``, naming only the field left alone, and text
+    (or None) gave a TypeError naming none (``'<=' not supported between instances of 'float' and 'str'``)."""
+    with pytest.raises(ConfigError) as e:
+        Mission(Sine(), duration_s=10.0, physics_hz=1001.0)
+    said = str(e.value)
+    assert said.startswith("<python>: rate_hz: the physics rate 1001 Hz (physics_hz) must be a whole multiple of it "
+                           "(allowed: 1001 Hz divided by a whole number, 50-1000 Hz; the whole ones 77, 91, 143)"), said
+    assert said.endswith(", got 250"), said
+    with pytest.raises(ConfigError, match=r"^<python>: rate_hz: the physics rate 800 Hz \(physics_hz\) must be"):
+        simulate(Mission(Sine(), duration_s=1.0, physics_hz=800.0, rate_hz=200.0), rate_hz=300.0, plots=False)
+    with pytest.raises(ConfigError, match=r"^<python>: physics_hz: must be in \[100, 10000\], got 50$"):
+        Mission(Sine(), duration_s=10.0, physics_hz=50.0)
+    for field, value, unit in (("physics_hz", "1000", "Hz"), ("physics_hz", None, "Hz"), ("physics_hz", True, "Hz"),
+                               ("rate_hz", "250", "Hz"), ("duration_s", "10", "s")):
+        with pytest.raises(ConfigError) as e:
+            Mission(Sine(), **{"duration_s": 10.0, field: value})
+        assert str(e.value) == f"<python>: {field}: expected a number ({unit}), got {value!r}", e.value
+
+
 # -- issue 11: what is accepted can be flown; a name names one directory ---------------------------------
 def test_the_envelope_is_the_plants() -> None:
     """The loader's envelope is where the plant's own divergence check trips, in every direction."""
