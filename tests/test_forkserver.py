@@ -376,3 +376,37 @@ def test_a_launcher_loads_no_kernels_its_fork_server_loads_them_for_its_children
     out = json.loads(r.stdout.strip().splitlines()[-1])
     assert out == {"rc": 0, "held": [], "server": True}, (out, r.stderr[-3000:])
     assert "compiling" not in (tmp_path / "run" / "vehicle.log").read_text()  # it inherited them
+
+
+# ``bsst sitl`` as a user starts it, in a process that says after the session which modules it imported
+MODULES_SCRIPT = """
+import json, sys
+from bridge.cli import main
+rc = main(json.loads(sys.argv[1]))
+print(json.dumps({"rc": rc, "modules": sorted(sys.modules)}))
+"""
+
+
+def test_a_plain_session_imports_no_sweep_code_and_its_children_import_nothing_of_the_bridge(tmp_path) -> None:
+    """``bsst sitl --no-plots`` with no noise or link flag: the launcher imports no campaign code (``bridge.sweep``
+    and its multiprocessing: the check of ``--noise`` imported it, ~0.03 CPU-s a process), and the children, forked
+    from a server that preloaded what they fly, import no module of the project (each imported ``bridge.sweep``
+    and ``bridge.swarm`` for that check, ~0.04 CPU-s). Seen by Python's own import log (``PYTHONPROFILEIMPORTTIME``:
+    a line on stderr per module imported, the children's stderr their logs)."""
+    (tmp_path / "short.toml").write_text('name = "short"\nduration_s = 1.0\n[trajectory]\nkind = "sine"\n')
+    env = {k: v for k, v in os.environ.items() if k != ENV}
+    root = str(Path(__file__).resolve().parent.parent)
+    env.update(PYTHONPROFILEIMPORTTIME="1", PYTHONPATH=os.pathsep.join(filter(None, [root, env.get("PYTHONPATH")])))
+    with instance_slot() as n:
+        argv = ["sitl", "short.toml", "--no-plots", "--instance", str(n), "--out", "run"]
+        r = subprocess.run([sys.executable, "-c", MODULES_SCRIPT, json.dumps(argv)], capture_output=True,
+                           text=True, timeout=300, cwd=tmp_path, env=env)
+    assert r.returncode == 0, r.stderr[-3000:]
+    out = json.loads(r.stdout.strip().splitlines()[-1])
+    assert out["rc"] == 0, r.stderr[-3000:]
+    assert not [m for m in out["modules"] if m.split(".")[0] == "multiprocessing" or m.startswith("bridge.sweep")]
+    for child in ("vehicle", "controller"):
+        log = (tmp_path / "run" / f"{child}.log").read_text()
+        imported = [ln.rpartition("|")[2].strip() for ln in log.splitlines() if ln.startswith("import time:")]
+        assert not [m for m in imported if m.split(".")[0] in ("bridge", "controller", "plant", "missions")], (
+            child, imported)

@@ -130,7 +130,7 @@ def checked_mission(args: argparse.Namespace, mission: Mission | str | Path | No
     here), with the flags that would change nothing in it refused, each by the rule a sweep refuses its axis with:
     ``--noise X`` where every vehicle flies the true state (``truth``: it has no sensors, so none are streamed
     either, HIGHRES_IMU and GPS_RAW_INT included) or a sensor set with no noise
-    (:func:`bridge.sweep.grid.noise_problem`); a link flag that acts only with another (``--burst`` without loss,
+    (:func:`bridge.core.flight.noise_problem`); a link flag that acts only with another (``--burst`` without loss,
     ``--queue`` without a bandwidth cap, ``--link-trace-loop`` without a trace) where nothing gives that
     (:func:`bridge.cli.linkflags.idle_link_flag`). Before the file is validated, the flags its own keys make wrong,
     named as the flags: a guard flag that clashes with its other guard keys (``--command-lag`` without prediction:
@@ -140,9 +140,7 @@ def checked_mission(args: argparse.Namespace, mission: Mission | str | Path | No
     directions. A key of the mission's ``[link]`` that would change nothing and a ``--discretization`` for a law
     without a super-twisting step are :func:`bridge.core.flight.prepare`'s to refuse, the command's and the Python
     API's alike (:func:`bridge.core.flight.idle_link_key`, :func:`bridge.core.flight.discretization_refusal`)."""
-    from bridge.core.flight import at_rest, discretization_refusal, prepare  # lazy: start-up time
-    from bridge.swarm import fleet_flights, fleet_mission  # lazy: start-up time
-    from bridge.sweep.grid import noise_problem  # lazy: start-up time
+    from bridge.core.flight import at_rest, discretization_refusal  # lazy: start-up time
     from missions import Mission, load_mission  # lazy: start-up time
 
     table, source = _own(mission)
@@ -158,9 +156,19 @@ def checked_mission(args: argparse.Namespace, mission: Mission | str | Path | No
         if idle:
             raise ConfigError(idle)
         args = argparse.Namespace(**{**vars(args), "controller": None, "discretization": None})
+    if getattr(args, "noise", None) is not None or idle_flags_given(args):
+        _refuse_idle_flags(args, m, axes)
+    return flown
+
+
+def _refuse_idle_flags(args: argparse.Namespace, m: Mission, axes: Mapping[str, Sequence[float]] | None) -> None:
+    """Refuse (ConfigError) ``--noise X`` or a link flag that would change nothing in the flights of ``m`` with
+    ``args`` laid over it (:func:`checked_mission`). Apart, so that a command given neither (every session's
+    children) imports none of the fleet's code."""
+    from bridge.core.flight import noise_problem, prepare  # lazy: start-up time
+    from bridge.swarm import fleet_flights, fleet_mission  # lazy: start-up time
+
     noise = getattr(args, "noise", None)
-    if noise is None and not idle_flags_given(args):
-        return flown
     over = replace(overrides_from_args(args), noise=1.0)  # the set's own sigmas: a scale of 0 changes a noisy set
     fleet = fleet_mission(m, getattr(args, "vehicles", None), getattr(args, "formation", None))
     flights = (fleet_flights(fleet, over, laid_named=True) if fleet is not None  # (bad input)
@@ -171,7 +179,6 @@ def checked_mission(args: argparse.Namespace, mission: Mission | str | Path | No
     idle = idle_link_flag(args, [f.link for f in flights], axes)
     if idle:
         raise ConfigError(idle)
-    return flown
 
 
 def _rate_flag_refusal(args: argparse.Namespace, own: Mapping[str, Any], source: str) -> str | None:

@@ -16,7 +16,7 @@ bad value fails before anything starts, with the file and key named. ``Overrides
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -64,7 +64,7 @@ from plant.events import (
     timeline_from_tables,
 )
 from plant.profiles import sensors_from_table
-from plant.sensors import IDEAL, SensorConfig, SensorSuite
+from plant.sensors import IDEAL, SIGMA_KEYS, SensorConfig, SensorSuite
 from plant.wind import WindConfig, wind_from_table
 
 Progress = Callable[[float, float, float], None]  # a flight's progress: (t s, duration s, current 3-D error m)
@@ -341,6 +341,24 @@ def discretization_refusal(scheme: str | None, laws: Iterable[str]) -> str | Non
     change nothing (:func:`controller.law.discretization_problem`); None, and None for no scheme."""
     why = None if scheme is None else discretization_problem(laws)
     return None if why is None else f"--discretization {scheme}: {why}; drop the flag, or fly --controller bsst"
+
+
+def noiseless(sensors: SensorConfig) -> bool:
+    """Whether a sensor set has no noise at all (every sigma 0 or unused): scaling it changes nothing."""
+    return not any(getattr(sensors, k) for k in SIGMA_KEYS)
+
+
+def noise_problem(estimators: Sequence[str], sensors: SensorConfig) -> str | None:
+    """Why a noise scale would change nothing in flights with these estimator kinds and this sensor set
+    (None if it does): every one is ``truth`` (the true state: the sensors are not read), or the set
+    has no noise to scale."""
+    if set(estimators) <= {"truth"}:
+        return ("the estimator is 'truth' (the true state: the sensors are not read), so noise changes nothing; "
+                "give --estimator raw or ekf (or [estimator] kind)")
+    if noiseless(sensors):
+        return (f"the sensor set {sensors.name!r} has no noise (every sigma is 0), so its scale changes nothing; "
+                "choose one with --sensors mocap or gnss (or [sensors] set)")
+    return None
 
 
 def event_problem(kind: str, prof: Profile, sensors: SensorConfig | None, estimator: str = "ekf",

@@ -34,7 +34,6 @@ from missions.fleet import FLEET_RANGES
 from missions.mission import DEFAULT_DISCRETIZATION, DISCRETIZATIONS, law_spec_from, law_spec_problem
 from params import ConfigError
 from plant.profiles import NOISE_SCALE_RANGE
-from plant.sensors import SIGMA_KEYS, SensorConfig
 from plant.wind import TURBULENCE, WIND_RANGES
 
 # Grid axes, in the order of the product (the last varies fastest; seeds vary faster still). The vehicle's
@@ -326,11 +325,6 @@ def cell_overrides(cell: Cell) -> Overrides:
                      **{a: getattr(cell, a) for a in cell.sensing}, **weather)  # estimator, noise; wind, turbulence
 
 
-def noiseless(sensors: SensorConfig) -> bool:
-    """Whether a sensor set has no noise at all (every sigma 0 or unused): scaling it changes nothing."""
-    return not any(getattr(sensors, k) for k in SIGMA_KEYS)
-
-
 def cell_flight(mission: Mission, cell: Cell) -> Flight:
     """The parts a cell flies, by the one path from a mission and its overrides (its link values named as the
     grid's axes where one changes nothing: bridge.sweep.spec); a law that cannot be built named as it was given."""
@@ -349,16 +343,3 @@ def link_trace(flight: Flight) -> str | None:
     L = flight.link
     configs = (L.up, L.down, *(c for _, u, d in L.handovers for c in (u, d)))
     return next((c.trace.path for c in configs if c.trace is not None), None)
-
-
-def noise_problem(estimators: Sequence[str], sensors: SensorConfig) -> str | None:
-    """Why a noise scale would change nothing in flights with these estimator kinds and this sensor set
-    (None if it does): every one is ``truth`` (the true state: the sensors are not read), or the set
-    has no noise to scale."""
-    if set(estimators) <= {"truth"}:
-        return ("the estimator is 'truth' (the true state: the sensors are not read), so noise changes nothing; "
-                "give --estimator raw or ekf (or [estimator] kind)")
-    if noiseless(sensors):
-        return (f"the sensor set {sensors.name!r} has no noise (every sigma is 0), so its scale changes nothing; "
-                "choose one with --sensors mocap or gnss (or [sensors] set)")
-    return None

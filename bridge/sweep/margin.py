@@ -61,14 +61,14 @@ from operator import itemgetter
 from pathlib import Path
 from typing import Any
 
-from bridge.core.flight import prepare
+from bridge.core.flight import noise_problem, prepare
 from bridge.core.interrupt import Deferred, sigint_deferred
 from bridge.link.model import NEEDS, idle_problem
 from bridge.record.runlog import run_dir, write_json_atomic
 from bridge.sweep.cells import FAILED, broke_policy, seeds_alike
 from bridge.sweep.classes import CLASSES, Classes, classify
 from bridge.sweep.executors import Report, engine_for, run_batch, run_cell, run_local
-from bridge.sweep.grid import LINK_AXES, RANGES, Cell, cell_flight, link_trace, mission_value, noise_problem
+from bridge.sweep.grid import LINK_AXES, RANGES, Cell, cell_flight, link_trace, mission_value
 from bridge.sweep.spec import check_jobs
 from controller.law import LawError, is_builtin
 from missions import Mission

@@ -16,7 +16,7 @@ from itertools import product
 from pathlib import Path
 from typing import Any
 
-from bridge.core.flight import prepare
+from bridge.core.flight import noise_problem, prepare
 from bridge.link.model import NEEDS, idle_problem, swept_links
 from bridge.record.runlog import check_trace_steps
 from bridge.swarm import check_fleet_steps, fleet_flights, fleet_mission
@@ -41,7 +41,6 @@ from bridge.sweep.grid import (
     grid_size,
     link_trace,
     mission_value,
-    noise_problem,
 )
 from controller.law import discretization_problem
 from missions import Mission, load_mission
