@@ -387,12 +387,13 @@ print(json.dumps({"rc": rc, "modules": sorted(sys.modules)}))
 """
 
 
-def test_a_plain_session_imports_no_sweep_code_and_its_children_import_nothing_of_the_bridge(tmp_path) -> None:
+def test_a_plain_session_imports_no_sweep_code_and_its_children_import_nothing(tmp_path) -> None:
     """``bsst sitl --no-plots`` with no noise or link flag: the launcher imports no campaign code (``bridge.sweep``
     and its multiprocessing: the check of ``--noise`` imported it, ~0.03 CPU-s a process), and the children, forked
-    from a server that preloaded what they fly, import no module of the project (each imported ``bridge.sweep``
-    and ``bridge.swarm`` for that check, ~0.04 CPU-s). Seen by Python's own import log (``PYTHONPROFILEIMPORTTIME``:
-    a line on stderr per module imported, the children's stderr their logs)."""
+    from a server that preloaded what they fly, import nothing (each imported ``bridge.sweep`` and ``bridge.swarm``
+    for that check, ~0.04 CPU-s, and ``numpy.ma``, which ``np.percentile`` imports, ~0.01). Seen by Python's own
+    import log (``PYTHONPROFILEIMPORTTIME``: a line on stderr per module imported, the children's stderr their
+    logs)."""
     (tmp_path / "short.toml").write_text('name = "short"\nduration_s = 1.0\n[trajectory]\nkind = "sine"\n')
     env = {k: v for k, v in os.environ.items() if k != ENV}
     root = str(Path(__file__).resolve().parent.parent)
@@ -408,5 +409,4 @@ def test_a_plain_session_imports_no_sweep_code_and_its_children_import_nothing_o
     for child in ("vehicle", "controller"):
         log = (tmp_path / "run" / f"{child}.log").read_text()
         imported = [ln.rpartition("|")[2].strip() for ln in log.splitlines() if ln.startswith("import time:")]
-        assert not [m for m in imported if m.split(".")[0] in ("bridge", "controller", "plant", "missions")], (
-            child, imported)
+        assert not imported, (child, imported)

@@ -23,6 +23,10 @@ def preload() -> None:
     """Import what the children import lazily at their start (bridge.cli.flying, linktools), and build the
     parser, so that a forked child starts with all of it done; with ``BSST_KERNELS=compiled``, load the compiled
     kernels too (each child would load them: bridge.core.kernelpreload)."""
+    import encodings.idna  # noqa: F401  (the codec of a socket's address given as text: each child's first send)
+
+    import numpy.ma  # noqa: F401  (np.percentile imports it, in np.unique: each child's link figures at its end)
+
     import bridge.core.flight  # noqa: F401  (lazy in the children: preloaded here for every child at once)
     import bridge.mavlink.signing  # noqa: F401  (lazy in the children, as above)
     import bridge.mavlink.telemetry  # noqa: F401  (lazy in the children, as above)
