@@ -387,13 +387,13 @@ print(json.dumps({"rc": rc, "modules": sorted(sys.modules)}))
 """
 
 
-def test_a_plain_session_imports_no_sweep_code_and_its_children_import_nothing(tmp_path) -> None:
+def test_a_plain_sessions_launcher_imports_no_sweep_nor_vehicle_code_and_its_children_nothing(tmp_path) -> None:
     """``bsst sitl --no-plots`` with no noise or link flag: the launcher imports no campaign code (``bridge.sweep``
-    and its multiprocessing: the check of ``--noise`` imported it, ~0.03 CPU-s a process), and the children, forked
-    from a server that preloaded what they fly, import nothing (each imported ``bridge.sweep`` and ``bridge.swarm``
-    for that check, ~0.04 CPU-s, and ``numpy.ma``, which ``np.percentile`` imports, ~0.01). Seen by Python's own
-    import log (``PYTHONPROFILEIMPORTTIME``: a line on stderr per module imported, the children's stderr their
-    logs)."""
+    and its multiprocessing: the check of ``--noise`` imported it, ~0.03 CPU-s a process) and no vehicle code (for
+    a fleet's gate, ~0.03: its children fly the vehicle), and the children, forked from a server that preloaded
+    what they fly, import nothing (each imported ``bridge.sweep`` and ``bridge.swarm`` for that check, ~0.04 CPU-s,
+    and ``numpy.ma``, which ``np.percentile`` imports, ~0.01). Seen by Python's own import log
+    (``PYTHONPROFILEIMPORTTIME``: a line on stderr per module imported, the children's stderr their logs)."""
     (tmp_path / "short.toml").write_text('name = "short"\nduration_s = 1.0\n[trajectory]\nkind = "sine"\n')
     env = {k: v for k, v in os.environ.items() if k != ENV}
     root = str(Path(__file__).resolve().parent.parent)
@@ -405,7 +405,8 @@ def test_a_plain_session_imports_no_sweep_code_and_its_children_import_nothing(t
     assert r.returncode == 0, r.stderr[-3000:]
     out = json.loads(r.stdout.strip().splitlines()[-1])
     assert out["rc"] == 0, r.stderr[-3000:]
-    assert not [m for m in out["modules"] if m.split(".")[0] == "multiprocessing" or m.startswith("bridge.sweep")]
+    assert not [m for m in out["modules"] if m.split(".")[0] == "multiprocessing"
+                or m.startswith(("bridge.sweep", "bridge.nodes.vehicle"))]
     for child in ("vehicle", "controller"):
         log = (tmp_path / "run" / f"{child}.log").read_text()
         imported = [ln.rpartition("|")[2].strip() for ln in log.splitlines() if ln.startswith("import time:")]

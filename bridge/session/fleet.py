@@ -38,7 +38,7 @@ import tempfile
 import threading
 from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from bridge.autopilot.estimator import compile_estimator
 from bridge.core.flight import Flight
@@ -47,12 +47,14 @@ from bridge.link.turns import TURNS
 from bridge.mavlink.endpoint import LINK_PORT
 from bridge.mavlink.signing import key_from_file
 from bridge.nodes.forkserver import warm
-from bridge.nodes.vehicle.gate import GateConfig, say_lost
 from bridge.record.runlog import Run, blackout_windows, finish_run
 from bridge.session import check_options
 from bridge.session.children import READY_TIMEOUT_S, catch_stop_signals, check_port_free, free_udp_port
 from bridge.session.session import Session
 from params import ConfigError
+
+if TYPE_CHECKING:
+    from bridge.nodes.vehicle.gate import GateConfig
 
 MAX_INSTANCE = 9  # instances 0-9, as bridge.session.children.instance_slot holds them
 ARRIVAL = ("first come, first served on the wall clock: each vehicle's relay puts its packets in the one queue as "
@@ -140,6 +142,8 @@ def _fly(flights: Sequence[Flight], ids: Sequence[int], dirs: Sequence[Path], *,
     gates: list[Path | None] = [None] * len(flights)
     cfgs: list[GateConfig] = []
     if radii is not None and not realtime and len(flights) > 1:
+        from bridge.nodes.vehicle.gate import GateConfig  # lazy: a lockstep fleet's (the vehicle's code, ~0.03 CPU-s)
+
         ports = tuple(free_udp_port() for _ in flights)
         for j, d in enumerate(dirs):
             gates[j] = d / "gate.json"
@@ -196,6 +200,8 @@ def _fly(flights: Sequence[Flight], ids: Sequence[int], dirs: Sequence[Path], *,
 def _lost(cfg: GateConfig, held: list[socket.socket], frozen: bool) -> None:
     """Vehicle ``cfg.index``'s process has ended (``frozen``: its session killed it so): the other gates are told
     (:func:`say_lost`); its port held."""
+    from bridge.nodes.vehicle.gate import say_lost  # lazy: as GateConfig in _fly
+
     sock = say_lost(cfg, frozen)
     if sock is not None:
         held.append(sock)
