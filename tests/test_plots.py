@@ -182,10 +182,37 @@ def test_legends_are_inside_the_figure_and_off_the_data(clean_figs: dict, cut_fi
     assert n >= 20  # positions, errors (cut), angles x3, inputs, path3d, estimate x7, ...
 
 
-def test_the_figures_are_written_at_their_dpi(clean: dict, clean_figs: dict, tmp_path: Path) -> None:
+@pytest.fixture(scope="module")
+def written(clean: dict, tmp_path_factory: pytest.TempPathFactory) -> tuple[list[Path], list[int], int, int]:
+    """The clean flight's figures written by make_plots (one set, ~1 CPU-s, for the two tests that read it: their
+    files, and the heap's freeze count at each collection the drawing set off), and the freeze count before and
+    after. Each collection's count walks the whole frozen heap (~35 ms in a test worker): at the default threshold's
+    ~170 young collections that was 6 CPU-s, so the drawing sets off a tenth as many here (a young collection every
+    7 000 allocations, not 700), each of them still checked."""
+    seen: list[int] = []
+
+    def note(phase: str, info: dict) -> None:
+        if phase == "start":
+            seen.append(gc.get_freeze_count())
+
+    before = gc.get_freeze_count()
+    thresholds = gc.get_threshold()
+    gc.set_threshold(7000, *thresholds[1:])
+    gc.callbacks.append(note)
+    try:
+        paths = make_plots(clean, tmp_path_factory.mktemp("plots"), "short")
+    finally:
+        gc.callbacks.remove(note)
+        gc.set_threshold(*thresholds)
+    return paths, seen, before, gc.get_freeze_count()
+
+
+def test_the_figures_are_written_at_their_dpi(clean_figs: dict, written: tuple) -> None:
     sizes = {name: fig.get_size_inches() for name, fig in clean_figs.items()}
     assert all(fig.dpi == DPI for fig in clean_figs.values())
-    for p in make_plots(clean, tmp_path, "short"):
+    paths = written[0]
+    assert sorted(p.stem for p in paths) == sorted(clean_figs)
+    for p in paths:
         head = p.read_bytes()[:24]
         assert head[:8] == b"\x89PNG\r\n\x1a\n"
         w, h = struct.unpack(">II", head[16:24])
@@ -193,23 +220,15 @@ def test_the_figures_are_written_at_their_dpi(clean: dict, clean_figs: dict, tmp
         assert (w, h) == (round(want[0]), round(want[1])), p.name
 
 
-def test_figures_are_drawn_with_the_heap_before_them_frozen(clean: dict, tmp_path: Path) -> None:
+def test_figures_are_drawn_with_the_heap_before_them_frozen(written: tuple) -> None:
     """The collections matplotlib sets off while drawing skip the heap that was there before (frozen, then given
     back); a heap frozen already, as a fork server's child has it, stays frozen (heap_frozen, which make_plots
-    draws in: one set of figures drawn here, ~1 CPU-s)."""
-    seen: list[int] = []
-
-    def note(phase: str, info: dict) -> None:
-        if phase == "start":
-            seen.append(gc.get_freeze_count())
-
-    assert gc.get_freeze_count() == 0  # a test worker freezes nothing
-    gc.callbacks.append(note)
-    try:
-        make_plots(clean, tmp_path / "cold", "short")
-    finally:
-        gc.callbacks.remove(note)
+    draws in: the figures of ``written``)."""
+    _, seen, before, after = written
+    assert before == 0  # a test worker freezes nothing
+    assert len(seen) >= 5, seen  # (collections while drawing: not one by chance)
     assert seen and min(seen) > 0
+    assert after == 0
     assert gc.get_freeze_count() == 0
     gc.freeze()  # as bridge.nodes.forkserver before it forks a child
     frozen = gc.get_freeze_count()
