@@ -6,6 +6,7 @@ Out: a validated :class:`Mission` and its :class:`Reference` (x, y, z m and psi 
      with four derivatives). Pure: no sockets, no processes; the file is read by :mod:`params`
 
 - :mod:`missions.mission`     the mission file: load, validate, the :class:`Mission`
+- :mod:`missions.trajectories` its ``[trajectory]`` table, and a plan, as a reference
 - :mod:`missions.references`  the trajectories: set-points, steps, sine, waypoints
 - :mod:`missions.planfiles`   ground stations' plans: QGroundControl ``.plan`` and ``QGC WPL 110`` text
 - :mod:`missions.geodetic`    PX4's projection of latitude, longitude, altitude to the local frames

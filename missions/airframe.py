@@ -12,7 +12,8 @@ import math
 from dataclasses import replace
 
 from missions.minsnap import Smooth, accelerations, demands, stretched
-from missions.mission import MAX_STRETCH, Mission
+from missions.mission import Mission
+from missions.trajectories import MAX_STRETCH
 from params import ConfigError
 
 # the share of the airframe's thrust (the profile's u1 limit) and tilt (the law's tilt_max) a trajectory may

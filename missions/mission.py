@@ -30,13 +30,12 @@ from missions.envelope import ENVELOPE_RADIUS_M, envelope_problem, ground_proble
 from missions.fleet import fleet_from_table
 from missions.geodetic import Home as GeoHome
 from missions.geofence import geofence_from_table
-from missions.minsnap import Knot, Smooth
-from missions.planfiles import MAX_ITEMS, PlanFile, read_plan_text
+from missions.planfiles import PlanFile, read_plan_text
 from missions.rally import rally_dict, rally_from_plan, rally_from_table
-from missions.references import Reference, Setpoint, Sine, Step, Waypoints
-from missions.route import LIMIT_RANGES, Limits, least_duration_s, smooth_from_plan
+from missions.references import Reference
 from missions.scatter import fleet_scatter_problem, scattered_start
 from missions.steps import PlanBudget, StepCap
+from missions.trajectories import END_REST_S, PLAN_MAX_BYTES, plan_of, plan_smooth, trajectory_of
 from params import ConfigError, Table, load_toml, read_text_file, unreachable
 
 CONTROLLERS = ("bsst", "smc", "pid")
@@ -56,13 +55,9 @@ MISSION_RANGES: dict[str, tuple[float, float]] = {
     "seed": (0, 2**31 - 1),
     "start_scatter_m": (0.0, 100.0),  # [start] scatter_m, --scatter: missions.scatter
 }
-TRAJECTORIES = ("step", "sine", "waypoints", "smooth", "plan")
 PLAN_SUFFIXES = (".plan", ".waypoints", ".txt")  # QGroundControl's JSON plan; QGC WPL 110 text
 DEFAULT_RATE_HZ = 250.0  # Hz: a mission's control rate unless it gives one (a plan's, always)
 DEFAULT_PHYSICS_HZ = 1000.0  # Hz: a mission's physics rate unless it gives one
-PLAN_MAX_BYTES = 16 << 20  # a plan of MAX_ITEMS items is about 5 MB of JSON
-END_REST_S = 1.0  # s: a plan's mission lasts this long after its trajectory ends (at rest, or on the ground)
-MAX_STRETCH = 4.0  # the most a trajectory is slowed (``stretched_by``; missions.airframe fits a plan's with it)
 # what the vehicle does once the mission's time is flown (``[end] action``): land where it is with its on-board
 # landing and disarm on the ground, or hold its position until the session ends; never motors off in the air
 END_ACTIONS = ("land", "hold")
@@ -275,25 +270,6 @@ def load_mission(path: str | Path, cap: StepCap | None = None, table: Mapping[st
     return mission_from_table(load_toml(p) if table is None else table, str(p), default_name=p.stem, cap=cap)
 
 
-def plan_smooth(plan: PlanFile, limits: Mapping[str, float] | None = None, budget: PlanBudget | None = None) -> Smooth:
-    """The smooth trajectory of a read plan (a file's, or one a ground station uploaded): its cruise speed is
-    MPC_XY_CRUISE unless ``limits`` give it. With a ``budget`` (how long the mission it makes may last), a plan
-    whose least length (:func:`missions.route.least_duration_s`, then :data:`END_REST_S`) is over it is refused
-    before the trajectory is timed (milliseconds, where the timing takes seconds a thousand items)."""
-    given = dict(limits or {})
-    if plan.cruise_m_s is not None and "MPC_XY_CRUISE" not in given:
-        lo, hi = LIMIT_RANGES["MPC_XY_CRUISE"]
-        if not lo <= plan.cruise_m_s <= hi:
-            raise ConfigError(f"{plan.source}: mission.hoverSpeed: {plan.cruise_m_s:g} m/s, must be in "
-                              f"[{lo:g}, {hi:g}]")
-        given["MPC_XY_CRUISE"] = plan.cruise_m_s
-    limited = Limits(**given)
-    if budget is not None:
-        budget.check(plan.source, len(plan.items), least_duration_s(plan, limited, ENVELOPE_RADIUS_M) + END_REST_S)
-    smooth, _ = smooth_from_plan(plan, limited, ENVELOPE_RADIUS_M)
-    return smooth
-
-
 def _budget(rate_hz: float, cap: StepCap | None = None) -> PlanBudget:
     """What a plan's mission may last: the longest ``duration_s``, and ``cap`` at ``rate_hz``."""
     return PlanBudget(MISSION_RANGES["duration_s"][1], rate_hz, cap)
@@ -349,9 +325,9 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
     if too_long:
         raise ConfigError(f"{source}: {too_long}")
     budget = _budget(rate, cap) if derived else None  # a plan's own length: checked before it is timed
-    plan = _plan_of(trajectory_table)  # its plan file, read once (None: no plan, or no file named)
-    trajectory = _trajectory(trajectory_table, duration if not derived else MISSION_RANGES["duration_s"][1], budget,
-                             plan)
+    plan = plan_of(trajectory_table)  # its plan file, read once (None: no plan, or no file named)
+    trajectory = trajectory_of(trajectory_table, duration if not derived else MISSION_RANGES["duration_s"][1], budget,
+                               plan)
     if derived:
         duration = trajectory.end_s + END_REST_S  # type: ignore[attr-defined]
     raw = {k: _table(t, k) for k in ("gains", "effects", "link", "failsafe", "sensors", "estimator", "params", "wind")}
@@ -362,7 +338,7 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
     if not isinstance(events, list) or not all(isinstance(e, Mapping) for e in events):
         raise t.error("events", "expected an array of tables [[events]] (t_s, kind and its settings)")
     span = duration if not derived else MISSION_RANGES["duration_s"][1]
-    vehicles, separation = fleet_from_table(t, lambda tt: _trajectory(tt, span, budget), _law)
+    vehicles, separation = fleet_from_table(t, lambda tt: trajectory_of(tt, span, budget), _law)
     fence, rally = (plan.fence, _plan_rally(plan)) if plan is not None else (None, ())  # a plan's, unless its own
     fence = geofence_from_table(t.table("geofence")) if t.has("geofence") else fence
     rally = rally_from_table(t.table("rally"), ENVELOPE_RADIUS_M) if t.has("rally") else rally
@@ -407,91 +383,3 @@ def _table(t: Table, name: str) -> Mapping[str, Any]:
     if not isinstance(v, Mapping):
         raise t.error(name, "expected a table")
     return v
-
-
-def _setpoints(t: Table, key: str, duration: float, stops: list[bool] | None = None) -> tuple[Setpoint, ...]:
-    """The list of points {t, x, y, z, psi} under ``key``; with ``stops``, each may say ``stop`` (appended)."""
-    items = t.raw(key)
-    if not isinstance(items, list) or not items:
-        raise t.error(key, "expected a non-empty list of tables {t, x, y, z, psi}")
-    if len(items) > MAX_ITEMS:  # as a plan's items: checked before any is read (19 000 smooth knots: 39 s to refuse)
-        raise t.error(key, f"{len(items)} points, more than {MAX_ITEMS}")
-    out = []
-    for i, item in enumerate(items):
-        s = Table(item, t._source, f"{t.key(key)}[{i}]")
-        sp = Setpoint(
-            s.number("t", lo=0.0, hi=duration),
-            s.number("x", lo=-1e4, hi=1e4),
-            s.number("y", lo=-1e4, hi=1e4),
-            s.number("z", lo=-1e4, hi=1e4),
-            s.number("psi", 0.0, lo=-100.0, hi=100.0),
-        )
-        if stops is not None:
-            stops.append(s.boolean("stop", False))
-        s.done()
-        if out and sp.t <= out[-1].t:
-            raise s.error("t", f"must be later than the previous one ({out[-1].t:g})")
-        out.append(sp)
-    return tuple(out)
-
-
-def _trajectory(t: Table, duration: float, budget: PlanBudget | None = None, plan: PlanFile | None = None) -> Reference:
-    """The trajectory of a ``[trajectory]`` table; a plan's (``kind = "plan"``) with ``budget`` (:func:`plan_smooth`),
-    ``plan`` its file if read already."""
-    kind = t.string("kind", choices=TRAJECTORIES)
-    if kind == "sine":
-        ref: Reference = Sine(
-            amplitude=t.number("amplitude", 1.0, lo=0.0, hi=1e4),
-            omega=t.number("omega", 0.5, lo=0.0, hi=100.0),
-            climb=t.number("climb", 0.1, lo=-100.0, hi=100.0),
-            z0=t.number("z0", 0.0, lo=-1e4, hi=1e4),
-            psi=t.number("psi", 0.0, lo=-100.0, hi=100.0),
-            x0=t.number("x0", 0.0, lo=-1e4, hi=1e4),
-            y0=t.number("y0", 0.0, lo=-1e4, hi=1e4),
-        )
-    elif kind == "step":
-        ref = Step(_setpoints(t, "setpoints", duration))
-    elif kind == "waypoints":
-        ref = Waypoints(_setpoints(t, "points", duration))
-    elif kind == "smooth":
-        ref = _smooth(t, duration)
-    else:
-        ref = _plan(t, budget, plan)
-    t.done()
-    return ref
-
-
-def _smooth(t: Table, duration: float) -> Smooth:
-    """``kind = "smooth"``: knots {t, x, y, z, psi, stop} (the times from 0), ``lands``, ``stretched_by``."""
-    lands = t.boolean("lands", False)
-    factor = t.number("stretched_by", 1.0, lo=1.0, hi=MAX_STRETCH)
-    stops: list[bool] = []
-    points = _setpoints(t, "points", duration, stops)
-    if len(points) < 2:
-        raise t.error("points", "a smooth trajectory needs at least two points")
-    return Smooth(tuple(Knot(p.t, p.x, p.y, p.z, p.psi, s) for p, s in zip(points, stops)), lands, factor)
-
-
-def _plan(t: Table, budget: PlanBudget | None = None, plan: PlanFile | None = None) -> Smooth:
-    """``kind = "plan"``: ``file`` (a ``.plan`` or ``QGC WPL 110`` file, relative to the mission's folder; ``plan``,
-    if read already) and PX4's speed and acceleration limits by name (:class:`missions.route.Limits`)."""
-    p = _plan_path(t, t.string("file"))
-    limits = {k: t.number(k, lo=lo, hi=hi) for k, (lo, hi) in LIMIT_RANGES.items() if t.has(k)}
-    if plan is None:
-        plan = read_plan_text(read_text_file(p, "a mission plan", PLAN_MAX_BYTES), str(p))
-    return plan_smooth(plan, limits, budget)
-
-
-def _plan_path(t: Table, name: str) -> Path:
-    """A ``kind = "plan"`` trajectory's ``file``: relative to the mission's folder."""
-    p = Path(name).expanduser()
-    return p if p.is_absolute() else Path(t._source).parent / p
-
-
-def _plan_of(t: Table) -> PlanFile | None:
-    """A ``kind = "plan"`` trajectory's plan file, read (its route, geofence and rally points: read once), or
-    None (another kind, or no ``file`` named: :func:`_plan` names the key)."""
-    if t.raw("kind") != "plan" or not isinstance(t.raw("file"), str):
-        return None
-    p = _plan_path(t, t.raw("file"))
-    return read_plan_text(read_text_file(p, "a mission plan", PLAN_MAX_BYTES), str(p))

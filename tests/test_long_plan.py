@@ -16,6 +16,7 @@ from typing import Any
 import pytest
 
 import missions.mission as mission_module
+import missions.trajectories as trajectories_module
 from bridge.cli import main
 from bridge.record.runlog import trace_cap
 from missions import load_mission, mission_from_table
@@ -102,7 +103,8 @@ def test_bsst_sim_reads_its_plan_once(tmp_path: Path, monkeypatch: pytest.Monkey
         read.append(source)
         return read_plan_text(text, source)
 
-    monkeypatch.setattr(mission_module, "read_plan_text", counted)
+    monkeypatch.setattr(mission_module, "read_plan_text", counted)  # a plan file given as the mission
+    monkeypatch.setattr(trajectories_module, "read_plan_text", counted)  # a mission file's [trajectory] plan
     mission = plan
     if kind == "toml":
         mission = tmp_path / "boxed.toml"

@@ -177,7 +177,7 @@ def test_stretching_scales_every_derivative_exactly() -> None:
 
 
 def test_round_trips_through_its_table() -> None:
-    from missions.mission import _smooth  # the loader's reading of kind = "smooth" (not exported)
+    from missions.trajectories import _smooth  # the loader's reading of kind = "smooth" (not exported)
     from params import Table
 
     ref = Smooth(KNOTS, lands=True)
