@@ -122,62 +122,23 @@ def flying(flight: Flight, path: Path | None = None, *, plots: bool = True, prog
     ends ``aborted``, recorded. ``radios``: the (up, down) radios the flight's links share, as their ``user``."""
     m = flight.mission
     check_trace_steps(m)
-    vehicle = flight.make_vehicle(armed=True)
-    intention = UserModeIntention(vehicle)  # the mode a disarm in LAND or the failsafe leaves, as a session's vehicle
-    ctl = flight.make_controller()
-    law = ctl.law
-    plant = vehicle.plant
-    actuation = flight.profile.actuation
-    sample = Prefetched(m.trajectory.sample)  # the row's sample at t is the law's (aim = t): sampled once a step
-    rate = m.rate_hz
-    up, down = flight.link.make(radios, user)
-    guard = LinkGuard(ctl, flight.guard)
-    vend = VehicleEnd(vehicle, up, actuation)
-    cend = ControllerEnd(guard, down)
-    blackouts = flight.blackout_notes()
+    w = _Wiring(flight, radios, user)
+    vehicle, plant, intention, rate = w.vehicle, w.plant, w.intention, m.rate_hz
     rows = array("d")  # the trace, row after row, 8 bytes a value: 0.6 KB a step (a tuple of floats took 1.6 KB)
     record = RunRecord(path, m) if path is not None else None
     trace, events = (record.trace, record.events) if record is not None else (None, None)
     outcome = "completed" if vehicle.armed else "denied"  # denied: its pre-arm check refused (a preflight event)
     failsafe_seen = False
     logged = 0
-    noted = 0
-    demanded = wire = (0.0, 0.0, 0.0, 0.0)
-    changes = list(flight.param_changes)  # scheduled parameter changes: at the start of their step, as in SITL
     k = 0
     try:
         for k in range(m.steps if vehicle.armed else 0):
             t = k / rate
-            while changes and changes[0].step(rate) <= k:
-                c = changes.pop(0)
-                vehicle.change_param(c.name, c.value)
-            X = plant.state
-            E = vehicle.published()  # what the vehicle knows, and sends down the link
-            ref = sample(t)
-            while blackouts and blackouts[0][0] <= t:
-                vehicle.event("blackout", blackouts.pop(0)[1])
-            # the law reads the state as ODOMETRY carries it (float32), as in SITL
-            cend.receive_state(t, state_over_wire(E), vehicle.armed and vehicle.mode == OFFBOARD)
-            dec = cend.step(t, sample)
-            for e in guard.events[noted:]:
-                vehicle.event(e[1], e[2])
-            noted = len(guard.events)
-            if dec.arm:
-                vend.receive_arm(t)
-            cmd = dec.command
-            if cmd is not None:
-                received, wire = command_over_wire(actuation, cmd.normalised)  # the float32 target, as in SITL
-                vend.receive_command(t, received, dec.state_t)
-                demanded = cmd.demanded
-            vend.deliver(t)
-            truth = state_columns(X)
-            row = trace_row(t, truth, ref, demanded, wire, plant.realised,
-                            dec.state_age_s if cmd is not None else math.nan, law.desired,
-                            truth if E is X else state_columns(E), vehicle.nees(E))  # truth: E is X
+            X, ref, row = w.period(k, t)
             rows.extend(row)
             if trace is not None:
                 trace.row(row)
-            vend.advance()
+            w.vend.advance()
             flown = intention.after_period()  # the period's mode (a disarm then takes the user's, as in a session)
             logged = _log_new_events(vehicle, events, logged)
             contact = yield plant.state
@@ -206,13 +167,73 @@ def flying(flight: Flight, path: Path | None = None, *, plots: bool = True, prog
         raise
     try:  # the record stays open for the verdicts' lines, and is closed whatever happens
         arrays = trace_arrays(rows, TRACE_COLUMNS)
-        link = {"up": up.stats.summary(), "down": down.stats.summary(), "rejected": dict(vend.rejected)}
+        link = {"up": w.up.stats.summary(), "down": w.down.stats.summary(), "rejected": dict(w.vend.rejected)}
         summary = yield from _judged(flight, vehicle, intention, arrays, outcome, link)
     finally:
         _close_record(record, vehicle.events[logged:])
     if record is not None:
         record.finish(arrays, summary, f"{m.name} ({m.controller}, {flight.profile.name})", plots)
     return Run(arrays, summary, path)
+
+
+class _Wiring:
+    """One flight's parts wired as a session wires them (the vehicle and its user's mode, the controller behind its
+    link guard, the two links and their ends), and one control period of them (:meth:`period`). What carries from
+    period to period is held here: the parameter changes and blackout notes not yet due, how many of the guard's
+    events the vehicle was told, and the last command demanded and sent (the trace repeats them until the next)."""
+
+    def __init__(self, flight: Flight, radios: tuple[Radio, Radio] | None, user: int) -> None:
+        m = flight.mission
+        self.vehicle = vehicle = flight.make_vehicle(armed=True)
+        self.intention = UserModeIntention(vehicle)  # the mode a disarm in LAND or the failsafe leaves, as a session's
+        ctl = flight.make_controller()
+        self.law = ctl.law
+        self.plant = vehicle.plant
+        self.actuation = flight.profile.actuation
+        self.sample = Prefetched(m.trajectory.sample)  # the row's sample at t is the law's (aim = t): once a step
+        self.up, self.down = flight.link.make(radios, user)
+        self.guard = LinkGuard(ctl, flight.guard)
+        self.vend = VehicleEnd(vehicle, self.up, self.actuation)
+        self.cend = ControllerEnd(self.guard, self.down)
+        self.blackouts = flight.blackout_notes()
+        self.changes = list(flight.param_changes)  # scheduled parameter changes: at the start of their step, as in SITL
+        self.rate = m.rate_hz
+        self.noted = 0
+        self.demanded = self.wire = (0.0, 0.0, 0.0, 0.0)
+
+    def period(self, k: int, t: float) -> tuple[tuple[float, ...], Any, tuple[float, ...]]:
+        """The control period ``k`` (at ``t`` s) up to the vehicle's step: its due changes and notes made, the state
+        sent down, the law's decision, the command sent up and delivered. Returns the plant's true state at its
+        start (eq. 7 order), the reference sampled at ``t`` and the trace's row (:func:`trace_row`)."""
+        vehicle, changes, blackouts, guard, vend, cend = (self.vehicle, self.changes, self.blackouts, self.guard,
+                                                          self.vend, self.cend)
+        while changes and changes[0].step(self.rate) <= k:
+            c = changes.pop(0)
+            vehicle.change_param(c.name, c.value)
+        X = self.plant.state
+        E = vehicle.published()  # what the vehicle knows, and sends down the link
+        ref = self.sample(t)
+        while blackouts and blackouts[0][0] <= t:
+            vehicle.event("blackout", blackouts.pop(0)[1])
+        # the law reads the state as ODOMETRY carries it (float32), as in SITL
+        cend.receive_state(t, state_over_wire(E), vehicle.armed and vehicle.mode == OFFBOARD)
+        dec = cend.step(t, self.sample)
+        for e in guard.events[self.noted:]:
+            vehicle.event(e[1], e[2])
+        self.noted = len(guard.events)
+        if dec.arm:
+            vend.receive_arm(t)
+        cmd = dec.command
+        if cmd is not None:
+            received, self.wire = command_over_wire(self.actuation, cmd.normalised)  # the float32 target, as in SITL
+            vend.receive_command(t, received, dec.state_t)
+            self.demanded = cmd.demanded
+        vend.deliver(t)
+        truth = state_columns(X)
+        row = trace_row(t, truth, ref, self.demanded, self.wire, self.plant.realised,
+                        dec.state_age_s if cmd is not None else math.nan, self.law.desired,
+                        truth if E is X else state_columns(E), vehicle.nees(E))  # truth: E is X
+        return X, ref, row
 
 
 def _judged(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention, arrays: dict[str, Any], outcome: str,
