@@ -7,9 +7,9 @@ Out: :meth:`Session.run`: a :class:`~bridge.record.runlog.Run`; the run director
      stderr with ``live``; with ``announce``, once the vehicle is up, where a ground station connects
      (:func:`bridge.session.announce.vehicle_up_line`) on stderr
 
-The children's command lines are :meth:`Session._start`'s; the order their reports are acted on,
-:mod:`bridge.session.eventorder`'s; ``summary.json`` is :func:`bridge.record.summary.session_summary`'s, from what
-the session saw.
+The children's command lines are :mod:`bridge.session.commands`'s, their ports :meth:`Session._start`'s; the
+order their reports are acted on, :mod:`bridge.session.eventorder`'s; ``summary.json`` is
+:func:`bridge.record.summary.session_summary`'s, from what the session saw.
 """
 
 from __future__ import annotations
@@ -24,7 +24,6 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from bridge.autopilot.params import param_at_args
 from bridge.autopilot.vehicleevents import Sender, typed_fields
 from bridge.core.flight import Flight, Progress, prepare
 from bridge.core.scalar import FLIES_ENV
@@ -48,6 +47,7 @@ from bridge.session.children import (
     free_udp_port,
     stop_children,
 )
+from bridge.session.commands import Commands
 from bridge.session.eventorder import in_cause_order
 from params import ConfigError
 
@@ -173,7 +173,6 @@ class Session:
     def _start(self) -> None:
         """Start the children at once (each one's start-up, ~0.5 s of Python and imports, overlaps the
         others'), every port they need chosen first, then wait until each is ready."""
-        mission = str(self.path / "mission.toml")
         # the controller's source port, named to the vehicle before either starts: the vehicle hears the
         # controller's ids from that address only (through a relay, from the relay's back port), so no
         # other process can claim them, not even before the controller's first message
@@ -184,48 +183,15 @@ class Session:
         if self.listen.endswith(":0"):
             self.listen = f"127.0.0.1:{free_udp_port()}"
         port = self.listen.rpartition(":")[2]
-        argv = ["vehicle", mission, "--listen", self.listen, "--gcs", self.gcs or "none",
-                "--sysid", str(self.sysid), "--realtime" if self.realtime else "--lockstep",
-                "--controller-from", f"127.0.0.1:{back}", "--out", str(self.path), "--overwrite"]
-        if self.speed is not None:
-            argv += ["--speed", repr(self.speed)]
-        elif not self.realtime:  # as fast as it goes, said: the vehicle's own default paces a ground station's mission
-            argv += ["--speed", "0"]
-        if self.await_mission:  # its start refuses what the controller would: past the trace kept, over before a change
-            argv += ["--await-mission", "--trace-cap", *param_at_args(self.flight.param_changes)]
-        if self.gate is not None:  # a fleet: its processes outnumber the cores, so none polls before it sleeps
-            argv += ["--gate", str(self.gate), "--spin", "0"]
-        keyarg = ["--key", str(self.key)] if self.key is not None else []
+        told = Commands(self.path, self.realtime, self.gcs, self.sysid, self.speed, self.await_mission, self.gate,
+                        self.start_timeout, self.radio, self.flight.param_changes, self.key)
         env = {**os.environ, FLIES_ENV: self.flight.kernels_flown()}  # loaded by their fork server, before the fork
-        self.vehicle = Child("vehicle", argv + keyarg, self.path / "vehicle.log", env)
+        self.vehicle = Child("vehicle", told.vehicle(self.listen, back), self.path / "vehicle.log", env)
         to = port
         if relayed:  # the link model on the wall clock, between the two
             to = str(free_udp_port())
-            # no --overwrite: relay.json is a run file, so the run directory is new (or a fresh temporary one) or
-            # was cleared (runlog.run_dir, clear_run); one there now is not this run's: refused, not replaced
-            self.relay = Child("relay", ["relay", "--listen", f"127.0.0.1:{to}", "--to", f"127.0.0.1:{port}",
-                                         "--back-port", str(back), "--client", f"127.0.0.1:{source}",
-                                         "--mission", mission, "--mission-clock",
-                                         "--stats", str(self.path / "relay.json"), *self._radio_args()],
-                               self.path / "relay.log")
-        # its wait for the vehicle's heartbeat now includes the vehicle's start-up: the session's budget for it
-        argv = ["controller", mission, "--vehicle", f"127.0.0.1:{to}", "--target-sysid", str(self.sysid),
-                "--source-port", str(source), "--timeout", f"{READY_TIMEOUT_S:g}", "--out", str(self.path),
-                "--overwrite"]
-        if self.realtime:
-            argv.append("--realtime")
-        if self.start_timeout is not None:
-            argv += ["--start-timeout", repr(self.start_timeout), "--spin", "0"]
-        if self.gate is not None:  # its vehicle may wait at its gate for a silent one (bridge.nodes.vehicle.gate)
-            from bridge.nodes.vehicle.gate import STATE_WAIT_S  # lazy: a fleet's (the vehicle's code, ~0.03 CPU-s)
-
-            argv += ["--state-timeout", repr(STATE_WAIT_S)]
-        if not self.realtime:  # a lockstep fleet's one radio: the controllers' states queue on it (the vehicles':
-            argv += self._radio_args()  # their commands, by their gate file)
-        if self.await_mission:
-            argv.append("--await-mission")
-        argv += param_at_args(self.flight.param_changes)
-        self.controller = Child("controller", argv + keyarg, self.path / "controller.log", env)
+            self.relay = Child("relay", told.relay(to, port, back, source), self.path / "relay.log")
+        self.controller = Child("controller", told.controller(to, source), self.path / "controller.log", env)
         try:
             ready = self._wait_ready(self.vehicle)
             self._note("started", f"vehicle pid {self.vehicle.pid}: {ready.describe()}", "session")
@@ -473,10 +439,6 @@ class Session:
             sys.stderr.write(f"\rsitl t {t:7.2f} / {self.flight.mission.duration_s:.2f} s   "
                              f"real-time factor {t / max(wall, 1e-9):6.1f}x   3-D error {err:.2e} m   ")
             sys.stderr.flush()
-
-    def _radio_args(self) -> list[str]:
-        """The relay's flags for the fleet's one radio (none: the link's own radio)."""
-        return ["--radio", str(self.radio[0]), "--radio-user", str(self.radio[1])] if self.radio else []
 
     def _relay_stats(self) -> dict[str, Any] | None:
         """What ``bsst relay --stats`` wrote on exit (None without a relay or a readable file)."""
