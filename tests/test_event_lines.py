@@ -1,4 +1,4 @@
-"""Covers bridge.cli.flying: the events a run's printed summary lists.
+"""Covers bridge.cli.runreport: the events a run's printed summary lists.
 
 `bsst sitl` listed only the first eight, five of them a session's start-up events, so a failsafe, its landing and
 its disarm were never printed; a long list now keeps its head and its tail.
@@ -6,7 +6,7 @@ its disarm were never printed; a long list now keeps its head and its tail.
 
 from __future__ import annotations
 
-from bridge.cli.flying import EVENTS_SHOWN, event_lines
+from bridge.cli.runreport import EVENTS_SHOWN, event_lines
 
 
 def _events(n: int) -> list[dict]:

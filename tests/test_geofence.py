@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from bridge import simulate
-from bridge.cli.flying import report_run
+from bridge.cli.runreport import report_run
 from missions import Mission, Sine, load_mission
 from missions.geofence import Geofence, Zone, geofence_from_table
 from missions.mission import mission_from_table

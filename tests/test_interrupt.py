@@ -1,5 +1,5 @@
-"""Covers bridge.core.interrupt, bridge.__main__ and bridge.cli.flying: Ctrl-C while the main thread waits on a
-pool's futures, while the ``bsst`` command is still importing the CLI, and once its run is on disk.
+"""Covers bridge.core.interrupt, bridge.__main__, bridge.cli.flying and bridge.cli.runreport: Ctrl-C while the main
+thread waits on a pool's futures, while the ``bsst`` command is still importing the CLI, and once its run is on disk.
 
 Each case is a real Python child sent a real SIGINT: the interrupt must come out as KeyboardInterrupt at
 the wait's return, never inside concurrent.futures' locks (where it left `bsst sweep` hanging), even when the
@@ -221,14 +221,14 @@ def test_ctrl_c_while_the_cli_imports_is_said_not_traced() -> None:
 # (of a 2 s sine: how long it flew before does not matter; missions/sine.toml's 30 s cost 1.0 CPU-s, this 0.26)
 SUMMARY_SIGINT = """
     import os, signal, sys
-    import bridge.cli.flying as flying
+    import bridge.cli.runreport as runreport
 
-    printing = flying.print_summary
+    printing = runreport.print_summary
     def sigint_then_print(*args, **kwargs):
         os.kill(os.getpid(), signal.SIGINT)
         return printing(*args, **kwargs)
 
-    flying.print_summary = sigint_then_print
+    runreport.print_summary = sigint_then_print
     sys.argv = ["bsst", "sim", sys.argv[2], "--no-plots", "--out", sys.argv[1]]
     from bridge.__main__ import main
     sys.exit(main())

@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from bridge.cli import main
-from bridge.cli.flying import report_fleet
+from bridge.cli.runreport import report_fleet
 from bridge.link.radio import make_radio_file
 from bridge.link.turns import TurnRadio
 from bridge.nodes.vehicle import gate as gatemod

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bridge.cli.flying import report_fleet
+from bridge.cli.runreport import report_fleet
 from bridge.link.radio import make_radio_file
 from bridge.link.turns import TURNS
 from bridge.session.children import PORT_LOCKS

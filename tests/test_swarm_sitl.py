@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from bridge.cli import main
-from bridge.cli.flying import report_fleet
+from bridge.cli.runreport import report_fleet
 from bridge.record.halves import count_records
 from bridge.record.separation import Watch, judge_traces
 from bridge.session import instance_slot

@@ -24,7 +24,7 @@ from typing import Any
 
 import pytest
 
-from bridge.cli.flying import report_fleet
+from bridge.cli.runreport import report_fleet
 from bridge.record.separation import CONTINUED, WALL_CLOCK
 from bridge.session.children import free_udp_port
 from bridge.swarm import FleetRun, simulate, sitl

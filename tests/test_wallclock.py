@@ -1,4 +1,4 @@
-"""Covers bridge.record.wallclock and bridge.cli.flying: a lockstep fleet's records as its separation judge takes them.
+"""Covers bridge.record.wallclock and bridge.cli.runreport: a lockstep fleet's records as separation is judged on them.
 
 Pure (finished records in memory, no processes): a vehicle on the shared clock to its end is judged as before (its
 end landing up to the step it left, then where its gate said it stayed); one that flew on, on the wall clock, is
@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from bridge.cli.flying import report_fleet
+from bridge.cli.runreport import report_fleet
 from bridge.record.runlog import Run
 from bridge.record.separation import CONTINUED, NOWHERE, WALL_CLOCK, Watch, judge_traces
 from bridge.record.wallclock import at_rest, clocked_records, judged_on_wall_clock, taken_over_records

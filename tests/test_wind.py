@@ -13,7 +13,7 @@ import pytest
 
 from bridge import simulate
 from bridge.cli import main
-from bridge.cli.flying import print_summary
+from bridge.cli.runreport import print_summary
 from bridge.sweep.grid import Grid, cell_flight, cells
 from missions import load_mission
 from params import ConfigError

@@ -19,8 +19,9 @@ from typing import Any, NoReturn
 
 from bridge.cli.campaigns import add_margin_command, add_sweep_commands
 from bridge.cli.flags import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK, _Parser
-from bridge.cli.flying import add_sim_command, add_sitl_commands, print_summary, report_run
+from bridge.cli.flying import add_sim_command, add_sitl_commands
 from bridge.cli.linktools import add_link_commands, add_relay_command
+from bridge.cli.runreport import print_summary, report_run
 
 __all__ = ["EXIT_BAD_INPUT", "EXIT_FAILED", "EXIT_OK", "build_parser", "package_version", "print_summary",
            "report_run"]
