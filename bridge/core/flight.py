@@ -36,10 +36,10 @@ from bridge.autopilot.params import (
 from bridge.autopilot.simvehicle import HOLD, OFFBOARD, SimVehicle
 from bridge.core.overrides import Overrides, table_settings
 from bridge.core.scalar import checked_choice, compile_for, compiled_needed, compiled_wanted, wire_for
+from bridge.core.weather import handovers_of, weather_of
 from bridge.link.model import (
     DIRECTIONS,
     NEEDS,
-    LinkConfig,
     LinkSettings,
     absolute_link_paths,
     idle_problem,
@@ -55,17 +55,10 @@ from missions.airframe import fitted_to_airframe
 from params import ConfigError, Table
 from plant import Effects, Profile, Quadrotor, load_profile
 from plant.effects import effects_from_table
-from plant.events import (
-    SENSOR_EVENT_KINDS,
-    EventError,
-    TimedEvent,
-    check_state_changes,
-    table_where,
-    timeline_from_tables,
-)
+from plant.events import TimedEvent
 from plant.profiles import sensors_from_table
 from plant.sensors import IDEAL, SIGMA_KEYS, SensorConfig, SensorSuite
-from plant.wind import WindConfig, wind_from_table
+from plant.wind import WindConfig
 
 Progress = Callable[[float, float, float], None]  # a flight's progress: (t s, duration s, current 3-D error m)
 
@@ -218,13 +211,7 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
         raise ConfigError(f"{src}: vehicles: a mission of several vehicles is flown by bsst sim and bsst sitl "
                           "(bridge.simulate, bridge.swarm.sitl): sweeps, bsst margin, bsst vehicle and bsst "
                           "controller fly one vehicle")
-    try:
-        prof = load_profile(m.profile)
-    except ConfigError as exc:  # an override's named as the flag (the mission may have no profile key)
-        raise ConfigError(f"{f'--profile {over.profile}' if over.profile is not None else f'{src}: profile'}: {exc}"
-                          ) from None
-    if m.actuation:
-        prof = prof.with_actuation(m.actuation)
+    prof = _profile_of(m, over)
     effects = effects_from_table(Table(m.effects, src, "effects"))
     gains = gains_from_table(m.gains, src) if m.gains else Gains()
     m = fitted_to_airframe(m, prof.mass, prof.gravity, prof.u_max[0], gains.tilt_max)  # a plan's: slowed or refused
@@ -234,29 +221,9 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
     vehicle_params = params_from_table(m.params, src, VehicleParams(failsafe_from_table(m.failsafe, src)))
     failsafe = vehicle_params.failsafe
     changes = check_param_changes(over.param_at, m.duration_s)
-    try:
-        link_settings = link_from_table(m.link, src, seed=m.seed, duration_s=m.duration_s)
-    except ConfigError as exc:
-        if not over.link or not Path(src).is_file():  # no file (bsst relay or vehicle without one, --await-mission,
-            raise  # a Mission made in Python): no file's [link] to tell the overrides from
-        # the file's [link] with the overrides over it: say them, or a user who gave --stop-after 40 reads that the
-        # file has a stop_ms it does not have
-        laid = table_settings(over.link, "link")
-        raise ConfigError(f"{exc} (with these laid over the mission's [link]: {laid})") from None
-    given_set = (over.sensors or {}).get("set")
-    if given_set is not None and given_set not in [n for n, _ in prof.sensors]:  # an override: named as the flag
-        raise ConfigError(f"{src}: --sensors {given_set!r} (sensors.set): profile {prof.name!r} has no such sensor "
-                          f"set; it has: {', '.join(n for n, _ in prof.sensors)}")
-    sensor_config = sensors_from_table(prof, m.sensors, src)
-    est_table = Table(m.estimator, src, "estimator")
-    estimator_kind = est_table.string("kind", "truth", choices=ESTIMATOR_KINDS)
-    est_table.done()
-    for d in ("up", "down"):  # a blackout that would never happen is a mistake in the file, not a plan
-        for start, dur in getattr(link_settings, d).blackouts:
-            if start >= m.duration_s:
-                raise ConfigError(f"{_blackouts_given(m, over, d)}: the window [{start:g}, {start + dur:g}) s starts "
-                                  f"after the mission's end (duration_s = {m.duration_s:g} s), so it would never "
-                                  "happen")
+    link_settings = _link_of(m, over)
+    sensor_config, estimator_kind = _sensing_of(m, over, prof)
+    _check_blackouts(m, over, link_settings)
     # an event's refusal is named where it was given (plant.events.table_where): a flag's and a table laid from
     # Python each by its TimedEvent.at (--at 10:gps:off, at[0]), else the mission's table
     wind, timeline = weather_of(m, prof, sensor_config, estimator_kind, effects.battery)
@@ -282,6 +249,58 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
     if idle:
         raise ConfigError(idle)
     return flight
+
+
+def _profile_of(m: Mission, over: Overrides) -> Profile:
+    """The mission's vehicle profile (:func:`plant.profiles.load_profile`), its actuation if the mission gives one; a
+    profile refused is named where it was given: the ``--profile`` override, else the mission's key."""
+    try:
+        prof = load_profile(m.profile)
+    except ConfigError as exc:  # an override's named as the flag (the mission may have no profile key)
+        raise ConfigError(f"{f'--profile {over.profile}' if over.profile is not None else f'{m.source}: profile'}: "
+                          f"{exc}") from None
+    return prof.with_actuation(m.actuation) if m.actuation else prof
+
+
+def _link_of(m: Mission, over: Overrides) -> LinkSettings:
+    """The mission's link settings (:func:`bridge.link.model.link_from_table`, the overrides laid over already); a
+    table refused with overrides over a file's says what was laid over it."""
+    src = m.source
+    try:
+        return link_from_table(m.link, src, seed=m.seed, duration_s=m.duration_s)
+    except ConfigError as exc:
+        if not over.link or not Path(src).is_file():  # no file (bsst relay or vehicle without one, --await-mission,
+            raise  # a Mission made in Python): no file's [link] to tell the overrides from
+        # the file's [link] with the overrides over it: say them, or a user who gave --stop-after 40 reads that the
+        # file has a stop_ms it does not have
+        laid = table_settings(over.link, "link")
+        raise ConfigError(f"{exc} (with these laid over the mission's [link]: {laid})") from None
+
+
+def _sensing_of(m: Mission, over: Overrides, prof: Profile) -> tuple[SensorConfig, str]:
+    """The flight's sensors (its profile's set the mission or ``--sensors`` names: :func:`sensors_from_table`) and
+    its estimator's kind (``[estimator] kind``: :data:`ESTIMATOR_KINDS`)."""
+    src = m.source
+    given_set = (over.sensors or {}).get("set")
+    if given_set is not None and given_set not in [n for n, _ in prof.sensors]:  # an override: named as the flag
+        raise ConfigError(f"{src}: --sensors {given_set!r} (sensors.set): profile {prof.name!r} has no such sensor "
+                          f"set; it has: {', '.join(n for n, _ in prof.sensors)}")
+    sensor_config = sensors_from_table(prof, m.sensors, src)
+    est_table = Table(m.estimator, src, "estimator")
+    estimator_kind = est_table.string("kind", "truth", choices=ESTIMATOR_KINDS)
+    est_table.done()
+    return sensor_config, estimator_kind
+
+
+def _check_blackouts(m: Mission, over: Overrides, link_settings: LinkSettings) -> None:
+    """Refuse a link blackout that starts after the mission's end: one that would never happen is a mistake in the
+    file, not a plan (named where it was given: :func:`_blackouts_given`)."""
+    for d in ("up", "down"):
+        for start, dur in getattr(link_settings, d).blackouts:
+            if start >= m.duration_s:
+                raise ConfigError(f"{_blackouts_given(m, over, d)}: the window [{start:g}, {start + dur:g}) s starts "
+                                  f"after the mission's end (duration_s = {m.duration_s:g} s), so it would never "
+                                  "happen")
 
 
 def idle_link_key(m: Mission, link: Mapping[str, Any] | None, axes: Iterable[str] = ()) -> str | None:
@@ -359,88 +378,6 @@ def noise_problem(estimators: Sequence[str], sensors: SensorConfig) -> str | Non
         return (f"the sensor set {sensors.name!r} has no noise (every sigma is 0), so its scale changes nothing; "
                 "choose one with --sensors mocap or gnss (or [sensors] set)")
     return None
-
-
-def event_problem(kind: str, prof: Profile, sensors: SensorConfig | None, estimator: str = "ekf",
-                  battery: bool = False) -> str | None:
-    """Why an event of ``kind`` cannot act on this vehicle (``sensors`` None: the truth estimator, no sensor
-    to fail; ``battery``: it flies the profile's pack, ``[effects] battery``), or None: a motor event needs rotors,
-    a sensor event the vehicle's sensors, a GPS event a gnss set, a compass event a heading sensor, and an
-    ``estimator`` that reads that sensor (``raw`` reads no barometer, nor a compass when its set measures the
-    attitude: docs/sensors.md), a battery event a battery. The timeline's check, and a ground station's
-    injection's."""
-    if kind == "battery" and not (battery and prof.battery is not None):
-        if prof.battery is None:
-            return f"profile {prof.name!r} has no battery ([battery] table): fly --profile x500, [effects] battery"
-        return "the vehicle flies no battery: set the mission's [effects] battery = true"
-    if kind == "motor" and prof.actuation != "motors":
-        return (f"profile {prof.name!r} flies ideal wrench actuation: it has no rotors to fail (fly --profile x500, "
-                "or set the mission's actuation = \"motors\")")
-    if kind in SENSOR_EVENT_KINDS and sensors is None:
-        return ("the truth estimator reads the true state, no sensor to fail: fly --estimator ekf (or raw), with "
-                "--sensors gnss or mocap")
-    if kind == "gps" and sensors is not None and sensors.position_class != "gnss":
-        return f"sensor set {sensors.name!r} has no GPS (its position is {sensors.position_class}): fly --sensors gnss"
-    if kind == "mag" and sensors is not None and sensors.heading_rate_hz <= 0.0:
-        return f"sensor set {sensors.name!r} has no magnetometer (heading_rate_hz = 0)"
-    if estimator == "raw" and sensors is not None and (kind == "baro" or (kind == "mag" and
-                                                                          sensors.position_class == "mocap")):
-        what = "barometer" if kind == "baro" else f"compass (set {sensors.name!r} measures the attitude)"
-        return f"the raw estimator never reads the {what}, so the fault would change nothing: fly --estimator ekf"
-    return None
-
-
-def weather_of(m: Mission, prof: Profile, sensors: SensorConfig, estimator: str,
-               battery: bool = False) -> tuple[WindConfig | None, tuple[TimedEvent, ...]]:
-    """The mission's ``[wind]`` (its turbulence at the reference's mean height unless ``altitude_m``; None: still
-    air) and ``[[events]]``, validated and checked against the flight (``battery``: it flies the profile's pack,
-    ``[effects] battery``): a motor event needs rotors, a sensor event the vehicle's sensors (an estimator other
-    than truth), a GPS event a gnss set, a compass event a heading sensor, a battery event a battery; a wind or
-    gust event with no ``[wind]`` flies the plant in (still) air."""
-    src = m.source
-    timeline = timeline_from_tables(m.events, src, m.duration_s)
-    for e in timeline:
-        why = event_problem(e.kind, prof, None if estimator == "truth" else sensors, estimator, battery)
-        if why is not None:
-            raise EventError(e, why, table_where(src, e))
-    check_state_changes(timeline, m.rate_hz, src)  # an event that changes nothing, or two at one step: refused
-    if not m.wind and not any(e.kind in ("wind", "gust") for e in timeline):
-        return None, timeline
-    wind = wind_from_table(Table(m.wind, src, "wind"), m.duration_s)
-    if wind.altitude_m is None:  # the flight's altitude: the reference's mean height over the mission
-        n = 100
-        heights = [m.trajectory.sample(m.duration_s * k / n)[2][0] for k in range(n + 1)]
-        wind = wind.at_altitude(max(sum(heights) / len(heights), 0.0))
-    return wind, timeline
-
-
-GUARD_KEYS = ("stale_ms", "stop_ms", "compensation", "command_lag_ms")  # the controller's: not the link's to hand over
-
-
-def handovers_of(timeline: tuple[TimedEvent, ...], m: Mission) -> tuple[tuple[float, LinkConfig, LinkConfig], ...]:
-    """The timeline's ``link`` events as the link model's handovers: (the time of the control step it acts at,
-    s; the up and down links from then), each a ``[link]`` table of its own (a profile and/or keys, unset keys
-    at their defaults, the mission's seed) validated as the mission's is. The controller's guard stays the
-    flight's: guard keys in a handover are refused, a profile's are not used."""
-    out = []
-    for e in timeline:
-        if e.kind != "link":
-            continue
-        where = table_where(m.source, e)
-        table = dict(e.settings)
-        guard = [k for k in GUARD_KEYS if k in table]
-        if guard:
-            raise EventError(e, f"{guard[0]} is the controller's guard, not the link's: it stays the flight's "
-                             f"([link] {guard[0]}); a handover changes the two directions only", where)
-        try:
-            ls = link_from_table(table, m.source, seed=m.seed, duration_s=m.duration_s)
-        except ConfigError as exc:
-            raise EventError(e, str(exc).removeprefix(m.source + ": "), where) from None
-        unmet = unmet_key(table)  # a handover's table is its own: a key of it that needs what it never gives
-        if unmet:
-            raise EventError(e, f"link.{unmet[0]}: {unmet[1]}", where)
-        out.append((e.step(m.rate_hz) / m.rate_hz, ls.up, ls.down))
-    return tuple(out)
 
 
 def at_rest() -> Mission:

@@ -54,7 +54,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from bridge.autopilot.modes import TERMINATION
 from bridge.autopilot.simvehicle import OFFBOARD, SimVehicle
 from bridge.autopilot.vehicleevents import Sender
-from bridge.core.flight import event_problem
+from bridge.core.weather import event_problem
 from bridge.mavlink.modes import mode_name
 from bridge.nodes.vehicle.authority import attribute
 from bridge.nodes.vehicle.clock import Clock

@@ -2,7 +2,7 @@
 
 In:  the command's param1 (failure unit, MAVLink's FAILURE_UNIT), param2 (FAILURE_TYPE) and param3 (instance:
      a motor's number 1-4, 0 for all; a sensor's 0 or 1), floats as they came; the plant time now (s); why an
-     event of a kind cannot act on this vehicle (:func:`bridge.core.flight.event_problem`, bound to it)
+     event of a kind cannot act on this vehicle (:func:`bridge.core.weather.event_problem`, bound to it)
 Out: :class:`Injection`: the MAV_RESULT PX4 answers, the :class:`~plant.events.TimedEvent` s to act on
      (ACCEPTED), and why it was not (a STATUSTEXT's text; None when accepted)
 
