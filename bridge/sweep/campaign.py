@@ -12,7 +12,7 @@ from __future__ import annotations
 import hashlib
 import os
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -184,14 +184,7 @@ def run_sweep(
         results.update({row_key(r): r for r in kept if row_key(r) in order})
     todo = [c for c in all_cells if c.key() not in results]
     sink = CellsFile(path / CELLS_CSV, [results[k] for k in sorted(results, key=order.__getitem__)]) if path else None
-    # cells that fly at once, each round's first carrying the start-up: a batch chunk's rows come together, and a
-    # Dask cluster's threads each fly a task
-    if client is not None:
-        at_once = sum(client.nthreads().values()) or 1
-    else:
-        at_once = 1 if used == "batch" else jobs  # (the batch engine: one chunk at a time)
-    lanes = (BATCH_CHUNK if used == "batch" else 1) * at_once
-    bar = Progress(len(all_cells), len(results), enabled=progress, lanes=lanes)
+    bar = Progress(len(all_cells), len(results), enabled=progress, lanes=_lanes(used, client, jobs))
     reused = len(results)
 
     def record(row: dict[str, Any]) -> None:
@@ -207,16 +200,7 @@ def run_sweep(
 
     interrupted = False
     try:
-        if todo and used == "batch":
-            if client is not None:
-                run_batch_dask(client, spec.mission, todo, record)
-            else:
-                run_batch(spec.mission, todo, record, jobs=jobs)
-        elif todo:
-            if client is not None:
-                run_dask(client, spec.mission, todo, spec.mode, record)
-            else:
-                run_local(spec.mission, todo, spec.mode, jobs, record)
+        _fly(spec, todo, used, client, jobs, record)
     except KeyboardInterrupt:
         interrupted = True
     finally:
@@ -236,6 +220,32 @@ def run_sweep(
     failed = sum(1 for r in rows if r["outcome"] in FAILED)
     return Outcome(rows, len(rows) - reused, reused, failed, path, time.monotonic() - t0, interrupted, used,
                    used_why, len(all_cells), engines)
+
+
+def _lanes(used: str, client: Any, jobs: int) -> int:
+    """The cells that fly at once, each round's first carrying the start-up (the progress bar's lanes): a batch
+    chunk's rows come together, and a Dask cluster's threads each fly a task."""
+    if client is not None:
+        at_once = sum(client.nthreads().values()) or 1
+    else:
+        at_once = 1 if used == "batch" else jobs  # (the batch engine: one chunk at a time)
+    return (BATCH_CHUNK if used == "batch" else 1) * at_once
+
+
+def _fly(spec: Sweep, todo: list[Any], used: str, client: Any, jobs: int,
+         record: Callable[[dict[str, Any]], None]) -> None:
+    """Fly the cells ``todo`` on the engine ``used`` (batch or one process a cell), on ``client``'s Dask cluster if
+    given, else here on ``jobs`` cores; each row to ``record`` as it comes."""
+    if todo and used == "batch":
+        if client is not None:
+            run_batch_dask(client, spec.mission, todo, record)
+        else:
+            run_batch(spec.mission, todo, record, jobs=jobs)
+    elif todo:
+        if client is not None:
+            run_dask(client, spec.mission, todo, spec.mode, record)
+        else:
+            run_local(spec.mission, todo, spec.mode, jobs, record)
 
 
 def _open_dir(spec: Sweep, out: str | Path | None, resume: bool, overwrite: bool,
