@@ -53,7 +53,8 @@ from typing import Any
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
-from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, udp_table_row
+from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID
+from bridge.mavlink.kerneldrops import udp_table_row
 from bridge.record.halves import count_records, read_half
 from bridge.session import instance_slot
 from tests.sitlkit import Proc

@@ -352,9 +352,9 @@ def test_a_perfect_loopback_link_loses_nothing_and_says_where_every_packet_went(
 
 
 def test_the_kernels_drop_counter_counts_what_a_full_socket_could_not_take() -> None:
-    """bridge.mavlink.endpoint.socket_drops: a real socket with a small receive buffer, flooded and not read,
+    """bridge.mavlink.kerneldrops.socket_drops: a real socket with a small receive buffer, flooded and not read,
     has its drops counted by the kernel; the relay's summary carries each direction's (bsst relay --stats)."""
-    from bridge.mavlink.endpoint import socket_drops
+    from bridge.mavlink.kerneldrops import socket_drops
     from bridge.nodes.relay import Relay
 
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -411,14 +411,14 @@ PREMISE_S = 20.0  # s: the most the test reads the table waiting for single read
 
 
 def test_a_socket_stays_in_the_udp_table_while_others_come_and_go() -> None:
-    """bridge.mavlink.endpoint.udp_table_row: ``/proc/net/udp`` is handed out a page per read, and a row is
+    """bridge.mavlink.kerneldrops.udp_table_row: ``/proc/net/udp`` is handed out a page per read, and a row is
     skipped when a socket listed before it closes between two reads, as other processes' do on a busy machine
     (a loaded suite's fuzz test once found the vehicle's socket "not bound any more" so). The row skipped is the
     first of a kernel page (32 rows), so a single socket is missed only while it sits there; with another process
     closing and opening 400 sockets meanwhile (a thread of this one missed nothing in 115 000 reads on a 6.18
     kernel: it holds the GIL through a read), a single read of the table misses one of our 50 now and then; the
     rows found by ``udp_table_row`` (read again when not found) never miss one."""
-    from bridge.mavlink.endpoint import udp_table_row
+    from bridge.mavlink.kerneldrops import udp_table_row
 
     churn = subprocess.Popen([sys.executable, "-c", CHURN], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     mine = []

@@ -69,7 +69,7 @@ from bridge.link.impairment import LinkStats
 from bridge.link.model import LinkImpairment, LinkSettings
 from bridge.link.radio import ProcessRadio
 from bridge.mavlink.endpoint import parse_address as endpoint_address
-from bridge.mavlink.endpoint import socket_drops
+from bridge.mavlink.kerneldrops import socket_drops
 from bridge.nodes.relaystats import RelayCounters, SnapshotWriter
 from bridge.nodes.report import Event, Ready
 
@@ -390,7 +390,7 @@ class Relay:
 
     def _socket_drops(self) -> dict[str, int | None]:
         """Datagrams the kernel dropped on each socket before the relay read them, by the direction they travel
-        (:func:`bridge.mavlink.endpoint.socket_drops`; None where it does not say)."""
+        (:func:`bridge.mavlink.kerneldrops.socket_drops`; None where it does not say)."""
         front, back = socket_drops(self.front), socket_drops(self.back)
         return {self.front_link.direction: front, self.back_link.direction: back}
 

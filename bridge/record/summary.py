@@ -268,7 +268,7 @@ def socket_counts(sent: int, delivered: int, refused: int, in_flight: int, maybe
     where the receiver was not reading (outside the steps it read, after it stopped: :func:`sends_outside`),
     plus of the ``maybe`` sends it cannot tell (read, or sent after it stopped) as many as were not read;
     ``shed`` by the receive budgets (none: the peer is exempt, docs/hostile-input.md); ``dropped_by_kernel`` (the
-    receiving socket's counter, :func:`bridge.mavlink.endpoint.socket_drops`; 0 where unknown); ``lost`` on the
+    receiving socket's counter, :func:`bridge.mavlink.kerneldrops.socket_drops`; 0 where unknown); ``lost`` on the
     link, the rest (sent = delivered + refused + lost + in_flight + shed + dropped_by_kernel)."""
     dropped = int(kernel or 0)
     in_flight += min(maybe, max(0, sent - delivered - refused - in_flight - dropped))
