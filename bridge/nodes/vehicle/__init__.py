@@ -62,7 +62,8 @@ Its parts, as PX4 splits an autopilot:
 - :mod:`.clock`         the step clock: one state machine (idle, lockstep, answered, free-running,
                         halted), its transitions in one table
 - :mod:`.authority`     who may command what on which link; who caused an event (its ``by``)
-- :mod:`.commander`     arming, flight modes, commands, the triggers that end a flight
+- :mod:`.commander`     arming, flight modes, commands
+- :mod:`.clocking`      which clock the flight runs on as its modes and its end change; what ends a flight
 - :mod:`.requests`      requests for messages and their rates (SET/GET_MESSAGE_INTERVAL, REQUEST_MESSAGE, ...)
 - :mod:`.paramservice`  PX4's parameters over MAVLink
 - :mod:`.mission`       PX4's mission protocol (upload, download, clear, set current) and the mission held

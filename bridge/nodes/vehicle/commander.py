@@ -39,6 +39,7 @@ from bridge.mavlink.receive import FORCE_DISARM, arm_disarm_args
 from bridge.nodes.vehicle.actions import Actions
 from bridge.nodes.vehicle.authority import Authority, attribute
 from bridge.nodes.vehicle.clock import Clock, Trigger
+from bridge.nodes.vehicle.clocking import Clocking
 from bridge.nodes.vehicle.intention import ModeIntention
 from bridge.nodes.vehicle.mission import START_ARM, START_ARMED, START_COMMAND, MissionManager, in_air_refusal
 from bridge.nodes.vehicle.prestart import PreStart
@@ -98,17 +99,16 @@ class Commander:
         self.clock = clock
         self.authority = authority
         self.cfg = authority.cfg
-        self.lockstep = self.cfg.clock == "lockstep"
         self._statustext = texts
-        self.substeps = substeps
         self.ports = ports
         self.texts: list[Any] = []  # STATUSTEXTs saying why a command was refused: sent after its COMMAND_ACK
         self.plant_at_end: dict[str, Any] | None = None  # the plant's summary blocks when the mission ended
-        self.end_landing = False  # lockstep: the mission's end landing is flown (its failsafe's too), clocked as it
+        # which clock the flight runs on as its modes and its end change (lockstep, the wall clock, none)
+        self.clocking = Clocking(sim, clock, self.cfg, substeps, ports.step, ports.state_out)
         # a ground station's arm in HOLD on the ground awaiting a mission's start (--await-mission)
         self.pre_start = PreStart(sim, clock, ports.missions, self.cfg.await_mission)
         self.intention = ModeIntention(sim, ports.missions)  # the mode a disarm in LAND, RTL or failsafe leaves
-        self.actions = Actions(sim, clock, ports.reject, self._off_step_clock, ports.missions)
+        self.actions = Actions(sim, clock, ports.reject, self.clocking.off_step_clock, ports.missions)
         # link (controller, gcs) -> its stream table: a link's requests change its own
         self.requests = MessageRequests(sim, streams, self.cfg.sysid, ports.message, ports.reject)
 
@@ -290,7 +290,7 @@ class Commander:
         was = self.sim.mode
         self.sim.set_mode(mode, takeoff_alt_m, hold_at)
         attribute(self.sim.events, n0, by)
-        self._clock_after_mode(was)
+        self.clocking.after_mode(was)
         return mavlink.MAV_RESULT_ACCEPTED
 
     def _not_now(self, why: str) -> int:
@@ -355,58 +355,20 @@ class Commander:
         # summary.json's plant blocks are the mission's, as offline (taken before the end action flies)
         self.plant_at_end = plant_blocks(self.sim.plant)
         self.sim.end_mission("land" if mode == LAND else "hold")
-        self.end_landing = self.lockstep and mode == LAND
-        if self.lockstep and mode == HOLD and self.clock.engaged:
-            self.clock.fire(Trigger.DISARM)  # the lockstep flight is over: time stands still
+        self.clocking.end_mission(mode)
         return mavlink.MAV_RESULT_ACCEPTED
 
     def flight_over(self) -> None:
         """After a control period: a lockstep flight whose vehicle disarmed itself on the ground (the end
         action's landing) is over; time stands still until it is armed again, as after a disarm by command. Then
         the mode a disarm in LAND, RTL or the failsafe leaves (:meth:`_after_change`)."""
-        if self.clock.engaged and not self.sim.armed and self.end_landing:  # (a ground station's LAND runs free)
-            self.clock.fire(Trigger.DISARM)
-            self.end_landing = False
+        self.clocking.landed()
         self._after_change()
 
     def _after_change(self) -> None:
         """After a command or a control period: the mode to take after disarming noted, and, disarmed in LAND, RTL or
         the failsafe, taken (:mod:`.intention`: PX4's user mode intention, its failsafe cleared on disarm)."""
         self.intention.after_period()
-
-    def _clock_after_mode(self, was: str) -> None:
-        """The step clock after a mode change: a vehicle flown by its own controller (HOLD, LAND,
-        TAKEOFF) needs no controller's answers and runs on the wall clock (``speed`` if given);
-        OFFBOARD again, armed, returns to lockstep (the state of step k goes out, its answer awaited)."""
-        sim, now = self.sim, time.monotonic()
-        if not self.lockstep or not sim.armed:
-            return
-        if sim.mode in GROUND_MODES and not self.clock.free_running:
-            self._ground_takes_over(now)
-        elif sim.mode == OFFBOARD and was != OFFBOARD:
-            self._engage_lockstep(now)
-
-    def _ground_takes_over(self, now: float, how: str = "flown by the vehicle") -> None:
-        """Lockstep, a ground station's mode flown by the vehicle's own controller: on the wall clock
-        from now; a lockstep flight that was on, or a session's vehicle awaiting its controller (a ground
-        station's arm in HOLD before the controller's), says so (its record: it left lockstep here)."""
-        if self.clock.engaged or self.cfg.controller_from is not None:
-            self.sim.event("lockstep", f"{mode_name(self.sim.mode)} set by a ground station: {how} on the wall "
-                                       "clock")
-        self.clock.run_free(Trigger.GROUND, now, self.ports.step() * self.substeps)
-        self.end_landing = False
-
-    def _off_step_clock(self) -> None:
-        """Lockstep: a flight termination leaves the step clock; the vehicle falls on the wall clock."""
-        if self.lockstep and not (self.clock.free_running or self.clock.halted):
-            self._ground_takes_over(time.monotonic(), "the vehicle falls")
-
-    def _engage_lockstep(self, now: float) -> None:
-        """Lockstep from now: the state of step k goes out and its target is awaited. Only ever at a control
-        period's start: on the wall clock the vehicle holds what may lead here (:func:`engages_lockstep`) until then."""
-        self.clock.engage(now, self.ports.step() * self.substeps)
-        self.end_landing = False
-        self.ports.state_out(now)
 
     # -- arming ----------------------------------------------------------------------------------------
     def arm_disarm(self, p1: float, p2: float, by: Sender | None = None) -> int:
@@ -436,15 +398,15 @@ class Commander:
                 self.pre_start.armed(now, n0)
                 return mavlink.MAV_RESULT_ACCEPTED
             if sim.mode in GROUND_MODES:  # the vehicle's own controller flies: no controller's answers
-                if self.lockstep and not self.clock.free_running:
-                    self._ground_takes_over(now)
+                if self.clocking.lockstep and not self.clock.free_running:
+                    self.clocking.ground_takes_over(now)
                 if from_gcs:
                     self.pre_start.ground_armed(now)  # in HOLD on the ground: PX4's pre-takeoff timeout
                 return mavlink.MAV_RESULT_ACCEPTED
             if not was_offboard:
                 self.ports.new_flight(from_gcs)  # no target of the last flight is in force
-                if self.lockstep:
-                    self._engage_lockstep(now)  # back to lockstep
+                if self.clocking.lockstep:
+                    self.clocking.engage(now)  # back to lockstep
             return mavlink.MAV_RESULT_ACCEPTED
         forced = p2 == FORCE_DISARM
         if sim.armed and not sim.plant.on_ground and not forced:  # in the air: only a forced disarm, as PX4's
@@ -456,35 +418,11 @@ class Commander:
         self.clock.fire(Trigger.DISARM)  # a lockstep flight is over: time stands still until armed again
         return mavlink.MAV_RESULT_ACCEPTED
 
-    # -- what ends a flight --------------------------------------------------------------------------
-    def controller_lost(self, now: float) -> None:
-        """Lockstep, the controller silent for ``lost_after_s``: on the wall clock from ``now``, where the
-        vehicle's timeout and failsafe take over."""
-        self.sim.event("lockstep", f"controller silent for {self.cfg.lost_after_s:g} s of wall time: "
-                                   "leaving lockstep, running on the wall clock")
-        self.clock.run_free(Trigger.LOSE, now, self.ports.step() * self.substeps)
-
-    def collided(self, why: str) -> None:
-        """A fleet's shared clock: another vehicle touched this one (``why``); the flight ends there, disarmed,
-        the clock halted, as offline (``collision``)."""
-        self.sim.event("collision", why)
-        self.sim.disarm(f"collision: {why}")
-        self.clock.fire(Trigger.COLLIDE)
-
-    def diverged(self) -> bool:
-        """After a control period: whether the plant ended the flight (diverged, or crashed while armed:
-        :meth:`SimVehicle.plant_verdict`, as offline); then disarmed, and the clock halted for good."""
-        verdict = self.sim.plant_verdict()
-        if verdict is None:
-            return False
-        self.sim.disarm(f"{verdict}: {self.sim.events[-1].text}")
-        self.clock.fire(Trigger.DIVERGE)
-        return True
 
 
 def engages_lockstep(m: Any) -> bool:
-    """Whether ``m`` may engage lockstep (:meth:`Commander._engage_lockstep`), from either link: an arm
-    (COMPONENT_ARM_DISARM param1 1), or OFFBOARD asked for (DO_SET_MODE, SET_MODE)."""
+    """Whether ``m`` may engage lockstep (:meth:`~bridge.nodes.vehicle.clocking.Clocking.engage`), from either link:
+    an arm (COMPONENT_ARM_DISARM param1 1), or OFFBOARD asked for (DO_SET_MODE, SET_MODE)."""
     kind = m.get_type()
     if kind == "SET_MODE":
         return requested_custom_mode(m.base_mode, m.custom_mode)[0] == OFFBOARD

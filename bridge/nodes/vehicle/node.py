@@ -124,6 +124,7 @@ class Vehicle:
         tables = {"controller": self.streaming.ctl_streams, "gcs": self.streaming.streams}
         self.commander = Commander(self.sim, self.clock, self.authority, self._statustext, tables, self.substeps,
                                    ports)
+        self.clocking = self.commander.clocking  # which clock the flight runs on as its modes and its end change
         self.receiver = Receiver(self.link, self.authority, self._reject, self.targets, self.commander, self.params,
                                  self.missions, ReceiverPorts(step=lambda: self.k, flight_on=self._flight_on,
                                                announce=self.announcer.drain, heartbeat=self.streaming.heartbeat,
@@ -223,7 +224,7 @@ class Vehicle:
     def _collided(self, why: str) -> None:
         """Another vehicle of the fleet touched this one: the flight ends (:meth:`Commander.collided`), and its
         events are said at once (the session waits on the disarm to end the run)."""
-        self.commander.collided(why)
+        self.clocking.collided(why)
         self.announcer.drain()
 
     # -- lockstep --------------------------------------------------------------------------
@@ -234,14 +235,14 @@ class Vehicle:
             self._handle(ep, m, addr)
         if self.clock.state is ClockState.ANSWERED:
             # (a fleet: the others flew k - 1; on one radio, its turn of step k came, unless the mission is over)
-            if self.gate is None or self.gate.clear(self._collided, None if self.commander.end_landing else self.k):
+            if self.gate is None or self.gate.clear(self._collided, None if self.clocking.end_landing else self.k):
                 self._step_lockstep()
             return
         if self.clock.state is not ClockState.LOCKSTEP:
             return
         now = time.monotonic()
         if now >= self._lost_at:
-            self.commander.controller_lost(now)
+            self.clocking.controller_lost(now)
         elif now >= self._resend_at:
             self._send_odometry(now, fresh=False)
 
@@ -257,7 +258,7 @@ class Vehicle:
         if wire is not None:
             vend.receive_command(t, command_from_wire(self.actuation, wire), t)
             self.targets.applied = (k, wire, recv)
-        ending = self.commander.end_landing  # the mission's end landing, clocked as the mission (Commander)
+        ending = self.clocking.end_landing  # the mission's end landing, clocked as the mission (Commander)
         if vend.held is not None and not ending:  # a fleet's one radio: its turn of step k (Gate.clear)
             vend.release()
             self.gate.took(k)  # type: ignore[union-attr]
@@ -395,7 +396,7 @@ class Vehicle:
             self.announcer.drain()
         if self.missions.watch is not None:  # a ground station's mission in flight: its items reached
             self.missions.flight_step(self.t, self.plant.state, self.sim.armed)
-        if self.commander.diverged():
+        if self.clocking.diverged():
             self.announcer.drain()
             return False
         return True
