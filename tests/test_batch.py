@@ -312,7 +312,7 @@ def test_the_batch_predictor_is_the_scalar_one_cell_by_cell() -> None:
 def test_each_compiled_kernel_is_its_plain_function_to_the_bit() -> None:
     """bridge.batch.kernels compiles the scalar engine's own functions (one source each); on random inputs the
     compiled twin returns the very floats the plain function does (same operations, same libm)."""
-    from bridge.autopilot.failsafe import level_wrench
+    from bridge.autopilot.onboard import level_wrench
     from bridge.batch import kernels as K
     from bridge.core.wire import odometry_fields, state_from_odometry_fields
     from controller.actuation import allocate_motors, allocate_wrench

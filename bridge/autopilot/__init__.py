@@ -4,7 +4,8 @@ In:  actuator targets (paper frame), arm/mode requests, sensor readings, PX4 par
 Out: the flown state, the estimate the vehicle reports, failsafe decisions and events
 
 - :mod:`bridge.autopilot.simvehicle`  plant + arming + offboard timeout + failsafe, for every clock
-- :mod:`bridge.autopilot.failsafe`    level-and-descend landing loop and the on-board targets
+- :mod:`bridge.autopilot.failsafe`    the failsafe's actions, the on-board targets and gains
+- :mod:`bridge.autopilot.onboard`     the on-board position controller that flies them
 - :mod:`bridge.autopilot.params`      PX4 parameters: names, one range table, changes
 - :mod:`bridge.autopilot.returnland`  Return's height near home (PX4's cone), the auto landing's speed by height
 - :mod:`bridge.autopilot.estimator`   truth or EKF estimate of the state

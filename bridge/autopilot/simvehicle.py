@@ -12,7 +12,7 @@ Shared by the in-process loop and the MAVLink vehicle so that both fly, time out
 advances in control periods of ``physics_hz / rate_hz`` physics steps; the command is held over the period
 (zero-order hold).
 
-Out of offboard control and armed, the vehicle's own :class:`~bridge.autopilot.failsafe.OnboardController` flies its
+Out of offboard control and armed, the vehicle's own :class:`~bridge.autopilot.onboard.OnboardController` flies its
 target at every physics step (:meth:`SimVehicle.fly_onboard`): the failsafe's action (``[failsafe] action``), and
 whatever a later mode hands it. Under a target that lands, resting on the ground, it disarms after COM_DISARM_LAND
 (mode ``landed``). Mode changes happen at the start of a control period, the same step in every clock.
@@ -36,7 +36,6 @@ from bridge.autopilot.estimator import Estimator, TruthEstimator, estimator_nees
 from bridge.autopilot.failsafe import (
     ACTION_TEXT,
     FailsafeConfig,
-    OnboardController,
     PositionHold,
     ReturnConfig,
     Takeoff,
@@ -58,6 +57,7 @@ from bridge.autopilot.modes import (  # noqa: F401  (the modes: imported from he
     end_target,
     mode_target,
 )
+from bridge.autopilot.onboard import OnboardController
 from bridge.autopilot.params import VehicleParams, change_param, read_param, shown_value
 from bridge.autopilot.positionloss import NOAID_TIMEOUT_US, PositionWatch
 from bridge.autopilot.timeline import act_on, changes_nothing

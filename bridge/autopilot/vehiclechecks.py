@@ -19,9 +19,10 @@ from typing import Any, Protocol
 
 from bridge.autopilot.batterywatch import BatteryWatch
 from bridge.autopilot.estimator import Estimator
-from bridge.autopilot.failsafe import ACTION_TEXT, FailsafeConfig, OnboardController
+from bridge.autopilot.failsafe import ACTION_TEXT, FailsafeConfig
 from bridge.autopilot.fencewatch import FENCE_ACTION_TEXT, FENCE_FAILSAFE, arming_refusal, breaches
 from bridge.autopilot.modes import FAILSAFE, LANDED
+from bridge.autopilot.onboard import OnboardController
 from bridge.autopilot.params import FENCE_ACTIONS
 from bridge.autopilot.positionloss import PositionWatch, fallback
 from missions.geofence import Geofence

@@ -105,7 +105,7 @@ class Constants(NamedTuple):
     nom_d: float
     nom_omega_max: float
     nom_w2_max: float
-    land: tuple  # bridge.autopilot.failsafe.level_wrench's constants after X
+    land: tuple  # bridge.autopilot.onboard.level_wrench's constants after X
     dt_max: float  # the predictor's: largest step (s), nominal mass and gravity, coefficients
     pm: float
     pg: float

@@ -1,5 +1,5 @@
 """The compiled kernels, one per equation: the plain-float functions of controller/, plant/, bridge/core/wire.py
-and bridge/autopilot/failsafe.py, compiled with numba for the batch engine and the scalar engine alike.
+and bridge/autopilot/onboard.py, compiled with numba for the batch engine and the scalar engine alike.
 
 In:  nothing at import but those pure functions (importing this module imports numba: ~0.6-1.2 s)
 Out: their compiled twins: the BS-ST law (eq. 24-40), PID, the super-twisting integrator (eq. 22, both steps),
@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from numba.extending import register_jitable
 
-from bridge.autopilot import failsafe
+from bridge.autopilot import onboard
 from bridge.autopilot.kernelcache import njit
 from bridge.core import wire
 from controller import actuation, bsst, jets, pid, power, predict, supertwisting
@@ -59,4 +59,4 @@ odometry_fields = njit(cache=True)(wire.odometry_fields)
 state_from_odometry_fields = njit(cache=True)(wire.state_from_odometry_fields)
 wrench_to_wire = njit(cache=True)(wire.wrench_to_wire)
 wrench_from_wire = njit(cache=True)(wire.wrench_from_wire)
-level_wrench = njit(cache=True)(failsafe.level_wrench)
+level_wrench = njit(cache=True)(onboard.level_wrench)

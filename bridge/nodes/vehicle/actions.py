@@ -7,7 +7,7 @@ In:  MAV_CMD_INJECT_FAILURE (:mod:`.injection`), MAV_CMD_DO_CHANGE_SPEED (param1
      authority (:class:`~bridge.autopilot.vehicleevents.Sender`); the simulated vehicle and its step clock
 Out: the MAV_RESULT and why a command was refused (the commander's STATUSTEXT); an injection's events scheduled
      (:meth:`~bridge.autopilot.simvehicle.SimVehicle.schedule`); a ``speed`` event, the vehicle's own
-     controller's horizontal speed (:meth:`~bridge.autopilot.failsafe.OnboardController.cruise`); a ``terminated``
+     controller's horizontal speed (:meth:`~bridge.autopilot.onboard.OnboardController.cruise`); a ``terminated``
      event, the motors off (disarmed), mode TERMINATION (latched: :meth:`Actions.refusal`); PROTOCOL_VERSION (msg 300);
      MISSION_CURRENT (:mod:`.setcurrent`)
 
