@@ -221,7 +221,10 @@ def test_a_violation_is_in_the_policies_and_noted() -> None:
     (1, "nonsense", {}, (), "aborted"),
     (None, None, {}, (), "aborted"),
     (0, "completed", {"aborted": True}, (), "aborted"),
-    (0, "completed", {}, ("failsafe",), "completed"),  # resumed after its failsafe
+    (0, "completed", {}, ("failsafe", "armed"), "completed"),  # resumed after its failsafe (armed again)
+    # not resumed: a real-time controller whose link was lost over the end heard nothing of it (completed, exit 0
+    # until the third wave's fortieth session)
+    (0, "completed", {}, ("failsafe",), "failsafe"),
     (1, "aborted", {}, ("failsafe",), "failsafe"),
     (-9, None, {"died": "controller"}, (), "aborted"),
 ])
@@ -230,6 +233,14 @@ def test_the_outcome_from_what_the_session_saw(rc, said, seen, vehicle, expect) 
     events = [RunEvent(0.5, kind, kind, "vehicle") for kind in vehicle]  # (the vehicle's events of the mission)
     assert outcome_of(facts(**seen), controller, events) == expect
     assert controller_completed(controller) == (rc in (0, 1) and (rc == 0 or said == "completed"))
+
+
+def test_a_failsafe_after_the_missions_end_leaves_a_completion() -> None:
+    """A completed mission's vehicle that fails safe in its end landing (after the mission's end) completed it; one that
+    failed safe before the end, never armed again, did not, whatever its controller heard (:func:`outcome_of`)."""
+    controller = ChildEnd("controller", 0, "", {}, "completed")
+    for t, expect in ((2.3, "completed"), (1.5, "failsafe")):
+        assert outcome_of(facts(), controller, [RunEvent(t, "failsafe", "no target", "vehicle")], 2.0) == expect
 
 
 def test_trace_rows_have_the_trace_columns_as_names() -> None:

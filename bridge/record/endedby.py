@@ -5,8 +5,9 @@ In:  a run's events (:class:`~bridge.record.events.RunEvent`: ``t`` s, ``kind``,
      :func:`~bridge.record.events.split_at_start`), its outcome (``completed``, ``failsafe``, ``diverged``, ...),
      the configured controller's ids (sysid, compid) and the mission's end (s)
 Out: who ended it and how (:func:`ended_by_outcome`: ``{"who", "how"}``), the first disarm or takeover by command
-     the controller did not send (:func:`ended_by_command`: the event and its sender), and the end of a flight whose
-     arm the vehicle's pre-arm check denied (:func:`arming_denied_end`)
+     the controller did not send (:func:`ended_by_command`: the event and its sender), the end of a flight whose
+     arm the vehicle's pre-arm check denied (:func:`arming_denied_end`), and the vehicle's failsafe in the mission
+     that no arm after it ended (:func:`failsafe_not_resumed`)
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from collections.abc import Sequence
 
 from bridge.autopilot.simvehicle import OFFBOARD
 from bridge.autopilot.vehicleevents import Sender
-from bridge.record.events import RunEvent
+from bridge.record.events import RunEvent, in_time_order
 from bridge.record.policies import CONTROLLER_ID, EPS_S, vehicle_events
 
 
@@ -45,6 +46,22 @@ def ended_by_command(events: Sequence[RunEvent], controller_id: tuple[int, int] 
             continue
         return e, who
     return None
+
+
+def failsafe_not_resumed(events: Sequence[RunEvent], end_s: float = math.inf) -> RunEvent | None:
+    """The vehicle's latest failsafe before ``end_s`` (the mission's end, s) if no arm came after it before then (an
+    arm is what hands it back: ``[failsafe] resume``), else None. ``events``: the mission's. The controller's word
+    cannot tell it in real time: a blackout over the mission's end lost the failsafe's every message on the wire,
+    and the controller flew its ticks to the end and called it completed."""
+    last = None
+    for e in in_time_order(vehicle_events(events)):
+        if e.t is None or e.t >= end_s:
+            break
+        if e.kind == "failsafe":
+            last = e
+        elif e.kind == "armed":
+            last = None
+    return last
 
 
 def ended_by_outcome(outcome: str, events: Sequence[RunEvent]) -> dict[str, str]:

@@ -29,7 +29,7 @@ import numpy as np
 from bridge.core.clock import STALL_S
 from bridge.core.flight import Flight
 from bridge.record.columns import TRACE_COLUMNS
-from bridge.record.endedby import arming_denied_end, ended_by_command, ended_by_outcome
+from bridge.record.endedby import arming_denied_end, ended_by_command, ended_by_outcome, failsafe_not_resumed
 from bridge.record.events import RunEvent, in_time_order, split_at_start
 from bridge.record.interventions import (
     ended_by_change,
@@ -103,19 +103,21 @@ def controller_completed(controller: ChildEnd | None) -> bool:
     return controller.returncode == 0 or controller.outcome == "completed"
 
 
-def outcome_of(facts: SessionFacts, controller: ChildEnd | None, events: Sequence[RunEvent] = ()) -> str:
+def outcome_of(facts: SessionFacts, controller: ChildEnd | None, events: Sequence[RunEvent] = (),
+               end_s: float = math.inf) -> str:
     """The flight's outcome before who ended it is weighed (:func:`ended_by`), the vehicle's failsafe and divergence
-    from ``events``, the mission's (from its time 0: :func:`~bridge.record.events.split_at_start`). A failsafe before
-    it is a ground station's own flight's, before an awaited mission's start, recorded (its event,
-    :func:`before_start_notes`), not the mission's; a divergence never comes before it (the plant halts for good:
-    no mission's first row, no time 0, follows)."""
+    from ``events``, the mission's (from its time 0: :func:`~bridge.record.events.split_at_start`; ``end_s``: its
+    end, s). A failsafe before it is a ground station's own flight's, before an awaited mission's start, recorded
+    (its event, :func:`before_start_notes`), not the mission's; a divergence never comes before it (the plant halts
+    for good: no mission's first row, no time 0, follows). A controller's completion after a failsafe in the mission
+    is one only if an arm handed the vehicle back (:func:`~bridge.record.endedby.failsafe_not_resumed`)."""
     said = {e.kind for e in vehicle_events(events)}
     completed = controller_completed(controller) and not (facts.aborted or facts.died)
     if "diverged" in said:
         return "diverged"
     if controller is not None and controller.outcome == "law_failed" and not facts.died:
         return "law_failed"  # the failsafe that followed is the vehicle's answer to it, not the cause
-    if "failsafe" in said and not completed:  # completed after a failsafe: resumed ([failsafe] resume)
+    if "failsafe" in said and (not completed or failsafe_not_resumed(events, end_s)):
         return "failsafe"
     if facts.aborted or facts.died:
         return "aborted"
@@ -427,7 +429,7 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
     if caps := flight.link.jitter_capped():  # the delay capped a jitter: not flown as asked (docs/links.md)
         link["jitter_capped"] = caps
     mission, hop = split_at_start(events)  # (the hop: a ground station's own flight before an awaited mission's start)
-    outcome = plant_outcome(outcome_of(facts, controller, mission), facts, mission)
+    outcome = plant_outcome(outcome_of(facts, controller, mission, m.duration_s), facts, mission)
     summary = summarise(arrays, m, flight.gains, clock=facts.clock, outcome=outcome,
                         events=[], link=link, estimator=flight.estimator, sensors=flight.sensors.name)
     ev = vehicle_events(events)

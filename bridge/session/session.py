@@ -29,8 +29,9 @@ from bridge.core.flight import Flight, Progress, prepare
 from bridge.core.scalar import FLIES_ENV
 from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, LINK_PORT
 from bridge.nodes.report import Event, MissionLoaded, Ready, Report
+from bridge.record.endedby import failsafe_not_resumed
 from bridge.record.ending import end_block
-from bridge.record.events import RunEvent
+from bridge.record.events import RunEvent, split_at_start
 from bridge.record.joiner import TraceJoiner, off_clock_time
 from bridge.record.missionclock import MissionClock
 from bridge.record.runlog import EventLog, Run, RunRecord
@@ -166,8 +167,10 @@ class Session:
         return out
 
     def _controller_completed(self) -> bool:
-        """Whether the controller flew its mission to the end (:func:`bridge.record.summary.controller_completed`)."""
-        return controller_completed(_end(self.controller))
+        """Whether the controller flew its mission to the end (:func:`bridge.record.summary.controller_completed`),
+        its vehicle not in a failsafe no arm ended (a real-time link lost over the end hid it: it is left to land)."""
+        return controller_completed(_end(self.controller)) and failsafe_not_resumed(
+            split_at_start(self.events)[0], self.flight.mission.duration_s) is None
 
     # -- children ----------------------------------------------------------------------------------
     def _start(self) -> None:
