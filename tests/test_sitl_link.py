@@ -148,6 +148,38 @@ def test_long_blackout_failsafe_descends_disarms_exit_1(tmp_path: Path) -> None:
     assert "blackout" in log and "failsafe: no actuator target" in log and "landed: disarmed" in log
 
 
+@pytest.mark.parametrize(("clock", "blackout"), [
+    (["--realtime"], "1:30"),  # over the mission's end: nothing of the failsafe crosses the wire until 31 s
+    ([], "1:30"),  # lockstep (its model spares the HEARTBEAT: its controller sees the failsafe)
+    (["--realtime"], "1:0.8"),  # back at 1.8 s, before the end: the controller hears it (HEARTBEAT, EVENT asked again)
+], ids=["realtime-over-the-end", "lockstep-over-the-end", "realtime-back-before-the-end"])
+def test_a_failsafe_in_a_blackout_ends_the_run_failsafe_exit_1_in_either_clock(tmp_path: Path, clock: list[str],
+                                                                                blackout: str) -> None:
+    """A 2 s sine climbing 1 m/s, a blackout from 1 s: the vehicle fails safe at 1.5 s, lands at 4.8 s and disarms
+    COM_DISARM_LAND (2 s) later, and the run ends ``failsafe`` by the vehicle, exit 1, its landing and disarm waited
+    for, in either clock. In real time a blackout over the end hid all of it from the controller, which called the
+    mission completed: the run said ``completed: by mission``, exit 0, all policies held, and it waited out the
+    blackout (34 s) for the state of the mission's end where lockstep's took 5 s; ending on its tick schedule, the
+    controller gives the vehicle's end action up at 5 s, and the session left it there, still landing (until the third
+    wave's fortieth session)."""
+    mission = tmp_path / "sine2.toml"
+    mission.write_text('name = "sine2"\nduration_s = 2.0\n[trajectory]\nkind = "sine"\nclimb = 1.0\n')
+    out = tmp_path / "run"
+    with instance_slot() as n:
+        p = run_bsst("sitl", str(mission), *clock, "--instance", str(n), "--out", str(out), "--no-plots",
+                     "--blackout", blackout, cwd=ROOT, env=ENV, timeout=120)
+    summary = json.loads((out / "summary.json").read_text())
+    assert (summary["outcome"], p.returncode) == ("failsafe", 1), (summary["ended_by"], p.stderr)
+    assert "outcome: failsafe" in p.stdout
+    vehicle = {e["kind"]: e["t"] for e in summary["events"] if e["source"] == "vehicle"}
+    # 0.5 s after the last target, in real time a few ms either way
+    assert 1.45 < vehicle["failsafe"] < 1.6 and vehicle["disarmed"] > 6.0, vehicle
+    assert summary["ended_by"]["who"] == "vehicle"
+    assert summary["ended_by"]["how"].startswith(f"failsafe at t={vehicle['failsafe']:.3f} s: no actuator target")
+    assert summary["timing"]["wall_s"] < 20.0  # not the 30 s of the blackout
+    assert summary["sitl"]["died"] is None
+
+
 # ``missions/sine.toml`` cut to 4 s: a failsafe around its end (the review's sine with ``--blackout 27.5:3``, its
 # landing to 34.571 s, and an x500 landed by its battery at 6 s of 8 s, cut short)
 SINE_4S = replace(load_mission(SINE), duration_s=4.0)

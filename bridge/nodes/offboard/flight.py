@@ -330,14 +330,16 @@ class Offboard(RealtimeFlying):
         if self._t_wall is not None and self.cfg.clock == "realtime":
             self.t_mission, self._t_wall = self.vehicle_t(), time.monotonic()
 
-    def _end_of_mission(self, t_end: float, odo: Any) -> str:
-        """The mission's steps are flown (the state of mission time ``t_end``, s, came): ``failsafe`` if the
-        vehicle's failsafe took over and it is not back under offboard control, else ``completed``. A vehicle
-        its failsafe landed (lockstep) waits out its disarm on the step clock (:meth:`_clock_disarm`); one it
-        disarmed is disarmed by command too, which ends its lockstep flight."""
+    def _end_of_mission(self, t_end: float, odo: Any, due: tuple[int, float] | None = None) -> str:
+        """The mission's steps are flown (the state of mission time ``t_end``, s, came; or, real time, ``due``: its
+        step and when it was due to arrive, s of time.monotonic, by the tick schedule, ``odo`` the newest state
+        flown): ``failsafe`` if the vehicle's failsafe took over and it is not back under offboard control, else
+        ``completed``. A vehicle its failsafe landed (lockstep) waits out its disarm on the step clock
+        (:meth:`_clock_disarm`); one it disarmed is disarmed by command too, which ends its lockstep flight."""
+        k, arrived = due if due is not None else (step_of_usec(odo.time_usec, self.rate), self._odo_recv)
         # on the vehicle's clock (the session orders both children's events by time): it measured that state
         # the way down before it came
-        self.t_mission, self._t_wall = t_end, self._odo_recv - (self._way_down or 0.0)  # (its arrival: not when read)
+        self.t_mission, self._t_wall = t_end, arrived - (self._way_down or 0.0)  # (its arrival: not when read)
         self._end_height_m = max(-float(odo.z), 0.0)  # m above the start (NED z): the landing's time
         self._settle_events()
         lost = self._check_vehicle()  # disarmed, taken over, ... in the mission's last steps: not completed
@@ -349,8 +351,7 @@ class Offboard(RealtimeFlying):
         self.reason = f"the vehicle's failsafe took over ({self.failsafe_seen.value})"
         # stamped when it took over, its EVENT's time on the flight's clock (that state's step less the mission's
         # time is the first state's), not at the mission's end when it is judged; NaN without one
-        took = math.nan if self.failsafe_at is None else \
-            self.failsafe_at - (step_of_usec(odo.time_usec, self.rate) / self.rate - t_end)
+        took = math.nan if self.failsafe_at is None else self.failsafe_at - (k / self.rate - t_end)
         self.event("failsafe", self.reason, answers=("failsafe",), t=took)
         if self.vehicle_armed and self._resting():
             self._clock_disarm()

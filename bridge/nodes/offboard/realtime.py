@@ -47,7 +47,7 @@ class RealtimeFlying(OffboardLink):
     def _decide(self, t: float, k: int, time_usec: int, recv: float, late: float) -> tuple[float, ...] | None:
         raise NotImplementedError  # the flight's: Offboard._decide
 
-    def _end_of_mission(self, t_end: float, odo: Any) -> str:
+    def _end_of_mission(self, t_end: float, odo: Any, due: tuple[int, float] | None = None) -> str:
         raise NotImplementedError  # the flight's: Offboard._end_of_mission
 
     def _check_vehicle(self) -> str | None:
@@ -66,6 +66,7 @@ class RealtimeFlying(OffboardLink):
         self.schedule = clock = FixedRate(phase + k0 * period + PHASE_S, rate)
         last_k = k0 - 1
         usec, recv = 0, math.nan  # the newest state's stamp and arrival
+        flown: Any = None  # the newest state flown
         woke = max(mono(), clock.due(0) - period)  # when the last tick woke (s): the first tick's is judged too
         way_down: float | None = None  # the states' one-way trip (s), once TIMESYNC tells it
         j = 0
@@ -89,6 +90,10 @@ class RealtimeFlying(OffboardLink):
                 return outcome
             odo = self._odo
             if odo is None or step_of_usec(odo.time_usec, rate) <= last_k:
+                if j >= steps and last_k >= k0:
+                    # the mission's time is over on the vehicle's clock and its state not come (a blackout over the
+                    # end): nothing is left to fly. Waiting for it waited out the blackout, 30 s for --blackout 1:30
+                    return self._end_of_mission(steps / rate, flown, (k0 + steps, clock.due(steps) - PHASE_S))
                 self.stale_ticks += 1
                 if last_k < k0:
                     j += 1
@@ -108,7 +113,7 @@ class RealtimeFlying(OffboardLink):
                     return self._end_of_mission((k - k0) / rate, odo)
                 usec, recv = odo.time_usec, self._odo_recv
                 self._observe(odo, (k - k0) / rate, recv)
-                last_k = k
+                last_k, flown = k, odo
             # mission time of this tick on the vehicle's clock: state k0 + j was measured at
             # j / rate, arrived the way down later, and the tick is PHASE_S after its arrival
             t = j / rate + (way_down + PHASE_S if way_down is not None else 0.0)
