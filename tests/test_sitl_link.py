@@ -180,6 +180,35 @@ def test_a_failsafe_in_a_blackout_ends_the_run_failsafe_exit_1_in_either_clock(t
     assert summary["sitl"]["died"] is None
 
 
+@pytest.mark.parametrize("clock", [["--realtime"], []], ids=["realtime", "lockstep"])
+def test_an_end_action_lost_in_a_blackout_over_the_end_is_not_flown_as_asked(tmp_path: Path, clock: list[str]) -> None:
+    """A 2 s sine climbing 1 m/s, a blackout from 1.8 s: in real time the relay loses the controller's NAV_LAND (every
+    datagram), the vehicle fails safe 0.5 s after its last target, after the mission's end, and lands by it. The
+    mission was flown (``completed``), but ``end`` says the vehicle never took its end action and what flew instead,
+    the run says not flown as asked (summary, ``events.log``, stderr) and exits 1, and the session waits for the
+    failsafe's landing and disarm (until the third wave's fortieth session: exit 0, nothing said, the vehicle stopped
+    in the air). Lockstep's model acts on the targets, arms and states, not on the end action's command (nor
+    offline, which sends none): there the vehicle lands by it, exit 0."""
+    mission = tmp_path / "sine2.toml"
+    mission.write_text('name = "sine2"\nduration_s = 2.0\n[trajectory]\nkind = "sine"\nclimb = 1.0\n')
+    out = tmp_path / "run"
+    with instance_slot() as n:
+        p = run_bsst("sitl", str(mission), *clock, "--instance", str(n), "--out", str(out), "--no-plots",
+                     "--blackout", "1.8:30", cwd=ROOT, env=ENV, timeout=120)
+    summary = json.loads((out / "summary.json").read_text())
+    end, said = summary["end"], "not flown as asked: the vehicle never took the mission's end action (LAND"
+    assert summary["outcome"] == "completed" and summary["ended_by"]["who"] == "mission", summary["ended_by"]
+    if not clock:
+        assert end["taken"] and end["disarmed"] and said not in p.stdout + p.stderr and p.returncode == 0, p.stderr
+        return
+    assert p.returncode == 1 and not end["taken"] and end["why"] == "no answer", (end, p.stderr)
+    assert end["failsafe"].startswith("no actuator target") and 2.2 < end["failsafe_t"] < 2.5, end
+    vehicle = {e["kind"]: e["t"] for e in summary["events"] if e["source"] == "vehicle"}
+    assert end["disarmed"] and end["disarmed_t"] == vehicle["disarmed"] > vehicle["landed"] > end["failsafe_t"]
+    assert said in p.stdout and f"bsst sitl: {said}" in p.stderr and said in (out / "events.log").read_text()
+    assert summary["timing"]["wall_s"] < 20.0  # not the 30 s of the blackout
+
+
 # ``missions/sine.toml`` cut to 4 s: a failsafe around its end (the review's sine with ``--blackout 27.5:3``, its
 # landing to 34.571 s, and an x500 landed by its battery at 6 s of 8 s, cut short)
 SINE_4S = replace(load_mission(SINE), duration_s=4.0)

@@ -243,6 +243,33 @@ def test_a_failsafe_after_the_missions_end_leaves_a_completion() -> None:
         assert outcome_of(facts(), controller, [RunEvent(t, "failsafe", "no target", "vehicle")], 2.0) == expect
 
 
+def test_an_end_action_the_vehicle_never_took_is_not_flown_as_asked() -> None:
+    """The controller sent the end action (its ``end`` event) and the vehicle never took it (no ``end`` event of its
+    own: the NAV_LAND lost in a real-time blackout over the end); its failsafe after the end landed it. The mission
+    stays completed (the failsafe came after its end), but ``end`` says ``taken`` false and what flew instead, a
+    closing note says not flown as asked, and the exit status is 1 (until the third wave's fortieth session: no
+    ``end``, no note, exit 0). A vehicle that took it (its ``end`` event) leaves none of that."""
+    vehicle, controller = ends()
+    lost = RunEvent(4.0, "end", "the vehicle did not take the mission's end action (LAND): no answer", "controller")
+    after = [RunEvent(1.3, "failsafe", "no actuator target for 0.503 s: level and descend", "vehicle"),
+             RunEvent(4.5, "landed", "landing detected", "vehicle"),
+             RunEvent(6.5, "disarmed", "landed: disarmed", "vehicle", ITSELF)]
+    out = session_summary(FLIGHT, facts(clock="realtime"), joined(), [ARMED, *after, lost], vehicle, controller)
+    s = out.summary
+    assert s["outcome"] == "completed" and s["ended_by"] == {"who": "mission", "how": "completed"}
+    assert s["end"] == {"action": "land", "taken": False, "why": "no answer", "failsafe": after[0].text,
+                        "failsafe_t": 1.3, "disarmed": True, "disarmed_t": 6.5}
+    note = ("not flown as asked: the vehicle never took the mission's end action (LAND; its command: no answer): "
+            "its failsafe took over at t=1.300 s (no actuator target for 0.503 s: level and descend), disarmed at "
+            "t=6.500 s")
+    assert [(n.kind, n.text) for n in out.notes][-1] == ("end", note)
+    assert not run_ok(s) and all(p["ok"] for p in s["policies"])
+    took = [RunEvent(1.0, "end", "mission over: LAND at x=0 y=1 m from z=1 m, 0.7 m/s", "vehicle"),
+            RunEvent(1.0, "end", "mission over: the vehicle lands where it is and disarms on the ground", "controller")]
+    out = session_summary(FLIGHT, facts(clock="realtime"), joined(), [ARMED, *took], vehicle, controller)
+    assert "end" not in out.summary and [n.kind for n in out.notes] == ["ended"] and run_ok(out.summary)
+
+
 def test_trace_rows_have_the_trace_columns_as_names() -> None:
     assert TraceRow._fields == TRACE_COLUMNS
     r = rows(2)[1]

@@ -110,6 +110,7 @@ def report_fleet(run: Any, command: str) -> int:
 
 def report_run(run: Any, command: str) -> int:
     """Print a run's summary, name each violated policy on stderr; its exit status (0: a clean completion)."""
+    from bridge.record.ending import not_taken_text  # lazy: numpy
     from bridge.record.interventions import intervention_text, unconfirmed_text  # lazy: numpy
     from bridge.record.policies import run_ok, stalls_of, violation_text  # lazy: numpy
     from bridge.record.summary import stalls_text  # lazy: numpy
@@ -128,6 +129,8 @@ def report_run(run: Any, command: str) -> int:
     for p in run.summary.get("param_at") or []:
         if not p.get("confirmed"):
             print(f"bsst {command}: not flown as asked: {unconfirmed_text(p)}", file=sys.stderr)
+    if not (run.summary.get("end") or {}).get("taken", True):  # its end action lost: it came down by its failsafe
+        print(f"bsst {command}: not flown as asked: {not_taken_text(run.summary['end'])}", file=sys.stderr)
     stalls = stalls_of(run.summary)
     if stalls is not None:
         print(f"bsst {command}: {stalls_text(stalls)}", file=sys.stderr)
@@ -150,6 +153,7 @@ def event_lines(events: list[dict[str, Any]]) -> list[str]:
 def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
     """The one-screen summary printed after a run."""
     from bridge.link.model import jitter_capped_text  # lazy: start-up time
+    from bridge.record.ending import not_taken_text  # lazy: numpy
     from bridge.record.metrics import air_text  # lazy: numpy (loaded by the run this sums up)
     from bridge.record.policies import violation_text  # lazy: numpy
     from bridge.record.summary import stalls_text  # lazy: numpy
@@ -174,6 +178,8 @@ def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
         w(f"not flown as asked: a ground station ({i['by']}) at t={i['t']:.3f} s (step {i['step']})"
           f"{', before the start' if i.get('before_start') else ''}: "
           + (f"{i['name']} = {i['new']:g} (was {i['old']:g})\n" if "name" in i else f"{i['kind']} {i['what']}\n"))
+    if not (s.get("end") or {}).get("taken", True):  # the vehicle never took the mission's end action
+        w(f"not flown as asked: {not_taken_text(s['end'])}\n")
     if (s.get("timing") or {}).get("stalls", {}).get("count"):  # a real-time run the machine stalled
         w(stalls_text(s["timing"]["stalls"]) + "\n")
     rms = s.get("rms_3d")

@@ -8,7 +8,9 @@ Out: :func:`end_block`, ``summary.json["end"]``: ``action``; ``rows``; ``disarme
      after it); ``disarm_z_m`` (the last row before the disarm) and ``touchdown_vz_mps`` (the last row before the
      ``landed`` event: the touchdown; without one, before the disarm); ``max_descent_mps``; ``failsafe`` (the
      text of the first failsafe that took the end action over, a position lost in the landing; None: none);
-     ``max_drift_m`` (a hold: the largest height change from its first row)
+     ``max_drift_m`` (a hold: the largest height change from its first row); ``taken`` (true). A session's vehicle
+     that never took it (:func:`end_not_taken`: no ``end`` event of its own, its command lost on a real-time link
+     in a blackout over the end): ``taken`` false and what flew instead, and :func:`not_taken_text`, the note
 
 The mission's trace and figures stop at its end (``trace.csv`` holds the mission's rows only, so that every
 figure is the mission's); the end action is summarised here, from the same rows in every clock (offline: the
@@ -19,6 +21,9 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from typing import Any, Protocol
+
+from bridge.record.events import RunEvent
+from bridge.record.policies import EPS_S, vehicle_events
 
 
 class _Event(Protocol):
@@ -39,6 +44,7 @@ def end_block(action: str, rows: Sequence[tuple[float, float, float]], events: S
     touch = next((r for r in reversed(flown) if down is None or r[0] <= down + 1e-9), None)
     out: dict[str, Any] = {
         "action": action,
+        "taken": True,
         "rows": len(flown),
         "disarmed": disarm is not None,
         "landing_s": None if disarm is None or start is None else round(disarm - start, 6),
@@ -51,3 +57,33 @@ def end_block(action: str, rows: Sequence[tuple[float, float, float]], events: S
     if action == "hold":
         out["max_drift_m"] = max((abs(r[1] - flown[0][1]) for r in flown), default=None)
     return out
+
+
+def end_not_taken(outcome: str, action: str, events: Sequence[RunEvent], end_s: float) -> dict[str, Any] | None:
+    """``summary.json["end"]`` of a session whose mission was completed (``outcome``), whose controller sent the end
+    action (its ``end`` event) but whose vehicle never took it (no ``end`` event of its own after the mission's end,
+    ``end_s`` s): ``taken`` false, the answer its command had (``why``), the vehicle's first failsafe after the end
+    (PX4's offboard loss: no target came after the mission's last) and whether it landed and disarmed. None when it
+    took it, or when none was sent (a mission not completed). ``events``: the mission's (with ``source``)."""
+    if outcome != "completed":
+        return None
+    ev = [e for e in vehicle_events(events) if e.t >= end_s - EPS_S]
+    said = next((e.text for e in events if e.kind == "end" and e.source == "controller"), None)
+    if said is None or any(e.kind == "end" for e in ev):  # not sent (the controller says each), or taken
+        return None
+    why = said.rpartition("): ")[2]  # its answer: "no answer", "MAV_RESULT 4"
+    fs = next((e for e in ev if e.kind == "failsafe"), None)
+    down = next((e for e in ev if e.kind == "disarmed" and (fs is None or e.t >= fs.t)), None)
+    return {"action": action, "taken": False, "why": why, "failsafe": None if fs is None else fs.text,
+            "failsafe_t": None if fs is None else fs.t, "disarmed": down is not None,
+            "disarmed_t": None if down is None else down.t}
+
+
+def not_taken_text(end: dict[str, Any]) -> str:
+    """The note of a vehicle that never took the mission's end action (:func:`end_not_taken`): what flew instead."""
+    what = "HOLD" if end["action"] == "hold" else "LAND"
+    instead = (f"its failsafe took over at t={end['failsafe_t']:.3f} s ({end['failsafe']})" if end["failsafe"]
+               else "nothing took over")
+    down = f", disarmed at t={end['disarmed_t']:.3f} s" if end["disarmed"] else ", not seen to disarm"
+    why = f"; its command: {end['why']}" if end.get("why") else ""
+    return f"the vehicle never took the mission's end action ({what}{why}): {instead}{down}"

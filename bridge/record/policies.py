@@ -466,9 +466,10 @@ def run_ok(summary: Mapping[str, Any]) -> bool:
     """Whether a run is a clean completion (exit status 0): outcome ``completed``, every policy
     holds, a lockstep session held lockstep throughout, nobody but the flight's controller changed
     the flight (``interventions``, e.g. a ground station's parameter), the vehicle confirmed every
-    scheduled change (``param_at``) and (real time) the machine never stalled the loop (``timing.stalls``):
-    else not flown as asked."""
+    scheduled change (``param_at``), took the mission's end action (``end.taken``) and (real time) the machine never
+    stalled the loop (``timing.stalls``): else not flown as asked."""
     return (summary.get("outcome") == "completed" and all_hold(summary.get("policies"))
+            and (summary.get("end") or {}).get("taken", True)
             and (summary.get("lockstep") or {"held": True}).get("held", False) and not summary.get("interventions")
             and all(p.get("confirmed") for p in summary.get("param_at") or ())
             and stalls_of(summary) is None)

@@ -10,7 +10,8 @@ Out: :class:`SessionSummary`: the trace arrays, ``summary.json`` (the figures of
      :func:`bridge.record.metrics.summarise`, the ``link``, ``timing`` and ``sitl`` blocks, the downloads of a
      ground station's mission, fence and rally points (``mission_transfer``: :mod:`bridge.record.transfers`;
      ``--await-mission`` only), the lockstep record, ``ended_by``, the policies' verdicts, the events in time
-     order) and the session's closing notes (its ``ended``, ``lockstep`` and ``policy`` events, also in
+     order; ``end`` of a vehicle that never took the end action: :func:`~bridge.record.ending.end_not_taken`) and
+     the session's closing notes (its ``ended``, ``lockstep``, ``end`` and ``policy`` events, also in
      ``summary["events"]``, for events.log; at the trace's last row or an event in its period, with none at the
      latest event's: :func:`notes_time`)
 
@@ -30,6 +31,7 @@ from bridge.core.clock import STALL_S
 from bridge.core.flight import Flight
 from bridge.record.columns import TRACE_COLUMNS
 from bridge.record.endedby import arming_denied_end, ended_by_command, ended_by_outcome, failsafe_not_resumed
+from bridge.record.ending import end_not_taken, not_taken_text
 from bridge.record.events import RunEvent, in_time_order, split_at_start
 from bridge.record.interventions import (
     ended_by_change,
@@ -459,6 +461,9 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
     summary["ended_by"] = ended_by_change(summary["ended_by"], summary["outcome"], mission, changes)
     summary["ended_by"].update(after_faults(summary["outcome"], [e.as_dict() for e in ev]))
     summary["ended_by"].update(not_reached(summary["outcome"], flight.timeline, arrays["t"], flight.wind))
+    # a completed mission whose end action the vehicle never took (lost on the wire): not flown as asked
+    if (untaken := end_not_taken(summary["outcome"], m.end_action, mission, m.duration_s)) is not None:
+        summary["end"] = untaken
     if lockstep is not None:
         summary["lockstep"] = reproducibility(lockstep, changes)
     rules = rules_for(flight, facts.clock, link, controller_id)
@@ -473,6 +478,8 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
     texts += [("intervention", f"not flown as asked: {intervention_text(i)}") for i in changes]
     texts += [("param", f"not flown as asked: {unconfirmed_text(p)}") for p in summary.get("param_at", ())
               if not p["confirmed"]]
+    if untaken is not None:
+        texts.append(("end", f"not flown as asked: {not_taken_text(untaken)}"))
     texts += before_start_notes(hop)
     texts += [("policy", violation_text(v)) for v in violated]
     if (stalls := stalls_of(summary)) is not None:

@@ -30,7 +30,7 @@ from bridge.core.scalar import FLIES_ENV
 from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, LINK_PORT
 from bridge.nodes.report import Event, MissionLoaded, Ready, Report
 from bridge.record.endedby import failsafe_not_resumed
-from bridge.record.ending import end_block
+from bridge.record.ending import end_block, end_not_taken
 from bridge.record.events import RunEvent, split_at_start
 from bridge.record.joiner import TraceJoiner, off_clock_time
 from bridge.record.missionclock import MissionClock
@@ -168,9 +168,13 @@ class Session:
 
     def _controller_completed(self) -> bool:
         """Whether the controller flew its mission to the end (:func:`bridge.record.summary.controller_completed`),
-        its vehicle not in a failsafe no arm ended (a real-time link lost over the end hid it: it is left to land)."""
-        return controller_completed(_end(self.controller)) and failsafe_not_resumed(
-            split_at_start(self.events)[0], self.flight.mission.duration_s) is None
+        its vehicle not in a failsafe no arm ended (a real-time link lost over the end hid it: it is left to land)
+        and, armed, flying the end action it took (its ``end`` event; one lost on the wire leaves the vehicle to its
+        failsafe: it is left to land, until the third wave's fortieth session stopped in the air)."""
+        mission = split_at_start(self.events)[0]
+        end = self.flight.mission.duration_s
+        return controller_completed(_end(self.controller)) and failsafe_not_resumed(mission, end) is None and (
+            not self.vehicle_armed or end_not_taken("completed", "", mission, end) is None)
 
     # -- children ----------------------------------------------------------------------------------
     def _start(self) -> None:
