@@ -268,6 +268,11 @@ def test_an_end_action_the_vehicle_never_took_is_not_flown_as_asked() -> None:
             RunEvent(1.0, "end", "mission over: the vehicle lands where it is and disarms on the ground", "controller")]
     out = session_summary(FLIGHT, facts(clock="realtime"), joined(), [ARMED, *took], vehicle, controller)
     assert "end" not in out.summary and [n.kind for n in out.notes] == ["ended"] and run_ok(out.summary)
+    # the link back at 2.8 s, after the vehicle's failsafe: it takes the LAND as a mode the controller selected
+    late = [after[0], RunEvent(1.8, "mode", "LAND at x=0 y=1 m", "vehicle", CONTROLLER, mode="LAND", armed=True),
+            took[1]]
+    out = session_summary(FLIGHT, facts(clock="realtime"), joined(), [ARMED, *late], vehicle, controller)
+    assert "end" not in out.summary and run_ok(out.summary)
 
 
 def test_trace_rows_have_the_trace_columns_as_names() -> None:

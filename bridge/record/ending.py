@@ -62,14 +62,17 @@ def end_block(action: str, rows: Sequence[tuple[float, float, float]], events: S
 def end_not_taken(outcome: str, action: str, events: Sequence[RunEvent], end_s: float) -> dict[str, Any] | None:
     """``summary.json["end"]`` of a session whose mission was completed (``outcome``), whose controller sent the end
     action (its ``end`` event) but whose vehicle never took it (no ``end`` event of its own after the mission's end,
-    ``end_s`` s): ``taken`` false, the answer its command had (``why``), the vehicle's first failsafe after the end
-    (PX4's offboard loss: no target came after the mission's last) and whether it landed and disarmed. None when it
-    took it, or when none was sent (a mission not completed). ``events``: the mission's (with ``source``)."""
+    ``end_s`` s, nor a mode the controller selected): ``taken`` false, the answer its command had (``why``), the
+    vehicle's first failsafe after the end (PX4's offboard loss: no target came after the mission's last) and
+    whether it landed and disarmed. None when it took it, or when none was sent (a mission not completed).
+    ``events``: the mission's (with ``source``)."""
     if outcome != "completed":
         return None
     ev = [e for e in vehicle_events(events) if e.t >= end_s - EPS_S]
     said = next((e.text for e in events if e.kind == "end" and e.source == "controller"), None)
-    if said is None or any(e.kind == "end" for e in ev):  # not sent (the controller says each), or taken
+    # taken: its own end, or (its failsafe on when the command came: a link back after the end) a mode by the controller
+    if said is None or any(e.kind == "end" or e.kind == "mode" and e.by is not None and e.by.link == "controller"
+                           for e in ev):
         return None
     why = said.rpartition("): ")[2]  # its answer: "no answer", "MAV_RESULT 4"
     fs = next((e for e in ev if e.kind == "failsafe"), None)
