@@ -31,10 +31,20 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.cli import build_parser, link_table_from_args, main
 from bridge.core.flight import prepare
-from bridge.link.fit import model_records
+from bridge.link.fit import fit_toml, fit_trace, model_records
 from bridge.link.model import LinkConfig, LinkImpairment, link_from_table
 from bridge.link.profile import PROFILE_DIR, load_link_profile, profile_names
-from bridge.link.trace import DirectionTrace, Records, Replay, make_records, parse_trace, read_trace, trace_text
+from bridge.link.trace import (
+    CHUNK_BYTES,
+    FIRST_CHUNK_BYTES,
+    DirectionTrace,
+    Records,
+    Replay,
+    make_records,
+    parse_trace,
+    read_trace,
+    trace_text,
+)
 from bridge.loop import simulate
 from bridge.nodes.relay import Relay
 from bridge.record.linkextract import extract_tlogs
@@ -134,6 +144,55 @@ def test_a_bad_file_is_refused_at_load_and_by_the_cli_with_one_line(tmp_path: Pa
         read_trace(tmp_path)
     assert "no such file" in one_line_error(bsst("sim", "missions/sine.toml", "--link-trace", "nope.csv"))
     assert "is not a regular file" in one_line_error(bsst("sim", "missions/sine.toml", "--link-trace", str(tmp_path)))
+
+
+def _big_trace(n: int = 12_000) -> list[str]:
+    """The lines of a two-way trace of ``n`` rows, ``repr`` floats as ``bsst link extract`` writes, one in 9 lost."""
+    rng = np.random.default_rng(3)
+    delays = ["" if k % 9 == 4 else repr(float(x)) for k, x in enumerate(30.0 + 5.0 * rng.random(n))]
+    return ["t_s,delay_ms,direction"] + [f"{k * 0.002!r},{d},{'up' if k % 2 else 'down'}" for k, d in enumerate(delays)]
+
+
+def _records(tf) -> tuple:
+    return tuple((r.t_s.tobytes(), r.delay_s.tobytes(), r.length_s) for r in (tf.up, tf.down))
+
+
+def test_a_large_trace_reads_the_same_in_plain_chunks_or_line_by_line() -> None:
+    """A trace of plain ASCII rows is read ~1000 rows at a time with numpy, any other chunk line by line: the
+    same records, bit for bit, and the same fitted profile. Here every chunk is made to go line by line (a
+    comment that is not ASCII), or keeps its spaces, CRLF line ends, a byte-order mark and comments."""
+    lines = _big_trace()
+    plain = parse_trace(("\n".join(lines) + "\n").encode(), "big.csv")
+    assert plain.up.n == plain.down.n == 6000 and plain.up.lost + plain.down.lost == 1333
+    by_line = "\n".join(ln + ("\n# mesuré" if k % 40 == 0 else "") for k, ln in enumerate(lines)) + "\n"
+    spaced = "\r\n".join([lines[0]] + [" " + ln.replace(",", " , ") + "  " for ln in lines[1:]])
+    commented = "\ufeff# a comment\n\n" + "\n".join(ln + ("\n  # x\n \n" if k % 500 == 7 else "")
+                                                    for k, ln in enumerate(lines))
+    profile = fit_toml(fit_trace(plain), "big.csv")
+    for text in (by_line, spaced, commented):
+        tf = parse_trace(text.encode(), "big.csv")
+        assert _records(tf) == _records(plain) and fit_toml(fit_trace(tf), "big.csv") == profile
+
+
+def test_bad_rows_deep_in_a_large_trace_are_named_by_line_and_counted() -> None:
+    """A bad row past the first chunks is refused as in a small trace: the first named by its line, the rest
+    counted, whichever way its chunk is read; a t_s that does not increase across two chunks too."""
+    lines = _big_trace()
+    data = ("\n".join(lines) + "\n").encode()
+    first = data.find(b"\n", FIRST_CHUNK_BYTES) + 1
+    second = data.find(b"\n", first + CHUNK_BYTES) + 1  # the third chunk's first row: repeat the row before it
+    at = data[:second].count(b"\n")  # its index in lines
+    t_before = lines[at - 1].split(",")[0]
+    lines[at] = f"{t_before},1.0,{lines[at - 1].split(',')[2]}"
+    lines[9000] = lines[9000].rsplit(",", 2)[0] + ",nan,up"
+    lines[11_000] = "1_0,2,up"
+    with pytest.raises(ConfigError) as exc:
+        parse_trace(("\n".join(lines) + "\n").encode(), "big.csv")
+    assert str(exc.value) == (f"big.csv line {at + 1}: t_s must increase: {float(t_before)!r} after "
+                              f"{float(t_before)!r} of the {lines[at - 1].split(',')[2]} rows (and 2 more bad rows)")
+    bad_utf8 = "\n".join(_big_trace()[:9000]).encode() + b"\n0.1,\xff\n"
+    with pytest.raises(ConfigError, match="^big.csv line 9001: not UTF-8 text"):
+        parse_trace(bad_utf8, "big.csv")
 
 
 # -- replay: the record with the largest t_s <= t ------------------------------------------------------

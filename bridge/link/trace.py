@@ -26,7 +26,7 @@ import csv
 import io
 import math
 from array import array
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -127,19 +127,153 @@ def read_trace(path: str | Path) -> TraceFile:
     return parse_trace(data, str(path))
 
 
-def _lines(data: bytes, name: str) -> Iterator[tuple[int, str]]:
-    """(line number, text) of every line that is neither blank nor a ``#`` comment, one at a time (a
-    trace may hold 10^7 rows: no list of them), numbered as ``str.splitlines`` numbers them."""
-    number = 0
-    for raw in io.BytesIO(data):  # shares the bytes; splits after each b"\n"
-        try:
-            text = utf8_text(raw) if number == 0 else raw.decode("utf-8")
-        except UnicodeDecodeError:
-            raise ConfigError(f"{name} line {number + 1}: not UTF-8 text (expected a CSV link trace)") from None
-        for ln in text.splitlines():
-            number += 1
-            if ln.strip() and not ln.lstrip().startswith("#"):
-                yield number, ln
+FIRST_CHUNK_BYTES = 256  # the header's chunk: read line by line (anything may come before the header)
+CHUNK_BYTES = 1 << 15  # ~1000 rows a chunk: its Python objects stay ~200 kB (a trace may hold 10^7 rows)
+# what a plain chunk holds: printable ASCII but the quote (a quoted field is csv's) and the underscore (a digit
+# separator, which params.text.number refuses), lines ended by \n or \r\n; every other chunk is read line by line
+_PLAIN_BYTES = bytes(b for b in range(0x20, 0x7F) if b not in b'"_') + b"\r\n"
+_NOT_SEPARATOR = bytes(b for b in range(256) if b not in b",\n")
+
+
+def parse_trace(data: bytes, name: str) -> TraceFile:
+    """Validate a trace's bytes; ``name`` is what the errors call the file. Memory: the bytes, a chunk's rows
+    as Python objects, and 16 bytes per record (:class:`Records` holds arrays of doubles)."""
+    reader = _Reader(name)
+    pos, size = 0, FIRST_CHUNK_BYTES
+    while pos < len(data):
+        end = data.find(b"\n", pos + size)  # chunks end after a newline: no line, no UTF-8 character, is cut
+        end = len(data) if end < 0 else end + 1
+        chunk = data[pos:end]
+        if reader.cols is None or not reader.plain(chunk):
+            reader.by_line(chunk)
+        pos, size = end, CHUNK_BYTES
+    return reader.result()
+
+
+class _Reader:
+    """A trace read chunk by chunk: a plain chunk of good rows at once (:meth:`plain`, numpy), any other line
+    by line (:meth:`by_line`: every refusal and its line come from there); the same records either way."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self.line = 0  # lines read, numbered as str.splitlines numbers them
+        self.cols: tuple[str, ...] | None = None
+        self.rows: dict[str, tuple[array[float], array[float]]] = {}
+        self.last: dict[str, float] = {}  # each direction's last good t_s
+        self.first_bad, self.bad = "", 0
+
+    def by_line(self, chunk: bytes) -> None:
+        for raw in io.BytesIO(chunk):  # shares the bytes; splits after each b"\n"
+            try:
+                text = utf8_text(raw) if self.line == 0 else raw.decode("utf-8")
+            except UnicodeDecodeError:
+                raise ConfigError(f"{self.name} line {self.line + 1}: not UTF-8 text (expected a CSV link trace)") \
+                    from None
+            for ln in text.splitlines():
+                self.line += 1
+                if ln.strip() and not ln.lstrip().startswith("#"):
+                    self._take(ln)
+
+    def _take(self, ln: str) -> None:
+        fields, why = _fields(ln)
+        if self.cols is None:  # the first line that is neither blank nor a comment
+            if why:
+                raise ConfigError(f"{self.name} line {self.line}: {why}")
+            self.cols = _header(fields, self.name, self.line)
+            return
+        direction, t, d = "", math.nan, math.nan
+        if not why:
+            why, direction, t, d = _row(fields, self.cols, self.last)
+        if direction and t == t:  # a good time on a bad row still orders the rows after it
+            self.last[direction] = t
+        if why:
+            self.bad += 1
+            self.first_bad = self.first_bad or f"{self.name} line {self.line}: {why}"
+            return
+        ts, ds = self.rows.setdefault(direction, (array("d"), array("d")))
+        ts.append(t)
+        ds.append(d)
+
+    def plain(self, chunk: bytes) -> bool:
+        """Take a chunk whose bytes are plain (:data:`_PLAIN_BYTES`) and whose every row is good, at once, as
+        :meth:`by_line` would (the same float() of each field); False, nothing taken, if it is not one."""
+        if chunk.translate(None, _PLAIN_BYTES) or chunk.count(b"\r") != chunk.count(b"\r\n"):
+            return False
+        text = chunk.decode("ascii").replace("\r\n", "\n")
+        lines = text.count("\n") + (not text.endswith("\n"))
+        if "#" in text or " " in text or "\n\n" in text or text.startswith("\n"):  # comments, blanks, spaces
+            kept = [ln for ln in text.splitlines() if ln.strip() and ln.lstrip()[:1] != "#"]
+            text = "\n".join(kept) + "\n" if kept else ""
+        elif not text.endswith("\n"):
+            text += "\n"
+        cols = _plain_columns(text, self.cols or ())
+        if cols is None:
+            return False
+        groups = _plain_records(cols)
+        if groups is None or any(k in self.last and not t[0] > self.last[k] for k, (t, _) in groups.items()):
+            return False
+        for k, (t, d) in groups.items():
+            ts, ds = self.rows.setdefault(k, (array("d"), array("d")))
+            ts.frombytes(t.tobytes())
+            ds.frombytes(d.tobytes())
+            self.last[k] = float(t[-1])
+        self.line += lines
+        return True
+
+    def result(self) -> TraceFile:
+        name = self.name
+        if self.cols is None:
+            raise ConfigError(f"{name}: empty; expected a CSV header {','.join(REQUIRED)}[,direction] and records")
+        if self.bad:
+            more = f" (and {self.bad - 1} more bad row{'s' if self.bad > 2 else ''})" if self.bad > 1 else ""
+            raise ConfigError(self.first_bad + more)
+        if not self.rows:
+            raise ConfigError(f"{name}: no records after the header (rows of {','.join(self.cols)})")
+        recs = {k: make_records(*v) for k, v in self.rows.items()}
+        if "direction" in self.cols:
+            return TraceFile(name, up=recs.get("up"), down=recs.get("down"))
+        return TraceFile(name, both=recs["both"])
+
+
+def _plain_columns(text: str, cols: tuple[str, ...]) -> dict[str, list[str]] | None:
+    """Each column's fields (stripped) of rows ``text`` (each ended by \\n), or None where a row has another
+    number of fields or is too long (:meth:`_Reader.by_line` says which)."""
+    n, k = text.count("\n"), len(cols)
+    raw = text.encode("ascii")
+    if not n or raw.translate(None, _NOT_SEPARATOR) != (b"," * (k - 1) + b"\n") * n:
+        return None
+    if int(np.diff(np.flatnonzero(np.frombuffer(raw, dtype=np.uint8) == 10), prepend=-1).max()) > MAX_ROW_CHARS + 1:
+        return None
+    flat = text.replace("\n", ",").split(",")  # the fields row by row, then the "" after the last
+    spaced = " " in text
+    return {c: list(map(str.strip, flat[i:n * k:k])) if spaced else flat[i:n * k:k] for i, c in enumerate(cols)}
+
+
+def _plain_records(cols: dict[str, list[str]]) -> dict[str, tuple[np.ndarray, np.ndarray]] | None:
+    """Each direction's (t_s, delay s) of these rows' fields, as _row reads them, or None if a row is bad or its
+    t_s does not increase (the order past the chunk is the caller's)."""
+    delays = cols["delay_ms"]
+    try:  # float() as params.text.number calls it (no "_" here); an empty delay (lost) read as "nan"
+        t = np.array(list(map(float, cols["t_s"])), dtype=float)
+        d = np.array(list(map(float, [x or "nan" for x in delays])), dtype=float)
+    except ValueError:
+        return None
+    (t_lo, t_hi), (d_lo, d_hi) = T_RANGE_S, DELAY_RANGE_MS
+    given = np.array(list(map(bool, delays)), dtype=bool)
+    if not (np.all((t >= t_lo) & (t <= t_hi)) and np.all((d >= d_lo) & (d <= d_hi) | ~given)):
+        return None  # a NaN fails both: a "nan" given is refused, line by line
+    d = np.where(given, d / 1000.0, math.nan)
+    if "direction" not in cols:
+        groups = {"both": (t, d)}
+    else:
+        dirs = cols["direction"]
+        if not set(dirs) <= set(DIRECTIONS):
+            return None
+        up = np.array([x == "up" for x in dirs], dtype=bool)
+        groups = {k: (t[m], d[m]) for k, m in (("up", up), ("down", ~up)) if m.any()}
+    if any(len(t) > 1 and not np.all(np.diff(t) > 0.0) for t, _ in groups.values()):
+        return None
+    return groups
 
 
 def _fields(line: str) -> tuple[list[str], str | None]:
@@ -154,46 +288,6 @@ def _fields(line: str) -> tuple[list[str], str | None]:
     except csv.Error as exc:
         why = "an unclosed quote (a field cannot hold a newline)" if "end of data" in str(exc) else str(exc)
         return [], f"not a CSV record: {why}"
-
-
-def parse_trace(data: bytes, name: str) -> TraceFile:
-    """Validate a trace's bytes; ``name`` is what the errors call the file. Memory: the bytes, and 16 bytes
-    per record (:class:`Records` holds arrays of doubles)."""
-    lines = _lines(data, name)
-    first = next(lines, None)
-    if first is None:
-        raise ConfigError(f"{name}: empty; expected a CSV header {','.join(REQUIRED)}[,direction] and records")
-    head_line, head = first
-    names, why = _fields(head)
-    if why:
-        raise ConfigError(f"{name} line {head_line}: {why}")
-    cols = _header(names, name, head_line)
-    rows: dict[str, tuple[array[float], array[float]]] = {}
-    first_bad, bad = "", 0
-    last: dict[str, float] = {}
-    for line_no, ln in lines:
-        fields, why = _fields(ln)
-        direction, t, d = "", math.nan, math.nan
-        if not why:
-            why, direction, t, d = _row(fields, cols, last)
-        if direction and t == t:  # a good time on a bad row still orders the rows after it
-            last[direction] = t
-        if why:
-            bad += 1
-            first_bad = first_bad or f"{name} line {line_no}: {why}"
-            continue
-        ts, ds = rows.setdefault(direction, (array("d"), array("d")))
-        ts.append(t)
-        ds.append(d)
-    if bad:
-        more = f" (and {bad - 1} more bad row{'s' if bad > 2 else ''})" if bad > 1 else ""
-        raise ConfigError(first_bad + more)
-    if not rows:
-        raise ConfigError(f"{name}: no records after the header (rows of {','.join(cols)})")
-    recs = {k: make_records(*v) for k, v in rows.items()}
-    if "direction" in cols:
-        return TraceFile(name, up=recs.get("up"), down=recs.get("down"))
-    return TraceFile(name, both=recs["both"])
 
 
 def _header(names: list[str], name: str, line: int) -> tuple[str, ...]:
