@@ -31,6 +31,7 @@ sys.path.insert(0, str(ROOT))
 
 _PEAK = """
 import resource, sys, time
+sys.path.remove("")  # -c puts the working directory first: the checkout PYTHONPATH names is the one measured
 from bridge.link.trace import read_trace
 t0 = time.perf_counter()
 if sys.argv[1] != "-":
