@@ -16,7 +16,8 @@ spacing (:attr:`Records.length_s`); past its end it is refused for a longer miss
 (bridge.link.model), or looped: t is taken modulo that length.
 
 Pure: the file's bytes come from :func:`params.read_regular_file`, which refuses what is not a
-regular file; this module only reads text.
+regular file; this module only reads text, ~1000 rows at a time: a chunk of plain good rows at once (numpy,
+~1 µs a row), any other line by line, which names every bad row (docs/figures.md, the third wave's fortieth session).
 """
 
 from __future__ import annotations
