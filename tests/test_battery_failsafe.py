@@ -13,7 +13,7 @@ import pytest
 from bridge import simulate
 from bridge.autopilot.batterywatch import BatteryWatch
 from bridge.autopilot.simvehicle import FAILSAFE
-from bridge.batch.engine import flights_problem
+from bridge.batch.scope import flights_problem
 from bridge.core.flight import prepare
 from params import ConfigError, Table
 from plant.effects import effects_from_table

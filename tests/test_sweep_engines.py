@@ -91,7 +91,7 @@ def test_a_mission_that_lands_in_wind_flies_on_the_process_engine_which_judges_i
     the process engine, which flies the landing, said ``crashed`` (the sine at 40 m/s in severe turbulence; the x500
     at 25 m/s). ``auto`` flies it on the process engine and says why; ``--engine batch`` is refused; ending in a
     hold, or in still air at the end (a wind event back to 0, a gust over), it is batched."""
-    from bridge.batch.engine import air_at_end
+    from bridge.batch.scope import air_at_end
 
     sine = Mission(Sine(), duration_s=3.0, name="short3")
     windy = cells(sine, Grid(wind_mps=tuple(float(w) for w in range(BATCH_MIN_CELLS))))
@@ -156,6 +156,44 @@ def test_the_command_line_says_which_engine_flew(tmp_path: Path, capsys) -> None
     capsys.readouterr()
     assert main(["sweep", str(short), "--delay", "0,5", "--out", str(tmp_path / "s"), "--no-plots"]) == 0
     assert f"engine process (fewer than {BATCH_MIN_CELLS} cells to fly)" in capsys.readouterr().out
+
+
+# the commands as a user starts them, in one process that says after each whether numba was imported, then which
+# engine a grid of BATCH_MIN_CELLS cells would take
+NO_NUMBA_SCRIPT = """
+import json, sys
+from bridge.cli import main
+out = []
+for argv in json.loads(sys.argv[1]):
+    out.append([main(argv), "numba" in sys.modules])
+from bridge.sweep.executors import engine_for
+from bridge.sweep.grid import Grid, cells
+from missions import load_mission
+m = load_mission("short.toml")
+big = cells(m, Grid(delay_ms=tuple(float(d) for d in range(int(sys.argv[2])))))
+print(json.dumps({"runs": out, "big": list(engine_for(m, big, "offline", "auto")), "numba": "numba" in sys.modules}))
+"""
+
+
+def test_a_small_sweep_or_a_margin_the_batch_cannot_fly_imports_no_numba(tmp_path: Path) -> None:
+    """``--engine auto`` asks what the batch can fly before it counts the cells (its reason names that first), and
+    that check imported the batch engine and numba with it (~0.25 CPU-s of a 2-cell sweep's ~0.55 in its main
+    process) for a grid then flown on the process engine; a ``bsst margin`` the batch cannot fly (over sensor noise)
+    likewise. Now neither imports numba (bridge.batch.scope), a large grid still takes the batch, and the reasons
+    are the same (a real command in a fresh process: ``sys.modules`` read after each)."""
+    (tmp_path / "short.toml").write_text('name = "short"\nduration_s = 1.0\n[trajectory]\nkind = "sine"\n')
+    runs = [["sweep", "short.toml", "--delay", "0,5", "--no-plots", "--out", "s"],
+            ["margin", "short.toml", "--over", "noise", "--sensors", "mocap", "--estimator", "raw", "--until",
+             "rms=0.5", "--out", "m"]]
+    env = {k: v for k, v in os.environ.items() if k != "BSST_KERNELS"}  # (auto: no kernels loaded unasked)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT), env.get("PYTHONPATH")]))
+    r = subprocess.run([sys.executable, "-c", NO_NUMBA_SCRIPT, json.dumps(runs), str(BATCH_MIN_CELLS)],
+                       capture_output=True, text=True, timeout=300, cwd=tmp_path, env=env)
+    assert r.returncode == 0, r.stderr[-3000:]
+    out = json.loads(r.stdout.strip().splitlines()[-1])
+    assert out == {"runs": [[0, False], [0, False]], "big": ["batch", "the grid allows it"], "numba": False}, out
+    assert f"engine process (fewer than {BATCH_MIN_CELLS} cells to fly)" in r.stdout
+    assert [r["outcome"] for r in read_cells(tmp_path / "s" / CELLS_CSV)] == ["completed"] * 2
 
 
 def test_cells_with_sensors_fly_on_the_process_engine_and_say_so() -> None:

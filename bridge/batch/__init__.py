@@ -8,9 +8,14 @@ Out: per cell the measured columns of a ``cells.csv`` row (:data:`MEASURES`: ``r
      the same numbers :func:`bridge.sweep.cells.row_from_run` takes from the scalar loop's run;
      :func:`batch_problem` says in one line why a set of cells cannot be flown here
 
+The engine's names (:data:`MEASURES`, :func:`fly_batch`, ...) are imported on first use: the engine imports numba
+(~0.25 CPU-s), and a sweep under ``--engine auto`` asks :func:`batch_problem` of every grid, a small one to fly
+it on the process engine, which needs no numba.
+
 The parts:
 
-- :mod:`bridge.batch.engine`   the batches (what may be flown, the link plan, the threads)
+- :mod:`bridge.batch.scope`    what the batch can fly, and why not (no numba)
+- :mod:`bridge.batch.engine`   the batches (the link plan, the threads)
 - :mod:`bridge.batch.flight`   each cell's whole flight in one compiled call, cell by cell
 - :mod:`bridge.batch.kernels`  the scalar engine's own plain-float functions, compiled (one source each)
 - :mod:`bridge.batch.control`  the laws the batch flies, one cell's actuation
@@ -22,17 +27,18 @@ The parts:
 
 from __future__ import annotations
 
-from bridge.batch.engine import (
-    CELL_STEPS,
-    MEASURES,
-    _prepare_all,
-    batch_problem,
-    compile_batch,
-    error_measures,
-    flights_problem,
-    fly_batch,
-    fly_flights,
-)
+from typing import Any
+
+from bridge.batch.scope import CELL_STEPS, _prepare_all, batch_problem, flights_problem
 
 __all__ = ["CELL_STEPS", "MEASURES", "_prepare_all", "batch_problem", "compile_batch", "error_measures",
            "flights_problem", "fly_batch", "fly_flights"]
+_ENGINE = frozenset({"MEASURES", "compile_batch", "error_measures", "fly_batch", "fly_flights"})
+
+
+def __getattr__(name: str) -> Any:
+    if name in _ENGINE:
+        from bridge.batch import engine  # lazy: numba's import, only where the batch flies (the module's docstring)
+
+        return getattr(engine, name)
+    raise AttributeError(f"module 'bridge.batch' has no attribute {name!r}")

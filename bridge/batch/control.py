@@ -2,8 +2,9 @@
 
 In:  the nominal model (its actuation, limits N, rotor coefficients, top rotor speed rad/s); per cell and
      step the wrench demanded (u1 N, u2..u4 N)
-Out: :data:`BATCH_LAWS`; the realisable wrench, the normalised command, the saturation flags and the
-     signed rotor-speed sum omega_d (rad/s) of :func:`allocate_cell`
+Out: the realisable wrench, the normalised command, the saturation flags and the
+     signed rotor-speed sum omega_d (rad/s) of :func:`allocate_cell` (the laws' names:
+     :data:`bridge.batch.scope.BATCH_LAWS`)
 
 The laws themselves (:func:`controller.bsst.backstepping` with the explicit or implicit super-twisting
 step, ``smc`` the same arithmetic with the sign reaching law, :func:`controller.pid.pid`) are called cell
@@ -17,9 +18,6 @@ import numpy as np
 from bridge.autopilot.kernelcache import njit
 from bridge.batch import kernels as K
 from controller.nominal import Nominal
-
-BACKSTEPPING = ("bsst", "smc")  # the laws of controller.bsst (super-twisting or sign reaching)
-BATCH_LAWS = (*BACKSTEPPING, "pid")
 
 
 class BatchActuation:

@@ -1,7 +1,7 @@
 """The whole flight of every cell of a batch in one compiled call: wire, prediction, law, actuation, plant
 substeps, failsafe landing and figures, cell by cell over numba's threads.
 
-In:  a batch's prepared flights (one mission, one control rate; :func:`bridge.batch.engine.flights_problem`
+In:  a batch's prepared flights (one mission, one control rate; :func:`bridge.batch.scope.flights_problem`
      says which), its link plan (:class:`bridge.link.plan.LinkPlan`) and clocks, the references (x, y, z,
      psi: m, rad, value and 4 derivatives) per control step
 Out: per cell the running figures (:class:`bridge.batch.metrics.Metrics`: squared 3-D error m^2, the last

@@ -55,7 +55,7 @@ def measured_rows(met: Metrics, flown: np.ndarray, outcome: np.ndarray, counts: 
             "up_sent": int(counts["up_sent"][i]), "up_lost": int(counts["up_lost"][i]),
             "down_sent": int(counts["down_sent"][i]), "down_lost": int(counts["down_lost"][i]),
             "flown_s": _num(dur), "error": "",
-            "policies": "",  # not judged: the batch keeps no trace or events (engine.flights_problem: no geofence)
+            "policies": "",  # not judged: the batch keeps no trace or events (scope.flights_problem: no geofence)
         })
     return rows
 

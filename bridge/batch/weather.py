@@ -14,7 +14,8 @@ cells fly and read by the compiled flight at each physics step, where it adds th
 <bridge.autopilot.simvehicle.SimVehicle.advance>` acts on it (the same test on the same plant clock); a gust
 event is a gust starting at that step's plant time, as :meth:`SimVehicle.inject
 <bridge.autopilot.simvehicle.SimVehicle.inject>` adds it. The batch flies ``motor``, ``wind`` and ``gust``
-events (:data:`BATCH_EVENT_KINDS`); the others are refused (:func:`bridge.batch.engine.flights_problem`).
+events (:data:`bridge.batch.scope.BATCH_EVENT_KINDS`); the others are refused
+(:func:`bridge.batch.scope.flights_problem`).
 """
 
 from __future__ import annotations
@@ -30,7 +31,6 @@ from bridge.link.plan import Clocks
 from plant.events import TimedEvent
 from plant.wind import blowing, turbulence_series
 
-BATCH_EVENT_KINDS = ("motor", "wind", "gust")  # the timeline's kinds the batch engine flies
 EV_MOTOR, EV_WIND = 0.0, 1.0  # an event's kind in Weather.events[..., 0]
 NO_STEP = np.iinfo(np.int64).max  # an event slot with nothing in it
 

@@ -31,6 +31,7 @@ from types import FrameType
 from typing import Any
 
 from bridge.autopilot.compiling import announce_compiling
+from bridge.batch.scope import batch_problem
 from bridge.core.interrupt import Interrupts, sigint_futures, wait_or_interrupt
 from bridge.core.scalar import compiled_loaded, kernels_choice
 from bridge.loop import fly
@@ -387,17 +388,16 @@ BATCH_MIN_CELLS = 32
 def engine_for(mission: Mission, todo: Sequence[Cell], mode: str, engine: str,
                min_cells: int = BATCH_MIN_CELLS) -> tuple[str, str]:
     """The engine that flies ``todo``, and why: ``batch`` where the batch can fly the grid
-    (offline cells, :func:`bridge.batch.batch_problem` has nothing against them; for ``auto``
+    (offline cells, :func:`bridge.batch.scope.batch_problem` has nothing against them; for ``auto``
     also at least ``min_cells`` of them), ``process`` otherwise. ``engine`` ``"batch"``
     that cannot be honoured is bad input (ConfigError), not a silent fallback; ``"auto"`` falls
     back and says why: what the batch cannot fly (sensors and an estimator, a law of one's own, ...)
-    before the grid's size, so that the reason given is the one that decides."""
+    before the grid's size, so that the reason given is the one that decides (a check that imports no numba: a
+    small grid flies on the process engine)."""
     if engine not in ENGINES:
         raise ConfigError(f"--engine: must be one of {', '.join(ENGINES)}, got {engine!r}")
     if engine == "process":
         return "process", "asked for"
-    from bridge.batch import batch_problem  # numba's import (~0.3 s): only where cells are to be flown
-
     fleets = sorted({c.vehicles for c in todo if c.vehicles > 1})
     why = "lockstep cells fly as SITL sessions" if mode == "lockstep" else (
         f"cells of {', '.join(map(str, fleets))} vehicles (--vehicles) fly a fleet in one world, which the batch "

@@ -48,7 +48,7 @@ than a few cells), so keep ``seeds`` and the laws few. Noise needs an estimator 
 the sensors (``raw`` or ``ekf``; ``truth`` ignores them) and a set with noise to scale. Over
 ``wind_mps`` the batch engine flies the probes (steady wind, and the mission's turbulence if it has one) of a
 mission that ends in a hold; one that ends in a landing flies them on the process engine, which judges a landing
-in wind (:func:`bridge.batch.engine.air_at_end`).
+in wind (:func:`bridge.batch.scope.air_at_end`).
 """
 
 from __future__ import annotations
