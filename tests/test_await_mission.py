@@ -110,18 +110,20 @@ def landed_early():
     if not armed or armed[-1] != a:
         armed.append(a)
     return True in armed and not a and not mr.is_mission_finished()
+def last_reached():  # progress's current past the last item; its total is MAVSDK's count of the last transfer (the
+    return any(p[0] == len(items) for p in progress)  # rally points' with zones: [5, 1], never [5, 5])
 # MAVSDK's own order, as its mission examples fly a PX4: arm (in HOLD, on the ground), then start the mission
 # (AUTO.MISSION)
 out["arm"] = Action(system).arm().name
 out["start"] = mr.start_mission().name
 deadline = time.monotonic() + float(sys.argv[3])
-while (time.monotonic() < deadline and not mr.is_mission_finished() and [len(items)] * 2 not in progress
+while (time.monotonic() < deadline and not mr.is_mission_finished() and not last_reached()
        and not landed_early()):
     time.sleep(0.1)
 done_by = time.monotonic() + 10.0  # the last MISSION_CURRENT (sent as its item is reached) says it complete;
 # the progress callback runs on MAVSDK's own thread, so [n, n] may land after is_mission_finished() turns true
-while (time.monotonic() < done_by and not (mr.is_mission_finished() and [len(items)] * 2 in progress)
-       and not landed_early()):
+# (with zones it waited all 10 s for a [5, 5] that never came, its session gone meanwhile)
+while (time.monotonic() < done_by and not (mr.is_mission_finished() and last_reached()) and not landed_early()):
     time.sleep(0.05)
 out["finished"] = mr.is_mission_finished()
 out["landed_early"] = landed_early()
