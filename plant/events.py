@@ -69,8 +69,10 @@ LINK_SCALARS = (str, int, float)  # a handover's keys: a profile name and [link]
 # that the flight flown from that file (bsst sitl's children, a ground station's mission in its place) names the flag
 AT_KEY = "at"
 # ... or, for a table a Python caller laid (``at=({...},)``: bridge.core.overrides), its place there, as its refusals
-# name it: ``at[0]`` (never a flag's text, which begins with a time)
-CALLER_AT = re.compile(r"at\[\d+\]")
+# name it: ``at[0]`` (never a flag's text, which begins with a time); ASCII digits, no leading zero, as overrides
+# writes it (``\d`` would take any script's digits)
+CALLER_AT = re.compile(r"at\[(?:0|[1-9][0-9]*)\]")
+LAID_FROM_PYTHON = "laid from Python"  # said beside a file's table whose at is a caller's place (CALLER_AT)
 
 
 @dataclass(frozen=True, slots=True)
@@ -235,15 +237,19 @@ def timeline_from_tables(tables: Sequence[Mapping[str, Any]], source: str, durat
 
 def event_given(raw: Mapping[str, Any], source: str, prefix: str, duration_s: float) -> TimedEvent:
     """One event's table validated (:func:`event_from_table`), its errors named where it was given: the ``--at``
-    flag that laid it when it holds one (:data:`AT_KEY`, refused unless the table is that flag's event), or a Python
-    caller's place in ``at=`` (:data:`CALLER_AT`), else ``source: prefix``."""
+    flag that laid it when it holds one (:data:`AT_KEY`, refused unless the table is that flag's event), else
+    ``source: prefix``, with a Python caller's place in ``at=`` when it holds one (:data:`CALLER_AT`:
+    ``m.toml: events[1] (at[0], laid from Python)``; ``source`` alone when ``prefix`` is empty, the caller's own
+    ``at[0]``)."""
     if AT_KEY not in raw:
         return event_from_table(Table(raw, source, prefix), duration_s)
     t = Table(raw, source, prefix)
     text = t.string(AT_KEY)
     own = {k: v for k, v in raw.items() if k != AT_KEY}
-    if CALLER_AT.fullmatch(text):  # a Python caller's table: named by its place in at=, as in its own process
-        return replace(event_from_table(Table(own, text), duration_s), at=text)
+    if CALLER_AT.fullmatch(text):  # a Python caller's table: named by its place in at=; read from a file (prefix),
+        # by the file's table too, which a hand edit may have changed (nothing to check it against, as a flag's is)
+        where = f"{source}: {prefix} ({text}, {LAID_FROM_PYTHON})" if prefix else source
+        return replace(event_from_table(Table(own, where), duration_s), at=text)
     try:
         flagged = event_table_from_flag(text)
     except ValueError as exc:
@@ -257,10 +263,12 @@ def event_given(raw: Mapping[str, Any], source: str, prefix: str, duration_s: fl
 
 def table_where(source: str, e: TimedEvent) -> str:
     """Where a mission's event was given, as a refusal names it: the flag that laid it (``--at 10:gps:off``), else
-    its table (``m.toml: events (t_s = 10, kind = gps)``)."""
-    if e.at is not None:
-        return e.at if CALLER_AT.fullmatch(e.at) else f"--at {e.at}"
-    return f"{source}: events (t_s = {e.t_s:g}, kind = {e.kind})"
+    its table (``m.toml: events (t_s = 10, kind = gps)``), with a Python caller's place in ``at=`` when it holds one
+    (``m.toml: events (t_s = 10, kind = gps; at[0], laid from Python)``)."""
+    if e.at is not None and not CALLER_AT.fullmatch(e.at):
+        return f"--at {e.at}"
+    laid = f"; {e.at}, {LAID_FROM_PYTHON}" if e.at is not None else ""
+    return f"{source}: events (t_s = {e.t_s:g}, kind = {e.kind}{laid})"
 
 
 # the devices the timeline sets to a state, each with the state it starts every flight in: the GPS and the compass

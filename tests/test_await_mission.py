@@ -1339,22 +1339,60 @@ def test_an_at_event_after_an_uploaded_missions_end_is_refused_naming_the_flag(t
 def test_an_at_table_from_python_after_an_uploaded_missions_end_is_refused_naming_its_place(tmp_path):
     """``sitl(..., await_mission=True, at=({...},))`` and a ground station's mission of 10.9 s: a table laid from
     Python keeps its place in ``at`` in the run's mission.toml (its ``at`` key, as a flag's keeps the flag), so the
-    children's start check and download refuse its event after the mission's end as the caller's own process does,
-    ``at[0]``. Until the third wave's fortieth session the children named ``.../mission.toml: events[1]`` (after the
-    mission's own event), and the caller's process ``command line: events[1]``: neither what the user wrote."""
+    children's start check and download refuse its event after the mission's end naming its place, ``at[0]``, as
+    the caller's own process does, beside the file's table it is in (``mission.toml: events[1] (at[0], laid from
+    Python)``: the file may have been edited by hand). Until the third wave's fortieth session the children named
+    ``.../mission.toml: events[1]`` (after the mission's own event), and the caller's process ``command line:
+    events[1]``: neither what the user wrote. The caller's own refusal of the table names its place alone."""
     own = {"t_s": 1.0, "kind": "gust", "duration_s": 2.0, "amplitude_mps": 3.0}
     table = {**own, "t_s": 20.0}
     laid = prepare(replace(at_rest(), events=(own,)), at=(table,))
     RunRecord(tmp_path, laid.mission).close()  # the run directory as the session writes it, read as its children do
     child = prepare(tmp_path / "mission.toml")
-    for flight in (laid, child):
+    for flight, source in ((laid, "command line"), (child, str(tmp_path / "mission.toml"))):
         with pytest.raises(ConfigError) as refused:
             uploaded_flight(flight, SHORT_ITEMS, SHORT_HOME, source="the vehicle's mission")
-        assert str(refused.value) == "at[0]: t_s: must be in [0, 10.919) s (before the mission's end), got 20"
+        assert str(refused.value) == (f"{source}: events[1] (at[0], laid from Python): t_s: must be in [0, 10.919) s "
+                                      "(before the mission's end), got 20")
+    with pytest.raises(ConfigError) as refused:
+        prepare(replace(at_rest(), duration_s=10.0), at=(own, table))
+    assert str(refused.value) == "at[1]: t_s: must be in [0, 10) s (before the mission's end), got 20"
     assert [e.get("at") for e in child.mission.events] == [None, "at[0]"]
     _, new = uploaded_flight(prepare(replace(at_rest(), events=(own,)), at=({**own, "t_s": 2.0},)), SHORT_ITEMS,
                              SHORT_HOME)
     assert [(e.t_s, e.at) for e in new.timeline] == [(1.0, None), (2.0, "at[0]")]
+
+
+def test_a_hand_edited_at_place_is_refused_naming_the_file(tmp_path, capsys):
+    """A file's ``[[events]]`` table whose ``at`` is a place in a Python caller's ``at=`` (``at = "at[7]"``, as a
+    run's mission.toml keeps one) is not checked against anything, as a flag's is: a hand edit of it flies or is
+    refused as the file's own, named where it is, the file and the table, beside the place it claims
+    (docs/weather.md). Until the third wave's fortieth session's fix it was refused naming ``at[7]`` alone, no file
+    (``bsst: at[7]: speed_mps: ...``). A place not as overrides writes one (``at[07]``, another script's digits) is
+    no place: refused naming ``events[0].at``."""
+    def mission(at: str, event: str) -> Path:
+        path = tmp_path / f"m{len(list(tmp_path.iterdir()))}.toml"
+        path.write_text(f'name = "hand"\nduration_s = 5.0\nevents = [{{ t_s = 1.0, {event}, at = "{at}" }}]\n'
+                        '[trajectory]\nkind = "sine"\n', encoding="utf-8")
+        return path
+
+    path = mission("at[7]", 'kind = "wind", speed_mps = 500.0')
+    assert main(["sim", str(path), "--no-plots", "--out", str(tmp_path / "run")]) == 2
+    assert capsys.readouterr().err == (f"bsst: {path}: events[0] (at[7], laid from Python): speed_mps: must be in "
+                                       "[0, 50] m/s, got 500\n")
+    assert not (tmp_path / "run").exists()
+    path = mission("at[7]", 'kind = "gps", state = "off"')  # refused by the flight, not the table: named the same
+    with pytest.raises(ConfigError) as refused:
+        prepare(path)
+    assert str(refused.value).startswith(f"{path}: events (t_s = 1, kind = gps; at[7], laid from Python): the "
+                                         "truth estimator")
+    for at in ("at[07]", "at[\u0667]", "at[-1]"):
+        path = mission(at, 'kind = "wind", speed_mps = 5.0')
+        with pytest.raises(ConfigError) as refused:
+            prepare(path)
+        assert str(refused.value).startswith(f"{path}: events[0].at: not an --at flag's T:KIND[:ARGS] nor a place "
+                                             "in at= (at[0])")
+    assert prepare(mission("at[7]", 'kind = "wind", speed_mps = 5.0')).timeline[0].at == "at[7]"
 
 
 def test_plan_text_reads_back_and_the_transfer_block_is_typed():

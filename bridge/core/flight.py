@@ -224,8 +224,8 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
     link_settings = _link_of(m, over)
     sensor_config, estimator_kind = _sensing_of(m, over, prof)
     _check_blackouts(m, over, link_settings)
-    # an event's refusal is named where it was given (plant.events.table_where): a flag's and a table laid from
-    # Python each by its TimedEvent.at (--at 10:gps:off, at[0]), else the mission's table
+    # an event's refusal is named where it was given (plant.events.table_where): a flag's by its TimedEvent.at
+    # (--at 10:gps:off), else the mission's table, with a table laid from Python's place in at= (at[0])
     wind, timeline = weather_of(m, prof, sensor_config, estimator_kind, effects.battery)
     link_settings = replace(link_settings, handovers=handovers_of(timeline, m))
     try:
