@@ -38,7 +38,8 @@ policies"): ``summary.json["ended_by"]`` names who ended the flight (the mission
 vehicle names for a disarm by command, the vehicle's failsafe, a child that died, the user), a
 lockstep session has ``summary.json["lockstep"]`` (held, or when and why the vehicle left it),
 and the safety policies of :mod:`bridge.record.policies` are checked over its trace and events
-(``summary.json["policies"]``); ``events.log`` ends with the same.
+(``summary.json["policies"]``); ``events.log`` says the same, in time order among the flight's events
+(docs/design.md).
 
 The parts: :class:`~bridge.session.session.Session` starts, supervises and stops the children
 (:mod:`bridge.session.children`) and reads their reports (:mod:`bridge.nodes.report`), acted on in the order things

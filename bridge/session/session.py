@@ -130,7 +130,7 @@ class Session:
             done = self._summary(time.monotonic() - self.t_wall0)
             arrays, summary = done.arrays, done.summary
         finally:
-            record.close()  # after the summary: events.log ends with how the run ended and its verdicts
+            record.close()  # after the summary: events.log gets the run's end and verdicts, then is sorted
         m = self.flight.mission  # --await-mission: the ground station's
         if keep:
             title = f"{m.name} ({m.controller}, {self.flight.profile.name}, SITL {summary['clock']})"
@@ -370,7 +370,7 @@ class Session:
         self.record.mission = flight.mission
         self.transfer = t = report.transfer
         # noted before its rows are joined: the download came before the flight's time 0, which may be long flown
-        # by the time this is read (it was stamped at the newest row joined: t=0.648 at --speed 0)
+        # by the time this is read (it was stamped at the newest row joined: t=0.468 at --speed 0)
         self._note("mission", f"the controller downloaded {report.items} items in {t.get('duration_s', 0):.2f} s "
                               f"({t.get('re_requests')} requests again): {flight.mission.duration_s:.2f} s to fly",
                    "session")

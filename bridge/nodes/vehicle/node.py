@@ -222,7 +222,7 @@ class Vehicle:
         return self.k / self.rate
 
     def _collided(self, why: str) -> None:
-        """Another vehicle of the fleet touched this one: the flight ends (:meth:`Commander.collided`), and its
+        """Another vehicle of the fleet touched this one: the flight ends (:meth:`Clocking.collided`), and its
         events are said at once (the session waits on the disarm to end the run)."""
         self.clocking.collided(why)
         self.announcer.drain()
@@ -258,7 +258,7 @@ class Vehicle:
         if wire is not None:
             vend.receive_command(t, command_from_wire(self.actuation, wire), t)
             self.targets.applied = (k, wire, recv)
-        ending = self.clocking.end_landing  # the mission's end landing, clocked as the mission (Commander)
+        ending = self.clocking.end_landing  # the mission's end landing, clocked as the mission (Clocking)
         if vend.held is not None and not ending:  # a fleet's one radio: its turn of step k (Gate.clear)
             vend.release()
             self.gate.took(k)  # type: ignore[union-attr]
