@@ -404,15 +404,19 @@ def stalls_text(stalls: Mapping[str, Any]) -> str:
 
 def notes_time(joined: Joined, events: Sequence[RunEvent], rate_hz: float) -> float:
     """The time (s) of a session's closing notes: the trace's last row, or the latest event in its control period
-    (``rate_hz``) if later; with no row (no mission's time 0: a session stopped, or a ground station's flight ended,
-    before the start) the latest event's, on the clock the events are on then (the vehicle's:
+    (``rate_hz``), its end included, if later; with no row (no mission's time 0: a session stopped, or a ground
+    station's flight ended, before the start) the latest event's, on the clock the events are on then (the vehicle's:
     :mod:`bridge.record.missionclock`), so that the notes come after what they sum up. A row is stamped at its
     period's start, the vehicle's events at the physics step they happen in: in real time the disarm that ends the
-    session's wait falls in the last row's period, and the notes were stamped up to a period before it."""
+    session's wait falls in the last row's period, and the notes were stamped up to a period before it. The period's
+    end is the step after the last row's, the mission's end: a vehicle leaving lockstep there (its controller silent
+    over the end) was reported by a note stamped a period before it (``the vehicle left lockstep at t=30.000 s`` at
+    29.996) until the third wave's fortieth session's fix."""
     if not joined.rows:
         return max((e.t for e in events if e.t is not None), default=0.0)
     last = joined.rows[-1].t
-    return max((last, *(e.t for e in events if e.t is not None and e.t < last + 1.0 / rate_hz)))
+    end = last + 1.0 / rate_hz + 1e-9  # (the period's end as a step time: k / rate may round either side of it)
+    return max((last, *(e.t for e in events if e.t is not None and e.t <= end)))
 
 
 def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events: Sequence[RunEvent],
