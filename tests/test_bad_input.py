@@ -1141,12 +1141,18 @@ def test_a_number_with_digit_separators_is_refused(capsys, argv, names) -> None:
      "bsst: --stats: an empty path (give one, or leave the flag out)"),
     (["link", "fit", ""], "bsst: the trace: an empty path (give one)"),
     (["link", "nope"], "bsst link: ACTION: invalid choice: 'nope' (choose from 'extract', 'fit', 'show')"),
+    (["vehicle", "--realtime", "--lockstep"], "bsst: --lockstep: not allowed with --realtime: give one of them"),
+    (["sweep", "{m}", "--offline", "--lockstep"], "bsst: --lockstep: not allowed with --offline: give one of them"),
+    (["sim", "{m}", "--link-trace", ""], "bsst: --link-trace: an empty path (give one, or leave the flag out)"),
+    (["relay", "--listen", "127.0.0.1:1", "--to", "127.0.0.1:2", "--up-link-trace", ""],
+     "bsst: --up-link-trace: an empty path (give one, or leave the flag out)"),
 ])
 def test_a_flags_bad_value_is_one_line_in_the_house_style(capsys, argv, line) -> None:
     """A value an argparse type refuses reads as bsst's own refusals do, ``bsst: --flag ...``, the flag named once,
     for every command; argparse's own words (an invalid choice, a missing value) follow the flag, or a positional's
     command. Until the third wave's fortieth session they read ``bsst sim: argument --vehicles: --vehicles must be
-    ...``: the flag twice, behind the command's name."""
+    ...``: the flag twice, behind the command's name; two flags of one group ``bsst: --lockstep: not allowed with
+    argument --realtime``, and an empty trace ``bsst: --link-trace : is not a regular file`` (as --out's now)."""
     said = _refused(capsys, [a.format(m=MISSION_DIR / "sine.toml") for a in argv], "bsst")
     assert said == line and said.count(argv[-2]) <= 1, said
 

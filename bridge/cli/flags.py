@@ -40,6 +40,9 @@ UNRECOGNIZED_IN = "_bsst_unrecognized_in"  # on the namespace: the (sub-)parser 
 VALUE_NOT_FLAG = re.compile(r"^-(\.?\d|(inf|nan)([:,=]|$))", re.IGNORECASE)
 
 
+CLASH = "not allowed with argument "  # argparse's words for two flags of a mutually exclusive group
+
+
 class _Parser(argparse.ArgumentParser):
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         kwargs.setdefault("exit_on_error", False)  # a bad value raises here, to be said in the house's words (refusal)
@@ -76,13 +79,16 @@ class _Parser(argparse.ArgumentParser):
         """A bad value's line as bsst's own refusals read: a flag type's words alone (they name the flag: ``bsst:
         --vehicles must be in [1, 64], got 0``), argparse's own after the flag (``bsst: --at: expected one
         argument``), or a positional's after its command (``bsst link: ACTION: invalid choice: ...``). Argparse said
-        ``bsst sim: argument --vehicles: --vehicles must be ...`` (until the third wave's fortieth session)."""
+        ``bsst sim: argument --vehicles: --vehicles must be ...`` (until the third wave's fortieth session). Two
+        flags of a mutually exclusive group: ``bsst: --lockstep: not allowed with --realtime: give one of them``."""
         if isinstance(exc.__context__, argparse.ArgumentTypeError):  # (raised by a type of flags.py, which names it)
             return f"bsst: {exc.message}"
-        name = exc.argument_name
+        name, message = exc.argument_name, exc.message
         if name is None:
-            return f"{self.prog}: {exc.message}"
-        return f"{'bsst' if name.startswith('-') else self.prog}: {name}: {exc.message}"
+            return f"{self.prog}: {message}"
+        if message.startswith(CLASH):  # two flags of one group (--realtime --lockstep): named as flags are
+            message = f"not allowed with {message.removeprefix(CLASH)}: give one of them"
+        return f"{'bsst' if name.startswith('-') else self.prog}: {name}: {message}"
 
     def flag_hint(self, extras: Sequence[str]) -> str:
         """``; did you mean --delay?`` for the first unknown flag of ``extras`` close to one of this parser's
@@ -340,8 +346,9 @@ def noise_scale(flag: str) -> Callable[[str], float]:
 
 
 def existing_file(flag: str, text: str) -> str:
-    """``text`` as an absolute path to a regular file (relative: to the working directory)."""
-    p = Path(text).expanduser()
+    """``text`` as an absolute path to a regular file (relative: to the working directory); an empty one refused as
+    :func:`path_given` refuses it (it read ``--link-trace : is not a regular file``)."""
+    p = Path(path_given(flag)(text)).expanduser()
     why = unreachable(p)
     if why:
         raise argparse.ArgumentTypeError(f"{flag} {text}: cannot read ({why})")
