@@ -26,7 +26,7 @@ from pathlib import Path
 import pytest
 
 from bridge.cli import main
-from bridge.record.runlog import EventLog
+from bridge.record.runlog import EventLog, write_text_atomic
 from bridge.session import instance_slot, sitl
 from missions import Mission, Sine
 from tests.sitlkit import ENV, ROOT, Proc, clean_exit, run_bsst
@@ -326,6 +326,23 @@ def test_an_event_with_no_time_known_is_written_with_none(tmp_path: Path) -> Non
     assert (tmp_path / "events.log").read_text().splitlines() == [
         "t=n/a failsafe: the vehicle's failsafe took over (HEARTBEAT system_status CRITICAL) [controller]",
         "t=1.500 landed: x [vehicle]"]
+
+
+def test_an_events_log_that_cannot_be_rewritten_leaves_no_temporary_file(tmp_path: Path) -> None:
+    """events.log's rewrite in time order fails after its temporary file is written (the rename refused: a directory
+    stands where the log was): the temporary file is removed, nothing beside the run's files (until the third wave's
+    fortieth session's fix ``.events.log.tmp<pid>`` stayed), and the close says nothing. (A read-only directory
+    would not do: the tests may run as root.)"""
+    log = EventLog(tmp_path / "events.log")
+    log.event(2.0, "landed", "x", source="vehicle")
+    log.event(1.0, "ended", "y", source="session")  # out of order: close rewrites the file
+    (tmp_path / "events.log").unlink()
+    (tmp_path / "events.log").mkdir()
+    log.close()
+    assert [p.name for p in tmp_path.iterdir()] == ["events.log"] and (tmp_path / "events.log").is_dir()
+    with pytest.raises(IsADirectoryError):
+        write_text_atomic(tmp_path / "events.log", "z\n")
+    assert [p.name for p in tmp_path.iterdir()] == ["events.log"]
 
 
 def test_a_perfect_loopback_link_loses_nothing_and_says_where_every_packet_went(tmp_path: Path) -> None:

@@ -15,6 +15,7 @@ row), and ``summary.json`` is written to a temporary name and renamed.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -319,14 +320,20 @@ def write_json_atomic(path: str | Path, obj: Any) -> None:
 
 def write_text_atomic(path: str | Path, text: str) -> None:
     """Write ``text`` to ``path`` via a temporary file (flushed to disk) and rename: whatever
-    kills the process, ``path`` is the old file, the new one complete, or absent."""
+    kills the process, ``path`` is the old file, the new one complete, or absent. A write or rename that fails
+    removes the temporary file (it was left beside the run's files, ``.events.log.tmp<pid>``)."""
     path = Path(path)
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    with open(tmp, "w") as f:
-        f.write(text)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "w") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:  # (an interrupt too: only a kill leaves it)
+        with contextlib.suppress(OSError):
+            tmp.unlink(missing_ok=True)
+        raise
 
 
 def _jsonable(v: Any) -> Any:
