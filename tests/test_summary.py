@@ -106,8 +106,7 @@ def test_the_events_are_listed_in_time_order_the_closing_notes_among_them() -> N
     """The session's closing notes are stamped at the trace's last row but made last, after the vehicle's end landing
     (its ``end``, ``landed``, ``disarmed``, ``mode``): summary.json lists every event in time order (a printed
     summary showed ``ended`` at 0.996 s after the disarm at 3 s); events of one time keep the order recorded (the
-    vehicle's ``end`` before the controller's answer to it, the notes after both: the ``end`` at 1.0 s is at the
-    last row's period's end, and the notes are not before it); one with no time keeps its place."""
+    vehicle's ``end`` before the controller's answer to it); one with no time keeps its place."""
     vehicle, controller = ends()
     end = RunEvent(1.0, "end", "mission over: LAND", "vehicle")
     answer = RunEvent(1.0, "end", "mission over: the vehicle lands", "controller")
@@ -116,18 +115,20 @@ def test_the_events_are_listed_in_time_order_the_closing_notes_among_them() -> N
     disarmed = RunEvent(3.3, "disarmed", "landed: disarmed", "vehicle", ITSELF)
     recorded = [ARMED, end, answer, landed, untimed, disarmed]
     out = session_summary(FLIGHT, facts(), joined(), recorded, vehicle, controller)
+    last_row = round((STEPS - 1) / RATE, 6)
     assert [(e["t"], e["kind"], e.get("source")) for e in out.summary["events"]] == [
-        (0.0, "armed", "vehicle"), (1.0, "end", "vehicle"), (1.0, "end", "controller"), (1.0, "ended", "session"),
+        (0.0, "armed", "vehicle"), (last_row, "ended", "session"), (1.0, "end", "vehicle"), (1.0, "end", "controller"),
         (1.3, "landed", "vehicle"), (None, "warning", "controller"), (3.3, "disarmed", "vehicle")]
     assert in_time_order([untimed, landed, ARMED]) == [untimed, ARMED, landed]  # (recorded before any time: first)
 
 
-def test_the_closing_notes_are_not_before_an_event_at_the_end_of_the_last_rows_period() -> None:
+def test_the_closing_notes_are_not_before_the_vehicle_leaving_lockstep_at_the_missions_end() -> None:
     """The vehicle leaves lockstep at the mission's end (1.000 s: its controller silent over it), the step after the
-    trace's last row (0.996 s): the notes saying so are stamped at it, after it (``bsst sitl missions/sine.toml
+    trace's last row (0.996 s): the notes reporting it are stamped at it, after it (``bsst sitl missions/sine.toml
     --blackout 27.5:3``: ``lockstep: not a lockstep run: the vehicle left lockstep at t=30.000 s`` at 29.996, before
     the vehicle's own ``t=30.000 lockstep:``, until the third wave's fortieth session's fix). An event a period later
-    is after the notes."""
+    is after the notes; a vehicle's ``end`` there, leaving nothing, after them as before
+    (:func:`test_the_events_are_listed_in_time_order_the_closing_notes_among_them`)."""
     vehicle, controller = ends(rc=1)
     left = RunEvent(1.0, "lockstep", "controller silent for 0.5 s of wall time", "vehicle")
     later = RunEvent(1.004, "landed", "landing detected", "vehicle")

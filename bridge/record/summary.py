@@ -402,21 +402,21 @@ def stalls_text(stalls: Mapping[str, Any]) -> str:
             f"{stalls['worst_ms']:g} ms ({first}{more}): outages no link model asked for")
 
 
-def notes_time(joined: Joined, events: Sequence[RunEvent], rate_hz: float) -> float:
+def notes_time(joined: Joined, events: Sequence[RunEvent], rate_hz: float, reported: Sequence[float] = ()) -> float:
     """The time (s) of a session's closing notes: the trace's last row, or the latest event in its control period
-    (``rate_hz``), its end included, if later; with no row (no mission's time 0: a session stopped, or a ground
-    station's flight ended, before the start) the latest event's, on the clock the events are on then (the vehicle's:
+    (``rate_hz``) if later, or the latest of ``reported`` (the times of the events the notes report) if later
+    still; with no row (no mission's time 0: a session stopped, or a ground station's flight ended, before the
+    start) the latest event's, on the clock the events are on then (the vehicle's:
     :mod:`bridge.record.missionclock`), so that the notes come after what they sum up. A row is stamped at its
     period's start, the vehicle's events at the physics step they happen in: in real time the disarm that ends the
-    session's wait falls in the last row's period, and the notes were stamped up to a period before it. The period's
-    end is the step after the last row's, the mission's end: a vehicle leaving lockstep there (its controller silent
-    over the end) was reported by a note stamped a period before it (``the vehicle left lockstep at t=30.000 s`` at
-    29.996) until the third wave's fortieth session's fix."""
+    session's wait falls in the last row's period, and the notes were stamped up to a period before it. A vehicle
+    leaving lockstep at the mission's end (its controller silent over it), the step after the last row's, was
+    reported by a note stamped a period before it (``the vehicle left lockstep at t=30.000 s`` at 29.996) until the
+    third wave's fortieth session's fix: the leaving is ``reported``."""
     if not joined.rows:
-        return max((e.t for e in events if e.t is not None), default=0.0)
+        return max((*(e.t for e in events if e.t is not None), *reported), default=0.0)
     last = joined.rows[-1].t
-    end = last + 1.0 / rate_hz + 1e-9  # (the period's end as a step time: k / rate may round either side of it)
-    return max((last, *(e.t for e in events if e.t is not None and e.t <= end)))
+    return max((last, *(e.t for e in events if e.t is not None and e.t < last + 1.0 / rate_hz), *reported))
 
 
 def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events: Sequence[RunEvent],
@@ -488,7 +488,8 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
     texts += [("policy", violation_text(v)) for v in violated]
     if (stalls := stalls_of(summary)) is not None:
         texts.append(("stall", stalls_text(stalls)))
-    t = notes_time(joined, events, m.rate_hz)
+    left = [lockstep["left_at_s"]] if lockstep is not None and not lockstep["held"] else []  # (its note's)
+    t = notes_time(joined, events, m.rate_hz, left)
     notes = [RunEvent.at(t, kind, text, "session") for kind, text in texts]
     summary["events"] = [e.as_dict() for e in in_time_order((*events, *notes))]  # the notes in their time too
     return SessionSummary(arrays, summary, notes)
