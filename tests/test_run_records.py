@@ -345,6 +345,23 @@ def test_an_events_log_that_cannot_be_rewritten_leaves_no_temporary_file(tmp_pat
     assert [p.name for p in tmp_path.iterdir()] == ["events.log"]
 
 
+def test_run_files_are_written_in_utf_8_whatever_the_locale(tmp_path: Path) -> None:
+    """events.log is appended in UTF-8 and rewritten in time order at close by ``write_text_atomic``, which
+    wrote in the locale's encoding: under an ASCII locale (no UTF-8 mode, no coercion) a line with a non-ASCII
+    character raised UnicodeEncodeError out of the close (until the third wave's fortieth session)."""
+    script = (f"from bridge.record.runlog import EventLog\n"
+              f"log = EventLog({str(tmp_path / 'events.log')!r})\n"
+              "log.event(2.0, 'landed', 'caf\\u00e9', source='vehicle')\n"
+              "log.event(1.0, 'ended', '\\u00b0', source='session')\n"
+              "log.close()\n")
+    env = {**ENV, "LC_ALL": "POSIX", "PYTHONUTF8": "0", "PYTHONCOERCECLOCALE": "0"}
+    res = subprocess.run([sys.executable, "-c", script], cwd=ROOT, env=env, capture_output=True, text=True,
+                         timeout=60)
+    assert res.returncode == 0, res.stderr
+    lines = (tmp_path / "events.log").read_bytes().decode("utf-8").splitlines()
+    assert [ln.split(" ", 1)[0] for ln in lines] == ["t=1.000", "t=2.000"] and "caf\u00e9" in lines[1], lines
+
+
 def test_a_perfect_loopback_link_loses_nothing_and_says_where_every_packet_went(tmp_path: Path) -> None:
     """``bsst sitl --realtime`` on a perfect link: lost 0 both ways, and what was sent but not delivered is
     named (in flight at the ends, refused, shed, dropped by the kernel), in summary.json and the printout."""

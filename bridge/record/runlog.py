@@ -325,7 +325,7 @@ def write_text_atomic(path: str | Path, text: str) -> None:
     path = Path(path)
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
     try:
-        with open(tmp, "w") as f:
+        with open(tmp, "w", encoding="utf-8") as f:
             f.write(text)
             f.flush()
             os.fsync(f.fileno())
@@ -344,7 +344,7 @@ def _jsonable(v: Any) -> Any:
 
 def read_trace(path: str | Path) -> dict[str, Any]:
     """Read a ``trace.csv`` back into numpy arrays by column, ignoring a torn last line."""
-    with open(path) as f:
+    with open(path, encoding="utf-8") as f:
         header = f.readline().strip().split(",")
         rows = []
         for line in f:

@@ -288,7 +288,7 @@ def _open_dir(spec: Sweep, out: str | Path | None, resume: bool, overwrite: bool
     for stale in path.glob("map_*.png"):
         stale.unlink()
     text = dump_toml(spec.mission.to_dict())
-    (path / MISSION_TOML).write_text(text)
+    (path / MISSION_TOML).write_text(text, encoding="utf-8")
     records = {MISSION_HASH: _sha256(text.encode()), INPUT_HASHES: input_hashes(ident), ENGINES: []}
     write_json_atomic(path / SWEEP_JSON, ident | records)
     return path, [], []

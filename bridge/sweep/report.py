@@ -319,7 +319,7 @@ def write_report(path: Path, rows: Sequence[Mapping[str, Any]], meta: Mapping[st
                   "the first one:", "", "```sh", reproduce(rows[0], swept), "```", ""]
     out = path / REPORT_MD
     tmp = path / REPORT_TMP
-    tmp.write_text("\n".join(lines))
+    tmp.write_text("\n".join(lines), encoding="utf-8")
     tmp.replace(out)
     return out
 
