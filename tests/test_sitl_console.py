@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.core.clock import lockstep_pace
@@ -25,6 +26,7 @@ from bridge.mavlink.endpoint import GCS_PORT
 from bridge.nodes.report import Ready
 from bridge.session import instance_slot
 from bridge.session.announce import pace_words, vehicle_up_line
+from bridge.session.children import free_udp_port
 from tests.sitlkit import ROOT, Proc, run_bsst
 from tests.waiting import wait_for
 
@@ -75,6 +77,46 @@ def test_await_mission_says_at_once_where_a_ground_station_connects_and_that_it_
     summary = json.loads((out / "summary.json").read_text())
     assert summary["outcome"] == "aborted" and summary["sitl"]["speed"] == 1.0, summary["sitl"]  # as said
     assert sum(ln.startswith(UP) for ln in sitl.lines) == 1, sitl.lines
+
+
+@pytest.mark.parametrize("form", ["udpin:", "udp:"])
+def test_a_bound_ground_station_link_says_to_send_to_it_and_a_ground_station_doing_so_hears_the_vehicle(
+        tmp_path: Path, form: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--gcs udpin:HOST:PORT`` (``udp:`` the same) binds the vehicle's GCS link there: the line says a ground
+    station sends there (udpout), not that it listens there (the port is the vehicle's: a ground station binding
+    it met "Address already in use"); pymavlink doing what the line says hears that vehicle's heartbeats."""
+    port = free_udp_port()
+    out = tmp_path / "run"
+    with instance_slot() as n:
+        sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--gcs", f"{form}127.0.0.1:{port}",
+                         "--out", str(out), "--no-plots", cwd=ROOT)
+        gcs = None
+        try:
+            line = sitl.wait_line(lambda s: s.startswith(UP), timeout=60)
+            said = f"mavproxy.py --master=udpout:127.0.0.1:{port}; MAVSDK udpout://127.0.0.1:{port})"
+            assert line.startswith(f"{UP}{n + 1}: a ground station connects by sending to UDP 127.0.0.1:{port}, "
+                                   "where the vehicle listens and answers with its telemetry (") and said in line, line
+            monkeypatch.setenv("MAVLINK20", "1")  # the vehicle takes MAVLink 2 only
+            gcs = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=255, source_component=190,
+                                             dialect="common")  # what the line says
+            beats: list[Any] = []
+
+            def heartbeat() -> bool:
+                gcs.mav.heartbeat_send(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+                m = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=0.5)
+                if m is not None and m.get_srcSystem() == n + 1:
+                    beats.append(m)
+                return bool(beats)
+
+            wait_for(heartbeat, 30.0, f"a HEARTBEAT of system {n + 1} answering udpout:127.0.0.1:{port}")
+            sitl.p.send_signal(signal.SIGINT)
+            assert sitl.p.wait(timeout=60) == 1
+        finally:
+            sitl.stop()
+            if gcs is not None:
+                gcs.close()
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["outcome"] == "aborted" and summary["sitl"]["gcs"] == f"{form}127.0.0.1:{port}", summary["sitl"]
 
 
 def _event_times(stdout: str) -> list[float]:

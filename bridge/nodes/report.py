@@ -52,9 +52,10 @@ class Kind(StrEnum):
 class Ready:
     """A child is up. ``node``: ``vehicle``, ``controller`` or ``relay``; the rest as the node has them:
 
-    - vehicle: ``listen`` (HOST:PORT of its controller link), ``gcs`` (where its GCS telemetry goes, or
-      None), ``sysid``, ``clock`` (``lockstep``/``realtime``), ``profile``, ``controller_from`` (the one
-      address it hears its controller from, or None);
+    - vehicle: ``listen`` (HOST:PORT of its controller link), ``gcs`` (HOST:PORT of its GCS link, or None) and
+      ``gcs_mode`` (``udpout``: it sends its telemetry there; ``udpin``: it is bound there, the port it got, and a
+      ground station sends to it first), ``sysid``, ``clock`` (``lockstep``/``realtime``), ``profile``,
+      ``controller_from`` (the one address it hears its controller from, or None);
     - controller: ``vehicle`` (HOST:PORT it sends to), ``local`` (its own), ``clock``;
     - relay: ``listen`` (its front), ``to`` (where it forwards), ``back`` (the port it forwards from),
       ``client`` (the controller side, or None: the first sender), ``up`` and ``down`` (each direction's
@@ -64,6 +65,7 @@ class Ready:
     node: str
     listen: str | None = None
     gcs: str | None = None
+    gcs_mode: str | None = None
     sysid: int | None = None
     clock: str | None = None
     profile: str | None = None

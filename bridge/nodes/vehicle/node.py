@@ -143,9 +143,11 @@ class Vehicle:
 
     def run(self) -> None:
         """Serve until :meth:`stop`: step the clock, answer the links, stream telemetry."""
-        pinned = self.authority.pinned
-        self._report(Ready("vehicle", listen=f"{self.link.local[0]}:{self.link.local[1]}",
-                           gcs=self.gcs.address.hostport if self.gcs is not None else None, sysid=self.cfg.sysid,
+        pinned, g = self.authority.pinned, self.gcs
+        # a bound GCS link says the port it got (udpin:HOST:0 too), where a ground station sends to it
+        gcs = None if g is None else g.address.hostport if g.address.mode == "udpout" else f"{g.local[0]}:{g.local[1]}"
+        self._report(Ready("vehicle", listen=f"{self.link.local[0]}:{self.link.local[1]}", gcs=gcs,
+                           gcs_mode=g.address.mode if g is not None else None, sysid=self.cfg.sysid,
                            clock=self.cfg.clock, profile=self.flight.profile.name,
                            controller_from=f"{pinned[0]}:{pinned[1]}" if pinned is not None else None))
         try:
