@@ -20,16 +20,20 @@ from typing import Any
 
 import numpy as np
 import pytest
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import common as M
 
 from bridge.cli import main
 from bridge.cli.runreport import report_fleet
+from bridge.mavlink.endpoint import GCS_PORT
 from bridge.record.halves import count_records
+from bridge.record.interventions import intervention_text
 from bridge.record.separation import Watch, judge_traces
 from bridge.session import instance_slot
 from bridge.swarm import FleetRun, simulate, sitl
 from missions import MISSION_DIR
 from params import ConfigError
-from tests.sitlkit import Proc, csv_rows
+from tests.sitlkit import ENV, Bsst, Proc, csv_rows
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes
@@ -253,3 +257,47 @@ def test_a_vehicle_killed_or_frozen_in_flight_is_dropped_and_the_other_flies_on(
 def test_a_fleet_awaiting_a_ground_stations_mission_is_refused() -> None:
     with pytest.raises(ConfigError, match="--vehicles with --await-mission"):
         sitl(None, vehicles=2, await_mission=True)
+
+
+def _from(gcs: Any, kind: str, sysid: int, fleet: Bsst) -> Any:
+    """The next message of ``kind`` from system ``sysid`` (30 s for each), the fleet's output if none comes."""
+    while (m := gcs.recv_match(type=kind, blocking=True, timeout=30)) is None or m.get_srcSystem() != sysid:
+        assert m is not None, fleet.communicate(timeout=60)
+    return m
+
+
+def test_a_fleet_not_flown_as_asked_names_why_for_that_vehicle_on_stderr_and_under_its_line(tmp_path: Path,
+                                                                                          monkeypatch) -> None:
+    """A lockstep fleet of two (2 s of sine at 2x real time) whose vehicle 1 a ground station changes a parameter of
+    (COM_DISARM_LAND, harmless: the landing after the mission): both complete, the separation holds, exit 1, and
+    stderr says why as one vehicle's run does, for that vehicle (``bsst sitl: vehicle 1: not flown as asked: ...``),
+    the printed summary under its line, with each vehicle's policies. Until the third wave's fortieth session a
+    fleet said nothing of it (a real-time fleet the machine stalled: exit 1, its reason only in the events)."""
+    mission = short_sine(tmp_path, 2.0)
+    out = tmp_path / "run"
+    monkeypatch.setenv("MAVLINK20", "1")
+    with _two_instances() as n:
+        gcs = mavutil.mavlink_connection(f"udpin:127.0.0.1:{GCS_PORT + n}", source_system=255, source_component=190,
+                                         dialect="common")  # the fleet's one ground-station port
+        s = Bsst("sitl", mission, "--vehicles", "2", "--formation", "line:2", "--instance", n, "--speed", "2",
+                 "--out", out, "--no-plots", env=ENV)
+        try:
+            _from(gcs, "HEARTBEAT", n + 1, s)
+            gcs.mav.param_set_send(n + 1, 1, b"COM_DISARM_LAND", 1.0, M.MAV_PARAM_TYPE_REAL32)
+            m = _from(gcs, "PARAM_VALUE", n + 1, s)
+            assert m.param_id == "COM_DISARM_LAND" and m.param_value == 1.0, m
+            stdout, err = s.communicate(timeout=120)
+        finally:
+            if s.poll() is None:
+                s.kill()
+            gcs.close()
+    fleet = json.loads((out / "summary.json").read_text())
+    assert s.returncode == 1 and fleet["outcome"] == "completed" and fleet["policies"][0]["ok"], (stdout, err)
+    [change] = json.loads((out / "vehicle-1" / "summary.json").read_text())["interventions"]
+    assert not json.loads((out / "vehicle-2" / "summary.json").read_text()).get("interventions")
+    said = f"not flown as asked: {intervention_text(change)}"
+    assert [ln for ln in err.splitlines() if not ln.startswith("bsst sitl: vehicle up")] == \
+        [f"bsst sitl: vehicle 1: {said}"], err
+    one, two = stdout.split("\nvehicle 2 ")
+    assert f"\n  {said}\n" in one and said not in two, stdout
+    assert "\n  policies: all " in one and "\n  policies: all " in two, stdout

@@ -46,11 +46,7 @@ def report_fleet(run: Any, command: str) -> int:
             where = "its own trajectory" if v["trajectory"] == "own" else f"offset {v['offset']} m"
             w(f"vehicle {v['id']} (sysid {v['sysid']}, {v['profile']}, {where}): {v['outcome']}, "
               f"3-D RMS {rms}\n")
-            w("".join("  " + line for line in event_lines(r.summary.get("events") or [])))  # its faults, gusts, end
-            for c in (v.get("link") or {}).get("jitter_capped") or ():  # flown, not as asked (docs/links.md)
-                from bridge.link.model import jitter_capped_text  # lazy: start-up time
-
-                w(f"  link {jitter_capped_text(c)}\n")
+            w("".join("  " + line for line in _vehicle_lines(r.summary)))
         for d, r in ((d, s["radio"][d]) for d in ("up", "down") if "radio" in s):
             cap = f"of {r['rate_bps']:g} B/s (occupancy {r['occupancy']:.2f})" if r["rate_bps"] else "(no rate cap)"
             w(f"one radio, {d}: {r['share_bps']:.0f} B/s {cap}, {r['lost_queue']} queue drops; by vehicle "
@@ -94,6 +90,9 @@ def report_fleet(run: Any, command: str) -> int:
             said = (f" (touched vehicle {c['with']} at step {c['step']}, t={c['t']:.3f} s{went})" if c
                     else f": ended by {eb['who']}: {eb['how']}" if eb else "")
             print(f"bsst {command}: vehicle {v['id']}: {v['outcome']}{said}", file=sys.stderr)
+    for v, r in zip(s["vehicles"], run.runs, strict=True):  # as one vehicle's run names them (its policies: below)
+        for why in not_as_asked(r.summary):
+            print(f"bsst {command}: vehicle {v['id']}: {why}", file=sys.stderr)
     for p in s.get("policies") or []:
         if p.get("not_judged") is not None and p.get("why") == p["not_judged"]:  # held while judged, not throughout
             print(f"bsst {command}: policy {p['name']} {p['not_judged']}", file=sys.stderr)
@@ -108,36 +107,48 @@ def report_fleet(run: Any, command: str) -> int:
     return EXIT_OK if ok else EXIT_FAILED
 
 
+def _vehicle_lines(s: dict[str, Any]) -> list[str]:
+    """What a fleet's printed summary says under a vehicle's line, as one vehicle's summary says it: why it was not
+    flown as asked, its link, its events (its faults, gusts, failsafe, end), its policies."""
+    return ([f"{why}\n" for why in not_as_asked(s)] + link_lines(s.get("link") or {})
+            + event_lines(s.get("events") or []) + policy_lines(s.get("policies") or []))
+
+
 def report_run(run: Any, command: str) -> int:
     """Print a run's summary, name each violated policy on stderr; its exit status (0: a clean completion)."""
-    from bridge.record.ending import not_taken_text  # lazy: numpy
-    from bridge.record.interventions import intervention_text, unconfirmed_text  # lazy: numpy
-    from bridge.record.policies import run_ok, stalls_of, violation_text  # lazy: numpy
-    from bridge.record.summary import stalls_text  # lazy: numpy
+    from bridge.record.policies import run_ok, violation_text  # lazy: numpy
 
     try:
         print_summary(run.summary, run.path)
         sys.stdout.flush()
     except BrokenPipeError:  # stdout closed early (bsst sim ... | head): the run is on disk, its status stands
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-    lock = run.summary.get("lockstep") or {"held": True}
-    if not lock.get("held", True):
-        print(f"bsst {command}: not a lockstep run: the vehicle left lockstep at t={lock['left_at_s']:.3f} s "
-              f"({lock['why']})", file=sys.stderr)
-    for i in run.summary.get("interventions") or []:  # exit 1: the run did not fly as the command asked
-        print(f"bsst {command}: not flown as asked: {intervention_text(i)}", file=sys.stderr)
-    for p in run.summary.get("param_at") or []:
-        if not p.get("confirmed"):
-            print(f"bsst {command}: not flown as asked: {unconfirmed_text(p)}", file=sys.stderr)
-    if not (run.summary.get("end") or {}).get("taken", True):  # its end action lost: it came down by its failsafe
-        print(f"bsst {command}: not flown as asked: {not_taken_text(run.summary['end'])}", file=sys.stderr)
-    stalls = stalls_of(run.summary)
-    if stalls is not None:
-        print(f"bsst {command}: {stalls_text(stalls)}", file=sys.stderr)
+    for why in not_as_asked(run.summary):
+        print(f"bsst {command}: {why}", file=sys.stderr)
     for v in run.summary.get("policies") or []:
         if not v.get("ok"):
             print(f"bsst {command}: policy {violation_text(v)}", file=sys.stderr)
     return EXIT_OK if run_ok(run.summary) else EXIT_FAILED
+
+
+def not_as_asked(s: dict[str, Any]) -> list[str]:
+    """Why a run (one vehicle's) was not flown as the command asked, beyond its outcome and its policies, one text
+    each (exit 1): it left lockstep, someone else changed it, a scheduled change went unconfirmed, the machine
+    stalled it in real time, the vehicle never took the mission's end action."""
+    from bridge.record.ending import not_taken_text  # lazy: numpy
+    from bridge.record.interventions import intervention_text, unconfirmed_text  # lazy: numpy
+    from bridge.record.policies import stalls_of  # lazy: numpy
+    from bridge.record.summary import stalls_text  # lazy: numpy
+
+    lock = s.get("lockstep") or {"held": True}
+    said = ([f"not a lockstep run: the vehicle left lockstep at t={lock['left_at_s']:.3f} s ({lock['why']})"]
+            if not lock.get("held", True) else [])
+    said += [f"not flown as asked: {intervention_text(i)}" for i in s.get("interventions") or []]
+    said += [f"not flown as asked: {unconfirmed_text(p)}" for p in s.get("param_at") or [] if not p.get("confirmed")]
+    if not (s.get("end") or {}).get("taken", True):  # its end action lost: it came down by its failsafe
+        said.append(f"not flown as asked: {not_taken_text(s['end'])}")
+    stalls = stalls_of(s)
+    return said + ([stalls_text(stalls)] if stalls is not None else [])
 
 
 def event_lines(events: list[dict[str, Any]]) -> list[str]:
@@ -152,10 +163,8 @@ def event_lines(events: list[dict[str, Any]]) -> list[str]:
 
 def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
     """The one-screen summary printed after a run."""
-    from bridge.link.model import jitter_capped_text  # lazy: start-up time
     from bridge.record.ending import not_taken_text  # lazy: numpy
     from bridge.record.metrics import air_text  # lazy: numpy (loaded by the run this sums up)
-    from bridge.record.policies import violation_text  # lazy: numpy
     from bridge.record.summary import stalls_text  # lazy: numpy
 
     out = stream or sys.stdout
@@ -196,7 +205,20 @@ def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
     w("input  " + ("  ".join(inputs) or "n/a (nothing flew)") + "\n")
     if s.get("wind"):  # the air flown (its events are the event lines)
         w(air_text(s["wind"]) + "\n")
-    link = s.get("link", {})
+    w("".join(link_lines(s.get("link", {}))))
+    for line in event_lines(s.get("events", [])):
+        w(line)
+    w("".join(policy_lines(s.get("policies") or [])))
+    if path is not None:
+        w(f"run directory: {path}\n")
+
+
+def link_lines(link: dict[str, Any]) -> list[str]:
+    """A run's link as its printed summary says it: each direction's counts and delays when the link model did
+    anything (lost, duplicated, reordered, held, delayed), and each jitter it capped (docs/links.md)."""
+    from bridge.link.model import jitter_capped_text  # lazy: start-up time
+
+    lines = []
     if any(L.get("lost") or L.get("duplicated") or L.get("reordered") or L.get("in_flight")  # (held: a delay)
            or (L.get("delay_ms") or {}).get("max") for L in (link.get("up", {}), link.get("down", {}))):
         for d in ("up", "down"):
@@ -205,16 +227,17 @@ def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
             more = "".join(f" {name} {L[key]}" for key, name in (("in_flight", "in flight"), ("shed", "shed"),
                                                                   ("dropped_by_kernel", "dropped by kernel"))
                            if key in L)
-            w(f"link {d:4}: sent {L['sent']} delivered {L['delivered']} lost {L['lost']}{more} dup {L['duplicated']} "
-              f"reordered {L['reordered']} delay p50 {ms['p50']} ms p99 {ms['p99']} ms max {ms['max']} ms\n")
-    for c in link.get("jitter_capped") or []:
-        w(f"link {jitter_capped_text(c)}\n")
-    for line in event_lines(s.get("events", [])):
-        w(line)
-    policies = s.get("policies") or []
+            lines.append(f"link {d:4}: sent {L['sent']} delivered {L['delivered']} lost {L['lost']}{more} dup "
+                         f"{L['duplicated']} reordered {L['reordered']} delay p50 {ms['p50']} ms p99 {ms['p99']} ms "
+                         f"max {ms['max']} ms\n")
+    return lines + [f"link {jitter_capped_text(c)}\n" for c in link.get("jitter_capped") or []]
+
+
+def policy_lines(policies: list[dict[str, Any]]) -> list[str]:
+    """A run's policies as its printed summary says them: that all hold, or each one violated."""
+    from bridge.record.policies import violation_text  # lazy: numpy
+
     broken = [v for v in policies if not v.get("ok")]
-    if policies:
-        w(f"policies: all {len(policies)} hold\n" if not broken else
-          "".join(f"policy {violation_text(v)}\n" for v in broken))
-    if path is not None:
-        w(f"run directory: {path}\n")
+    if broken:
+        return [f"policy {violation_text(v)}\n" for v in broken]
+    return [f"policies: all {len(policies)} hold\n"] if policies else []
