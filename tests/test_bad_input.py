@@ -645,6 +645,16 @@ IDLE_FLAGS = [  # (argv after the command's mission, what the one line names): a
     # string" (until the same session), not for the noise it would not change
     (["margin", "--over", "delay_ms", "--until", "rms=0.1", "--controller", "bsst,smc", "--noise", "2"],
      "--noise 2: the estimator is 'truth'"),
+    # --sensors where every vehicle flies the true state, its sensors not sampled (docs/sensors.md; until the third
+    # wave's fortieth session bsst sim --sensors gnss flew byte for byte as without it): named with what to give
+    (["sim", "--sensors", "gnss"], "--sensors gnss: the estimator is 'truth' (the true state: the sensors are not "
+                                   "read), so the sensor set changes nothing; give --estimator raw or ekf"),
+    (["sitl", "--vehicles", "2", "--sensors", "mocap"], "--sensors mocap: the estimator is 'truth'"),
+    (["vehicle", "--sensors", "gnss"], "--sensors gnss: the estimator is 'truth'"),
+    (["sweep", "--loss", "0,5", "--sensors", "gnss"], "bsst sweep: --sensors gnss: the estimator is 'truth'"),
+    (["sweep", "--estimator", "truth", "--sensors", "gnss"], "bsst sweep: --sensors gnss: the estimator is 'truth'"),
+    (["margin", "--over", "delay_ms", "--until", "rms=0.1", "--sensors", "gnss"],
+     "--sensors gnss: the estimator is 'truth'"),
 ]
 
 
@@ -652,6 +662,20 @@ IDLE_FLAGS = [  # (argv after the command's mission, what the one line names): a
 def test_a_flag_that_would_change_nothing_is_refused(files, capsys, argv, names):
     """Exit 2, one line naming the flag and what it needs, before anything is written (no run directory)."""
     _refused(capsys, [argv[0], files.mission, *argv[1:], "--out", files.out], names)
+    assert not files.out.exists()
+
+
+def test_sensors_read_by_an_estimator_or_a_files_own_set_are_not_refused(files, tmp_path, capsys):
+    """``--sensors`` is taken where a vehicle reads its sensors (``--estimator ekf``, a sweep's estimator axis with a
+    kind that reads them) and a mission file's own ``[sensors]`` table under ``truth`` is not refused (older files
+    have one): each is refused for what comes next instead (a later rule of the same command)."""
+    _refused(capsys, ["sim", files.mission, "--sensors", "gnss", "--estimator", "ekf", "--burst", "3", "--out",
+                      files.out], "--burst 3: changes nothing")
+    _refused(capsys, ["sweep", files.mission, "--sensors", "gnss", "--estimator", "truth,ekf", "--loss", "0,5",
+                      "--max-cells", "1", "--out", files.out], "over the cap of 1")
+    own = tmp_path / "own.toml"
+    own.write_text(Path(files.mission).read_text() + '\n[sensors]\nset = "gnss"\n')
+    _refused(capsys, ["sim", own, "--burst", "3", "--out", files.out], "--burst 3: changes nothing")
     assert not files.out.exists()
 
 

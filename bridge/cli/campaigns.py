@@ -133,12 +133,12 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    from bridge.core.flight import idle_link_key, prepare  # lazy: start-up time
+    from bridge.core.flight import idle_link_key, prepare, unread_problem  # lazy: start-up time
     from bridge.core.interrupt import ignore_sigint  # lazy: start-up time
     from bridge.core.overrides import Overrides  # lazy: start-up time
     from bridge.sweep import AXES, Grid, Sweep, is_sweep_file, load_sweep, run_sweep  # lazy: start-up time
     from bridge.sweep.cells import broke_policy  # lazy: start-up time
-    from bridge.sweep.grid import LINK_AXES, SHORT  # lazy: start-up time
+    from bridge.sweep.grid import LINK_AXES, SHORT, mission_value  # lazy: start-up time
     from missions import load_mission  # lazy: start-up time
 
     spec = load_sweep(args.mission) if is_sweep_file(args.mission) else Sweep(load_mission(args.mission), Grid())
@@ -161,6 +161,9 @@ def _sweep(args: argparse.Namespace) -> int:
         raise UsageError(f"bsst sweep: {given} with {trace}: the trace gives the link's {', '.join(LINK_AXES)}, so "
                          f"{a} cannot be swept over it; drop one of them")
     sensors = {"set": args.sensors} if args.sensors is not None else None
+    unread = unread_problem(spec.grid.estimator or (mission_value(spec.mission, "estimator"),), "the sensor set")
+    if sensors is not None and unread:  # (no cell reads the sensors: every one flies the set's truth)
+        raise UsageError(f"bsst sweep: --sensors {args.sensors}: {unread}")
     laid = fixed or sensors or args.scatter is not None
     clash = guard_flag_refusal(args, spec.mission.link, spec.mission.source)  # (named as the flag, not the key)
     if clash:

@@ -130,7 +130,8 @@ def checked_mission(args: argparse.Namespace, mission: Mission | str | Path | No
     here), with the flags that would change nothing in it refused, each by the rule a sweep refuses its axis with:
     ``--noise X`` where every vehicle flies the true state (``truth``: it has no sensors, so none are streamed
     either, HIGHRES_IMU and GPS_RAW_INT included) or a sensor set with no noise
-    (:func:`bridge.core.flight.noise_problem`); a link flag that acts only with another (``--burst`` without loss,
+    (:func:`bridge.core.flight.noise_problem`); ``--sensors NAME`` where every vehicle flies the true state
+    (:func:`bridge.core.flight.unread_problem`); a link flag that acts only with another (``--burst`` without loss,
     ``--queue`` without a bandwidth cap, ``--link-trace-loop`` without a trace) where nothing gives that
     (:func:`bridge.cli.linkflags.idle_link_flag`). Before the file is validated, the flags its own keys make wrong,
     named as the flags: a guard flag that clashes with its other guard keys (``--command-lag`` without prediction:
@@ -156,16 +157,16 @@ def checked_mission(args: argparse.Namespace, mission: Mission | str | Path | No
         if idle:
             raise ConfigError(idle)
         args = argparse.Namespace(**{**vars(args), "controller": None, "discretization": None})
-    if getattr(args, "noise", None) is not None or idle_flags_given(args):
+    if getattr(args, "noise", None) is not None or getattr(args, "sensors", None) is not None or idle_flags_given(args):
         _refuse_idle_flags(args, m, axes)
     return flown
 
 
 def _refuse_idle_flags(args: argparse.Namespace, m: Mission, axes: Mapping[str, Sequence[float]] | None) -> None:
-    """Refuse (ConfigError) ``--noise X`` or a link flag that would change nothing in the flights of ``m`` with
-    ``args`` laid over it (:func:`checked_mission`). Apart, so that a command given neither (every session's
-    children) imports none of the fleet's code."""
-    from bridge.core.flight import noise_problem, prepare  # lazy: start-up time
+    """Refuse (ConfigError) ``--noise X``, ``--sensors NAME`` or a link flag that would change nothing in the flights
+    of ``m`` with ``args`` laid over it (:func:`checked_mission`). Apart, so that a command given none (every
+    session's children) imports none of the fleet's code."""
+    from bridge.core.flight import noise_problem, prepare, unread_problem  # lazy: start-up time
     from bridge.swarm import fleet_flights, fleet_mission  # lazy: start-up time
 
     noise = getattr(args, "noise", None)
@@ -176,6 +177,9 @@ def _refuse_idle_flags(args: argparse.Namespace, m: Mission, axes: Mapping[str, 
     whys = [noise_problem((f.estimator,), f.sensors) for f in flights]
     if noise is not None and all(whys):
         raise ConfigError(f"--noise {noise:g}: {whys[0]}")
+    unread = unread_problem([f.estimator for f in flights], "the sensor set")  # (a file's own [sensors]: its own)
+    if getattr(args, "sensors", None) is not None and unread:
+        raise ConfigError(f"--sensors {args.sensors}: {unread}")
     idle = idle_link_flag(args, [f.link for f in flights], axes)
     if idle:
         raise ConfigError(idle)

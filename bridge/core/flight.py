@@ -367,13 +367,21 @@ def noiseless(sensors: SensorConfig) -> bool:
     return not any(getattr(sensors, k) for k in SIGMA_KEYS)
 
 
+def unread_problem(estimators: Sequence[str], what: str) -> str | None:
+    """Why ``what`` of the sensors (their noise, the set flown) would change nothing in flights with these estimator
+    kinds (None if it would): every one is ``truth`` (the true state: the sensors are not read)."""
+    if set(estimators) <= {"truth"}:
+        return (f"the estimator is 'truth' (the true state: the sensors are not read), so {what} changes nothing; "
+                "give --estimator raw or ekf (or [estimator] kind)")
+    return None
+
+
 def noise_problem(estimators: Sequence[str], sensors: SensorConfig) -> str | None:
     """Why a noise scale would change nothing in flights with these estimator kinds and this sensor set
-    (None if it does): every one is ``truth`` (the true state: the sensors are not read), or the set
-    has no noise to scale."""
-    if set(estimators) <= {"truth"}:
-        return ("the estimator is 'truth' (the true state: the sensors are not read), so noise changes nothing; "
-                "give --estimator raw or ekf (or [estimator] kind)")
+    (None if it does): every one is ``truth`` (:func:`unread_problem`), or the set has no noise to scale."""
+    unread = unread_problem(estimators, "noise")
+    if unread:
+        return unread
     if noiseless(sensors):
         return (f"the sensor set {sensors.name!r} has no noise (every sigma is 0), so its scale changes nothing; "
                 "choose one with --sensors mocap or gnss (or [sensors] set)")
