@@ -31,7 +31,8 @@ def _run(xs: list[float], y: float, left: tuple[int, list[float]] | None, events
     trace = {"t": np.arange(len(xs)) / RATE, "x": np.array(xs), "y": np.full(len(xs), y), "z": np.ones(len(xs))}
     summary: dict[str, Any] = {
         "outcome": outcome, "events": [{"t": 0.0, "kind": k, "text": k, "source": s} for k, s in events],
-        "lockstep": {"held": left is None, **({"why": "HOLD set by a ground station"} if left else {})},
+        "lockstep": {"held": left is None,
+                     **({"left_at_s": left[0] / RATE, "why": "HOLD set by a ground station"} if left else {})},
         "sitl": {"gate": {"left": None if left is None else {"step": left[0], "position": left[1]}}}}
     return Run(trace, summary, None, after or [])
 
@@ -108,6 +109,10 @@ def test_a_fleet_that_held_while_judged_is_not_said_to_hold_when_one_was_not_jud
            "its record, matched by mission time (approximate); judged only until t=0.400 s" in out, out
     assert "bsst sitl: policy separation not judged over the whole flight: vehicle 2 only until t=0.400 s" in err
     assert "violated" not in err, err
+    # each vehicle that left lockstep named on stderr, as one vehicle's run names it (a fleet's: from the third
+    # wave's fortieth session)
+    assert "bsst sitl: vehicle 2: not a lockstep run: the vehicle left lockstep at t=0.200 s (HOLD set by a ground " \
+           "station)" in err, err
 
 
 def test_a_fleet_on_the_shared_clock_throughout_is_judged_as_before() -> None:
