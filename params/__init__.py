@@ -21,7 +21,7 @@ from contextvars import ContextVar
 from pathlib import Path
 from typing import Any, ParamSpec, TypeVar
 
-from params.text import is_typo_of, likely  # noqa: F401  (a misspelt key's: params' own names for them)
+from params.text import is_typo_of, likely, unknown_key_hint  # noqa: F401  (a misspelt key's: params' own names)
 
 _P = ParamSpec("_P")
 _R = TypeVar("_R")
@@ -243,9 +243,9 @@ class Table:
     """One TOML table being validated: typed getters that name the file and the key.
 
     Call :meth:`done` at the end so that any key nobody asked for is rejected as unknown, with the
-    likely key suggested (every key the table asked for is a known one). A misspelled required key
-    (``duraton_s``) is reported as the unknown key it is, with ``did you mean 'duration_s'?``, not as
-    the missing key it leaves behind.
+    likely key suggested, else the keys it takes (every key the table asked for is a known one). A misspelled
+    required key (``duraton_s``; ``t_s`` for ``t``, ``t`` for ``t_s``) is reported as the unknown key it is, with
+    ``did you mean 'duration_s'?``, not as the missing key it leaves behind.
     """
 
     def __init__(self, data: Mapping[str, Any], source: str, prefix: str = "") -> None:
@@ -254,7 +254,7 @@ class Table:
         self._data = data
         self._source = source
         self._prefix = prefix
-        self._used: set[str] = set()
+        self._used: dict[str, None] = {}  # the keys asked for, in order: the ones it takes (an ordered set)
 
     def key(self, name: str) -> str:
         return f"{self._prefix}.{name}" if self._prefix else name
@@ -267,11 +267,11 @@ class Table:
     def has(self, name: str) -> bool:
         """Whether the table holds key ``name``; if not, a key it knows all the same (a misspelling suggests it)."""
         if name not in self._data:
-            self._used.add(name)
+            self._used[name] = None
         return name in self._data
 
     def _get(self, name: str, default: Any) -> Any:
-        self._used.add(name)
+        self._used[name] = None
         if name in self._data:
             return self._data[name]
         if default is _REQUIRED:
@@ -283,9 +283,13 @@ class Table:
             # the key without its unit (``t`` for ``t_s``): too short for a typing slip, but what was meant
             stem = name.rsplit("_", 1)[0] if "_" in name else None
             bare = [str(k) for k in self._data if k not in self._used and str(k) == stem]
+            where = f"in [{self._prefix}]" if self._prefix else "at the top level"
             if bare:
-                where = f"in [{self._prefix}]" if self._prefix else "at the top level"
                 raise self.error(bare[0], f"unknown key {where}; did you mean {name!r} (the unit is in the name)?")
+            # the key with a unit it does not take (``t_s`` for a point's ``t``)
+            united = [str(k) for k in self._data if k not in self._used and str(k).rsplit("_", 1)[0] == name]
+            if united:
+                raise self.error(united[0], f"unknown key {where}; did you mean {name!r}?")
             raise self.error(name, "is required")
         return default
 
@@ -367,15 +371,14 @@ class Table:
 
     def unknown(self, name: str, known: Iterable[str]) -> ConfigError:
         """The error for key ``name``, which the table does not have: where it is, and the key of ``known``
-        it most likely meant (difflib), if one is close."""
+        it most likely meant, else the keys of ``known`` (:func:`params.text.unknown_key_hint`)."""
         where = f"in [{self._prefix}]" if self._prefix else "at the top level"
-        like = likely(str(name), known)
-        return self.error(name, f"unknown key {where}" + (f"; did you mean {like!r}?" if like else ""))
+        return self.error(name, f"unknown key {where}{unknown_key_hint(str(name), known)}")
 
     def done(self) -> None:
-        unknown = sorted(set(self._data) - self._used)
+        unknown = sorted(set(self._data) - self._used.keys())
         if unknown:
-            raise self.unknown(unknown[0], sorted(self._used))
+            raise self.unknown(unknown[0], self._used)
 
 
 class _Required:

@@ -6,7 +6,8 @@ In:  any text (an exception's message, a ``repr``), the most characters it may k
      keys, a flag's choices)
 Out: the text on one line: every run of whitespace (line breaks, tabs) one space; one over ``cap`` characters cut
      to ``cap``, ending ``...``; the number (:func:`number`, :func:`whole`), ValueError if it is none; the word it
-     likely misspells (:func:`likely`, :func:`is_typo_of`), or None
+     likely misspells (:func:`likely`, :func:`is_typo_of`), or None; what an unknown key's refusal adds
+     (:func:`unknown_key_hint`: the key meant, where a PX4 parameter goes, else the keys allowed)
 
 (Apart from ``params/__init__.py``, which re-exports the misspelling's two, and was at its 500 lines.)
 """
@@ -15,6 +16,8 @@ from __future__ import annotations
 
 import difflib
 from collections.abc import Iterable
+
+from params.px4 import px4_hint
 
 ONE_LINE_MAX = 300  # characters of a quoted message a line keeps (a sweep's error cell, a law's raise)
 
@@ -70,3 +73,27 @@ def likely(text: str, known: Iterable[str], cutoff: float = 0.6) -> str | None:
         return slips[0]
     close = difflib.get_close_matches(text, words, n=1, cutoff=cutoff)
     return close[0] if close else None
+
+
+ALLOWED_SHOWN_MAX = 12  # keys an unknown key's refusal lists whole; of a table of more, the closest few and "..."
+
+
+def unknown_key_hint(text: str, known: Iterable[str]) -> str:
+    """What follows an unknown key ``text``'s refusal, ``known`` the keys its table takes (in the order it reads
+    them): ``; did you mean 'delay_ms'?`` (:func:`likely`, or the key in another case: ``MPC_ACC_HOR``), else where a
+    PX4 parameter's name goes (:func:`params.px4.px4_hint`), else ``; allowed: ...`` (every key, or of a table of
+    more than :data:`ALLOWED_SHOWN_MAX` the closest few or the first, ``...`` and how many): the line says what it
+    may be."""
+    words = list(dict.fromkeys(str(k) for k in known))
+    like = next((w for w in words if w.lower() == text.lower()), None) or likely(text, words)
+    if like:
+        return f"; did you mean {like!r}?"
+    px4 = px4_hint(text)
+    if px4:
+        return f" ({px4})"
+    if not words:
+        return ""
+    if len(words) <= ALLOWED_SHOWN_MAX:
+        return f"; allowed: {', '.join(words)}"
+    close = difflib.get_close_matches(text, words, n=6, cutoff=0.4) or words[:6]  # (none close: the first ones)
+    return f"; allowed: {', '.join(close)}, ... ({len(words)} keys)"

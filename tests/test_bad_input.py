@@ -28,13 +28,16 @@ from typing import Any
 import pytest
 
 from bridge import simulate
+from bridge.autopilot.params import BY_NAME
 from bridge.cli import build_parser, main
 from bridge.cli.flags import UsageError
 from bridge.core.flight import prepare
 from bridge.mavlink.endpoint import LINK_PORT
 from bridge.session import instance_slot
 from missions import MISSION_DIR, mission_from_table
+from missions.route import LIMIT_RANGES
 from params import ConfigError, Table, dump_toml, is_typo_of, load_toml, show
+from params.px4 import PX4_NAMES
 from tests.sitlkit import ROOT, run_bsst
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -1023,6 +1026,80 @@ def test_every_mission_key_misspelled_is_named_with_the_likely_one(slip: str) ->
             where = f"in [{table}]" if table else "at the top level"
             want = f"<walk>: {table + '.' if table else ''}{typo(name)}: unknown key {where}; did you mean {name!r}?"
             assert str(exc.value) == want
+    assert seen > 60
+
+
+UNKNOWN_KEYS = [  # (the file's text, the line's end after the file): what a key that is no slip of one is told
+    ("foo = 1\n" + TINY, "foo: unknown key at the top level; allowed: name, trajectory, duration_s, profile, "
+     "actuation, controller, ... (25 keys)"),
+    (TINY + "[wind]\ndirection = 90\n", "wind.direction: unknown key in [wind]; allowed: speed_mps, from_deg, "
+     "turbulence, turbulence_scaling, altitude_m, gusts"),
+    (TINY + "[failsafe]\nmode = 1\n", "failsafe.mode: unknown key in [failsafe]; allowed: timeout_s, "
+     "descent_rate, resume, action, hold_s"),
+    (TINY + "[[vehicles]]\nid = 1\n[[vehicles]]\nid = 2\nsysid = 7\n", "vehicles[1].sysid: unknown key in "
+     "[vehicles[1]]; allowed: id, trajectory, offset, start, profile, controller"),
+    (TINY.replace('"sine"', '"waypoints"\npoints = [{t = 0, x = 0, y = 0, z = 0}, {t = 0.1, x = 0, y = 0, z = 1, '
+                  'yaw = 1}]'), "trajectory.points[1].yaw: unknown key in [trajectory.points[1]]; allowed: t, x, y, z, "
+     "psi"),
+    (TINY + "mpc_acc_hor = 2.0\n", "trajectory.mpc_acc_hor: unknown key in [trajectory] (a PX4 limit of a plan's "
+     'trajectory: put it in a [trajectory] of kind = "plan" as MPC_ACC_HOR)'),
+    (TINY + "[failsafe]\ncom_of_loss_t = 2\n", "failsafe.com_of_loss_t: unknown key in [failsafe] (a PX4 "
+     "parameter: put it in [params] as COM_OF_LOSS_T)"),
+    (TINY + "[link]\nGF_ACTION = 2\n", "link.GF_ACTION: unknown key in [link] (a PX4 parameter: put it in [params] as "
+     "GF_ACTION)"),
+    (TINY.replace('"sine"', '"waypoints"\npoints = [{t = 0, x = 0, y = 0, z = 0}, {t_s = 0.1, x = 0, y = 0, z = 1}]'),
+     "trajectory.points[1].t_s: unknown key in [trajectory.points[1]]; did you mean 't'?"),
+]
+
+
+@pytest.mark.parametrize("text, said", UNKNOWN_KEYS, ids=[s.split(":")[0] for _, s in UNKNOWN_KEYS])
+def test_an_unknown_key_with_no_likely_one_is_told_what_its_table_takes(tmp_path, capsys, text, said):
+    """The table's keys (all, or of a long table the closest or first few), where a PX4 parameter goes in
+    any case, and a point's ``t_s`` before the ``t`` it leaves out (it said ``t: is required``): until the third
+    wave's fortieth session such a line ended at ``unknown key in [wind]``."""
+    mission = tmp_path / "m.toml"
+    mission.write_text(text)
+    line = _refused(capsys, ["sim", mission, "--out", tmp_path / "out", "--no-plots"], "unknown key")
+    assert line == f"bsst: {mission}: {said}"
+
+
+def test_a_key_of_a_plans_trajectory_in_the_wrong_case_is_the_likely_one(tmp_path, capsys):
+    plan = ROOT / "examples" / "box.plan"
+    mission = tmp_path / "m.toml"
+    mission.write_text(f'name = "box"\n[trajectory]\nkind = "plan"\nfile = "{plan}"\nmpc_acc_hor = 2.0\n')
+    line = _refused(capsys, ["sim", mission, "--out", tmp_path / "out", "--no-plots"], "unknown key")
+    assert line == f"bsst: {mission}: trajectory.mpc_acc_hor: unknown key in [trajectory]; did you mean 'MPC_ACC_HOR'?"
+
+
+def test_the_px4_names_an_unknown_key_is_told_of_are_the_vehicles_and_a_plans() -> None:
+    """params.px4 holds the names apart (params imports nothing above it): they are the vehicle's parameters
+    and a plan's limits, each where it goes."""
+    assert set(PX4_NAMES) == set(BY_NAME) | set(LIMIT_RANGES)
+    assert {n for n, where in PX4_NAMES.items() if "[params]" in where} == set(BY_NAME)
+    assert {n for n, where in PX4_NAMES.items() if "[trajectory]" in where} == set(LIMIT_RANGES) - set(BY_NAME)
+
+
+def test_every_mission_key_replaced_by_a_stranger_is_told_its_tables_keys() -> None:
+    """Every key of every table the validators read, renamed to one like none of them: where the line is the
+    unknown key's, it names the key it replaced among those its table takes (or says how many)."""
+    seen = 0
+    for ctl in ("bsst", "smc", "pid"):
+        data = _full_mission(ctl)
+        for key in _keys_asked(data, "<walk>"):
+            bad = _renamed(data, key, lambda _: "qqqq")
+            if bad is None:
+                continue
+            table, _, name = key.rpartition(".")
+            with pytest.raises(ConfigError) as exc:
+                prepare(mission_from_table(bad, "<walk>"))
+            where = f"in [{table}]" if table else "at the top level"
+            head = f"<walk>: {table + '.' if table else ''}qqqq: unknown key {where}; allowed: "
+            if not str(exc.value).startswith(head):  # a required key's absence said first ("kind: is required")
+                assert str(exc.value).endswith("is required"), str(exc.value)
+                continue
+            seen += 1
+            allowed = str(exc.value).removeprefix(head)
+            assert name in allowed.split(", ") or allowed.endswith(" keys)"), str(exc.value)
     assert seen > 60
 
 
