@@ -29,6 +29,7 @@ from typing import Any, TypeVar
 
 from missions.minsnap import Knot, Smooth
 from missions.references import Reference, Setpoint, Sine, Step, Waypoints
+from missions.trajectories import psi_of
 from params import ConfigError, Table
 
 MAX_VEHICLES = 64  # system ids 1..N; a MAVLink system id is one byte, and N plants are flown in one loop
@@ -135,7 +136,7 @@ def _vehicle(v: Table, i: int, trajectory: Callable[[Table], Reference],
     start = None
     if v.has("start"):
         st = v.table("start")
-        start = st.vector("position", 3, (0.0, 0.0, 0.0), lo=-1e4, hi=1e4) + (st.number("psi", 0.0, lo=-10, hi=10),)
+        start = st.vector("position", 3, (0.0, 0.0, 0.0), lo=-1e4, hi=1e4) + (psi_of(st),)
         st.done()
     profile = v.string("profile") if v.has("profile") else None
     controller = law(v, "controller")

@@ -35,7 +35,7 @@ from missions.rally import rally_dict, rally_from_plan, rally_from_table
 from missions.references import Reference
 from missions.scatter import fleet_scatter_problem, scattered_start
 from missions.steps import PlanBudget, StepCap
-from missions.trajectories import END_REST_S, PLAN_MAX_BYTES, plan_of, plan_smooth, trajectory_of
+from missions.trajectories import END_REST_S, PLAN_MAX_BYTES, PSI_RANGE, plan_of, plan_smooth, psi_of, trajectory_of
 from params import ConfigError, Table, load_toml, read_text_file, unreachable
 
 CONTROLLERS = ("bsst", "smc", "pid")
@@ -54,6 +54,7 @@ MISSION_RANGES: dict[str, tuple[float, float]] = {
     "physics_hz": (100.0, 10000.0),
     "seed": (0, 2**31 - 1),
     "start_scatter_m": (0.0, 100.0),  # [start] scatter_m, --scatter: missions.scatter
+    "psi": PSI_RANGE,  # rad: [start] psi, a sine's, a first point's (missions.trajectories.psi_of)
 }
 PLAN_SUFFIXES = (".plan", ".waypoints", ".txt")  # QGroundControl's JSON plan; QGC WPL 110 text
 DEFAULT_RATE_HZ = 250.0  # Hz: a mission's control rate unless it gives one (a plan's, always)
@@ -318,7 +319,7 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
                           f"(in the file: --rate lays a rate over it, but the file's own must fit too)")
     seed = t.integer("seed", 0, lo=int(r["seed"][0]), hi=int(r["seed"][1]))
     st = t.table("start")
-    start = st.vector("position", 3, (0.0, 0.0, 0.0), lo=-1e4, hi=1e4) + (st.number("psi", 0.0, lo=-10, hi=10),)
+    start = st.vector("position", 3, (0.0, 0.0, 0.0), lo=-1e4, hi=1e4) + (psi_of(st),)
     scatter = st.number("scatter_m", 0.0, lo=r["start_scatter_m"][0], hi=r["start_scatter_m"][1])
     st.done()
     too_long = cap.problem(duration, rate) if cap is not None and not derived else None  # before the trajectory

@@ -13,6 +13,7 @@ this module is what a trajectory's table and a plan become.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -27,6 +28,7 @@ from params import ConfigError, Table, read_text_file
 TRAJECTORIES = ("step", "sine", "waypoints", "smooth", "plan")
 PLAN_MAX_BYTES = 16 << 20  # a plan of MAX_ITEMS items is about 5 MB of JSON
 END_REST_S = 1.0  # s: a plan's mission lasts this long after its trajectory ends (at rest, or on the ground)
+PSI_RANGE = (-2 * math.pi, 2 * math.pi)  # rad: a yaw of one turn either way (a start's, a sine's, a first point's)
 MAX_STRETCH = 4.0  # the most a trajectory is slowed (``stretched_by``; missions.airframe fits a plan's with it)
 
 
@@ -64,7 +66,7 @@ def _setpoints(t: Table, key: str, duration: float, stops: list[bool] | None = N
             s.number("x", lo=-1e4, hi=1e4),
             s.number("y", lo=-1e4, hi=1e4),
             s.number("z", lo=-1e4, hi=1e4),
-            s.number("psi", 0.0, lo=-100.0, hi=100.0),
+            psi_of(s, out[-1].psi if out else None),
         )
         if stops is not None:
             stops.append(s.boolean("stop", False))
@@ -73,6 +75,20 @@ def _setpoints(t: Table, key: str, duration: float, stops: list[bool] | None = N
             raise s.error("t", f"must be later than the previous one ({out[-1].t:g})")
         out.append(sp)
     return tuple(out)
+
+
+def psi_of(t: Table, previous: float | None = None) -> float:
+    """Key ``psi`` of ``t`` (rad; 0 if not given): in :data:`PSI_RANGE`, or with ``previous`` (the point before's)
+    within one turn of it, so a list of points may turn on (a plan's knots are unwrapped along its route, and a
+    run's mission.toml holds them so). A yaw in degrees (``psi = 90``: 14 turns) is refused, saying so."""
+    v = t.number("psi", 0.0)
+    unit = "radians; a QGC plan's yaw, param4, is degrees"
+    if previous is None and not PSI_RANGE[0] <= v <= PSI_RANGE[1]:
+        raise t.error("psi", f"must be in [-2π, 2π] = [{PSI_RANGE[0]:.5g}, {PSI_RANGE[1]:.5g}] ({unit}), got {v:g}")
+    if previous is not None and abs(v - previous) > PSI_RANGE[1]:
+        raise t.error("psi", f"must be within 2π = {PSI_RANGE[1]:.5g} (one turn) of the point before's {previous:g} "
+                             f"({unit}), got {v:g}")
+    return v
 
 
 def trajectory_of(t: Table, duration: float, budget: PlanBudget | None = None,
@@ -86,7 +102,7 @@ def trajectory_of(t: Table, duration: float, budget: PlanBudget | None = None,
             omega=t.number("omega", 0.5, lo=0.0, hi=100.0),
             climb=t.number("climb", 0.1, lo=-100.0, hi=100.0),
             z0=t.number("z0", 0.0, lo=-1e4, hi=1e4),
-            psi=t.number("psi", 0.0, lo=-100.0, hi=100.0),
+            psi=psi_of(t),
             x0=t.number("x0", 0.0, lo=-1e4, hi=1e4),
             y0=t.number("y0", 0.0, lo=-1e4, hi=1e4),
         )

@@ -126,6 +126,32 @@ def test_bad_step_mission(tmp_path: Path, old: str, new: str, key: str, words: s
     _fails(_write(tmp_path, STEP_TEXT.replace(old, new, 1)), key, words)
 
 
+WAYPOINTS = '[trajectory]\nkind = "waypoints"\npoints = [{ t = 0, x = 0, y = 0, z = 0, psi = %s }, ' \
+            '{ t = 5, x = 0, y = 0, z = 1, psi = %s }, { t = 10, x = 0, y = 0, z = 1, psi = %s }]\n'
+FLEET = '[[vehicles]]\nid = 1\n[[vehicles]]\nid = 2\nstart = { position = [0, 2, 0], psi = %s }\n'
+
+
+@pytest.mark.parametrize("text, key, said", [
+    (SINE_TEXT.replace("psi = 0.0", "psi = 90"), "trajectory.psi", "[-6.2832, 6.2832] (radians; a QGC plan's yaw, "
+     "param4, is degrees), got 90"),
+    (SINE_TEXT + "[start]\npsi = -7\n", "start.psi", "[-2π, 2π]"),
+    (SINE_TEXT + FLEET % 180, "vehicles[1].start.psi", "got 180"),
+    (SINE_TEXT.split("[trajectory]")[0] + WAYPOINTS % (45, 0, 0), "trajectory.points[0].psi", "got 45"),
+    (SINE_TEXT.split("[trajectory]")[0] + WAYPOINTS % (0, 90, 0), "trajectory.points[1].psi", "within 2π = 6.2832 "
+     "(one turn) of the point before's 0 (radians; a QGC plan's yaw, param4, is degrees), got 90"),
+])
+def test_a_yaw_in_degrees_is_refused_saying_radians(tmp_path: Path, text: str, key: str, said: str) -> None:
+    """A yaw is radians: ``psi = 90`` flew 90 rad, 14 turns, exit 0, until the third wave's fortieth session. One
+    turn either way (a start's, a sine's, a first point's), and a point's within one turn of the one before."""
+    _fails(_write(tmp_path, text), key, said)
+
+
+def test_a_list_of_points_may_turn_on_one_turn_at_a_time(tmp_path: Path) -> None:
+    """Points unwrapped along their way (a plan's knots in a run's mission.toml) stay flyable past 2π."""
+    text = SINE_TEXT.split("[trajectory]")[0] + WAYPOINTS % (0, 6, 12)
+    assert [p.psi for p in prepare(_write(tmp_path, text)).mission.trajectory.points] == [0.0, 6.0, 12.0]
+
+
 @pytest.mark.parametrize(
     "old, new, key, words",
     [
