@@ -477,6 +477,31 @@ def test_a_real_time_flight_is_not_sped_up(files, capsys):
     _refused(capsys, ["sitl", files.mission, "--realtime", "--speed", "0", "--out", files.out], "--speed")  # 0: unpaced
 
 
+FLAG_FILES = [  # (flag, what follows it): a file a flag gives, bad on its own
+    ("--link-trace", "line 1: unknown column 'name = \"tiny\"'; a trace has the columns t_s, delay_ms, direction"),
+    ("--up-link-trace", "line 1: unknown column"),
+    ("--down-link-trace", "line 1: unknown column"),
+    ("--link-profile", ": link: a link profile needs a [link] table"),
+]
+
+
+@pytest.mark.parametrize("flag, said", FLAG_FILES)
+def test_a_bad_file_a_flag_gives_is_named_as_the_flag_not_the_mission(files, capsys, flag, said):
+    """``bsst sim m.toml --link-trace m.toml`` read ``bsst: m.toml: link.up.trace: .../m.toml line 2: ... (with these
+    laid over the mission's [link]: ...)`` until the third wave's fortieth session: the mission blamed for the flag's
+    file. Now the flag first, then the file and its line; ``--sensors`` alike."""
+    line = _refused(capsys, ["sim", files.mission, flag, files.mission, "--out", files.out], flag)
+    assert line.startswith(f"bsst: {flag} {files.mission.resolve()}") and said in line, line
+    assert "laid over" not in line and "link.up" not in line, line
+
+
+def test_a_sensor_set_a_flag_names_is_the_flags_from_the_command_line_and_python(files, capsys):
+    line = _refused(capsys, ["sim", files.mission, "--sensors", "GNSS", "--out", files.out], "--sensors")
+    assert line == "bsst: --sensors GNSS: profile 'paper' has no such sensor set; it has: ideal, mocap, gnss", line
+    with pytest.raises(ConfigError, match=r"^--up-link-trace .*line 1: unknown column"):
+        simulate(str(files.mission), link={"up": {"trace": str(files.mission)}})  # Python's: the field's flag
+
+
 def test_a_flags_value_is_named_as_given_not_as_the_files(files, capsys):
     """A link value from a flag that breaks a rule of the [link] table is named as the flag (``--burst 0.5``,
     ``--stop-after`` below the stale age: test_a_guard_flag_that_clashes_is_named_as_the_flag; ``--rate`` not

@@ -47,6 +47,7 @@ from bridge.link.model import (
     unmet_key,
 )
 from bridge.link.profile import load_link_profile
+from bridge.link.trace import read_trace
 from controller import Controller, Gains, Nominal, gains_from_table
 from controller.law import LawError, LawFactory, discretization_problem, resolve_law
 from controller.link_guard import GuardConfig
@@ -271,10 +272,32 @@ def _link_of(m: Mission, over: Overrides) -> LinkSettings:
     except ConfigError as exc:
         if not over.link or not Path(src).is_file():  # no file (bsst relay or vehicle without one, --await-mission,
             raise  # a Mission made in Python): no file's [link] to tell the overrides from
+        flagged = laid_file_problem(over.link)  # a trace or profile the flags gave, bad alone: the flag's
+        if flagged:
+            raise ConfigError(flagged) from None
         # the file's [link] with the overrides over it: say them, or a user who gave --stop-after 40 reads that the
         # file has a stop_ms it does not have
         laid = table_settings(over.link, "link")
         raise ConfigError(f"{exc} (with these laid over the mission's [link]: {laid})") from None
+
+
+def laid_file_problem(link: Mapping[str, Any]) -> str | None:
+    """The line refusing a trace or profile file that ``link`` (the flags', or a caller's ``link=``) lays over a
+    mission's ``[link]`` and that is bad on its own, named as the flag that gives it (``--link-trace``, both
+    directions; ``--up-link-trace``; ``--link-profile``), not as the mission's key; None. Read again only once the
+    table was refused (a trace may be millions of records)."""
+    link = absolute_link_paths(link, Path("."))
+    sides = {d: t.get("trace") for d in DIRECTIONS if isinstance(t := link.get(d), Mapping)}
+    both = link.get("trace") or (sides.get("up") if sides.get("up") == sides.get("down") else None)
+    files = [("--link-profile", link.get("profile"), load_link_profile), ("--link-trace", both, read_trace)]
+    files += [(f"--{d}-link-trace", sides.get(d), read_trace) for d in DIRECTIONS if not both]
+    for flag, path, read in files:
+        if isinstance(path, str) and path:
+            try:
+                read(path)
+            except ConfigError as exc:
+                return f"{flag} {exc}"
+    return None
 
 
 def _sensing_of(m: Mission, over: Overrides, prof: Profile) -> tuple[SensorConfig, str]:
@@ -283,8 +306,8 @@ def _sensing_of(m: Mission, over: Overrides, prof: Profile) -> tuple[SensorConfi
     src = m.source
     given_set = (over.sensors or {}).get("set")
     if given_set is not None and given_set not in [n for n, _ in prof.sensors]:  # an override: named as the flag
-        raise ConfigError(f"{src}: --sensors {given_set!r} (sensors.set): profile {prof.name!r} has no such sensor "
-                          f"set; it has: {', '.join(n for n, _ in prof.sensors)}")
+        raise ConfigError(f"--sensors {given_set}: profile {prof.name!r} has no such sensor set; it has: "
+                          f"{', '.join(n for n, _ in prof.sensors)}")
     sensor_config = sensors_from_table(prof, m.sensors, src)
     est_table = Table(m.estimator, src, "estimator")
     estimator_kind = est_table.string("kind", "truth", choices=ESTIMATOR_KINDS)
