@@ -502,6 +502,18 @@ def test_a_sensor_set_a_flag_names_is_the_flags_from_the_command_line_and_python
         simulate(str(files.mission), link={"up": {"trace": str(files.mission)}})  # Python's: the field's flag
 
 
+def test_a_table_a_caller_lays_over_the_mission_bad_alone_is_named_as_the_override(files):
+    """``simulate("m.toml", wind={"speed": 5})`` read ``m.toml: wind.speed: ...`` of a file with no [wind], until the
+    third wave's fortieth session; now as Overrides names a wrong type: ``overrides:``."""
+    with pytest.raises(ConfigError) as exc:
+        simulate(str(files.mission), wind={"speed": 5})
+    assert str(exc.value) == "overrides: wind.speed: unknown key in [wind]; did you mean 'speed_mps'?"
+    with pytest.raises(ConfigError) as exc:
+        simulate(str(files.mission), failsafe={"mode": 1})
+    assert str(exc.value) == ("overrides: failsafe.mode: unknown key in [failsafe]; allowed: timeout_s, descent_rate, "
+                              "resume, action, hold_s")
+
+
 def test_a_flags_value_is_named_as_given_not_as_the_files(files, capsys):
     """A link value from a flag that breaks a rule of the [link] table is named as the flag (``--burst 0.5``,
     ``--stop-after`` below the stale age: test_a_guard_flag_that_clashes_is_named_as_the_flag; ``--rate`` not

@@ -59,7 +59,7 @@ from plant.effects import effects_from_table
 from plant.events import TimedEvent
 from plant.profiles import sensors_from_table
 from plant.sensors import IDEAL, SIGMA_KEYS, SensorConfig, SensorSuite
-from plant.wind import WindConfig
+from plant.wind import WindConfig, wind_from_table
 
 Progress = Callable[[float, float, float], None]  # a flight's progress: (t s, duration s, current 3-D error m)
 
@@ -212,6 +212,7 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
         raise ConfigError(f"{src}: vehicles: a mission of several vehicles is flown by bsst sim and bsst sitl "
                           "(bridge.simulate, bridge.swarm.sitl): sweeps, bsst margin, bsst vehicle and bsst "
                           "controller fly one vehicle")
+    _laid_tables_alone(m, over)
     prof = _profile_of(m, over)
     effects = effects_from_table(Table(m.effects, src, "effects"))
     gains = gains_from_table(m.gains, src) if m.gains else Gains()
@@ -250,6 +251,17 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
     if idle:
         raise ConfigError(idle)
     return flight
+
+
+def _laid_tables_alone(m: Mission, over: Overrides) -> None:
+    """A ``wind`` or ``failsafe`` table a caller lays over the mission, checked alone first: a key or value bad on
+    its own is named as the override it came in (``overrides: wind.speed: unknown key in [wind]; did you mean
+    'speed_mps'?``, as :class:`Overrides` names a wrong type), not as the file's, which may have no such table (the
+    flags that fill them, ``--wind``, ``--failsafe-action``, are checked as they are parsed)."""
+    if over.wind:
+        wind_from_table(Table(over.wind, "overrides", "wind"), m.duration_s)
+    if over.failsafe:
+        failsafe_from_table(over.failsafe, "overrides")
 
 
 def _profile_of(m: Mission, over: Overrides) -> Profile:
