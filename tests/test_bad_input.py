@@ -1140,6 +1140,14 @@ def test_every_mission_key_replaced_by_a_stranger_is_told_its_tables_keys() -> N
     assert seen > 60
 
 
+@pytest.mark.parametrize("cmd", ["sim", "sitl"])
+def test_a_duration_flag_says_the_mission_file_sets_it(files, capsys, cmd):
+    """``bsst sim m.toml --duration 5`` offered ``--formation`` until the third wave's fortieth session."""
+    line = _refused(capsys, [cmd, files.mission, "--duration", "5"], "--duration")
+    assert line == (f"bsst {cmd}: unrecognized arguments: --duration 5; bsst {cmd} has no --duration flag: the "
+                    "mission file's duration_s sets it"), line
+
+
 def test_a_misspelled_flag_gets_the_likely_one() -> None:
     line = _one_line(_bsst("sim", "missions/sine.toml", "--dealy", "5"))
     assert line == "bsst sim: unrecognized arguments: --dealy 5; did you mean --delay?"
@@ -1247,7 +1255,7 @@ def test_an_empty_out_is_refused_not_taken_for_the_current_folder(tmp_path: Path
 
 
 @pytest.mark.parametrize("argv, names", [
-    (["sim", "missions/sine.toml", "--delay", "1_0"], "--delay must be a number, got '1_0'"),
+    (["sim", "missions/sine.toml", "--delay", "1_0"], "--delay must be a number in [0, 60000] ms, got '1_0'"),
     (["sim", "missions/sine.toml", "--seed", "1_0"], "--seed must be an integer, got '1_0'"),
     (["sim", "missions/sine.toml", "--wind", "1_0"], "--wind"),
     (["sim", "missions/sine.toml", "--blackout", "1_0:1"], "--blackout"),
@@ -1266,7 +1274,7 @@ def test_a_number_with_digit_separators_is_refused(capsys, argv, names) -> None:
 
 @pytest.mark.parametrize("argv, line", [
     (["sim", "{m}", "--vehicles", "0"], "bsst: --vehicles must be in [1, 64], got 0"),
-    (["sim", "{m}", "--rate", "x"], "bsst: --rate must be a number, got 'x'"),
+    (["sim", "{m}", "--rate", "x"], "bsst: --rate must be a number in [50, 1000], got 'x'"),
     (["sim", "{m}", "--wind", "x"], "bsst: --wind: expected SPEED[:FROM_DEG] (m/s, compass degrees), got 'x'"),
     (["sim", "{m}", "--discretization", "foo"],
      "bsst: --discretization: invalid choice: 'foo' (choose from 'explicit', 'implicit')"),

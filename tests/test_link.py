@@ -301,7 +301,8 @@ def test_mission_file_link_error_exits_2_with_one_line(tmp_path, capsys, mission
 
 
 @pytest.mark.parametrize(("flags", "message"), [
-    (["--loss", "120"], "--loss must be in [0, 100], got 120"),
+    (["--loss", "120"], "--loss must be in [0, 100] %, got 120"),
+    (["--delay", "20ms"], "--delay must be a number in [0, 60000] ms, got '20ms'"),
     (["--up-delay", "x"], "--up-delay must be a number"),
     (["--blackout", "3"], "--blackout must be START:DURATION"),
     (["--down-blackout", "3:-1"], "--down-blackout must be START:DURATION"),

@@ -96,9 +96,15 @@ class _Parser(argparse.ArgumentParser):
         flags = [f for action in self._actions for f in action.option_strings]
         for text in extras:
             if text.startswith("-"):
-                like = likely(text.partition("=")[0], flags, cutoff=FLAG_CUTOFF)
+                name = text.partition("=")[0]
+                if name in KEY_NOT_FLAG:  # a mission's key taken for a flag: no flag is like it (--formation was)
+                    return f"; {self.prog} has no {name} flag: the mission file's {KEY_NOT_FLAG[name]} sets it"
+                like = likely(name, flags, cutoff=FLAG_CUTOFF)
                 return f"; did you mean {like}?" if like else ""
         return ""
+
+
+KEY_NOT_FLAG = {"--duration": "duration_s", "--duration-s": "duration_s"}  # flags a mission's key is asked as
 
 
 def path_given(name: str) -> Callable[[str], str]:
@@ -127,18 +133,18 @@ def int_in(name: str, lo: int, hi: int) -> Callable[[str], int]:
 
 
 def number_in(name: str, lo: float, hi: float, *, lo_open: bool = False,
-              hi_open: bool = False) -> Callable[[str], float]:
+              hi_open: bool = False, unit: str = "") -> Callable[[str], float]:
     """An argparse type: a finite number in [lo, hi] (either end open with ``lo_open`` / ``hi_open``), named in
-    the error."""
-    left, right = "(" if lo_open else "[", ")" if hi_open else "]"
+    the error with its range and ``unit`` (``--delay 20ms``: a number in [0, 10000] ms, the unit not written)."""
+    span = f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}" + (f" {unit}" if unit else "")
 
     def conv(text: str) -> float:
         try:
             v = number(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} must be a number, got {text!r}") from None
+            raise argparse.ArgumentTypeError(f"{name} must be a number in {span}, got {text!r}") from None
         if not (lo < v if lo_open else lo <= v) or not (v < hi if hi_open else v <= hi):  # also refuses nan
-            raise argparse.ArgumentTypeError(f"{name} must be in {left}{lo:g}, {hi:g}{right}, got {text}")
+            raise argparse.ArgumentTypeError(f"{name} must be in {span}, got {text}")
         return v
 
     return conv
@@ -278,6 +284,9 @@ def axis_values(flag: str, axis: str) -> Callable[[str], tuple[float, ...]]:
     return conv
 
 
+LINK_UNITS = {"_ms": "ms", "_pct": "%", "_bps": "bytes/s", "burst_len": "packets"}  # a [link] key's, by its end
+
+
 def link_number(flag: str, key: str | None = None) -> Callable[[str], float]:
     """An argparse type for a ``[link]`` number: in the range the mission file allows for
     ``key`` (bridge.link.model, looked up when a flag is given, so that building the parser does
@@ -286,7 +295,9 @@ def link_number(flag: str, key: str | None = None) -> Callable[[str], float]:
         from bridge.link.model import GUARD_RANGES, HI_OPEN, LO_OPEN, NUMBER_RANGES  # lazy: start-up time
 
         k = key or "command_lag_ms"
-        return number_in(flag, *{**NUMBER_RANGES, **GUARD_RANGES}[k], lo_open=k in LO_OPEN, hi_open=k in HI_OPEN)(text)
+        unit = next((u for end, u in LINK_UNITS.items() if k.endswith(end)), "")
+        return number_in(flag, *{**NUMBER_RANGES, **GUARD_RANGES}[k], lo_open=k in LO_OPEN, hi_open=k in HI_OPEN,
+                         unit=unit)(text)
 
     return conv
 
