@@ -134,9 +134,7 @@ def _plan(t: Table, budget: PlanBudget | None = None, plan: PlanFile | None = No
     if read already) and PX4's speed and acceleration limits by name (:class:`missions.route.Limits`)."""
     p = _plan_path(t, t.string("file"))
     limits = {k: t.number(k, lo=lo, hi=hi) for k, (lo, hi) in LIMIT_RANGES.items() if t.has(k)}
-    if plan is None:
-        plan = read_plan_text(read_text_file(p, "a mission plan", PLAN_MAX_BYTES), str(p))
-    return plan_smooth(plan, limits, budget)
+    return plan_smooth(plan if plan is not None else _read_plan(t, p), limits, budget)
 
 
 def _plan_path(t: Table, name: str) -> Path:
@@ -150,5 +148,14 @@ def plan_of(t: Table) -> PlanFile | None:
     None (another kind, or no ``file`` named: :func:`_plan` names the key)."""
     if t.raw("kind") != "plan" or not isinstance(t.raw("file"), str):
         return None
-    p = _plan_path(t, t.raw("file"))
-    return read_plan_text(read_text_file(p, "a mission plan", PLAN_MAX_BYTES), str(p))
+    return _read_plan(t, _plan_path(t, t.raw("file")))
+
+
+def _read_plan(t: Table, p: Path) -> PlanFile:
+    """The plan file ``p`` that ``t``'s ``file`` names, read; one that cannot be read (not there, a folder, not
+    text) is named as the key too (``m.toml: trajectory.file: m/box.plan: no such file``), a bad plan by its item."""
+    try:
+        text = read_text_file(p, "a mission plan", PLAN_MAX_BYTES)
+    except ConfigError as exc:
+        raise t.error("file", str(exc)) from None
+    return read_plan_text(text, str(p))

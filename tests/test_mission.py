@@ -363,3 +363,12 @@ def test_a_blackout_after_the_end_is_refused(tmp_path: Path) -> None:
     assert "never happen" in msg
     ends_late = prepare(_write(tmp_path, body + "[link]\nblackouts = [[4.0, 100.0]]\n"))  # running past the end: fine
     assert ends_late.link.up.blackouts == ((4.0, 100.0),)
+
+
+def test_a_plan_file_that_is_not_there_is_named_as_the_missions_key(tmp_path: Path) -> None:
+    """It said ``.../box.plan: no such file``, naming no key of the mission that gave it, until the third wave's
+    fortieth session."""
+    path = _write(tmp_path, 'name = "box"\n[trajectory]\nkind = "plan"\nfile = "box.plan"\n')
+    with pytest.raises(ConfigError) as exc:
+        load_mission(path)
+    assert str(exc.value) == f"{path}: trajectory.file: {tmp_path / 'box.plan'}: no such file"
