@@ -1308,3 +1308,14 @@ def test_a_trace_field_with_digit_separators_is_refused(tmp_path, capsys) -> Non
     trace.write_text("t_s,delay_ms\n0,1_0\n0.1,10\n")
     _refused(capsys, ["sim", "missions/sine.toml", "--link-trace", trace, "--no-plots"],
              f"{trace} line 2: delay_ms is not a number: '1_0'")
+
+
+@pytest.mark.parametrize("form", ["udpin:", "udp:"])
+def test_a_fleet_given_a_bound_ground_station_address_is_refused_before_anything_starts(capsys, tmp_path, form) -> None:
+    """Every vehicle of a SITL fleet sends to the one ``--gcs`` address, so a bound one (``udpin:``, ``udp:``)
+    would be bound by each: until the third wave's fortieth session the first vehicle started, the run's files
+    were written, and the second said ``cannot bind (Address already in use)``, its neighbour's port."""
+    out = tmp_path / "fleet"
+    line = _refused(capsys, ["sitl", "missions/sine.toml", "--vehicles", 2, "--gcs", f"{form}127.0.0.1:31999",
+                             "--no-plots", "--out", out], "--gcs")
+    assert "fleet" in line and "udpout" in line and not out.exists(), line

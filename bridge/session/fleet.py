@@ -44,7 +44,7 @@ from bridge.autopilot.estimator import compile_estimator
 from bridge.core.flight import Flight
 from bridge.link.radio import make_radio_file, occupancy_of_parts
 from bridge.link.turns import TURNS
-from bridge.mavlink.endpoint import LINK_PORT
+from bridge.mavlink.endpoint import LINK_PORT, parse_address
 from bridge.mavlink.signing import key_from_file
 from bridge.nodes.forkserver import warm
 from bridge.record.runlog import Run, blackout_windows, finish_run
@@ -69,6 +69,11 @@ def check_fleet(count: int, *, realtime: bool, instance: int | None, gcs: str | 
     if key is not None:
         key_from_file(key)
     gcs_text = check_options(realtime=realtime, instance=instance, gcs=gcs, speed=speed)
+    if count > 1 and gcs_text is not None and parse_address(gcs_text, "udpout", "--gcs").mode == "udpin":
+        # each vehicle would bind that one port: the second met its neighbour there, after the first had started
+        raise ConfigError(f"--gcs {gcs_text}: a fleet's vehicles all send to the one --gcs address, so it cannot be "
+                          f"bound (udpin: or udp:) by each of {count} vehicles; give HOST:PORT (udpout, where the "
+                          "ground station listens)")
     if instance is None:
         return gcs_text
     last = instance + count - 1
