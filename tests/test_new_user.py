@@ -183,6 +183,23 @@ def test_the_same_script_under_the_guard_flies(tmp_path: Path) -> None:
     assert "ROWS ['completed', 'completed']" in proc.stdout
 
 
+def test_a_sweep_started_in_a_folder_holding_missions_imports_bsst_s_own(tmp_path: Path) -> None:
+    """A user's folder holds ``missions/`` (their mission files, no ``__init__.py``). multiprocessing's fork
+    server is started by ``python -c``, so its path begins with its working directory: started there, it took that
+    folder for the ``missions`` package (a namespace one, an editable install's finder coming after), its preload
+    failed silently, and every worker died importing ``bridge.sweep`` ("cannot import name 'CONTROLLERS' from
+    'missions'"), every later sweep of the process too (until the third wave's fortieth session). A fresh process,
+    so the fork server starts here."""
+    cwd = user_dir(tmp_path)
+    (cwd / "short.toml").write_text(dump_toml(SHORT.to_dict()))
+    script = ("from bridge.sweep import Grid, sweep\n"
+              "rows = sweep('short.toml', Grid(delay_ms=(0, 10)), jobs=2, engine='process')\n"
+              "print('ROWS', [r['outcome'] for r in rows])\n")
+    # no PYTHONPATH: bsst as installed (make's venv: editable, by a finder after the path's own folders)
+    proc = run_python(["-c", script], cwd, timeout=300.0, extra_env={"PYTHONPATH": ""})
+    assert proc.returncode == 0 and "ROWS ['completed', 'completed']" in proc.stdout, proc.stderr[-3000:]
+
+
 # -- a sweep whose every cell failed -----------------------------------------------------------------------
 
 
