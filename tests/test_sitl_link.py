@@ -163,7 +163,9 @@ def test_a_failsafe_in_a_blackout_ends_the_run_failsafe_exit_1_in_either_clock(t
     controller gives the vehicle's end action up at 5 s, and the session left it there, still landing (until the third
     wave's fortieth session)."""
     mission = tmp_path / "sine2.toml"
-    mission.write_text('name = "sine2"\nduration_s = 2.0\n[trajectory]\nkind = "sine"\nclimb = 1.0\n')
+    mission.write_text('name = "sine2"\nduration_s = 2.0\n[trajectory]\nkind = "sine"\namplitude = 0.0\nclimb = 1.0\n')
+    # a straight climb: the descend failsafe has no position hold, and a sine's horizontal speed at it (the tilt
+    # of the last target held for 0.5 s) took it to the ground at 2.4 m/s once, a crash
     out = tmp_path / "run"
     with instance_slot() as n:
         p = run_bsst("sitl", str(mission), *clock, "--instance", str(n), "--out", str(out), "--no-plots",
@@ -190,12 +192,13 @@ def test_an_end_action_lost_in_a_blackout_over_the_end_is_not_flown_as_asked(tmp
     in the air). Lockstep's model acts on the targets, arms and states, not on the end action's command (nor
     offline, which sends none): there the vehicle lands by it, exit 0."""
     mission = tmp_path / "sine2.toml"
-    mission.write_text('name = "sine2"\nduration_s = 2.0\n[trajectory]\nkind = "sine"\nclimb = 1.0\n')
+    mission.write_text('name = "sine2"\nduration_s = 2.0\n[trajectory]\nkind = "sine"\namplitude = 0.0\nclimb = 1.0\n')
     out = tmp_path / "run"
     with instance_slot() as n:
         p = run_bsst("sitl", str(mission), *clock, "--instance", str(n), "--out", str(out), "--no-plots",
                      "--blackout", "1.8:30", cwd=ROOT, env=ENV, timeout=120)
     summary = json.loads((out / "summary.json").read_text())
+    assert summary["outcome"] == "completed", (summary["outcome"], summary["ended_by"])
     end, said = summary["end"], "not flown as asked: the vehicle never took the mission's end action (LAND"
     assert summary["outcome"] == "completed" and summary["ended_by"]["who"] == "mission", summary["ended_by"]
     if not clock:
