@@ -143,7 +143,14 @@ def test_mavproxys_ftp_module_lists_and_gets_the_events_file(tmp_path: Path) -> 
             mp.wait_line(lambda s: "all_events.json" in s, start=mark)
             mark = mp.say("ftp get /etc/extras/all_events.json events.json")
             mp.wait_line(lambda s: "Wrote" in s and "events.json" in s, start=mark, timeout=30)
+            # MAVProxy prints 'Wrote' before it closes the file (its last chunk still in the file object's
+            # buffer): stopped then, it could end first. One thread reads the link and runs typed commands, a
+            # command only once the packet in hand is handled, the close included: an answer to one typed now
+            # is the file complete ('No transfer in progress', or the sessions its parameter module's FTP holds)
+            mark = mp.say("ftp status")
+            mp.wait_line(lambda s: "No transfer in progress" in s or "FTP session" in s, start=mark)
+            got = (tmp_path / "events.json").read_bytes()
         finally:
             mp.stop()
             sitl.stop()
-    assert (tmp_path / "events.json").read_bytes() == compmeta.FILES[compmeta.EVENTS_PATH]
+    assert got == compmeta.FILES[compmeta.EVENTS_PATH]
