@@ -81,6 +81,21 @@ def test_a_request_sent_again_gets_the_same_reply() -> None:
     assert s.handle(_req(6, ftp.BURST_READ_FILE, 2), ME) == burst
 
 
+def test_another_sessions_request_with_the_same_seq_is_its_own() -> None:
+    """MAVProxy numbers each operation's requests from 0 in its own session: its parameter module's OpenFileRO of
+    ``@PARAM/param.pck`` (NAKed) and then a typed ``ftp get``'s are both seq 0. Until 2026-12-07 the second got the
+    first's NAK again (a request sent again, by seq and opcode alone), and so did each of its retries."""
+    s = ftp.FtpServer(FILES)
+    (nak,) = _ops(s.handle(_req(0, ftp.OPEN_FILE_RO, 7, data=b"@PARAM/param.pck"), ME))
+    assert (nak.opcode, nak.session) == (ftp.NAK, 7)
+    for _ in range(2):  # and its retry, the same request sent again
+        (ack,) = _ops(s.handle(_req(0, ftp.OPEN_FILE_RO, 8, data=b"top.txt"), ME))
+        assert (ack.opcode, ack.session, ack.seq, ack.data) == (ftp.ACK, 8, 1, struct.pack("<I", 1))
+    assert {r.session for r in _ops(s.handle(_req(1, ftp.BURST_READ_FILE, 8), ME))} == {8}
+    (other,) = _ops(s.handle(_req(1, ftp.BURST_READ_FILE, 9), ME))  # no session 9: not session 8's burst again
+    assert (other.opcode, other.session, other.data) == (ftp.NAK, 9, bytes((ftp.ERR_INVALID_SESSION,)))
+
+
 def test_list_a_directory_from_an_index() -> None:
     s = ftp.FtpServer(FILES)
     (root,) = _ops(s.handle(_req(0, ftp.LIST_DIRECTORY, data=b"/"), ME))

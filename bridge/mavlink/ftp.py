@@ -9,15 +9,16 @@ Out: the reply payloads, in order (one ACK or NAK; a BurstReadFile's data messag
 
 As the MAVLink FTP spec (mavlink-devguide, en/services/ftp.md) and PX4's server (PX4-Autopilot
 src/modules/mavlink/mavlink_ftp.cpp) have it: a reply's seq is the request's + 1 and a burst's messages count on from
-there; a request sent again (its seq + 1 is the seq of the last reply to its sender, for the same opcode) gets that
-reply again, unchanged; OpenFileRO's ACK carries the file's size (4 bytes), ReadFile up to ``size`` bytes at
-``offset``, a read at or past the end NAKs EOF; BurstReadFile streams :data:`BURST_MESSAGES` messages of its
-``size`` bytes each (239 at most), the last with ``burst_complete`` 1, or the file's rest and an EOF NAK (PX4 sends
-the file to its end and then that NAK, a burst of at most 35 000 bytes); ListDirectory lists the entries from index
-``offset`` (``F<name>\\t<size>`` and ``D<name>``, each NUL-ended) and NAKs EOF past the last. Ours: a session takes the
-id the client gave (PX4 has one session, 0, which QGroundControl sends; MAVProxy gives each operation its own id
-and routes the replies by it), per sender, at most :data:`MAX_SESSIONS` (the least recently used is closed for a
-new one). Writing, removing, renaming and every other opcode NAK UnknownCommand: nothing here can be changed.
+there; a request sent again (its seq + 1 is the seq of the last reply to its sender, for the same opcode and session:
+MAVProxy numbers each session's requests from 0) gets that reply again, unchanged; OpenFileRO's ACK carries the file's
+size (4 bytes), ReadFile up to ``size`` bytes at ``offset``, a read at or past the end NAKs EOF; BurstReadFile streams
+:data:`BURST_MESSAGES` messages of its ``size`` bytes each (239 at most), the last with ``burst_complete`` 1, or the
+file's rest and an EOF NAK (PX4 sends the file to its end and then that NAK, a burst of at most 35 000 bytes);
+ListDirectory lists the entries from index ``offset`` (``F<name>\\t<size>`` and ``D<name>``, each NUL-ended) and NAKs
+EOF past the last. Ours: a session takes the id the client gave (PX4 has one session, 0, which QGroundControl sends;
+MAVProxy gives each operation its own id and routes the replies by it), per sender, at most :data:`MAX_SESSIONS` (the
+least recently used is closed for a new one). Writing, removing, renaming and every other opcode NAK UnknownCommand:
+nothing here can be changed.
 """
 
 from __future__ import annotations
@@ -116,7 +117,8 @@ class FtpServer:
         if op is None or op.opcode >= ACK:
             return []
         last = self.last.get(sender)
-        if last and last[0].req_opcode == op.opcode and (op.seq + 1) & 0xFFFF == last[0].seq:
+        again = (op.opcode, op.session, (op.seq + 1) & 0xFFFF)
+        if last and (last[0].req_opcode, last[0].session, last[0].seq) == again:
             return [r.encode() for r in last]  # its reply was lost: the same again (PX4's _last_reply)
         replies = self._answer(op, sender)
         self.last.pop(sender, None)
