@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
-from numbers import Real
+from numbers import Integral, Real
 from pathlib import Path
 from typing import Any
 
@@ -32,11 +32,11 @@ from missions.geodetic import Home as GeoHome
 from missions.geofence import geofence_from_table
 from missions.planfiles import PlanFile, read_plan_text
 from missions.rally import rally_dict, rally_from_plan, rally_from_table
-from missions.references import Reference
+from missions.references import Reference, Sine, Step, Waypoints
 from missions.scatter import fleet_scatter_problem, scattered_start
 from missions.steps import PlanBudget, StepCap
 from missions.trajectories import END_REST_S, PLAN_MAX_BYTES, PSI_RANGE, plan_of, plan_smooth, psi_of, trajectory_of
-from params import ConfigError, Table, load_toml, read_text_file, unreachable
+from params import ConfigError, Table, load_toml, read_text_file, show, unreachable
 
 CONTROLLERS = ("bsst", "smc", "pid")
 # how the super-twisting step of ``bsst`` is stepped over the control period (controller.supertwisting):
@@ -103,6 +103,7 @@ class Mission:
         if why:
             raise ConfigError(f"{self.source}: name: {why}")
         check_timing(self.duration_s, self.rate_hz, self.physics_hz, self.source)
+        check_fields(self)
         why = law_spec_problem(self.controller)
         if why:
             raise ConfigError(f"{self.source}: controller: {why}")
@@ -113,6 +114,9 @@ class Mission:
             raise ConfigError(f"{self.source}: end.action: must be one of {', '.join(END_ACTIONS)}; "
                               f"got {self.end_action!r}"[:300])
         lo, hi = MISSION_RANGES["start_scatter_m"]
+        if isinstance(self.start_scatter_m, bool) or not isinstance(self.start_scatter_m, Real):
+            raise ConfigError(f"{self.source}: start.scatter_m: expected a number (m), "
+                              f"got {show(self.start_scatter_m)}")
         if not lo <= self.start_scatter_m <= hi:  # also refuses nan
             raise ConfigError(f"{self.source}: start.scatter_m: must be in [{lo:g}, {hi:g}] m; "
                               f"got {self.start_scatter_m!r}"[:300])
@@ -317,9 +321,9 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
     if not t.has("rate_hz") and (why := rate_problem(rate, physics, " (physics_hz)")):  # the default's, not the file's
         raise ConfigError(f"{source}: rate_hz: not given, so {rate:g} Hz (the default), and {why}; give rate_hz "
                           f"(in the file: --rate lays a rate over it, but the file's own must fit too)")
-    seed = t.integer("seed", 0, lo=int(r["seed"][0]), hi=int(r["seed"][1]))
+    seed = _seed_of(t)
     st = t.table("start")
-    start = st.vector("position", 3, (0.0, 0.0, 0.0), lo=-1e4, hi=1e4) + (psi_of(st),)
+    start = _start_of(st)
     scatter = st.number("scatter_m", 0.0, lo=r["start_scatter_m"][0], hi=r["start_scatter_m"][1])
     st.done()
     too_long = cap.problem(duration, rate) if cap is not None and not derived else None  # before the trajectory
@@ -366,6 +370,63 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
         rally=rally,
         **raw,
     )
+
+
+def _seed_of(t: Table) -> int:
+    """Key ``seed`` of ``t``: an integer in its one range (:data:`MISSION_RANGES`); 0 if not given."""
+    lo, hi = MISSION_RANGES["seed"]
+    return t.integer("seed", 0, lo=int(lo), hi=int(hi))
+
+
+def _start_of(st: Table) -> tuple[float, float, float, float]:
+    """A ``[start]`` table's ``position`` (x, y, z m) and ``psi`` (rad: :func:`psi_of`), as the start's 4-tuple."""
+    return st.vector("position", 3, (0.0, 0.0, 0.0), lo=-1e4, hi=1e4) + (psi_of(st),)  # type: ignore[return-value]
+
+
+def check_fields(m: Mission) -> None:
+    """The fields of a :class:`Mission` built in Python that a mission file's loader reads, read as it reads them
+    (one reader and one range per key: :data:`MISSION_RANGES`, :data:`missions.trajectories.PSI_RANGE`,
+    :func:`missions.trajectories.trajectory_of`), so that ``Mission(seed="x")`` or ``Mission(Sine(psi=90), ...)`` is
+    refused as a file's ``seed = "x"`` or ``psi = 90`` is, the field named as the file's key (``seed``,
+    ``start.psi``, ``trajectory.psi``, ``trajectory.setpoints[0].t``; a point's time may be past ``duration_s``, never
+    past the longest mission's): a trajectory of the kinds a file writes
+    (:class:`Sine`, :class:`Step`, :class:`Waypoints`), the raw tables (a mapping each) and ``events``. A smooth
+    trajectory (a plan's, checked as it is planned) and a caller's own reference are taken as given."""
+    _seed_of(Table(_plain({"seed": m.seed}), m.source))
+    start = m.start
+    if not isinstance(start, (tuple, list)) or len(start) != 4:
+        raise ConfigError(f"{m.source}: start: expected (x, y, z, psi): 4 numbers (m, m, m, rad), got {show(start)}")
+    _start_of(Table(_plain({"position": list(start[:3]), "psi": start[3]}), m.source, "start"))
+    ref = m.trajectory
+    if not all(callable(getattr(ref, a, None)) for a in ("sample", "change_times", "to_dict")):
+        raise ConfigError(f"{m.source}: trajectory: expected a reference (Sine, Step, Waypoints, or an object with "
+                          f"sample, change_times and to_dict: missions.references.Reference), got {show(ref)}")
+    if isinstance(ref, (Sine, Step, Waypoints)):  # (each value read as the file's: a new reference, thrown away)
+        # a point's time up to the longest mission's, not this one's: a file's mission flown shorter from Python
+        # (``replace(step, duration_s=12.0)``, its first 12 s) keeps the points it does not reach
+        trajectory_of(Table(_plain(ref.to_dict()), m.source, "trajectory"), MISSION_RANGES["duration_s"][1])
+    for k in ("gains", "effects", "link", "failsafe", "sensors", "estimator", "params", "wind"):
+        if not isinstance(getattr(m, k), Mapping):
+            raise ConfigError(f"{m.source}: {k}: expected a table (a mapping), got {show(getattr(m, k))}")
+    if not isinstance(m.events, (tuple, list)) or not all(isinstance(e, Mapping) for e in m.events):
+        raise ConfigError(f"{m.source}: events: expected a tuple of tables (t_s, kind and its settings), "
+                          f"got {show(m.events)}")
+
+
+def _plain(v: Any) -> Any:
+    """A Python caller's value as a TOML file's: numpy's and other numbers as int or float (a bool stays one), lists
+    and tuples as lists, mappings as dicts; anything else as it is (its reader names it)."""
+    if isinstance(v, bool) or isinstance(v, (str, int, float)):
+        return v
+    if isinstance(v, Integral):
+        return int(v)
+    if isinstance(v, Real):
+        return float(v)
+    if isinstance(v, Mapping):
+        return {k: _plain(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_plain(x) for x in v]
+    return v
 
 
 def _law(t: Table, key: str) -> str | None:

@@ -1,0 +1,107 @@
+"""Covers missions.mission: a Mission built in Python is refused where a mission file is, by the file's own readers
+and ranges, naming the field as the file's key.
+
+``Mission(seed="x")``, ``Mission(Sine(psi=90), ...)``, a start's psi of 90, a set-point's text were taken (the seed
+failed later as ``link.seed``, a key the caller never gave; text in a sine failed deep in the law with a TypeError;
+a yaw in degrees flew 14 turns): each is a :class:`params.ConfigError` now, before anything flies.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from missions import MISSION_DIR, Mission, Setpoint, Sine, Step, Waypoints, load_mission
+from params import ConfigError
+
+PSI = "must be in [-2π, 2π] = [-6.2832, 6.2832] (radians; a QGC plan's yaw, param4, is degrees), got 90"
+
+
+@pytest.mark.parametrize("seed, said", [
+    ("x", "seed: expected an integer, got 'x'"),
+    (1.5, "seed: expected an integer, got 1.5"),
+    (True, "seed: expected an integer, got True"),
+    (-1, "seed: must be in [0, 2147483647], got -1"),
+    (2**31, "seed: must be in [0, 2147483647], got 2147483648"),
+])
+def test_a_seed_is_refused_as_a_files_seed_is(tmp_path: Path, seed: object, said: str) -> None:
+    """The file's message for the file's ``seed = ...``, the field's for the field (it was taken, and failed once
+    flown as ``<python>: link.seed: ...``)."""
+    with pytest.raises(ConfigError) as e:
+        Mission(Sine(), duration_s=1.0, seed=seed)  # type: ignore[arg-type]
+    assert str(e.value) == f"<python>: {said}"
+    with pytest.raises(ConfigError) as e:
+        Mission(Sine(), duration_s=1.0).with_overrides(seed=seed)
+    assert str(e.value) == f"<python>: {said}"
+    if not isinstance(seed, str):  # the file refuses the same value in the same words
+        f = tmp_path / "m.toml"
+        text = (MISSION_DIR / "sine.toml").read_text()
+        f.write_text(re.sub(r"(?m)^seed = .*$", f"seed = {str(seed).lower()}", text))
+        with pytest.raises(ConfigError) as e:
+            load_mission(f)
+        assert str(e.value) == f"{f}: {said}"
+    assert Mission(Sine(), duration_s=1.0, seed=np.int64(7)).seed == 7  # numpy's integers are integers
+
+
+@pytest.mark.parametrize("make, key", [
+    (lambda: Mission(Sine(psi=90), duration_s=1.0), "trajectory.psi"),
+    (lambda: Mission(Sine(), duration_s=1.0, start=(0.0, 0.0, 0.0, 90)), "start.psi"),
+    (lambda: Mission(Step((Setpoint(0.0, 0.0, 0.0, 1.0, 90),)), duration_s=1.0), "trajectory.setpoints[0].psi"),
+    (lambda: Mission(Waypoints((Setpoint(0.0, 0.0, 0.0, 1.0, 90),)), duration_s=1.0), "trajectory.points[0].psi"),
+])
+def test_a_yaw_in_degrees_is_refused_from_python_saying_radians(make, key: str) -> None:
+    with pytest.raises(ConfigError) as e:
+        make()
+    assert str(e.value) == f"<python>: {key}: {PSI}"
+
+
+def test_a_list_of_points_may_turn_on_one_turn_at_a_time_from_python_too() -> None:
+    turns = tuple(Setpoint(float(i), 0.0, 0.0, 1.0, 6.0 * i) for i in range(3))  # 12 rad: past 2π, a turn at a time
+    assert Mission(Waypoints(turns), duration_s=3.0).trajectory == Waypoints(turns)
+    jump = (Setpoint(0.0, 0.0, 0.0, 1.0, 0.0), Setpoint(1.0, 0.0, 0.0, 1.0, 7.0))
+    with pytest.raises(ConfigError, match=r"^<python>: trajectory\.points\[1\]\.psi: must be within 2π = 6\.2832 "
+                                          r"\(one turn\) of the point before's 0 .*, got 7$"):
+        Mission(Waypoints(jump), duration_s=3.0)
+
+
+@pytest.mark.parametrize("make, said", [
+    (lambda: Mission(Sine(psi="x"), duration_s=1.0), "trajectory.psi: expected a number, got 'x'"),  # type: ignore
+    (lambda: Mission(Sine(omega=1000.0), duration_s=1.0), "trajectory.omega: must be in [0, 100], got 1000"),
+    (lambda: Mission(Sine(amplitude=-1.0), duration_s=1.0), "trajectory.amplitude: must be in [0, 10000], got -1"),
+    (lambda: Mission(Sine(z0=math.nan), duration_s=1.0), "trajectory.z0: must be finite, got nan"),
+    (lambda: Mission(Step((Setpoint(-1.0, 0.0, 0.0, 1.0),)), duration_s=1.0),
+     "trajectory.setpoints[0].t: must be in [0, 86400], got -1"),
+    (lambda: Mission(Step((Setpoint(0.0, "a", 0.0, 1.0),)), duration_s=1.0),  # type: ignore[arg-type]
+     "trajectory.setpoints[0].x: expected a number, got 'a'"),
+    (lambda: Mission(Sine(), duration_s=1.0, start=(0.0, 0.0, 0.0)),  # type: ignore[arg-type]
+     "start: expected (x, y, z, psi): 4 numbers (m, m, m, rad), got (0.0, 0.0, 0.0)"),
+    (lambda: Mission(Sine(), duration_s=1.0, start=(0.0, "a", 0.0, 0.0)),  # type: ignore[arg-type]
+     "start.position: element 1 must be a finite number, got 'a'"),
+    (lambda: Mission(Sine(), duration_s=1.0, start_scatter_m="wide"),  # type: ignore[arg-type]
+     "start.scatter_m: expected a number (m), got 'wide'"),
+    (lambda: Mission(3, duration_s=1.0),  # type: ignore[arg-type]
+     "trajectory: expected a reference (Sine, Step, Waypoints, or an object with sample, change_times and to_dict: "
+     "missions.references.Reference), got 3"),
+    (lambda: Mission(Sine(), duration_s=1.0, link=3), "link: expected a table (a mapping), got 3"),  # type: ignore
+    (lambda: Mission(Sine(), duration_s=1.0, events=3),  # type: ignore[arg-type]
+     "events: expected a tuple of tables (t_s, kind and its settings), got 3"),
+])
+def test_what_a_file_refuses_is_refused_from_python_naming_the_field(make, said: str) -> None:
+    """Each was taken, then failed deep inside with a TypeError or AttributeError naming no field (text in a sine:
+    the law's ``unsupported operand type(s) for -``; a set-point's text: the envelope's ``can't multiply sequence``;
+    ``link=3``: ``'int' object has no attribute 'items'``), or flew (omega 1000 rad/s, a nan z0, a time of -1 s)."""
+    with pytest.raises(ConfigError) as e:
+        make()
+    assert str(e.value) == f"<python>: {said}"
+
+
+def test_a_files_mission_flown_shorter_from_python_keeps_its_later_points() -> None:
+    """A point's time is bounded by the longest mission's from Python, not the mission's own: the step's first
+    12 s (its set-point at 20 s never reached) is a mission, as tests/test_kernels.py flies it."""
+    m = dataclasses.replace(load_mission(MISSION_DIR / "step.toml"), duration_s=12.0)
+    assert m.trajectory.change_times() == (0.0, 10.0, 20.0)
