@@ -7,7 +7,8 @@ In:  any text (an exception's message, a ``repr``), the most characters it may k
 Out: the text on one line: every run of whitespace (line breaks, tabs) one space; one over ``cap`` characters cut
      to ``cap``, ending ``...``; the number (:func:`number`, :func:`whole`), ValueError if it is none; the word it
      likely misspells (:func:`likely`, :func:`is_typo_of`), or None; what an unknown key's refusal adds
-     (:func:`unknown_key_hint`: the key meant, where a PX4 parameter goes, else the keys allowed)
+     (:func:`unknown_key_hint`: the key meant, where a PX4 parameter goes, else the keys allowed; :func:`meant_hint`,
+     the first two alone: a vehicle parameter's name)
 
 (Apart from ``params/__init__.py``, which re-exports the misspelling's two, and was at its 500 lines.)
 """
@@ -78,19 +79,39 @@ def likely(text: str, known: Iterable[str], cutoff: float = 0.6) -> str | None:
 ALLOWED_SHOWN_MAX = 12  # keys an unknown key's refusal lists whole; of a table of more, the closest few and "..."
 
 
-def unknown_key_hint(text: str, known: Iterable[str]) -> str:
-    """What follows an unknown key ``text``'s refusal, ``known`` the keys its table takes (in the order it reads
-    them): ``; did you mean 'delay_ms'?`` (:func:`likely`, or the key in another case: ``MPC_ACC_HOR``), else where a
-    PX4 parameter's name goes (:func:`params.px4.px4_hint`), else ``; allowed: ...`` (every key, or of a table of
-    more than :data:`ALLOWED_SHOWN_MAX` the closest few or the first, ``...`` and how many): the line says what it
-    may be."""
+def meant(text: str, known: Iterable[str]) -> str | None:
+    """The word of ``known`` that ``text`` most likely means: itself in another case (``mpc_acc_hor`` for
+    ``MPC_ACC_HOR``), else one it misspells (:func:`likely`), as written or in another case (``com_of_los_t`` for
+    ``COM_OF_LOSS_T``); None if none is."""
     words = list(dict.fromkeys(str(k) for k in known))
-    like = next((w for w in words if w.lower() == text.lower()), None) or likely(text, words)
+    same = next((w for w in words if w.lower() == text.lower()), None)
+    if same is not None:
+        return same
+    lowered = {w.lower(): w for w in words}
+    like = likely(text, words) or likely(text.lower(), lowered)
+    return lowered.get(like, like) if like else None
+
+
+def meant_hint(text: str, known: Iterable[str]) -> str | None:
+    """What an unknown name ``text``'s refusal adds when it says what was meant: ``; did you mean 'delay_ms'?``
+    (:func:`meant`, ``known`` the names allowed), else where a PX4 parameter's name goes
+    (:func:`params.px4.px4_hint`); None if neither (the caller lists what is allowed)."""
+    like = meant(text, known)
     if like:
         return f"; did you mean {like!r}?"
     px4 = px4_hint(text)
-    if px4:
-        return f" ({px4})"
+    return f" ({px4})" if px4 else None
+
+
+def unknown_key_hint(text: str, known: Iterable[str]) -> str:
+    """What follows an unknown key ``text``'s refusal, ``known`` the keys its table takes (in the order it reads
+    them): the key meant or where a PX4 parameter's name goes (:func:`meant_hint`), else ``; allowed: ...`` (every
+    key, or of a table of more than :data:`ALLOWED_SHOWN_MAX` the closest few or the first, ``...`` and how many):
+    the line says what it may be."""
+    words = list(dict.fromkeys(str(k) for k in known))
+    hint = meant_hint(text, words)
+    if hint:
+        return hint
     if not words:
         return ""
     if len(words) <= ALLOWED_SHOWN_MAX:

@@ -1,9 +1,11 @@
-"""Covers missions.mission: a Mission built in Python is refused where a mission file is, by the file's own readers
-and ranges, naming the field as the file's key.
+"""Covers missions.mission, bridge.autopilot.params and params.text: a Mission built in Python is refused where a
+mission file is, by the file's own readers and ranges, naming the field as the file's key.
 
 ``Mission(seed="x")``, ``Mission(Sine(psi=90), ...)``, a start's psi of 90, a set-point's text were taken (the seed
 failed later as ``link.seed``, a key the caller never gave; text in a sine failed deep in the law with a TypeError;
-a yaw in degrees flew 14 turns): each is a :class:`params.ConfigError` now, before anything flies.
+a yaw in degrees flew 14 turns): each is a :class:`params.ConfigError` now, before anything flies. A ``[params]``
+name in another case (``com_of_loss_t``), in a file, a Mission, ``params=`` or ``--param``, is told the name it
+means, as an unknown key of a table is; a plan's PX4 limit put in ``[params]`` is told where it goes.
 """
 
 from __future__ import annotations
@@ -16,6 +18,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bridge import simulate
+from bridge.autopilot.params import parse_assignment
+from bridge.core.flight import prepare
 from missions import MISSION_DIR, Mission, Setpoint, Sine, Step, Waypoints, load_mission
 from params import ConfigError
 
@@ -105,3 +110,27 @@ def test_a_files_mission_flown_shorter_from_python_keeps_its_later_points() -> N
     12 s (its set-point at 20 s never reached) is a mission, as tests/test_kernels.py flies it."""
     m = dataclasses.replace(load_mission(MISSION_DIR / "step.toml"), duration_s=12.0)
     assert m.trajectory.change_times() == (0.0, 10.0, 20.0)
+
+
+@pytest.mark.parametrize("name, hint", [
+    ("com_of_loss_t", "; did you mean 'COM_OF_LOSS_T'?"),
+    ("Com_Of_Loss_T", "; did you mean 'COM_OF_LOSS_T'?"),
+    ("com_of_los_t", "; did you mean 'COM_OF_LOSS_T'?"),  # another case and one slip
+    ("mpc_xy_cruise", " (a PX4 limit of a plan's trajectory: put it in a [trajectory] of kind = \"plan\" as "
+                      "MPC_XY_CRUISE)"),
+    ("MPC_XY_VEL_MAX", "; the vehicle has COM_OF_LOSS_T, COM_OBL_ACT, "),  # no parameter here, in any case
+])
+def test_a_params_name_in_another_case_is_told_the_name_it_means(tmp_path: Path, name: str, hint: str) -> None:
+    """In a file's ``[params]``, a Mission's ``params``, ``params=`` and ``--param``: each said ``no such parameter;
+    the vehicle has`` and all 26 names, the one meant among them in capitals."""
+    f = tmp_path / "m.toml"
+    f.write_text((MISSION_DIR / "sine.toml").read_text() + f"\n[params]\n{name} = 2\n")
+    for build, said in ((lambda: prepare(f), f"{f}: params.{name}: no such parameter"),
+                        (lambda: prepare(Mission(Sine(), duration_s=1.0, params={name: 2})),
+                         f"<python>: params.{name}: no such parameter"),
+                        (lambda: simulate(Mission(Sine(), duration_s=1.0), params={name: 2}, plots=False),
+                         f"--param {name}=2: no such parameter"),
+                        (lambda: parse_assignment(f"{name}=2"), f"{name}: no such parameter")):
+        with pytest.raises(ConfigError) as e:
+            build()
+        assert str(e.value).startswith(said + hint), str(e.value)

@@ -42,7 +42,7 @@ from bridge.autopilot.failsafe import FAILSAFE_RANGES, FailsafeConfig
 from bridge.autopilot.positionloss import NOAID_TIMEOUT_RANGE_US, NOAID_TIMEOUT_US
 from bridge.autopilot.returnland import LAND_RANGES, RETURN_RANGES, ReturnConfig
 from params import ConfigError, Table, finite_float, show
-from params.text import number, whole
+from params.text import meant_hint, number, whole
 
 REAL32 = "REAL32"
 INT32 = "INT32"
@@ -332,6 +332,15 @@ def change_param(p: VehicleParams, name: str, value: float, running: bool = True
     return replace(p, sysid=int(value))
 
 
+def no_such_param(name: object) -> str:
+    """Why ``name`` is refused at start (``[params]``, ``--param``, ``Mission(params=...)``, ``params=``): no such
+    parameter, and what it likely meant, as an unknown key of a table says (:func:`params.text.meant_hint`): the
+    vehicle's parameter in another case or one slip away (``com_of_loss_t``: did you mean 'COM_OF_LOSS_T'?), or
+    where a PX4 name that is no vehicle parameter goes (a plan's ``MPC_XY_CRUISE``); else every parameter the vehicle
+    has. (A ground station's PARAM_SET is told no such parameter alone: :func:`change_param`.)"""
+    return f"no such parameter{meant_hint(str(name), BY_NAME) or '; the vehicle has ' + ', '.join(BY_NAME)}"
+
+
 def params_from_table(data: Mapping[str, Any], source: str, start: VehicleParams) -> VehicleParams:
     """A ``[params]`` table (NAME = value) applied over ``start``, each value checked with its
     parameter's one range; names the file and the key (``params.NAME``) of a bad one, and both keys of
@@ -341,7 +350,7 @@ def params_from_table(data: Mapping[str, Any], source: str, start: VehicleParams
     for name in data:
         spec = BY_NAME.get(name)
         if spec is None:
-            raise t.error(name, f"no such parameter; the vehicle has {', '.join(BY_NAME)}")
+            raise t.error(name, no_such_param(name))
         v = data[name]  # an integer past the float range goes on as it is: apply_params names the range
         huge = isinstance(v, int) and not isinstance(v, bool) and finite_float(v) is None
         if spec.kind == INT32 and isinstance(v, float):  # 1e6 or 1000000.0: typed_value takes a finite whole one
@@ -364,8 +373,7 @@ def apply_params(start: VehicleParams, entries: Iterable[tuple[str, Any]], prefi
         spec = BY_NAME.get(name)
         try:
             if spec is None:
-                raise ParamRefused(f"{name}: no such parameter; the vehicle has {', '.join(BY_NAME)}",
-                                   Refusal.UNKNOWN)
+                raise ParamRefused(f"{name}: {no_such_param(name)}", Refusal.UNKNOWN)
             after = change_param(p, name, typed_value(spec, value), running=False)
         except ParamRefused as exc:
             raise ConfigError(f"{prefix}{where(name, value)}: {str(exc).split(': ', 1)[1]}") from None
@@ -396,7 +404,7 @@ def parse_assignment(text: str) -> tuple[str, float]:
         raise ConfigError(f"expected NAME=VALUE, got {text!r}")
     spec = BY_NAME.get(name)
     if spec is None:
-        raise ConfigError(f"{name}: no such parameter; the vehicle has {', '.join(BY_NAME)}")
+        raise ConfigError(f"{name}: {no_such_param(name)}")
     for parse in ((whole, number) if spec.kind == INT32 else (number,)):
         try:
             got = parse(value)
