@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from missions.envelope import ENVELOPE_RADIUS_M, envelope_problem, ground_problem
-from missions.fleet import fleet_from_table
+from missions.fleet import Separation, VehicleSpec, fleet_from_table
 from missions.geodetic import Home as GeoHome
 from missions.geofence import geofence_from_table
 from missions.planfiles import PlanFile, read_plan_text
@@ -401,7 +401,7 @@ def check_fields(m: Mission) -> None:
     if not all(callable(getattr(ref, a, None)) for a in ("sample", "change_times", "to_dict")):
         raise ConfigError(f"{m.source}: trajectory: expected a reference (Sine, Step, Waypoints, or an object with "
                           f"sample, change_times and to_dict: missions.references.Reference), got {show(ref)}")
-    if isinstance(ref, (Sine, Step, Waypoints)):  # (each value read as the file's: a new reference, thrown away)
+    if isinstance(ref, _READ_AGAIN):  # (each value read as the file's: a new reference, thrown away)
         # a point's time up to the longest mission's, not this one's: a file's mission flown shorter from Python
         # (``replace(step, duration_s=12.0)``, its first 12 s) keeps the points it does not reach
         trajectory_of(Table(_plain(ref.to_dict()), m.source, "trajectory"), MISSION_RANGES["duration_s"][1])
@@ -411,6 +411,33 @@ def check_fields(m: Mission) -> None:
     if not isinstance(m.events, (tuple, list)) or not all(isinstance(e, Mapping) for e in m.events):
         raise ConfigError(f"{m.source}: events: expected a tuple of tables (t_s, kind and its settings), "
                           f"got {show(m.events)}")
+    if m.vehicles or m.separation is not None:
+        _check_fleet(m)
+
+
+_READ_AGAIN = (Sine, Step, Waypoints)  # the trajectories check_fields reads again (a smooth one: as given)
+
+
+def _check_fleet(m: Mission) -> None:
+    """A Python mission's ``vehicles`` and ``separation`` read as a file's ``[[vehicles]]`` and ``[separation]``
+    (:func:`missions.fleet.fleet_from_table`: ids 1..N, offsets, starts, their trajectories and laws, the ranges)."""
+    for i, v in enumerate(m.vehicles):
+        if not isinstance(v, VehicleSpec):
+            raise ConfigError(f"{m.source}: vehicles[{i}]: expected a missions.fleet.VehicleSpec, got {show(v)}")
+        if v.start is not None and (not isinstance(v.start, (tuple, list)) or len(v.start) != 4):
+            raise ConfigError(f"{m.source}: vehicles[{i}].start: expected (x, y, z, psi): 4 numbers (m, m, m, rad), "
+                              f"got {show(v.start)}")
+        if v.trajectory is not None and not callable(getattr(v.trajectory, "to_dict", None)):
+            raise ConfigError(f"{m.source}: vehicles[{i}].trajectory: expected a reference, got {show(v.trajectory)}")
+    if m.separation is not None and not isinstance(m.separation, Separation):
+        raise ConfigError(f"{m.source}: separation: expected a missions.fleet.Separation, got {show(m.separation)}")
+    table = {"vehicles": [v.to_dict() for v in m.vehicles]} if m.vehicles else {}
+    if m.separation is not None:
+        table["separation"] = m.separation.to_dict()
+    t = Table(_plain(table), m.source)
+    longest = MISSION_RANGES["duration_s"][1]
+    fleet_from_table(t, lambda tt: trajectory_of(tt, longest) if tt.raw("kind") in ("sine", "step", "waypoints")
+                     else Sine(), _law)
 
 
 def _plain(v: Any) -> Any:

@@ -22,6 +22,7 @@ from bridge import simulate
 from bridge.autopilot.params import parse_assignment
 from bridge.core.flight import prepare
 from missions import MISSION_DIR, Mission, Setpoint, Sine, Step, Waypoints, load_mission
+from missions.fleet import Separation, VehicleSpec
 from params import ConfigError
 
 PSI = "must be in [-2π, 2π] = [-6.2832, 6.2832] (radians; a QGC plan's yaw, param4, is degrees), got 90"
@@ -110,6 +111,28 @@ def test_a_files_mission_flown_shorter_from_python_keeps_its_later_points() -> N
     12 s (its set-point at 20 s never reached) is a mission, as tests/test_kernels.py flies it."""
     m = dataclasses.replace(load_mission(MISSION_DIR / "step.toml"), duration_s=12.0)
     assert m.trajectory.change_times() == (0.0, 10.0, 20.0)
+
+
+@pytest.mark.parametrize("vehicles, separation, said", [
+    ((VehicleSpec(1), VehicleSpec(5, offset=(0.0, 2.0, 0.0))), None,
+     "vehicles: the ids must be 1..2, each once (they are the system ids); got 1, 5"),
+    ((VehicleSpec(1), VehicleSpec(2, offset=(0.0, "a", 0.0))), None,  # type: ignore[arg-type]
+     "vehicles[1].offset: element 1 must be a finite number, got 'a'"),
+    ((VehicleSpec(1), 3), None, "vehicles[1]: expected a missions.fleet.VehicleSpec, got 3"),
+    ((VehicleSpec(1), VehicleSpec(2, trajectory=Sine(y0=2.0, omega=1000.0))), None,
+     "vehicles[1].trajectory.omega: must be in [0, 100], got 1000"),
+    ((VehicleSpec(1), VehicleSpec(2, offset=(0.0, 2.0, 0.0))), Separation(min_m=-5.0),
+     "separation.min_m: must be in [0, 100], got -5"),
+])
+def test_a_fleet_built_in_python_is_read_as_a_files_vehicles(vehicles, separation, said: str) -> None:
+    """``Mission(vehicles=..., separation=...)`` as a file's ``[[vehicles]]`` and ``[separation]``: ids 1, 5 flew
+    two vehicles, a text offset was a TypeError, a non-VehicleSpec an AttributeError (``'int' object has no attribute
+    'controller'``), a negative separation was taken."""
+    with pytest.raises(ConfigError) as e:
+        Mission(Sine(), duration_s=1.0, vehicles=vehicles, separation=separation)
+    assert str(e.value) == f"<python>: {said}"
+    two = (VehicleSpec(1), VehicleSpec(2, offset=(0.0, 2.0, 0.0)))
+    assert Mission(Sine(), duration_s=1.0, vehicles=two, separation=Separation(min_m=0.5)).vehicles == two
 
 
 @pytest.mark.parametrize("name, hint", [
