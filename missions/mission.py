@@ -311,8 +311,7 @@ def mission_from_table(data: Mapping[str, Any], source: str, default_name: str =
     derived = trajectory_table.raw("kind") == "plan" and not t.has("duration_s")  # the plan's own length
     duration = 0.0 if derived else t.number("duration_s", lo=MISSION_RANGES["duration_s"][0], lo_open=True,
                                             hi=MISSION_RANGES["duration_s"][1])
-    profile = t.string("profile", "paper")
-    actuation = t.string("actuation", "", choices=("", "wrench", "motors")) or None
+    profile, actuation = _vehicle_of(t)
     controller = _law(t, "controller") or "bsst"
     discretization = t.string("discretization", DEFAULT_DISCRETIZATION, choices=DISCRETIZATIONS)
     r = MISSION_RANGES
@@ -378,6 +377,12 @@ def _seed_of(t: Table) -> int:
     return t.integer("seed", 0, lo=int(lo), hi=int(hi))
 
 
+def _vehicle_of(t: Table) -> tuple[str, str | None]:
+    """Keys ``profile`` (a name or a profile file's path, found when the flight is built) and ``actuation`` (None:
+    the profile's own) of ``t``."""
+    return t.string("profile", "paper"), t.string("actuation", "", choices=("", "wrench", "motors")) or None
+
+
 def _start_of(st: Table) -> tuple[float, float, float, float]:
     """A ``[start]`` table's ``position`` (x, y, z m) and ``psi`` (rad: :func:`psi_of`), as the start's 4-tuple."""
     return st.vector("position", 3, (0.0, 0.0, 0.0), lo=-1e4, hi=1e4) + (psi_of(st),)  # type: ignore[return-value]
@@ -392,7 +397,10 @@ def check_fields(m: Mission) -> None:
     past the longest mission's): a trajectory of the kinds a file writes
     (:class:`Sine`, :class:`Step`, :class:`Waypoints`), the raw tables (a mapping each) and ``events``. A smooth
     trajectory (a plan's, checked as it is planned) and a caller's own reference are taken as given."""
-    _seed_of(Table(_plain({"seed": m.seed}), m.source))
+    top = Table(_plain({"seed": m.seed, "profile": m.profile, "actuation": "" if m.actuation is None else m.actuation}),
+                m.source)
+    _seed_of(top)
+    _vehicle_of(top)
     start = m.start
     if not isinstance(start, (tuple, list)) or len(start) != 4:
         raise ConfigError(f"{m.source}: start: expected (x, y, z, psi): 4 numbers (m, m, m, rad), got {show(start)}")

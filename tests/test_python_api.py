@@ -94,13 +94,18 @@ def test_a_list_of_points_may_turn_on_one_turn_at_a_time_from_python_too() -> No
      "trajectory: expected a reference (Sine, Step, Waypoints, or an object with sample, change_times and to_dict: "
      "missions.references.Reference), got 3"),
     (lambda: Mission(Sine(), duration_s=1.0, link=3), "link: expected a table (a mapping), got 3"),  # type: ignore
+    (lambda: Mission(Sine(), duration_s=1.0, actuation="rotors"),
+     "actuation: must be one of '', wrench, motors; got 'rotors'"),
+    (lambda: Mission(Sine(), duration_s=1.0, profile=3), "profile: expected a string, got 3"),  # type: ignore
     (lambda: Mission(Sine(), duration_s=1.0, events=3),  # type: ignore[arg-type]
      "events: expected a tuple of tables (t_s, kind and its settings), got 3"),
 ])
 def test_what_a_file_refuses_is_refused_from_python_naming_the_field(make, said: str) -> None:
     """Each was taken, then failed deep inside with a TypeError or AttributeError naming no field (text in a sine:
     the law's ``unsupported operand type(s) for -``; a set-point's text: the envelope's ``can't multiply sequence``;
-    ``link=3``: ``'int' object has no attribute 'items'``), or flew (omega 1000 rad/s, a nan z0, a time of -1 s)."""
+    ``link=3``: ``'int' object has no attribute 'items'``), or flew (omega 1000 rad/s, a nan z0, a time of -1 s), or
+    failed once flown naming no field (``actuation must be one of wrench, motors; got 'rotors'``) or the wrong one
+    (``profile: unknown profile '3'``)."""
     with pytest.raises(ConfigError) as e:
         make()
     assert str(e.value) == f"<python>: {said}"
