@@ -368,7 +368,7 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
     over flies on under it, recorded, judged on its record, said (``separation.taken_over``)."""
     from bridge.core.clock import lockstep_pace  # lazy: start-up time
     from bridge.session import sitl as sitl_one  # lazy: start-up time
-    from bridge.session.fleet import check_fleet, check_fleet_ports, fly_sessions, radio_block  # lazy: start-up
+    from bridge.session.fleet import check_fleet, fleet_instances, fly_sessions, radio_block  # lazy: start-up
 
     given = Overrides.of(overrides, **keywords)
     given_link = given.link or {}
@@ -403,41 +403,41 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
     keep = out is not None or write
     if keep:  # a refused run directory is named before a busy port (both before anything starts)
         run_dir(out, fleet.name, overwrite, create=False)
-    check_fleet_ports(len(flights), instance)
-    path = run_dir(out, fleet.name, overwrite) if keep else Path(tempfile.mkdtemp(prefix="bsst-sitl-fleet-"))
-    try:
-        fm = over.laid_over(fleet)
-        dirs = [d for d in _vehicle_dirs(fm, path) if d is not None]
-        ids = [v.id for v in fm.vehicles]
-        watch = _watch(fm, flights)
-        clocked = not realtime  # lockstep: one shared step clock (bridge.nodes.vehicle.gate)
-        runs = fly_sessions(flights, ids, dirs, realtime=realtime, instance=instance, gcs=gcs_text, speed=speed,
-                            key=Path(key) if key is not None else None, plots=plots, keep=keep,
-                            radii=watch.radii if clocked else None, shared_radio=shared, announce=live)
-        rec = clocked_records(runs, ids, fm.rate_hz) if clocked else taken_over_records(runs, ids, fm.rate_hz)
-        contacts = judge_traces(watch, [r.trace for r in runs], fm.rate_hz, rec.finals,
-                                [f.mission.start for f in flights] if clocked else None, rec.afters, rec.walls,
-                                own_clocks=not clocked)
-        runs = [_touched(r, contacts.get(j)) for j, r in enumerate(runs)]
-        summary = fleet_summary(fm, flights, runs, watch, "realtime" if realtime else "lockstep", instance or 0)
-        if rec.flown:  # a vehicle flew on: lockstep, on the wall clock; real time, under a ground station
-            judged_on_wall_clock(summary, rec, *(() if clocked else ("taken_over", REALTIME)))
-        if shared:
-            summary["radio"] = radio_block(ids, flights, runs, realtime)
-        summary["sitl"] = {"instances": None if instance is None else list(range(instance, instance + len(ids))),
-                           "gcs": gcs_text, "sysids": [(instance or 0) + i for i in ids], "shared_clock": clocked,
-                           "signed": key is not None}
-        if clocked:
-            summary["sitl"]["gate"] = {str(i): (r.summary.get("sitl") or {}).get("gate") for i, r in zip(ids, runs)}
-        if contacts and not clocked:
-            summary["sitl"]["note"] = CONTINUED
-        elif any(c.get("continued") for c in contacts.values()):
-            summary["sitl"]["note"] = WALL_CLOCK
-        _finish(fm, path if keep else None, runs, watch, summary, plots)
-        return FleetRun(runs, summary, path if keep else None)
-    finally:
-        if not keep:
-            shutil.rmtree(path, ignore_errors=True)
+    with fleet_instances(len(flights), instance):  # held for the fleet's life; another session's refused here
+        path = run_dir(out, fleet.name, overwrite) if keep else Path(tempfile.mkdtemp(prefix="bsst-sitl-fleet-"))
+        try:
+            fm = over.laid_over(fleet)
+            dirs = [d for d in _vehicle_dirs(fm, path) if d is not None]
+            ids = [v.id for v in fm.vehicles]
+            watch = _watch(fm, flights)
+            clocked = not realtime  # lockstep: one shared step clock (bridge.nodes.vehicle.gate)
+            runs = fly_sessions(flights, ids, dirs, realtime=realtime, instance=instance, gcs=gcs_text, speed=speed,
+                                key=Path(key) if key is not None else None, plots=plots, keep=keep,
+                                radii=watch.radii if clocked else None, shared_radio=shared, announce=live)
+            rec = clocked_records(runs, ids, fm.rate_hz) if clocked else taken_over_records(runs, ids, fm.rate_hz)
+            contacts = judge_traces(watch, [r.trace for r in runs], fm.rate_hz, rec.finals,
+                                    [f.mission.start for f in flights] if clocked else None, rec.afters, rec.walls,
+                                    own_clocks=not clocked)
+            runs = [_touched(r, contacts.get(j)) for j, r in enumerate(runs)]
+            summary = fleet_summary(fm, flights, runs, watch, "realtime" if realtime else "lockstep", instance or 0)
+            if rec.flown:  # a vehicle flew on: lockstep, on the wall clock; real time, under a ground station
+                judged_on_wall_clock(summary, rec, *(() if clocked else ("taken_over", REALTIME)))
+            if shared:
+                summary["radio"] = radio_block(ids, flights, runs, realtime)
+            summary["sitl"] = {"instances": None if instance is None else list(range(instance, instance + len(ids))),
+                               "gcs": gcs_text, "sysids": [(instance or 0) + i for i in ids], "shared_clock": clocked,
+                               "signed": key is not None}
+            if clocked:
+                summary["sitl"]["gate"] = {str(i): (r.summary.get("sitl") or {}).get("gate") for i, r in zip(ids, runs)}
+            if contacts and not clocked:
+                summary["sitl"]["note"] = CONTINUED
+            elif any(c.get("continued") for c in contacts.values()):
+                summary["sitl"]["note"] = WALL_CLOCK
+            _finish(fm, path if keep else None, runs, watch, summary, plots)
+            return FleetRun(runs, summary, path if keep else None)
+        finally:
+            if not keep:
+                shutil.rmtree(path, ignore_errors=True)
 
 
 def _touched(run: Run, contact: dict[str, Any] | None) -> Run:

@@ -227,6 +227,7 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
     from bridge.nodes.vehicle import VehicleConfig, run_vehicle  # lazy: start-up time
     from bridge.nodes.vehicle.gate import GateConfig  # lazy: start-up time
     from bridge.record.runlog import trace_cap  # lazy: start-up time
+    from bridge.session.children import hold_instances  # lazy: start-up time
 
     refuse_vehicle_flags(args)
     mission = checked_mission(args, args.mission)  # read once (not capped: the vehicle streams its rows to disk)
@@ -255,7 +256,9 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
                         await_mission=args.await_mission, trace_cap=trace_cap() if args.trace_cap else None,
                         gate=GateConfig.load(args.gate) if args.gate else None,
                         **({"spin_s": args.spin} if args.spin is not None else {}))
-    return run_vehicle(flight, cfg, args.out, args.overwrite)
+    # instance N's ports (either not named): its lock held while it serves, refused before --out is written
+    with hold_instances((n,) if args.listen is None or args.gcs is None else (), lambda k: f"--instance {k}"):
+        return run_vehicle(flight, cfg, args.out, args.overwrite)
 
 
 def cmd_controller(args: argparse.Namespace) -> int:

@@ -47,8 +47,10 @@ happened (:mod:`bridge.session.eventorder`) and recorded on the mission's clock 
 the summary is :func:`bridge.record.summary.session_summary`'s, a pure function of what the session saw.
 
 Ports, as PX4 numbers its instances: the vehicle binds 14560 + N for the controller link
-and sends GCS telemetry to 14550 + N, with sysid N + 1. ``instance=None`` (for campaigns
-running many sessions at once) binds a free port instead and sends no GCS telemetry.
+and sends GCS telemetry to 14550 + N, with sysid N + 1, holding instance N's lock for its life
+(:func:`~bridge.session.children.hold_instances`: one another session holds is refused before anything is
+written). ``instance=None`` (for campaigns running many sessions at once) binds a free port instead and sends no
+GCS telemetry.
 """
 
 from __future__ import annotations
@@ -68,12 +70,12 @@ from bridge.mavlink.endpoint import GCS_PORT, LINK_PORT, parse_address
 from bridge.mavlink.signing import key_from_file
 from bridge.nodes.forkserver import warm
 from bridge.record.runlog import Run, check_trace_steps, run_dir, trace_cap
-from bridge.session.children import ChildError, check_port_free, instance_slot
+from bridge.session.children import ChildError, check_port_free, hold_instances, instance_slot
 from bridge.session.session import Session
 from missions import Mission, Setpoint, Step, load_mission
 from params import ConfigError, reads_inputs
 
-__all__ = ["ChildError", "Session", "check_options", "instance_slot", "sitl"]
+__all__ = ["ChildError", "Session", "check_options", "hold_instances", "instance_slot", "sitl"]
 
 
 AWAIT_DURATION_S = 600.0  # s: --await-mission's settings' duration (the ground station's mission has its own)
@@ -188,16 +190,18 @@ def sitl(
     keep = out is not None or write
     if keep:  # a refused run directory is named before a busy port (both before anything starts)
         run_dir(out, flight.mission.name, overwrite, create=False)
-    if instance is not None:
-        check_port_free(LINK_PORT + n, f"--instance {n}")
-    forked = warm()  # the fork server's imports (bridge.nodes.forkserver) overlap what follows
-    fill_kernel_cache(flight, forked)
-    path = run_dir(out, flight.mission.name, overwrite) if keep else Path(tempfile.mkdtemp(prefix="bsst-sitl-"))
-    try:
-        s = Session(flight, path, realtime=realtime, instance=instance, gcs=gcs_text, speed=speed,
-                    progress=progress, live=live, key=Path(key) if key is not None else None,
-                    await_mission=await_mission, announce=live)
-        return s.run(plots=plots and keep, keep=keep)
-    finally:
-        if not keep:
-            shutil.rmtree(path, ignore_errors=True)
+    # the instance held for the session's life (another session's is refused here, before anything is written)
+    with hold_instances(() if instance is None else (n,), lambda k: f"--instance {k}"):
+        if instance is not None:
+            check_port_free(LINK_PORT + n, f"--instance {n}")
+        forked = warm()  # the fork server's imports (bridge.nodes.forkserver) overlap what follows
+        fill_kernel_cache(flight, forked)
+        path = run_dir(out, flight.mission.name, overwrite) if keep else Path(tempfile.mkdtemp(prefix="bsst-sitl-"))
+        try:
+            s = Session(flight, path, realtime=realtime, instance=instance, gcs=gcs_text, speed=speed,
+                        progress=progress, live=live, key=Path(key) if key is not None else None,
+                        await_mission=await_mission, announce=live)
+            return s.run(plots=plots and keep, keep=keep)
+        finally:
+            if not keep:
+                shutil.rmtree(path, ignore_errors=True)

@@ -1,12 +1,14 @@
 """The child processes of a SITL session, and the instance lock that keeps sessions apart.
 
-In:  a command line for ``python -m bridge`` and a log path; for :func:`instance_slot`, nothing
+In:  a command line for ``python -m bridge`` and a log path; for :func:`instance_slot`, nothing; for
+     :func:`hold_instances`, instance numbers
 Out: the child's reports (its stdout, read without blocking, each line parsed by
      :func:`bridge.nodes.report.parse_line`), its exit, and the last line of its stderr; an instance
-     number N (0-9) held exclusively
+     number N (0-9) held exclusively (a ``flock`` on ``<tmp>/bsst-instance-N.lock``)
 
 :func:`instance_slot` holds one of the ten PX4-style instance numbers (ports 14550 + N /
-14560 + N) for as long as a block runs.
+14560 + N) for as long as a block runs; :func:`hold_instances` holds the ones a session was told to fly, or
+refuses them when another session holds them.
 """
 
 from __future__ import annotations
@@ -248,29 +250,112 @@ def _ports_free(n: int) -> bool:
     return True
 
 
+INSTANCE_LOCK = "bsst-instance-{}.lock"  # in the temporary directory: flock'ed by the session flying instance N
+
+
+def instance_lock_path(n: int) -> str:
+    """``<tmp>/bsst-instance-N.lock``: the file whose ``flock`` holds instance N."""
+    return os.path.join(tempfile.gettempdir(), INSTANCE_LOCK.format(n))
+
+
+def _lock_instance(n: int) -> tuple[int | None, int | None]:
+    """Take instance N's lock (never waits): (its descriptor, None), or (None, the pid holding it: None where
+    unknown). Closing the descriptor releases it, as the process's end does, however it ends (the kernel's)."""
+    path = instance_lock_path(n)
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    except PermissionError:  # another user's file (0644, or a sticky /tmp's protected_regular): read-only locks too
+        try:
+            fd = os.open(path, os.O_RDONLY)
+        except OSError as exc:
+            raise ConfigError(f"instance {n}: cannot open its lock file {path} ({exc.strerror})") from None
+    except OSError as exc:
+        raise ConfigError(f"instance {n}: cannot open its lock file {path} ({exc.strerror})") from None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        holder = _lock_holder(fd)
+        os.close(fd)
+        return None, holder
+    return fd, None
+
+
+def _lock_holder(fd: int) -> int | None:
+    """The pid holding a ``flock`` on ``fd``'s file, as /proc/locks lists it (None: not listed, no /proc)."""
+    st = os.fstat(fd)
+    file = f"{os.major(st.st_dev):02x}:{os.minor(st.st_dev):02x}:{st.st_ino}"
+    try:
+        with open("/proc/locks") as locks:
+            for line in locks:
+                fields = line.split()
+                if len(fields) > 5 and fields[1] == "FLOCK" and fields[5] == file:  # ("->" lines: waiters)
+                    return int(fields[4])
+    except (OSError, ValueError):
+        pass
+    return None
+
+
+def _lineage() -> set[int]:
+    """This process's pid and its ancestors' (their parents' from /proc/PID/stat, up to init)."""
+    pids, pid = {os.getpid()}, os.getppid()
+    while pid > 1 and pid not in pids:
+        pids.add(pid)
+        try:
+            with open(f"/proc/{pid}/stat") as stat:
+                pid = int(stat.read().rpartition(")")[2].split()[1])
+        except (OSError, ValueError, IndexError):
+            break
+    return pids
+
+
+@contextlib.contextmanager
+def hold_instances(numbers: Sequence[int], flag: Callable[[int], str]) -> Iterator[None]:
+    """Hold instances ``numbers`` (0-9) for as long as the block runs (a session's life): the ``flock`` of
+    :func:`instance_slot`, so that two sessions (two users', a user's beside the test suite's) never fly one
+    instance's ports and system id at once. One held by another session is refused before anything is
+    written: ConfigError naming ``flag(n)``, the instance and the holder's pid. One held by this process or by
+    one that started it (a sweep's or a test's :func:`instance_slot` around the session it starts) is its own:
+    flown without a second lock. Released when the block ends, or by the kernel when the process dies."""
+    fds: list[int] = []
+    try:
+        for n in numbers:
+            for _ in range(2):  # (a holder gone between the lock refused and /proc/locks read: once more)
+                fd, holder = _lock_instance(n)
+                if fd is not None or holder is not None:
+                    break
+            if fd is not None:
+                fds.append(fd)
+            elif holder is None or holder not in _lineage():
+                by = f" (pid {holder})" if holder is not None else f" ({instance_lock_path(n)} is locked)"
+                raise ConfigError(f"{flag(n)}: instance {n} is in use by another session{by}; pick another "
+                                  "instance")
+        yield
+    finally:
+        for fd in fds:
+            os.close(fd)  # closing releases the lock
+
+
 @contextlib.contextmanager
 def instance_slot(timeout_s: float = 600.0) -> Iterator[int]:
     """Hold instance number N (0-9) of this machine exclusively while the block runs: one whose ports are free
     too (a ground station listening on 14550 + N, or a process of an earlier holder still closing its socket, would
     take this session's telemetry or refuse its bind: that slot is passed over).
 
-    An advisory ``flock`` on ``<tmp>/bsst-instance-N.lock`` (the convention ``bsst sweep``
-    uses too), so sessions started by tests, sweeps or scripts side by side never share
-    ports 14550 + N / 14560 + N. Raises TimeoutError when all ten stay taken.
+    An advisory ``flock`` on ``<tmp>/bsst-instance-N.lock``, the lock every session flying an instance holds
+    (:func:`hold_instances`: ``bsst sitl --instance N``, a fleet's instances, ``bsst vehicle``'s, ``bsst
+    sweep``'s), so sessions started by tests, sweeps, scripts or people side by side never share ports 14550 + N /
+    14560 + N; a session this process starts in the slot (in it, or as its child) flies in it. Raises
+    TimeoutError when all ten stay taken.
 
     The highest free number first: the low ones are those a person names (``bsst sitl`` flies instance 0 by
     default, whose 14550 is a ground station's default port; the README's example takes 1), and a session that
-    names its instance waits for it while an automatic pick holds it (the suite's README example waited 28 s).
+    names its instance is refused while an automatic pick holds it.
     """
     deadline = time.monotonic() + timeout_s
     while True:
         for n in range(9, -1, -1):
-            fd = os.open(os.path.join(tempfile.gettempdir(), f"bsst-instance-{n}.lock"), os.O_RDWR | os.O_CREAT,
-                         0o644)
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except BlockingIOError:
-                os.close(fd)
+            fd, _ = _lock_instance(n)
+            if fd is None:
                 continue
             if not _ports_free(n):  # held by a program outside the locks (or one still closing): another slot
                 os.close(fd)

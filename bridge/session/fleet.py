@@ -49,7 +49,7 @@ from bridge.mavlink.signing import key_from_file
 from bridge.nodes.forkserver import warm
 from bridge.record.runlog import Run, blackout_windows, finish_run
 from bridge.session import check_options
-from bridge.session.children import READY_TIMEOUT_S, catch_stop_signals, check_port_free, free_udp_port
+from bridge.session.children import READY_TIMEOUT_S, catch_stop_signals, check_port_free, free_udp_port, hold_instances
 from bridge.session.session import Session
 from params import ConfigError
 
@@ -84,10 +84,15 @@ def check_fleet(count: int, *, realtime: bool, instance: int | None, gcs: str | 
     return gcs_text
 
 
-def check_fleet_ports(count: int, instance: int | None) -> None:
-    """Refuse a fleet whose vehicles' controller ports (14560 + B .. 14560 + B + N - 1) are taken."""
-    for n in range(instance, instance + count) if instance is not None else ():
-        check_port_free(LINK_PORT + n, f"--instance {instance} (vehicle {n - instance + 1})")
+@contextlib.contextmanager
+def fleet_instances(count: int, instance: int | None) -> Iterator[None]:
+    """Hold a fleet's instances B..B + N - 1 for the block (the fleet's life: :func:`hold_instances`), and refuse,
+    before anything is written, one another session holds or whose controller port (14560 + B + i - 1) is taken."""
+    numbers = range(instance, instance + count) if instance is not None else range(0)
+    with hold_instances(numbers, lambda n: f"--instance {instance} (vehicle {n - numbers.start + 1})"):
+        for n in numbers:
+            check_port_free(LINK_PORT + n, f"--instance {instance} (vehicle {n - numbers.start + 1})")
+        yield
 
 
 def fly_sessions(flights: Sequence[Flight], ids: Sequence[int], dirs: Sequence[Path], *, realtime: bool,
