@@ -227,7 +227,6 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
     from bridge.nodes.vehicle import VehicleConfig, run_vehicle  # lazy: start-up time
     from bridge.nodes.vehicle.gate import GateConfig  # lazy: start-up time
     from bridge.record.runlog import trace_cap  # lazy: start-up time
-    from bridge.session.children import hold_instances  # lazy: start-up time
 
     refuse_vehicle_flags(args)
     mission = checked_mission(args, args.mission)  # read once (not capped: the vehicle streams its rows to disk)
@@ -256,8 +255,12 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
                         await_mission=args.await_mission, trace_cap=trace_cap() if args.trace_cap else None,
                         gate=GateConfig.load(args.gate) if args.gate else None,
                         **({"spin_s": args.spin} if args.spin is not None else {}))
-    # instance N's ports (either not named): its lock held while it serves, refused before --out is written
-    with hold_instances((n,) if args.listen is None or args.gcs is None else (), lambda k: f"--instance {k}"):
+    if args.listen is not None and args.gcs is not None:  # no port of instance N's (a session's vehicle)
+        return run_vehicle(flight, cfg, args.out, args.overwrite)
+    from bridge.session.children import hold_instances  # lazy, only here: ~0.08 s a session's vehicle never pays
+
+    # instance N's ports: its lock held while it serves; another session's refused before --out is written
+    with hold_instances((n,), lambda k: f"--instance {k}"):
         return run_vehicle(flight, cfg, args.out, args.overwrite)
 
 
