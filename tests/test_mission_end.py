@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from bridge.loop import simulate
+from bridge.nodes.report import Done, Ready, parse_line
 from bridge.record.halves import count_records, read_half
 from bridge.session import instance_slot, sitl
 from missions import MISSION_DIR, load_mission
@@ -155,3 +156,44 @@ def test_the_end_action_is_the_missions_and_kept_as_flown(tmp_path: Path) -> Non
     assert hold.end_action == "hold" and hold.to_dict()["end"] == {"action": "hold"}
     assert "end" not in load_mission(SINE).to_dict()  # the default unwritten: a run's mission.toml as before
     assert json.loads(json.dumps(hold.to_dict()))["end"]["action"] == "hold"
+
+
+@pytest.mark.parametrize("blackout", [True, False], ids=["end-action-lost", "clean"])
+def test_a_controller_alone_whose_end_action_went_unanswered_says_not_flown_as_asked(tmp_path: Path,
+                                                                                     blackout: bool) -> None:
+    """``bsst vehicle`` and ``bsst controller`` started alone on the wall clock, ``bsst relay --mission-clock``
+    between them, on ``bsst sitl``'s case (test_sitl_link, the end action lost in a blackout over the end): a 2 s
+    climb at 1 m/s, a blackout from 1.8 s for 30 s. The relay loses every NAV_LAND of the controller's 3 s of tries;
+    the mission was flown (``done``: completed), but the controller says not flown as asked, in ``bsst sitl``'s words
+    (bridge.record.asked), and exits 1. Until the third wave's forty-first session it exited 0 and said nothing on
+    stderr (its ``done`` report's reason only), where ``bsst sitl`` exits 1. The same flight without the blackout
+    (the relay passing all): the vehicle takes LAND, the controller waits for its disarm, exit 0, nothing said."""
+    mission = tmp_path / "climb2.toml"
+    mission.write_text('name = "climb2"\nduration_s = 2.0\n[trajectory]\nkind = "sine"\namplitude = 0.0\n'
+                       "climb = 1.0\n" + ("[link]\nblackouts = [[1.8, 30.0]]\n" if blackout else
+                                          "[link]\ndelay_ms = 1.0\n"))  # the relay must model something
+    with instance_slot() as n:
+        vehicle = Proc.bsst("vehicle", str(mission), "--realtime", "--instance", str(n), "--gcs", "none",
+                            "--out", str(tmp_path / "v"), cwd=ROOT)
+        relay = None
+        try:
+            listen = vehicle.wait_report(Ready, timeout=60).listen
+            relay = Proc.bsst("relay", "--listen", "127.0.0.1:0", "--to", listen, "--mission", str(mission),
+                              "--mission-clock", cwd=ROOT)
+            port = relay.wait_report(Ready, timeout=60).listen.rsplit(":", 1)[1]
+            ctl = run_bsst("controller", str(mission), "--realtime", "--vehicle", f"127.0.0.1:{port}",
+                           "--out", str(tmp_path / "c"), cwd=ROOT, env=ENV, timeout=120)
+        finally:
+            if relay is not None:
+                relay.stop()
+            vehicle.stop()
+    [done] = [r for r in map(parse_line, ctl.stdout.splitlines()) if isinstance(r, Done)]
+    assert done.outcome == "completed", (done, ctl.stderr)
+    said = ("bsst controller: not flown as asked: the vehicle was not seen to take the mission's end action (LAND; "
+            "its command: no answer): what flew instead not seen (the controller stops there; the vehicle silent "
+            "for its last ")
+    if not blackout:
+        assert ctl.returncode == 0 and "not flown as asked" not in ctl.stderr, ctl.stderr
+        return
+    assert ctl.returncode == 1 and said in ctl.stderr, ctl.stderr
+    assert done.reason == "the vehicle did not take the mission's end action (LAND): no answer", done

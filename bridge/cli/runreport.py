@@ -16,6 +16,7 @@ import sys
 from typing import Any
 
 from bridge.cli.flags import EXIT_FAILED, EXIT_OK
+from bridge.record.asked import not_as_asked
 
 EVENTS_SHOWN = 16  # events a run's printed summary lists (all of summary.json's beyond: its first 6 and last 10)
 SHOWN_PAIRS = 12  # pairs a fleet's printed summary lists, its closest (summary.json has every pair)
@@ -129,26 +130,6 @@ def report_run(run: Any, command: str) -> int:
         if not v.get("ok"):
             print(f"bsst {command}: policy {violation_text(v)}", file=sys.stderr)
     return EXIT_OK if run_ok(run.summary) else EXIT_FAILED
-
-
-def not_as_asked(s: dict[str, Any]) -> list[str]:
-    """Why a run (one vehicle's) was not flown as the command asked, beyond its outcome and its policies, one text
-    each (exit 1): it left lockstep, someone else changed it, a scheduled change went unconfirmed, the machine
-    stalled it in real time, the vehicle never took the mission's end action."""
-    from bridge.record.ending import not_taken_text  # lazy: numpy
-    from bridge.record.interventions import intervention_text, unconfirmed_text  # lazy: numpy
-    from bridge.record.policies import stalls_of  # lazy: numpy
-    from bridge.record.summary import stalls_text  # lazy: numpy
-
-    lock = s.get("lockstep") or {"held": True}
-    said = ([f"not a lockstep run: the vehicle left lockstep at t={lock['left_at_s']:.3f} s ({lock['why']})"]
-            if not lock.get("held", True) else [])
-    said += [f"not flown as asked: {intervention_text(i)}" for i in s.get("interventions") or []]
-    said += [f"not flown as asked: {unconfirmed_text(p)}" for p in s.get("param_at") or [] if not p.get("confirmed")]
-    if not (s.get("end") or {}).get("taken", True):  # its end action lost: it came down by its failsafe
-        said.append(f"not flown as asked: {not_taken_text(s['end'])}")
-    stalls = stalls_of(s)
-    return said + ([stalls_text(stalls)] if stalls is not None else [])
 
 
 def event_lines(events: list[dict[str, Any]]) -> list[str]:

@@ -10,7 +10,8 @@ Out: :func:`end_block`, ``summary.json["end"]``: ``action``; ``rows``; ``disarme
      text of the first failsafe that took the end action over, a position lost in the landing; None: none);
      ``max_drift_m`` (a hold: the largest height change from its first row); ``taken`` (true). A session's vehicle
      that never took it (:func:`end_not_taken`: no ``end`` event of its own, its command lost on a real-time link
-     in a blackout over the end): ``taken`` false and what flew instead, and :func:`not_taken_text`, the note
+     in a blackout over the end): ``taken`` false and what flew instead, and :func:`not_taken_text`, the note; a
+     controller alone whose end action went unanswered (:func:`end_unanswered`): ``taken`` and ``seen`` false
 
 The mission's trace and figures stop at its end (``trace.csv`` holds the mission's rows only, so that every
 figure is the mission's); the end action is summarised here, from the same rows in every clock (offline: the
@@ -82,9 +83,21 @@ def end_not_taken(outcome: str, action: str, events: Sequence[RunEvent], end_s: 
             "disarmed_t": None if down is None else down.t}
 
 
+def end_unanswered(action: str, why: str, silent_s: float) -> dict[str, Any]:
+    """The ``end`` a controller alone (``bsst controller``) knows of an end action its vehicle never answered as taken
+    (``why``: its command's answer, "no answer", "MAV_RESULT 4"): ``taken`` false and ``seen`` false, as it stops
+    there and never sees what flies instead; ``silent_s``: how long the vehicle had been silent then (s, wall time)."""
+    return {"action": action, "taken": False, "why": why, "seen": False, "silent_s": round(silent_s, 3)}
+
+
 def not_taken_text(end: dict[str, Any]) -> str:
-    """The note of a vehicle that never took the mission's end action (:func:`end_not_taken`): what flew instead."""
+    """The note of a vehicle that never took the mission's end action (:func:`end_not_taken`): what flew instead;
+    a controller's alone (:func:`end_unanswered`): not seen to take it, what flew instead not seen."""
     what = "HOLD" if end["action"] == "hold" else "LAND"
+    if not end.get("seen", True):
+        quiet = f"; the vehicle silent for its last {end['silent_s']:.1f} s" if end["silent_s"] >= 1.0 else ""
+        return (f"the vehicle was not seen to take the mission's end action ({what}; its command: {end['why']}): what "
+                f"flew instead not seen (the controller stops there{quiet})")
     instead = (f"its failsafe took over at t={end['failsafe_t']:.3f} s ({end['failsafe']})" if end["failsafe"]
                else "nothing took over")
     down = f", disarmed at t={end['disarmed_t']:.3f} s" if end["disarmed"] else ", not seen to disarm"

@@ -30,6 +30,7 @@ from bridge.nodes.offboard.radioturn import down_link
 from bridge.nodes.offboard.realtime import RealtimeFlying
 from bridge.nodes.report import Ready, Report
 from bridge.record.columns import CONTROLLER_COLUMNS
+from bridge.record.ending import end_unanswered
 from bridge.record.halves import HalfWriter
 from controller.law import LawFailed
 from controller.link_guard import LinkGuard
@@ -80,6 +81,7 @@ class Offboard(RealtimeFlying):
         self.way_down: dict[str, float] | None = None  # real time: that in ms and how far off it may be (stats)
         self._end_usec: int | None = None  # lockstep: the stamp of the state that ended the mission, unanswered
         self._end_height_m = 0.0
+        self.end_unanswered: dict[str, Any] | None = None  # the end action not seen taken (its summary ``end``)
 
     @property
     def overruns(self) -> int:
@@ -283,8 +285,9 @@ class Offboard(RealtimeFlying):
             result = self._command(mavlink.MAV_CMD_NAV_LAND, 0.0, 0.0)
         self._at_end_now()
         if result != mavlink.MAV_RESULT_ACCEPTED:
-            self.reason = f"the vehicle did not take the mission's end action ({'HOLD' if hold else 'LAND'}): " + (
-                "no answer" if result is None else f"MAV_RESULT {result}")
+            why = "no answer" if result is None else f"MAV_RESULT {result}"
+            self.reason = f"the vehicle did not take the mission's end action ({'HOLD' if hold else 'LAND'}): {why}"
+            self.end_unanswered = end_unanswered(self.flight.mission.end_action, why, time.monotonic() - self._last_rx)
             self.event("end", self.reason)
             return
         self.event("end", "mission over: the vehicle holds its position" if hold else

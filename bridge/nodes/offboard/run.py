@@ -3,8 +3,9 @@
 In:  the :class:`~bridge.core.flight.Flight`, the controller's settings (:class:`OffboardConfig`), the run
      directory (or None), whether to overwrite it
 Out: the ``stats`` and ``done`` reports on stdout (JSON lines, :mod:`bridge.nodes.report`), what did not go as
-     asked on stderr, and the exit status: 0 the mission completed in lockstep (or on the wall clock) with every
-     scheduled change confirmed, else 1
+     asked on stderr (``not flown as asked: ...`` in ``bsst sitl``'s words, :mod:`bridge.record.asked`), and the exit
+     status: 0 the mission completed in lockstep (or on the wall clock) with every scheduled change confirmed and
+     its end action answered as taken, else 1
 """
 
 from __future__ import annotations
@@ -17,14 +18,15 @@ from bridge.nodes.offboard.config import OffboardConfig
 from bridge.nodes.offboard.flight import Offboard
 from bridge.nodes.process import on_stop_signals, report_printer
 from bridge.nodes.report import Done, Stats
-from bridge.record.interventions import unconfirmed_text
+from bridge.record.asked import not_as_asked
 from bridge.record.runlog import side_dir
 
 
 def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None = None,
                    overwrite: bool = False) -> int:
     """``bsst controller``: fly, then exit 0 if the mission completed (in lockstep: without the vehicle
-    leaving it), else 1 (failsafe, diverged, aborted, or lockstep left)."""
+    leaving it) as asked, else 1 (failsafe, diverged, aborted, lockstep left, a scheduled change unconfirmed, the
+    end action not answered as taken)."""
     path = side_dir(out, ("controller.tlog", "controller.bin"), overwrite) if out is not None else None
     emit = report_printer()
     transfer = vehicle = None
@@ -59,6 +61,9 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
         sys.stderr.write(f"bsst controller: {outcome}" + (f": {node.reason}" if node.reason else "") + "\n")
     elif left:
         sys.stderr.write(f"bsst controller: completed, but not in lockstep: said by {node.left_lockstep}\n")
-    for p in unconfirmed:
-        sys.stderr.write(f"bsst controller: {unconfirmed_text(p.as_dict())}\n")
-    return 0 if outcome == "completed" and not left and not unconfirmed else 1
+    # what it alone knows of sitl's "not flown as asked" (bridge.record.asked), said in the same words: a scheduled
+    # change unconfirmed, an end action not seen taken (lost on the wire: the vehicle left to its failsafe)
+    said = not_as_asked({"param_at": [p.as_dict() for p in unconfirmed], "end": node.end_unanswered})
+    for why in said:
+        sys.stderr.write(f"bsst controller: {why}\n")
+    return 0 if outcome == "completed" and not left and not said else 1

@@ -1,0 +1,36 @@
+"""Why a flight was not flown as asked: the one list every command says it from (``bsst sim``, ``bsst sitl``, a
+fleet's vehicle, ``bsst controller`` alone).
+
+In:  a run's ``summary.json`` as a dict (one vehicle's), or the blocks of it a process alone knows (``bsst
+     controller``: ``param_at``, ``end``, ``timing.stalls``): ``lockstep``, ``interventions``, ``param_at``, ``end``
+     (:mod:`bridge.record.ending`), ``timing.stalls`` (t s, ms)
+Out: :func:`not_as_asked`: one line each, ``not flown as asked: ...`` (or ``not a lockstep run: ...``); any one
+     of them makes the exit status 1
+
+Split out of :mod:`bridge.cli.runreport` (which prints a run's summary) so that ``bsst controller``, below the CLI,
+says it in the same words.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+def not_as_asked(s: dict[str, Any]) -> list[str]:
+    """Why a run (one vehicle's) was not flown as the command asked, beyond its outcome and its policies, one text
+    each (exit 1): it left lockstep, someone else changed it, a scheduled change went unconfirmed, the machine
+    stalled it in real time, the vehicle never took the mission's end action."""
+    from bridge.record.ending import not_taken_text  # lazy: numpy
+    from bridge.record.interventions import intervention_text, unconfirmed_text  # lazy: numpy
+    from bridge.record.policies import stalls_of  # lazy: numpy
+    from bridge.record.summary import stalls_text  # lazy: numpy
+
+    lock = s.get("lockstep") or {"held": True}
+    said = ([f"not a lockstep run: the vehicle left lockstep at t={lock['left_at_s']:.3f} s ({lock['why']})"]
+            if not lock.get("held", True) else [])
+    said += [f"not flown as asked: {intervention_text(i)}" for i in s.get("interventions") or []]
+    said += [f"not flown as asked: {unconfirmed_text(p)}" for p in s.get("param_at") or [] if not p.get("confirmed")]
+    if not (s.get("end") or {}).get("taken", True):  # its end action lost: it came down by its failsafe
+        said.append(f"not flown as asked: {not_taken_text(s['end'])}")
+    stalls = stalls_of(s)
+    return said + ([stalls_text(stalls)] if stalls is not None else [])
