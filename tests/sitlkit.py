@@ -375,10 +375,27 @@ def unexplained_outages(trace: dict[str, Any], stalls: dict[str, Any], over_s: f
     return {"rows": rows, "stalls": missed}
 
 
+CONTROLLER_STALLED = "bsst controller: not flown as asked: the machine stalled the real-time loop"
+
+
 def clean_exit(summary: dict[str, Any]) -> int:
     """The exit status of a run that flew as asked but for the machine's stalls: 0, or 1 if it stalled (a host
     that takes its cores back stalls the suite's real-time runs: ``timing.stalls``)."""
     return 0 if stalls_of(summary) is None else 1
+
+
+def controller_exit(lines: list[str]) -> int:
+    """The exit status of a real-time ``bsst controller`` alone that flew as asked but for the machine's stalls of its
+    ticks (its stderr's lines, or its stdout's and stderr's as one): 0, or 1 if it said it stalled (:func:`clean_exit`
+    for a session)."""
+    return 1 if any(ln.startswith(CONTROLLER_STALLED) for ln in lines) else 0
+
+
+def controller_exit_text(summary: dict[str, Any]) -> str:
+    """``sitl.controller_exit`` of a real-time session's controller that flew as asked but for the machine's stalls
+    of its ticks: status 1 if ``timing.stalls`` lists one on its side (it says so as it would alone), else 0."""
+    stalls = (summary.get("timing") or {}).get("stalls") or {}
+    return f"exited with status {int(any(s['side'] == 'controller' for s in stalls.get('at', ())))}"
 
 
 def stall_blackouts(stalls: dict[str, Any], duration_s: float) -> list[list[float]]:

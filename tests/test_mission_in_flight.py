@@ -30,7 +30,7 @@ from bridge.mavlink.telemetry import StatusTextJoiner
 from bridge.nodes.report import Ready
 from bridge.session import instance_slot
 from missions import MISSION_DIR
-from tests.sitlkit import ROOT, Proc
+from tests.sitlkit import ROOT, Proc, controller_exit
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -330,7 +330,9 @@ def test_an_upload_after_the_mission_ended_in_hold_is_taken_while_armed_as_on_px
         gcs.recv("GLOBAL_POSITION_INT", 60, "GLOBAL_POSITION_INT.relative_alt > 500")  # its own mission, up
         assert gcs.start() == M.MAV_RESULT_DENIED  # (it told the ground station to land and start it)
         assert "flies whole, once" in gcs.joined_text("MISSION_START: the mission is flying")
-        assert controller.p.wait(timeout=120) == 0, "\n".join(controller.lines[-20:])
+        rc = controller.p.wait(timeout=120)
+        controller.reports()  # (reads its last lines)
+        assert rc == controller_exit(controller.lines), "\n".join(controller.lines[-20:])  # 1: stalled by the machine
         gcs.recv("HEARTBEAT", 10, f"HEARTBEAT.get_srcComponent()==1 and HEARTBEAT.base_mode & 128 and "
                                   f"HEARTBEAT.custom_mode=={hold}")
         gcs.recv("MISSION_CURRENT", 5, f"MISSION_CURRENT.mission_state=={M.MISSION_STATE_COMPLETE}")

@@ -9,13 +9,16 @@ state before: the target answering a late state still reaches the vehicle before
 step. A state that never comes costs its tick that wait, and the next state is answered on time.
 The vehicle's clock (TIMESYNC) tells the controller how long its states travel, which the
 arrival schedule alone cannot: that way down is part of every state's age. One lockstep flight too (the vehicle
-stepping on each answer): a scheduled change never echoed is not sent again at the flight's end.
+stepping on each answer): a scheduled change never echoed is not sent again at the flight's end. One against the
+real ``bsst vehicle``: a controller the machine stalls says so and exits 1, as ``bsst sitl`` does.
 """
 
 from __future__ import annotations
 
 import math
+import os
 import select
+import signal
 import socket
 import time
 from collections import Counter
@@ -29,9 +32,11 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.core.wire import state_to_odometry, step_usec
 from bridge.nodes.offboard.link import TIMESYNC_WINDOW
-from bridge.nodes.report import Done, Stats, parse_line
-from bridge.record.halves import read_half
-from tests.sitlkit import Proc
+from bridge.nodes.report import Done, Ready, Stats, parse_line
+from bridge.record.halves import count_records, read_half
+from bridge.session import instance_slot
+from tests.sitlkit import CONTROLLER_STALLED, Proc, controller_exit
+from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -210,10 +215,11 @@ def fly(tmp: Path, timesync_skew_s: float = 0.0, spoofs: dict[int, int] | None =
             if k % 5 == 0:
                 v.heartbeat()
             k += 1
-        assert ctl.p.wait(timeout=20) == 0, ctl.lines[-10:]
+        rc = ctl.p.wait(timeout=20)
     finally:
         ctl.stop()
         v.sock.close()
+    assert rc == controller_exit(ctl.lines), ctl.lines[-10:]  # 1 only for the machine's stalls of its ticks
     # steps renumbered from the first one streamed, as LATE and DROPPED count them
     targets = Counter({(usec - step_usec(k_first, RATE)) // step_usec(1, RATE): n for usec, n in v.targets.items()})
     assert v.first_arm is not None and v.first_target is not None
@@ -417,3 +423,42 @@ def test_a_scheduled_change_pending_at_a_lockstep_flights_end_is_not_resent(tmp_
     assert v.param_sets == [steps], v.param_sets  # one, with the last step's state: none after the end's state
     [sent] = stats_of(ctl.lines)["param_at"]
     assert sent["sends"] == 1 and sent["confirmed"] is False, sent
+
+
+def test_a_controller_alone_the_machine_stalls_says_not_flown_as_asked(tmp_path: Path) -> None:
+    """``bsst vehicle`` and ``bsst controller`` started alone on the wall clock (the 3 s sine ending in HOLD), the
+    controller stopped for 0.2 s a second into the mission (SIGSTOP, SIGCONT), as a host that takes its core back
+    stops it: the mission completes (the vehicle held the last target, short of its 0.5 s failsafe), but the
+    controller says in ``bsst sitl``'s words that the machine stalled its loop, naming its side, and exits 1, as
+    ``bsst sitl`` does on its ``timing.stalls`` (test_sitl). Until the third wave's forty-first session: exit 0,
+    nothing said (its ``stats`` listed the stall)."""
+    mission = tmp_path / "m.toml"
+    mission.write_text('name = "stalled"\nduration_s = 3.0\n[trajectory]\nkind = "sine"\n[end]\naction = "hold"\n')
+    with instance_slot() as n:
+        vehicle = Proc.bsst("vehicle", str(mission), "--realtime", "--instance", str(n), "--gcs", "none",
+                            "--out", str(tmp_path / "v"))
+        ctl = None
+        try:
+            vehicle.wait_report(Ready, timeout=60)
+            ctl = Proc.bsst("controller", str(mission), "--realtime", "--instance", str(n),
+                            "--out", str(tmp_path / "c"))
+            try:
+                wait_for(lambda: count_records(tmp_path / "c" / "controller.bin") > 250 or ctl.p.poll() is not None,
+                         60, "1 s of the mission flown")
+            except AssertionError as exc:  # what each said, read now
+                ctl.reports(), vehicle.reports()
+                raise AssertionError(f"{exc}; controller: {ctl.lines[-8:]}; vehicle: {vehicle.lines[-8:]}") from None
+            assert ctl.p.poll() is None, (ctl.reports()[-10:], vehicle.reports()[-10:])
+            os.kill(ctl.p.pid, signal.SIGSTOP)
+            time.sleep(0.2)  # the stall itself, not a wait for something to happen
+            os.kill(ctl.p.pid, signal.SIGCONT)
+            rc = ctl.p.wait(timeout=60)
+        finally:
+            if ctl is not None:
+                ctl.stop()
+            vehicle.stop()
+    [done] = [r for r in map(parse_line, ctl.lines) if isinstance(r, Done)]
+    said = [ln for ln in ctl.lines if ln.startswith(CONTROLLER_STALLED)]
+    assert done.outcome == "completed" and rc == 1 and len(said) == 1, ctl.lines[-5:]
+    stalls = next(r for r in map(parse_line, ctl.lines) if isinstance(r, Stats)).values["stalls"]
+    assert stalls["worst_ms"] >= 180.0 and f"worst {stalls['worst_ms']:g} ms (controller " in said[0], (stalls, said)

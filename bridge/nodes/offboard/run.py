@@ -4,14 +4,15 @@ In:  the :class:`~bridge.core.flight.Flight`, the controller's settings (:class:
      directory (or None), whether to overwrite it
 Out: the ``stats`` and ``done`` reports on stdout (JSON lines, :mod:`bridge.nodes.report`), what did not go as
      asked on stderr (``not flown as asked: ...`` in ``bsst sitl``'s words, :mod:`bridge.record.asked`), and the exit
-     status: 0 the mission completed in lockstep (or on the wall clock) with every scheduled change confirmed and
-     its end action answered as taken, else 1
+     status: 0 the mission completed in lockstep (or on the wall clock) with every scheduled change confirmed, its
+     end action answered as taken and (real time) none of its ticks in the mission stalled by the machine, else 1
 """
 
 from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import Any
 
 from bridge.core.flight import Flight
 from bridge.nodes.offboard.config import OffboardConfig
@@ -26,7 +27,7 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
                    overwrite: bool = False) -> int:
     """``bsst controller``: fly, then exit 0 if the mission completed (in lockstep: without the vehicle
     leaving it) as asked, else 1 (failsafe, diverged, aborted, lockstep left, a scheduled change unconfirmed, the
-    end action not answered as taken)."""
+    end action not answered as taken, a tick the machine stalled)."""
     path = side_dir(out, ("controller.tlog", "controller.bin"), overwrite) if out is not None else None
     emit = report_printer()
     transfer = vehicle = None
@@ -62,8 +63,22 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
     elif left:
         sys.stderr.write(f"bsst controller: completed, but not in lockstep: said by {node.left_lockstep}\n")
     # what it alone knows of sitl's "not flown as asked" (bridge.record.asked), said in the same words: a scheduled
-    # change unconfirmed, an end action not seen taken (lost on the wire: the vehicle left to its failsafe)
-    said = not_as_asked({"param_at": [p.as_dict() for p in unconfirmed], "end": node.end_unanswered})
+    # change unconfirmed, an end action not seen taken (lost on the wire: the vehicle left to its failsafe), its own
+    # ticks the machine stalled in the mission (real time)
+    said = not_as_asked({"param_at": [p.as_dict() for p in unconfirmed], "end": node.end_unanswered,
+                         "timing": {"stalls": own_stalls(flight, node.stalls.report())}})
     for why in said:
         sys.stderr.write(f"bsst controller: {why}\n")
     return 0 if outcome == "completed" and not left and not said else 1
+
+
+def own_stalls(flight: Flight, stalls: dict[str, Any]) -> dict[str, Any] | None:
+    """The controller's own stalls (its ``stats``' ``stalls``, real time) in the mission (0 <= t < its duration), as
+    ``bsst sitl``'s ``timing.stalls`` counts the controller's side (:func:`bridge.record.summary.stalls_block`);
+    None when it met none."""
+    if not stalls.get("count"):
+        return None
+    from bridge.record.summary import stalls_block  # lazy: the session's summary, only for a stalled controller
+
+    m = flight.mission
+    return stalls_block({}, {"stalls": stalls}, None, m.rate_hz, m.duration_s)
