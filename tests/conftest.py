@@ -79,6 +79,18 @@ def sigint_handler_kept() -> Iterator[None]:
     assert after is before, f"the test left SIGINT's handler {after!r} (it was {before!r})"
 
 
+@pytest.fixture(autouse=True)
+def sys_path_kept() -> Iterator[None]:
+    """Every test leaves ``sys.path`` as it found it: a folder left on it is inherited by every process the worker
+    starts after that test with ``sys.path`` passed on (multiprocessing's spawn, a Dask cluster's workers). Once
+    ``benchmarks/`` was left first (a benchmark module imported, its own ``sys.path.insert`` undone by a ``pop(0)`` of
+    the wrong entry): a later test's Dask worker imported ``benchmarks/missions.py`` as ``missions`` ("'missions' is
+    not a package"). Put it back with :func:`tests.sitlkit.benchmark_module`."""
+    before = list(sys.path)
+    yield
+    assert sys.path == before, f"the test left sys.path {sys.path!r} (it was {before!r})"
+
+
 INSTANCE_PORTS = range(14550, 14570)  # instances 0-9: their ground-station and vehicle ports (bridge.mavlink.address)
 
 

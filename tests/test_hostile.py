@@ -21,6 +21,7 @@ from bridge.mavlink.receive import MAX_POSITION_M, Rejections, odometry_problem,
 from bridge.mavlink.signing import Signing
 from bridge.nodes.vehicle import Vehicle, VehicleConfig
 from missions import MISSION_DIR, Mission, Sine, load_mission
+from tests.benchkit import benchmark_module
 from tests.hostile import Fuzzer, drop_held_answer, fly_flooded, fly_fuzzed, vehicle_state
 from tests.sitlkit import stall_blackouts, unexplained_outages
 from tests.waiting import wait_for
@@ -256,7 +257,8 @@ def test_valid_frames_of_every_message_id_from_strangers_and_a_gcs_change_nothin
     ground station to the GCS link (never a valid ARM_DISARM), during a lockstep mission: the
     trace is the undisturbed run's byte for byte, every stranger's frame is refused and every
     GCS frame the vehicle handles is refused or answered, and no safety policy is violated."""
-    from benchmarks.fuzz import command_checks, fly_commands  # the benchmark's fuzzer: one copy of it
+    fuzz = benchmark_module("fuzz")  # the benchmark's fuzzer: one copy of it
+    command_checks, fly_commands = fuzz.command_checks, fuzz.fly_commands
 
     mission, (ref, ref_dir) = FUZZED, undisturbed
     assert ref.outcome == "completed"

@@ -8,7 +8,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import sys
 from pathlib import Path
 
 import pytest
@@ -21,6 +20,7 @@ from missions.mission import mission_from_table
 from missions.planfiles import read_plan_text
 from missions.route import Limits, route_of
 from params import ConfigError
+from tests.benchkit import benchmark_module
 from tests.plans import BOX_PLAN, ROOT, l_plan, write_plan
 from tests.sitlkit import run_bsst
 
@@ -250,13 +250,7 @@ def test_too_hard_for_the_airframe_is_slowed_or_refused(tmp_path: Path) -> None:
 
 
 def test_box_plan_flown_offline_meets_the_figures() -> None:
-    sys.path.insert(0, str(ROOT / "benchmarks"))
-    try:
-        import missions as _  # noqa: F401  (the project's package, not the benchmark of the same name)
-        from benchmarks.missions import figures  # type: ignore[import-not-found]
-    finally:
-        sys.path.pop(0)
-    fig = figures(BOX_PLAN)
+    fig = benchmark_module("missions").figures(BOX_PLAN)
     assert fig["outcome"] == "completed" and fig["landed_and_disarmed"]
     assert all(w["closest_m"] <= 0.1 for w in fig["waypoints"]) and len(fig["waypoints"]) >= 6
     assert fig["rms_3d_all_m"] <= 1e-3
