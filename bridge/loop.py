@@ -27,6 +27,7 @@ each event at the start of its control step. A touchdown too fast or too tilted 
 
 from __future__ import annotations
 
+import inspect
 import math
 from array import array
 from collections.abc import Generator
@@ -104,13 +105,25 @@ def simulate(
 
 
 def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progress: Progress | None = None) -> Run:
-    """Fly a prepared :class:`Flight`; write its run directory into ``path`` if given."""
+    """Fly a prepared :class:`Flight`; write its run directory into ``path`` if given. A Ctrl-C (SIGINT, or SIGTERM
+    taken as one) raised here, between two steps, is thrown into the flight, which ends ``aborted``, recorded, as on
+    one raised within a step. Before, it left the flight unrecorded (no summary.json): Python raises it wherever the
+    main thread next looks, and that is here for a signal landing as a step ends (at its yield)."""
     steps = flying(flight, path, plots=plots, progress=progress)
+    stop = False
     while True:
         try:
-            next(steps)
+            if stop:
+                stop = False
+                steps.throw(KeyboardInterrupt)
+            else:
+                next(steps)
         except StopIteration as done:
             return done.value
+        except KeyboardInterrupt:
+            if inspect.getgeneratorstate(steps) != inspect.GEN_SUSPENDED:
+                raise  # the flight's own: not started, or let through (a second stop)
+            stop = True
 
 
 def flying(flight: Flight, path: Path | None = None, *, plots: bool = True, progress: Progress | None = None,

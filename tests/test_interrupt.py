@@ -273,6 +273,51 @@ def test_a_stop_sent_to_bsst_sim_alone_ends_it_aborted_recorded(tmp_path, sig: s
         proc.stop()
 
 
+# ``bsst sim`` whose loop (bridge.loop.fly) has its steps' ``next`` wrapped: after the 300th step has yielded, a real
+# stop is sent to the bsst process (this one; a watched flight's parent), and the wrapper waits for the stop to come
+# back as KeyboardInterrupt (passed on to a watched child): it is raised in fly's own frame, between two steps, as
+# Python raises a signal that lands as a step ends
+BETWEEN_STEPS = """
+    import os, signal, sys, time
+    import bridge.loop as loop
+
+    top, sig, steps = os.getpid(), signal.Signals[sys.argv[3]], [0]
+    def next_then_stop(flight):
+        step = next(flight)
+        steps[0] += 1
+        if steps[0] == 300:
+            os.kill(top, sig)
+            deadline = time.monotonic() + 60
+            while time.monotonic() < deadline:
+                time.sleep(0.001)
+        return step
+
+    loop.next = next_then_stop
+    sys.argv = ["bsst", "sim", sys.argv[2], "--no-plots", "--out", sys.argv[1], "--controller", sys.argv[4]]
+    from bridge.__main__ import main
+    sys.exit(main())
+"""
+
+
+@pytest.mark.parametrize("controller", ["bsst", "examples/my_law.py:MyLaw"])  # in this process; in a watched child
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_stop_landing_between_two_steps_ends_the_flight_aborted_recorded(tmp_path, sig: signal.Signals,
+                                                                           controller: str) -> None:
+    """A stop whose KeyboardInterrupt is raised between two steps of the flight (in bridge.loop.fly, as a step has
+    yielded): the flight ends ``aborted`` at that step, recorded, exit 1. Before, it escaped the flight: ``bsst:
+    interrupted``, exit 1, no summary.json; with a watched law, the test above failed so once in a quiet make
+    test (SIGTERM, six workers on two cores)."""
+    mission = tmp_path / "sine300.toml"
+    mission.write_text(LONG_SINE)
+    out = tmp_path / "run"
+    proc = Proc([sys.executable, "-c", textwrap.dedent(BETWEEN_STEPS), str(out), str(mission), sig.name, controller])
+    try:
+        _assert_aborted_recorded(out, proc, rows=300)
+        assert json.loads((out / "summary.json").read_text())["duration_s"] == pytest.approx(300 / 250)
+    finally:
+        proc.stop()
+
+
 def test_a_ctrl_c_to_the_group_is_one_stop_for_a_watched_flight(tmp_path) -> None:
     """A terminal's Ctrl-C (SIGINT to the process group) reaches ``bsst sim`` and its watched child both: the parent
     passes it on, and the child takes the two as one stop, its record whole (a second KeyboardInterrupt, raised
@@ -289,8 +334,9 @@ def test_a_ctrl_c_to_the_group_is_one_stop_for_a_watched_flight(tmp_path) -> Non
         proc.stop()
 
 
-def _assert_aborted_recorded(out: Path, proc: Proc) -> None:
-    """The run ended ``aborted`` by the user, exit 1, said and on disk whole (summary.json, the trace, the event)."""
+def _assert_aborted_recorded(out: Path, proc: Proc, rows: int = 250) -> None:
+    """The run ended ``aborted`` by the user, exit 1, said and on disk whole (summary.json, the trace of ``rows`` at
+    least, the event)."""
     assert proc.p.wait(timeout=60) == 1
     proc.stop()  # (ended: reads what is left)
     assert "outcome: aborted" in proc.lines and "ended by user: interrupted (Ctrl-C or SIGTERM)" in proc.lines, \
@@ -298,5 +344,5 @@ def _assert_aborted_recorded(out: Path, proc: Proc) -> None:
     assert not any("Traceback" in s or s.startswith("bsst") for s in proc.lines), proc.lines
     summary = json.loads((out / "summary.json").read_text())
     assert summary["outcome"] == "aborted" and summary["ended_by"]["who"] == "user", summary["ended_by"]
-    assert csv_rows(out / "trace.csv") >= 250
+    assert csv_rows(out / "trace.csv") >= rows
     assert "aborted: interrupted" in (out / "events.log").read_text()
