@@ -318,6 +318,43 @@ def test_a_stop_landing_between_two_steps_ends_the_flight_aborted_recorded(tmp_p
         proc.stop()
 
 
+# ``bsst sim`` with a watched law whose run_watched is entered only after a real stop has been sent to this process:
+# the stop lands once the mission is loaded, as the command turns to starting the flight's child
+BEFORE_THE_FORK = """
+    import os, signal, sys
+    import bridge.nodes.watched as watched
+
+    forking, sig = watched.run_watched, signal.Signals[sys.argv[3]]
+    def stop_then_fork(*args, **kwargs):
+        os.kill(os.getpid(), sig)
+        return forking(*args, **kwargs)
+
+    watched.run_watched = stop_then_fork
+    sys.argv = ["bsst", "sim", sys.argv[2], "--no-plots", "--out", sys.argv[1], "--controller",
+                "examples/my_law.py:MyLaw"]
+    from bridge.__main__ import main
+    sys.exit(main())
+"""
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_stop_before_a_watched_flight_starts_is_said(tmp_path, sig: signal.Signals) -> None:
+    """A stop sent to ``bsst sim`` as it starts a watched flight's child: said (``bsst: interrupted``, exit 1, no
+    traceback), nothing flown. Before, the command ignored SIGINT from just before it (SIGTERM became that SIGINT)
+    until the child was watched: the stop was lost, and the 300 s mission flew on (here: past the 60 s wait)."""
+    mission = tmp_path / "sine300.toml"
+    mission.write_text(LONG_SINE)
+    out = tmp_path / "run"
+    proc = Proc([sys.executable, "-c", textwrap.dedent(BEFORE_THE_FORK), str(out), str(mission), sig.name])
+    try:
+        assert proc.p.wait(timeout=60) == 1
+        proc.stop()  # (ended: reads what is left)
+        assert proc.lines == ["bsst: interrupted"], "\n".join(proc.lines)
+        assert not out.exists()
+    finally:
+        proc.stop()
+
+
 def test_a_ctrl_c_to_the_group_is_one_stop_for_a_watched_flight(tmp_path) -> None:
     """A terminal's Ctrl-C (SIGINT to the process group) reaches ``bsst sim`` and its watched child both: the parent
     passes it on, and the child takes the two as one stop, its record whole (a second KeyboardInterrupt, raised

@@ -81,7 +81,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
     ends the process (a signal, a C extension's exit) ends the command exit 1, said, never exit 0 and silent.
     SIGTERM is a Ctrl-C (bridge.core.interrupt.sigterm_as_sigint): the flight ends ``aborted``, recorded, exit 1,
     whether the signal reached the process group or this process alone; the watched child is passed it as one."""
-    from bridge.core.interrupt import ignore_sigint, sigterm_as_sigint  # lazy: start-up time
+    from bridge.core.interrupt import sigterm_as_sigint  # lazy: start-up time
     from bridge.nodes.watched import run_watched  # lazy: start-up time
     from bridge.record.runlog import trace_cap  # lazy: start-up time
     from missions import load_mission  # lazy: start-up time
@@ -91,8 +91,9 @@ def cmd_sim(args: argparse.Namespace) -> int:
         laws = own_laws(args, mission)
         if not laws:
             return _sim(args, mission)
-        ignore_sigint()  # this process only passes stops on from here (while it watches), its result the child's
-        end = run_watched(lambda: _sim(args, mission), (UsageError, ConfigError))
+        # a stop until the fork is said (bsst: interrupted), passed on to the flight from there; once the child has
+        # ended, ignored (its result this command's)
+        end = run_watched(lambda: _sim(args, mission), (UsageError, ConfigError), final=True)
     if end.signalled is not None:  # this command was ended (SIGHUP): its flight with it
         print(f"bsst sim: ended by signal {signal.Signals(end.signalled).name}", file=sys.stderr)
         return 128 + end.signalled

@@ -52,8 +52,12 @@ class Watched:
     signalled: int | None = None
 
 
-def run_watched(work: Callable[[], int], bad_input: tuple[type[BaseException], ...] = (ConfigError,)) -> Watched:
-    """Run ``work`` in a forked child and wait for it (see the module docstring)."""
+def run_watched(work: Callable[[], int], bad_input: tuple[type[BaseException], ...] = (ConfigError,), *,
+                final: bool = False) -> Watched:
+    """Run ``work`` in a forked child and wait for it (see the module docstring). ``final``: the child's result is
+    the caller's, so once the child has ended this process ignores SIGINT (bridge.core.interrupt.ignore_sigint), set
+    while the stops are still passed on: a stop is never lost before the fork (SIGINT ignored by the caller before
+    this call lost one: the flight then flew to its end) nor raised after the child's end."""
     sys.stdout.flush()
     sys.stderr.flush()
     r, w = os.pipe()
@@ -97,7 +101,7 @@ def run_watched(work: Callable[[], int], bad_input: tuple[type[BaseException], .
         _, status = os.waitpid(pid, 0)
     finally:
         for s, handler in saved.items():
-            signal.signal(s, handler)
+            signal.signal(s, signal.SIG_IGN if final and s == signal.SIGINT else handler)
         os.close(r)
         os.close(asked_w)
     report = b"".join(chunks).decode("utf-8", "replace")
