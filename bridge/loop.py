@@ -31,6 +31,7 @@ import inspect
 import math
 from array import array
 from collections.abc import Generator
+from contextlib import nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -39,6 +40,7 @@ from bridge.autopilot.intention import FAILSAFE_MODES, UserModeIntention
 from bridge.autopilot.simvehicle import FAILSAFE, LAND, OFFBOARD, SimVehicle
 from bridge.autopilot.vehicleevents import typed_fields
 from bridge.core.flight import Flight, Progress, prepare
+from bridge.core.interrupt import Held, sigint_held
 from bridge.core.overrides import Overrides
 from bridge.core.wire import command_over_wire, state_over_wire
 from bridge.link.ends import ControllerEnd, VehicleEnd
@@ -111,18 +113,19 @@ def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progres
     main thread next looks, and that is here for a signal landing as a step ends (at its yield)."""
     steps = flying(flight, path, plots=plots, progress=progress)
     stop = False
-    while True:
+    while True:  # (its jump back comes only after a stop thrown in: the steps' loop is within the try)
         try:
-            if stop:
-                stop = False
-                steps.throw(KeyboardInterrupt)
-            else:
-                next(steps)
+            while True:
+                if stop:
+                    stop = False
+                    steps.throw(KeyboardInterrupt)
+                else:
+                    next(steps)
         except StopIteration as done:
             return done.value
         except KeyboardInterrupt:
             if inspect.getgeneratorstate(steps) != inspect.GEN_SUSPENDED:
-                raise  # the flight's own: not started, or let through (a second stop)
+                raise  # the flight's own: not started, or let through (a second stop, one held: flying)
             stop = True
 
 
@@ -178,14 +181,20 @@ def flying(flight: Flight, path: Path | None = None, *, plots: bool = True, prog
     except BaseException:
         _close_record(record, vehicle.events[logged:])
         raise
-    try:  # the record stays open for the verdicts' lines, and is closed whatever happens
-        arrays = trace_arrays(rows, TRACE_COLUMNS)
-        link = {"up": w.up.stats.summary(), "down": w.down.stats.summary(), "rejected": dict(w.vend.rejected)}
-        summary = yield from _judged(flight, vehicle, intention, arrays, outcome, link)
-    finally:
-        _close_record(record, vehicle.events[logged:])
-    if record is not None:
-        record.finish(arrays, summary, f"{m.name} ({m.controller}, {flight.profile.name})", plots)
+    # its last step flown: a stop while it is judged and written is held (its record is never cut), taken by its end
+    # landing if it has one to fly (aborted there), else raised once the record is on disk (at the landing's yields
+    # the previous handler is back: a fleet's other flights, and this one's caller, meet it as before)
+    with sigint_held() as held:
+        try:  # the record stays open for the verdicts' lines, and is closed whatever happens
+            arrays = trace_arrays(rows, TRACE_COLUMNS)
+            link = {"up": w.up.stats.summary(), "down": w.down.stats.summary(), "rejected": dict(w.vend.rejected)}
+            summary = yield from _judged(flight, vehicle, intention, arrays, outcome, link, held)
+        finally:
+            _close_record(record, vehicle.events[logged:])
+        if record is not None:
+            record.finish(arrays, summary, f"{m.name} ({m.controller}, {flight.profile.name})", plots)
+    if held.pending:
+        raise KeyboardInterrupt  # (held: the record is whole, as the flight ended)
     return Run(arrays, summary, path)
 
 
@@ -250,9 +259,28 @@ class _Wiring:
 
 
 def _judged(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention, arrays: dict[str, Any], outcome: str,
-            link: dict[str, Any]) -> Generator[Step, str | None, dict[str, Any]]:
+            link: dict[str, Any], held: Held) -> Generator[Step, str | None, dict[str, Any]]:
     """The flight's summary: its figures, plant blocks, who ended it, the policies' verdicts (each violation
-    an event), and when it completed, its end action flown (:func:`fly_end`: its steps yielded, as the mission's)."""
+    an event), and when it completed, its end action flown (:func:`fly_end`: its steps yielded, as the mission's).
+    A stop while it judges is ``held`` (:func:`flying`), and taken by the landing, if one is flown."""
+    summary = _verdicts(flight, vehicle, arrays, outcome, link)
+    verdict = None
+    if outcome == "completed":  # after the mission's figures: nothing of them changes
+        summary["end"], verdict = yield from fly_end(flight, vehicle, intention, summary["events"], held)
+    elif outcome == "failsafe":
+        verdict = yield from land_failsafe(flight, vehicle, intention, summary["events"], held)
+    if verdict is not None:  # its landing touched down hard (or the plant diverged): the plant ended the flight
+        summary["outcome"] = verdict
+        summary["ended_by"] = ended_by_outcome(verdict, [RunEvent(round(e.t, 6), e.kind, e.text, by=e.by)
+                                                         for e in vehicle.events])
+        summary.update({k: v for k, v in plant_blocks(vehicle.plant).items() if k == "impact"})
+    return summary
+
+
+def _verdicts(flight: Flight, vehicle: SimVehicle, arrays: dict[str, Any], outcome: str,
+              link: dict[str, Any]) -> dict[str, Any]:
+    """The flight's summary before its end action: figures, plant blocks, who ended it, the policies' verdicts (each
+    violation an event)."""
     m, plant = flight.mission, vehicle.plant
     if caps := flight.link.jitter_capped():  # the delay capped a jitter (docs/links.md): said
         link["jitter_capped"] = caps
@@ -266,21 +294,11 @@ def _judged(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention, a
     for v in judge(summary, arrays, ev, rules_for(flight, "offline", link)):
         vehicle.event("policy", violation_text(v))
         shown.append({"t": round(vehicle.t, 6), "kind": "policy", "text": violation_text(v)})
-    verdict = None
-    if outcome == "completed":  # after the mission's figures: nothing of them changes
-        summary["end"], verdict = yield from fly_end(flight, vehicle, intention, summary["events"])
-    elif outcome == "failsafe":
-        verdict = yield from land_failsafe(flight, vehicle, intention, summary["events"])
-    if verdict is not None:  # its landing touched down hard (or the plant diverged): the plant ended the flight
-        summary["outcome"] = verdict
-        summary["ended_by"] = ended_by_outcome(verdict, [RunEvent(round(e.t, 6), e.kind, e.text, by=e.by)
-                                                         for e in vehicle.events])
-        summary.update({k: v for k, v in plant_blocks(plant).items() if k == "impact"})
     return summary
 
 
-def fly_end(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention,
-            shown: list[dict[str, Any]]) -> Generator[Step, str | None, tuple[dict[str, Any], str | None]]:
+def fly_end(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention, shown: list[dict[str, Any]],
+            held: Held | None = None) -> Generator[Step, str | None, tuple[dict[str, Any], str | None]]:
     """The mission's end action offline (``[end] action``, :meth:`SimVehicle.end_mission`), as the vehicle flies
     it in a session: ``land`` steps the vehicle's own landing (nothing from the controller; the mission's link
     is done with, its statistics the mission's) until it disarms on the ground, bounded by the descent at the
@@ -292,12 +310,12 @@ def fly_end(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention,
     in its shared world, as a lockstep session's gate does (docs/swarm.md)."""
     n0 = len(vehicle.events)
     vehicle.end_mission(flight.mission.end_action)
-    rows, verdict = yield from _fly_alone(flight, vehicle, intention, LAND, shown, n0, heeds=True)
+    rows, verdict = yield from _fly_alone(flight, vehicle, intention, LAND, shown, n0, heeds=True, held=held)
     return end_block(flight.mission.end_action, rows, vehicle.events[n0:]), verdict
 
 
-def land_failsafe(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention,
-                  shown: list[dict[str, Any]]) -> Generator[Step, str | None, str | None]:
+def land_failsafe(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention, shown: list[dict[str, Any]],
+                  held: Held | None = None) -> Generator[Step, str | None, str | None]:
     """A failsafe's landing still going at the mission's end goes on to the ground, as a session's vehicle flies it
     (on the wall clock: it leaves lockstep for it), stepped as :func:`fly_end` steps the end landing; the plant's
     verdict (None: none). Each period yields :class:`Alone`: a fleet judges its world on it but tells it nothing, as
@@ -306,12 +324,13 @@ def land_failsafe(flight: Flight, vehicle: SimVehicle, intention: UserModeIntent
     target = vehicle.onboard.target
     if not (vehicle.armed and vehicle.mode == FAILSAFE and target is not None and target.lands):
         return None
-    _, verdict = yield from _fly_alone(flight, vehicle, intention, FAILSAFE, shown, len(vehicle.events), heeds=False)
+    _, verdict = yield from _fly_alone(flight, vehicle, intention, FAILSAFE, shown, len(vehicle.events), heeds=False,
+                                       held=held)
     return verdict
 
 
 def _fly_alone(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention, mode: str,
-               shown: list[dict[str, Any]], n0: int, *, heeds: bool
+               shown: list[dict[str, Any]], n0: int, *, heeds: bool, held: Held | None = None
                ) -> Generator[Step, str | None, tuple[list[tuple[float, float, float]], str | None]]:
     """Step the vehicle alone (nothing from the controller; the mission's link is done with, its statistics the
     mission's) while it is armed in ``mode`` (or a failsafe's, taken meanwhile), until it disarms on the ground,
@@ -320,7 +339,8 @@ def _fly_alone(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention
     judged on it). ``heeds``: a contact sent back ends it there, armed and not ended by its plant: ``collision``,
     disarmed, as a lockstep session's vehicle (its plant's verdict comes first there too); else the state is yielded
     as :class:`Alone` and what is sent back is not heeded. Interrupted (Ctrl-C),
-    it ends ``aborted``, recorded. Returns the rows (t s, z m, vz m/s) and the verdict (None: none)."""
+    it ends ``aborted``, recorded, as on a stop ``held`` while the flight was judged. Returns the rows (t s, z m,
+    vz m/s) and the verdict (None: none)."""
     m, plant = flight.mission, vehicle.plant
     rows: list[tuple[float, float, float]] = []
     k, rate = m.steps, m.rate_hz
@@ -329,6 +349,9 @@ def _fly_alone(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention
     verdict = None
     try:
         while verdict is None and vehicle.armed and vehicle.mode in (mode, FAILSAFE) and k < bound:
+            if held is not None and held.pending:  # a stop held while the flight was judged: the landing takes it
+                held.pending = False
+                raise KeyboardInterrupt
             X = plant.state
             vehicle.advance()  # the vehicle alone: what the up link still holds stays in flight (its statistics too)
             intention.after_period()  # disarmed: the mode it takes (as a session's vehicle, before the plant's verdict)
@@ -337,10 +360,9 @@ def _fly_alone(flight: Flight, vehicle: SimVehicle, intention: UserModeIntention
             k += 1
             if verdict is not None:
                 vehicle.disarm(f"{verdict}: {vehicle.events[-1].text}")  # (as a session's: its landing's came first)
-            if not heeds:
-                yield Alone(plant.state)
-            else:
-                contact = yield plant.state
+            with held.released() if held is not None else nullcontext():
+                contact = (yield Alone(plant.state)) if not heeds else (yield plant.state)
+            if heeds:
                 if contact is not None and verdict is None and vehicle.armed:
                     vehicle.event("collision", contact)
                     vehicle.disarm(f"collision: {contact}")

@@ -6,7 +6,8 @@ Out: :class:`Interrupts`: a :class:`~concurrent.futures.Future` completed (its r
      KeyboardInterrupt once it has returned; :func:`sigint_deferred`: SIGINT raised only inside
      :meth:`Deferred.raising` blocks (where a search flies), noted elsewhere (its bookkeeping); :func:`ignore_sigint`:
      a command whose result is final ignores SIGINT from there on (its write, its summary, the interpreter's exit);
-     :func:`sigterm_as_sigint`: SIGTERM taken as a Ctrl-C (:func:`as_sigint`, the handler)
+     :func:`sigterm_as_sigint`: SIGTERM taken as a Ctrl-C (:func:`as_sigint`, the handler); :func:`sigint_held`: the
+     KeyboardInterrupt of a SIGINT held (:class:`Held`) while work that must not be cut runs (a flight's record)
 
 Why:
 - Python raises KeyboardInterrupt between any two bytecodes of the main thread, so also inside
@@ -173,6 +174,58 @@ def sigint_deferred() -> Iterator[Deferred]:
         signal.signal(signal.SIGINT, previous)
 
 
+@dataclass
+class Held:
+    """The stops a :func:`sigint_held` block held: ``pending`` once one came (the one who acts on it clears it)."""
+
+    pending: bool = False
+    _previous: Any = None  # the handler the block chains to (None: nothing installed)
+
+    def on_sigint(self, signum: int, frame: Any) -> None:
+        try:
+            if not callable(self._previous):  # (SIG_DFL: the stop would have ended the process)
+                raise KeyboardInterrupt
+            self._previous(signum, frame)
+        except KeyboardInterrupt:
+            self.pending = True
+
+    @contextmanager
+    def released(self) -> Iterator[None]:
+        """Within the block (a ``yield``: the caller's code, another flight's, runs) SIGINT meets the previous
+        handler again; held again after it."""
+        if self._previous is None:
+            yield
+            return
+        signal.getsignal(signal.SIGINT)  # (a call: a SIGINT that came before it is handled here, held)
+        signal.signal(signal.SIGINT, self._previous)
+        try:
+            yield
+        finally:
+            signal.signal(signal.SIGINT, self.on_sigint)
+
+
+@contextmanager
+def sigint_held(got: Held | None = None) -> Iterator[Held]:
+    """Within the block (work that must not be cut; around each ``yield`` in it, :meth:`Held.released`), SIGINT
+    meets the previous handler as before, but a KeyboardInterrupt it raises is held (``pending`` in ``got``, or a
+    new :class:`Held`), not raised; the previous handler is back after it. Outside the main thread, or where SIGINT
+    is ignored, nothing is installed. A chain, not a stand-in: a handler that passes stops on, counts them or
+    ignores some (a watched flight's child) still decides what is a stop."""
+    got = Held() if got is None else got
+    previous = _previous_handler()
+    if previous is None:
+        yield got
+        return
+    got._previous = previous
+    signal.signal(signal.SIGINT, got.on_sigint)
+    try:
+        yield got
+    finally:
+        signal.getsignal(signal.SIGINT)  # (a call: a SIGINT that came meanwhile is handled here, held, before the swap)
+        signal.signal(signal.SIGINT, previous)
+        got._previous = None
+
+
 def ignore_sigint() -> None:
     """From here on this process ignores SIGINT (in the main thread; elsewhere nothing changes): a command's result
     is final, and neither its summary nor the interpreter's exit may be cut by a Ctrl-C (see the module's docstring).
@@ -201,5 +254,5 @@ def sigterm_as_sigint() -> Iterator[None]:
         signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)
 
 
-__all__ = ["Deferred", "Interrupts", "as_sigint", "ignore_sigint", "sigint_deferred", "sigint_futures",
-           "sigterm_as_sigint", "wait_or_interrupt"]
+__all__ = ["Deferred", "Held", "Interrupts", "as_sigint", "ignore_sigint", "sigint_deferred", "sigint_futures",
+           "sigint_held", "sigterm_as_sigint", "wait_or_interrupt"]
