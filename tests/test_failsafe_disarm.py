@@ -4,8 +4,8 @@ PX4 clears its failsafe on disarm (failsafe/framework.cpp: no action is selected
 mode again (UserModeIntention::onDisarm) and says STANDBY (streams/HEARTBEAT.hpp: any disarmed vehicle). A real
 ``bsst vehicle`` and a ground station on pymavlink: a geofence Land failsafe from HOLD lands and disarms the vehicle,
 which then shows HOLD (pymavlink's LOITER), STANDBY, and arms there again. A real ``bsst sitl`` session (lockstep):
-the sine's failsafe landing past the mission's end (``--blackout 27.5:3``) ends in OFFBOARD, STANDBY, with the same
-events at the same times as offline.
+the sine's failsafe landing past the mission's end (the sine cut to 15 s, ``--blackout 12.5:3``) ends in OFFBOARD,
+STANDBY, with the same events at the same times as offline.
 """
 
 from __future__ import annotations
@@ -98,16 +98,20 @@ def test_a_ground_stations_vehicle_disarmed_by_its_geofence_failsafe_shows_hold_
 
 
 def test_the_briefs_failsafe_landing_in_lockstep_ends_offboard_standby_as_offline(tmp_path):
-    """``bsst sitl missions/sine.toml --blackout 27.5:3``: the failsafe's descent from 28.0 s, still going at the
-    mission's end, lands at 32.571 s and disarms at 34.571 s; at 34.572 s the vehicle is back in OFFBOARD (the mode it
+    """The brief's ``bsst sitl missions/sine.toml --blackout 27.5:3`` (the sine's failsafe landing past the mission's
+    end), flown on the sine cut to 15 s, ``--blackout 12.5:3``: the failsafe's descent from 13.0 s, still going at the
+    mission's end, lands at 15.424 s and disarms at 17.424 s; at 17.428 s the vehicle is back in OFFBOARD (the mode it
     was armed in), disarmed, saying why, and its HEARTBEAT says STANDBY (it said CRITICAL, LAND, until armed again).
-    The run is still ``failsafe`` (exit 1), and ``bsst sim`` says the same events at the same times."""
+    The run is still ``failsafe`` (exit 1), and ``bsst sim`` says the same events at the same times. (The whole sine's
+    flew 34.6 s in each twin; this one 17.4 s. Offline, the whole sine's: tests/test_landed_event.py.)"""
+    sine = tmp_path / "sine15.toml"
+    sine.write_text((MISSION_DIR / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 15.0"))
     with instance_slot() as n:
-        r = run_bsst("sitl", str(MISSION_DIR / "sine.toml"), "--blackout", "27.5:3", "--instance", str(n),
+        r = run_bsst("sitl", str(sine), "--blackout", "12.5:3", "--instance", str(n),
                      "--no-plots", "--out", str(tmp_path / "s"), env=ENV, timeout=300)
     assert r.returncode == 1, r.stdout[-2000:] + r.stderr[-2000:]
     sitl = json.loads((tmp_path / "s" / "summary.json").read_text())
-    offline = simulate(MISSION_DIR / "sine.toml", plots=False, link={"blackouts": [[27.5, 3.0]]}).summary
+    offline = simulate(sine, plots=False, link={"blackouts": [[12.5, 3.0]]}).summary
     assert sitl["outcome"] == offline["outcome"] == "failsafe" and sitl["ended_by"] == offline["ended_by"]
 
     def said(events: list) -> list:
@@ -115,8 +119,9 @@ def test_the_briefs_failsafe_landing_in_lockstep_ends_offboard_standby_as_offlin
                 if e.get("source", "vehicle") == "vehicle" and e["kind"] in ("failsafe", "landed", "disarmed", "mode")]
 
     assert said(sitl["events"]) == said(offline["events"])
-    assert said(offline["events"])[-2:] == [(34.571, "disarmed", "landed: disarmed"),
-                                            (34.572, "mode", f"OFFBOARD {CLEARED}")]
+    assert said(offline["events"])[-2:] == [(17.424, "disarmed", "landed: disarmed"),
+                                            (17.428, "mode", f"OFFBOARD {CLEARED}")]
+    assert [t for t, k, _ in said(offline["events"]) if k == "landed"] == [15.424]  # after the mission's end
     beats = vehicle_heartbeats(tmp_path / "s" / "vehicle.tlog")
     never_critical_disarmed(beats)
     assert (True, LAND_MODE, M.MAV_STATE_CRITICAL) in beats  # its failsafe, while it flew
