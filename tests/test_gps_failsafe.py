@@ -4,7 +4,7 @@ A real ``bsst vehicle`` (x500, gnss, EKF, lockstep at 4x) flown by MAVSDK over U
 holding, MAVSDK's Failure plugin turns the GPS off; MAVSDK's Telemetry sees the position health go false, then, at
 EKF2_NOAID_TOUT, PX4's Descend (flight mode LAND), the landing and the disarm; GLOBAL_POSITION_INT stops (its
 ``position`` no longer updates) until the GPS is back and fused; ESTIMATOR_STATUS's flags say it. Then the
-product's own fault event (``--at 10:gps:off``) in a lockstep ``bsst sitl`` session: the same failsafe at the same
+product's own fault event (``--at T:gps:off``) in a lockstep ``bsst sitl`` session: the same failsafe at the same
 step as ``bsst sim`` offline, outcome ``failsafe``, exit 1, the summary naming it. The timing rules themselves:
 tests/test_positionloss.py.
 """
@@ -170,18 +170,19 @@ def test_mavsdk_sees_the_gps_lost_the_descent_and_the_position_back(tmp_path):
 
 
 def test_the_product_fault_event_fails_safe_in_lockstep_as_offline(tmp_path):
-    """``--sensors gnss --estimator ekf --at 10:gps:off`` on the sine cut to 20 s: ``bsst sim`` and a lockstep ``bsst
-    sitl`` both end ``failsafe``, exit 1, the position lost and PX4's Descend at 15.124 s and the disarm on the ground
-    at 19.876 s (2 s after the touchdown, COM_DISARM_LAND) in both; the summary's ``ended_by`` names the position loss
-    and the fault; the trace the same."""
-    sine = tmp_path / "sine20.toml"
-    sine.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 20.0"))
+    """``--sensors gnss --estimator ekf --at 2:gps:off`` on the sine cut to 11 s: ``bsst sim`` and a lockstep ``bsst
+    sitl`` both end ``failsafe``, exit 1, the position lost and PX4's Descend at 7.124 s (EKF2_NOAID_TOUT after the
+    fault) and the disarm on the ground at 10.655 s (2 s after the touchdown, COM_DISARM_LAND) in both; the summary's
+    ``ended_by`` names the position loss and the fault; the trace the same. (The docs' ``--at 10:gps:off`` on the
+    sine cut to 20 s flew the same, 8 s later: 20 s in each twin; this one 11 s.)"""
+    sine = tmp_path / "sine11.toml"
+    sine.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 11.0"))
     summaries = []
     for command in ("sim", "sitl"):
         out = tmp_path / command
         with instance_slot() as n:
             extra = ("--instance", str(n)) if command == "sitl" else ()
-            r = run_bsst(command, sine, "--sensors", "gnss", "--estimator", "ekf", "--at", "10:gps:off", "--out",
+            r = run_bsst(command, sine, "--sensors", "gnss", "--estimator", "ekf", "--at", "2:gps:off", "--out",
                          str(out), "--no-plots", *extra, env=ENV, timeout=300)
         assert r.returncode == 1 and (out / "summary.json").exists(), f"bsst {command}: {r.stderr[-2000:]}"
         summaries.append(json.loads((out / "summary.json").read_text()))
@@ -190,11 +191,11 @@ def test_the_product_fault_event_fails_safe_in_lockstep_as_offline(tmp_path):
     events = [[(e["t"], e["kind"], e["text"].split(" [by ")[0]) for e in s["events"] if e["kind"] in mine
                and e.get("source", "vehicle") == "vehicle"] for s in summaries]
     assert events[0] == events[1] and [(t, k) for t, k, _ in events[0]] == [
-        (10.0, "fault"), (15.124, "position"), (15.124, "failsafe"), (19.876, "disarmed")], events
+        (2.0, "fault"), (7.124, "position"), (7.124, "failsafe"), (10.655, "disarmed")], events
     assert sitl["outcome"] == offline["outcome"] == "failsafe"
     assert sitl["ended_by"] == offline["ended_by"] == {
-        "who": "vehicle", "how": "failsafe at t=15.124 s: position lost: level and descend",
-        "after_faults": ["t=10.000 s: gps off"]}
+        "who": "vehicle", "how": "failsafe at t=7.124 s: position lost: level and descend",
+        "after_faults": ["t=2.000 s: gps off"]}
     rows = [(tmp_path / c / "trace.csv").read_text().splitlines() for c in ("sim", "sitl")]
     keep = rows[0][0].split(",").index("z") + 1  # t and the true state's columns up to z
     assert [r.split(",")[:keep] for r in rows[0]] == [r.split(",")[:keep] for r in rows[1]]
@@ -206,27 +207,30 @@ def _vehicle_events(summary: dict, kinds: tuple[str, ...]) -> list[tuple[float, 
 
 
 def test_a_gps_lost_in_the_end_landing_lands_in_descend_in_lockstep_as_offline(tmp_path):
-    """``--at 26:gps:off`` on the sine: the position is lost at 31.124 s, in the mission's end landing. Offline flies
-    PX4's Descend on to the ground (it used to stop there, armed in the air, and call it completed), and a lockstep
-    session flies the same steps on the step clock (it used to leave lockstep at the disarm, and its policies read
-    the failsafe as a late one and the descent as a jump of the mission's time): touchdown 34.544 s, disarm 2 s
-    later, the same ``end`` block, every policy held, outcome completed (the mission was), exit 0, in both."""
+    """``--at 10:gps:off`` on the sine cut to 14 s: the position is lost at 15.124 s, in the mission's end landing.
+    Offline flies PX4's Descend on to the ground (it used to stop there, armed in the air, and call it completed), and
+    a lockstep session flies the same steps on the step clock (it used to leave lockstep at the disarm, and its
+    policies read the failsafe as a late one and the descent as a jump of the mission's time): touchdown 16.203 s,
+    disarm 2 s later, the same ``end`` block, every policy held, outcome completed (the mission was), exit 0, in both.
+    (The whole sine with ``--at 26:gps:off`` flew the same, 16 s later: 36.5 s in each twin; this one 18.2 s.)"""
+    sine = tmp_path / "sine14.toml"
+    sine.write_text((ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", "duration_s = 14.0"))
     summaries = []
     for command in ("sim", "sitl"):
         out = tmp_path / command
         with instance_slot() as n:
             extra = ("--instance", str(n)) if command == "sitl" else ()
-            r = run_bsst(command, ROOT / "missions" / "sine.toml", "--sensors", "gnss", "--estimator", "ekf", "--at",
-                         "26:gps:off", "--out", str(out), "--no-plots", *extra, env=ENV, timeout=300)
+            r = run_bsst(command, sine, "--sensors", "gnss", "--estimator", "ekf", "--at",
+                         "10:gps:off", "--out", str(out), "--no-plots", *extra, env=ENV, timeout=300)
         assert r.returncode == 0 and (out / "summary.json").exists(), f"bsst {command}: {r.stderr[-2000:]}"
         summaries.append(json.loads((out / "summary.json").read_text()))
     offline, sitl = summaries
     kinds = ("position", "failsafe", "landed", "disarmed")
     assert _vehicle_events(offline, kinds) == _vehicle_events(sitl, kinds)
     assert [(t, k) for t, k, _ in _vehicle_events(offline, kinds)] == [
-        (31.124, "position"), (31.124, "failsafe"), (34.544, "landed"), (36.544, "disarmed")]
+        (15.124, "position"), (15.124, "failsafe"), (16.203, "landed"), (18.203, "disarmed")]
     assert offline["outcome"] == sitl["outcome"] == "completed"
-    assert offline["end"] == sitl["end"] and offline["end"]["disarmed"] and offline["end"]["landing_s"] == 6.544
+    assert offline["end"] == sitl["end"] and offline["end"]["disarmed"] and offline["end"]["landing_s"] == 4.203
     assert offline["end"]["failsafe"] == "position lost: level and descend"  # who finished the landing
     assert all(v["ok"] for v in sitl["policies"]) and all(v["ok"] for v in offline["policies"]), sitl["policies"]
     assert not [e for e in sitl["events"] if e["kind"] == "lockstep"], "the session left lockstep"
