@@ -80,12 +80,14 @@ def test_a_law_without_desired_does_not_fit(nominal: Nominal) -> None:
 
 
 def _sine(tmp_path: Path, duration_s: float) -> Path:
-    """missions/sine.toml flown for ``duration_s``, not 30 s (every other key as shipped): the same steps
-    compared, fewer of them (the 30 s sine's lockstep-equals-offline is tests/test_sitl.py's)."""
+    """missions/sine.toml flown for ``duration_s``, not 30 s, and ended in hold (every other key as shipped): the
+    same steps compared, fewer of them (the 30 s sine's lockstep-equals-offline is tests/test_sitl.py's). The tests
+    read the mission's rows and its summary only: the end landing (3.5 s more, with COM_DISARM_LAND) flew for nobody,
+    and trace.csv, the mission's steps, is the same either way."""
     path = tmp_path / "sine.toml"
     text = (ROOT / "missions" / "sine.toml").read_text()
-    assert "duration_s = 30.0" in text
-    path.write_text(text.replace("duration_s = 30.0", f"duration_s = {duration_s}"))
+    assert "duration_s = 30.0" in text and "[end]" not in text
+    path.write_text(text.replace("duration_s = 30.0", f"duration_s = {duration_s}") + '[end]\naction = "hold"\n')
     return path
 
 
