@@ -96,25 +96,39 @@ def test_raw_passes_noise_on_and_the_ekf_removes_it(ekf_sim):
     assert ekf["rms_3d"] < raw["rms_3d"]
 
 
-def test_a_seed_gives_the_same_lockstep_trace_twice_and_another_seed_another(tmp_path):
+@pytest.fixture(scope="module")
+def ekf_session(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, object]:
+    """A lockstep session of 2 s on the estimate (seed 0, the mission's end held), its figures drawn: its run
+    directory and run. The seed test reads its trace, the plots test its figures (each flew its own before)."""
+    d = tmp_path_factory.mktemp("ekf_session")
+    m = d / "a.toml"
+    m.write_text(SINE_EKF.format(seed=0, seconds=2.0) + HOLD_AT_END)
+    return d / "a", sitl(m, out=d / "a", instance=None)
+
+
+def test_a_seed_gives_the_same_lockstep_trace_twice_and_another_seed_another(ekf_session, tmp_path):
     """Three lockstep sessions of 2 s, the mission's end held (the sensors' noise differs from the first sample:
-    the 6 s and end landing flown before added 6.6 s to each that the test does not read)."""
-    runs = {}
-    for name, seed in (("a", 1), ("b", 1), ("c", 2)):
+    the 6 s and end landing flown before added 6.6 s to each that the test does not read); the first is
+    :func:`ekf_session` (its figures drawn: they do not touch the trace)."""
+    runs = {"a": ekf_session}
+    for name, seed in (("b", 0), ("c", 2)):
         m = tmp_path / f"{name}.toml"
         m.write_text(SINE_EKF.format(seed=seed, seconds=2.0) + HOLD_AT_END)
-        run = sitl(m, out=tmp_path / name, plots=False, instance=None)
+        runs[name] = tmp_path / name, sitl(m, out=tmp_path / name, plots=False, instance=None)
+    for _, run in runs.values():
         assert run.outcome == "completed" and "estimation" in run.summary
-        runs[name] = (tmp_path / name / "trace.csv").read_bytes()
-    assert runs["a"] == runs["b"]
-    assert runs["a"] != runs["c"]
+    a, b, c = ((out / "trace.csv").read_bytes() for out, _ in runs.values())
+    assert a == b
+    assert a != c
 
 
 def test_lockstep_matches_offline_and_odometry_carries_the_covariance(tmp_path):
     """A real ``bsst sitl`` process against the offline loop (the sine cut to 12 s); ODOMETRY in the vehicle's
     tlog."""
     sine = tmp_path / "sine12.toml"
-    sine.write_text(SINE.read_text().replace("duration_s = 30.0", "duration_s = 12.0"))
+    # its end held: the rows, the summary's estimation and ODOMETRY read are the mission's (its end landing, 3.5 s
+    # more in each twin, flew for nobody)
+    sine.write_text(SINE.read_text().replace("duration_s = 30.0", "duration_s = 12.0") + HOLD_AT_END)
     off = simulate(sine, plots=False, **EKF_MOCAP)
     assert len(off.trace["t"]) == 3000
     out = tmp_path / "run"
@@ -234,7 +248,7 @@ def test_estimator_flag_choices_are_the_estimator_kinds():
         assert sorted(action.choices) == sorted(ESTIMATOR_KINDS)
 
 
-def test_plots_show_the_estimate_against_truth_only_when_flown_on_an_estimate(tmp_path):
+def test_plots_show_the_estimate_against_truth_only_when_flown_on_an_estimate(ekf_session, tmp_path):
     """``plots/estimate.png`` from ``bsst sim`` and ``bsst sitl`` under ekf; none under truth (nothing to show)."""
     for kind in ("ekf", "truth"):
         mission = _mission(tmp_path, kind)  # the figures show the mission's rows: its end landing flew for nobody
@@ -243,11 +257,9 @@ def test_plots_show_the_estimate_against_truth_only_when_flown_on_an_estimate(tm
         assert (tmp_path / kind / "plots" / "positions.png").stat().st_size > 10_000
     assert (tmp_path / "ekf" / "plots" / "estimate.png").stat().st_size > 10_000
     assert not (tmp_path / "truth" / "plots" / "estimate.png").exists()
-    mission = _mission(tmp_path, "ekf", seconds=2.0)  # the figure read, not the flight: 2 s, its end held
-    mission.write_text(mission.read_text() + HOLD_AT_END)
-    run = sitl(mission, out=tmp_path / "sitl", instance=None)
+    out, run = ekf_session  # the figure read, not the flight: 2 s, its end held
     assert run.outcome == "completed"
-    assert (tmp_path / "sitl" / "plots" / "estimate.png").stat().st_size > 10_000
+    assert (out / "plots" / "estimate.png").stat().st_size > 10_000
 
 
 def test_the_failsafe_lands_on_the_estimate(tmp_path):
