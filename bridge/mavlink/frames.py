@@ -46,13 +46,22 @@ class HotLayout:
         for name, n in zip(cls.ordered_fieldnames, cls.array_lengths, strict=True):
             self.spans.append((name, i, n))
             i += max(n, 1)
+        self._fields = _fields_function(self.spans)
 
     def decode(self, payload: bytes) -> dict[str, Any]:
         """Field values by name (arrays as tuples); a truncated MAVLink 2 payload is zero-padded."""
         if len(payload) < self.size:
             payload = payload + bytes(self.size - len(payload))
-        v = self.struct.unpack(payload)
-        return {name: v[i] if n == 0 else v[i:i + n] for name, i, n in self.spans}
+        return self._fields(self.struct.unpack(payload))
+
+
+def _fields_function(spans: list[tuple[str, int, int]]) -> Callable[[tuple[Any, ...]], dict[str, Any]]:
+    """``values -> {name: value}`` for a layout's ``spans`` (an array's values as a tuple), as one dict display:
+    a step's message is decoded in about half the time of a comprehension over the spans (the same dict)."""
+    items = ", ".join(f"{name!r}: v[{i}]" if n == 0 else f"{name!r}: v[{i}:{i + n}]" for name, i, n in spans)
+    scope: dict[str, Any] = {}
+    exec(f"def fields(v):\n    return {{{items}}}\n", scope)  # the names are string literals (repr)
+    return scope["fields"]
 
 
 class HotMessage:
@@ -60,7 +69,7 @@ class HotMessage:
     a pymavlink message the handlers use."""
 
     def __init__(self, layout: HotLayout, fields: dict[str, Any], src: int, comp: int, buf: bytes) -> None:
-        self.__dict__.update(fields)
+        self.__dict__ = fields  # (a new dict each message: HotLayout.decode's) taken, not copied
         self._type = layout.name
         self._src = src
         self._comp = comp
