@@ -267,13 +267,21 @@ class Endpoint:
     def send_hot(self, layout: HotLayout, values: tuple[Any, ...], to: tuple[str, int] | None = None) -> bool:
         """Encode a hot-path message from its flat field values (see :class:`HotLayout`) and
         send it: the same bytes pymavlink would make, without a message object."""
-        return self.send_frame(self.encode_hot(layout, values), to)
+        return self.send_frame(self.encode_payload(layout, layout.struct.pack(*values)), to)
+
+    def send_payload(self, layout: HotLayout, payload: bytes, to: tuple[str, int] | None = None) -> bool:
+        """:meth:`send_hot` of values already packed (``layout.struct``'s bytes, trailing zeros and all)."""
+        return self.send_frame(self.encode_payload(layout, payload), to)
 
     def encode_hot(self, layout: HotLayout, values: tuple[Any, ...]) -> bytes:
         """The frame of a hot-path message (next sequence number; signed with a key)."""
+        return self.encode_payload(layout, layout.struct.pack(*values))
+
+    def encode_payload(self, layout: HotLayout, packed: bytes) -> bytes:
+        """:meth:`encode_hot` of values already packed by ``layout.struct``."""
         mav = self.mav
         signing = self.signing
-        payload = layout.struct.pack(*values).rstrip(b"\0") or b"\0"  # MAVLink 2 drops trailing zeros
+        payload = packed.rstrip(b"\0") or b"\0"  # MAVLink 2 drops trailing zeros
         head = HEADER2.pack(MAGIC2, len(payload), 0 if signing is None else IFLAG_SIGNED, 0, mav.seq,
                              mav.srcSystem, mav.srcComponent, layout.id & 0xFFFF, layout.id >> 16)
         body = head + payload

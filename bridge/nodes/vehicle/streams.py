@@ -16,6 +16,7 @@ request; None: never streamed, sent on request, or, for the sensor messages, at 
 from __future__ import annotations
 
 import math
+import struct
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -284,6 +285,12 @@ class StatusTexts:
 _COV_UNKNOWN = (math.nan,) + (0.0,) * 20
 ODOMETRY_TAIL = (*_COV_UNKNOWN, *_COV_UNKNOWN, mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_BODY_FRD, 0,
                  mavlink.MAV_ESTIMATOR_TYPE_NAIVE, 100)
+# a truth state's ODOMETRY packed in two: time_usec and the 13 state values (the first of the wire order), then
+# ODOMETRY_TAIL's bytes, packed once (61 values packed a step cost 1.2 us, these 14 and a join 0.4 us)
+_ODOMETRY_HEAD = struct.Struct("<Q13f")
+_ODOMETRY_TAIL_BYTES = ODOMETRY.struct.pack(0, *(0.0,) * 13, *ODOMETRY_TAIL)[_ODOMETRY_HEAD.size:]
+if _ODOMETRY_HEAD.pack(1, *range(13)) + _ODOMETRY_TAIL_BYTES != ODOMETRY.struct.pack(1, *range(13), *ODOMETRY_TAIL):
+    raise RuntimeError(f"ODOMETRY's wire order is not time_usec and 13 floats first: {ODOMETRY.struct.format}")
 # an estimate's (raw, ekf): its covariances follow; the autopilot's own estimator (ekf) or the sensors as read (raw)
 ESTIMATOR_TYPES = {"raw": mavlink.MAV_ESTIMATOR_TYPE_NAIVE, "ekf": mavlink.MAV_ESTIMATOR_TYPE_AUTOPILOT}
 # the pose block's 21 upper-triangle entries: (index in Covariance.state's 9x9, sign) over (x, y, z, roll, pitch,
@@ -346,13 +353,14 @@ class OdometryOut:
         if not tm.finite(X):
             return False
         f = self.fields(X)  # state_to_odometry written out, flat (one call: the hot path; tests/test_wire.py)
-        if sim.sensors is None:
-            tail = ODOMETRY_TAIL
+        if sim.sensors is None:  # the truth: its 14 values packed, the unchanging rest's bytes after them
+            payload = _ODOMETRY_HEAD.pack(step_usec(k, self.rate), *f) + _ODOMETRY_TAIL_BYTES
         else:
             assert sim.estimator is not None
             tail = estimate_tail((f[3], f[4], f[5], f[6]), sim.estimator.covariance(), self.estimator)
+            payload = ODOMETRY.struct.pack(step_usec(k, self.rate), *f, *tail)
         before = time.monotonic()  # the send left between these two (a receiver that stopped reading: docs/sitl.md)
-        if self.link.send_hot(ODOMETRY, (step_usec(k, self.rate), *f, *tail)):
+        if self.link.send_payload(ODOMETRY, payload):
             self.count += 1
             self.sends.add(k, before, time.monotonic())
         sent_at = self.sent_at
