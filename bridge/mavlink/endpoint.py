@@ -389,16 +389,19 @@ class Endpoint:
                     continue
                 budget = None  # its one frame is paid for
             if hot is not None and (signing is None or signing.verify(data, data[5], data[6]) is None):
-                msgs: list[Any] = [hot]
+                self.received += 1  # (a step's message: one frame, the whole datagram)
+                if self.tlog is not None:
+                    self.tlog.record(data)
+                out.append((hot, addr))
             else:  # everything else, and a hot frame whose signature failed (to name the reason)
                 msgs = parse_datagram(data, self.mav, signing, rejected, from_peer, budget)
                 if not msgs:
                     continue
-            self.received += len(msgs)
-            if self.tlog is not None:
-                for m in msgs:
-                    self.tlog.record(m.get_msgbuf())
-            out.extend((m, addr) for m in msgs)
+                self.received += len(msgs)
+                if self.tlog is not None:
+                    for m in msgs:
+                        self.tlog.record(m.get_msgbuf())
+                out.extend((m, addr) for m in msgs)
             if self.follow:
                 self.peer = addr
         return True
