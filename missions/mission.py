@@ -29,7 +29,7 @@ from typing import Any
 from missions.envelope import ENVELOPE_RADIUS_M, envelope_problem, ground_problem
 from missions.fleet import Separation, VehicleSpec, fleet_from_table
 from missions.geodetic import Home as GeoHome
-from missions.geofence import geofence_from_table
+from missions.geofence import Geofence, geofence_from_table
 from missions.planfiles import PlanFile, read_plan_text
 from missions.rally import rally_dict, rally_from_plan, rally_from_table
 from missions.references import Reference, Sine, Step, Waypoints
@@ -419,6 +419,13 @@ def check_fields(m: Mission) -> None:
     if not isinstance(m.events, (tuple, list)) or not all(isinstance(e, Mapping) for e in m.events):
         raise ConfigError(f"{m.source}: events: expected a tuple of tables (t_s, kind and its settings), "
                           f"got {show(m.events)}")
+    for k, what in (("vehicles", "missions.fleet.VehicleSpec"), ("rally", "(x, y) points (m)")):
+        if not isinstance(getattr(m, k), (tuple, list)):
+            raise ConfigError(f"{m.source}: {k}: expected a tuple of {what}, got {show(getattr(m, k))}")
+    if m.geofence is not None and not isinstance(m.geofence, Geofence):
+        raise ConfigError(f"{m.source}: geofence: expected a missions.geofence.Geofence, got {show(m.geofence)}")
+    if m.rally:  # read as a file's [rally] points (x, y m within the envelope)
+        rally_from_table(Table(_plain({"points": m.rally}), m.source, "rally"), ENVELOPE_RADIUS_M)
     if m.vehicles or m.separation is not None:
         _check_fleet(m)
 

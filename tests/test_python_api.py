@@ -99,13 +99,21 @@ def test_a_list_of_points_may_turn_on_one_turn_at_a_time_from_python_too() -> No
     (lambda: Mission(Sine(), duration_s=1.0, profile=3), "profile: expected a string, got 3"),  # type: ignore
     (lambda: Mission(Sine(), duration_s=1.0, events=3),  # type: ignore[arg-type]
      "events: expected a tuple of tables (t_s, kind and its settings), got 3"),
+    (lambda: Mission(Sine(), duration_s=1.0, vehicles=3),  # type: ignore[arg-type]
+     "vehicles: expected a tuple of missions.fleet.VehicleSpec, got 3"),
+    (lambda: Mission(Sine(), duration_s=1.0, geofence=3), "geofence: expected a missions.geofence.Geofence, got 3"),
+    (lambda: Mission(Sine(), duration_s=1.0, rally=3),  # type: ignore[arg-type]
+     "rally: expected a tuple of (x, y) points (m), got 3"),
+    (lambda: Mission(Sine(), duration_s=1.0, rally=((1.0,),)),  # type: ignore[arg-type]
+     "rally.points: point 0: expected [x, y], finite, within 100 m of the home (the plant's envelope), got [1.0]"),
 ])
 def test_what_a_file_refuses_is_refused_from_python_naming_the_field(make, said: str) -> None:
     """Each was taken, then failed deep inside with a TypeError or AttributeError naming no field (text in a sine:
     the law's ``unsupported operand type(s) for -``; a set-point's text: the envelope's ``can't multiply sequence``;
-    ``link=3``: ``'int' object has no attribute 'items'``), or flew (omega 1000 rad/s, a nan z0, a time of -1 s), or
-    failed once flown naming no field (``actuation must be one of wrench, motors; got 'rotors'``) or the wrong one
-    (``profile: unknown profile '3'``)."""
+    ``link=3``: ``'int' object has no attribute 'items'``; ``vehicles=3``: ``'int' object is not iterable``;
+    ``geofence=3`` once flown: ``'int' object has no attribute 'first_breach'``), or flew (omega 1000 rad/s, a nan
+    z0, a time of -1 s, ``rally=3``, a rally point ``(1.0,)``), or failed once flown naming no field (``actuation
+    must be one of wrench, motors; got 'rotors'``) or the wrong one (``profile: unknown profile '3'``)."""
     with pytest.raises(ConfigError) as e:
         make()
     assert str(e.value) == f"<python>: {said}"
