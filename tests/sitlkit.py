@@ -387,8 +387,11 @@ def clean_exit(summary: dict[str, Any]) -> int:
 def controller_exit(lines: list[str]) -> int:
     """The exit status of a real-time ``bsst controller`` alone that flew as asked but for the machine's stalls of its
     ticks (its stderr's lines, or its stdout's and stderr's as one): 0, or 1 if it said it stalled (:func:`clean_exit`
-    for a session)."""
-    return 1 if any(ln.startswith(CONTROLLER_STALLED) for ln in lines) else 0
+    for a session) and nothing else: a stall beside another reason (``bsst controller: failsafe: ...``, an end action
+    unanswered) is 0, so that the caller's ``rc == controller_exit(...)`` fails on that exit 1 (a stall line alone
+    accepted then any exit 1: the flight's own failure hidden behind the machine's stall)."""
+    said = [ln for ln in lines if ln.startswith("bsst controller:")]
+    return 1 if said and all(ln.startswith(CONTROLLER_STALLED) for ln in said) else 0
 
 
 def controller_exit_text(summary: dict[str, Any]) -> str:

@@ -462,3 +462,13 @@ def test_a_controller_alone_the_machine_stalls_says_not_flown_as_asked(tmp_path:
     assert done.outcome == "completed" and rc == 1 and len(said) == 1, ctl.lines[-5:]
     stalls = next(r for r in map(parse_line, ctl.lines) if isinstance(r, Stats)).values["stalls"]
     assert stalls["worst_ms"] >= 180.0 and f"worst {stalls['worst_ms']:g} ms (controller " in said[0], (stalls, said)
+
+
+def test_controller_exit_takes_exit_1_for_the_machines_stall_said_alone() -> None:
+    """The suite's ``rc == controller_exit(lines)`` takes a controller's exit 1 only for the machine's stall said
+    alone: beside another reason (a failsafe, an end action unanswered) it wants 0, so the flight's own failure is
+    not hidden behind a stall (until the forty-first session's review any stall line accepted any exit 1)."""
+    stall = f"{CONTROLLER_STALLED} 1 time(s), worst 12 ms (controller 12 ms at t=0.216 s): outages no link model"
+    assert controller_exit(['{"report": "done", "outcome": "completed"}', stall]) == 1
+    assert controller_exit(['{"report": "done", "outcome": "completed"}']) == 0
+    assert controller_exit(["bsst controller: failsafe: offboard lost", stall]) == 0
