@@ -119,6 +119,31 @@ def test_what_a_file_refuses_is_refused_from_python_naming_the_field(make, said:
     assert str(e.value) == f"<python>: {said}"
 
 
+RALLY = "within 100 m of the home (the plant's envelope)"
+
+
+@pytest.mark.parametrize("make, said", [
+    (lambda: Mission(Sine(), duration_s=1.0, rally=(("a", 2.0),)),  # type: ignore[arg-type]
+     f"rally.points: point 0: expected [x, y], finite, {RALLY}, got ['a', 2.0]"),
+    (lambda: Mission(Sine(), duration_s=1.0, rally=(1.0, 2.0)),  # type: ignore[arg-type]
+     f"rally.points: point 0: expected [x, y], finite, {RALLY}, got 1.0"),
+    (lambda: Mission(Sine(), duration_s=1.0, rally=((5.0, math.nan),)),
+     f"rally.points: point 0: expected [x, y], finite, {RALLY}, got [5.0, nan]"),
+    (lambda: Mission(Sine(), duration_s=1.0, rally="x"),  # type: ignore[arg-type]
+     "rally: expected a tuple of (x, y) points (m), got 'x'"),
+    (lambda: Mission(Sine(), duration_s=1.0, geofence={"x": 1}),
+     "geofence: expected a missions.geofence.Geofence, got {'x': 1}"),
+])
+def test_a_python_missions_rally_and_geofence_are_read_as_a_files(make, said: str) -> None:
+    """Each was taken: a text rally point failed once a Return flew to it (``unsupported operand type(s) for -:
+    'str' and 'float'``), a bare (1, 2) with ``cannot unpack non-iterable int object``, a nan one flew, a dict as the
+    geofence an ``AttributeError`` (``'dict' object has no attribute 'first_breach'``) once flown."""
+    with pytest.raises(ConfigError) as e:
+        make()
+    assert str(e.value) == f"<python>: {said}"
+    assert Mission(Sine(), duration_s=1.0, rally=((1.0, 2.0),)).rally == ((1.0, 2.0),)
+
+
 def test_a_files_mission_flown_shorter_from_python_keeps_its_later_points() -> None:
     """A point's time is bounded by the longest mission's from Python, not the mission's own: the step's first
     12 s (its set-point at 20 s never reached) is a mission, as tests/test_kernels.py flies it."""
