@@ -199,3 +199,32 @@ def test_a_controller_alone_whose_end_action_went_unanswered_says_not_flown_as_a
         return
     assert ctl.returncode == 1 and said in ctl.stderr, ctl.stderr
     assert done.reason == "the vehicle did not take the mission's end action (LAND): no answer", done
+
+
+def test_a_controller_alone_stopped_in_the_end_landing_says_aborted_exit_1(tmp_path: Path) -> None:
+    """``bsst vehicle`` (lockstep at 1x, so the 2 s climb's landing from 2 m lasts seconds) and ``bsst controller``
+    alone; SIGTERM (a Ctrl-C) to the controller once it has handed over LAND, the vehicle still armed in the air.
+    The landing the controller was to see through was cut: ``aborted``, said on stderr, exit 1, as ``bsst sim``'s
+    and ``bsst sitl``'s end landing cut by a stop. Until the third wave's forty-first session it exited 0, ``done``
+    ``completed``, nothing on stderr, and reported an ``end`` event with no text."""
+    mission = tmp_path / "climb2.toml"
+    mission.write_text('name = "climb2"\nduration_s = 2.0\n[trajectory]\nkind = "sine"\namplitude = 0.0\n'
+                       "climb = 1.0\n")
+    with instance_slot() as n:
+        vehicle = Proc.bsst("vehicle", str(mission), "--instance", str(n), "--gcs", "none", "--speed", "1",
+                            cwd=ROOT)
+        try:
+            vehicle.wait_report(Ready, timeout=60)
+            ctl = Proc.bsst("controller", str(mission), "--instance", str(n), cwd=ROOT)
+            try:
+                ctl.wait_event(lambda e: "mission over: the vehicle lands" in e, timeout=120)
+                status = ctl.stop(timeout=30)
+            finally:
+                ctl.stop()
+        finally:
+            vehicle.stop()
+    [done] = [r for r in ctl.reports() if isinstance(r, Done)]
+    said = "interrupted (Ctrl-C or SIGTERM) in the mission's end landing: the vehicle still armed"
+    assert (status, done.outcome, done.reason) == (1, "aborted", said), ctl.lines[-5:]
+    assert f"bsst controller: aborted: {said}" in ctl.lines, ctl.lines[-5:]
+    assert [e for e in ctl.events() if e.startswith("end: ")][-1].endswith(said), ctl.events()

@@ -109,7 +109,7 @@ class Offboard(RealtimeFlying):
             self._await_param_echoes()
             self._pending_params.clear()  # given up (said not made): not resent while the vehicle lands
             if outcome == "completed":
-                self._fly_end()
+                outcome = self._fly_end()
             return outcome
         finally:
             self.close()
@@ -270,12 +270,13 @@ class Offboard(RealtimeFlying):
                   dec.state_age_s if cmd is not None else math.nan)
         return wire
 
-    def _fly_end(self) -> None:
+    def _fly_end(self) -> str:
         """The mission's time is flown: the vehicle's own end action (``[end] action``), never a disarm in the
         air. ``land``: NAV_LAND, then wait until it has landed and disarmed itself, in lockstep answering each
         state with the no-target acknowledgement (the landing is clocked as the mission was: offline's to the
         bit); ``hold``: HOLD (DO_SET_MODE AUTO LOITER), the vehicle's until the session ends. What went wrong
-        is the :attr:`reason` (the mission itself was completed)."""
+        is the :attr:`reason` (the mission itself was completed). The outcome: ``completed``, or ``aborted`` when a
+        stop (Ctrl-C, SIGTERM) came while the vehicle was landing, still armed (as ``bsst sim``'s end landing)."""
         self.ending = True
         hold = self.flight.mission.end_action == "hold"
         if hold:
@@ -289,11 +290,16 @@ class Offboard(RealtimeFlying):
             self.reason = f"the vehicle did not take the mission's end action ({'HOLD' if hold else 'LAND'}): {why}"
             self.end_unanswered = end_unanswered(self.flight.mission.end_action, why, time.monotonic() - self._last_rx)
             self.event("end", self.reason)
-            return
+            return "completed"
         self.event("end", "mission over: the vehicle holds its position" if hold else
                    "mission over: the vehicle lands where it is and disarms on the ground", answers=("end",))
         if not hold and not self._await_landing():
+            if self.stopping and not self.reason:  # (a stop: _await_landing says no other reason)
+                self.reason = "interrupted (Ctrl-C or SIGTERM) in the mission's end landing: the vehicle still armed"
+                self.event("end", self.reason)
+                return "aborted"
             self.event("end", self.reason)
+        return "completed"
 
     def _await_landing(self) -> bool:
         """Serve the link until the vehicle has disarmed on the ground (True), or :attr:`reason` says why not:
