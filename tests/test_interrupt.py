@@ -309,6 +309,33 @@ def test_a_stop_sent_to_bsst_sim_alone_ends_it_aborted_recorded(tmp_path, sig: s
         proc.stop()
 
 
+# ``bsst`` started with SIGINT ignored, as a shell without job control starts a script's ``bsst sim ... &``
+SIGINT_IGNORED = ("import os, signal, sys; signal.signal(signal.SIGINT, signal.SIG_IGN); "
+                  "os.execv(sys.executable, [sys.executable, '-m', 'bridge', *sys.argv[1:]])")
+
+
+def test_a_sigterm_ends_bsst_sim_aborted_recorded_where_sigint_is_ignored(tmp_path) -> None:
+    """A script's background ``bsst sim`` (SIGINT ignored, inherited) sent SIGTERM as its trace grows: ``aborted``,
+    recorded, exit 1, and a SIGINT sent before it still ignored. Until the third wave's forty-first session the
+    SIGTERM, taken as a Ctrl-C by raising SIGINT, met SIGINT's SIG_IGN: the 300 s sine flew to its end, ``completed``,
+    exit 0 (8.9 s after the SIGTERM, measured)."""
+    mission = tmp_path / "sine300.toml"
+    mission.write_text(LONG_SINE)
+    out = tmp_path / "run"
+    proc = Proc([sys.executable, "-c", SIGINT_IGNORED, "sim", str(mission), "--no-plots", "--out", str(out)])
+    try:
+        wait_for(lambda: csv_rows(out / "trace.csv") >= 250 or proc.p.poll() is not None, 120, "a second flown")
+        proc.p.send_signal(signal.SIGINT)  # ignored: the flight flies on
+        rows = csv_rows(out / "trace.csv")
+        wait_for(lambda: csv_rows(out / "trace.csv") >= rows + 250 or proc.p.poll() is not None, 120,
+                 "a second more flown after the SIGINT")
+        assert proc.p.poll() is None, proc.lines[-5:]
+        proc.p.send_signal(signal.SIGTERM)
+        _assert_aborted_recorded(out, proc, rows + 250)
+    finally:
+        proc.stop()
+
+
 # ``bsst sim`` whose loop (bridge.loop.fly) has its steps' ``next`` wrapped: after the 300th step has yielded, a real
 # stop is sent to the bsst process (this one; a watched flight's parent), and the wrapper waits for the stop to come
 # back as KeyboardInterrupt (passed on to a watched child): it is raised in fly's own frame, between two steps, as

@@ -239,19 +239,45 @@ def as_sigint(signum: int, frame: Any) -> None:
     signal.raise_signal(signal.SIGINT)
 
 
+class _TermOnly:
+    """SIGINT's handler in a :func:`sigterm_as_sigint` block entered with SIGINT ignored (a script's ``bsst sim &``:
+    a shell without job control starts it so): a SIGINT is a Ctrl-C (KeyboardInterrupt) only when a SIGTERM raised
+    it, else ignored, as it was."""
+
+    def __init__(self) -> None:
+        self.term = False
+
+    def on_sigterm(self, signum: int, frame: Any) -> None:
+        self.term = True
+        signal.raise_signal(signal.SIGINT)
+
+    def __call__(self, signum: int, frame: Any) -> None:
+        if self.term:
+            self.term = False
+            raise KeyboardInterrupt
+
+
 @contextmanager
 def sigterm_as_sigint() -> Iterator[None]:
-    """Within the block SIGTERM is a Ctrl-C (:func:`as_sigint`); the previous handler is back after it. Outside the
-    main thread, or where SIGTERM is ignored, nothing is installed."""
+    """Within the block SIGTERM is a Ctrl-C (:func:`as_sigint`); the previous handlers are back after it. Outside
+    the main thread, or where SIGTERM is ignored, nothing is installed. Where SIGINT is ignored (a script's
+    background job), a SIGTERM is a Ctrl-C all the same and a SIGINT stays ignored (:class:`_TermOnly`): SIGINT
+    raised by the SIGTERM met SIG_IGN, and the flight flew on to its end, exit 0, until the third wave's forty-first
+    session. Once :func:`ignore_sigint` has run in the block (the result is final) both are ignored."""
     previous = signal.getsignal(signal.SIGTERM)
     if threading.current_thread() is not threading.main_thread() or previous is signal.SIG_IGN:
         yield
         return
-    signal.signal(signal.SIGTERM, as_sigint)
+    term_only = _TermOnly() if signal.getsignal(signal.SIGINT) is signal.SIG_IGN else None
+    if term_only is not None:
+        signal.signal(signal.SIGINT, term_only)
+    signal.signal(signal.SIGTERM, as_sigint if term_only is None else term_only.on_sigterm)
     try:
         yield
     finally:
         signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)
+        if term_only is not None and signal.getsignal(signal.SIGINT) is term_only:
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 __all__ = ["Deferred", "Held", "Interrupts", "as_sigint", "ignore_sigint", "sigint_deferred", "sigint_futures",
