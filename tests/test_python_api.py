@@ -19,8 +19,9 @@ import numpy as np
 import pytest
 
 from bridge import simulate
-from bridge.autopilot.params import parse_assignment
+from bridge.autopilot.params import ParamChange, parse_assignment
 from bridge.core.flight import prepare
+from bridge.core.overrides import Overrides
 from missions import MISSION_DIR, Mission, Setpoint, Sine, Step, Waypoints, load_mission
 from missions.fleet import Separation, VehicleSpec
 from params import ConfigError
@@ -195,3 +196,20 @@ def test_a_params_name_in_another_case_is_told_the_name_it_means(tmp_path: Path,
         with pytest.raises(ConfigError) as e:
             build()
         assert str(e.value).startswith(said + hint), str(e.value)
+
+
+@pytest.mark.parametrize("keywords, said", [
+    ({"at": "2:gps:off"}, "at: expected a tuple of event tables or 'T:KIND[:ARGS]' strings, got '2:gps:off' alone"),
+    ({"at": {"t_s": 2.0, "kind": "gps", "state": "off"}}, "at: expected a tuple of event tables or 'T:KIND[:ARGS]' "
+     "strings, got {'t_s': 2.0, 'kind': 'gps', 'state': 'off'} alone"),
+    ({"param_at": ParamChange(2.0, "COM_OF_LOSS_T", 3.0)}, "param_at: expected a tuple of ParamChange(t_s, name, "
+     "value) entries, got ParamChange(t_s=2.0, name='COM_OF_LOSS_T', value=3.0) alone"),
+])
+def test_one_event_or_change_given_alone_is_refused_as_alone(keywords: dict, said: str) -> None:
+    """``at=`` and ``param_at=`` take tuples; one entry given alone was read item by item: ``at="2:gps:off"`` was
+    refused as ``--at 2: unknown event kind '' in '2'`` (its first character), a table by its keys, a ParamChange
+    by its fields (the forty-first session's tour)."""
+    with pytest.raises(ConfigError) as e:
+        Overrides.of(**keywords)
+    assert str(e.value) == said + " (a tuple of one: " + next(iter(keywords)) + "=(...,))"
+    assert Overrides.of(**{k: (v,) for k, v in keywords.items()})  # a tuple of it is taken

@@ -27,6 +27,14 @@ from params import ConfigError
 from plant.events import AT_KEY, event_given, event_table_from_flag
 
 
+def _not_alone(name: str, value: object, one: tuple[type, ...], what: str) -> None:
+    """Refuse one entry given where a tuple of them goes: it would be read item by item (``'2'`` of ``'2:gps:off'``,
+    a table's keys, a ParamChange's fields), and refused naming a part the caller never wrote."""
+    if isinstance(value, one):
+        raise ConfigError(f"{name}: expected a tuple of {what}, got {value!r} alone (a tuple of one: {name}=(...,))"
+                          [:300])
+
+
 @dataclass(frozen=True)
 class Overrides:
     """What a caller lays over a mission: ``bsst``'s flags, or Python's keywords. None (and an empty
@@ -68,6 +76,7 @@ class Overrides:
             _check_type("wind", w, Mapping, "a table, a speed (m/s) or (speed m/s, from deg)")
             if w is not None:
                 object.__setattr__(self, "wind", dict(w))
+        _not_alone("at", self.at, (str, Mapping), "event tables or 'T:KIND[:ARGS]' strings")
         events, named = [], []
         for i, e in enumerate(tuple(self.at)):
             if isinstance(e, str):
@@ -97,6 +106,7 @@ class Overrides:
         if self.params:  # each as its parameter's type (an INT32 an int), checked, named as the flag
             apply_params(VehicleParams(), self.params.items(), "", lambda name, value: f"--param {name}={value}")
             object.__setattr__(self, "params", {n: typed_value(BY_NAME[n], v) for n, v in self.params.items()})
+        _not_alone("param_at", self.param_at, (str, ParamChange), "ParamChange(t_s, name, value) entries")
         changes = tuple(self.param_at)
         for c in changes:
             if not isinstance(c, ParamChange):
