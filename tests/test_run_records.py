@@ -252,9 +252,11 @@ def _event_lines(path: Path) -> list[tuple[float, str, str]]:
 def test_events_log_lists_causes_before_their_effects(tmp_path: Path, realtime: bool) -> None:
     """The two children's events on one clock, in the order they happened: the vehicle's arming (by the
     controller's command) and its end of mission before the controller's word about them, times never going
-    back, the landing's disarm last, then the mode it takes disarmed (OFFBOARD, the last one it arms in: PX4's)."""
+    back, the landing's disarm last, then the mode it takes disarmed (OFFBOARD, the last one it arms in: PX4's).
+    (Landed, it disarms 0.5 s later, not PX4's 2 s: in real time each second is the test's CPU.)"""
     out = tmp_path / "run"
-    run = sitl(Mission(Sine(), duration_s=2.0, name="sine2"), realtime=realtime, out=out, plots=False, instance=None)
+    run = sitl(Mission(Sine(), duration_s=2.0, name="sine2", params={"COM_DISARM_LAND": 0.5}), realtime=realtime,
+               out=out, plots=False, instance=None)
     events = _event_lines(out)
     times = [t for t, _, _ in events]  # (the controller's failsafe, said at the mission's end, too: the log is sorted)
     assert times == sorted(times), events
@@ -281,12 +283,12 @@ def _log_times(log: list[str]) -> list[float]:
 def test_events_log_is_in_time_order_and_holds_every_event_of_the_summary(tmp_path: Path) -> None:
     """A lockstep flight failing safe (both ways blacked out from 1 s): the controller judges it at the mission's end
     but stamps that at the failsafe (1.5 s), and the session's closing notes are at the trace's last row (1.996 s),
-    said after the vehicle's landing (2.1 s) and disarm (4.1 s). The finished events.log is in time order, line for
-    line summary.json's events. Until the third wave's fortieth session it was in the order said: the notes after
-    the disarm."""
+    said after the vehicle's landing (2.1 s) and disarm (2.6 s: COM_DISARM_LAND 0.5 s, not PX4's 2 s, on the wall
+    clock). The finished events.log is in time order, line for line summary.json's events. Until the third wave's
+    fortieth session it was in the order said: the notes after the disarm."""
     out = tmp_path / "run"
-    run = sitl(Mission(Sine(), duration_s=2.0, name="fs2"), realtime=False, out=out, plots=False, instance=None,
-               link={"blackouts": [[1.0, 3.0]]})
+    run = sitl(Mission(Sine(), duration_s=2.0, name="fs2", params={"COM_DISARM_LAND": 0.5}), realtime=False, out=out,
+               plots=False, instance=None, link={"blackouts": [[1.0, 3.0]]})
     assert run.outcome == "failsafe", run.summary["ended_by"]
     log = (out / "events.log").read_text().splitlines()
     times = _log_times(log)
@@ -364,12 +366,13 @@ def test_run_files_are_written_in_utf_8_whatever_the_locale(tmp_path: Path) -> N
 
 def test_a_perfect_loopback_link_loses_nothing_and_says_where_every_packet_went(tmp_path: Path) -> None:
     """``bsst sitl --realtime`` on a perfect link: lost 0 both ways, and what was sent but not delivered is
-    named (in flight at the ends, refused, shed, dropped by the kernel), in summary.json and the printout."""
+    named (in flight at the ends, refused, shed, dropped by the kernel), in summary.json and the printout. (Landed,
+    the vehicle disarms 0.5 s later, not PX4's 2 s: each second is the test's CPU.)"""
     mission = short_sine(tmp_path, 3.0)
     out = tmp_path / "rt"
     with instance_slot() as n:  # ports of our own: sessions of other tests run beside this one
         res = run_bsst("sitl", str(mission), "--realtime", "--out", str(out), "--no-plots", "--instance", str(n),
-                       cwd=ROOT, env=ENV, timeout=180)
+                       "--param", "COM_DISARM_LAND=0.5", cwd=ROOT, env=ENV, timeout=180)
     summary = json.loads((out / "summary.json").read_text())
     assert res.returncode == clean_exit(summary), res.stderr
     link = summary["link"]
