@@ -2,9 +2,10 @@
 
 - the README's Python example, verbatim, saved as a script (``python example.py``) and typed into
   ``python -i``: it flies, its sweep's cells are measured, nothing errors (both read a 1-second
-  ``missions/sine.toml``, every other key as shipped: what the tests cover is how the code arrives, a
-  script's ``__main__`` the sweep's workers import again and an interactive one they cannot, not the
-  30 seconds of the real-time flight, nor its twelve cells' 30 seconds each);
+  ``missions/sine.toml`` disarming 0.5 s after its landing, every other key as shipped: what the tests
+  cover is how the code arrives, a script's ``__main__`` the sweep's workers import again and an
+  interactive one they cannot, not the 30 seconds of the real-time flight, nor its twelve cells' 30
+  seconds each, nor PX4's 2 s wait for the disarm);
 - a script that starts a sweep's pool without the ``if __name__ == "__main__":`` guard fails at
   once, naming the guard (its workers used to re-run the script and come back as 'error' rows, exit 0);
 - a sweep whose every cell failed never passes for a result: ``bsst sweep`` exits 1 with a line
@@ -84,11 +85,14 @@ def user_dir(tmp_path: Path) -> Path:
 
 
 def short_sine(cwd: Path) -> None:
-    """The user directory's ``missions/sine.toml`` flown for 1 s, not 30 (every other key as shipped)."""
+    """The user directory's ``missions/sine.toml`` flown for 1 s, not 30, its vehicle disarmed 0.5 s after its
+    landing, not PX4's 2 s (the real-time flight's wall clock is the test's CPU); every other key as shipped."""
     sine = cwd / "missions" / "sine.toml"
     text = sine.read_text(encoding="utf-8")
     assert "\nduration_s = 30.0\n" in text, "missions/sine.toml no longer says duration_s = 30.0"
-    sine.write_text(text.replace("\nduration_s = 30.0\n", "\nduration_s = 1.0\n"), encoding="utf-8")
+    assert "[params]" not in text, "missions/sine.toml has a [params] table now: set COM_DISARM_LAND in it"
+    text = text.replace("\nduration_s = 30.0\n", "\nduration_s = 1.0\n") + "\n[params]\nCOM_DISARM_LAND = 0.5\n"
+    sine.write_text(text, encoding="utf-8")
 
 
 def run_python(args: list[str], cwd: Path, stdin: str | None = None, timeout: float = 600.0,
