@@ -31,6 +31,7 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.core.wire import state_to_odometry, step_usec
+from bridge.nodes.offboard.config import PHASE_STATES
 from bridge.nodes.offboard.link import TIMESYNC_WINDOW
 from bridge.nodes.report import Done, Ready, Stats, parse_line
 from bridge.record.halves import count_records, read_half
@@ -472,3 +473,59 @@ def test_controller_exit_takes_exit_1_for_the_machines_stall_said_alone() -> Non
     assert controller_exit(['{"report": "done", "outcome": "completed"}', stall]) == 1
     assert controller_exit(['{"report": "done", "outcome": "completed"}']) == 0
     assert controller_exit(["bsst controller: failsafe: offboard lost", stall]) == 0
+
+
+def test_a_stall_while_the_first_state_is_awaited_is_not_the_missions(tmp_path: Path) -> None:
+    """The scripted vehicle streams the five states the controller phase-locks on, then none for 1 s (heartbeats
+    on), as a vehicle slow to start its mission does; the controller, its ticks waiting for the mission's first
+    state, is stopped 0.2 s of it (SIGSTOP, SIGCONT), as a machine busy at start-up stops it. The states come back,
+    the mission is flown: exit 0, nothing said; the stall is listed apart (``stalls_waiting``), not as the
+    mission's. Until the forty-first session's review it was the mission's, stamped at the waiting tick's j / rate
+    (inside the mission's time): ``not flown as asked: the machine stalled the real-time loop``, exit 1."""
+    (tmp_path / "m.toml").write_text(MISSION)
+    v = ScriptedVehicle()
+    ctl = Proc.bsst("controller", str(tmp_path / "m.toml"), "--realtime", "--vehicle", f"127.0.0.1:{v.port}",
+                    "--out", str(tmp_path / "run"), "--timeout", "20")
+    stopped = False
+    try:
+        deadline = time.monotonic() + 30
+        while not v.armed:  # heartbeats at 10 Hz until the controller arms us
+            assert time.monotonic() < deadline and ctl.p.poll() is None, "the controller never armed the vehicle"
+            v.heartbeat()
+            v.until(time.monotonic() + 0.1)
+        k = int((time.monotonic() + 0.05 - v.v0) / PERIOD)
+        for _ in range(PHASE_STATES):  # the states the controller phase-locks on, each at its time
+            v.until(v.v0 + k * PERIOD + WAY_DOWN_S)
+            v.odometry(k)
+            k += 1
+        pause = time.monotonic()
+        k += RATE  # 1 s of states never sent: the vehicle's clock runs on
+        while not v.disarmed:  # heartbeats through the pause, then states until the mission's end lands us
+            assert time.monotonic() < deadline and ctl.p.poll() is None, ctl.lines[-10:]
+            if not stopped and time.monotonic() >= pause + 0.4:  # its ticks have waited 0.4 s for the first state
+                os.kill(ctl.p.pid, signal.SIGSTOP)
+                time.sleep(0.2)  # the stall itself, not a wait for something to happen
+                os.kill(ctl.p.pid, signal.SIGCONT)
+                stopped = True
+            due = v.v0 + k * PERIOD + WAY_DOWN_S
+            if due - time.monotonic() > PERIOD:  # the pause: a heartbeat each 0.1 s
+                v.heartbeat()
+                v.until(min(due - PERIOD, time.monotonic() + 0.1))
+                continue
+            v.until(due)
+            v.odometry(k)
+            if k % 5 == 0:
+                v.heartbeat()
+            k += 1
+        rc = ctl.p.wait(timeout=20)
+    finally:
+        ctl.stop()
+        v.sock.close()
+    assert stopped
+    done = [r for r in map(parse_line, ctl.lines) if isinstance(r, Done)]
+    values = stats_of(ctl.lines)
+    assert done[0].outcome == "completed" and rc == 0, ctl.lines[-5:]
+    assert not any(ln.startswith(CONTROLLER_STALLED) for ln in ctl.lines), ctl.lines[-5:]
+    # the stop fell in the wait (the premise): its stall listed apart, a tick it stopped late by the 0.2 s
+    assert values["stalls_waiting"]["worst_ms"] >= 180.0, values["stalls_waiting"]
+    assert values["stalls"]["worst_ms"] < 180.0, values["stalls"]

@@ -71,7 +71,8 @@ class Offboard(RealtimeFlying):
         self._last_state = time.monotonic()  # wall time of the newest state flown
         self._started = False  # the mission's third state come (before it: start_timeout_s)
         self.stale_ticks = 0
-        self.stalls = Stalls()  # real time: the ticks the machine woke us too late for
+        self.stalls = Stalls()  # real time: the mission's ticks the machine woke us too late for
+        self.stalls_waiting = Stalls()  # real time: those before the mission's first state (not the mission's)
         self.schedule: FixedRate | None = None  # realtime: the tick schedule, once phase-locked
         self.reason = ""
         self.ended_taken_over = False  # the flight ended for a ground station's mode (no more targets sent)

@@ -4,7 +4,8 @@ In:  the vehicle's states as :class:`~bridge.nodes.offboard.link.OffboardLink` r
      ``time.monotonic``; their stamps, us of the vehicle's clock), TIMESYNC's offset bounds (ns), the control rate (Hz)
 Out: one control step per tick (:meth:`Offboard._decide <bridge.nodes.offboard.flight.Offboard._decide>`, mission
      time s on the vehicle's clock); the tick schedule (:class:`~bridge.core.clock.FixedRate`), its stalls
-     (:class:`~bridge.core.clock.Stalls`), the stale ticks, and the states' way down (``way_down``: ms, within ms)
+     (:class:`~bridge.core.clock.Stalls`: the mission's, and apart those met before its first state came), the stale
+     ticks, and the states' way down (``way_down``: ms, within ms)
 
 :class:`RealtimeFlying` is :class:`~bridge.nodes.offboard.flight.Offboard`'s base: the flight's steps (observe,
 decide, end) are the flight's, named below as what this clock calls (docs/sitl.md, "Real time").
@@ -35,7 +36,8 @@ class RealtimeFlying(OffboardLink):
 
     steps: int  # the mission's control steps
     stale_ticks: int  # ticks with no new state
-    stalls: Stalls  # the ticks the machine woke us too late for
+    stalls: Stalls  # the mission's ticks the machine woke us too late for
+    stalls_waiting: Stalls  # those of the ticks before the mission's first state (not the mission's)
     schedule: FixedRate | None  # the tick schedule, once phase-locked
     _way_down: float | None  # the states' way down (s)
     way_down: dict[str, float] | None  # that in ms and how far off it may be (stats)
@@ -74,8 +76,11 @@ class RealtimeFlying(OffboardLink):
             self._sleep_until(clock.due(j))
             now = mono()
             # a stall: more than a period since the last tick woke (lateness against the schedule would count
-            # a schedule re-phased into the past on the first state, below, which is arithmetic, not a stall)
-            self.stalls.note(j / rate, now - woke - period)
+            # a schedule re-phased into the past on the first state, below, which is arithmetic, not a stall);
+            # while the mission's first state is awaited it is judged once this tick has read its state (below)
+            stall = (j / rate, now - woke - period)
+            if last_k >= k0:
+                self.stalls.note(*stall)
             woke = now
             j = clock.catch_up(j, now)  # missed ticks are skipped, the schedule kept (no drift)
             due = clock.due(j)
@@ -96,6 +101,7 @@ class RealtimeFlying(OffboardLink):
                     return self._end_of_mission(steps / rate, flown, (k0 + steps, clock.due(steps) - PHASE_S))
                 self.stale_ticks += 1
                 if last_k < k0:
+                    self.stalls_waiting.note(*stall)  # the mission not begun: not its stall
                     j += 1
                     continue  # no state of the mission yet
             else:
@@ -109,6 +115,9 @@ class RealtimeFlying(OffboardLink):
                     self.schedule = clock = FixedRate(due + (k - k0 - j) * period, rate, clock.skipped)
                     woke += (k - k0 - j) * period  # the schedule moved, not the process: no stall at the next tick
                     k0, j = k, 0
+                    self.stalls_waiting.note(*stall)  # met before the mission's first state came: not its stall
+                elif last_k < k0:
+                    self.stalls.note(*stall)  # the mission's first tick, its state the first one's: judged
                 if k - k0 >= steps:
                     return self._end_of_mission((k - k0) / rate, odo)
                 usec, recv = odo.time_usec, self._odo_recv

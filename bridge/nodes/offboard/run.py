@@ -47,6 +47,7 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
                 "states": node.states, "received": node.ep.received,
                 "sent": node.ep.sent, "stale_ticks": node.stale_ticks, "overruns": node.overruns,
                 "stalls": node.stalls.report(),
+                "stalls_waiting": node.stalls_waiting.report(),  # before the mission's first state: not its own
                 "way_down": node.way_down,  # real time: the states' way down counted in their ages, ms (or None)
                 "spin_skipped": node.spinner.skipped,
                 "down": node.cend.down.stats.summary() if cfg.clock == "lockstep" else None,
