@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
+from numbers import Real
 from typing import Any, TypeVar
 
 from missions.minsnap import Knot, Smooth
@@ -69,6 +70,16 @@ def clearance(pa: Sequence[float], pb: Sequence[float], ra: float, rb: float) ->
     return d, d - ra - rb
 
 
+def four_of(v: Any) -> tuple[Any, ...] | None:
+    """A start's four values in order (a tuple, a list, a numpy array: x, y, z, psi), their numbers for the file's
+    reader to judge; None for text, a mapping, or other than four."""
+    try:
+        got = None if isinstance(v, (str, bytes, Mapping)) else tuple(v)
+    except TypeError:  # not a sequence: a number, None, a 0-d array
+        return None
+    return got if got is not None and len(got) == 4 else None
+
+
 @dataclass(frozen=True)
 class VehicleSpec:
     """One vehicle of a mission: its system id, and what of the mission it flies differently."""
@@ -79,6 +90,11 @@ class VehicleSpec:
     trajectory: Reference | None = None  # its own; None: the mission's (moved by ``offset``)
     profile: str | None = None  # None: the mission's
     controller: str | None = None  # None: the mission's
+
+    def __post_init__(self) -> None:
+        four = four_of(self.start)  # an array's, numpy's numbers: a file's floats (the rest refused by check_fields)
+        if four is not None and all(isinstance(x, Real) and not isinstance(x, bool) for x in four):
+            object.__setattr__(self, "start", tuple(map(float, four)))
 
     def to_dict(self) -> dict[str, Any]:
         d: dict[str, Any] = {"id": self.id}

@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from missions.envelope import ENVELOPE_RADIUS_M, envelope_problem, ground_problem
-from missions.fleet import Separation, VehicleSpec, fleet_from_table
+from missions.fleet import Separation, VehicleSpec, fleet_from_table, four_of
 from missions.geodetic import Home as GeoHome
 from missions.geofence import Geofence, geofence_from_table
 from missions.planfiles import PlanFile, read_plan_text
@@ -104,6 +104,7 @@ class Mission:
             raise ConfigError(f"{self.source}: name: {why}")
         check_timing(self.duration_s, self.rate_hz, self.physics_hz, self.source)
         check_fields(self)
+        object.__setattr__(self, "start", tuple(map(float, self.start)))  # an array's, numpy's numbers: a file's
         why = law_spec_problem(self.controller)
         if why:
             raise ConfigError(f"{self.source}: controller: {why}")
@@ -402,7 +403,7 @@ def check_fields(m: Mission) -> None:
     _seed_of(top)
     _vehicle_of(top)
     start = m.start
-    if not isinstance(start, (tuple, list)) or len(start) != 4:
+    if four_of(start) is None:
         raise ConfigError(f"{m.source}: start: expected (x, y, z, psi): 4 numbers (m, m, m, rad), got {show(start)}")
     _start_of(Table(_plain({"position": list(start[:3]), "psi": start[3]}), m.source, "start"))
     ref = m.trajectory
@@ -439,7 +440,7 @@ def _check_fleet(m: Mission) -> None:
     for i, v in enumerate(m.vehicles):
         if not isinstance(v, VehicleSpec):
             raise ConfigError(f"{m.source}: vehicles[{i}]: expected a missions.fleet.VehicleSpec, got {show(v)}")
-        if v.start is not None and (not isinstance(v.start, (tuple, list)) or len(v.start) != 4):
+        if v.start is not None and four_of(v.start) is None:
             raise ConfigError(f"{m.source}: vehicles[{i}].start: expected (x, y, z, psi): 4 numbers (m, m, m, rad), "
                               f"got {show(v.start)}")
         if v.trajectory is not None and not callable(getattr(v.trajectory, "to_dict", None)):

@@ -11,6 +11,7 @@ means, as an unknown key of a table is; a plan's PX4 limit put in ``[params]`` i
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import re
 from pathlib import Path
@@ -89,6 +90,14 @@ def test_a_list_of_points_may_turn_on_one_turn_at_a_time_from_python_too() -> No
      "start: expected (x, y, z, psi): 4 numbers (m, m, m, rad), got (0.0, 0.0, 0.0)"),
     (lambda: Mission(Sine(), duration_s=1.0, start=(0.0, "a", 0.0, 0.0)),  # type: ignore[arg-type]
      "start.position: element 1 must be a finite number, got 'a'"),
+    (lambda: Mission(Sine(), duration_s=1.0, start=np.array([0.0, 0.0, 1.0])),  # type: ignore[arg-type]
+     "start: expected (x, y, z, psi): 4 numbers (m, m, m, rad), got array([0., 0., 1.])"),
+    (lambda: Mission(Sine(), duration_s=1.0, start="abcd"),  # type: ignore[arg-type]
+     "start: expected (x, y, z, psi): 4 numbers (m, m, m, rad), got 'abcd'"),
+    (lambda: Mission(Sine(), duration_s=1.0, start=np.array(["0", "0", "1", "0"])),  # type: ignore[arg-type]
+     "start.position: element 0 must be a finite number, got np.str_('0')"),
+    (lambda: Mission(Sine(), duration_s=1.0, vehicles=(VehicleSpec(1, start=np.zeros(3)),)),  # type: ignore
+     "vehicles[0].start: expected (x, y, z, psi): 4 numbers (m, m, m, rad), got array([0., 0., 0.])"),
     (lambda: Mission(Sine(), duration_s=1.0, start_scatter_m="wide"),  # type: ignore[arg-type]
      "start.scatter_m: expected a number (m), got 'wide'"),
     (lambda: Mission(3, duration_s=1.0),  # type: ignore[arg-type]
@@ -143,6 +152,20 @@ def test_a_python_missions_rally_and_geofence_are_read_as_a_files(make, said: st
         make()
     assert str(e.value) == f"<python>: {said}"
     assert Mission(Sine(), duration_s=1.0, rally=((1.0, 2.0),)).rally == ((1.0, 2.0),)
+
+
+def test_a_start_of_numpys_numbers_is_taken_as_a_files() -> None:
+    """A start given as a numpy array (or a list of numpy numbers), the mission's or a vehicle's, is taken as the
+    same numbers in a tuple, plain floats as a file's (its record's JSON writes them). The forty-first session's
+    check_fields refused it (``start: expected (x, y, z, psi): 4 numbers (m, m, m, rad), got array([0, 0, 1, 0])``)
+    where numpy numbers are taken elsewhere; a wrong length and text are still refused (above)."""
+    m = Mission(Sine(), duration_s=1.0, start=np.array([0, 0, 1, 0]))
+    assert m.start == (0.0, 0.0, 1.0, 0.0) and all(type(x) is float for x in m.start), m.start
+    assert Mission(Sine(), duration_s=1.0, start=[np.float32(0.5), 0, np.int64(1), 0]).start == (0.5, 0.0, 1.0, 0.0)
+    fleet = Mission(Sine(), duration_s=1.0, vehicles=(VehicleSpec(1, start=np.array([0.0, 0.0, 1.0, 0.0])),
+                                                      VehicleSpec(2, offset=(0.0, 2.0, 0.0))))
+    assert fleet.vehicles[0].start == (0.0, 0.0, 1.0, 0.0), fleet.vehicles[0]
+    assert json.loads(json.dumps(fleet.to_dict()))["vehicles"][0]["start"] == {"position": [0.0, 0.0, 1.0], "psi": 0.0}
 
 
 def test_a_files_mission_flown_shorter_from_python_keeps_its_later_points() -> None:
