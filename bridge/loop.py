@@ -62,6 +62,15 @@ from params import reads_inputs
 TOUCHDOWN_M = 0.05  # m above the ground, and m/s: a landing trajectory's end finds the vehicle down, and disarms it
 
 
+class StopAfterRecord(KeyboardInterrupt):
+    """A stop held while a flight was judged (:func:`flying`), raised once its record is written: ``run`` is what the
+    flight returns (a fleet keeps it in its record: :func:`bridge.swarm.fly_fleet`)."""
+
+    def __init__(self, run: Run) -> None:
+        super().__init__()
+        self.run = run
+
+
 @dataclass(frozen=True)
 class Alone:
     """A period the vehicle flew alone, told nothing: a failsafe's landing still going at the mission's end
@@ -194,7 +203,7 @@ def flying(flight: Flight, path: Path | None = None, *, plots: bool = True, prog
         if record is not None:
             record.finish(arrays, summary, f"{m.name} ({m.controller}, {flight.profile.name})", plots)
     if held.pending:
-        raise KeyboardInterrupt  # (held: the record is whole, as the flight ended)
+        raise StopAfterRecord(Run(arrays, summary, path))  # (held: the record is whole, as the flight ended)
     return Run(arrays, summary, path)
 
 

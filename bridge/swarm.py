@@ -30,6 +30,7 @@ from __future__ import annotations
 import shutil
 import tempfile
 from collections.abc import Generator, Sequence
+from inspect import GEN_CLOSED, getgeneratorstate
 from pathlib import Path
 from typing import Any
 
@@ -38,7 +39,7 @@ from bridge.core.overrides import Overrides
 from bridge.link.model import merge_link_tables
 from bridge.link.radio import Radio
 from bridge.link.turns import TURNS, turn_order
-from bridge.loop import Alone, Step, flying
+from bridge.loop import Alone, Step, StopAfterRecord, flying
 from bridge.loop import simulate as simulate_one
 from bridge.record.policies import run_ok
 from bridge.record.runlog import (
@@ -225,7 +226,8 @@ def fly_fleet(m: Mission, flights: list[Flight], path: Path | None, *, plots: bo
     dirs = _vehicle_dirs(m, path)
     steps = [flying(f, d, plots=plots, progress=progress if i == 0 else None, radios=radios, user=i)
              for i, (f, d) in enumerate(zip(flights, dirs))]
-    runs, untold = _fly_together(steps, [f.mission.start[:3] for f in flights], flights[0].mission.rate_hz, watch)
+    runs, untold, stopped = _fly_together(steps, [f.mission.start[:3] for f in flights], flights[0].mission.rate_hz,
+                                          watch)
     runs = [r if r.outcome == "collision" else _touched(r, untold.found.get(j)) for j, r in enumerate(runs)]
     summary = fleet_summary(m, flights, runs, watch)
     if untold.first:  # a failsafe's landing after the mission, flown alone: judged, said
@@ -236,6 +238,8 @@ def fly_fleet(m: Mission, flights: list[Flight], path: Path | None, *, plots: bo
         summary["radio"] = {"shared": True, "order": TURNS,
                             **{d: r.occupancy(ids, until) for d, r in zip(("up", "down"), radios)}}
     _finish(m, path, runs, watch, summary, plots)
+    if stopped:
+        raise KeyboardInterrupt  # (held as the last flights were judged: the fleet's record is whole, as it ended)
     return FleetRun(runs, summary, path)
 
 
@@ -269,9 +273,10 @@ def _finish(m: Mission, path: Path | None, runs: list[Run], watch: Watch, summar
 
 
 def _fly_together(steps: list[Generator[Step, str | None, Run]], starts: list[Sequence[float]],
-                  rate: float, watch: Watch) -> tuple[list[Run], Untold]:
+                  rate: float, watch: Watch) -> tuple[list[Run], Untold, bool]:
     """Step every vehicle's flight once a control step until all have ended; judge the world after each step (a
-    vehicle flying alone, :class:`~bridge.loop.Alone`, judged but told nothing: :class:`Untold`)."""
+    vehicle flying alone, :class:`~bridge.loop.Alone`, judged but told nothing: :class:`Untold`). A stop ends every
+    flight (each recorded); True if no flight took it (it came as the last were judged: :class:`StopAfterRecord`)."""
     n = len(steps)
     runs: list[Run | None] = [None] * n
     positions: list[Sequence[float]] = list(starts)
@@ -281,6 +286,7 @@ def _fly_together(steps: list[Generator[Step, str | None, Run]], starts: list[Se
         told[a] = told[b] = why
     live = list(range(n))
     k = 0
+    pending = False  # a stop that no flight took
     try:
         while live:
             for i in turn_order(live, k):  # who goes first this step (TURNS): on one radio, the first in its queue
@@ -295,6 +301,11 @@ def _fly_together(steps: list[Generator[Step, str | None, Run]], starts: list[Se
                     live.remove(i)
                     if done.value.outcome == "aborted":  # Ctrl-C in one vehicle's step: every vehicle stops
                         raise KeyboardInterrupt from None
+                except KeyboardInterrupt as stop:
+                    if getgeneratorstate(steps[i]) == GEN_CLOSED:  # raised by the flight: recorded (a stop held as
+                        live.remove(i)  # it was judged: its run kept) or not started yet (none)
+                        runs[i] = stop.run if isinstance(stop, StopAfterRecord) else None
+                    raise
             k += 1
             for a, b, why in untold.told(k, watch.check(k / rate, positions)):
                 for i in (a, b):
@@ -306,15 +317,19 @@ def _fly_together(steps: list[Generator[Step, str | None, Run]], starts: list[Se
                 steps[i].throw(KeyboardInterrupt)
             except StopIteration as done:
                 runs[i] = done.value
-            except KeyboardInterrupt:  # not started yet (interrupted within the first step): nothing recorded
-                pass
+            except KeyboardInterrupt as again:  # another stop as it was judged (its run kept), or not started yet
+                runs[i] = again.run if isinstance(again, StopAfterRecord) else None  # (interrupted within the
+                # first step: nothing recorded)
         if any(r is None for r in runs):
             raise
+        # taken by a flight (aborted) it is the fleet's end; else it came as the last flights were judged (each
+        # recorded whole, as it ended): raised once the fleet's record is written, as one flight's is
+        pending = not any(r.outcome == "aborted" for r in runs)  # type: ignore[union-attr]
     except BaseException:
         for s in steps:
             s.close()  # each closes its record
         raise
-    return runs, untold  # type: ignore[return-value]
+    return runs, untold, pending  # type: ignore[return-value]
 
 
 def fleet_summary(m: Mission, flights: list[Flight], runs: list[Run], watch: Watch,

@@ -469,6 +469,61 @@ def test_a_stop_while_the_flight_is_judged_never_cuts_its_record(tmp_path, sig: 
         proc.stop()
 
 
+FLEET_JUDGED = """
+    import os, signal, sys, time
+    import bridge.loop as loop
+
+    top, nth, judging, calls = os.getpid(), int(sys.argv[3]), loop.summarise, []
+    def held():  # (the handler is bridge.core.interrupt.Held.on_sigint, of the Held that notes it)
+        return getattr(getattr(signal.getsignal(signal.SIGINT), "__self__", None), "pending", False)
+
+    def stop_then_summarise(*args, **kwargs):  # the nth flight judged meets the stop
+        calls.append(1)
+        if len(calls) == nth:
+            os.kill(top, signal.SIGINT)
+            deadline = time.monotonic() + 60
+            while not held() and time.monotonic() < deadline:
+                time.sleep(0.001)
+        return judging(*args, **kwargs)
+
+    loop.summarise = stop_then_summarise
+    sys.argv = ["bsst", "sim", sys.argv[2], "--no-plots", "--out", sys.argv[1]]
+    from bridge.__main__ import main
+    sys.exit(main())
+"""
+
+
+@pytest.mark.parametrize("nth", [1, 2], ids=["first-judged", "last-judged"])
+def test_a_stop_while_a_fleets_flight_is_judged_keeps_the_fleets_record(tmp_path, nth: int) -> None:
+    """Two vehicles, ``[end] action = "hold"``, a stop as one of them is judged (held: its record written whole,
+    then raised). The first judged: the other, not yet, takes the stop (``aborted``), the fleet's summary.json says
+    so, exit 1. The last judged (the other ``completed``): the fleet's record is written whole, both ``completed``,
+    then ``bsst: interrupted``, exit 1. Until the forty-first session's review the fleet threw the stop again into
+    the flight that had raised it, took it for one not started, and lost its summary.json either way."""
+    mission = tmp_path / "pair.toml"
+    mission.write_text('name = "pair"\nduration_s = 2.0\n[trajectory]\nkind = "sine"\n[end]\naction = "hold"\n'
+                       '[[vehicles]]\nid = 1\n[[vehicles]]\nid = 2\noffset = [0.0, 2.0, 0.0]\n')
+    out = tmp_path / "run"
+    proc = Proc([sys.executable, "-c", textwrap.dedent(FLEET_JUDGED), str(out), str(mission), str(nth)])
+    try:
+        assert proc.p.wait(timeout=120) == 1
+        proc.stop()  # (ended: reads what is left)
+        assert not any("Traceback" in s for s in proc.lines), proc.lines
+        summary = json.loads((out / "summary.json").read_text())
+        outcomes = sorted(v["outcome"] for v in summary["vehicles"])
+        if nth == 1:
+            assert summary["outcome"] == "aborted" and outcomes == ["aborted", "completed"], summary["vehicles"]
+            assert "bsst: interrupted" not in proc.lines, proc.lines
+        else:
+            assert summary["outcome"] == "completed" and outcomes == ["completed", "completed"], summary["vehicles"]
+            assert proc.lines[-1] == "bsst: interrupted", proc.lines
+        for v in (1, 2):
+            assert json.loads((out / f"vehicle-{v}" / "summary.json").read_text())["outcome"] in outcomes
+            assert csv_rows(out / f"vehicle-{v}" / "trace.csv") == 500
+    finally:
+        proc.stop()
+
+
 def test_a_ctrl_c_to_the_group_is_one_stop_for_a_watched_flight(tmp_path) -> None:
     """A terminal's Ctrl-C (SIGINT to the process group) reaches ``bsst sim`` and its watched child both: the parent
     passes it on, and the child takes the two as one stop, its record whole (a second KeyboardInterrupt, raised
