@@ -11,6 +11,7 @@ Real ``bsst`` processes on 127.0.0.1; the holders beside them are real processes
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
 from pathlib import Path
@@ -19,6 +20,7 @@ import pytest
 
 from bridge.nodes.report import Ready, parse_line
 from bridge.session import hold_instances, sitl
+from bridge.session.children import lock_holder_in
 from params import ConfigError
 from tests.sitlkit import ROOT, Proc, run_bsst
 from tests.waiting import wait_for
@@ -139,3 +141,19 @@ def test_a_vehicle_holds_its_instance_until_it_dies_even_by_sigkill(tmp_path: Pa
         third.wait_report(Ready, timeout=60)
     finally:
         assert third.stop() == 0
+
+
+def test_the_lock_holder_is_found_on_its_inode_where_the_locks_device_is_not_the_files() -> None:
+    """/proc/locks names a ``flock``'s file by device and inode; on btrfs a subvolume's files stat on a device of
+    their own, so the holder was never found by both (None: a test's own session inside its ``instance_slot`` was
+    refused as another session's). The device and inode are matched first (the waiters' ``->`` lines and POSIX
+    locks passed over); where no lock is on that device, the inode alone, if one process holds a flock on it."""
+    dev, ino = os.makedev(0, 0x2F), 2146956  # fstat's: btrfs's anonymous device of the subvolume
+    locks = ["1: POSIX  ADVISORY  WRITE 4547 00:2f:2146956 0 EOF\n",
+             "2: FLOCK  ADVISORY  WRITE 7001 00:1e:2146956 0 EOF\n",  # the lock, on the file system's device
+             "2: -> FLOCK  ADVISORY  WRITE 7002 00:1e:2146956 0 EOF\n",  # a waiter
+             "3: FLOCK  ADVISORY  WRITE 7003 00:1e:99 0 EOF\n"]
+    assert lock_holder_in(locks, dev, ino) == 7001
+    assert lock_holder_in(locks + ["4: FLOCK  ADVISORY  WRITE 7004 00:2f:2146956 0 EOF\n"], dev, ino) == 7004
+    assert lock_holder_in(locks + ["4: FLOCK  ADVISORY  WRITE 7005 00:31:2146956 0 EOF\n"], dev, ino) is None
+    assert lock_holder_in(locks, dev, 5) is None

@@ -24,7 +24,7 @@ import subprocess
 import tempfile
 import threading
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -283,16 +283,31 @@ def _lock_instance(n: int) -> tuple[int | None, int | None]:
 def _lock_holder(fd: int) -> int | None:
     """The pid holding a ``flock`` on ``fd``'s file, as /proc/locks lists it (None: not listed, no /proc)."""
     st = os.fstat(fd)
-    file = f"{os.major(st.st_dev):02x}:{os.minor(st.st_dev):02x}:{st.st_ino}"
     try:
         with open("/proc/locks") as locks:
-            for line in locks:
-                fields = line.split()
-                if len(fields) > 5 and fields[1] == "FLOCK" and fields[5] == file:  # ("->" lines: waiters)
-                    return int(fields[4])
-    except (OSError, ValueError):
-        pass
-    return None
+            return lock_holder_in(locks, st.st_dev, st.st_ino)
+    except OSError:
+        return None
+
+
+def lock_holder_in(lines: Iterable[str], dev: int, ino: int) -> int | None:
+    """The pid holding a ``flock`` on the file of device ``dev`` and inode ``ino`` (its ``fstat``'s) in the
+    ``lines`` of /proc/locks (``N: FLOCK ADVISORY WRITE pid maj:min:inode start end``, hex device), None if none
+    does. Where no lock is listed on that device (btrfs: a subvolume's files stat on a device of their own, not the
+    one /proc/locks lists), the inode alone, if one process alone holds a ``flock`` on an inode of that number."""
+    device = f"{os.major(dev):02x}:{os.minor(dev):02x}"
+    by_inode: set[int] = set()
+    for line in lines:
+        fields = line.split()
+        if len(fields) < 6 or fields[1] != "FLOCK":  # ("->" lines: waiters)
+            continue
+        on, _, inode = fields[5].rpartition(":")
+        if inode != str(ino) or not fields[4].isdigit():
+            continue
+        if on == device:
+            return int(fields[4])
+        by_inode.add(int(fields[4]))
+    return by_inode.pop() if len(by_inode) == 1 else None
 
 
 def _lineage() -> set[int]:
