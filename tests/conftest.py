@@ -91,6 +91,15 @@ def sys_path_kept() -> Iterator[None]:
     assert sys.path == before, f"the test left sys.path {sys.path!r} (it was {before!r})"
 
 
+@pytest.fixture
+def sys_path_restored() -> Iterator[None]:
+    """``sys.path`` put back after a test whose code under test changes it by design, before ``sys_path_kept``
+    checks: a user's law file that puts its own folder on it, Dask's in-process workers their scratch folders."""
+    before = list(sys.path)
+    yield
+    sys.path[:] = before
+
+
 INSTANCE_PORTS = range(14550, 14570)  # instances 0-9: their ground-station and vehicle ports (bridge.mavlink.address)
 
 

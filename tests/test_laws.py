@@ -202,6 +202,7 @@ class L(MyLaw):
 """
 
 
+@pytest.mark.usefixtures("sys_path_restored")  # (the law file puts examples/ on sys.path itself)
 def test_an_edited_law_file_is_flown_at_its_next_flight(tmp_path: Path) -> None:
     """One process (a script, a notebook) flies a law file, the user edits it, and flies it again: the edit flies
     (it was the first version, silently: one module per file per process). Same bytes, same class (a sweep's

@@ -171,6 +171,7 @@ def test_kill_then_resume_flies_only_missing_cells(tmp_path: Path, capsys) -> No
     assert (killed / "report.md").read_text() == (whole / "report.md").read_text()
 
 
+@pytest.mark.usefixtures("sys_path_restored")  # (Dask's workers put their scratch folders on it)
 def test_dask_local_cluster_gives_the_same_rows(mission_file: Path, local: tuple[Path, list[dict]],
                                                 tmp_path: Path) -> None:
     distributed = pytest.importorskip("distributed")
@@ -184,6 +185,7 @@ def test_dask_local_cluster_gives_the_same_rows(mission_file: Path, local: tuple
     assert [{k: v for k, v in r.items() if k != "class"} for r in dask_rows] == strip
 
 
+@pytest.mark.usefixtures("sys_path_restored")  # (Dask's workers put their scratch folders on it)
 def test_a_relative_law_file_is_the_callers_working_directorys_at_each_sweep(tmp_path: Path,
                                                                               monkeypatch: pytest.MonkeyPatch) -> None:
     """A relative law file given to a sweep from Python is the one in the caller's working directory at the call,
