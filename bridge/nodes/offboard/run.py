@@ -66,8 +66,10 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
     # what it alone knows of sitl's "not flown as asked" (bridge.record.asked), said in the same words: a scheduled
     # change unconfirmed, an end action not seen taken (lost on the wire: the vehicle left to its failsafe), its own
     # ticks the machine stalled in the mission (real time)
-    said = not_as_asked({"param_at": [p.as_dict() for p in unconfirmed], "end": node.end_unanswered,
-                         "timing": {"stalls": own_stalls(flight, node.stalls.report())}})
+    stalls = own_stalls(flight, node.stalls.report())
+    said = (not_as_asked({"param_at": [p.as_dict() for p in unconfirmed], "end": node.end_unanswered,
+                          "timing": {"stalls": stalls}})
+            if unconfirmed or node.end_unanswered or stalls else [])  # (a clean end imports none of its readers)
     for why in said:
         sys.stderr.write(f"bsst controller: {why}\n")
     return 0 if outcome == "completed" and not left and not said else 1
