@@ -29,7 +29,7 @@ from bridge.cli import main
 from bridge.record.runlog import EventLog, write_text_atomic
 from bridge.session import instance_slot, sitl
 from missions import Mission, Sine
-from tests.sitlkit import ENV, ROOT, Proc, clean_exit, run_bsst
+from tests.sitlkit import ENV, ROOT, Bsst, Proc, clean_exit, run_bsst
 from tests.test_cli_sim import bsst as _sim
 from tests.test_cli_sim import short_sine
 from tests.waiting import wait_for
@@ -315,6 +315,45 @@ def test_a_realtime_sessions_notes_are_not_before_the_disarm_that_ended_it(tmp_p
     log = (out / "events.log").read_text().splitlines()
     assert log.index(_as_logged(ended)) > log.index(_as_logged(disarm)), log
     assert log == [_as_logged(e) for e in events]
+
+
+def test_a_session_stopped_in_its_end_landing_stamps_the_stop_after_the_landing_so_far(tmp_path: Path) -> None:
+    """``bsst sitl`` (lockstep at 2x) of a 1 s climb to 1 m, SIGINT once events.log has the landing's ``landed``
+    (its disarm 5 s later: the vehicle still armed, in the air's end landing). The stop's notes (the session's
+    ``aborted``, the controller's word on the cut landing, the closing ``ended``) are stamped when the stop came, on
+    the vehicle's clock, after the landing's events so far; the run is ``aborted``, exit 1. Until the third wave's
+    forty-first session they were stamped at the trace's last row (0.996 s), before the landing's first events
+    (1.000 s): read in order, the run was aborted before its landing began."""
+    mission = tmp_path / "climb1.toml"
+    mission.write_text('name = "climb1"\nduration_s = 1.0\n[trajectory]\nkind = "sine"\namplitude = 0.0\n'
+                       "climb = 1.0\n[params]\nCOM_DISARM_LAND = 5.0\n")
+    out = tmp_path / "run"
+    with instance_slot() as n:
+        p = Bsst("sitl", str(mission), "--speed", "2", "--instance", str(n), "--out", str(out), "--no-plots",
+                 env=ENV)
+        try:
+            wait_for(lambda: " landed: " in _text(out / "events.log"), 60, "the end landing's landed in events.log")
+            p.send_signal(signal.SIGINT)
+            _, err = p.communicate(timeout=60)
+        finally:
+            if p.poll() is None:
+                p.kill()
+    summary = json.loads((out / "summary.json").read_text())
+    assert p.returncode == 1 and summary["outcome"] == "aborted", err
+    log = (out / "events.log").read_text().splitlines()
+    assert _log_times(log) == sorted(_log_times(log)) and log == [_as_logged(e) for e in summary["events"]], log
+    landing = [e for e in summary["events"] if e["kind"] in ("end", "landed") and e["source"] == "vehicle"]
+    [stop] = [e for e in summary["events"] if e["kind"] == "aborted"]
+    events = summary["events"]
+    [cut] = [e for e in events if e["source"] == "controller" and "in the mission's end landing" in e["text"]]
+    ended = summary["events"][-1]
+    assert [e["kind"] for e in landing] == ["end", "landed"] and ended["kind"] == "ended", log
+    assert landing[-1]["t"] <= stop["t"] <= cut["t"] <= ended["t"], log
+    assert summary["events"].index(landing[-1]) < summary["events"].index(stop) < summary["events"].index(ended)
+
+
+def _text(path: Path) -> str:
+    return path.read_text() if path.exists() else ""
 
 
 def test_an_event_with_no_time_known_is_written_with_none(tmp_path: Path) -> None:

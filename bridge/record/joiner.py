@@ -245,6 +245,13 @@ class TraceJoiner:
         r = self.rows[-1]
         return r.t, math.sqrt((r.x - r.x_ref) ** 2 + (r.y - r.y_ref) ** 2 + (r.z - r.z_ref) ** 2)
 
+    def newest_t(self) -> float | None:
+        """The mission time (s) of the vehicle's newest state joined: the trace's last row, or its end action's last
+        row after it (:attr:`after`); None before the flight's time 0."""
+        if self.k0 is None or not self.rows:
+            return None
+        return max((self.rows[-1].t, *(t - self.k0 / self.rate for t, _, _ in self.after[-1:])))
+
     def joined(self, delivered: bool = False) -> Joined:
         """The rows joined so far and what the join measured. ``delivered`` (real time through a relay, which may
         reorder): the one-way delays are every per-step message's that arrived, from the tlogs (the halves time

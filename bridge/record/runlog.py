@@ -246,11 +246,11 @@ class EventLog(LineWriter):
     known), flushed at once: for people (the sender is the event's field, :attr:`bridge.record.events.RunEvent.by`).
 
     Lines are appended as they are recorded, which in a session is as its children report (a controller's judgement
-    stamped at its cause, the closing notes at the trace's last row, after the end action's lines): a run stopped
-    mid-way keeps them so. :meth:`close` rewrites the file in time order (atomically: the appended file, or the
-    sorted one), as :func:`bridge.record.events.in_time_order` orders ``summary.json``'s events: stably, a line with
-    no time after the one before it. Lines on a clock ahead of the mission's (:meth:`clock_moved`) are ordered on
-    the mission's and keep their written times."""
+    stamped at its cause, the closing notes at the trace's last row, after the end action's lines; a stopped run's
+    at its stop): a run stopped mid-way keeps them so. :meth:`close` rewrites the file in time order (atomically:
+    the appended file, or the sorted one), as :func:`bridge.record.events.in_time_order` orders ``summary.json``'s
+    events: stably, a line with no time after the one before it. Lines on a clock ahead of the mission's
+    (:meth:`clock_moved`) are ordered on the mission's and keep their written times."""
 
     def __init__(self, path: str | Path) -> None:
         super().__init__(path, None, batch=1)

@@ -412,11 +412,14 @@ def notes_time(joined: Joined, events: Sequence[RunEvent], rate_hz: float, repor
     session's wait falls in the last row's period, and the notes were stamped up to a period before it. A vehicle
     leaving lockstep at the mission's end (its controller silent over it), the step after the last row's, was
     reported by a note stamped a period before it (``the vehicle left lockstep at t=30.000 s`` at 29.996) until the
-    third wave's fortieth session's fix: the leaving is ``reported``."""
+    third wave's fortieth session's fix: the leaving is ``reported``. Nor before the session's own notes (a stop's,
+    a death's: stamped when it came, :meth:`bridge.session.session.Session._note`): a run stopped in its end
+    landing had its closing notes a period before the landing's first events, before its own stop too."""
     if not joined.rows:
         return max((*(e.t for e in events if e.t is not None), *reported), default=0.0)
     last = joined.rows[-1].t
-    return max((last, *(e.t for e in events if e.t is not None and e.t < last + 1.0 / rate_hz), *reported))
+    said = (e.t for e in events if e.t is not None and (e.t < last + 1.0 / rate_hz or e.source == "session"))
+    return max((last, *said, *reported))
 
 
 def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events: Sequence[RunEvent],
@@ -489,7 +492,8 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
     if (stalls := stalls_of(summary)) is not None:
         texts.append(("stall", stalls_text(stalls)))
     left = [lockstep["left_at_s"]] if lockstep is not None and not lockstep["held"] else []  # (its note's)
-    t = notes_time(joined, events, m.rate_hz, left)
+    stop = [e.t for e in events if e.t is not None] if facts.aborted else []  # all came before it, its effects too
+    t = notes_time(joined, events, m.rate_hz, left + stop)
     notes = [RunEvent.at(t, kind, text, "session") for kind, text in texts]
     summary["events"] = [e.as_dict() for e in in_time_order((*events, *notes))]  # the notes in their time too
     return SessionSummary(arrays, summary, notes)

@@ -115,6 +115,7 @@ class Session:
                 self._supervise()
             except KeyboardInterrupt:
                 self.aborted = True
+                self._handle(self._read_all(self.vehicle))  # what it said before the stop: before the stop's note
                 self._note("aborted", "interrupted (Ctrl-C or SIGTERM): stopping both processes", "session")
             except ChildError:
                 pass  # already said by name (_died); the outcome is "aborted", the files are kept
@@ -410,9 +411,11 @@ class Session:
         """Record an event (``fields``: its typed fields, :func:`~bridge.autopilot.simvehicle.typed_fields`)."""
         if t is None and getattr(self, "joiner", None):
             self._join()  # lockstep joins only on demand during the flight (_join_in_flight)
-        if t is None:  # (before the mission's time 0: at the vehicle's latest event)
-            t = self.clock.stamps([(False, self.joiner.rows[-1].t if getattr(self, "joiner", None) and self.joiner.rows
-                                    else 0.0)])[0]
+        if t is None:  # now on the vehicle's clock: its newest state joined, or its latest event if later (a state's
+            # row may wait in its half's batch; before the mission's time 0: at the vehicle's latest event)
+            newest = self.joiner.newest_t() if getattr(self, "joiner", None) else None
+            now = 0.0 if newest is None else max((newest, *self.clock.vehicle_said.values()))
+            t = self.clock.stamps([(False, now)])[0]
         self.events.append(RunEvent.at(t, kind, text, source, by, **fields))
         if self._event_log is not None:
             self._event_log.event(t, kind, text, by, source)

@@ -307,7 +307,7 @@ class Offboard(RealtimeFlying):
         silent, or not down within the descent's time at the failsafe's rate, COM_DISARM_LAND and 10 s (vehicle time:
         lockstep counts the steps it clocks, whatever the pace; real time the wall clock)."""
         lockstep = self.cfg.clock == "lockstep"
-        usec = self._end_usec
+        usec, t_end = self._end_usec, self.t_mission
         allowed_s = 10.0 + self.flight.failsafe.time_to_land_s(self._end_height_m) + max(
             self.flight.params.land_disarm_s, 0.0)  # landed, the vehicle disarms after COM_DISARM_LAND
         deadline = time.monotonic() + allowed_s
@@ -331,6 +331,8 @@ class Offboard(RealtimeFlying):
             if time.monotonic() >= self._next_house:
                 self._housekeeping()
         self._at_end_now()
+        if lockstep and usec is not None and self._end_usec is not None:  # at the step it waits at now (a stop's
+            self.t_mission = t_end + (usec - self._end_usec) / 1e6  # word was at the mission's end, before the landing)
         return not self.vehicle_armed
 
     def _at_end_now(self) -> None:
