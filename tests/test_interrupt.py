@@ -309,6 +309,9 @@ def test_a_stop_sent_to_bsst_sim_alone_ends_it_aborted_recorded(tmp_path, sig: s
         proc.stop()
 
 
+SIM_STOPPED = "bsst sim: aborted: ended by user: interrupted (Ctrl-C or SIGTERM)"  # its line on stderr
+
+
 # ``bsst`` started with SIGINT ignored, as a shell without job control starts a script's ``bsst sim ... &``
 SIGINT_IGNORED = ("import os, signal, sys; signal.signal(signal.SIGINT, signal.SIG_IGN); "
                   "os.execv(sys.executable, [sys.executable, '-m', 'bridge', *sys.argv[1:]])")
@@ -541,13 +544,15 @@ def test_a_ctrl_c_to_the_group_is_one_stop_for_a_watched_flight(tmp_path) -> Non
 
 
 def _assert_aborted_recorded(out: Path, proc: Proc, rows: int = 250) -> None:
-    """The run ended ``aborted`` by the user, exit 1, said and on disk whole (summary.json, the trace of ``rows`` at
-    least, the event)."""
+    """The run ended ``aborted`` by the user, exit 1, said (in the summary on stdout, and in one line on stderr, as
+    every exit-1 reason is: until the third wave's forty-first session on stdout alone) and on disk whole
+    (summary.json, the trace of ``rows`` at least, the event)."""
     assert proc.p.wait(timeout=60) == 1
     proc.stop()  # (ended: reads what is left)
     assert "outcome: aborted" in proc.lines and "ended by user: interrupted (Ctrl-C or SIGTERM)" in proc.lines, \
         proc.lines
-    assert not any("Traceback" in s or s.startswith("bsst") for s in proc.lines), proc.lines
+    assert not any("Traceback" in s for s in proc.lines), proc.lines
+    assert [s for s in proc.lines if s.startswith("bsst")] == [SIM_STOPPED], proc.lines  # (stderr's own prefix)
     summary = json.loads((out / "summary.json").read_text())
     assert summary["outcome"] == "aborted" and summary["ended_by"]["who"] == "user", summary["ended_by"]
     assert csv_rows(out / "trace.csv") >= rows

@@ -283,8 +283,10 @@ def test_controller_sigkill_means_failsafe_landing_exit_1(tmp_path):
 
 
 def test_ctrl_c_stops_everything_within_2_s(tmp_path):
-    p, run, _, _, pids, elapsed = _interrupted(tmp_path, lambda p, pids: p.send_signal(signal.SIGINT))
+    p, run, _, err, pids, elapsed = _interrupted(tmp_path, lambda p, pids: p.send_signal(signal.SIGINT))
     assert elapsed < 2.0 and p.returncode == 1
+    # named on stderr, as every exit-1 reason is (until the third wave's forty-first session on stdout alone)
+    assert "bsst sitl: aborted: ended by user: interrupted (Ctrl-C or SIGTERM)" in err.splitlines(), err
     assert set(pids) == {"vehicle", "controller"}
     for pid in pids.values():
         with pytest.raises(ProcessLookupError):

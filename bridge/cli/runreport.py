@@ -116,7 +116,8 @@ def _vehicle_lines(s: dict[str, Any]) -> list[str]:
 
 
 def report_run(run: Any, command: str) -> int:
-    """Print a run's summary, name each violated policy on stderr; its exit status (0: a clean completion)."""
+    """Print a run's summary, name on stderr a stop that ended it and each reason it was not flown as asked or
+    violated policy; its exit status (0: a clean completion)."""
     from bridge.record.policies import run_ok, violation_text  # lazy: numpy
 
     try:
@@ -124,6 +125,9 @@ def report_run(run: Any, command: str) -> int:
         sys.stdout.flush()
     except BrokenPipeError:  # stdout closed early (bsst sim ... | head): the run is on disk, its status stands
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    eb = run.summary.get("ended_by") or {}
+    if eb.get("who") == "user":  # a stop (Ctrl-C, SIGTERM): named here too, as every exit-1 reason is
+        print(f"bsst {command}: {run.summary['outcome']}: ended by user: {eb['how']}", file=sys.stderr)
     for why in not_as_asked(run.summary):
         print(f"bsst {command}: {why}", file=sys.stderr)
     for v in run.summary.get("policies") or []:
