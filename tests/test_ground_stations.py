@@ -366,9 +366,11 @@ def test_a_ground_stations_land_that_touches_down_hard_is_a_crash(tmp_path):
             out = _mavsdk(n, "hard_land")
             crash = v.wait_event(lambda s: s.startswith("crashed: hit the ground at "))
         finally:
-            assert v.stop() == 0
+            status = v.stop()
     assert out["found"] and [out[k] for k in ("hold", "arm", "set_takeoff_altitude", "takeoff", "land")] == \
         ["SUCCESS"] * 5, out
+    # stopped, the vehicle says its flight crashed and exits 1 (until the third wave's forty-first session: 0, silent)
+    assert status == 1 and any(ln.startswith("bsst vehicle: crashed at t=") for ln in v.lines), v.lines[-5:]
     assert out["at_height"] and out["disarmed_seen"], out
     speed = float(crash.text.split(" at ")[1].split(" m/s")[0])
     assert 4.0 < speed < 5.0, crash.text

@@ -150,9 +150,11 @@ def test_an_injection_after_the_plant_ended_the_flight_is_denied(tmp_path):
             assert text is not None and text.text.endswith(": the plant ended the flight"), text
         finally:
             gcs.close()  # (left open it held the instance's GCS port past its slot)
-            assert v.stop() == 0
+            status = v.stop()
     faults = [e.text for e in _events(v) if e.kind == "fault"]
     assert faults == [f"motor {i}: off" for i in (1, 2, 3, 4)], faults
+    # stopped, it says its flight crashed and exits 1 (until the third wave's forty-first session: 0, silent)
+    assert status == 1 and any(ln.startswith("bsst vehicle: crashed at t=") for ln in v.lines), v.lines[-5:]
 
 
 def test_paper_profile_has_no_rotors(tmp_path):

@@ -16,6 +16,7 @@ wall-clock housekeeping.
 
 from __future__ import annotations
 
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -45,6 +46,7 @@ from bridge.nodes.vehicle.rows import Rows
 from bridge.nodes.vehicle.streaming import Streaming
 from bridge.nodes.vehicle.streams import HEARTBEAT_S, OdometryOut, StatusTexts
 from bridge.nodes.vehicle.targets import Targets
+from bridge.nodes.vehicle.verdict import flights_not_ended_well
 from bridge.record.metrics import plant_blocks
 from bridge.record.runlog import side_dir
 
@@ -483,11 +485,15 @@ class Vehicle:
 
 
 def run_vehicle(flight: Flight, cfg: VehicleConfig, out: str | Path | None = None, overwrite: bool = False) -> int:
-    """``bsst vehicle``: serve until SIGTERM or SIGINT; its reports on stdout (JSON lines); exit status 0."""
+    """``bsst vehicle``: serve until SIGTERM or SIGINT; its reports on stdout (JSON lines); exit status 0, or 1 for
+    a flight that did not end well, each said on stderr (:mod:`bridge.nodes.vehicle.verdict`)."""
     path = side_dir(out, ("vehicle.tlog", "vehicle.bin"), overwrite) if out is not None else None
     v = Vehicle(flight, cfg, path, report_printer())
     on_stop_signals(v.stop)
     v.run()
     v.report_stats()
-    return 0
+    said = flights_not_ended_well(v.sim.events)
+    for why in said:
+        sys.stderr.write(f"bsst vehicle: {why}\n")
+    return 1 if said else 0
 

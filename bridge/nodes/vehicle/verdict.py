@@ -1,0 +1,39 @@
+"""``bsst vehicle`` alone: how its flights ended, for its exit status.
+
+In:  the vehicle's events in the order it said them (:class:`~bridge.autopilot.vehicleevents.Event`: t s, kind,
+     text, a ``mode`` event's mode and whether it acted on an armed vehicle)
+Out: :func:`flights_not_ended_well`: one line each for a flight the plant ended (``crashed``, ``diverged``, a
+     ``collision``, a ground station's ``terminated``) and for a failsafe the flight ended in (no arm, no mode
+     selected armed, after it: a controller's or a ground station's taking it back), as ``bsst sitl`` names those
+     outcomes; any one makes the exit status 1
+
+``bsst controller`` alone says what went wrong as far as it knows (bridge.nodes.offboard.run); the vehicle alone,
+stopped (Ctrl-C, SIGTERM), says what its own flights came to. A clean stop of a vehicle whose flights ended well (or
+that never flew) says nothing and exits 0.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+from bridge.autopilot.vehicleevents import Event
+
+PLANT_ENDS = ("crashed", "diverged", "collision", "terminated")  # the flight's end, its plant's (or motors cut)
+
+
+def flights_not_ended_well(events: Iterable[Event]) -> list[str]:
+    """What the vehicle's flights came to that was not a safe end, one line each, in the order it happened
+    (module docstring); empty for a vehicle whose flights ended well."""
+    said: list[tuple[float, str]] = []
+    failsafe: Event | None = None  # the latest failsafe its flight has not come back from
+    for e in events:
+        if e.kind in PLANT_ENDS:
+            said.append((e.t, f"{e.kind} at t={e.t:.3f} s: {e.shown}"))
+        elif e.kind == "failsafe":
+            failsafe = e
+        elif e.kind == "armed" or e.kind == "mode" and e.armed:
+            failsafe = None  # armed again (a new flight, or back under offboard control), or a mode selected armed
+    if failsafe is not None:
+        said.append((failsafe.t, f"failsafe at t={failsafe.t:.3f} s: {failsafe.shown}: its flight ended in it (no "
+                                 "arm, no mode selected, took it back)"))
+    return [text for _, text in sorted(said, key=lambda s: s[0])]

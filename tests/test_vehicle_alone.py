@@ -1,0 +1,105 @@
+"""Covers bridge.nodes.vehicle.verdict and bridge.nodes.vehicle.node: ``bsst vehicle`` alone, its exit status.
+
+``bsst vehicle`` run alone (docs/sitl.md, "Each side alone") serves until Ctrl-C or SIGTERM; stopped, it says on
+stderr what its flights came to that was not a safe end and exits 1 (a crash, a divergence, a collision, a
+termination, a failsafe its flight never came back from), as ``bsst controller`` alone says what it knows
+(bridge.record.asked); a clean stop of a vehicle whose flights ended well exits 0, nothing said. Real processes:
+``bsst vehicle`` and ``bsst controller`` over UDP on 127.0.0.1; the stop a real SIGINT, sent once the vehicle has
+reported the event the case waits for.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+from pathlib import Path
+
+import pytest
+
+from bridge.autopilot.modes import OFFBOARD
+from bridge.autopilot.vehicleevents import Event
+from bridge.nodes.report import Ready
+from bridge.nodes.vehicle.verdict import flights_not_ended_well
+from bridge.session import instance_slot
+from tests.sitlkit import ENV, ROOT, Proc, run_bsst
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
+
+# a 1 s climb to 2 m, then the end landing; at MPC_LAND_SPEED 4 m/s it touches down hard (over 2 m/s): crashed
+CLIMB = 'name = "climb2"\nduration_s = 1.0\n[trajectory]\nkind = "sine"\namplitude = 0.0\nclimb = 2.0\n'
+HARD = "[params]\nMPC_LAND_SPEED = 4.0\n"
+
+
+def _stopped(vehicle: Proc) -> tuple[int, list[str]]:
+    """SIGINT (a Ctrl-C) to the vehicle; its exit status and its stderr's own lines (``bsst vehicle: ...``: its
+    stdout, merged here, is JSON reports)."""
+    vehicle.p.send_signal(signal.SIGINT)
+    status = vehicle.p.wait(timeout=30)
+    vehicle.stop()  # (ended: reads what is left)
+    return status, [ln for ln in vehicle.lines if ln.startswith("bsst vehicle")]
+
+
+@pytest.mark.parametrize("hard", [True, False], ids=["crashed", "landed"])
+def test_a_vehicle_alone_that_crashed_says_so_and_exits_1_a_healthy_one_0(tmp_path: Path, hard: bool) -> None:
+    """``bsst vehicle`` and ``bsst controller`` alone, lockstep: the controller flies the climb and hands over the
+    end landing; at 4 m/s the vehicle crashes on touchdown, at the default speed it lands and disarms. Stopped by a
+    Ctrl-C: the crashed one says ``bsst vehicle: crashed at t=...`` and exits 1, the landed one says nothing and exits
+    0. Until the third wave's forty-first session both exited 0, nothing on stderr."""
+    mission = tmp_path / "climb2.toml"
+    mission.write_text(CLIMB + (HARD if hard else ""))
+    with instance_slot() as n:
+        vehicle = Proc.bsst("vehicle", str(mission), "--instance", str(n), "--gcs", "none", cwd=ROOT)
+        try:
+            vehicle.wait_report(Ready, timeout=60)
+            run_bsst("controller", str(mission), "--instance", str(n), cwd=ROOT, env=ENV, timeout=120)
+            vehicle.wait_event(lambda e: e.startswith("crashed: " if hard else "disarmed: "), timeout=60)
+            status, said = _stopped(vehicle)
+        finally:
+            vehicle.stop()
+    if hard:
+        assert status == 1 and len(said) == 1 and said[0].startswith("bsst vehicle: crashed at t="), vehicle.lines[-5:]
+    else:
+        assert (status, said) == (0, []), vehicle.lines[-5:]
+
+
+def test_a_vehicle_alone_whose_flight_ended_in_its_failsafe_says_so_and_exits_1(tmp_path: Path) -> None:
+    """The controller killed (SIGKILL) once the vehicle is armed under it: no more targets, the vehicle's failsafe
+    takes over and ends the flight. Stopped by a Ctrl-C, the vehicle says ``bsst vehicle: failsafe at t=...: ...:
+    its flight ended in it`` and exits 1 (until the third wave's forty-first session: 0, nothing said)."""
+    mission = tmp_path / "climb2.toml"
+    mission.write_text(CLIMB)
+    with instance_slot() as n:
+        vehicle = Proc.bsst("vehicle", str(mission), "--instance", str(n), "--gcs", "none", cwd=ROOT)
+        ctl = None
+        try:
+            vehicle.wait_report(Ready, timeout=60)
+            ctl = Proc.bsst("controller", str(mission), "--instance", str(n), cwd=ROOT)
+            vehicle.wait_event(lambda e: e.startswith("armed: "), timeout=60)
+            os.kill(ctl.p.pid, signal.SIGKILL)
+            vehicle.wait_event(lambda e: e.startswith("failsafe: "), timeout=60)
+            status, said = _stopped(vehicle)
+        finally:
+            if ctl is not None:
+                ctl.stop()
+            vehicle.stop()
+    assert status == 1 and len(said) == 1, vehicle.lines[-5:]
+    assert said[0].startswith("bsst vehicle: failsafe at t=") and said[0].endswith(
+        ": its flight ended in it (no arm, no mode selected, took it back)"), said
+
+
+def test_a_failsafe_the_flight_came_back_from_is_no_end_a_plant_end_always_is() -> None:
+    """The verdict on the events alone: a failsafe followed by an arm or a mode selected armed (OFFBOARD, a ground
+    station's LAND) is no end of the flight, one followed by a mode selected disarmed is; a crash is, whatever came
+    after; in the order they happened."""
+    fs = Event(1.0, "failsafe", "no actuator target for 0.500 s: descend")
+    back = Event(2.0, "mode", "OFFBOARD", mode=OFFBOARD, armed=True)
+    assert flights_not_ended_well([Event(0.0, "armed", "armed, offboard control"), fs, back]) == []
+    assert flights_not_ended_well([fs, Event(2.0, "mode", "LAND", mode="land", armed=True)]) == []
+    assert len(flights_not_ended_well([fs, Event(2.0, "mode", "HOLD (disarmed: ...)", mode="hold", armed=False)])) == 1
+    assert flights_not_ended_well([fs, Event(2.0, "armed", "armed, offboard control")]) == []
+    crash = Event(3.0, "crashed", "touched down at 3.1 m/s")
+    assert flights_not_ended_well([fs, back, crash, Event(4.0, "armed", "armed")]) == [
+        "crashed at t=3.000 s: touched down at 3.1 m/s"]
+    assert flights_not_ended_well([crash, Event(5.0, "failsafe", "x")]) == [
+        "crashed at t=3.000 s: touched down at 3.1 m/s", "failsafe at t=5.000 s: x: its flight ended in it (no arm, no "
+        "mode selected, took it back)"]
