@@ -458,23 +458,16 @@ def wait(endpoints: Sequence[Endpoint], deadline: float,
         if got:
             ep = spinner.endpoint
             return [(ep, m, a) for m, a in got]
-    polled = endpoints
     while True:
-        out = [(ep, m, a) for ep in polled for m, a in ep.poll(deadline)]
+        out = [(ep, m, a) for ep in endpoints for m, a in ep.poll(deadline)]
         if out:
             return out
         left = deadline - mono()
         if left <= 0.0:
             return out
         if any(ep.backlog for ep in endpoints):
-            polled = endpoints
             continue  # more waiting on a main socket: read on (each poll stops at the deadline)
         try:  # an endpoint with a peer socket sleeps on it only (Endpoint.prioritise)
-            ready = select.select([ep.wake_socket for ep in endpoints], [], [], left)[0]
+            select.select([ep.wake_socket for ep in endpoints], [], [], left)
         except InterruptedError:
-            polled = endpoints
-            continue
-        if len(endpoints) > 1:  # once woken, an endpoint whose one socket select found empty is not read (its poll
-            # would find nothing): a vehicle's ground-station link costs no system call a lockstep step; one with a
-            # peer socket is read as before (its main socket is not among select's)
-            polled = [ep for ep in endpoints if ep.prio is not None or ep.sock in ready]
+            pass
