@@ -268,6 +268,55 @@ def test_parameter_protocol_over_udp(tmp_path):
     assert stats["rejected"]["param_refused"] == 4 and stats["rejected"]["param_unknown"] == 4
 
 
+@pytest.mark.parametrize("link", ["link", "gcs"])
+def test_a_parameter_changed_is_said_to_the_session_before_its_echo_goes_out(link):
+    """A PARAM_SET that changes a parameter, from the controller on the vehicle's own link or from a ground station:
+    the vehicle's ``param`` event line is out (its report) before the setter's PARAM_VALUE echo is. The session reads
+    the controller's pipe before the vehicle's, so an answer's cause is read with it or before it
+    (:mod:`bridge.session.eventorder`) only if the vehicle says its event before it answers, as it does a command's
+    before its COMMAND_ACK. The echo went out first: in 1 of ~10 real-time runs of
+    test_a_scheduled_change_confirmed_only_after_the_flights_end_is_not_made[late] the controller's "echoed by the
+    vehicle only after the flight's end" was read before the vehicle's change, at the same t=3.201, and events.log
+    put it first. A vehicle built in this process, real UDP on 127.0.0.1: what the setter had received when the
+    line was said is read from its socket then."""
+    from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, parse_address
+    from bridge.nodes.report import Event
+    from bridge.nodes.vehicle import Vehicle, VehicleConfig
+    from tests.sitlkit import GcsSocket
+    from tests.waiting import wait_for
+
+    gcs = GcsSocket()
+    setter = GcsSocket(CONTROLLER_SYSID, CONTROLLER_COMPID, link="link") if link == "link" else gcs
+    got: list[Any] = []  # what the setter received, in order
+    said: list[list[str]] = []  # at each param event's line: the setter's messages received by then
+
+    def status(report: Any) -> None:
+        if isinstance(report, Event) and report.kind == "param":
+            got.extend(setter.received())
+            said.append([m.get_type() for m in got])
+
+    v = Vehicle(prepare(Mission(Sine(), duration_s=5.0, name="said")),
+                VehicleConfig(parse_address("udpin:127.0.0.1:0"), parse_address(gcs.url)), status=status)
+    try:
+        ep = getattr(v, link)
+        set_ = M.MAVLink_param_set_message(1, 1, b"MIS_TAKEOFF_ALT", 5.0, M.MAV_PARAM_TYPE_REAL32)
+        setter.sock.sendto(set_.pack(setter.mav), ep.local)
+
+        def echoed() -> bool:
+            for m, addr in ep.poll():
+                v._handle(ep, m, addr)
+            got.extend(setter.received())
+            return any(m.get_type() == "PARAM_VALUE" for m in got)
+
+        wait_for(echoed, 5.0, "the vehicle's PARAM_VALUE echo", poll_s=0.001)
+        assert [m.param_value for m in got if m.get_type() == "PARAM_VALUE"] == [5.0]
+        assert len(said) == 1 and "PARAM_VALUE" not in said[0], said  # the line first, then the echo
+    finally:
+        v.close()
+        gcs.close()
+        setter.close()
+
+
 def test_the_controllers_change_reaches_the_ground_station_as_px4_sends_it(tmp_path):
     """A lockstep session whose controller sets COM_OF_LOSS_T at 1 s (``--param-at``): the ground station, which
     asked nothing, gets the new PARAM_VALUE (PX4's ``MavlinkParametersManager::send_untransmitted``: each changed

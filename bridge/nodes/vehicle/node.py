@@ -111,7 +111,9 @@ class Vehicle:
         self.odometry = OdometryOut(self.link, self.sim, self.rate, flight.estimator, flight.wire()[0])
         self.targets = Targets(self.sim, self.clock, self.authority, self.rate, self.actuation, self._reject)
         self._statustext = StatusTexts()
-        self.params = ParamService(self.sim, self.authority, self._statustext, self._reject, self._refused)
+        # (a change's line is said before its echo: by the announcer, which is made below, as it reads the values)
+        self.params = ParamService(self.sim, self.authority, self._statustext, self._reject, self._refused,
+                                   lambda: self.announcer.report_events())
         self.missions = MissionManager(self.sim, self.authority, self._statustext, self._to_ground_stations,
                                        self._refused, flight)
         self.streaming = Streaming(self.sim, flight, cfg, self.missions, self.clock, lambda: self.t, now, load_at)

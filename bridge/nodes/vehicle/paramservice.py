@@ -5,7 +5,8 @@ In:  PARAM_REQUEST_LIST, PARAM_REQUEST_READ (by index, or by name with index -1)
 Out: PARAM_VALUE (all, in one datagram, for a list; the new or unchanged value for a set); for a set refused
      or a name unknown, PARAM_ERROR (its MAV_PARAM_ERROR code) first and a STATUSTEXT saying why; a ``param``
      event of a set that changed a setting, with its sender (``by``) and the change (``param``: name, old and
-     new value) as typed fields (a set to the value in force is no change: answered, no event);
+     new value) as typed fields, said as a status line before the set's answer goes out (a set to the value in
+     force is no change: answered, no event);
      refusals counted (``target``, ``reply_limited``, ``param_refused``, ``param_unknown``)
 
 The parameters and their checks are :mod:`bridge.autopilot.params`; a set acts from the next control
@@ -50,13 +51,14 @@ class ParamService:
     """Answers the parameter protocol for one vehicle (its :class:`SimVehicle` holds the values)."""
 
     def __init__(self, sim: SimVehicle, authority: Authority, texts: StatusTexts,
-                 reject: Callable[[str], None], refused: Callable[[str], None]) -> None:
+                 reject: Callable[[str], None], refused: Callable[[str], None], say: Callable[[], None]) -> None:
         self.sim = sim
         self.authority = authority
         self.sysid = authority.cfg.sysid
         self._texts = texts
         self._reject = reject
         self._refused = refused  # a set refused, and why (its report to the session)
+        self._say = say  # the new events' status lines, now (Announcer.report_events): a change's before its echo
 
     def params(self) -> VehicleParams:
         return self.sim.params(self.sysid)
@@ -119,6 +121,7 @@ class ParamService:
             changed = self.sim.change_param(name, param_from_wire(m.param_value, want), self.sysid)
             if changed is not None:  # its sender, typed: the session records who changed what, and when
                 changed.by = self.authority.sender(m, addr, link)
+                self._say()  # its line before its echo: the controller's word of the echo never comes first
         except ParamRefused as exc:
             self._reject("param_refused")
             self._refused(str(exc))
