@@ -480,14 +480,28 @@ EARLY_BLACKOUT = {"blackouts": [[6.0, 2.0]]}
 
 
 
+def _line_of(log: list[str], *parts: str) -> int:
+    """The index of the first line of ``log`` holding every one of ``parts``."""
+    return next(i for i, line in enumerate(log) if all(p in line for p in parts))
+
+
 def test_a_parameter_set_at_a_mission_time_is_reproducible_in_lockstep_and_matches_offline(tmp_path):
     """``--param-at``: the controller sends PARAM_SET before the answer of its step, the vehicle makes
     it before it flies that step, the offline loop at the start of it: twice the same trace.csv in
-    lockstep, and offline within 1e-4 m (the same, bit for bit: the offline loop flies the float32 wire)."""
+    lockstep, and offline within 1e-4 m (the same, bit for bit: the offline loop flies the float32 wire).
+    events.log lists each change by cause at its one time: the controller's PARAM_SET, the vehicle's change, the
+    controller's word of its echo (the change came first, before the PARAM_SET that made it, until the forty-first
+    session: bridge.session.eventorder put the vehicle's events first on every tie)."""
     runs = []
     for i in range(2):
         sitl(SHORT, out=tmp_path / f"r{i}", instance=None, link=EARLY_BLACKOUT, param_at=CHANGES, plots=False)
         runs.append((tmp_path / f"r{i}" / "trace.csv").read_bytes())
+        log = (tmp_path / f"r{i}" / "events.log").read_text().splitlines()
+        for c in CHANGES:
+            sent = _line_of(log, f"param: PARAM_SET {c.name} = ")
+            made = _line_of(log, f"param: {c.name} = ", "(was", "[vehicle]")
+            echoed = _line_of(log, f"param: {c.name} = ", "confirmed by the vehicle")
+            assert sent < made < echoed, [log[j] for j in (sent, made, echoed)]
     assert runs[0] == runs[1]
     s = json.loads((tmp_path / "r0" / "summary.json").read_text())
     assert s["outcome"] == "failsafe" and "hold here" in s["ended_by"]["how"]

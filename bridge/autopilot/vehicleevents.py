@@ -61,6 +61,7 @@ class Sender:
 
 
 VEHICLE_LINK = "vehicle"
+CONTROLLER_LINK = "controller"  # the link of a sender on the vehicle's own link (its controller's); else "gcs"
 ITSELF = Sender(None, None, None, None, VEHICLE_LINK)  # the vehicle's own decision
 TYPED_FIELDS = ("param", "mode", "armed", "pre_start")  # an event's typed fields (:class:`Event`), as it travels
 

@@ -1,16 +1,25 @@
 """The children's reports of one read, put in the order things happened on the flight's clock.
 
-In:  reports read together from a session's children (the controller's pipe read before the vehicle's), the time
+In:  reports read together from a session's children (the controller's pipe read before the vehicle's; an event's
+     ``answers`` and, the vehicle's, its sender ``by``: its controller's link or not), the time
      of each on the events' clock (s; -inf for a report that is not a timed event), and the vehicle's latest
      event of each kind in earlier reads (s, by kind: updated here)
 Out: the reports in that order, each with the time it is recorded at (s)
 
 Each child's pipe is read in turn, so the order read is not the order things happened: events go in the order of
-their times (the vehicle's first on a tie: the controller's events about the vehicle are its answers). A
-controller's event said in answer to the vehicle's own (its ``answers``: it armed it, took the end action, saw it
-crash) is never put before its cause, the latest of them read before it or the earliest read with it: the
-controller stamps its word at the last state it answered, and in real time the two clocks are mapped onto the
-flight's only to within a few ms.
+their times. A controller's event said in answer to the vehicle's own (its ``answers``: it armed it, took the end
+action, saw it crash, its parameter set was echoed) is never put before its cause, the latest of them read before
+it or the earliest read with it: the controller stamps its word at the last state it answered, and in real time the
+two clocks are mapped onto the flight's only to within a few ms. Its cause is never read after it: the controller's
+pipe is read first, and the vehicle says each event before the answer to whoever caused it goes out (a command's
+before its COMMAND_ACK, a parameter's change before its PARAM_VALUE echo); a controller says its own act before it
+sends it (a PARAM_SET).
+
+Events of one time go by cause (:func:`_rank`): the vehicle's own first (what the controller stamped at that time
+came after the state that showed them), then the others' (the controller's acts, the relay's), then the vehicle's
+events caused by its controller (the change its PARAM_SET made, in lockstep at the step the controller stamped its
+PARAM_SET at), then the controller's answers. Until the forty-first session the vehicle's came first on every tie:
+its change before the controller's PARAM_SET that made it.
 """
 
 from __future__ import annotations
@@ -18,6 +27,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+from bridge.autopilot.vehicleevents import CONTROLLER_LINK
 from bridge.nodes.report import Event, Report
 from bridge.session.children import Child
 
@@ -38,7 +48,16 @@ def in_cause_order(reports: Sequence[tuple[Child, Report]], times: Sequence[floa
     for (child, r), t in zip(reports, times):
         if isinstance(r, Event) and child.name != "vehicle" and r.answers:
             t = max(t, *(max(vehicle_said.get(k, -math.inf), first.get(k, -math.inf)) for k in r.answers))
-        timed.append((t, child.name != "vehicle", child, r))
+        timed.append((t, _rank(child, r), child, r))
     for kind, t in last.items():
         vehicle_said[kind] = max(t, vehicle_said.get(kind, -math.inf))
     return [(child, report, t) for t, _, child, report in sorted(timed, key=lambda x: x[:2])]
+
+
+def _rank(child: Child, report: Report) -> int:
+    """Where ``report`` goes among its read's reports of its time (module docstring): 0 the vehicle's own, 1 the
+    others' (the controller's acts), 2 the vehicle's caused by its controller (``by`` its link), 3 the controller's
+    answers."""
+    if child.name == "vehicle":
+        return 2 if isinstance(report, Event) and report.by is not None and report.by.link == CONTROLLER_LINK else 0
+    return 3 if isinstance(report, Event) and report.answers else 1

@@ -252,8 +252,9 @@ class OffboardLink:
         sent = ScheduledSet(change, wire, kind, self.t_mission)
         self.param_sets.append(sent)
         self._pending_params[change.name] = sent
-        self._send_set(sent)
+        # said before it goes: the session reads it with the vehicle's change or before it (bridge.session.eventorder)
         self.event("param", f"PARAM_SET {change.name} = {change.value:g} sent (waiting for the vehicle's echo)")
+        self._send_set(sent)
 
     def _send_set(self, s: ScheduledSet) -> None:
         s.sends += 1

@@ -20,7 +20,7 @@ from __future__ import annotations
 import socket
 from typing import Any
 
-from bridge.autopilot.vehicleevents import ITSELF, Event, Sender
+from bridge.autopilot.vehicleevents import CONTROLLER_LINK, ITSELF, Event, Sender
 from bridge.mavlink.receive import addressed_elsewhere
 from bridge.nodes.vehicle.config import VehicleConfig
 
@@ -93,4 +93,4 @@ class Authority:
         """The flight's controller (configured ids, learned address ``peer``) as a :class:`Sender`."""
         cfg = self.cfg
         host, port = peer or ("?", 0)
-        return Sender(cfg.controller_sysid, cfg.controller_compid, host, port, "controller")
+        return Sender(cfg.controller_sysid, cfg.controller_compid, host, port, CONTROLLER_LINK)

@@ -25,6 +25,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from bridge.autopilot.vehicleevents import CONTROLLER_LINK
 from bridge.mavlink.compmeta import FILES as METADATA_FILES
 from bridge.mavlink.endpoint import Endpoint
 from bridge.mavlink.ftp import FtpServer
@@ -224,7 +225,7 @@ class Receiver:
         return Charged(self)
 
     def _link_name(self, ep: Endpoint) -> str:
-        return "controller" if ep is self.link else "gcs"
+        return CONTROLLER_LINK if ep is self.link else "gcs"
 
     def _request(self, ep: Endpoint, addr: tuple[str, int], answer: Any) -> None:
         """Answer a request that changes nothing, within its sender's reply budget."""
