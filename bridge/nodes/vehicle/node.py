@@ -111,9 +111,8 @@ class Vehicle:
         self.odometry = OdometryOut(self.link, self.sim, self.rate, flight.estimator, flight.wire()[0])
         self.targets = Targets(self.sim, self.clock, self.authority, self.rate, self.actuation, self._reject)
         self._statustext = StatusTexts()
-        # (a change's line is said before its echo: by the announcer, which is made below, as it reads the values)
         self.params = ParamService(self.sim, self.authority, self._statustext, self._reject, self._refused,
-                                   lambda: self.announcer.report_events())
+                                   lambda: self.announcer.report_events())  # (a change's line before its echo)
         self.missions = MissionManager(self.sim, self.authority, self._statustext, self._to_ground_stations,
                                        self._refused, flight)
         self.streaming = Streaming(self.sim, flight, cfg, self.missions, self.clock, lambda: self.t, now, load_at)
@@ -495,7 +494,6 @@ def run_vehicle(flight: Flight, cfg: VehicleConfig, out: str | Path | None = Non
     v.run()
     v.report_stats()
     said = flights_not_ended_well(v.sim.events)
-    for why in said:
-        sys.stderr.write(f"bsst vehicle: {why}\n")
+    sys.stderr.writelines(f"bsst vehicle: {why}\n" for why in said)
     return 1 if said else 0
 
