@@ -18,8 +18,10 @@ sends it (a PARAM_SET).
 Events of one time go by cause (:func:`_rank`): the vehicle's own first (what the controller stamped at that time
 came after the state that showed them), then the others' (the controller's acts, the relay's), then the vehicle's
 events caused by its controller (the change its PARAM_SET made, in lockstep at the step the controller stamped its
-PARAM_SET at), then the controller's answers. Until the forty-first session the vehicle's came first on every tie:
-its change before the controller's PARAM_SET that made it.
+PARAM_SET at), then the controller's answers; the vehicle's own events keep the order it said them in (one said
+after a caused one goes after it: a ground station's fence upload after the controller's ARM, both stamped at the
+step the flight waits at). Until the forty-first session the vehicle's came first on every tie: its change before
+the controller's PARAM_SET that made it.
 """
 
 from __future__ import annotations
@@ -45,10 +47,16 @@ def in_cause_order(reports: Sequence[tuple[Child, Report]], times: Sequence[floa
         if isinstance(r, Event) and child.name == "vehicle":
             first[r.kind], last[r.kind] = min(t, first.get(r.kind, math.inf)), max(t, last.get(r.kind, -math.inf))
     timed = []
+    caused_at: set[float] = set()  # the times of this read at which the vehicle said an event its controller caused
     for (child, r), t in zip(reports, times):
         if isinstance(r, Event) and child.name != "vehicle" and r.answers:
             t = max(t, *(max(vehicle_said.get(k, -math.inf), first.get(k, -math.inf)) for k in r.answers))
-        timed.append((t, _rank(child, r), child, r))
+        rank = _rank(child, r)
+        if rank == 2:
+            caused_at.add(t)
+        elif rank == 0 and t in caused_at:  # (said after one its controller caused: after it still)
+            rank = 2
+        timed.append((t, rank, child, r))
     for kind, t in last.items():
         vehicle_said[kind] = max(t, vehicle_said.get(kind, -math.inf))
     return [(child, report, t) for t, _, child, report in sorted(timed, key=lambda x: x[:2])]
@@ -57,7 +65,8 @@ def in_cause_order(reports: Sequence[tuple[Child, Report]], times: Sequence[floa
 def _rank(child: Child, report: Report) -> int:
     """Where ``report`` goes among its read's reports of its time (module docstring): 0 the vehicle's own, 1 the
     others' (the controller's acts), 2 the vehicle's caused by its controller (``by`` its link), 3 the controller's
-    answers."""
+    answers. The vehicle's events keep the order it said them in (:func:`in_cause_order` ranks one said after a
+    caused one 2 too: the vehicle's pipe is in the order things happened on it)."""
     if child.name == "vehicle":
         return 2 if isinstance(report, Event) and report.by is not None and report.by.link == CONTROLLER_LINK else 0
     return 3 if isinstance(report, Event) and report.answers else 1
