@@ -267,7 +267,7 @@ class Endpoint:
     def send_hot(self, layout: HotLayout, values: tuple[Any, ...], to: tuple[str, int] | None = None) -> bool:
         """Encode a hot-path message from its flat field values (see :class:`HotLayout`) and
         send it: the same bytes pymavlink would make, without a message object."""
-        return self.send_frame(self.encode_payload(layout, layout.struct.pack(*values)), to)
+        return self.send_frame(self.encode_hot(layout, values), to)
 
     def send_payload(self, layout: HotLayout, payload: bytes, to: tuple[str, int] | None = None) -> bool:
         """:meth:`send_hot` of values already packed (``layout.struct``'s bytes, trailing zeros and all)."""
