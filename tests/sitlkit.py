@@ -254,6 +254,15 @@ class Proc:
         """The first event whose :func:`shown` text satisfies ``pred``."""
         return self.wait_report(Event, lambda e: pred(shown(e)), timeout)
 
+    def ended(self, timeout: float = 30.0) -> int:
+        """The exit status of a process that ends itself (a refusal said, its exit under way): waited for, and only
+        after ``timeout`` stopped. :meth:`stop` at once could SIGTERM it between its last line and its exit (-15)."""
+        try:
+            self.p.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            pass
+        return self.stop()
+
     def stop(self, timeout: float = 5.0) -> int:
         """SIGTERM, wait (SIGKILL after ``timeout``), read what is left; the exit status."""
         if self.p.poll() is None:

@@ -27,6 +27,7 @@ from bridge.mavlink.endpoint import (
     Tlog,
     hot_frame,
     parse_address,
+    sweep,
     wait,
 )
 from bridge.mavlink.receive import RateLimiter, ReplyBudget
@@ -223,6 +224,47 @@ def test_wait_honours_its_deadline(tmp_path):
         a.close()
         b.close()
         tb.close()
+
+
+class _ReachedWhileSwept(Endpoint):
+    """A ground station's link reached by the sweep just after its controller's answer and its own HOLD came,
+    in that order, both after the sweep had read the controller's link: the moment a loaded machine can choose."""
+
+    def __init__(self, *args, before: list, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.before = before
+
+    def poll(self, until=None):
+        while self.before:
+            self.before.pop(0)()
+        return super().poll(until)
+
+
+def test_a_controllers_answer_sent_before_a_ground_stations_command_is_read_first():
+    """:func:`wait` reads the first endpoint (the controller's link) again when a later one (the ground station's)
+    yields, and hands out what reached the first meanwhile first. It read the HOLD alone, and the vehicle refused
+    the answer the HOLD came after as ``not_offboard`` (the CI's test_vehicle, once)."""
+    link = Endpoint(parse_address("udpin:127.0.0.1:0"), sysid=1, compid=1, priority=True)
+    ctl = Endpoint(parse_address(f"udpout:127.0.0.1:{link.local[1]}"), sysid=200, compid=191)
+    events: list = []
+    gcs = _ReachedWhileSwept(parse_address("udpin:127.0.0.1:0"), sysid=1, compid=1, before=events)
+    ground = Endpoint(parse_address(f"udpout:127.0.0.1:{gcs.local[1]}"), sysid=255, compid=190)
+    try:
+        ctl.send(mavlink.MAVLink_heartbeat_message(18, 8, 0, 0, 4, 3))
+        got = [m for _, m, _a in wait((link,), time.monotonic() + 5.0)]
+        link.peer = ctl.local
+        link.prioritise(ctl.local)  # as a vehicle does on its controller's first word
+        assert [m.get_type() for m in got] == ["HEARTBEAT"]
+        answer = mavlink.MAVLink_set_actuator_control_target_message(20000, 0, 1, 1, [0.0] * 8)
+        hold = mavlink.MAVLink_command_long_message(1, 1, 176, 0, 1, 4, 3, 0, 0, 0, 0)
+        events += [lambda: ctl.send(answer), lambda: ground.send(hold)]
+        got = wait((link, gcs), time.monotonic() + 5.0)
+        assert [(ep is link, m.get_type()) for ep, m, _a in got] == [
+            (True, "SET_ACTUATOR_CONTROL_TARGET"), (False, "COMMAND_LONG")]
+        assert sweep((link, gcs)) == []
+    finally:
+        for ep in (link, ctl, gcs, ground):
+            ep.close()
 
 
 def test_tlog_holds_both_directions_and_mavlogdump_reads_it(tmp_path):

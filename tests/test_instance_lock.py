@@ -63,7 +63,7 @@ def _flying(tmp_path: Path, mission: str) -> tuple[Proc, int]:
                       "--no-plots", cwd=ROOT)
         if p.wait_line(lambda s: s.startswith((UP, "bsst: --instance")), timeout=120).startswith(UP):
             return p, n
-        assert p.stop() == 2 and "in use" in p.lines[-1], p.lines[-5:]
+        assert p.ended() == 2 and "in use" in p.lines[-1], p.lines[-5:]
     raise AssertionError("no free instance from 2 to 9")
 
 
@@ -124,7 +124,7 @@ def test_a_vehicle_holds_its_instance_until_it_dies_even_by_sigkill(tmp_path: Pa
         line = v.wait_line(lambda s: isinstance(parse_line(s), Ready) or s.startswith("bsst:"), timeout=60)
         if isinstance(parse_line(line), Ready):
             break
-        assert v.stop() == 2 and "in use" in line, v.lines[-5:]
+        assert v.ended() == 2 and "in use" in line, v.lines[-5:]  # (stop() here: -15 once in the CI)
     else:
         raise AssertionError("no free instance from 2 to 9")
     try:

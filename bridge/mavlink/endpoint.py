@@ -459,7 +459,7 @@ def wait(endpoints: Sequence[Endpoint], deadline: float,
             ep = spinner.endpoint
             return [(ep, m, a) for m, a in got]
     while True:
-        out = [(ep, m, a) for ep in endpoints for m, a in ep.poll(deadline)]
+        out = sweep(endpoints, deadline)
         if out:
             return out
         left = deadline - mono()
@@ -471,3 +471,19 @@ def wait(endpoints: Sequence[Endpoint], deadline: float,
             select.select([ep.wake_socket for ep in endpoints], [], [], left)
         except InterruptedError:
             pass
+
+
+def sweep(endpoints: Sequence[Endpoint], deadline: float | None = None) -> list[tuple[Endpoint, Any, tuple[str, int]]]:
+    """One poll of every endpoint (:meth:`Endpoint.poll`), the messages of an earlier one first. When a later one
+    yields, the earlier ones are polled again, and what reached them meanwhile goes first: two datagrams on two
+    sockets have no order the reader can see, and the first endpoint is the one a step waits on (a controller's
+    answer sent before a ground station's HOLD was read after it, when the sweep passed the controller's link just
+    before the answer came, and was refused as ``not_offboard``)."""
+    out: list[tuple[Endpoint, Any, tuple[str, int]]] = []
+    for i, ep in enumerate(endpoints):
+        got = ep.poll(deadline)
+        if got and i:
+            for earlier in endpoints[:i]:
+                out.extend((earlier, m, a) for m, a in earlier.poll(deadline))
+        out.extend((ep, m, a) for m, a in got)
+    return out

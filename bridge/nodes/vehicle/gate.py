@@ -42,7 +42,7 @@ from typing import Any
 
 from bridge.link.radio import NEVER, RadioFile
 from bridge.link.turns import LEFT, TurnRadio
-from bridge.mavlink.endpoint import Endpoint
+from bridge.mavlink.endpoint import Endpoint, sweep
 from bridge.nodes.vehicle.clock import Clock, ClockState, Trigger
 from missions.fleet import clearance
 from params import ConfigError
@@ -362,7 +362,7 @@ class Gate:
     def wait(self, endpoints: Sequence[Endpoint], deadline: float) -> list[tuple[Endpoint, Any, tuple[str, int]]]:
         """Messages from the links, waiting at most until ``deadline`` (``time.monotonic``) or the gate's word."""
         self.poll()
-        out = [(ep, m, a) for ep in endpoints for m, a in ep.poll(deadline)]
+        out = sweep(endpoints, deadline)
         turn = self.turn_at is not None
         if out or (self.complete() and not turn):
             return out
@@ -376,7 +376,7 @@ class Gate:
             except InterruptedError:
                 pass
         self.poll()
-        return [(ep, m, a) for ep in endpoints for m, a in ep.poll(deadline)]
+        return sweep(endpoints, deadline)
 
     def stats(self) -> dict[str, Any]:
         """The shared clock as this vehicle saw it (its stats report's ``gate``)."""
