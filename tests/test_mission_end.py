@@ -228,3 +228,25 @@ def test_a_controller_alone_stopped_in_the_end_landing_says_aborted_exit_1(tmp_p
     assert (status, done.outcome, done.reason) == (1, "aborted", said), ctl.lines[-5:]
     assert f"bsst controller: aborted: {said}" in ctl.lines, ctl.lines[-5:]
     assert [e for e in ctl.events() if e.startswith("end: ")][-1].endswith(said), ctl.events()
+
+
+def test_a_landing_with_no_auto_disarm_is_as_asked_in_a_session(tmp_path: Path) -> None:
+    """``bsst sitl`` (lockstep) of a 2 s climb with ``COM_DISARM_LAND = -1`` (no auto-disarm: PX4 leaves the landed
+    vehicle armed): the end landing lands, the vehicle stays armed, as asked. The controller says so, after the
+    landing, and nothing on stderr; exit 0. Until the third wave's forty-second session the controller said "the
+    vehicle did not land and disarm after the mission", on stderr and as an event stamped at the mission's end,
+    before the landing it had seen."""
+    mission = tmp_path / "climb2.toml"
+    mission.write_text('name = "climb2"\nduration_s = 2.0\n[trajectory]\nkind = "sine"\namplitude = 0.0\n'
+                       "climb = 1.0\n[params]\nCOM_DISARM_LAND = -1\n")
+    with instance_slot() as n:
+        res = run_bsst("sitl", str(mission), "--instance", str(n), "--no-plots", "--out", str(tmp_path / "run"),
+                       cwd=ROOT, env=ENV, timeout=180)
+    assert res.returncode == 0 and "land and disarm" not in res.stderr, res.stderr
+    s = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert s["outcome"] == "completed" and s["end"]["disarmed"] is False and s["end"]["taken"] is True, s["end"]
+    [landed] = [e["t"] for e in s["events"] if e["kind"] == "landed"]
+    said = [e for e in s["events"] if e["kind"] == "end" and "as asked" in e["text"]]
+    assert [e["text"] for e in said] == ["the vehicle landed and stays armed, as asked (COM_DISARM_LAND = -1: no "
+                                         "auto-disarm)"], s["events"]
+    assert said[0]["t"] > landed and not [e for e in s["events"] if e["kind"] == "disarmed"], s["events"]

@@ -292,20 +292,27 @@ class Offboard(RealtimeFlying):
             self.end_unanswered = end_unanswered(self.flight.mission.end_action, why, time.monotonic() - self._last_rx)
             self.event("end", self.reason)
             return "completed"
+        stays = "stays armed (COM_DISARM_LAND <= 0)" if self.flight.params.land_disarm_s <= 0.0 else "disarms"
         self.event("end", "mission over: the vehicle holds its position" if hold else
-                   "mission over: the vehicle lands where it is and disarms on the ground", answers=("end",))
+                   f"mission over: the vehicle lands where it is and {stays} on the ground", answers=("end",))
         if not hold and not self._await_landing():
             if self.stopping and not self.reason:  # (a stop: _await_landing says no other reason)
                 self.reason = "interrupted (Ctrl-C or SIGTERM) in the mission's end landing: the vehicle still armed"
                 self.event("end", self.reason)
                 return "aborted"
             self.event("end", self.reason)
+        elif not hold and self.vehicle_armed:  # landed, COM_DISARM_LAND <= 0: armed on the ground is what was asked
+            self.event("end", f"the vehicle landed and stays armed, as asked (COM_DISARM_LAND = "
+                              f"{self.flight.params.land_disarm_s:g}: no auto-disarm)")
         return "completed"
 
     def _await_landing(self) -> bool:
         """Serve the link until the vehicle has disarmed on the ground (True), or :attr:`reason` says why not:
         silent, or not down within the descent's time at the failsafe's rate, COM_DISARM_LAND and 10 s (vehicle time:
-        lockstep counts the steps it clocks, whatever the pace; real time the wall clock)."""
+        lockstep counts the steps it clocks, whatever the pace; real time the wall clock). With COM_DISARM_LAND 0 or
+        less (no auto-disarm) a vehicle that landed (its EVENT LANDED since) and is still armed then is as asked
+        (True): the same time flown, so that its end rows stay offline's."""
+        keeps_armed, landed_before = self.flight.params.land_disarm_s <= 0.0, self.landed_at
         lockstep = self.cfg.clock == "lockstep"
         usec, t_end = self._end_usec, self.t_mission
         allowed_s = 10.0 + self.flight.failsafe.time_to_land_s(self._end_height_m) + max(
@@ -317,6 +324,8 @@ class Offboard(RealtimeFlying):
         while self.vehicle_armed and not self.stopping:
             now = time.monotonic()
             late = usec is not None and usec > last_usec if lockstep else now > deadline
+            if late and keeps_armed and self.landed_at != landed_before:  # on the ground, armed: as asked
+                break
             if late or now - self._last_rx > self.cfg.vehicle_timeout_s:
                 self.vehicle_silent = not late
                 self.reason = "the vehicle did not land and disarm after the mission" if late else \
@@ -333,7 +342,7 @@ class Offboard(RealtimeFlying):
         self._at_end_now()
         if lockstep and usec is not None and self._end_usec is not None:  # at the step it waits at now (a stop's
             self.t_mission = t_end + (usec - self._end_usec) / 1e6  # word was at the mission's end, before the landing)
-        return not self.vehicle_armed
+        return not self.vehicle_armed or (keeps_armed and self.landed_at != landed_before and not self.stopping)
 
     def _at_end_now(self) -> None:
         """After the mission's steps, events are at the time they happen, not at the last step's: in lockstep
