@@ -177,6 +177,9 @@ def test_divergence_exits_1_and_is_recorded(tmp_path: Path) -> None:
     res = bsst(far, "--out", out, "--no-plots")
     assert res.returncode == 1, res.stderr
     assert "Traceback" not in res.stderr
+    # why it exits 1, on stderr (bridge.record.asked.ended_text): until the third wave's forty-second session, nothing
+    assert res.stderr.splitlines() == ["bsst sim: diverged: ended by plant: diverged at t=3.632 s: position beyond "
+                                       "100 m"], res.stderr
     s = json.loads((out / "summary.json").read_text())
     assert s["outcome"] == "diverged"
     assert any(e["kind"] == "diverged" and "100 m" in e["text"] for e in s["events"])
@@ -186,6 +189,18 @@ def test_divergence_exits_1_and_is_recorded(tmp_path: Path) -> None:
     assert 0 < len(rows) < 30 * 250
     last_x = float(rows[-1][1])
     assert 90.0 < last_x <= 100.5
+
+
+def test_a_failsafe_exits_1_saying_why(tmp_path: Path) -> None:
+    """A 4 s sine whose up link is blacked out from 1 s: the vehicle's offboard-loss failsafe takes over 0.5 s later
+    (every policy holds). Exit 1, and stderr says why in one line, as the summary's ``ended_by`` says it; until the
+    third wave's forty-second session ``bsst sim`` exited 1 with nothing on stderr."""
+    mission = short_sine(tmp_path)
+    mission.write_text(mission.read_text() + "\n[link]\nblackouts = [[1.0, 10.0]]\n")
+    res = bsst(mission, "--out", tmp_path / "run", "--no-plots")
+    assert res.returncode == 1 and "Traceback" not in res.stderr, res.stderr
+    assert res.stderr.splitlines() == ["bsst sim: failsafe: ended by vehicle: failsafe at t=1.500 s: no actuator "
+                                       "target for 0.504 s: level and descend"], res.stderr
 
 
 def test_a_reader_that_stops_early_costs_no_traceback_nor_the_exit_status(tmp_path):

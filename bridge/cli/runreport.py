@@ -16,7 +16,7 @@ import sys
 from typing import Any
 
 from bridge.cli.flags import EXIT_FAILED, EXIT_OK
-from bridge.record.asked import not_as_asked
+from bridge.record.asked import ended_text, not_as_asked
 
 EVENTS_SHOWN = 16  # events a run's printed summary lists (all of summary.json's beyond: its first 6 and last 10)
 SHOWN_PAIRS = 12  # pairs a fleet's printed summary lists, its closest (summary.json has every pair)
@@ -87,10 +87,9 @@ def report_fleet(run: Any, command: str) -> int:
                     "; the flights went on: found afterwards, one of them in its failsafe's landing, flown alone"
                     if s["clock"] == "offline" else
                     "; the flights went on: found afterwards, one of them flying on the wall clock")
-            eb = v.get("ended_by") or {}
-            said = (f" (touched vehicle {c['with']} at step {c['step']}, t={c['t']:.3f} s{went})" if c
-                    else f": ended by {eb['who']}: {eb['how']}" if eb else "")
-            print(f"bsst {command}: vehicle {v['id']}: {v['outcome']}{said}", file=sys.stderr)
+            said = (f"{v['outcome']} (touched vehicle {c['with']} at step {c['step']}, t={c['t']:.3f} s{went})" if c
+                    else ended_text(v))
+            print(f"bsst {command}: vehicle {v['id']}: {said}", file=sys.stderr)
     for v, r in zip(s["vehicles"], run.runs, strict=True):  # as one vehicle's run names them (its policies: below)
         for why in not_as_asked(r.summary):
             print(f"bsst {command}: vehicle {v['id']}: {why}", file=sys.stderr)
@@ -125,9 +124,9 @@ def report_run(run: Any, command: str) -> int:
         sys.stdout.flush()
     except BrokenPipeError:  # stdout closed early (bsst sim ... | head): the run is on disk, its status stands
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-    eb = run.summary.get("ended_by") or {}
-    if eb.get("who") == "user":  # a stop (Ctrl-C, SIGTERM): named here too, as every exit-1 reason is
-        print(f"bsst {command}: {run.summary['outcome']}: ended by user: {eb['how']}", file=sys.stderr)
+    ended = ended_text(run.summary)
+    if ended is not None:  # a failsafe, a divergence, a stop (Ctrl-C, SIGTERM), ...: named, as every exit-1 reason is
+        print(f"bsst {command}: {ended}", file=sys.stderr)
     for why in not_as_asked(run.summary):
         print(f"bsst {command}: {why}", file=sys.stderr)
     for v in run.summary.get("policies") or []:

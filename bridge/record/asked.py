@@ -4,8 +4,9 @@ fleet's vehicle, ``bsst controller`` alone).
 In:  a run's ``summary.json`` as a dict (one vehicle's), or the blocks of it a process alone knows (``bsst
      controller``: ``param_at``, ``end``, ``timing.stalls``): ``lockstep``, ``interventions``, ``param_at``, ``end``
      (:mod:`bridge.record.ending`), ``timing.stalls`` (t s, ms)
-Out: :func:`not_as_asked`: one line each, ``not flown as asked: ...`` (or ``not a lockstep run: ...``); any one
-     of them makes the exit status 1
+Out: :func:`ended_text`: why a flight ended before its mission did (its outcome, who ended it and how: ``failsafe:
+     ended by vehicle: ...``); :func:`not_as_asked`: one line each, ``not flown as asked: ...`` (or ``not a lockstep
+     run: ...``); any one of them makes the exit status 1
 
 Split out of :mod:`bridge.cli.runreport` (which prints a run's summary) so that ``bsst controller``, below the CLI,
 says it in the same words.
@@ -14,6 +15,17 @@ says it in the same words.
 from __future__ import annotations
 
 from typing import Any
+
+
+def ended_text(s: dict[str, Any]) -> str | None:
+    """Why a run (one vehicle's: its ``outcome`` and ``ended_by``) ended before its mission did, as its summary says it
+    (``diverged: ended by plant: diverged at t=3.632 s: position beyond 100 m``); None when it completed (exit 1
+    otherwise: a failsafe, a divergence, a crash, a stop, ...)."""
+    outcome = s.get("outcome")
+    if outcome in (None, "completed"):
+        return None
+    eb = s.get("ended_by") or {}
+    return f"{outcome}: ended by {eb['who']}: {eb['how']}" if eb else str(outcome)
 
 
 def not_as_asked(s: dict[str, Any]) -> list[str]:
