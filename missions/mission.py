@@ -99,11 +99,11 @@ class Mission:
     rally: tuple[tuple[float, float], ...] = ()  # [rally] points (x, y m), or a plan's rallyPoints: missions.rally
 
     def __post_init__(self) -> None:
+        check_fields(self)  # first: its source, which every error names
         why = name_problem(self.name)
         if why:
             raise ConfigError(f"{self.source}: name: {why}")
         check_timing(self.duration_s, self.rate_hz, self.physics_hz, self.source)
-        check_fields(self)
         object.__setattr__(self, "start", tuple(map(float, self.start)))  # an array's, numpy's numbers: a file's
         why = law_spec_problem(self.controller)
         if why:
@@ -397,7 +397,11 @@ def check_fields(m: Mission) -> None:
     ``start.psi``, ``trajectory.psi``, ``trajectory.setpoints[0].t``; a point's time may be past ``duration_s``, never
     past the longest mission's): a trajectory of the kinds a file writes
     (:class:`Sine`, :class:`Step`, :class:`Waypoints`), the raw tables (a mapping each) and ``events``. A smooth
-    trajectory (a plan's, checked as it is planned) and a caller's own reference are taken as given."""
+    trajectory (a plan's, checked as it is planned) and a caller's own reference are taken as given. ``source``
+    first: every error names it (a string: the file, or ``<python>``)."""
+    if not isinstance(m.source, str):
+        raise ConfigError(f"<python>: source: expected a string (the mission's file, or '<python>': its errors name "
+                          f"it), got {show(m.source)}")
     top = Table(_plain({"seed": m.seed, "profile": m.profile, "actuation": "" if m.actuation is None else m.actuation}),
                 m.source)
     _seed_of(top)

@@ -104,6 +104,8 @@ def test_a_list_of_points_may_turn_on_one_turn_at_a_time_from_python_too() -> No
      "trajectory: expected a reference (Sine, Step, Waypoints, or an object with sample, change_times and to_dict: "
      "missions.references.Reference), got 3"),
     (lambda: Mission(Sine(), duration_s=1.0, link=3), "link: expected a table (a mapping), got 3"),  # type: ignore
+    (lambda: Mission(Sine(), duration_s=1.0, source=3),  # type: ignore[arg-type]
+     "source: expected a string (the mission's file, or '<python>': its errors name it), got 3"),
     (lambda: Mission(Sine(), duration_s=1.0, actuation="rotors"),
      "actuation: must be one of '', wrench, motors; got 'rotors'"),
     (lambda: Mission(Sine(), duration_s=1.0, profile=3), "profile: expected a string, got 3"),  # type: ignore
@@ -121,9 +123,11 @@ def test_what_a_file_refuses_is_refused_from_python_naming_the_field(make, said:
     """Each was taken, then failed deep inside with a TypeError or AttributeError naming no field (text in a sine:
     the law's ``unsupported operand type(s) for -``; a set-point's text: the envelope's ``can't multiply sequence``;
     ``link=3``: ``'int' object has no attribute 'items'``; ``vehicles=3``: ``'int' object is not iterable``;
-    ``geofence=3`` once flown: ``'int' object has no attribute 'first_breach'``), or flew (omega 1000 rad/s, a nan
-    z0, a time of -1 s, ``rally=3``, a rally point ``(1.0,)``), or failed once flown naming no field (``actuation
-    must be one of wrench, motors; got 'rotors'``) or the wrong one (``profile: unknown profile '3'``)."""
+    ``geofence=3`` once flown: ``'int' object has no attribute 'first_breach'``; ``source=3`` once flown, until the
+    third wave's forty-second session: pathlib's ``expected str, bytes or os.PathLike object, not int``), or flew
+    (omega 1000 rad/s, a nan z0, a time of -1 s, ``rally=3``, a rally point ``(1.0,)``), or failed once flown naming
+    no field (``actuation must be one of wrench, motors; got 'rotors'``) or the wrong one (``profile: unknown profile
+    '3'``)."""
     with pytest.raises(ConfigError) as e:
         make()
     assert str(e.value) == f"<python>: {said}"
