@@ -8,7 +8,8 @@ Out: the text on one line: every run of whitespace (line breaks, tabs) one space
      to ``cap``, ending ``...``; the number (:func:`number`, :func:`whole`), ValueError if it is none; the word it
      likely misspells (:func:`likely`, :func:`is_typo_of`), or None; what an unknown key's refusal adds
      (:func:`unknown_key_hint`: the key meant, where a PX4 parameter goes, else the keys allowed; :func:`meant_hint`,
-     the first two alone: a vehicle parameter's name)
+     the first two alone: a vehicle parameter's name); a name a user gave, quoted and shortened (:func:`quoted`,
+     :func:`shown_name`)
 
 (Apart from ``params/__init__.py``, which re-exports the misspelling's two, and was at its 500 lines.)
 """
@@ -29,6 +30,28 @@ def one_line(text: str, cap: int = ONE_LINE_MAX) -> str:
     array's repr spans several."""
     flat = " ".join(text.split())
     return flat if len(flat) <= cap else flat[:cap - 3] + "..."
+
+
+NAME_SHOWN_MAX = 60  # characters of a name a user gave (a parameter's) a message shows whole
+
+
+def quoted(text: str) -> str:
+    """``text`` a user gave, quoted in a message (its repr: one line, where it ends plain); one of over
+    :data:`NAME_SHOWN_MAX` characters by its first ones, ``…`` and its length (a 3000-character name was echoed
+    whole)."""
+    if len(text) <= NAME_SHOWN_MAX:
+        return repr(text)
+    return f"{text[:NAME_SHOWN_MAX]!r}… ({len(text)} characters)"
+
+
+def shown_name(name: object) -> str:
+    """A name a user gave (a vehicle parameter's) before a refusal's ``: why``: as it is when plainly a name
+    (printable, no ``: ``, ``=`` or quote, no space at its ends), else :func:`quoted` (``'A: B': no such
+    parameter``: it was ``A: B: no such parameter``, and ``--param``'s Python path cut it to ``B: ...``)."""
+    text = str(name)
+    plain = (text.isprintable() and text == text.strip() and ": " not in text and not any(c in text for c in "='\"")
+             and 0 < len(text) <= NAME_SHOWN_MAX)
+    return text if plain else quoted(text)
 
 
 def number(text: str) -> float:

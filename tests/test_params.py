@@ -58,6 +58,7 @@ from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
 from missions import Mission, Sine
 from params import ConfigError
+from params.text import quoted
 from tests.sitlkit import ENV, ROOT, Bsst, Proc, clean_exit, run_bsst
 from tests.test_await_mission import _small_plan_items, _upload
 
@@ -174,6 +175,22 @@ def test_a_missions_params_table_and_the_flags_are_checked_and_ordered(tmp_path)
 def test_bad_parameter_flags_are_one_line_exit_2(args, says):
     r = run_bsst("sim", "missions/sine.toml", *args, cwd=ROOT, timeout=60)
     assert r.returncode == 2 and says in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+
+
+@pytest.mark.parametrize("name, shown", [("A: B", "'A: B'"), ("X" * 3000, "'" + "X" * 60 + "'… (3000 characters)")],
+                         ids=["colon", "long"])
+def test_an_unknown_params_name_is_quoted_whole_and_a_long_one_shortened(name: str, shown: str) -> None:
+    """``--param 'A: B=1'`` and ``params={"A: B": 1}``: the name quoted, whole (a user's tour: ``A: B: no such
+    parameter``, and from Python its ``: `` taken for the message's own, cut to ``--param A: B=1: B: no such
+    parameter``); a 3000-character name by its first 60 characters and its length (it was echoed whole, twice on
+    the command line)."""
+    r = run_bsst("sim", "missions/sine.toml", "--param", f"{name}=1", cwd=ROOT, timeout=60)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr[:500]
+    assert f": {shown}: no such parameter; the vehicle has " in r.stderr and len(r.stderr) < 1000, r.stderr[:500]
+    with pytest.raises(ConfigError) as e:
+        simulate(Mission(Sine(), duration_s=1.0), params={name: 1}, plots=False)
+    said = str(e.value)
+    assert said.startswith(f"--param {shown}=1: no such parameter; the vehicle has ") and len(said) < 1000, said[:500]
 
 
 def test_the_offboard_loss_parameter_flies_the_failsafe_action_it_names():
@@ -705,7 +722,7 @@ def test_a_flags_number_past_the_float_range_is_out_of_range_not_inf(name, says)
         for flag, given in (("--param", f"{name}={text}"), ("--param-at", f"5:{name}={text}")):
             with pytest.raises(argparse.ArgumentTypeError) as err:
                 param_assignment(flag, timed=flag == "--param-at")(given)
-            assert str(err.value) == f"{flag} {given!r}: {name}: {says}, got {got}"
+            assert str(err.value) == f"{flag} {quoted(given)}: {name}: {says}, got {got}"  # (a long one shortened)
     with pytest.raises(argparse.ArgumentTypeError, match=r": (must be finite|an INT32, .*), got inf$"):
         param_assignment("--param")(f"{name}=inf")
     r = _bsst("sim", "missions/sine.toml", "--param", f"{name}={PAST_FLOAT[0][0]}")

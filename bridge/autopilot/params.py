@@ -42,7 +42,7 @@ from bridge.autopilot.failsafe import FAILSAFE_RANGES, FailsafeConfig
 from bridge.autopilot.positionloss import NOAID_TIMEOUT_RANGE_US, NOAID_TIMEOUT_US
 from bridge.autopilot.returnland import LAND_RANGES, RETURN_RANGES, ReturnConfig
 from params import ConfigError, Table, finite_float, show
-from params.text import meant_hint, number, whole
+from params.text import meant_hint, number, quoted, shown_name, whole
 
 REAL32 = "REAL32"
 INT32 = "INT32"
@@ -375,8 +375,8 @@ def apply_params(start: VehicleParams, entries: Iterable[tuple[str, Any]], prefi
             if spec is None:
                 raise ParamRefused(f"{name}: {no_such_param(name)}", Refusal.UNKNOWN)
             after = change_param(p, name, typed_value(spec, value), running=False)
-        except ParamRefused as exc:
-            raise ConfigError(f"{prefix}{where(name, value)}: {str(exc).split(': ', 1)[1]}") from None
+        except ParamRefused as exc:  # (its text "NAME: why": the name's own ": " is no end of it)
+            raise ConfigError(f"{prefix}{where(name, value)}: {str(exc).removeprefix(f'{name}: ')}") from None
         key = spec.failsafe_key
         if key is not None:
             other = by_setting.get(key)
@@ -401,10 +401,10 @@ def parse_assignment(text: str) -> tuple[str, float]:
     name, sep, value = text.partition("=")
     name = name.strip()
     if not sep or not name:
-        raise ConfigError(f"expected NAME=VALUE, got {text!r}")
+        raise ConfigError(f"expected NAME=VALUE, got {quoted(text)}")
     spec = BY_NAME.get(name)
     if spec is None:
-        raise ConfigError(f"{name}: {no_such_param(name)}")
+        raise ConfigError(f"{shown_name(name)}: {no_such_param(name)}")
     for parse in ((whole, number) if spec.kind == INT32 else (number,)):
         try:
             got = parse(value)
@@ -462,11 +462,11 @@ def parse_change(text: str) -> ParamChange:
     """``T:NAME=VALUE`` (``--param-at``) as a :class:`ParamChange`; ConfigError saying what is wrong."""
     t, sep, rest = text.partition(":")
     if not sep:
-        raise ConfigError(f"expected T:NAME=VALUE (T in s of mission time), got {text!r}")
+        raise ConfigError(f"expected T:NAME=VALUE (T in s of mission time), got {quoted(text)}")
     try:
         t_s = float(t)
     except ValueError:
-        raise ConfigError(f"expected T:NAME=VALUE, T a number of seconds, got {t.strip()!r}") from None
+        raise ConfigError(f"expected T:NAME=VALUE, T a number of seconds, got {quoted(t.strip())}") from None
     name, value = parse_assignment(rest)
     return ParamChange(t_s, name, value)
 

@@ -308,15 +308,16 @@ def param_assignment(flag: str, timed: bool = False) -> Callable[[str], Any]:
     def conv(text: str) -> Any:
         from bridge.autopilot.params import BY_NAME, parse_assignment, parse_change, value_problem  # lazy: start-up
         from params import ConfigError  # lazy: start-up time
+        from params.text import quoted  # lazy: start-up time
 
         try:
             got = parse_change(text) if timed else parse_assignment(text)
         except ConfigError as exc:
-            raise argparse.ArgumentTypeError(f"{flag} {text!r}: {exc}") from None
+            raise argparse.ArgumentTypeError(f"{flag} {quoted(text)}: {exc}") from None
         name, value = (got.name, got.value) if timed else got
         why = value_problem(BY_NAME[name], value)
         if why:
-            raise argparse.ArgumentTypeError(f"{flag} {text!r}: {why}")
+            raise argparse.ArgumentTypeError(f"{flag} {quoted(text)}: {why}")
         return got
 
     return conv

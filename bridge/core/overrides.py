@@ -24,6 +24,7 @@ from bridge.link.model import absolute_link_paths, merge_link_tables
 from missions import Mission
 from missions.mission import law_spec_from
 from params import ConfigError
+from params.text import shown_name
 from plant.events import AT_KEY, event_given, event_table_from_flag
 
 
@@ -104,7 +105,8 @@ class Overrides:
             if v is not None:  # a copy: a caller's later change to its dict changes nothing here
                 object.__setattr__(self, f, dict(v))
         if self.params:  # each as its parameter's type (an INT32 an int), checked, named as the flag
-            apply_params(VehicleParams(), self.params.items(), "", lambda name, value: f"--param {name}={value}")
+            apply_params(VehicleParams(), self.params.items(), "",
+                         lambda name, value: f"--param {shown_name(name)}={value}")
             object.__setattr__(self, "params", {n: typed_value(BY_NAME[n], v) for n, v in self.params.items()})
         _not_alone("param_at", self.param_at, (str, ParamChange), "ParamChange(t_s, name, value) entries")
         changes = tuple(self.param_at)
