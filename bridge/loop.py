@@ -71,6 +71,12 @@ class StopAfterRecord(KeyboardInterrupt):
         self.run = run
 
 
+def recorded_run(stop: KeyboardInterrupt) -> Run | None:
+    """The run a stop carries: its flight's, recorded whole (:class:`StopAfterRecord`), or None (a plain stop: its
+    flight not started yet, or stopped within its first step, nothing recorded)."""
+    return stop.run if isinstance(stop, StopAfterRecord) else None
+
+
 @dataclass(frozen=True)
 class Alone:
     """A period the vehicle flew alone, told nothing: a failsafe's landing still going at the mission's end

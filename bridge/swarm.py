@@ -39,7 +39,7 @@ from bridge.core.overrides import Overrides
 from bridge.link.model import merge_link_tables
 from bridge.link.radio import Radio
 from bridge.link.turns import TURNS, turn_order
-from bridge.loop import Alone, Step, StopAfterRecord, flying
+from bridge.loop import Alone, Step, flying, recorded_run
 from bridge.loop import simulate as simulate_one
 from bridge.record.policies import run_ok
 from bridge.record.runlog import (
@@ -276,7 +276,8 @@ def _fly_together(steps: list[Generator[Step, str | None, Run]], starts: list[Se
                   rate: float, watch: Watch) -> tuple[list[Run], Untold, bool]:
     """Step every vehicle's flight once a control step until all have ended; judge the world after each step (a
     vehicle flying alone, :class:`~bridge.loop.Alone`, judged but told nothing: :class:`Untold`). A stop ends every
-    flight (each recorded); True if no flight took it (it came as the last were judged: :class:`StopAfterRecord`)."""
+    flight (each recorded); True if no flight took it (it came as the last were judged:
+    :func:`bridge.loop.recorded_run`)."""
     n = len(steps)
     runs: list[Run | None] = [None] * n
     positions: list[Sequence[float]] = list(starts)
@@ -304,7 +305,7 @@ def _fly_together(steps: list[Generator[Step, str | None, Run]], starts: list[Se
                 except KeyboardInterrupt as stop:
                     if getgeneratorstate(steps[i]) == GEN_CLOSED:  # raised by the flight: recorded (a stop held as
                         live.remove(i)  # it was judged: its run kept) or not started yet (none)
-                        runs[i] = stop.run if isinstance(stop, StopAfterRecord) else None
+                        runs[i] = recorded_run(stop)
                     raise
             k += 1
             for a, b, why in untold.told(k, watch.check(k / rate, positions)):
@@ -318,8 +319,7 @@ def _fly_together(steps: list[Generator[Step, str | None, Run]], starts: list[Se
             except StopIteration as done:
                 runs[i] = done.value
             except KeyboardInterrupt as again:  # another stop as it was judged (its run kept), or not started yet
-                runs[i] = again.run if isinstance(again, StopAfterRecord) else None  # (interrupted within the
-                # first step: nothing recorded)
+                runs[i] = recorded_run(again)  # (interrupted within the first step: nothing recorded)
         if any(r is None for r in runs):
             raise
         # taken by a flight (aborted) it is the fleet's end; else it came as the last flights were judged (each

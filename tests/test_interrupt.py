@@ -22,6 +22,8 @@ from pathlib import Path
 import pytest
 
 from bridge.core.interrupt import sigint_futures
+from bridge.loop import StopAfterRecord, recorded_run
+from bridge.record.runlog import Run
 from tests.sitlkit import Proc, csv_rows
 from tests.waiting import wait_for
 
@@ -525,6 +527,14 @@ def test_a_stop_while_a_fleets_flight_is_judged_keeps_the_fleets_record(tmp_path
             assert csv_rows(out / f"vehicle-{v}" / "trace.csv") == 500
     finally:
         proc.stop()
+
+
+def test_a_stop_carries_its_flights_run_only_when_held_until_it_was_recorded() -> None:
+    """The one reading of a stop a fleet's flight raised (bridge.loop.recorded_run), said twice in
+    bridge.swarm._fly_together until the third wave's forty-second session: a stop held as the flight was judged
+    carries its run (recorded whole), a plain one none (nothing recorded). The fleet's stops: the test above."""
+    run = Run({}, {"outcome": "completed"}, None)
+    assert recorded_run(StopAfterRecord(run)) is run and recorded_run(KeyboardInterrupt()) is None
 
 
 def test_a_ctrl_c_to_the_group_is_one_stop_for_a_watched_flight(tmp_path) -> None:
