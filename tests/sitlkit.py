@@ -23,6 +23,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Literal, TypeVar
 
+import numpy as np
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
@@ -421,6 +422,26 @@ def stall_blackouts(stalls: dict[str, Any], duration_s: float) -> list[list[floa
         else:
             merged.append([lo, hi])
     return [[round(lo, 3), round(min(hi, duration_s) - lo, 3)] for lo, hi in merged if lo < duration_s]
+
+
+def trace_blackouts(trace: dict[str, Any], rate_hz: float) -> list[list[float]]:
+    """The outages a real-time run flew, from its trace, as ``[link] blackouts`` (``[[t_s, duration_s], ...]``) that
+    fly them offline: each control tick whose state no command in force ever answered (a row's ``t -
+    state_age_s``), lost. It takes what :func:`stall_blackouts` models (a stall's outage) at the length the run had
+    it (a catch-up the loaded machine slowed; a tick the controller skipped for waking late) and nothing else: a
+    command the vehicle flew that its controller never sent shows in the RMS, not here."""
+    period = 1.0 / rate_hz
+    t = np.asarray(trace["t"], dtype=float)
+    answered = set(np.rint((t - np.asarray(trace["state_age_s"], dtype=float)) * rate_hz).astype(int).tolist())
+    out: list[list[float]] = []
+    for j in range(int(round(t[-1] * rate_hz)) - 1 if len(t) else 0):
+        if j in answered:
+            continue
+        if out and abs(out[-1][0] + out[-1][1] - (j - 0.5) * period) < 1e-9:
+            out[-1][1] += period
+        else:
+            out.append([(j - 0.5) * period, period])
+    return [[round(a, 6), round(d, 6)] for a, d in out]
 
 
 def child_pids(run: Path) -> dict[str, int]:
