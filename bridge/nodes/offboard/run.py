@@ -61,6 +61,7 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
               node.vehicle_silent))
     if outcome != "completed":
         sys.stderr.write(f"bsst controller: {outcome}" + (f": {node.reason}" if node.reason else "") + "\n")
+        sys.stderr.writelines(f"bsst controller: the vehicle warned: {text}\n" for text in node.vehicle_warned)
     elif left:
         sys.stderr.write(f"bsst controller: completed, but not in lockstep: said by {node.left_lockstep}\n")
     # what it alone knows of sitl's "not flown as asked" (bridge.record.asked), said in the same words: a scheduled

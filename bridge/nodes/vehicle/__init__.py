@@ -73,14 +73,16 @@ Its parts, as PX4 splits an autopilot:
 - :mod:`.streaming`     the vehicle's view for its messages, each link's streams sent when due, its load
 - :mod:`.rows`          ``vehicle.bin``
 - :mod:`.config`        :class:`VehicleConfig`
-- :mod:`.node`          :class:`Vehicle`, which wires the parts to the links, and :func:`run_vehicle`
+- :mod:`.node`          :class:`Vehicle`, which wires the parts to the links
+- :mod:`.run`           :func:`run_vehicle`: ``bsst vehicle``
 """
 
 from bridge.nodes.vehicle.clock import TRANSITIONS, Clock, ClockState, IllegalTransition, Trigger
 from bridge.nodes.vehicle.commander import OFFBOARD_STREAM_S
 from bridge.nodes.vehicle.config import CLOCKS, VehicleConfig
-from bridge.nodes.vehicle.node import Vehicle, run_vehicle
+from bridge.nodes.vehicle.node import Vehicle
 from bridge.nodes.vehicle.rows import MODE_CODES
+from bridge.nodes.vehicle.run import run_vehicle
 from bridge.nodes.vehicle.streams import DEFAULT_STREAMS, STREAMS, StreamTable, odometry_covariance
 
 __all__ = [

@@ -1,4 +1,4 @@
-"""The simulated vehicle's node: :class:`Vehicle` wires its parts to two UDP links; ``bsst vehicle``.
+"""The simulated vehicle's node: :class:`Vehicle` wires its parts to two UDP links (``bsst vehicle``: :mod:`.run`).
 
 In:  datagrams on the controller link (``--listen``) and the GCS link (``--gcs``): actuator targets
      stamped with the ``time_usec`` (us) of the state they answer, the no-target acknowledgement,
@@ -16,7 +16,6 @@ wall-clock housekeeping.
 
 from __future__ import annotations
 
-import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -30,7 +29,6 @@ from bridge.link.ends import VehicleEnd
 from bridge.link.turns import TurnRadio
 from bridge.mavlink.endpoint import Spinner, Tlog, wait
 from bridge.mavlink.receive import Rejections
-from bridge.nodes.process import on_stop_signals, report_printer
 from bridge.nodes.report import Ready, Refused, Report, Stats
 from bridge.nodes.vehicle.announcer import Announcer
 from bridge.nodes.vehicle.authority import COMMANDS, Authority
@@ -46,9 +44,7 @@ from bridge.nodes.vehicle.rows import Rows
 from bridge.nodes.vehicle.streaming import Streaming
 from bridge.nodes.vehicle.streams import HEARTBEAT_S, OdometryOut, StatusTexts
 from bridge.nodes.vehicle.targets import Targets
-from bridge.nodes.vehicle.verdict import flights_not_ended_well
 from bridge.record.metrics import plant_blocks
-from bridge.record.runlog import side_dir
 
 HOUSEKEEPING_S = 0.02  # s of wall time between looks at the GCS socket, streams, file flushes
 RESEND_S = 0.05  # lockstep: resend the state nobody answered (a datagram can be dropped)
@@ -109,7 +105,8 @@ class Vehicle:
             self.vend.held = []
             self._first_answers_s = max(SILENT_S, cfg.lost_after_s)
         self.odometry = OdometryOut(self.link, self.sim, self.rate, flight.estimator, flight.wire()[0])
-        self.targets = Targets(self.sim, self.clock, self.authority, self.rate, self.actuation, self._reject)
+        self.targets = Targets(self.sim, self.clock, self.authority, self.rate, self.actuation, self._reject,
+                               flight.profile.name)
         self._statustext = StatusTexts()
         self.params = ParamService(self.sim, self.authority, self._statustext, self._reject, self._refused,
                                    lambda: self.announcer.report_events())  # (a change's line before its echo)
@@ -436,6 +433,8 @@ class Vehicle:
             self._next_heartbeat = now + HEARTBEAT_S
             self.announcer.beat()
             self.streaming.measure_load(now)
+        if self.targets.mismatch.due():  # the controller flies the other actuation: said once, in words, first
+            self.announcer.to_links(self._statustext(mavlink.MAV_SEVERITY_WARNING, self.targets.mismatch.text))
         refused = self.rejected.report(now)  # once per second while the receive path refuses anything
         if refused is not None:
             warning = mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_WARNING, refused.encode())
@@ -483,17 +482,3 @@ class Vehicle:
         lockstep; on the wall clock it runs on between physics steps. Never 0: a TIMESYNC with
         tc1 = 0 is a request, not an answer."""
         return max(int(self.clock.time_s(time.monotonic(), self.t) * 1e9), 1)
-
-
-def run_vehicle(flight: Flight, cfg: VehicleConfig, out: str | Path | None = None, overwrite: bool = False) -> int:
-    """``bsst vehicle``: serve until SIGTERM or SIGINT; its reports on stdout (JSON lines); exit status 0, or 1 for
-    a flight that did not end well, each said on stderr (:mod:`bridge.nodes.vehicle.verdict`)."""
-    path = side_dir(out, ("vehicle.tlog", "vehicle.bin"), overwrite) if out is not None else None
-    v = Vehicle(flight, cfg, path, report_printer())
-    on_stop_signals(v.stop)
-    v.run()
-    v.report_stats()
-    said = flights_not_ended_well(v.sim.events)
-    sys.stderr.writelines(f"bsst vehicle: {why}\n" for why in said)
-    return 1 if said else 0
-

@@ -8,7 +8,9 @@ Out: in a lockstep flight the answer of step k held by the :class:`~bridge.nodes
      (:class:`~bridge.nodes.vehicle.clock.Answer`); on the wall clock the target applied to the
      :class:`SimVehicle` at once; refusals counted (``sender``, ``message``, ``group``, ``target``,
      ``not_offboard``, a wire problem, ``reordered``, ``repeated``, ``stale``, ``future``); in lockstep the answers
-     that are expected but not flown, counted apart (``answered_again``, ``answered_wall_clock``)
+     that are expected but not flown, counted apart (``answered_again``, ``answered_wall_clock``); the
+     controller's targets of the other actuation mode (a ``--profile`` that differs), said in words once
+     (:class:`ActuationMismatch`)
 """
 
 from __future__ import annotations
@@ -27,19 +29,47 @@ from bridge.nodes.vehicle.authority import Authority
 from bridge.nodes.vehicle.clock import Answer, Clock, ClockState
 
 Applied = tuple[int, tuple[float, ...], float]  # (the step it answered, wire, wall time received)
+MESSAGES = {"motors": "HIL_ACTUATOR_CONTROLS", "wrench": "SET_ACTUATOR_CONTROL_TARGET"}  # each actuation's target
+
+
+class ActuationMismatch:
+    """The controller's targets refused for the other actuation mode (``message``): its profile is not the
+    vehicle's. The count says only ``message N``; this says, once, what differs and what to do."""
+
+    def __init__(self, actuation: str, profile: str) -> None:
+        self.actuation = actuation
+        self.profile = profile
+        self.refused = 0
+        self.text = ""
+        self._said = False
+
+    def note(self, sent: str) -> None:
+        """A target of ``sent`` (its message's name) refused for the other actuation mode."""
+        self.refused += 1
+        if not self.text:
+            self.text = (f"actuation: the controller sends {sent}; this vehicle (profile {self.profile}) flies "
+                         f"{self.actuation} ({MESSAGES[self.actuation]}): refused; fly both with one --profile")
+
+    def due(self) -> bool:
+        """True once, when there is something to say (then said)."""
+        if self._said or not self.text:
+            return False
+        self._said = True
+        return True
 
 
 class Targets:
     """Checks the controller's answers and hands them to the clock (lockstep) or the vehicle (wall clock)."""
 
     def __init__(self, sim: SimVehicle, clock: Clock, authority: Authority, rate_hz: float, actuation: str,
-                 reject: Callable[[str], None]) -> None:
+                 reject: Callable[[str], None], profile: str = "") -> None:
         self.sim = sim
         self.clock = clock
         self.authority = authority
         self.rate = rate_hz
         self.actuation = actuation
         self._reject = reject
+        self.mismatch = ActuationMismatch(actuation, profile)
         self.applied: Applied | None = None  # the target in force
         self.accepted = 0
         self.new_steps = 0  # accepted targets of a step newer than any before (vehicle.bin's ``cmd_arrived``)
@@ -75,9 +105,11 @@ class Targets:
             if not m.mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED:
                 return self._no_target(m, k)
             if self.actuation != "motors":
+                self.mismatch.note(kind)
                 return self._reject("message")
         else:
             if self.actuation != "wrench":
+                self.mismatch.note(kind)
                 return self._reject("message")
             if m.group_mlx != 0:
                 return self._reject("group")
