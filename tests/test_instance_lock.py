@@ -14,12 +14,14 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import threading
 from pathlib import Path
 
 import pytest
 
 from bridge.nodes.report import Ready, parse_line
-from bridge.session import hold_instances, sitl
+from bridge.record.halves import count_records
+from bridge.session import hold_instances, instance_slot, sitl
 from bridge.session.children import lock_holder_in
 from params import ConfigError
 from tests.sitlkit import ROOT, Proc, run_bsst
@@ -157,3 +159,33 @@ def test_the_lock_holder_is_found_on_its_inode_where_the_locks_device_is_not_the
     assert lock_holder_in(locks + ["4: FLOCK  ADVISORY  WRITE 7004 00:2f:2146956 0 EOF\n"], dev, ino) == 7004
     assert lock_holder_in(locks + ["4: FLOCK  ADVISORY  WRITE 7005 00:31:2146956 0 EOF\n"], dev, ino) is None
     assert lock_holder_in(locks, dev, 5) is None
+
+
+def test_two_threads_of_one_process_cannot_fly_one_instance(tmp_path: Path) -> None:
+    """``bridge.session.sitl(instance=N)`` from two threads of one process: the second is refused while the first
+    flies (its flock is the process's, so the own-holder rule let both fly N's ports at once until the third wave's
+    forty-second session), the first completes, and N is free for this process's next session after it."""
+    with instance_slot() as n:
+        first: dict[str, object] = {}
+
+        def fly() -> None:
+            try:
+                first["run"] = sitl(_mission(tmp_path, 3.0), instance=n, out=tmp_path / "a", plots=False)
+            except BaseException as exc:  # re-raised below
+                first["error"] = exc
+
+        th = threading.Thread(target=fly, name="first-session")
+        th.start()
+        try:
+            wait_for(lambda: count_records(tmp_path / "a" / "vehicle.bin") > 0 or not th.is_alive(), 60,
+                     "the first session flying")
+            assert th.is_alive(), first
+            with pytest.raises(ConfigError, match=rf"^--instance {n}: instance {n} is in use by another session of "
+                                                  rf"this process \(pid {os.getpid()}, thread 'first-session'\); "):
+                sitl(_mission(tmp_path, 0.5), instance=n, out=tmp_path / "b", plots=False)
+        finally:
+            th.join(timeout=120)
+        assert "error" not in first and first["run"].outcome == "completed", first  # type: ignore[attr-defined]
+        assert not (tmp_path / "b").exists()
+        with hold_instances((n,), str):  # free again for this process
+            pass

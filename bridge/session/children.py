@@ -251,6 +251,11 @@ def _ports_free(n: int) -> bool:
 
 
 INSTANCE_LOCK = "bsst-instance-{}.lock"  # in the temporary directory: flock'ed by the session flying instance N
+# the instances this process's sessions fly (instance -> pid, the thread's name; a forked child's copy is not its
+# own): a session's flock stands for the whole process, so a second session of it (another thread's
+# sitl(instance=N)) is refused here, not flown beside the first
+_FLOWN_HERE: dict[int, tuple[int, str]] = {}
+_FLOWN_HERE_LOCK = threading.Lock()
 
 
 def instance_lock_path(n: int) -> str:
@@ -330,8 +335,16 @@ def hold_instances(numbers: Sequence[int], flag: Callable[[int], str]) -> Iterat
     instance's ports and system id at once. One held by another session is refused before anything is
     written: ConfigError naming ``flag(n)``, the instance and the holder's pid. One held by this process or by
     one that started it (a sweep's or a test's :func:`instance_slot` around the session it starts) is its own:
-    flown without a second lock. Released when the block ends, or by the kernel when the process dies."""
+    flown without a second lock; but not one another session of this process flies (another thread's), refused
+    as another's. Released when the block ends, or by the kernel when the process dies."""
     fds: list[int] = []
+    with _FLOWN_HERE_LOCK:
+        pid = os.getpid()
+        for n in numbers:
+            if _FLOWN_HERE.get(n, (0, ""))[0] == pid:
+                raise ConfigError(f"{flag(n)}: instance {n} is in use by another session of this process (pid "
+                                  f"{pid}, thread {_FLOWN_HERE[n][1]!r}); pick another instance")
+        _FLOWN_HERE.update((n, (pid, threading.current_thread().name)) for n in numbers)
     try:
         for n in numbers:
             for _ in range(2):  # (a holder gone between the lock refused and /proc/locks read: once more)
@@ -348,6 +361,9 @@ def hold_instances(numbers: Sequence[int], flag: Callable[[int], str]) -> Iterat
     finally:
         for fd in fds:
             os.close(fd)  # closing releases the lock
+        with _FLOWN_HERE_LOCK:
+            for n in numbers:
+                _FLOWN_HERE.pop(n, None)
 
 
 @contextlib.contextmanager
