@@ -50,6 +50,7 @@ from bridge.record.endedby import ended_by_outcome
 from bridge.record.ending import end_block
 from bridge.record.events import RunEvent
 from bridge.record.metrics import after_faults, not_reached, plant_blocks, plant_summary, summarise
+from bridge.record.outlock import out_held
 from bridge.record.policies import judge, rules_for, violation_text
 from bridge.record.runlog import Run, RunRecord, check_trace_steps, run_dir, trace_arrays, trace_cap
 from controller.law import LawFailed
@@ -117,8 +118,9 @@ def simulate(
     m = mission if isinstance(mission, Mission) else load_mission(mission, trace_cap(over.rate_hz))  # capped early
     flight = prepare(m, over)
     check_trace_steps(flight.mission)  # before the run directory is made: a refused mission writes nothing
-    path = run_dir(out, flight.mission.name, overwrite) if (out is not None or write) else None
-    return fly(flight, path, plots=plots, progress=progress)
+    with out_held(out):  # (another run writing this --out: refused before its files are touched)
+        path = run_dir(out, flight.mission.name, overwrite) if (out is not None or write) else None
+        return fly(flight, path, plots=plots, progress=progress)
 
 
 def fly(flight: Flight, path: Path | None = None, *, plots: bool = True, progress: Progress | None = None) -> Run:

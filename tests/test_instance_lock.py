@@ -19,10 +19,10 @@ from pathlib import Path
 
 import pytest
 
+from bridge.core.locks import lock_holder_in
 from bridge.nodes.report import Ready, parse_line
 from bridge.record.halves import count_records
 from bridge.session import hold_instances, instance_slot, sitl
-from bridge.session.children import lock_holder_in
 from params import ConfigError
 from tests.sitlkit import ROOT, Proc, run_bsst
 from tests.waiting import wait_for

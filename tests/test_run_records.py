@@ -29,6 +29,7 @@ from bridge.cli import main
 from bridge.record.runlog import EventLog, write_text_atomic
 from bridge.session import instance_slot, sitl
 from missions import Mission, Sine
+from params import ConfigError
 from tests.sitlkit import ENV, ROOT, Bsst, Proc, clean_exit, run_bsst
 from tests.test_cli_sim import bsst as _sim
 from tests.test_cli_sim import short_sine
@@ -522,3 +523,34 @@ def test_a_socket_stays_in_the_udp_table_while_others_come_and_go() -> None:
         churn.wait(10)
         for s in mine:
             s.close()
+
+
+def test_a_run_directory_another_run_writes_is_refused_and_kept_whole(tmp_path: Path) -> None:
+    """Two runs given one ``--out`` (``--overwrite`` on both): while a ``bsst sitl`` session writes it, ``bsst sim``
+    into it is refused (exit 2, naming the run that holds it, nothing cleared), as is a Python ``sitl`` of another
+    thread of this process; once the session has ended the directory holds its one run, and the next run
+    overwrites it. Until the third wave's forty-second session the second cleared the first's files and wrote its
+    own beside what the first wrote after (its summary.json and events.log, the second's mission.toml and
+    trace.csv)."""
+    out = tmp_path / "same"
+    first = Proc.bsst("sitl", str(short_sine(tmp_path, 3.0)), "--realtime", "--out", str(out), "--no-plots",
+                      cwd=ROOT)
+    try:
+        wait_for(lambda: (out / "vehicle.bin").is_file() and (out / "vehicle.bin").stat().st_size > 0
+                 or first.p.poll() is not None, 60, "the session flying")
+        assert first.p.poll() is None, first.lines[-5:]
+        other = tmp_path / "other"
+        other.mkdir()
+        second = _sim(short_sine(other, 1.0), "--out", out, "--overwrite")
+        assert second.returncode == 2 and second.stdout == "", second
+        assert second.stderr.startswith(f"bsst: --out {out}: in use by another run (pid "), second.stderr
+        with pytest.raises(ConfigError, match=r"in use by another run"):
+            sitl(short_sine(other, 1.0), out=out, overwrite=True, plots=False, instance=None)
+        status = first.ended(timeout=120)
+    finally:
+        first.stop()
+    summary = json.loads((out / "summary.json").read_text())
+    assert status == clean_exit(summary), first.lines[-5:]
+    assert summary["duration_s"] == 3.0 and "duration_s = 3.0" in (out / "mission.toml").read_text()
+    again = _sim(short_sine(tmp_path / "other", 1.0), "--out", out, "--overwrite")
+    assert again.returncode == 0, again.stderr

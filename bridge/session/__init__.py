@@ -69,6 +69,7 @@ from bridge.core.scalar import kernel_cache_on
 from bridge.mavlink.endpoint import GCS_PORT, LINK_PORT, parse_address
 from bridge.mavlink.signing import key_from_file
 from bridge.nodes.forkserver import warm
+from bridge.record.outlock import check_out_free, out_held
 from bridge.record.runlog import Run, check_trace_steps, run_dir, trace_cap
 from bridge.session.children import ChildError, check_port_free, hold_instances, instance_slot
 from bridge.session.session import Session
@@ -190,18 +191,20 @@ def sitl(
     keep = out is not None or write
     if keep:  # a refused run directory is named before a busy port (both before anything starts)
         run_dir(out, flight.mission.name, overwrite, create=False)
+        check_out_free(out)  # another run writing it now
     # the instance held for the session's life (another session's is refused here, before anything is written)
     with hold_instances(() if instance is None else (n,), lambda k: f"--instance {k}"):
         if instance is not None:
             check_port_free(LINK_PORT + n, f"--instance {n}")
         forked = warm()  # the fork server's imports (bridge.nodes.forkserver) overlap what follows
         fill_kernel_cache(flight, forked)
-        path = run_dir(out, flight.mission.name, overwrite) if keep else Path(tempfile.mkdtemp(prefix="bsst-sitl-"))
-        try:
-            s = Session(flight, path, realtime=realtime, instance=instance, gcs=gcs_text, speed=speed,
-                        progress=progress, live=live, key=Path(key) if key is not None else None,
-                        await_mission=await_mission, announce=live)
-            return s.run(plots=plots and keep, keep=keep)
-        finally:
-            if not keep:
-                shutil.rmtree(path, ignore_errors=True)
+        with out_held(out):  # for the session's life
+            path = run_dir(out, flight.mission.name, overwrite) if keep else Path(tempfile.mkdtemp(prefix="bsst-sitl-"))
+            try:
+                s = Session(flight, path, realtime=realtime, instance=instance, gcs=gcs_text, speed=speed,
+                            progress=progress, live=live, key=Path(key) if key is not None else None,
+                            await_mission=await_mission, announce=live)
+                return s.run(plots=plots and keep, keep=keep)
+            finally:
+                if not keep:
+                    shutil.rmtree(path, ignore_errors=True)

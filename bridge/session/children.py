@@ -24,10 +24,11 @@ import subprocess
 import tempfile
 import threading
 import time
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
+from bridge.core.locks import Claims, lineage, take_flock
 from bridge.mavlink.address import GCS_PORT, LINK_PORT
 from bridge.nodes.forkserver import ForkedChild, start_child
 from bridge.nodes.process import exit_text
@@ -251,11 +252,8 @@ def _ports_free(n: int) -> bool:
 
 
 INSTANCE_LOCK = "bsst-instance-{}.lock"  # in the temporary directory: flock'ed by the session flying instance N
-# the instances this process's sessions fly (instance -> pid, the thread's name; a forked child's copy is not its
-# own): a session's flock stands for the whole process, so a second session of it (another thread's
-# sitl(instance=N)) is refused here, not flown beside the first
-_FLOWN_HERE: dict[int, tuple[int, str]] = {}
-_FLOWN_HERE_LOCK = threading.Lock()
+# the instances this process's sessions fly: a second session of it (another thread's sitl(instance=N)) is refused
+_FLOWN_HERE = Claims()
 
 
 def instance_lock_path(n: int) -> str:
@@ -266,66 +264,7 @@ def instance_lock_path(n: int) -> str:
 def _lock_instance(n: int) -> tuple[int | None, int | None]:
     """Take instance N's lock (never waits): (its descriptor, None), or (None, the pid holding it: None where
     unknown). Closing the descriptor releases it, as the process's end does, however it ends (the kernel's)."""
-    path = instance_lock_path(n)
-    try:
-        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
-    except PermissionError:  # another user's file (0644, or a sticky /tmp's protected_regular): read-only locks too
-        try:
-            fd = os.open(path, os.O_RDONLY)
-        except OSError as exc:
-            raise ConfigError(f"instance {n}: cannot open its lock file {path} ({exc.strerror})") from None
-    except OSError as exc:
-        raise ConfigError(f"instance {n}: cannot open its lock file {path} ({exc.strerror})") from None
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        holder = _lock_holder(fd)
-        os.close(fd)
-        return None, holder
-    return fd, None
-
-
-def _lock_holder(fd: int) -> int | None:
-    """The pid holding a ``flock`` on ``fd``'s file, as /proc/locks lists it (None: not listed, no /proc)."""
-    st = os.fstat(fd)
-    try:
-        with open("/proc/locks") as locks:
-            return lock_holder_in(locks, st.st_dev, st.st_ino)
-    except OSError:
-        return None
-
-
-def lock_holder_in(lines: Iterable[str], dev: int, ino: int) -> int | None:
-    """The pid holding a ``flock`` on the file of device ``dev`` and inode ``ino`` (its ``fstat``'s) in the
-    ``lines`` of /proc/locks (``N: FLOCK ADVISORY WRITE pid maj:min:inode start end``, hex device), None if none
-    does. Where no lock is listed on that device (btrfs: a subvolume's files stat on a device of their own, not the
-    one /proc/locks lists), the inode alone, if one process alone holds a ``flock`` on an inode of that number."""
-    device = f"{os.major(dev):02x}:{os.minor(dev):02x}"
-    by_inode: set[int] = set()
-    for line in lines:
-        fields = line.split()
-        if len(fields) < 6 or fields[1] != "FLOCK":  # ("->" lines: waiters)
-            continue
-        on, _, inode = fields[5].rpartition(":")
-        if inode != str(ino) or not fields[4].isdigit():
-            continue
-        if on == device:
-            return int(fields[4])
-        by_inode.add(int(fields[4]))
-    return by_inode.pop() if len(by_inode) == 1 else None
-
-
-def _lineage() -> set[int]:
-    """This process's pid and its ancestors' (their parents' from /proc/PID/stat, up to init)."""
-    pids, pid = {os.getpid()}, os.getppid()
-    while pid > 1 and pid not in pids:
-        pids.add(pid)
-        try:
-            with open(f"/proc/{pid}/stat") as stat:
-                pid = int(stat.read().rpartition(")")[2].split()[1])
-        except (OSError, ValueError, IndexError):
-            break
-    return pids
+    return take_flock(instance_lock_path(n), f"instance {n}")
 
 
 @contextlib.contextmanager
@@ -338,13 +277,9 @@ def hold_instances(numbers: Sequence[int], flag: Callable[[int], str]) -> Iterat
     flown without a second lock; but not one another session of this process flies (another thread's), refused
     as another's. Released when the block ends, or by the kernel when the process dies."""
     fds: list[int] = []
-    with _FLOWN_HERE_LOCK:
-        pid = os.getpid()
-        for n in numbers:
-            if _FLOWN_HERE.get(n, (0, ""))[0] == pid:
-                raise ConfigError(f"{flag(n)}: instance {n} is in use by another session of this process (pid "
-                                  f"{pid}, thread {_FLOWN_HERE[n][1]!r}); pick another instance")
-        _FLOWN_HERE.update((n, (pid, threading.current_thread().name)) for n in numbers)
+    _FLOWN_HERE.claim(numbers, lambda n, thread: f"{flag(n)}: instance {n} is in use by another session of "  # type: ignore[arg-type]
+                                                 f"this process (pid {os.getpid()}, thread {thread!r}); pick another "
+                                                 "instance")
     try:
         for n in numbers:
             for _ in range(2):  # (a holder gone between the lock refused and /proc/locks read: once more)
@@ -353,7 +288,7 @@ def hold_instances(numbers: Sequence[int], flag: Callable[[int], str]) -> Iterat
                     break
             if fd is not None:
                 fds.append(fd)
-            elif holder is None or holder not in _lineage():
+            elif holder is None or holder not in lineage():
                 by = f" (pid {holder})" if holder is not None else f" ({instance_lock_path(n)} is locked)"
                 raise ConfigError(f"{flag(n)}: instance {n} is in use by another session{by}; pick another "
                                   "instance")
@@ -361,9 +296,7 @@ def hold_instances(numbers: Sequence[int], flag: Callable[[int], str]) -> Iterat
     finally:
         for fd in fds:
             os.close(fd)  # closing releases the lock
-        with _FLOWN_HERE_LOCK:
-            for n in numbers:
-                _FLOWN_HERE.pop(n, None)
+        _FLOWN_HERE.release(numbers)
 
 
 @contextlib.contextmanager

@@ -27,7 +27,7 @@ from bridge.core.flight import Flight
 from bridge.core.wire import command_from_wire
 from bridge.link.ends import VehicleEnd
 from bridge.link.turns import TurnRadio
-from bridge.mavlink.endpoint import Spinner, Tlog, wait
+from bridge.mavlink.endpoint import Spinner, Tlog, sweep, wait
 from bridge.mavlink.receive import Rejections
 from bridge.nodes.report import Ready, Refused, Report, Stats
 from bridge.nodes.vehicle.announcer import Announcer
@@ -424,8 +424,8 @@ class Vehicle:
         """Wall-clock duties: GCS commands (to ``take``, else :meth:`_handle`), heartbeat, streams, flushing files."""
         now = time.monotonic()
         if self.gcs is not None:
-            for m, addr in self.gcs.poll():
-                (take or self._handle)(self.gcs, m, addr)
+            for ep, m, addr in sweep((self.link, self.gcs)) if self.gcs.queued() else ():  # (the link's first)
+                (take or self._handle)(ep, m, addr)
         with self.receiver.charged():  # a re-request to a would-be controller: within its trial's credit
             self.missions.tick(now)
         self.commander.pre_start.tick(now)  # COM_DISARM_PRFLT

@@ -1,0 +1,78 @@
+"""The run directory a run writes, held for the run's life: one writer per ``--out DIR`` at a time.
+
+In:  the ``--out`` path a command was given (None: an automatic ``runs/<UTC time>-<name>``, new, never shared)
+Out: the directory held while the block runs (an ``flock`` on ``<tmp>/bsst-out-<hash of its real path>.lock``,
+     removed after), or a :class:`params.ConfigError` naming the flag, the path and the run holding it (its pid;
+     another thread's of this process by name)
+
+Two runs given one ``--out`` (``--overwrite`` on both) wrote into it at once: the second cleared the first's
+files and the directory ended up mixing the two runs' files (a user's tour: the first's summary.json and
+events.log, the second's mission.toml and trace.csv). Now the second is refused before it clears anything.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import os
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+from bridge.core.locks import Claims, take_flock
+from params import ConfigError
+
+OUT_LOCK = "bsst-out-{}.lock"  # in the temporary directory, by the sha256 of the run directory's real path
+_WRITING = Claims()  # the run directories this process's runs write (another thread's run is refused)
+
+
+def out_lock_path(real: str) -> str:
+    """The lock file of the run directory whose real path is ``real``."""
+    return os.path.join(tempfile.gettempdir(), OUT_LOCK.format(hashlib.sha256(real.encode()).hexdigest()[:24]))
+
+
+@contextlib.contextmanager
+def out_held(out: str | Path | None, flag: str = "--out") -> Iterator[None]:
+    """Hold run directory ``out`` while the block runs (nothing for None): another run writing it is refused,
+    before anything is cleared or written. Released, and its lock file removed, when the block ends (by the kernel
+    if the process dies: the file is then left, empty, for the next run to take)."""
+    if out is None:
+        yield
+        return
+    real = str(Path(out).resolve())
+    _WRITING.claim([real], lambda _k, thread: f"{flag} {out}: in use by another run of this process (pid "
+                                              f"{os.getpid()}, thread {thread!r}); give another directory")
+    try:
+        fd = _take(real, flag, out)
+        try:
+            yield
+        finally:
+            with contextlib.suppress(OSError):
+                os.unlink(out_lock_path(real))  # unlinked while held: a run that opened it before sees it gone
+            os.close(fd)
+    finally:
+        _WRITING.release([real])
+
+
+def check_out_free(out: str | Path | None, flag: str = "--out") -> None:
+    """Refuse ``out`` if another run writes it now (a command's check before it starts anything)."""
+    with out_held(out, flag):
+        pass
+
+
+def _take(real: str, flag: str, out: str | Path) -> int:
+    """The lock of ``real``'s file, held (its descriptor), or ConfigError naming its holder."""
+    path = out_lock_path(real)
+    for _ in range(8):  # (its file removed by the run that held it, between our open and our lock: take the new one)
+        fd, holder = take_flock(path, f"{flag} {out}")
+        if fd is None:
+            by = f" (pid {holder})" if holder is not None else ""
+            raise ConfigError(f"{flag} {out}: in use by another run{by}; give another directory, or wait for it to "
+                              "end")
+        try:
+            if os.stat(path).st_ino == os.fstat(fd).st_ino:
+                return fd
+        except FileNotFoundError:
+            pass
+        os.close(fd)
+    raise ConfigError(f"{flag} {out}: its lock file {path} keeps being replaced; give another directory")
