@@ -85,3 +85,28 @@ def test_a_constant_imported_by_name_is_in_the_closure() -> None:
                 if source not in closure:
                     missing.append(f"{m}.{name} from {source} (kernels of {module})")
     assert missing == []
+
+
+def test_the_python_only_modules_hold_no_kernel_and_are_in_no_closure() -> None:
+    """numba compiles no function of :data:`~bridge.autopilot.kernelcache.PYTHON_ONLY` (the input readers, the wind's
+    samples): none is a dispatcher or registered with numba once every kernel module is imported, so no kernel's
+    closure holds them. Before, the batch engine's held them all (through bridge.link.trace's and plant.events'
+    readers, bridge.batch.weather's wind samples), and an error message's new wording in ``params/text.py`` compiled
+    its kernel afresh (~24 s of CPU) in the next ``make test`` and a user's next sweep."""
+    import importlib
+    from types import FunctionType
+
+    from numba.core.typing.templates import builtin_registry
+
+    kernels = _kernels()
+    files = [f for p in kernelcache.PYTHON_ONLY for f in [ROOT / f"{p.replace('.', '/')}.py",
+                                                             *(ROOT / p.replace(".", "/")).rglob("*.py")] if f.exists()]
+    names = {".".join(f.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__") for f in files}
+    assert {"params", "params.text", "plant.events", "plant.wind", "bridge.link.trace"} <= names
+    modules = [importlib.import_module(n) for n in sorted(names)]  # every one, imported or not
+    compiled = [f"{m.__name__}.{k}" for m in modules for k, v in vars(m).items() if hasattr(v, "py_func")]
+    registered = [f"{v.__module__}.{v.__name__}" for v, _ in builtin_registry.globals
+                  if isinstance(v, FunctionType) and kernelcache.python_only(v.__module__)]
+    assert compiled == registered == []
+    held = {m for k in kernels for m in kernelcache.source_closure(k.py_func.__module__) if kernelcache.python_only(m)}
+    assert held == set()

@@ -15,12 +15,12 @@ compiles afresh, once, after a pull, an upgrade or an edit.
 The closure is what numba can reach by name from the kernel: the module of its Python function, and every
 project module (``bridge``, ``controller``, ``plant``, ``missions``, ``params``) that module's globals
 lead to (a module; a function or dispatcher, its module; a named tuple or enum, or an instance of one, its
-class's module), and so on. It over-reaches (a whole module, not the functions used): a change anywhere in
-the closure compiles the kernel again. It does not follow a package's submodules through the package (the
-import system binds them there in whatever order a process imports them: the stamp would differ between
-processes) nor see where a bare number came from: a kernel module names such a constant through its module
-(``plan_cell.HOLD``). tests/test_kernelcache.py walks the package for both, and checks that every kernel is
-made with this ``njit``.
+class's module), and so on; not a plain function of the modules numba compiles nothing of (:data:`PYTHON_ONLY`). It
+over-reaches (a whole module, not the functions used): a change anywhere in the closure compiles the kernel again.
+It does not follow a package's submodules through the package (the import system binds them there in whatever
+order a process imports them: the stamp would differ between processes) nor see where a bare number came from: a
+kernel module names such a constant through its module (``plan_cell.HOLD``). tests/test_kernelcache.py walks the
+package for both, checks that every kernel is made with this ``njit``, and that :data:`PYTHON_ONLY` holds none.
 """
 
 from __future__ import annotations
@@ -34,6 +34,14 @@ from types import FunctionType, ModuleType
 from typing import Any
 
 PROJECT_PACKAGES = ("bridge", "controller", "plant", "missions", "params")
+# Python's alone: the input readers (files, text, their error messages: params, a link trace's parser, the timeline's
+# events) and the wind's samples (computed before a flight, flown as arrays). numba compiles none of their functions
+# into a kernel (none is a dispatcher or registered with numba: tests/test_kernelcache.py), so a function of theirs
+# that a kernel module's plain Python calls (to read or check its input, to sample the wind) brings them into no
+# closure. Through such calls they were all in the batch engine's: an error message's new wording compiled its
+# kernel afresh (~24 s of CPU) in the next ``make test`` and a user's next sweep (15 of the 26 commits of a day that
+# made it compile)
+PYTHON_ONLY = ("params", "plant.events", "plant.wind", "bridge.link.trace")
 
 CACHE_OFF_NOTE = ("bsst: note: numba kernel cache off: no writable cache location (set NUMBA_CACHE_DIR to a "
                   "writable directory); kernels are compiled in each process")
@@ -141,10 +149,17 @@ def _origin(value: Any) -> str | None:
         home = value.__name__
     elif isinstance(value, FunctionType) or hasattr(value, "py_func"):
         home = getattr(value, "py_func", value).__module__
+        if not hasattr(value, "py_func") and isinstance(home, str) and python_only(home):
+            return None  # a plain function of a module whose functions are never compiled (PYTHON_ONLY)
     else:
         kind = value if isinstance(value, type) else type(value)
         home = kind.__module__ if issubclass(kind, (tuple, enum.Enum)) else None
     return home if isinstance(home, str) and _ours(home) else None
+
+
+def python_only(module: str) -> bool:
+    """Whether ``module`` is one of :data:`PYTHON_ONLY` or in one of them."""
+    return any(module == p or module.startswith(p + ".") for p in PYTHON_ONLY)
 
 
 def _ours(module: str) -> bool:
