@@ -47,9 +47,12 @@ class CommandMsg(NamedTuple):
 @dataclass(frozen=True, slots=True)
 class ArmMsg:
     """COMMAND_LONG ARM_DISARM(1) as it travels up; ``acted``: called once it has been acted on (the MAVLink
-    vehicle's final COMMAND_ACK after its IN_PROGRESS), None offline."""
+    vehicle's final COMMAND_ACK after its IN_PROGRESS), None offline; ``wanted``: whether it is still to be acted on
+    when delivered (the MAVLink vehicle's: not a resend of an arm a copy of which was, bridge.nodes.vehicle.armretry),
+    None: always (offline)."""
 
     acted: Callable[[], None] | None = None
+    wanted: Callable[[], bool] | None = None
 
 
 class StateMsg(NamedTuple):
@@ -88,10 +91,11 @@ class VehicleEnd:
         """The controller's actuator target crossed the socket at step time t (s)."""
         self._send(t, self.frame_bytes, CommandMsg(c, state_t))
 
-    def receive_arm(self, t: float, acted: Callable[[], None] | None = None) -> None:
+    def receive_arm(self, t: float, acted: Callable[[], None] | None = None,
+                    wanted: Callable[[], bool] | None = None) -> None:
         """An arm request crossed the socket at step time t (s); ``acted`` is called once the model delivers it
-        and the vehicle has acted on it (never, if the model loses it)."""
-        self._send(t, FRAME_BYTES["COMMAND_LONG"], ArmMsg(acted))
+        and the vehicle has acted on it, or not (``wanted`` said no), never if the model loses it."""
+        self._send(t, FRAME_BYTES["COMMAND_LONG"], ArmMsg(acted, wanted))
 
     def _send(self, t: float, size: int, msg: Any) -> None:
         if self.held is None:
@@ -111,7 +115,8 @@ class VehicleEnd:
         for d in self.up.deliver(t + EPS_T):
             msg = d.payload
             if isinstance(msg, ArmMsg):
-                self.vehicle.arm()
+                if msg.wanted is None or msg.wanted():
+                    self.vehicle.arm()
                 if msg.acted is not None:
                     msg.acted()
             elif d.sent_t <= self.newest_sent_t:

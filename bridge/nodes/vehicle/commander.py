@@ -37,6 +37,7 @@ from bridge.mavlink.endpoint import Endpoint
 from bridge.mavlink.modes import MISSION, mode_name, requested_custom_mode, requested_mode
 from bridge.mavlink.receive import FORCE_DISARM, arm_disarm_args
 from bridge.nodes.vehicle.actions import Actions
+from bridge.nodes.vehicle.armretry import Arm, ArmRetries
 from bridge.nodes.vehicle.authority import Authority, attribute
 from bridge.nodes.vehicle.clock import Clock, Trigger
 from bridge.nodes.vehicle.clocking import Clocking
@@ -59,8 +60,9 @@ class CommanderPorts:
     step: Callable[[], int]  # the current control step k
     state_out: Callable[[float], None]  # send step k's state at wall time now (s): lockstep awaits its answer
     new_flight: Callable[[bool], None]  # a new flight is armed (True: by a ground station)
-    # the controller's arm enters the up-link model now (lockstep); the callable: when it has been acted on
-    arm_through_link: Callable[[Callable[[], None]], None]
+    # the controller's arm enters the up-link model now (lockstep); the callables: when it has been acted on, and
+    # whether it is still to be when the model delivers it
+    arm_through_link: Callable[[Callable[[], None], Callable[[], bool]], None]
     target_wall: Callable[[], float]  # wall time (s) of the newest actuator target from the controller
     controller_heard: Callable[[], bool]  # whether a controller has spoken on the controller link
     message: Callable[[int, bool], list[Any]]  # the message(s) of an id as a stream sends them (own: a GCS's frame)
@@ -78,14 +80,22 @@ class FinalAck:
     ACCEPTED if it is armed in OFFBOARD then, TEMPORARILY_REJECTED if its pre-arm check denied it, else FAILED.
     An arm the model loses gets none, as a command lost on a real link does."""
 
-    def __init__(self, m: Any, ep: Endpoint, addr: tuple[str, int], sim: SimVehicle) -> None:
+    def __init__(self, m: Any, ep: Endpoint, addr: tuple[str, int], sim: SimVehicle, arm: Arm) -> None:
         self.command, self.sysid, self.compid = m.command, m.get_srcSystem(), m.get_srcComponent()
-        self.ep, self.addr, self.sim = ep, addr, sim
+        self.ep, self.addr, self.sim, self.arm = ep, addr, sim, arm
+
+    def wanted(self) -> bool:
+        """Whether this copy, delivered by the model, is still to be acted on: not if a copy of the same arm was
+        (a resend on its way while the first armed the vehicle, whose failsafe may have disarmed it since)."""
+        return self.arm.result is None
 
     def __call__(self) -> None:
-        sim = self.sim
-        result = (mavlink.MAV_RESULT_ACCEPTED if sim.armed and sim.mode == OFFBOARD
-                  else mavlink.MAV_RESULT_TEMPORARILY_REJECTED if sim.arming_refused else mavlink.MAV_RESULT_FAILED)
+        sim, result = self.sim, self.arm.result
+        if result is None:  # this copy was acted on: its result answers the later ones
+            result = (mavlink.MAV_RESULT_ACCEPTED if sim.armed and sim.mode == OFFBOARD
+                      else mavlink.MAV_RESULT_TEMPORARILY_REJECTED if sim.arming_refused
+                      else mavlink.MAV_RESULT_FAILED)
+            ArmRetries.acted(self.arm, result)
         self.ep.send(mavlink.MAVLink_command_ack_message(self.command, result, 0, 0, self.sysid, self.compid),
                      self.addr)
 
@@ -111,6 +121,7 @@ class Commander:
         self.actions = Actions(sim, clock, ports.reject, self.clocking.off_step_clock, ports.missions)
         # link (controller, gcs) -> its stream table: a link's requests change its own
         self.requests = MessageRequests(sim, streams, self.cfg.sysid, ports.message, ports.reject)
+        self.arm_copies = ArmRetries()  # each sender's arm: acted on once, however many copies come
 
     # -- the messages ---------------------------------------------------------------------------------
     def command(self, ep: Endpoint, m: Any, addr: tuple[str, int], link: str) -> bool:
@@ -162,20 +173,9 @@ class Commander:
             if args is None:
                 self.ports.reject("bad_number")
                 return mavlink.MAV_RESULT_DENIED, ()
-            if args[0] and by.link == "gcs" and not self.sim.armed and self._mission_selected():
-                if self.sim.arming_denied():  # PX4 arms at once, so checks first: the mission does not start
-                    return mavlink.MAV_RESULT_TEMPORARILY_REJECTED, ()
-                return self._start_mission(by, 0.0, START_ARM), ()  # AUTO.MISSION, then arm: the mission starts
-            if args[0] and self._through_link(m, by):
-                if getattr(m, "confirmation", 0) > 0 and self.sim.armed and self.sim.mode == OFFBOARD:
-                    # the controller's ARM again, its first ACCEPTED late on a loaded machine: armed already.
-                    # Through the link model it would take a packet's fate offline never drew (and its
-                    # IN_PROGRESS overtook the ACCEPTED: "arming refused (MAV_RESULT 5)")
-                    return mavlink.MAV_RESULT_ACCEPTED, ()
-                # acts when the model delivers it, as offline; then its final answer
-                self.ports.arm_through_link(FinalAck(m, ep, addr, self.sim))
-                return mavlink.MAV_RESULT_IN_PROGRESS, ()
-            return self.arm_disarm(m.param1, m.param2, by), ()
+            if not args[0]:
+                return self.arm_disarm(m.param1, m.param2, by), ()
+            return self._arm_copy(m, by, ep, addr), ()
         asked = self.requests.run(m, by)  # SET/GET_MESSAGE_INTERVAL, REQUEST_MESSAGE, CAPABILITIES, HOME_POSITION
         if asked is not None:
             return asked
@@ -371,6 +371,43 @@ class Commander:
         self.intention.after_period()
 
     # -- arming ----------------------------------------------------------------------------------------
+    def _arm_copy(self, m: Any, by: Sender, ep: Endpoint, addr: tuple[str, int]) -> int:
+        """An ARM (checked): acted on once per arm, however many of its copies come (:mod:`.armretry`); a resend of
+        an arm acted on already is answered with its result, nothing done (PX4's commander: a duplicate)."""
+        confirmation = getattr(m, "confirmation", 0)  # (COMMAND_INT has none)
+        arm = self.arm_copies.copy((m.get_srcSystem(), m.get_srcComponent(), addr), confirmation, time.monotonic())
+        if arm.result is not None:
+            return self._resend_answered(arm.result, confirmation)
+        if by.link == "gcs" and not self.sim.armed and self._mission_selected():
+            if self.sim.arming_denied():  # PX4 arms at once, so checks first: the mission does not start
+                result = mavlink.MAV_RESULT_TEMPORARILY_REJECTED
+            else:
+                result = self._start_mission(by, 0.0, START_ARM)  # AUTO.MISSION, then arm: the mission starts
+        elif self._through_link(m, by):
+            if confirmation > 0 and self.sim.armed and self.sim.mode == OFFBOARD:
+                # the controller's ARM again, its first ACCEPTED late on a loaded machine: armed already.
+                # Through the link model it would take a packet's fate offline never drew (and its
+                # IN_PROGRESS overtook the ACCEPTED: "arming refused (MAV_RESULT 5)")
+                return mavlink.MAV_RESULT_ACCEPTED
+            # acts when the model delivers it, as offline (unless a copy of the same arm acted first); then its
+            # final answer
+            final = FinalAck(m, ep, addr, self.sim, arm)
+            self.ports.arm_through_link(final, final.wanted)
+            return mavlink.MAV_RESULT_IN_PROGRESS
+        else:
+            result = self.arm_disarm(m.param1, m.param2, by)
+        ArmRetries.acted(arm, result)
+        return result
+
+    def _resend_answered(self, result: int, confirmation: int) -> int:
+        """A resend (``confirmation``) of an arm acted on: its result again; said when the vehicle is no longer
+        armed (its failsafe disarmed it since: the flight that arm began is over, a resend begins none)."""
+        if not self.sim.armed:
+            self.texts += self._statustext(
+                mavlink.MAV_SEVERITY_WARNING, f"ARM resend (confirmation {confirmation}) of an arm acted on "
+                                              "already: not armed again")
+        return result
+
     def arm_disarm(self, p1: float, p2: float, by: Sender | None = None) -> int:
         """Arm (``p1`` 1) or disarm (0; in the air only with ``p2`` = 21196, forced), checked
         values (:func:`bridge.mavlink.receive.arm_disarm_args`). A new flight armed from a

@@ -116,7 +116,7 @@ class Vehicle:
         self.announcer = Announcer(self.sim, self.authority, self.link, self.endpoints, self._report,
                                    self._statustext, self.streaming.heartbeat, self.params.value_of)
         ports = CommanderPorts(step=lambda: self.k, state_out=self._send_odometry, new_flight=self._new_flight,
-                               arm_through_link=lambda acted: self.vend.receive_arm(self.t, acted),
+                               arm_through_link=lambda acted, wanted: self.vend.receive_arm(self.t, acted, wanted),
                                target_wall=lambda: self.targets.wall,
                                controller_heard=lambda: self.link.peer is not None, message=self._requested,
                                reject=self._reject, refused=self._refused, announce=self.announcer.report_events,
