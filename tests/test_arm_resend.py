@@ -1,24 +1,31 @@
-"""Covers bridge.nodes.vehicle.armretry and bridge.nodes.vehicle.commander: resent ARMs.
+"""Covers bridge.nodes.vehicle.armretry, bridge.nodes.vehicle.commander and bridge.nodes.offboard.flight: resent ARMs.
 
 Over a slow, lossy link (``bsst sitl missions/sine.toml --realtime --delay 150 --loss 60``) the controller resent
 its ARM while the first copy had armed the vehicle; its failsafe (no target: the controller had no ACK yet)
-disarmed it, and a late resend armed it again: the flight the failsafe had ended went on, and crashed. A real
-``bsst vehicle`` on 127.0.0.1 and a scripted controller (pymavlink).
+disarmed it, and a late resend armed it again: the flight the failsafe had ended went on, and crashed. Real
+processes (``bsst vehicle``, ``bsst controller``) on 127.0.0.1, a scripted controller (pymavlink) or a link in the
+middle that loses what the test says (:class:`Lossy`: the ARM's ACKs, the vehicle's HEARTBEATs after the arm).
 """
 
 from __future__ import annotations
 
 import os
+import selectors
+import socket
+import threading
+import time
+from pathlib import Path
 
 import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.mavlink.endpoint import LINK_PORT
-from bridge.nodes.report import Ready
+from bridge.mavlink.events import EventId, received_id
+from bridge.nodes.report import Done, Event, Ready
 from bridge.nodes.vehicle.armretry import RETRY_GAP_S, ArmRetries
 from bridge.session import instance_slot
-from tests.sitlkit import Proc
+from tests.sitlkit import ROOT, Proc, run_bsst
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -104,3 +111,142 @@ def test_a_resend_long_after_its_arm_is_a_new_arm():
     assert arms.copy(src, 3, 10.1 + 2 * RETRY_GAP_S).result is None  # too late to be a resend of it
     assert arms.copy(src, 0, 30.0).result is None
     assert arms.copy((200, 191, ("127.0.0.1", 5001)), 1, 30.0).result is None  # another sender's
+
+
+class Lossy(threading.Thread):
+    """A link between ``bsst controller`` and ``bsst vehicle`` that loses the vehicle's COMMAND_ACKs of ARM_DISARM
+    and, with ``no_heartbeat_after_arm``, its HEARTBEATs once an ARM has passed up (the controller then learns what
+    came of its arm only from the vehicle's EVENTs); it notes when each ARM passed up (``arms``: (time.monotonic,
+    confirmation)), and when the vehicle's first armed HEARTBEAT and its first EVENT FAILSAFE passed down."""
+
+    def __init__(self, vehicle: tuple[str, int], no_heartbeat_after_arm: bool = False) -> None:
+        super().__init__(daemon=True)
+        self.vehicle = vehicle
+        self.no_hb = no_heartbeat_after_arm
+        self.front = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.front.bind(("127.0.0.1", 0))
+        self.back = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.back.bind(("127.0.0.1", 0))
+        self.port = self.front.getsockname()[1]
+        self.client: tuple[str, int] | None = None
+        self.arms: list[tuple[float, int]] = []
+        self.armed_hb_at: float | None = None  # the first HEARTBEAT showing the vehicle armed, passed down
+        self.failsafe_at: float | None = None  # the vehicle's first EVENT FAILSAFE, passed down
+        self._halt = threading.Event()
+        os.environ["MAVLINK20"] = "1"
+        self._up = mavlink.MAVLink(None)
+        self._down = mavlink.MAVLink(None)
+        self._up.robust_parsing = self._down.robust_parsing = True
+
+    def run(self) -> None:
+        sel = selectors.DefaultSelector()
+        sel.register(self.front, selectors.EVENT_READ)
+        sel.register(self.back, selectors.EVENT_READ)
+        while not self._halt.is_set():
+            for key, _ in sel.select(0.05):
+                data, addr = key.fileobj.recvfrom(65535)
+                if key.fileobj is self.front:
+                    self.client = addr
+                    self._pass_up(data)
+                elif self.client is not None:
+                    kept = self._pass_down(data)
+                    if kept:
+                        self.front.sendto(kept, self.client)
+        sel.close()
+
+    def _pass_up(self, data: bytes) -> None:
+        for m in self._up.parse_buffer(data) or []:
+            if m.get_type() == "COMMAND_LONG" and m.command == ARM and m.param1 == 1:
+                self.arms.append((time.monotonic(), m.confirmation))
+        self.back.sendto(data, self.vehicle)
+
+    def _pass_down(self, data: bytes) -> bytes:
+        kept = b""
+        for m in self._down.parse_buffer(data) or []:
+            kind = m.get_type()
+            if kind == "COMMAND_ACK" and m.command == ARM:
+                continue
+            if kind == "HEARTBEAT":
+                if self.no_hb and self.arms:
+                    continue
+                if m.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED and self.armed_hb_at is None:
+                    self.armed_hb_at = time.monotonic()
+            if kind == "EVENT" and received_id(m) is EventId.FAILSAFE and self.failsafe_at is None:
+                self.failsafe_at = time.monotonic()
+            kept += m.get_msgbuf()
+        return kept
+
+    def stop(self) -> None:
+        self._halt.set()
+        self.join(5)
+        self.front.close()
+        self.back.close()
+
+
+def _short_mission(tmp_path: Path, seconds: float) -> Path:
+    text = (ROOT / "missions" / "sine.toml").read_text().replace("duration_s = 30.0", f"duration_s = {seconds}")
+    path = tmp_path / "short.toml"
+    path.write_text(text)
+    return path
+
+
+def _fly_through(tmp_path: Path, lossy_hb: bool) -> tuple[Proc, Proc, Lossy, Done]:
+    with instance_slot() as n:
+        v = Proc.bsst("vehicle", "--instance", str(n), "--realtime", "--gcs", "none", "--out", str(tmp_path / "v"))
+        v.wait_report(Ready)
+        link = Lossy(("127.0.0.1", LINK_PORT + n), no_heartbeat_after_arm=lossy_hb)
+        link.start()
+        c = Proc.bsst("controller", str(_short_mission(tmp_path, 2.0)), "--realtime", "--vehicle",
+                      f"127.0.0.1:{link.port}", "--out", str(tmp_path / "c"))
+        try:
+            done = c.wait_report(Done, timeout=60)
+            c.ended()
+        finally:
+            c.stop()
+            v.stop()
+            link.stop()
+    return v, c, link, done
+
+
+def test_the_controller_stops_resending_its_arm_once_the_vehicles_heartbeat_shows_it_armed(tmp_path):
+    """Every ACK of the ARM lost: the controller stops resending it once the vehicle's HEARTBEAT shows it armed in
+    OFFBOARD (sent at once on the arm), and flies. On the previous code it resent 30 times, 3 s, then gave up
+    ("arming not acknowledged"), while the vehicle, armed since the first, flew its failsafe."""
+    v, c, link, done = _fly_through(tmp_path, lossy_hb=False)
+    assert link.armed_hb_at is not None
+    assert any(e.startswith("armed: vehicle armed, offboard control") for e in c.events()), c.lines[-20:]
+    late = [conf for t, conf in link.arms if t > link.armed_hb_at + 0.5]  # (0.5 s: a loaded machine's wake-up)
+    assert not late, (link.arms, link.armed_hb_at)
+    assert len(link.arms) < 10, link.arms
+    assert done.reason is None or "arming" not in done.reason, done
+    assert sum(e.startswith("armed:") for e in v.events()) == 1, v.events()
+
+
+def test_a_failsafe_before_the_arms_answer_ends_the_flight_no_arm_sent_again(tmp_path):
+    """Every ACK of the ARM and every HEARTBEAT after it lost: the vehicle, armed by the first copy, gets no target,
+    and its failsafe disarms it on the ground. The controller learns it from the vehicle's EVENT FAILSAFE: it sends
+    no ARM again and ends as ``failsafe``, said so; the vehicle was armed once. On the previous code the controller
+    resent its ARM 30 times (the vehicle armed again after each failsafe) and ended ``aborted: arming not
+    acknowledged``."""
+    v, c, link, done = _fly_through(tmp_path, lossy_hb=True)
+    assert done.outcome == "failsafe", done
+    assert link.failsafe_at is not None and link.arms
+    assert isinstance(v.wait_event(lambda s: s.startswith("failsafe:"), timeout=1), Event)
+    # no ARM after the vehicle's EVENT FAILSAFE had come down, but one the controller sent before it read it
+    # (0.5 s: a loaded machine's wake-up)
+    assert not [a for a in link.arms if a[0] > link.failsafe_at + 0.5], (link.arms, link.failsafe_at)
+    assert sum(e.startswith("armed:") for e in v.events()) == 1, v.events()
+    assert any("bsst controller: failsafe" in ln for ln in c.lines), c.lines[-10:]
+
+
+def test_the_controller_says_a_crash_not_a_failsafe(tmp_path):
+    """A lockstep session whose vehicle crashes (the law cannot fly 150 ms-old states: the sine through
+    ``--delay 150 --loss 60`` hits the ground at 1.09 s): the controller's final word is ``crashed`` by the vehicle's
+    EVENT, not ``failsafe`` (its HEARTBEAT EMERGENCY taken for one, until the third wave's forty-second session)."""
+    with instance_slot() as n:
+        r = run_bsst("sitl", "missions/sine.toml", "--delay", "150", "--loss", "60", "--seed", "1", "--instance",
+                     str(n), "--no-plots", "--out", str(tmp_path / "s"), timeout=120)
+    assert r.returncode == 1, r.stderr
+    said = (tmp_path / "s" / "controller.log").read_text()
+    assert said.startswith("bsst controller: crashed: the vehicle's flight ended: it crashed"), said
+    assert "outcome: crashed" in r.stdout

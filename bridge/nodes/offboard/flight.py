@@ -22,10 +22,11 @@ from bridge.core.wire import command_over_wire, step_of_usec
 from bridge.link.ends import ControllerEnd
 from bridge.mavlink.endpoint import FORCE_DISARM, Spinner, wait
 from bridge.mavlink.eventseq import REQUEST_TIMEOUT_S, REQUEST_TRIES
-from bridge.mavlink.modes import MAIN_AUTO, SUB_LOITER
+from bridge.mavlink.modes import MAIN_AUTO, MAIN_OFFBOARD, SUB_LOITER, main_mode
 from bridge.nodes.offboard.config import (
     OffboardConfig,
 )
+from bridge.nodes.offboard.link import FailsafeSign
 from bridge.nodes.offboard.radioturn import down_link
 from bridge.nodes.offboard.realtime import RealtimeFlying
 from bridge.nodes.report import Ready, Report
@@ -36,8 +37,12 @@ from controller.law import LawFailed
 from controller.link_guard import LinkGuard
 from missions.references import Prefetched
 
-OUTCOMES = ("completed", "failsafe", "diverged", "aborted", "law_failed")
+# crashed, collision, terminated: the vehicle's plant ended the flight, said by its EVENT (before the forty-second
+# session such a flight was "failsafe", its HEARTBEAT EMERGENCY taken for one)
+OUTCOMES = ("completed", "failsafe", "diverged", "crashed", "collision", "terminated", "aborted", "law_failed")
 PARAM_SETTLE_S = 1.0  # s of wall time after the flight for the echoes of the last scheduled PARAM_SETs
+END_ASK_S = 1.0  # s of wall time (real time) the vehicle is asked what ended its flight before the controller says
+END_EVENT_TRIES = 30  # a HEARTBEAT EMERGENCY's EVENT missed is asked for (every 0.1 s) this many times, not 5
 
 
 class Offboard(RealtimeFlying):
@@ -83,6 +88,7 @@ class Offboard(RealtimeFlying):
         self._end_usec: int | None = None  # lockstep: the stamp of the state that ended the mission, unanswered
         self._end_height_m = 0.0
         self.end_unanswered: dict[str, Any] | None = None  # the end action not seen taken (its summary ``end``)
+        self._end_ask_until: float | None = None  # real time: until when the vehicle is asked how its flight ended
 
     @property
     def overruns(self) -> int:
@@ -153,18 +159,38 @@ class Offboard(RealtimeFlying):
         return True
 
     def _arm(self) -> bool:
-        result = self._command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0, 0.0)
+        """ARM, resent until its ACK, or until the vehicle said otherwise what came of it (:meth:`_arm_settled`). One
+        its failsafe took over before its answer came (a slow, lossy link) flies on as any failsafe's: no ARM
+        sent again (it would arm the vehicle the failsafe disarmed), the flight's outcome ``failsafe``."""
+        self.arming = True
+        result = self._command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0, 0.0, settled=self._arm_settled)
+        self.arming = False
+        if result is None and self._arm_settled():
+            result = mavlink.MAV_RESULT_ACCEPTED  # its HEARTBEAT or its failsafe said it armed
         if result != mavlink.MAV_RESULT_ACCEPTED:
             entry = mavlink.enums["MAV_RESULT"].get(result) if result is not None else None
             self.reason = ("arming not acknowledged" if result is None
                            else f"arming refused: {entry.name if entry else 'unknown result'} (MAV_RESULT {result})")
             self.event("aborted", self.reason)
             return False
+        if self.failsafe_seen or self.plant_end:  # its HEARTBEAT since says what it is now, not the ACK
+            self.armed_seen = True
+            self.event("armed", "vehicle armed, offboard control; its failsafe took over before the controller had "
+                                "the answer: no ARM sent again", answers=("armed",))
+            return True
         # armed under offboard control from now on: its state of step k0 may come before the heartbeat saying so
         self.vehicle_armed = self.armed_seen = True
         self.vehicle_state = mavlink.MAV_STATE_ACTIVE
         self.event("armed", "vehicle armed, offboard control", answers=("armed",))
         return True
+
+    def _arm_settled(self) -> bool:
+        """While the ARM is resent: the vehicle said what came of it other than by its ACK, so no copy more goes: its
+        HEARTBEAT shows it armed under offboard control (or flying its failsafe), or its failsafe took over or its
+        plant ended the flight (a late copy would arm again the vehicle its failsafe disarmed)."""
+        armed = self.vehicle_armed and (main_mode(self.vehicle_mode) == MAIN_OFFBOARD
+                                        or self.vehicle_state == mavlink.MAV_STATE_CRITICAL)
+        return armed or bool(self.failsafe_seen) or bool(self.plant_end)
 
     def _end_lockstep_flight(self) -> None:
         """A vehicle its failsafe disarmed, the mission's steps flown: a disarm by command, which ends its lockstep
@@ -363,7 +389,7 @@ class Offboard(RealtimeFlying):
         self.t_mission, self._t_wall = t_end, arrived - (self._way_down or 0.0)  # (its arrival: not when read)
         self._end_height_m = max(-float(odo.z), 0.0)  # m above the start (NED z): the landing's time
         self._settle_events()
-        lost = self._check_vehicle()  # disarmed, taken over, ... in the mission's last steps: not completed
+        lost = self._check_vehicle(at_end=True)  # disarmed, taken over, ... in the mission's last steps: not completed
         if lost:
             return lost
         back = self.vehicle_armed and self.vehicle_state != mavlink.MAV_STATE_CRITICAL
@@ -406,6 +432,25 @@ class Offboard(RealtimeFlying):
         while self.events_awaited() and not self.stopping and time.monotonic() < deadline:
             self._serve(min(deadline, self._next_house))
 
+    def _word_awaited(self, tries: int = 0) -> bool:
+        """Real time, before an end whose cause the controller does not know yet (a HEARTBEAT EMERGENCY without its
+        EVENT, a disarm without its failsafe's, no state though the vehicle is heard since its last): whether to wait
+        for the vehicle's word, which a lossy link loses. Once, it is asked for its HEARTBEAT, whose datagram carries
+        its event sequence (an EVENT missed is then asked for again: bridge.mavlink.eventseq), until one comes or for
+        END_ASK_S; ``tries``: each EVENT missed is asked for that many times (more than REQUEST_TRIES). Through
+        ``bsst relay --delay 150 --loss 60`` 3 of 8 crashes ended ``aborted`` (``crashed, diverged or was touched``),
+        2 ``no new state``, and 3 failsafes ``the vehicle was disarmed during the mission`` without it (docs/sitl.md,
+        "An ARM's resends")."""
+        if self.cfg.clock != "realtime":
+            return False
+        now = time.monotonic()
+        if self._end_ask_until is None:
+            self._end_ask_until = now + END_ASK_S
+            self.ask_heartbeat()
+        if tries > self.event_seq.tries:  # the flight over for good (EMERGENCY): libevents asks until answered
+            self.event_seq.tries = tries
+        return now < self._end_ask_until and self._hb_asks > 0  # (none left: its HEARTBEAT came)
+
     def _row(self, k: int, t: float, ref: Any, u: Any, wire: Any, desired: Any, recv: float, sent: float,
              s2c: float, late: float, age: float) -> None:
         if self.rows is not None:  # odo_arrived: the states taken since the previous row, this one's included
@@ -413,32 +458,43 @@ class Offboard(RealtimeFlying):
             self.rows.write((k, t, ref[0][0], ref[1][0], ref[2][0], ref[3][0], *u, *wire, *desired, recv, sent, s2c,
                              late, age, arrived))
 
-    def _check_vehicle(self) -> str | None:
+    def _check_vehicle(self, at_end: bool = False) -> str | None:
         """The outcome if the vehicle is lost to the flight (silent, no more states, disarmed
         other than by its failsafe, its flight ended by its plant, taken out of OFFBOARD by a ground
-        station), else None. Its failsafe alone does not end the flight."""
+        station), else None. Its failsafe alone does not end the flight. ``at_end``: the mission's time is flown (None
+        is then ``completed``: the vehicle is not asked for its word, :meth:`_word_awaited`, which is for its end)."""
         now = time.monotonic()
         timeout = self._silence_s
         answers: tuple[str, ...] | None = None  # the vehicle's own events this outcome answers
+        emergency = self.armed_seen and self.vehicle_state == mavlink.MAV_STATE_EMERGENCY
         if self.taken_over:
             self.reason = f"the vehicle was switched to {self.taken_over}: no more targets sent"
             self.ended_taken_over = True
         elif now - self._last_rx > timeout:
             self.reason, self.vehicle_silent = f"vehicle silent for {timeout:g} s", True
+        elif emergency:
+            # at once: its clock halted, so waiting out the state timeout would only delay the end. Its EVENT says how
+            # (the outcome: crashed, not the failsafe that may have flown before): one missed is asked for again
+            if not self.plant_end and ((not at_end and self._word_awaited(END_EVENT_TRIES)) | self.events_awaited()):
+                return None
+            how = {"crashed": "it crashed", "diverged": "it diverged", "collision": "another vehicle touched it",
+                   "terminated": "a flight termination"}.get(self.plant_end, "it crashed, diverged or was touched")
+            self.reason = f"the vehicle's flight ended: {how} (HEARTBEAT system_status EMERGENCY)"
+            answers = (self.plant_end,) if self.plant_end else ("crashed", "diverged", "collision")
         elif self.armed_seen and not self.vehicle_armed and not self.failsafe_seen:
-            if self.events_awaited():  # a missed EVENT, asked for again, may be the failsafe that disarmed it
+            if (not at_end and self._word_awaited()) or self.events_awaited():  # a missed EVENT: its failsafe's?
                 return None
             self.reason, answers = "the vehicle was disarmed during the mission", ("disarmed",)
-        elif self.armed_seen and self.vehicle_state == mavlink.MAV_STATE_EMERGENCY:
-            # at once: its clock halted, so waiting out the state timeout would only delay the end
-            self.reason = ("the vehicle's flight ended: it crashed, diverged or was touched "
-                           "(HEARTBEAT system_status EMERGENCY)")
-            answers = ("crashed", "diverged", "collision")
         elif now - self._last_state > (wait := self._state_wait_s if self._started else
                                        self.cfg.start_timeout_s or self._state_wait_s):
+            if not at_end and self.armed_seen and self._last_rx > self._last_state and self._word_awaited():
+                return None  # heard, no state: its plant's end (its clock halted), its HEARTBEAT EMERGENCY lost?
             self.reason = f"no new state from the vehicle for {wait:g} s"
         else:
             return None
-        outcome = "failsafe" if self.failsafe_seen else "aborted"
+        # its plant's end by its EVENT; without one, a failsafe only if one was said (not its HEARTBEAT EMERGENCY)
+        flew_failsafe = self.failsafe_seen not in (FailsafeSign.NONE, FailsafeSign.EMERGENCY)
+        outcome = self.plant_end or ("failsafe" if flew_failsafe or (self.failsafe_seen and not emergency)
+                                     else "aborted")
         self.event(outcome, self.reason, answers)
         return outcome

@@ -66,6 +66,11 @@ HEARTBEAT_ASKS = 10  # ... and at most this many (the vehicle's own 1 Hz heartbe
 VEHICLE_WARNED = 3  # the vehicle's first distinct warnings kept for a failed end's stderr
 
 
+# the vehicle's EVENTs that say its plant ended the flight (its HEARTBEAT then EMERGENCY), by the outcome they give
+PLANT_ENDS = {EventId.CRASHED: "crashed", EventId.DIVERGED: "diverged", EventId.COLLISION: "collision",
+              EventId.TERMINATED: "terminated"}
+
+
 class FailsafeSign(Enum):
     """How the vehicle said its failsafe since the controller armed it (its value: the words of the controller's
     record); false for NONE. A HEARTBEAT's word is kept once seen: the EVENT of a failsafe that disarmed in its
@@ -106,6 +111,9 @@ class OffboardLink:
         self.armed_seen = False  # the vehicle's heartbeat showed it armed since we armed it
         self.vehicle_armed = False
         self.vehicle_state = mavlink.MAV_STATE_UNINIT
+        self.vehicle_mode = 0  # its HEARTBEAT's custom_mode (PX4's)
+        self.arming = False  # the controller's ARM is being sent: the vehicle's failsafe, crash count from now
+        self.plant_end = ""  # how its plant ended the flight, by its EVENT: crashed, diverged, collision, terminated
         self.failsafe_seen = FailsafeSign.NONE  # how the vehicle said its failsafe since we armed it
         self.failsafe_at: float | None = None  # s, the vehicle's clock: its latest EVENT FAILSAFE's time
         self.landed_at: float | None = None  # s, the vehicle's clock: its latest EVENT LANDED's (land detected)
@@ -146,20 +154,25 @@ class OffboardLink:
         self._status(Event.at(self.t_mission if t is None else t, kind, text, answers=answers))
 
     def _command(self, cmd: int, p1: float, p2: float, tries: int = 30, every_s: float = 0.1,
-                 p3: float = 0.0) -> int | None:
+                 p3: float = 0.0, settled: Callable[[], bool] | None = None) -> int | None:
         """COMMAND_LONG to the vehicle, repeated (confirmation 0, 1, ...) until ACKed with a final result
-        (IN_PROGRESS is not one). Every 0.1 s: an ARM whose ACK was lost has armed the vehicle, whose failsafe
-        takes over 0.5 s later without a target (ARM_DISARM is idempotent; a resent ARM the vehicle finds
-        armed in OFFBOARD is ACCEPTED and does nothing: ``Commander._run_command`` in bridge.nodes.vehicle)."""
+        (IN_PROGRESS is not one), or, ``settled`` true, until the vehicle has said otherwise what came of it
+        (None). Every 0.1 s: an ARM whose ACK was lost has armed the vehicle, whose failsafe takes over 0.5 s later
+        without a target (the vehicle acts on one arm once, however many of its copies come: a resend is answered
+        with its first's result, bridge.nodes.vehicle.armretry)."""
         self._acks.pop(cmd, None)
         for n in range(tries):
-            self.ep.send(mavlink.MAVLink_command_long_message(self.vsys or 0, self.vcomp, cmd, n, p1, p2,
+            if settled is not None and settled():
+                return None
+            self.ep.send(mavlink.MAVLink_command_long_message(self.vsys or 0, self.vcomp, cmd, min(n, 255), p1, p2,
                                                               p3, 0, 0, 0, 0))
             deadline = time.monotonic() + every_s
             while time.monotonic() < deadline and not self.stopping:
                 self._serve(deadline)
                 if cmd in self._acks:
                     return self._acks.pop(cmd)
+                if settled is not None and settled():
+                    return None
             if self.stopping:
                 return None
         return None
@@ -221,7 +234,9 @@ class OffboardLink:
         self.ep.send_hot(HIL_ACTUATOR_CONTROLS, (time_usec, 1, *_ZERO16, 0))
 
     def _send_arm(self) -> None:
-        """Ask the vehicle to arm again (the guard's ``resume``); once per step while it asks."""
+        """Ask the vehicle to arm again (the guard's ``resume``, the mission's own ask after a failsafe); once per
+        step while it asks, each a command of its own (confirmation 0), as offline's guard asks each step: it
+        crosses the link model and draws its fate there, as offline's does (bridge.nodes.vehicle.armretry)."""
         self.ep.send(mavlink.MAVLink_command_long_message(self.vsys or 0, self.vcomp,
                                                           mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1.0, 0.0,
                                                           0, 0, 0, 0, 0))
@@ -364,7 +379,7 @@ class OffboardLink:
             self._hb_asks, self._next_hb_ask = 0, math.inf  # (ask_heartbeat: answered)
             self._last_rx = time.monotonic()
             self.vehicle_armed = bool(m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
-            self.vehicle_state = m.system_status
+            self.vehicle_state, self.vehicle_mode = m.system_status, m.custom_mode
             if self.vehicle_armed:
                 self.armed_seen = True
             if self.armed_seen and m.system_status in (mavlink.MAV_STATE_CRITICAL, mavlink.MAV_STATE_EMERGENCY):
@@ -408,7 +423,10 @@ class OffboardLink:
     def _event(self, m: Any) -> None:
         """A typed EVENT of the vehicle's (bridge.mavlink.events): what the controller decides by, by its id."""
         eid = received_id(m)
-        if eid is EventId.FAILSAFE and self.armed_seen:
+        since_armed = self.armed_seen or self.arming  # (its ARM's ACK or HEARTBEAT may come after its failsafe)
+        if eid in PLANT_ENDS and since_armed:
+            self.plant_end = self.plant_end or PLANT_ENDS[eid]
+        if eid is EventId.FAILSAFE and since_armed:
             # when it took over, on the vehicle's clock (an EVENT asked for again keeps its time)
             self.failsafe_at = max(self.failsafe_at or 0.0, m.event_time_boot_ms / 1000.0)
             # a failsafe that disarms the vehicle in its own control period (its disarm action, or on the
