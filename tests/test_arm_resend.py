@@ -22,7 +22,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.mavlink.endpoint import LINK_PORT
 from bridge.mavlink.events import EventId, received_id
-from bridge.nodes.report import Done, Event, Ready
+from bridge.nodes.report import Done, Event, Ready, Stats
 from bridge.nodes.vehicle.armretry import RETRY_GAP_S, ArmRetries
 from bridge.session import instance_slot
 from tests.sitlkit import ROOT, Proc, run_bsst
@@ -115,14 +115,18 @@ def test_a_resend_long_after_its_arm_is_a_new_arm():
 
 class Lossy(threading.Thread):
     """A link between ``bsst controller`` and ``bsst vehicle`` that loses the vehicle's COMMAND_ACKs of ARM_DISARM
-    and, with ``no_heartbeat_after_arm``, its HEARTBEATs once an ARM has passed up (the controller then learns what
+    and, with ``no_heartbeat_after_arm``, its HEARTBEATs once an ARM has passed up (or before
+    ``heartbeat_after_states`` states) (the controller then learns what
     came of its arm only from the vehicle's EVENTs); it notes when each ARM passed up (``arms``: (time.monotonic,
     confirmation)), and when the vehicle's first armed HEARTBEAT and its first EVENT FAILSAFE passed down."""
 
-    def __init__(self, vehicle: tuple[str, int], no_heartbeat_after_arm: bool = False) -> None:
+    def __init__(self, vehicle: tuple[str, int], no_heartbeat_after_arm: bool = False,
+                 heartbeat_after_states: int = 0) -> None:
         super().__init__(daemon=True)
         self.vehicle = vehicle
         self.no_hb = no_heartbeat_after_arm
+        self.hb_after = heartbeat_after_states  # the vehicle's HEARTBEATs lost until this many states passed down
+        self.states = 0
         self.front = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.front.bind(("127.0.0.1", 0))
         self.back = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -166,8 +170,9 @@ class Lossy(threading.Thread):
             kind = m.get_type()
             if kind == "COMMAND_ACK" and m.command == ARM:
                 continue
+            self.states += kind == "ODOMETRY"
             if kind == "HEARTBEAT":
-                if self.no_hb and self.arms:
+                if (self.no_hb and self.arms) or self.states < self.hb_after:
                     continue
                 if m.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED and self.armed_hb_at is None:
                     self.armed_hb_at = time.monotonic()
@@ -190,11 +195,11 @@ def _short_mission(tmp_path: Path, seconds: float) -> Path:
     return path
 
 
-def _fly_through(tmp_path: Path, lossy_hb: bool) -> tuple[Proc, Proc, Lossy, Done]:
+def _fly_through(tmp_path: Path, lossy_hb: bool, hb_after: int = 0) -> tuple[Proc, Proc, Lossy, Done]:
     with instance_slot() as n:
         v = Proc.bsst("vehicle", "--instance", str(n), "--realtime", "--gcs", "none", "--out", str(tmp_path / "v"))
         v.wait_report(Ready)
-        link = Lossy(("127.0.0.1", LINK_PORT + n), no_heartbeat_after_arm=lossy_hb)
+        link = Lossy(("127.0.0.1", LINK_PORT + n), no_heartbeat_after_arm=lossy_hb, heartbeat_after_states=hb_after)
         link.start()
         c = Proc.bsst("controller", str(_short_mission(tmp_path, 2.0)), "--realtime", "--vehicle",
                       f"127.0.0.1:{link.port}", "--out", str(tmp_path / "c"))
@@ -237,6 +242,17 @@ def test_a_failsafe_before_the_arms_answer_ends_the_flight_no_arm_sent_again(tmp
     assert not [a for a in link.arms if a[0] > link.failsafe_at + 0.5], (link.arms, link.failsafe_at)
     assert sum(e.startswith("armed:") for e in v.events()) == 1, v.events()
     assert any("bsst controller: failsafe" in ln for ln in c.lines), c.lines[-10:]
+
+
+def test_states_before_the_vehicles_first_heartbeat_are_counted_unheard_not_sender(tmp_path):
+    """``bsst controller`` without ``--target-sysid`` learns the vehicle's system from its HEARTBEAT; the states
+    that come before it (a lossy link loses the first HEARTBEATs, the 1 Hz stream's next is up to 1 s later) are
+    refused as ``unheard``. On the previous code they were ``sender``, said "from an address other than the peer":
+    the tour's 306 of 499 frames through ``bsst relay --loss 60``, all from the relay's listen port, the peer."""
+    _, c, link, _ = _fly_through(tmp_path, lossy_hb=False, hb_after=50)
+    stats = c.wait_report(Stats, timeout=5).values
+    assert stats["rejected"].get("unheard", 0) >= 40 and "sender" not in stats["rejected"], stats["rejected"]
+    assert link.states >= 50, stats["rejected"]
 
 
 def test_the_controller_says_a_crash_not_a_failsafe(tmp_path):

@@ -66,6 +66,8 @@ REASONS: dict[str, str] = {
                     "frames or bytes per second: the datagram (or the rest of it) dropped unparsed",
     "sender": "from an address other than the peer of a sending link, or a target or state from another "
               "system or component than the configured one",
+    "unheard": "the controller: a state before the vehicle's HEARTBEAT named its system (no --target-sysid): the "
+               "controller flies no vehicle it has not heard",
     # frame
     "truncated": "empty datagram, or one that ends inside a frame",
     "oversized": f"datagram over {MAX_DATAGRAM} bytes, or a payload longer than its message",

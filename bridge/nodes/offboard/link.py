@@ -347,7 +347,7 @@ class OffboardLink:
         kind = m._type
         if kind == "ODOMETRY":  # checked before the law sees it (bridge.mavlink.receive)
             now = time.monotonic()
-            why = ("sender" if src != self.vsys
+            why = ("unheard" if self.vsys is None else "sender" if src != self.vsys  # (its HEARTBEAT not come yet)
                    else stamp_problem(m.time_usec, self._odo_usec, now - self._odo_recv, 1.0 / self.rate,
                                       self._stamp_slack_s) or odometry_problem(m))
             if src == self.vsys:  # the window of steps this side read: what the vehicle sent outside it never came
