@@ -41,7 +41,7 @@ from bridge.autopilot.simvehicle import FAILSAFE, LAND, OFFBOARD, SimVehicle
 from bridge.autopilot.vehicleevents import typed_fields
 from bridge.core.flight import Flight, Progress, prepare
 from bridge.core.interrupt import Held, sigint_held
-from bridge.core.overrides import Overrides
+from bridge.core.overrides import Overrides, check_switches
 from bridge.core.wire import command_over_wire, state_over_wire
 from bridge.link.ends import ControllerEnd, VehicleEnd
 from bridge.link.radio import Radio
@@ -114,6 +114,7 @@ def simulate(
     table (PX4 names, ``{"COM_OF_LOSS_T": 1.0}``); ``param_at``: parameter changes at mission times
     (``[ParamChange(10.0, "COM_OBL_ACT", 1)]``), made at the start of their control step.
     """
+    check_switches(write=write, overwrite=overwrite, plots=plots)
     over = Overrides.of(overrides, **keywords)
     m = mission if isinstance(mission, Mission) else load_mission(mission, trace_cap(over.rate_hz))  # capped early
     flight = prepare(m, over)

@@ -35,12 +35,13 @@ from pathlib import Path
 from typing import Any
 
 from bridge.core.flight import Flight, Progress, discretization_refusal, prepare
-from bridge.core.overrides import Overrides
+from bridge.core.overrides import Overrides, check_switches
 from bridge.link.model import merge_link_tables
 from bridge.link.radio import Radio
 from bridge.link.turns import TURNS, turn_order
 from bridge.loop import Alone, Step, flying, recorded_run
 from bridge.loop import simulate as simulate_one
+from bridge.record.outlock import check_out_free, out_held
 from bridge.record.policies import run_ok
 from bridge.record.runlog import (
     MAX_TRACE_STEPS,
@@ -106,6 +107,7 @@ def simulate(mission: Mission | str | Path, *, vehicles: int | Sequence[Any] | N
     (``line:SPACING``, ``grid:SPACING`` or ``circle:RADIUS``, m; default ``line:2``), or ``vehicles`` = a
     sequence of :class:`~missions.fleet.VehicleSpec`. ``progress`` follows vehicle 1. Everything else as
     :func:`bridge.loop.simulate`."""
+    check_switches(write=write, overwrite=overwrite, plots=plots)
     rate = Overrides.of(overrides, **keywords).rate_hz  # the cap's rate: a plan too long is refused before it is timed
     m = mission if isinstance(mission, Mission) else load_mission(mission, trace_cap(rate))  # loaded once
     fleet = fleet_mission(m, vehicles, formation)
@@ -117,8 +119,9 @@ def simulate(mission: Mission | str | Path, *, vehicles: int | Sequence[Any] | N
     check_fleet_steps(fleet, flights)  # before the run directory is made: a refused mission writes nothing
     check_fleet_starts(fleet, flights, vehicles, formation)
     radios = shared_radios(fleet, flights, over)
-    path = run_dir(out, fleet.name, overwrite) if (out is not None or write) else None
-    return fly_fleet(over.laid_over(fleet), flights, path, plots=plots, progress=progress, radios=radios)
+    with out_held(out):  # (another run writing this --out: refused before its files are touched)
+        path = run_dir(out, fleet.name, overwrite) if (out is not None or write) else None
+        return fly_fleet(over.laid_over(fleet), flights, path, plots=plots, progress=progress, radios=radios)
 
 
 def check_fleet_steps(m: Mission, flights: list[Flight]) -> None:
@@ -418,7 +421,8 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
     keep = out is not None or write
     if keep:  # a refused run directory is named before a busy port (both before anything starts)
         run_dir(out, fleet.name, overwrite, create=False)
-    with fleet_instances(len(flights), instance):  # held for the fleet's life; another session's refused here
+        check_out_free(out)  # another run writing it now
+    with fleet_instances(len(flights), instance), out_held(out):  # both for the fleet's life
         path = run_dir(out, fleet.name, overwrite) if keep else Path(tempfile.mkdtemp(prefix="bsst-sitl-fleet-"))
         try:
             fm = over.laid_over(fleet)

@@ -36,6 +36,14 @@ def _not_alone(name: str, value: object, one: tuple[type, ...], what: str) -> No
                           [:300])
 
 
+def check_switches(**switches: object) -> None:
+    """Refuse a Python caller's switch (``realtime``, ``overwrite``, ``plots``, ...) that is not True or False: a
+    string is truthy, so ``realtime="no"`` flew in real time (a user's tour)."""
+    for name, value in switches.items():
+        if not isinstance(value, bool):
+            raise ConfigError(f"{name}: expected True or False, got {value!r}"[:300])
+
+
 @dataclass(frozen=True)
 class Overrides:
     """What a caller lays over a mission: ``bsst``'s flags, or Python's keywords. None (and an empty

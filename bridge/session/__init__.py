@@ -64,7 +64,7 @@ from typing import Any
 from bridge.autopilot.estimator import compile_estimator
 from bridge.core.clock import lockstep_pace, realtime_speed_problem, speed_problem
 from bridge.core.flight import Flight, Progress, prepare
-from bridge.core.overrides import Overrides
+from bridge.core.overrides import Overrides, check_switches
 from bridge.core.scalar import kernel_cache_on
 from bridge.mavlink.endpoint import GCS_PORT, LINK_PORT, parse_address
 from bridge.mavlink.signing import key_from_file
@@ -165,6 +165,8 @@ def sitl(
     ``await_mission`` (``mission`` None): no mission file; a ground station uploads one to the vehicle and starts
     it, the controller downloads it and flies it (docs/missions.md, "From a ground station").
     """
+    check_switches(write=write, overwrite=overwrite, plots=plots, realtime=realtime, live=live,
+                   await_mission=await_mission)
     if await_mission:
         if mission is not None:
             raise ConfigError("--await-mission: give no mission file (a ground station uploads the mission)")
