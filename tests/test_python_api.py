@@ -242,21 +242,16 @@ def test_one_event_or_change_given_alone_is_refused_as_alone(keywords: dict, sai
     assert Overrides.of(**{k: (v,) for k, v in keywords.items()})  # a tuple of it is taken
 
 
-@pytest.mark.parametrize("call, keywords, said", [
-    ("simulate", {"plots": "no"}, "plots: expected True or False, got 'no'"),
-    ("simulate", {"overwrite": 1}, "overwrite: expected True or False, got 1"),
-    ("simulate", {"vehicles": 2, "write": "yes"}, "write: expected True or False, got 'yes'"),
-    ("sitl", {"realtime": "no"}, "realtime: expected True or False, got 'no'"),
-    ("sitl", {"live": None}, "live: expected True or False, got None"),
-])
-def test_a_switch_that_is_not_true_or_false_is_refused(tmp_path: Path, call: str, keywords: dict, said: str) -> None:
-    """A Python caller's switch is True or False: a string is truthy, so ``sitl(..., realtime="no")`` flew in real
-    time (the forty-second session's tour). Refused before anything flies or is written."""
-    import bridge.session  # (imported here: the module's other tests fly nothing over sockets)
 
-    fly = simulate if call == "simulate" else bridge.session.sitl
+@pytest.mark.parametrize("keywords, said", [
+    ({"plots": "no"}, "plots: expected True or False, got 'no'"),
+    ({"overwrite": 1}, "overwrite: expected True or False, got 1"),
+    ({"vehicles": 2, "write": "yes"}, "write: expected True or False, got 'yes'"),
+])
+def test_a_switch_that_is_not_true_or_false_is_refused(tmp_path: Path, keywords: dict, said: str) -> None:
+    """A Python caller's switch is True or False: a string is truthy (``sitl(..., realtime="no")`` flew in real time,
+    the forty-second session's tour; ``sitl``'s in test_run_records). Refused before anything flies or is written."""
     with pytest.raises(ConfigError) as e:
-        fly(MISSION_DIR / "sine.toml", out=tmp_path / "run", instance=None, **keywords) if call == "sitl" else \
-            fly(MISSION_DIR / "sine.toml", out=tmp_path / "run", **keywords)
+        simulate(MISSION_DIR / "sine.toml", out=tmp_path / "run", **keywords)
     assert str(e.value) == said
     assert not (tmp_path / "run").exists()

@@ -554,3 +554,16 @@ def test_a_run_directory_another_run_writes_is_refused_and_kept_whole(tmp_path: 
     assert summary["duration_s"] == 3.0 and "duration_s = 3.0" in (out / "mission.toml").read_text()
     again = _sim(short_sine(tmp_path / "other", 1.0), "--out", out, "--overwrite")
     assert again.returncode == 0, again.stderr
+
+
+@pytest.mark.parametrize("keywords, said", [
+    ({"realtime": "no"}, "realtime: expected True or False, got 'no'"),
+    ({"live": None}, "live: expected True or False, got None"),
+])
+def test_a_sessions_switch_that_is_not_true_or_false_is_refused(tmp_path: Path, keywords: dict, said: str) -> None:
+    """``sitl(..., realtime="no")`` flew in real time (a string is truthy; the forty-second session's tour): refused
+    before anything starts or is written."""
+    with pytest.raises(ConfigError) as e:
+        sitl(short_sine(tmp_path, 1.0), out=tmp_path / "run", instance=None, **keywords)
+    assert str(e.value) == said
+    assert not (tmp_path / "run").exists()
