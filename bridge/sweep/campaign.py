@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from bridge.core.interrupt import sigint_held
 from bridge.record.runlog import check_out_dir, run_dir, write_json_atomic
 from bridge.sweep.cells import (
     CELLS_CSV,
@@ -199,25 +200,30 @@ def run_sweep(
         bar.update(row)
 
     interrupted = False
-    try:
-        _fly(spec, todo, used, client, jobs, record)
-    except KeyboardInterrupt:
-        interrupted = True
-    finally:
-        bar.close()
-        if sink is not None:
-            sink.close()
-    rows = [results[c.key()] for c in all_cells if c.key() in results]
-    interrupted = interrupted and len(rows) < len(all_cells)  # a stop after the last cell was handed out: whole
-    if len(rows) > reused and used not in engines:
-        engines = [*engines, used]
-    if path is not None:
-        _record_engines(path / SWEEP_JSON, engines)
-    if path is not None and not interrupted:
-        write_cells(path / CELLS_CSV, rows)
-        if report:
-            write_report(path, rows, spec.identity() | {ENGINES: engines}, plots=plots)
-    failed = sum(1 for r in rows if r["outcome"] in FAILED)
+    # a Ctrl-C stops the flights only: once they are over (every cell flown, or the stop taken) it is held, so that
+    # the record and the report are written whole (it landed there and ended a whole sweep 'interrupted', exit 1,
+    # with no report.md), and a whole sweep's stops nothing (docs/campaigns.md)
+    with sigint_held() as held:
+        try:
+            with held.released():
+                _fly(spec, todo, used, client, jobs, record)
+        except KeyboardInterrupt:
+            interrupted = True
+        finally:
+            bar.close()
+            if sink is not None:
+                sink.close()
+        rows = [results[c.key()] for c in all_cells if c.key() in results]
+        interrupted = interrupted and len(rows) < len(all_cells)  # a stop after the last cell was handed out: whole
+        if len(rows) > reused and used not in engines:
+            engines = [*engines, used]
+        if path is not None:
+            _record_engines(path / SWEEP_JSON, engines)
+        if path is not None and not interrupted:
+            write_cells(path / CELLS_CSV, rows)
+            if report:
+                write_report(path, rows, spec.identity() | {ENGINES: engines}, plots=plots)
+        failed = sum(1 for r in rows if r["outcome"] in FAILED)
     return Outcome(rows, len(rows) - reused, reused, failed, path, time.monotonic() - t0, interrupted, used,
                    used_why, len(all_cells), engines)
 
