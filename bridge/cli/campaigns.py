@@ -137,7 +137,6 @@ def _sweep(args: argparse.Namespace) -> int:
     from bridge.core.interrupt import ignore_sigint  # lazy: start-up time
     from bridge.core.overrides import Overrides  # lazy: start-up time
     from bridge.sweep import AXES, Grid, Sweep, is_sweep_file, load_sweep, run_sweep  # lazy: start-up time
-    from bridge.sweep.cells import broke_policy  # lazy: start-up time
     from bridge.sweep.grid import LINK_AXES, SHORT, mission_value  # lazy: start-up time
     from missions import load_mission  # lazy: start-up time
 
@@ -205,18 +204,35 @@ def _sweep(args: argparse.Namespace) -> int:
     elif res.failed:
         print(f"bsst sweep: {res.failed} of {len(res.rows)} cells failed (cells.csv's error column); the first: "
               f"{res.first_error()}", file=sys.stderr)
-    broken = [r for r in res.rows if broke_policy(r)]
-    if broken:  # measured, as a diverged cell is (the exit status stays the sweep's), but said: not flown as asked
-        print(f"bsst sweep: {len(broken)} of {len(res.rows)} cells broke a safety policy (cells.csv's policies "
+    say_measured(res.rows, spec.grid.swept())
+    return EXIT_FAILED if res.failed else EXIT_OK
+
+
+def say_measured(rows: list[dict[str, Any]], swept: tuple[str, ...]) -> None:
+    """On stderr, the cells of a sweep that flew but not well, or not as asked, with the first of each: measured,
+    as a diverged cell is (the exit status stays the sweep's), but said: crashed ones, broken policies, a jitter the
+    delay capped."""
+    from bridge.sweep.cells import broke_policy  # lazy: start-up time
+    from bridge.sweep.classes import CRASHED  # lazy: start-up time
+
+    crashed = [r for r in rows if r["outcome"] in CRASHED]
+    if crashed:  # a result (class crashed), not a cell that could not be flown
+        at = ", ".join(f"{a} {v:g}" if isinstance(v, float) else f"{a} {v}" for a, v in
+                       ((a, crashed[0][a]) for a in swept))
+        print(f"bsst sweep: {len(crashed)} of {len(rows)} cells crashed (class crashed: cells.csv's outcome column, "
+              f"report.md's tables); the first: {at + ', ' if at else ''}seed {crashed[0]['seed']}: "
+              f"{crashed[0]['outcome']}", file=sys.stderr)
+    broken = [r for r in rows if broke_policy(r)]
+    if broken:  # not flown as asked
+        print(f"bsst sweep: {len(broken)} of {len(rows)} cells broke a safety policy (cells.csv's policies "
               f"column, report.md's Policies); the first: {broken[0]['controller']}, seed {broken[0]['seed']}: "
               f"{broken[0]['policies']}", file=sys.stderr)
-    capped = [r for r in res.rows if r.get("jitter_capped")]
-    if capped:  # flown as documented (exit status unchanged), but not the jitter its jitter_ms asked for
-        print(f"bsst sweep: {len(capped)} of {len(res.rows)} cells flew a jitter capped at the delay (cells.csv's "
+    capped = [r for r in rows if r.get("jitter_capped")]
+    if capped:  # flown as documented, but not the jitter its jitter_ms asked for
+        print(f"bsst sweep: {len(capped)} of {len(rows)} cells flew a jitter capped at the delay (cells.csv's "
               f"jitter_capped column, report.md's Jitter capped at the delay; docs/links.md); the first: delay "
               f"{capped[0]['delay_ms']:g} ms, jitter {capped[0]['jitter_ms']:g} ms: {capped[0]['jitter_capped']}",
               file=sys.stderr)
-    return EXIT_FAILED if res.failed else EXIT_OK
 
 
 

@@ -283,10 +283,12 @@ def read_cells(path: str | Path, legacy: Mapping[str, Any] | None = None, classe
             continue
         try:
             row = parse_row(_record(p, n, line), columns)
-            if classes is not None and row["class"] != classify(row, classes):
+            want = row["class"] if classes is None else classify(row, classes)
+            if (row["class"], want) == ("error", "crashed"):  # a sweep's of before the class (its crash an error
+                row["class"] = want  # with no reason given): kept as a sweep classes it now
+            if row["class"] != want:
                 raise ValueError(f"class {row['class']!r} contradicts the row (outcome {row['outcome']}, rms "
-                                 f"{row['rms']} m, ripple_u2 {row['ripple_u2']} N: {classify(row, classes)!r} by "
-                                 f"the sweep's classes)")
+                                 f"{row['rms']} m, ripple_u2 {row['ripple_u2']} N: {want!r} by the sweep's classes)")
             row = {c: row[c] if c in row else legacy[c] for c in COLUMNS} if legacy is not None else row
             outside = next((a for a in grid if not _in_grid(row, a, grid[a])), None)
             if outside is not None:  # hand-edited, or another sweep's: never counted as one of this grid's cells

@@ -5,7 +5,7 @@ In:  a ``cells.csv`` row (``outcome``, ``rms`` m, ``ripple_u2`` N) and the thres
 Out: its class name, one of :data:`CLASSES`; the rules as Markdown table rows
 
 Classes, best to worst: ``clean``, ``degraded``, ``limit-cycling``, ``failsafe``,
-``diverged``, ``error`` (the rules are in :mod:`bridge.sweep.report`'s docstring and in
+``diverged``, ``crashed``, ``error`` (the rules are in :mod:`bridge.sweep.report`'s docstring and in
 :func:`classify`).
 """
 
@@ -18,7 +18,10 @@ from typing import Any
 
 from params import ConfigError, Table
 
-CLASSES = ("clean", "degraded", "limit-cycling", "failsafe", "diverged", "error")  # best to worst
+CLASSES = ("clean", "degraded", "limit-cycling", "failsafe", "diverged", "crashed", "error")  # best to worst
+# the outcomes of a flight that ended on the ground or against another vehicle before its end: measured (a result, as
+# a diverged one is), never ``error`` (which is a cell that could not be flown, its ``error`` column saying why)
+CRASHED = ("crashed", "collision", "terminated")
 
 
 @dataclass(frozen=True)
@@ -72,6 +75,8 @@ def classify(row: Mapping[str, Any], classes: Classes) -> str:
     """The class of one row (see the module docstring for the rules)."""
     outcome = row["outcome"]
     rms = row.get("rms")
+    if outcome in CRASHED:  # what happened, whatever its RMS (its error is the fall's)
+        return "crashed"
     if outcome not in ("completed", "failsafe", "diverged"):
         return "error"
     if outcome == "diverged" or (rms is not None and rms > classes.diverged_rms_m):
@@ -97,5 +102,7 @@ def thresholds_text(c: Classes) -> list[str]:
         "second half of the flight) |",
         "| failsafe | the vehicle's failsafe took over (outcome `failsafe`) |",
         f"| diverged | the plant's divergence check tripped, or 3-D RMS > {c.diverged_rms_m:g} m |",
+        "| crashed | the flight ended on the ground or against another vehicle: outcome `crashed` (it hit the "
+        "ground too hard), `collision` (a fleet's vehicles touched) or `terminated` (its motors cut) |",
         "| error | the cell could not be flown (see the `error` column) |",
     ]

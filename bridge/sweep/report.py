@@ -12,6 +12,8 @@ Out: ``report.md`` (thresholds, an overview per law, a table per pair of swept a
 Classes, worst first (a grid point flown with several seeds shows its worst class):
 
 - ``error``: the cell could not be flown (its ``error`` column says why);
+- ``crashed``: the flight ended on the ground or against another vehicle (outcome ``crashed``, ``collision``,
+  ``terminated``);
 - ``diverged``: the plant's divergence check tripped, or the 3-D RMS error exceeds
   ``diverged_rms_m``;
 - ``failsafe``: the vehicle's failsafe took over (no valid command for its timeout);
