@@ -26,6 +26,7 @@ from pathlib import Path
 import pytest
 
 from bridge.cli import main
+from bridge.record.outlock import out_held
 from bridge.record.runlog import EventLog, write_text_atomic
 from bridge.session import instance_slot, sitl
 from missions import Mission, Sine
@@ -567,3 +568,20 @@ def test_a_sessions_switch_that_is_not_true_or_false_is_refused(tmp_path: Path, 
         sitl(short_sine(tmp_path, 1.0), out=tmp_path / "run", instance=None, **keywords)
     assert str(e.value) == said
     assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("command", [("sweep", "--delay", "0,10"), ("sweep", "--delay", "0,10", "--resume"),
+                                     ("sim",)])
+def test_a_directory_another_process_writes_is_refused_by_sweeps_and_sims(tmp_path: Path, command: tuple) -> None:
+    """While another process writes a directory (here this test, holding it as a run does), ``bsst sweep`` into it,
+    a resume of a sweep there, and ``bsst sim --overwrite`` are refused (exit 2, naming this pid), nothing cleared."""
+    out = tmp_path / "held"
+    out.mkdir()
+    (out / "events.log").write_text("kept\n")
+    with out_held(out):
+        r = run_bsst(command[0], str(short_sine(tmp_path, 1.0)), *command[1:], "--out", str(out), "--overwrite",
+                     cwd=ROOT, env=ENV, timeout=120)
+    assert r.returncode == 2, r
+    assert r.stderr == (f"bsst: --out {out}: in use by another run (pid {os.getpid()}); give another directory, or "
+                        "wait for it to end\n"), r.stderr
+    assert [p.name for p in out.iterdir()] == ["events.log"] and (out / "events.log").read_text() == "kept\n"

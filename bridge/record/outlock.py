@@ -13,15 +13,18 @@ events.log, the second's mission.toml and trace.csv). Now the second is refused 
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import os
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any, TypeVar
 
 from bridge.core.locks import Claims, take_flock
 from params import ConfigError
 
+R = TypeVar("R")
 OUT_LOCK = "bsst-out-{}.lock"  # in the temporary directory, by the sha256 of the run directory's real path
 _WRITING = Claims()  # the run directories this process's runs write (another thread's run is refused)
 
@@ -52,6 +55,16 @@ def out_held(out: str | Path | None, flag: str = "--out") -> Iterator[None]:
             os.close(fd)
     finally:
         _WRITING.release([real])
+
+
+def holding_out(run: Callable[..., R]) -> Callable[..., R]:
+    """``run`` (a command's whole run, given its directory as the keyword ``out``) with that directory held
+    (:func:`out_held`) for as long as it runs."""
+    @functools.wraps(run)
+    def held(*args: Any, out: str | Path | None = None, **keywords: Any) -> R:
+        with out_held(out):
+            return run(*args, out=out, **keywords)
+    return held
 
 
 def check_out_free(out: str | Path | None, flag: str = "--out") -> None:

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from bridge.core.interrupt import sigint_held
+from bridge.record.outlock import holding_out
 from bridge.record.runlog import check_out_dir, run_dir, write_json_atomic
 from bridge.sweep.cells import (
     CELLS_CSV,
@@ -148,6 +149,7 @@ class SweepFailed(Exception):
 
 
 @reads_inputs
+@holding_out  # one sweep writes its --out at a time (a resume too)
 def run_sweep(
     spec: Sweep,
     *,
