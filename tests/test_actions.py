@@ -313,4 +313,7 @@ def test_mavsdk_terminate_ends_a_sessions_flight_terminated_exit_1(tmp_path: Pat
     assert who.startswith("245:190 ") and who.endswith(" gcs"), who
     assert how.startswith("flight terminated at t=") and "motors off at x=" in how, how
     kinds = [e["kind"] for e in summary["events"]]
-    assert kinds.count("terminated") == 1 and "disarmed" in kinds
+    assert [e["source"] for e in summary["events"] if e["kind"] == "terminated"] == ["vehicle", "controller"]
+    assert "disarmed" in kinds
+    said = next(e["text"] for e in summary["events"] if e["kind"] == "terminated" and e["source"] == "controller")
+    assert said == "the vehicle's flight ended: a flight termination (its EVENT)", said

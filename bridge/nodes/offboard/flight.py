@@ -22,16 +22,15 @@ from bridge.core.wire import command_over_wire, step_of_usec
 from bridge.link.ends import ControllerEnd
 from bridge.mavlink.endpoint import FORCE_DISARM, Spinner, wait
 from bridge.mavlink.eventseq import REQUEST_TIMEOUT_S, REQUEST_TRIES
-from bridge.mavlink.modes import MAIN_AUTO, MAIN_OFFBOARD, SUB_LOITER, main_mode
+from bridge.mavlink.modes import MAIN_OFFBOARD, main_mode
 from bridge.nodes.offboard.config import (
     OffboardConfig,
 )
+from bridge.nodes.offboard.endflight import EndFlying
 from bridge.nodes.offboard.link import FailsafeSign
 from bridge.nodes.offboard.radioturn import down_link
-from bridge.nodes.offboard.realtime import RealtimeFlying
 from bridge.nodes.report import Ready, Report
 from bridge.record.columns import CONTROLLER_COLUMNS
-from bridge.record.ending import end_unanswered
 from bridge.record.halves import HalfWriter
 from controller.law import LawFailed
 from controller.link_guard import LinkGuard
@@ -45,7 +44,7 @@ END_ASK_S = 1.0  # s of wall time (real time) the vehicle is asked what ended it
 END_EVENT_TRIES = 30  # a HEARTBEAT EMERGENCY's EVENT missed is asked for (every 0.1 s) this many times, not 5
 
 
-class Offboard(RealtimeFlying):
+class Offboard(EndFlying):
     """One offboard controller flying one mission; :meth:`run` returns the outcome."""
 
     def __init__(self, flight: Flight, cfg: OffboardConfig, out: Path | None = None,
@@ -297,86 +296,6 @@ class Offboard(RealtimeFlying):
                   dec.state_age_s if cmd is not None else math.nan)
         return wire
 
-    def _fly_end(self) -> str:
-        """The mission's time is flown: the vehicle's own end action (``[end] action``), never a disarm in the
-        air. ``land``: NAV_LAND, then wait until it has landed and disarmed itself, in lockstep answering each
-        state with the no-target acknowledgement (the landing is clocked as the mission was: offline's to the
-        bit); ``hold``: HOLD (DO_SET_MODE AUTO LOITER), the vehicle's until the session ends. What went wrong
-        is the :attr:`reason` (the mission itself was completed). The outcome: ``completed``, or ``aborted`` when a
-        stop (Ctrl-C, SIGTERM) came while the vehicle was landing, still armed (as ``bsst sim``'s end landing)."""
-        self.ending = True
-        hold = self.flight.mission.end_action == "hold"
-        if hold:
-            result = self._command(mavlink.MAV_CMD_DO_SET_MODE, float(mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED),
-                                   float(MAIN_AUTO), p3=float(SUB_LOITER))
-        else:
-            result = self._command(mavlink.MAV_CMD_NAV_LAND, 0.0, 0.0)
-        self._at_end_now()
-        if result != mavlink.MAV_RESULT_ACCEPTED:
-            why = "no answer" if result is None else f"MAV_RESULT {result}"
-            self.reason = f"the vehicle did not take the mission's end action ({'HOLD' if hold else 'LAND'}): {why}"
-            self.end_unanswered = end_unanswered(self.flight.mission.end_action, why, time.monotonic() - self._last_rx)
-            self.event("end", self.reason)
-            return "completed"
-        stays = "stays armed (COM_DISARM_LAND <= 0)" if self.flight.params.land_disarm_s <= 0.0 else "disarms"
-        self.event("end", "mission over: the vehicle holds its position" if hold else
-                   f"mission over: the vehicle lands where it is and {stays} on the ground", answers=("end",))
-        if not hold and not self._await_landing():
-            if self.stopping and not self.reason:  # (a stop: _await_landing says no other reason)
-                self.reason = "interrupted (Ctrl-C or SIGTERM) in the mission's end landing: the vehicle still armed"
-                self.event("end", self.reason)
-                return "aborted"
-            self.event("end", self.reason)
-        elif not hold and self.vehicle_armed:  # landed, COM_DISARM_LAND <= 0: armed on the ground is what was asked
-            self.event("end", f"the vehicle landed and stays armed, as asked (COM_DISARM_LAND = "
-                              f"{self.flight.params.land_disarm_s:g}: no auto-disarm)")
-        return "completed"
-
-    def _await_landing(self) -> bool:
-        """Serve the link until the vehicle has disarmed on the ground (True), or :attr:`reason` says why not:
-        silent, or not down within the descent's time at the failsafe's rate, COM_DISARM_LAND and 10 s (vehicle time:
-        lockstep counts the steps it clocks, whatever the pace; real time the wall clock). With COM_DISARM_LAND 0 or
-        less (no auto-disarm) a vehicle that landed (its EVENT LANDED since) and is still armed then is as asked
-        (True): the same time flown, so that its end rows stay offline's."""
-        keeps_armed, landed_before = self.flight.params.land_disarm_s <= 0.0, self.landed_at
-        lockstep = self.cfg.clock == "lockstep"
-        usec, t_end = self._end_usec, self.t_mission
-        allowed_s = 10.0 + self.flight.failsafe.time_to_land_s(self._end_height_m) + max(
-            self.flight.params.land_disarm_s, 0.0)  # landed, the vehicle disarms after COM_DISARM_LAND
-        deadline = time.monotonic() + allowed_s
-        last_usec = (usec or 0) + int(allowed_s * 1e6)
-        if lockstep and usec is not None:
-            self._send_no_target(usec)
-        while self.vehicle_armed and not self.stopping:
-            now = time.monotonic()
-            late = usec is not None and usec > last_usec if lockstep else now > deadline
-            if late and keeps_armed and self.landed_at != landed_before:  # on the ground, armed: as asked
-                break
-            if late or now - self._last_rx > self.cfg.vehicle_timeout_s:
-                self.vehicle_silent = not late
-                self.reason = "the vehicle did not land and disarm after the mission" if late else \
-                    f"vehicle silent for {self.cfg.vehicle_timeout_s:g} s while landing"
-                return False
-            for _, m, _addr in wait((self.ep,), min(deadline, self._next_house), self.spinner):
-                self._on(m)
-            odo, self._odo = self._odo, None
-            if lockstep and odo is not None and self.vehicle_armed and usec is not None and odo.time_usec >= usec:
-                usec = odo.time_usec
-                self._send_no_target(usec)
-            if time.monotonic() >= self._next_house:
-                self._housekeeping()
-        self._at_end_now()
-        if lockstep and usec is not None and self._end_usec is not None:  # at the step it waits at now (a stop's
-            self.t_mission = t_end + (usec - self._end_usec) / 1e6  # word was at the mission's end, before the landing)
-        return not self.vehicle_armed or (keeps_armed and self.landed_at != landed_before and not self.stopping)
-
-    def _at_end_now(self) -> None:
-        """After the mission's steps, events are at the time they happen, not at the last step's: in lockstep
-        the vehicle waits at the state that ended the mission, in real time the wall clock has gone on since it
-        came (the session orders the two children's events by time: an answer never comes before its cause)."""
-        if self._t_wall is not None and self.cfg.clock == "realtime":
-            self.t_mission, self._t_wall = self.vehicle_t(), time.monotonic()
-
     def _end_of_mission(self, t_end: float, odo: Any, due: tuple[int, float] | None = None) -> str:
         """The mission's steps are flown (the state of mission time ``t_end``, s, came; or, real time, ``due``: its
         step and when it was due to arrive, s of time.monotonic, by the tick schedule, ``odo`` the newest state
@@ -472,14 +391,15 @@ class Offboard(RealtimeFlying):
             self.ended_taken_over = True
         elif now - self._last_rx > timeout:
             self.reason, self.vehicle_silent = f"vehicle silent for {timeout:g} s", True
-        elif emergency:
+        elif emergency or self.plant_end:
             # at once: its clock halted, so waiting out the state timeout would only delay the end. Its EVENT says how
             # (the outcome: crashed, not the failsafe that may have flown before): one missed is asked for again
             if not self.plant_end and ((not at_end and self._word_awaited(END_EVENT_TRIES)) | self.events_awaited()):
                 return None
             how = {"crashed": "it crashed", "diverged": "it diverged", "collision": "another vehicle touched it",
                    "terminated": "a flight termination"}.get(self.plant_end, "it crashed, diverged or was touched")
-            self.reason = f"the vehicle's flight ended: {how} (HEARTBEAT system_status EMERGENCY)"
+            sign = "HEARTBEAT system_status EMERGENCY" if emergency else "its EVENT"  # (a termination: disarmed)
+            self.reason = f"the vehicle's flight ended: {how} ({sign})"
             answers = (self.plant_end,) if self.plant_end else ("crashed", "diverged", "collision")
         elif self.armed_seen and not self.vehicle_armed and not self.failsafe_seen:
             if (not at_end and self._word_awaited()) or self.events_awaited():  # a missed EVENT: its failsafe's?

@@ -63,7 +63,6 @@ TARGETS_TIMED = 256  # the latest targets' sends timed (just before, just after)
 TIMESYNC_BURST_S = 0.01  # s of wall time between TIMESYNC requests until that many answers are in (then timesync_s)
 HEARTBEAT_ASK_S = 0.1  # s of wall time between REQUEST_MESSAGE HEARTBEATs unanswered (ask_heartbeat)
 HEARTBEAT_ASKS = 10  # ... and at most this many (the vehicle's own 1 Hz heartbeat comes anyway)
-VEHICLE_WARNED = 3  # the vehicle's first distinct warnings kept for a failed end's stderr
 
 
 # the vehicle's EVENTs that say its plant ended the flight (its HEARTBEAT then EMERGENCY), by the outcome they give
@@ -98,7 +97,6 @@ class OffboardLink:
         self.tlog = Tlog(out / "controller.tlog") if out is not None else None
         self.rejected = Rejections()  # what the receive path refused (bridge.mavlink.receive)
         self._texts = StatusTextJoiner()  # chunked STATUSTEXTs, joined before they are reported
-        self.vehicle_warned: list[str] = []  # its first few WARNING-or-worse STATUSTEXTs (said on a failed end)
         self.ep = Endpoint(cfg.vehicle, sysid=cfg.sysid, compid=cfg.compid, tlog=self.tlog, name="--vehicle",
                            signing=Signing(cfg.key) if cfg.key is not None else None, rejected=self.rejected,
                            source_port=cfg.source_port)
@@ -449,9 +447,6 @@ class OffboardLink:
         return self.event_seq.pending()
 
     def _statustext(self, severity: int, text: str) -> None:
-        if severity <= mavlink.MAV_SEVERITY_WARNING and len(self.vehicle_warned) < VEHICLE_WARNED \
-                and text not in self.vehicle_warned:
-            self.vehicle_warned.append(text)
         self._status(StatusText(severity, text))
 
     def _timesync(self, m: Any) -> None:

@@ -14,13 +14,17 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from pymavlink.dialects.v20.common import MAV_SEVERITY_WARNING
+
 from bridge.core.flight import Flight
 from bridge.nodes.offboard.config import OffboardConfig
 from bridge.nodes.offboard.flight import Offboard
 from bridge.nodes.process import on_stop_signals, report_printer
-from bridge.nodes.report import Done, Stats
+from bridge.nodes.report import Done, Stats, StatusText
 from bridge.record.asked import not_as_asked
 from bridge.record.runlog import side_dir
+
+WARNED = 3  # the vehicle's first distinct warnings a failed end repeats on stderr
 
 
 def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None = None,
@@ -29,7 +33,15 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
     leaving it) as asked, else 1 (failsafe, diverged, aborted, lockstep left, a scheduled change unconfirmed, the
     end action not answered as taken, a tick the machine stalled)."""
     path = side_dir(out, ("controller.tlog", "controller.bin"), overwrite) if out is not None else None
-    emit = report_printer()
+    warned: list[str] = []  # the vehicle's first few distinct WARNING-or-worse STATUSTEXTs, said on a failed end
+    printed = report_printer()
+
+    def emit(report: Any) -> None:
+        if isinstance(report, StatusText) and report.severity <= MAV_SEVERITY_WARNING and len(warned) < WARNED \
+                and report.text not in warned:
+            warned.append(report.text)
+        printed(report)
+
     transfer = vehicle = None
     if cfg.await_mission:  # a ground station's mission: waited for, downloaded, flown (bridge.nodes.offboard.mission)
         from bridge.nodes.offboard.mission import mission_flight  # lazy: only for --await-mission
@@ -61,7 +73,7 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
               node.vehicle_silent))
     if outcome != "completed":
         sys.stderr.write(f"bsst controller: {outcome}" + (f": {node.reason}" if node.reason else "") + "\n")
-        sys.stderr.writelines(f"bsst controller: the vehicle warned: {text}\n" for text in node.vehicle_warned)
+        sys.stderr.writelines(f"bsst controller: the vehicle warned: {text}\n" for text in warned)
     elif left:
         sys.stderr.write(f"bsst controller: completed, but not in lockstep: said by {node.left_lockstep}\n")
     # what it alone knows of sitl's "not flown as asked" (bridge.record.asked), said in the same words: a scheduled
