@@ -172,6 +172,25 @@ def test_reordered_and_duplicated_commands_are_rejected_not_applied() -> None:
     assert run.rms < 1e-3
 
 
+def test_duplicates_do_not_undo_the_reordering() -> None:
+    """A held packet's copy is held with it (docs/links.md): every packet duplicated flies as without copies, and
+    both directions count their copies and the packets they reordered. Until the fix-linkdup branch the copies went
+    through on time: ``--dup 100 --reorder 99.9`` flew the perfect link's trace to completion (its lone reorder
+    fails safe), and ``--dup 100 --reorder 50`` counted reordered 0 both ways."""
+    m = Mission(Sine(), duration_s=3.0, name="s")
+    alone = simulate(m, plots=False, link={"reorder_pct": 99.9})
+    both = simulate(m, plots=False, link={"reorder_pct": 99.9, "dup_pct": 100.0})
+    assert alone.outcome == both.outcome == "failsafe"
+    for k, v in alone.trace.items():
+        assert np.array_equal(np.asarray(v), np.asarray(both.trace[k]), equal_nan=True), k
+    down = both.summary["link"]["down"]
+    assert down["duplicated"] == down["delivered"] > 0 and down["reordered"] == down["delivered"] - 1
+    half = simulate(m, plots=False, link={"reorder_pct": 50.0, "dup_pct": 100.0}).summary["link"]
+    for d in ("up", "down"):
+        assert half[d]["reordered"] > 0.4 * half[d]["sent"], d
+        assert half[d]["duplicated"] == half[d]["delivered"] > 0.99 * half[d]["sent"], d
+
+
 # -- blackouts: ride through, failsafe, recovery ------------------------------------------
 def test_short_blackout_of_both_directions_rides_through() -> None:
     run = simulate(SINE, plots=False, link={"blackouts": [[15.0, 0.3]]})

@@ -76,14 +76,19 @@ def _arrivals(ok: np.ndarray, seq: np.ndarray, n_sent: int, t: np.ndarray, fp: n
             out[k] = NEVER
             continue
         s = min(max(seq[k], 0), top)
-        if reordered and held[s]:  # released by its successor (NEVER: none), unless a duplicate arrives
-            c = NEVER if nxt[k] >= steps else max(first_at_or_after(thresholds, max(due[k], due[nxt[k]]), per_s),
-                                                   nxt[k] * per_step)
+        copy = duplicated and dup[s]  # its copy, held with it if it is held (LinkImpairment.send)
+        if reordered and held[s]:  # released, with its copy, by its successor (NEVER: none)
+            if nxt[k] >= steps:
+                out[k] = NEVER
+                continue
+            rel, first = due[nxt[k]], nxt[k] * per_step
+            c = max(first_at_or_after(thresholds, max(due[k], rel), per_s), first)
+            if copy:
+                c = min(c, max(first_at_or_after(thresholds, max(t[k] + delay + dup_jit[s], rel), per_s), first))
         else:
             c = max(first_at_or_after(thresholds, due[k], per_s), k * per_step)
-        if duplicated and dup[s]:
-            cd = max(first_at_or_after(thresholds, t[k] + delay + dup_jit[s], per_s), k * per_step)
-            c = min(c, cd)
+            if copy:
+                c = min(c, max(first_at_or_after(thresholds, t[k] + delay + dup_jit[s], per_s), k * per_step))
         out[k] = c
 
 
