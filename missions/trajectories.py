@@ -23,7 +23,7 @@ from missions.planfiles import MAX_ITEMS, PlanFile, read_plan_text
 from missions.references import Reference, Setpoint, Sine, Step, Waypoints
 from missions.route import LIMIT_RANGES, Limits, least_duration_s, smooth_from_plan
 from missions.steps import PlanBudget
-from params import ConfigError, Table, read_text_file
+from params import ConfigError, Table, path_problem, read_text_file
 
 TRAJECTORIES = ("step", "sine", "waypoints", "smooth", "plan")
 PLAN_MAX_BYTES = 16 << 20  # a plan of MAX_ITEMS items is about 5 MB of JSON
@@ -138,7 +138,11 @@ def _plan(t: Table, budget: PlanBudget | None = None, plan: PlanFile | None = No
 
 
 def _plan_path(t: Table, name: str) -> Path:
-    """A ``kind = "plan"`` trajectory's ``file``: relative to the mission's folder."""
+    """A ``kind = "plan"`` trajectory's ``file``: relative to the mission's folder (an empty one is refused as an
+    empty flag path is: not the mission's folder)."""
+    why = path_problem(name, "give the plan's file, relative to the mission's folder")
+    if why:
+        raise t.error("file", why)
     p = Path(name).expanduser()
     return p if p.is_absolute() else Path(t._source).parent / p
 

@@ -160,6 +160,12 @@ def utf8_text(raw: bytes) -> str:
     return raw.decode("utf-8").removeprefix("\ufeff")
 
 
+def path_problem(text: str, fix: str = "give one") -> str | None:
+    """Why ``text`` is no path, or None: empty (an unset shell variable's ``"$DIR"``, a key left blank), which
+    would be read as the current folder. The one check of every path given (a flag's, a mission file's key)."""
+    return None if text else f"an empty path ({fix})"
+
+
 def read_text_file(path: str | Path, expected: str, max_bytes: int = MAX_TOML_BYTES) -> str:
     """The UTF-8 text of a regular file of at most ``max_bytes`` (:func:`read_regular_file`, :func:`utf8_text`);
     every problem a :class:`ConfigError` naming the path and ``expected`` (a mission plan, a waypoint file)."""

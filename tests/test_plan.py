@@ -331,3 +331,13 @@ def test_a_plan_is_swept_and_its_delay_margin_searched(tmp_path: Path, capsys) -
     law = found["controllers"][0]  # margin.json: one entry per law, one law here
     assert law["margin"] is not None and law["margin"] < law["bracket"][1], found
     capsys.readouterr()
+
+
+def test_an_empty_plan_file_is_an_empty_path_not_the_missions_folder(tmp_path: Path) -> None:
+    """An empty ``trajectory.file`` is refused as ``bsst sim ""`` is (params.path_problem, one check): it read as the
+    mission's folder (``m: is a directory, expected a mission plan``)."""
+    source = str(tmp_path / "m.toml")
+    with pytest.raises(ConfigError) as exc:
+        mission_from_table({"trajectory": {"kind": "plan", "file": ""}}, source)
+    assert str(exc.value) == f"{source}: trajectory.file: an empty path (give the plan's file, relative to the " \
+                             "mission's folder)"

@@ -18,7 +18,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
-from params import likely, unreachable
+from params import likely, path_problem, unreachable
 from params.text import number, whole
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
@@ -111,9 +111,9 @@ def path_given(name: str) -> Callable[[str], str]:
     """An argparse type: a path that is not empty (an unset shell variable's ``--out "$DIR"`` would be the current
     folder, with ``--overwrite`` the user's own files), named in the error."""
     def conv(text: str) -> str:
-        if not text:
-            raise argparse.ArgumentTypeError(f"{name}: an empty path (give one" + (
-                ")" if not name.startswith("-") else ", or leave the flag out)"))
+        why = path_problem(text, "give one" if not name.startswith("-") else "give one, or leave the flag out")
+        if why:
+            raise argparse.ArgumentTypeError(f"{name}: {why}")
         return text
 
     return conv
