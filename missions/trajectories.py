@@ -114,6 +114,14 @@ def trajectory_of(t: Table, duration: float, budget: PlanBudget | None = None,
         ref = _smooth(t, duration)
     else:
         ref = _plan(t, budget, plan)
+        if ref.end_s > duration:  # its knots past duration_s, as a step's point past it: refused, not cut
+            least = f"at least {ref.end_s:g} s"
+            own = t.key("file") == "trajectory.file"  # (a fleet's vehicle's: duration_s is the mission's trajectory's)
+            fix = f"drop duration_s to fly the plan's own length (or give {least})" if own else \
+                f"give a duration_s of {least}"
+            raise t.error("file", f"{t.raw('file')} flies {ref.end_s:g} s, then {END_REST_S:g} s at rest ("
+                                  f"{ref.end_s + END_REST_S:g} s flown whole), longer than the mission's duration_s = "
+                                  f"{duration:g} s, which would end the flight inside the plan; {fix}")
     t.done()
     return ref
 

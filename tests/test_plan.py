@@ -333,6 +333,35 @@ def test_a_plan_is_swept_and_its_delay_margin_searched(tmp_path: Path, capsys) -
     capsys.readouterr()
 
 
+def test_a_duration_that_ends_inside_the_plan_is_refused(tmp_path: Path) -> None:
+    """A mission's ``duration_s`` shorter than its plan is refused, naming both lengths, as a step's point past it
+    is; ``duration_s`` at the plan's end or past it flies. Until the fix-linkdup branch ``bsst sim`` flew the plan's
+    first 3 s, said completed, exit 0, its waypoints never reached, and the run's ``mission.toml`` (the plan's knots
+    past 3 s) was refused when flown again. A fleet's vehicle's plan: the mission's duration_s is not the plan's."""
+    l_plan(tmp_path)
+    source = str(tmp_path / "m.toml")
+    plan = {"kind": "plan", "file": "l.plan"}
+    end = mission_from_table({"trajectory": plan}, source).trajectory.end_s
+    with pytest.raises(ConfigError) as exc:
+        mission_from_table({"duration_s": 3.0, "trajectory": plan}, source)
+    assert str(exc.value) == (f"{source}: trajectory.file: l.plan flies {end:g} s, then 1 s at rest ({end + 1:g} s "
+                              f"flown whole), longer than the mission's duration_s = 3 s, which would end the flight "
+                              f"inside the plan; drop duration_s to fly the plan's own length (or give at least "
+                              f"{end:g} s)")
+    assert mission_from_table({"duration_s": end, "trajectory": plan}, source).duration_s == end
+    fleet = {"duration_s": 3.0, "trajectory": {"kind": "step", "setpoints": [{"t": 0.0, "x": 0.0, "y": 0.0, "z": 1.0}]},
+             "vehicles": [{"id": 1, "offset": [0.0, 0.0, 0.0]}, {"id": 2, "trajectory": plan}]}
+    with pytest.raises(ConfigError) as fleet_exc:  # a vehicle's plan: duration_s is the mission's own trajectory's
+        mission_from_table(fleet, source)
+    assert str(fleet_exc.value).startswith(f"{source}: vehicles[1].trajectory.file: l.plan flies {end:g} s, ")
+    assert str(fleet_exc.value).endswith(f"inside the plan; give a duration_s of at least {end:g} s")
+    mission = tmp_path / "cut.toml"
+    mission.write_text('name = "cut"\nduration_s = 3\n[trajectory]\nkind = "plan"\nfile = "l.plan"\n')
+    p = run_bsst("sim", mission, "--out", tmp_path / "run", "--no-plots", timeout=120)
+    assert p.returncode == 2 and p.stderr.strip() == f"bsst: {mission}: {str(exc.value).split(': ', 1)[1]}", p.stderr
+    assert not (tmp_path / "run").exists()
+
+
 def test_an_empty_plan_file_is_an_empty_path_not_the_missions_folder(tmp_path: Path) -> None:
     """An empty ``trajectory.file`` is refused as ``bsst sim ""`` is (params.path_problem, one check): it read as the
     mission's folder (``m: is a directory, expected a mission plan``)."""
