@@ -24,7 +24,7 @@ from bridge.record.halves import read_half
 from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
 from missions import MISSION_DIR, Mission, Sine, load_mission
-from tests.sitlkit import ENV, ROOT, run_bsst
+from tests.sitlkit import ENV, ROOT, clean_exit, run_bsst
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -220,6 +220,45 @@ def test_an_end_action_lost_in_a_blackout_over_the_end_is_not_flown_as_asked(tmp
 SINE_4S = replace(load_mission(SINE), duration_s=4.0)
 # the summary's blocks of one clock only (the rest, figures and verdicts, is the same in every clock)
 CLOCK_ONLY = ("events", "clock", "timing", "sitl", "lockstep", "interventions", "link")
+
+
+@pytest.mark.parametrize(("blackout", "action"), [("2.9:2", "land"), ("2.9:0.2", "land")],
+                         ids=["back-after-the-failsafe", "back-before-it"])
+def test_an_end_action_taken_only_after_the_failsafe_is_not_flown_as_asked(tmp_path: Path, blackout: str,
+                                                                          action: str) -> None:
+    """A 3 s step, a real-time blackout from 2.9 s for 2 s: the vehicle fails safe 0.5 s after its last target (3.4 s),
+    after the mission's end, and descends by it until the link is back (4.9 s) and the controller's NAV_LAND, retried
+    for 3 s, arrives: the vehicle takes it as a mode the controller selected, 1.5 s into its failsafe, and says no
+    ``end`` event. The mission was flown (``completed``), but its end action was not taken at its end: ``end`` says
+    ``taken`` false, the failsafe and the late LAND (``late_t``), the run says not flown as asked (stdout, stderr,
+    ``events.log``) and exits 1 (until the third wave's forty-second session: ``completed``, exit 0, no ``end``, only
+    the controller's ``end`` event). A link back before the failsafe (0.2 s) delivers the NAV_LAND in OFFBOARD: the
+    vehicle's own ``end``, ``end.taken``, exit 0 but for the machine's stalls (:func:`tests.sitlkit.clean_exit`)."""
+    mission = tmp_path / "short.toml"
+    mission.write_text('name = "short"\nduration_s = 3.0\n[trajectory]\nkind = "step"\n'
+                       'setpoints = [ { t = 0.0, x = 0.5, y = 0.0, z = 1.0, psi = 0.0 } ]\n'
+                       f'[end]\naction = "{action}"\n')
+    out = tmp_path / "run"
+    with instance_slot() as n:
+        p = run_bsst("sitl", str(mission), "--realtime", "--instance", str(n), "--out", str(out), "--no-plots",
+                     "--blackout", blackout, "--param", "COM_DISARM_LAND=0.5", cwd=ROOT, env=ENV, timeout=120)
+    summary = json.loads((out / "summary.json").read_text())
+    end, said = summary.get("end"), "not flown as asked: the vehicle did not take the mission's end action at its end"
+    assert summary["outcome"] == "completed" and summary["ended_by"]["who"] == "mission", (summary["ended_by"], end)
+    vehicle: dict[str, float] = {}  # each kind's first time
+    for e in summary["events"]:
+        if e["source"] == "vehicle":
+            vehicle.setdefault(e["kind"], e["t"])
+    if blackout == "2.9:0.2":
+        assert end is not None and end["taken"] and end["disarmed"] and "failsafe" not in vehicle, (end, vehicle)
+        assert said not in p.stdout + p.stderr and p.returncode == clean_exit(summary), p.stderr
+        return
+    assert end is not None and not end["taken"] and end["why"] == "accepted", (end, p.stderr)
+    assert end["failsafe"].startswith("no actuator target") and 3.3 < end["failsafe_t"] < 3.6, end
+    assert 4.9 < end["late_t"] == vehicle["mode"] and end["late_t"] - end["failsafe_t"] > 1.0, (end, vehicle)
+    assert p.returncode == 1 and said in p.stdout and f"bsst sitl: {said}" in p.stderr, p.stderr
+    assert said in (out / "events.log").read_text()
+    assert end["disarmed"] and end["disarmed_t"] == vehicle["disarmed"] > vehicle["landed"] > end["late_t"], end
 
 
 @pytest.mark.parametrize(("over", "held"), [

@@ -276,7 +276,7 @@ def test_an_end_action_the_vehicle_never_took_is_not_flown_as_asked() -> None:
     s = out.summary
     assert s["outcome"] == "completed" and s["ended_by"] == {"who": "mission", "how": "completed"}
     assert s["end"] == {"action": "land", "taken": False, "why": "no answer", "failsafe": after[0].text,
-                        "failsafe_t": 1.3, "disarmed": True, "disarmed_t": 6.5}
+                        "failsafe_t": 1.3, "late_t": None, "disarmed": True, "disarmed_t": 6.5}
     note = ("not flown as asked: the vehicle never took the mission's end action (LAND; its command: no answer): "
             "its failsafe took over at t=1.300 s (no actuator target for 0.503 s: level and descend), disarmed at "
             "t=6.500 s")
@@ -286,10 +286,21 @@ def test_an_end_action_the_vehicle_never_took_is_not_flown_as_asked() -> None:
             RunEvent(1.0, "end", "mission over: the vehicle lands where it is and disarms on the ground", "controller")]
     out = session_summary(FLIGHT, facts(clock="realtime"), joined(), [ARMED, *took], vehicle, controller)
     assert "end" not in out.summary and [n.kind for n in out.notes] == ["ended"] and run_ok(out.summary)
-    # the link back at 2.8 s, after the vehicle's failsafe: it takes the LAND as a mode the controller selected
+    # the link back at 2.8 s, after the vehicle's failsafe: it takes the LAND as a mode the controller selected, late:
+    # its failsafe flew the end first (until the third wave's forty-second session: taken, no ``end``, exit 0)
     late = [after[0], RunEvent(1.8, "mode", "LAND at x=0 y=1 m", "vehicle", CONTROLLER, mode="LAND", armed=True),
-            took[1]]
+            took[1], *after[1:]]
     out = session_summary(FLIGHT, facts(clock="realtime"), joined(), [ARMED, *late], vehicle, controller)
+    assert out.summary["end"] == {"action": "land", "taken": False, "why": "accepted", "failsafe": after[0].text,
+                                  "failsafe_t": 1.3, "late_t": 1.8, "disarmed": True, "disarmed_t": 6.5}
+    assert [(n.kind, n.text) for n in out.notes][-1] == ("end", (
+        "not flown as asked: the vehicle did not take the mission's end action at its end (LAND; its command: "
+        "accepted late): its failsafe took over at t=1.300 s (no actuator target for 0.503 s: level and descend), "
+        "LAND only at t=1.800 s (0.500 s of its failsafe), disarmed at t=6.500 s"))
+    assert not run_ok(out.summary)
+    # a mode the controller selected with no failsafe before it is taken
+    first = [late[1], took[1]]
+    out = session_summary(FLIGHT, facts(clock="realtime"), joined(), [ARMED, *first], vehicle, controller)
     assert "end" not in out.summary and run_ok(out.summary)
 
 

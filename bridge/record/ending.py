@@ -10,7 +10,8 @@ Out: :func:`end_block`, ``summary.json["end"]``: ``action``; ``rows``; ``disarme
      text of the first failsafe that took the end action over, a position lost in the landing; None: none);
      ``max_drift_m`` (a hold: the largest height change from its first row); ``taken`` (true). A session's vehicle
      that never took it (:func:`end_not_taken`: no ``end`` event of its own, its command lost on a real-time link
-     in a blackout over the end): ``taken`` false and what flew instead, and :func:`not_taken_text`, the note; a
+     in a blackout over the end; or taken only after its failsafe had taken over, the command retried through a link
+     back: ``late_t``): ``taken`` false and what flew instead, and :func:`not_taken_text`, the note; a
      controller alone whose end action went unanswered (:func:`end_unanswered`): ``taken`` and ``seen`` false
 
 The mission's trace and figures stop at its end (``trace.csv`` holds the mission's rows only, so that every
@@ -23,7 +24,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any, Protocol
 
-from bridge.record.events import RunEvent
+from bridge.record.events import RunEvent, in_time_order
 from bridge.record.policies import EPS_S, vehicle_events
 
 
@@ -62,25 +63,28 @@ def end_block(action: str, rows: Sequence[tuple[float, float, float]], events: S
 
 def end_not_taken(outcome: str, action: str, events: Sequence[RunEvent], end_s: float) -> dict[str, Any] | None:
     """``summary.json["end"]`` of a session whose mission was completed (``outcome``), whose controller sent the end
-    action (its ``end`` event) but whose vehicle never took it (no ``end`` event of its own after the mission's end,
-    ``end_s`` s, nor a mode the controller selected): ``taken`` false, the answer its command had (``why``), the
-    vehicle's first failsafe after the end (PX4's offboard loss: no target came after the mission's last) and
-    whether it landed and disarmed. None when it took it, or when none was sent (a mission not completed).
-    ``events``: the mission's (with ``source``)."""
+    action (its ``end`` event) but whose vehicle did not take it at the end (no ``end`` event of its own after the
+    mission's end, ``end_s`` s, nor a mode the controller selected before a failsafe did): ``taken`` false, the answer
+    its command had (``why``; ``accepted`` when it came late), the vehicle's first failsafe after the end (PX4's
+    offboard loss: no target came after the mission's last), the controller's mode it took after that failsafe
+    (``late_t``: the command retried through a link back; None: never) and whether it landed and disarmed. None when
+    it took it, or when none was sent (a mission not completed). ``events``: the mission's (with ``source``)."""
     if outcome != "completed":
         return None
-    ev = [e for e in vehicle_events(events) if e.t >= end_s - EPS_S]
+    ev = in_time_order([e for e in vehicle_events(events) if e.t >= end_s - EPS_S])
     said = next((e.text for e in events if e.kind == "end" and e.source == "controller"), None)
-    # taken: its own end, or (its failsafe on when the command came: a link back after the end) a mode by the controller
-    if said is None or any(e.kind == "end" or e.kind == "mode" and e.by is not None and e.by.link == "controller"
-                           for e in ev):
-        return None
-    why = said.rpartition("): ")[2]  # its answer: "no answer", "MAV_RESULT 4"
     fs = next((e for e in ev if e.kind == "failsafe"), None)
+    mode = next((e for e in ev if e.kind == "mode" and e.by is not None and e.by.link == "controller"), None)
+    # taken: its own end, or a mode by the controller before any failsafe; one after it is the failsafe's landing
+    # finished by the command retried through a link back: the failsafe took over first (until the third wave's
+    # forty-second session that read as taken: no ``end``, exit 0)
+    if said is None or any(e.kind == "end" for e in ev) or (mode is not None and (fs is None or mode.t < fs.t)):
+        return None
+    why = said.rpartition("): ")[2] if "): " in said else "accepted"  # its answer: "no answer", "MAV_RESULT 4"
     down = next((e for e in ev if e.kind == "disarmed" and (fs is None or e.t >= fs.t)), None)
     return {"action": action, "taken": False, "why": why, "failsafe": None if fs is None else fs.text,
-            "failsafe_t": None if fs is None else fs.t, "disarmed": down is not None,
-            "disarmed_t": None if down is None else down.t}
+            "failsafe_t": None if fs is None else fs.t, "late_t": None if mode is None else mode.t,
+            "disarmed": down is not None, "disarmed_t": None if down is None else down.t}
 
 
 def end_unanswered(action: str, why: str, silent_s: float) -> dict[str, Any]:
@@ -101,5 +105,10 @@ def not_taken_text(end: dict[str, Any]) -> str:
     instead = (f"its failsafe took over at t={end['failsafe_t']:.3f} s ({end['failsafe']})" if end["failsafe"]
                else "nothing took over")
     down = f", disarmed at t={end['disarmed_t']:.3f} s" if end["disarmed"] else ", not seen to disarm"
+    if end.get("late_t") is not None:  # the command retried through a link back, into the failsafe's flight
+        late = end["late_t"] - (end["failsafe_t"] or end["late_t"])
+        answer = f"{end['why']} late" if end["why"] == "accepted" else f"{end['why']}, taken late"
+        return (f"the vehicle did not take the mission's end action at its end ({what}; its command: {answer}): "
+                f"{instead}, {what} only at t={end['late_t']:.3f} s ({late:.3f} s of its failsafe){down}")
     why = f"; its command: {end['why']}" if end.get("why") else ""
     return f"the vehicle never took the mission's end action ({what}{why}): {instead}{down}"
