@@ -222,8 +222,8 @@ SINE_4S = replace(load_mission(SINE), duration_s=4.0)
 CLOCK_ONLY = ("events", "clock", "timing", "sitl", "lockstep", "interventions", "link")
 
 
-@pytest.mark.parametrize(("blackout", "action"), [("2.9:2", "land"), ("2.9:0.2", "land")],
-                         ids=["back-after-the-failsafe", "back-before-it"])
+@pytest.mark.parametrize(("blackout", "action"), [("2.9:2", "land"), ("2.9:0.2", "land"), ("2.9:2", "hold")],
+                         ids=["back-after-the-failsafe", "back-before-it", "hold"])
 def test_an_end_action_taken_only_after_the_failsafe_is_not_flown_as_asked(tmp_path: Path, blackout: str,
                                                                           action: str) -> None:
     """A 3 s step, a real-time blackout from 2.9 s for 2 s: the vehicle fails safe 0.5 s after its last target (3.4 s),
@@ -233,7 +233,9 @@ def test_an_end_action_taken_only_after_the_failsafe_is_not_flown_as_asked(tmp_p
     ``taken`` false, the failsafe and the late LAND (``late_t``), the run says not flown as asked (stdout, stderr,
     ``events.log``) and exits 1 (until the third wave's forty-second session: ``completed``, exit 0, no ``end``, only
     the controller's ``end`` event). A link back before the failsafe (0.2 s) delivers the NAV_LAND in OFFBOARD: the
-    vehicle's own ``end``, ``end.taken``, exit 0 but for the machine's stalls (:func:`tests.sitlkit.clean_exit`)."""
+    vehicle's own ``end``, ``end.taken``, exit 0 but for the machine's stalls (:func:`tests.sitlkit.clean_exit`). A
+    HOLD taken late is said so too, and the session ends with the controller: the vehicle flies the HOLD it took (no
+    wait for a landing that a HOLD never makes)."""
     mission = tmp_path / "short.toml"
     mission.write_text('name = "short"\nduration_s = 3.0\n[trajectory]\nkind = "step"\n'
                        'setpoints = [ { t = 0.0, x = 0.5, y = 0.0, z = 1.0, psi = 0.0 } ]\n'
@@ -258,6 +260,10 @@ def test_an_end_action_taken_only_after_the_failsafe_is_not_flown_as_asked(tmp_p
     assert 4.9 < end["late_t"] == vehicle["mode"] and end["late_t"] - end["failsafe_t"] > 1.0, (end, vehicle)
     assert p.returncode == 1 and said in p.stdout and f"bsst sitl: {said}" in p.stderr, p.stderr
     assert said in (out / "events.log").read_text()
+    if action == "hold":  # it holds in the air: the session ends with its controller
+        assert not end["disarmed"] and f"({action.upper()}; its command: accepted late)" in p.stdout, end
+        assert not any(e["kind"] == "waiting" for e in summary["events"]), summary["events"]
+        return
     assert end["disarmed"] and end["disarmed_t"] == vehicle["disarmed"] > vehicle["landed"] > end["late_t"], end
 
 

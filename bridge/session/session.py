@@ -170,12 +170,14 @@ class Session:
     def _controller_completed(self) -> bool:
         """Whether the controller flew its mission to the end (:func:`bridge.record.summary.controller_completed`),
         its vehicle not in a failsafe no arm ended (a real-time link lost over the end hid it: it is left to land)
-        and, armed, flying the end action it took (its ``end`` event; one lost on the wire leaves the vehicle to its
-        failsafe: it is left to land, until the third wave's fortieth session stopped in the air)."""
+        and, armed, flying the end action it took (its ``end`` event, or its mode taken late, after its failsafe; one
+        lost on the wire leaves the vehicle to its failsafe: it is left to land, until the third wave's fortieth
+        session stopped in the air)."""
         mission = split_at_start(self.events)[0]
         end = self.flight.mission.duration_s
+        untaken = end_not_taken("completed", "", mission, end)  # (taken late, after its failsafe: it flies it now)
         return controller_completed(_end(self.controller)) and failsafe_not_resumed(mission, end) is None and (
-            not self.vehicle_armed or end_not_taken("completed", "", mission, end) is None)
+            not self.vehicle_armed or untaken is None or untaken["late_t"] is not None)
 
     # -- children ----------------------------------------------------------------------------------
     def _start(self) -> None:
